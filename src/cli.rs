@@ -1,0 +1,216 @@
+//! Command-line interface: clap structures only. Each subcommand turns into validated library
+//! configuration in `main.rs` before any work starts.
+
+use bitrock::data::{DataOptions, SplitRule};
+use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// Calibrate and select drill-string bit-rock interaction laws from downhole measurements of
+/// bit speed and torque on bit, and simulate torsional stick-slip.
+///
+/// Laws (Castello & Ritto): m1 Tucker-Wang (tanh + hump), m2 Navarro-Lopez exponential decay,
+/// m3 exponential bump + tanh (the paper's new law), m4 cubic polynomial. Bit speed w in rad/s;
+/// every law is scaled by r = WOB / W_ref.
+#[derive(Debug, Parser)]
+#[command(name = "bitrock", version, about, long_about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Least-squares fit of each law to a field record (the paper's deterministic calibration).
+    Fit(FitCmd),
+    /// Simulate the 1-DOF torsional drill string with a bit-rock law; writes a field-like CSV.
+    Simulate(SimulateCmd),
+    /// Run the whole pipeline on the embedded (synthetic) demo record.
+    Demo(DemoCmd),
+}
+
+/// Which columns of the CSV to read, their units, and which rows to use.
+#[derive(Debug, Args, Clone)]
+pub struct DataArgs {
+    /// Bit-speed column [default: the one column whose name contains "speed"].
+    #[arg(long, value_name = "NAME")]
+    pub speed_col: Option<String>,
+    /// Torque-on-bit column [default: the one column whose name contains "torque"].
+    #[arg(long, value_name = "NAME")]
+    pub torque_col: Option<String>,
+    /// Weight-on-bit column [default: the one column whose name contains "wob", if any].
+    #[arg(long, value_name = "NAME")]
+    pub wob_col: Option<String>,
+    /// Time column, in seconds [default: the one column whose name contains "time", if any].
+    #[arg(long, value_name = "NAME")]
+    pub time_col: Option<String>,
+    /// Unit of the speed column [default: from its suffix, _rpm or _rad_s].
+    #[arg(long, value_enum)]
+    pub speed_unit: Option<SpeedUnit>,
+    /// Unit of the torque column [default: from its suffix, _nm or _knm].
+    #[arg(long, value_enum)]
+    pub torque_unit: Option<TorqueUnit>,
+    /// Unit of the weight-on-bit column [default: from its suffix, _n or _kn].
+    #[arg(long, value_enum)]
+    pub wob_unit: Option<ForceUnit>,
+    /// Drop rows whose bit speed is below this, rpm: the laws hold for a turning bit, and
+    /// stick-phase samples say nothing about them.
+    #[arg(long, default_value_t = 5.0, value_name = "RPM")]
+    pub min_speed_rpm: f64,
+    /// Use only rows at or after this time, s (needs a time column).
+    #[arg(long, value_name = "SECONDS")]
+    pub t_start_s: Option<f64>,
+    /// Use only rows at or before this time, s (needs a time column).
+    #[arg(long, value_name = "SECONDS")]
+    pub t_end_s: Option<f64>,
+    /// Keep every K-th row of the time window (applied before the speed filter).
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub thin: usize,
+    /// Fraction of the kept rows used for calibration; the rest validates the fit.
+    #[arg(long, default_value_t = 0.5, value_name = "F")]
+    pub calibration_fraction: f64,
+    /// How calibration rows are chosen: block = the first part of the record, interleaved =
+    /// spread evenly through it.
+    #[arg(long, value_enum, default_value_t = SplitRule::Block)]
+    pub split: SplitRule,
+}
+
+impl DataArgs {
+    pub fn options(&self) -> DataOptions {
+        DataOptions {
+            speed_column: self.speed_col.clone(),
+            torque_column: self.torque_col.clone(),
+            wob_column: self.wob_col.clone(),
+            time_column: self.time_col.clone(),
+            speed_unit: self.speed_unit,
+            torque_unit: self.torque_unit,
+            wob_unit: self.wob_unit,
+            min_speed_rpm: self.min_speed_rpm,
+            t_start_s: self.t_start_s,
+            t_end_s: self.t_end_s,
+            thin: self.thin,
+            calibration_fraction: self.calibration_fraction,
+            split: self.split,
+        }
+    }
+}
+
+/// How the least-squares fit runs.
+#[derive(Debug, Args, Clone)]
+pub struct FitArgs {
+    /// Laws to fit, comma-separated.
+    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
+    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Lift the physical bounds (positive static and dynamic torques, positive rates and widths).
+    #[arg(long)]
+    pub no_bounds: bool,
+    /// Starting points polished by Levenberg-Marquardt per law (chosen from a data-driven grid).
+    #[arg(long, default_value_t = 6, value_name = "N")]
+    pub starts: usize,
+    /// Scale each sample's predicted torque by r = WOB / W_ref (needs a WOB column). Off: r = 1,
+    /// the paper's assumption that the record was taken at W = W_ref.
+    #[arg(long)]
+    pub scale_by_wob: bool,
+    /// Reference weight on bit W_ref, kN.
+    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    pub w_ref_kn: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct FitCmd {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    #[command(flatten)]
+    pub fit: FitArgs,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Where the simulation starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum InitialState {
+    /// Steady rotation at the top-drive speed, with the bit speed kicked by --kick-rpm.
+    Equilibrium,
+    /// Everything at rest; the top drive starts at the set speed at t = 0.
+    Rest,
+}
+
+#[derive(Debug, Args)]
+pub struct SimulateCmd {
+    /// Bit-rock law (m1, m2, m3, m4).
+    #[arg(long)]
+    pub law: bitrock::Law,
+    /// The law's parameters in its order (m2: tsb,tcb,g), torques in --param-torque-unit
+    /// [default: the paper's least-squares estimate].
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
+    pub params: Option<Vec<f64>>,
+    /// Torque unit of the torque-valued parameters in --params.
+    #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
+    pub param_torque_unit: TorqueUnit,
+    /// Top-drive (rotary table) speed Omega, rpm.
+    #[arg(long, value_name = "RPM")]
+    pub omega_rpm: f64,
+    /// Weight on bit W, kN.
+    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    pub wob_kn: f64,
+    /// Reference weight on bit W_ref at which the law's parameters hold, kN.
+    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    pub w_ref_kn: f64,
+    /// Equivalent moment of inertia of the 1-DOF string I_eq, kg·m².
+    #[arg(long, default_value_t = 383.33, value_name = "KG_M2")]
+    pub inertia_kg_m2: f64,
+    /// Natural frequency of the 1-DOF string omega_n, rad/s.
+    #[arg(long, default_value_t = 0.85, value_name = "RAD_S")]
+    pub omega_n_rad_s: f64,
+    /// Damping ratio of the 1-DOF string xi.
+    #[arg(long, default_value_t = 0.25, value_name = "XI")]
+    pub damping_ratio: f64,
+    /// Recorded duration, s.
+    #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
+    pub duration_s: f64,
+    /// Simulated time discarded before recording starts (lets a limit cycle settle), s.
+    #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
+    pub settle_s: f64,
+    /// Output sample rate, Hz (the paper's downhole tool records at 50 Hz).
+    #[arg(long, default_value_t = 50.0, value_name = "HZ")]
+    pub sample_hz: f64,
+    /// Integration step of the RK4 scheme, s.
+    #[arg(long, default_value_t = 1e-3, value_name = "SECONDS")]
+    pub dt_s: f64,
+    /// Initial state.
+    #[arg(long, value_enum, default_value_t = InitialState::Equilibrium)]
+    pub initial: InitialState,
+    /// Bit-speed kick added to steady rotation at t = 0 (with --initial equilibrium), rpm.
+    #[arg(long, default_value_t = 5.0, value_name = "RPM", allow_hyphen_values = true)]
+    pub kick_rpm: f64,
+    /// Standard deviation of Gaussian noise added to the recorded torque, kN·m.
+    #[arg(long, default_value_t = 0.0, value_name = "KNM")]
+    pub noise_torque_knm: f64,
+    /// Standard deviation of Gaussian noise added to the recorded bit speed, rpm.
+    #[arg(long, default_value_t = 0.0, value_name = "RPM")]
+    pub noise_speed_rpm: f64,
+    /// Standard deviation of a slow random fluctuation of the weight on bit, kN.
+    #[arg(long, default_value_t = 0.0, value_name = "KN")]
+    pub wob_fluctuation_kn: f64,
+    /// Correlation time of the weight-on-bit fluctuation, s.
+    #[arg(long, default_value_t = 20.0, value_name = "SECONDS")]
+    pub wob_correlation_s: f64,
+    /// Seed of the noise and fluctuation generator.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output CSV (time_s, bit_speed_rpm, torque_knm, wob_kn) [default: standard output].
+    #[arg(long, short, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub struct DemoCmd {
+    #[command(flatten)]
+    pub fit: FitArgs,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}

@@ -1,0 +1,601 @@
+//! Field data: a CSV record of bit speed and torque on bit (optionally time and weight on bit)
+//! read into SI, filtered, and split into a calibration and a validation part.
+//!
+//! Columns are chosen by name (flags) or found by what their names contain (`speed`, `torque`,
+//! `time`, `wob`); units come from flags or from name suffixes (`_rpm`, `_rad_s`, `_nm`, `_knm`,
+//! `_kn`, `_n`, time `_s`). Every refusal names the file, and where it applies the line and the
+//! column.
+
+use crate::error::{Error, Result};
+use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use serde::Serialize;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// How the record is divided into calibration and validation samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum SplitRule {
+    /// The first fraction of the record (in time order) calibrates, the rest validates.
+    Block,
+    /// Rows are dealt out evenly through the record in the given proportion.
+    Interleaved,
+}
+
+/// Which columns to read, in which units, and which rows to keep.
+#[derive(Clone, Debug)]
+pub struct DataOptions {
+    /// Bit-speed column; `None` finds the one column whose name contains "speed".
+    pub speed_column: Option<String>,
+    /// Torque-on-bit column; `None` finds the one column whose name contains "torque".
+    pub torque_column: Option<String>,
+    /// Weight-on-bit column; `None` uses the one column whose name contains "wob", if any.
+    pub wob_column: Option<String>,
+    /// Time column (seconds); `None` uses the one column whose name contains "time", if any.
+    pub time_column: Option<String>,
+    /// Speed unit; `None` reads it from the column suffix.
+    pub speed_unit: Option<SpeedUnit>,
+    /// Torque unit; `None` reads it from the column suffix.
+    pub torque_unit: Option<TorqueUnit>,
+    /// Weight-on-bit unit; `None` reads it from the column suffix.
+    pub wob_unit: Option<ForceUnit>,
+    /// Rows with bit speed below this (rpm) are dropped: the laws hold for w > 0 and
+    /// stick-phase samples say nothing about them.
+    pub min_speed_rpm: f64,
+    /// Keep rows with time ≥ this (s); needs a time column.
+    pub t_start_s: Option<f64>,
+    /// Keep rows with time ≤ this (s); needs a time column.
+    pub t_end_s: Option<f64>,
+    /// Keep every k-th row of the time window (1 keeps all), before the speed filter.
+    pub thin: usize,
+    /// Fraction of the kept rows used for calibration, in (0, 1].
+    pub calibration_fraction: f64,
+    /// How calibration rows are chosen.
+    pub split: SplitRule,
+}
+
+impl Default for DataOptions {
+    fn default() -> Self {
+        Self {
+            speed_column: None,
+            torque_column: None,
+            wob_column: None,
+            time_column: None,
+            speed_unit: None,
+            torque_unit: None,
+            wob_unit: None,
+            min_speed_rpm: 5.0,
+            t_start_s: None,
+            t_end_s: None,
+            thin: 1,
+            calibration_fraction: 0.5,
+            split: SplitRule::Block,
+        }
+    }
+}
+
+impl DataOptions {
+    /// Refuses option values that cannot mean anything, naming the flag.
+    pub fn validate(&self) -> Result<()> {
+        if !self.min_speed_rpm.is_finite() || self.min_speed_rpm < 0.0 {
+            return Err(Error::arg(
+                "--min-speed-rpm",
+                format!("must be a finite number ≥ 0, got {}", self.min_speed_rpm),
+            ));
+        }
+        if self.thin == 0 {
+            return Err(Error::arg("--thin", "must be at least 1 (1 keeps every row)"));
+        }
+        if !(self.calibration_fraction > 0.0 && self.calibration_fraction <= 1.0) {
+            return Err(Error::arg(
+                "--calibration-fraction",
+                format!("must lie in (0, 1], got {}", self.calibration_fraction),
+            ));
+        }
+        for (flag, v) in [("--t-start-s", self.t_start_s), ("--t-end-s", self.t_end_s)] {
+            if let Some(v) = v
+                && !v.is_finite()
+            {
+                return Err(Error::arg(flag, format!("must be finite, got {v}")));
+            }
+        }
+        if let (Some(a), Some(b)) = (self.t_start_s, self.t_end_s)
+            && a >= b
+        {
+            return Err(Error::arg(
+                "--t-end-s",
+                format!("must exceed --t-start-s ({a} s), got {b} s"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Samples of a law's input and output, in SI.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Samples {
+    /// Bit speed, rad/s.
+    pub speed_rad_s: Vec<f64>,
+    /// Torque on bit, N·m.
+    pub torque_nm: Vec<f64>,
+    /// Weight on bit, N, when the record has it.
+    pub wob_n: Option<Vec<f64>>,
+    /// Time, s, when the record has it.
+    pub time_s: Option<Vec<f64>>,
+}
+
+impl Samples {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.speed_rad_s.len()
+    }
+    /// True when there is no sample.
+    pub fn is_empty(&self) -> bool {
+        self.speed_rad_s.is_empty()
+    }
+    /// Σ y² (N·m)², the denominator of the paper's ρ, summed in f64 with compensation.
+    pub fn sum_sq_torque(&self) -> f64 {
+        crate::numerics::compensated_sum(self.torque_nm.iter().map(|y| y * y))
+    }
+    /// Weight-on-bit ratio r = W / W_ref per sample, or all ones when WOB is not recorded
+    /// or `w_ref_n` is `None` (the paper's assumption: data taken at W = W_ref).
+    pub fn wob_ratio(&self, w_ref_n: Option<f64>) -> Vec<f64> {
+        match (&self.wob_n, w_ref_n) {
+            (Some(w), Some(w_ref)) => w.iter().map(|w| w / w_ref).collect(),
+            _ => vec![1.0; self.len()],
+        }
+    }
+
+    fn pick(&self, keep: impl Fn(usize) -> bool) -> Samples {
+        let sel = |v: &Vec<f64>| {
+            v.iter()
+                .enumerate()
+                .filter(|(i, _)| keep(*i))
+                .map(|(_, x)| *x)
+                .collect::<Vec<_>>()
+        };
+        Samples {
+            speed_rad_s: sel(&self.speed_rad_s),
+            torque_nm: sel(&self.torque_nm),
+            wob_n: self.wob_n.as_ref().map(sel),
+            time_s: self.time_s.as_ref().map(sel),
+        }
+    }
+}
+
+/// A field record after reading, filtering and splitting.
+#[derive(Clone, Debug)]
+pub struct FieldData {
+    /// Where it came from (a path, or `<embedded demo data>`).
+    pub source: PathBuf,
+    /// The unit the record gave torques in; results are printed in it.
+    pub torque_unit: TorqueUnit,
+    /// The unit the record gave speeds in.
+    pub speed_unit: SpeedUnit,
+    /// Columns used, in the order speed, torque, wob, time.
+    pub columns: ColumnsUsed,
+    /// Data rows in the file.
+    pub rows_read: usize,
+    /// Rows kept by the filters (calibration + validation).
+    pub rows_used: usize,
+    /// Samples the laws are calibrated on.
+    pub calibration: Samples,
+    /// Samples held back to judge the calibration.
+    pub validation: Samples,
+}
+
+/// Names of the columns read.
+#[derive(Clone, Debug, Serialize)]
+pub struct ColumnsUsed {
+    pub speed: String,
+    pub torque: String,
+    pub wob: Option<String>,
+    pub time: Option<String>,
+}
+
+/// The embedded demo record (synthetic; see data/README.md).
+pub const DEMO_CSV: &str = include_str!("../data/demo.csv");
+/// Name shown for the embedded record.
+pub const DEMO_SOURCE: &str = "<embedded demo data>";
+
+/// Reads a field record from a file.
+pub fn read_field_data(path: &Path, opts: &DataOptions) -> Result<FieldData> {
+    let file = std::fs::File::open(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_field_data(file, path, opts)
+}
+
+/// Reads the embedded demo record.
+pub fn demo_field_data(opts: &DataOptions) -> Result<FieldData> {
+    parse_field_data(DEMO_CSV.as_bytes(), Path::new(DEMO_SOURCE), opts)
+}
+
+/// Index of the column named `wanted`, or of the single column whose name contains `hint`.
+fn resolve_column(
+    headers: &csv::StringRecord,
+    wanted: Option<&str>,
+    hint: &str,
+    flag: &str,
+    required: bool,
+    path: &Path,
+) -> Result<Option<usize>> {
+    let listing = || headers.iter().collect::<Vec<_>>().join(", ");
+    if let Some(name) = wanted {
+        return match headers.iter().position(|h| h == name) {
+            Some(i) => Ok(Some(i)),
+            None => Err(Error::Format {
+                path: path.to_path_buf(),
+                line: Some(1),
+                message: format!(
+                    "no column named '{name}' (given by {flag}); the header has: {}",
+                    listing()
+                ),
+            }),
+        };
+    }
+    let matches: Vec<usize> = headers
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| h.to_ascii_lowercase().contains(hint))
+        .map(|(i, _)| i)
+        .collect();
+    match matches.as_slice() {
+        [i] => Ok(Some(*i)),
+        [] if !required => Ok(None),
+        [] => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: format!(
+                "no column name contains '{hint}'; name the column with {flag} (the header has: {})",
+                listing()
+            ),
+        }),
+        many => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: format!(
+                "several columns contain '{hint}' ({}); choose one with {flag}",
+                many.iter().map(|&i| &headers[i]).collect::<Vec<_>>().join(", ")
+            ),
+        }),
+    }
+}
+
+/// The unit of a column: the flag's when given (and not contradicting the suffix), else the
+/// suffix's.
+fn resolve_unit<U: Copy + PartialEq>(
+    column: &str,
+    flag_value: Option<U>,
+    from_suffix: fn(&str) -> Option<U>,
+    label: fn(U) -> &'static str,
+    flag: &str,
+    path: &Path,
+) -> Result<U> {
+    match (flag_value, from_suffix(column)) {
+        (Some(f), Some(s)) if f != s => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: format!(
+                "column '{column}' declares {} by its name but {flag} says {}; rename the column or drop the flag",
+                label(s),
+                label(f)
+            ),
+        }),
+        (Some(u), _) | (None, Some(u)) => Ok(u),
+        (None, None) => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: format!("cannot tell the unit of column '{column}' from its name; give {flag}"),
+        }),
+    }
+}
+
+/// Reads, filters and splits a field record from any reader. `path` is only used in messages.
+pub fn parse_field_data<R: Read>(reader: R, path: &Path, opts: &DataOptions) -> Result<FieldData> {
+    opts.validate()?;
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(reader);
+    let csv_error = |e: csv::Error| Error::Format {
+        path: path.to_path_buf(),
+        line: e.position().map(|p| p.line()),
+        message: e.to_string(),
+    };
+    let headers = rdr.headers().map_err(csv_error)?.clone();
+    if headers.is_empty() {
+        return Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: "empty file: expected a header line".into(),
+        });
+    }
+    let speed_i = resolve_column(
+        &headers,
+        opts.speed_column.as_deref(),
+        "speed",
+        "--speed-col",
+        true,
+        path,
+    )?
+    .expect("required");
+    let torque_i = resolve_column(
+        &headers,
+        opts.torque_column.as_deref(),
+        "torque",
+        "--torque-col",
+        true,
+        path,
+    )?
+    .expect("required");
+    let wob_i = resolve_column(&headers, opts.wob_column.as_deref(), "wob", "--wob-col", false, path)?;
+    let time_i = resolve_column(&headers, opts.time_column.as_deref(), "time", "--time-col", false, path)?;
+    let name = |i: usize| headers[i].to_string();
+
+    let speed_unit = resolve_unit(
+        &headers[speed_i],
+        opts.speed_unit,
+        SpeedUnit::from_suffix,
+        SpeedUnit::label,
+        "--speed-unit",
+        path,
+    )?;
+    let torque_unit = resolve_unit(
+        &headers[torque_i],
+        opts.torque_unit,
+        TorqueUnit::from_suffix,
+        TorqueUnit::label,
+        "--torque-unit",
+        path,
+    )?;
+    let wob_unit = match wob_i {
+        Some(i) => Some(resolve_unit(
+            &headers[i],
+            opts.wob_unit,
+            ForceUnit::from_suffix,
+            ForceUnit::label,
+            "--wob-unit",
+            path,
+        )?),
+        None => None,
+    };
+    if time_i.is_none() && (opts.t_start_s.is_some() || opts.t_end_s.is_some()) {
+        return Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: "--t-start-s/--t-end-s need a time column (none found; name it with --time-col)".into(),
+        });
+    }
+
+    let mut all = Samples {
+        wob_n: wob_i.map(|_| Vec::new()),
+        time_s: time_i.map(|_| Vec::new()),
+        ..Samples::default()
+    };
+    let mut rows_read = 0usize;
+    let mut record = csv::StringRecord::new();
+    while rdr.read_record(&mut record).map_err(csv_error)? {
+        rows_read += 1;
+        let line = record.position().map(|p| p.line()).unwrap_or(0);
+        let cell = |i: usize| -> Result<f64> {
+            let text = record.get(i).unwrap_or("");
+            let fail = |message: String| Error::Cell {
+                path: path.to_path_buf(),
+                line,
+                column: i + 1,
+                name: name(i),
+                message,
+            };
+            let v: f64 = text.parse().map_err(|_| fail(format!("'{text}' is not a number")))?;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(fail(format!("'{text}' is not a finite number")))
+            }
+        };
+        all.speed_rad_s.push(speed_unit.to_rad_s(cell(speed_i)?));
+        all.torque_nm.push(cell(torque_i)? * torque_unit.newton_metres());
+        if let (Some(i), Some(u), Some(v)) = (wob_i, wob_unit, all.wob_n.as_mut()) {
+            v.push(cell(i)? * u.newtons());
+        }
+        if let (Some(i), Some(v)) = (time_i, all.time_s.as_mut()) {
+            v.push(cell(i)?);
+        }
+    }
+    if rows_read == 0 {
+        return Err(Error::Data {
+            path: path.to_path_buf(),
+            message: "no data rows after the header".into(),
+        });
+    }
+
+    // Filters: time window, then thinning, then the minimum bit speed.
+    let in_window = |i: usize| match &all.time_s {
+        Some(t) => opts.t_start_s.is_none_or(|a| t[i] >= a) && opts.t_end_s.is_none_or(|b| t[i] <= b),
+        None => true,
+    };
+    let window: Vec<usize> = (0..rows_read).filter(|&i| in_window(i)).collect();
+    let min_speed = SpeedUnit::Rpm.to_rad_s(opts.min_speed_rpm);
+    let kept: Vec<usize> = window
+        .iter()
+        .step_by(opts.thin)
+        .copied()
+        .filter(|&i| all.speed_rad_s[i] >= min_speed)
+        .collect();
+    if kept.is_empty() {
+        return Err(Error::Data {
+            path: path.to_path_buf(),
+            message: format!(
+                "no row left after filtering ({rows_read} read, {} in the time window, none with bit speed ≥ {} rpm after thinning by {}); relax --min-speed-rpm, --t-start-s/--t-end-s or --thin",
+                window.len(),
+                opts.min_speed_rpm,
+                opts.thin
+            ),
+        });
+    }
+    let mut keep_mask = vec![false; rows_read];
+    for &i in &kept {
+        keep_mask[i] = true;
+    }
+    let used = all.pick(|i| keep_mask[i]);
+    if used.torque_nm.iter().all(|&y| y == 0.0) {
+        return Err(Error::Data {
+            path: path.to_path_buf(),
+            message: format!(
+                "every kept torque value in column '{}' is zero: the misfit ρ = ‖y − T‖²/‖y‖² is undefined",
+                name(torque_i)
+            ),
+        });
+    }
+
+    let n = used.len();
+    let f = opts.calibration_fraction;
+    let in_calibration = |i: usize| match opts.split {
+        SplitRule::Block => (i as f64) < (f * n as f64).ceil(),
+        // Bresenham: row i calibrates when the running quota floor((i+1)f) steps up.
+        SplitRule::Interleaved => ((i + 1) as f64 * f).floor() > (i as f64 * f).floor(),
+    };
+    let calibration = used.pick(in_calibration);
+    let validation = used.pick(|i| !in_calibration(i));
+    if calibration.torque_nm.iter().all(|&y| y == 0.0) {
+        return Err(Error::Data {
+            path: path.to_path_buf(),
+            message:
+                "every calibration torque is zero: the misfit ρ is undefined; change --calibration-fraction or --split"
+                    .into(),
+        });
+    }
+
+    Ok(FieldData {
+        source: path.to_path_buf(),
+        torque_unit,
+        speed_unit,
+        columns: ColumnsUsed {
+            speed: name(speed_i),
+            torque: name(torque_i),
+            wob: wob_i.map(name),
+            time: time_i.map(name),
+        },
+        rows_read,
+        rows_used: n,
+        calibration,
+        validation,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str, opts: &DataOptions) -> Result<FieldData> {
+        parse_field_data(text.as_bytes(), Path::new("x.csv"), opts)
+    }
+
+    const GOOD: &str =
+        "time_s,bit_speed_rpm,torque_knm,wob_kn\n0,60,10,240\n0.02,2,11,241\n0.04,90,9,242\n0.06,120,8,243\n";
+
+    #[test]
+    fn reads_si_and_filters_slow_rows() {
+        let d = parse(
+            GOOD,
+            &DataOptions {
+                calibration_fraction: 1.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(d.rows_read, 4);
+        assert_eq!(d.rows_used, 3);
+        let w = &d.calibration.speed_rad_s;
+        assert!((w[0] - 2.0 * std::f64::consts::PI).abs() < 1e-12);
+        assert_eq!(d.calibration.torque_nm, vec![10_000.0, 9_000.0, 8_000.0]);
+        assert_eq!(
+            d.calibration.wob_n.as_ref().unwrap(),
+            &vec![240_000.0, 242_000.0, 243_000.0]
+        );
+        assert_eq!(d.torque_unit, TorqueUnit::KNm);
+    }
+
+    #[test]
+    fn block_and_interleaved_splits() {
+        let text: String = std::iter::once("speed_rad_s,torque_nm".to_string())
+            .chain((0..10).map(|i| format!("{},{}", 1 + i, 100 + i)))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let block = parse(
+            &text,
+            &DataOptions {
+                calibration_fraction: 0.3,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(block.calibration.torque_nm, vec![100.0, 101.0, 102.0]);
+        assert_eq!(block.validation.len(), 7);
+        let inter = parse(
+            &text,
+            &DataOptions {
+                calibration_fraction: 0.5,
+                split: SplitRule::Interleaved,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(inter.calibration.torque_nm, vec![101.0, 103.0, 105.0, 107.0, 109.0]);
+        assert_eq!(inter.validation.torque_nm, vec![100.0, 102.0, 104.0, 106.0, 108.0]);
+    }
+
+    #[test]
+    fn window_and_thinning() {
+        let opts = DataOptions {
+            t_start_s: Some(0.01),
+            t_end_s: Some(0.07),
+            thin: 2,
+            calibration_fraction: 1.0,
+            min_speed_rpm: 0.0,
+            ..Default::default()
+        };
+        let d = parse(GOOD, &opts).unwrap();
+        // window keeps rows 2..4, thinning keeps rows 2 and 4.
+        assert_eq!(d.calibration.torque_nm, vec![11_000.0, 8_000.0]);
+    }
+
+    #[test]
+    fn errors_name_line_and_column() {
+        let bad = "time_s,bit_speed_rpm,torque_knm\n0,60,10\n0.02,abc,11\n";
+        let e = parse(bad, &DataOptions::default()).unwrap_err().to_string();
+        assert_eq!(e, "x.csv:3:2: column 'bit_speed_rpm': 'abc' is not a number");
+        let nan = "time_s,bit_speed_rpm,torque_knm\n0,60,10\n0.02,60,inf\n";
+        let e = parse(nan, &DataOptions::default()).unwrap_err().to_string();
+        assert_eq!(e, "x.csv:3:3: column 'torque_knm': 'inf' is not a finite number");
+        let e = parse(
+            "a_rpm,torque_nm\n1,2\n",
+            &DataOptions {
+                speed_column: Some("w".into()),
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("no column named 'w'"), "{e}");
+        let e = parse("speed,torque_nm\n60,2\n", &DataOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("--speed-unit"), "{e}");
+        let e = parse("speed_rpm,torque_nm\n60,0\n70,0\n", &DataOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("zero"), "{e}");
+        let e = parse("speed_rpm,torque_nm\n1,3\n", &DataOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("no row left"), "{e}");
+        let e = parse("speed_rpm,torque_nm\n60,3,4\n", &DataOptions::default()).unwrap_err();
+        assert!(e.to_string().starts_with("x.csv:2:"), "{e}");
+        let e = parse(
+            "speed_rpm,torque_knm\n60,3\n",
+            &DataOptions {
+                torque_unit: Some(TorqueUnit::Nm),
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("declares kN·m"), "{e}");
+        assert!(e.is_bad_input());
+    }
+}

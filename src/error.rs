@@ -1,0 +1,66 @@
+//! The library's error type. Variants that describe bad input (a file, a cell, a flag) map to
+//! exit status 2 in the binary; the rest are failures of the computation or the machine.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in bitrock.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An input file cannot be opened or read.
+    #[error("{}: cannot read: {source}", path.display())]
+    Read { path: PathBuf, source: std::io::Error },
+    /// A CSV cell holds something that is not a finite number.
+    #[error("{}:{line}:{column}: column '{name}': {message}", path.display())]
+    Cell {
+        path: PathBuf,
+        line: u64,
+        column: usize,
+        name: String,
+        message: String,
+    },
+    /// A file is malformed as a whole or at a line (ragged rows, missing header, missing column).
+    #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Format {
+        path: PathBuf,
+        line: Option<u64>,
+        message: String,
+    },
+    /// The data read fine but cannot be used (empty after filtering, all-zero torque...).
+    #[error("{}: {message}", path.display())]
+    Data { path: PathBuf, message: String },
+    /// A command-line flag or configuration value is refused.
+    #[error("{flag}: {message}")]
+    InvalidArgument { flag: String, message: String },
+    /// An output file cannot be written.
+    #[error("{}: cannot write: {source}", path.display())]
+    Write { path: PathBuf, source: std::io::Error },
+    /// A numerical procedure failed where it should not have.
+    #[error("numerical failure: {0}")]
+    Numerical(String),
+}
+
+impl Error {
+    /// Shorthand for [`Error::InvalidArgument`].
+    pub fn arg(flag: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::InvalidArgument {
+            flag: flag.into(),
+            message: message.into(),
+        }
+    }
+
+    /// True when the user's input is at fault (exit status 2), false for failures of the
+    /// computation or of the machine (exit status 1).
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            Error::Read { .. }
+                | Error::Cell { .. }
+                | Error::Format { .. }
+                | Error::Data { .. }
+                | Error::InvalidArgument { .. }
+        )
+    }
+}
+
+/// Result with the library's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,521 @@
+//! Least-squares calibration of each law: minimise the paper's misfit
+//! ρ(φ) = ‖y − A(φ)‖² / ‖y‖² over the calibration samples (eq. LSeq).
+//!
+//! The problem is made scale-free before the optimiser sees it: torques are divided by the
+//! RMS torque and speeds by the 95th-percentile speed, and every parameter is rescaled by its
+//! dimension ([`crate::laws::ParamSpec`]). So laboratory data in N·m and field data in kN·m are
+//! the same problem to the optimiser. Starting points come from the data: for each law the
+//! parameters that enter linearly are solved exactly on a grid of the nonlinear ones
+//! (variable projection), and Levenberg-Marquardt (the `levenberg-marquardt` crate) polishes
+//! the best few. Physical lower bounds are kept by MINUIT's transform
+//! p = lb − 1 + √(u² + 1), which leaves the optimiser unconstrained.
+
+use crate::data::Samples;
+use crate::error::{Error, Result};
+use crate::laws::Law;
+use crate::numerics::{compensated_sum, geomspace, quantile};
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// How to fit.
+#[derive(Clone, Copy, Debug)]
+pub struct FitOptions {
+    /// Keep every parameter within its physical bound (`--no-bounds` lifts them).
+    pub bounded: bool,
+    /// Number of grid starting points polished by Levenberg-Marquardt per law.
+    pub starts: usize,
+    /// When set, the predicted torque of each sample is scaled by r = WOB / W_ref (N); when
+    /// `None`, r = 1 for every sample (the paper's assumption).
+    pub w_ref_n: Option<f64>,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            bounded: true,
+            starts: 6,
+            w_ref_n: None,
+        }
+    }
+}
+
+/// The least-squares estimate of one law. Parameters are SI (torques in N·m).
+#[derive(Clone, Debug, Serialize)]
+pub struct LawFit {
+    pub law: Law,
+    /// Estimates, SI (torque-valued parameters in N·m).
+    pub params_si: Vec<f64>,
+    /// Standard errors from the Jacobian, SI; `None` for a parameter on its bound or one the
+    /// data cannot determine.
+    pub std_errors_si: Vec<Option<f64>>,
+    /// ρ on the calibration samples.
+    pub rho: f64,
+    /// ρ on the validation samples, when there are any.
+    pub validation_rho: Option<f64>,
+    /// Condition number of the column-normalised Jacobian at the estimate.
+    pub condition_number: f64,
+    /// Pearson correlations of the estimates (row-major, n × n); `None` entries where a
+    /// standard error is undefined.
+    pub correlations: Vec<Vec<Option<f64>>>,
+    /// Whatever the user must know before trusting the numbers.
+    pub warnings: Vec<String>,
+    /// Levenberg-Marquardt runs made (starting points polished).
+    pub starts: usize,
+}
+
+/// The paper's misfit ρ = Σ(y − r·T(w))² / Σy², summed with compensation. `sum_y2` is Σy²
+/// (pass [`Samples::sum_sq_torque`]); `params` must be in the unit of `y`.
+pub fn misfit(law: Law, params: &[f64], w: &[f64], y: &[f64], r: &[f64], sum_y2: f64) -> f64 {
+    let ssr = compensated_sum(w.iter().zip(y).zip(r).map(|((&w, &y), &r)| {
+        let e = y - law.torque(params, w, r);
+        e * e
+    }));
+    ssr / sum_y2
+}
+
+/// Fits every law in `laws` (in parallel) to the calibration part of `samples`.
+pub fn fit_laws(laws: &[Law], calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<Vec<LawFit>> {
+    laws.par_iter()
+        .map(|&law| fit_law(law, calibration, validation, opts))
+        .collect()
+}
+
+/// Characteristic scales that make the problem dimensionless.
+#[derive(Clone, Copy, Debug)]
+struct Scales {
+    /// RMS torque (N·m).
+    torque: f64,
+    /// 95th-percentile bit speed (rad/s).
+    speed: f64,
+}
+
+impl Scales {
+    /// Factor that takes an SI parameter to the scaled problem.
+    fn factor(&self, law: Law, j: usize) -> f64 {
+        let s = law.params()[j];
+        self.speed.powi(s.inverse_speed_power) / self.torque.powi(s.torque_power)
+    }
+}
+
+/// One parameter's map from the optimiser's unconstrained u to the scaled parameter p.
+#[derive(Clone, Copy, Debug)]
+enum Transform {
+    Free,
+    /// MINUIT's one-sided transform: p = lb − 1 + √(u² + 1) ≥ lb.
+    Lower(f64),
+}
+
+impl Transform {
+    fn to_param(self, u: f64) -> f64 {
+        match self {
+            Transform::Free => u,
+            Transform::Lower(lb) => lb - 1.0 + (u * u + 1.0).sqrt(),
+        }
+    }
+    fn to_internal(self, p: f64) -> f64 {
+        match self {
+            Transform::Free => p,
+            Transform::Lower(lb) => {
+                let a = (p - lb + 1.0).max(1.0);
+                (a * a - 1.0).sqrt()
+            }
+        }
+    }
+    fn derivative(self, u: f64) -> f64 {
+        match self {
+            Transform::Free => 1.0,
+            Transform::Lower(_) => u / (u * u + 1.0).sqrt(),
+        }
+    }
+}
+
+/// The scaled least-squares problem handed to Levenberg-Marquardt.
+struct Problem<'a> {
+    law: Law,
+    w: &'a [f64],
+    y: &'a [f64],
+    r: &'a [f64],
+    transforms: Vec<Transform>,
+    u: DVector<f64>,
+}
+
+impl Problem<'_> {
+    fn scaled_params(&self) -> Vec<f64> {
+        self.transforms
+            .iter()
+            .zip(self.u.iter())
+            .map(|(t, &u)| t.to_param(u))
+            .collect()
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, u: &DVector<f64>) {
+        self.u.copy_from(u);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.u.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        let p = self.scaled_params();
+        let res = DVector::from_iterator(
+            self.w.len(),
+            self.w
+                .iter()
+                .zip(self.y)
+                .zip(self.r)
+                .map(|((&w, &y), &r)| self.law.torque(&p, w, r) - y),
+        );
+        res.iter().all(|v| v.is_finite()).then_some(res)
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        let p = self.scaled_params();
+        let n = p.len();
+        let chain: Vec<f64> = self
+            .transforms
+            .iter()
+            .zip(self.u.iter())
+            .map(|(t, &u)| t.derivative(u))
+            .collect();
+        let mut jac = DMatrix::zeros(self.w.len(), n);
+        let mut grad = [0.0; crate::laws::MAX_PARAMS];
+        for (i, (&w, &r)) in self.w.iter().zip(self.r).enumerate() {
+            self.law.torque_and_gradient(&p, w, &mut grad[..n]);
+            for j in 0..n {
+                jac[(i, j)] = r * grad[j] * chain[j];
+            }
+        }
+        jac.iter().all(|v| v.is_finite()).then_some(jac)
+    }
+}
+
+/// Least squares for the coefficients of `columns` (each a function of the sample index),
+/// by normal equations on a handful of columns. `None` when singular.
+fn linear_coefficients(columns: &[Vec<f64>], y: &[f64]) -> Option<Vec<f64>> {
+    let k = columns.len();
+    let mut ata = DMatrix::<f64>::zeros(k, k);
+    let mut aty = DVector::<f64>::zeros(k);
+    for a in 0..k {
+        for b in a..k {
+            let v = compensated_sum(columns[a].iter().zip(&columns[b]).map(|(x, z)| x * z));
+            ata[(a, b)] = v;
+            ata[(b, a)] = v;
+        }
+        aty[a] = compensated_sum(columns[a].iter().zip(y).map(|(x, z)| x * z));
+    }
+    let solution = ata.cholesky()?.solve(&aty);
+    solution
+        .iter()
+        .all(|v| v.is_finite())
+        .then(|| solution.iter().copied().collect())
+}
+
+/// Candidate starting points (scaled parameters) from a grid over the nonlinear parameters,
+/// the linear ones solved exactly at each grid point.
+fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
+    let col = |f: &dyn Fn(f64) -> f64| -> Vec<f64> { w.iter().zip(r).map(|(&w, &r)| r * f(w)).collect() };
+    let mut out = Vec::new();
+    match law {
+        Law::M1 => {
+            for &b1 in &geomspace(0.3, 100.0, 8) {
+                for &b3 in &geomspace(0.3, 3e4, 10) {
+                    let cols = [col(&|w| (b1 * w).tanh()), col(&|w| w / (1.0 + b3 * w * w))];
+                    if let Some(c) = linear_coefficients(&cols, y)
+                        && c[0].abs() > 1e-12
+                    {
+                        out.push(vec![c[0], b1, c[1] / c[0], b3]);
+                    }
+                }
+            }
+        }
+        Law::M2 => {
+            for &g in &geomspace(0.05, 100.0, 24) {
+                let cols = [col(&|w| (-g * w).exp()), col(&|w| 1.0 - (-g * w).exp())];
+                if let Some(c) = linear_coefficients(&cols, y) {
+                    out.push(vec![c[0], c[1], g]);
+                }
+            }
+        }
+        Law::M3 => {
+            for &a1 in &geomspace(0.3, 3e4, 9) {
+                for &a2 in &[-0.05, 0.0, 0.02, 0.08, 0.2, 0.5] {
+                    for &a5 in &geomspace(0.1, 30.0, 7) {
+                        let cols = [
+                            col(&|w| (-a1 * (w - a2) * (w - a2)).exp()),
+                            col(&|_| 1.0),
+                            col(&|w| -(a5 * w).tanh()),
+                        ];
+                        if let Some(c) = linear_coefficients(&cols, y) {
+                            out.push(vec![c[0], a1, a2, c[1], c[2], a5]);
+                        }
+                    }
+                }
+            }
+        }
+        Law::M4 => {
+            let cols = [col(&|_| 1.0), col(&|w| w), col(&|w| w * w), col(&|w| w * w * w)];
+            if let Some(c) = linear_coefficients(&cols, y) {
+                out.push(c);
+            }
+        }
+    }
+    out
+}
+
+/// Sum of squared residuals of scaled parameters on scaled data.
+fn ssr(law: Law, p: &[f64], w: &[f64], y: &[f64], r: &[f64]) -> f64 {
+    compensated_sum(w.iter().zip(y).zip(r).map(|((&w, &y), &r)| {
+        let e = y - law.torque(p, w, r);
+        e * e
+    }))
+}
+
+/// One polished start.
+struct Polished {
+    params: Vec<f64>,
+    ssr: f64,
+    termination: TerminationReason,
+}
+
+/// Fits one law. See the module documentation for the method.
+pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<LawFit> {
+    let m = calibration.len();
+    let n = law.n_params();
+    if m <= n {
+        return Err(Error::Data {
+            path: "calibration data".into(),
+            message: format!("{m} calibration samples cannot determine the {n} parameters of {law}"),
+        });
+    }
+    let y_si = &calibration.torque_nm;
+    let sum_y2 = calibration.sum_sq_torque();
+    let scales = Scales {
+        torque: (sum_y2 / m as f64).sqrt(),
+        speed: quantile(&calibration.speed_rad_s, 0.95).max(f64::MIN_POSITIVE),
+    };
+    let w: Vec<f64> = calibration.speed_rad_s.iter().map(|w| w / scales.speed).collect();
+    let y: Vec<f64> = y_si.iter().map(|y| y / scales.torque).collect();
+    let r = calibration.wob_ratio(opts.w_ref_n);
+
+    let lower: Vec<f64> = (0..n)
+        .map(|j| {
+            if opts.bounded {
+                law.params()[j].lower * scales.factor(law, j)
+            } else {
+                f64::NEG_INFINITY
+            }
+        })
+        .collect();
+    let transforms: Vec<Transform> = lower
+        .iter()
+        .map(|&lb| {
+            if lb.is_finite() {
+                Transform::Lower(lb)
+            } else {
+                Transform::Free
+            }
+        })
+        .collect();
+
+    // Rank grid points by misfit after pulling them just inside the bounds, keep the best
+    // few that are not near-copies of a better one.
+    let margin = 1e-3;
+    let mut candidates: Vec<(f64, Vec<f64>)> = grid_starts(law, &w, &y, &r)
+        .into_iter()
+        .map(|mut p| {
+            for (v, &lb) in p.iter_mut().zip(&lower) {
+                if *v < lb + margin {
+                    *v = lb + margin;
+                }
+            }
+            (ssr(law, &p, &w, &y, &r), p)
+        })
+        .filter(|(s, _)| s.is_finite())
+        .collect();
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut starts: Vec<Vec<f64>> = Vec::new();
+    for (_, p) in candidates {
+        let distinct = starts.iter().all(|q| {
+            q.iter()
+                .zip(&p)
+                .any(|(a, b)| (a - b).abs() > 1e-3 * (a.abs() + b.abs()).max(1e-6))
+        });
+        if distinct {
+            starts.push(p);
+        }
+        if starts.len() >= opts.starts.max(1) {
+            break;
+        }
+    }
+    if starts.is_empty() {
+        return Err(Error::Numerical(format!("{law}: no finite starting point on the data")));
+    }
+
+    let solver = LevenbergMarquardt::new().with_patience(400);
+    let mut polished: Vec<Polished> = starts
+        .iter()
+        .map(|p0| {
+            let problem = Problem {
+                law,
+                w: &w,
+                y: &y,
+                r: &r,
+                u: DVector::from_iterator(n, transforms.iter().zip(p0).map(|(t, &p)| t.to_internal(p))),
+                transforms: transforms.clone(),
+            };
+            let (problem, report) = solver.minimize(problem);
+            let params = problem.scaled_params();
+            Polished {
+                ssr: ssr(law, &params, &w, &y, &r),
+                params,
+                termination: report.termination,
+            }
+        })
+        .filter(|p| p.ssr.is_finite())
+        .collect();
+    if polished.is_empty() {
+        return Err(Error::Numerical(format!(
+            "{law}: Levenberg-Marquardt failed from every start"
+        )));
+    }
+    polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
+    let best = &polished[0];
+    let p = &best.params;
+
+    let mut warnings = Vec::new();
+    if !best.termination.was_successful() {
+        warnings.push(format!(
+            "the optimiser stopped without converging ({:?})",
+            best.termination
+        ));
+    }
+    // Other starts that fit as well but land elsewhere mean the data do not pin the law down.
+    for other in &polished[1..] {
+        if other.ssr <= best.ssr * (1.0 + 1e-6) + 1e-300 {
+            let differing: Vec<&str> = (0..n)
+                .filter(|&j| (other.params[j] - p[j]).abs() > 1e-2 * p[j].abs().max(1e-3))
+                .map(|j| law.params()[j].name)
+                .collect();
+            if !differing.is_empty() {
+                warnings.push(format!(
+                    "several parameter sets fit equally well; the data do not identify {}",
+                    differing.join(", ")
+                ));
+                break;
+            }
+        }
+    }
+
+    let on_bound: Vec<bool> = (0..n).map(|j| lower[j].is_finite() && p[j] - lower[j] < 1e-6).collect();
+    for j in (0..n).filter(|&j| on_bound[j]) {
+        warnings.push(format!(
+            "{} sits on its physical bound ({} ≥ {}): the data push it further; try --no-bounds to see where",
+            law.params()[j].name,
+            law.params()[j].name,
+            law.params()[j].lower
+        ));
+    }
+
+    // Covariance from the Jacobian over the parameters not on a bound: σ² (JᵀJ)⁻¹.
+    let free: Vec<usize> = (0..n).filter(|&j| !on_bound[j]).collect();
+    let mut jac = DMatrix::<f64>::zeros(m, free.len());
+    let mut grad = [0.0; crate::laws::MAX_PARAMS];
+    for i in 0..m {
+        law.torque_and_gradient(p, w[i], &mut grad[..n]);
+        for (c, &j) in free.iter().enumerate() {
+            jac[(i, c)] = r[i] * grad[j];
+        }
+    }
+    let norms: Vec<f64> = (0..free.len()).map(|c| jac.column(c).norm()).collect();
+    let mut std_errors_si = vec![None; n];
+    let mut correlations = vec![vec![None; n]; n];
+    let mut condition_number = f64::INFINITY;
+    if norms.iter().all(|&v| v > 0.0) && !free.is_empty() {
+        let mut normalised = jac.clone();
+        for (c, &norm) in norms.iter().enumerate() {
+            normalised.column_mut(c).scale_mut(1.0 / norm);
+        }
+        let sv = normalised.singular_values();
+        let (smax, smin) = (sv.max(), sv.min());
+        condition_number = if smin > 0.0 { smax / smin } else { f64::INFINITY };
+        if condition_number < 1e12 {
+            let sigma2 = best.ssr / (m - free.len()).max(1) as f64;
+            let jtj = normalised.transpose() * &normalised;
+            if let Some(inv) = jtj.try_inverse() {
+                for (a, &ja) in free.iter().enumerate() {
+                    let var = sigma2 * inv[(a, a)] / (norms[a] * norms[a]);
+                    std_errors_si[ja] = Some(var.sqrt() / scales.factor(law, ja));
+                    for (b, &jb) in free.iter().enumerate() {
+                        correlations[ja][jb] = Some(inv[(a, b)] / (inv[(a, a)] * inv[(b, b)]).sqrt());
+                    }
+                }
+            }
+        }
+    }
+    if condition_number >= 1e6 {
+        let mut worst = (0.0, "", "");
+        for (a, row) in correlations.iter().enumerate() {
+            for (b, &c) in row.iter().enumerate().skip(a + 1) {
+                if let Some(c) = c
+                    && c.abs() > worst.0
+                {
+                    worst = (c.abs(), law.params()[a].name, law.params()[b].name);
+                }
+            }
+        }
+        let pair = if worst.0 > 0.0 {
+            format!(
+                "; {} and {} trade off (|correlation| = {:.6})",
+                worst.1, worst.2, worst.0
+            )
+        } else {
+            String::new()
+        };
+        warnings.push(format!(
+            "ill-conditioned (condition number {condition_number:.2e}){pair}"
+        ));
+    }
+
+    let params_si: Vec<f64> = (0..n).map(|j| p[j] / scales.factor(law, j)).collect();
+    for j in 0..n {
+        if let Some(se) = std_errors_si[j]
+            && se > 0.5 * params_si[j].abs()
+        {
+            warnings.push(format!(
+                "{} is not identified by the data: its standard error exceeds half its value",
+                law.params()[j].name
+            ));
+        }
+    }
+    let rho = best.ssr * scales.torque * scales.torque / sum_y2;
+    let validation_rho = (!validation.is_empty()).then(|| {
+        misfit(
+            law,
+            &params_si,
+            &validation.speed_rad_s,
+            &validation.torque_nm,
+            &validation.wob_ratio(opts.w_ref_n),
+            validation.sum_sq_torque(),
+        )
+    });
+    Ok(LawFit {
+        law,
+        params_si,
+        std_errors_si,
+        rho,
+        validation_rho,
+        condition_number,
+        correlations,
+        warnings,
+        starts: starts.len(),
+    })
+}

@@ -1,0 +1,152 @@
+//! Units at the edges of the program. The library works in SI (rad/s, N·m, N); these enums name
+//! what the user reads and writes, and convert.
+
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+
+/// rad/s per rpm.
+pub const RAD_S_PER_RPM: f64 = 2.0 * PI / 60.0;
+
+/// Unit of bit or rotary speed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+pub enum SpeedUnit {
+    /// Revolutions per minute.
+    #[value(name = "rpm")]
+    #[serde(rename = "rpm")]
+    Rpm,
+    /// Radians per second.
+    #[value(name = "rad_s")]
+    #[serde(rename = "rad/s")]
+    RadS,
+}
+
+impl SpeedUnit {
+    /// Value in this unit → rad/s.
+    pub fn to_rad_s(self, v: f64) -> f64 {
+        match self {
+            SpeedUnit::Rpm => v * RAD_S_PER_RPM,
+            SpeedUnit::RadS => v,
+        }
+    }
+    /// Printed name.
+    pub fn label(self) -> &'static str {
+        match self {
+            SpeedUnit::Rpm => "rpm",
+            SpeedUnit::RadS => "rad/s",
+        }
+    }
+    /// The unit a column name's suffix declares (`bit_speed_rpm`, `w_rad_s`), if any.
+    pub fn from_suffix(column: &str) -> Option<Self> {
+        let c = column.to_ascii_lowercase();
+        if c.ends_with("_rpm") {
+            Some(SpeedUnit::Rpm)
+        } else if c.ends_with("_rad_s") {
+            Some(SpeedUnit::RadS)
+        } else {
+            None
+        }
+    }
+}
+
+/// Unit of torque.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+pub enum TorqueUnit {
+    /// Newton metres (laboratory rigs).
+    #[value(name = "nm")]
+    #[serde(rename = "N·m")]
+    Nm,
+    /// Kilonewton metres (field data; the paper's parameters).
+    #[value(name = "knm")]
+    #[serde(rename = "kN·m")]
+    KNm,
+}
+
+impl TorqueUnit {
+    /// N·m per one of this unit.
+    pub fn newton_metres(self) -> f64 {
+        match self {
+            TorqueUnit::Nm => 1.0,
+            TorqueUnit::KNm => 1000.0,
+        }
+    }
+    /// Printed name.
+    pub fn label(self) -> &'static str {
+        match self {
+            TorqueUnit::Nm => "N·m",
+            TorqueUnit::KNm => "kN·m",
+        }
+    }
+    /// The unit a column name's suffix declares (`torque_knm`, `tob_nm`), if any.
+    pub fn from_suffix(column: &str) -> Option<Self> {
+        let c = column.to_ascii_lowercase();
+        if c.ends_with("_knm") {
+            Some(TorqueUnit::KNm)
+        } else if c.ends_with("_nm") {
+            Some(TorqueUnit::Nm)
+        } else {
+            None
+        }
+    }
+}
+
+/// Unit of force (weight on bit).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+pub enum ForceUnit {
+    /// Newtons.
+    #[value(name = "n")]
+    #[serde(rename = "N")]
+    N,
+    /// Kilonewtons.
+    #[value(name = "kn")]
+    #[serde(rename = "kN")]
+    KN,
+}
+
+impl ForceUnit {
+    /// N per one of this unit.
+    pub fn newtons(self) -> f64 {
+        match self {
+            ForceUnit::N => 1.0,
+            ForceUnit::KN => 1000.0,
+        }
+    }
+    /// Printed name.
+    pub fn label(self) -> &'static str {
+        match self {
+            ForceUnit::N => "N",
+            ForceUnit::KN => "kN",
+        }
+    }
+    /// The unit a column name's suffix declares (`wob_kn`, `wob_n`), if any.
+    pub fn from_suffix(column: &str) -> Option<Self> {
+        let c = column.to_ascii_lowercase();
+        if c.ends_with("_kn") {
+            Some(ForceUnit::KN)
+        } else if c.ends_with("_n") {
+            Some(ForceUnit::N)
+        } else {
+            None
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn suffixes_name_units() {
+        assert_eq!(SpeedUnit::from_suffix("bit_speed_rpm"), Some(SpeedUnit::Rpm));
+        assert_eq!(SpeedUnit::from_suffix("W_RAD_S"), Some(SpeedUnit::RadS));
+        assert_eq!(SpeedUnit::from_suffix("speed"), None);
+        assert_eq!(TorqueUnit::from_suffix("torque_knm"), Some(TorqueUnit::KNm));
+        assert_eq!(TorqueUnit::from_suffix("torque_nm"), Some(TorqueUnit::Nm));
+        assert_eq!(ForceUnit::from_suffix("wob_kn"), Some(ForceUnit::KN));
+        assert_eq!(ForceUnit::from_suffix("wob_n"), Some(ForceUnit::N));
+    }
+
+    #[test]
+    fn sixty_rpm_is_two_pi_rad_s() {
+        assert!((SpeedUnit::Rpm.to_rad_s(60.0) - 2.0 * PI).abs() < 1e-12);
+    }
+}
