@@ -23,6 +23,9 @@ pub struct Cli {
 pub enum Command {
     /// Least-squares fit of each law to a field record (the paper's deterministic calibration).
     Fit(FitCmd),
+    /// ABC rejection sampling with model selection (the paper's Algorithm 1): posterior law
+    /// probabilities and parameter distributions, written to a run directory.
+    Abc(AbcCmd),
     /// Simulate the 1-DOF torsional drill string with a bit-rock law; writes a field-like CSV.
     Simulate(SimulateCmd),
     /// Run the whole pipeline on the embedded (synthetic) demo record.
@@ -206,11 +209,84 @@ pub struct SimulateCmd {
     pub out: Option<PathBuf>,
 }
 
+/// How the ABC sampler runs.
+#[derive(Debug, Args, Clone)]
+pub struct AbcArgs {
+    /// Particles per population, N (the paper's 25,000).
+    #[arg(long, default_value_t = 25_000, value_name = "N")]
+    pub particles: usize,
+    /// Prior half-width: each parameter is uniform on [p(1 − δ), p(1 + δ)] around its
+    /// least-squares estimate p, clipped to its physical bound.
+    #[arg(long, default_value_t = 0.4, value_name = "DELTA", allow_hyphen_values = true)]
+    pub delta: f64,
+    /// Prior file (TOML) with explicit bounds or law weights; overrides the δ rule where it
+    /// speaks (format in the README).
+    #[arg(long, value_name = "FILE")]
+    pub prior: Option<PathBuf>,
+    /// Smallest tolerance on ρ: the population that reaches it is the last (the paper's 0.014).
+    #[arg(long, default_value_t = 0.014, value_name = "EPS")]
+    pub eps_min: f64,
+    /// Tolerance schedule ε_1 > ε_2 > ... instead of the median rule (ε_0 stays ∞).
+    #[arg(long, value_delimiter = ',', value_name = "E1,E2,...")]
+    pub epsilons: Option<Vec<f64>>,
+    /// Tolerance of population 0 [default: ∞, the first N prior draws].
+    #[arg(long, value_name = "EPS")]
+    pub start_epsilon: Option<f64>,
+    /// Most populations, population 0 included.
+    #[arg(long, default_value_t = 30, value_name = "G")]
+    pub max_populations: usize,
+    /// Most candidates scored over the run.
+    #[arg(long, default_value_t = 2_000_000_000, value_name = "COUNT")]
+    pub max_draws: u64,
+    /// Stop when the projected acceptance rate of the next population falls below this.
+    #[arg(long, default_value_t = 1e-5, value_name = "RATE")]
+    pub min_acceptance: f64,
+    /// nested: one candidate stream, each population keeps the previous particles below its
+    /// tolerance (same distribution, about half the evaluations); paper: a fresh stream per
+    /// population, as the paper's Algorithm 1.
+    #[arg(long, value_enum, default_value_t = bitrock::abc::rejection::Mode::Nested)]
+    pub mode: bitrock::abc::rejection::Mode,
+    /// Seed of the candidate streams: the same seed gives the same populations.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+}
+
 #[derive(Debug, Args)]
-pub struct DemoCmd {
+pub struct AbcCmd {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
+    /// Run directory to write (run.json, particle and envelope CSVs).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Replace a non-empty run directory.
+    #[arg(long)]
+    pub force: bool,
+    #[command(flatten)]
+    pub data_args: DataArgs,
     #[command(flatten)]
     pub fit: FitArgs,
+    #[command(flatten)]
+    pub abc: AbcArgs,
     /// Print JSON instead of tables.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct DemoCmd {
+    /// Run directory for the ABC run of the demo.
+    #[arg(long, value_name = "DIR", default_value = "bitrock-demo")]
+    pub out: PathBuf,
+    /// Particles per population (the paper's N is 25,000).
+    #[arg(long, default_value_t = 25_000, value_name = "N")]
+    pub particles: usize,
+    /// Seed of the candidate streams.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
 }

@@ -7,11 +7,15 @@
 //! only at the edges (CSV columns, flags, printed tables), always named.
 #![deny(clippy::float_cmp)]
 
+pub mod abc;
 pub mod data;
 pub mod error;
+pub mod eval;
 pub mod fit;
 pub mod laws;
 pub mod numerics;
+pub mod prior;
+pub mod rng;
 pub mod simulate;
 pub mod stability;
 pub mod units;

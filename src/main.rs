@@ -5,8 +5,13 @@ mod cli;
 mod output;
 
 use anyhow::Context;
+use bitrock::abc::posterior::{PosteriorSummary, predictive_envelope, speed_grid, summarize};
+use bitrock::abc::rejection::{self, Mode, RejectionConfig, RejectionRun};
 use bitrock::data::{self, FieldData};
+use bitrock::eval::cpu::CpuEvaluator;
+use bitrock::eval::{AbcProblem, Evaluator};
 use bitrock::fit::{self, FitOptions};
+use bitrock::prior::{Prior, PriorFile};
 use bitrock::simulate::{self, Initial, SimConfig};
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
@@ -14,6 +19,7 @@ use bitrock::{Error, Law};
 use clap::Parser;
 use cli::{Cli, Command, FitArgs};
 use std::io::Write;
+use std::path::Path;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -42,17 +48,28 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             };
             fit_and_print(&data, &cmd.fit, cmd.json)?;
         }
-        Command::Simulate(cmd) => simulate_cmd(&cmd)?,
-        Command::Demo(cmd) => {
-            let data = data::demo_field_data(&data::DataOptions::default())?;
-            if !cmd.json {
-                println!(
-                    "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
-                );
-                println!("the paper's field data are not public.\n");
+        Command::Abc(cmd) => {
+            let opts = cmd.data_args.options();
+            let data = match &cmd.data {
+                Some(path) => data::read_field_data(path, &opts)?,
+                None => {
+                    eprintln!("note: no DATA given; using the embedded synthetic demo record");
+                    data::demo_field_data(&opts)?
+                }
+            };
+            let done = run_abc(&data, &cmd.fit, &cmd.abc, &cmd.out, cmd.force, cmd.json)?;
+            let mut out = std::io::stdout().lock();
+            if cmd.json {
+                serde_json::to_writer_pretty(&mut out, &done.report)?;
+                writeln!(out)?;
+            } else {
+                output::print_population_table(&mut out, &done.run)?;
+                output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
+                writeln!(out, "\nrun written to {}", cmd.out.display())?;
             }
-            fit_and_print(&data, &cmd.fit, cmd.json)?;
         }
+        Command::Simulate(cmd) => simulate_cmd(&cmd)?,
+        Command::Demo(cmd) => demo_cmd(&cmd)?,
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -93,6 +110,207 @@ fn fit_and_print(data: &FieldData, args: &FitArgs, json: bool) -> anyhow::Result
     } else {
         output::print_fit_tables(&mut out, data, &fits)?;
     }
+    Ok(())
+}
+
+/// What an ABC run leaves for printing.
+struct AbcDone {
+    run: RejectionRun,
+    posterior: PosteriorSummary,
+    report: serde_json::Value,
+}
+
+/// Refuses a run directory that would be overwritten without --force, before any work.
+fn check_run_dir(dir: &Path, force: bool) -> anyhow::Result<()> {
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(Error::arg("--out", format!("{} exists and is not a directory", dir.display())).into());
+        }
+        let non_empty = std::fs::read_dir(dir)?.next().is_some();
+        if non_empty && !force {
+            return Err(Error::arg(
+                "--out",
+                format!("{} is not empty; pass --force to replace it", dir.display()),
+            )
+            .into());
+        }
+    }
+    Ok(())
+}
+
+/// Fit, prior, rejection sampling, summaries; writes the run directory whole or not at all.
+fn run_abc(
+    data: &FieldData,
+    fit_args: &FitArgs,
+    args: &cli::AbcArgs,
+    out_dir: &Path,
+    force: bool,
+    quiet: bool,
+) -> anyhow::Result<AbcDone> {
+    // Everything that can be refused is refused before any work.
+    let fit_opts = fit_options(fit_args, data)?;
+    let config = RejectionConfig {
+        particles: args.particles,
+        eps_min: args.eps_min,
+        max_populations: args.max_populations,
+        max_draws: args.max_draws,
+        min_acceptance: args.min_acceptance,
+        start_epsilon: args.start_epsilon,
+        epsilons: args.epsilons.clone(),
+        mode: args.mode,
+        ..RejectionConfig::default()
+    };
+    config.validate()?;
+    if !(args.delta.is_finite() && args.delta > 0.0) {
+        return Err(Error::arg("--delta", format!("must be a positive number, got {}", args.delta)).into());
+    }
+    let prior_file = args.prior.as_deref().map(PriorFile::read).transpose()?;
+    check_run_dir(out_dir, force)?;
+    if let Some(threads) = args.threads {
+        if threads == 0 {
+            return Err(Error::arg("--threads", "must be at least 1").into());
+        }
+        rayon::ThreadPoolBuilder::new().num_threads(threads).build_global()?;
+    }
+
+    let fits = fit::fit_laws(&fit_args.laws, &data.calibration, &data.validation, &fit_opts)?;
+    let prior = Prior::from_fits(&fits, args.delta, prior_file.as_ref(), data.torque_unit.newton_metres())?;
+    let problem = AbcProblem::new(prior.clone(), args.seed, &data.calibration, fit_opts.w_ref_n);
+    let evaluator = CpuEvaluator::new(problem);
+    let run = rejection::run_with_progress(&evaluator, &config, &mut |r| {
+        if !quiet {
+            let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
+            eprintln!(
+                "population {:>2}: ε = {eps}, {} accepted of {} drawn, {:.2} s",
+                r.index, r.accepted, r.draws, r.seconds
+            );
+        }
+    })?;
+    let last = run
+        .populations
+        .last()
+        .ok_or_else(|| Error::Numerical("no population completed".into()))?;
+    let posterior = summarize(&last.particles, &fit_args.laws);
+    let all_speeds = data.calibration.speed_rad_s.iter().chain(&data.validation.speed_rad_s);
+    let (lo, hi) = all_speeds.fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
+    let grid = speed_grid(lo, hi, 200);
+    let envelopes: Vec<_> = fit_args
+        .laws
+        .iter()
+        .filter_map(|&law| predictive_envelope(&last.particles, law, &grid, output::ENVELOPE_LEVEL, 1.0))
+        .collect();
+    let report = output::AbcReport {
+        data,
+        fits: &fits,
+        prior: &prior,
+        run: &run,
+        posterior: &posterior,
+        config: serde_json::json!({
+            "particles": args.particles,
+            "delta": args.delta,
+            "prior_file": args.prior.as_ref().map(|p| p.display().to_string()),
+            "eps_min": args.eps_min,
+            "epsilons": args.epsilons,
+            "start_epsilon": args.start_epsilon,
+            "max_populations": args.max_populations,
+            "max_draws": args.max_draws,
+            "min_acceptance": args.min_acceptance,
+            "mode": args.mode,
+            "laws": fit_args.laws,
+            "bounded_fit": fit_opts.bounded,
+            "w_ref_kn_for_wob_scaling": fit_opts.w_ref_n.map(|w| w / 1000.0),
+            "threads": rayon::current_num_threads(),
+        }),
+        seed: args.seed,
+        backend: evaluator.backend(),
+    }
+    .json();
+
+    // Write into a fresh directory beside the target, then move it into place.
+    let parent = out_dir
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).map_err(|source| Error::Write {
+        path: parent.to_path_buf(),
+        source,
+    })?;
+    let staging = tempfile::Builder::new()
+        .prefix(".bitrock-run-")
+        .tempdir_in(parent)
+        .map_err(|source| Error::Write {
+            path: parent.to_path_buf(),
+            source,
+        })?;
+    std::fs::write(
+        staging.path().join("run.json"),
+        serde_json::to_string_pretty(&report)? + "\n",
+    )?;
+    std::fs::create_dir(staging.path().join("populations"))?;
+    for p in &run.populations {
+        let path = staging
+            .path()
+            .join("populations")
+            .join(format!("population_{:03}.csv", p.record.index));
+        output::write_particles(&path, &p.particles, &fit_args.laws, data.torque_unit)?;
+    }
+    output::write_envelopes(staging.path(), &envelopes, data)?;
+    if out_dir.exists() {
+        std::fs::remove_dir_all(out_dir).map_err(|source| Error::Write {
+            path: out_dir.to_path_buf(),
+            source,
+        })?;
+    }
+    let staged = staging.keep();
+    std::fs::rename(&staged, out_dir).map_err(|source| Error::Write {
+        path: out_dir.to_path_buf(),
+        source,
+    })?;
+    Ok(AbcDone { run, posterior, report })
+}
+
+/// The whole pipeline on the embedded record: fits, then ABC, printed as tables.
+fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
+    let data = data::demo_field_data(&data::DataOptions::default())?;
+    // The demo replaces its own run directory, but nothing else.
+    let replace = cmd.out.join("run.json").exists();
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
+    )?;
+    writeln!(out, "the paper's field data are not public.\n")?;
+    let fit_args = FitArgs {
+        laws: Law::ALL.to_vec(),
+        no_bounds: false,
+        starts: 6,
+        scale_by_wob: false,
+        w_ref_kn: 244.2,
+    };
+    fit_and_print(&data, &fit_args, false)?;
+    let args = cli::AbcArgs {
+        particles: cmd.particles,
+        delta: 0.4,
+        prior: None,
+        eps_min: 0.014,
+        epsilons: None,
+        start_epsilon: None,
+        max_populations: 30,
+        max_draws: 2_000_000_000,
+        min_acceptance: 1e-5,
+        mode: Mode::Nested,
+        seed: cmd.seed,
+        threads: cmd.threads,
+    };
+    writeln!(
+        out,
+        "ABC rejection with model selection: N = {}, δ = 0.4, ε_min = 0.014, seed {}",
+        args.particles, args.seed
+    )?;
+    let done = run_abc(&data, &fit_args, &args, &cmd.out, replace, false)?;
+    output::print_population_table(&mut out, &done.run)?;
+    output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
+    writeln!(out, "\nrun written to {}", cmd.out.display())?;
     Ok(())
 }
 

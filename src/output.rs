@@ -1,10 +1,17 @@
 //! What the binary prints: aligned tables with units for people, JSON for programs.
 //! Parameters leave the library in SI and are shown in the record's torque unit.
 
+use bitrock::Law;
+use bitrock::abc::Particle;
+use bitrock::abc::posterior::{Envelope, PosteriorSummary};
+use bitrock::abc::rejection::{PopulationRecord, RejectionRun};
 use bitrock::data::FieldData;
 use bitrock::fit::LawFit;
+use bitrock::prior::Prior;
+use bitrock::units::TorqueUnit;
 use serde_json::{Value, json};
 use std::io::{self, Write};
+use std::path::Path;
 
 /// The parameter values and standard errors of `fit` in the record's torque unit.
 fn in_record_units(data: &FieldData, fit: &LawFit) -> (Vec<f64>, Vec<Option<f64>>) {
@@ -151,6 +158,268 @@ pub fn print_fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit])
             writeln!(out, "    warning: {w}")?;
         }
         writeln!(out)?;
+    }
+    Ok(())
+}
+
+/// A torque-scaled vector (parameters, their spreads) from SI to the record's torque unit.
+fn to_record_units(law: Law, values_si: &[f64], torque_unit: TorqueUnit) -> Vec<f64> {
+    law.scale_torque(values_si, 1.0 / torque_unit.newton_metres())
+}
+
+/// `{"m1": p, ...}` from per-law values.
+fn by_law(values: impl IntoIterator<Item = (Law, f64)>) -> Value {
+    Value::Object(
+        values
+            .into_iter()
+            .map(|(law, p)| (law.name().to_string(), json!(p)))
+            .collect(),
+    )
+}
+
+/// One population's record as JSON.
+fn population_json(record: &PopulationRecord) -> Value {
+    json!({
+        "index": record.index,
+        "epsilon": record.epsilon,
+        "draws": record.draws,
+        "accepted": record.accepted,
+        "acceptance_rate": record.acceptance_rate,
+        "model_probabilities": by_law(record.per_law.iter().map(|l| (l.law, l.probability))),
+        "per_law": record.per_law,
+        "candidates_scored": record.candidates_scored,
+        "evaluations": record.evaluations,
+        "seconds": record.seconds,
+        "stream": record.stream,
+    })
+}
+
+/// Everything an ABC run produced, as written to DIR/run.json and printed by `abc --json`.
+pub struct AbcReport<'a> {
+    pub data: &'a FieldData,
+    pub fits: &'a [LawFit],
+    pub prior: &'a Prior,
+    pub run: &'a RejectionRun,
+    pub posterior: &'a PosteriorSummary,
+    pub config: Value,
+    pub seed: u64,
+    pub backend: &'a str,
+}
+
+impl AbcReport<'_> {
+    pub fn json(&self) -> Value {
+        let unit = self.data.torque_unit;
+        let priors: Vec<Value> = self
+            .prior
+            .boxes
+            .iter()
+            .zip(&self.prior.weights)
+            .map(|(b, w)| {
+                let lower: Vec<f64> = b.lower.iter().map(|&v| f64::from(v)).collect();
+                let upper: Vec<f64> = b.upper.iter().map(|&v| f64::from(v)).collect();
+                json!({
+                    "law": b.law,
+                    "names": b.law.param_names(),
+                    "units": b.law.params().iter().map(|s| s.unit(unit.label())).collect::<Vec<_>>(),
+                    "lower": to_record_units(b.law, &lower, unit),
+                    "upper": to_record_units(b.law, &upper, unit),
+                    "weight": w,
+                })
+            })
+            .collect();
+        let laws: Vec<Value> = self
+            .posterior
+            .laws
+            .iter()
+            .map(|s| {
+                let conv = |v: &[f64]| to_record_units(s.law, v, unit);
+                json!({
+                    "law": s.law,
+                    "names": s.names,
+                    "units": s.law.params().iter().map(|p| p.unit(unit.label())).collect::<Vec<_>>(),
+                    "count": s.count,
+                    "probability": s.probability,
+                    "mean": conv(&s.mean),
+                    "std_dev": conv(&s.std_dev),
+                    "q01": conv(&s.q01),
+                    "q50": conv(&s.q50),
+                    "q99": conv(&s.q99),
+                    "correlation": s.correlation,
+                    "best": {"index": s.best.index, "rho": s.best.rho, "params": conv(&s.best.params)},
+                    "map": conv(&s.map),
+                    "map_bandwidth": conv(&s.map_bandwidth),
+                })
+            })
+            .collect();
+        let fits = fit_json(self.data, self.fits);
+        json!({
+            "version": env!("CARGO_PKG_VERSION"),
+            "backend": self.backend,
+            "seed": self.seed,
+            "config": self.config,
+            "data": {
+                "source": fits["source"],
+                "columns": fits["columns"],
+                "torque_unit": unit.label(),
+                "rows_read": self.data.rows_read,
+                "rows_used": self.data.rows_used,
+                "calibration_rows": self.data.calibration.len(),
+                "validation_rows": self.data.validation.len(),
+            },
+            "fits": fits["fits"],
+            "priors": priors,
+            "populations": self.run.populations.iter().map(|p| population_json(&p.record)).collect::<Vec<_>>(),
+            "stop_reason": self.run.stop,
+            "stop_description": self.run.stop.describe(),
+            "posterior": {
+                "population": self.run.populations.len() - 1,
+                "total": self.posterior.total,
+                "model_probabilities": by_law(self.posterior.model_probabilities.iter().copied()),
+                "laws": laws,
+            },
+            "envelopes": {"file": "envelopes.csv", "level": ENVELOPE_LEVEL},
+            "evaluations": self.run.evaluations,
+            "seconds": self.run.seconds,
+        })
+    }
+}
+
+/// The paper's predictive envelope level.
+pub const ENVELOPE_LEVEL: f64 = 0.98;
+
+/// Header of a particle CSV: law, index, rho, then every law's parameters with units.
+fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {
+    let mut header = vec!["law".to_string(), "index".to_string(), "rho".to_string()];
+    for law in laws {
+        for spec in law.params() {
+            header.push(format!("{} [{}]", spec.name, spec.unit(unit.label())));
+        }
+    }
+    header
+}
+
+/// Writes one population's particles: one row per particle, parameters in columns (empty
+/// cells for the other laws' parameters).
+pub fn write_particles(path: &Path, particles: &[Particle], laws: &[Law], unit: TorqueUnit) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_path(path)?;
+    w.write_record(particle_header(laws, unit))?;
+    for p in particles {
+        let mut row = vec![p.law.name().to_string(), p.index.to_string(), format!("{:e}", p.rho)];
+        for law in laws {
+            if *law == p.law {
+                row.extend(to_record_units(p.law, &p.params, unit).iter().map(|v| format!("{v:e}")));
+            } else {
+                row.extend(std::iter::repeat_n(String::new(), law.n_params()));
+            }
+        }
+        w.write_record(&row)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// Writes the predictive envelopes (one block of rows per law) and, beside them, the data.
+pub fn write_envelopes(dir: &Path, envelopes: &[Envelope], data: &FieldData) -> anyhow::Result<()> {
+    let unit = data.torque_unit;
+    let suffix = match unit {
+        TorqueUnit::Nm => "nm",
+        TorqueUnit::KNm => "knm",
+    };
+    let to_unit = 1.0 / unit.newton_metres();
+    let mut w = csv::Writer::from_path(dir.join("envelopes.csv"))?;
+    w.write_record([
+        "law".to_string(),
+        "speed_rad_s".into(),
+        format!("lower_{suffix}"),
+        format!("median_{suffix}"),
+        format!("upper_{suffix}"),
+    ])?;
+    for e in envelopes {
+        for i in 0..e.speed_rad_s.len() {
+            w.write_record([
+                e.law.name().to_string(),
+                format!("{:.6}", e.speed_rad_s[i]),
+                format!("{:.6e}", e.lower[i] * to_unit),
+                format!("{:.6e}", e.median[i] * to_unit),
+                format!("{:.6e}", e.upper[i] * to_unit),
+            ])?;
+        }
+    }
+    w.flush()?;
+    let mut w = csv::Writer::from_path(dir.join("data.csv"))?;
+    w.write_record(["set".to_string(), "speed_rad_s".into(), format!("torque_{suffix}")])?;
+    for (set, samples) in [("calibration", &data.calibration), ("validation", &data.validation)] {
+        for (s, t) in samples.speed_rad_s.iter().zip(&samples.torque_nm) {
+            w.write_record([set.to_string(), format!("{s:.6}"), format!("{:.6e}", t * to_unit)])?;
+        }
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// The per-population table of an ABC run.
+pub fn print_population_table(out: &mut impl Write, run: &RejectionRun) -> io::Result<()> {
+    let laws: Vec<Law> = run.populations[0].record.per_law.iter().map(|l| l.law).collect();
+    write!(
+        out,
+        "{:>4}  {:>10}  {:>12}  {:>8}  {:>9}",
+        "pop", "epsilon", "draws", "accepted", "acc.rate"
+    )?;
+    for law in &laws {
+        write!(out, "  {:>7}", format!("P({law})"))?;
+    }
+    writeln!(out, "  {:>8}", "time_s")?;
+    for p in &run.populations {
+        let r = &p.record;
+        let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
+        write!(
+            out,
+            "{:>4}  {:>10}  {:>12}  {:>8}  {:>9.5}",
+            r.index, eps, r.draws, r.accepted, r.acceptance_rate
+        )?;
+        for l in &r.per_law {
+            write!(out, "  {:>7.4}", l.probability)?;
+        }
+        writeln!(out, "  {:>8.3}", r.seconds)?;
+    }
+    writeln!(
+        out,
+        "stopped: {}; {:.3e} candidate × data-point evaluations in {:.2} s",
+        run.stop.describe(),
+        run.evaluations as f64,
+        run.seconds
+    )
+}
+
+/// Per-law posterior tables in the record's units.
+pub fn print_posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: TorqueUnit) -> io::Result<()> {
+    for s in &posterior.laws {
+        writeln!(
+            out,
+            "\n{}  P = {:.4}  ({} particles; best ρ = {:.5})",
+            s.law, s.probability, s.count, s.best.rho
+        )?;
+        let conv = |v: &[f64]| to_record_units(s.law, v, unit);
+        let cols = [
+            conv(&s.mean),
+            conv(&s.std_dev),
+            conv(&s.q01),
+            conv(&s.q50),
+            conv(&s.q99),
+            conv(&s.map),
+        ];
+        writeln!(
+            out,
+            "    {:<6} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12}  unit",
+            "param", "mean", "std.dev", "q01", "q50", "q99", "MAP"
+        )?;
+        for (j, spec) in s.law.params().iter().enumerate() {
+            write!(out, "    {:<6}", spec.name)?;
+            for c in &cols {
+                write!(out, " {:>12}", number(c[j]))?;
+            }
+            writeln!(out, "  {}", spec.unit(unit.label()))?;
+        }
     }
     Ok(())
 }

@@ -150,12 +150,122 @@ fn simulated_record_is_fitted_back() {
 }
 
 #[test]
-fn demo_prints_the_fit_table() {
-    let (code, stdout, stderr) = run(&["demo"]);
+fn demo_prints_fits_and_the_population_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo-run");
+    let (code, stdout, stderr) = run(&["demo", "--particles", "2000", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("synthetic"));
     for law in ["m1", "m2", "m3", "m4"] {
         assert!(stdout.contains(&format!("{law}  T = ")), "{stdout}");
+        assert!(stdout.contains(&format!("P({law})")), "{stdout}");
     }
-    assert!(stdout.contains("kN·m"));
+    assert!(stdout.contains("stopped: the tolerance reached --eps-min"), "{stdout}");
+    assert!(out.join("run.json").exists());
+    // Run again: the demo replaces its own run directory.
+    let (code, _, stderr) = run(&["demo", "--particles", "500", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+}
+
+#[test]
+fn abc_writes_a_run_directory_and_json_with_its_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let args = [
+        "abc",
+        "--particles",
+        "1000",
+        "--seed",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ];
+    let (code, stdout, stderr) = run(&args);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    for key in ["populations", "posterior", "evaluations", "seconds", "backend"] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    let pops = v["populations"].as_array().unwrap();
+    for p in pops {
+        for key in ["index", "epsilon", "draws", "accepted", "model_probabilities"] {
+            assert!(p.get(key).is_some(), "missing {key} in {p}");
+        }
+        let total: f64 = p["model_probabilities"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|x| x.as_f64().unwrap())
+            .sum();
+        assert!((total - 1.0).abs() < 1e-12);
+    }
+    assert!(pops[0]["epsilon"].is_null(), "ε_0 = ∞ is null");
+    let eps_last = pops.last().unwrap()["epsilon"].as_f64().unwrap();
+    assert!((eps_last - 0.014).abs() < 1e-15, "{eps_last}");
+    // The run directory holds the same JSON, every population's particles and the envelopes.
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+    assert_eq!(stored, v);
+    for g in 0..pops.len() {
+        let csv = std::fs::read_to_string(out.join(format!("populations/population_{g:03}.csv"))).unwrap();
+        assert_eq!(csv.lines().count(), 1001);
+        assert!(csv.starts_with("law,index,rho,b0 [kN·m]"), "{}", &csv[..80]);
+    }
+    let envelopes = std::fs::read_to_string(out.join("envelopes.csv")).unwrap();
+    assert!(envelopes.starts_with("law,speed_rad_s,lower_knm,median_knm,upper_knm"));
+    assert!(out.join("data.csv").exists());
+
+    // Same seed, same populations.
+    let again = dir.path().join("again");
+    let (code, stdout2, _) = run(&[
+        "abc",
+        "--particles",
+        "1000",
+        "--seed",
+        "3",
+        "--out",
+        again.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0);
+    let w: serde_json::Value = serde_json::from_str(&stdout2).unwrap();
+    for (a, b) in pops.iter().zip(w["populations"].as_array().unwrap()) {
+        assert_eq!(
+            (&a["epsilon"], &a["draws"], &a["model_probabilities"]),
+            (&b["epsilon"], &b["draws"], &b["model_probabilities"])
+        );
+    }
+
+    // A non-empty directory is not overwritten without --force, and nothing is computed.
+    let (code, _, stderr) = run(&args);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("--force"), "{stderr}");
+    let (code, _, stderr) = run(&[&args[..], &["--force"]].concat());
+    assert_eq!(code, 0, "{stderr}");
+}
+
+#[test]
+fn refused_abc_configurations_error_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = out.to_str().unwrap();
+    for (args, flag) in [
+        (vec!["abc", "--particles", "0", "--out", o], "--particles"),
+        (vec!["abc", "--delta", "0", "--out", o], "--delta"),
+        (vec!["abc", "--delta", "-0.2", "--out", o], "--delta"),
+        (vec!["abc", "--laws", "m2,m9", "--out", o], "m9"),
+        (vec!["abc", "--epsilons", "0.05,0.07", "--out", o], "--epsilons"),
+        (vec!["abc", "--prior", "/no/such/prior.toml", "--out", o], "prior.toml"),
+    ] {
+        let (code, _, stderr) = run(&args);
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stderr.contains(flag), "{args:?}: {stderr}");
+        assert!(!out.exists(), "{args:?} wrote {o}");
+    }
+    let bad = dir.path().join("prior.toml");
+    std::fs::write(&bad, "[m2]\ntsb = [10, 20]\ngamma = [1, 2]\n").unwrap();
+    let (code, _, stderr) = run(&["abc", "--prior", bad.to_str().unwrap(), "--out", o]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("no parameter 'gamma'"), "{stderr}");
 }

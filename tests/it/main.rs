@@ -1,5 +1,6 @@
 //! One integration-test binary; each module covers one part of the pipeline.
 
+mod abc;
 mod cli;
 mod fit;
 mod laws;

@@ -1,0 +1,371 @@
+//! Priors of the ABC: a probability per law and, per parameter, an independent uniform box.
+//!
+//! The paper's rule (eq. minmax): [φ̂(1 − δ), φ̂(1 + δ)] around the least-squares estimate,
+//! ordered (a negative estimate flips the ends) and clipped to the law's physical bounds. A
+//! TOML file can replace any box and set the law weights:
+//!
+//! ```toml
+//! # Torque-valued bounds in the record's torque unit (kN·m for a kN·m record), speeds in rad/s.
+//! [weights]          # prior law probabilities, normalised; laws not listed keep weight 1
+//! m1 = 1.0
+//! m4 = 0.5
+//! [m2]               # [lower, upper] per parameter; parameters not listed keep the δ rule
+//! tsb = [8.0, 18.0]
+//! g = [0.1, 0.5]
+//! ```
+//!
+//! Candidates are drawn from the prior by [`Prior::candidate`], a pure function of
+//! (seed, population, index) through Philox (see [`crate::rng`]); parameters are f32 so that a
+//! WGSL kernel reproduces them bit for bit.
+
+use crate::error::{Error, Result};
+use crate::fit::LawFit;
+use crate::laws::{Law, MAX_PARAMS};
+use crate::rng::{candidate_counter, key_of_seed, philox4x32_10, unit_f32};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The uniform box of one law, SI (torques N·m), as the f32 values candidates are drawn with.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LawBox {
+    pub law: Law,
+    pub lower: Vec<f32>,
+    pub upper: Vec<f32>,
+}
+
+impl LawBox {
+    /// Volume of the box (product of widths), for prior densities.
+    pub fn volume(&self) -> f64 {
+        self.lower
+            .iter()
+            .zip(&self.upper)
+            .map(|(&a, &b)| f64::from(b) - f64::from(a))
+            .product()
+    }
+
+    /// True when `params` lie inside the box (ends included).
+    pub fn contains(&self, params: &[f64]) -> bool {
+        params
+            .iter()
+            .zip(self.lower.iter().zip(&self.upper))
+            .all(|(&p, (&a, &b))| p >= f64::from(a) && p <= f64::from(b))
+    }
+}
+
+/// A prior over (law, parameters).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Prior {
+    /// One box per law considered, in the order laws were given.
+    pub boxes: Vec<LawBox>,
+    /// Prior law probabilities, normalised, in the order of `boxes`.
+    pub weights: Vec<f64>,
+    /// Law k is chosen when the first Philox word is below `thresholds[k]` (and not below the
+    /// previous one); the last threshold is 2³². Integer comparison: identical on every backend.
+    pub thresholds: Vec<u64>,
+}
+
+/// A candidate drawn from the prior: which box (index into [`Prior::boxes`]) and its parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    pub slot: usize,
+    pub params: [f32; MAX_PARAMS],
+}
+
+/// The contents of a prior TOML file (see the module documentation).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PriorFile {
+    #[serde(default)]
+    pub weights: BTreeMap<String, f64>,
+    #[serde(default)]
+    pub m1: BTreeMap<String, [f64; 2]>,
+    #[serde(default)]
+    pub m2: BTreeMap<String, [f64; 2]>,
+    #[serde(default)]
+    pub m3: BTreeMap<String, [f64; 2]>,
+    #[serde(default)]
+    pub m4: BTreeMap<String, [f64; 2]>,
+}
+
+impl PriorFile {
+    /// Reads and checks a prior file; errors name the file and, for TOML syntax, line and column.
+    pub fn read(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let file: PriorFile = toml::from_str(&text).map_err(|e| {
+            let line = e.span().map(|s| text[..s.start].lines().count().max(1) as u64);
+            Error::Format {
+                path: path.to_path_buf(),
+                line,
+                message: e.message().to_string(),
+            }
+        })?;
+        for law in Law::ALL {
+            for name in file.bounds(law).keys() {
+                if !law.param_names().contains(&name.as_str()) {
+                    return Err(Error::Format {
+                        path: path.to_path_buf(),
+                        line: None,
+                        message: format!(
+                            "[{law}] has no parameter '{name}' (it has {})",
+                            law.param_names().join(", ")
+                        ),
+                    });
+                }
+            }
+        }
+        for (name, &w) in &file.weights {
+            let known = name.parse::<Law>().map_err(|m| Error::Format {
+                path: path.to_path_buf(),
+                line: None,
+                message: format!("[weights]: {m}"),
+            })?;
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(Error::Format {
+                    path: path.to_path_buf(),
+                    line: None,
+                    message: format!("[weights] {known} = {w}: a weight must be finite and ≥ 0"),
+                });
+            }
+        }
+        Ok(file)
+    }
+
+    fn bounds(&self, law: Law) -> &BTreeMap<String, [f64; 2]> {
+        match law {
+            Law::M1 => &self.m1,
+            Law::M2 => &self.m2,
+            Law::M3 => &self.m3,
+            Law::M4 => &self.m4,
+        }
+    }
+}
+
+impl Prior {
+    /// The paper's prior: laws weighted uniformly (or by `file`), boxes φ̂(1 ± δ) around each
+    /// fit, clipped to physical bounds, replaced where `file` gives explicit bounds.
+    /// `torque_unit_nm` is N·m per unit of the file's torque-valued bounds.
+    pub fn from_fits(fits: &[LawFit], delta: f64, file: Option<&PriorFile>, torque_unit_nm: f64) -> Result<Self> {
+        if !(delta.is_finite() && delta > 0.0) {
+            return Err(Error::arg("--delta", format!("must be a positive number, got {delta}")));
+        }
+        let mut boxes = Vec::new();
+        let mut weights = Vec::new();
+        for fit in fits {
+            let law = fit.law;
+            let explicit = file.map(|f| f.bounds(law));
+            let mut lower = Vec::new();
+            let mut upper = Vec::new();
+            for (j, spec) in law.params().iter().enumerate() {
+                let (lo, hi) = if let Some(&[a, b]) = explicit.and_then(|m| m.get(spec.name)) {
+                    let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
+                    if !(a.is_finite() && b.is_finite() && a < b) {
+                        return Err(Error::arg(
+                            "--prior",
+                            format!(
+                                "[{law}] {} = [{a}, {b}]: need finite bounds with lower < upper",
+                                spec.name
+                            ),
+                        ));
+                    }
+                    (a * unit, b * unit)
+                } else {
+                    let estimate = fit.params_si[j];
+                    if estimate == 0.0 {
+                        return Err(Error::arg(
+                            "--delta",
+                            format!(
+                                "{law}.{} was estimated as exactly 0, so the box 0·(1 ± δ) is empty; give explicit bounds for it in a --prior file",
+                                spec.name
+                            ),
+                        ));
+                    }
+                    let (a, b) = (estimate * (1.0 - delta), estimate * (1.0 + delta));
+                    (a.min(b), a.max(b))
+                };
+                let lo = lo.max(spec.lower);
+                if lo >= hi {
+                    return Err(Error::arg(
+                        "--delta",
+                        format!(
+                            "{law}.{}: the box [{lo}, {hi}] (SI) is empty after clipping to the bound {} ≥ {}; give explicit bounds in a --prior file",
+                            spec.name, spec.name, spec.lower
+                        ),
+                    ));
+                }
+                lower.push(lo as f32);
+                upper.push(hi as f32);
+            }
+            boxes.push(LawBox { law, lower, upper });
+            weights.push(file.and_then(|f| f.weights.get(law.name()).copied()).unwrap_or(1.0));
+        }
+        Self::new(boxes, weights)
+    }
+
+    /// A prior from explicit boxes (SI) and unnormalised law weights.
+    pub fn new(boxes: Vec<LawBox>, weights: Vec<f64>) -> Result<Self> {
+        if boxes.is_empty() {
+            return Err(Error::arg("--laws", "no law to sample"));
+        }
+        let total: f64 = weights.iter().sum();
+        if !(total.is_finite() && total > 0.0) {
+            return Err(Error::arg("--prior", "the law weights sum to zero"));
+        }
+        let weights: Vec<f64> = weights.iter().map(|w| w / total).collect();
+        let mut cumulative = 0.0;
+        let mut thresholds: Vec<u64> = weights
+            .iter()
+            .map(|w| {
+                cumulative += w;
+                ((cumulative * 4_294_967_296.0).round() as u64).min(1 << 32)
+            })
+            .collect();
+        *thresholds.last_mut().expect("non-empty") = 1 << 32;
+        Ok(Self {
+            boxes,
+            weights,
+            thresholds,
+        })
+    }
+
+    /// Candidate `index` of population `population` in the stream of `seed`.
+    ///
+    /// Block 0 of the counter gives the law (word 0) and parameters 0..2 (words 1..3), block 1
+    /// parameters 3..5. Parameter j = fma(upper − lower, u, lower) in f32, u = [`unit_f32`].
+    #[inline]
+    pub fn candidate(&self, seed: u64, population: u32, index: u64) -> Candidate {
+        let key = key_of_seed(seed);
+        let b0 = philox4x32_10(candidate_counter(population, index, 0), key);
+        let slot = self.slot_of_word(u64::from(b0[0]));
+        let bx = &self.boxes[slot];
+        let n = bx.lower.len();
+        let mut words = [b0[1], b0[2], b0[3], 0, 0, 0];
+        if n > 3 {
+            let b1 = philox4x32_10(candidate_counter(population, index, 1), key);
+            words[3..].copy_from_slice(&b1[..3]);
+        }
+        let mut params = [0.0f32; MAX_PARAMS];
+        for j in 0..n {
+            params[j] = (bx.upper[j] - bx.lower[j]).mul_add(unit_f32(words[j]), bx.lower[j]);
+        }
+        Candidate { slot, params }
+    }
+
+    /// The box (law) of candidate `index`: the first Philox block only, for counting draws.
+    #[inline]
+    pub fn candidate_slot(&self, seed: u64, population: u32, index: u64) -> usize {
+        let word = u64::from(philox4x32_10(candidate_counter(population, index, 0), key_of_seed(seed))[0]);
+        self.slot_of_word(word)
+    }
+
+    #[inline]
+    fn slot_of_word(&self, word: u64) -> usize {
+        self.thresholds
+            .iter()
+            .position(|&t| word < t)
+            .unwrap_or(self.boxes.len() - 1)
+    }
+
+    /// The law of box `slot`.
+    pub fn law(&self, slot: usize) -> Law {
+        self.boxes[slot].law
+    }
+
+    /// Prior density of (law, params): weight / box volume inside the box, 0 outside.
+    pub fn density(&self, slot: usize, params: &[f64]) -> f64 {
+        let bx = &self.boxes[slot];
+        if bx.contains(params) {
+            self.weights[slot] / bx.volume()
+        } else {
+            0.0
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fit(law: Law, params: Vec<f64>) -> LawFit {
+        LawFit {
+            law,
+            std_errors_si: vec![None; params.len()],
+            params_si: params,
+            rho: 0.0,
+            validation_rho: None,
+            condition_number: 1.0,
+            correlations: vec![],
+            warnings: vec![],
+            starts: 1,
+        }
+    }
+
+    #[test]
+    fn delta_boxes_are_ordered_and_clipped() {
+        let m4 = fit(Law::M4, vec![11.8, -0.93, 0.057, -1.2e-3]);
+        let p = Prior::from_fits(&[m4], 0.4, None, 1.0).unwrap();
+        let b = &p.boxes[0];
+        assert_eq!(b.lower[1].to_bits(), ((-0.93f64 * 1.4) as f32).to_bits());
+        assert_eq!(b.upper[1].to_bits(), ((-0.93f64 * 0.6) as f32).to_bits());
+        // δ > 1 would make the static torque negative: clipped at its bound 0.
+        let m2 = fit(Law::M2, vec![13.0, 6.5, 0.3]);
+        let p = Prior::from_fits(&[m2], 1.5, None, 1.0).unwrap();
+        assert_eq!(p.boxes[0].lower, vec![0.0, 0.0, 0.0]);
+        assert_eq!(p.boxes[0].upper[0].to_bits(), 32.5f32.to_bits());
+    }
+
+    #[test]
+    fn refusals_name_the_flag() {
+        let m2 = fit(Law::M2, vec![13.0, 6.5, 0.3]);
+        assert!(
+            Prior::from_fits(std::slice::from_ref(&m2), 0.0, None, 1.0)
+                .unwrap_err()
+                .to_string()
+                .starts_with("--delta")
+        );
+        let zero = fit(Law::M3, vec![2.72, 1.0, 0.0, 9.52, 4.0, 0.08]);
+        let e = Prior::from_fits(&[zero], 0.4, None, 1.0).unwrap_err().to_string();
+        assert!(e.contains("m3.a2") && e.contains("--prior"), "{e}");
+    }
+
+    #[test]
+    fn explicit_bounds_and_weights_override() {
+        let file: PriorFile = toml::from_str("[weights]\nm2 = 3.0\n[m2]\ng = [0.1, 0.5]\ntsb = [10, 20]\n").unwrap();
+        let fits = [
+            fit(Law::M1, vec![5.67, 0.48, 8.79, 4.56]),
+            fit(Law::M2, vec![13e3, 6.5e3, 0.3]),
+        ];
+        let p = Prior::from_fits(&fits, 0.4, Some(&file), 1000.0).unwrap();
+        assert_eq!(p.weights, vec![0.25, 0.75]);
+        assert_eq!(p.boxes[1].lower, vec![10e3, (6.5e3f64 * 0.6) as f32, 0.1]);
+        assert_eq!(p.boxes[1].upper, vec![20e3, (6.5e3f64 * 1.4) as f32, 0.5]);
+        assert_eq!(p.thresholds, vec![1 << 30, 1 << 32]);
+    }
+
+    #[test]
+    fn candidates_are_pure_in_the_box_and_follow_the_weights() {
+        let fits = [
+            fit(Law::M2, vec![13.0, 6.5, 0.3]),
+            fit(Law::M3, vec![2.72, 1.0, 0.09, 9.52, 4.0, 0.08]),
+        ];
+        let p = Prior::new(Prior::from_fits(&fits, 0.4, None, 1.0).unwrap().boxes, vec![1.0, 3.0]).unwrap();
+        let mut count = [0usize; 2];
+        for i in 0..40_000u64 {
+            let c = p.candidate(9, 2, i);
+            assert_eq!(c, p.candidate(9, 2, i));
+            count[c.slot] += 1;
+            let params: Vec<f64> = c.params[..p.boxes[c.slot].lower.len()]
+                .iter()
+                .map(|&v| f64::from(v))
+                .collect();
+            assert!(p.boxes[c.slot].contains(&params));
+        }
+        // Binomial(40000, 1/4): σ ≈ 87.
+        assert!((count[0] as f64 - 10_000.0).abs() < 5.0 * 87.0, "{count:?}");
+        assert_ne!(p.candidate(9, 2, 0), p.candidate(9, 3, 0));
+        assert_ne!(p.candidate(9, 2, 0), p.candidate(10, 2, 0));
+    }
+}
