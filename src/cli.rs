@@ -252,6 +252,9 @@ pub struct AbcArgs {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Population to summarise (statistics, MAP, envelopes) [default: the last].
+    #[arg(long, value_name = "G")]
+    pub summary_population: Option<usize>,
 }
 
 #[derive(Debug, Args)]

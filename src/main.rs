@@ -186,10 +186,18 @@ fn run_abc(
             );
         }
     })?;
-    let last = run
-        .populations
-        .last()
-        .ok_or_else(|| Error::Numerical("no population completed".into()))?;
+    let last = match args.summary_population {
+        None => run
+            .populations
+            .last()
+            .ok_or_else(|| Error::Numerical("no population completed".into()))?,
+        Some(g) => run.populations.get(g).ok_or_else(|| {
+            Error::arg(
+                "--summary-population",
+                format!("the run has populations 0..={}", run.populations.len() - 1),
+            )
+        })?,
+    };
     let posterior = summarize(&last.particles, &fit_args.laws);
     let all_speeds = data.calibration.speed_rad_s.iter().chain(&data.validation.speed_rad_s);
     let (lo, hi) = all_speeds.fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
@@ -205,6 +213,7 @@ fn run_abc(
         prior: &prior,
         run: &run,
         posterior: &posterior,
+        summary_population: last.record.index,
         config: serde_json::json!({
             "particles": args.particles,
             "delta": args.delta,
@@ -301,6 +310,7 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         mode: Mode::Nested,
         seed: cmd.seed,
         threads: cmd.threads,
+        summary_population: None,
     };
     writeln!(
         out,

@@ -201,6 +201,8 @@ pub struct AbcReport<'a> {
     pub prior: &'a Prior,
     pub run: &'a RejectionRun,
     pub posterior: &'a PosteriorSummary,
+    /// Index of the summarised population.
+    pub summary_population: usize,
     pub config: Value,
     pub seed: u64,
     pub backend: &'a str,
@@ -272,7 +274,7 @@ impl AbcReport<'_> {
             "stop_reason": self.run.stop,
             "stop_description": self.run.stop.describe(),
             "posterior": {
-                "population": self.run.populations.len() - 1,
+                "population": self.summary_population,
                 "total": self.posterior.total,
                 "model_probabilities": by_law(self.posterior.model_probabilities.iter().copied()),
                 "laws": laws,
