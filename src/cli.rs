@@ -2,6 +2,7 @@
 //! configuration in `main.rs` before any work starts.
 
 use bitrock::data::{DataOptions, SplitRule};
+use bitrock::eval::Backend;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -252,6 +253,10 @@ pub struct AbcArgs {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so),
+    /// gpu = the GPU or an error, cpu = the f64 reference.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
     /// Population to summarise (statistics, MAP, envelopes) [default: the last].
     #[arg(long, value_name = "G")]
     pub summary_population: Option<usize>,
@@ -292,4 +297,7 @@ pub struct DemoCmd {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Where ρ is computed (auto, gpu, cpu).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
 }

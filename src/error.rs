@@ -34,6 +34,9 @@ pub enum Error {
     /// An output file cannot be written.
     #[error("{}: cannot write: {source}", path.display())]
     Write { path: PathBuf, source: std::io::Error },
+    /// The GPU backend failed (no adapter, device lost, out of memory...).
+    #[error(transparent)]
+    Gpu(#[from] crate::eval::gpu::GpuError),
     /// A numerical procedure failed where it should not have.
     #[error("numerical failure: {0}")]
     Numerical(String),

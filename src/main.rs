@@ -8,8 +8,7 @@ use anyhow::Context;
 use bitrock::abc::posterior::{PosteriorSummary, predictive_envelope, speed_grid, summarize};
 use bitrock::abc::rejection::{self, Mode, RejectionConfig, RejectionRun};
 use bitrock::data::{self, FieldData};
-use bitrock::eval::cpu::CpuEvaluator;
-use bitrock::eval::{AbcProblem, Evaluator};
+use bitrock::eval::AbcProblem;
 use bitrock::fit::{self, FitOptions};
 use bitrock::prior::{Prior, PriorFile};
 use bitrock::simulate::{self, Initial, SimConfig};
@@ -176,8 +175,12 @@ fn run_abc(
     let fits = fit::fit_laws(&fit_args.laws, &data.calibration, &data.validation, &fit_opts)?;
     let prior = Prior::from_fits(&fits, args.delta, prior_file.as_ref(), data.torque_unit.newton_metres())?;
     let problem = AbcProblem::new(prior.clone(), args.seed, &data.calibration, fit_opts.w_ref_n);
-    let evaluator = CpuEvaluator::new(problem);
-    let run = rejection::run_with_progress(&evaluator, &config, &mut |r| {
+    let evaluator = bitrock::eval::evaluator(problem, args.backend, &mut |note| {
+        if !quiet {
+            eprintln!("{note}");
+        }
+    })?;
+    let run = rejection::run_with_progress(evaluator.as_ref(), &config, &mut |r| {
         if !quiet {
             let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
             eprintln!(
@@ -310,6 +313,7 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         mode: Mode::Nested,
         seed: cmd.seed,
         threads: cmd.threads,
+        backend: cmd.backend,
         summary_population: None,
     };
     writeln!(

@@ -189,6 +189,7 @@ fn population_json(record: &PopulationRecord) -> Value {
         "per_law": record.per_law,
         "candidates_scored": record.candidates_scored,
         "evaluations": record.evaluations,
+        "near_threshold": record.near_threshold,
         "seconds": record.seconds,
         "stream": record.stream,
     })

@@ -21,7 +21,7 @@
 use crate::error::{Error, Result};
 use crate::fit::LawFit;
 use crate::laws::{Law, MAX_PARAMS};
-use crate::rng::{candidate_counter, key_of_seed, philox4x32_10, unit_f32};
+use crate::rng::{candidate_counter, key_of_seed, philox4x32_10, uniform_between};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -234,7 +234,8 @@ impl Prior {
     /// Candidate `index` of population `population` in the stream of `seed`.
     ///
     /// Block 0 of the counter gives the law (word 0) and parameters 0..2 (words 1..3), block 1
-    /// parameters 3..5. Parameter j = fma(upper − lower, u, lower) in f32, u = [`unit_f32`].
+    /// parameters 3..5. Parameter j = [`uniform_between`]`(lower, upper, word)`, bit-identical
+    /// on every backend.
     #[inline]
     pub fn candidate(&self, seed: u64, population: u32, index: u64) -> Candidate {
         let key = key_of_seed(seed);
@@ -249,7 +250,7 @@ impl Prior {
         }
         let mut params = [0.0f32; MAX_PARAMS];
         for j in 0..n {
-            params[j] = (bx.upper[j] - bx.lower[j]).mul_add(unit_f32(words[j]), bx.lower[j]);
+            params[j] = uniform_between(bx.lower[j], bx.upper[j], words[j]);
         }
         Candidate { slot, params }
     }

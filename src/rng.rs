@@ -8,7 +8,8 @@
 //! - key = (seed mod 2³², seed div 2³²)
 //! - counter of block b of candidate i in population g = (i mod 2³², i div 2³², g, b)
 //!
-//! Words become uniforms by one formula on every backend, [`unit_f32`].
+//! Words become uniforms by one formula on every backend: [`unit_f32`] on [0, 1) and
+//! [`uniform_between`] on a prior box.
 
 /// Philox4x32 multipliers and Weyl key increments (Random123).
 const M0: u32 = 0xD251_1F53;
@@ -56,6 +57,26 @@ pub fn candidate_counter(population: u32, index: u64, block: u32) -> [u32; 4] {
 #[inline]
 pub fn unit_f32(word: u32) -> f32 {
     (word >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+/// A uniform f32 in [lo, hi] from one word: lo + (hi − lo)·u with u = (word >> 8)·2⁻²⁴,
+/// computed so that every backend gets the same bits.
+///
+/// A fused multiply-add cannot be relied on: lavapipe evaluates WGSL `fma` unfused, other
+/// drivers may fuse a plain `a * b + c`. So the product is split until every partial product
+/// is exact in f32 (12 × 12 significant bits): the width keeps its top 12 bits in `wh` and the
+/// rest in `wl` (bit masking, exact), u its top and bottom 12 bits. With exact products, fused
+/// and unfused evaluation round identically, and the fixed order of the additions does the rest.
+#[inline]
+pub fn uniform_between(lo: f32, hi: f32, word: u32) -> f32 {
+    let width = hi - lo;
+    let wh = f32::from_bits(width.to_bits() & 0xFFFF_F000);
+    let wl = width - wh;
+    let k = word >> 8;
+    let uh = (k & 0x00FF_F000) as f32 * (1.0 / 16_777_216.0);
+    let ul = (k & 0x0000_0FFF) as f32 * (1.0 / 16_777_216.0);
+    // Rounding can carry the sum an ulp past hi: clamp (exact on every backend).
+    (lo + (((wh * uh + wh * ul) + wl * uh) + wl * ul)).min(hi)
 }
 
 #[cfg(test)]
@@ -106,5 +127,23 @@ mod tests {
         let var = s2 / n as f64 - mean * mean;
         assert!((mean - 0.5).abs() < 5.0 * (1.0 / 12.0 / n as f64).sqrt(), "{mean}");
         assert!((var - 1.0 / 12.0).abs() < 5e-4, "{var}");
+    }
+
+    #[test]
+    fn uniform_between_matches_the_plain_formula_to_rounding_and_spans_the_box() {
+        let (lo, hi) = (-3.7f32, 12.9f32);
+        assert_eq!(uniform_between(lo, hi, 0).to_bits(), lo.to_bits());
+        for i in 0..100_000u32 {
+            let word = i.wrapping_mul(2_654_435_761);
+            let v = uniform_between(lo, hi, word);
+            let exact = f64::from(lo) + (f64::from(hi) - f64::from(lo)) * f64::from(unit_f32(word));
+            // The width and four sums round once each: at most 5 half-ulps of the largest
+            // magnitude involved, |lo| + |hi| = 16.6 (ulp 2^-19).
+            assert!(
+                (f64::from(v) - exact).abs() <= 5.0 * 0.5 * 2f64.powi(-19),
+                "{word}: {v} vs {exact}"
+            );
+            assert!(v >= lo && v <= hi);
+        }
     }
 }

@@ -23,7 +23,7 @@
 
 use super::Particle;
 use crate::error::{Error, Result};
-use crate::eval::Evaluator;
+use crate::eval::{Evaluator, PARITY_TOLERANCE};
 use crate::laws::Law;
 use crate::numerics::quantile;
 use serde::Serialize;
@@ -153,6 +153,9 @@ pub struct PopulationRecord {
     pub candidates_scored: u64,
     /// candidates_scored × data points.
     pub evaluations: u64,
+    /// Candidates considered whose ρ lies within the CPU/GPU parity tolerance of ε
+    /// ([`crate::eval::PARITY_TOLERANCE`]): the only ones another backend may decide otherwise.
+    pub near_threshold: u64,
     pub seconds: f64,
     /// The candidate stream (population counter) the particles come from.
     pub stream: u32,
@@ -244,6 +247,8 @@ pub fn run_with_progress(
         let mut law_draws = vec![0u64; prior.boxes.len()];
         let mut law_accepted = vec![0usize; prior.boxes.len()];
         let mut position = 0u64;
+        let mut near = 0u64;
+        let near_threshold = |rho: f64| (rho - epsilon).abs() <= PARITY_TOLERANCE * epsilon;
         if config.mode == Mode::Nested && g > 0 {
             // Stream positions before `scanned_to` are known: the previous population's
             // particles are all candidates there below ε_{g-1} > ε_g.
@@ -251,6 +256,7 @@ pub fn run_with_progress(
             for p in previous.iter().filter(|p| p.rho < epsilon) {
                 particles.push(p.clone());
             }
+            near += previous.iter().filter(|p| near_threshold(p.rho)).count() as u64;
             if particles.len() >= n {
                 particles.truncate(n);
                 position = particles[n - 1].index + 1;
@@ -304,6 +310,7 @@ pub fn run_with_progress(
                 let index = batch.start + k as u64;
                 let slot = prior.candidate_slot(problem.seed, stream, index);
                 law_draws[slot] += 1;
+                near += u64::from(near_threshold(rho));
                 if rho < epsilon {
                     let c = prior.candidate(problem.seed, stream, index);
                     let law = prior.law(c.slot);
@@ -354,6 +361,7 @@ pub fn run_with_progress(
                 .collect(),
             candidates_scored: scored_here,
             evaluations: scored_here * d,
+            near_threshold: near,
             seconds: t0.elapsed().as_secs_f64(),
             stream,
         };

@@ -2,10 +2,16 @@
 //! scores against. The CPU evaluator (f64) is the reference; the GPU one must match it.
 
 pub mod cpu;
+pub mod gpu;
 
 use crate::data::Samples;
 use crate::error::Result;
 use crate::prior::Prior;
+
+/// Largest relative difference of ρ between the GPU (f32) and the CPU (f64) that bitrock
+/// accepts; candidates whose ρ lies this close to ε may be accepted by one backend only.
+/// Measured on lavapipe: about 1e-6 on the embedded record (tests/it/gpu.rs prints it).
+pub const PARITY_TOLERANCE: f64 = 1e-5;
 
 /// Everything that determines ρ of a candidate: the prior and seed (which generate it) and
 /// the calibration data (which score it).
@@ -52,4 +58,39 @@ pub trait Evaluator: Sync {
     fn problem(&self) -> &AbcProblem;
     /// Writes ρ of candidates `start .. start + out.len()` of `population` into `out`.
     fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()>;
+}
+
+/// Which evaluator computes ρ.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// The GPU when an adapter exists, else the CPU (saying so).
+    Auto,
+    /// The GPU (WGSL through wgpu); an error when there is no adapter.
+    Gpu,
+    /// The CPU reference (f64, rayon).
+    Cpu,
+}
+
+/// The evaluator for `backend`. With `Auto`, a GPU that cannot be set up is reported through
+/// `note` and the CPU is used instead.
+pub fn evaluator(problem: AbcProblem, backend: Backend, note: &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> {
+    match backend {
+        Backend::Cpu => Ok(Box::new(cpu::CpuEvaluator::new(problem))),
+        Backend::Gpu => {
+            let gpu = gpu::residual::GpuEvaluator::new(problem)?;
+            note(format!("GPU backend: {}", gpu.adapter()));
+            Ok(Box::new(gpu))
+        }
+        Backend::Auto => match gpu::residual::GpuEvaluator::new(problem.clone()) {
+            Ok(gpu) => {
+                note(format!("GPU backend: {}", gpu.adapter()));
+                Ok(Box::new(gpu))
+            }
+            Err(e) => {
+                note(format!("no usable GPU ({e}); computing on the CPU"));
+                Ok(Box::new(cpu::CpuEvaluator::new(problem)))
+            }
+        },
+    }
 }

@@ -3,5 +3,6 @@
 mod abc;
 mod cli;
 mod fit;
+mod gpu;
 mod laws;
 mod support;

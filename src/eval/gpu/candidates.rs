@@ -1,0 +1,98 @@
+//! Runs `shaders/candidates.wgsl`: the raw Philox blocks and the candidates the GPU generates,
+//! for bit-for-bit comparison with the CPU (tests, `bitrock parity`).
+
+use super::{GpuError, GpuPrior, Job, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use crate::prior::Prior;
+
+/// What the GPU made of one candidate index.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GpuCandidate {
+    /// Philox blocks 0 and 1 of the candidate's counter.
+    pub philox: [u32; 8],
+    /// Prior slot (law) chosen.
+    pub slot: u32,
+    /// Parameters as f32 bits (unused ones 0).
+    pub param_bits: [u32; 6],
+}
+
+/// Generates candidates `start .. start + count` of `population` on the GPU.
+pub fn generate(
+    prior: &Prior,
+    seed: u64,
+    population: u32,
+    start: u64,
+    count: u32,
+) -> Result<Vec<GpuCandidate>, GpuError> {
+    let ctx = super::context()?;
+    let usage = wgpu::BufferUsages::COPY_DST;
+    let prior_buffer = ctx.buffer(
+        "prior",
+        size_of::<GpuPrior>() as u64,
+        wgpu::BufferUsages::UNIFORM | usage,
+    )?;
+    let job_buffer = ctx.buffer("job", size_of::<Job>() as u64, wgpu::BufferUsages::UNIFORM | usage)?;
+    let bytes = 64 * u64::from(count);
+    let out = ctx.buffer(
+        "candidates",
+        bytes,
+        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    )?;
+    let staging = ctx.buffer("candidates staging", bytes, wgpu::BufferUsages::MAP_READ | usage)?;
+    let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
+    ctx.queue
+        .write_buffer(&prior_buffer, 0, bytemuck::bytes_of(&GpuPrior::new(prior, seed)));
+    ctx.queue.write_buffer(
+        &job_buffer,
+        0,
+        bytemuck::bytes_of(&Job::new(population, start, count, 0, row_width)),
+    );
+    let entries = [
+        buffer_entry(0, UNIFORM),
+        buffer_entry(1, UNIFORM),
+        buffer_entry(2, STORAGE_WRITE),
+    ];
+    let (pipeline, layout) = ctx.pipeline("candidates", &super::candidates_source(), &entries, &[])?;
+    let bind_group = ctx.scoped(|| {
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("candidates"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: prior_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: job_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: out.as_entire_binding(),
+                },
+            ],
+        })
+    })?;
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("candidates"),
+    });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("candidates"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+    encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, bytes);
+    let raw = ctx.finish_and_read(encoder, &staging, bytes)?;
+    let words: &[u32] = bytemuck::cast_slice(&raw);
+    Ok(words
+        .chunks_exact(16)
+        .map(|w| GpuCandidate {
+            philox: w[..8].try_into().expect("8 words"),
+            slot: w[8],
+            param_bits: w[9..15].try_into().expect("6 words"),
+        })
+        .collect())
+}

@@ -1,0 +1,338 @@
+//! The GPU backend: one wgpu device per process, the WGSL kernels, and the host twins of their
+//! uniform structs.
+//!
+//! Kernels live in `shaders/`, one per file with entry point `main`; the shared code of
+//! `shaders/shared/` is prepended to each (concatenation, never string replacement). The
+//! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a
+//! case-insensitive substring of the adapter's name); its own limits are requested.
+
+pub mod candidates;
+pub mod residual;
+
+use crate::prior::Prior;
+use bytemuck::{Pod, Zeroable};
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// Shared WGSL: Philox, the dispatch record, the prior's candidate generator, the laws.
+const PHILOX_WGSL: &str = include_str!("../../../shaders/shared/philox.wgsl");
+const JOB_WGSL: &str = include_str!("../../../shaders/shared/job.wgsl");
+const CANDIDATE_WGSL: &str = include_str!("../../../shaders/shared/candidate.wgsl");
+const LAWS_WGSL: &str = include_str!("../../../shaders/shared/laws.wgsl");
+
+/// The complete source of each kernel: shared files, then the kernel.
+pub fn kernel_sources() -> Vec<(&'static str, String)> {
+    vec![("residual", residual_source()), ("candidates", candidates_source())]
+}
+
+fn residual_source() -> String {
+    [
+        PHILOX_WGSL,
+        JOB_WGSL,
+        CANDIDATE_WGSL,
+        LAWS_WGSL,
+        include_str!("../../../shaders/residual.wgsl"),
+    ]
+    .join("\n")
+}
+
+fn candidates_source() -> String {
+    [
+        PHILOX_WGSL,
+        JOB_WGSL,
+        CANDIDATE_WGSL,
+        include_str!("../../../shaders/candidates.wgsl"),
+    ]
+    .join("\n")
+}
+
+/// What can go wrong on the GPU, as text the user can act on.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter: {0}. Install a Vulkan driver (for a software one: apt-get install mesa-vulkan-drivers libvulkan1) or use --backend cpu"
+    )]
+    NoAdapter(String),
+    #[error("the GPU adapter refused a device: {0}")]
+    RequestDevice(String),
+    #[error("GPU validation error (a bug in bitrock; please report it): {0}")]
+    Validation(String),
+    #[error("the GPU ran out of memory: {0}; use fewer data points or --backend cpu")]
+    OutOfMemory(String),
+    #[error("the GPU device was lost: {0}")]
+    DeviceLost(String),
+    #[error("the problem does not fit this GPU: {0}")]
+    TooLarge(String),
+    #[error("reading results back from the GPU failed: {0}")]
+    Readback(String),
+}
+
+/// The process's GPU: created once, shared by every evaluator.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    pub limits: wgpu::Limits,
+    /// Set by the device-lost callback.
+    lost: Arc<Mutex<Option<String>>>,
+}
+
+static CONTEXT: OnceLock<Result<GpuContext, GpuError>> = OnceLock::new();
+
+/// The process's GPU context, created on first use.
+pub fn context() -> Result<&'static GpuContext, GpuError> {
+    CONTEXT.get_or_init(create_context).as_ref().map_err(Clone::clone)
+}
+
+fn create_context() -> Result<GpuContext, GpuError> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+        Ok(wanted) => {
+            let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+            let adapters = pollster::block_on(instance.enumerate_adapters(backends));
+            let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+            adapters
+                .into_iter()
+                .find(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()))
+                .ok_or_else(|| GpuError::NoAdapter(format!("WGPU_ADAPTER_NAME={wanted} matches none of {names:?}")))?
+        }
+        Err(_) => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::from_env().unwrap_or(wgpu::PowerPreference::HighPerformance),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?,
+    };
+    let info = adapter.get_info();
+    let limits = adapter.limits();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("bitrock"),
+        required_features: wgpu::Features::empty(),
+        required_limits: limits.clone(),
+        experimental_features: wgpu::ExperimentalFeatures::disabled(),
+        memory_hints: wgpu::MemoryHints::Performance,
+        trace: wgpu::Trace::Off,
+    }))
+    .map_err(|e| GpuError::RequestDevice(e.to_string()))?;
+    let lost = Arc::new(Mutex::new(None));
+    let flag = lost.clone();
+    device.set_device_lost_callback(move |reason, message| {
+        *flag.lock().expect("device-lost flag") = Some(format!("{reason:?}: {message}"));
+    });
+    Ok(GpuContext {
+        device,
+        queue,
+        info,
+        limits,
+        lost,
+    })
+}
+
+impl GpuContext {
+    /// One line naming the adapter, for logs and reports.
+    pub fn describe(&self) -> String {
+        let i = &self.info;
+        format!(
+            "{} ({:?}, {:?}, driver {} {})",
+            i.name, i.backend, i.device_type, i.driver, i.driver_info
+        )
+    }
+
+    /// Fails if the device was lost since the last check.
+    fn check_lost(&self) -> Result<(), GpuError> {
+        match self.lost.lock().expect("device-lost flag").clone() {
+            Some(message) => Err(GpuError::DeviceLost(message)),
+            None => Ok(()),
+        }
+    }
+
+    /// Runs `f` inside validation and out-of-memory error scopes, turning captured errors into
+    /// typed ones.
+    fn scoped<T>(&self, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let value = f();
+        if let Some(e) = pollster::block_on(validation.pop()) {
+            return Err(GpuError::Validation(e.to_string()));
+        }
+        if let Some(e) = pollster::block_on(oom.pop()) {
+            return Err(GpuError::OutOfMemory(e.to_string()));
+        }
+        self.check_lost()?;
+        Ok(value)
+    }
+
+    /// A compute pipeline for `source` with an explicit layout of `entries` in group 0 and
+    /// values for its `override` constants.
+    fn pipeline(
+        &self,
+        label: &str,
+        source: &str,
+        entries: &[wgpu::BindGroupLayoutEntry],
+        constants: &[(&str, f64)],
+    ) -> Result<(wgpu::ComputePipeline, wgpu::BindGroupLayout), GpuError> {
+        self.scoped(|| {
+            let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+            let layout = self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries,
+            });
+            let pipeline_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants,
+                    ..Default::default()
+                },
+                cache: None,
+            });
+            (pipeline, layout)
+        })
+    }
+
+    /// A buffer, with allocation failures reported as typed errors.
+    fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer, GpuError> {
+        let max = self.limits.max_buffer_size;
+        if size > max {
+            return Err(GpuError::TooLarge(format!(
+                "{label} needs {size} bytes, the adapter allows {max}"
+            )));
+        }
+        self.scoped(|| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        })
+    }
+
+    /// Dispatch grid for `invocations` threads of `workgroup_size`: (x, y, row width). Past
+    /// the adapter's workgroups-per-dimension limit (65,535 on most) the grid becomes 2-D.
+    fn grid(&self, invocations: u32, workgroup_size: u32) -> (u32, u32, u32) {
+        let groups = invocations.div_ceil(workgroup_size).max(1);
+        let max = self.limits.max_compute_workgroups_per_dimension.max(1);
+        if groups <= max {
+            (groups, 1, groups * workgroup_size)
+        } else {
+            (max, groups.div_ceil(max), max * workgroup_size)
+        }
+    }
+
+    /// Submits `encoder`, waits, and copies the first `bytes` of `staging` out.
+    fn finish_and_read(
+        &self,
+        encoder: wgpu::CommandEncoder,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+    ) -> Result<Vec<u8>, GpuError> {
+        self.scoped(|| self.queue.submit([encoder.finish()]))?;
+        let slice = staging.slice(..bytes);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        self.check_lost()?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let bytes = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .to_vec();
+        staging.unmap();
+        Ok(bytes)
+    }
+}
+
+/// Host twin of `Prior` in shaders/shared/candidate.wgsl. Keep in sync.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GpuPrior {
+    key: [u32; 2],
+    n_laws: u32,
+    _pad0: u32,
+    thresholds: [u32; 4],
+    law_id: [u32; 4],
+    n_params: [u32; 4],
+    lower: [[f32; 4]; 8],
+    upper: [[f32; 4]; 8],
+}
+
+impl GpuPrior {
+    /// The uniform of `prior` and `seed`. Thresholds of all but the last slot are below 2³²
+    /// (every weight is positive), so they fit u32 and compare as on the CPU.
+    pub fn new(prior: &Prior, seed: u64) -> Self {
+        let mut g = GpuPrior::zeroed();
+        g.key = crate::rng::key_of_seed(seed);
+        g.n_laws = prior.boxes.len() as u32;
+        for (slot, b) in prior.boxes.iter().enumerate() {
+            g.thresholds[slot] = prior.thresholds[slot].min(u64::from(u32::MAX)) as u32;
+            g.law_id[slot] = crate::laws::Law::ALL.iter().position(|&l| l == b.law).expect("law") as u32;
+            g.n_params[slot] = b.lower.len() as u32;
+            for j in 0..b.lower.len() {
+                g.lower[2 * slot + j / 4][j % 4] = b.lower[j];
+                g.upper[2 * slot + j / 4][j % 4] = b.upper[j];
+            }
+        }
+        g
+    }
+}
+
+/// Host twin of `Job` in shaders/shared/job.wgsl. Keep in sync.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct Job {
+    start: [u32; 2],
+    population: u32,
+    count: u32,
+    data_len: u32,
+    row_width: u32,
+    _pad: [u32; 2],
+}
+
+impl Job {
+    fn new(population: u32, start: u64, count: u32, data_len: u32, row_width: u32) -> Self {
+        Self {
+            start: [start as u32, (start >> 32) as u32],
+            population,
+            count,
+            data_len,
+            row_width,
+            _pad: [0; 2],
+        }
+    }
+}
+
+/// A bind-group-layout entry for a compute-visible buffer.
+fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+const UNIFORM: wgpu::BufferBindingType = wgpu::BufferBindingType::Uniform;
+const STORAGE_READ: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage { read_only: true };
+const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage { read_only: false };
+
+/// Invocations per workgroup of every kernel (`@workgroup_size(64)`).
+const WORKGROUP_SIZE: u32 = 64;

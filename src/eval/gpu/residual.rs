@@ -1,0 +1,191 @@
+//! The GPU evaluator: `shaders/residual.wgsl` regenerates each candidate from
+//! (seed, population, index), one invocation per candidate, and returns its Σ(y − r·T)² in f32;
+//! the host divides by Σy² (f64). Data, prior, pipeline and bind group are set up once.
+
+use super::{GpuContext, GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use crate::error::Result;
+use crate::eval::{AbcProblem, Evaluator};
+use std::sync::Mutex;
+
+/// Buffers, pipeline and bind group of one run, created once.
+struct Resources {
+    job: wgpu::Buffer,
+    ssr: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+}
+
+/// Scores candidates on the GPU.
+pub struct GpuEvaluator {
+    problem: AbcProblem,
+    context: &'static GpuContext,
+    data_len: u32,
+    /// Candidates per dispatch at most.
+    chunk: usize,
+    resources: Mutex<Resources>,
+}
+
+impl GpuEvaluator {
+    /// Uploads the data and the prior and builds the pipeline, on the process's GPU.
+    pub fn new(problem: AbcProblem) -> std::result::Result<Self, GpuError> {
+        let context = super::context()?;
+        let d = problem.data_len();
+        // Columns padded to whole quads (w = 1 keeps every law finite; the kernel masks them).
+        let quads = d.div_ceil(4);
+        let column = |v: &[f64], pad: f32| {
+            let mut c: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+            c.resize(4 * quads, pad);
+            c
+        };
+        let columns = [
+            column(&problem.speed_rad_s, 1.0),
+            column(&problem.torque_nm, 0.0),
+            column(&problem.wob_ratio, 0.0),
+        ];
+        let has_ratio = problem.wob_ratio.iter().any(|&r| r.to_bits() != 1.0f64.to_bits());
+        let column_bytes = 16 * quads.max(1) as u64;
+        let max_binding = context.limits.max_storage_buffer_binding_size;
+        if column_bytes > max_binding {
+            return Err(GpuError::TooLarge(format!(
+                "{d} data points need {column_bytes} bytes per column, the adapter binds at most {max_binding}"
+            )));
+        }
+        // Per dispatch: at most 2³² candidate × sample evaluations (seconds on a software
+        // driver, far below watchdog limits on hardware), 4 M candidates and the binding limit.
+        let chunk = ((1u64 << 32) / d.max(1) as u64)
+            .clamp(1024, 1 << 22)
+            .min(max_binding / 4) as usize;
+        let prior = GpuPrior::new(&problem.prior, problem.seed);
+        let copy = wgpu::BufferUsages::COPY_DST;
+        let prior_buffer = context.buffer(
+            "prior",
+            size_of::<GpuPrior>() as u64,
+            wgpu::BufferUsages::UNIFORM | copy,
+        )?;
+        let job = context.buffer("job", size_of::<Job>() as u64, wgpu::BufferUsages::UNIFORM | copy)?;
+        let mut data = Vec::new();
+        for (name, column) in ["speed", "torque", "ratio"].iter().zip(&columns) {
+            let buffer = context.buffer(name, column_bytes, wgpu::BufferUsages::STORAGE | copy)?;
+            context.queue.write_buffer(&buffer, 0, bytemuck::cast_slice(column));
+            data.push(buffer);
+        }
+        let ssr_bytes = 4 * chunk as u64;
+        let ssr = context.buffer(
+            "ssr",
+            ssr_bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let staging = context.buffer("ssr staging", ssr_bytes, wgpu::BufferUsages::MAP_READ | copy)?;
+        context.queue.write_buffer(&prior_buffer, 0, bytemuck::bytes_of(&prior));
+        let entries = [
+            buffer_entry(0, UNIFORM),
+            buffer_entry(1, UNIFORM),
+            buffer_entry(2, STORAGE_READ),
+            buffer_entry(3, STORAGE_READ),
+            buffer_entry(4, STORAGE_READ),
+            buffer_entry(5, STORAGE_WRITE),
+        ];
+        let constants = [("HAS_RATIO", if has_ratio { 1.0 } else { 0.0 })];
+        let (pipeline, layout) = context.pipeline("residual", &super::residual_source(), &entries, &constants)?;
+        let bind_group = context.scoped(|| {
+            context.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("residual"),
+                layout: &layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: prior_buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: job.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: data[0].as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: data[1].as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: data[2].as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: ssr.as_entire_binding(),
+                    },
+                ],
+            })
+        })?;
+        Ok(Self {
+            problem,
+            context,
+            data_len: d as u32,
+            chunk,
+            resources: Mutex::new(Resources {
+                job,
+                ssr,
+                staging,
+                pipeline,
+                bind_group,
+            }),
+        })
+    }
+
+    /// The adapter this evaluator runs on.
+    pub fn adapter(&self) -> String {
+        self.context.describe()
+    }
+
+    /// Σ(y − r·T)² (f32, as the kernel returns it) of candidates `start ..` into `out`.
+    pub fn sum_sq_residuals(&self, population: u32, start: u64, out: &mut [f32]) -> std::result::Result<(), GpuError> {
+        let res = self.resources.lock().expect("GPU resources");
+        let ctx = self.context;
+        for (c, chunk) in out.chunks_mut(self.chunk).enumerate() {
+            let first = start + (c * self.chunk) as u64;
+            let count = chunk.len() as u32;
+            let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
+            let job = Job::new(population, first, count, self.data_len, row_width);
+            ctx.queue.write_buffer(&res.job, 0, bytemuck::bytes_of(&job));
+            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("residual"),
+            });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("residual"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&res.pipeline);
+                pass.set_bind_group(0, &res.bind_group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            let bytes = 4 * u64::from(count);
+            encoder.copy_buffer_to_buffer(&res.ssr, 0, &res.staging, 0, bytes);
+            let raw = ctx.finish_and_read(encoder, &res.staging, bytes)?;
+            chunk.copy_from_slice(bytemuck::cast_slice(&raw));
+        }
+        Ok(())
+    }
+}
+
+impl Evaluator for GpuEvaluator {
+    fn backend(&self) -> &'static str {
+        "gpu"
+    }
+
+    fn problem(&self) -> &AbcProblem {
+        &self.problem
+    }
+
+    fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()> {
+        let mut ssr = vec![0.0f32; out.len()];
+        self.sum_sq_residuals(population, start, &mut ssr)?;
+        for (rho, s) in out.iter_mut().zip(ssr) {
+            *rho = f64::from(s) / self.problem.sum_sq_torque;
+        }
+        Ok(())
+    }
+}

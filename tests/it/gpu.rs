@@ -1,0 +1,156 @@
+//! The GPU backend against the CPU reference: shaders valid without a device, Philox and
+//! candidates bit for bit, ρ within the parity tolerance, whole runs alike. These tests need a
+//! GPU adapter (Mesa's lavapipe is enough: scripts/test.sh installs it) and fail loudly without
+//! one, unless BITROCK_SKIP_GPU_TESTS=1.
+
+use bitrock::Law;
+use bitrock::abc::rejection::{self, RejectionConfig};
+use bitrock::data::{DataOptions, demo_field_data};
+use bitrock::eval::cpu::CpuEvaluator;
+use bitrock::eval::gpu::{self, candidates, residual::GpuEvaluator};
+use bitrock::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
+use bitrock::fit::{FitOptions, fit_laws};
+use bitrock::prior::Prior;
+
+/// True when the GPU tests may run; panics with what to do when no adapter exists.
+fn gpu_available() -> bool {
+    if std::env::var("BITROCK_SKIP_GPU_TESTS").is_ok_and(|v| v == "1") {
+        eprintln!("BITROCK_SKIP_GPU_TESTS=1: GPU test skipped");
+        return false;
+    }
+    match gpu::context() {
+        Ok(ctx) => {
+            eprintln!("GPU tests on {}", ctx.describe());
+            true
+        }
+        Err(e) => panic!(
+            "GPU tests need a GPU adapter and found none ({e}). Run ./scripts/test.sh, which installs Mesa's lavapipe \
+             (apt-get install mesa-vulkan-drivers libvulkan1), or set BITROCK_SKIP_GPU_TESTS=1 to skip them."
+        ),
+    }
+}
+
+#[test]
+fn every_shader_parses_and_validates_with_naga() {
+    for (name, source) in gpu::kernel_sources() {
+        let module =
+            naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
+        assert!(
+            module.entry_points.iter().any(|e| e.name == "main"),
+            "{name} has no entry point main"
+        );
+    }
+}
+
+/// The demo record in full (5,374 samples ≥ 5,000) and the paper's priors (δ = 0.4) for `laws`.
+fn demo_problem(laws: &[Law], seed: u64) -> AbcProblem {
+    let data = demo_field_data(&DataOptions {
+        calibration_fraction: 1.0,
+        ..Default::default()
+    })
+    .unwrap();
+    let fits = fit_laws(laws, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
+    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
+    AbcProblem::new(prior, seed, &data.calibration, None)
+}
+
+#[test]
+fn philox_words_and_candidates_are_identical_bit_for_bit() {
+    if !gpu_available() {
+        return;
+    }
+    let problem = demo_problem(&Law::ALL, 0x1234_5678_9abc_def0);
+    // 131,072 candidates × 8 Philox words = 1,048,576 words; the start crosses 2³² so the
+    // high counter word is exercised.
+    let start = (1u64 << 32) - 65_536;
+    let count = 131_072u32;
+    let got = candidates::generate(&problem.prior, problem.seed, 7, start, count).unwrap();
+    let key = bitrock::rng::key_of_seed(problem.seed);
+    for (k, g) in got.iter().enumerate() {
+        let index = start + k as u64;
+        let b0 = bitrock::rng::philox4x32_10(bitrock::rng::candidate_counter(7, index, 0), key);
+        let b1 = bitrock::rng::philox4x32_10(bitrock::rng::candidate_counter(7, index, 1), key);
+        assert_eq!(g.philox[..4], b0, "block 0 of candidate {index}");
+        assert_eq!(g.philox[4..], b1, "block 1 of candidate {index}");
+        let c = problem.prior.candidate(problem.seed, 7, index);
+        assert_eq!(g.slot as usize, c.slot, "law of candidate {index}");
+        let n = problem.prior.boxes[c.slot].lower.len();
+        for j in 0..n {
+            assert_eq!(
+                g.param_bits[j],
+                c.params[j].to_bits(),
+                "parameter {j} of candidate {index}"
+            );
+        }
+    }
+}
+
+/// Largest and median relative difference of ρ between backends over `count` candidates.
+fn rho_difference(problem: &AbcProblem, count: usize) -> (f64, f64) {
+    let gpu = GpuEvaluator::new(problem.clone()).unwrap();
+    let cpu = CpuEvaluator::new(problem.clone());
+    let (mut a, mut b) = (vec![0.0; count], vec![0.0; count]);
+    gpu.score(3, 10_000, &mut a).unwrap();
+    cpu.score(3, 10_000, &mut b).unwrap();
+    let mut rel: Vec<f64> = a.iter().zip(&b).map(|(g, c)| ((g - c) / c).abs()).collect();
+    rel.sort_by(f64::total_cmp);
+    (rel[count - 1], rel[count / 2])
+}
+
+#[test]
+fn rho_agrees_with_the_cpu_for_every_law() {
+    if !gpu_available() {
+        return;
+    }
+    for law in Law::ALL {
+        let problem = demo_problem(&[law], 11);
+        assert!(problem.data_len() >= 5_000);
+        let (max, median) = rho_difference(&problem, 100_000);
+        eprintln!(
+            "{law}: largest relative difference of rho {max:.2e}, median {median:.2e} (100,000 candidates, D = {})",
+            problem.data_len()
+        );
+        assert!(max <= PARITY_TOLERANCE, "{law}: {max:e} > {PARITY_TOLERANCE:e}");
+    }
+}
+
+#[test]
+fn a_rejection_run_gives_the_same_populations_on_both_backends() {
+    if !gpu_available() {
+        return;
+    }
+    let problem = demo_problem(&Law::ALL, 21);
+    let config = RejectionConfig {
+        particles: 2_000,
+        eps_min: 0.014,
+        ..Default::default()
+    };
+    let cpu = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
+    let gpu_run = rejection::run(&GpuEvaluator::new(problem.clone()).unwrap(), &config).unwrap();
+    assert_eq!(cpu.populations.len(), gpu_run.populations.len());
+    let reference = CpuEvaluator::new(problem);
+    let mut exceptions = 0;
+    for (c, g) in cpu.populations.iter().zip(&gpu_run.populations) {
+        let (ec, eg) = (
+            c.record.epsilon.unwrap_or(f64::INFINITY),
+            g.record.epsilon.unwrap_or(f64::INFINITY),
+        );
+        assert!(ec == eg || ((ec - eg) / ec).abs() <= PARITY_TOLERANCE, "ε {ec} vs {eg}");
+        let ci: std::collections::BTreeSet<u64> = c.particles.iter().map(|p| p.index).collect();
+        let gi: std::collections::BTreeSet<u64> = g.particles.iter().map(|p| p.index).collect();
+        for &index in ci.symmetric_difference(&gi) {
+            // A candidate on one side only must lie within the parity tolerance of ε, or past
+            // the end of the other side's scan (the N-th particle moved with it).
+            let mut rho = [0.0];
+            reference.score(c.record.stream, index, &mut rho).unwrap();
+            let last = ci.last().unwrap().min(gi.last().unwrap());
+            let near = (rho[0] - ec).abs() <= 2.0 * PARITY_TOLERANCE * ec;
+            assert!(near || index > *last, "candidate {index}: rho {} vs ε {ec}", rho[0]);
+            exceptions += 1;
+        }
+    }
+    eprintln!("populations alike on both backends; {exceptions} near-threshold exceptions");
+}
