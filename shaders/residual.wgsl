@@ -8,9 +8,11 @@
 // read only when the run scales by weight on bit (override HAS_RATIO).
 //
 // Accumulation is blocked: 64 samples per block (16 quads, a naive f32 sum), 64 blocks per
-// group, groups summed at the end, so no partial sum holds more than 64 terms for D up to
-// 262,144 (worst-case relative error about 3 x 64 ulps, typically a few) and no driver rewrite
-// can undo it.
+// group, groups summed per dispatch, dispatches (65,536 samples each) added in order, so no
+// partial sum holds more than 64 terms for D up to 4 M (worst-case relative error about
+// 4 x 64 ulps, typically a few) and no driver rewrite can undo it. The host splits the data
+// into dispatches of 65,536 samples because lavapipe stops any loop after 65,535 iterations
+// per invocation (gallivm's loop limiter), which would silently drop the rest of the data.
 
 // False when every sample has r = 1 (the paper's assumption): the ratio column is not read.
 override HAS_RATIO: bool = true;
@@ -35,7 +37,7 @@ fn residual(t: vec4<f32>, q: u32) -> vec4<f32> {
     } else {
         e = torque4[q] - t;
     }
-    let valid = vec4<u32>(4u * q) + vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(job.data_len);
+    let valid = vec4<u32>(4u * q) + vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(job.data_end);
     return select(vec4<f32>(0.0), e, valid);
 }
 
@@ -89,11 +91,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let c = make_candidate(prior, job.population, add_index(job.start, k));
     let law = prior.law_id[c.slot];
-    let quads = (job.data_len + 3u) / 4u;
+    let first = job.data_start / 4u;
+    let quads = (job.data_end + 3u) / 4u;
     var total = 0.0;
     var group = 0.0;
     var blocks = 0u;
-    for (var q0 = 0u; q0 < quads; q0 = q0 + QUADS_PER_BLOCK) {
+    for (var q0 = first; q0 < quads; q0 = q0 + QUADS_PER_BLOCK) {
         group = group + block_ssr(law, c.params, q0, min(q0 + QUADS_PER_BLOCK, quads));
         blocks = blocks + 1u;
         if (blocks == BLOCKS_PER_GROUP) {
@@ -102,5 +105,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             blocks = 0u;
         }
     }
-    ssr[k] = total + group;
+    let sum = total + group;
+    if (job.accumulate == 1u) {
+        ssr[k] = ssr[k] + sum;
+    } else {
+        ssr[k] = sum;
+    }
 }

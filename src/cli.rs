@@ -31,6 +31,12 @@ pub enum Command {
     Simulate(SimulateCmd),
     /// Run the whole pipeline on the embedded (synthetic) demo record.
     Demo(DemoCmd),
+    /// Score the same candidates on the CPU and the GPU and report their agreement: what to run
+    /// on new hardware before trusting its GPU. Exit status 1 when a check fails.
+    Parity(ParityCmd),
+    /// Benchmark report: evaluator throughput per law and backend, the fixed cost of a call,
+    /// and a paper-scale ABC run end to end.
+    Bench(BenchCmd),
 }
 
 /// Which columns of the CSV to read, their units, and which rows to use.
@@ -300,4 +306,46 @@ pub struct DemoCmd {
     /// Where ρ is computed (auto, gpu, cpu).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+}
+
+#[derive(Debug, Args)]
+pub struct ParityCmd {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    /// Laws to compare, comma-separated (priors from their least-squares fits, δ = 0.4).
+    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
+    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Candidates scored per law on each backend.
+    #[arg(long, default_value_t = 100_000, value_name = "N")]
+    pub candidates: usize,
+    /// Tolerance at which accept/reject decisions are compared [default: each law's median ρ].
+    #[arg(long, value_name = "EPS")]
+    pub epsilon: Option<f64>,
+    /// Seed of the candidate stream.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct BenchCmd {
+    /// Repetitions per measurement (median, min and max are reported).
+    #[arg(long, default_value_t = 5, value_name = "R")]
+    pub reps: usize,
+    /// Laws to measure, comma-separated.
+    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
+    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Only this backend [default: both].
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Small sizes only (65,536 × 5,000; end-to-end with N = 5,000): a smoke test in seconds.
+    #[arg(long)]
+    pub quick: bool,
+    /// Print JSON instead of lines.
+    #[arg(long)]
+    pub json: bool,
 }

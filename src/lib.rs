@@ -8,6 +8,7 @@
 #![deny(clippy::float_cmp)]
 
 pub mod abc;
+pub mod bench;
 pub mod data;
 pub mod error;
 pub mod eval;

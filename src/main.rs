@@ -69,6 +69,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Simulate(cmd) => simulate_cmd(&cmd)?,
         Command::Demo(cmd) => demo_cmd(&cmd)?,
+        Command::Parity(cmd) => return parity_cmd(&cmd),
+        Command::Bench(cmd) => bench_cmd(&cmd)?,
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -325,6 +327,136 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
     output::print_population_table(&mut out, &done.run)?;
     output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
     writeln!(out, "\nrun written to {}", cmd.out.display())?;
+    Ok(())
+}
+
+fn parity_cmd(cmd: &cli::ParityCmd) -> anyhow::Result<ExitCode> {
+    if cmd.candidates == 0 {
+        return Err(Error::arg("--candidates", "must be at least 1").into());
+    }
+    if let Some(e) = cmd.epsilon
+        && !(e.is_finite() && e > 0.0)
+    {
+        return Err(Error::arg("--epsilon", format!("must be a positive number, got {e}")).into());
+    }
+    let opts = cmd.data_args.options();
+    let data = match &cmd.data {
+        Some(path) => data::read_field_data(path, &opts)?,
+        None => data::demo_field_data(&opts)?,
+    };
+    let fits = fit::fit_laws(&cmd.laws, &data.calibration, &data.validation, &FitOptions::default())?;
+    let prior = Prior::from_fits(&fits, 0.4, None, data.torque_unit.newton_metres())?;
+    let problem = AbcProblem::new(prior, cmd.seed, &data.calibration, None);
+    let report = bitrock::bench::parity(&problem, cmd.candidates, cmd.epsilon)?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        writeln!(out, "adapter: {}", report.adapter)?;
+        writeln!(
+            out,
+            "data: {} points; tolerance on the relative difference of ρ: {:e}",
+            problem.data_len(),
+            report.tolerance
+        )?;
+        writeln!(
+            out,
+            "law  candidates  max rel.diff  median rel.diff     epsilon  decisions differ (near ε)"
+        )?;
+        for l in &report.laws {
+            writeln!(
+                out,
+                "{:<3}  {:>10}  {:>12.3e}  {:>15.3e}  {:>10.5}  {:>8} ({})",
+                l.law,
+                l.candidates,
+                l.max_rel_diff,
+                l.median_rel_diff,
+                l.epsilon,
+                l.decisions_differ,
+                l.decisions_differ_near_threshold
+            )?;
+        }
+        let p = &report.philox;
+        writeln!(
+            out,
+            "Philox: {} of {} words differ; candidates: {} of {} differ",
+            p.words_differ, p.words_compared, p.candidates_differ, p.candidates_compared
+        )?;
+        writeln!(
+            out,
+            "{}",
+            if report.pass {
+                "PASS: this GPU agrees with the CPU reference"
+            } else {
+                "FAIL: do not trust this GPU's results"
+            }
+        )?;
+    }
+    Ok(if report.pass {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+fn bench_cmd(cmd: &cli::BenchCmd) -> anyhow::Result<()> {
+    if cmd.reps == 0 {
+        return Err(Error::arg("--reps", "must be at least 1").into());
+    }
+    let mut opts = bitrock::bench::BenchOptions {
+        repetitions: cmd.reps,
+        laws: cmd.laws.clone(),
+        ..Default::default()
+    };
+    match cmd.backend {
+        Some(bitrock::eval::Backend::Auto) | None => {}
+        Some(b) => opts.backends = vec![b],
+    }
+    if cmd.quick {
+        opts.sizes = vec![(65_536, 5_000)];
+        opts.particles = 5_000;
+    }
+    let quiet = cmd.json;
+    let report = bitrock::bench::run(&opts, &mut |line| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    })?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        writeln!(
+            out,
+            "machine: {} ({} cores); adapter: {}",
+            report.machine, report.cores, report.adapter
+        )?;
+        writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
+        writeln!(out, "backend  law          N        D   evaluations/s (min–max)")?;
+        for t in &report.throughput {
+            writeln!(
+                out,
+                "{:<7}  {:<3}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})",
+                t.backend, t.law, t.n, t.d, t.evals_per_s, t.evals_per_s_spread.min, t.evals_per_s_spread.max
+            )?;
+        }
+        for (backend, s) in &report.small_call_seconds {
+            writeln!(
+                out,
+                "{backend:<7}  small call (64 × 100): {:.3e} s ({:.2e}–{:.2e})",
+                s.median, s.min, s.max
+            )?;
+        }
+        for e in &report.end_to_end {
+            writeln!(
+                out,
+                "{:<7}  paper-scale run: {:.3} s ({:.3}–{:.3}), {} populations, {:.3e} evaluations",
+                e.backend, e.seconds, e.seconds_spread.min, e.seconds_spread.max, e.populations, e.evaluations as f64
+            )?;
+        }
+    }
     Ok(())
 }
 

@@ -154,3 +154,105 @@ fn a_rejection_run_gives_the_same_populations_on_both_backends() {
     }
     eprintln!("populations alike on both backends; {exceptions} near-threshold exceptions");
 }
+
+fn run_bitrock(args: &[&str]) -> (i32, String, String) {
+    let out = crate::support::bin().args(args).output().expect("run bitrock");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn parity_command_reports_agreement_as_json() {
+    if !gpu_available() {
+        return;
+    }
+    let (code, stdout, stderr) = run_bitrock(&["parity", "--candidates", "4000", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["pass"], true);
+    assert_eq!(v["philox"]["words_compared"], 1_048_576);
+    assert_eq!(v["philox"]["words_differ"], 0);
+    assert_eq!(v["laws"].as_array().unwrap().len(), 4);
+    for l in v["laws"].as_array().unwrap() {
+        assert!(l["max_rel_diff"].as_f64().unwrap() <= PARITY_TOLERANCE);
+    }
+}
+
+#[test]
+fn bench_json_keeps_its_keys_and_both_backends_count_the_same_evaluations() {
+    if !gpu_available() {
+        return;
+    }
+    let (code, stdout, stderr) = run_bitrock(&["bench", "--quick", "--reps", "1", "--laws", "m2", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(v["adapter"].as_str().unwrap().contains("llvmpipe") || !v["adapter"].as_str().unwrap().starts_with("none"));
+    let t = v["throughput"].as_array().unwrap();
+    assert_eq!(t.len(), 2);
+    for row in t {
+        for key in ["backend", "law", "n", "d", "evals_per_s"] {
+            assert!(row.get(key).is_some(), "{key} missing in {row}");
+        }
+        assert!(row["evals_per_s"].as_f64().unwrap() > 0.0);
+    }
+    let e = v["end_to_end"].as_array().unwrap();
+    assert_eq!(e.len(), 2);
+    // Same seed, same populations: the CPU and GPU runs score the same candidates.
+    assert_eq!(e[0]["evaluations"], e[1]["evaluations"]);
+    assert!(e[0].get("seconds").is_some());
+}
+
+#[test]
+fn abc_on_the_gpu_backend_matches_the_cpu_backend() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mut outputs = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let out = dir.path().join(backend);
+        let (code, stdout, stderr) = run_bitrock(&[
+            "abc",
+            "--particles",
+            "1000",
+            "--backend",
+            backend,
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ]);
+        assert_eq!(code, 0, "{stderr}");
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(v["backend"], backend);
+        outputs.push(v);
+    }
+    let (a, b) = (&outputs[0]["populations"], &outputs[1]["populations"]);
+    assert_eq!(a.as_array().unwrap().len(), b.as_array().unwrap().len());
+    for (pa, pb) in a.as_array().unwrap().iter().zip(b.as_array().unwrap()) {
+        // Identical unless a candidate sat within the parity tolerance of ε.
+        if pa["near_threshold"] == 0 && pb["near_threshold"] == 0 {
+            assert_eq!(pa["draws"], pb["draws"]);
+            assert_eq!(pa["model_probabilities"], pb["model_probabilities"]);
+        }
+    }
+}
+
+#[test]
+fn a_million_data_points_and_a_two_dimensional_dispatch_agree_with_the_cpu() {
+    if !gpu_available() {
+        return;
+    }
+    // D = 2^20: the blocked accumulation over a long record.
+    let big = bitrock::bench::synthetic_problem(Law::M3, 1 << 20, 5);
+    let (max, _) = rho_difference(&big, 512);
+    eprintln!("D = 2^20: largest relative difference of rho {max:.2e}");
+    assert!(max <= PARITY_TOLERANCE, "{max:e}");
+    // 4,194,304 candidates in one dispatch: past 65,535 workgroups of 64, the grid is 2-D.
+    let small = bitrock::bench::synthetic_problem(Law::M2, 64, 6);
+    let (max, _) = rho_difference(&small, 1 << 22);
+    eprintln!("4,194,304 candidates: largest relative difference of rho {max:.2e}");
+    assert!(max <= PARITY_TOLERANCE, "{max:e}");
+}

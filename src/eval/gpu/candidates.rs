@@ -44,7 +44,7 @@ pub fn generate(
     ctx.queue.write_buffer(
         &job_buffer,
         0,
-        bytemuck::bytes_of(&Job::new(population, start, count, 0, row_width)),
+        bytemuck::bytes_of(&Job::new(population, start, count, row_width)),
     );
     let entries = [
         buffer_entry(0, UNIFORM),

@@ -298,20 +298,32 @@ pub struct Job {
     start: [u32; 2],
     population: u32,
     count: u32,
-    data_len: u32,
+    data_start: u32,
+    data_end: u32,
     row_width: u32,
-    _pad: [u32; 2],
+    accumulate: u32,
 }
 
 impl Job {
-    fn new(population: u32, start: u64, count: u32, data_len: u32, row_width: u32) -> Self {
+    fn new(population: u32, start: u64, count: u32, row_width: u32) -> Self {
         Self {
             start: [start as u32, (start >> 32) as u32],
             population,
             count,
-            data_len,
+            data_start: 0,
+            data_end: 0,
             row_width,
-            _pad: [0; 2],
+            accumulate: 0,
+        }
+    }
+
+    /// The same job restricted to samples `range`, adding to earlier dispatches unless first.
+    fn samples(self, range: std::ops::Range<u32>) -> Self {
+        Self {
+            data_start: range.start,
+            data_end: range.end,
+            accumulate: u32::from(range.start > 0),
+            ..self
         }
     }
 }

@@ -7,6 +7,10 @@ use crate::error::Result;
 use crate::eval::{AbcProblem, Evaluator};
 use std::sync::Mutex;
 
+/// Samples scored per dispatch: lavapipe ends any loop after 65,535 iterations per invocation,
+/// so longer records are scored in slices whose sums the kernel adds up.
+const SAMPLES_PER_DISPATCH: u32 = 65_536;
+
 /// Buffers, pipeline and bind group of one run, created once.
 struct Resources {
     job: wgpu::Buffer,
@@ -148,19 +152,30 @@ impl GpuEvaluator {
             let first = start + (c * self.chunk) as u64;
             let count = chunk.len() as u32;
             let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
-            let job = Job::new(population, first, count, self.data_len, row_width);
-            ctx.queue.write_buffer(&res.job, 0, bytemuck::bytes_of(&job));
+            let job = Job::new(population, first, count, row_width);
+            // Samples in slices of SAMPLES_PER_DISPATCH, each dispatch adding to the last.
             let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("residual"),
             });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("residual"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&res.pipeline);
-                pass.set_bind_group(0, &res.bind_group, &[]);
-                pass.dispatch_workgroups(x, y, 1);
+            for s0 in (0..self.data_len).step_by(SAMPLES_PER_DISPATCH as usize) {
+                let slice = job.samples(s0..(s0 + SAMPLES_PER_DISPATCH).min(self.data_len));
+                ctx.queue.write_buffer(&res.job, 0, bytemuck::bytes_of(&slice));
+                {
+                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some("residual"),
+                        timestamp_writes: None,
+                    });
+                    pass.set_pipeline(&res.pipeline);
+                    pass.set_bind_group(0, &res.bind_group, &[]);
+                    pass.dispatch_workgroups(x, y, 1);
+                }
+                if s0 + SAMPLES_PER_DISPATCH < self.data_len {
+                    // The next slice rewrites the job uniform: submit this one first.
+                    ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
+                    encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("residual"),
+                    });
+                }
             }
             let bytes = 4 * u64::from(count);
             encoder.copy_buffer_to_buffer(&res.ssr, 0, &res.staging, 0, bytes);

@@ -1,0 +1,354 @@
+//! `bitrock bench` and `bitrock parity`: what a user runs on new hardware to know how fast
+//! bitrock is there and whether to trust its GPU.
+
+use crate::Law;
+use crate::abc::rejection::{self, RejectionConfig};
+use crate::data::{DataOptions, Samples, demo_field_data};
+use crate::error::Result;
+use crate::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE, cpu::CpuEvaluator, evaluator, gpu};
+use crate::fit::{FitOptions, fit_laws};
+use crate::numerics::quantile;
+use crate::prior::{LawBox, Prior};
+use serde::Serialize;
+use std::time::Instant;
+
+/// Median, min and max of repeated measurements.
+#[derive(Clone, Debug, Serialize)]
+pub struct Spread {
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    fn of(values: &[f64]) -> Self {
+        Spread {
+            median: quantile(values, 0.5),
+            min: values.iter().copied().fold(f64::INFINITY, f64::min),
+            max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        }
+    }
+}
+
+/// Throughput of one backend and law at one size.
+#[derive(Clone, Debug, Serialize)]
+pub struct Throughput {
+    pub backend: &'static str,
+    pub law: Law,
+    /// Candidates per call.
+    pub n: usize,
+    /// Data points.
+    pub d: usize,
+    /// Candidate × data-point evaluations per second (median).
+    pub evals_per_s: f64,
+    /// The same, min and max over the repetitions.
+    pub evals_per_s_spread: Spread,
+}
+
+/// A paper-scale run, end to end.
+#[derive(Clone, Debug, Serialize)]
+pub struct EndToEnd {
+    pub backend: &'static str,
+    /// Wall time of the sampler (median over repetitions), s.
+    pub seconds: f64,
+    pub seconds_spread: Spread,
+    pub evaluations: u64,
+    pub populations: usize,
+}
+
+/// Everything `bitrock bench` measures.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    pub machine: String,
+    pub cores: usize,
+    /// The GPU adapter and driver, or why there is none.
+    pub adapter: String,
+    pub repetitions: usize,
+    pub throughput: Vec<Throughput>,
+    /// Time of one small call (64 candidates, 100 points), s: the fixed cost of a dispatch.
+    pub small_call_seconds: Vec<(String, Spread)>,
+    pub end_to_end: Vec<EndToEnd>,
+}
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub repetitions: usize,
+    pub laws: Vec<Law>,
+    pub backends: Vec<Backend>,
+    /// (candidates, data points) pairs.
+    pub sizes: Vec<(usize, usize)>,
+    /// Particles of the end-to-end run (the paper's 25,000).
+    pub particles: usize,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            repetitions: 5,
+            laws: Law::ALL.to_vec(),
+            backends: vec![Backend::Cpu, Backend::Gpu],
+            sizes: vec![(65_536, 5_000), (1_048_576, 5_000), (65_536, 100_000)],
+            particles: 25_000,
+        }
+    }
+}
+
+/// A single-law problem: `d` samples of the law at the paper's estimate (N·m) with a
+/// deterministic ±5 % ripple, speeds 0.5-20 rad/s, and the paper's ±40 % prior box.
+pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> AbcProblem {
+    let truth = law.scale_torque(law.paper_estimate(), 1000.0);
+    let speed: Vec<f64> = (0..d)
+        .map(|i| 0.5 + 19.5 * i as f64 / d.max(2).saturating_sub(1) as f64)
+        .collect();
+    let torque = speed
+        .iter()
+        .enumerate()
+        .map(|(i, &w)| law.torque(&truth, w, 1.0) * (1.0 + 0.05 * ((i * 7919 % 101) as f64 / 50.0 - 1.0)))
+        .collect();
+    let data = Samples {
+        speed_rad_s: speed,
+        torque_nm: torque,
+        wob_n: None,
+        time_s: None,
+    };
+    let (lower, upper) = truth
+        .iter()
+        .map(|&p| ((p * 0.6).min(p * 1.4) as f32, (p * 0.6).max(p * 1.4) as f32))
+        .unzip();
+    let prior = Prior::new(vec![LawBox { law, lower, upper }], vec![1.0]).expect("one positive weight");
+    AbcProblem::new(prior, seed, &data, None)
+}
+
+fn backend_name(b: Backend) -> &'static str {
+    match b {
+        Backend::Cpu => "cpu",
+        Backend::Gpu => "gpu",
+        Backend::Auto => "auto",
+    }
+}
+
+/// The CPU model, from /proc/cpuinfo where there is one.
+fn machine() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string())
+}
+
+/// Times `f` `reps` times after one warm-up call; seconds per call.
+fn time_calls(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<Vec<f64>> {
+    f()?;
+    (0..reps)
+        .map(|_| {
+            let t = Instant::now();
+            f()?;
+            Ok(t.elapsed().as_secs_f64())
+        })
+        .collect()
+}
+
+/// Runs the benchmark, reporting progress lines through `log`.
+pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchReport> {
+    let adapter = match gpu::context() {
+        Ok(ctx) => ctx.describe(),
+        Err(e) => format!("none ({e})"),
+    };
+    let reps = opts.repetitions.max(1);
+    let mut throughput = Vec::new();
+    for &backend in &opts.backends {
+        for &(n, d) in &opts.sizes {
+            for &law in &opts.laws {
+                let ev = evaluator(synthetic_problem(law, d, 1), backend, &mut |_| {})?;
+                let mut rho = vec![0.0; n];
+                let times = time_calls(reps, || ev.score(0, 0, &mut rho))?;
+                let rates: Vec<f64> = times.iter().map(|t| (n * d) as f64 / t).collect();
+                let spread = Spread::of(&rates);
+                log(format!(
+                    "{:>3} {law} N = {n:>9} D = {d:>7}: {:.3e} evaluations/s",
+                    ev.backend(),
+                    spread.median
+                ));
+                throughput.push(Throughput {
+                    backend: backend_name(backend),
+                    law,
+                    n,
+                    d,
+                    evals_per_s: spread.median,
+                    evals_per_s_spread: spread,
+                });
+            }
+        }
+    }
+    let mut small_call_seconds = Vec::new();
+    for &backend in &opts.backends {
+        let ev = evaluator(synthetic_problem(Law::M2, 100, 1), backend, &mut |_| {})?;
+        let mut rho = vec![0.0; 64];
+        let times = time_calls(reps.max(20), || ev.score(0, 0, &mut rho))?;
+        let spread = Spread::of(&times);
+        log(format!(
+            "{:>3} small call (64 candidates, 100 points): {:.3e} s",
+            ev.backend(),
+            spread.median
+        ));
+        small_call_seconds.push((backend_name(backend).to_string(), spread));
+    }
+    let mut end_to_end = Vec::new();
+    let data = demo_field_data(&DataOptions::default())?;
+    let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default())?;
+    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0)?;
+    let config = RejectionConfig {
+        particles: opts.particles,
+        ..RejectionConfig::default()
+    };
+    for &backend in &opts.backends {
+        let ev = evaluator(
+            AbcProblem::new(prior.clone(), 1, &data.calibration, None),
+            backend,
+            &mut |_| {},
+        )?;
+        let mut last = None;
+        let times = time_calls(reps, || {
+            last = Some(rejection::run(ev.as_ref(), &config)?);
+            Ok(())
+        })?;
+        let run = last.expect("at least one run");
+        let spread = Spread::of(&times);
+        log(format!(
+            "{:>3} paper-scale run (N = {}, four laws, embedded record, to ε = {}): {:.3} s, {:.3e} evaluations",
+            ev.backend(),
+            opts.particles,
+            config.eps_min,
+            spread.median,
+            run.evaluations as f64
+        ));
+        end_to_end.push(EndToEnd {
+            backend: backend_name(backend),
+            seconds: spread.median,
+            seconds_spread: spread,
+            evaluations: run.evaluations,
+            populations: run.populations.len(),
+        });
+    }
+    Ok(BenchReport {
+        machine: machine(),
+        cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        adapter,
+        repetitions: reps,
+        throughput,
+        small_call_seconds,
+        end_to_end,
+    })
+}
+
+/// Agreement of one law's ρ between backends.
+#[derive(Clone, Debug, Serialize)]
+pub struct LawParity {
+    pub law: Law,
+    pub candidates: usize,
+    pub d: usize,
+    pub max_rel_diff: f64,
+    pub median_rel_diff: f64,
+    /// Tolerance the decisions were compared at (the CPU median ρ unless given).
+    pub epsilon: f64,
+    /// Candidates accepted by one backend only.
+    pub decisions_differ: usize,
+    /// Of those, how many lie within the parity tolerance of ε (expected exceptions).
+    pub decisions_differ_near_threshold: usize,
+}
+
+/// Bit-for-bit agreement of the candidate generator.
+#[derive(Clone, Debug, Serialize)]
+pub struct PhiloxParity {
+    pub words_compared: usize,
+    pub words_differ: usize,
+    pub candidates_compared: usize,
+    pub candidates_differ: usize,
+}
+
+/// What `bitrock parity` reports.
+#[derive(Clone, Debug, Serialize)]
+pub struct ParityReport {
+    pub adapter: String,
+    pub tolerance: f64,
+    pub laws: Vec<LawParity>,
+    pub philox: PhiloxParity,
+    /// Every check within tolerance: ρ, decisions away from ε, Philox and candidates exact.
+    pub pass: bool,
+}
+
+/// Scores the same candidates on both backends for each law's prior in `prior` (one law at a
+/// time), and compares the candidate generators bit for bit.
+pub fn parity(problem: &AbcProblem, candidates: usize, epsilon: Option<f64>) -> Result<ParityReport> {
+    let ctx = gpu::context()?;
+    let mut laws = Vec::new();
+    for (slot, bx) in problem.prior.boxes.iter().enumerate() {
+        let single = AbcProblem {
+            prior: Prior::new(vec![bx.clone()], vec![problem.prior.weights[slot]])?,
+            ..problem.clone()
+        };
+        let gpu = gpu::residual::GpuEvaluator::new(single.clone())?;
+        let cpu = CpuEvaluator::new(single);
+        let (mut g, mut c) = (vec![0.0; candidates], vec![0.0; candidates]);
+        gpu.score(0, 0, &mut g)?;
+        cpu.score(0, 0, &mut c)?;
+        let rel: Vec<f64> = g.iter().zip(&c).map(|(g, c)| ((g - c) / c).abs()).collect();
+        let eps = epsilon.unwrap_or_else(|| quantile(&c, 0.5));
+        let differ: Vec<usize> = (0..candidates).filter(|&i| (g[i] < eps) != (c[i] < eps)).collect();
+        let near = differ
+            .iter()
+            .filter(|&&i| (c[i] - eps).abs() <= PARITY_TOLERANCE * eps)
+            .count();
+        laws.push(LawParity {
+            law: bx.law,
+            candidates,
+            d: problem.data_len(),
+            max_rel_diff: rel.iter().copied().fold(0.0, f64::max),
+            median_rel_diff: quantile(&rel, 0.5),
+            epsilon: eps,
+            decisions_differ: differ.len(),
+            decisions_differ_near_threshold: near,
+        });
+    }
+    // 2¹⁷ candidates × 8 words = 1,048,576 Philox words, starting below 2³² so that the high
+    // counter word changes inside the range.
+    let count = 131_072u32;
+    let start = (1u64 << 32) - u64::from(count) / 2;
+    let got = gpu::candidates::generate(&problem.prior, problem.seed, 1, start, count)?;
+    let key = crate::rng::key_of_seed(problem.seed);
+    let (mut words_differ, mut candidates_differ) = (0, 0);
+    for (k, g) in got.iter().enumerate() {
+        let index = start + k as u64;
+        for b in 0..2u32 {
+            let want = crate::rng::philox4x32_10(crate::rng::candidate_counter(1, index, b), key);
+            let have = &g.philox[4 * b as usize..4 * b as usize + 4];
+            words_differ += want.iter().zip(have).filter(|(a, b)| a != b).count();
+        }
+        let c = problem.prior.candidate(problem.seed, 1, index);
+        let n = problem.prior.boxes[c.slot].lower.len();
+        let same = g.slot as usize == c.slot && (0..n).all(|j| g.param_bits[j] == c.params[j].to_bits());
+        candidates_differ += usize::from(!same);
+    }
+    let philox = PhiloxParity {
+        words_compared: 8 * count as usize,
+        words_differ,
+        candidates_compared: count as usize,
+        candidates_differ,
+    };
+    let pass = philox.words_differ == 0
+        && philox.candidates_differ == 0
+        && laws
+            .iter()
+            .all(|l| l.max_rel_diff <= PARITY_TOLERANCE && l.decisions_differ == l.decisions_differ_near_threshold);
+    Ok(ParityReport {
+        adapter: ctx.describe(),
+        tolerance: PARITY_TOLERANCE,
+        laws,
+        philox,
+        pass,
+    })
+}
