@@ -1,34 +1,20 @@
-//! CPU evaluator throughput: candidate × data-point evaluations per second for each law at
-//! D = 5,000 (the targets on two cores: m3 ≥ 1.5e8/s, m2 ≥ 5e8/s).
-//! `cargo bench --bench evaluator`; criterion's "thrpt" line is evaluations per second.
+//! Evaluator throughput: candidate × data-point evaluations per second for each law at
+//! D = 5,000, on the CPU (8,192 candidates per call) and, when an adapter exists, on the GPU
+//! (65,536 candidates per call). `cargo bench --bench evaluator`; criterion's "thrpt" line is
+//! evaluations per second. `bitrock bench` measures the same kernels at more sizes.
 
 use bitrock::Law;
-use bitrock::data::Samples;
 use bitrock::eval::cpu::CpuEvaluator;
+use bitrock::eval::gpu::residual::GpuEvaluator;
 use bitrock::eval::{AbcProblem, Evaluator};
-use bitrock::prior::{LawBox, Prior};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 const D: usize = 5_000;
 const CANDIDATES: usize = 8_192;
 
-/// One-law problem: data from the law at the paper's estimate (N·m), prior box ±40 %.
+/// One-law problem: the paper's estimate with a ±5 % ripple, ±40 % prior box.
 fn problem(law: Law) -> AbcProblem {
-    let truth = law.scale_torque(law.paper_estimate(), 1000.0);
-    let speed: Vec<f64> = (0..D).map(|i| 0.5 + 20.0 * i as f64 / D as f64).collect();
-    let torque = speed.iter().map(|&w| law.torque(&truth, w, 1.0)).collect();
-    let data = Samples {
-        speed_rad_s: speed,
-        torque_nm: torque,
-        wob_n: None,
-        time_s: None,
-    };
-    let (lower, upper) = truth
-        .iter()
-        .map(|&p| ((p * 0.6).min(p * 1.4) as f32, (p * 0.6).max(p * 1.4) as f32))
-        .unzip();
-    let prior = Prior::new(vec![LawBox { law, lower, upper }], vec![1.0]).expect("prior");
-    AbcProblem::new(prior, 1, &data, None)
+    bitrock::bench::synthetic_problem(law, D, 1)
 }
 
 fn benches(c: &mut Criterion) {
@@ -43,6 +29,25 @@ fn benches(c: &mut Criterion) {
         });
     }
     group.finish();
+
+    match bitrock::eval::gpu::context() {
+        Err(e) => eprintln!("no GPU adapter ({e}): GPU benchmarks skipped"),
+        Ok(ctx) => {
+            eprintln!("GPU: {}", ctx.describe());
+            const GPU_CANDIDATES: usize = 65_536;
+            let mut group = c.benchmark_group("gpu_evaluator_d5000");
+            group.throughput(Throughput::Elements((D * GPU_CANDIDATES) as u64));
+            group.sample_size(10);
+            for law in Law::ALL {
+                let evaluator = GpuEvaluator::new(problem(law)).expect("GPU evaluator");
+                let mut rho = vec![0.0; GPU_CANDIDATES];
+                group.bench_function(law.name(), |b| {
+                    b.iter(|| evaluator.score(0, 0, &mut rho).expect("score"))
+                });
+            }
+            group.finish();
+        }
+    }
 }
 
 criterion_group!(evaluator, benches);
