@@ -37,25 +37,11 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Fit(cmd) => {
-            let opts = cmd.data_args.options();
-            let data = match &cmd.data {
-                Some(path) => data::read_field_data(path, &opts)?,
-                None => {
-                    eprintln!("note: no DATA given; using the embedded synthetic demo record");
-                    data::demo_field_data(&opts)?
-                }
-            };
+            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
             fit_and_print(&data, &cmd.fit, cmd.json)?;
         }
         Command::Abc(cmd) => {
-            let opts = cmd.data_args.options();
-            let data = match &cmd.data {
-                Some(path) => data::read_field_data(path, &opts)?,
-                None => {
-                    eprintln!("note: no DATA given; using the embedded synthetic demo record");
-                    data::demo_field_data(&opts)?
-                }
-            };
+            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
             let done = run_abc(&data, &cmd.fit, &cmd.abc, &cmd.out, cmd.force, cmd.json)?;
             let mut out = std::io::stdout().lock();
             if cmd.json {
@@ -73,6 +59,18 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(cmd) => bench_cmd(&cmd)?,
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The record at `path`, or the embedded demo record (saying so) when there is none.
+fn load_data(path: Option<&Path>, args: &cli::DataArgs) -> anyhow::Result<FieldData> {
+    let opts = args.options();
+    Ok(match path {
+        Some(path) => data::read_field_data(path, &opts)?,
+        None => {
+            eprintln!("note: no DATA given; using the embedded synthetic demo record");
+            data::demo_field_data(&opts)?
+        }
+    })
 }
 
 /// Validated fit options from the flags.
@@ -339,11 +337,7 @@ fn parity_cmd(cmd: &cli::ParityCmd) -> anyhow::Result<ExitCode> {
     {
         return Err(Error::arg("--epsilon", format!("must be a positive number, got {e}")).into());
     }
-    let opts = cmd.data_args.options();
-    let data = match &cmd.data {
-        Some(path) => data::read_field_data(path, &opts)?,
-        None => data::demo_field_data(&opts)?,
-    };
+    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     let fits = fit::fit_laws(&cmd.laws, &data.calibration, &data.validation, &FitOptions::default())?;
     let prior = Prior::from_fits(&fits, 0.4, None, data.torque_unit.newton_metres())?;
     let problem = AbcProblem::new(prior, cmd.seed, &data.calibration, None);

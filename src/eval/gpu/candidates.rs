@@ -52,26 +52,7 @@ pub fn generate(
         buffer_entry(2, STORAGE_WRITE),
     ];
     let (pipeline, layout) = ctx.pipeline("candidates", &super::candidates_source(), &entries, &[])?;
-    let bind_group = ctx.scoped(|| {
-        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("candidates"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: prior_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: job_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: out.as_entire_binding(),
-                },
-            ],
-        })
-    })?;
+    let bind_group = ctx.bind_group("candidates", &layout, &[&prior_buffer, &job_buffer, &out])?;
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("candidates"),
     });

@@ -92,38 +92,11 @@ impl GpuEvaluator {
         ];
         let constants = [("HAS_RATIO", if has_ratio { 1.0 } else { 0.0 })];
         let (pipeline, layout) = context.pipeline("residual", &super::residual_source(), &entries, &constants)?;
-        let bind_group = context.scoped(|| {
-            context.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("residual"),
-                layout: &layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: prior_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: job.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: data[0].as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: data[1].as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: data[2].as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: ssr.as_entire_binding(),
-                    },
-                ],
-            })
-        })?;
+        let bind_group = context.bind_group(
+            "residual",
+            &layout,
+            &[&prior_buffer, &job, &data[0], &data[1], &data[2], &ssr],
+        )?;
         Ok(Self {
             problem,
             context,
