@@ -1,4 +1,5 @@
-//! Torsional stability: the 1-DOF lumped model now; the finite-element string and the maps
-//! arrive with the stability issue.
+//! Torsional stability: the 1-DOF lumped model, stability maps over (Ω, W); the
+//! finite-element string arrives next.
 
 pub mod lumped;
+pub mod map;

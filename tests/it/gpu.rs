@@ -256,3 +256,71 @@ fn a_million_data_points_and_a_two_dimensional_dispatch_agree_with_the_cpu() {
     eprintln!("4,194,304 candidates: largest relative difference of rho {max:.2e}");
     assert!(max <= PARITY_TOLERANCE, "{max:e}");
 }
+
+#[test]
+fn the_stability_grid_agrees_with_the_cpu_cell_by_cell() {
+    use bitrock::stability::lumped::Lumped;
+    use bitrock::stability::map::{Criterion, growth_rate_grid, parse_axis, probability_grid};
+    if !gpu_available() {
+        return;
+    }
+    let omega = parse_axis("10:250:61", "x").unwrap();
+    let wob = parse_axis("10:700:71", "y").unwrap();
+    let lumped = Lumped::default();
+    let w_ref = 244.2e3;
+    for law in Law::ALL {
+        // 40,000 samples: more than one slice of 32,768, ±30 % around the paper's estimate.
+        let base = law.scale_torque(law.paper_estimate(), 1000.0);
+        let samples: Vec<Vec<f64>> = (0..40_000u32)
+            .map(|i| {
+                base.iter()
+                    .enumerate()
+                    .map(|(j, &p)| {
+                        let u = f64::from(bitrock::rng::unit_f32(
+                            bitrock::rng::philox4x32_10([i, j as u32, 0, 0], [9, 9])[0],
+                        ));
+                        p * (0.7 + 0.6 * u)
+                    })
+                    .collect()
+            })
+            .collect();
+        for criterion in [Criterion::Lumped(lumped), Criterion::Critical(-200.0)] {
+            let cpu = probability_grid(law, &samples, &omega, &wob, criterion, w_ref);
+            let (gpu, growth) = gpu::stability::stability_grid(law, &samples, &omega, &wob, criterion, w_ref).unwrap();
+            let c = criterion.critical_nms();
+            let mut differing = 0;
+            for (cell, (&p, &count)) in cpu.iter().zip(&gpu).enumerate() {
+                let (rpm, kn) = (omega[cell / wob.len()], wob[cell % wob.len()]);
+                let diff = ((p * samples.len() as f64).round() - f64::from(count)).abs();
+                if diff > 0.0 {
+                    // Samples whose bit damping lies within 1e-5 of c_b* may be decided either way.
+                    let near = samples
+                        .iter()
+                        .filter(|s| {
+                            let cb = kn * 1000.0 / w_ref * law.dtorque_dw(s, rpm * bitrock::units::RAD_S_PER_RPM, 1.0);
+                            (cb - c).abs() <= 1e-5 * c.abs()
+                        })
+                        .count();
+                    assert!(
+                        diff <= near as f64,
+                        "{law} at ({rpm} rpm, {kn} kN): {count} vs {}",
+                        p * samples.len() as f64
+                    );
+                }
+                differing += usize::from(diff > 0.0);
+            }
+            eprintln!(
+                "{law} {criterion:?}: {differing} of {} cells differ, all within the tolerance",
+                cpu.len()
+            );
+            if let Criterion::Lumped(l) = criterion {
+                let reference = growth_rate_grid(law, &samples[0], &omega, &wob, &l, w_ref);
+                // The eigenvalue sums terms of order ω_n ≈ 1/s in f32: absolute agreement to
+                // 1e-5/s, relative beyond.
+                for (g, r) in growth.iter().zip(&reference) {
+                    assert!((f64::from(*g) - r).abs() <= 1e-5 * (1.0 + r.abs()), "growth {g} vs {r}");
+                }
+            }
+        }
+    }
+}

@@ -8,6 +8,7 @@
 
 pub mod candidates;
 pub mod residual;
+pub mod stability;
 
 use crate::prior::Prior;
 use bytemuck::{Pod, Zeroable};
@@ -33,6 +34,10 @@ fn residual_source() -> String {
         include_str!("../../../shaders/residual.wgsl"),
     ]
     .join("\n")
+}
+
+fn stability_source() -> String {
+    [LAWS_WGSL, include_str!("../../../shaders/stability.wgsl")].join("\n")
 }
 
 fn candidates_source() -> String {

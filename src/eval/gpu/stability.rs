@@ -1,0 +1,151 @@
+//! Runs `shaders/stability.wgsl`: per cell of an (Ω, W) grid, how many of S parameter samples
+//! are unstable, and the growth rate of the first. The GPU twin of
+//! `crate::stability::map::probability_grid` and `growth_rate_grid`.
+
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use crate::laws::Law;
+use crate::stability::map::Criterion;
+use crate::units::RAD_S_PER_RPM;
+use bytemuck::{Pod, Zeroable};
+
+/// Host twin of `StabilityJob` in shaders/stability.wgsl. Keep in sync.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct StabilityJob {
+    n_omega: u32,
+    n_wob: u32,
+    sample_start: u32,
+    sample_end: u32,
+    law: u32,
+    row_width: u32,
+    mode: u32,
+    accumulate: u32,
+    inertia_kg_m2: f32,
+    two_omega_n_xi: f32,
+    omega_n_sq: f32,
+    critical_nms: f32,
+    w_ref_n: f32,
+    _pad: [f32; 3],
+}
+
+/// Samples per dispatch: lavapipe ends loops after 65,535 iterations.
+const SAMPLES_PER_DISPATCH: usize = 32_768;
+
+/// Unstable counts (row-major over Ω, W) and the growth rates of the first sample (1-DOF
+/// criterion only; zeros otherwise). Speeds rpm, weights kN, samples SI.
+pub fn stability_grid(
+    law: Law,
+    samples: &[Vec<f64>],
+    omega_rpm: &[f64],
+    wob_kn: &[f64],
+    criterion: Criterion,
+    w_ref_n: f64,
+) -> Result<(Vec<u32>, Vec<f32>), GpuError> {
+    let ctx = super::context()?;
+    let cells = omega_rpm.len() * wob_kn.len();
+    if samples.is_empty() || cells == 0 {
+        return Ok((vec![0; cells], vec![0.0; cells]));
+    }
+    let omega: Vec<f32> = omega_rpm.iter().map(|&r| (r * RAD_S_PER_RPM) as f32).collect();
+    let wob: Vec<f32> = wob_kn.iter().map(|&k| (k * 1000.0) as f32).collect();
+    let mut flat = vec![0.0f32; 6 * samples.len()];
+    for (s, p) in samples.iter().enumerate() {
+        for (j, &v) in p.iter().enumerate() {
+            flat[6 * s + j] = v as f32;
+        }
+    }
+    let copy = wgpu::BufferUsages::COPY_DST;
+    let storage = wgpu::BufferUsages::STORAGE;
+    let job_buffer = ctx.buffer(
+        "stability job",
+        size_of::<StabilityJob>() as u64,
+        wgpu::BufferUsages::UNIFORM | copy,
+    )?;
+    let omega_buffer = ctx.buffer("omega", 4 * omega.len() as u64, storage | copy)?;
+    let wob_buffer = ctx.buffer("wob", 4 * wob.len() as u64, storage | copy)?;
+    let sample_buffer = ctx.buffer("samples", 4 * flat.len() as u64, storage | copy)?;
+    let bytes = 4 * cells as u64;
+    let counts = ctx.buffer("unstable counts", bytes, storage | wgpu::BufferUsages::COPY_SRC)?;
+    let growth = ctx.buffer("growth rates", bytes, storage | wgpu::BufferUsages::COPY_SRC)?;
+    let staging = ctx.buffer("stability staging", 2 * bytes, wgpu::BufferUsages::MAP_READ | copy)?;
+    ctx.queue.write_buffer(&omega_buffer, 0, bytemuck::cast_slice(&omega));
+    ctx.queue.write_buffer(&wob_buffer, 0, bytemuck::cast_slice(&wob));
+    ctx.queue.write_buffer(&sample_buffer, 0, bytemuck::cast_slice(&flat));
+    let entries = [
+        buffer_entry(0, UNIFORM),
+        buffer_entry(1, STORAGE_READ),
+        buffer_entry(2, STORAGE_READ),
+        buffer_entry(3, STORAGE_READ),
+        buffer_entry(4, STORAGE_WRITE),
+        buffer_entry(5, STORAGE_WRITE),
+    ];
+    let (pipeline, layout) = ctx.pipeline("stability", &super::stability_source(), &entries, &[])?;
+    let bind_group = ctx.bind_group(
+        "stability",
+        &layout,
+        &[
+            &job_buffer,
+            &omega_buffer,
+            &wob_buffer,
+            &sample_buffer,
+            &counts,
+            &growth,
+        ],
+    )?;
+    let (x, y, row_width) = ctx.grid(cells as u32, WORKGROUP_SIZE);
+    let (mode, critical, inertia, two_omega_n_xi, omega_n_sq) = match criterion {
+        Criterion::Lumped(l) => (
+            0,
+            0.0,
+            l.inertia_kg_m2,
+            2.0 * l.omega_n_rad_s * l.damping_ratio,
+            l.omega_n_rad_s * l.omega_n_rad_s,
+        ),
+        Criterion::Critical(c) => (1, c, 1.0, 0.0, 0.0),
+    };
+    let law_id = Law::ALL.iter().position(|&l| l == law).expect("law") as u32;
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("stability"),
+    });
+    for s0 in (0..samples.len()).step_by(SAMPLES_PER_DISPATCH) {
+        let job = StabilityJob {
+            n_omega: omega.len() as u32,
+            n_wob: wob.len() as u32,
+            sample_start: s0 as u32,
+            sample_end: (s0 + SAMPLES_PER_DISPATCH).min(samples.len()) as u32,
+            law: law_id,
+            row_width,
+            mode,
+            accumulate: u32::from(s0 > 0),
+            inertia_kg_m2: inertia as f32,
+            two_omega_n_xi: two_omega_n_xi as f32,
+            omega_n_sq: omega_n_sq as f32,
+            critical_nms: critical as f32,
+            w_ref_n: w_ref_n as f32,
+            _pad: [0.0; 3],
+        };
+        ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("stability"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        if s0 + SAMPLES_PER_DISPATCH < samples.len() {
+            // The next slice rewrites the job uniform: submit this one first.
+            ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
+            encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("stability"),
+            });
+        }
+    }
+    encoder.copy_buffer_to_buffer(&counts, 0, &staging, 0, bytes);
+    encoder.copy_buffer_to_buffer(&growth, 0, &staging, bytes, bytes);
+    let raw = ctx.finish_and_read(encoder, &staging, 2 * bytes)?;
+    let counts: Vec<u32> = bytemuck::cast_slice(&raw[..bytes as usize]).to_vec();
+    let growth: Vec<f32> = bytemuck::cast_slice(&raw[bytes as usize..]).to_vec();
+    Ok((counts, growth))
+}

@@ -1,0 +1,304 @@
+//! Stability maps over operating points (top-drive speed Ω, weight on bit W).
+//!
+//! Linearised about steady rotation at Ω, the law enters only through the bit damping
+//! c_b = r·dT/dw(Ω), r = W / W_ref, and steady rotation is unstable when c_b ≤ c_b*, the
+//! structure's critical bit damping (−c_eq for the 1-DOF model, found once by bisection for the
+//! finite-element string). So every map reduces to a critical weight on bit per sample and speed,
+//! W*(Ω) = W_ref · c_b* / dT/dw(Ω) where dT/dw(Ω) < 0 (never unstable otherwise): unstable for
+//! W ≥ W*. The stochastic boundary at percentile p is the p-quantile of W* over posterior
+//! samples (P(unstable | Ω, W) = share of samples with W* ≤ W); a mixture of laws weights each
+//! law's samples by its posterior probability. The grids computed cell by cell (CPU here, GPU in
+//! `shaders/stability.wgsl`) check the reduction.
+
+use crate::error::{Error, Result};
+use crate::laws::Law;
+use crate::stability::lumped::Lumped;
+use crate::units::RAD_S_PER_RPM;
+
+/// An evenly spaced axis "MIN:MAX:COUNT" (both ends included).
+pub fn parse_axis(text: &str, flag: &str) -> Result<Vec<f64>> {
+    let parts: Vec<&str> = text.split(':').collect();
+    let bad = |why: &str| {
+        Error::arg(
+            flag,
+            format!("'{text}': {why} (expected MIN:MAX:COUNT, e.g. 20:200:91)"),
+        )
+    };
+    if parts.len() != 3 {
+        return Err(bad("three fields needed"));
+    }
+    let lo: f64 = parts[0].trim().parse().map_err(|_| bad("MIN is not a number"))?;
+    let hi: f64 = parts[1].trim().parse().map_err(|_| bad("MAX is not a number"))?;
+    let n: usize = parts[2]
+        .trim()
+        .parse()
+        .map_err(|_| bad("COUNT is not a whole number"))?;
+    if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo) {
+        return Err(bad("need 0 < MIN < MAX"));
+    }
+    if !(2..=100_000).contains(&n) {
+        return Err(bad("COUNT must lie in 2..=100000"));
+    }
+    Ok((0..n).map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64).collect())
+}
+
+/// The critical weight on bit W* (N) of one parameter set at top-drive speed `omega_rad_s`:
+/// `None` when dT/dw(Ω) ≥ 0 (no weight on bit destabilises). `params_si` in N·m,
+/// `critical_nms` = c_b* (< 0, N·m·s/rad).
+pub fn critical_wob_n(law: Law, params_si: &[f64], omega_rad_s: f64, critical_nms: f64, w_ref_n: f64) -> Option<f64> {
+    let slope = law.dtorque_dw(params_si, omega_rad_s, 1.0);
+    (slope < 0.0).then(|| w_ref_n * critical_nms / slope)
+}
+
+/// The q-quantile (type 7) of critical weights where `None` (never unstable) counts as +∞;
+/// `None` when the quantile is infinite.
+fn quantile_with_infinity(mut values: Vec<f64>, q: f64) -> Option<f64> {
+    values.sort_by(f64::total_cmp);
+    let h = q * (values.len() - 1) as f64;
+    let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+    let (a, b) = (values[lo], values[hi]);
+    if !a.is_finite() || !b.is_finite() {
+        return None;
+    }
+    Some(a + (h - lo as f64) * (b - a))
+}
+
+/// Boundary W (kN) per speed of the `p` percentile over `samples` (each a parameter set, SI):
+/// the weight on bit above which at least a share p of the samples are unstable.
+pub fn percentile_boundary_kn(
+    law: Law,
+    samples: &[Vec<f64>],
+    omega_rpm: &[f64],
+    critical_nms: f64,
+    w_ref_n: f64,
+    p: f64,
+) -> Vec<Option<f64>> {
+    omega_rpm
+        .iter()
+        .map(|&rpm| {
+            let w: Vec<f64> = samples
+                .iter()
+                .map(|s| critical_wob_n(law, s, rpm * RAD_S_PER_RPM, critical_nms, w_ref_n).unwrap_or(f64::INFINITY))
+                .collect();
+            quantile_with_infinity(w, p).map(|v| v / 1000.0)
+        })
+        .collect()
+}
+
+/// The deterministic boundary (kN) of one parameter set (e.g. the MAP) per speed.
+pub fn deterministic_boundary_kn(
+    law: Law,
+    params_si: &[f64],
+    omega_rpm: &[f64],
+    critical_nms: f64,
+    w_ref_n: f64,
+) -> Vec<Option<f64>> {
+    omega_rpm
+        .iter()
+        .map(|&rpm| critical_wob_n(law, params_si, rpm * RAD_S_PER_RPM, critical_nms, w_ref_n).map(|w| w / 1000.0))
+        .collect()
+}
+
+/// The mixture's boundary (kN) at percentile `p`: the weight on bit W where
+/// Σ_k π_k · P_k(W* ≤ W) = p, with each law's samples weighted by its probability π_k.
+pub fn mixture_boundary_kn(
+    components: &[(f64, Law, &[Vec<f64>])],
+    omega_rpm: &[f64],
+    critical_nms: f64,
+    w_ref_n: f64,
+    p: f64,
+) -> Vec<Option<f64>> {
+    let total: f64 = components.iter().map(|c| c.0).sum();
+    omega_rpm
+        .iter()
+        .map(|&rpm| {
+            let mut weighted: Vec<(f64, f64)> = Vec::new();
+            for &(weight, law, samples) in components {
+                let each = weight / total / samples.len() as f64;
+                for s in samples {
+                    let w = critical_wob_n(law, s, rpm * RAD_S_PER_RPM, critical_nms, w_ref_n).unwrap_or(f64::INFINITY);
+                    weighted.push((w, each));
+                }
+            }
+            weighted.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let mut cumulative = 0.0;
+            for (w, share) in weighted {
+                cumulative += share;
+                if cumulative >= p - 1e-12 {
+                    return w.is_finite().then_some(w / 1000.0);
+                }
+            }
+            None
+        })
+        .collect()
+}
+
+/// What decides stability at a cell: the 1-DOF closed form or a critical bit damping.
+#[derive(Clone, Copy, Debug)]
+pub enum Criterion {
+    /// The 2×2 Jacobian of the 1-DOF model: unstable when its largest eigenvalue real part ≥ 0.
+    Lumped(Lumped),
+    /// Unstable when c_b ≤ c_b* (the finite-element string's critical bit damping, N·m·s/rad).
+    Critical(f64),
+}
+
+impl Criterion {
+    /// c_b*, N·m·s/rad.
+    pub fn critical_nms(&self) -> f64 {
+        match self {
+            Criterion::Lumped(l) => l.critical_bit_damping_nms(),
+            Criterion::Critical(c) => *c,
+        }
+    }
+
+    fn unstable(&self, bit_damping_nms: f64) -> bool {
+        match self {
+            Criterion::Lumped(l) => l.growth_rate(bit_damping_nms) >= 0.0,
+            Criterion::Critical(c) => bit_damping_nms <= *c,
+        }
+    }
+}
+
+/// Share of `samples` unstable at every cell, row-major over (Ω, W): the CPU twin of
+/// `shaders/stability.wgsl`. Speeds in rpm, weights in kN.
+pub fn probability_grid(
+    law: Law,
+    samples: &[Vec<f64>],
+    omega_rpm: &[f64],
+    wob_kn: &[f64],
+    criterion: Criterion,
+    w_ref_n: f64,
+) -> Vec<f64> {
+    let mut out = Vec::with_capacity(omega_rpm.len() * wob_kn.len());
+    for &rpm in omega_rpm {
+        let slopes: Vec<f64> = samples
+            .iter()
+            .map(|s| law.dtorque_dw(s, rpm * RAD_S_PER_RPM, 1.0))
+            .collect();
+        for &kn in wob_kn {
+            let r = kn * 1000.0 / w_ref_n;
+            let unstable = slopes.iter().filter(|&&slope| criterion.unstable(r * slope)).count();
+            out.push(unstable as f64 / samples.len() as f64);
+        }
+    }
+    out
+}
+
+/// Largest real part of the 1-DOF Jacobian's eigenvalues (1/s) at every cell for one
+/// parameter set: the growth-rate map. Row-major over (Ω, W).
+pub fn growth_rate_grid(
+    law: Law,
+    params_si: &[f64],
+    omega_rpm: &[f64],
+    wob_kn: &[f64],
+    lumped: &Lumped,
+    w_ref_n: f64,
+) -> Vec<f64> {
+    let mut out = Vec::with_capacity(omega_rpm.len() * wob_kn.len());
+    for &rpm in omega_rpm {
+        let slope = law.dtorque_dw(params_si, rpm * RAD_S_PER_RPM, 1.0);
+        for &kn in wob_kn {
+            out.push(lumped.growth_rate(kn * 1000.0 / w_ref_n * slope));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m2_nm() -> Vec<f64> {
+        Law::M2.scale_torque(Law::M2.paper_estimate(), 1000.0)
+    }
+
+    #[test]
+    fn axes_parse_and_refuse_nonsense() {
+        assert_eq!(parse_axis("10:30:3", "--omega-rpm").unwrap(), vec![10.0, 20.0, 30.0]);
+        for bad in ["10:30", "30:10:5", "0:10:5", "a:10:5", "1:10:1", "1:10:x"] {
+            assert!(
+                parse_axis(bad, "--omega-rpm")
+                    .unwrap_err()
+                    .to_string()
+                    .starts_with("--omega-rpm"),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_critical_weight_is_the_closed_form_of_the_paper_criterion() {
+        // m2: dT/dw = -(tsb - tcb) g exp(-g Ω); 1-DOF: unstable when r dT/dw ≤ -c_eq.
+        let lumped = Lumped::default();
+        let c = lumped.critical_bit_damping_nms();
+        let omega = 60.0 * RAD_S_PER_RPM;
+        let slope = -(13e3 - 6.5e3) * 0.3 * (-0.3 * omega).exp();
+        let w = critical_wob_n(Law::M2, &m2_nm(), omega, c, 244.2e3).unwrap();
+        assert!((w - 244.2e3 * c / slope).abs() < 1e-9 * w);
+        // Just above W* the growth rate is positive, just below negative.
+        assert!(lumped.growth_rate(w * 1.0001 / 244.2e3 * slope) > 0.0);
+        assert!(lumped.growth_rate(w * 0.9999 / 244.2e3 * slope) < 0.0);
+        // m3 rises on its bump below a2 = 0.09 rad/s: no weight on bit destabilises there.
+        let m3 = Law::M3.scale_torque(Law::M3.paper_estimate(), 1000.0);
+        assert!(Law::M3.dtorque_dw(&m3, 0.01, 1.0) > 0.0);
+        assert!(critical_wob_n(Law::M3, &m3, 0.01, c, 244.2e3).is_none());
+    }
+
+    #[test]
+    fn the_grid_agrees_with_the_reduction_on_every_cell() {
+        let omega = parse_axis("20:200:37", "x").unwrap();
+        let wob = parse_axis("20:600:59", "y").unwrap();
+        let lumped = Lumped::default();
+        let samples: Vec<Vec<f64>> = (0..50)
+            .map(|i| Law::M2.scale_torque(&[13.0, 6.5, 0.2 + 0.004 * i as f64], 1000.0))
+            .collect();
+        let grid = probability_grid(Law::M2, &samples, &omega, &wob, Criterion::Lumped(lumped), 244.2e3);
+        let c = lumped.critical_bit_damping_nms();
+        for (i, &rpm) in omega.iter().enumerate() {
+            for (j, &kn) in wob.iter().enumerate() {
+                let by_reduction = samples
+                    .iter()
+                    .filter(|s| {
+                        critical_wob_n(Law::M2, s, rpm * RAD_S_PER_RPM, c, 244.2e3).is_some_and(|w| kn * 1000.0 >= w)
+                    })
+                    .count() as f64
+                    / 50.0;
+                assert!((grid[i * wob.len() + j] - by_reduction).abs() < 1e-12, "({rpm}, {kn})");
+            }
+        }
+    }
+
+    #[test]
+    fn percentile_and_mixture_boundaries() {
+        let omega = [60.0];
+        let c = Lumped::default().critical_bit_damping_nms();
+        let samples: Vec<Vec<f64>> = (0..101)
+            .map(|i| Law::M2.scale_torque(&[13.0, 6.5, 0.2 + 0.002 * i as f64], 1000.0))
+            .collect();
+        let w: Vec<f64> = samples
+            .iter()
+            .map(|s| critical_wob_n(Law::M2, s, 2.0 * std::f64::consts::PI, c, 244.2e3).unwrap())
+            .collect();
+        let p2 = percentile_boundary_kn(Law::M2, &samples, &omega, c, 244.2e3, 0.02)[0].unwrap();
+        assert!((p2 - crate::numerics::quantile(&w, 0.02) / 1000.0).abs() < 1e-9);
+        // A mixture of one law with itself is that law (up to the step of the empirical CDF).
+        let mix = mixture_boundary_kn(
+            &[(0.4, Law::M2, &samples), (0.6, Law::M2, &samples)],
+            &omega,
+            c,
+            244.2e3,
+            0.02,
+        )[0]
+        .unwrap();
+        let mut sorted = w.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert!(
+            (mix - sorted[2] / 1000.0).abs() < 1e-9,
+            "{mix} vs {}",
+            sorted[2] / 1000.0
+        );
+        // The MAP boundary is the deterministic one.
+        let det = deterministic_boundary_kn(Law::M2, &samples[50], &omega, c, 244.2e3)[0].unwrap();
+        assert!((det - w[50] / 1000.0).abs() < 1e-9);
+    }
+}
