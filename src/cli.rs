@@ -37,6 +37,12 @@ pub enum Command {
     /// Benchmark report: evaluator throughput per law and backend, the fixed cost of a call,
     /// and a paper-scale ABC run end to end.
     Bench(BenchCmd),
+    /// Natural frequencies, modal damping and critical bit damping of the finite-element
+    /// torsional drill string (the paper's appendix).
+    Fe(FeCmd),
+    /// Stability maps over top-drive speed and weight on bit: deterministic (MAP), stochastic
+    /// (percentile over posterior samples) and the mixture of laws, from an ABC run or a law.
+    Stability(StabilityCmd),
 }
 
 /// Which columns of the CSV to read, their units, and which rows to use.
@@ -346,6 +352,114 @@ pub struct BenchCmd {
     #[arg(long)]
     pub quick: bool,
     /// Print JSON instead of lines.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The finite-element drill string: a TOML file (the paper's table built in) and overrides.
+#[derive(Debug, Args, Clone)]
+pub struct FeArgs {
+    /// TOML file with any of: shear_modulus_pa, density_kg_m3, dp_length_m, bha_length_m,
+    /// dp_outer_m, dp_inner_m, bha_outer_m, bha_inner_m, dp_elements, bha_elements, alpha, beta.
+    #[arg(long, value_name = "FILE")]
+    pub fe_file: Option<PathBuf>,
+    /// Elements in the drill pipe.
+    #[arg(long, value_name = "N")]
+    pub dp_elements: Option<usize>,
+    /// Elements in the BHA.
+    #[arg(long, value_name = "N")]
+    pub bha_elements: Option<usize>,
+    /// Mass-proportional Rayleigh damping α, 1/s.
+    #[arg(long, value_name = "ALPHA")]
+    pub alpha: Option<f64>,
+    /// Stiffness-proportional Rayleigh damping β, s.
+    #[arg(long, value_name = "BETA")]
+    pub beta: Option<f64>,
+}
+
+/// The equivalent 1-DOF string.
+#[derive(Debug, Args, Clone)]
+pub struct LumpedArgs {
+    /// Equivalent moment of inertia I_eq, kg·m².
+    #[arg(long, default_value_t = 383.33, value_name = "KG_M2")]
+    pub inertia_kg_m2: f64,
+    /// Natural frequency omega_n, rad/s.
+    #[arg(long, default_value_t = 0.85, value_name = "RAD_S")]
+    pub omega_n_rad_s: f64,
+    /// Damping ratio xi.
+    #[arg(long, default_value_t = 0.25, value_name = "XI")]
+    pub damping_ratio: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct FeCmd {
+    #[command(flatten)]
+    pub fe: FeArgs,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
+    /// Find β (keeping α) so that the string's critical bit damping equals the 1-DOF model's:
+    /// the appendix's damping adjustment.
+    #[arg(long)]
+    pub match_1dof: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Which structure decides stability.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Structure {
+    /// The paper's 1-DOF model (closed-form 2x2 criterion).
+    #[value(name = "1dof")]
+    Lumped,
+    /// The finite-element string (critical bit damping by bisection).
+    Fe,
+}
+
+#[derive(Debug, Args)]
+pub struct StabilityCmd {
+    /// ABC run directory (from `bitrock abc`): MAP, posterior samples and law probabilities.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["law", "params"])]
+    pub run: Option<PathBuf>,
+    /// A law for a what-if map without a run.
+    #[arg(long, requires = "params")]
+    pub law: Option<bitrock::Law>,
+    /// The law's parameters in its order, torques in --torque-unit.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
+    pub params: Option<Vec<f64>>,
+    /// Unit of the torque-valued parameters in --params.
+    #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
+    pub torque_unit: TorqueUnit,
+    /// Structure: 1dof (the paper's) or fe (the finite-element string).
+    #[arg(long, value_enum, default_value_t = Structure::Lumped)]
+    pub structure: Structure,
+    #[command(flatten)]
+    pub fe: FeArgs,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
+    /// Reference weight on bit W_ref of the law's parameters, kN.
+    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    pub w_ref_kn: f64,
+    /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
+    #[arg(long, default_value = "20:220:101", value_name = "MIN:MAX:COUNT")]
+    pub omega_rpm: String,
+    /// Weights on bit, kN, as MIN:MAX:COUNT.
+    #[arg(long, default_value = "20:700:69", value_name = "MIN:MAX:COUNT")]
+    pub wob_kn: String,
+    /// Percentile of the stochastic boundary, %: the weight on bit above which at least this
+    /// share of the posterior samples is unstable (the paper's 2 %).
+    #[arg(long, default_value_t = 2.0, value_name = "PERCENT")]
+    pub percentile: f64,
+    /// Posterior samples per law for the stochastic maps (the paper's 700).
+    #[arg(long, default_value_t = 700, value_name = "S")]
+    pub samples: usize,
+    /// Where the probability grids are computed (auto, gpu, cpu).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Write the boundaries as CSV to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Print JSON (boundaries and probability grids) instead of a table.
     #[arg(long)]
     pub json: bool,
 }

@@ -3,6 +3,7 @@
 
 mod cli;
 mod output;
+mod stability_cmd;
 
 use anyhow::Context;
 use bitrock::abc::posterior::{PosteriorSummary, predictive_envelope, speed_grid, summarize};
@@ -57,6 +58,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Demo(cmd) => demo_cmd(&cmd)?,
         Command::Parity(cmd) => return parity_cmd(&cmd),
         Command::Bench(cmd) => bench_cmd(&cmd)?,
+        Command::Fe(cmd) => stability_cmd::fe_cmd(&cmd)?,
+        Command::Stability(cmd) => stability_cmd::stability_cmd(&cmd)?,
     }
     Ok(ExitCode::SUCCESS)
 }

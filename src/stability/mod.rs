@@ -1,5 +1,7 @@
-//! Torsional stability: the 1-DOF lumped model, stability maps over (Ω, W); the
-//! finite-element string arrives next.
+//! Torsional stability: the paper's 1-DOF model (closed-form 2x2 criterion), the
+//! finite-element drill string of its appendix, and maps over (Ω, W) that reduce both to a
+//! critical bit damping.
 
+pub mod fe;
 pub mod lumped;
 pub mod map;

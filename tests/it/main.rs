@@ -5,4 +5,5 @@ mod cli;
 mod fit;
 mod gpu;
 mod laws;
+mod stability;
 mod support;
