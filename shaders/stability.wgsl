@@ -1,8 +1,13 @@
 // Stability over a grid of operating points (top-drive speed Ω × weight on bit W) for S
 // parameter samples of one law: per cell, how many samples make steady rotation unstable, and
-// for a single sample the growth rate (largest real part of the 1-DOF Jacobian's eigenvalues).
-// The twin of `probability_grid` / `growth_rate_grid` in src/stability/map.rs.
-// Needs shared/laws.wgsl. f32 throughout; SI units (rad/s, N, N·m·s/rad).
+// for the first sample the growth rate (largest real part of the 1-DOF Jacobian's eigenvalues).
+// The twin of `probability_grid` / `growth_rate_grid` in src/stability/map.rs. Reads the slopes
+// dT/dw(Ω_i) of `slopes.wgsl`; the bit damping of sample s at cell (i, j) is c_b = r_j·slope.
+// f32 throughout; SI units (rad/s, N, N·m·s/rad).
+//
+// The 1-DOF Jacobian [[0, 1], [-ω_n², -2ω_nξ - c_b/I]] has determinant ω_n² > 0, so both
+// eigenvalues have negative real parts exactly when its trace is negative (Routh-Hurwitz): the
+// closed-form criterion is trace ≥ 0 ⇔ unstable.
 
 // Keep in sync with `StabilityJob` in src/eval/gpu/stability.rs.
 struct StabilityJob {
@@ -12,8 +17,7 @@ struct StabilityJob {
     // 65,535 iterations, so the host slices S).
     sample_start: u32,
     sample_end: u32,
-    // Law id (0 = m1 .. 3 = m4) and cells per row of the (possibly 2-D) grid.
-    law: u32,
+    n_samples: u32,
     row_width: u32,
     // 0: the 1-DOF closed form; 1: unstable when c_b <= critical_nms (finite-element string).
     mode: u32,
@@ -31,13 +35,11 @@ struct StabilityJob {
 }
 
 @group(0) @binding(0) var<uniform> job: StabilityJob;
-@group(0) @binding(1) var<storage, read> omega_rad_s: array<f32>;
-@group(0) @binding(2) var<storage, read> wob_n: array<f32>;
-// Six parameters (SI, N·m) per sample.
-@group(0) @binding(3) var<storage, read> samples: array<f32>;
-@group(0) @binding(4) var<storage, read_write> unstable_count: array<u32>;
+@group(0) @binding(1) var<storage, read> wob_n: array<f32>;
+@group(0) @binding(2) var<storage, read> slope: array<f32>;
+@group(0) @binding(3) var<storage, read_write> unstable_count: array<u32>;
 // Growth rate (1/s) of sample 0, for the single-sample map.
-@group(0) @binding(5) var<storage, read_write> growth_rate: array<f32>;
+@group(0) @binding(4) var<storage, read_write> growth_rate: array<f32>;
 
 // Largest real part of the eigenvalues of [[0, 1], [-ω_n², -2ω_nξ - c_b / I]].
 fn lumped_growth(bit_damping: f32) -> f32 {
@@ -52,24 +54,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (cell >= job.n_omega * job.n_wob) {
         return;
     }
-    let omega = omega_rad_s[cell / job.n_wob];
+    let row = (cell / job.n_wob) * job.n_samples;
     let r = wob_n[cell % job.n_wob] / job.w_ref_n;
+    // Unstable when r·slope crosses a threshold: the trace of the 1-DOF Jacobian reaches 0 at
+    // c_b = -2ω_nξ I, the finite-element string at c_b*.
+    var threshold = job.critical_nms;
+    if (job.mode == 0u) {
+        threshold = -job.two_omega_n_xi * job.inertia_kg_m2;
+        if (job.accumulate == 0u) {
+            growth_rate[cell] = lumped_growth(r * slope[row]);
+        }
+    }
     var count = 0u;
     for (var s = job.sample_start; s < job.sample_end; s = s + 1u) {
-        let b = 6u * s;
-        let p = array<f32, 6>(samples[b], samples[b + 1u], samples[b + 2u], samples[b + 3u], samples[b + 4u], samples[b + 5u]);
-        let bit_damping = r * dtorque_dw(job.law, p, omega);
-        var unstable: bool;
-        if (job.mode == 0u) {
-            let g = lumped_growth(bit_damping);
-            unstable = g >= 0.0;
-            if (s == 0u) {
-                growth_rate[cell] = g;
-            }
-        } else {
-            unstable = bit_damping <= job.critical_nms;
-        }
-        count = count + select(0u, 1u, unstable);
+        count = count + select(0u, 1u, r * slope[row + s] <= threshold);
     }
     if (job.accumulate == 1u) {
         unstable_count[cell] = unstable_count[cell] + count;

@@ -68,6 +68,17 @@ pub struct BenchReport {
     /// Time of one small call (64 candidates, 100 points), s: the fixed cost of a dispatch.
     pub small_call_seconds: Vec<(String, Spread)>,
     pub end_to_end: Vec<EndToEnd>,
+    /// Stability grid on the GPU: cells × samples per second (median), with the grid size.
+    pub stability: Option<StabilityThroughput>,
+}
+
+/// Throughput of the stability kernel.
+#[derive(Clone, Debug, Serialize)]
+pub struct StabilityThroughput {
+    pub cells: usize,
+    pub samples: usize,
+    pub cell_samples_per_s: f64,
+    pub cell_samples_per_s_spread: Spread,
 }
 
 /// What to measure.
@@ -80,6 +91,8 @@ pub struct BenchOptions {
     pub sizes: Vec<(usize, usize)>,
     /// Particles of the end-to-end run (the paper's 25,000).
     pub particles: usize,
+    /// Stability grid (side, samples): 512 × 512 cells × 10,000 samples.
+    pub stability: (usize, usize),
 }
 
 impl Default for BenchOptions {
@@ -90,6 +103,7 @@ impl Default for BenchOptions {
             backends: vec![Backend::Cpu, Backend::Gpu],
             sizes: vec![(65_536, 5_000), (1_048_576, 5_000), (65_536, 100_000)],
             particles: 25_000,
+            stability: (512, 10_000),
         }
     }
 }
@@ -234,7 +248,40 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             populations: run.populations.len(),
         });
     }
+    let stability = if opts.backends.contains(&Backend::Gpu) {
+        let (side, count) = opts.stability;
+        let omega: Vec<f64> = (0..side).map(|i| 20.0 + 200.0 * i as f64 / side as f64).collect();
+        let wob: Vec<f64> = (0..side).map(|i| 20.0 + 600.0 * i as f64 / side as f64).collect();
+        let base = Law::M3.scale_torque(Law::M3.paper_estimate(), 1000.0);
+        let samples: Vec<Vec<f64>> = (0..count)
+            .map(|s| {
+                base.iter()
+                    .map(|&p| p * (0.8 + 0.4 * (s as f64 + 0.5) / count as f64))
+                    .collect()
+            })
+            .collect();
+        let criterion = crate::stability::map::Criterion::Lumped(crate::stability::lumped::Lumped::default());
+        let times = time_calls(reps, || {
+            gpu::stability::stability_grid(Law::M3, &samples, &omega, &wob, criterion, 244.2e3)?;
+            Ok(())
+        })?;
+        let rates: Vec<f64> = times.iter().map(|t| (side * side * count) as f64 / t).collect();
+        let spread = Spread::of(&rates);
+        log(format!(
+            "gpu stability grid {side} × {side} cells × {count} samples: {:.3e} cell-samples/s",
+            spread.median
+        ));
+        Some(StabilityThroughput {
+            cells: side * side,
+            samples: count,
+            cell_samples_per_s: spread.median,
+            cell_samples_per_s_spread: spread,
+        })
+    } else {
+        None
+    };
     Ok(BenchReport {
+        stability,
         machine: machine(),
         cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         adapter,

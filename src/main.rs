@@ -413,6 +413,7 @@ fn bench_cmd(cmd: &cli::BenchCmd) -> anyhow::Result<()> {
     if cmd.quick {
         opts.sizes = vec![(65_536, 5_000)];
         opts.particles = 5_000;
+        opts.stability = (128, 1_000);
     }
     let quiet = cmd.json;
     let report = bitrock::bench::run(&opts, &mut |line| {
@@ -444,6 +445,17 @@ fn bench_cmd(cmd: &cli::BenchCmd) -> anyhow::Result<()> {
                 out,
                 "{backend:<7}  small call (64 × 100): {:.3e} s ({:.2e}–{:.2e})",
                 s.median, s.min, s.max
+            )?;
+        }
+        if let Some(st) = &report.stability {
+            writeln!(
+                out,
+                "gpu      stability grid: {} cells × {} samples: {:.3e} cell-samples/s ({:.2e}–{:.2e})",
+                st.cells,
+                st.samples,
+                st.cell_samples_per_s,
+                st.cell_samples_per_s_spread.min,
+                st.cell_samples_per_s_spread.max
             )?;
         }
         for e in &report.end_to_end {

@@ -36,8 +36,12 @@ fn residual_source() -> String {
     .join("\n")
 }
 
+fn slopes_source() -> String {
+    [LAWS_WGSL, include_str!("../../../shaders/slopes.wgsl")].join("\n")
+}
+
 fn stability_source() -> String {
-    [LAWS_WGSL, include_str!("../../../shaders/stability.wgsl")].join("\n")
+    include_str!("../../../shaders/stability.wgsl").to_string()
 }
 
 fn candidates_source() -> String {

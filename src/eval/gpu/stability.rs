@@ -1,5 +1,5 @@
-//! Runs `shaders/stability.wgsl`: per cell of an (Ω, W) grid, how many of S parameter samples
-//! are unstable, and the growth rate of the first. The GPU twin of
+//! Runs `shaders/slopes.wgsl` then `shaders/stability.wgsl`: per cell of an (Ω, W) grid, how
+//! many of S parameter samples are unstable, and the growth rate of the first. The GPU twin of
 //! `crate::stability::map::probability_grid` and `growth_rate_grid`.
 
 use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
@@ -7,6 +7,16 @@ use crate::laws::Law;
 use crate::stability::map::Criterion;
 use crate::units::RAD_S_PER_RPM;
 use bytemuck::{Pod, Zeroable};
+
+/// Host twin of `SlopeJob` in shaders/slopes.wgsl. Keep in sync.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct SlopeJob {
+    n_omega: u32,
+    n_samples: u32,
+    law: u32,
+    row_width: u32,
+}
 
 /// Host twin of `StabilityJob` in shaders/stability.wgsl. Keep in sync.
 #[repr(C)]
@@ -16,7 +26,7 @@ struct StabilityJob {
     n_wob: u32,
     sample_start: u32,
     sample_end: u32,
-    law: u32,
+    n_samples: u32,
     row_width: u32,
     mode: u32,
     accumulate: u32,
@@ -32,7 +42,8 @@ struct StabilityJob {
 const SAMPLES_PER_DISPATCH: usize = 32_768;
 
 /// Unstable counts (row-major over Ω, W) and the growth rates of the first sample (1-DOF
-/// criterion only; zeros otherwise). Speeds rpm, weights kN, samples SI.
+/// criterion only; zeros otherwise). Speeds rpm, weights kN, samples SI. Two kernels: the
+/// slopes dT/dw per (speed, sample), then the count per cell.
 pub fn stability_grid(
     law: Law,
     samples: &[Vec<f64>],
@@ -54,16 +65,25 @@ pub fn stability_grid(
             flat[6 * s + j] = v as f32;
         }
     }
+    let slope_count = omega.len() * samples.len();
+    let slope_bytes = 4 * slope_count as u64;
+    if slope_bytes > ctx.limits.max_storage_buffer_binding_size {
+        return Err(GpuError::TooLarge(format!(
+            "{} speeds × {} samples of slopes need {slope_bytes} bytes, the adapter binds at most {}",
+            omega.len(),
+            samples.len(),
+            ctx.limits.max_storage_buffer_binding_size
+        )));
+    }
     let copy = wgpu::BufferUsages::COPY_DST;
     let storage = wgpu::BufferUsages::STORAGE;
-    let job_buffer = ctx.buffer(
-        "stability job",
-        size_of::<StabilityJob>() as u64,
-        wgpu::BufferUsages::UNIFORM | copy,
-    )?;
+    let uniform = wgpu::BufferUsages::UNIFORM | copy;
+    let slope_job = ctx.buffer("slope job", size_of::<SlopeJob>() as u64, uniform)?;
+    let job_buffer = ctx.buffer("stability job", size_of::<StabilityJob>() as u64, uniform)?;
     let omega_buffer = ctx.buffer("omega", 4 * omega.len() as u64, storage | copy)?;
     let wob_buffer = ctx.buffer("wob", 4 * wob.len() as u64, storage | copy)?;
     let sample_buffer = ctx.buffer("samples", 4 * flat.len() as u64, storage | copy)?;
+    let slopes = ctx.buffer("slopes", slope_bytes, storage)?;
     let bytes = 4 * cells as u64;
     let counts = ctx.buffer("unstable counts", bytes, storage | wgpu::BufferUsages::COPY_SRC)?;
     let growth = ctx.buffer("growth rates", bytes, storage | wgpu::BufferUsages::COPY_SRC)?;
@@ -71,26 +91,41 @@ pub fn stability_grid(
     ctx.queue.write_buffer(&omega_buffer, 0, bytemuck::cast_slice(&omega));
     ctx.queue.write_buffer(&wob_buffer, 0, bytemuck::cast_slice(&wob));
     ctx.queue.write_buffer(&sample_buffer, 0, bytemuck::cast_slice(&flat));
+    let law_id = Law::ALL.iter().position(|&l| l == law).expect("law") as u32;
+
+    let slope_entries = [
+        buffer_entry(0, UNIFORM),
+        buffer_entry(1, STORAGE_READ),
+        buffer_entry(2, STORAGE_READ),
+        buffer_entry(3, STORAGE_WRITE),
+    ];
+    let (slope_pipeline, slope_layout) = ctx.pipeline("slopes", &super::slopes_source(), &slope_entries, &[])?;
+    let slope_group = ctx.bind_group(
+        "slopes",
+        &slope_layout,
+        &[&slope_job, &omega_buffer, &sample_buffer, &slopes],
+    )?;
+    let (sx, sy, slope_row) = ctx.grid(slope_count as u32, WORKGROUP_SIZE);
+    let sjob = SlopeJob {
+        n_omega: omega.len() as u32,
+        n_samples: samples.len() as u32,
+        law: law_id,
+        row_width: slope_row,
+    };
+    ctx.queue.write_buffer(&slope_job, 0, bytemuck::bytes_of(&sjob));
+
     let entries = [
         buffer_entry(0, UNIFORM),
         buffer_entry(1, STORAGE_READ),
         buffer_entry(2, STORAGE_READ),
-        buffer_entry(3, STORAGE_READ),
+        buffer_entry(3, STORAGE_WRITE),
         buffer_entry(4, STORAGE_WRITE),
-        buffer_entry(5, STORAGE_WRITE),
     ];
     let (pipeline, layout) = ctx.pipeline("stability", &super::stability_source(), &entries, &[])?;
     let bind_group = ctx.bind_group(
         "stability",
         &layout,
-        &[
-            &job_buffer,
-            &omega_buffer,
-            &wob_buffer,
-            &sample_buffer,
-            &counts,
-            &growth,
-        ],
+        &[&job_buffer, &wob_buffer, &slopes, &counts, &growth],
     )?;
     let (x, y, row_width) = ctx.grid(cells as u32, WORKGROUP_SIZE);
     let (mode, critical, inertia, two_omega_n_xi, omega_n_sq) = match criterion {
@@ -103,17 +138,25 @@ pub fn stability_grid(
         ),
         Criterion::Critical(c) => (1, c, 1.0, 0.0, 0.0),
     };
-    let law_id = Law::ALL.iter().position(|&l| l == law).expect("law") as u32;
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("stability"),
     });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("slopes"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&slope_pipeline);
+        pass.set_bind_group(0, &slope_group, &[]);
+        pass.dispatch_workgroups(sx, sy, 1);
+    }
     for s0 in (0..samples.len()).step_by(SAMPLES_PER_DISPATCH) {
         let job = StabilityJob {
             n_omega: omega.len() as u32,
             n_wob: wob.len() as u32,
             sample_start: s0 as u32,
             sample_end: (s0 + SAMPLES_PER_DISPATCH).min(samples.len()) as u32,
-            law: law_id,
+            n_samples: samples.len() as u32,
             row_width,
             mode,
             accumulate: u32::from(s0 > 0),
