@@ -175,15 +175,8 @@ pub struct SimulateCmd {
     /// Reference weight on bit W_ref at which the law's parameters hold, kN.
     #[arg(long, default_value_t = 244.2, value_name = "KN")]
     pub w_ref_kn: f64,
-    /// Equivalent moment of inertia of the 1-DOF string I_eq, kg·m².
-    #[arg(long, default_value_t = 383.33, value_name = "KG_M2")]
-    pub inertia_kg_m2: f64,
-    /// Natural frequency of the 1-DOF string omega_n, rad/s.
-    #[arg(long, default_value_t = 0.85, value_name = "RAD_S")]
-    pub omega_n_rad_s: f64,
-    /// Damping ratio of the 1-DOF string xi.
-    #[arg(long, default_value_t = 0.25, value_name = "XI")]
-    pub damping_ratio: f64,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
     /// Recorded duration, s.
     #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
     pub duration_s: f64,
@@ -389,6 +382,17 @@ pub struct LumpedArgs {
     /// Damping ratio xi.
     #[arg(long, default_value_t = 0.25, value_name = "XI")]
     pub damping_ratio: f64,
+}
+
+impl LumpedArgs {
+    /// The 1-DOF model these flags describe (validate before use).
+    pub fn lumped(&self) -> bitrock::stability::lumped::Lumped {
+        bitrock::stability::lumped::Lumped {
+            inertia_kg_m2: self.inertia_kg_m2,
+            omega_n_rad_s: self.omega_n_rad_s,
+            damping_ratio: self.damping_ratio,
+        }
+    }
 }
 
 #[derive(Debug, Args)]

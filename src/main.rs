@@ -13,7 +13,6 @@ use bitrock::eval::AbcProblem;
 use bitrock::fit::{self, FitOptions};
 use bitrock::prior::{Prior, PriorFile};
 use bitrock::simulate::{self, Initial, SimConfig};
-use bitrock::stability::lumped::Lumped;
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
 use bitrock::{Error, Law};
 use clap::Parser;
@@ -481,11 +480,7 @@ fn simulate_cmd(cmd: &cli::SimulateCmd) -> anyhow::Result<()> {
     let config = SimConfig {
         law,
         params_nm: law.scale_torque(&params, cmd.param_torque_unit.newton_metres()),
-        structure: Lumped {
-            inertia_kg_m2: cmd.inertia_kg_m2,
-            omega_n_rad_s: cmd.omega_n_rad_s,
-            damping_ratio: cmd.damping_ratio,
-        },
+        structure: cmd.lumped.lumped(),
         omega_rad_s: cmd.omega_rpm * RAD_S_PER_RPM,
         wob_n: cmd.wob_kn * 1000.0,
         w_ref_n: cmd.w_ref_kn * 1000.0,

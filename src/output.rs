@@ -385,9 +385,10 @@ pub fn print_population_table(out: &mut impl Write, run: &RejectionRun) -> io::R
         }
         writeln!(out, "  {:>8.3}", r.seconds)?;
     }
+    let near: u64 = run.populations.iter().map(|p| p.record.near_threshold).sum();
     writeln!(
         out,
-        "stopped: {}; {:.3e} candidate × data-point evaluations in {:.2} s",
+        "stopped: {}; {:.3e} candidate × data-point evaluations in {:.2} s; {near} candidates within the CPU/GPU parity tolerance of ε",
         run.stop.describe(),
         run.evaluations as f64,
         run.seconds

@@ -36,11 +36,7 @@ fn drill_string(args: &FeArgs) -> anyhow::Result<DrillString> {
 }
 
 fn lumped(args: &LumpedArgs) -> anyhow::Result<Lumped> {
-    let l = Lumped {
-        inertia_kg_m2: args.inertia_kg_m2,
-        omega_n_rad_s: args.omega_n_rad_s,
-        damping_ratio: args.damping_ratio,
-    };
+    let l = args.lumped();
     l.validate()?;
     Ok(l)
 }
