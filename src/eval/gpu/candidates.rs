@@ -56,15 +56,7 @@ pub fn generate(
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("candidates"),
     });
-    {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("candidates"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(x, y, 1);
-    }
+    super::encode_dispatch(&mut encoder, "candidates", &pipeline, &bind_group, (x, y));
     encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, bytes);
     let raw = ctx.finish_and_read(encoder, &staging, bytes)?;
     let words: &[u32] = bytemuck::cast_slice(&raw);

@@ -133,15 +133,7 @@ impl GpuEvaluator {
             for s0 in (0..self.data_len).step_by(SAMPLES_PER_DISPATCH as usize) {
                 let slice = job.samples(s0..(s0 + SAMPLES_PER_DISPATCH).min(self.data_len));
                 ctx.queue.write_buffer(&res.job, 0, bytemuck::bytes_of(&slice));
-                {
-                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some("residual"),
-                        timestamp_writes: None,
-                    });
-                    pass.set_pipeline(&res.pipeline);
-                    pass.set_bind_group(0, &res.bind_group, &[]);
-                    pass.dispatch_workgroups(x, y, 1);
-                }
+                super::encode_dispatch(&mut encoder, "residual", &res.pipeline, &res.bind_group, (x, y));
                 if s0 + SAMPLES_PER_DISPATCH < self.data_len {
                     // The next slice rewrites the job uniform: submit this one first.
                     ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;

@@ -141,15 +141,7 @@ pub fn stability_grid(
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("stability"),
     });
-    {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("slopes"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&slope_pipeline);
-        pass.set_bind_group(0, &slope_group, &[]);
-        pass.dispatch_workgroups(sx, sy, 1);
-    }
+    super::encode_dispatch(&mut encoder, "slopes", &slope_pipeline, &slope_group, (sx, sy));
     for s0 in (0..samples.len()).step_by(SAMPLES_PER_DISPATCH) {
         let job = StabilityJob {
             n_omega: omega.len() as u32,
@@ -168,15 +160,7 @@ pub fn stability_grid(
             _pad: [0.0; 3],
         };
         ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("stability"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(x, y, 1);
-        }
+        super::encode_dispatch(&mut encoder, "stability", &pipeline, &bind_group, (x, y));
         if s0 + SAMPLES_PER_DISPATCH < samples.len() {
             // The next slice rewrites the job uniform: submit this one first.
             ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
