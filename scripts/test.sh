@@ -6,7 +6,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 has_vulkan_driver() {
-    ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json >/dev/null 2>&1 && ldconfig -p | grep -q libvulkan.so.1
+    # An ICD manifest in either standard place, and the Vulkan loader.
+    { ls /usr/share/vulkan/icd.d/*.json || ls /etc/vulkan/icd.d/*.json; } >/dev/null 2>&1 \
+        && ldconfig -p | grep libvulkan.so.1 >/dev/null
 }
 if ! has_vulkan_driver; then
     echo "installing Mesa lavapipe (mesa-vulkan-drivers, libvulkan1)..."
