@@ -248,7 +248,8 @@ pub fn run_with_progress(
         let mut law_accepted = vec![0usize; prior.boxes.len()];
         let mut position = 0u64;
         let mut near = 0u64;
-        let near_threshold = |rho: f64| (rho - epsilon).abs() <= PARITY_TOLERANCE * epsilon;
+        // ε_0 = ∞ decides nothing near a threshold.
+        let near_threshold = |rho: f64| epsilon.is_finite() && (rho - epsilon).abs() <= PARITY_TOLERANCE * epsilon;
         if config.mode == Mode::Nested && g > 0 {
             // Stream positions before `scanned_to` are known: the previous population's
             // particles are all candidates there below ε_{g-1} > ε_g.

@@ -201,6 +201,10 @@ fn abc_writes_a_run_directory_and_json_with_its_keys() {
         assert!((total - 1.0).abs() < 1e-12);
     }
     assert!(pops[0]["epsilon"].is_null(), "ε_0 = ∞ is null");
+    assert_eq!(
+        pops[0]["near_threshold"], 0,
+        "no candidate is near an infinite tolerance"
+    );
     let eps_last = pops.last().unwrap()["epsilon"].as_f64().unwrap();
     assert!((eps_last - 0.014).abs() < 1e-15, "{eps_last}");
     // The run directory holds the same JSON, every population's particles and the envelopes.
