@@ -134,14 +134,6 @@ pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> AbcProblem {
     AbcProblem::new(prior, seed, &data, None)
 }
 
-fn backend_name(b: Backend) -> &'static str {
-    match b {
-        Backend::Cpu => "cpu",
-        Backend::Gpu => "gpu",
-        Backend::Auto => "auto",
-    }
-}
-
 /// The CPU model, from /proc/cpuinfo where there is one.
 fn machine() -> String {
     std::fs::read_to_string("/proc/cpuinfo")
@@ -188,7 +180,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
                     spread.median
                 ));
                 throughput.push(Throughput {
-                    backend: backend_name(backend),
+                    backend: ev.backend(),
                     law,
                     n,
                     d,
@@ -209,7 +201,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             ev.backend(),
             spread.median
         ));
-        small_call_seconds.push((backend_name(backend).to_string(), spread));
+        small_call_seconds.push((ev.backend().to_string(), spread));
     }
     let mut end_to_end = Vec::new();
     let data = demo_field_data(&DataOptions::default())?;
@@ -241,7 +233,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             run.evaluations as f64
         ));
         end_to_end.push(EndToEnd {
-            backend: backend_name(backend),
+            backend: ev.backend(),
             seconds: spread.median,
             seconds_spread: spread,
             evaluations: run.evaluations,

@@ -35,15 +35,6 @@ pub struct LawBox {
 }
 
 impl LawBox {
-    /// Volume of the box (product of widths), for prior densities.
-    pub fn volume(&self) -> f64 {
-        self.lower
-            .iter()
-            .zip(&self.upper)
-            .map(|(&a, &b)| f64::from(b) - f64::from(a))
-            .product()
-    }
-
     /// True when `params` lie inside the box (ends included).
     pub fn contains(&self, params: &[f64]) -> bool {
         params
@@ -273,16 +264,6 @@ impl Prior {
     /// The law of box `slot`.
     pub fn law(&self, slot: usize) -> Law {
         self.boxes[slot].law
-    }
-
-    /// Prior density of (law, params): weight / box volume inside the box, 0 outside.
-    pub fn density(&self, slot: usize, params: &[f64]) -> f64 {
-        let bx = &self.boxes[slot];
-        if bx.contains(params) {
-            self.weights[slot] / bx.volume()
-        } else {
-            0.0
-        }
     }
 }
 

@@ -153,7 +153,7 @@ impl Criterion {
 
     fn unstable(&self, bit_damping_nms: f64) -> bool {
         match self {
-            Criterion::Lumped(l) => l.growth_rate(bit_damping_nms) >= 0.0,
+            Criterion::Lumped(l) => l.is_unstable(bit_damping_nms),
             Criterion::Critical(c) => bit_damping_nms <= *c,
         }
     }
