@@ -6,8 +6,9 @@ mod output;
 mod stability_cmd;
 
 use anyhow::Context;
+use bitrock::abc::Run;
 use bitrock::abc::posterior::{PosteriorSummary, predictive_envelope, speed_grid, summarize};
-use bitrock::abc::rejection::{self, Mode, RejectionConfig, RejectionRun};
+use bitrock::abc::rejection::{self, Mode, RejectionConfig};
 use bitrock::data::{self, FieldData};
 use bitrock::eval::AbcProblem;
 use bitrock::fit::{self, FitOptions};
@@ -116,7 +117,7 @@ fn fit_and_print(data: &FieldData, args: &FitArgs, json: bool) -> anyhow::Result
 
 /// What an ABC run leaves for printing.
 struct AbcDone {
-    run: RejectionRun,
+    run: Run,
     posterior: PosteriorSummary,
     report: serde_json::Value,
 }
@@ -182,15 +183,23 @@ fn run_abc(
             eprintln!("{note}");
         }
     })?;
-    let run = rejection::run_with_progress(evaluator.as_ref(), &config, &mut |r| {
-        if !quiet {
-            let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
-            eprintln!(
-                "population {:>2}: ε = {eps}, {} accepted of {} drawn, {:.2} s",
-                r.index, r.accepted, r.draws, r.seconds
-            );
+    struct Log {
+        quiet: bool,
+    }
+    impl bitrock::abc::Observer for Log {
+        fn population_done(&mut self, p: &bitrock::abc::Population) -> bitrock::Result<()> {
+            let r = &p.record;
+            if !self.quiet {
+                let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
+                eprintln!(
+                    "population {:>2}: ε = {eps}, {} accepted of {} drawn, {:.2} s",
+                    r.index, r.accepted, r.draws, r.seconds
+                );
+            }
+            Ok(())
         }
-    })?;
+    }
+    let run = rejection::run_observed(evaluator.as_ref(), &config, Vec::new(), &mut Log { quiet })?;
     let last = match args.summary_population {
         None => run
             .populations

@@ -4,7 +4,7 @@
 use bitrock::Law;
 use bitrock::abc::Particle;
 use bitrock::abc::posterior::{Envelope, PosteriorSummary};
-use bitrock::abc::rejection::{PopulationRecord, RejectionRun};
+use bitrock::abc::{PopulationRecord, Run};
 use bitrock::data::FieldData;
 use bitrock::fit::LawFit;
 use bitrock::prior::Prior;
@@ -190,6 +190,7 @@ fn population_json(record: &PopulationRecord) -> Value {
         "candidates_scored": record.candidates_scored,
         "evaluations": record.evaluations,
         "near_threshold": record.near_threshold,
+        "ess": record.ess,
         "seconds": record.seconds,
         "stream": record.stream,
     })
@@ -200,7 +201,7 @@ pub struct AbcReport<'a> {
     pub data: &'a FieldData,
     pub fits: &'a [LawFit],
     pub prior: &'a Prior,
-    pub run: &'a RejectionRun,
+    pub run: &'a Run,
     pub posterior: &'a PosteriorSummary,
     /// Index of the summarised population.
     pub summary_population: usize,
@@ -361,7 +362,7 @@ pub fn write_envelopes(dir: &Path, envelopes: &[Envelope], data: &FieldData) -> 
 }
 
 /// The per-population table of an ABC run.
-pub fn print_population_table(out: &mut impl Write, run: &RejectionRun) -> io::Result<()> {
+pub fn print_population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
     let laws: Vec<Law> = run.populations[0].record.per_law.iter().map(|l| l.law).collect();
     write!(
         out,

@@ -1,14 +1,22 @@
 //! Approximate Bayesian Computation with model selection: the paper's rejection sampler
-//! (Algorithm 1), its records, and the posterior summaries a user reads off it.
+//! (Algorithm 1), the records every sampler shares, and the posterior summaries a user reads
+//! off a population.
+//!
+//! A sampler runs populations one after another and hands each finished [`Population`] to an
+//! [`Observer`] (the run store writes it in one transaction), so a run can be continued from
+//! the populations it already has: given the same configuration and the same completed
+//! populations, a sampler continues exactly as an uninterrupted run would.
 
 pub mod posterior;
 pub mod rejection;
 
+use crate::error::Result;
 use crate::laws::Law;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-/// One accepted candidate: a law, its parameters (SI; the f32 values the candidate generator
-/// produced, widened exactly to f64) and its misfit ρ.
+/// One accepted particle: a law, its parameters (SI; for the rejection sampler the f32 values
+/// the candidate generator produced, widened exactly to f64), its misfit ρ and its importance
+/// weight.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Particle {
     pub law: Law,
@@ -17,4 +25,135 @@ pub struct Particle {
     pub index: u64,
     pub params: Vec<f64>,
     pub rho: f64,
+    /// Importance weight, normalised over the population (Σ w = 1). Rejection sampling gives
+    /// every particle 1/N.
+    pub weight: f64,
+}
+
+/// Per-law counts of one population.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LawRecord {
+    pub law: Law,
+    /// Candidates of this law considered.
+    pub draws: u64,
+    pub accepted: usize,
+    pub acceptance_rate: f64,
+    /// Posterior probability of the law in this population: its share of the weight.
+    pub probability: f64,
+}
+
+/// What happened in one population.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PopulationRecord {
+    pub index: usize,
+    /// ε_g; `None` for ∞.
+    pub epsilon: Option<f64>,
+    /// Candidates considered (stream positions scanned), what a fresh rejection sample costs.
+    pub draws: u64,
+    pub accepted: usize,
+    pub acceptance_rate: f64,
+    pub per_law: Vec<LawRecord>,
+    /// New candidates scored in this population.
+    pub candidates_scored: u64,
+    /// candidates_scored × data points.
+    pub evaluations: u64,
+    /// Candidates considered whose ρ lies within the CPU/GPU parity tolerance of ε
+    /// ([`crate::eval::PARITY_TOLERANCE`]): the only ones another backend may decide otherwise.
+    pub near_threshold: u64,
+    /// Kish effective sample size (Σw)²/Σw² of the particles' weights; N for equal weights.
+    pub ess: f64,
+    pub seconds: f64,
+    /// The candidate stream (population counter) the particles come from.
+    pub stream: u32,
+}
+
+/// One population: its record and particles in index order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Population {
+    pub record: PopulationRecord,
+    pub particles: Vec<Particle>,
+}
+
+/// Why a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// ε reached the floor eps_min.
+    EpsMin,
+    /// The user's ε schedule ran out.
+    ScheduleExhausted,
+    MaxPopulations,
+    /// The projected acceptance of the next population fell below the floor.
+    AcceptanceFloor,
+    /// The draw budget ran out inside a population (which was dropped).
+    MaxDraws,
+    /// The wall-time budget ran out inside a population (which was dropped).
+    WallTime,
+}
+
+impl StopReason {
+    /// A sentence for people.
+    pub fn describe(self) -> &'static str {
+        match self {
+            StopReason::EpsMin => "the tolerance reached --eps-min",
+            StopReason::ScheduleExhausted => "the --epsilons schedule ran out",
+            StopReason::MaxPopulations => "--max-populations populations were drawn",
+            StopReason::AcceptanceFloor => "the projected acceptance fell below --min-acceptance",
+            StopReason::MaxDraws => "--max-draws candidates were scored (the last population was incomplete)",
+            StopReason::WallTime => "--max-seconds ran out (the last population was incomplete)",
+        }
+    }
+}
+
+/// The result of a run: every population (those it was continued from included).
+#[derive(Clone, Debug)]
+pub struct Run {
+    pub populations: Vec<Population>,
+    pub stop: StopReason,
+    /// Candidate × data-point evaluations over the run (all populations).
+    pub evaluations: u64,
+    /// Seconds of this invocation (a continued run counts only its own time).
+    pub seconds: f64,
+}
+
+/// Where a population in progress stands, for progress bars and logs.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    pub population: usize,
+    /// ε of the population being filled; `None` for ∞.
+    pub epsilon: Option<f64>,
+    pub accepted: usize,
+    /// Particles wanted, N.
+    pub target: usize,
+    /// Candidates considered so far in this population.
+    pub draws: u64,
+    /// Candidates scored so far in this population.
+    pub scored: u64,
+    /// Data points per candidate, D.
+    pub data_len: usize,
+    /// Seconds since the population started.
+    pub seconds: f64,
+}
+
+/// Watches a run. Both methods have defaults that do nothing.
+pub trait Observer {
+    /// After every scored batch of a population in progress.
+    fn progress(&mut self, _progress: &Progress) {}
+    /// When a population is complete, before the next one starts. An error (the store could
+    /// not write it, say) ends the run with that error.
+    fn population_done(&mut self, _population: &Population) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// An observer that watches nothing.
+pub struct Silent;
+
+impl Observer for Silent {}
+
+/// Kish's effective sample size (Σw)²/Σw²; 0 for no weights.
+pub fn effective_sample_size(weights: &[f64]) -> f64 {
+    let sum = crate::numerics::compensated_sum(weights.iter().copied());
+    let sum_sq = crate::numerics::compensated_sum(weights.iter().map(|w| w * w));
+    if sum_sq > 0.0 { sum * sum / sum_sq } else { 0.0 }
 }

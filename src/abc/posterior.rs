@@ -540,6 +540,7 @@ mod tests {
             index,
             params: params.to_vec(),
             rho,
+            weight: 1.0,
         }
     }
 

@@ -21,16 +21,16 @@
 //! below `min_acceptance`, or `max_draws` candidates were scored (the population in progress
 //! is dropped).
 
-use super::Particle;
+use super::{LawRecord, Observer, Particle, Population, PopulationRecord, Progress, Run, Silent, StopReason};
 use crate::error::{Error, Result};
 use crate::eval::{Evaluator, PARITY_TOLERANCE};
 use crate::laws::Law;
 use crate::numerics::quantile;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 /// How populations relate to the candidate streams.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// One stream for the whole run; each population keeps the previous one's particles that
@@ -41,7 +41,7 @@ pub enum Mode {
 }
 
 /// Configuration of a rejection run.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RejectionConfig {
     /// Particles per population, N.
     pub particles: usize,
@@ -60,6 +60,8 @@ pub struct RejectionConfig {
     pub mode: Mode,
     /// Candidates per evaluator call at most.
     pub max_batch: usize,
+    /// Wall-time budget of one invocation, seconds; the population in progress is dropped.
+    pub max_seconds: Option<f64>,
 }
 
 impl Default for RejectionConfig {
@@ -74,6 +76,7 @@ impl Default for RejectionConfig {
             epsilons: None,
             mode: Mode::Nested,
             max_batch: 1 << 20,
+            max_seconds: None,
         }
     }
 }
@@ -119,91 +122,19 @@ impl RejectionConfig {
                 previous = e;
             }
         }
+        if let Some(t) = self.max_seconds
+            && !(t.is_finite() && t > 0.0)
+        {
+            return Err(Error::arg(
+                "--max-seconds",
+                format!("must be a positive number of seconds, got {t}"),
+            ));
+        }
         if self.max_batch == 0 {
             return Err(Error::arg("--batch", "must be at least 1"));
         }
         Ok(())
     }
-}
-
-/// Per-law counts of one population.
-#[derive(Clone, Debug, Serialize)]
-pub struct LawRecord {
-    pub law: Law,
-    /// Candidates of this law considered.
-    pub draws: u64,
-    pub accepted: usize,
-    pub acceptance_rate: f64,
-    /// Share of the population's particles.
-    pub probability: f64,
-}
-
-/// What happened in one population.
-#[derive(Clone, Debug, Serialize)]
-pub struct PopulationRecord {
-    pub index: usize,
-    /// ε_g; `None` for ∞.
-    pub epsilon: Option<f64>,
-    /// Candidates considered (stream positions scanned), what a fresh rejection sample costs.
-    pub draws: u64,
-    pub accepted: usize,
-    pub acceptance_rate: f64,
-    pub per_law: Vec<LawRecord>,
-    /// New candidates scored in this population.
-    pub candidates_scored: u64,
-    /// candidates_scored × data points.
-    pub evaluations: u64,
-    /// Candidates considered whose ρ lies within the CPU/GPU parity tolerance of ε
-    /// ([`crate::eval::PARITY_TOLERANCE`]): the only ones another backend may decide otherwise.
-    pub near_threshold: u64,
-    pub seconds: f64,
-    /// The candidate stream (population counter) the particles come from.
-    pub stream: u32,
-}
-
-/// One population: its record and particles in index order.
-#[derive(Clone, Debug)]
-pub struct Population {
-    pub record: PopulationRecord,
-    pub particles: Vec<Particle>,
-}
-
-/// Why the run ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum StopReason {
-    /// ε reached the floor eps_min.
-    EpsMin,
-    /// The user's ε schedule ran out.
-    ScheduleExhausted,
-    MaxPopulations,
-    /// The projected acceptance of the next population fell below the floor.
-    AcceptanceFloor,
-    /// The draw budget ran out inside a population (which was dropped).
-    MaxDraws,
-}
-
-impl StopReason {
-    /// A sentence for people.
-    pub fn describe(self) -> &'static str {
-        match self {
-            StopReason::EpsMin => "the tolerance reached --eps-min",
-            StopReason::ScheduleExhausted => "the --epsilons schedule ran out",
-            StopReason::MaxPopulations => "--max-populations populations were drawn",
-            StopReason::AcceptanceFloor => "the projected acceptance fell below --min-acceptance",
-            StopReason::MaxDraws => "--max-draws candidates were scored (the last population was incomplete)",
-        }
-    }
-}
-
-/// The result of a rejection run.
-#[derive(Clone, Debug)]
-pub struct RejectionRun {
-    pub populations: Vec<Population>,
-    pub stop: StopReason,
-    /// Candidate × data-point evaluations over the run.
-    pub evaluations: u64,
-    pub seconds: f64,
 }
 
 /// Candidates scored but not yet scanned, kept so nested mode never scores one twice.
@@ -214,28 +145,46 @@ struct Scored {
 }
 
 /// Runs the sampler with `evaluator` (which fixes prior, seed and data).
-pub fn run(evaluator: &dyn Evaluator, config: &RejectionConfig) -> Result<RejectionRun> {
-    run_with_progress(evaluator, config, &mut |_| {})
+pub fn run(evaluator: &dyn Evaluator, config: &RejectionConfig) -> Result<Run> {
+    run_observed(evaluator, config, Vec::new(), &mut Silent)
 }
 
-/// As [`run`], calling `progress` after every completed population.
-pub fn run_with_progress(
+/// As [`run`], continuing after the completed populations `previous` (empty for a fresh run)
+/// and reporting to `observer`. Continuing gives exactly the populations an uninterrupted run
+/// with `config` gives: a population depends only on the seed, the data, the configuration
+/// and the populations before it. (Only `candidates_scored` may differ: an uninterrupted
+/// nested run reuses candidates it scored ahead of the previous population's end.)
+pub fn run_observed(
     evaluator: &dyn Evaluator,
     config: &RejectionConfig,
-    progress: &mut dyn FnMut(&PopulationRecord),
-) -> Result<RejectionRun> {
+    previous: Vec<Population>,
+    observer: &mut dyn Observer,
+) -> Result<Run> {
     config.validate()?;
     let problem = evaluator.problem();
     let prior = &problem.prior;
     let n = config.particles;
     let d = problem.data_len() as u64;
     let started = Instant::now();
-    let mut populations: Vec<Population> = Vec::new();
-    let mut total_scored = 0u64;
-    let mut epsilon = config.start_epsilon.unwrap_or(f64::INFINITY);
+    let mut populations = previous;
+    let mut total_scored: u64 = populations.iter().map(|p| p.record.candidates_scored).sum();
     let mut pending: Option<Scored> = None;
     // Nested mode: where the previous population stopped scanning its stream.
-    let mut scanned_to = 0u64;
+    let mut scanned_to = populations.last().map_or(0, |p| p.record.draws);
+    let mut epsilon = match populations.last() {
+        None => config.start_epsilon.unwrap_or(f64::INFINITY),
+        Some(_) => match next_epsilon(&populations, config) {
+            Ok(e) => e,
+            Err(stop) => {
+                return Ok(Run {
+                    populations,
+                    stop,
+                    evaluations: total_scored * d,
+                    seconds: started.elapsed().as_secs_f64(),
+                });
+            }
+        },
+    };
     let stop = loop {
         let g = populations.len();
         let t0 = Instant::now();
@@ -248,6 +197,7 @@ pub fn run_with_progress(
         let mut law_accepted = vec![0usize; prior.boxes.len()];
         let mut position = 0u64;
         let mut near = 0u64;
+        let weight = 1.0 / n as f64;
         // ε_0 = ∞ decides nothing near a threshold.
         let near_threshold = |rho: f64| epsilon.is_finite() && (rho - epsilon).abs() <= PARITY_TOLERANCE * epsilon;
         if config.mode == Mode::Nested && g > 0 {
@@ -255,7 +205,7 @@ pub fn run_with_progress(
             // particles are all candidates there below ε_{g-1} > ε_g.
             let previous = &populations[g - 1].particles;
             for p in previous.iter().filter(|p| p.rho < epsilon) {
-                particles.push(p.clone());
+                particles.push(Particle { weight, ..p.clone() });
             }
             near += previous.iter().filter(|p| near_threshold(p.rho)).count() as u64;
             if particles.len() >= n {
@@ -279,15 +229,22 @@ pub fn run_with_progress(
             }
         }
         let mut scored_here = 0u64;
-        let mut out_of_budget = false;
+        let mut interrupted = None;
+        let epsilon_shown = epsilon.is_finite().then_some(epsilon);
         while particles.len() < n {
+            if let Some(limit) = config.max_seconds
+                && started.elapsed().as_secs_f64() > limit
+            {
+                interrupted = Some(StopReason::WallTime);
+                break;
+            }
             // Score a batch starting at `position`, reusing what is pending.
             let batch = match pending.take() {
                 Some(s) if s.stream == stream && s.start <= position && position < s.start + s.rho.len() as u64 => s,
                 _ => {
                     let budget = config.max_draws.saturating_sub(total_scored + scored_here);
                     if budget == 0 {
-                        out_of_budget = true;
+                        interrupted = Some(StopReason::MaxDraws);
                         break;
                     }
                     // Enough for the particles still missing at half the last acceptance rate
@@ -321,6 +278,7 @@ pub fn run_with_progress(
                         index,
                         params: c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
                         rho,
+                        weight,
                     });
                     if particles.len() == n {
                         consumed = k + 1;
@@ -332,15 +290,25 @@ pub fn run_with_progress(
             if consumed < batch.rho.len() {
                 pending = Some(batch);
             }
+            observer.progress(&Progress {
+                population: g,
+                epsilon: epsilon_shown,
+                accepted: particles.len(),
+                target: n,
+                draws: position,
+                scored: scored_here,
+                data_len: d as usize,
+                seconds: t0.elapsed().as_secs_f64(),
+            });
         }
         total_scored += scored_here;
-        if out_of_budget {
-            break StopReason::MaxDraws;
+        if let Some(stop) = interrupted {
+            break stop;
         }
         scanned_to = position;
         let record = PopulationRecord {
             index: g,
-            epsilon: epsilon.is_finite().then_some(epsilon),
+            epsilon: epsilon_shown,
             draws: position,
             accepted: n,
             acceptance_rate: n as f64 / position as f64,
@@ -363,40 +331,51 @@ pub fn run_with_progress(
             candidates_scored: scored_here,
             evaluations: scored_here * d,
             near_threshold: near,
+            ess: n as f64,
             seconds: t0.elapsed().as_secs_f64(),
             stream,
         };
-        progress(&record);
-        populations.push(Population { record, particles });
-
-        // Next tolerance and the stopping rules.
-        if epsilon <= config.eps_min {
-            break StopReason::EpsMin;
+        let population = Population { record, particles };
+        observer.population_done(&population)?;
+        populations.push(population);
+        match next_epsilon(&populations, config) {
+            Ok(e) => epsilon = e,
+            Err(stop) => break stop,
         }
-        let current = populations.last().expect("just pushed");
-        let next = match &config.epsilons {
-            Some(list) => match list.get(g) {
-                Some(&e) => e,
-                None => break StopReason::ScheduleExhausted,
-            },
-            None => median_rho(&current.particles),
-        };
-        let next = next.max(config.eps_min);
-        if populations.len() >= config.max_populations {
-            break StopReason::MaxPopulations;
-        }
-        let below = current.particles.iter().filter(|p| p.rho < next).count() as f64 / n as f64;
-        if below * current.record.acceptance_rate < config.min_acceptance {
-            break StopReason::AcceptanceFloor;
-        }
-        epsilon = next;
     };
-    Ok(RejectionRun {
+    Ok(Run {
         populations,
         stop,
         evaluations: total_scored * d,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+/// The tolerance of the population after the last of `populations`, or why there is none
+/// (the stopping rules, checked in the order the module documentation gives).
+fn next_epsilon(populations: &[Population], config: &RejectionConfig) -> std::result::Result<f64, StopReason> {
+    let current = populations.last().expect("at least one population");
+    let epsilon = current.record.epsilon.unwrap_or(f64::INFINITY);
+    if epsilon <= config.eps_min {
+        return Err(StopReason::EpsMin);
+    }
+    let next = match &config.epsilons {
+        Some(list) => match list.get(current.record.index) {
+            Some(&e) => e,
+            None => return Err(StopReason::ScheduleExhausted),
+        },
+        None => median_rho(&current.particles),
+    };
+    let next = next.max(config.eps_min);
+    if populations.len() >= config.max_populations {
+        return Err(StopReason::MaxPopulations);
+    }
+    let n = current.particles.len();
+    let below = current.particles.iter().filter(|p| p.rho < next).count() as f64 / n as f64;
+    if below * current.record.acceptance_rate < config.min_acceptance {
+        return Err(StopReason::AcceptanceFloor);
+    }
+    Ok(next)
 }
 
 /// The median of a population's ρ (the mean of the two middle values for even N), the

@@ -3,7 +3,8 @@
 
 use crate::support::{rng, samples};
 use bitrock::Law;
-use bitrock::abc::rejection::{self, Mode, RejectionConfig, RejectionRun, StopReason};
+use bitrock::abc::rejection::{self, Mode, RejectionConfig};
+use bitrock::abc::{Run, StopReason};
 use bitrock::data::Samples;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::{AbcProblem, Evaluator};
@@ -32,7 +33,7 @@ fn one_parameter_problem(seed: u64) -> AbcProblem {
     AbcProblem::new(prior, seed, &data, None)
 }
 
-fn same_populations(a: &RejectionRun, b: &RejectionRun) {
+fn same_populations(a: &Run, b: &Run) {
     assert_eq!(a.populations.len(), b.populations.len());
     for (pa, pb) in a.populations.iter().zip(&b.populations) {
         assert_eq!(pa.record.epsilon.map(f64::to_bits), pb.record.epsilon.map(f64::to_bits));
@@ -176,7 +177,7 @@ fn nested_and_paper_modes_sample_the_same_distribution_with_fewer_evaluations() 
     )
     .unwrap();
     assert_eq!(nested.stop, StopReason::ScheduleExhausted);
-    let last = |r: &RejectionRun| {
+    let last = |r: &Run| {
         r.populations
             .last()
             .unwrap()
