@@ -27,6 +27,9 @@ pub enum Command {
     /// ABC rejection sampling with model selection (the paper's Algorithm 1): posterior law
     /// probabilities and parameter distributions, written to a run directory.
     Abc(AbcCmd),
+    /// Export a run directory's store: particles as CSV (one row per particle, parameters in
+    /// columns, the record's torque unit), or the whole run as JSON.
+    Export(ExportCmd),
     /// Simulate the 1-DOF torsional drill string with a bit-rock law; writes a field-like CSV.
     Simulate(SimulateCmd),
     /// Run the whole pipeline on the embedded (synthetic) demo record.
@@ -229,24 +232,30 @@ pub struct AbcArgs {
     /// speaks (format in the README).
     #[arg(long, value_name = "FILE")]
     pub prior: Option<PathBuf>,
-    /// Smallest tolerance on ρ: the population that reaches it is the last (the paper's 0.014).
-    #[arg(long, default_value_t = 0.014, value_name = "EPS")]
-    pub eps_min: f64,
+    /// Smallest tolerance on ρ: the population that reaches it is the last [default: 0.014,
+    /// the paper's; with --resume: the run's].
+    #[arg(long, value_name = "EPS")]
+    pub eps_min: Option<f64>,
     /// Tolerance schedule ε_1 > ε_2 > ... instead of the median rule (ε_0 stays ∞).
     #[arg(long, value_delimiter = ',', value_name = "E1,E2,...")]
     pub epsilons: Option<Vec<f64>>,
     /// Tolerance of population 0 [default: ∞, the first N prior draws].
     #[arg(long, value_name = "EPS")]
     pub start_epsilon: Option<f64>,
-    /// Most populations, population 0 included.
-    #[arg(long, default_value_t = 30, value_name = "G")]
-    pub max_populations: usize,
-    /// Most candidates scored over the run.
-    #[arg(long, default_value_t = 2_000_000_000, value_name = "COUNT")]
-    pub max_draws: u64,
-    /// Stop when the projected acceptance rate of the next population falls below this.
-    #[arg(long, default_value_t = 1e-5, value_name = "RATE")]
-    pub min_acceptance: f64,
+    /// Most populations, population 0 included [default: 30; with --resume: the run's].
+    #[arg(long, value_name = "G")]
+    pub max_populations: Option<usize>,
+    /// Most candidates scored over the run [default: 2e9; with --resume: the run's].
+    #[arg(long, value_name = "COUNT")]
+    pub max_draws: Option<u64>,
+    /// Stop when the projected acceptance rate of the next population falls below this
+    /// [default: 1e-5; with --resume: the run's].
+    #[arg(long, value_name = "RATE")]
+    pub min_acceptance: Option<f64>,
+    /// Wall-time budget of this invocation in seconds; the population in progress is dropped
+    /// and the run can be continued with --resume.
+    #[arg(long, value_name = "SECONDS")]
+    pub max_seconds: Option<f64>,
     /// nested: one candidate stream, each population keeps the previous particles below its
     /// tolerance (same distribution, about half the evaluations); paper: a fresh stream per
     /// population, as the paper's Algorithm 1.
@@ -259,9 +268,10 @@ pub struct AbcArgs {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so),
-    /// gpu = the GPU or an error, cpu = the f64 reference.
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
-    pub backend: Backend,
+    /// gpu = the GPU or an error, cpu = the f64 reference [default: auto; with --resume: the
+    /// run's].
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
     /// Population to summarise (statistics, MAP, envelopes) [default: the last].
     #[arg(long, value_name = "G")]
     pub summary_population: Option<usize>,
@@ -271,12 +281,26 @@ pub struct AbcArgs {
 pub struct AbcCmd {
     /// Field record (CSV with a header) [default: the embedded demo record].
     pub data: Option<PathBuf>,
-    /// Run directory to write (run.json, particle and envelope CSVs).
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
+    /// Run directory to write: run.sqlite (the run store: every population and particle,
+    /// written as each population completes), run.json (summary) and envelopes.csv.
+    #[arg(long, value_name = "DIR", required_unless_present = "resume")]
+    pub out: Option<PathBuf>,
     /// Replace a non-empty run directory.
     #[arg(long)]
     pub force: bool,
+    /// Continue the run in DIR (killed or finished) after its last stored population: more
+    /// populations, a lower --eps-min, a new --max-draws/--max-seconds or --backend. The
+    /// populations are exactly those an uninterrupted run gives.
+    #[arg(long, value_name = "DIR", conflicts_with_all = [
+        "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
+        "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
+        "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior", "epsilons",
+        "start_epsilon", "mode", "seed", "summary_population",
+    ])]
+    pub resume: Option<PathBuf>,
+    /// No progress bar or population lines on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
     #[command(flatten)]
     pub data_args: DataArgs,
     #[command(flatten)]
@@ -286,6 +310,29 @@ pub struct AbcCmd {
     /// Print JSON instead of tables.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Format of `bitrock export`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// Particles: population, law, candidate, rho, weight, then every law's parameters.
+    Csv,
+    /// Configuration, data summary, fits, prior, and every population with its particles.
+    Json,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportCmd {
+    /// Run directory (written by `bitrock abc --out`).
+    pub dir: PathBuf,
+    #[arg(long, value_enum, default_value_t = ExportFormat::Csv)]
+    pub format: ExportFormat,
+    /// Only this population [default: all].
+    #[arg(long, value_name = "G")]
+    pub population: Option<usize>,
+    /// Write to FILE instead of stdout.
+    #[arg(long, short, value_name = "FILE")]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]

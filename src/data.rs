@@ -8,7 +8,7 @@
 
 use crate::error::{Error, Result};
 use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
@@ -185,7 +185,7 @@ pub struct FieldData {
 }
 
 /// Names of the columns read.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ColumnsUsed {
     pub speed: String,
     pub torque: String,

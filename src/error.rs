@@ -37,6 +37,9 @@ pub enum Error {
     /// The GPU backend failed (no adapter, device lost, out of memory...).
     #[error(transparent)]
     Gpu(#[from] crate::eval::gpu::GpuError),
+    /// The run store (SQLite) failed or holds something it should not.
+    #[error("{}: run store: {message}", path.display())]
+    Store { path: PathBuf, message: String },
     /// A numerical procedure failed where it should not have.
     #[error("numerical failure: {0}")]
     Numerical(String),

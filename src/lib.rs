@@ -17,8 +17,10 @@ pub mod laws;
 pub mod numerics;
 pub mod prior;
 pub mod rng;
+pub mod run;
 pub mod simulate;
 pub mod stability;
+pub mod store;
 pub mod units;
 
 pub use error::{Error, Result};

@@ -2,17 +2,20 @@
 //! status 2 and a message naming the file, line, column or flag; other failures exit 1.
 
 mod cli;
+mod export;
 mod output;
+mod progress;
 mod stability_cmd;
 
 use anyhow::Context;
-use bitrock::abc::Run;
 use bitrock::abc::posterior::{PosteriorSummary, predictive_envelope, speed_grid, summarize};
-use bitrock::abc::rejection::{self, Mode, RejectionConfig};
+use bitrock::abc::rejection::{Mode, RejectionConfig};
 use bitrock::data::{self, FieldData};
 use bitrock::eval::AbcProblem;
+use bitrock::eval::Backend;
 use bitrock::fit::{self, FitOptions};
 use bitrock::prior::{Prior, PriorFile};
+use bitrock::run::{Continuation, RunConfig, SamplerConfig};
 use bitrock::simulate::{self, Initial, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
 use bitrock::{Error, Law};
@@ -42,18 +45,19 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             fit_and_print(&data, &cmd.fit, cmd.json)?;
         }
         Command::Abc(cmd) => {
-            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-            let done = run_abc(&data, &cmd.fit, &cmd.abc, &cmd.out, cmd.force, cmd.json)?;
+            let done = abc_cmd(&cmd)?;
             let mut out = std::io::stdout().lock();
             if cmd.json {
                 serde_json::to_writer_pretty(&mut out, &done.report)?;
                 writeln!(out)?;
             } else {
-                output::print_population_table(&mut out, &done.run)?;
-                output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
-                writeln!(out, "\nrun written to {}", cmd.out.display())?;
+                let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("clap requires one");
+                output::print_population_table(&mut out, &done.outcome.run)?;
+                output::print_posterior(&mut out, &done.posterior, done.outcome.setup.data.torque_unit)?;
+                writeln!(out, "\nrun written to {}", dir.display())?;
             }
         }
+        Command::Export(cmd) => export::export_cmd(&cmd)?,
         Command::Simulate(cmd) => simulate_cmd(&cmd)?,
         Command::Demo(cmd) => demo_cmd(&cmd)?,
         Command::Parity(cmd) => return parity_cmd(&cmd),
@@ -117,186 +121,180 @@ fn fit_and_print(data: &FieldData, args: &FitArgs, json: bool) -> anyhow::Result
 
 /// What an ABC run leaves for printing.
 struct AbcDone {
-    run: Run,
+    outcome: bitrock::run::Outcome,
     posterior: PosteriorSummary,
     report: serde_json::Value,
 }
 
-/// Refuses a run directory that would be overwritten without --force, before any work.
-fn check_run_dir(dir: &Path, force: bool) -> anyhow::Result<()> {
-    if dir.exists() {
-        if !dir.is_dir() {
-            return Err(Error::arg("--out", format!("{} exists and is not a directory", dir.display())).into());
+/// `bitrock abc`: a new run into `--out`, or `--resume DIR`; then the summary files.
+fn abc_cmd(cmd: &cli::AbcCmd) -> anyhow::Result<AbcDone> {
+    set_threads(cmd.abc.threads)?;
+    let quiet = cmd.quiet;
+    let mut note = |line: String| {
+        if !quiet {
+            eprintln!("{line}");
         }
-        let non_empty = std::fs::read_dir(dir)?.next().is_some();
-        if non_empty && !force {
-            return Err(Error::arg(
-                "--out",
-                format!("{} is not empty; pass --force to replace it", dir.display()),
-            )
-            .into());
+    };
+    let mut progress = progress::RunProgress::new(quiet);
+    let (outcome, dir) = match (&cmd.resume, &cmd.out) {
+        (Some(dir), _) => {
+            let more = Continuation {
+                eps_min: cmd.abc.eps_min,
+                max_populations: cmd.abc.max_populations,
+                max_draws: cmd.abc.max_draws,
+                min_acceptance: cmd.abc.min_acceptance,
+                max_seconds: cmd.abc.max_seconds,
+                backend: cmd.abc.backend,
+            };
+            (bitrock::run::resume(dir, &more, &mut progress, &mut note)?, dir)
         }
-    }
-    Ok(())
+        (None, Some(dir)) => {
+            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+            let (config, prior_file) = abc_config(&data, &cmd.fit, &cmd.abc)?;
+            bitrock::run::check_new_run_dir(dir, cmd.force)?;
+            let outcome = bitrock::run::start(dir, data, config, prior_file.as_ref(), &mut progress, &mut note)?;
+            (outcome, dir)
+        }
+        (None, None) => return Err(Error::arg("--out", "give the run directory to write").into()),
+    };
+    write_summary(dir, outcome, cmd.abc.summary_population)
 }
 
-/// Fit, prior, rejection sampling, summaries; writes the run directory whole or not at all.
-fn run_abc(
-    data: &FieldData,
-    fit_args: &FitArgs,
-    args: &cli::AbcArgs,
-    out_dir: &Path,
-    force: bool,
-    quiet: bool,
-) -> anyhow::Result<AbcDone> {
-    // Everything that can be refused is refused before any work.
-    let fit_opts = fit_options(fit_args, data)?;
-    let config = RejectionConfig {
-        particles: args.particles,
-        eps_min: args.eps_min,
-        max_populations: args.max_populations,
-        max_draws: args.max_draws,
-        min_acceptance: args.min_acceptance,
-        start_epsilon: args.start_epsilon,
-        epsilons: args.epsilons.clone(),
-        mode: args.mode,
-        ..RejectionConfig::default()
-    };
-    config.validate()?;
-    if !(args.delta.is_finite() && args.delta > 0.0) {
-        return Err(Error::arg("--delta", format!("must be a positive number, got {}", args.delta)).into());
-    }
-    let prior_file = args.prior.as_deref().map(PriorFile::read).transpose()?;
-    check_run_dir(out_dir, force)?;
-    if let Some(threads) = args.threads {
+fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
+    if let Some(threads) = threads {
         if threads == 0 {
             return Err(Error::arg("--threads", "must be at least 1").into());
         }
         rayon::ThreadPoolBuilder::new().num_threads(threads).build_global()?;
     }
+    Ok(())
+}
 
-    let fits = fit::fit_laws(&fit_args.laws, &data.calibration, &data.validation, &fit_opts)?;
-    let prior = Prior::from_fits(&fits, args.delta, prior_file.as_ref(), data.torque_unit.newton_metres())?;
-    let problem = AbcProblem::new(prior.clone(), args.seed, &data.calibration, fit_opts.w_ref_n);
-    let evaluator = bitrock::eval::evaluator(problem, args.backend, &mut |note| {
-        if !quiet {
-            eprintln!("{note}");
-        }
-    })?;
-    struct Log {
-        quiet: bool,
+/// The validated run configuration (and parsed prior file) of a new run, refused before any
+/// work when a flag is out of range.
+fn abc_config(
+    data: &FieldData,
+    fit_args: &FitArgs,
+    args: &cli::AbcArgs,
+) -> anyhow::Result<(RunConfig, Option<PriorFile>)> {
+    let fit = fit_options(fit_args, data)?;
+    let defaults = RejectionConfig::default();
+    let sampler = RejectionConfig {
+        particles: args.particles,
+        eps_min: args.eps_min.unwrap_or(defaults.eps_min),
+        max_populations: args.max_populations.unwrap_or(defaults.max_populations),
+        max_draws: args.max_draws.unwrap_or(defaults.max_draws),
+        min_acceptance: args.min_acceptance.unwrap_or(defaults.min_acceptance),
+        start_epsilon: args.start_epsilon,
+        epsilons: args.epsilons.clone(),
+        mode: args.mode,
+        max_seconds: args.max_seconds,
+        ..defaults
+    };
+    sampler.validate()?;
+    if !(args.delta.is_finite() && args.delta > 0.0) {
+        return Err(Error::arg("--delta", format!("must be a positive number, got {}", args.delta)).into());
     }
-    impl bitrock::abc::Observer for Log {
-        fn population_done(&mut self, p: &bitrock::abc::Population) -> bitrock::Result<()> {
-            let r = &p.record;
-            if !self.quiet {
-                let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
-                eprintln!(
-                    "population {:>2}: ε = {eps}, {} accepted of {} drawn, {:.2} s",
-                    r.index, r.accepted, r.draws, r.seconds
-                );
-            }
-            Ok(())
-        }
-    }
-    let run = rejection::run_observed(evaluator.as_ref(), &config, Vec::new(), &mut Log { quiet })?;
-    let last = match args.summary_population {
+    let prior_file = args.prior.as_deref().map(PriorFile::read).transpose()?;
+    let config = RunConfig {
+        laws: fit_args.laws.clone(),
+        fit,
+        delta: args.delta,
+        prior_file: args.prior.clone(),
+        seed: args.seed,
+        backend: args.backend.unwrap_or(Backend::Auto),
+        sampler: SamplerConfig::Rejection(sampler),
+    };
+    Ok((config, prior_file))
+}
+
+/// Summarises population `summary_population` (default: the last) and writes run.json and
+/// envelopes.csv (with data.csv beside) into the run directory, each whole or not at all.
+fn write_summary(
+    dir: &Path,
+    outcome: bitrock::run::Outcome,
+    summary_population: Option<usize>,
+) -> anyhow::Result<AbcDone> {
+    let run = &outcome.run;
+    let data = &outcome.setup.data;
+    let last = match summary_population {
         None => run
             .populations
             .last()
-            .ok_or_else(|| Error::Numerical("no population completed".into()))?,
+            .ok_or_else(|| Error::Numerical(format!("no population completed ({})", run.stop.describe())))?,
         Some(g) => run.populations.get(g).ok_or_else(|| {
             Error::arg(
                 "--summary-population",
-                format!("the run has populations 0..={}", run.populations.len() - 1),
+                format!(
+                    "the run has populations 0..={}",
+                    run.populations.len().saturating_sub(1)
+                ),
             )
         })?,
     };
-    let posterior = summarize(&last.particles, &fit_args.laws);
+    let laws = &outcome.config.laws;
+    let posterior = summarize(&last.particles, laws);
     let all_speeds = data.calibration.speed_rad_s.iter().chain(&data.validation.speed_rad_s);
     let (lo, hi) = all_speeds.fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
     let grid = speed_grid(lo, hi, 200);
-    let envelopes: Vec<_> = fit_args
-        .laws
+    let envelopes: Vec<_> = laws
         .iter()
         .filter_map(|&law| predictive_envelope(&last.particles, law, &grid, output::ENVELOPE_LEVEL, 1.0))
         .collect();
+    let mut config = serde_json::to_value(&outcome.config)?;
+    config["threads"] = rayon::current_num_threads().into();
     let report = output::AbcReport {
         data,
-        fits: &fits,
-        prior: &prior,
-        run: &run,
+        fits: &outcome.setup.fits,
+        prior: &outcome.setup.prior,
+        run,
         posterior: &posterior,
         summary_population: last.record.index,
-        config: serde_json::json!({
-            "particles": args.particles,
-            "delta": args.delta,
-            "prior_file": args.prior.as_ref().map(|p| p.display().to_string()),
-            "eps_min": args.eps_min,
-            "epsilons": args.epsilons,
-            "start_epsilon": args.start_epsilon,
-            "max_populations": args.max_populations,
-            "max_draws": args.max_draws,
-            "min_acceptance": args.min_acceptance,
-            "mode": args.mode,
-            "laws": fit_args.laws,
-            "bounded_fit": fit_opts.bounded,
-            "w_ref_kn_for_wob_scaling": fit_opts.w_ref_n.map(|w| w / 1000.0),
-            "threads": rayon::current_num_threads(),
-        }),
-        seed: args.seed,
-        backend: evaluator.backend(),
+        config,
+        seed: outcome.config.seed,
+        backend: outcome.backend,
     }
     .json();
-
-    // Write into a fresh directory beside the target, then move it into place.
-    let parent = out_dir
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent).map_err(|source| Error::Write {
-        path: parent.to_path_buf(),
-        source,
-    })?;
+    // Written beside the targets, then moved into place.
     let staging = tempfile::Builder::new()
-        .prefix(".bitrock-run-")
-        .tempdir_in(parent)
+        .prefix(".bitrock-summary-")
+        .tempdir_in(dir)
         .map_err(|source| Error::Write {
-            path: parent.to_path_buf(),
+            path: dir.to_path_buf(),
             source,
         })?;
     std::fs::write(
         staging.path().join("run.json"),
         serde_json::to_string_pretty(&report)? + "\n",
     )?;
-    std::fs::create_dir(staging.path().join("populations"))?;
-    for p in &run.populations {
-        let path = staging
-            .path()
-            .join("populations")
-            .join(format!("population_{:03}.csv", p.record.index));
-        output::write_particles(&path, &p.particles, &fit_args.laws, data.torque_unit)?;
-    }
     output::write_envelopes(staging.path(), &envelopes, data)?;
-    if out_dir.exists() {
-        std::fs::remove_dir_all(out_dir).map_err(|source| Error::Write {
-            path: out_dir.to_path_buf(),
+    for name in ["run.json", "envelopes.csv", "data.csv"] {
+        std::fs::rename(staging.path().join(name), dir.join(name)).map_err(|source| Error::Write {
+            path: dir.join(name),
             source,
         })?;
     }
-    let staged = staging.keep();
-    std::fs::rename(&staged, out_dir).map_err(|source| Error::Write {
-        path: out_dir.to_path_buf(),
-        source,
-    })?;
-    Ok(AbcDone { run, posterior, report })
+    Ok(AbcDone {
+        outcome,
+        posterior,
+        report,
+    })
 }
 
-/// The whole pipeline on the embedded record: fits, then ABC, printed as tables.
+/// Marks a directory the demo wrote, so that a later demo may replace it (and nothing else).
+const DEMO_MARKER: &str = "bitrock-demo.txt";
+
+/// The prior half-widths δ of the paper's three runs.
+const DEMO_DELTAS: [f64; 3] = [0.4, 0.6, 0.8];
+
+/// The whole paper on the embedded record: fits, ABC for δ = 0.4, 0.6, 0.8, printed as tables.
 fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
     let data = data::demo_field_data(&data::DataOptions::default())?;
-    // The demo replaces its own run directory, but nothing else.
-    let replace = cmd.out.join("run.json").exists();
+    let root = &cmd.out;
+    if root.exists() && !root.join(DEMO_MARKER).exists() {
+        bitrock::run::check_new_run_dir(root, false)?;
+    }
+    set_threads(cmd.threads)?;
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
@@ -311,31 +309,56 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         w_ref_kn: 244.2,
     };
     fit_and_print(&data, &fit_args, false)?;
-    let args = cli::AbcArgs {
-        particles: cmd.particles,
-        delta: 0.4,
-        prior: None,
-        eps_min: 0.014,
-        epsilons: None,
-        start_epsilon: None,
-        max_populations: 30,
-        max_draws: 2_000_000_000,
-        min_acceptance: 1e-5,
-        mode: Mode::Nested,
-        seed: cmd.seed,
-        threads: cmd.threads,
-        backend: cmd.backend,
-        summary_population: None,
-    };
-    writeln!(
-        out,
-        "ABC rejection with model selection: N = {}, δ = 0.4, ε_min = 0.014, seed {}",
-        args.particles, args.seed
+    if root.exists() {
+        std::fs::remove_dir_all(root).map_err(|source| Error::Write {
+            path: root.clone(),
+            source,
+        })?;
+    }
+    std::fs::create_dir_all(root).map_err(|source| Error::Write {
+        path: root.clone(),
+        source,
+    })?;
+    std::fs::write(
+        root.join(DEMO_MARKER),
+        "Written by `bitrock demo`; a later `bitrock demo` replaces this directory.\n",
     )?;
-    let done = run_abc(&data, &fit_args, &args, &cmd.out, replace, false)?;
-    output::print_population_table(&mut out, &done.run)?;
-    output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
-    writeln!(out, "\nrun written to {}", cmd.out.display())?;
+    for delta in DEMO_DELTAS {
+        let args = cli::AbcArgs {
+            particles: cmd.particles,
+            delta,
+            prior: None,
+            eps_min: None,
+            epsilons: None,
+            start_epsilon: None,
+            max_populations: None,
+            max_draws: None,
+            min_acceptance: None,
+            max_seconds: None,
+            mode: Mode::Nested,
+            seed: cmd.seed,
+            threads: None,
+            backend: Some(cmd.backend),
+            summary_population: None,
+        };
+        let (config, _) = abc_config(&data, &fit_args, &args)?;
+        let dir = root.join(format!("delta-{delta:.1}"));
+        writeln!(
+            out,
+            "\nABC rejection with model selection: N = {}, δ = {delta}, ε_min = 0.014, seed {} → {}",
+            args.particles,
+            args.seed,
+            dir.display()
+        )?;
+        let mut progress = progress::RunProgress::new(false);
+        let outcome = bitrock::run::start(&dir, data.clone(), config, None, &mut progress, &mut |line| {
+            eprintln!("{line}")
+        })?;
+        let done = write_summary(&dir, outcome, None)?;
+        output::print_population_table(&mut out, &done.outcome.run)?;
+        output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
+    }
+    writeln!(out, "\nruns written to {}", root.display())?;
     Ok(())
 }
 

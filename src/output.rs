@@ -2,9 +2,8 @@
 //! Parameters leave the library in SI and are shown in the record's torque unit.
 
 use bitrock::Law;
-use bitrock::abc::Particle;
 use bitrock::abc::posterior::{Envelope, PosteriorSummary};
-use bitrock::abc::{PopulationRecord, Run};
+use bitrock::abc::{Population, PopulationRecord, Run};
 use bitrock::data::FieldData;
 use bitrock::fit::LawFit;
 use bitrock::prior::Prior;
@@ -213,24 +212,7 @@ pub struct AbcReport<'a> {
 impl AbcReport<'_> {
     pub fn json(&self) -> Value {
         let unit = self.data.torque_unit;
-        let priors: Vec<Value> = self
-            .prior
-            .boxes
-            .iter()
-            .zip(&self.prior.weights)
-            .map(|(b, w)| {
-                let lower: Vec<f64> = b.lower.iter().map(|&v| f64::from(v)).collect();
-                let upper: Vec<f64> = b.upper.iter().map(|&v| f64::from(v)).collect();
-                json!({
-                    "law": b.law,
-                    "names": b.law.param_names(),
-                    "units": b.law.params().iter().map(|s| s.unit(unit.label())).collect::<Vec<_>>(),
-                    "lower": to_record_units(b.law, &lower, unit),
-                    "upper": to_record_units(b.law, &upper, unit),
-                    "weight": w,
-                })
-            })
-            .collect();
+        let priors = prior_json(self.prior, unit);
         let laws: Vec<Value> = self
             .posterior
             .laws
@@ -291,9 +273,13 @@ impl AbcReport<'_> {
 /// The paper's predictive envelope level.
 pub const ENVELOPE_LEVEL: f64 = 0.98;
 
-/// Header of a particle CSV: law, index, rho, then every law's parameters with units.
+/// Header of a particle CSV: population, law, candidate, rho, weight, then every law's
+/// parameters with units.
 fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {
-    let mut header = vec!["law".to_string(), "index".to_string(), "rho".to_string()];
+    let mut header: Vec<String> = ["population", "law", "candidate", "rho", "weight"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
     for law in laws {
         for spec in law.params() {
             header.push(format!("{} [{}]", spec.name, spec.unit(unit.label())));
@@ -302,24 +288,78 @@ fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {
     header
 }
 
-/// Writes one population's particles: one row per particle, parameters in columns (empty
-/// cells for the other laws' parameters).
-pub fn write_particles(path: &Path, particles: &[Particle], laws: &[Law], unit: TorqueUnit) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(path)?;
+/// Writes populations' particles as CSV: one row per particle, parameters in columns in the
+/// record's torque unit (empty cells for the other laws' parameters).
+pub fn write_particles(
+    out: impl Write,
+    populations: &[&Population],
+    laws: &[Law],
+    unit: TorqueUnit,
+) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
     w.write_record(particle_header(laws, unit))?;
-    for p in particles {
-        let mut row = vec![p.law.name().to_string(), p.index.to_string(), format!("{:e}", p.rho)];
-        for law in laws {
-            if *law == p.law {
-                row.extend(to_record_units(p.law, &p.params, unit).iter().map(|v| format!("{v:e}")));
-            } else {
-                row.extend(std::iter::repeat_n(String::new(), law.n_params()));
+    for population in populations {
+        for p in &population.particles {
+            let mut row = vec![
+                population.record.index.to_string(),
+                p.law.name().to_string(),
+                p.index.to_string(),
+                format!("{:e}", p.rho),
+                format!("{:e}", p.weight),
+            ];
+            for law in laws {
+                if *law == p.law {
+                    row.extend(to_record_units(p.law, &p.params, unit).iter().map(|v| format!("{v:e}")));
+                } else {
+                    row.extend(std::iter::repeat_n(String::new(), law.n_params()));
+                }
             }
+            w.write_record(&row)?;
         }
-        w.write_record(&row)?;
     }
     w.flush()?;
     Ok(())
+}
+
+/// A population and its particles as JSON, parameters in the record's torque unit.
+pub fn population_with_particles_json(population: &Population, unit: TorqueUnit) -> Value {
+    let particles: Vec<Value> = population
+        .particles
+        .iter()
+        .map(|p| {
+            json!({
+                "law": p.law,
+                "candidate": p.index,
+                "rho": p.rho,
+                "weight": p.weight,
+                "params": to_record_units(p.law, &p.params, unit),
+            })
+        })
+        .collect();
+    let mut value = population_json(&population.record);
+    value["particles"] = Value::Array(particles);
+    value
+}
+
+/// The prior boxes in the record's units, with names, units and law weights.
+pub fn prior_json(prior: &Prior, unit: TorqueUnit) -> Value {
+    prior
+        .boxes
+        .iter()
+        .zip(&prior.weights)
+        .map(|(b, w)| {
+            let lower: Vec<f64> = b.lower.iter().map(|&v| f64::from(v)).collect();
+            let upper: Vec<f64> = b.upper.iter().map(|&v| f64::from(v)).collect();
+            json!({
+                "law": b.law,
+                "names": b.law.param_names(),
+                "units": b.law.params().iter().map(|s| s.unit(unit.label())).collect::<Vec<_>>(),
+                "lower": to_record_units(b.law, &lower, unit),
+                "upper": to_record_units(b.law, &upper, unit),
+                "weight": w,
+            })
+        })
+        .collect()
 }
 
 /// Writes the predictive envelopes (one block of rows per law) and, beside them, the data.

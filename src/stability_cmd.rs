@@ -2,14 +2,12 @@
 //! (Ω, W) from an ABC run directory or from one law's parameters.
 
 use crate::cli::{FeArgs, FeCmd, LumpedArgs, StabilityCmd, Structure};
-use anyhow::Context;
 use bitrock::eval::Backend;
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
 use bitrock::stability::map::{self, Criterion};
-use bitrock::units::TorqueUnit;
 use bitrock::{Error, Law};
-use serde_json::{Value, json};
+use serde_json::json;
 use std::io::Write;
 use std::path::Path;
 
@@ -107,70 +105,33 @@ struct LawInput {
     samples_si: Vec<Vec<f64>>,
 }
 
-/// Reads the summarised population of a run directory: each law's MAP, probability and the
-/// first `samples` particles in index order (deterministic), converted to SI.
+/// Reads the last population of a run directory's store: each law's MAP and probability and
+/// its first `samples` particles in population order (deterministic), SI.
 fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawInput>> {
-    let not_a_run = |why: String| Error::Data {
+    let store = bitrock::store::RunStore::open(dir)?;
+    let populations = store.load_populations()?;
+    let last = populations.last().ok_or_else(|| Error::Data {
         path: dir.to_path_buf(),
-        message: format!("not a bitrock run directory ({why}); give a directory written by `bitrock abc --out`"),
-    };
-    let text = std::fs::read_to_string(dir.join("run.json")).map_err(|e| not_a_run(format!("run.json: {e}")))?;
-    let run: Value = serde_json::from_str(&text).map_err(|e| not_a_run(format!("run.json: {e}")))?;
-    let unit = match run["data"]["torque_unit"].as_str() {
-        Some("kN·m") => TorqueUnit::KNm,
-        Some("N·m") => TorqueUnit::Nm,
-        other => return Err(not_a_run(format!("run.json names no torque unit ({other:?})")).into()),
-    };
-    let population = run["posterior"]["population"]
-        .as_u64()
-        .ok_or_else(|| not_a_run("no posterior".into()))?;
-    let csv_path = dir.join("populations").join(format!("population_{population:03}.csv"));
-    let mut reader =
-        csv::Reader::from_path(&csv_path).map_err(|e| not_a_run(format!("{}: {e}", csv_path.display())))?;
-    let headers = reader.headers()?.clone();
-    let mut inputs = Vec::new();
-    for law_summary in run["posterior"]["laws"]
-        .as_array()
-        .ok_or_else(|| not_a_run("no posterior laws".into()))?
-    {
-        let law: Law = law_summary["law"]
-            .as_str()
-            .unwrap_or("")
-            .parse()
-            .map_err(|e: String| not_a_run(e))?;
-        let map_record: Vec<f64> = serde_json::from_value(law_summary["map"].clone()).context("run.json: MAP")?;
-        inputs.push(LawInput {
-            law,
-            probability: law_summary["probability"].as_f64().unwrap_or(0.0),
-            map_si: law.scale_torque(&map_record, unit.newton_metres()),
-            samples_si: Vec::new(),
-        });
-    }
-    for record in reader.records() {
-        let record = record?;
-        let Some(input) = inputs.iter_mut().find(|i| record.get(0) == Some(i.law.name())) else {
-            continue;
-        };
-        if input.samples_si.len() >= samples {
-            continue;
-        }
-        let mut params = Vec::with_capacity(input.law.n_params());
-        for spec in input.law.params() {
-            let column = headers
+        message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
+    })?;
+    let laws: Vec<Law> = last.record.per_law.iter().map(|l| l.law).collect();
+    let posterior = bitrock::abc::posterior::summarize(&last.particles, &laws);
+    Ok(posterior
+        .laws
+        .iter()
+        .map(|summary| LawInput {
+            law: summary.law,
+            probability: summary.probability,
+            map_si: summary.map.clone(),
+            samples_si: last
+                .particles
                 .iter()
-                .position(|h| h.split(' ').next() == Some(spec.name))
-                .ok_or_else(|| not_a_run(format!("{} has no column {}", csv_path.display(), spec.name)))?;
-            let cell = record.get(column).unwrap_or("");
-            params.push(
-                cell.parse::<f64>()
-                    .map_err(|_| not_a_run(format!("{}: '{cell}' is not a number", csv_path.display())))?,
-            );
-        }
-        input
-            .samples_si
-            .push(input.law.scale_torque(&params, unit.newton_metres()));
-    }
-    Ok(inputs)
+                .filter(|p| p.law == summary.law)
+                .take(samples)
+                .map(|p| p.params.clone())
+                .collect(),
+        })
+        .collect())
 }
 
 /// Share of unstable samples per cell on the chosen backend.

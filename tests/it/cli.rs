@@ -161,7 +161,10 @@ fn demo_prints_fits_and_the_population_table() {
         assert!(stdout.contains(&format!("P({law})")), "{stdout}");
     }
     assert!(stdout.contains("stopped: the tolerance reached --eps-min"), "{stdout}");
-    assert!(out.join("run.json").exists());
+    for delta in ["0.4", "0.6", "0.8"] {
+        assert!(out.join(format!("delta-{delta}/run.json")).exists());
+        assert!(out.join(format!("delta-{delta}/run.sqlite")).exists());
+    }
     // Run again: the demo replaces its own run directory.
     let (code, _, stderr) = run(&["demo", "--particles", "500", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
@@ -207,14 +210,22 @@ fn abc_writes_a_run_directory_and_json_with_its_keys() {
     );
     let eps_last = pops.last().unwrap()["epsilon"].as_f64().unwrap();
     assert!((eps_last - 0.014).abs() < 1e-15, "{eps_last}");
-    // The run directory holds the same JSON, every population's particles and the envelopes.
+    // The run directory holds the same JSON, the store and the envelopes; `export` gives
+    // every population's particles.
     let stored: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
     assert_eq!(stored, v);
+    assert!(out.join("run.sqlite").exists());
     for g in 0..pops.len() {
-        let csv = std::fs::read_to_string(out.join(format!("populations/population_{g:03}.csv"))).unwrap();
+        let (code, csv, stderr) = run(&["export", out.to_str().unwrap(), "--population", &g.to_string()]);
+        assert_eq!(code, 0, "{stderr}");
         assert_eq!(csv.lines().count(), 1001);
-        assert!(csv.starts_with("law,index,rho,b0 [kN·m]"), "{}", &csv[..80]);
+        assert!(
+            csv.starts_with("population,law,candidate,rho,weight,b0 [kN·m]"),
+            "{}",
+            &csv[..80]
+        );
+        assert!(csv.lines().skip(1).all(|l| l.starts_with(&format!("{g},"))));
     }
     let envelopes = std::fs::read_to_string(out.join("envelopes.csv")).unwrap();
     assert!(envelopes.starts_with("law,speed_rad_s,lower_knm,median_knm,upper_knm"));

@@ -1,0 +1,119 @@
+//! Live view of a sampler run on stderr: an indicatif bar per population on a terminal, one
+//! line per population (and one every few seconds inside a long one) otherwise, nothing with
+//! `--quiet`.
+
+use bitrock::abc::{Observer, Population, Progress};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
+use std::time::{Duration, Instant};
+
+/// How often a non-terminal log line reports a population in progress.
+const LOG_EVERY: Duration = Duration::from_secs(10);
+
+enum Display {
+    Bar(Option<ProgressBar>),
+    Lines { last: Instant },
+    Quiet,
+}
+
+/// The progress display of one run.
+pub struct RunProgress {
+    display: Display,
+}
+
+impl RunProgress {
+    /// A bar when stderr is a terminal, log lines when it is not, nothing when `quiet`.
+    pub fn new(quiet: bool) -> Self {
+        let display = if quiet {
+            Display::Quiet
+        } else if std::io::stderr().is_terminal() {
+            Display::Bar(None)
+        } else {
+            Display::Lines { last: Instant::now() }
+        };
+        Self { display }
+    }
+}
+
+fn epsilon_text(epsilon: Option<f64>) -> String {
+    epsilon.map_or_else(|| "∞".to_string(), |e| format!("{e:.5}"))
+}
+
+fn rate(p: &Progress) -> f64 {
+    if p.seconds > 0.0 {
+        (p.scored as f64 * p.data_len as f64) / p.seconds
+    } else {
+        0.0
+    }
+}
+
+impl Observer for RunProgress {
+    fn progress(&mut self, p: &Progress) {
+        match &mut self.display {
+            Display::Bar(bar) => {
+                let bar = bar.get_or_insert_with(|| {
+                    let bar = ProgressBar::new(p.target as u64);
+                    bar.set_style(
+                        ProgressStyle::with_template(
+                            "{prefix:>14} [{bar:28}] {pos}/{len} accepted · {msg} · ETA {eta}",
+                        )
+                        .expect("a valid template")
+                        .progress_chars("=> "),
+                    );
+                    bar.set_prefix(format!("population {}", p.population));
+                    bar
+                });
+                bar.set_position(p.accepted as u64);
+                bar.set_message(format!(
+                    "ε = {}, {} drawn, {:.2e} eval/s",
+                    epsilon_text(p.epsilon),
+                    p.draws,
+                    rate(p)
+                ));
+            }
+            Display::Lines { last } => {
+                if last.elapsed() >= LOG_EVERY {
+                    *last = Instant::now();
+                    eprintln!(
+                        "population {:>2}: ε = {}, {}/{} accepted, {} drawn, {:.2e} eval/s, {:.1} s",
+                        p.population,
+                        epsilon_text(p.epsilon),
+                        p.accepted,
+                        p.target,
+                        p.draws,
+                        rate(p),
+                        p.seconds
+                    );
+                }
+            }
+            Display::Quiet => {}
+        }
+    }
+
+    fn population_done(&mut self, population: &Population) -> bitrock::Result<()> {
+        let r = &population.record;
+        let line = format!(
+            "population {:>2}: ε = {}, {} accepted of {} drawn, ESS {:.0}, {:.2} s",
+            r.index,
+            epsilon_text(r.epsilon),
+            r.accepted,
+            r.draws,
+            r.ess,
+            r.seconds
+        );
+        match &mut self.display {
+            Display::Bar(bar) => {
+                if let Some(bar) = bar.take() {
+                    bar.finish_and_clear();
+                }
+                eprintln!("{line}");
+            }
+            Display::Lines { last } => {
+                *last = Instant::now();
+                eprintln!("{line}");
+            }
+            Display::Quiet => {}
+        }
+        Ok(())
+    }
+}
