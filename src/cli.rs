@@ -26,7 +26,7 @@ pub enum Command {
     Fit(FitCmd),
     /// ABC rejection sampling with model selection (the paper's Algorithm 1): posterior law
     /// probabilities and parameter distributions, written to a run directory.
-    Abc(AbcCmd),
+    Abc(Box<AbcCmd>),
     /// Export a run directory's store: particles as CSV (one row per particle, parameters in
     /// columns, the record's torque unit), or the whole run as JSON.
     Export(ExportCmd),
