@@ -6,4 +6,5 @@ mod fit;
 mod gpu;
 mod laws;
 mod stability;
+mod store;
 mod support;

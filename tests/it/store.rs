@@ -1,0 +1,282 @@
+//! The run store: what goes in comes back bit for bit, a continued run equals an
+//! uninterrupted one (also after a SIGKILL part-way), and a directory that is not a run is
+//! refused by name.
+
+use crate::support::bin;
+use bitrock::abc::rejection::RejectionConfig;
+use bitrock::abc::{Population, Silent, StopReason};
+use bitrock::data::{DataOptions, demo_field_data};
+use bitrock::eval::Backend;
+use bitrock::fit::FitOptions;
+use bitrock::run::{self, Continuation, Outcome, RunConfig, SamplerConfig};
+use bitrock::store::RunStore;
+use bitrock::{Error, Law};
+use std::path::Path;
+
+fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
+    RunConfig {
+        laws: Law::ALL.to_vec(),
+        fit: FitOptions::default(),
+        delta: 0.4,
+        prior_file: None,
+        seed: 11,
+        backend: Backend::Cpu,
+        sampler: SamplerConfig::Rejection(RejectionConfig {
+            particles,
+            max_populations,
+            eps_min,
+            ..RejectionConfig::default()
+        }),
+    }
+}
+
+fn start(dir: &Path, config: RunConfig) -> Outcome {
+    let data = demo_field_data(&DataOptions::default()).unwrap();
+    run::start(dir, data, config, None, &mut Silent, &mut |_| {}).unwrap()
+}
+
+/// Populations equal in everything a population is: ε, counts, particles (bit for bit).
+/// Timings and the candidates an uninterrupted run scored ahead may differ.
+fn assert_same_populations(a: &[Population], b: &[Population]) {
+    assert_eq!(a.len(), b.len(), "population counts");
+    for (p, q) in a.iter().zip(b) {
+        let (r, s) = (&p.record, &q.record);
+        assert_eq!(
+            (
+                r.index,
+                r.epsilon.map(f64::to_bits),
+                r.draws,
+                r.accepted,
+                r.near_threshold,
+                r.stream
+            ),
+            (
+                s.index,
+                s.epsilon.map(f64::to_bits),
+                s.draws,
+                s.accepted,
+                s.near_threshold,
+                s.stream
+            ),
+            "population {}",
+            r.index
+        );
+        assert_eq!(r.per_law, s.per_law, "population {}", r.index);
+        assert_eq!(p.particles, q.particles, "particles of population {}", r.index);
+    }
+}
+
+#[test]
+fn store_round_trip_is_bit_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let outcome = start(&run_dir, config(600, 4, 0.014));
+    assert_eq!(outcome.run.populations.len(), 4);
+    let stored = RunStore::open(&run_dir).unwrap().load().unwrap();
+    // Records (timings included) and particles come back exactly.
+    assert_eq!(stored.populations, outcome.run.populations);
+    assert_eq!(stored.setup.prior, outcome.setup.prior);
+    assert_eq!(stored.setup.data.calibration, outcome.setup.data.calibration);
+    assert_eq!(stored.setup.data.validation, outcome.setup.data.validation);
+    assert_eq!(stored.setup.data.torque_unit, outcome.setup.data.torque_unit);
+    assert_eq!(stored.setup.data.columns, outcome.setup.data.columns);
+    assert_eq!(stored.setup.fits.len(), 4);
+    for (a, b) in stored.setup.fits.iter().zip(&outcome.setup.fits) {
+        assert_eq!(a.law, b.law);
+        assert_eq!(
+            a.params_si.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            b.params_si.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(a.std_errors_si, b.std_errors_si);
+        assert_eq!(a.rho.to_bits(), b.rho.to_bits());
+        assert_eq!(a.correlations, b.correlations);
+        assert_eq!(a.warnings, b.warnings);
+    }
+    let config: RunConfig = serde_json::from_value(stored.setup.config).unwrap();
+    assert_eq!(config, outcome.config);
+    // Weights are 1/N and sum to 1 per population.
+    for p in &stored.populations {
+        let total: f64 = p.particles.iter().map(|q| q.weight).sum();
+        assert!((total - 1.0).abs() < 1e-12, "{total}");
+    }
+
+    // The particles are plain rows a user can query: one per particle, parameters in columns.
+    let conn = rusqlite::Connection::open(run_dir.join("run.sqlite")).unwrap();
+    let rows: i64 = conn
+        .query_row("SELECT COUNT(*) FROM particles", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(rows, 4 * 600);
+    let (m2, with_tsb): (i64, i64) = conn
+        .query_row(
+            "SELECT COUNT(*), COUNT(tsb) FROM particles WHERE law = 'm2' AND population = 3",
+            [],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )
+        .unwrap();
+    assert_eq!(m2, with_tsb, "every m2 particle has its tsb column");
+    let stray: i64 = conn
+        .query_row(
+            "SELECT COUNT(*) FROM particles WHERE law = 'm2' AND b0 IS NOT NULL",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(stray, 0, "an m2 particle has no m1 parameter");
+    let probability: f64 = conn
+        .query_row(
+            "SELECT SUM(probability) FROM population_laws WHERE population = 3",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert!((probability - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn continuing_a_run_equals_the_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = start(&dir.path().join("whole"), config(800, 6, 0.0));
+    assert_eq!(whole.run.stop, StopReason::MaxPopulations);
+    // Stopped after 3 populations, then continued to 6.
+    let part_dir = dir.path().join("part");
+    let part = start(&part_dir, config(800, 3, 0.0));
+    assert_eq!(part.run.populations.len(), 3);
+    let more = Continuation {
+        max_populations: Some(6),
+        ..Continuation::default()
+    };
+    let continued = run::resume(&part_dir, &more, &mut Silent, &mut |_| {}).unwrap();
+    assert_eq!(continued.run.stop, StopReason::MaxPopulations);
+    assert_same_populations(&continued.run.populations, &whole.run.populations);
+    let stored = RunStore::open(&part_dir).unwrap().load_populations().unwrap();
+    assert_same_populations(&stored, &whole.run.populations);
+    // Continuing a finished run with the same rules adds nothing.
+    let again = run::resume(&part_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap();
+    assert_eq!(again.run.populations.len(), 6);
+    assert_eq!(again.run.stop, StopReason::MaxPopulations);
+}
+
+#[test]
+fn a_finished_run_continues_to_a_lower_eps_min() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let first = start(&run_dir, config(500, 30, 0.03));
+    assert_eq!(first.run.stop, StopReason::EpsMin);
+    let n = first.run.populations.len();
+    let more = Continuation {
+        eps_min: Some(0.016),
+        ..Continuation::default()
+    };
+    let continued = run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap();
+    assert_eq!(continued.run.stop, StopReason::EpsMin);
+    assert!(continued.run.populations.len() > n);
+    assert_same_populations(&continued.run.populations[..n], &first.run.populations);
+    // After the stored populations, the median rule with the new floor.
+    for g in n..continued.run.populations.len() {
+        let previous = &continued.run.populations[g - 1];
+        let expected = bitrock::abc::rejection::median_rho(&previous.particles).max(0.016);
+        let eps = continued.run.populations[g].record.epsilon.unwrap();
+        assert_eq!(eps.to_bits(), expected.to_bits(), "population {g}");
+    }
+}
+
+#[test]
+fn a_directory_that_is_not_a_run_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    for target in [dir.path().to_path_buf(), dir.path().join("missing")] {
+        let err = RunStore::open(&target).err().expect("refused");
+        assert!(matches!(err, Error::Data { .. }), "{err}");
+        assert!(err.to_string().contains("not a bitrock run directory"), "{err}");
+        for args in [
+            vec!["export", target.to_str().unwrap()],
+            vec!["abc", "--resume", target.to_str().unwrap()],
+            vec!["stability", "--run", target.to_str().unwrap()],
+        ] {
+            let out = bin().args(&args).output().unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+            assert!(stderr.contains("not a bitrock run directory"), "{args:?}: {stderr}");
+        }
+    }
+    // A file named run.sqlite that is not a store.
+    std::fs::write(dir.path().join("run.sqlite"), "not a database").unwrap();
+    let err = RunStore::open(dir.path()).err().expect("refused");
+    assert!(err.to_string().contains("not a bitrock"), "{err}");
+    // Run-defining flags cannot change on --resume.
+    let out = bin()
+        .args(["abc", "--resume", dir.path().to_str().unwrap(), "--seed", "4"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--seed"));
+}
+
+/// Populations stored so far, read while the writer may hold its lock.
+fn stored_populations(dir: &Path) -> usize {
+    let Ok(conn) =
+        rusqlite::Connection::open_with_flags(dir.join("run.sqlite"), rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
+    else {
+        return 0;
+    };
+    conn.query_row("SELECT COUNT(*) FROM populations", [], |r| r.get::<_, i64>(0))
+        .map_or(0, |n| n as usize)
+}
+
+#[test]
+fn a_run_killed_part_way_resumes_to_the_uninterrupted_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let killed = dir.path().join("killed");
+    let whole = dir.path().join("whole");
+    let args = |out: &Path| {
+        vec![
+            "abc".to_string(),
+            "--particles".into(),
+            "2000".into(),
+            "--eps-min".into(),
+            "0".into(),
+            "--max-populations".into(),
+            "9".into(),
+            "--backend".into(),
+            "cpu".into(),
+            "--seed".into(),
+            "5".into(),
+            "--quiet".into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+        ]
+    };
+    let mut child = bin().args(args(&killed)).spawn().unwrap();
+    // Each population costs about twice the one before, so killing once 4 are stored
+    // interrupts the run well before its end.
+    let t0 = std::time::Instant::now();
+    while stored_populations(&killed) < 4 {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before it could be killed"
+        );
+        assert!(t0.elapsed().as_secs() < 300, "the run did not reach population 3");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let at_kill = stored_populations(&killed);
+    assert!((4..9).contains(&at_kill), "{at_kill} populations stored when killed");
+    assert!(!killed.join("run.json").exists(), "a killed run has no summary yet");
+
+    let out = bin()
+        .args(["abc", "--resume", killed.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = bin().args(args(&whole)).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let a = RunStore::open(&killed).unwrap().load_populations().unwrap();
+    let b = RunStore::open(&whole).unwrap().load_populations().unwrap();
+    assert_eq!(a.len(), 9);
+    assert_same_populations(&a, &b);
+    // The exports are byte-identical.
+    let export = |d: &Path| bin().args(["export", d.to_str().unwrap()]).output().unwrap().stdout;
+    assert_eq!(export(&killed), export(&whole));
+    assert!(killed.join("run.json").exists());
+}
