@@ -58,24 +58,7 @@ pub fn export_cmd(cmd: &ExportCmd) -> anyhow::Result<()> {
     }
     match &cmd.out {
         None => std::io::stdout().lock().write_all(&text)?,
-        Some(path) => {
-            let dir = path
-                .parent()
-                .filter(|d| !d.as_os_str().is_empty())
-                .unwrap_or(std::path::Path::new("."));
-            let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|source| Error::Write {
-                path: path.clone(),
-                source,
-            })?;
-            tmp.write_all(&text).map_err(|source| Error::Write {
-                path: path.clone(),
-                source,
-            })?;
-            tmp.persist(path).map_err(|e| Error::Write {
-                path: path.clone(),
-                source: e.error,
-            })?;
-        }
+        Some(path) => output::write_file_atomically(path, |file| Ok(file.write_all(&text)?))?,
     }
     Ok(())
 }

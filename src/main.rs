@@ -536,24 +536,8 @@ fn simulate_cmd(cmd: &cli::SimulateCmd) -> anyhow::Result<()> {
     let trace = simulate::simulate(&config)?;
     match &cmd.out {
         None => simulate::write_csv(&trace, std::io::stdout().lock())?,
-        Some(path) => {
-            // Write beside the target and rename, so a failure leaves nothing half-written.
-            let dir = path
-                .parent()
-                .filter(|d| !d.as_os_str().is_empty())
-                .unwrap_or(std::path::Path::new("."));
-            let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|source| Error::Write {
-                path: path.clone(),
-                source,
-            })?;
-            simulate::write_csv(&trace, &mut tmp)?;
-            tmp.persist(path)
-                .map_err(|e| Error::Write {
-                    path: path.clone(),
-                    source: e.error,
-                })
-                .with_context(|| format!("saving the simulation to {}", path.display()))?;
-        }
+        Some(path) => output::write_file_atomically(path, |file| Ok(simulate::write_csv(&trace, file)?))
+            .with_context(|| format!("saving the simulation to {}", path.display()))?,
     }
     Ok(())
 }

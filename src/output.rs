@@ -468,3 +468,25 @@ pub fn print_posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit:
     }
     Ok(())
 }
+
+/// Writes `path` through `write` into a temporary file beside it, then renames it into place,
+/// so a failure leaves nothing half-written.
+pub fn write_file_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|source| bitrock::Error::Write {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    write(tmp.as_file_mut())?;
+    tmp.persist(path).map_err(|e| bitrock::Error::Write {
+        path: path.to_path_buf(),
+        source: e.error,
+    })?;
+    Ok(())
+}
