@@ -288,8 +288,7 @@ impl AbcReport<'_> {
     }
 }
 
-/// The paper's predictive envelope level.
-pub const ENVELOPE_LEVEL: f64 = 0.98;
+pub use bitrock::abc::posterior::ENVELOPE_LEVEL;
 
 /// Header of a particle CSV: law, index, rho, then every law's parameters with units.
 fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {

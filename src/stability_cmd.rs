@@ -6,7 +6,7 @@ use anyhow::Context;
 use bitrock::eval::Backend;
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
-use bitrock::stability::map::{self, Criterion};
+use bitrock::stability::map::{self, Criterion, LawSamples};
 use bitrock::units::TorqueUnit;
 use bitrock::{Error, Law};
 use serde_json::{Value, json};
@@ -99,17 +99,9 @@ pub fn fe_cmd(cmd: &FeCmd) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// One law's parameters for a map: MAP (or the given ones) and posterior samples, SI.
-struct LawInput {
-    law: Law,
-    probability: f64,
-    map_si: Vec<f64>,
-    samples_si: Vec<Vec<f64>>,
-}
-
 /// Reads the summarised population of a run directory: each law's MAP, probability and the
 /// first `samples` particles in index order (deterministic), converted to SI.
-fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawInput>> {
+fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawSamples>> {
     let not_a_run = |why: String| Error::Data {
         path: dir.to_path_buf(),
         message: format!("not a bitrock run directory ({why}); give a directory written by `bitrock abc --out`"),
@@ -139,7 +131,7 @@ fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawInput>> {
             .parse()
             .map_err(|e: String| not_a_run(e))?;
         let map_record: Vec<f64> = serde_json::from_value(law_summary["map"].clone()).context("run.json: MAP")?;
-        inputs.push(LawInput {
+        inputs.push(LawSamples {
             law,
             probability: law_summary["probability"].as_f64().unwrap_or(0.0),
             map_si: law.scale_torque(&map_record, unit.newton_metres()),
@@ -175,7 +167,7 @@ fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawInput>> {
 
 /// Share of unstable samples per cell on the chosen backend.
 fn probability_grid(
-    input: &LawInput,
+    input: &LawSamples,
     omega: &[f64],
     wob: &[f64],
     criterion: Criterion,
@@ -254,7 +246,7 @@ pub fn stability_cmd(cmd: &StabilityCmd) -> anyhow::Result<()> {
                 .into());
             }
             let si = law.scale_torque(params, cmd.torque_unit.newton_metres());
-            vec![LawInput {
+            vec![LawSamples {
                 law,
                 probability: 1.0,
                 map_si: si.clone(),
@@ -273,24 +265,18 @@ pub fn stability_cmd(cmd: &StabilityCmd) -> anyhow::Result<()> {
     let mut boundaries = serde_json::Map::new();
     let mut grids = serde_json::Map::new();
     let mut columns: Vec<(String, Vec<Option<f64>>)> = Vec::new();
-    for input in &inputs {
-        let det = map::deterministic_boundary_kn(input.law, &input.map_si, &omega, c, w_ref_n);
-        let stochastic = map::percentile_boundary_kn(input.law, &input.samples_si, &omega, c, w_ref_n, p);
+    let computed = map::boundaries(&inputs, &omega, c, w_ref_n, p);
+    for (input, b) in inputs.iter().zip(computed.laws) {
         let grid = probability_grid(input, &omega, &wob, criterion, w_ref_n, cmd.backend)?;
-        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": det, "p_wob_kn": stochastic, "probability": input.probability, "samples": input.samples_si.len()}));
+        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples}));
         grids.insert(
             input.law.name().into(),
             json!(grid.chunks(wob.len()).collect::<Vec<_>>()),
         );
-        columns.push((format!("{}_map_wob_kn", input.law), det));
-        columns.push((format!("{}_p_wob_kn", input.law), stochastic));
+        columns.push((format!("{}_map_wob_kn", input.law), b.map_wob_kn));
+        columns.push((format!("{}_p_wob_kn", input.law), b.p_wob_kn));
     }
-    if inputs.len() > 1 {
-        let components: Vec<(f64, Law, &[Vec<f64>])> = inputs
-            .iter()
-            .map(|i| (i.probability, i.law, i.samples_si.as_slice()))
-            .collect();
-        let mixture = map::mixture_boundary_kn(&components, &omega, c, w_ref_n, p);
+    if let Some(mixture) = computed.mixture_wob_kn {
         boundaries.insert("mixture".into(), json!({"p_wob_kn": mixture}));
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }
