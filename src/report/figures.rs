@@ -987,7 +987,8 @@ impl Figure for Correlation {
             })
             .collect();
         let cells = area.margin(0, 16, 0, 0).split_evenly((d, d));
-        let small = TICK - 6;
+        // Smaller text where six parameters share the width.
+        let small = if d <= 4 { TICK - 2 } else { TICK - 6 };
         for (index, cell) in cells.iter().enumerate() {
             let (i, j) = (index / d, index % d);
             let (x_range, y_range) = if i == j {
