@@ -43,6 +43,10 @@ pub enum Error {
     /// A numerical procedure failed where it should not have.
     #[error("numerical failure: {0}")]
     Numerical(String),
+    /// A figure could not be drawn (the plotting library refused it or the embedded font is
+    /// unreadable): a failure of the program, not of the user's input.
+    #[error("figure {figure}: {message}")]
+    Plot { figure: String, message: String },
 }
 
 impl Error {

@@ -16,6 +16,7 @@ pub mod fit;
 pub mod laws;
 pub mod numerics;
 pub mod prior;
+pub mod report;
 pub mod rng;
 pub mod run;
 pub mod simulate;

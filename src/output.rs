@@ -270,8 +270,7 @@ impl AbcReport<'_> {
     }
 }
 
-/// The paper's predictive envelope level.
-pub const ENVELOPE_LEVEL: f64 = 0.98;
+pub use bitrock::abc::posterior::ENVELOPE_LEVEL;
 
 /// Header of a particle CSV: population, law, candidate, rho, weight, then every law's
 /// parameters with units.

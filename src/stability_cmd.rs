@@ -5,7 +5,7 @@ use crate::cli::{FeArgs, FeCmd, LumpedArgs, StabilityCmd, Structure};
 use bitrock::eval::Backend;
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
-use bitrock::stability::map::{self, Criterion};
+use bitrock::stability::map::{self, Criterion, LawSamples};
 use bitrock::{Error, Law};
 use serde_json::json;
 use std::io::Write;
@@ -97,17 +97,9 @@ pub fn fe_cmd(cmd: &FeCmd) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// One law's parameters for a map: MAP (or the given ones) and posterior samples, SI.
-struct LawInput {
-    law: Law,
-    probability: f64,
-    map_si: Vec<f64>,
-    samples_si: Vec<Vec<f64>>,
-}
-
 /// Reads the last population of a run directory's store: each law's MAP and probability and
 /// its first `samples` particles in population order (deterministic), SI.
-fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawInput>> {
+fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawSamples>> {
     let store = bitrock::store::RunStore::open(dir)?;
     let populations = store.load_populations()?;
     let last = populations.last().ok_or_else(|| Error::Data {
@@ -119,7 +111,7 @@ fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawInput>> {
     Ok(posterior
         .laws
         .iter()
-        .map(|summary| LawInput {
+        .map(|summary| LawSamples {
             law: summary.law,
             probability: summary.probability,
             map_si: summary.map.clone(),
@@ -136,7 +128,7 @@ fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawInput>> {
 
 /// Share of unstable samples per cell on the chosen backend.
 fn probability_grid(
-    input: &LawInput,
+    input: &LawSamples,
     omega: &[f64],
     wob: &[f64],
     criterion: Criterion,
@@ -215,7 +207,7 @@ pub fn stability_cmd(cmd: &StabilityCmd) -> anyhow::Result<()> {
                 .into());
             }
             let si = law.scale_torque(params, cmd.torque_unit.newton_metres());
-            vec![LawInput {
+            vec![LawSamples {
                 law,
                 probability: 1.0,
                 map_si: si.clone(),
@@ -234,24 +226,18 @@ pub fn stability_cmd(cmd: &StabilityCmd) -> anyhow::Result<()> {
     let mut boundaries = serde_json::Map::new();
     let mut grids = serde_json::Map::new();
     let mut columns: Vec<(String, Vec<Option<f64>>)> = Vec::new();
-    for input in &inputs {
-        let det = map::deterministic_boundary_kn(input.law, &input.map_si, &omega, c, w_ref_n);
-        let stochastic = map::percentile_boundary_kn(input.law, &input.samples_si, &omega, c, w_ref_n, p);
+    let computed = map::boundaries(&inputs, &omega, c, w_ref_n, p);
+    for (input, b) in inputs.iter().zip(computed.laws) {
         let grid = probability_grid(input, &omega, &wob, criterion, w_ref_n, cmd.backend)?;
-        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": det, "p_wob_kn": stochastic, "probability": input.probability, "samples": input.samples_si.len()}));
+        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples}));
         grids.insert(
             input.law.name().into(),
             json!(grid.chunks(wob.len()).collect::<Vec<_>>()),
         );
-        columns.push((format!("{}_map_wob_kn", input.law), det));
-        columns.push((format!("{}_p_wob_kn", input.law), stochastic));
+        columns.push((format!("{}_map_wob_kn", input.law), b.map_wob_kn));
+        columns.push((format!("{}_p_wob_kn", input.law), b.p_wob_kn));
     }
-    if inputs.len() > 1 {
-        let components: Vec<(f64, Law, &[Vec<f64>])> = inputs
-            .iter()
-            .map(|i| (i.probability, i.law, i.samples_si.as_slice()))
-            .collect();
-        let mixture = map::mixture_boundary_kn(&components, &omega, c, w_ref_n, p);
+    if let Some(mixture) = computed.mixture_wob_kn {
         boundaries.insert("mixture".into(), json!({"p_wob_kn": mixture}));
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }

@@ -448,6 +448,9 @@ fn all_densities<const D: usize>(z: &[[f64; D]]) -> Vec<f64> {
     density
 }
 
+/// The paper's predictive envelope level (98 %), shared by the run directory and the report.
+pub const ENVELOPE_LEVEL: f64 = 0.98;
+
 /// The predictive band of one law's torque-on-bit curve T(w): at each speed, the median and
 /// the central `level` interval of T over the law's particles. Torques in N·m, speeds rad/s.
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -133,6 +133,58 @@ pub fn mixture_boundary_kn(
         .collect()
 }
 
+/// One law's inputs to the maps: its posterior probability, its MAP (or the given parameters)
+/// and posterior samples, SI. Shared by `bitrock stability` and the report.
+#[derive(Clone, Debug)]
+pub struct LawSamples {
+    pub law: Law,
+    pub probability: f64,
+    pub map_si: Vec<f64>,
+    pub samples_si: Vec<Vec<f64>>,
+}
+
+/// One law's boundaries (kN per speed, `None` where no weight on bit destabilises).
+#[derive(Clone, Debug)]
+pub struct LawBoundaries {
+    pub law: Law,
+    pub probability: f64,
+    pub samples: usize,
+    /// Deterministic boundary of the MAP.
+    pub map_wob_kn: Vec<Option<f64>>,
+    /// Percentile boundary over the samples.
+    pub p_wob_kn: Vec<Option<f64>>,
+}
+
+/// The boundaries of a set of laws: each law's, and their mixture's when there is more than one.
+#[derive(Clone, Debug)]
+pub struct Boundaries {
+    pub laws: Vec<LawBoundaries>,
+    /// [`mixture_boundary_kn`] of all the laws weighted by their probability.
+    pub mixture_wob_kn: Option<Vec<Option<f64>>>,
+}
+
+/// Deterministic, percentile (`p`) and mixture boundaries of `inputs` at `omega_rpm`.
+pub fn boundaries(inputs: &[LawSamples], omega_rpm: &[f64], critical_nms: f64, w_ref_n: f64, p: f64) -> Boundaries {
+    let laws = inputs
+        .iter()
+        .map(|input| LawBoundaries {
+            law: input.law,
+            probability: input.probability,
+            samples: input.samples_si.len(),
+            map_wob_kn: deterministic_boundary_kn(input.law, &input.map_si, omega_rpm, critical_nms, w_ref_n),
+            p_wob_kn: percentile_boundary_kn(input.law, &input.samples_si, omega_rpm, critical_nms, w_ref_n, p),
+        })
+        .collect();
+    let mixture_wob_kn = (inputs.len() > 1).then(|| {
+        let components: Vec<(f64, Law, &[Vec<f64>])> = inputs
+            .iter()
+            .map(|i| (i.probability, i.law, i.samples_si.as_slice()))
+            .collect();
+        mixture_boundary_kn(&components, omega_rpm, critical_nms, w_ref_n, p)
+    });
+    Boundaries { laws, mixture_wob_kn }
+}
+
 /// What decides stability at a cell: the 1-DOF closed form or a critical bit damping.
 #[derive(Clone, Copy, Debug)]
 pub enum Criterion {

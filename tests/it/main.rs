@@ -5,6 +5,7 @@ mod cli;
 mod fit;
 mod gpu;
 mod laws;
+mod report;
 mod stability;
 mod store;
 mod support;

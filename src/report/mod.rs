@@ -1,0 +1,586 @@
+//! The paper's figures and a Markdown report from in-memory results: the data with the
+//! least-squares fits, model probabilities and tolerances per population for several prior
+//! widths δ, posterior marginals and correlations, 98 % predictive envelopes, deterministic and
+//! stochastic stability maps and the appendix's 1-DOF / finite-element comparison.
+//!
+//! Every figure is written as SVG and PNG (sizes in [`FigureInfo`]), drawn by plotters with the
+//! embedded DejaVu Sans font so that no system font is needed. The report is rendered whole in
+//! memory and only then moved into the target directory, so a failure leaves no half-written
+//! report. The same input gives the same bytes.
+//!
+//! Weights: probabilities come from the population records (each law's share of the weight),
+//! histograms add the particles' weights, and the summaries, envelopes and maps, which take
+//! equally weighted particles, get a population with unequal weights (ABC-SMC) as a systematic
+//! resample; a rejection population (weights all 1/N) is used as it is.
+
+mod figures;
+mod plot;
+mod stats;
+
+use crate::abc::Population;
+use crate::abc::posterior::{self, PosteriorSummary};
+use crate::data::FieldData;
+use crate::error::{Error, Result};
+use crate::fit::LawFit;
+use crate::laws::Law;
+use crate::stability::fe::DrillString;
+use crate::stability::lumped::Lumped;
+use crate::stability::map::{self, Criterion, LawSamples};
+use crate::units::RAD_S_PER_RPM;
+use std::borrow::Cow;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// One ABC run (one prior width δ) to report.
+#[derive(Clone, Debug)]
+pub struct ReportRun {
+    /// How the figures name the run, e.g. "δ = 0.4".
+    pub label: String,
+    /// The prior half-width δ of φ̂(1 ± δ).
+    pub delta: f64,
+    /// The laws that competed, in the order the tables list them.
+    pub laws: Vec<Law>,
+    /// Every population in order; the last one is the posterior.
+    pub populations: Vec<Population>,
+    /// The reference weight on bit W_ref (N) the run's parameters refer to when the fit scaled
+    /// each sample by r = WOB / W_ref (`FitOptions::w_ref_n`); `None` takes the maps'
+    /// [`StabilitySettings::w_ref_n`].
+    pub w_ref_n: Option<f64>,
+}
+
+/// The structures and axes of the stability maps. [`Default`] is the paper's.
+#[derive(Clone, Debug)]
+pub struct StabilitySettings {
+    /// The 1-DOF string of every map.
+    pub lumped: Lumped,
+    /// Finite-element strings compared with the 1-DOF one (the appendix).
+    pub strings: Vec<DrillString>,
+    /// W_ref (N): the laws' torque is scaled by r = W / W_ref.
+    pub w_ref_n: f64,
+    /// Top-drive speeds of the maps (rpm, ascending).
+    pub omega_rpm: Vec<f64>,
+    /// Weights on bit of the maps (kN, ascending).
+    pub wob_kn: Vec<f64>,
+    /// Percentile of the stochastic boundaries, as a share (the paper's 2 % is 0.02).
+    pub percentile: f64,
+    /// Posterior samples per law for the stochastic maps (the paper's 700).
+    pub samples_per_law: usize,
+    /// Speeds (rpm) of the boundary table in report.md.
+    pub table_omega_rpm: Vec<f64>,
+}
+
+impl Default for StabilitySettings {
+    /// The paper's 1-DOF string; its 2-DOF finite-element string (α = 0.5 1/s, β = 0.006 s) and
+    /// 10-DOF one (8 + 2 elements) with β = 0.006 s and β = 0.0021 s; W_ref = 244.2 kN;
+    /// Ω 20–220 rpm, W 20–700 kN; the 2 % percentile over 700 samples per law.
+    fn default() -> Self {
+        let two = DrillString::default();
+        let ten = DrillString {
+            dp_elements: 8,
+            bha_elements: 2,
+            ..DrillString::default()
+        };
+        Self {
+            lumped: Lumped::default(),
+            strings: vec![two, ten.clone(), DrillString { beta: 0.0021, ..ten }],
+            w_ref_n: 244.2e3,
+            omega_rpm: axis(20.0, 220.0, 101),
+            wob_kn: axis(20.0, 700.0, 69),
+            percentile: 0.02,
+            samples_per_law: 700,
+            table_omega_rpm: vec![40.0, 60.0, 80.0, 100.0, 120.0, 160.0, 200.0],
+        }
+    }
+}
+
+fn axis(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    posterior::speed_grid(lo, hi, n)
+}
+
+/// Everything a report is made from.
+#[derive(Clone, Debug)]
+pub struct ReportInput<'a> {
+    /// The record (calibration and validation samples, SI; its torque unit is the display unit).
+    pub data: &'a FieldData,
+    /// The least-squares estimates of every law.
+    pub fits: &'a [LawFit],
+    /// The runs, at least one. The first is the reference case the single-run figures
+    /// (correlations, envelopes, stability maps) are drawn for, as the paper draws its δ = 0.4.
+    pub runs: &'a [ReportRun],
+    pub stability: StabilitySettings,
+}
+
+/// One figure as written: `figures/{stem}.svg` and `figures/{stem}.png`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FigureInfo {
+    pub stem: String,
+    pub caption: String,
+    /// Pixels of the PNG and user units of the SVG's width and height attributes.
+    pub width: u32,
+    pub height: u32,
+}
+
+/// What [`write_report`] wrote.
+#[derive(Clone, Debug)]
+pub struct ReportSummary {
+    /// The report directory.
+    pub dir: PathBuf,
+    /// Files written, relative to `dir`, sorted: `report.md` and every figure's SVG and PNG.
+    pub files: Vec<PathBuf>,
+    pub figures: Vec<FigureInfo>,
+    /// Wall time of [`write_report`] (s).
+    pub seconds: f64,
+}
+
+/// Figure size (px) of the single- and multi-panel figures.
+pub const FIGURE_SIZE: (u32, u32) = (1200, 800);
+/// Size of the correlation matrices, square so that the panels are.
+pub const CORRELATION_SIZE: (u32, u32) = (1200, 1200);
+
+/// The least particles a law needs in the reference run's posterior for its correlation matrix.
+const MIN_CORRELATION_PARTICLES: usize = 20;
+/// The least probability a law needs to be drawn on the stochastic map (the paper leaves out the
+/// laws that die out).
+const MIN_MAP_PROBABILITY: f64 = 0.01;
+
+/// Writes `report.md` and the figures under `dir/figures/` (creating `dir`; files of the same
+/// names are replaced, nothing else is touched). Everything is rendered in memory first and
+/// moved into place only when all of it succeeded.
+pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
+    let start = Instant::now();
+    let prepared = Prepared::new(input)?;
+    let rendered = figures::render_all(&prepared)?;
+    let markdown = prepared.markdown(&rendered.iter().map(|r| r.info.clone()).collect::<Vec<_>>());
+
+    let mut files: Vec<(PathBuf, Vec<u8>)> = vec![(PathBuf::from("report.md"), markdown.into_bytes())];
+    for r in rendered.iter() {
+        files.push((
+            Path::new("figures").join(format!("{}.svg", r.info.stem)),
+            r.svg.as_bytes().to_vec(),
+        ));
+        files.push((Path::new("figures").join(format!("{}.png", r.info.stem)), r.png.clone()));
+    }
+    let write_err = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| Error::Write { path, source }
+    };
+    std::fs::create_dir_all(dir.join("figures")).map_err(write_err(dir))?;
+    let staging = tempfile::Builder::new()
+        .prefix(".bitrock-report-")
+        .tempdir_in(dir)
+        .map_err(write_err(dir))?;
+    std::fs::create_dir(staging.path().join("figures")).map_err(write_err(staging.path()))?;
+    for (rel, bytes) in &files {
+        let path = staging.path().join(rel);
+        std::fs::write(&path, bytes).map_err(write_err(&path))?;
+    }
+    for (rel, _) in &files {
+        std::fs::rename(staging.path().join(rel), dir.join(rel)).map_err(write_err(&dir.join(rel)))?;
+    }
+    let mut names: Vec<PathBuf> = files.into_iter().map(|f| f.0).collect();
+    names.sort();
+    Ok(ReportSummary {
+        dir: dir.to_path_buf(),
+        files: names,
+        figures: rendered.into_iter().map(|r| r.info).collect(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// One run with its posterior read off.
+struct RunView<'a> {
+    run: &'a ReportRun,
+    /// The last population.
+    last: &'a Population,
+    /// Its particles, equally weighted (see [`stats::equally_weighted`]).
+    particles: Cow<'a, [crate::abc::Particle]>,
+    summary: PosteriorSummary,
+    /// P(law | data) of the last population per law of `run.laws`, from the record.
+    probabilities: Vec<(Law, f64)>,
+}
+
+/// A structure of the maps and its critical bit damping.
+struct StructureView {
+    label: String,
+    /// For a panel caption.
+    short_label: String,
+    critical_nms: f64,
+}
+
+/// Everything the figures and the Markdown need, computed once.
+struct Prepared<'a> {
+    input: &'a ReportInput<'a>,
+    /// N·m per display torque unit.
+    torque_scale: f64,
+    unit: &'static str,
+    runs: Vec<RunView<'a>>,
+    /// 1-DOF first, then the finite-element strings.
+    structures: Vec<StructureView>,
+    /// The reference run's laws for the maps (MAP, samples, probability), SI; laws with
+    /// particles only.
+    map_inputs: Vec<LawSamples>,
+    /// The deterministic map's parameters per law: the reference run's MAP, or the least-squares
+    /// estimate for a law that died out (flagged `true`).
+    deterministic: Vec<(Law, Vec<f64>, bool)>,
+    w_ref_n: f64,
+}
+
+/// P(law) of a population's record for each of `laws` (0 for a law not in the record).
+fn record_probabilities(population: &Population, laws: &[Law]) -> Vec<(Law, f64)> {
+    laws.iter()
+        .map(|&law| {
+            let p = population
+                .record
+                .per_law
+                .iter()
+                .find(|r| r.law == law)
+                .map_or(0.0, |r| r.probability);
+            (law, p)
+        })
+        .collect()
+}
+
+impl<'a> Prepared<'a> {
+    fn new(input: &'a ReportInput<'a>) -> Result<Self> {
+        let s = &input.stability;
+        let bad = |message: String| Error::arg("report", message);
+        if input.runs.is_empty() {
+            return Err(bad("no run to report".into()));
+        }
+        if !(s.percentile > 0.0 && s.percentile < 1.0) {
+            return Err(bad(format!("the percentile {} is not in (0, 1)", s.percentile)));
+        }
+        if s.samples_per_law == 0 {
+            return Err(bad("samples_per_law must be at least 1".into()));
+        }
+        for (name, axis) in [("omega_rpm", &s.omega_rpm), ("wob_kn", &s.wob_kn)] {
+            if axis.len() < 2
+                || axis.iter().any(|v| !v.is_finite())
+                || axis.windows(2).any(|w| w[1] <= w[0])
+                || axis[0] <= 0.0
+            {
+                return Err(bad(format!(
+                    "the {name} axis must hold at least two ascending positive values"
+                )));
+            }
+        }
+        s.lumped.validate()?;
+        let mut runs = Vec::with_capacity(input.runs.len());
+        for run in input.runs {
+            let last = run
+                .populations
+                .last()
+                .filter(|p| !p.particles.is_empty())
+                .ok_or_else(|| bad(format!("run '{}' has no population with particles", run.label)))?;
+            let particles = stats::equally_weighted(&last.particles);
+            let summary = posterior::summarize(&particles, &run.laws);
+            runs.push(RunView {
+                run,
+                last,
+                probabilities: record_probabilities(last, &run.laws),
+                particles,
+                summary,
+            });
+        }
+        let mut structures = vec![StructureView {
+            label: format!(
+                "1-DOF (ω_n = {} rad/s, ξ = {})",
+                s.lumped.omega_n_rad_s, s.lumped.damping_ratio
+            ),
+            short_label: "1-DOF".into(),
+            critical_nms: s.lumped.critical_bit_damping_nms(),
+        }];
+        for string in &s.strings {
+            structures.push(StructureView {
+                label: format!(
+                    "FE {} + {} elements, α = {} 1/s, β = {} s",
+                    string.dp_elements, string.bha_elements, string.alpha, string.beta
+                ),
+                short_label: format!(
+                    "FE {}+{}, β = {} s",
+                    string.dp_elements, string.bha_elements, string.beta
+                ),
+                critical_nms: string.critical_bit_damping()?.critical_bit_damping_nms,
+            });
+        }
+        let reference = &runs[0];
+        let map_inputs: Vec<LawSamples> = reference
+            .summary
+            .laws
+            .iter()
+            .map(|law_summary| {
+                let law = law_summary.law;
+                let probability = reference
+                    .probabilities
+                    .iter()
+                    .find(|p| p.0 == law)
+                    .map_or(law_summary.probability, |p| p.1);
+                LawSamples {
+                    law,
+                    probability,
+                    map_si: law_summary.map.clone(),
+                    samples_si: stats::law_samples(&reference.last.particles, law, s.samples_per_law)
+                        .into_iter()
+                        .map(|p| p.params.clone())
+                        .collect(),
+                }
+            })
+            .collect();
+        let deterministic = Law::ALL
+            .iter()
+            .filter_map(|&law| {
+                if let Some(m) = map_inputs.iter().find(|m| m.law == law) {
+                    Some((law, m.map_si.clone(), false))
+                } else {
+                    input
+                        .fits
+                        .iter()
+                        .find(|f| f.law == law)
+                        .map(|f| (law, f.params_si.clone(), true))
+                }
+            })
+            .collect();
+        Ok(Self {
+            input,
+            torque_scale: input.data.torque_unit.newton_metres(),
+            unit: input.data.torque_unit.label(),
+            w_ref_n: reference.run.w_ref_n.unwrap_or(s.w_ref_n),
+            runs,
+            structures,
+            map_inputs,
+            deterministic,
+        })
+    }
+
+    /// Parameters in display units (torques in the record's unit).
+    fn display(&self, law: Law, si: &[f64]) -> Vec<f64> {
+        law.scale_torque(si, 1.0 / self.torque_scale)
+    }
+
+    /// The laws of any run, in [`Law::ALL`] order.
+    fn all_laws(&self) -> Vec<Law> {
+        Law::ALL
+            .into_iter()
+            .filter(|l| self.runs.iter().any(|r| r.run.laws.contains(l)))
+            .collect()
+    }
+
+    /// The stochastic map's laws: those of the reference run with probability ≥ 1 %.
+    fn map_laws(&self) -> Vec<&LawSamples> {
+        self.map_inputs
+            .iter()
+            .filter(|m| m.probability >= MIN_MAP_PROBABILITY)
+            .collect()
+    }
+
+    /// P(unstable) of the mixture of the reference run's laws at every (Ω, W), row-major over Ω.
+    fn mixture_grid(&self) -> Vec<f64> {
+        let s = &self.input.stability;
+        let criterion = Criterion::Lumped(s.lumped);
+        let total: f64 = self.map_inputs.iter().map(|m| m.probability).sum();
+        let mut grid = vec![0.0; s.omega_rpm.len() * s.wob_kn.len()];
+        for m in &self.map_inputs {
+            let g = map::probability_grid(m.law, &m.samples_si, &s.omega_rpm, &s.wob_kn, criterion, self.w_ref_n);
+            for (cell, p) in grid.iter_mut().zip(g) {
+                *cell += m.probability / total * p;
+            }
+        }
+        grid
+    }
+
+    fn markdown(&self, figures: &[FigureInfo]) -> String {
+        let mut md = String::new();
+        let data = self.input.data;
+        let unit = self.unit;
+        let _ = writeln!(md, "# bitrock report\n");
+        let _ = writeln!(
+            md,
+            "Record: `{}`: {} rows read, {} used ({} calibration, {} validation samples); torques in {unit}, \
+             speeds in rpm, weights on bit in kN.\n",
+            data.source.display(),
+            data.rows_read,
+            data.rows_used,
+            data.calibration.len(),
+            data.validation.len()
+        );
+
+        let _ = writeln!(md, "## Least-squares fits\n");
+        let _ = writeln!(md, "| law | T(w) | estimate | ρ calibration | ρ validation |");
+        let _ = writeln!(md, "|---|---|---|---|---|");
+        for fit in self.input.fits {
+            let shown = self.display(fit.law, &fit.params_si);
+            let params: Vec<String> = fit
+                .law
+                .params()
+                .iter()
+                .zip(&shown)
+                .map(|(spec, v)| format!("{} = {} {}", spec.name, plot::short(*v), plot::unit(spec, unit)))
+                .collect();
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.5} | {} |",
+                fit.law,
+                fit.law.formula(),
+                params.join(", "),
+                fit.rho,
+                fit.validation_rho.map_or("—".into(), |r| format!("{r:.5}"))
+            );
+        }
+
+        let _ = writeln!(md, "\n## Model probabilities\n");
+        let _ = writeln!(md, "### Last population\n");
+        let laws = self.all_laws();
+        let _ = write!(md, "| run | δ | population | ε |");
+        for law in &laws {
+            let _ = write!(md, " P({law}) |");
+        }
+        let _ = writeln!(md, "\n|---|---|---|---|{}", "---|".repeat(laws.len()));
+        for r in &self.runs {
+            let _ = write!(
+                md,
+                "| {} | {} | {} | {} |",
+                r.run.label,
+                r.run.delta,
+                r.last.record.index,
+                epsilon_text(r.last.record.epsilon)
+            );
+            for law in &laws {
+                let p = r.probabilities.iter().find(|p| p.0 == *law).map(|p| p.1);
+                let _ = write!(md, " {} |", p.map_or("—".into(), |p| format!("{p:.6}")));
+            }
+            let _ = writeln!(md);
+        }
+        for r in &self.runs {
+            let _ = writeln!(md, "\n### {} (δ = {}): every population\n", r.run.label, r.run.delta);
+            let _ = write!(md, "| population | ε | accepted | drawn | ESS |");
+            for law in &r.run.laws {
+                let _ = write!(md, " P({law}) |");
+            }
+            let _ = writeln!(md, "\n|---|---|---|---|---|{}", "---|".repeat(r.run.laws.len()));
+            for p in &r.run.populations {
+                let _ = write!(
+                    md,
+                    "| {} | {} | {} | {} | {:.0} |",
+                    p.record.index,
+                    epsilon_text(p.record.epsilon),
+                    p.record.accepted,
+                    p.record.draws,
+                    p.record.ess
+                );
+                for (_, prob) in record_probabilities(p, &r.run.laws) {
+                    let _ = write!(md, " {prob:.6} |");
+                }
+                let _ = writeln!(md);
+            }
+        }
+
+        let _ = writeln!(md, "\n## Posterior estimates (last population)\n");
+        let _ = writeln!(
+            md,
+            "MAP: mode of a kernel density estimate; mean and the central 98 % interval (1 % and 99 % \
+             quantiles) over the law's particles.\n"
+        );
+        for r in &self.runs {
+            for ls in &r.summary.laws {
+                let _ = writeln!(
+                    md,
+                    "### {} — {} ({} particles, P = {:.4})\n",
+                    r.run.label,
+                    ls.law,
+                    ls.count,
+                    r.probabilities
+                        .iter()
+                        .find(|p| p.0 == ls.law)
+                        .map_or(ls.probability, |p| p.1)
+                );
+                let _ = writeln!(md, "| parameter | unit | MAP | mean | 1 % | 99 % |");
+                let _ = writeln!(md, "|---|---|---|---|---|---|");
+                let (map, mean, lo, hi) = (
+                    self.display(ls.law, &ls.map),
+                    self.display(ls.law, &ls.mean),
+                    self.display(ls.law, &ls.q01),
+                    self.display(ls.law, &ls.q99),
+                );
+                for (j, spec) in ls.law.params().iter().enumerate() {
+                    let _ = writeln!(
+                        md,
+                        "| {} | {} | {} | {} | {} | {} |",
+                        spec.name,
+                        plot::unit(spec, unit),
+                        plot::short(map[j]),
+                        plot::short(mean[j]),
+                        plot::short(lo[j]),
+                        plot::short(hi[j])
+                    );
+                }
+                let _ = writeln!(md);
+            }
+        }
+
+        let s = &self.input.stability;
+        let _ = writeln!(md, "## Stability\n");
+        let _ = writeln!(
+            md,
+            "Run {}; W_ref = {} kN; critical bit damping c_b* per structure (steady rotation is unstable \
+             when r·dT/dw(Ω) ≤ c_b*):\n",
+            self.runs[0].run.label,
+            self.w_ref_n / 1000.0
+        );
+        let _ = writeln!(md, "| structure | c_b* (N·m·s/rad) |");
+        let _ = writeln!(md, "|---|---|");
+        for st in &self.structures {
+            let _ = writeln!(md, "| {} | {:.2} |", st.label, st.critical_nms);
+        }
+        let c = self.structures[0].critical_nms;
+        let inputs: Vec<LawSamples> = self.map_laws().into_iter().cloned().collect();
+        let b = map::boundaries(&inputs, &s.table_omega_rpm, c, self.w_ref_n, s.percentile);
+        let _ = writeln!(
+            md,
+            "\nBoundaries of the 1-DOF string, W* (kN) above which steady rotation is unstable (— : none \
+             destabilises): MAP, the {} % percentile over {} samples per law, and the mixture of the laws \
+             weighted by their probability.\n",
+            s.percentile * 100.0,
+            s.samples_per_law
+        );
+        let _ = write!(md, "| Ω (rpm) |");
+        for l in &b.laws {
+            let _ = write!(md, " {} MAP | {} {} % |", l.law, l.law, s.percentile * 100.0);
+        }
+        if b.mixture_wob_kn.is_some() {
+            let _ = write!(md, " mixture {} % |", s.percentile * 100.0);
+        }
+        let columns = 2 * b.laws.len() + usize::from(b.mixture_wob_kn.is_some());
+        let _ = writeln!(md, "\n|---|{}", "---|".repeat(columns));
+        let kn = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.1}"));
+        for (i, rpm) in s.table_omega_rpm.iter().enumerate() {
+            let _ = write!(md, "| {rpm} |");
+            for l in &b.laws {
+                let _ = write!(md, " {} | {} |", kn(l.map_wob_kn[i]), kn(l.p_wob_kn[i]));
+            }
+            if let Some(m) = &b.mixture_wob_kn {
+                let _ = write!(md, " {} |", kn(m[i]));
+            }
+            let _ = writeln!(md);
+        }
+
+        let _ = writeln!(md, "\n## Figures\n");
+        for f in figures {
+            let _ = writeln!(
+                md,
+                "### {}\n\n![{}](figures/{}.svg)\n\n{} ({} × {} px; [PNG](figures/{}.png), [SVG](figures/{}.svg))\n",
+                f.stem, f.stem, f.stem, f.caption, f.width, f.height, f.stem, f.stem
+            );
+        }
+        md
+    }
+}
+
+fn epsilon_text(e: Option<f64>) -> String {
+    e.map_or("∞".into(), |e| format!("{e:.5}"))
+}
+
+/// rpm of a speed in rad/s.
+fn rpm(w: f64) -> f64 {
+    w / RAD_S_PER_RPM
+}
