@@ -30,6 +30,10 @@ pub enum Command {
     /// Export a run directory's store: particles as CSV (one row per particle, parameters in
     /// columns, the record's torque unit), or the whole run as JSON.
     Export(ExportCmd),
+    /// The paper's figures (SVG and PNG) and report.md from one or more run directories, e.g.
+    /// the runs for δ = 0.4, 0.6 and 0.8 of one record; the first is the reference run of the
+    /// single-run figures (correlations, envelopes, stability maps).
+    Report(ReportCmd),
     /// Simulate the 1-DOF torsional drill string with a bit-rock law; writes a field-like CSV.
     Simulate(SimulateCmd),
     /// Run the whole pipeline on the embedded (synthetic) demo record.
@@ -333,6 +337,16 @@ pub struct ExportCmd {
     /// Write to FILE instead of stdout.
     #[arg(long, short, value_name = "FILE")]
     pub out: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub struct ReportCmd {
+    /// Run directories (written by `bitrock abc --out`), all calibrated on the same record.
+    #[arg(required = true, value_name = "DIR")]
+    pub runs: Vec<PathBuf>,
+    /// Report directory: report.md and figures/ (files of the same names are replaced).
+    #[arg(long, value_name = "DIR", default_value = "bitrock-report")]
+    pub out: PathBuf,
 }
 
 #[derive(Debug, Args)]

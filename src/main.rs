@@ -58,6 +58,14 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
         }
         Command::Export(cmd) => export::export_cmd(&cmd)?,
+        Command::Report(cmd) => {
+            let summary = report_cmd(&cmd.runs, &cmd.out)?;
+            println!(
+                "report written to {} ({} figures, SVG and PNG)",
+                summary.dir.join("report.md").display(),
+                summary.figures.len()
+            );
+        }
         Command::Simulate(cmd) => simulate_cmd(&cmd)?,
         Command::Demo(cmd) => demo_cmd(&cmd)?,
         Command::Parity(cmd) => return parity_cmd(&cmd),
@@ -281,6 +289,64 @@ fn write_summary(
     })
 }
 
+/// Reads run directories into the report's runs and writes the report into `out`. The runs
+/// must share their record (the figures draw one data set).
+fn report_cmd(dirs: &[std::path::PathBuf], out: &Path) -> anyhow::Result<bitrock::report::ReportSummary> {
+    let mut runs = Vec::new();
+    let mut first: Option<bitrock::store::RunSetup> = None;
+    for dir in dirs {
+        let stored = bitrock::store::RunStore::open(dir)?.load()?;
+        if stored.populations.is_empty() {
+            return Err(Error::Data {
+                path: dir.clone(),
+                message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
+            }
+            .into());
+        }
+        let config: RunConfig = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
+            path: dir.clone(),
+            message: format!("the stored configuration is not one this bitrock reads: {e}"),
+        })?;
+        if let Some(reference) = &first
+            && (reference.data.calibration != stored.setup.data.calibration
+                || reference.data.validation != stored.setup.data.validation)
+        {
+            return Err(Error::Data {
+                path: dir.clone(),
+                message: format!(
+                    "its record differs from that of {}; a report draws runs of one record",
+                    dirs[0].display()
+                ),
+            }
+            .into());
+        }
+        let same_delta = runs
+            .iter()
+            .any(|r: &bitrock::report::ReportRun| r.delta.to_bits() == config.delta.to_bits());
+        let label = if same_delta {
+            format!("δ = {} ({})", config.delta, dir.display())
+        } else {
+            format!("δ = {}", config.delta)
+        };
+        runs.push(bitrock::report::ReportRun {
+            label,
+            delta: config.delta,
+            laws: config.laws.clone(),
+            populations: stored.populations,
+            w_ref_n: config.fit.w_ref_n,
+        });
+        first.get_or_insert(stored.setup);
+    }
+    let setup = first.expect("clap requires at least one run");
+    let input = bitrock::report::ReportInput {
+        data: &setup.data,
+        fits: &setup.fits,
+        runs: &runs,
+        stability: bitrock::report::StabilitySettings::default(),
+    };
+    Ok(bitrock::report::write_report(out, &input)?)
+}
+
 /// Marks a directory the demo wrote, so that a later demo may replace it (and nothing else).
 const DEMO_MARKER: &str = "bitrock-demo.txt";
 
@@ -323,6 +389,8 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         root.join(DEMO_MARKER),
         "Written by `bitrock demo`; a later `bitrock demo` replaces this directory.\n",
     )?;
+    let mut run_dirs = Vec::new();
+    let mut headlines = Vec::new();
     for delta in DEMO_DELTAS {
         let args = cli::AbcArgs {
             particles: cmd.particles,
@@ -357,8 +425,54 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         let done = write_summary(&dir, outcome, None)?;
         output::print_population_table(&mut out, &done.outcome.run)?;
         output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
+        headlines.push((delta, done.outcome.run.populations.len(), done.posterior));
+        run_dirs.push(dir);
     }
-    writeln!(out, "\nruns written to {}", root.display())?;
+    let report_dir = root.join("report");
+    let report = report_cmd(&run_dirs, &report_dir)?;
+    writeln!(out, "\n== bitrock demo: headline ==")?;
+    writeln!(out, "final model probabilities (ε = 0.014):")?;
+    for (delta, populations, posterior) in &headlines {
+        let probabilities: Vec<String> = posterior
+            .model_probabilities
+            .iter()
+            .map(|(law, p)| format!("P({law}) = {p:.3}"))
+            .collect();
+        writeln!(
+            out,
+            "  δ = {delta}: {} ({populations} populations)",
+            probabilities.join(", ")
+        )?;
+    }
+    if let Some(best) = headlines[0]
+        .2
+        .laws
+        .iter()
+        .max_by(|a, b| a.probability.total_cmp(&b.probability))
+    {
+        let unit = data.torque_unit;
+        let map = best.law.scale_torque(&best.map, 1.0 / unit.newton_metres());
+        let named: Vec<String> = best
+            .law
+            .params()
+            .iter()
+            .zip(&map)
+            .map(|(spec, v)| format!("{} = {v:.4} {}", spec.name, spec.unit(unit.label())))
+            .collect();
+        writeln!(
+            out,
+            "most probable law at δ = 0.4: {}, MAP {}",
+            best.law,
+            named.join(", ")
+        )?;
+    }
+    writeln!(out, "runs: {}", root.display())?;
+    writeln!(
+        out,
+        "report: {} ({} figures as SVG and PNG: fits, model probabilities, tolerances, marginals, correlations, envelopes, stability maps 1-DOF and FE)",
+        report.dir.join("report.md").display(),
+        report.figures.len()
+    )?;
     Ok(())
 }
 

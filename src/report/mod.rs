@@ -452,7 +452,7 @@ impl<'a> Prepared<'a> {
             let _ = writeln!(md);
         }
         for r in &self.runs {
-            let _ = writeln!(md, "\n### {} (δ = {}): every population\n", r.run.label, r.run.delta);
+            let _ = writeln!(md, "\n### {}: every population\n", r.run.label);
             let _ = write!(md, "| population | ε | accepted | drawn | ESS |");
             for law in &r.run.laws {
                 let _ = write!(md, " P({law}) |");

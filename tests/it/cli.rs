@@ -165,6 +165,26 @@ fn demo_prints_fits_and_the_population_table() {
         assert!(out.join(format!("delta-{delta}/run.json")).exists());
         assert!(out.join(format!("delta-{delta}/run.sqlite")).exists());
     }
+    // The report of the three runs, and where it is.
+    let report = out.join("report");
+    assert!(
+        stdout.contains(&format!("report: {}", report.join("report.md").display())),
+        "{stdout}"
+    );
+    let markdown = std::fs::read_to_string(report.join("report.md")).unwrap();
+    for delta in ["δ = 0.4", "δ = 0.6", "δ = 0.8"] {
+        assert!(markdown.contains(delta), "{delta}");
+    }
+    for stem in [
+        "fig01_data_and_fits",
+        "fig02_model_probabilities",
+        "fig08_map_stochastic",
+        "fig09_structures",
+    ] {
+        for ext in ["svg", "png"] {
+            assert!(report.join(format!("figures/{stem}.{ext}")).exists(), "{stem}.{ext}");
+        }
+    }
     // Run again: the demo replaces its own run directory.
     let (code, _, stderr) = run(&["demo", "--particles", "500", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");

@@ -191,6 +191,7 @@ fn a_directory_that_is_not_a_run_is_refused_by_name() {
             vec!["export", target.to_str().unwrap()],
             vec!["abc", "--resume", target.to_str().unwrap()],
             vec!["stability", "--run", target.to_str().unwrap()],
+            vec!["report", target.to_str().unwrap()],
         ] {
             let out = bin().args(&args).output().unwrap();
             let stderr = String::from_utf8_lossy(&out.stderr);
