@@ -5,5 +5,6 @@ mod cli;
 mod fit;
 mod gpu;
 mod laws;
+mod smc;
 mod stability;
 mod support;
