@@ -163,6 +163,13 @@ fn run_abc(
         ..RejectionConfig::default()
     };
     config.validate()?;
+    let smc_config = bitrock::abc::smc::SmcConfig {
+        base: config.clone(),
+        p_stay: args.p_stay,
+        kernel_scale: args.kernel_scale,
+        weights_on: args.smc_weights,
+    };
+    smc_config.validate()?;
     if !(args.delta.is_finite() && args.delta > 0.0) {
         return Err(Error::arg("--delta", format!("must be a positive number, got {}", args.delta)).into());
     }
@@ -199,7 +206,14 @@ fn run_abc(
             Ok(())
         }
     }
-    let run = rejection::run_observed(evaluator.as_ref(), &config, Vec::new(), &mut Log { quiet })?;
+    let run = match args.sampler {
+        cli::Sampler::Rejection => {
+            rejection::run_observed(evaluator.as_ref(), &config, Vec::new(), &mut Log { quiet })?
+        }
+        cli::Sampler::Smc => {
+            bitrock::abc::smc::run_observed(evaluator.as_ref(), &smc_config, Vec::new(), &mut Log { quiet })?
+        }
+    };
     let last = match args.summary_population {
         None => run
             .populations
@@ -239,6 +253,10 @@ fn run_abc(
             "max_draws": args.max_draws,
             "min_acceptance": args.min_acceptance,
             "mode": args.mode,
+            "sampler": args.sampler,
+            "p_stay": args.p_stay,
+            "kernel_scale": args.kernel_scale,
+            "smc_weights": args.smc_weights,
             "laws": fit_args.laws,
             "bounded_fit": fit_opts.bounded,
             "w_ref_kn_for_wob_scaling": fit_opts.w_ref_n.map(|w| w / 1000.0),
@@ -322,6 +340,10 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         max_draws: 2_000_000_000,
         min_acceptance: 1e-5,
         mode: Mode::Nested,
+        sampler: cli::Sampler::Rejection,
+        p_stay: 0.7,
+        kernel_scale: 2.0,
+        smc_weights: bitrock::abc::smc::WeightsOn::Host,
         seed: cmd.seed,
         threads: cmd.threads,
         backend: cmd.backend,
