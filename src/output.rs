@@ -293,7 +293,12 @@ pub const ENVELOPE_LEVEL: f64 = 0.98;
 
 /// Header of a particle CSV: law, index, rho, then every law's parameters with units.
 fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {
-    let mut header = vec!["law".to_string(), "index".to_string(), "rho".to_string()];
+    let mut header = vec![
+        "law".to_string(),
+        "index".to_string(),
+        "rho".to_string(),
+        "weight".to_string(),
+    ];
     for law in laws {
         for spec in law.params() {
             header.push(format!("{} [{}]", spec.name, spec.unit(unit.label())));
@@ -302,13 +307,18 @@ fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {
     header
 }
 
-/// Writes one population's particles: one row per particle, parameters in columns (empty
-/// cells for the other laws' parameters).
+/// Writes one population's particles: one row per particle (with its importance weight),
+/// parameters in columns (empty cells for the other laws' parameters).
 pub fn write_particles(path: &Path, particles: &[Particle], laws: &[Law], unit: TorqueUnit) -> anyhow::Result<()> {
     let mut w = csv::Writer::from_path(path)?;
     w.write_record(particle_header(laws, unit))?;
     for p in particles {
-        let mut row = vec![p.law.name().to_string(), p.index.to_string(), format!("{:e}", p.rho)];
+        let mut row = vec![
+            p.law.name().to_string(),
+            p.index.to_string(),
+            format!("{:e}", p.rho),
+            format!("{:e}", p.weight),
+        ];
         for law in laws {
             if *law == p.law {
                 row.extend(to_record_units(p.law, &p.params, unit).iter().map(|v| format!("{v:e}")));
