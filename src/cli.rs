@@ -266,11 +266,11 @@ pub struct AbcArgs {
     pub sampler: Sampler,
     /// SMC: probability that the model kernel keeps a particle's law (else it jumps uniformly
     /// to another law still alive).
-    #[arg(long, default_value_t = 0.7, value_name = "P")]
+    #[arg(long, default_value_t = 0.7, value_name = "P", allow_hyphen_values = true)]
     pub p_stay: f64,
     /// SMC: the Gaussian perturbation's covariance is this times the weighted covariance of
     /// the law's previous particles (2: Beaumont et al. 2009).
-    #[arg(long, default_value_t = 2.0, value_name = "S")]
+    #[arg(long, default_value_t = 2.0, value_name = "S", allow_hyphen_values = true)]
     pub kernel_scale: f64,
     /// SMC: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
     /// that GPU and CPU runs give the same populations; evaluator: on the --backend (the

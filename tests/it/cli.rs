@@ -214,7 +214,7 @@ fn abc_writes_a_run_directory_and_json_with_its_keys() {
     for g in 0..pops.len() {
         let csv = std::fs::read_to_string(out.join(format!("populations/population_{g:03}.csv"))).unwrap();
         assert_eq!(csv.lines().count(), 1001);
-        assert!(csv.starts_with("law,index,rho,b0 [kN·m]"), "{}", &csv[..80]);
+        assert!(csv.starts_with("law,index,rho,weight,b0 [kN·m]"), "{}", &csv[..80]);
     }
     let envelopes = std::fs::read_to_string(out.join("envelopes.csv")).unwrap();
     assert!(envelopes.starts_with("law,speed_rad_s,lower_knm,median_knm,upper_knm"));
@@ -272,4 +272,63 @@ fn refused_abc_configurations_error_before_any_work() {
     let (code, _, stderr) = run(&["abc", "--prior", bad.to_str().unwrap(), "--out", o]);
     assert_eq!(code, 2);
     assert!(stderr.contains("no parameter 'gamma'"), "{stderr}");
+}
+
+#[test]
+fn abc_runs_the_smc_sampler_and_refuses_its_bad_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("smc");
+    let (code, stdout, stderr) = run(&[
+        "abc",
+        "--sampler",
+        "smc",
+        "--particles",
+        "400",
+        "--eps-min",
+        "0.02",
+        "--backend",
+        "cpu",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["config"]["sampler"], "smc");
+    assert!((v["config"]["p_stay"].as_f64().unwrap() - 0.7).abs() < 1e-15);
+    let pops = v["populations"].as_array().unwrap();
+    assert!(pops.len() >= 3, "{}", pops.len());
+    for p in &pops[1..] {
+        // Weighted populations: ESS below N, weights summing to 1 in the particle CSV.
+        let ess = p["ess"].as_f64().unwrap();
+        assert!(ess > 0.0 && ess <= 400.0 + 1e-9, "{ess}");
+        assert!(
+            p["per_law"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|l| l.get("alive").is_some())
+        );
+    }
+    let g = pops.len() - 1;
+    let csv = std::fs::read_to_string(out.join(format!("populations/population_{g:03}.csv"))).unwrap();
+    let total: f64 = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(3).unwrap().parse::<f64>().unwrap())
+        .sum();
+    assert!((total - 1.0).abs() < 1e-9, "{total}");
+    for (flag, value) in [("--p-stay", "1.5"), ("--kernel-scale", "-1")] {
+        let (code, _, stderr) = run(&[
+            "abc",
+            "--sampler",
+            "smc",
+            flag,
+            value,
+            "--out",
+            dir.path().join("bad").to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(stderr.contains(flag), "{stderr}");
+    }
 }
