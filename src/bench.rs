@@ -3,6 +3,7 @@
 
 use crate::Law;
 use crate::abc::rejection::{self, RejectionConfig};
+use crate::abc::smc::{self, SmcConfig};
 use crate::data::{DataOptions, Samples, demo_field_data};
 use crate::error::Result;
 use crate::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE, cpu::CpuEvaluator, evaluator, gpu};
@@ -56,6 +57,22 @@ pub struct EndToEnd {
     pub populations: usize,
 }
 
+/// One sampler run to eps_min on the embedded record: the evaluations it needed.
+#[derive(Clone, Debug, Serialize)]
+pub struct SamplerRun {
+    /// `rejection` (nested mode) or `smc`.
+    pub sampler: &'static str,
+    pub backend: &'static str,
+    pub particles: usize,
+    pub eps_min: f64,
+    /// Candidate × data-point evaluations to reach eps_min.
+    pub evaluations: u64,
+    /// Wall time (median over up to 3 repetitions), s.
+    pub seconds: f64,
+    pub populations: usize,
+    pub final_epsilon: Option<f64>,
+}
+
 /// Everything `bitrock bench` measures.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
@@ -68,6 +85,9 @@ pub struct BenchReport {
     /// Time of one small call (64 candidates, 100 points), s: the fixed cost of a dispatch.
     pub small_call_seconds: Vec<(String, Spread)>,
     pub end_to_end: Vec<EndToEnd>,
+    /// Rejection and SMC to the same eps_min with the same N on the embedded record: the
+    /// paper's ε_min with the end-to-end N, and 1.1 × the smallest least-squares ρ with N / 5.
+    pub samplers: Vec<SamplerRun>,
     /// Stability grid on the GPU: cells × samples per second (median), with the grid size.
     pub stability: Option<StabilityThroughput>,
 }
@@ -240,6 +260,61 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             populations: run.populations.len(),
         });
     }
+    // Rejection and SMC to the same ε_min with the same N: at the paper's ε_min, and near the
+    // noise floor (1.1 × the smallest least-squares ρ) with N / 5, where rejection from the
+    // prior accepts about one candidate in a thousand.
+    let mut samplers = Vec::new();
+    let floor = fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
+    let targets = [
+        (config.eps_min, opts.particles),
+        (1.1 * floor, (opts.particles / 5).max(100)),
+    ];
+    for &backend in &opts.backends {
+        let ev = evaluator(
+            AbcProblem::new(prior.clone(), 1, &data.calibration, None),
+            backend,
+            &mut |_| {},
+        )?;
+        for &(eps_min, particles) in &targets {
+            let base = RejectionConfig {
+                particles,
+                eps_min,
+                ..RejectionConfig::default()
+            };
+            let smc_config = SmcConfig {
+                base: base.clone(),
+                ..SmcConfig::default()
+            };
+            for sampler in ["rejection", "smc"] {
+                let mut last = None;
+                let times = time_calls(reps.min(3), || {
+                    last = Some(match sampler {
+                        "rejection" => rejection::run(ev.as_ref(), &base)?,
+                        _ => smc::run(ev.as_ref(), &smc_config)?,
+                    });
+                    Ok(())
+                })?;
+                let run = last.expect("at least one run");
+                let seconds = Spread::of(&times).median;
+                log(format!(
+                    "{:>3} {sampler:>9} to ε = {eps_min:.5} (N = {particles}): {:.3e} evaluations, {} populations, {seconds:.3} s",
+                    ev.backend(),
+                    run.evaluations as f64,
+                    run.populations.len(),
+                ));
+                samplers.push(SamplerRun {
+                    sampler,
+                    backend: ev.backend(),
+                    particles,
+                    eps_min,
+                    evaluations: run.evaluations,
+                    seconds,
+                    populations: run.populations.len(),
+                    final_epsilon: run.populations.last().and_then(|p| p.record.epsilon),
+                });
+            }
+        }
+    }
     let stability = if opts.backends.contains(&Backend::Gpu) {
         let (side, count) = opts.stability;
         let omega: Vec<f64> = (0..side).map(|i| 20.0 + 200.0 * i as f64 / side as f64).collect();
@@ -281,6 +356,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         throughput,
         small_call_seconds,
         end_to_end,
+        samplers,
     })
 }
 

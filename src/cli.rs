@@ -222,6 +222,14 @@ pub struct SimulateCmd {
     pub out: Option<PathBuf>,
 }
 
+/// Which ABC sampler runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampler {
+    Rejection,
+    Smc,
+}
+
 /// How the ABC sampler runs.
 #[derive(Debug, Args, Clone)]
 pub struct AbcArgs {
@@ -265,6 +273,23 @@ pub struct AbcArgs {
     /// population, as the paper's Algorithm 1.
     #[arg(long, value_enum, default_value_t = bitrock::abc::rejection::Mode::Nested)]
     pub mode: bitrock::abc::rejection::Mode,
+    /// rejection: the paper's Algorithm 1 (see --mode); smc: ABC-SMC with model selection
+    /// (population 0 from the prior, then perturbed, importance-weighted populations).
+    #[arg(long, value_enum, default_value_t = Sampler::Rejection)]
+    pub sampler: Sampler,
+    /// SMC: probability that the model kernel keeps a particle's law (else it jumps uniformly
+    /// to another law still alive).
+    #[arg(long, default_value_t = 0.7, value_name = "P", allow_hyphen_values = true)]
+    pub p_stay: f64,
+    /// SMC: the Gaussian perturbation's covariance is this times the weighted covariance of
+    /// the law's previous particles (2: Beaumont et al. 2009).
+    #[arg(long, default_value_t = 2.0, value_name = "S", allow_hyphen_values = true)]
+    pub kernel_scale: f64,
+    /// SMC: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
+    /// that GPU and CPU runs give the same populations; evaluator: on the --backend (the
+    /// GPU's f32 kernel: faster for large N, but its populations drift from the CPU run's).
+    #[arg(long, value_enum, default_value_t = bitrock::abc::smc::WeightsOn::Host)]
+    pub smc_weights: bitrock::abc::smc::WeightsOn,
     /// Seed of the candidate streams: the same seed gives the same populations.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -299,7 +324,7 @@ pub struct AbcCmd {
         "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
         "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior", "epsilons",
-        "start_epsilon", "mode", "seed", "summary_population",
+        "start_epsilon", "mode", "seed", "summary_population", "sampler", "p_stay", "kernel_scale", "smc_weights",
     ])]
     pub resume: Option<PathBuf>,
     /// No progress bar or population lines on stderr.

@@ -211,8 +211,17 @@ fn abc_config(
         prior_file: args.prior.clone(),
         seed: args.seed,
         backend: args.backend.unwrap_or(Backend::Auto),
-        sampler: SamplerConfig::Rejection(sampler),
+        sampler: match args.sampler {
+            cli::Sampler::Rejection => SamplerConfig::Rejection(sampler),
+            cli::Sampler::Smc => SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
+                base: sampler,
+                p_stay: args.p_stay,
+                kernel_scale: args.kernel_scale,
+                weights_on: args.smc_weights,
+            }),
+        },
     };
+    config.sampler.validate()?;
     Ok((config, prior_file))
 }
 
@@ -404,6 +413,10 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
             min_acceptance: None,
             max_seconds: None,
             mode: Mode::Nested,
+            sampler: cli::Sampler::Rejection,
+            p_stay: 0.7,
+            kernel_scale: 2.0,
+            smc_weights: bitrock::abc::smc::WeightsOn::Host,
             seed: cmd.seed,
             threads: None,
             backend: Some(cmd.backend),

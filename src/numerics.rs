@@ -29,6 +29,42 @@ pub fn quantile(values: &[f64], q: f64) -> f64 {
     v[lo] + (h - lo as f64) * (v[hi] - v[lo])
 }
 
+/// The q-quantile of `values` with non-negative `weights` (not all 0): type 7 generalised to
+/// weights. Sorted by value, point k sits at position h_k = C_{k−1} / (W − w_last), where
+/// C_{k−1} is the weight before it and W the total, so the first point is at 0, the last at
+/// 1, and equal weights give type 7's positions (k − 1)/(n − 1); between positions the
+/// quantile interpolates linearly. Continuous in the weights, so nearly equal weights give
+/// nearly [`quantile`]'s values.
+pub fn weighted_quantile(values: &[f64], weights: &[f64], q: f64) -> f64 {
+    assert!(!values.is_empty(), "quantile of an empty set");
+    assert_eq!(values.len(), weights.len(), "one weight per value");
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    let total = compensated_sum(weights.iter().copied());
+    let span = total - weights[order[order.len() - 1]];
+    if span.is_nan() || span <= 0.0 {
+        // One point carries all the weight.
+        return values[order[order.len() - 1]];
+    }
+    let q = q.clamp(0.0, 1.0);
+    let mut before = 0.0;
+    let mut previous = (0.0, values[order[0]]);
+    for &i in &order {
+        let h = (before / span).min(1.0);
+        if h >= q {
+            let (h0, x0) = previous;
+            return if h > h0 {
+                x0 + (q - h0) / (h - h0) * (values[i] - x0)
+            } else {
+                values[i]
+            };
+        }
+        previous = (h, values[i]);
+        before += weights[i];
+    }
+    values[order[order.len() - 1]]
+}
+
 /// `count` values spaced geometrically from `lo` to `hi` inclusive (lo, hi > 0).
 pub fn geomspace(lo: f64, hi: f64, count: usize) -> Vec<f64> {
     if count == 1 {
@@ -106,6 +142,23 @@ mod tests {
         assert!((quantile(&v, 0.0) - 1.0).abs() < 1e-15);
         assert!((quantile(&v, 1.0) - 4.0).abs() < 1e-15);
         assert!((quantile(&v, 1.0 / 3.0) - 2.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn weighted_quantiles_generalise_type_7() {
+        let v = [3.0, 1.0, 2.0, 4.0];
+        for q in [0.0, 0.01, 1.0 / 3.0, 0.5, 0.77, 0.99, 1.0] {
+            let (a, b) = (weighted_quantile(&v, &[0.25; 4], q), quantile(&v, q));
+            assert!((a - b).abs() < 1e-15, "{q}: {a} vs {b}");
+        }
+        // Weights 1, 1, 2 on 1, 2, 3: positions 0, 1/2, 1 (W − w_last = 2).
+        let (v, w) = ([3.0, 1.0, 2.0], [2.0, 1.0, 1.0]);
+        assert!((weighted_quantile(&v, &w, 0.25) - 1.5).abs() < 1e-15);
+        assert!((weighted_quantile(&v, &w, 0.75) - 2.5).abs() < 1e-15);
+        assert!((weighted_quantile(&[1.0, 9.0], &[1.0, 1.0], 0.3) - 3.4).abs() < 1e-15);
+        // All the weight on one point: that point.
+        assert!((weighted_quantile(&[5.0], &[1.0], 0.3) - 5.0).abs() < 1e-15);
+        assert!((weighted_quantile(&[1.0, 9.0], &[0.0, 1.0], 0.3) - 9.0).abs() < 1e-15);
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //! from its store and gives exactly the populations an uninterrupted run would.
 
 use crate::abc::rejection::{self, RejectionConfig};
+use crate::abc::smc::{self, SmcConfig};
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
@@ -37,6 +38,8 @@ pub struct RunConfig {
 pub enum SamplerConfig {
     /// The paper's rejection sampler (Algorithm 1), nested or as published.
     Rejection(RejectionConfig),
+    /// ABC-SMC with model selection (Toni et al. 2009).
+    Smc(SmcConfig),
 }
 
 impl SamplerConfig {
@@ -44,19 +47,36 @@ impl SamplerConfig {
     pub fn validate(&self) -> Result<()> {
         match self {
             SamplerConfig::Rejection(c) => c.validate(),
+            SamplerConfig::Smc(c) => c.validate(),
+        }
+    }
+
+    /// The settings both samplers share: N, tolerances and stopping rules.
+    pub fn base(&self) -> &RejectionConfig {
+        match self {
+            SamplerConfig::Rejection(c) => c,
+            SamplerConfig::Smc(c) => &c.base,
+        }
+    }
+
+    /// The sampler's name in records (`rejection`, `smc`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            SamplerConfig::Rejection(_) => "rejection",
+            SamplerConfig::Smc(_) => "smc",
         }
     }
 
     fn apply(&mut self, more: &Continuation) {
-        match self {
-            SamplerConfig::Rejection(c) => {
-                c.eps_min = more.eps_min.unwrap_or(c.eps_min);
-                c.max_populations = more.max_populations.unwrap_or(c.max_populations);
-                c.max_draws = more.max_draws.unwrap_or(c.max_draws);
-                c.min_acceptance = more.min_acceptance.unwrap_or(c.min_acceptance);
-                c.max_seconds = more.max_seconds.or(c.max_seconds);
-            }
-        }
+        let c = match self {
+            SamplerConfig::Rejection(c) => c,
+            SamplerConfig::Smc(c) => &mut c.base,
+        };
+        c.eps_min = more.eps_min.unwrap_or(c.eps_min);
+        c.max_populations = more.max_populations.unwrap_or(c.max_populations);
+        c.max_draws = more.max_draws.unwrap_or(c.max_draws);
+        c.min_acceptance = more.min_acceptance.unwrap_or(c.min_acceptance);
+        c.max_seconds = more.max_seconds.or(c.max_seconds);
     }
 }
 
@@ -206,6 +226,7 @@ fn sample(
     let mut storing = Storing { store, inner: observer };
     let run = match &config.sampler {
         SamplerConfig::Rejection(c) => rejection::run_observed(evaluator, c, previous, &mut storing)?,
+        SamplerConfig::Smc(c) => smc::run_observed(evaluator, c, previous, &mut storing)?,
     };
     let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
     store.finish_invocation(invocation, stop.as_str().unwrap_or_default())?;

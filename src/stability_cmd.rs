@@ -98,7 +98,8 @@ pub fn fe_cmd(cmd: &FeCmd) -> anyhow::Result<()> {
 }
 
 /// Reads the last population of a run directory's store: each law's MAP and probability and
-/// its first `samples` particles in population order (deterministic), SI.
+/// `samples` of its particles ([`bitrock::abc::posterior::law_samples`]: the first ones, or a
+/// systematic resample by weight for an SMC population), SI.
 fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawSamples>> {
     let store = bitrock::store::RunStore::open(dir)?;
     let populations = store.load_populations()?;
@@ -115,11 +116,8 @@ fn read_run(dir: &Path, samples: usize) -> anyhow::Result<Vec<LawSamples>> {
             law: summary.law,
             probability: summary.probability,
             map_si: summary.map.clone(),
-            samples_si: last
-                .particles
-                .iter()
-                .filter(|p| p.law == summary.law)
-                .take(samples)
+            samples_si: bitrock::abc::posterior::law_samples(&last.particles, summary.law, samples)
+                .into_iter()
                 .map(|p| p.params.clone())
                 .collect(),
         })

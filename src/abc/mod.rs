@@ -9,6 +9,7 @@
 
 pub mod posterior;
 pub mod rejection;
+pub mod smc;
 
 use crate::error::Result;
 use crate::laws::Law;
@@ -40,6 +41,15 @@ pub struct LawRecord {
     pub acceptance_rate: f64,
     /// Posterior probability of the law in this population: its share of the weight.
     pub probability: f64,
+    /// Whether the sampler proposes this law in the next population. Rejection draws every
+    /// law from the prior (always true); in SMC a law with no particle here is dead: it gets
+    /// no more proposals, and later records keep it with 0 draws, 0 accepted, probability 0.
+    #[serde(default = "alive_by_default")]
+    pub alive: bool,
+}
+
+fn alive_by_default() -> bool {
+    true
 }
 
 /// What happened in one population.

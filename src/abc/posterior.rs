@@ -5,10 +5,17 @@
 //!
 //! Everything here is deterministic: the same population gives bit-identical summaries on any
 //! number of threads, so reports and regression tests can compare outputs exactly.
+//!
+//! Summaries use the particles' importance weights (SMC): law probabilities are weight shares,
+//! means, standard deviations (reliability weights: Σw(x − x̄)² / (V₁ − V₂/V₁), V_k = Σw^k),
+//! correlations, quantiles ([`weighted_quantile`]), the KDE behind the MAP (weighted kernels,
+//! Scott's rule with the Kish ESS for n) and the envelopes are weighted. Equal weights (the
+//! rejection sampler's) enter as exactly 1.0, which leaves every sum bit-identical to the
+//! unweighted formulas, and take the unweighted type-7 quantiles.
 
 use crate::abc::Particle;
 use crate::laws::{Law, MAX_PARAMS};
-use crate::numerics::{compensated_sum, quantile};
+use crate::numerics::{compensated_sum, quantile, weighted_quantile};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -21,7 +28,8 @@ pub struct LawSummary {
     pub names: Vec<&'static str>,
     /// Particles of this law.
     pub count: usize,
-    /// `count / total`: the ABC estimate of P(law | data).
+    /// The law's share of the population's weight (`count / total` for equal weights): the
+    /// ABC estimate of P(law | data).
     pub probability: f64,
     pub mean: Vec<f64>,
     /// Sample standard deviation (divisor n − 1); 0 for a single particle or a constant
@@ -67,11 +75,22 @@ pub struct PosteriorSummary {
 /// When a particle has not exactly as many parameters as its law.
 pub fn summarize(particles: &[Particle], laws_considered: &[Law]) -> PosteriorSummary {
     let total = particles.len();
+    let equal = particles
+        .iter()
+        .all(|p| p.weight.to_bits() == particles[0].weight.to_bits());
+    let total_weight = compensated_sum(particles.iter().map(|p| p.weight));
     let laws: Vec<LawSummary> = Law::ALL
         .iter()
         .filter_map(|&law| {
             let members: Vec<&Particle> = particles.iter().filter(|p| p.law == law).collect();
-            (!members.is_empty()).then(|| summarize_law(law, &members, total))
+            (!members.is_empty()).then(|| {
+                let probability = if equal {
+                    members.len() as f64 / total as f64
+                } else {
+                    compensated_sum(members.iter().map(|p| p.weight)) / total_weight
+                };
+                summarize_law(law, &members, probability)
+            })
         })
         .collect();
     let model_probabilities = laws_considered
@@ -92,7 +111,20 @@ pub fn summarize(particles: &[Particle], laws_considered: &[Law]) -> PosteriorSu
 const Q_LOW: f64 = 0.01;
 const Q_HIGH: f64 = 0.99;
 
-fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
+/// Weights relative to the largest: exactly 1.0 each when all are equal (or all 0).
+fn relative_weights(members: &[&Particle]) -> Vec<f64> {
+    let max = members.iter().map(|p| p.weight).fold(0.0, f64::max);
+    let equal = members
+        .iter()
+        .all(|p| p.weight.to_bits() == members[0].weight.to_bits());
+    if equal || !(max > 0.0 && max.is_finite()) {
+        vec![1.0; members.len()]
+    } else {
+        members.iter().map(|p| p.weight / max).collect()
+    }
+}
+
+fn summarize_law(law: Law, members: &[&Particle], probability: f64) -> LawSummary {
     let d = law.n_params();
     let n = members.len();
     for p in members {
@@ -105,6 +137,10 @@ fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
         );
     }
     let columns: Vec<Vec<f64>> = (0..d).map(|j| members.iter().map(|p| p.params[j]).collect()).collect();
+    let w = relative_weights(members);
+    let weighted = w.iter().any(|&v| v.to_bits() != 1.0f64.to_bits());
+    let v1 = compensated_sum(w.iter().copied());
+    let v2 = compensated_sum(w.iter().map(|v| v * v));
     // A parameter whose values are all equal gets its value as mean and exactly 0 as spread:
     // computing them would leave rounding noise (σ ~ 1e-16·|x|) that turns into a spurious
     // correlation and a spurious kernel bandwidth.
@@ -119,7 +155,7 @@ fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
             if k {
                 c[0]
             } else {
-                compensated_sum(c.iter().copied()) / n as f64
+                compensated_sum(c.iter().zip(&w).map(|(v, w)| w * v)) / v1
             }
         })
         .collect();
@@ -129,13 +165,15 @@ fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
         .zip(&mean)
         .map(|(c, m)| c.iter().map(|v| v - m).collect())
         .collect();
-    let varies: Vec<bool> = constant.iter().map(|&k| !k && n >= 2).collect();
+    // A law whose weight sits on one particle has no spread either (V₁ = V₂/V₁).
+    let varies: Vec<bool> = constant.iter().map(|&k| !k && n >= 2 && v1 - v2 / v1 > 0.0).collect();
+    let wsum = |f: &dyn Fn(usize) -> f64| compensated_sum((0..n).map(|i| w[i] * f(i)));
     let std_dev: Vec<f64> = deviations
         .iter()
         .zip(&varies)
         .map(|(dv, &v)| {
             if v {
-                (compensated_sum(dv.iter().map(|x| x * x)) / (n - 1) as f64).sqrt()
+                (wsum(&|i| dv[i] * dv[i]) / (v1 - v2 / v1)).sqrt()
             } else {
                 0.0
             }
@@ -149,7 +187,14 @@ fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
             s
         })
         .collect();
-    let quantiles = |q: f64| -> Vec<f64> { sorted.iter().map(|s| quantile(s, q)).collect() };
+    let quantile_of = |j: usize, q: f64| {
+        if weighted {
+            weighted_quantile(&columns[j], &w, q)
+        } else {
+            quantile(&sorted[j], q)
+        }
+    };
+    let quantiles = |q: f64| -> Vec<f64> { (0..d).map(|j| quantile_of(j, q)).collect() };
     let (q01, q50, q99) = (quantiles(Q_LOW), quantiles(0.5), quantiles(Q_HIGH));
 
     let mut correlation = vec![vec![None; d]; d];
@@ -162,9 +207,10 @@ fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
             if !varies[k] {
                 continue;
             }
-            let sxy = compensated_sum(deviations[j].iter().zip(&deviations[k]).map(|(a, b)| a * b));
-            let sxx = compensated_sum(deviations[j].iter().map(|a| a * a));
-            let syy = compensated_sum(deviations[k].iter().map(|b| b * b));
+            let (dj, dk) = (&deviations[j], &deviations[k]);
+            let sxy = wsum(&|i| dj[i] * dk[i]);
+            let sxx = wsum(&|i| dj[i] * dj[i]);
+            let syy = wsum(&|i| dk[i] * dk[i]);
             // Rounding can push |r| a hair past 1 for an exactly linear pair.
             let r = (sxy / (sxx.sqrt() * syy.sqrt())).clamp(-1.0, 1.0);
             correlation[j][k] = Some(r);
@@ -183,7 +229,7 @@ fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
             if !varies[j] {
                 return 0.0;
             }
-            let iqr = quantile(&sorted[j], 0.75) - quantile(&sorted[j], 0.25);
+            let iqr = quantile_of(j, 0.75) - quantile_of(j, 0.25);
             if iqr > 0.0 {
                 std_dev[j].min(iqr / IQR_PER_SIGMA)
             } else {
@@ -191,13 +237,13 @@ fn summarize_law(law: Law, members: &[&Particle], total: usize) -> LawSummary {
             }
         })
         .collect();
-    let (map, map_bandwidth) = kde_mode(&columns, &mean, &scale);
+    let (map, map_bandwidth) = kde_mode(&columns, &mean, &scale, &w);
 
     LawSummary {
         law,
         names: law.param_names(),
         count: n,
-        probability: n as f64 / total as f64,
+        probability,
         mean,
         std_dev,
         q01,
@@ -253,12 +299,14 @@ const MODE_CANDIDATES: usize = 2_000;
 /// mean-shift iterations z ← Σ K_i z_i / Σ K_i climb from there: for a Gaussian kernel each
 /// step increases f, so it converges to the maximum of the basin the start lies in. It stops
 /// when a step is below 1e-9 bandwidths, or after 200 iterations.
-fn kde_mode(columns: &[Vec<f64>], mean: &[f64], scale: &[f64]) -> (Vec<f64>, Vec<f64>) {
+fn kde_mode(columns: &[Vec<f64>], mean: &[f64], scale: &[f64], weights: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let active: Vec<usize> = (0..scale.len())
         .filter(|&j| scale[j] > 0.0 && scale[j].is_finite())
         .collect();
     let n = columns.first().map_or(0, Vec::len);
-    let factor = (n as f64).powf(-1.0 / (active.len() as f64 + 4.0));
+    // Scott's n is the Kish ESS: n itself for equal weights (all 1.0).
+    let n_eff = crate::abc::effective_sample_size(weights);
+    let factor = n_eff.powf(-1.0 / (active.len() as f64 + 4.0));
     let bandwidth: Vec<f64> = (0..scale.len())
         .map(|j| if active.contains(&j) { scale[j] * factor } else { 0.0 })
         .collect();
@@ -271,12 +319,12 @@ fn kde_mode(columns: &[Vec<f64>], mean: &[f64], scale: &[f64]) -> (Vec<f64>, Vec
     // Fixed-size points let the compiler unroll the distance loop.
     let z = match active.len() {
         0 => return (mode, bandwidth),
-        1 => climb::<1>(&points(n, standardised)).to_vec(),
-        2 => climb::<2>(&points(n, standardised)).to_vec(),
-        3 => climb::<3>(&points(n, standardised)).to_vec(),
-        4 => climb::<4>(&points(n, standardised)).to_vec(),
-        5 => climb::<5>(&points(n, standardised)).to_vec(),
-        6 => climb::<6>(&points(n, standardised)).to_vec(),
+        1 => climb::<1>(&points(n, standardised), weights).to_vec(),
+        2 => climb::<2>(&points(n, standardised), weights).to_vec(),
+        3 => climb::<3>(&points(n, standardised), weights).to_vec(),
+        4 => climb::<4>(&points(n, standardised), weights).to_vec(),
+        5 => climb::<5>(&points(n, standardised), weights).to_vec(),
+        6 => climb::<6>(&points(n, standardised), weights).to_vec(),
         d => unreachable!("{d} parameters; no law has more than {MAX_PARAMS}"),
     };
     for (k, &j) in active.iter().enumerate() {
@@ -344,15 +392,15 @@ fn sum4(values: &[f64]) -> f64 {
 }
 
 /// The KDE mode in standardised coordinates (see [`kde_mode`]).
-fn climb<const D: usize>(z: &[[f64; D]]) -> [f64; D] {
+fn climb<const D: usize>(z: &[[f64; D]], weights: &[f64]) -> [f64; D] {
     let density = if z.len() <= FULL_SEARCH_LIMIT {
-        all_densities(z)
+        all_densities(z, weights)
     } else {
         let stride = z.len().div_ceil(MODE_CANDIDATES);
         let candidates: Vec<&[f64; D]> = z.iter().step_by(stride).collect();
         let density: Vec<f64> = candidates
             .par_iter()
-            .map(|&c| z.iter().map(|p| kernel(c, p)).sum())
+            .map(|&c| z.iter().zip(weights).map(|(p, w)| kernel(c, p) * w).sum())
             .collect();
         let mut full = vec![f64::NEG_INFINITY; z.len()];
         for (k, d) in density.into_iter().enumerate() {
@@ -372,11 +420,12 @@ fn climb<const D: usize>(z: &[[f64; D]]) -> [f64; D] {
     for _ in 0..MEAN_SHIFT_MAX_ITER {
         let partial: Vec<(f64, [f64; D])> = z
             .par_chunks(BLOCK)
-            .map(|block| {
+            .zip(weights.par_chunks(BLOCK))
+            .map(|(block, block_weights)| {
                 let mut weight = 0.0;
                 let mut moment = [0.0; D];
-                for p in block {
-                    let w = kernel(&x, p);
+                for (p, wp) in block.iter().zip(block_weights) {
+                    let w = kernel(&x, p) * wp;
                     weight += w;
                     for k in 0..D {
                         moment[k] += w * p[k];
@@ -408,8 +457,9 @@ fn climb<const D: usize>(z: &[[f64; D]]) -> [f64; D] {
 /// The KDE (up to a constant) at every point, using the symmetry of the kernel: each pair is
 /// evaluated once, in tiles of BLOCK × BLOCK points computed in parallel and added in tile
 /// order (deterministic for any thread count).
-fn all_densities<const D: usize>(z: &[[f64; D]]) -> Vec<f64> {
+fn all_densities<const D: usize>(z: &[[f64; D]], weights: &[f64]) -> Vec<f64> {
     let blocks: Vec<&[[f64; D]]> = z.chunks(BLOCK).collect();
+    let block_weights: Vec<&[f64]> = weights.chunks(BLOCK).collect();
     let tiles: Vec<(usize, usize)> = (0..blocks.len())
         .flat_map(|i| (i..blocks.len()).map(move |j| (i, j)))
         .collect();
@@ -427,16 +477,21 @@ fn all_densities<const D: usize>(z: &[[f64; D]]) -> Vec<f64> {
                 let rest: [&[f64]; D] = std::array::from_fn(|c| &columns[c][first..]);
                 let kernels = &mut buffer[first..];
                 kernels_into(pa, &rest, kernels);
-                sa[ia] = sum4(kernels);
+                // Point b gains w_a K_ab, point a gains Σ_b w_b K_ab (weights 1.0: exact).
+                let wa = block_weights[bi][ia];
                 for (s, v) in sb[first..].iter_mut().zip(kernels.iter()) {
-                    *s += v;
+                    *s += v * wa;
                 }
+                for (v, &wb) in kernels.iter_mut().zip(&block_weights[bj][first..]) {
+                    *v *= wb;
+                }
+                sa[ia] = sum4(kernels);
             }
             (sa, sb)
         })
         .collect();
-    // Every point's own term exp(0) = 1.
-    let mut density = vec![1.0; z.len()];
+    // Every point's own term w exp(0) = w.
+    let mut density = weights.to_vec();
     for (&(bi, bj), (sa, sb)) in tiles.iter().zip(&partial) {
         for (d, s) in density[bi * BLOCK..].iter_mut().zip(sa) {
             *d += s;
@@ -479,25 +534,33 @@ pub fn predictive_envelope(
     wob_ratio: f64,
 ) -> Option<Envelope> {
     assert!((0.0..=1.0).contains(&level), "envelope level {level} is not in [0, 1]");
-    let members: Vec<&[f64]> = particles
-        .iter()
-        .filter(|p| p.law == law)
-        .map(|p| p.params.as_slice())
-        .collect();
-    if members.is_empty() {
+    let law_particles: Vec<&Particle> = particles.iter().filter(|p| p.law == law).collect();
+    if law_particles.is_empty() {
         return None;
     }
+    let members: Vec<&[f64]> = law_particles.iter().map(|p| p.params.as_slice()).collect();
+    let w = relative_weights(&law_particles);
+    let weighted = w.iter().any(|&v| v.to_bits() != 1.0f64.to_bits());
     let (q_lo, q_hi) = ((1.0 - level) / 2.0, (1.0 + level) / 2.0);
     let bands: Vec<(f64, f64, f64)> = speed_grid_rad_s
         .par_iter()
-        .map(|&w| {
-            let mut t: Vec<f64> = members.iter().map(|p| law.torque(p, w, wob_ratio)).collect();
-            // Sorted once here, `quantile`'s own sort of the copy is a linear pass.
-            t.sort_by(f64::total_cmp);
-            let median = quantile(&t, 0.5);
+        .map(|&speed| {
+            let mut t: Vec<f64> = members.iter().map(|p| law.torque(p, speed, wob_ratio)).collect();
+            if !weighted {
+                // Sorted once here, `quantile`'s own sort of the copy is a linear pass.
+                t.sort_by(f64::total_cmp);
+            }
+            let q = |level: f64| {
+                if weighted {
+                    weighted_quantile(&t, &w, level)
+                } else {
+                    quantile(&t, level)
+                }
+            };
+            let median = q(0.5);
             // Interpolation rounding could in principle invert neighbours by an ulp; the
             // band stays ordered regardless.
-            (quantile(&t, q_lo).min(median), median, quantile(&t, q_hi).max(median))
+            (q(q_lo).min(median), median, q(q_hi).max(median))
         })
         .collect();
     Some(Envelope {
@@ -530,9 +593,64 @@ pub fn speed_grid(lo: f64, hi: f64, count: usize) -> Vec<f64> {
     }
 }
 
+/// True when every weight equals the first within rounding (rejection sampling gives 1/N to
+/// every particle; an empty or single-particle set is trivially equal).
+pub fn equal_weights<'a>(weights: impl IntoIterator<Item = &'a f64>) -> bool {
+    let mut weights = weights.into_iter();
+    let Some(&first) = weights.next() else {
+        return true;
+    };
+    weights.all(|&w| (w - first).abs() <= 1e-12 * first.abs())
+}
+
+/// `count` indices drawn from `weights` by systematic resampling with the fixed offset 1/2
+/// (deterministic: the same weights give the same indices). Indices come out ascending.
+pub fn systematic(weights: &[f64], count: usize) -> Vec<usize> {
+    let total: f64 = crate::numerics::compensated_sum(weights.iter().copied());
+    let mut out = Vec::with_capacity(count);
+    if total.is_nan() || total <= 0.0 || weights.is_empty() {
+        return out;
+    }
+    let (mut i, mut cumulative) = (0, weights[0]);
+    for j in 0..count {
+        let u = (j as f64 + 0.5) / count as f64 * total;
+        while cumulative < u && i + 1 < weights.len() {
+            i += 1;
+            cumulative += weights[i];
+        }
+        out.push(i);
+    }
+    out
+}
+
+/// Up to `count` parameter sets of `law` standing for its posterior: with equal weights the
+/// first `count` particles in index order (what `bitrock stability --run` and the report's maps take), else a
+/// systematic resample by weight.
+pub fn law_samples(particles: &[Particle], law: Law, count: usize) -> Vec<&Particle> {
+    let members: Vec<&Particle> = particles.iter().filter(|p| p.law == law).collect();
+    if equal_weights(members.iter().map(|p| &p.weight)) {
+        return members.into_iter().take(count).collect();
+    }
+    let weights: Vec<f64> = members.iter().map(|p| p.weight).collect();
+    systematic(&weights, count.min(members.len()))
+        .into_iter()
+        .map(|i| members[i])
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn systematic_resampling_follows_the_weights() {
+        assert_eq!(systematic(&[1.0, 1.0, 1.0, 1.0], 4), vec![0, 1, 2, 3]);
+        let idx = systematic(&[0.0, 3.0, 1.0], 8);
+        assert_eq!(idx.iter().filter(|&&i| i == 1).count(), 6);
+        assert_eq!(idx.iter().filter(|&&i| i == 2).count(), 2);
+        assert!(systematic(&[0.0, 0.0], 3).is_empty());
+    }
+
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Gamma, StandardNormal};
@@ -837,6 +955,87 @@ mod tests {
                 assert!((0..grid.len()).all(|i| env.upper[i] > env.lower[i]));
             }
         }
+    }
+
+    #[test]
+    fn weights_enter_probabilities_moments_quantiles_map_and_envelopes() {
+        // Cluster A: 600 M4 particles near c0 = 0, weight 1; cluster B: 400 near c0 = 10,
+        // weight 5, so B holds 2000/2600 of the weight. One M2 particle of weight 600.
+        let mut rng = StdRng::seed_from_u64(4);
+        let mut particles: Vec<Particle> = (0..1000u64)
+            .map(|i| {
+                let u: f64 = StandardNormal.sample(&mut rng);
+                let (centre, w) = if i < 600 { (0.0, 1.0) } else { (10.0, 5.0) };
+                Particle {
+                    weight: w,
+                    ..particle(Law::M4, i, &[centre + 0.5 * u, 0.0, 0.0, 0.0], 0.01)
+                }
+            })
+            .collect();
+        particles.push(Particle {
+            weight: 600.0,
+            ..particle(Law::M2, 2000, &[1.0, 2.0, 3.0], 0.01)
+        });
+        let s = summarize(&particles, &[Law::M2, Law::M4]);
+        let (m2, m4) = (&s.laws[0], &s.laws[1]);
+        assert!(close(m2.probability, 600.0 / 3200.0, 1e-15) && close(m4.probability, 2600.0 / 3200.0, 1e-15));
+        // Weighted mean: (Σ_A c0 + 5 Σ_B c0) / 2600, by hand from the particles.
+        let (sa, sb): (f64, f64) = (
+            particles[..600].iter().map(|p| p.params[0]).sum(),
+            particles[600..1000].iter().map(|p| p.params[0]).sum(),
+        );
+        assert!(close(m4.mean[0], (sa + 5.0 * sb) / 2600.0, 1e-12), "{}", m4.mean[0]);
+        // The median lies in B (B holds 77 % of the weight), the 1 % quantile in A.
+        assert!(
+            (m4.q50[0] - 10.0).abs() < 1.0 && m4.q01[0] < 1.0,
+            "{} {}",
+            m4.q50[0],
+            m4.q01[0]
+        );
+        // The weighted KDE's mode is B's centre; unweighted it would be A's.
+        assert!((m4.map[0] - 10.0).abs() < 0.5, "MAP {}", m4.map[0]);
+        let unweighted: Vec<Particle> = particles
+            .iter()
+            .map(|p| Particle {
+                weight: 1.0,
+                ..p.clone()
+            })
+            .collect();
+        let map_a = summarize(&unweighted, &[Law::M4]).laws[1].map[0];
+        assert!(map_a.abs() < 0.5, "unweighted MAP {map_a}");
+        let env = predictive_envelope(&particles, Law::M4, &[1.0], 0.98, 1.0).unwrap();
+        assert!((env.median[0] - 10.0).abs() < 1.0, "{}", env.median[0]);
+        // Equal weights of any size summarise as weight 1.0 does, to the bit (the best
+        // particle carries its own weight).
+        let scaled: Vec<Particle> = unweighted
+            .iter()
+            .map(|p| Particle {
+                weight: 1.0 / 1001.0,
+                ..p.clone()
+            })
+            .collect();
+        let mut a = summarize(&scaled, &[Law::M2, Law::M4]);
+        for l in &mut a.laws {
+            l.best.weight = 1.0;
+        }
+        assert_eq!(a, summarize(&unweighted, &[Law::M2, Law::M4]));
+    }
+
+    #[test]
+    fn weighted_standard_deviation_uses_reliability_weights() {
+        // x = 1, 2, 4 with weights 1, 1, 2: x̄ = 11/4, Σw(x − x̄)² = 49/16 + 9/16 + 2·25/16
+        // = 108/16, V₁ − V₂/V₁ = 4 − 6/4 = 5/2, σ² = 2.7.
+        let particles: Vec<Particle> = [(1.0, 1.0), (2.0, 1.0), (4.0, 2.0)]
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, w))| Particle {
+                weight: w,
+                ..particle(Law::M2, i as u64, &[x, 1.0, 1.0], 0.1)
+            })
+            .collect();
+        let m2 = &summarize(&particles, &[Law::M2]).laws[0];
+        assert!(close(m2.mean[0], 2.75, 1e-15));
+        assert!(close(m2.std_dev[0], 2.7f64.sqrt(), 1e-15), "{}", m2.std_dev[0]);
     }
 
     #[test]

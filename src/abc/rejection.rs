@@ -326,6 +326,8 @@ pub fn run_observed(
                         0.0
                     },
                     probability: law_accepted[s] as f64 / n as f64,
+                    // Every law keeps being drawn from the prior.
+                    alive: true,
                 })
                 .collect(),
             candidates_scored: scored_here,
@@ -353,7 +355,10 @@ pub fn run_observed(
 
 /// The tolerance of the population after the last of `populations`, or why there is none
 /// (the stopping rules, checked in the order the module documentation gives).
-fn next_epsilon(populations: &[Population], config: &RejectionConfig) -> std::result::Result<f64, StopReason> {
+pub(crate) fn next_epsilon(
+    populations: &[Population],
+    config: &RejectionConfig,
+) -> std::result::Result<f64, StopReason> {
     let current = populations.last().expect("at least one population");
     let epsilon = current.record.epsilon.unwrap_or(f64::INFINITY);
     if epsilon <= config.eps_min {
@@ -385,7 +390,7 @@ pub fn median_rho(particles: &[Particle]) -> f64 {
     quantile(&rho, 0.5)
 }
 
-fn slot_of(prior: &crate::prior::Prior, law: Law) -> usize {
+pub(crate) fn slot_of(prior: &crate::prior::Prior, law: Law) -> usize {
     prior
         .boxes
         .iter()

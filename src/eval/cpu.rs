@@ -1,10 +1,11 @@
 //! The CPU reference evaluator: f64 arithmetic on the f32 candidate parameters, rayon across
 //! candidates, compensated (Kahan) summation in four interleaved lanes per candidate.
 
-use super::{AbcProblem, Evaluator};
+use super::{AbcProblem, Evaluator, KernelSums};
 use crate::error::Result;
-use crate::laws::Law;
+use crate::laws::{Law, MAX_PARAMS};
 use crate::numerics;
+use crate::prior::Candidate;
 use rayon::prelude::*;
 
 /// Scores candidates on the CPU. Thread count follows the ambient rayon pool.
@@ -116,13 +117,101 @@ impl Evaluator for CpuEvaluator {
         let problem = &self.problem;
         out.par_iter_mut().with_min_len(16).enumerate().for_each(|(k, slot)| {
             let c = problem.prior.candidate(problem.seed, population, start + k as u64);
-            let law = problem.prior.law(c.slot);
-            let mut p = [0.0f64; crate::laws::MAX_PARAMS];
-            for (dst, &src) in p.iter_mut().zip(&c.params) {
-                *dst = f64::from(src);
-            }
-            *slot = rho(problem, law, &p[..law.n_params()]);
+            *slot = rho_of_candidate(problem, &c);
         });
         Ok(())
+    }
+
+    fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
+        assert_eq!(candidates.len(), out.len(), "one ρ per candidate");
+        let problem = &self.problem;
+        out.par_iter_mut()
+            .with_min_len(16)
+            .zip(candidates)
+            .for_each(|(slot, c)| *slot = rho_of_candidate(problem, c));
+        Ok(())
+    }
+}
+
+/// ρ of a candidate: f64 arithmetic on its f32 parameters, widened exactly.
+fn rho_of_candidate(problem: &AbcProblem, c: &Candidate) -> f64 {
+    let law = problem.prior.law(c.slot);
+    let mut p = [0.0f64; MAX_PARAMS];
+    for (dst, &src) in p.iter_mut().zip(&c.params) {
+        *dst = f64::from(src);
+    }
+    rho(problem, law, &p[..law.n_params()])
+}
+
+/// Terms per block of the kernel sums: each block is a plain sum, blocks are added in groups,
+/// as in the GPU twin `shaders/kernel_sums.wgsl` (same loop shape, f64 here).
+const TERMS_PER_BLOCK: usize = 64;
+const BLOCKS_PER_GROUP: usize = 64;
+
+/// The CPU twin of `shaders/kernel_sums.wgsl` in f64: S_i = Σ_j w_j exp(−|y_i − x_j|²/2) for
+/// every target, rayon across targets, each sum in a fixed order (bit-identical on any number
+/// of threads).
+pub fn kernel_sums(sums: &KernelSums, out: &mut [f64]) {
+    assert_eq!(sums.targets.len(), out.len(), "one sum per target");
+    assert_eq!(sums.sources.len(), sums.weights.len(), "one weight per source");
+    out.par_iter_mut()
+        .with_min_len(8)
+        .zip(sums.targets)
+        .for_each(|(slot, y)| {
+            let (mut total, mut group, mut blocks) = (0.0f64, 0.0f64, 0usize);
+            for (xs, ws) in sums
+                .sources
+                .chunks(TERMS_PER_BLOCK)
+                .zip(sums.weights.chunks(TERMS_PER_BLOCK))
+            {
+                let mut s = 0.0f64;
+                for (x, &w) in xs.iter().zip(ws) {
+                    let mut r2 = 0.0f64;
+                    for k in 0..MAX_PARAMS {
+                        let d = y[k] - x[k];
+                        r2 += d * d;
+                    }
+                    s += w * numerics::exp(-0.5 * r2);
+                }
+                group += s;
+                blocks += 1;
+                if blocks == BLOCKS_PER_GROUP {
+                    total += group;
+                    group = 0.0;
+                    blocks = 0;
+                }
+            }
+            *slot = total + group;
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kernel_sums_are_the_weighted_gaussian_sums() {
+        // Sources 0, 1, 2 on the first axis with weights 0.5, 0.25, 0.25; target at 1:
+        // S = 0.5 e^{-1/2} + 0.25 + 0.25 e^{-1/2}.
+        let p = |x: f64| [x, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let sources = [p(0.0), p(1.0), p(2.0)];
+        let targets = [p(1.0), [1.0, 2.0, 0.0, 0.0, 0.0, 0.0]];
+        let mut out = [0.0; 2];
+        kernel_sums(
+            &KernelSums {
+                targets: &targets,
+                sources: &sources,
+                weights: &[0.5, 0.25, 0.25],
+            },
+            &mut out,
+        );
+        let e = (-0.5f64).exp();
+        assert!((out[0] - (0.75 * e + 0.25)).abs() <= 1e-15, "{}", out[0]);
+        // Two units off the axis multiplies every term by e^{-2}.
+        assert!(
+            (out[1] - (0.75 * e + 0.25) * (-2.0f64).exp()).abs() <= 1e-15,
+            "{}",
+            out[1]
+        );
     }
 }

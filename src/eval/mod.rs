@@ -6,7 +6,8 @@ pub mod gpu;
 
 use crate::data::Samples;
 use crate::error::Result;
-use crate::prior::Prior;
+use crate::laws::MAX_PARAMS;
+use crate::prior::{Candidate, Prior};
 
 /// Largest relative difference of ρ between the GPU (f32) and the CPU (f64) that bitrock
 /// accepts; candidates whose ρ lies this close to ε may be accepted by one backend only.
@@ -49,8 +50,20 @@ impl AbcProblem {
     }
 }
 
-/// Scores contiguous ranges of candidate indices. Implementations must return, for candidate
-/// i of population g, ρ of `problem.prior.candidate(seed, g, i)` against the data.
+/// Gaussian kernel sums S_i = Σ_j w_j exp(−|y_i − x_j|²/2) between targets y_i and weighted
+/// sources x_j, in whitened coordinates (unused coordinates 0): the O(N²) part of the SMC
+/// importance weights (see [`crate::abc::smc`]).
+#[derive(Clone, Copy, Debug)]
+pub struct KernelSums<'a> {
+    pub targets: &'a [[f64; MAX_PARAMS]],
+    pub sources: &'a [[f64; MAX_PARAMS]],
+    /// w_j, one per source.
+    pub weights: &'a [f64],
+}
+
+/// Scores candidates: contiguous ranges of the prior's candidate streams, or explicit
+/// parameter vectors. Implementations must return, for candidate i of population g, ρ of
+/// `problem.prior.candidate(seed, g, i)` against the data.
 pub trait Evaluator: Sync {
     /// Backend name for records (`cpu`, `gpu`).
     fn backend(&self) -> &'static str;
@@ -58,6 +71,16 @@ pub trait Evaluator: Sync {
     fn problem(&self) -> &AbcProblem;
     /// Writes ρ of candidates `start .. start + out.len()` of `population` into `out`.
     fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()>;
+    /// Writes ρ of explicit candidates (prior slot and f32 parameters, unused ones 0) into
+    /// `out` (as long as `candidates`). Every backend scores the same f32 values, so the
+    /// parity of [`Evaluator::score`] holds here too.
+    fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()>;
+    /// Writes the kernel sums of `sums` (one per target) into `out`. The default is the CPU
+    /// twin in f64, [`cpu::kernel_sums`].
+    fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {
+        cpu::kernel_sums(sums, out);
+        Ok(())
+    }
 }
 
 /// Which evaluator computes ρ.

@@ -7,7 +7,7 @@ use super::plot::{
 };
 use super::stats;
 use super::{CORRELATION_SIZE, FIGURE_SIZE, FigureInfo, MIN_CORRELATION_PARTICLES, Prepared, rpm};
-use crate::abc::posterior::{ENVELOPE_LEVEL, predictive_envelope, speed_grid};
+use crate::abc::posterior::{self, ENVELOPE_LEVEL, predictive_envelope, speed_grid};
 use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::stability::map;
@@ -948,7 +948,7 @@ impl Correlation {
                 .collect(),
             columns,
             weights: members.iter().map(|q| q.weight).collect(),
-            scatter: stats::law_samples(&r.last.particles, law, MAX_SCATTER)
+            scatter: posterior::law_samples(&r.last.particles, law, MAX_SCATTER)
                 .into_iter()
                 .map(|q| p.display(law, &q.params))
                 .collect(),

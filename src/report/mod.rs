@@ -193,7 +193,7 @@ struct RunView<'a> {
     run: &'a ReportRun,
     /// The last population.
     last: &'a Population,
-    /// Its particles, equally weighted (see [`stats::equally_weighted`]).
+    /// Its particles with their weights (the summaries and envelopes weigh them).
     particles: Cow<'a, [crate::abc::Particle]>,
     summary: PosteriorSummary,
     /// P(law | data) of the last population per law of `run.laws`, from the record.
@@ -273,7 +273,7 @@ impl<'a> Prepared<'a> {
                 .last()
                 .filter(|p| !p.particles.is_empty())
                 .ok_or_else(|| bad(format!("run '{}' has no population with particles", run.label)))?;
-            let particles = stats::equally_weighted(&last.particles);
+            let particles = Cow::Borrowed(&last.particles[..]);
             let summary = posterior::summarize(&particles, &run.laws);
             runs.push(RunView {
                 run,
@@ -320,7 +320,7 @@ impl<'a> Prepared<'a> {
                     law,
                     probability,
                     map_si: law_summary.map.clone(),
-                    samples_si: stats::law_samples(&reference.last.particles, law, s.samples_per_law)
+                    samples_si: posterior::law_samples(&reference.last.particles, law, s.samples_per_law)
                         .into_iter()
                         .map(|p| p.params.clone())
                         .collect(),

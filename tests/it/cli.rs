@@ -304,3 +304,77 @@ fn refused_abc_configurations_error_before_any_work() {
     assert_eq!(code, 2);
     assert!(stderr.contains("no parameter 'gamma'"), "{stderr}");
 }
+
+#[test]
+fn abc_runs_the_smc_sampler_and_refuses_its_bad_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("smc");
+    let (code, stdout, stderr) = run(&[
+        "abc",
+        "--sampler",
+        "smc",
+        "--particles",
+        "400",
+        "--eps-min",
+        "0.02",
+        "--backend",
+        "cpu",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["config"]["sampler"]["sampler"], "smc");
+    assert!((v["config"]["sampler"]["p_stay"].as_f64().unwrap() - 0.7).abs() < 1e-15);
+    let pops = v["populations"].as_array().unwrap();
+    assert!(pops.len() >= 3, "{}", pops.len());
+    for p in &pops[1..] {
+        // Weighted populations: ESS below N, weights summing to 1 in the particle CSV.
+        let ess = p["ess"].as_f64().unwrap();
+        assert!(ess > 0.0 && ess <= 400.0 + 1e-9, "{ess}");
+        assert!(
+            p["per_law"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|l| l.get("alive").is_some())
+        );
+    }
+    let g = pops.len() - 1;
+    let (code, csv, stderr) = run(&["export", out.to_str().unwrap(), "--population", &g.to_string()]);
+    assert_eq!(code, 0, "{stderr}");
+    let total: f64 = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(4).unwrap().parse::<f64>().unwrap())
+        .sum();
+    assert!((total - 1.0).abs() < 1e-9, "{total}");
+    // An SMC run continues as a rejection run does: one more population after the stored ones.
+    let (code, stdout, stderr) = run(&[
+        "abc",
+        "--resume",
+        out.to_str().unwrap(),
+        "--eps-min",
+        "0.015",
+        "--json",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let w: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(w["populations"].as_array().unwrap().len() > pops.len());
+    assert_eq!(&w["populations"].as_array().unwrap()[..pops.len()], &pops[..]);
+    for (flag, value) in [("--p-stay", "1.5"), ("--kernel-scale", "-1")] {
+        let (code, _, stderr) = run(&[
+            "abc",
+            "--sampler",
+            "smc",
+            flag,
+            value,
+            "--out",
+            dir.path().join("bad").to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(stderr.contains(flag), "{stderr}");
+    }
+}

@@ -324,3 +324,199 @@ fn the_stability_grid_agrees_with_the_cpu_cell_by_cell() {
         }
     }
 }
+
+/// Candidates of the prior stream, as explicit parameter vectors.
+fn stream_candidates(
+    problem: &AbcProblem,
+    population: u32,
+    start: u64,
+    count: usize,
+) -> Vec<bitrock::prior::Candidate> {
+    (0..count as u64)
+        .map(|k| problem.prior.candidate(problem.seed, population, start + k))
+        .collect()
+}
+
+#[test]
+fn explicit_parameters_score_as_the_stream_does_on_both_backends() {
+    if !gpu_available() {
+        return;
+    }
+    let problem = demo_problem(&Law::ALL, 31);
+    let count = 40_000;
+    let candidates = stream_candidates(&problem, 2, 500, count);
+    let cpu = CpuEvaluator::new(problem.clone());
+    let gpu = GpuEvaluator::new(problem.clone()).unwrap();
+    let (mut stream, mut cpu_params, mut gpu_params) = (vec![0.0; count], vec![0.0; count], vec![0.0; count]);
+    cpu.score(2, 500, &mut stream).unwrap();
+    cpu.score_params(&candidates, &mut cpu_params).unwrap();
+    gpu.score_params(&candidates, &mut gpu_params).unwrap();
+    // The CPU scores the same f32 parameters by the same code: the same bits.
+    for (a, b) in stream.iter().zip(&cpu_params) {
+        assert_eq!(a.to_bits(), b.to_bits());
+    }
+    let mut worst = 0.0f64;
+    for (g, c) in gpu_params.iter().zip(&cpu_params) {
+        worst = worst.max(((g - c) / c).abs());
+    }
+    eprintln!("score_params: largest relative difference of rho {worst:.2e} ({count} candidates, four laws)");
+    assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
+    // Past the 65,536-sample slicing: a long record through the explicit kernel.
+    let big = bitrock::bench::synthetic_problem(Law::M1, 100_000, 3);
+    let candidates = stream_candidates(&big, 0, 0, 256);
+    let (mut c, mut g) = (vec![0.0; 256], vec![0.0; 256]);
+    CpuEvaluator::new(big.clone())
+        .score_params(&candidates, &mut c)
+        .unwrap();
+    GpuEvaluator::new(big)
+        .unwrap()
+        .score_params(&candidates, &mut g)
+        .unwrap();
+    let worst = g.iter().zip(&c).map(|(g, c)| ((g - c) / c).abs()).fold(0.0, f64::max);
+    eprintln!("score_params, D = 100,000: largest relative difference of rho {worst:.2e}");
+    assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
+}
+
+/// Largest relative difference between the GPU kernel sums and the CPU twin allowed: f32
+/// coordinates (relative 6e-8 of |y| ≈ 3) and f32 exp make each term's relative error about
+/// 1e-6 for the distances that carry the sum. Measured on lavapipe: 3.5e-7 largest, 8e-8 median.
+const KERNEL_SUM_TOLERANCE: f64 = 1e-5;
+
+#[test]
+fn kernel_sums_agree_with_the_cpu_twin() {
+    if !gpu_available() {
+        return;
+    }
+    use bitrock::eval::KernelSums;
+    // 70,000 sources (three dispatches of 32,768) in 4 whitened dimensions, standard normal; 3,000
+    // targets drawn from the same cloud, as SMC proposals are. Weights positive, normalised.
+    let normal = |i: u32, j: u32| {
+        let w = bitrock::rng::philox4x32_10([i, j, 0, 0], [5, 6]);
+        let u1 = (f64::from(w[0]) + 0.5) / 4_294_967_296.0;
+        let u2 = f64::from(w[1]) / 4_294_967_296.0;
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    };
+    let point = |i: u32| -> [f64; 6] { std::array::from_fn(|j| if j < 4 { normal(i, j as u32) } else { 0.0 }) };
+    let sources: Vec<[f64; 6]> = (0..70_000).map(point).collect();
+    let targets: Vec<[f64; 6]> = (100_000..103_000).map(point).collect();
+    let raw: Vec<f64> = (0..70_000u32).map(|i| 0.5 + normal(i, 9).abs()).collect();
+    let total: f64 = raw.iter().sum();
+    let weights: Vec<f64> = raw.iter().map(|w| w / total).collect();
+    let sums = KernelSums {
+        targets: &targets,
+        sources: &sources,
+        weights: &weights,
+    };
+    let cpu = CpuEvaluator::new(demo_problem(&[Law::M2], 1));
+    let gpu = GpuEvaluator::new(demo_problem(&[Law::M2], 1)).unwrap();
+    let (mut c, mut g) = (vec![0.0; targets.len()], vec![0.0; targets.len()]);
+    cpu.kernel_sums(&sums, &mut c).unwrap();
+    gpu.kernel_sums(&sums, &mut g).unwrap();
+    let mut rel: Vec<f64> = g.iter().zip(&c).map(|(g, c)| ((g - c) / c).abs()).collect();
+    rel.sort_by(f64::total_cmp);
+    let (worst, median) = (rel[rel.len() - 1], rel[rel.len() / 2]);
+    eprintln!("kernel sums: largest relative difference {worst:.2e}, median {median:.2e} (3,000 × 70,000, d = 4)");
+    assert!(worst <= KERNEL_SUM_TOLERANCE, "{worst:e}");
+    assert!(c.iter().all(|&s| s > 0.0));
+}
+
+#[test]
+fn an_smc_run_gives_the_same_populations_on_both_backends() {
+    use bitrock::abc::smc::{self, SmcConfig, WeightsOn};
+    if !gpu_available() {
+        return;
+    }
+    let problem = demo_problem(&Law::ALL, 21);
+    let config = SmcConfig {
+        base: RejectionConfig {
+            particles: 1000,
+            eps_min: 0.009,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let cpu = smc::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
+    let gpu_run = smc::run(&GpuEvaluator::new(problem.clone()).unwrap(), &config).unwrap();
+    assert!(cpu.populations.len() >= 6, "{}", cpu.populations.len());
+    let reference = CpuEvaluator::new(problem.clone());
+    let mut identical = 0;
+    let mut exceptions = 0;
+    for (c, g) in cpu.populations.iter().zip(&gpu_run.populations) {
+        let (ec, eg) = (
+            c.record.epsilon.unwrap_or(f64::INFINITY),
+            g.record.epsilon.unwrap_or(f64::INFINITY),
+        );
+        assert!(ec == eg || ((ec - eg) / ec).abs() <= PARITY_TOLERANCE, "ε {ec} vs {eg}");
+        let ci: Vec<u64> = c.particles.iter().map(|p| p.index).collect();
+        let gi: Vec<u64> = g.particles.iter().map(|p| p.index).collect();
+        if ci != gi {
+            // A decision taken otherwise: it must be a candidate within the parity tolerance
+            // of ε (or past the end of the other side's scan). From here on the populations
+            // legitimately differ (other ancestors, other kernels).
+            let (cs, gs): (std::collections::BTreeSet<u64>, std::collections::BTreeSet<u64>) =
+                (ci.iter().copied().collect(), gi.iter().copied().collect());
+            let last = *ci.last().unwrap().min(gi.last().unwrap());
+            for &index in cs.symmetric_difference(&gs) {
+                let p = c
+                    .particles
+                    .iter()
+                    .chain(&g.particles)
+                    .find(|p| p.index == index)
+                    .unwrap();
+                let slot = problem.prior.boxes.iter().position(|b| b.law == p.law).unwrap();
+                let mut params = [0.0f32; 6];
+                for (d, &s) in params.iter_mut().zip(&p.params) {
+                    *d = s as f32;
+                }
+                let mut rho = [0.0];
+                reference
+                    .score_params(&[bitrock::prior::Candidate { slot, params }], &mut rho)
+                    .unwrap();
+                let near = (rho[0] - ec).abs() <= 2.0 * PARITY_TOLERANCE * ec;
+                assert!(near || index > last, "candidate {index}: rho {} vs ε {ec}", rho[0]);
+                exceptions += 1;
+            }
+            break;
+        }
+        // Same proposals and host weights: parameters and weights to the bit, ρ within tolerance.
+        for (a, b) in c.particles.iter().zip(&g.particles) {
+            assert_eq!(a.params, b.params);
+            assert_eq!(a.weight.to_bits(), b.weight.to_bits(), "weight of particle {}", a.index);
+            assert!(((a.rho - b.rho) / a.rho).abs() <= PARITY_TOLERANCE);
+        }
+        assert_eq!(c.record.per_law, g.record.per_law);
+        identical += 1;
+    }
+    eprintln!(
+        "SMC: {identical} of {} populations alike on both backends; {exceptions} near-threshold exceptions",
+        cpu.populations.len()
+    );
+    assert!(identical == cpu.populations.len() || exceptions > 0);
+    if exceptions == 0 {
+        assert_eq!(cpu.populations.len(), gpu_run.populations.len());
+    }
+
+    // Weights from the GPU kernel: population 1's proposals depend on population 0 only (equal
+    // weights), so its particles are the CPU's, and its weights within the kernel tolerance.
+    let on_gpu = SmcConfig {
+        weights_on: WeightsOn::Evaluator,
+        base: RejectionConfig {
+            max_populations: 2,
+            ..config.base.clone()
+        },
+        ..config
+    };
+    let g = smc::run(&GpuEvaluator::new(problem).unwrap(), &on_gpu).unwrap();
+    let (a, b) = (&cpu.populations[1], &g.populations[1]);
+    let worst = a
+        .particles
+        .iter()
+        .zip(&b.particles)
+        .map(|(x, y)| {
+            assert_eq!(x.index, y.index);
+            ((x.weight - y.weight) / x.weight).abs()
+        })
+        .fold(0.0, f64::max);
+    eprintln!("SMC weights from the GPU kernel: largest relative difference {worst:.2e}");
+    assert!(worst <= KERNEL_SUM_TOLERANCE, "{worst:e}");
+}

@@ -6,6 +6,7 @@ mod fit;
 mod gpu;
 mod laws;
 mod report;
+mod smc;
 mod stability;
 mod store;
 mod support;

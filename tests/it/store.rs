@@ -132,14 +132,37 @@ fn store_round_trip_is_bit_exact() {
     assert!((probability - 1.0).abs() < 1e-12);
 }
 
+/// The same run with the SMC sampler.
+fn smc(config: RunConfig) -> RunConfig {
+    let SamplerConfig::Rejection(base) = config.sampler else {
+        unreachable!("config() builds rejection runs")
+    };
+    RunConfig {
+        sampler: SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
+            base,
+            ..Default::default()
+        }),
+        ..config
+    }
+}
+
 #[test]
 fn continuing_a_run_equals_the_uninterrupted_run() {
+    continuing_equals_uninterrupted(|c| c);
+}
+
+#[test]
+fn continuing_an_smc_run_equals_the_uninterrupted_run() {
+    continuing_equals_uninterrupted(smc);
+}
+
+fn continuing_equals_uninterrupted(sampler: fn(RunConfig) -> RunConfig) {
     let dir = tempfile::tempdir().unwrap();
-    let whole = start(&dir.path().join("whole"), config(800, 6, 0.0));
+    let whole = start(&dir.path().join("whole"), sampler(config(800, 6, 0.0)));
     assert_eq!(whole.run.stop, StopReason::MaxPopulations);
     // Stopped after 3 populations, then continued to 6.
     let part_dir = dir.path().join("part");
-    let part = start(&part_dir, config(800, 3, 0.0));
+    let part = start(&part_dir, sampler(config(800, 3, 0.0)));
     assert_eq!(part.run.populations.len(), 3);
     let more = Continuation {
         max_populations: Some(6),

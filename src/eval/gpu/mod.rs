@@ -7,6 +7,7 @@
 //! case-insensitive substring of the adapter's name); its own limits are requested.
 
 pub mod candidates;
+pub mod kernel_sums;
 pub mod residual;
 pub mod stability;
 
@@ -19,10 +20,18 @@ const PHILOX_WGSL: &str = include_str!("../../../shaders/shared/philox.wgsl");
 const JOB_WGSL: &str = include_str!("../../../shaders/shared/job.wgsl");
 const CANDIDATE_WGSL: &str = include_str!("../../../shaders/shared/candidate.wgsl");
 const LAWS_WGSL: &str = include_str!("../../../shaders/shared/laws.wgsl");
+const SSR_WGSL: &str = include_str!("../../../shaders/shared/ssr.wgsl");
 
-/// The complete source of each kernel: shared files, then the kernel.
+/// The complete source of every kernel: shared files, then the kernel.
 pub fn kernel_sources() -> Vec<(&'static str, String)> {
-    vec![("residual", residual_source()), ("candidates", candidates_source())]
+    vec![
+        ("residual", residual_source()),
+        ("candidates", candidates_source()),
+        ("score_params", score_params_source()),
+        ("kernel_sums", kernel_sums_source()),
+        ("slopes", slopes_source()),
+        ("stability", stability_source()),
+    ]
 }
 
 fn residual_source() -> String {
@@ -31,9 +40,24 @@ fn residual_source() -> String {
         JOB_WGSL,
         CANDIDATE_WGSL,
         LAWS_WGSL,
+        SSR_WGSL,
         include_str!("../../../shaders/residual.wgsl"),
     ]
     .join("\n")
+}
+
+fn score_params_source() -> String {
+    [
+        JOB_WGSL,
+        LAWS_WGSL,
+        SSR_WGSL,
+        include_str!("../../../shaders/score_params.wgsl"),
+    ]
+    .join("\n")
+}
+
+fn kernel_sums_source() -> String {
+    [LAWS_WGSL, include_str!("../../../shaders/kernel_sums.wgsl")].join("\n")
 }
 
 fn slopes_source() -> String {

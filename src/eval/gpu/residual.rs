@@ -1,10 +1,15 @@
 //! The GPU evaluator: `shaders/residual.wgsl` regenerates each candidate from
 //! (seed, population, index), one invocation per candidate, and returns its Σ(y − r·T)² in f32;
 //! the host divides by Σy² (f64). Data, prior, pipeline and bind group are set up once.
+//! `shaders/score_params.wgsl` scores explicit parameter vectors against the same data (its
+//! pipeline is built on first use), and `shaders/kernel_sums.wgsl` computes the SMC weights'
+//! kernel sums (see [`super::kernel_sums`]).
 
 use super::{GpuContext, GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
 use crate::error::Result;
-use crate::eval::{AbcProblem, Evaluator};
+use crate::eval::{AbcProblem, Evaluator, KernelSums};
+use crate::prior::Candidate;
+use bytemuck::{Pod, Zeroable};
 use std::sync::Mutex;
 
 /// Samples scored per dispatch: lavapipe ends any loop after 65,535 iterations per invocation,
@@ -18,6 +23,27 @@ struct Resources {
     staging: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
+    /// Speed, torque and ratio columns (bindings 2-4 of both scoring kernels).
+    data: Vec<wgpu::Buffer>,
+    has_ratio: bool,
+    /// The explicit-parameter kernel, built on first use.
+    params: Option<ParamsResources>,
+}
+
+/// Pipeline and buffers of `shaders/score_params.wgsl`.
+struct ParamsResources {
+    proposals: wgpu::Buffer,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+}
+
+/// Host twin of `Proposal` in shaders/score_params.wgsl. Keep in sync.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct GpuProposal {
+    law: u32,
+    params: [f32; 6],
+    _pad: u32,
 }
 
 /// Scores candidates on the GPU.
@@ -27,6 +53,8 @@ pub struct GpuEvaluator {
     data_len: u32,
     /// Candidates per dispatch at most.
     chunk: usize,
+    /// Explicit candidates per dispatch at most (32 bytes each, within the binding limit).
+    params_chunk: usize,
     resources: Mutex<Resources>,
 }
 
@@ -102,12 +130,16 @@ impl GpuEvaluator {
             context,
             data_len: d as u32,
             chunk,
+            params_chunk: chunk.min(1 << 20).min((max_binding / 32) as usize),
             resources: Mutex::new(Resources {
                 job,
                 ssr,
                 staging,
                 pipeline,
                 bind_group,
+                data,
+                has_ratio,
+                params: None,
             }),
         })
     }
@@ -120,32 +152,109 @@ impl GpuEvaluator {
     /// Σ(y − r·T)² (f32, as the kernel returns it) of candidates `start ..` into `out`.
     pub fn sum_sq_residuals(&self, population: u32, start: u64, out: &mut [f32]) -> std::result::Result<(), GpuError> {
         let res = self.resources.lock().expect("GPU resources");
-        let ctx = self.context;
         for (c, chunk) in out.chunks_mut(self.chunk).enumerate() {
             let first = start + (c * self.chunk) as u64;
-            let count = chunk.len() as u32;
-            let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
-            let job = Job::new(population, first, count, row_width);
-            // Samples in slices of SAMPLES_PER_DISPATCH, each dispatch adding to the last.
-            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("residual"),
-            });
-            for s0 in (0..self.data_len).step_by(SAMPLES_PER_DISPATCH as usize) {
-                let slice = job.samples(s0..(s0 + SAMPLES_PER_DISPATCH).min(self.data_len));
-                ctx.queue.write_buffer(&res.job, 0, bytemuck::bytes_of(&slice));
-                super::encode_dispatch(&mut encoder, "residual", &res.pipeline, &res.bind_group, (x, y));
-                if s0 + SAMPLES_PER_DISPATCH < self.data_len {
-                    // The next slice rewrites the job uniform: submit this one first.
-                    ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
-                    encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("residual"),
-                    });
-                }
+            self.dispatch_slices(&res, &res.pipeline, &res.bind_group, population, first, chunk)?;
+        }
+        Ok(())
+    }
+
+    /// Runs `pipeline` over `out.len()` candidates from `first` (Job semantics), the samples in
+    /// slices of SAMPLES_PER_DISPATCH, each dispatch adding to the last, and reads back SSR.
+    fn dispatch_slices(
+        &self,
+        res: &Resources,
+        pipeline: &wgpu::ComputePipeline,
+        bind_group: &wgpu::BindGroup,
+        population: u32,
+        first: u64,
+        out: &mut [f32],
+    ) -> std::result::Result<(), GpuError> {
+        let ctx = self.context;
+        let count = out.len() as u32;
+        let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
+        let job = Job::new(population, first, count, row_width);
+        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("residual"),
+        });
+        for s0 in (0..self.data_len).step_by(SAMPLES_PER_DISPATCH as usize) {
+            let slice = job.samples(s0..(s0 + SAMPLES_PER_DISPATCH).min(self.data_len));
+            ctx.queue.write_buffer(&res.job, 0, bytemuck::bytes_of(&slice));
+            super::encode_dispatch(&mut encoder, "residual", pipeline, bind_group, (x, y));
+            if s0 + SAMPLES_PER_DISPATCH < self.data_len {
+                // The next slice rewrites the job uniform: submit this one first.
+                ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
+                encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("residual"),
+                });
             }
-            let bytes = 4 * u64::from(count);
-            encoder.copy_buffer_to_buffer(&res.ssr, 0, &res.staging, 0, bytes);
-            let raw = ctx.finish_and_read(encoder, &res.staging, bytes)?;
-            chunk.copy_from_slice(bytemuck::cast_slice(&raw));
+        }
+        let bytes = 4 * u64::from(count);
+        encoder.copy_buffer_to_buffer(&res.ssr, 0, &res.staging, 0, bytes);
+        let raw = ctx.finish_and_read(encoder, &res.staging, bytes)?;
+        out.copy_from_slice(bytemuck::cast_slice(&raw));
+        Ok(())
+    }
+
+    /// Builds the explicit-parameter pipeline on first use (a rejection run never needs it).
+    fn params_resources<'a>(&self, res: &'a mut Resources) -> std::result::Result<&'a ParamsResources, GpuError> {
+        if res.params.is_none() {
+            let ctx = self.context;
+            let proposals = ctx.buffer(
+                "proposals",
+                (self.params_chunk * size_of::<GpuProposal>()) as u64,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            )?;
+            let entries = [
+                buffer_entry(0, STORAGE_READ),
+                buffer_entry(1, UNIFORM),
+                buffer_entry(2, STORAGE_READ),
+                buffer_entry(3, STORAGE_READ),
+                buffer_entry(4, STORAGE_READ),
+                buffer_entry(5, STORAGE_WRITE),
+            ];
+            let constants = [("HAS_RATIO", if res.has_ratio { 1.0 } else { 0.0 })];
+            let (pipeline, layout) =
+                ctx.pipeline("score_params", &super::score_params_source(), &entries, &constants)?;
+            let bind_group = ctx.bind_group(
+                "score_params",
+                &layout,
+                &[&proposals, &res.job, &res.data[0], &res.data[1], &res.data[2], &res.ssr],
+            )?;
+            res.params = Some(ParamsResources {
+                proposals,
+                pipeline,
+                bind_group,
+            });
+        }
+        Ok(res.params.as_ref().expect("just built"))
+    }
+
+    /// Σ(y − r·T)² (f32) of explicit candidates into `out`.
+    pub fn sum_sq_residuals_of(&self, candidates: &[Candidate], out: &mut [f32]) -> std::result::Result<(), GpuError> {
+        let mut guard = self.resources.lock().expect("GPU resources");
+        self.params_resources(&mut guard)?;
+        let res = &*guard;
+        let params = res.params.as_ref().expect("built above");
+        for (cands, chunk) in candidates
+            .chunks(self.params_chunk)
+            .zip(out.chunks_mut(self.params_chunk))
+        {
+            let upload: Vec<GpuProposal> = cands
+                .iter()
+                .map(|c| GpuProposal {
+                    law: crate::laws::Law::ALL
+                        .iter()
+                        .position(|&l| l == self.problem.prior.law(c.slot))
+                        .expect("law") as u32,
+                    params: c.params,
+                    _pad: 0,
+                })
+                .collect();
+            self.context
+                .queue
+                .write_buffer(&params.proposals, 0, bytemuck::cast_slice(&upload));
+            self.dispatch_slices(res, &params.pipeline, &params.bind_group, 0, 0, chunk)?;
         }
         Ok(())
     }
@@ -166,6 +275,21 @@ impl Evaluator for GpuEvaluator {
         for (rho, s) in out.iter_mut().zip(ssr) {
             *rho = f64::from(s) / self.problem.sum_sq_torque;
         }
+        Ok(())
+    }
+
+    fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
+        assert_eq!(candidates.len(), out.len(), "one ρ per candidate");
+        let mut ssr = vec![0.0f32; out.len()];
+        self.sum_sq_residuals_of(candidates, &mut ssr)?;
+        for (rho, s) in out.iter_mut().zip(ssr) {
+            *rho = f64::from(s) / self.problem.sum_sq_torque;
+        }
+        Ok(())
+    }
+
+    fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {
+        super::kernel_sums::kernel_sums(self.context, sums, out)?;
         Ok(())
     }
 }

@@ -1,0 +1,32 @@
+// Scores explicit parameter vectors uploaded by the host (the SMC sampler's perturbed
+// proposals, which need log/cos/sqrt and are therefore generated once, on the host): invocation
+// k writes SSR = Σ (y - r T(w))² of proposal job.start.x + k over the job's slice of the data
+// (shared/ssr.wgsl); the host divides by Σy² (f64). Needs shared/job.wgsl, shared/laws.wgsl,
+// shared/ssr.wgsl (bindings 2-4).
+
+// One proposal: law id (0 = m1 .. 3 = m4) and its parameters (unused ones 0). Keep in sync
+// with `GpuProposal` in src/eval/gpu/residual.rs.
+struct Proposal {
+    law: u32,
+    params: array<f32, 6>,
+    _pad: u32,
+}
+
+@group(0) @binding(0) var<storage, read> proposals: array<Proposal>;
+@group(0) @binding(1) var<uniform> job: Job;
+@group(0) @binding(5) var<storage, read_write> ssr: array<f32>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = gid.x + gid.y * job.row_width;
+    if (k >= job.count) {
+        return;
+    }
+    let p = proposals[job.start.x + k];
+    let sum = slice_ssr(p.law, p.params, job.data_start, job.data_end);
+    if (job.accumulate == 1u) {
+        ssr[k] = ssr[k] + sum;
+    } else {
+        ssr[k] = sum;
+    }
+}

@@ -1,0 +1,840 @@
+//! ABC-SMC with model selection (Toni et al. 2009; Toni & Stumpf 2010): each population after
+//! the first perturbs the previous one instead of drawing from the prior, and importance
+//! weights correct for the proposal.
+//!
+//! **Population 0** is the rejection sampler's population 0 at ε_0 (∞ unless a start is
+//! given): the same stream, so the same particles, each of weight 1/N.
+//!
+//! **Proposal i of population t ≥ 1** is a pure function of (seed, t, i), generated once, on
+//! the host, from Philox blocks 0-2 of counter (i, t) (see [`crate::rng`]); u = (w + ½)·2⁻³²
+//! turns a word w into a uniform on (0, 1):
+//! 1. a law m′ by inverse CDF of the previous population's law probabilities P(m′) (word 0);
+//! 2. the model kernel K_M: stay at m′ with probability `p_stay` (default 0.7), otherwise jump
+//!    uniformly to another *alive* law (words 1, 2); with one alive law, always stay;
+//! 3. an ancestor φ_j among the previous particles of the chosen law m, by inverse CDF of their
+//!    weights (word 3);
+//! 4. φ = φ_j + L_m z, z ~ N(0, I) by Box–Muller from words 4-9 in pairs (w_a, w_b):
+//!    u_a = (w_a + ½)·2⁻³², u_b = w_b·2⁻³², z = √(−2 ln u_a) (cos 2πu_b, sin 2πu_b), f64;
+//! 5. φ rounded to f32 (what both backends score, and the particle's parameters). A proposal
+//!    outside the prior box is *counted as rejected*: it is a draw of its law, is not scored,
+//!    and is not accepted. (Equivalent to redrawing: the accepted particles are the first N
+//!    in index order that are inside the box and below ε.)
+//!
+//! **Kernel**: per law, L_m L_mᵀ = Σ_m = `kernel_scale` · C_m + (10⁻⁴ · box width)² I, where C_m
+//! is the weighted covariance (divisor Σw, no bias correction) of the previous particles of m.
+//! The default scale 2 is Beaumont et al. (2009)'s choice, twice the covariance; the tiny
+//! diagonal keeps Σ_m positive definite for a law with one particle or a parameter all its
+//! particles share. Parameters with a zero-width box are fixed and take no part.
+//!
+//! **Weights** of particle (m, φ): w ∝ π(m) π(φ|m) / q(m, φ), with the proposal density
+//! q(m, φ) = [Σ_m′ P(m′) K_M(m|m′)] · Σ_{j ∈ m} (w_j / P(m)) N(φ; φ_j, Σ_m) (the model-kernel
+//! term included), normalised per population so that Σw = 1; a law's probability is its
+//! share of the weight. The O(N²) sums Σ_j w_j exp(−|L⁻¹(φ − φ_j)|²/2) are
+//! [`Evaluator::kernel_sums`] on whitened coordinates.
+//!
+//! **Where the weights are computed, and why on the host by default.** Weights steer the next
+//! population (law probabilities, ancestor choice by inverse CDF, kernel covariance), so a
+//! difference in their last bits could pick another ancestor and from there change every later
+//! population. With [`WeightsOn::Host`] (the default) they are the f64 CPU twin on every
+//! backend: proposals and weights are then bit-identical across backends, and populations
+//! differ only where a ρ within [`PARITY_TOLERANCE`] of ε is decided otherwise (counted in
+//! `near_threshold`; tests/it/gpu.rs checks this on a whole run). [`WeightsOn::Evaluator`] uses
+//! the evaluator's kernel (the GPU's f32 kernel, relative difference below 1e-6 from the twin):
+//! faster for large N, but a GPU run then no longer reproduces the CPU run's later populations.
+//!
+//! **Tolerances**: ε_{t+1} = the *unweighted* median of population t's ρ (the paper's rule and
+//! the rejection sampler's; it does not depend on the weights, so not on where they were
+//! computed), or the user's schedule. Stopping rules are the rejection sampler's, in the same
+//! order: eps_min, schedule, max populations, minimum projected acceptance (the fraction of
+//! population t below ε_{t+1} times its acceptance rate), max draws and wall time (the
+//! population in progress is dropped).
+//!
+//! Populations do not depend on batch size, thread count or backend (up to near-threshold
+//! decisions), and continuing from completed populations gives exactly what an uninterrupted
+//! run gives: population t depends only on the seed, data, configuration and population t − 1
+//! (particles and weights).
+
+use super::rejection::{self, Mode, RejectionConfig, next_epsilon, slot_of};
+use super::{LawRecord, Observer, Particle, Population, PopulationRecord, Progress, Run, Silent, StopReason};
+use crate::error::{Error, Result};
+use crate::eval::{Evaluator, KernelSums, PARITY_TOLERANCE};
+use crate::laws::MAX_PARAMS;
+use crate::numerics::compensated_sum;
+use crate::prior::{Candidate, Prior};
+use crate::rng::{candidate_counter, key_of_seed, philox4x32_10};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Where the importance weights' kernel sums are computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum WeightsOn {
+    /// The f64 CPU twin, whatever the evaluator: runs are identical across backends.
+    Host,
+    /// The evaluator's kernel (the GPU's when it scores): faster for large N, but GPU runs
+    /// then differ from CPU runs after the first population.
+    Evaluator,
+}
+
+/// Configuration of an SMC run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SmcConfig {
+    /// N, tolerances, stopping rules, batch limit and wall time, as for rejection (population
+    /// 0 is a rejection population; `mode` is not used).
+    pub base: RejectionConfig,
+    /// Probability that the model kernel keeps the ancestor's law.
+    pub p_stay: f64,
+    /// Perturbation covariance = kernel_scale × the weighted covariance of the law's particles.
+    pub kernel_scale: f64,
+    pub weights_on: WeightsOn,
+}
+
+impl Default for SmcConfig {
+    fn default() -> Self {
+        Self {
+            base: RejectionConfig::default(),
+            p_stay: 0.7,
+            kernel_scale: 2.0,
+            weights_on: WeightsOn::Host,
+        }
+    }
+}
+
+impl SmcConfig {
+    /// Refuses configurations that cannot run, naming the flag, before any work.
+    pub fn validate(&self) -> Result<()> {
+        self.base.validate()?;
+        if !(0.0..=1.0).contains(&self.p_stay) {
+            return Err(Error::arg(
+                "--p-stay",
+                format!("must lie in [0, 1], got {}", self.p_stay),
+            ));
+        }
+        if !(self.kernel_scale.is_finite() && self.kernel_scale > 0.0) {
+            return Err(Error::arg(
+                "--kernel-scale",
+                format!("must be a positive number, got {}", self.kernel_scale),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Relative floor of the kernel's standard deviation: 10⁻⁴ of the prior box width.
+const KERNEL_FLOOR: f64 = 1e-4;
+
+/// A word as a uniform on (0, 1), f64: (w + ½)·2⁻³².
+#[inline]
+fn open_unit(word: u32) -> f64 {
+    (f64::from(word) + 0.5) * (1.0 / 4_294_967_296.0)
+}
+
+/// Two standard normals from two words by Box–Muller (see the module documentation).
+#[inline]
+fn box_muller(a: u32, b: u32) -> [f64; 2] {
+    let r = (-2.0 * open_unit(a).ln()).sqrt();
+    let angle = std::f64::consts::TAU * (f64::from(b) * (1.0 / 4_294_967_296.0));
+    [r * angle.cos(), r * angle.sin()]
+}
+
+/// The first index whose cumulative value exceeds `u` (inverse CDF; `cdf` ends at ≥ u).
+#[inline]
+fn inverse_cdf(cdf: &[f64], u: f64) -> usize {
+    cdf.partition_point(|&c| c <= u).min(cdf.len() - 1)
+}
+
+/// The perturbation kernel of one alive law, built from the previous population.
+#[derive(Clone, Debug)]
+struct LawKernel {
+    /// Parameters with a box of positive width (the others are fixed).
+    free: Vec<usize>,
+    /// Weighted mean of the free parameters (the centre of the whitened coordinates).
+    mean: Vec<f64>,
+    /// Lower-triangular Cholesky factor of Σ, row-major k × k (k = free.len()).
+    chol: Vec<f64>,
+    /// log det L = Σ log L_ii.
+    log_det_l: f64,
+    /// Indices of the law's particles in the previous population.
+    members: Vec<usize>,
+    /// Cumulative within-law weights, normalised to end at 1.
+    cdf: Vec<f64>,
+    /// P(m): the law's share of the previous population's weight.
+    share: f64,
+    /// log of 1 / prior box volume over the free parameters.
+    log_prior_density: f64,
+}
+
+/// Weighted mean and covariance (divisor Σw) of `points` (k columns), compensated sums.
+fn weighted_moments(points: &[Vec<f64>], weights: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let k = points.first().map_or(0, Vec::len);
+    let total = compensated_sum(weights.iter().copied());
+    let mean: Vec<f64> = (0..k)
+        .map(|a| compensated_sum(points.iter().zip(weights).map(|(p, w)| w * p[a])) / total)
+        .collect();
+    let mut cov = vec![0.0; k * k];
+    for a in 0..k {
+        for b in 0..=a {
+            let c = compensated_sum(
+                points
+                    .iter()
+                    .zip(weights)
+                    .map(|(p, w)| w * (p[a] - mean[a]) * (p[b] - mean[b])),
+            ) / total;
+            cov[a * k + b] = c;
+            cov[b * k + a] = c;
+        }
+    }
+    (mean, cov)
+}
+
+/// Lower-triangular L with L Lᵀ = `a` (row-major k × k); `None` unless positive definite.
+fn cholesky(a: &[f64], k: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; k * k];
+    for i in 0..k {
+        for j in 0..=i {
+            let s = a[i * k + j] - (0..j).map(|m| l[i * k + m] * l[j * k + m]).sum::<f64>();
+            if i == j {
+                if !(s > 0.0 && s.is_finite()) {
+                    return None;
+                }
+                l[i * k + i] = s.sqrt();
+            } else {
+                l[i * k + j] = s / l[j * k + j];
+            }
+        }
+    }
+    Some(l)
+}
+
+impl LawKernel {
+    fn new(prior: &Prior, slot: usize, previous: &[Particle], members: Vec<usize>, scale: f64) -> Result<Self> {
+        let bx = &prior.boxes[slot];
+        let free: Vec<usize> = (0..bx.lower.len()).filter(|&j| bx.upper[j] > bx.lower[j]).collect();
+        let k = free.len();
+        let weights: Vec<f64> = members.iter().map(|&i| previous[i].weight).collect();
+        let points: Vec<Vec<f64>> = members
+            .iter()
+            .map(|&i| free.iter().map(|&j| previous[i].params[j]).collect())
+            .collect();
+        let (mean, cov) = weighted_moments(&points, &weights);
+        let mut sigma: Vec<f64> = cov.iter().map(|c| scale * c).collect();
+        for (a, &j) in free.iter().enumerate() {
+            let floor = KERNEL_FLOOR * (f64::from(bx.upper[j]) - f64::from(bx.lower[j]));
+            sigma[a * k + a] += floor * floor;
+        }
+        let chol = cholesky(&sigma, k).ok_or_else(|| {
+            Error::Numerical(format!(
+                "the SMC kernel covariance of {} is not positive definite",
+                bx.law
+            ))
+        })?;
+        let log_det_l = (0..k).map(|a| chol[a * k + a].ln()).sum();
+        let share = compensated_sum(weights.iter().copied());
+        let mut running = 0.0;
+        let mut cdf: Vec<f64> = weights
+            .iter()
+            .map(|w| {
+                running += w;
+                running
+            })
+            .collect();
+        let last = *cdf.last().expect("an alive law has a particle");
+        for c in &mut cdf {
+            *c /= last;
+        }
+        let log_prior_density = -free
+            .iter()
+            .map(|&j| (f64::from(bx.upper[j]) - f64::from(bx.lower[j])).ln())
+            .sum::<f64>();
+        Ok(Self {
+            free,
+            mean,
+            chol,
+            log_det_l,
+            members,
+            cdf,
+            share,
+            log_prior_density,
+        })
+    }
+
+    /// Whitened coordinates L⁻¹(φ − mean) of the free parameters of `params`, zero-padded.
+    fn whiten(&self, params: &[f64]) -> [f64; MAX_PARAMS] {
+        let k = self.free.len();
+        let mut y = [0.0; MAX_PARAMS];
+        for a in 0..k {
+            let s = (params[self.free[a]] - self.mean[a]) - (0..a).map(|b| self.chol[a * k + b] * y[b]).sum::<f64>();
+            y[a] = s / self.chol[a * k + a];
+        }
+        y
+    }
+}
+
+/// Everything a population's proposals depend on: one kernel per alive law.
+struct Kernels {
+    /// Per prior slot: the law's kernel, `None` for a dead law.
+    laws: Vec<Option<LawKernel>>,
+    /// Slots of the alive laws, ascending.
+    alive: Vec<usize>,
+    /// Cumulative law probabilities over `alive`, normalised to end at 1.
+    law_cdf: Vec<f64>,
+    p_stay: f64,
+}
+
+impl Kernels {
+    fn new(prior: &Prior, previous: &[Particle], config: &SmcConfig) -> Result<Self> {
+        let mut members = vec![Vec::new(); prior.boxes.len()];
+        for (i, p) in previous.iter().enumerate() {
+            members[slot_of(prior, p.law)].push(i);
+        }
+        let laws: Vec<Option<LawKernel>> = members
+            .into_iter()
+            .enumerate()
+            .map(|(slot, m)| {
+                (!m.is_empty())
+                    .then(|| LawKernel::new(prior, slot, previous, m, config.kernel_scale))
+                    .transpose()
+            })
+            .collect::<Result<_>>()?;
+        let alive: Vec<usize> = (0..laws.len()).filter(|&s| laws[s].is_some()).collect();
+        let mut running = 0.0;
+        let mut law_cdf: Vec<f64> = alive
+            .iter()
+            .map(|&s| {
+                running += laws[s].as_ref().expect("alive").share;
+                running
+            })
+            .collect();
+        let last = *law_cdf.last().expect("a population has particles");
+        for c in &mut law_cdf {
+            *c /= last;
+        }
+        Ok(Self {
+            laws,
+            alive,
+            law_cdf,
+            p_stay: config.p_stay,
+        })
+    }
+
+    /// K_M(m | m′) over alive laws.
+    fn model_kernel(&self, to: usize, from: usize) -> f64 {
+        let a = self.alive.len();
+        if a == 1 {
+            1.0
+        } else if to == from {
+            self.p_stay
+        } else {
+            (1.0 - self.p_stay) / (a - 1) as f64
+        }
+    }
+
+    /// Σ_m′ P(m′) K_M(m | m′): the probability that a proposal is of law `slot`.
+    fn law_proposal_probability(&self, slot: usize) -> f64 {
+        let total: f64 = self
+            .alive
+            .iter()
+            .map(|&s| self.laws[s].as_ref().expect("alive").share)
+            .sum();
+        compensated_sum(
+            self.alive
+                .iter()
+                .map(|&s| self.laws[s].as_ref().expect("alive").share / total * self.model_kernel(slot, s)),
+        )
+    }
+
+    /// Proposal `index` of stream `stream`: its law slot, and its f32 parameters unless they
+    /// fall outside the prior box.
+    fn propose(
+        &self,
+        prior: &Prior,
+        previous: &[Particle],
+        key: [u32; 2],
+        stream: u32,
+        index: u64,
+    ) -> (usize, Option<[f32; MAX_PARAMS]>) {
+        let b0 = philox4x32_10(candidate_counter(stream, index, 0), key);
+        let b1 = philox4x32_10(candidate_counter(stream, index, 1), key);
+        let b2 = philox4x32_10(candidate_counter(stream, index, 2), key);
+        let from = self.alive[inverse_cdf(&self.law_cdf, open_unit(b0[0]))];
+        let a = self.alive.len();
+        let slot = if a > 1 && open_unit(b0[1]) >= self.p_stay {
+            // Uniform among the other alive laws: ⌊w·(a − 1) / 2³²⌋, exact in integers.
+            let others: Vec<usize> = self.alive.iter().copied().filter(|&s| s != from).collect();
+            others[((u64::from(b0[2]) * (a as u64 - 1)) >> 32) as usize]
+        } else {
+            from
+        };
+        let law = self.laws[slot].as_ref().expect("proposals go to alive laws");
+        let ancestor = &previous[law.members[inverse_cdf(&law.cdf, open_unit(b0[3]))]];
+        let words = [b1[0], b1[1], b1[2], b1[3], b2[0], b2[1]];
+        let mut z = [0.0; MAX_PARAMS];
+        for pair in 0..MAX_PARAMS / 2 {
+            let [x, y] = box_muller(words[2 * pair], words[2 * pair + 1]);
+            z[2 * pair] = x;
+            z[2 * pair + 1] = y;
+        }
+        let k = law.free.len();
+        let bx = &prior.boxes[slot];
+        let mut params = [0.0f32; MAX_PARAMS];
+        for (j, p) in params.iter_mut().enumerate().take(bx.lower.len()) {
+            *p = ancestor.params[j] as f32;
+        }
+        for a in 0..k {
+            let step: f64 = (0..=a).map(|b| law.chol[a * k + b] * z[b]).sum();
+            let j = law.free[a];
+            params[j] = (ancestor.params[j] + step) as f32;
+        }
+        let inside = (0..bx.lower.len()).all(|j| params[j] >= bx.lower[j] && params[j] <= bx.upper[j]);
+        (slot, inside.then_some(params))
+    }
+
+    /// Normalised importance weights of `particles` (see the module documentation).
+    fn weights(
+        &self,
+        prior: &Prior,
+        previous: &[Particle],
+        particles: &[Particle],
+        sums_on: &dyn Fn(&KernelSums, &mut [f64]) -> Result<()>,
+    ) -> Result<Vec<f64>> {
+        let mut log_w = vec![0.0; particles.len()];
+        for (slot, law) in self.laws.iter().enumerate() {
+            let Some(law) = law else { continue };
+            let new: Vec<usize> = (0..particles.len())
+                .filter(|&i| slot_of(prior, particles[i].law) == slot)
+                .collect();
+            if new.is_empty() {
+                continue;
+            }
+            let targets: Vec<[f64; MAX_PARAMS]> = new.iter().map(|&i| law.whiten(&particles[i].params)).collect();
+            let sources: Vec<[f64; MAX_PARAMS]> =
+                law.members.iter().map(|&j| law.whiten(&previous[j].params)).collect();
+            let weights: Vec<f64> = law.members.iter().map(|&j| previous[j].weight / law.share).collect();
+            let mut sums = vec![0.0; new.len()];
+            sums_on(
+                &KernelSums {
+                    targets: &targets,
+                    sources: &sources,
+                    weights: &weights,
+                },
+                &mut sums,
+            )?;
+            let k = law.free.len() as f64;
+            let log_model = self.law_proposal_probability(slot).ln();
+            let log_prior = prior.weights[slot].ln() + law.log_prior_density;
+            for (&i, &s) in new.iter().zip(&sums) {
+                if !(s > 0.0 && s.is_finite()) {
+                    return Err(Error::Numerical(format!(
+                        "SMC kernel density {s} at particle {} of {}",
+                        particles[i].index, particles[i].law
+                    )));
+                }
+                let log_q = log_model + s.ln() - 0.5 * k * std::f64::consts::TAU.ln() - law.log_det_l;
+                log_w[i] = log_prior - log_q;
+            }
+        }
+        Ok(normalise_log_weights(&log_w))
+    }
+}
+
+/// exp(log w − max), divided by its compensated sum: Σ w = 1 to rounding.
+fn normalise_log_weights(log_w: &[f64]) -> Vec<f64> {
+    let max = log_w.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let w: Vec<f64> = log_w.iter().map(|l| (l - max).exp()).collect();
+    let total = compensated_sum(w.iter().copied());
+    w.iter().map(|v| v / total).collect()
+}
+
+/// Runs ABC-SMC with `evaluator` (which fixes prior, seed and data).
+pub fn run(evaluator: &dyn Evaluator, config: &SmcConfig) -> Result<Run> {
+    run_observed(evaluator, config, Vec::new(), &mut Silent)
+}
+
+/// As [`run`], continuing after the completed populations `previous` (empty for a fresh run)
+/// and reporting to `observer`. Continuing gives exactly the populations an uninterrupted run
+/// with `config` gives.
+pub fn run_observed(
+    evaluator: &dyn Evaluator,
+    config: &SmcConfig,
+    previous: Vec<Population>,
+    observer: &mut dyn Observer,
+) -> Result<Run> {
+    config.validate()?;
+    let started = Instant::now();
+    let problem = evaluator.problem();
+    let prior = &problem.prior;
+    let base = &config.base;
+    let n = base.particles;
+    let d = problem.data_len() as u64;
+    let mut populations = previous;
+    let mut total_scored: u64 = populations.iter().map(|p| p.record.candidates_scored).sum();
+    let finish = |populations: Vec<Population>, stop: StopReason, scored: u64| Run {
+        populations,
+        stop,
+        evaluations: scored * d,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    if populations.is_empty() {
+        // Population 0: the rejection sampler's, from the prior at ε_0.
+        let first = RejectionConfig {
+            max_populations: 1,
+            mode: Mode::Nested,
+            ..base.clone()
+        };
+        let run = rejection::run_observed(evaluator, &first, Vec::new(), observer)?;
+        total_scored += run.populations.iter().map(|p| p.record.candidates_scored).sum::<u64>();
+        if matches!(run.stop, StopReason::MaxDraws | StopReason::WallTime) {
+            return Ok(finish(run.populations, run.stop, total_scored));
+        }
+        populations = run.populations;
+    }
+    let key = key_of_seed(problem.seed);
+    let sums_on = |sums: &KernelSums, out: &mut [f64]| -> Result<()> {
+        match config.weights_on {
+            WeightsOn::Host => {
+                crate::eval::cpu::kernel_sums(sums, out);
+                Ok(())
+            }
+            WeightsOn::Evaluator => evaluator.kernel_sums(sums, out),
+        }
+    };
+    let stop = loop {
+        let epsilon = match next_epsilon(&populations, base) {
+            Ok(e) => e,
+            Err(stop) => break stop,
+        };
+        let t = populations.len();
+        let stream = t as u32;
+        let t0 = Instant::now();
+        let previous = &populations[t - 1];
+        let kernels = Kernels::new(prior, &previous.particles, config)?;
+        let near_threshold = |rho: f64| (rho - epsilon).abs() <= PARITY_TOLERANCE * epsilon;
+        let mut particles: Vec<Particle> = Vec::with_capacity(n);
+        let mut law_draws = vec![0u64; prior.boxes.len()];
+        let mut law_accepted = vec![0usize; prior.boxes.len()];
+        let (mut position, mut near, mut scored_here) = (0u64, 0u64, 0u64);
+        let mut interrupted = None;
+        // The acceptance rate the first batch is sized by: the last SMC population's, or a
+        // guess for the first one. Later batches use this population's own.
+        let mut rate = if t >= 2 { previous.record.acceptance_rate } else { 0.25 };
+        while particles.len() < n {
+            if let Some(limit) = base.max_seconds
+                && started.elapsed().as_secs_f64() > limit
+            {
+                interrupted = Some(StopReason::WallTime);
+                break;
+            }
+            let budget = base.max_draws.saturating_sub(total_scored + scored_here);
+            if budget == 0 {
+                interrupted = Some(StopReason::MaxDraws);
+                break;
+            }
+            let missing = (n - particles.len()) as f64;
+            let size = ((1.05 * missing / rate.max(1e-4)).ceil() as u64 + 16)
+                .min(base.max_batch as u64)
+                .min(budget);
+            let proposals: Vec<(usize, Option<[f32; MAX_PARAMS]>)> = (0..size as usize)
+                .into_par_iter()
+                .with_min_len(256)
+                .map(|k| kernels.propose(prior, &previous.particles, key, stream, position + k as u64))
+                .collect();
+            let valid: Vec<Candidate> = proposals
+                .iter()
+                .filter_map(|&(slot, p)| p.map(|params| Candidate { slot, params }))
+                .collect();
+            let mut rho = vec![0.0; valid.len()];
+            evaluator.score_params(&valid, &mut rho)?;
+            scored_here += valid.len() as u64;
+            let mut next_valid = 0;
+            for &(slot, params) in &proposals {
+                position += 1;
+                law_draws[slot] += 1;
+                let Some(params) = params else { continue };
+                let r = rho[next_valid];
+                next_valid += 1;
+                near += u64::from(near_threshold(r));
+                if r < epsilon {
+                    let law = prior.law(slot);
+                    law_accepted[slot] += 1;
+                    particles.push(Particle {
+                        law,
+                        index: position - 1,
+                        params: params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
+                        rho: r,
+                        weight: 0.0,
+                    });
+                    if particles.len() == n {
+                        break;
+                    }
+                }
+            }
+            rate = particles.len().max(1) as f64 / position as f64;
+            observer.progress(&Progress {
+                population: t,
+                epsilon: Some(epsilon),
+                accepted: particles.len(),
+                target: n,
+                draws: position,
+                scored: scored_here,
+                data_len: d as usize,
+                seconds: t0.elapsed().as_secs_f64(),
+            });
+        }
+        total_scored += scored_here;
+        if let Some(stop) = interrupted {
+            break stop;
+        }
+        let weights = kernels.weights(prior, &previous.particles, &particles, &sums_on)?;
+        for (p, w) in particles.iter_mut().zip(&weights) {
+            p.weight = *w;
+        }
+        let per_law = prior
+            .boxes
+            .iter()
+            .enumerate()
+            .map(|(s, b)| LawRecord {
+                law: b.law,
+                draws: law_draws[s],
+                accepted: law_accepted[s],
+                acceptance_rate: if law_draws[s] > 0 {
+                    law_accepted[s] as f64 / law_draws[s] as f64
+                } else {
+                    0.0
+                },
+                probability: compensated_sum(particles.iter().filter(|p| p.law == b.law).map(|p| p.weight)),
+                alive: law_accepted[s] > 0,
+            })
+            .collect();
+        let record = PopulationRecord {
+            index: t,
+            epsilon: Some(epsilon),
+            draws: position,
+            accepted: n,
+            acceptance_rate: n as f64 / position as f64,
+            per_law,
+            candidates_scored: scored_here,
+            evaluations: scored_here * d,
+            near_threshold: near,
+            ess: super::effective_sample_size(&weights),
+            seconds: t0.elapsed().as_secs_f64(),
+            stream,
+        };
+        let population = Population { record, particles };
+        observer.population_done(&population)?;
+        populations.push(population);
+    };
+    Ok(finish(populations, stop, total_scored))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::laws::Law;
+    use crate::prior::LawBox;
+
+    #[test]
+    fn box_muller_gives_standard_normals() {
+        // 2 × 200,000 normals from Philox words: mean 0 ± 5σ/√n, variance 1 ± 5·√(2/n),
+        // fourth moment 3 ± 5·√(96/n).
+        let n = 400_000.0;
+        let (mut s1, mut s2, mut s4) = (0.0, 0.0, 0.0);
+        for i in 0..200_000u64 {
+            let w = philox4x32_10(candidate_counter(1, i, 1), key_of_seed(3));
+            for z in box_muller(w[0], w[1]) {
+                s1 += z;
+                s2 += z * z;
+                s4 += z * z * z * z;
+            }
+        }
+        let (mean, var, m4) = (s1 / n, s2 / n, s4 / n);
+        assert!(mean.abs() < 5.0 / f64::sqrt(n), "{mean}");
+        assert!((var - 1.0).abs() < 5.0 * (2.0 / n).sqrt(), "{var}");
+        assert!((m4 - 3.0).abs() < 5.0 * (96.0 / n).sqrt(), "{m4}");
+        // The extreme words stay finite: u_a ∈ (0, 1) never reaches ln 0.
+        assert!(box_muller(0, 0)[0].is_finite() && box_muller(u32::MAX, u32::MAX)[1].is_finite());
+    }
+
+    fn particle(law: Law, index: u64, params: &[f64], weight: f64) -> Particle {
+        Particle {
+            law,
+            index,
+            params: params.to_vec(),
+            rho: 0.1,
+            weight,
+        }
+    }
+
+    /// m2 and m4 boxes; m4's last two parameters fixed (zero width).
+    fn two_law_prior() -> Prior {
+        Prior::new(
+            vec![
+                LawBox {
+                    law: Law::M2,
+                    lower: vec![0.0, 0.0, 0.0],
+                    upper: vec![10.0, 10.0, 1.0],
+                },
+                LawBox {
+                    law: Law::M4,
+                    lower: vec![0.0, -1.0, 0.5, 0.0],
+                    upper: vec![4.0, 1.0, 0.5, 0.0],
+                },
+            ],
+            vec![1.0, 1.0],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn kernel_covariance_is_twice_the_weighted_covariance() {
+        // Three m2 particles with weights 0.5, 0.25, 0.25 (within the law): mean of tsb =
+        // 0.5·1 + 0.25·2 + 0.25·5 = 2.25, weighted variance 0.5·1.5625 + 0.25·0.0625 +
+        // 0.25·7.5625 = 2.6875; covariance with tcb (2, 2, 4): mean 2.5, 0.5·(−1.25)(−0.5) +
+        // 0.25·(−0.25)(−0.5) + 0.25·(2.75)(1.5) = 1.375.
+        let prior = two_law_prior();
+        let previous = vec![
+            particle(Law::M2, 0, &[1.0, 2.0, 0.5], 0.4),
+            particle(Law::M4, 1, &[1.0, 0.0, 0.5, 0.0], 0.2),
+            particle(Law::M2, 2, &[2.0, 2.0, 0.5], 0.2),
+            particle(Law::M2, 3, &[5.0, 4.0, 0.5], 0.2),
+        ];
+        let k = LawKernel::new(&prior, 0, &previous, vec![0, 2, 3], 2.0).unwrap();
+        assert_eq!(k.free, vec![0, 1, 2]);
+        assert!((k.share - 0.8).abs() < 1e-15);
+        assert!((k.mean[0] - 2.25).abs() < 1e-15 && (k.mean[1] - 2.5).abs() < 1e-15);
+        // Σ = L Lᵀ: 2 × covariance plus the floor (10⁻⁴ · width)² on the diagonal.
+        let l = &k.chol;
+        let sigma = |a: usize, b: usize| (0..3).map(|m| l[a * 3 + m] * l[b * 3 + m]).sum::<f64>();
+        assert!((sigma(0, 0) - (2.0 * 2.6875 + 1e-6)).abs() < 1e-12, "{}", sigma(0, 0));
+        assert!((sigma(0, 1) - 2.0 * 1.375).abs() < 1e-12, "{}", sigma(0, 1));
+        // g is the same in every particle: only the floor (10⁻⁴ · 1)² remains.
+        assert!((sigma(2, 2) - 1e-8).abs() < 1e-20, "{}", sigma(2, 2));
+        assert!((k.cdf[2] - 1.0).abs() < 1e-15 && (k.cdf[0] - 0.5).abs() < 1e-15);
+        // m4 has one particle and two fixed parameters: a floor-only kernel on c0, c1.
+        let k4 = LawKernel::new(&prior, 1, &previous, vec![1], 2.0).unwrap();
+        assert_eq!(k4.free, vec![0, 1]);
+        assert!((k4.chol[0] - 4e-4).abs() < 1e-18 && (k4.chol[3] - 2e-4).abs() < 1e-18);
+    }
+
+    #[test]
+    fn weights_are_normalised_and_follow_prior_over_proposal() {
+        let w = normalise_log_weights(&[-1000.0, -1000.0 + 2f64.ln(), -1000.0 + 5f64.ln()]);
+        let total = compensated_sum(w.iter().copied());
+        assert!((total - 1.0).abs() < 1e-15, "{total} {w:?}");
+        // −1000 + ln 2 holds ln 2 to an ulp of 1000 (1.1e-13): the ratios are that exact.
+        assert!(
+            (w[0] - 1.0 / 8.0).abs() < 1e-12 && (w[2] - 5.0 / 8.0).abs() < 1e-12,
+            "{w:?}"
+        );
+        // One law, one free parameter, previous particles at 1 and 3 with equal weight, kernel
+        // σ² = 2·1 + (10⁻⁴·4)²: a new particle at x has q ∝ N(x; 1, σ²) + N(x; 3, σ²), so
+        // its weight is ∝ 1 / q(x).
+        let prior = Prior::new(
+            vec![LawBox {
+                law: Law::M4,
+                lower: vec![0.0, 0.0, 0.0, 0.0],
+                upper: vec![4.0, 0.0, 0.0, 0.0],
+            }],
+            vec![1.0],
+        )
+        .unwrap();
+        let previous = vec![
+            particle(Law::M4, 0, &[1.0, 0.0, 0.0, 0.0], 0.5),
+            particle(Law::M4, 1, &[3.0, 0.0, 0.0, 0.0], 0.5),
+        ];
+        let config = SmcConfig::default();
+        let kernels = Kernels::new(&prior, &previous, &config).unwrap();
+        let new = [
+            particle(Law::M4, 0, &[2.0, 0.0, 0.0, 0.0], 0.0),
+            particle(Law::M4, 1, &[0.5, 0.0, 0.0, 0.0], 0.0),
+        ];
+        let host = |s: &KernelSums, out: &mut [f64]| -> Result<()> {
+            crate::eval::cpu::kernel_sums(s, out);
+            Ok(())
+        };
+        let w = kernels.weights(&prior, &previous, &new, &host).unwrap();
+        let s2 = 2.0 + 1.6e-7;
+        let q = |x: f64| (-(x - 1.0f64).powi(2) / (2.0 * s2)).exp() + (-(x - 3.0f64).powi(2) / (2.0 * s2)).exp();
+        let expected = (1.0 / q(2.0)) / (1.0 / q(2.0) + 1.0 / q(0.5));
+        assert!((w[0] - expected).abs() < 1e-12, "{} vs {expected}", w[0]);
+        assert!((w[0] + w[1] - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn the_model_kernel_term_enters_the_weights() {
+        // Two laws with one free parameter each and the same kernel shape; the previous
+        // population holds 90 % of the weight in m2. With p_stay = 0.7 a proposal is m2 with
+        // probability 0.9·0.7 + 0.1·0.3 = 0.66, m4 with 0.34; with equal priors, identical
+        // boxes and identical relative positions, the weights differ by 0.66 / 0.34 only
+        // through that term and P(m) inside the within-law density.
+        let prior = Prior::new(
+            vec![
+                LawBox {
+                    law: Law::M2,
+                    lower: vec![0.0, 1.0, 1.0],
+                    upper: vec![4.0, 1.0, 1.0],
+                },
+                LawBox {
+                    law: Law::M4,
+                    lower: vec![0.0, 0.0, 0.0, 0.0],
+                    upper: vec![4.0, 0.0, 0.0, 0.0],
+                },
+            ],
+            vec![1.0, 1.0],
+        )
+        .unwrap();
+        let previous = vec![
+            particle(Law::M2, 0, &[1.0, 1.0, 1.0], 0.45),
+            particle(Law::M2, 1, &[3.0, 1.0, 1.0], 0.45),
+            particle(Law::M4, 2, &[1.0, 0.0, 0.0, 0.0], 0.05),
+            particle(Law::M4, 3, &[3.0, 0.0, 0.0, 0.0], 0.05),
+        ];
+        let kernels = Kernels::new(&prior, &previous, &SmcConfig::default()).unwrap();
+        assert!((kernels.law_proposal_probability(0) - 0.66).abs() < 1e-15);
+        assert!((kernels.law_proposal_probability(1) - 0.34).abs() < 1e-15);
+        let new = [
+            particle(Law::M2, 0, &[2.0, 1.0, 1.0], 0.0),
+            particle(Law::M4, 1, &[2.0, 0.0, 0.0, 0.0], 0.0),
+        ];
+        let host = |s: &KernelSums, out: &mut [f64]| -> Result<()> {
+            crate::eval::cpu::kernel_sums(s, out);
+            Ok(())
+        };
+        let w = kernels.weights(&prior, &previous, &new, &host).unwrap();
+        assert!((w[1] / w[0] - 0.66 / 0.34).abs() < 1e-12, "{w:?}");
+    }
+
+    #[test]
+    fn proposals_are_pure_stay_inside_alive_laws_and_follow_the_model_kernel() {
+        let prior = two_law_prior();
+        // m4 holds 30 % of the weight; no law dead.
+        let previous = vec![
+            particle(Law::M2, 0, &[5.0, 5.0, 0.5], 0.35),
+            particle(Law::M2, 1, &[6.0, 4.0, 0.4], 0.35),
+            particle(Law::M4, 2, &[2.0, 0.0, 0.5, 0.0], 0.3),
+        ];
+        let config = SmcConfig::default();
+        let kernels = Kernels::new(&prior, &previous, &config).unwrap();
+        let key = key_of_seed(17);
+        let n = 100_000;
+        let mut m4 = 0usize;
+        for i in 0..n {
+            let (slot, params) = kernels.propose(&prior, &previous, key, 1, i);
+            assert_eq!((slot, params), kernels.propose(&prior, &previous, key, 1, i));
+            m4 += usize::from(slot == 1);
+            if let (1, Some(p)) = (slot, params) {
+                // Fixed parameters keep their value.
+                assert_eq!((p[2].to_bits(), p[3].to_bits()), (0.5f32.to_bits(), 0.0f32.to_bits()));
+            }
+        }
+        // P(m4) = 0.3·0.7 + 0.7·0.3 = 0.42; binomial σ = 156.
+        assert!((m4 as f64 - 0.42 * n as f64).abs() < 5.0 * 156.0, "{m4}");
+        // A dead law gets no proposal.
+        let only_m2 = &previous[..2];
+        let kernels = Kernels::new(&prior, only_m2, &config).unwrap();
+        assert_eq!(kernels.alive, vec![0]);
+        assert!(kernels.laws[1].is_none());
+        assert!((0..10_000).all(|i| kernels.propose(&prior, only_m2, key, 1, i).0 == 0));
+        assert!((kernels.law_proposal_probability(0) - 1.0).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,321 @@
+//! The SMC sampler: against closed forms and the rejection sampler (same ABC posterior at the
+//! same ε, within Monte-Carlo error), determinism, continuation, dead laws.
+
+use crate::support::{rng, samples};
+use bitrock::Law;
+use bitrock::abc::rejection::{self, RejectionConfig};
+use bitrock::abc::smc::{self, SmcConfig};
+use bitrock::abc::{Observer, Population, Run, StopReason, effective_sample_size};
+use bitrock::data::{DataOptions, Samples, demo_field_data};
+use bitrock::eval::AbcProblem;
+use bitrock::eval::cpu::CpuEvaluator;
+use bitrock::fit::{FitOptions, fit_laws};
+use bitrock::prior::{LawBox, Prior};
+use rand_distr::{Distribution, Normal};
+
+/// m4 with c0 ~ U[0, 2] and c1..c3 fixed at 0 against y ≡ 1 (ρ = (1 − c0)²), plus, with
+/// prior weight `other`, an m2 law whose torque is ≥ 50 everywhere (ρ ≥ 49²): it cannot fit.
+fn one_parameter_problem(seed: u64, other: Option<f64>) -> AbcProblem {
+    let mut boxes = vec![LawBox {
+        law: Law::M4,
+        lower: vec![0.0, 0.0, 0.0, 0.0],
+        upper: vec![2.0, 0.0, 0.0, 0.0],
+    }];
+    let mut weights = vec![1.0];
+    if let Some(w) = other {
+        boxes.push(LawBox {
+            law: Law::M2,
+            lower: vec![50.0, 50.0, 0.1],
+            upper: vec![60.0, 60.0, 0.2],
+        });
+        weights.push(w);
+    }
+    let data = Samples {
+        speed_rad_s: (0..64).map(|i| 1.0 + i as f64 * 0.25).collect(),
+        torque_nm: vec![1.0; 64],
+        wob_n: None,
+        time_s: None,
+    };
+    AbcProblem::new(Prior::new(boxes, weights).unwrap(), seed, &data, None)
+}
+
+/// sup |F − G| between the weighted empirical CDF of (x, w) and the CDF `g`.
+fn weighted_ks_against(values: &[(f64, f64)], g: impl Fn(f64) -> f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|p| p.1).sum();
+    let (mut below, mut d) = (0.0, 0.0f64);
+    for &(x, w) in &v {
+        d = d.max((below / total - g(x)).abs());
+        below += w;
+        d = d.max((below / total - g(x)).abs());
+    }
+    d
+}
+
+/// sup |F − G| between two weighted empirical CDFs.
+fn weighted_ks(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
+    let (ta, tb): (f64, f64) = (a.iter().map(|p| p.1).sum(), b.iter().map(|p| p.1).sum());
+    let mut all: Vec<(f64, f64, f64)> = a
+        .iter()
+        .map(|p| (p.0, p.1 / ta, 0.0))
+        .chain(b.iter().map(|p| (p.0, 0.0, p.1 / tb)))
+        .collect();
+    all.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let (mut fa, mut fb, mut d) = (0.0, 0.0, 0.0f64);
+    for (_, wa, wb) in all {
+        fa += wa;
+        fb += wb;
+        d = d.max((fa - fb).abs());
+    }
+    d
+}
+
+/// (c0, weight) of a population's particles.
+fn c0(p: &Population) -> Vec<(f64, f64)> {
+    p.particles.iter().map(|q| (q.params[0], q.weight)).collect()
+}
+
+fn ess(p: &Population) -> f64 {
+    effective_sample_size(&p.particles.iter().map(|q| q.weight).collect::<Vec<_>>())
+}
+
+fn smc_config(particles: usize, epsilons: Option<Vec<f64>>, eps_min: f64) -> SmcConfig {
+    SmcConfig {
+        base: RejectionConfig {
+            particles,
+            eps_min,
+            epsilons,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+#[test]
+fn smc_samples_the_closed_form_posterior_and_agrees_with_rejection() {
+    // At ε the ABC posterior of c0 is uniform on (1 − √ε, 1 + √ε).
+    let evaluator = CpuEvaluator::new(one_parameter_problem(8, None));
+    // ε falls fourfold per population (the width of the accepted set halves) to 6.1e-5,
+    // where a prior draw is accepted with probability √ε = 0.8 %.
+    let schedule: Vec<f64> = (1..=7).map(|g| 0.25f64.powi(g)).collect();
+    let smc_run = smc::run(&evaluator, &smc_config(4000, Some(schedule.clone()), 0.0)).unwrap();
+    assert_eq!(smc_run.stop, StopReason::ScheduleExhausted);
+    assert_eq!(smc_run.populations.len(), 8);
+    let rej = rejection::run(&evaluator, &smc_config(4000, Some(schedule), 0.0).base).unwrap();
+    for (g, (s, r)) in smc_run.populations.iter().zip(&rej.populations).enumerate().skip(1) {
+        let eps = s.record.epsilon.unwrap();
+        let h = eps.sqrt();
+        let n_eff = ess(s);
+        assert!(
+            (s.record.ess - n_eff).abs() < 1e-9 && n_eff > 0.5 * 4000.0,
+            "ESS {n_eff}"
+        );
+        // Weighted one-sample KS against the closed form, with the Kish ESS as sample size:
+        // critical value at α = 0.001 is 1.95 / √ESS.
+        let d = weighted_ks_against(&c0(s), |x| ((x - (1.0 - h)) / (2.0 * h)).clamp(0.0, 1.0));
+        assert!(d < 1.95 / n_eff.sqrt(), "population {g}: KS {d} (ESS {n_eff})");
+        // Two-sample against rejection at the same ε: 1.95 √(1/ESS + 1/N).
+        let d2 = weighted_ks(&c0(s), &c0(r));
+        assert!(
+            d2 < 1.95 * (1.0 / n_eff + 1.0 / 4000.0).sqrt(),
+            "population {g}: KS {d2}"
+        );
+        // Weighted mean within 4 standard errors (σ = h/√3, n = ESS) of 1.
+        let mean: f64 = c0(s).iter().map(|(x, w)| x * w).sum();
+        assert!(
+            (mean - 1.0).abs() < 4.0 * h / 3f64.sqrt() / n_eff.sqrt(),
+            "population {g}: {mean}"
+        );
+        assert!(s.particles.iter().all(|p| (p.params[0] - 1.0).abs() < h && p.rho < eps));
+        let total: f64 = s.particles.iter().map(|p| p.weight).sum();
+        assert!((total - 1.0).abs() < 1e-12);
+    }
+    // SMC scores far fewer candidates: each population accepts about a third of its
+    // proposals (measured: see below), while rejection pays 1/0.8 % per particle.
+    eprintln!(
+        "one parameter to ε = 6.1e-5: SMC {} evaluations, rejection {}",
+        smc_run.evaluations, rej.evaluations
+    );
+    assert!(
+        smc_run.evaluations * 3 < rej.evaluations,
+        "{} vs {}",
+        smc_run.evaluations,
+        rej.evaluations
+    );
+    // Population 0 is the rejection sampler's.
+    let (a, b) = (&smc_run.populations[0], &rej.populations[0]);
+    assert_eq!(a.particles, b.particles);
+}
+
+fn same_populations(a: &Run, b: &Run) {
+    assert_eq!(a.populations.len(), b.populations.len());
+    for (pa, pb) in a.populations.iter().zip(&b.populations) {
+        assert_eq!(pa.record.epsilon.map(f64::to_bits), pb.record.epsilon.map(f64::to_bits));
+        assert_eq!(pa.record.draws, pb.record.draws);
+        assert_eq!(pa.record.per_law, pb.record.per_law);
+        assert_eq!(pa.record.ess.to_bits(), pb.record.ess.to_bits());
+        assert_eq!(pa.particles, pb.particles);
+    }
+}
+
+/// m2 at the paper's estimate with 5 % noise against all four laws (priors from least
+/// squares, δ = 0.4), as in tests/it/abc.rs.
+fn paper_m2_problem(seed: u64) -> (AbcProblem, f64) {
+    let truth = Law::M2.scale_torque(Law::M2.paper_estimate(), 1000.0);
+    let mut data = samples(Law::M2, &truth, 0.1, 20.0, 800);
+    let mut g = rng(21);
+    let noise = Normal::new(0.0, 400.0).unwrap();
+    for y in &mut data.torque_nm {
+        *y += noise.sample(&mut g);
+    }
+    let fits = fit_laws(&Law::ALL, &data, &Samples::default(), &FitOptions::default()).unwrap();
+    let rho = fits[1].rho;
+    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
+    (AbcProblem::new(prior, seed, &data, None), rho)
+}
+
+#[test]
+fn smc_populations_do_not_depend_on_threads_or_batch_size() {
+    let (problem, rho) = paper_m2_problem(77);
+    let config = smc_config(500, None, rho * 1.5);
+    let evaluator = CpuEvaluator::new(problem);
+    let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let double = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let a = single.install(|| smc::run(&evaluator, &config)).unwrap();
+    let mut small = config.clone();
+    small.base.max_batch = 300;
+    let b = double.install(|| smc::run(&evaluator, &small)).unwrap();
+    assert_eq!(a.stop, StopReason::EpsMin);
+    assert!(a.populations.len() >= 4, "{}", a.populations.len());
+    same_populations(&a, &b);
+}
+
+/// Keeps every completed population, as a run store would.
+#[derive(Default)]
+struct Keep(Vec<Population>);
+
+impl Observer for Keep {
+    fn population_done(&mut self, p: &Population) -> bitrock::Result<()> {
+        self.0.push(p.clone());
+        Ok(())
+    }
+}
+
+#[test]
+fn continuing_from_completed_populations_equals_an_uninterrupted_run() {
+    let (problem, rho) = paper_m2_problem(5);
+    let evaluator = CpuEvaluator::new(problem);
+    let config = smc_config(400, None, rho * 1.5);
+    let mut seen = Keep::default();
+    let whole = smc::run_observed(&evaluator, &config, Vec::new(), &mut seen).unwrap();
+    assert_eq!(seen.0.len(), whole.populations.len());
+    assert!(whole.populations.len() >= 4);
+    for cut in [1, 3] {
+        let mut limited = config.clone();
+        limited.base.max_populations = cut;
+        let first = smc::run(&evaluator, &limited).unwrap();
+        assert_eq!((first.populations.len(), first.stop), (cut, StopReason::MaxPopulations));
+        let rest = smc::run_observed(&evaluator, &config, first.populations, &mut Keep::default()).unwrap();
+        assert_eq!(rest.stop, whole.stop);
+        same_populations(&rest, &whole);
+    }
+}
+
+#[test]
+fn a_law_that_dies_is_recorded_dead_and_gets_no_more_proposals() {
+    // m2 holds 30 % of the prior and ρ ≥ 2401, m4 ρ ≤ 1: the median of population 0 lies
+    // among m4's particles, so population 1 has no m2 particle.
+    let evaluator = CpuEvaluator::new(one_parameter_problem(3, Some(3.0 / 7.0)));
+    let run = smc::run(&evaluator, &smc_config(1000, None, 1e-3)).unwrap();
+    assert_eq!(run.stop, StopReason::EpsMin);
+    let m2 = |p: &Population| p.record.per_law.iter().find(|l| l.law == Law::M2).unwrap().clone();
+    let first = m2(&run.populations[0]);
+    assert!(
+        first.alive && first.accepted > 200 && first.probability > 0.2,
+        "{first:?}"
+    );
+    let died = m2(&run.populations[1]);
+    assert!(!died.alive && died.accepted == 0 && died.draws > 0, "{died:?}");
+    assert_eq!(died.probability.to_bits(), 0.0f64.to_bits());
+    for p in &run.populations[2..] {
+        let l = m2(p);
+        assert_eq!(
+            (l.alive, l.draws, l.accepted),
+            (false, 0, 0),
+            "population {}",
+            p.record.index
+        );
+        assert_eq!(l.probability.to_bits(), 0.0f64.to_bits());
+        let m4 = p.record.per_law.iter().find(|l| l.law == Law::M4).unwrap();
+        assert!(m4.alive && (m4.probability - 1.0).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn refusals_name_the_flag() {
+    let evaluator = CpuEvaluator::new(one_parameter_problem(1, None));
+    for (config, flag) in [
+        (
+            SmcConfig {
+                p_stay: 1.5,
+                ..Default::default()
+            },
+            "--p-stay",
+        ),
+        (
+            SmcConfig {
+                kernel_scale: 0.0,
+                ..Default::default()
+            },
+            "--kernel-scale",
+        ),
+    ] {
+        let e = smc::run(&evaluator, &config).unwrap_err().to_string();
+        assert!(e.starts_with(flag), "{e}");
+    }
+}
+
+/// Law probabilities of a population by law.
+fn probabilities(p: &Population) -> Vec<(Law, f64)> {
+    p.record.per_law.iter().map(|l| (l.law, l.probability)).collect()
+}
+
+#[test]
+fn on_the_embedded_record_both_samplers_give_the_same_law_probabilities() {
+    let data = demo_field_data(&DataOptions::default()).unwrap();
+    let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
+    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
+    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 12, &data.calibration, None));
+    let n = 1500;
+    // The rejection run's median schedule, given to both: the same ε in every population.
+    let rej = rejection::run(
+        &evaluator,
+        &RejectionConfig {
+            particles: n,
+            eps_min: 0.02,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let schedule: Vec<f64> = rej.populations[1..].iter().map(|p| p.record.epsilon.unwrap()).collect();
+    let smc_run = smc::run(&evaluator, &smc_config(n, Some(schedule), 0.02)).unwrap();
+    assert_eq!(smc_run.populations.len(), rej.populations.len());
+    let (s, r) = (smc_run.populations.last().unwrap(), rej.populations.last().unwrap());
+    assert_eq!(s.record.epsilon.map(f64::to_bits), r.record.epsilon.map(f64::to_bits));
+    // Per law: |p_smc − p_rej| ≤ 4 √(p(1 − p) (1/ESS + 1/N)), p the pooled estimate.
+    let n_eff = s.record.ess;
+    for ((law, ps), (_, pr)) in probabilities(s).into_iter().zip(probabilities(r)) {
+        let p = (ps + pr) / 2.0;
+        let se = (p * (1.0 - p) * (1.0 / n_eff + 1.0 / n as f64)).sqrt();
+        eprintln!("{law}: SMC {ps:.4} rejection {pr:.4} (4 SE {:.4})", 4.0 * se);
+        assert!((ps - pr).abs() <= 4.0 * se.max(1e-3), "{law}: {ps} vs {pr} (SE {se})");
+    }
+    eprintln!(
+        "embedded record, N = {n}, {} populations to ε = {:.4}: SMC {:.3e} evaluations, rejection {:.3e}",
+        s.record.index + 1,
+        s.record.epsilon.unwrap(),
+        smc_run.evaluations as f64,
+        rej.evaluations as f64
+    );
+}
