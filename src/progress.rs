@@ -54,22 +54,20 @@ impl Observer for RunProgress {
                 let bar = bar.get_or_insert_with(|| {
                     let bar = ProgressBar::new(p.target as u64);
                     bar.set_style(
-                        ProgressStyle::with_template(
-                            "{prefix:>14} [{bar:28}] {pos}/{len} accepted · {msg} · ETA {eta}",
-                        )
-                        .expect("a valid template")
-                        .progress_chars("=> "),
+                        ProgressStyle::with_template("{prefix} [{bar:20}] {pos}/{len} · {msg} · ETA {eta}")
+                            .expect("a valid template")
+                            .progress_chars("=> "),
                     );
-                    bar.set_prefix(format!("population {}", p.population));
+                    bar.set_prefix(format!("pop. {}", p.population));
                     bar
                 });
-                bar.set_position(p.accepted as u64);
                 bar.set_message(format!(
-                    "ε = {}, {} drawn, {:.2e} eval/s",
+                    "ε {} · {} drawn · {:.1e} eval/s",
                     epsilon_text(p.epsilon),
                     p.draws,
                     rate(p)
                 ));
+                bar.set_position(p.accepted as u64);
             }
             Display::Lines { last } => {
                 if last.elapsed() >= LOG_EVERY {
