@@ -1,7 +1,7 @@
 // Scores explicit parameter vectors uploaded by the host (the SMC sampler's perturbed
 // proposals, which need log/cos/sqrt and are therefore generated once, on the host): invocation
-// k writes SSR = Σ (y - r T(w))² of proposals job.start.x + 4k .. job.start.x + 4k + 3 over the
-// job's slice of the data (shared/ssr.wgsl: four candidates per invocation); the host divides
+// k writes SSR = Σ (y - r T(w))² of proposals job.start.x + 16k .. job.start.x + 16k + 15 over
+// the job's slice of the data (shared/ssr.wgsl: 16 candidates per invocation); the host divides
 // by Σy² (f64). Needs shared/job.wgsl, shared/laws.wgsl, shared/ssr.wgsl (bindings 2-4).
 
 // One proposal: law id (0 = m1 .. 3 = m4) and its parameters (unused ones 0). Keep in sync
@@ -18,27 +18,27 @@ struct Proposal {
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let first = 4u * (gid.x + gid.y * job.row_width);
+    let first = CANDIDATES * (gid.x + gid.y * job.row_width);
     if (first >= job.count) {
         return;
     }
-    var laws = vec4<u32>(NO_LAW);
-    var p: Params4;
-    for (var j = 0u; j < 4u; j = j + 1u) {
+    var laws = Laws(vec4<u32>(NO_LAW), vec4<u32>(NO_LAW), vec4<u32>(NO_LAW), vec4<u32>(NO_LAW));
+    var p: Params;
+    for (var j = 0u; j < CANDIDATES; j = j + 1u) {
         if (first + j < job.count) {
             let proposal = proposals[job.start.x + first + j];
-            laws[j] = proposal.law;
+            laws[j / 4u][j % 4u] = proposal.law;
             p[j] = proposal.params;
         }
     }
     let sums = slice_ssr(laws, p, job.data_start, job.data_end);
-    for (var j = 0u; j < 4u; j = j + 1u) {
+    for (var j = 0u; j < CANDIDATES; j = j + 1u) {
         let k = first + j;
         if (k < job.count) {
             if (job.accumulate == 1u) {
-                ssr[k] = ssr[k] + sums[j];
+                ssr[k] = ssr[k] + sums[j / 4u][j % 4u];
             } else {
-                ssr[k] = sums[j];
+                ssr[k] = sums[j / 4u][j % 4u];
             }
         }
     }
