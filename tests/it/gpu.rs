@@ -258,6 +258,33 @@ fn a_million_data_points_and_a_two_dimensional_dispatch_agree_with_the_cpu() {
 }
 
 #[test]
+fn mixed_laws_over_several_dispatches_agree_with_the_cpu() {
+    if !gpu_available() {
+        return;
+    }
+    // Candidates of all four laws share each invocation, so the kernel makes one pass over the
+    // data per law present; every pass must cover all 65,536 samples of each dispatch (loop
+    // limiter) and keep only its own law's sums. 150,000 samples: the demo record repeated.
+    let data = demo_field_data(&DataOptions {
+        calibration_fraction: 1.0,
+        ..Default::default()
+    })
+    .unwrap();
+    let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
+    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
+    let mut long = data.calibration.clone();
+    long.wob_n = None;
+    long.time_s = None;
+    let n = data.calibration.speed_rad_s.len();
+    long.speed_rad_s = (0..150_000).map(|i| data.calibration.speed_rad_s[i % n]).collect();
+    long.torque_nm = (0..150_000).map(|i| data.calibration.torque_nm[i % n]).collect();
+    let problem = AbcProblem::new(prior, 17, &long, None);
+    let (max, _) = rho_difference(&problem, 3_001);
+    eprintln!("four laws mixed, D = 150,000: largest relative difference of rho {max:.2e}");
+    assert!(max <= PARITY_TOLERANCE, "{max:e}");
+}
+
+#[test]
 fn the_stability_grid_agrees_with_the_cpu_cell_by_cell() {
     use bitrock::stability::lumped::Lumped;
     use bitrock::stability::map::{Criterion, growth_rate_grid, parse_axis, probability_grid};

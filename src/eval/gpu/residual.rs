@@ -1,5 +1,5 @@
 //! The GPU evaluator: `shaders/residual.wgsl` regenerates each candidate from
-//! (seed, population, index), one invocation per candidate, and returns its Σ(y − r·T)² in f32;
+//! (seed, population, index), 16 candidates per invocation, and returns its Σ(y − r·T)² in f32;
 //! the host divides by Σy² (f64). Data, prior, pipeline and bind group are set up once.
 //! `shaders/score_params.wgsl` scores explicit parameter vectors against the same data (its
 //! pipeline is built on first use), and `shaders/kernel_sums.wgsl` computes the SMC weights'
@@ -12,9 +12,14 @@ use crate::prior::Candidate;
 use bytemuck::{Pod, Zeroable};
 use std::sync::Mutex;
 
-/// Samples scored per dispatch: lavapipe ends any loop after 65,535 iterations per invocation,
-/// so longer records are scored in slices whose sums the kernel adds up.
-const SAMPLES_PER_DISPATCH: u32 = 65_536;
+/// Samples scored per dispatch: lavapipe ends loops once an invocation has run 65,535
+/// iterations of all its loops together, and a dispatch may make four passes over its slice
+/// (one per law; shaders/shared/ssr.wgsl), so longer records are scored in slices whose sums the
+/// kernel adds up.
+const SAMPLES_PER_DISPATCH: u32 = 32_768;
+
+/// Candidates scored by one invocation of either scoring kernel (shaders/shared/ssr.wgsl).
+const CANDIDATES_PER_INVOCATION: u32 = 16;
 
 /// Buffers, pipeline and bind group of one run, created once.
 struct Resources {
@@ -172,7 +177,7 @@ impl GpuEvaluator {
     ) -> std::result::Result<(), GpuError> {
         let ctx = self.context;
         let count = out.len() as u32;
-        let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
+        let (x, y, row_width) = ctx.grid(count.div_ceil(CANDIDATES_PER_INVOCATION), WORKGROUP_SIZE);
         let job = Job::new(population, first, count, row_width);
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("residual"),
@@ -291,5 +296,17 @@ impl Evaluator for GpuEvaluator {
     fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {
         super::kernel_sums::kernel_sums(self.context, sums, out)?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_kernels_score_as_many_candidates_per_invocation_as_the_host_dispatches_for() {
+        let line = format!("const CANDIDATES: u32 = {}u;", super::CANDIDATES_PER_INVOCATION);
+        assert!(
+            super::super::SSR_WGSL.contains(&line),
+            "shaders/shared/ssr.wgsl lacks `{line}`"
+        );
     }
 }
