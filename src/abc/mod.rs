@@ -48,6 +48,21 @@ pub struct LawRecord {
     pub alive: bool,
 }
 
+impl LawRecord {
+    /// The record of a law with `accepted` of `draws` candidates accepted (rate 0 when none
+    /// was drawn).
+    pub fn new(law: Law, draws: u64, accepted: usize, probability: f64, alive: bool) -> Self {
+        Self {
+            law,
+            draws,
+            accepted,
+            acceptance_rate: if draws > 0 { accepted as f64 / draws as f64 } else { 0.0 },
+            probability,
+            alive,
+        }
+    }
+}
+
 fn alive_by_default() -> bool {
     true
 }

@@ -316,18 +316,15 @@ pub fn run_observed(
                 .boxes
                 .iter()
                 .enumerate()
-                .map(|(s, b)| LawRecord {
-                    law: b.law,
-                    draws: law_draws[s],
-                    accepted: law_accepted[s],
-                    acceptance_rate: if law_draws[s] > 0 {
-                        law_accepted[s] as f64 / law_draws[s] as f64
-                    } else {
-                        0.0
-                    },
-                    probability: law_accepted[s] as f64 / n as f64,
-                    // Every law keeps being drawn from the prior.
-                    alive: true,
+                // Every law keeps being drawn from the prior: always alive.
+                .map(|(s, b)| {
+                    LawRecord::new(
+                        b.law,
+                        law_draws[s],
+                        law_accepted[s],
+                        law_accepted[s] as f64 / n as f64,
+                        true,
+                    )
                 })
                 .collect(),
             candidates_scored: scored_here,

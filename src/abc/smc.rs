@@ -593,17 +593,9 @@ pub fn run_observed(
             .boxes
             .iter()
             .enumerate()
-            .map(|(s, b)| LawRecord {
-                law: b.law,
-                draws: law_draws[s],
-                accepted: law_accepted[s],
-                acceptance_rate: if law_draws[s] > 0 {
-                    law_accepted[s] as f64 / law_draws[s] as f64
-                } else {
-                    0.0
-                },
-                probability: compensated_sum(particles.iter().filter(|p| p.law == b.law).map(|p| p.weight)),
-                alive: law_accepted[s] > 0,
+            .map(|(s, b)| {
+                let probability = compensated_sum(particles.iter().filter(|p| p.law == b.law).map(|p| p.weight));
+                LawRecord::new(b.law, law_draws[s], law_accepted[s], probability, law_accepted[s] > 0)
             })
             .collect();
         let record = PopulationRecord {
