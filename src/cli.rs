@@ -265,7 +265,7 @@ pub struct AbcArgs {
     #[arg(long, value_name = "RATE")]
     pub min_acceptance: Option<f64>,
     /// Wall-time budget of this invocation in seconds; the population in progress is dropped
-    /// and the run can be continued with --resume.
+    /// and the run can be continued with --resume (which has no budget unless given again).
     #[arg(long, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
     /// nested: one candidate stream, each population keeps the previous particles below its

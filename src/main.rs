@@ -235,10 +235,13 @@ fn write_summary(
     let run = &outcome.run;
     let data = &outcome.setup.data;
     let last = match summary_population {
-        None => run
-            .populations
-            .last()
-            .ok_or_else(|| Error::Numerical(format!("no population completed ({})", run.stop.describe())))?,
+        None => run.populations.last().ok_or_else(|| {
+            anyhow::anyhow!(
+                "no population completed: {}; continue with `bitrock abc --resume {}`",
+                run.stop.describe(),
+                dir.display()
+            )
+        })?,
         Some(g) => run.populations.get(g).ok_or_else(|| {
             Error::arg(
                 "--summary-population",

@@ -76,7 +76,8 @@ impl SamplerConfig {
         c.max_populations = more.max_populations.unwrap_or(c.max_populations);
         c.max_draws = more.max_draws.unwrap_or(c.max_draws);
         c.min_acceptance = more.min_acceptance.unwrap_or(c.min_acceptance);
-        c.max_seconds = more.max_seconds.or(c.max_seconds);
+        // A wall-time budget belongs to one invocation, not to the run.
+        c.max_seconds = more.max_seconds;
     }
 }
 

@@ -304,3 +304,21 @@ fn a_run_killed_part_way_resumes_to_the_uninterrupted_result() {
     assert_eq!(export(&killed), export(&whole));
     assert!(killed.join("run.json").exists());
 }
+
+#[test]
+fn a_wall_time_stop_is_continued_without_the_old_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let mut budgeted = config(500, 4, 0.0);
+    if let SamplerConfig::Rejection(c) = &mut budgeted.sampler {
+        // Spent before the first batch: the run stops with nothing stored.
+        c.max_seconds = Some(1e-9);
+    }
+    let first = start(&run_dir, budgeted);
+    assert_eq!(first.run.stop, StopReason::WallTime);
+    assert!(first.run.populations.is_empty());
+    let continued = run::resume(&run_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap();
+    assert_eq!(continued.run.stop, StopReason::MaxPopulations);
+    let whole = start(&dir.path().join("whole"), config(500, 4, 0.0));
+    assert_same_populations(&continued.run.populations, &whole.run.populations);
+}
