@@ -402,7 +402,10 @@ pub fn write_envelopes(dir: &Path, envelopes: &[Envelope], data: &FieldData) -> 
 
 /// The per-population table of an ABC run.
 pub fn print_population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
-    let laws: Vec<Law> = run.populations[0].record.per_law.iter().map(|l| l.law).collect();
+    let Some(first) = run.populations.first() else {
+        return writeln!(out, "stopped before any population completed: {}", run.stop.describe());
+    };
+    let laws: Vec<Law> = first.record.per_law.iter().map(|l| l.law).collect();
     write!(
         out,
         "{:>4}  {:>10}  {:>12}  {:>8}  {:>9}",
@@ -411,7 +414,7 @@ pub fn print_population_table(out: &mut impl Write, run: &Run) -> io::Result<()>
     for law in &laws {
         write!(out, "  {:>7}", format!("P({law})"))?;
     }
-    writeln!(out, "  {:>8}", "time_s")?;
+    writeln!(out, "  {:>8}  {:>8}", "ESS", "time_s")?;
     for p in &run.populations {
         let r = &p.record;
         let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
@@ -423,7 +426,21 @@ pub fn print_population_table(out: &mut impl Write, run: &Run) -> io::Result<()>
         for l in &r.per_law {
             write!(out, "  {:>7.4}", l.probability)?;
         }
-        writeln!(out, "  {:>8.3}", r.seconds)?;
+        writeln!(out, "  {:>8.0}  {:>8.3}", r.ess, r.seconds)?;
+    }
+    // SMC stops proposing a law with no particle left; say when each died.
+    for law in &laws {
+        let died = run
+            .populations
+            .iter()
+            .find(|p| p.record.per_law.iter().any(|l| l.law == *law && !l.alive));
+        if let Some(p) = died {
+            writeln!(
+                out,
+                "{law} died out in population {}: no particle left, no proposals after it",
+                p.record.index
+            )?;
+        }
     }
     let near: u64 = run.populations.iter().map(|p| p.record.near_threshold).sum();
     writeln!(
