@@ -2,11 +2,10 @@
 // stream from (seed, population, index) and writes their SSR = Σ (y - r T(w))² over the job's
 // slice of the data (shared/ssr.wgsl: 16 candidates per invocation); the host divides by Σy²
 // (f64). Needs shared/philox.wgsl, shared/job.wgsl, shared/candidate.wgsl, shared/laws.wgsl,
-// shared/ssr.wgsl (bindings 2-4).
+// shared/ssr.wgsl (bindings 2-5).
 
 @group(0) @binding(0) var<uniform> prior: Prior;
 @group(0) @binding(1) var<uniform> job: Job;
-@group(0) @binding(5) var<storage, read_write> ssr: array<f32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -23,15 +22,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             p[j] = c.params;
         }
     }
-    let sums = slice_ssr(laws, p, job.data_start, job.data_end);
-    for (var j = 0u; j < CANDIDATES; j = j + 1u) {
-        let k = first + j;
-        if (k < job.count) {
-            if (job.accumulate == 1u) {
-                ssr[k] = ssr[k] + sums[j / 4u][j % 4u];
-            } else {
-                ssr[k] = sums[j / 4u][j % 4u];
-            }
-        }
-    }
+    store_sums(first, job.count, job.accumulate == 1u, slice_ssr(laws, p, job.data_start, job.data_end));
 }

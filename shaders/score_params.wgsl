@@ -2,7 +2,7 @@
 // proposals, which need log/cos/sqrt and are therefore generated once, on the host): invocation
 // k writes SSR = Σ (y - r T(w))² of proposals job.start.x + 16k .. job.start.x + 16k + 15 over
 // the job's slice of the data (shared/ssr.wgsl: 16 candidates per invocation); the host divides
-// by Σy² (f64). Needs shared/job.wgsl, shared/laws.wgsl, shared/ssr.wgsl (bindings 2-4).
+// by Σy² (f64). Needs shared/job.wgsl, shared/laws.wgsl, shared/ssr.wgsl (bindings 2-5).
 
 // One proposal: law id (0 = m1 .. 3 = m4) and its parameters (unused ones 0). Keep in sync
 // with `GpuProposal` in src/eval/gpu/residual.rs.
@@ -14,7 +14,6 @@ struct Proposal {
 
 @group(0) @binding(0) var<storage, read> proposals: array<Proposal>;
 @group(0) @binding(1) var<uniform> job: Job;
-@group(0) @binding(5) var<storage, read_write> ssr: array<f32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -31,15 +30,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             p[j] = proposal.params;
         }
     }
-    let sums = slice_ssr(laws, p, job.data_start, job.data_end);
-    for (var j = 0u; j < CANDIDATES; j = j + 1u) {
-        let k = first + j;
-        if (k < job.count) {
-            if (job.accumulate == 1u) {
-                ssr[k] = ssr[k] + sums[j / 4u][j % 4u];
-            } else {
-                ssr[k] = sums[j / 4u][j % 4u];
-            }
-        }
-    }
+    store_sums(first, job.count, job.accumulate == 1u, slice_ssr(laws, p, job.data_start, job.data_end));
 }

@@ -1,7 +1,7 @@
 // Σ (y - r T(w))² of parameter vectors over a slice of the data, shared by the kernels that
 // score candidates (residual.wgsl: regenerated from Philox; score_params.wgsl: uploaded by the
-// host). Needs laws.wgsl. Declares bindings 2-4 of group 0 (the data columns); the kernels
-// including it use the other bindings.
+// host). Needs laws.wgsl. Declares bindings 2-4 of group 0 (the data columns) and 5 (the
+// sums out); the kernels including it use bindings 0-1.
 //
 // On a SIMD driver such as lavapipe every invocation of a batch reads the same sample, and each
 // storage load becomes a per-lane scalar loop, so loads, not arithmetic, bound the speed. Hence
@@ -27,6 +27,8 @@ override HAS_RATIO: bool = true;
 @group(0) @binding(2) var<storage, read> speed4: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> torque4: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> ratio4: array<vec4<f32>>;
+// SSR per candidate of the job (written, or added to when the data come in several dispatches).
+@group(0) @binding(5) var<storage, read_write> ssr: array<f32>;
 
 const QUADS_PER_BLOCK: u32 = 16u;
 const BLOCKS_PER_GROUP: u32 = 64u;
@@ -193,4 +195,19 @@ fn slice_ssr(laws: Laws, p: Params, data_start: u32, data_end: u32) -> Sums {
     out = law_pass(2u, laws, p, data_start, data_end, out);
     out = law_pass(3u, laws, p, data_start, data_end, out);
     return out;
+}
+
+// Writes (or, with `accumulate`, adds) the sums of candidates first..first+15 of the job, those
+// below `count`.
+fn store_sums(first: u32, count: u32, accumulate: bool, sums: Sums) {
+    for (var j = 0u; j < CANDIDATES; j = j + 1u) {
+        let k = first + j;
+        if (k < count) {
+            if (accumulate) {
+                ssr[k] = ssr[k] + sums[j / 4u][j % 4u];
+            } else {
+                ssr[k] = sums[j / 4u][j % 4u];
+            }
+        }
+    }
 }
