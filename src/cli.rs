@@ -24,8 +24,9 @@ pub struct Cli {
 pub enum Command {
     /// Least-squares fit of each law to a field record (the paper's deterministic calibration).
     Fit(FitCmd),
-    /// ABC rejection sampling with model selection (the paper's Algorithm 1): posterior law
-    /// probabilities and parameter distributions, written to a run directory.
+    /// ABC with model selection, rejection (the paper's Algorithm 1) or SMC: posterior law
+    /// probabilities and parameter distributions, written to a run directory and its store;
+    /// `--resume DIR` continues a killed or finished run.
     Abc(Box<AbcCmd>),
     /// Export a run directory's store: particles as CSV (one row per particle, parameters in
     /// columns, the record's torque unit), or the whole run as JSON.
@@ -36,13 +37,14 @@ pub enum Command {
     Report(ReportCmd),
     /// Simulate the 1-DOF torsional drill string with a bit-rock law; writes a field-like CSV.
     Simulate(SimulateCmd),
-    /// Run the whole pipeline on the embedded (synthetic) demo record.
+    /// The whole paper on the embedded (synthetic) demo record: fits, ABC for δ = 0.4, 0.6, 0.8,
+    /// stability maps (1-DOF and FE) and the report, ending with the headline numbers.
     Demo(DemoCmd),
     /// Score the same candidates on the CPU and the GPU and report their agreement: what to run
     /// on new hardware before trusting its GPU. Exit status 1 when a check fails.
     Parity(ParityCmd),
     /// Benchmark report: evaluator throughput per law and backend, the fixed cost of a call,
-    /// and a paper-scale ABC run end to end.
+    /// a paper-scale ABC run end to end, and rejection versus SMC to the same ε.
     Bench(BenchCmd),
     /// Natural frequencies, modal damping and critical bit damping of the finite-element
     /// torsional drill string (the paper's appendix).
