@@ -378,7 +378,7 @@ pub struct ReportCmd {
 
 #[derive(Debug, Args)]
 pub struct DemoCmd {
-    /// Run directory for the ABC run of the demo.
+    /// Directory of the demo: the runs (delta-0.4/, delta-0.6/, delta-0.8/) and report/.
     #[arg(long, value_name = "DIR", default_value = "bitrock-demo")]
     pub out: PathBuf,
     /// Particles per population (the paper's N is 25,000).
