@@ -1,7 +1,7 @@
 //! The rejection sampler: determinism, a case with a closed-form accepted set, the tolerance
 //! schedule, model selection and coverage.
 
-use crate::support::{rng, samples};
+use crate::support::{paper_m2_problem, rng, samples};
 use bitrock::Law;
 use bitrock::abc::rejection::{self, Mode, RejectionConfig};
 use bitrock::abc::{Run, StopReason};
@@ -46,27 +46,13 @@ fn same_populations(a: &Run, b: &Run) {
 }
 
 /// m2 at the paper's estimate with 5 % noise, speeds 0.1-20 rad/s (where m1, whose torque
-/// vanishes at w = 0, cannot mimic m2's static torque), priors from least squares, δ = 0.4.
-fn paper_m2_m4_problem(seed: u64) -> (AbcProblem, Vec<f64>) {
-    let truth = Law::M2.scale_torque(Law::M2.paper_estimate(), 1000.0);
-    let mut data = samples(Law::M2, &truth, 0.1, 20.0, 800);
-    let mut g = rng(21);
-    let noise = Normal::new(0.0, 400.0).unwrap();
-    for y in &mut data.torque_nm {
-        *y += noise.sample(&mut g);
-    }
-    let fits = fit_laws(&Law::ALL, &data, &Samples::default(), &FitOptions::default()).unwrap();
-    let rho_m2 = fits[1].rho;
-    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
-    (AbcProblem::new(prior, seed, &data, None), vec![rho_m2])
-}
 
 #[test]
 fn populations_do_not_depend_on_threads_or_batch_size() {
-    let (problem, rho) = paper_m2_m4_problem(77);
+    let (problem, rho) = paper_m2_problem(77);
     let config = RejectionConfig {
         particles: 600,
-        eps_min: rho[0] * 1.5,
+        eps_min: rho * 1.5,
         max_batch: 1 << 20,
         ..Default::default()
     };
@@ -205,11 +191,11 @@ fn nested_and_paper_modes_sample_the_same_distribution_with_fewer_evaluations() 
 
 #[test]
 fn model_selection_prefers_the_generating_law() {
-    let (problem, rho) = paper_m2_m4_problem(3);
+    let (problem, rho) = paper_m2_problem(3);
     let evaluator = CpuEvaluator::new(problem);
     let config = RejectionConfig {
         particles: 2000,
-        eps_min: rho[0] * 1.5,
+        eps_min: rho * 1.5,
         ..Default::default()
     };
     let run = rejection::run(&evaluator, &config).unwrap();
@@ -267,7 +253,7 @@ fn posterior_intervals_cover_the_generating_parameters() {
 
 #[test]
 fn cpu_rho_agrees_with_the_reference_misfit() {
-    let (problem, _) = paper_m2_m4_problem(9);
+    let (problem, _) = paper_m2_problem(9);
     let evaluator = CpuEvaluator::new(problem.clone());
     let mut rho = vec![0.0; 2000];
     evaluator.score(4, 1000, &mut rho).unwrap();

@@ -13,8 +13,19 @@ use bitrock::prior::Prior;
 use bitrock::report::{ReportInput, ReportRun, StabilitySettings, write_report};
 use std::path::Path;
 
-/// The demo record (thinned for speed), its fits and one rejection run per δ.
+/// The demo record (thinned for speed), its fits and one small rejection run per δ.
 fn runs(particles: usize, deltas: &[f64], thin: usize) -> (FieldData, Vec<LawFit>, Vec<ReportRun>) {
+    let config = RejectionConfig {
+        particles,
+        eps_min: 0.02,
+        max_populations: 4,
+        ..RejectionConfig::default()
+    };
+    runs_with(&config, deltas, thin)
+}
+
+/// The demo record thinned by `thin`, its fits and one rejection run with `config` per δ.
+fn runs_with(config: &RejectionConfig, deltas: &[f64], thin: usize) -> (FieldData, Vec<LawFit>, Vec<ReportRun>) {
     let data = demo_field_data(&DataOptions {
         thin,
         ..DataOptions::default()
@@ -26,13 +37,7 @@ fn runs(particles: usize, deltas: &[f64], thin: usize) -> (FieldData, Vec<LawFit
         .map(|&delta| {
             let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).unwrap();
             let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 2023, &data.calibration, None));
-            let config = RejectionConfig {
-                particles,
-                eps_min: 0.02,
-                max_populations: 4,
-                ..RejectionConfig::default()
-            };
-            let run = rejection::run(&evaluator, &config).unwrap();
+            let run = rejection::run(&evaluator, config).unwrap();
             ReportRun {
                 label: format!("δ = {delta}"),
                 delta,
@@ -230,7 +235,7 @@ fn unequal_weights_and_refused_input() {
 #[ignore]
 fn report_at_paper_scale() {
     let start = std::time::Instant::now();
-    let (data, fits, runs) = runs_paper();
+    let (data, fits, runs) = runs_with(&RejectionConfig::default(), &[0.4, 0.6, 0.8], 1);
     let abc = start.elapsed().as_secs_f64();
     let input = ReportInput {
         data: &data,
@@ -246,25 +251,4 @@ fn report_at_paper_scale() {
         summary.files.len(),
         dir.display()
     );
-}
-
-fn runs_paper() -> (FieldData, Vec<LawFit>, Vec<ReportRun>) {
-    let data = demo_field_data(&DataOptions::default()).unwrap();
-    let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
-    let runs = [0.4, 0.6, 0.8]
-        .iter()
-        .map(|&delta| {
-            let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).unwrap();
-            let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 2023, &data.calibration, None));
-            let run = rejection::run(&evaluator, &RejectionConfig::default()).unwrap();
-            ReportRun {
-                label: format!("δ = {delta}"),
-                delta,
-                laws: Law::ALL.to_vec(),
-                populations: run.populations,
-                w_ref_n: None,
-            }
-        })
-        .collect();
-    (data, fits, runs)
 }

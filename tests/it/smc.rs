@@ -1,7 +1,7 @@
 //! The SMC sampler: against closed forms and the rejection sampler (same ABC posterior at the
 //! same ε, within Monte-Carlo error), determinism, continuation, dead laws.
 
-use crate::support::{rng, samples};
+use crate::support::paper_m2_problem;
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
 use bitrock::abc::smc::{self, SmcConfig};
@@ -11,7 +11,6 @@ use bitrock::eval::AbcProblem;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::{LawBox, Prior};
-use rand_distr::{Distribution, Normal};
 
 /// m4 with c0 ~ U[0, 2] and c1..c3 fixed at 0 against y ≡ 1 (ρ = (1 − c0)²), plus, with
 /// prior weight `other`, an m2 law whose torque is ≥ 50 everywhere (ρ ≥ 49²): it cannot fit.
@@ -160,20 +159,6 @@ fn same_populations(a: &Run, b: &Run) {
 }
 
 /// m2 at the paper's estimate with 5 % noise against all four laws (priors from least
-/// squares, δ = 0.4), as in tests/it/abc.rs.
-fn paper_m2_problem(seed: u64) -> (AbcProblem, f64) {
-    let truth = Law::M2.scale_torque(Law::M2.paper_estimate(), 1000.0);
-    let mut data = samples(Law::M2, &truth, 0.1, 20.0, 800);
-    let mut g = rng(21);
-    let noise = Normal::new(0.0, 400.0).unwrap();
-    for y in &mut data.torque_nm {
-        *y += noise.sample(&mut g);
-    }
-    let fits = fit_laws(&Law::ALL, &data, &Samples::default(), &FitOptions::default()).unwrap();
-    let rho = fits[1].rho;
-    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
-    (AbcProblem::new(prior, seed, &data, None), rho)
-}
 
 #[test]
 fn smc_populations_do_not_depend_on_threads_or_batch_size() {
