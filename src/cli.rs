@@ -271,7 +271,7 @@ pub struct AbcArgs {
     #[arg(long, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
     /// nested: one candidate stream, each population keeps the previous particles below its
-    /// tolerance (same distribution, about half the evaluations); paper: a fresh stream per
+    /// tolerance (same distribution, 0.38× the evaluations on the demo record); paper: a fresh stream per
     /// population, as the paper's Algorithm 1.
     #[arg(long, value_enum, default_value_t = bitrock::abc::rejection::Mode::Nested)]
     pub mode: bitrock::abc::rejection::Mode,

@@ -116,6 +116,12 @@ impl Law {
     /// All laws in the paper's order.
     pub const ALL: [Law; 4] = [Law::M1, Law::M2, Law::M3, Law::M4];
 
+    /// Position in [`Law::ALL`] (m1 = 0 .. m4 = 3): the law id of the WGSL kernels and the
+    /// order of the run store's parameter columns.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
     /// Identifier used on the command line and in outputs.
     pub fn name(self) -> &'static str {
         match self {
@@ -302,6 +308,13 @@ pub fn parse_law_list(s: &str) -> Result<Vec<Law>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn index_is_the_position_in_all() {
+        for (i, law) in Law::ALL.iter().enumerate() {
+            assert_eq!(law.index(), i);
+        }
+    }
 
     #[test]
     fn units_read_like_a_paper() {

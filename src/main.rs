@@ -369,8 +369,18 @@ const DEMO_DELTAS: [f64; 3] = [0.4, 0.6, 0.8];
 fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
     let data = data::demo_field_data(&data::DataOptions::default())?;
     let root = &cmd.out;
-    if root.exists() && !root.join(DEMO_MARKER).exists() {
-        bitrock::run::check_new_run_dir(root, false)?;
+    if root.exists()
+        && !root.join(DEMO_MARKER).exists()
+        && std::fs::read_dir(root).map_or(true, |mut d| d.next().is_some())
+    {
+        return Err(Error::arg(
+            "--out",
+            format!(
+                "{} is not empty and was not written by `bitrock demo`; choose another directory",
+                root.display()
+            ),
+        )
+        .into());
     }
     set_threads(cmd.threads)?;
     let mut out = std::io::stdout().lock();

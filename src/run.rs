@@ -51,22 +51,6 @@ impl SamplerConfig {
         }
     }
 
-    /// The settings both samplers share: N, tolerances and stopping rules.
-    pub fn base(&self) -> &RejectionConfig {
-        match self {
-            SamplerConfig::Rejection(c) => c,
-            SamplerConfig::Smc(c) => &c.base,
-        }
-    }
-
-    /// The sampler's name in records (`rejection`, `smc`).
-    pub fn name(&self) -> &'static str {
-        match self {
-            SamplerConfig::Rejection(_) => "rejection",
-            SamplerConfig::Smc(_) => "smc",
-        }
-    }
-
     fn apply(&mut self, more: &Continuation) {
         let c = match self {
             SamplerConfig::Rejection(c) => c,

@@ -373,7 +373,7 @@ impl RunStore {
                 .collect::<std::result::Result<_, _>>()
                 .map_err(&err)?;
             for (position, p) in population.particles.iter().enumerate() {
-                let statement = &mut statements[law_position(p.law)];
+                let statement = &mut statements[p.law.index()];
                 let mut values: Vec<rusqlite::types::Value> = vec![
                     (r.index as i64).into(),
                     (position as i64).into(),
@@ -608,10 +608,7 @@ impl RunStore {
         while let Some(row) = rows.next().map_err(&err)? {
             let law_name: String = row.get(0).map_err(&err)?;
             let law = self.parse_law(&law_name)?;
-            let first = 4 + Law::ALL[..law_position(law)]
-                .iter()
-                .map(|l| l.n_params())
-                .sum::<usize>();
+            let first = 4 + Law::ALL[..law.index()].iter().map(|l| l.n_params()).sum::<usize>();
             let params = (first..first + law.n_params())
                 .map(|c| row.get::<_, f64>(c))
                 .collect::<std::result::Result<Vec<_>, _>>()
@@ -633,13 +630,6 @@ impl RunStore {
             message: e,
         })
     }
-}
-
-fn law_position(law: Law) -> usize {
-    Law::ALL
-        .iter()
-        .position(|&l| l == law)
-        .expect("every law is in Law::ALL")
 }
 
 fn data_meta(data: &FieldData) -> DataMeta {

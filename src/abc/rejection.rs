@@ -11,8 +11,9 @@
 //!   stopped. Each population is still exactly a rejection sample of the prior restricted to
 //!   ρ < ε_g (the first N successes of an i.i.d. stream are i.i.d. draws of the conditional
 //!   law), so it samples the same distribution; only consecutive populations share particles.
-//!   It evaluates each candidate once instead of once per population: about half the
-//!   evaluations with the median schedule. A test compares both modes' final populations.
+//!   It evaluates each candidate once instead of once per population: 0.38× the evaluations
+//!   of paper mode with the median schedule on the embedded record (N = 5,000, ε down to
+//!   0.014: 1.66e8 against 4.39e8). A test compares both modes' final populations.
 //!
 //! Tolerances: ε_0 = ∞ (the first N prior draws) unless a start is given; ε_{g+1} = the
 //! median of population g's ρ, or the next value of a user schedule. Stopping rules, checked
@@ -208,21 +209,13 @@ pub fn run_observed(
                 particles.push(Particle { weight, ..p.clone() });
             }
             near += previous.iter().filter(|p| near_threshold(p.rho)).count() as u64;
-            if particles.len() >= n {
-                particles.truncate(n);
-                position = particles[n - 1].index + 1;
-            } else {
-                position = scanned_to;
-            }
-            // Every stream position before `position` counts as a draw of this population.
-            if position == scanned_to {
-                for (count, law) in law_draws.iter_mut().zip(&populations[g - 1].record.per_law) {
-                    *count = law.draws;
-                }
-            } else {
-                for i in 0..position {
-                    law_draws[prior.candidate_slot(problem.seed, stream, i)] += 1;
-                }
+            // The previous population ended at its N-th particle, at stream position
+            // `scanned_to`, so even when all of them pass, every position before it is a draw
+            // of this population too, with the previous population's per-law draws.
+            debug_assert_eq!(previous.last().map(|p| p.index + 1), Some(scanned_to));
+            position = scanned_to;
+            for (count, law) in law_draws.iter_mut().zip(&populations[g - 1].record.per_law) {
+                *count = law.draws;
             }
             for p in &particles {
                 law_accepted[slot_of(prior, p.law)] += 1;

@@ -27,16 +27,8 @@ fn sum_sq_residual(w: &[f64], y: &[f64], r: &[f64], torque: impl Fn(f64) -> f64)
     let mut sum = [0.0f64; LANES];
     let mut carry = [0.0f64; LANES];
     let (wc, yc, rc) = (w.chunks_exact(LANES), y.chunks_exact(LANES), r.chunks_exact(LANES));
-    let tail: Vec<f64> = wc
-        .remainder()
-        .iter()
-        .zip(yc.remainder())
-        .zip(rc.remainder())
-        .map(|((&w, &y), &r)| {
-            let e = y - r * torque(w);
-            e * e
-        })
-        .collect();
+    // The last D mod 4 samples, summed after the lanes (lazily: no allocation per candidate).
+    let (w_tail, y_tail, r_tail) = (wc.remainder(), yc.remainder(), rc.remainder());
     for ((w, y), r) in wc.zip(yc).zip(rc) {
         let (w, y, r): (&[f64; LANES], &[f64; LANES], &[f64; LANES]) =
             (w.try_into().unwrap(), y.try_into().unwrap(), r.try_into().unwrap());
@@ -51,6 +43,10 @@ fn sum_sq_residual(w: &[f64], y: &[f64], r: &[f64], torque: impl Fn(f64) -> f64)
             sum[l] = t;
         }
     }
+    let tail = w_tail.iter().zip(y_tail).zip(r_tail).map(|((&w, &y), &r)| {
+        let e = y - r * torque(w);
+        e * e
+    });
     numerics::compensated_sum(sum.into_iter().chain(carry.iter().map(|c| -c)).chain(tail))
 }
 

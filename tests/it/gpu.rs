@@ -388,7 +388,7 @@ fn explicit_parameters_score_as_the_stream_does_on_both_backends() {
     }
     eprintln!("score_params: largest relative difference of rho {worst:.2e} ({count} candidates, four laws)");
     assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
-    // Past the 65,536-sample slicing: a long record through the explicit kernel.
+    // Past the 32,768-sample slicing: a long record through the explicit kernel.
     let big = bitrock::bench::synthetic_problem(Law::M1, 100_000, 3);
     let candidates = stream_candidates(&big, 0, 0, 256);
     let (mut c, mut g) = (vec![0.0; 256], vec![0.0; 256]);

@@ -337,7 +337,7 @@ impl GpuPrior {
         g.n_laws = prior.boxes.len() as u32;
         for (slot, b) in prior.boxes.iter().enumerate() {
             g.thresholds[slot] = prior.thresholds[slot].min(u64::from(u32::MAX)) as u32;
-            g.law_id[slot] = crate::laws::Law::ALL.iter().position(|&l| l == b.law).expect("law") as u32;
+            g.law_id[slot] = b.law.index() as u32;
             g.n_params[slot] = b.lower.len() as u32;
             for j in 0..b.lower.len() {
                 g.lower[2 * slot + j / 4][j % 4] = b.lower[j];

@@ -248,10 +248,7 @@ impl GpuEvaluator {
             let upload: Vec<GpuProposal> = cands
                 .iter()
                 .map(|c| GpuProposal {
-                    law: crate::laws::Law::ALL
-                        .iter()
-                        .position(|&l| l == self.problem.prior.law(c.slot))
-                        .expect("law") as u32,
+                    law: self.problem.prior.law(c.slot).index() as u32,
                     params: c.params,
                     _pad: 0,
                 })

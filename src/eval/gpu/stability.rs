@@ -91,7 +91,7 @@ pub fn stability_grid(
     ctx.queue.write_buffer(&omega_buffer, 0, bytemuck::cast_slice(&omega));
     ctx.queue.write_buffer(&wob_buffer, 0, bytemuck::cast_slice(&wob));
     ctx.queue.write_buffer(&sample_buffer, 0, bytemuck::cast_slice(&flat));
-    let law_id = Law::ALL.iter().position(|&l| l == law).expect("law") as u32;
+    let law_id = law.index() as u32;
 
     let slope_entries = [
         buffer_entry(0, UNIFORM),
