@@ -332,28 +332,47 @@ fn report_cmd(dirs: &[std::path::PathBuf], out: &Path) -> anyhow::Result<bitrock
             }
             .into());
         }
-        let same_delta = runs
-            .iter()
-            .any(|r: &bitrock::report::ReportRun| r.delta.to_bits() == config.delta.to_bits());
-        let label = if same_delta {
-            format!("δ = {} ({})", config.delta, dir.display())
-        } else {
-            format!("δ = {}", config.delta)
-        };
-        runs.push(bitrock::report::ReportRun {
-            label,
-            delta: config.delta,
-            laws: config.laws.clone(),
-            populations: stored.populations,
-            w_ref_n: config.fit.w_ref_n,
-        });
+        runs.push(report_run(&runs, dir, &config, stored.populations, None));
         first.get_or_insert(stored.setup);
     }
     let setup = first.expect("clap requires at least one run");
+    write_report(out, &setup, &runs)
+}
+
+/// One run of a report, labelled by its δ (and its directory when another run has the same δ).
+fn report_run(
+    earlier: &[bitrock::report::ReportRun],
+    dir: &Path,
+    config: &RunConfig,
+    populations: Vec<bitrock::abc::Population>,
+    summary: Option<PosteriorSummary>,
+) -> bitrock::report::ReportRun {
+    let same_delta = earlier.iter().any(|r| r.delta.to_bits() == config.delta.to_bits());
+    let label = if same_delta {
+        format!("δ = {} ({})", config.delta, dir.display())
+    } else {
+        format!("δ = {}", config.delta)
+    };
+    bitrock::report::ReportRun {
+        label,
+        delta: config.delta,
+        laws: config.laws.clone(),
+        populations,
+        w_ref_n: config.fit.w_ref_n,
+        summary,
+    }
+}
+
+/// The report of `runs` (all of the record and fits in `setup`) with the paper's map settings.
+fn write_report(
+    out: &Path,
+    setup: &bitrock::store::RunSetup,
+    runs: &[bitrock::report::ReportRun],
+) -> anyhow::Result<bitrock::report::ReportSummary> {
     let input = bitrock::report::ReportInput {
         data: &setup.data,
         fits: &setup.fits,
-        runs: &runs,
+        runs,
         stability: bitrock::report::StabilitySettings::default(),
     };
     Ok(bitrock::report::write_report(out, &input)?)
@@ -411,7 +430,8 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         root.join(DEMO_MARKER),
         "Written by `bitrock demo`; a later `bitrock demo` replaces this directory.\n",
     )?;
-    let mut run_dirs = Vec::new();
+    let mut report_runs = Vec::new();
+    let mut report_setup = None;
     let mut headlines = Vec::new();
     for delta in DEMO_DELTAS {
         let args = cli::AbcArgs {
@@ -451,11 +471,21 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         let done = write_summary(&dir, outcome, None)?;
         output::print_population_table(&mut out, &done.outcome.run)?;
         output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
-        headlines.push((delta, done.outcome.run.populations.len(), done.posterior));
-        run_dirs.push(dir);
+        headlines.push((delta, done.outcome.run.populations.len(), done.posterior.clone()));
+        // The report takes the runs as they are, with their summaries (no store reload, no
+        // second kernel density estimate).
+        let bitrock::run::Outcome { config, setup, run, .. } = done.outcome;
+        report_runs.push(report_run(
+            &report_runs,
+            &dir,
+            &config,
+            run.populations,
+            Some(done.posterior),
+        ));
+        report_setup.get_or_insert(setup);
     }
     let report_dir = root.join("report");
-    let report = report_cmd(&run_dirs, &report_dir)?;
+    let report = write_report(&report_dir, &report_setup.expect("three runs"), &report_runs)?;
     writeln!(out, "\n== bitrock demo: headline ==")?;
     writeln!(out, "final model probabilities (ε = 0.014):")?;
     for (delta, populations, posterior) in &headlines {

@@ -47,6 +47,10 @@ pub struct ReportRun {
     /// each sample by r = WOB / W_ref (`FitOptions::w_ref_n`); `None` takes the maps'
     /// [`StabilitySettings::w_ref_n`].
     pub w_ref_n: Option<f64>,
+    /// `posterior::summarize(last population, laws)` when the caller has it already (the
+    /// demo does), so that its kernel density estimate is not computed twice; `None`: computed
+    /// here.
+    pub summary: Option<PosteriorSummary>,
 }
 
 /// The structures and axes of the stability maps. [`Default`] is the paper's.
@@ -274,7 +278,10 @@ impl<'a> Prepared<'a> {
                 .filter(|p| !p.particles.is_empty())
                 .ok_or_else(|| bad(format!("run '{}' has no population with particles", run.label)))?;
             let particles = Cow::Borrowed(&last.particles[..]);
-            let summary = posterior::summarize(&particles, &run.laws);
+            let summary = match &run.summary {
+                Some(summary) => summary.clone(),
+                None => posterior::summarize(&particles, &run.laws),
+            };
             runs.push(RunView {
                 run,
                 last,

@@ -44,6 +44,7 @@ fn runs_with(config: &RejectionConfig, deltas: &[f64], thin: usize) -> (FieldDat
                 laws: Law::ALL.to_vec(),
                 populations: run.populations,
                 w_ref_n: None,
+                summary: None,
             }
         })
         .collect();
