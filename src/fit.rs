@@ -63,6 +63,9 @@ pub struct LawFit {
     pub warnings: Vec<String>,
     /// Levenberg-Marquardt runs made (starting points polished).
     pub starts: usize,
+    /// Scales of the calibration samples the law was fitted to.
+    #[serde(skip)]
+    pub scales: RecordScales,
 }
 
 /// The paper's misfit ρ = Σ(y − r·T(w))² / Σy², summed with compensation. `sum_y2` is Σy²
@@ -82,20 +85,37 @@ pub fn fit_laws(laws: &[Law], calibration: &Samples, validation: &Samples, opts:
         .collect()
 }
 
-/// Characteristic scales that make the problem dimensionless.
-#[derive(Clone, Copy, Debug)]
-struct Scales {
-    /// RMS torque (N·m).
-    torque: f64,
-    /// 95th-percentile bit speed (rad/s).
-    speed: f64,
+/// Characteristic scales of a record, which make the least-squares problem dimensionless and
+/// give every parameter a natural size (a torque parameter the RMS torque, a rate the inverse
+/// of a typical speed) where its estimate gives none (see [`crate::prior`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct RecordScales {
+    /// RMS torque, N·m.
+    pub torque: f64,
+    /// 95th-percentile bit speed, rad/s.
+    pub speed: f64,
 }
 
-impl Scales {
+impl RecordScales {
+    /// The scales of the samples a law is fitted to.
+    pub fn of(samples: &Samples) -> Self {
+        let m = samples.speed_rad_s.len().max(1);
+        Self {
+            torque: (samples.sum_sq_torque() / m as f64).sqrt(),
+            speed: quantile(&samples.speed_rad_s, 0.95).max(f64::MIN_POSITIVE),
+        }
+    }
+
     /// Factor that takes an SI parameter to the scaled problem.
     fn factor(&self, law: Law, j: usize) -> f64 {
         let s = law.params()[j];
         self.speed.powi(s.inverse_speed_power) / self.torque.powi(s.torque_power)
+    }
+
+    /// The record's natural size of parameter `j` of `law`, SI: torque^t · speed^(−s) for a
+    /// parameter of dimension torque^t · (rad/s)^(−s).
+    pub fn param_scale(&self, law: Law, j: usize) -> f64 {
+        1.0 / self.factor(law, j)
     }
 }
 
@@ -298,10 +318,7 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
     }
     let y_si = &calibration.torque_nm;
     let sum_y2 = calibration.sum_sq_torque();
-    let scales = Scales {
-        torque: (sum_y2 / m as f64).sqrt(),
-        speed: quantile(&calibration.speed_rad_s, 0.95).max(f64::MIN_POSITIVE),
-    };
+    let scales = RecordScales::of(calibration);
     let w: Vec<f64> = calibration.speed_rad_s.iter().map(|w| w / scales.speed).collect();
     let y: Vec<f64> = y_si.iter().map(|y| y / scales.torque).collect();
     let r = calibration.wob_ratio(opts.w_ref_n);
@@ -517,5 +534,6 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
         correlations,
         warnings,
         starts: starts.len(),
+        scales,
     })
 }

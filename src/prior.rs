@@ -1,8 +1,19 @@
 //! Priors of the ABC: a probability per law and, per parameter, an independent uniform box.
 //!
 //! The paper's rule (eq. minmax): [φ̂(1 − δ), φ̂(1 + δ)] around the least-squares estimate,
-//! ordered (a negative estimate flips the ends) and clipped to the law's physical bounds. A
-//! TOML file can replace any box and set the law weights:
+//! ordered (a negative estimate flips the ends) and clipped to the law's physical bounds.
+//!
+//! That rule has no width where the estimate is 0 or sits on its physical bound (a laboratory
+//! record's dynamic torque tcb, say, which the data push below 0): there the box is
+//! φ̂ ± δ·s, where s is the record's own size of the parameter's dimension (the RMS torque for
+//! a torque, the inverse of the 95th-percentile speed for a rate, their ratio for a torque per
+//! speed; see [`crate::fit::RecordScales::param_scale`]), clipped to the bound. Estimates the data do not
+//! identify (a standard error above |φ̂|, or none because two parameters trade off) keep the
+//! paper's box, which is centred on a point of the least-squares ridge and scales the
+//! trading parameters together; they are marked so that the user knows the box, not the data,
+//! sets their spread. [`BoxRule`] records which rule made every box.
+//!
+//! A TOML file can replace any box and set the law weights:
 //!
 //! ```toml
 //! # Torque-valued bounds in the record's torque unit (kN·m for a kN·m record), speeds in rad/s.
@@ -44,11 +55,61 @@ impl LawBox {
     }
 }
 
+/// Which rule made a parameter's box.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoxRule {
+    /// The paper's φ̂(1 ± δ), clipped to the physical bound.
+    Delta,
+    /// φ̂(1 ± δ), but the data do not identify φ̂ (a standard error above |φ̂|, or none because
+    /// parameters trade off): the box, not the data, sets the spread.
+    DeltaNotIdentified,
+    /// φ̂ ± δ·s with s the record's scale of the parameter: φ̂ is 0 or on its physical bound,
+    /// where δ·|φ̂| gives no width.
+    RecordScale,
+    /// Given explicitly (a `--prior` file, or a box built by a program).
+    Given,
+    /// Not recorded: a run store of schema version 1 kept the boxes but not their rules.
+    Unrecorded,
+}
+
+impl BoxRule {
+    /// A short name for tables and stores.
+    pub fn name(self) -> &'static str {
+        match self {
+            BoxRule::Delta => "delta",
+            BoxRule::DeltaNotIdentified => "delta_not_identified",
+            BoxRule::RecordScale => "record_scale",
+            BoxRule::Given => "given",
+            BoxRule::Unrecorded => "unrecorded",
+        }
+    }
+
+    /// The rule of a stored name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [
+            BoxRule::Delta,
+            BoxRule::DeltaNotIdentified,
+            BoxRule::RecordScale,
+            BoxRule::Given,
+            BoxRule::Unrecorded,
+        ]
+        .into_iter()
+        .find(|r| r.name() == name)
+    }
+}
+
+/// Relative distance from a physical bound (in units of the record's scale) within which an
+/// estimate is taken to sit on it; the least-squares fit uses the same threshold.
+const ON_BOUND: f64 = 1e-6;
+
 /// A prior over (law, parameters).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Prior {
     /// One box per law considered, in the order laws were given.
     pub boxes: Vec<LawBox>,
+    /// The rule that made each parameter's box, per box.
+    pub rules: Vec<Vec<BoxRule>>,
     /// Prior law probabilities, normalised, in the order of `boxes`.
     pub weights: Vec<f64>,
     /// Law k is chosen when the first Philox word is below `thresholds[k]` (and not below the
@@ -144,14 +205,16 @@ impl Prior {
             return Err(Error::arg("--delta", format!("must be a positive number, got {delta}")));
         }
         let mut boxes = Vec::new();
+        let mut rules = Vec::new();
         let mut weights = Vec::new();
         for fit in fits {
             let law = fit.law;
             let explicit = file.map(|f| f.bounds(law));
             let mut lower = Vec::new();
             let mut upper = Vec::new();
+            let mut law_rules = Vec::new();
             for (j, spec) in law.params().iter().enumerate() {
-                let (lo, hi) = if let Some(&[a, b]) = explicit.and_then(|m| m.get(spec.name)) {
+                let (lo, hi, rule) = if let Some(&[a, b]) = explicit.and_then(|m| m.get(spec.name)) {
                     let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
                     if !(a.is_finite() && b.is_finite() && a < b) {
                         return Err(Error::arg(
@@ -162,20 +225,9 @@ impl Prior {
                             ),
                         ));
                     }
-                    (a * unit, b * unit)
+                    (a * unit, b * unit, BoxRule::Given)
                 } else {
-                    let estimate = fit.params_si[j];
-                    if estimate == 0.0 {
-                        return Err(Error::arg(
-                            "--delta",
-                            format!(
-                                "{law}.{} was estimated as exactly 0, so the box 0·(1 ± δ) is empty; give explicit bounds for it in a --prior file",
-                                spec.name
-                            ),
-                        ));
-                    }
-                    let (a, b) = (estimate * (1.0 - delta), estimate * (1.0 + delta));
-                    (a.min(b), a.max(b))
+                    delta_box(fit, j, delta)
                 };
                 let lo = lo.max(spec.lower);
                 if lo >= hi {
@@ -189,11 +241,15 @@ impl Prior {
                 }
                 lower.push(lo as f32);
                 upper.push(hi as f32);
+                law_rules.push(rule);
             }
             boxes.push(LawBox { law, lower, upper });
+            rules.push(law_rules);
             weights.push(file.and_then(|f| f.weights.get(law.name()).copied()).unwrap_or(1.0));
         }
-        Self::new(boxes, weights)
+        let mut prior = Self::new(boxes, weights)?;
+        prior.rules = rules;
+        Ok(prior)
     }
 
     /// A prior from explicit boxes (SI) and unnormalised law weights.
@@ -215,8 +271,10 @@ impl Prior {
             })
             .collect();
         *thresholds.last_mut().expect("non-empty") = 1 << 32;
+        let rules = boxes.iter().map(|b| vec![BoxRule::Given; b.lower.len()]).collect();
         Ok(Self {
             boxes,
+            rules,
             weights,
             thresholds,
         })
@@ -267,9 +325,32 @@ impl Prior {
     }
 }
 
+/// The box of parameter `j` of `fit` by the δ rules of the module documentation (before
+/// clipping to the physical bound): (lower, upper, rule), SI.
+fn delta_box(fit: &LawFit, j: usize, delta: f64) -> (f64, f64, BoxRule) {
+    let spec = fit.law.params()[j];
+    let estimate = fit.params_si[j];
+    let scale = fit.scales.param_scale(fit.law, j);
+    // Zero width: an estimate of 0 (or one the record's scale cannot tell from 0), or one on
+    // its physical bound (the data push it further, so its size says nothing).
+    let on_bound = spec.lower.is_finite() && (estimate - spec.lower) <= ON_BOUND * scale;
+    if on_bound || estimate.abs() <= ON_BOUND * scale {
+        return (estimate - delta * scale, estimate + delta * scale, BoxRule::RecordScale);
+    }
+    let (a, b) = (estimate * (1.0 - delta), estimate * (1.0 + delta));
+    let identified = fit.std_errors_si[j].is_some_and(|se| se <= estimate.abs());
+    let rule = if identified {
+        BoxRule::Delta
+    } else {
+        BoxRule::DeltaNotIdentified
+    };
+    (a.min(b), a.max(b), rule)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::RecordScales;
 
     fn fit(law: Law, params: Vec<f64>) -> LawFit {
         LawFit {
@@ -282,6 +363,10 @@ mod tests {
             correlations: vec![],
             warnings: vec![],
             starts: 1,
+            scales: RecordScales {
+                torque: 1.0,
+                speed: 1.0,
+            },
         }
     }
 
@@ -308,9 +393,54 @@ mod tests {
                 .to_string()
                 .starts_with("--delta")
         );
-        let zero = fit(Law::M3, vec![2.72, 1.0, 0.0, 9.52, 4.0, 0.08]);
-        let e = Prior::from_fits(&[zero], 0.4, None, 1.0).unwrap_err().to_string();
-        assert!(e.contains("m3.a2") && e.contains("--prior"), "{e}");
+    }
+
+    #[test]
+    fn zero_and_on_bound_estimates_get_boxes_of_the_record_scale() {
+        // Torque scale 3 N·m, speed scale 20 rad/s: a2 (rad/s) has scale 20, tcb (N·m) 3.
+        let scales = RecordScales {
+            torque: 3.0,
+            speed: 20.0,
+        };
+        let mut m3 = fit(Law::M3, vec![2.72, 1.0, 0.0, 9.52, 4.0, 0.08]);
+        m3.scales = scales;
+        m3.std_errors_si = vec![Some(0.1); 6];
+        let mut m2 = fit(Law::M2, vec![3.0, 0.0, 0.3]);
+        m2.scales = scales;
+        m2.std_errors_si = vec![Some(0.1), None, Some(0.01)];
+        let p = Prior::from_fits(&[m3, m2], 0.4, None, 1.0).unwrap();
+        // a2 = 0 is free: ±δ·20 rad/s.
+        assert_eq!(p.boxes[0].lower[2].to_bits(), (-8.0f32).to_bits());
+        assert_eq!(p.boxes[0].upper[2].to_bits(), 8.0f32.to_bits());
+        assert_eq!(p.rules[0][2], BoxRule::RecordScale);
+        // tcb = 0 sits on its bound 0: [0, δ·3 N·m].
+        assert_eq!(p.boxes[1].lower[1].to_bits(), 0.0f32.to_bits());
+        assert_eq!(p.boxes[1].upper[1].to_bits(), (1.2f64 as f32).to_bits());
+        assert_eq!(p.rules[1][1], BoxRule::RecordScale);
+        // The others keep the paper's box; a5's standard error (0.1) exceeds 0.08.
+        assert_eq!(p.rules[0], {
+            use BoxRule::*;
+            vec![Delta, Delta, RecordScale, Delta, Delta, DeltaNotIdentified]
+        });
+        assert_eq!(p.boxes[0].lower[0].to_bits(), ((2.72f64 * 0.6) as f32).to_bits());
+        assert_eq!(p.rules[1][0], BoxRule::Delta);
+    }
+
+    #[test]
+    fn boxes_built_by_programs_are_given_and_rule_names_round_trip() {
+        let p = Prior::from_fits(&[fit(Law::M2, vec![13.0, 6.5, 0.3])], 0.4, None, 1.0).unwrap();
+        let q = Prior::new(p.boxes.clone(), vec![1.0]).unwrap();
+        assert_eq!(q.rules, vec![vec![BoxRule::Given; 3]]);
+        for rule in [
+            BoxRule::Delta,
+            BoxRule::DeltaNotIdentified,
+            BoxRule::RecordScale,
+            BoxRule::Given,
+            BoxRule::Unrecorded,
+        ] {
+            assert_eq!(BoxRule::from_name(rule.name()), Some(rule));
+        }
+        assert_eq!(BoxRule::from_name("delta "), None);
     }
 
     #[test]

@@ -126,7 +126,8 @@ pub fn start(
     config.sampler.validate()?;
     let fits = fit::fit_laws(&config.laws, &data.calibration, &data.validation, &config.fit)?;
     let prior = Prior::from_fits(&fits, config.delta, prior_file, data.torque_unit.newton_metres())?;
-    let problem = AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n);
+    let problem =
+        AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
     let evaluator = crate::eval::evaluator(problem, config.backend, note)?;
     if dir.exists() {
         std::fs::remove_dir_all(dir).map_err(|source| Error::Write {
@@ -176,7 +177,8 @@ pub fn resume(
         config.seed,
         &setup.data.calibration,
         config.fit.w_ref_n,
-    );
+    )
+    .with_best_rho(&setup.fits);
     let evaluator = crate::eval::evaluator(problem, config.backend, note)?;
     note(format!(
         "continuing {} after population {} ({} stored)",

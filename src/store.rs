@@ -15,9 +15,9 @@
 use crate::abc::{Particle, Population, PopulationRecord};
 use crate::data::{ColumnsUsed, FieldData, Samples};
 use crate::error::{Error, Result};
-use crate::fit::LawFit;
+use crate::fit::{LawFit, RecordScales};
 use crate::laws::Law;
-use crate::prior::{LawBox, Prior};
+use crate::prior::{BoxRule, LawBox, Prior};
 use crate::units::{SpeedUnit, TorqueUnit};
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
@@ -26,8 +26,9 @@ use std::path::{Path, PathBuf};
 /// File name of the store inside a run directory.
 pub const STORE_FILE: &str = "run.sqlite";
 
-/// Version of the schema below; a store of another version is refused.
-pub const SCHEMA_VERSION: i64 = 1;
+/// Version of the schema below. Version 1 (no `prior_bounds.rule`) is still read, its box
+/// rules as [`BoxRule::Unrecorded`]; any other version is refused.
+pub const SCHEMA_VERSION: i64 = 2;
 
 const SCHEMA: &str = r#"
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -83,6 +84,7 @@ CREATE TABLE prior_bounds (
     position INTEGER NOT NULL,
     lower_si REAL NOT NULL,
     upper_si REAL NOT NULL,
+    rule TEXT NOT NULL,
     PRIMARY KEY (law, position)
 );
 CREATE TABLE populations (
@@ -155,6 +157,8 @@ pub struct StoredRun {
 pub struct RunStore {
     conn: Connection,
     path: PathBuf,
+    /// Schema version of the file (older versions are read, see [`SCHEMA_VERSION`]).
+    schema_version: i64,
 }
 
 fn sql_error(path: &Path) -> impl Fn(rusqlite::Error) -> Error + '_ {
@@ -269,17 +273,21 @@ impl RunStore {
                 params![slot as i64, b.law.name(), probability, *threshold as i64],
             )
             .map_err(&err)?;
-            for (j, (lo, hi)) in b.lower.iter().zip(&b.upper).enumerate() {
+            for (j, ((lo, hi), rule)) in b.lower.iter().zip(&b.upper).zip(&prior.rules[slot]).enumerate() {
                 tx.execute(
-                    "INSERT INTO prior_bounds (law, position, lower_si, upper_si) VALUES (?1, ?2, ?3, ?4)",
-                    params![b.law.name(), j as i64, f64::from(*lo), f64::from(*hi)],
+                    "INSERT INTO prior_bounds (law, position, lower_si, upper_si, rule) VALUES (?1, ?2, ?3, ?4, ?5)",
+                    params![b.law.name(), j as i64, f64::from(*lo), f64::from(*hi), rule.name()],
                 )
                 .map_err(&err)?;
             }
         }
         tx.commit().map_err(&err)?;
         drop(err);
-        Ok(Self { conn, path })
+        Ok(Self {
+            conn,
+            path,
+            schema_version: SCHEMA_VERSION,
+        })
     }
 
     /// Opens the store of run directory `dir`; a directory without one, or with a store of
@@ -303,9 +311,13 @@ impl RunStore {
             .optional()
             .map_err(|e| not_a_run(format!("{STORE_FILE} is not a bitrock store: {e}")))?;
         match version.as_deref().map(str::parse::<i64>) {
-            Some(Ok(SCHEMA_VERSION)) => Ok(Self { conn, path }),
+            Some(Ok(v @ (1 | SCHEMA_VERSION))) => Ok(Self {
+                conn,
+                path,
+                schema_version: v,
+            }),
             Some(Ok(v)) => Err(not_a_run(format!(
-                "{STORE_FILE} has schema version {v}; this bitrock reads version {SCHEMA_VERSION}"
+                "{STORE_FILE} has schema version {v}; this bitrock reads versions 1 to {SCHEMA_VERSION}"
             ))),
             _ => Err(not_a_run(format!("{STORE_FILE} has no schema version"))),
         }
@@ -440,7 +452,7 @@ impl RunStore {
             calibration: self.load_samples("calibration")?,
             validation: self.load_samples("validation")?,
         };
-        let fits = self.load_fits()?;
+        let fits = self.load_fits(RecordScales::of(&data.calibration))?;
         let prior = self.load_prior()?;
         let populations = self.load_populations()?;
         Ok(StoredRun {
@@ -475,7 +487,9 @@ impl RunStore {
         })
     }
 
-    fn load_fits(&self) -> Result<Vec<LawFit>> {
+    /// The stored fits; `scales` are those of the stored calibration samples, which the fits
+    /// were made on.
+    fn load_fits(&self, scales: RecordScales) -> Result<Vec<LawFit>> {
         let err = sql_error(&self.path);
         let jerr = json_error(&self.path);
         let mut stmt = self
@@ -524,6 +538,7 @@ impl RunStore {
                 correlations: serde_json::from_str(&correlations).map_err(&jerr)?,
                 warnings: serde_json::from_str(&warnings).map_err(&jerr)?,
                 starts: starts as usize,
+                scales,
             });
         }
         Ok(fits)
@@ -541,19 +556,35 @@ impl RunStore {
             .collect::<std::result::Result<_, _>>()
             .map_err(&err)?;
         let mut boxes = Vec::new();
+        let mut rules = Vec::new();
         let mut weights = Vec::new();
         let mut thresholds = Vec::new();
+        // Schema 1 did not record the rules.
+        let rule_column = if self.schema_version >= 2 { "rule" } else { "NULL" };
         for (law, probability, threshold) in rows {
             let law = self.parse_law(&law)?;
             let mut bounds = self
                 .conn
-                .prepare("SELECT lower_si, upper_si FROM prior_bounds WHERE law = ?1 ORDER BY position")
+                .prepare(&format!(
+                    "SELECT lower_si, upper_si, {rule_column} FROM prior_bounds WHERE law = ?1 ORDER BY position"
+                ))
                 .map_err(&err)?;
-            let values: Vec<(f64, f64)> = bounds
-                .query_map([law.name()], |r| Ok((r.get(0)?, r.get(1)?)))
+            let values: Vec<(f64, f64, Option<String>)> = bounds
+                .query_map([law.name()], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
                 .map_err(&err)?
                 .collect::<std::result::Result<_, _>>()
                 .map_err(&err)?;
+            let mut law_rules = Vec::new();
+            for (_, _, name) in &values {
+                law_rules.push(match name {
+                    None => BoxRule::Unrecorded,
+                    Some(name) => BoxRule::from_name(name).ok_or_else(|| Error::Store {
+                        path: self.path.clone(),
+                        message: format!("prior_bounds of {law}: unknown box rule '{name}'"),
+                    })?,
+                });
+            }
+            rules.push(law_rules);
             // Written from f32, so the narrowing is exact.
             boxes.push(LawBox {
                 law,
@@ -565,6 +596,7 @@ impl RunStore {
         }
         Ok(Prior {
             boxes,
+            rules,
             weights,
             thresholds,
         })

@@ -7,11 +7,13 @@
 //! the populations it already has: given the same configuration and the same completed
 //! populations, a sampler continues exactly as an uninterrupted run would.
 
+pub mod floor;
 pub mod posterior;
 pub mod rejection;
 pub mod smc;
 
 use crate::error::Result;
+use crate::eval::AbcProblem;
 use crate::laws::Law;
 use serde::{Deserialize, Serialize};
 
@@ -44,14 +46,28 @@ pub struct LawRecord {
     /// Whether the sampler proposes this law in the next population. Rejection draws every
     /// law from the prior (always true); in SMC a law with no particle here is dead: it gets
     /// no more proposals, and later records keep it with 0 draws, 0 accepted, probability 0.
-    #[serde(default = "alive_by_default")]
+    #[serde(default = "true_by_default")]
     pub alive: bool,
+    /// Whether the law can reach the population's ε at all. When its best least-squares ρ on
+    /// the calibration data is at or above ε (and none of its candidates was accepted), no
+    /// candidate of it can be accepted: its probability is 0 by construction, not evidence
+    /// against it.
+    #[serde(default = "true_by_default")]
+    pub reachable: bool,
 }
 
 impl LawRecord {
     /// The record of a law with `accepted` of `draws` candidates accepted (rate 0 when none
-    /// was drawn).
-    pub fn new(law: Law, draws: u64, accepted: usize, probability: f64, alive: bool) -> Self {
+    /// was drawn) in a population at tolerance `epsilon` of `problem`.
+    pub fn new(
+        law: Law,
+        draws: u64,
+        accepted: usize,
+        probability: f64,
+        alive: bool,
+        problem: &AbcProblem,
+        epsilon: f64,
+    ) -> Self {
         Self {
             law,
             draws,
@@ -59,11 +75,17 @@ impl LawRecord {
             acceptance_rate: if draws > 0 { accepted as f64 / draws as f64 } else { 0.0 },
             probability,
             alive,
+            reachable: accepted > 0 || problem.can_reach(law, epsilon),
         }
+    }
+
+    /// True when the law's probability is 0 because no candidate of it can reach ε.
+    pub fn zero_by_construction(&self) -> bool {
+        !self.reachable
     }
 }
 
-fn alive_by_default() -> bool {
+fn true_by_default() -> bool {
     true
 }
 
@@ -114,6 +136,10 @@ pub enum StopReason {
     MaxDraws,
     /// The wall-time budget ran out inside a population (which was dropped).
     WallTime,
+    /// The median rule lowered ε by less than [`rejection::STALL_FRACTION`]: ε is near the
+    /// best ρ the laws can attain, and each further population would cost more draws for
+    /// almost no change.
+    Stalled,
 }
 
 impl StopReason {
@@ -126,6 +152,9 @@ impl StopReason {
             StopReason::AcceptanceFloor => "the projected acceptance fell below --min-acceptance",
             StopReason::MaxDraws => "--max-draws candidates were scored (the last population was incomplete)",
             StopReason::WallTime => "--max-seconds ran out (the last population was incomplete)",
+            StopReason::Stalled => {
+                "the tolerance stalled (the median rule lowered it by less than 1 %): it is near the best ρ the laws can attain"
+            }
         }
     }
 }

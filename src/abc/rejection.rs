@@ -18,7 +18,8 @@
 //! Tolerances: ε_0 = ∞ (the first N prior draws) unless a start is given; ε_{g+1} = the
 //! median of population g's ρ, or the next value of a user schedule. Stopping rules, checked
 //! in this order, so the run always ends: ε reached `eps_min` (that population is the last),
-//! the schedule ran out, `max_populations`, the projected acceptance of the next population is
+//! the schedule ran out, the median rule stalled (it would lower ε by less than
+//! [`STALL_FRACTION`]), `max_populations`, the projected acceptance of the next population is
 //! below `min_acceptance`, or `max_draws` candidates were scored (the population in progress
 //! is dropped).
 
@@ -317,6 +318,8 @@ pub fn run_observed(
                         law_accepted[s],
                         law_accepted[s] as f64 / n as f64,
                         true,
+                        problem,
+                        epsilon,
                     )
                 })
                 .collect(),
@@ -343,6 +346,11 @@ pub fn run_observed(
     })
 }
 
+/// The median rule stops ("stalled") when it would lower ε by less than this fraction: ε is
+/// then near the best ρ the laws attain, where each population costs about twice the draws of
+/// the last for a change below 1 %.
+pub const STALL_FRACTION: f64 = 0.01;
+
 /// The tolerance of the population after the last of `populations`, or why there is none
 /// (the stopping rules, checked in the order the module documentation gives).
 pub(crate) fn next_epsilon(
@@ -359,7 +367,14 @@ pub(crate) fn next_epsilon(
             Some(&e) => e,
             None => return Err(StopReason::ScheduleExhausted),
         },
-        None => median_rho(&current.particles),
+        None => {
+            let median = median_rho(&current.particles);
+            // A median step to eps_min or below is the last one and always taken.
+            if median > config.eps_min && median > epsilon * (1.0 - STALL_FRACTION) {
+                return Err(StopReason::Stalled);
+            }
+            median
+        }
     };
     let next = next.max(config.eps_min);
     if populations.len() >= config.max_populations {

@@ -45,7 +45,7 @@
 //! **Tolerances**: ε_{t+1} = the *unweighted* median of population t's ρ (the paper's rule and
 //! the rejection sampler's; it does not depend on the weights, so not on where they were
 //! computed), or the user's schedule. Stopping rules are the rejection sampler's, in the same
-//! order: eps_min, schedule, max populations, minimum projected acceptance (the fraction of
+//! order: eps_min, schedule, stall, max populations, minimum projected acceptance (the fraction of
 //! population t below ε_{t+1} times its acceptance rate), max draws and wall time (the
 //! population in progress is dropped).
 //!
@@ -595,7 +595,15 @@ pub fn run_observed(
             .enumerate()
             .map(|(s, b)| {
                 let probability = compensated_sum(particles.iter().filter(|p| p.law == b.law).map(|p| p.weight));
-                LawRecord::new(b.law, law_draws[s], law_accepted[s], probability, law_accepted[s] > 0)
+                LawRecord::new(
+                    b.law,
+                    law_draws[s],
+                    law_accepted[s],
+                    probability,
+                    law_accepted[s] > 0,
+                    problem,
+                    epsilon,
+                )
             })
             .collect();
         let record = PopulationRecord {

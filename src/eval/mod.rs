@@ -6,7 +6,8 @@ pub mod gpu;
 
 use crate::data::Samples;
 use crate::error::Result;
-use crate::laws::MAX_PARAMS;
+use crate::fit::LawFit;
+use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::{Candidate, Prior};
 
 /// Largest relative difference of ρ between the GPU (f32) and the CPU (f64) that bitrock
@@ -28,6 +29,9 @@ pub struct AbcProblem {
     pub wob_ratio: Vec<f64>,
     /// Σy², (N·m)², summed once on the host in f64 with compensation.
     pub sum_sq_torque: f64,
+    /// Best least-squares ρ of each law on these data (indexed by [`Law::index`]) where known:
+    /// no candidate of the law scores below it, so a tolerance at or below it cannot be reached.
+    pub best_rho: [Option<f64>; Law::ALL.len()],
 }
 
 impl AbcProblem {
@@ -41,7 +45,23 @@ impl AbcProblem {
             torque_nm: data.torque_nm.clone(),
             wob_ratio: data.wob_ratio(w_ref_n),
             sum_sq_torque: data.sum_sq_torque(),
+            best_rho: [None; Law::ALL.len()],
         }
+    }
+
+    /// The problem with the laws' best least-squares ρ taken from `fits` (made on the same
+    /// calibration data).
+    pub fn with_best_rho(mut self, fits: &[LawFit]) -> Self {
+        for fit in fits {
+            self.best_rho[fit.law.index()] = Some(fit.rho);
+        }
+        self
+    }
+
+    /// False when `law`'s best least-squares ρ shows that no candidate of it can score below
+    /// `epsilon`; true when it can or when its best ρ is unknown.
+    pub fn can_reach(&self, law: Law, epsilon: f64) -> bool {
+        self.best_rho[law.index()].is_none_or(|best| best < epsilon)
     }
 
     /// Number of data points D.
