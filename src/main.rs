@@ -220,6 +220,7 @@ fn abc_config(
                 weights_on: args.smc_weights,
             }),
         },
+        eps_min_from_record: args.eps_min.is_none(),
     };
     config.sampler.validate()?;
     Ok((config, prior_file))

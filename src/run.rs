@@ -3,6 +3,7 @@
 //! [`start`] begins a run in a fresh directory; [`resume`] continues a killed or finished one
 //! from its store and gives exactly the populations an uninterrupted run would.
 
+use crate::abc::floor;
 use crate::abc::rejection::{self, RejectionConfig};
 use crate::abc::smc::{self, SmcConfig};
 use crate::abc::{Observer, Population, Progress, Run};
@@ -30,6 +31,10 @@ pub struct RunConfig {
     pub seed: u64,
     pub backend: Backend,
     pub sampler: SamplerConfig,
+    /// The sampler's eps_min was not given: [`start`] replaces it by the floor the record can
+    /// reach ([`floor::resolve`]) and stores the result.
+    #[serde(default)]
+    pub eps_min_from_record: bool,
 }
 
 /// The sampler and its settings.
@@ -51,11 +56,16 @@ impl SamplerConfig {
         }
     }
 
-    fn apply(&mut self, more: &Continuation) {
-        let c = match self {
+    /// The stopping rules and tolerances every sampler shares.
+    pub fn base_mut(&mut self) -> &mut RejectionConfig {
+        match self {
             SamplerConfig::Rejection(c) => c,
             SamplerConfig::Smc(c) => &mut c.base,
-        };
+        }
+    }
+
+    fn apply(&mut self, more: &Continuation) {
+        let c = self.base_mut();
         c.eps_min = more.eps_min.unwrap_or(c.eps_min);
         c.max_populations = more.max_populations.unwrap_or(c.max_populations);
         c.max_draws = more.max_draws.unwrap_or(c.max_draws);
@@ -118,13 +128,20 @@ pub fn check_new_run_dir(dir: &Path, force: bool) -> Result<()> {
 pub fn start(
     dir: &Path,
     data: FieldData,
-    config: RunConfig,
+    mut config: RunConfig,
     prior_file: Option<&PriorFile>,
     observer: &mut dyn Observer,
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     config.sampler.validate()?;
     let fits = fit::fit_laws(&config.laws, &data.calibration, &data.validation, &config.fit)?;
+    let base = config.sampler.base_mut();
+    let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
+    base.eps_min = floor.eps_min;
+    floor::check_start_epsilon(&fits, base.start_epsilon)?;
+    if let Some(line) = &floor.note {
+        note(line.clone());
+    }
     let prior = Prior::from_fits(&fits, config.delta, prior_file, data.torque_unit.newton_metres())?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);

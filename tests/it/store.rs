@@ -27,6 +27,7 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
             eps_min,
             ..RejectionConfig::default()
         }),
+        eps_min_from_record: false,
     }
 }
 
