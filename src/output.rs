@@ -346,7 +346,8 @@ pub fn prior_json(prior: &Prior, unit: TorqueUnit) -> Value {
         .boxes
         .iter()
         .zip(&prior.weights)
-        .map(|(b, w)| {
+        .zip(&prior.rules)
+        .map(|((b, w), rules)| {
             let lower: Vec<f64> = b.lower.iter().map(|&v| f64::from(v)).collect();
             let upper: Vec<f64> = b.upper.iter().map(|&v| f64::from(v)).collect();
             json!({
@@ -355,6 +356,7 @@ pub fn prior_json(prior: &Prior, unit: TorqueUnit) -> Value {
                 "units": b.law.params().iter().map(|s| s.unit(unit.label())).collect::<Vec<_>>(),
                 "lower": to_record_units(b.law, &lower, unit),
                 "upper": to_record_units(b.law, &upper, unit),
+                "rules": rules.iter().map(|r| r.name()).collect::<Vec<_>>(),
                 "weight": w,
             })
         })

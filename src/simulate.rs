@@ -30,7 +30,7 @@
 use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::stability::lumped::Lumped;
-use crate::units::RAD_S_PER_RPM;
+use crate::units::{RAD_S_PER_RPM, TorqueUnit};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -271,14 +271,26 @@ impl Trace {
 /// of field data and of `bitrock`'s own readers. Precision: time 0.1 ms, speed 0.001 rpm,
 /// torque 0.1 N·m, WOB 1 N — below the noise of any downhole recorder.
 pub fn write_csv<W: std::io::Write>(trace: &Trace, out: W) -> std::io::Result<()> {
+    write_csv_in(trace, TorqueUnit::KNm, out)
+}
+
+/// Writes a trace as CSV with torque and weight on bit in the scale of `unit`: kN·m and kN
+/// (field records, see [`write_csv`]), or N·m and N for a laboratory rig, whose torques of a
+/// few N·m need 0.1 mN·m (columns `torque_nm`, `wob_n`; WOB to 1 mN).
+pub fn write_csv_in<W: std::io::Write>(trace: &Trace, unit: TorqueUnit, out: W) -> std::io::Result<()> {
+    let (torque_column, wob_column) = match unit {
+        TorqueUnit::KNm => ("torque_knm", "wob_kn"),
+        TorqueUnit::Nm => ("torque_nm", "wob_n"),
+    };
+    let per_unit = unit.newton_metres();
     let mut writer = csv::Writer::from_writer(out);
-    writer.write_record(["time_s", "bit_speed_rpm", "torque_knm", "wob_kn"])?;
+    writer.write_record(["time_s", "bit_speed_rpm", torque_column, wob_column])?;
     for i in 0..trace.len() {
         writer.write_record([
             format!("{:.4}", trace.time_s[i]),
             format!("{:.3}", trace.bit_speed_rad_s[i] / RAD_S_PER_RPM),
-            format!("{:.4}", trace.torque_nm[i] / 1000.0),
-            format!("{:.3}", trace.wob_n[i] / 1000.0),
+            format!("{:.4}", trace.torque_nm[i] / per_unit),
+            format!("{:.3}", trace.wob_n[i] / per_unit),
         ])?;
     }
     writer.flush()?;
@@ -962,6 +974,18 @@ mod tests {
         assert_eq!(
             text,
             "time_s,bit_speed_rpm,torque_knm,wob_kn\n0.0000,60.000,12.3457,244.200\n0.0200,0.000,-0.0010,0.000\n"
+        );
+        // A laboratory rig's torques of a few N·m keep their digits in N·m.
+        let rig = Trace {
+            torque_nm: vec![3.25438, -0.00004],
+            wob_n: vec![512.3456, 0.0],
+            ..trace
+        };
+        let mut out = Vec::new();
+        write_csv_in(&rig, TorqueUnit::Nm, &mut out).unwrap();
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "time_s,bit_speed_rpm,torque_nm,wob_n\n0.0000,60.000,3.2544,512.346\n0.0200,0.000,-0.0000,0.000\n"
         );
     }
 }

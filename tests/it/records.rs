@@ -1,0 +1,211 @@
+//! Records like a public laboratory test rig (issue 14), which break the paper's defaults:
+//! torque of a few N·m and weight on bit of a few hundred N, bit speed from below zero (speed
+//! noise while the bit sticks) to a few hundred rpm, a least-squares estimate on its physical
+//! bound (m2's dynamic torque tcb) and a noise floor far above the paper's ε = 0.014.
+
+use crate::support::bin;
+use bitrock::Law;
+use bitrock::simulate::{self, Initial, SimConfig};
+use bitrock::stability::lumped::Lumped;
+use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
+use std::sync::OnceLock;
+
+/// The rig: the new law m3 with a nearly linear velocity weakening (N·m), on a light string
+/// at 100 rpm and 500 N (r = 1), with 0.15 N·m torque noise and 2 rpm speed noise.
+const RIG_PARAMS_NM: [f64; 6] = [0.3, 1.0, 0.5, 3.0, 2.95, 0.03];
+const RIG: Lumped = Lumped {
+    inertia_kg_m2: 0.02,
+    omega_n_rad_s: 5.0,
+    damping_ratio: 0.1,
+};
+
+/// The rig record as a CSV file in N·m and N, written once per test binary.
+fn rig_record() -> &'static std::path::Path {
+    static FILE: OnceLock<tempfile::TempPath> = OnceLock::new();
+    FILE.get_or_init(|| {
+        let mut config = SimConfig::new(Law::M3, RIG_PARAMS_NM.to_vec(), 100.0 * RAD_S_PER_RPM, 500.0);
+        config.structure = RIG;
+        config.w_ref_n = 500.0;
+        config.settle_s = 10.0;
+        config.initial = Initial::Equilibrium {
+            speed_perturbation_rad_s: 0.0,
+        };
+        config.noise_torque_nm = 0.15;
+        config.noise_speed_rad_s = 2.0 * RAD_S_PER_RPM;
+        config.wob_fluctuation_n = 100.0;
+        config.wob_correlation_s = 5.0;
+        config.seed = 7;
+        let trace = simulate::simulate(&config).unwrap();
+        let (lo, hi) = trace.speed_range_rad_s(0.0).unwrap();
+        assert!(
+            lo < 0.0 && hi > 300.0 * RAD_S_PER_RPM,
+            "not the rig's range: {lo}..{hi} rad/s"
+        );
+        let file = tempfile::Builder::new().suffix(".csv").tempfile().unwrap();
+        simulate::write_csv_in(&trace, TorqueUnit::Nm, file.as_file()).unwrap();
+        file.into_temp_path()
+    })
+}
+
+fn run(args: &[&str]) -> (i32, String, String) {
+    let out = bin().args(args).output().expect("run bitrock");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn json(text: &str) -> serde_json::Value {
+    serde_json::from_str(text).unwrap_or_else(|e| panic!("{e}: {text}"))
+}
+
+/// Best least-squares ρ per law, from `fit --json`.
+fn best_rho(fit: &serde_json::Value) -> Vec<(String, f64)> {
+    fit["fits"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| (f["law"].as_str().unwrap().to_string(), f["rho"].as_f64().unwrap()))
+        .collect()
+}
+
+#[test]
+fn fit_warns_about_the_estimate_on_its_bound_and_the_noise_floor_is_above_the_papers() {
+    let path = rig_record().to_str().unwrap();
+    let (code, stdout, stderr) = run(&["fit", path, "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let fit = json(&stdout);
+    assert_eq!(fit["torque_unit"], "N·m");
+    let m2 = &fit["fits"][1];
+    assert_eq!(m2["law"], "m2");
+    let warnings = m2["warnings"].to_string();
+    assert!(warnings.contains("tcb sits on its physical bound"), "{warnings}");
+    let tcb = m2["params"][1].as_f64().unwrap();
+    assert!((0.0..1e-5).contains(&tcb), "tcb = {tcb} N·m");
+    for (law, rho) in best_rho(&fit) {
+        assert!(
+            rho > 2.0 * 0.014,
+            "{law}: ρ = {rho}: not a record with a high noise floor"
+        );
+    }
+}
+
+#[test]
+fn abc_with_every_default_samples_all_laws_to_a_reachable_floor_and_marks_the_rest() {
+    let path = rig_record().to_str().unwrap();
+    let (_, stdout, _) = run(&["fit", path, "--json"]);
+    let fits = best_rho(&json(&stdout));
+    let best = fits.iter().map(|f| f.1).fold(f64::INFINITY, f64::min);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let out_s = out.to_str().unwrap();
+    let (code, _, stderr) = run(&["abc", path, "--particles", "2000", "--backend", "cpu", "--out", out_s]);
+    assert_eq!(code, 0, "{stderr}");
+    // One line says why the floor is not the paper's.
+    assert!(
+        stderr.contains("ε floor") && stderr.contains("1.1 × the best least-squares ρ"),
+        "{stderr}"
+    );
+    let run_json = json(&std::fs::read_to_string(out.join("run.json")).unwrap());
+    let eps_min = run_json["config"]["sampler"]["eps_min"].as_f64().unwrap();
+    assert_eq!(eps_min.to_bits(), (1.1 * best).to_bits());
+    assert_eq!(run_json["stop_reason"], "eps_min");
+    // Every law is in the prior; m2's tcb (on its bound) has a box of the record's scale.
+    let priors = run_json["priors"].as_array().unwrap();
+    assert_eq!(priors.len(), 4);
+    assert_eq!(priors[1]["law"], "m2");
+    assert_eq!(priors[1]["rules"][1], "record_scale");
+    assert_eq!(priors[1]["lower"][1].as_f64().unwrap().to_bits(), 0.0f64.to_bits());
+    let populations = run_json["populations"].as_array().unwrap();
+    assert!(populations.len() <= 12, "{} populations", populations.len());
+    // A law is unreachable exactly when its best ρ is at or above ε and none was accepted;
+    // then its probability is 0 by construction.
+    let mut marked = 0;
+    for p in populations {
+        let epsilon = p["epsilon"].as_f64().unwrap_or(f64::INFINITY);
+        for l in p["per_law"].as_array().unwrap() {
+            let law = l["law"].as_str().unwrap();
+            let rho = fits.iter().find(|f| f.0 == law).unwrap().1;
+            let accepted = l["accepted"].as_u64().unwrap();
+            let reachable = l["reachable"].as_bool().unwrap();
+            assert_eq!(reachable, accepted > 0 || rho < epsilon, "{law} at ε = {epsilon}: {l}");
+            if !reachable {
+                assert_eq!(l["probability"].as_f64().unwrap().to_bits(), 0.0f64.to_bits());
+                marked += 1;
+            }
+        }
+    }
+    assert!(
+        marked > 0,
+        "the worst law (best ρ well above the floor) is never marked"
+    );
+}
+
+#[test]
+fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_slip() {
+    let path = rig_record().to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let out_s = out.to_str().unwrap();
+    let (code, _, stderr) = run(&[
+        "abc",
+        path,
+        "--particles",
+        "1000",
+        "--backend",
+        "cpu",
+        "--out",
+        out_s,
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, stderr) = run(&[
+        "stability",
+        "--run",
+        out_s,
+        "--inertia-kg-m2",
+        "0.02",
+        "--omega-n-rad-s",
+        "5",
+        "--damping-ratio",
+        "0.1",
+        "--w-ref-kn",
+        "0.5",
+        "--omega-rpm",
+        "100:120:3",
+        "--wob-kn",
+        "0.05:0.5:2",
+        "--backend",
+        "cpu",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let map = json(&stdout);
+    // 1-DOF: c_b* = −c_eq = −2 ξ ω_n I = −0.02 N·m·s/rad.
+    let critical = map["critical_bit_damping_nms"].as_f64().unwrap();
+    assert!((critical + 0.02).abs() < 1e-12, "{critical}");
+    // The record shows stick-slip at 100 rpm and 500 N, so the law it was made from is unstable
+    // there; at 50 N (r = 0.1) its damping r·dT/dw ≈ −0.008 lies above c_b*: stable.
+    let p: Vec<f64> = map["probability_unstable"]["m3"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|row| row.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
+        .collect();
+    // Layout [Ω][W] or [W][Ω]: Ω = 100 rpm comes first either way, W = 50 N before 500 N.
+    let omega = map["omega_rpm"].as_array().unwrap();
+    assert_eq!((omega.len(), p.len()), (3, 6));
+    let at = |o: usize, w: usize| {
+        let rows = map["probability_unstable"]["m3"].as_array().unwrap();
+        if rows.len() == omega.len() {
+            p[2 * o + w]
+        } else {
+            p[2 * w + o]
+        }
+    };
+    assert!(
+        at(0, 0) <= 0.01 && at(0, 1) >= 0.99,
+        "P(unstable) at 100 rpm, 50 N and 500 N: {p:?}"
+    );
+}
