@@ -402,3 +402,68 @@ pub(crate) fn slot_of(prior: &crate::prior::Prior, law: Law) -> usize {
         .position(|b| b.law == law)
         .expect("particle law is in the prior")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::abc::PopulationRecord;
+
+    /// A population at `epsilon` whose particles have the given ρ.
+    fn population(epsilon: f64, rhos: &[f64]) -> Population {
+        let particles: Vec<Particle> = rhos
+            .iter()
+            .enumerate()
+            .map(|(i, &rho)| Particle {
+                law: Law::M2,
+                index: i as u64,
+                params: vec![1.0, 1.0, 1.0],
+                rho,
+                weight: 1.0 / rhos.len() as f64,
+            })
+            .collect();
+        Population {
+            record: PopulationRecord {
+                index: 3,
+                epsilon: Some(epsilon),
+                draws: 1000,
+                accepted: particles.len(),
+                acceptance_rate: 0.5,
+                per_law: vec![],
+                candidates_scored: 1000,
+                evaluations: 1000,
+                near_threshold: 0,
+                ess: particles.len() as f64,
+                seconds: 0.0,
+                stream: 0,
+            },
+            particles,
+        }
+    }
+
+    #[test]
+    fn the_median_rule_stalls_near_the_best_attainable_rho_but_always_takes_its_last_step() {
+        let config = RejectionConfig {
+            eps_min: 0.014,
+            ..RejectionConfig::default()
+        };
+        // Median 0.0299 against ε = 0.03: lowered by 0.33 % < 1 %.
+        let stalled = population(0.03, &[0.0298, 0.0299, 0.02995]);
+        assert_eq!(next_epsilon(&[stalled], &config), Err(StopReason::Stalled));
+        // Median 0.0296: lowered by 1.3 %, taken.
+        let moving = population(0.03, &[0.0290, 0.0296, 0.0299]);
+        assert_eq!(
+            next_epsilon(&[moving], &config).map(f64::to_bits),
+            Ok(0.0296f64.to_bits())
+        );
+        // A median at or below eps_min is the last step and taken however small.
+        let last = population(0.0141, &[0.0139, 0.01395, 0.01409]);
+        assert_eq!(next_epsilon(&[last], &config).map(f64::to_bits), Ok(0.014f64.to_bits()));
+        // A user schedule is never called stalled.
+        let schedule = RejectionConfig {
+            epsilons: Some(vec![0.05, 0.04, 0.03, 0.0299]),
+            ..config
+        };
+        let p = population(0.03, &[0.0298, 0.0299, 0.02995]);
+        assert_eq!(next_epsilon(&[p], &schedule).map(f64::to_bits), Ok(0.0299f64.to_bits()));
+    }
+}

@@ -323,3 +323,43 @@ fn a_wall_time_stop_is_continued_without_the_old_budget() {
     let whole = start(&dir.path().join("whole"), config(500, 4, 0.0));
     assert_same_populations(&continued.run.populations, &whole.run.populations);
 }
+
+#[test]
+fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_and_resumed() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let outcome = start(&run_dir, config(500, 2, 0.014));
+    // What bitrock 3a5ee53 wrote: no rule column, schema version 1.
+    let conn = rusqlite::Connection::open(run_dir.join("run.sqlite")).unwrap();
+    conn.execute_batch(
+        "ALTER TABLE prior_bounds DROP COLUMN rule; UPDATE meta SET value = '1' WHERE key = 'schema_version';",
+    )
+    .unwrap();
+    drop(conn);
+    let stored = RunStore::open(&run_dir).unwrap().load().unwrap();
+    assert_eq!(stored.setup.prior.boxes, outcome.setup.prior.boxes);
+    assert_eq!(stored.setup.prior.thresholds, outcome.setup.prior.thresholds);
+    for rules in &stored.setup.prior.rules {
+        assert!(
+            rules.iter().all(|&r| r == bitrock::prior::BoxRule::Unrecorded),
+            "{rules:?}"
+        );
+    }
+    assert_eq!(stored.populations, outcome.run.populations);
+    // It resumes like a run of this version.
+    let more = Continuation {
+        max_populations: Some(3),
+        ..Default::default()
+    };
+    let resumed = run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap();
+    let direct = start(&dir.path().join("direct"), config(500, 3, 0.014));
+    assert_same_populations(&resumed.run.populations, &direct.run.populations);
+
+    // Another version is refused by name, not misread.
+    let conn = rusqlite::Connection::open(run_dir.join("run.sqlite")).unwrap();
+    conn.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'", [])
+        .unwrap();
+    drop(conn);
+    let e = RunStore::open(&run_dir).err().unwrap().to_string();
+    assert!(e.contains("schema version 99") && e.contains("versions 1 to 2"), "{e}");
+}
