@@ -34,12 +34,18 @@ pub enum Error {
     /// An output file cannot be written.
     #[error("{}: cannot write: {source}", path.display())]
     Write { path: PathBuf, source: std::io::Error },
-    /// The GPU backend failed (no adapter, device lost, out of memory...).
+    /// The GPU backend failed (no adapter, device lost, out of memory...). The GPU module's
+    /// own error (`eval::gpu::GpuError`) converts into it, so that this bottom layer does not
+    /// depend on the GPU module.
     #[error(transparent)]
-    Gpu(#[from] crate::eval::gpu::GpuError),
+    Gpu(Box<dyn std::error::Error + Send + Sync + 'static>),
     /// The run store (SQLite) failed or holds something it should not.
     #[error("{}: run store: {message}", path.display())]
     Store { path: PathBuf, message: String },
+    /// A run stopped (a draw or wall-time budget) before the population asked for was
+    /// complete.
+    #[error("{0}")]
+    Incomplete(String),
     /// A numerical procedure failed where it should not have.
     #[error("numerical failure: {0}")]
     Numerical(String),

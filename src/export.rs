@@ -5,8 +5,8 @@ use crate::cli::{ExportCmd, ExportFormat};
 use crate::output;
 use bitrock::Error;
 use bitrock::abc::Population;
+use bitrock::documents;
 use bitrock::store::RunStore;
-use serde_json::json;
 use std::io::Write;
 
 pub fn export_cmd(cmd: &ExportCmd) -> anyhow::Result<()> {
@@ -26,36 +26,17 @@ pub fn export_cmd(cmd: &ExportCmd) -> anyhow::Result<()> {
             )
         })?],
     };
-    let unit = setup.data.torque_unit;
-    let laws: Vec<bitrock::Law> = setup.prior.boxes.iter().map(|b| b.law).collect();
-    let mut text = Vec::new();
-    match cmd.format {
-        ExportFormat::Csv => output::write_particles(&mut text, &populations, &laws, unit)?,
-        ExportFormat::Json => {
-            let fits = output::fit_json(&setup.data, &setup.fits);
-            let value = json!({
-                "version": env!("CARGO_PKG_VERSION"),
-                "config": setup.config,
-                "data": {
-                    "source": fits["source"],
-                    "columns": fits["columns"],
-                    "torque_unit": unit.label(),
-                    "rows_read": setup.data.rows_read,
-                    "rows_used": setup.data.rows_used,
-                    "calibration_rows": setup.data.calibration.len(),
-                    "validation_rows": setup.data.validation.len(),
-                },
-                "fits": fits["fits"],
-                "priors": output::prior_json(&setup.prior, unit),
-                "populations": populations
-                    .iter()
-                    .map(|p| output::population_with_particles_json(p, unit))
-                    .collect::<Vec<_>>(),
-            });
-            serde_json::to_writer_pretty(&mut text, &value)?;
-            text.push(b'\n');
+    let text = match cmd.format {
+        ExportFormat::Csv => {
+            let laws: Vec<bitrock::Law> = setup.prior.boxes.iter().map(|b| b.law).collect();
+            documents::particles_csv(&populations, &laws, setup.data.torque_unit)
         }
-    }
+        ExportFormat::Json => {
+            let mut text = serde_json::to_vec_pretty(&documents::export_json(setup, &populations))?;
+            text.push(b'\n');
+            text
+        }
+    };
     match &cmd.out {
         None => std::io::stdout().lock().write_all(&text)?,
         Some(path) => output::write_file_atomically(path, |file| Ok(file.write_all(&text)?))?,

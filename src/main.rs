@@ -8,13 +8,14 @@ mod progress;
 mod stability_cmd;
 
 use anyhow::Context;
-use bitrock::abc::posterior::{PosteriorSummary, predictive_envelope, speed_grid, summarize};
-use bitrock::abc::rejection::{Mode, RejectionConfig};
+use bitrock::abc::rejection::RejectionConfig;
 use bitrock::data::{self, FieldData};
 use bitrock::eval::AbcProblem;
 use bitrock::eval::Backend;
 use bitrock::fit::{self, FitOptions};
-use bitrock::prior::{Prior, PriorFile};
+use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
+use bitrock::prior::Prior;
+use bitrock::report::ReportRun;
 use bitrock::run::{Continuation, RunConfig, SamplerConfig};
 use bitrock::simulate::{self, Initial, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
@@ -48,7 +49,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let done = abc_cmd(&cmd)?;
             let mut out = std::io::stdout().lock();
             if cmd.json {
-                serde_json::to_writer_pretty(&mut out, &done.report)?;
+                serde_json::to_writer_pretty(&mut out, &done.json())?;
                 writeln!(out)?;
             } else {
                 let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("clap requires one");
@@ -59,7 +60,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Export(cmd) => export::export_cmd(&cmd)?,
         Command::Report(cmd) => {
-            let summary = report_cmd(&cmd.runs, &cmd.out)?;
+            let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;
+            let summary = bitrock::report::write_paper_report(&cmd.out, &setup, &runs)?;
             println!(
                 "report written to {} ({} figures, SVG and PNG)",
                 summary.dir.join("report.md").display(),
@@ -88,22 +90,13 @@ fn load_data(path: Option<&Path>, args: &cli::DataArgs) -> anyhow::Result<FieldD
     })
 }
 
-/// Validated fit options from the flags.
-fn fit_options(args: &FitArgs, data: &FieldData) -> anyhow::Result<FitOptions> {
+/// The fit options of the flags (the library validates them); `--w-ref-kn` is refused here
+/// even when `--scale-by-wob` does not use it.
+fn fit_options(args: &FitArgs) -> anyhow::Result<FitOptions> {
     if !(args.w_ref_kn.is_finite() && args.w_ref_kn > 0.0) {
         return Err(Error::arg(
             "--w-ref-kn",
             format!("must be a positive number of kN, got {}", args.w_ref_kn),
-        )
-        .into());
-    }
-    if args.starts == 0 {
-        return Err(Error::arg("--starts", "must be at least 1").into());
-    }
-    if args.scale_by_wob && data.calibration.wob_n.is_none() {
-        return Err(Error::arg(
-            "--scale-by-wob",
-            "the record has no weight-on-bit column (name one with --wob-col)",
         )
         .into());
     }
@@ -115,11 +108,11 @@ fn fit_options(args: &FitArgs, data: &FieldData) -> anyhow::Result<FitOptions> {
 }
 
 fn fit_and_print(data: &FieldData, args: &FitArgs, json: bool) -> anyhow::Result<()> {
-    let opts = fit_options(args, data)?;
+    let opts = fit_options(args)?;
     let fits = fit::fit_laws(&args.laws, &data.calibration, &data.validation, &opts)?;
     let mut out = std::io::stdout().lock();
     if json {
-        serde_json::to_writer_pretty(&mut out, &output::fit_json(data, &fits))?;
+        serde_json::to_writer_pretty(&mut out, &bitrock::documents::fit_json(data, &fits))?;
         writeln!(out)?;
     } else {
         output::print_fit_tables(&mut out, data, &fits)?;
@@ -127,15 +120,9 @@ fn fit_and_print(data: &FieldData, args: &FitArgs, json: bool) -> anyhow::Result
     Ok(())
 }
 
-/// What an ABC run leaves for printing.
-struct AbcDone {
-    outcome: bitrock::run::Outcome,
-    posterior: PosteriorSummary,
-    report: serde_json::Value,
-}
-
-/// `bitrock abc`: a new run into `--out`, or `--resume DIR`; then the summary files.
-fn abc_cmd(cmd: &cli::AbcCmd) -> anyhow::Result<AbcDone> {
+/// `bitrock abc`: a new run into `--out`, or `--resume DIR`; the library writes the run
+/// directory and its summary files.
+fn abc_cmd(cmd: &cli::AbcCmd) -> anyhow::Result<Analysis> {
     set_threads(cmd.abc.threads)?;
     let quiet = cmd.quiet;
     let mut note = |line: String| {
@@ -144,7 +131,7 @@ fn abc_cmd(cmd: &cli::AbcCmd) -> anyhow::Result<AbcDone> {
         }
     };
     let mut progress = progress::RunProgress::new(quiet);
-    let (outcome, dir) = match (&cmd.resume, &cmd.out) {
+    match (&cmd.resume, &cmd.out) {
         (Some(dir), _) => {
             let more = Continuation {
                 eps_min: cmd.abc.eps_min,
@@ -154,18 +141,28 @@ fn abc_cmd(cmd: &cli::AbcCmd) -> anyhow::Result<AbcDone> {
                 max_seconds: cmd.abc.max_seconds,
                 backend: cmd.abc.backend,
             };
-            (bitrock::run::resume(dir, &more, &mut progress, &mut note)?, dir)
+            Ok(pipeline::resume(
+                dir,
+                &more,
+                cmd.abc.summary_population,
+                &mut progress,
+                &mut note,
+            )?)
         }
         (None, Some(dir)) => {
             let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-            let (config, prior_file) = abc_config(&data, &cmd.fit, &cmd.abc)?;
-            bitrock::run::check_new_run_dir(dir, cmd.force)?;
-            let outcome = bitrock::run::start(dir, data, config, prior_file.as_ref(), &mut progress, &mut note)?;
-            (outcome, dir)
+            let job = AbcJob {
+                config: run_config(&cmd.fit, &cmd.abc)?,
+                summary_population: cmd.abc.summary_population,
+                out: Some(RunDir {
+                    path: dir.clone(),
+                    replace: cmd.force,
+                }),
+            };
+            Ok(job.run(data, &mut progress, &mut note)?)
         }
-        (None, None) => return Err(Error::arg("--out", "give the run directory to write").into()),
-    };
-    write_summary(dir, outcome, cmd.abc.summary_population)
+        (None, None) => Err(Error::arg("--out", "give the run directory to write").into()),
+    }
 }
 
 fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
@@ -178,14 +175,8 @@ fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The validated run configuration (and parsed prior file) of a new run, refused before any
-/// work when a flag is out of range.
-fn abc_config(
-    data: &FieldData,
-    fit_args: &FitArgs,
-    args: &cli::AbcArgs,
-) -> anyhow::Result<(RunConfig, Option<PriorFile>)> {
-    let fit = fit_options(fit_args, data)?;
+/// The run configuration the flags describe (validated by the library before any work).
+fn run_config(fit_args: &FitArgs, args: &cli::AbcArgs) -> anyhow::Result<RunConfig> {
     let defaults = RejectionConfig::default();
     let sampler = RejectionConfig {
         particles: args.particles,
@@ -199,14 +190,9 @@ fn abc_config(
         max_seconds: args.max_seconds,
         ..defaults
     };
-    sampler.validate()?;
-    if !(args.delta.is_finite() && args.delta > 0.0) {
-        return Err(Error::arg("--delta", format!("must be a positive number, got {}", args.delta)).into());
-    }
-    let prior_file = args.prior.as_deref().map(PriorFile::read).transpose()?;
-    let config = RunConfig {
+    Ok(RunConfig {
         laws: fit_args.laws.clone(),
-        fit,
+        fit: fit_options(fit_args)?,
         delta: args.delta,
         prior_file: args.prior.clone(),
         seed: args.seed,
@@ -220,162 +206,7 @@ fn abc_config(
                 weights_on: args.smc_weights,
             }),
         },
-    };
-    config.sampler.validate()?;
-    Ok((config, prior_file))
-}
-
-/// Summarises population `summary_population` (default: the last) and writes run.json and
-/// envelopes.csv (with data.csv beside) into the run directory, each whole or not at all.
-fn write_summary(
-    dir: &Path,
-    outcome: bitrock::run::Outcome,
-    summary_population: Option<usize>,
-) -> anyhow::Result<AbcDone> {
-    let run = &outcome.run;
-    let data = &outcome.setup.data;
-    let last = match summary_population {
-        None => run.populations.last().ok_or_else(|| {
-            anyhow::anyhow!(
-                "no population completed: {}; continue with `bitrock abc --resume {}`",
-                run.stop.describe(),
-                dir.display()
-            )
-        })?,
-        Some(g) => run.populations.get(g).ok_or_else(|| {
-            Error::arg(
-                "--summary-population",
-                format!(
-                    "the run has populations 0..={}",
-                    run.populations.len().saturating_sub(1)
-                ),
-            )
-        })?,
-    };
-    let laws = &outcome.config.laws;
-    let posterior = summarize(&last.particles, laws);
-    let all_speeds = data.calibration.speed_rad_s.iter().chain(&data.validation.speed_rad_s);
-    let (lo, hi) = all_speeds.fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
-    let grid = speed_grid(lo, hi, 200);
-    let envelopes: Vec<_> = laws
-        .iter()
-        .filter_map(|&law| predictive_envelope(&last.particles, law, &grid, output::ENVELOPE_LEVEL, 1.0))
-        .collect();
-    let mut config = serde_json::to_value(&outcome.config)?;
-    config["threads"] = rayon::current_num_threads().into();
-    let report = output::AbcReport {
-        data,
-        fits: &outcome.setup.fits,
-        prior: &outcome.setup.prior,
-        run,
-        posterior: &posterior,
-        summary_population: last.record.index,
-        config,
-        seed: outcome.config.seed,
-        backend: outcome.backend,
-    }
-    .json();
-    // Written beside the targets, then moved into place.
-    let staging = tempfile::Builder::new()
-        .prefix(".bitrock-summary-")
-        .tempdir_in(dir)
-        .map_err(|source| Error::Write {
-            path: dir.to_path_buf(),
-            source,
-        })?;
-    std::fs::write(
-        staging.path().join("run.json"),
-        serde_json::to_string_pretty(&report)? + "\n",
-    )?;
-    output::write_envelopes(staging.path(), &envelopes, data)?;
-    for name in ["run.json", "envelopes.csv", "data.csv"] {
-        std::fs::rename(staging.path().join(name), dir.join(name)).map_err(|source| Error::Write {
-            path: dir.join(name),
-            source,
-        })?;
-    }
-    Ok(AbcDone {
-        outcome,
-        posterior,
-        report,
     })
-}
-
-/// Reads run directories into the report's runs and writes the report into `out`. The runs
-/// must share their record (the figures draw one data set).
-fn report_cmd(dirs: &[std::path::PathBuf], out: &Path) -> anyhow::Result<bitrock::report::ReportSummary> {
-    let mut runs = Vec::new();
-    let mut first: Option<bitrock::store::RunSetup> = None;
-    for dir in dirs {
-        let stored = bitrock::store::RunStore::open(dir)?.load()?;
-        if stored.populations.is_empty() {
-            return Err(Error::Data {
-                path: dir.clone(),
-                message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
-            }
-            .into());
-        }
-        let config: RunConfig = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
-            path: dir.clone(),
-            message: format!("the stored configuration is not one this bitrock reads: {e}"),
-        })?;
-        if let Some(reference) = &first
-            && (reference.data.calibration != stored.setup.data.calibration
-                || reference.data.validation != stored.setup.data.validation)
-        {
-            return Err(Error::Data {
-                path: dir.clone(),
-                message: format!(
-                    "its record differs from that of {}; a report draws runs of one record",
-                    dirs[0].display()
-                ),
-            }
-            .into());
-        }
-        runs.push(report_run(&runs, dir, &config, stored.populations, None));
-        first.get_or_insert(stored.setup);
-    }
-    let setup = first.expect("clap requires at least one run");
-    write_report(out, &setup, &runs)
-}
-
-/// One run of a report, labelled by its δ (and its directory when another run has the same δ).
-fn report_run(
-    earlier: &[bitrock::report::ReportRun],
-    dir: &Path,
-    config: &RunConfig,
-    populations: Vec<bitrock::abc::Population>,
-    summary: Option<PosteriorSummary>,
-) -> bitrock::report::ReportRun {
-    let same_delta = earlier.iter().any(|r| r.delta.to_bits() == config.delta.to_bits());
-    let label = if same_delta {
-        format!("δ = {} ({})", config.delta, dir.display())
-    } else {
-        format!("δ = {}", config.delta)
-    };
-    bitrock::report::ReportRun {
-        label,
-        delta: config.delta,
-        laws: config.laws.clone(),
-        populations,
-        w_ref_n: config.fit.w_ref_n,
-        summary,
-    }
-}
-
-/// The report of `runs` (all of the record and fits in `setup`) with the paper's map settings.
-fn write_report(
-    out: &Path,
-    setup: &bitrock::store::RunSetup,
-    runs: &[bitrock::report::ReportRun],
-) -> anyhow::Result<bitrock::report::ReportSummary> {
-    let input = bitrock::report::ReportInput {
-        data: &setup.data,
-        fits: &setup.fits,
-        runs,
-        stability: bitrock::report::StabilitySettings::default(),
-    };
-    Ok(bitrock::report::write_report(out, &input)?)
 }
 
 /// Marks a directory the demo wrote, so that a later demo may replace it (and nothing else).
@@ -434,48 +265,46 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
     let mut report_setup = None;
     let mut headlines = Vec::new();
     for delta in DEMO_DELTAS {
-        let args = cli::AbcArgs {
-            particles: cmd.particles,
-            delta,
-            prior: None,
-            eps_min: None,
-            epsilons: None,
-            start_epsilon: None,
-            max_populations: None,
-            max_draws: None,
-            min_acceptance: None,
-            max_seconds: None,
-            mode: Mode::Nested,
-            sampler: cli::Sampler::Rejection,
-            p_stay: 0.7,
-            kernel_scale: 2.0,
-            smc_weights: bitrock::abc::smc::WeightsOn::Host,
-            seed: cmd.seed,
-            threads: None,
-            backend: Some(cmd.backend),
-            summary_population: None,
-        };
-        let (config, _) = abc_config(&data, &fit_args, &args)?;
         let dir = root.join(format!("delta-{delta:.1}"));
+        let job = AbcJob {
+            config: RunConfig {
+                laws: fit_args.laws.clone(),
+                fit: fit_options(&fit_args)?,
+                delta,
+                seed: cmd.seed,
+                backend: cmd.backend,
+                sampler: SamplerConfig::Rejection(RejectionConfig {
+                    particles: cmd.particles,
+                    ..RejectionConfig::default()
+                }),
+                ..RunConfig::default()
+            },
+            summary_population: None,
+            out: Some(RunDir {
+                path: dir.clone(),
+                replace: true,
+            }),
+        };
+        let SamplerConfig::Rejection(sampler) = &job.config.sampler else {
+            unreachable!("the demo runs the rejection sampler")
+        };
         writeln!(
             out,
-            "\nABC rejection with model selection: N = {}, δ = {delta}, ε_min = 0.014, seed {} → {}",
-            args.particles,
-            args.seed,
+            "\nABC rejection with model selection: N = {}, δ = {delta}, ε_min = {}, seed {} → {}",
+            sampler.particles,
+            sampler.eps_min,
+            cmd.seed,
             dir.display()
         )?;
         let mut progress = progress::RunProgress::new(false);
-        let outcome = bitrock::run::start(&dir, data.clone(), config, None, &mut progress, &mut |line| {
-            eprintln!("{line}")
-        })?;
-        let done = write_summary(&dir, outcome, None)?;
+        let done = job.run(data.clone(), &mut progress, &mut |line| eprintln!("{line}"))?;
         output::print_population_table(&mut out, &done.outcome.run)?;
         output::print_posterior(&mut out, &done.posterior, data.torque_unit)?;
         headlines.push((delta, done.outcome.run.populations.len(), done.posterior.clone()));
         // The report takes the runs as they are, with their summaries (no store reload, no
         // second kernel density estimate).
         let bitrock::run::Outcome { config, setup, run, .. } = done.outcome;
-        report_runs.push(report_run(
+        report_runs.push(ReportRun::new(
             &report_runs,
             &dir,
             &config,
@@ -485,7 +314,7 @@ fn demo_cmd(cmd: &cli::DemoCmd) -> anyhow::Result<()> {
         report_setup.get_or_insert(setup);
     }
     let report_dir = root.join("report");
-    let report = write_report(&report_dir, &report_setup.expect("three runs"), &report_runs)?;
+    let report = bitrock::report::write_paper_report(&report_dir, &report_setup.expect("three runs"), &report_runs)?;
     writeln!(out, "\n== bitrock demo: headline ==")?;
     writeln!(out, "final model probabilities (ε = 0.014):")?;
     for (delta, populations, posterior) in &headlines {

@@ -15,7 +15,10 @@
 
 mod figures;
 mod plot;
+mod runs;
 mod stats;
+
+pub use runs::{read_run_dirs, write_paper_report};
 
 use crate::abc::Population;
 use crate::abc::posterior::{self, PosteriorSummary};
