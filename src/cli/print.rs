@@ -23,7 +23,7 @@ fn number(v: f64) -> String {
 }
 
 /// The human form of `fit`: one block per law.
-pub fn print_fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io::Result<()> {
+pub fn fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io::Result<()> {
     let torque = data.torque_unit.label();
     writeln!(
         out,
@@ -112,7 +112,7 @@ pub fn print_fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit])
 }
 
 /// The per-population table of an ABC run.
-pub fn print_population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
+pub fn population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
     let Some(first) = run.populations.first() else {
         return writeln!(out, "stopped before any population completed: {}", run.stop.describe());
     };
@@ -164,7 +164,7 @@ pub fn print_population_table(out: &mut impl Write, run: &Run) -> io::Result<()>
 }
 
 /// Per-law posterior tables in the record's units.
-pub fn print_posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: TorqueUnit) -> io::Result<()> {
+pub fn posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: TorqueUnit) -> io::Result<()> {
     for s in &posterior.laws {
         writeln!(
             out,

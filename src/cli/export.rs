@@ -1,15 +1,40 @@
 //! `bitrock export DIR`: the run store's contents as CSV (particles) or JSON (the whole run),
 //! for users who would rather not open run.sqlite themselves.
 
-use crate::cli::{ExportCmd, ExportFormat};
-use crate::output;
+use super::print;
 use bitrock::Error;
 use bitrock::abc::Population;
 use bitrock::documents;
 use bitrock::store::RunStore;
+use clap::{Args, ValueEnum};
 use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
 
-pub fn export_cmd(cmd: &ExportCmd) -> anyhow::Result<()> {
+/// Format of `bitrock export`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// Particles: population, law, candidate, rho, weight, then every law's parameters.
+    Csv,
+    /// Configuration, data summary, fits, prior, and every population with its particles.
+    Json,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportCmd {
+    /// Run directory (written by `bitrock abc --out`).
+    pub dir: PathBuf,
+    #[arg(long, value_enum, default_value_t = ExportFormat::Csv)]
+    pub format: ExportFormat,
+    /// Only this population [default: all].
+    #[arg(long, value_name = "G")]
+    pub population: Option<usize>,
+    /// Write to FILE instead of stdout.
+    #[arg(long, short, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     let store = RunStore::open(&cmd.dir)?;
     let stored = store.load()?;
     let setup = &stored.setup;
@@ -39,7 +64,7 @@ pub fn export_cmd(cmd: &ExportCmd) -> anyhow::Result<()> {
     };
     match &cmd.out {
         None => std::io::stdout().lock().write_all(&text)?,
-        Some(path) => output::write_file_atomically(path, |file| Ok(file.write_all(&text)?))?,
+        Some(path) => print::write_file_atomically(path, |file| Ok(file.write_all(&text)?))?,
     }
-    Ok(())
+    Ok(ExitCode::SUCCESS)
 }
