@@ -1,13 +1,18 @@
 //! The `bitrock` binary: parses the command line, dispatches to the command's module under
 //! `cli/`, and maps errors to exit statuses. Bad input exits with status 2 and a message naming
-//! the file, line, column or flag; other failures exit 1.
+//! the file, line, column or flag; other failures exit 1; a closed pipe on stdout ends quietly.
 
 mod cli;
 
 use bitrock::Error;
 use clap::Parser;
 use cli::{Cli, Command};
+use std::io::ErrorKind;
 use std::process::ExitCode;
+
+/// Exit status of a command whose output pipe was closed (`bitrock export DIR | head`): what a
+/// shell reports for a tool killed by SIGPIPE (128 + 13).
+const CLOSED_PIPE: u8 = 141;
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
@@ -24,6 +29,7 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
+        Err(err) if is_closed_pipe(&err) => ExitCode::from(CLOSED_PIPE),
         Err(err) => {
             eprintln!("error: {err:#}");
             let bad_input = err
@@ -31,5 +37,24 @@ fn main() -> ExitCode {
                 .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));
             ExitCode::from(if bad_input { 2 } else { 1 })
         }
+    }
+}
+
+/// True when a write failed because the reader of the pipe went away.
+fn is_closed_pipe(err: &anyhow::Error) -> bool {
+    err.chain().any(is_broken_pipe)
+}
+
+/// A broken pipe in `e` itself or in the I/O error it wraps: serde_json and csv keep their
+/// I/O error out of the source chain, and `io::Error::other(csv_error)` hides it further.
+fn is_broken_pipe(e: &(dyn std::error::Error + 'static)) -> bool {
+    if let Some(io) = e.downcast_ref::<std::io::Error>() {
+        io.kind() == ErrorKind::BrokenPipe || io.get_ref().is_some_and(|inner| is_broken_pipe(inner))
+    } else if let Some(json) = e.downcast_ref::<serde_json::Error>() {
+        json.io_error_kind() == Some(ErrorKind::BrokenPipe)
+    } else if let Some(csv) = e.downcast_ref::<csv::Error>() {
+        matches!(csv.kind(), csv::ErrorKind::Io(io) if io.kind() == ErrorKind::BrokenPipe)
+    } else {
+        false
     }
 }
