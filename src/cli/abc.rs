@@ -6,6 +6,7 @@ use super::print;
 use super::progress::RunProgress;
 use bitrock::Error;
 use bitrock::abc::rejection::RejectionConfig;
+use bitrock::abc::smc::SmcConfig;
 use bitrock::eval::Backend;
 use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
 use bitrock::run::{Continuation, RunConfig, SamplerConfig};
@@ -26,11 +27,11 @@ pub enum Sampler {
 #[derive(Debug, Args, Clone)]
 pub struct AbcArgs {
     /// Particles per population, N (the paper's 25,000).
-    #[arg(long, default_value_t = 25_000, value_name = "N")]
+    #[arg(long, default_value_t = RejectionConfig::default().particles, value_name = "N")]
     pub particles: usize,
     /// Prior half-width: each parameter is uniform on [p(1 − δ), p(1 + δ)] around its
     /// least-squares estimate p, clipped to its physical bound.
-    #[arg(long, default_value_t = 0.4, value_name = "DELTA", allow_hyphen_values = true)]
+    #[arg(long, default_value_t = RunConfig::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
     pub delta: f64,
     /// Prior file (TOML) with explicit bounds or law weights; overrides the δ rule where it
     /// speaks (format in the README).
@@ -63,7 +64,7 @@ pub struct AbcArgs {
     /// nested: one candidate stream, each population keeps the previous particles below its
     /// tolerance (same distribution, 0.38× the evaluations on the demo record); paper: a fresh stream per
     /// population, as the paper's Algorithm 1.
-    #[arg(long, value_enum, default_value_t = bitrock::abc::rejection::Mode::Nested)]
+    #[arg(long, value_enum, default_value_t = RejectionConfig::default().mode)]
     pub mode: bitrock::abc::rejection::Mode,
     /// rejection: the paper's Algorithm 1 (see --mode); smc: ABC-SMC with model selection
     /// (population 0 from the prior, then perturbed, importance-weighted populations).
@@ -71,19 +72,19 @@ pub struct AbcArgs {
     pub sampler: Sampler,
     /// SMC: probability that the model kernel keeps a particle's law (else it jumps uniformly
     /// to another law still alive).
-    #[arg(long, default_value_t = 0.7, value_name = "P", allow_hyphen_values = true)]
+    #[arg(long, default_value_t = SmcConfig::default().p_stay, value_name = "P", allow_hyphen_values = true)]
     pub p_stay: f64,
     /// SMC: the Gaussian perturbation's covariance is this times the weighted covariance of
     /// the law's previous particles (2: Beaumont et al. 2009).
-    #[arg(long, default_value_t = 2.0, value_name = "S", allow_hyphen_values = true)]
+    #[arg(long, default_value_t = SmcConfig::default().kernel_scale, value_name = "S", allow_hyphen_values = true)]
     pub kernel_scale: f64,
     /// SMC: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
     /// that GPU and CPU runs give the same populations; evaluator: on the --backend (the
     /// GPU's f32 kernel: faster for large N, but its populations drift from the CPU run's).
-    #[arg(long, value_enum, default_value_t = bitrock::abc::smc::WeightsOn::Host)]
+    #[arg(long, value_enum, default_value_t = SmcConfig::default().weights_on)]
     pub smc_weights: bitrock::abc::smc::WeightsOn,
     /// Seed of the candidate streams: the same seed gives the same populations.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = RunConfig::default().seed)]
     pub seed: u64,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
@@ -217,7 +218,7 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
         backend: args.backend.unwrap_or(Backend::Auto),
         sampler: match args.sampler {
             Sampler::Rejection => SamplerConfig::Rejection(sampler),
-            Sampler::Smc => SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
+            Sampler::Smc => SamplerConfig::Smc(SmcConfig {
                 base: sampler,
                 p_stay: args.p_stay,
                 kernel_scale: args.kernel_scale,

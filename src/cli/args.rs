@@ -4,6 +4,7 @@
 use bitrock::Error;
 use bitrock::data::{self, DataOptions, FieldData, SplitRule};
 use bitrock::fit::FitOptions;
+use bitrock::laws::PAPER_W_REF_N;
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -36,7 +37,7 @@ pub struct DataArgs {
     pub wob_unit: Option<ForceUnit>,
     /// Drop rows whose bit speed is below this, rpm: the laws hold for a turning bit, and
     /// stick-phase samples say nothing about them.
-    #[arg(long, default_value_t = 5.0, value_name = "RPM")]
+    #[arg(long, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
     pub min_speed_rpm: f64,
     /// Use only rows at or after this time, s (needs a time column).
     #[arg(long, value_name = "SECONDS")]
@@ -45,14 +46,14 @@ pub struct DataArgs {
     #[arg(long, value_name = "SECONDS")]
     pub t_end_s: Option<f64>,
     /// Keep every K-th row of the time window (applied before the speed filter).
-    #[arg(long, default_value_t = 1, value_name = "K")]
+    #[arg(long, default_value_t = DataOptions::default().thin, value_name = "K")]
     pub thin: usize,
     /// Fraction of the kept rows used for calibration; the rest validates the fit.
-    #[arg(long, default_value_t = 0.5, value_name = "F")]
+    #[arg(long, default_value_t = DataOptions::default().calibration_fraction, value_name = "F")]
     pub calibration_fraction: f64,
     /// How calibration rows are chosen: block = the first part of the record, interleaved =
     /// spread evenly through it.
-    #[arg(long, value_enum, default_value_t = SplitRule::Block)]
+    #[arg(long, value_enum, default_value_t = DataOptions::default().split)]
     pub split: SplitRule,
 }
 
@@ -87,14 +88,14 @@ pub struct FitArgs {
     #[arg(long)]
     pub no_bounds: bool,
     /// Starting points polished by Levenberg-Marquardt per law (chosen from a data-driven grid).
-    #[arg(long, default_value_t = 6, value_name = "N")]
+    #[arg(long, default_value_t = FitOptions::default().starts, value_name = "N")]
     pub starts: usize,
     /// Scale each sample's predicted torque by r = WOB / W_ref (needs a WOB column). Off: r = 1,
     /// the paper's assumption that the record was taken at W = W_ref.
     #[arg(long)]
     pub scale_by_wob: bool,
     /// Reference weight on bit W_ref, kN.
-    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub w_ref_kn: f64,
 }
 
@@ -165,13 +166,13 @@ pub struct FeArgs {
 #[derive(Debug, Args, Clone)]
 pub struct LumpedArgs {
     /// Equivalent moment of inertia I_eq, kg·m².
-    #[arg(long, default_value_t = 383.33, value_name = "KG_M2")]
+    #[arg(long, default_value_t = Lumped::default().inertia_kg_m2, value_name = "KG_M2")]
     pub inertia_kg_m2: f64,
     /// Natural frequency omega_n, rad/s.
-    #[arg(long, default_value_t = 0.85, value_name = "RAD_S")]
+    #[arg(long, default_value_t = Lumped::default().omega_n_rad_s, value_name = "RAD_S")]
     pub omega_n_rad_s: f64,
     /// Damping ratio xi.
-    #[arg(long, default_value_t = 0.25, value_name = "XI")]
+    #[arg(long, default_value_t = Lumped::default().damping_ratio, value_name = "XI")]
     pub damping_ratio: f64,
 }
 

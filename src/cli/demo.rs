@@ -1,20 +1,23 @@
 //! `bitrock demo`: the whole paper on the embedded record: the fits, three calls of the
 //! library's ABC job (δ = 0.4, 0.6, 0.8), the report, and the headline numbers.
 
-use super::args::{FitArgs, set_threads};
+use super::args::set_threads;
 use super::fit::fit_and_print;
 use super::print;
 use super::progress::RunProgress;
+use bitrock::Error;
+use bitrock::abc::posterior::PosteriorSummary;
 use bitrock::abc::rejection::RejectionConfig;
 use bitrock::data;
+use bitrock::data::FieldData;
 use bitrock::eval::Backend;
 use bitrock::pipeline::{AbcJob, RunDir};
 use bitrock::report::ReportRun;
+use bitrock::report::ReportSummary;
 use bitrock::run::{RunConfig, SamplerConfig};
-use bitrock::{Error, Law};
 use clap::Args;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Debug, Args)]
@@ -23,10 +26,10 @@ pub struct DemoCmd {
     #[arg(long, value_name = "DIR", default_value = "bitrock-demo")]
     pub out: PathBuf,
     /// Particles per population (the paper's N is 25,000).
-    #[arg(long, default_value_t = 25_000, value_name = "N")]
+    #[arg(long, default_value_t = RejectionConfig::default().particles, value_name = "N")]
     pub particles: usize,
     /// Seed of the candidate streams.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = RunConfig::default().seed)]
     pub seed: u64,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
@@ -42,23 +45,12 @@ const DEMO_MARKER: &str = "bitrock-demo.txt";
 /// The prior half-widths δ of the paper's three runs.
 const DEMO_DELTAS: [f64; 3] = [0.4, 0.6, 0.8];
 
-/// The whole paper on the embedded record: fits, ABC for δ = 0.4, 0.6, 0.8, printed as tables.
+/// The whole paper on the embedded record: fits, ABC for δ = 0.4, 0.6, 0.8, printed as tables,
+/// the report, and the headline numbers.
 pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     let data = data::demo_field_data(&data::DataOptions::default())?;
     let root = &cmd.out;
-    if root.exists()
-        && !root.join(DEMO_MARKER).exists()
-        && std::fs::read_dir(root).map_or(true, |mut d| d.next().is_some())
-    {
-        return Err(Error::arg(
-            "--out",
-            format!(
-                "{} is not empty and was not written by `bitrock demo`; choose another directory",
-                root.display()
-            ),
-        )
-        .into());
-    }
+    check_root(root)?;
     set_threads(cmd.threads)?;
     let mut out = std::io::stdout().lock();
     writeln!(
@@ -66,54 +58,17 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
     )?;
     writeln!(out, "the paper's field data are not public.\n")?;
-    let fit_args = FitArgs {
-        laws: Law::ALL.to_vec(),
-        no_bounds: false,
-        starts: 6,
-        scale_by_wob: false,
-        w_ref_kn: 244.2,
-    };
-    fit_and_print(&data, &fit_args, false)?;
-    if root.exists() {
-        std::fs::remove_dir_all(root).map_err(|source| Error::Write {
-            path: root.clone(),
-            source,
-        })?;
-    }
-    std::fs::create_dir_all(root).map_err(|source| Error::Write {
-        path: root.clone(),
-        source,
-    })?;
-    std::fs::write(
-        root.join(DEMO_MARKER),
-        "Written by `bitrock demo`; a later `bitrock demo` replaces this directory.\n",
-    )?;
+    let defaults = RunConfig::default();
+    fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
+    replace_root(root)?;
     let mut report_runs = Vec::new();
     let mut report_setup = None;
     let mut headlines = Vec::new();
     for delta in DEMO_DELTAS {
         let dir = root.join(format!("delta-{delta:.1}"));
-        let job = AbcJob {
-            config: RunConfig {
-                laws: fit_args.laws.clone(),
-                fit: fit_args.options()?,
-                delta,
-                seed: cmd.seed,
-                backend: cmd.backend,
-                sampler: SamplerConfig::Rejection(RejectionConfig {
-                    particles: cmd.particles,
-                    ..RejectionConfig::default()
-                }),
-                ..RunConfig::default()
-            },
-            summary_population: None,
-            out: Some(RunDir {
-                path: dir.clone(),
-                replace: true,
-            }),
-        };
-        let SamplerConfig::Rejection(sampler) = &job.config.sampler else {
-            unreachable!("the demo runs the rejection sampler")
+        let sampler = RejectionConfig {
+            particles: cmd.particles,
+            ..RejectionConfig::default()
         };
         writeln!(
             out,
@@ -123,11 +78,32 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             cmd.seed,
             dir.display()
         )?;
-        let mut progress = RunProgress::new(false);
-        let done = job.run(data.clone(), &mut progress, &mut |line| eprintln!("{line}"))?;
+        let eps_min = sampler.eps_min;
+        let job = AbcJob {
+            config: RunConfig {
+                delta,
+                seed: cmd.seed,
+                backend: cmd.backend,
+                sampler: SamplerConfig::Rejection(sampler),
+                ..RunConfig::default()
+            },
+            summary_population: None,
+            out: Some(RunDir {
+                path: dir.clone(),
+                replace: true,
+            }),
+        };
+        let done = job.run(data.clone(), &mut RunProgress::new(false), &mut |line| {
+            eprintln!("{line}")
+        })?;
         print::population_table(&mut out, &done.outcome.run)?;
         print::posterior(&mut out, &done.posterior, data.torque_unit)?;
-        headlines.push((delta, done.outcome.run.populations.len(), done.posterior.clone()));
+        headlines.push(Headline {
+            delta,
+            eps_min,
+            populations: done.outcome.run.populations.len(),
+            posterior: done.posterior.clone(),
+        });
         // The report takes the runs as they are, with their summaries (no store reload, no
         // second kernel density estimate).
         let bitrock::run::Outcome { config, setup, run, .. } = done.outcome;
@@ -142,22 +118,82 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     }
     let report_dir = root.join("report");
     let report = bitrock::report::write_paper_report(&report_dir, &report_setup.expect("three runs"), &report_runs)?;
+    print_headline(&mut out, &headlines, &data, root, &report)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Refuses an `--out` that holds something the demo did not write.
+fn check_root(root: &Path) -> anyhow::Result<()> {
+    if root.exists()
+        && !root.join(DEMO_MARKER).exists()
+        && std::fs::read_dir(root).map_or(true, |mut d| d.next().is_some())
+    {
+        return Err(Error::arg(
+            "--out",
+            format!(
+                "{} is not empty and was not written by `bitrock demo`; choose another directory",
+                root.display()
+            ),
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Empties the demo's directory (one [`check_root`] accepted) and marks it as the demo's.
+fn replace_root(root: &Path) -> anyhow::Result<()> {
+    let write_error = |source| Error::Write {
+        path: root.to_path_buf(),
+        source,
+    };
+    if root.exists() {
+        std::fs::remove_dir_all(root).map_err(write_error)?;
+    }
+    std::fs::create_dir_all(root).map_err(write_error)?;
+    std::fs::write(
+        root.join(DEMO_MARKER),
+        "Written by `bitrock demo`; a later `bitrock demo` replaces this directory.\n",
+    )?;
+    Ok(())
+}
+
+/// What the headline says of one run.
+struct Headline {
+    delta: f64,
+    eps_min: f64,
+    populations: usize,
+    posterior: PosteriorSummary,
+}
+
+/// The closing lines: each run's final model probabilities, the MAP of the most probable law
+/// of the first run, and where the runs and the report are.
+fn print_headline(
+    out: &mut impl Write,
+    headlines: &[Headline],
+    data: &FieldData,
+    root: &Path,
+    report: &ReportSummary,
+) -> std::io::Result<()> {
     writeln!(out, "\n== bitrock demo: headline ==")?;
-    writeln!(out, "final model probabilities (ε = 0.014):")?;
-    for (delta, populations, posterior) in &headlines {
-        let probabilities: Vec<String> = posterior
+    writeln!(out, "final model probabilities (ε = {}):", headlines[0].eps_min)?;
+    for h in headlines {
+        let probabilities: Vec<String> = h
+            .posterior
             .model_probabilities
             .iter()
             .map(|(law, p)| format!("P({law}) = {p:.3}"))
             .collect();
         writeln!(
             out,
-            "  δ = {delta}: {} ({populations} populations)",
-            probabilities.join(", ")
+            "  δ = {}: {} ({} populations)",
+            h.delta,
+            probabilities.join(", "),
+            h.populations
         )?;
     }
-    if let Some(best) = headlines[0]
-        .2
+    let first = &headlines[0];
+    if let Some(best) = first
+        .posterior
         .laws
         .iter()
         .max_by(|a, b| a.probability.total_cmp(&b.probability))
@@ -173,7 +209,8 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             .collect();
         writeln!(
             out,
-            "most probable law at δ = 0.4: {}, MAP {}",
+            "most probable law at δ = {}: {}, MAP {}",
+            first.delta,
             best.law,
             named.join(", ")
         )?;
@@ -184,6 +221,5 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         "report: {} ({} figures as SVG and PNG: fits, model probabilities, tolerances, marginals, correlations, envelopes, stability maps 1-DOF and FE)",
         report.dir.join("report.md").display(),
         report.figures.len()
-    )?;
-    Ok(ExitCode::SUCCESS)
+    )
 }

@@ -2,8 +2,9 @@
 
 use super::args::{DataArgs, FitArgs, load_data};
 use super::print;
+use bitrock::Law;
 use bitrock::data::FieldData;
-use bitrock::fit;
+use bitrock::fit::{self, FitOptions};
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
@@ -24,14 +25,13 @@ pub struct FitCmd {
 
 pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    fit_and_print(&data, &cmd.fit, cmd.json)?;
+    fit_and_print(&data, &cmd.fit.laws, &cmd.fit.options()?, cmd.json)?;
     Ok(ExitCode::SUCCESS)
 }
 
-/// Fits the laws of `args` to `data` and prints them (also the start of `bitrock demo`).
-pub fn fit_and_print(data: &FieldData, args: &FitArgs, json: bool) -> anyhow::Result<()> {
-    let opts = args.options()?;
-    let fits = fit::fit_laws(&args.laws, &data.calibration, &data.validation, &opts)?;
+/// Fits `laws` to `data` and prints them (also the start of `bitrock demo`).
+pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bool) -> anyhow::Result<()> {
+    let fits = fit::fit_laws(laws, &data.calibration, &data.validation, opts)?;
     let mut out = std::io::stdout().lock();
     if json {
         serde_json::to_writer_pretty(&mut out, &bitrock::documents::fit_json(data, &fits))?;

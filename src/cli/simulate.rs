@@ -4,6 +4,7 @@ use super::args::LumpedArgs;
 use super::print;
 use anyhow::Context;
 use bitrock::Law;
+use bitrock::laws::PAPER_W_REF_N;
 use bitrock::simulate::{self, Initial, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
 use clap::{Args, ValueEnum};
@@ -35,10 +36,10 @@ pub struct SimulateCmd {
     #[arg(long, value_name = "RPM")]
     pub omega_rpm: f64,
     /// Weight on bit W, kN.
-    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub wob_kn: f64,
     /// Reference weight on bit W_ref at which the law's parameters hold, kN.
-    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub w_ref_kn: f64,
     #[command(flatten)]
     pub lumped: LumpedArgs,

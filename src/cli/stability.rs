@@ -4,6 +4,7 @@
 use super::args::{FeArgs, LumpedArgs};
 use bitrock::Error;
 use bitrock::eval::Backend;
+use bitrock::laws::PAPER_W_REF_N;
 use bitrock::stability::map::{self, Criterion, LawSamples};
 use bitrock::units::TorqueUnit;
 use clap::{Args, ValueEnum};
@@ -44,7 +45,7 @@ pub struct StabilityCmd {
     #[command(flatten)]
     pub lumped: LumpedArgs,
     /// Reference weight on bit W_ref of the law's parameters, kN.
-    #[arg(long, default_value_t = 244.2, value_name = "KN")]
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub w_ref_kn: f64,
     /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value = "20:220:101", value_name = "MIN:MAX:COUNT")]
