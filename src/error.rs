@@ -1,5 +1,6 @@
 //! The library's error type. Variants that describe bad input (a file, a cell, a flag) map to
-//! exit status 2 in the binary; the rest are failures of the computation or the machine.
+//! exit status 2 in the binary; the rest are failures of the computation or the machine (exit
+//! status 3).
 
 use std::path::PathBuf;
 
@@ -65,7 +66,7 @@ impl Error {
     }
 
     /// True when the user's input is at fault (exit status 2), false for failures of the
-    /// computation or of the machine (exit status 1).
+    /// computation or of the machine (exit status 3).
     pub fn is_bad_input(&self) -> bool {
         matches!(
             self,

@@ -1,18 +1,15 @@
 //! The `bitrock` binary: parses the command line, dispatches to the command's module under
-//! `cli/`, and maps errors to exit statuses. Bad input exits with status 2 and a message naming
-//! the file, line, column or flag; other failures exit 1; a closed pipe on stdout ends quietly.
+//! `cli/`, and maps errors to exit statuses ([`cli::exit`]): bad input exits 2 with a message
+//! naming the file, line, column or flag; failures that stopped the work exit 3; a closed pipe
+//! on stdout ends quietly with 141.
 
 mod cli;
 
 use bitrock::Error;
 use clap::Parser;
-use cli::{Cli, Command};
+use cli::{Cli, Command, exit};
 use std::io::ErrorKind;
 use std::process::ExitCode;
-
-/// Exit status of a command whose output pipe was closed (`bitrock export DIR | head`): what a
-/// shell reports for a tool killed by SIGPIPE (128 + 13).
-const CLOSED_PIPE: u8 = 141;
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
@@ -29,13 +26,13 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
-        Err(err) if is_closed_pipe(&err) => ExitCode::from(CLOSED_PIPE),
+        Err(err) if is_closed_pipe(&err) => ExitCode::from(exit::CLOSED_PIPE),
         Err(err) => {
             eprintln!("error: {err:#}");
             let bad_input = err
                 .chain()
                 .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));
-            ExitCode::from(if bad_input { 2 } else { 1 })
+            ExitCode::from(if bad_input { exit::BAD_INPUT } else { exit::FAILURE })
         }
     }
 }

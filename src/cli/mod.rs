@@ -19,6 +19,19 @@ pub mod stability;
 
 use clap::{Parser, Subcommand};
 
+/// Exit statuses, for scripts (as `grep` tells "no match" from "error"); listed in `--help`.
+pub mod exit {
+    /// `bitrock parity` ran and found a difference between the CPU and the GPU.
+    pub const DIFFERENCE: u8 = 1;
+    /// Bad input (a file, a cell, a flag, named in the message); nothing was written.
+    pub const BAD_INPUT: u8 = 2;
+    /// A failure that stopped the work: no GPU adapter, a lost device, a full disk...
+    pub const FAILURE: u8 = 3;
+    /// The reader of the output pipe went away (`| head`): what a shell reports for a tool
+    /// killed by SIGPIPE (128 + 13).
+    pub const CLOSED_PIPE: u8 = 141;
+}
+
 /// Calibrate and select drill-string bit-rock interaction laws from downhole measurements of
 /// bit speed and torque on bit, and simulate torsional stick-slip.
 ///
@@ -26,11 +39,16 @@ use clap::{Parser, Subcommand};
 /// m3 exponential bump + tanh (the paper's new law), m4 cubic polynomial. Bit speed w in rad/s;
 /// every law is scaled by r = WOB / W_ref.
 #[derive(Debug, Parser)]
-#[command(name = "bitrock", version, about, long_about)]
+#[command(name = "bitrock", version, about, long_about, after_long_help = EXIT_STATUS_HELP)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
 }
+
+/// The exit statuses of [`exit`], as `--help` lists them.
+const EXIT_STATUS_HELP: &str = "Exit status: 0 done; 1 `bitrock parity` ran and found a difference; 2 bad input (a file, \
+cell or flag, named in the message; nothing written); 3 a failure that stopped the work (no GPU adapter, a lost \
+device, a full disk...); 141 the output pipe was closed (`| head`).";
 
 #[derive(Debug, Subcommand)]
 pub enum Command {

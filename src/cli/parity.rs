@@ -95,6 +95,6 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
     Ok(if report.pass {
         ExitCode::SUCCESS
     } else {
-        ExitCode::from(1)
+        ExitCode::from(super::exit::DIFFERENCE)
     })
 }

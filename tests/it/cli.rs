@@ -166,6 +166,30 @@ fn simulated_record_is_fitted_back() {
 }
 
 #[test]
+fn a_failure_that_stopped_the_work_exits_3() {
+    // No adapter of that name: the GPU backend cannot start, which is not the input's fault.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let result = bin()
+        .args([
+            "abc",
+            "--backend",
+            "gpu",
+            "--particles",
+            "100",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .env("WGPU_ADAPTER_NAME", "no-such-adapter")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(3), "{stderr}");
+    assert!(stderr.contains("error: no GPU adapter"), "{stderr}");
+    assert!(!out.exists());
+}
+
+#[test]
 fn a_closed_pipe_ends_quietly_with_status_141() {
     // 600 s at 50 Hz: about 1 MB of CSV, far more than a pipe holds.
     let (first, out) = first_line_then_close(&["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "600"]);
