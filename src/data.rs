@@ -292,13 +292,44 @@ fn resolve_unit<U: Copy + PartialEq>(
     }
 }
 
+/// The field delimiter of a record, read off its header line (the first line that is neither
+/// blank nor a `#` comment): a comma when the header has one, else a semicolon or a tab (as
+/// spreadsheets in many locales export). A header with both and no comma is refused, naming
+/// them.
+fn detect_delimiter(text: &[u8], path: &Path) -> Result<u8> {
+    let header = text
+        .split(|&b| b == b'\n')
+        .find(|line| !line.starts_with(b"#") && !line.trim_ascii().is_empty())
+        .unwrap_or_default();
+    let has = |b: u8| header.contains(&b);
+    match (has(b','), has(b';'), has(b'\t')) {
+        (true, _, _) | (false, false, false) => Ok(b','),
+        (false, true, false) => Ok(b';'),
+        (false, false, true) => Ok(b'\t'),
+        (false, true, true) => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: None,
+            message: "the header line has both ';' and tab separators and no comma: use one delimiter (a comma, a semicolon or a tab)".into(),
+        }),
+    }
+}
+
 /// Reads, filters and splits a field record from any reader. `path` is only used in messages.
-pub fn parse_field_data<R: Read>(reader: R, path: &Path, opts: &DataOptions) -> Result<FieldData> {
+/// Fields are separated by commas, or by semicolons or tabs when the header line says so
+/// ([`detect_delimiter`]); numbers take a decimal point.
+pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions) -> Result<FieldData> {
     opts.validate()?;
+    let mut text = Vec::new();
+    reader.read_to_end(&mut text).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let delimiter = detect_delimiter(&text, path)?;
     let mut rdr = csv::ReaderBuilder::new()
+        .delimiter(delimiter)
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
-        .from_reader(reader);
+        .from_reader(text.as_slice());
     let csv_error = |e: csv::Error| Error::Format {
         path: path.to_path_buf(),
         line: e.position().map(|p| p.line()),
@@ -388,7 +419,13 @@ pub fn parse_field_data<R: Read>(reader: R, path: &Path, opts: &DataOptions) -> 
                 name: name(i),
                 message,
             };
-            let v: f64 = text.parse().map_err(|_| fail(format!("'{text}' is not a number")))?;
+            let v: f64 = text.parse().map_err(|_| {
+                fail(if delimiter != b',' && text.contains(',') {
+                    format!("'{text}' is not a number (write decimals with a point, not a comma)")
+                } else {
+                    format!("'{text}' is not a number")
+                })
+            })?;
             if v.is_finite() {
                 Ok(v)
             } else {
@@ -560,6 +597,31 @@ mod tests {
         let d = parse(GOOD, &opts).unwrap();
         // window keeps rows 2..4, thinning keeps rows 2 and 4.
         assert_eq!(d.calibration.torque_nm, vec![11_000.0, 8_000.0]);
+    }
+
+    #[test]
+    fn semicolon_and_tab_records_read_as_comma_ones() {
+        let opts = DataOptions {
+            calibration_fraction: 1.0,
+            ..Default::default()
+        };
+        let comma = parse(GOOD, &opts).unwrap();
+        for delimiter in [";", "\t", "; "] {
+            let text = format!("# a comment, with a comma\n{}", GOOD.replace(',', delimiter));
+            let d = parse(&text, &opts).unwrap_or_else(|e| panic!("{delimiter:?}: {e}"));
+            assert_eq!(d.columns, comma.columns, "{delimiter:?}");
+            assert_eq!(d.calibration, comma.calibration, "{delimiter:?}");
+        }
+        // A decimal comma in a semicolon record is named as such, at its line and column.
+        let e = parse("speed_rpm;torque_knm\n60;1,5\n", &opts).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "x.csv:2:2: column 'torque_knm': '1,5' is not a number (write decimals with a point, not a comma)"
+        );
+        // Both separators and no comma: refused, naming both.
+        let e = parse("time_s;speed_rpm\ttorque_knm\n0;60\t1\n", &opts).unwrap_err();
+        assert!(e.is_bad_input());
+        assert!(e.to_string().contains("both ';' and tab"), "{e}");
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! The library's error type. Variants that describe bad input (a file, a cell, a flag) map to
-//! exit status 2 in the binary; the rest are failures of the computation or the machine.
+//! exit status 2 in the binary; the rest are failures of the computation or the machine (exit
+//! status 3).
 
 use std::path::PathBuf;
 
@@ -34,12 +35,18 @@ pub enum Error {
     /// An output file cannot be written.
     #[error("{}: cannot write: {source}", path.display())]
     Write { path: PathBuf, source: std::io::Error },
-    /// The GPU backend failed (no adapter, device lost, out of memory...).
+    /// The GPU backend failed (no adapter, device lost, out of memory...). The GPU module's
+    /// own error (`eval::gpu::GpuError`) converts into it, so that this bottom layer does not
+    /// depend on the GPU module.
     #[error(transparent)]
-    Gpu(#[from] crate::eval::gpu::GpuError),
+    Gpu(Box<dyn std::error::Error + Send + Sync + 'static>),
     /// The run store (SQLite) failed or holds something it should not.
     #[error("{}: run store: {message}", path.display())]
     Store { path: PathBuf, message: String },
+    /// A run stopped (a draw or wall-time budget) before the population asked for was
+    /// complete.
+    #[error("{0}")]
+    Incomplete(String),
     /// A numerical procedure failed where it should not have.
     #[error("numerical failure: {0}")]
     Numerical(String),
@@ -59,7 +66,7 @@ impl Error {
     }
 
     /// True when the user's input is at fault (exit status 2), false for failures of the
-    /// computation or of the machine (exit status 1).
+    /// computation or of the machine (exit status 3).
     pub fn is_bad_input(&self) -> bool {
         matches!(
             self,

@@ -41,6 +41,38 @@ impl Default for FitOptions {
     }
 }
 
+impl FitOptions {
+    /// Refuses options that cannot fit, naming the flag: no starting point, a W_ref that is
+    /// not a positive number.
+    pub fn validate(&self) -> Result<()> {
+        if self.starts == 0 {
+            return Err(Error::arg("--starts", "must be at least 1"));
+        }
+        if let Some(w_ref_n) = self.w_ref_n
+            && !(w_ref_n.is_finite() && w_ref_n > 0.0)
+        {
+            return Err(Error::arg(
+                "--w-ref-kn",
+                format!("must be a positive number of kN, got {}", w_ref_n / 1000.0),
+            ));
+        }
+        Ok(())
+    }
+
+    /// [`Self::validate`], and refuses scaling by r = WOB / W_ref on samples without weight on
+    /// bit.
+    pub fn validate_for(&self, calibration: &Samples) -> Result<()> {
+        self.validate()?;
+        if self.w_ref_n.is_some() && calibration.wob_n.is_none() {
+            return Err(Error::arg(
+                "--scale-by-wob",
+                "the record has no weight-on-bit column (name one with --wob-col)",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The least-squares estimate of one law. Parameters are SI (torques in N·m).
 #[derive(Clone, Debug, Serialize)]
 pub struct LawFit {
@@ -79,7 +111,9 @@ pub fn misfit(law: Law, params: &[f64], w: &[f64], y: &[f64], r: &[f64], sum_y2:
 }
 
 /// Fits every law in `laws` (in parallel) to the calibration part of `samples`.
+/// Refuses options that cannot fit these samples first ([`FitOptions::validate_for`]).
 pub fn fit_laws(laws: &[Law], calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<Vec<LawFit>> {
+    opts.validate_for(calibration)?;
     laws.par_iter()
         .map(|&law| fit_law(law, calibration, validation, opts))
         .collect()

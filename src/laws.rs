@@ -109,6 +109,10 @@ const M4_PARAMS: [ParamSpec; 4] = [
     ParamSpec::new("c3", 1, 3, FREE),
 ];
 
+/// The paper's reference weight on bit W_ref (N): every law's torque is scaled by r = W / W_ref,
+/// and the paper's estimates hold at W = W_ref.
+pub const PAPER_W_REF_N: f64 = 244.2e3;
+
 /// The largest number of parameters of any law (M3 has six).
 pub const MAX_PARAMS: usize = 6;
 

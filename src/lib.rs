@@ -5,16 +5,55 @@
 //!
 //! Inside the library every quantity is SI (rad/s, N·m, N, kg·m², s); the user's units appear
 //! only at the edges (CSV columns, flags, printed tables), always named.
+//!
+//! # The whole job in one call
+//!
+//! [`pipeline::AbcJob`] is what `bitrock abc` runs: a record → least-squares fits → prior →
+//! ABC populations → posterior summary and predictive envelopes, optionally written to a run
+//! directory. Its [`Default`] is the command line's defaults:
+//!
+//! ```
+//! use bitrock::abc::Silent;
+//! use bitrock::abc::rejection::RejectionConfig;
+//! use bitrock::data::{DataOptions, demo_field_data};
+//! use bitrock::eval::Backend;
+//! use bitrock::pipeline::AbcJob;
+//! use bitrock::run::{RunConfig, SamplerConfig};
+//!
+//! # fn main() -> bitrock::Result<()> {
+//! let data = demo_field_data(&DataOptions::default())?;
+//! let job = AbcJob {
+//!     config: RunConfig {
+//!         backend: Backend::Cpu,
+//!         sampler: SamplerConfig::Rejection(RejectionConfig {
+//!             particles: 200,
+//!             eps_min: 0.05,
+//!             ..RejectionConfig::default()
+//!         }),
+//!         ..RunConfig::default()
+//!     },
+//!     ..AbcJob::default() // in memory; `out: Some(RunDir { .. })` writes the run directory
+//! };
+//! let analysis = job.run(data, &mut Silent, &mut |note| eprintln!("{note}"))?;
+//! let probabilities = &analysis.posterior.model_probabilities;
+//! let total: f64 = probabilities.iter().map(|(_, p)| p).sum();
+//! assert!((total - 1.0).abs() < 1e-12);
+//! assert_eq!(analysis.envelopes.len(), analysis.posterior.laws.len());
+//! # Ok(())
+//! # }
+//! ```
 #![deny(clippy::float_cmp)]
 
 pub mod abc;
 pub mod bench;
 pub mod data;
+pub mod documents;
 pub mod error;
 pub mod eval;
 pub mod fit;
 pub mod laws;
 pub mod numerics;
+pub mod pipeline;
 pub mod prior;
 pub mod report;
 pub mod rng;

@@ -18,7 +18,8 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Everything that defines a run besides its data: stored with the run, so that `--resume`
-/// needs nothing else.
+/// needs nothing else. [`Default`] is `bitrock abc`'s defaults (every law, bounded fits, δ =
+/// 0.4, seed 1, the paper's rejection sampler with N = 25,000 down to ε = 0.014).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunConfig {
     /// Laws competing, in order (the prior's boxes follow it).
@@ -31,10 +32,44 @@ pub struct RunConfig {
     pub seed: u64,
     pub backend: Backend,
     pub sampler: SamplerConfig,
-    /// The sampler's eps_min was not given: [`start`] replaces it by the floor the record can
-    /// reach ([`floor::resolve`]) and stores the result.
+    /// Replace the sampler's eps_min by the floor the record can reach ([`floor::resolve`]:
+    /// the paper's 0.014 where reachable), in [`start`], and store the result. `bitrock abc`
+    /// sets it when `--eps-min` is not given; [`Default`] leaves eps_min as given.
     #[serde(default)]
     pub eps_min_from_record: bool,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            laws: Law::ALL.to_vec(),
+            fit: FitOptions::default(),
+            delta: 0.4,
+            prior_file: None,
+            seed: 1,
+            backend: Backend::Auto,
+            sampler: SamplerConfig::Rejection(RejectionConfig::default()),
+            eps_min_from_record: false,
+        }
+    }
+}
+
+impl RunConfig {
+    /// The one gate of a run's settings: refuses, naming the flag, what cannot run (an empty
+    /// law list, bad fit options, δ ≤ 0, sampler settings out of range), before any work.
+    pub fn validate(&self) -> Result<()> {
+        if self.laws.is_empty() {
+            return Err(Error::arg("--laws", "give at least one law"));
+        }
+        self.fit.validate()?;
+        if !(self.delta.is_finite() && self.delta > 0.0) {
+            return Err(Error::arg(
+                "--delta",
+                format!("must be a positive number, got {}", self.delta),
+            ));
+        }
+        self.sampler.validate()
+    }
 }
 
 /// The sampler and its settings.
@@ -122,18 +157,19 @@ pub fn check_new_run_dir(dir: &Path, force: bool) -> Result<()> {
     Ok(())
 }
 
-/// Fits, builds the prior and the evaluator, then creates `dir` (replacing it) with its store
-/// and samples. `prior_file` is the parsed `config.prior_file`. The directory is created only
-/// once everything that can be refused has been.
+/// Fits, builds the prior and the evaluator, then samples. With a `dir`, creates it
+/// (replacing it) with its store first, and every population is stored as it completes;
+/// without one the run lives in memory only. `prior_file` is the parsed `config.prior_file`.
+/// The directory is created only once everything that can be refused has been.
 pub fn start(
-    dir: &Path,
+    dir: Option<&Path>,
     data: FieldData,
     mut config: RunConfig,
     prior_file: Option<&PriorFile>,
     observer: &mut dyn Observer,
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
-    config.sampler.validate()?;
+    config.validate()?;
     let fits = fit::fit_laws(&config.laws, &data.calibration, &data.validation, &config.fit)?;
     let base = config.sampler.base_mut();
     let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
@@ -146,6 +182,37 @@ pub fn start(
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
     let evaluator = crate::eval::evaluator(problem, config.backend, note)?;
+    let setup = RunSetup {
+        config: serde_json::to_value(&config).expect("the configuration serialises"),
+        data,
+        fits,
+        prior,
+    };
+    let run = match dir {
+        Some(dir) => {
+            replace_dir(dir)?;
+            let mut store = RunStore::create(dir, &setup)?;
+            sample(
+                Some(&mut store),
+                "start",
+                &config,
+                evaluator.as_ref(),
+                Vec::new(),
+                observer,
+            )?
+        }
+        None => sample(None, "start", &config, evaluator.as_ref(), Vec::new(), observer)?,
+    };
+    Ok(Outcome {
+        config,
+        setup,
+        run,
+        backend: evaluator.backend(),
+    })
+}
+
+/// Creates `dir` empty, removing what was there.
+fn replace_dir(dir: &Path) -> Result<()> {
     if dir.exists() {
         std::fs::remove_dir_all(dir).map_err(|source| Error::Write {
             path: dir.to_path_buf(),
@@ -155,20 +222,6 @@ pub fn start(
     std::fs::create_dir_all(dir).map_err(|source| Error::Write {
         path: dir.to_path_buf(),
         source,
-    })?;
-    let setup = RunSetup {
-        config: serde_json::to_value(&config).expect("the configuration serialises"),
-        data,
-        fits,
-        prior,
-    };
-    let mut store = RunStore::create(dir, &setup)?;
-    let run = sample(&mut store, "start", &config, evaluator.as_ref(), Vec::new(), observer)?;
-    Ok(Outcome {
-        config,
-        setup,
-        run,
-        backend: evaluator.backend(),
     })
 }
 
@@ -188,7 +241,7 @@ pub fn resume(
     })?;
     config.sampler.apply(more);
     config.backend = more.backend.unwrap_or(config.backend);
-    config.sampler.validate()?;
+    config.validate()?;
     let problem = AbcProblem::new(
         setup.prior.clone(),
         config.seed,
@@ -203,7 +256,14 @@ pub fn resume(
         populations.len().saturating_sub(1),
         populations.len()
     ));
-    let run = sample(&mut store, "resume", &config, evaluator.as_ref(), populations, observer)?;
+    let run = sample(
+        Some(&mut store),
+        "resume",
+        &config,
+        evaluator.as_ref(),
+        populations,
+        observer,
+    )?;
     let setup = RunSetup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
         ..setup
@@ -216,25 +276,46 @@ pub fn resume(
     })
 }
 
-/// Runs the sampler after `previous`, writing each new population to `store`.
+/// Runs the sampler after `previous`, writing each new population to `store` when there is
+/// one.
 fn sample(
-    store: &mut RunStore,
+    store: Option<&mut RunStore>,
     kind: &str,
     config: &RunConfig,
     evaluator: &dyn Evaluator,
     previous: Vec<Population>,
     observer: &mut dyn Observer,
 ) -> Result<Run> {
+    let Some(store) = store else {
+        return run_sampler(config, evaluator, previous, observer);
+    };
     let json = serde_json::to_value(config).expect("the configuration serialises");
     let invocation = store.begin_invocation(kind, evaluator.backend(), &json)?;
-    let mut storing = Storing { store, inner: observer };
-    let run = match &config.sampler {
-        SamplerConfig::Rejection(c) => rejection::run_observed(evaluator, c, previous, &mut storing)?,
-        SamplerConfig::Smc(c) => smc::run_observed(evaluator, c, previous, &mut storing)?,
-    };
+    let run = run_sampler(
+        config,
+        evaluator,
+        previous,
+        &mut Storing {
+            store: &mut *store,
+            inner: observer,
+        },
+    )?;
     let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
     store.finish_invocation(invocation, stop.as_str().unwrap_or_default())?;
     Ok(run)
+}
+
+/// The configured sampler from `previous` on.
+fn run_sampler(
+    config: &RunConfig,
+    evaluator: &dyn Evaluator,
+    previous: Vec<Population>,
+    observer: &mut dyn Observer,
+) -> Result<Run> {
+    match &config.sampler {
+        SamplerConfig::Rejection(c) => rejection::run_observed(evaluator, c, previous, observer),
+        SamplerConfig::Smc(c) => smc::run_observed(evaluator, c, previous, observer),
+    }
 }
 
 /// Writes every completed population to the store before the caller's observer sees it.

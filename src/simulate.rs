@@ -28,7 +28,7 @@
 //! crossing and replacing a clean stick by chatter.
 
 use crate::error::{Error, Result};
-use crate::laws::Law;
+use crate::laws::{Law, PAPER_W_REF_N};
 use crate::stability::lumped::Lumped;
 use crate::units::{RAD_S_PER_RPM, TorqueUnit};
 use rand::SeedableRng;
@@ -91,9 +91,6 @@ pub struct SimConfig {
 }
 
 impl SimConfig {
-    /// The paper's reference weight on bit (N).
-    pub const PAPER_W_REF_N: f64 = 244.2e3;
-
     /// A noise-free configuration on the paper's drill string: W_ref = 244.2 kN, 60 s recorded
     /// at 50 Hz after no settling, dt = 1 ms, starting on the equilibrium without a kick,
     /// WOB correlation time 20 s (unused while the fluctuation is zero), seed 0.
@@ -104,7 +101,7 @@ impl SimConfig {
             structure: Lumped::default(),
             omega_rad_s,
             wob_n,
-            w_ref_n: Self::PAPER_W_REF_N,
+            w_ref_n: PAPER_W_REF_N,
             duration_s: 60.0,
             settle_s: 0.0,
             sample_hz: 50.0,
@@ -638,7 +635,7 @@ mod tests {
             initial: Initial::Equilibrium {
                 speed_perturbation_rad_s: 2.0,
             },
-            ..SimConfig::new(law, paper_nm(law), omega_rad_s, SimConfig::PAPER_W_REF_N)
+            ..SimConfig::new(law, paper_nm(law), omega_rad_s, PAPER_W_REF_N)
         }
     }
 
@@ -660,7 +657,7 @@ mod tests {
         let omega = rpm(150.0);
         let cfg = SimConfig {
             duration_s: 10.0,
-            wob_n: 0.8 * SimConfig::PAPER_W_REF_N,
+            wob_n: 0.8 * PAPER_W_REF_N,
             ..SimConfig::new(law, paper_nm(law), omega, 0.0)
         };
         let trace = simulate(&cfg).unwrap();
@@ -723,7 +720,7 @@ mod tests {
         let cfg = SimConfig {
             initial: Initial::Rest,
             duration_s: 40.0,
-            ..SimConfig::new(law, paper_nm(law), omega, SimConfig::PAPER_W_REF_N)
+            ..SimConfig::new(law, paper_nm(law), omega, PAPER_W_REF_N)
         };
         let s = cfg.structure;
         let (k, c) = (s.stiffness_nm_per_rad(), s.damping_nms_per_rad());
@@ -765,7 +762,7 @@ mod tests {
                 initial: Initial::Rest,
                 duration_s: 20.0,
                 dt_s,
-                ..SimConfig::new(law, paper_nm(law), rpm(60.0), SimConfig::PAPER_W_REF_N)
+                ..SimConfig::new(law, paper_nm(law), rpm(60.0), PAPER_W_REF_N)
             };
             simulate(&cfg).unwrap().bit_speed_rad_s
         };
@@ -821,7 +818,7 @@ mod tests {
         let law = Law::M4;
         let cfg = SimConfig {
             initial: Initial::Rest,
-            ..SimConfig::new(law, paper_nm(law), rpm(150.0), SimConfig::PAPER_W_REF_N)
+            ..SimConfig::new(law, paper_nm(law), rpm(150.0), PAPER_W_REF_N)
         };
         let err = simulate(&cfg).unwrap_err();
         assert!(matches!(err, Error::Numerical(_)) && !err.is_bad_input());

@@ -15,14 +15,17 @@
 
 mod figures;
 mod plot;
+mod runs;
 mod stats;
+
+pub use runs::{read_run_dirs, write_paper_report};
 
 use crate::abc::Population;
 use crate::abc::posterior::{self, PosteriorSummary};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::fit::LawFit;
-use crate::laws::Law;
+use crate::laws::{Law, PAPER_W_REF_N};
 use crate::stability::fe::DrillString;
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{self, Criterion, LawSamples};
@@ -88,7 +91,7 @@ impl Default for StabilitySettings {
         Self {
             lumped: Lumped::default(),
             strings: vec![two, ten.clone(), DrillString { beta: 0.0021, ..ten }],
-            w_ref_n: 244.2e3,
+            w_ref_n: PAPER_W_REF_N,
             omega_rpm: axis(20.0, 220.0, 101),
             wob_kn: axis(20.0, 700.0, 69),
             percentile: 0.02,

@@ -179,7 +179,8 @@ fn nested_and_paper_modes_sample_the_same_distribution_with_fewer_evaluations() 
     // Both are uniform on (0.9, 1.1): compare with an exact uniform grid the same way.
     let uniform: Vec<f64> = (0..4000).map(|i| 0.9 + 0.2 * (i as f64 + 0.5) / 4000.0).collect();
     assert!(ks_statistic(&a, &uniform) < 0.0436 && ks_statistic(&b, &uniform) < 0.0436);
-    assert!(a.iter().all(|&c| (c - 1.0).abs() < 0.1));
+    // The prior is (0, 2) and ρ = (c − 1)²: the last tolerance 0.01 keeps |c − 1| ≤ 0.1.
+    assert!(a.iter().chain(&b).all(|&c| (c - 1.0).abs() <= 0.1));
     // The nested run scores each candidate once.
     assert!(
         nested.evaluations < paper.evaluations,
@@ -212,7 +213,6 @@ fn model_selection_prefers_the_generating_law() {
     }
     let total: f64 = last.record.per_law.iter().map(|l| l.probability).sum();
     assert!((total - 1.0).abs() < 1e-12);
-    assert_eq!(evaluator.backend(), "cpu");
 }
 
 #[test]

@@ -13,6 +13,22 @@ fn run(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// Runs bitrock, reads the first line of its stdout and closes the pipe, as `| head -1` does.
+fn first_line_then_close(args: &[&str]) -> (String, std::process::Output) {
+    use std::io::BufRead;
+    let mut child = bin()
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run bitrock");
+    let mut first = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    (first, child.wait_with_output().unwrap())
+}
+
 fn csv_file(text: &str) -> tempfile::NamedTempFile {
     let mut f = tempfile::Builder::new().suffix(".csv").tempfile().unwrap();
     f.write_all(text.as_bytes()).unwrap();
@@ -150,6 +166,39 @@ fn simulated_record_is_fitted_back() {
 }
 
 #[test]
+fn a_failure_that_stopped_the_work_exits_3() {
+    // No adapter of that name: the GPU backend cannot start, which is not the input's fault.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let result = bin()
+        .args([
+            "abc",
+            "--backend",
+            "gpu",
+            "--particles",
+            "100",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .env("WGPU_ADAPTER_NAME", "no-such-adapter")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(3), "{stderr}");
+    assert!(stderr.contains("error: no GPU adapter"), "{stderr}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn a_closed_pipe_ends_quietly_with_status_141() {
+    // 600 s at 50 Hz: about 1 MB of CSV, far more than a pipe holds.
+    let (first, out) = first_line_then_close(&["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "600"]);
+    assert_eq!(first, "time_s,bit_speed_rpm,torque_knm,wob_kn\n");
+    assert_eq!(out.status.code(), Some(141));
+    assert_eq!(String::from_utf8_lossy(&out.stderr), "");
+}
+
+#[test]
 fn demo_prints_fits_and_the_population_table() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo-run");
@@ -247,6 +296,11 @@ fn abc_writes_a_run_directory_and_json_with_its_keys() {
         );
         assert!(csv.lines().skip(1).all(|l| l.starts_with(&format!("{g},"))));
     }
+    // Every population's particles (several hundred kB) into a pipe closed after one line.
+    let (first, export) = first_line_then_close(&["export", out.to_str().unwrap()]);
+    assert!(first.starts_with("population,law,candidate"), "{first}");
+    assert_eq!(export.status.code(), Some(141));
+    assert_eq!(String::from_utf8_lossy(&export.stderr), "");
     let envelopes = std::fs::read_to_string(out.join("envelopes.csv")).unwrap();
     assert!(envelopes.starts_with("law,speed_rad_s,lower_knm,median_knm,upper_knm"));
     assert!(out.join("data.csv").exists());

@@ -5,6 +5,7 @@ mod cli;
 mod fit;
 mod gpu;
 mod laws;
+mod pipeline;
 mod records;
 mod report;
 mod smc;

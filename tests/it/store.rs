@@ -33,7 +33,7 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
 
 fn start(dir: &Path, config: RunConfig) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
-    run::start(dir, data, config, None, &mut Silent, &mut |_| {}).unwrap()
+    run::start(Some(dir), data, config, None, &mut Silent, &mut |_| {}).unwrap()
 }
 
 /// Populations equal in everything a population is: ε, counts, particles (bit for bit).

@@ -99,6 +99,12 @@ pub enum GpuError {
     Readback(String),
 }
 
+impl From<GpuError> for crate::Error {
+    fn from(e: GpuError) -> Self {
+        crate::Error::Gpu(Box::new(e))
+    }
+}
+
 /// The process's GPU: created once, shared by every evaluator.
 pub struct GpuContext {
     pub device: wgpu::Device,

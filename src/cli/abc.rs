@@ -1,0 +1,230 @@
+//! `bitrock abc`: a new run into `--out`, or `--resume DIR`, through the library's
+//! [`bitrock::pipeline`]; then the population table and posterior, or run.json on stdout.
+
+use super::args::{DataArgs, FitArgs, load_data, set_threads};
+use super::print;
+use super::progress::RunProgress;
+use bitrock::Error;
+use bitrock::abc::rejection::RejectionConfig;
+use bitrock::abc::smc::SmcConfig;
+use bitrock::eval::Backend;
+use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
+use bitrock::run::{Continuation, RunConfig, SamplerConfig};
+use clap::Args;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Which ABC sampler runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampler {
+    Rejection,
+    Smc,
+}
+
+/// How the ABC sampler runs.
+#[derive(Debug, Args, Clone)]
+pub struct AbcArgs {
+    /// Particles per population, N (the paper's 25,000).
+    #[arg(long, default_value_t = RejectionConfig::default().particles, value_name = "N")]
+    pub particles: usize,
+    /// Prior half-width: each parameter is uniform on [p(1 − δ), p(1 + δ)] around its
+    /// least-squares estimate p, clipped to its physical bound.
+    #[arg(long, default_value_t = RunConfig::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
+    pub delta: f64,
+    /// Prior file (TOML) with explicit bounds or law weights; overrides the δ rule where it
+    /// speaks (format in the README).
+    #[arg(long, value_name = "FILE")]
+    pub prior: Option<PathBuf>,
+    /// Smallest tolerance on ρ: the population that reaches it is the last [default: 0.014,
+    /// the paper's; with --resume: the run's].
+    #[arg(long, value_name = "EPS")]
+    pub eps_min: Option<f64>,
+    /// Tolerance schedule ε_1 > ε_2 > ... instead of the median rule (ε_0 stays ∞).
+    #[arg(long, value_delimiter = ',', value_name = "E1,E2,...")]
+    pub epsilons: Option<Vec<f64>>,
+    /// Tolerance of population 0 [default: ∞, the first N prior draws].
+    #[arg(long, value_name = "EPS")]
+    pub start_epsilon: Option<f64>,
+    /// Most populations, population 0 included [default: 30; with --resume: the run's].
+    #[arg(long, value_name = "G")]
+    pub max_populations: Option<usize>,
+    /// Most candidates scored over the run [default: 2e9; with --resume: the run's].
+    #[arg(long, value_name = "COUNT")]
+    pub max_draws: Option<u64>,
+    /// Stop when the projected acceptance rate of the next population falls below this
+    /// [default: 1e-5; with --resume: the run's].
+    #[arg(long, value_name = "RATE")]
+    pub min_acceptance: Option<f64>,
+    /// Wall-time budget of this invocation in seconds; the population in progress is dropped
+    /// and the run can be continued with --resume (which has no budget unless given again).
+    #[arg(long, value_name = "SECONDS")]
+    pub max_seconds: Option<f64>,
+    /// nested: one candidate stream, each population keeps the previous particles below its
+    /// tolerance (same distribution, 0.38× the evaluations on the demo record); paper: a fresh stream per
+    /// population, as the paper's Algorithm 1.
+    #[arg(long, value_enum, default_value_t = RejectionConfig::default().mode)]
+    pub mode: bitrock::abc::rejection::Mode,
+    /// rejection: the paper's Algorithm 1 (see --mode); smc: ABC-SMC with model selection
+    /// (population 0 from the prior, then perturbed, importance-weighted populations).
+    #[arg(long, value_enum, default_value_t = Sampler::Rejection)]
+    pub sampler: Sampler,
+    /// SMC: probability that the model kernel keeps a particle's law (else it jumps uniformly
+    /// to another law still alive).
+    #[arg(long, default_value_t = SmcConfig::default().p_stay, value_name = "P", allow_hyphen_values = true)]
+    pub p_stay: f64,
+    /// SMC: the Gaussian perturbation's covariance is this times the weighted covariance of
+    /// the law's previous particles (2: Beaumont et al. 2009).
+    #[arg(long, default_value_t = SmcConfig::default().kernel_scale, value_name = "S", allow_hyphen_values = true)]
+    pub kernel_scale: f64,
+    /// SMC: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
+    /// that GPU and CPU runs give the same populations; evaluator: on the --backend (the
+    /// GPU's f32 kernel: faster for large N, but its populations drift from the CPU run's).
+    #[arg(long, value_enum, default_value_t = SmcConfig::default().weights_on)]
+    pub smc_weights: bitrock::abc::smc::WeightsOn,
+    /// Seed of the candidate streams: the same seed gives the same populations.
+    #[arg(long, default_value_t = RunConfig::default().seed)]
+    pub seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so),
+    /// gpu = the GPU or an error, cpu = the f64 reference [default: auto; with --resume: the
+    /// run's].
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Population to summarise (statistics, MAP, envelopes) [default: the last].
+    #[arg(long, value_name = "G")]
+    pub summary_population: Option<usize>,
+}
+
+#[derive(Debug, Args)]
+pub struct AbcCmd {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
+    /// Run directory to write: run.sqlite (the run store: every population and particle,
+    /// written as each population completes), run.json (summary) and envelopes.csv.
+    #[arg(long, value_name = "DIR", required_unless_present = "resume")]
+    pub out: Option<PathBuf>,
+    /// Replace a non-empty run directory.
+    #[arg(long)]
+    pub force: bool,
+    /// Continue the run in DIR (killed or finished) after its last stored population: more
+    /// populations, a lower --eps-min, a new --max-draws/--max-seconds or --backend. The
+    /// populations are exactly those an uninterrupted run gives.
+    #[arg(long, value_name = "DIR", conflicts_with_all = [
+        "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
+        "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
+        "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior", "epsilons",
+        "start_epsilon", "mode", "seed", "summary_population", "sampler", "p_stay", "kernel_scale", "smc_weights",
+    ])]
+    pub resume: Option<PathBuf>,
+    /// No progress bar or population lines on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    #[command(flatten)]
+    pub fit: FitArgs,
+    #[command(flatten)]
+    pub abc: AbcArgs,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(cmd: &AbcCmd) -> anyhow::Result<ExitCode> {
+    let done = start_or_resume(cmd)?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &done.json())?;
+        writeln!(out)?;
+    } else {
+        let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("clap requires one");
+        print::population_table(&mut out, &done.outcome.run)?;
+        print::posterior(&mut out, &done.posterior, done.outcome.setup.data.torque_unit)?;
+        writeln!(out, "\nrun written to {}", dir.display())?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `bitrock abc`: a new run into `--out`, or `--resume DIR`; the library writes the run
+/// directory and its summary files.
+fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
+    set_threads(cmd.abc.threads)?;
+    let quiet = cmd.quiet;
+    let mut note = |line: String| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    };
+    let mut progress = RunProgress::new(quiet);
+    match (&cmd.resume, &cmd.out) {
+        (Some(dir), _) => {
+            let more = Continuation {
+                eps_min: cmd.abc.eps_min,
+                max_populations: cmd.abc.max_populations,
+                max_draws: cmd.abc.max_draws,
+                min_acceptance: cmd.abc.min_acceptance,
+                max_seconds: cmd.abc.max_seconds,
+                backend: cmd.abc.backend,
+            };
+            Ok(pipeline::resume(
+                dir,
+                &more,
+                cmd.abc.summary_population,
+                &mut progress,
+                &mut note,
+            )?)
+        }
+        (None, Some(dir)) => {
+            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+            let job = AbcJob {
+                config: run_config(&cmd.fit, &cmd.abc)?,
+                summary_population: cmd.abc.summary_population,
+                out: Some(RunDir {
+                    path: dir.clone(),
+                    replace: cmd.force,
+                }),
+            };
+            Ok(job.run(data, &mut progress, &mut note)?)
+        }
+        (None, None) => Err(Error::arg("--out", "give the run directory to write").into()),
+    }
+}
+
+/// The run configuration the flags describe (validated by the library before any work).
+fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
+    let defaults = RejectionConfig::default();
+    let sampler = RejectionConfig {
+        particles: args.particles,
+        eps_min: args.eps_min.unwrap_or(defaults.eps_min),
+        max_populations: args.max_populations.unwrap_or(defaults.max_populations),
+        max_draws: args.max_draws.unwrap_or(defaults.max_draws),
+        min_acceptance: args.min_acceptance.unwrap_or(defaults.min_acceptance),
+        start_epsilon: args.start_epsilon,
+        epsilons: args.epsilons.clone(),
+        mode: args.mode,
+        max_seconds: args.max_seconds,
+        ..defaults
+    };
+    Ok(RunConfig {
+        laws: fit_args.laws.clone(),
+        fit: fit_args.options()?,
+        delta: args.delta,
+        prior_file: args.prior.clone(),
+        seed: args.seed,
+        backend: args.backend.unwrap_or(Backend::Auto),
+        sampler: match args.sampler {
+            Sampler::Rejection => SamplerConfig::Rejection(sampler),
+            Sampler::Smc => SamplerConfig::Smc(SmcConfig {
+                base: sampler,
+                p_stay: args.p_stay,
+                kernel_scale: args.kernel_scale,
+                weights_on: args.smc_weights,
+            }),
+        },
+        eps_min_from_record: args.eps_min.is_none(),
+    })
+}

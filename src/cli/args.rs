@@ -1,0 +1,219 @@
+//! Argument groups shared by several commands (the record, the fit, the drill strings) and
+//! their conversion into the library's options.
+
+use bitrock::Error;
+use bitrock::data::{self, DataOptions, FieldData, SplitRule};
+use bitrock::fit::FitOptions;
+use bitrock::laws::PAPER_W_REF_N;
+use bitrock::stability::fe::DrillString;
+use bitrock::stability::lumped::Lumped;
+use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use clap::Args;
+use std::path::{Path, PathBuf};
+
+/// Which columns of the CSV to read, their units, and which rows to use.
+#[derive(Debug, Args, Clone)]
+pub struct DataArgs {
+    /// Bit-speed column [default: the one column whose name contains "speed"].
+    #[arg(long, value_name = "NAME")]
+    pub speed_col: Option<String>,
+    /// Torque-on-bit column [default: the one column whose name contains "torque"].
+    #[arg(long, value_name = "NAME")]
+    pub torque_col: Option<String>,
+    /// Weight-on-bit column [default: the one column whose name contains "wob", if any].
+    #[arg(long, value_name = "NAME")]
+    pub wob_col: Option<String>,
+    /// Time column, in seconds [default: the one column whose name contains "time", if any].
+    #[arg(long, value_name = "NAME")]
+    pub time_col: Option<String>,
+    /// Unit of the speed column [default: from its suffix, _rpm or _rad_s].
+    #[arg(long, value_enum)]
+    pub speed_unit: Option<SpeedUnit>,
+    /// Unit of the torque column [default: from its suffix, _nm or _knm].
+    #[arg(long, value_enum)]
+    pub torque_unit: Option<TorqueUnit>,
+    /// Unit of the weight-on-bit column [default: from its suffix, _n or _kn].
+    #[arg(long, value_enum)]
+    pub wob_unit: Option<ForceUnit>,
+    /// Drop rows whose bit speed is below this, rpm: the laws hold for a turning bit, and
+    /// stick-phase samples say nothing about them.
+    #[arg(long, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
+    pub min_speed_rpm: f64,
+    /// Use only rows at or after this time, s (needs a time column).
+    #[arg(long, value_name = "SECONDS")]
+    pub t_start_s: Option<f64>,
+    /// Use only rows at or before this time, s (needs a time column).
+    #[arg(long, value_name = "SECONDS")]
+    pub t_end_s: Option<f64>,
+    /// Keep every K-th row of the time window (applied before the speed filter).
+    #[arg(long, default_value_t = DataOptions::default().thin, value_name = "K")]
+    pub thin: usize,
+    /// Fraction of the kept rows used for calibration; the rest validates the fit.
+    #[arg(long, default_value_t = DataOptions::default().calibration_fraction, value_name = "F")]
+    pub calibration_fraction: f64,
+    /// How calibration rows are chosen: block = the first part of the record, interleaved =
+    /// spread evenly through it.
+    #[arg(long, value_enum, default_value_t = DataOptions::default().split)]
+    pub split: SplitRule,
+}
+
+impl DataArgs {
+    /// The library's options for these flags (validated when the record is read).
+    pub fn options(&self) -> DataOptions {
+        DataOptions {
+            speed_column: self.speed_col.clone(),
+            torque_column: self.torque_col.clone(),
+            wob_column: self.wob_col.clone(),
+            time_column: self.time_col.clone(),
+            speed_unit: self.speed_unit,
+            torque_unit: self.torque_unit,
+            wob_unit: self.wob_unit,
+            min_speed_rpm: self.min_speed_rpm,
+            t_start_s: self.t_start_s,
+            t_end_s: self.t_end_s,
+            thin: self.thin,
+            calibration_fraction: self.calibration_fraction,
+            split: self.split,
+        }
+    }
+}
+
+/// How the least-squares fit runs.
+#[derive(Debug, Args, Clone)]
+pub struct FitArgs {
+    /// Laws to fit, comma-separated.
+    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
+    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Lift the physical bounds (positive static and dynamic torques, positive rates and widths).
+    #[arg(long)]
+    pub no_bounds: bool,
+    /// Starting points polished by Levenberg-Marquardt per law (chosen from a data-driven grid).
+    #[arg(long, default_value_t = FitOptions::default().starts, value_name = "N")]
+    pub starts: usize,
+    /// Scale each sample's predicted torque by r = WOB / W_ref (needs a WOB column). Off: r = 1,
+    /// the paper's assumption that the record was taken at W = W_ref.
+    #[arg(long)]
+    pub scale_by_wob: bool,
+    /// Reference weight on bit W_ref, kN.
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
+    pub w_ref_kn: f64,
+}
+
+impl FitArgs {
+    /// The fit options of the flags (the library validates them); `--w-ref-kn` is refused here
+    /// even when `--scale-by-wob` does not use it.
+    pub fn options(&self) -> anyhow::Result<FitOptions> {
+        if !(self.w_ref_kn.is_finite() && self.w_ref_kn > 0.0) {
+            return Err(Error::arg(
+                "--w-ref-kn",
+                format!("must be a positive number of kN, got {}", self.w_ref_kn),
+            )
+            .into());
+        }
+        Ok(FitOptions {
+            bounded: !self.no_bounds,
+            starts: self.starts,
+            w_ref_n: self.scale_by_wob.then_some(self.w_ref_kn * 1000.0),
+        })
+    }
+}
+
+/// The record at `path`, or the embedded demo record (saying so) when there is none.
+pub fn load_data(path: Option<&Path>, args: &DataArgs) -> anyhow::Result<FieldData> {
+    let opts = args.options();
+    Ok(match path {
+        Some(path) => data::read_field_data(path, &opts)?,
+        None => {
+            eprintln!("note: no DATA given; using the embedded synthetic demo record");
+            data::demo_field_data(&opts)?
+        }
+    })
+}
+
+/// Sizes rayon's global pool (`--threads`); `None` keeps one thread per core.
+pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
+    if let Some(threads) = threads {
+        if threads == 0 {
+            return Err(Error::arg("--threads", "must be at least 1").into());
+        }
+        rayon::ThreadPoolBuilder::new().num_threads(threads).build_global()?;
+    }
+    Ok(())
+}
+
+/// The finite-element drill string: a TOML file (the paper's table built in) and overrides.
+#[derive(Debug, Args, Clone)]
+pub struct FeArgs {
+    /// TOML file with any of: shear_modulus_pa, density_kg_m3, dp_length_m, bha_length_m,
+    /// dp_outer_m, dp_inner_m, bha_outer_m, bha_inner_m, dp_elements, bha_elements, alpha, beta.
+    #[arg(long, value_name = "FILE")]
+    pub fe_file: Option<PathBuf>,
+    /// Elements in the drill pipe.
+    #[arg(long, value_name = "N")]
+    pub dp_elements: Option<usize>,
+    /// Elements in the BHA.
+    #[arg(long, value_name = "N")]
+    pub bha_elements: Option<usize>,
+    /// Mass-proportional Rayleigh damping α, 1/s.
+    #[arg(long, value_name = "ALPHA")]
+    pub alpha: Option<f64>,
+    /// Stiffness-proportional Rayleigh damping β, s.
+    #[arg(long, value_name = "BETA")]
+    pub beta: Option<f64>,
+}
+
+/// The equivalent 1-DOF string.
+#[derive(Debug, Args, Clone)]
+pub struct LumpedArgs {
+    /// Equivalent moment of inertia I_eq, kg·m².
+    #[arg(long, default_value_t = Lumped::default().inertia_kg_m2, value_name = "KG_M2")]
+    pub inertia_kg_m2: f64,
+    /// Natural frequency omega_n, rad/s.
+    #[arg(long, default_value_t = Lumped::default().omega_n_rad_s, value_name = "RAD_S")]
+    pub omega_n_rad_s: f64,
+    /// Damping ratio xi.
+    #[arg(long, default_value_t = Lumped::default().damping_ratio, value_name = "XI")]
+    pub damping_ratio: f64,
+}
+
+impl LumpedArgs {
+    /// The 1-DOF model these flags describe (validate before use).
+    pub fn lumped(&self) -> Lumped {
+        Lumped {
+            inertia_kg_m2: self.inertia_kg_m2,
+            omega_n_rad_s: self.omega_n_rad_s,
+            damping_ratio: self.damping_ratio,
+        }
+    }
+
+    /// [`Self::lumped`], validated.
+    pub fn validated(&self) -> anyhow::Result<Lumped> {
+        let lumped = self.lumped();
+        lumped.validate()?;
+        Ok(lumped)
+    }
+}
+
+impl FeArgs {
+    /// The drill string from the file (or the paper's) with the flags' overrides, validated.
+    pub fn drill_string(&self) -> anyhow::Result<DrillString> {
+        let mut s = match &self.fe_file {
+            Some(path) => DrillString::from_toml_file(path)?,
+            None => DrillString::default(),
+        };
+        if let Some(n) = self.dp_elements {
+            s.dp_elements = n;
+        }
+        if let Some(n) = self.bha_elements {
+            s.bha_elements = n;
+        }
+        if let Some(a) = self.alpha {
+            s.alpha = a;
+        }
+        if let Some(b) = self.beta {
+            s.beta = b;
+        }
+        s.validate()?;
+        Ok(s)
+    }
+}

@@ -1,0 +1,98 @@
+//! `bitrock bench`: the benchmark report (throughput, fixed cost, end-to-end runs).
+
+use bitrock::Error;
+use bitrock::eval::Backend;
+use clap::Args;
+use std::io::Write;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct BenchCmd {
+    /// Repetitions per measurement (median, min and max are reported).
+    #[arg(long, default_value_t = 5, value_name = "R")]
+    pub reps: usize,
+    /// Laws to measure, comma-separated.
+    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
+    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Only this backend [default: both].
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Small sizes only (65,536 × 5,000; end-to-end with N = 5,000): a smoke test in seconds.
+    #[arg(long)]
+    pub quick: bool,
+    /// Print JSON instead of lines.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
+    if cmd.reps == 0 {
+        return Err(Error::arg("--reps", "must be at least 1").into());
+    }
+    let mut opts = bitrock::bench::BenchOptions {
+        repetitions: cmd.reps,
+        laws: cmd.laws.clone(),
+        ..Default::default()
+    };
+    match cmd.backend {
+        Some(bitrock::eval::Backend::Auto) | None => {}
+        Some(b) => opts.backends = vec![b],
+    }
+    if cmd.quick {
+        opts.sizes = vec![(65_536, 5_000)];
+        opts.particles = 5_000;
+        opts.stability = (128, 1_000);
+    }
+    let quiet = cmd.json;
+    let report = bitrock::bench::run(&opts, &mut |line| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    })?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        writeln!(
+            out,
+            "machine: {} ({} cores); adapter: {}",
+            report.machine, report.cores, report.adapter
+        )?;
+        writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
+        writeln!(out, "backend  law          N        D   evaluations/s (min–max)")?;
+        for t in &report.throughput {
+            writeln!(
+                out,
+                "{:<7}  {:<3}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})",
+                t.backend, t.law, t.n, t.d, t.evals_per_s, t.evals_per_s_spread.min, t.evals_per_s_spread.max
+            )?;
+        }
+        for (backend, s) in &report.small_call_seconds {
+            writeln!(
+                out,
+                "{backend:<7}  small call (64 × 100): {:.3e} s ({:.2e}–{:.2e})",
+                s.median, s.min, s.max
+            )?;
+        }
+        if let Some(st) = &report.stability {
+            writeln!(
+                out,
+                "gpu      stability grid: {} cells × {} samples: {:.3e} cell-samples/s ({:.2e}–{:.2e})",
+                st.cells,
+                st.samples,
+                st.cell_samples_per_s,
+                st.cell_samples_per_s_spread.min,
+                st.cell_samples_per_s_spread.max
+            )?;
+        }
+        for e in &report.end_to_end {
+            writeln!(
+                out,
+                "{:<7}  paper-scale run: {:.3} s ({:.3}–{:.3}), {} populations, {:.3e} evaluations",
+                e.backend, e.seconds, e.seconds_spread.min, e.seconds_spread.max, e.populations, e.evaluations as f64
+            )?;
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,225 @@
+//! `bitrock demo`: the whole paper on the embedded record: the fits, three calls of the
+//! library's ABC job (δ = 0.4, 0.6, 0.8), the report, and the headline numbers.
+
+use super::args::set_threads;
+use super::fit::fit_and_print;
+use super::print;
+use super::progress::RunProgress;
+use bitrock::Error;
+use bitrock::abc::posterior::PosteriorSummary;
+use bitrock::abc::rejection::RejectionConfig;
+use bitrock::data;
+use bitrock::data::FieldData;
+use bitrock::eval::Backend;
+use bitrock::pipeline::{AbcJob, RunDir};
+use bitrock::report::ReportRun;
+use bitrock::report::ReportSummary;
+use bitrock::run::{RunConfig, SamplerConfig};
+use clap::Args;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct DemoCmd {
+    /// Directory of the demo: the runs (delta-0.4/, delta-0.6/, delta-0.8/) and report/.
+    #[arg(long, value_name = "DIR", default_value = "bitrock-demo")]
+    pub out: PathBuf,
+    /// Particles per population (the paper's N is 25,000).
+    #[arg(long, default_value_t = RejectionConfig::default().particles, value_name = "N")]
+    pub particles: usize,
+    /// Seed of the candidate streams.
+    #[arg(long, default_value_t = RunConfig::default().seed)]
+    pub seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Where ρ is computed (auto, gpu, cpu).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+}
+
+/// Marks a directory the demo wrote, so that a later demo may replace it (and nothing else).
+const DEMO_MARKER: &str = "bitrock-demo.txt";
+
+/// The prior half-widths δ of the paper's three runs.
+const DEMO_DELTAS: [f64; 3] = [0.4, 0.6, 0.8];
+
+/// The whole paper on the embedded record: fits, ABC for δ = 0.4, 0.6, 0.8, printed as tables,
+/// the report, and the headline numbers.
+pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
+    let data = data::demo_field_data(&data::DataOptions::default())?;
+    let root = &cmd.out;
+    check_root(root)?;
+    set_threads(cmd.threads)?;
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
+    )?;
+    writeln!(out, "the paper's field data are not public.\n")?;
+    let defaults = RunConfig::default();
+    fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
+    replace_root(root)?;
+    let mut report_runs = Vec::new();
+    let mut report_setup = None;
+    let mut headlines = Vec::new();
+    for delta in DEMO_DELTAS {
+        let dir = root.join(format!("delta-{delta:.1}"));
+        let sampler = RejectionConfig {
+            particles: cmd.particles,
+            ..RejectionConfig::default()
+        };
+        writeln!(
+            out,
+            "\nABC rejection with model selection: N = {}, δ = {delta}, ε_min = {}, seed {} → {}",
+            sampler.particles,
+            sampler.eps_min,
+            cmd.seed,
+            dir.display()
+        )?;
+        let eps_min = sampler.eps_min;
+        let job = AbcJob {
+            config: RunConfig {
+                delta,
+                seed: cmd.seed,
+                backend: cmd.backend,
+                sampler: SamplerConfig::Rejection(sampler),
+                ..RunConfig::default()
+            },
+            summary_population: None,
+            out: Some(RunDir {
+                path: dir.clone(),
+                replace: true,
+            }),
+        };
+        let done = job.run(data.clone(), &mut RunProgress::new(false), &mut |line| {
+            eprintln!("{line}")
+        })?;
+        print::population_table(&mut out, &done.outcome.run)?;
+        print::posterior(&mut out, &done.posterior, data.torque_unit)?;
+        headlines.push(Headline {
+            delta,
+            eps_min,
+            populations: done.outcome.run.populations.len(),
+            posterior: done.posterior.clone(),
+        });
+        // The report takes the runs as they are, with their summaries (no store reload, no
+        // second kernel density estimate).
+        let bitrock::run::Outcome { config, setup, run, .. } = done.outcome;
+        report_runs.push(ReportRun::new(
+            &report_runs,
+            &dir,
+            &config,
+            run.populations,
+            Some(done.posterior),
+        ));
+        report_setup.get_or_insert(setup);
+    }
+    let report_dir = root.join("report");
+    let report = bitrock::report::write_paper_report(&report_dir, &report_setup.expect("three runs"), &report_runs)?;
+    print_headline(&mut out, &headlines, &data, root, &report)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Refuses an `--out` that holds something the demo did not write.
+fn check_root(root: &Path) -> anyhow::Result<()> {
+    if root.exists()
+        && !root.join(DEMO_MARKER).exists()
+        && std::fs::read_dir(root).map_or(true, |mut d| d.next().is_some())
+    {
+        return Err(Error::arg(
+            "--out",
+            format!(
+                "{} is not empty and was not written by `bitrock demo`; choose another directory",
+                root.display()
+            ),
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Empties the demo's directory (one [`check_root`] accepted) and marks it as the demo's.
+fn replace_root(root: &Path) -> anyhow::Result<()> {
+    let write_error = |source| Error::Write {
+        path: root.to_path_buf(),
+        source,
+    };
+    if root.exists() {
+        std::fs::remove_dir_all(root).map_err(write_error)?;
+    }
+    std::fs::create_dir_all(root).map_err(write_error)?;
+    std::fs::write(
+        root.join(DEMO_MARKER),
+        "Written by `bitrock demo`; a later `bitrock demo` replaces this directory.\n",
+    )?;
+    Ok(())
+}
+
+/// What the headline says of one run.
+struct Headline {
+    delta: f64,
+    eps_min: f64,
+    populations: usize,
+    posterior: PosteriorSummary,
+}
+
+/// The closing lines: each run's final model probabilities, the MAP of the most probable law
+/// of the first run, and where the runs and the report are.
+fn print_headline(
+    out: &mut impl Write,
+    headlines: &[Headline],
+    data: &FieldData,
+    root: &Path,
+    report: &ReportSummary,
+) -> std::io::Result<()> {
+    writeln!(out, "\n== bitrock demo: headline ==")?;
+    writeln!(out, "final model probabilities (ε = {}):", headlines[0].eps_min)?;
+    for h in headlines {
+        let probabilities: Vec<String> = h
+            .posterior
+            .model_probabilities
+            .iter()
+            .map(|(law, p)| format!("P({law}) = {p:.3}"))
+            .collect();
+        writeln!(
+            out,
+            "  δ = {}: {} ({} populations)",
+            h.delta,
+            probabilities.join(", "),
+            h.populations
+        )?;
+    }
+    let first = &headlines[0];
+    if let Some(best) = first
+        .posterior
+        .laws
+        .iter()
+        .max_by(|a, b| a.probability.total_cmp(&b.probability))
+    {
+        let unit = data.torque_unit;
+        let map = best.law.scale_torque(&best.map, 1.0 / unit.newton_metres());
+        let named: Vec<String> = best
+            .law
+            .params()
+            .iter()
+            .zip(&map)
+            .map(|(spec, v)| format!("{} = {v:.4} {}", spec.name, spec.unit(unit.label())))
+            .collect();
+        writeln!(
+            out,
+            "most probable law at δ = {}: {}, MAP {}",
+            first.delta,
+            best.law,
+            named.join(", ")
+        )?;
+    }
+    writeln!(out, "runs: {}", root.display())?;
+    writeln!(
+        out,
+        "report: {} ({} figures as SVG and PNG: fits, model probabilities, tolerances, marginals, correlations, envelopes, stability maps 1-DOF and FE)",
+        report.dir.join("report.md").display(),
+        report.figures.len()
+    )
+}

@@ -1,0 +1,70 @@
+//! `bitrock export DIR`: the run store's contents as CSV (particles) or JSON (the whole run),
+//! for users who would rather not open run.sqlite themselves.
+
+use super::print;
+use bitrock::Error;
+use bitrock::abc::Population;
+use bitrock::documents;
+use bitrock::store::RunStore;
+use clap::{Args, ValueEnum};
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Format of `bitrock export`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// Particles: population, law, candidate, rho, weight, then every law's parameters.
+    Csv,
+    /// Configuration, data summary, fits, prior, and every population with its particles.
+    Json,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportCmd {
+    /// Run directory (written by `bitrock abc --out`).
+    pub dir: PathBuf,
+    #[arg(long, value_enum, default_value_t = ExportFormat::Csv)]
+    pub format: ExportFormat,
+    /// Only this population [default: all].
+    #[arg(long, value_name = "G")]
+    pub population: Option<usize>,
+    /// Write to FILE instead of stdout.
+    #[arg(long, short, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
+    let store = RunStore::open(&cmd.dir)?;
+    let stored = store.load()?;
+    let setup = &stored.setup;
+    let populations: Vec<&Population> = match cmd.population {
+        None => stored.populations.iter().collect(),
+        Some(g) => vec![stored.populations.get(g).ok_or_else(|| {
+            Error::arg(
+                "--population",
+                if stored.populations.is_empty() {
+                    "the run has no completed population".to_string()
+                } else {
+                    format!("the run has populations 0..={}", stored.populations.len() - 1)
+                },
+            )
+        })?],
+    };
+    let text = match cmd.format {
+        ExportFormat::Csv => {
+            let laws: Vec<bitrock::Law> = setup.prior.boxes.iter().map(|b| b.law).collect();
+            documents::particles_csv(&populations, &laws, setup.data.torque_unit)
+        }
+        ExportFormat::Json => {
+            let mut text = serde_json::to_vec_pretty(&documents::export_json(setup, &populations))?;
+            text.push(b'\n');
+            text
+        }
+    };
+    match &cmd.out {
+        None => std::io::stdout().lock().write_all(&text)?,
+        Some(path) => print::write_file_atomically(path, |file| Ok(file.write_all(&text)?))?,
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,43 @@
+//! `bitrock fit`: least squares per law on a record, printed as tables or JSON.
+
+use super::args::{DataArgs, FitArgs, load_data};
+use super::print;
+use bitrock::Law;
+use bitrock::data::FieldData;
+use bitrock::fit::{self, FitOptions};
+use clap::Args;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct FitCmd {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    #[command(flatten)]
+    pub fit: FitArgs,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
+    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    fit_and_print(&data, &cmd.fit.laws, &cmd.fit.options()?, cmd.json)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Fits `laws` to `data` and prints them (also the start of `bitrock demo`).
+pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bool) -> anyhow::Result<()> {
+    let fits = fit::fit_laws(laws, &data.calibration, &data.validation, opts)?;
+    let mut out = std::io::stdout().lock();
+    if json {
+        serde_json::to_writer_pretty(&mut out, &bitrock::documents::fit_json(data, &fits))?;
+        writeln!(out)?;
+    } else {
+        print::fit_tables(&mut out, data, &fits)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,100 @@
+//! `bitrock parity`: the same candidates scored on the CPU and the GPU, and their agreement.
+
+use super::args::{DataArgs, load_data};
+use bitrock::Error;
+use bitrock::eval::AbcProblem;
+use bitrock::fit::{self, FitOptions};
+use bitrock::prior::Prior;
+use clap::Args;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct ParityCmd {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    /// Laws to compare, comma-separated (priors from their least-squares fits, δ = 0.4).
+    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
+    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Candidates scored per law on each backend.
+    #[arg(long, default_value_t = 100_000, value_name = "N")]
+    pub candidates: usize,
+    /// Tolerance at which accept/reject decisions are compared [default: each law's median ρ].
+    #[arg(long, value_name = "EPS")]
+    pub epsilon: Option<f64>,
+    /// Seed of the candidate stream.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
+    if cmd.candidates == 0 {
+        return Err(Error::arg("--candidates", "must be at least 1").into());
+    }
+    if let Some(e) = cmd.epsilon
+        && !(e.is_finite() && e > 0.0)
+    {
+        return Err(Error::arg("--epsilon", format!("must be a positive number, got {e}")).into());
+    }
+    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    let fits = fit::fit_laws(&cmd.laws, &data.calibration, &data.validation, &FitOptions::default())?;
+    let prior = Prior::from_fits(&fits, 0.4, None, data.torque_unit.newton_metres())?;
+    let problem = AbcProblem::new(prior, cmd.seed, &data.calibration, None);
+    let report = bitrock::bench::parity(&problem, cmd.candidates, cmd.epsilon)?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        writeln!(out, "adapter: {}", report.adapter)?;
+        writeln!(
+            out,
+            "data: {} points; tolerance on the relative difference of ρ: {:e}",
+            problem.data_len(),
+            report.tolerance
+        )?;
+        writeln!(
+            out,
+            "law  candidates  max rel.diff  median rel.diff     epsilon  decisions differ (near ε)"
+        )?;
+        for l in &report.laws {
+            writeln!(
+                out,
+                "{:<3}  {:>10}  {:>12.3e}  {:>15.3e}  {:>10.5}  {:>8} ({})",
+                l.law,
+                l.candidates,
+                l.max_rel_diff,
+                l.median_rel_diff,
+                l.epsilon,
+                l.decisions_differ,
+                l.decisions_differ_near_threshold
+            )?;
+        }
+        let p = &report.philox;
+        writeln!(
+            out,
+            "Philox: {} of {} words differ; candidates: {} of {} differ",
+            p.words_differ, p.words_compared, p.candidates_differ, p.candidates_compared
+        )?;
+        writeln!(
+            out,
+            "{}",
+            if report.pass {
+                "PASS: this GPU agrees with the CPU reference"
+            } else {
+                "FAIL: do not trust this GPU's results"
+            }
+        )?;
+    }
+    Ok(if report.pass {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(super::exit::DIFFERENCE)
+    })
+}

@@ -1,0 +1,219 @@
+//! What the binary prints for people: aligned tables with units (the JSON and CSV documents
+//! for programs are the library's, `bitrock::documents`). Parameters leave the library in SI
+//! and are shown in the record's torque unit.
+
+use bitrock::Law;
+use bitrock::abc::Run;
+use bitrock::abc::posterior::PosteriorSummary;
+use bitrock::data::FieldData;
+use bitrock::documents::{fit_in_record_units, to_record_units};
+use bitrock::fit::LawFit;
+use bitrock::units::TorqueUnit;
+use std::io::{self, Write};
+use std::path::Path;
+
+/// Numbers in a table: fixed notation where it reads well, scientific otherwise.
+fn number(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-3..1e5).contains(&a) {
+        format!("{v:.4e}")
+    } else {
+        format!("{v:.5}")
+    }
+}
+
+/// The human form of `fit`: one block per law.
+pub fn fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io::Result<()> {
+    let torque = data.torque_unit.label();
+    writeln!(
+        out,
+        "data: {}  (speed '{}' in {}, torque '{}' in {})",
+        data.source.display(),
+        data.columns.speed,
+        data.speed_unit.label(),
+        data.columns.torque,
+        torque
+    )?;
+    writeln!(
+        out,
+        "rows: {} read, {} used ({} calibration, {} validation)",
+        data.rows_read,
+        data.rows_used,
+        data.calibration.len(),
+        data.validation.len()
+    )?;
+    writeln!(
+        out,
+        "least squares on the calibration rows; ρ = ‖y − T(w)‖² / ‖y‖², w in rad/s\n"
+    )?;
+    for fit in fits {
+        let (params, std_errors) = fit_in_record_units(data, fit);
+        let validation = fit
+            .validation_rho
+            .map(|v| format!("   ρ(validation) = {v:.5}"))
+            .unwrap_or_default();
+        writeln!(out, "{}  T = {}", fit.law, fit.law.formula())?;
+        writeln!(out, "    ρ = {:.5}{validation}", fit.rho)?;
+        let rows: Vec<[String; 4]> = fit
+            .law
+            .params()
+            .iter()
+            .zip(&params)
+            .zip(&std_errors)
+            .map(|((spec, &p), se)| {
+                [
+                    spec.name.to_string(),
+                    number(p),
+                    se.map(number).unwrap_or_else(|| "—".into()),
+                    spec.unit(torque),
+                ]
+            })
+            .collect();
+        let header = ["param", "estimate", "std.error", "unit"];
+        let width: Vec<usize> = (0..4)
+            .map(|c| {
+                rows.iter()
+                    .map(|r| r[c].chars().count())
+                    .chain([header[c].len()])
+                    .max()
+                    .unwrap_or(0)
+            })
+            .collect();
+        writeln!(
+            out,
+            "    {:<w0$}  {:>w1$}  {:>w2$}  {}",
+            header[0],
+            header[1],
+            header[2],
+            header[3],
+            w0 = width[0],
+            w1 = width[1],
+            w2 = width[2]
+        )?;
+        for r in &rows {
+            writeln!(
+                out,
+                "    {:<w0$}  {:>w1$}  {:>w2$}  {}",
+                r[0],
+                r[1],
+                r[2],
+                r[3],
+                w0 = width[0],
+                w1 = width[1],
+                w2 = width[2]
+            )?;
+        }
+        for w in &fit.warnings {
+            writeln!(out, "    warning: {w}")?;
+        }
+        writeln!(out)?;
+    }
+    Ok(())
+}
+
+/// The per-population table of an ABC run.
+pub fn population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
+    let Some(first) = run.populations.first() else {
+        return writeln!(out, "stopped before any population completed: {}", run.stop.describe());
+    };
+    let laws: Vec<Law> = first.record.per_law.iter().map(|l| l.law).collect();
+    write!(
+        out,
+        "{:>4}  {:>10}  {:>12}  {:>8}  {:>9}",
+        "pop", "epsilon", "draws", "accepted", "acc.rate"
+    )?;
+    for law in &laws {
+        write!(out, "  {:>7}", format!("P({law})"))?;
+    }
+    writeln!(out, "  {:>8}  {:>8}", "ESS", "time_s")?;
+    for p in &run.populations {
+        let r = &p.record;
+        let eps = r.epsilon.map(|e| format!("{e:.5}")).unwrap_or_else(|| "∞".into());
+        write!(
+            out,
+            "{:>4}  {:>10}  {:>12}  {:>8}  {:>9.5}",
+            r.index, eps, r.draws, r.accepted, r.acceptance_rate
+        )?;
+        for l in &r.per_law {
+            write!(out, "  {:>7.4}", l.probability)?;
+        }
+        writeln!(out, "  {:>8.0}  {:>8.3}", r.ess, r.seconds)?;
+    }
+    // SMC stops proposing a law with no particle left; say when each died.
+    for law in &laws {
+        let died = run
+            .populations
+            .iter()
+            .find(|p| p.record.per_law.iter().any(|l| l.law == *law && !l.alive));
+        if let Some(p) = died {
+            writeln!(
+                out,
+                "{law} died out in population {}: no particle left, no proposals after it",
+                p.record.index
+            )?;
+        }
+    }
+    let near: u64 = run.populations.iter().map(|p| p.record.near_threshold).sum();
+    writeln!(
+        out,
+        "stopped: {}; {:.3e} candidate × data-point evaluations in {:.2} s; {near} candidates within the CPU/GPU parity tolerance of ε",
+        run.stop.describe(),
+        run.evaluations as f64,
+        run.seconds
+    )
+}
+
+/// Per-law posterior tables in the record's units.
+pub fn posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: TorqueUnit) -> io::Result<()> {
+    for s in &posterior.laws {
+        writeln!(
+            out,
+            "\n{}  P = {:.4}  ({} particles; best ρ = {:.5})",
+            s.law, s.probability, s.count, s.best.rho
+        )?;
+        let conv = |v: &[f64]| to_record_units(s.law, v, unit);
+        let cols = [
+            conv(&s.mean),
+            conv(&s.std_dev),
+            conv(&s.q01),
+            conv(&s.q50),
+            conv(&s.q99),
+            conv(&s.map),
+        ];
+        writeln!(
+            out,
+            "    {:<6} {:>12} {:>12} {:>12} {:>12} {:>12} {:>12}  unit",
+            "param", "mean", "std.dev", "q01", "q50", "q99", "MAP"
+        )?;
+        for (j, spec) in s.law.params().iter().enumerate() {
+            write!(out, "    {:<6}", spec.name)?;
+            for c in &cols {
+                write!(out, " {:>12}", number(c[j]))?;
+            }
+            writeln!(out, "  {}", spec.unit(unit.label()))?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes `path` through `write` into a temporary file beside it, then renames it into place,
+/// so a failure leaves nothing half-written.
+pub fn write_file_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|source| bitrock::Error::Write {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    write(tmp.as_file_mut())?;
+    tmp.persist(path).map_err(|e| bitrock::Error::Write {
+        path: path.to_path_buf(),
+        source: e.error,
+    })?;
+    Ok(())
+}

@@ -1,0 +1,124 @@
+//! `bitrock simulate`: the 1-DOF string with a bit-rock law, written as a field-like CSV.
+
+use super::args::LumpedArgs;
+use super::print;
+use anyhow::Context;
+use bitrock::Law;
+use bitrock::laws::PAPER_W_REF_N;
+use bitrock::simulate::{self, Initial, SimConfig};
+use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
+use clap::{Args, ValueEnum};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Where the simulation starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum InitialState {
+    /// Steady rotation at the top-drive speed, with the bit speed kicked by --kick-rpm.
+    Equilibrium,
+    /// Everything at rest; the top drive starts at the set speed at t = 0.
+    Rest,
+}
+
+#[derive(Debug, Args)]
+pub struct SimulateCmd {
+    /// Bit-rock law (m1, m2, m3, m4).
+    #[arg(long)]
+    pub law: bitrock::Law,
+    /// The law's parameters in its order (m2: tsb,tcb,g), torques in --param-torque-unit
+    /// [default: the paper's least-squares estimate].
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
+    pub params: Option<Vec<f64>>,
+    /// Torque unit of the torque-valued parameters in --params.
+    #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
+    pub param_torque_unit: TorqueUnit,
+    /// Top-drive (rotary table) speed Omega, rpm.
+    #[arg(long, value_name = "RPM")]
+    pub omega_rpm: f64,
+    /// Weight on bit W, kN.
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
+    pub wob_kn: f64,
+    /// Reference weight on bit W_ref at which the law's parameters hold, kN.
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
+    pub w_ref_kn: f64,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
+    /// Recorded duration, s.
+    #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
+    pub duration_s: f64,
+    /// Simulated time discarded before recording starts (lets a limit cycle settle), s.
+    #[arg(long, default_value_t = 0.0, value_name = "SECONDS")]
+    pub settle_s: f64,
+    /// Output sample rate, Hz (the paper's downhole tool records at 50 Hz).
+    #[arg(long, default_value_t = 50.0, value_name = "HZ")]
+    pub sample_hz: f64,
+    /// Integration step of the RK4 scheme, s.
+    #[arg(long, default_value_t = 1e-3, value_name = "SECONDS")]
+    pub dt_s: f64,
+    /// Initial state.
+    #[arg(long, value_enum, default_value_t = InitialState::Equilibrium)]
+    pub initial: InitialState,
+    /// Bit-speed kick added to steady rotation at t = 0 (with --initial equilibrium), rpm.
+    #[arg(long, default_value_t = 5.0, value_name = "RPM", allow_hyphen_values = true)]
+    pub kick_rpm: f64,
+    /// Standard deviation of Gaussian noise added to the recorded torque, kN·m.
+    #[arg(long, default_value_t = 0.0, value_name = "KNM")]
+    pub noise_torque_knm: f64,
+    /// Standard deviation of Gaussian noise added to the recorded bit speed, rpm.
+    #[arg(long, default_value_t = 0.0, value_name = "RPM")]
+    pub noise_speed_rpm: f64,
+    /// Standard deviation of a slow random fluctuation of the weight on bit, kN.
+    #[arg(long, default_value_t = 0.0, value_name = "KN")]
+    pub wob_fluctuation_kn: f64,
+    /// Correlation time of the weight-on-bit fluctuation, s.
+    #[arg(long, default_value_t = 20.0, value_name = "SECONDS")]
+    pub wob_correlation_s: f64,
+    /// Seed of the noise and fluctuation generator.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output CSV (time_s, bit_speed_rpm, torque_knm, wob_kn) [default: standard output].
+    #[arg(long, short, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
+    let law: Law = cmd.law;
+    let params = cmd.params.clone().unwrap_or_else(|| {
+        let p = law.paper_estimate();
+        law.scale_torque(
+            p,
+            TorqueUnit::KNm.newton_metres() / cmd.param_torque_unit.newton_metres(),
+        )
+    });
+    let config = SimConfig {
+        law,
+        params_nm: law.scale_torque(&params, cmd.param_torque_unit.newton_metres()),
+        structure: cmd.lumped.lumped(),
+        omega_rad_s: cmd.omega_rpm * RAD_S_PER_RPM,
+        wob_n: cmd.wob_kn * 1000.0,
+        w_ref_n: cmd.w_ref_kn * 1000.0,
+        duration_s: cmd.duration_s,
+        settle_s: cmd.settle_s,
+        sample_hz: cmd.sample_hz,
+        dt_s: cmd.dt_s,
+        initial: match cmd.initial {
+            InitialState::Equilibrium => Initial::Equilibrium {
+                speed_perturbation_rad_s: cmd.kick_rpm * RAD_S_PER_RPM,
+            },
+            InitialState::Rest => Initial::Rest,
+        },
+        noise_torque_nm: cmd.noise_torque_knm * 1000.0,
+        noise_speed_rad_s: cmd.noise_speed_rpm * RAD_S_PER_RPM,
+        wob_fluctuation_n: cmd.wob_fluctuation_kn * 1000.0,
+        wob_correlation_s: cmd.wob_correlation_s,
+        seed: cmd.seed,
+    };
+    config.validate()?;
+    let trace = simulate::simulate(&config)?;
+    match &cmd.out {
+        None => simulate::write_csv(&trace, std::io::stdout().lock())?,
+        Some(path) => print::write_file_atomically(path, |file| Ok(simulate::write_csv(&trace, file)?))
+            .with_context(|| format!("saving the simulation to {}", path.display()))?,
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,213 @@
+//! `bitrock stability`: maps over (Ω, W) from an ABC run directory or from one law's
+//! parameters: deterministic, percentile and mixture boundaries, and the probability grids.
+
+use super::args::{FeArgs, LumpedArgs};
+use bitrock::Error;
+use bitrock::eval::Backend;
+use bitrock::laws::PAPER_W_REF_N;
+use bitrock::stability::map::{self, Criterion, LawSamples};
+use bitrock::units::TorqueUnit;
+use clap::{Args, ValueEnum};
+use serde_json::json;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Which structure decides stability.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Structure {
+    /// The paper's 1-DOF model (closed-form 2x2 criterion).
+    #[value(name = "1dof")]
+    Lumped,
+    /// The finite-element string (critical bit damping by bisection).
+    Fe,
+}
+
+#[derive(Debug, Args)]
+pub struct StabilityCmd {
+    /// ABC run directory (from `bitrock abc`): MAP, posterior samples and law probabilities.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["law", "params"])]
+    pub run: Option<PathBuf>,
+    /// A law for a what-if map without a run.
+    #[arg(long, requires = "params")]
+    pub law: Option<bitrock::Law>,
+    /// The law's parameters in its order, torques in --torque-unit.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
+    pub params: Option<Vec<f64>>,
+    /// Unit of the torque-valued parameters in --params.
+    #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
+    pub torque_unit: TorqueUnit,
+    /// Structure: 1dof (the paper's) or fe (the finite-element string).
+    #[arg(long, value_enum, default_value_t = Structure::Lumped)]
+    pub structure: Structure,
+    #[command(flatten)]
+    pub fe: FeArgs,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
+    /// Reference weight on bit W_ref of the law's parameters, kN.
+    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
+    pub w_ref_kn: f64,
+    /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
+    #[arg(long, default_value = "20:220:101", value_name = "MIN:MAX:COUNT")]
+    pub omega_rpm: String,
+    /// Weights on bit, kN, as MIN:MAX:COUNT.
+    #[arg(long, default_value = "20:700:69", value_name = "MIN:MAX:COUNT")]
+    pub wob_kn: String,
+    /// Percentile of the stochastic boundary, %: the weight on bit above which at least this
+    /// share of the posterior samples is unstable (the paper's 2 %).
+    #[arg(long, default_value_t = 2.0, value_name = "PERCENT")]
+    pub percentile: f64,
+    /// Posterior samples per law for the stochastic maps (the paper's 700).
+    #[arg(long, default_value_t = 700, value_name = "S")]
+    pub samples: usize,
+    /// Where the probability grids are computed (auto, gpu, cpu).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Write the boundaries as CSV to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Print JSON (boundaries and probability grids) instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
+    let omega = map::parse_axis(&cmd.omega_rpm, "--omega-rpm")?;
+    let wob = map::parse_axis(&cmd.wob_kn, "--wob-kn")?;
+    if !(cmd.percentile > 0.0 && cmd.percentile < 100.0) {
+        return Err(Error::arg(
+            "--percentile",
+            format!("must lie in (0, 100) %, got {}", cmd.percentile),
+        )
+        .into());
+    }
+    if !(cmd.w_ref_kn.is_finite() && cmd.w_ref_kn > 0.0) {
+        return Err(Error::arg(
+            "--w-ref-kn",
+            format!("must be a positive number of kN, got {}", cmd.w_ref_kn),
+        )
+        .into());
+    }
+    if cmd.samples == 0 {
+        return Err(Error::arg("--samples", "must be at least 1").into());
+    }
+    let w_ref_n = cmd.w_ref_kn * 1000.0;
+    let p = cmd.percentile / 100.0;
+    let lumped = cmd.lumped.validated()?;
+    let criterion = match cmd.structure {
+        Structure::Lumped => Criterion::Lumped(lumped),
+        Structure::Fe => Criterion::Critical(cmd.fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms),
+    };
+    let inputs = match (&cmd.run, cmd.law, &cmd.params) {
+        (Some(dir), _, _) => LawSamples::of_run_dir(dir, cmd.samples)?,
+        (None, Some(law), Some(params)) => {
+            if params.len() != law.n_params() {
+                return Err(Error::arg(
+                    "--params",
+                    format!(
+                        "{law} takes {} parameters ({}), got {}",
+                        law.n_params(),
+                        law.param_names().join(", "),
+                        params.len()
+                    ),
+                )
+                .into());
+            }
+            let si = law.scale_torque(params, cmd.torque_unit.newton_metres());
+            vec![LawSamples {
+                law,
+                probability: 1.0,
+                map_si: si.clone(),
+                samples_si: vec![si],
+            }]
+        }
+        _ => {
+            return Err(Error::arg(
+                "--run",
+                "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",
+            )
+            .into());
+        }
+    };
+    let c = criterion.critical_nms();
+    let mut boundaries = serde_json::Map::new();
+    let mut grids = serde_json::Map::new();
+    let mut columns: Vec<(String, Vec<Option<f64>>)> = Vec::new();
+    let computed = map::boundaries(&inputs, &omega, c, w_ref_n, p);
+    for (input, b) in inputs.iter().zip(computed.laws) {
+        let grid = map::probability_grid_on(cmd.backend, input, &omega, &wob, criterion, w_ref_n, &mut |line| {
+            eprintln!("{line}")
+        })?;
+        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples}));
+        grids.insert(
+            input.law.name().into(),
+            json!(grid.chunks(wob.len()).collect::<Vec<_>>()),
+        );
+        columns.push((format!("{}_map_wob_kn", input.law), b.map_wob_kn));
+        columns.push((format!("{}_p_wob_kn", input.law), b.p_wob_kn));
+    }
+    if let Some(mixture) = computed.mixture_wob_kn {
+        boundaries.insert("mixture".into(), json!({"p_wob_kn": mixture}));
+        columns.push(("mixture_p_wob_kn".into(), mixture));
+    }
+    if let Some(path) = &cmd.out {
+        let mut w = csv::Writer::from_path(path).map_err(|e| Error::Write {
+            path: path.clone(),
+            source: e.into(),
+        })?;
+        let mut header = vec!["omega_rpm".to_string()];
+        header.extend(columns.iter().map(|c| c.0.clone()));
+        w.write_record(&header)?;
+        for (i, rpm) in omega.iter().enumerate() {
+            let mut row = vec![format!("{rpm}")];
+            row.extend(
+                columns
+                    .iter()
+                    .map(|c| c.1[i].map(|v| format!("{v:.4}")).unwrap_or_default()),
+            );
+            w.write_record(&row)?;
+        }
+        w.flush()?;
+    }
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        let v = json!({
+            "structure": match cmd.structure { Structure::Lumped => "1dof", Structure::Fe => "fe" },
+            "critical_bit_damping_nms": c,
+            "percentile": cmd.percentile,
+            "omega_rpm": omega,
+            "wob_kn": wob,
+            "boundaries": boundaries,
+            "probability_unstable": grids,
+        });
+        serde_json::to_writer_pretty(&mut out, &v)?;
+        writeln!(out)?;
+    } else {
+        writeln!(
+            out,
+            "critical bit damping c_b* = {c:.3} N·m·s/rad ({}); boundaries: weight on bit (kN) above which steady rotation is unstable",
+            match cmd.structure {
+                Structure::Lumped => "1-DOF",
+                Structure::Fe => "finite elements",
+            }
+        )?;
+        write!(out, "{:>9}", "omega_rpm")?;
+        for (name, _) in &columns {
+            write!(out, "  {name:>18}")?;
+        }
+        writeln!(out)?;
+        let step = (omega.len() / 20).max(1);
+        for i in (0..omega.len()).step_by(step) {
+            write!(out, "{:>9.1}", omega[i])?;
+            for (_, values) in &columns {
+                write!(
+                    out,
+                    "  {:>18}",
+                    values[i].map(|v| format!("{v:.1}")).unwrap_or_else(|| "—".into())
+                )?;
+            }
+            writeln!(out)?;
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

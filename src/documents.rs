@@ -1,0 +1,342 @@
+//! The machine-readable documents bitrock writes: the fits as JSON (`fit --json`), a run's
+//! summary (run.json, also printed by `abc --json`), its envelopes.csv and data.csv, and a
+//! store's export (particles as CSV, the whole run as JSON). One place for their shapes, so
+//! that the run directory the library writes and what the binary prints agree. Parameters
+//! leave the library in SI and appear here in the record's torque unit, named with units.
+
+use crate::Law;
+use crate::abc::posterior::{ENVELOPE_LEVEL, Envelope, PosteriorSummary};
+use crate::abc::{Population, PopulationRecord, Run};
+use crate::data::FieldData;
+use crate::fit::LawFit;
+use crate::prior::Prior;
+use crate::store::RunSetup;
+use crate::units::TorqueUnit;
+use serde_json::{Value, json};
+
+/// The parameter values and standard errors of `fit` in the record's torque unit.
+pub fn fit_in_record_units(data: &FieldData, fit: &LawFit) -> (Vec<f64>, Vec<Option<f64>>) {
+    let to_unit = 1.0 / data.torque_unit.newton_metres();
+    let params = fit.law.scale_torque(&fit.params_si, to_unit);
+    let std_errors = fit
+        .std_errors_si
+        .iter()
+        .zip(fit.law.params())
+        .map(|(se, spec)| se.map(|v| if spec.torque_power == 1 { v * to_unit } else { v }))
+        .collect();
+    (params, std_errors)
+}
+
+/// `fit --json`: `{"rows_read", "rows_used", "fits": [{"law", "names", "params", "std_errors",
+/// "rho", "warnings"}]}` plus context (units, split, validation misfit).
+pub fn fit_json(data: &FieldData, fits: &[LawFit]) -> Value {
+    let torque = data.torque_unit.label();
+    let fits: Vec<Value> = fits
+        .iter()
+        .map(|fit| {
+            let (params, std_errors) = fit_in_record_units(data, fit);
+            json!({
+                "law": fit.law,
+                "formula": fit.law.formula(),
+                "names": fit.law.param_names(),
+                "units": fit.law.params().iter().map(|s| s.unit(torque)).collect::<Vec<_>>(),
+                "params": params,
+                "std_errors": std_errors,
+                "rho": fit.rho,
+                "validation_rho": fit.validation_rho,
+                "condition_number": if fit.condition_number.is_finite() { json!(fit.condition_number) } else { Value::Null },
+                "correlations": fit.correlations,
+                "warnings": fit.warnings,
+                "starts": fit.starts,
+            })
+        })
+        .collect();
+    json!({
+        "source": data.source.display().to_string(),
+        "columns": data.columns,
+        "torque_unit": torque,
+        "speed_unit_of_params": "rad/s",
+        "rows_read": data.rows_read,
+        "rows_used": data.rows_used,
+        "calibration_rows": data.calibration.len(),
+        "validation_rows": data.validation.len(),
+        "fits": fits,
+    })
+}
+
+/// A torque-scaled vector (parameters, their spreads) from SI to the record's torque unit.
+pub fn to_record_units(law: Law, values_si: &[f64], torque_unit: TorqueUnit) -> Vec<f64> {
+    law.scale_torque(values_si, 1.0 / torque_unit.newton_metres())
+}
+
+/// `{"m1": p, ...}` from per-law values.
+fn by_law(values: impl IntoIterator<Item = (Law, f64)>) -> Value {
+    Value::Object(
+        values
+            .into_iter()
+            .map(|(law, p)| (law.name().to_string(), json!(p)))
+            .collect(),
+    )
+}
+
+/// One population's record as JSON.
+fn population_json(record: &PopulationRecord) -> Value {
+    json!({
+        "index": record.index,
+        "epsilon": record.epsilon,
+        "draws": record.draws,
+        "accepted": record.accepted,
+        "acceptance_rate": record.acceptance_rate,
+        "model_probabilities": by_law(record.per_law.iter().map(|l| (l.law, l.probability))),
+        "per_law": record.per_law,
+        "candidates_scored": record.candidates_scored,
+        "evaluations": record.evaluations,
+        "near_threshold": record.near_threshold,
+        "ess": record.ess,
+        "seconds": record.seconds,
+        "stream": record.stream,
+    })
+}
+
+/// The record's summary shared by run.json and the export: source, columns, unit, row counts.
+fn data_json(data: &FieldData, fits: &Value) -> Value {
+    json!({
+        "source": fits["source"],
+        "columns": fits["columns"],
+        "torque_unit": data.torque_unit.label(),
+        "rows_read": data.rows_read,
+        "rows_used": data.rows_used,
+        "calibration_rows": data.calibration.len(),
+        "validation_rows": data.validation.len(),
+    })
+}
+
+/// Everything an ABC run produced, as written to DIR/run.json and printed by `abc --json`.
+pub struct RunSummary<'a> {
+    pub data: &'a FieldData,
+    pub fits: &'a [LawFit],
+    pub prior: &'a Prior,
+    pub run: &'a Run,
+    pub posterior: &'a PosteriorSummary,
+    /// Index of the summarised population.
+    pub summary_population: usize,
+    /// The run configuration as stored, with the worker threads of this invocation.
+    pub config: Value,
+    pub seed: u64,
+    pub backend: &'a str,
+}
+
+impl RunSummary<'_> {
+    /// The run.json document.
+    pub fn json(&self) -> Value {
+        let unit = self.data.torque_unit;
+        let priors = prior_json(self.prior, unit);
+        let laws: Vec<Value> = self
+            .posterior
+            .laws
+            .iter()
+            .map(|s| {
+                let conv = |v: &[f64]| to_record_units(s.law, v, unit);
+                json!({
+                    "law": s.law,
+                    "names": s.names,
+                    "units": s.law.params().iter().map(|p| p.unit(unit.label())).collect::<Vec<_>>(),
+                    "count": s.count,
+                    "probability": s.probability,
+                    "mean": conv(&s.mean),
+                    "std_dev": conv(&s.std_dev),
+                    "q01": conv(&s.q01),
+                    "q50": conv(&s.q50),
+                    "q99": conv(&s.q99),
+                    "correlation": s.correlation,
+                    "best": {"index": s.best.index, "rho": s.best.rho, "params": conv(&s.best.params)},
+                    "map": conv(&s.map),
+                    "map_bandwidth": conv(&s.map_bandwidth),
+                })
+            })
+            .collect();
+        let fits = fit_json(self.data, self.fits);
+        json!({
+            "version": env!("CARGO_PKG_VERSION"),
+            "backend": self.backend,
+            "seed": self.seed,
+            "config": self.config,
+            "data": data_json(self.data, &fits),
+            "fits": fits["fits"],
+            "priors": priors,
+            "populations": self.run.populations.iter().map(|p| population_json(&p.record)).collect::<Vec<_>>(),
+            "stop_reason": self.run.stop,
+            "stop_description": self.run.stop.describe(),
+            "posterior": {
+                "population": self.summary_population,
+                "total": self.posterior.total,
+                "model_probabilities": by_law(self.posterior.model_probabilities.iter().copied()),
+                "laws": laws,
+            },
+            "envelopes": {"file": "envelopes.csv", "level": ENVELOPE_LEVEL},
+            "evaluations": self.run.evaluations,
+            "seconds": self.run.seconds,
+        })
+    }
+}
+
+/// Header of a particle CSV: population, law, candidate, rho, weight, then every law's
+/// parameters with units.
+fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {
+    let mut header: Vec<String> = ["population", "law", "candidate", "rho", "weight"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    for law in laws {
+        for spec in law.params() {
+            header.push(format!("{} [{}]", spec.name, spec.unit(unit.label())));
+        }
+    }
+    header
+}
+
+/// Rows of text as CSV (quoted where a cell needs it).
+fn csv_text<R: AsRef<[u8]>>(rows: impl IntoIterator<Item = impl IntoIterator<Item = R>>) -> Vec<u8> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    for row in rows {
+        w.write_record(row).expect("CSV into memory");
+    }
+    w.into_inner().expect("CSV into memory")
+}
+
+/// Populations' particles as CSV: one row per particle, parameters in columns in the record's
+/// torque unit (empty cells for the other laws' parameters).
+pub fn particles_csv(populations: &[&Population], laws: &[Law], unit: TorqueUnit) -> Vec<u8> {
+    let rows = populations.iter().flat_map(|population| {
+        population.particles.iter().map(move |p| {
+            let mut row = vec![
+                population.record.index.to_string(),
+                p.law.name().to_string(),
+                p.index.to_string(),
+                format!("{:e}", p.rho),
+                format!("{:e}", p.weight),
+            ];
+            for law in laws {
+                if *law == p.law {
+                    row.extend(to_record_units(p.law, &p.params, unit).iter().map(|v| format!("{v:e}")));
+                } else {
+                    row.extend(std::iter::repeat_n(String::new(), law.n_params()));
+                }
+            }
+            row
+        })
+    });
+    csv_text(std::iter::once(particle_header(laws, unit)).chain(rows))
+}
+
+/// A population and its particles as JSON, parameters in the record's torque unit.
+fn population_with_particles_json(population: &Population, unit: TorqueUnit) -> Value {
+    let particles: Vec<Value> = population
+        .particles
+        .iter()
+        .map(|p| {
+            json!({
+                "law": p.law,
+                "candidate": p.index,
+                "rho": p.rho,
+                "weight": p.weight,
+                "params": to_record_units(p.law, &p.params, unit),
+            })
+        })
+        .collect();
+    let mut value = population_json(&population.record);
+    value["particles"] = Value::Array(particles);
+    value
+}
+
+/// A stored run as JSON (`export --format json`): configuration, data summary, fits, prior,
+/// and `populations` with their particles.
+pub fn export_json(setup: &RunSetup, populations: &[&Population]) -> Value {
+    let unit = setup.data.torque_unit;
+    let fits = fit_json(&setup.data, &setup.fits);
+    json!({
+        "version": env!("CARGO_PKG_VERSION"),
+        "config": setup.config,
+        "data": data_json(&setup.data, &fits),
+        "fits": fits["fits"],
+        "priors": prior_json(&setup.prior, unit),
+        "populations": populations
+            .iter()
+            .map(|p| population_with_particles_json(p, unit))
+            .collect::<Vec<_>>(),
+    })
+}
+
+/// The prior boxes in the record's units, with names, units and law weights.
+fn prior_json(prior: &Prior, unit: TorqueUnit) -> Value {
+    prior
+        .boxes
+        .iter()
+        .zip(&prior.weights)
+        .zip(&prior.rules)
+        .map(|((b, w), rules)| {
+            let lower: Vec<f64> = b.lower.iter().map(|&v| f64::from(v)).collect();
+            let upper: Vec<f64> = b.upper.iter().map(|&v| f64::from(v)).collect();
+            json!({
+                "law": b.law,
+                "names": b.law.param_names(),
+                "units": b.law.params().iter().map(|s| s.unit(unit.label())).collect::<Vec<_>>(),
+                "lower": to_record_units(b.law, &lower, unit),
+                "upper": to_record_units(b.law, &upper, unit),
+                "rules": rules.iter().map(|r| r.name()).collect::<Vec<_>>(),
+                "weight": w,
+            })
+        })
+        .collect()
+}
+
+/// The suffix of torque columns in the record's unit (`nm`, `knm`).
+fn torque_suffix(unit: TorqueUnit) -> &'static str {
+    match unit {
+        TorqueUnit::Nm => "nm",
+        TorqueUnit::KNm => "knm",
+    }
+}
+
+/// envelopes.csv: the predictive envelopes, one block of rows per law, in the record's torque
+/// unit.
+pub fn envelopes_csv(envelopes: &[Envelope], unit: TorqueUnit) -> Vec<u8> {
+    let suffix = torque_suffix(unit);
+    let to_unit = 1.0 / unit.newton_metres();
+    let header = [
+        "law".to_string(),
+        "speed_rad_s".into(),
+        format!("lower_{suffix}"),
+        format!("median_{suffix}"),
+        format!("upper_{suffix}"),
+    ];
+    let rows = envelopes.iter().flat_map(|e| {
+        (0..e.speed_rad_s.len()).map(move |i| {
+            [
+                e.law.name().to_string(),
+                format!("{:.6}", e.speed_rad_s[i]),
+                format!("{:.6e}", e.lower[i] * to_unit),
+                format!("{:.6e}", e.median[i] * to_unit),
+                format!("{:.6e}", e.upper[i] * to_unit),
+            ]
+        })
+    });
+    csv_text(std::iter::once(header).chain(rows))
+}
+
+/// data.csv: the calibration and validation samples the envelopes are drawn against.
+pub fn data_csv(data: &FieldData) -> Vec<u8> {
+    let suffix = torque_suffix(data.torque_unit);
+    let to_unit = 1.0 / data.torque_unit.newton_metres();
+    let header = ["set".to_string(), "speed_rad_s".into(), format!("torque_{suffix}")];
+    let rows = [("calibration", &data.calibration), ("validation", &data.validation)]
+        .into_iter()
+        .flat_map(|(set, samples)| {
+            samples
+                .speed_rad_s
+                .iter()
+                .zip(&samples.torque_nm)
+                .map(move |(s, t)| [set.to_string(), format!("{s:.6}"), format!("{:.6e}", t * to_unit)])
+        });
+    csv_text(std::iter::once(header).chain(rows))
+}

@@ -1,0 +1,196 @@
+//! The whole ABC job in one call: a loaded record → least-squares fits → prior → populations
+//! → posterior summary → predictive envelopes, optionally written to a run directory
+//! (run.sqlite as each population completes, then run.json, envelopes.csv and data.csv).
+//! `bitrock abc` and `bitrock demo` are two callers of [`AbcJob::run`] and [`resume`]; a
+//! program that wants what `bitrock abc` does calls them too.
+
+use crate::abc::posterior::{ENVELOPE_LEVEL, Envelope, PosteriorSummary, predictive_envelope, speed_grid, summarize};
+use crate::abc::{Observer, Population};
+use crate::data::FieldData;
+use crate::documents::{self, RunSummary};
+use crate::error::{Error, Result};
+use crate::prior::PriorFile;
+use crate::run::{self, Continuation, Outcome, RunConfig};
+use std::path::{Path, PathBuf};
+
+/// Speeds of the predictive envelopes, evenly spaced over the record's range.
+const ENVELOPE_SPEEDS: usize = 200;
+
+/// Where a job writes its run directory.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunDir {
+    pub path: PathBuf,
+    /// Replace a non-empty directory (`--force`); without it such a directory is refused
+    /// before any work.
+    pub replace: bool,
+}
+
+/// An ABC job: what defines the run and what to summarise. [`Default`] is `bitrock abc`'s
+/// defaults, in memory (no run directory).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AbcJob {
+    /// Laws, fits, prior width, seed, backend and sampler (stored with the run).
+    pub config: RunConfig,
+    /// Population to summarise (statistics, MAP, envelopes); `None`: the last.
+    pub summary_population: Option<usize>,
+    /// The run directory to write; `None` keeps the run in memory.
+    pub out: Option<RunDir>,
+}
+
+/// A finished job: the run (configuration, record, fits, prior, populations) and the summary
+/// of one population.
+pub struct Analysis {
+    pub outcome: Outcome,
+    /// Index of the summarised population.
+    pub summary_population: usize,
+    pub posterior: PosteriorSummary,
+    /// The 98 % predictive envelope of every law with particles in the summarised population.
+    pub envelopes: Vec<Envelope>,
+}
+
+impl AbcJob {
+    /// Refuses, naming the flag, a configuration that cannot run, and a run directory that
+    /// would be overwritten without `replace`, before any work.
+    pub fn validate(&self) -> Result<()> {
+        self.config.validate()?;
+        if let Some(out) = &self.out {
+            run::check_new_run_dir(&out.path, out.replace)?;
+        }
+        Ok(())
+    }
+
+    /// Runs the job on `data`: validates, reads the prior file, fits, samples (reporting to
+    /// `observer`; `note` hears what the user should know, such as a fallback to the CPU),
+    /// summarises, and writes the run directory when there is one. Nothing is written when
+    /// something is refused.
+    pub fn run(&self, data: FieldData, observer: &mut dyn Observer, note: &mut dyn FnMut(String)) -> Result<Analysis> {
+        self.config.validate()?;
+        let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        if let Some(out) = &self.out {
+            run::check_new_run_dir(&out.path, out.replace)?;
+        }
+        let dir = self.out.as_ref().map(|out| out.path.as_path());
+        let outcome = run::start(dir, data, self.config.clone(), prior_file.as_ref(), observer, note)?;
+        let analysis = Analysis::new(outcome, self.summary_population, dir)?;
+        if let Some(dir) = dir {
+            analysis.write_summary(dir)?;
+        }
+        Ok(analysis)
+    }
+}
+
+/// Continues the run in `dir` ([`run::resume`]), then summarises population
+/// `summary_population` (default: the last) and rewrites the directory's summary files.
+pub fn resume(
+    dir: &Path,
+    more: &Continuation,
+    summary_population: Option<usize>,
+    observer: &mut dyn Observer,
+    note: &mut dyn FnMut(String),
+) -> Result<Analysis> {
+    let outcome = run::resume(dir, more, observer, note)?;
+    let analysis = Analysis::new(outcome, summary_population, Some(dir))?;
+    analysis.write_summary(dir)?;
+    Ok(analysis)
+}
+
+impl Analysis {
+    /// Summarises population `summary_population` (default: the last) of `outcome`: posterior
+    /// statistics and MAP, and the predictive envelopes over the record's speed range. `dir`
+    /// only names the run in the message of a run stopped before its first population.
+    pub fn new(outcome: Outcome, summary_population: Option<usize>, dir: Option<&Path>) -> Result<Self> {
+        let populations = &outcome.run.populations;
+        let last = match summary_population {
+            None => populations.last().ok_or_else(|| no_population(&outcome, dir))?,
+            Some(g) => populations.get(g).ok_or_else(|| {
+                Error::arg(
+                    "--summary-population",
+                    format!("the run has populations 0..={}", populations.len().saturating_sub(1)),
+                )
+            })?,
+        };
+        let laws = &outcome.config.laws;
+        let posterior = summarize(&last.particles, laws);
+        let envelopes = envelopes(last, laws, &outcome.setup.data);
+        Ok(Self {
+            summary_population: last.record.index,
+            posterior,
+            envelopes,
+            outcome,
+        })
+    }
+
+    /// The run.json document (also what `abc --json` prints).
+    pub fn json(&self) -> serde_json::Value {
+        let outcome = &self.outcome;
+        let mut config = serde_json::to_value(&outcome.config).expect("the configuration serialises");
+        config["threads"] = rayon::current_num_threads().into();
+        RunSummary {
+            data: &outcome.setup.data,
+            fits: &outcome.setup.fits,
+            prior: &outcome.setup.prior,
+            run: &outcome.run,
+            posterior: &self.posterior,
+            summary_population: self.summary_population,
+            config,
+            seed: outcome.config.seed,
+            backend: outcome.backend,
+        }
+        .json()
+    }
+
+    /// Writes run.json, envelopes.csv and data.csv into the run directory `dir`, each whole or
+    /// not at all: written beside the targets, then moved into place.
+    pub fn write_summary(&self, dir: &Path) -> Result<()> {
+        let staging = tempfile::Builder::new()
+            .prefix(".bitrock-summary-")
+            .tempdir_in(dir)
+            .map_err(|source| Error::Write {
+                path: dir.to_path_buf(),
+                source,
+            })?;
+        let run_json = serde_json::to_string_pretty(&self.json()).expect("JSON into memory") + "\n";
+        let data = &self.outcome.setup.data;
+        let files = [
+            ("run.json", run_json.into_bytes()),
+            (
+                "envelopes.csv",
+                documents::envelopes_csv(&self.envelopes, data.torque_unit),
+            ),
+            ("data.csv", documents::data_csv(data)),
+        ];
+        for (name, bytes) in &files {
+            let path = staging.path().join(name);
+            std::fs::write(&path, bytes).map_err(|source| Error::Write { path, source })?;
+        }
+        for (name, _) in &files {
+            std::fs::rename(staging.path().join(name), dir.join(name)).map_err(|source| Error::Write {
+                path: dir.join(name),
+                source,
+            })?;
+        }
+        Ok(())
+    }
+}
+
+/// The refusal of a run stopped before its first population, saying how to continue it.
+fn no_population(outcome: &Outcome, dir: Option<&Path>) -> Error {
+    let stop = outcome.run.stop.describe();
+    Error::Incomplete(match dir {
+        Some(dir) => format!(
+            "no population completed: {stop}; continue with `bitrock abc --resume {}`",
+            dir.display()
+        ),
+        None => format!("no population completed: {stop}"),
+    })
+}
+
+/// The predictive envelopes of `population`'s laws over the record's speed range.
+fn envelopes(population: &Population, laws: &[crate::Law], data: &FieldData) -> Vec<Envelope> {
+    let all_speeds = data.calibration.speed_rad_s.iter().chain(&data.validation.speed_rad_s);
+    let (lo, hi) = all_speeds.fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
+    let grid = speed_grid(lo, hi, ENVELOPE_SPEEDS);
+    laws.iter()
+        .filter_map(|&law| predictive_envelope(&population.particles, law, &grid, ENVELOPE_LEVEL, 1.0))
+        .collect()
+}

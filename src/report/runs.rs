@@ -1,0 +1,86 @@
+//! The report's runs from where they live: run directories (`bitrock report`) or runs just
+//! finished (`bitrock demo`), labelled by their δ; then the report with the paper's maps.
+
+use super::{ReportInput, ReportRun, ReportSummary, StabilitySettings, write_report};
+use crate::abc::Population;
+use crate::abc::posterior::PosteriorSummary;
+use crate::error::{Error, Result};
+use crate::run::RunConfig;
+use crate::store::{RunSetup, RunStore};
+use std::path::{Path, PathBuf};
+
+impl ReportRun {
+    /// One run of a report, labelled by its δ (and its directory `dir` when an `earlier` run
+    /// has the same δ). `summary`: the last population's summary when the caller has it.
+    pub fn new(
+        earlier: &[ReportRun],
+        dir: &Path,
+        config: &RunConfig,
+        populations: Vec<Population>,
+        summary: Option<PosteriorSummary>,
+    ) -> Self {
+        let same_delta = earlier.iter().any(|r| r.delta.to_bits() == config.delta.to_bits());
+        let label = if same_delta {
+            format!("δ = {} ({})", config.delta, dir.display())
+        } else {
+            format!("δ = {}", config.delta)
+        };
+        ReportRun {
+            label,
+            delta: config.delta,
+            laws: config.laws.clone(),
+            populations,
+            w_ref_n: config.fit.w_ref_n,
+            summary,
+        }
+    }
+}
+
+/// Reads run directories into the report's runs, with the set-up (record, fits) of the first.
+/// Refuses an empty list, a run without a completed population, and runs of different records
+/// (the figures draw one data set).
+pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
+    let mut runs = Vec::new();
+    let mut first: Option<RunSetup> = None;
+    for dir in dirs {
+        let stored = RunStore::open(dir)?.load()?;
+        if stored.populations.is_empty() {
+            return Err(Error::Data {
+                path: dir.clone(),
+                message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
+            });
+        }
+        let config: RunConfig = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
+            path: dir.clone(),
+            message: format!("the stored configuration is not one this bitrock reads: {e}"),
+        })?;
+        if let Some(reference) = &first
+            && (reference.data.calibration != stored.setup.data.calibration
+                || reference.data.validation != stored.setup.data.validation)
+        {
+            return Err(Error::Data {
+                path: dir.clone(),
+                message: format!(
+                    "its record differs from that of {}; a report draws runs of one record",
+                    dirs[0].display()
+                ),
+            });
+        }
+        runs.push(ReportRun::new(&runs, dir, &config, stored.populations, None));
+        first.get_or_insert(stored.setup);
+    }
+    let setup = first.ok_or_else(|| Error::arg("DIR", "give at least one run directory"))?;
+    Ok((setup, runs))
+}
+
+/// The report of `runs` (all of the record and fits in `setup`) with the paper's map settings,
+/// written into `out`.
+pub fn write_paper_report(out: &Path, setup: &RunSetup, runs: &[ReportRun]) -> Result<ReportSummary> {
+    let input = ReportInput {
+        data: &setup.data,
+        fits: &setup.fits,
+        runs,
+        stability: StabilitySettings::default(),
+    };
+    write_report(out, &input)
+}

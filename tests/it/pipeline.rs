@@ -1,0 +1,98 @@
+//! The library's entry point for the whole job: the same populations in memory as in a run
+//! directory, the directory's run.json is the analysis's JSON, and a refused job writes nothing.
+
+use bitrock::abc::Silent;
+use bitrock::abc::rejection::RejectionConfig;
+use bitrock::data::{DataOptions, demo_field_data};
+use bitrock::eval::Backend;
+use bitrock::pipeline::{AbcJob, RunDir};
+use bitrock::run::{RunConfig, SamplerConfig};
+
+fn job(particles: usize) -> AbcJob {
+    AbcJob {
+        config: RunConfig {
+            backend: Backend::Cpu,
+            seed: 5,
+            sampler: SamplerConfig::Rejection(RejectionConfig {
+                particles,
+                eps_min: 0.03,
+                ..RejectionConfig::default()
+            }),
+            ..RunConfig::default()
+        },
+        ..AbcJob::default()
+    }
+}
+
+#[test]
+fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
+    let data = || demo_field_data(&DataOptions::default()).unwrap();
+    let in_memory = job(300).run(data(), &mut Silent, &mut |_| {}).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run");
+    let on_disk = AbcJob {
+        out: Some(RunDir {
+            path: path.clone(),
+            replace: false,
+        }),
+        ..job(300)
+    }
+    .run(data(), &mut Silent, &mut |_| {})
+    .unwrap();
+    let (a, b) = (&in_memory.outcome.run.populations, &on_disk.outcome.run.populations);
+    assert!(a.len() >= 2, "{} populations", a.len());
+    assert_eq!(a.len(), b.len());
+    for (p, q) in a.iter().zip(b) {
+        assert_eq!(p.particles, q.particles, "population {}", p.record.index);
+        assert_eq!(p.record.per_law, q.record.per_law);
+    }
+    assert_eq!(in_memory.summary_population, a.len() - 1);
+    assert_eq!(
+        in_memory.posterior.model_probabilities,
+        on_disk.posterior.model_probabilities
+    );
+    // The directory holds the store and the summary files; run.json is the analysis's JSON.
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path.join("run.json")).unwrap()).unwrap();
+    assert_eq!(stored, on_disk.json());
+    for file in ["run.sqlite", "envelopes.csv", "data.csv"] {
+        assert!(path.join(file).is_file(), "{file}");
+    }
+    // One envelope per law with particles, 200 speeds each.
+    assert_eq!(in_memory.envelopes.len(), in_memory.posterior.laws.len());
+    assert!(in_memory.envelopes.iter().all(|e| e.speed_rad_s.len() == 200));
+}
+
+#[test]
+fn a_refused_job_names_the_setting_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run");
+    let out = Some(RunDir {
+        path: path.clone(),
+        replace: false,
+    });
+    let mut zero_delta = AbcJob {
+        out: out.clone(),
+        ..job(100)
+    };
+    zero_delta.config.delta = 0.0;
+    let mut no_starts = AbcJob { out, ..job(100) };
+    no_starts.config.fit.starts = 0;
+    for (job, flag) in [(zero_delta, "--delta"), (no_starts, "--starts")] {
+        assert!(job.validate().unwrap_err().to_string().starts_with(flag));
+        let data = demo_field_data(&DataOptions::default()).unwrap();
+        let err = job.run(data, &mut Silent, &mut |_| {}).err().expect("refused");
+        assert!(err.is_bad_input() && err.to_string().starts_with(flag), "{err}");
+        assert!(!path.exists());
+    }
+    // A summary population the run does not have.
+    let data = demo_field_data(&DataOptions::default()).unwrap();
+    let err = AbcJob {
+        summary_population: Some(99),
+        ..job(100)
+    }
+    .run(data, &mut Silent, &mut |_| {})
+    .err()
+    .expect("refused");
+    assert!(err.to_string().starts_with("--summary-population"), "{err}");
+}
