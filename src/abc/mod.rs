@@ -114,6 +114,49 @@ pub struct PopulationRecord {
     pub stream: u32,
 }
 
+impl PopulationRecord {
+    /// The laws whose probability in this population is 0 by construction (see
+    /// [`LawRecord::reachable`]).
+    pub fn unreachable_laws(&self) -> Vec<Law> {
+        self.per_law
+            .iter()
+            .filter(|l| l.zero_by_construction())
+            .map(|l| l.law)
+            .collect()
+    }
+
+    /// What a reader of this population's model probabilities must be told, in sentences:
+    /// which probabilities are 0 by construction, and when the ranking is decided by the laws'
+    /// best least-squares ρ alone (a single law can reach ε). Empty when every law can.
+    pub fn probability_caveats(&self) -> Vec<String> {
+        let unreachable = self.unreachable_laws();
+        if unreachable.is_empty() {
+            return Vec::new();
+        }
+        let names: Vec<&str> = unreachable.iter().map(|l| l.name()).collect();
+        let epsilon = self.epsilon.map_or("∞".to_string(), |e| format!("{e:.5}"));
+        let mut caveats = vec![format!(
+            "P = 0 by construction for {}: ε = {epsilon} is at or below {} best least-squares ρ, so no candidate of {} could be accepted; this is not evidence against {}.",
+            names.join(", "),
+            if names.len() == 1 { "its" } else { "their" },
+            if names.len() == 1 { "it" } else { "them" },
+            if names.len() == 1 { "it" } else { "them" },
+        )];
+        let reachable: Vec<&str> = self
+            .per_law
+            .iter()
+            .filter(|l| l.reachable)
+            .map(|l| l.law.name())
+            .collect();
+        if let [only] = reachable.as_slice() {
+            caveats.push(format!(
+                "Only {only} can reach ε = {epsilon}: its probability 1 says that its best least-squares ρ is the lowest, and nothing more; the ranking is decided by best-fit ρ alone."
+            ));
+        }
+        caveats
+    }
+}
+
 /// One population: its record and particles in index order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Population {

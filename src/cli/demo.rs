@@ -103,6 +103,12 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             eps_min,
             populations: done.outcome.run.populations.len(),
             posterior: done.posterior.clone(),
+            caveats: done
+                .outcome
+                .run
+                .populations
+                .last()
+                .map_or_else(Vec::new, |p| p.record.probability_caveats()),
         });
         // The report takes the runs as they are, with their summaries (no store reload, no
         // second kernel density estimate).
@@ -163,6 +169,8 @@ struct Headline {
     eps_min: f64,
     populations: usize,
     posterior: PosteriorSummary,
+    /// Which final probabilities are 0 by construction, and whether best-fit ρ alone decides.
+    caveats: Vec<String>,
 }
 
 /// The closing lines: each run's final model probabilities, the MAP of the most probable law
@@ -190,6 +198,9 @@ fn print_headline(
             probabilities.join(", "),
             h.populations
         )?;
+        for caveat in &h.caveats {
+            writeln!(out, "    {caveat}")?;
+        }
     }
     let first = &headlines[0];
     if let Some(best) = first

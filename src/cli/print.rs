@@ -135,9 +135,34 @@ pub fn population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
             r.index, eps, r.draws, r.accepted, r.acceptance_rate
         )?;
         for l in &r.per_law {
-            write!(out, "  {:>7.4}", l.probability)?;
+            if l.zero_by_construction() {
+                write!(out, "  {:>7}", "0*")?;
+            } else {
+                write!(out, "  {:>7.4}", l.probability)?;
+            }
         }
         writeln!(out, "  {:>8.0}  {:>8.3}", r.ess, r.seconds)?;
+    }
+    // Probabilities that are 0 because ε is below a law's best fit, not because of evidence.
+    for law in &laws {
+        let from = run.populations.iter().find(|p| {
+            p.record
+                .per_law
+                .iter()
+                .any(|l| l.law == *law && l.zero_by_construction())
+        });
+        if let Some(p) = from {
+            writeln!(
+                out,
+                "* {law}: 0 by construction from population {} on (ε at or below its best least-squares ρ: none of its candidates can be accepted; not evidence against it)",
+                p.record.index
+            )?;
+        }
+    }
+    if let Some(last) = run.populations.last() {
+        for caveat in last.record.probability_caveats().iter().skip(1) {
+            writeln!(out, "{caveat}")?;
+        }
     }
     // SMC stops proposing a law with no particle left; say when each died.
     for law in &laws {

@@ -157,7 +157,7 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
         &probabilities,
     )?);
 
-    // 3. Final model probabilities.
+    // 3. Final model probabilities; 0* marks those that are 0 by construction.
     let last = FinalProbabilities {
         laws: laws.clone(),
         runs: p
@@ -171,10 +171,23 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
                 (r.run.label.clone(), probs)
             })
             .collect(),
+        zero_by_construction: p
+            .runs
+            .iter()
+            .map(|r| super::record_zero_by_construction(r.last, &laws))
+            .collect(),
     };
+    let any_zero = last.zero_by_construction.iter().flatten().any(|&z| z);
     out.push(render_one(
         "fig03_final_probabilities".into(),
-        "Model probabilities at the last population of each run.".into(),
+        if any_zero {
+            format!(
+                "Model probabilities at the last population of each run. {}",
+                super::BY_CONSTRUCTION_NOTE
+            )
+        } else {
+            "Model probabilities at the last population of each run.".into()
+        },
         FIGURE_SIZE,
         &last,
     )?);
@@ -675,6 +688,8 @@ impl Figure for ModelProbabilities {
 struct FinalProbabilities {
     laws: Vec<Law>,
     runs: Vec<(String, Vec<f64>)>,
+    /// Per run and law: the probability is 0 by construction (labelled `0*`).
+    zero_by_construction: Vec<Vec<bool>>,
 }
 
 impl Figure for FinalProbabilities {
@@ -720,8 +735,13 @@ impl Figure for FinalProbabilities {
         for (g, probs) in groups.iter().enumerate() {
             for (k, &prob) in probs.iter().enumerate() {
                 let x = g as f64 - 0.4 + (k as f64 + 0.46) * width;
+                let by_construction = self.zero_by_construction.get(g).and_then(|z| z.get(k)) == Some(&true);
                 chart.draw_series(std::iter::once(Text::new(
-                    format!("{prob:.2}"),
+                    if by_construction {
+                        "0*".to_string()
+                    } else {
+                        format!("{prob:.2}")
+                    },
                     (x, prob + 0.01),
                     font(TICK - 2).pos(Pos::new(HPos::Center, VPos::Bottom)),
                 )))?;

@@ -233,6 +233,32 @@ struct Prepared<'a> {
     w_ref_n: f64,
 }
 
+/// For each of `laws`, whether its probability in the population is 0 by construction (ε at
+/// or below its best least-squares ρ; see `LawRecord::reachable`).
+fn record_zero_by_construction(population: &Population, laws: &[Law]) -> Vec<bool> {
+    laws.iter()
+        .map(|&law| {
+            population
+                .record
+                .per_law
+                .iter()
+                .any(|r| r.law == law && r.zero_by_construction())
+        })
+        .collect()
+}
+
+/// A probability in a table: 6 decimals, or `0*` when it is 0 by construction.
+fn probability_text(p: f64, by_construction: bool) -> String {
+    if by_construction {
+        "0*".into()
+    } else {
+        format!("{p:.6}")
+    }
+}
+
+/// The footnote of tables and figures that show `0*`.
+const BY_CONSTRUCTION_NOTE: &str = "0* = 0 by construction: ε is at or below the law's best least-squares ρ, so none of its candidates could be accepted; it is not evidence against the law.";
+
 /// P(law) of a population's record for each of `laws` (0 for a law not in the record).
 fn record_probabilities(population: &Population, laws: &[Law]) -> Vec<(Law, f64)> {
     laws.iter()
@@ -455,11 +481,26 @@ impl<'a> Prepared<'a> {
                 r.last.record.index,
                 epsilon_text(r.last.record.epsilon)
             );
-            for law in &laws {
+            let zero = record_zero_by_construction(r.last, &laws);
+            for (law, zero) in laws.iter().zip(zero) {
                 let p = r.probabilities.iter().find(|p| p.0 == *law).map(|p| p.1);
-                let _ = write!(md, " {} |", p.map_or("—".into(), |p| format!("{p:.6}")));
+                let _ = write!(md, " {} |", p.map_or("—".into(), |p| probability_text(p, zero)));
             }
             let _ = writeln!(md);
+        }
+        let any_zero = self.runs.iter().any(|r| {
+            r.run
+                .populations
+                .iter()
+                .any(|p| !p.record.unreachable_laws().is_empty())
+        });
+        if any_zero {
+            let _ = writeln!(md, "\n{BY_CONSTRUCTION_NOTE}");
+        }
+        for r in &self.runs {
+            for caveat in r.last.record.probability_caveats() {
+                let _ = writeln!(md, "\n{}: {caveat}", r.run.label);
+            }
         }
         for r in &self.runs {
             let _ = writeln!(md, "\n### {}: every population\n", r.run.label);
@@ -478,8 +519,9 @@ impl<'a> Prepared<'a> {
                     p.record.draws,
                     p.record.ess
                 );
-                for (_, prob) in record_probabilities(p, &r.run.laws) {
-                    let _ = write!(md, " {prob:.6} |");
+                let zero = record_zero_by_construction(p, &r.run.laws);
+                for ((_, prob), zero) in record_probabilities(p, &r.run.laws).into_iter().zip(zero) {
+                    let _ = write!(md, " {} |", probability_text(prob, zero));
                 }
                 let _ = writeln!(md);
             }
