@@ -448,6 +448,35 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         });
     }
 
+    let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &name(torque_i))?;
+
+    Ok(FieldData {
+        source: path.to_path_buf(),
+        torque_unit,
+        speed_unit,
+        columns: ColumnsUsed {
+            speed: name(speed_i),
+            torque: name(torque_i),
+            wob: wob_i.map(name),
+            time: time_i.map(name),
+        },
+        rows_read,
+        rows_used,
+        calibration,
+        validation,
+    })
+}
+
+/// The filters (time window, then thinning, then the minimum bit speed) and the calibration /
+/// validation split of every row read; the number of rows kept. Refuses a record left empty,
+/// or whose kept or calibration torque is zero throughout.
+fn filter_and_split(
+    all: &Samples,
+    opts: &DataOptions,
+    path: &Path,
+    torque_column: &str,
+) -> Result<(usize, Samples, Samples)> {
+    let rows_read = all.len();
     // Filters: time window, then thinning, then the minimum bit speed.
     let in_window = |i: usize| match &all.time_s {
         Some(t) => opts.t_start_s.is_none_or(|a| t[i] >= a) && opts.t_end_s.is_none_or(|b| t[i] <= b),
@@ -481,8 +510,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         return Err(Error::Data {
             path: path.to_path_buf(),
             message: format!(
-                "every kept torque value in column '{}' is zero: the misfit ρ = ‖y − T‖²/‖y‖² is undefined",
-                name(torque_i)
+                "every kept torque value in column '{torque_column}' is zero: the misfit ρ = ‖y − T‖²/‖y‖² is undefined"
             ),
         });
     }
@@ -505,21 +533,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         });
     }
 
-    Ok(FieldData {
-        source: path.to_path_buf(),
-        torque_unit,
-        speed_unit,
-        columns: ColumnsUsed {
-            speed: name(speed_i),
-            torque: name(torque_i),
-            wob: wob_i.map(name),
-            time: time_i.map(name),
-        },
-        rows_read,
-        rows_used: n,
-        calibration,
-        validation,
-    })
+    Ok((n, calibration, validation))
 }
 
 #[cfg(test)]

@@ -2,6 +2,7 @@
 //! parameters: deterministic, percentile and mixture boundaries, and the probability grids.
 
 use super::args::{FeArgs, LumpedArgs};
+use super::print;
 use bitrock::Error;
 use bitrock::eval::Backend;
 use bitrock::laws::PAPER_W_REF_N;
@@ -71,6 +72,9 @@ pub struct StabilityCmd {
     pub json: bool,
 }
 
+/// A named boundary column of the table and the CSV: kN per speed, `None` where none.
+type Column = (String, Vec<Option<f64>>);
+
 pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let omega = map::parse_axis(&cmd.omega_rpm, "--omega-rpm")?;
     let wob = map::parse_axis(&cmd.wob_kn, "--wob-kn")?;
@@ -98,41 +102,11 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         Structure::Lumped => Criterion::Lumped(lumped),
         Structure::Fe => Criterion::Critical(cmd.fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms),
     };
-    let inputs = match (&cmd.run, cmd.law, &cmd.params) {
-        (Some(dir), _, _) => LawSamples::of_run_dir(dir, cmd.samples)?,
-        (None, Some(law), Some(params)) => {
-            if params.len() != law.n_params() {
-                return Err(Error::arg(
-                    "--params",
-                    format!(
-                        "{law} takes {} parameters ({}), got {}",
-                        law.n_params(),
-                        law.param_names().join(", "),
-                        params.len()
-                    ),
-                )
-                .into());
-            }
-            let si = law.scale_torque(params, cmd.torque_unit.newton_metres());
-            vec![LawSamples {
-                law,
-                probability: 1.0,
-                map_si: si.clone(),
-                samples_si: vec![si],
-            }]
-        }
-        _ => {
-            return Err(Error::arg(
-                "--run",
-                "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",
-            )
-            .into());
-        }
-    };
+    let inputs = map_inputs(cmd)?;
     let c = criterion.critical_nms();
     let mut boundaries = serde_json::Map::new();
     let mut grids = serde_json::Map::new();
-    let mut columns: Vec<(String, Vec<Option<f64>>)> = Vec::new();
+    let mut columns: Vec<Column> = Vec::new();
     let computed = map::boundaries(&inputs, &omega, c, w_ref_n, p);
     for (input, b) in inputs.iter().zip(computed.laws) {
         let grid = map::probability_grid_on(cmd.backend, input, &omega, &wob, criterion, w_ref_n, &mut |line| {
@@ -151,23 +125,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }
     if let Some(path) = &cmd.out {
-        let mut w = csv::Writer::from_path(path).map_err(|e| Error::Write {
-            path: path.clone(),
-            source: e.into(),
-        })?;
-        let mut header = vec!["omega_rpm".to_string()];
-        header.extend(columns.iter().map(|c| c.0.clone()));
-        w.write_record(&header)?;
-        for (i, rpm) in omega.iter().enumerate() {
-            let mut row = vec![format!("{rpm}")];
-            row.extend(
-                columns
-                    .iter()
-                    .map(|c| c.1[i].map(|v| format!("{v:.4}")).unwrap_or_default()),
-            );
-            w.write_record(&row)?;
-        }
-        w.flush()?;
+        print::write_file_atomically(path, |file| Ok(file.write_all(&boundaries_csv(&omega, &columns))?))?;
     }
     let mut out = std::io::stdout().lock();
     if cmd.json {
@@ -183,31 +141,94 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         serde_json::to_writer_pretty(&mut out, &v)?;
         writeln!(out)?;
     } else {
-        writeln!(
-            out,
-            "critical bit damping c_b* = {c:.3} N·m·s/rad ({}); boundaries: weight on bit (kN) above which steady rotation is unstable",
-            match cmd.structure {
-                Structure::Lumped => "1-DOF",
-                Structure::Fe => "finite elements",
-            }
-        )?;
-        write!(out, "{:>9}", "omega_rpm")?;
-        for (name, _) in &columns {
-            write!(out, "  {name:>18}")?;
-        }
-        writeln!(out)?;
-        let step = (omega.len() / 20).max(1);
-        for i in (0..omega.len()).step_by(step) {
-            write!(out, "{:>9.1}", omega[i])?;
-            for (_, values) in &columns {
-                write!(
-                    out,
-                    "  {:>18}",
-                    values[i].map(|v| format!("{v:.1}")).unwrap_or_else(|| "—".into())
-                )?;
-            }
-            writeln!(out)?;
-        }
+        print_table(&mut out, cmd.structure, c, &omega, &columns)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The laws the maps are drawn for: the last population of `--run`, or `--law` at `--params`.
+fn map_inputs(cmd: &StabilityCmd) -> anyhow::Result<Vec<LawSamples>> {
+    match (&cmd.run, cmd.law, &cmd.params) {
+        (Some(dir), _, _) => Ok(LawSamples::of_run_dir(dir, cmd.samples)?),
+        (None, Some(law), Some(params)) => {
+            if params.len() != law.n_params() {
+                return Err(Error::arg(
+                    "--params",
+                    format!(
+                        "{law} takes {} parameters ({}), got {}",
+                        law.n_params(),
+                        law.param_names().join(", "),
+                        params.len()
+                    ),
+                )
+                .into());
+            }
+            let si = law.scale_torque(params, cmd.torque_unit.newton_metres());
+            Ok(vec![LawSamples {
+                law,
+                probability: 1.0,
+                map_si: si.clone(),
+                samples_si: vec![si],
+            }])
+        }
+        _ => Err(Error::arg(
+            "--run",
+            "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",
+        )
+        .into()),
+    }
+}
+
+/// `--out`: one row per speed, the boundaries in kN to 4 decimals (empty where none).
+fn boundaries_csv(omega_rpm: &[f64], columns: &[Column]) -> Vec<u8> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let mut header = vec!["omega_rpm".to_string()];
+    header.extend(columns.iter().map(|c| c.0.clone()));
+    w.write_record(&header).expect("CSV into memory");
+    for (i, rpm) in omega_rpm.iter().enumerate() {
+        let mut row = vec![format!("{rpm}")];
+        row.extend(
+            columns
+                .iter()
+                .map(|c| c.1[i].map(|v| format!("{v:.4}")).unwrap_or_default()),
+        );
+        w.write_record(&row).expect("CSV into memory");
+    }
+    w.into_inner().expect("CSV into memory")
+}
+
+/// The boundaries at about 20 of the speeds, for people.
+fn print_table(
+    out: &mut impl Write,
+    structure: Structure,
+    critical_nms: f64,
+    omega_rpm: &[f64],
+    columns: &[Column],
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "critical bit damping c_b* = {critical_nms:.3} N·m·s/rad ({}); boundaries: weight on bit (kN) above which steady rotation is unstable",
+        match structure {
+            Structure::Lumped => "1-DOF",
+            Structure::Fe => "finite elements",
+        }
+    )?;
+    write!(out, "{:>9}", "omega_rpm")?;
+    for (name, _) in columns {
+        write!(out, "  {name:>18}")?;
+    }
+    writeln!(out)?;
+    let step = (omega_rpm.len() / 20).max(1);
+    for i in (0..omega_rpm.len()).step_by(step) {
+        write!(out, "{:>9.1}", omega_rpm[i])?;
+        for (_, values) in columns {
+            write!(
+                out,
+                "  {:>18}",
+                values[i].map(|v| format!("{v:.1}")).unwrap_or_else(|| "—".into())
+            )?;
+        }
+        writeln!(out)?;
+    }
+    Ok(())
 }
