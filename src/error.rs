@@ -68,6 +68,7 @@ impl Error {
                 | Error::Format { .. }
                 | Error::Data { .. }
                 | Error::InvalidArgument { .. }
+                | Error::Gpu(crate::eval::gpu::GpuError::Setting { .. })
         )
     }
 }
