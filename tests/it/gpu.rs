@@ -263,6 +263,9 @@ fn bench_json_keeps_its_keys_and_both_backends_count_the_same_evaluations() {
     assert_eq!(code, 0, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert!(v["adapter"].as_str().unwrap().contains("llvmpipe") || !v["adapter"].as_str().unwrap().starts_with("none"));
+    // The adapter's shape (blocked on lavapipe, a CPU driver) unless BITROCK_GPU_SHAPE says.
+    let expected = gpu::Shape::chosen(gpu::context().unwrap()).unwrap();
+    assert_eq!(v["shape"], expected.name());
     let t = v["throughput"].as_array().unwrap();
     assert_eq!(t.len(), 2);
     for row in t {
@@ -275,6 +278,13 @@ fn bench_json_keeps_its_keys_and_both_backends_count_the_same_evaluations() {
     assert_eq!(e.len(), 2);
     // Same seed, same populations: the CPU and GPU runs score the same candidates.
     assert_eq!(e[0]["evaluations"], e[1]["evaluations"]);
+    for run in e {
+        let rate = run["evaluations"].as_f64().unwrap() / run["seconds"].as_f64().unwrap();
+        assert!(
+            (run["evals_per_s"].as_f64().unwrap() / rate - 1.0).abs() < 1e-9,
+            "{run}"
+        );
+    }
     assert!(e[0].get("seconds").is_some());
 }
 
