@@ -54,6 +54,8 @@ pub struct EndToEnd {
     pub seconds: f64,
     pub seconds_spread: Spread,
     pub evaluations: u64,
+    /// Candidate × data-point evaluations per second of the whole run (median seconds).
+    pub evals_per_s: f64,
     pub populations: usize,
 }
 
@@ -80,6 +82,8 @@ pub struct BenchReport {
     pub cores: usize,
     /// The GPU adapter and driver, or why there is none.
     pub adapter: String,
+    /// The GPU scoring shape used (the adapter's, or `BITROCK_GPU_SHAPE`'s); none without a GPU.
+    pub shape: Option<gpu::Shape>,
     pub repetitions: usize,
     pub throughput: Vec<Throughput>,
     /// Time of one small call (64 candidates, 100 points), s: the fixed cost of a dispatch.
@@ -121,7 +125,8 @@ impl Default for BenchOptions {
             repetitions: 5,
             laws: Law::ALL.to_vec(),
             backends: vec![Backend::Cpu, Backend::Gpu],
-            sizes: vec![(65_536, 5_000), (1_048_576, 5_000), (65_536, 100_000)],
+            // The last: the paper's N and the embedded record's length, the size users run.
+            sizes: vec![(65_536, 5_000), (1_048_576, 5_000), (65_536, 100_000), (25_000, 2_687)],
             particles: 25_000,
             stability: (512, 10_000),
         }
@@ -180,10 +185,13 @@ fn time_calls(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<Vec<f64>
 
 /// Runs the benchmark, reporting progress lines through `log`.
 pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchReport> {
-    let adapter = match gpu::context() {
-        Ok(ctx) => ctx.describe(),
-        Err(e) => format!("none ({e})"),
+    let (adapter, shape) = match gpu::context() {
+        Ok(ctx) => (ctx.describe(), Some(gpu::Shape::chosen(ctx)?)),
+        Err(e) => (format!("none ({e})"), None),
     };
+    if let Some(shape) = shape {
+        log(format!("GPU: {adapter}, {shape} scoring"));
+    }
     let reps = opts.repetitions.max(1);
     let mut throughput = Vec::new();
     for &backend in &opts.backends {
@@ -244,8 +252,9 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         })?;
         let run = last.expect("at least one run");
         let spread = Spread::of(&times);
+        let evals_per_s = run.evaluations as f64 / spread.median;
         log(format!(
-            "{:>3} paper-scale run (N = {}, four laws, embedded record, to ε = {}): {:.3} s, {:.3e} evaluations",
+            "{:>3} paper-scale run (N = {}, four laws, embedded record, to ε = {}): {:.3} s, {:.3e} evaluations, {evals_per_s:.3e} evaluations/s",
             ev.backend(),
             opts.particles,
             config.eps_min,
@@ -257,6 +266,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             seconds: spread.median,
             seconds_spread: spread,
             evaluations: run.evaluations,
+            evals_per_s,
             populations: run.populations.len(),
         });
     }
@@ -352,6 +362,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         machine: machine(),
         cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         adapter,
+        shape,
         repetitions: reps,
         throughput,
         small_call_seconds,

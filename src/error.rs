@@ -75,6 +75,7 @@ impl Error {
                 | Error::Format { .. }
                 | Error::Data { .. }
                 | Error::InvalidArgument { .. }
+                | Error::Gpu(crate::eval::gpu::GpuError::Setting { .. })
         )
     }
 }

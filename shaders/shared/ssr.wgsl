@@ -1,7 +1,10 @@
 // Σ (y - r T(w))² of parameter vectors over a slice of the data, shared by the kernels that
 // score candidates (residual.wgsl: regenerated from Philox; score_params.wgsl: uploaded by the
-// host). Needs laws.wgsl. Declares bindings 2-4 of group 0 (the data columns) and 5 (the
-// sums out); the kernels including it use bindings 0-1.
+// host). Needs laws.wgsl and job.wgsl. Declares bindings 2-4 of group 0 (the data columns) and
+// 5 (the sums out); the kernels including it use bindings 0-1 and define
+// `job_candidate(job, k) -> JobCandidate`, candidate k of the job. Two shapes share this
+// contract: the register-blocked one below (entry point `main`, for SIMD CPU drivers) and the
+// tiled one of tile.wgsl (entry point `main_tiled`, for discrete GPUs).
 //
 // On a SIMD driver such as lavapipe every invocation of a batch reads the same sample, and each
 // storage load becomes a per-lane scalar loop, so loads, not arithmetic, bound the speed. Hence
@@ -195,6 +198,30 @@ fn slice_ssr(laws: Laws, p: Params, data_start: u32, data_end: u32) -> Sums {
     out = law_pass(2u, laws, p, data_start, data_end, out);
     out = law_pass(3u, laws, p, data_start, data_end, out);
     return out;
+}
+
+// Law id (0 = m1 .. 3 = m4) and parameters (unused ones 0) of one candidate of a job.
+struct JobCandidate {
+    law: u32,
+    params: array<f32, 6>,
+}
+
+// The register-blocked shape: the invocation scoring candidates first..first+15 of `job`
+// fetches them, scores them over the job's slice of the data and stores their sums.
+fn score_blocked(job: Job, first: u32) {
+    if (first >= job.count) {
+        return;
+    }
+    var laws = Laws(vec4<u32>(NO_LAW), vec4<u32>(NO_LAW), vec4<u32>(NO_LAW), vec4<u32>(NO_LAW));
+    var p: Params;
+    for (var j = 0u; j < CANDIDATES; j = j + 1u) {
+        if (first + j < job.count) {
+            let c = job_candidate(job, first + j);
+            laws[j / 4u][j % 4u] = c.law;
+            p[j] = c.params;
+        }
+    }
+    store_sums(first, job.count, job.accumulate == 1u, slice_ssr(laws, p, job.data_start, job.data_end));
 }
 
 // Writes (or, with `accumulate`, adds) the sums of candidates first..first+15 of the job, those

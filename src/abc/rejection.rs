@@ -222,6 +222,17 @@ pub fn run_observed(
                 law_accepted[slot_of(prior, p.law)] += 1;
             }
         }
+        // Acceptance rate of this population's fresh candidates: the share of the previous
+        // population below ε times its acceptance rate (the projection of the stopping rules);
+        // half, a guess, for population 0. Batches are sized by it with a 10 % margin, so a
+        // population rarely needs a second round trip nor scores much past its N-th particle.
+        let projected_acceptance = match populations.last() {
+            None => 0.5,
+            Some(p) => {
+                p.particles.iter().filter(|q| q.rho < epsilon).count() as f64 / p.particles.len() as f64
+                    * p.record.acceptance_rate
+            }
+        };
         let mut scored_here = 0u64;
         let mut interrupted = None;
         let epsilon_shown = epsilon.is_finite().then_some(epsilon);
@@ -241,10 +252,9 @@ pub fn run_observed(
                         interrupted = Some(StopReason::MaxDraws);
                         break;
                     }
-                    // Enough for the particles still missing at half the last acceptance rate
-                    // (the median schedule halves it), within the evaluator's batch limit.
-                    let accepted_so_far = populations.last().map(|p| p.record.acceptance_rate).unwrap_or(1.0);
-                    let expected = ((n - particles.len()) as f64 / (0.5 * accepted_so_far).max(1e-6)).ceil() as u64;
+                    // Enough for the particles still missing at the projected acceptance rate
+                    // and a margin, within the evaluator's batch limit.
+                    let expected = (1.1 * (n - particles.len()) as f64 / projected_acceptance.max(1e-6)).ceil() as u64;
                     let size = expected.max(1024).min(config.max_batch as u64).min(budget);
                     let mut rho = vec![0.0; size as usize];
                     evaluator.score(stream, position, &mut rho)?;
@@ -260,8 +270,6 @@ pub fn run_observed(
             let mut consumed = batch.rho.len();
             for (k, &rho) in batch.rho.iter().enumerate().skip(offset) {
                 let index = batch.start + k as u64;
-                let slot = prior.candidate_slot(problem.seed, stream, index);
-                law_draws[slot] += 1;
                 near += u64::from(near_threshold(rho));
                 if rho < epsilon {
                     let c = prior.candidate(problem.seed, stream, index);
@@ -280,6 +288,13 @@ pub fn run_observed(
                     }
                 }
             }
+            count_slots(
+                prior,
+                problem.seed,
+                stream,
+                batch.start + offset as u64..batch.start + consumed as u64,
+                &mut law_draws,
+            );
             position = batch.start + consumed as u64;
             if consumed < batch.rho.len() {
                 pending = Some(batch);
@@ -393,6 +408,30 @@ pub(crate) fn next_epsilon(
 pub fn median_rho(particles: &[Particle]) -> f64 {
     let rho: Vec<f64> = particles.iter().map(|p| p.rho).collect();
     quantile(&rho, 0.5)
+}
+
+/// Adds the prior slot (law) of each candidate `indexes` of `stream` to `counts`: one Philox
+/// block each, in parallel, since at 10⁵ candidates per batch this was the largest host-side
+/// share of a population.
+fn count_slots(prior: &crate::prior::Prior, seed: u64, stream: u32, indexes: std::ops::Range<u64>, counts: &mut [u64]) {
+    use rayon::prelude::*;
+    let per_slot = indexes
+        .into_par_iter()
+        .fold(
+            || vec![0u64; counts.len()],
+            |mut c, index| {
+                c[prior.candidate_slot(seed, stream, index)] += 1;
+                c
+            },
+        )
+        .reduce(
+            || vec![0u64; counts.len()],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
+    counts.iter_mut().zip(per_slot).for_each(|(x, y)| *x += y);
 }
 
 pub(crate) fn slot_of(prior: &crate::prior::Prior, law: Law) -> usize {

@@ -122,14 +122,16 @@ pub fn evaluator(problem: AbcProblem, backend: Backend, note: &mut dyn FnMut(Str
         Backend::Cpu => Ok(Box::new(cpu::CpuEvaluator::new(problem))),
         Backend::Gpu => {
             let gpu = gpu::residual::GpuEvaluator::new(problem)?;
-            note(format!("GPU backend: {}", gpu.adapter()));
+            note(format!("GPU backend: {} ({} scoring)", gpu.adapter(), gpu.shape()));
             Ok(Box::new(gpu))
         }
         Backend::Auto => match gpu::residual::GpuEvaluator::new(problem.clone()) {
             Ok(gpu) => {
-                note(format!("GPU backend: {}", gpu.adapter()));
+                note(format!("GPU backend: {} ({} scoring)", gpu.adapter(), gpu.shape()));
                 Ok(Box::new(gpu))
             }
+            // A refused setting is the user's to fix, not a reason to fall back.
+            Err(e @ gpu::GpuError::Setting { .. }) => Err(e.into()),
             Err(e) => {
                 note(format!("no usable GPU ({e}); computing on the CPU"));
                 Ok(Box::new(cpu::CpuEvaluator::new(problem)))

@@ -1,13 +1,14 @@
 //! The GPU backend against the CPU reference: shaders valid without a device, Philox and
 //! candidates bit for bit, ρ within the parity tolerance, whole runs alike. These tests need a
 //! GPU adapter (Mesa's lavapipe is enough: scripts/test.sh installs it) and fail loudly without
-//! one, unless BITROCK_SKIP_GPU_TESTS=1.
+//! one, unless BITROCK_SKIP_GPU_TESTS=1. Every test that scores runs once per scoring shape
+//! (`per_shape!`: `NAME::blocked`, `NAME::tiled`), whatever shape the adapter would pick.
 
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::cpu::CpuEvaluator;
-use bitrock::eval::gpu::{self, candidates, residual::GpuEvaluator};
+use bitrock::eval::gpu::{self, Shape, candidates, residual::GpuEvaluator};
 use bitrock::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::Prior;
@@ -30,18 +31,50 @@ fn gpu_available() -> bool {
     }
 }
 
+/// Stamps out each `fn name(shape: Shape) { ... }` as a module `name` with one test per
+/// scoring shape, `name::blocked` and `name::tiled`.
+macro_rules! per_shape {
+    ($($(#[$doc:meta])* fn $name:ident($shape:ident: Shape) $body:block)*) => {
+        $(
+            $(#[$doc])*
+            mod $name {
+                use super::*;
+
+                fn run($shape: Shape) $body
+
+                #[test]
+                fn blocked() {
+                    run(Shape::Blocked)
+                }
+
+                #[test]
+                fn tiled() {
+                    run(Shape::Tiled)
+                }
+            }
+        )*
+    };
+}
+
+/// The evaluator of `problem` in `shape`.
+fn gpu_evaluator(problem: &AbcProblem, shape: Shape) -> GpuEvaluator {
+    GpuEvaluator::with_shape(problem.clone(), shape).unwrap()
+}
+
 #[test]
 fn every_shader_parses_and_validates_with_naga() {
-    for (name, source) in gpu::kernel_sources() {
+    for (name, source, entry_points) in gpu::kernel_sources() {
         let module =
             naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
-        assert!(
-            module.entry_points.iter().any(|e| e.name == "main"),
-            "{name} has no entry point main"
-        );
+        for entry in entry_points {
+            assert!(
+                module.entry_points.iter().any(|e| e.name == *entry),
+                "{name} has no entry point {entry}"
+            );
+        }
     }
 }
 
@@ -89,8 +122,8 @@ fn philox_words_and_candidates_are_identical_bit_for_bit() {
 }
 
 /// Largest and median relative difference of ρ between backends over `count` candidates.
-fn rho_difference(problem: &AbcProblem, count: usize) -> (f64, f64) {
-    let gpu = GpuEvaluator::new(problem.clone()).unwrap();
+fn rho_difference(problem: &AbcProblem, count: usize, shape: Shape) -> (f64, f64) {
+    let gpu = gpu_evaluator(problem, shape);
     let cpu = CpuEvaluator::new(problem.clone());
     let (mut a, mut b) = (vec![0.0; count], vec![0.0; count]);
     gpu.score(3, 10_000, &mut a).unwrap();
@@ -100,25 +133,24 @@ fn rho_difference(problem: &AbcProblem, count: usize) -> (f64, f64) {
     (rel[count - 1], rel[count / 2])
 }
 
-#[test]
-fn rho_agrees_with_the_cpu_for_every_law() {
+per_shape! {
+fn rho_agrees_with_the_cpu_for_every_law(shape: Shape) {
     if !gpu_available() {
         return;
     }
     for law in Law::ALL {
         let problem = demo_problem(&[law], 11);
         assert!(problem.data_len() >= 5_000);
-        let (max, median) = rho_difference(&problem, 100_000);
+        let (max, median) = rho_difference(&problem, 100_000, shape);
         eprintln!(
-            "{law}: largest relative difference of rho {max:.2e}, median {median:.2e} (100,000 candidates, D = {})",
+            "{shape} {law}: largest relative difference of rho {max:.2e}, median {median:.2e} (100,000 candidates, D = {})",
             problem.data_len()
         );
         assert!(max <= PARITY_TOLERANCE, "{law}: {max:e} > {PARITY_TOLERANCE:e}");
     }
 }
 
-#[test]
-fn a_rejection_run_gives_the_same_populations_on_both_backends() {
+fn a_rejection_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     if !gpu_available() {
         return;
     }
@@ -129,7 +161,7 @@ fn a_rejection_run_gives_the_same_populations_on_both_backends() {
         ..Default::default()
     };
     let cpu = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
-    let gpu_run = rejection::run(&GpuEvaluator::new(problem.clone()).unwrap(), &config).unwrap();
+    let gpu_run = rejection::run(&gpu_evaluator(&problem, shape), &config).unwrap();
     assert_eq!(cpu.populations.len(), gpu_run.populations.len());
     let reference = CpuEvaluator::new(problem);
     let mut exceptions = 0;
@@ -152,11 +184,21 @@ fn a_rejection_run_gives_the_same_populations_on_both_backends() {
             exceptions += 1;
         }
     }
-    eprintln!("populations alike on both backends; {exceptions} near-threshold exceptions");
+    eprintln!("{shape}: populations alike on both backends; {exceptions} near-threshold exceptions");
+}
 }
 
 fn run_bitrock(args: &[&str]) -> (i32, String, String) {
-    let out = crate::support::bin().args(args).output().expect("run bitrock");
+    run_bitrock_with(&[], args)
+}
+
+/// Runs the binary with environment variables `env` set.
+fn run_bitrock_with(env: &[(&str, &str)], args: &[&str]) -> (i32, String, String) {
+    let out = crate::support::bin()
+        .envs(env.iter().copied())
+        .args(args)
+        .output()
+        .expect("run bitrock");
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -164,12 +206,16 @@ fn run_bitrock(args: &[&str]) -> (i32, String, String) {
     )
 }
 
-#[test]
-fn parity_command_reports_agreement_as_json() {
+per_shape! {
+/// The shape comes through BITROCK_GPU_SHAPE, as a user overrides it.
+fn parity_command_reports_agreement_as_json(shape: Shape) {
     if !gpu_available() {
         return;
     }
-    let (code, stdout, stderr) = run_bitrock(&["parity", "--candidates", "4000", "--json"]);
+    let (code, stdout, stderr) = run_bitrock_with(
+        &[(gpu::SHAPE_VAR, shape.name())],
+        &["parity", "--candidates", "4000", "--json"],
+    );
     assert_eq!(code, 0, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(v["pass"], true);
@@ -179,6 +225,33 @@ fn parity_command_reports_agreement_as_json() {
     for l in v["laws"].as_array().unwrap() {
         assert!(l["max_rel_diff"].as_f64().unwrap() <= PARITY_TOLERANCE);
     }
+}
+}
+
+#[test]
+fn a_refused_shape_setting_exits_2_naming_the_variable() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let (code, stdout, stderr) = run_bitrock_with(
+        &[(gpu::SHAPE_VAR, "wide")],
+        &[
+            "abc",
+            "--particles",
+            "10",
+            "--backend",
+            "auto",
+            "--json",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stdout.is_empty(), "{stdout}");
+    assert!(!out.exists(), "nothing may be written");
+    assert!(
+        stderr.contains("BITROCK_GPU_SHAPE") && stderr.contains("`wide`"),
+        "{stderr}"
+    );
 }
 
 #[test]
@@ -190,6 +263,9 @@ fn bench_json_keeps_its_keys_and_both_backends_count_the_same_evaluations() {
     assert_eq!(code, 0, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert!(v["adapter"].as_str().unwrap().contains("llvmpipe") || !v["adapter"].as_str().unwrap().starts_with("none"));
+    // The adapter's shape (blocked on lavapipe, a CPU driver) unless BITROCK_GPU_SHAPE says.
+    let expected = gpu::Shape::chosen(gpu::context().unwrap()).unwrap();
+    assert_eq!(v["shape"], expected.name());
     let t = v["throughput"].as_array().unwrap();
     assert_eq!(t.len(), 2);
     for row in t {
@@ -202,11 +278,18 @@ fn bench_json_keeps_its_keys_and_both_backends_count_the_same_evaluations() {
     assert_eq!(e.len(), 2);
     // Same seed, same populations: the CPU and GPU runs score the same candidates.
     assert_eq!(e[0]["evaluations"], e[1]["evaluations"]);
+    for run in e {
+        let rate = run["evaluations"].as_f64().unwrap() / run["seconds"].as_f64().unwrap();
+        assert!(
+            (run["evals_per_s"].as_f64().unwrap() / rate - 1.0).abs() < 1e-9,
+            "{run}"
+        );
+    }
     assert!(e[0].get("seconds").is_some());
 }
 
-#[test]
-fn abc_on_the_gpu_backend_matches_the_cpu_backend() {
+per_shape! {
+fn abc_on_the_gpu_backend_matches_the_cpu_backend(shape: Shape) {
     if !gpu_available() {
         return;
     }
@@ -214,7 +297,7 @@ fn abc_on_the_gpu_backend_matches_the_cpu_backend() {
     let mut outputs = Vec::new();
     for backend in ["cpu", "gpu"] {
         let out = dir.path().join(backend);
-        let (code, stdout, stderr) = run_bitrock(&[
+        let (code, stdout, stderr) = run_bitrock_with(&[(gpu::SHAPE_VAR, shape.name())], &[
             "abc",
             "--particles",
             "1000",
@@ -240,31 +323,31 @@ fn abc_on_the_gpu_backend_matches_the_cpu_backend() {
     }
 }
 
-#[test]
-fn a_million_data_points_and_a_two_dimensional_dispatch_agree_with_the_cpu() {
+fn a_million_data_points_and_a_two_dimensional_dispatch_agree_with_the_cpu(shape: Shape) {
     if !gpu_available() {
         return;
     }
     // D = 2^20: the blocked accumulation over a long record.
     let big = bitrock::bench::synthetic_problem(Law::M3, 1 << 20, 5);
-    let (max, _) = rho_difference(&big, 512);
-    eprintln!("D = 2^20: largest relative difference of rho {max:.2e}");
+    let (max, _) = rho_difference(&big, 512, shape);
+    eprintln!("{shape} D = 2^20: largest relative difference of rho {max:.2e}");
     assert!(max <= PARITY_TOLERANCE, "{max:e}");
-    // 4,194,304 candidates in one dispatch: past 65,535 workgroups of 64, the grid is 2-D.
+    // 4,194,304 candidates in one dispatch: 262,144 tiles, past 65,535 workgroups (tiled: one
+    // per tile), so the grid is 2-D.
     let small = bitrock::bench::synthetic_problem(Law::M2, 64, 6);
-    let (max, _) = rho_difference(&small, 1 << 22);
-    eprintln!("4,194,304 candidates: largest relative difference of rho {max:.2e}");
+    let (max, _) = rho_difference(&small, 1 << 22, shape);
+    eprintln!("{shape} 4,194,304 candidates: largest relative difference of rho {max:.2e}");
     assert!(max <= PARITY_TOLERANCE, "{max:e}");
 }
 
-#[test]
-fn mixed_laws_over_several_dispatches_agree_with_the_cpu() {
+fn mixed_laws_over_a_long_record_agree_with_the_cpu(shape: Shape) {
     if !gpu_available() {
         return;
     }
-    // Candidates of all four laws share each invocation, so the kernel makes one pass over the
-    // data per law present; every pass must cover all 65,536 samples of each dispatch (loop
-    // limiter) and keep only its own law's sums. 150,000 samples: the demo record repeated.
+    // Candidates of all four laws share each invocation (blocked) or tile (tiled), so the
+    // kernel makes one pass over the data per law present (per group of four, tiled); every
+    // pass must cover all 32,768 samples of each of the 32 dispatches (lavapipe's loop limiter)
+    // and keep only its own law's sums. 2^20 samples: the demo record repeated.
     let data = demo_field_data(&DataOptions {
         calibration_fraction: 1.0,
         ..Default::default()
@@ -276,12 +359,13 @@ fn mixed_laws_over_several_dispatches_agree_with_the_cpu() {
     long.wob_n = None;
     long.time_s = None;
     let n = data.calibration.speed_rad_s.len();
-    long.speed_rad_s = (0..150_000).map(|i| data.calibration.speed_rad_s[i % n]).collect();
-    long.torque_nm = (0..150_000).map(|i| data.calibration.torque_nm[i % n]).collect();
+    long.speed_rad_s = (0..1 << 20).map(|i| data.calibration.speed_rad_s[i % n]).collect();
+    long.torque_nm = (0..1 << 20).map(|i| data.calibration.torque_nm[i % n]).collect();
     let problem = AbcProblem::new(prior, 17, &long, None);
-    let (max, _) = rho_difference(&problem, 3_001);
-    eprintln!("four laws mixed, D = 150,000: largest relative difference of rho {max:.2e}");
+    let (max, _) = rho_difference(&problem, 1_001, shape);
+    eprintln!("{shape} four laws mixed, D = 2^20: largest relative difference of rho {max:.2e}");
     assert!(max <= PARITY_TOLERANCE, "{max:e}");
+}
 }
 
 #[test]
@@ -364,8 +448,8 @@ fn stream_candidates(
         .collect()
 }
 
-#[test]
-fn explicit_parameters_score_as_the_stream_does_on_both_backends() {
+per_shape! {
+fn explicit_parameters_score_as_the_stream_does_on_both_backends(shape: Shape) {
     if !gpu_available() {
         return;
     }
@@ -373,7 +457,7 @@ fn explicit_parameters_score_as_the_stream_does_on_both_backends() {
     let count = 40_000;
     let candidates = stream_candidates(&problem, 2, 500, count);
     let cpu = CpuEvaluator::new(problem.clone());
-    let gpu = GpuEvaluator::new(problem.clone()).unwrap();
+    let gpu = gpu_evaluator(&problem, shape);
     let (mut stream, mut cpu_params, mut gpu_params) = (vec![0.0; count], vec![0.0; count], vec![0.0; count]);
     cpu.score(2, 500, &mut stream).unwrap();
     cpu.score_params(&candidates, &mut cpu_params).unwrap();
@@ -386,7 +470,7 @@ fn explicit_parameters_score_as_the_stream_does_on_both_backends() {
     for (g, c) in gpu_params.iter().zip(&cpu_params) {
         worst = worst.max(((g - c) / c).abs());
     }
-    eprintln!("score_params: largest relative difference of rho {worst:.2e} ({count} candidates, four laws)");
+    eprintln!("{shape} score_params: largest relative difference of rho {worst:.2e} ({count} candidates, four laws)");
     assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
     // Past the 32,768-sample slicing: a long record through the explicit kernel.
     let big = bitrock::bench::synthetic_problem(Law::M1, 100_000, 3);
@@ -395,13 +479,13 @@ fn explicit_parameters_score_as_the_stream_does_on_both_backends() {
     CpuEvaluator::new(big.clone())
         .score_params(&candidates, &mut c)
         .unwrap();
-    GpuEvaluator::new(big)
-        .unwrap()
+    gpu_evaluator(&big, shape)
         .score_params(&candidates, &mut g)
         .unwrap();
     let worst = g.iter().zip(&c).map(|(g, c)| ((g - c) / c).abs()).fold(0.0, f64::max);
-    eprintln!("score_params, D = 100,000: largest relative difference of rho {worst:.2e}");
+    eprintln!("{shape} score_params, D = 100,000: largest relative difference of rho {worst:.2e}");
     assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
+}
 }
 
 /// Largest relative difference between the GPU kernel sums and the CPU twin allowed: f32
@@ -447,8 +531,8 @@ fn kernel_sums_agree_with_the_cpu_twin() {
     assert!(c.iter().all(|&s| s > 0.0));
 }
 
-#[test]
-fn an_smc_run_gives_the_same_populations_on_both_backends() {
+per_shape! {
+fn an_smc_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     use bitrock::abc::smc::{self, SmcConfig, WeightsOn};
     if !gpu_available() {
         return;
@@ -463,7 +547,7 @@ fn an_smc_run_gives_the_same_populations_on_both_backends() {
         ..Default::default()
     };
     let cpu = smc::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
-    let gpu_run = smc::run(&GpuEvaluator::new(problem.clone()).unwrap(), &config).unwrap();
+    let gpu_run = smc::run(&gpu_evaluator(&problem, shape), &config).unwrap();
     assert!(cpu.populations.len() >= 6, "{}", cpu.populations.len());
     let reference = CpuEvaluator::new(problem.clone());
     let mut identical = 0;
@@ -515,7 +599,7 @@ fn an_smc_run_gives_the_same_populations_on_both_backends() {
         identical += 1;
     }
     eprintln!(
-        "SMC: {identical} of {} populations alike on both backends; {exceptions} near-threshold exceptions",
+        "{shape} SMC: {identical} of {} populations alike on both backends; {exceptions} near-threshold exceptions",
         cpu.populations.len()
     );
     assert!(identical == cpu.populations.len() || exceptions > 0);
@@ -533,7 +617,7 @@ fn an_smc_run_gives_the_same_populations_on_both_backends() {
         },
         ..config
     };
-    let g = smc::run(&GpuEvaluator::new(problem).unwrap(), &on_gpu).unwrap();
+    let g = smc::run(&gpu_evaluator(&problem, shape), &on_gpu).unwrap();
     let (a, b) = (&cpu.populations[1], &g.populations[1]);
     let worst = a
         .particles
@@ -544,6 +628,7 @@ fn an_smc_run_gives_the_same_populations_on_both_backends() {
             ((x.weight - y.weight) / x.weight).abs()
         })
         .fold(0.0, f64::max);
-    eprintln!("SMC weights from the GPU kernel: largest relative difference {worst:.2e}");
+    eprintln!("{shape} SMC weights from the GPU kernel: largest relative difference {worst:.2e}");
     assert!(worst <= KERNEL_SUM_TOLERANCE, "{worst:e}");
+}
 }

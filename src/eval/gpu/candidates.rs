@@ -51,12 +51,12 @@ pub fn generate(
         buffer_entry(1, UNIFORM),
         buffer_entry(2, STORAGE_WRITE),
     ];
-    let (pipeline, layout) = ctx.pipeline("candidates", &super::candidates_source(), &entries, &[])?;
-    let bind_group = ctx.bind_group("candidates", &layout, &[&prior_buffer, &job_buffer, &out])?;
+    let kernel = ctx.kernel("candidates", "main", super::candidates_source, &entries, &[])?;
+    let bind_group = ctx.bind_group("candidates", &kernel.layout, &[&prior_buffer, &job_buffer, &out])?;
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("candidates"),
     });
-    super::encode_dispatch(&mut encoder, "candidates", &pipeline, &bind_group, (x, y));
+    super::encode_dispatch(&mut encoder, "candidates", &kernel.pipeline, &bind_group, (x, y));
     encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, bytes);
     let raw = ctx.finish_and_read(encoder, &staging, bytes)?;
     let words: &[u32] = bytemuck::cast_slice(&raw);

@@ -6,7 +6,7 @@ use super::{GpuContext, GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROU
 use crate::eval::KernelSums;
 use crate::laws::MAX_PARAMS;
 use bytemuck::{Pod, Zeroable};
-use std::sync::OnceLock;
+use std::sync::Mutex;
 
 /// Sources summed per dispatch. lavapipe ends any loop after 65,535 iterations per invocation,
 /// and counts the iterations of a nested loop over the whole invocation (65,535 sources per
@@ -25,9 +25,6 @@ struct SumsJob {
     _pad: [u32; 3],
 }
 
-/// The pipeline, built once per process.
-static PIPELINE: OnceLock<Result<(wgpu::ComputePipeline, wgpu::BindGroupLayout), GpuError>> = OnceLock::new();
-
 /// Two vec4 per point: coordinates 0-3, then 4-5, `extra` and 0.
 fn pack(points: &[[f64; MAX_PARAMS]], extra: impl Fn(usize) -> f64) -> Vec<f32> {
     points
@@ -44,94 +41,146 @@ fn pack(points: &[[f64; MAX_PARAMS]], extra: impl Fn(usize) -> f64) -> Vec<f32> 
         .collect()
 }
 
-/// The kernel sums of `sums` on the GPU of `ctx`, into `out` (one per target).
-pub fn kernel_sums(ctx: &GpuContext, sums: &KernelSums, out: &mut [f64]) -> Result<(), GpuError> {
-    assert_eq!(sums.targets.len(), out.len(), "one sum per target");
-    assert_eq!(sums.sources.len(), sums.weights.len(), "one weight per source");
-    if out.is_empty() {
-        return Ok(());
-    }
-    if sums.sources.is_empty() {
-        out.fill(0.0);
-        return Ok(());
-    }
-    let (pipeline, layout) = PIPELINE
-        .get_or_init(|| {
-            let entries = [
-                buffer_entry(0, UNIFORM),
-                buffer_entry(1, STORAGE_READ),
-                buffer_entry(2, STORAGE_READ),
-                buffer_entry(3, STORAGE_WRITE),
-            ];
-            ctx.pipeline("kernel_sums", &super::kernel_sums_source(), &entries, &[])
+/// Buffers sized for the largest call so far, reused by later calls (an SMC run computes the
+/// kernel sums of every population with about the same N).
+#[derive(Default)]
+pub struct Scratch(Mutex<Option<Buffers>>);
+
+struct Buffers {
+    /// Sources and targets (points) each buffer holds.
+    sources: usize,
+    targets: usize,
+    source: wgpu::Buffer,
+    target: wgpu::Buffer,
+    sum: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    job: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+}
+
+fn entries() -> [wgpu::BindGroupLayoutEntry; 4] {
+    [
+        buffer_entry(0, UNIFORM),
+        buffer_entry(1, STORAGE_READ),
+        buffer_entry(2, STORAGE_READ),
+        buffer_entry(3, STORAGE_WRITE),
+    ]
+}
+
+impl Buffers {
+    fn new(ctx: &GpuContext, layout: &wgpu::BindGroupLayout, sources: usize, targets: usize) -> Result<Self, GpuError> {
+        let copy = wgpu::BufferUsages::COPY_DST;
+        let source = ctx.buffer(
+            "kernel sources",
+            32 * sources as u64,
+            wgpu::BufferUsages::STORAGE | copy,
+        )?;
+        let target = ctx.buffer(
+            "kernel targets",
+            32 * targets as u64,
+            wgpu::BufferUsages::STORAGE | copy,
+        )?;
+        let sum_bytes = 4 * targets as u64;
+        let sum = ctx.buffer(
+            "kernel sums",
+            sum_bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let staging = ctx.buffer("kernel sums staging", sum_bytes, wgpu::BufferUsages::MAP_READ | copy)?;
+        let job = ctx.buffer(
+            "kernel job",
+            size_of::<SumsJob>() as u64,
+            wgpu::BufferUsages::UNIFORM | copy,
+        )?;
+        let bind_group = ctx.bind_group("kernel_sums", layout, &[&job, &target, &source, &sum])?;
+        Ok(Self {
+            sources,
+            targets,
+            source,
+            target,
+            sum,
+            staging,
+            job,
+            bind_group,
         })
-        .as_ref()
-        .map_err(Clone::clone)?;
-    let sources = pack(sums.sources, |j| sums.weights[j]);
-    let copy = wgpu::BufferUsages::COPY_DST;
-    let source_buffer = ctx.buffer(
-        "kernel sources",
-        4 * sources.len() as u64,
-        wgpu::BufferUsages::STORAGE | copy,
-    )?;
-    ctx.queue
-        .write_buffer(&source_buffer, 0, bytemuck::cast_slice(&sources));
-    // Targets per dispatch: within the binding limit (32 bytes each) and 2²² at most.
-    let chunk = (ctx.limits.max_storage_buffer_binding_size / 32).clamp(1, 1 << 22) as usize;
-    let chunk = chunk.min(out.len());
-    let target_buffer = ctx.buffer("kernel targets", 32 * chunk as u64, wgpu::BufferUsages::STORAGE | copy)?;
-    let sum_bytes = 4 * chunk as u64;
-    let sum_buffer = ctx.buffer(
-        "kernel sums",
-        sum_bytes,
-        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-    )?;
-    let staging = ctx.buffer("kernel sums staging", sum_bytes, wgpu::BufferUsages::MAP_READ | copy)?;
-    let job_buffer = ctx.buffer(
-        "kernel job",
-        size_of::<SumsJob>() as u64,
-        wgpu::BufferUsages::UNIFORM | copy,
-    )?;
-    let bind_group = ctx.bind_group(
-        "kernel_sums",
-        layout,
-        &[&job_buffer, &target_buffer, &source_buffer, &sum_buffer],
-    )?;
-    let n_sources = sums.sources.len();
-    for (targets, dst) in sums.targets.chunks(chunk).zip(out.chunks_mut(chunk)) {
+    }
+}
+
+impl Scratch {
+    /// The kernel sums of `sums` on the GPU of `ctx`, into `out` (one per target).
+    pub fn run(&self, ctx: &GpuContext, sums: &KernelSums, out: &mut [f64]) -> Result<(), GpuError> {
+        assert_eq!(sums.targets.len(), out.len(), "one sum per target");
+        assert_eq!(sums.sources.len(), sums.weights.len(), "one weight per source");
+        if out.is_empty() {
+            return Ok(());
+        }
+        if sums.sources.is_empty() {
+            out.fill(0.0);
+            return Ok(());
+        }
+        let kernel = ctx.kernel("kernel_sums", "main", super::kernel_sums_source, &entries(), &[])?;
+        // Targets per dispatch: within the binding limit (32 bytes each) and 2²² at most.
+        let chunk = (ctx.limits.max_storage_buffer_binding_size / 32).clamp(1, 1 << 22) as usize;
+        let chunk = chunk.min(out.len());
+        let n_sources = sums.sources.len();
+        let mut guard = self.0.lock().expect("kernel-sum buffers");
+        if guard
+            .as_ref()
+            .is_none_or(|b| b.sources < n_sources || b.targets < chunk)
+        {
+            let (old_sources, old_targets) = guard.as_ref().map_or((0, 0), |b| (b.sources, b.targets));
+            *guard = Some(Buffers::new(
+                ctx,
+                &kernel.layout,
+                n_sources.max(old_sources),
+                chunk.max(old_targets),
+            )?);
+        }
+        let buffers = guard.as_ref().expect("sized above");
+        let sources = pack(sums.sources, |j| sums.weights[j]);
         ctx.queue
-            .write_buffer(&target_buffer, 0, bytemuck::cast_slice(&pack(targets, |_| 0.0)));
-        let count = targets.len() as u32;
-        let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("kernel_sums"),
-        });
-        for s0 in (0..n_sources).step_by(SOURCES_PER_DISPATCH) {
-            let job = SumsJob {
-                count,
-                source_start: s0 as u32,
-                source_end: (s0 + SOURCES_PER_DISPATCH).min(n_sources) as u32,
-                row_width,
-                accumulate: u32::from(s0 > 0),
-                _pad: [0; 3],
-            };
-            ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
-            super::encode_dispatch(&mut encoder, "kernel_sums", pipeline, &bind_group, (x, y));
-            if s0 + SOURCES_PER_DISPATCH < n_sources {
-                // The next slice rewrites the job uniform: submit this one first.
-                ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
-                encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("kernel_sums"),
-                });
+            .write_buffer(&buffers.source, 0, bytemuck::cast_slice(&sources));
+        for (targets, dst) in sums.targets.chunks(chunk).zip(out.chunks_mut(chunk)) {
+            ctx.queue
+                .write_buffer(&buffers.target, 0, bytemuck::cast_slice(&pack(targets, |_| 0.0)));
+            let count = targets.len() as u32;
+            let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
+            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("kernel_sums"),
+            });
+            for s0 in (0..n_sources).step_by(SOURCES_PER_DISPATCH) {
+                let job = SumsJob {
+                    count,
+                    source_start: s0 as u32,
+                    source_end: (s0 + SOURCES_PER_DISPATCH).min(n_sources) as u32,
+                    row_width,
+                    accumulate: u32::from(s0 > 0),
+                    _pad: [0; 3],
+                };
+                ctx.queue.write_buffer(&buffers.job, 0, bytemuck::bytes_of(&job));
+                super::encode_dispatch(
+                    &mut encoder,
+                    "kernel_sums",
+                    &kernel.pipeline,
+                    &buffers.bind_group,
+                    (x, y),
+                );
+                if s0 + SOURCES_PER_DISPATCH < n_sources {
+                    // The next slice rewrites the job uniform: submit this one first.
+                    ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
+                    encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("kernel_sums"),
+                    });
+                }
+            }
+            let bytes = 4 * u64::from(count);
+            encoder.copy_buffer_to_buffer(&buffers.sum, 0, &buffers.staging, 0, bytes);
+            let raw = ctx.finish_and_read(encoder, &buffers.staging, bytes)?;
+            let values: &[f32] = bytemuck::cast_slice(&raw);
+            for (d, &v) in dst.iter_mut().zip(values) {
+                *d = f64::from(v);
             }
         }
-        let bytes = 4 * u64::from(count);
-        encoder.copy_buffer_to_buffer(&sum_buffer, 0, &staging, 0, bytes);
-        let raw = ctx.finish_and_read(encoder, &staging, bytes)?;
-        let values: &[f32] = bytemuck::cast_slice(&raw);
-        for (d, &v) in dst.iter_mut().zip(values) {
-            *d = f64::from(v);
-        }
+        Ok(())
     }
-    Ok(())
 }

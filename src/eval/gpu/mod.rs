@@ -4,7 +4,9 @@
 //! Kernels live in `shaders/`, one per file with entry point `main`; the shared code of
 //! `shaders/shared/` is prepended to each (concatenation, never string replacement). The
 //! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a
-//! case-insensitive substring of the adapter's name); its own limits are requested.
+//! case-insensitive substring of the adapter's name); its own limits are requested. Pipelines
+//! are built once per context ([`GpuContext::kernel`]). The scoring kernels come in two
+//! [`Shape`]s, chosen by adapter type or by `BITROCK_GPU_SHAPE`.
 
 pub mod candidates;
 pub mod kernel_sums;
@@ -13,6 +15,7 @@ pub mod stability;
 
 use crate::prior::Prior;
 use bytemuck::{Pod, Zeroable};
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Shared WGSL: Philox, the dispatch record, the prior's candidate generator, the laws.
@@ -21,17 +24,92 @@ const JOB_WGSL: &str = include_str!("../../../shaders/shared/job.wgsl");
 const CANDIDATE_WGSL: &str = include_str!("../../../shaders/shared/candidate.wgsl");
 const LAWS_WGSL: &str = include_str!("../../../shaders/shared/laws.wgsl");
 const SSR_WGSL: &str = include_str!("../../../shaders/shared/ssr.wgsl");
+const TILE_WGSL: &str = include_str!("../../../shaders/shared/tile.wgsl");
 
-/// The complete source of every kernel: shared files, then the kernel.
-pub fn kernel_sources() -> Vec<(&'static str, String)> {
+/// The complete source of every kernel (shared files, then the kernel) and its entry points.
+pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> {
+    const SCORING: &[&str] = &[Shape::Blocked.entry_point(), Shape::Tiled.entry_point()];
     vec![
-        ("residual", residual_source()),
-        ("candidates", candidates_source()),
-        ("score_params", score_params_source()),
-        ("kernel_sums", kernel_sums_source()),
-        ("slopes", slopes_source()),
-        ("stability", stability_source()),
+        ("residual", residual_source(), SCORING),
+        ("candidates", candidates_source(), &["main"]),
+        ("score_params", score_params_source(), SCORING),
+        ("kernel_sums", kernel_sums_source(), &["main"]),
+        ("slopes", slopes_source(), &["main"]),
+        ("stability", stability_source(), &["main"]),
     ]
+}
+
+/// How the scoring kernels (residual.wgsl, score_params.wgsl) spread candidates over
+/// invocations. Both score the same candidates by the same law code and blocked sums
+/// (shaders/shared/ssr.wgsl); they differ in which invocation evaluates what.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Shape {
+    /// One invocation scores 16 candidates over every sample (register blocking): a SIMD CPU
+    /// driver such as lavapipe, where loads cost more than arithmetic. Entry point `main`.
+    Blocked,
+    /// One workgroup of 64 scores 16 candidates, its invocations striding over the samples,
+    /// the partial sums meeting in a fixed-order tree reduction (shaders/shared/tile.wgsl):
+    /// GPUs, which need many more invocations than candidates / 16. Entry point `main_tiled`.
+    Tiled,
+}
+
+/// Environment variable that overrides the adapter's scoring shape: `blocked` or `tiled`.
+pub const SHAPE_VAR: &str = "BITROCK_GPU_SHAPE";
+
+impl Shape {
+    pub const ALL: [Shape; 2] = [Shape::Blocked, Shape::Tiled];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Shape::Blocked => "blocked",
+            Shape::Tiled => "tiled",
+        }
+    }
+
+    const fn entry_point(self) -> &'static str {
+        match self {
+            Shape::Blocked => "main",
+            Shape::Tiled => "main_tiled",
+        }
+    }
+
+    /// The shape an adapter of `device_type` wants: register blocking on a CPU driver, tiles
+    /// everywhere else.
+    pub fn for_device_type(device_type: wgpu::DeviceType) -> Shape {
+        match device_type {
+            wgpu::DeviceType::Cpu => Shape::Blocked,
+            _ => Shape::Tiled,
+        }
+    }
+
+    /// The shape named by `BITROCK_GPU_SHAPE` when set, else the one `ctx`'s adapter wants.
+    pub fn chosen(ctx: &GpuContext) -> Result<Shape, GpuError> {
+        match std::env::var(SHAPE_VAR) {
+            Ok(value) => value.parse(),
+            Err(_) => Ok(Shape::for_device_type(ctx.info.device_type)),
+        }
+    }
+}
+
+impl std::str::FromStr for Shape {
+    type Err = GpuError;
+
+    fn from_str(value: &str) -> Result<Shape, GpuError> {
+        Shape::ALL
+            .into_iter()
+            .find(|s| s.name() == value.trim().to_lowercase())
+            .ok_or_else(|| GpuError::Setting {
+                name: SHAPE_VAR,
+                message: format!("must be `blocked` or `tiled`, got `{value}`"),
+            })
+    }
+}
+
+impl std::fmt::Display for Shape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 fn residual_source() -> String {
@@ -41,6 +119,7 @@ fn residual_source() -> String {
         CANDIDATE_WGSL,
         LAWS_WGSL,
         SSR_WGSL,
+        TILE_WGSL,
         include_str!("../../../shaders/residual.wgsl"),
     ]
     .join("\n")
@@ -51,6 +130,7 @@ fn score_params_source() -> String {
         JOB_WGSL,
         LAWS_WGSL,
         SSR_WGSL,
+        TILE_WGSL,
         include_str!("../../../shaders/score_params.wgsl"),
     ]
     .join("\n")
@@ -97,6 +177,9 @@ pub enum GpuError {
     TooLarge(String),
     #[error("reading results back from the GPU failed: {0}")]
     Readback(String),
+    /// A setting (environment variable) the user gave is refused: bad input.
+    #[error("{name}: {message}")]
+    Setting { name: &'static str, message: String },
 }
 
 impl From<GpuError> for crate::Error {
@@ -113,6 +196,15 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     /// Set by the device-lost callback.
     lost: Arc<Mutex<Option<String>>>,
+    /// Pipelines built so far, by label, entry point and override constants.
+    kernels: Mutex<HashMap<String, Kernel>>,
+}
+
+/// A compute pipeline and the layout of its bind group 0.
+#[derive(Clone, Debug)]
+pub(crate) struct Kernel {
+    pub pipeline: wgpu::ComputePipeline,
+    pub layout: wgpu::BindGroupLayout,
 }
 
 static CONTEXT: OnceLock<Result<GpuContext, GpuError>> = OnceLock::new();
@@ -162,6 +254,7 @@ fn create_context() -> Result<GpuContext, GpuError> {
         info,
         limits,
         lost,
+        kernels: Mutex::new(HashMap::new()),
     })
 }
 
@@ -199,15 +292,35 @@ impl GpuContext {
         Ok(value)
     }
 
-    /// A compute pipeline for `source` with an explicit layout of `entries` in group 0 and
-    /// values for its `override` constants.
-    fn pipeline(
+    /// The compute pipeline of entry point `entry` of `source` (called only when the pipeline
+    /// is not built yet: once per context) with an explicit layout of `entries` in group 0 and
+    /// values for its `override` constants. One label names one source and layout.
+    fn kernel(
         &self,
         label: &str,
+        entry: &str,
+        source: impl FnOnce() -> String,
+        entries: &[wgpu::BindGroupLayoutEntry],
+        constants: &[(&str, f64)],
+    ) -> Result<Kernel, GpuError> {
+        let key = format!("{label}:{entry}:{constants:?}");
+        let mut kernels = self.kernels.lock().expect("pipeline cache");
+        if let Some(kernel) = kernels.get(&key) {
+            return Ok(kernel.clone());
+        }
+        let kernel = self.build_kernel(label, entry, &source(), entries, constants)?;
+        kernels.insert(key, kernel.clone());
+        Ok(kernel)
+    }
+
+    fn build_kernel(
+        &self,
+        label: &str,
+        entry: &str,
         source: &str,
         entries: &[wgpu::BindGroupLayoutEntry],
         constants: &[(&str, f64)],
-    ) -> Result<(wgpu::ComputePipeline, wgpu::BindGroupLayout), GpuError> {
+    ) -> Result<Kernel, GpuError> {
         self.scoped(|| {
             let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(label),
@@ -226,14 +339,14 @@ impl GpuContext {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
                 module: &module,
-                entry_point: Some("main"),
+                entry_point: Some(entry),
                 compilation_options: wgpu::PipelineCompilationOptions {
                     constants,
                     ..Default::default()
                 },
                 cache: None,
             });
-            (pipeline, layout)
+            Kernel { pipeline, layout }
         })
     }
 

@@ -1,11 +1,14 @@
 //! The GPU evaluator: `shaders/residual.wgsl` regenerates each candidate from
-//! (seed, population, index), 16 candidates per invocation, and returns its Σ(y − r·T)² in f32;
-//! the host divides by Σy² (f64). Data, prior, pipeline and bind group are set up once.
-//! `shaders/score_params.wgsl` scores explicit parameter vectors against the same data (its
-//! pipeline is built on first use), and `shaders/kernel_sums.wgsl` computes the SMC weights'
+//! (seed, population, index), 16 candidates per invocation ([`Shape::Blocked`]) or per
+//! workgroup ([`Shape::Tiled`]), and returns its Σ(y − r·T)² in f32; the host divides by Σy²
+//! (f64). Data, prior and bind group are set up once per evaluator, pipelines once per context.
+//! `shaders/score_params.wgsl` scores explicit parameter vectors against the same data in the
+//! same shape (set up on first use), and `shaders/kernel_sums.wgsl` computes the SMC weights'
 //! kernel sums (see [`super::kernel_sums`]).
 
-use super::{GpuContext, GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use super::{
+    GpuContext, GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, Shape, UNIFORM, WORKGROUP_SIZE, buffer_entry,
+};
 use crate::error::Result;
 use crate::eval::{AbcProblem, Evaluator, KernelSums};
 use crate::prior::Candidate;
@@ -18,8 +21,10 @@ use std::sync::Mutex;
 /// kernel adds up.
 const SAMPLES_PER_DISPATCH: u32 = 32_768;
 
-/// Candidates scored by one invocation of either scoring kernel (shaders/shared/ssr.wgsl).
-const CANDIDATES_PER_INVOCATION: u32 = 16;
+/// Candidates scored together by either scoring kernel: by one invocation
+/// ([`Shape::Blocked`]) or one workgroup ([`Shape::Tiled`]); `CANDIDATES` in
+/// shaders/shared/ssr.wgsl.
+const CANDIDATES_PER_TILE: u32 = 16;
 
 /// Buffers, pipeline and bind group of one run, created once.
 struct Resources {
@@ -55,17 +60,27 @@ struct GpuProposal {
 pub struct GpuEvaluator {
     problem: AbcProblem,
     context: &'static GpuContext,
+    shape: Shape,
     data_len: u32,
     /// Candidates per dispatch at most.
     chunk: usize,
     /// Explicit candidates per dispatch at most (32 bytes each, within the binding limit).
     params_chunk: usize,
     resources: Mutex<Resources>,
+    /// Buffers of the SMC kernel sums, reused across calls.
+    kernel_sums: super::kernel_sums::Scratch,
 }
 
 impl GpuEvaluator {
-    /// Uploads the data and the prior and builds the pipeline, on the process's GPU.
+    /// Uploads the data and the prior, on the process's GPU, in the shape its adapter wants
+    /// (or `BITROCK_GPU_SHAPE` names; see [`Shape::chosen`]).
     pub fn new(problem: AbcProblem) -> std::result::Result<Self, GpuError> {
+        let context = super::context()?;
+        Self::with_shape(problem, Shape::chosen(context)?)
+    }
+
+    /// As [`GpuEvaluator::new`], scoring in `shape` whatever the adapter (tests, benchmarks).
+    pub fn with_shape(problem: AbcProblem, shape: Shape) -> std::result::Result<Self, GpuError> {
         let context = super::context()?;
         let d = problem.data_len();
         // Columns padded to whole quads (w = 1 keeps every law finite; the kernel masks them).
@@ -124,15 +139,22 @@ impl GpuEvaluator {
             buffer_entry(5, STORAGE_WRITE),
         ];
         let constants = [("HAS_RATIO", if has_ratio { 1.0 } else { 0.0 })];
-        let (pipeline, layout) = context.pipeline("residual", &super::residual_source(), &entries, &constants)?;
+        let kernel = context.kernel(
+            "residual",
+            shape.entry_point(),
+            super::residual_source,
+            &entries,
+            &constants,
+        )?;
         let bind_group = context.bind_group(
             "residual",
-            &layout,
+            &kernel.layout,
             &[&prior_buffer, &job, &data[0], &data[1], &data[2], &ssr],
         )?;
         Ok(Self {
             problem,
             context,
+            shape,
             data_len: d as u32,
             chunk,
             params_chunk: chunk.min(1 << 20).min((max_binding / 32) as usize),
@@ -140,18 +162,24 @@ impl GpuEvaluator {
                 job,
                 ssr,
                 staging,
-                pipeline,
+                pipeline: kernel.pipeline,
                 bind_group,
                 data,
                 has_ratio,
                 params: None,
             }),
+            kernel_sums: Default::default(),
         })
     }
 
     /// The adapter this evaluator runs on.
     pub fn adapter(&self) -> String {
         self.context.describe()
+    }
+
+    /// The scoring shape this evaluator dispatches.
+    pub fn shape(&self) -> Shape {
+        self.shape
     }
 
     /// Σ(y − r·T)² (f32, as the kernel returns it) of candidates `start ..` into `out`.
@@ -177,7 +205,12 @@ impl GpuEvaluator {
     ) -> std::result::Result<(), GpuError> {
         let ctx = self.context;
         let count = out.len() as u32;
-        let (x, y, row_width) = ctx.grid(count.div_ceil(CANDIDATES_PER_INVOCATION), WORKGROUP_SIZE);
+        let tiles = count.div_ceil(CANDIDATES_PER_TILE);
+        // Row width in invocations (blocked) or workgroups (tiled), as the entry point counts.
+        let (x, y, row_width) = match self.shape {
+            Shape::Blocked => ctx.grid(tiles, WORKGROUP_SIZE),
+            Shape::Tiled => ctx.grid(tiles, 1),
+        };
         let job = Job::new(population, first, count, row_width);
         let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("residual"),
@@ -219,16 +252,21 @@ impl GpuEvaluator {
                 buffer_entry(5, STORAGE_WRITE),
             ];
             let constants = [("HAS_RATIO", if res.has_ratio { 1.0 } else { 0.0 })];
-            let (pipeline, layout) =
-                ctx.pipeline("score_params", &super::score_params_source(), &entries, &constants)?;
+            let kernel = ctx.kernel(
+                "score_params",
+                self.shape.entry_point(),
+                super::score_params_source,
+                &entries,
+                &constants,
+            )?;
             let bind_group = ctx.bind_group(
                 "score_params",
-                &layout,
+                &kernel.layout,
                 &[&proposals, &res.job, &res.data[0], &res.data[1], &res.data[2], &res.ssr],
             )?;
             res.params = Some(ParamsResources {
                 proposals,
-                pipeline,
+                pipeline: kernel.pipeline,
                 bind_group,
             });
         }
@@ -291,7 +329,7 @@ impl Evaluator for GpuEvaluator {
     }
 
     fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {
-        super::kernel_sums::kernel_sums(self.context, sums, out)?;
+        self.kernel_sums.run(self.context, sums, out)?;
         Ok(())
     }
 }
@@ -299,8 +337,8 @@ impl Evaluator for GpuEvaluator {
 #[cfg(test)]
 mod tests {
     #[test]
-    fn the_kernels_score_as_many_candidates_per_invocation_as_the_host_dispatches_for() {
-        let line = format!("const CANDIDATES: u32 = {}u;", super::CANDIDATES_PER_INVOCATION);
+    fn the_kernels_score_as_many_candidates_per_tile_as_the_host_dispatches_for() {
+        let line = format!("const CANDIDATES: u32 = {}u;", super::CANDIDATES_PER_TILE);
         assert!(
             super::super::SSR_WGSL.contains(&line),
             "shaders/shared/ssr.wgsl lacks `{line}`"

@@ -99,10 +99,10 @@ pub fn stability_grid(
         buffer_entry(2, STORAGE_READ),
         buffer_entry(3, STORAGE_WRITE),
     ];
-    let (slope_pipeline, slope_layout) = ctx.pipeline("slopes", &super::slopes_source(), &slope_entries, &[])?;
+    let slope_kernel = ctx.kernel("slopes", "main", super::slopes_source, &slope_entries, &[])?;
     let slope_group = ctx.bind_group(
         "slopes",
-        &slope_layout,
+        &slope_kernel.layout,
         &[&slope_job, &omega_buffer, &sample_buffer, &slopes],
     )?;
     let (sx, sy, slope_row) = ctx.grid(slope_count as u32, WORKGROUP_SIZE);
@@ -121,10 +121,10 @@ pub fn stability_grid(
         buffer_entry(3, STORAGE_WRITE),
         buffer_entry(4, STORAGE_WRITE),
     ];
-    let (pipeline, layout) = ctx.pipeline("stability", &super::stability_source(), &entries, &[])?;
+    let kernel = ctx.kernel("stability", "main", super::stability_source, &entries, &[])?;
     let bind_group = ctx.bind_group(
         "stability",
-        &layout,
+        &kernel.layout,
         &[&job_buffer, &wob_buffer, &slopes, &counts, &growth],
     )?;
     let (x, y, row_width) = ctx.grid(cells as u32, WORKGROUP_SIZE);
@@ -141,7 +141,7 @@ pub fn stability_grid(
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("stability"),
     });
-    super::encode_dispatch(&mut encoder, "slopes", &slope_pipeline, &slope_group, (sx, sy));
+    super::encode_dispatch(&mut encoder, "slopes", &slope_kernel.pipeline, &slope_group, (sx, sy));
     for s0 in (0..samples.len()).step_by(SAMPLES_PER_DISPATCH) {
         let job = StabilityJob {
             n_omega: omega.len() as u32,
@@ -160,7 +160,7 @@ pub fn stability_grid(
             _pad: [0.0; 3],
         };
         ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
-        super::encode_dispatch(&mut encoder, "stability", &pipeline, &bind_group, (x, y));
+        super::encode_dispatch(&mut encoder, "stability", &kernel.pipeline, &bind_group, (x, y));
         if s0 + SAMPLES_PER_DISPATCH < samples.len() {
             // The next slice rewrites the job uniform: submit this one first.
             ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
