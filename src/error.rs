@@ -75,7 +75,6 @@ impl Error {
                 | Error::Format { .. }
                 | Error::Data { .. }
                 | Error::InvalidArgument { .. }
-                | Error::Gpu(crate::eval::gpu::GpuError::Setting { .. })
         )
     }
 }

@@ -183,8 +183,13 @@ pub enum GpuError {
 }
 
 impl From<GpuError> for crate::Error {
+    /// A refused setting is the user's input (exit 2, naming the variable); the rest are
+    /// failures of the GPU.
     fn from(e: GpuError) -> Self {
-        crate::Error::Gpu(Box::new(e))
+        match e {
+            GpuError::Setting { name, message } => crate::Error::arg(name, message),
+            e => crate::Error::Gpu(Box::new(e)),
+        }
     }
 }
 
