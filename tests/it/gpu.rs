@@ -13,7 +13,7 @@ use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::Prior;
 
 /// True when the GPU tests may run; panics with what to do when no adapter exists.
-fn gpu_available() -> bool {
+pub(crate) fn gpu_available() -> bool {
     if std::env::var("BITROCK_SKIP_GPU_TESTS").is_ok_and(|v| v == "1") {
         eprintln!("BITROCK_SKIP_GPU_TESTS=1: GPU test skipped");
         return false;

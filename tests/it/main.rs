@@ -10,3 +10,4 @@ mod smc;
 mod stability;
 mod store;
 mod support;
+mod uniform;

@@ -31,6 +31,7 @@ pub fn kernel_sources() -> Vec<(&'static str, String)> {
         ("kernel_sums", kernel_sums_source()),
         ("slopes", slopes_source()),
         ("stability", stability_source()),
+        ("test_uniform_between", test_uniform_between_source()),
     ]
 }
 
@@ -76,6 +77,10 @@ fn candidates_source() -> String {
         include_str!("../../../shaders/candidates.wgsl"),
     ]
     .join("\n")
+}
+
+fn test_uniform_between_source() -> String {
+    [PHILOX_WGSL, include_str!("../../../shaders/test_uniform_between.wgsl")].join("\n")
 }
 
 /// What can go wrong on the GPU, as text the user can act on.
