@@ -581,6 +581,9 @@ fn parity_cmd(cmd: &cli::ParityCmd) -> anyhow::Result<ExitCode> {
             "Philox: {} of {} words differ; candidates: {} of {} differ",
             p.words_differ, p.words_compared, p.candidates_differ, p.candidates_compared
         )?;
+        for d in &p.first_differences {
+            writeln!(out, "  {d}")?;
+        }
         writeln!(
             out,
             "{}",

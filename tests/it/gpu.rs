@@ -175,6 +175,8 @@ fn parity_command_reports_agreement_as_json() {
     assert_eq!(v["pass"], true);
     assert_eq!(v["philox"]["words_compared"], 1_048_576);
     assert_eq!(v["philox"]["words_differ"], 0);
+    assert_eq!(v["philox"]["candidates_differ"], 0);
+    assert_eq!(v["philox"]["first_differences"], serde_json::json!([]));
     assert_eq!(v["laws"].as_array().unwrap().len(), 4);
     for l in v["laws"].as_array().unwrap() {
         assert!(l["max_rel_diff"].as_f64().unwrap() <= PARITY_TOLERANCE);
