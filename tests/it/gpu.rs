@@ -117,6 +117,11 @@ fn rho_agrees_with_the_cpu_for_every_law() {
     }
 }
 
+/// The parameters of a particle as bits: the backends must agree on every one.
+fn param_bits(p: &bitrock::abc::Particle) -> Vec<u64> {
+    p.params.iter().map(|v| v.to_bits()).collect()
+}
+
 #[test]
 fn a_rejection_run_gives_the_same_populations_on_both_backends() {
     if !gpu_available() {
@@ -131,16 +136,49 @@ fn a_rejection_run_gives_the_same_populations_on_both_backends() {
     let cpu = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
     let gpu_run = rejection::run(&GpuEvaluator::new(problem.clone()).unwrap(), &config).unwrap();
     assert_eq!(cpu.populations.len(), gpu_run.populations.len());
+    assert!(cpu.populations.len() >= 5, "{} populations", cpu.populations.len());
     let reference = CpuEvaluator::new(problem);
-    let mut exceptions = 0;
+    let (mut exceptions, mut identical_populations, mut particles_compared) = (0, 0, 0);
     for (c, g) in cpu.populations.iter().zip(&gpu_run.populations) {
         let (ec, eg) = (
             c.record.epsilon.unwrap_or(f64::INFINITY),
             g.record.epsilon.unwrap_or(f64::INFINITY),
         );
         assert!(ec == eg || ((ec - eg) / ec).abs() <= PARITY_TOLERANCE, "ε {ec} vs {eg}");
+        // A candidate accepted on both sides is the same particle: law, parameters to the
+        // bit; only its ρ may differ, within the parity tolerance.
+        let on_gpu: std::collections::BTreeMap<u64, &bitrock::abc::Particle> =
+            g.particles.iter().map(|p| (p.index, p)).collect();
+        for pc in &c.particles {
+            if let Some(pg) = on_gpu.get(&pc.index) {
+                assert_eq!(pc.law, pg.law, "law of candidate {}", pc.index);
+                assert_eq!(param_bits(pc), param_bits(pg), "parameters of candidate {}", pc.index);
+                assert!(
+                    ((pc.rho - pg.rho) / pc.rho).abs() <= PARITY_TOLERANCE,
+                    "candidate {}: rho {} vs {}",
+                    pc.index,
+                    pc.rho,
+                    pg.rho
+                );
+                particles_compared += 1;
+            }
+        }
+        if c.record.near_threshold == 0 && g.record.near_threshold == 0 {
+            // No ρ within the tolerance of ε: the same particles in the same order, the same
+            // draws per law.
+            let key = |p: &bitrock::abc::Particle| (p.index, p.law, param_bits(p));
+            assert_eq!(
+                c.particles.iter().map(key).collect::<Vec<_>>(),
+                g.particles.iter().map(key).collect::<Vec<_>>(),
+                "population {}",
+                c.record.index
+            );
+            assert_eq!(c.record.per_law, g.record.per_law, "population {}", c.record.index);
+            identical_populations += 1;
+            continue;
+        }
         let ci: std::collections::BTreeSet<u64> = c.particles.iter().map(|p| p.index).collect();
-        let gi: std::collections::BTreeSet<u64> = g.particles.iter().map(|p| p.index).collect();
+        let gi: std::collections::BTreeSet<u64> = on_gpu.keys().copied().collect();
         for &index in ci.symmetric_difference(&gi) {
             // A candidate on one side only must lie within the parity tolerance of ε, or past
             // the end of the other side's scan (the N-th particle moved with it).
@@ -152,7 +190,12 @@ fn a_rejection_run_gives_the_same_populations_on_both_backends() {
             exceptions += 1;
         }
     }
-    eprintln!("populations alike on both backends; {exceptions} near-threshold exceptions");
+    eprintln!(
+        "{} populations: {identical_populations} identical on both backends, {particles_compared} particles alike to the bit, {exceptions} near-threshold exceptions",
+        cpu.populations.len()
+    );
+    // Population 0 (ε = ∞) decides nothing near a threshold: always identical.
+    assert!(identical_populations >= 1);
 }
 
 fn run_bitrock(args: &[&str]) -> (i32, String, String) {
