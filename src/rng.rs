@@ -114,26 +114,27 @@ fn exact_term(x: f32, factor: i64) -> ExactTerm {
 /// 74 keeps |sum| < 2⁴⁸·2⁷⁴ + 2⁴⁸ < 2¹²³: four 32-bit words on the GPU.
 const MAX_ALIGNMENT: i32 = 74;
 
-/// a + b as `sum · 2^exponent`: exact, except that a term more than [`MAX_ALIGNMENT`] binades
+/// The exponent a zero term counts with in `exact_sum`: more than `MAX_ALIGNMENT` below every
+/// f32's (−149), so the other term stays exact and the zero one adds its sign, 0.
+const ZERO_EXPONENT: i32 = -1000;
+
+/// a + b as `sum · 2^exponent`: exact, except that a term more than `MAX_ALIGNMENT` binades
 /// below the other counts as its sign only, which rounds to the same f32 (see there).
 #[inline]
 fn exact_sum(a: ExactTerm, b: ExactTerm) -> (i128, i32) {
-    if b.0 == 0 {
-        return (i128::from(a.0), a.1);
-    }
-    if a.0 == 0 {
-        return (i128::from(b.0), b.1);
-    }
-    let (large, small) = if a.1 >= b.1 { (a, b) } else { (b, a) };
-    let shift = large.1 - small.1;
-    if shift <= MAX_ALIGNMENT {
-        ((i128::from(large.0) << shift) + i128::from(small.0), small.1)
+    let effective = |t: ExactTerm| if t.0 == 0 { ZERO_EXPONENT } else { t.1 };
+    let (large, small) = if effective(a) >= effective(b) { (a, b) } else { (b, a) };
+    let shift = effective(large) - effective(small);
+    let aligned = shift.min(MAX_ALIGNMENT);
+    let small_kept = if shift > MAX_ALIGNMENT {
+        small.0.signum()
     } else {
-        (
-            (i128::from(large.0) << MAX_ALIGNMENT) + i128::from(small.0.signum()),
-            large.1 - MAX_ALIGNMENT,
-        )
-    }
+        small.0
+    };
+    (
+        (i128::from(large.0) << aligned) + i128::from(small_kept),
+        large.1 - aligned,
+    )
 }
 
 /// `sum · 2^exponent` rounded once to the nearest f32, ties to even, for sums whose value is

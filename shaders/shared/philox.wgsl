@@ -57,8 +57,13 @@ struct ExactTerm {
     exponent: i32,
 }
 
-// Largest exponent difference exact_sum aligns exactly (src/rng.rs MAX_ALIGNMENT).
+// Largest exponent difference exact_sum aligns exactly (src/rng.rs MAX_ALIGNMENT), and the
+// exponent a zero term counts with: further below any f32's than that (src/rng.rs).
 const MAX_ALIGNMENT: i32 = 74;
+const ZERO_EXPONENT: i32 = -1000;
+
+// Straight-line code throughout (select, no loops, no per-invocation vector indexing): a SIMD
+// driver such as lavapipe runs every branch side and turns a varying index into a per-lane loop.
 
 // x * factor exactly for a finite f32 x and factor <= 2^24: the signed integer significand
 // (|m| < 2^24, subnormals with exponent -149) times factor, below 2^48 in magnitude.
@@ -76,30 +81,23 @@ fn exact_term(x: f32, factor: u32) -> ExactTerm {
 }
 
 // a + b, exact except that a term more than MAX_ALIGNMENT binades below the other counts as its
-// sign only, which rounds to the same f32 (src/rng.rs MAX_ALIGNMENT says why).
+// sign only (a zero term as 0), which rounds to the same f32 (src/rng.rs MAX_ALIGNMENT says why).
 fn exact_sum(a: ExactTerm, b: ExactTerm) -> ExactTerm {
-    if (wide_is_zero(b.value)) {
-        return a;
-    }
-    if (wide_is_zero(a.value)) {
-        return b;
-    }
-    var large = a;
-    var small = b;
-    if (a.exponent < b.exponent) {
-        large = b;
-        small = a;
-    }
-    let shift = large.exponent - small.exponent;
+    let ea = select(a.exponent, ZERO_EXPONENT, wide_is_zero(a.value));
+    let eb = select(b.exponent, ZERO_EXPONENT, wide_is_zero(b.value));
+    let a_large = ea >= eb;
+    let large = select(b.value, a.value, a_large);
+    let small = select(a.value, b.value, a_large);
+    let shift = max(ea, eb) - min(ea, eb);
+    let aligned = min(shift, MAX_ALIGNMENT);
+    let sign = select(
+        select(vec4<u32>(1u, 0u, 0u, 0u), vec4<u32>(0xFFFFFFFFu), wide_is_negative(small)),
+        vec4<u32>(0u),
+        wide_is_zero(small)
+    );
     var s: ExactTerm;
-    if (shift <= MAX_ALIGNMENT) {
-        s.value = wide_add(wide_shift_left(large.value, u32(shift)), small.value);
-        s.exponent = small.exponent;
-    } else {
-        let sign = select(vec4<u32>(1u, 0u, 0u, 0u), vec4<u32>(0xFFFFFFFFu), wide_is_negative(small.value));
-        s.value = wide_add(wide_shift_left(large.value, u32(MAX_ALIGNMENT)), sign);
-        s.exponent = large.exponent - MAX_ALIGNMENT;
-    }
+    s.value = wide_add(wide_shift_left(large, u32(aligned)), select(small, sign, shift > MAX_ALIGNMENT));
+    s.exponent = select(b.exponent, a.exponent, a_large) - aligned;
     return s;
 }
 
@@ -107,31 +105,20 @@ fn exact_sum(a: ExactTerm, b: ExactTerm) -> ExactTerm {
 // (src/rng.rs round_to_f32).
 fn round_to_f32(sum: vec4<u32>, exponent: i32) -> f32 {
     let negative = wide_is_negative(sum);
-    var magnitude = select(sum, wide_negate(sum), negative);
-    var lead = -1;
-    for (var i = 0; i < 4; i = i + 1) {
-        if (magnitude[i] != 0u) {
-            lead = 32 * i + i32(firstLeadingBit(magnitude[i]));
-        }
-    }
-    if (lead < 0) {
-        return 0.0;
-    }
+    let magnitude = select(sum, wide_negate(sum), negative);
+    // Position of the leading bit (-1 for zero).
+    let top = vec4<i32>(firstLeadingBit(magnitude)) + vec4<i32>(0, 32, 64, 96);
+    let lead = select(select(select(select(-1, top.x, magnitude.x != 0u), top.y, magnitude.y != 0u), top.z, magnitude.z != 0u), top.w, magnitude.w != 0u);
     // Bit position of the result's last significant bit: 24 significant bits, never below 2^-149.
     let cut = max(lead - 23, -149 - exponent);
-    var significand: u32;
-    if (cut <= 0) {
-        significand = magnitude.x << u32(-cut);
-    } else {
-        significand = wide_shift_right(magnitude, u32(cut)).x;
-        let round_bit = (wide_shift_right(magnitude, u32(cut - 1)).x & 1u) == 1u;
-        let sticky = !wide_is_zero(wide_shift_left(magnitude, u32(129 - cut)));
-        if (round_bit && (sticky || (significand & 1u) == 1u)) {
-            significand = significand + 1u;
-        }
-    }
+    let right = u32(max(cut, 0));
+    let kept = select(wide_shift_right(magnitude, right).x, magnitude.x << u32(max(-cut, 0)), cut <= 0);
+    // Round bit (bit cut - 1) and sticky bits (below it); none when nothing is cut off.
+    let round_bit = (cut > 0) & ((wide_shift_right(magnitude, u32(max(cut - 1, 0))).x & 1u) == 1u);
+    let sticky = !wide_is_zero(wide_shift_left(magnitude, u32(clamp(129 - cut, 0, 128))));
+    let significand = kept + select(0u, 1u, round_bit & (sticky | ((kept & 1u) == 1u)));
     // Biased exponent and fraction at once; a rounding carry moves into the next binade.
-    let bits = (u32(cut + exponent + 149) << 23u) + significand;
+    let bits = (u32(select(cut + exponent + 149, 0, lead < 0)) << 23u) + select(significand, 0u, lead < 0);
     return bitcast<f32>(bits | select(0u, 0x80000000u, negative));
 }
 
@@ -143,49 +130,36 @@ fn wide_is_negative(a: vec4<u32>) -> bool {
     return (a.w >> 31u) == 1u;
 }
 
+// a + b modulo 2^128.
 fn wide_add(a: vec4<u32>, b: vec4<u32>) -> vec4<u32> {
-    var s = a + b;
-    var carry = 0u;
-    for (var i = 0; i < 4; i = i + 1) {
-        let with_carry = s[i] + carry;
-        carry = select(0u, 1u, s[i] < a[i]) + select(0u, 1u, with_carry < carry);
-        s[i] = with_carry;
-    }
-    return s;
+    let s = a + b;
+    let carry = select(vec4<u32>(0u), vec4<u32>(1u), s < a);
+    let y = s.y + carry.x;
+    let carry_y = carry.y + select(0u, 1u, y < carry.x);
+    let z = s.z + carry_y;
+    let carry_z = carry.z + select(0u, 1u, z < carry_y);
+    return vec4<u32>(s.x, y, z, s.w + carry_z);
 }
 
 fn wide_negate(a: vec4<u32>) -> vec4<u32> {
     return wide_add(~a, vec4<u32>(1u, 0u, 0u, 0u));
 }
 
-// a << n for any n (0 from n = 128 on); WGSL shifts need amounts below 32.
+// a << n for n <= 128 (0 at 128). Word moves by select; every shift amount stays below 32
+// (WGSL's rule): x >> (32 - b) is written (x >> 1) >> (31 - b), 0 at b = 0.
 fn wide_shift_left(a: vec4<u32>, n: u32) -> vec4<u32> {
-    let words = n / 32u;
-    let bits = n % 32u;
-    var out = vec4<u32>(0u);
-    for (var i = words; i < 4u; i = i + 1u) {
-        let j = i - words;
-        var w = a[j] << bits;
-        if (bits > 0u && j > 0u) {
-            w = w | (a[j - 1u] >> (32u - bits));
-        }
-        out[i] = w;
-    }
-    return out;
+    let by64 = select(a, vec4<u32>(0u, 0u, a.x, a.y), (n & 64u) != 0u);
+    let v = select(by64, vec4<u32>(0u, by64.x, by64.y, by64.z), (n & 32u) != 0u);
+    let b = vec4<u32>(n & 31u);
+    let carried = (vec4<u32>(0u, v.x, v.y, v.z) >> vec4<u32>(1u)) >> (vec4<u32>(31u) - b);
+    return select((v << b) | carried, vec4<u32>(0u), n >= 128u);
 }
 
-// a >> n (logical) for any n (0 from n = 128 on).
+// a >> n (logical) for n <= 128 (0 at 128), as wide_shift_left.
 fn wide_shift_right(a: vec4<u32>, n: u32) -> vec4<u32> {
-    let words = n / 32u;
-    let bits = n % 32u;
-    var out = vec4<u32>(0u);
-    for (var i = words; i < 4u; i = i + 1u) {
-        let j = i - words;
-        var w = a[i] >> bits;
-        if (bits > 0u && i + 1u < 4u) {
-            w = w | (a[i + 1u] << (32u - bits));
-        }
-        out[j] = w;
-    }
-    return out;
+    let by64 = select(a, vec4<u32>(a.z, a.w, 0u, 0u), (n & 64u) != 0u);
+    let v = select(by64, vec4<u32>(by64.y, by64.z, by64.w, 0u), (n & 32u) != 0u);
+    let b = vec4<u32>(n & 31u);
+    let carried = (vec4<u32>(v.y, v.z, v.w, 0u) << vec4<u32>(1u)) << (vec4<u32>(31u) - b);
+    return select((v >> b) | carried, vec4<u32>(0u), n >= 128u);
 }
