@@ -22,3 +22,5 @@ export NODEVICE_SELECT=1
 
 # Slow tests (fits, simulations, ABC runs, GPU parity) run in release.
 cargo test --release --all-targets
+# --all-targets leaves out the doctests (the crate documentation's example of the library API).
+cargo test --release --doc

@@ -6,6 +6,7 @@ use crate::abc::rejection::{self, RejectionConfig};
 use crate::abc::smc::{self, SmcConfig};
 use crate::data::{DataOptions, Samples, demo_field_data};
 use crate::error::Result;
+use crate::eval::gpu::candidates::GpuCandidate;
 use crate::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE, cpu::CpuEvaluator, evaluator, gpu};
 use crate::fit::{FitOptions, fit_laws};
 use crate::numerics::quantile;
@@ -394,6 +395,139 @@ pub struct PhiloxParity {
     pub words_differ: usize,
     pub candidates_compared: usize,
     pub candidates_differ: usize,
+    /// The first [`DIFFERENCES_SHOWN`] differences in index order: evidence for a driver bug
+    /// report.
+    pub first_differences: Vec<CandidateDifference>,
+}
+
+/// Differences of candidates that `bitrock parity` keeps and prints.
+pub const DIFFERENCES_SHOWN: usize = 8;
+
+/// How one candidate differs between backends.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "differs", rename_all = "snake_case")]
+pub enum CandidateDifference {
+    /// The backends chose different laws (`gpu` is `None` for a slot outside the prior).
+    Law {
+        population: u32,
+        index: u64,
+        cpu: Law,
+        gpu: Option<Law>,
+    },
+    /// The same law, a different value of one parameter (SI units, f32 as the backends hold it).
+    Parameter {
+        population: u32,
+        index: u64,
+        law: Law,
+        parameter: &'static str,
+        cpu: f32,
+        gpu: f32,
+        /// The f32 bits, as hexadecimal.
+        cpu_bits: String,
+        gpu_bits: String,
+        /// gpu − cpu in units in the last place (signed; counts across zero).
+        ulps: i64,
+    },
+}
+
+impl std::fmt::Display for CandidateDifference {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Law {
+                population,
+                index,
+                cpu,
+                gpu,
+            } => {
+                let gpu = gpu.map_or("a slot outside the prior".to_string(), |l| l.to_string());
+                write!(
+                    f,
+                    "population {population} candidate {index}: law {cpu} on the cpu, {gpu} on the gpu"
+                )
+            }
+            Self::Parameter {
+                population,
+                index,
+                law,
+                parameter,
+                cpu,
+                gpu,
+                cpu_bits,
+                gpu_bits,
+                ulps,
+            } => write!(
+                f,
+                "population {population} candidate {index}: {law}.{parameter} (SI) cpu {cpu:e} [{cpu_bits}], gpu {gpu:e} [{gpu_bits}], {ulps:+} ulp"
+            ),
+        }
+    }
+}
+
+/// Signed distance b − a in f32 units in the last place: the bit patterns mapped to integers
+/// that are monotone in the value (−0 and +0 both 0).
+pub fn ulp_distance(a: f32, b: f32) -> i64 {
+    let ordinal = |x: f32| {
+        let bits = x.to_bits();
+        let magnitude = i64::from(bits & 0x7FFF_FFFF);
+        if bits >> 31 == 1 { -magnitude } else { magnitude }
+    };
+    ordinal(b) - ordinal(a)
+}
+
+/// Compares what the GPU generated for candidates `start ..` of `population` (`got`, in index
+/// order) with the CPU's Philox words and candidates of `prior` and `seed`.
+pub fn compare_candidates(prior: &Prior, seed: u64, population: u32, start: u64, got: &[GpuCandidate]) -> PhiloxParity {
+    let key = crate::rng::key_of_seed(seed);
+    let (mut words_differ, mut candidates_differ) = (0, 0);
+    let mut first_differences = Vec::new();
+    for (k, g) in got.iter().enumerate() {
+        let index = start + k as u64;
+        for b in 0..2u32 {
+            let want = crate::rng::philox4x32_10(crate::rng::candidate_counter(population, index, b), key);
+            let have = &g.philox[4 * b as usize..4 * b as usize + 4];
+            words_differ += want.iter().zip(have).filter(|(a, b)| a != b).count();
+        }
+        let c = prior.candidate(seed, population, index);
+        let law = prior.law(c.slot);
+        let differences: Vec<CandidateDifference> = if g.slot as usize != c.slot {
+            vec![CandidateDifference::Law {
+                population,
+                index,
+                cpu: law,
+                gpu: prior.boxes.get(g.slot as usize).map(|b| b.law),
+            }]
+        } else {
+            law.param_names()
+                .into_iter()
+                .enumerate()
+                .filter(|&(j, _)| g.param_bits[j] != c.params[j].to_bits())
+                .map(|(j, parameter)| {
+                    let gpu = f32::from_bits(g.param_bits[j]);
+                    CandidateDifference::Parameter {
+                        population,
+                        index,
+                        law,
+                        parameter,
+                        cpu: c.params[j],
+                        gpu,
+                        cpu_bits: format!("{:#010x}", c.params[j].to_bits()),
+                        gpu_bits: format!("{:#010x}", g.param_bits[j]),
+                        ulps: ulp_distance(c.params[j], gpu),
+                    }
+                })
+                .collect()
+        };
+        candidates_differ += usize::from(!differences.is_empty());
+        let room = DIFFERENCES_SHOWN - first_differences.len();
+        first_differences.extend(differences.into_iter().take(room));
+    }
+    PhiloxParity {
+        words_compared: 8 * got.len(),
+        words_differ,
+        candidates_compared: got.len(),
+        candidates_differ,
+        first_differences,
+    }
 }
 
 /// What `bitrock parity` reports.
@@ -445,26 +579,7 @@ pub fn parity(problem: &AbcProblem, candidates: usize, epsilon: Option<f64>) -> 
     let count = 131_072u32;
     let start = (1u64 << 32) - u64::from(count) / 2;
     let got = gpu::candidates::generate(&problem.prior, problem.seed, 1, start, count)?;
-    let key = crate::rng::key_of_seed(problem.seed);
-    let (mut words_differ, mut candidates_differ) = (0, 0);
-    for (k, g) in got.iter().enumerate() {
-        let index = start + k as u64;
-        for b in 0..2u32 {
-            let want = crate::rng::philox4x32_10(crate::rng::candidate_counter(1, index, b), key);
-            let have = &g.philox[4 * b as usize..4 * b as usize + 4];
-            words_differ += want.iter().zip(have).filter(|(a, b)| a != b).count();
-        }
-        let c = problem.prior.candidate(problem.seed, 1, index);
-        let n = problem.prior.boxes[c.slot].lower.len();
-        let same = g.slot as usize == c.slot && (0..n).all(|j| g.param_bits[j] == c.params[j].to_bits());
-        candidates_differ += usize::from(!same);
-    }
-    let philox = PhiloxParity {
-        words_compared: 8 * count as usize,
-        words_differ,
-        candidates_compared: count as usize,
-        candidates_differ,
-    };
+    let philox = compare_candidates(&problem.prior, problem.seed, 1, start, &got);
     let pass = philox.words_differ == 0
         && philox.candidates_differ == 0
         && laws
@@ -477,4 +592,143 @@ pub fn parity(problem: &AbcProblem, candidates: usize, epsilon: Option<f64>) -> 
         philox,
         pass,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ulp_distance_counts_representable_steps_across_zero() {
+        assert_eq!(ulp_distance(1.0, 1.0f32.next_up()), 1);
+        assert_eq!(ulp_distance(1.0f32.next_up(), 1.0), -1);
+        assert_eq!(ulp_distance(1.0, 1.0f32.next_down()), -1);
+        assert_eq!(ulp_distance(-0.0, 0.0), 0);
+        assert_eq!(ulp_distance(-f32::from_bits(1), f32::from_bits(2)), 3);
+        assert_eq!(ulp_distance(2.0, 4.0), 1 << 23);
+    }
+
+    /// What a GPU that agrees with the CPU returns for candidates `start .. start + count`.
+    fn cpu_as_gpu(prior: &Prior, seed: u64, population: u32, start: u64, count: u64) -> Vec<GpuCandidate> {
+        let key = crate::rng::key_of_seed(seed);
+        (start..start + count)
+            .map(|index| {
+                let c = prior.candidate(seed, population, index);
+                let b0 = crate::rng::philox4x32_10(crate::rng::candidate_counter(population, index, 0), key);
+                let b1 = crate::rng::philox4x32_10(crate::rng::candidate_counter(population, index, 1), key);
+                GpuCandidate {
+                    philox: [b0, b1].concat().try_into().expect("8 words"),
+                    slot: c.slot as u32,
+                    // Unused parameters are 0 on both backends.
+                    param_bits: c.params.map(f32::to_bits),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn compare_candidates_names_each_difference_with_its_ulps() {
+        let prior = synthetic_problem(Law::M3, 10, 1).prior;
+        let two_laws = Prior::new(
+            vec![
+                synthetic_problem(Law::M2, 10, 1).prior.boxes[0].clone(),
+                prior.boxes[0].clone(),
+            ],
+            vec![1.0, 1.0],
+        )
+        .unwrap();
+        let (seed, population, start) = (7, 3, 1000);
+        let mut got = cpu_as_gpu(&two_laws, seed, population, start, 500);
+        let clean = compare_candidates(&two_laws, seed, population, start, &got);
+        assert_eq!((clean.words_differ, clean.candidates_differ), (0, 0));
+        assert_eq!(clean.words_compared, 4000);
+        assert!(clean.first_differences.is_empty());
+
+        // Candidate 10: one parameter one ulp up; candidate 20: the other law; candidate 30: a
+        // Philox word and two parameters (-2 ulp, and a sign flip).
+        let slot_of = |g: &GpuCandidate| g.slot as usize;
+        let p10 = f32::from_bits(got[10].param_bits[1]);
+        got[10].param_bits[1] = p10.next_up().to_bits();
+        let law20 = two_laws.law(slot_of(&got[20]));
+        got[20].slot = 1 - got[20].slot;
+        got[30].philox[5] ^= 1;
+        let p30 = [
+            f32::from_bits(got[30].param_bits[0]),
+            f32::from_bits(got[30].param_bits[2]),
+        ];
+        got[30].param_bits[0] = p30[0].next_down().next_down().to_bits();
+        got[30].param_bits[2] = (-p30[1]).to_bits();
+        let report = compare_candidates(&two_laws, seed, population, start, &got);
+        assert_eq!(report.words_differ, 1);
+        assert_eq!(report.candidates_differ, 3);
+        let d = &report.first_differences;
+        assert_eq!(d.len(), 4, "{d:#?}");
+        let law10 = two_laws.law(slot_of(&got[10]));
+        assert_eq!(
+            d[0],
+            CandidateDifference::Parameter {
+                population,
+                index: start + 10,
+                law: law10,
+                parameter: law10.param_names()[1],
+                cpu: p10,
+                gpu: p10.next_up(),
+                cpu_bits: format!("{:#010x}", p10.to_bits()),
+                gpu_bits: format!("{:#010x}", p10.next_up().to_bits()),
+                ulps: 1,
+            }
+        );
+        assert_eq!(
+            d[1],
+            CandidateDifference::Law {
+                population,
+                index: start + 20,
+                cpu: law20,
+                gpu: Some(two_laws.law(1 - two_laws.boxes.iter().position(|b| b.law == law20).unwrap())),
+            }
+        );
+        let law30 = two_laws.law(slot_of(&got[30]));
+        match (&d[2], &d[3]) {
+            (
+                CandidateDifference::Parameter {
+                    index: i0,
+                    parameter: n0,
+                    ulps: u0,
+                    ..
+                },
+                CandidateDifference::Parameter {
+                    index: i2,
+                    parameter: n2,
+                    ulps: u2,
+                    gpu,
+                    ..
+                },
+            ) => {
+                assert_eq!((*i0, *n0, *u0), (start + 30, law30.param_names()[0], -2));
+                assert_eq!((*i2, *n2), (start + 30, law30.param_names()[2]));
+                assert_eq!(gpu.to_bits(), (-p30[1]).to_bits());
+                assert_eq!(*u2, ulp_distance(p30[1], -p30[1]));
+            }
+            other => panic!("{other:?}"),
+        }
+        let line = d[0].to_string();
+        assert!(line.contains(&format!("candidate {}", start + 10)), "{line}");
+        assert!(
+            line.contains("+1 ulp") && line.contains(&format!("{:#010x}", p10.to_bits())),
+            "{line}"
+        );
+        assert!(
+            d[1].to_string().contains(&format!("law {law20} on the cpu")),
+            "{}",
+            d[1]
+        );
+
+        // Only the first DIFFERENCES_SHOWN are kept; all are counted.
+        for g in got.iter_mut().skip(100).take(20) {
+            g.param_bits[0] ^= 1;
+        }
+        let report = compare_candidates(&two_laws, seed, population, start, &got);
+        assert_eq!(report.candidates_differ, 23);
+        assert_eq!(report.first_differences.len(), DIFFERENCES_SHOWN);
+    }
 }

@@ -225,6 +225,10 @@ fn replace_dir(dir: &Path) -> Result<()> {
     })
 }
 
+/// The first store schema written by bitrock with the integer-exact candidate transform
+/// ([`crate::rng::uniform_between`]); runs of older stores cannot be continued exactly.
+const FIRST_EXACT_CANDIDATES_SCHEMA: i64 = 2;
+
 /// Continues the run in `dir` after its last stored population with the stopping rules of
 /// `more`; the populations are those an uninterrupted run with the same settings gives.
 pub fn resume(
@@ -234,6 +238,15 @@ pub fn resume(
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     let mut store = RunStore::open(dir)?;
+    if store.schema_version() < FIRST_EXACT_CANDIDATES_SCHEMA {
+        return Err(Error::Data {
+            path: store.path().to_path_buf(),
+            message: format!(
+                "written by an older bitrock (store schema {}), whose candidate parameters were rounded differently (by an ulp in some candidates): continuing it would not reproduce an uninterrupted run; start a new run (export and report still read this one)",
+                store.schema_version()
+            ),
+        });
+    }
     let StoredRun { setup, populations } = store.load()?;
     let mut config: RunConfig = serde_json::from_value(setup.config.clone()).map_err(|e| Error::Store {
         path: dir.join(STORE_FILE),

@@ -328,6 +328,11 @@ impl RunStore {
         &self.path
     }
 
+    /// Schema version of the file.
+    pub fn schema_version(&self) -> i64 {
+        self.schema_version
+    }
+
     /// Writes one completed population (record and particles) in one transaction.
     pub fn append_population(&mut self, population: &Population) -> Result<()> {
         let path = self.path.clone();

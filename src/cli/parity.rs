@@ -82,6 +82,9 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
             "Philox: {} of {} words differ; candidates: {} of {} differ",
             p.words_differ, p.words_compared, p.candidates_differ, p.candidates_compared
         )?;
+        for d in &p.first_differences {
+            writeln!(out, "  {d}")?;
+        }
         writeln!(
             out,
             "{}",

@@ -14,7 +14,7 @@ use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::Prior;
 
 /// True when the GPU tests may run; panics with what to do when no adapter exists.
-fn gpu_available() -> bool {
+pub(crate) fn gpu_available() -> bool {
     if std::env::var("BITROCK_SKIP_GPU_TESTS").is_ok_and(|v| v == "1") {
         eprintln!("BITROCK_SKIP_GPU_TESTS=1: GPU test skipped");
         return false;
@@ -133,6 +133,11 @@ fn rho_difference(problem: &AbcProblem, count: usize, shape: Shape) -> (f64, f64
     (rel[count - 1], rel[count / 2])
 }
 
+/// The parameters of a particle as bits: the backends must agree on every one.
+fn param_bits(p: &bitrock::abc::Particle) -> Vec<u64> {
+    p.params.iter().map(|v| v.to_bits()).collect()
+}
+
 per_shape! {
 fn rho_agrees_with_the_cpu_for_every_law(shape: Shape) {
     if !gpu_available() {
@@ -163,16 +168,49 @@ fn a_rejection_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     let cpu = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
     let gpu_run = rejection::run(&gpu_evaluator(&problem, shape), &config).unwrap();
     assert_eq!(cpu.populations.len(), gpu_run.populations.len());
+    assert!(cpu.populations.len() >= 5, "{} populations", cpu.populations.len());
     let reference = CpuEvaluator::new(problem);
-    let mut exceptions = 0;
+    let (mut exceptions, mut identical_populations, mut particles_compared) = (0, 0, 0);
     for (c, g) in cpu.populations.iter().zip(&gpu_run.populations) {
         let (ec, eg) = (
             c.record.epsilon.unwrap_or(f64::INFINITY),
             g.record.epsilon.unwrap_or(f64::INFINITY),
         );
         assert!(ec == eg || ((ec - eg) / ec).abs() <= PARITY_TOLERANCE, "ε {ec} vs {eg}");
+        // A candidate accepted on both sides is the same particle: law, parameters to the
+        // bit; only its ρ may differ, within the parity tolerance.
+        let on_gpu: std::collections::BTreeMap<u64, &bitrock::abc::Particle> =
+            g.particles.iter().map(|p| (p.index, p)).collect();
+        for pc in &c.particles {
+            if let Some(pg) = on_gpu.get(&pc.index) {
+                assert_eq!(pc.law, pg.law, "law of candidate {}", pc.index);
+                assert_eq!(param_bits(pc), param_bits(pg), "parameters of candidate {}", pc.index);
+                assert!(
+                    ((pc.rho - pg.rho) / pc.rho).abs() <= PARITY_TOLERANCE,
+                    "candidate {}: rho {} vs {}",
+                    pc.index,
+                    pc.rho,
+                    pg.rho
+                );
+                particles_compared += 1;
+            }
+        }
+        if c.record.near_threshold == 0 && g.record.near_threshold == 0 {
+            // No ρ within the tolerance of ε: the same particles in the same order, the same
+            // draws per law.
+            let key = |p: &bitrock::abc::Particle| (p.index, p.law, param_bits(p));
+            assert_eq!(
+                c.particles.iter().map(key).collect::<Vec<_>>(),
+                g.particles.iter().map(key).collect::<Vec<_>>(),
+                "population {}",
+                c.record.index
+            );
+            assert_eq!(c.record.per_law, g.record.per_law, "population {}", c.record.index);
+            identical_populations += 1;
+            continue;
+        }
         let ci: std::collections::BTreeSet<u64> = c.particles.iter().map(|p| p.index).collect();
-        let gi: std::collections::BTreeSet<u64> = g.particles.iter().map(|p| p.index).collect();
+        let gi: std::collections::BTreeSet<u64> = on_gpu.keys().copied().collect();
         for &index in ci.symmetric_difference(&gi) {
             // A candidate on one side only must lie within the parity tolerance of ε, or past
             // the end of the other side's scan (the N-th particle moved with it).
@@ -184,7 +222,12 @@ fn a_rejection_run_gives_the_same_populations_on_both_backends(shape: Shape) {
             exceptions += 1;
         }
     }
-    eprintln!("{shape}: populations alike on both backends; {exceptions} near-threshold exceptions");
+    eprintln!(
+        "{shape}: {} populations: {identical_populations} identical on both backends, {particles_compared} particles alike to the bit, {exceptions} near-threshold exceptions",
+        cpu.populations.len()
+    );
+    // Population 0 (ε = ∞) decides nothing near a threshold: always identical.
+    assert!(identical_populations >= 1);
 }
 }
 
@@ -221,6 +264,8 @@ fn parity_command_reports_agreement_as_json(shape: Shape) {
     assert_eq!(v["pass"], true);
     assert_eq!(v["philox"]["words_compared"], 1_048_576);
     assert_eq!(v["philox"]["words_differ"], 0);
+    assert_eq!(v["philox"]["candidates_differ"], 0);
+    assert_eq!(v["philox"]["first_differences"], serde_json::json!([]));
     assert_eq!(v["laws"].as_array().unwrap().len(), 4);
     for l in v["laws"].as_array().unwrap() {
         assert!(l["max_rel_diff"].as_f64().unwrap() <= PARITY_TOLERANCE);

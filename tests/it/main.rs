@@ -12,3 +12,4 @@ mod smc;
 mod stability;
 mod store;
 mod support;
+mod uniform;

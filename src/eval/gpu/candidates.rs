@@ -1,7 +1,8 @@
 //! Runs `shaders/candidates.wgsl`: the raw Philox blocks and the candidates the GPU generates,
-//! for bit-for-bit comparison with the CPU (tests, `bitrock parity`).
+//! for bit-for-bit comparison with the CPU (tests, `bitrock parity`); and
+//! `shaders/test_uniform_between.wgsl`, the WGSL candidate transform on arbitrary inputs (tests).
 
-use super::{GpuError, GpuPrior, Job, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use super::{GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
 use crate::prior::Prior;
 
 /// What the GPU made of one candidate index.
@@ -68,4 +69,61 @@ pub fn generate(
             param_bits: w[9..15].try_into().expect("6 words"),
         })
         .collect())
+}
+
+/// `uniform_between` of shaders/shared/philox.wgsl on each (lo, hi, word), computed by
+/// `shaders/test_uniform_between.wgsl`: the WGSL twin's results, for comparing its bits with
+/// [`crate::rng::uniform_between`] on inputs no prior box produces.
+pub fn uniform_between(triples: &[(f32, f32, u32)]) -> Result<Vec<f32>, GpuError> {
+    let ctx = super::context()?;
+    let entries = [buffer_entry(0, STORAGE_READ), buffer_entry(1, STORAGE_WRITE)];
+    let kernel = ctx.kernel(
+        "test_uniform_between",
+        "main",
+        super::test_uniform_between_source,
+        &entries,
+        &[],
+    )?;
+    // Chunks of 2²⁰ triples (16 MiB) stay inside every adapter's storage-binding limit.
+    let mut results = Vec::with_capacity(triples.len());
+    for chunk in triples.chunks(1 << 20) {
+        let packed: Vec<[u32; 4]> = chunk
+            .iter()
+            .map(|&(lo, hi, word)| [lo.to_bits(), hi.to_bits(), word, 0])
+            .collect();
+        let input_bytes = 16 * chunk.len() as u64;
+        let output_bytes = 4 * chunk.len() as u64;
+        let input = ctx.buffer(
+            "uniform_between triples",
+            input_bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let output = ctx.buffer(
+            "uniform_between results",
+            output_bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let staging = ctx.buffer(
+            "uniform_between staging",
+            output_bytes,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        )?;
+        ctx.queue.write_buffer(&input, 0, bytemuck::cast_slice(&packed));
+        let bind_group = ctx.bind_group("test_uniform_between", &kernel.layout, &[&input, &output])?;
+        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("test_uniform_between"),
+        });
+        let (x, y, _) = ctx.grid(chunk.len() as u32, WORKGROUP_SIZE);
+        super::encode_dispatch(
+            &mut encoder,
+            "test_uniform_between",
+            &kernel.pipeline,
+            &bind_group,
+            (x, y),
+        );
+        encoder.copy_buffer_to_buffer(&output, 0, &staging, 0, output_bytes);
+        let raw = ctx.finish_and_read(encoder, &staging, output_bytes)?;
+        results.extend(bytemuck::cast_slice::<u8, u32>(&raw).iter().map(|&b| f32::from_bits(b)));
+    }
+    Ok(results)
 }

@@ -36,6 +36,7 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
         ("kernel_sums", kernel_sums_source(), &["main"]),
         ("slopes", slopes_source(), &["main"]),
         ("stability", stability_source(), &["main"]),
+        ("test_uniform_between", test_uniform_between_source(), &["main"]),
     ]
 }
 
@@ -156,6 +157,10 @@ fn candidates_source() -> String {
         include_str!("../../../shaders/candidates.wgsl"),
     ]
     .join("\n")
+}
+
+fn test_uniform_between_source() -> String {
+    [PHILOX_WGSL, include_str!("../../../shaders/test_uniform_between.wgsl")].join("\n")
 }
 
 /// What can go wrong on the GPU, as text the user can act on.
