@@ -100,6 +100,29 @@ pub struct LawFit {
     pub scales: RecordScales,
 }
 
+impl LawFit {
+    /// A fit with the given estimates and ρ, no standard errors and unit scales: for tests of
+    /// what is built on fits (priors, floors).
+    #[cfg(test)]
+    pub(crate) fn for_tests(law: Law, params_si: Vec<f64>, rho: f64) -> Self {
+        Self {
+            law,
+            std_errors_si: vec![None; params_si.len()],
+            params_si,
+            rho,
+            validation_rho: None,
+            condition_number: 1.0,
+            correlations: vec![],
+            warnings: vec![],
+            starts: 1,
+            scales: RecordScales {
+                torque: 1.0,
+                speed: 1.0,
+            },
+        }
+    }
+}
+
 /// The paper's misfit ρ = Σ(y − r·T(w))² / Σy², summed with compensation. `sum_y2` is Σy²
 /// (pass [`Samples::sum_sq_torque`]); `params` must be in the unit of `y`.
 pub fn misfit(law: Law, params: &[f64], w: &[f64], y: &[f64], r: &[f64], sum_y2: f64) -> f64 {

@@ -353,21 +353,7 @@ mod tests {
     use crate::fit::RecordScales;
 
     fn fit(law: Law, params: Vec<f64>) -> LawFit {
-        LawFit {
-            law,
-            std_errors_si: vec![None; params.len()],
-            params_si: params,
-            rho: 0.0,
-            validation_rho: None,
-            condition_number: 1.0,
-            correlations: vec![],
-            warnings: vec![],
-            starts: 1,
-            scales: RecordScales {
-                torque: 1.0,
-                speed: 1.0,
-            },
-        }
+        LawFit::for_tests(law, params, 0.0)
     }
 
     #[test]

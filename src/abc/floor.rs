@@ -103,24 +103,9 @@ pub fn check_start_epsilon(fits: &[LawFit], start: Option<f64>) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::RecordScales;
 
     fn fit(law: Law, rho: f64) -> LawFit {
-        LawFit {
-            law,
-            params_si: vec![1.0; law.n_params()],
-            std_errors_si: vec![None; law.n_params()],
-            rho,
-            validation_rho: None,
-            condition_number: 1.0,
-            correlations: vec![],
-            warnings: vec![],
-            starts: 1,
-            scales: RecordScales {
-                torque: 1.0,
-                speed: 1.0,
-            },
-        }
+        LawFit::for_tests(law, vec![1.0; law.n_params()], rho)
     }
 
     #[test]
