@@ -68,15 +68,18 @@ impl Error {
     /// True when the user's input is at fault (exit status 2), false for failures of the
     /// computation or of the machine (exit status 3).
     pub fn is_bad_input(&self) -> bool {
-        matches!(
-            self,
+        match self {
             Error::Read { .. }
-                | Error::Cell { .. }
-                | Error::Format { .. }
-                | Error::Data { .. }
-                | Error::InvalidArgument { .. }
-                | Error::Gpu(crate::eval::gpu::GpuError::Setting { .. })
-        )
+            | Error::Cell { .. }
+            | Error::Format { .. }
+            | Error::Data { .. }
+            | Error::InvalidArgument { .. } => true,
+            Error::Gpu(e) => matches!(
+                e.downcast_ref::<crate::eval::gpu::GpuError>(),
+                Some(crate::eval::gpu::GpuError::Setting { .. })
+            ),
+            _ => false,
+        }
     }
 }
 
