@@ -50,6 +50,7 @@ pub mod data;
 pub mod documents;
 pub mod error;
 pub mod eval;
+pub mod files;
 pub mod fit;
 pub mod laws;
 pub mod numerics;

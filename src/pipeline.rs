@@ -9,21 +9,15 @@ use crate::abc::{Observer, Population};
 use crate::data::FieldData;
 use crate::documents::{self, RunSummary};
 use crate::error::{Error, Result};
+use crate::files;
 use crate::prior::PriorFile;
 use crate::run::{self, Continuation, Outcome, RunConfig};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Speeds of the predictive envelopes, evenly spaced over the record's range.
 const ENVELOPE_SPEEDS: usize = 200;
 
-/// Where a job writes its run directory.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RunDir {
-    pub path: PathBuf,
-    /// Replace a non-empty directory (`--force`); without it such a directory is refused
-    /// before any work.
-    pub replace: bool,
-}
+pub use crate::run::RunDir;
 
 /// An ABC job: what defines the run and what to summarise. [`Default`] is `bitrock abc`'s
 /// defaults, in memory (no run directory).
@@ -54,7 +48,7 @@ impl AbcJob {
     pub fn validate(&self) -> Result<()> {
         self.config.validate()?;
         if let Some(out) = &self.out {
-            run::check_new_run_dir(&out.path, out.replace)?;
+            run::check_new_run_dir(out, None)?;
         }
         Ok(())
     }
@@ -67,10 +61,17 @@ impl AbcJob {
         self.config.validate()?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
         if let Some(out) = &self.out {
-            run::check_new_run_dir(&out.path, out.replace)?;
+            run::check_new_run_dir(out, Some(&data.source))?;
         }
+        let outcome = run::start(
+            self.out.as_ref(),
+            data,
+            self.config.clone(),
+            prior_file.as_ref(),
+            observer,
+            note,
+        )?;
         let dir = self.out.as_ref().map(|out| out.path.as_path());
-        let outcome = run::start(dir, data, self.config.clone(), prior_file.as_ref(), observer, note)?;
         let analysis = Analysis::new(outcome, self.summary_population, dir)?;
         if let Some(dir) = dir {
             analysis.write_summary(dir)?;
@@ -140,15 +141,8 @@ impl Analysis {
     }
 
     /// Writes run.json, envelopes.csv and data.csv into the run directory `dir`, each whole or
-    /// not at all: written beside the targets, then moved into place.
+    /// not at all ([`files::write_whole`]).
     pub fn write_summary(&self, dir: &Path) -> Result<()> {
-        let staging = tempfile::Builder::new()
-            .prefix(".bitrock-summary-")
-            .tempdir_in(dir)
-            .map_err(|source| Error::Write {
-                path: dir.to_path_buf(),
-                source,
-            })?;
         let run_json = serde_json::to_string_pretty(&self.json()).expect("JSON into memory") + "\n";
         let data = &self.outcome.setup.data;
         let files = [
@@ -160,14 +154,7 @@ impl Analysis {
             ("data.csv", documents::data_csv(data)),
         ];
         for (name, bytes) in &files {
-            let path = staging.path().join(name);
-            std::fs::write(&path, bytes).map_err(|source| Error::Write { path, source })?;
-        }
-        for (name, _) in &files {
-            std::fs::rename(staging.path().join(name), dir.join(name)).map_err(|source| Error::Write {
-                path: dir.join(name),
-                source,
-            })?;
+            files::write_whole(&dir.join(name), "--out", |out| out.write_all(bytes))?;
         }
         Ok(())
     }
