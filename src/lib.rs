@@ -53,6 +53,7 @@ pub mod eval;
 pub mod files;
 pub mod fit;
 pub mod laws;
+pub mod limits;
 pub mod numerics;
 pub mod pipeline;
 pub mod prior;

@@ -47,6 +47,7 @@ impl AbcJob {
     /// would be overwritten without `replace`, before any work.
     pub fn validate(&self) -> Result<()> {
         self.config.validate()?;
+        self.check_summary_population()?;
         if let Some(out) = &self.out {
             run::check_new_run_dir(out, None)?;
         }
@@ -59,6 +60,7 @@ impl AbcJob {
     /// something is refused.
     pub fn run(&self, data: FieldData, observer: &mut dyn Observer, note: &mut dyn FnMut(String)) -> Result<Analysis> {
         self.config.validate()?;
+        self.check_summary_population()?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
         if let Some(out) = &self.out {
             run::check_new_run_dir(out, Some(&data.source))?;
@@ -77,6 +79,21 @@ impl AbcJob {
             analysis.write_summary(dir)?;
         }
         Ok(analysis)
+    }
+}
+
+impl AbcJob {
+    /// Refuses a summary population the run can never have (at or beyond --max-populations),
+    /// before the run rather than after it.
+    fn check_summary_population(&self) -> Result<()> {
+        let max = self.config.sampler.base().max_populations;
+        match self.summary_population {
+            Some(g) if g >= max => Err(Error::arg(
+                "--summary-population",
+                format!("the run has at most {max} populations (0..={}), got {g}", max - 1),
+            )),
+            _ => Ok(()),
+        }
     }
 }
 

@@ -13,6 +13,7 @@ use crate::eval::{AbcProblem, Backend, Evaluator};
 use crate::files;
 use crate::fit::{self, FitOptions};
 use crate::laws::Law;
+use crate::limits;
 use crate::prior::{Prior, PriorFile};
 use crate::store::{RunSetup, RunStore, STORE_FILE, StoredRun};
 use serde::{Deserialize, Serialize};
@@ -69,9 +70,24 @@ impl RunConfig {
                 format!("must be a positive number, got {}", self.delta),
             ));
         }
-        self.sampler.validate()
+        self.sampler.validate()?;
+        if let SamplerConfig::Smc(smc) = &self.sampler {
+            let fewest_params = self.laws.iter().map(|l| l.params().len()).min().unwrap_or(0);
+            smc.check_kernel_reach(fewest_params)?;
+        }
+        let particles = self.sampler.base().particles;
+        limits::check_memory(
+            "--particles",
+            POPULATIONS_HELD * particles as f64 * PARTICLE_BYTES as f64,
+            &format!("holding {POPULATIONS_HELD} populations of {particles} particles"),
+        )
     }
 }
+
+/// Populations a sampler holds at least while drawing: the last one and the one being drawn.
+const POPULATIONS_HELD: f64 = 2.0;
+/// Memory of one particle: the struct and its parameters on the heap.
+const PARTICLE_BYTES: usize = std::mem::size_of::<crate::abc::Particle>() + crate::laws::MAX_PARAMS * 8;
 
 /// The sampler and its settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -93,6 +109,14 @@ impl SamplerConfig {
     }
 
     /// The stopping rules and tolerances every sampler shares.
+    pub fn base(&self) -> &RejectionConfig {
+        match self {
+            SamplerConfig::Rejection(c) => c,
+            SamplerConfig::Smc(c) => &c.base,
+        }
+    }
+
+    /// The stopping rules and tolerances every sampler shares, to change.
     pub fn base_mut(&mut self) -> &mut RejectionConfig {
         match self {
             SamplerConfig::Rejection(c) => c,

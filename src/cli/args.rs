@@ -130,12 +130,11 @@ pub fn load_data(path: Option<&Path>, args: &DataArgs) -> anyhow::Result<FieldDa
     })
 }
 
-/// Sizes rayon's global pool (`--threads`); `None` keeps one thread per core.
+/// Sizes rayon's global pool (`--threads`, bounded by [`bitrock::limits::max_threads`]);
+/// `None` keeps one thread per core.
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(threads) = threads {
-        if threads == 0 {
-            return Err(Error::arg("--threads", "must be at least 1").into());
-        }
+        bitrock::limits::check_threads(threads)?;
         rayon::ThreadPoolBuilder::new().num_threads(threads).build_global()?;
     }
     Ok(())
