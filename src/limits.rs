@@ -95,7 +95,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.starts_with("--particles: two populations needs about 1000000.0 EB"),
+            e.starts_with("--particles: two populations needs about 1000000000000.0 EB"),
             "{e}"
         );
     }
