@@ -343,6 +343,17 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
             message: "empty file: expected a header line".into(),
         });
     }
+    if let Some(duplicate) = headers
+        .iter()
+        .enumerate()
+        .find_map(|(i, h)| headers.iter().skip(i + 1).any(|g| g == h).then_some(h))
+    {
+        return Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: format!("two columns are named '{duplicate}'; rename one"),
+        });
+    }
     let speed_i = resolve_column(
         &headers,
         opts.speed_column.as_deref(),
@@ -364,6 +375,24 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
     let wob_i = resolve_column(&headers, opts.wob_column.as_deref(), "wob", "--wob-col", false, path)?;
     let time_i = resolve_column(&headers, opts.time_column.as_deref(), "time", "--time-col", false, path)?;
     let name = |i: usize| headers[i].to_string();
+    let roles = [
+        ("--speed-col", Some(speed_i)),
+        ("--torque-col", Some(torque_i)),
+        ("--wob-col", wob_i),
+        ("--time-col", time_i),
+    ];
+    for (a, (flag_a, i)) in roles.iter().enumerate() {
+        if let Some((flag_b, _)) = i.and_then(|i| roles[a + 1..].iter().find(|(_, j)| *j == Some(i))) {
+            return Err(Error::Format {
+                path: path.to_path_buf(),
+                line: Some(1),
+                message: format!(
+                    "column '{}' is chosen for both {flag_a} and {flag_b}; a column is one quantity",
+                    name(i.expect("found"))
+                ),
+            });
+        }
+    }
 
     let speed_unit = resolve_unit(
         &headers[speed_i],
@@ -532,8 +561,44 @@ fn filter_and_split(
                     .into(),
         });
     }
+    check_fittable(&calibration, path, torque_column)?;
 
     Ok((n, calibration, validation))
+}
+
+/// Largest |torque| a record may have, N·m: a hundred times the largest top drive's (about
+/// 1e5 N·m), and where f32 sums of squared residuals on the GPU stay finite.
+pub const MAX_TORQUE_NM: f64 = 1e9;
+/// Smallest largest-|torque| of a record, N·m: far below a bench rig's (about 0.1 N·m); below
+/// it the squares the fit and the GPU sum leave f32's normal range.
+pub const MIN_TORQUE_NM: f64 = 1e-6;
+
+/// Refuses calibration samples that no law can be fitted to, saying why: bit speed constant
+/// (identical rows among them: the laws are told apart only by how torque changes with speed),
+/// or torques outside [`MIN_TORQUE_NM`]..[`MAX_TORQUE_NM`] (a unit or scaling error).
+fn check_fittable(calibration: &Samples, path: &Path, torque_column: &str) -> Result<()> {
+    let fail = |message: String| {
+        Err(Error::Data {
+            path: path.to_path_buf(),
+            message,
+        })
+    };
+    let (lo, hi) = calibration
+        .speed_rad_s
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &w| (a.min(w), b.max(w)));
+    if hi - lo <= 1e-9 * hi.abs() {
+        return fail(format!(
+            "every calibration row has bit speed {lo} rad/s: the laws are fitted to how torque changes with speed, and a constant speed cannot tell them apart (or fix their parameters)"
+        ));
+    }
+    let largest = calibration.torque_nm.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+    if !(MIN_TORQUE_NM..=MAX_TORQUE_NM).contains(&largest) {
+        return fail(format!(
+            "the largest |torque| in column '{torque_column}' is {largest:e} N·m, outside {MIN_TORQUE_NM:e}..{MAX_TORQUE_NM:e} N·m where a drill string's lies and the fit's arithmetic holds; check the column's unit (--torque-unit)"
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -35,6 +35,17 @@ pub enum Error {
     /// An output file cannot be written.
     #[error("{}: cannot write: {source}", path.display())]
     Write { path: PathBuf, source: std::io::Error },
+    /// An output the user named by `flag` cannot be written (a missing directory, no
+    /// permission: bad input; a full disk: a failure of the machine).
+    #[error("{flag}: {}: cannot write: {source}", path.display())]
+    Output {
+        flag: String,
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A run directory is being written by another process (one writer per run directory).
+    #[error("{}: in use by {holder}; one bitrock at a time writes a run directory", path.display())]
+    Busy { path: PathBuf, holder: String },
     /// The GPU backend failed (no adapter, device lost, out of memory...). The GPU module's
     /// own error (`eval::gpu::GpuError`) converts into it, so that this bottom layer does not
     /// depend on the GPU module.
@@ -65,18 +76,40 @@ impl Error {
         }
     }
 
+    /// Shorthand for [`Error::Output`].
+    pub fn output(flag: &str, path: &std::path::Path, source: std::io::Error) -> Self {
+        Error::Output {
+            flag: flag.to_string(),
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
     /// True when the user's input is at fault (exit status 2), false for failures of the
     /// computation or of the machine (exit status 3).
     pub fn is_bad_input(&self) -> bool {
-        matches!(
-            self,
+        match self {
             Error::Read { .. }
-                | Error::Cell { .. }
-                | Error::Format { .. }
-                | Error::Data { .. }
-                | Error::InvalidArgument { .. }
-        )
+            | Error::Cell { .. }
+            | Error::Format { .. }
+            | Error::Data { .. }
+            | Error::InvalidArgument { .. }
+            | Error::Busy { .. } => true,
+            Error::Output { source, .. } => is_bad_target(source),
+            // A refused GPU setting converts into InvalidArgument (eval::gpu).
+            _ => false,
+        }
     }
+}
+
+/// True when writing failed because of the target the user gave (missing, not a directory, no
+/// permission), not because the machine failed (a full disk, an I/O error).
+fn is_bad_target(e: &std::io::Error) -> bool {
+    use std::io::ErrorKind::*;
+    matches!(
+        e.kind(),
+        NotFound | PermissionDenied | AlreadyExists | NotADirectory | IsADirectory | ReadOnlyFilesystem | InvalidInput
+    )
 }
 
 /// Result with the library's [`Error`].

@@ -69,6 +69,18 @@ impl FitOptions {
                 "the record has no weight-on-bit column (name one with --wob-col)",
             ));
         }
+        if let (Some(_), Some(wob)) = (self.w_ref_n, &calibration.wob_n) {
+            let not_positive = wob.iter().filter(|&&w| w.is_nan() || w <= 0.0).count();
+            if not_positive > 0 {
+                return Err(Error::arg(
+                    "--scale-by-wob",
+                    format!(
+                        "{not_positive} of the {} calibration rows have weight on bit ≤ 0, where r = WOB / W_ref makes every law predict no torque; drop --scale-by-wob or those rows",
+                        wob.len()
+                    ),
+                ));
+            }
+        }
         Ok(())
     }
 }

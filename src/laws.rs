@@ -257,10 +257,14 @@ impl Law {
     /// Converts parameters between torque units: multiplies every torque-valued parameter
     /// by `factor` (1000 turns kN·m parameters into N·m ones).
     pub fn scale_torque(self, p: &[f64], factor: f64) -> Vec<f64> {
-        self.params()
-            .iter()
+        // Values beyond the law's parameters are kept as they are, for the caller's count check.
+        let specs = self.params().iter().map(Some).chain(std::iter::repeat(None));
+        specs
             .zip(p)
-            .map(|(spec, &v)| if spec.torque_power == 1 { v * factor } else { v })
+            .map(|(spec, &v)| match spec {
+                Some(spec) if spec.torque_power == 1 => v * factor,
+                _ => v,
+            })
             .collect()
     }
 

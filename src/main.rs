@@ -28,13 +28,30 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(err) if is_closed_pipe(&err) => ExitCode::from(exit::CLOSED_PIPE),
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", message(&err));
             let bad_input = err
                 .chain()
                 .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));
             ExitCode::from(if bad_input { exit::BAD_INPUT } else { exit::FAILURE })
         }
     }
+}
+
+/// The error and its causes joined by ": ", each once: a cause whose text the message already
+/// holds (an OS error that a library error quotes) is not repeated.
+fn message(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let line = cause.to_string();
+        if text.contains(&line) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&line);
+    }
+    text
 }
 
 /// True when a write failed because the reader of the pipe went away.

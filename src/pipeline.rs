@@ -9,21 +9,15 @@ use crate::abc::{Observer, Population};
 use crate::data::FieldData;
 use crate::documents::{self, RunSummary};
 use crate::error::{Error, Result};
+use crate::files;
 use crate::prior::PriorFile;
 use crate::run::{self, Continuation, Outcome, RunConfig};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Speeds of the predictive envelopes, evenly spaced over the record's range.
 const ENVELOPE_SPEEDS: usize = 200;
 
-/// Where a job writes its run directory.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RunDir {
-    pub path: PathBuf,
-    /// Replace a non-empty directory (`--force`); without it such a directory is refused
-    /// before any work.
-    pub replace: bool,
-}
+pub use crate::run::RunDir;
 
 /// An ABC job: what defines the run and what to summarise. [`Default`] is `bitrock abc`'s
 /// defaults, in memory (no run directory).
@@ -53,8 +47,9 @@ impl AbcJob {
     /// would be overwritten without `replace`, before any work.
     pub fn validate(&self) -> Result<()> {
         self.config.validate()?;
+        self.check_summary_population()?;
         if let Some(out) = &self.out {
-            run::check_new_run_dir(&out.path, out.replace)?;
+            run::check_new_run_dir(out, None)?;
         }
         Ok(())
     }
@@ -65,17 +60,40 @@ impl AbcJob {
     /// something is refused.
     pub fn run(&self, data: FieldData, observer: &mut dyn Observer, note: &mut dyn FnMut(String)) -> Result<Analysis> {
         self.config.validate()?;
+        self.check_summary_population()?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
         if let Some(out) = &self.out {
-            run::check_new_run_dir(&out.path, out.replace)?;
+            run::check_new_run_dir(out, Some(&data.source))?;
         }
+        let outcome = run::start(
+            self.out.as_ref(),
+            data,
+            self.config.clone(),
+            prior_file.as_ref(),
+            observer,
+            note,
+        )?;
         let dir = self.out.as_ref().map(|out| out.path.as_path());
-        let outcome = run::start(dir, data, self.config.clone(), prior_file.as_ref(), observer, note)?;
         let analysis = Analysis::new(outcome, self.summary_population, dir)?;
         if let Some(dir) = dir {
             analysis.write_summary(dir)?;
         }
         Ok(analysis)
+    }
+}
+
+impl AbcJob {
+    /// Refuses a summary population the run can never have (at or beyond --max-populations),
+    /// before the run rather than after it.
+    fn check_summary_population(&self) -> Result<()> {
+        let max = self.config.sampler.base().max_populations;
+        match self.summary_population {
+            Some(g) if g >= max => Err(Error::arg(
+                "--summary-population",
+                format!("the run has at most {max} populations (0..={}), got {g}", max - 1),
+            )),
+            _ => Ok(()),
+        }
     }
 }
 
@@ -140,15 +158,8 @@ impl Analysis {
     }
 
     /// Writes run.json, envelopes.csv and data.csv into the run directory `dir`, each whole or
-    /// not at all: written beside the targets, then moved into place.
+    /// not at all ([`files::write_whole`]).
     pub fn write_summary(&self, dir: &Path) -> Result<()> {
-        let staging = tempfile::Builder::new()
-            .prefix(".bitrock-summary-")
-            .tempdir_in(dir)
-            .map_err(|source| Error::Write {
-                path: dir.to_path_buf(),
-                source,
-            })?;
         let run_json = serde_json::to_string_pretty(&self.json()).expect("JSON into memory") + "\n";
         let data = &self.outcome.setup.data;
         let files = [
@@ -160,14 +171,7 @@ impl Analysis {
             ("data.csv", documents::data_csv(data)),
         ];
         for (name, bytes) in &files {
-            let path = staging.path().join(name);
-            std::fs::write(&path, bytes).map_err(|source| Error::Write { path, source })?;
-        }
-        for (name, _) in &files {
-            std::fs::rename(staging.path().join(name), dir.join(name)).map_err(|source| Error::Write {
-                path: dir.join(name),
-                source,
-            })?;
+            files::write_whole(&dir.join(name), "--out", |out| out.write_all(bytes))?;
         }
         Ok(())
     }

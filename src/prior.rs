@@ -131,13 +131,13 @@ pub struct PriorFile {
     #[serde(default)]
     pub weights: BTreeMap<String, f64>,
     #[serde(default)]
-    pub m1: BTreeMap<String, [f64; 2]>,
+    pub m1: BTreeMap<String, Vec<f64>>,
     #[serde(default)]
-    pub m2: BTreeMap<String, [f64; 2]>,
+    pub m2: BTreeMap<String, Vec<f64>>,
     #[serde(default)]
-    pub m3: BTreeMap<String, [f64; 2]>,
+    pub m3: BTreeMap<String, Vec<f64>>,
     #[serde(default)]
-    pub m4: BTreeMap<String, [f64; 2]>,
+    pub m4: BTreeMap<String, Vec<f64>>,
 }
 
 impl PriorFile {
@@ -156,7 +156,14 @@ impl PriorFile {
             }
         })?;
         for law in Law::ALL {
-            for name in file.bounds(law).keys() {
+            for (name, bound) in file.bounds(law) {
+                if bound.len() != 2 {
+                    return Err(Error::Format {
+                        path: path.to_path_buf(),
+                        line: None,
+                        message: format!("[{law}] {name} has {} values; a bound is [lower, upper]", bound.len()),
+                    });
+                }
                 if !law.param_names().contains(&name.as_str()) {
                     return Err(Error::Format {
                         path: path.to_path_buf(),
@@ -186,7 +193,7 @@ impl PriorFile {
         Ok(file)
     }
 
-    fn bounds(&self, law: Law) -> &BTreeMap<String, [f64; 2]> {
+    fn bounds(&self, law: Law) -> &BTreeMap<String, Vec<f64>> {
         match law {
             Law::M1 => &self.m1,
             Law::M2 => &self.m2,
@@ -214,7 +221,7 @@ impl Prior {
             let mut upper = Vec::new();
             let mut law_rules = Vec::new();
             for (j, spec) in law.params().iter().enumerate() {
-                let (lo, hi, rule) = if let Some(&[a, b]) = explicit.and_then(|m| m.get(spec.name)) {
+                let (lo, hi, rule) = if let Some(&[a, b]) = explicit.and_then(|m| m.get(spec.name)).map(Vec::as_slice) {
                     let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
                     if !(a.is_finite() && b.is_finite() && a < b) {
                         return Err(Error::arg(
@@ -230,6 +237,19 @@ impl Prior {
                     delta_box(fit, j, delta)
                 };
                 let lo = lo.max(spec.lower);
+                if rule == BoxRule::Given && lo >= hi {
+                    let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
+                    return Err(Error::arg(
+                        "--prior",
+                        format!(
+                            "[{law}] {}: the bounds lie at or below its physical bound {} ≥ {} (in the file's units); give an upper bound above it",
+                            spec.name,
+                            spec.name,
+                            spec.lower / unit
+                        ),
+                    ));
+                }
+                check_box_reach(law, spec.name, lo, hi, rule, delta)?;
                 if lo >= hi {
                     return Err(Error::arg(
                         "--delta",
@@ -323,6 +343,30 @@ impl Prior {
     pub fn law(&self, slot: usize) -> Law {
         self.boxes[slot].law
     }
+}
+
+/// Refuses a box that f32 candidates cannot span (an end beyond f32's range, as δ = 1e100
+/// makes) and a δ box that crosses 0 (δ ≥ 1 on a parameter without a physical bound): it
+/// would hold values of the sign opposite to the estimate, another law shape than the fit's.
+fn check_box_reach(law: Law, name: &str, lo: f64, hi: f64, rule: BoxRule, delta: f64) -> Result<()> {
+    let flag = if rule == BoxRule::Given { "--prior" } else { "--delta" };
+    if !((lo as f32).is_finite() && (hi as f32).is_finite()) {
+        return Err(Error::arg(
+            flag,
+            format!(
+                "{law}.{name}: the box [{lo:e}, {hi:e}] (SI) has an end beyond what candidates (f32, ±3.4e38) can hold; narrow it"
+            ),
+        ));
+    }
+    if matches!(rule, BoxRule::Delta | BoxRule::DeltaNotIdentified) && lo < 0.0 && hi > 0.0 {
+        return Err(Error::arg(
+            "--delta",
+            format!(
+                "{law}.{name}: δ = {delta} makes the box [{lo:e}, {hi:e}] (SI) cross 0, so it holds values of the sign opposite to the estimate; use δ < 1, or give the box in a --prior file"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The box of parameter `j` of `fit` by the δ rules of the module documentation (before

@@ -10,8 +10,10 @@ use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::{AbcProblem, Backend, Evaluator};
+use crate::files;
 use crate::fit::{self, FitOptions};
 use crate::laws::Law;
+use crate::limits;
 use crate::prior::{Prior, PriorFile};
 use crate::store::{RunSetup, RunStore, STORE_FILE, StoredRun};
 use serde::{Deserialize, Serialize};
@@ -68,9 +70,24 @@ impl RunConfig {
                 format!("must be a positive number, got {}", self.delta),
             ));
         }
-        self.sampler.validate()
+        self.sampler.validate()?;
+        if let SamplerConfig::Smc(smc) = &self.sampler {
+            let fewest_params = self.laws.iter().map(|l| l.params().len()).min().unwrap_or(0);
+            smc.check_kernel_reach(fewest_params)?;
+        }
+        let particles = self.sampler.base().particles;
+        limits::check_memory(
+            "--particles",
+            POPULATIONS_HELD * particles as f64 * PARTICLE_BYTES as f64,
+            &format!("holding {POPULATIONS_HELD} populations of {particles} particles"),
+        )
     }
 }
+
+/// Populations a sampler holds at least while drawing: the last one and the one being drawn.
+const POPULATIONS_HELD: f64 = 2.0;
+/// Memory of one particle: the struct and its parameters on the heap.
+const PARTICLE_BYTES: usize = std::mem::size_of::<crate::abc::Particle>() + crate::laws::MAX_PARAMS * 8;
 
 /// The sampler and its settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -92,6 +109,14 @@ impl SamplerConfig {
     }
 
     /// The stopping rules and tolerances every sampler shares.
+    pub fn base(&self) -> &RejectionConfig {
+        match self {
+            SamplerConfig::Rejection(c) => c,
+            SamplerConfig::Smc(c) => &c.base,
+        }
+    }
+
+    /// The stopping rules and tolerances every sampler shares, to change.
     pub fn base_mut(&mut self) -> &mut RejectionConfig {
         match self {
             SamplerConfig::Rejection(c) => c,
@@ -129,40 +154,107 @@ pub struct Outcome {
     pub run: Run,
     /// Backend that scored this invocation's candidates (`cpu`, `gpu`).
     pub backend: &'static str,
+    /// The run directory's lock, held while the outcome lives (its summary files are written
+    /// under it); `None` for a run in memory.
+    pub lock: Option<files::DirLock>,
 }
 
-/// Refuses a run directory that would be overwritten without `force`, before any work.
-pub fn check_new_run_dir(dir: &Path, force: bool) -> Result<()> {
-    if dir.exists() {
-        if !dir.is_dir() {
-            return Err(Error::arg(
-                "--out",
-                format!("{} exists and is not a directory", dir.display()),
-            ));
-        }
-        let non_empty = std::fs::read_dir(dir)
-            .map_err(|source| Error::Read {
-                path: dir.to_path_buf(),
-                source,
-            })?
-            .next()
-            .is_some();
-        if non_empty && !force {
-            return Err(Error::arg(
-                "--out",
-                format!("{} is not empty; pass --force to replace it", dir.display()),
-            ));
-        }
+/// Where a run is written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunDir {
+    pub path: PathBuf,
+    /// Replace the bitrock run the directory holds (`--force`); without it such a directory
+    /// is refused before any work. A directory holding anything bitrock did not write is
+    /// refused either way.
+    pub replace: bool,
+}
+
+/// What a run directory holds, once [`check_new_run_dir`] accepted it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DirState {
+    /// Missing, empty, or holding only bitrock's temporaries: the run is written in place.
+    Fresh,
+    /// A bitrock run, to be replaced (`--force`) once the new run's first population is stored.
+    Replace,
+}
+
+/// Files a run directory holds besides bitrock's temporaries and lock ([`files`]).
+const RUN_FILES: [&str; 7] = [
+    STORE_FILE,
+    "run.sqlite-journal",
+    "run.sqlite-wal",
+    "run.sqlite-shm",
+    "run.json",
+    "envelopes.csv",
+    "data.csv",
+];
+
+/// Refuses, before any work and naming `--out`, a run directory that cannot be written: one
+/// that holds anything bitrock did not write (even with `replace`), the current directory or
+/// one holding the record `input` (the record is never deleted), a bitrock run without
+/// `replace`, a store that is not a bitrock store.
+pub fn check_new_run_dir(dir: &RunDir, input: Option<&Path>) -> Result<DirState> {
+    let path = dir.path.as_path();
+    files::check_output_dir(path, "--out")?;
+    let refuse = |why: String| Err(Error::arg("--out", format!("{}: {why}", path.display())));
+    let Ok(real) = path.canonicalize() else {
+        return Ok(DirState::Fresh);
+    };
+    if let Some(input) = input.and_then(|i| i.canonicalize().ok())
+        && input.starts_with(&real)
+    {
+        return refuse(format!(
+            "holds the record {}; write the run to a directory of its own",
+            input.display()
+        ));
     }
-    Ok(())
+    let entries = std::fs::read_dir(path).map_err(|source| Error::output("--out", path, source))?;
+    let names: Vec<String> = entries
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|name| !files::is_bitrock_scratch(name))
+        .collect();
+    let has_store = names.iter().any(|n| n == STORE_FILE);
+    let foreign: Vec<&str> = names
+        .iter()
+        .map(String::as_str)
+        .filter(|n| !(has_store && RUN_FILES.contains(n)))
+        .collect();
+    if !foreign.is_empty() {
+        let shown = foreign.iter().take(5).copied().collect::<Vec<_>>().join(", ");
+        let more = if foreign.len() > 5 { ", ..." } else { "" };
+        return refuse(format!(
+            "holds files bitrock did not write ({shown}{more}); it is not replaced, even with --force: give another directory"
+        ));
+    }
+    if !has_store {
+        return Ok(DirState::Fresh);
+    }
+    if let Err(e) = RunStore::open(path) {
+        return refuse(format!(
+            "its {STORE_FILE} cannot be read as a bitrock run ({e}); remove the directory yourself if it can go"
+        ));
+    }
+    if !dir.replace {
+        return refuse("holds a bitrock run; pass --force to replace it".into());
+    }
+    if std::env::current_dir().is_ok_and(|cwd| cwd.canonicalize().is_ok_and(|cwd| cwd == real)) {
+        return refuse(
+            "is the current directory, which is never replaced; give the run directory's path from its parent".into(),
+        );
+    }
+    Ok(DirState::Replace)
 }
 
-/// Fits, builds the prior and the evaluator, then samples. With a `dir`, creates it
-/// (replacing it) with its store first, and every population is stored as it completes;
-/// without one the run lives in memory only. `prior_file` is the parsed `config.prior_file`.
-/// The directory is created only once everything that can be refused has been.
+/// Fits, builds the prior and the evaluator, then samples. With a `dir`, the run directory is
+/// claimed (locked, one writer at a time) with its store first, and every population is
+/// stored as it completes; without one the run lives in memory only. A run replacing another
+/// ([`DirState::Replace`]) is staged beside it and swapped in once its first population is
+/// stored, so that the directory holds the old run or the new one at every moment.
+/// `prior_file` is the parsed `config.prior_file`. The directory is created only once
+/// everything that can be refused has been.
 pub fn start(
-    dir: Option<&Path>,
+    dir: Option<&RunDir>,
     data: FieldData,
     mut config: RunConfig,
     prior_file: Option<&PriorFile>,
@@ -170,6 +262,10 @@ pub fn start(
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     config.validate()?;
+    let input = data.source.clone();
+    if let Some(dir) = dir {
+        check_new_run_dir(dir, Some(&input))?;
+    }
     let fits = fit::fit_laws(&config.laws, &data.calibration, &data.validation, &config.fit)?;
     let base = config.sampler.base_mut();
     let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
@@ -188,41 +284,118 @@ pub fn start(
         fits,
         prior,
     };
-    let run = match dir {
+    let (run, lock) = match dir {
         Some(dir) => {
-            replace_dir(dir)?;
-            let mut store = RunStore::create(dir, &setup)?;
-            sample(
-                Some(&mut store),
+            let mut claim = Claim::new(dir, Some(&input))?;
+            let store = RunStore::create(claim.store_dir(), &setup)?;
+            let run = sample(
+                Some(store),
+                Some(&mut claim),
                 "start",
                 &config,
                 evaluator.as_ref(),
                 Vec::new(),
                 observer,
-            )?
+            )?;
+            (run, Some(claim.finish()?))
         }
-        None => sample(None, "start", &config, evaluator.as_ref(), Vec::new(), observer)?,
+        None => (
+            sample(None, None, "start", &config, evaluator.as_ref(), Vec::new(), observer)?,
+            None,
+        ),
     };
     Ok(Outcome {
         config,
         setup,
         run,
         backend: evaluator.backend(),
+        lock,
     })
 }
 
-/// Creates `dir` empty, removing what was there.
-fn replace_dir(dir: &Path) -> Result<()> {
-    if dir.exists() {
-        std::fs::remove_dir_all(dir).map_err(|source| Error::Write {
-            path: dir.to_path_buf(),
-            source,
-        })?;
+/// A run directory being written: its lock, and for a replacement the staging directory beside
+/// it that the new run is written to until its first population is stored.
+struct Claim {
+    dir: PathBuf,
+    /// The run directory's lock; `None` once handed to the outcome.
+    lock: Option<files::DirLock>,
+    /// The new run's directory and lock while it is staged; `None` once in place.
+    staged: Option<(PathBuf, files::DirLock)>,
+}
+
+impl Claim {
+    /// Locks `dir` (creating it) and checks again under the lock what it holds; stages the new
+    /// run beside a run it replaces.
+    fn new(dir: &RunDir, input: Option<&Path>) -> Result<Self> {
+        let path = dir.path.clone();
+        std::fs::create_dir_all(&path).map_err(|source| Error::output("--out", &path, source))?;
+        let lock = files::DirLock::acquire(&path)?;
+        // Another process may have written a run here since the first check.
+        let state = check_new_run_dir(dir, input)?;
+        files::remove_stale(&path);
+        let staged = match state {
+            DirState::Fresh => None,
+            DirState::Replace => {
+                let parent = files::parent_dir(&path);
+                files::remove_stale(parent);
+                let staging = tempfile::Builder::new()
+                    .prefix(files::STAGING_PREFIX)
+                    .tempdir_in(parent)
+                    .map_err(|source| Error::output("--out", &path, source))?
+                    .keep();
+                let staging_lock = files::DirLock::acquire(&staging)?;
+                Some((staging, staging_lock))
+            }
+        };
+        Ok(Self {
+            dir: path,
+            lock: Some(lock),
+            staged,
+        })
     }
-    std::fs::create_dir_all(dir).map_err(|source| Error::Write {
-        path: dir.to_path_buf(),
-        source,
-    })
+
+    /// Where the store is created: the staging directory, or the run directory itself.
+    fn store_dir(&self) -> &Path {
+        self.staged.as_ref().map_or(&self.dir, |(staging, _)| staging)
+    }
+
+    /// Swaps a staged run into place (its first population is stored) and removes the old
+    /// run; the store must then be reopened at its new place. No-op for a run in place.
+    fn put_in_place(&mut self) -> Result<bool> {
+        let Some((staging, staging_lock)) = self.staged.take() else {
+            return Ok(false);
+        };
+        files::exchange_dirs(&self.dir, &staging).map_err(|source| Error::output("--out", &self.dir, source))?;
+        files::sync_dir(files::parent_dir(&self.dir));
+        // The staging name now holds the old run, still locked by us: gone before the lock is.
+        let old_lock = self.lock.replace(staging_lock);
+        std::fs::remove_dir_all(&staging).map_err(|source| Error::output("--out", &staging, source))?;
+        drop(old_lock);
+        Ok(true)
+    }
+
+    /// The lock of the run directory once sampling ended. A staged run that stored no
+    /// population is discarded: the old run stays.
+    fn finish(&mut self) -> Result<files::DirLock> {
+        if let Some((staging, staging_lock)) = self.staged.take() {
+            let _ = std::fs::remove_dir_all(&staging);
+            drop(staging_lock);
+            return Err(Error::Incomplete(format!(
+                "the new run stored no population; {} still holds the run it held",
+                self.dir.display()
+            )));
+        }
+        Ok(self.lock.take().expect("the lock is handed over once"))
+    }
+}
+
+impl Drop for Claim {
+    /// A staged run abandoned by an error is removed; the old run stays.
+    fn drop(&mut self) {
+        if let Some((staging, _)) = &self.staged {
+            let _ = std::fs::remove_dir_all(staging);
+        }
+    }
 }
 
 /// The first store schema written by bitrock with the integer-exact candidate transform
@@ -237,7 +410,7 @@ pub fn resume(
     observer: &mut dyn Observer,
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
-    let mut store = RunStore::open(dir)?;
+    let store = RunStore::open(dir)?;
     if store.schema_version() < FIRST_EXACT_CANDIDATES_SCHEMA {
         return Err(Error::Data {
             path: store.path().to_path_buf(),
@@ -247,7 +420,10 @@ pub fn resume(
             ),
         });
     }
+    let lock = files::DirLock::acquire(dir)?;
+    files::remove_stale(dir);
     let StoredRun { setup, populations } = store.load()?;
+    check_particles_stored(dir, &populations)?;
     let mut config: RunConfig = serde_json::from_value(setup.config.clone()).map_err(|e| Error::Store {
         path: dir.join(STORE_FILE),
         message: format!("the stored configuration is not one this bitrock reads: {e}"),
@@ -270,7 +446,8 @@ pub fn resume(
         populations.len()
     ));
     let run = sample(
-        Some(&mut store),
+        Some(store),
+        None,
         "resume",
         &config,
         evaluator.as_ref(),
@@ -286,35 +463,55 @@ pub fn resume(
         setup,
         run,
         backend: evaluator.backend(),
+        lock: Some(lock),
     })
 }
 
+/// Refuses a store whose populations lack particles their records count (rows deleted by
+/// hand): the sampler continues from them and cannot from fewer.
+fn check_particles_stored(dir: &Path, populations: &[Population]) -> Result<()> {
+    for p in populations {
+        if p.particles.len() != p.record.accepted {
+            return Err(Error::Data {
+                path: dir.join(STORE_FILE),
+                message: format!(
+                    "population {} has {} of its {} particles; the store was altered and this run cannot be continued (start a new run)",
+                    p.record.index,
+                    p.particles.len(),
+                    p.record.accepted
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Runs the sampler after `previous`, writing each new population to `store` when there is
-/// one.
+/// one, and putting a staged run in place once its first population is stored.
 fn sample(
-    store: Option<&mut RunStore>,
+    store: Option<RunStore>,
+    claim: Option<&mut Claim>,
     kind: &str,
     config: &RunConfig,
     evaluator: &dyn Evaluator,
     previous: Vec<Population>,
     observer: &mut dyn Observer,
 ) -> Result<Run> {
-    let Some(store) = store else {
+    let Some(mut store) = store else {
         return run_sampler(config, evaluator, previous, observer);
     };
     let json = serde_json::to_value(config).expect("the configuration serialises");
     let invocation = store.begin_invocation(kind, evaluator.backend(), &json)?;
-    let run = run_sampler(
-        config,
-        evaluator,
-        previous,
-        &mut Storing {
-            store: &mut *store,
-            inner: observer,
-        },
-    )?;
+    let mut storing = Storing {
+        store,
+        claim,
+        inner: observer,
+    };
+    let run = run_sampler(config, evaluator, previous, &mut storing)?;
     let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
-    store.finish_invocation(invocation, stop.as_str().unwrap_or_default())?;
+    storing
+        .store
+        .finish_invocation(invocation, stop.as_str().unwrap_or_default())?;
     Ok(run)
 }
 
@@ -331,9 +528,11 @@ fn run_sampler(
     }
 }
 
-/// Writes every completed population to the store before the caller's observer sees it.
+/// Writes every completed population to the store before the caller's observer sees it; the
+/// first one stored puts a staged run in place.
 struct Storing<'a> {
-    store: &'a mut RunStore,
+    store: RunStore,
+    claim: Option<&'a mut Claim>,
     inner: &'a mut dyn Observer,
 }
 
@@ -344,6 +543,12 @@ impl Observer for Storing<'_> {
 
     fn population_done(&mut self, population: &Population) -> Result<()> {
         self.store.append_population(population)?;
+        if let Some(claim) = self.claim.as_deref_mut()
+            && claim.put_in_place()?
+        {
+            // SQLite names its journal after the path it opened: reopen at the new place.
+            self.store = RunStore::open(&claim.dir)?;
+        }
         self.inner.population_done(population)
     }
 }

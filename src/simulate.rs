@@ -174,6 +174,15 @@ impl SimConfig {
                 ),
             ));
         }
+        let samples = self.duration_s * self.sample_hz;
+        crate::limits::check_memory(
+            "--duration-s",
+            samples * TRACE_BYTES_PER_SAMPLE,
+            &format!(
+                "recording {samples:.3e} samples ({} s at {} Hz)",
+                self.duration_s, self.sample_hz
+            ),
+        )?;
         if self.dt_s > 1.0 / self.sample_hz {
             return Err(Error::arg(
                 "--dt-s",
@@ -293,6 +302,9 @@ pub fn write_csv_in<W: std::io::Write>(trace: &Trace, unit: TorqueUnit, out: W) 
     writer.flush()?;
     Ok(())
 }
+
+/// Memory of one recorded sample: time, bit speed, torque and weight on bit, f64 each.
+const TRACE_BYTES_PER_SAMPLE: f64 = 4.0 * 8.0;
 
 /// Simulates the configuration and returns the recorded trace.
 ///

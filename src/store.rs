@@ -15,6 +15,7 @@
 use crate::abc::{Particle, Population, PopulationRecord};
 use crate::data::{ColumnsUsed, FieldData, Samples};
 use crate::error::{Error, Result};
+use crate::files;
 use crate::fit::{LawFit, RecordScales};
 use crate::laws::Law;
 use crate::prior::{BoxRule, LawBox, Prior};
@@ -176,7 +177,11 @@ fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
 }
 
 impl RunStore {
-    /// Creates `dir/run.sqlite` (which must not exist) and writes the set-up in one transaction.
+    /// Creates `dir/run.sqlite` (which must not exist) whole or not at all: the schema and the
+    /// set-up are written in one transaction into a temporary beside it (no journal: a failed
+    /// temporary is discarded), which is renamed to run.sqlite once complete. A kill at any
+    /// moment leaves no store or a complete one, and the temporary is removed by the next run
+    /// in `dir` ([`files::remove_stale`]).
     pub fn create(dir: &Path, setup: &RunSetup) -> Result<Self> {
         let path = dir.join(STORE_FILE);
         if path.exists() {
@@ -185,8 +190,10 @@ impl RunStore {
                 message: "a run store already exists here".into(),
             });
         }
+        let temp = files::TempFile::beside(&path, "--out")?;
         let err = sql_error(&path);
-        let mut conn = Connection::open(&path).map_err(&err)?;
+        let mut conn = Connection::open(temp.path()).map_err(&err)?;
+        conn.pragma_update(None, "journal_mode", "OFF").map_err(&err)?;
         let tx = conn.transaction().map_err(&err)?;
         tx.execute_batch(SCHEMA).map_err(&err)?;
         let meta = [
@@ -282,6 +289,9 @@ impl RunStore {
             }
         }
         tx.commit().map_err(&err)?;
+        conn.close().map_err(|(_, e)| err(e))?;
+        temp.commit(&path)?;
+        let conn = Connection::open(&path).map_err(&err)?;
         drop(err);
         Ok(Self {
             conn,

@@ -121,6 +121,41 @@ impl SmcConfig {
     }
 }
 
+/// An upper bound on the share of population 1's proposals of a law with `dims` parameters
+/// that land inside the prior box, when population 0 is the prior itself (no start ε): per
+/// parameter, a uniform on a box of width w perturbed by a Gaussian of standard deviation
+/// √S·w/√12 stays inside with probability ≤ w/(s√(2π)) = √(6/(πS)).
+pub fn population_one_in_box_bound(kernel_scale: f64, dims: usize) -> f64 {
+    (6.0 / (std::f64::consts::PI * kernel_scale))
+        .sqrt()
+        .min(1.0)
+        .powi(dims as i32)
+}
+
+impl SmcConfig {
+    /// Refuses a kernel scale that makes acceptance impossible: when even the law with the
+    /// fewest parameters (`fewest_params`) would land fewer proposals inside its prior box than
+    /// `--min-acceptance` stops at, or than the draw budget needs for N particles.
+    pub fn check_kernel_reach(&self, fewest_params: usize) -> Result<()> {
+        if self.base.start_epsilon.is_some() {
+            return Ok(()); // population 0 is narrower than the prior: the bound does not apply
+        }
+        let share = population_one_in_box_bound(self.kernel_scale, fewest_params);
+        let budget = self.base.particles as f64 / self.base.max_draws as f64;
+        let needed = self.base.min_acceptance.max(budget);
+        if share < needed {
+            return Err(Error::arg(
+                "--kernel-scale",
+                format!(
+                    "{} makes the perturbation √{0}× as wide as the posterior: at most {share:.1e} of population 1's proposals of a {fewest_params}-parameter law land inside its prior box, below the {needed:.1e} the run needs (--min-acceptance, or --particles/--max-draws); use a scale near 2",
+                    self.kernel_scale
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Relative floor of the kernel's standard deviation: 10⁻⁴ of the prior box width.
 const KERNEL_FLOOR: f64 = 1e-4;
 

@@ -130,12 +130,11 @@ pub fn load_data(path: Option<&Path>, args: &DataArgs) -> anyhow::Result<FieldDa
     })
 }
 
-/// Sizes rayon's global pool (`--threads`); `None` keeps one thread per core.
+/// Sizes rayon's global pool (`--threads`, bounded by [`bitrock::limits::max_threads`]);
+/// `None` keeps one thread per core.
 pub fn set_threads(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(threads) = threads {
-        if threads == 0 {
-            return Err(Error::arg("--threads", "must be at least 1").into());
-        }
+        bitrock::limits::check_threads(threads)?;
         rayon::ThreadPoolBuilder::new().num_threads(threads).build_global()?;
     }
     Ok(())
@@ -195,6 +194,19 @@ impl LumpedArgs {
 }
 
 impl FeArgs {
+    /// The first of these flags the user gave, for refusing them where no FE string is built.
+    pub fn given_flag(&self) -> Option<&'static str> {
+        [
+            ("--fe-file", self.fe_file.is_some()),
+            ("--dp-elements", self.dp_elements.is_some()),
+            ("--bha-elements", self.bha_elements.is_some()),
+            ("--alpha", self.alpha.is_some()),
+            ("--beta", self.beta.is_some()),
+        ]
+        .into_iter()
+        .find_map(|(flag, given)| given.then_some(flag))
+    }
+
     /// The drill string from the file (or the paper's) with the flags' overrides, validated.
     pub fn drill_string(&self) -> anyhow::Result<DrillString> {
         let mut s = match &self.fe_file {

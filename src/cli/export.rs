@@ -1,11 +1,10 @@
 //! `bitrock export DIR`: the run store's contents as CSV (particles) or JSON (the whole run),
 //! for users who would rather not open run.sqlite themselves.
 
-use super::print;
-use bitrock::Error;
 use bitrock::abc::Population;
 use bitrock::documents;
 use bitrock::store::RunStore;
+use bitrock::{Error, files};
 use clap::{Args, ValueEnum};
 use std::io::Write;
 use std::path::PathBuf;
@@ -35,6 +34,9 @@ pub struct ExportCmd {
 }
 
 pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
+    if let Some(path) = &cmd.out {
+        files::check_output_file(path, "--out")?;
+    }
     let store = RunStore::open(&cmd.dir)?;
     let stored = store.load()?;
     let setup = &stored.setup;
@@ -64,7 +66,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     };
     match &cmd.out {
         None => std::io::stdout().lock().write_all(&text)?,
-        Some(path) => print::write_file_atomically(path, |file| Ok(file.write_all(&text)?))?,
+        Some(path) => files::write_whole(path, "--out", |file| file.write_all(&text))?,
     }
     Ok(ExitCode::SUCCESS)
 }

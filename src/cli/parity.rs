@@ -44,7 +44,14 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
     }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     let fits = fit::fit_laws(&cmd.laws, &data.calibration, &data.validation, &FitOptions::default())?;
-    let prior = Prior::from_fits(&fits, 0.4, None, data.torque_unit.newton_metres())?;
+    let delta = bitrock::run::RunConfig::default().delta;
+    let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).map_err(|e| {
+        // Parity has no --delta or --prior: the record is what the prior cannot be built from.
+        Error::Data {
+            path: data.source.clone(),
+            message: format!("the prior parity draws from (δ = {delta} around the fits) cannot be built: {e}"),
+        }
+    })?;
     let problem = AbcProblem::new(prior, cmd.seed, &data.calibration, None);
     let report = bitrock::bench::parity(&problem, cmd.candidates, cmd.epsilon)?;
     let mut out = std::io::stdout().lock();

@@ -10,7 +10,6 @@ use bitrock::documents::{fit_in_record_units, to_record_units};
 use bitrock::fit::LawFit;
 use bitrock::units::TorqueUnit;
 use std::io::{self, Write};
-use std::path::Path;
 
 /// Numbers in a table: fixed notation where it reads well, scientific otherwise.
 fn number(v: f64) -> String {
@@ -218,27 +217,5 @@ pub fn posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: Torqu
             writeln!(out, "  {}", spec.unit(unit.label()))?;
         }
     }
-    Ok(())
-}
-
-/// Writes `path` through `write` into a temporary file beside it, then renames it into place,
-/// so a failure leaves nothing half-written.
-pub fn write_file_atomically(
-    path: &Path,
-    write: impl FnOnce(&mut std::fs::File) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|source| bitrock::Error::Write {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    write(tmp.as_file_mut())?;
-    tmp.persist(path).map_err(|e| bitrock::Error::Write {
-        path: path.to_path_buf(),
-        source: e.error,
-    })?;
     Ok(())
 }

@@ -1,12 +1,10 @@
 //! `bitrock simulate`: the 1-DOF string with a bit-rock law, written as a field-like CSV.
 
 use super::args::LumpedArgs;
-use super::print;
-use anyhow::Context;
-use bitrock::Law;
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::simulate::{self, Initial, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
+use bitrock::{Law, files};
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -114,11 +112,13 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
         seed: cmd.seed,
     };
     config.validate()?;
+    if let Some(path) = &cmd.out {
+        files::check_output_file(path, "--out")?;
+    }
     let trace = simulate::simulate(&config)?;
     match &cmd.out {
         None => simulate::write_csv(&trace, std::io::stdout().lock())?,
-        Some(path) => print::write_file_atomically(path, |file| Ok(simulate::write_csv(&trace, file)?))
-            .with_context(|| format!("saving the simulation to {}", path.display()))?,
+        Some(path) => files::write_whole(path, "--out", |file| simulate::write_csv(&trace, file))?,
     }
     Ok(ExitCode::SUCCESS)
 }

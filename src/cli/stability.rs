@@ -2,12 +2,11 @@
 //! parameters: deterministic, percentile and mixture boundaries, and the probability grids.
 
 use super::args::{FeArgs, LumpedArgs};
-use super::print;
-use bitrock::Error;
 use bitrock::eval::Backend;
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::stability::map::{self, Criterion, LawSamples};
 use bitrock::units::TorqueUnit;
+use bitrock::{Error, files};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use std::io::Write;
@@ -95,6 +94,18 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     if cmd.samples == 0 {
         return Err(Error::arg("--samples", "must be at least 1").into());
     }
+    if cmd.structure == Structure::Lumped
+        && let Some(flag) = cmd.fe.given_flag()
+    {
+        return Err(Error::arg(
+            flag,
+            "applies to --structure fe only (the 1-DOF string has no elements)",
+        )
+        .into());
+    }
+    if let Some(path) = &cmd.out {
+        files::check_output_file(path, "--out")?;
+    }
     let w_ref_n = cmd.w_ref_kn * 1000.0;
     let p = cmd.percentile / 100.0;
     let lumped = cmd.lumped.validated()?;
@@ -125,7 +136,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }
     if let Some(path) = &cmd.out {
-        print::write_file_atomically(path, |file| Ok(file.write_all(&boundaries_csv(&omega, &columns))?))?;
+        files::write_whole(path, "--out", |file| file.write_all(&boundaries_csv(&omega, &columns)))?;
     }
     let mut out = std::io::stdout().lock();
     if cmd.json {

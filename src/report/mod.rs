@@ -168,22 +168,10 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
         ));
         files.push((Path::new("figures").join(format!("{}.png", r.info.stem)), r.png.clone()));
     }
-    let write_err = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| Error::Write { path, source }
-    };
-    std::fs::create_dir_all(dir.join("figures")).map_err(write_err(dir))?;
-    let staging = tempfile::Builder::new()
-        .prefix(".bitrock-report-")
-        .tempdir_in(dir)
-        .map_err(write_err(dir))?;
-    std::fs::create_dir(staging.path().join("figures")).map_err(write_err(staging.path()))?;
+    crate::files::check_output_dir(dir, "--out")?;
+    std::fs::create_dir_all(dir.join("figures")).map_err(|source| Error::output("--out", dir, source))?;
     for (rel, bytes) in &files {
-        let path = staging.path().join(rel);
-        std::fs::write(&path, bytes).map_err(write_err(&path))?;
-    }
-    for (rel, _) in &files {
-        std::fs::rename(staging.path().join(rel), dir.join(rel)).map_err(write_err(&dir.join(rel)))?;
+        crate::files::write_whole(&dir.join(rel), "--out", |out| std::io::Write::write_all(out, bytes))?;
     }
     let mut names: Vec<PathBuf> = files.into_iter().map(|f| f.0).collect();
     names.sort();

@@ -4,6 +4,7 @@ mod abc;
 mod cli;
 mod fit;
 mod gpu;
+mod hostile;
 mod laws;
 mod pipeline;
 mod records;

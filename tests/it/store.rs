@@ -33,7 +33,11 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
 
 fn start(dir: &Path, config: RunConfig) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
-    run::start(Some(dir), data, config, None, &mut Silent, &mut |_| {}).unwrap()
+    let dir = run::RunDir {
+        path: dir.to_path_buf(),
+        replace: false,
+    };
+    run::start(Some(&dir), data, config, None, &mut Silent, &mut |_| {}).unwrap()
 }
 
 /// Populations equal in everything a population is: ε, counts, particles (bit for bit).

@@ -1,0 +1,102 @@
+//! Bounds the machine sets on what a flag may ask for: worker threads and memory. A request
+//! beyond them is refused before any work, naming the flag and the estimate, rather than
+//! spawning without end or aborting on a failed allocation.
+
+use crate::error::{Error, Result};
+
+/// Most worker threads per hardware thread: more only adds switching.
+pub const THREADS_PER_CORE: usize = 4;
+
+/// The most worker threads `--threads` may ask for: [`THREADS_PER_CORE`] × the hardware
+/// threads available to this process.
+pub fn max_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, usize::from) * THREADS_PER_CORE
+}
+
+/// Refuses a `--threads` of 0 or above [`max_threads`].
+pub fn check_threads(threads: usize) -> Result<()> {
+    let max = max_threads();
+    if threads == 0 || threads > max {
+        return Err(Error::arg(
+            "--threads",
+            format!(
+                "must lie in 1..={max} ({THREADS_PER_CORE} × the {} hardware threads here), got {threads}",
+                max / THREADS_PER_CORE
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Memory this process can use, bytes: `MemAvailable` of /proc/meminfo; `None` where the
+/// machine does not say.
+pub fn available_memory_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Refuses, naming `flag`, work whose memory estimate (`bytes`, for `what`) exceeds the memory
+/// available. Where the machine does not say, the estimate is checked against the address
+/// space only.
+pub fn check_memory(flag: &str, bytes: f64, what: &str) -> Result<()> {
+    let available = available_memory_bytes().map_or(u64::MAX as f64, |b| b as f64);
+    if bytes.is_nan() || bytes > available {
+        return Err(Error::arg(
+            flag,
+            format!(
+                "{what} needs about {} of memory; {} is available",
+                human_bytes(bytes),
+                human_bytes(available)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Bytes in decimal units (B, kB, MB, GB, TB...) with one decimal.
+pub fn human_bytes(bytes: f64) -> String {
+    const UNITS: [&str; 7] = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut value = bytes;
+    let mut unit = 0;
+    while value >= 1000.0 && unit + 1 < UNITS.len() {
+        value /= 1000.0;
+        unit += 1;
+    }
+    format!("{value:.1} {}", UNITS[unit])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bytes_read_in_decimal_units() {
+        assert_eq!(human_bytes(512.0), "512.0 B");
+        assert_eq!(human_bytes(56e9), "56.0 GB");
+        assert_eq!(human_bytes(4e14), "400.0 TB");
+    }
+
+    #[test]
+    fn threads_are_bounded_by_the_machine() {
+        assert!(check_threads(1).is_ok());
+        assert!(check_threads(max_threads()).is_ok());
+        for bad in [0, max_threads() + 1, 99_999_999_999] {
+            let e = check_threads(bad).unwrap_err().to_string();
+            assert!(e.starts_with("--threads: must lie in 1..="), "{e}");
+        }
+    }
+
+    #[test]
+    fn memory_beyond_the_machine_is_refused_with_the_estimate() {
+        assert!(check_memory("--particles", 1e6, "a population").is_ok());
+        let e = check_memory("--particles", 1e30, "two populations")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("--particles: two populations needs about 1000000000000.0 EB"),
+            "{e}"
+        );
+    }
+}

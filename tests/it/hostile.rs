@@ -1,0 +1,483 @@
+//! Hostile but realistic use (issue 16): `--force` never deletes what bitrock did not write,
+//! every file is written whole or not at all, one writer per run directory, no flag hangs or
+//! exhausts the machine, and data or targets that cannot work exit 2 naming the file or flag.
+//! Every run is small (the embedded record, a few hundred particles, the CPU).
+
+use crate::support::bin;
+use bitrock::files::{self, DirLock, TEMP_PREFIX};
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+/// Runs bitrock in `cwd`; (status, stdout, stderr).
+fn run_in(cwd: &Path, args: &[&str]) -> (i32, String, String) {
+    let out: Output = bin().current_dir(cwd).args(args).output().expect("run bitrock");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A small finished run into `dir` (relative to `cwd`), with `extra` flags.
+fn small_run(cwd: &Path, dir: &str, extra: &[&str]) -> (i32, String, String) {
+    let mut args = vec![
+        "abc",
+        "--out",
+        dir,
+        "--particles",
+        "200",
+        "--max-populations",
+        "2",
+        "--backend",
+        "cpu",
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    run_in(cwd, &args)
+}
+
+/// The particles of a run as CSV (what `export` prints).
+fn export(cwd: &Path, dir: &str) -> String {
+    let (code, out, err) = run_in(cwd, &["export", dir]);
+    assert_eq!(code, 0, "{err}");
+    out
+}
+
+/// Names in `dir`, sorted.
+fn names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// The embedded record as a file at `path`, its rows changed by `row`.
+fn record(path: &Path, row: impl Fn(&[f64]) -> Vec<f64>) -> PathBuf {
+    let mut text = String::new();
+    for (i, line) in bitrock::data::DEMO_CSV.lines().enumerate() {
+        if i == 0 || line.starts_with('#') {
+            text.push_str(line);
+        } else {
+            let values: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+            let changed: Vec<String> = row(&values).iter().map(|v| format!("{v:e}")).collect();
+            text.push_str(&changed.join(","));
+        }
+        text.push('\n');
+    }
+    std::fs::write(path, text).unwrap();
+    path.to_path_buf()
+}
+
+fn assert_refused(result: (i32, String, String), needles: &[&str]) {
+    let (code, _, err) = result;
+    assert_eq!(code, 2, "{err}");
+    for needle in needles {
+        assert!(err.contains(needle), "'{needle}' not in: {err}");
+    }
+}
+
+// 1. --force replaces only what bitrock wrote.
+
+#[test]
+fn force_refuses_a_directory_bitrock_did_not_write() {
+    let tmp = tempfile::tempdir().unwrap();
+    let notes = tmp.path().join("notes");
+    std::fs::create_dir(&notes).unwrap();
+    std::fs::write(notes.join("thesis.tex"), "mine").unwrap();
+    assert_refused(small_run(tmp.path(), "notes", &["--force"]), &["--out", "thesis.tex"]);
+    // From inside it, as `--out .`: refused the same way.
+    assert_refused(small_run(&notes, ".", &["--force"]), &["--out", "thesis.tex"]);
+    assert_eq!(names(&notes), ["thesis.tex"]);
+    // A run directory with a file of the user's in it is not replaced either.
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    std::fs::write(tmp.path().join("R/notes.txt"), "mine").unwrap();
+    assert_refused(small_run(tmp.path(), "R", &["--force"]), &["notes.txt"]);
+    assert!(tmp.path().join("R/notes.txt").exists());
+}
+
+#[test]
+fn force_refuses_the_current_directory_and_any_holding_the_record() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    let r = tmp.path().join("R");
+    assert_refused(small_run(&r, ".", &["--force"]), &["--out", "current directory"]);
+    assert_eq!(export(tmp.path(), "R"), before);
+
+    let w = tmp.path().join("W");
+    std::fs::create_dir_all(w.join("sub")).unwrap();
+    let rec = record(&w.join("sub/my_record.csv"), |v| v.to_vec());
+    for out in ["W", "W/sub"] {
+        let (code, _, err) = run_in(
+            tmp.path(),
+            &[
+                "abc",
+                rec.to_str().unwrap(),
+                "--out",
+                out,
+                "--force",
+                "--particles",
+                "100",
+                "-q",
+            ],
+        );
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("holds the record"), "{err}");
+    }
+    assert!(rec.exists());
+}
+
+#[test]
+fn force_replaces_a_run_with_a_new_one_and_leaves_nothing_beside_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let old = export(tmp.path(), "R");
+    assert_refused(small_run(tmp.path(), "R", &[]), &["--force"]);
+    assert_eq!(small_run(tmp.path(), "R", &["--force", "--seed", "2"]).0, 0);
+    let new = export(tmp.path(), "R");
+    assert_ne!(old, new);
+    assert_eq!(names(tmp.path()), ["R"]);
+}
+
+#[test]
+fn a_kill_during_force_leaves_the_old_run_or_the_new_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let old = export(tmp.path(), "R");
+    let mut saw_old = false;
+    let mut saw_new = false;
+    for kill_ms in [30, 150, 300, 500, 800, 1200] {
+        let mut child = bin()
+            .current_dir(tmp.path())
+            .args([
+                "abc",
+                "--out",
+                "R",
+                "--force",
+                "--seed",
+                "3",
+                "--particles",
+                "4000",
+                "--max-populations",
+                "4",
+                "--backend",
+                "cpu",
+                "-q",
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(kill_ms));
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+        let now = export(tmp.path(), "R");
+        if now == old {
+            saw_old = true;
+        } else {
+            // The new run: a store with at least its population 0.
+            assert!(now.lines().nth(1).is_some_and(|l| l.starts_with("0,")), "{now}");
+            saw_new = true;
+            // Back to the old run for the next kill time.
+            assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
+            assert_eq!(export(tmp.path(), "R"), old);
+        }
+    }
+    // The kill times span both sides of the swap on a loaded machine or not; which side each
+    // landed on is not asserted, only that R held a whole run each time.
+    assert!(saw_old || saw_new);
+    // A later run in the same parent removes the staging directories the kills left.
+    assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
+    assert_eq!(names(tmp.path()), ["R"]);
+}
+
+// 2. Every file whole or not at all.
+
+#[test]
+fn a_failed_write_leaves_the_old_file_and_no_temporary() {
+    let tmp = tempfile::tempdir().unwrap();
+    let target = tmp.path().join("map.csv");
+    std::fs::write(&target, "old contents\n").unwrap();
+    // A full disk mid-write, injected: part of the file is written, then ENOSPC.
+    let err = files::write_whole(&target, "--out", |w| {
+        w.write_all(b"omega_rpm,wob_kn\n20,1")?;
+        Err(std::io::Error::from(std::io::ErrorKind::StorageFull))
+    })
+    .unwrap_err();
+    let text = err.to_string();
+    assert!(text.starts_with("--out: ") && text.contains("map.csv"), "{text}");
+    assert!(!err.is_bad_input(), "a full disk is a failure of the machine (exit 3)");
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "old contents\n");
+    assert_eq!(names(tmp.path()), ["map.csv"]);
+    // A write that succeeds replaces it whole.
+    files::write_whole(&target, "--out", |w| w.write_all(b"new\n")).unwrap();
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "new\n");
+    assert_eq!(names(tmp.path()), ["map.csv"]);
+}
+
+#[cfg(unix)]
+#[test]
+fn outputs_are_created_with_the_process_umask() {
+    use std::os::unix::fs::PermissionsExt;
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let bitrock = env!("CARGO_BIN_EXE_bitrock");
+    let script =
+        format!("umask 027 && '{bitrock}' export R -o particles.csv && '{bitrock}' simulate --duration-s 2 -o sim.csv");
+    let status = std::process::Command::new("sh")
+        .current_dir(tmp.path())
+        .args(["-c", &script])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    for name in ["particles.csv", "sim.csv"] {
+        let mode = std::fs::metadata(tmp.path().join(name)).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o640, "{name}: {mode:o}");
+    }
+}
+
+#[test]
+fn a_store_killed_while_being_created_leaves_only_a_stale_temporary_the_next_run_removes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let r = tmp.path().join("R");
+    std::fs::create_dir(&r).unwrap();
+    // What a kill during creation leaves: an unlocked temporary of bitrock's naming.
+    std::fs::write(r.join(format!("{TEMP_PREFIX}Ab12Cd")), b"SQLite format 3\0partial").unwrap();
+    // Not a run (export says so), and not a directory that needs --force.
+    assert_eq!(run_in(tmp.path(), &["export", "R"]).0, 2);
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    assert_eq!(
+        names(&r),
+        [".bitrock-lock", "data.csv", "envelopes.csv", "run.json", "run.sqlite"]
+    );
+}
+
+#[test]
+fn stale_staging_directories_of_summaries_and_reports_are_removed_by_the_next_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let r = tmp.path().join("R");
+    std::fs::create_dir(r.join(".bitrock-summary-x1Y2")).unwrap();
+    std::fs::write(r.join(".bitrock-summary-x1Y2/run.json"), "{").unwrap();
+    let (code, _, err) = run_in(tmp.path(), &["abc", "--resume", "R", "-q"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!r.join(".bitrock-summary-x1Y2").exists());
+}
+
+#[test]
+fn no_command_writes_over_a_runs_store() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    assert_refused(
+        run_in(tmp.path(), &["export", "R", "-o", "R/run.sqlite"]),
+        &["--out", "run's store"],
+    );
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &[
+                "stability",
+                "--run",
+                "R",
+                "--out",
+                "R/run.sqlite",
+                "--omega-rpm",
+                "20:220:3",
+                "--wob-kn",
+                "20:700:3",
+            ],
+        ),
+        &["--out", "run's store"],
+    );
+    assert_eq!(export(tmp.path(), "R"), before);
+}
+
+// 3. One writer per run directory.
+
+#[test]
+fn a_locked_run_is_refused_naming_the_holder() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    let lock = DirLock::acquire(&tmp.path().join("R")).unwrap();
+    let pid = format!("PID {}", std::process::id());
+    assert_refused(run_in(tmp.path(), &["abc", "--resume", "R", "-q"]), &["in use", &pid]);
+    assert_refused(small_run(tmp.path(), "R", &["--force"]), &["in use", &pid]);
+    drop(lock);
+    assert_eq!(export(tmp.path(), "R"), before);
+    assert_eq!(run_in(tmp.path(), &["abc", "--resume", "R", "-q"]).0, 0);
+}
+
+// 4. No flag can hang, exhaust memory or spawn unbounded threads.
+
+#[test]
+fn flags_beyond_the_machine_are_refused_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_refused(
+        small_run(tmp.path(), "T", &["--threads", "99999999999"]),
+        &["--threads", "1..="],
+    );
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &[
+                "abc",
+                "--out",
+                "P",
+                "--particles",
+                "1000000000",
+                "--backend",
+                "cpu",
+                "-q",
+            ],
+        ),
+        &["--particles", "needs about", "available"],
+    );
+    assert_refused(
+        run_in(tmp.path(), &["simulate", "--duration-s", "1e12"]),
+        &["--duration-s", "needs about"],
+    );
+    assert_refused(small_run(tmp.path(), "D", &["--delta", "1e100"]), &["--delta"]);
+    assert_refused(
+        small_run(tmp.path(), "K", &["--sampler", "smc", "--kernel-scale", "1e300"]),
+        &["--kernel-scale", "prior box"],
+    );
+    assert_refused(
+        small_run(tmp.path(), "E", &["--start-epsilon", "0.001"]),
+        &["--start-epsilon"],
+    );
+    assert_refused(
+        small_run(tmp.path(), "S", &["--summary-population", "99"]),
+        &["--summary-population"],
+    );
+    // Nothing was written for any of them.
+    assert!(names(tmp.path()).is_empty(), "{:?}", names(tmp.path()));
+}
+
+#[test]
+fn resuming_a_store_that_lost_particles_is_refused_not_a_panic() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let conn = rusqlite::Connection::open(tmp.path().join("R/run.sqlite")).unwrap();
+    conn.execute("DELETE FROM particles WHERE population = 1", []).unwrap();
+    drop(conn);
+    assert_refused(
+        run_in(tmp.path(), &["abc", "--resume", "R", "--max-populations", "3", "-q"]),
+        &["run.sqlite", "population 1 has 0 of its 200 particles"],
+    );
+}
+
+// 5. Exit codes and messages.
+
+#[test]
+fn data_that_defeat_the_fits_exit_2_naming_the_file_and_the_cause() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |name: &str| tmp.path().join(name);
+    // Columns: time_s, bit_speed_rpm, torque_knm, wob_kn.
+    let cases = [
+        (
+            record(&p("constant.csv"), |v| vec![v[0], 100.0, v[2], v[3]]),
+            "bit speed",
+        ),
+        (
+            record(&p("identical.csv"), |_| vec![1.0, 100.0, 7.0, 240.0]),
+            "bit speed",
+        ),
+        (
+            record(&p("huge.csv"), |v| vec![v[0], v[1], v[2] * 1e300, v[3]]),
+            "largest |torque|",
+        ),
+        (
+            record(&p("tiny.csv"), |v| vec![v[0], v[1], v[2] * 1e-320, v[3]]),
+            "largest |torque|",
+        ),
+    ];
+    for (file, cause) in &cases {
+        let path = file.to_str().unwrap();
+        assert_refused(run_in(tmp.path(), &["fit", path]), &[path, cause]);
+    }
+    let no_wob = record(&p("no_wob.csv"), |v| vec![v[0], v[1], v[2], 0.0]);
+    assert_refused(
+        run_in(tmp.path(), &["fit", no_wob.to_str().unwrap(), "--scale-by-wob"]),
+        &["--scale-by-wob", "weight on bit ≤ 0"],
+    );
+}
+
+#[test]
+fn output_targets_that_cannot_be_written_name_their_flag() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    std::fs::create_dir(tmp.path().join("adir")).unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["export", "R", "--out", "adir"]),
+        &["--out", "is a directory"],
+    );
+    assert_refused(
+        run_in(tmp.path(), &["export", "R", "--out", "missing/x.csv"]),
+        &["--out", "does not exist"],
+    );
+    let (code, _, err) = small_run(tmp.path(), "/proc/bitrock-run", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--out: /proc/bitrock-run"), "{err}");
+    assert_eq!(err.matches("os error").count(), 1, "the OS error once: {err}");
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("nowhere", tmp.path().join("dangling")).unwrap();
+        assert_refused(small_run(tmp.path(), "dangling", &[]), &["--out", "symbolic link"]);
+        assert_refused(
+            run_in(tmp.path(), &["export", "R", "-o", "dangling"]),
+            &["--out", "symbolic link"],
+        );
+    }
+}
+
+#[test]
+fn extra_values_duplicate_columns_and_doubled_roles_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let prior = tmp.path().join("prior.toml");
+    std::fs::write(&prior, "[m1]\nb0 = [4.0, 5.0, 6.0]\n").unwrap();
+    assert_refused(
+        small_run(tmp.path(), "R", &["--prior", prior.to_str().unwrap()]),
+        &["prior.toml", "[m1] b0 has 3 values"],
+    );
+    // Empty explicit bounds are blamed on the file, in its units.
+    std::fs::write(&prior, "[m2]\ntsb = [-2.0, -1.0]\n").unwrap();
+    assert_refused(
+        small_run(tmp.path(), "R", &["--prior", prior.to_str().unwrap()]),
+        &["--prior", "[m2] tsb"],
+    );
+    assert_refused(
+        run_in(tmp.path(), &["simulate", "--law", "m2", "--params", "10,5,0.3,7"]),
+        &["--params", "takes 3 parameters", "got 4"],
+    );
+    let dup = tmp.path().join("dup.csv");
+    std::fs::write(&dup, "bit_speed_rpm,torque_knm,torque_knm\n100,7,8\n120,6,5\n").unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["fit", dup.to_str().unwrap()]),
+        &["dup.csv:1", "two columns"],
+    );
+    let rec = record(&tmp.path().join("rec.csv"), |v| v.to_vec());
+    assert_refused(
+        run_in(tmp.path(), &["fit", rec.to_str().unwrap(), "--speed-col", "torque_knm"]),
+        &["rec.csv:1", "--speed-col and --torque-col"],
+    );
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &[
+                "stability",
+                "--law",
+                "m2",
+                "--params",
+                "10,5,0.3",
+                "--fe-file",
+                "nowhere.toml",
+            ],
+        ),
+        &["--fe-file", "--structure fe"],
+    );
+    assert_eq!(names(tmp.path()), ["dup.csv", "prior.toml", "rec.csv"]);
+}
