@@ -70,7 +70,7 @@ impl FitOptions {
             ));
         }
         if let (Some(_), Some(wob)) = (self.w_ref_n, &calibration.wob_n) {
-            let not_positive = wob.iter().filter(|&&w| !(w > 0.0)).count();
+            let not_positive = wob.iter().filter(|&&w| w <= 0.0).count();
             if not_positive > 0 {
                 return Err(Error::arg(
                     "--scale-by-wob",

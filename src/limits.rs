@@ -42,7 +42,7 @@ pub fn available_memory_bytes() -> Option<u64> {
 /// space only.
 pub fn check_memory(flag: &str, bytes: f64, what: &str) -> Result<()> {
     let available = available_memory_bytes().map_or(u64::MAX as f64, |b| b as f64);
-    if !(bytes <= available) {
+    if bytes.is_nan() || bytes > available {
         return Err(Error::arg(
             flag,
             format!(
