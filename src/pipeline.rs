@@ -74,10 +74,11 @@ impl AbcJob {
             note,
         )?;
         let dir = self.out.as_ref().map(|out| out.path.as_path());
-        let analysis = Analysis::new(outcome, self.summary_population, dir)?;
+        let mut analysis = Analysis::new(outcome, self.summary_population, dir)?;
         if let Some(dir) = dir {
             analysis.write_summary(dir)?;
         }
+        analysis.outcome.lock = None; // the directory is complete: the next writer may come
         Ok(analysis)
     }
 }
@@ -107,8 +108,9 @@ pub fn resume(
     note: &mut dyn FnMut(String),
 ) -> Result<Analysis> {
     let outcome = run::resume(dir, more, observer, note)?;
-    let analysis = Analysis::new(outcome, summary_population, Some(dir))?;
+    let mut analysis = Analysis::new(outcome, summary_population, Some(dir))?;
     analysis.write_summary(dir)?;
+    analysis.outcome.lock = None; // the directory is complete: the next writer may come
     Ok(analysis)
 }
 

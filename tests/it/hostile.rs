@@ -185,9 +185,11 @@ fn a_kill_during_force_leaves_the_old_run_or_the_new_one() {
             assert_eq!(export(tmp.path(), "R"), old);
         }
     }
-    // The kill times span both sides of the swap on a loaded machine or not; which side each
-    // landed on is not asserted, only that R held a whole run each time.
-    assert!(saw_old || saw_new);
+    // 30 ms is before the fits end, however loaded the machine: the old run. Which side the
+    // later kills land on depends on the machine's speed (about 0.6 s to population 0 on two
+    // shared cores); each time R held a whole run.
+    assert!(saw_old);
+    eprintln!("kills after the swap seen: {saw_new}");
     // A later run in the same parent removes the staging directories the kills left.
     assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
     assert_eq!(names(tmp.path()), ["R"]);
@@ -224,8 +226,9 @@ fn outputs_are_created_with_the_process_umask() {
     let tmp = tempfile::tempdir().unwrap();
     assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
     let bitrock = env!("CARGO_BIN_EXE_bitrock");
-    let script =
-        format!("umask 027 && '{bitrock}' export R -o particles.csv && '{bitrock}' simulate --duration-s 2 -o sim.csv");
+    let script = format!(
+        "umask 027 && '{bitrock}' export R -o particles.csv && '{bitrock}' simulate --law m2 --omega-rpm 100 --duration-s 2 -o sim.csv"
+    );
     let status = std::process::Command::new("sh")
         .current_dir(tmp.path())
         .args(["-c", &script])
@@ -337,7 +340,10 @@ fn flags_beyond_the_machine_are_refused_before_any_work() {
         &["--particles", "needs about", "available"],
     );
     assert_refused(
-        run_in(tmp.path(), &["simulate", "--duration-s", "1e12"]),
+        run_in(
+            tmp.path(),
+            &["simulate", "--law", "m2", "--omega-rpm", "100", "--duration-s", "1e12"],
+        ),
         &["--duration-s", "needs about"],
     );
     assert_refused(small_run(tmp.path(), "D", &["--delta", "1e100"]), &["--delta"]);
@@ -450,7 +456,18 @@ fn extra_values_duplicate_columns_and_doubled_roles_are_refused() {
         &["--prior", "[m2] tsb"],
     );
     assert_refused(
-        run_in(tmp.path(), &["simulate", "--law", "m2", "--params", "10,5,0.3,7"]),
+        run_in(
+            tmp.path(),
+            &[
+                "simulate",
+                "--law",
+                "m2",
+                "--omega-rpm",
+                "100",
+                "--params",
+                "10,5,0.3,7",
+            ],
+        ),
         &["--params", "takes 3 parameters", "got 4"],
     );
     let dup = tmp.path().join("dup.csv");

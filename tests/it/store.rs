@@ -37,7 +37,14 @@ fn start(dir: &Path, config: RunConfig) -> Outcome {
         path: dir.to_path_buf(),
         replace: false,
     };
-    run::start(Some(&dir), data, config, None, &mut Silent, &mut |_| {}).unwrap()
+    released(run::start(Some(&dir), data, config, None, &mut Silent, &mut |_| {}).unwrap())
+}
+
+/// `outcome` without its run directory's lock, which it holds while it lives (one writer per
+/// run directory): these tests continue the run in the same process.
+fn released(mut outcome: Outcome) -> Outcome {
+    outcome.lock = None;
+    outcome
 }
 
 /// Populations equal in everything a population is: ε, counts, particles (bit for bit).
@@ -173,13 +180,13 @@ fn continuing_equals_uninterrupted(sampler: fn(RunConfig) -> RunConfig) {
         max_populations: Some(6),
         ..Continuation::default()
     };
-    let continued = run::resume(&part_dir, &more, &mut Silent, &mut |_| {}).unwrap();
+    let continued = released(run::resume(&part_dir, &more, &mut Silent, &mut |_| {}).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     assert_same_populations(&continued.run.populations, &whole.run.populations);
     let stored = RunStore::open(&part_dir).unwrap().load_populations().unwrap();
     assert_same_populations(&stored, &whole.run.populations);
     // Continuing a finished run with the same rules adds nothing.
-    let again = run::resume(&part_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap();
+    let again = released(run::resume(&part_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap());
     assert_eq!(again.run.populations.len(), 6);
     assert_eq!(again.run.stop, StopReason::MaxPopulations);
 }
@@ -195,7 +202,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
         eps_min: Some(0.016),
         ..Continuation::default()
     };
-    let continued = run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap();
+    let continued = released(run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap());
     assert_eq!(continued.run.stop, StopReason::EpsMin);
     assert!(continued.run.populations.len() > n);
     assert_same_populations(&continued.run.populations[..n], &first.run.populations);
@@ -322,7 +329,7 @@ fn a_wall_time_stop_is_continued_without_the_old_budget() {
     let first = start(&run_dir, budgeted);
     assert_eq!(first.run.stop, StopReason::WallTime);
     assert!(first.run.populations.is_empty());
-    let continued = run::resume(&run_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap();
+    let continued = released(run::resume(&run_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     let whole = start(&dir.path().join("whole"), config(500, 4, 0.0));
     assert_same_populations(&continued.run.populations, &whole.run.populations);
