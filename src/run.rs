@@ -234,7 +234,7 @@ pub fn resume(
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     let mut store = RunStore::open(dir)?;
-    let StoredRun { setup, populations } = store.load()?;
+    let StoredRun { setup, populations } = store.load_to_continue()?;
     let mut config: RunConfig = serde_json::from_value(setup.config.clone()).map_err(|e| Error::Store {
         path: dir.join(STORE_FILE),
         message: format!("the stored configuration is not one this bitrock reads: {e}"),
@@ -329,8 +329,13 @@ impl Observer for Storing<'_> {
         self.inner.progress(progress);
     }
 
-    fn population_done(&mut self, population: &Population) -> Result<()> {
-        self.store.append_population(population)?;
-        self.inner.population_done(population)
+    fn population_done(&mut self, population: &Population, previous: Option<&Population>) -> Result<()> {
+        self.store.append_population(population, previous)?;
+        self.inner.population_done(population, previous)
+    }
+
+    /// The store holds every population's particles.
+    fn keeps_particles(&self) -> bool {
+        true
     }
 }
