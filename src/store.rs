@@ -862,20 +862,29 @@ fn insert_particle_rows(
         .first()
         .map(|p| p.weight)
         .filter(|w| new.iter().all(|p| p.weight.to_bits() == w.to_bits()));
-    let mut insert = tx.prepare(
-        "INSERT INTO particle_rows (id, first_population, law, candidate, rho, weight, p0, p1, p2, p3, p4, p5)
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)",
-    )?;
-    for (k, p) in new.iter().enumerate() {
-        insert.raw_bind_parameter(1, first_row + k as i64)?;
-        insert.raw_bind_parameter(2, g)?;
-        insert.raw_bind_parameter(3, p.law.name())?;
-        insert.raw_bind_parameter(4, p.index as i64)?;
-        insert.raw_bind_parameter(5, p.rho)?;
-        insert.raw_bind_parameter(6, if row_weight.is_some() { None } else { Some(p.weight) })?;
-        for j in 0..crate::laws::MAX_PARAMS {
-            insert.raw_bind_parameter(7 + j, p.params.get(j).copied())?;
+    // Rows go in ROWS_PER_INSERT at a time: one statement step per row was most of the
+    // cost of writing a population.
+    let statement = |rows: usize| {
+        let values = vec!["(?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"; rows].join(", ");
+        tx.prepare(&format!(
+            "INSERT INTO particle_rows (id, first_population, law, candidate, rho, weight, p0, p1, p2, p3, p4, p5)
+             VALUES {values}"
+        ))
+    };
+    let weight_of = |p: &Particle| if row_weight.is_some() { None } else { Some(p.weight) };
+    let (chunked, tail) = new.split_at(new.len() / ROWS_PER_INSERT * ROWS_PER_INSERT);
+    let mut insert = statement(ROWS_PER_INSERT)?;
+    for (c, chunk) in chunked.chunks_exact(ROWS_PER_INSERT).enumerate() {
+        for (k, p) in chunk.iter().enumerate() {
+            let id = first_row + (c * ROWS_PER_INSERT + k) as i64;
+            bind_particle_row(&mut insert, k, id, g, p, weight_of(p))?;
         }
+        insert.raw_execute()?;
+    }
+    let mut insert = statement(1)?;
+    for (k, p) in tail.iter().enumerate() {
+        let id = first_row + (chunked.len() + k) as i64;
+        bind_particle_row(&mut insert, 0, id, g, p, weight_of(p))?;
         insert.raw_execute()?;
     }
     tx.execute(
@@ -890,6 +899,33 @@ fn insert_particle_rows(
             row_weight
         ],
     )?;
+    Ok(())
+}
+
+/// Rows of `particle_rows` per INSERT statement (12 parameters each, far below SQLite's
+/// limit of 32,766).
+const ROWS_PER_INSERT: usize = 64;
+
+/// Binds the values of `particle_rows` row number `row` of a multi-row INSERT: id, first
+/// population, law, candidate, ρ, weight (NULL: the population's row weight), p0..p5.
+fn bind_particle_row(
+    insert: &mut rusqlite::Statement,
+    row: usize,
+    id: i64,
+    population: i64,
+    p: &Particle,
+    weight: Option<f64>,
+) -> rusqlite::Result<()> {
+    let at = 12 * row;
+    insert.raw_bind_parameter(at + 1, id)?;
+    insert.raw_bind_parameter(at + 2, population)?;
+    insert.raw_bind_parameter(at + 3, p.law.name())?;
+    insert.raw_bind_parameter(at + 4, p.index as i64)?;
+    insert.raw_bind_parameter(at + 5, p.rho)?;
+    insert.raw_bind_parameter(at + 6, weight)?;
+    for j in 0..crate::laws::MAX_PARAMS {
+        insert.raw_bind_parameter(at + 7 + j, p.params.get(j).copied())?;
+    }
     Ok(())
 }
 

@@ -48,7 +48,7 @@ pub struct LawSummary {
     /// MAP estimate: the mode of a Gaussian product-kernel density estimate over the law's
     /// particles, found by mean-shift from the particle of highest estimated density. Up to
     /// 25,000 particles: over all of them, every particle tried as the start. Beyond: over an
-    /// evenly strided subsample of at most 25,000, the best of 2,000 strided starts, an
+    /// evenly strided subsample of at most 25,000, the best of 500 strided starts, an
     /// estimate with the sampling error of that many draws (see `KDE_POINTS`).
     pub map: Vec<f64>,
     /// The kernel bandwidth of each parameter (SI): Scott's rule for a d-dimensional product
@@ -151,8 +151,10 @@ fn summarize_law(law: Law, members: &[&Particle], probability: f64) -> LawSummar
         .iter()
         .map(|c| c.iter().all(|v| v.to_bits() == c[0].to_bits()))
         .collect();
+    // Each sum below is one compensated sum in particle order (so the same bits on any number
+    // of threads); the sums of different columns and pairs run in parallel.
     let mean: Vec<f64> = columns
-        .iter()
+        .par_iter()
         .zip(&constant)
         .map(|(c, &k)| {
             if k {
@@ -164,23 +166,23 @@ fn summarize_law(law: Law, members: &[&Particle], probability: f64) -> LawSummar
         .collect();
     // Two-pass (deviations from the mean) sums: no cancellation when |mean| ≫ σ.
     let deviations: Vec<Vec<f64>> = columns
-        .iter()
+        .par_iter()
         .zip(&mean)
         .map(|(c, m)| c.iter().map(|v| v - m).collect())
         .collect();
     // A law whose weight sits on one particle has no spread either (V₁ = V₂/V₁).
     let varies: Vec<bool> = constant.iter().map(|&k| !k && n >= 2 && v1 - v2 / v1 > 0.0).collect();
-    let wsum = |f: &dyn Fn(usize) -> f64| compensated_sum((0..n).map(|i| w[i] * f(i)));
-    let std_dev: Vec<f64> = deviations
+    // Σ w_i a_i b_i.
+    let weighted_sum = |a: &[f64], b: &[f64]| compensated_sum(w.iter().zip(a).zip(b).map(|((w, x), y)| w * (x * y)));
+    let squares: Vec<f64> = deviations
+        .par_iter()
+        .zip(&varies)
+        .map(|(dv, &v)| if v { weighted_sum(dv, dv) } else { 0.0 })
+        .collect();
+    let std_dev: Vec<f64> = squares
         .iter()
         .zip(&varies)
-        .map(|(dv, &v)| {
-            if v {
-                (wsum(&|i| dv[i] * dv[i]) / (v1 - v2 / v1)).sqrt()
-            } else {
-                0.0
-            }
-        })
+        .map(|(&s, &v)| if v { (s / (v1 - v2 / v1)).sqrt() } else { 0.0 })
         .collect();
     // Every quantile of the full population, exact: one sorted copy of a column at a time
     // (sorted on all cores; the order of a total order is unique, so any sort gives the same
@@ -201,25 +203,23 @@ fn summarize_law(law: Law, members: &[&Particle], probability: f64) -> LawSummar
     let quantiles = |level: usize| -> Vec<f64> { column_quantiles.iter().map(|q| q[level]).collect() };
     let (q01, q50, q99) = (quantiles(0), quantiles(2), quantiles(4));
 
+    let pairs: Vec<(usize, usize)> = (0..d)
+        .flat_map(|j| (j + 1..d).map(move |k| (j, k)))
+        .filter(|&(j, k)| varies[j] && varies[k])
+        .collect();
+    let products: Vec<f64> = pairs
+        .par_iter()
+        .map(|&(j, k)| weighted_sum(&deviations[j], &deviations[k]))
+        .collect();
     let mut correlation = vec![vec![None; d]; d];
-    for j in 0..d {
-        if !varies[j] {
-            continue;
-        }
+    for j in (0..d).filter(|&j| varies[j]) {
         correlation[j][j] = Some(1.0);
-        for k in j + 1..d {
-            if !varies[k] {
-                continue;
-            }
-            let (dj, dk) = (&deviations[j], &deviations[k]);
-            let sxy = wsum(&|i| dj[i] * dk[i]);
-            let sxx = wsum(&|i| dj[i] * dj[i]);
-            let syy = wsum(&|i| dk[i] * dk[i]);
-            // Rounding can push |r| a hair past 1 for an exactly linear pair.
-            let r = (sxy / (sxx.sqrt() * syy.sqrt())).clamp(-1.0, 1.0);
-            correlation[j][k] = Some(r);
-            correlation[k][j] = Some(r);
-        }
+    }
+    for (&(j, k), &sxy) in pairs.iter().zip(&products) {
+        // Rounding can push |r| a hair past 1 for an exactly linear pair.
+        let r = (sxy / (squares[j].sqrt() * squares[k].sqrt())).clamp(-1.0, 1.0);
+        correlation[j][k] = Some(r);
+        correlation[k][j] = Some(r);
     }
 
     let best = members
@@ -292,12 +292,13 @@ const BLOCK: usize = 1024;
 /// evaluated at every particle to find the start (n²/2 kernel terms: 3.1e8 at the limit).
 /// Beyond, it is built on an evenly strided subsample of at most this many (a systematic,
 /// i.i.d. sample of the population; Scott's rule with its size) and the start is the best of
-/// [`MODE_CANDIDATES`] strided particles, so the cost is bounded whatever n: the MAP of a law
+/// [`MODE_CANDIDATES`] strided particles of it (500 × 25,000 kernel terms, and 25,000 per
+/// mean-shift step), so the cost is bounded whatever n: the MAP of a law
 /// with more particles is an estimate from 12,500 to 25,000 of them, whose sampling error is
 /// that of a KDE mode from that many draws (about 0.1 σ per coordinate for a 2-parameter
 /// Gaussian posterior, against 0.03 σ from 10⁶; a test checks it at n = 400,000).
 const KDE_POINTS: usize = 25_000;
-const MODE_CANDIDATES: usize = 2_000;
+const MODE_CANDIDATES: usize = 500;
 
 /// The mode of a Gaussian product-kernel density estimate, returned as (mode, bandwidth).
 ///
@@ -422,9 +423,21 @@ fn climb<const D: usize>(z: &[[f64; D]], weights: &[f64], full_search: bool) -> 
     } else {
         let stride = z.len().div_ceil(MODE_CANDIDATES);
         let candidates: Vec<&[f64; D]> = z.iter().step_by(stride).collect();
+        // By coordinate, so that the kernels of one candidate vectorise.
+        let columns: [Vec<f64>; D] = std::array::from_fn(|k| z.iter().map(|p| p[k]).collect());
+        let columns: [&[f64]; D] = std::array::from_fn(|k| columns[k].as_slice());
         let density: Vec<f64> = candidates
             .par_iter()
-            .map(|&c| z.iter().zip(weights).map(|(p, w)| kernel(c, p) * w).sum())
+            .map_init(
+                || vec![0.0; z.len()],
+                |kernels, &c| {
+                    kernels_into(c, &columns, kernels);
+                    for (v, w) in kernels.iter_mut().zip(weights) {
+                        *v *= w;
+                    }
+                    sum4(kernels)
+                },
+            )
             .collect();
         let mut full = vec![f64::NEG_INFINITY; z.len()];
         for (k, d) in density.into_iter().enumerate() {
@@ -576,7 +589,15 @@ pub fn predictive_envelope(
         let stride = law_particles.len().div_ceil(ENVELOPE_POINTS);
         law_particles = law_particles.into_iter().step_by(stride).collect();
     }
-    let members: Vec<&[f64]> = law_particles.iter().map(|p| p.params.as_slice()).collect();
+    // Contiguous copies: the torques of one speed read them in a stream.
+    let members: Vec<[f64; MAX_PARAMS]> = law_particles
+        .iter()
+        .map(|p| {
+            let mut a = [0.0; MAX_PARAMS];
+            a[..p.params.len()].copy_from_slice(&p.params);
+            a
+        })
+        .collect();
     let w = relative_weights(&law_particles);
     let weighted = w.iter().any(|&v| v.to_bits() != 1.0f64.to_bits());
     let (q_lo, q_hi) = ((1.0 - level) / 2.0, (1.0 + level) / 2.0);
@@ -874,7 +895,7 @@ mod tests {
     fn map_of_a_large_population_is_the_mode_of_a_subsample_within_its_stated_error() {
         // Past KDE_POINTS the KDE is that of every 16th particle here (m = 25,000), with
         // Scott's rule for m and the full population's robust scale, and the start is the
-        // best of 2,000 strided particles; the tolerance is 4 standard deviations of a KDE
+        // best of 500 strided particles; the tolerance is 4 standard deviations of a KDE
         // mode from m draws (sd 0.101 σ at m = 25,000).
         let (mu, sigma, rho, n) = ([1.0e4, 0.08], [1.5e3, 0.01], -0.5, 400_000);
         let particles = gaussian_population(8, n, mu, sigma, rho);
