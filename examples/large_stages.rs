@@ -36,7 +36,7 @@ fn main() -> anyhow::Result<()> {
     let t = Instant::now();
     cpu_at_start.set(cpu_seconds());
     let store = RunStore::open(dir)?;
-    let stored = store.load_to_continue()?;
+    let stored = store.load_with_last_particles()?;
     time("read the last population back", t);
     let last = stored
         .populations

@@ -234,7 +234,7 @@ pub fn resume(
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     let mut store = RunStore::open(dir)?;
-    let StoredRun { setup, populations } = store.load_to_continue()?;
+    let StoredRun { setup, populations } = store.load_with_last_particles()?;
     let mut config: RunConfig = serde_json::from_value(setup.config.clone()).map_err(|e| Error::Store {
         path: dir.join(STORE_FILE),
         message: format!("the stored configuration is not one this bitrock reads: {e}"),

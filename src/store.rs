@@ -443,9 +443,9 @@ impl RunStore {
     }
 
     /// As [`load`](Self::load), with the particles of the last population only (the others'
-    /// are empty): what continuing the run needs, in memory O(N) however many populations
-    /// it has.
-    pub fn load_to_continue(&self) -> Result<StoredRun> {
+    /// are empty): what continuing the run and its report need, in memory O(N) however many
+    /// populations it has.
+    pub fn load_with_last_particles(&self) -> Result<StoredRun> {
         self.load_with(false)
     }
 
