@@ -18,15 +18,37 @@ pub fn compensated_sum(values: impl IntoIterator<Item = f64>) -> f64 {
 }
 
 /// The q-quantile (0 ≤ q ≤ 1) of `values` by linear interpolation between order statistics
-/// (type 7, as numpy's default). `values` need not be sorted; NaNs are not expected.
+/// (type 7, as numpy's default). `values` need not be sorted; NaNs are not expected. O(n):
+/// the two order statistics are found by selection, not by sorting.
 pub fn quantile(values: &[f64], q: f64) -> f64 {
     assert!(!values.is_empty(), "quantile of an empty set");
     let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let h = q.clamp(0.0, 1.0) * (v.len() - 1) as f64;
-    let lo = h.floor() as usize;
-    let hi = h.ceil() as usize;
-    v[lo] + (h - lo as f64) * (v[hi] - v[lo])
+    let (lo, hi, h) = type7_position(v.len(), q);
+    let (_, &mut at_lo, above) = v.select_nth_unstable_by(lo, f64::total_cmp);
+    // The next order statistic is the smallest of those above.
+    let at_hi = if hi == lo {
+        at_lo
+    } else {
+        above
+            .iter()
+            .copied()
+            .reduce(|a, b| if b.total_cmp(&a).is_lt() { b } else { a })
+            .expect("hi < n")
+    };
+    at_lo + (h - lo as f64) * (at_hi - at_lo)
+}
+
+/// [`quantile`] of values already sorted ascending (by `f64::total_cmp`): no copy, O(1).
+pub fn quantile_of_sorted(sorted: &[f64], q: f64) -> f64 {
+    assert!(!sorted.is_empty(), "quantile of an empty set");
+    let (lo, hi, h) = type7_position(sorted.len(), q);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+/// Type 7's position h = q (n − 1) and the order statistics (0-based) either side of it.
+fn type7_position(n: usize, q: f64) -> (usize, usize, f64) {
+    let h = q.clamp(0.0, 1.0) * (n - 1) as f64;
+    (h.floor() as usize, h.ceil() as usize, h)
 }
 
 /// The q-quantile of `values` with non-negative `weights` (not all 0): type 7 generalised to
@@ -142,6 +164,34 @@ mod tests {
         assert!((quantile(&v, 0.0) - 1.0).abs() < 1e-15);
         assert!((quantile(&v, 1.0) - 4.0).abs() < 1e-15);
         assert!((quantile(&v, 1.0 / 3.0) - 2.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn selection_quantiles_equal_those_of_the_sorted_values_to_the_bit() {
+        // Ties, signed zeros and an even count: the selection's order statistics are the
+        // sort's.
+        let mut state = 12345u64;
+        let values: Vec<f64> = (0..10_001)
+            .map(|i| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                match i % 97 {
+                    0 => 0.0,
+                    1 => -0.0,
+                    2 => 1.5,
+                    _ => (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5,
+                }
+            })
+            .collect();
+        for values in [&values[..], &values[..10_000], &values[..1], &values[..2]] {
+            let mut sorted = values.to_vec();
+            sorted.sort_by(f64::total_cmp);
+            for q in [0.0, 0.01, 0.25, 1.0 / 3.0, 0.5, 0.75, 0.99, 1.0] {
+                let (a, b) = (quantile(values, q), quantile_of_sorted(&sorted, q));
+                assert_eq!(a.to_bits(), b.to_bits(), "n {} q {q}", values.len());
+            }
+        }
     }
 
     #[test]

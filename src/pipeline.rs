@@ -5,13 +5,14 @@
 //! program that wants what `bitrock abc` does calls them too.
 
 use crate::abc::posterior::{ENVELOPE_LEVEL, Envelope, PosteriorSummary, predictive_envelope, speed_grid, summarize};
-use crate::abc::{Observer, Population};
+use crate::abc::{Observer, Particle};
 use crate::data::FieldData;
 use crate::documents::{self, RunSummary};
 use crate::error::{Error, Result};
 use crate::files;
 use crate::prior::PriorFile;
 use crate::run::{self, Continuation, Outcome, RunConfig};
+use crate::store::RunStore;
 use std::path::Path;
 
 /// Speeds of the predictive envelopes, evenly spaced over the record's range.
@@ -130,8 +131,17 @@ impl Analysis {
             })?,
         };
         let laws = &outcome.config.laws;
-        let posterior = summarize(&last.particles, laws);
-        let envelopes = envelopes(last, laws, &outcome.setup.data);
+        // A stored run keeps only its last population's particles in memory.
+        let stored;
+        let particles = match dir {
+            Some(dir) if last.particles.is_empty() && last.record.accepted > 0 => {
+                stored = RunStore::open(dir)?.load_particles(last.record.index)?;
+                &stored
+            }
+            _ => &last.particles,
+        };
+        let posterior = summarize(particles, laws);
+        let envelopes = envelopes(particles, laws, &outcome.setup.data);
         Ok(Self {
             summary_population: last.record.index,
             posterior,
@@ -191,12 +201,12 @@ fn no_population(outcome: &Outcome, dir: Option<&Path>) -> Error {
     })
 }
 
-/// The predictive envelopes of `population`'s laws over the record's speed range.
-fn envelopes(population: &Population, laws: &[crate::Law], data: &FieldData) -> Vec<Envelope> {
+/// The predictive envelopes of a population's laws over the record's speed range.
+fn envelopes(particles: &[Particle], laws: &[crate::Law], data: &FieldData) -> Vec<Envelope> {
     let all_speeds = data.calibration.speed_rad_s.iter().chain(&data.validation.speed_rad_s);
     let (lo, hi) = all_speeds.fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
     let grid = speed_grid(lo, hi, ENVELOPE_SPEEDS);
     laws.iter()
-        .filter_map(|&law| predictive_envelope(&population.particles, law, &grid, ENVELOPE_LEVEL, 1.0))
+        .filter_map(|&law| predictive_envelope(particles, law, &grid, ENVELOPE_LEVEL, 1.0))
         .collect()
 }

@@ -422,7 +422,7 @@ pub fn resume(
     }
     let lock = files::DirLock::acquire(dir)?;
     files::remove_stale(dir);
-    let StoredRun { setup, populations } = store.load()?;
+    let StoredRun { setup, populations } = store.load_with_last_particles()?;
     check_particles_stored(dir, &populations)?;
     let mut config: RunConfig = serde_json::from_value(setup.config.clone()).map_err(|e| Error::Store {
         path: dir.join(STORE_FILE),
@@ -467,10 +467,11 @@ pub fn resume(
     })
 }
 
-/// Refuses a store whose populations lack particles their records count (rows deleted by
-/// hand): the sampler continues from them and cannot from fewer.
+/// Refuses a store whose last population lacks particles its record counts (rows deleted by
+/// hand): the sampler continues from it and cannot from fewer. Earlier populations are loaded
+/// without particles (`load_with_last_particles`), so only the last is checked.
 fn check_particles_stored(dir: &Path, populations: &[Population]) -> Result<()> {
-    for p in populations {
+    if let Some(p) = populations.last() {
         if p.particles.len() != p.record.accepted {
             return Err(Error::Data {
                 path: dir.join(STORE_FILE),
@@ -541,14 +542,19 @@ impl Observer for Storing<'_> {
         self.inner.progress(progress);
     }
 
-    fn population_done(&mut self, population: &Population) -> Result<()> {
-        self.store.append_population(population)?;
+    fn population_done(&mut self, population: &Population, previous: Option<&Population>) -> Result<()> {
+        self.store.append_population(population, previous)?;
         if let Some(claim) = self.claim.as_deref_mut()
             && claim.put_in_place()?
         {
             // SQLite names its journal after the path it opened: reopen at the new place.
             self.store = RunStore::open(&claim.dir)?;
         }
-        self.inner.population_done(population)
+        self.inner.population_done(population, previous)
+    }
+
+    /// The store holds every population's particles.
+    fn keeps_particles(&self) -> bool {
+        true
     }
 }

@@ -8,9 +8,17 @@
 //! `bitrock abc --resume DIR` continues from what is stored. Everything is SI (rad/s, N·m, N,
 //! s); parameters carry their SI unit in the `parameters` table.
 //!
-//! Particles are one row each with one column per parameter name (parameter names are unique
-//! across the laws: `b0..b3`, `tsb, tcb, g`, `a0..a5`, `c0..c3`); a particle's columns of the
-//! other laws are NULL. The schema is in the README ("Run store").
+//! Particles (schema 3) are stored once each in `particle_rows`, however many populations they
+//! belong to: in nested mode population g+1 keeps the particles of population g below its ε,
+//! and storing them again made the store 5 × N rows of about 106 bytes at N = 10⁶. A
+//! population's particles are its own new rows plus the rows it carries: those of the
+//! populations since `population_rows.carried_from_row` whose ρ is below
+//! `population_rows.carried_below` (see [`append_population`](RunStore::append_population)
+//! for when a population may carry). The view `particles` shows them as schema 2's table did,
+//! one row per particle and population with one column per parameter name (parameter names
+//! are unique across the laws: `b0..b3`, `tsb, tcb, g`, `a0..a5`, `c0..c3`; a particle's
+//! columns of the other laws are NULL). Schemas 1 and 2 stored `particles` as that table; they
+//! are read, and continued in their own layout. The schema is in the README ("Run store").
 
 use crate::abc::{Particle, Population, PopulationRecord};
 use crate::data::{ColumnsUsed, FieldData, Samples};
@@ -28,8 +36,13 @@ use std::path::{Path, PathBuf};
 pub const STORE_FILE: &str = "run.sqlite";
 
 /// Version of the schema below. Version 1 (no `prior_bounds.rule`) is still read, its box
-/// rules as [`BoxRule::Unrecorded`]; any other version is refused.
-pub const SCHEMA_VERSION: i64 = 2;
+/// rules as [`BoxRule::Unrecorded`], and so is version 2 (particles as one table row per
+/// particle and population); any other version is refused.
+pub const SCHEMA_VERSION: i64 = 3;
+
+/// The first schema that stores each particle once (`particle_rows`, `population_rows` and the
+/// view `particles`).
+const ROWS_SCHEMA: i64 = 3;
 
 const SCHEMA: &str = r#"
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -111,18 +124,27 @@ CREATE TABLE population_laws (
     probability REAL NOT NULL,
     PRIMARY KEY (population, law)
 );
-CREATE TABLE particles (
-    population INTEGER NOT NULL,
-    position INTEGER NOT NULL,
+-- Each particle once, in the order of the population that first holds it: p0.. are its law's
+-- parameters in the order of `parameters.position`; weight NULL is its first population's
+-- `population_rows.row_weight`.
+CREATE TABLE particle_rows (
+    id INTEGER PRIMARY KEY,
+    first_population INTEGER NOT NULL,
     law TEXT NOT NULL,
     candidate INTEGER NOT NULL,
     rho REAL NOT NULL,
-    weight REAL NOT NULL,
-    b0 REAL, b1 REAL, b2 REAL, b3 REAL,
-    tsb REAL, tcb REAL, g REAL,
-    a0 REAL, a1 REAL, a2 REAL, a3 REAL, a4 REAL, a5 REAL,
-    c0 REAL, c1 REAL, c2 REAL, c3 REAL,
-    PRIMARY KEY (population, position)
+    weight REAL,
+    p0 REAL, p1 REAL, p2 REAL, p3 REAL, p4 REAL, p5 REAL
+);
+-- Which rows population g holds, in id order: its new rows [first_row, end_row), and the rows
+-- in [carried_from_row, first_row) with rho < carried_below (none when it is NULL).
+CREATE TABLE population_rows (
+    population INTEGER PRIMARY KEY,
+    first_row INTEGER NOT NULL,
+    end_row INTEGER NOT NULL,
+    carried_from_row INTEGER NOT NULL,
+    carried_below REAL,
+    row_weight REAL
 );
 "#;
 
@@ -196,6 +218,7 @@ impl RunStore {
         conn.pragma_update(None, "journal_mode", "OFF").map_err(&err)?;
         let tx = conn.transaction().map_err(&err)?;
         tx.execute_batch(SCHEMA).map_err(&err)?;
+        tx.execute_batch(&particles_view()).map_err(&err)?;
         let meta = [
             ("schema_version", SCHEMA_VERSION.to_string()),
             ("bitrock_version", env!("CARGO_PKG_VERSION").to_string()),
@@ -321,7 +344,7 @@ impl RunStore {
             .optional()
             .map_err(|e| not_a_run(format!("{STORE_FILE} is not a bitrock store: {e}")))?;
         match version.as_deref().map(str::parse::<i64>) {
-            Some(Ok(v @ (1 | SCHEMA_VERSION))) => Ok(Self {
+            Some(Ok(v @ 1..=SCHEMA_VERSION)) => Ok(Self {
                 conn,
                 path,
                 schema_version: v,
@@ -344,7 +367,15 @@ impl RunStore {
     }
 
     /// Writes one completed population (record and particles) in one transaction.
-    pub fn append_population(&mut self, population: &Population) -> Result<()> {
+    /// `previous` is the population before it (`None` for population 0), as stored.
+    ///
+    /// A particle is written once: when `population` begins with exactly the particles of
+    /// `previous` whose ρ is below its ε (bit for bit, in their order, as nested rejection
+    /// sampling makes it), those are recorded as carried (`population_rows.carried_below`) and
+    /// only the rest are written. Carrying needs ε no higher than the ε `previous` carried
+    /// with, so that "ρ below the last ε" selects exactly the rows of every population in the
+    /// chain; otherwise (paper mode, SMC) every particle is written.
+    pub fn append_population(&mut self, population: &Population, previous: Option<&Population>) -> Result<()> {
         let path = self.path.clone();
         let err = sql_error(&path);
         let r = &population.record;
@@ -384,34 +415,10 @@ impl RunStore {
             )
             .map_err(&err)?;
         }
-        {
-            let mut statements: Vec<rusqlite::Statement> = Law::ALL
-                .iter()
-                .map(|law| {
-                    let names: Vec<&str> = law.param_names();
-                    let marks: Vec<String> = (0..names.len()).map(|j| format!("?{}", j + 7)).collect();
-                    tx.prepare(&format!(
-                        "INSERT INTO particles (population, position, law, candidate, rho, weight, {})
-                         VALUES (?1, ?2, ?3, ?4, ?5, ?6, {})",
-                        names.join(", "),
-                        marks.join(", ")
-                    ))
-                })
-                .collect::<std::result::Result<_, _>>()
-                .map_err(&err)?;
-            for (position, p) in population.particles.iter().enumerate() {
-                let statement = &mut statements[p.law.index()];
-                let mut values: Vec<rusqlite::types::Value> = vec![
-                    (r.index as i64).into(),
-                    (position as i64).into(),
-                    p.law.name().to_string().into(),
-                    (p.index as i64).into(),
-                    p.rho.into(),
-                    p.weight.into(),
-                ];
-                values.extend(p.params.iter().map(|&v| rusqlite::types::Value::Real(v)));
-                statement.execute(rusqlite::params_from_iter(values)).map_err(&err)?;
-            }
+        if self.schema_version >= ROWS_SCHEMA {
+            insert_particle_rows(&tx, population, previous).map_err(&err)?;
+        } else {
+            insert_particles_table(&tx, population).map_err(&err)?;
         }
         tx.commit().map_err(&err)
     }
@@ -447,6 +454,17 @@ impl RunStore {
 
     /// Reads the whole run back, bit for bit as it was written.
     pub fn load(&self) -> Result<StoredRun> {
+        self.load_with(true)
+    }
+
+    /// As [`load`](Self::load), with the particles of the last population only (the others'
+    /// are empty): what continuing the run and its report need, in memory O(N) however many
+    /// populations it has.
+    pub fn load_with_last_particles(&self) -> Result<StoredRun> {
+        self.load_with(false)
+    }
+
+    fn load_with(&self, every_population: bool) -> Result<StoredRun> {
         let path = &self.path;
         let err = sql_error(path);
         let jerr = json_error(path);
@@ -469,7 +487,7 @@ impl RunStore {
         };
         let fits = self.load_fits(RecordScales::of(&data.calibration))?;
         let prior = self.load_prior()?;
-        let populations = self.load_populations()?;
+        let populations = self.load_populations_with(every_population)?;
         Ok(StoredRun {
             setup: RunSetup {
                 config,
@@ -619,6 +637,12 @@ impl RunStore {
 
     /// Every completed population, in order.
     pub fn load_populations(&self) -> Result<Vec<Population>> {
+        self.load_populations_with(true)
+    }
+
+    /// Every completed population's record, with the particles of every population or of
+    /// the last only.
+    fn load_populations_with(&self, every_population: bool) -> Result<Vec<Population>> {
         let err = sql_error(&self.path);
         let jerr = json_error(&self.path);
         let mut stmt = self
@@ -631,9 +655,14 @@ impl RunStore {
             .collect::<std::result::Result<_, _>>()
             .map_err(&err)?;
         let mut populations = Vec::with_capacity(records.len());
-        for text in records {
+        let last = records.len().saturating_sub(1);
+        for (k, text) in records.into_iter().enumerate() {
             let record: PopulationRecord = serde_json::from_str(&text).map_err(&jerr)?;
-            let particles = self.load_particles(record.index)?;
+            let particles = if every_population || k == last {
+                self.load_particles(record.index)?
+            } else {
+                Vec::new()
+            };
             populations.push(Population { record, particles });
         }
         Ok(populations)
@@ -641,6 +670,74 @@ impl RunStore {
 
     /// The particles of population `g`, in order.
     pub fn load_particles(&self, g: usize) -> Result<Vec<Particle>> {
+        if self.schema_version >= ROWS_SCHEMA {
+            self.load_particle_rows(g)
+        } else {
+            self.load_particles_table(g)
+        }
+    }
+
+    /// Schema 3: population g's carried and new rows, in id order.
+    fn load_particle_rows(&self, g: usize) -> Result<Vec<Particle>> {
+        let err = sql_error(&self.path);
+        let range: Option<(i64, i64, i64, Option<f64>)> = self
+            .conn
+            .query_row(
+                "SELECT first_row, end_row, carried_from_row, carried_below FROM population_rows WHERE population = ?1",
+                [g as i64],
+                |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)),
+            )
+            .optional()
+            .map_err(&err)?;
+        let Some((first_row, end_row, carried_from_row, carried_below)) = range else {
+            return Ok(Vec::new());
+        };
+        let row_weights: std::collections::HashMap<i64, Option<f64>> = self
+            .conn
+            .prepare("SELECT population, row_weight FROM population_rows")
+            .and_then(|mut s| {
+                s.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?
+                    .collect::<std::result::Result<_, _>>()
+            })
+            .map_err(&err)?;
+        let mut stmt = self
+            .conn
+            .prepare(
+                "SELECT first_population, law, candidate, rho, weight, p0, p1, p2, p3, p4, p5 FROM particle_rows
+                 WHERE id >= ?1 AND id < ?2 AND (id >= ?3 OR rho < ?4) ORDER BY id",
+            )
+            .map_err(&err)?;
+        let mut rows = stmt
+            .query(params![carried_from_row, end_row, first_row, carried_below])
+            .map_err(&err)?;
+        let mut particles = Vec::with_capacity((end_row - first_row).max(0) as usize);
+        while let Some(row) = rows.next().map_err(&err)? {
+            let first: i64 = row.get(0).map_err(&err)?;
+            let law = self.parse_law(&row.get::<_, String>(1).map_err(&err)?)?;
+            let weight = match row.get::<_, Option<f64>>(4).map_err(&err)? {
+                Some(w) => w,
+                None => row_weights.get(&first).copied().flatten().ok_or_else(|| Error::Store {
+                    path: self.path.clone(),
+                    message: format!("a particle of population {first} has no weight"),
+                })?,
+            };
+            let params = (5..5 + law.n_params())
+                .map(|c| row.get::<_, f64>(c))
+                .collect::<std::result::Result<Vec<_>, _>>()
+                .map_err(&err)?;
+            particles.push(Particle {
+                law,
+                index: row.get::<_, i64>(2).map_err(&err)? as u64,
+                params,
+                rho: row.get(3).map_err(&err)?,
+                weight,
+            });
+        }
+        Ok(particles)
+    }
+
+    /// Schemas 1 and 2: population g's rows of the `particles` table.
+    fn load_particles_table(&self, g: usize) -> Result<Vec<Particle>> {
         let err = sql_error(&self.path);
         let all_names: Vec<&str> = Law::ALL.iter().flat_map(|l| l.param_names()).collect();
         let mut stmt = self
@@ -677,6 +774,207 @@ impl RunStore {
             message: e,
         })
     }
+}
+
+/// The view `particles` over schema 3's rows: what schema 2 stored as a table, one row per
+/// particle and population (`position` its place in the population), with one column per
+/// parameter name.
+fn particles_view() -> String {
+    let parameter_columns: Vec<String> = Law::ALL
+        .iter()
+        .flat_map(|law| {
+            law.param_names()
+                .into_iter()
+                .enumerate()
+                .map(move |(j, name)| format!("CASE r.law WHEN '{}' THEN r.p{j} END AS {name}", law.name()))
+        })
+        .collect();
+    format!(
+        "CREATE VIEW particles AS
+         SELECT m.population AS population,
+                ROW_NUMBER() OVER (PARTITION BY m.population ORDER BY r.id) - 1 AS position,
+                r.law AS law, r.candidate AS candidate, r.rho AS rho,
+                COALESCE(r.weight, f.row_weight) AS weight,
+                {}
+         FROM population_rows m
+         JOIN particle_rows r ON r.id >= m.carried_from_row AND r.id < m.end_row
+              AND (r.id >= m.first_row OR r.rho < m.carried_below)
+         JOIN population_rows f ON f.population = r.first_population;",
+        parameter_columns.join(",\n                ")
+    )
+}
+
+/// Particles equal to the bit (parameters, ρ and weight compared as bits).
+fn same_particle(a: &Particle, b: &Particle) -> bool {
+    let bits = |p: &Particle| -> (u64, u64) { (p.rho.to_bits(), p.weight.to_bits()) };
+    a.law == b.law
+        && a.index == b.index
+        && bits(a) == bits(b)
+        && a.params.len() == b.params.len()
+        && a.params.iter().zip(&b.params).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// Schema 3: how many leading particles of `population` are carried from `previous` (the
+/// stored population before it), and from which row the carried rows begin; `None` when it
+/// carries nothing (see [`RunStore::append_population`]).
+fn carried_prefix(
+    tx: &rusqlite::Transaction,
+    population: &Population,
+    previous: Option<&Population>,
+) -> rusqlite::Result<Option<(i64, f64, usize)>> {
+    let (Some(previous), Some(epsilon)) = (previous, population.record.epsilon) else {
+        return Ok(None);
+    };
+    if previous.record.index + 1 != population.record.index || epsilon.is_nan() {
+        return Ok(None);
+    }
+    let stored: Option<(i64, i64, Option<f64>)> = tx
+        .query_row(
+            "SELECT first_row, carried_from_row, carried_below FROM population_rows WHERE population = ?1",
+            [previous.record.index as i64],
+            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
+        )
+        .optional()?;
+    let Some((first_row, carried_from_row, carried_below)) = stored else {
+        return Ok(None);
+    };
+    let chain_from = match carried_below {
+        None => first_row,
+        Some(below) if epsilon <= below => carried_from_row,
+        Some(_) => return Ok(None),
+    };
+    let mut carried = previous.particles.iter().filter(|p| p.rho < epsilon);
+    let mut count = 0;
+    for p in &population.particles {
+        match carried.next() {
+            Some(q) if same_particle(p, q) => count += 1,
+            Some(_) => return Ok(None),
+            None => break,
+        }
+    }
+    if carried.next().is_some() {
+        return Ok(None);
+    }
+    Ok(Some((chain_from, epsilon, count)))
+}
+
+/// Schema 3: the rows of `population` that `previous` does not carry, and its entry in
+/// `population_rows`. One prepared statement, parameters bound in place.
+fn insert_particle_rows(
+    tx: &rusqlite::Transaction,
+    population: &Population,
+    previous: Option<&Population>,
+) -> rusqlite::Result<()> {
+    let g = population.record.index as i64;
+    let first_row: i64 = tx.query_row("SELECT COALESCE(MAX(end_row), 0) FROM population_rows", [], |r| {
+        r.get(0)
+    })?;
+    let (carried_from_row, carried_below, carried) = carried_prefix(tx, population, previous)?
+        .map_or((first_row, None, 0), |(from, below, n)| (from, Some(below), n));
+    let new = &population.particles[carried..];
+    // Rejection gives every particle the same weight: stored once, not per row.
+    let row_weight = new
+        .first()
+        .map(|p| p.weight)
+        .filter(|w| new.iter().all(|p| p.weight.to_bits() == w.to_bits()));
+    // Rows go in ROWS_PER_INSERT at a time: one statement step per row was most of the
+    // cost of writing a population.
+    let statement = |rows: usize| {
+        let values = vec!["(?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"; rows].join(", ");
+        tx.prepare(&format!(
+            "INSERT INTO particle_rows (id, first_population, law, candidate, rho, weight, p0, p1, p2, p3, p4, p5)
+             VALUES {values}"
+        ))
+    };
+    let weight_of = |p: &Particle| if row_weight.is_some() { None } else { Some(p.weight) };
+    let (chunked, tail) = new.split_at(new.len() / ROWS_PER_INSERT * ROWS_PER_INSERT);
+    let mut insert = statement(ROWS_PER_INSERT)?;
+    for (c, chunk) in chunked.chunks_exact(ROWS_PER_INSERT).enumerate() {
+        for (k, p) in chunk.iter().enumerate() {
+            let id = first_row + (c * ROWS_PER_INSERT + k) as i64;
+            bind_particle_row(&mut insert, k, id, g, p, weight_of(p))?;
+        }
+        insert.raw_execute()?;
+    }
+    let mut insert = statement(1)?;
+    for (k, p) in tail.iter().enumerate() {
+        let id = first_row + (chunked.len() + k) as i64;
+        bind_particle_row(&mut insert, 0, id, g, p, weight_of(p))?;
+        insert.raw_execute()?;
+    }
+    tx.execute(
+        "INSERT INTO population_rows (population, first_row, end_row, carried_from_row, carried_below, row_weight)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+        params![
+            g,
+            first_row,
+            first_row + new.len() as i64,
+            carried_from_row,
+            carried_below,
+            row_weight
+        ],
+    )?;
+    Ok(())
+}
+
+/// Rows of `particle_rows` per INSERT statement (12 parameters each, far below SQLite's
+/// limit of 32,766).
+const ROWS_PER_INSERT: usize = 64;
+
+/// Binds the values of `particle_rows` row number `row` of a multi-row INSERT: id, first
+/// population, law, candidate, ρ, weight (NULL: the population's row weight), p0..p5.
+fn bind_particle_row(
+    insert: &mut rusqlite::Statement,
+    row: usize,
+    id: i64,
+    population: i64,
+    p: &Particle,
+    weight: Option<f64>,
+) -> rusqlite::Result<()> {
+    let at = 12 * row;
+    insert.raw_bind_parameter(at + 1, id)?;
+    insert.raw_bind_parameter(at + 2, population)?;
+    insert.raw_bind_parameter(at + 3, p.law.name())?;
+    insert.raw_bind_parameter(at + 4, p.index as i64)?;
+    insert.raw_bind_parameter(at + 5, p.rho)?;
+    insert.raw_bind_parameter(at + 6, weight)?;
+    for j in 0..crate::laws::MAX_PARAMS {
+        insert.raw_bind_parameter(at + 7 + j, p.params.get(j).copied())?;
+    }
+    Ok(())
+}
+
+/// Schemas 1 and 2: one row of the `particles` table per particle, so that a run stored by
+/// an older bitrock continues in its own layout.
+fn insert_particles_table(tx: &rusqlite::Transaction, population: &Population) -> rusqlite::Result<()> {
+    let g = population.record.index as i64;
+    let mut statements: Vec<rusqlite::Statement> = Law::ALL
+        .iter()
+        .map(|law| {
+            let names: Vec<&str> = law.param_names();
+            let marks: Vec<String> = (0..names.len()).map(|j| format!("?{}", j + 7)).collect();
+            tx.prepare(&format!(
+                "INSERT INTO particles (population, position, law, candidate, rho, weight, {})
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, {})",
+                names.join(", "),
+                marks.join(", ")
+            ))
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    for (position, p) in population.particles.iter().enumerate() {
+        let statement = &mut statements[p.law.index()];
+        statement.raw_bind_parameter(1, g)?;
+        statement.raw_bind_parameter(2, position as i64)?;
+        statement.raw_bind_parameter(3, p.law.name())?;
+        statement.raw_bind_parameter(4, p.index as i64)?;
+        statement.raw_bind_parameter(5, p.rho)?;
+        statement.raw_bind_parameter(6, p.weight)?;
+        for (j, &v) in p.params.iter().enumerate() {
+            statement.raw_bind_parameter(7 + j, v)?;
+        }
+        statement.raw_execute()?;
+    }
+    Ok(())
 }
 
 fn data_meta(data: &FieldData) -> DataMeta {

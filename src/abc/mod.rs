@@ -202,7 +202,9 @@ impl StopReason {
     }
 }
 
-/// The result of a run: every population (those it was continued from included).
+/// The result of a run: every population (those it was continued from included). A run
+/// written to a store holds only the last population's particles (see
+/// [`complete_population`]); read the others with [`crate::store::RunStore::load_particles`].
 #[derive(Clone, Debug)]
 pub struct Run {
     pub populations: Vec<Population>,
@@ -236,11 +238,39 @@ pub struct Progress {
 pub trait Observer {
     /// After every scored batch of a population in progress.
     fn progress(&mut self, _progress: &Progress) {}
-    /// When a population is complete, before the next one starts. An error (the store could
-    /// not write it, say) ends the run with that error.
-    fn population_done(&mut self, _population: &Population) -> Result<()> {
+    /// When a population is complete, before the next one starts; `previous` is the
+    /// population before it (`None` for population 0). An error (the store could not write
+    /// it, say) ends the run with that error.
+    fn population_done(&mut self, _population: &Population, _previous: Option<&Population>) -> Result<()> {
         Ok(())
     }
+    /// True when the observer keeps every completed population's particles itself (the run
+    /// store does): the sampler then releases them once no population needs them, so that a
+    /// run holds the particles of two populations at most (see [`complete_population`]).
+    fn keeps_particles(&self) -> bool {
+        false
+    }
+}
+
+/// Hands a finished `population` to `observer` and appends it to `populations`. When the
+/// observer keeps the particles ([`Observer::keeps_particles`]), those of the population
+/// before it are released: a sampler needs only the last population's, so memory stays at
+/// the particles of two populations (the last and the one being drawn) instead of growing
+/// with every population; [`Run::populations`] then holds all records and only the last
+/// population's particles.
+pub(crate) fn complete_population(
+    populations: &mut Vec<Population>,
+    population: Population,
+    observer: &mut dyn Observer,
+) -> Result<()> {
+    observer.population_done(&population, populations.last())?;
+    if observer.keeps_particles()
+        && let Some(previous) = populations.last_mut()
+    {
+        previous.particles = Vec::new();
+    }
+    populations.push(population);
+    Ok(())
 }
 
 /// An observer that watches nothing.

@@ -28,6 +28,7 @@ use crate::error::{Error, Result};
 use crate::eval::{Evaluator, PARITY_TOLERANCE};
 use crate::laws::Law;
 use crate::numerics::quantile;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -206,10 +207,13 @@ pub fn run_observed(
             // Stream positions before `scanned_to` are known: the previous population's
             // particles are all candidates there below ε_{g-1} > ε_g.
             let previous = &populations[g - 1].particles;
-            for p in previous.iter().filter(|p| p.rho < epsilon) {
-                particles.push(Particle { weight, ..p.clone() });
-            }
-            near += previous.iter().filter(|p| near_threshold(p.rho)).count() as u64;
+            particles.par_extend(
+                previous
+                    .par_iter()
+                    .filter(|p| p.rho < epsilon)
+                    .map(|p| Particle { weight, ..p.clone() }),
+            );
+            near += previous.par_iter().filter(|p| near_threshold(p.rho)).count() as u64;
             // The previous population ended at its N-th particle, at stream position
             // `scanned_to`, so even when all of them pass, every position before it is a draw
             // of this population too, with the previous population's per-law draws.
@@ -217,9 +221,6 @@ pub fn run_observed(
             position = scanned_to;
             for (count, law) in law_draws.iter_mut().zip(&populations[g - 1].record.per_law) {
                 *count = law.draws;
-            }
-            for p in &particles {
-                law_accepted[slot_of(prior, p.law)] += 1;
             }
         }
         // Acceptance rate of this population's fresh candidates: the share of the previous
@@ -268,26 +269,30 @@ pub fn run_observed(
             };
             let offset = (position - batch.start) as usize;
             let mut consumed = batch.rho.len();
+            // The scan only picks the accepted candidates; they are regenerated after it,
+            // in parallel and in index order.
+            let mut accepted: Vec<(u64, f64)> = Vec::new();
             for (k, &rho) in batch.rho.iter().enumerate().skip(offset) {
-                let index = batch.start + k as u64;
                 near += u64::from(near_threshold(rho));
                 if rho < epsilon {
-                    let c = prior.candidate(problem.seed, stream, index);
-                    let law = prior.law(c.slot);
-                    law_accepted[c.slot] += 1;
-                    particles.push(Particle {
-                        law,
-                        index,
-                        params: c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
-                        rho,
-                        weight,
-                    });
-                    if particles.len() == n {
+                    accepted.push((batch.start + k as u64, rho));
+                    if particles.len() + accepted.len() == n {
                         consumed = k + 1;
                         break;
                     }
                 }
             }
+            particles.par_extend(accepted.into_par_iter().map(|(index, rho)| {
+                let c = prior.candidate(problem.seed, stream, index);
+                let law = prior.law(c.slot);
+                Particle {
+                    law,
+                    index,
+                    params: c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
+                    rho,
+                    weight,
+                }
+            }));
             count_slots(
                 prior,
                 problem.seed,
@@ -315,6 +320,9 @@ pub fn run_observed(
             break stop;
         }
         scanned_to = position;
+        for p in &particles {
+            law_accepted[slot_of(prior, p.law)] += 1;
+        }
         let record = PopulationRecord {
             index: g,
             epsilon: epsilon_shown,
@@ -345,9 +353,7 @@ pub fn run_observed(
             seconds: t0.elapsed().as_secs_f64(),
             stream,
         };
-        let population = Population { record, particles };
-        observer.population_done(&population)?;
-        populations.push(population);
+        super::complete_population(&mut populations, Population { record, particles }, observer)?;
         match next_epsilon(&populations, config) {
             Ok(e) => epsilon = e,
             Err(stop) => break stop,
@@ -414,7 +420,6 @@ pub fn median_rho(particles: &[Particle]) -> f64 {
 /// block each, in parallel, since at 10⁵ candidates per batch this was the largest host-side
 /// share of a population.
 fn count_slots(prior: &crate::prior::Prior, seed: u64, stream: u32, indexes: std::ops::Range<u64>, counts: &mut [u64]) {
-    use rayon::prelude::*;
     let per_slot = indexes
         .into_par_iter()
         .fold(

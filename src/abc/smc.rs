@@ -655,9 +655,7 @@ pub fn run_observed(
             seconds: t0.elapsed().as_secs_f64(),
             stream,
         };
-        let population = Population { record, particles };
-        observer.population_done(&population)?;
-        populations.push(population);
+        super::complete_population(&mut populations, Population { record, particles }, observer)?;
     };
     Ok(finish(populations, stop, total_scored))
 }

@@ -88,7 +88,7 @@ impl Observer for RunProgress {
         }
     }
 
-    fn population_done(&mut self, population: &Population) -> bitrock::Result<()> {
+    fn population_done(&mut self, population: &Population, _previous: Option<&Population>) -> bitrock::Result<()> {
         let r = &population.record;
         let line = format!(
             "population {:>2}: ε = {}, {} accepted of {} drawn, ESS {:.0}, {:.2} s",

@@ -43,7 +43,8 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
     let mut runs = Vec::new();
     let mut first: Option<RunSetup> = None;
     for dir in dirs {
-        let stored = RunStore::open(dir)?.load()?;
+        // The report draws the last population's particles and every population's record.
+        let stored = RunStore::open(dir)?.load_with_last_particles()?;
         if stored.populations.is_empty() {
             return Err(Error::Data {
                 path: dir.clone(),

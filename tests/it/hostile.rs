@@ -368,7 +368,8 @@ fn resuming_a_store_that_lost_particles_is_refused_not_a_panic() {
     let tmp = tempfile::tempdir().unwrap();
     assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
     let conn = rusqlite::Connection::open(tmp.path().join("R/run.sqlite")).unwrap();
-    conn.execute("DELETE FROM particles WHERE population = 1", []).unwrap();
+    // Schema 3 stores each particle once (`particles` is a view): delete the rows themselves.
+    conn.execute("DELETE FROM particle_rows", []).unwrap();
     drop(conn);
     assert_refused(
         run_in(tmp.path(), &["abc", "--resume", "R", "--max-populations", "3", "-q"]),

@@ -5,8 +5,9 @@ use bitrock::abc::Silent;
 use bitrock::abc::rejection::RejectionConfig;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::Backend;
-use bitrock::pipeline::{AbcJob, RunDir};
+use bitrock::pipeline::{AbcJob, Analysis, RunDir};
 use bitrock::run::{RunConfig, SamplerConfig};
+use bitrock::store::RunStore;
 
 fn job(particles: usize) -> AbcJob {
     AbcJob {
@@ -42,11 +43,29 @@ fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
     let (a, b) = (&in_memory.outcome.run.populations, &on_disk.outcome.run.populations);
     assert!(a.len() >= 2, "{} populations", a.len());
     assert_eq!(a.len(), b.len());
-    for (p, q) in a.iter().zip(b) {
-        assert_eq!(p.particles, q.particles, "population {}", p.record.index);
+    // The stored run holds only its last population's particles in memory; the store has
+    // them all.
+    let stored = RunStore::open(&path).unwrap().load_populations().unwrap();
+    for ((p, q), s) in a.iter().zip(b).zip(&stored) {
+        assert_eq!(p.particles, s.particles, "population {}", p.record.index);
         assert_eq!(p.record.per_law, q.record.per_law);
+        assert_eq!(p.record.per_law, s.record.per_law);
+        let last = q.record.index + 1 == b.len();
+        assert_eq!(q.particles.is_empty(), !last, "population {}", q.record.index);
     }
-    assert_eq!(in_memory.summary_population, a.len() - 1);
+    assert_eq!(a.last().unwrap().particles, b.last().unwrap().particles);
+    let populations = a.len();
+    // A summary of an earlier population reads its particles back from the store.
+    let first_in_memory = Analysis::new(in_memory.outcome, Some(0), None).unwrap();
+    let first_on_disk = Analysis::new(on_disk.outcome, Some(0), Some(&path)).unwrap();
+    assert_eq!(first_on_disk.posterior, first_in_memory.posterior);
+    assert_eq!(first_on_disk.envelopes, first_in_memory.envelopes);
+    assert_eq!(first_on_disk.posterior.total, 300);
+    let (in_memory, on_disk) = (
+        Analysis::new(first_in_memory.outcome, None, None).unwrap(),
+        Analysis::new(first_on_disk.outcome, None, Some(&path)).unwrap(),
+    );
+    assert_eq!(in_memory.summary_population, populations - 1);
     assert_eq!(
         in_memory.posterior.model_probabilities,
         on_disk.posterior.model_probabilities

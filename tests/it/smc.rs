@@ -181,7 +181,7 @@ fn smc_populations_do_not_depend_on_threads_or_batch_size() {
 struct Keep(Vec<Population>);
 
 impl Observer for Keep {
-    fn population_done(&mut self, p: &Population) -> bitrock::Result<()> {
+    fn population_done(&mut self, p: &Population, _previous: Option<&Population>) -> bitrock::Result<()> {
         self.0.push(p.clone());
         Ok(())
     }

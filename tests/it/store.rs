@@ -78,6 +78,17 @@ fn assert_same_populations(a: &[Population], b: &[Population]) {
     }
 }
 
+/// The populations of the store in `dir`, with all their particles.
+fn stored(dir: &Path) -> Vec<Population> {
+    RunStore::open(dir).unwrap().load_populations().unwrap()
+}
+
+/// The run of `config` in memory only: every population keeps its particles.
+fn in_memory(config: RunConfig) -> Outcome {
+    let data = demo_field_data(&DataOptions::default()).unwrap();
+    run::start(None, data, config, None, &mut Silent, &mut |_| {}).unwrap()
+}
+
 #[test]
 fn store_round_trip_is_bit_exact() {
     let dir = tempfile::tempdir().unwrap();
@@ -85,8 +96,14 @@ fn store_round_trip_is_bit_exact() {
     let outcome = start(&run_dir, config(600, 4, 0.014));
     assert_eq!(outcome.run.populations.len(), 4);
     let stored = RunStore::open(&run_dir).unwrap().load().unwrap();
-    // Records (timings included) and particles come back exactly.
-    assert_eq!(stored.populations, outcome.run.populations);
+    // Records (timings included) come back exactly; the stored run kept only the last
+    // population's particles in memory, and the store has every population's, those of the
+    // same run in memory.
+    let records = |p: &[Population]| p.iter().map(|p| p.record.clone()).collect::<Vec<_>>();
+    assert_eq!(records(&stored.populations), records(&outcome.run.populations));
+    assert_eq!(stored.populations.last(), outcome.run.populations.last());
+    assert!(outcome.run.populations[..3].iter().all(|p| p.particles.is_empty()));
+    assert_same_populations(&stored.populations, &in_memory(config(600, 4, 0.014)).run.populations);
     assert_eq!(stored.setup.prior, outcome.setup.prior);
     assert_eq!(stored.setup.data.calibration, outcome.setup.data.calibration);
     assert_eq!(stored.setup.data.validation, outcome.setup.data.validation);
@@ -183,8 +200,7 @@ fn continuing_equals_uninterrupted(sampler: fn(RunConfig) -> RunConfig) {
     let continued = released(run::resume(&part_dir, &more, &mut Silent, &mut |_| {}).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     assert_same_populations(&continued.run.populations, &whole.run.populations);
-    let stored = RunStore::open(&part_dir).unwrap().load_populations().unwrap();
-    assert_same_populations(&stored, &whole.run.populations);
+    assert_same_populations(&stored(&part_dir), &stored(&dir.path().join("whole")));
     // Continuing a finished run with the same rules adds nothing.
     let again = released(run::resume(&part_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap());
     assert_eq!(again.run.populations.len(), 6);
@@ -198,6 +214,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
     let first = start(&run_dir, config(500, 30, 0.03));
     assert_eq!(first.run.stop, StopReason::EpsMin);
     let n = first.run.populations.len();
+    let before = stored(&run_dir);
     let more = Continuation {
         eps_min: Some(0.016),
         ..Continuation::default()
@@ -205,10 +222,11 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
     let continued = released(run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap());
     assert_eq!(continued.run.stop, StopReason::EpsMin);
     assert!(continued.run.populations.len() > n);
-    assert_same_populations(&continued.run.populations[..n], &first.run.populations);
+    let populations = stored(&run_dir);
+    assert_same_populations(&populations[..n], &before);
     // After the stored populations, the median rule with the new floor.
     for g in n..continued.run.populations.len() {
-        let previous = &continued.run.populations[g - 1];
+        let previous = &populations[g - 1];
         let expected = bitrock::abc::rejection::median_rho(&previous.particles).max(0.016);
         let eps = continued.run.populations[g].record.epsilon.unwrap();
         assert_eq!(eps.to_bits(), expected.to_bits(), "population {g}");
@@ -333,6 +351,128 @@ fn a_wall_time_stop_is_continued_without_the_old_budget() {
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     let whole = start(&dir.path().join("whole"), config(500, 4, 0.0));
     assert_same_populations(&continued.run.populations, &whole.run.populations);
+    assert_same_populations(&stored(&run_dir), &stored(&dir.path().join("whole")));
+}
+
+/// Rewrites the store in `dir` as bitrock 843167d wrote it (schema 2): the particles as a
+/// table, one row per particle and population.
+fn downgrade_to_schema_2(dir: &Path) {
+    let conn = rusqlite::Connection::open(dir.join("run.sqlite")).unwrap();
+    conn.execute_batch(
+        "CREATE TABLE particles_v2 (
+            population INTEGER NOT NULL,
+            position INTEGER NOT NULL,
+            law TEXT NOT NULL,
+            candidate INTEGER NOT NULL,
+            rho REAL NOT NULL,
+            weight REAL NOT NULL,
+            b0 REAL, b1 REAL, b2 REAL, b3 REAL,
+            tsb REAL, tcb REAL, g REAL,
+            a0 REAL, a1 REAL, a2 REAL, a3 REAL, a4 REAL, a5 REAL,
+            c0 REAL, c1 REAL, c2 REAL, c3 REAL,
+            PRIMARY KEY (population, position)
+        );
+        INSERT INTO particles_v2 SELECT * FROM particles;
+        DROP VIEW particles;
+        DROP TABLE particle_rows;
+        DROP TABLE population_rows;
+        ALTER TABLE particles_v2 RENAME TO particles;
+        UPDATE meta SET value = '2' WHERE key = 'schema_version';",
+    )
+    .unwrap();
+}
+
+#[test]
+fn a_store_of_schema_2_is_read_and_continued_in_its_own_layout() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    start(&run_dir, config(500, 2, 0.014));
+    let before = stored(&run_dir);
+    downgrade_to_schema_2(&run_dir);
+    assert_eq!(stored(&run_dir), before);
+    let more = Continuation {
+        max_populations: Some(4),
+        ..Default::default()
+    };
+    let resumed = run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap();
+    let direct_dir = dir.path().join("direct");
+    let direct = start(&direct_dir, config(500, 4, 0.014));
+    assert_same_populations(&resumed.run.populations, &direct.run.populations);
+    assert_same_populations(&stored(&run_dir), &stored(&direct_dir));
+    // Still schema 2: a table with a row per particle and population.
+    let conn = rusqlite::Connection::open(run_dir.join("run.sqlite")).unwrap();
+    let (version, kind, rows): (String, String, i64) = conn
+        .query_row(
+            "SELECT (SELECT value FROM meta WHERE key = 'schema_version'),
+                    (SELECT type FROM sqlite_master WHERE name = 'particles'),
+                    (SELECT COUNT(*) FROM particles)",
+            [],
+            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
+        )
+        .unwrap();
+    assert_eq!((version.as_str(), kind.as_str(), rows), ("2", "table", 4 * 500));
+}
+
+#[test]
+fn a_nested_run_stores_each_particle_once_and_the_particles_view_shows_every_population() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let config = config(600, 5, 0.0);
+    start(&run_dir, config.clone());
+    let populations = in_memory(config).run.populations;
+    assert_eq!(populations.len(), 5);
+    // Population g repeats the particles of g − 1 below ε_g: those are not stored again.
+    let carried: usize = populations
+        .windows(2)
+        .map(|w| {
+            let epsilon = w[1].record.epsilon.unwrap();
+            w[0].particles.iter().filter(|p| p.rho < epsilon).count()
+        })
+        .sum();
+    assert!(carried > 4 * 600 / 3, "{carried} carried");
+    let conn = rusqlite::Connection::open(run_dir.join("run.sqlite")).unwrap();
+    let rows: i64 = conn
+        .query_row("SELECT COUNT(*) FROM particle_rows", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(rows as usize, 5 * 600 - carried);
+    // The view gives each population's particles, in order, as schema 2's table did.
+    let mut select = conn
+        .prepare("SELECT position, law, candidate, rho, weight, tsb, c3 FROM particles WHERE population = ?1")
+        .unwrap();
+    for p in &populations {
+        type Row = (i64, String, i64, f64, f64, Option<f64>, Option<f64>);
+        let rows: Vec<Row> = select
+            .query_map([p.record.index as i64], |r| {
+                Ok((
+                    r.get(0)?,
+                    r.get(1)?,
+                    r.get(2)?,
+                    r.get(3)?,
+                    r.get(4)?,
+                    r.get(5)?,
+                    r.get(6)?,
+                ))
+            })
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(rows.len(), p.particles.len(), "population {}", p.record.index);
+        for (k, (row, q)) in rows.iter().zip(&p.particles).enumerate() {
+            assert_eq!(
+                (row.0, row.1.as_str(), row.2, row.3.to_bits(), row.4.to_bits()),
+                (
+                    k as i64,
+                    q.law.name(),
+                    q.index as i64,
+                    q.rho.to_bits(),
+                    q.weight.to_bits()
+                )
+            );
+            let tsb = (q.law == Law::M2).then(|| q.params[0]);
+            let c3 = (q.law == Law::M4).then(|| q.params[3]);
+            assert_eq!((row.5, row.6), (tsb, c3), "population {} position {k}", p.record.index);
+        }
+    }
 }
 
 #[test]
@@ -340,7 +480,9 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
     let dir = tempfile::tempdir().unwrap();
     let run_dir = dir.path().join("run");
     let outcome = start(&run_dir, config(500, 2, 0.014));
+    let before = stored(&run_dir);
     // What bitrock 3a5ee53 wrote: no rule column, schema version 1.
+    downgrade_to_schema_2(&run_dir);
     let conn = rusqlite::Connection::open(run_dir.join("run.sqlite")).unwrap();
     conn.execute_batch(
         "ALTER TABLE prior_bounds DROP COLUMN rule; UPDATE meta SET value = '1' WHERE key = 'schema_version';",
@@ -356,7 +498,7 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
             "{rules:?}"
         );
     }
-    assert_eq!(stored.populations, outcome.run.populations);
+    assert_eq!(stored.populations, before);
     // Its candidates were rounded by the older float transform: continuing it is refused,
     // naming the reason, and nothing is written.
     let more = Continuation {
@@ -377,5 +519,5 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
         .unwrap();
     drop(conn);
     let e = RunStore::open(&run_dir).err().unwrap().to_string();
-    assert!(e.contains("schema version 99") && e.contains("versions 1 to 2"), "{e}");
+    assert!(e.contains("schema version 99") && e.contains("versions 1 to 3"), "{e}");
 }
