@@ -471,18 +471,18 @@ pub fn resume(
 /// hand): the sampler continues from it and cannot from fewer. Earlier populations are loaded
 /// without particles (`load_with_last_particles`), so only the last is checked.
 fn check_particles_stored(dir: &Path, populations: &[Population]) -> Result<()> {
-    if let Some(p) = populations.last() {
-        if p.particles.len() != p.record.accepted {
-            return Err(Error::Data {
-                path: dir.join(STORE_FILE),
-                message: format!(
-                    "population {} has {} of its {} particles; the store was altered and this run cannot be continued (start a new run)",
-                    p.record.index,
-                    p.particles.len(),
-                    p.record.accepted
-                ),
-            });
-        }
+    if let Some(p) = populations.last()
+        && p.particles.len() != p.record.accepted
+    {
+        return Err(Error::Data {
+            path: dir.join(STORE_FILE),
+            message: format!(
+                "population {} has {} of its {} particles; the store was altered and this run cannot be continued (start a new run)",
+                p.record.index,
+                p.particles.len(),
+                p.record.accepted
+            ),
+        });
     }
     Ok(())
 }
