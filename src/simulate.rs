@@ -444,6 +444,14 @@ impl<'a> Model<'a> {
         }
     }
 
+    /// Bit speed beyond which the motion has run away (rad/s): a thousand times the rotary
+    /// speed, and never under 1,000 rad/s (≈ 9,550 rpm), far above any stick-slip peak (a few
+    /// times Ω) yet far below where f64 overflows, so a law whose torque turns negative at high
+    /// speed is reported instead of producing a finite trace of absurd speeds.
+    fn runaway_speed_rad_s(&self) -> f64 {
+        1e3 * self.omega_rad_s.abs().max(1.0)
+    }
+
     /// Static torque T_s = r·T(0), clamped at ≥ 0 (N·m).
     fn static_torque_nm(&self, r: f64) -> f64 {
         self.law.torque(self.params, 0.0, r).max(0.0)
@@ -543,7 +551,7 @@ impl Integrator<'_> {
         let mut remaining_s = h_s;
         // Each pass either finishes the step or consumes one transition; a handful suffices.
         for _ in 0..16 {
-            if !(self.state.twist_rad.is_finite() && self.state.w.is_finite()) {
+            if !(self.state.twist_rad.is_finite() && self.state.w.abs() <= m.runaway_speed_rad_s()) {
                 // A law whose torque turns negative at high speed (M4's cubic beyond its fitted
                 // range) accelerates the bit without bound.
                 return Err("the bit speed diverged: does the law's torque turn negative at \
@@ -834,6 +842,26 @@ mod tests {
         };
         let err = simulate(&cfg).unwrap_err();
         assert!(matches!(err, Error::Numerical(_)) && !err.is_bad_input());
+        assert!(err.to_string().contains("diverged"), "{err}");
+    }
+
+    #[test]
+    fn a_runaway_to_finite_but_absurd_speeds_is_an_error_too() {
+        // A light string driving a law whose torque falls with speed (c1 < 0): the bit
+        // accelerated to 1e227 rpm while every number stayed finite, and a trace was written.
+        let cfg = SimConfig {
+            structure: Lumped {
+                inertia_kg_m2: 0.01,
+                omega_n_rad_s: 5.0,
+                damping_ratio: 0.1,
+            },
+            w_ref_n: 500.0,
+            initial: Initial::Equilibrium {
+                speed_perturbation_rad_s: rpm(10.0),
+            },
+            ..SimConfig::new(Law::M4, vec![3.0, -0.12, 0.0, 0.0], rpm(100.0), 500.0)
+        };
+        let err = simulate(&cfg).unwrap_err();
         assert!(err.to_string().contains("diverged"), "{err}");
     }
 

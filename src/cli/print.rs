@@ -68,28 +68,17 @@ pub fn fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io
                 ]
             })
             .collect();
-        let header = ["param", "estimate", "std.error", "unit"];
+        let header = ["param", "estimate", "std.error", "unit"].map(String::from);
         let width: Vec<usize> = (0..4)
             .map(|c| {
                 rows.iter()
+                    .chain([&header])
                     .map(|r| r[c].chars().count())
-                    .chain([header[c].len()])
                     .max()
                     .unwrap_or(0)
             })
             .collect();
-        writeln!(
-            out,
-            "    {:<w0$}  {:>w1$}  {:>w2$}  {}",
-            header[0],
-            header[1],
-            header[2],
-            header[3],
-            w0 = width[0],
-            w1 = width[1],
-            w2 = width[2]
-        )?;
-        for r in &rows {
+        for r in std::iter::once(&header).chain(&rows) {
             writeln!(
                 out,
                 "    {:<w0$}  {:>w1$}  {:>w2$}  {}",
