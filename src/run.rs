@@ -266,7 +266,7 @@ pub fn start(
     if let Some(dir) = dir {
         check_new_run_dir(dir, Some(&input))?;
     }
-    let fits = fit::fit_laws(&config.laws, &data.calibration, &data.validation, &config.fit)?;
+    let fits = fit::fit_record(&config.laws, &data, &config.fit)?;
     let base = config.sampler.base_mut();
     let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
     base.eps_min = floor.eps_min;

@@ -43,7 +43,7 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
         return Err(Error::arg("--epsilon", format!("must be a positive number, got {e}")).into());
     }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    let fits = fit::fit_laws(&cmd.laws, &data.calibration, &data.validation, &FitOptions::default())?;
+    let fits = fit::fit_record(&cmd.laws, &data, &FitOptions::default())?;
     let delta = bitrock::run::RunConfig::default().delta;
     let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).map_err(|e| {
         // Parity has no --delta or --prior: the record is what the prior cannot be built from.

@@ -405,6 +405,45 @@ fn data_that_defeat_the_fits_exit_2_naming_the_file_and_the_cause() {
         let path = file.to_str().unwrap();
         assert_refused(run_in(tmp.path(), &["fit", path]), &[path, cause]);
     }
+    // Records that pass those checks but defeat a law's fit: the record, the law and the cause
+    // are named, in every command that fits, and nothing is written.
+    let fast = record(&p("fast.csv"), |v| vec![v[0], v[1] * 1e60, v[2], v[3]]);
+    let fast = fast.to_str().unwrap();
+    assert_refused(run_in(tmp.path(), &["fit", fast]), &[fast, "bit speed", "--speed-unit"]);
+    // Two speeds, alternating: four-parameter laws are curves through two points.
+    let two = record(&p("two_speeds.csv"), |v| {
+        vec![v[0], if v[0] % 0.04 < 0.01 { 100.0 } else { 150.0 }, v[2], v[3]]
+    });
+    let two = two.to_str().unwrap();
+    // Of several laws that fail, the first asked for is named, every time.
+    for command in [
+        &["fit", two, "--laws", "m4,m2"][..],
+        &["abc", two, "--out", "T2", "--laws", "m4,m1"],
+    ] {
+        assert_refused(
+            run_in(tmp.path(), command),
+            &[
+                two,
+                "m4: least-squares fit",
+                "2 distinct bit speeds",
+                "needs at least 4",
+            ],
+        );
+    }
+    // Four speeds 10⁻⁸ apart: distinct, but the cubic's normal equations are singular.
+    let near = record(&p("near_speeds.csv"), |v| {
+        vec![v[0], 100.0 + 1e-6 * ((v[0] * 50.0).round() % 4.0), v[2], v[3]]
+    });
+    let near = near.to_str().unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["fit", near, "--laws", "m4"]),
+        &[near, "m4: least-squares fit", "no starting point"],
+    );
+    assert_refused(
+        run_in(tmp.path(), &["parity", near, "--laws", "m4"]),
+        &[near, "m4: least-squares fit"],
+    );
+    assert!(!p("T2").exists());
     let no_wob = record(&p("no_wob.csv"), |v| vec![v[0], v[1], v[2], 0.0]);
     assert_refused(
         run_in(tmp.path(), &["fit", no_wob.to_str().unwrap(), "--scale-by-wob"]),
