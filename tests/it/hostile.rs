@@ -364,6 +364,39 @@ fn flags_beyond_the_machine_are_refused_before_any_work() {
 }
 
 #[test]
+fn a_summary_population_beyond_the_resumed_run_is_refused_before_any_population() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    // Were it checked only after the run, populations 2 and 3 would be stored first.
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &[
+                "abc",
+                "--resume",
+                "R",
+                "--max-populations",
+                "4",
+                "--summary-population",
+                "4",
+                "-q",
+            ],
+        ),
+        &["--summary-population", "at most 4 populations (0..=3), got 4"],
+    );
+    assert_eq!(export(tmp.path(), "R"), before);
+    // One the continued run can have is accepted and summarised.
+    let (code, out, err) = run_in(
+        tmp.path(),
+        &["abc", "--resume", "R", "--summary-population", "0", "--json", "-q"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let summary: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(summary["posterior"]["population"], 0, "{out}");
+}
+
+#[test]
 fn resuming_a_store_that_lost_particles_is_refused_not_a_panic() {
     let tmp = tempfile::tempdir().unwrap();
     assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
@@ -536,4 +569,54 @@ fn extra_values_duplicate_columns_and_doubled_roles_are_refused() {
         &["--fe-file", "--structure fe"],
     );
     assert_eq!(names(tmp.path()), ["dup.csv", "prior.toml", "rec.csv"]);
+}
+
+#[test]
+fn flags_that_do_not_apply_to_the_run_are_refused_naming_flag_and_mode() {
+    let tmp = tempfile::tempdir().unwrap();
+    // SMC-only flags with the rejection sampler (the default, or named).
+    for (flag, value) in [("--kernel-scale", "3"), ("--p-stay", "0.5"), ("--smc-weights", "host")] {
+        assert_refused(
+            small_run(tmp.path(), "R", &[flag, value]),
+            &[&format!("{flag}: applies only to --sampler smc"), "rejection sampler"],
+        );
+        assert_refused(
+            small_run(tmp.path(), "R", &["--sampler", "rejection", flag, value]),
+            &[flag, "rejection sampler"],
+        );
+    }
+    // The rejection sampler's --mode with SMC.
+    assert_refused(
+        small_run(tmp.path(), "R", &["--sampler", "smc", "--mode", "paper"]),
+        &["--mode: applies only to the rejection sampler", "--sampler smc"],
+    );
+    // W_ref without the scaling that uses it.
+    for result in [
+        run_in(tmp.path(), &["fit", "--w-ref-kn", "100"]),
+        small_run(tmp.path(), "R", &["--w-ref-kn", "100"]),
+    ] {
+        assert_refused(result, &["--w-ref-kn: applies only with --scale-by-wob"]);
+    }
+    assert!(names(tmp.path()).is_empty(), "{:?}", names(tmp.path()));
+    // What defines the populations cannot be changed by a resume: refused, naming the flag.
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    for extra in [
+        &["--seed", "2"][..],
+        &["--particles", "100"],
+        &["--delta", "0.5"],
+        &["--laws", "m2"],
+        &["--sampler", "smc"],
+        &["--kernel-scale", "3"],
+        &["--mode", "paper"],
+        &["--epsilons", "0.1,0.05"],
+        &["--force"],
+        &["--min-speed-rpm", "10"],
+        &["--w-ref-kn", "100"],
+    ] {
+        let mut args = vec!["abc", "--resume", "R", "-q"];
+        args.extend_from_slice(extra);
+        assert_refused(run_in(tmp.path(), &args), &["--resume", extra[0]]);
+    }
+    assert_eq!(export(tmp.path(), "R"), before);
 }
