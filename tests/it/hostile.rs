@@ -141,55 +141,117 @@ fn force_replaces_a_run_with_a_new_one_and_leaves_nothing_beside_it() {
     assert_eq!(names(tmp.path()), ["R"]);
 }
 
+/// When to SIGKILL `abc --out R --force` in [`a_kill_during_force_leaves_the_old_run_or_the_new_one`].
+#[cfg(target_os = "linux")]
+#[derive(Clone, Copy, Debug)]
+enum KillAt {
+    /// This long after the start: before the fits end, however loaded the machine.
+    Start(u64),
+    /// This long after the new run is swapped into R (R's inode changes).
+    Swap(u64),
+}
+
+/// True when `part` is the export of a run stopped after a whole population of the run whose
+/// export is `whole`: its header and populations 0..=k, each identical, for some k ≥ 0.
+#[cfg(target_os = "linux")]
+fn whole_populations_of(part: &str, whole: &str) -> bool {
+    let population = |line: Option<&str>| line.and_then(|l| l.split(',').next().map(str::to_string));
+    let Some(rest) = whole.strip_prefix(part) else {
+        return false;
+    };
+    let holds_population_0 = part.lines().nth(1).is_some_and(|l| l.starts_with("0,"));
+    let ends_at_a_population = rest.is_empty() || population(rest.lines().next()) != population(part.lines().last());
+    holds_population_0 && part.ends_with('\n') && ends_at_a_population
+}
+
+#[cfg(target_os = "linux")]
 #[test]
 fn a_kill_during_force_leaves_the_old_run_or_the_new_one() {
+    use std::os::unix::fs::MetadataExt;
+    use std::time::{Duration, Instant};
     let tmp = tempfile::tempdir().unwrap();
+    let new_run = [
+        "--seed",
+        "3",
+        "--particles",
+        "4000",
+        "--max-populations",
+        "4",
+        "--backend",
+        "cpu",
+        "-q",
+    ];
+    // The new run, uninterrupted: what R must hold, population by population, once swapped.
+    let mut args = vec!["abc", "--out", "NEW"];
+    args.extend_from_slice(&new_run);
+    assert_eq!(run_in(tmp.path(), &args).0, 0);
+    let new = export(tmp.path(), "NEW");
+    std::fs::remove_dir_all(tmp.path().join("NEW")).unwrap();
+    // The judge itself: whole populations pass; no population, or a cut inside one, does not.
+    let header = new.find('\n').unwrap() + 1;
+    let first_row = header + new[header..].find('\n').unwrap() + 1;
+    let population_1 = new.find("\n1,").unwrap() + 1;
+    assert!(whole_populations_of(&new, &new) && whole_populations_of(&new[..population_1], &new));
+    assert!(!whole_populations_of(&new[..header], &new));
+    assert!(!whole_populations_of(&new[..first_row], &new));
+    assert!(!whole_populations_of(&new[..population_1 - 1], &new));
+
     assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
     let old = export(tmp.path(), "R");
-    let mut saw_old = false;
-    let mut saw_new = false;
-    for kill_ms in [30, 150, 300, 500, 800, 1200] {
+    let r = tmp.path().join("R");
+    let kills = [
+        KillAt::Start(30),
+        KillAt::Swap(0),
+        KillAt::Swap(20),
+        KillAt::Swap(100),
+        KillAt::Swap(300),
+    ];
+    for kill in kills {
+        let old_inode = std::fs::metadata(&r).unwrap().ino();
         let mut child = bin()
             .current_dir(tmp.path())
-            .args([
-                "abc",
-                "--out",
-                "R",
-                "--force",
-                "--seed",
-                "3",
-                "--particles",
-                "4000",
-                "--max-populations",
-                "4",
-                "--backend",
-                "cpu",
-                "-q",
-            ])
+            .args(["abc", "--out", "R", "--force"])
+            .args(new_run)
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::null())
             .spawn()
             .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(kill_ms));
-        child.kill().unwrap(); // SIGKILL
-        child.wait().unwrap();
+        let started = Instant::now();
+        let mut swapped = false;
+        loop {
+            // R is never missing, at any moment of the run.
+            swapped = std::fs::metadata(&r).unwrap().ino() != old_inode;
+            let due = match kill {
+                KillAt::Start(ms) => started.elapsed() >= Duration::from_millis(ms),
+                KillAt::Swap(_) => swapped,
+            };
+            if due || child.try_wait().unwrap().is_some() {
+                break;
+            }
+            assert!(started.elapsed() < Duration::from_secs(120), "no swap in 120 s");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        if let KillAt::Swap(ms) = kill {
+            std::thread::sleep(Duration::from_millis(ms));
+        }
+        let _ = child.kill(); // SIGKILL (an error if it had already ended)
+        let status = child.wait().unwrap();
         let now = export(tmp.path(), "R");
-        if now == old {
-            saw_old = true;
-        } else {
-            // The new run: a store with at least its population 0.
-            assert!(now.lines().nth(1).is_some_and(|l| l.starts_with("0,")), "{now}");
-            saw_new = true;
-            // Back to the old run for the next kill time.
-            assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
-            assert_eq!(export(tmp.path(), "R"), old);
+        match kill {
+            KillAt::Start(ms) => assert_eq!(now, old, "killed {ms} ms after the start: the old run"),
+            KillAt::Swap(ms) => {
+                assert!(swapped, "{kill:?}: the run ended ({status}) without swapping");
+                assert!(
+                    whole_populations_of(&now, &new),
+                    "killed {ms} ms after the swap: R holds neither the old run nor whole populations of the new one:\n{}",
+                    now.lines().take(3).collect::<Vec<_>>().join("\n")
+                );
+                // Back to the old run for the next kill.
+                assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
+                assert_eq!(export(tmp.path(), "R"), old);
+            }
         }
     }
-    // 30 ms is before the fits end, however loaded the machine: the old run. Which side the
-    // later kills land on depends on the machine's speed (about 0.6 s to population 0 on two
-    // shared cores); each time R held a whole run.
-    assert!(saw_old);
-    eprintln!("kills after the swap seen: {saw_new}");
     // A later run in the same parent removes the staging directories the kills left.
     assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
     assert_eq!(names(tmp.path()), ["R"]);
