@@ -217,20 +217,19 @@ fn a_kill_during_force_leaves_the_old_run_or_the_new_one() {
             .spawn()
             .unwrap();
         let started = Instant::now();
-        let mut swapped = false;
-        loop {
+        let swapped = loop {
             // R is never missing, at any moment of the run.
-            swapped = std::fs::metadata(&r).unwrap().ino() != old_inode;
+            let swapped = std::fs::metadata(&r).unwrap().ino() != old_inode;
             let due = match kill {
                 KillAt::Start(ms) => started.elapsed() >= Duration::from_millis(ms),
                 KillAt::Swap(_) => swapped,
             };
             if due || child.try_wait().unwrap().is_some() {
-                break;
+                break swapped;
             }
             assert!(started.elapsed() < Duration::from_secs(120), "no swap in 120 s");
             std::thread::sleep(Duration::from_millis(1));
-        }
+        };
         if let KillAt::Swap(ms) = kill {
             std::thread::sleep(Duration::from_millis(ms));
         }
