@@ -138,7 +138,7 @@ pub struct AbcCmd {
 
 pub fn run(cmd: &AbcCmd) -> anyhow::Result<ExitCode> {
     let done = start_or_resume(cmd)?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &done.json())?;
         writeln!(out)?;

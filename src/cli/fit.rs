@@ -33,7 +33,7 @@ pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
 /// Fits `laws` to `data` and prints them (also the start of `bitrock demo`).
 pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bool) -> anyhow::Result<()> {
     let fits = fit::fit_record(laws, data, opts)?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if json {
         serde_json::to_writer_pretty(&mut out, &bitrock::documents::fit_json(data, &fits))?;
         writeln!(out)?;

@@ -54,7 +54,7 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
     })?;
     let problem = AbcProblem::new(prior, cmd.seed, &data.calibration, None);
     let report = bitrock::bench::parity(&problem, cmd.candidates, cmd.epsilon)?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;
         writeln!(out)?;

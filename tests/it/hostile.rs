@@ -681,3 +681,28 @@ fn flags_that_do_not_apply_to_the_run_are_refused_naming_flag_and_mode() {
     }
     assert_eq!(export(tmp.path(), "R"), before);
 }
+
+/// A full disk under standard output (`/dev/full`) is a failure of the machine (exit 3) whose
+/// message names what could not be written, once.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_under_standard_output_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    for args in [
+        &["export", "R"][..],
+        &["fit", "--json"],
+        &["simulate", "--law", "m2", "--omega-rpm", "100", "--duration-s", "2"],
+        &["abc", "--resume", "R", "-q", "--json"],
+    ] {
+        let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+        let out = bin().current_dir(tmp.path()).args(args).stdout(full).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(3), "{args:?}: {err}");
+        assert!(
+            err.contains("error: standard output: cannot write: "),
+            "{args:?}: {err}"
+        );
+        assert_eq!(err.matches("os error").count(), 1, "{args:?}: {err}");
+    }
+}
