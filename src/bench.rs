@@ -8,7 +8,7 @@ use crate::data::{DataOptions, Samples, demo_field_data};
 use crate::error::Result;
 use crate::eval::gpu::candidates::GpuCandidate;
 use crate::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE, cpu::CpuEvaluator, evaluator, gpu};
-use crate::fit::{FitOptions, fit_laws};
+use crate::fit::{FitOptions, fit_record};
 use crate::numerics::quantile;
 use crate::prior::{LawBox, Prior};
 use serde::Serialize;
@@ -234,7 +234,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
     }
     let mut end_to_end = Vec::new();
     let data = demo_field_data(&DataOptions::default())?;
-    let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default())?;
+    let fits = fit_record(&Law::ALL, &data, &FitOptions::default())?;
     let prior = Prior::from_fits(&fits, 0.4, None, 1000.0)?;
     let config = RejectionConfig {
         particles: opts.particles,

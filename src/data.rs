@@ -7,7 +7,7 @@
 //! column.
 
 use crate::error::{Error, Result};
-use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use crate::units::{ForceUnit, RAD_S_PER_RPM, SpeedUnit, TorqueUnit};
 use serde::{Deserialize, Serialize};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -477,18 +477,19 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         });
     }
 
-    let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &name(torque_i))?;
+    let columns = ColumnsUsed {
+        speed: name(speed_i),
+        torque: name(torque_i),
+        wob: wob_i.map(name),
+        time: time_i.map(name),
+    };
+    let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
 
     Ok(FieldData {
         source: path.to_path_buf(),
         torque_unit,
         speed_unit,
-        columns: ColumnsUsed {
-            speed: name(speed_i),
-            torque: name(torque_i),
-            wob: wob_i.map(name),
-            time: time_i.map(name),
-        },
+        columns,
         rows_read,
         rows_used,
         calibration,
@@ -503,8 +504,9 @@ fn filter_and_split(
     all: &Samples,
     opts: &DataOptions,
     path: &Path,
-    torque_column: &str,
+    columns: &ColumnsUsed,
 ) -> Result<(usize, Samples, Samples)> {
+    let torque_column = &columns.torque;
     let rows_read = all.len();
     // Filters: time window, then thinning, then the minimum bit speed.
     let in_window = |i: usize| match &all.time_s {
@@ -561,7 +563,7 @@ fn filter_and_split(
                     .into(),
         });
     }
-    check_fittable(&calibration, path, torque_column)?;
+    check_fittable(&calibration, path, columns)?;
 
     Ok((n, calibration, validation))
 }
@@ -573,10 +575,20 @@ pub const MAX_TORQUE_NM: f64 = 1e9;
 /// it the squares the fit and the GPU sum leave f32's normal range.
 pub const MIN_TORQUE_NM: f64 = 1e-6;
 
+/// Largest bit speed a record may have, rad/s (about 95,000 rpm): a hundred times a
+/// turbodrill's, and where the fit's speed-cubed scales stay finite.
+pub const MAX_SPEED_RAD_S: f64 = 1e4;
+
+/// Relative difference below which two bit speeds count as the same: 10⁻⁹ of the largest,
+/// far below any tachometer's resolution and far above f64's rounding.
+pub const SAME_SPEED_TOLERANCE: f64 = 1e-9;
+
 /// Refuses calibration samples that no law can be fitted to, saying why: bit speed constant
 /// (identical rows among them: the laws are told apart only by how torque changes with speed),
-/// or torques outside [`MIN_TORQUE_NM`]..[`MAX_TORQUE_NM`] (a unit or scaling error).
-fn check_fittable(calibration: &Samples, path: &Path, torque_column: &str) -> Result<()> {
+/// or speeds above [`MAX_SPEED_RAD_S`] or torques outside [`MIN_TORQUE_NM`]..[`MAX_TORQUE_NM`]
+/// (a unit or scaling error).
+fn check_fittable(calibration: &Samples, path: &Path, columns: &ColumnsUsed) -> Result<()> {
+    let (speed_column, torque_column) = (&columns.speed, &columns.torque);
     let fail = |message: String| {
         Err(Error::Data {
             path: path.to_path_buf(),
@@ -587,9 +599,16 @@ fn check_fittable(calibration: &Samples, path: &Path, torque_column: &str) -> Re
         .speed_rad_s
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &w| (a.min(w), b.max(w)));
-    if hi - lo <= 1e-9 * hi.abs() {
+    if hi - lo <= SAME_SPEED_TOLERANCE * hi.abs() {
         return fail(format!(
             "every calibration row has bit speed {lo} rad/s: the laws are fitted to how torque changes with speed, and a constant speed cannot tell them apart (or fix their parameters)"
+        ));
+    }
+    let fastest = lo.abs().max(hi.abs());
+    if fastest > MAX_SPEED_RAD_S {
+        return fail(format!(
+            "the largest |bit speed| in column '{speed_column}' is {fastest:.3e} rad/s ({:.3e} rpm), above {MAX_SPEED_RAD_S:e} rad/s (about 95,000 rpm), far beyond any drill bit; check the column's unit (--speed-unit)",
+            fastest / RAD_S_PER_RPM
         ));
     }
     let largest = calibration.torque_nm.iter().fold(0.0f64, |m, y| m.max(y.abs()));

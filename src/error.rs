@@ -29,6 +29,15 @@ pub enum Error {
     /// The data read fine but cannot be used (empty after filtering, all-zero torque...).
     #[error("{}: {message}", path.display())]
     Data { path: PathBuf, message: String },
+    /// A law's least-squares fit fails on the samples given (too few of them or of distinct
+    /// speeds, no finite starting point, the optimiser diverging from every start): the record
+    /// is at fault. `record` names it where known ([`crate::fit::fit_record`] attaches it).
+    #[error("{}{law}: least-squares fit: {message}", record.as_ref().map(|p| format!("{}: ", p.display())).unwrap_or_default())]
+    Fit {
+        record: Option<PathBuf>,
+        law: String,
+        message: String,
+    },
     /// A command-line flag or configuration value is refused.
     #[error("{flag}: {message}")]
     InvalidArgument { flag: String, message: String },
@@ -93,6 +102,7 @@ impl Error {
             | Error::Cell { .. }
             | Error::Format { .. }
             | Error::Data { .. }
+            | Error::Fit { .. }
             | Error::InvalidArgument { .. }
             | Error::Busy { .. } => true,
             Error::Output { source, .. } => is_bad_target(source),

@@ -10,7 +10,7 @@
 //! the best few. Physical lower bounds are kept by MINUIT's transform
 //! p = lb − 1 + √(u² + 1), which leaves the optimiser unconstrained.
 
-use crate::data::Samples;
+use crate::data::{FieldData, SAME_SPEED_TOLERANCE, Samples};
 use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::numerics::{compensated_sum, geomspace, quantile};
@@ -145,13 +145,29 @@ pub fn misfit(law: Law, params: &[f64], w: &[f64], y: &[f64], r: &[f64], sum_y2:
     ssr / sum_y2
 }
 
+/// Fits every law in `laws` to a record's calibration samples ([`fit_laws`]); a fit the
+/// samples defeat is refused as bad input naming the record ([`Error::Fit`]).
+pub fn fit_record(laws: &[Law], data: &FieldData, opts: &FitOptions) -> Result<Vec<LawFit>> {
+    fit_laws(laws, &data.calibration, &data.validation, opts).map_err(|e| match e {
+        Error::Fit { law, message, .. } => Error::Fit {
+            record: Some(data.source.clone()),
+            law,
+            message,
+        },
+        other => other,
+    })
+}
+
 /// Fits every law in `laws` (in parallel) to the calibration part of `samples`.
-/// Refuses options that cannot fit these samples first ([`FitOptions::validate_for`]).
+/// Refuses options that cannot fit these samples first ([`FitOptions::validate_for`]); of
+/// several laws that fail, the first in `laws` is reported, whatever the threads' order.
 pub fn fit_laws(laws: &[Law], calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<Vec<LawFit>> {
     opts.validate_for(calibration)?;
-    laws.par_iter()
+    let fits: Vec<Result<LawFit>> = laws
+        .par_iter()
         .map(|&law| fit_law(law, calibration, validation, opts))
-        .collect()
+        .collect();
+    fits.into_iter().collect()
 }
 
 /// Characteristic scales of a record, which make the least-squares problem dimensionless and
@@ -360,6 +376,18 @@ fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
     out
 }
 
+/// Bit speeds among `speeds` that differ by more than [`SAME_SPEED_TOLERANCE`] of the largest:
+/// the points a law, a curve torque(speed), is fitted through.
+fn distinct_speeds(speeds: &[f64]) -> usize {
+    let mut sorted = speeds.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let largest = sorted.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    1 + sorted
+        .windows(2)
+        .filter(|p| p[1] - p[0] > SAME_SPEED_TOLERANCE * largest)
+        .count()
+}
+
 /// Sum of squared residuals of scaled parameters on scaled data.
 fn ssr(law: Law, p: &[f64], w: &[f64], y: &[f64], r: &[f64]) -> f64 {
     compensated_sum(w.iter().zip(y).zip(r).map(|((&w, &y), &r)| {
@@ -379,11 +407,21 @@ struct Polished {
 pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<LawFit> {
     let m = calibration.len();
     let n = law.n_params();
+    let refuse = |message: String| Error::Fit {
+        record: None,
+        law: law.to_string(),
+        message,
+    };
     if m <= n {
-        return Err(Error::Data {
-            path: "calibration data".into(),
-            message: format!("{m} calibration samples cannot determine the {n} parameters of {law}"),
-        });
+        return Err(refuse(format!(
+            "{m} calibration samples cannot determine its {n} parameters"
+        )));
+    }
+    let speeds = distinct_speeds(&calibration.speed_rad_s);
+    if speeds < n {
+        return Err(refuse(format!(
+            "the {m} calibration samples have {speeds} distinct bit speeds, and a law of {n} parameters, a curve torque(speed), needs at least {n}; leave {law} out (--laws) or record more speeds"
+        )));
     }
     let y_si = &calibration.torque_nm;
     let sum_y2 = calibration.sum_sq_torque();
@@ -443,7 +481,10 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
         }
     }
     if starts.is_empty() {
-        return Err(Error::Numerical(format!("{law}: no finite starting point on the data")));
+        return Err(refuse(
+            "no starting point of the grid gives a finite misfit on the calibration samples (their torques against speed leave every start's linear parameters undetermined or overflowing)"
+                .into(),
+        ));
     }
 
     let solver = LevenbergMarquardt::new().with_patience(400);
@@ -469,8 +510,9 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
         .filter(|p| p.ssr.is_finite())
         .collect();
     if polished.is_empty() {
-        return Err(Error::Numerical(format!(
-            "{law}: Levenberg-Marquardt failed from every start"
+        return Err(refuse(format!(
+            "Levenberg-Marquardt diverges to non-finite torques from every one of its {} starting points on the calibration samples",
+            starts.len()
         )));
     }
     polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));

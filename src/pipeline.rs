@@ -48,7 +48,7 @@ impl AbcJob {
     /// would be overwritten without `replace`, before any work.
     pub fn validate(&self) -> Result<()> {
         self.config.validate()?;
-        self.check_summary_population()?;
+        self.config.check_summary_population(self.summary_population)?;
         if let Some(out) = &self.out {
             run::check_new_run_dir(out, None)?;
         }
@@ -61,7 +61,7 @@ impl AbcJob {
     /// something is refused.
     pub fn run(&self, data: FieldData, observer: &mut dyn Observer, note: &mut dyn FnMut(String)) -> Result<Analysis> {
         self.config.validate()?;
-        self.check_summary_population()?;
+        self.config.check_summary_population(self.summary_population)?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
         if let Some(out) = &self.out {
             run::check_new_run_dir(out, Some(&data.source))?;
@@ -84,32 +84,16 @@ impl AbcJob {
     }
 }
 
-impl AbcJob {
-    /// Refuses a summary population the run can never have (at or beyond --max-populations),
-    /// before the run rather than after it.
-    fn check_summary_population(&self) -> Result<()> {
-        let max = self.config.sampler.base().max_populations;
-        match self.summary_population {
-            Some(g) if g >= max => Err(Error::arg(
-                "--summary-population",
-                format!("the run has at most {max} populations (0..={}), got {g}", max - 1),
-            )),
-            _ => Ok(()),
-        }
-    }
-}
-
 /// Continues the run in `dir` ([`run::resume`]), then summarises population
-/// `summary_population` (default: the last) and rewrites the directory's summary files.
+/// `more.summary_population` (default: the last) and rewrites the directory's summary files.
 pub fn resume(
     dir: &Path,
     more: &Continuation,
-    summary_population: Option<usize>,
     observer: &mut dyn Observer,
     note: &mut dyn FnMut(String),
 ) -> Result<Analysis> {
     let outcome = run::resume(dir, more, observer, note)?;
-    let mut analysis = Analysis::new(outcome, summary_population, Some(dir))?;
+    let mut analysis = Analysis::new(outcome, more.summary_population, Some(dir))?;
     analysis.write_summary(dir)?;
     analysis.outcome.lock = None; // the directory is complete: the next writer may come
     Ok(analysis)

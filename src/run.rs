@@ -84,6 +84,21 @@ impl RunConfig {
     }
 }
 
+impl RunConfig {
+    /// Refuses a summary population `g` the run can never have (at or beyond
+    /// `--max-populations`), before the run rather than after it.
+    pub fn check_summary_population(&self, g: Option<usize>) -> Result<()> {
+        let max = self.sampler.base().max_populations;
+        match g {
+            Some(g) if g >= max => Err(Error::arg(
+                "--summary-population",
+                format!("the run has at most {max} populations (0..={}), got {g}", max - 1),
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
 /// Populations a sampler holds at least while drawing: the last one and the one being drawn.
 const POPULATIONS_HELD: f64 = 2.0;
 /// Memory of one particle: the struct and its parameters on the heap.
@@ -145,6 +160,9 @@ pub struct Continuation {
     pub min_acceptance: Option<f64>,
     pub max_seconds: Option<f64>,
     pub backend: Option<Backend>,
+    /// The population this invocation summarises (default: the last), checked against the
+    /// continued run's `max_populations` before any population is drawn.
+    pub summary_population: Option<usize>,
 }
 
 /// A run after an invocation: its set-up, every population, and why it stopped.
@@ -266,7 +284,7 @@ pub fn start(
     if let Some(dir) = dir {
         check_new_run_dir(dir, Some(&input))?;
     }
-    let fits = fit::fit_laws(&config.laws, &data.calibration, &data.validation, &config.fit)?;
+    let fits = fit::fit_record(&config.laws, &data, &config.fit)?;
     let base = config.sampler.base_mut();
     let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
     base.eps_min = floor.eps_min;
@@ -431,6 +449,7 @@ pub fn resume(
     config.sampler.apply(more);
     config.backend = more.backend.unwrap_or(config.backend);
     config.validate()?;
+    config.check_summary_population(more.summary_population)?;
     let problem = AbcProblem::new(
         setup.prior.clone(),
         config.seed,

@@ -5,8 +5,8 @@ use super::args::{DataArgs, FitArgs, load_data, set_threads};
 use super::print;
 use super::progress::RunProgress;
 use bitrock::Error;
-use bitrock::abc::rejection::RejectionConfig;
-use bitrock::abc::smc::SmcConfig;
+use bitrock::abc::rejection::{Mode, RejectionConfig};
+use bitrock::abc::smc::{SmcConfig, WeightsOn};
 use bitrock::eval::Backend;
 use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
 use bitrock::run::{Continuation, RunConfig, SamplerConfig};
@@ -61,28 +61,30 @@ pub struct AbcArgs {
     /// and the run can be continued with --resume (which has no budget unless given again).
     #[arg(long, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
-    /// nested: one candidate stream, each population keeps the previous particles below its
-    /// tolerance (same distribution, 0.38× the evaluations on the demo record); paper: a fresh stream per
-    /// population, as the paper's Algorithm 1.
-    #[arg(long, value_enum, default_value_t = RejectionConfig::default().mode)]
-    pub mode: bitrock::abc::rejection::Mode,
+    /// Rejection sampler only. nested: one candidate stream, each population keeps the previous
+    /// particles below its tolerance (same distribution, 0.38× the evaluations on the demo
+    /// record); paper: a fresh stream per population, as the paper's Algorithm 1 [default:
+    /// nested].
+    #[arg(long, value_enum)]
+    pub mode: Option<Mode>,
     /// rejection: the paper's Algorithm 1 (see --mode); smc: ABC-SMC with model selection
     /// (population 0 from the prior, then perturbed, importance-weighted populations).
     #[arg(long, value_enum, default_value_t = Sampler::Rejection)]
     pub sampler: Sampler,
-    /// SMC: probability that the model kernel keeps a particle's law (else it jumps uniformly
-    /// to another law still alive).
-    #[arg(long, default_value_t = SmcConfig::default().p_stay, value_name = "P", allow_hyphen_values = true)]
-    pub p_stay: f64,
-    /// SMC: the Gaussian perturbation's covariance is this times the weighted covariance of
-    /// the law's previous particles (2: Beaumont et al. 2009).
-    #[arg(long, default_value_t = SmcConfig::default().kernel_scale, value_name = "S", allow_hyphen_values = true)]
-    pub kernel_scale: f64,
-    /// SMC: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
+    /// SMC only: probability that the model kernel keeps a particle's law (else it jumps
+    /// uniformly to another law still alive) [default: 0.7].
+    #[arg(long, value_name = "P", allow_hyphen_values = true)]
+    pub p_stay: Option<f64>,
+    /// SMC only: the Gaussian perturbation's covariance is this times the weighted covariance
+    /// of the law's previous particles [default: 2, Beaumont et al. 2009].
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
+    pub kernel_scale: Option<f64>,
+    /// SMC only: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
     /// that GPU and CPU runs give the same populations; evaluator: on the --backend (the
-    /// GPU's f32 kernel: faster for large N, but its populations drift from the CPU run's).
-    #[arg(long, value_enum, default_value_t = SmcConfig::default().weights_on)]
-    pub smc_weights: bitrock::abc::smc::WeightsOn,
+    /// GPU's f32 kernel: faster for large N, but its populations drift from the CPU run's)
+    /// [default: host].
+    #[arg(long, value_enum)]
+    pub smc_weights: Option<WeightsOn>,
     /// Seed of the candidate streams: the same seed gives the same populations.
     #[arg(long, default_value_t = RunConfig::default().seed)]
     pub seed: u64,
@@ -111,13 +113,13 @@ pub struct AbcCmd {
     #[arg(long)]
     pub force: bool,
     /// Continue the run in DIR (killed or finished) after its last stored population: more
-    /// populations, a lower --eps-min, a new --max-draws/--max-seconds or --backend. The
-    /// populations are exactly those an uninterrupted run gives.
+    /// populations, a lower --eps-min, a new --max-draws/--max-seconds or --backend, another
+    /// --summary-population. The populations are exactly those an uninterrupted run gives.
     #[arg(long, value_name = "DIR", conflicts_with_all = [
         "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
         "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior", "epsilons",
-        "start_epsilon", "mode", "seed", "summary_population", "sampler", "p_stay", "kernel_scale", "smc_weights",
+        "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights",
     ])]
     pub resume: Option<PathBuf>,
     /// No progress bar or population lines on stderr.
@@ -136,7 +138,7 @@ pub struct AbcCmd {
 
 pub fn run(cmd: &AbcCmd) -> anyhow::Result<ExitCode> {
     let done = start_or_resume(cmd)?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &done.json())?;
         writeln!(out)?;
@@ -169,17 +171,11 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                 min_acceptance: cmd.abc.min_acceptance,
                 max_seconds: cmd.abc.max_seconds,
                 backend: cmd.abc.backend,
+                summary_population: cmd.abc.summary_population,
             };
-            Ok(pipeline::resume(
-                dir,
-                &more,
-                cmd.abc.summary_population,
-                &mut progress,
-                &mut note,
-            )?)
+            Ok(pipeline::resume(dir, &more, &mut progress, &mut note)?)
         }
         (None, Some(dir)) => {
-            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
             let job = AbcJob {
                 config: run_config(&cmd.fit, &cmd.abc)?,
                 summary_population: cmd.abc.summary_population,
@@ -188,6 +184,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                     replace: cmd.force,
                 }),
             };
+            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
             Ok(job.run(data, &mut progress, &mut note)?)
         }
         (None, None) => Err(Error::arg("--out", "give the run directory to write").into()),
@@ -196,6 +193,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
 
 /// The run configuration the flags describe (validated by the library before any work).
 fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
+    check_sampler_flags(args)?;
     let defaults = RejectionConfig::default();
     let sampler = RejectionConfig {
         particles: args.particles,
@@ -205,7 +203,7 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
         min_acceptance: args.min_acceptance.unwrap_or(defaults.min_acceptance),
         start_epsilon: args.start_epsilon,
         epsilons: args.epsilons.clone(),
-        mode: args.mode,
+        mode: args.mode.unwrap_or(defaults.mode),
         max_seconds: args.max_seconds,
         ..defaults
     };
@@ -218,13 +216,43 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
         backend: args.backend.unwrap_or(Backend::Auto),
         sampler: match args.sampler {
             Sampler::Rejection => SamplerConfig::Rejection(sampler),
-            Sampler::Smc => SamplerConfig::Smc(SmcConfig {
-                base: sampler,
-                p_stay: args.p_stay,
-                kernel_scale: args.kernel_scale,
-                weights_on: args.smc_weights,
-            }),
+            Sampler::Smc => {
+                let smc = SmcConfig::default();
+                SamplerConfig::Smc(SmcConfig {
+                    base: sampler,
+                    p_stay: args.p_stay.unwrap_or(smc.p_stay),
+                    kernel_scale: args.kernel_scale.unwrap_or(smc.kernel_scale),
+                    weights_on: args.smc_weights.unwrap_or(smc.weights_on),
+                })
+            }
         },
         eps_min_from_record: args.eps_min.is_none(),
     })
+}
+
+/// Refuses a flag of the other sampler, naming it and the sampler that runs: the run would
+/// ignore it, and the user could believe it shaped the populations. (`--resume` refuses them
+/// all: a resumed run keeps its sampler's settings.)
+fn check_sampler_flags(args: &AbcArgs) -> Result<(), Error> {
+    match args.sampler {
+        Sampler::Rejection => {
+            let smc_only = [
+                ("--p-stay", args.p_stay.is_some()),
+                ("--kernel-scale", args.kernel_scale.is_some()),
+                ("--smc-weights", args.smc_weights.is_some()),
+            ];
+            match smc_only.into_iter().find(|&(_, given)| given) {
+                Some((flag, _)) => Err(Error::arg(
+                    flag,
+                    "applies only to --sampler smc, and this run uses the rejection sampler (the default); add --sampler smc or drop the flag",
+                )),
+                None => Ok(()),
+            }
+        }
+        Sampler::Smc if args.mode.is_some() => Err(Error::arg(
+            "--mode",
+            "applies only to the rejection sampler, and this run uses --sampler smc, which perturbs each population into the next instead of drawing streams; drop --mode",
+        )),
+        Sampler::Smc => Ok(()),
+    }
 }

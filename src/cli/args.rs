@@ -94,26 +94,27 @@ pub struct FitArgs {
     /// the paper's assumption that the record was taken at W = W_ref.
     #[arg(long)]
     pub scale_by_wob: bool,
-    /// Reference weight on bit W_ref, kN.
-    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
-    pub w_ref_kn: f64,
+    /// Reference weight on bit W_ref, kN, of --scale-by-wob [default: 244.2, the paper's].
+    #[arg(long, value_name = "KN")]
+    pub w_ref_kn: Option<f64>,
 }
 
 impl FitArgs {
-    /// The fit options of the flags (the library validates them); `--w-ref-kn` is refused here
-    /// even when `--scale-by-wob` does not use it.
+    /// The fit options of the flags (the library validates them). `--w-ref-kn` without
+    /// `--scale-by-wob` is refused: r = 1 then, and the user could believe W_ref was used.
     pub fn options(&self) -> anyhow::Result<FitOptions> {
-        if !(self.w_ref_kn.is_finite() && self.w_ref_kn > 0.0) {
+        if self.w_ref_kn.is_some() && !self.scale_by_wob {
             return Err(Error::arg(
                 "--w-ref-kn",
-                format!("must be a positive number of kN, got {}", self.w_ref_kn),
+                "applies only with --scale-by-wob (r = WOB / W_ref); without it r = 1 for every sample and W_ref is not used",
             )
             .into());
         }
+        let w_ref_kn = self.w_ref_kn.unwrap_or(PAPER_W_REF_N / 1000.0);
         Ok(FitOptions {
             bounded: !self.no_bounds,
             starts: self.starts,
-            w_ref_n: self.scale_by_wob.then_some(self.w_ref_kn * 1000.0),
+            w_ref_n: self.scale_by_wob.then_some(w_ref_kn * 1000.0),
         })
     }
 }

@@ -49,7 +49,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             eprintln!("{line}");
         }
     })?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;
         writeln!(out)?;

@@ -52,7 +52,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     let root = &cmd.out;
     check_root(root)?;
     set_threads(cmd.threads)?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     writeln!(
         out,
         "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"

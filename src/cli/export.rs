@@ -65,7 +65,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
         }
     };
     match &cmd.out {
-        None => std::io::stdout().lock().write_all(&text)?,
+        None => super::print::stdout().write_all(&text)?,
         Some(path) => files::write_whole(path, "--out", |file| file.write_all(&text))?,
     }
     Ok(ExitCode::SUCCESS)

@@ -33,7 +33,7 @@ pub fn run(cmd: &FeCmd) -> anyhow::Result<ExitCode> {
     }
     let modes = string.modes()?;
     let critical = string.critical_bit_damping()?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if cmd.json {
         let v = json!({
             "dofs": string.dofs(),

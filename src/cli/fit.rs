@@ -24,15 +24,16 @@ pub struct FitCmd {
 }
 
 pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
+    let opts = cmd.fit.options()?;
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    fit_and_print(&data, &cmd.fit.laws, &cmd.fit.options()?, cmd.json)?;
+    fit_and_print(&data, &cmd.fit.laws, &opts, cmd.json)?;
     Ok(ExitCode::SUCCESS)
 }
 
 /// Fits `laws` to `data` and prints them (also the start of `bitrock demo`).
 pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bool) -> anyhow::Result<()> {
-    let fits = fit::fit_laws(laws, &data.calibration, &data.validation, opts)?;
-    let mut out = std::io::stdout().lock();
+    let fits = fit::fit_record(laws, data, opts)?;
+    let mut out = super::print::stdout();
     if json {
         serde_json::to_writer_pretty(&mut out, &bitrock::documents::fit_json(data, &fits))?;
         writeln!(out)?;

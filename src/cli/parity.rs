@@ -43,7 +43,7 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
         return Err(Error::arg("--epsilon", format!("must be a positive number, got {e}")).into());
     }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    let fits = fit::fit_laws(&cmd.laws, &data.calibration, &data.validation, &FitOptions::default())?;
+    let fits = fit::fit_record(&cmd.laws, &data, &FitOptions::default())?;
     let delta = bitrock::run::RunConfig::default().delta;
     let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).map_err(|e| {
         // Parity has no --delta or --prior: the record is what the prior cannot be built from.
@@ -54,7 +54,7 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
     })?;
     let problem = AbcProblem::new(prior, cmd.seed, &data.calibration, None);
     let report = bitrock::bench::parity(&problem, cmd.candidates, cmd.epsilon)?;
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;
         writeln!(out)?;

@@ -11,6 +11,30 @@ use bitrock::fit::LawFit;
 use bitrock::units::TorqueUnit;
 use std::io::{self, Write};
 
+/// Standard output for a command's results. A failed write names it (`standard output:
+/// cannot write: No space left on device`) and keeps its kind, so that a closed pipe still ends
+/// quietly. (Standard output is line-buffered: results end with a newline, so nothing is left
+/// for the flush at exit, whose error would be lost.)
+pub fn stdout() -> Stdout {
+    Stdout(io::stdout().lock())
+}
+
+/// See [`stdout`].
+pub struct Stdout(io::StdoutLock<'static>);
+
+impl Write for Stdout {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.0.write(buf).map_err(named_stdout)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.0.flush().map_err(named_stdout)
+    }
+}
+
+fn named_stdout(e: io::Error) -> io::Error {
+    io::Error::new(e.kind(), format!("standard output: cannot write: {e}"))
+}
+
 /// Numbers in a table: fixed notation where it reads well, scientific otherwise.
 fn number(v: f64) -> String {
     let a = v.abs();

@@ -19,7 +19,7 @@ pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
     let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;
     let summary = bitrock::report::write_paper_report(&cmd.out, &setup, &runs)?;
     writeln!(
-        std::io::stdout().lock(),
+        super::print::stdout(),
         "report written to {} ({} figures, SVG and PNG)",
         summary.dir.join("report.md").display(),
         summary.figures.len()

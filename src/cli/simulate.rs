@@ -117,7 +117,7 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
     }
     let trace = simulate::simulate(&config)?;
     match &cmd.out {
-        None => simulate::write_csv(&trace, std::io::stdout().lock())?,
+        None => simulate::write_csv(&trace, super::print::stdout())?,
         Some(path) => files::write_whole(path, "--out", |file| simulate::write_csv(&trace, file))?,
     }
     Ok(ExitCode::SUCCESS)

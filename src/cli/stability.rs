@@ -138,7 +138,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         files::write_whole(path, "--out", |file| file.write_all(&boundaries_csv(&omega, &columns)))?;
     }
-    let mut out = std::io::stdout().lock();
+    let mut out = super::print::stdout();
     if cmd.json {
         let v = json!({
             "structure": match cmd.structure { Structure::Lumped => "1dof", Structure::Fe => "fe" },

@@ -141,55 +141,116 @@ fn force_replaces_a_run_with_a_new_one_and_leaves_nothing_beside_it() {
     assert_eq!(names(tmp.path()), ["R"]);
 }
 
+/// When to SIGKILL `abc --out R --force` in [`a_kill_during_force_leaves_the_old_run_or_the_new_one`].
+#[cfg(target_os = "linux")]
+#[derive(Clone, Copy, Debug)]
+enum KillAt {
+    /// This long after the start: before the fits end, however loaded the machine.
+    Start(u64),
+    /// This long after the new run is swapped into R (R's inode changes).
+    Swap(u64),
+}
+
+/// True when `part` is the export of a run stopped after a whole population of the run whose
+/// export is `whole`: its header and populations 0..=k, each identical, for some k ≥ 0.
+#[cfg(target_os = "linux")]
+fn whole_populations_of(part: &str, whole: &str) -> bool {
+    let population = |line: Option<&str>| line.and_then(|l| l.split(',').next().map(str::to_string));
+    let Some(rest) = whole.strip_prefix(part) else {
+        return false;
+    };
+    let holds_population_0 = part.lines().nth(1).is_some_and(|l| l.starts_with("0,"));
+    let ends_at_a_population = rest.is_empty() || population(rest.lines().next()) != population(part.lines().last());
+    holds_population_0 && part.ends_with('\n') && ends_at_a_population
+}
+
+#[cfg(target_os = "linux")]
 #[test]
 fn a_kill_during_force_leaves_the_old_run_or_the_new_one() {
+    use std::os::unix::fs::MetadataExt;
+    use std::time::{Duration, Instant};
     let tmp = tempfile::tempdir().unwrap();
+    let new_run = [
+        "--seed",
+        "3",
+        "--particles",
+        "4000",
+        "--max-populations",
+        "4",
+        "--backend",
+        "cpu",
+        "-q",
+    ];
+    // The new run, uninterrupted: what R must hold, population by population, once swapped.
+    let mut args = vec!["abc", "--out", "NEW"];
+    args.extend_from_slice(&new_run);
+    assert_eq!(run_in(tmp.path(), &args).0, 0);
+    let new = export(tmp.path(), "NEW");
+    std::fs::remove_dir_all(tmp.path().join("NEW")).unwrap();
+    // The judge itself: whole populations pass; no population, or a cut inside one, does not.
+    let header = new.find('\n').unwrap() + 1;
+    let first_row = header + new[header..].find('\n').unwrap() + 1;
+    let population_1 = new.find("\n1,").unwrap() + 1;
+    assert!(whole_populations_of(&new, &new) && whole_populations_of(&new[..population_1], &new));
+    assert!(!whole_populations_of(&new[..header], &new));
+    assert!(!whole_populations_of(&new[..first_row], &new));
+    assert!(!whole_populations_of(&new[..population_1 - 1], &new));
+
     assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
     let old = export(tmp.path(), "R");
-    let mut saw_old = false;
-    let mut saw_new = false;
-    for kill_ms in [30, 150, 300, 500, 800, 1200] {
+    let r = tmp.path().join("R");
+    let kills = [
+        KillAt::Start(30),
+        KillAt::Swap(0),
+        KillAt::Swap(20),
+        KillAt::Swap(100),
+        KillAt::Swap(300),
+    ];
+    for kill in kills {
+        let old_inode = std::fs::metadata(&r).unwrap().ino();
         let mut child = bin()
             .current_dir(tmp.path())
-            .args([
-                "abc",
-                "--out",
-                "R",
-                "--force",
-                "--seed",
-                "3",
-                "--particles",
-                "4000",
-                "--max-populations",
-                "4",
-                "--backend",
-                "cpu",
-                "-q",
-            ])
+            .args(["abc", "--out", "R", "--force"])
+            .args(new_run)
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::null())
             .spawn()
             .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(kill_ms));
-        child.kill().unwrap(); // SIGKILL
-        child.wait().unwrap();
+        let started = Instant::now();
+        let swapped = loop {
+            // R is never missing, at any moment of the run.
+            let swapped = std::fs::metadata(&r).unwrap().ino() != old_inode;
+            let due = match kill {
+                KillAt::Start(ms) => started.elapsed() >= Duration::from_millis(ms),
+                KillAt::Swap(_) => swapped,
+            };
+            if due || child.try_wait().unwrap().is_some() {
+                break swapped;
+            }
+            assert!(started.elapsed() < Duration::from_secs(120), "no swap in 120 s");
+            std::thread::sleep(Duration::from_millis(1));
+        };
+        if let KillAt::Swap(ms) = kill {
+            std::thread::sleep(Duration::from_millis(ms));
+        }
+        let _ = child.kill(); // SIGKILL (an error if it had already ended)
+        let status = child.wait().unwrap();
         let now = export(tmp.path(), "R");
-        if now == old {
-            saw_old = true;
-        } else {
-            // The new run: a store with at least its population 0.
-            assert!(now.lines().nth(1).is_some_and(|l| l.starts_with("0,")), "{now}");
-            saw_new = true;
-            // Back to the old run for the next kill time.
-            assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
-            assert_eq!(export(tmp.path(), "R"), old);
+        match kill {
+            KillAt::Start(ms) => assert_eq!(now, old, "killed {ms} ms after the start: the old run"),
+            KillAt::Swap(ms) => {
+                assert!(swapped, "{kill:?}: the run ended ({status}) without swapping");
+                assert!(
+                    whole_populations_of(&now, &new),
+                    "killed {ms} ms after the swap: R holds neither the old run nor whole populations of the new one:\n{}",
+                    now.lines().take(3).collect::<Vec<_>>().join("\n")
+                );
+                // Back to the old run for the next kill.
+                assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
+                assert_eq!(export(tmp.path(), "R"), old);
+            }
         }
     }
-    // 30 ms is before the fits end, however loaded the machine: the old run. Which side the
-    // later kills land on depends on the machine's speed (about 0.6 s to population 0 on two
-    // shared cores); each time R held a whole run.
-    assert!(saw_old);
-    eprintln!("kills after the swap seen: {saw_new}");
     // A later run in the same parent removes the staging directories the kills left.
     assert_eq!(small_run(tmp.path(), "R", &["--force"]).0, 0);
     assert_eq!(names(tmp.path()), ["R"]);
@@ -364,6 +425,39 @@ fn flags_beyond_the_machine_are_refused_before_any_work() {
 }
 
 #[test]
+fn a_summary_population_beyond_the_resumed_run_is_refused_before_any_population() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    // Were it checked only after the run, populations 2 and 3 would be stored first.
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &[
+                "abc",
+                "--resume",
+                "R",
+                "--max-populations",
+                "4",
+                "--summary-population",
+                "4",
+                "-q",
+            ],
+        ),
+        &["--summary-population", "at most 4 populations (0..=3), got 4"],
+    );
+    assert_eq!(export(tmp.path(), "R"), before);
+    // One the continued run can have is accepted and summarised.
+    let (code, out, err) = run_in(
+        tmp.path(),
+        &["abc", "--resume", "R", "--summary-population", "0", "--json", "-q"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let summary: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(summary["posterior"]["population"], 0, "{out}");
+}
+
+#[test]
 fn resuming_a_store_that_lost_particles_is_refused_not_a_panic() {
     let tmp = tempfile::tempdir().unwrap();
     assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
@@ -406,6 +500,45 @@ fn data_that_defeat_the_fits_exit_2_naming_the_file_and_the_cause() {
         let path = file.to_str().unwrap();
         assert_refused(run_in(tmp.path(), &["fit", path]), &[path, cause]);
     }
+    // Records that pass those checks but defeat a law's fit: the record, the law and the cause
+    // are named, in every command that fits, and nothing is written.
+    let fast = record(&p("fast.csv"), |v| vec![v[0], v[1] * 1e60, v[2], v[3]]);
+    let fast = fast.to_str().unwrap();
+    assert_refused(run_in(tmp.path(), &["fit", fast]), &[fast, "bit speed", "--speed-unit"]);
+    // Two speeds, alternating: four-parameter laws are curves through two points.
+    let two = record(&p("two_speeds.csv"), |v| {
+        vec![v[0], if v[0] % 0.04 < 0.01 { 100.0 } else { 150.0 }, v[2], v[3]]
+    });
+    let two = two.to_str().unwrap();
+    // Of several laws that fail, the first asked for is named, every time.
+    for command in [
+        &["fit", two, "--laws", "m4,m2"][..],
+        &["abc", two, "--out", "T2", "--laws", "m4,m1"],
+    ] {
+        assert_refused(
+            run_in(tmp.path(), command),
+            &[
+                two,
+                "m4: least-squares fit",
+                "2 distinct bit speeds",
+                "needs at least 4",
+            ],
+        );
+    }
+    // Four speeds 10⁻⁸ apart: distinct, but the cubic's normal equations are singular.
+    let near = record(&p("near_speeds.csv"), |v| {
+        vec![v[0], 100.0 + 1e-6 * ((v[0] * 50.0).round() % 4.0), v[2], v[3]]
+    });
+    let near = near.to_str().unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["fit", near, "--laws", "m4"]),
+        &[near, "m4: least-squares fit", "no starting point"],
+    );
+    assert_refused(
+        run_in(tmp.path(), &["parity", near, "--laws", "m4"]),
+        &[near, "m4: least-squares fit"],
+    );
+    assert!(!p("T2").exists());
     let no_wob = record(&p("no_wob.csv"), |v| vec![v[0], v[1], v[2], 0.0]);
     assert_refused(
         run_in(tmp.path(), &["fit", no_wob.to_str().unwrap(), "--scale-by-wob"]),
@@ -498,4 +631,79 @@ fn extra_values_duplicate_columns_and_doubled_roles_are_refused() {
         &["--fe-file", "--structure fe"],
     );
     assert_eq!(names(tmp.path()), ["dup.csv", "prior.toml", "rec.csv"]);
+}
+
+#[test]
+fn flags_that_do_not_apply_to_the_run_are_refused_naming_flag_and_mode() {
+    let tmp = tempfile::tempdir().unwrap();
+    // SMC-only flags with the rejection sampler (the default, or named).
+    for (flag, value) in [("--kernel-scale", "3"), ("--p-stay", "0.5"), ("--smc-weights", "host")] {
+        assert_refused(
+            small_run(tmp.path(), "R", &[flag, value]),
+            &[&format!("{flag}: applies only to --sampler smc"), "rejection sampler"],
+        );
+        assert_refused(
+            small_run(tmp.path(), "R", &["--sampler", "rejection", flag, value]),
+            &[flag, "rejection sampler"],
+        );
+    }
+    // The rejection sampler's --mode with SMC.
+    assert_refused(
+        small_run(tmp.path(), "R", &["--sampler", "smc", "--mode", "paper"]),
+        &["--mode: applies only to the rejection sampler", "--sampler smc"],
+    );
+    // W_ref without the scaling that uses it.
+    for result in [
+        run_in(tmp.path(), &["fit", "--w-ref-kn", "100"]),
+        small_run(tmp.path(), "R", &["--w-ref-kn", "100"]),
+    ] {
+        assert_refused(result, &["--w-ref-kn: applies only with --scale-by-wob"]);
+    }
+    assert!(names(tmp.path()).is_empty(), "{:?}", names(tmp.path()));
+    // What defines the populations cannot be changed by a resume: refused, naming the flag.
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    for extra in [
+        &["--seed", "2"][..],
+        &["--particles", "100"],
+        &["--delta", "0.5"],
+        &["--laws", "m2"],
+        &["--sampler", "smc"],
+        &["--kernel-scale", "3"],
+        &["--mode", "paper"],
+        &["--epsilons", "0.1,0.05"],
+        &["--force"],
+        &["--min-speed-rpm", "10"],
+        &["--w-ref-kn", "100"],
+    ] {
+        let mut args = vec!["abc", "--resume", "R", "-q"];
+        args.extend_from_slice(extra);
+        assert_refused(run_in(tmp.path(), &args), &["--resume", extra[0]]);
+    }
+    assert_eq!(export(tmp.path(), "R"), before);
+}
+
+/// A full disk under standard output (`/dev/full`) is a failure of the machine (exit 3) whose
+/// message names what could not be written, once.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_under_standard_output_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    for args in [
+        &["export", "R"][..],
+        &["fit", "--json"],
+        &["simulate", "--law", "m2", "--omega-rpm", "100", "--duration-s", "2"],
+        &["abc", "--resume", "R", "-q", "--json"],
+    ] {
+        let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+        let out = bin().current_dir(tmp.path()).args(args).stdout(full).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(3), "{args:?}: {err}");
+        assert!(
+            err.contains("error: standard output: cannot write: "),
+            "{args:?}: {err}"
+        );
+        assert_eq!(err.matches("os error").count(), 1, "{args:?}: {err}");
+    }
 }
