@@ -184,8 +184,9 @@ pub enum DirState {
     Replace,
 }
 
-/// Files a run directory holds besides bitrock's temporaries and lock ([`files`]).
-const RUN_FILES: [&str; 7] = [
+/// Files a run directory holds besides bitrock's temporaries and lock ([`files`]), and the
+/// directory of its selection check ([`crate::selection`]).
+const RUN_FILES: [&str; 8] = [
     STORE_FILE,
     "run.sqlite-journal",
     "run.sqlite-wal",
@@ -193,6 +194,7 @@ const RUN_FILES: [&str; 7] = [
     "run.json",
     "envelopes.csv",
     "data.csv",
+    crate::selection::SELECTION_DIR,
 ];
 
 /// Refuses, before any work and naming `--out`, a run directory that cannot be written: one
