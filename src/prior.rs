@@ -528,7 +528,7 @@ mod tests {
         let mut big = fit(Law::M2, vec![130.0, 65.0, 3.0]);
         big.std_errors_si = vec![Some(0.5); 3];
         let q = Prior::from_fits_by(&[big], PriorRule::Stderr { k: 3.0 }, 0.4, None, 1.0).unwrap();
-        assert_eq!(q.boxes[0].upper[0] - q.boxes[0].lower[0], 3.0);
+        assert_eq!((q.boxes[0].upper[0] - q.boxes[0].lower[0]).to_bits(), 3.0f32.to_bits());
         let zero_k = Prior::from_fits_by(
             &[fit(Law::M2, vec![13.0, 6.5, 0.3])],
             PriorRule::Stderr { k: 0.0 },

@@ -383,7 +383,7 @@ fn verdict(law: Law, laws: &[Law], firsts: &[usize], k: usize, median_own: f64) 
         .filter(|&(&l, &c)| l != law && c > 0)
         .map(|(&l, &c)| (l, c))
         .collect();
-    others.sort_by(|a, b| b.1.cmp(&a.1));
+    others.sort_by_key(|&(_, count)| std::cmp::Reverse(count));
     let head = if own == k {
         format!("{law} data are recovered as {law} in all {k} replicates")
     } else if let Some(&(top, count)) = others.first()
