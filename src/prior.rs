@@ -523,7 +523,10 @@ mod tests {
         // tsb: 13 ± 1.5; g: 0.3 ± 0.75 clipped at its bound 0; tcb has no σ̂: the δ box.
         assert_eq!(p.boxes[0].lower, vec![11.5, (6.5f64 * 0.6) as f32, 0.0]);
         assert_eq!(p.boxes[0].upper, vec![14.5, (6.5f64 * 1.4) as f32, 1.05]);
-        assert_eq!(p.rules[0], vec![BoxRule::StdErr, BoxRule::Delta, BoxRule::StdErr]);
+        assert_eq!(
+            p.rules[0],
+            vec![BoxRule::StdErr, BoxRule::DeltaNotIdentified, BoxRule::StdErr]
+        );
         // The box does not scale with |φ̂|: the same σ̂ gives the same width at 10× the estimate.
         let mut big = fit(Law::M2, vec![130.0, 65.0, 3.0]);
         big.std_errors_si = vec![Some(0.5); 3];
