@@ -60,6 +60,7 @@ pub mod prior;
 pub mod report;
 pub mod rng;
 pub mod run;
+pub mod selection;
 pub mod simulate;
 pub mod stability;
 pub mod store;

@@ -21,6 +21,7 @@ fn main() -> ExitCode {
         Command::Demo(cmd) => cli::demo::run(&cmd),
         Command::Parity(cmd) => cli::parity::run(&cmd),
         Command::Bench(cmd) => cli::bench::run(&cmd),
+        Command::CheckSelection(cmd) => cli::check::run(&cmd),
         Command::Fe(cmd) => cli::fe::run(&cmd),
         Command::Stability(cmd) => cli::stability::run(&cmd),
     };

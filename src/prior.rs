@@ -67,6 +67,9 @@ pub enum BoxRule {
     /// φ̂ ± δ·s with s the record's scale of the parameter: φ̂ is 0 or on its physical bound,
     /// where δ·|φ̂| gives no width.
     RecordScale,
+    /// φ̂ ± k·σ̂ with σ̂ the least-squares standard error (`--prior-rule stderr`), clipped to
+    /// the physical bound: a width set by what the data determine, not by |φ̂|.
+    StdErr,
     /// Given explicitly (a `--prior` file, or a box built by a program).
     Given,
     /// Not recorded: a run store of schema version 1 kept the boxes but not their rules.
@@ -80,6 +83,7 @@ impl BoxRule {
             BoxRule::Delta => "delta",
             BoxRule::DeltaNotIdentified => "delta_not_identified",
             BoxRule::RecordScale => "record_scale",
+            BoxRule::StdErr => "stderr",
             BoxRule::Given => "given",
             BoxRule::Unrecorded => "unrecorded",
         }
@@ -91,11 +95,42 @@ impl BoxRule {
             BoxRule::Delta,
             BoxRule::DeltaNotIdentified,
             BoxRule::RecordScale,
+            BoxRule::StdErr,
             BoxRule::Given,
             BoxRule::Unrecorded,
         ]
         .into_iter()
         .find(|r| r.name() == name)
+    }
+}
+
+/// How the boxes around the least-squares estimates are sized (`--prior-rule`).
+///
+/// The paper's rule scales each box with |φ̂|, so a law whose parameters happen to be large
+/// (or whose prediction is sensitive to a large parameter) gets a box that spans more misfit,
+/// and ABC, which rewards the share of a law's box below ε, penalises it for the size of its
+/// numbers rather than for its fit. `StdErr` sizes every box by what the record determines
+/// instead: k standard errors of the least-squares estimate, so that every law's box covers
+/// about the same region of its own likelihood.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "rule", rename_all = "lowercase")]
+pub enum PriorRule {
+    /// The paper's φ̂(1 ± δ) (with the fallbacks of the module documentation).
+    #[default]
+    Delta,
+    /// φ̂ ± k·σ̂, clipped to the physical bound; where σ̂ is undefined (a parameter on its
+    /// bound, or two that trade off) or zero, the δ rule's box.
+    Stderr { k: f64 },
+}
+
+impl PriorRule {
+    /// Refuses a k that gives no box, naming the flag.
+    pub fn validate(&self) -> Result<()> {
+        match *self {
+            PriorRule::Delta => Ok(()),
+            PriorRule::Stderr { k } if k.is_finite() && k > 0.0 => Ok(()),
+            PriorRule::Stderr { k } => Err(Error::arg("--prior-k", format!("must be a positive number, got {k}"))),
+        }
     }
 }
 
@@ -208,6 +243,19 @@ impl Prior {
     /// fit, clipped to physical bounds, replaced where `file` gives explicit bounds.
     /// `torque_unit_nm` is N·m per unit of the file's torque-valued bounds.
     pub fn from_fits(fits: &[LawFit], delta: f64, file: Option<&PriorFile>, torque_unit_nm: f64) -> Result<Self> {
+        Self::from_fits_by(fits, PriorRule::Delta, delta, file, torque_unit_nm)
+    }
+
+    /// As [`Prior::from_fits`], with the boxes sized by `rule` (δ is the fallback of
+    /// [`PriorRule::Stderr`] where a standard error is undefined).
+    pub fn from_fits_by(
+        fits: &[LawFit],
+        rule: PriorRule,
+        delta: f64,
+        file: Option<&PriorFile>,
+        torque_unit_nm: f64,
+    ) -> Result<Self> {
+        rule.validate()?;
         if !(delta.is_finite() && delta > 0.0) {
             return Err(Error::arg("--delta", format!("must be a positive number, got {delta}")));
         }
@@ -234,7 +282,10 @@ impl Prior {
                     }
                     (a * unit, b * unit, BoxRule::Given)
                 } else {
-                    delta_box(fit, j, delta)
+                    match rule {
+                        PriorRule::Delta => delta_box(fit, j, delta),
+                        PriorRule::Stderr { k } => stderr_box(fit, j, k).unwrap_or_else(|| delta_box(fit, j, delta)),
+                    }
                 };
                 let lo = lo.max(spec.lower);
                 if rule == BoxRule::Given && lo >= hi {
@@ -391,6 +442,14 @@ fn delta_box(fit: &LawFit, j: usize, delta: f64) -> (f64, f64, BoxRule) {
     (a.min(b), a.max(b), rule)
 }
 
+/// The box φ̂ ± k·σ̂ of parameter `j` of `fit` (before clipping), or `None` where the standard
+/// error is undefined or zero.
+fn stderr_box(fit: &LawFit, j: usize, k: f64) -> Option<(f64, f64, BoxRule)> {
+    let estimate = fit.params_si[j];
+    let half = k * fit.std_errors_si[j].filter(|se| se.is_finite() && *se > 0.0)?;
+    Some((estimate - half, estimate + half, BoxRule::StdErr))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -457,6 +516,33 @@ mod tests {
     }
 
     #[test]
+    fn stderr_boxes_span_k_standard_errors_and_fall_back_to_delta_where_undefined() {
+        let mut m2 = fit(Law::M2, vec![13.0, 6.5, 0.3]);
+        m2.std_errors_si = vec![Some(0.5), None, Some(0.25)];
+        let p = Prior::from_fits_by(&[m2], PriorRule::Stderr { k: 3.0 }, 0.4, None, 1.0).unwrap();
+        // tsb: 13 ± 1.5; g: 0.3 ± 0.75 clipped at its bound 0; tcb has no σ̂: the δ box.
+        assert_eq!(p.boxes[0].lower, vec![11.5, (6.5f64 * 0.6) as f32, 0.0]);
+        assert_eq!(p.boxes[0].upper, vec![14.5, (6.5f64 * 1.4) as f32, 1.05]);
+        assert_eq!(
+            p.rules[0],
+            vec![BoxRule::StdErr, BoxRule::DeltaNotIdentified, BoxRule::StdErr]
+        );
+        // The box does not scale with |φ̂|: the same σ̂ gives the same width at 10× the estimate.
+        let mut big = fit(Law::M2, vec![130.0, 65.0, 3.0]);
+        big.std_errors_si = vec![Some(0.5); 3];
+        let q = Prior::from_fits_by(&[big], PriorRule::Stderr { k: 3.0 }, 0.4, None, 1.0).unwrap();
+        assert_eq!((q.boxes[0].upper[0] - q.boxes[0].lower[0]).to_bits(), 3.0f32.to_bits());
+        let zero_k = Prior::from_fits_by(
+            &[fit(Law::M2, vec![13.0, 6.5, 0.3])],
+            PriorRule::Stderr { k: 0.0 },
+            0.4,
+            None,
+            1.0,
+        );
+        assert!(zero_k.unwrap_err().to_string().starts_with("--prior-k"));
+    }
+
+    #[test]
     fn boxes_built_by_programs_are_given_and_rule_names_round_trip() {
         let p = Prior::from_fits(&[fit(Law::M2, vec![13.0, 6.5, 0.3])], 0.4, None, 1.0).unwrap();
         let q = Prior::new(p.boxes.clone(), vec![1.0]).unwrap();
@@ -465,6 +551,7 @@ mod tests {
             BoxRule::Delta,
             BoxRule::DeltaNotIdentified,
             BoxRule::RecordScale,
+            BoxRule::StdErr,
             BoxRule::Given,
             BoxRule::Unrecorded,
         ] {

@@ -14,7 +14,7 @@ use crate::files;
 use crate::fit::{self, FitOptions};
 use crate::laws::Law;
 use crate::limits;
-use crate::prior::{Prior, PriorFile};
+use crate::prior::{Prior, PriorFile, PriorRule};
 use crate::store::{RunSetup, RunStore, STORE_FILE, StoredRun};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -29,6 +29,10 @@ pub struct RunConfig {
     pub fit: FitOptions,
     /// Prior half-width δ.
     pub delta: f64,
+    /// How the prior boxes are sized: the paper's δ rule or k standard errors (runs stored
+    /// before the option read as the δ rule).
+    #[serde(default)]
+    pub prior_rule: PriorRule,
     /// The prior file the boxes were read from (provenance; the prior itself is stored).
     pub prior_file: Option<PathBuf>,
     pub seed: u64,
@@ -47,6 +51,7 @@ impl Default for RunConfig {
             laws: Law::ALL.to_vec(),
             fit: FitOptions::default(),
             delta: 0.4,
+            prior_rule: PriorRule::Delta,
             prior_file: None,
             seed: 1,
             backend: Backend::Auto,
@@ -70,6 +75,7 @@ impl RunConfig {
                 format!("must be a positive number, got {}", self.delta),
             ));
         }
+        self.prior_rule.validate()?;
         self.sampler.validate()?;
         if let SamplerConfig::Smc(smc) = &self.sampler {
             let fewest_params = self.laws.iter().map(|l| l.params().len()).min().unwrap_or(0);
@@ -196,8 +202,9 @@ pub enum DirState {
     Replace,
 }
 
-/// Files a run directory holds besides bitrock's temporaries and lock ([`files`]).
-const RUN_FILES: [&str; 7] = [
+/// Files a run directory holds besides bitrock's temporaries and lock ([`files`]), and the
+/// directory of its selection check ([`crate::selection`]).
+const RUN_FILES: [&str; 8] = [
     STORE_FILE,
     "run.sqlite-journal",
     "run.sqlite-wal",
@@ -205,6 +212,7 @@ const RUN_FILES: [&str; 7] = [
     "run.json",
     "envelopes.csv",
     "data.csv",
+    crate::selection::SELECTION_DIR,
 ];
 
 /// Refuses, before any work and naming `--out`, a run directory that cannot be written: one
@@ -292,7 +300,13 @@ pub fn start(
     if let Some(line) = &floor.note {
         note(line.clone());
     }
-    let prior = Prior::from_fits(&fits, config.delta, prior_file, data.torque_unit.newton_metres())?;
+    let prior = Prior::from_fits_by(
+        &fits,
+        config.prior_rule,
+        config.delta,
+        prior_file,
+        data.torque_unit.newton_metres(),
+    )?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
     let evaluator = crate::eval::evaluator(problem, config.backend, note)?;

@@ -9,6 +9,7 @@ use bitrock::abc::rejection::{Mode, RejectionConfig};
 use bitrock::abc::smc::{SmcConfig, WeightsOn};
 use bitrock::eval::Backend;
 use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
+use bitrock::prior::PriorRule;
 use bitrock::run::{Continuation, RunConfig, SamplerConfig};
 use clap::Args;
 use std::io::Write;
@@ -23,6 +24,29 @@ pub enum Sampler {
     Smc,
 }
 
+/// `--prior-rule`: the rule of [`PriorRule`] without its k.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PriorRuleArg {
+    Delta,
+    Stderr,
+}
+
+/// `--prior-k` when not given: three standard errors each side, where a Gaussian estimate
+/// lies with probability 99.7 %.
+pub const DEFAULT_PRIOR_K: f64 = 3.0;
+
+impl AbcArgs {
+    /// The prior rule `--prior-rule` and `--prior-k` describe.
+    pub fn prior_rule(&self) -> PriorRule {
+        match self.prior_rule {
+            PriorRuleArg::Delta => PriorRule::Delta,
+            PriorRuleArg::Stderr => PriorRule::Stderr {
+                k: self.prior_k.unwrap_or(DEFAULT_PRIOR_K),
+            },
+        }
+    }
+}
+
 /// How the ABC sampler runs.
 #[derive(Debug, Args, Clone)]
 pub struct AbcArgs {
@@ -33,6 +57,14 @@ pub struct AbcArgs {
     /// least-squares estimate p, clipped to its physical bound.
     #[arg(long, default_value_t = RunConfig::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
     pub delta: f64,
+    /// How the prior boxes are sized: delta = the paper's φ̂(1 ± δ); stderr = φ̂ ± k·σ̂ with σ̂
+    /// the least-squares standard error (k = --prior-k), which does not grow with |φ̂| (the
+    /// δ box where σ̂ is undefined). Both clipped to the physical bounds.
+    #[arg(long, value_enum, default_value_t = PriorRuleArg::Delta)]
+    pub prior_rule: PriorRuleArg,
+    /// Standard errors on each side of the estimate with --prior-rule stderr [default: 3].
+    #[arg(long, value_name = "K", allow_hyphen_values = true)]
+    pub prior_k: Option<f64>,
     /// Prior file (TOML) with explicit bounds or law weights; overrides the δ rule where it
     /// speaks (format in the README).
     #[arg(long, value_name = "FILE")]
@@ -118,7 +150,7 @@ pub struct AbcCmd {
     #[arg(long, value_name = "DIR", conflicts_with_all = [
         "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
-        "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior", "epsilons",
+        "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior_rule", "prior_k", "prior", "epsilons",
         "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights",
     ])]
     pub resume: Option<PathBuf>,
@@ -194,6 +226,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
 /// The run configuration the flags describe (validated by the library before any work).
 fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
     check_sampler_flags(args)?;
+    check_prior_flags(args)?;
     let defaults = RejectionConfig::default();
     let sampler = RejectionConfig {
         particles: args.particles,
@@ -211,6 +244,7 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
         laws: fit_args.laws.clone(),
         fit: fit_args.options()?,
         delta: args.delta,
+        prior_rule: args.prior_rule(),
         prior_file: args.prior.clone(),
         seed: args.seed,
         backend: args.backend.unwrap_or(Backend::Auto),
@@ -254,5 +288,16 @@ fn check_sampler_flags(args: &AbcArgs) -> Result<(), Error> {
             "applies only to the rejection sampler, and this run uses --sampler smc, which perturbs each population into the next instead of drawing streams; drop --mode",
         )),
         Sampler::Smc => Ok(()),
+    }
+}
+
+/// Refuses `--prior-k` with the δ rule, which does not read it.
+fn check_prior_flags(args: &AbcArgs) -> Result<(), Error> {
+    match (args.prior_rule, args.prior_k) {
+        (PriorRuleArg::Delta, Some(_)) => Err(Error::arg(
+            "--prior-k",
+            "applies only to --prior-rule stderr, and this run sizes its prior boxes by δ (the default rule); add --prior-rule stderr or drop the flag",
+        )),
+        _ => Ok(()),
     }
 }

@@ -6,6 +6,7 @@
 pub mod abc;
 pub mod args;
 pub mod bench;
+pub mod check;
 pub mod demo;
 pub mod export;
 pub mod fe;
@@ -76,6 +77,10 @@ pub enum Command {
     /// Benchmark report: evaluator throughput per law and backend, the fixed cost of a call,
     /// a paper-scale ABC run end to end, and rejection versus SMC to the same ε.
     Bench(bench::BenchCmd),
+    /// How far the run's model selection can be trusted: K synthetic records per law made at the
+    /// record's speeds (posterior parameters, bootstrapped residuals), each through the run's own
+    /// fits, prior and sampler; the confusion matrix, written to RUN_DIR/selection/.
+    CheckSelection(check::CheckCmd),
     /// Natural frequencies, modal damping and critical bit damping of the finite-element
     /// torsional drill string (the paper's appendix).
     Fe(fe::FeCmd),

@@ -20,6 +20,8 @@ mod stats;
 
 pub use runs::{read_run_dirs, write_paper_report};
 
+pub(crate) use figures::confusion_figure;
+
 use crate::abc::Population;
 use crate::abc::posterior::{self, PosteriorSummary};
 use crate::data::FieldData;
@@ -54,6 +56,8 @@ pub struct ReportRun {
     /// demo does), so that its kernel density estimate is not computed twice; `None`: computed
     /// here.
     pub summary: Option<PosteriorSummary>,
+    /// The run's selection check (`bitrock check-selection`), when its directory holds one.
+    pub selection: Option<crate::selection::SelectionCheck>,
 }
 
 /// The structures and axes of the stability maps. [`Default`] is the paper's.
@@ -558,6 +562,8 @@ impl<'a> Prepared<'a> {
             }
         }
 
+        self.selection_markdown(&mut md);
+
         let s = &self.input.stability;
         let _ = writeln!(md, "## Stability\n");
         let _ = writeln!(
@@ -613,6 +619,55 @@ impl<'a> Prepared<'a> {
             );
         }
         md
+    }
+}
+
+impl Prepared<'_> {
+    /// The section of the runs that hold a selection check: the confusion matrix, the
+    /// distribution of the generating law's own probability and the verdicts.
+    fn selection_markdown(&self, md: &mut String) {
+        let checked: Vec<(&RunView, &crate::selection::SelectionCheck)> = self
+            .runs
+            .iter()
+            .filter_map(|r| r.run.selection.as_ref().map(|c| (r, c)))
+            .collect();
+        if checked.is_empty() {
+            return;
+        }
+        let _ = writeln!(md, "## Can the selection be trusted? (`bitrock check-selection`)\n");
+        let _ = writeln!(
+            md,
+            "Synthetic records made by each law at the record's speeds (parameters from the law's posterior, \
+             noise resampled from its least-squares residuals), each run through the same fits, prior and \
+             sampler. Rows: the law that made the records; columns: mean posterior probability / share of \
+             replicates ranking the law first.\n"
+        );
+        for (r, check) in checked {
+            let _ = writeln!(
+                md,
+                "### {}: {} replicates per law, N = {}, backend {}, {:.1} s\n",
+                r.run.label, check.replicates, check.particles, check.backend, check.seconds
+            );
+            let _ = write!(md, "| data from |");
+            for law in &check.laws {
+                let _ = write!(md, " P({law}) / first |");
+            }
+            let _ = writeln!(md, " P(own): 10 % / median / 90 % |");
+            let _ = writeln!(md, "|---|{}---|", "---|".repeat(check.laws.len()));
+            for row in &check.rows {
+                let _ = write!(md, "| {} |", row.law);
+                for (p, f) in row.mean_probability.iter().zip(&row.first_share) {
+                    let _ = write!(md, " {p:.3} / {f:.2} |");
+                }
+                let q = &row.own_probability;
+                let _ = writeln!(md, " {:.3} / {:.3} / {:.3} |", q.q10, q.median, q.q90);
+            }
+            let _ = writeln!(md);
+            for row in &check.rows {
+                let _ = writeln!(md, "- {}", row.verdict);
+            }
+            let _ = writeln!(md);
+        }
     }
 }
 

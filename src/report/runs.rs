@@ -32,6 +32,7 @@ impl ReportRun {
             populations,
             w_ref_n: config.fit.w_ref_n,
             summary,
+            selection: None,
         }
     }
 }
@@ -67,7 +68,9 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
                 ),
             });
         }
-        runs.push(ReportRun::new(&runs, dir, &config, stored.populations, None));
+        let mut run = ReportRun::new(&runs, dir, &config, stored.populations, None);
+        run.selection = crate::selection::read(dir)?;
+        runs.push(run);
         first.get_or_insert(stored.setup);
     }
     let setup = first.ok_or_else(|| Error::arg("DIR", "give at least one run directory"))?;

@@ -652,6 +652,11 @@ fn flags_that_do_not_apply_to_the_run_are_refused_naming_flag_and_mode() {
         small_run(tmp.path(), "R", &["--sampler", "smc", "--mode", "paper"]),
         &["--mode: applies only to the rejection sampler", "--sampler smc"],
     );
+    // The stderr rule's k with the δ rule.
+    assert_refused(
+        small_run(tmp.path(), "R", &["--prior-k", "2"]),
+        &["--prior-k: applies only to --prior-rule stderr"],
+    );
     // W_ref without the scaling that uses it.
     for result in [
         run_in(tmp.path(), &["fit", "--w-ref-kn", "100"]),
@@ -667,6 +672,8 @@ fn flags_that_do_not_apply_to_the_run_are_refused_naming_flag_and_mode() {
         &["--seed", "2"][..],
         &["--particles", "100"],
         &["--delta", "0.5"],
+        &["--prior-rule", "stderr"],
+        &["--prior-k", "2"],
         &["--laws", "m2"],
         &["--sampler", "smc"],
         &["--kernel-scale", "3"],

@@ -9,6 +9,7 @@ mod laws;
 mod pipeline;
 mod records;
 mod report;
+mod selection;
 mod smc;
 mod stability;
 mod store;

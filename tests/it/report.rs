@@ -45,6 +45,7 @@ fn runs_with(config: &RejectionConfig, deltas: &[f64], thin: usize) -> (FieldDat
                 populations: run.populations,
                 w_ref_n: None,
                 summary: None,
+                selection: None,
             }
         })
         .collect();

@@ -18,6 +18,7 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
         laws: Law::ALL.to_vec(),
         fit: FitOptions::default(),
         delta: 0.4,
+        prior_rule: Default::default(),
         prior_file: None,
         seed: 11,
         backend: Backend::Cpu,

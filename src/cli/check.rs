@@ -1,0 +1,112 @@
+//! `bitrock check-selection RUN_DIR`: how far the run's model selection can be trusted, by
+//! re-simulation ([`bitrock::selection`]); the confusion matrix on stdout (or JSON), the
+//! results in `RUN_DIR/selection/`.
+
+use super::args::set_threads;
+use bitrock::eval::Backend;
+use bitrock::selection::{self, CheckOptions, CheckedRun, SelectionCheck};
+use clap::Args;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct CheckCmd {
+    /// Run directory (written by `bitrock abc --out`) whose selection is checked; the results
+    /// go to RUN_DIR/selection/ (selection.json, matrix.csv, replicates.csv, confusion.svg/png).
+    #[arg(value_name = "RUN_DIR")]
+    pub run: PathBuf,
+    /// Synthetic records per law, K.
+    #[arg(long, default_value_t = CheckOptions::default().replicates, value_name = "K")]
+    pub replicates: usize,
+    /// Replicates run at once [default: all, balanced over the threads].
+    #[arg(long, value_name = "COUNT")]
+    pub batch: Option<usize>,
+    /// Where ρ is computed [default: the run's backend].
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// No progress lines on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Print the check as JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
+    let options = CheckOptions {
+        replicates: cmd.replicates,
+        backend: cmd.backend,
+        batch: cmd.batch,
+    };
+    options.validate()?;
+    set_threads(cmd.threads)?;
+    let checked = CheckedRun::open(&cmd.run)?;
+    let quiet = cmd.quiet;
+    let progress = |done: usize, total: usize| {
+        if !quiet {
+            eprintln!("replicate {done}/{total}");
+        }
+    };
+    let check = selection::check(&checked, &options, &progress, &mut |line| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    })?;
+    let written = selection::write(&checked, &check)?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &check)?;
+        writeln!(out)?;
+    } else {
+        table(&mut out, &check)?;
+        writeln!(out, "\ncheck written to {}", written.display())?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The confusion matrix, the generating law's own probability and the verdicts.
+fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "Selection check of {}: {} replicates per law, N = {}, {} prior, backend {}, {:.1} s",
+        check.run_dir.display(),
+        check.replicates,
+        check.particles,
+        match check.prior_rule {
+            bitrock::prior::PriorRule::Delta => format!("δ = {}", check.delta),
+            bitrock::prior::PriorRule::Stderr { k } => format!("φ̂ ± {k}·σ̂"),
+        },
+        check.backend,
+        check.seconds
+    )?;
+    writeln!(
+        out,
+        "\nrows: law that made the data; columns: mean posterior probability (share ranked first)"
+    )?;
+    write!(out, "{:<10}", "data from")?;
+    for law in &check.laws {
+        write!(out, " {:>15}", law.to_string())?;
+    }
+    writeln!(out, "   P(own) 10% / median / 90%")?;
+    for row in &check.rows {
+        write!(out, "{:<10}", row.law.to_string())?;
+        for (p, f) in row.mean_probability.iter().zip(&row.first_share) {
+            write!(out, " {:>15}", format!("{p:.3} ({f:.2})"))?;
+        }
+        let q = &row.own_probability;
+        writeln!(out, "   {:.3} / {:.3} / {:.3}", q.q10, q.median, q.q90)?;
+    }
+    writeln!(out)?;
+    for row in &check.rows {
+        let source = match row.source {
+            selection::ParamSource::Posterior => "",
+            selection::ParamSource::LeastSquares => " (the law died out: its least-squares estimate made the data)",
+        };
+        writeln!(out, "{}{source}", row.verdict)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,640 @@
+//! How far can a run's model selection be trusted? A confusion matrix by re-simulation.
+//!
+//! For every law of a run, K synthetic records are made at the run's own calibration and
+//! validation speeds (and weight-on-bit ratios, when it scales by them): parameters drawn from
+//! the law's posterior in the run's last population (its least-squares estimate when the law
+//! died out), plus noise resampled with replacement from that law's calibration residuals (a
+//! bootstrap that keeps the record's noise level and distribution). Each synthetic record goes
+//! through the run's own pipeline ([`run::start`] with the stored [`RunConfig`]: least squares
+//! of every law, the same prior rule, δ and prior file, the same sampler and stopping rules)
+//! with its own seed, [`replicate_seed`]. Row i of the confusion matrix is what the pipeline
+//! says about data made by law i: the mean posterior probability of every law, and the share
+//! of replicates in which each law ranks first.
+//!
+//! Replicates are independent runs, and each one's populations depend only on its record and
+//! seed, so they are run `batch` at a time on the rayon pool (the CPU evaluator of each adds its
+//! own parallelism over candidates) and give the same results for any `batch` and thread count.
+//! On a GPU each replicate has its own evaluator on the shared context.
+//!
+//! The results are written to `DIR/selection/` (see [`write`]) as one directory, whole or not
+//! at all, under the run directory's lock; `bitrock report` shows them when present.
+
+use crate::abc::Silent;
+use crate::data::{FieldData, Samples};
+use crate::error::{Error, Result};
+use crate::eval::Backend;
+use crate::files;
+use crate::fit::LawFit;
+use crate::laws::Law;
+use crate::numerics::quantile;
+use crate::prior::{PriorFile, PriorRule};
+use crate::run::{self, RunConfig};
+use crate::store::{RunStore, StoredRun};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// The directory of a run directory that holds its selection check.
+pub const SELECTION_DIR: &str = "selection";
+/// The check's results in JSON (what the report reads back).
+pub const SELECTION_JSON: &str = "selection.json";
+
+/// How to check a run's selection. [`Default`] is `bitrock check-selection`'s defaults.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CheckOptions {
+    /// Synthetic records per law, K.
+    pub replicates: usize,
+    /// Where ρ is computed; `None`: the run's backend.
+    pub backend: Option<Backend>,
+    /// Replicates run at once; `None`: all of them (rayon balances them over the threads).
+    pub batch: Option<usize>,
+}
+
+impl Default for CheckOptions {
+    fn default() -> Self {
+        Self {
+            replicates: 20,
+            backend: None,
+            batch: None,
+        }
+    }
+}
+
+impl CheckOptions {
+    /// Refuses, naming the flag, options that cannot run.
+    pub fn validate(&self) -> Result<()> {
+        if self.replicates == 0 {
+            return Err(Error::arg("--replicates", "must be at least 1"));
+        }
+        if self.batch == Some(0) {
+            return Err(Error::arg("--batch", "must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// Where a generating law's parameters come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ParamSource {
+    /// Particles of the law in the run's last population, drawn by weight.
+    Posterior,
+    /// The law has no particle in the last population: its least-squares estimate.
+    LeastSquares,
+}
+
+/// One synthetic record and what the pipeline concluded from it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Replicate {
+    pub index: usize,
+    /// Seed of its synthesis and of its ABC run ([`replicate_seed`]).
+    pub seed: u64,
+    /// The generating parameters, SI (torques N·m).
+    pub params_si: Vec<f64>,
+    /// Posterior probability of each law of the check, in [`SelectionCheck::laws`] order.
+    pub probabilities: Vec<f64>,
+    /// The law with the highest probability (the first in law order among equals).
+    pub first: Law,
+    /// ε of the last population (`None`: ∞).
+    pub final_epsilon: Option<f64>,
+    pub populations: usize,
+}
+
+/// Quantiles of the generating law's own probability over its replicates.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Quantiles {
+    pub min: f64,
+    pub q10: f64,
+    pub q25: f64,
+    pub median: f64,
+    pub q75: f64,
+    pub q90: f64,
+    pub max: f64,
+}
+
+impl Quantiles {
+    fn of(values: &[f64]) -> Self {
+        Self {
+            min: quantile(values, 0.0),
+            q10: quantile(values, 0.1),
+            q25: quantile(values, 0.25),
+            median: quantile(values, 0.5),
+            q75: quantile(values, 0.75),
+            q90: quantile(values, 0.9),
+            max: quantile(values, 1.0),
+        }
+    }
+}
+
+/// One row of the confusion matrix: the records made by one law.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeneratingLaw {
+    pub law: Law,
+    pub source: ParamSource,
+    /// Mean posterior probability of each law over the replicates.
+    pub mean_probability: Vec<f64>,
+    /// Share of the replicates in which each law ranks first.
+    pub first_share: Vec<f64>,
+    /// The distribution of P(this law) over its replicates.
+    pub own_probability: Quantiles,
+    /// One sentence for people.
+    pub verdict: String,
+    pub replicates: Vec<Replicate>,
+}
+
+/// A run's selection check: the confusion matrix and how it was made.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SelectionCheck {
+    /// The run directory checked.
+    pub run_dir: PathBuf,
+    /// The run's laws: the columns (and rows) of the matrix.
+    pub laws: Vec<Law>,
+    /// Replicates per law, K.
+    pub replicates: usize,
+    /// The run's prior rule and δ, which every replicate uses too.
+    pub prior_rule: PriorRule,
+    pub delta: f64,
+    /// The run's seed, from which every replicate's is derived.
+    pub run_seed: u64,
+    /// Particles per population of every replicate.
+    pub particles: usize,
+    /// Backend that scored the candidates (`cpu`, `gpu`).
+    pub backend: String,
+    pub rows: Vec<GeneratingLaw>,
+    /// Wall time of the check, s.
+    pub seconds: f64,
+}
+
+impl SelectionCheck {
+    /// The confusion matrix as CSV: one line per (generating law, column law) with the mean
+    /// probability and the share ranked first.
+    pub fn matrix_csv(&self) -> Vec<u8> {
+        let mut text = String::from("generating_law,law,mean_probability,first_share\n");
+        for row in &self.rows {
+            for (j, law) in self.laws.iter().enumerate() {
+                text.push_str(&format!(
+                    "{},{law},{},{}\n",
+                    row.law, row.mean_probability[j], row.first_share[j]
+                ));
+            }
+        }
+        text.into_bytes()
+    }
+
+    /// Every replicate as CSV: its seed, the probability of each law, the law ranked first.
+    pub fn replicates_csv(&self) -> Vec<u8> {
+        let mut text = String::from("generating_law,replicate,seed");
+        for law in &self.laws {
+            text.push_str(&format!(",p_{law}"));
+        }
+        text.push_str(",first,final_epsilon,populations\n");
+        for row in &self.rows {
+            for r in &row.replicates {
+                text.push_str(&format!("{},{},{}", row.law, r.index, r.seed));
+                for p in &r.probabilities {
+                    text.push_str(&format!(",{p}"));
+                }
+                let eps = r.final_epsilon.map_or(String::new(), |e| e.to_string());
+                text.push_str(&format!(",{},{eps},{}\n", r.first, r.populations));
+            }
+        }
+        text.into_bytes()
+    }
+}
+
+/// The seed of replicate `replicate` of law slot `law_slot` of a run seeded `run_seed`: a
+/// SplitMix64 mix of the three, so that neighbouring replicates get unrelated streams and the
+/// result depends on nothing else (not on the batch, the thread or the backend).
+pub fn replicate_seed(run_seed: u64, law_slot: usize, replicate: usize) -> u64 {
+    let mix = |mut z: u64| {
+        z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    mix(run_seed ^ mix(((law_slot as u64) << 32) | replicate as u64))
+}
+
+/// A run to check: its stored set-up and last population, read and refused before any work.
+pub struct CheckedRun {
+    pub dir: PathBuf,
+    pub config: RunConfig,
+    pub stored: StoredRun,
+    prior_file: Option<PriorFile>,
+    /// The run directory's lock, held from [`CheckedRun::open`] until the check is written:
+    /// the run cannot be continued or replaced under the check.
+    _lock: files::DirLock,
+}
+
+impl CheckedRun {
+    /// Reads the run in `dir` and takes its lock; refuses a directory that is not a run, a run without a completed
+    /// population (no law has a posterior to draw from), and a run whose every law lacks both
+    /// particles and a finite least-squares fit.
+    pub fn open(dir: &Path) -> Result<Self> {
+        let stored = RunStore::open(dir)?.load_with_last_particles()?;
+        let refuse = |message: String| Error::Data {
+            path: dir.to_path_buf(),
+            message,
+        };
+        let config: RunConfig = serde_json::from_value(stored.setup.config.clone())
+            .map_err(|e| refuse(format!("the stored configuration is not one this bitrock reads: {e}")))?;
+        let Some(last) = stored.populations.last() else {
+            return Err(refuse(
+                "the run has no completed population: its laws all died out before one, so none has a posterior to draw synthetic records from".into(),
+            ));
+        };
+        let usable = config.laws.iter().any(|&law| {
+            last.particles.iter().any(|p| p.law == law)
+                || fit_of(&stored.setup.fits, law).is_some_and(|f| f.rho.is_finite())
+        });
+        if !usable {
+            return Err(refuse(
+                "every law of the run died out and none has a finite least-squares fit to draw synthetic records from"
+                    .into(),
+            ));
+        }
+        let prior_file = config.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        let lock = files::DirLock::acquire(dir)?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            config,
+            stored,
+            prior_file,
+            _lock: lock,
+        })
+    }
+}
+
+fn fit_of(fits: &[LawFit], law: Law) -> Option<&LawFit> {
+    fits.iter().find(|f| f.law == law)
+}
+
+/// One replicate to run: its generating law (slot in the run's laws) and index.
+#[derive(Clone, Copy)]
+struct Job {
+    slot: usize,
+    replicate: usize,
+}
+
+/// Checks the selection of `run`: K replicates per law, each through the run's pipeline.
+/// `progress(done, total)` is called as replicates finish (from any thread); `note` hears what
+/// the user should know (the backend, a fallback to the CPU), each line once.
+pub fn check(
+    run: &CheckedRun,
+    options: &CheckOptions,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    note: &mut dyn FnMut(String),
+) -> Result<SelectionCheck> {
+    options.validate()?;
+    let started = Instant::now();
+    let config = &run.config;
+    let laws = &config.laws;
+    let k = options.replicates;
+    let jobs: Vec<Job> = (0..laws.len())
+        .flat_map(|slot| (0..k).map(move |replicate| Job { slot, replicate }))
+        .collect();
+    let batch = options.batch.unwrap_or(jobs.len()).max(1);
+    let done = AtomicUsize::new(0);
+    let mut results: Vec<(Replicate, &'static str)> = Vec::with_capacity(jobs.len());
+    let mut notes: Vec<String> = Vec::new();
+    for chunk in jobs.chunks(batch) {
+        let outcomes: Vec<Result<(Replicate, &'static str, Vec<String>)>> = chunk
+            .par_iter()
+            .map(|&job| {
+                let result = run_replicate(run, options, job);
+                progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
+                result
+            })
+            .collect();
+        for outcome in outcomes {
+            let (replicate, backend, lines) = outcome?;
+            for line in lines {
+                if !notes.contains(&line) {
+                    note(line.clone());
+                    notes.push(line);
+                }
+            }
+            results.push((replicate, backend));
+        }
+    }
+    let backend = results.first().map_or("cpu", |r| r.1).to_string();
+    let mut results = results.into_iter().map(|r| r.0);
+    let last = run.stored.populations.last().expect("checked by CheckedRun::open");
+    let rows = laws
+        .iter()
+        .map(|&law| {
+            let replicates: Vec<Replicate> = results.by_ref().take(k).collect();
+            let source = if last.particles.iter().any(|p| p.law == law) {
+                ParamSource::Posterior
+            } else {
+                ParamSource::LeastSquares
+            };
+            summarize_row(law, source, laws, replicates)
+        })
+        .collect();
+    Ok(SelectionCheck {
+        run_dir: run.dir.clone(),
+        laws: laws.clone(),
+        replicates: k,
+        prior_rule: config.prior_rule,
+        delta: config.delta,
+        run_seed: config.seed,
+        particles: config.sampler.base().particles,
+        backend,
+        rows,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// The row of `law` from its replicates.
+fn summarize_row(law: Law, source: ParamSource, laws: &[Law], replicates: Vec<Replicate>) -> GeneratingLaw {
+    let k = replicates.len() as f64;
+    let own = laws.iter().position(|&l| l == law).expect("a law of the run");
+    let mean_probability = (0..laws.len())
+        .map(|j| replicates.iter().map(|r| r.probabilities[j]).sum::<f64>() / k)
+        .collect();
+    let firsts: Vec<usize> = (0..laws.len())
+        .map(|j| replicates.iter().filter(|r| r.first == laws[j]).count())
+        .collect();
+    let own_values: Vec<f64> = replicates.iter().map(|r| r.probabilities[own]).collect();
+    let own_probability = Quantiles::of(&own_values);
+    let verdict = verdict(law, laws, &firsts, replicates.len(), own_probability.median);
+    GeneratingLaw {
+        law,
+        source,
+        mean_probability,
+        first_share: firsts.iter().map(|&c| c as f64 / k).collect(),
+        own_probability,
+        verdict,
+        replicates,
+    }
+}
+
+/// "m2 data rank m2 first in 6 of 20 replicates and m1 in 14; median P(m2) = 0.43."
+fn verdict(law: Law, laws: &[Law], firsts: &[usize], k: usize, median_own: f64) -> String {
+    let own = firsts[laws.iter().position(|&l| l == law).expect("a law of the run")];
+    let mut others: Vec<(Law, usize)> = laws
+        .iter()
+        .zip(firsts)
+        .filter(|&(&l, &c)| l != law && c > 0)
+        .map(|(&l, &c)| (l, c))
+        .collect();
+    others.sort_by_key(|&(_, count)| std::cmp::Reverse(count));
+    let head = if own == k {
+        format!("{law} data are recovered as {law} in all {k} replicates")
+    } else if let Some(&(top, count)) = others.first()
+        && count > own
+    {
+        format!("{law} data are assigned to {top} in {count} of {k} replicates ({law} ranks first in {own})")
+    } else {
+        format!("{law} data rank {law} first in {own} of {k} replicates")
+    };
+    let named_first = usize::from(others.first().is_some_and(|&(_, c)| c > own));
+    let rest: Vec<String> = others[named_first..].iter().map(|(l, c)| format!("{l} {c}")).collect();
+    let rest = if rest.is_empty() || own == k {
+        String::new()
+    } else {
+        format!("; first elsewhere: {}", rest.join(", "))
+    };
+    format!("{head}{rest}; median P({law}) = {median_own:.2}.")
+}
+
+/// Makes and runs one replicate: the synthetic record, then the run's pipeline on it in
+/// memory. Returns the replicate, the backend that scored it and the notes it produced.
+fn run_replicate(run: &CheckedRun, options: &CheckOptions, job: Job) -> Result<(Replicate, &'static str, Vec<String>)> {
+    let config = &run.config;
+    let law = config.laws[job.slot];
+    let seed = replicate_seed(config.seed, job.slot, job.replicate);
+    let data = &run.stored.setup.data;
+    let mut rng = StdRng::seed_from_u64(seed);
+    let params_si = generating_params(run, law, &mut rng);
+    let fit = fit_of(&run.stored.setup.fits, law).ok_or_else(|| Error::Data {
+        path: run.dir.clone(),
+        message: format!("the run has no least-squares fit of {law}"),
+    })?;
+    let w_ref_n = config.fit.w_ref_n;
+    let residuals = residuals(law, &fit.params_si, &data.calibration, w_ref_n);
+    let synthetic = FieldData {
+        source: run
+            .dir
+            .join(format!("{SELECTION_DIR}/{law}-replicate-{}", job.replicate)),
+        calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &residuals, &mut rng),
+        validation: synthesize(law, &params_si, &data.validation, w_ref_n, &residuals, &mut rng),
+        ..data.clone()
+    };
+    let mut replicate_config = config.clone();
+    replicate_config.seed = seed;
+    replicate_config.backend = options.backend.unwrap_or(config.backend);
+    replicate_config.sampler.base_mut().max_seconds = None;
+    let mut notes = Vec::new();
+    let outcome = run::start(
+        None,
+        synthetic,
+        replicate_config,
+        run.prior_file.as_ref(),
+        &mut Silent,
+        &mut |line| notes.push(line),
+    )
+    .map_err(|e| in_replicate(law, job.replicate, e))?;
+    let last = outcome.run.populations.last().ok_or_else(|| {
+        Error::Incomplete(format!(
+            "{law} replicate {}: no population completed ({})",
+            job.replicate,
+            outcome.run.stop.describe()
+        ))
+    })?;
+    let probabilities: Vec<f64> = config
+        .laws
+        .iter()
+        .map(|&l| {
+            last.record
+                .per_law
+                .iter()
+                .find(|r| r.law == l)
+                .map_or(0.0, |r| r.probability)
+        })
+        .collect();
+    let first = config.laws[first_index(&probabilities)];
+    // Notes about the synthetic record's own floor differ per replicate: only the backend's
+    // lines are worth repeating to the user.
+    notes.retain(|line| line.contains("GPU") || line.contains("CPU"));
+    Ok((
+        Replicate {
+            index: job.replicate,
+            seed,
+            params_si,
+            probabilities,
+            first,
+            final_epsilon: last.record.epsilon,
+            populations: outcome.run.populations.len(),
+        },
+        outcome.backend,
+        notes,
+    ))
+}
+
+/// The index of the largest probability, the first among equals.
+fn first_index(probabilities: &[f64]) -> usize {
+    let mut best = 0;
+    for (j, &p) in probabilities.iter().enumerate() {
+        if p > probabilities[best] {
+            best = j;
+        }
+    }
+    best
+}
+
+/// An error of one replicate, saying which.
+fn in_replicate(law: Law, replicate: usize, e: Error) -> Error {
+    match e {
+        Error::Numerical(m) => Error::Numerical(format!("{law} replicate {replicate}: {m}")),
+        Error::Incomplete(m) => Error::Incomplete(format!("{law} replicate {replicate}: {m}")),
+        other => other,
+    }
+}
+
+/// Parameters of a replicate of `law`: a particle of its posterior drawn by weight, or its
+/// least-squares estimate when it has none.
+fn generating_params(run: &CheckedRun, law: Law, rng: &mut StdRng) -> Vec<f64> {
+    let last = run.stored.populations.last().expect("checked by CheckedRun::open");
+    let members: Vec<&crate::abc::Particle> = last.particles.iter().filter(|p| p.law == law).collect();
+    if members.is_empty() {
+        return fit_of(&run.stored.setup.fits, law)
+            .map(|f| f.params_si.clone())
+            .unwrap_or_default();
+    }
+    let total: f64 = members.iter().map(|p| p.weight).sum();
+    let mut u = rng.random::<f64>() * total;
+    for p in &members {
+        u -= p.weight;
+        if u < 0.0 {
+            return p.params.clone();
+        }
+    }
+    members.last().expect("non-empty").params.clone()
+}
+
+/// y − r·T(w) of `law` at `params` on `samples`, N·m.
+fn residuals(law: Law, params: &[f64], samples: &Samples, w_ref_n: Option<f64>) -> Vec<f64> {
+    let r = samples.wob_ratio(w_ref_n);
+    samples
+        .speed_rad_s
+        .iter()
+        .zip(&samples.torque_nm)
+        .zip(&r)
+        .map(|((&w, &y), &r)| y - law.torque(params, w, r))
+        .collect()
+}
+
+/// `samples` with its torque replaced by r·T(w) of `law` at `params` plus residuals drawn
+/// with replacement from `residuals`.
+fn synthesize(
+    law: Law,
+    params: &[f64],
+    samples: &Samples,
+    w_ref_n: Option<f64>,
+    residuals: &[f64],
+    rng: &mut StdRng,
+) -> Samples {
+    let r = samples.wob_ratio(w_ref_n);
+    let torque_nm = samples
+        .speed_rad_s
+        .iter()
+        .zip(&r)
+        .map(|(&w, &r)| law.torque(params, w, r) + residuals[rng.random_range(0..residuals.len())])
+        .collect();
+    Samples {
+        torque_nm,
+        ..samples.clone()
+    }
+}
+
+/// Writes the check into `DIR/selection/`: selection.json, matrix.csv, replicates.csv and
+/// the heat map (confusion.svg, confusion.png). The files are written into a staging
+/// directory beside it and swapped in by one rename, under the run directory's lock, so the
+/// directory holds the previous check or this one, whole, at every moment.
+pub fn write(run: &CheckedRun, check: &SelectionCheck) -> Result<PathBuf> {
+    let dir = run.dir.as_path();
+    let (svg, png) = crate::report::confusion_figure(check)?;
+    let json = serde_json::to_string_pretty(check).expect("the check serialises") + "\n";
+    let contents: [(&str, Vec<u8>); 5] = [
+        (SELECTION_JSON, json.into_bytes()),
+        ("matrix.csv", check.matrix_csv()),
+        ("replicates.csv", check.replicates_csv()),
+        ("confusion.svg", svg.into_bytes()),
+        ("confusion.png", png),
+    ];
+    files::remove_stale(dir);
+    let staging = tempfile::Builder::new()
+        .prefix(files::STAGING_PREFIX)
+        .tempdir_in(dir)
+        .map_err(|source| Error::output("RUN_DIR", dir, source))?;
+    for (name, bytes) in &contents {
+        files::write_whole(&staging.path().join(name), "RUN_DIR", |out| out.write_all(bytes))?;
+    }
+    let target = dir.join(SELECTION_DIR);
+    if target.exists() {
+        files::exchange_dirs(&target, staging.path()).map_err(|source| Error::output("RUN_DIR", &target, source))?;
+        // The staging directory now holds the previous check; dropping it removes it.
+    } else {
+        let staged = staging.keep();
+        std::fs::rename(&staged, &target).map_err(|source| Error::output("RUN_DIR", &target, source))?;
+    }
+    files::sync_dir(dir);
+    Ok(target)
+}
+
+/// The check stored in run directory `dir`, if it holds one.
+pub fn read(dir: &Path) -> Result<Option<SelectionCheck>> {
+    let path = dir.join(SELECTION_DIR).join(SELECTION_JSON);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => return Err(Error::Read { path, source }),
+    };
+    serde_json::from_str(&text).map(Some).map_err(|e| Error::Format {
+        path,
+        line: Some(e.line() as u64),
+        message: format!("not a selection check this bitrock reads: {e}"),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replicate_seeds_differ_by_law_replicate_and_run() {
+        let mut seen = std::collections::HashSet::new();
+        for run in [1u64, 2] {
+            for slot in 0..4 {
+                for r in 0..50 {
+                    assert!(seen.insert(replicate_seed(run, slot, r)));
+                }
+            }
+        }
+        assert_eq!(replicate_seed(7, 2, 3), replicate_seed(7, 2, 3));
+    }
+
+    #[test]
+    fn verdicts_name_the_winner() {
+        let laws = [Law::M1, Law::M2, Law::M4];
+        assert_eq!(
+            verdict(Law::M2, &laws, &[14, 6, 0], 20, 0.43),
+            "m2 data are assigned to m1 in 14 of 20 replicates (m2 ranks first in 6); median P(m2) = 0.43."
+        );
+        assert_eq!(
+            verdict(Law::M1, &laws, &[10, 7, 3], 20, 0.5),
+            "m1 data rank m1 first in 10 of 20 replicates; first elsewhere: m2 7, m4 3; median P(m1) = 0.50."
+        );
+        assert_eq!(
+            verdict(Law::M4, &laws, &[0, 0, 20], 20, 0.9),
+            "m4 data are recovered as m4 in all 20 replicates; median P(m4) = 0.90."
+        );
+        assert_eq!(first_index(&[0.25, 0.5, 0.5]), 1);
+    }
+}

@@ -1,0 +1,219 @@
+//! `bitrock check-selection`: known answers of the confusion matrix (two laws the data cannot
+//! tell apart, one that fits far better), replicates independent of the batch, and bad input
+//! refused with nothing written.
+
+use crate::support::{bin, rng};
+use bitrock::Law;
+use bitrock::abc::Silent;
+use bitrock::abc::rejection::RejectionConfig;
+use bitrock::data::{DataOptions, parse_field_data};
+use bitrock::eval::Backend;
+use bitrock::pipeline::{AbcJob, RunDir};
+use bitrock::run::{RunConfig, SamplerConfig};
+use bitrock::selection::{self, CheckOptions, CheckedRun, ParamSource, SelectionCheck};
+use rand_distr::{Distribution, Normal};
+use std::path::{Path, PathBuf};
+
+/// A record in N·m and rad/s: `torque(w)` plus Gaussian noise of `sigma_nm`, 400 speeds
+/// evenly spread over 1..20 rad/s, interleaved calibration and validation halves.
+fn record(torque: impl Fn(f64) -> f64, sigma_nm: f64, seed: u64) -> bitrock::data::FieldData {
+    let mut g = rng(seed);
+    let noise = Normal::new(0.0, sigma_nm).unwrap();
+    let mut csv = String::from("speed_rad_s,torque_nm\n");
+    for i in 0..400 {
+        let w = 1.0 + 19.0 * i as f64 / 399.0;
+        csv.push_str(&format!("{w},{}\n", torque(w) + noise.sample(&mut g)));
+    }
+    let options = DataOptions {
+        split: bitrock::data::SplitRule::Interleaved,
+        ..DataOptions::default()
+    };
+    parse_field_data(csv.as_bytes(), Path::new("synthetic.csv"), &options).unwrap()
+}
+
+/// Runs rejection ABC of `laws` on `data` into `dir/run` (CPU, N particles, down to eps_min).
+fn run_dir(
+    dir: &Path,
+    data: bitrock::data::FieldData,
+    laws: &[Law],
+    particles: usize,
+    eps_min: f64,
+    prior_file: Option<PathBuf>,
+) -> PathBuf {
+    let path = dir.join("run");
+    AbcJob {
+        config: RunConfig {
+            laws: laws.to_vec(),
+            backend: Backend::Cpu,
+            seed: 3,
+            prior_file,
+            sampler: SamplerConfig::Rejection(RejectionConfig {
+                particles,
+                eps_min,
+                ..RejectionConfig::default()
+            }),
+            ..RunConfig::default()
+        },
+        summary_population: None,
+        out: Some(RunDir {
+            path: path.clone(),
+            replace: false,
+        }),
+    }
+    .run(data, &mut Silent, &mut |_| {})
+    .unwrap();
+    path
+}
+
+fn check(dir: &Path, replicates: usize, batch: Option<usize>) -> SelectionCheck {
+    let run = CheckedRun::open(dir).unwrap();
+    let options = CheckOptions {
+        replicates,
+        backend: None,
+        batch,
+    };
+    let check = selection::check(&run, &options, &|_, _| {}, &mut |_| {}).unwrap();
+    selection::write(&run, &check).unwrap();
+    check
+}
+
+/// m2 with a sharp decay (g = 1 s/rad) over 1..20 rad/s, 100 N·m of noise, against m4: the
+/// cubic cannot follow the exponential (its best ρ lies near ε_min = 1e-3, so that only a few of
+/// its candidates are ever accepted; m2's is about 2e-4).
+fn m2_beats_m4(dir: &Path) -> PathBuf {
+    let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
+    run_dir(dir, data, &[Law::M2, Law::M4], 200, 1e-3, None)
+}
+
+#[test]
+fn a_law_that_fits_far_better_is_recovered_in_every_replicate() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = m2_beats_m4(dir.path());
+    let c = check(&run, 4, None);
+    let m2 = &c.rows[0];
+    assert_eq!(m2.law, Law::M2);
+    assert_eq!(m2.source, ParamSource::Posterior);
+    assert_eq!(m2.first_share, vec![1.0, 0.0]);
+    assert!(
+        m2.replicates
+            .iter()
+            .all(|r| r.first == Law::M2 && r.probabilities[0] >= 0.9),
+        "{:?}",
+        m2.replicates
+            .iter()
+            .map(|r| (&r.probabilities, r.final_epsilon))
+            .collect::<Vec<_>>()
+    );
+    // What was written is what was returned, and the report shows it.
+    assert_eq!(selection::read(&run).unwrap().as_ref(), Some(&c));
+    for name in ["matrix.csv", "replicates.csv", "confusion.svg", "confusion.png"] {
+        assert!(run.join("selection").join(name).is_file(), "{name}");
+    }
+    let (setup, runs) = bitrock::report::read_run_dirs(std::slice::from_ref(&run)).unwrap();
+    assert_eq!(runs[0].selection.as_ref(), Some(&c));
+    let report = bitrock::report::write_paper_report(&dir.path().join("report"), &setup, &runs).unwrap();
+    let md = std::fs::read_to_string(report.dir.join("report.md")).unwrap();
+    assert!(md.contains("## Can the selection be trusted?"), "{md}");
+    assert!(md.contains(&c.rows[0].verdict));
+    assert!(report.figures.iter().any(|f| f.stem == "fig10_selection_1"));
+}
+
+#[test]
+fn replicates_do_not_depend_on_the_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = m2_beats_m4(dir.path());
+    let one_at_a_time = check(&run, 3, Some(1));
+    let all_at_once = check(&run, 3, None);
+    let replicates = |c: &SelectionCheck| c.rows.iter().map(|r| r.replicates.clone()).collect::<Vec<_>>();
+    assert_eq!(replicates(&one_at_a_time), replicates(&all_at_once));
+}
+
+#[test]
+fn two_laws_the_data_cannot_tell_apart_give_a_symmetric_matrix() {
+    // A constant torque of 10 kN·m with 300 N·m of noise. The prior file makes m2 and m4 the same
+    // family of candidates: m2 decays within 1/50 rad/s (e^{-50} at the slowest sample) to its
+    // dynamic torque tcb, m4's slope terms are below 1e-9, and tcb and c0 share one box.
+    let dir = tempfile::tempdir().unwrap();
+    let prior = dir.path().join("prior.toml");
+    std::fs::write(
+        &prior,
+        "[m2]\ntsb = [9000.0, 11000.0]\ntcb = [9000.0, 11000.0]\ng = [50.0, 51.0]\n\
+         [m4]\nc0 = [9000.0, 11000.0]\nc1 = [0.0, 1e-9]\nc2 = [0.0, 1e-9]\nc3 = [0.0, 1e-9]\n",
+    )
+    .unwrap();
+    let data = record(|_| 1e4, 300.0, 5);
+    // ε_min = 0.002 accepts |c − 10⁴| ≲ 330 N·m: a third of the box, so acceptance decides.
+    let run = run_dir(dir.path(), data, &[Law::M2, Law::M4], 400, 0.002, Some(prior));
+    let k = 8;
+    let c = check(&run, k, None);
+    // Each replicate's P(m2) is a binomial share of 400 particles (σ ≤ 0.025); a row's mean over
+    // 8 replicates has σ ≤ 0.009 and the difference of two such means σ ≤ 0.013: 0.05 is ≥ 4σ.
+    let m = |i: usize, j: usize| c.rows[i].mean_probability[j];
+    assert!(
+        (m(0, 1) - m(1, 0)).abs() < 0.05,
+        "{:?}",
+        c.rows.iter().map(|r| &r.mean_probability).collect::<Vec<_>>()
+    );
+    for i in 0..2 {
+        for j in 0..2 {
+            assert!((m(i, j) - 0.5).abs() < 0.05, "row {i} column {j}: {}", m(i, j));
+        }
+    }
+}
+
+/// Runs `bitrock args...`: (exit status, stderr).
+fn run_bin(args: &[&str]) -> (i32, String) {
+    let out = bin().args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Every path under `dir`, sorted.
+fn listing(dir: &Path) -> Vec<PathBuf> {
+    let mut all: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+    all.sort();
+    all
+}
+
+#[test]
+fn bad_input_is_refused_with_exit_2_and_nothing_written() {
+    let dir = tempfile::tempdir().unwrap();
+    // Not a run.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let (code, stderr) = run_bin(&["check-selection", empty.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("not a bitrock run directory"), "{stderr}");
+    assert!(listing(&empty).is_empty());
+    // K = 0, on a real run.
+    let run = m2_beats_m4(dir.path());
+    let before = listing(&run);
+    let (code, stderr) = run_bin(&["check-selection", run.to_str().unwrap(), "--replicates", "0"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--replicates"), "{stderr}");
+    assert_eq!(listing(&run), before);
+    // A run whose laws all died before its first population (the draw budget ran out in it).
+    let dead = dir.path().join("dead");
+    let (code, stderr) = run_bin(&[
+        "abc",
+        "--out",
+        dead.to_str().unwrap(),
+        "--particles",
+        "1000",
+        "--start-epsilon",
+        "0.0145",
+        "--max-draws",
+        "1000",
+        "--backend",
+        "cpu",
+        "-q",
+    ]);
+    assert_eq!(code, 3, "{stderr}");
+    let before = listing(&dead);
+    let (code, stderr) = run_bin(&["check-selection", dead.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("no completed population"), "{stderr}");
+    assert_eq!(listing(&dead), before);
+}
