@@ -134,7 +134,8 @@ impl RejectionConfig {
             ));
         }
         if self.max_batch == 0 {
-            return Err(Error::arg("--batch", "must be at least 1"));
+            // No flag sets it: only a program using the library can get this wrong.
+            return Err(Error::arg("RejectionConfig::max_batch", "must be at least 1"));
         }
         Ok(())
     }
