@@ -198,6 +198,46 @@ fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
     }
 }
 
+/// How a store lays out particles ([`RunStore::layout`]).
+#[derive(Clone, Copy, Debug)]
+pub struct StoreLayout {
+    schema_version: i64,
+}
+
+impl StoreLayout {
+    /// What [`RunStore::append_population`] writes, taken while the sampler still holds
+    /// `previous`, and owned: it can be written on another thread
+    /// ([`RunStore::write_pending`]) while the next population is drawn. It copies only the
+    /// particles the store does not hold yet.
+    pub fn prepare(self, population: &Population, previous: Option<&Population>) -> PendingPopulation {
+        let carried = self.carried(population, previous);
+        PendingPopulation {
+            record: population.record.clone(),
+            carried,
+            new: population.particles[carried.unwrap_or(0)..].to_vec(),
+        }
+    }
+
+    /// How many leading particles of `population` are carried from `previous` (schema 3;
+    /// `None`: none, every particle is written).
+    fn carried(self, population: &Population, previous: Option<&Population>) -> Option<usize> {
+        if self.schema_version >= ROWS_SCHEMA {
+            carried_count(population, previous)
+        } else {
+            None
+        }
+    }
+}
+
+/// A population prepared for the store by [`StoreLayout::prepare`]: its record, how
+/// many of its leading particles the store holds already (carried from the population before
+/// it), and a copy of the others.
+pub struct PendingPopulation {
+    record: PopulationRecord,
+    carried: Option<usize>,
+    new: Vec<Particle>,
+}
+
 impl RunStore {
     /// Creates `dir/run.sqlite` (which must not exist) whole or not at all: the schema and the
     /// set-up are written in one transaction into a temporary beside it (no journal: a failed
@@ -376,9 +416,34 @@ impl RunStore {
     /// with, so that "ρ below the last ε" selects exactly the rows of every population in the
     /// chain; otherwise (paper mode, SMC) every particle is written.
     pub fn append_population(&mut self, population: &Population, previous: Option<&Population>) -> Result<()> {
+        let carried = self.carried(population, previous);
+        let new = &population.particles[carried.unwrap_or(0)..];
+        self.write_population(&population.record, carried, new)
+    }
+
+    /// How this store lays out particles: what prepares populations for it once the store
+    /// itself has moved to a writing thread.
+    pub fn layout(&self) -> StoreLayout {
+        StoreLayout {
+            schema_version: self.schema_version,
+        }
+    }
+
+    /// Writes a population prepared by [`StoreLayout::prepare`], in the order they were
+    /// prepared.
+    pub fn write_pending(&mut self, pending: PendingPopulation) -> Result<()> {
+        self.write_population(&pending.record, pending.carried, &pending.new)
+    }
+
+    fn carried(&self, population: &Population, previous: Option<&Population>) -> Option<usize> {
+        self.layout().carried(population, previous)
+    }
+
+    /// One transaction: the record, its per-law rows and its `new` particles (those after
+    /// the `carried` prefix).
+    fn write_population(&mut self, r: &PopulationRecord, carried: Option<usize>, new: &[Particle]) -> Result<()> {
         let path = self.path.clone();
         let err = sql_error(&path);
-        let r = &population.record;
         let tx = self.conn.transaction().map_err(&err)?;
         tx.execute(
             "INSERT INTO populations (population, epsilon, draws, accepted, acceptance_rate, candidates_scored,
@@ -416,9 +481,9 @@ impl RunStore {
             .map_err(&err)?;
         }
         if self.schema_version >= ROWS_SCHEMA {
-            insert_particle_rows(&tx, population, previous).map_err(&err)?;
+            insert_particle_rows(&tx, r, carried, new).map_err(&err)?;
         } else {
-            insert_particles_table(&tx, population).map_err(&err)?;
+            insert_particles_table(&tx, r.index, new).map_err(&err)?;
         }
         tx.commit().map_err(&err)
     }
@@ -815,63 +880,73 @@ fn same_particle(a: &Particle, b: &Particle) -> bool {
 }
 
 /// Schema 3: how many leading particles of `population` are carried from `previous` (the
-/// stored population before it), and from which row the carried rows begin; `None` when it
-/// carries nothing (see [`RunStore::append_population`]).
-fn carried_prefix(
-    tx: &rusqlite::Transaction,
-    population: &Population,
-    previous: Option<&Population>,
-) -> rusqlite::Result<Option<(i64, f64, usize)>> {
-    let (Some(previous), Some(epsilon)) = (previous, population.record.epsilon) else {
-        return Ok(None);
-    };
-    if previous.record.index + 1 != population.record.index || epsilon.is_nan() {
-        return Ok(None);
+/// stored population before it); `None` when it carries nothing (see
+/// [`RunStore::append_population`]). Decided from the particles alone, so that it can be
+/// decided while the sampler still holds `previous` and written later: carrying needs ε no
+/// higher than `previous`'s, which makes ε no higher than the ε every population of the
+/// chain carried with.
+fn carried_count(population: &Population, previous: Option<&Population>) -> Option<usize> {
+    let (previous, epsilon) = (previous?, population.record.epsilon?);
+    if previous.record.index + 1 != population.record.index
+        || epsilon.is_nan()
+        || previous.record.epsilon.is_some_and(|e| epsilon > e)
+    {
+        return None;
     }
-    let stored: Option<(i64, i64, Option<f64>)> = tx
-        .query_row(
-            "SELECT first_row, carried_from_row, carried_below FROM population_rows WHERE population = ?1",
-            [previous.record.index as i64],
-            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
-        )
-        .optional()?;
-    let Some((first_row, carried_from_row, carried_below)) = stored else {
-        return Ok(None);
-    };
-    let chain_from = match carried_below {
-        None => first_row,
-        Some(below) if epsilon <= below => carried_from_row,
-        Some(_) => return Ok(None),
-    };
     let mut carried = previous.particles.iter().filter(|p| p.rho < epsilon);
     let mut count = 0;
     for p in &population.particles {
         match carried.next() {
             Some(q) if same_particle(p, q) => count += 1,
-            Some(_) => return Ok(None),
+            Some(_) => return None,
             None => break,
         }
     }
     if carried.next().is_some() {
-        return Ok(None);
+        return None;
     }
-    Ok(Some((chain_from, epsilon, count)))
+    Some(count)
+}
+
+/// Schema 3, for a population carrying `carried` particles: the row its carried rows begin
+/// at. The population before it was written by the same store, before it: its entry is
+/// there, and ε is no higher than the one it carried with ([`carried_count`]).
+fn carried_from_row(tx: &rusqlite::Transaction, previous_index: i64, epsilon: f64) -> rusqlite::Result<i64> {
+    let (first_row, carried_from_row, carried_below): (i64, i64, Option<f64>) = tx.query_row(
+        "SELECT first_row, carried_from_row, carried_below FROM population_rows WHERE population = ?1",
+        [previous_index],
+        |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
+    )?;
+    match carried_below {
+        None => Ok(first_row),
+        Some(below) if epsilon <= below => Ok(carried_from_row),
+        // Unreachable through carried_count; a misuse of the store if it ever happens.
+        Some(below) => Err(rusqlite::Error::SqliteFailure(
+            rusqlite::ffi::Error::new(rusqlite::ffi::SQLITE_MISUSE),
+            Some(format!(
+                "population {}: ε = {epsilon} above the ε = {below} of the population it carries from",
+                previous_index + 1
+            )),
+        )),
+    }
 }
 
 /// Schema 3: the rows of `population` that `previous` does not carry, and its entry in
 /// `population_rows`. One prepared statement, parameters bound in place.
 fn insert_particle_rows(
     tx: &rusqlite::Transaction,
-    population: &Population,
-    previous: Option<&Population>,
+    record: &PopulationRecord,
+    carried: Option<usize>,
+    new: &[Particle],
 ) -> rusqlite::Result<()> {
-    let g = population.record.index as i64;
+    let g = record.index as i64;
     let first_row: i64 = tx.query_row("SELECT COALESCE(MAX(end_row), 0) FROM population_rows", [], |r| {
         r.get(0)
     })?;
-    let (carried_from_row, carried_below, carried) = carried_prefix(tx, population, previous)?
-        .map_or((first_row, None, 0), |(from, below, n)| (from, Some(below), n));
-    let new = &population.particles[carried..];
+    let (carried_from_row, carried_below) = match (carried, record.epsilon) {
+        (Some(_), Some(epsilon)) => (carried_from_row(tx, g - 1, epsilon)?, Some(epsilon)),
+        _ => (first_row, None),
+    };
     // Rejection gives every particle the same weight: stored once, not per row.
     let row_weight = new
         .first()
@@ -946,8 +1021,8 @@ fn bind_particle_row(
 
 /// Schemas 1 and 2: one row of the `particles` table per particle, so that a run stored by
 /// an older bitrock continues in its own layout.
-fn insert_particles_table(tx: &rusqlite::Transaction, population: &Population) -> rusqlite::Result<()> {
-    let g = population.record.index as i64;
+fn insert_particles_table(tx: &rusqlite::Transaction, index: usize, particles: &[Particle]) -> rusqlite::Result<()> {
+    let g = index as i64;
     let mut statements: Vec<rusqlite::Statement> = Law::ALL
         .iter()
         .map(|law| {
@@ -961,7 +1036,7 @@ fn insert_particles_table(tx: &rusqlite::Transaction, population: &Population) -
             ))
         })
         .collect::<std::result::Result<_, _>>()?;
-    for (position, p) in population.particles.iter().enumerate() {
+    for (position, p) in particles.iter().enumerate() {
         let statement = &mut statements[p.law.index()];
         statement.raw_bind_parameter(1, g)?;
         statement.raw_bind_parameter(2, position as i64)?;

@@ -522,3 +522,29 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
     let e = RunStore::open(&run_dir).err().unwrap().to_string();
     assert!(e.contains("schema version 99") && e.contains("versions 1 to 3"), "{e}");
 }
+
+#[test]
+fn a_write_that_fails_on_the_store_thread_ends_the_run_with_its_error() {
+    // Populations are written by a thread of their own while the next is drawn: a failure
+    // there must still end the run, with its error, and leave the populations written before.
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    start(&run_dir, config(500, 2, 0.0));
+    let conn = rusqlite::Connection::open(run_dir.join("run.sqlite")).unwrap();
+    conn.execute_batch(
+        "CREATE TRIGGER injected BEFORE INSERT ON populations WHEN NEW.population = 3
+         BEGIN SELECT RAISE(ABORT, 'injected write failure'); END;",
+    )
+    .unwrap();
+    drop(conn);
+    let more = Continuation {
+        max_populations: Some(6),
+        ..Continuation::default()
+    };
+    let e = run::resume(&run_dir, &more, &mut Silent, &mut |_| {})
+        .err()
+        .expect("the failed write ends the run")
+        .to_string();
+    assert!(e.contains("injected write failure") && e.contains("run.sqlite"), "{e}");
+    assert_eq!(stored_populations(&run_dir), 3);
+}
