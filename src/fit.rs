@@ -488,8 +488,11 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
     }
 
     let solver = LevenbergMarquardt::new().with_patience(400);
+    // The starts are polished in parallel (collected in order: the same result): a start that
+    // loses patience costs seconds, and a lone slow fit would otherwise hold one thread while
+    // others idle (the selection check fits many records side by side).
     let mut polished: Vec<Polished> = starts
-        .iter()
+        .par_iter()
         .map(|p0| {
             let problem = Problem {
                 law,
