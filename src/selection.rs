@@ -30,7 +30,7 @@ use crate::files;
 use crate::fit::LawFit;
 use crate::laws::Law;
 use crate::numerics::quantile;
-use crate::prior::{PriorFile, PriorRule};
+use crate::prior::{Prior, PriorFile, PriorRule};
 use crate::run::{self, RunConfig};
 use crate::store::{RunStore, StoredRun};
 use rand::rngs::StdRng;
@@ -275,7 +275,10 @@ impl CheckedRun {
                     .into(),
             ));
         }
-        let prior_file = config.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        let prior_file = match &config.prior_file {
+            Some(path) => Some(stored_prior_file(dir, path, &stored, &config)?),
+            None => None,
+        };
         let lock = files::DirLock::acquire(dir)?;
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -284,6 +287,28 @@ impl CheckedRun {
             prior_file,
             _lock: lock,
         })
+    }
+}
+
+/// The `--prior` file a run was made with, as its store keeps it ([`PriorFile::of_prior`]),
+/// never read from `path`, where it may have moved or changed since. Accepted once it rebuilds
+/// the run's own prior from the run's own fits exactly (boxes, rules and law thresholds); a
+/// store that does not record which boxes the file gave (schema 1) cannot, and is refused.
+fn stored_prior_file(dir: &Path, path: &Path, stored: &StoredRun, config: &RunConfig) -> Result<PriorFile> {
+    let prior = &stored.setup.prior;
+    let unit = stored.setup.data.torque_unit.newton_metres();
+    let file = PriorFile::of_prior(prior, unit);
+    let rebuilt = Prior::from_fits_by(&stored.setup.fits, config.prior_rule, config.delta, Some(&file), unit);
+    match rebuilt {
+        Ok(p) if p.boxes == prior.boxes && p.rules == prior.rules && p.thresholds == prior.thresholds => Ok(file),
+        _ => Err(Error::Data {
+            path: dir.to_path_buf(),
+            message: format!(
+                "the run was made with the prior file {}, and its store does not record that file's boxes in a form the check can reuse (a store written by an older bitrock); run `bitrock abc --prior {}` again and check the new run",
+                path.display(),
+                path.display()
+            ),
+        }),
     }
 }
 
