@@ -105,6 +105,10 @@ pub struct Replicate {
     /// ε of the last population (`None`: ∞).
     pub final_epsilon: Option<f64>,
     pub populations: usize,
+    /// Candidates of all its populations whose ρ lay within the CPU/GPU parity tolerance of ε:
+    /// where none did, the other backend gives the same populations.
+    #[serde(default)]
+    pub near_threshold: u64,
 }
 
 /// Quantiles of the generating law's own probability over its replicates.
@@ -567,6 +571,7 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted) ->
             first,
             final_epsilon: last.record.epsilon,
             populations: outcome.run.populations.len(),
+            near_threshold: outcome.run.populations.iter().map(|p| p.record.near_threshold).sum(),
         },
         backend: outcome.backend,
         notes,
