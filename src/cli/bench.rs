@@ -70,7 +70,9 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             report.machine, report.cores, report.adapter
         )?;
         writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
-        writeln!(out, "backend  law          N        D   evaluations/s (min–max)")?;
+        if !report.throughput.is_empty() {
+            writeln!(out, "backend  law          N        D   evaluations/s (min–max)")?;
+        }
         for t in &report.throughput {
             writeln!(
                 out,

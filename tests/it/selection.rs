@@ -361,3 +361,43 @@ fn the_check_does_not_depend_on_the_backend(shape: Shape) {
     assert!(compared >= 3, "only {compared} of 6 replicates comparable");
 }
 }
+
+#[test]
+fn bench_selection_times_the_check_and_splits_its_phases() {
+    let out = bin()
+        .args([
+            "bench",
+            "--selection",
+            "--quick",
+            "--backend",
+            "cpu",
+            "--reps",
+            "1",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let s = &v["selection"];
+    assert_eq!(s["backend"], "cpu");
+    assert_eq!(
+        (s["laws"].as_u64(), s["replicates_per_law"].as_u64()),
+        (Some(4), Some(2))
+    );
+    assert_eq!(
+        (s["particles"].as_u64(), s["eps_min"].as_f64()),
+        (Some(5000), Some(0.014))
+    );
+    let seconds = s["seconds"].as_f64().unwrap();
+    assert!(
+        (s["replicates_per_s"].as_f64().unwrap() * seconds - 8.0).abs() < 1e-9,
+        "{s}"
+    );
+    // The two phases are parts of the check's wall time.
+    let phases = s["fit_seconds"].as_f64().unwrap() + s["sampling_seconds"].as_f64().unwrap();
+    assert!(phases > 0.0 && phases <= seconds, "{s}");
+    assert!(s["evaluations"].as_u64().unwrap() > 0);
+    // Only the selection section is measured.
+    assert_eq!(v["throughput"], serde_json::json!([]));
+}
