@@ -95,6 +95,33 @@ pub struct BenchReport {
     pub samplers: Vec<SamplerRun>,
     /// Stability grid on the GPU: cells × samples per second (median), with the grid size.
     pub stability: Option<StabilityThroughput>,
+    /// `bitrock check-selection` of issue 15's target (measured with `--selection` only).
+    pub selection: Option<SelectionBench>,
+}
+
+/// `bitrock check-selection` of a run of the embedded record: every law, K replicates each.
+#[derive(Clone, Debug, Serialize)]
+pub struct SelectionBench {
+    /// Backend asked for, and the one that scored the candidates (`cpu`, `gpu`).
+    pub backend_asked: Backend,
+    pub backend: String,
+    pub laws: usize,
+    pub replicates_per_law: usize,
+    /// Particles per population of the run and of every replicate.
+    pub particles: usize,
+    pub eps_min: f64,
+    /// Wall time of the check (median over the repetitions), s.
+    pub seconds: f64,
+    pub seconds_spread: Spread,
+    /// Replicates per second at the median.
+    pub replicates_per_s: f64,
+    /// The check's two phases (median over the repetitions), s: the synthetic records with
+    /// their least-squares fits, and the samplers.
+    pub fit_seconds: f64,
+    pub sampling_seconds: f64,
+    /// Candidate × data-point evaluations of all replicates (the same every repetition).
+    pub evaluations: u64,
+    pub repetitions: usize,
 }
 
 /// Throughput of the stability kernel.
@@ -118,6 +145,9 @@ pub struct BenchOptions {
     pub particles: usize,
     /// Stability grid (side, samples): 512 × 512 cells × 10,000 samples.
     pub stability: (usize, usize),
+    /// Measure only `bitrock check-selection` ([`selection_check`]) with this many replicates
+    /// per law (issue 15's target: 20), instead of the other sections.
+    pub selection_replicates: Option<usize>,
 }
 
 impl Default for BenchOptions {
@@ -130,6 +160,7 @@ impl Default for BenchOptions {
             sizes: vec![(65_536, 5_000), (1_048_576, 5_000), (65_536, 100_000), (25_000, 2_687)],
             particles: 25_000,
             stability: (512, 10_000),
+            selection_replicates: None,
         }
     }
 }
@@ -194,6 +225,29 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         log(format!("GPU: {adapter}, {shape} scoring"));
     }
     let reps = opts.repetitions.max(1);
+    let report = BenchReport {
+        machine: machine(),
+        cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        adapter,
+        shape,
+        repetitions: reps,
+        throughput: Vec::new(),
+        small_call_seconds: Vec::new(),
+        end_to_end: Vec::new(),
+        samplers: Vec::new(),
+        stability: None,
+        selection: None,
+    };
+    if let Some(k) = opts.selection_replicates {
+        let backend = match opts.backends.as_slice() {
+            [only] => *only,
+            _ => Backend::Auto,
+        };
+        return Ok(BenchReport {
+            selection: Some(selection_check(k, SELECTION_PARTICLES, backend, reps.min(3), log)?),
+            ..report
+        });
+    }
     let mut throughput = Vec::new();
     for &backend in &opts.backends {
         for &(n, d) in &opts.sizes {
@@ -360,15 +414,96 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
     };
     Ok(BenchReport {
         stability,
-        machine: machine(),
-        cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
-        adapter,
-        shape,
-        repetitions: reps,
         throughput,
         small_call_seconds,
         end_to_end,
         samplers,
+        ..report
+    })
+}
+
+/// Particles of issue 15's target run and of its replicates.
+pub const SELECTION_PARTICLES: usize = 5_000;
+
+/// Times `bitrock check-selection` `reps` times: a rejection run of every law on the embedded
+/// record (N = `particles`, down to ε = 0.014, `backend`) written to a temporary directory,
+/// then K = `replicates` per law checked with the same backend. The results are the same
+/// every repetition; the time is not.
+pub fn selection_check(
+    replicates: usize,
+    particles: usize,
+    backend: Backend,
+    reps: usize,
+    log: &mut dyn FnMut(String),
+) -> Result<SelectionBench> {
+    use crate::pipeline::{AbcJob, RunDir};
+    use crate::run::{RunConfig, SamplerConfig};
+    use crate::selection::{CheckOptions, CheckedRun};
+    let dir =
+        tempfile::tempdir().map_err(|source| crate::error::Error::output("TMPDIR", &std::env::temp_dir(), source))?;
+    let run_dir = dir.path().join("run");
+    let sampler = RejectionConfig {
+        particles,
+        ..RejectionConfig::default()
+    };
+    let eps_min = sampler.eps_min;
+    let config = RunConfig {
+        backend,
+        sampler: SamplerConfig::Rejection(sampler),
+        ..RunConfig::default()
+    };
+    let laws = config.laws.len();
+    AbcJob {
+        config,
+        summary_population: None,
+        out: Some(RunDir {
+            path: run_dir.clone(),
+            replace: false,
+        }),
+    }
+    .run(
+        demo_field_data(&DataOptions::default())?,
+        &mut crate::abc::Silent,
+        &mut |_| {},
+    )?;
+    let run = CheckedRun::open(&run_dir)?;
+    let options = CheckOptions {
+        replicates,
+        backend: Some(backend),
+        batch: None,
+    };
+    let mut checks = Vec::new();
+    for rep in 0..reps.max(1) {
+        let check = crate::selection::check(&run, &options, &|_, _| {}, &mut |_| {})?;
+        log(format!(
+            "check-selection ({}/{}): {laws} laws × {replicates} replicates, N = {particles}, to ε = {eps_min}, backend {}: {:.2} s (records and fits {:.2} s, sampling {:.2} s)",
+            rep + 1,
+            reps.max(1),
+            check.backend,
+            check.seconds,
+            check.timing.fit_seconds,
+            check.timing.sampling_seconds
+        ));
+        checks.push(check);
+    }
+    let median =
+        |f: &dyn Fn(&crate::selection::SelectionCheck) -> f64| quantile(&checks.iter().map(f).collect::<Vec<_>>(), 0.5);
+    let seconds_spread = Spread::of(&checks.iter().map(|c| c.seconds).collect::<Vec<_>>());
+    let seconds = seconds_spread.median;
+    Ok(SelectionBench {
+        backend_asked: backend,
+        backend: checks[0].backend.clone(),
+        laws,
+        replicates_per_law: replicates,
+        particles,
+        eps_min,
+        seconds,
+        seconds_spread,
+        replicates_per_s: (laws * replicates) as f64 / seconds,
+        fit_seconds: median(&|c| c.timing.fit_seconds),
+        sampling_seconds: median(&|c| c.timing.sampling_seconds),
+        evaluations: checks[0].timing.evaluations,
+        repetitions: checks.len(),
     })
 }
 

@@ -18,6 +18,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// How to fit.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -303,38 +304,84 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 }
 
-/// Least squares for the coefficients of `columns` (each a function of the sample index),
-/// by normal equations on a handful of columns. `None` when singular.
-fn linear_coefficients(columns: &[Vec<f64>], y: &[f64]) -> Option<Vec<f64>> {
-    let k = columns.len();
-    let mut ata = DMatrix::<f64>::zeros(k, k);
-    let mut aty = DVector::<f64>::zeros(k);
-    for a in 0..k {
-        for b in a..k {
-            let v = compensated_sum(columns[a].iter().zip(&columns[b]).map(|(x, z)| x * z));
-            ata[(a, b)] = v;
-            ata[(b, a)] = v;
+/// The normal equations of a grid's linear parameters. Grid points share columns (m3's 378
+/// points use 54 Gaussian columns, one constant and 7 tanh columns), so each column, and each
+/// product of two columns or of a column and y, is computed once and reused: the same sums,
+/// bit for bit, as computing them at every point.
+struct GridColumns<'a> {
+    y: &'a [f64],
+    columns: Vec<Vec<f64>>,
+    /// Σ column_a · column_b (compensated), by (a, b) with a ≤ b.
+    products: HashMap<(usize, usize), f64>,
+    /// Σ column_a · y (compensated), by a.
+    with_y: HashMap<usize, f64>,
+}
+
+impl<'a> GridColumns<'a> {
+    fn new(y: &'a [f64]) -> Self {
+        Self {
+            y,
+            columns: Vec::new(),
+            products: HashMap::new(),
+            with_y: HashMap::new(),
         }
-        aty[a] = compensated_sum(columns[a].iter().zip(y).map(|(x, z)| x * z));
     }
-    let solution = ata.cholesky()?.solve(&aty);
-    solution
-        .iter()
-        .all(|v| v.is_finite())
-        .then(|| solution.iter().copied().collect())
+
+    /// Adds a column (one value per sample); returns its id.
+    fn add(&mut self, column: Vec<f64>) -> usize {
+        self.columns.push(column);
+        self.columns.len() - 1
+    }
+
+    /// Least squares for the coefficients of columns `ids`, by normal equations on a handful
+    /// of columns. `None` when singular.
+    fn coefficients(&mut self, ids: &[usize]) -> Option<Vec<f64>> {
+        let k = ids.len();
+        let mut ata = DMatrix::<f64>::zeros(k, k);
+        let mut aty = DVector::<f64>::zeros(k);
+        for a in 0..k {
+            for b in a..k {
+                let key = (ids[a].min(ids[b]), ids[a].max(ids[b]));
+                let columns = &self.columns;
+                let v = *self
+                    .products
+                    .entry(key)
+                    .or_insert_with(|| compensated_sum(columns[key.0].iter().zip(&columns[key.1]).map(|(x, z)| x * z)));
+                ata[(a, b)] = v;
+                ata[(b, a)] = v;
+            }
+            let (columns, y) = (&self.columns, self.y);
+            aty[a] = *self
+                .with_y
+                .entry(ids[a])
+                .or_insert_with(|| compensated_sum(columns[ids[a]].iter().zip(y).map(|(x, z)| x * z)));
+        }
+        let solution = ata.cholesky()?.solve(&aty);
+        solution
+            .iter()
+            .all(|v| v.is_finite())
+            .then(|| solution.iter().copied().collect())
+    }
 }
 
 /// Candidate starting points (scaled parameters) from a grid over the nonlinear parameters,
 /// the linear ones solved exactly at each grid point.
 fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
     let col = |f: &dyn Fn(f64) -> f64| -> Vec<f64> { w.iter().zip(r).map(|(&w, &r)| r * f(w)).collect() };
+    let mut grid = GridColumns::new(y);
     let mut out = Vec::new();
     match law {
         Law::M1 => {
-            for &b1 in &geomspace(0.3, 100.0, 8) {
-                for &b3 in &geomspace(0.3, 3e4, 10) {
-                    let cols = [col(&|w| (b1 * w).tanh()), col(&|w| w / (1.0 + b3 * w * w))];
-                    if let Some(c) = linear_coefficients(&cols, y)
+            let b1s = geomspace(0.3, 100.0, 8);
+            let b3s = geomspace(0.3, 3e4, 10);
+            let tanh_ids: Vec<usize> = b1s.iter().map(|&b1| grid.add(col(&|w| (b1 * w).tanh()))).collect();
+            let rational_ids: Vec<usize> = b3s
+                .iter()
+                .map(|&b3| grid.add(col(&|w| w / (1.0 + b3 * w * w))))
+                .collect();
+            for (&b1, &tanh_id) in b1s.iter().zip(&tanh_ids) {
+                for (&b3, &rational_id) in b3s.iter().zip(&rational_ids) {
+                    if let Some(c) = grid.coefficients(&[tanh_id, rational_id])
                         && c[0].abs() > 1e-12
                     {
                         out.push(vec![c[0], b1, c[1] / c[0], b3]);
@@ -344,22 +391,25 @@ fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
         }
         Law::M2 => {
             for &g in &geomspace(0.05, 100.0, 24) {
-                let cols = [col(&|w| (-g * w).exp()), col(&|w| 1.0 - (-g * w).exp())];
-                if let Some(c) = linear_coefficients(&cols, y) {
+                let ids = [
+                    grid.add(col(&|w| (-g * w).exp())),
+                    grid.add(col(&|w| 1.0 - (-g * w).exp())),
+                ];
+                if let Some(c) = grid.coefficients(&ids) {
                     out.push(vec![c[0], c[1], g]);
                 }
             }
         }
         Law::M3 => {
+            let a2s = [-0.05, 0.0, 0.02, 0.08, 0.2, 0.5];
+            let a5s = geomspace(0.1, 30.0, 7);
+            let constant_id = grid.add(col(&|_| 1.0));
+            let tanh_ids: Vec<usize> = a5s.iter().map(|&a5| grid.add(col(&|w| -(a5 * w).tanh()))).collect();
             for &a1 in &geomspace(0.3, 3e4, 9) {
-                for &a2 in &[-0.05, 0.0, 0.02, 0.08, 0.2, 0.5] {
-                    for &a5 in &geomspace(0.1, 30.0, 7) {
-                        let cols = [
-                            col(&|w| (-a1 * (w - a2) * (w - a2)).exp()),
-                            col(&|_| 1.0),
-                            col(&|w| -(a5 * w).tanh()),
-                        ];
-                        if let Some(c) = linear_coefficients(&cols, y) {
+                for &a2 in &a2s {
+                    let gauss_id = grid.add(col(&|w| (-a1 * (w - a2) * (w - a2)).exp()));
+                    for (&a5, &tanh_id) in a5s.iter().zip(&tanh_ids) {
+                        if let Some(c) = grid.coefficients(&[gauss_id, constant_id, tanh_id]) {
                             out.push(vec![c[0], a1, a2, c[1], c[2], a5]);
                         }
                     }
@@ -367,8 +417,13 @@ fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
             }
         }
         Law::M4 => {
-            let cols = [col(&|_| 1.0), col(&|w| w), col(&|w| w * w), col(&|w| w * w * w)];
-            if let Some(c) = linear_coefficients(&cols, y) {
+            let ids = [
+                grid.add(col(&|_| 1.0)),
+                grid.add(col(&|w| w)),
+                grid.add(col(&|w| w * w)),
+                grid.add(col(&|w| w * w * w)),
+            ];
+            if let Some(c) = grid.coefficients(&ids) {
                 out.push(c);
             }
         }
@@ -488,8 +543,11 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
     }
 
     let solver = LevenbergMarquardt::new().with_patience(400);
+    // The starts are polished in parallel (collected in order: the same result): a start that
+    // loses patience costs seconds, and a lone slow fit would otherwise hold one thread while
+    // others idle (the selection check fits many records side by side).
     let mut polished: Vec<Polished> = starts
-        .iter()
+        .par_iter()
         .map(|p0| {
             let problem = Problem {
                 law,

@@ -228,6 +228,36 @@ impl PriorFile {
         Ok(file)
     }
 
+    /// The file that gives `prior`'s explicit boxes ([`BoxRule::Given`]) and its law weights,
+    /// torque-valued bounds in units of `torque_unit_nm` N·m: what a run store keeps of the
+    /// `--prior` file the run was made with (the store holds the prior, not the file). The
+    /// boxes come back as the same f32 values; the weights are the normalised ones.
+    pub fn of_prior(prior: &Prior, torque_unit_nm: f64) -> Self {
+        let mut file = PriorFile::default();
+        for ((bx, rules), &weight) in prior.boxes.iter().zip(&prior.rules).zip(&prior.weights) {
+            file.weights.insert(bx.law.name().to_string(), weight);
+            let given = bx.law.params().iter().zip(&bx.lower).zip(&bx.upper).zip(rules);
+            let bounds: BTreeMap<String, Vec<f64>> = given
+                .filter(|(_, rule)| **rule == BoxRule::Given)
+                .map(|(((spec, &lo), &hi), _)| {
+                    let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
+                    (spec.name.to_string(), vec![f64::from(lo) / unit, f64::from(hi) / unit])
+                })
+                .collect();
+            *file.bounds_mut(bx.law) = bounds;
+        }
+        file
+    }
+
+    fn bounds_mut(&mut self, law: Law) -> &mut BTreeMap<String, Vec<f64>> {
+        match law {
+            Law::M1 => &mut self.m1,
+            Law::M2 => &mut self.m2,
+            Law::M3 => &mut self.m3,
+            Law::M4 => &mut self.m4,
+        }
+    }
+
     fn bounds(&self, law: Law) -> &BTreeMap<String, Vec<f64>> {
         match law {
             Law::M1 => &self.m1,

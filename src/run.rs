@@ -282,17 +282,45 @@ pub fn check_new_run_dir(dir: &RunDir, input: Option<&Path>) -> Result<DirState>
 pub fn start(
     dir: Option<&RunDir>,
     data: FieldData,
-    mut config: RunConfig,
+    config: RunConfig,
     prior_file: Option<&PriorFile>,
     observer: &mut dyn Observer,
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     config.validate()?;
-    let input = data.source.clone();
     if let Some(dir) = dir {
-        check_new_run_dir(dir, Some(&input))?;
+        check_new_run_dir(dir, Some(&data.source))?;
     }
     let fits = fit::fit_record(&config.laws, &data, &config.fit)?;
+    start_with_fits(dir, data, config, fits, prior_file, observer, note)
+}
+
+/// [`start`] of a run in memory whose record's least-squares fits the caller made
+/// (`fit::fit_record(&config.laws, &data, &config.fit)`): the selection check fits all its
+/// replicates' records before sampling any, to time and balance the two apart.
+pub fn start_fitted_in_memory(
+    data: FieldData,
+    config: RunConfig,
+    fits: Vec<fit::LawFit>,
+    prior_file: Option<&PriorFile>,
+    observer: &mut dyn Observer,
+    note: &mut dyn FnMut(String),
+) -> Result<Outcome> {
+    config.validate()?;
+    start_with_fits(None, data, config, fits, prior_file, observer, note)
+}
+
+/// [`start`] after the fits: the floor, the prior, the evaluator, the sampler.
+fn start_with_fits(
+    dir: Option<&RunDir>,
+    data: FieldData,
+    mut config: RunConfig,
+    fits: Vec<fit::LawFit>,
+    prior_file: Option<&PriorFile>,
+    observer: &mut dyn Observer,
+    note: &mut dyn FnMut(String),
+) -> Result<Outcome> {
+    let input = data.source.clone();
     let base = config.sampler.base_mut();
     let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
     base.eps_min = floor.eps_min;

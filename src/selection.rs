@@ -14,7 +14,10 @@
 //! Replicates are independent runs, and each one's populations depend only on its record and
 //! seed, so they are run `batch` at a time on the rayon pool (the CPU evaluator of each adds its
 //! own parallelism over candidates) and give the same results for any `batch` and thread count.
-//! On a GPU each replicate has its own evaluator on the shared context.
+//! A batch runs in two phases, each over all its replicates at once: the synthetic records and
+//! their least-squares fits, then the samplers ([`run::start_fitted_in_memory`]); the check
+//! reports each phase's wall time ([`CheckTiming`]). On a GPU each replicate has its own
+//! evaluator on the shared context.
 //!
 //! The results are written to `DIR/selection/` (see [`write`]) as one directory, whole or not
 //! at all, under the run directory's lock; `bitrock report` shows them when present.
@@ -27,7 +30,7 @@ use crate::files;
 use crate::fit::LawFit;
 use crate::laws::Law;
 use crate::numerics::quantile;
-use crate::prior::{PriorFile, PriorRule};
+use crate::prior::{Prior, PriorFile, PriorRule};
 use crate::run::{self, RunConfig};
 use crate::store::{RunStore, StoredRun};
 use rand::rngs::StdRng;
@@ -102,6 +105,10 @@ pub struct Replicate {
     /// ε of the last population (`None`: ∞).
     pub final_epsilon: Option<f64>,
     pub populations: usize,
+    /// Candidates of all its populations whose ρ lay within the CPU/GPU parity tolerance of ε:
+    /// where none did, the other backend gives the same populations.
+    #[serde(default)]
+    pub near_threshold: u64,
 }
 
 /// Quantiles of the generating law's own probability over its replicates.
@@ -167,6 +174,21 @@ pub struct SelectionCheck {
     pub rows: Vec<GeneratingLaw>,
     /// Wall time of the check, s.
     pub seconds: f64,
+    /// Where the replicates' time went (checks written before it read as zeros).
+    #[serde(default)]
+    pub timing: CheckTiming,
+}
+
+/// Where the check's wall time went. Every batch first synthesises and fits its replicates'
+/// records side by side, then runs their samplers side by side: the two phases' wall times.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CheckTiming {
+    /// Synthetic records and the least-squares fits of every law to them, s.
+    pub fit_seconds: f64,
+    /// The replicates' ABC runs (prior, evaluator, populations), s.
+    pub sampling_seconds: f64,
+    /// Candidate × data-point evaluations of all replicates.
+    pub evaluations: u64,
 }
 
 impl SelectionCheck {
@@ -257,7 +279,10 @@ impl CheckedRun {
                     .into(),
             ));
         }
-        let prior_file = config.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        let prior_file = match &config.prior_file {
+            Some(path) => Some(stored_prior_file(dir, path, &stored, &config)?),
+            None => None,
+        };
         let lock = files::DirLock::acquire(dir)?;
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -266,6 +291,28 @@ impl CheckedRun {
             prior_file,
             _lock: lock,
         })
+    }
+}
+
+/// The `--prior` file a run was made with, as its store keeps it ([`PriorFile::of_prior`]),
+/// never read from `path`, where it may have moved or changed since. Accepted once it rebuilds
+/// the run's own prior from the run's own fits exactly (boxes, rules and law thresholds); a
+/// store that does not record which boxes the file gave (schema 1) cannot, and is refused.
+fn stored_prior_file(dir: &Path, path: &Path, stored: &StoredRun, config: &RunConfig) -> Result<PriorFile> {
+    let prior = &stored.setup.prior;
+    let unit = stored.setup.data.torque_unit.newton_metres();
+    let file = PriorFile::of_prior(prior, unit);
+    let rebuilt = Prior::from_fits_by(&stored.setup.fits, config.prior_rule, config.delta, Some(&file), unit);
+    match rebuilt {
+        Ok(p) if p.boxes == prior.boxes && p.rules == prior.rules && p.thresholds == prior.thresholds => Ok(file),
+        _ => Err(Error::Data {
+            path: dir.to_path_buf(),
+            message: format!(
+                "the run was made with the prior file {}, and its store does not record that file's boxes in a form the check can reuse (a store written by an older bitrock); run `bitrock abc --prior {}` again and check the new run",
+                path.display(),
+                path.display()
+            ),
+        }),
     }
 }
 
@@ -299,30 +346,41 @@ pub fn check(
         .collect();
     let batch = options.batch.unwrap_or(jobs.len()).max(1);
     let done = AtomicUsize::new(0);
-    let mut results: Vec<(Replicate, &'static str)> = Vec::with_capacity(jobs.len());
+    let mut results: Vec<Replicate> = Vec::with_capacity(jobs.len());
+    let mut backend = "cpu";
+    let mut timing = CheckTiming::default();
     let mut notes: Vec<String> = Vec::new();
     for chunk in jobs.chunks(batch) {
-        let outcomes: Vec<Result<(Replicate, &'static str, Vec<String>)>> = chunk
-            .par_iter()
-            .map(|&job| {
-                let result = run_replicate(run, options, job);
+        let fitting = Instant::now();
+        let fitted: Vec<Result<Fitted>> = chunk.par_iter().map(|&job| fit_replicate(run, job)).collect();
+        timing.fit_seconds += fitting.elapsed().as_secs_f64();
+        let fitted: Vec<Fitted> = fitted.into_iter().collect::<Result<_>>()?;
+        let sampling = Instant::now();
+        let outcomes: Vec<Result<ReplicateOutcome>> = fitted
+            .into_par_iter()
+            .map(|fitted| {
+                let result = sample_replicate(run, options, fitted);
                 progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
                 result
             })
             .collect();
+        timing.sampling_seconds += sampling.elapsed().as_secs_f64();
         for outcome in outcomes {
-            let (replicate, backend, lines) = outcome?;
-            for line in lines {
+            let outcome = outcome?;
+            for line in outcome.notes {
                 if !notes.contains(&line) {
                     note(line.clone());
                     notes.push(line);
                 }
             }
-            results.push((replicate, backend));
+            if results.is_empty() {
+                backend = outcome.backend;
+            }
+            timing.evaluations += outcome.evaluations;
+            results.push(outcome.replicate);
         }
     }
-    let backend = results.first().map_or("cpu", |r| r.1).to_string();
-    let mut results = results.into_iter().map(|r| r.0);
+    let mut results = results.into_iter();
     let last = run.stored.populations.last().expect("checked by CheckedRun::open");
     let rows = laws
         .iter()
@@ -344,9 +402,10 @@ pub fn check(
         delta: config.delta,
         run_seed: config.seed,
         particles: config.sampler.base().particles,
-        backend,
+        backend: backend.to_string(),
         rows,
         seconds: started.elapsed().as_secs_f64(),
+        timing,
     })
 }
 
@@ -403,9 +462,29 @@ fn verdict(law: Law, laws: &[Law], firsts: &[usize], k: usize, median_own: f64) 
     format!("{head}{rest}; median P({law}) = {median_own:.2}.")
 }
 
-/// Makes and runs one replicate: the synthetic record, then the run's pipeline on it in
-/// memory. Returns the replicate, the backend that scored it and the notes it produced.
-fn run_replicate(run: &CheckedRun, options: &CheckOptions, job: Job) -> Result<(Replicate, &'static str, Vec<String>)> {
+/// A replicate's synthetic record, fitted: the first phase of a replicate.
+struct Fitted {
+    job: Job,
+    seed: u64,
+    /// The generating parameters, SI.
+    params_si: Vec<f64>,
+    data: FieldData,
+    fits: Vec<LawFit>,
+}
+
+/// One replicate run, with what the check reports besides it.
+struct ReplicateOutcome {
+    replicate: Replicate,
+    /// Backend that scored it (`cpu`, `gpu`).
+    backend: &'static str,
+    /// Notes it produced, for the user.
+    notes: Vec<String>,
+    /// Candidate × data-point evaluations of its sampler.
+    evaluations: u64,
+}
+
+/// Makes replicate `job`'s synthetic record and fits every law of the run to it.
+fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
     let config = &run.config;
     let law = config.laws[job.slot];
     let seed = replicate_seed(config.seed, job.slot, job.replicate);
@@ -426,15 +505,36 @@ fn run_replicate(run: &CheckedRun, options: &CheckOptions, job: Job) -> Result<(
         validation: synthesize(law, &params_si, &data.validation, w_ref_n, &residuals, &mut rng),
         ..data.clone()
     };
+    let fits = crate::fit::fit_record(&config.laws, &synthetic, &config.fit)?;
+    Ok(Fitted {
+        job,
+        seed,
+        params_si,
+        data: synthetic,
+        fits,
+    })
+}
+
+/// Runs the run's pipeline after the fits on a fitted replicate, in memory.
+fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted) -> Result<ReplicateOutcome> {
+    let config = &run.config;
+    let Fitted {
+        job,
+        seed,
+        params_si,
+        data,
+        fits,
+    } = fitted;
+    let law = config.laws[job.slot];
     let mut replicate_config = config.clone();
     replicate_config.seed = seed;
     replicate_config.backend = options.backend.unwrap_or(config.backend);
     replicate_config.sampler.base_mut().max_seconds = None;
     let mut notes = Vec::new();
-    let outcome = run::start(
-        None,
-        synthetic,
+    let outcome = run::start_fitted_in_memory(
+        data,
         replicate_config,
+        fits,
         run.prior_file.as_ref(),
         &mut Silent,
         &mut |line| notes.push(line),
@@ -462,8 +562,8 @@ fn run_replicate(run: &CheckedRun, options: &CheckOptions, job: Job) -> Result<(
     // Notes about the synthetic record's own floor differ per replicate: only the backend's
     // lines are worth repeating to the user.
     notes.retain(|line| line.contains("GPU") || line.contains("CPU"));
-    Ok((
-        Replicate {
+    Ok(ReplicateOutcome {
+        replicate: Replicate {
             index: job.replicate,
             seed,
             params_si,
@@ -471,10 +571,12 @@ fn run_replicate(run: &CheckedRun, options: &CheckOptions, job: Job) -> Result<(
             first,
             final_epsilon: last.record.epsilon,
             populations: outcome.run.populations.len(),
+            near_threshold: outcome.run.populations.iter().map(|p| p.record.near_threshold).sum(),
         },
-        outcome.backend,
+        backend: outcome.backend,
         notes,
-    ))
+        evaluations: outcome.run.evaluations,
+    })
 }
 
 /// The index of the largest probability, the first among equals.

@@ -20,6 +20,11 @@ pub struct BenchCmd {
     /// Small sizes only (65,536 × 5,000; end-to-end with N = 5,000): a smoke test in seconds.
     #[arg(long)]
     pub quick: bool,
+    /// Measure only `bitrock check-selection` (issue 15's target): a run of every law on the
+    /// embedded record (N = 5,000, to ε = 0.014), then K replicates per law checked, timed
+    /// (up to 3 repetitions); K = 20, or 2 with --quick. --backend picks the backend [default: auto].
+    #[arg(long)]
+    pub selection: bool,
     /// Print JSON instead of lines.
     #[arg(long)]
     pub json: bool,
@@ -43,6 +48,11 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         opts.particles = 5_000;
         opts.stability = (128, 1_000);
     }
+    if cmd.selection {
+        opts.selection_replicates = Some(if cmd.quick { 2 } else { 20 });
+        // The check runs on one backend: the one asked for, auto otherwise.
+        opts.backends = vec![cmd.backend.unwrap_or(Backend::Auto)];
+    }
     let quiet = cmd.json;
     let report = bitrock::bench::run(&opts, &mut |line| {
         if !quiet {
@@ -60,7 +70,9 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             report.machine, report.cores, report.adapter
         )?;
         writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
-        writeln!(out, "backend  law          N        D   evaluations/s (min–max)")?;
+        if !report.throughput.is_empty() {
+            writeln!(out, "backend  law          N        D   evaluations/s (min–max)")?;
+        }
         for t in &report.throughput {
             writeln!(
                 out,
@@ -84,6 +96,25 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
                 st.cell_samples_per_s,
                 st.cell_samples_per_s_spread.min,
                 st.cell_samples_per_s_spread.max
+            )?;
+        }
+        if let Some(c) = &report.selection {
+            writeln!(
+                out,
+                "{:<7}  check-selection: {} laws × {} replicates, N = {}, to ε = {} (--backend {}): {:.2} s ({:.2}–{:.2}), {:.2} replicates/s; records and fits {:.2} s, sampling {:.2} s, {:.3e} evaluations",
+                c.backend,
+                c.laws,
+                c.replicates_per_law,
+                c.particles,
+                c.eps_min,
+                serde_json::to_value(c.backend_asked)?.as_str().unwrap_or_default(),
+                c.seconds,
+                c.seconds_spread.min,
+                c.seconds_spread.max,
+                c.replicates_per_s,
+                c.fit_seconds,
+                c.sampling_seconds,
+                c.evaluations as f64
             )?;
         }
         for e in &report.end_to_end {

@@ -83,6 +83,12 @@ fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
         check.backend,
         check.seconds
     )?;
+    let t = &check.timing;
+    writeln!(
+        out,
+        "synthetic records and fits {:.1} s, sampling {:.1} s ({:.3e} candidate × data-point evaluations)",
+        t.fit_seconds, t.sampling_seconds, t.evaluations as f64
+    )?;
     writeln!(
         out,
         "\nrows: law that made the data; columns: mean posterior probability (share ranked first)"

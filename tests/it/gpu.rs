@@ -56,6 +56,8 @@ macro_rules! per_shape {
     };
 }
 
+pub(crate) use per_shape;
+
 /// The evaluator of `problem` in `shape`.
 fn gpu_evaluator(problem: &AbcProblem, shape: Shape) -> GpuEvaluator {
     GpuEvaluator::with_shape(problem.clone(), shape).unwrap()

@@ -1,13 +1,16 @@
 //! `bitrock check-selection`: known answers of the confusion matrix (two laws the data cannot
-//! tell apart, one that fits far better), replicates independent of the batch, and bad input
-//! refused with nothing written.
+//! tell apart, one that fits far better), a law that died out generating from its least-squares
+//! estimate, replicates independent of the batch and of the backend, the prior file read from
+//! the store, and bad input refused with nothing written.
 
+use crate::gpu::{gpu_available, per_shape};
 use crate::support::{bin, rng};
 use bitrock::Law;
 use bitrock::abc::Silent;
 use bitrock::abc::rejection::RejectionConfig;
 use bitrock::data::{DataOptions, parse_field_data};
 use bitrock::eval::Backend;
+use bitrock::eval::gpu::{self, Shape};
 use bitrock::pipeline::{AbcJob, RunDir};
 use bitrock::run::{RunConfig, SamplerConfig};
 use bitrock::selection::{self, CheckOptions, CheckedRun, ParamSource, SelectionCheck};
@@ -216,4 +219,185 @@ fn bad_input_is_refused_with_exit_2_and_nothing_written() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("no completed population"), "{stderr}");
     assert_eq!(listing(&dead), before);
+}
+
+#[test]
+fn a_law_that_died_out_generates_from_its_least_squares_estimate() {
+    // m4 has prior weight 1e-9 (one Philox word in 2³² picks it): no m4 candidate is ever
+    // drawn, so m4 has no particle in the last population, in the run and in every replicate.
+    let dir = tempfile::tempdir().unwrap();
+    let prior = dir.path().join("prior.toml");
+    std::fs::write(&prior, "[weights]\nm2 = 1.0\nm4 = 1e-9\n").unwrap();
+    let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
+    let run = run_dir(dir.path(), data, &[Law::M2, Law::M4], 200, 1e-3, Some(prior));
+    let checked = CheckedRun::open(&run).unwrap();
+    let last = checked.stored.populations.last().unwrap();
+    assert!(last.particles.iter().all(|p| p.law == Law::M2));
+    let m4_estimate = checked
+        .stored
+        .setup
+        .fits
+        .iter()
+        .find(|f| f.law == Law::M4)
+        .unwrap()
+        .params_si
+        .clone();
+    let options = CheckOptions {
+        replicates: 3,
+        ..CheckOptions::default()
+    };
+    let c = selection::check(&checked, &options, &|_, _| {}, &mut |_| {}).unwrap();
+    let (m2, m4) = (&c.rows[0], &c.rows[1]);
+    assert_eq!((m2.law, m2.source), (Law::M2, ParamSource::Posterior));
+    assert_eq!((m4.law, m4.source), (Law::M4, ParamSource::LeastSquares));
+    for r in &m4.replicates {
+        assert_eq!(r.params_si, m4_estimate, "replicate {}", r.index);
+        assert_eq!(r.probabilities[1], 0.0);
+    }
+    // m2's replicates are drawn from its particles: each one's parameters are a particle's.
+    for r in &m2.replicates {
+        assert_ne!(r.params_si, m4_estimate);
+        assert!(
+            last.particles.iter().any(|p| p.params == r.params_si),
+            "replicate {}: {:?}",
+            r.index,
+            r.params_si
+        );
+    }
+    // The table says so.
+    drop(checked);
+    let out = bin()
+        .args(["check-selection", run.to_str().unwrap(), "--replicates", "1", "-q"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        stdout.contains("(the law died out: its least-squares estimate made the data)"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn the_prior_file_is_read_from_the_store_not_from_its_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let prior = dir.path().join("prior.toml");
+    let file = "[weights]\nm2 = 3.0\n[m2]\ng = [0.5, 2.0]\n[m4]\nc0 = [5000.0, 9000.0]\n";
+    std::fs::write(&prior, file).unwrap();
+    let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
+    let run = run_dir(dir.path(), data, &[Law::M2, Law::M4], 200, 1e-3, Some(prior.clone()));
+    // What the store keeps rebuilds the run's prior from the run's fits exactly: the given
+    // boxes, their rules, and the law thresholds the weights make.
+    let checked = CheckedRun::open(&run).unwrap();
+    let setup = &checked.stored.setup;
+    let unit = setup.data.torque_unit.newton_metres();
+    let stored = bitrock::prior::PriorFile::of_prior(&setup.prior, unit);
+    let original = bitrock::prior::PriorFile::read(&prior).unwrap();
+    let rebuild = |f| bitrock::prior::Prior::from_fits(&setup.fits, 0.4, Some(f), unit).unwrap();
+    let (from_store, from_file) = (rebuild(&stored), rebuild(&original));
+    assert_eq!(from_store.boxes, from_file.boxes);
+    assert_eq!(from_store.rules, from_file.rules);
+    assert_eq!(from_store.thresholds, from_file.thresholds);
+    assert_eq!(from_store.thresholds, setup.prior.thresholds);
+    let before = selection::check(
+        &checked,
+        &CheckOptions {
+            replicates: 2,
+            ..CheckOptions::default()
+        },
+        &|_, _| {},
+        &mut |_| {},
+    )
+    .unwrap();
+    drop(checked);
+    // Moved away, then back with other contents: the check neither needs nor reads it.
+    std::fs::rename(&prior, dir.path().join("moved.toml")).unwrap();
+    let moved = check(&run, 2, None);
+    std::fs::write(&prior, "[weights]\nm4 = 50.0\n").unwrap();
+    let changed = check(&run, 2, None);
+    let replicates = |c: &SelectionCheck| c.rows.iter().map(|r| r.replicates.clone()).collect::<Vec<_>>();
+    assert_eq!(replicates(&moved), replicates(&before));
+    assert_eq!(replicates(&changed), replicates(&before));
+}
+
+per_shape! {
+/// The check on the GPU (the shape through BITROCK_GPU_SHAPE) against the CPU: every replicate
+/// whose populations had no candidate within the parity tolerance of ε on either backend has
+/// the same probabilities, first law and number of populations, and its last ε within PARITY_TOLERANCE
+/// (the GPU's f32 ρ sets the quantiles); a replicate with such a candidate may diverge.
+fn the_check_does_not_depend_on_the_backend(shape: Shape) {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let run = m2_beats_m4(dir.path());
+    let mut checks = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let out = bin()
+            .env(gpu::SHAPE_VAR, shape.name())
+            .args(["check-selection", run.to_str().unwrap(), "--replicates", "3", "--backend", backend, "--json", "-q"])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let c: SelectionCheck = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(c.backend, backend);
+        checks.push(c);
+    }
+    let (cpu, gpu) = (&checks[0], &checks[1]);
+    let mut compared = 0;
+    for (rc, rg) in cpu.rows.iter().zip(&gpu.rows) {
+        for (a, b) in rc.replicates.iter().zip(&rg.replicates) {
+            // The synthetic record and its fits are made on the CPU in f64: the same parameters.
+            assert_eq!((a.seed, &a.params_si), (b.seed, &b.params_si));
+            if a.near_threshold == 0 && b.near_threshold == 0 {
+                compared += 1;
+                assert_eq!((&a.probabilities, a.first, a.populations), (&b.probabilities, b.first, b.populations));
+                let (ea, eb) = (a.final_epsilon.unwrap(), b.final_epsilon.unwrap());
+                assert!(((ea - eb) / ea).abs() <= bitrock::eval::PARITY_TOLERANCE, "{ea} vs {eb}");
+            }
+        }
+    }
+    eprintln!("{shape}: {compared} of 6 replicates had no candidate near ε on either backend");
+    assert!(compared >= 3, "only {compared} of 6 replicates comparable");
+}
+}
+
+#[test]
+fn bench_selection_times_the_check_and_splits_its_phases() {
+    let out = bin()
+        .args([
+            "bench",
+            "--selection",
+            "--quick",
+            "--backend",
+            "cpu",
+            "--reps",
+            "1",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let s = &v["selection"];
+    assert_eq!(s["backend"], "cpu");
+    assert_eq!(
+        (s["laws"].as_u64(), s["replicates_per_law"].as_u64()),
+        (Some(4), Some(2))
+    );
+    assert_eq!(
+        (s["particles"].as_u64(), s["eps_min"].as_f64()),
+        (Some(5000), Some(0.014))
+    );
+    let seconds = s["seconds"].as_f64().unwrap();
+    assert!(
+        (s["replicates_per_s"].as_f64().unwrap() * seconds - 8.0).abs() < 1e-9,
+        "{s}"
+    );
+    // The two phases are parts of the check's wall time.
+    let phases = s["fit_seconds"].as_f64().unwrap() + s["sampling_seconds"].as_f64().unwrap();
+    assert!(phases > 0.0 && phases <= seconds, "{s}");
+    assert!(s["evaluations"].as_u64().unwrap() > 0);
+    // Only the selection section is measured.
+    assert_eq!(v["throughput"], serde_json::json!([]));
 }
