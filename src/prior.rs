@@ -89,18 +89,19 @@ impl BoxRule {
         }
     }
 
+    /// Every rule.
+    pub const ALL: [BoxRule; 6] = [
+        BoxRule::Delta,
+        BoxRule::DeltaNotIdentified,
+        BoxRule::RecordScale,
+        BoxRule::StdErr,
+        BoxRule::Given,
+        BoxRule::Unrecorded,
+    ];
+
     /// The rule of a stored name.
     pub fn from_name(name: &str) -> Option<Self> {
-        [
-            BoxRule::Delta,
-            BoxRule::DeltaNotIdentified,
-            BoxRule::RecordScale,
-            BoxRule::StdErr,
-            BoxRule::Given,
-            BoxRule::Unrecorded,
-        ]
-        .into_iter()
-        .find(|r| r.name() == name)
+        Self::ALL.into_iter().find(|r| r.name() == name)
     }
 }
 
@@ -577,14 +578,7 @@ mod tests {
         let p = Prior::from_fits(&[fit(Law::M2, vec![13.0, 6.5, 0.3])], 0.4, None, 1.0).unwrap();
         let q = Prior::new(p.boxes.clone(), vec![1.0]).unwrap();
         assert_eq!(q.rules, vec![vec![BoxRule::Given; 3]]);
-        for rule in [
-            BoxRule::Delta,
-            BoxRule::DeltaNotIdentified,
-            BoxRule::RecordScale,
-            BoxRule::StdErr,
-            BoxRule::Given,
-            BoxRule::Unrecorded,
-        ] {
+        for rule in BoxRule::ALL {
             assert_eq!(BoxRule::from_name(rule.name()), Some(rule));
         }
         assert_eq!(BoxRule::from_name("delta "), None);

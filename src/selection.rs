@@ -547,17 +547,7 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted) ->
             outcome.run.stop.describe()
         ))
     })?;
-    let probabilities: Vec<f64> = config
-        .laws
-        .iter()
-        .map(|&l| {
-            last.record
-                .per_law
-                .iter()
-                .find(|r| r.law == l)
-                .map_or(0.0, |r| r.probability)
-        })
-        .collect();
+    let probabilities: Vec<f64> = config.laws.iter().map(|&l| last.record.probability_of(l)).collect();
     let first = config.laws[first_index(&probabilities)];
     // Notes about the synthetic record's own floor differ per replicate: only the backend's
     // lines are worth repeating to the user.

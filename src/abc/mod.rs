@@ -115,6 +115,14 @@ pub struct PopulationRecord {
 }
 
 impl PopulationRecord {
+    /// P(`law`) in this population; 0 for a law not in it.
+    pub fn probability_of(&self, law: Law) -> f64 {
+        self.per_law
+            .iter()
+            .find(|r| r.law == law)
+            .map_or(0.0, |r| r.probability)
+    }
+
     /// The laws whose probability in this population is 0 by construction (see
     /// [`LawRecord::reachable`]).
     pub fn unreachable_laws(&self) -> Vec<Law> {

@@ -254,15 +254,7 @@ const BY_CONSTRUCTION_NOTE: &str = "0* = 0 by construction: ε is at or below th
 /// P(law) of a population's record for each of `laws` (0 for a law not in the record).
 fn record_probabilities(population: &Population, laws: &[Law]) -> Vec<(Law, f64)> {
     laws.iter()
-        .map(|&law| {
-            let p = population
-                .record
-                .per_law
-                .iter()
-                .find(|r| r.law == law)
-                .map_or(0.0, |r| r.probability);
-            (law, p)
-        })
+        .map(|&law| (law, population.record.probability_of(law)))
         .collect()
 }
 
