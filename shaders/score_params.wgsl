@@ -2,16 +2,8 @@
 // proposals, which need log/cos/sqrt and are therefore generated once, on the host): SSR =
 // Σ (y - r T(w))² of proposals job.start.x .. job.start.x + count - 1 over the job's slice of
 // the data; the host divides by Σy² (f64). Entry points `main` and `main_tiled` as in
-// residual.wgsl. Needs shared/job.wgsl, shared/laws.wgsl, shared/ssr.wgsl (bindings 2-5) and
+// residual.wgsl. Needs shared/job.wgsl, shared/proposal.wgsl, shared/laws.wgsl, shared/ssr.wgsl (bindings 2-5) and
 // shared/tile.wgsl.
-
-// One proposal: law id (0 = m1 .. 3 = m4) and its parameters (unused ones 0). Keep in sync
-// with `GpuProposal` in src/eval/gpu/residual.rs.
-struct Proposal {
-    law: u32,
-    params: array<f32, 6>,
-    _pad: u32,
-}
 
 @group(0) @binding(0) var<storage, read> proposals: array<Proposal>;
 @group(0) @binding(1) var<uniform> job: Job;

@@ -292,31 +292,43 @@ pub fn start(
         check_new_run_dir(dir, Some(&data.source))?;
     }
     let fits = fit::fit_record(&config.laws, &data, &config.fit)?;
-    start_with_fits(dir, data, config, fits, prior_file, observer, note)
+    let backend = config.backend;
+    let mut make_evaluator = |problem, note: &mut dyn FnMut(String)| crate::eval::evaluator(problem, backend, note);
+    start_with_fits(dir, data, config, fits, prior_file, &mut make_evaluator, observer, note)
 }
 
+/// Makes a run's evaluator from its problem, saying what the user should know through the
+/// second argument ([`crate::eval::evaluator`] of the run's backend, unless the caller scores
+/// elsewhere).
+pub type MakeEvaluator<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> + 'a;
+
 /// [`start`] of a run in memory whose record's least-squares fits the caller made
-/// (`fit::fit_record(&config.laws, &data, &config.fit)`): the selection check fits all its
-/// replicates' records before sampling any, to time and balance the two apart.
+/// (`fit::fit_record(&config.laws, &data, &config.fit)`) and whose evaluator the caller makes
+/// from the run's problem: the selection check fits all its replicates' records before
+/// sampling any, and scores their candidates together ([`crate::eval::records`]).
+#[allow(clippy::too_many_arguments)]
 pub fn start_fitted_in_memory(
     data: FieldData,
     config: RunConfig,
     fits: Vec<fit::LawFit>,
     prior_file: Option<&PriorFile>,
+    make_evaluator: &mut MakeEvaluator,
     observer: &mut dyn Observer,
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     config.validate()?;
-    start_with_fits(None, data, config, fits, prior_file, observer, note)
+    start_with_fits(None, data, config, fits, prior_file, make_evaluator, observer, note)
 }
 
 /// [`start`] after the fits: the floor, the prior, the evaluator, the sampler.
+#[allow(clippy::too_many_arguments)]
 fn start_with_fits(
     dir: Option<&RunDir>,
     data: FieldData,
     mut config: RunConfig,
     fits: Vec<fit::LawFit>,
     prior_file: Option<&PriorFile>,
+    make_evaluator: &mut MakeEvaluator,
     observer: &mut dyn Observer,
     note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
@@ -337,7 +349,7 @@ fn start_with_fits(
     )?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
-    let evaluator = crate::eval::evaluator(problem, config.backend, note)?;
+    let evaluator = make_evaluator(problem, note)?;
     let setup = RunSetup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
         data,

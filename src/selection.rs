@@ -12,12 +12,12 @@
 //! of replicates in which each law ranks first.
 //!
 //! Replicates are independent runs, and each one's populations depend only on its record and
-//! seed, so they are run `batch` at a time on the rayon pool (the CPU evaluator of each adds its
-//! own parallelism over candidates) and give the same results for any `batch` and thread count.
-//! A batch runs in two phases, each over all its replicates at once: the synthetic records and
-//! their least-squares fits, then the samplers ([`run::start_fitted_in_memory`]); the check
-//! reports each phase's wall time ([`CheckTiming`]). On a GPU each replicate has its own
-//! evaluator on the shared context.
+//! seed, so they are run `batch` at a time and give the same results for any `batch`, thread
+//! count and order of completion. A batch runs in two phases, each over all its replicates at
+//! once: the synthetic records and their least-squares fits (on the rayon pool), then the
+//! samplers ([`run::start_fitted_in_memory`]), one thread each, whose candidates are scored
+//! together: one GPU dispatch, or one rayon pass on the CPU, for the requests of all of them
+//! ([`crate::eval::records`]). The check reports each phase's wall time ([`CheckTiming`]).
 //!
 //! The results are written to `DIR/selection/` (see [`write`]) as one directory, whole or not
 //! at all, under the run directory's lock; `bitrock report` shows them when present.
@@ -26,6 +26,7 @@ use crate::abc::Silent;
 use crate::data::{FieldData, Samples};
 use crate::error::{Error, Result};
 use crate::eval::Backend;
+use crate::eval::records::{RecordBatch, Seat};
 use crate::files;
 use crate::fit::LawFit;
 use crate::laws::Law;
@@ -189,6 +190,15 @@ pub struct CheckTiming {
     pub sampling_seconds: f64,
     /// Candidate × data-point evaluations of all replicates.
     pub evaluations: u64,
+    /// Times the waiting replicates' candidates were scored together, and the GPU dispatches
+    /// that took (0 on the CPU; see [`crate::eval::records`]).
+    #[serde(default)]
+    pub batches: u64,
+    #[serde(default)]
+    pub dispatches: u64,
+    /// Of the sampling, the wall time spent scoring the batches, s.
+    #[serde(default)]
+    pub scoring_seconds: f64,
 }
 
 impl SelectionCheck {
@@ -356,15 +366,43 @@ pub fn check(
         timing.fit_seconds += fitting.elapsed().as_secs_f64();
         let fitted: Vec<Fitted> = fitted.into_iter().collect::<Result<_>>()?;
         let sampling = Instant::now();
-        let outcomes: Vec<Result<ReplicateOutcome>> = fitted
-            .into_par_iter()
-            .map(|fitted| {
-                let result = sample_replicate(run, options, fitted);
-                progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
-                result
-            })
-            .collect();
+        let mut batch_notes = Vec::new();
+        let records = RecordBatch::new(options.backend.unwrap_or(config.backend), &mut |line| {
+            batch_notes.push(line)
+        })?;
+        // Every seat is taken before any sampler starts (see RecordBatch::seat).
+        let seats: Vec<Seat> = fitted.iter().map(|_| records.seat()).collect();
+        let total = jobs.len();
+        let outcomes: Vec<Result<ReplicateOutcome>> = std::thread::scope(|scope| {
+            let done = &done;
+            let threads: Vec<_> = fitted
+                .into_iter()
+                .zip(seats)
+                .map(|(fitted, seat)| {
+                    scope.spawn(move || {
+                        let result = sample_replicate(run, options, fitted, &seat);
+                        drop(seat);
+                        progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+                        result
+                    })
+                })
+                .collect();
+            threads
+                .into_iter()
+                .map(|t| t.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+                .collect()
+        });
         timing.sampling_seconds += sampling.elapsed().as_secs_f64();
+        let counts = records.counts();
+        timing.batches += counts.batches;
+        timing.dispatches += counts.dispatches;
+        timing.scoring_seconds += counts.seconds;
+        for line in batch_notes {
+            if !notes.contains(&line) {
+                note(line.clone());
+                notes.push(line);
+            }
+        }
         for outcome in outcomes {
             let outcome = outcome?;
             for line in outcome.notes {
@@ -515,8 +553,9 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
     })
 }
 
-/// Runs the run's pipeline after the fits on a fitted replicate, in memory.
-fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted) -> Result<ReplicateOutcome> {
+/// Runs the run's pipeline after the fits on a fitted replicate, in memory, its candidates
+/// scored through `seat` with the other replicates'.
+fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, seat: &Seat) -> Result<ReplicateOutcome> {
     let config = &run.config;
     let Fitted {
         job,
@@ -536,6 +575,7 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted) ->
         replicate_config,
         fits,
         run.prior_file.as_ref(),
+        &mut |problem, _| Ok(Box::new(seat.evaluator(problem))),
         &mut Silent,
         &mut |line| notes.push(line),
     )

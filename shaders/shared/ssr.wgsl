@@ -57,12 +57,17 @@ struct Quad {
     valid: vec4<bool>,
 }
 
+// First quad of the record being scored: 0 for the single-record kernels; the multi-record
+// kernel (records.wgsl) sets it per invocation, the records lying one after another in the
+// columns. Quad indices q stay relative to the record.
+var<private> record_quad: u32 = 0u;
+
 fn load_quad(q: u32, end: u32) -> Quad {
     var d: Quad;
-    d.w = speed4[q];
-    d.y = torque4[q];
+    d.w = speed4[record_quad + q];
+    d.y = torque4[record_quad + q];
     if (HAS_RATIO) {
-        d.r = ratio4[q];
+        d.r = ratio4[record_quad + q];
     }
     d.valid = vec4<u32>(4u * q) + vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(end);
     return d;

@@ -110,23 +110,32 @@ impl Evaluator for CpuEvaluator {
     }
 
     fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()> {
-        let problem = &self.problem;
-        out.par_iter_mut().with_min_len(16).enumerate().for_each(|(k, slot)| {
-            let c = problem.prior.candidate(problem.seed, population, start + k as u64);
-            *slot = rho_of_candidate(problem, &c);
-        });
+        score_stream(&self.problem, population, start, out);
         Ok(())
     }
 
     fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
-        assert_eq!(candidates.len(), out.len(), "one ρ per candidate");
-        let problem = &self.problem;
-        out.par_iter_mut()
-            .with_min_len(16)
-            .zip(candidates)
-            .for_each(|(slot, c)| *slot = rho_of_candidate(problem, c));
+        score_candidates(&self.problem, candidates, out);
         Ok(())
     }
+}
+
+/// ρ of candidates `start .. start + out.len()` of stream `population` of `problem`, into
+/// `out` (rayon across candidates).
+pub fn score_stream(problem: &AbcProblem, population: u32, start: u64, out: &mut [f64]) {
+    out.par_iter_mut().with_min_len(16).enumerate().for_each(|(k, slot)| {
+        let c = problem.prior.candidate(problem.seed, population, start + k as u64);
+        *slot = rho_of_candidate(problem, &c);
+    });
+}
+
+/// ρ of explicit candidates of `problem` into `out` (as long as `candidates`).
+pub fn score_candidates(problem: &AbcProblem, candidates: &[Candidate], out: &mut [f64]) {
+    assert_eq!(candidates.len(), out.len(), "one ρ per candidate");
+    out.par_iter_mut()
+        .with_min_len(16)
+        .zip(candidates)
+        .for_each(|(slot, c)| *slot = rho_of_candidate(problem, c));
 }
 
 /// ρ of a candidate: f64 arithmetic on its f32 parameters, widened exactly.

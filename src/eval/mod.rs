@@ -3,6 +3,7 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod records;
 
 use crate::data::Samples;
 use crate::error::Result;

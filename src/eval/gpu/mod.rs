@@ -10,6 +10,7 @@
 
 pub mod candidates;
 pub mod kernel_sums;
+pub mod records;
 pub mod residual;
 pub mod stability;
 
@@ -25,6 +26,7 @@ const CANDIDATE_WGSL: &str = include_str!("../../../shaders/shared/candidate.wgs
 const LAWS_WGSL: &str = include_str!("../../../shaders/shared/laws.wgsl");
 const SSR_WGSL: &str = include_str!("../../../shaders/shared/ssr.wgsl");
 const TILE_WGSL: &str = include_str!("../../../shaders/shared/tile.wgsl");
+const PROPOSAL_WGSL: &str = include_str!("../../../shaders/shared/proposal.wgsl");
 
 /// The complete source of every kernel (shared files, then the kernel) and its entry points.
 pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> {
@@ -33,6 +35,7 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
         ("residual", residual_source(), SCORING),
         ("candidates", candidates_source(), &["main"]),
         ("score_params", score_params_source(), SCORING),
+        ("records", records_source(), SCORING),
         ("kernel_sums", kernel_sums_source(), &["main"]),
         ("slopes", slopes_source(), &["main"]),
         ("stability", stability_source(), &["main"]),
@@ -129,10 +132,25 @@ fn residual_source() -> String {
 fn score_params_source() -> String {
     [
         JOB_WGSL,
+        PROPOSAL_WGSL,
         LAWS_WGSL,
         SSR_WGSL,
         TILE_WGSL,
         include_str!("../../../shaders/score_params.wgsl"),
+    ]
+    .join("\n")
+}
+
+fn records_source() -> String {
+    [
+        PHILOX_WGSL,
+        JOB_WGSL,
+        CANDIDATE_WGSL,
+        PROPOSAL_WGSL,
+        LAWS_WGSL,
+        SSR_WGSL,
+        TILE_WGSL,
+        include_str!("../../../shaders/records.wgsl"),
     ]
     .join("\n")
 }
@@ -475,6 +493,89 @@ impl GpuPrior {
         }
         g
     }
+}
+
+/// Host twin of `Proposal` in shaders/shared/proposal.wgsl. Keep in sync.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub(crate) struct GpuProposal {
+    pub law: u32,
+    pub params: [f32; 6],
+    pub _pad: u32,
+}
+
+impl GpuProposal {
+    fn new(law: crate::laws::Law, params: [f32; 6]) -> Self {
+        Self {
+            law: law.index() as u32,
+            params,
+            _pad: 0,
+        }
+    }
+}
+
+/// Samples scored per dispatch: lavapipe ends loops once an invocation has run 65,535
+/// iterations of all its loops together, and a dispatch may make four passes over its slice
+/// (one per law; shaders/shared/ssr.wgsl), so longer records are scored in slices whose sums the
+/// kernel adds up.
+const SAMPLES_PER_DISPATCH: u32 = 32_768;
+
+/// Candidates scored together by either scoring kernel: by one invocation
+/// ([`Shape::Blocked`]) or one workgroup ([`Shape::Tiled`]); `CANDIDATES` in
+/// shaders/shared/ssr.wgsl.
+const CANDIDATES_PER_TILE: u32 = 16;
+
+/// The job uniform and the SSR buffers of a scoring kernel (bindings 1 and 5, and the
+/// buffer SSR is read back through).
+struct ScoringBuffers<'a> {
+    job: &'a wgpu::Buffer,
+    ssr: &'a wgpu::Buffer,
+    staging: &'a wgpu::Buffer,
+}
+
+/// Runs a scoring kernel (`pipeline`, entry point of `shape`) over the `out.len()` candidates
+/// of `job` (its row width set here), over `data_len` samples in slices of
+/// SAMPLES_PER_DISPATCH, each dispatch adding to the last, and reads back their SSR into `out`.
+#[allow(clippy::too_many_arguments)]
+fn score_dispatch(
+    ctx: &GpuContext,
+    shape: Shape,
+    buffers: &ScoringBuffers,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    job: Job,
+    data_len: u32,
+    out: &mut [f32],
+) -> Result<(), GpuError> {
+    let count = out.len() as u32;
+    let tiles = count.div_ceil(CANDIDATES_PER_TILE);
+    // Row width in invocations (blocked) or workgroups (tiled), as the entry point counts.
+    let (x, y, row_width) = match shape {
+        Shape::Blocked => ctx.grid(tiles, WORKGROUP_SIZE),
+        Shape::Tiled => ctx.grid(tiles, 1),
+    };
+    debug_assert_eq!(job.count, count, "one sum per candidate of the job");
+    let job = Job { row_width, ..job };
+    let new_encoder = || {
+        ctx.device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scoring") })
+    };
+    let mut encoder = new_encoder();
+    for s0 in (0..data_len).step_by(SAMPLES_PER_DISPATCH as usize) {
+        let slice = job.samples(s0..(s0 + SAMPLES_PER_DISPATCH).min(data_len));
+        ctx.queue.write_buffer(buffers.job, 0, bytemuck::bytes_of(&slice));
+        encode_dispatch(&mut encoder, "scoring", pipeline, bind_group, (x, y));
+        if s0 + SAMPLES_PER_DISPATCH < data_len {
+            // The next slice rewrites the job uniform: submit this one first.
+            ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
+            encoder = new_encoder();
+        }
+    }
+    let bytes = 4 * u64::from(count);
+    encoder.copy_buffer_to_buffer(buffers.ssr, 0, buffers.staging, 0, bytes);
+    let raw = ctx.finish_and_read(encoder, buffers.staging, bytes)?;
+    out.copy_from_slice(bytemuck::cast_slice(&raw));
+    Ok(())
 }
 
 /// Host twin of `Job` in shaders/shared/job.wgsl. Keep in sync.

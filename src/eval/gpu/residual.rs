@@ -7,24 +7,13 @@
 //! kernel sums (see [`super::kernel_sums`]).
 
 use super::{
-    GpuContext, GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, Shape, UNIFORM, WORKGROUP_SIZE, buffer_entry,
+    GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, STORAGE_WRITE, ScoringBuffers, Shape, UNIFORM,
+    buffer_entry, score_dispatch,
 };
 use crate::error::Result;
 use crate::eval::{AbcProblem, Evaluator, KernelSums};
 use crate::prior::Candidate;
-use bytemuck::{Pod, Zeroable};
 use std::sync::Mutex;
-
-/// Samples scored per dispatch: lavapipe ends loops once an invocation has run 65,535
-/// iterations of all its loops together, and a dispatch may make four passes over its slice
-/// (one per law; shaders/shared/ssr.wgsl), so longer records are scored in slices whose sums the
-/// kernel adds up.
-const SAMPLES_PER_DISPATCH: u32 = 32_768;
-
-/// Candidates scored together by either scoring kernel: by one invocation
-/// ([`Shape::Blocked`]) or one workgroup ([`Shape::Tiled`]); `CANDIDATES` in
-/// shaders/shared/ssr.wgsl.
-const CANDIDATES_PER_TILE: u32 = 16;
 
 /// Buffers, pipeline and bind group of one run, created once.
 struct Resources {
@@ -45,15 +34,6 @@ struct ParamsResources {
     proposals: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
-}
-
-/// Host twin of `Proposal` in shaders/score_params.wgsl. Keep in sync.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct GpuProposal {
-    law: u32,
-    params: [f32; 6],
-    _pad: u32,
 }
 
 /// Scores candidates on the GPU.
@@ -192,8 +172,7 @@ impl GpuEvaluator {
         Ok(())
     }
 
-    /// Runs `pipeline` over `out.len()` candidates from `first` (Job semantics), the samples in
-    /// slices of SAMPLES_PER_DISPATCH, each dispatch adding to the last, and reads back SSR.
+    /// Runs `pipeline` over `out.len()` candidates from `first` and reads back their SSR.
     fn dispatch_slices(
         &self,
         res: &Resources,
@@ -203,35 +182,22 @@ impl GpuEvaluator {
         first: u64,
         out: &mut [f32],
     ) -> std::result::Result<(), GpuError> {
-        let ctx = self.context;
-        let count = out.len() as u32;
-        let tiles = count.div_ceil(CANDIDATES_PER_TILE);
-        // Row width in invocations (blocked) or workgroups (tiled), as the entry point counts.
-        let (x, y, row_width) = match self.shape {
-            Shape::Blocked => ctx.grid(tiles, WORKGROUP_SIZE),
-            Shape::Tiled => ctx.grid(tiles, 1),
+        let buffers = ScoringBuffers {
+            job: &res.job,
+            ssr: &res.ssr,
+            staging: &res.staging,
         };
-        let job = Job::new(population, first, count, row_width);
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("residual"),
-        });
-        for s0 in (0..self.data_len).step_by(SAMPLES_PER_DISPATCH as usize) {
-            let slice = job.samples(s0..(s0 + SAMPLES_PER_DISPATCH).min(self.data_len));
-            ctx.queue.write_buffer(&res.job, 0, bytemuck::bytes_of(&slice));
-            super::encode_dispatch(&mut encoder, "residual", pipeline, bind_group, (x, y));
-            if s0 + SAMPLES_PER_DISPATCH < self.data_len {
-                // The next slice rewrites the job uniform: submit this one first.
-                ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
-                encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("residual"),
-                });
-            }
-        }
-        let bytes = 4 * u64::from(count);
-        encoder.copy_buffer_to_buffer(&res.ssr, 0, &res.staging, 0, bytes);
-        let raw = ctx.finish_and_read(encoder, &res.staging, bytes)?;
-        out.copy_from_slice(bytemuck::cast_slice(&raw));
-        Ok(())
+        let job = Job::new(population, first, out.len() as u32, 0);
+        score_dispatch(
+            self.context,
+            self.shape,
+            &buffers,
+            pipeline,
+            bind_group,
+            job,
+            self.data_len,
+            out,
+        )
     }
 
     /// Builds the explicit-parameter pipeline on first use (a rejection run never needs it).
@@ -285,11 +251,7 @@ impl GpuEvaluator {
         {
             let upload: Vec<GpuProposal> = cands
                 .iter()
-                .map(|c| GpuProposal {
-                    law: self.problem.prior.law(c.slot).index() as u32,
-                    params: c.params,
-                    _pad: 0,
-                })
+                .map(|c| GpuProposal::new(self.problem.prior.law(c.slot), c.params))
                 .collect();
             self.context
                 .queue
@@ -338,7 +300,7 @@ impl Evaluator for GpuEvaluator {
 mod tests {
     #[test]
     fn the_kernels_score_as_many_candidates_per_tile_as_the_host_dispatches_for() {
-        let line = format!("const CANDIDATES: u32 = {}u;", super::CANDIDATES_PER_TILE);
+        let line = format!("const CANDIDATES: u32 = {}u;", super::super::CANDIDATES_PER_TILE);
         assert!(
             super::super::SSR_WGSL.contains(&line),
             "shaders/shared/ssr.wgsl lacks `{line}`"
