@@ -119,6 +119,12 @@ pub struct SelectionBench {
     /// their least-squares fits, and the samplers.
     pub fit_seconds: f64,
     pub sampling_seconds: f64,
+    /// Of the sampling, the time spent scoring the replicates' batched requests (median), s.
+    pub scoring_seconds: f64,
+    /// Batches the replicates' requests were scored in, and GPU dispatches (the same every
+    /// repetition).
+    pub batches: u64,
+    pub dispatches: u64,
     /// Candidate × data-point evaluations of all replicates (the same every repetition).
     pub evaluations: u64,
     pub repetitions: usize,
@@ -476,13 +482,14 @@ pub fn selection_check(
     for rep in 0..reps.max(1) {
         let check = crate::selection::check(&run, &options, &|_, _| {}, &mut |_| {})?;
         log(format!(
-            "check-selection ({}/{}): {laws} laws × {replicates} replicates, N = {particles}, to ε = {eps_min}, backend {}: {:.2} s (records and fits {:.2} s, sampling {:.2} s)",
+            "check-selection ({}/{}): {laws} laws × {replicates} replicates, N = {particles}, to ε = {eps_min}, backend {}: {:.2} s (records and fits {:.2} s, sampling {:.2} s, of which scoring {:.2} s)",
             rep + 1,
             reps.max(1),
             check.backend,
             check.seconds,
             check.timing.fit_seconds,
-            check.timing.sampling_seconds
+            check.timing.sampling_seconds,
+            check.timing.scoring_seconds
         ));
         checks.push(check);
     }
@@ -502,6 +509,9 @@ pub fn selection_check(
         replicates_per_s: (laws * replicates) as f64 / seconds,
         fit_seconds: median(&|c| c.timing.fit_seconds),
         sampling_seconds: median(&|c| c.timing.sampling_seconds),
+        scoring_seconds: median(&|c| c.timing.scoring_seconds),
+        batches: checks[0].timing.batches,
+        dispatches: checks[0].timing.dispatches,
         evaluations: checks[0].timing.evaluations,
         repetitions: checks.len(),
     })

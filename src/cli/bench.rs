@@ -101,7 +101,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         if let Some(c) = &report.selection {
             writeln!(
                 out,
-                "{:<7}  check-selection: {} laws × {} replicates, N = {}, to ε = {} (--backend {}): {:.2} s ({:.2}–{:.2}), {:.2} replicates/s; records and fits {:.2} s, sampling {:.2} s, {:.3e} evaluations",
+                "{:<7}  check-selection: {} laws × {} replicates, N = {}, to ε = {} (--backend {}): {:.2} s ({:.2}–{:.2}), {:.2} replicates/s; records and fits {:.2} s, sampling {:.2} s (scoring {:.2} s in {} batches, {} GPU dispatches), {:.3e} evaluations",
                 c.backend,
                 c.laws,
                 c.replicates_per_law,
@@ -114,6 +114,9 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
                 c.replicates_per_s,
                 c.fit_seconds,
                 c.sampling_seconds,
+                c.scoring_seconds,
+                c.batches,
+                c.dispatches,
                 c.evaluations as f64
             )?;
         }

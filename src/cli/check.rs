@@ -86,8 +86,8 @@ fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
     let t = &check.timing;
     writeln!(
         out,
-        "synthetic records and fits {:.1} s, sampling {:.1} s ({:.3e} candidate × data-point evaluations)",
-        t.fit_seconds, t.sampling_seconds, t.evaluations as f64
+        "synthetic records and fits {:.1} s, sampling {:.1} s (scoring {:.1} s in {} batches; {:.3e} candidate × data-point evaluations)",
+        t.fit_seconds, t.sampling_seconds, t.scoring_seconds, t.batches, t.evaluations as f64
     )?;
     writeln!(
         out,

@@ -181,7 +181,7 @@ fn samplers_on_the_gpu_get_their_own_evaluators_results(shape: Shape) {
 /// that differs by sampler and call.
 fn call(problem: &AbcProblem, r: usize, k: usize) -> Candidates {
     let len = 37 * (r + 1) + 101 * k;
-    if k % 2 == 0 {
+    if k.is_multiple_of(2) {
         Candidates::Stream {
             population: k as u32,
             start: 13 * r as u64,

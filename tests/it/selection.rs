@@ -398,6 +398,15 @@ fn bench_selection_times_the_check_and_splits_its_phases() {
     let phases = s["fit_seconds"].as_f64().unwrap() + s["sampling_seconds"].as_f64().unwrap();
     assert!(phases > 0.0 && phases <= seconds, "{s}");
     assert!(s["evaluations"].as_u64().unwrap() > 0);
+    // Scoring is part of the sampling; the replicates' requests go in several batches, which
+    // the CPU scores without dispatches.
+    let scoring = s["scoring_seconds"].as_f64().unwrap();
+    assert!(
+        scoring > 0.0 && scoring <= s["sampling_seconds"].as_f64().unwrap(),
+        "{s}"
+    );
+    assert!(s["batches"].as_u64().unwrap() >= 2, "{s}");
+    assert_eq!(s["dispatches"].as_u64(), Some(0), "{s}");
     // Only the selection section is measured.
     assert_eq!(v["throughput"], serde_json::json!([]));
 }
