@@ -131,6 +131,49 @@ fn replicates_do_not_depend_on_the_batch() {
     assert_eq!(replicates(&one_at_a_time), replicates(&all_at_once));
 }
 
+/// An SMC run's replicates are SMC runs: their perturbed proposals go through the batches as
+/// explicit candidates, and the replicates do not depend on the batch either.
+#[test]
+fn an_smc_run_is_checked_with_smc_for_any_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run");
+    let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
+    AbcJob {
+        config: RunConfig {
+            laws: vec![Law::M2, Law::M4],
+            backend: Backend::Cpu,
+            seed: 5,
+            sampler: SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
+                base: RejectionConfig {
+                    particles: 200,
+                    eps_min: 1e-3,
+                    ..RejectionConfig::default()
+                },
+                ..Default::default()
+            }),
+            ..RunConfig::default()
+        },
+        summary_population: None,
+        out: Some(RunDir {
+            path: path.clone(),
+            replace: false,
+        }),
+    }
+    .run(data, &mut Silent, &mut |_| {})
+    .unwrap();
+    let one_at_a_time = check(&path, 2, Some(1));
+    let all_at_once = check(&path, 2, None);
+    let replicates = |c: &SelectionCheck| c.rows.iter().map(|r| r.replicates.clone()).collect::<Vec<_>>();
+    assert_eq!(replicates(&one_at_a_time), replicates(&all_at_once));
+    // Every replicate ran SMC populations after its rejection population 0.
+    for row in &all_at_once.rows {
+        for r in &row.replicates {
+            assert!(r.populations >= 2, "{r:?}");
+        }
+    }
+    assert!(all_at_once.timing.batches >= 2);
+}
+
 #[test]
 fn two_laws_the_data_cannot_tell_apart_give_a_symmetric_matrix() {
     // A constant torque of 10 kN·m with 300 N·m of noise. The prior file makes m2 and m4 the same
