@@ -54,7 +54,7 @@ pub struct CheckOptions {
     pub replicates: usize,
     /// Where ρ is computed; `None`: the run's backend.
     pub backend: Option<Backend>,
-    /// Replicates run at once; `None`: all of them (rayon balances them over the threads).
+    /// Replicates run at once, their candidates scored together; `None`: all of them.
     pub batch: Option<usize>,
 }
 

@@ -19,7 +19,8 @@ pub struct CheckCmd {
     /// Synthetic records per law, K.
     #[arg(long, default_value_t = CheckOptions::default().replicates, value_name = "K")]
     pub replicates: usize,
-    /// Replicates run at once [default: all, balanced over the threads].
+    /// Replicates run at once, their candidates scored together (one GPU dispatch or one
+    /// pass over the CPU threads per round) [default: all].
     #[arg(long, value_name = "COUNT")]
     pub batch: Option<usize>,
     /// Where ρ is computed [default: the run's backend].
