@@ -393,6 +393,7 @@ pub fn check(
                 .collect()
         });
         timing.sampling_seconds += sampling.elapsed().as_secs_f64();
+        batch_notes.extend(records.take_notes());
         let counts = records.counts();
         timing.batches += counts.batches;
         timing.dispatches += counts.dispatches;

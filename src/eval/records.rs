@@ -68,7 +68,12 @@ enum Scorer {
     Cpu,
     /// The shape, and the records' GPU buffers once the first batch built them (every record
     /// has registered by then: its sampler is waiting).
-    Gpu(gpu::Shape, Option<Box<gpu::records::GpuRecords>>),
+    Gpu {
+        shape: gpu::Shape,
+        records: Option<Box<gpu::records::GpuRecords>>,
+        /// `auto`: the CPU scores when the records cannot be set up on the GPU.
+        fallback: bool,
+    },
 }
 
 /// What the samplers share: the records, the requests waiting, the results not yet collected.
@@ -86,7 +91,10 @@ struct State {
 
 /// Scores many records' requests together; see the module documentation.
 pub struct RecordBatch {
-    backend: &'static str,
+    /// `cpu` or `gpu`; `cpu` once `auto` fell back.
+    backend: Mutex<&'static str>,
+    /// What the user should know that happened after [`RecordBatch::new`] (a fallback).
+    notes: Mutex<Vec<String>>,
     /// Candidates per GPU dispatch at most (tests split requests with it).
     max_candidates: Option<usize>,
     state: Mutex<State>,
@@ -106,7 +114,11 @@ impl RecordBatch {
                     "GPU backend: {} ({shape} scoring, records batched)",
                     ctx.describe()
                 ));
-                Scorer::Gpu(shape, None)
+                Scorer::Gpu {
+                    shape,
+                    records: None,
+                    fallback: false,
+                }
             }
             Backend::Auto => match gpu::context().and_then(|ctx| Ok((ctx, gpu::Shape::chosen(ctx)?))) {
                 Ok((ctx, shape)) => {
@@ -114,7 +126,11 @@ impl RecordBatch {
                         "GPU backend: {} ({shape} scoring, records batched)",
                         ctx.describe()
                     ));
-                    Scorer::Gpu(shape, None)
+                    Scorer::Gpu {
+                        shape,
+                        records: None,
+                        fallback: true,
+                    }
                 }
                 // A refused setting is the user's to fix, not a reason to fall back.
                 Err(e @ gpu::GpuError::Setting { .. }) => return Err(e.into()),
@@ -129,16 +145,22 @@ impl RecordBatch {
 
     /// A batch on the GPU in `shape`, at most `max_candidates` per dispatch (tests, benchmarks).
     pub fn on_gpu(shape: gpu::Shape, max_candidates: Option<usize>) -> Arc<Self> {
-        Self::with_scorer(Scorer::Gpu(shape, None), max_candidates)
+        let scorer = Scorer::Gpu {
+            shape,
+            records: None,
+            fallback: false,
+        };
+        Self::with_scorer(scorer, max_candidates)
     }
 
     fn with_scorer(scorer: Scorer, max_candidates: Option<usize>) -> Arc<Self> {
         let backend = match scorer {
             Scorer::Cpu => "cpu",
-            Scorer::Gpu(..) => "gpu",
+            Scorer::Gpu { .. } => "gpu",
         };
         Arc::new(Self {
-            backend,
+            backend: Mutex::new(backend),
+            notes: Mutex::new(Vec::new()),
             max_candidates,
             state: Mutex::new(State {
                 problems: Vec::new(),
@@ -153,9 +175,15 @@ impl RecordBatch {
         })
     }
 
-    /// `cpu` or `gpu`.
+    /// `cpu` or `gpu` (`cpu` once `auto` fell back to it).
     pub fn backend(&self) -> &'static str {
-        self.backend
+        *self.backend.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// Lines for the user about what happened since [`RecordBatch::new`] (a fallback to the
+    /// CPU), each once.
+    pub fn take_notes(&self) -> Vec<String> {
+        std::mem::take(&mut *self.notes.lock().unwrap_or_else(|poisoned| poisoned.into_inner()))
     }
 
     /// A seat for one sampler. Take every seat before any sampler starts: a batch is scored
@@ -199,11 +227,10 @@ impl RecordBatch {
 
     /// Scores every waiting request (the lock released meanwhile) and wakes their samplers.
     fn score_pending<'a>(&'a self, mut state: MutexGuard<'a, State>) -> MutexGuard<'a, State> {
-        let pending = std::mem::take(&mut state.pending);
+        let (tickets, requests): (Vec<u64>, Vec<Request>) = std::mem::take(&mut state.pending).into_iter().unzip();
         let mut scorer = state.scorer.take().expect("checked by ready");
         let problems = state.problems.clone();
         drop(state);
-        let requests: Vec<Request> = pending.iter().map(|(_, r)| r.clone()).collect();
         let started = std::time::Instant::now();
         let (results, dispatches) = self.score_all(&mut scorer, &problems, &requests);
         let seconds = started.elapsed().as_secs_f64();
@@ -213,65 +240,81 @@ impl RecordBatch {
         state.counts.requests += requests.len() as u64;
         state.counts.dispatches += dispatches as u64;
         state.counts.seconds += seconds;
-        for ((ticket, _), result) in pending.into_iter().zip(results) {
+        for (ticket, result) in tickets.into_iter().zip(results) {
             state.done.insert(ticket, result);
         }
         self.scored.notify_all();
         state
     }
 
-    /// ρ of every request, and the GPU dispatches made.
+    /// ρ of every request, and the GPU dispatches made. With `auto`, records the GPU cannot
+    /// hold are scored on the CPU from then on, and the user is told.
     fn score_all(
         &self,
         scorer: &mut Scorer,
         problems: &[Arc<AbcProblem>],
         requests: &[Request],
     ) -> (Vec<std::result::Result<Vec<f64>, gpu::GpuError>>, usize) {
-        match scorer {
-            Scorer::Cpu => {
-                let results = requests
-                    .par_iter()
-                    .map(|r| {
-                        let problem = &problems[r.record];
-                        let mut rho = vec![0.0; r.candidates.len()];
-                        match &r.candidates {
-                            Candidates::Stream { population, start, .. } => {
-                                cpu::score_stream(problem, *population, *start, &mut rho)
-                            }
-                            Candidates::Explicit(c) => cpu::score_candidates(problem, c, &mut rho),
-                        }
-                        Ok(rho)
-                    })
-                    .collect();
-                (results, 0)
-            }
-            Scorer::Gpu(shape, records) => {
-                // Every record has registered before the first batch (its sampler waits in
-                // it); one registering later would have the buffers rebuilt with it.
-                let scored = match records {
-                    Some(records) if records.records() == problems.len() => records.sum_sq_residuals(requests),
-                    _ => {
-                        let all: Vec<&AbcProblem> = problems.iter().map(|p| p.as_ref()).collect();
-                        gpu::records::GpuRecords::new(&all, *shape, self.max_candidates)
-                            .and_then(|built| records.insert(Box::new(built)).sum_sq_residuals(requests))
-                    }
-                };
-                match scored {
-                    Ok((ssr, dispatches)) => {
-                        let rho = requests
-                            .iter()
-                            .zip(ssr)
-                            .map(|(r, s)| {
-                                let sum_sq = problems[r.record].sum_sq_torque;
-                                Ok(s.into_iter().map(|v| f64::from(v) / sum_sq).collect())
-                            })
-                            .collect();
-                        (rho, dispatches)
-                    }
-                    Err(e) => (requests.iter().map(|_| Err(e.clone())).collect(), 0),
+        let fail = |e: &gpu::GpuError| requests.iter().map(|_| Err(e.clone())).collect();
+        if let Scorer::Gpu {
+            shape,
+            records,
+            fallback,
+        } = scorer
+        {
+            // Every record has registered before the first batch (its sampler waits in it);
+            // one registering later would have the buffers rebuilt with it.
+            let built = match records.take() {
+                Some(built) if built.records() == problems.len() => Ok(built),
+                _ => {
+                    let all: Vec<&AbcProblem> = problems.iter().map(|p| p.as_ref()).collect();
+                    gpu::records::GpuRecords::new(&all, *shape, self.max_candidates).map(Box::new)
                 }
+            };
+            match built {
+                Ok(built) => {
+                    return match records.insert(built).sum_sq_residuals(requests) {
+                        Ok((ssr, dispatches)) => {
+                            let rho = requests
+                                .iter()
+                                .zip(ssr)
+                                .map(|(r, s)| {
+                                    let sum_sq = problems[r.record].sum_sq_torque;
+                                    Ok(s.into_iter().map(|v| f64::from(v) / sum_sq).collect())
+                                })
+                                .collect();
+                            (rho, dispatches)
+                        }
+                        Err(e) => (fail(&e), 0),
+                    };
+                }
+                Err(e) if *fallback => {
+                    let line = format!("the records do not fit the GPU ({e}); computing on the CPU");
+                    self.notes
+                        .lock()
+                        .unwrap_or_else(|poisoned| poisoned.into_inner())
+                        .push(line);
+                    *self.backend.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = "cpu";
+                    *scorer = Scorer::Cpu;
+                }
+                Err(e) => return (fail(&e), 0),
             }
         }
+        let results = requests
+            .par_iter()
+            .map(|r| {
+                let problem = &problems[r.record];
+                let mut rho = vec![0.0; r.candidates.len()];
+                match &r.candidates {
+                    Candidates::Stream { population, start, .. } => {
+                        cpu::score_stream(problem, *population, *start, &mut rho)
+                    }
+                    Candidates::Explicit(c) => cpu::score_candidates(problem, c, &mut rho),
+                }
+                Ok(rho)
+            })
+            .collect();
+        (results, 0)
     }
 }
 
@@ -325,7 +368,7 @@ pub struct RecordEvaluator {
 
 impl Evaluator for RecordEvaluator {
     fn backend(&self) -> &'static str {
-        self.batch.backend
+        self.batch.backend()
     }
 
     fn problem(&self) -> &AbcProblem {
@@ -356,7 +399,7 @@ impl Evaluator for RecordEvaluator {
     }
 
     fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {
-        if self.batch.backend == "gpu" {
+        if self.batch.backend() == "gpu" {
             self.kernel_sums.run(gpu::context()?, sums, out)?;
         } else {
             cpu::kernel_sums(sums, out);
