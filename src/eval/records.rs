@@ -220,9 +220,11 @@ impl RecordBatch {
         }
     }
 
-    /// True when every seated sampler waits and nobody is scoring.
+    /// True when every seated sampler waits (as many requests as seats: the samplers call
+    /// their evaluator from one thread; a sampler that made concurrent calls would only make
+    /// batches go sooner, never hang) and nobody is scoring.
     fn ready(state: &State) -> bool {
-        !state.pending.is_empty() && state.pending.len() == state.seated && state.scorer.is_some()
+        !state.pending.is_empty() && state.pending.len() >= state.seated && state.scorer.is_some()
     }
 
     /// Scores every waiting request (the lock released meanwhile) and wakes their samplers.
