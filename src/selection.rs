@@ -404,17 +404,11 @@ pub fn check(
                 notes.push(line);
             }
         }
+        if results.is_empty() {
+            backend = records.backend();
+        }
         for outcome in outcomes {
             let outcome = outcome?;
-            for line in outcome.notes {
-                if !notes.contains(&line) {
-                    note(line.clone());
-                    notes.push(line);
-                }
-            }
-            if results.is_empty() {
-                backend = outcome.backend;
-            }
             timing.evaluations += outcome.evaluations;
             results.push(outcome.replicate);
         }
@@ -514,10 +508,6 @@ struct Fitted {
 /// One replicate run, with what the check reports besides it.
 struct ReplicateOutcome {
     replicate: Replicate,
-    /// Backend that scored it (`cpu`, `gpu`).
-    backend: &'static str,
-    /// Notes it produced, for the user.
-    notes: Vec<String>,
     /// Candidate × data-point evaluations of its sampler.
     evaluations: u64,
 }
@@ -570,7 +560,6 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
     replicate_config.seed = seed;
     replicate_config.backend = options.backend.unwrap_or(config.backend);
     replicate_config.sampler.base_mut().max_seconds = None;
-    let mut notes = Vec::new();
     let outcome = run::start_fitted_in_memory(
         data,
         replicate_config,
@@ -578,7 +567,9 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
         run.prior_file.as_ref(),
         &mut |problem, _| Ok(Box::new(seat.evaluator(problem))),
         &mut Silent,
-        &mut |line| notes.push(line),
+        // Notes about the synthetic record's own floor differ per replicate and are not
+        // repeated; the backend's come from the batch.
+        &mut |_| {},
     )
     .map_err(|e| in_replicate(law, job.replicate, e))?;
     let last = outcome.run.populations.last().ok_or_else(|| {
@@ -590,9 +581,6 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
     })?;
     let probabilities: Vec<f64> = config.laws.iter().map(|&l| last.record.probability_of(l)).collect();
     let first = config.laws[first_index(&probabilities)];
-    // Notes about the synthetic record's own floor differ per replicate: only the backend's
-    // lines are worth repeating to the user.
-    notes.retain(|line| line.contains("GPU") || line.contains("CPU"));
     Ok(ReplicateOutcome {
         replicate: Replicate {
             index: job.replicate,
@@ -604,8 +592,6 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
             populations: outcome.run.populations.len(),
             near_threshold: outcome.run.populations.iter().map(|p| p.record.near_threshold).sum(),
         },
-        backend: outcome.backend,
-        notes,
         evaluations: outcome.run.evaluations,
     })
 }

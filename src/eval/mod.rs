@@ -131,12 +131,20 @@ pub fn evaluator(problem: AbcProblem, backend: Backend, note: &mut dyn FnMut(Str
                 note(format!("GPU backend: {} ({} scoring)", gpu.adapter(), gpu.shape()));
                 Ok(Box::new(gpu))
             }
-            // A refused setting is the user's to fix, not a reason to fall back.
-            Err(e @ gpu::GpuError::Setting { .. }) => Err(e.into()),
             Err(e) => {
-                note(format!("no usable GPU ({e}); computing on the CPU"));
+                fall_back_to_cpu(e, note)?;
                 Ok(Box::new(cpu::CpuEvaluator::new(problem)))
             }
         },
     }
+}
+
+/// What a GPU that cannot be set up means under `auto`: a refused setting is the user's to fix
+/// (the error), anything else is said through `note` and the CPU computes instead.
+fn fall_back_to_cpu(e: gpu::GpuError, note: &mut dyn FnMut(String)) -> Result<()> {
+    if let gpu::GpuError::Setting { .. } = e {
+        return Err(e.into());
+    }
+    note(format!("no usable GPU ({e}); computing on the CPU"));
+    Ok(())
 }

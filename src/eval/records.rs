@@ -105,11 +105,20 @@ impl RecordBatch {
     /// A batch on `backend` (with `Auto`, the GPU when one can be set up, else the CPU, said
     /// through `note`).
     pub fn new(backend: Backend, note: &mut dyn FnMut(String)) -> Result<Arc<Self>> {
-        let scorer = match backend {
-            Backend::Cpu => Scorer::Cpu,
-            Backend::Gpu => {
-                let ctx = gpu::context()?;
-                let shape = gpu::Shape::chosen(ctx)?;
+        let setup = || gpu::context().and_then(|ctx| Ok((ctx, gpu::Shape::chosen(ctx)?)));
+        let gpu = match backend {
+            Backend::Cpu => None,
+            Backend::Gpu => Some(setup()?),
+            Backend::Auto => match setup() {
+                Ok(gpu) => Some(gpu),
+                Err(e) => {
+                    super::fall_back_to_cpu(e, note)?;
+                    None
+                }
+            },
+        };
+        let scorer = match gpu {
+            Some((ctx, shape)) => {
                 note(format!(
                     "GPU backend: {} ({shape} scoring, records batched)",
                     ctx.describe()
@@ -117,33 +126,15 @@ impl RecordBatch {
                 Scorer::Gpu {
                     shape,
                     records: None,
-                    fallback: false,
+                    fallback: backend == Backend::Auto,
                 }
             }
-            Backend::Auto => match gpu::context().and_then(|ctx| Ok((ctx, gpu::Shape::chosen(ctx)?))) {
-                Ok((ctx, shape)) => {
-                    note(format!(
-                        "GPU backend: {} ({shape} scoring, records batched)",
-                        ctx.describe()
-                    ));
-                    Scorer::Gpu {
-                        shape,
-                        records: None,
-                        fallback: true,
-                    }
-                }
-                // A refused setting is the user's to fix, not a reason to fall back.
-                Err(e @ gpu::GpuError::Setting { .. }) => return Err(e.into()),
-                Err(e) => {
-                    note(format!("no usable GPU ({e}); computing on the CPU"));
-                    Scorer::Cpu
-                }
-            },
+            None => Scorer::Cpu,
         };
         Ok(Self::with_scorer(scorer, None))
     }
 
-    /// A batch on the GPU in `shape`, at most `max_candidates` per dispatch (tests, benchmarks).
+    /// A batch on the GPU in `shape`, at most `max_candidates` per dispatch (tests).
     pub fn on_gpu(shape: gpu::Shape, max_candidates: Option<usize>) -> Arc<Self> {
         let scorer = Scorer::Gpu {
             shape,

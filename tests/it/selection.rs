@@ -43,6 +43,22 @@ fn run_dir(
     eps_min: f64,
     prior_file: Option<PathBuf>,
 ) -> PathBuf {
+    let sampler = SamplerConfig::Rejection(RejectionConfig {
+        particles,
+        eps_min,
+        ..RejectionConfig::default()
+    });
+    run_dir_with(dir, data, laws, sampler, prior_file)
+}
+
+/// Runs ABC of `laws` on `data` with `sampler` into `dir/run` (CPU, seed 3).
+fn run_dir_with(
+    dir: &Path,
+    data: bitrock::data::FieldData,
+    laws: &[Law],
+    sampler: SamplerConfig,
+    prior_file: Option<PathBuf>,
+) -> PathBuf {
     let path = dir.join("run");
     AbcJob {
         config: RunConfig {
@@ -50,11 +66,7 @@ fn run_dir(
             backend: Backend::Cpu,
             seed: 3,
             prior_file,
-            sampler: SamplerConfig::Rejection(RejectionConfig {
-                particles,
-                eps_min,
-                ..RejectionConfig::default()
-            }),
+            sampler,
             ..RunConfig::default()
         },
         summary_population: None,
@@ -136,31 +148,16 @@ fn replicates_do_not_depend_on_the_batch() {
 #[test]
 fn an_smc_run_is_checked_with_smc_for_any_batch() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("run");
     let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
-    AbcJob {
-        config: RunConfig {
-            laws: vec![Law::M2, Law::M4],
-            backend: Backend::Cpu,
-            seed: 5,
-            sampler: SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
-                base: RejectionConfig {
-                    particles: 200,
-                    eps_min: 1e-3,
-                    ..RejectionConfig::default()
-                },
-                ..Default::default()
-            }),
-            ..RunConfig::default()
+    let sampler = SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
+        base: RejectionConfig {
+            particles: 200,
+            eps_min: 1e-3,
+            ..RejectionConfig::default()
         },
-        summary_population: None,
-        out: Some(RunDir {
-            path: path.clone(),
-            replace: false,
-        }),
-    }
-    .run(data, &mut Silent, &mut |_| {})
-    .unwrap();
+        ..Default::default()
+    });
+    let path = run_dir_with(dir.path(), data, &[Law::M2, Law::M4], sampler, None);
     let one_at_a_time = check(&path, 2, Some(1));
     let all_at_once = check(&path, 2, None);
     let replicates = |c: &SelectionCheck| c.rows.iter().map(|r| r.replicates.clone()).collect::<Vec<_>>();

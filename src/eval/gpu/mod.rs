@@ -14,6 +14,7 @@ pub mod records;
 pub mod residual;
 pub mod stability;
 
+use crate::eval::AbcProblem;
 use crate::prior::Prior;
 use bytemuck::{Pod, Zeroable};
 use std::collections::HashMap;
@@ -524,6 +525,40 @@ const SAMPLES_PER_DISPATCH: u32 = 32_768;
 /// ([`Shape::Blocked`]) or one workgroup ([`Shape::Tiled`]); `CANDIDATES` in
 /// shaders/shared/ssr.wgsl.
 const CANDIDATES_PER_TILE: u32 = 16;
+
+/// The data columns of the scoring kernels (bindings 2-4): bit speed, torque and weight-on-bit
+/// ratio of `problem` in f32, padded to whole quads (w = 1 keeps every law finite; the kernels
+/// mask the padding).
+fn data_columns(problem: &AbcProblem) -> [Vec<f32>; 3] {
+    let len = 4 * problem.data_len().div_ceil(4);
+    let column = |v: &[f64], pad: f32| {
+        let mut c: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+        c.resize(len, pad);
+        c
+    };
+    [
+        column(&problem.speed_rad_s, 1.0),
+        column(&problem.torque_nm, 0.0),
+        column(&problem.wob_ratio, 0.0),
+    ]
+}
+
+/// False when every sample has r = 1 (the paper's assumption): the kernels then skip the ratio
+/// column (override HAS_RATIO).
+fn has_ratio(problem: &AbcProblem) -> bool {
+    problem.wob_ratio.iter().any(|&r| r.to_bits() != 1.0f64.to_bits())
+}
+
+/// Candidates per scoring dispatch at most, for records of `d` samples: at most 2³² candidate ×
+/// sample evaluations (seconds on a software driver, far below watchdog limits on hardware),
+/// 4 M candidates and the binding limit; and of those, explicit ones (32 bytes each).
+fn candidates_per_dispatch(d: usize, limits: &wgpu::Limits) -> (usize, usize) {
+    let max_binding = limits.max_storage_buffer_binding_size;
+    let chunk = ((1u64 << 32) / d.max(1) as u64)
+        .clamp(1024, 1 << 22)
+        .min(max_binding / 4) as usize;
+    (chunk, chunk.min(1 << 20).min((max_binding / 32) as usize))
+}
 
 /// The job uniform and the SSR buffers of a scoring kernel (bindings 1 and 5, and the
 /// buffer SSR is read back through).

@@ -129,39 +129,24 @@ impl GpuRecords {
                 "{records} records of {d} data points need {column_bytes} bytes per column, the adapter binds at most {max_binding}"
             )));
         }
-        // As GpuEvaluator: at most 2³² candidate × sample evaluations per dispatch, 4 M
-        // candidates, the binding limit; whole tiles.
+        // As GpuEvaluator's limits, in whole tiles.
         let tile = CANDIDATES_PER_TILE as usize;
-        let mut chunk = ((1u64 << 32) / d.max(1) as u64)
-            .clamp(1024, 1 << 22)
-            .min(max_binding / 4) as usize;
-        if let Some(max) = max_candidates {
-            chunk = chunk.min(max);
-        }
-        let chunk = (chunk / tile).max(1) * tile;
-        let params_chunk = chunk.min(1 << 20).min((max_binding / 32) as usize);
-        let has_ratio = problems
-            .iter()
-            .any(|p| p.wob_ratio.iter().any(|&r| r.to_bits() != 1.0f64.to_bits()));
+        let (chunk, params_chunk) = super::candidates_per_dispatch(d, &context.limits);
+        let chunk = (chunk.min(max_candidates.unwrap_or(usize::MAX)) / tile).max(1) * tile;
+        let params_chunk = params_chunk.min(chunk);
+        let has_ratio = problems.iter().any(|p| super::has_ratio(p));
         let copy = wgpu::BufferUsages::COPY_DST;
         let storage = wgpu::BufferUsages::STORAGE | copy;
         let mut columns = Vec::new();
-        for (name, pad) in [("speed", 1.0f32), ("torque", 0.0), ("ratio", 0.0)] {
-            let buffer = context.buffer(name, column_bytes, storage)?;
-            for (i, p) in problems.iter().enumerate() {
-                let values = match name {
-                    "speed" => &p.speed_rad_s,
-                    "torque" => &p.torque_nm,
-                    _ => &p.wob_ratio,
-                };
-                // Padded to whole quads (w = 1 keeps every law finite; the kernel masks them).
-                let mut column: Vec<f32> = values.iter().map(|&x| x as f32).collect();
-                column.resize(4 * quads, pad);
+        for name in ["speed", "torque", "ratio"] {
+            columns.push(context.buffer(name, column_bytes, storage)?);
+        }
+        for (i, p) in problems.iter().enumerate() {
+            for (buffer, column) in columns.iter().zip(super::data_columns(p)) {
                 context
                     .queue
-                    .write_buffer(&buffer, (16 * quads * i) as u64, bytemuck::cast_slice(&column));
+                    .write_buffer(buffer, (16 * quads * i) as u64, bytemuck::cast_slice(&column));
             }
-            columns.push(buffer);
         }
         let priors_upload: Vec<GpuPrior> = problems.iter().map(|p| GpuPrior::new(&p.prior, p.seed)).collect();
         let priors = context.buffer("priors", (size_of::<GpuPrior>() * records) as u64, storage)?;
@@ -231,11 +216,6 @@ impl GpuRecords {
     /// Records uploaded.
     pub fn records(&self) -> usize {
         self.priors.len()
-    }
-
-    /// The scoring shape this dispatches.
-    pub fn shape(&self) -> Shape {
-        self.shape
     }
 
     /// Σ(y − r·T)² (f32, as the kernel returns it) of every request's candidates, one vector

@@ -63,19 +63,9 @@ impl GpuEvaluator {
     pub fn with_shape(problem: AbcProblem, shape: Shape) -> std::result::Result<Self, GpuError> {
         let context = super::context()?;
         let d = problem.data_len();
-        // Columns padded to whole quads (w = 1 keeps every law finite; the kernel masks them).
         let quads = d.div_ceil(4);
-        let column = |v: &[f64], pad: f32| {
-            let mut c: Vec<f32> = v.iter().map(|&x| x as f32).collect();
-            c.resize(4 * quads, pad);
-            c
-        };
-        let columns = [
-            column(&problem.speed_rad_s, 1.0),
-            column(&problem.torque_nm, 0.0),
-            column(&problem.wob_ratio, 0.0),
-        ];
-        let has_ratio = problem.wob_ratio.iter().any(|&r| r.to_bits() != 1.0f64.to_bits());
+        let columns = super::data_columns(&problem);
+        let has_ratio = super::has_ratio(&problem);
         let column_bytes = 16 * quads.max(1) as u64;
         let max_binding = context.limits.max_storage_buffer_binding_size;
         if column_bytes > max_binding {
@@ -83,11 +73,7 @@ impl GpuEvaluator {
                 "{d} data points need {column_bytes} bytes per column, the adapter binds at most {max_binding}"
             )));
         }
-        // Per dispatch: at most 2³² candidate × sample evaluations (seconds on a software
-        // driver, far below watchdog limits on hardware), 4 M candidates and the binding limit.
-        let chunk = ((1u64 << 32) / d.max(1) as u64)
-            .clamp(1024, 1 << 22)
-            .min(max_binding / 4) as usize;
+        let (chunk, params_chunk) = super::candidates_per_dispatch(d, &context.limits);
         let prior = GpuPrior::new(&problem.prior, problem.seed);
         let copy = wgpu::BufferUsages::COPY_DST;
         let prior_buffer = context.buffer(
@@ -137,7 +123,7 @@ impl GpuEvaluator {
             shape,
             data_len: d as u32,
             chunk,
-            params_chunk: chunk.min(1 << 20).min((max_binding / 32) as usize),
+            params_chunk,
             resources: Mutex::new(Resources {
                 job,
                 ssr,
