@@ -92,11 +92,18 @@ impl TempFile {
     }
 }
 
-/// Writes `target` (named by `flag`) whole or not at all: `write` fills a temporary beside it,
-/// which replaces `target` only when everything was written. Stale temporaries of bitrock's in
-/// that directory are removed first. A run's store is never a target.
+/// Writes the user's output file `target` (named by `flag`) whole or not at all: checked by
+/// [`check_output_file`] (a symbolic link is written through), then [`write_own`].
 pub fn write_whole(target: &Path, flag: &str, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
     check_output_file(target, flag)?;
+    write_own(&output_target(target), flag, write)
+}
+
+/// Writes `target`, a file of a directory bitrock manages (a run's summary files, a staged
+/// report), whole or not at all: `write` fills a temporary beside it, which replaces `target`
+/// only when everything was written. Stale temporaries of bitrock's in that directory are
+/// removed first.
+pub fn write_own(target: &Path, flag: &str, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
     remove_stale(parent_dir(target));
     let mut temp = TempFile::beside(target, flag)?;
     let mut out = std::io::BufWriter::new(temp.file_mut());
@@ -107,24 +114,28 @@ pub fn write_whole(target: &Path, flag: &str, write: impl FnOnce(&mut dyn Write)
     temp.commit(target)
 }
 
-/// Refuses, naming `flag`, an output file that cannot be written: a directory, a dangling
-/// symbolic link, a path in a directory that does not exist, or a run's store.
+/// Refuses, naming `flag`, an output file that cannot be written or is not the user's to
+/// replace: a directory, a dangling symbolic link, a path in a directory that does not exist,
+/// one of bitrock's own lock or temporary files, and any file inside a run directory (a run
+/// keeps to its own files, its store above all). A symbolic link is written through: the
+/// file it points to is the target, checked by the same rule ([`output_target`]).
 pub fn check_output_file(target: &Path, flag: &str) -> Result<()> {
     check_not_dangling(target, flag)?;
-    if target.is_dir() {
+    let real = output_target(target);
+    if real.is_dir() {
         return Err(Error::arg(
             flag,
             format!("{} is a directory; give a file name", target.display()),
         ));
     }
-    let dir = parent_dir(target);
+    let dir = parent_dir(&real);
     if !dir.is_dir() {
         return Err(Error::arg(
             flag,
             format!("{}: the directory {} does not exist", target.display(), dir.display()),
         ));
     }
-    if is_run_store(target) {
+    if is_run_store(&real) {
         return Err(Error::arg(
             flag,
             format!(
@@ -134,6 +145,148 @@ pub fn check_output_file(target: &Path, flag: &str) -> Result<()> {
             ),
         ));
     }
+    if real
+        .file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(is_bitrock_scratch)
+    {
+        return Err(Error::arg(
+            flag,
+            format!(
+                "{} is one of bitrock's lock or temporary files; give another file",
+                target.display()
+            ),
+        ));
+    }
+    refuse_inside_run(&real, flag)
+}
+
+/// Refuses, naming `flag`, an output path inside a run directory (its parent, or the parent's
+/// parent: a run's `selection/`): a run holds only what bitrock writes there.
+pub fn refuse_inside_run(path: &Path, flag: &str) -> Result<()> {
+    match enclosing_run_dir(path) {
+        Some(run) => Err(Error::arg(
+            flag,
+            format!(
+                "{} lies inside the run directory {}, which holds only what bitrock writes there; write it outside the run",
+                path.display(),
+                run.display()
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// The file an output path names: the path itself, or where a symbolic link leads (a link is
+/// written through, not replaced by a file).
+pub fn output_target(target: &Path) -> PathBuf {
+    let is_link = std::fs::symlink_metadata(target).is_ok_and(|m| m.file_type().is_symlink());
+    if is_link && let Ok(real) = target.canonicalize() {
+        return real;
+    }
+    target.to_path_buf()
+}
+
+/// The run directory `path` lies in (its parent or the parent's parent: a run's `selection/`),
+/// if any.
+fn enclosing_run_dir(path: &Path) -> Option<PathBuf> {
+    let dir = parent_dir(path).canonicalize().ok()?;
+    dir.ancestors()
+        .take(2)
+        .find(|d| crate::rundir::is_run_dir(d))
+        .map(Path::to_path_buf)
+}
+
+/// Everything under `dir` that bitrock did not write, judged by `owned` (relative path,
+/// is-a-directory), in sorted order; bitrock's own temporaries and lock are never foreign.
+/// Directories `owned` accepts are searched; symbolic links are judged as files, never followed.
+pub fn foreign_entries(dir: &Path, owned: &dyn Fn(&Path, bool) -> bool) -> Vec<PathBuf> {
+    fn walk(root: &Path, rel: &Path, owned: &dyn Fn(&Path, bool) -> bool, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(root.join(rel)) else {
+            return;
+        };
+        let mut entries: Vec<_> = entries.flatten().collect();
+        entries.sort_by_key(|e| e.file_name());
+        for entry in entries {
+            let name = entry.file_name();
+            if name.to_str().is_some_and(is_bitrock_scratch) {
+                continue;
+            }
+            let child = rel.join(&name);
+            let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
+            if !owned(&child, is_dir) {
+                out.push(child);
+            } else if is_dir {
+                walk(root, &child, owned, out);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, Path::new(""), owned, &mut out);
+    out
+}
+
+/// Refuses, naming `flag`, a directory to be replaced or written into that holds anything
+/// bitrock did not write ([`foreign_entries`]), listing the first few. The one rule of every
+/// command that replaces a directory: `abc --force`, `demo`, `report`, `check-selection`.
+pub fn refuse_foreign(dir: &Path, flag: &str, owned: &dyn Fn(&Path, bool) -> bool) -> Result<()> {
+    let foreign = foreign_entries(dir, owned);
+    if foreign.is_empty() {
+        return Ok(());
+    }
+    const SHOWN: usize = 5;
+    let shown: Vec<String> = foreign.iter().take(SHOWN).map(|p| p.display().to_string()).collect();
+    let more = if foreign.len() > SHOWN {
+        format!(" and {} more", foreign.len() - SHOWN)
+    } else {
+        String::new()
+    };
+    Err(Error::arg(
+        flag,
+        format!(
+            "{}: holds files bitrock did not write ({}{more}); it is not replaced, even with --force: give another directory",
+            dir.display(),
+            shown.join(", ")
+        ),
+    ))
+}
+
+/// Replaces directory `target` (named by `flag`) by one holding exactly `contents` (relative
+/// paths and bytes), in one step: the new directory is staged beside it and swapped in
+/// ([`exchange_dirs`]), so `target` holds the old files or all the new ones at every moment,
+/// and nothing an earlier version wrote there outlives it. A `target` holding anything
+/// `owned` does not accept is refused first ([`refuse_foreign`]).
+pub fn replace_dir(
+    target: &Path,
+    flag: &str,
+    owned: &dyn Fn(&Path, bool) -> bool,
+    contents: &[(PathBuf, Vec<u8>)],
+) -> Result<()> {
+    check_output_dir(target, flag)?;
+    refuse_foreign(target, flag, owned)?;
+    let parent = parent_dir(target);
+    std::fs::create_dir_all(parent).map_err(|source| Error::output(flag, target, source))?;
+    remove_stale(parent);
+    let staging = tempfile::Builder::new()
+        .prefix(STAGING_PREFIX)
+        .tempdir_in(parent)
+        .map_err(|source| Error::output(flag, target, source))?;
+    // Live while locked: a concurrent writer's clean-up leaves it alone.
+    let lock = DirLock::acquire(staging.path())?;
+    for (rel, bytes) in contents {
+        let path = staging.path().join(rel);
+        std::fs::create_dir_all(parent_dir(&path)).map_err(|source| Error::output(flag, target, source))?;
+        write_own(&path, flag, |out| out.write_all(bytes))?;
+    }
+    if target.exists() {
+        exchange_dirs(target, staging.path()).map_err(|source| Error::output(flag, target, source))?;
+        // The staging name now holds the old directory: dropping it removes it.
+    } else {
+        let staged = staging.keep();
+        std::fs::rename(&staged, target).map_err(|source| Error::output(flag, target, source))?;
+    }
+    sync_dir(parent);
+    drop(lock);
     Ok(())
 }
 

@@ -43,6 +43,8 @@
 //! # }
 //! ```
 #![deny(clippy::float_cmp)]
+// The library speaks through its results and callbacks, never to a terminal.
+#![cfg_attr(not(test), deny(clippy::print_stdout, clippy::print_stderr))]
 
 pub mod abc;
 pub mod bench;
@@ -60,6 +62,7 @@ pub mod prior;
 pub mod report;
 pub mod rng;
 pub mod run;
+pub mod rundir;
 pub mod selection;
 pub mod simulate;
 pub mod stability;

@@ -3,6 +3,10 @@
 //! naming the file, line, column or flag; failures that stopped the work exit 3; a closed pipe
 //! on stdout ends quietly with 141.
 
+// Everything for people goes through `cli::print` (stdout with its errors named, stderr that
+// never panics); the print macros panic when a stream fails.
+#![deny(clippy::print_stdout, clippy::print_stderr)]
+
 mod cli;
 
 use bitrock::Error;
@@ -29,7 +33,7 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(err) if is_closed_pipe(&err) => ExitCode::from(exit::CLOSED_PIPE),
         Err(err) => {
-            eprintln!("error: {}", message(&err));
+            cli::print::note(format_args!("error: {}", message(&err)));
             let bad_input = err
                 .chain()
                 .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));

@@ -12,6 +12,7 @@ use crate::error::{Error, Result};
 use crate::files;
 use crate::prior::PriorFile;
 use crate::run::{self, Continuation, Outcome, RunConfig};
+use crate::rundir;
 use crate::store::RunStore;
 use std::path::Path;
 
@@ -86,6 +87,7 @@ impl AbcJob {
 
 /// Continues the run in `dir` ([`run::resume`]), then summarises population
 /// `more.summary_population` (default: the last) and rewrites the directory's summary files.
+/// A resume that adds no population changes nothing on disk (the summary is only returned).
 pub fn resume(
     dir: &Path,
     more: &Continuation,
@@ -93,8 +95,17 @@ pub fn resume(
     note: &mut dyn FnMut(String),
 ) -> Result<Analysis> {
     let outcome = run::resume(dir, more, observer, note)?;
+    let unchanged = outcome.added == 0 && dir.join(rundir::RUN_JSON).is_file();
     let mut analysis = Analysis::new(outcome, more.summary_population, Some(dir))?;
-    analysis.write_summary(dir)?;
+    if unchanged {
+        note(format!(
+            "no population added ({}); {} is unchanged",
+            analysis.outcome.run.stop.describe(),
+            dir.display()
+        ));
+    } else {
+        analysis.write_summary(dir)?;
+    }
     analysis.outcome.lock = None; // the directory is complete: the next writer may come
     Ok(analysis)
 }
@@ -154,20 +165,20 @@ impl Analysis {
     }
 
     /// Writes run.json, envelopes.csv and data.csv into the run directory `dir`, each whole or
-    /// not at all ([`files::write_whole`]).
+    /// not at all ([`files::write_own`]).
     pub fn write_summary(&self, dir: &Path) -> Result<()> {
         let run_json = serde_json::to_string_pretty(&self.json()).expect("JSON into memory") + "\n";
         let data = &self.outcome.setup.data;
         let files = [
-            ("run.json", run_json.into_bytes()),
+            (rundir::RUN_JSON, run_json.into_bytes()),
             (
-                "envelopes.csv",
+                rundir::ENVELOPES_CSV,
                 documents::envelopes_csv(&self.envelopes, data.torque_unit),
             ),
-            ("data.csv", documents::data_csv(data)),
+            (rundir::DATA_CSV, documents::data_csv(data)),
         ];
         for (name, bytes) in &files {
-            files::write_whole(&dir.join(name), "--out", |out| out.write_all(bytes))?;
+            files::write_own(&dir.join(name), "--out", |out| out.write_all(bytes))?;
         }
         Ok(())
     }

@@ -181,6 +181,9 @@ pub struct Outcome {
     /// The run directory's lock, held while the outcome lives (its summary files are written
     /// under it); `None` for a run in memory.
     pub lock: Option<files::DirLock>,
+    /// Populations this invocation added (a resume whose stopping rules already end the run
+    /// adds none, and then changes nothing: `config` is the stored one).
+    pub added: usize,
 }
 
 /// Where a run is written.
@@ -202,19 +205,6 @@ pub enum DirState {
     Replace,
 }
 
-/// Files a run directory holds besides bitrock's temporaries and lock ([`files`]), and the
-/// directory of its selection check ([`crate::selection`]).
-const RUN_FILES: [&str; 8] = [
-    STORE_FILE,
-    "run.sqlite-journal",
-    "run.sqlite-wal",
-    "run.sqlite-shm",
-    "run.json",
-    "envelopes.csv",
-    "data.csv",
-    crate::selection::SELECTION_DIR,
-];
-
 /// Refuses, before any work and naming `--out`, a run directory that cannot be written: one
 /// that holds anything bitrock did not write (even with `replace`), the current directory or
 /// one holding the record `input` (the record is never deleted), a bitrock run without
@@ -234,25 +224,11 @@ pub fn check_new_run_dir(dir: &RunDir, input: Option<&Path>) -> Result<DirState>
             input.display()
         ));
     }
-    let entries = std::fs::read_dir(path).map_err(|source| Error::output("--out", path, source))?;
-    let names: Vec<String> = entries
-        .flatten()
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|name| !files::is_bitrock_scratch(name))
-        .collect();
-    let has_store = names.iter().any(|n| n == STORE_FILE);
-    let foreign: Vec<&str> = names
-        .iter()
-        .map(String::as_str)
-        .filter(|n| !(has_store && RUN_FILES.contains(n)))
-        .collect();
-    if !foreign.is_empty() {
-        let shown = foreign.iter().take(5).copied().collect::<Vec<_>>().join(", ");
-        let more = if foreign.len() > 5 { ", ..." } else { "" };
-        return refuse(format!(
-            "holds files bitrock did not write ({shown}{more}); it is not replaced, even with --force: give another directory"
-        ));
-    }
+    let has_store = crate::rundir::is_run_dir(path);
+    // Without a store nothing in the directory is a run's: only bitrock's temporaries may be there.
+    files::refuse_foreign(path, "--out", &|rel, is_dir| {
+        has_store && crate::rundir::Owned::Run.owns(rel, is_dir)
+    })?;
     if !has_store {
         return Ok(DirState::Fresh);
     }
@@ -376,12 +352,14 @@ fn start_with_fits(
             None,
         ),
     };
+    let added = run.populations.len();
     Ok(Outcome {
         config,
         setup,
         run,
         backend: evaluator.backend(),
         lock,
+        added,
     })
 }
 
@@ -505,6 +483,7 @@ pub fn resume(
         path: dir.join(STORE_FILE),
         message: format!("the stored configuration is not one this bitrock reads: {e}"),
     })?;
+    let stored_config = config.clone();
     config.sampler.apply(more);
     config.backend = more.backend.unwrap_or(config.backend);
     config.validate()?;
@@ -517,11 +496,12 @@ pub fn resume(
     )
     .with_best_rho(&setup.fits);
     let evaluator = crate::eval::evaluator(problem, config.backend, note)?;
+    let stored = populations.len();
     note(format!(
         "continuing {} after population {} ({} stored)",
         dir.display(),
-        populations.len().saturating_sub(1),
-        populations.len()
+        stored.saturating_sub(1),
+        stored
     ));
     let run = sample(
         Some(store),
@@ -532,6 +512,11 @@ pub fn resume(
         populations,
         observer,
     )?;
+    let added = run.populations.len() - stored;
+    if added == 0 {
+        // Nothing was run: the stored facts stand, and so does every file made from them.
+        config = stored_config;
+    }
     let setup = RunSetup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
         ..setup
@@ -542,6 +527,7 @@ pub fn resume(
         run,
         backend: evaluator.backend(),
         lock: Some(lock),
+        added,
     })
 }
 
@@ -570,30 +556,52 @@ fn check_particles_stored(dir: &Path, populations: &[Population]) -> Result<()> 
 fn sample(
     store: Option<RunStore>,
     claim: Option<&mut Claim>,
-    kind: &str,
+    kind: &'static str,
     config: &RunConfig,
     evaluator: &dyn Evaluator,
     previous: Vec<Population>,
     observer: &mut dyn Observer,
 ) -> Result<Run> {
-    let Some(mut store) = store else {
+    let Some(store) = store else {
         return run_sampler(config, evaluator, previous, observer);
     };
-    let json = serde_json::to_value(config).expect("the configuration serialises");
-    let invocation = store.begin_invocation(kind, evaluator.backend(), &json)?;
+    let invocation = Invocation {
+        kind,
+        backend: evaluator.backend(),
+        config: serde_json::to_value(config).expect("the configuration serialises"),
+        id: None,
+    };
     let mut storing = Storing {
         store: Writer::Here(store),
         claim,
         inner: observer,
+        invocation,
     };
+    // A new run's invocation is stored at once; a resumed run's with its first new population,
+    // so that a resume which adds none leaves the store as it was.
+    if kind == "start" {
+        storing.begin_invocation()?;
+    }
     let run = run_sampler(config, evaluator, previous, &mut storing);
+    let invocation = storing.invocation.id;
     // Every population handed over is written before the run is reported (or its error).
     let store = storing.store.finish();
     let run = run?;
     let mut store = store?;
-    let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
-    store.finish_invocation(invocation, stop.as_str().unwrap_or_default())?;
+    if let Some(invocation) = invocation {
+        let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
+        store.finish_invocation(invocation, stop.as_str().unwrap_or_default())?;
+    }
     Ok(run)
+}
+
+/// One invocation of a run (`start` or `resume`) as the store records it.
+struct Invocation {
+    kind: &'static str,
+    backend: &'static str,
+    config: serde_json::Value,
+    /// Its row in the store, once begun.
+    id: Option<i64>,
 }
 
 /// The configured sampler from `previous` on.
@@ -618,6 +626,22 @@ struct Storing<'a> {
     store: Writer,
     claim: Option<&'a mut Claim>,
     inner: &'a mut dyn Observer,
+    invocation: Invocation,
+}
+
+impl Storing<'_> {
+    /// Records the invocation in the store (once; the store is still on this thread then).
+    fn begin_invocation(&mut self) -> Result<()> {
+        if self.invocation.id.is_some() {
+            return Ok(());
+        }
+        let Writer::Here(store) = &mut self.store else {
+            return Err(Error::Incomplete("the invocation is recorded before any population is written".into()));
+        };
+        let inv = &self.invocation;
+        self.invocation.id = Some(store.begin_invocation(inv.kind, inv.backend, &inv.config)?);
+        Ok(())
+    }
 }
 
 /// The run store, written on this thread or by a thread of its own.
@@ -686,6 +710,7 @@ impl Observer for Storing<'_> {
     }
 
     fn population_done(&mut self, population: &Population, previous: Option<&Population>) -> Result<()> {
+        self.begin_invocation()?;
         match (&mut self.store, self.claim.as_deref_mut()) {
             // A staged run is put in place once its first population is stored: written here.
             (Writer::Here(store), Some(claim)) if claim.is_staged() => {

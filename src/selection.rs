@@ -42,10 +42,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-/// The directory of a run directory that holds its selection check.
-pub const SELECTION_DIR: &str = "selection";
-/// The check's results in JSON (what the report reads back).
-pub const SELECTION_JSON: &str = "selection.json";
+pub use crate::rundir::{SELECTION_DIR, SELECTION_JSON};
 
 /// How to check a run's selection. [`Default`] is `bitrock check-selection`'s defaults.
 #[derive(Clone, Debug, PartialEq)]
@@ -680,30 +677,17 @@ pub fn write(run: &CheckedRun, check: &SelectionCheck) -> Result<PathBuf> {
     let dir = run.dir.as_path();
     let (svg, png) = crate::report::confusion_figure(check)?;
     let json = serde_json::to_string_pretty(check).expect("the check serialises") + "\n";
-    let contents: [(&str, Vec<u8>); 5] = [
-        (SELECTION_JSON, json.into_bytes()),
-        ("matrix.csv", check.matrix_csv()),
-        ("replicates.csv", check.replicates_csv()),
-        ("confusion.svg", svg.into_bytes()),
-        ("confusion.png", png),
+    let names = crate::rundir::SELECTION_FILES;
+    let bodies = [
+        json.into_bytes(),
+        check.matrix_csv(),
+        check.replicates_csv(),
+        svg.into_bytes(),
+        png,
     ];
-    files::remove_stale(dir);
-    let staging = tempfile::Builder::new()
-        .prefix(files::STAGING_PREFIX)
-        .tempdir_in(dir)
-        .map_err(|source| Error::output("RUN_DIR", dir, source))?;
-    for (name, bytes) in &contents {
-        files::write_whole(&staging.path().join(name), "RUN_DIR", |out| out.write_all(bytes))?;
-    }
+    let contents: Vec<(PathBuf, Vec<u8>)> = names.iter().map(PathBuf::from).zip(bodies).collect();
     let target = dir.join(SELECTION_DIR);
-    if target.exists() {
-        files::exchange_dirs(&target, staging.path()).map_err(|source| Error::output("RUN_DIR", &target, source))?;
-        // The staging directory now holds the previous check; dropping it removes it.
-    } else {
-        let staged = staging.keep();
-        std::fs::rename(&staged, &target).map_err(|source| Error::output("RUN_DIR", &target, source))?;
-    }
-    files::sync_dir(dir);
+    files::replace_dir(&target, "RUN_DIR", &|rel, is_dir| crate::rundir::Owned::Selection.owns(rel, is_dir), &contents)?;
     Ok(target)
 }
 

@@ -190,7 +190,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
     let quiet = cmd.quiet;
     let mut note = |line: String| {
         if !quiet {
-            eprintln!("{line}");
+            super::print::note(line);
         }
     };
     let mut progress = RunProgress::new(quiet);

@@ -125,7 +125,7 @@ pub fn load_data(path: Option<&Path>, args: &DataArgs) -> anyhow::Result<FieldDa
     Ok(match path {
         Some(path) => data::read_field_data(path, &opts)?,
         None => {
-            eprintln!("note: no DATA given; using the embedded synthetic demo record");
+            super::print::note("note: no DATA given; using the embedded synthetic demo record");
             data::demo_field_data(&opts)?
         }
     })

@@ -56,7 +56,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let quiet = cmd.json;
     let report = bitrock::bench::run(&opts, &mut |line| {
         if !quiet {
-            eprintln!("{line}");
+            super::print::note(line);
         }
     })?;
     let mut out = super::print::stdout();

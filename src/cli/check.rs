@@ -49,12 +49,12 @@ pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     let quiet = cmd.quiet;
     let progress = |done: usize, total: usize| {
         if !quiet {
-            eprintln!("replicate {done}/{total}");
+            super::print::note(format_args!("replicate {done}/{total}"));
         }
     };
     let check = selection::check(&checked, &options, &progress, &mut |line| {
         if !quiet {
-            eprintln!("{line}");
+            super::print::note(line);
         }
     })?;
     let written = selection::write(&checked, &check)?;

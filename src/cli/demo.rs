@@ -5,7 +5,8 @@ use super::args::set_threads;
 use super::fit::fit_and_print;
 use super::print;
 use super::progress::RunProgress;
-use bitrock::Error;
+use bitrock::rundir::Owned;
+use bitrock::{Error, files};
 use bitrock::abc::posterior::PosteriorSummary;
 use bitrock::abc::rejection::RejectionConfig;
 use bitrock::data;
@@ -42,6 +43,9 @@ pub struct DemoCmd {
 /// Marks a directory the demo wrote, so that a later demo may replace it (and nothing else).
 const DEMO_MARKER: &str = "bitrock-demo.txt";
 
+/// The demo's report, beside its runs.
+const REPORT_DIR: &str = "report";
+
 /// The prior half-widths δ of the paper's three runs.
 const DEMO_DELTAS: [f64; 3] = [0.4, 0.6, 0.8];
 
@@ -60,12 +64,12 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     writeln!(out, "the paper's field data are not public.\n")?;
     let defaults = RunConfig::default();
     fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
-    replace_root(root)?;
+    mark_root(root)?;
     let mut report_runs = Vec::new();
     let mut report_setup = None;
     let mut headlines = Vec::new();
     for delta in DEMO_DELTAS {
-        let dir = root.join(format!("delta-{delta:.1}"));
+        let dir = root.join(run_dir_name(delta));
         let sampler = RejectionConfig {
             particles: cmd.particles,
             ..RejectionConfig::default()
@@ -94,7 +98,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             }),
         };
         let done = job.run(data.clone(), &mut RunProgress::new(false), &mut |line| {
-            eprintln!("{line}")
+            super::print::note(line)
         })?;
         print::population_table(&mut out, &done.outcome.run)?;
         print::posterior(&mut out, &done.posterior, data.torque_unit)?;
@@ -122,18 +126,22 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         ));
         report_setup.get_or_insert(setup);
     }
-    let report_dir = root.join("report");
+    let report_dir = root.join(REPORT_DIR);
     let report = bitrock::report::write_paper_report(&report_dir, &report_setup.expect("three runs"), &report_runs)?;
     print_headline(&mut out, &headlines, &data, root, &report)?;
     Ok(ExitCode::SUCCESS)
 }
 
-/// Refuses an `--out` that holds something the demo did not write.
+/// Refuses an `--out` that holds something the demo did not write: a directory that is not
+/// empty must be an earlier demo's (its marker) and hold nothing but the demo's runs, report
+/// and marker ([`files::refuse_foreign`], the rule of `abc --force`).
 fn check_root(root: &Path) -> anyhow::Result<()> {
-    if root.exists()
-        && !root.join(DEMO_MARKER).exists()
-        && std::fs::read_dir(root).map_or(true, |mut d| d.next().is_some())
-    {
+    files::check_output_dir(root, "--out")?;
+    let empty = std::fs::read_dir(root).map_or(true, |mut d| d.next().is_none());
+    if empty {
+        return Ok(());
+    }
+    if !root.join(DEMO_MARKER).is_file() {
         return Err(Error::arg(
             "--out",
             format!(
@@ -143,23 +151,44 @@ fn check_root(root: &Path) -> anyhow::Result<()> {
         )
         .into());
     }
+    files::refuse_foreign(root, "--out", &demo_owns)?;
     Ok(())
 }
 
-/// Empties the demo's directory (one [`check_root`] accepted) and marks it as the demo's.
-fn replace_root(root: &Path) -> anyhow::Result<()> {
-    let write_error = |source| Error::Write {
-        path: root.to_path_buf(),
-        source,
+/// What the demo writes in its directory: its marker, one run directory per δ, the report.
+fn demo_owns(rel: &Path, is_dir: bool) -> bool {
+    let mut parts = rel.components();
+    let Some(first) = parts.next().and_then(|c| c.as_os_str().to_str()) else {
+        return false;
     };
-    if root.exists() {
-        std::fs::remove_dir_all(root).map_err(write_error)?;
+    let rest = parts.as_path();
+    let top = rest.as_os_str().is_empty();
+    if first == DEMO_MARKER {
+        return top && !is_dir;
     }
-    std::fs::create_dir_all(root).map_err(write_error)?;
-    std::fs::write(
-        root.join(DEMO_MARKER),
-        "Written by `bitrock demo`; a later `bitrock demo` replaces this directory.\n",
-    )?;
+    let owned = if DEMO_DELTAS.iter().any(|d| first == run_dir_name(*d)) {
+        Owned::Run
+    } else if first == REPORT_DIR {
+        Owned::Report
+    } else {
+        return false;
+    };
+    if top { is_dir } else { owned.owns(rest, is_dir) }
+}
+
+/// The run directory of the demo's run with prior half-width `delta`.
+fn run_dir_name(delta: f64) -> String {
+    format!("delta-{delta:.1}")
+}
+
+/// Creates the demo's directory and marks it as the demo's (one [`check_root`] accepted). Its
+/// runs and report are then replaced one by one, each in one step, so an interrupted demo
+/// leaves each of them old or new, never half-written, and never anything of the user's lost.
+fn mark_root(root: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(root).map_err(|source| Error::output("--out", root, source))?;
+    files::write_own(&root.join(DEMO_MARKER), "--out", |out| {
+        out.write_all(b"Written by `bitrock demo`; a later `bitrock demo` replaces the runs and the report in this directory.\n")
+    })?;
     Ok(())
 }
 

@@ -35,6 +35,13 @@ fn named_stdout(e: io::Error) -> io::Error {
     io::Error::new(e.kind(), format!("standard output: cannot write: {e}"))
 }
 
+/// Writes one line for people to standard error: notes, progress and the final error. A
+/// standard error that cannot be written (full, closed) loses the line and nothing else: the
+/// work goes on and ends with its own exit status, never a panic (`eprintln!` panics).
+pub fn note(line: impl std::fmt::Display) {
+    let _ = writeln!(io::stderr().lock(), "{line}");
+}
+
 /// Numbers in a table: fixed notation where it reads well, scientific otherwise.
 fn number(v: f64) -> String {
     let a = v.abs();

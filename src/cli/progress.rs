@@ -72,7 +72,7 @@ impl Observer for RunProgress {
             Display::Lines { last } => {
                 if last.elapsed() >= LOG_EVERY {
                     *last = Instant::now();
-                    eprintln!(
+                    super::print::note(format_args!(
                         "population {:>2}: ε = {}, {}/{} accepted, {} drawn, {:.2e} eval/s, {:.1} s",
                         p.population,
                         epsilon_text(p.epsilon),
@@ -81,7 +81,7 @@ impl Observer for RunProgress {
                         p.draws,
                         rate(p),
                         p.seconds
-                    );
+                    ));
                 }
             }
             Display::Quiet => {}
@@ -104,11 +104,11 @@ impl Observer for RunProgress {
                 if let Some(bar) = bar.take() {
                     bar.finish_and_clear();
                 }
-                eprintln!("{line}");
+                super::print::note(line);
             }
             Display::Lines { last } => {
                 *last = Instant::now();
-                eprintln!("{line}");
+                super::print::note(line);
             }
             Display::Quiet => {}
         }

@@ -10,7 +10,8 @@ pub struct ReportCmd {
     /// Run directories (written by `bitrock abc --out`), all calibrated on the same record.
     #[arg(required = true, value_name = "DIR")]
     pub runs: Vec<PathBuf>,
-    /// Report directory: report.md and figures/ (files of the same names are replaced).
+    /// Report directory: report.md and figures/, replaced as a whole (a directory holding
+    /// anything else is refused).
     #[arg(long, value_name = "DIR", default_value = "bitrock-report")]
     pub out: PathBuf,
 }

@@ -121,7 +121,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let computed = map::boundaries(&inputs, &omega, c, w_ref_n, p);
     for (input, b) in inputs.iter().zip(computed.laws) {
         let grid = map::probability_grid_on(cmd.backend, input, &omega, &wob, criterion, w_ref_n, &mut |line| {
-            eprintln!("{line}")
+            super::print::note(line)
         })?;
         boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples}));
         grids.insert(

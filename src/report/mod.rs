@@ -155,28 +155,23 @@ const MIN_CORRELATION_PARTICLES: usize = 20;
 /// laws that die out).
 const MIN_MAP_PROBABILITY: f64 = 0.01;
 
-/// Writes `report.md` and the figures under `dir/figures/` (creating `dir`; files of the same
-/// names are replaced, nothing else is touched). Everything is rendered in memory first and
-/// moved into place only when all of it succeeded.
+/// Writes `report.md` and the figures under `dir/figures/`: everything is rendered in memory
+/// first, then `dir` is replaced as a whole ([`crate::files::replace_dir`]), so it never mixes
+/// figures of two reports. A `dir` holding anything but a report is refused.
 pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
     let start = Instant::now();
     let prepared = Prepared::new(input)?;
     let rendered = figures::render_all(&prepared)?;
     let markdown = prepared.markdown(&rendered.iter().map(|r| r.info.clone()).collect::<Vec<_>>());
 
-    let mut files: Vec<(PathBuf, Vec<u8>)> = vec![(PathBuf::from("report.md"), markdown.into_bytes())];
+    let figures = Path::new(crate::rundir::FIGURES_DIR);
+    let mut files: Vec<(PathBuf, Vec<u8>)> = vec![(PathBuf::from(crate::rundir::REPORT_MD), markdown.into_bytes())];
     for r in rendered.iter() {
-        files.push((
-            Path::new("figures").join(format!("{}.svg", r.info.stem)),
-            r.svg.as_bytes().to_vec(),
-        ));
-        files.push((Path::new("figures").join(format!("{}.png", r.info.stem)), r.png.clone()));
+        files.push((figures.join(format!("{}.svg", r.info.stem)), r.svg.as_bytes().to_vec()));
+        files.push((figures.join(format!("{}.png", r.info.stem)), r.png.clone()));
     }
-    crate::files::check_output_dir(dir, "--out")?;
-    std::fs::create_dir_all(dir.join("figures")).map_err(|source| Error::output("--out", dir, source))?;
-    for (rel, bytes) in &files {
-        crate::files::write_whole(&dir.join(rel), "--out", |out| std::io::Write::write_all(out, bytes))?;
-    }
+    crate::files::refuse_inside_run(dir, "--out")?;
+    crate::files::replace_dir(dir, "--out", &|rel, is_dir| crate::rundir::Owned::Report.owns(rel, is_dir), &files)?;
     let mut names: Vec<PathBuf> = files.into_iter().map(|f| f.0).collect();
     names.sort();
     Ok(ReportSummary {
