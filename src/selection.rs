@@ -175,6 +175,31 @@ pub struct SelectionCheck {
     /// Where the replicates' time went (checks written before it read as zeros).
     #[serde(default)]
     pub timing: CheckTiming,
+    /// The state of the run the check describes: a check whose run has moved on since (a
+    /// resume added populations or changed its settings) is stale ([`SelectionCheck::stale`]).
+    /// `None` for checks written before it was recorded.
+    #[serde(default)]
+    pub describes: Option<RunState>,
+}
+
+/// What a derived output records of the run it was made from: how many populations the run
+/// had, its last ε and its stored settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunState {
+    pub populations: usize,
+    pub last_epsilon: Option<f64>,
+    pub config: serde_json::Value,
+}
+
+impl RunState {
+    /// The state of a stored run.
+    pub fn of(stored: &StoredRun) -> Self {
+        Self {
+            populations: stored.populations.len(),
+            last_epsilon: stored.populations.last().and_then(|p| p.record.epsilon),
+            config: stored.setup.config.clone(),
+        }
+    }
 }
 
 /// Where the check's wall time went. Every batch first synthesises and fits its replicates'
@@ -199,6 +224,24 @@ pub struct CheckTiming {
 }
 
 impl SelectionCheck {
+    /// Why this check no longer describes the run now in `now`, in a sentence; `None` when it
+    /// does. A check that did not record its run's state is said to be of unknown age.
+    pub fn stale(&self, now: &RunState) -> Option<String> {
+        let Some(then) = &self.describes else {
+            return Some("this check does not record which populations it describes (written by an older bitrock); run `bitrock check-selection` again".into());
+        };
+        if then.populations != now.populations || then.config != now.config {
+            return Some(format!(
+                "this check describes the run at {} populations (ε {}); the run has {} now (ε {}) or other settings: run `bitrock check-selection` again",
+                then.populations,
+                then.last_epsilon.map_or("-".into(), |e| format!("{e:.4}")),
+                now.populations,
+                now.last_epsilon.map_or("-".into(), |e| format!("{e:.4}")),
+            ));
+        }
+        None
+    }
+
     /// The confusion matrix as CSV: one line per (generating law, column law) with the mean
     /// probability and the share ranked first.
     pub fn matrix_csv(&self) -> Vec<u8> {
@@ -265,6 +308,10 @@ impl CheckedRun {
     /// particles and a finite least-squares fit.
     pub fn open(dir: &Path) -> Result<Self> {
         let stored = RunStore::open(dir)?.load_with_last_particles()?;
+        // Refused before any work: the check replaces only a check of its own.
+        files::refuse_foreign(&dir.join(SELECTION_DIR), "RUN_DIR", &|rel, is_dir| {
+            crate::rundir::Owned::Selection.owns(rel, is_dir)
+        })?;
         let refuse = |message: String| Error::Data {
             path: dir.to_path_buf(),
             message,
@@ -436,6 +483,7 @@ pub fn check(
         rows,
         seconds: started.elapsed().as_secs_f64(),
         timing,
+        describes: Some(RunState::of(&run.stored)),
     })
 }
 

@@ -203,33 +203,7 @@ impl SimConfig {
                 format!("must be finite, got {}", speed_perturbation_rad_s / RAD_S_PER_RPM),
             ));
         }
-        let n = self.law.n_params();
-        if self.params_nm.len() != n {
-            return Err(Error::arg(
-                "--params",
-                format!(
-                    "law {} takes {n} parameters ({}), got {}",
-                    self.law,
-                    self.law.param_names().join(", "),
-                    self.params_nm.len()
-                ),
-            ));
-        }
-        for (spec, v) in self.law.params().iter().zip(&self.params_nm) {
-            if !v.is_finite() {
-                return Err(Error::arg("--params", format!("{} must be finite, got {v}", spec.name)));
-            }
-        }
-        if let Some((spec, v)) = self.law.bound_violation(&self.params_nm) {
-            return Err(Error::arg(
-                "--params",
-                format!(
-                    "{} = {v} (SI, N·m-based) is below its physical bound {}",
-                    spec.name, spec.lower
-                ),
-            ));
-        }
-        Ok(())
+        self.law.check_params(&self.params_nm, "--params")
     }
 }
 

@@ -517,6 +517,39 @@ impl RunStore {
         Ok(())
     }
 
+    /// How the run ended, when not by its own stopping rules, in a sentence for everything made
+    /// from it: its last invocation was killed before it finished, or it stopped early on a
+    /// draw or time budget (its last population was dropped). `None` for a run that ended by
+    /// its tolerance, schedule, population count, acceptance or stall rule.
+    pub fn early_end(&self) -> Result<Option<String>> {
+        use crate::abc::StopReason;
+        let last: Option<(String, Option<String>)> = self
+            .conn
+            .query_row(
+                "SELECT kind, stop_reason FROM invocations ORDER BY id DESC LIMIT 1",
+                [],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+            .map_err(sql_error(&self.path))?;
+        let Some((kind, stop)) = last else {
+            return Ok(None);
+        };
+        let Some(stop) = stop else {
+            return Ok(Some(format!(
+                "the run was interrupted: its last invocation ({kind}) did not finish; its populations are whole, and `bitrock abc --resume` continues it"
+            )));
+        };
+        let reason: Option<StopReason> = serde_json::from_value(serde_json::Value::String(stop)).ok();
+        Ok(match reason {
+            Some(r @ (StopReason::MaxDraws | StopReason::WallTime)) => Some(format!(
+                "the run stopped early: {}; `bitrock abc --resume` continues it",
+                r.describe()
+            )),
+            _ => None,
+        })
+    }
+
     /// Reads the whole run back, bit for bit as it was written.
     pub fn load(&self) -> Result<StoredRun> {
         self.load_with(true)

@@ -46,6 +46,9 @@ pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     options.validate()?;
     set_threads(cmd.threads)?;
     let checked = CheckedRun::open(&cmd.run)?;
+    if let Some(why) = bitrock::store::RunStore::open(&cmd.run)?.early_end()? {
+        super::print::note(format_args!("note: {}: {why}", cmd.run.display()));
+    }
     let quiet = cmd.quiet;
     let progress = |done: usize, total: usize| {
         if !quiet {

@@ -160,21 +160,19 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
 /// The laws the maps are drawn for: the last population of `--run`, or `--law` at `--params`.
 fn map_inputs(cmd: &StabilityCmd) -> anyhow::Result<Vec<LawSamples>> {
     match (&cmd.run, cmd.law, &cmd.params) {
-        (Some(dir), _, _) => Ok(LawSamples::of_run_dir(dir, cmd.samples)?),
+        (Some(dir), _, _) => {
+            if let Some(why) = bitrock::store::RunStore::open(dir)?.early_end()? {
+                super::print::note(format_args!("note: {}: {why}", dir.display()));
+            }
+            Ok(LawSamples::of_run_dir(dir, cmd.samples)?)
+        }
         (None, Some(law), Some(params)) => {
+            // The count first (scaling takes one value per parameter); the values once in SI.
             if params.len() != law.n_params() {
-                return Err(Error::arg(
-                    "--params",
-                    format!(
-                        "{law} takes {} parameters ({}), got {}",
-                        law.n_params(),
-                        law.param_names().join(", "),
-                        params.len()
-                    ),
-                )
-                .into());
+                law.check_params(params, "--params")?;
             }
             let si = law.scale_torque(params, cmd.torque_unit.newton_metres());
+            law.check_params(&si, "--params")?;
             Ok(vec![LawSamples {
                 law,
                 probability: 1.0,

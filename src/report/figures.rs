@@ -401,7 +401,7 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
 
     // 10. The selection checks of the runs that hold one.
     for (i, r) in p.runs.iter().enumerate() {
-        if let Some(check) = &r.run.selection {
+        if let Some((check, _)) = &r.run.selection {
             let figure = ConfusionMatrix::new(check, &r.run.label);
             out.push(render_one(
                 format!("fig10_selection_{}", i + 1),

@@ -56,8 +56,12 @@ pub struct ReportRun {
     /// demo does), so that its kernel density estimate is not computed twice; `None`: computed
     /// here.
     pub summary: Option<PosteriorSummary>,
-    /// The run's selection check (`bitrock check-selection`), when its directory holds one.
-    pub selection: Option<crate::selection::SelectionCheck>,
+    /// The run's selection check (`bitrock check-selection`), when its directory holds one,
+    /// and why it no longer describes the run when it does not.
+    pub selection: Option<(crate::selection::SelectionCheck, Option<String>)>,
+    /// How the run ended when not by its own stopping rules (interrupted, or stopped on a
+    /// budget): said in the report ([`crate::store::RunStore::early_end`]).
+    pub early_end: Option<String>,
 }
 
 /// The structures and axes of the stability maps. [`Default`] is the paper's.
@@ -467,6 +471,11 @@ impl<'a> Prepared<'a> {
             }
             let _ = writeln!(md);
         }
+        for r in &self.runs {
+            if let Some(why) = &r.run.early_end {
+                let _ = writeln!(md, "\n> **{}:** {why}.", r.run.label);
+            }
+        }
         let any_zero = self.runs.iter().any(|r| {
             r.run
                 .populations
@@ -613,10 +622,10 @@ impl Prepared<'_> {
     /// The section of the runs that hold a selection check: the confusion matrix, the
     /// distribution of the generating law's own probability and the verdicts.
     fn selection_markdown(&self, md: &mut String) {
-        let checked: Vec<(&RunView, &crate::selection::SelectionCheck)> = self
+        let checked: Vec<(&RunView, &crate::selection::SelectionCheck, &Option<String>)> = self
             .runs
             .iter()
-            .filter_map(|r| r.run.selection.as_ref().map(|c| (r, c)))
+            .filter_map(|r| r.run.selection.as_ref().map(|(c, stale)| (r, c, stale)))
             .collect();
         if checked.is_empty() {
             return;
@@ -629,12 +638,15 @@ impl Prepared<'_> {
              sampler. Rows: the law that made the records; columns: mean posterior probability / share of \
              replicates ranking the law first.\n"
         );
-        for (r, check) in checked {
+        for (r, check, stale) in checked {
             let _ = writeln!(
                 md,
                 "### {}: {} replicates per law, N = {}, backend {}, {:.1} s\n",
                 r.run.label, check.replicates, check.particles, check.backend, check.seconds
             );
+            if let Some(why) = stale {
+                let _ = writeln!(md, "> **Stale:** {why}.\n");
+            }
             let _ = write!(md, "| data from |");
             for law in &check.laws {
                 let _ = write!(md, " P({law}) / first |");

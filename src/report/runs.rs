@@ -33,6 +33,7 @@ impl ReportRun {
             w_ref_n: config.fit.w_ref_n,
             summary,
             selection: None,
+            early_end: None,
         }
     }
 }
@@ -45,7 +46,9 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
     let mut first: Option<RunSetup> = None;
     for dir in dirs {
         // The report draws the last population's particles and every population's record.
-        let stored = RunStore::open(dir)?.load_with_last_particles()?;
+        let store = RunStore::open(dir)?;
+        let stored = store.load_with_last_particles()?;
+        let early_end = store.early_end()?;
         if stored.populations.is_empty() {
             return Err(Error::Data {
                 path: dir.clone(),
@@ -68,8 +71,13 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
                 ),
             });
         }
+        let now = crate::selection::RunState::of(&stored);
         let mut run = ReportRun::new(&runs, dir, &config, stored.populations, None);
-        run.selection = crate::selection::read(dir)?;
+        run.early_end = early_end;
+        run.selection = crate::selection::read(dir)?.map(|check| {
+            let stale = check.stale(&now);
+            (check, stale)
+        });
         runs.push(run);
         first.get_or_insert(stored.setup);
     }
