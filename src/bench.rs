@@ -689,6 +689,18 @@ pub struct ParityReport {
 /// Scores the same candidates on both backends for each law's prior in `prior` (one law at a
 /// time), and compares the candidate generators bit for bit.
 pub fn parity(problem: &AbcProblem, candidates: usize, epsilon: Option<f64>) -> Result<ParityReport> {
+    // ρ on both backends, their relative differences and a sorted copy for the median.
+    crate::limits::check_memory(
+        "--candidates",
+        candidates as f64 * 4.0 * 8.0,
+        &format!("comparing {candidates} candidates"),
+    )?;
+    crate::limits::check_work(
+        "--candidates",
+        candidates as f64 * problem.data_len() as f64 * problem.prior.boxes.len() as f64,
+        1e12,
+        &format!("{candidates} candidates on {} samples per law", problem.data_len()),
+    )?;
     let ctx = gpu::context()?;
     let mut laws = Vec::new();
     for (slot, bx) in problem.prior.boxes.iter().enumerate() {

@@ -198,13 +198,56 @@ pub const DEMO_CSV: &str = include_str!("../data/demo.csv");
 /// Name shown for the embedded record.
 pub const DEMO_SOURCE: &str = "<embedded demo data>";
 
-/// Reads a field record from a file.
+/// The most a record read from a pipe may hold, bytes: a day of a 50 Hz downhole tool's
+/// columns is about 0.2 GB, so 4 GB is generous and still bounds an endless stream.
+pub const MAX_PIPE_BYTES: u64 = 4_000_000_000;
+/// Memory the parse needs per byte of the record: the text, the parsed columns and the
+/// filtered copies.
+const PARSE_BYTES_PER_BYTE: f64 = 4.0;
+
+/// Reads a field record from a file: a regular file, whose size is checked against the memory
+/// available before it is read, or a pipe (`/dev/stdin`, a named pipe), read up to
+/// [`MAX_PIPE_BYTES`]. Anything else (a device such as `/dev/zero`, a directory, a socket) is
+/// refused naming the path, before a byte is read.
 pub fn read_field_data(path: &Path, opts: &DataOptions) -> Result<FieldData> {
-    let file = std::fs::File::open(path).map_err(|source| Error::Read {
+    let read_error = |source| Error::Read {
         path: path.to_path_buf(),
         source,
-    })?;
-    parse_field_data(file, path, opts)
+    };
+    let refuse = |message: String| Error::Data {
+        path: path.to_path_buf(),
+        message,
+    };
+    let file = std::fs::File::open(path).map_err(read_error)?;
+    let kind = file.metadata().map_err(read_error)?.file_type();
+    if kind.is_file() {
+        let size = file.metadata().map_err(read_error)?.len();
+        crate::limits::check_memory(
+            "DATA",
+            size as f64 * PARSE_BYTES_PER_BYTE,
+            &format!("reading {} ({})", path.display(), crate::limits::human_bytes(size as f64)),
+        )?;
+        return parse_field_data(file, path, opts);
+    }
+    #[cfg(unix)]
+    if std::os::unix::fs::FileTypeExt::is_fifo(&kind) {
+        let cap = MAX_PIPE_BYTES.min(
+            crate::limits::available_memory_bytes().map_or(u64::MAX, |b| (b as f64 / PARSE_BYTES_PER_BYTE) as u64),
+        );
+        let mut text = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::Read::take(file, cap + 1), &mut text).map_err(read_error)?;
+        if text.len() as u64 > cap {
+            return Err(refuse(format!(
+                "the pipe holds more than {}, the most a record read from a pipe may hold here; write the record to a file",
+                crate::limits::human_bytes(cap as f64)
+            )));
+        }
+        return parse_field_data(text.as_slice(), path, opts);
+    }
+    let what = if kind.is_dir() { "a directory" } else { "a device or socket" };
+    Err(refuse(format!(
+        "is {what}, not a record: give a CSV file (or a pipe such as /dev/stdin)"
+    )))
 }
 
 /// Reads the embedded demo record.

@@ -55,6 +55,28 @@ pub fn check_memory(flag: &str, bytes: f64, what: &str) -> Result<()> {
     Ok(())
 }
 
+/// The longest work a flag may ask for, s: past a day the request is a typo or a unit error,
+/// not a computation anyone waits for.
+pub const MAX_WORK_SECONDS: f64 = 86_400.0;
+
+/// Refuses, naming `flag`, work of `operations` units that would take longer than
+/// [`MAX_WORK_SECONDS`] even at `fastest_per_s` units per second (a rate above what the
+/// fastest machine bitrock runs on reaches: the estimate is a lower bound on the time, so only
+/// requests that cannot finish in a day are refused).
+pub fn check_work(flag: &str, operations: f64, fastest_per_s: f64, what: &str) -> Result<()> {
+    let seconds = operations / fastest_per_s;
+    if seconds.is_nan() || seconds > MAX_WORK_SECONDS {
+        return Err(Error::arg(
+            flag,
+            format!(
+                "{what} would take more than {:.0} hours even at {fastest_per_s:.0e} per second; the most accepted is a day's work",
+                (seconds / 3600.0).min(1e12)
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Bytes in decimal units (B, kB, MB, GB, TB...) with one decimal.
 pub fn human_bytes(bytes: f64) -> String {
     const UNITS: [&str; 7] = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
@@ -70,6 +92,14 @@ pub fn human_bytes(bytes: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn work_beyond_a_day_is_refused_naming_the_flag() {
+        assert!(check_work("--samples", 1e14, 1e10, "the grid").is_ok());
+        let e = check_work("--samples", 1e16, 1e10, "the grid").unwrap_err().to_string();
+        assert!(e.contains("--samples") && e.contains("277 hours"), "{e}");
+        assert!(check_work("--samples", f64::NAN, 1e10, "the grid").is_err());
+    }
 
     #[test]
     fn bytes_read_in_decimal_units() {

@@ -478,11 +478,12 @@ pub fn resume(
     let lock = files::DirLock::acquire(dir)?;
     files::remove_stale(dir);
     let StoredRun { setup, populations } = store.load_with_last_particles()?;
-    check_particles_stored(dir, &populations)?;
+
     let mut config: RunConfig = serde_json::from_value(setup.config.clone()).map_err(|e| Error::Store {
         path: dir.join(STORE_FILE),
         message: format!("the stored configuration is not one this bitrock reads: {e}"),
     })?;
+    check_stored_run(dir, &config, &setup.prior, &populations)?;
     let stored_config = config.clone();
     config.sampler.apply(more);
     config.backend = more.backend.unwrap_or(config.backend);
@@ -531,22 +532,64 @@ pub fn resume(
     })
 }
 
-/// Refuses a store whose last population lacks particles its record counts (rows deleted by
-/// hand): the sampler continues from it and cannot from fewer. Earlier populations are loaded
-/// without particles (`load_with_last_particles`), so only the last is checked.
-fn check_particles_stored(dir: &Path, populations: &[Population]) -> Result<()> {
-    if let Some(p) = populations.last()
-        && p.particles.len() != p.record.accepted
-    {
-        return Err(Error::Data {
-            path: dir.join(STORE_FILE),
-            message: format!(
-                "population {} has {} of its {} particles; the store was altered and this run cannot be continued (start a new run)",
-                p.record.index,
-                p.particles.len(),
-                p.record.accepted
-            ),
-        });
+/// Refuses a store whose populations no longer match its settings (rows deleted or edited by
+/// hand): the sampler continues from the last population and would otherwise silently give a
+/// run that no settings produce. Earlier populations are loaded without particles
+/// (`load_with_last_particles`), so their records are checked, and the last one's particles:
+/// the count, each particle's law, parameters inside the stored prior, ρ below its ε, and
+/// weights that sum to 1.
+fn check_stored_run(dir: &Path, config: &RunConfig, prior: &Prior, populations: &[Population]) -> Result<()> {
+    let refuse = |g: usize, what: String| Error::Data {
+        path: dir.join(STORE_FILE),
+        message: format!("population {g} {what}; the store was altered and this run cannot be continued (start a new run)"),
+    };
+    let n = config.sampler.base().particles;
+    let mut previous_epsilon = f64::INFINITY;
+    for (g, p) in populations.iter().enumerate() {
+        let r = &p.record;
+        if r.index != g {
+            return Err(refuse(g, format!("is stored as population {}", r.index)));
+        }
+        if r.accepted != n {
+            return Err(refuse(g, format!("holds {} particles where the run draws {n}", r.accepted)));
+        }
+        let epsilon = r.epsilon.unwrap_or(f64::INFINITY);
+        if g > 0 && !(epsilon < previous_epsilon) {
+            return Err(refuse(g, format!("has ε = {epsilon}, not below the previous population's {previous_epsilon}")));
+        }
+        previous_epsilon = epsilon;
+    }
+    let Some(last) = populations.last() else {
+        return Ok(());
+    };
+    let g = last.record.index;
+    if last.particles.len() != last.record.accepted {
+        return Err(refuse(
+            g,
+            format!("has {} of its {} particles", last.particles.len(), last.record.accepted),
+        ));
+    }
+    let epsilon = last.record.epsilon.unwrap_or(f64::INFINITY);
+    for particle in &last.particles {
+        let Some(law_box) = prior.boxes.iter().find(|b| b.law == particle.law) else {
+            return Err(refuse(g, format!("holds a particle of {}, a law the run does not compete", particle.law)));
+        };
+        if particle.params.len() != particle.law.n_params() || !law_box.contains(&particle.params) {
+            return Err(refuse(
+                g,
+                format!("holds a {} particle (index {}) outside the run's prior", particle.law, particle.index),
+            ));
+        }
+        if !(particle.rho < epsilon) {
+            return Err(refuse(
+                g,
+                format!("holds a particle (index {}) with ρ = {} not below its ε = {epsilon}", particle.index, particle.rho),
+            ));
+        }
+    }
+    let total: f64 = last.particles.iter().map(|p| p.weight).sum();
+    if !last.particles.iter().all(|p| p.weight.is_finite() && p.weight >= 0.0) || (total - 1.0).abs() > 1e-6 {
+        return Err(refuse(g, format!("has particle weights summing to {total}, not 1")));
     }
     Ok(())
 }

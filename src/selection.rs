@@ -78,6 +78,40 @@ impl CheckOptions {
     }
 }
 
+/// Candidate evaluations per second above any device's: the time estimate is a lower bound.
+const FASTEST_EVALUATIONS_PER_S: f64 = 1e12;
+
+/// Refuses, naming `--replicates` or `--batch`, a check that cannot fit in memory (the
+/// results of every replicate, and a batch of replicate runs held at once) or could not finish
+/// in a day (every replicate draws at least its N particles against the whole record).
+fn check_size(run: &CheckedRun, options: &CheckOptions) -> Result<()> {
+    let laws = run.config.laws.len() as f64;
+    let replicates = options.replicates as f64 * laws;
+    let particles = run.config.sampler.base().particles as f64;
+    let samples = run.stored.setup.data.calibration.len() as f64;
+    let result_bytes = std::mem::size_of::<Replicate>() as f64 + (laws + crate::laws::MAX_PARAMS as f64) * 8.0;
+    crate::limits::check_memory(
+        "--replicates",
+        replicates * result_bytes,
+        &format!("the results of {replicates} replicates"),
+    )?;
+    let batch = options.batch.map_or(replicates, |b| (b as f64).min(replicates));
+    // A replicate run holds two populations and its synthetic record.
+    let run_bytes = 2.0 * particles * (std::mem::size_of::<crate::abc::Particle>() as f64 + 8.0 * crate::laws::MAX_PARAMS as f64)
+        + samples * 4.0 * 8.0;
+    crate::limits::check_memory(
+        if options.batch.is_some() { "--batch" } else { "--replicates" },
+        batch * run_bytes,
+        &format!("{batch} replicate runs at once (N = {particles})"),
+    )?;
+    crate::limits::check_work(
+        "--replicates",
+        replicates * particles * samples,
+        FASTEST_EVALUATIONS_PER_S,
+        &format!("{replicates} replicate runs of N = {particles} on {samples} samples"),
+    )
+}
+
 /// Where a generating law's parameters come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -395,6 +429,7 @@ pub fn check(
     let config = &run.config;
     let laws = &config.laws;
     let k = options.replicates;
+    check_size(run, options)?;
     let jobs: Vec<Job> = (0..laws.len())
         .flat_map(|slot| (0..k).map(move |replicate| Job { slot, replicate }))
         .collect();

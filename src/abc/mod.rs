@@ -197,7 +197,7 @@ impl StopReason {
     /// A sentence for people.
     pub fn describe(self) -> &'static str {
         match self {
-            StopReason::EpsMin => "the tolerance reached --eps-min",
+            StopReason::EpsMin => "the tolerance reached the run's floor ε_min",
             StopReason::ScheduleExhausted => "the --epsilons schedule ran out",
             StopReason::MaxPopulations => "--max-populations populations were drawn",
             StopReason::AcceptanceFloor => "the projected acceptance fell below --min-acceptance",

@@ -124,6 +124,26 @@ impl RejectionConfig {
                 }
                 previous = e;
             }
+            // A schedule is run as given or refused: never cut at the floor or the count.
+            if let Some(&below) = list.iter().find(|&&e| e < self.eps_min) {
+                return Err(Error::arg(
+                    "--epsilons",
+                    format!(
+                        "{below} lies below --eps-min {}, where the run would stop: lower --eps-min or end the schedule above it",
+                        self.eps_min
+                    ),
+                ));
+            }
+            if list.len() >= self.max_populations {
+                return Err(Error::arg(
+                    "--max-populations",
+                    format!(
+                        "{} populations cannot hold the schedule's {} tolerances after population 0",
+                        self.max_populations,
+                        list.len()
+                    ),
+                ));
+            }
         }
         if let Some(t) = self.max_seconds
             && !(t.is_finite() && t > 0.0)

@@ -1,6 +1,7 @@
 //! `bitrock abc`: a new run into `--out`, or `--resume DIR`, through the library's
 //! [`bitrock::pipeline`]; then the population table and posterior, or run.json on stdout.
 
+use super::args::finite_number;
 use super::args::{DataArgs, FitArgs, load_data, set_threads};
 use super::print;
 use super::progress::RunProgress;
@@ -55,7 +56,7 @@ pub struct AbcArgs {
     pub particles: usize,
     /// Prior half-width: each parameter is uniform on [p(1 − δ), p(1 + δ)] around its
     /// least-squares estimate p, clipped to its physical bound.
-    #[arg(long, default_value_t = RunConfig::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, default_value_t = RunConfig::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
     pub delta: f64,
     /// How the prior boxes are sized: delta = the paper's φ̂(1 ± δ); stderr = φ̂ ± k·σ̂ with σ̂
     /// the least-squares standard error (k = --prior-k), which does not grow with |φ̂| (the
@@ -63,7 +64,7 @@ pub struct AbcArgs {
     #[arg(long, value_enum, default_value_t = PriorRuleArg::Delta)]
     pub prior_rule: PriorRuleArg,
     /// Standard errors on each side of the estimate with --prior-rule stderr [default: 3].
-    #[arg(long, value_name = "K", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, value_name = "K", allow_hyphen_values = true)]
     pub prior_k: Option<f64>,
     /// Prior file (TOML) with explicit bounds or law weights; overrides the δ rule where it
     /// speaks (format in the README).
@@ -71,13 +72,14 @@ pub struct AbcArgs {
     pub prior: Option<PathBuf>,
     /// Smallest tolerance on ρ: the population that reaches it is the last [default: 0.014,
     /// the paper's; with --resume: the run's].
-    #[arg(long, value_name = "EPS")]
+    #[arg(long, value_parser = finite_number, value_name = "EPS")]
     pub eps_min: Option<f64>,
-    /// Tolerance schedule ε_1 > ε_2 > ... instead of the median rule (ε_0 stays ∞).
-    #[arg(long, value_delimiter = ',', value_name = "E1,E2,...")]
+    /// Tolerance schedule ε_1 > ε_2 > ... instead of the median rule (ε_0 stays ∞), run as
+    /// given: the run ends with its last tolerance (values below --eps-min are refused).
+    #[arg(long, value_parser = finite_number, value_delimiter = ',', value_name = "E1,E2,...")]
     pub epsilons: Option<Vec<f64>>,
     /// Tolerance of population 0 [default: ∞, the first N prior draws].
-    #[arg(long, value_name = "EPS")]
+    #[arg(long, value_parser = finite_number, value_name = "EPS")]
     pub start_epsilon: Option<f64>,
     /// Most populations, population 0 included [default: 30; with --resume: the run's].
     #[arg(long, value_name = "G")]
@@ -87,11 +89,11 @@ pub struct AbcArgs {
     pub max_draws: Option<u64>,
     /// Stop when the projected acceptance rate of the next population falls below this
     /// [default: 1e-5; with --resume: the run's].
-    #[arg(long, value_name = "RATE")]
+    #[arg(long, value_parser = finite_number, value_name = "RATE")]
     pub min_acceptance: Option<f64>,
     /// Wall-time budget of this invocation in seconds; the population in progress is dropped
     /// and the run can be continued with --resume (which has no budget unless given again).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
     /// Rejection sampler only. nested: one candidate stream, each population keeps the previous
     /// particles below its tolerance (same distribution, 0.38× the evaluations on the demo
@@ -105,11 +107,11 @@ pub struct AbcArgs {
     pub sampler: Sampler,
     /// SMC only: probability that the model kernel keeps a particle's law (else it jumps
     /// uniformly to another law still alive) [default: 0.7].
-    #[arg(long, value_name = "P", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, value_name = "P", allow_hyphen_values = true)]
     pub p_stay: Option<f64>,
     /// SMC only: the Gaussian perturbation's covariance is this times the weighted covariance
     /// of the law's previous particles [default: 2, Beaumont et al. 2009].
-    #[arg(long, value_name = "S", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, value_name = "S", allow_hyphen_values = true)]
     pub kernel_scale: Option<f64>,
     /// SMC only: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
     /// that GPU and CPU runs give the same populations; evaluator: on the --backend (the
@@ -228,10 +230,17 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
     check_sampler_flags(args)?;
     check_prior_flags(args)?;
     let defaults = RejectionConfig::default();
+    // A schedule is the user's: it ends the run where it ends (no floor below it unless
+    // --eps-min is given) and has room for all its populations unless --max-populations says less.
+    let schedule = args.epsilons.as_ref().map(Vec::len);
     let sampler = RejectionConfig {
         particles: args.particles,
-        eps_min: args.eps_min.unwrap_or(defaults.eps_min),
-        max_populations: args.max_populations.unwrap_or(defaults.max_populations),
+        eps_min: args
+            .eps_min
+            .unwrap_or(if schedule.is_some() { 0.0 } else { defaults.eps_min }),
+        max_populations: args
+            .max_populations
+            .unwrap_or(defaults.max_populations.max(schedule.map_or(0, |n| n + 1))),
         max_draws: args.max_draws.unwrap_or(defaults.max_draws),
         min_acceptance: args.min_acceptance.unwrap_or(defaults.min_acceptance),
         start_epsilon: args.start_epsilon,
@@ -260,7 +269,7 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
                 })
             }
         },
-        eps_min_from_record: args.eps_min.is_none(),
+        eps_min_from_record: args.eps_min.is_none() && schedule.is_none(),
     })
 }
 

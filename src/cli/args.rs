@@ -37,19 +37,19 @@ pub struct DataArgs {
     pub wob_unit: Option<ForceUnit>,
     /// Drop rows whose bit speed is below this, rpm: the laws hold for a turning bit, and
     /// stick-phase samples say nothing about them.
-    #[arg(long, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
+    #[arg(long, value_parser = finite_number, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
     pub min_speed_rpm: f64,
     /// Use only rows at or after this time, s (needs a time column).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
     pub t_start_s: Option<f64>,
     /// Use only rows at or before this time, s (needs a time column).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
     pub t_end_s: Option<f64>,
     /// Keep every K-th row of the time window (applied before the speed filter).
     #[arg(long, default_value_t = DataOptions::default().thin, value_name = "K")]
     pub thin: usize,
     /// Fraction of the kept rows used for calibration; the rest validates the fit.
-    #[arg(long, default_value_t = DataOptions::default().calibration_fraction, value_name = "F")]
+    #[arg(long, value_parser = finite_number, default_value_t = DataOptions::default().calibration_fraction, value_name = "F")]
     pub calibration_fraction: f64,
     /// How calibration rows are chosen: block = the first part of the record, interleaved =
     /// spread evenly through it.
@@ -95,7 +95,7 @@ pub struct FitArgs {
     #[arg(long)]
     pub scale_by_wob: bool,
     /// Reference weight on bit W_ref, kN, of --scale-by-wob [default: 244.2, the paper's].
-    #[arg(long, value_name = "KN")]
+    #[arg(long, value_parser = finite_number, value_name = "KN")]
     pub w_ref_kn: Option<f64>,
 }
 
@@ -116,6 +116,18 @@ impl FitArgs {
             starts: self.starts,
             w_ref_n: self.scale_by_wob.then_some(w_ref_kn * 1000.0),
         })
+    }
+}
+
+/// The value parser of every floating-point flag: a number, finite. NaN and infinities are
+/// refused where they enter, naming the flag (clap's error, exit status 2); ranges and signs
+/// are the library's validation, which names the flag too.
+pub fn finite_number(text: &str) -> Result<f64, String> {
+    let value: f64 = text.trim().parse().map_err(|_| format!("'{text}' is not a number"))?;
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(format!("'{text}' is not a finite number"))
     }
 }
 
@@ -155,10 +167,10 @@ pub struct FeArgs {
     #[arg(long, value_name = "N")]
     pub bha_elements: Option<usize>,
     /// Mass-proportional Rayleigh damping α, 1/s.
-    #[arg(long, value_name = "ALPHA")]
+    #[arg(long, value_parser = finite_number, value_name = "ALPHA")]
     pub alpha: Option<f64>,
     /// Stiffness-proportional Rayleigh damping β, s.
-    #[arg(long, value_name = "BETA")]
+    #[arg(long, value_parser = finite_number, value_name = "BETA")]
     pub beta: Option<f64>,
 }
 
@@ -166,13 +178,13 @@ pub struct FeArgs {
 #[derive(Debug, Args, Clone)]
 pub struct LumpedArgs {
     /// Equivalent moment of inertia I_eq, kg·m².
-    #[arg(long, default_value_t = Lumped::default().inertia_kg_m2, value_name = "KG_M2")]
+    #[arg(long, value_parser = finite_number, default_value_t = Lumped::default().inertia_kg_m2, value_name = "KG_M2")]
     pub inertia_kg_m2: f64,
     /// Natural frequency omega_n, rad/s.
-    #[arg(long, default_value_t = Lumped::default().omega_n_rad_s, value_name = "RAD_S")]
+    #[arg(long, value_parser = finite_number, default_value_t = Lumped::default().omega_n_rad_s, value_name = "RAD_S")]
     pub omega_n_rad_s: f64,
     /// Damping ratio xi.
-    #[arg(long, default_value_t = Lumped::default().damping_ratio, value_name = "XI")]
+    #[arg(long, value_parser = finite_number, default_value_t = Lumped::default().damping_ratio, value_name = "XI")]
     pub damping_ratio: f64,
 }
 

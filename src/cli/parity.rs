@@ -1,5 +1,6 @@
 //! `bitrock parity`: the same candidates scored on the CPU and the GPU, and their agreement.
 
+use super::args::finite_number;
 use super::args::{DataArgs, load_data};
 use bitrock::Error;
 use bitrock::eval::AbcProblem;
@@ -23,7 +24,7 @@ pub struct ParityCmd {
     #[arg(long, default_value_t = 100_000, value_name = "N")]
     pub candidates: usize,
     /// Tolerance at which accept/reject decisions are compared [default: each law's median ρ].
-    #[arg(long, value_name = "EPS")]
+    #[arg(long, value_parser = finite_number, value_name = "EPS")]
     pub epsilon: Option<f64>,
     /// Seed of the candidate stream.
     #[arg(long, default_value_t = 1)]

@@ -1,6 +1,7 @@
 //! `bitrock stability`: maps over (Ω, W) from an ABC run directory or from one law's
 //! parameters: deterministic, percentile and mixture boundaries, and the probability grids.
 
+use super::args::finite_number;
 use super::args::{FeArgs, LumpedArgs};
 use bitrock::eval::Backend;
 use bitrock::laws::PAPER_W_REF_N;
@@ -32,7 +33,7 @@ pub struct StabilityCmd {
     #[arg(long, requires = "params")]
     pub law: Option<bitrock::Law>,
     /// The law's parameters in its order, torques in --torque-unit.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
+    #[arg(long, value_parser = finite_number, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
     pub params: Option<Vec<f64>>,
     /// Unit of the torque-valued parameters in --params.
     #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
@@ -45,7 +46,7 @@ pub struct StabilityCmd {
     #[command(flatten)]
     pub lumped: LumpedArgs,
     /// Reference weight on bit W_ref of the law's parameters, kN.
-    #[arg(long, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
+    #[arg(long, value_parser = finite_number, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub w_ref_kn: f64,
     /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value = "20:220:101", value_name = "MIN:MAX:COUNT")]
@@ -55,7 +56,7 @@ pub struct StabilityCmd {
     pub wob_kn: String,
     /// Percentile of the stochastic boundary, %: the weight on bit above which at least this
     /// share of the posterior samples is unstable (the paper's 2 %).
-    #[arg(long, default_value_t = 2.0, value_name = "PERCENT")]
+    #[arg(long, value_parser = finite_number, default_value_t = 2.0, value_name = "PERCENT")]
     pub percentile: f64,
     /// Posterior samples per law for the stochastic maps (the paper's 700).
     #[arg(long, default_value_t = 700, value_name = "S")]
@@ -94,6 +95,8 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     if cmd.samples == 0 {
         return Err(Error::arg("--samples", "must be at least 1").into());
     }
+    // One law's grid first, before the string's critical damping and the run are read.
+    map::check_grid_size(omega.len() * wob.len(), 1, cmd.samples)?;
     if cmd.structure == Structure::Lumped
         && let Some(flag) = cmd.fe.given_flag()
     {
@@ -114,6 +117,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         Structure::Fe => Criterion::Critical(cmd.fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms),
     };
     let inputs = map_inputs(cmd)?;
+    map::check_grid_size(omega.len() * wob.len(), inputs.len(), cmd.samples)?;
     let c = criterion.critical_nms();
     let mut boundaries = serde_json::Map::new();
     let mut grids = serde_json::Map::new();

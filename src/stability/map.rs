@@ -274,6 +274,30 @@ pub fn probability_grid(
     out
 }
 
+/// Bytes of one grid cell as the maps hold and print it: the f64 probability per law and the
+/// mixture, the u32 count the GPU returns, and up to 24 characters of JSON.
+const GRID_CELL_BYTES: f64 = 8.0 + 4.0 + 24.0;
+/// Cell-samples per second above any device's: the time estimate is a lower bound.
+const FASTEST_CELL_SAMPLES_PER_S: f64 = 1e11;
+
+/// Refuses, before any work, a probability grid of `cells` (Ω × W) for `laws` laws of
+/// `samples` samples each that would not fit in memory or could not finish in a day; the
+/// flags of the axes and the sample count are named.
+pub fn check_grid_size(cells: usize, laws: usize, samples: usize) -> Result<()> {
+    let grids = cells as f64 * (laws as f64 + 1.0);
+    crate::limits::check_memory(
+        "--omega-rpm/--wob-kn",
+        grids * GRID_CELL_BYTES,
+        &format!("a grid of {cells} cells for {laws} laws"),
+    )?;
+    crate::limits::check_work(
+        "--samples",
+        cells as f64 * laws as f64 * samples as f64,
+        FASTEST_CELL_SAMPLES_PER_S,
+        &format!("{cells} cells × {samples} samples × {laws} laws"),
+    )
+}
+
 /// [`probability_grid`] of `input` on `backend`: the GPU's `stability_grid` unless `backend`
 /// is the CPU; with `Auto` a GPU failure is told to `note` and the CPU computes the grid.
 pub fn probability_grid_on(
