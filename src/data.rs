@@ -182,6 +182,10 @@ pub struct FieldData {
     pub calibration: Samples,
     /// Samples held back to judge the calibration.
     pub validation: Samples,
+    /// What the record looks wrong in without being unusable (a time column that runs
+    /// backwards, torques mostly of the wrong sign): said once by every command that reads it
+    /// and kept in the run's record.
+    pub warnings: Vec<String>,
 }
 
 /// Names of the columns read.
@@ -478,6 +482,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         ..Samples::default()
     };
     let mut rows_read = 0usize;
+    let mut backwards: Option<(u64, f64, f64)> = None;
     let mut record = csv::StringRecord::new();
     while rdr.read_record(&mut record).map_err(csv_error)? {
         rows_read += 1;
@@ -510,7 +515,14 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
             v.push(cell(i)? * u.newtons());
         }
         if let (Some(i), Some(v)) = (time_i, all.time_s.as_mut()) {
-            v.push(cell(i)?);
+            let t = cell(i)?;
+            if let Some(&previous) = v.last()
+                && t < previous
+                && backwards.is_none()
+            {
+                backwards = Some((line, previous, t));
+            }
+            v.push(t);
         }
     }
     if rows_read == 0 {
@@ -527,6 +539,23 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         time: time_i.map(name),
     };
     let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
+    let mut warnings = Vec::new();
+    if let Some((line, previous, t)) = backwards {
+        warnings.push(format!(
+            "{}:{line}: the time column '{}' runs backwards (t = {t} s after {previous} s): rows are used in file order, and the time window and the block split assume time order",
+            path.display(),
+            columns.time.as_deref().unwrap_or("time")
+        ));
+    }
+    let used = calibration.torque_nm.iter().chain(&validation.torque_nm);
+    let negative = used.clone().filter(|&&y| y < 0.0).count();
+    if 2 * negative > rows_used {
+        warnings.push(format!(
+            "{}: {negative} of the {rows_used} torques used are negative: the laws give a positive torque on bit for a turning bit; check the sign convention of column '{}'",
+            path.display(),
+            columns.torque
+        ));
+    }
 
     Ok(FieldData {
         source: path.to_path_buf(),
@@ -537,6 +566,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         rows_used,
         calibration,
         validation,
+        warnings,
     })
 }
 

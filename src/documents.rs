@@ -127,8 +127,8 @@ pub struct RunSummary<'a> {
 }
 
 impl RunSummary<'_> {
-    /// The run.json document.
-    pub fn json(&self) -> Value {
+    /// The run.json document, with the result's `warnings` ([`crate::pipeline::Analysis::warnings`]).
+    pub fn json(&self, warnings: Vec<String>) -> Value {
         let unit = self.data.torque_unit;
         let priors = prior_json(self.prior, unit);
         let laws: Vec<Value> = self
@@ -167,6 +167,7 @@ impl RunSummary<'_> {
             "populations": self.run.populations.iter().map(|p| population_json(&p.record)).collect::<Vec<_>>(),
             "stop_reason": self.run.stop,
             "stop_description": self.run.stop.describe(),
+            "warnings": warnings,
             "posterior": {
                 "population": self.summary_population,
                 "total": self.posterior.total,

@@ -18,6 +18,10 @@ use std::path::Path;
 
 /// Speeds of the predictive envelopes, evenly spaced over the record's range.
 const ENVELOPE_SPEEDS: usize = 200;
+/// A least-squares ρ below this is an exact fit (rounding of an exactly representable record).
+const EXACT_FIT_RHO: f64 = 1e-12;
+/// An effective sample size below this share of a population's particles is warned of.
+const MIN_ESS_SHARE: f64 = 0.1;
 
 pub use crate::run::RunDir;
 
@@ -145,6 +149,45 @@ impl Analysis {
         })
     }
 
+    /// What the user must know about a result that ran but says less than it seems to: the
+    /// record's warnings, every law fitting it exactly (ρ = 0: a constant torque, which no
+    /// tolerance can tell the laws apart on), and populations whose effective sample size is a
+    /// small share of their particles (their estimates rest on a few heavy particles). Said
+    /// once each, by the command and in run.json (`warnings`).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out = self.outcome.setup.data.warnings.clone();
+        out.extend(self.run_warnings());
+        out
+    }
+
+    /// [`Self::warnings`] of the run itself, without the record's (which the command that
+    /// read the record has said).
+    pub fn run_warnings(&self) -> Vec<String> {
+        let setup = &self.outcome.setup;
+        let mut out = Vec::new();
+        if !setup.fits.is_empty() && setup.fits.iter().all(|f| f.rho < EXACT_FIT_RHO) {
+            out.push(format!(
+                "every law fits the record exactly (ρ < {EXACT_FIT_RHO:e}): the torque does not depend on the bit speed here (a constant record?), and the model probabilities say nothing"
+            ));
+        }
+        let thin: Vec<String> = self
+            .outcome
+            .run
+            .populations
+            .iter()
+            .filter(|p| p.record.accepted > 0 && p.record.ess < MIN_ESS_SHARE * p.record.accepted as f64)
+            .map(|p| format!("{} ({:.0} of {})", p.record.index, p.record.ess, p.record.accepted))
+            .collect();
+        if !thin.is_empty() {
+            out.push(format!(
+                "effective sample size below {:.0} % of the particles in population(s) {}: those estimates rest on a few heavily weighted particles (more particles or a wider SMC kernel help)",
+                MIN_ESS_SHARE * 100.0,
+                thin.join(", ")
+            ));
+        }
+        out
+    }
+
     /// The run.json document (also what `abc --json` prints).
     pub fn json(&self) -> serde_json::Value {
         let outcome = &self.outcome;
@@ -161,7 +204,7 @@ impl Analysis {
             seed: outcome.config.seed,
             backend: outcome.backend,
         }
-        .json()
+        .json(self.warnings())
     }
 
     /// Writes run.json, envelopes.csv and data.csv into the run directory `dir`, each whole or

@@ -612,6 +612,7 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
             .join(format!("{SELECTION_DIR}/{law}-replicate-{}", job.replicate)),
         calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &residuals, &mut rng),
         validation: synthesize(law, &params_si, &data.validation, w_ref_n, &residuals, &mut rng),
+        warnings: Vec::new(),
         ..data.clone()
     };
     let fits = crate::fit::fit_record(&config.laws, &synthetic, &config.fit)?;

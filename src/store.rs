@@ -157,6 +157,9 @@ struct DataMeta {
     columns: ColumnsUsed,
     rows_read: usize,
     rows_used: usize,
+    /// The record's warnings (stores written before they were kept read as none).
+    #[serde(default)]
+    warnings: Vec<String>,
 }
 
 /// What defines a run besides its populations.
@@ -582,6 +585,7 @@ impl RunStore {
             rows_used: data_meta.rows_used,
             calibration: self.load_samples("calibration")?,
             validation: self.load_samples("validation")?,
+            warnings: data_meta.warnings,
         };
         let fits = self.load_fits(RecordScales::of(&data.calibration))?;
         let prior = self.load_prior()?;
@@ -1093,6 +1097,7 @@ fn data_meta(data: &FieldData) -> DataMeta {
         columns: data.columns.clone(),
         rows_read: data.rows_read,
         rows_used: data.rows_used,
+        warnings: data.warnings.clone(),
     }
 }
 

@@ -172,6 +172,9 @@ pub struct AbcCmd {
 
 pub fn run(cmd: &AbcCmd) -> anyhow::Result<ExitCode> {
     let done = start_or_resume(cmd)?;
+    for warning in done.run_warnings() {
+        super::print::note(format_args!("warning: {warning}"));
+    }
     let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &done.json())?;

@@ -134,13 +134,17 @@ pub fn finite_number(text: &str) -> Result<f64, String> {
 /// The record at `path`, or the embedded demo record (saying so) when there is none.
 pub fn load_data(path: Option<&Path>, args: &DataArgs) -> anyhow::Result<FieldData> {
     let opts = args.options();
-    Ok(match path {
+    let data = match path {
         Some(path) => data::read_field_data(path, &opts)?,
         None => {
             super::print::note("note: no DATA given; using the embedded synthetic demo record");
             data::demo_field_data(&opts)?
         }
-    })
+    };
+    for warning in &data.warnings {
+        super::print::note(format_args!("warning: {warning}"));
+    }
+    Ok(data)
 }
 
 /// Sizes rayon's global pool (`--threads`, bounded by [`bitrock::limits::max_threads`]);

@@ -100,6 +100,9 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         let done = job.run(data.clone(), &mut RunProgress::new(false), &mut |line| {
             super::print::note(line)
         })?;
+        for warning in done.run_warnings() {
+            super::print::note(format_args!("warning: {warning}"));
+        }
         print::population_table(&mut out, &done.outcome.run)?;
         print::posterior(&mut out, &done.posterior, data.torque_unit)?;
         headlines.push(Headline {
