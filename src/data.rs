@@ -229,7 +229,11 @@ pub fn read_field_data(path: &Path, opts: &DataOptions) -> Result<FieldData> {
         crate::limits::check_memory(
             "DATA",
             size as f64 * PARSE_BYTES_PER_BYTE,
-            &format!("reading {} ({})", path.display(), crate::limits::human_bytes(size as f64)),
+            &format!(
+                "reading {} ({})",
+                path.display(),
+                crate::limits::human_bytes(size as f64)
+            ),
         )?;
         return parse_field_data(file, path, opts);
     }
@@ -248,7 +252,11 @@ pub fn read_field_data(path: &Path, opts: &DataOptions) -> Result<FieldData> {
         }
         return parse_field_data(text.as_slice(), path, opts);
     }
-    let what = if kind.is_dir() { "a directory" } else { "a device or socket" };
+    let what = if kind.is_dir() {
+        "a directory"
+    } else {
+        "a device or socket"
+    };
     Err(refuse(format!(
         "is {what}, not a record: give a CSV file (or a pipe such as /dev/stdin)"
     )))

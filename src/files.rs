@@ -278,6 +278,9 @@ pub fn replace_dir(
         std::fs::create_dir_all(parent_dir(&path)).map_err(|source| Error::output(flag, target, source))?;
         write_own(&path, flag, |out| out.write_all(bytes))?;
     }
+    // The lock file goes before the swap (the lock itself is held on its open file until the
+    // end): the directory holds exactly `contents`.
+    let _ = std::fs::remove_file(staging.path().join(LOCK_FILE));
     if target.exists() {
         exchange_dirs(target, staging.path()).map_err(|source| Error::output(flag, target, source))?;
         // The staging name now holds the old directory: dropping it removes it.

@@ -284,7 +284,10 @@ impl Law {
         }
         for (spec, v) in self.params().iter().zip(params_si) {
             if !v.is_finite() {
-                return Err(crate::Error::arg(flag, format!("{} must be finite, got {v}", spec.name)));
+                return Err(crate::Error::arg(
+                    flag,
+                    format!("{} must be finite, got {v}", spec.name),
+                ));
             }
         }
         if let Some((spec, v)) = self.bound_violation(params_si) {

@@ -541,7 +541,9 @@ pub fn resume(
 fn check_stored_run(dir: &Path, config: &RunConfig, prior: &Prior, populations: &[Population]) -> Result<()> {
     let refuse = |g: usize, what: String| Error::Data {
         path: dir.join(STORE_FILE),
-        message: format!("population {g} {what}; the store was altered and this run cannot be continued (start a new run)"),
+        message: format!(
+            "population {g} {what}; the store was altered and this run cannot be continued (start a new run)"
+        ),
     };
     let n = config.sampler.base().particles;
     let mut previous_epsilon = f64::INFINITY;
@@ -551,11 +553,17 @@ fn check_stored_run(dir: &Path, config: &RunConfig, prior: &Prior, populations: 
             return Err(refuse(g, format!("is stored as population {}", r.index)));
         }
         if r.accepted != n {
-            return Err(refuse(g, format!("holds {} particles where the run draws {n}", r.accepted)));
+            return Err(refuse(
+                g,
+                format!("holds {} particles where the run draws {n}", r.accepted),
+            ));
         }
         let epsilon = r.epsilon.unwrap_or(f64::INFINITY);
         if g > 0 && !(epsilon < previous_epsilon) {
-            return Err(refuse(g, format!("has ε = {epsilon}, not below the previous population's {previous_epsilon}")));
+            return Err(refuse(
+                g,
+                format!("has ε = {epsilon}, not below the previous population's {previous_epsilon}"),
+            ));
         }
         previous_epsilon = epsilon;
     }
@@ -572,18 +580,27 @@ fn check_stored_run(dir: &Path, config: &RunConfig, prior: &Prior, populations: 
     let epsilon = last.record.epsilon.unwrap_or(f64::INFINITY);
     for particle in &last.particles {
         let Some(law_box) = prior.boxes.iter().find(|b| b.law == particle.law) else {
-            return Err(refuse(g, format!("holds a particle of {}, a law the run does not compete", particle.law)));
+            return Err(refuse(
+                g,
+                format!("holds a particle of {}, a law the run does not compete", particle.law),
+            ));
         };
         if particle.params.len() != particle.law.n_params() || !law_box.contains(&particle.params) {
             return Err(refuse(
                 g,
-                format!("holds a {} particle (index {}) outside the run's prior", particle.law, particle.index),
+                format!(
+                    "holds a {} particle (index {}) outside the run's prior",
+                    particle.law, particle.index
+                ),
             ));
         }
         if !(particle.rho < epsilon) {
             return Err(refuse(
                 g,
-                format!("holds a particle (index {}) with ρ = {} not below its ε = {epsilon}", particle.index, particle.rho),
+                format!(
+                    "holds a particle (index {}) with ρ = {} not below its ε = {epsilon}",
+                    particle.index, particle.rho
+                ),
             ));
         }
     }
@@ -679,7 +696,9 @@ impl Storing<'_> {
             return Ok(());
         }
         let Writer::Here(store) = &mut self.store else {
-            return Err(Error::Incomplete("the invocation is recorded before any population is written".into()));
+            return Err(Error::Incomplete(
+                "the invocation is recorded before any population is written".into(),
+            ));
         };
         let inv = &self.invocation;
         self.invocation.id = Some(store.begin_invocation(inv.kind, inv.backend, &inv.config)?);

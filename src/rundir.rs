@@ -59,7 +59,9 @@ impl Owned {
                 [STORE_FILE, RUN_JSON, ENVELOPES_CSV, DATA_CSV].contains(name) || STORE_COMPANIONS.contains(name)
             }
             (Owned::Run, [SELECTION_DIR]) => is_dir,
-            (Owned::Run, [SELECTION_DIR, rest @ ..]) => Owned::Selection.owns(&rest.iter().collect::<std::path::PathBuf>(), is_dir),
+            (Owned::Run, [SELECTION_DIR, rest @ ..]) => {
+                Owned::Selection.owns(&rest.iter().collect::<std::path::PathBuf>(), is_dir)
+            }
             (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,

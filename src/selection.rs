@@ -97,10 +97,15 @@ fn check_size(run: &CheckedRun, options: &CheckOptions) -> Result<()> {
     )?;
     let batch = options.batch.map_or(replicates, |b| (b as f64).min(replicates));
     // A replicate run holds two populations and its synthetic record.
-    let run_bytes = 2.0 * particles * (std::mem::size_of::<crate::abc::Particle>() as f64 + 8.0 * crate::laws::MAX_PARAMS as f64)
-        + samples * 4.0 * 8.0;
+    let run_bytes =
+        2.0 * particles * (std::mem::size_of::<crate::abc::Particle>() as f64 + 8.0 * crate::laws::MAX_PARAMS as f64)
+            + samples * 4.0 * 8.0;
     crate::limits::check_memory(
-        if options.batch.is_some() { "--batch" } else { "--replicates" },
+        if options.batch.is_some() {
+            "--batch"
+        } else {
+            "--replicates"
+        },
         batch * run_bytes,
         &format!("{batch} replicate runs at once (N = {particles})"),
     )?;
@@ -771,7 +776,12 @@ pub fn write(run: &CheckedRun, check: &SelectionCheck) -> Result<PathBuf> {
     ];
     let contents: Vec<(PathBuf, Vec<u8>)> = names.iter().map(PathBuf::from).zip(bodies).collect();
     let target = dir.join(SELECTION_DIR);
-    files::replace_dir(&target, "RUN_DIR", &|rel, is_dir| crate::rundir::Owned::Selection.owns(rel, is_dir), &contents)?;
+    files::replace_dir(
+        &target,
+        "RUN_DIR",
+        &|rel, is_dir| crate::rundir::Owned::Selection.owns(rel, is_dir),
+        &contents,
+    )?;
     Ok(target)
 }
 

@@ -183,6 +183,18 @@ impl SimConfig {
                 self.duration_s, self.sample_hz
             ),
         )?;
+        // RK4 steps of the settling and the recording: at most a day's work even at a rate
+        // above any machine's (the steps themselves are serial).
+        crate::limits::check_work(
+            "--dt-s",
+            (self.settle_s + self.duration_s) / self.dt_s,
+            FASTEST_STEPS_PER_S,
+            &format!(
+                "integrating {} s in steps of {} s",
+                self.settle_s + self.duration_s,
+                self.dt_s
+            ),
+        )?;
         if self.dt_s > 1.0 / self.sample_hz {
             return Err(Error::arg(
                 "--dt-s",
@@ -277,6 +289,8 @@ pub fn write_csv_in<W: std::io::Write>(trace: &Trace, unit: TorqueUnit, out: W) 
     Ok(())
 }
 
+/// RK4 steps per second above any machine's: the time estimate is a lower bound.
+const FASTEST_STEPS_PER_S: f64 = 1e9;
 /// Memory of one recorded sample: time, bit speed, torque and weight on bit, f64 each.
 const TRACE_BYTES_PER_SAMPLE: f64 = 4.0 * 8.0;
 

@@ -515,6 +515,8 @@ pub fn run_observed(
         let first = RejectionConfig {
             max_populations: 1,
             mode: Mode::Nested,
+            // Population 0 is drawn at ε_0; the schedule starts with population 1.
+            epsilons: None,
             ..base.clone()
         };
         let run = rejection::run_observed(evaluator, &first, Vec::new(), observer)?;

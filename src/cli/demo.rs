@@ -5,8 +5,6 @@ use super::args::set_threads;
 use super::fit::fit_and_print;
 use super::print;
 use super::progress::RunProgress;
-use bitrock::rundir::Owned;
-use bitrock::{Error, files};
 use bitrock::abc::posterior::PosteriorSummary;
 use bitrock::abc::rejection::RejectionConfig;
 use bitrock::data;
@@ -16,6 +14,8 @@ use bitrock::pipeline::{AbcJob, RunDir};
 use bitrock::report::ReportRun;
 use bitrock::report::ReportSummary;
 use bitrock::run::{RunConfig, SamplerConfig};
+use bitrock::rundir::Owned;
+use bitrock::{Error, files};
 use clap::Args;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -190,7 +190,9 @@ fn run_dir_name(delta: f64) -> String {
 fn mark_root(root: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(root).map_err(|source| Error::output("--out", root, source))?;
     files::write_own(&root.join(DEMO_MARKER), "--out", |out| {
-        out.write_all(b"Written by `bitrock demo`; a later `bitrock demo` replaces the runs and the report in this directory.\n")
+        out.write_all(
+            b"Written by `bitrock demo`; a later `bitrock demo` replaces the runs and the report in this directory.\n",
+        )
     })?;
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! `bitrock simulate`: the 1-DOF string with a bit-rock law, written as a field-like CSV.
 
-use super::args::finite_number;
 use super::args::LumpedArgs;
+use super::args::finite_number;
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::simulate::{self, Initial, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};

@@ -175,7 +175,12 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
         files.push((figures.join(format!("{}.png", r.info.stem)), r.png.clone()));
     }
     crate::files::refuse_inside_run(dir, "--out")?;
-    crate::files::replace_dir(dir, "--out", &|rel, is_dir| crate::rundir::Owned::Report.owns(rel, is_dir), &files)?;
+    crate::files::replace_dir(
+        dir,
+        "--out",
+        &|rel, is_dir| crate::rundir::Owned::Report.owns(rel, is_dir),
+        &files,
+    )?;
     let mut names: Vec<PathBuf> = files.into_iter().map(|f| f.0).collect();
     names.sort();
     Ok(ReportSummary {

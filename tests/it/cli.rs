@@ -209,7 +209,10 @@ fn demo_prints_fits_and_the_population_table() {
         assert!(stdout.contains(&format!("{law}  T = ")), "{stdout}");
         assert!(stdout.contains(&format!("P({law})")), "{stdout}");
     }
-    assert!(stdout.contains("stopped: the tolerance reached the run's floor ε_min"), "{stdout}");
+    assert!(
+        stdout.contains("stopped: the tolerance reached the run's floor ε_min"),
+        "{stdout}"
+    );
     for delta in ["0.4", "0.6", "0.8"] {
         assert!(out.join(format!("delta-{delta}/run.json")).exists());
         assert!(out.join(format!("delta-{delta}/run.sqlite")).exists());

@@ -46,7 +46,7 @@ fn runs_with(config: &RejectionConfig, deltas: &[f64], thin: usize) -> (FieldDat
                 w_ref_n: None,
                 summary: None,
                 selection: None,
-            early_end: None,
+                early_end: None,
             }
         })
         .collect();

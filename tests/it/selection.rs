@@ -125,7 +125,11 @@ fn a_law_that_fits_far_better_is_recovered_in_every_replicate() {
         assert!(run.join("selection").join(name).is_file(), "{name}");
     }
     let (setup, runs) = bitrock::report::read_run_dirs(std::slice::from_ref(&run)).unwrap();
-    assert_eq!(runs[0].selection.as_ref(), Some(&(c.clone(), None)), "a fresh check is not stale");
+    assert_eq!(
+        runs[0].selection.as_ref(),
+        Some(&(c.clone(), None)),
+        "a fresh check is not stale"
+    );
     let report = bitrock::report::write_paper_report(&dir.path().join("report"), &setup, &runs).unwrap();
     let md = std::fs::read_to_string(report.dir.join("report.md")).unwrap();
     assert!(md.contains("## Can the selection be trusted?"), "{md}");

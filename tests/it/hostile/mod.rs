@@ -1,7 +1,15 @@
-//! Hostile but realistic use (issue 16): `--force` never deletes what bitrock did not write,
-//! every file is written whole or not at all, one writer per run directory, no flag hangs or
-//! exhausts the machine, and data or targets that cannot work exit 2 naming the file or flag.
-//! Every run is small (the embedded record, a few hundred particles, the CPU).
+//! Hostile but realistic use: `--force` never deletes what bitrock did not write, every file
+//! is written whole or not at all, one writer per run directory, no flag hangs or exhausts the
+//! machine, and data or targets that cannot work exit 2 naming the file or flag. The modules
+//! below hold one class of failure each. Every run is small (the embedded record, a few hundred
+//! particles, the CPU).
+
+mod bounds;
+mod degenerate;
+mod numbers;
+mod outputs;
+mod stale;
+mod streams;
 
 use crate::support::bin;
 use bitrock::files::{self, DirLock, TEMP_PREFIX};
@@ -9,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 /// Runs bitrock in `cwd`; (status, stdout, stderr).
-fn run_in(cwd: &Path, args: &[&str]) -> (i32, String, String) {
+pub(super) fn run_in(cwd: &Path, args: &[&str]) -> (i32, String, String) {
     let out: Output = bin().current_dir(cwd).args(args).output().expect("run bitrock");
     (
         out.status.code().unwrap_or(-1),
@@ -19,7 +27,12 @@ fn run_in(cwd: &Path, args: &[&str]) -> (i32, String, String) {
 }
 
 /// A small finished run into `dir` (relative to `cwd`), with `extra` flags.
-fn small_run(cwd: &Path, dir: &str, extra: &[&str]) -> (i32, String, String) {
+pub(super) fn small_run(cwd: &Path, dir: &str, extra: &[&str]) -> (i32, String, String) {
+    run_of(cwd, dir, "2", extra)
+}
+
+/// A small run of at most `populations` populations into `dir`, with `extra` flags.
+pub(super) fn run_of(cwd: &Path, dir: &str, populations: &str, extra: &[&str]) -> (i32, String, String) {
     let mut args = vec![
         "abc",
         "--out",
@@ -27,7 +40,7 @@ fn small_run(cwd: &Path, dir: &str, extra: &[&str]) -> (i32, String, String) {
         "--particles",
         "200",
         "--max-populations",
-        "2",
+        populations,
         "--backend",
         "cpu",
         "-q",
@@ -37,14 +50,14 @@ fn small_run(cwd: &Path, dir: &str, extra: &[&str]) -> (i32, String, String) {
 }
 
 /// The particles of a run as CSV (what `export` prints).
-fn export(cwd: &Path, dir: &str) -> String {
+pub(super) fn export(cwd: &Path, dir: &str) -> String {
     let (code, out, err) = run_in(cwd, &["export", dir]);
     assert_eq!(code, 0, "{err}");
     out
 }
 
 /// Names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
+pub(super) fn names(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -54,7 +67,7 @@ fn names(dir: &Path) -> Vec<String> {
 }
 
 /// The embedded record as a file at `path`, its rows changed by `row`.
-fn record(path: &Path, row: impl Fn(&[f64]) -> Vec<f64>) -> PathBuf {
+pub(super) fn record(path: &Path, row: impl Fn(&[f64]) -> Vec<f64>) -> PathBuf {
     let mut text = String::new();
     for (i, line) in bitrock::data::DEMO_CSV.lines().enumerate() {
         if i == 0 || line.starts_with('#') {
@@ -70,7 +83,7 @@ fn record(path: &Path, row: impl Fn(&[f64]) -> Vec<f64>) -> PathBuf {
     path.to_path_buf()
 }
 
-fn assert_refused(result: (i32, String, String), needles: &[&str]) {
+pub(super) fn assert_refused(result: (i32, String, String), needles: &[&str]) {
     let (code, _, err) = result;
     assert_eq!(code, 2, "{err}");
     for needle in needles {

@@ -1,0 +1,173 @@
+//! Only bitrock's own files are ever replaced, by every command that writes: one rule for
+//! output files (never a lock, a temporary or a file inside a run; a symbolic link is written
+//! through) and one for replacing a directory (anything bitrock did not write refuses it).
+
+use super::{assert_refused, export, names, run_in, small_run};
+use std::path::Path;
+
+fn demo(cwd: &Path) -> (i32, String, String) {
+    run_in(cwd, &["demo", "--out", "D", "--particles", "200", "--backend", "cpu"])
+}
+
+#[test]
+fn demo_never_deletes_what_the_user_put_in_its_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, _, err) = demo(tmp.path());
+    assert_eq!(code, 0, "{err}");
+    let d = tmp.path().join("D");
+    let report_before = std::fs::read(d.join("report/report.md")).unwrap();
+    // Each of the user's files, wherever in the demo's tree, refuses the next demo before any
+    // work, is named, and stays.
+    for (rel, is_dir) in [
+        ("notes.txt", false),
+        ("mine", true),
+        ("report/my-notes.md", false),
+        ("report/figures/sketch.txt", false),
+        ("delta-0.4/thesis.tex", false),
+        ("delta-0.6/selection/mine.csv", false),
+    ] {
+        let path = d.join(rel);
+        if is_dir {
+            std::fs::create_dir(&path).unwrap();
+        } else {
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(&path, "mine").unwrap();
+        }
+        let name = Path::new(rel).file_name().unwrap().to_str().unwrap();
+        assert_refused(demo(tmp.path()), &["--out", name, "did not write"]);
+        assert!(path.exists(), "{rel} was removed");
+        assert_eq!(std::fs::read(d.join("report/report.md")).unwrap(), report_before);
+        if is_dir {
+            std::fs::remove_dir(&path).unwrap();
+        } else {
+            std::fs::remove_file(&path).unwrap();
+        }
+    }
+    // A directory the demo did not write is refused as before.
+    std::fs::create_dir(tmp.path().join("E")).unwrap();
+    std::fs::write(tmp.path().join("E/x"), "mine").unwrap();
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &["demo", "--out", "E", "--particles", "200", "--backend", "cpu"],
+        ),
+        &["--out", "not written by `bitrock demo`"],
+    );
+    // With only its own files there, the demo replaces them.
+    let (code, _, err) = demo(tmp.path());
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        names(&d),
+        ["bitrock-demo.txt", "delta-0.4", "delta-0.6", "delta-0.8", "report"]
+    );
+}
+
+#[test]
+fn report_replaces_only_a_report_and_never_writes_into_a_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let (code, _, err) = run_in(tmp.path(), &["report", "R", "--out", "Rep"]);
+    assert_eq!(code, 0, "{err}");
+    let rep = tmp.path().join("Rep");
+    // A stale figure of an earlier report does not survive the next one: the directory is
+    // replaced as a whole.
+    std::fs::write(rep.join("figures/fig99_old.svg"), "<svg/>").unwrap();
+    assert_eq!(run_in(tmp.path(), &["report", "R", "--out", "Rep"]).0, 0);
+    assert!(!rep.join("figures/fig99_old.svg").exists());
+    for rel in ["my-notes.md", "figures/sketch.txt"] {
+        std::fs::write(rep.join(rel), "mine").unwrap();
+        assert_refused(run_in(tmp.path(), &["report", "R", "--out", "Rep"]), &["--out", rel]);
+        assert_eq!(std::fs::read_to_string(rep.join(rel)).unwrap(), "mine");
+        std::fs::remove_file(rep.join(rel)).unwrap();
+    }
+    // Into the run itself or a directory inside it: refused, the run untouched.
+    let before = export(tmp.path(), "R");
+    assert_refused(run_in(tmp.path(), &["report", "R", "--out", "R"]), &["--out"]);
+    assert_refused(
+        run_in(tmp.path(), &["report", "R", "--out", "R/rep"]),
+        &["--out", "inside the run directory"],
+    );
+    assert!(!tmp.path().join("R/rep").exists());
+    assert_eq!(export(tmp.path(), "R"), before);
+}
+
+#[test]
+fn output_files_never_replace_a_lock_a_temporary_or_a_runs_own_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let run_json = std::fs::read(tmp.path().join("R/run.json")).unwrap();
+    for (target, why) in [
+        ("R/.bitrock-lock", "lock or temporary"),
+        ("R/run.json", "inside the run directory"),
+        ("R/notes.csv", "inside the run directory"),
+        ("R/selection.csv", "inside the run directory"),
+        (".bitrock-tmp-x", "lock or temporary"),
+    ] {
+        assert_refused(run_in(tmp.path(), &["export", "R", "-o", target]), &["--out", why]);
+        assert_refused(
+            run_in(
+                tmp.path(),
+                &[
+                    "simulate",
+                    "--law",
+                    "m2",
+                    "--omega-rpm",
+                    "60",
+                    "--duration-s",
+                    "1",
+                    "-o",
+                    target,
+                ],
+            ),
+            &["--out", why],
+        );
+    }
+    assert!(!tmp.path().join("R/notes.csv").exists());
+    assert_eq!(std::fs::read(tmp.path().join("R/run.json")).unwrap(), run_json);
+    // While a writer holds the lock, a second is still refused (the lock file was not replaced).
+    let _held = bitrock::files::DirLock::acquire(&tmp.path().join("R")).unwrap();
+    assert_refused(small_run(tmp.path(), "R", &["--force"]), &["in use by another process"]);
+}
+
+#[test]
+fn an_output_through_a_symbolic_link_writes_the_file_it_points_to() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    std::fs::create_dir(tmp.path().join("results")).unwrap();
+    std::fs::write(tmp.path().join("results/particles.csv"), "old").unwrap();
+    std::os::unix::fs::symlink("results/particles.csv", tmp.path().join("latest.csv")).unwrap();
+    let (code, _, err) = run_in(tmp.path(), &["export", "R", "-o", "latest.csv"]);
+    assert_eq!(code, 0, "{err}");
+    let link = tmp.path().join("latest.csv");
+    assert!(
+        std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(),
+        "the link stays a link"
+    );
+    assert_eq!(
+        std::fs::read_to_string(tmp.path().join("results/particles.csv")).unwrap(),
+        export(tmp.path(), "R")
+    );
+    // A link into a run is judged by where it leads.
+    std::os::unix::fs::symlink("R/run.json", tmp.path().join("sneaky.json")).unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["export", "R", "-o", "sneaky.json"]),
+        &["--out", "inside the run directory"],
+    );
+}
+
+#[test]
+fn check_selection_refuses_a_selection_directory_holding_the_users_files_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let sel = tmp.path().join("R/selection");
+    std::fs::create_dir(&sel).unwrap();
+    std::fs::write(sel.join("my-matrix.xlsx"), "mine").unwrap();
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &["check-selection", "R", "--replicates", "1", "--backend", "cpu", "-q"],
+        ),
+        &["RUN_DIR", "my-matrix.xlsx"],
+    );
+    assert_eq!(names(&sel), ["my-matrix.xlsx"]);
+}
