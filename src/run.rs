@@ -559,7 +559,7 @@ fn check_stored_run(dir: &Path, config: &RunConfig, prior: &Prior, populations: 
             ));
         }
         let epsilon = r.epsilon.unwrap_or(f64::INFINITY);
-        if g > 0 && !(epsilon < previous_epsilon) {
+        if g > 0 && epsilon.partial_cmp(&previous_epsilon) != Some(std::cmp::Ordering::Less) {
             return Err(refuse(
                 g,
                 format!("has ε = {epsilon}, not below the previous population's {previous_epsilon}"),
@@ -594,7 +594,7 @@ fn check_stored_run(dir: &Path, config: &RunConfig, prior: &Prior, populations: 
                 ),
             ));
         }
-        if !(particle.rho < epsilon) {
+        if particle.rho.partial_cmp(&epsilon) != Some(std::cmp::Ordering::Less) {
             return Err(refuse(
                 g,
                 format!(
