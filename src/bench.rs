@@ -95,7 +95,7 @@ pub struct BenchReport {
     pub samplers: Vec<SamplerRun>,
     /// Stability grid on the GPU: cells × samples per second (median), with the grid size.
     pub stability: Option<StabilityThroughput>,
-    /// `bitrock check-selection` of issue 15's target (measured with `--selection` only).
+    /// `bitrock check-selection` of the embedded record's run (measured with `--selection` only).
     pub selection: Option<SelectionBench>,
 }
 
@@ -152,7 +152,7 @@ pub struct BenchOptions {
     /// Stability grid (side, samples): 512 × 512 cells × 10,000 samples.
     pub stability: (usize, usize),
     /// Measure only `bitrock check-selection` ([`selection_check`]) with this many replicates
-    /// per law (issue 15's target: 20), instead of the other sections.
+    /// per law (20 by default), instead of the other sections.
     pub selection_replicates: Option<usize>,
 }
 
@@ -428,7 +428,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
     })
 }
 
-/// Particles of issue 15's target run and of its replicates.
+/// Particles of the selection benchmark's run and of its replicates.
 pub const SELECTION_PARTICLES: usize = 5_000;
 
 /// Times `bitrock check-selection` `reps` times: a rejection run of every law on the embedded

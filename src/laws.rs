@@ -74,7 +74,7 @@ impl ParamSpec {
 
 const FREE: f64 = f64::NEG_INFINITY;
 
-// Bounds (documented in README, "Laws"):
+// Bounds (documented in the README, "The laws"):
 // - M1: the asymptotic torque r·b0 is positive, b1 is a rate, the hump b2·w/(1+b3 w²) adds
 //   torque (b2 ≥ 0) and b3 ≥ 0 keeps its denominator from vanishing.
 // - M2: static torque tsb and dynamic torque tcb are positive, the decay rate g is positive.

@@ -97,7 +97,7 @@ mod tests {
     fn work_beyond_a_day_is_refused_naming_the_flag() {
         assert!(check_work("--samples", 1e14, 1e10, "the grid").is_ok());
         let e = check_work("--samples", 1e16, 1e10, "the grid").unwrap_err().to_string();
-        assert!(e.contains("--samples") && e.contains("277 hours"), "{e}");
+        assert!(e.contains("--samples") && e.contains("278 hours"), "{e}");
         assert!(check_work("--samples", f64::NAN, 1e10, "the grid").is_err());
     }
 

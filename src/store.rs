@@ -18,7 +18,7 @@
 //! one row per particle and population with one column per parameter name (parameter names
 //! are unique across the laws: `b0..b3`, `tsb, tcb, g`, `a0..a5`, `c0..c3`; a particle's
 //! columns of the other laws are NULL). Schemas 1 and 2 stored `particles` as that table; they
-//! are read, and continued in their own layout. The schema is in the README ("Run store").
+//! are read, and continued in their own layout. The schema is in docs/run-store.md.
 
 use crate::abc::{Particle, Population, PopulationRecord};
 use crate::data::{ColumnsUsed, FieldData, Samples};

@@ -121,7 +121,7 @@ mod tests {
 
     #[test]
     fn an_unreachable_paper_floor_becomes_a_multiple_of_the_best_fit() {
-        // The laboratory rig of issue 14: best ρ 0.0273 (m3).
+        // A laboratory rig record: best ρ 0.0273 (m3).
         let fits = [fit(Law::M1, 0.0339), fit(Law::M3, 0.0273), fit(Law::M4, 0.0277)];
         let f = resolve(&fits, None).unwrap();
         assert_eq!(f.source, FloorSource::BestFit);

@@ -67,7 +67,7 @@ pub struct AbcArgs {
     #[arg(long, value_parser = finite_number, value_name = "K", allow_hyphen_values = true)]
     pub prior_k: Option<f64>,
     /// Prior file (TOML) with explicit bounds or law weights; overrides the δ rule where it
-    /// speaks (format in the README).
+    /// speaks (format in docs/commands.md).
     #[arg(long, value_name = "FILE")]
     pub prior: Option<PathBuf>,
     /// Smallest tolerance on ρ: the population that reaches it is the last [default: 0.014,

@@ -20,7 +20,7 @@ pub struct BenchCmd {
     /// Small sizes only (65,536 × 5,000; end-to-end with N = 5,000): a smoke test in seconds.
     #[arg(long)]
     pub quick: bool,
-    /// Measure only `bitrock check-selection` (issue 15's target): a run of every law on the
+    /// Measure only `bitrock check-selection`: a run of every law on the
     /// embedded record (N = 5,000, to ε = 0.014), then K replicates per law checked, timed
     /// (up to 3 repetitions); K = 20, or 2 with --quick. --backend picks the backend [default: auto].
     #[arg(long)]
