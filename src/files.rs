@@ -141,7 +141,7 @@ pub fn check_output_file(target: &Path, flag: &str) -> Result<()> {
             format!(
                 "{} is a run's store ({}); it is never overwritten: give another file",
                 target.display(),
-                crate::store::STORE_FILE
+                crate::rundir::STORE_FILE
             ),
         ));
     }
@@ -327,7 +327,7 @@ fn is_run_store(path: &Path) -> bool {
         return false;
     };
     let mut magic = [0u8; 16];
-    real.file_name().is_some_and(|n| n == crate::store::STORE_FILE)
+    real.file_name().is_some_and(|n| n == crate::rundir::STORE_FILE)
         && File::open(&real)
             .and_then(|mut f| f.read_exact(&mut magic))
             .is_ok_and(|()| &magic == b"SQLite format 3\0")

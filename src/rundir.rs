@@ -5,7 +5,8 @@
 
 use std::path::{Component, Path};
 
-pub use crate::store::STORE_FILE;
+/// The run store (SQLite): everything that defines a run and every population.
+pub const STORE_FILE: &str = "run.sqlite";
 
 /// The run's summary document (settings, fits, prior, populations, posterior).
 pub const RUN_JSON: &str = "run.json";

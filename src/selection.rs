@@ -759,12 +759,12 @@ fn synthesize(
 }
 
 /// Writes the check into `DIR/selection/`: selection.json, matrix.csv, replicates.csv and
-/// the heat map (confusion.svg, confusion.png). The files are written into a staging
-/// directory beside it and swapped in by one rename, under the run directory's lock, so the
-/// directory holds the previous check or this one, whole, at every moment.
-pub fn write(run: &CheckedRun, check: &SelectionCheck) -> Result<PathBuf> {
+/// its heat map as drawn by the report (`svg`, `png`: [`crate::report::write_selection`] draws
+/// and writes). The files are written into a staging directory beside it and swapped in by one
+/// rename, under the run directory's lock, so the directory holds the previous check or this
+/// one, whole, at every moment.
+pub fn write(run: &CheckedRun, check: &SelectionCheck, svg: String, png: Vec<u8>) -> Result<PathBuf> {
     let dir = run.dir.as_path();
-    let (svg, png) = crate::report::confusion_figure(check)?;
     let json = serde_json::to_string_pretty(check).expect("the check serialises") + "\n";
     let names = crate::rundir::SELECTION_FILES;
     let bodies = [

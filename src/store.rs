@@ -32,8 +32,7 @@ use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// File name of the store inside a run directory.
-pub const STORE_FILE: &str = "run.sqlite";
+pub use crate::rundir::STORE_FILE;
 
 /// Version of the schema below. Version 1 (no `prior_bounds.rule`) is still read, its box
 /// rules as [`BoxRule::Unrecorded`], and so is version 2 (particles as one table row per

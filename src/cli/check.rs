@@ -60,7 +60,7 @@ pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
             super::print::note(line);
         }
     })?;
-    let written = selection::write(&checked, &check)?;
+    let written = bitrock::report::write_selection(&checked, &check)?;
     let mut out = std::io::stdout().lock();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &check)?;

@@ -20,7 +20,17 @@ mod stats;
 
 pub use runs::{read_run_dirs, write_paper_report};
 
-pub(crate) use figures::confusion_figure;
+use figures::confusion_figure;
+
+/// Draws a selection check's heat map and writes the check into its run directory
+/// ([`crate::selection::write`]); returns the check's directory.
+pub fn write_selection(
+    run: &crate::selection::CheckedRun,
+    check: &crate::selection::SelectionCheck,
+) -> Result<PathBuf> {
+    let (svg, png) = confusion_figure(check)?;
+    crate::selection::write(run, check, svg, png)
+}
 
 use crate::abc::Population;
 use crate::abc::posterior::{self, PosteriorSummary};

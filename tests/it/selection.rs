@@ -88,7 +88,7 @@ fn check(dir: &Path, replicates: usize, batch: Option<usize>) -> SelectionCheck 
         batch,
     };
     let check = selection::check(&run, &options, &|_, _| {}, &mut |_| {}).unwrap();
-    selection::write(&run, &check).unwrap();
+    bitrock::report::write_selection(&run, &check).unwrap();
     check
 }
 
