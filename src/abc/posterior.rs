@@ -13,7 +13,7 @@
 //! rejection sampler's) enter as exactly 1.0, which leaves every sum bit-identical to the
 //! unweighted formulas, and take the unweighted type-7 quantiles.
 
-use crate::abc::Particle;
+use crate::abc::{Particle, Population};
 use crate::laws::{Law, MAX_PARAMS};
 use crate::numerics::{compensated_sum, quantile, quantile_of_sorted, weighted_quantile};
 use rayon::prelude::*;
@@ -690,6 +690,27 @@ pub fn law_samples(particles: &[Particle], law: Law, count: usize) -> Vec<&Parti
     systematic(&weights, count.min(members.len()))
         .into_iter()
         .map(|i| members[i])
+        .collect()
+}
+
+/// The stability maps' inputs of `population`: every law with particles in it, its MAP, its
+/// probability and `count` of its particles ([`law_samples`]: the first ones, or a systematic
+/// resample by weight for an SMC population), SI.
+pub fn map_inputs(population: &Population, count: usize) -> Vec<crate::stability::map::LawSamples> {
+    let laws: Vec<Law> = population.record.per_law.iter().map(|l| l.law).collect();
+    let posterior = summarize(&population.particles, &laws);
+    posterior
+        .laws
+        .iter()
+        .map(|summary| crate::stability::map::LawSamples {
+            law: summary.law,
+            probability: summary.probability,
+            map_si: summary.map.clone(),
+            samples_si: law_samples(&population.particles, summary.law, count)
+                .into_iter()
+                .map(|p| p.params.clone())
+                .collect(),
+        })
         .collect()
 }
 

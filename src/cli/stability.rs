@@ -5,7 +5,8 @@ use super::args::finite_number;
 use super::args::{FeArgs, LumpedArgs};
 use bitrock::eval::Backend;
 use bitrock::laws::PAPER_W_REF_N;
-use bitrock::stability::map::{self, Criterion, LawSamples};
+use bitrock::pipeline::{MapSource, StabilityJob};
+use bitrock::stability::map::{self, Criterion};
 use bitrock::units::TorqueUnit;
 use bitrock::{Error, files};
 use clap::{Args, ValueEnum};
@@ -78,25 +79,6 @@ type Column = (String, Vec<Option<f64>>);
 pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let omega = map::parse_axis(&cmd.omega_rpm, "--omega-rpm")?;
     let wob = map::parse_axis(&cmd.wob_kn, "--wob-kn")?;
-    if !(cmd.percentile > 0.0 && cmd.percentile < 100.0) {
-        return Err(Error::arg(
-            "--percentile",
-            format!("must lie in (0, 100) %, got {}", cmd.percentile),
-        )
-        .into());
-    }
-    if !(cmd.w_ref_kn.is_finite() && cmd.w_ref_kn > 0.0) {
-        return Err(Error::arg(
-            "--w-ref-kn",
-            format!("must be a positive number of kN, got {}", cmd.w_ref_kn),
-        )
-        .into());
-    }
-    if cmd.samples == 0 {
-        return Err(Error::arg("--samples", "must be at least 1").into());
-    }
-    // One law's grid first, before the string's critical damping and the run are read.
-    map::check_grid_size(omega.len() * wob.len(), 1, cmd.samples)?;
     if cmd.structure == Structure::Lumped
         && let Some(flag) = cmd.fe.given_flag()
     {
@@ -109,24 +91,31 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         files::check_output_file(path, "--out")?;
     }
-    let w_ref_n = cmd.w_ref_kn * 1000.0;
-    let p = cmd.percentile / 100.0;
-    let lumped = cmd.lumped.validated()?;
-    let criterion = match cmd.structure {
-        Structure::Lumped => Criterion::Lumped(lumped),
-        Structure::Fe => Criterion::Critical(cmd.fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms),
+    let mut job = StabilityJob {
+        source: map_source(cmd)?,
+        omega_rpm: omega,
+        wob_kn: wob,
+        // Replaced below once the job's cheap checks passed (an FE string's is a bisection).
+        criterion: Criterion::Lumped(cmd.lumped.validated()?),
+        w_ref_n: cmd.w_ref_kn * 1000.0,
+        percentile: cmd.percentile / 100.0,
+        samples: cmd.samples,
+        backend: cmd.backend,
     };
-    let inputs = map_inputs(cmd)?;
-    map::check_grid_size(omega.len() * wob.len(), inputs.len(), cmd.samples)?;
-    let c = criterion.critical_nms();
+    job.validate()?;
+    if cmd.structure == Structure::Fe {
+        job.criterion = Criterion::Critical(cmd.fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms);
+    }
+    let maps = job.run(&mut |line| super::print::note(line))?;
+    if let (MapSource::Run(dir), Some(why)) = (&job.source, &maps.early_end) {
+        super::print::note(format_args!("note: {}: {why}", dir.display()));
+    }
+    let (omega, wob) = (&job.omega_rpm, &job.wob_kn);
+    let c = job.criterion.critical_nms();
     let mut boundaries = serde_json::Map::new();
     let mut grids = serde_json::Map::new();
     let mut columns: Vec<Column> = Vec::new();
-    let computed = map::boundaries(&inputs, &omega, c, w_ref_n, p);
-    for (input, b) in inputs.iter().zip(computed.laws) {
-        let grid = map::probability_grid_on(cmd.backend, input, &omega, &wob, criterion, w_ref_n, &mut |line| {
-            super::print::note(line)
-        })?;
+    for ((input, b), grid) in maps.inputs.iter().zip(maps.boundaries.laws).zip(&maps.grids) {
         boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples}));
         grids.insert(
             input.law.name().into(),
@@ -135,12 +124,12 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         columns.push((format!("{}_map_wob_kn", input.law), b.map_wob_kn));
         columns.push((format!("{}_p_wob_kn", input.law), b.p_wob_kn));
     }
-    if let Some(mixture) = computed.mixture_wob_kn {
+    if let Some(mixture) = maps.boundaries.mixture_wob_kn {
         boundaries.insert("mixture".into(), json!({"p_wob_kn": mixture}));
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }
     if let Some(path) = &cmd.out {
-        files::write_whole(path, "--out", |file| file.write_all(&boundaries_csv(&omega, &columns)))?;
+        files::write_whole(path, "--out", |file| file.write_all(&boundaries_csv(omega, &columns)))?;
     }
     let mut out = super::print::stdout();
     if cmd.json {
@@ -156,33 +145,24 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         serde_json::to_writer_pretty(&mut out, &v)?;
         writeln!(out)?;
     } else {
-        print_table(&mut out, cmd.structure, c, &omega, &columns)?;
+        print_table(&mut out, cmd.structure, c, omega, &columns)?;
     }
     Ok(ExitCode::SUCCESS)
 }
 
-/// The laws the maps are drawn for: the last population of `--run`, or `--law` at `--params`.
-fn map_inputs(cmd: &StabilityCmd) -> anyhow::Result<Vec<LawSamples>> {
+/// Whose maps: `--run`, or `--law` at `--params` (in `--torque-unit`, made SI here).
+fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
     match (&cmd.run, cmd.law, &cmd.params) {
-        (Some(dir), _, _) => {
-            if let Some(why) = bitrock::store::RunStore::open(dir)?.early_end()? {
-                super::print::note(format_args!("note: {}: {why}", dir.display()));
-            }
-            Ok(LawSamples::of_run_dir(dir, cmd.samples)?)
-        }
+        (Some(dir), _, _) => Ok(MapSource::Run(dir.clone())),
         (None, Some(law), Some(params)) => {
-            // The count first (scaling takes one value per parameter); the values once in SI.
+            // The count first: scaling takes one value per parameter.
             if params.len() != law.n_params() {
                 law.check_params(params, "--params")?;
             }
-            let si = law.scale_torque(params, cmd.torque_unit.newton_metres());
-            law.check_params(&si, "--params")?;
-            Ok(vec![LawSamples {
+            Ok(MapSource::Law {
                 law,
-                probability: 1.0,
-                map_si: si.clone(),
-                samples_si: vec![si],
-            }])
+                params_si: law.scale_torque(params, cmd.torque_unit.newton_metres()),
+            })
         }
         _ => Err(Error::arg(
             "--run",

@@ -141,10 +141,42 @@ pub fn evaluator(problem: AbcProblem, backend: Backend, note: &mut dyn FnMut(Str
 
 /// What a GPU that cannot be set up means under `auto`: a refused setting is the user's to fix
 /// (the error), anything else is said through `note` and the CPU computes instead.
-fn fall_back_to_cpu(e: gpu::GpuError, note: &mut dyn FnMut(String)) -> Result<()> {
+pub(crate) fn fall_back_to_cpu(e: gpu::GpuError, note: &mut dyn FnMut(String)) -> Result<()> {
     if let gpu::GpuError::Setting { .. } = e {
         return Err(e.into());
     }
     note(format!("no usable GPU ({e}); computing on the CPU"));
     Ok(())
+}
+
+// The requests of the batched scoring ([`records`]), shared by its CPU and GPU scorers.
+
+/// Which candidates of a record to score.
+#[derive(Clone, Debug)]
+pub enum Candidates {
+    /// Candidates `start .. start + len` of stream `population` of the record's prior.
+    Stream { population: u32, start: u64, len: usize },
+    /// Explicit candidates (prior slot and f32 parameters).
+    Explicit(Vec<Candidate>),
+}
+
+impl Candidates {
+    pub fn len(&self) -> usize {
+        match self {
+            Candidates::Stream { len, .. } => *len,
+            Candidates::Explicit(c) => c.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// One scoring call of one record's sampler.
+#[derive(Clone, Debug)]
+pub struct Request {
+    /// The record's index in its [`records::RecordBatch`] (the order seats registered).
+    pub record: usize,
+    pub candidates: Candidates,
 }

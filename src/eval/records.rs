@@ -13,42 +13,12 @@
 //! Every sampler holds a [`Seat`], taken before any of them starts: a seat given up (the run
 //! ended, failed or panicked) no longer holds the others back.
 
-use super::{AbcProblem, Backend, Evaluator, KernelSums, cpu, gpu};
+use super::{AbcProblem, Backend, Candidates, Evaluator, KernelSums, Request, cpu, gpu};
 use crate::error::Result;
 use crate::prior::Candidate;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
-
-/// Which candidates of a record to score.
-#[derive(Clone, Debug)]
-pub enum Candidates {
-    /// Candidates `start .. start + len` of stream `population` of the record's prior.
-    Stream { population: u32, start: u64, len: usize },
-    /// Explicit candidates (prior slot and f32 parameters).
-    Explicit(Vec<Candidate>),
-}
-
-impl Candidates {
-    pub fn len(&self) -> usize {
-        match self {
-            Candidates::Stream { len, .. } => *len,
-            Candidates::Explicit(c) => c.len(),
-        }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-}
-
-/// One scoring call of one record's sampler.
-#[derive(Clone, Debug)]
-pub struct Request {
-    /// The record's index in its [`RecordBatch`] (the order seats registered).
-    pub record: usize,
-    pub candidates: Candidates,
-}
 
 /// How many batches a [`RecordBatch`] scored, and what they held.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

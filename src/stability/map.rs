@@ -10,15 +10,10 @@
 //! law's samples by its posterior probability. The grids computed cell by cell (CPU here, GPU in
 //! `shaders/stability.wgsl`) check the reduction.
 
-use crate::abc::Population;
-use crate::abc::posterior;
 use crate::error::{Error, Result};
-use crate::eval::Backend;
 use crate::laws::Law;
 use crate::stability::lumped::Lumped;
-use crate::store::RunStore;
 use crate::units::RAD_S_PER_RPM;
-use std::path::Path;
 
 /// An evenly spaced axis "MIN:MAX:COUNT" (both ends included).
 pub fn parse_axis(text: &str, flag: &str) -> Result<Vec<f64>> {
@@ -139,46 +134,14 @@ pub fn mixture_boundary_kn(
 }
 
 /// One law's inputs to the maps: its posterior probability, its MAP (or the given parameters)
-/// and posterior samples, SI. Shared by `bitrock stability` and the report.
+/// and posterior samples, SI. Shared by `bitrock stability` and the report
+/// ([`crate::abc::posterior::map_inputs`] of a population).
 #[derive(Clone, Debug)]
 pub struct LawSamples {
     pub law: Law,
     pub probability: f64,
     pub map_si: Vec<f64>,
     pub samples_si: Vec<Vec<f64>>,
-}
-
-impl LawSamples {
-    /// Every law with particles in `population`: its MAP, its probability and `count` of its
-    /// particles ([`crate::abc::posterior::law_samples`]: the first ones, or a systematic
-    /// resample by weight for an SMC population), SI.
-    pub fn of_population(population: &Population, count: usize) -> Vec<LawSamples> {
-        let laws: Vec<Law> = population.record.per_law.iter().map(|l| l.law).collect();
-        let posterior = posterior::summarize(&population.particles, &laws);
-        posterior
-            .laws
-            .iter()
-            .map(|summary| LawSamples {
-                law: summary.law,
-                probability: summary.probability,
-                map_si: summary.map.clone(),
-                samples_si: posterior::law_samples(&population.particles, summary.law, count)
-                    .into_iter()
-                    .map(|p| p.params.clone())
-                    .collect(),
-            })
-            .collect()
-    }
-
-    /// [`Self::of_population`] of the last population of the run in `dir`.
-    pub fn of_run_dir(dir: &Path, count: usize) -> Result<Vec<LawSamples>> {
-        let populations = RunStore::open(dir)?.load_populations()?;
-        let last = populations.last().ok_or_else(|| Error::Data {
-            path: dir.to_path_buf(),
-            message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
-        })?;
-        Ok(Self::of_population(last, count))
-    }
 }
 
 /// One law's boundaries (kN per speed, `None` where no weight on bit destabilises).
@@ -296,46 +259,6 @@ pub fn check_grid_size(cells: usize, laws: usize, samples: usize) -> Result<()> 
         FASTEST_CELL_SAMPLES_PER_S,
         &format!("{cells} cells × {samples} samples × {laws} laws"),
     )
-}
-
-/// [`probability_grid`] of `input` on `backend`: the GPU's `stability_grid` unless `backend`
-/// is the CPU; with `Auto` a GPU failure is told to `note` and the CPU computes the grid.
-pub fn probability_grid_on(
-    backend: Backend,
-    input: &LawSamples,
-    omega_rpm: &[f64],
-    wob_kn: &[f64],
-    criterion: Criterion,
-    w_ref_n: f64,
-    note: &mut dyn FnMut(String),
-) -> Result<Vec<f64>> {
-    if backend != Backend::Cpu {
-        match crate::eval::gpu::stability::stability_grid(
-            input.law,
-            &input.samples_si,
-            omega_rpm,
-            wob_kn,
-            criterion,
-            w_ref_n,
-        ) {
-            Ok((counts, _)) => {
-                return Ok(counts
-                    .iter()
-                    .map(|&c| f64::from(c) / input.samples_si.len() as f64)
-                    .collect());
-            }
-            Err(e) if backend == Backend::Gpu => return Err(e.into()),
-            Err(e) => note(format!("no usable GPU ({e}); computing the grid on the CPU")),
-        }
-    }
-    Ok(probability_grid(
-        input.law,
-        &input.samples_si,
-        omega_rpm,
-        wob_kn,
-        criterion,
-        w_ref_n,
-    ))
 }
 
 /// Largest real part of the 1-DOF Jacobian's eigenvalues (1/s) at every cell for one

@@ -9,8 +9,9 @@ use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::records::GpuRecords;
 use bitrock::eval::gpu::{Shape, residual::GpuEvaluator};
-use bitrock::eval::records::{Candidates, RecordBatch, Request};
+use bitrock::eval::records::RecordBatch;
 use bitrock::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE};
+use bitrock::eval::{Candidates, Request};
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::{Candidate, Prior};
 

@@ -7,6 +7,7 @@ mod fit;
 mod gpu;
 mod hostile;
 mod laws;
+mod layers;
 mod pipeline;
 mod records;
 mod report;

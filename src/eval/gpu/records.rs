@@ -11,7 +11,7 @@ use super::{
     Shape, UNIFORM, buffer_entry, score_dispatch,
 };
 use crate::eval::AbcProblem;
-use crate::eval::records::{Candidates, Request};
+use crate::eval::{Candidates, Request};
 use crate::laws::Law;
 use crate::prior::Prior;
 use bytemuck::{Pod, Zeroable};

@@ -16,6 +16,10 @@ use crate::rundir;
 use crate::store::RunStore;
 use std::path::Path;
 
+pub mod stability;
+
+pub use stability::{MapSource, StabilityJob, StabilityMaps};
+
 /// Speeds of the predictive envelopes, evenly spaced over the record's range.
 const ENVELOPE_SPEEDS: usize = 200;
 /// A least-squares ρ below this is an exact fit (rounding of an exactly representable record).

@@ -1,0 +1,158 @@
+//! The stability job: maps over (Ω, W) for the laws of an ABC run's last population or for one
+//! law's parameters — the deterministic (MAP) and percentile boundaries of each law, the
+//! mixture's, and each law's probability-of-instability grid, on the GPU where one is usable.
+//! `bitrock stability` is its caller; the physics and the grids are `crate::stability::map`'s.
+
+use crate::error::{Error, Result};
+use crate::eval::Backend;
+use crate::laws::Law;
+use crate::stability::map::{self, Boundaries, Criterion, LawSamples};
+use crate::store::RunStore;
+use std::path::PathBuf;
+
+/// Whose maps: a run's last population, or one law at given parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MapSource {
+    /// The run directory: every law with particles in its last population, with its posterior
+    /// probability, MAP and `samples` posterior samples.
+    Run(PathBuf),
+    /// One law at `params_si` (SI, torques in N·m): a what-if map without a run.
+    Law { law: Law, params_si: Vec<f64> },
+}
+
+/// A stability job: what to map, on which grid, by which criterion.
+#[derive(Clone, Debug)]
+pub struct StabilityJob {
+    pub source: MapSource,
+    /// Top-drive speeds, rpm.
+    pub omega_rpm: Vec<f64>,
+    /// Weights on bit, kN.
+    pub wob_kn: Vec<f64>,
+    /// The 1-DOF closed form or a finite-element string's critical bit damping.
+    pub criterion: Criterion,
+    /// Reference weight on bit W_ref of the laws' parameters, N.
+    pub w_ref_n: f64,
+    /// Share of the posterior samples unstable above the percentile boundary, in (0, 1).
+    pub percentile: f64,
+    /// Posterior samples per law for the stochastic maps.
+    pub samples: usize,
+    /// Where the probability grids are computed.
+    pub backend: Backend,
+}
+
+/// The maps of a [`StabilityJob`].
+pub struct StabilityMaps {
+    /// Each law's inputs: probability, MAP, samples (SI).
+    pub inputs: Vec<LawSamples>,
+    pub boundaries: Boundaries,
+    /// Each law's share of unstable samples, row-major over (Ω, W), in `inputs` order.
+    pub grids: Vec<Vec<f64>>,
+    /// How the run ended when not by its own rules ([`RunStore::early_end`]), for a run source.
+    pub early_end: Option<String>,
+}
+
+impl StabilityJob {
+    /// Refuses, naming the setting, what cannot be mapped: a percentile outside (0, 1), a
+    /// W_ref that is not a positive number, no samples, a law's parameters it cannot take, and
+    /// a grid beyond memory or a day's work (one law's, before any run is read).
+    pub fn validate(&self) -> Result<()> {
+        if !(self.percentile > 0.0 && self.percentile < 1.0) {
+            return Err(Error::arg(
+                "--percentile",
+                format!("must lie in (0, 100) %, got {}", self.percentile * 100.0),
+            ));
+        }
+        if !(self.w_ref_n.is_finite() && self.w_ref_n > 0.0) {
+            return Err(Error::arg(
+                "--w-ref-kn",
+                format!("must be a positive number of kN, got {}", self.w_ref_n / 1000.0),
+            ));
+        }
+        if self.samples == 0 {
+            return Err(Error::arg("--samples", "must be at least 1"));
+        }
+        if let MapSource::Law { law, params_si } = &self.source {
+            law.check_params(params_si, "--params")?;
+        }
+        map::check_grid_size(self.cells(), 1, self.samples)
+    }
+
+    fn cells(&self) -> usize {
+        self.omega_rpm.len() * self.wob_kn.len()
+    }
+
+    /// Reads the source, checks the grid for its laws, and computes every boundary and grid.
+    /// A GPU that cannot be used under `auto` is told to `note`, and the CPU computes.
+    pub fn run(&self, note: &mut dyn FnMut(String)) -> Result<StabilityMaps> {
+        self.validate()?;
+        let (inputs, early_end) = match &self.source {
+            MapSource::Run(dir) => {
+                let store = RunStore::open(dir)?;
+                let early_end = store.early_end()?;
+                let stored = store.load_with_last_particles()?;
+                let last = stored.populations.last().ok_or_else(|| Error::Data {
+                    path: dir.clone(),
+                    message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
+                })?;
+                (crate::abc::posterior::map_inputs(last, self.samples), early_end)
+            }
+            MapSource::Law { law, params_si } => (
+                vec![LawSamples {
+                    law: *law,
+                    probability: 1.0,
+                    map_si: params_si.clone(),
+                    samples_si: vec![params_si.clone()],
+                }],
+                None,
+            ),
+        };
+        map::check_grid_size(self.cells(), inputs.len(), self.samples)?;
+        let c = self.criterion.critical_nms();
+        let boundaries = map::boundaries(&inputs, &self.omega_rpm, c, self.w_ref_n, self.percentile);
+        let mut backend = self.backend;
+        let grids = inputs
+            .iter()
+            .map(|input| self.grid(input, &mut backend, note))
+            .collect::<Result<_>>()?;
+        Ok(StabilityMaps {
+            inputs,
+            boundaries,
+            grids,
+            early_end,
+        })
+    }
+
+    /// One law's probability grid: the GPU's `stability_grid` unless the backend is the CPU;
+    /// under `auto` a GPU that cannot be used is said once and the CPU computes this grid and
+    /// the next ones.
+    fn grid(&self, input: &LawSamples, backend: &mut Backend, note: &mut dyn FnMut(String)) -> Result<Vec<f64>> {
+        if *backend != Backend::Cpu {
+            match crate::eval::gpu::stability::stability_grid(
+                input.law,
+                &input.samples_si,
+                &self.omega_rpm,
+                &self.wob_kn,
+                self.criterion,
+                self.w_ref_n,
+            ) {
+                Ok((counts, _)) => {
+                    let n = input.samples_si.len() as f64;
+                    return Ok(counts.iter().map(|&c| f64::from(c) / n).collect());
+                }
+                Err(e) if *backend == Backend::Gpu => return Err(e.into()),
+                Err(e) => {
+                    crate::eval::fall_back_to_cpu(e, note)?;
+                    *backend = Backend::Cpu;
+                }
+            }
+        }
+        Ok(map::probability_grid(
+            input.law,
+            &input.samples_si,
+            &self.omega_rpm,
+            &self.wob_kn,
+            self.criterion,
+            self.w_ref_n,
+        ))
+    }
+}

@@ -1,0 +1,132 @@
+//! The library's layers, kept true: every module imports only from its own layer or the layers
+//! below it (the README's layout table), and no two top-level modules import each other
+//! through any path. Read from the source itself: `crate::` and `super::` paths outside
+//! comments and test modules.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+/// Each top-level module of the library and its layer, lowest first.
+const LAYERS: [(&str, u8); 22] = [
+    ("error", 0),
+    ("units", 0),
+    ("rng", 0),
+    ("numerics", 0),
+    ("limits", 0),
+    ("data", 0),
+    ("laws", 1),
+    ("fit", 1),
+    ("prior", 1),
+    ("stability", 1),
+    ("simulate", 1),
+    ("eval", 2),
+    ("abc", 3),
+    ("rundir", 4),
+    ("files", 4),
+    ("store", 4),
+    ("run", 4),
+    ("pipeline", 5),
+    ("selection", 5),
+    ("report", 5),
+    ("bench", 5),
+    ("documents", 5),
+];
+
+/// The source of a file without comments and without its test module.
+fn code(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap();
+    let text = text.split("#[cfg(test)]").next().unwrap();
+    text.lines()
+        .map(|l| l.split("//").next().unwrap())
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Top-level module → the top-level modules it refers to.
+fn imports() -> BTreeMap<String, BTreeSet<String>> {
+    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut stack = vec![src.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            let rel = path.strip_prefix(&src).unwrap().to_string_lossy().into_owned();
+            if path.is_dir() {
+                if rel != "cli" {
+                    stack.push(path);
+                }
+                continue;
+            }
+            if rel == "main.rs" || rel == "lib.rs" || !rel.ends_with(".rs") {
+                continue;
+            }
+            let module = rel.split(['/', '.']).next().unwrap().to_string();
+            let nested = rel.contains('/');
+            let text = code(&path);
+            let refs = out.entry(module.clone()).or_default();
+            for (i, _) in text.match_indices("crate::") {
+                let name: String = text[i + 7..]
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                refs.insert(name);
+            }
+            // `super::x` in a top-level file is the crate root's x.
+            if !nested {
+                for (i, _) in text.match_indices("super::") {
+                    let name: String = text[i + 7..]
+                        .chars()
+                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                        .collect();
+                    refs.insert(name);
+                }
+            }
+            refs.remove(&module);
+        }
+    }
+    let known: BTreeSet<&str> = LAYERS.iter().map(|l| l.0).collect();
+    for refs in out.values_mut() {
+        refs.retain(|r| known.contains(r.as_str()));
+    }
+    out
+}
+
+#[test]
+fn every_module_imports_only_from_its_layer_or_below() {
+    let layer: BTreeMap<&str, u8> = LAYERS.into_iter().collect();
+    let imports = imports();
+    assert_eq!(
+        imports.keys().map(String::as_str).collect::<BTreeSet<_>>(),
+        layer.keys().copied().collect::<BTreeSet<_>>(),
+        "every top-level module has a layer here and in the README"
+    );
+    let mut up = Vec::new();
+    for (module, refs) in &imports {
+        for r in refs {
+            if layer[r.as_str()] > layer[module.as_str()] {
+                up.push(format!("{module} → {r}"));
+            }
+        }
+    }
+    assert!(up.is_empty(), "imports from a higher layer: {up:?}");
+}
+
+#[test]
+fn no_two_modules_import_each_other() {
+    let imports = imports();
+    // Every module's reach; a module in its own reach is on a circle.
+    let mut circles = Vec::new();
+    for start in imports.keys() {
+        let mut seen = BTreeSet::new();
+        let mut todo: Vec<&String> = imports[start].iter().collect();
+        while let Some(m) = todo.pop() {
+            if seen.insert(m.clone()) {
+                todo.extend(imports.get(m).into_iter().flatten());
+            }
+        }
+        if seen.contains(start) {
+            circles.push(start.clone());
+        }
+    }
+    assert!(circles.is_empty(), "modules on an import circle: {circles:?}");
+}
