@@ -691,12 +691,12 @@ pub struct ParityReport {
 pub fn parity(problem: &AbcProblem, candidates: usize, epsilon: Option<f64>) -> Result<ParityReport> {
     // ρ on both backends, their relative differences and a sorted copy for the median.
     crate::limits::check_memory(
-        "--candidates",
+        "candidates",
         candidates as f64 * 4.0 * 8.0,
         &format!("comparing {candidates} candidates"),
     )?;
     crate::limits::check_work(
-        "--candidates",
+        "candidates",
         candidates as f64 * problem.data_len() as f64 * problem.prior.boxes.len() as f64,
         1e12,
         &format!("{candidates} candidates on {} samples per law", problem.data_len()),

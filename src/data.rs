@@ -13,7 +13,8 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// How the record is divided into calibration and validation samples.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum SplitRule {
     /// The first fraction of the record (in time order) calibrates, the rest validates.
@@ -78,33 +79,33 @@ impl DataOptions {
     /// Refuses option values that cannot mean anything, naming the flag.
     pub fn validate(&self) -> Result<()> {
         if !self.min_speed_rpm.is_finite() || self.min_speed_rpm < 0.0 {
-            return Err(Error::arg(
-                "--min-speed-rpm",
+            return Err(Error::setting(
+                "min_speed_rpm",
                 format!("must be a finite number ≥ 0, got {}", self.min_speed_rpm),
             ));
         }
         if self.thin == 0 {
-            return Err(Error::arg("--thin", "must be at least 1 (1 keeps every row)"));
+            return Err(Error::setting("thin", "must be at least 1 (1 keeps every row)"));
         }
         if !(self.calibration_fraction > 0.0 && self.calibration_fraction <= 1.0) {
-            return Err(Error::arg(
-                "--calibration-fraction",
+            return Err(Error::setting(
+                "calibration_fraction",
                 format!("must lie in (0, 1], got {}", self.calibration_fraction),
             ));
         }
-        for (flag, v) in [("--t-start-s", self.t_start_s), ("--t-end-s", self.t_end_s)] {
+        for (field, v) in [("t_start_s", self.t_start_s), ("t_end_s", self.t_end_s)] {
             if let Some(v) = v
                 && !v.is_finite()
             {
-                return Err(Error::arg(flag, format!("must be finite, got {v}")));
+                return Err(Error::setting(field, format!("must be finite, got {v}")));
             }
         }
         if let (Some(a), Some(b)) = (self.t_start_s, self.t_end_s)
             && a >= b
         {
-            return Err(Error::arg(
-                "--t-end-s",
-                format!("must exceed --t-start-s ({a} s), got {b} s"),
+            return Err(Error::setting(
+                "t_end_s",
+                format!("must exceed `t_start_s` ({a} s), got {b} s"),
             ));
         }
         Ok(())
@@ -272,7 +273,7 @@ fn resolve_column(
     headers: &csv::StringRecord,
     wanted: Option<&str>,
     hint: &str,
-    flag: &str,
+    field: &str,
     required: bool,
     path: &Path,
 ) -> Result<Option<usize>> {
@@ -284,7 +285,7 @@ fn resolve_column(
                 path: path.to_path_buf(),
                 line: Some(1),
                 message: format!(
-                    "no column named '{name}' (given by {flag}); the header has: {}",
+                    "no column named '{name}' (given by `{field}`); the header has: {}",
                     listing()
                 ),
             }),
@@ -303,7 +304,7 @@ fn resolve_column(
             path: path.to_path_buf(),
             line: Some(1),
             message: format!(
-                "no column name contains '{hint}'; name the column with {flag} (the header has: {})",
+                "no column name contains '{hint}'; name the column with `{field}` (the header has: {})",
                 listing()
             ),
         }),
@@ -311,7 +312,7 @@ fn resolve_column(
             path: path.to_path_buf(),
             line: Some(1),
             message: format!(
-                "several columns contain '{hint}' ({}); choose one with {flag}",
+                "several columns contain '{hint}' ({}); choose one with `{field}`",
                 many.iter().map(|&i| &headers[i]).collect::<Vec<_>>().join(", ")
             ),
         }),
@@ -325,7 +326,7 @@ fn resolve_unit<U: Copy + PartialEq>(
     flag_value: Option<U>,
     from_suffix: fn(&str) -> Option<U>,
     label: fn(U) -> &'static str,
-    flag: &str,
+    field: &str,
     path: &Path,
 ) -> Result<U> {
     match (flag_value, from_suffix(column)) {
@@ -333,7 +334,7 @@ fn resolve_unit<U: Copy + PartialEq>(
             path: path.to_path_buf(),
             line: Some(1),
             message: format!(
-                "column '{column}' declares {} by its name but {flag} says {}; rename the column or drop the flag",
+                "column '{column}' declares {} by its name but `{field}` says {}; rename the column or drop the flag",
                 label(s),
                 label(f)
             ),
@@ -342,7 +343,7 @@ fn resolve_unit<U: Copy + PartialEq>(
         (None, None) => Err(Error::Format {
             path: path.to_path_buf(),
             line: Some(1),
-            message: format!("cannot tell the unit of column '{column}' from its name; give {flag}"),
+            message: format!("cannot tell the unit of column '{column}' from its name; give `{field}`"),
         }),
     }
 }
@@ -413,7 +414,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         &headers,
         opts.speed_column.as_deref(),
         "speed",
-        "--speed-col",
+        "speed_column",
         true,
         path,
     )?
@@ -422,27 +423,34 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         &headers,
         opts.torque_column.as_deref(),
         "torque",
-        "--torque-col",
+        "torque_column",
         true,
         path,
     )?
     .expect("required");
-    let wob_i = resolve_column(&headers, opts.wob_column.as_deref(), "wob", "--wob-col", false, path)?;
-    let time_i = resolve_column(&headers, opts.time_column.as_deref(), "time", "--time-col", false, path)?;
+    let wob_i = resolve_column(&headers, opts.wob_column.as_deref(), "wob", "wob_column", false, path)?;
+    let time_i = resolve_column(
+        &headers,
+        opts.time_column.as_deref(),
+        "time",
+        "time_column",
+        false,
+        path,
+    )?;
     let name = |i: usize| headers[i].to_string();
     let roles = [
-        ("--speed-col", Some(speed_i)),
-        ("--torque-col", Some(torque_i)),
-        ("--wob-col", wob_i),
-        ("--time-col", time_i),
+        ("speed_column", Some(speed_i)),
+        ("torque_column", Some(torque_i)),
+        ("wob_column", wob_i),
+        ("time_column", time_i),
     ];
-    for (a, (flag_a, i)) in roles.iter().enumerate() {
-        if let Some((flag_b, _)) = i.and_then(|i| roles[a + 1..].iter().find(|(_, j)| *j == Some(i))) {
+    for (a, (field_a, i)) in roles.iter().enumerate() {
+        if let Some((field_b, _)) = i.and_then(|i| roles[a + 1..].iter().find(|(_, j)| *j == Some(i))) {
             return Err(Error::Format {
                 path: path.to_path_buf(),
                 line: Some(1),
                 message: format!(
-                    "column '{}' is chosen for both {flag_a} and {flag_b}; a column is one quantity",
+                    "column '{}' is chosen for both `{field_a}` and `{field_b}`; a column is one quantity",
                     name(i.expect("found"))
                 ),
             });
@@ -454,7 +462,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         opts.speed_unit,
         SpeedUnit::from_suffix,
         SpeedUnit::label,
-        "--speed-unit",
+        "speed_unit",
         path,
     )?;
     let torque_unit = resolve_unit(
@@ -462,7 +470,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         opts.torque_unit,
         TorqueUnit::from_suffix,
         TorqueUnit::label,
-        "--torque-unit",
+        "torque_unit",
         path,
     )?;
     let wob_unit = match wob_i {
@@ -471,7 +479,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
             opts.wob_unit,
             ForceUnit::from_suffix,
             ForceUnit::label,
-            "--wob-unit",
+            "wob_unit",
             path,
         )?),
         None => None,
@@ -480,7 +488,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         return Err(Error::Format {
             path: path.to_path_buf(),
             line: Some(1),
-            message: "--t-start-s/--t-end-s need a time column (none found; name it with --time-col)".into(),
+            message: "`t_start_s`/`t_end_s` need a time column (none found; name it with `time_column`)".into(),
         });
     }
 
@@ -606,7 +614,7 @@ fn filter_and_split(
         return Err(Error::Data {
             path: path.to_path_buf(),
             message: format!(
-                "no row left after filtering ({rows_read} read, {} in the time window, none with bit speed ≥ {} rpm after thinning by {}); relax --min-speed-rpm, --t-start-s/--t-end-s or --thin",
+                "no row left after filtering ({rows_read} read, {} in the time window, none with bit speed ≥ {} rpm after thinning by {}); relax `min_speed_rpm`, `t_start_s`/`t_end_s` or `thin`",
                 window.len(),
                 opts.min_speed_rpm,
                 opts.thin
@@ -640,7 +648,7 @@ fn filter_and_split(
         return Err(Error::Data {
             path: path.to_path_buf(),
             message:
-                "every calibration torque is zero: the misfit ρ is undefined; change --calibration-fraction or --split"
+                "every calibration torque is zero: the misfit ρ is undefined; change `calibration_fraction` or `split`"
                     .into(),
         });
     }
@@ -688,14 +696,14 @@ fn check_fittable(calibration: &Samples, path: &Path, columns: &ColumnsUsed) -> 
     let fastest = lo.abs().max(hi.abs());
     if fastest > MAX_SPEED_RAD_S {
         return fail(format!(
-            "the largest |bit speed| in column '{speed_column}' is {fastest:.3e} rad/s ({:.3e} rpm), above {MAX_SPEED_RAD_S:e} rad/s (about 95,000 rpm), far beyond any drill bit; check the column's unit (--speed-unit)",
+            "the largest |bit speed| in column '{speed_column}' is {fastest:.3e} rad/s ({:.3e} rpm), above {MAX_SPEED_RAD_S:e} rad/s (about 95,000 rpm), far beyond any drill bit; check the column's unit (`speed_unit`)",
             fastest / RAD_S_PER_RPM
         ));
     }
     let largest = calibration.torque_nm.iter().fold(0.0f64, |m, y| m.max(y.abs()));
     if !(MIN_TORQUE_NM..=MAX_TORQUE_NM).contains(&largest) {
         return fail(format!(
-            "the largest |torque| in column '{torque_column}' is {largest:e} N·m, outside {MIN_TORQUE_NM:e}..{MAX_TORQUE_NM:e} N·m where a drill string's lies and the fit's arithmetic holds; check the column's unit (--torque-unit)"
+            "the largest |torque| in column '{torque_column}' is {largest:e} N·m, outside {MIN_TORQUE_NM:e}..{MAX_TORQUE_NM:e} N·m where a drill string's lies and the fit's arithmetic holds; check the column's unit (`torque_unit`)"
         ));
     }
     Ok(())
@@ -821,7 +829,7 @@ mod tests {
         .unwrap_err();
         assert!(e.to_string().contains("no column named 'w'"), "{e}");
         let e = parse("speed,torque_nm\n60,2\n", &DataOptions::default()).unwrap_err();
-        assert!(e.to_string().contains("--speed-unit"), "{e}");
+        assert!(e.to_string().contains("speed_unit"), "{e}");
         let e = parse("speed_rpm,torque_nm\n60,0\n70,0\n", &DataOptions::default()).unwrap_err();
         assert!(e.to_string().contains("zero"), "{e}");
         let e = parse("speed_rpm,torque_nm\n1,3\n", &DataOptions::default()).unwrap_err();

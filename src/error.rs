@@ -38,17 +38,18 @@ pub enum Error {
         law: String,
         message: String,
     },
-    /// A command-line flag or configuration value is refused.
-    #[error("{flag}: {message}")]
-    InvalidArgument { flag: String, message: String },
+    /// A configuration value is refused. `field` names the setting as the library's
+    /// configuration does (`particles`, `min_speed_rpm`); the command line shows its flag.
+    #[error("`{field}`: {message}")]
+    InvalidSetting { field: String, message: String },
     /// An output file cannot be written.
     #[error("{}: cannot write: {source}", path.display())]
     Write { path: PathBuf, source: std::io::Error },
-    /// An output the user named by `flag` cannot be written (a missing directory, no
+    /// An output the user named by the setting `field` cannot be written (a missing directory, no
     /// permission: bad input; a full disk: a failure of the machine).
-    #[error("{flag}: {}: cannot write: {source}", path.display())]
+    #[error("`{field}`: {}: cannot write: {source}", path.display())]
     Output {
-        flag: String,
+        field: String,
         path: PathBuf,
         source: std::io::Error,
     },
@@ -77,18 +78,18 @@ pub enum Error {
 }
 
 impl Error {
-    /// Shorthand for [`Error::InvalidArgument`].
-    pub fn arg(flag: impl Into<String>, message: impl Into<String>) -> Self {
-        Error::InvalidArgument {
-            flag: flag.into(),
+    /// Shorthand for [`Error::InvalidSetting`].
+    pub fn setting(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::InvalidSetting {
+            field: field.into(),
             message: message.into(),
         }
     }
 
     /// Shorthand for [`Error::Output`].
-    pub fn output(flag: &str, path: &std::path::Path, source: std::io::Error) -> Self {
+    pub fn output(field: &str, path: &std::path::Path, source: std::io::Error) -> Self {
         Error::Output {
-            flag: flag.to_string(),
+            field: field.to_string(),
             path: path.to_path_buf(),
             source,
         }
@@ -103,10 +104,10 @@ impl Error {
             | Error::Format { .. }
             | Error::Data { .. }
             | Error::Fit { .. }
-            | Error::InvalidArgument { .. }
+            | Error::InvalidSetting { .. }
             | Error::Busy { .. } => true,
             Error::Output { source, .. } => is_bad_target(source),
-            // A refused GPU setting converts into InvalidArgument (eval::gpu).
+            // A refused GPU setting converts into InvalidSetting (eval::gpu).
             _ => false,
         }
     }

@@ -42,12 +42,12 @@ pub fn parent_dir(path: &Path) -> &Path {
 pub struct TempFile {
     file: tempfile::NamedTempFile,
     /// The flag that named the target, for messages.
-    flag: String,
+    field: String,
 }
 
 impl TempFile {
     /// A locked temporary in the directory of `target` (which `flag` named).
-    pub fn beside(target: &Path, flag: &str) -> Result<Self> {
+    pub fn beside(target: &Path, field: &str) -> Result<Self> {
         let dir = parent_dir(target);
         let mut builder = tempfile::Builder::new();
         builder.prefix(TEMP_PREFIX);
@@ -55,14 +55,14 @@ impl TempFile {
         builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
         let file = builder
             .tempfile_in(dir)
-            .map_err(|source| Error::output(flag, target, source))?;
+            .map_err(|source| Error::output(field, target, source))?;
         // Held until the file is renamed or removed: a later writer's clean-up leaves it alone.
         file.as_file()
             .try_lock()
-            .map_err(|e| Error::output(flag, target, lock_io_error(e)))?;
+            .map_err(|e| Error::output(field, target, lock_io_error(e)))?;
         Ok(Self {
             file,
-            flag: flag.to_string(),
+            field: field.to_string(),
         })
     }
 
@@ -79,14 +79,14 @@ impl TempFile {
     /// Syncs the temporary and renames it over `target`, then syncs the directory, so that
     /// `target` is the old file or the whole new one at every moment, a power cut included.
     pub fn commit(self, target: &Path) -> Result<()> {
-        let flag = self.flag.clone();
+        let field = self.field.clone();
         self.file
             .as_file()
             .sync_all()
-            .map_err(|source| Error::output(&flag, target, source))?;
+            .map_err(|source| Error::output(&field, target, source))?;
         self.file
             .persist(target)
-            .map_err(|e| Error::output(&flag, target, e.error))?;
+            .map_err(|e| Error::output(&field, target, e.error))?;
         sync_dir(parent_dir(target));
         Ok(())
     }
@@ -94,22 +94,26 @@ impl TempFile {
 
 /// Writes the user's output file `target` (named by `flag`) whole or not at all: checked by
 /// [`check_output_file`] (a symbolic link is written through), then [`write_own`].
-pub fn write_whole(target: &Path, flag: &str, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
-    check_output_file(target, flag)?;
-    write_own(&output_target(target), flag, write)
+pub fn write_whole(
+    target: &Path,
+    field: &str,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<()> {
+    check_output_file(target, field)?;
+    write_own(&output_target(target), field, write)
 }
 
 /// Writes `target`, a file of a directory bitrock manages (a run's summary files, a staged
 /// report), whole or not at all: `write` fills a temporary beside it, which replaces `target`
 /// only when everything was written. Stale temporaries of bitrock's in that directory are
 /// removed first.
-pub fn write_own(target: &Path, flag: &str, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
+pub fn write_own(target: &Path, field: &str, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
     remove_stale(parent_dir(target));
-    let mut temp = TempFile::beside(target, flag)?;
+    let mut temp = TempFile::beside(target, field)?;
     let mut out = std::io::BufWriter::new(temp.file_mut());
     write(&mut out)
         .and_then(|()| out.flush())
-        .map_err(|source| Error::output(flag, target, source))?;
+        .map_err(|source| Error::output(field, target, source))?;
     drop(out);
     temp.commit(target)
 }
@@ -119,25 +123,25 @@ pub fn write_own(target: &Path, flag: &str, write: impl FnOnce(&mut dyn Write) -
 /// one of bitrock's own lock or temporary files, and any file inside a run directory (a run
 /// keeps to its own files, its store above all). A symbolic link is written through: the
 /// file it points to is the target, checked by the same rule ([`output_target`]).
-pub fn check_output_file(target: &Path, flag: &str) -> Result<()> {
-    check_not_dangling(target, flag)?;
+pub fn check_output_file(target: &Path, field: &str) -> Result<()> {
+    check_not_dangling(target, field)?;
     let real = output_target(target);
     if real.is_dir() {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!("{} is a directory; give a file name", target.display()),
         ));
     }
     let dir = parent_dir(&real);
     if !dir.is_dir() {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!("{}: the directory {} does not exist", target.display(), dir.display()),
         ));
     }
     if is_run_store(&real) {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!(
                 "{} is a run's store ({}); it is never overwritten: give another file",
                 target.display(),
@@ -150,23 +154,23 @@ pub fn check_output_file(target: &Path, flag: &str) -> Result<()> {
         .and_then(|n| n.to_str())
         .is_some_and(is_bitrock_scratch)
     {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!(
                 "{} is one of bitrock's lock or temporary files; give another file",
                 target.display()
             ),
         ));
     }
-    refuse_inside_run(&real, flag)
+    refuse_inside_run(&real, field)
 }
 
 /// Refuses, naming `flag`, an output path inside a run directory (its parent, or the parent's
 /// parent: a run's `selection/`): a run holds only what bitrock writes there.
-pub fn refuse_inside_run(path: &Path, flag: &str) -> Result<()> {
+pub fn refuse_inside_run(path: &Path, field: &str) -> Result<()> {
     match enclosing_run_dir(path) {
-        Some(run) => Err(Error::arg(
-            flag,
+        Some(run) => Err(Error::setting(
+            field,
             format!(
                 "{} lies inside the run directory {}, which holds only what bitrock writes there; write it outside the run",
                 path.display(),
@@ -229,7 +233,7 @@ pub fn foreign_entries(dir: &Path, owned: &dyn Fn(&Path, bool) -> bool) -> Vec<P
 /// Refuses, naming `flag`, a directory to be replaced or written into that holds anything
 /// bitrock did not write ([`foreign_entries`]), listing the first few. The one rule of every
 /// command that replaces a directory: `abc --force`, `demo`, `report`, `check-selection`.
-pub fn refuse_foreign(dir: &Path, flag: &str, owned: &dyn Fn(&Path, bool) -> bool) -> Result<()> {
+pub fn refuse_foreign(dir: &Path, field: &str, owned: &dyn Fn(&Path, bool) -> bool) -> Result<()> {
     let foreign = foreign_entries(dir, owned);
     if foreign.is_empty() {
         return Ok(());
@@ -241,10 +245,10 @@ pub fn refuse_foreign(dir: &Path, flag: &str, owned: &dyn Fn(&Path, bool) -> boo
     } else {
         String::new()
     };
-    Err(Error::arg(
-        flag,
+    Err(Error::setting(
+        field,
         format!(
-            "{}: holds files bitrock did not write ({}{more}); it is not replaced, even with --force: give another directory",
+            "{}: holds files bitrock did not write ({}{more}); it is not replaced, even with `force`: give another directory",
             dir.display(),
             shown.join(", ")
         ),
@@ -258,35 +262,35 @@ pub fn refuse_foreign(dir: &Path, flag: &str, owned: &dyn Fn(&Path, bool) -> boo
 /// `owned` does not accept is refused first ([`refuse_foreign`]).
 pub fn replace_dir(
     target: &Path,
-    flag: &str,
+    field: &str,
     owned: &dyn Fn(&Path, bool) -> bool,
     contents: &[(PathBuf, Vec<u8>)],
 ) -> Result<()> {
-    check_output_dir(target, flag)?;
-    refuse_foreign(target, flag, owned)?;
+    check_output_dir(target, field)?;
+    refuse_foreign(target, field, owned)?;
     let parent = parent_dir(target);
-    std::fs::create_dir_all(parent).map_err(|source| Error::output(flag, target, source))?;
+    std::fs::create_dir_all(parent).map_err(|source| Error::output(field, target, source))?;
     remove_stale(parent);
     let staging = tempfile::Builder::new()
         .prefix(STAGING_PREFIX)
         .tempdir_in(parent)
-        .map_err(|source| Error::output(flag, target, source))?;
+        .map_err(|source| Error::output(field, target, source))?;
     // Live while locked: a concurrent writer's clean-up leaves it alone.
     let lock = DirLock::acquire(staging.path())?;
     for (rel, bytes) in contents {
         let path = staging.path().join(rel);
-        std::fs::create_dir_all(parent_dir(&path)).map_err(|source| Error::output(flag, target, source))?;
-        write_own(&path, flag, |out| out.write_all(bytes))?;
+        std::fs::create_dir_all(parent_dir(&path)).map_err(|source| Error::output(field, target, source))?;
+        write_own(&path, field, |out| out.write_all(bytes))?;
     }
     // The lock file goes before the swap (the lock itself is held on its open file until the
     // end): the directory holds exactly `contents`.
     let _ = std::fs::remove_file(staging.path().join(LOCK_FILE));
     if target.exists() {
-        exchange_dirs(target, staging.path()).map_err(|source| Error::output(flag, target, source))?;
+        exchange_dirs(target, staging.path()).map_err(|source| Error::output(field, target, source))?;
         // The staging name now holds the old directory: dropping it removes it.
     } else {
         let staged = staging.keep();
-        std::fs::rename(&staged, target).map_err(|source| Error::output(flag, target, source))?;
+        std::fs::rename(&staged, target).map_err(|source| Error::output(field, target, source))?;
     }
     sync_dir(parent);
     drop(lock);
@@ -294,23 +298,23 @@ pub fn replace_dir(
 }
 
 /// Refuses, naming `flag`, an output directory that is a dangling symbolic link or a file.
-pub fn check_output_dir(dir: &Path, flag: &str) -> Result<()> {
-    check_not_dangling(dir, flag)?;
+pub fn check_output_dir(dir: &Path, field: &str) -> Result<()> {
+    check_not_dangling(dir, field)?;
     if dir.exists() && !dir.is_dir() {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!("{} exists and is not a directory", dir.display()),
         ));
     }
     Ok(())
 }
 
-fn check_not_dangling(path: &Path, flag: &str) -> Result<()> {
+fn check_not_dangling(path: &Path, field: &str) -> Result<()> {
     let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
     if is_link && !path.exists() {
         let to = std::fs::read_link(path).unwrap_or_default();
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!(
                 "{} is a symbolic link to {}, which does not exist",
                 path.display(),

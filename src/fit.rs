@@ -47,13 +47,13 @@ impl FitOptions {
     /// not a positive number.
     pub fn validate(&self) -> Result<()> {
         if self.starts == 0 {
-            return Err(Error::arg("--starts", "must be at least 1"));
+            return Err(Error::setting("starts", "must be at least 1"));
         }
         if let Some(w_ref_n) = self.w_ref_n
             && !(w_ref_n.is_finite() && w_ref_n > 0.0)
         {
-            return Err(Error::arg(
-                "--w-ref-kn",
+            return Err(Error::setting(
+                "w_ref_kn",
                 format!("must be a positive number of kN, got {}", w_ref_n / 1000.0),
             ));
         }
@@ -65,18 +65,18 @@ impl FitOptions {
     pub fn validate_for(&self, calibration: &Samples) -> Result<()> {
         self.validate()?;
         if self.w_ref_n.is_some() && calibration.wob_n.is_none() {
-            return Err(Error::arg(
-                "--scale-by-wob",
-                "the record has no weight-on-bit column (name one with --wob-col)",
+            return Err(Error::setting(
+                "scale_by_wob",
+                "the record has no weight-on-bit column (name one with `wob_column`)",
             ));
         }
         if let (Some(_), Some(wob)) = (self.w_ref_n, &calibration.wob_n) {
             let not_positive = wob.iter().filter(|&&w| w.is_nan() || w <= 0.0).count();
             if not_positive > 0 {
-                return Err(Error::arg(
-                    "--scale-by-wob",
+                return Err(Error::setting(
+                    "scale_by_wob",
                     format!(
-                        "{not_positive} of the {} calibration rows have weight on bit ≤ 0, where r = WOB / W_ref makes every law predict no torque; drop --scale-by-wob or those rows",
+                        "{not_positive} of the {} calibration rows have weight on bit ≤ 0, where r = WOB / W_ref makes every law predict no torque; drop `scale_by_wob` or those rows",
                         wob.len()
                     ),
                 ));
@@ -475,7 +475,7 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
     let speeds = distinct_speeds(&calibration.speed_rad_s);
     if speeds < n {
         return Err(refuse(format!(
-            "the {m} calibration samples have {speeds} distinct bit speeds, and a law of {n} parameters, a curve torque(speed), needs at least {n}; leave {law} out (--laws) or record more speeds"
+            "the {m} calibration samples have {speeds} distinct bit speeds, and a law of {n} parameters, a curve torque(speed), needs at least {n}; leave {law} out (`laws`) or record more speeds"
         )));
     }
     let y_si = &calibration.torque_nm;
@@ -604,7 +604,7 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
     let on_bound: Vec<bool> = (0..n).map(|j| lower[j].is_finite() && p[j] - lower[j] < 1e-6).collect();
     for j in (0..n).filter(|&j| on_bound[j]) {
         warnings.push(format!(
-            "{} sits on its physical bound ({} ≥ {}): the data push it further; try --no-bounds to see where",
+            "{} sits on its physical bound ({} ≥ {}): the data push it further; try `no_bounds` to see where",
             law.params()[j].name,
             law.params()[j].name,
             law.params()[j].lower

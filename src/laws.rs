@@ -270,11 +270,11 @@ impl Law {
 
     /// Refuses, naming `flag`, parameters (SI, N·m-based) that this law cannot take: the wrong
     /// count, a value that is not finite, or one below its physical bound.
-    pub fn check_params(self, params_si: &[f64], flag: &str) -> crate::Result<()> {
+    pub fn check_params(self, params_si: &[f64], field: &str) -> crate::Result<()> {
         let n = self.n_params();
         if params_si.len() != n {
-            return Err(crate::Error::arg(
-                flag,
+            return Err(crate::Error::setting(
+                field,
                 format!(
                     "law {self} takes {n} parameters ({}), got {}",
                     self.param_names().join(", "),
@@ -284,15 +284,15 @@ impl Law {
         }
         for (spec, v) in self.params().iter().zip(params_si) {
             if !v.is_finite() {
-                return Err(crate::Error::arg(
-                    flag,
+                return Err(crate::Error::setting(
+                    field,
                     format!("{} must be finite, got {v}", spec.name),
                 ));
             }
         }
         if let Some((spec, v)) = self.bound_violation(params_si) {
-            return Err(crate::Error::arg(
-                flag,
+            return Err(crate::Error::setting(
+                field,
                 format!(
                     "{} = {v} (SI, N·m-based) is below its physical bound {}",
                     spec.name, spec.lower

@@ -17,8 +17,8 @@ pub fn max_threads() -> usize {
 pub fn check_threads(threads: usize) -> Result<()> {
     let max = max_threads();
     if threads == 0 || threads > max {
-        return Err(Error::arg(
-            "--threads",
+        return Err(Error::setting(
+            "threads",
             format!(
                 "must lie in 1..={max} ({THREADS_PER_CORE} × the {} hardware threads here), got {threads}",
                 max / THREADS_PER_CORE
@@ -40,11 +40,11 @@ pub fn available_memory_bytes() -> Option<u64> {
 /// Refuses, naming `flag`, work whose memory estimate (`bytes`, for `what`) exceeds the memory
 /// available. Where the machine does not say, the estimate is checked against the address
 /// space only.
-pub fn check_memory(flag: &str, bytes: f64, what: &str) -> Result<()> {
+pub fn check_memory(field: &str, bytes: f64, what: &str) -> Result<()> {
     let available = available_memory_bytes().map_or(u64::MAX as f64, |b| b as f64);
     if bytes.is_nan() || bytes > available {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!(
                 "{what} needs about {} of memory; {} is available",
                 human_bytes(bytes),
@@ -63,11 +63,11 @@ pub const MAX_WORK_SECONDS: f64 = 86_400.0;
 /// [`MAX_WORK_SECONDS`] even at `fastest_per_s` units per second (a rate above what the
 /// fastest machine bitrock runs on reaches: the estimate is a lower bound on the time, so only
 /// requests that cannot finish in a day are refused).
-pub fn check_work(flag: &str, operations: f64, fastest_per_s: f64, what: &str) -> Result<()> {
+pub fn check_work(field: &str, operations: f64, fastest_per_s: f64, what: &str) -> Result<()> {
     let seconds = operations / fastest_per_s;
     if seconds.is_nan() || seconds > MAX_WORK_SECONDS {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!(
                 "{what} would take more than {:.0} hours even at {fastest_per_s:.0e} per second; the most accepted is a day's work",
                 (seconds / 3600.0).min(1e12)
@@ -95,10 +95,10 @@ mod tests {
 
     #[test]
     fn work_beyond_a_day_is_refused_naming_the_flag() {
-        assert!(check_work("--samples", 1e14, 1e10, "the grid").is_ok());
-        let e = check_work("--samples", 1e16, 1e10, "the grid").unwrap_err().to_string();
-        assert!(e.contains("--samples") && e.contains("278 hours"), "{e}");
-        assert!(check_work("--samples", f64::NAN, 1e10, "the grid").is_err());
+        assert!(check_work("samples", 1e14, 1e10, "the grid").is_ok());
+        let e = check_work("samples", 1e16, 1e10, "the grid").unwrap_err().to_string();
+        assert!(e.contains("samples") && e.contains("278 hours"), "{e}");
+        assert!(check_work("samples", f64::NAN, 1e10, "the grid").is_err());
     }
 
     #[test]
@@ -114,18 +114,18 @@ mod tests {
         assert!(check_threads(max_threads()).is_ok());
         for bad in [0, max_threads() + 1, 99_999_999_999] {
             let e = check_threads(bad).unwrap_err().to_string();
-            assert!(e.starts_with("--threads: must lie in 1..="), "{e}");
+            assert!(e.starts_with("`threads`: must lie in 1..="), "{e}");
         }
     }
 
     #[test]
     fn memory_beyond_the_machine_is_refused_with_the_estimate() {
-        assert!(check_memory("--particles", 1e6, "a population").is_ok());
-        let e = check_memory("--particles", 1e30, "two populations")
+        assert!(check_memory("particles", 1e6, "a population").is_ok());
+        let e = check_memory("particles", 1e30, "two populations")
             .unwrap_err()
             .to_string();
         assert!(
-            e.starts_with("--particles: two populations needs about 1000000000000.0 EB"),
+            e.starts_with("`particles`: two populations needs about 1000000000000.0 EB"),
             "{e}"
         );
     }

@@ -130,7 +130,7 @@ impl PriorRule {
         match *self {
             PriorRule::Delta => Ok(()),
             PriorRule::Stderr { k } if k.is_finite() && k > 0.0 => Ok(()),
-            PriorRule::Stderr { k } => Err(Error::arg("--prior-k", format!("must be a positive number, got {k}"))),
+            PriorRule::Stderr { k } => Err(Error::setting("prior_k", format!("must be a positive number, got {k}"))),
         }
     }
 }
@@ -288,7 +288,10 @@ impl Prior {
     ) -> Result<Self> {
         rule.validate()?;
         if !(delta.is_finite() && delta > 0.0) {
-            return Err(Error::arg("--delta", format!("must be a positive number, got {delta}")));
+            return Err(Error::setting(
+                "delta",
+                format!("must be a positive number, got {delta}"),
+            ));
         }
         let mut boxes = Vec::new();
         let mut rules = Vec::new();
@@ -303,8 +306,8 @@ impl Prior {
                 let (lo, hi, rule) = if let Some(&[a, b]) = explicit.and_then(|m| m.get(spec.name)).map(Vec::as_slice) {
                     let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
                     if !(a.is_finite() && b.is_finite() && a < b) {
-                        return Err(Error::arg(
-                            "--prior",
+                        return Err(Error::setting(
+                            "prior",
                             format!(
                                 "[{law}] {} = [{a}, {b}]: need finite bounds with lower < upper",
                                 spec.name
@@ -321,8 +324,8 @@ impl Prior {
                 let lo = lo.max(spec.lower);
                 if rule == BoxRule::Given && lo >= hi {
                     let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
-                    return Err(Error::arg(
-                        "--prior",
+                    return Err(Error::setting(
+                        "prior",
                         format!(
                             "[{law}] {}: the bounds lie at or below its physical bound {} ≥ {} (in the file's units); give an upper bound above it",
                             spec.name,
@@ -333,10 +336,10 @@ impl Prior {
                 }
                 check_box_reach(law, spec.name, lo, hi, rule, delta)?;
                 if lo >= hi {
-                    return Err(Error::arg(
-                        "--delta",
+                    return Err(Error::setting(
+                        "delta",
                         format!(
-                            "{law}.{}: the box [{lo}, {hi}] (SI) is empty after clipping to the bound {} ≥ {}; give explicit bounds in a --prior file",
+                            "{law}.{}: the box [{lo}, {hi}] (SI) is empty after clipping to the bound {} ≥ {}; give explicit bounds in a `prior` file",
                             spec.name, spec.name, spec.lower
                         ),
                     ));
@@ -357,11 +360,11 @@ impl Prior {
     /// A prior from explicit boxes (SI) and unnormalised law weights.
     pub fn new(boxes: Vec<LawBox>, weights: Vec<f64>) -> Result<Self> {
         if boxes.is_empty() {
-            return Err(Error::arg("--laws", "no law to sample"));
+            return Err(Error::setting("laws", "no law to sample"));
         }
         let total: f64 = weights.iter().sum();
         if !(total.is_finite() && total > 0.0) {
-            return Err(Error::arg("--prior", "the law weights sum to zero"));
+            return Err(Error::setting("prior", "the law weights sum to zero"));
         }
         let weights: Vec<f64> = weights.iter().map(|w| w / total).collect();
         let mut cumulative = 0.0;
@@ -431,20 +434,20 @@ impl Prior {
 /// makes) and a δ box that crosses 0 (δ ≥ 1 on a parameter without a physical bound): it
 /// would hold values of the sign opposite to the estimate, another law shape than the fit's.
 fn check_box_reach(law: Law, name: &str, lo: f64, hi: f64, rule: BoxRule, delta: f64) -> Result<()> {
-    let flag = if rule == BoxRule::Given { "--prior" } else { "--delta" };
+    let field = if rule == BoxRule::Given { "prior" } else { "delta" };
     if !((lo as f32).is_finite() && (hi as f32).is_finite()) {
-        return Err(Error::arg(
-            flag,
+        return Err(Error::setting(
+            field,
             format!(
                 "{law}.{name}: the box [{lo:e}, {hi:e}] (SI) has an end beyond what candidates (f32, ±3.4e38) can hold; narrow it"
             ),
         ));
     }
     if matches!(rule, BoxRule::Delta | BoxRule::DeltaNotIdentified) && lo < 0.0 && hi > 0.0 {
-        return Err(Error::arg(
-            "--delta",
+        return Err(Error::setting(
+            "delta",
             format!(
-                "{law}.{name}: δ = {delta} makes the box [{lo:e}, {hi:e}] (SI) cross 0, so it holds values of the sign opposite to the estimate; use δ < 1, or give the box in a --prior file"
+                "{law}.{name}: δ = {delta} makes the box [{lo:e}, {hi:e}] (SI) cross 0, so it holds values of the sign opposite to the estimate; use δ < 1, or give the box in a `prior` file"
             ),
         ));
     }
@@ -511,7 +514,7 @@ mod tests {
             Prior::from_fits(std::slice::from_ref(&m2), 0.0, None, 1.0)
                 .unwrap_err()
                 .to_string()
-                .starts_with("--delta")
+                .starts_with("`delta`:")
         );
     }
 
@@ -570,7 +573,7 @@ mod tests {
             None,
             1.0,
         );
-        assert!(zero_k.unwrap_err().to_string().starts_with("--prior-k"));
+        assert!(zero_k.unwrap_err().to_string().starts_with("`prior_k`:"));
     }
 
     #[test]

@@ -66,12 +66,12 @@ impl RunConfig {
     /// law list, bad fit options, δ ≤ 0, sampler settings out of range), before any work.
     pub fn validate(&self) -> Result<()> {
         if self.laws.is_empty() {
-            return Err(Error::arg("--laws", "give at least one law"));
+            return Err(Error::setting("laws", "give at least one law"));
         }
         self.fit.validate()?;
         if !(self.delta.is_finite() && self.delta > 0.0) {
-            return Err(Error::arg(
-                "--delta",
+            return Err(Error::setting(
+                "delta",
                 format!("must be a positive number, got {}", self.delta),
             ));
         }
@@ -83,7 +83,7 @@ impl RunConfig {
         }
         let particles = self.sampler.base().particles;
         limits::check_memory(
-            "--particles",
+            "particles",
             POPULATIONS_HELD * particles as f64 * PARTICLE_BYTES as f64,
             &format!("holding {POPULATIONS_HELD} populations of {particles} particles"),
         )
@@ -96,8 +96,8 @@ impl RunConfig {
     pub fn check_summary_population(&self, g: Option<usize>) -> Result<()> {
         let max = self.sampler.base().max_populations;
         match g {
-            Some(g) if g >= max => Err(Error::arg(
-                "--summary-population",
+            Some(g) if g >= max => Err(Error::setting(
+                "summary_population",
                 format!("the run has at most {max} populations (0..={}), got {g}", max - 1),
             )),
             _ => Ok(()),
@@ -211,8 +211,8 @@ pub enum DirState {
 /// `replace`, a store that is not a bitrock store.
 pub fn check_new_run_dir(dir: &RunDir, input: Option<&Path>) -> Result<DirState> {
     let path = dir.path.as_path();
-    files::check_output_dir(path, "--out")?;
-    let refuse = |why: String| Err(Error::arg("--out", format!("{}: {why}", path.display())));
+    files::check_output_dir(path, "out")?;
+    let refuse = |why: String| Err(Error::setting("out", format!("{}: {why}", path.display())));
     let Ok(real) = path.canonicalize() else {
         return Ok(DirState::Fresh);
     };
@@ -226,7 +226,7 @@ pub fn check_new_run_dir(dir: &RunDir, input: Option<&Path>) -> Result<DirState>
     }
     let has_store = crate::rundir::is_run_dir(path);
     // Without a store nothing in the directory is a run's: only bitrock's temporaries may be there.
-    files::refuse_foreign(path, "--out", &|rel, is_dir| {
+    files::refuse_foreign(path, "out", &|rel, is_dir| {
         has_store && crate::rundir::Owned::Run.owns(rel, is_dir)
     })?;
     if !has_store {
@@ -238,7 +238,7 @@ pub fn check_new_run_dir(dir: &RunDir, input: Option<&Path>) -> Result<DirState>
         ));
     }
     if !dir.replace {
-        return refuse("holds a bitrock run; pass --force to replace it".into());
+        return refuse("holds a bitrock run; pass `force` to replace it".into());
     }
     if std::env::current_dir().is_ok_and(|cwd| cwd.canonicalize().is_ok_and(|cwd| cwd == real)) {
         return refuse(
@@ -378,7 +378,7 @@ impl Claim {
     /// run beside a run it replaces.
     fn new(dir: &RunDir, input: Option<&Path>) -> Result<Self> {
         let path = dir.path.clone();
-        std::fs::create_dir_all(&path).map_err(|source| Error::output("--out", &path, source))?;
+        std::fs::create_dir_all(&path).map_err(|source| Error::output("out", &path, source))?;
         let lock = files::DirLock::acquire(&path)?;
         // Another process may have written a run here since the first check.
         let state = check_new_run_dir(dir, input)?;
@@ -391,7 +391,7 @@ impl Claim {
                 let staging = tempfile::Builder::new()
                     .prefix(files::STAGING_PREFIX)
                     .tempdir_in(parent)
-                    .map_err(|source| Error::output("--out", &path, source))?
+                    .map_err(|source| Error::output("out", &path, source))?
                     .keep();
                 let staging_lock = files::DirLock::acquire(&staging)?;
                 Some((staging, staging_lock))
@@ -420,11 +420,11 @@ impl Claim {
         let Some((staging, staging_lock)) = self.staged.take() else {
             return Ok(false);
         };
-        files::exchange_dirs(&self.dir, &staging).map_err(|source| Error::output("--out", &self.dir, source))?;
+        files::exchange_dirs(&self.dir, &staging).map_err(|source| Error::output("out", &self.dir, source))?;
         files::sync_dir(files::parent_dir(&self.dir));
         // The staging name now holds the old run, still locked by us: gone before the lock is.
         let old_lock = self.lock.replace(staging_lock);
-        std::fs::remove_dir_all(&staging).map_err(|source| Error::output("--out", &staging, source))?;
+        std::fs::remove_dir_all(&staging).map_err(|source| Error::output("out", &staging, source))?;
         drop(old_lock);
         Ok(true)
     }

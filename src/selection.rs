@@ -69,10 +69,10 @@ impl CheckOptions {
     /// Refuses, naming the flag, options that cannot run.
     pub fn validate(&self) -> Result<()> {
         if self.replicates == 0 {
-            return Err(Error::arg("--replicates", "must be at least 1"));
+            return Err(Error::setting("replicates", "must be at least 1"));
         }
         if self.batch == Some(0) {
-            return Err(Error::arg("--batch", "must be at least 1"));
+            return Err(Error::setting("batch", "must be at least 1"));
         }
         Ok(())
     }
@@ -91,7 +91,7 @@ fn check_size(run: &CheckedRun, options: &CheckOptions) -> Result<()> {
     let samples = run.stored.setup.data.calibration.len() as f64;
     let result_bytes = std::mem::size_of::<Replicate>() as f64 + (laws + crate::laws::MAX_PARAMS as f64) * 8.0;
     crate::limits::check_memory(
-        "--replicates",
+        "replicates",
         replicates * result_bytes,
         &format!("the results of {replicates} replicates"),
     )?;
@@ -101,16 +101,12 @@ fn check_size(run: &CheckedRun, options: &CheckOptions) -> Result<()> {
         2.0 * particles * (std::mem::size_of::<crate::abc::Particle>() as f64 + 8.0 * crate::laws::MAX_PARAMS as f64)
             + samples * 4.0 * 8.0;
     crate::limits::check_memory(
-        if options.batch.is_some() {
-            "--batch"
-        } else {
-            "--replicates"
-        },
+        if options.batch.is_some() { "batch" } else { "replicates" },
         batch * run_bytes,
         &format!("{batch} replicate runs at once (N = {particles})"),
     )?;
     crate::limits::check_work(
-        "--replicates",
+        "replicates",
         replicates * particles * samples,
         FASTEST_EVALUATIONS_PER_S,
         &format!("{replicates} replicate runs of N = {particles} on {samples} samples"),

@@ -135,39 +135,39 @@ impl SimConfig {
         self.structure.validate()?;
         // (flag, value in SI, SI per flag unit)
         let positive = [
-            ("--omega-rpm", self.omega_rad_s, RAD_S_PER_RPM),
-            ("--wob-kn", self.wob_n, 1000.0),
-            ("--w-ref-kn", self.w_ref_n, 1000.0),
-            ("--duration-s", self.duration_s, 1.0),
-            ("--sample-hz", self.sample_hz, 1.0),
-            ("--dt-s", self.dt_s, 1.0),
-            ("--wob-correlation-s", self.wob_correlation_s, 1.0),
+            ("omega_rpm", self.omega_rad_s, RAD_S_PER_RPM),
+            ("wob_kn", self.wob_n, 1000.0),
+            ("w_ref_kn", self.w_ref_n, 1000.0),
+            ("duration_s", self.duration_s, 1.0),
+            ("sample_hz", self.sample_hz, 1.0),
+            ("dt_s", self.dt_s, 1.0),
+            ("wob_correlation_s", self.wob_correlation_s, 1.0),
         ];
-        for (flag, value, unit) in positive {
+        for (field, value, unit) in positive {
             if !(value.is_finite() && value > 0.0) {
-                return Err(Error::arg(
-                    flag,
+                return Err(Error::setting(
+                    field,
                     format!("must be positive and finite, got {}", value / unit),
                 ));
             }
         }
         let non_negative = [
-            ("--settle-s", self.settle_s, 1.0),
-            ("--noise-torque-knm", self.noise_torque_nm, 1000.0),
-            ("--noise-speed-rpm", self.noise_speed_rad_s, RAD_S_PER_RPM),
-            ("--wob-fluctuation-kn", self.wob_fluctuation_n, 1000.0),
+            ("settle_s", self.settle_s, 1.0),
+            ("noise_torque_knm", self.noise_torque_nm, 1000.0),
+            ("noise_speed_rpm", self.noise_speed_rad_s, RAD_S_PER_RPM),
+            ("wob_fluctuation_kn", self.wob_fluctuation_n, 1000.0),
         ];
-        for (flag, value, unit) in non_negative {
+        for (field, value, unit) in non_negative {
             if !(value.is_finite() && value >= 0.0) {
-                return Err(Error::arg(
-                    flag,
+                return Err(Error::setting(
+                    field,
                     format!("must be finite and not negative, got {}", value / unit),
                 ));
             }
         }
         if self.duration_s * self.sample_hz < 1.0 {
-            return Err(Error::arg(
-                "--duration-s",
+            return Err(Error::setting(
+                "duration_s",
                 format!(
                     "{} s at {} Hz records no sample; record at least one sample period",
                     self.duration_s, self.sample_hz
@@ -176,7 +176,7 @@ impl SimConfig {
         }
         let samples = self.duration_s * self.sample_hz;
         crate::limits::check_memory(
-            "--duration-s",
+            "duration_s",
             samples * TRACE_BYTES_PER_SAMPLE,
             &format!(
                 "recording {samples:.3e} samples ({} s at {} Hz)",
@@ -186,7 +186,7 @@ impl SimConfig {
         // RK4 steps of the settling and the recording: at most a day's work even at a rate
         // above any machine's (the steps themselves are serial).
         crate::limits::check_work(
-            "--dt-s",
+            "dt_s",
             (self.settle_s + self.duration_s) / self.dt_s,
             FASTEST_STEPS_PER_S,
             &format!(
@@ -196,8 +196,8 @@ impl SimConfig {
             ),
         )?;
         if self.dt_s > 1.0 / self.sample_hz {
-            return Err(Error::arg(
-                "--dt-s",
+            return Err(Error::setting(
+                "dt_s",
                 format!(
                     "the integration step {} s exceeds the sample period {} s",
                     self.dt_s,
@@ -210,12 +210,12 @@ impl SimConfig {
         } = self.initial
             && !speed_perturbation_rad_s.is_finite()
         {
-            return Err(Error::arg(
-                "--kick-rpm",
+            return Err(Error::setting(
+                "kick_rpm",
                 format!("must be finite, got {}", speed_perturbation_rad_s / RAD_S_PER_RPM),
             ));
         }
-        self.law.check_params(&self.params_nm, "--params")
+        self.law.check_params(&self.params_nm, "params")
     }
 }
 
@@ -854,114 +854,114 @@ mod tests {
     }
 
     #[test]
-    fn validation_names_the_flag() {
+    fn validation_names_the_setting() {
         let base = SimConfig::new(Law::M2, paper_nm(Law::M2), 6.0, 244.2e3);
         assert!(base.validate().is_ok());
         let flag_of = |cfg: SimConfig| match cfg.validate().unwrap_err() {
-            Error::InvalidArgument { flag, .. } => flag,
+            Error::InvalidSetting { field, .. } => field,
             other => panic!("{other}"),
         };
         let cases: Vec<(&str, SimConfig)> = vec![
             (
-                "--omega-rpm",
+                "omega_rpm",
                 SimConfig {
                     omega_rad_s: 0.0,
                     ..base.clone()
                 },
             ),
             (
-                "--wob-kn",
+                "wob_kn",
                 SimConfig {
                     wob_n: f64::NAN,
                     ..base.clone()
                 },
             ),
             (
-                "--duration-s",
+                "duration_s",
                 SimConfig {
                     duration_s: -1.0,
                     ..base.clone()
                 },
             ),
             (
-                "--sample-hz",
+                "sample_hz",
                 SimConfig {
                     sample_hz: f64::INFINITY,
                     ..base.clone()
                 },
             ),
             (
-                "--dt-s",
+                "dt_s",
                 SimConfig {
                     dt_s: 0.0,
                     ..base.clone()
                 },
             ),
             (
-                "--dt-s",
+                "dt_s",
                 SimConfig {
                     dt_s: 0.05,
                     ..base.clone()
                 },
             ),
             (
-                "--settle-s",
+                "settle_s",
                 SimConfig {
                     settle_s: -1.0,
                     ..base.clone()
                 },
             ),
             (
-                "--noise-torque-knm",
+                "noise_torque_knm",
                 SimConfig {
                     noise_torque_nm: -1.0,
                     ..base.clone()
                 },
             ),
             (
-                "--noise-speed-rpm",
+                "noise_speed_rpm",
                 SimConfig {
                     noise_speed_rad_s: f64::NAN,
                     ..base.clone()
                 },
             ),
             (
-                "--wob-fluctuation-kn",
+                "wob_fluctuation_kn",
                 SimConfig {
                     wob_fluctuation_n: -1.0,
                     ..base.clone()
                 },
             ),
             (
-                "--wob-correlation-s",
+                "wob_correlation_s",
                 SimConfig {
                     wob_correlation_s: 0.0,
                     ..base.clone()
                 },
             ),
             (
-                "--params",
+                "params",
                 SimConfig {
                     params_nm: vec![1.0, 2.0],
                     ..base.clone()
                 },
             ),
             (
-                "--params",
+                "params",
                 SimConfig {
                     params_nm: vec![13e3, 6.5e3, -0.3],
                     ..base.clone()
                 },
             ),
             (
-                "--params",
+                "params",
                 SimConfig {
                     params_nm: vec![13e3, f64::NAN, 0.3],
                     ..base.clone()
                 },
             ),
             (
-                "--damping-ratio",
+                "damping_ratio",
                 SimConfig {
                     structure: Lumped {
                         damping_ratio: 0.0,
@@ -971,8 +971,8 @@ mod tests {
                 },
             ),
         ];
-        for (flag, cfg) in cases {
-            assert_eq!(flag_of(cfg), flag);
+        for (field, cfg) in cases {
+            assert_eq!(flag_of(cfg), field);
         }
         // Messages speak the flag's unit, not SI.
         let msg = SimConfig {
@@ -982,7 +982,7 @@ mod tests {
         .validate()
         .unwrap_err()
         .to_string();
-        assert_eq!(msg, "--wob-kn: must be positive and finite, got -5");
+        assert_eq!(msg, "`wob_kn`: must be positive and finite, got -5");
     }
 
     #[test]

@@ -254,7 +254,7 @@ impl RunStore {
                 message: "a run store already exists here".into(),
             });
         }
-        let temp = files::TempFile::beside(&path, "--out")?;
+        let temp = files::TempFile::beside(&path, "out")?;
         let err = sql_error(&path);
         let mut conn = Connection::open(temp.path()).map_err(&err)?;
         conn.pragma_update(None, "journal_mode", "OFF").map_err(&err)?;

@@ -8,14 +8,15 @@ use std::f64::consts::PI;
 pub const RAD_S_PER_RPM: f64 = 2.0 * PI / 60.0;
 
 /// Unit of bit or rotary speed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum SpeedUnit {
     /// Revolutions per minute.
-    #[value(name = "rpm")]
+    #[cfg_attr(feature = "cli", value(name = "rpm"))]
     #[serde(rename = "rpm")]
     Rpm,
     /// Radians per second.
-    #[value(name = "rad_s")]
+    #[cfg_attr(feature = "cli", value(name = "rad_s"))]
     #[serde(rename = "rad/s")]
     RadS,
 }
@@ -49,14 +50,15 @@ impl SpeedUnit {
 }
 
 /// Unit of torque.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum TorqueUnit {
     /// Newton metres (laboratory rigs).
-    #[value(name = "nm")]
+    #[cfg_attr(feature = "cli", value(name = "nm"))]
     #[serde(rename = "N·m")]
     Nm,
     /// Kilonewton metres (field data; the paper's parameters).
-    #[value(name = "knm")]
+    #[cfg_attr(feature = "cli", value(name = "knm"))]
     #[serde(rename = "kN·m")]
     KNm,
 }
@@ -90,14 +92,15 @@ impl TorqueUnit {
 }
 
 /// Unit of force (weight on bit).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum ForceUnit {
     /// Newtons.
-    #[value(name = "n")]
+    #[cfg_attr(feature = "cli", value(name = "n"))]
     #[serde(rename = "N")]
     N,
     /// Kilonewtons.
-    #[value(name = "kn")]
+    #[cfg_attr(feature = "cli", value(name = "kn"))]
     #[serde(rename = "kN")]
     KN,
 }

@@ -61,7 +61,7 @@ pub fn resolve(fits: &[LawFit], requested: Option<f64>) -> Result<EpsFloor> {
             best,
             note: (eps_min <= rho).then(|| {
                 format!(
-                    "no law can reach --eps-min {eps_min} (the best least-squares ρ is {law}'s {rho:.5}); the run will end when ε stalls"
+                    "no law can reach `eps_min` {eps_min} (the best least-squares ρ is {law}'s {rho:.5}); the run will end when ε stalls"
                 )
             }),
         },
@@ -78,7 +78,7 @@ pub fn resolve(fits: &[LawFit], requested: Option<f64>) -> Result<EpsFloor> {
                 source: FloorSource::BestFit,
                 best,
                 note: Some(format!(
-                    "ε floor {eps_min:.5} = {FLOOR_MULTIPLE} × the best least-squares ρ ({law}: {rho:.5}): the paper's {PAPER_EPS_MIN} is out of this record's reach (--eps-min sets the floor)"
+                    "ε floor {eps_min:.5} = {FLOOR_MULTIPLE} × the best least-squares ρ ({law}: {rho:.5}): the paper's {PAPER_EPS_MIN} is out of this record's reach (`eps_min` sets the floor)"
                 )),
             }
         }
@@ -90,8 +90,8 @@ pub fn check_start_epsilon(fits: &[LawFit], start: Option<f64>) -> Result<()> {
     if let (Some(start), Some((law, rho))) = (start, best_fit(fits))
         && start <= rho
     {
-        return Err(Error::arg(
-            "--start-epsilon",
+        return Err(Error::setting(
+            "start_epsilon",
             format!(
                 "{start} is at or below every law's best least-squares ρ (the lowest is {law}'s {rho:.5}): no candidate could be accepted"
             ),
@@ -140,7 +140,7 @@ mod tests {
         assert_eq!((f.source, f.note), (FloorSource::Requested, None));
         let f = resolve(&fits, Some(0.02)).unwrap();
         assert_eq!(f.eps_min.to_bits(), 0.02f64.to_bits());
-        assert!(f.note.unwrap().contains("no law can reach --eps-min 0.02"));
+        assert!(f.note.unwrap().contains("no law can reach `eps_min` 0.02"));
     }
 
     #[test]
@@ -149,6 +149,6 @@ mod tests {
         assert!(check_start_epsilon(&fits, Some(0.028)).is_ok());
         assert!(check_start_epsilon(&fits, None).is_ok());
         let e = check_start_epsilon(&fits, Some(0.001)).unwrap_err().to_string();
-        assert!(e.starts_with("--start-epsilon") && e.contains("0.02730"), "{e}");
+        assert!(e.starts_with("`start_epsilon`:") && e.contains("0.02730"), "{e}");
     }
 }

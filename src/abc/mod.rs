@@ -198,11 +198,11 @@ impl StopReason {
     pub fn describe(self) -> &'static str {
         match self {
             StopReason::EpsMin => "the tolerance reached the run's floor ε_min",
-            StopReason::ScheduleExhausted => "the --epsilons schedule ran out",
-            StopReason::MaxPopulations => "--max-populations populations were drawn",
-            StopReason::AcceptanceFloor => "the projected acceptance fell below --min-acceptance",
-            StopReason::MaxDraws => "--max-draws candidates were scored (the last population was incomplete)",
-            StopReason::WallTime => "--max-seconds ran out (the last population was incomplete)",
+            StopReason::ScheduleExhausted => "the `epsilons` schedule ran out",
+            StopReason::MaxPopulations => "`max_populations` populations were drawn",
+            StopReason::AcceptanceFloor => "the projected acceptance fell below `min_acceptance`",
+            StopReason::MaxDraws => "`max_draws` candidates were scored (the last population was incomplete)",
+            StopReason::WallTime => "`max_seconds` ran out (the last population was incomplete)",
             StopReason::Stalled => {
                 "the tolerance stalled (the median rule lowered it by less than 1 %): it is near the best ρ the laws can attain"
             }

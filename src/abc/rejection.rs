@@ -33,7 +33,8 @@ use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 /// How populations relate to the candidate streams.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// One stream for the whole run; each population keeps the previous one's particles that
@@ -88,37 +89,37 @@ impl RejectionConfig {
     /// Refuses configurations that cannot run, naming the flag, before any work.
     pub fn validate(&self) -> Result<()> {
         if self.particles == 0 {
-            return Err(Error::arg("--particles", "must be at least 1"));
+            return Err(Error::setting("particles", "must be at least 1"));
         }
         if !(self.eps_min.is_finite() && self.eps_min >= 0.0) {
-            return Err(Error::arg(
-                "--eps-min",
+            return Err(Error::setting(
+                "eps_min",
                 format!("must be finite and ≥ 0, got {}", self.eps_min),
             ));
         }
         if self.max_populations == 0 {
-            return Err(Error::arg("--max-populations", "must be at least 1"));
+            return Err(Error::setting("max_populations", "must be at least 1"));
         }
         if self.max_draws < self.particles as u64 {
-            return Err(Error::arg("--max-draws", "must be at least the number of particles"));
+            return Err(Error::setting("max_draws", "must be at least the number of particles"));
         }
         if !(0.0..1.0).contains(&self.min_acceptance) {
-            return Err(Error::arg("--min-acceptance", "must lie in [0, 1)"));
+            return Err(Error::setting("min_acceptance", "must lie in [0, 1)"));
         }
         if let Some(e) = self.start_epsilon
             && (e.is_nan() || e <= 0.0)
         {
-            return Err(Error::arg("--start-epsilon", format!("must be positive, got {e}")));
+            return Err(Error::setting("start_epsilon", format!("must be positive, got {e}")));
         }
         if let Some(list) = &self.epsilons {
             if list.is_empty() {
-                return Err(Error::arg("--epsilons", "the list is empty"));
+                return Err(Error::setting("epsilons", "the list is empty"));
             }
             let mut previous = self.start_epsilon.unwrap_or(f64::INFINITY);
             for &e in list {
                 if !(e.is_finite() && e > 0.0 && e < previous) {
-                    return Err(Error::arg(
-                        "--epsilons",
+                    return Err(Error::setting(
+                        "epsilons",
                         format!("must be positive and strictly decreasing (ε_1 > ε_2 > ...), got {e} after {previous}"),
                     ));
                 }
@@ -126,17 +127,17 @@ impl RejectionConfig {
             }
             // A schedule is run as given or refused: never cut at the floor or the count.
             if let Some(&below) = list.iter().find(|&&e| e < self.eps_min) {
-                return Err(Error::arg(
-                    "--epsilons",
+                return Err(Error::setting(
+                    "epsilons",
                     format!(
-                        "{below} lies below --eps-min {}, where the run would stop: lower --eps-min or end the schedule above it",
+                        "{below} lies below `eps_min` {}, where the run would stop: lower `eps_min` or end the schedule above it",
                         self.eps_min
                     ),
                 ));
             }
             if list.len() >= self.max_populations {
-                return Err(Error::arg(
-                    "--max-populations",
+                return Err(Error::setting(
+                    "max_populations",
                     format!(
                         "{} populations cannot hold the schedule's {} tolerances after population 0",
                         self.max_populations,
@@ -148,14 +149,14 @@ impl RejectionConfig {
         if let Some(t) = self.max_seconds
             && !(t.is_finite() && t > 0.0)
         {
-            return Err(Error::arg(
-                "--max-seconds",
+            return Err(Error::setting(
+                "max_seconds",
                 format!("must be a positive number of seconds, got {t}"),
             ));
         }
         if self.max_batch == 0 {
             // No flag sets it: only a program using the library can get this wrong.
-            return Err(Error::arg("RejectionConfig::max_batch", "must be at least 1"));
+            return Err(Error::setting("RejectionConfig::max_batch", "must be at least 1"));
         }
         Ok(())
     }

@@ -67,7 +67,8 @@ use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 /// Where the importance weights' kernel sums are computed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum WeightsOn {
     /// The f64 CPU twin, whatever the evaluator: runs are identical across backends.
@@ -106,14 +107,14 @@ impl SmcConfig {
     pub fn validate(&self) -> Result<()> {
         self.base.validate()?;
         if !(0.0..=1.0).contains(&self.p_stay) {
-            return Err(Error::arg(
-                "--p-stay",
+            return Err(Error::setting(
+                "p_stay",
                 format!("must lie in [0, 1], got {}", self.p_stay),
             ));
         }
         if !(self.kernel_scale.is_finite() && self.kernel_scale > 0.0) {
-            return Err(Error::arg(
-                "--kernel-scale",
+            return Err(Error::setting(
+                "kernel_scale",
                 format!("must be a positive number, got {}", self.kernel_scale),
             ));
         }
@@ -144,10 +145,10 @@ impl SmcConfig {
         let budget = self.base.particles as f64 / self.base.max_draws as f64;
         let needed = self.base.min_acceptance.max(budget);
         if share < needed {
-            return Err(Error::arg(
-                "--kernel-scale",
+            return Err(Error::setting(
+                "kernel_scale",
                 format!(
-                    "{} makes the perturbation √{0}× as wide as the posterior: at most {share:.1e} of population 1's proposals of a {fewest_params}-parameter law land inside its prior box, below the {needed:.1e} the run needs (--min-acceptance, or --particles/--max-draws); use a scale near 2",
+                    "{} makes the perturbation √{0}× as wide as the posterior: at most {share:.1e} of population 1's proposals of a {fewest_params}-parameter law land inside its prior box, below the {needed:.1e} the run needs (`min_acceptance`, or `particles`/`max_draws`); use a scale near 2",
                     self.kernel_scale
                 ),
             ));

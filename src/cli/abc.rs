@@ -224,7 +224,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
             let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
             Ok(job.run(data, &mut progress, &mut note)?)
         }
-        (None, None) => Err(Error::arg("--out", "give the run directory to write").into()),
+        (None, None) => Err(Error::setting("out", "give the run directory to write").into()),
     }
 }
 
@@ -283,20 +283,20 @@ fn check_sampler_flags(args: &AbcArgs) -> Result<(), Error> {
     match args.sampler {
         Sampler::Rejection => {
             let smc_only = [
-                ("--p-stay", args.p_stay.is_some()),
-                ("--kernel-scale", args.kernel_scale.is_some()),
-                ("--smc-weights", args.smc_weights.is_some()),
+                ("p_stay", args.p_stay.is_some()),
+                ("kernel_scale", args.kernel_scale.is_some()),
+                ("smc_weights", args.smc_weights.is_some()),
             ];
             match smc_only.into_iter().find(|&(_, given)| given) {
-                Some((flag, _)) => Err(Error::arg(
+                Some((flag, _)) => Err(Error::setting(
                     flag,
                     "applies only to --sampler smc, and this run uses the rejection sampler (the default); add --sampler smc or drop the flag",
                 )),
                 None => Ok(()),
             }
         }
-        Sampler::Smc if args.mode.is_some() => Err(Error::arg(
-            "--mode",
+        Sampler::Smc if args.mode.is_some() => Err(Error::setting(
+            "mode",
             "applies only to the rejection sampler, and this run uses --sampler smc, which perturbs each population into the next instead of drawing streams; drop --mode",
         )),
         Sampler::Smc => Ok(()),
@@ -306,8 +306,8 @@ fn check_sampler_flags(args: &AbcArgs) -> Result<(), Error> {
 /// Refuses `--prior-k` with the δ rule, which does not read it.
 fn check_prior_flags(args: &AbcArgs) -> Result<(), Error> {
     match (args.prior_rule, args.prior_k) {
-        (PriorRuleArg::Delta, Some(_)) => Err(Error::arg(
-            "--prior-k",
+        (PriorRuleArg::Delta, Some(_)) => Err(Error::setting(
+            "prior_k",
             "applies only to --prior-rule stderr, and this run sizes its prior boxes by δ (the default rule); add --prior-rule stderr or drop the flag",
         )),
         _ => Ok(()),

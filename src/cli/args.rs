@@ -104,8 +104,8 @@ impl FitArgs {
     /// `--scale-by-wob` is refused: r = 1 then, and the user could believe W_ref was used.
     pub fn options(&self) -> anyhow::Result<FitOptions> {
         if self.w_ref_kn.is_some() && !self.scale_by_wob {
-            return Err(Error::arg(
-                "--w-ref-kn",
+            return Err(Error::setting(
+                "w_ref_kn",
                 "applies only with --scale-by-wob (r = WOB / W_ref); without it r = 1 for every sample and W_ref is not used",
             )
             .into());
@@ -214,11 +214,11 @@ impl FeArgs {
     /// The first of these flags the user gave, for refusing them where no FE string is built.
     pub fn given_flag(&self) -> Option<&'static str> {
         [
-            ("--fe-file", self.fe_file.is_some()),
-            ("--dp-elements", self.dp_elements.is_some()),
-            ("--bha-elements", self.bha_elements.is_some()),
-            ("--alpha", self.alpha.is_some()),
-            ("--beta", self.beta.is_some()),
+            ("fe_file", self.fe_file.is_some()),
+            ("dp_elements", self.dp_elements.is_some()),
+            ("bha_elements", self.bha_elements.is_some()),
+            ("alpha", self.alpha.is_some()),
+            ("beta", self.beta.is_some()),
         ]
         .into_iter()
         .find_map(|(flag, given)| given.then_some(flag))

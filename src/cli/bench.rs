@@ -32,7 +32,7 @@ pub struct BenchCmd {
 
 pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     if cmd.reps == 0 {
-        return Err(Error::arg("--reps", "must be at least 1").into());
+        return Err(Error::setting("reps", "must be at least 1").into());
     }
     let mut opts = bitrock::bench::BenchOptions {
         repetitions: cmd.reps,

@@ -139,14 +139,14 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
 /// empty must be an earlier demo's (its marker) and hold nothing but the demo's runs, report
 /// and marker ([`files::refuse_foreign`], the rule of `abc --force`).
 fn check_root(root: &Path) -> anyhow::Result<()> {
-    files::check_output_dir(root, "--out")?;
+    files::check_output_dir(root, "out")?;
     let empty = std::fs::read_dir(root).map_or(true, |mut d| d.next().is_none());
     if empty {
         return Ok(());
     }
     if !root.join(DEMO_MARKER).is_file() {
-        return Err(Error::arg(
-            "--out",
+        return Err(Error::setting(
+            "out",
             format!(
                 "{} is not empty and was not written by `bitrock demo`; choose another directory",
                 root.display()
@@ -154,7 +154,7 @@ fn check_root(root: &Path) -> anyhow::Result<()> {
         )
         .into());
     }
-    files::refuse_foreign(root, "--out", &demo_owns)?;
+    files::refuse_foreign(root, "out", &demo_owns)?;
     Ok(())
 }
 
@@ -188,8 +188,8 @@ fn run_dir_name(delta: f64) -> String {
 /// runs and report are then replaced one by one, each in one step, so an interrupted demo
 /// leaves each of them old or new, never half-written, and never anything of the user's lost.
 fn mark_root(root: &Path) -> anyhow::Result<()> {
-    std::fs::create_dir_all(root).map_err(|source| Error::output("--out", root, source))?;
-    files::write_own(&root.join(DEMO_MARKER), "--out", |out| {
+    std::fs::create_dir_all(root).map_err(|source| Error::output("out", root, source))?;
+    files::write_own(&root.join(DEMO_MARKER), "out", |out| {
         out.write_all(
             b"Written by `bitrock demo`; a later `bitrock demo` replaces the runs and the report in this directory.\n",
         )

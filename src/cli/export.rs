@@ -35,7 +35,7 @@ pub struct ExportCmd {
 
 pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "--out")?;
+        files::check_output_file(path, "out")?;
     }
     let store = RunStore::open(&cmd.dir)?;
     let stored = store.load()?;
@@ -43,8 +43,8 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     let populations: Vec<&Population> = match cmd.population {
         None => stored.populations.iter().collect(),
         Some(g) => vec![stored.populations.get(g).ok_or_else(|| {
-            Error::arg(
-                "--population",
+            Error::setting(
+                "population",
                 if stored.populations.is_empty() {
                     "the run has no completed population".to_string()
                 } else {
@@ -66,7 +66,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     };
     match &cmd.out {
         None => super::print::stdout().write_all(&text)?,
-        Some(path) => files::write_whole(path, "--out", |file| file.write_all(&text))?,
+        Some(path) => files::write_whole(path, "out", |file| file.write_all(&text))?,
     }
     Ok(ExitCode::SUCCESS)
 }

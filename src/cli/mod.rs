@@ -10,6 +10,7 @@ pub mod check;
 pub mod demo;
 pub mod export;
 pub mod fe;
+pub mod fields;
 pub mod fit;
 pub mod parity;
 pub mod print;

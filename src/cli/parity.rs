@@ -36,12 +36,12 @@ pub struct ParityCmd {
 
 pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
     if cmd.candidates == 0 {
-        return Err(Error::arg("--candidates", "must be at least 1").into());
+        return Err(Error::setting("candidates", "must be at least 1").into());
     }
     if let Some(e) = cmd.epsilon
         && !(e.is_finite() && e > 0.0)
     {
-        return Err(Error::arg("--epsilon", format!("must be a positive number, got {e}")).into());
+        return Err(Error::setting("epsilon", format!("must be a positive number, got {e}")).into());
     }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     let fits = fit::fit_record(&cmd.laws, &data, &FitOptions::default())?;

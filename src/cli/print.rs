@@ -38,8 +38,9 @@ fn named_stdout(e: io::Error) -> io::Error {
 /// Writes one line for people to standard error: notes, progress and the final error. A
 /// standard error that cannot be written (full, closed) loses the line and nothing else: the
 /// work goes on and ends with its own exit status, never a panic (`eprintln!` panics).
+/// Settings the library names are said as their flags ([`super::fields`]).
 pub fn note(line: impl std::fmt::Display) {
-    let _ = writeln!(io::stderr().lock(), "{line}");
+    let _ = writeln!(io::stderr().lock(), "{}", super::fields::as_flags(&line.to_string()));
 }
 
 /// Numbers in a table: fixed notation where it reads well, scientific otherwise.
@@ -123,7 +124,7 @@ pub fn fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io
             )?;
         }
         for w in &fit.warnings {
-            writeln!(out, "    warning: {w}")?;
+            writeln!(out, "    warning: {}", super::fields::as_flags(&w.to_string()))?;
         }
         writeln!(out)?;
     }
@@ -133,7 +134,11 @@ pub fn fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io
 /// The per-population table of an ABC run.
 pub fn population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
     let Some(first) = run.populations.first() else {
-        return writeln!(out, "stopped before any population completed: {}", run.stop.describe());
+        return writeln!(
+            out,
+            "stopped before any population completed: {}",
+            super::fields::as_flags(run.stop.describe())
+        );
     };
     let laws: Vec<Law> = first.record.per_law.iter().map(|l| l.law).collect();
     write!(
@@ -201,7 +206,7 @@ pub fn population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
     writeln!(
         out,
         "stopped: {}; {:.3e} candidate × data-point evaluations in {:.2} s; {near} candidates within the CPU/GPU parity tolerance of ε",
-        run.stop.describe(),
+        super::fields::as_flags(run.stop.describe()),
         run.evaluations as f64,
         run.seconds
     )

@@ -114,12 +114,12 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
     };
     config.validate()?;
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "--out")?;
+        files::check_output_file(path, "out")?;
     }
     let trace = simulate::simulate(&config)?;
     match &cmd.out {
         None => simulate::write_csv(&trace, super::print::stdout())?,
-        Some(path) => files::write_whole(path, "--out", |file| simulate::write_csv(&trace, file))?,
+        Some(path) => files::write_whole(path, "out", |file| simulate::write_csv(&trace, file))?,
     }
     Ok(ExitCode::SUCCESS)
 }

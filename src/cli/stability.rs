@@ -77,19 +77,19 @@ pub struct StabilityCmd {
 type Column = (String, Vec<Option<f64>>);
 
 pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
-    let omega = map::parse_axis(&cmd.omega_rpm, "--omega-rpm")?;
-    let wob = map::parse_axis(&cmd.wob_kn, "--wob-kn")?;
+    let omega = map::parse_axis(&cmd.omega_rpm, "omega_rpm")?;
+    let wob = map::parse_axis(&cmd.wob_kn, "wob_kn")?;
     if cmd.structure == Structure::Lumped
         && let Some(flag) = cmd.fe.given_flag()
     {
-        return Err(Error::arg(
+        return Err(Error::setting(
             flag,
             "applies to --structure fe only (the 1-DOF string has no elements)",
         )
         .into());
     }
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "--out")?;
+        files::check_output_file(path, "out")?;
     }
     let mut job = StabilityJob {
         source: map_source(cmd)?,
@@ -129,7 +129,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }
     if let Some(path) = &cmd.out {
-        files::write_whole(path, "--out", |file| file.write_all(&boundaries_csv(omega, &columns)))?;
+        files::write_whole(path, "out", |file| file.write_all(&boundaries_csv(omega, &columns)))?;
     }
     let mut out = super::print::stdout();
     if cmd.json {
@@ -157,15 +157,15 @@ fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
         (None, Some(law), Some(params)) => {
             // The count first: scaling takes one value per parameter.
             if params.len() != law.n_params() {
-                law.check_params(params, "--params")?;
+                law.check_params(params, "params")?;
             }
             Ok(MapSource::Law {
                 law,
                 params_si: law.scale_torque(params, cmd.torque_unit.newton_metres()),
             })
         }
-        _ => Err(Error::arg(
-            "--run",
+        _ => Err(Error::setting(
+            "run",
             "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",
         )
         .into()),

@@ -127,8 +127,8 @@ impl Analysis {
         let last = match summary_population {
             None => populations.last().ok_or_else(|| no_population(&outcome, dir))?,
             Some(g) => populations.get(g).ok_or_else(|| {
-                Error::arg(
-                    "--summary-population",
+                Error::setting(
+                    "summary_population",
                     format!("the run has populations 0..={}", populations.len().saturating_sub(1)),
                 )
             })?,
@@ -225,7 +225,7 @@ impl Analysis {
             (rundir::DATA_CSV, documents::data_csv(data)),
         ];
         for (name, bytes) in &files {
-            files::write_own(&dir.join(name), "--out", |out| out.write_all(bytes))?;
+            files::write_own(&dir.join(name), "out", |out| out.write_all(bytes))?;
         }
         Ok(())
     }

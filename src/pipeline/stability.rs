@@ -57,22 +57,22 @@ impl StabilityJob {
     /// a grid beyond memory or a day's work (one law's, before any run is read).
     pub fn validate(&self) -> Result<()> {
         if !(self.percentile > 0.0 && self.percentile < 1.0) {
-            return Err(Error::arg(
-                "--percentile",
+            return Err(Error::setting(
+                "percentile",
                 format!("must lie in (0, 100) %, got {}", self.percentile * 100.0),
             ));
         }
         if !(self.w_ref_n.is_finite() && self.w_ref_n > 0.0) {
-            return Err(Error::arg(
-                "--w-ref-kn",
+            return Err(Error::setting(
+                "w_ref_kn",
                 format!("must be a positive number of kN, got {}", self.w_ref_n / 1000.0),
             ));
         }
         if self.samples == 0 {
-            return Err(Error::arg("--samples", "must be at least 1"));
+            return Err(Error::setting("samples", "must be at least 1"));
         }
         if let MapSource::Law { law, params_si } = &self.source {
-            law.check_params(params_si, "--params")?;
+            law.check_params(params_si, "params")?;
         }
         map::check_grid_size(self.cells(), 1, self.samples)
     }

@@ -184,10 +184,10 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
         files.push((figures.join(format!("{}.svg", r.info.stem)), r.svg.as_bytes().to_vec()));
         files.push((figures.join(format!("{}.png", r.info.stem)), r.png.clone()));
     }
-    crate::files::refuse_inside_run(dir, "--out")?;
+    crate::files::refuse_inside_run(dir, "out")?;
     crate::files::replace_dir(
         dir,
-        "--out",
+        "out",
         &|rel, is_dir| crate::rundir::Owned::Report.owns(rel, is_dir),
         &files,
     )?;
@@ -275,7 +275,7 @@ fn record_probabilities(population: &Population, laws: &[Law]) -> Vec<(Law, f64)
 impl<'a> Prepared<'a> {
     fn new(input: &'a ReportInput<'a>) -> Result<Self> {
         let s = &input.stability;
-        let bad = |message: String| Error::arg("report", message);
+        let bad = |message: String| Error::setting("report", message);
         if input.runs.is_empty() {
             return Err(bad("no run to report".into()));
         }

@@ -81,7 +81,7 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
         runs.push(run);
         first.get_or_insert(stored.setup);
     }
-    let setup = first.ok_or_else(|| Error::arg("DIR", "give at least one run directory"))?;
+    let setup = first.ok_or_else(|| Error::setting("DIR", "give at least one run directory"))?;
     Ok((setup, runs))
 }
 

@@ -146,13 +146,13 @@ impl DrillString {
     /// `--alpha`, `--beta`) or, for values set only from a file, the TOML key.
     pub fn validate(&self) -> Result<()> {
         match self.first_invalid() {
-            Some(bad) => Err(Error::arg(bad.flag, bad.message)),
+            Some(bad) => Err(Error::setting(bad.field, bad.message)),
             None => Ok(()),
         }
     }
 
     fn first_invalid(&self) -> Option<Invalid> {
-        let invalid = |key: &'static str, flag: &'static str, message: String| Some(Invalid { key, flag, message });
+        let invalid = |key: &'static str, field: &'static str, message: String| Some(Invalid { key, field, message });
         let positive = [
             ("shear_modulus_pa", self.shear_modulus_pa),
             ("density_kg_m3", self.density_kg_m3),
@@ -182,33 +182,33 @@ impl DrillString {
             }
         }
         let sections = [
-            ("dp_elements", "--dp-elements", self.dp_elements),
-            ("bha_elements", "--bha-elements", self.bha_elements),
+            ("dp_elements", "dp_elements", self.dp_elements),
+            ("bha_elements", "bha_elements", self.bha_elements),
         ];
-        for (key, flag, count) in sections {
+        for (key, field, count) in sections {
             if count == 0 {
-                return invalid(key, flag, "needs at least one element".to_string());
+                return invalid(key, field, "needs at least one element".to_string());
             }
         }
         if self.dofs() > MAX_ELEMENTS {
-            let (key, flag, _) = if self.dp_elements >= self.bha_elements {
+            let (key, field, _) = if self.dp_elements >= self.bha_elements {
                 sections[0]
             } else {
                 sections[1]
             };
             return invalid(
                 key,
-                flag,
+                field,
                 format!(
                     "{} + {} elements exceed the {MAX_ELEMENTS} that dense eigenvalue solves handle",
                     self.dp_elements, self.bha_elements
                 ),
             );
         }
-        let rayleigh = [("alpha", "--alpha", self.alpha), ("beta", "--beta", self.beta)];
-        for (key, flag, value) in rayleigh {
+        let rayleigh = [("alpha", "alpha", self.alpha), ("beta", "beta", self.beta)];
+        for (key, field, value) in rayleigh {
             if !(value.is_finite() && value >= 0.0) {
-                return invalid(key, flag, format!("must be finite and ≥ 0, got {value}"));
+                return invalid(key, field, format!("must be finite and ≥ 0, got {value}"));
             }
         }
         None
@@ -318,8 +318,8 @@ impl DrillString {
     pub fn critical_bit_damping(&self) -> Result<CriticalDamping> {
         self.validate()?;
         if self.alpha <= 0.0 && self.beta <= 0.0 {
-            return Err(Error::arg(
-                "--alpha",
+            return Err(Error::setting(
+                "alpha",
                 "alpha and beta are both 0: the undamped string is marginal at c_b = 0, there is no crossing to find",
             ));
         }
@@ -365,8 +365,8 @@ impl DrillString {
         let mut beta_lo = 0.0;
         let at_zero = critical_at(beta_lo)?;
         if at_zero <= target_nms {
-            return Err(Error::arg(
-                "--alpha",
+            return Err(Error::setting(
+                "alpha",
                 format!(
                     "alpha = {} 1/s alone gives c_b* = {at_zero} N·m·s/rad, already at or below the 1-DOF \
                      model's {target_nms}: no beta ≥ 0 matches; lower alpha",
@@ -414,7 +414,7 @@ impl DrillString {
 /// A refused value: its TOML key, its command-line flag (the key when it has none) and why.
 struct Invalid {
     key: &'static str,
-    flag: &'static str,
+    field: &'static str,
     message: String,
 }
 
@@ -755,11 +755,11 @@ mod tests {
             ..ten_dof(0.006)
         };
         let err = heavy.match_lumped_beta(&Lumped::default()).unwrap_err().to_string();
-        assert!(err.starts_with("--alpha:"), "{err}");
+        assert!(err.starts_with("`alpha`:"), "{err}");
     }
 
     #[test]
-    fn validation_names_the_flag_or_key() {
+    fn validation_names_the_setting_or_key() {
         let bad = |s: DrillString| s.validate().unwrap_err().to_string();
         let base = DrillString::default();
         assert!(base.validate().is_ok());
@@ -769,56 +769,56 @@ mod tests {
                     dp_elements: 0,
                     ..base.clone()
                 },
-                "--dp-elements:",
+                "`dp_elements`:",
             ),
             (
                 DrillString {
                     bha_elements: 0,
                     ..base.clone()
                 },
-                "--bha-elements:",
+                "`bha_elements`:",
             ),
             (
                 DrillString {
                     dp_elements: MAX_ELEMENTS,
                     ..base.clone()
                 },
-                "--dp-elements:",
+                "`dp_elements`:",
             ),
             (
                 DrillString {
                     alpha: -0.1,
                     ..base.clone()
                 },
-                "--alpha:",
+                "`alpha`:",
             ),
             (
                 DrillString {
                     beta: f64::NAN,
                     ..base.clone()
                 },
-                "--beta:",
+                "`beta`:",
             ),
             (
                 DrillString {
                     shear_modulus_pa: 0.0,
                     ..base.clone()
                 },
-                "shear_modulus_pa:",
+                "`shear_modulus_pa`:",
             ),
             (
                 DrillString {
                     dp_inner_m: 0.15,
                     ..base.clone()
                 },
-                "dp_inner_m:",
+                "`dp_inner_m`:",
             ),
             (
                 DrillString {
                     bha_length_m: f64::INFINITY,
                     ..base.clone()
                 },
-                "bha_length_m:",
+                "`bha_length_m`:",
             ),
         ];
         for (string, prefix) in cases {
@@ -837,7 +837,7 @@ mod tests {
                 .critical_bit_damping()
                 .unwrap_err()
                 .to_string()
-                .starts_with("--alpha:")
+                .starts_with("`alpha`:")
         );
     }
 
@@ -864,7 +864,7 @@ mod tests {
         assert!(err.is_bad_input());
         let message = err.to_string();
         assert!(message.contains(&invalid.path().display().to_string()), "{message}");
-        assert!(message.contains("bha_inner_m:"), "{message}");
+        assert!(message.contains(": bha_inner_m: "), "{message}");
 
         drop(file);
         let missing = DrillString::from_toml_file(Path::new(&path)).unwrap_err().to_string();

@@ -79,13 +79,16 @@ impl Lumped {
     /// Refuses non-positive or non-finite values, naming the flag that set them.
     pub fn validate(&self) -> Result<()> {
         let checks = [
-            ("--inertia-kg-m2", self.inertia_kg_m2),
-            ("--omega-n-rad-s", self.omega_n_rad_s),
-            ("--damping-ratio", self.damping_ratio),
+            ("inertia_kg_m2", self.inertia_kg_m2),
+            ("omega_n_rad_s", self.omega_n_rad_s),
+            ("damping_ratio", self.damping_ratio),
         ];
-        for (flag, value) in checks {
+        for (field, value) in checks {
             if !(value.is_finite() && value > 0.0) {
-                return Err(Error::arg(flag, format!("must be positive and finite, got {value}")));
+                return Err(Error::setting(
+                    field,
+                    format!("must be positive and finite, got {value}"),
+                ));
             }
         }
         Ok(())
@@ -147,7 +150,7 @@ mod tests {
     }
 
     #[test]
-    fn validation_names_the_flag() {
+    fn validation_names_the_setting() {
         let bad = |s: Lumped| s.validate().unwrap_err().to_string();
         let base = Lumped::default();
         assert!(base.validate().is_ok());
@@ -156,21 +159,21 @@ mod tests {
                 inertia_kg_m2: 0.0,
                 ..base
             })
-            .starts_with("--inertia-kg-m2:")
+            .starts_with("`inertia_kg_m2`:")
         );
         assert!(
             bad(Lumped {
                 omega_n_rad_s: f64::NAN,
                 ..base
             })
-            .starts_with("--omega-n-rad-s:")
+            .starts_with("`omega_n_rad_s`:")
         );
         assert!(
             bad(Lumped {
                 damping_ratio: -0.1,
                 ..base
             })
-            .starts_with("--damping-ratio:")
+            .starts_with("`damping_ratio`:")
         );
     }
 }

@@ -16,11 +16,11 @@ use crate::stability::lumped::Lumped;
 use crate::units::RAD_S_PER_RPM;
 
 /// An evenly spaced axis "MIN:MAX:COUNT" (both ends included).
-pub fn parse_axis(text: &str, flag: &str) -> Result<Vec<f64>> {
+pub fn parse_axis(text: &str, field: &str) -> Result<Vec<f64>> {
     let parts: Vec<&str> = text.split(':').collect();
     let bad = |why: &str| {
-        Error::arg(
-            flag,
+        Error::setting(
+            field,
             format!("'{text}': {why} (expected MIN:MAX:COUNT, e.g. 20:200:91)"),
         )
     };
@@ -249,12 +249,12 @@ const FASTEST_CELL_SAMPLES_PER_S: f64 = 1e11;
 pub fn check_grid_size(cells: usize, laws: usize, samples: usize) -> Result<()> {
     let grids = cells as f64 * (laws as f64 + 1.0);
     crate::limits::check_memory(
-        "--omega-rpm/--wob-kn",
+        "omega_rpm/wob_kn",
         grids * GRID_CELL_BYTES,
         &format!("a grid of {cells} cells for {laws} laws"),
     )?;
     crate::limits::check_work(
-        "--samples",
+        "samples",
         cells as f64 * laws as f64 * samples as f64,
         FASTEST_CELL_SAMPLES_PER_S,
         &format!("{cells} cells × {samples} samples × {laws} laws"),
@@ -291,13 +291,13 @@ mod tests {
 
     #[test]
     fn axes_parse_and_refuse_nonsense() {
-        assert_eq!(parse_axis("10:30:3", "--omega-rpm").unwrap(), vec![10.0, 20.0, 30.0]);
+        assert_eq!(parse_axis("10:30:3", "omega_rpm").unwrap(), vec![10.0, 20.0, 30.0]);
         for bad in ["10:30", "30:10:5", "0:10:5", "a:10:5", "1:10:1", "1:10:x"] {
             assert!(
-                parse_axis(bad, "--omega-rpm")
+                parse_axis(bad, "omega_rpm")
                     .unwrap_err()
                     .to_string()
-                    .starts_with("--omega-rpm"),
+                    .starts_with("`omega_rpm`:"),
                 "{bad}"
             );
         }

@@ -8,6 +8,7 @@ mod gpu;
 mod hostile;
 mod laws;
 mod layers;
+mod messages;
 mod pipeline;
 mod records;
 mod report;

@@ -97,7 +97,7 @@ fn a_refused_job_names_the_setting_and_writes_nothing() {
     zero_delta.config.delta = 0.0;
     let mut no_starts = AbcJob { out, ..job(100) };
     no_starts.config.fit.starts = 0;
-    for (job, flag) in [(zero_delta, "--delta"), (no_starts, "--starts")] {
+    for (job, flag) in [(zero_delta, "`delta`:"), (no_starts, "`starts`:")] {
         assert!(job.validate().unwrap_err().to_string().starts_with(flag));
         let data = demo_field_data(&DataOptions::default()).unwrap();
         let err = job.run(data, &mut Silent, &mut |_| {}).err().expect("refused");

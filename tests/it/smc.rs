@@ -246,14 +246,14 @@ fn refusals_name_the_flag() {
                 p_stay: 1.5,
                 ..Default::default()
             },
-            "--p-stay",
+            "`p_stay`:",
         ),
         (
             SmcConfig {
                 kernel_scale: 0.0,
                 ..Default::default()
             },
-            "--kernel-scale",
+            "`kernel_scale`:",
         ),
     ] {
         let e = smc::run(&evaluator, &config).unwrap_err().to_string();

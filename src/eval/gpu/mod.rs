@@ -186,14 +186,14 @@ fn test_uniform_between_source() -> String {
 #[derive(Clone, Debug, thiserror::Error)]
 pub enum GpuError {
     #[error(
-        "no GPU adapter: {0}. Install a Vulkan driver (for a software one: apt-get install mesa-vulkan-drivers libvulkan1) or use --backend cpu"
+        "no GPU adapter: {0}. Install a Vulkan driver (for a software one: apt-get install mesa-vulkan-drivers libvulkan1) or use `backend` cpu"
     )]
     NoAdapter(String),
     #[error("the GPU adapter refused a device: {0}")]
     RequestDevice(String),
     #[error("GPU validation error (a bug in bitrock; please report it): {0}")]
     Validation(String),
-    #[error("the GPU ran out of memory: {0}; use fewer data points or --backend cpu")]
+    #[error("the GPU ran out of memory: {0}; use fewer data points or `backend` cpu")]
     OutOfMemory(String),
     #[error("the GPU device was lost: {0}")]
     DeviceLost(String),
@@ -211,7 +211,7 @@ impl From<GpuError> for crate::Error {
     /// failures of the GPU.
     fn from(e: GpuError) -> Self {
         match e {
-            GpuError::Setting { name, message } => crate::Error::arg(name, message),
+            GpuError::Setting { name, message } => crate::Error::setting(name, message),
             e => crate::Error::Gpu(Box::new(e)),
         }
     }
@@ -273,9 +273,9 @@ fn create_context() -> Result<GpuContext, GpuError> {
     }))
     .map_err(|e| GpuError::RequestDevice(e.to_string()))?;
     let lost = Arc::new(Mutex::new(None));
-    let flag = lost.clone();
+    let field = lost.clone();
     device.set_device_lost_callback(move |reason, message| {
-        *flag.lock().expect("device-lost flag") = Some(format!("{reason:?}: {message}"));
+        *field.lock().expect("device-lost field") = Some(format!("{reason:?}: {message}"));
     });
     Ok(GpuContext {
         device,
@@ -299,7 +299,7 @@ impl GpuContext {
 
     /// Fails if the device was lost since the last check.
     fn check_lost(&self) -> Result<(), GpuError> {
-        match self.lost.lock().expect("device-lost flag").clone() {
+        match self.lost.lock().expect("device-lost field").clone() {
             Some(message) => Err(GpuError::DeviceLost(message)),
             None => Ok(()),
         }

@@ -277,18 +277,18 @@ fn a_failed_write_leaves_the_old_file_and_no_temporary() {
     let target = tmp.path().join("map.csv");
     std::fs::write(&target, "old contents\n").unwrap();
     // A full disk mid-write, injected: part of the file is written, then ENOSPC.
-    let err = files::write_whole(&target, "--out", |w| {
+    let err = files::write_whole(&target, "out", |w| {
         w.write_all(b"omega_rpm,wob_kn\n20,1")?;
         Err(std::io::Error::from(std::io::ErrorKind::StorageFull))
     })
     .unwrap_err();
     let text = err.to_string();
-    assert!(text.starts_with("--out: ") && text.contains("map.csv"), "{text}");
+    assert!(text.starts_with("`out`: ") && text.contains("map.csv"), "{text}");
     assert!(!err.is_bad_input(), "a full disk is a failure of the machine (exit 3)");
     assert_eq!(std::fs::read_to_string(&target).unwrap(), "old contents\n");
     assert_eq!(names(tmp.path()), ["map.csv"]);
     // A write that succeeds replaces it whole.
-    files::write_whole(&target, "--out", |w| w.write_all(b"new\n")).unwrap();
+    files::write_whole(&target, "out", |w| w.write_all(b"new\n")).unwrap();
     assert_eq!(std::fs::read_to_string(&target).unwrap(), "new\n");
     assert_eq!(names(tmp.path()), ["map.csv"]);
 }

@@ -93,7 +93,7 @@ fn a_run_stopped_on_its_budget_or_interrupted_is_said_so_in_what_is_made_from_it
     let (code, _, err) = run_in(tmp.path(), &["report", "R", "--out", "Rep"]);
     assert_eq!(code, 0, "{err}");
     let md = std::fs::read_to_string(tmp.path().join("Rep/report.md")).unwrap();
-    assert!(md.contains("the run stopped early: --max-draws"), "{md}");
+    assert!(md.contains("the run stopped early: `max_draws`"), "{md}");
     let stability = [
         "stability",
         "--run",

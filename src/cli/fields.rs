@@ -1,0 +1,157 @@
+//! The library names its settings as its configuration does (`particles`, `min_speed_rpm`),
+//! between backticks; the command line says them as its flags. This table is the one place
+//! where a setting becomes a flag.
+
+/// Each setting the library can name, with the flag that sets it.
+const FLAGS: &[(&str, &str)] = &[
+    // The record and its columns.
+    ("speed_column", "--speed-col"),
+    ("torque_column", "--torque-col"),
+    ("wob_column", "--wob-col"),
+    ("time_column", "--time-col"),
+    ("speed_unit", "--speed-unit"),
+    ("torque_unit", "--torque-unit"),
+    ("wob_unit", "--wob-unit"),
+    ("min_speed_rpm", "--min-speed-rpm"),
+    ("t_start_s", "--t-start-s"),
+    ("t_end_s", "--t-end-s"),
+    ("thin", "--thin"),
+    ("calibration_fraction", "--calibration-fraction"),
+    ("split", "--split"),
+    // Least squares.
+    ("laws", "--laws"),
+    ("starts", "--starts"),
+    ("w_ref_kn", "--w-ref-kn"),
+    ("scale_by_wob", "--scale-by-wob"),
+    ("no_bounds", "--no-bounds"),
+    // The prior.
+    ("prior", "--prior"),
+    ("delta", "--delta"),
+    ("prior_k", "--prior-k"),
+    // The samplers.
+    ("particles", "--particles"),
+    ("eps_min", "--eps-min"),
+    ("epsilons", "--epsilons"),
+    ("start_epsilon", "--start-epsilon"),
+    ("max_populations", "--max-populations"),
+    ("max_draws", "--max-draws"),
+    ("max_seconds", "--max-seconds"),
+    ("min_acceptance", "--min-acceptance"),
+    ("summary_population", "--summary-population"),
+    ("mode", "--mode"),
+    ("p_stay", "--p-stay"),
+    ("kernel_scale", "--kernel-scale"),
+    ("smc_weights", "--smc-weights"),
+    ("backend", "--backend"),
+    ("threads", "--threads"),
+    // Outputs.
+    ("out", "--out"),
+    ("force", "--force"),
+    ("population", "--population"),
+    ("run", "--run"),
+    // Simulation and the 1-DOF drill string.
+    ("params", "--params"),
+    ("omega_rpm", "--omega-rpm"),
+    ("wob_kn", "--wob-kn"),
+    ("omega_rpm/wob_kn", "--omega-rpm/--wob-kn"),
+    ("duration_s", "--duration-s"),
+    ("settle_s", "--settle-s"),
+    ("sample_hz", "--sample-hz"),
+    ("dt_s", "--dt-s"),
+    ("kick_rpm", "--kick-rpm"),
+    ("noise_torque_knm", "--noise-torque-knm"),
+    ("noise_speed_rpm", "--noise-speed-rpm"),
+    ("wob_fluctuation_kn", "--wob-fluctuation-kn"),
+    ("wob_correlation_s", "--wob-correlation-s"),
+    ("inertia_kg_m2", "--inertia-kg-m2"),
+    ("omega_n_rad_s", "--omega-n-rad-s"),
+    ("damping_ratio", "--damping-ratio"),
+    // The finite-element drill string.
+    ("fe_file", "--fe-file"),
+    ("dp_elements", "--dp-elements"),
+    ("bha_elements", "--bha-elements"),
+    ("alpha", "--alpha"),
+    ("beta", "--beta"),
+    // Stability maps, the selection check, parity and benchmarks.
+    ("percentile", "--percentile"),
+    ("samples", "--samples"),
+    ("replicates", "--replicates"),
+    ("batch", "--batch"),
+    ("candidates", "--candidates"),
+    ("epsilon", "--epsilon"),
+    ("reps", "--reps"),
+];
+
+/// `text` with every setting the library names (`` `particles` ``) said as its flag
+/// (`--particles`); other backticked text is left as it is.
+pub fn as_flags(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(open) = rest.find('`') {
+        let Some(len) = rest[open + 1..].find('`') else { break };
+        let name = &rest[open + 1..open + 1 + len];
+        out.push_str(&rest[..open]);
+        match flag_of(name) {
+            Some(flag) => {
+                out.push_str(flag);
+                rest = &rest[open + len + 2..];
+            }
+            None => {
+                // Not a setting: keep the opening backtick and look on from the next one.
+                out.push('`');
+                rest = &rest[open + 1..];
+            }
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The flag that sets the library's setting `name`.
+pub fn flag_of(name: &str) -> Option<&'static str> {
+    FLAGS.iter().find(|(field, _)| *field == name).map(|(_, flag)| *flag)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn settings_become_flags_and_other_backticks_stay() {
+        assert_eq!(
+            as_flags("`particles`: must be at least 1"),
+            "--particles: must be at least 1"
+        );
+        assert_eq!(
+            as_flags("relax `min_speed_rpm`, `t_start_s`/`t_end_s` or `thin`"),
+            "relax --min-speed-rpm, --t-start-s/--t-end-s or --thin"
+        );
+        assert_eq!(
+            as_flags("continue with `bitrock abc --resume R` (`max_draws` ran out)"),
+            "continue with `bitrock abc --resume R` (--max-draws ran out)"
+        );
+        assert_eq!(as_flags("an odd ` backtick"), "an odd ` backtick");
+        assert_eq!(as_flags("`out`: R/`x`: cannot write"), "--out: R/`x`: cannot write");
+    }
+
+    /// Every flag of the table is a flag of some command, and each setting appears once.
+    #[test]
+    fn the_table_names_real_flags() {
+        let mut longs = std::collections::BTreeSet::new();
+        let cli = crate::cli::Cli::command();
+        for command in cli.get_subcommands() {
+            for arg in command.get_arguments() {
+                if let Some(long) = arg.get_long() {
+                    longs.insert(format!("--{long}"));
+                }
+            }
+        }
+        for (field, flags) in FLAGS {
+            for flag in flags.split('/') {
+                assert!(longs.contains(flag), "{field}: {flag} is no command's flag");
+            }
+            assert_eq!(FLAGS.iter().filter(|(f, _)| f == field).count(), 1, "{field} twice");
+        }
+    }
+}
