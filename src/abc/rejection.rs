@@ -23,13 +23,15 @@
 //! below `min_acceptance`, or `max_draws` candidates were scored (the population in progress
 //! is dropped).
 
-use super::{LawRecord, Observer, Particle, Population, PopulationRecord, Progress, Run, Silent, StopReason};
+use super::fill::{Filling, Spent};
+use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
-use crate::eval::{Evaluator, PARITY_TOLERANCE};
+use crate::eval::Evaluator;
 use crate::laws::Law;
 use crate::numerics::quantile;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 /// How populations relate to the candidate streams.
@@ -212,36 +214,29 @@ pub fn run_observed(
     };
     let stop = loop {
         let g = populations.len();
-        let t0 = Instant::now();
         let stream = match config.mode {
             Mode::Paper => g as u32,
             Mode::Nested => 0,
         };
-        let mut particles: Vec<Particle> = Vec::with_capacity(n);
-        let mut law_draws = vec![0u64; prior.boxes.len()];
-        let mut law_accepted = vec![0usize; prior.boxes.len()];
-        let mut position = 0u64;
-        let mut near = 0u64;
+        let mut fill = Filling::new(g, stream, epsilon, n, prior, d);
         let weight = 1.0 / n as f64;
-        // ε_0 = ∞ decides nothing near a threshold.
-        let near_threshold = |rho: f64| epsilon.is_finite() && (rho - epsilon).abs() <= PARITY_TOLERANCE * epsilon;
         if config.mode == Mode::Nested && g > 0 {
             // Stream positions before `scanned_to` are known: the previous population's
             // particles are all candidates there below ε_{g-1} > ε_g.
             let previous = &populations[g - 1].particles;
-            particles.par_extend(
+            fill.particles.par_extend(
                 previous
                     .par_iter()
                     .filter(|p| p.rho < epsilon)
                     .map(|p| Particle { weight, ..p.clone() }),
             );
-            near += previous.par_iter().filter(|p| near_threshold(p.rho)).count() as u64;
+            fill.near += previous.par_iter().filter(|p| fill.near_threshold(p.rho)).count() as u64;
             // The previous population ended at its N-th particle, at stream position
             // `scanned_to`, so even when all of them pass, every position before it is a draw
             // of this population too, with the previous population's per-law draws.
             debug_assert_eq!(previous.last().map(|p| p.index + 1), Some(scanned_to));
-            position = scanned_to;
-            for (count, law) in law_draws.iter_mut().zip(&populations[g - 1].record.per_law) {
+            fill.position = scanned_to;
+            for (count, law) in fill.law_draws.iter_mut().zip(&populations[g - 1].record.per_law) {
                 *count = law.draws;
             }
         }
@@ -256,126 +251,51 @@ pub fn run_observed(
                     * p.record.acceptance_rate
             }
         };
-        let mut scored_here = 0u64;
-        let mut interrupted = None;
-        let epsilon_shown = epsilon.is_finite().then_some(epsilon);
-        while particles.len() < n {
-            if let Some(limit) = config.max_seconds
-                && started.elapsed().as_secs_f64() > limit
-            {
-                interrupted = Some(StopReason::WallTime);
-                break;
-            }
-            // Score a batch starting at `position`, reusing what is pending.
+        let spent = Spent {
+            started,
+            scored: total_scored,
+        };
+        let interrupted = fill.fill(config, &spent, observer, |fill, budget| {
             let batch = match pending.take() {
-                Some(s) if s.stream == stream && s.start <= position && position < s.start + s.rho.len() as u64 => s,
+                Some(s)
+                    if s.stream == stream
+                        && s.start <= fill.position
+                        && fill.position < s.start + s.rho.len() as u64 =>
+                {
+                    s
+                }
                 _ => {
-                    let budget = config.max_draws.saturating_sub(total_scored + scored_here);
                     if budget == 0 {
-                        interrupted = Some(StopReason::MaxDraws);
-                        break;
+                        return Ok(ControlFlow::Break(StopReason::MaxDraws));
                     }
-                    // Enough for the particles still missing at the projected acceptance rate
-                    // and a margin, within the evaluator's batch limit.
-                    let expected = (1.1 * (n - particles.len()) as f64 / projected_acceptance.max(1e-6)).ceil() as u64;
-                    let size = expected.max(1024).min(config.max_batch as u64).min(budget);
+                    let size = batch_size(n - fill.particles.len(), projected_acceptance, config.max_batch, budget);
                     let mut rho = vec![0.0; size as usize];
-                    evaluator.score(stream, position, &mut rho)?;
-                    scored_here += size;
+                    evaluator.score(stream, fill.position, &mut rho)?;
+                    fill.scored += size;
                     Scored {
                         stream,
-                        start: position,
+                        start: fill.position,
                         rho,
                     }
                 }
             };
-            let offset = (position - batch.start) as usize;
-            let mut consumed = batch.rho.len();
-            // The scan only picks the accepted candidates; they are regenerated after it,
-            // in parallel and in index order.
-            let mut accepted: Vec<(u64, f64)> = Vec::new();
-            for (k, &rho) in batch.rho.iter().enumerate().skip(offset) {
-                near += u64::from(near_threshold(rho));
-                if rho < epsilon {
-                    accepted.push((batch.start + k as u64, rho));
-                    if particles.len() + accepted.len() == n {
-                        consumed = k + 1;
-                        break;
-                    }
-                }
-            }
-            particles.par_extend(accepted.into_par_iter().map(|(index, rho)| {
-                let c = prior.candidate(problem.seed, stream, index);
-                let law = prior.law(c.slot);
-                Particle {
-                    law,
-                    index,
-                    params: c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
-                    rho,
-                    weight,
-                }
-            }));
-            count_slots(
-                prior,
-                problem.seed,
-                stream,
-                batch.start + offset as u64..batch.start + consumed as u64,
-                &mut law_draws,
-            );
-            position = batch.start + consumed as u64;
-            if consumed < batch.rho.len() {
+            scan(problem, fill, &batch, weight);
+            if fill.position < batch.start + batch.rho.len() as u64 {
                 pending = Some(batch);
             }
-            observer.progress(&Progress {
-                population: g,
-                epsilon: epsilon_shown,
-                accepted: particles.len(),
-                target: n,
-                draws: position,
-                scored: scored_here,
-                data_len: d as usize,
-                seconds: t0.elapsed().as_secs_f64(),
-            });
-        }
-        total_scored += scored_here;
+            Ok(ControlFlow::Continue(()))
+        })?;
+        total_scored += fill.scored;
         if let Some(stop) = interrupted {
             break stop;
         }
-        scanned_to = position;
-        for p in &particles {
-            law_accepted[slot_of(prior, p.law)] += 1;
+        scanned_to = fill.position;
+        for p in &fill.particles {
+            fill.law_accepted[slot_of(prior, p.law)] += 1;
         }
-        let record = PopulationRecord {
-            index: g,
-            epsilon: epsilon_shown,
-            draws: position,
-            accepted: n,
-            acceptance_rate: n as f64 / position as f64,
-            per_law: prior
-                .boxes
-                .iter()
-                .enumerate()
-                // Every law keeps being drawn from the prior: always alive.
-                .map(|(s, b)| {
-                    LawRecord::new(
-                        b.law,
-                        law_draws[s],
-                        law_accepted[s],
-                        law_accepted[s] as f64 / n as f64,
-                        true,
-                        problem,
-                        epsilon,
-                    )
-                })
-                .collect(),
-            candidates_scored: scored_here,
-            evaluations: scored_here * d,
-            near_threshold: near,
-            ess: n as f64,
-            seconds: t0.elapsed().as_secs_f64(),
-            stream,
-        };
-        super::complete_population(&mut populations, Population { record, particles }, observer)?;
+        // Every law keeps being drawn from the prior: always alive.
+        let per_law = fill.law_records(problem, |s| (fill.law_accepted[s] as f64 / n as f64, true));
+        super::complete_population(&mut populations, fill.into_population(per_law, n as f64), observer)?;
         match next_epsilon(&populations, config) {
             Ok(e) => epsilon = e,
             Err(stop) => break stop,
@@ -387,6 +307,54 @@ pub fn run_observed(
         evaluations: total_scored * d,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+/// Candidates to score for the `missing` particles at the `projected_acceptance` rate with a
+/// 10 % margin, at least 1,024, within the evaluator's batch limit and the draw budget.
+fn batch_size(missing: usize, projected_acceptance: f64, max_batch: usize, budget: u64) -> u64 {
+    let expected = (1.1 * missing as f64 / projected_acceptance.max(1e-6)).ceil() as u64;
+    expected.max(1024).min(max_batch as u64).min(budget)
+}
+
+/// Scans `batch` from the population's stream position: accepts candidates below ε in index
+/// order until N, counts the draws per law and the candidates near ε, and moves the position
+/// past the last candidate considered. The scan only picks the accepted candidates; they are
+/// regenerated after it, in parallel and in index order.
+fn scan(problem: &crate::eval::AbcProblem, fill: &mut Filling, batch: &Scored, weight: f64) {
+    let prior = &problem.prior;
+    let offset = (fill.position - batch.start) as usize;
+    let mut consumed = batch.rho.len();
+    let mut accepted: Vec<(u64, f64)> = Vec::new();
+    for (k, &rho) in batch.rho.iter().enumerate().skip(offset) {
+        fill.near += u64::from(fill.near_threshold(rho));
+        if rho < fill.epsilon {
+            accepted.push((batch.start + k as u64, rho));
+            if fill.particles.len() + accepted.len() == fill.target {
+                consumed = k + 1;
+                break;
+            }
+        }
+    }
+    let stream = fill.stream;
+    fill.particles.par_extend(accepted.into_par_iter().map(|(index, rho)| {
+        let c = prior.candidate(problem.seed, stream, index);
+        let law = prior.law(c.slot);
+        Particle {
+            law,
+            index,
+            params: c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
+            rho,
+            weight,
+        }
+    }));
+    count_slots(
+        prior,
+        problem.seed,
+        stream,
+        batch.start + offset as u64..batch.start + consumed as u64,
+        &mut fill.law_draws,
+    );
+    fill.position = batch.start + consumed as u64;
 }
 
 /// The median rule stops ("stalled") when it would lower ε by less than this fraction: ε is

@@ -54,16 +54,18 @@
 //! run gives: population t depends only on the seed, data, configuration and population t − 1
 //! (particles and weights).
 
+use super::fill::{Filling, Spent};
 use super::rejection::{self, Mode, RejectionConfig, next_epsilon, slot_of};
-use super::{LawRecord, Observer, Particle, Population, PopulationRecord, Progress, Run, Silent, StopReason};
+use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
-use crate::eval::{Evaluator, KernelSums, PARITY_TOLERANCE};
+use crate::eval::{Evaluator, KernelSums};
 use crate::laws::MAX_PARAMS;
 use crate::numerics::compensated_sum;
 use crate::prior::{Candidate, Prior};
 use crate::rng::{candidate_counter, key_of_seed, philox4x32_10};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 /// Where the importance weights' kernel sums are computed.
@@ -487,6 +489,34 @@ pub fn run(evaluator: &dyn Evaluator, config: &SmcConfig) -> Result<Run> {
     run_observed(evaluator, config, Vec::new(), &mut Silent)
 }
 
+/// Goes through `proposals` in index order, with the ρ of the valid ones in `rho`: counts
+/// each as a draw of its law and accepts those below ε until N.
+fn accept_in_order(prior: &Prior, fill: &mut Filling, proposals: &[(usize, Option<[f32; MAX_PARAMS]>)], rho: &[f64]) {
+    let mut next_valid = 0;
+    for &(slot, params) in proposals {
+        fill.position += 1;
+        fill.law_draws[slot] += 1;
+        let Some(params) = params else { continue };
+        let r = rho[next_valid];
+        next_valid += 1;
+        fill.near += u64::from(fill.near_threshold(r));
+        if r < fill.epsilon {
+            let law = prior.law(slot);
+            fill.law_accepted[slot] += 1;
+            fill.particles.push(Particle {
+                law,
+                index: fill.position - 1,
+                params: params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
+                rho: r,
+                weight: 0.0,
+            });
+            if fill.particles.len() == fill.target {
+                break;
+            }
+        }
+    }
+}
+
 /// As [`run`], continuing after the completed populations `previous` (empty for a fresh run)
 /// and reporting to `observer`. Continuing gives exactly the populations an uninterrupted run
 /// with `config` gives.
@@ -544,38 +574,28 @@ pub fn run_observed(
         };
         let t = populations.len();
         let stream = t as u32;
-        let t0 = Instant::now();
+        let mut fill = Filling::new(t, stream, epsilon, n, prior, d);
         let previous = &populations[t - 1];
         let kernels = Kernels::new(prior, &previous.particles, config)?;
-        let near_threshold = |rho: f64| (rho - epsilon).abs() <= PARITY_TOLERANCE * epsilon;
-        let mut particles: Vec<Particle> = Vec::with_capacity(n);
-        let mut law_draws = vec![0u64; prior.boxes.len()];
-        let mut law_accepted = vec![0usize; prior.boxes.len()];
-        let (mut position, mut near, mut scored_here) = (0u64, 0u64, 0u64);
-        let mut interrupted = None;
         // The acceptance rate the first batch is sized by: the last SMC population's, or a
         // guess for the first one. Later batches use this population's own.
         let mut rate = if t >= 2 { previous.record.acceptance_rate } else { 0.25 };
-        while particles.len() < n {
-            if let Some(limit) = base.max_seconds
-                && started.elapsed().as_secs_f64() > limit
-            {
-                interrupted = Some(StopReason::WallTime);
-                break;
-            }
-            let budget = base.max_draws.saturating_sub(total_scored + scored_here);
+        let spent = Spent {
+            started,
+            scored: total_scored,
+        };
+        let interrupted = fill.fill(base, &spent, observer, |fill, budget| {
             if budget == 0 {
-                interrupted = Some(StopReason::MaxDraws);
-                break;
+                return Ok(ControlFlow::Break(StopReason::MaxDraws));
             }
-            let missing = (n - particles.len()) as f64;
+            let missing = (n - fill.particles.len()) as f64;
             let size = ((1.05 * missing / rate.max(1e-4)).ceil() as u64 + 16)
                 .min(base.max_batch as u64)
                 .min(budget);
             let proposals: Vec<(usize, Option<[f32; MAX_PARAMS]>)> = (0..size as usize)
                 .into_par_iter()
                 .with_min_len(256)
-                .map(|k| kernels.propose(prior, &previous.particles, key, stream, position + k as u64))
+                .map(|k| kernels.propose(prior, &previous.particles, key, stream, fill.position + k as u64))
                 .collect();
             let valid: Vec<Candidate> = proposals
                 .iter()
@@ -583,82 +603,26 @@ pub fn run_observed(
                 .collect();
             let mut rho = vec![0.0; valid.len()];
             evaluator.score_params(&valid, &mut rho)?;
-            scored_here += valid.len() as u64;
-            let mut next_valid = 0;
-            for &(slot, params) in &proposals {
-                position += 1;
-                law_draws[slot] += 1;
-                let Some(params) = params else { continue };
-                let r = rho[next_valid];
-                next_valid += 1;
-                near += u64::from(near_threshold(r));
-                if r < epsilon {
-                    let law = prior.law(slot);
-                    law_accepted[slot] += 1;
-                    particles.push(Particle {
-                        law,
-                        index: position - 1,
-                        params: params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
-                        rho: r,
-                        weight: 0.0,
-                    });
-                    if particles.len() == n {
-                        break;
-                    }
-                }
-            }
-            rate = particles.len().max(1) as f64 / position as f64;
-            observer.progress(&Progress {
-                population: t,
-                epsilon: Some(epsilon),
-                accepted: particles.len(),
-                target: n,
-                draws: position,
-                scored: scored_here,
-                data_len: d as usize,
-                seconds: t0.elapsed().as_secs_f64(),
-            });
-        }
-        total_scored += scored_here;
+            fill.scored += valid.len() as u64;
+            accept_in_order(prior, fill, &proposals, &rho);
+            rate = fill.particles.len().max(1) as f64 / fill.position as f64;
+            Ok(ControlFlow::Continue(()))
+        })?;
+        total_scored += fill.scored;
         if let Some(stop) = interrupted {
             break stop;
         }
-        let weights = kernels.weights(prior, &previous.particles, &particles, &sums_on)?;
-        for (p, w) in particles.iter_mut().zip(&weights) {
+        let weights = kernels.weights(prior, &previous.particles, &fill.particles, &sums_on)?;
+        for (p, w) in fill.particles.iter_mut().zip(&weights) {
             p.weight = *w;
         }
-        let per_law = prior
-            .boxes
-            .iter()
-            .enumerate()
-            .map(|(s, b)| {
-                let probability = compensated_sum(particles.iter().filter(|p| p.law == b.law).map(|p| p.weight));
-                LawRecord::new(
-                    b.law,
-                    law_draws[s],
-                    law_accepted[s],
-                    probability,
-                    law_accepted[s] > 0,
-                    problem,
-                    epsilon,
-                )
-            })
-            .collect();
-        let record = PopulationRecord {
-            index: t,
-            epsilon: Some(epsilon),
-            draws: position,
-            accepted: n,
-            acceptance_rate: n as f64 / position as f64,
-            per_law,
-            candidates_scored: scored_here,
-            evaluations: scored_here * d,
-            near_threshold: near,
-            ess: super::effective_sample_size(&weights),
-            seconds: t0.elapsed().as_secs_f64(),
-            stream,
-        };
-        super::complete_population(&mut populations, Population { record, particles }, observer)?;
+        let per_law = fill.law_records(problem, |s| {
+            let law = prior.law(s);
+            let probability = compensated_sum(fill.particles.iter().filter(|p| p.law == law).map(|p| p.weight));
+            (probability, fill.law_accepted[s] > 0)
+        });
+        let population = fill.into_population(per_law, super::effective_sample_size(&weights));
+        super::complete_population(&mut populations, population, observer)?;
     };
     Ok(finish(populations, stop, total_scored))
 }

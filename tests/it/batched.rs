@@ -3,7 +3,7 @@
 //! else shares the dispatch, however requests are split over dispatches, and whichever
 //! samplers leave early. The GPU tests need an adapter, as in gpu.rs.
 
-use super::gpu::{gpu_available, per_shape};
+use super::gpu::{per_shape, require_gpu};
 use bitrock::Law;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::cpu::CpuEvaluator;
@@ -99,9 +99,7 @@ per_shape! {
 /// ending mid-tile): each record's sums are its own evaluator's, bit for bit, and within the
 /// parity tolerance of the CPU.
 fn a_dispatch_of_many_records_scores_each_as_its_own_evaluator(shape: Shape) {
-    if !gpu_available() {
-        return;
-    }
+    require_gpu();
     let problems = mixed_records();
     let refs: Vec<&AbcProblem> = problems.iter().collect();
     let requests = requests(&problems);
@@ -131,9 +129,7 @@ fn a_dispatch_of_many_records_scores_each_as_its_own_evaluator(shape: Shape) {
 /// Records past the 32,768-sample slicing: each record's data are found at its own offset in
 /// every slice.
 fn long_records_are_scored_slice_by_slice_at_their_own_offsets(shape: Shape) {
-    if !gpu_available() {
-        return;
-    }
+    require_gpu();
     let problems: Vec<AbcProblem> = [(Law::M3, 1), (Law::M1, 2), (Law::M3, 3)]
         .iter()
         .map(|&(law, seed)| bitrock::bench::synthetic_problem(law, 40_000, seed))
@@ -159,9 +155,7 @@ fn long_records_are_scored_slice_by_slice_at_their_own_offsets(shape: Shape) {
 /// Samplers on threads through a batch of the GPU: as `samplers_that_wait_and_leave_…` on
 /// the CPU, with requests split over dispatches of at most 256 candidates.
 fn samplers_on_the_gpu_get_their_own_evaluators_results(shape: Shape) {
-    if !gpu_available() {
-        return;
-    }
+    require_gpu();
     let problems = mixed_records();
     let batch = RecordBatch::on_gpu(shape, Some(256));
     let results = run_samplers(&batch, &problems);

@@ -42,10 +42,11 @@ fn code(path: &Path) -> String {
         .join("\n")
 }
 
-/// Top-level module → the top-level modules it refers to.
-fn imports() -> BTreeMap<String, BTreeSet<String>> {
-    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+/// The library's source files (the binary's `main.rs` and `cli/` left out), each with its path
+/// relative to `src/`.
+fn library_files() -> Vec<(String, std::path::PathBuf)> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
     let mut stack = vec![src.clone()];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).unwrap() {
@@ -55,34 +56,43 @@ fn imports() -> BTreeMap<String, BTreeSet<String>> {
                 if rel != "cli" {
                     stack.push(path);
                 }
-                continue;
+            } else if rel != "main.rs" && rel.ends_with(".rs") {
+                files.push((rel, path));
             }
-            if rel == "main.rs" || rel == "lib.rs" || !rel.ends_with(".rs") {
-                continue;
-            }
-            let module = rel.split(['/', '.']).next().unwrap().to_string();
-            let nested = rel.contains('/');
-            let text = code(&path);
-            let refs = out.entry(module.clone()).or_default();
-            for (i, _) in text.match_indices("crate::") {
+        }
+    }
+    files
+}
+
+/// Top-level module → the top-level modules it refers to.
+fn imports() -> BTreeMap<String, BTreeSet<String>> {
+    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (rel, path) in library_files() {
+        if rel == "lib.rs" {
+            continue;
+        }
+        let module = rel.split(['/', '.']).next().unwrap().to_string();
+        let nested = rel.contains('/');
+        let text = code(&path);
+        let refs = out.entry(module.clone()).or_default();
+        for (i, _) in text.match_indices("crate::") {
+            let name: String = text[i + 7..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
+            refs.insert(name);
+        }
+        // `super::x` in a top-level file is the crate root's x.
+        if !nested {
+            for (i, _) in text.match_indices("super::") {
                 let name: String = text[i + 7..]
                     .chars()
                     .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
                     .collect();
                 refs.insert(name);
             }
-            // `super::x` in a top-level file is the crate root's x.
-            if !nested {
-                for (i, _) in text.match_indices("super::") {
-                    let name: String = text[i + 7..]
-                        .chars()
-                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                        .collect();
-                    refs.insert(name);
-                }
-            }
-            refs.remove(&module);
         }
+        refs.remove(&module);
     }
     let known: BTreeSet<&str> = LAYERS.iter().map(|l| l.0).collect();
     for refs in out.values_mut() {
@@ -129,4 +139,30 @@ fn no_two_modules_import_each_other() {
         }
     }
     assert!(circles.is_empty(), "modules on an import circle: {circles:?}");
+}
+
+/// The library speaks of configuration fields; flags are the command line's words (its table in
+/// `cli/fields.rs`). A `--flag` in library code is allowed only inside a `bitrock …` command
+/// the message tells the user to run; `clap` only behind the `cli` feature.
+#[test]
+fn the_library_names_no_flag_and_needs_no_clap() {
+    let mut found = Vec::new();
+    for (rel, path) in library_files() {
+        for (i, line) in code(&path).lines().enumerate() {
+            let flag = line
+                .match_indices("--")
+                .any(|(at, _)| line[at + 2..].starts_with(|c: char| c.is_ascii_lowercase()));
+            if flag && !line.contains("bitrock ") {
+                found.push(format!("src/{rel}:{}: {}", i + 1, line.trim()));
+            }
+            if line.contains("clap::") && !line.contains("cfg_attr(feature = \"cli\"") {
+                found.push(format!("src/{rel}:{}: {}", i + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "command-line words in the library:\n{}",
+        found.join("\n")
+    );
 }

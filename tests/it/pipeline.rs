@@ -113,5 +113,5 @@ fn a_refused_job_names_the_setting_and_writes_nothing() {
     .run(data, &mut Silent, &mut |_| {})
     .err()
     .expect("refused");
-    assert!(err.to_string().starts_with("--summary-population"), "{err}");
+    assert!(err.to_string().starts_with("`summary_population`:"), "{err}");
 }

@@ -3,7 +3,7 @@
 //! estimate, replicates independent of the batch and of the backend, the prior file read from
 //! the store, and bad input refused with nothing written.
 
-use crate::gpu::{gpu_available, per_shape};
+use crate::gpu::{per_shape, require_gpu};
 use crate::support::{bin, rng};
 use bitrock::Law;
 use bitrock::abc::Silent;
@@ -370,9 +370,7 @@ per_shape! {
 /// the same probabilities, first law and number of populations, and its last ε within PARITY_TOLERANCE
 /// (the GPU's f32 ρ sets the quantiles); a replicate with such a candidate may diverge.
 fn the_check_does_not_depend_on_the_backend(shape: Shape) {
-    if !gpu_available() {
-        return;
-    }
+    require_gpu();
     let dir = tempfile::tempdir().unwrap();
     let run = m2_beats_m4(dir.path());
     let mut checks = Vec::new();

@@ -216,10 +216,9 @@ fn uniform_between_is_the_correctly_rounded_exact_value_on_ten_million_hard_trip
 }
 
 #[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
 fn the_wgsl_twin_gives_the_same_bits_on_four_million_hard_triples() {
-    if !crate::gpu::gpu_available() {
-        return;
-    }
+    crate::gpu::require_gpu();
     let triples = hard_triples(1 << 22);
     let gpu = bitrock::eval::gpu::candidates::uniform_between(&triples).unwrap();
     assert_eq!(gpu.len(), triples.len());
