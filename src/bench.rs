@@ -467,11 +467,7 @@ pub fn selection_check(
             replace: false,
         }),
     }
-    .run(
-        demo_field_data(&DataOptions::default())?,
-        &mut crate::abc::Silent,
-        &mut |_| {},
-    )?;
+    .run(demo_field_data(&DataOptions::default())?, &mut crate::abc::Silent)?;
     let run = CheckedRun::open(&run_dir)?;
     let options = CheckOptions {
         replicates,

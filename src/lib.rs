@@ -34,7 +34,8 @@
 //!     },
 //!     ..AbcJob::default() // in memory; `out: Some(RunDir { .. })` writes the run directory
 //! };
-//! let analysis = job.run(data, &mut Silent, &mut |note| eprintln!("{note}"))?;
+//! // `Silent` watches nothing; an `Observer` of your own hears progress, populations and notes.
+//! let analysis = job.run(data, &mut Silent)?;
 //! let probabilities = &analysis.posterior.model_probabilities;
 //! let total: f64 = probabilities.iter().map(|(_, p)| p).sum();
 //! assert!((total - 1.0).abs() < 1e-12);

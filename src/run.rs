@@ -261,7 +261,6 @@ pub fn start(
     config: RunConfig,
     prior_file: Option<&PriorFile>,
     observer: &mut dyn Observer,
-    note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     config.validate()?;
     if let Some(dir) = dir {
@@ -270,7 +269,7 @@ pub fn start(
     let fits = fit::fit_record(&config.laws, &data, &config.fit)?;
     let backend = config.backend;
     let mut make_evaluator = |problem, note: &mut dyn FnMut(String)| crate::eval::evaluator(problem, backend, note);
-    start_with_fits(dir, data, config, fits, prior_file, &mut make_evaluator, observer, note)
+    start_with_fits(dir, data, config, fits, prior_file, &mut make_evaluator, observer)
 }
 
 /// Makes a run's evaluator from its problem, saying what the user should know through the
@@ -282,7 +281,6 @@ pub type MakeEvaluator<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Re
 /// (`fit::fit_record(&config.laws, &data, &config.fit)`) and whose evaluator the caller makes
 /// from the run's problem: the selection check fits all its replicates' records before
 /// sampling any, and scores their candidates together ([`crate::eval::records`]).
-#[allow(clippy::too_many_arguments)]
 pub fn start_fitted_in_memory(
     data: FieldData,
     config: RunConfig,
@@ -290,14 +288,12 @@ pub fn start_fitted_in_memory(
     prior_file: Option<&PriorFile>,
     make_evaluator: &mut MakeEvaluator,
     observer: &mut dyn Observer,
-    note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     config.validate()?;
-    start_with_fits(None, data, config, fits, prior_file, make_evaluator, observer, note)
+    start_with_fits(None, data, config, fits, prior_file, make_evaluator, observer)
 }
 
 /// [`start`] after the fits: the floor, the prior, the evaluator, the sampler.
-#[allow(clippy::too_many_arguments)]
 fn start_with_fits(
     dir: Option<&RunDir>,
     data: FieldData,
@@ -306,7 +302,6 @@ fn start_with_fits(
     prior_file: Option<&PriorFile>,
     make_evaluator: &mut MakeEvaluator,
     observer: &mut dyn Observer,
-    note: &mut dyn FnMut(String),
 ) -> Result<Outcome> {
     let input = data.source.clone();
     let base = config.sampler.base_mut();
@@ -314,7 +309,7 @@ fn start_with_fits(
     base.eps_min = floor.eps_min;
     floor::check_start_epsilon(&fits, base.start_epsilon)?;
     if let Some(line) = &floor.note {
-        note(line.clone());
+        observer.note(line.clone());
     }
     let prior = Prior::from_fits_by(
         &fits,
@@ -325,7 +320,7 @@ fn start_with_fits(
     )?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
-    let evaluator = make_evaluator(problem, note)?;
+    let evaluator = make_evaluator(problem, &mut |line| observer.note(line))?;
     let setup = RunSetup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
         data,
@@ -459,12 +454,7 @@ const FIRST_EXACT_CANDIDATES_SCHEMA: i64 = 2;
 
 /// Continues the run in `dir` after its last stored population with the stopping rules of
 /// `more`; the populations are those an uninterrupted run with the same settings gives.
-pub fn resume(
-    dir: &Path,
-    more: &Continuation,
-    observer: &mut dyn Observer,
-    note: &mut dyn FnMut(String),
-) -> Result<Outcome> {
+pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> Result<Outcome> {
     let store = RunStore::open(dir)?;
     if store.schema_version() < FIRST_EXACT_CANDIDATES_SCHEMA {
         return Err(Error::Data {
@@ -496,9 +486,9 @@ pub fn resume(
         config.fit.w_ref_n,
     )
     .with_best_rho(&setup.fits);
-    let evaluator = crate::eval::evaluator(problem, config.backend, note)?;
+    let evaluator = crate::eval::evaluator(problem, config.backend, &mut |line| observer.note(line))?;
     let stored = populations.len();
-    note(format!(
+    observer.note(format!(
         "continuing {} after population {} ({} stored)",
         dir.display(),
         stored.saturating_sub(1),
@@ -789,5 +779,9 @@ impl Observer for Storing<'_> {
     /// The store holds every population's particles.
     fn keeps_particles(&self) -> bool {
         true
+    }
+
+    fn note(&mut self, line: String) {
+        self.inner.note(line);
     }
 }

@@ -648,10 +648,9 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
         fits,
         run.prior_file.as_ref(),
         &mut |problem, _| Ok(Box::new(seat.evaluator(problem))),
-        &mut Silent,
         // Notes about the synthetic record's own floor differ per replicate and are not
         // repeated; the backend's come from the batch.
-        &mut |_| {},
+        &mut Silent,
     )
     .map_err(|e| in_replicate(law, job.replicate, e))?;
     let last = outcome.run.populations.last().ok_or_else(|| {

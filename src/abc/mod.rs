@@ -243,7 +243,8 @@ pub struct Progress {
     pub seconds: f64,
 }
 
-/// Watches a run. Both methods have defaults that do nothing.
+/// Watches a run: its progress, its finished populations and what the user should know
+/// about it. Every method has a default that does nothing.
 pub trait Observer {
     /// After every scored batch of a population in progress.
     fn progress(&mut self, _progress: &Progress) {}
@@ -259,6 +260,9 @@ pub trait Observer {
     fn keeps_particles(&self) -> bool {
         false
     }
+    /// A line for the user, said once: a fallback to the CPU, a tolerance floor moved to the
+    /// record's reach, a resume that added nothing.
+    fn note(&mut self, _line: String) {}
 }
 
 /// Hands a finished `population` to `observer` and appends it to `populations`. When the

@@ -192,13 +192,7 @@ pub fn run(cmd: &AbcCmd) -> anyhow::Result<ExitCode> {
 /// directory and its summary files.
 fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
     set_threads(cmd.abc.threads)?;
-    let quiet = cmd.quiet;
-    let mut note = |line: String| {
-        if !quiet {
-            super::print::note(line);
-        }
-    };
-    let mut progress = RunProgress::new(quiet);
+    let mut progress = RunProgress::new(cmd.quiet);
     match (&cmd.resume, &cmd.out) {
         (Some(dir), _) => {
             let more = Continuation {
@@ -210,7 +204,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                 backend: cmd.abc.backend,
                 summary_population: cmd.abc.summary_population,
             };
-            Ok(pipeline::resume(dir, &more, &mut progress, &mut note)?)
+            Ok(pipeline::resume(dir, &more, &mut progress)?)
         }
         (None, Some(dir)) => {
             let job = AbcJob {
@@ -222,7 +216,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                 }),
             };
             let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-            Ok(job.run(data, &mut progress, &mut note)?)
+            Ok(job.run(data, &mut progress)?)
         }
         (None, None) => Err(Error::setting("out", "give the run directory to write").into()),
     }

@@ -1,6 +1,6 @@
 //! Live view of a sampler run on stderr: an indicatif bar per population on a terminal, one
 //! line per population (and one every few seconds inside a long one) otherwise, nothing with
-//! `--quiet`.
+//! `--quiet`; the run's notes between them.
 
 use bitrock::abc::{Observer, Population, Progress};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -113,5 +113,14 @@ impl Observer for RunProgress {
             Display::Quiet => {}
         }
         Ok(())
+    }
+
+    /// Notes go to stderr above a bar in progress; `--quiet` silences them too.
+    fn note(&mut self, line: String) {
+        match &self.display {
+            Display::Bar(Some(bar)) => bar.suspend(|| super::print::note(&line)),
+            Display::Bar(None) | Display::Lines { .. } => super::print::note(line),
+            Display::Quiet => {}
+        }
     }
 }

@@ -64,11 +64,11 @@ impl AbcJob {
         Ok(())
     }
 
-    /// Runs the job on `data`: validates, reads the prior file, fits, samples (reporting to
-    /// `observer`; `note` hears what the user should know, such as a fallback to the CPU),
+    /// Runs the job on `data`: validates, reads the prior file, fits, samples (reporting its
+    /// progress and what the user should know, such as a fallback to the CPU, to `observer`),
     /// summarises, and writes the run directory when there is one. Nothing is written when
     /// something is refused.
-    pub fn run(&self, data: FieldData, observer: &mut dyn Observer, note: &mut dyn FnMut(String)) -> Result<Analysis> {
+    pub fn run(&self, data: FieldData, observer: &mut dyn Observer) -> Result<Analysis> {
         self.config.validate()?;
         self.config.check_summary_population(self.summary_population)?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
@@ -81,7 +81,6 @@ impl AbcJob {
             self.config.clone(),
             prior_file.as_ref(),
             observer,
-            note,
         )?;
         let dir = self.out.as_ref().map(|out| out.path.as_path());
         let mut analysis = Analysis::new(outcome, self.summary_population, dir)?;
@@ -96,17 +95,12 @@ impl AbcJob {
 /// Continues the run in `dir` ([`run::resume`]), then summarises population
 /// `more.summary_population` (default: the last) and rewrites the directory's summary files.
 /// A resume that adds no population changes nothing on disk (the summary is only returned).
-pub fn resume(
-    dir: &Path,
-    more: &Continuation,
-    observer: &mut dyn Observer,
-    note: &mut dyn FnMut(String),
-) -> Result<Analysis> {
-    let outcome = run::resume(dir, more, observer, note)?;
+pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> Result<Analysis> {
+    let outcome = run::resume(dir, more, observer)?;
     let unchanged = outcome.added == 0 && dir.join(rundir::RUN_JSON).is_file();
     let mut analysis = Analysis::new(outcome, more.summary_population, Some(dir))?;
     if unchanged {
-        note(format!(
+        observer.note(format!(
             "no population added ({}); {} is unchanged",
             analysis.outcome.run.stop.describe(),
             dir.display()

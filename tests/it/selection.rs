@@ -75,7 +75,7 @@ fn run_dir_with(
             replace: false,
         }),
     }
-    .run(data, &mut Silent, &mut |_| {})
+    .run(data, &mut Silent)
     .unwrap();
     path
 }

@@ -38,7 +38,7 @@ fn start(dir: &Path, config: RunConfig) -> Outcome {
         path: dir.to_path_buf(),
         replace: false,
     };
-    released(run::start(Some(&dir), data, config, None, &mut Silent, &mut |_| {}).unwrap())
+    released(run::start(Some(&dir), data, config, None, &mut Silent).unwrap())
 }
 
 /// `outcome` without its run directory's lock, which it holds while it lives (one writer per
@@ -87,7 +87,7 @@ fn stored(dir: &Path) -> Vec<Population> {
 /// The run of `config` in memory only: every population keeps its particles.
 fn in_memory(config: RunConfig) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
-    run::start(None, data, config, None, &mut Silent, &mut |_| {}).unwrap()
+    run::start(None, data, config, None, &mut Silent).unwrap()
 }
 
 #[test]
@@ -198,12 +198,12 @@ fn continuing_equals_uninterrupted(sampler: fn(RunConfig) -> RunConfig) {
         max_populations: Some(6),
         ..Continuation::default()
     };
-    let continued = released(run::resume(&part_dir, &more, &mut Silent, &mut |_| {}).unwrap());
+    let continued = released(run::resume(&part_dir, &more, &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     assert_same_populations(&continued.run.populations, &whole.run.populations);
     assert_same_populations(&stored(&part_dir), &stored(&dir.path().join("whole")));
     // Continuing a finished run with the same rules adds nothing.
-    let again = released(run::resume(&part_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap());
+    let again = released(run::resume(&part_dir, &Continuation::default(), &mut Silent).unwrap());
     assert_eq!(again.run.populations.len(), 6);
     assert_eq!(again.run.stop, StopReason::MaxPopulations);
 }
@@ -220,7 +220,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
         eps_min: Some(0.016),
         ..Continuation::default()
     };
-    let continued = released(run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap());
+    let continued = released(run::resume(&run_dir, &more, &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::EpsMin);
     assert!(continued.run.populations.len() > n);
     let populations = stored(&run_dir);
@@ -348,7 +348,7 @@ fn a_wall_time_stop_is_continued_without_the_old_budget() {
     let first = start(&run_dir, budgeted);
     assert_eq!(first.run.stop, StopReason::WallTime);
     assert!(first.run.populations.is_empty());
-    let continued = released(run::resume(&run_dir, &Continuation::default(), &mut Silent, &mut |_| {}).unwrap());
+    let continued = released(run::resume(&run_dir, &Continuation::default(), &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     let whole = start(&dir.path().join("whole"), config(500, 4, 0.0));
     assert_same_populations(&continued.run.populations, &whole.run.populations);
@@ -395,7 +395,7 @@ fn a_store_of_schema_2_is_read_and_continued_in_its_own_layout() {
         max_populations: Some(4),
         ..Default::default()
     };
-    let resumed = run::resume(&run_dir, &more, &mut Silent, &mut |_| {}).unwrap();
+    let resumed = run::resume(&run_dir, &more, &mut Silent).unwrap();
     let direct_dir = dir.path().join("direct");
     let direct = start(&direct_dir, config(500, 4, 0.014));
     assert_same_populations(&resumed.run.populations, &direct.run.populations);
@@ -506,10 +506,7 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
         max_populations: Some(3),
         ..Default::default()
     };
-    let e = run::resume(&run_dir, &more, &mut Silent, &mut |_| {})
-        .err()
-        .unwrap()
-        .to_string();
+    let e = run::resume(&run_dir, &more, &mut Silent).err().unwrap().to_string();
     assert!(e.contains("store schema 1") && e.contains("start a new run"), "{e}");
     let again = RunStore::open(&run_dir).unwrap().load().unwrap();
     assert_eq!(again.populations.len(), 2);
@@ -541,7 +538,7 @@ fn a_write_that_fails_on_the_store_thread_ends_the_run_with_its_error() {
         max_populations: Some(6),
         ..Continuation::default()
     };
-    let e = run::resume(&run_dir, &more, &mut Silent, &mut |_| {})
+    let e = run::resume(&run_dir, &more, &mut Silent)
         .err()
         .expect("the failed write ends the run")
         .to_string();
