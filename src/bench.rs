@@ -4,11 +4,11 @@
 use crate::Law;
 use crate::abc::rejection::{self, RejectionConfig};
 use crate::abc::smc::{self, SmcConfig};
-use crate::data::{DataOptions, Samples, demo_field_data};
+use crate::data::{DataOptions, FieldData, Samples, demo_field_data};
 use crate::error::Result;
 use crate::eval::gpu::candidates::GpuCandidate;
 use crate::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE, cpu::CpuEvaluator, evaluator, gpu};
-use crate::fit::{FitOptions, fit_record};
+use crate::fit::{FitOptions, LawFit, fit_record};
 use crate::numerics::quantile;
 use crate::prior::{LawBox, Prior};
 use serde::Serialize;
@@ -221,15 +221,12 @@ fn time_calls(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<Vec<f64>
         .collect()
 }
 
-/// Runs the benchmark, reporting progress lines through `log`.
+/// Runs the benchmark, reporting progress lines through `log`: with
+/// [`BenchOptions::selection_replicates`] only the selection check ([`selection_check`]),
+/// else each other section in turn: evaluator throughput, the small call, the paper-scale run
+/// end to end, rejection against SMC, and the GPU stability grid.
 pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchReport> {
-    let (adapter, shape) = match gpu::context() {
-        Ok(ctx) => (ctx.describe(), Some(gpu::Shape::chosen(ctx)?)),
-        Err(e) => (format!("none ({e})"), None),
-    };
-    if let Some(shape) = shape {
-        log(format!("GPU: {adapter}, {shape} scoring"));
-    }
+    let (adapter, shape) = gpu_adapter(log)?;
     let reps = opts.repetitions.max(1);
     let report = BenchReport {
         machine: machine(),
@@ -254,6 +251,46 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             ..report
         });
     }
+    let throughput = measure_throughput(opts, reps, log)?;
+    let small_call_seconds = measure_small_calls(&opts.backends, reps, log)?;
+    let embedded = EmbeddedRecord::fitted()?;
+    let config = RejectionConfig {
+        particles: opts.particles,
+        ..RejectionConfig::default()
+    };
+    let end_to_end = measure_end_to_end(&opts.backends, reps, &embedded, &config, log)?;
+    let samplers = compare_samplers(opts, reps, &embedded, config.eps_min, log)?;
+    let stability = if opts.backends.contains(&Backend::Gpu) {
+        Some(measure_stability(opts.stability, reps, log)?)
+    } else {
+        None
+    };
+    Ok(BenchReport {
+        stability,
+        throughput,
+        small_call_seconds,
+        end_to_end,
+        samplers,
+        ..report
+    })
+}
+
+/// The GPU adapter's description and the scoring shape it is used with (logged), or why there
+/// is no GPU and no shape.
+fn gpu_adapter(log: &mut dyn FnMut(String)) -> Result<(String, Option<gpu::Shape>)> {
+    let (adapter, shape) = match gpu::context() {
+        Ok(ctx) => (ctx.describe(), Some(gpu::Shape::chosen(ctx)?)),
+        Err(e) => (format!("none ({e})"), None),
+    };
+    if let Some(shape) = shape {
+        log(format!("GPU: {adapter}, {shape} scoring"));
+    }
+    Ok((adapter, shape))
+}
+
+/// Evaluator throughput of every backend, size and law, on [`synthetic_problem`]s: one call
+/// scoring N candidates against D points, timed `reps` times.
+fn measure_throughput(opts: &BenchOptions, reps: usize, log: &mut dyn FnMut(String)) -> Result<Vec<Throughput>> {
     let mut throughput = Vec::new();
     for &backend in &opts.backends {
         for &(n, d) in &opts.sizes {
@@ -279,8 +316,18 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             }
         }
     }
+    Ok(throughput)
+}
+
+/// The fixed cost of a call on each backend: 64 candidates against 100 points, timed at least
+/// 20 times; seconds per call, by backend.
+fn measure_small_calls(
+    backends: &[Backend],
+    reps: usize,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<(String, Spread)>> {
     let mut small_call_seconds = Vec::new();
-    for &backend in &opts.backends {
+    for &backend in backends {
         let ev = evaluator(synthetic_problem(Law::M2, 100, 1), backend, &mut |_| {})?;
         let mut rho = vec![0.0; 64];
         let times = time_calls(reps.max(20), || ev.score(0, 0, &mut rho))?;
@@ -292,23 +339,52 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         ));
         small_call_seconds.push((ev.backend().to_string(), spread));
     }
-    let mut end_to_end = Vec::new();
-    let data = demo_field_data(&DataOptions::default())?;
-    let fits = fit_record(&Law::ALL, &data, &FitOptions::default())?;
-    let prior = Prior::from_fits(&fits, 0.4, None, 1000.0)?;
-    let config = RejectionConfig {
-        particles: opts.particles,
-        ..RejectionConfig::default()
-    };
-    for &backend in &opts.backends {
-        let ev = evaluator(
-            AbcProblem::new(prior.clone(), 1, &data.calibration, None),
+    Ok(small_call_seconds)
+}
+
+/// The embedded record with every law's least-squares fit and the prior built on them: what
+/// the paper-scale runs and the sampler comparison sample.
+struct EmbeddedRecord {
+    data: FieldData,
+    fits: Vec<LawFit>,
+    prior: Prior,
+}
+
+impl EmbeddedRecord {
+    /// Reads and fits the embedded record with default options; the prior is the fits' ±40 %
+    /// box.
+    fn fitted() -> Result<Self> {
+        let data = demo_field_data(&DataOptions::default())?;
+        let fits = fit_record(&Law::ALL, &data, &FitOptions::default())?;
+        let prior = Prior::from_fits(&fits, 0.4, None, 1000.0)?;
+        Ok(Self { data, fits, prior })
+    }
+
+    /// An evaluator of the record's calibration samples under the prior (seed 1) on `backend`.
+    fn evaluator(&self, backend: Backend) -> Result<Box<dyn Evaluator>> {
+        evaluator(
+            AbcProblem::new(self.prior.clone(), 1, &self.data.calibration, None),
             backend,
             &mut |_| {},
-        )?;
+        )
+    }
+}
+
+/// A rejection run on the embedded record to `config`'s ε_min with its N, on each backend,
+/// timed `reps` times.
+fn measure_end_to_end(
+    backends: &[Backend],
+    reps: usize,
+    embedded: &EmbeddedRecord,
+    config: &RejectionConfig,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<EndToEnd>> {
+    let mut end_to_end = Vec::new();
+    for &backend in backends {
+        let ev = embedded.evaluator(backend)?;
         let mut last = None;
         let times = time_calls(reps, || {
-            last = Some(rejection::run(ev.as_ref(), &config)?);
+            last = Some(rejection::run(ev.as_ref(), config)?);
             Ok(())
         })?;
         let run = last.expect("at least one run");
@@ -317,7 +393,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         log(format!(
             "{:>3} paper-scale run (N = {}, four laws, embedded record, to ε = {}): {:.3} s, {:.3e} evaluations, {evals_per_s:.3e} evaluations/s",
             ev.backend(),
-            opts.particles,
+            config.particles,
             config.eps_min,
             spread.median,
             run.evaluations as f64
@@ -331,21 +407,28 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             populations: run.populations.len(),
         });
     }
-    // Rejection and SMC to the same ε_min with the same N: at the paper's ε_min, and near the
-    // noise floor (1.1 × the smallest least-squares ρ) with N / 5, where rejection from the
-    // prior accepts about one candidate in a thousand.
+    Ok(end_to_end)
+}
+
+/// Rejection and SMC to the same ε_min with the same N on each backend: at the paper's ε_min
+/// (`paper_eps_min`) with the end-to-end N, and near the noise floor (1.1 × the smallest
+/// least-squares ρ) with N / 5, where rejection from the prior accepts about one candidate in
+/// a thousand.
+fn compare_samplers(
+    opts: &BenchOptions,
+    reps: usize,
+    embedded: &EmbeddedRecord,
+    paper_eps_min: f64,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<SamplerRun>> {
     let mut samplers = Vec::new();
-    let floor = fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
+    let floor = embedded.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
     let targets = [
-        (config.eps_min, opts.particles),
+        (paper_eps_min, opts.particles),
         (1.1 * floor, (opts.particles / 5).max(100)),
     ];
     for &backend in &opts.backends {
-        let ev = evaluator(
-            AbcProblem::new(prior.clone(), 1, &data.calibration, None),
-            backend,
-            &mut |_| {},
-        )?;
+        let ev = embedded.evaluator(backend)?;
         for &(eps_min, particles) in &targets {
             let base = RejectionConfig {
                 particles,
@@ -357,74 +440,86 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
                 ..SmcConfig::default()
             };
             for sampler in ["rejection", "smc"] {
-                let mut last = None;
-                let times = time_calls(reps.min(3), || {
-                    last = Some(match sampler {
-                        "rejection" => rejection::run(ev.as_ref(), &base)?,
-                        _ => smc::run(ev.as_ref(), &smc_config)?,
-                    });
-                    Ok(())
-                })?;
-                let run = last.expect("at least one run");
-                let seconds = Spread::of(&times).median;
-                log(format!(
-                    "{:>3} {sampler:>9} to ε = {eps_min:.5} (N = {particles}): {:.3e} evaluations, {} populations, {seconds:.3} s",
-                    ev.backend(),
-                    run.evaluations as f64,
-                    run.populations.len(),
-                ));
-                samplers.push(SamplerRun {
-                    sampler,
-                    backend: ev.backend(),
-                    particles,
-                    eps_min,
-                    evaluations: run.evaluations,
-                    seconds,
-                    populations: run.populations.len(),
-                    final_epsilon: run.populations.last().and_then(|p| p.record.epsilon),
-                });
+                samplers.push(time_sampler(ev.as_ref(), sampler, &smc_config, reps, log)?);
             }
         }
     }
-    let stability = if opts.backends.contains(&Backend::Gpu) {
-        let (side, count) = opts.stability;
-        let omega: Vec<f64> = (0..side).map(|i| 20.0 + 200.0 * i as f64 / side as f64).collect();
-        let wob: Vec<f64> = (0..side).map(|i| 20.0 + 600.0 * i as f64 / side as f64).collect();
-        let base = Law::M3.scale_torque(Law::M3.paper_estimate(), 1000.0);
-        let samples: Vec<Vec<f64>> = (0..count)
-            .map(|s| {
-                base.iter()
-                    .map(|&p| p * (0.8 + 0.4 * (s as f64 + 0.5) / count as f64))
-                    .collect()
-            })
-            .collect();
-        let criterion = crate::stability::map::Criterion::Lumped(crate::stability::lumped::Lumped::default());
-        let times = time_calls(reps, || {
-            gpu::stability::stability_grid(Law::M3, &samples, &omega, &wob, criterion, 244.2e3)?;
-            Ok(())
-        })?;
-        let rates: Vec<f64> = times.iter().map(|t| (side * side * count) as f64 / t).collect();
-        let spread = Spread::of(&rates);
-        log(format!(
-            "gpu stability grid {side} × {side} cells × {count} samples: {:.3e} cell-samples/s",
-            spread.median
-        ));
-        Some(StabilityThroughput {
-            cells: side * side,
-            samples: count,
-            cell_samples_per_s: spread.median,
-            cell_samples_per_s_spread: spread,
+    Ok(samplers)
+}
+
+/// One sampler (`rejection` or `smc`) run to `smc_config`'s ε_min with its N (rejection takes
+/// its base configuration), timed up to 3 times; the evaluations and populations of the last
+/// run.
+fn time_sampler(
+    ev: &dyn Evaluator,
+    sampler: &'static str,
+    smc_config: &SmcConfig,
+    reps: usize,
+    log: &mut dyn FnMut(String),
+) -> Result<SamplerRun> {
+    let base = &smc_config.base;
+    let (eps_min, particles) = (base.eps_min, base.particles);
+    let mut last = None;
+    let times = time_calls(reps.min(3), || {
+        last = Some(match sampler {
+            "rejection" => rejection::run(ev, base)?,
+            _ => smc::run(ev, smc_config)?,
+        });
+        Ok(())
+    })?;
+    let run = last.expect("at least one run");
+    let seconds = Spread::of(&times).median;
+    log(format!(
+        "{:>3} {sampler:>9} to ε = {eps_min:.5} (N = {particles}): {:.3e} evaluations, {} populations, {seconds:.3} s",
+        ev.backend(),
+        run.evaluations as f64,
+        run.populations.len(),
+    ));
+    Ok(SamplerRun {
+        sampler,
+        backend: ev.backend(),
+        particles,
+        eps_min,
+        evaluations: run.evaluations,
+        seconds,
+        populations: run.populations.len(),
+        final_epsilon: run.populations.last().and_then(|p| p.record.epsilon),
+    })
+}
+
+/// Throughput of the GPU stability grid: m3 at the paper's estimate, `count` samples scaled
+/// 0.8-1.2 of it, on a `side` × `side` grid of speed and weight on bit, timed `reps` times.
+fn measure_stability(
+    (side, count): (usize, usize),
+    reps: usize,
+    log: &mut dyn FnMut(String),
+) -> Result<StabilityThroughput> {
+    let omega: Vec<f64> = (0..side).map(|i| 20.0 + 200.0 * i as f64 / side as f64).collect();
+    let wob: Vec<f64> = (0..side).map(|i| 20.0 + 600.0 * i as f64 / side as f64).collect();
+    let base = Law::M3.scale_torque(Law::M3.paper_estimate(), 1000.0);
+    let samples: Vec<Vec<f64>> = (0..count)
+        .map(|s| {
+            base.iter()
+                .map(|&p| p * (0.8 + 0.4 * (s as f64 + 0.5) / count as f64))
+                .collect()
         })
-    } else {
-        None
-    };
-    Ok(BenchReport {
-        stability,
-        throughput,
-        small_call_seconds,
-        end_to_end,
-        samplers,
-        ..report
+        .collect();
+    let criterion = crate::stability::map::Criterion::Lumped(crate::stability::lumped::Lumped::default());
+    let times = time_calls(reps, || {
+        gpu::stability::stability_grid(Law::M3, &samples, &omega, &wob, criterion, 244.2e3)?;
+        Ok(())
+    })?;
+    let rates: Vec<f64> = times.iter().map(|t| (side * side * count) as f64 / t).collect();
+    let spread = Spread::of(&rates);
+    log(format!(
+        "gpu stability grid {side} × {side} cells × {count} samples: {:.3e} cell-samples/s",
+        spread.median
+    ));
+    Ok(StabilityThroughput {
+        cells: side * side,
+        samples: count,
+        cell_samples_per_s: spread.median,
+        cell_samples_per_s_spread: spread,
     })
 }
 

@@ -13,7 +13,7 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// How the record is divided into calibration and validation samples.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum SplitRule {
@@ -372,7 +372,7 @@ fn detect_delimiter(text: &[u8], path: &Path) -> Result<u8> {
 
 /// Reads, filters and splits a field record from any reader. `path` is only used in messages.
 /// Fields are separated by commas, or by semicolons or tabs when the header line says so
-/// ([`detect_delimiter`]); numbers take a decimal point.
+/// (`detect_delimiter`); numbers take a decimal point.
 pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions) -> Result<FieldData> {
     opts.validate()?;
     let mut text = Vec::new();
@@ -386,12 +386,60 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
         .from_reader(text.as_slice());
-    let csv_error = |e: csv::Error| Error::Format {
+    let headers = rdr.headers().map_err(|e| csv_error(path, e))?.clone();
+    check_headers(&headers, path)?;
+    let indices = ColumnIndices::resolve(&headers, opts, path)?;
+    let units = ColumnUnits::resolve(&headers, &indices, opts, path)?;
+    if indices.time.is_none() && (opts.t_start_s.is_some() || opts.t_end_s.is_some()) {
+        return Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: "`t_start_s`/`t_end_s` need a time column (none found; name it with `time_column`)".into(),
+        });
+    }
+
+    let (all, backwards) = read_rows(&mut rdr, &headers, &indices, &units, delimiter, path)?;
+    let rows_read = all.len();
+    if rows_read == 0 {
+        return Err(Error::Data {
+            path: path.to_path_buf(),
+            message: "no data rows after the header".into(),
+        });
+    }
+
+    let name = |i: usize| headers[i].to_string();
+    let columns = ColumnsUsed {
+        speed: name(indices.speed),
+        torque: name(indices.torque),
+        wob: indices.wob.map(name),
+        time: indices.time.map(name),
+    };
+    let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
+    let warnings = record_warnings(path, &columns, backwards, &calibration, &validation, rows_used);
+    Ok(FieldData {
+        source: path.to_path_buf(),
+        torque_unit: units.torque,
+        speed_unit: units.speed,
+        columns,
+        rows_read,
+        rows_used,
+        calibration,
+        validation,
+        warnings,
+    })
+}
+
+/// A CSV reader's error as a format error of `path`, at its line where known.
+fn csv_error(path: &Path, e: csv::Error) -> Error {
+    Error::Format {
         path: path.to_path_buf(),
         line: e.position().map(|p| p.line()),
         message: e.to_string(),
-    };
-    let headers = rdr.headers().map_err(csv_error)?.clone();
+    }
+}
+
+/// Refuses a header line that is empty or names a column twice: columns are found by name.
+fn check_headers(headers: &csv::StringRecord, path: &Path) -> Result<()> {
     if headers.is_empty() {
         return Err(Error::Format {
             path: path.to_path_buf(),
@@ -410,127 +458,139 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
             message: format!("two columns are named '{duplicate}'; rename one"),
         });
     }
-    let speed_i = resolve_column(
-        &headers,
-        opts.speed_column.as_deref(),
-        "speed",
-        "speed_column",
-        true,
-        path,
-    )?
-    .expect("required");
-    let torque_i = resolve_column(
-        &headers,
-        opts.torque_column.as_deref(),
-        "torque",
-        "torque_column",
-        true,
-        path,
-    )?
-    .expect("required");
-    let wob_i = resolve_column(&headers, opts.wob_column.as_deref(), "wob", "wob_column", false, path)?;
-    let time_i = resolve_column(
-        &headers,
-        opts.time_column.as_deref(),
-        "time",
-        "time_column",
-        false,
-        path,
-    )?;
-    let name = |i: usize| headers[i].to_string();
-    let roles = [
-        ("speed_column", Some(speed_i)),
-        ("torque_column", Some(torque_i)),
-        ("wob_column", wob_i),
-        ("time_column", time_i),
-    ];
-    for (a, (field_a, i)) in roles.iter().enumerate() {
-        if let Some((field_b, _)) = i.and_then(|i| roles[a + 1..].iter().find(|(_, j)| *j == Some(i))) {
-            return Err(Error::Format {
-                path: path.to_path_buf(),
-                line: Some(1),
-                message: format!(
-                    "column '{}' is chosen for both `{field_a}` and `{field_b}`; a column is one quantity",
-                    name(i.expect("found"))
-                ),
-            });
-        }
-    }
+    Ok(())
+}
 
-    let speed_unit = resolve_unit(
-        &headers[speed_i],
-        opts.speed_unit,
-        SpeedUnit::from_suffix,
-        SpeedUnit::label,
-        "speed_unit",
-        path,
-    )?;
-    let torque_unit = resolve_unit(
-        &headers[torque_i],
-        opts.torque_unit,
-        TorqueUnit::from_suffix,
-        TorqueUnit::label,
-        "torque_unit",
-        path,
-    )?;
-    let wob_unit = match wob_i {
-        Some(i) => Some(resolve_unit(
-            &headers[i],
-            opts.wob_unit,
-            ForceUnit::from_suffix,
-            ForceUnit::label,
-            "wob_unit",
+/// Where the columns read sit in the header (0-based).
+struct ColumnIndices {
+    speed: usize,
+    torque: usize,
+    wob: Option<usize>,
+    time: Option<usize>,
+}
+
+impl ColumnIndices {
+    /// Each column by its option or its name's hint ([`resolve_column`]): speed and torque
+    /// required, weight on bit and time when present. Refuses one column chosen for two roles.
+    fn resolve(headers: &csv::StringRecord, opts: &DataOptions, path: &Path) -> Result<Self> {
+        let speed = resolve_column(
+            headers,
+            opts.speed_column.as_deref(),
+            "speed",
+            "speed_column",
+            true,
             path,
-        )?),
-        None => None,
-    };
-    if time_i.is_none() && (opts.t_start_s.is_some() || opts.t_end_s.is_some()) {
-        return Err(Error::Format {
-            path: path.to_path_buf(),
-            line: Some(1),
-            message: "`t_start_s`/`t_end_s` need a time column (none found; name it with `time_column`)".into(),
-        });
+        )?
+        .expect("required");
+        let torque = resolve_column(
+            headers,
+            opts.torque_column.as_deref(),
+            "torque",
+            "torque_column",
+            true,
+            path,
+        )?
+        .expect("required");
+        let wob = resolve_column(headers, opts.wob_column.as_deref(), "wob", "wob_column", false, path)?;
+        let time = resolve_column(headers, opts.time_column.as_deref(), "time", "time_column", false, path)?;
+        let roles = [
+            ("speed_column", Some(speed)),
+            ("torque_column", Some(torque)),
+            ("wob_column", wob),
+            ("time_column", time),
+        ];
+        for (a, (field_a, i)) in roles.iter().enumerate() {
+            if let Some((field_b, _)) = i.and_then(|i| roles[a + 1..].iter().find(|(_, j)| *j == Some(i))) {
+                return Err(Error::Format {
+                    path: path.to_path_buf(),
+                    line: Some(1),
+                    message: format!(
+                        "column '{}' is chosen for both `{field_a}` and `{field_b}`; a column is one quantity",
+                        &headers[i.expect("found")]
+                    ),
+                });
+            }
+        }
+        Ok(Self {
+            speed,
+            torque,
+            wob,
+            time,
+        })
     }
+}
 
+/// Units of the columns read.
+struct ColumnUnits {
+    speed: SpeedUnit,
+    torque: TorqueUnit,
+    wob: Option<ForceUnit>,
+}
+
+impl ColumnUnits {
+    /// The unit of each column read ([`resolve_unit`]), in the order speed, torque, weight on
+    /// bit.
+    fn resolve(headers: &csv::StringRecord, indices: &ColumnIndices, opts: &DataOptions, path: &Path) -> Result<Self> {
+        let speed = resolve_unit(
+            &headers[indices.speed],
+            opts.speed_unit,
+            SpeedUnit::from_suffix,
+            SpeedUnit::label,
+            "speed_unit",
+            path,
+        )?;
+        let torque = resolve_unit(
+            &headers[indices.torque],
+            opts.torque_unit,
+            TorqueUnit::from_suffix,
+            TorqueUnit::label,
+            "torque_unit",
+            path,
+        )?;
+        let wob = match indices.wob {
+            Some(i) => Some(resolve_unit(
+                &headers[i],
+                opts.wob_unit,
+                ForceUnit::from_suffix,
+                ForceUnit::label,
+                "wob_unit",
+                path,
+            )?),
+            None => None,
+        };
+        Ok(Self { speed, torque, wob })
+    }
+}
+
+/// The first place the time column runs backwards: (line, previous time, time), s.
+type Backwards = (u64, f64, f64);
+
+/// Every data row in SI, in file order, and the first place the time column runs backwards.
+/// Refuses the first cell that is not a finite number, naming its line and column.
+fn read_rows(
+    rdr: &mut csv::Reader<&[u8]>,
+    headers: &csv::StringRecord,
+    indices: &ColumnIndices,
+    units: &ColumnUnits,
+    delimiter: u8,
+    path: &Path,
+) -> Result<(Samples, Option<Backwards>)> {
     let mut all = Samples {
-        wob_n: wob_i.map(|_| Vec::new()),
-        time_s: time_i.map(|_| Vec::new()),
+        wob_n: indices.wob.map(|_| Vec::new()),
+        time_s: indices.time.map(|_| Vec::new()),
         ..Samples::default()
     };
-    let mut rows_read = 0usize;
-    let mut backwards: Option<(u64, f64, f64)> = None;
+    let mut backwards: Option<Backwards> = None;
     let mut record = csv::StringRecord::new();
-    while rdr.read_record(&mut record).map_err(csv_error)? {
-        rows_read += 1;
+    while rdr.read_record(&mut record).map_err(|e| csv_error(path, e))? {
         let line = record.position().map(|p| p.line()).unwrap_or(0);
-        let cell = |i: usize| -> Result<f64> {
-            let text = record.get(i).unwrap_or("");
-            let fail = |message: String| Error::Cell {
-                path: path.to_path_buf(),
-                line,
-                column: i + 1,
-                name: name(i),
-                message,
-            };
-            let v: f64 = text.parse().map_err(|_| {
-                fail(if delimiter != b',' && text.contains(',') {
-                    format!("'{text}' is not a number (write decimals with a point, not a comma)")
-                } else {
-                    format!("'{text}' is not a number")
-                })
-            })?;
-            if v.is_finite() {
-                Ok(v)
-            } else {
-                Err(fail(format!("'{text}' is not a finite number")))
-            }
-        };
-        all.speed_rad_s.push(speed_unit.to_rad_s(cell(speed_i)?));
-        all.torque_nm.push(cell(torque_i)? * torque_unit.newton_metres());
-        if let (Some(i), Some(u), Some(v)) = (wob_i, wob_unit, all.wob_n.as_mut()) {
+        let cell = |i: usize| parse_cell(&record, i, line, headers, delimiter, path);
+        all.speed_rad_s.push(units.speed.to_rad_s(cell(indices.speed)?));
+        all.torque_nm.push(cell(indices.torque)? * units.torque.newton_metres());
+        if let (Some(i), Some(u), Some(v)) = (indices.wob, units.wob, all.wob_n.as_mut()) {
             v.push(cell(i)? * u.newtons());
         }
-        if let (Some(i), Some(v)) = (time_i, all.time_s.as_mut()) {
+        if let (Some(i), Some(v)) = (indices.time, all.time_s.as_mut()) {
             let t = cell(i)?;
             if let Some(&previous) = v.last()
                 && t < previous
@@ -541,20 +601,51 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
             v.push(t);
         }
     }
-    if rows_read == 0 {
-        return Err(Error::Data {
-            path: path.to_path_buf(),
-            message: "no data rows after the header".into(),
-        });
-    }
+    Ok((all, backwards))
+}
 
-    let columns = ColumnsUsed {
-        speed: name(speed_i),
-        torque: name(torque_i),
-        wob: wob_i.map(name),
-        time: time_i.map(name),
+/// The number in column `i` (0-based) of `record`, on `line`; refuses text that is not a
+/// finite number, hinting at decimal commas in a record not separated by commas.
+fn parse_cell(
+    record: &csv::StringRecord,
+    i: usize,
+    line: u64,
+    headers: &csv::StringRecord,
+    delimiter: u8,
+    path: &Path,
+) -> Result<f64> {
+    let text = record.get(i).unwrap_or("");
+    let fail = |message: String| Error::Cell {
+        path: path.to_path_buf(),
+        line,
+        column: i + 1,
+        name: headers[i].to_string(),
+        message,
     };
-    let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
+    let v: f64 = text.parse().map_err(|_| {
+        fail(if delimiter != b',' && text.contains(',') {
+            format!("'{text}' is not a number (write decimals with a point, not a comma)")
+        } else {
+            format!("'{text}' is not a number")
+        })
+    })?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(fail(format!("'{text}' is not a finite number")))
+    }
+}
+
+/// What the record looks wrong in without being unusable: a time column that runs backwards
+/// (`backwards`), or more than half the torques used negative.
+fn record_warnings(
+    path: &Path,
+    columns: &ColumnsUsed,
+    backwards: Option<Backwards>,
+    calibration: &Samples,
+    validation: &Samples,
+    rows_used: usize,
+) -> Vec<String> {
     let mut warnings = Vec::new();
     if let Some((line, previous, t)) = backwards {
         warnings.push(format!(
@@ -572,18 +663,7 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
             columns.torque
         ));
     }
-
-    Ok(FieldData {
-        source: path.to_path_buf(),
-        torque_unit,
-        speed_unit,
-        columns,
-        rows_read,
-        rows_used,
-        calibration,
-        validation,
-        warnings,
-    })
+    warnings
 }
 
 /// The filters (time window, then thinning, then the minimum bit speed) and the calibration /

@@ -458,65 +458,149 @@ struct Polished {
     termination: TerminationReason,
 }
 
-/// Fits one law. See the module documentation for the method.
+/// Fits one law. See the module documentation for the method: samples that cannot determine
+/// the law are refused first; the grid's best distinct starts are polished, and the best
+/// polished start is the estimate, with its standard errors and what the user must know
+/// before trusting it.
 pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<LawFit> {
-    let m = calibration.len();
+    check_determinable(law, calibration)?;
     let n = law.n_params();
-    let refuse = |message: String| Error::Fit {
-        record: None,
-        law: law.to_string(),
-        message,
-    };
-    if m <= n {
-        return Err(refuse(format!(
-            "{m} calibration samples cannot determine its {n} parameters"
-        )));
-    }
-    let speeds = distinct_speeds(&calibration.speed_rad_s);
-    if speeds < n {
-        return Err(refuse(format!(
-            "the {m} calibration samples have {speeds} distinct bit speeds, and a law of {n} parameters, a curve torque(speed), needs at least {n}; leave {law} out (`laws`) or record more speeds"
-        )));
-    }
-    let y_si = &calibration.torque_nm;
     let sum_y2 = calibration.sum_sq_torque();
     let scales = RecordScales::of(calibration);
     let w: Vec<f64> = calibration.speed_rad_s.iter().map(|w| w / scales.speed).collect();
-    let y: Vec<f64> = y_si.iter().map(|y| y / scales.torque).collect();
+    let y: Vec<f64> = calibration.torque_nm.iter().map(|y| y / scales.torque).collect();
     let r = calibration.wob_ratio(opts.w_ref_n);
+    let scaled = ScaledData { w: &w, y: &y, r: &r };
 
-    let lower: Vec<f64> = (0..n)
+    let lower = lower_bounds(law, &scales, opts.bounded);
+    let starts = select_starts(law, scaled, &lower, opts.starts);
+    if starts.is_empty() {
+        return Err(refusal(
+            law,
+            "no starting point of the grid gives a finite misfit on the calibration samples (their torques against speed leave every start's linear parameters undetermined or overflowing)"
+                .into(),
+        ));
+    }
+    let polished = polish_starts(law, scaled, &lower, &starts);
+    if polished.is_empty() {
+        return Err(refusal(
+            law,
+            format!(
+                "Levenberg-Marquardt diverges to non-finite torques from every one of its {} starting points on the calibration samples",
+                starts.len()
+            ),
+        ));
+    }
+    let best = &polished[0];
+    let p = &best.params;
+
+    let on_bound: Vec<bool> = (0..n).map(|j| lower[j].is_finite() && p[j] - lower[j] < 1e-6).collect();
+    let covariance = Covariance::at(law, best, scaled, &on_bound, &scales);
+    let params_si: Vec<f64> = (0..n).map(|j| p[j] / scales.factor(law, j)).collect();
+    let warnings = fit_warnings(law, &polished, &on_bound, &covariance, &params_si);
+    let rho = best.ssr * scales.torque * scales.torque / sum_y2;
+    let validation_rho = (!validation.is_empty()).then(|| {
+        misfit(
+            law,
+            &params_si,
+            &validation.speed_rad_s,
+            &validation.torque_nm,
+            &validation.wob_ratio(opts.w_ref_n),
+            validation.sum_sq_torque(),
+        )
+    });
+    Ok(LawFit {
+        law,
+        params_si,
+        std_errors_si: covariance.std_errors_si,
+        rho,
+        validation_rho,
+        condition_number: covariance.condition_number,
+        correlations: covariance.correlations,
+        warnings,
+        starts: starts.len(),
+        scales,
+    })
+}
+
+/// A fit of `law` refused for what the calibration samples are ([`Error::Fit`]; the record is
+/// named by [`fit_record`]).
+fn refusal(law: Law, message: String) -> Error {
+    Error::Fit {
+        record: None,
+        law: law.to_string(),
+        message,
+    }
+}
+
+/// Refuses calibration samples that cannot determine `law`'s parameters before any fitting:
+/// no more samples than parameters, or fewer distinct bit speeds than parameters (a law is a
+/// curve torque(speed), fitted through the speeds).
+fn check_determinable(law: Law, calibration: &Samples) -> Result<()> {
+    let m = calibration.len();
+    let n = law.n_params();
+    if m <= n {
+        return Err(refusal(
+            law,
+            format!("{m} calibration samples cannot determine its {n} parameters"),
+        ));
+    }
+    let speeds = distinct_speeds(&calibration.speed_rad_s);
+    if speeds < n {
+        return Err(refusal(
+            law,
+            format!(
+                "the {m} calibration samples have {speeds} distinct bit speeds, and a law of {n} parameters, a curve torque(speed), needs at least {n}; leave {law} out (`laws`) or record more speeds"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The calibration samples on the optimiser's scale: speed w / speed scale, torque
+/// y / torque scale, and the weight-on-bit ratio r per sample.
+#[derive(Clone, Copy)]
+struct ScaledData<'a> {
+    w: &'a [f64],
+    y: &'a [f64],
+    r: &'a [f64],
+}
+
+impl ScaledData<'_> {
+    /// Sum of squared residuals of scaled parameters `p` ([`ssr`]).
+    fn ssr(&self, law: Law, p: &[f64]) -> f64 {
+        ssr(law, p, self.w, self.y, self.r)
+    }
+}
+
+/// Each parameter's lower bound on the scaled problem: its physical bound when `bounded`, else
+/// −∞ (no bound).
+fn lower_bounds(law: Law, scales: &RecordScales, bounded: bool) -> Vec<f64> {
+    (0..law.n_params())
         .map(|j| {
-            if opts.bounded {
+            if bounded {
                 law.params()[j].lower * scales.factor(law, j)
             } else {
                 f64::NEG_INFINITY
             }
         })
-        .collect();
-    let transforms: Vec<Transform> = lower
-        .iter()
-        .map(|&lb| {
-            if lb.is_finite() {
-                Transform::Lower(lb)
-            } else {
-                Transform::Free
-            }
-        })
-        .collect();
+        .collect()
+}
 
-    // Rank grid points by misfit after pulling them just inside the bounds, keep the best
-    // few that are not near-copies of a better one.
+/// The grid's starting points ([`grid_starts`]) to polish: each pulled just inside the
+/// bounds, ranked by misfit, and the best `max_starts` (at least one) kept that are not
+/// near-copies of a better one. Empty when no grid point gives a finite misfit.
+fn select_starts(law: Law, data: ScaledData, lower: &[f64], max_starts: usize) -> Vec<Vec<f64>> {
     let margin = 1e-3;
-    let mut candidates: Vec<(f64, Vec<f64>)> = grid_starts(law, &w, &y, &r)
+    let mut candidates: Vec<(f64, Vec<f64>)> = grid_starts(law, data.w, data.y, data.r)
         .into_iter()
         .map(|mut p| {
-            for (v, &lb) in p.iter_mut().zip(&lower) {
+            for (v, &lb) in p.iter_mut().zip(lower) {
                 if *v < lb + margin {
                     *v = lb + margin;
                 }
             }
-            (ssr(law, &p, &w, &y, &r), p)
+            (data.ssr(law, &p), p)
         })
         .filter(|(s, _)| s.is_finite())
         .collect();
@@ -531,17 +615,27 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
         if distinct {
             starts.push(p);
         }
-        if starts.len() >= opts.starts.max(1) {
+        if starts.len() >= max_starts.max(1) {
             break;
         }
     }
-    if starts.is_empty() {
-        return Err(refuse(
-            "no starting point of the grid gives a finite misfit on the calibration samples (their torques against speed leave every start's linear parameters undetermined or overflowing)"
-                .into(),
-        ));
-    }
+    starts
+}
 
+/// Polishes every start by Levenberg-Marquardt, bounds kept by MINUIT's transform; the runs
+/// that end on a finite misfit, best first. Empty when every run diverges.
+fn polish_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>]) -> Vec<Polished> {
+    let n = law.n_params();
+    let transforms: Vec<Transform> = lower
+        .iter()
+        .map(|&lb| {
+            if lb.is_finite() {
+                Transform::Lower(lb)
+            } else {
+                Transform::Free
+            }
+        })
+        .collect();
     let solver = LevenbergMarquardt::new().with_patience(400);
     // The starts are polished in parallel (collected in order: the same result): a start that
     // loses patience costs seconds, and a lone slow fit would otherwise hold one thread while
@@ -551,32 +645,101 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
         .map(|p0| {
             let problem = Problem {
                 law,
-                w: &w,
-                y: &y,
-                r: &r,
+                w: data.w,
+                y: data.y,
+                r: data.r,
                 u: DVector::from_iterator(n, transforms.iter().zip(p0).map(|(t, &p)| t.to_internal(p))),
                 transforms: transforms.clone(),
             };
             let (problem, report) = solver.minimize(problem);
             let params = problem.scaled_params();
             Polished {
-                ssr: ssr(law, &params, &w, &y, &r),
+                ssr: data.ssr(law, &params),
                 params,
                 termination: report.termination,
             }
         })
         .filter(|p| p.ssr.is_finite())
         .collect();
-    if polished.is_empty() {
-        return Err(refuse(format!(
-            "Levenberg-Marquardt diverges to non-finite torques from every one of its {} starting points on the calibration samples",
-            starts.len()
-        )));
-    }
     polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
+    polished
+}
+
+/// The uncertainty of an estimate, from the Jacobian at it.
+struct Covariance {
+    /// Standard errors, SI; `None` for a parameter on its bound or one the data cannot
+    /// determine.
+    std_errors_si: Vec<Option<f64>>,
+    /// Pearson correlations (n × n); `None` where a standard error is undefined.
+    correlations: Vec<Vec<Option<f64>>>,
+    /// Condition number of the column-normalised Jacobian (∞ when a column vanishes).
+    condition_number: f64,
+}
+
+impl Covariance {
+    /// σ² (JᵀJ)⁻¹ over the parameters not on a bound, at the estimate `best` (scaled), with
+    /// σ² its sum of squared residuals over the degrees of freedom. The Jacobian's columns are
+    /// normalised first, and the inverse is taken only below condition number 10¹².
+    fn at(law: Law, best: &Polished, data: ScaledData, on_bound: &[bool], scales: &RecordScales) -> Self {
+        let (m, n) = (data.w.len(), law.n_params());
+        let p = &best.params;
+        let free: Vec<usize> = (0..n).filter(|&j| !on_bound[j]).collect();
+        let mut jac = DMatrix::<f64>::zeros(m, free.len());
+        let mut grad = [0.0; crate::laws::MAX_PARAMS];
+        for i in 0..m {
+            law.torque_and_gradient(p, data.w[i], &mut grad[..n]);
+            for (c, &j) in free.iter().enumerate() {
+                jac[(i, c)] = data.r[i] * grad[j];
+            }
+        }
+        let norms: Vec<f64> = (0..free.len()).map(|c| jac.column(c).norm()).collect();
+        let mut std_errors_si = vec![None; n];
+        let mut correlations = vec![vec![None; n]; n];
+        let mut condition_number = f64::INFINITY;
+        if norms.iter().all(|&v| v > 0.0) && !free.is_empty() {
+            let mut normalised = jac.clone();
+            for (c, &norm) in norms.iter().enumerate() {
+                normalised.column_mut(c).scale_mut(1.0 / norm);
+            }
+            let sv = normalised.singular_values();
+            let (smax, smin) = (sv.max(), sv.min());
+            condition_number = if smin > 0.0 { smax / smin } else { f64::INFINITY };
+            if condition_number < 1e12 {
+                let sigma2 = best.ssr / (m - free.len()).max(1) as f64;
+                let jtj = normalised.transpose() * &normalised;
+                if let Some(inv) = jtj.try_inverse() {
+                    for (a, &ja) in free.iter().enumerate() {
+                        let var = sigma2 * inv[(a, a)] / (norms[a] * norms[a]);
+                        std_errors_si[ja] = Some(var.sqrt() / scales.factor(law, ja));
+                        for (b, &jb) in free.iter().enumerate() {
+                            correlations[ja][jb] = Some(inv[(a, b)] / (inv[(a, a)] * inv[(b, b)]).sqrt());
+                        }
+                    }
+                }
+            }
+        }
+        Self {
+            std_errors_si,
+            correlations,
+            condition_number,
+        }
+    }
+}
+
+/// What the user must know before trusting the estimate `polished[0]` (the polished starts,
+/// best first): an optimiser that did not converge, other starts that fit as well elsewhere,
+/// parameters on their bounds, an ill-conditioned Jacobian, standard errors above half the
+/// value. In that order.
+fn fit_warnings(
+    law: Law,
+    polished: &[Polished],
+    on_bound: &[bool],
+    covariance: &Covariance,
+    params_si: &[f64],
+) -> Vec<String> {
+    let n = law.n_params();
     let best = &polished[0];
     let p = &best.params;
-
     let mut warnings = Vec::new();
     if !best.termination.was_successful() {
         warnings.push(format!(
@@ -600,8 +763,6 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
             }
         }
     }
-
-    let on_bound: Vec<bool> = (0..n).map(|j| lower[j].is_finite() && p[j] - lower[j] < 1e-6).collect();
     for j in (0..n).filter(|&j| on_bound[j]) {
         warnings.push(format!(
             "{} sits on its physical bound ({} ≥ {}): the data push it further; try `no_bounds` to see where",
@@ -610,99 +771,51 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
             law.params()[j].lower
         ));
     }
-
-    // Covariance from the Jacobian over the parameters not on a bound: σ² (JᵀJ)⁻¹.
-    let free: Vec<usize> = (0..n).filter(|&j| !on_bound[j]).collect();
-    let mut jac = DMatrix::<f64>::zeros(m, free.len());
-    let mut grad = [0.0; crate::laws::MAX_PARAMS];
-    for i in 0..m {
-        law.torque_and_gradient(p, w[i], &mut grad[..n]);
-        for (c, &j) in free.iter().enumerate() {
-            jac[(i, c)] = r[i] * grad[j];
-        }
-    }
-    let norms: Vec<f64> = (0..free.len()).map(|c| jac.column(c).norm()).collect();
-    let mut std_errors_si = vec![None; n];
-    let mut correlations = vec![vec![None; n]; n];
-    let mut condition_number = f64::INFINITY;
-    if norms.iter().all(|&v| v > 0.0) && !free.is_empty() {
-        let mut normalised = jac.clone();
-        for (c, &norm) in norms.iter().enumerate() {
-            normalised.column_mut(c).scale_mut(1.0 / norm);
-        }
-        let sv = normalised.singular_values();
-        let (smax, smin) = (sv.max(), sv.min());
-        condition_number = if smin > 0.0 { smax / smin } else { f64::INFINITY };
-        if condition_number < 1e12 {
-            let sigma2 = best.ssr / (m - free.len()).max(1) as f64;
-            let jtj = normalised.transpose() * &normalised;
-            if let Some(inv) = jtj.try_inverse() {
-                for (a, &ja) in free.iter().enumerate() {
-                    let var = sigma2 * inv[(a, a)] / (norms[a] * norms[a]);
-                    std_errors_si[ja] = Some(var.sqrt() / scales.factor(law, ja));
-                    for (b, &jb) in free.iter().enumerate() {
-                        correlations[ja][jb] = Some(inv[(a, b)] / (inv[(a, a)] * inv[(b, b)]).sqrt());
-                    }
-                }
-            }
-        }
-    }
-    if condition_number >= 1e6 {
-        let mut worst = (0.0, "", "");
-        for (a, row) in correlations.iter().enumerate() {
-            for (b, &c) in row.iter().enumerate().skip(a + 1) {
-                if let Some(c) = c
-                    && c.abs() > worst.0
-                {
-                    worst = (c.abs(), law.params()[a].name, law.params()[b].name);
-                }
-            }
-        }
-        let pair = if worst.0 > 0.0 {
-            format!(
-                "; {} and {} trade off (|correlation| = {:.6})",
-                worst.1, worst.2, worst.0
-            )
-        } else {
-            String::new()
-        };
-        warnings.push(format!(
-            "ill-conditioned (condition number {condition_number:.2e}){pair}"
-        ));
-    }
-
-    let params_si: Vec<f64> = (0..n).map(|j| p[j] / scales.factor(law, j)).collect();
-    for j in 0..n {
-        if let Some(se) = std_errors_si[j]
-            && se > 0.5 * params_si[j].abs()
+    warnings.extend(conditioning_warning(law, covariance));
+    for (spec, (&se, value)) in law.params().iter().zip(covariance.std_errors_si.iter().zip(params_si)) {
+        if let Some(se) = se
+            && se > 0.5 * value.abs()
         {
             warnings.push(format!(
                 "{} is not identified by the data: its standard error exceeds half its value",
-                law.params()[j].name
+                spec.name
             ));
         }
     }
-    let rho = best.ssr * scales.torque * scales.torque / sum_y2;
-    let validation_rho = (!validation.is_empty()).then(|| {
-        misfit(
-            law,
-            &params_si,
-            &validation.speed_rad_s,
-            &validation.torque_nm,
-            &validation.wob_ratio(opts.w_ref_n),
-            validation.sum_sq_torque(),
+    warnings
+}
+
+/// The warning for a condition number of 10⁶ or more, naming the most strongly correlated
+/// pair of parameters where correlations are known; `None` below it.
+fn conditioning_warning(law: Law, covariance: &Covariance) -> Option<String> {
+    let condition_number = covariance.condition_number;
+    if condition_number >= 1e6 {
+        Some(ill_conditioned(law, condition_number, &covariance.correlations))
+    } else {
+        None
+    }
+}
+
+/// The ill-conditioning warning: the condition number, and the parameter pair of largest
+/// |correlation| where one is known.
+fn ill_conditioned(law: Law, condition_number: f64, correlations: &[Vec<Option<f64>>]) -> String {
+    let mut worst = (0.0, "", "");
+    for (a, row) in correlations.iter().enumerate() {
+        for (b, &c) in row.iter().enumerate().skip(a + 1) {
+            if let Some(c) = c
+                && c.abs() > worst.0
+            {
+                worst = (c.abs(), law.params()[a].name, law.params()[b].name);
+            }
+        }
+    }
+    let pair = if worst.0 > 0.0 {
+        format!(
+            "; {} and {} trade off (|correlation| = {:.6})",
+            worst.1, worst.2, worst.0
         )
-    });
-    Ok(LawFit {
-        law,
-        params_si,
-        std_errors_si,
-        rho,
-        validation_rho,
-        condition_number,
-        correlations,
-        warnings,
-        starts: starts.len(),
-        scales,
-    })
+    } else {
+        String::new()
+    };
+    format!("ill-conditioned (condition number {condition_number:.2e}){pair}")
 }

@@ -69,55 +69,99 @@ fn render_one(stem: String, caption: String, size: (u32, u32), figure: &impl Fig
 
 /// Builds and renders every figure, in the paper's order.
 pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
-    let mut out = Vec::new();
-    let unit = p.unit;
-    let data = p.input.data;
-    let points = |s: &crate::data::Samples| -> Vec<(f64, f64)> {
-        let all: Vec<(f64, f64)> = s
-            .speed_rad_s
-            .iter()
-            .zip(&s.torque_nm)
-            .map(|(&w, &t)| (rpm(w), t / p.torque_scale))
-            .collect();
-        plot::thinned(&all, MAX_POINTS)
-    };
-    let (cal, val) = (points(&data.calibration), points(&data.validation));
-    let thinning_note = {
-        let shown = cal.len() + val.len();
-        let total = data.calibration.len() + data.validation.len();
-        if shown < total {
-            format!(" ({shown} of {total} samples shown, evenly spaced in time)")
-        } else {
-            String::new()
-        }
-    };
-    let (w_lo, w_hi) = plot::extent(
-        data.calibration
-            .speed_rad_s
-            .iter()
-            .chain(&data.validation.speed_rad_s)
-            .copied(),
-    )
-    .unwrap_or((0.1, 25.0));
-    let grid = speed_grid(w_lo, w_hi, CURVE_POINTS);
+    let shared = Shared::new(p);
+    let laws = p.all_laws();
+    let mut out = vec![
+        render_data_and_fits(p, &shared)?,
+        render_model_probabilities(p, &laws)?,
+        render_final_probabilities(p, &laws)?,
+        render_tolerance(p)?,
+    ];
+    out.extend(render_marginals(p, &laws)?);
+    out.extend(render_correlations(p)?);
+    out.push(render_envelopes(p, &shared)?);
+    out.push(render_deterministic_map(p)?);
+    out.push(render_stochastic_map(p)?);
+    out.push(render_structures(p)?);
+    out.extend(render_selection_checks(p)?);
+    Ok(out)
+}
 
-    // 1. Data and least-squares fits.
+/// What figures 1 and 7 share: the record's points in display units and the curves' speeds.
+struct Shared {
+    /// Calibration points (rpm, torque), thinned to [`MAX_POINTS`].
+    cal: Vec<(f64, f64)>,
+    /// Validation points (rpm, torque), thinned to [`MAX_POINTS`].
+    val: Vec<(f64, f64)>,
+    /// The captions' note on thinned points; empty when every sample is shown.
+    thinning_note: String,
+    /// Speeds (rad/s) of the fitted and predicted curves, over the record's speeds.
+    grid: Vec<f64>,
+}
+
+impl Shared {
+    /// Reads the points, the thinning note and the curves' speeds off the record.
+    fn new(p: &Prepared) -> Self {
+        let data = p.input.data;
+        let points = |s: &crate::data::Samples| -> Vec<(f64, f64)> {
+            let all: Vec<(f64, f64)> = s
+                .speed_rad_s
+                .iter()
+                .zip(&s.torque_nm)
+                .map(|(&w, &t)| (rpm(w), t / p.torque_scale))
+                .collect();
+            plot::thinned(&all, MAX_POINTS)
+        };
+        let (cal, val) = (points(&data.calibration), points(&data.validation));
+        let thinning_note = {
+            let shown = cal.len() + val.len();
+            let total = data.calibration.len() + data.validation.len();
+            if shown < total {
+                format!(" ({shown} of {total} samples shown, evenly spaced in time)")
+            } else {
+                String::new()
+            }
+        };
+        let (w_lo, w_hi) = plot::extent(
+            data.calibration
+                .speed_rad_s
+                .iter()
+                .chain(&data.validation.speed_rad_s)
+                .copied(),
+        )
+        .unwrap_or((0.1, 25.0));
+        Self {
+            cal,
+            val,
+            thinning_note,
+            grid: speed_grid(w_lo, w_hi, CURVE_POINTS),
+        }
+    }
+}
+
+/// Figure 1: the data and each law's least-squares fit.
+fn render_data_and_fits(p: &Prepared, shared: &Shared) -> Result<Rendered> {
     let fits = DataFits {
-        cal: cal.clone(),
-        val: val.clone(),
-        unit,
+        cal: shared.cal.clone(),
+        val: shared.val.clone(),
+        unit: p.unit,
         curves: p
             .input
             .fits
             .iter()
             .map(|f| {
                 let params = p.display(f.law, &f.params_si);
-                let curve = grid.iter().map(|&w| (rpm(w), f.law.torque(&params, w, 1.0))).collect();
+                let curve = shared
+                    .grid
+                    .iter()
+                    .map(|&w| (rpm(w), f.law.torque(&params, w, 1.0)))
+                    .collect();
                 (f.law, curve, format!("{} (ρ = {:.4})", f.law, f.rho))
             })
             .collect(),
     };
-    out.push(render_one(
+    let thinning_note = &shared.thinning_note;
+    render_one(
         "fig01_data_and_fits".into(),
         format!(
             "Field data (calibration: red circles, validation: blue dots){thinning_note} and the least-squares \
@@ -125,12 +169,13 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
         ),
         FIGURE_SIZE,
         &fits,
-    )?);
+    )
+}
 
-    // 2. Model probabilities per population, one panel per run.
-    let laws = p.all_laws();
+/// Figure 2: model probabilities per population, one panel per run.
+fn render_model_probabilities(p: &Prepared, laws: &[Law]) -> Result<Rendered> {
     let probabilities = ModelProbabilities {
-        laws: laws.clone(),
+        laws: laws.to_vec(),
         runs: p
             .runs
             .iter()
@@ -140,7 +185,7 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
                     .populations
                     .iter()
                     .map(|pop| {
-                        super::record_probabilities(pop, &laws)
+                        super::record_probabilities(pop, laws)
                             .into_iter()
                             .map(|x| x.1)
                             .collect()
@@ -150,21 +195,23 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
             })
             .collect(),
     };
-    out.push(render_one(
+    render_one(
         "fig02_model_probabilities".into(),
         "Model probabilities P(M_k | y) per population, one panel per prior width δ.".into(),
         FIGURE_SIZE,
         &probabilities,
-    )?);
+    )
+}
 
-    // 3. Final model probabilities; 0* marks those that are 0 by construction.
+/// Figure 3: final model probabilities; 0* marks those that are 0 by construction.
+fn render_final_probabilities(p: &Prepared, laws: &[Law]) -> Result<Rendered> {
     let last = FinalProbabilities {
-        laws: laws.clone(),
+        laws: laws.to_vec(),
         runs: p
             .runs
             .iter()
             .map(|r| {
-                let probs = super::record_probabilities(r.last, &laws)
+                let probs = super::record_probabilities(r.last, laws)
                     .into_iter()
                     .map(|x| x.1)
                     .collect();
@@ -174,11 +221,11 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
         zero_by_construction: p
             .runs
             .iter()
-            .map(|r| super::record_zero_by_construction(r.last, &laws))
+            .map(|r| super::record_zero_by_construction(r.last, laws))
             .collect(),
     };
     let any_zero = last.zero_by_construction.iter().flatten().any(|&z| z);
-    out.push(render_one(
+    render_one(
         "fig03_final_probabilities".into(),
         if any_zero {
             format!(
@@ -190,9 +237,11 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
         },
         FIGURE_SIZE,
         &last,
-    )?);
+    )
+}
 
-    // 4. Tolerance per population.
+/// Figure 4: the tolerance per population, runs overlaid.
+fn render_tolerance(p: &Prepared) -> Result<Rendered> {
     let tolerance = Tolerance {
         runs: p
             .runs
@@ -208,15 +257,18 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
             })
             .collect(),
     };
-    out.push(render_one(
+    render_one(
         "fig04_tolerance".into(),
         "Tolerance ε_g per population (population 0, ε = ∞, is the prior).".into(),
         FIGURE_SIZE,
         &tolerance,
-    )?);
+    )
+}
 
-    // 5. Posterior marginals per law, runs overlaid.
-    for &law in &laws {
+/// Figures 5: posterior marginals, one figure per law with particles, runs overlaid.
+fn render_marginals(p: &Prepared, laws: &[Law]) -> Result<Vec<Rendered>> {
+    let mut out = Vec::new();
+    for &law in laws {
         if let Some(m) = Marginals::new(p, law) {
             out.push(render_one(
                 format!("fig05_marginals_{law}"),
@@ -229,9 +281,13 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
             )?);
         }
     }
+    Ok(out)
+}
 
-    // 6. Correlation matrices of the reference run.
+/// Figures 6: the reference run's correlation matrices, one per law with enough particles.
+fn render_correlations(p: &Prepared) -> Result<Vec<Rendered>> {
     let reference = &p.runs[0];
+    let mut out = Vec::new();
     for ls in &reference.summary.laws {
         if ls.count >= MIN_CORRELATION_PARTICLES {
             let c = Correlation::new(p, ls.law);
@@ -249,15 +305,19 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
             )?);
         }
     }
+    Ok(out)
+}
 
-    // 7. Predictive envelopes of the reference run.
+/// Figure 7: the reference run's predictive envelopes over the data, up to four laws.
+fn render_envelopes(p: &Prepared, shared: &Shared) -> Result<Rendered> {
+    let reference = &p.runs[0];
     let envelopes = Envelopes {
         panels: reference
             .summary
             .laws
             .iter()
             .filter_map(|ls| {
-                let e = predictive_envelope(&reference.particles, ls.law, &grid, ENVELOPE_LEVEL, 1.0)?;
+                let e = predictive_envelope(&reference.particles, ls.law, &shared.grid, ENVELOPE_LEVEL, 1.0)?;
                 let prob = reference
                     .probabilities
                     .iter()
@@ -280,62 +340,80 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
             })
             .take(4)
             .collect(),
-        cal,
-        val,
-        unit,
+        cal: shared.cal.clone(),
+        val: shared.val.clone(),
+        unit: p.unit,
         run: reference.run.label.clone(),
     };
-    out.push(render_one(
+    render_one(
         "fig07_envelopes".into(),
         format!(
             "98 % predictive envelopes of each law's torque (grey band) and its median (black) from the last \
-             population of {}, with the calibration (red circles) and validation (blue dots) data{thinning_note}.",
-            reference.run.label
+             population of {}, with the calibration (red circles) and validation (blue dots) data{}.",
+            reference.run.label, shared.thinning_note
         ),
         FIGURE_SIZE,
         &envelopes,
-    )?);
+    )
+}
 
-    // 8. Stability maps of the 1-DOF string.
+/// Each law's deterministic boundary (kN per map speed) on a structure of critical damping `c`.
+fn deterministic_boundaries(p: &Prepared, c: f64) -> Vec<BoundaryCurve> {
     let s = &p.input.stability;
-    let lumped_c = p.structures[0].critical_nms;
-    let deterministic = |c: f64| -> Vec<BoundaryCurve> {
-        p.deterministic
-            .iter()
-            .map(|(law, params, least_squares)| {
-                let label = if *least_squares {
-                    format!("{law} (least squares; died out)")
-                } else {
-                    format!("{law} (MAP)")
-                };
-                (
-                    *law,
-                    label,
-                    map::deterministic_boundary_kn(*law, params, &s.omega_rpm, c, p.w_ref_n),
-                )
-            })
-            .collect()
-    };
-    let wob_range = (s.wob_kn[0], s.wob_kn[s.wob_kn.len() - 1]);
-    let omega_range = (s.omega_rpm[0], s.omega_rpm[s.omega_rpm.len() - 1]);
-    out.push(render_one(
+    p.deterministic
+        .iter()
+        .map(|(law, params, least_squares)| {
+            let label = if *least_squares {
+                format!("{law} (least squares; died out)")
+            } else {
+                format!("{law} (MAP)")
+            };
+            (
+                *law,
+                label,
+                map::deterministic_boundary_kn(*law, params, &s.omega_rpm, c, p.w_ref_n),
+            )
+        })
+        .collect()
+}
+
+/// The maps' (Ω range in rpm, W range in kN): first to last value of each axis.
+fn map_ranges(p: &Prepared) -> ((f64, f64), (f64, f64)) {
+    let s = &p.input.stability;
+    (
+        (s.omega_rpm[0], s.omega_rpm[s.omega_rpm.len() - 1]),
+        (s.wob_kn[0], s.wob_kn[s.wob_kn.len() - 1]),
+    )
+}
+
+/// Figure 8, deterministic: the 1-DOF string's stability map with each law's MAP parameters.
+fn render_deterministic_map(p: &Prepared) -> Result<Rendered> {
+    let (omega_range, wob_range) = map_ranges(p);
+    render_one(
         "fig08_map_deterministic".into(),
         format!(
             "Stability map of the 1-DOF string with each law's MAP parameters ({}): operating points above a \
              curve are unstable, below it stable.",
-            reference.run.label
+            p.runs[0].run.label
         ),
         FIGURE_SIZE,
         &BoundaryPanels {
             title: format!("Deterministic stability map, {}", p.structures[0].label),
-            panels: vec![(String::new(), deterministic(lumped_c))],
-            omega: s.omega_rpm.clone(),
+            panels: vec![(String::new(), deterministic_boundaries(p, p.structures[0].critical_nms))],
+            omega: p.input.stability.omega_rpm.clone(),
             omega_range,
             wob_range,
         },
-    )?);
+    )
+}
+
+/// Figure 8, stochastic: P(unstable) of the reference run's mixture with the MAP and percentile
+/// boundaries.
+fn render_stochastic_map(p: &Prepared) -> Result<Rendered> {
+    let s = &p.input.stability;
     let map_laws = p.map_laws();
     let inputs: Vec<_> = map_laws.iter().map(|m| (*m).clone()).collect();
+    let lumped_c = p.structures[0].critical_nms;
     let b = map::boundaries(&inputs, &s.omega_rpm, lumped_c, p.w_ref_n, s.percentile);
     let stochastic = StochasticMap {
         omega: s.omega_rpm.clone(),
@@ -350,10 +428,10 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
         percent: s.percentile * 100.0,
         title: format!(
             "Stochastic stability map, {}, {}",
-            reference.run.label, p.structures[0].label
+            p.runs[0].run.label, p.structures[0].label
         ),
     };
-    out.push(render_one(
+    render_one(
         "fig08_map_stochastic".into(),
         format!(
             "P(unstable) of the 1-DOF string under the mixture of the laws weighted by their probability (colour; {} samples per law), \
@@ -365,9 +443,13 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
         ),
         FIGURE_SIZE,
         &stochastic,
-    )?);
+    )
+}
 
-    // 9. The appendix: 1-DOF against finite-element strings.
+/// Figure 9, the appendix: the MAP boundaries on the 1-DOF and the finite-element strings.
+fn render_structures(p: &Prepared) -> Result<Rendered> {
+    let s = &p.input.stability;
+    let (omega_range, wob_range) = map_ranges(p);
     let structures = BoundaryPanels {
         title: match s.strings.first() {
             Some(fe) => format!(
@@ -382,7 +464,7 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
             .map(|st| {
                 (
                     format!("{}: c_b* = {:.0} N·m·s/rad", st.short_label, st.critical_nms),
-                    deterministic(st.critical_nms),
+                    deterministic_boundaries(p, st.critical_nms),
                 )
             })
             .collect(),
@@ -390,16 +472,19 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
         omega_range,
         wob_range,
     };
-    out.push(render_one(
+    render_one(
         "fig09_structures".into(),
         "The MAP boundaries of each law on the 1-DOF string and on the finite-element strings (the paper's \
          appendix): each structure enters only through its critical bit damping c_b*."
             .into(),
         FIGURE_SIZE,
         &structures,
-    )?);
+    )
+}
 
-    // 10. The selection checks of the runs that hold one.
+/// Figures 10: the confusion matrix of each run that holds a selection check.
+fn render_selection_checks(p: &Prepared) -> Result<Vec<Rendered>> {
+    let mut out = Vec::new();
     for (i, r) in p.runs.iter().enumerate() {
         if let Some((check, _)) = &r.run.selection {
             let figure = ConfusionMatrix::new(check, &r.run.label);

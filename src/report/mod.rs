@@ -423,8 +423,25 @@ impl<'a> Prepared<'a> {
         grid
     }
 
+    /// The text of report.md, section by section, with `figures` listed at the end.
     fn markdown(&self, figures: &[FigureInfo]) -> String {
         let mut md = String::new();
+        self.record_markdown(&mut md);
+        self.fits_markdown(&mut md);
+        self.probabilities_markdown(&mut md);
+        self.populations_markdown(&mut md);
+        self.posterior_markdown(&mut md);
+        self.selection_markdown(&mut md);
+        self.stability_markdown(&mut md);
+        self.boundaries_markdown(&mut md);
+        figures_markdown(&mut md, figures);
+        md
+    }
+}
+
+impl Prepared<'_> {
+    /// The title and what the record holds.
+    fn record_markdown(&self, md: &mut String) {
         let data = self.input.data;
         let unit = self.unit;
         let _ = writeln!(md, "# bitrock report\n");
@@ -438,7 +455,10 @@ impl<'a> Prepared<'a> {
             data.calibration.len(),
             data.validation.len()
         );
+    }
 
+    /// The section of the least-squares fits: each law's estimate and ρ.
+    fn fits_markdown(&self, md: &mut String) {
         let _ = writeln!(md, "## Least-squares fits\n");
         let _ = writeln!(md, "| law | T(w) | estimate | ρ calibration | ρ validation |");
         let _ = writeln!(md, "|---|---|---|---|---|");
@@ -449,7 +469,7 @@ impl<'a> Prepared<'a> {
                 .params()
                 .iter()
                 .zip(&shown)
-                .map(|(spec, v)| format!("{} = {} {}", spec.name, plot::short(*v), plot::unit(spec, unit)))
+                .map(|(spec, v)| format!("{} = {} {}", spec.name, plot::short(*v), plot::unit(spec, self.unit)))
                 .collect();
             let _ = writeln!(
                 md,
@@ -461,7 +481,11 @@ impl<'a> Prepared<'a> {
                 fit.validation_rho.map_or("—".into(), |r| format!("{r:.5}"))
             );
         }
+    }
 
+    /// The model probabilities of each run's last population, with the notes on how runs
+    /// ended early, on `0*` and the records' caveats.
+    fn probabilities_markdown(&self, md: &mut String) {
         let _ = writeln!(md, "\n## Model probabilities\n");
         let _ = writeln!(md, "### Last population\n");
         let laws = self.all_laws();
@@ -505,6 +529,10 @@ impl<'a> Prepared<'a> {
                 let _ = writeln!(md, "\n{}: {caveat}", r.run.label);
             }
         }
+    }
+
+    /// One table per run of every population: ε, acceptances, draws, ESS and P(law).
+    fn populations_markdown(&self, md: &mut String) {
         for r in &self.runs {
             let _ = writeln!(md, "\n### {}: every population\n", r.run.label);
             let _ = write!(md, "| population | ε | accepted | drawn | ESS |");
@@ -529,7 +557,11 @@ impl<'a> Prepared<'a> {
                 let _ = writeln!(md);
             }
         }
+    }
 
+    /// The section of the posterior estimates: MAP, mean and 98 % interval per run, law and
+    /// parameter.
+    fn posterior_markdown(&self, md: &mut String) {
         let _ = writeln!(md, "\n## Posterior estimates (last population)\n");
         let _ = writeln!(
             md,
@@ -562,7 +594,7 @@ impl<'a> Prepared<'a> {
                         md,
                         "| {} | {} | {} | {} | {} | {} |",
                         spec.name,
-                        plot::unit(spec, unit),
+                        plot::unit(spec, self.unit),
                         plot::short(map[j]),
                         plot::short(mean[j]),
                         plot::short(lo[j]),
@@ -572,68 +604,8 @@ impl<'a> Prepared<'a> {
                 let _ = writeln!(md);
             }
         }
-
-        self.selection_markdown(&mut md);
-
-        let s = &self.input.stability;
-        let _ = writeln!(md, "## Stability\n");
-        let _ = writeln!(
-            md,
-            "Run {}; W_ref = {} kN; critical bit damping c_b* per structure (steady rotation is unstable \
-             when r·dT/dw(Ω) ≤ c_b*):\n",
-            self.runs[0].run.label,
-            self.w_ref_n / 1000.0
-        );
-        let _ = writeln!(md, "| structure | c_b* (N·m·s/rad) |");
-        let _ = writeln!(md, "|---|---|");
-        for st in &self.structures {
-            let _ = writeln!(md, "| {} | {:.2} |", st.label, st.critical_nms);
-        }
-        let c = self.structures[0].critical_nms;
-        let inputs: Vec<LawSamples> = self.map_laws().into_iter().cloned().collect();
-        let b = map::boundaries(&inputs, &s.table_omega_rpm, c, self.w_ref_n, s.percentile);
-        let _ = writeln!(
-            md,
-            "\nBoundaries of the 1-DOF string, W* (kN) above which steady rotation is unstable (— : none \
-             destabilises): MAP, the {} % percentile over {} samples per law, and the mixture of the laws \
-             weighted by their probability.\n",
-            s.percentile * 100.0,
-            s.samples_per_law
-        );
-        let _ = write!(md, "| Ω (rpm) |");
-        for l in &b.laws {
-            let _ = write!(md, " {} MAP | {} {} % |", l.law, l.law, s.percentile * 100.0);
-        }
-        if b.mixture_wob_kn.is_some() {
-            let _ = write!(md, " mixture {} % |", s.percentile * 100.0);
-        }
-        let columns = 2 * b.laws.len() + usize::from(b.mixture_wob_kn.is_some());
-        let _ = writeln!(md, "\n|---|{}", "---|".repeat(columns));
-        let kn = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.1}"));
-        for (i, rpm) in s.table_omega_rpm.iter().enumerate() {
-            let _ = write!(md, "| {rpm} |");
-            for l in &b.laws {
-                let _ = write!(md, " {} | {} |", kn(l.map_wob_kn[i]), kn(l.p_wob_kn[i]));
-            }
-            if let Some(m) = &b.mixture_wob_kn {
-                let _ = write!(md, " {} |", kn(m[i]));
-            }
-            let _ = writeln!(md);
-        }
-
-        let _ = writeln!(md, "\n## Figures\n");
-        for f in figures {
-            let _ = writeln!(
-                md,
-                "### {}\n\n![{}](figures/{}.svg)\n\n{} ({} × {} px; [PNG](figures/{}.png), [SVG](figures/{}.svg))\n",
-                f.stem, f.stem, f.stem, f.caption, f.width, f.height, f.stem, f.stem
-            );
-        }
-        md
     }
-}
 
-impl Prepared<'_> {
     /// The section of the runs that hold a selection check: the confusion matrix, the
     /// distribution of the generating law's own probability and the verdicts.
     fn selection_markdown(&self, md: &mut String) {
@@ -682,6 +654,73 @@ impl Prepared<'_> {
             }
             let _ = writeln!(md);
         }
+    }
+
+    /// The stability section's opening: the reference run, W_ref and each structure's critical
+    /// bit damping.
+    fn stability_markdown(&self, md: &mut String) {
+        let _ = writeln!(md, "## Stability\n");
+        let _ = writeln!(
+            md,
+            "Run {}; W_ref = {} kN; critical bit damping c_b* per structure (steady rotation is unstable \
+             when r·dT/dw(Ω) ≤ c_b*):\n",
+            self.runs[0].run.label,
+            self.w_ref_n / 1000.0
+        );
+        let _ = writeln!(md, "| structure | c_b* (N·m·s/rad) |");
+        let _ = writeln!(md, "|---|---|");
+        for st in &self.structures {
+            let _ = writeln!(md, "| {} | {:.2} |", st.label, st.critical_nms);
+        }
+    }
+
+    /// The table of the 1-DOF string's boundaries at the table's speeds: MAP and percentile per
+    /// law, and the mixture's.
+    fn boundaries_markdown(&self, md: &mut String) {
+        let s = &self.input.stability;
+        let c = self.structures[0].critical_nms;
+        let inputs: Vec<LawSamples> = self.map_laws().into_iter().cloned().collect();
+        let b = map::boundaries(&inputs, &s.table_omega_rpm, c, self.w_ref_n, s.percentile);
+        let _ = writeln!(
+            md,
+            "\nBoundaries of the 1-DOF string, W* (kN) above which steady rotation is unstable (— : none \
+             destabilises): MAP, the {} % percentile over {} samples per law, and the mixture of the laws \
+             weighted by their probability.\n",
+            s.percentile * 100.0,
+            s.samples_per_law
+        );
+        let _ = write!(md, "| Ω (rpm) |");
+        for l in &b.laws {
+            let _ = write!(md, " {} MAP | {} {} % |", l.law, l.law, s.percentile * 100.0);
+        }
+        if b.mixture_wob_kn.is_some() {
+            let _ = write!(md, " mixture {} % |", s.percentile * 100.0);
+        }
+        let columns = 2 * b.laws.len() + usize::from(b.mixture_wob_kn.is_some());
+        let _ = writeln!(md, "\n|---|{}", "---|".repeat(columns));
+        let kn = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.1}"));
+        for (i, rpm) in s.table_omega_rpm.iter().enumerate() {
+            let _ = write!(md, "| {rpm} |");
+            for l in &b.laws {
+                let _ = write!(md, " {} | {} |", kn(l.map_wob_kn[i]), kn(l.p_wob_kn[i]));
+            }
+            if let Some(m) = &b.mixture_wob_kn {
+                let _ = write!(md, " {} |", kn(m[i]));
+            }
+            let _ = writeln!(md);
+        }
+    }
+}
+
+/// The section listing each figure with its caption, size and links to its SVG and PNG.
+fn figures_markdown(md: &mut String, figures: &[FigureInfo]) {
+    let _ = writeln!(md, "\n## Figures\n");
+    for f in figures {
+        let _ = writeln!(
+            md,
+            "### {}\n\n![{}](figures/{}.svg)\n\n{} ({} × {} px; [PNG](figures/{}.png), [SVG](figures/{}.svg))\n",
+            f.stem, f.stem, f.stem, f.caption, f.width, f.height, f.stem, f.stem
+        );
     }
 }
 

@@ -5,7 +5,7 @@
 //! `shaders/shared/` is prepended to each (concatenation, never string replacement). The
 //! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a
 //! case-insensitive substring of the adapter's name); its own limits are requested. Pipelines
-//! are built once per context ([`GpuContext::kernel`]). The scoring kernels come in two
+//! are built once per context (`GpuContext::kernel`). The scoring kernels come in two
 //! [`Shape`]s, chosen by adapter type or by `BITROCK_GPU_SHAPE`.
 
 pub mod candidates;
@@ -560,24 +560,23 @@ fn candidates_per_dispatch(d: usize, limits: &wgpu::Limits) -> (usize, usize) {
     (chunk, chunk.min(1 << 20).min((max_binding / 32) as usize))
 }
 
-/// The job uniform and the SSR buffers of a scoring kernel (bindings 1 and 5, and the
-/// buffer SSR is read back through).
+/// A scoring kernel bound to its buffers: its pipeline and bind group, the job uniform and the
+/// SSR buffers (bindings 1 and 5, and the buffer SSR is read back through).
 struct ScoringBuffers<'a> {
+    pipeline: &'a wgpu::ComputePipeline,
+    bind_group: &'a wgpu::BindGroup,
     job: &'a wgpu::Buffer,
     ssr: &'a wgpu::Buffer,
     staging: &'a wgpu::Buffer,
 }
 
-/// Runs a scoring kernel (`pipeline`, entry point of `shape`) over the `out.len()` candidates
-/// of `job` (its row width set here), over `data_len` samples in slices of
+/// Runs a scoring kernel (`buffers.pipeline`, entry point of `shape`) over the `out.len()`
+/// candidates of `job` (its row width set here), over `data_len` samples in slices of
 /// SAMPLES_PER_DISPATCH, each dispatch adding to the last, and reads back their SSR into `out`.
-#[allow(clippy::too_many_arguments)]
 fn score_dispatch(
     ctx: &GpuContext,
     shape: Shape,
     buffers: &ScoringBuffers,
-    pipeline: &wgpu::ComputePipeline,
-    bind_group: &wgpu::BindGroup,
     job: Job,
     data_len: u32,
     out: &mut [f32],
@@ -599,7 +598,7 @@ fn score_dispatch(
     for s0 in (0..data_len).step_by(SAMPLES_PER_DISPATCH as usize) {
         let slice = job.samples(s0..(s0 + SAMPLES_PER_DISPATCH).min(data_len));
         ctx.queue.write_buffer(buffers.job, 0, bytemuck::bytes_of(&slice));
-        encode_dispatch(&mut encoder, "scoring", pipeline, bind_group, (x, y));
+        encode_dispatch(&mut encoder, "scoring", buffers.pipeline, buffers.bind_group, (x, y));
         if s0 + SAMPLES_PER_DISPATCH < data_len {
             // The next slice rewrites the job uniform: submit this one first.
             ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;

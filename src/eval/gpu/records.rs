@@ -328,22 +328,15 @@ impl GpuRecords {
             queue.write_buffer(&b.offsets, 0, bytemuck::cast_slice(&plan.offsets));
         }
         let buffers = ScoringBuffers {
+            pipeline: &self.kernel.pipeline,
+            bind_group: &self.bind_group,
             job: &b.job,
             ssr: &b.ssr,
             staging: &self.staging,
         };
         let mut ssr = vec![0.0f32; plan.padded];
         let job = Job::new(0, 0, plan.padded as u32, 0);
-        score_dispatch(
-            self.context,
-            self.shape,
-            &buffers,
-            &self.kernel.pipeline,
-            &self.bind_group,
-            job,
-            self.data_len,
-            &mut ssr,
-        )?;
+        score_dispatch(self.context, self.shape, &buffers, job, self.data_len, &mut ssr)?;
         for &(request, from, count, first) in &plan.pieces {
             for (&o, &v) in orders[request][from..from + count]
                 .iter()

@@ -169,21 +169,14 @@ impl GpuEvaluator {
         out: &mut [f32],
     ) -> std::result::Result<(), GpuError> {
         let buffers = ScoringBuffers {
+            pipeline,
+            bind_group,
             job: &res.job,
             ssr: &res.ssr,
             staging: &res.staging,
         };
         let job = Job::new(population, first, out.len() as u32, 0);
-        score_dispatch(
-            self.context,
-            self.shape,
-            &buffers,
-            pipeline,
-            bind_group,
-            job,
-            self.data_len,
-            out,
-        )
+        score_dispatch(self.context, self.shape, &buffers, job, self.data_len, out)
     }
 
     /// Builds the explicit-parameter pipeline on first use (a rejection run never needs it).
