@@ -75,6 +75,10 @@ pub enum Error {
     /// unreadable): a failure of the program, not of the user's input.
     #[error("figure {figure}: {message}")]
     Plot { figure: String, message: String },
+    /// The run's observer asked it to stop (Ctrl-C in Python): the populations completed
+    /// before are kept, and a run directory can be continued.
+    #[error("interrupted; the completed populations are kept")]
+    Interrupted,
 }
 
 impl Error {

@@ -4,8 +4,8 @@
 //! from its store and gives exactly the populations an uninterrupted run would.
 
 use crate::abc::floor;
-use crate::abc::rejection::{self, RejectionConfig};
-use crate::abc::smc::{self, SmcConfig};
+use crate::abc::rejection::{self, Mode, RejectionConfig};
+use crate::abc::smc::{self, SmcConfig, WeightsOn};
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
@@ -101,6 +101,160 @@ impl RunConfig {
                 format!("the run has at most {max} populations (0..={}), got {g}", max - 1),
             )),
             _ => Ok(()),
+        }
+    }
+}
+
+/// Which ABC sampler runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Sampler {
+    /// The paper's Algorithm 1 (see [`Mode`]).
+    #[default]
+    Rejection,
+    /// ABC-SMC with model selection: population 0 from the prior, then perturbed,
+    /// importance-weighted populations.
+    Smc,
+}
+
+/// How prior boxes are sized, without the rule's k ([`PriorRule`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum PriorRuleName {
+    /// The paper's φ̂(1 ± δ).
+    #[default]
+    Delta,
+    /// φ̂ ± k·σ̂ from the fit's standard errors.
+    Stderr,
+}
+
+/// `prior_k` when not given: three standard errors each side, where a Gaussian estimate lies
+/// with probability 99.7 %.
+pub const DEFAULT_PRIOR_K: f64 = 3.0;
+
+/// A new run's settings as a user gives them (the command line's flags, the Python package's
+/// keyword arguments): every `None` takes the library's default, and [`Settings::config`]
+/// turns them into the [`RunConfig`] the run stores, refusing settings that the run would
+/// ignore.
+#[derive(Clone, Debug, Default)]
+pub struct Settings {
+    /// Laws competing; `None` is every law.
+    pub laws: Option<Vec<Law>>,
+    pub fit: FitOptions,
+    pub sampler: Sampler,
+    pub particles: Option<usize>,
+    pub delta: Option<f64>,
+    pub prior_rule: PriorRuleName,
+    pub prior_k: Option<f64>,
+    pub prior_file: Option<PathBuf>,
+    /// The floor ε_min; `None` is the record's reachable floor (the paper's 0.014 where the
+    /// record reaches it), or 0 under a schedule.
+    pub eps_min: Option<f64>,
+    /// A tolerance schedule for populations 1, 2, …, which then ends the run.
+    pub epsilons: Option<Vec<f64>>,
+    pub start_epsilon: Option<f64>,
+    pub max_populations: Option<usize>,
+    pub max_draws: Option<u64>,
+    pub min_acceptance: Option<f64>,
+    pub max_seconds: Option<f64>,
+    /// Rejection sampler only.
+    pub mode: Option<Mode>,
+    /// SMC only.
+    pub p_stay: Option<f64>,
+    /// SMC only.
+    pub kernel_scale: Option<f64>,
+    /// SMC only.
+    pub smc_weights: Option<WeightsOn>,
+    pub seed: Option<u64>,
+    pub backend: Option<Backend>,
+}
+
+impl Settings {
+    /// The run's configuration. A schedule is the user's: it ends the run where it ends (no
+    /// floor below it unless `eps_min` is given) and has room for all its populations unless
+    /// `max_populations` says less. Settings of the other sampler, and `prior_k` with the δ
+    /// rule, are refused: the run would ignore them.
+    pub fn config(&self) -> Result<RunConfig> {
+        self.check_sampler_settings()?;
+        if self.prior_rule == PriorRuleName::Delta && self.prior_k.is_some() {
+            return Err(Error::setting(
+                "prior_k",
+                "applies only to `prior_rule` stderr, and this run sizes its prior boxes by δ (the default rule); add `prior_rule` stderr or drop the flag",
+            ));
+        }
+        let defaults = RunConfig::default();
+        let rejection = RejectionConfig::default();
+        let schedule = self.epsilons.as_ref().map(Vec::len);
+        let base = RejectionConfig {
+            particles: self.particles.unwrap_or(rejection.particles),
+            eps_min: self
+                .eps_min
+                .unwrap_or(if schedule.is_some() { 0.0 } else { rejection.eps_min }),
+            max_populations: self
+                .max_populations
+                .unwrap_or(rejection.max_populations.max(schedule.map_or(0, |n| n + 1))),
+            max_draws: self.max_draws.unwrap_or(rejection.max_draws),
+            min_acceptance: self.min_acceptance.unwrap_or(rejection.min_acceptance),
+            start_epsilon: self.start_epsilon,
+            epsilons: self.epsilons.clone(),
+            mode: self.mode.unwrap_or(rejection.mode),
+            max_seconds: self.max_seconds,
+            ..rejection
+        };
+        let sampler = match self.sampler {
+            Sampler::Rejection => SamplerConfig::Rejection(base),
+            Sampler::Smc => {
+                let smc = SmcConfig::default();
+                SamplerConfig::Smc(SmcConfig {
+                    base,
+                    p_stay: self.p_stay.unwrap_or(smc.p_stay),
+                    kernel_scale: self.kernel_scale.unwrap_or(smc.kernel_scale),
+                    weights_on: self.smc_weights.unwrap_or(smc.weights_on),
+                })
+            }
+        };
+        Ok(RunConfig {
+            laws: self.laws.clone().unwrap_or(defaults.laws),
+            fit: self.fit,
+            delta: self.delta.unwrap_or(defaults.delta),
+            prior_rule: match self.prior_rule {
+                PriorRuleName::Delta => PriorRule::Delta,
+                PriorRuleName::Stderr => PriorRule::Stderr {
+                    k: self.prior_k.unwrap_or(DEFAULT_PRIOR_K),
+                },
+            },
+            prior_file: self.prior_file.clone(),
+            seed: self.seed.unwrap_or(defaults.seed),
+            backend: self.backend.unwrap_or(defaults.backend),
+            sampler,
+            eps_min_from_record: self.eps_min.is_none() && schedule.is_none(),
+        })
+    }
+
+    /// Refuses a setting of the other sampler, naming it and the sampler that runs.
+    fn check_sampler_settings(&self) -> Result<()> {
+        match self.sampler {
+            Sampler::Rejection => {
+                let smc_only = [
+                    ("p_stay", self.p_stay.is_some()),
+                    ("kernel_scale", self.kernel_scale.is_some()),
+                    ("smc_weights", self.smc_weights.is_some()),
+                ];
+                match smc_only.into_iter().find(|&(_, given)| given) {
+                    Some((field, _)) => Err(Error::setting(
+                        field,
+                        "applies only to `sampler` smc, and this run uses the rejection sampler (the default); add `sampler` smc or drop the flag",
+                    )),
+                    None => Ok(()),
+                }
+            }
+            Sampler::Smc if self.mode.is_some() => Err(Error::setting(
+                "mode",
+                "applies only to the rejection sampler, and this run uses `sampler` smc, which perturbs each population into the next instead of drawing streams; drop `mode`",
+            )),
+            Sampler::Smc => Ok(()),
         }
     }
 }
@@ -783,5 +937,9 @@ impl Observer for Storing<'_> {
 
     fn note(&mut self, line: String) {
         self.inner.note(line);
+    }
+
+    fn interrupted(&mut self) -> bool {
+        self.inner.interrupted()
     }
 }

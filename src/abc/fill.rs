@@ -66,7 +66,7 @@ impl Filling {
     /// Calls `batch` with the draw budget left until N particles are accepted; stops early,
     /// with the reason, when the run's wall time or draw budget runs out (`batch` decides
     /// whether a budget of 0 stops it: it may still hold scored candidates). The observer sees
-    /// the progress after every batch.
+    /// the progress after every batch, and may interrupt the run there.
     pub fn fill(
         &mut self,
         limits: &super::rejection::RejectionConfig,
@@ -94,6 +94,9 @@ impl Filling {
                 data_len: self.data_len as usize,
                 seconds: self.started.elapsed().as_secs_f64(),
             });
+            if observer.interrupted() {
+                return Err(crate::Error::Interrupted);
+            }
         }
         Ok(None)
     }

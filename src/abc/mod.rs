@@ -213,7 +213,7 @@ impl StopReason {
 
 /// The result of a run: every population (those it was continued from included). A run
 /// written to a store holds only the last population's particles (see
-/// [`complete_population`]); read the others with [`crate::store::RunStore::load_particles`].
+/// `complete_population`); read the others with [`crate::store::RunStore::load_particles`].
 #[derive(Clone, Debug)]
 pub struct Run {
     pub populations: Vec<Population>,
@@ -256,13 +256,18 @@ pub trait Observer {
     }
     /// True when the observer keeps every completed population's particles itself (the run
     /// store does): the sampler then releases them once no population needs them, so that a
-    /// run holds the particles of two populations at most (see [`complete_population`]).
+    /// run holds the particles of two populations at most (see `complete_population`).
     fn keeps_particles(&self) -> bool {
         false
     }
     /// A line for the user, said once: a fallback to the CPU, a tolerance floor moved to the
     /// record's reach, a resume that added nothing.
     fn note(&mut self, _line: String) {}
+    /// Asked after every batch: true stops the run with [`crate::Error::Interrupted`], the
+    /// population in progress dropped and those completed kept (stored, for a run directory).
+    fn interrupted(&mut self) -> bool {
+        false
+    }
 }
 
 /// Hands a finished `population` to `observer` and appends it to `populations`. When the

@@ -7,46 +7,14 @@ use super::print;
 use super::progress::RunProgress;
 use bitrock::Error;
 use bitrock::abc::rejection::{Mode, RejectionConfig};
-use bitrock::abc::smc::{SmcConfig, WeightsOn};
+use bitrock::abc::smc::WeightsOn;
 use bitrock::eval::Backend;
 use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
-use bitrock::prior::PriorRule;
-use bitrock::run::{Continuation, RunConfig, SamplerConfig};
+use bitrock::run::{Continuation, PriorRuleName, RunConfig, Sampler, Settings};
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
-
-/// Which ABC sampler runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Sampler {
-    Rejection,
-    Smc,
-}
-
-/// `--prior-rule`: the rule of [`PriorRule`] without its k.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum PriorRuleArg {
-    Delta,
-    Stderr,
-}
-
-/// `--prior-k` when not given: three standard errors each side, where a Gaussian estimate
-/// lies with probability 99.7 %.
-pub const DEFAULT_PRIOR_K: f64 = 3.0;
-
-impl AbcArgs {
-    /// The prior rule `--prior-rule` and `--prior-k` describe.
-    pub fn prior_rule(&self) -> PriorRule {
-        match self.prior_rule {
-            PriorRuleArg::Delta => PriorRule::Delta,
-            PriorRuleArg::Stderr => PriorRule::Stderr {
-                k: self.prior_k.unwrap_or(DEFAULT_PRIOR_K),
-            },
-        }
-    }
-}
 
 /// How the ABC sampler runs.
 #[derive(Debug, Args, Clone)]
@@ -61,8 +29,8 @@ pub struct AbcArgs {
     /// How the prior boxes are sized: delta = the paper's φ̂(1 ± δ); stderr = φ̂ ± k·σ̂ with σ̂
     /// the least-squares standard error (k = --prior-k), which does not grow with |φ̂| (the
     /// δ box where σ̂ is undefined). Both clipped to the physical bounds.
-    #[arg(long, value_enum, default_value_t = PriorRuleArg::Delta)]
-    pub prior_rule: PriorRuleArg,
+    #[arg(long, value_enum, default_value_t = PriorRuleName::Delta)]
+    pub prior_rule: PriorRuleName,
     /// Standard errors on each side of the estimate with --prior-rule stderr [default: 3].
     #[arg(long, value_parser = finite_number, value_name = "K", allow_hyphen_values = true)]
     pub prior_k: Option<f64>,
@@ -177,8 +145,7 @@ pub fn run(cmd: &AbcCmd) -> anyhow::Result<ExitCode> {
     }
     let mut out = super::print::stdout();
     if cmd.json {
-        serde_json::to_writer_pretty(&mut out, &done.json())?;
-        writeln!(out)?;
+        super::print::json(&mut out, done.json())?;
     } else {
         let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("clap requires one");
         print::population_table(&mut out, &done.outcome.run)?;
@@ -222,88 +189,31 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
     }
 }
 
-/// The run configuration the flags describe (validated by the library before any work).
+/// The run configuration the flags describe (the library applies the defaults and refuses
+/// settings the run would ignore).
 fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
-    check_sampler_flags(args)?;
-    check_prior_flags(args)?;
-    let defaults = RejectionConfig::default();
-    // A schedule is the user's: it ends the run where it ends (no floor below it unless
-    // --eps-min is given) and has room for all its populations unless --max-populations says less.
-    let schedule = args.epsilons.as_ref().map(Vec::len);
-    let sampler = RejectionConfig {
-        particles: args.particles,
-        eps_min: args
-            .eps_min
-            .unwrap_or(if schedule.is_some() { 0.0 } else { defaults.eps_min }),
-        max_populations: args
-            .max_populations
-            .unwrap_or(defaults.max_populations.max(schedule.map_or(0, |n| n + 1))),
-        max_draws: args.max_draws.unwrap_or(defaults.max_draws),
-        min_acceptance: args.min_acceptance.unwrap_or(defaults.min_acceptance),
-        start_epsilon: args.start_epsilon,
-        epsilons: args.epsilons.clone(),
-        mode: args.mode.unwrap_or(defaults.mode),
-        max_seconds: args.max_seconds,
-        ..defaults
-    };
-    Ok(RunConfig {
-        laws: fit_args.laws.clone(),
+    let settings = Settings {
+        laws: Some(fit_args.laws.clone()),
         fit: fit_args.options()?,
-        delta: args.delta,
-        prior_rule: args.prior_rule(),
+        sampler: args.sampler,
+        particles: Some(args.particles),
+        delta: Some(args.delta),
+        prior_rule: args.prior_rule,
+        prior_k: args.prior_k,
         prior_file: args.prior.clone(),
-        seed: args.seed,
-        backend: args.backend.unwrap_or(Backend::Auto),
-        sampler: match args.sampler {
-            Sampler::Rejection => SamplerConfig::Rejection(sampler),
-            Sampler::Smc => {
-                let smc = SmcConfig::default();
-                SamplerConfig::Smc(SmcConfig {
-                    base: sampler,
-                    p_stay: args.p_stay.unwrap_or(smc.p_stay),
-                    kernel_scale: args.kernel_scale.unwrap_or(smc.kernel_scale),
-                    weights_on: args.smc_weights.unwrap_or(smc.weights_on),
-                })
-            }
-        },
-        eps_min_from_record: args.eps_min.is_none() && schedule.is_none(),
-    })
-}
-
-/// Refuses a flag of the other sampler, naming it and the sampler that runs: the run would
-/// ignore it, and the user could believe it shaped the populations. (`--resume` refuses them
-/// all: a resumed run keeps its sampler's settings.)
-fn check_sampler_flags(args: &AbcArgs) -> Result<(), Error> {
-    match args.sampler {
-        Sampler::Rejection => {
-            let smc_only = [
-                ("p_stay", args.p_stay.is_some()),
-                ("kernel_scale", args.kernel_scale.is_some()),
-                ("smc_weights", args.smc_weights.is_some()),
-            ];
-            match smc_only.into_iter().find(|&(_, given)| given) {
-                Some((flag, _)) => Err(Error::setting(
-                    flag,
-                    "applies only to --sampler smc, and this run uses the rejection sampler (the default); add --sampler smc or drop the flag",
-                )),
-                None => Ok(()),
-            }
-        }
-        Sampler::Smc if args.mode.is_some() => Err(Error::setting(
-            "mode",
-            "applies only to the rejection sampler, and this run uses --sampler smc, which perturbs each population into the next instead of drawing streams; drop --mode",
-        )),
-        Sampler::Smc => Ok(()),
-    }
-}
-
-/// Refuses `--prior-k` with the δ rule, which does not read it.
-fn check_prior_flags(args: &AbcArgs) -> Result<(), Error> {
-    match (args.prior_rule, args.prior_k) {
-        (PriorRuleArg::Delta, Some(_)) => Err(Error::setting(
-            "prior_k",
-            "applies only to --prior-rule stderr, and this run sizes its prior boxes by δ (the default rule); add --prior-rule stderr or drop the flag",
-        )),
-        _ => Ok(()),
-    }
+        eps_min: args.eps_min,
+        epsilons: args.epsilons.clone(),
+        start_epsilon: args.start_epsilon,
+        max_populations: args.max_populations,
+        max_draws: args.max_draws,
+        min_acceptance: args.min_acceptance,
+        max_seconds: args.max_seconds,
+        mode: args.mode,
+        p_stay: args.p_stay,
+        kernel_scale: args.kernel_scale,
+        smc_weights: args.smc_weights,
+        seed: Some(args.seed),
+        backend: args.backend,
+    };
+    Ok(settings.config()?)
 }

@@ -47,8 +47,7 @@ pub fn run(cmd: &FeCmd) -> anyhow::Result<ExitCode> {
             "sign_changes": critical.sign_changes,
             "bracket_nms": [critical.bracket_nms.0, critical.bracket_nms.1],
         });
-        serde_json::to_writer_pretty(&mut out, &v)?;
-        writeln!(out)?;
+        super::print::json(&mut out, v)?;
     } else {
         writeln!(
             out,

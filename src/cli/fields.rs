@@ -82,6 +82,16 @@ const FLAGS: &[(&str, &str)] = &[
     ("reps", "--reps"),
 ];
 
+/// Every string in a JSON document said with flags, as [`as_flags`] says one text.
+pub fn json_as_flags(value: &mut serde_json::Value) {
+    match value {
+        serde_json::Value::String(text) => *text = as_flags(text),
+        serde_json::Value::Array(items) => items.iter_mut().for_each(json_as_flags),
+        serde_json::Value::Object(fields) => fields.values_mut().for_each(json_as_flags),
+        _ => {}
+    }
+}
+
 /// `text` with every setting the library names (`` `particles` ``) said as its flag
 /// (`--particles`); other backticked text is left as it is.
 pub fn as_flags(text: &str) -> String {

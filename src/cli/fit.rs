@@ -6,7 +6,6 @@ use bitrock::Law;
 use bitrock::data::FieldData;
 use bitrock::fit::{self, FitOptions};
 use clap::Args;
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -35,8 +34,7 @@ pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bo
     let fits = fit::fit_record(laws, data, opts)?;
     let mut out = super::print::stdout();
     if json {
-        serde_json::to_writer_pretty(&mut out, &bitrock::documents::fit_json(data, &fits))?;
-        writeln!(out)?;
+        super::print::json(&mut out, bitrock::documents::fit_json(data, &fits))?;
     } else {
         print::fit_tables(&mut out, data, &fits)?;
     }

@@ -35,6 +35,13 @@ fn named_stdout(e: io::Error) -> io::Error {
     io::Error::new(e.kind(), format!("standard output: cannot write: {e}"))
 }
 
+/// Prints a JSON document, its messages said with flags ([`super::fields::json_as_flags`]).
+pub fn json(out: &mut impl Write, mut document: serde_json::Value) -> io::Result<()> {
+    super::fields::json_as_flags(&mut document);
+    serde_json::to_writer_pretty(&mut *out, &document)?;
+    writeln!(out)
+}
+
 /// Writes one line for people to standard error: notes, progress and the final error. A
 /// standard error that cannot be written (full, closed) loses the line and nothing else: the
 /// work goes on and ends with its own exit status, never a panic (`eprintln!` panics).

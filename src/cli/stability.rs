@@ -142,8 +142,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
             "boundaries": boundaries,
             "probability_unstable": grids,
         });
-        serde_json::to_writer_pretty(&mut out, &v)?;
-        writeln!(out)?;
+        super::print::json(&mut out, v)?;
     } else {
         print_table(&mut out, cmd.structure, c, omega, &columns)?;
     }
