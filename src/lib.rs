@@ -43,6 +43,22 @@
 //! # Ok(())
 //! # }
 //! ```
+//!
+//! # Where to start
+//!
+//! | for | read |
+//! |---|---|
+//! | a record | [`data::read_field_data`] (CSV, units named) or [`data::demo_field_data`] → [`data::FieldData`] |
+//! | the laws and their least-squares fits | [`Law`], [`fit::fit_record`] → [`fit::LawFit`] |
+//! | the prior | [`prior::Prior`] (boxes around the fits, or a [`prior::PriorFile`]) |
+//! | scoring candidates | the [`eval::Evaluator`] trait, made by [`eval::evaluator`] for a [`eval::Backend`] |
+//! | the samplers | [`abc::rejection`], [`abc::smc`]; a run's [`abc::Population`]s, watched by an [`abc::Observer`] |
+//! | a whole run | [`pipeline::AbcJob`] → [`pipeline::Analysis`] ([`abc::posterior::PosteriorSummary`], envelopes); [`pipeline::resume`] |
+//! | a run directory | [`run::RunConfig`], [`store::RunStore`] (SQLite), [`rundir`] (what a directory holds) |
+//! | the selection check | [`selection::check`] → [`selection::SelectionCheck`] |
+//! | stability maps | [`pipeline::StabilityJob`] → [`pipeline::StabilityMaps`]; the physics in [`stability`] |
+//! | a report | [`report::write_report`] |
+//! | errors | [`Error`]: bad input ([`Error::is_bad_input`]) names the file, line, column or setting |
 #![deny(clippy::float_cmp)]
 // The library speaks through its results and callbacks, never to a terminal.
 #![cfg_attr(not(test), deny(clippy::print_stdout, clippy::print_stderr))]

@@ -19,7 +19,7 @@
 //! together: one GPU dispatch, or one rayon pass on the CPU, for the requests of all of them
 //! ([`crate::eval::records`]). The check reports each phase's wall time ([`CheckTiming`]).
 //!
-//! The results are written to `DIR/selection/` (see [`write`]) as one directory, whole or not
+//! The results are written to `DIR/selection/` (see [`write()`]) as one directory, whole or not
 //! at all, under the run directory's lock; `bitrock report` shows them when present.
 
 use crate::abc::Silent;

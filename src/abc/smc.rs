@@ -37,7 +37,7 @@
 //! difference in their last bits could pick another ancestor and from there change every later
 //! population. With [`WeightsOn::Host`] (the default) they are the f64 CPU twin on every
 //! backend: proposals and weights are then bit-identical across backends, and populations
-//! differ only where a ρ within [`PARITY_TOLERANCE`] of ε is decided otherwise (counted in
+//! differ only where a ρ within [`crate::eval::PARITY_TOLERANCE`] of ε is decided otherwise (counted in
 //! `near_threshold`; tests/it/gpu.rs checks this on a whole run). [`WeightsOn::Evaluator`] uses
 //! the evaluator's kernel (the GPU's f32 kernel, relative difference below 1e-6 from the twin):
 //! faster for large N, but a GPU run then no longer reproduces the CPU run's later populations.

@@ -166,3 +166,26 @@ fn the_library_names_no_flag_and_needs_no_clap() {
         found.join("\n")
     );
 }
+
+/// The README's layout table names every module in its layer's row: the map a newcomer reads
+/// stays the one the imports follow.
+#[test]
+fn the_readme_layout_table_matches_the_layers() {
+    const ROWS: [&str; 6] = ["ground", "physics", "scoring", "samplers", "run directory", "pipeline"];
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let row = |name: &str| -> String {
+        readme
+            .lines()
+            .find(|l| l.starts_with(&format!("| {name} |")))
+            .unwrap_or_else(|| panic!("README layout table has no `{name}` row"))
+            .to_string()
+    };
+    let mut misplaced = Vec::new();
+    for (module, layer) in LAYERS {
+        let line = row(ROWS[layer as usize]);
+        if !line.contains(&format!("`{module}.rs`")) && !line.contains(&format!("`{module}/`")) {
+            misplaced.push(format!("{module} (layer {})", ROWS[layer as usize]));
+        }
+    }
+    assert!(misplaced.is_empty(), "modules not in their README row: {misplaced:?}");
+}
