@@ -334,7 +334,7 @@ fn resolve_unit<U: Copy + PartialEq>(
             path: path.to_path_buf(),
             line: Some(1),
             message: format!(
-                "column '{column}' declares {} by its name but `{field}` says {}; rename the column or drop the flag",
+                "column '{column}' declares {} by its name but `{field}` says {}; rename the column or leave `{field}` out",
                 label(s),
                 label(f)
             ),
@@ -390,6 +390,96 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
     check_headers(&headers, path)?;
     let indices = ColumnIndices::resolve(&headers, opts, path)?;
     let units = ColumnUnits::resolve(&headers, &indices, opts, path)?;
+    check_time_window(&indices, opts, path)?;
+
+    let (all, backwards) = read_rows(&mut rdr, &headers, &indices, &units, delimiter, path)?;
+    assemble(all, backwards, &headers, &indices, &units, opts, path)
+}
+
+/// A field record from named columns already in memory (a pandas DataFrame's, in the units
+/// their names or `opts` say), read as [`parse_field_data`] reads a CSV: the same choice of
+/// columns and units, filters, split and refusals. `source` names the record in messages; a
+/// value that is not finite is refused naming its column and row (0-based).
+pub fn field_data_from_columns(
+    names: &[String],
+    columns: &[&[f64]],
+    source: &Path,
+    opts: &DataOptions,
+) -> Result<FieldData> {
+    let refuse = |message: String| Error::Data {
+        path: source.to_path_buf(),
+        message,
+    };
+    if names.len() != columns.len() {
+        return Err(refuse(format!(
+            "{} column names for {} columns",
+            names.len(),
+            columns.len()
+        )));
+    }
+    let rows = columns.first().map_or(0, |c| c.len());
+    if let Some((name, column)) = names.iter().zip(columns).find(|(_, c)| c.len() != rows) {
+        return Err(refuse(format!(
+            "column '{name}' has {} rows, the first column {rows}",
+            column.len()
+        )));
+    }
+    // Header refusals say line 1 of a CSV; columns have no lines.
+    let headerless = |e: Error| match e {
+        Error::Format { path, message, .. } => Error::Format {
+            path,
+            line: None,
+            message,
+        },
+        e => e,
+    };
+    opts.validate()?;
+    let headers = csv::StringRecord::from(names.to_vec());
+    check_headers(&headers, source).map_err(headerless)?;
+    let indices = ColumnIndices::resolve(&headers, opts, source).map_err(headerless)?;
+    let units = ColumnUnits::resolve(&headers, &indices, opts, source).map_err(headerless)?;
+    check_time_window(&indices, opts, source).map_err(headerless)?;
+
+    let value = |column: usize, row: usize| -> Result<f64> {
+        let v = columns[column][row];
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(refuse(format!(
+                "column '{}', row {row}: {v} is not a finite number",
+                names[column]
+            )))
+        }
+    };
+    let mut all = Samples {
+        wob_n: indices.wob.map(|_| Vec::with_capacity(rows)),
+        time_s: indices.time.map(|_| Vec::with_capacity(rows)),
+        ..Samples::default()
+    };
+    let mut backwards = None;
+    for row in 0..rows {
+        all.speed_rad_s.push(units.speed.to_rad_s(value(indices.speed, row)?));
+        all.torque_nm
+            .push(value(indices.torque, row)? * units.torque.newton_metres());
+        if let (Some(i), Some(u), Some(v)) = (indices.wob, units.wob, all.wob_n.as_mut()) {
+            v.push(value(i, row)? * u.newtons());
+        }
+        if let (Some(i), Some(v)) = (indices.time, all.time_s.as_mut()) {
+            let t = value(i, row)?;
+            if let Some(&previous) = v.last()
+                && t < previous
+                && backwards.is_none()
+            {
+                backwards = Some((format!("{} row {row}", source.display()), previous, t));
+            }
+            v.push(t);
+        }
+    }
+    assemble(all, backwards, &headers, &indices, &units, opts, source)
+}
+
+/// Refuses a time window without a time column.
+fn check_time_window(indices: &ColumnIndices, opts: &DataOptions, path: &Path) -> Result<()> {
     if indices.time.is_none() && (opts.t_start_s.is_some() || opts.t_end_s.is_some()) {
         return Err(Error::Format {
             path: path.to_path_buf(),
@@ -397,8 +487,20 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
             message: "`t_start_s`/`t_end_s` need a time column (none found; name it with `time_column`)".into(),
         });
     }
+    Ok(())
+}
 
-    let (all, backwards) = read_rows(&mut rdr, &headers, &indices, &units, delimiter, path)?;
+/// The record from every row read (`all`, in SI): filtered, split and looked over for
+/// warnings. Refuses a record without rows.
+fn assemble(
+    all: Samples,
+    backwards: Option<Backwards>,
+    headers: &csv::StringRecord,
+    indices: &ColumnIndices,
+    units: &ColumnUnits,
+    opts: &DataOptions,
+    path: &Path,
+) -> Result<FieldData> {
     let rows_read = all.len();
     if rows_read == 0 {
         return Err(Error::Data {
@@ -562,8 +664,8 @@ impl ColumnUnits {
     }
 }
 
-/// The first place the time column runs backwards: (line, previous time, time), s.
-type Backwards = (u64, f64, f64);
+/// The first place the time column runs backwards: (where, previous time, time), s.
+type Backwards = (String, f64, f64);
 
 /// Every data row in SI, in file order, and the first place the time column runs backwards.
 /// Refuses the first cell that is not a finite number, naming its line and column.
@@ -596,7 +698,7 @@ fn read_rows(
                 && t < previous
                 && backwards.is_none()
             {
-                backwards = Some((line, previous, t));
+                backwards = Some((format!("{}:{line}", path.display()), previous, t));
             }
             v.push(t);
         }
@@ -647,10 +749,9 @@ fn record_warnings(
     rows_used: usize,
 ) -> Vec<String> {
     let mut warnings = Vec::new();
-    if let Some((line, previous, t)) = backwards {
+    if let Some((place, previous, t)) = backwards {
         warnings.push(format!(
-            "{}:{line}: the time column '{}' runs backwards (t = {t} s after {previous} s): rows are used in file order, and the time window and the block split assume time order",
-            path.display(),
+            "{place}: the time column '{}' runs backwards (t = {t} s after {previous} s): rows are used in file order, and the time window and the block split assume time order",
             columns.time.as_deref().unwrap_or("time")
         ));
     }
@@ -926,5 +1027,85 @@ mod tests {
         .unwrap_err();
         assert!(e.to_string().contains("declares kN·m"), "{e}");
         assert!(e.is_bad_input());
+    }
+
+    /// The columns of a CSV, as a DataFrame would hand them over.
+    fn columns_of(text: &str) -> (Vec<String>, Vec<Vec<f64>>) {
+        let mut lines = text.lines();
+        let names: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+        let mut columns = vec![Vec::new(); names.len()];
+        for line in lines {
+            for (column, cell) in columns.iter_mut().zip(line.split(',')) {
+                column.push(cell.parse().unwrap());
+            }
+        }
+        (names, columns)
+    }
+
+    fn from_columns(names: &[String], columns: &[Vec<f64>], opts: &DataOptions) -> Result<FieldData> {
+        let slices: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+        field_data_from_columns(names, &slices, Path::new("<DataFrame>"), opts)
+    }
+
+    #[test]
+    fn columns_in_memory_read_as_the_same_csv_does() {
+        let text = "time_s,bit_speed_rpm,torque_knm,wob_kn\n0,60,10,240\n0.02,2,11,241\n0.04,90,9,242\n0.01,120,8,243\n0.08,100,8.5,244\n";
+        let (names, columns) = columns_of(text);
+        for opts in [
+            DataOptions::default(),
+            DataOptions {
+                split: SplitRule::Interleaved,
+                calibration_fraction: 0.6,
+                ..Default::default()
+            },
+        ] {
+            let csv = parse(text, &opts).unwrap();
+            let mem = from_columns(&names, &columns, &opts).unwrap();
+            assert_eq!(mem.calibration, csv.calibration);
+            assert_eq!(mem.validation, csv.validation);
+            assert_eq!((mem.rows_read, mem.rows_used), (csv.rows_read, csv.rows_used));
+            assert_eq!(mem.columns, csv.columns);
+            assert_eq!(mem.torque_unit, TorqueUnit::KNm);
+            // The same warning (time runs backwards at 0.01 s), placed by row, not line.
+            assert_eq!(mem.warnings.len(), 1);
+            assert!(
+                mem.warnings[0].starts_with("<DataFrame> row 3: the time column"),
+                "{:?}",
+                mem.warnings
+            );
+            assert!(
+                csv.warnings[0].starts_with("x.csv:5: the time column"),
+                "{:?}",
+                csv.warnings
+            );
+        }
+    }
+
+    #[test]
+    fn columns_in_memory_are_refused_naming_column_and_row() {
+        let (names, mut columns) = columns_of(GOOD);
+        columns[2][1] = f64::NAN;
+        let e = from_columns(&names, &columns, &DataOptions::default()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "<DataFrame>: column 'torque_knm', row 1: NaN is not a finite number"
+        );
+        assert!(e.is_bad_input());
+
+        let (names, mut columns) = columns_of(GOOD);
+        columns[0].pop();
+        let e = from_columns(&names, &columns, &DataOptions::default()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "<DataFrame>: column 'bit_speed_rpm' has 4 rows, the first column 3"
+        );
+
+        let (mut names, columns) = columns_of(GOOD);
+        names[2] = "torque".into();
+        let e = from_columns(&names, &columns, &DataOptions::default()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "<DataFrame>: cannot tell the unit of column 'torque' from its name; give `torque_unit`"
+        );
     }
 }

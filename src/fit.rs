@@ -12,7 +12,7 @@
 
 use crate::data::{FieldData, SAME_SPEED_TOLERANCE, Samples};
 use crate::error::{Error, Result};
-use crate::laws::Law;
+use crate::laws::{Law, PAPER_W_REF_N};
 use crate::numerics::{compensated_sum, geomspace, quantile};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
@@ -23,13 +23,39 @@ use std::collections::HashMap;
 /// How to fit.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FitOptions {
-    /// Keep every parameter within its physical bound (`--no-bounds` lifts them).
+    /// Keep every parameter within its physical bound (`bounded: false` lifts them).
     pub bounded: bool,
     /// Number of grid starting points polished by Levenberg-Marquardt per law.
     pub starts: usize,
     /// When set, the predicted torque of each sample is scaled by r = WOB / W_ref (N); when
     /// `None`, r = 1 for every sample (the paper's assumption).
     pub w_ref_n: Option<f64>,
+}
+
+impl FitOptions {
+    /// The options as a user sets them: `bounded`, `starts` (`None`: the default), and
+    /// `scale_by_wob` with its reference weight `w_ref_kn` (kN; `None`: the paper's 244.2).
+    /// `w_ref_kn` without `scale_by_wob` is refused: r = 1 then, and the user could believe
+    /// W_ref was used.
+    pub fn from_settings(
+        bounded: bool,
+        starts: Option<usize>,
+        scale_by_wob: bool,
+        w_ref_kn: Option<f64>,
+    ) -> Result<Self> {
+        if w_ref_kn.is_some() && !scale_by_wob {
+            return Err(Error::setting(
+                "w_ref_kn",
+                "applies only with `scale_by_wob` (r = WOB / W_ref); without it r = 1 for every sample and W_ref is not used",
+            ));
+        }
+        let w_ref_kn = w_ref_kn.unwrap_or(PAPER_W_REF_N / 1000.0);
+        Ok(Self {
+            bounded,
+            starts: starts.unwrap_or(Self::default().starts),
+            w_ref_n: scale_by_wob.then_some(w_ref_kn * 1000.0),
+        })
+    }
 }
 
 impl Default for FitOptions {

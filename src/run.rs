@@ -62,7 +62,7 @@ impl Default for RunConfig {
 }
 
 impl RunConfig {
-    /// The one gate of a run's settings: refuses, naming the flag, what cannot run (an empty
+    /// The one gate of a run's settings: refuses, naming the setting, what cannot run (an empty
     /// law list, bad fit options, δ ≤ 0, sampler settings out of range), before any work.
     pub fn validate(&self) -> Result<()> {
         if self.laws.is_empty() {
@@ -181,7 +181,7 @@ impl Settings {
         if self.prior_rule == PriorRuleName::Delta && self.prior_k.is_some() {
             return Err(Error::setting(
                 "prior_k",
-                "applies only to `prior_rule` stderr, and this run sizes its prior boxes by δ (the default rule); add `prior_rule` stderr or drop the flag",
+                "applies only to `prior_rule` stderr, and this run sizes its prior boxes by δ (the default rule); add `prior_rule` stderr or leave it out",
             ));
         }
         let defaults = RunConfig::default();
@@ -245,7 +245,7 @@ impl Settings {
                 match smc_only.into_iter().find(|&(_, given)| given) {
                     Some((field, _)) => Err(Error::setting(
                         field,
-                        "applies only to `sampler` smc, and this run uses the rejection sampler (the default); add `sampler` smc or drop the flag",
+                        "applies only to `sampler` smc, and this run uses the rejection sampler (the default); add `sampler` smc or leave it out",
                     )),
                     None => Ok(()),
                 }
@@ -275,7 +275,7 @@ pub enum SamplerConfig {
 }
 
 impl SamplerConfig {
-    /// Refuses settings that cannot run, naming the flag.
+    /// Refuses settings that cannot run, naming the setting.
     pub fn validate(&self) -> Result<()> {
         match self {
             SamplerConfig::Rejection(c) => c.validate(),

@@ -88,7 +88,7 @@ impl Default for RejectionConfig {
 }
 
 impl RejectionConfig {
-    /// Refuses configurations that cannot run, naming the flag, before any work.
+    /// Refuses configurations that cannot run, naming the setting, before any work.
     pub fn validate(&self) -> Result<()> {
         if self.particles == 0 {
             return Err(Error::setting("particles", "must be at least 1"));

@@ -105,7 +105,7 @@ impl Default for SmcConfig {
 }
 
 impl SmcConfig {
-    /// Refuses configurations that cannot run, naming the flag, before any work.
+    /// Refuses configurations that cannot run, naming the setting, before any work.
     pub fn validate(&self) -> Result<()> {
         self.base.validate()?;
         if !(0.0..=1.0).contains(&self.p_stay) {

@@ -1,10 +1,8 @@
 //! Argument groups shared by several commands (the record, the fit, the drill strings) and
 //! their conversion into the library's options.
 
-use bitrock::Error;
 use bitrock::data::{self, DataOptions, FieldData, SplitRule};
 use bitrock::fit::FitOptions;
-use bitrock::laws::PAPER_W_REF_N;
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -100,22 +98,14 @@ pub struct FitArgs {
 }
 
 impl FitArgs {
-    /// The fit options of the flags (the library validates them). `--w-ref-kn` without
-    /// `--scale-by-wob` is refused: r = 1 then, and the user could believe W_ref was used.
+    /// The fit options of the flags (the library validates them).
     pub fn options(&self) -> anyhow::Result<FitOptions> {
-        if self.w_ref_kn.is_some() && !self.scale_by_wob {
-            return Err(Error::setting(
-                "w_ref_kn",
-                "applies only with --scale-by-wob (r = WOB / W_ref); without it r = 1 for every sample and W_ref is not used",
-            )
-            .into());
-        }
-        let w_ref_kn = self.w_ref_kn.unwrap_or(PAPER_W_REF_N / 1000.0);
-        Ok(FitOptions {
-            bounded: !self.no_bounds,
-            starts: self.starts,
-            w_ref_n: self.scale_by_wob.then_some(w_ref_kn * 1000.0),
-        })
+        Ok(FitOptions::from_settings(
+            !self.no_bounds,
+            Some(self.starts),
+            self.scale_by_wob,
+            self.w_ref_kn,
+        )?)
     }
 }
 

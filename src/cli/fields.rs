@@ -38,6 +38,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("max_seconds", "--max-seconds"),
     ("min_acceptance", "--min-acceptance"),
     ("summary_population", "--summary-population"),
+    ("sampler", "--sampler"),
+    ("prior_rule", "--prior-rule"),
     ("mode", "--mode"),
     ("p_stay", "--p-stay"),
     ("kernel_scale", "--kernel-scale"),

@@ -53,7 +53,7 @@ pub struct Analysis {
 }
 
 impl AbcJob {
-    /// Refuses, naming the flag, a configuration that cannot run, and a run directory that
+    /// Refuses, naming the setting, a configuration that cannot run, and a run directory that
     /// would be overwritten without `replace`, before any work.
     pub fn validate(&self) -> Result<()> {
         self.config.validate()?;

@@ -54,7 +54,7 @@ fn a_schedule_is_run_as_given_or_refused() {
         .collect();
     assert_eq!(epsilons, [0.05, 0.02, 0.01, 0.008]);
     assert_eq!(run["stop_reason"], "schedule_exhausted");
-    assert_eq!(run["stop_description"], "the `epsilons` schedule ran out");
+    assert_eq!(run["stop_description"], "the --epsilons schedule ran out");
     // A schedule that --eps-min or --max-populations would cut is refused, not cut.
     assert_refused(
         small_run(tmp.path(), "T", &["--epsilons", "0.05,0.01,0.008", "--eps-min", "0.01"]),
