@@ -462,7 +462,10 @@ fn start_with_fits(
     let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
     base.eps_min = floor.eps_min;
     floor::check_start_epsilon(&fits, base.start_epsilon)?;
-    if let Some(line) = &floor.note {
+    // A schedule ends the run itself: a floor out of reach says nothing then.
+    if let Some(line) = &floor.note
+        && base.epsilons.is_none()
+    {
         observer.note(line.clone());
     }
     let prior = Prior::from_fits_by(

@@ -44,6 +44,26 @@ fn a_schedule_is_run_as_given_or_refused() {
     // Without --eps-min the schedule ends the run: every tolerance is used, none replaced.
     let (code, out, err) = run_of(tmp.path(), "S", "5", &["--epsilons", "0.05,0.02,0.01,0.008", "--json"]);
     assert_eq!(code, 0, "{err}");
+    // No floor is in play, so none is said to be out of reach.
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "abc",
+            "--out",
+            "N",
+            "--particles",
+            "200",
+            "--backend",
+            "cpu",
+            "--epsilons",
+            "0.05,0.03",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("population  2: ε = 0.03000") && !err.contains("eps-min"),
+        "{err}"
+    );
     let run: serde_json::Value = serde_json::from_str(&out).unwrap();
     let epsilons: Vec<f64> = run["populations"]
         .as_array()
