@@ -6,6 +6,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+apt_install() {
+    local sudo=""
+    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "$@" >/dev/null
+}
+
 has_vulkan_driver() {
     # An ICD manifest in either standard place, and the Vulkan loader.
     { ls /usr/share/vulkan/icd.d/*.json || ls /etc/vulkan/icd.d/*.json; } >/dev/null 2>&1 \
@@ -13,10 +20,7 @@ has_vulkan_driver() {
 }
 if ! has_vulkan_driver; then
     echo "installing Mesa lavapipe (mesa-vulkan-drivers, libvulkan1)..."
-    SUDO=""
-    if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-    $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+    apt_install mesa-vulkan-drivers libvulkan1
 fi
 # Silences a harmless warning of Mesa's device-select layer.
 export NODEVICE_SELECT=1
@@ -25,3 +29,17 @@ export NODEVICE_SELECT=1
 cargo test --release --all-targets
 # --all-targets leaves out the doctests (the crate documentation's example of the library API).
 cargo test --release --doc
+
+# The Python package, installed as its users install it (pip builds the wheel with maturin)
+# into a virtual environment of its own, then its tests against the binary built above.
+TARGET="$(cd "${CARGO_TARGET_DIR:-target}" && pwd)"
+VENV="$TARGET/python-venv"
+if [ ! -x "$VENV/bin/python" ] && ! python3 -m venv "$VENV" >/dev/null 2>&1; then
+    rm -rf "$VENV"
+    echo "installing Python's venv (python3, python3-venv)..."
+    apt_install python3 python3-venv
+    python3 -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check "./bindings/python[test]"
+# pytest exits 5 when it collects no test: set -e fails the run then too.
+BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q bindings/python/tests

@@ -398,11 +398,12 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
 
 /// A field record from named columns already in memory (a pandas DataFrame's, in the units
 /// their names or `opts` say), read as [`parse_field_data`] reads a CSV: the same choice of
-/// columns and units, filters, split and refusals. `source` names the record in messages; a
+/// columns and units, filters, split and refusals. A column given as `None` holds no numbers
+/// (text, say) and is refused only when chosen. `source` names the record in messages; a
 /// value that is not finite is refused naming its column and row (0-based).
 pub fn field_data_from_columns(
     names: &[String],
-    columns: &[&[f64]],
+    columns: &[Option<&[f64]>],
     source: &Path,
     opts: &DataOptions,
 ) -> Result<FieldData> {
@@ -417,11 +418,12 @@ pub fn field_data_from_columns(
             columns.len()
         )));
     }
-    let rows = columns.first().map_or(0, |c| c.len());
-    if let Some((name, column)) = names.iter().zip(columns).find(|(_, c)| c.len() != rows) {
+    let rows = columns.iter().flatten().next().map_or(0, |c| c.len());
+    let lengths = names.iter().zip(columns).filter_map(|(n, c)| c.map(|c| (n, c.len())));
+    if let Some((name, length)) = lengths.clone().find(|&(_, length)| length != rows) {
+        let first = lengths.clone().next().map_or("", |(n, _)| n.as_str());
         return Err(refuse(format!(
-            "column '{name}' has {} rows, the first column {rows}",
-            column.len()
+            "column '{name}' has {length} rows, column '{first}' {rows}"
         )));
     }
     // Header refusals say line 1 of a CSV; columns have no lines.
@@ -439,9 +441,13 @@ pub fn field_data_from_columns(
     let indices = ColumnIndices::resolve(&headers, opts, source).map_err(headerless)?;
     let units = ColumnUnits::resolve(&headers, &indices, opts, source).map_err(headerless)?;
     check_time_window(&indices, opts, source).map_err(headerless)?;
+    let chosen = [Some(indices.speed), Some(indices.torque), indices.wob, indices.time];
+    if let Some(i) = chosen.into_iter().flatten().find(|&i| columns[i].is_none()) {
+        return Err(refuse(format!("column '{}' does not hold numbers", names[i])));
+    }
 
     let value = |column: usize, row: usize| -> Result<f64> {
-        let v = columns[column][row];
+        let v = columns[column].expect("checked above")[row];
         if v.is_finite() {
             Ok(v)
         } else {
@@ -1043,7 +1049,7 @@ mod tests {
     }
 
     fn from_columns(names: &[String], columns: &[Vec<f64>], opts: &DataOptions) -> Result<FieldData> {
-        let slices: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+        let slices: Vec<Option<&[f64]>> = columns.iter().map(|c| Some(c.as_slice())).collect();
         field_data_from_columns(names, &slices, Path::new("<DataFrame>"), opts)
     }
 
@@ -1097,8 +1103,28 @@ mod tests {
         let e = from_columns(&names, &columns, &DataOptions::default()).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "<DataFrame>: column 'bit_speed_rpm' has 4 rows, the first column 3"
+            "<DataFrame>: column 'bit_speed_rpm' has 4 rows, column 'time_s' 3"
         );
+
+        // A column without numbers is refused when chosen, and only then.
+        let (names, columns) = columns_of(GOOD);
+        let mut slices: Vec<Option<&[f64]>> = columns.iter().map(|c| Some(c.as_slice())).collect();
+        slices[3] = None;
+        let source = Path::new("<DataFrame>");
+        let e = field_data_from_columns(&names, &slices, source, &DataOptions::default()).unwrap_err();
+        assert_eq!(e.to_string(), "<DataFrame>: column 'wob_kn' does not hold numbers");
+        slices[3] = Some(&columns[3]);
+        slices[0] = None;
+        let opts = DataOptions {
+            time_column: Some("time_s".into()),
+            ..Default::default()
+        };
+        assert!(field_data_from_columns(&names, &slices, source, &opts).is_err());
+        let renamed: Vec<String> = ["comment", "bit_speed_rpm", "torque_knm", "wob_kn"]
+            .map(String::from)
+            .to_vec();
+        let d = field_data_from_columns(&renamed, &slices, source, &DataOptions::default()).unwrap();
+        assert_eq!(d.rows_read, 4);
 
         let (mut names, columns) = columns_of(GOOD);
         names[2] = "torque".into();

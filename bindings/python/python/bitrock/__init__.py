@@ -1,0 +1,416 @@
+"""bitrock from Python: calibrate and select drill-string bit-rock interaction laws by
+Approximate Bayesian Computation, on the same engine (and with the same numbers) as the
+``bitrock`` command line.
+
+>>> import bitrock
+>>> record = bitrock.read_record("field.csv")          # or a pandas DataFrame
+>>> result = bitrock.abc(record, particles=5000, seed=1)
+>>> result.model_probabilities                          # population × law
+>>> df, w = result.get_distribution("m2")               # as pyABC's History gives it
+
+Keyword arguments are named as the command line's flags without dashes (``eps_min`` for
+``--eps-min``); an argument left at ``None`` takes the library's default.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import pandas as pd
+
+from . import _bitrock
+from ._errors import BitrockError, BitrockWarning, GpuError, InputError
+
+__all__ = [
+    "BitrockError",
+    "BitrockWarning",
+    "GpuError",
+    "InputError",
+    "Record",
+    "Result",
+    "abc",
+    "fit",
+    "open_run",
+    "read_record",
+    "resume",
+]
+
+__version__ = _bitrock.version()
+
+Record = _bitrock.Record
+
+def read_record(
+    source: str | os.PathLike[str] | pd.DataFrame | None = None,
+    *,
+    speed_col: str | None = None,
+    torque_col: str | None = None,
+    time_col: str | None = None,
+    wob_col: str | None = None,
+    speed_unit: str | None = None,
+    torque_unit: str | None = None,
+    wob_unit: str | None = None,
+    min_speed_rpm: float | None = None,
+    t_start_s: float | None = None,
+    t_end_s: float | None = None,
+    thin: int | None = None,
+    calibration_fraction: float | None = None,
+    split: str | None = None,
+) -> Record:
+    """Reads a record of bit speed and torque on bit (and weight on bit, time).
+
+    ``source`` is a CSV path, a pandas DataFrame (its columns read as a CSV's would be), or
+    ``None`` for the embedded demo record. Columns are found by name (``speed``, ``torque``,
+    ``wob``, ``time``) unless named; units come from the column suffixes (``_rpm``, ``_knm``)
+    unless given (``rpm``, ``rad_s``, ``nm``, ``knm``, ``n``, ``kn``). A DataFrame's
+    ``timedelta64`` column is read in seconds, a ``datetime64`` one in seconds from its first
+    row. Rows below ``min_speed_rpm`` are dropped, and the rest split into calibration and
+    validation samples (``calibration_fraction``, ``split`` ``"block"`` or ``"interleaved"``).
+    """
+    options = {k: v for k, v in locals().items() if k != "source"}
+    if isinstance(source, pd.DataFrame):
+        names = [str(c) for c in source.columns]
+        return _bitrock.read_columns(names, [_numbers(source.iloc[:, i]) for i in range(len(names))], "<DataFrame>", options)
+    path = None if source is None else os.fspath(source)
+    return _bitrock.read_csv(path, options)
+
+
+def _numbers(column: pd.Series) -> np.ndarray | None:
+    """A DataFrame column as contiguous float64 (missing values NaN, refused by the reader
+    if the column is used), times in seconds; ``None`` when it holds no numbers."""
+    if pd.api.types.is_timedelta64_dtype(column):
+        return np.ascontiguousarray(column.dt.total_seconds().to_numpy(dtype=np.float64, na_value=np.nan))
+    if pd.api.types.is_datetime64_any_dtype(column):
+        return np.ascontiguousarray((column - column.iloc[0]).dt.total_seconds().to_numpy(dtype=np.float64, na_value=np.nan))
+    if pd.api.types.is_bool_dtype(column) or not pd.api.types.is_numeric_dtype(column):
+        return None
+    return np.ascontiguousarray(column.to_numpy(dtype=np.float64, na_value=np.nan))
+
+
+def fit(
+    record: Record,
+    *,
+    laws: Sequence[str] | None = None,
+    bounds: bool = True,
+    starts: int | None = None,
+    scale_by_wob: bool = False,
+    w_ref_kn: float | None = None,
+) -> pd.DataFrame:
+    """Least-squares fits of the laws (``m1``…``m4``; all by default) to the record's
+    calibration samples: one row per law and parameter, with the estimate and its standard
+    error in the record's torque unit, the misfit ρ on the calibration and validation
+    samples, and the fit's warnings. ``bounds=False`` lifts the physical bounds;
+    ``scale_by_wob`` scales each predicted torque by WOB / W_ref (``w_ref_kn``, kN)."""
+    options = {"bounds": bounds, "starts": starts, "scale_by_wob": scale_by_wob, "w_ref_kn": w_ref_kn}
+    doc = json.loads(_bitrock.fit(record, None if laws is None else list(laws), options))
+    rows = []
+    for f in doc["fits"]:
+        for name, unit, estimate, se in zip(f["names"], f["units"], f["params"], f["std_errors"]):
+            rows.append(
+                {
+                    "law": f["law"],
+                    "parameter": name,
+                    "estimate": estimate,
+                    "std_error": np.nan if se is None else se,
+                    "unit": unit,
+                    "rho": f["rho"],
+                    "validation_rho": f["validation_rho"],
+                    "warnings": list(f["warnings"]),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def _progress(progress: bool | Callable[..., Any]) -> tuple[Callable[..., Any] | None, Callable[[], None]]:
+    """The progress callback and its closer: a user's callable, a tqdm bar per population when
+    tqdm is installed, or nothing."""
+    if callable(progress):
+        return progress, lambda: None
+    if not progress:
+        return None, lambda: None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None, lambda: None
+    bars: dict[int, Any] = {}
+
+    def update(population: int, accepted: int, target: int, draws: int, epsilon: float | None) -> None:
+        bar = bars.get(population)
+        if bar is None:
+            for old in bars.values():
+                old.close()
+            eps = "∞" if epsilon is None else f"{epsilon:.5f}"
+            bar = bars[population] = tqdm(total=target, desc=f"population {population} (ε {eps})", leave=False)
+        bar.update(accepted - bar.n)
+
+    def close() -> None:
+        for bar in bars.values():
+            bar.close()
+
+    return update, close
+
+
+def _note(line: str) -> None:
+    import warnings
+
+    warnings.warn(line, BitrockWarning, stacklevel=3)
+
+
+def abc(
+    record: Record,
+    *,
+    laws: Sequence[str] | None = None,
+    particles: int | None = None,
+    sampler: str | None = None,
+    epsilons: Sequence[float] | None = None,
+    eps_min: float | None = None,
+    start_epsilon: float | None = None,
+    delta: float | None = None,
+    prior_rule: str | None = None,
+    prior_k: float | None = None,
+    prior_file: str | os.PathLike[str] | None = None,
+    max_populations: int | None = None,
+    max_draws: int | None = None,
+    min_acceptance: float | None = None,
+    max_seconds: float | None = None,
+    mode: str | None = None,
+    p_stay: float | None = None,
+    kernel_scale: float | None = None,
+    smc_weights: str | None = None,
+    bounds: bool = True,
+    starts: int | None = None,
+    scale_by_wob: bool = False,
+    w_ref_kn: float | None = None,
+    seed: int | None = None,
+    backend: str | None = None,
+    out: str | os.PathLike[str] | None = None,
+    force: bool = False,
+    progress: bool | Callable[..., Any] = True,
+) -> "Result":
+    """ABC with model selection on ``record``: least-squares fits, a prior around them, then
+    populations of the rejection sampler (the paper's Algorithm 1) or ABC-SMC down to the
+    tolerance floor. Gives the particles ``bitrock abc`` gives with the same settings and
+    seed. With ``out``, the run is written to that directory (``force`` replaces a run there)
+    and can be continued with :func:`resume`; Ctrl-C stops it between batches, keeping the
+    populations completed. ``progress``: a tqdm bar (when tqdm is installed), ``False``, or a
+    callable ``(population, accepted, target, drawn, epsilon)``."""
+    settings = {k: v for k, v in locals().items() if k not in ("record", "out", "force", "progress")}
+    for key in ("laws", "epsilons"):
+        if settings[key] is not None:
+            settings[key] = list(settings[key])
+    if settings["prior_file"] is not None:
+        settings["prior_file"] = os.fspath(settings["prior_file"])
+    callback, close = _progress(progress)
+    try:
+        run = _bitrock.abc(record, settings, None if out is None else os.fspath(out), force, callback, _note)
+    finally:
+        close()
+    return Result(run)
+
+
+def resume(
+    path: str | os.PathLike[str],
+    *,
+    eps_min: float | None = None,
+    max_populations: int | None = None,
+    max_draws: int | None = None,
+    min_acceptance: float | None = None,
+    max_seconds: float | None = None,
+    backend: str | None = None,
+    progress: bool | Callable[..., Any] = True,
+) -> "Result":
+    """Continues the run in ``path`` (killed, interrupted or finished) with new stopping
+    rules; the populations are those an uninterrupted run gives."""
+    more = {
+        "eps_min": eps_min,
+        "max_populations": max_populations,
+        "max_draws": max_draws,
+        "min_acceptance": min_acceptance,
+        "max_seconds": max_seconds,
+        "backend": backend,
+    }
+    callback, close = _progress(progress)
+    try:
+        run = _bitrock.resume(os.fspath(path), more, callback, _note)
+    finally:
+        close()
+    return Result(run)
+
+
+def open_run(path: str | os.PathLike[str]) -> "Result":
+    """The run in directory ``path``, as written by ``bitrock abc`` or :func:`abc`."""
+    return Result(_bitrock.open_run(os.fspath(path)))
+
+
+@dataclass(frozen=True)
+class Result:
+    """A finished ABC run: its populations, model probabilities and particles."""
+
+    _run: Any
+
+    @property
+    def document(self) -> dict[str, Any]:
+        """The run's ``run.json`` document (configuration, fits, priors, populations,
+        posterior summary)."""
+        return json.loads(self._run.summary)
+
+    @property
+    def path(self) -> pathlib.Path | None:
+        """The run directory, or ``None`` for a run in memory."""
+        return self._run.path
+
+    @property
+    def laws(self) -> list[str]:
+        return list(self.document["config"]["laws"])
+
+    @property
+    def populations(self) -> pd.DataFrame:
+        """One row per population: ε, accepted, drawn, acceptance rate, ESS, seconds."""
+        rows = [
+            {
+                "population": p["index"],
+                "epsilon": np.inf if p["epsilon"] is None else p["epsilon"],
+                "accepted": p["accepted"],
+                "drawn": p["draws"],
+                "acceptance_rate": p["acceptance_rate"],
+                "ess": p["ess"],
+                "seconds": p["seconds"],
+            }
+            for p in self.document["populations"]
+        ]
+        return pd.DataFrame(rows).set_index("population")
+
+    @property
+    def model_probabilities(self) -> pd.DataFrame:
+        """Population × law posterior probabilities, with each population's ε."""
+        doc = self.document
+        laws = doc["config"]["laws"]
+        rows = []
+        for p in doc["populations"]:
+            row = {law: p["model_probabilities"].get(law, 0.0) for law in laws}
+            row["epsilon"] = np.inf if p["epsilon"] is None else p["epsilon"]
+            rows.append(row)
+        frame = pd.DataFrame(rows, columns=[*laws, "epsilon"])
+        frame.index.name = "population"
+        return frame
+
+    def _population(self, population: int) -> int:
+        count = len(self.document["populations"])
+        g = population + count if population < 0 else population
+        if not 0 <= g < count:
+            raise InputError(f"population: the run has populations 0..={count - 1}, got {population}", "population")
+        return g
+
+    def particles(self, population: int = -1) -> dict[str, tuple[list[str], np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """Population ``population``'s particles by law: ``(names, params [n, k] in the
+        record's torque unit, weights, rho, candidate index)``."""
+        return self._run.particles(self._population(population))
+
+    def get_distribution(self, law: str, population: int = -1) -> tuple[pd.DataFrame, np.ndarray]:
+        """The law's particles in ``population`` (the last by default) and their weights,
+        normalised within the law: ``(DataFrame of parameters, weights)``, as pyABC's
+        ``History.get_distribution(m, t)`` returns them, so that its plotting functions
+        accept them."""
+        if law not in self.laws:
+            raise InputError(f"law: the run's laws are {', '.join(self.laws)}, got {law!r}", "law")
+        found = self.particles(population).get(law)
+        if found is None:
+            names = _param_names(self.document, law)
+            return pd.DataFrame(columns=names, dtype=float), np.zeros(0)
+        names, params, weights, _rho, _index = found
+        frame = pd.DataFrame(params, columns=names)
+        frame.columns.name = "name"
+        total = weights.sum()
+        return frame, weights / total if total > 0 else weights
+
+    def summary(self) -> pd.DataFrame:
+        """The summarised population's posterior per law and parameter: probability, mean,
+        standard deviation, 1 %, 50 % and 99 % quantiles, MAP, in the record's torque unit."""
+        rows = []
+        for s in self.document["posterior"]["laws"]:
+            for i, name in enumerate(s["names"]):
+                rows.append(
+                    {
+                        "law": s["law"],
+                        "parameter": name,
+                        "unit": s["units"][i],
+                        "probability": s["probability"],
+                        "mean": s["mean"][i],
+                        "std_dev": s["std_dev"][i],
+                        "q01": s["q01"][i],
+                        "q50": s["q50"][i],
+                        "q99": s["q99"][i],
+                        "map": s["map"][i],
+                    }
+                )
+        return pd.DataFrame(rows)
+
+    def to_datatree(self, population: int = -1) -> Any:
+        """The population (the last by default) as an ``xarray.DataTree``: one node per law
+        with the groups ArviZ reads, ``posterior`` (each parameter over ``chain`` × ``draw``,
+        one chain, in the record's torque unit) and ``sample_stats`` (``weight``, normalised
+        within the law, and the misfit ``rho``), and at the root ``model_probabilities``
+        (population × law, with ``epsilon``). ABC particles carry weights (uniform for the
+        rejection sampler, not for SMC): estimates that ignore ``weight`` treat them as equal.
+        ArviZ 1.x reads a law's node directly (``tree["m2"]``); ArviZ 0.23 through
+        ``arviz.InferenceData.from_datatree(tree["m2"])``."""
+        import xarray as xr
+
+        g = self._population(population)
+        doc = self.document
+        probabilities = self.model_probabilities
+        nodes: dict[str, xr.Dataset] = {
+            "/": xr.Dataset(
+                {
+                    "model_probabilities": (("population", "law"), probabilities[self.laws].to_numpy()),
+                    "epsilon": ("population", probabilities["epsilon"].to_numpy()),
+                },
+                coords={"population": probabilities.index.to_numpy(), "law": self.laws},
+                attrs={"source": doc["data"]["source"], "population": g, "torque_unit": doc["data"]["torque_unit"]},
+            )
+        }
+        particles = self.particles(g)
+        for law in self.laws:
+            names, params, weights, rho, _index = particles.get(
+                law, (_param_names(doc, law), np.zeros((0, len(_param_names(doc, law)))), np.zeros(0), np.zeros(0), None)
+            )
+            units = dict(zip(_param_names(doc, law), _param_units(doc, law)))
+            draws = np.arange(len(weights))
+            nodes[f"/{law}/posterior"] = xr.Dataset(
+                {n: (("chain", "draw"), params[None, :, i], {"units": units.get(n, "")}) for i, n in enumerate(names)},
+                coords={"chain": [0], "draw": draws},
+                attrs={"law": law, "population": g, "inference_library": "bitrock", "inference_library_version": __version__},
+            )
+            total = weights.sum()
+            nodes[f"/{law}/sample_stats"] = xr.Dataset(
+                {
+                    "weight": (("chain", "draw"), (weights / total if total > 0 else weights)[None, :]),
+                    "rho": (("chain", "draw"), rho[None, :]),
+                },
+                coords={"chain": [0], "draw": draws},
+            )
+        return xr.DataTree.from_dict(nodes)
+
+    def __repr__(self) -> str:
+        doc = self.document
+        probabilities = ", ".join(f"{k} {v:.3f}" for k, v in doc["posterior"]["model_probabilities"].items())
+        where = self.path or "in memory"
+        return f"<bitrock.Result {len(doc['populations'])} populations ({where}); {probabilities}>"
+
+
+def _param_names(doc: dict[str, Any], law: str) -> list[str]:
+    for f in doc["fits"]:
+        if f["law"] == law:
+            return list(f["names"])
+    return []
+
+
+def _param_units(doc: dict[str, Any], law: str) -> list[str]:
+    for f in doc["fits"]:
+        if f["law"] == law:
+            return list(f["units"])
+    return []

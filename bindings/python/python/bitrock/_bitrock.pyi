@@ -1,0 +1,68 @@
+"""The extension module: the Rust library's entry points. Use the ``bitrock`` package, which
+wraps these in pandas and xarray; signatures here may change between releases."""
+
+from collections.abc import Callable
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+class Record:
+    """A field record, read and split into calibration and validation samples (SI inside)."""
+
+    @property
+    def source(self) -> str: ...
+    @property
+    def rows_read(self) -> int: ...
+    @property
+    def rows_used(self) -> int: ...
+    @property
+    def torque_unit(self) -> str: ...
+    @property
+    def speed_unit(self) -> str: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    @property
+    def columns(self) -> tuple[str, str, str | None, str | None]:
+        """(speed, torque, weight on bit, time): the columns read."""
+    def calibration(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Bit speed (rad/s) and torque on bit (N·m) of the calibration samples."""
+    def validation(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Bit speed (rad/s) and torque on bit (N·m) of the validation samples."""
+
+Particles = tuple[list[str], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.uint64]]
+
+class Run:
+    """A finished run: its run.json document and its particles."""
+
+    @property
+    def summary(self) -> str:
+        """The run.json document, as text."""
+    @property
+    def path(self) -> Path | None: ...
+    def particles(self, g: int) -> dict[str, Particles]:
+        """Population g's particles by law: (names, params [n, k] in the record's torque unit,
+        weights, rho, candidate index)."""
+
+Progress = Callable[[int, int, int, int, float | None], Any]
+
+def read_csv(path: str | PathLike[str] | None, options: dict[str, Any]) -> Record: ...
+def read_columns(
+    names: list[str], columns: list[npt.NDArray[np.float64] | None], source: str, options: dict[str, Any]
+) -> Record: ...
+def fit(record: Record, laws: list[str] | None, options: dict[str, Any]) -> str: ...
+def abc(
+    record: Record,
+    settings: dict[str, Any],
+    out: str | PathLike[str] | None,
+    force: bool,
+    progress: Progress | None,
+    note: Callable[[str], Any] | None,
+) -> Run: ...
+def resume(
+    path: str | PathLike[str], more: dict[str, Any], progress: Progress | None, note: Callable[[str], Any] | None
+) -> Run: ...
+def open_run(path: str | PathLike[str]) -> Run: ...
+def version() -> str: ...

@@ -1,0 +1,534 @@
+//! `bitrock._bitrock`: the library's entry points for the Python package. Arguments arrive as
+//! the Python layer's keyword arguments (named like the command line's flags without dashes);
+//! results leave as JSON documents (the ones `run.json` and `fit --json` hold) and NumPy
+//! arrays. Work runs with the interpreter released; Ctrl-C stops a run between batches.
+
+use bitrock::abc::{Observer, Population, Progress};
+use bitrock::data::{DataOptions, FieldData};
+use bitrock::error::Error;
+use bitrock::eval::Backend;
+use bitrock::fit::FitOptions;
+use bitrock::pipeline::{AbcJob, RunDir};
+use bitrock::run::{Continuation, Settings};
+use bitrock::store::RunStore;
+use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use bitrock::{Law, documents};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
+use pyo3::exceptions::PyKeyboardInterrupt;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use std::path::{Path, PathBuf};
+
+/// Keyword arguments whose names differ from the library's configuration fields: an error
+/// about the field names the argument the caller wrote.
+const ARGUMENTS: &[(&str, &str)] = &[
+    ("speed_column", "speed_col"),
+    ("torque_column", "torque_col"),
+    ("wob_column", "wob_col"),
+    ("time_column", "time_col"),
+    ("prior", "prior_file"),
+    ("bounded", "bounds"),
+    ("no_bounds", "bounds=False"),
+];
+
+/// `message` with the configuration fields it names (`` `speed_column` ``) said as the
+/// keyword arguments a Python caller writes (`` `speed_col` ``).
+fn as_arguments(message: &str) -> String {
+    ARGUMENTS.iter().fold(message.to_string(), |text, (field, argument)| {
+        text.replace(&format!("`{field}`"), &format!("`{argument}`"))
+    })
+}
+
+/// The Python exception for a library error: `InputError` naming the argument, the matching
+/// `OSError` for files, `GpuError`, `KeyboardInterrupt` for a run stopped by Ctrl-C,
+/// `BitrockError` otherwise (all but the last two defined in Python, so that they pickle).
+fn to_py(py: Python<'_>, err: Error) -> PyErr {
+    let message = as_arguments(&err.to_string());
+    if matches!(err, Error::Interrupted) {
+        return PyKeyboardInterrupt::new_err(message);
+    }
+    let built = py.import("bitrock._errors").and_then(|errors| match &err {
+        Error::InvalidSetting { field, message } => {
+            let argument = ARGUMENTS
+                .iter()
+                .find(|(f, _)| f == field)
+                .map_or(field.as_str(), |(_, a)| a);
+            errors
+                .getattr("InputError")?
+                .call1((format!("{argument}: {}", as_arguments(message)), argument))
+        }
+        Error::Read { path, source } | Error::Write { path, source } | Error::Output { path, source, .. } => errors
+            .getattr("os_error")?
+            .call1((source.raw_os_error().unwrap_or(0), message, path.display().to_string())),
+        Error::Gpu(_) => errors.getattr("GpuError")?.call1((message,)),
+        e if e.is_bad_input() => errors.getattr("InputError")?.call1((message, py.None())),
+        _ => errors.getattr("BitrockError")?.call1((message,)),
+    });
+    match built {
+        Ok(value) => PyErr::from_value(value),
+        Err(e) => e,
+    }
+}
+
+/// `Ok` or the Python exception of the library's error.
+fn check<T>(py: Python<'_>, result: bitrock::Result<T>) -> PyResult<T> {
+    result.map_err(|e| to_py(py, e))
+}
+
+/// A value of one of the library's lowercase enums (`cpu`, `smc`, `nested`…) from its name.
+fn named<T: serde::de::DeserializeOwned>(py: Python<'_>, argument: &str, value: Option<String>) -> PyResult<Option<T>> {
+    value
+        .map(|v| {
+            serde_json::from_value(serde_json::Value::String(v.to_lowercase())).map_err(|_| {
+                to_py(
+                    py,
+                    Error::setting(argument, format!("`{v}` is not one of the accepted values")),
+                )
+            })
+        })
+        .transpose()
+}
+
+/// A unit from its command-line name (`rpm`, `rad_s`, `knm`, `nm`, `kn`, `n`), read as a
+/// column suffix is.
+fn unit<T>(
+    py: Python<'_>,
+    argument: &str,
+    value: Option<String>,
+    from_suffix: fn(&str) -> Option<T>,
+) -> PyResult<Option<T>> {
+    value
+        .map(|v| {
+            from_suffix(&format!("column_{}", v.to_lowercase()))
+                .ok_or_else(|| to_py(py, Error::setting(argument, format!("unknown unit `{v}`"))))
+        })
+        .transpose()
+}
+
+/// The laws named in `laws`, or `None` for every law.
+fn laws(py: Python<'_>, laws: Option<Vec<String>>) -> PyResult<Option<Vec<Law>>> {
+    laws.map(|names| {
+        names
+            .iter()
+            .map(|n| {
+                n.parse::<Law>()
+                    .map_err(|e| to_py(py, Error::setting("laws", e.to_string())))
+            })
+            .collect()
+    })
+    .transpose()
+}
+
+/// A field record, read and split into calibration and validation samples (SI inside).
+#[pyclass(frozen, module = "bitrock._bitrock")]
+struct Record {
+    data: FieldData,
+}
+
+#[pymethods]
+impl Record {
+    /// Where the record came from.
+    #[getter]
+    fn source(&self) -> String {
+        self.data.source.display().to_string()
+    }
+    #[getter]
+    fn rows_read(&self) -> usize {
+        self.data.rows_read
+    }
+    #[getter]
+    fn rows_used(&self) -> usize {
+        self.data.rows_used
+    }
+    /// The unit torques are given and reported in (`kN·m`, `N·m`).
+    #[getter]
+    fn torque_unit(&self) -> &'static str {
+        self.data.torque_unit.label()
+    }
+    #[getter]
+    fn speed_unit(&self) -> &'static str {
+        self.data.speed_unit.label()
+    }
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.data.warnings.clone()
+    }
+    /// `{"speed", "torque", "wob", "time"}`: the columns read.
+    #[getter]
+    fn columns(&self) -> (String, String, Option<String>, Option<String>) {
+        let c = &self.data.columns;
+        (c.speed.clone(), c.torque.clone(), c.wob.clone(), c.time.clone())
+    }
+    /// The calibration samples: bit speed (rad/s) and torque (N·m), without copies.
+    fn calibration<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let s = &self.data.calibration;
+        (
+            PyArray1::from_slice(py, &s.speed_rad_s),
+            PyArray1::from_slice(py, &s.torque_nm),
+        )
+    }
+    /// The validation samples: bit speed (rad/s) and torque (N·m).
+    fn validation<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let s = &self.data.validation;
+        (
+            PyArray1::from_slice(py, &s.speed_rad_s),
+            PyArray1::from_slice(py, &s.torque_nm),
+        )
+    }
+}
+
+/// The keyword argument `key` of `kw`, `None` when absent or `None`.
+fn kwarg<'py, T>(kw: &Bound<'py, PyDict>, key: &str) -> PyResult<Option<T>>
+where
+    T: for<'a> FromPyObject<'a, 'py>,
+    for<'a> <T as FromPyObject<'a, 'py>>::Error: Into<PyErr>,
+{
+    kw.get_item(key)?
+        .filter(|v| !v.is_none())
+        .map(|v| v.extract().map_err(Into::into))
+        .transpose()
+}
+
+/// The record options from `bitrock.read_record`'s keyword arguments (`None`: the library's
+/// default).
+fn data_options(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<DataOptions> {
+    let defaults = DataOptions::default();
+    Ok(DataOptions {
+        speed_column: kwarg(kw, "speed_col")?,
+        torque_column: kwarg(kw, "torque_col")?,
+        wob_column: kwarg(kw, "wob_col")?,
+        time_column: kwarg(kw, "time_col")?,
+        speed_unit: unit(py, "speed_unit", kwarg(kw, "speed_unit")?, SpeedUnit::from_suffix)?,
+        torque_unit: unit(py, "torque_unit", kwarg(kw, "torque_unit")?, TorqueUnit::from_suffix)?,
+        wob_unit: unit(py, "wob_unit", kwarg(kw, "wob_unit")?, ForceUnit::from_suffix)?,
+        min_speed_rpm: kwarg(kw, "min_speed_rpm")?.unwrap_or(defaults.min_speed_rpm),
+        t_start_s: kwarg(kw, "t_start_s")?,
+        t_end_s: kwarg(kw, "t_end_s")?,
+        thin: kwarg(kw, "thin")?.unwrap_or(defaults.thin),
+        calibration_fraction: kwarg(kw, "calibration_fraction")?.unwrap_or(defaults.calibration_fraction),
+        split: named(py, "split", kwarg(kw, "split")?)?.unwrap_or(defaults.split),
+    })
+}
+
+/// Reads a CSV record at `path` (`None`: the embedded demo record).
+#[pyfunction]
+fn read_csv(py: Python<'_>, path: Option<PathBuf>, options: &Bound<'_, PyDict>) -> PyResult<Record> {
+    let opts = data_options(py, options)?;
+    let data = py.detach(|| match &path {
+        Some(path) => bitrock::data::read_field_data(path, &opts),
+        None => bitrock::data::demo_field_data(&opts),
+    });
+    Ok(Record { data: check(py, data)? })
+}
+
+/// Reads a record from named float64 columns (a DataFrame's), read without copies; `None`
+/// for a column that holds no numbers.
+#[pyfunction]
+fn read_columns(
+    py: Python<'_>,
+    names: Vec<String>,
+    columns: Vec<Option<PyReadonlyArray1<'_, f64>>>,
+    source: String,
+    options: &Bound<'_, PyDict>,
+) -> PyResult<Record> {
+    let opts = data_options(py, options)?;
+    let slices = columns
+        .iter()
+        .map(|c| c.as_ref().map(|c| c.as_slice()).transpose())
+        .collect::<Result<Vec<Option<&[f64]>>, _>>()?;
+    let data = bitrock::data::field_data_from_columns(&names, &slices, Path::new(&source), &opts);
+    Ok(Record { data: check(py, data)? })
+}
+
+/// The least-squares fit options from keyword arguments.
+fn fit_options(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<FitOptions> {
+    let options = FitOptions::from_settings(
+        kwarg(kw, "bounds")?.unwrap_or(true),
+        kwarg(kw, "starts")?,
+        kwarg(kw, "scale_by_wob")?.unwrap_or(false),
+        kwarg(kw, "w_ref_kn")?,
+    );
+    check(py, options)
+}
+
+/// Least-squares fits of `laws` (`None`: all) to the record: `fit --json`'s document.
+#[pyfunction]
+#[pyo3(signature = (record, laws, options))]
+fn fit(py: Python<'_>, record: &Record, laws: Option<Vec<String>>, options: &Bound<'_, PyDict>) -> PyResult<String> {
+    let laws = self::laws(py, laws)?.unwrap_or_else(|| Law::ALL.to_vec());
+    let opts = fit_options(py, options)?;
+    let data = &record.data;
+    let fits = py.detach(|| bitrock::fit::fit_record(&laws, data, &opts));
+    let fits = check(py, fits)?;
+    Ok(as_arguments(&documents::fit_json(data, &fits).to_string()))
+}
+
+/// Watches a run for Python: progress to a callable, notes to `warnings`-like callable, and
+/// Ctrl-C (checked after every batch) stops it.
+struct PyObserver {
+    progress: Option<Py<PyAny>>,
+    note: Option<Py<PyAny>>,
+    /// A Python exception raised by a callback or by a signal handler.
+    raised: Option<PyErr>,
+}
+
+impl Observer for PyObserver {
+    fn progress(&mut self, p: &Progress) {
+        if self.raised.is_some() {
+            return;
+        }
+        Python::attach(|py| {
+            if let Err(e) = py.check_signals() {
+                self.raised = Some(e);
+                return;
+            }
+            if let Some(callback) = &self.progress
+                && let Err(e) = callback.call1(py, (p.population, p.accepted, p.target, p.draws, p.epsilon))
+            {
+                self.raised = Some(e);
+            }
+        });
+    }
+
+    fn population_done(&mut self, population: &Population, _previous: Option<&Population>) -> bitrock::Result<()> {
+        if let Some(callback) = &self.progress {
+            let r = &population.record;
+            Python::attach(|py| {
+                if let Err(e) = callback.call1(py, (r.index, r.accepted, r.accepted, r.draws, r.epsilon)) {
+                    self.raised.get_or_insert(e);
+                }
+            });
+        }
+        Ok(())
+    }
+
+    fn note(&mut self, line: String) {
+        if let Some(callback) = &self.note {
+            Python::attach(|py| {
+                if let Err(e) = callback.call1(py, (line,)) {
+                    self.raised.get_or_insert(e);
+                }
+            });
+        }
+    }
+
+    fn interrupted(&mut self) -> bool {
+        self.raised.is_some()
+    }
+}
+
+/// A finished run: its `run.json` document, and the particles of any population.
+#[pyclass(frozen, module = "bitrock._bitrock")]
+struct Run {
+    /// The run.json document.
+    #[pyo3(get)]
+    summary: String,
+    /// The run directory; `None` for a run in memory.
+    #[pyo3(get)]
+    path: Option<PathBuf>,
+    /// Every population of a run in memory (with particles); empty for a stored run, whose
+    /// particles are read from its store.
+    populations: Vec<Population>,
+    torque_unit: TorqueUnit,
+}
+
+#[pymethods]
+impl Run {
+    /// The particles of population `g` by law: `{law: (params [n, k] in the record's torque
+    /// unit, weights, rho, candidate index)}`.
+    fn particles<'py>(&self, py: Python<'py>, g: usize) -> PyResult<Bound<'py, PyDict>> {
+        let loaded;
+        let particles = match (&self.path, self.populations.get(g)) {
+            (_, Some(p)) if !p.particles.is_empty() => &p.particles,
+            (Some(dir), _) => {
+                loaded = check(py, RunStore::open(dir).and_then(|s| s.load_particles(g)))?;
+                &loaded
+            }
+            (None, _) => {
+                return Err(to_py(
+                    py,
+                    Error::setting("population", format!("the run has no population {g}")),
+                ));
+            }
+        };
+        let out = PyDict::new(py);
+        let mut laws: Vec<Law> = particles.iter().map(|p| p.law).collect();
+        laws.dedup();
+        laws.sort_by_key(|l| l.name());
+        laws.dedup();
+        for law in laws {
+            let of_law: Vec<_> = particles.iter().filter(|p| p.law == law).collect();
+            let k = law.n_params();
+            let flat: Vec<f64> = of_law
+                .iter()
+                .flat_map(|p| documents::to_record_units(law, &p.params, self.torque_unit))
+                .collect();
+            let params = PyArray1::from_vec(py, flat).reshape([of_law.len(), k])?;
+            let weights = PyArray1::from_vec(py, of_law.iter().map(|p| p.weight).collect());
+            let rho = PyArray1::from_vec(py, of_law.iter().map(|p| p.rho).collect());
+            let index = PyArray1::from_vec(py, of_law.iter().map(|p| p.index).collect());
+            let names = PyList::new(py, law.param_names())?;
+            out.set_item(law.name(), (names, params, weights, rho, index))?;
+        }
+        Ok(out)
+    }
+}
+
+/// The `Run` of an analysis: its document and, in memory, its populations.
+fn run_of(analysis: bitrock::pipeline::Analysis, path: Option<PathBuf>) -> Run {
+    let summary = as_arguments(&analysis.json().to_string());
+    let torque_unit = analysis.outcome.setup.data.torque_unit;
+    let populations = if path.is_some() {
+        Vec::new()
+    } else {
+        analysis.outcome.run.populations
+    };
+    Run {
+        summary,
+        path,
+        populations,
+        torque_unit,
+    }
+}
+
+/// Runs the ABC job on `record` with the settings in `settings` (keyword arguments of
+/// `bitrock.abc`), into `out` when given.
+#[pyfunction]
+#[pyo3(signature = (record, settings, out, force, progress, note))]
+fn abc(
+    py: Python<'_>,
+    record: &Record,
+    settings: &Bound<'_, PyDict>,
+    out: Option<PathBuf>,
+    force: bool,
+    progress: Option<Py<PyAny>>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<Run> {
+    let s = run_settings(py, settings)?;
+    let config = check(py, s.config())?;
+    let job = AbcJob {
+        config,
+        summary_population: None,
+        out: out.clone().map(|path| RunDir { path, replace: force }),
+    };
+    let mut observer = PyObserver {
+        progress,
+        note,
+        raised: None,
+    };
+    let data = record.data.clone();
+    let result = py.detach(|| job.run(data, &mut observer));
+    if let Some(e) = observer.raised.take() {
+        return Err(e);
+    }
+    let analysis = check(py, result)?;
+    Ok(run_of(analysis, out))
+}
+
+/// Continues the run in `path` with the stopping rules in `more`.
+#[pyfunction]
+#[pyo3(signature = (path, more, progress, note))]
+fn resume(
+    py: Python<'_>,
+    path: PathBuf,
+    more: &Bound<'_, PyDict>,
+    progress: Option<Py<PyAny>>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<Run> {
+    let continuation = Continuation {
+        eps_min: kwarg(more, "eps_min")?,
+        max_populations: kwarg(more, "max_populations")?,
+        max_draws: kwarg(more, "max_draws")?,
+        min_acceptance: kwarg(more, "min_acceptance")?,
+        max_seconds: kwarg(more, "max_seconds")?,
+        backend: named::<Backend>(py, "backend", kwarg(more, "backend")?)?,
+        summary_population: None,
+    };
+    let mut observer = PyObserver {
+        progress,
+        note,
+        raised: None,
+    };
+    let result = py.detach(|| bitrock::pipeline::resume(&path, &continuation, &mut observer));
+    if let Some(e) = observer.raised.take() {
+        return Err(e);
+    }
+    let analysis = check(py, result)?;
+    Ok(run_of(analysis, Some(path)))
+}
+
+/// Opens the finished run in `path`: its run.json and its store.
+#[pyfunction]
+fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
+    let summary = as_arguments(&check(py, read_summary(&path))?);
+    let store = check(py, RunStore::open(&path).and_then(|s| s.load()))?;
+    Ok(Run {
+        summary,
+        path: Some(path),
+        populations: Vec::new(),
+        torque_unit: store.setup.data.torque_unit,
+    })
+}
+
+/// The run.json of a run directory; a run stopped before its end has none, and is refused
+/// saying how to continue it.
+fn read_summary(dir: &Path) -> bitrock::Result<String> {
+    let path = dir.join(bitrock::rundir::RUN_JSON);
+    match std::fs::read_to_string(&path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && RunStore::open(dir).is_ok() => Err(Error::Data {
+            path: dir.to_path_buf(),
+            message:
+                "the run was stopped before it finished (it has no run.json yet): continue it with `bitrock.resume`"
+                    .into(),
+        }),
+        result => result.map_err(|source| Error::Read { path, source }),
+    }
+}
+
+/// The run settings from `bitrock.abc`'s keyword arguments.
+fn run_settings(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<Settings> {
+    let text = |key: &str| kwarg::<String>(kw, key);
+    Ok(Settings {
+        laws: laws(py, kwarg(kw, "laws")?)?,
+        fit: fit_options(py, kw)?,
+        sampler: named(py, "sampler", text("sampler")?)?.unwrap_or_default(),
+        particles: kwarg(kw, "particles")?,
+        delta: kwarg(kw, "delta")?,
+        prior_rule: named(py, "prior_rule", text("prior_rule")?)?.unwrap_or_default(),
+        prior_k: kwarg(kw, "prior_k")?,
+        prior_file: kwarg(kw, "prior_file")?,
+        eps_min: kwarg(kw, "eps_min")?,
+        epsilons: kwarg(kw, "epsilons")?,
+        start_epsilon: kwarg(kw, "start_epsilon")?,
+        max_populations: kwarg(kw, "max_populations")?,
+        max_draws: kwarg(kw, "max_draws")?,
+        min_acceptance: kwarg(kw, "min_acceptance")?,
+        max_seconds: kwarg(kw, "max_seconds")?,
+        mode: named(py, "mode", text("mode")?)?,
+        p_stay: kwarg(kw, "p_stay")?,
+        kernel_scale: kwarg(kw, "kernel_scale")?,
+        smc_weights: named(py, "smc_weights", text("smc_weights")?)?,
+        seed: kwarg(kw, "seed")?,
+        backend: named(py, "backend", text("backend")?)?,
+    })
+}
+
+/// The library's version.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+#[pymodule]
+fn _bitrock(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Record>()?;
+    m.add_class::<Run>()?;
+    m.add_function(wrap_pyfunction!(read_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(read_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(abc, m)?)?;
+    m.add_function(wrap_pyfunction!(resume, m)?)?;
+    m.add_function(wrap_pyfunction!(open_run, m)?)?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    Ok(())
+}

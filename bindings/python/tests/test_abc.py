@@ -1,0 +1,201 @@
+"""ABC runs from Python: tables, distributions, the DataTree, reproducibility, run directories,
+refusals and interruption."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import bitrock
+
+
+def test_population_and_probability_tables(small_run: bitrock.Result) -> None:
+    populations = small_run.populations
+    assert list(populations.columns) == ["epsilon", "accepted", "drawn", "acceptance_rate", "ess", "seconds"]
+    assert (populations["accepted"] == 300).all()
+    assert np.isinf(populations["epsilon"].iloc[0])
+    assert (np.diff(populations["epsilon"].to_numpy()[1:]) < 0).all()
+    probabilities = small_run.model_probabilities
+    assert list(probabilities.columns) == ["m1", "m2", "m3", "m4", "epsilon"]
+    assert len(probabilities) == len(populations)
+    np.testing.assert_allclose(probabilities[["m1", "m2", "m3", "m4"]].sum(axis=1), 1.0, rtol=0, atol=1e-12)
+
+
+def test_get_distribution_as_pyabc_returns_it(small_run: bitrock.Result) -> None:
+    total = 0
+    for law, k in [("m1", 4), ("m2", 3), ("m3", 6), ("m4", 4)]:
+        frame, weights = small_run.get_distribution(law)
+        assert frame.shape == (len(weights), k)
+        assert frame.columns.name == "name"
+        if len(weights):
+            assert weights.sum() == pytest.approx(1.0, abs=1e-12)
+        total += len(weights)
+    assert total == 300
+    first, _ = small_run.get_distribution("m2", population=0)
+    assert not first.equals(small_run.get_distribution("m2")[0])
+    with pytest.raises(bitrock.InputError):
+        small_run.get_distribution("m7")
+    with pytest.raises(bitrock.InputError):
+        small_run.get_distribution("m2", population=99)
+
+
+def test_the_particles_lie_in_their_prior_and_match_the_probabilities(small_run: bitrock.Result) -> None:
+    document = small_run.document
+    last = small_run.particles()
+    for prior in document["priors"]:
+        names, params, _w, rho, _i = last[prior["law"]]
+        low, high = np.array(prior["lower"]), np.array(prior["upper"])
+        assert ((params >= low - 1e-9 * abs(low)) & (params <= high + 1e-9 * abs(high))).all(), prior["law"]
+        assert (rho <= small_run.populations["epsilon"].iloc[-1]).all()
+    probabilities = small_run.model_probabilities.iloc[-1]
+    for law, (_n, params, _w, _r, _i) in last.items():
+        assert probabilities[law] == pytest.approx(len(params) / 300, abs=1e-12)
+
+
+def test_summary_lists_every_parameter(small_run: bitrock.Result) -> None:
+    summary = small_run.summary()
+    assert len(summary) == 17
+    assert (summary["q01"] <= summary["q50"]).all() and (summary["q50"] <= summary["q99"]).all()
+
+
+def test_to_datatree_has_the_groups_arviz_reads(small_run: bitrock.Result) -> None:
+    tree = small_run.to_datatree()
+    assert set(tree.children) == {"m1", "m2", "m3", "m4"}
+    m2 = tree["m2"]
+    posterior = m2["posterior"].to_dataset()
+    assert set(posterior.data_vars) == {"tsb", "tcb", "g"}
+    frame, weights = small_run.get_distribution("m2")
+    assert posterior.sizes["chain"] == 1 and posterior.sizes["draw"] == len(weights)
+    assert np.array_equal(posterior["tsb"].values[0], frame["tsb"].to_numpy())
+    assert posterior["tsb"].attrs["units"] == "kN·m"
+    stats = m2["sample_stats"].to_dataset()
+    assert stats["weight"].values.sum() == pytest.approx(1.0, abs=1e-12)
+    root = tree.to_dataset()
+    assert root["model_probabilities"].dims == ("population", "law")
+    assert np.array_equal(root["model_probabilities"].values, small_run.model_probabilities[["m1", "m2", "m3", "m4"]].to_numpy())
+
+
+def test_the_same_seed_gives_the_same_particles(demo: bitrock.Record, small_run: bitrock.Result) -> None:
+    again = bitrock.abc(demo, particles=300, seed=11, backend="cpu", progress=False)
+    other = bitrock.abc(demo, particles=300, seed=12, backend="cpu", progress=False)
+    for law, (_n, params, weights, rho, index) in small_run.particles().items():
+        _n2, params2, weights2, rho2, index2 = again.particles()[law]
+        assert np.array_equal(params, params2) and np.array_equal(weights, weights2)
+        assert np.array_equal(rho, rho2) and np.array_equal(index, index2)
+    assert not np.array_equal(small_run.particles()["m2"][1], other.particles().get("m2", (0, np.zeros(0)))[1])
+
+
+def test_smc_with_a_schedule(demo: bitrock.Record) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a schedule ends the run: no note about a floor
+        run = bitrock.abc(demo, particles=300, sampler="smc", epsilons=[0.05, 0.03, 0.02], seed=3, backend="cpu", progress=False)
+    assert list(run.populations["epsilon"])[1:] == [0.05, 0.03, 0.02]
+    assert run.document["stop_reason"] == "schedule_exhausted"
+    assert run.document["stop_description"] == "the `epsilons` schedule ran out"
+
+
+def test_progress_goes_to_a_callable(demo: bitrock.Record) -> None:
+    seen: list[tuple[int, int, int, int, float | None]] = []
+    bitrock.abc(demo, particles=200, seed=2, backend="cpu", max_populations=3, progress=lambda *a: seen.append(a))
+    populations = [s[0] for s in seen]
+    assert populations == sorted(populations) and set(populations) == {0, 1, 2}
+    assert all(0 <= accepted <= target == 200 for _g, accepted, target, _d, _e in seen)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "argument", "words"),
+    [
+        ({"particles": 0}, "particles", "particles: must be at least 1"),
+        ({"sampler": "gibbs"}, "sampler", "`gibbs` is not one of the accepted values"),
+        ({"backend": "tpu"}, "backend", "`tpu` is not one of the accepted values"),
+        ({"kernel_scale": 2.0}, "kernel_scale", "kernel_scale: applies only to `sampler` smc"),
+        ({"delta": -0.1}, "delta", "delta:"),
+        ({"epsilons": [0.05, 0.08]}, "epsilons", "epsilons:"),
+    ],
+)
+def test_refused_settings_name_their_argument(demo: bitrock.Record, arguments, argument: str, words: str) -> None:
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.abc(demo, progress=False, **{"particles": 50, "backend": "cpu", **arguments})
+    assert caught.value.argument == argument
+    assert words in str(caught.value)
+    assert "--" not in str(caught.value)
+    # Survives pickling back from a worker process.
+    back = pickle.loads(pickle.dumps(caught.value))
+    assert type(back) is bitrock.InputError and back.argument == argument and str(back) == str(caught.value)
+
+
+def test_errors_are_pure_python_classes() -> None:
+    assert issubclass(bitrock.InputError, bitrock.BitrockError) and issubclass(bitrock.InputError, ValueError)
+    assert issubclass(bitrock.GpuError, bitrock.BitrockError)
+    error = pickle.loads(pickle.dumps(bitrock.GpuError("no adapter")))
+    assert str(error) == "no adapter"
+
+
+def test_a_run_directory_is_written_opened_and_resumed(demo: bitrock.Record, tmp_path) -> None:
+    out = tmp_path / "run"
+    written = bitrock.abc(demo, particles=300, seed=11, backend="cpu", max_populations=3, out=out, progress=False)
+    assert written.path == out and (out / "run.json").is_file()
+    opened = bitrock.open_run(out)
+    assert len(opened.populations) == 3
+    for g in range(3):
+        for law, (_n, params, *_rest) in written.particles(g).items():
+            assert np.array_equal(params, opened.particles(g)[law][1])
+    with pytest.raises(bitrock.InputError, match="holds a bitrock run; pass `force` to replace it") as caught:
+        bitrock.abc(demo, particles=300, seed=11, backend="cpu", out=out, progress=False)
+    assert caught.value.argument == "out"
+    bitrock.abc(demo, particles=300, seed=11, backend="cpu", max_populations=2, out=out, force=True, progress=False)
+    with pytest.warns(bitrock.BitrockWarning, match=r"continuing .* after population 1 \(2 stored\)"):
+        resumed = bitrock.resume(out, max_populations=3, progress=False)
+    assert len(resumed.populations) == 3
+    for law, (_n, params, *_rest) in written.particles().items():
+        assert np.array_equal(params, resumed.particles()[law][1])
+
+
+def test_a_callback_that_raises_stops_the_run_and_leaves_it_resumable(demo: bitrock.Record, tmp_path) -> None:
+    whole = bitrock.abc(demo, particles=300, seed=5, backend="cpu", out=tmp_path / "whole", progress=False)
+
+    def stop_in_population_2(population: int, *_rest) -> None:
+        if population == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        bitrock.abc(demo, particles=300, seed=5, backend="cpu", out=tmp_path / "cut", progress=stop_in_population_2)
+    with pytest.raises(bitrock.InputError, match="stopped before it finished.*bitrock.resume"):
+        bitrock.open_run(tmp_path / "cut")
+    with pytest.warns(bitrock.BitrockWarning):
+        resumed = bitrock.resume(tmp_path / "cut", progress=False)
+    assert len(resumed.populations) == len(whole.populations)
+    for law, (_n, params, *_rest) in whole.particles().items():
+        assert np.array_equal(params, resumed.particles()[law][1])
+
+
+def test_ctrl_c_raises_keyboard_interrupt_within_a_second(tmp_path) -> None:
+    script = textwrap.dedent(
+        f"""
+        import sys, bitrock
+        def started(*_a):
+            print("started", flush=True)
+        bitrock.abc(bitrock.read_record(), particles=200000, max_draws=10**9, seed=1, backend="cpu",
+                    out={str(tmp_path / "big")!r}, progress=started)
+        """
+    )
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert child.stdout.readline().strip() == "started"
+    sent = time.monotonic()
+    child.send_signal(signal.SIGINT)
+    _out, err = child.communicate(timeout=60)
+    waited = time.monotonic() - sent
+    assert child.returncode != 0 and "KeyboardInterrupt" in err, err
+    # Batches are short; the interrupt is seen after the one in progress.
+    assert waited < 5.0, f"Ctrl-C took {waited:.1f} s"
+    assert (tmp_path / "big" / "run.json").exists() or (tmp_path / "big").is_dir()

@@ -1,0 +1,117 @@
+"""Reading records: CSV files, DataFrames at N·m and kN·m scale, and the refusals."""
+
+from __future__ import annotations
+
+import errno
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import bitrock
+from conftest import DEMO_CSV
+
+
+def test_the_demo_record_is_the_repository_csv(demo: bitrock.Record) -> None:
+    from_file = bitrock.read_record(DEMO_CSV)
+    assert (demo.rows_read, demo.rows_used) == (9000, 5374)
+    assert demo.columns == ("bit_speed_rpm", "torque_knm", "wob_kn", "time_s")
+    assert (demo.torque_unit, demo.speed_unit) == ("kN·m", "rpm")
+    for a, b in zip(demo.calibration() + demo.validation(), from_file.calibration() + from_file.validation()):
+        assert np.array_equal(a, b)
+
+
+def test_a_dataframe_reads_as_its_csv_bit_for_bit(demo: bitrock.Record) -> None:
+    frame = pd.read_csv(DEMO_CSV)
+    record = bitrock.read_record(frame)
+    assert record.source == "<DataFrame>"
+    assert (record.rows_read, record.rows_used) == (demo.rows_read, demo.rows_used)
+    for a, b in zip(record.calibration() + record.validation(), demo.calibration() + demo.validation()):
+        assert np.array_equal(a, b)
+
+
+def test_samples_are_in_si(demo: bitrock.Record) -> None:
+    speed, torque = demo.calibration()
+    frame = pd.read_csv(DEMO_CSV)
+    kept = frame[frame["bit_speed_rpm"] >= 5.0].head(len(speed))
+    np.testing.assert_allclose(speed, kept["bit_speed_rpm"] * np.pi / 30, rtol=1e-15)
+    np.testing.assert_allclose(torque, kept["torque_knm"] * 1e3, rtol=1e-15)
+
+
+def test_a_laboratory_record_in_newton_metres_and_rad_s_with_negative_speeds() -> None:
+    frame = pd.read_csv(DEMO_CSV)
+    lab = pd.DataFrame(
+        {
+            "t_s": frame["time_s"],
+            # A rig turning backwards at times: negative and near-zero speeds are stick, dropped.
+            "speed_rad_s": (frame["bit_speed_rpm"] - 20.0) * np.pi / 30,
+            "torque_nm": frame["torque_knm"] * 1e3,
+            "note": "rig A",
+        }
+    )
+    record = bitrock.read_record(lab, time_col="t_s", min_speed_rpm=1.0)
+    assert (record.torque_unit, record.speed_unit) == ("N·m", "rad/s")
+    assert record.columns == ("speed_rad_s", "torque_nm", None, "t_s")
+    assert record.rows_used == int((lab["speed_rad_s"] >= np.pi / 30).sum())
+    speed, torque = record.calibration()
+    assert speed.min() >= np.pi / 30 * (1 - 1e-12)
+    np.testing.assert_allclose(torque[:5], lab["torque_nm"][lab["speed_rad_s"] >= np.pi / 30][:5], rtol=1e-15)
+
+
+def test_time_columns_of_dataframes_are_seconds() -> None:
+    frame = pd.read_csv(DEMO_CSV)
+    timed = frame.assign(time_s=pd.to_timedelta(frame["time_s"], unit="s"))
+    dated = frame.assign(time_s=pd.Timestamp("2026-01-01") + pd.to_timedelta(frame["time_s"], unit="s"))
+    window = bitrock.read_record(frame, t_start_s=20.0, t_end_s=60.0)
+    for other in (timed, dated):
+        record = bitrock.read_record(other, t_start_s=20.0, t_end_s=60.0)
+        assert record.rows_used == window.rows_used
+        np.testing.assert_allclose(record.calibration()[1], window.calibration()[1], rtol=0)
+
+
+def test_splits_and_thinning_follow_their_arguments() -> None:
+    block = bitrock.read_record(calibration_fraction=0.25)
+    interleaved = bitrock.read_record(calibration_fraction=0.25, split="interleaved")
+    thinned = bitrock.read_record(thin=3)
+    assert len(block.calibration()[0]) == int(np.ceil(0.25 * block.rows_used))
+    assert abs(len(interleaved.calibration()[0]) - 0.25 * interleaved.rows_used) <= 1
+    assert thinned.rows_used < block.rows_used / 2
+
+
+def test_a_missing_file_is_file_not_found() -> None:
+    with pytest.raises(FileNotFoundError) as caught:
+        bitrock.read_record("no/such/record.csv")
+    assert caught.value.errno == errno.ENOENT
+    assert caught.value.filename == "no/such/record.csv"
+
+
+def test_a_bad_cell_names_file_line_and_column(tmp_path) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text("time_s,bit_speed_rpm,torque_knm\n0,60,10\n0.02,61,x\n0.04,62,9\n")
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.read_record(path)
+    assert caught.value.argument is None
+    assert str(caught.value) == f"{path}:3:3: column 'torque_knm': 'x' is not a number"
+
+
+def test_dataframe_refusals_name_column_and_row() -> None:
+    frame = pd.read_csv(DEMO_CSV).head(50)
+    frame.loc[7, "torque_knm"] = np.nan
+    with pytest.raises(bitrock.InputError, match=r"^<DataFrame>: column 'torque_knm', row 7: NaN is not a finite number$"):
+        bitrock.read_record(frame)
+    labelled = pd.read_csv(DEMO_CSV).head(50).assign(comment="ok")
+    with pytest.raises(bitrock.InputError, match=r"column 'comment' does not hold numbers"):
+        bitrock.read_record(labelled, torque_col="comment", torque_unit="knm")
+
+
+def test_arguments_are_named_as_the_caller_wrote_them() -> None:
+    with pytest.raises(bitrock.InputError, match=r"no column named 'rpm' \(given by `speed_col`\)"):
+        bitrock.read_record(speed_col="rpm")
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.read_record(speed_unit="furlongs")
+    assert caught.value.argument == "speed_unit"
+    assert str(caught.value) == "speed_unit: unknown unit `furlongs`"
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.read_record(calibration_fraction=1.5)
+    assert caught.value.argument == "calibration_fraction"
+    assert isinstance(caught.value, ValueError)
