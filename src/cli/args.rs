@@ -3,7 +3,7 @@
 
 use bitrock::data::{self, DataOptions, FieldData, SplitRule};
 use bitrock::fit::FitOptions;
-use bitrock::stability::fe::DrillString;
+use bitrock::stability::fe::DrillStringSettings;
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
@@ -201,38 +201,14 @@ impl LumpedArgs {
 }
 
 impl FeArgs {
-    /// The first of these flags the user gave, for refusing them where no FE string is built.
-    pub fn given_flag(&self) -> Option<&'static str> {
-        [
-            ("fe_file", self.fe_file.is_some()),
-            ("dp_elements", self.dp_elements.is_some()),
-            ("bha_elements", self.bha_elements.is_some()),
-            ("alpha", self.alpha.is_some()),
-            ("beta", self.beta.is_some()),
-        ]
-        .into_iter()
-        .find_map(|(flag, given)| given.then_some(flag))
-    }
-
-    /// The drill string from the file (or the paper's) with the flags' overrides, validated.
-    pub fn drill_string(&self) -> anyhow::Result<DrillString> {
-        let mut s = match &self.fe_file {
-            Some(path) => DrillString::from_toml_file(path)?,
-            None => DrillString::default(),
-        };
-        if let Some(n) = self.dp_elements {
-            s.dp_elements = n;
+    /// The drill string these flags describe.
+    pub fn settings(&self) -> DrillStringSettings {
+        DrillStringSettings {
+            fe_file: self.fe_file.clone(),
+            dp_elements: self.dp_elements,
+            bha_elements: self.bha_elements,
+            alpha: self.alpha,
+            beta: self.beta,
         }
-        if let Some(n) = self.bha_elements {
-            s.bha_elements = n;
-        }
-        if let Some(a) = self.alpha {
-            s.alpha = a;
-        }
-        if let Some(b) = self.beta {
-            s.beta = b;
-        }
-        s.validate()?;
-        Ok(s)
     }
 }

@@ -23,7 +23,7 @@ pub struct FeCmd {
 }
 
 pub fn run(cmd: &FeCmd) -> anyhow::Result<ExitCode> {
-    let mut string = cmd.fe.drill_string()?;
+    let mut string = cmd.fe.settings().drill_string()?;
     let lumped = cmd.lumped.validated()?;
     let mut matched_beta = None;
     if cmd.match_1dof {

@@ -69,6 +69,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("omega_n_rad_s", "--omega-n-rad-s"),
     ("damping_ratio", "--damping-ratio"),
     // The finite-element drill string.
+    ("structure", "--structure"),
     ("fe_file", "--fe-file"),
     ("dp_elements", "--dp-elements"),
     ("bha_elements", "--bha-elements"),

@@ -5,25 +5,18 @@ use super::args::finite_number;
 use super::args::{FeArgs, LumpedArgs};
 use bitrock::eval::Backend;
 use bitrock::laws::PAPER_W_REF_N;
+use bitrock::pipeline::stability::{DEFAULT_OMEGA_RPM, DEFAULT_PERCENT, DEFAULT_SAMPLES, DEFAULT_WOB_KN, Structure};
 use bitrock::pipeline::{MapSource, StabilityJob};
 use bitrock::stability::map::{self, Criterion};
 use bitrock::units::TorqueUnit;
 use bitrock::{Error, files};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use serde_json::json;
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// Which structure decides stability.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Structure {
-    /// The paper's 1-DOF model (closed-form 2x2 criterion).
-    #[value(name = "1dof")]
-    Lumped,
-    /// The finite-element string (critical bit damping by bisection).
-    Fe,
-}
 
 #[derive(Debug, Args)]
 pub struct StabilityCmd {
@@ -50,17 +43,17 @@ pub struct StabilityCmd {
     #[arg(long, value_parser = finite_number, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub w_ref_kn: f64,
     /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
-    #[arg(long, default_value = "20:220:101", value_name = "MIN:MAX:COUNT")]
+    #[arg(long, default_value = DEFAULT_OMEGA_RPM, value_name = "MIN:MAX:COUNT")]
     pub omega_rpm: String,
     /// Weights on bit, kN, as MIN:MAX:COUNT.
-    #[arg(long, default_value = "20:700:69", value_name = "MIN:MAX:COUNT")]
+    #[arg(long, default_value = DEFAULT_WOB_KN, value_name = "MIN:MAX:COUNT")]
     pub wob_kn: String,
     /// Percentile of the stochastic boundary, %: the weight on bit above which at least this
     /// share of the posterior samples is unstable (the paper's 2 %).
-    #[arg(long, value_parser = finite_number, default_value_t = 2.0, value_name = "PERCENT")]
+    #[arg(long, value_parser = finite_number, default_value_t = DEFAULT_PERCENT, value_name = "PERCENT")]
     pub percentile: f64,
     /// Posterior samples per law for the stochastic maps (the paper's 700).
-    #[arg(long, default_value_t = 700, value_name = "S")]
+    #[arg(long, default_value_t = DEFAULT_SAMPLES, value_name = "S")]
     pub samples: usize,
     /// Where the probability grids are computed (auto, gpu, cpu).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
@@ -79,33 +72,20 @@ type Column = (String, Vec<Option<f64>>);
 pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let omega = map::parse_axis(&cmd.omega_rpm, "omega_rpm")?;
     let wob = map::parse_axis(&cmd.wob_kn, "wob_kn")?;
-    if cmd.structure == Structure::Lumped
-        && let Some(flag) = cmd.fe.given_flag()
-    {
-        return Err(Error::setting(
-            flag,
-            "applies to --structure fe only (the 1-DOF string has no elements)",
-        )
-        .into());
-    }
     if let Some(path) = &cmd.out {
         files::check_output_file(path, "out")?;
     }
-    let mut job = StabilityJob {
+    let job = StabilityJob {
         source: map_source(cmd)?,
         omega_rpm: omega,
         wob_kn: wob,
-        // Replaced below once the job's cheap checks passed (an FE string's is a bisection).
-        criterion: Criterion::Lumped(cmd.lumped.validated()?),
+        criterion: Criterion::Lumped(cmd.lumped.lumped()),
         w_ref_n: cmd.w_ref_kn * 1000.0,
         percentile: cmd.percentile / 100.0,
         samples: cmd.samples,
         backend: cmd.backend,
-    };
-    job.validate()?;
-    if cmd.structure == Structure::Fe {
-        job.criterion = Criterion::Critical(cmd.fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms);
     }
+    .on(cmd.structure, cmd.lumped.lumped(), &cmd.fe.settings())?;
     let maps = job.run(&mut |line| super::print::note(line))?;
     if let (MapSource::Run(dir), Some(why)) = (&job.source, &maps.early_end) {
         super::print::note(format_args!("note: {}: {why}", dir.display()));
@@ -153,16 +133,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
 fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
     match (&cmd.run, cmd.law, &cmd.params) {
         (Some(dir), _, _) => Ok(MapSource::Run(dir.clone())),
-        (None, Some(law), Some(params)) => {
-            // The count first: scaling takes one value per parameter.
-            if params.len() != law.n_params() {
-                law.check_params(params, "params")?;
-            }
-            Ok(MapSource::Law {
-                law,
-                params_si: law.scale_torque(params, cmd.torque_unit.newton_metres()),
-            })
-        }
+        (None, Some(law), Some(params)) => Ok(MapSource::law(law, params, cmd.torque_unit)?),
         _ => Err(Error::setting(
             "run",
             "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",

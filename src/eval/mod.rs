@@ -105,11 +105,12 @@ pub trait Evaluator: Sync {
 }
 
 /// Which evaluator computes ρ.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
     /// The GPU when an adapter exists, else the CPU (saying so).
+    #[default]
     Auto,
     /// The GPU (WGSL through wgpu); an error when there is no adapter.
     Gpu,

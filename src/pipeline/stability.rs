@@ -6,9 +6,34 @@
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::laws::Law;
+use crate::stability::fe::DrillStringSettings;
+use crate::stability::lumped::Lumped;
 use crate::stability::map::{self, Boundaries, Criterion, LawSamples};
 use crate::store::RunStore;
 use std::path::PathBuf;
+
+/// The paper's grid of top-drive speeds, rpm, as MIN:MAX:COUNT ([`map::parse_axis`]).
+pub const DEFAULT_OMEGA_RPM: &str = "20:220:101";
+/// The paper's grid of weights on bit, kN, as MIN:MAX:COUNT.
+pub const DEFAULT_WOB_KN: &str = "20:700:69";
+/// The paper's percentile of the stochastic boundary, %.
+pub const DEFAULT_PERCENT: f64 = 2.0;
+/// The paper's posterior samples per law for the stochastic maps.
+pub const DEFAULT_SAMPLES: usize = 700;
+
+/// The drill string a map is drawn for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Structure {
+    /// The paper's 1-DOF model (closed-form 2x2 criterion).
+    #[default]
+    #[cfg_attr(feature = "cli", value(name = "1dof"))]
+    #[serde(rename = "1dof")]
+    Lumped,
+    /// The finite-element string (critical bit damping by bisection).
+    #[serde(rename = "fe")]
+    Fe,
+}
 
 /// Whose maps: a run's last population, or one law at given parameters.
 #[derive(Clone, Debug, PartialEq)]
@@ -18,6 +43,21 @@ pub enum MapSource {
     Run(PathBuf),
     /// One law at `params_si` (SI, torques in N·m): a what-if map without a run.
     Law { law: Law, params_si: Vec<f64> },
+}
+
+impl MapSource {
+    /// One law at `params` in its order, torques in `unit` (made SI here); a wrong count is
+    /// refused naming `params`.
+    pub fn law(law: Law, params: &[f64], unit: crate::units::TorqueUnit) -> Result<Self> {
+        // The count first: scaling takes one value per parameter.
+        if params.len() != law.n_params() {
+            law.check_params(params, "params")?;
+        }
+        Ok(MapSource::Law {
+            law,
+            params_si: law.scale_torque(params, unit.newton_metres()),
+        })
+    }
 }
 
 /// A stability job: what to map, on which grid, by which criterion.
@@ -71,10 +111,43 @@ impl StabilityJob {
         if self.samples == 0 {
             return Err(Error::setting("samples", "must be at least 1"));
         }
+        for (field, axis) in [("omega_rpm", &self.omega_rpm), ("wob_kn", &self.wob_kn)] {
+            let positive = axis.iter().all(|v| v.is_finite() && *v > 0.0);
+            if axis.is_empty() || !positive || axis.windows(2).any(|w| w[0] >= w[1]) {
+                return Err(Error::setting(
+                    field,
+                    format!(
+                        "must be positive numbers in increasing order, got {} values",
+                        axis.len()
+                    ),
+                ));
+            }
+        }
         if let MapSource::Law { law, params_si } = &self.source {
             law.check_params(params_si, "params")?;
         }
         map::check_grid_size(self.cells(), 1, self.samples)
+    }
+
+    /// The job on `structure`: the 1-DOF model `lumped`, or the finite-element string `fe`
+    /// describes, whose critical bit damping is found (a bisection) once the job's cheap checks
+    /// passed. Refuses FE settings given for the 1-DOF string.
+    pub fn on(mut self, structure: Structure, lumped: Lumped, fe: &DrillStringSettings) -> Result<Self> {
+        if structure == Structure::Lumped
+            && let Some(field) = fe.first_given()
+        {
+            return Err(Error::setting(
+                field,
+                "applies to `structure` fe only (the 1-DOF string has no elements)",
+            ));
+        }
+        lumped.validate()?;
+        self.criterion = Criterion::Lumped(lumped);
+        self.validate()?;
+        if structure == Structure::Fe {
+            self.criterion = Criterion::Critical(fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms);
+        }
+        Ok(self)
     }
 
     fn cells(&self) -> usize {

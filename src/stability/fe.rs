@@ -113,6 +113,48 @@ fn polar_moment_m4(outer_m: f64, inner_m: f64) -> f64 {
     PI / 32.0 * (outer_m.powi(4) - inner_m.powi(4))
 }
 
+/// A drill string as a user describes it: a TOML file (`None`: the paper's table) with any
+/// of its element counts and Rayleigh damping overridden.
+#[derive(Clone, Debug, Default)]
+pub struct DrillStringSettings {
+    pub fe_file: Option<std::path::PathBuf>,
+    pub dp_elements: Option<usize>,
+    pub bha_elements: Option<usize>,
+    /// Mass-proportional Rayleigh damping α, 1/s.
+    pub alpha: Option<f64>,
+    /// Stiffness-proportional Rayleigh damping β, s.
+    pub beta: Option<f64>,
+}
+
+impl DrillStringSettings {
+    /// The first setting given, for refusing them where no FE string is built.
+    pub fn first_given(&self) -> Option<&'static str> {
+        [
+            ("fe_file", self.fe_file.is_some()),
+            ("dp_elements", self.dp_elements.is_some()),
+            ("bha_elements", self.bha_elements.is_some()),
+            ("alpha", self.alpha.is_some()),
+            ("beta", self.beta.is_some()),
+        ]
+        .into_iter()
+        .find_map(|(field, given)| given.then_some(field))
+    }
+
+    /// The drill string: the file's (or the paper's) with the overrides, validated.
+    pub fn drill_string(&self) -> Result<DrillString> {
+        let mut s = match &self.fe_file {
+            Some(path) => DrillString::from_toml_file(path)?,
+            None => DrillString::default(),
+        };
+        s.dp_elements = self.dp_elements.unwrap_or(s.dp_elements);
+        s.bha_elements = self.bha_elements.unwrap_or(s.bha_elements);
+        s.alpha = self.alpha.unwrap_or(s.alpha);
+        s.beta = self.beta.unwrap_or(s.beta);
+        s.validate()?;
+        Ok(s)
+    }
+}
+
 impl DrillString {
     /// Free degrees of freedom n: one per element (the top node is fixed); the last is the bit.
     pub fn dofs(&self) -> usize {

@@ -38,6 +38,7 @@ __all__ = [
     "open_run",
     "read_record",
     "resume",
+    "stability",
 ]
 
 __version__ = _bitrock.version()
@@ -244,6 +245,80 @@ def resume(
 def open_run(path: str | os.PathLike[str]) -> "Result":
     """The run in directory ``path``, as written by ``bitrock abc`` or :func:`abc`."""
     return Result(_bitrock.open_run(os.fspath(path)))
+
+
+def stability(
+    source: "Result | str | os.PathLike[str] | None" = None,
+    *,
+    law: str | None = None,
+    params: Sequence[float] | None = None,
+    torque_unit: str | None = None,
+    omega_rpm: "Sequence[float] | str | None" = None,
+    wob_kn: "Sequence[float] | str | None" = None,
+    structure: str | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    fe_file: str | os.PathLike[str] | None = None,
+    dp_elements: int | None = None,
+    bha_elements: int | None = None,
+    alpha: float | None = None,
+    beta: float | None = None,
+    w_ref_kn: float | None = None,
+    percentile: float | None = None,
+    samples: int | None = None,
+    backend: str | None = None,
+) -> Any:
+    """Torsional stick-slip stability over top-drive speed Ω (rpm) and weight on bit W (kN),
+    as ``bitrock stability`` computes it: for a run's last population (``source``, a
+    :class:`Result` written to a directory or the directory), or for one ``law`` at ``params``
+    (its parameters in order, torques in ``torque_unit``, kN·m by default).
+
+    Returns an ``xarray.Dataset`` over ``law`` × ``omega_rpm`` × ``wob_kn``:
+    ``probability_unstable`` (the share of posterior samples unstable at each cell),
+    ``map_wob_kn`` (the MAP's boundary: the weight on bit above which it is unstable, NaN where
+    none), ``p_wob_kn`` (the ``percentile`` % boundary of the samples), ``mixture_p_wob_kn``
+    when the run has several laws, and each law's ``probability``. ``structure``: ``"1dof"``
+    (the paper's, with ``inertia_kg_m2``, ``omega_n_rad_s``, ``damping_ratio``) or ``"fe"``
+    (the finite-element string, the paper's or ``fe_file``'s, with its overrides). Axes are
+    values or ``"MIN:MAX:COUNT"``."""
+    import xarray as xr
+
+    if isinstance(source, Result):
+        if source.path is None:
+            raise InputError("source: a run kept in memory has no store to map; run abc with out=DIR", "source")
+        source = source.path
+    run = None if source is None else os.fspath(source)
+    options = {k: v for k, v in locals().items() if k not in ("source", "law", "params", "run", "xr")}
+    if options["fe_file"] is not None:
+        options["fe_file"] = os.fspath(options["fe_file"])
+    for key in ("omega_rpm", "wob_kn"):
+        if options[key] is not None and not isinstance(options[key], str):
+            options[key] = [float(v) for v in options[key]]
+    maps = _bitrock.stability(run, law, None if params is None else [float(p) for p in params], options, _note)
+    laws = maps["laws"]
+    variables = {
+        "probability_unstable": (("law", "omega_rpm", "wob_kn"), maps["probability_unstable"]),
+        "map_wob_kn": (("law", "omega_rpm"), maps["map_wob_kn"], {"units": "kN"}),
+        "p_wob_kn": (("law", "omega_rpm"), maps["p_wob_kn"], {"units": "kN"}),
+        "probability": ("law", np.asarray(maps["probability"])),
+        "samples": ("law", np.asarray(maps["samples"])),
+    }
+    if "mixture_p_wob_kn" in maps:
+        variables["mixture_p_wob_kn"] = ("omega_rpm", maps["mixture_p_wob_kn"], {"units": "kN"})
+    return xr.Dataset(
+        variables,
+        coords={
+            "law": laws,
+            "omega_rpm": ("omega_rpm", maps["omega_rpm"], {"units": "rpm"}),
+            "wob_kn": ("wob_kn", maps["wob_kn"], {"units": "kN"}),
+        },
+        attrs={
+            "structure": maps["structure"],
+            "critical_bit_damping_nms": maps["critical_bit_damping_nms"],
+            "percentile": maps["percentile"],
+        },
+    )
 
 
 @dataclass(frozen=True)
