@@ -75,3 +75,24 @@ def test_refusals_name_their_argument(small_run) -> None:
     with pytest.raises(bitrock.InputError) as caught:
         bitrock.stability(law="m2", params=[13, 6.5])
     assert caught.value.argument == "params"
+
+
+def test_the_selection_check_is_the_command_lines(cli, demo, tmp_path) -> None:
+    import shutil
+
+    bitrock.abc(demo, particles=150, seed=11, backend="cpu", laws=["m2", "m3"], max_populations=3, out=tmp_path / "py", progress=False)
+    shutil.copytree(tmp_path / "py", tmp_path / "cli")
+    seen: list[tuple[int, int]] = []
+    matrix = bitrock.check_selection(tmp_path / "py", replicates=2, backend="cpu", progress=lambda d, t: seen.append((d, t)))
+    assert matrix.shape == (2, 2) and list(matrix.index) == ["m2", "m3"] and list(matrix.columns) == ["m2", "m3"]
+    np.testing.assert_allclose(matrix.sum(axis=1), 1.0, atol=1e-9)
+    assert sorted(seen)[-1] == (4, 4)
+    assert (tmp_path / "py" / "selection").is_dir()
+    document = json.loads(run_cli(cli, "check-selection", str(tmp_path / "cli"), "--replicates", "2", "--backend", "cpu", "--json", "-q").stdout)
+    for ours, theirs in zip(matrix.attrs["document"]["rows"], document["rows"]):
+        assert ours["mean_probability"] == theirs["mean_probability"]
+        assert ours["first_share"] == theirs["first_share"]
+        assert ours["verdict"] == theirs["verdict"]
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.check_selection(tmp_path / "py", replicates=0)
+    assert caught.value.argument == "replicates"

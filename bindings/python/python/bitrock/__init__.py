@@ -34,6 +34,7 @@ __all__ = [
     "Record",
     "Result",
     "abc",
+    "check_selection",
     "fit",
     "open_run",
     "read_record",
@@ -319,6 +320,69 @@ def stability(
             "percentile": maps["percentile"],
         },
     )
+
+
+def check_selection(
+    source: "Result | str | os.PathLike[str]",
+    *,
+    replicates: int | None = None,
+    batch: int | None = None,
+    backend: str | None = None,
+    progress: bool | Callable[[int, int], Any] = True,
+) -> pd.DataFrame:
+    """How far the run's model selection can be trusted, as ``bitrock check-selection``
+    measures it: ``replicates`` synthetic records per law, each made from the law's posterior
+    (or least-squares estimate when it died out) with the record's noise, each run through the
+    run's own procedure. Writes the check into the run's ``selection/`` directory.
+
+    Returns the confusion matrix: one row per generating law, one column per law, the mean
+    posterior probability over its replicates. ``attrs`` holds ``first_share`` (the share of
+    replicates in which each law ranks first, same shape), ``verdicts`` (a sentence per
+    generating law) and ``document`` (the whole check). ``progress``: a tqdm bar over the
+    replicates, ``False``, or a callable ``(done, total)``. The check runs to its end once
+    started (Ctrl-C is seen when it returns)."""
+    if isinstance(source, Result):
+        if source.path is None:
+            raise InputError("source: a run kept in memory has no store to check; run abc with out=DIR", "source")
+        source = source.path
+    callback, close = _replicate_progress(progress)
+    try:
+        document = json.loads(
+            _bitrock.check_selection(os.fspath(source), {"replicates": replicates, "batch": batch, "backend": backend}, callback, _note)
+        )
+    finally:
+        close()
+    laws = document["laws"]
+    rows = [r["law"] for r in document["rows"]]
+    matrix = pd.DataFrame([r["mean_probability"] for r in document["rows"]], index=pd.Index(rows, name="generating"), columns=pd.Index(laws, name="law"))
+    first = pd.DataFrame([r["first_share"] for r in document["rows"]], index=matrix.index, columns=matrix.columns)
+    matrix.attrs = {"first_share": first, "verdicts": {r["law"]: r["verdict"] for r in document["rows"]}, "document": document}
+    return matrix
+
+
+def _replicate_progress(progress: bool | Callable[[int, int], Any]) -> tuple[Callable[[int, int], Any] | None, Callable[[], None]]:
+    """A selection check's progress: a user's callable, one tqdm bar over the replicates, or
+    nothing."""
+    if callable(progress):
+        return progress, lambda: None
+    if not progress:
+        return None, lambda: None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None, lambda: None
+    bar: list[Any] = []
+
+    def update(done: int, total: int) -> None:
+        if not bar:
+            bar.append(tqdm(total=total, desc="replicates", leave=False))
+        bar[0].update(done - bar[0].n)
+
+    def close() -> None:
+        for b in bar:
+            b.close()
+
+    return update, close
 
 
 @dataclass(frozen=True)

@@ -65,4 +65,19 @@ def resume(
     path: str | PathLike[str], more: dict[str, Any], progress: Progress | None, note: Callable[[str], Any] | None
 ) -> Run: ...
 def open_run(path: str | PathLike[str]) -> Run: ...
+def stability(
+    run: str | PathLike[str] | None,
+    law: str | None,
+    params: list[float] | None,
+    options: dict[str, Any],
+    note: Callable[[str], Any] | None,
+) -> dict[str, Any]:
+    """Boundaries and probability grids as NumPy arrays (law × Ω × W)."""
+def check_selection(
+    run: str | PathLike[str],
+    options: dict[str, Any],
+    progress: Callable[[int, int], Any] | None,
+    note: Callable[[str], Any] | None,
+) -> str:
+    """The selection check's document, as text."""
 def version() -> str: ...
