@@ -5,7 +5,7 @@ use crate::Law;
 use crate::abc::rejection::{self, RejectionConfig};
 use crate::abc::smc::{self, SmcConfig};
 use crate::data::{DataOptions, FieldData, Samples, demo_field_data};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::eval::gpu::candidates::GpuCandidate;
 use crate::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE, cpu::CpuEvaluator, evaluator, gpu};
 use crate::fit::{FitOptions, LawFit, fit_record};
@@ -775,6 +775,46 @@ pub struct ParityReport {
     pub philox: PhiloxParity,
     /// Every check within tolerance: ρ, decisions away from ε, Philox and candidates exact.
     pub pass: bool,
+}
+
+/// Candidates per law `bitrock parity` compares by default.
+pub const PARITY_CANDIDATES: usize = 100_000;
+/// The seed `bitrock parity` draws its candidates from by default.
+pub const PARITY_SEED: u64 = 1;
+
+/// [`parity`] on a record, as `bitrock parity` runs it: candidates drawn from the prior δ
+/// around the least-squares fits of `laws` (the run's default δ) with `seed`. Refuses no
+/// candidates, a tolerance that is not a positive number, and a record the prior cannot be
+/// built from.
+pub fn parity_on(
+    data: &FieldData,
+    laws: &[Law],
+    candidates: usize,
+    epsilon: Option<f64>,
+    seed: u64,
+) -> Result<ParityReport> {
+    if candidates == 0 {
+        return Err(Error::setting("candidates", "must be at least 1"));
+    }
+    if let Some(e) = epsilon
+        && !(e.is_finite() && e > 0.0)
+    {
+        return Err(Error::setting("epsilon", format!("must be a positive number, got {e}")));
+    }
+    let fits = fit_record(laws, data, &FitOptions::default())?;
+    let delta = crate::run::RunConfig::default().delta;
+    let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).map_err(|e| {
+        // Parity has no δ or prior file of its own: the record is what the prior cannot be built from.
+        Error::Data {
+            path: data.source.clone(),
+            message: format!("the prior parity draws from (δ = {delta} around the fits) cannot be built: {e}"),
+        }
+    })?;
+    parity(
+        &AbcProblem::new(prior, seed, &data.calibration, None),
+        candidates,
+        epsilon,
+    )
 }
 
 /// Scores the same candidates on both backends for each law's prior in `prior` (one law at a

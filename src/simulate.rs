@@ -50,6 +50,12 @@ pub enum Initial {
     Rest,
 }
 
+/// The bit-speed kick `bitrock simulate` starts on the equilibrium with, rpm: enough to show
+/// whether the steady rotation is stable.
+pub const DEFAULT_KICK_RPM: f64 = 5.0;
+/// The seed `bitrock simulate` draws its noise from.
+pub const DEFAULT_SEED: u64 = 1;
+
 /// Everything a simulation depends on. The output is a pure function of this value.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimConfig {

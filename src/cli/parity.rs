@@ -2,10 +2,6 @@
 
 use super::args::finite_number;
 use super::args::{DataArgs, load_data};
-use bitrock::Error;
-use bitrock::eval::AbcProblem;
-use bitrock::fit::{self, FitOptions};
-use bitrock::prior::Prior;
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
@@ -21,13 +17,13 @@ pub struct ParityCmd {
     #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
     pub laws: std::vec::Vec<bitrock::Law>,
     /// Candidates scored per law on each backend.
-    #[arg(long, default_value_t = 100_000, value_name = "N")]
+    #[arg(long, default_value_t = bitrock::bench::PARITY_CANDIDATES, value_name = "N")]
     pub candidates: usize,
     /// Tolerance at which accept/reject decisions are compared [default: each law's median ρ].
     #[arg(long, value_parser = finite_number, value_name = "EPS")]
     pub epsilon: Option<f64>,
     /// Seed of the candidate stream.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = bitrock::bench::PARITY_SEED)]
     pub seed: u64,
     /// Print JSON instead of a table.
     #[arg(long)]
@@ -35,26 +31,8 @@ pub struct ParityCmd {
 }
 
 pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
-    if cmd.candidates == 0 {
-        return Err(Error::setting("candidates", "must be at least 1").into());
-    }
-    if let Some(e) = cmd.epsilon
-        && !(e.is_finite() && e > 0.0)
-    {
-        return Err(Error::setting("epsilon", format!("must be a positive number, got {e}")).into());
-    }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    let fits = fit::fit_record(&cmd.laws, &data, &FitOptions::default())?;
-    let delta = bitrock::run::RunConfig::default().delta;
-    let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).map_err(|e| {
-        // Parity has no --delta or --prior: the record is what the prior cannot be built from.
-        Error::Data {
-            path: data.source.clone(),
-            message: format!("the prior parity draws from (δ = {delta} around the fits) cannot be built: {e}"),
-        }
-    })?;
-    let problem = AbcProblem::new(prior, cmd.seed, &data.calibration, None);
-    let report = bitrock::bench::parity(&problem, cmd.candidates, cmd.epsilon)?;
+    let report = bitrock::bench::parity_on(&data, &cmd.laws, cmd.candidates, cmd.epsilon, cmd.seed)?;
     let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;
@@ -64,7 +42,7 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
         writeln!(
             out,
             "data: {} points; tolerance on the relative difference of ρ: {:e}",
-            problem.data_len(),
+            data.calibration.len(),
             report.tolerance
         )?;
         writeln!(

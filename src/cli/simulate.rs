@@ -58,7 +58,7 @@ pub struct SimulateCmd {
     #[arg(long, value_enum, default_value_t = InitialState::Equilibrium)]
     pub initial: InitialState,
     /// Bit-speed kick added to steady rotation at t = 0 (with --initial equilibrium), rpm.
-    #[arg(long, value_parser = finite_number, default_value_t = 5.0, value_name = "RPM", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, default_value_t = simulate::DEFAULT_KICK_RPM, value_name = "RPM", allow_hyphen_values = true)]
     pub kick_rpm: f64,
     /// Standard deviation of Gaussian noise added to the recorded torque, kN·m.
     #[arg(long, value_parser = finite_number, default_value_t = 0.0, value_name = "KNM")]
@@ -73,7 +73,7 @@ pub struct SimulateCmd {
     #[arg(long, value_parser = finite_number, default_value_t = 20.0, value_name = "SECONDS")]
     pub wob_correlation_s: f64,
     /// Seed of the noise and fluctuation generator.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = simulate::DEFAULT_SEED)]
     pub seed: u64,
     /// Output CSV (time_s, bit_speed_rpm, torque_knm, wob_kn) [default: standard output].
     #[arg(long, short, value_name = "FILE")]

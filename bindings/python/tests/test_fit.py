@@ -44,3 +44,22 @@ def test_scaling_by_weight_on_bit_changes_the_fit(demo: bitrock.Record) -> None:
     plain = bitrock.fit(demo, laws=["m2"])
     scaled = bitrock.fit(demo, laws=["m2"], scale_by_wob=True, w_ref_kn=200.0)
     assert not np.array_equal(plain["estimate"].to_numpy(), scaled["estimate"].to_numpy())
+
+
+def test_a_simulated_record_is_the_command_lines_and_fits_back(cli, tmp_path) -> None:
+    import pandas as pd
+
+    frame = bitrock.simulate("m2", omega_rpm=50, duration_s=30, settle_s=10, noise_torque_knm=0.3, seed=4)
+    run_cli(cli, "simulate", "--law", "m2", "--omega-rpm", "50", "--duration-s", "30", "--settle-s", "10", "--noise-torque-knm", "0.3", "--seed", "4", "--out", str(tmp_path / "rig.csv"))
+    assert frame.equals(pd.read_csv(tmp_path / "rig.csv"))
+    assert list(frame.columns) == ["time_s", "bit_speed_rpm", "torque_knm", "wob_kn"]
+    assert len(frame) == 30 * 50
+    # The paper's m2 comes back from its own record (stick-slip at 50 rpm, 0.3 kN·m noise).
+    table = bitrock.fit(bitrock.read_record(frame), laws=["m2"]).set_index("parameter")
+    np.testing.assert_allclose(table.loc[["tsb", "tcb", "g"], "estimate"], [13.0, 6.5, 0.3], rtol=0.05)
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.simulate("m2", omega_rpm=50, params=[13, 6.5])
+    assert caught.value.argument == "params"
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.simulate("m2", omega_rpm=50, initial="sideways")
+    assert caught.value.argument == "initial"

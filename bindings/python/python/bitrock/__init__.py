@@ -37,8 +37,10 @@ __all__ = [
     "check_selection",
     "fit",
     "open_run",
+    "parity",
     "read_record",
     "resume",
+    "simulate",
     "stability",
 ]
 
@@ -383,6 +385,58 @@ def _replicate_progress(progress: bool | Callable[[int, int], Any]) -> tuple[Cal
             b.close()
 
     return update, close
+
+
+def simulate(
+    law: str,
+    *,
+    omega_rpm: float,
+    params: Sequence[float] | None = None,
+    param_torque_unit: str | None = None,
+    wob_kn: float | None = None,
+    w_ref_kn: float | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    duration_s: float | None = None,
+    settle_s: float | None = None,
+    sample_hz: float | None = None,
+    dt_s: float | None = None,
+    initial: str | None = None,
+    kick_rpm: float | None = None,
+    noise_torque_knm: float | None = None,
+    noise_speed_rpm: float | None = None,
+    wob_fluctuation_kn: float | None = None,
+    wob_correlation_s: float | None = None,
+    seed: int | None = None,
+) -> pd.DataFrame:
+    """A synthetic record of the paper's 1-DOF drill string driven at ``omega_rpm`` with
+    ``law`` (at ``params`` in its order, torques in ``param_torque_unit``; the paper's estimate
+    by default), as ``bitrock simulate`` writes it: a DataFrame with ``time_s``,
+    ``bit_speed_rpm``, ``torque_knm`` and ``wob_kn``, sampled at ``sample_hz`` after
+    ``settle_s``, with measurement noise and a fluctuating weight on bit when asked. It reads
+    back with :func:`read_record`."""
+    import io
+
+    options = {k: v for k, v in locals().items() if k not in ("law", "params", "omega_rpm", "io")}
+    text = _bitrock.simulate(law, None if params is None else [float(p) for p in params], float(omega_rpm), options)
+    return pd.read_csv(io.StringIO(text))
+
+
+def parity(
+    record: Record | None = None,
+    *,
+    laws: Sequence[str] | None = None,
+    candidates: int | None = None,
+    epsilon: float | None = None,
+    seed: int | None = None,
+) -> dict[str, Any]:
+    """Checks this machine's GPU against the f64 CPU reference, as ``bitrock parity`` does:
+    the same ``candidates`` per law scored on both (relative differences of ρ against the
+    tolerance, decisions at ``epsilon`` that differ away from it), and the candidate generator
+    compared bit for bit. Returns the report (``pass``, ``adapter``, ``tolerance``, ``laws``,
+    ``philox``). Raises :class:`GpuError` without a usable GPU."""
+    return json.loads(_bitrock.parity(record, None if laws is None else list(laws), {"candidates": candidates, "epsilon": epsilon, "seed": seed}))
 
 
 @dataclass(frozen=True)

@@ -80,4 +80,8 @@ def check_selection(
     note: Callable[[str], Any] | None,
 ) -> str:
     """The selection check's document, as text."""
+def simulate(law: str, params: list[float] | None, omega_rpm: float, options: dict[str, Any]) -> str:
+    """The simulated record as CSV text."""
+def parity(record: Record | None, laws: list[str] | None, options: dict[str, Any]) -> str:
+    """The parity report as JSON text."""
 def version() -> str: ...
