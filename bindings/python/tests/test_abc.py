@@ -199,3 +199,17 @@ def test_ctrl_c_raises_keyboard_interrupt_within_a_second(tmp_path) -> None:
     # Batches are short; the interrupt is seen after the one in progress.
     assert waited < 5.0, f"Ctrl-C took {waited:.1f} s"
     assert (tmp_path / "big" / "run.json").exists() or (tmp_path / "big").is_dir()
+
+
+def test_arviz_reads_a_laws_node(small_run: bitrock.Result) -> None:
+    import arviz as az
+
+    node = small_run.to_datatree()["m2"]
+    major = int(az.__version__.split(".")[0])
+    # ArviZ 1.x takes the DataTree itself; 0.23 converts it.
+    data = node if major >= 1 else az.InferenceData.from_datatree(node)
+    summary = az.summary(data, kind="stats")
+    frame, weights = small_run.get_distribution("m2")
+    assert list(summary.index) == ["tsb", "tcb", "g"]
+    # Rejection particles weigh the same: ArviZ's unweighted mean is the weighted one.
+    np.testing.assert_allclose(summary.loc["tsb", "mean"], (frame["tsb"] * weights).sum(), atol=1e-3)
