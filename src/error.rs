@@ -71,6 +71,9 @@ pub enum Error {
     /// A numerical procedure failed where it should not have.
     #[error("numerical failure: {0}")]
     Numerical(String),
+    /// A worker of a distributed run failed, or answered something the run did not ask for.
+    #[error("worker: {0}")]
+    Worker(String),
     /// A figure could not be drawn (the plotting library refused it or the embedded font is
     /// unreadable): a failure of the program, not of the user's input.
     #[error("figure {figure}: {message}")]

@@ -38,7 +38,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The uniform box of one law, SI (torques N·m), as the f32 values candidates are drawn with.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LawBox {
     pub law: Law,
     pub lower: Vec<f32>,
@@ -140,7 +140,7 @@ impl PriorRule {
 const ON_BOUND: f64 = 1e-6;
 
 /// A prior over (law, parameters).
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Prior {
     /// One box per law considered, in the order laws were given.
     pub boxes: Vec<LawBox>,

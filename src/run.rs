@@ -5,6 +5,7 @@
 
 use crate::abc::floor;
 use crate::abc::rejection::{self, Mode, RejectionConfig};
+use crate::abc::shard::{Local, Workers};
 use crate::abc::smc::{self, SmcConfig, WeightsOn};
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
@@ -416,20 +417,40 @@ pub fn start(
     prior_file: Option<&PriorFile>,
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
+    let backend = config.backend;
+    let mut here = move |problem, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers>> {
+        Ok(Box::new(Local(crate::eval::evaluator(problem, backend, note)?)))
+    };
+    start_on(dir, data, config, prior_file, &mut here, observer)
+}
+
+/// [`start`] with the populations' tasks run by the workers `make_workers` makes from the
+/// run's problem (a pool of processes or machines: [`crate::abc::shard`]); the result is the
+/// one [`start`] gives.
+pub fn start_on(
+    dir: Option<&RunDir>,
+    data: FieldData,
+    config: RunConfig,
+    prior_file: Option<&PriorFile>,
+    make_workers: &mut MakeWorkers,
+    observer: &mut dyn Observer,
+) -> Result<Outcome> {
     config.validate()?;
     if let Some(dir) = dir {
         check_new_run_dir(dir, Some(&data.source))?;
     }
     let fits = fit::fit_record(&config.laws, &data, &config.fit)?;
-    let backend = config.backend;
-    let mut make_evaluator = |problem, note: &mut dyn FnMut(String)| crate::eval::evaluator(problem, backend, note);
-    start_with_fits(dir, data, config, fits, prior_file, &mut make_evaluator, observer)
+    start_with_fits(dir, data, config, fits, prior_file, make_workers, observer)
 }
 
 /// Makes a run's evaluator from its problem, saying what the user should know through the
 /// second argument ([`crate::eval::evaluator`] of the run's backend, unless the caller scores
 /// elsewhere).
 pub type MakeEvaluator<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> + 'a;
+
+/// Makes the workers that run a run's tasks from its problem, saying what the user should
+/// know through the second argument.
+pub type MakeWorkers<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
 
 /// [`start`] of a run in memory whose record's least-squares fits the caller made
 /// (`fit::fit_record(&config.laws, &data, &config.fit)`) and whose evaluator the caller makes
@@ -444,7 +465,10 @@ pub fn start_fitted_in_memory(
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
     config.validate()?;
-    start_with_fits(None, data, config, fits, prior_file, make_evaluator, observer)
+    let mut here = |problem, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers + '_>> {
+        Ok(Box::new(Local(make_evaluator(problem, note)?)))
+    };
+    start_with_fits(None, data, config, fits, prior_file, &mut here, observer)
 }
 
 /// [`start`] after the fits: the floor, the prior, the evaluator, the sampler.
@@ -454,7 +478,7 @@ fn start_with_fits(
     mut config: RunConfig,
     fits: Vec<fit::LawFit>,
     prior_file: Option<&PriorFile>,
-    make_evaluator: &mut MakeEvaluator,
+    make_workers: &mut MakeWorkers,
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
     let input = data.source.clone();
@@ -477,7 +501,7 @@ fn start_with_fits(
     )?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
-    let evaluator = make_evaluator(problem, &mut |line| observer.note(line))?;
+    let evaluator = make_workers(problem, &mut |line| observer.note(line))?;
     let setup = RunSetup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
         data,
@@ -612,6 +636,23 @@ const FIRST_EXACT_CANDIDATES_SCHEMA: i64 = 2;
 /// Continues the run in `dir` after its last stored population with the stopping rules of
 /// `more`; the populations are those an uninterrupted run with the same settings gives.
 pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> Result<Outcome> {
+    let mut here = |problem, backend, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers>> {
+        Ok(Box::new(Local(crate::eval::evaluator(problem, backend, note)?)))
+    };
+    resume_on(dir, more, &mut here, observer)
+}
+
+/// Makes the workers of a continued run from its problem and backend.
+pub type MakeWorkersFor<'a> =
+    dyn FnMut(AbcProblem, Backend, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+
+/// [`resume`] with the new populations' tasks run by the workers `make_workers` makes.
+pub fn resume_on(
+    dir: &Path,
+    more: &Continuation,
+    make_workers: &mut MakeWorkersFor,
+    observer: &mut dyn Observer,
+) -> Result<Outcome> {
     let store = RunStore::open(dir)?;
     if store.schema_version() < FIRST_EXACT_CANDIDATES_SCHEMA {
         return Err(Error::Data {
@@ -643,7 +684,7 @@ pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> R
         config.fit.w_ref_n,
     )
     .with_best_rho(&setup.fits);
-    let evaluator = crate::eval::evaluator(problem, config.backend, &mut |line| observer.note(line))?;
+    let evaluator = make_workers(problem, config.backend, &mut |line| observer.note(line))?;
     let stored = populations.len();
     observer.note(format!(
         "continuing {} after population {} ({} stored)",
@@ -765,7 +806,7 @@ fn sample(
     claim: Option<&mut Claim>,
     kind: &'static str,
     config: &RunConfig,
-    evaluator: &dyn Evaluator,
+    evaluator: &dyn Workers,
     previous: Vec<Population>,
     observer: &mut dyn Observer,
 ) -> Result<Run> {
@@ -814,13 +855,13 @@ struct Invocation {
 /// The configured sampler from `previous` on.
 fn run_sampler(
     config: &RunConfig,
-    evaluator: &dyn Evaluator,
+    workers: &dyn Workers,
     previous: Vec<Population>,
     observer: &mut dyn Observer,
 ) -> Result<Run> {
     match &config.sampler {
-        SamplerConfig::Rejection(c) => rejection::run_observed(evaluator, c, previous, observer),
-        SamplerConfig::Smc(c) => smc::run_observed(evaluator, c, previous, observer),
+        SamplerConfig::Rejection(c) => rejection::run_on(workers, c, previous, observer),
+        SamplerConfig::Smc(c) => smc::run_on(workers, c, previous, observer),
     }
 }
 

@@ -11,6 +11,7 @@ mod fill;
 pub mod floor;
 pub mod posterior;
 pub mod rejection;
+pub mod shard;
 pub mod smc;
 
 use crate::error::Result;
@@ -21,7 +22,7 @@ use serde::{Deserialize, Serialize};
 /// One accepted particle: a law, its parameters (SI; for the rejection sampler the f32 values
 /// the candidate generator produced, widened exactly to f64), its misfit ρ and its importance
 /// weight.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Particle {
     pub law: Law,
     /// Candidate index within its stream: with the seed and population it regenerates the

@@ -24,6 +24,7 @@
 //! is dropped).
 
 use super::fill::{Filling, Spent};
+use super::shard::{self, Found, Local, Round, Task, Workers};
 use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
 use crate::eval::Evaluator;
@@ -167,8 +168,7 @@ impl RejectionConfig {
 /// Candidates scored but not yet scanned, kept so nested mode never scores one twice.
 struct Scored {
     stream: u32,
-    start: u64,
-    rho: Vec<f64>,
+    found: Found,
 }
 
 /// Runs the sampler with `evaluator` (which fixes prior, seed and data).
@@ -176,19 +176,30 @@ pub fn run(evaluator: &dyn Evaluator, config: &RejectionConfig) -> Result<Run> {
     run_observed(evaluator, config, Vec::new(), &mut Silent)
 }
 
-/// As [`run`], continuing after the completed populations `previous` (empty for a fresh run)
-/// and reporting to `observer`. Continuing gives exactly the populations an uninterrupted run
-/// with `config` gives: a population depends only on the seed, the data, the configuration
-/// and the populations before it. (Only `candidates_scored` may differ: an uninterrupted
-/// nested run reuses candidates it scored ahead of the previous population's end.)
+/// As [`run_on`], every task scored in this process by `evaluator`.
 pub fn run_observed(
     evaluator: &dyn Evaluator,
     config: &RejectionConfig,
     previous: Vec<Population>,
     observer: &mut dyn Observer,
 ) -> Result<Run> {
+    run_on(&Local(evaluator), config, previous, observer)
+}
+
+/// As [`run`], with every round's tasks run by `workers` (see [`super::shard`]), continuing
+/// after the completed populations `previous` (empty for a fresh run) and reporting to
+/// `observer`. Continuing gives exactly the populations an uninterrupted run
+/// with `config` gives: a population depends only on the seed, the data, the configuration
+/// and the populations before it. (Only `candidates_scored` may differ: an uninterrupted
+/// nested run reuses candidates it scored ahead of the previous population's end.)
+pub fn run_on(
+    workers: &dyn Workers,
+    config: &RejectionConfig,
+    previous: Vec<Population>,
+    observer: &mut dyn Observer,
+) -> Result<Run> {
     config.validate()?;
-    let problem = evaluator.problem();
+    let problem = workers.problem();
     let prior = &problem.prior;
     let n = config.particles;
     let d = problem.data_len() as u64;
@@ -257,30 +268,32 @@ pub fn run_observed(
         };
         let interrupted = fill.fill(config, &spent, observer, |fill, budget| {
             let batch = match pending.take() {
-                Some(s)
-                    if s.stream == stream
-                        && s.start <= fill.position
-                        && fill.position < s.start + s.rho.len() as u64 =>
-                {
-                    s
-                }
+                Some(s) if s.stream == stream && s.found.start <= fill.position && fill.position < s.found.end() => s,
                 _ => {
                     if budget == 0 {
                         return Ok(ControlFlow::Break(StopReason::MaxDraws));
                     }
                     let size = batch_size(n - fill.particles.len(), projected_acceptance, config.max_batch, budget);
-                    let mut rho = vec![0.0; size as usize];
-                    evaluator.score(stream, fill.position, &mut rho)?;
-                    fill.scored += size;
-                    Scored {
-                        stream,
-                        start: fill.position,
-                        rho,
-                    }
+                    let round = Round {
+                        population: g,
+                        context: None,
+                        tasks: shard::split(fill.position, size, workers.parallelism())
+                            .into_iter()
+                            .map(|(start, len)| Task::Scan {
+                                stream,
+                                start,
+                                len,
+                                epsilon,
+                            })
+                            .collect(),
+                    };
+                    let found = shard::run_found(workers, &round, fill.position, size)?;
+                    fill.scored += found.scored;
+                    Scored { stream, found }
                 }
             };
-            scan(problem, fill, &batch, weight);
-            if fill.position < batch.start + batch.rho.len() as u64 {
+            scan(problem, fill, &batch.found, weight);
+            if fill.position < batch.found.end() {
                 pending = Some(batch);
             }
             Ok(ControlFlow::Continue(()))
@@ -318,19 +331,21 @@ fn batch_size(missing: usize, projected_acceptance: f64, max_batch: usize, budge
 
 /// Scans `batch` from the population's stream position: accepts candidates below ε in index
 /// order until N, counts the draws per law and the candidates near ε, and moves the position
-/// past the last candidate considered. The scan only picks the accepted candidates; they are
-/// regenerated after it, in parallel and in index order.
-fn scan(problem: &crate::eval::AbcProblem, fill: &mut Filling, batch: &Scored, weight: f64) {
+/// past the last candidate considered. `batch` holds every candidate of its range that either
+/// rule looks at ([`shard::kept`]), so the scan is the scan of every ρ of the range. It only
+/// picks the accepted candidates; they are regenerated after it, in parallel and in index order.
+fn scan(problem: &crate::eval::AbcProblem, fill: &mut Filling, batch: &Found, weight: f64) {
     let prior = &problem.prior;
-    let offset = (fill.position - batch.start) as usize;
-    let mut consumed = batch.rho.len();
+    let from = fill.position;
+    let mut consumed = batch.end();
     let mut accepted: Vec<(u64, f64)> = Vec::new();
-    for (k, &rho) in batch.rho.iter().enumerate().skip(offset) {
+    let first = batch.kept.partition_point(|&(index, _)| index < from);
+    for &(index, rho) in &batch.kept[first..] {
         fill.near += u64::from(fill.near_threshold(rho));
         if rho < fill.epsilon {
-            accepted.push((batch.start + k as u64, rho));
+            accepted.push((index, rho));
             if fill.particles.len() + accepted.len() == fill.target {
-                consumed = k + 1;
+                consumed = index + 1;
                 break;
             }
         }
@@ -347,14 +362,8 @@ fn scan(problem: &crate::eval::AbcProblem, fill: &mut Filling, batch: &Scored, w
             weight,
         }
     }));
-    count_slots(
-        prior,
-        problem.seed,
-        stream,
-        batch.start + offset as u64..batch.start + consumed as u64,
-        &mut fill.law_draws,
-    );
-    fill.position = batch.start + consumed as u64;
+    count_slots(prior, problem.seed, stream, from..consumed, &mut fill.law_draws);
+    fill.position = consumed;
 }
 
 /// The median rule stops ("stalled") when it would lower ε by less than this fraction: ε is

@@ -56,9 +56,10 @@
 
 use super::fill::{Filling, Spent};
 use super::rejection::{self, Mode, RejectionConfig, next_epsilon, slot_of};
+use super::shard::{self, Context, Found, Local, Round, Task, Workers};
 use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
-use crate::eval::{Evaluator, KernelSums};
+use crate::eval::{AbcProblem, Evaluator, KernelSums};
 use crate::laws::MAX_PARAMS;
 use crate::numerics::compensated_sum;
 use crate::prior::{Candidate, Prior};
@@ -66,6 +67,7 @@ use crate::rng::{candidate_counter, key_of_seed, philox4x32_10};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Where the importance weights' kernel sums are computed.
@@ -310,7 +312,7 @@ impl LawKernel {
 }
 
 /// Everything a population's proposals depend on: one kernel per alive law.
-struct Kernels {
+pub(crate) struct Kernels {
     /// Per prior slot: the law's kernel, `None` for a dead law.
     laws: Vec<Option<LawKernel>>,
     /// Slots of the alive laws, ascending.
@@ -321,7 +323,7 @@ struct Kernels {
 }
 
 impl Kernels {
-    fn new(prior: &Prior, previous: &[Particle], config: &SmcConfig) -> Result<Self> {
+    pub(crate) fn new(prior: &Prior, previous: &[Particle], config: &SmcConfig) -> Result<Self> {
         let mut members = vec![Vec::new(); prior.boxes.len()];
         for (i, p) in previous.iter().enumerate() {
             members[slot_of(prior, p.law)].push(i);
@@ -382,6 +384,77 @@ impl Kernels {
         )
     }
 
+    /// The law slot of a proposal from its first Philox block (steps 1 and 2 of the module
+    /// documentation).
+    fn slot_of_block(&self, b0: [u32; 4]) -> usize {
+        let from = self.alive[inverse_cdf(&self.law_cdf, open_unit(b0[0]))];
+        let a = self.alive.len();
+        if a > 1 && open_unit(b0[1]) >= self.p_stay {
+            // Uniform among the other alive laws: ⌊w·(a − 1) / 2³²⌋, exact in integers.
+            let others: Vec<usize> = self.alive.iter().copied().filter(|&s| s != from).collect();
+            others[((u64::from(b0[2]) * (a as u64 - 1)) >> 32) as usize]
+        } else {
+            from
+        }
+    }
+
+    /// Adds the law slot of each proposal `indexes` of `stream` to `counts` (a draw of its law,
+    /// inside the prior box or not).
+    fn count_slots(&self, key: [u32; 2], stream: u32, indexes: std::ops::Range<u64>, counts: &mut [u64]) {
+        let per_slot = indexes
+            .into_par_iter()
+            .fold(
+                || vec![0u64; counts.len()],
+                |mut c, index| {
+                    c[self.slot_of_block(philox4x32_10(candidate_counter(stream, index, 0), key))] += 1;
+                    c
+                },
+            )
+            .reduce(
+                || vec![0u64; counts.len()],
+                |mut a, b| {
+                    a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                    a
+                },
+            );
+        counts.iter_mut().zip(per_slot).for_each(|(x, y)| *x += y);
+    }
+
+    /// Makes proposals `indexes` of `stream`, scores those inside the prior box with
+    /// `evaluator`, and returns how many were scored and the (index, ρ) of those kept at
+    /// `epsilon` ([`super::shard::kept`]): a [`super::shard::Task::Propose`].
+    pub(crate) fn propose_and_score(
+        &self,
+        evaluator: &(impl Evaluator + ?Sized),
+        previous: &[Particle],
+        stream: u32,
+        indexes: std::ops::Range<u64>,
+        epsilon: f64,
+    ) -> Result<(u64, Vec<(u64, f64)>)> {
+        let problem = evaluator.problem();
+        let key = key_of_seed(problem.seed);
+        let start = indexes.start;
+        let proposals: Vec<(u64, Candidate)> = (0..(indexes.end - start) as usize)
+            .into_par_iter()
+            .with_min_len(256)
+            .filter_map(|k| {
+                let index = start + k as u64;
+                let (slot, params) = self.propose(&problem.prior, previous, key, stream, index);
+                params.map(|params| (index, Candidate { slot, params }))
+            })
+            .collect();
+        let valid: Vec<Candidate> = proposals.iter().map(|&(_, c)| c).collect();
+        let mut rho = vec![0.0; valid.len()];
+        evaluator.score_params(&valid, &mut rho)?;
+        let kept = proposals
+            .iter()
+            .zip(&rho)
+            .filter(|&(_, &r)| super::shard::kept(r, epsilon))
+            .map(|(&(index, _), &r)| (index, r))
+            .collect();
+        Ok((valid.len() as u64, kept))
+    }
+
     /// Proposal `index` of stream `stream`: its law slot, and its f32 parameters unless they
     /// fall outside the prior box.
     fn propose(
@@ -395,15 +468,7 @@ impl Kernels {
         let b0 = philox4x32_10(candidate_counter(stream, index, 0), key);
         let b1 = philox4x32_10(candidate_counter(stream, index, 1), key);
         let b2 = philox4x32_10(candidate_counter(stream, index, 2), key);
-        let from = self.alive[inverse_cdf(&self.law_cdf, open_unit(b0[0]))];
-        let a = self.alive.len();
-        let slot = if a > 1 && open_unit(b0[1]) >= self.p_stay {
-            // Uniform among the other alive laws: ⌊w·(a − 1) / 2³²⌋, exact in integers.
-            let others: Vec<usize> = self.alive.iter().copied().filter(|&s| s != from).collect();
-            others[((u64::from(b0[2]) * (a as u64 - 1)) >> 32) as usize]
-        } else {
-            from
-        };
+        let slot = self.slot_of_block(b0);
         let law = self.laws[slot].as_ref().expect("proposals go to alive laws");
         let ancestor = &previous[law.members[inverse_cdf(&law.cdf, open_unit(b0[3]))]];
         let words = [b1[0], b1[1], b1[2], b1[3], b2[0], b2[1]];
@@ -428,8 +493,32 @@ impl Kernels {
         (slot, inside.then_some(params))
     }
 
-    /// Normalised importance weights of `particles` (see the module documentation).
-    fn weights(
+    /// Log importance weights of `particles`, unnormalised (see the module documentation),
+    /// with the kernel sums where `config.weights_on` says: a [`super::shard::Task::Weigh`].
+    /// Each particle's weight depends on it and the previous population only, so the weights
+    /// of any range of a population are those of the whole.
+    pub(crate) fn log_weights(
+        &self,
+        evaluator: &(impl Evaluator + ?Sized),
+        config: &SmcConfig,
+        previous: &[Particle],
+        particles: &[Particle],
+    ) -> Result<Vec<f64>> {
+        self.log_weights_with(
+            &evaluator.problem().prior,
+            previous,
+            particles,
+            &|sums, out| match config.weights_on {
+                WeightsOn::Host => {
+                    crate::eval::cpu::kernel_sums(sums, out);
+                    Ok(())
+                }
+                WeightsOn::Evaluator => evaluator.kernel_sums(sums, out),
+            },
+        )
+    }
+
+    fn log_weights_with(
         &self,
         prior: &Prior,
         previous: &[Particle],
@@ -472,7 +561,21 @@ impl Kernels {
                 log_w[i] = log_prior - log_q;
             }
         }
-        Ok(normalise_log_weights(&log_w))
+        Ok(log_w)
+    }
+
+    /// Normalised importance weights of `particles`, the kernel sums by `sums_on`.
+    #[cfg(test)]
+    fn weights(
+        &self,
+        prior: &Prior,
+        previous: &[Particle],
+        particles: &[Particle],
+        sums_on: &dyn Fn(&KernelSums, &mut [f64]) -> Result<()>,
+    ) -> Result<Vec<f64>> {
+        Ok(normalise_log_weights(
+            &self.log_weights_with(prior, previous, particles, sums_on)?,
+        ))
     }
 }
 
@@ -489,46 +592,95 @@ pub fn run(evaluator: &dyn Evaluator, config: &SmcConfig) -> Result<Run> {
     run_observed(evaluator, config, Vec::new(), &mut Silent)
 }
 
-/// Goes through `proposals` in index order, with the ρ of the valid ones in `rho`: counts
-/// each as a draw of its law and accepts those below ε until N.
-fn accept_in_order(prior: &Prior, fill: &mut Filling, proposals: &[(usize, Option<[f32; MAX_PARAMS]>)], rho: &[f64]) {
-    let mut next_valid = 0;
-    for &(slot, params) in proposals {
-        fill.position += 1;
-        fill.law_draws[slot] += 1;
-        let Some(params) = params else { continue };
-        let r = rho[next_valid];
-        next_valid += 1;
-        fill.near += u64::from(fill.near_threshold(r));
-        if r < fill.epsilon {
-            let law = prior.law(slot);
-            fill.law_accepted[slot] += 1;
-            fill.particles.push(Particle {
-                law,
-                index: fill.position - 1,
-                params: params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
-                rho: r,
-                weight: 0.0,
-            });
-            if fill.particles.len() == fill.target {
+/// Goes through the proposals of a round in index order (`found` holds those inside the
+/// prior box that the acceptance and near-threshold rules look at): accepts those below ε
+/// until N, and counts every proposal up to the last one considered as a draw of its law. The
+/// accepted proposals are made again here, in parallel, from their indices.
+fn accept_found(problem: &AbcProblem, fill: &mut Filling, context: &Context, found: &Found) {
+    let prior = &problem.prior;
+    let key = key_of_seed(problem.seed);
+    let from = fill.position;
+    let mut consumed = found.end();
+    let mut accepted: Vec<(u64, f64)> = Vec::new();
+    for &(index, rho) in &found.kept {
+        fill.near += u64::from(fill.near_threshold(rho));
+        if rho < fill.epsilon {
+            accepted.push((index, rho));
+            if fill.particles.len() + accepted.len() == fill.target {
+                consumed = index + 1;
                 break;
             }
         }
     }
+    let stream = fill.stream;
+    let kernels = &context.kernels;
+    let particles: Vec<Particle> = accepted
+        .into_par_iter()
+        .map(|(index, rho)| {
+            let (slot, params) = kernels.propose(prior, &context.particles, key, stream, index);
+            let law = prior.law(slot);
+            let params = params.expect("a scored proposal lies inside the prior box");
+            Particle {
+                law,
+                index,
+                params: params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
+                rho,
+                weight: 0.0,
+            }
+        })
+        .collect();
+    for p in &particles {
+        fill.law_accepted[slot_of(prior, p.law)] += 1;
+    }
+    fill.particles.extend(particles);
+    kernels.count_slots(key, stream, from..consumed, &mut fill.law_draws);
+    fill.position = consumed;
 }
 
-/// As [`run`], continuing after the completed populations `previous` (empty for a fresh run)
-/// and reporting to `observer`. Continuing gives exactly the populations an uninterrupted run
-/// with `config` gives.
+/// The normalised importance weights of a population's `particles`, computed in tasks by
+/// `workers` against the previous population in `context`.
+fn weigh(workers: &dyn Workers, population: usize, context: &Arc<Context>, particles: &[Particle]) -> Result<Vec<f64>> {
+    let round = Round {
+        population,
+        context: Some(context),
+        tasks: shard::split(0, particles.len() as u64, workers.parallelism())
+            .into_iter()
+            .map(|(first, len)| Task::Weigh {
+                first: first as usize,
+                particles: particles[first as usize..(first + len) as usize].to_vec(),
+            })
+            .collect(),
+    };
+    Ok(normalise_log_weights(&shard::run_log_weights(
+        workers,
+        &round,
+        particles.len(),
+    )?))
+}
+
+/// As [`run_on`], every task scored in this process by `evaluator`.
 pub fn run_observed(
     evaluator: &dyn Evaluator,
     config: &SmcConfig,
     previous: Vec<Population>,
     observer: &mut dyn Observer,
 ) -> Result<Run> {
+    run_on(&Local(evaluator), config, previous, observer)
+}
+
+/// As [`run`], with every round's tasks run by `workers` (see [`super::shard`]), continuing
+/// after the completed populations `previous` (empty for a fresh run) and reporting to
+/// `observer`. Continuing gives exactly the populations an uninterrupted run with `config`
+/// gives.
+pub fn run_on(
+    workers: &dyn Workers,
+    config: &SmcConfig,
+    previous: Vec<Population>,
+    observer: &mut dyn Observer,
+) -> Result<Run> {
     config.validate()?;
     let started = Instant::now();
-    let problem = evaluator.problem();
+    let problem = workers.problem();
     let prior = &problem.prior;
     let base = &config.base;
     let n = base.particles;
@@ -550,23 +702,13 @@ pub fn run_observed(
             epsilons: None,
             ..base.clone()
         };
-        let run = rejection::run_observed(evaluator, &first, Vec::new(), observer)?;
+        let run = rejection::run_on(workers, &first, Vec::new(), observer)?;
         total_scored += run.populations.iter().map(|p| p.record.candidates_scored).sum::<u64>();
         if matches!(run.stop, StopReason::MaxDraws | StopReason::WallTime) {
             return Ok(finish(run.populations, run.stop, total_scored));
         }
         populations = run.populations;
     }
-    let key = key_of_seed(problem.seed);
-    let sums_on = |sums: &KernelSums, out: &mut [f64]| -> Result<()> {
-        match config.weights_on {
-            WeightsOn::Host => {
-                crate::eval::cpu::kernel_sums(sums, out);
-                Ok(())
-            }
-            WeightsOn::Evaluator => evaluator.kernel_sums(sums, out),
-        }
-    };
     let stop = loop {
         let epsilon = match next_epsilon(&populations, base) {
             Ok(e) => e,
@@ -575,11 +717,17 @@ pub fn run_observed(
         let t = populations.len();
         let stream = t as u32;
         let mut fill = Filling::new(t, stream, epsilon, n, prior, d);
-        let previous = &populations[t - 1];
-        let kernels = Kernels::new(prior, &previous.particles, config)?;
+        let previous = &mut populations[t - 1];
+        let previous_rate = previous.record.acceptance_rate;
+        // The context holds the previous population's particles while this one is drawn.
+        let context = Arc::new(Context::new(
+            problem,
+            std::mem::take(&mut previous.particles),
+            config.clone(),
+        )?);
         // The acceptance rate the first batch is sized by: the last SMC population's, or a
         // guess for the first one. Later batches use this population's own.
-        let mut rate = if t >= 2 { previous.record.acceptance_rate } else { 0.25 };
+        let mut rate = if t >= 2 { previous_rate } else { 0.25 };
         let spent = Spent {
             started,
             scored: total_scored,
@@ -592,27 +740,38 @@ pub fn run_observed(
             let size = ((1.05 * missing / rate.max(1e-4)).ceil() as u64 + 16)
                 .min(base.max_batch as u64)
                 .min(budget);
-            let proposals: Vec<(usize, Option<[f32; MAX_PARAMS]>)> = (0..size as usize)
-                .into_par_iter()
-                .with_min_len(256)
-                .map(|k| kernels.propose(prior, &previous.particles, key, stream, fill.position + k as u64))
-                .collect();
-            let valid: Vec<Candidate> = proposals
-                .iter()
-                .filter_map(|&(slot, p)| p.map(|params| Candidate { slot, params }))
-                .collect();
-            let mut rho = vec![0.0; valid.len()];
-            evaluator.score_params(&valid, &mut rho)?;
-            fill.scored += valid.len() as u64;
-            accept_in_order(prior, fill, &proposals, &rho);
+            let round = Round {
+                population: t,
+                context: Some(&context),
+                tasks: shard::split(fill.position, size, workers.parallelism())
+                    .into_iter()
+                    .map(|(start, len)| Task::Propose {
+                        stream,
+                        start,
+                        len,
+                        epsilon,
+                    })
+                    .collect(),
+            };
+            let found = shard::run_found(workers, &round, fill.position, size)?;
+            fill.scored += found.scored;
+            accept_found(problem, fill, &context, &found);
             rate = fill.particles.len().max(1) as f64 / fill.position as f64;
             Ok(ControlFlow::Continue(()))
         })?;
         total_scored += fill.scored;
-        if let Some(stop) = interrupted {
-            break stop;
-        }
-        let weights = kernels.weights(prior, &previous.particles, &fill.particles, &sums_on)?;
+        let weights = match interrupted {
+            None => Some(weigh(workers, t, &context, &fill.particles)?),
+            Some(_) => None,
+        };
+        // The previous population gets its particles back (a run returns the last one's).
+        populations[t - 1].particles = match Arc::try_unwrap(context) {
+            Ok(context) => context.particles,
+            Err(shared) => shared.particles.clone(),
+        };
+        let Some(weights) = weights else {
+            break interrupted.expect("a population without weights was interrupted");
+        };
         for (p, w) in fill.particles.iter_mut().zip(&weights) {
             p.weight = *w;
         }

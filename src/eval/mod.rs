@@ -18,7 +18,7 @@ pub const PARITY_TOLERANCE: f64 = 1e-5;
 
 /// Everything that determines ρ of a candidate: the prior and seed (which generate it) and
 /// the calibration data (which score it).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct AbcProblem {
     pub prior: Prior,
     pub seed: u64,
@@ -85,7 +85,7 @@ pub struct KernelSums<'a> {
 /// Scores candidates: contiguous ranges of the prior's candidate streams, or explicit
 /// parameter vectors. Implementations must return, for candidate i of population g, ρ of
 /// `problem.prior.candidate(seed, g, i)` against the data.
-pub trait Evaluator: Sync {
+pub trait Evaluator: Send + Sync {
     /// Backend name for records (`cpu`, `gpu`).
     fn backend(&self) -> &'static str;
     /// The problem being scored.

@@ -13,6 +13,7 @@ mod pipeline;
 mod records;
 mod report;
 mod selection;
+mod shard;
 mod smc;
 mod stability;
 mod store;

@@ -1,0 +1,394 @@
+//! Populations as pure tasks: how a population is cut into pieces that any process can compute,
+//! and how their results are put back together into exactly the population one process makes.
+//!
+//! A sampler fills a population in *rounds*: a range of candidate indices (today's batch,
+//! sized by the projected acceptance). A round is cut into [`Task`]s, a [`Workers`] runs them
+//! (here, or on other processes and machines), and the sampler merges their [`Output`]s in
+//! index order. Because candidate i of stream g is a pure function of (seed, g, i) (see
+//! [`crate::rng`]) and a task returns every candidate its range holds below ε or near it
+//! ([`kept`]), the merge sees exactly what a scan of the whole round sees: the first N
+//! accepted in index order are the same whatever the cut, the number of workers, the order
+//! results arrive in, or a task run twice. Candidates a task scored past the N-th acceptance
+//! are discarded by the merge (or, in nested rejection, kept for the next population).
+//!
+//! Three kinds of task:
+//! - [`Task::Scan`]: a range of the prior's candidate stream (rejection, and SMC's
+//!   population 0);
+//! - [`Task::Propose`]: a range of SMC proposals, made on the worker from the round's
+//!   [`Context`] (the previous population), so that proposals are never shipped;
+//! - [`Task::Weigh`]: SMC's log importance weights of a range of the new population's
+//!   particles against the whole previous population, the O(N²) kernel-density sums.
+//!
+//! One process runs every task itself ([`Local`]): the single-process path and a distributed
+//! run go through the same planner ([`split`]) and merge. [`wire`] turns tasks, problems and
+//! contexts into bytes and back, and [`serve`] answers a request on a worker process, keeping
+//! the problem (record, prior, seed), its evaluator (one GPU context and its pipelines per
+//! process) and the context between tasks, so that each is shipped once per worker.
+
+use super::Particle;
+use super::smc::{Kernels, SmcConfig};
+use crate::error::{Error, Result};
+use crate::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+pub mod wire;
+
+pub use wire::{Remote, Transport, serve};
+
+/// True when a task returns a candidate of misfit `rho` at tolerance `epsilon`: below ε, or
+/// within twice the parity tolerance above it. That holds every candidate the acceptance rule
+/// (ρ < ε) and the near-threshold count (|ρ − ε| ≤ tolerance·ε) look at, at ε and at any
+/// smaller tolerance (nested rejection scans the same candidates again at ε_{g+1} < ε_g); the
+/// factor 2 keeps rounding in the products from ever excluding one of them.
+#[inline]
+pub fn kept(rho: f64, epsilon: f64) -> bool {
+    rho <= epsilon * (1.0 + 2.0 * PARITY_TOLERANCE)
+}
+
+/// One piece of a population's work.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Task {
+    /// Score candidates `start .. start + len` of the prior's stream `stream`; return those
+    /// [`kept`] at `epsilon`.
+    Scan {
+        stream: u32,
+        start: u64,
+        len: u64,
+        epsilon: f64,
+    },
+    /// Make SMC proposals `start .. start + len` of stream `stream` from the round's
+    /// [`Context`], score those inside the prior box, return those [`kept`] at `epsilon`.
+    Propose {
+        stream: u32,
+        start: u64,
+        len: u64,
+        epsilon: f64,
+    },
+    /// The log importance weights (unnormalised) of the new population's particles `first ..
+    /// first + particles.len()` against the round's [`Context`].
+    Weigh { first: usize, particles: Vec<Particle> },
+}
+
+/// What a task returns.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Output {
+    /// The result of a [`Task::Scan`] or [`Task::Propose`] over `start .. start + len`.
+    Found {
+        start: u64,
+        len: u64,
+        /// Candidates scored (proposals outside the prior box are not).
+        scored: u64,
+        /// (index, ρ) of the candidates kept, in index order.
+        kept: Vec<(u64, f64)>,
+    },
+    /// The result of a [`Task::Weigh`]: one log weight per particle from `first` on.
+    LogWeights { first: usize, values: Vec<f64> },
+}
+
+/// An SMC population's proposal distribution: the previous population and the kernel
+/// settings, with the kernels built from them once.
+pub struct Context {
+    pub(crate) particles: Vec<Particle>,
+    pub(crate) config: SmcConfig,
+    pub(crate) kernels: Kernels,
+}
+
+impl Context {
+    /// The proposal distribution of the population after `particles` (with their weights).
+    pub fn new(problem: &AbcProblem, particles: Vec<Particle>, config: SmcConfig) -> Result<Self> {
+        let kernels = Kernels::new(&problem.prior, &particles, &config)?;
+        Ok(Self {
+            particles,
+            config,
+            kernels,
+        })
+    }
+}
+
+/// A round of a population: its tasks and, for SMC, the context they need.
+pub struct Round<'a> {
+    /// The population the round belongs to.
+    pub population: usize,
+    pub context: Option<&'a Arc<Context>>,
+    pub tasks: Vec<Task>,
+}
+
+/// Runs rounds of tasks: in this process ([`Local`]), or on workers elsewhere.
+pub trait Workers: Sync {
+    /// The problem every task is scored against.
+    fn problem(&self) -> &AbcProblem;
+    /// The backend that scores, for records (`cpu`, `gpu`, or both for a mixed pool).
+    fn backend(&self) -> &'static str;
+    /// Tasks a round is cut into at most (1: one task per round).
+    fn parallelism(&self) -> usize {
+        1
+    }
+    /// One output per task of `round`, in any order.
+    fn run(&self, round: &Round) -> Result<Vec<Output>>;
+}
+
+impl<W: Workers + ?Sized> Workers for &W {
+    fn problem(&self) -> &AbcProblem {
+        (**self).problem()
+    }
+
+    fn backend(&self) -> &'static str {
+        (**self).backend()
+    }
+
+    fn parallelism(&self) -> usize {
+        (**self).parallelism()
+    }
+
+    fn run(&self, round: &Round) -> Result<Vec<Output>> {
+        (**self).run(round)
+    }
+}
+
+/// Every task run in this process by one evaluator.
+pub struct Local<E>(pub E);
+
+impl<E> Workers for Local<E>
+where
+    E: std::ops::Deref + Sync,
+    E::Target: Evaluator,
+{
+    fn problem(&self) -> &AbcProblem {
+        self.0.problem()
+    }
+
+    fn backend(&self) -> &'static str {
+        self.0.backend()
+    }
+
+    fn run(&self, round: &Round) -> Result<Vec<Output>> {
+        let context = round.context.map(Arc::as_ref);
+        round
+            .tasks
+            .iter()
+            .map(|task| execute(&*self.0, context, task))
+            .collect()
+    }
+}
+
+/// Runs one task with `evaluator`: what every worker does, here or elsewhere.
+pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>, task: &Task) -> Result<Output> {
+    let needs_context =
+        || context.ok_or_else(|| Error::Numerical("an SMC task arrived without its population's context".into()));
+    match *task {
+        Task::Scan {
+            stream,
+            start,
+            len,
+            epsilon,
+        } => {
+            let mut rho = vec![0.0; to_usize(len)?];
+            evaluator.score(stream, start, &mut rho)?;
+            Ok(Output::Found {
+                start,
+                len,
+                scored: len,
+                kept: keep(start, &rho, epsilon),
+            })
+        }
+        Task::Propose {
+            stream,
+            start,
+            len,
+            epsilon,
+        } => {
+            let context = needs_context()?;
+            let (scored, kept) = context.kernels.propose_and_score(
+                evaluator,
+                &context.particles,
+                stream,
+                start..start + len,
+                epsilon,
+            )?;
+            Ok(Output::Found {
+                start,
+                len,
+                scored,
+                kept,
+            })
+        }
+        Task::Weigh { first, ref particles } => {
+            let context = needs_context()?;
+            let values = context
+                .kernels
+                .log_weights(evaluator, &context.config, &context.particles, particles)?;
+            Ok(Output::LogWeights { first, values })
+        }
+    }
+}
+
+fn to_usize(len: u64) -> Result<usize> {
+    usize::try_from(len).map_err(|_| Error::Numerical(format!("a task of {len} candidates")))
+}
+
+/// (index, ρ) of the candidates of `rho` (candidate `start` first) kept at `epsilon`.
+pub(crate) fn keep(start: u64, rho: &[f64], epsilon: f64) -> Vec<(u64, f64)> {
+    rho.iter()
+        .enumerate()
+        .filter(|&(_, &r)| kept(r, epsilon))
+        .map(|(k, &r)| (start + k as u64, r))
+        .collect()
+}
+
+/// Tasks under this many candidates or particles are not cut further: below it the cost of a
+/// task's round trip outweighs its work.
+pub const MIN_TASK: u64 = 4096;
+
+/// Cuts `start .. start + len` into at most `pieces` contiguous ranges of near-equal length,
+/// none shorter than [`MIN_TASK`] unless the whole is.
+pub fn split(start: u64, len: u64, pieces: usize) -> Vec<(u64, u64)> {
+    let pieces = (pieces.max(1) as u64).min(len.div_ceil(MIN_TASK)).max(1);
+    let (base, extra) = (len / pieces, len % pieces);
+    let mut ranges = Vec::with_capacity(pieces as usize);
+    let mut at = start;
+    for k in 0..pieces {
+        let n = base + u64::from(k < extra);
+        ranges.push((at, n));
+        at += n;
+    }
+    ranges
+}
+
+/// The candidates of a round, merged from its tasks' outputs in index order: what a scan of
+/// the whole round in one process sees.
+pub(crate) struct Found {
+    pub start: u64,
+    pub len: u64,
+    pub scored: u64,
+    pub kept: Vec<(u64, f64)>,
+}
+
+impl Found {
+    /// One past the last candidate of the round.
+    pub fn end(&self) -> u64 {
+        self.start + self.len
+    }
+}
+
+/// Runs `tasks` (scans or proposals covering `start .. start + len`) on `workers` and merges
+/// their outputs, checking that they cover the round exactly once.
+pub(crate) fn run_found(workers: &dyn Workers, round: &Round, start: u64, len: u64) -> Result<Found> {
+    let mut outputs: Vec<Found> = workers
+        .run(round)?
+        .into_iter()
+        .map(|o| match o {
+            Output::Found {
+                start,
+                len,
+                scored,
+                kept,
+            } => Ok(Found {
+                start,
+                len,
+                scored,
+                kept,
+            }),
+            Output::LogWeights { .. } => Err(unexpected("log weights for a scan")),
+        })
+        .collect::<Result<_>>()?;
+    outputs.sort_by_key(|o| o.start);
+    let mut merged = Found {
+        start,
+        len,
+        scored: 0,
+        kept: Vec::new(),
+    };
+    let mut at = start;
+    for part in outputs {
+        let (s, end) = (part.start, part.end());
+        if s != at || part.kept.iter().any(|&(i, _)| i < s || i >= end) {
+            return Err(unexpected(&format!(
+                "a result for candidates {s}..{end} where {at} was next"
+            )));
+        }
+        at = end;
+        merged.scored += part.scored;
+        merged.kept.extend(part.kept);
+    }
+    if at != start + len {
+        return Err(unexpected(&format!(
+            "results end at candidate {at}, not {}",
+            start + len
+        )));
+    }
+    Ok(merged)
+}
+
+/// Runs `tasks` (weighings of `n` particles) on `workers` and merges their log weights.
+pub(crate) fn run_log_weights(workers: &dyn Workers, round: &Round, n: usize) -> Result<Vec<f64>> {
+    let mut outputs: Vec<(usize, Vec<f64>)> = workers
+        .run(round)?
+        .into_iter()
+        .map(|o| match o {
+            Output::LogWeights { first, values } => Ok((first, values)),
+            Output::Found { .. } => Err(unexpected("candidates for a weighing")),
+        })
+        .collect::<Result<_>>()?;
+    outputs.sort_by_key(|o| o.0);
+    let mut merged = Vec::with_capacity(n);
+    for (first, values) in outputs {
+        if first != merged.len() {
+            return Err(unexpected(&format!(
+                "weights from particle {first} where {} was next",
+                merged.len()
+            )));
+        }
+        merged.extend(values);
+    }
+    if merged.len() != n {
+        return Err(unexpected(&format!("{} weights for {n} particles", merged.len())));
+    }
+    Ok(merged)
+}
+
+fn unexpected(what: &str) -> Error {
+    Error::Worker(format!("the workers returned {what}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_split_covers_its_range_once_in_near_equal_pieces() {
+        for (start, len, pieces) in [(0, 10, 3), (7, 100_000, 3), (5, 4096 * 3 + 1, 8), (9, 1, 4), (0, 0, 2)] {
+            let ranges = split(start, len, pieces);
+            let mut at = start;
+            for &(s, n) in &ranges {
+                assert_eq!(s, at);
+                at += n;
+            }
+            assert_eq!(at, start + len, "{start} {len} {pieces}: {ranges:?}");
+            assert!(ranges.len() <= pieces.max(1));
+            let (lo, hi) = ranges.iter().fold((u64::MAX, 0), |(a, b), r| (a.min(r.1), b.max(r.1)));
+            assert!(hi - lo <= 1, "{ranges:?}");
+        }
+        // Short rounds are not cut below MIN_TASK.
+        assert_eq!(split(0, 5000, 8).len(), 2);
+        assert_eq!(split(0, 4096, 8), vec![(0, 4096)]);
+    }
+
+    #[test]
+    fn kept_holds_every_candidate_the_acceptance_and_near_counts_see() {
+        let eps = 0.0123;
+        for rho in [
+            0.0,
+            eps * 0.5,
+            eps * (1.0 - 1e-5),
+            eps,
+            eps * (1.0 + 1e-5),
+            eps * (1.0 + 1.5e-5),
+        ] {
+            assert!(kept(rho, eps), "{rho}");
+        }
+        assert!(!kept(eps * (1.0 + 3e-5), eps));
+        assert!(!kept(f64::NAN, eps) && !kept(f64::NAN, f64::INFINITY));
+        assert!(kept(1e300, f64::INFINITY));
+    }
+}

@@ -1,0 +1,398 @@
+//! Tasks as bytes: what a driver sends to a worker process and what comes back, the worker's
+//! side ([`serve`]) and the driver's ([`Remote`], over any [`Transport`]).
+//!
+//! A request names its problem (record, prior, seed) and, for SMC tasks, its context (the
+//! previous population) by key, without their contents. A worker that does not hold them
+//! yet answers [`Reply::Missing`], and the transport sends the same request again with both
+//! payloads attached; the worker keeps them (and the problem's evaluator: one GPU context and
+//! its pipelines per process) for the tasks that follow. So the record travels once per
+//! worker and the previous population once per worker and population, whatever the number of
+//! tasks. Everything is encoded with postcard (serde); a worker refuses a request from
+//! another bitrock version. Workers and driver must run the same build on the same platform:
+//! SMC proposals go through the platform's `ln`, `sin` and `cos`.
+
+use super::{Context, Output, Round, Task, Workers};
+use crate::abc::Particle;
+use crate::abc::smc::SmcConfig;
+use crate::error::{Error, Result};
+use crate::eval::{AbcProblem, Backend, Evaluator};
+use serde::{Deserialize, Serialize};
+use std::hash::{Hash, Hasher};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// The bitrock version every request carries.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// The environment variable that overrides, on a worker, the backend the driver asked for
+/// (`cpu`, `gpu` or `auto`): a node without a GPU in a pool of GPU nodes, say.
+pub const WORKER_BACKEND_VAR: &str = "BITROCK_WORKER_BACKEND";
+
+/// A task for a worker.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Request {
+    pub version: String,
+    /// Key of the problem's payload.
+    pub problem: u64,
+    /// Key of the context's payload, for SMC tasks.
+    pub context: Option<u64>,
+    pub backend: Backend,
+    pub task: Task,
+}
+
+/// A worker's answer.
+#[derive(Debug, Serialize, Deserialize)]
+pub enum Reply {
+    /// The task's output, and the backend that scored it (`cpu`, `gpu`).
+    Done { output: Output, backend: String },
+    /// The worker does not hold the request's problem or context: send the request again with
+    /// the payloads.
+    Missing,
+    /// The task failed in a way running it again cannot mend (another bitrock version, a
+    /// numerical failure, a refused GPU setting): the run stops with this message.
+    Failed(String),
+}
+
+/// The context's payload: the previous population and the kernel settings.
+#[derive(Serialize, Deserialize)]
+struct ContextPayload {
+    particles: Vec<Particle>,
+    config: SmcConfig,
+}
+
+/// Postcard bytes of `value`.
+pub fn encode<T: Serialize>(value: &T) -> Vec<u8> {
+    postcard::to_stdvec(value).expect("bitrock's messages serialise")
+}
+
+/// `value` from postcard `bytes`, or what is wrong with them.
+pub fn decode<'a, T: Deserialize<'a>>(bytes: &'a [u8], what: &str) -> Result<T> {
+    postcard::from_bytes(bytes).map_err(|e| Error::Worker(format!("not a bitrock {what}: {e}")))
+}
+
+/// True when `reply` asks for the payloads ([`Reply::Missing`]): what a transport checks.
+pub fn needs_payloads(reply: &[u8]) -> bool {
+    matches!(decode::<Reply>(reply, "reply"), Ok(Reply::Missing))
+}
+
+/// The key a payload is named by: a hash of its bytes.
+pub fn key_of(bytes: &[u8]) -> u64 {
+    let mut h = std::hash::DefaultHasher::new();
+    bytes.hash(&mut h);
+    h.finish()
+}
+
+/// Payloads and evaluators a worker process keeps, the most recently used last.
+#[derive(Default)]
+struct Held {
+    problems: Vec<(u64, Arc<AbcProblem>)>,
+    evaluators: Vec<((u64, Backend), Arc<dyn Evaluator>)>,
+    contexts: Vec<((u64, u64), Arc<Context>)>,
+}
+
+/// Problems and contexts a worker keeps at most (older ones are dropped first): several runs
+/// may share a pool of workers.
+const HELD: usize = 4;
+
+fn find<K: PartialEq + Copy, V: Clone>(list: &mut Vec<(K, V)>, key: K) -> Option<V> {
+    let at = list.iter().position(|(k, _)| *k == key)?;
+    let entry = list.remove(at);
+    let value = entry.1.clone();
+    list.push(entry);
+    Some(value)
+}
+
+fn hold<K, V>(list: &mut Vec<(K, V)>, key: K, value: V) {
+    if list.len() >= HELD {
+        list.remove(0);
+    }
+    list.push((key, value));
+}
+
+static HELD_HERE: Mutex<Option<Held>> = Mutex::new(None);
+
+/// Answers one request on a worker: the task's output, or [`Reply::Missing`] when the
+/// problem or context it names is neither held nor attached. Payloads attached are kept for
+/// later requests. Never fails: a failure is a [`Reply::Failed`].
+pub fn serve(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Vec<u8> {
+    encode(&match answer(request, problem, context) {
+        Ok(reply) => reply,
+        Err(e) => Reply::Failed(e.to_string()),
+    })
+}
+
+fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Result<Reply> {
+    let request: Request = decode(request, "request")?;
+    if request.version != VERSION {
+        return Err(Error::Worker(format!(
+            "the driver runs bitrock {} and this worker {VERSION}: install the same version on both",
+            request.version
+        )));
+    }
+    let backend = match std::env::var(WORKER_BACKEND_VAR) {
+        Ok(name) => worker_backend(&name)?,
+        Err(_) => request.backend,
+    };
+    let (evaluator, context) = {
+        let mut guard = HELD_HERE.lock().unwrap_or_else(|p| p.into_inner());
+        let held = guard.get_or_insert_with(Held::default);
+        if let Some(bytes) = problem
+            && find(&mut held.problems, request.problem).is_none()
+        {
+            let decoded: AbcProblem = decode(bytes, "problem")?;
+            hold(&mut held.problems, request.problem, Arc::new(decoded));
+        }
+        let Some(the_problem) = find(&mut held.problems, request.problem) else {
+            return Ok(Reply::Missing);
+        };
+        let evaluator = match find(&mut held.evaluators, (request.problem, backend)) {
+            Some(e) => e,
+            None => {
+                let made: Arc<dyn Evaluator> =
+                    Arc::from(crate::eval::evaluator((*the_problem).clone(), backend, &mut |_| {})?);
+                hold(&mut held.evaluators, (request.problem, backend), made.clone());
+                made
+            }
+        };
+        let context = match request.context {
+            None => None,
+            Some(key) => {
+                if let Some(bytes) = context
+                    && find(&mut held.contexts, (request.problem, key)).is_none()
+                {
+                    let payload: ContextPayload = decode(bytes, "context")?;
+                    let made = Context::new(&the_problem, payload.particles, payload.config)?;
+                    hold(&mut held.contexts, (request.problem, key), Arc::new(made));
+                }
+                match find(&mut held.contexts, (request.problem, key)) {
+                    Some(c) => Some(c),
+                    None => return Ok(Reply::Missing),
+                }
+            }
+        };
+        (evaluator, context)
+    };
+    let output = super::execute(evaluator.as_ref(), context.as_deref(), &request.task)?;
+    Ok(Reply::Done {
+        output,
+        backend: evaluator.backend().to_string(),
+    })
+}
+
+fn worker_backend(name: &str) -> Result<Backend> {
+    match name {
+        "cpu" => Ok(Backend::Cpu),
+        "gpu" => Ok(Backend::Gpu),
+        "auto" => Ok(Backend::Auto),
+        other => Err(Error::setting(
+            WORKER_BACKEND_VAR,
+            format!("must be cpu, gpu or auto, got {other:?}"),
+        )),
+    }
+}
+
+/// The payloads a request may need, for a transport to attach when a worker asks.
+pub struct Payloads<'a> {
+    pub problem: &'a [u8],
+    pub context: Option<&'a [u8]>,
+}
+
+/// What a transport sent and got back.
+pub struct Exchanged {
+    /// One [`Reply`] (encoded) per request, none of them [`Reply::Missing`], in request order.
+    pub replies: Vec<Vec<u8>>,
+    /// Bytes of the payloads the transport shipped (problem and context, once per worker
+    /// that asked).
+    pub payload_bytes: u64,
+}
+
+/// Carries requests to workers and their replies back: an executor of Python, Dask or Ray, or
+/// anything that can call [`serve`] elsewhere. It answers [`Reply::Missing`] by sending the
+/// request again with the payloads, and may run a request more than once (a lost worker):
+/// tasks are pure.
+pub trait Transport: Sync {
+    /// The replies to `requests`.
+    fn exchange(&self, requests: Vec<Vec<u8>>, payloads: &Payloads) -> Result<Exchanged>;
+    /// Tasks a round is worth cutting into (a few per worker).
+    fn parallelism(&self) -> usize;
+}
+
+/// What one population cost in traffic and waiting.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Traffic {
+    pub population: usize,
+    pub rounds: u64,
+    pub tasks: u64,
+    /// Bytes of the requests sent (first sending).
+    pub request_bytes: u64,
+    /// Bytes of the problem and context payloads shipped.
+    pub payload_bytes: u64,
+    /// Bytes of the replies received.
+    pub reply_bytes: u64,
+    /// Seconds the driver waited for the workers.
+    pub wait_seconds: f64,
+}
+
+/// Workers reached through a [`Transport`]: the driver's side of a distributed run.
+pub struct Remote<T> {
+    problem: AbcProblem,
+    problem_bytes: Vec<u8>,
+    problem_key: u64,
+    backend: Backend,
+    transport: T,
+    /// The context payload of the population in progress.
+    context: Mutex<Option<EncodedContext>>,
+    /// Backends the workers reported.
+    seen: Mutex<(bool, bool)>,
+    traffic: Mutex<Vec<Traffic>>,
+}
+
+impl<T: Transport> Remote<T> {
+    /// Workers for `problem` through `transport`, asked to score on `backend`.
+    pub fn new(problem: AbcProblem, backend: Backend, transport: T) -> Self {
+        let problem_bytes = encode(&problem);
+        Self {
+            problem_key: key_of(&problem_bytes),
+            problem,
+            problem_bytes,
+            backend,
+            transport,
+            context: Mutex::new(None),
+            seen: Mutex::new((false, false)),
+            traffic: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The transport the requests go through.
+    pub fn transport(&self) -> &T {
+        &self.transport
+    }
+
+    /// The traffic of every population so far.
+    pub fn traffic(&self) -> Vec<Traffic> {
+        self.traffic.lock().expect("traffic").clone()
+    }
+
+    /// The key and bytes of `round`'s context, encoded once per population.
+    fn context_payload(&self, round: &Round) -> Option<(u64, Arc<Vec<u8>>)> {
+        let context = round.context?;
+        let mut cached = self.context.lock().expect("context cache");
+        if let Some(c) = cached.as_ref().filter(|c| c.population == round.population) {
+            return Some((c.key, c.bytes.clone()));
+        }
+        let bytes = Arc::new(encode(&ContextPayloadRef {
+            particles: &context.particles,
+            config: &context.config,
+        }));
+        let key = key_of(&bytes);
+        *cached = Some(EncodedContext {
+            population: round.population,
+            key,
+            bytes: bytes.clone(),
+        });
+        Some((key, bytes))
+    }
+}
+
+/// A population's context as bytes, encoded once for all its rounds.
+struct EncodedContext {
+    population: usize,
+    key: u64,
+    bytes: Arc<Vec<u8>>,
+}
+
+/// [`ContextPayload`] borrowed, for encoding without a copy.
+#[derive(Serialize)]
+struct ContextPayloadRef<'a> {
+    particles: &'a [Particle],
+    config: &'a SmcConfig,
+}
+
+impl<T: Transport> Workers for Remote<T> {
+    fn problem(&self) -> &AbcProblem {
+        &self.problem
+    }
+
+    fn backend(&self) -> &'static str {
+        match *self.seen.lock().expect("backends") {
+            (true, true) => "cpu+gpu",
+            (false, true) => "gpu",
+            (true, false) => "cpu",
+            (false, false) => match self.backend {
+                Backend::Cpu => "cpu",
+                Backend::Gpu => "gpu",
+                Backend::Auto => "auto",
+            },
+        }
+    }
+
+    fn parallelism(&self) -> usize {
+        self.transport.parallelism().max(1)
+    }
+
+    fn run(&self, round: &Round) -> Result<Vec<Output>> {
+        let context = self.context_payload(round);
+        let requests: Vec<Vec<u8>> = round
+            .tasks
+            .iter()
+            .map(|task| {
+                encode(&Request {
+                    version: VERSION.to_string(),
+                    problem: self.problem_key,
+                    context: context.as_ref().map(|c| c.0),
+                    backend: self.backend,
+                    task: task.clone(),
+                })
+            })
+            .collect();
+        let request_bytes: u64 = requests.iter().map(|r| r.len() as u64).sum();
+        let started = Instant::now();
+        let exchanged = self.transport.exchange(
+            requests,
+            &Payloads {
+                problem: &self.problem_bytes,
+                context: context.as_ref().map(|c| c.1.as_slice()),
+            },
+        )?;
+        let wait_seconds = started.elapsed().as_secs_f64();
+        if exchanged.replies.len() != round.tasks.len() {
+            return Err(Error::Worker(format!(
+                "{} replies to {} tasks",
+                exchanged.replies.len(),
+                round.tasks.len()
+            )));
+        }
+        let reply_bytes: u64 = exchanged.replies.iter().map(|r| r.len() as u64).sum();
+        let mut outputs = Vec::with_capacity(round.tasks.len());
+        for reply in &exchanged.replies {
+            match decode::<Reply>(reply, "reply")? {
+                Reply::Done { output, backend } => {
+                    let mut seen = self.seen.lock().expect("backends");
+                    if backend == "gpu" {
+                        seen.1 = true;
+                    } else {
+                        seen.0 = true;
+                    }
+                    outputs.push(output);
+                }
+                Reply::Failed(message) => return Err(Error::Worker(message)),
+                Reply::Missing => return Err(Error::Worker("a worker still lacks the payloads it was sent".into())),
+            }
+        }
+        let mut traffic = self.traffic.lock().expect("traffic");
+        if traffic.last().is_none_or(|t| t.population != round.population) {
+            traffic.push(Traffic {
+                population: round.population,
+                ..Traffic::default()
+            });
+        }
+        let t = traffic.last_mut().expect("just pushed");
+        t.rounds += 1;
+        t.tasks += round.tasks.len() as u64;
+        t.request_bytes += request_bytes;
+        t.payload_bytes += exchanged.payload_bytes;
+        t.reply_bytes += reply_bytes;
+        t.wait_seconds += wait_seconds;
+        Ok(outputs)
+    }
+}

@@ -1,0 +1,208 @@
+//! Populations as tasks: a run whose tasks travel as bytes to "workers" that answer in any
+//! order, lose replies and run tasks twice gives exactly the single-process run.
+
+use crate::support::paper_m2_problem;
+use bitrock::abc::rejection::{self, Mode, RejectionConfig};
+use bitrock::abc::shard::wire::{self, Exchanged, Payloads, Reply, Request};
+use bitrock::abc::shard::{self, Remote, Task, Transport};
+use bitrock::abc::smc::{self, SmcConfig};
+use bitrock::abc::{Run, Silent};
+use bitrock::eval::Backend;
+use bitrock::eval::cpu::CpuEvaluator;
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Workers in this process behind bytes: requests served on the rayon pool in a shuffled
+/// order, every third reply (by a seeded coin) lost and the task run again, payloads attached
+/// only when a worker asks for them.
+struct Scrambling {
+    pieces: usize,
+    rng: Mutex<rand::rngs::StdRng>,
+    lost: AtomicU64,
+    asked: AtomicU64,
+}
+
+impl Scrambling {
+    fn new(pieces: usize, seed: u64) -> Self {
+        Self {
+            pieces,
+            rng: Mutex::new(rand::rngs::StdRng::seed_from_u64(seed)),
+            lost: AtomicU64::new(0),
+            asked: AtomicU64::new(0),
+        }
+    }
+}
+
+impl Transport for Scrambling {
+    fn exchange(&self, requests: Vec<Vec<u8>>, payloads: &Payloads) -> bitrock::Result<Exchanged> {
+        let order: Vec<(usize, bool)> = {
+            let mut rng = self.rng.lock().unwrap();
+            let mut order: Vec<(usize, bool)> = (0..requests.len()).map(|i| (i, rng.random_bool(0.33))).collect();
+            order.shuffle(&mut *rng);
+            order
+        };
+        let payload_bytes = AtomicU64::new(0);
+        let mut replies: Vec<(usize, Vec<u8>)> = order
+            .par_iter()
+            .map(|&(i, lose)| {
+                if lose {
+                    // The worker ran it, the reply never came: the task runs again.
+                    let _ = shard::serve(&requests[i], Some(payloads.problem), payloads.context);
+                    self.lost.fetch_add(1, Ordering::Relaxed);
+                }
+                let mut reply = shard::serve(&requests[i], None, None);
+                if wire::needs_payloads(&reply) {
+                    self.asked.fetch_add(1, Ordering::Relaxed);
+                    payload_bytes.fetch_add(
+                        (payloads.problem.len() + payloads.context.map_or(0, <[u8]>::len)) as u64,
+                        Ordering::Relaxed,
+                    );
+                    reply = shard::serve(&requests[i], Some(payloads.problem), payloads.context);
+                }
+                (i, reply)
+            })
+            .collect();
+        replies.sort_by_key(|r| r.0);
+        Ok(Exchanged {
+            replies: replies.into_iter().map(|r| r.1).collect(),
+            payload_bytes: payload_bytes.into_inner(),
+        })
+    }
+
+    fn parallelism(&self) -> usize {
+        self.pieces
+    }
+}
+
+/// Asserts two runs have the same populations: every particle to the bit, every record but
+/// its seconds.
+fn assert_same_run(a: &Run, b: &Run) {
+    assert_eq!(a.stop, b.stop);
+    assert_eq!(a.populations.len(), b.populations.len());
+    for (p, q) in a.populations.iter().zip(&b.populations) {
+        let (mut r, mut s) = (p.record.clone(), q.record.clone());
+        r.seconds = 0.0;
+        s.seconds = 0.0;
+        assert_eq!(r, s, "population {}", p.record.index);
+        assert_eq!(p.particles.len(), q.particles.len());
+        for (x, y) in p.particles.iter().zip(&q.particles) {
+            assert_eq!((x.law, x.index), (y.law, y.index));
+            assert_eq!(x.rho.to_bits(), y.rho.to_bits());
+            assert_eq!(x.weight.to_bits(), y.weight.to_bits(), "weight of {}", x.index);
+            assert!(x.params.iter().zip(&y.params).all(|(u, v)| u.to_bits() == v.to_bits()));
+        }
+    }
+    assert_eq!(a.evaluations, b.evaluations);
+}
+
+fn base(particles: usize, mode: Mode) -> RejectionConfig {
+    RejectionConfig {
+        particles,
+        eps_min: 0.0,
+        max_populations: 5,
+        mode,
+        max_batch: 20_000,
+        ..RejectionConfig::default()
+    }
+}
+
+#[test]
+fn rejection_through_scrambling_workers_is_the_single_process_run() {
+    let (problem, _) = paper_m2_problem(31);
+    for mode in [Mode::Nested, Mode::Paper] {
+        let config = base(1500, mode);
+        let here = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
+        for pieces in [2, 7] {
+            let remote = Remote::new(problem.clone(), Backend::Cpu, Scrambling::new(pieces, pieces as u64));
+            let there = rejection::run_on(&remote, &config, Vec::new(), &mut Silent).unwrap();
+            assert_same_run(&here, &there);
+            let traffic = remote.traffic();
+            // A nested population may come whole from the candidates scored for the last one.
+            assert!(traffic.len() <= here.populations.len(), "{mode:?}");
+            assert!(
+                traffic.iter().any(|t| t.tasks > t.rounds),
+                "rounds were cut: {traffic:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn smc_through_scrambling_workers_is_the_single_process_run() {
+    let (problem, _) = paper_m2_problem(32);
+    let config = SmcConfig {
+        base: base(1500, Mode::Nested),
+        ..SmcConfig::default()
+    };
+    let here = smc::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
+    assert!(here.populations.len() >= 4, "{}", here.populations.len());
+    let remote = Remote::new(problem.clone(), Backend::Cpu, Scrambling::new(5, 9));
+    let there = smc::run_on(&remote, &config, Vec::new(), &mut Silent).unwrap();
+    assert_same_run(&here, &there);
+    // The previous population travels as a payload when a worker asks for it, not with
+    // every task.
+    let traffic = remote.traffic();
+    let tasks: u64 = traffic.iter().map(|t| t.tasks).sum();
+    let asked = remote_asked(&remote);
+    assert!(asked < tasks, "{asked} payloads for {tasks} tasks");
+}
+
+fn remote_asked(remote: &Remote<Scrambling>) -> u64 {
+    remote.transport().asked.load(Ordering::Relaxed)
+}
+
+#[test]
+fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
+    let (problem, _) = paper_m2_problem(33);
+    let task = Task::Scan {
+        stream: 0,
+        start: 0,
+        len: 10,
+        epsilon: f64::INFINITY,
+    };
+    let request = |version: &str, problem: u64| {
+        wire::encode(&Request {
+            version: version.into(),
+            problem,
+            context: None,
+            backend: Backend::Cpu,
+            task: task.clone(),
+        })
+    };
+    let payload = wire::encode(&problem);
+    let key = wire::key_of(&payload) ^ 0x5eed; // a key this process has never held
+    let missing = shard::serve(&request(wire::VERSION, key), None, None);
+    assert!(wire::needs_payloads(&missing));
+    let done = shard::serve(&request(wire::VERSION, key), Some(&payload), None);
+    match wire::decode::<Reply>(&done, "reply").unwrap() {
+        Reply::Done {
+            output: shard::Output::Found { kept, scored, .. },
+            backend,
+        } => {
+            assert_eq!((scored, kept.len(), backend.as_str()), (10, 10, "cpu"));
+            let mut rho = [0.0; 10];
+            use bitrock::eval::Evaluator;
+            CpuEvaluator::new(problem.clone()).score(0, 0, &mut rho).unwrap();
+            assert!(kept.iter().zip(rho).all(|(k, r)| k.1.to_bits() == r.to_bits()));
+        }
+        other => panic!("{other:?}"),
+    }
+    // Held now: no payload needed.
+    assert!(!wire::needs_payloads(&shard::serve(
+        &request(wire::VERSION, key),
+        None,
+        None
+    )));
+    let other = shard::serve(&request("0.0.0-other", key), None, None);
+    match wire::decode::<Reply>(&other, "reply").unwrap() {
+        Reply::Failed(m) => assert!(m.contains("0.0.0-other") && m.contains(wire::VERSION), "{m}"),
+        r => panic!("{r:?}"),
+    }
+    match wire::decode::<Reply>(&shard::serve(b"\xff\xff", None, None), "reply").unwrap() {
+        Reply::Failed(m) => assert!(m.contains("not a bitrock request"), "{m}"),
+        r => panic!("{r:?}"),
+    }
+}
