@@ -838,7 +838,8 @@ fn sample(
     let mut store = store?;
     if let Some(invocation) = invocation {
         let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
-        store.finish_invocation(invocation, stop.as_str().unwrap_or_default())?;
+        // The backends that scored, as the workers reported them (a pool may mix them).
+        store.finish_invocation(invocation, stop.as_str().unwrap_or_default(), evaluator.backend())?;
     }
     Ok(run)
 }

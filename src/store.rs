@@ -508,12 +508,13 @@ impl RunStore {
         Ok(self.conn.last_insert_rowid())
     }
 
-    /// Marks invocation `id` finished with why it stopped.
-    pub fn finish_invocation(&mut self, id: i64, stop_reason: &str) -> Result<()> {
+    /// Marks invocation `id` finished with why it stopped and the backend that scored (known
+    /// for certain only once workers have answered).
+    pub fn finish_invocation(&mut self, id: i64, stop_reason: &str, backend: &str) -> Result<()> {
         self.conn
             .execute(
-                "UPDATE invocations SET finished_unix_s = ?1, stop_reason = ?2 WHERE id = ?3",
-                params![unix_seconds(), stop_reason, id],
+                "UPDATE invocations SET finished_unix_s = ?1, stop_reason = ?2, backend = ?3 WHERE id = ?4",
+                params![unix_seconds(), stop_reason, backend, id],
             )
             .map_err(sql_error(&self.path))?;
         Ok(())

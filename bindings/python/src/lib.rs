@@ -3,6 +3,8 @@
 //! results leave as JSON documents (the ones `run.json` and `fit --json` hold) and NumPy
 //! arrays. Work runs with the interpreter released; Ctrl-C stops a run between batches.
 
+use bitrock::abc::shard::wire::{Exchanged, Payloads, Traffic};
+use bitrock::abc::shard::{Remote, Transport, Workers};
 use bitrock::abc::{Observer, Population, Progress};
 use bitrock::data::{DataOptions, FieldData};
 use bitrock::error::Error;
@@ -16,8 +18,9 @@ use bitrock::{Law, documents};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyBytes, PyDict, PyList};
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
 
 /// Keyword arguments whose names differ from the library's configuration fields: an error
 /// about the field names the argument the caller wrote.
@@ -317,6 +320,94 @@ impl Observer for PyObserver {
     }
 }
 
+/// Carries a run's tasks to workers through a Python dispatcher (`bitrock._distributed`): its
+/// `exchange(requests, problem, context)` returns the replies and the payload bytes shipped.
+struct PyTransport {
+    dispatcher: Py<PyAny>,
+    parallelism: usize,
+    /// The Python exception that stopped an exchange (Ctrl-C, a task failing on every try).
+    raised: Mutex<Option<PyErr>>,
+}
+
+impl Transport for PyTransport {
+    fn exchange(&self, requests: Vec<Vec<u8>>, payloads: &Payloads) -> bitrock::Result<Exchanged> {
+        let exchanged = Python::attach(|py| -> PyResult<Exchanged> {
+            let requests = PyList::new(py, requests.iter().map(|r| PyBytes::new(py, r)))?;
+            let problem = PyBytes::new(py, payloads.problem);
+            let context = payloads.context.map(|c| PyBytes::new(py, c));
+            let answer = self
+                .dispatcher
+                .call_method1(py, "exchange", (requests, problem, context))?;
+            let (replies, payload_bytes): (Vec<Bound<'_, PyBytes>>, u64) = answer.extract(py)?;
+            Ok(Exchanged {
+                replies: replies.iter().map(|r| r.as_bytes().to_vec()).collect(),
+                payload_bytes,
+            })
+        });
+        exchanged.map_err(|e| {
+            *self.raised.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+            Error::Interrupted
+        })
+    }
+
+    fn parallelism(&self) -> usize {
+        self.parallelism
+    }
+}
+
+/// Makes the workers of a run on `dispatcher` once its problem is known, keeping them in
+/// `cell` so that their traffic and any Python exception can be read after the run.
+#[allow(clippy::needless_lifetimes)] // eliding 'a leaves the boxed workers' lifetime unnamed
+fn remote_on<'a>(
+    cell: &'a OnceLock<Remote<PyTransport>>,
+    dispatcher: Py<PyAny>,
+    parallelism: usize,
+) -> impl FnMut(bitrock::eval::AbcProblem, Backend) -> bitrock::Result<Box<dyn Workers + 'a>> {
+    let mut transport = Some(PyTransport {
+        dispatcher,
+        parallelism,
+        raised: Mutex::new(None),
+    });
+    move |problem, backend| {
+        let transport = transport.take().expect("a run makes its workers once");
+        Ok(Box::new(cell.get_or_init(|| Remote::new(problem, backend, transport))))
+    }
+}
+
+/// The traffic of a distributed run as JSON, and the Python exception that stopped it.
+fn after_remote(cell: OnceLock<Remote<PyTransport>>) -> (Option<String>, Option<PyErr>) {
+    match cell.into_inner() {
+        None => (None, None),
+        Some(remote) => {
+            let traffic: Vec<Traffic> = remote.traffic();
+            let raised = remote
+                .transport()
+                .raised
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .take();
+            (
+                Some(serde_json::to_string(&traffic).expect("traffic serialises")),
+                raised,
+            )
+        }
+    }
+}
+
+/// Answers a task on a worker process (see `bitrock::abc::shard::wire`).
+#[pyfunction]
+#[pyo3(signature = (request, problem=None, context=None))]
+fn serve<'py>(py: Python<'py>, request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Bound<'py, PyBytes> {
+    let reply = py.detach(|| bitrock::abc::shard::serve(request, problem, context));
+    PyBytes::new(py, &reply)
+}
+
+/// True when a worker's reply asks for the problem and context payloads.
+#[pyfunction]
+fn needs_payloads(reply: &[u8]) -> bool {
+    bitrock::abc::shard::wire::needs_payloads(reply)
+}
+
 /// A finished run: its `run.json` document, and the particles of any population.
 #[pyclass(frozen, module = "bitrock._bitrock")]
 struct Run {
@@ -330,6 +421,9 @@ struct Run {
     /// particles are read from its store.
     populations: Vec<Population>,
     torque_unit: TorqueUnit,
+    /// Per population of a distributed run: tasks, bytes shipped, seconds waited (JSON).
+    #[pyo3(get)]
+    traffic: Option<String>,
 }
 
 #[pymethods]
@@ -388,13 +482,15 @@ fn run_of(analysis: bitrock::pipeline::Analysis, path: Option<PathBuf>) -> Run {
         path,
         populations,
         torque_unit,
+        traffic: None,
     }
 }
 
 /// Runs the ABC job on `record` with the settings in `settings` (keyword arguments of
 /// `bitrock.abc`), into `out` when given.
 #[pyfunction]
-#[pyo3(signature = (record, settings, out, force, progress, note))]
+#[pyo3(signature = (record, settings, out, force, progress, note, dispatcher=None, parallelism=1))]
+#[allow(clippy::too_many_arguments)] // the Python layer's keyword arguments, passed through
 fn abc(
     py: Python<'_>,
     record: &Record,
@@ -403,6 +499,8 @@ fn abc(
     force: bool,
     progress: Option<Py<PyAny>>,
     note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
 ) -> PyResult<Run> {
     let s = run_settings(py, settings)?;
     let config = check(py, s.config())?;
@@ -417,23 +515,48 @@ fn abc(
         raised: None,
     };
     let data = record.data.clone();
-    let result = py.detach(|| job.run(data, &mut observer));
-    if let Some(e) = observer.raised.take() {
+    let cell = OnceLock::new();
+    let result = match dispatcher {
+        None => py.detach(|| job.run(data, &mut observer)),
+        Some(dispatcher) => {
+            let mut make = remote_on(&cell, dispatcher, parallelism);
+            let backend = job.config.backend;
+            py.detach(|| job.run_on(data, Some(&mut |problem, _note| make(problem, backend)), &mut observer))
+        }
+    };
+    finish_run(py, result, observer, cell, out)
+}
+
+/// The `Run` of a finished job, or the exception that stopped it (a callback's or the
+/// workers' before the library's own).
+fn finish_run(
+    py: Python<'_>,
+    result: bitrock::Result<bitrock::pipeline::Analysis>,
+    mut observer: PyObserver,
+    cell: OnceLock<Remote<PyTransport>>,
+    path: Option<PathBuf>,
+) -> PyResult<Run> {
+    let (traffic, raised) = after_remote(cell);
+    if let Some(e) = raised.or_else(|| observer.raised.take()) {
         return Err(e);
     }
     let analysis = check(py, result)?;
-    Ok(run_of(analysis, out))
+    let mut run = run_of(analysis, path);
+    run.traffic = traffic;
+    Ok(run)
 }
 
 /// Continues the run in `path` with the stopping rules in `more`.
 #[pyfunction]
-#[pyo3(signature = (path, more, progress, note))]
+#[pyo3(signature = (path, more, progress, note, dispatcher=None, parallelism=1))]
 fn resume(
     py: Python<'_>,
     path: PathBuf,
     more: &Bound<'_, PyDict>,
     progress: Option<Py<PyAny>>,
     note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
 ) -> PyResult<Run> {
     let continuation = Continuation {
         eps_min: kwarg(more, "eps_min")?,
@@ -449,12 +572,22 @@ fn resume(
         note,
         raised: None,
     };
-    let result = py.detach(|| bitrock::pipeline::resume(&path, &continuation, &mut observer));
-    if let Some(e) = observer.raised.take() {
-        return Err(e);
-    }
-    let analysis = check(py, result)?;
-    Ok(run_of(analysis, Some(path)))
+    let cell = OnceLock::new();
+    let result = match dispatcher {
+        None => py.detach(|| bitrock::pipeline::resume(&path, &continuation, &mut observer)),
+        Some(dispatcher) => {
+            let mut make = remote_on(&cell, dispatcher, parallelism);
+            py.detach(|| {
+                bitrock::pipeline::resume_on(
+                    &path,
+                    &continuation,
+                    Some(&mut |problem, backend, _note| make(problem, backend)),
+                    &mut observer,
+                )
+            })
+        }
+    };
+    finish_run(py, result, observer, cell, Some(path))
 }
 
 /// Opens the finished run in `path`: its run.json and its store.
@@ -467,6 +600,7 @@ fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
         path: Some(path),
         populations: Vec::new(),
         torque_unit: store.setup.data.torque_unit,
+        traffic: None,
     })
 }
 
@@ -816,5 +950,7 @@ fn _bitrock(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(parity, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(serve, m)?)?;
+    m.add_function(wrap_pyfunction!(needs_payloads, m)?)?;
     Ok(())
 }

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from . import _bitrock
+from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError
 
 __all__ = [
@@ -38,6 +39,7 @@ __all__ = [
     "fit",
     "open_run",
     "parity",
+    "ray_executor",
     "read_record",
     "resume",
     "simulate",
@@ -194,6 +196,7 @@ def abc(
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     progress: bool | Callable[..., Any] = True,
+    executor: Any = None,
 ) -> "Result":
     """ABC with model selection on ``record``: least-squares fits, a prior around them, then
     populations of the rejection sampler (the paper's Algorithm 1) or ABC-SMC down to the
@@ -201,16 +204,32 @@ def abc(
     seed. With ``out``, the run is written to that directory (``force`` replaces a run there)
     and can be continued with :func:`resume`; Ctrl-C stops it between batches, keeping the
     populations completed. ``progress``: a tqdm bar (when tqdm is installed), ``False``, or a
-    callable ``(population, accepted, target, drawn, epsilon)``."""
-    settings = {k: v for k, v in locals().items() if k not in ("record", "out", "force", "progress")}
+    callable ``(population, accepted, target, drawn, epsilon)``.
+
+    ``executor`` runs the populations' tasks on a pool of workers: a
+    ``concurrent.futures.Executor`` (a ``ProcessPoolExecutor`` must spawn, not fork), a
+    ``dask.distributed.Client``, or :func:`ray_executor`. The particles are the ones one
+    process gives, bit for bit, whatever the number of workers, the order tasks finish in,
+    or tasks lost and run again; :attr:`Result.traffic` says what travelled."""
+    settings = {k: v for k, v in locals().items() if k not in ("record", "out", "force", "progress", "executor")}
     for key in ("laws", "epsilons"):
         if settings[key] is not None:
             settings[key] = list(settings[key])
     if settings["prior_file"] is not None:
         settings["prior_file"] = os.fspath(settings["prior_file"])
+    dispatcher = None if executor is None else Dispatcher(executor)
     callback, close = _progress(progress)
     try:
-        run = _bitrock.abc(record, settings, None if out is None else os.fspath(out), force, callback, _note)
+        run = _bitrock.abc(
+            record,
+            settings,
+            None if out is None else os.fspath(out),
+            force,
+            callback,
+            _note,
+            dispatcher,
+            1 if dispatcher is None else dispatcher.parallelism,
+        )
     finally:
         close()
     return Result(run)
@@ -226,9 +245,11 @@ def resume(
     max_seconds: float | None = None,
     backend: str | None = None,
     progress: bool | Callable[..., Any] = True,
+    executor: Any = None,
 ) -> "Result":
     """Continues the run in ``path`` (killed, interrupted or finished) with new stopping
-    rules; the populations are those an uninterrupted run gives."""
+    rules; the populations are those an uninterrupted run gives. ``executor`` as for
+    :func:`abc`."""
     more = {
         "eps_min": eps_min,
         "max_populations": max_populations,
@@ -237,9 +258,17 @@ def resume(
         "max_seconds": max_seconds,
         "backend": backend,
     }
+    dispatcher = None if executor is None else Dispatcher(executor)
     callback, close = _progress(progress)
     try:
-        run = _bitrock.resume(os.fspath(path), more, callback, _note)
+        run = _bitrock.resume(
+            os.fspath(path),
+            more,
+            callback,
+            _note,
+            dispatcher,
+            1 if dispatcher is None else dispatcher.parallelism,
+        )
     finally:
         close()
     return Result(run)
@@ -476,6 +505,17 @@ class Result:
             for p in self.document["populations"]
         ]
         return pd.DataFrame(rows).set_index("population")
+
+    @property
+    def traffic(self) -> pd.DataFrame | None:
+        """For a run on an executor, one row per population this invocation ran: rounds,
+        tasks, bytes of requests, of payloads (record and previous population, once per worker
+        that asked) and of replies, and the seconds the driver waited for the workers.
+        ``None`` for a run in one process."""
+        if self._run.traffic is None:
+            return None
+        frame = pd.DataFrame(json.loads(self._run.traffic))
+        return frame.set_index("population") if len(frame) else frame
 
     @property
     def model_probabilities(self) -> pd.DataFrame:

@@ -42,6 +42,9 @@ class Run:
         """The run.json document, as text."""
     @property
     def path(self) -> Path | None: ...
+    @property
+    def traffic(self) -> str | None:
+        """Per population of a run on workers: tasks, bytes shipped, seconds waited (JSON)."""
     def particles(self, g: int) -> dict[str, Particles]:
         """Population g's particles by law: (names, params [n, k] in the record's torque unit,
         weights, rho, candidate index)."""
@@ -60,9 +63,16 @@ def abc(
     force: bool,
     progress: Progress | None,
     note: Callable[[str], Any] | None,
+    dispatcher: Any = None,
+    parallelism: int = 1,
 ) -> Run: ...
 def resume(
-    path: str | PathLike[str], more: dict[str, Any], progress: Progress | None, note: Callable[[str], Any] | None
+    path: str | PathLike[str],
+    more: dict[str, Any],
+    progress: Progress | None,
+    note: Callable[[str], Any] | None,
+    dispatcher: Any = None,
+    parallelism: int = 1,
 ) -> Run: ...
 def open_run(path: str | PathLike[str]) -> Run: ...
 def stability(
@@ -85,3 +95,7 @@ def simulate(law: str, params: list[float] | None, omega_rpm: float, options: di
 def parity(record: Record | None, laws: list[str] | None, options: dict[str, Any]) -> str:
     """The parity report as JSON text."""
 def version() -> str: ...
+def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:
+    """Answers one task on a worker process."""
+def needs_payloads(reply: bytes) -> bool:
+    """True when a worker's reply asks for the record and previous population."""
