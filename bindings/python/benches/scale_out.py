@@ -1,0 +1,150 @@
+"""How a run scales over worker processes: the same rejection run (the embedded record, CPU
+backend) in one process, on 1 and on 2 single-threaded worker processes (a spawning
+ProcessPoolExecutor), and on a local Dask cluster of 2 single-threaded workers. Prints, per
+set-up, the median seconds of ``--reps`` runs and, per population, the tasks, the bytes
+shipped and the driver's serial seconds (the population's seconds less the time it waited for
+the workers). Every run's particles are checked against the one-process run's.
+
+    python bindings/python/benches/scale_out.py --particles 1000000 --populations 2 --reps 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import json
+import multiprocessing
+import os
+import platform
+import statistics
+import time
+
+import numpy as np
+
+import bitrock
+
+
+def _single_threaded() -> None:
+    os.environ["RAYON_NUM_THREADS"] = "1"
+
+
+def _same(a: bitrock.Result, b: bitrock.Result) -> bool:
+    for g in range(len(a.populations)):
+        pa, pb = a.particles(g), b.particles(g)
+        if pa.keys() != pb.keys():
+            return False
+        for law in pa:
+            if not all(np.array_equal(x, y) for x, y in zip(pa[law][1:], pb[law][1:])):
+                return False
+    return len(a.populations) == len(b.populations)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--particles", type=int, default=1_000_000)
+    parser.add_argument("--populations", type=int, default=2)
+    parser.add_argument("--reps", type=int, default=3)
+    parser.add_argument("--sampler", default="rejection")
+    parser.add_argument("--json", help="also write the figures to this file")
+    args = parser.parse_args()
+    record = bitrock.read_record()
+    settings = dict(
+        particles=args.particles,
+        max_populations=args.populations,
+        sampler=args.sampler,
+        seed=1,
+        backend="cpu",
+        progress=False,
+    )
+    spawn = multiprocessing.get_context("spawn")
+
+    def one_process():
+        return None, lambda: None
+
+    def pool(workers):
+        def make():
+            executor = concurrent.futures.ProcessPoolExecutor(workers, mp_context=spawn, initializer=_single_threaded)
+            return executor, executor.shutdown
+
+        return make
+
+    def dask(workers):
+        def make():
+            import distributed
+
+            cluster = distributed.LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                env={"RAYON_NUM_THREADS": "1"},
+            )
+            client = distributed.Client(cluster)
+
+            def close() -> None:
+                client.close()
+                cluster.close()
+
+            return client, close
+
+        return make
+
+    setups = [
+        ("one process (rayon, all cores)", one_process),
+        ("ProcessPool, 1 worker × 1 thread", pool(1)),
+        ("ProcessPool, 2 workers × 1 thread", pool(2)),
+        ("Dask LocalCluster, 2 workers × 1 thread", dask(2)),
+    ]
+    reference = bitrock.abc(record, **settings)
+    figures = []
+    for name, make in setups:
+        executor, close = make()
+        # A first run warms the workers (process start, imports): the medians are of runs on
+        # warm workers, as a long job sees them.
+        if executor is not None:
+            bitrock.abc(record, **{**settings, "particles": 1000, "max_populations": 1}, executor=executor)
+        seconds, result = [], None
+        for _ in range(args.reps):
+            started = time.perf_counter()
+            result = bitrock.abc(record, **settings, executor=executor)
+            seconds.append(time.perf_counter() - started)
+        identical = _same(reference, result)
+        traffic = result.traffic
+        row = {"setup": name, "median_s": statistics.median(seconds), "runs_s": seconds, "identical": identical}
+        if traffic is not None:
+            pops = result.populations
+            serial = [pops.loc[g, "seconds"] - traffic.loc[g, "wait_seconds"] for g in traffic.index]
+            row["per_population"] = [
+                {
+                    "population": int(g),
+                    "tasks": int(traffic.loc[g, "tasks"]),
+                    "request_bytes": int(traffic.loc[g, "request_bytes"]),
+                    "payload_bytes": int(traffic.loc[g, "payload_bytes"]),
+                    "reply_bytes": int(traffic.loc[g, "reply_bytes"]),
+                    "driver_serial_s": float(s),
+                    "population_s": float(pops.loc[g, "seconds"]),
+                }
+                for g, s in zip(traffic.index, serial)
+            ]
+        figures.append(row)
+        close()
+        print(f"{name}: median {row['median_s']:.2f} s of {[round(s, 2) for s in seconds]}, identical: {identical}", flush=True)
+        for p in row.get("per_population", []):
+            print(
+                f"    population {p['population']}: {p['tasks']} tasks, requests {p['request_bytes']} B, "
+                f"payloads {p['payload_bytes']} B, replies {p['reply_bytes']} B, "
+                f"driver serial {p['driver_serial_s']:.3f} s of {p['population_s']:.2f} s",
+                flush=True,
+            )
+    meta = {
+        "command": "python bindings/python/benches/scale_out.py "
+        + f"--particles {args.particles} --populations {args.populations} --reps {args.reps} --sampler {args.sampler}",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
+        "bitrock": bitrock.__version__,
+        "date": time.strftime("%Y-%m-%d"),
+    }
+    print(json.dumps(meta))
+    if args.json:
+        with open(args.json, "w") as out:
+            json.dump({"meta": meta, "figures": figures}, out, indent=2)
+
+
+if __name__ == "__main__":
+    main()
