@@ -28,6 +28,7 @@ fn main() -> ExitCode {
         Command::CheckSelection(cmd) => cli::check::run(&cmd),
         Command::Fe(cmd) => cli::fe::run(&cmd),
         Command::Stability(cmd) => cli::stability::run(&cmd),
+        Command::Devices(cmd) => cli::devices::run(&cmd),
     };
     match result {
         Ok(code) => code,

@@ -5,7 +5,7 @@
 
 use crate::abc::floor;
 use crate::abc::rejection::{self, Mode, RejectionConfig};
-use crate::abc::shard::{Local, Workers};
+use crate::abc::shard::{self, Devices, Local, Workers};
 use crate::abc::smc::{self, SmcConfig, WeightsOn};
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
@@ -38,6 +38,9 @@ pub struct RunConfig {
     pub prior_file: Option<PathBuf>,
     pub seed: u64,
     pub backend: Backend,
+    /// Every GPU of the machine or one (see [`Devices`]); the populations are the same.
+    #[serde(default)]
+    pub devices: Devices,
     pub sampler: SamplerConfig,
     /// Replace the sampler's eps_min by the floor the record can reach ([`floor::resolve`]:
     /// the paper's 0.014 where reachable), in [`start`], and store the result. `bitrock abc`
@@ -56,6 +59,7 @@ impl Default for RunConfig {
             prior_file: None,
             seed: 1,
             backend: Backend::Auto,
+            devices: Devices::One,
             sampler: SamplerConfig::Rejection(RejectionConfig::default()),
             eps_min_from_record: false,
         }
@@ -170,6 +174,7 @@ pub struct Settings {
     pub smc_weights: Option<WeightsOn>,
     pub seed: Option<u64>,
     pub backend: Option<Backend>,
+    pub devices: Option<Devices>,
 }
 
 impl Settings {
@@ -229,6 +234,7 @@ impl Settings {
             prior_file: self.prior_file.clone(),
             seed: self.seed.unwrap_or(defaults.seed),
             backend: self.backend.unwrap_or(defaults.backend),
+            devices: self.devices.unwrap_or(defaults.devices),
             sampler,
             eps_min_from_record: self.eps_min.is_none() && schedule.is_none(),
         })
@@ -321,6 +327,7 @@ pub struct Continuation {
     pub min_acceptance: Option<f64>,
     pub max_seconds: Option<f64>,
     pub backend: Option<Backend>,
+    pub devices: Option<Devices>,
     /// The population this invocation summarises (default: the last), checked against the
     /// continued run's `max_populations` before any population is drawn.
     pub summary_population: Option<usize>,
@@ -417,10 +424,8 @@ pub fn start(
     prior_file: Option<&PriorFile>,
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
-    let backend = config.backend;
-    let mut here = move |problem, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers>> {
-        Ok(Box::new(Local(crate::eval::evaluator(problem, backend, note)?)))
-    };
+    let (backend, devices) = (config.backend, config.devices);
+    let mut here = move |problem, note: &mut dyn FnMut(String)| shard::here(problem, backend, devices, note);
     start_on(dir, data, config, prior_file, &mut here, observer)
 }
 
@@ -636,15 +641,16 @@ const FIRST_EXACT_CANDIDATES_SCHEMA: i64 = 2;
 /// Continues the run in `dir` after its last stored population with the stopping rules of
 /// `more`; the populations are those an uninterrupted run with the same settings gives.
 pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> Result<Outcome> {
-    let mut here = |problem, backend, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers>> {
-        Ok(Box::new(Local(crate::eval::evaluator(problem, backend, note)?)))
+    let mut here = |problem, config: &RunConfig, note: &mut dyn FnMut(String)| {
+        shard::here(problem, config.backend, config.devices, note)
     };
     resume_on(dir, more, &mut here, observer)
 }
 
-/// Makes the workers of a continued run from its problem and backend.
+/// Makes the workers of a continued run from its problem and configuration (with the
+/// continuation's backend and devices).
 pub type MakeWorkersFor<'a> =
-    dyn FnMut(AbcProblem, Backend, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+    dyn FnMut(AbcProblem, &RunConfig, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
 
 /// [`resume`] with the new populations' tasks run by the workers `make_workers` makes.
 pub fn resume_on(
@@ -675,6 +681,7 @@ pub fn resume_on(
     let stored_config = config.clone();
     config.sampler.apply(more);
     config.backend = more.backend.unwrap_or(config.backend);
+    config.devices = more.devices.unwrap_or(config.devices);
     config.validate()?;
     config.check_summary_population(more.summary_population)?;
     let problem = AbcProblem::new(
@@ -684,7 +691,7 @@ pub fn resume_on(
         config.fit.w_ref_n,
     )
     .with_best_rho(&setup.fits);
-    let evaluator = make_workers(problem, config.backend, &mut |line| observer.note(line))?;
+    let evaluator = make_workers(problem, &config, &mut |line| observer.note(line))?;
     let stored = populations.len();
     observer.note(format!(
         "continuing {} after population {} ({} stored)",

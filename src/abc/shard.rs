@@ -172,6 +172,92 @@ where
     }
 }
 
+/// Every task run in this process on one of several evaluators (one per GPU: `--devices
+/// all`): a round's tasks are dealt to them in turn and each evaluator runs its share on a
+/// thread of its own.
+pub struct Several<E>(pub Vec<E>);
+
+impl<E: Evaluator> Workers for Several<E> {
+    fn problem(&self) -> &AbcProblem {
+        self.0[0].problem()
+    }
+
+    fn backend(&self) -> &'static str {
+        self.0[0].backend()
+    }
+
+    fn parallelism(&self) -> usize {
+        self.0.len()
+    }
+
+    fn run(&self, round: &Round) -> Result<Vec<Output>> {
+        let context = round.context.map(Arc::as_ref);
+        let n = self.0.len();
+        std::thread::scope(|scope| {
+            let shares: Vec<_> = self
+                .0
+                .iter()
+                .enumerate()
+                .map(|(k, evaluator)| {
+                    scope.spawn(move || -> Result<Vec<Output>> {
+                        round
+                            .tasks
+                            .iter()
+                            .skip(k)
+                            .step_by(n)
+                            .map(|task| execute(evaluator, context, task))
+                            .collect()
+                    })
+                })
+                .collect();
+            let mut outputs = Vec::with_capacity(round.tasks.len());
+            for share in shares {
+                outputs.extend(share.join().expect("a device's thread does not panic")?);
+            }
+            Ok(outputs)
+        })
+    }
+}
+
+/// Which devices of this machine a run scores on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Devices {
+    /// One: the GPU the environment names (`BITROCK_ADAPTER`, `CUDA_VISIBLE_DEVICES`), or the
+    /// CPU.
+    #[default]
+    One,
+    /// Every GPU of the machine, each scoring a share of every round.
+    All,
+}
+
+/// The workers of this process: one evaluator on `backend`, or with [`Devices::All`] one per
+/// GPU (under `auto`, the CPU when there is none, said through `note`).
+pub fn here(
+    problem: AbcProblem,
+    backend: crate::eval::Backend,
+    devices: Devices,
+    note: &mut dyn FnMut(String),
+) -> Result<Box<dyn Workers>> {
+    use crate::eval::Backend;
+    if devices == Devices::All && backend != Backend::Cpu {
+        match crate::eval::gpu::residual::GpuEvaluator::on_every_gpu(&problem) {
+            Ok(gpus) => {
+                let names: Vec<String> = gpus
+                    .iter()
+                    .map(|g| format!("{} ({} scoring)", g.adapter(), g.shape()))
+                    .collect();
+                note(format!("GPU backend on {} devices: {}", gpus.len(), names.join("; ")));
+                return Ok(Box::new(Several(gpus)));
+            }
+            Err(e) if backend == Backend::Auto => crate::eval::fall_back_to_cpu(e, note)?,
+            Err(e) => return Err(e.into()),
+        }
+    }
+    Ok(Box::new(Local(crate::eval::evaluator(problem, backend, note)?)))
+}
+
 /// Runs one task with `evaluator`: what every worker does, here or elsewhere.
 pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>, task: &Task) -> Result<Output> {
     let needs_context =

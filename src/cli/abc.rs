@@ -7,6 +7,7 @@ use super::print;
 use super::progress::RunProgress;
 use bitrock::Error;
 use bitrock::abc::rejection::{Mode, RejectionConfig};
+use bitrock::abc::shard::Devices;
 use bitrock::abc::smc::WeightsOn;
 use bitrock::eval::Backend;
 use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
@@ -98,6 +99,11 @@ pub struct AbcArgs {
     /// run's].
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
+    /// GPUs to score on: one = the one BITROCK_ADAPTER or CUDA_VISIBLE_DEVICES names (else
+    /// the best), all = every GPU of the machine, each a share of every round; the populations
+    /// are the same [default: one; with --resume: the run's].
+    #[arg(long, value_enum)]
+    pub devices: Option<Devices>,
     /// Population to summarise (statistics, MAP, envelopes) [default: the last].
     #[arg(long, value_name = "G")]
     pub summary_population: Option<usize>,
@@ -169,6 +175,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                 min_acceptance: cmd.abc.min_acceptance,
                 max_seconds: cmd.abc.max_seconds,
                 backend: cmd.abc.backend,
+                devices: cmd.abc.devices,
                 summary_population: cmd.abc.summary_population,
             };
             Ok(pipeline::resume(dir, &more, &mut progress)?)
@@ -214,6 +221,7 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
         smc_weights: args.smc_weights,
         seed: Some(args.seed),
         backend: args.backend,
+        devices: args.devices,
     };
     Ok(settings.config()?)
 }

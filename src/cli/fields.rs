@@ -45,6 +45,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("kernel_scale", "--kernel-scale"),
     ("smc_weights", "--smc-weights"),
     ("backend", "--backend"),
+    ("devices", "--devices"),
     ("threads", "--threads"),
     // Outputs.
     ("out", "--out"),

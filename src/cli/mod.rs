@@ -8,6 +8,7 @@ pub mod args;
 pub mod bench;
 pub mod check;
 pub mod demo;
+pub mod devices;
 pub mod export;
 pub mod fe;
 pub mod fields;
@@ -85,6 +86,9 @@ pub enum Command {
     /// Natural frequencies, modal damping and critical bit damping of the finite-element
     /// torsional drill string (the paper's appendix).
     Fe(fe::FeCmd),
+    /// The GPU adapters this machine offers (index, type, PCI bus id), marking the one
+    /// BITROCK_ADAPTER, WGPU_ADAPTER_NAME or CUDA_VISIBLE_DEVICES picks.
+    Devices(devices::DevicesCmd),
     /// Stability maps over top-drive speed and weight on bit: deterministic (MAP), stochastic
     /// (percentile over posterior samples) and the mixture of laws, from an ABC run or a law.
     Stability(stability::StabilityCmd),

@@ -206,3 +206,76 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
         r => panic!("{r:?}"),
     }
 }
+
+#[test]
+fn several_evaluators_in_one_process_give_the_one_evaluator_run() {
+    let (problem, _) = paper_m2_problem(34);
+    let rejection = base(6000, Mode::Nested);
+    let smc = SmcConfig {
+        base: base(1500, Mode::Nested),
+        ..SmcConfig::default()
+    };
+    let three = || shard::Several((0..3).map(|_| CpuEvaluator::new(problem.clone())).collect::<Vec<_>>());
+    let one = CpuEvaluator::new(problem.clone());
+    assert_same_run(
+        &rejection::run(&one, &rejection).unwrap(),
+        &rejection::run_on(&three(), &rejection, Vec::new(), &mut Silent).unwrap(),
+    );
+    assert_same_run(
+        &smc::run(&one, &smc).unwrap(),
+        &smc::run_on(&three(), &smc, Vec::new(), &mut Silent).unwrap(),
+    );
+}
+
+/// `--devices all` on this machine's GPUs (lavapipe alone here: one device) gives the
+/// particles of the one-GPU run, through the command line.
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn devices_all_gives_the_one_gpu_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |devices: &str, out: &str| {
+        let done = crate::support::bin()
+            .args([
+                "abc",
+                "--particles",
+                "300",
+                "--seed",
+                "3",
+                "--backend",
+                "gpu",
+                "--max-populations",
+                "3",
+            ])
+            .args(["--devices", devices, "--out"])
+            .arg(dir.path().join(out))
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+        let mut doc: serde_json::Value = serde_json::from_slice(&done.stdout).unwrap();
+        for p in doc["populations"].as_array_mut().unwrap() {
+            p.as_object_mut().unwrap().remove("seconds");
+        }
+        (
+            doc["populations"].clone(),
+            String::from_utf8_lossy(&done.stderr).to_string(),
+        )
+    };
+    let (one, _) = run("one", "one");
+    let (all, said) = run("all", "all");
+    assert_eq!(one, all);
+    assert!(said.contains("GPU backend on 1 devices"), "{said}");
+    let export = |name: &str| {
+        let csv = dir.path().join(format!("{name}.csv"));
+        let done = crate::support::bin()
+            .args(["export"])
+            .arg(dir.path().join(name))
+            .arg("-o")
+            .arg(&csv)
+            .output()
+            .unwrap();
+        assert!(done.status.success());
+        std::fs::read(csv).unwrap()
+    };
+    assert_eq!(export("one"), export("all"));
+}

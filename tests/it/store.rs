@@ -22,6 +22,7 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
         prior_file: None,
         seed: 11,
         backend: Backend::Cpu,
+        devices: Default::default(),
         sampler: SamplerConfig::Rejection(RejectionConfig {
             particles,
             max_populations,

@@ -565,6 +565,7 @@ fn resume(
         min_acceptance: kwarg(more, "min_acceptance")?,
         max_seconds: kwarg(more, "max_seconds")?,
         backend: named::<Backend>(py, "backend", kwarg(more, "backend")?)?,
+        devices: named(py, "devices", kwarg(more, "devices")?)?,
         summary_population: None,
     };
     let mut observer = PyObserver {
@@ -581,7 +582,7 @@ fn resume(
                 bitrock::pipeline::resume_on(
                     &path,
                     &continuation,
-                    Some(&mut |problem, backend, _note| make(problem, backend)),
+                    Some(&mut |problem, config: &bitrock::run::RunConfig, _note| make(problem, config.backend)),
                     &mut observer,
                 )
             })
@@ -644,6 +645,7 @@ fn run_settings(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<Settings> {
         smc_weights: named(py, "smc_weights", text("smc_weights")?)?,
         seed: kwarg(kw, "seed")?,
         backend: named(py, "backend", text("backend")?)?,
+        devices: named(py, "devices", text("devices")?)?,
     })
 }
 

@@ -238,29 +238,194 @@ pub(crate) struct Kernel {
 
 static CONTEXT: OnceLock<Result<GpuContext, GpuError>> = OnceLock::new();
 
-/// The process's GPU context, created on first use.
+/// The process's GPU context, created on first use on the adapter the environment names
+/// (see [`AdapterWish`]).
 pub fn context() -> Result<&'static GpuContext, GpuError> {
     CONTEXT.get_or_init(create_context).as_ref().map_err(Clone::clone)
 }
 
+/// The environment variable that names the adapter: its index in [`adapters`]' list
+/// (`bitrock devices` prints it) or its PCI bus id (`0000:3b:00.0`).
+pub const ADAPTER_VAR: &str = "BITROCK_ADAPTER";
+
+/// Which adapter the environment asks for, in this order: [`ADAPTER_VAR`];
+/// `WGPU_ADAPTER_NAME` (a part of the adapter's name); the first entry of
+/// `CUDA_VISIBLE_DEVICES` (what Slurm, Ray and Dask give a GPU job: ordinal k is the k-th
+/// NVIDIA adapter in PCI bus order, CUDA's order with `CUDA_DEVICE_ORDER=PCI_BUS_ID`); else
+/// wgpu's high-performance choice.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AdapterWish {
+    Any,
+    Index(usize),
+    BusId(String),
+    Name(String),
+    CudaOrdinal(usize),
+    /// `CUDA_VISIBLE_DEVICES` hides every GPU (empty, or `-1`): the job was given none.
+    NoneVisible,
+}
+
+impl AdapterWish {
+    /// The wish of the environment `var` reads.
+    pub fn from_env(var: impl Fn(&str) -> Option<String>) -> Result<Self, GpuError> {
+        if let Some(value) = var(ADAPTER_VAR) {
+            let value = value.trim().to_lowercase();
+            return if let Ok(index) = value.parse() {
+                Ok(AdapterWish::Index(index))
+            } else if value.contains(':') {
+                Ok(AdapterWish::BusId(value))
+            } else {
+                Err(GpuError::Setting {
+                    name: ADAPTER_VAR,
+                    message: format!(
+                        "must be an adapter's index (`bitrock devices` lists them) or its PCI bus id such as 0000:3b:00.0, got `{value}`"
+                    ),
+                })
+            };
+        }
+        if let Some(name) = var("WGPU_ADAPTER_NAME") {
+            return Ok(AdapterWish::Name(name));
+        }
+        if let Some(visible) = var("CUDA_VISIBLE_DEVICES") {
+            let first = visible.split(',').next().unwrap_or("").trim();
+            return Ok(match first.parse::<i64>() {
+                _ if first.is_empty() => AdapterWish::NoneVisible,
+                Ok(k) if k < 0 => AdapterWish::NoneVisible,
+                Ok(k) => AdapterWish::CudaOrdinal(k as usize),
+                // A GPU or MIG UUID: not something wgpu reports; let wgpu choose.
+                Err(_) => AdapterWish::Any,
+            });
+        }
+        Ok(AdapterWish::Any)
+    }
+
+    /// The position in `adapters` of the adapter wished for; `None` for [`AdapterWish::Any`].
+    pub fn pick(&self, adapters: &[wgpu::AdapterInfo]) -> Result<Option<usize>, GpuError> {
+        let none = |why: String| Err(GpuError::NoAdapter(why));
+        match self {
+            AdapterWish::Any => Ok(None),
+            AdapterWish::NoneVisible => none("CUDA_VISIBLE_DEVICES gives this process no GPU".into()),
+            AdapterWish::Index(i) if *i < adapters.len() => Ok(Some(*i)),
+            AdapterWish::Index(i) => none(format!("{ADAPTER_VAR}={i}, but there are {} adapters", adapters.len())),
+            AdapterWish::BusId(bus) => match adapters.iter().position(|a| same_bus(&a.device_pci_bus_id, bus)) {
+                Some(i) => Ok(Some(i)),
+                None => none(format!(
+                    "{ADAPTER_VAR}={bus} matches no adapter's PCI bus id ({:?})",
+                    adapters.iter().map(|a| &a.device_pci_bus_id).collect::<Vec<_>>()
+                )),
+            },
+            AdapterWish::Name(wanted) => match adapters
+                .iter()
+                .position(|a| a.name.to_lowercase().contains(&wanted.to_lowercase()))
+            {
+                Some(i) => Ok(Some(i)),
+                None => none(format!(
+                    "WGPU_ADAPTER_NAME={wanted} matches none of {:?}",
+                    adapters.iter().map(|a| &a.name).collect::<Vec<_>>()
+                )),
+            },
+            AdapterWish::CudaOrdinal(k) => {
+                let mut buses: Vec<&str> = adapters
+                    .iter()
+                    .filter(|a| a.vendor == NVIDIA && !a.device_pci_bus_id.is_empty())
+                    .map(|a| a.device_pci_bus_id.as_str())
+                    .collect();
+                buses.sort_unstable();
+                buses.dedup();
+                match buses.get(*k) {
+                    Some(bus) => Ok(adapters.iter().position(|a| a.device_pci_bus_id == *bus)),
+                    None => none(format!(
+                        "CUDA_VISIBLE_DEVICES names NVIDIA GPU {k}, and wgpu sees {} NVIDIA adapters",
+                        buses.len()
+                    )),
+                }
+            }
+        }
+    }
+}
+
+/// PCI vendor id of NVIDIA.
+const NVIDIA: u32 = 0x10de;
+
+/// True when bus ids `a` and `b` name the same device (the domain `0000:` may be left out).
+fn same_bus(a: &str, b: &str) -> bool {
+    let strip = |s: &str| -> String {
+        let s = s.trim().to_lowercase();
+        if s.matches(':').count() == 2 {
+            s
+        } else {
+            format!("0000:{s}")
+        }
+    };
+    !a.is_empty() && strip(a) == strip(b)
+}
+
+/// The adapters wgpu sees (on the backends `WGPU_BACKEND` allows), in the order
+/// [`ADAPTER_VAR`] indexes.
+pub fn adapters() -> Vec<wgpu::AdapterInfo> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+    pollster::block_on(instance.enumerate_adapters(backends))
+        .iter()
+        .map(wgpu::Adapter::get_info)
+        .collect()
+}
+
 fn create_context() -> Result<GpuContext, GpuError> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
-        Ok(wanted) => {
-            let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-            let adapters = pollster::block_on(instance.enumerate_adapters(backends));
-            let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
-            adapters
-                .into_iter()
-                .find(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()))
-                .ok_or_else(|| GpuError::NoAdapter(format!("WGPU_ADAPTER_NAME={wanted} matches none of {names:?}")))?
-        }
-        Err(_) => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+    let wish = AdapterWish::from_env(|name| std::env::var(name).ok())?;
+    let adapter = match wish {
+        AdapterWish::Any => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::from_env().unwrap_or(wgpu::PowerPreference::HighPerformance),
             ..Default::default()
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?,
+        wish => {
+            let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+            let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
+            let infos: Vec<wgpu::AdapterInfo> = adapters.iter().map(wgpu::Adapter::get_info).collect();
+            let at = wish.pick(&infos)?.expect("a wish other than Any picks an adapter");
+            adapters.swap_remove(at)
+        }
     };
+    context_on(adapter)
+}
+
+/// The context of every distinct GPU wgpu sees (one per PCI bus id; adapters without one
+/// count by name), each created once: `--devices all`. A machine without a GPU adapter gives
+/// the one [`context`] picks (a CPU driver such as lavapipe).
+pub fn every_context() -> Result<Vec<&'static GpuContext>, GpuError> {
+    static ALL: OnceLock<Result<Vec<&'static GpuContext>, GpuError>> = OnceLock::new();
+    ALL.get_or_init(|| {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+        let mut seen = Vec::new();
+        let mut contexts = Vec::new();
+        for adapter in pollster::block_on(instance.enumerate_adapters(backends)) {
+            let info = adapter.get_info();
+            let gpu = matches!(
+                info.device_type,
+                wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
+            );
+            let id = if info.device_pci_bus_id.is_empty() {
+                info.name.clone()
+            } else {
+                info.device_pci_bus_id.clone()
+            };
+            if gpu && !seen.contains(&id) {
+                seen.push(id);
+                contexts.push(&*Box::leak(Box::new(context_on(adapter)?)));
+            }
+        }
+        if contexts.is_empty() {
+            contexts.push(context()?);
+        }
+        Ok(contexts)
+    })
+    .clone()
+}
+
+/// A context on `adapter`: its device and queue, with the adapter's own limits.
+fn context_on(adapter: wgpu::Adapter) -> Result<GpuContext, GpuError> {
     let info = adapter.get_info();
     let limits = adapter.limits();
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
@@ -686,3 +851,82 @@ const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage 
 
 /// Invocations per workgroup of every kernel (`@workgroup_size(64)`).
 const WORKGROUP_SIZE: u32 = 64;
+
+#[cfg(test)]
+mod adapter_tests {
+    use super::*;
+
+    fn adapter(name: &str, vendor: u32, bus: &str, backend: wgpu::Backend) -> wgpu::AdapterInfo {
+        wgpu::AdapterInfo {
+            name: name.into(),
+            vendor,
+            device_pci_bus_id: bus.into(),
+            ..wgpu::AdapterInfo::new(wgpu::DeviceType::DiscreteGpu, backend)
+        }
+    }
+
+    /// Two identical H100s (Vulkan and GL each, listed out of bus order) and lavapipe.
+    fn machine() -> Vec<wgpu::AdapterInfo> {
+        use wgpu::Backend::{Gl, Vulkan};
+        vec![
+            adapter("NVIDIA H100", NVIDIA, "0000:c1:00.0", Vulkan),
+            adapter("NVIDIA H100", NVIDIA, "0000:3b:00.0", Vulkan),
+            adapter("llvmpipe", 0x10005, "", Vulkan),
+            adapter("NVIDIA H100", NVIDIA, "0000:3b:00.0", Gl),
+        ]
+    }
+
+    fn wish(pairs: &[(&str, &str)]) -> Result<AdapterWish, GpuError> {
+        AdapterWish::from_env(|name| pairs.iter().find(|p| p.0 == name).map(|p| p.1.to_string()))
+    }
+
+    #[test]
+    fn the_environment_names_one_of_two_identical_gpus() {
+        let m = machine();
+        // CUDA ordinals count NVIDIA GPUs in PCI bus order, whatever order wgpu lists them in.
+        assert_eq!(
+            wish(&[("CUDA_VISIBLE_DEVICES", "0,1")]).unwrap().pick(&m).unwrap(),
+            Some(1)
+        );
+        assert_eq!(
+            wish(&[("CUDA_VISIBLE_DEVICES", "1")]).unwrap().pick(&m).unwrap(),
+            Some(0)
+        );
+        assert!(matches!(
+            wish(&[("CUDA_VISIBLE_DEVICES", "2")]).unwrap().pick(&m),
+            Err(GpuError::NoAdapter(_))
+        ));
+        // No GPU given to the job: no adapter (auto falls back to the CPU).
+        for hidden in ["", "-1", " "] {
+            assert_eq!(
+                wish(&[("CUDA_VISIBLE_DEVICES", hidden)]).unwrap(),
+                AdapterWish::NoneVisible
+            );
+        }
+        // A UUID is not something wgpu reports: wgpu chooses.
+        assert_eq!(wish(&[("CUDA_VISIBLE_DEVICES", "GPU-5a3c")]).unwrap(), AdapterWish::Any);
+        // BITROCK_ADAPTER wins over the others: an index, or a bus id with or without domain.
+        let both = [("BITROCK_ADAPTER", "2"), ("CUDA_VISIBLE_DEVICES", "0")];
+        assert_eq!(wish(&both).unwrap().pick(&m).unwrap(), Some(2));
+        assert_eq!(
+            wish(&[("BITROCK_ADAPTER", "C1:00.0")]).unwrap().pick(&m).unwrap(),
+            Some(0)
+        );
+        assert_eq!(
+            wish(&[("BITROCK_ADAPTER", "0000:3b:00.0")]).unwrap().pick(&m).unwrap(),
+            Some(1)
+        );
+        assert!(
+            matches!(wish(&[("BITROCK_ADAPTER", "4")]).unwrap().pick(&m), Err(GpuError::NoAdapter(m)) if m.contains("4 adapters"))
+        );
+        assert!(matches!(
+            wish(&[("BITROCK_ADAPTER", "fast")]),
+            Err(GpuError::Setting { name: ADAPTER_VAR, .. })
+        ));
+        assert_eq!(
+            wish(&[("WGPU_ADAPTER_NAME", "llvm")]).unwrap().pick(&m).unwrap(),
+            Some(2)
+        );
+        assert_eq!(wish(&[]).unwrap().pick(&m).unwrap(), None);
+    }
+}

@@ -61,7 +61,20 @@ impl GpuEvaluator {
 
     /// As [`GpuEvaluator::new`], scoring in `shape` whatever the adapter (tests, benchmarks).
     pub fn with_shape(problem: AbcProblem, shape: Shape) -> std::result::Result<Self, GpuError> {
-        let context = super::context()?;
+        Self::on(problem, shape, super::context()?)
+    }
+
+    /// One evaluator per GPU of the machine ([`super::every_context`]), each in the shape its
+    /// adapter wants: `--devices all`.
+    pub fn on_every_gpu(problem: &AbcProblem) -> std::result::Result<Vec<Self>, GpuError> {
+        super::every_context()?
+            .into_iter()
+            .map(|context| Self::on(problem.clone(), Shape::chosen(context)?, context))
+            .collect()
+    }
+
+    /// As [`GpuEvaluator::with_shape`], on the GPU of `context`.
+    pub fn on(problem: AbcProblem, shape: Shape, context: &'static GpuContext) -> std::result::Result<Self, GpuError> {
         let d = problem.data_len();
         let quads = d.div_ceil(4);
         let columns = super::data_columns(&problem);

@@ -193,6 +193,7 @@ def abc(
     w_ref_kn: float | None = None,
     seed: int | None = None,
     backend: str | None = None,
+    devices: str | None = None,
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     progress: bool | Callable[..., Any] = True,
@@ -206,6 +207,8 @@ def abc(
     populations completed. ``progress``: a tqdm bar (when tqdm is installed), ``False``, or a
     callable ``(population, accepted, target, drawn, epsilon)``.
 
+    ``devices="all"`` scores on every GPU of this machine, each a share of every round
+    (``"one"``, the default: the GPU ``BITROCK_ADAPTER`` or ``CUDA_VISIBLE_DEVICES`` names).
     ``executor`` runs the populations' tasks on a pool of workers: a
     ``concurrent.futures.Executor`` (a ``ProcessPoolExecutor`` must spawn, not fork), a
     ``dask.distributed.Client``, or :func:`ray_executor`. The particles are the ones one
@@ -244,6 +247,7 @@ def resume(
     min_acceptance: float | None = None,
     max_seconds: float | None = None,
     backend: str | None = None,
+    devices: str | None = None,
     progress: bool | Callable[..., Any] = True,
     executor: Any = None,
 ) -> "Result":
@@ -257,6 +261,7 @@ def resume(
         "min_acceptance": min_acceptance,
         "max_seconds": max_seconds,
         "backend": backend,
+        "devices": devices,
     }
     dispatcher = None if executor is None else Dispatcher(executor)
     callback, close = _progress(progress)
