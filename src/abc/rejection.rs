@@ -362,7 +362,7 @@ fn scan(problem: &crate::eval::AbcProblem, fill: &mut Filling, batch: &Found, we
             weight,
         }
     }));
-    count_slots(prior, problem.seed, stream, from..consumed, &mut fill.law_draws);
+    batch.add_draws(from, consumed, &mut fill.law_draws);
     fill.position = consumed;
 }
 
@@ -413,29 +413,6 @@ pub(crate) fn next_epsilon(
 pub fn median_rho(particles: &[Particle]) -> f64 {
     let rho: Vec<f64> = particles.iter().map(|p| p.rho).collect();
     quantile(&rho, 0.5)
-}
-
-/// Adds the prior slot (law) of each candidate `indexes` of `stream` to `counts`: one Philox
-/// block each, in parallel, since at 10⁵ candidates per batch this was the largest host-side
-/// share of a population.
-fn count_slots(prior: &crate::prior::Prior, seed: u64, stream: u32, indexes: std::ops::Range<u64>, counts: &mut [u64]) {
-    let per_slot = indexes
-        .into_par_iter()
-        .fold(
-            || vec![0u64; counts.len()],
-            |mut c, index| {
-                c[prior.candidate_slot(seed, stream, index)] += 1;
-                c
-            },
-        )
-        .reduce(
-            || vec![0u64; counts.len()],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                a
-            },
-        );
-    counts.iter_mut().zip(per_slot).for_each(|(x, y)| *x += y);
 }
 
 pub(crate) fn slot_of(prior: &crate::prior::Prior, law: Law) -> usize {

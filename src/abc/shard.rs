@@ -29,6 +29,7 @@ use super::Particle;
 use super::smc::{Kernels, SmcConfig};
 use crate::error::{Error, Result};
 use crate::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -81,6 +82,12 @@ pub enum Output {
         scored: u64,
         /// (index, ρ) of the candidates kept, in index order.
         kept: Vec<(u64, f64)>,
+        /// The draws of the range (every candidate, scored or not), per prior slot: the merge
+        /// counts a population's draws per law from these, not by making candidates again.
+        slots: Vec<u64>,
+        /// For each kept candidate, the draws per slot from `start` to it (itself included),
+        /// `slots.len()` numbers each: where a population stops inside a range.
+        prefix: Vec<u64>,
     },
     /// The result of a [`Task::Weigh`]: one log weight per particle from `first` on.
     LogWeights { first: usize, values: Vec<f64> },
@@ -271,11 +278,21 @@ pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>,
         } => {
             let mut rho = vec![0.0; to_usize(len)?];
             evaluator.score(stream, start, &mut rho)?;
+            let problem = evaluator.problem();
+            let slots: Vec<u8> = (0..rho.len())
+                .into_par_iter()
+                .with_min_len(4096)
+                .map(|k| problem.prior.candidate_slot(problem.seed, stream, start + k as u64) as u8)
+                .collect();
+            let kept = keep(start, &rho, epsilon);
+            let (slots, prefix) = slot_counts(problem.prior.boxes.len(), start, &slots, &kept);
             Ok(Output::Found {
                 start,
                 len,
                 scored: len,
-                kept: keep(start, &rho, epsilon),
+                kept,
+                slots,
+                prefix,
             })
         }
         Task::Propose {
@@ -285,18 +302,21 @@ pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>,
             epsilon,
         } => {
             let context = needs_context()?;
-            let (scored, kept) = context.kernels.propose_and_score(
+            let (scored, kept, slots) = context.kernels.propose_and_score(
                 evaluator,
                 &context.particles,
                 stream,
                 start..start + len,
                 epsilon,
             )?;
+            let (slots, prefix) = slot_counts(evaluator.problem().prior.boxes.len(), start, &slots, &kept);
             Ok(Output::Found {
                 start,
                 len,
                 scored,
                 kept,
+                slots,
+                prefix,
             })
         }
         Task::Weigh { first, ref particles } => {
@@ -320,6 +340,26 @@ pub(crate) fn keep(start: u64, rho: &[f64], epsilon: f64) -> Vec<(u64, f64)> {
         .filter(|&(_, &r)| kept(r, epsilon))
         .map(|(k, &r)| (start + k as u64, r))
         .collect()
+}
+
+/// The draws per slot of candidates `start ..` whose slots are `slots`, and at each `kept`
+/// candidate the draws per slot up to it (see [`Output::Found`]).
+fn slot_counts(n: usize, start: u64, slots: &[u8], kept: &[(u64, f64)]) -> (Vec<u64>, Vec<u64>) {
+    let mut running = vec![0u64; n];
+    let mut prefix = Vec::with_capacity(kept.len() * n);
+    let mut at = 0usize;
+    for &(index, _) in kept {
+        let upto = (index - start) as usize + 1;
+        for &slot in &slots[at..upto] {
+            running[slot as usize] += 1;
+        }
+        at = upto;
+        prefix.extend_from_slice(&running);
+    }
+    for &slot in &slots[at..] {
+        running[slot as usize] += 1;
+    }
+    (running, prefix)
 }
 
 /// Tasks under this many candidates or particles are not cut further: below it the cost of a
@@ -348,6 +388,12 @@ pub(crate) struct Found {
     pub len: u64,
     pub scored: u64,
     pub kept: Vec<(u64, f64)>,
+    /// Per task, in index order: its range and its draws per slot.
+    parts: Vec<(u64, u64, Vec<u64>)>,
+    /// Draws per slot from the start of its task to each kept candidate (see [`Output::Found`]).
+    prefix: Vec<u64>,
+    /// Prior slots.
+    slots: usize,
 }
 
 impl Found {
@@ -355,47 +401,85 @@ impl Found {
     pub fn end(&self) -> u64 {
         self.start + self.len
     }
+
+    /// Adds the draws per slot of candidates `from .. to` to `counts`. Each end lies at a
+    /// task's start or end, or just past a kept candidate: where a scan starts and stops.
+    pub fn add_draws(&self, from: u64, to: u64, counts: &mut [u64]) {
+        for (start, end, totals) in &self.parts {
+            let (lo, hi) = (from.max(*start), to.min(*end));
+            if lo >= hi {
+                continue;
+            }
+            let upper = self.drawn_before(hi, *start, *end, totals);
+            let lower = self.drawn_before(lo, *start, *end, totals);
+            for (c, (u, l)) in counts.iter_mut().zip(upper.iter().zip(&lower)) {
+                *c += u - l;
+            }
+        }
+    }
+
+    /// Draws per slot of a task's candidates `start .. position`.
+    fn drawn_before(&self, position: u64, start: u64, end: u64, totals: &[u64]) -> Vec<u64> {
+        if position == start {
+            return vec![0; self.slots];
+        }
+        if position == end {
+            return totals.to_vec();
+        }
+        let k = self
+            .kept
+            .binary_search_by_key(&(position - 1), |&(index, _)| index)
+            .expect("a scan stops just past a kept candidate");
+        self.prefix[k * self.slots..(k + 1) * self.slots].to_vec()
+    }
 }
 
 /// Runs `tasks` (scans or proposals covering `start .. start + len`) on `workers` and merges
 /// their outputs, checking that they cover the round exactly once.
 pub(crate) fn run_found(workers: &dyn Workers, round: &Round, start: u64, len: u64) -> Result<Found> {
-    let mut outputs: Vec<Found> = workers
-        .run(round)?
-        .into_iter()
-        .map(|o| match o {
-            Output::Found {
-                start,
-                len,
-                scored,
-                kept,
-            } => Ok(Found {
-                start,
-                len,
-                scored,
-                kept,
-            }),
-            Output::LogWeights { .. } => Err(unexpected("log weights for a scan")),
-        })
-        .collect::<Result<_>>()?;
-    outputs.sort_by_key(|o| o.start);
+    let slots = workers.problem().prior.boxes.len();
+    let mut outputs: Vec<Output> = workers.run(round)?;
+    outputs.sort_by_key(|o| match o {
+        Output::Found { start, .. } => *start,
+        Output::LogWeights { .. } => 0,
+    });
     let mut merged = Found {
         start,
         len,
         scored: 0,
         kept: Vec::new(),
+        parts: Vec::new(),
+        prefix: Vec::new(),
+        slots,
     };
     let mut at = start;
-    for part in outputs {
-        let (s, end) = (part.start, part.end());
-        if s != at || part.kept.iter().any(|&(i, _)| i < s || i >= end) {
+    for output in outputs {
+        let Output::Found {
+            start: s,
+            len: n,
+            scored,
+            kept,
+            slots: totals,
+            prefix,
+        } = output
+        else {
+            return Err(unexpected("log weights for a scan"));
+        };
+        let end = s + n;
+        if s != at
+            || kept.iter().any(|&(i, _)| i < s || i >= end)
+            || totals.len() != slots
+            || prefix.len() != kept.len() * slots
+        {
             return Err(unexpected(&format!(
                 "a result for candidates {s}..{end} where {at} was next"
             )));
         }
         at = end;
-        merged.scored += part.scored;
-        merged.kept.extend(part.kept);
+        merged.scored += scored;
+        merged.kept.extend(kept);
+        merged.prefix.extend(prefix);
+        merged.parts.push((s, end, totals));
     }
     if at != start + len {
         return Err(unexpected(&format!(

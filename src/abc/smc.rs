@@ -398,31 +398,10 @@ impl Kernels {
         }
     }
 
-    /// Adds the law slot of each proposal `indexes` of `stream` to `counts` (a draw of its law,
-    /// inside the prior box or not).
-    fn count_slots(&self, key: [u32; 2], stream: u32, indexes: std::ops::Range<u64>, counts: &mut [u64]) {
-        let per_slot = indexes
-            .into_par_iter()
-            .fold(
-                || vec![0u64; counts.len()],
-                |mut c, index| {
-                    c[self.slot_of_block(philox4x32_10(candidate_counter(stream, index, 0), key))] += 1;
-                    c
-                },
-            )
-            .reduce(
-                || vec![0u64; counts.len()],
-                |mut a, b| {
-                    a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                    a
-                },
-            );
-        counts.iter_mut().zip(per_slot).for_each(|(x, y)| *x += y);
-    }
-
     /// Makes proposals `indexes` of `stream`, scores those inside the prior box with
-    /// `evaluator`, and returns how many were scored and the (index, ρ) of those kept at
-    /// `epsilon` ([`super::shard::kept`]): a [`super::shard::Task::Propose`].
+    /// `evaluator`, and returns how many were scored, the (index, ρ) of those kept at
+    /// `epsilon` ([`super::shard::kept`]) and every proposal's law slot: a
+    /// [`super::shard::Task::Propose`].
     pub(crate) fn propose_and_score(
         &self,
         evaluator: &(impl Evaluator + ?Sized),
@@ -430,29 +409,31 @@ impl Kernels {
         stream: u32,
         indexes: std::ops::Range<u64>,
         epsilon: f64,
-    ) -> Result<(u64, Vec<(u64, f64)>)> {
+    ) -> Result<(u64, Vec<(u64, f64)>, Vec<u8>)> {
         let problem = evaluator.problem();
         let key = key_of_seed(problem.seed);
         let start = indexes.start;
-        let proposals: Vec<(u64, Candidate)> = (0..(indexes.end - start) as usize)
+        let proposals: Vec<(usize, Option<[f32; MAX_PARAMS]>)> = (0..(indexes.end - start) as usize)
             .into_par_iter()
             .with_min_len(256)
-            .filter_map(|k| {
-                let index = start + k as u64;
-                let (slot, params) = self.propose(&problem.prior, previous, key, stream, index);
-                params.map(|params| (index, Candidate { slot, params }))
-            })
+            .map(|k| self.propose(&problem.prior, previous, key, stream, start + k as u64))
             .collect();
-        let valid: Vec<Candidate> = proposals.iter().map(|&(_, c)| c).collect();
-        let mut rho = vec![0.0; valid.len()];
-        evaluator.score_params(&valid, &mut rho)?;
-        let kept = proposals
+        let valid: Vec<(u64, Candidate)> = proposals
+            .iter()
+            .enumerate()
+            .filter_map(|(k, &(slot, params))| params.map(|params| (start + k as u64, Candidate { slot, params })))
+            .collect();
+        let candidates: Vec<Candidate> = valid.iter().map(|&(_, c)| c).collect();
+        let mut rho = vec![0.0; candidates.len()];
+        evaluator.score_params(&candidates, &mut rho)?;
+        let kept = valid
             .iter()
             .zip(&rho)
             .filter(|&(_, &r)| super::shard::kept(r, epsilon))
             .map(|(&(index, _), &r)| (index, r))
             .collect();
-        Ok((valid.len() as u64, kept))
+        let slots = proposals.iter().map(|&(slot, _)| slot as u8).collect();
+        Ok((candidates.len() as u64, kept, slots))
     }
 
     /// Proposal `index` of stream `stream`: its law slot, and its f32 parameters unless they
@@ -633,7 +614,7 @@ fn accept_found(problem: &AbcProblem, fill: &mut Filling, context: &Context, fou
         fill.law_accepted[slot_of(prior, p.law)] += 1;
     }
     fill.particles.extend(particles);
-    kernels.count_slots(key, stream, from..consumed, &mut fill.law_draws);
+    found.add_draws(from, consumed, &mut fill.law_draws);
     fill.position = consumed;
 }
 
