@@ -302,7 +302,7 @@ pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>,
             epsilon,
         } => {
             let context = needs_context()?;
-            let (scored, kept, slots) = context.kernels.propose_and_score(
+            let super::smc::Proposed { scored, kept, slots } = context.kernels.propose_and_score(
                 evaluator,
                 &context.particles,
                 stream,

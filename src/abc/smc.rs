@@ -311,6 +311,14 @@ impl LawKernel {
     }
 }
 
+/// A range of proposals, scored: how many were inside the prior box and scored, the (index,
+/// ρ) of those kept, and every proposal's law slot.
+pub(crate) struct Proposed {
+    pub scored: u64,
+    pub kept: Vec<(u64, f64)>,
+    pub slots: Vec<u8>,
+}
+
 /// Everything a population's proposals depend on: one kernel per alive law.
 pub(crate) struct Kernels {
     /// Per prior slot: the law's kernel, `None` for a dead law.
@@ -409,7 +417,7 @@ impl Kernels {
         stream: u32,
         indexes: std::ops::Range<u64>,
         epsilon: f64,
-    ) -> Result<(u64, Vec<(u64, f64)>, Vec<u8>)> {
+    ) -> Result<Proposed> {
         let problem = evaluator.problem();
         let key = key_of_seed(problem.seed);
         let start = indexes.start;
@@ -433,7 +441,11 @@ impl Kernels {
             .map(|(&(index, _), &r)| (index, r))
             .collect();
         let slots = proposals.iter().map(|&(slot, _)| slot as u8).collect();
-        Ok((candidates.len() as u64, kept, slots))
+        Ok(Proposed {
+            scored: candidates.len() as u64,
+            kept,
+            slots,
+        })
     }
 
     /// Proposal `index` of stream `stream`: its law slot, and its f32 parameters unless they
