@@ -1,9 +1,10 @@
-"""How a run scales over worker processes: the same rejection run (the embedded record, CPU
-backend) in one process, on 1 and on 2 single-threaded worker processes (a spawning
+"""How a run scales over worker processes: the same run (rejection or SMC, the embedded record,
+CPU backend) in one process, on 1 and on 2 single-threaded worker processes (a spawning
 ProcessPoolExecutor), and on a local Dask cluster of 2 single-threaded workers. Prints, per
-set-up, the median seconds of ``--reps`` runs and, per population, the tasks, the bytes
-shipped and the driver's serial seconds (the population's seconds less the time it waited for
-the workers). Every run's particles are checked against the one-process run's.
+set-up, the median seconds of ``--reps`` runs and, per population of the first repetition, the
+tasks, the bytes shipped and the driver's serial seconds (the population's seconds less the time
+it waited for the workers). A warm-up run ships the record to the workers; its bytes are
+printed once. Every run's particles are checked against the one-process run's.
 
     python bindings/python/benches/scale_out.py --particles 1000000 --populations 2 --reps 3
 """
@@ -98,16 +99,27 @@ def main() -> None:
         executor, close = make()
         # A first run warms the workers (process start, imports): the medians are of runs on
         # warm workers, as a long job sees them.
+        record_bytes = 0
         if executor is not None:
-            bitrock.abc(record, **{**settings, "particles": 1000, "max_populations": 1}, executor=executor)
-        seconds, result = [], None
+            warm = bitrock.abc(record, **{**settings, "particles": 1000, "max_populations": 1}, executor=executor)
+            record_bytes = int(warm.traffic["payload_bytes"].sum())
+        seconds, results = [], []
         for _ in range(args.reps):
             started = time.perf_counter()
-            result = bitrock.abc(record, **settings, executor=executor)
+            results.append(bitrock.abc(record, **settings, executor=executor))
             seconds.append(time.perf_counter() - started)
-        identical = _same(reference, result)
+        identical = all(_same(reference, r) for r in results)
+        # The first repetition's traffic: later ones find the previous populations already held
+        # by the workers (the same run again), which a new run would not.
+        result = results[0]
         traffic = result.traffic
-        row = {"setup": name, "median_s": statistics.median(seconds), "runs_s": seconds, "identical": identical}
+        row = {
+            "setup": name,
+            "median_s": statistics.median(seconds),
+            "runs_s": seconds,
+            "identical": identical,
+            "record_payload_bytes": record_bytes,
+        }
         if traffic is not None:
             pops = result.populations
             serial = [pops.loc[g, "seconds"] - traffic.loc[g, "wait_seconds"] for g in traffic.index]
@@ -125,7 +137,11 @@ def main() -> None:
             ]
         figures.append(row)
         close()
-        print(f"{name}: median {row['median_s']:.2f} s of {[round(s, 2) for s in seconds]}, identical: {identical}", flush=True)
+        print(
+            f"{name}: median {row['median_s']:.2f} s of {[round(s, 2) for s in seconds]}, identical: {identical}"
+            + (f", record shipped: {record_bytes} B in all" if executor is not None else ""),
+            flush=True,
+        )
         for p in row.get("per_population", []):
             print(
                 f"    population {p['population']}: {p['tasks']} tasks, requests {p['request_bytes']} B, "
