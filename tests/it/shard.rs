@@ -279,3 +279,45 @@ fn devices_all_gives_the_one_gpu_run() {
     };
     assert_eq!(export("one"), export("all"));
 }
+
+/// A GPU named by the environment that is not there: `BITROCK_ADAPTER` malformed is the user's
+/// error (exit 2, naming it, nothing written); `CUDA_VISIBLE_DEVICES` giving no GPU makes
+/// `auto` compute on the CPU and say why.
+#[test]
+fn the_environment_names_the_gpu_or_says_why_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let bad = crate::support::bin()
+        .env("BITROCK_ADAPTER", "fast")
+        .args(["abc", "--particles", "100", "--max-populations", "1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(bad.status.code(), Some(2), "{said}");
+    assert!(said.contains("BITROCK_ADAPTER") && said.contains("`fast`"), "{said}");
+    assert!(!out.exists());
+    let hidden = crate::support::bin()
+        .env("CUDA_VISIBLE_DEVICES", "")
+        .env_remove("BITROCK_ADAPTER")
+        .env_remove("WGPU_ADAPTER_NAME")
+        .args([
+            "abc",
+            "--particles",
+            "100",
+            "--max-populations",
+            "1",
+            "--backend",
+            "auto",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&hidden.stderr);
+    assert!(hidden.status.success(), "{said}");
+    assert!(
+        said.contains("CUDA_VISIBLE_DEVICES gives this process no GPU") && said.contains("computing on the CPU"),
+        "{said}"
+    );
+}

@@ -189,6 +189,10 @@ pub enum GpuError {
         "no GPU adapter: {0}. Install a Vulkan driver (for a software one: apt-get install mesa-vulkan-drivers libvulkan1) or use `backend` cpu"
     )]
     NoAdapter(String),
+    /// Adapters exist, but the environment names none of them for this process, or gives it
+    /// none (`CUDA_VISIBLE_DEVICES` empty).
+    #[error("no GPU for this process: {0}")]
+    NotNamed(String),
     #[error("the GPU adapter refused a device: {0}")]
     RequestDevice(String),
     #[error("GPU validation error (a bug in bitrock; please report it): {0}")]
@@ -300,7 +304,7 @@ impl AdapterWish {
 
     /// The position in `adapters` of the adapter wished for; `None` for [`AdapterWish::Any`].
     pub fn pick(&self, adapters: &[wgpu::AdapterInfo]) -> Result<Option<usize>, GpuError> {
-        let none = |why: String| Err(GpuError::NoAdapter(why));
+        let none = |why: String| Err(GpuError::NotNamed(why));
         match self {
             AdapterWish::Any => Ok(None),
             AdapterWish::NoneVisible => none("CUDA_VISIBLE_DEVICES gives this process no GPU".into()),
@@ -894,7 +898,7 @@ mod adapter_tests {
         );
         assert!(matches!(
             wish(&[("CUDA_VISIBLE_DEVICES", "2")]).unwrap().pick(&m),
-            Err(GpuError::NoAdapter(_))
+            Err(GpuError::NotNamed(_))
         ));
         // No GPU given to the job: no adapter (auto falls back to the CPU).
         for hidden in ["", "-1", " "] {
@@ -917,7 +921,7 @@ mod adapter_tests {
             Some(1)
         );
         assert!(
-            matches!(wish(&[("BITROCK_ADAPTER", "4")]).unwrap().pick(&m), Err(GpuError::NoAdapter(m)) if m.contains("4 adapters"))
+            matches!(wish(&[("BITROCK_ADAPTER", "4")]).unwrap().pick(&m), Err(GpuError::NotNamed(m)) if m.contains("4 adapters"))
         );
         assert!(matches!(
             wish(&[("BITROCK_ADAPTER", "fast")]),
