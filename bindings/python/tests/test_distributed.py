@@ -146,6 +146,37 @@ def test_a_task_that_fails_every_try_stops_the_run_keeping_its_populations(demo,
         bitrock.abc(demo, backend="cpu", particles=300, seed=1, out=tmp_path / "f", progress=False, executor=Failing(0))
 
 
+def test_ctrl_c_while_waiting_for_workers_keeps_the_run_resumable(demo, one_process, tmp_path) -> None:
+    """Ctrl-C arrives while the driver waits for the workers of population 2 (here: raised by
+    the executor): KeyboardInterrupt, the populations before it kept, and resuming on workers
+    gives the uninterrupted run."""
+
+    class Interrupting(Scrambled):
+        def __init__(self) -> None:
+            super().__init__(seed=3)
+            self.population = -1
+
+        def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]
+            if self.population == 2:
+                raise KeyboardInterrupt
+            return self._pool.submit(fn, *args, **kwargs)
+
+    executor = Interrupting()
+
+    def watch(population, *_rest) -> None:
+        executor.population = population
+
+    with pytest.raises(KeyboardInterrupt):
+        bitrock.abc(demo, backend="cpu", out=tmp_path / "cut", progress=watch, executor=executor, **SETTINGS[1])
+    with pytest.warns(bitrock.BitrockWarning, match=r"\(2 stored\)"):
+        bitrock.resume(tmp_path / "cut", progress=False, executor=Scrambled(seed=4))
+    # Everything but the invocations (this run had two: the interrupted start and the resume).
+    rows, expected = store_rows(tmp_path / "cut"), store_rows(one_process[1])
+    assert [r[1] for r in rows.pop("invocations")] == ["start", "resume"]
+    expected.pop("invocations")
+    assert rows == expected
+
+
 def test_a_forking_process_pool_is_refused(demo) -> None:
     with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         with pytest.raises(bitrock.InputError, match="spawn"):
