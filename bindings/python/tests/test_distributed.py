@@ -264,7 +264,14 @@ def dask_client():
 def test_a_dask_cluster_gives_the_one_process_store(demo, one_process, dask_client, tmp_path, k) -> None:
     run = bitrock.abc(demo, backend="cpu", out=tmp_path / "dask", progress=False, executor=dask_client, **SETTINGS[k])
     assert_same_store(one_process[k], tmp_path / "dask")
-    assert run.traffic["tasks"].sum() > 0
+    # Payloads are scattered to both workers at once, each exactly once: the record with
+    # population 0, each previous population with the next (SMC).
+    payloads = run.traffic["payload_bytes"]
+    assert payloads.iloc[0] > 0 and payloads.iloc[0] % 2 == 0
+    if SETTINGS[k].get("sampler") == "smc":
+        assert (payloads.iloc[1:] > 0).all()
+    else:
+        assert (payloads.iloc[1:] == 0).all()
 
 
 def test_a_dask_worker_killed_mid_population_changes_nothing(demo, one_process, dask_client, tmp_path) -> None:

@@ -5,7 +5,8 @@ The library cuts each round of a population into tasks (bytes), and :class:`Disp
 carries them to the workers and their replies back. A worker answers a task with
 :func:`serve_task`; it keeps the run's record and the previous population between tasks,
 so that they travel once per worker, not once per task: a worker that lacks them says so,
-and the task is sent again with them. A task that fails on a worker (the worker was lost)
+and the task is sent again with them. On Dask they are scattered to every worker instead, and
+every task names them. A task that fails on a worker (the worker was lost)
 is sent again, up to ``retries`` times: tasks are pure, so a repeat gives the same reply.
 """
 
@@ -27,10 +28,14 @@ def serve_task(request: bytes, problem: bytes | None = None, context: bytes | No
     return _bitrock.serve(request, problem, context)
 
 
+def _is_dask_client(executor: Any) -> bool:
+    return hasattr(executor, "get_executor") and hasattr(executor, "nthreads") and hasattr(executor, "scatter")
+
+
 def _submitter(executor: Any) -> tuple[Callable[..., concurrent.futures.Future], int]:
     """The ``submit`` of ``executor`` (returning ``concurrent.futures`` futures) and its
     number of worker slots."""
-    if hasattr(executor, "get_executor") and hasattr(executor, "nthreads"):
+    if _is_dask_client(executor):
         # dask.distributed.Client: its executor view gives concurrent.futures futures.
         slots = sum(executor.nthreads().values()) or 1
         return executor.get_executor(pure=False).submit, slots
@@ -60,12 +65,34 @@ class Dispatcher:
         self._submit, self.workers = _submitter(executor)
         self.parallelism = max(1, self.workers * tasks_per_worker)
         self.retries = retries
+        # A Dask client places the payloads on every worker itself (scatter, broadcast): each
+        # travels once per worker, and every task names it.
+        self._client = executor if _is_dask_client(executor) else None
+        self._scattered: dict[str, tuple[int, Any]] = {}
+
+    def _on_every_worker(self, role: str, payload: bytes) -> tuple[Any, int]:
+        """A Dask future of ``payload`` held by every worker, and the bytes that took (0 when
+        the same payload is held already)."""
+        digest = hash(payload)
+        held = self._scattered.get(role)
+        if held is not None and held[0] == digest:
+            return held[1], 0
+        workers = len(self._client.scheduler_info()["workers"])
+        future = self._client.scatter(payload, broadcast=True, hash=False)
+        self._scattered[role] = (digest, future)
+        return future, len(payload) * workers
 
     def exchange(self, requests: list[bytes], problem: bytes, context: bytes | None) -> tuple[list[bytes], int]:
         """The replies to ``requests`` in their order, and the payload bytes shipped."""
         replies: list[bytes | None] = [None] * len(requests)
         pending: dict[concurrent.futures.Future, tuple[int, int, bool]] = {}
         shipped = 0
+        if self._client is not None:
+            problem, sent = self._on_every_worker("problem", problem)
+            shipped += sent
+            if context is not None:
+                context, sent = self._on_every_worker("context", context)
+                shipped += sent
 
         def send(i: int, tries: int, attach: bool) -> None:
             args = (requests[i], problem, context) if attach else (requests[i],)
@@ -73,7 +100,7 @@ class Dispatcher:
 
         try:
             for i in range(len(requests)):
-                send(i, 0, False)
+                send(i, 0, self._client is not None)
             while pending:
                 done, _ = concurrent.futures.wait(pending, return_when=concurrent.futures.FIRST_COMPLETED)
                 for future in done:
