@@ -70,7 +70,7 @@ fn describe(wish: &AdapterWish) -> String {
     match wish {
         AdapterWish::Index(_) | AdapterWish::BusId(_) => gpu::ADAPTER_VAR.to_string(),
         AdapterWish::Name(_) => "WGPU_ADAPTER_NAME".into(),
-        AdapterWish::CudaOrdinal(_) | AdapterWish::NoneVisible => "CUDA_VISIBLE_DEVICES".into(),
+        AdapterWish::CudaOrdinals(_) | AdapterWish::NoneVisible => "CUDA_VISIBLE_DEVICES".into(),
         AdapterWish::Any => "wgpu".into(),
     }
 }

@@ -253,17 +253,18 @@ pub fn context() -> Result<&'static GpuContext, GpuError> {
 pub const ADAPTER_VAR: &str = "BITROCK_ADAPTER";
 
 /// Which adapter the environment asks for, in this order: [`ADAPTER_VAR`];
-/// `WGPU_ADAPTER_NAME` (a part of the adapter's name); the first entry of
-/// `CUDA_VISIBLE_DEVICES` (what Slurm, Ray and Dask give a GPU job: ordinal k is the k-th
-/// NVIDIA adapter in PCI bus order, CUDA's order with `CUDA_DEVICE_ORDER=PCI_BUS_ID`); else
-/// wgpu's high-performance choice.
+/// `WGPU_ADAPTER_NAME` (a part of the adapter's name); `CUDA_VISIBLE_DEVICES` (what Slurm, Ray
+/// and Dask give a GPU job: ordinal k is the k-th NVIDIA adapter in PCI bus order, CUDA's
+/// order with `CUDA_DEVICE_ORDER=PCI_BUS_ID`; the first is a process's GPU; it says nothing
+/// on a machine where wgpu sees no NVIDIA adapter); else wgpu's high-performance choice.
 #[derive(Clone, Debug, PartialEq)]
 pub enum AdapterWish {
     Any,
     Index(usize),
     BusId(String),
     Name(String),
-    CudaOrdinal(usize),
+    /// The ordinals `CUDA_VISIBLE_DEVICES` lists.
+    CudaOrdinals(Vec<usize>),
     /// `CUDA_VISIBLE_DEVICES` hides every GPU (empty, or `-1`): the job was given none.
     NoneVisible,
 }
@@ -290,28 +291,63 @@ impl AdapterWish {
             return Ok(AdapterWish::Name(name));
         }
         if let Some(visible) = var("CUDA_VISIBLE_DEVICES") {
-            let first = visible.split(',').next().unwrap_or("").trim();
-            return Ok(match first.parse::<i64>() {
-                _ if first.is_empty() => AdapterWish::NoneVisible,
-                Ok(k) if k < 0 => AdapterWish::NoneVisible,
-                Ok(k) => AdapterWish::CudaOrdinal(k as usize),
-                // A GPU or MIG UUID: not something wgpu reports; let wgpu choose.
-                Err(_) => AdapterWish::Any,
+            // CUDA stops at the first entry it cannot use; so does this.
+            let mut ordinals = Vec::new();
+            for entry in visible.split(',').map(str::trim) {
+                match entry.parse::<i64>() {
+                    Ok(k) if k >= 0 => ordinals.push(k as usize),
+                    Ok(_) => break,
+                    // A GPU or MIG UUID: not something wgpu reports; let wgpu choose.
+                    Err(_) if !entry.is_empty() && ordinals.is_empty() => return Ok(AdapterWish::Any),
+                    Err(_) => break,
+                }
+            }
+            return Ok(if ordinals.is_empty() {
+                AdapterWish::NoneVisible
+            } else {
+                AdapterWish::CudaOrdinals(ordinals)
             });
         }
         Ok(AdapterWish::Any)
     }
 
-    /// The position in `adapters` of the adapter wished for; `None` for [`AdapterWish::Any`].
+    /// The position in `adapters` of the adapter wished for; `None` when wgpu chooses.
     pub fn pick(&self, adapters: &[wgpu::AdapterInfo]) -> Result<Option<usize>, GpuError> {
+        Ok(self.pick_all(adapters)?.and_then(|all| all.first().copied()))
+    }
+
+    /// The positions in `adapters` of every adapter wished for (`--devices all`): the one
+    /// named, every GPU `CUDA_VISIBLE_DEVICES` lists, or `None` when wgpu chooses.
+    pub fn pick_all(&self, adapters: &[wgpu::AdapterInfo]) -> Result<Option<Vec<usize>>, GpuError> {
         let none = |why: String| Err(GpuError::NotNamed(why));
+        let nvidia = nvidia_buses(adapters);
         match self {
             AdapterWish::Any => Ok(None),
+            AdapterWish::NoneVisible | AdapterWish::CudaOrdinals(_) if nvidia.is_empty() => Ok(None),
             AdapterWish::NoneVisible => none("CUDA_VISIBLE_DEVICES gives this process no GPU".into()),
-            AdapterWish::Index(i) if *i < adapters.len() => Ok(Some(*i)),
+            AdapterWish::CudaOrdinals(ordinals) => ordinals
+                .iter()
+                .map(|&k| match nvidia.get(k) {
+                    Some(bus) => Ok(primary_on_bus(adapters, bus)),
+                    None => Err(GpuError::NotNamed(format!(
+                        "CUDA_VISIBLE_DEVICES names NVIDIA GPU {k}, and wgpu sees {} NVIDIA adapters",
+                        nvidia.len()
+                    ))),
+                })
+                .collect::<Result<Vec<_>, _>>()
+                .map(Some),
+            one => one.pick_named(adapters).map(|i| Some(vec![i])),
+        }
+    }
+
+    /// The position of the adapter an index, bus id or name picks.
+    fn pick_named(&self, adapters: &[wgpu::AdapterInfo]) -> Result<usize, GpuError> {
+        let none = |why: String| Err(GpuError::NotNamed(why));
+        match self {
+            AdapterWish::Index(i) if *i < adapters.len() => Ok(*i),
             AdapterWish::Index(i) => none(format!("{ADAPTER_VAR}={i}, but there are {} adapters", adapters.len())),
             AdapterWish::BusId(bus) => match adapters.iter().position(|a| same_bus(&a.device_pci_bus_id, bus)) {
-                Some(i) => Ok(Some(i)),
+                Some(i) => Ok(i),
                 None => none(format!(
                     "{ADAPTER_VAR}={bus} matches no adapter's PCI bus id ({:?})",
                     adapters.iter().map(|a| &a.device_pci_bus_id).collect::<Vec<_>>()
@@ -321,30 +357,70 @@ impl AdapterWish {
                 .iter()
                 .position(|a| a.name.to_lowercase().contains(&wanted.to_lowercase()))
             {
-                Some(i) => Ok(Some(i)),
+                Some(i) => Ok(i),
                 None => none(format!(
                     "WGPU_ADAPTER_NAME={wanted} matches none of {:?}",
                     adapters.iter().map(|a| &a.name).collect::<Vec<_>>()
                 )),
             },
-            AdapterWish::CudaOrdinal(k) => {
-                let mut buses: Vec<&str> = adapters
-                    .iter()
-                    .filter(|a| a.vendor == NVIDIA && !a.device_pci_bus_id.is_empty())
-                    .map(|a| a.device_pci_bus_id.as_str())
-                    .collect();
-                buses.sort_unstable();
-                buses.dedup();
-                match buses.get(*k) {
-                    Some(bus) => Ok(adapters.iter().position(|a| a.device_pci_bus_id == *bus)),
-                    None => none(format!(
-                        "CUDA_VISIBLE_DEVICES names NVIDIA GPU {k}, and wgpu sees {} NVIDIA adapters",
-                        buses.len()
-                    )),
-                }
-            }
+            _ => unreachable!("only a named adapter is picked by name"),
         }
     }
+}
+
+/// The PCI bus ids of the NVIDIA adapters, sorted: CUDA's ordinals under
+/// `CUDA_DEVICE_ORDER=PCI_BUS_ID`.
+fn nvidia_buses(adapters: &[wgpu::AdapterInfo]) -> Vec<&str> {
+    let mut buses: Vec<&str> = adapters
+        .iter()
+        .filter(|a| a.vendor == NVIDIA && !a.device_pci_bus_id.is_empty())
+        .map(|a| a.device_pci_bus_id.as_str())
+        .collect();
+    buses.sort_unstable();
+    buses.dedup();
+    buses
+}
+
+/// The adapter of the device on `bus` to compute with: its first one not through OpenGL
+/// (wgpu lists a device once per backend).
+fn primary_on_bus(adapters: &[wgpu::AdapterInfo], bus: &str) -> usize {
+    let on_bus = || adapters.iter().enumerate().filter(|(_, a)| a.device_pci_bus_id == bus);
+    on_bus()
+        .find(|(_, a)| a.backend != wgpu::Backend::Gl)
+        .or_else(|| on_bus().next())
+        .map(|(i, _)| i)
+        .expect("the bus came from the list")
+}
+
+/// Every GPU of the machine once (`--devices all` when the environment names none): the
+/// discrete and integrated adapters, one per device (by PCI bus id, else by name), through a
+/// backend other than OpenGL where the device has one.
+pub fn every_gpu(adapters: &[wgpu::AdapterInfo]) -> Vec<usize> {
+    let gpu = |a: &wgpu::AdapterInfo| {
+        matches!(
+            a.device_type,
+            wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
+        )
+    };
+    let id = |a: &wgpu::AdapterInfo| {
+        if a.device_pci_bus_id.is_empty() {
+            a.name.clone()
+        } else {
+            a.device_pci_bus_id.clone()
+        }
+    };
+    let mut chosen: Vec<usize> = Vec::new();
+    for (i, a) in adapters.iter().enumerate().filter(|(_, a)| gpu(a)) {
+        match chosen.iter().position(|&c| id(&adapters[c]) == id(a)) {
+            None => chosen.push(i),
+            // The same device again: keep the one not through OpenGL.
+            Some(k) if adapters[chosen[k]].backend == wgpu::Backend::Gl && a.backend != wgpu::Backend::Gl => {
+                chosen[k] = i
+            }
+            Some(_) => {}
+        }
+    }
+    chosen
 }
 
 /// PCI vendor id of NVIDIA.
@@ -377,53 +453,52 @@ pub fn adapters() -> Vec<wgpu::AdapterInfo> {
 fn create_context() -> Result<GpuContext, GpuError> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let wish = AdapterWish::from_env(|name| std::env::var(name).ok())?;
-    let adapter = match wish {
-        AdapterWish::Any => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::from_env().unwrap_or(wgpu::PowerPreference::HighPerformance),
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?,
+    let named = match wish {
+        AdapterWish::Any => None,
         wish => {
             let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
             let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
             let infos: Vec<wgpu::AdapterInfo> = adapters.iter().map(wgpu::Adapter::get_info).collect();
-            let at = wish.pick(&infos)?.expect("a wish other than Any picks an adapter");
-            adapters.swap_remove(at)
+            wish.pick(&infos)?.map(|at| adapters.swap_remove(at))
         }
+    };
+    let adapter = match named {
+        Some(adapter) => adapter,
+        None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::from_env().unwrap_or(wgpu::PowerPreference::HighPerformance),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?,
     };
     context_on(adapter)
 }
 
-/// The context of every distinct GPU wgpu sees (one per PCI bus id; adapters without one
-/// count by name), each created once: `--devices all`. A machine without a GPU adapter gives
-/// the one [`context`] picks (a CPU driver such as lavapipe).
+/// The context of every GPU this process may use, each created once (`--devices all`): those
+/// the environment names ([`AdapterWish::pick_all`]), else every GPU of the machine
+/// ([`every_gpu`]). A machine without a GPU adapter gives the one [`context`] picks (a CPU
+/// driver such as lavapipe).
 pub fn every_context() -> Result<Vec<&'static GpuContext>, GpuError> {
     static ALL: OnceLock<Result<Vec<&'static GpuContext>, GpuError>> = OnceLock::new();
     ALL.get_or_init(|| {
+        let wish = AdapterWish::from_env(|name| std::env::var(name).ok())?;
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-        let mut seen = Vec::new();
-        let mut contexts = Vec::new();
-        for adapter in pollster::block_on(instance.enumerate_adapters(backends)) {
-            let info = adapter.get_info();
-            let gpu = matches!(
-                info.device_type,
-                wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu
-            );
-            let id = if info.device_pci_bus_id.is_empty() {
-                info.name.clone()
-            } else {
-                info.device_pci_bus_id.clone()
-            };
-            if gpu && !seen.contains(&id) {
-                seen.push(id);
-                contexts.push(&*Box::leak(Box::new(context_on(adapter)?)));
-            }
+        let mut adapters: Vec<Option<wgpu::Adapter>> = pollster::block_on(instance.enumerate_adapters(backends))
+            .into_iter()
+            .map(Some)
+            .collect();
+        let infos: Vec<wgpu::AdapterInfo> = adapters.iter().flatten().map(wgpu::Adapter::get_info).collect();
+        let chosen = wish.pick_all(&infos)?.unwrap_or_else(|| every_gpu(&infos));
+        if chosen.is_empty() {
+            return Ok(vec![context()?]);
         }
-        if contexts.is_empty() {
-            contexts.push(context()?);
-        }
-        Ok(contexts)
+        chosen
+            .into_iter()
+            .map(|i| {
+                let adapter = adapters[i].take().expect("each adapter is chosen once");
+                Ok(&*Box::leak(Box::new(context_on(adapter)?)))
+            })
+            .collect()
     })
     .clone()
 }
@@ -869,14 +944,16 @@ mod adapter_tests {
         }
     }
 
-    /// Two identical H100s (Vulkan and GL each, listed out of bus order) and lavapipe.
+    /// Two identical H100s (listed out of bus order, one also through GL) and lavapipe.
     fn machine() -> Vec<wgpu::AdapterInfo> {
         use wgpu::Backend::{Gl, Vulkan};
+        let mut lavapipe = adapter("llvmpipe", 0x10005, "", Vulkan);
+        lavapipe.device_type = wgpu::DeviceType::Cpu;
         vec![
             adapter("NVIDIA H100", NVIDIA, "0000:c1:00.0", Vulkan),
-            adapter("NVIDIA H100", NVIDIA, "0000:3b:00.0", Vulkan),
-            adapter("llvmpipe", 0x10005, "", Vulkan),
             adapter("NVIDIA H100", NVIDIA, "0000:3b:00.0", Gl),
+            lavapipe,
+            adapter("NVIDIA H100", NVIDIA, "0000:3b:00.0", Vulkan),
         ]
     }
 
@@ -887,31 +964,24 @@ mod adapter_tests {
     #[test]
     fn the_environment_names_one_of_two_identical_gpus() {
         let m = machine();
-        // CUDA ordinals count NVIDIA GPUs in PCI bus order, whatever order wgpu lists them in.
-        assert_eq!(
-            wish(&[("CUDA_VISIBLE_DEVICES", "0,1")]).unwrap().pick(&m).unwrap(),
-            Some(1)
-        );
-        assert_eq!(
-            wish(&[("CUDA_VISIBLE_DEVICES", "1")]).unwrap().pick(&m).unwrap(),
-            Some(0)
-        );
-        assert!(matches!(
-            wish(&[("CUDA_VISIBLE_DEVICES", "2")]).unwrap().pick(&m),
-            Err(GpuError::NotNamed(_))
-        ));
+        // CUDA ordinals count NVIDIA GPUs in PCI bus order, whatever order wgpu lists them in,
+        // and take a device's adapter not through OpenGL.
+        let cuda = |v: &str| wish(&[("CUDA_VISIBLE_DEVICES", v)]).unwrap();
+        assert_eq!(cuda("0,1").pick(&m).unwrap(), Some(3));
+        assert_eq!(cuda("1").pick(&m).unwrap(), Some(0));
+        assert_eq!(cuda("1,0").pick_all(&m).unwrap(), Some(vec![0, 3]));
+        assert!(matches!(cuda("2").pick(&m), Err(GpuError::NotNamed(_))));
         // No GPU given to the job: no adapter (auto falls back to the CPU).
         for hidden in ["", "-1", " "] {
-            assert_eq!(
-                wish(&[("CUDA_VISIBLE_DEVICES", hidden)]).unwrap(),
-                AdapterWish::NoneVisible
-            );
+            assert_eq!(cuda(hidden), AdapterWish::NoneVisible);
+            assert!(matches!(cuda(hidden).pick(&m), Err(GpuError::NotNamed(_))));
         }
         // A UUID is not something wgpu reports: wgpu chooses.
-        assert_eq!(wish(&[("CUDA_VISIBLE_DEVICES", "GPU-5a3c")]).unwrap(), AdapterWish::Any);
+        assert_eq!(cuda("GPU-5a3c"), AdapterWish::Any);
         // BITROCK_ADAPTER wins over the others: an index, or a bus id with or without domain.
         let both = [("BITROCK_ADAPTER", "2"), ("CUDA_VISIBLE_DEVICES", "0")];
         assert_eq!(wish(&both).unwrap().pick(&m).unwrap(), Some(2));
+        assert_eq!(wish(&both).unwrap().pick_all(&m).unwrap(), Some(vec![2]));
         assert_eq!(
             wish(&[("BITROCK_ADAPTER", "C1:00.0")]).unwrap().pick(&m).unwrap(),
             Some(0)
@@ -932,5 +1002,18 @@ mod adapter_tests {
             Some(2)
         );
         assert_eq!(wish(&[]).unwrap().pick(&m).unwrap(), None);
+        // Every GPU once, not through OpenGL where it can be avoided; no CPU driver.
+        assert_eq!(every_gpu(&m), vec![0, 3]);
+    }
+
+    #[test]
+    fn cuda_visible_devices_says_nothing_where_wgpu_sees_no_nvidia_adapter() {
+        let lavapipe_only = vec![machine()[2].clone()];
+        for v in ["0", "", "-1", "1,0"] {
+            let w = wish(&[("CUDA_VISIBLE_DEVICES", v)]).unwrap();
+            assert_eq!(w.pick(&lavapipe_only).unwrap(), None, "{v:?}");
+            assert_eq!(w.pick_all(&lavapipe_only).unwrap(), None, "{v:?}");
+        }
+        assert!(every_gpu(&lavapipe_only).is_empty());
     }
 }
