@@ -165,7 +165,7 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
     };
     let request = |version: &str, problem: u64| {
         wire::encode(&Request {
-            version: version.into(),
+            version: version.to_string(),
             problem,
             context: None,
             backend: Backend::Cpu,
@@ -174,9 +174,9 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
     };
     let payload = wire::encode(&problem);
     let key = wire::key_of(&payload) ^ 0x5eed; // a key this process has never held
-    let missing = shard::serve(&request(wire::VERSION, key), None, None);
+    let missing = shard::serve(&request(&wire::build(), key), None, None);
     assert!(wire::needs_payloads(&missing));
-    let done = shard::serve(&request(wire::VERSION, key), Some(&payload), None);
+    let done = shard::serve(&request(&wire::build(), key), Some(&payload), None);
     match wire::decode::<Reply>(&done, "reply").unwrap() {
         Reply::Done {
             output: shard::Output::Found { kept, scored, .. },
@@ -192,7 +192,7 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
     }
     // Held now: no payload needed.
     assert!(!wire::needs_payloads(&shard::serve(
-        &request(wire::VERSION, key),
+        &request(&wire::build(), key),
         None,
         None
     )));

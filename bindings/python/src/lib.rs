@@ -351,7 +351,9 @@ impl Transport for PyTransport {
     }
 
     fn parallelism(&self) -> usize {
-        self.parallelism
+        // Asked each round: a Dask cluster may have grown since the last.
+        Python::attach(|py| self.dispatcher.getattr(py, "parallelism")?.extract::<usize>(py))
+            .unwrap_or(self.parallelism)
     }
 }
 

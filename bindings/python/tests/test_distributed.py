@@ -183,6 +183,10 @@ def test_a_forking_process_pool_is_refused(demo) -> None:
             bitrock.abc(demo, particles=100, progress=False, executor=pool)
     with pytest.raises(bitrock.InputError, match="executor"):
         bitrock.abc(demo, particles=100, progress=False, executor=object())
+    # Which GPUs a worker uses is the worker's environment's to say.
+    with pytest.raises(bitrock.InputError, match="devices: applies to a run in this process") as caught:
+        bitrock.abc(demo, particles=100, progress=False, devices="all", executor=Scrambled(0))
+    assert caught.value.argument == "devices"
 
 
 def test_resume_on_workers_continues_as_one_process(demo, tmp_path) -> None:

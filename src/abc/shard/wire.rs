@@ -8,8 +8,8 @@
 //! its pipelines per process) for the tasks that follow. So the record travels once per
 //! worker and the previous population once per worker and population, whatever the number of
 //! tasks. Everything is encoded with postcard (serde); a worker refuses a request from
-//! another bitrock version. Workers and driver must run the same build on the same platform:
-//! SMC proposals go through the platform's `ln`, `sin` and `cos`.
+//! another bitrock version or platform ([`build`]): SMC proposals go through the platform's
+//! `ln`, `sin` and `cos`.
 
 use super::{Context, Output, Round, Task, Workers};
 use crate::abc::Particle;
@@ -24,6 +24,22 @@ use std::time::Instant;
 /// The bitrock version every request carries.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+/// What a driver and its workers must share for a population to be the same on both: the
+/// bitrock version, the platform, and the platform's `ln`, `sin` and `cos` (SMC's proposals go
+/// through them), fingerprinted by their values at a few arguments. Every request carries it.
+pub fn build() -> String {
+    let mut h = std::hash::DefaultHasher::new();
+    for x in [0.3f64, 1e-7, 0.5 + 1e-9, 2.5, 1234.5678, std::f64::consts::TAU] {
+        (x.ln().to_bits(), x.sin().to_bits(), x.cos().to_bits()).hash(&mut h);
+    }
+    format!(
+        "{VERSION} ({}-{}, libm {:016x})",
+        std::env::consts::ARCH,
+        std::env::consts::OS,
+        h.finish()
+    )
+}
+
 /// The environment variable that overrides, on a worker, the backend the driver asked for
 /// (`cpu`, `gpu` or `auto`): a node without a GPU in a pool of GPU nodes, say.
 pub const WORKER_BACKEND_VAR: &str = "BITROCK_WORKER_BACKEND";
@@ -31,6 +47,7 @@ pub const WORKER_BACKEND_VAR: &str = "BITROCK_WORKER_BACKEND";
 /// A task for a worker.
 #[derive(Debug, Serialize, Deserialize)]
 pub struct Request {
+    /// The driver's [`build`].
     pub version: String,
     /// Key of the problem's payload.
     pub problem: u64,
@@ -123,9 +140,10 @@ pub fn serve(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> 
 
 fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Result<Reply> {
     let request: Request = decode(request, "request")?;
-    if request.version != VERSION {
+    let here = build();
+    if request.version != here {
         return Err(Error::Worker(format!(
-            "the driver runs bitrock {} and this worker {VERSION}: install the same version on both",
+            "the driver runs bitrock {} and this worker {here}: driver and workers need the same bitrock on the same platform",
             request.version
         )));
     }
@@ -337,7 +355,7 @@ impl<T: Transport> Workers for Remote<T> {
             .iter()
             .map(|task| {
                 encode(&Request {
-                    version: VERSION.to_string(),
+                    version: build(),
                     problem: self.problem_key,
                     context: context.as_ref().map(|c| c.0),
                     backend: self.backend,

@@ -214,6 +214,12 @@ def abc(
     ``dask.distributed.Client``, or :func:`ray_executor`. The particles are the ones one
     process gives, bit for bit, whatever the number of workers, the order tasks finish in,
     or tasks lost and run again; :attr:`Result.traffic` says what travelled."""
+    if executor is not None and devices is not None:
+        raise InputError(
+            "devices: applies to a run in this process; with `executor`, each worker uses the GPU "
+            "its environment names (BITROCK_ADAPTER, CUDA_VISIBLE_DEVICES)",
+            "devices",
+        )
     settings = {k: v for k, v in locals().items() if k not in ("record", "out", "force", "progress", "executor")}
     for key in ("laws", "epsilons"):
         if settings[key] is not None:
@@ -263,6 +269,12 @@ def resume(
         "backend": backend,
         "devices": devices,
     }
+    if executor is not None and devices is not None:
+        raise InputError(
+            "devices: applies to a run in this process; with `executor`, each worker uses the GPU "
+            "its environment names (BITROCK_ADAPTER, CUDA_VISIBLE_DEVICES)",
+            "devices",
+        )
     dispatcher = None if executor is None else Dispatcher(executor)
     callback, close = _progress(progress)
     try:

@@ -62,13 +62,20 @@ class Dispatcher:
     """Carries the tasks of a run to ``executor``'s workers (see the module's text)."""
 
     def __init__(self, executor: Any, *, tasks_per_worker: int = 2, retries: int = 3) -> None:
-        self._submit, self.workers = _submitter(executor)
-        self.parallelism = max(1, self.workers * tasks_per_worker)
+        self._submit, self._workers = _submitter(executor)
+        self._tasks_per_worker = tasks_per_worker
         self.retries = retries
         # A Dask client places the payloads on every worker itself (scatter, broadcast): each
         # travels once per worker, and every task names it.
         self._client = executor if _is_dask_client(executor) else None
         self._scattered: dict[str, tuple[int, Any]] = {}
+
+    @property
+    def parallelism(self) -> int:
+        """Tasks a round is cut into: a few per worker slot. A Dask cluster is asked each
+        round, so that workers that joined since (dask-jobqueue jobs starting) get work."""
+        slots = sum(self._client.nthreads().values()) if self._client is not None else self._workers
+        return max(1, slots * self._tasks_per_worker)
 
     def _on_every_worker(self, role: str, payload: bytes) -> tuple[Any, int]:
         """A Dask future of ``payload`` held by every worker, and the bytes that took (0 when
@@ -87,12 +94,19 @@ class Dispatcher:
         replies: list[bytes | None] = [None] * len(requests)
         pending: dict[concurrent.futures.Future, tuple[int, int, bool]] = {}
         shipped = 0
+        payloads = (problem, context)
+
+        def place() -> int:
+            """On Dask: the payloads on every worker, named by the tasks; the bytes sent."""
+            nonlocal problem, context
+            problem, sent = self._on_every_worker("problem", payloads[0])
+            if payloads[1] is not None:
+                context, more = self._on_every_worker("context", payloads[1])
+                sent += more
+            return sent
+
         if self._client is not None:
-            problem, sent = self._on_every_worker("problem", problem)
-            shipped += sent
-            if context is not None:
-                context, sent = self._on_every_worker("context", context)
-                shipped += sent
+            shipped += place()
 
         def send(i: int, tries: int, attach: bool) -> None:
             args = (requests[i], problem, context) if attach else (requests[i],)
@@ -112,6 +126,10 @@ class Dispatcher:
                             raise BitrockError(
                                 f"a task failed on {tries + 1} tries, the last with: {error!r}"
                             ) from error
+                        if self._client is not None:
+                            # The workers holding the payloads may be gone: place them again.
+                            self._scattered.clear()
+                            shipped += place()
                         send(i, tries + 1, attached)
                         continue
                     if _bitrock.needs_payloads(reply):
