@@ -398,9 +398,15 @@ impl Kernels {
         let from = self.alive[inverse_cdf(&self.law_cdf, open_unit(b0[0]))];
         let a = self.alive.len();
         if a > 1 && open_unit(b0[1]) >= self.p_stay {
-            // Uniform among the other alive laws: ⌊w·(a − 1) / 2³²⌋, exact in integers.
-            let others: Vec<usize> = self.alive.iter().copied().filter(|&s| s != from).collect();
-            others[((u64::from(b0[2]) * (a as u64 - 1)) >> 32) as usize]
+            // Uniform among the other alive laws: the j-th of them, j = ⌊w·(a − 1) / 2³²⌋,
+            // exact in integers (no list of them made per proposal).
+            let j = ((u64::from(b0[2]) * (a as u64 - 1)) >> 32) as usize;
+            let at = self
+                .alive
+                .iter()
+                .position(|&s| s == from)
+                .expect("the ancestor's law is alive");
+            self.alive[if j < at { j } else { j + 1 }]
         } else {
             from
         }

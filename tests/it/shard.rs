@@ -174,9 +174,9 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
     };
     let payload = wire::encode(&problem);
     let key = wire::key_of(&payload) ^ 0x5eed; // a key this process has never held
-    let missing = shard::serve(&request(&wire::build(), key), None, None);
+    let missing = shard::serve(&request(wire::build(), key), None, None);
     assert!(wire::needs_payloads(&missing));
-    let done = shard::serve(&request(&wire::build(), key), Some(&payload), None);
+    let done = shard::serve(&request(wire::build(), key), Some(&payload), None);
     match wire::decode::<Reply>(&done, "reply").unwrap() {
         Reply::Done {
             output: shard::Output::Found { kept, scored, .. },
@@ -192,7 +192,7 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
     }
     // Held now: no payload needed.
     assert!(!wire::needs_payloads(&shard::serve(
-        &request(&wire::build(), key),
+        &request(wire::build(), key),
         None,
         None
     )));
@@ -227,6 +227,15 @@ fn several_evaluators_in_one_process_give_the_one_evaluator_run() {
     );
 }
 
+/// The `--json` document of `abc` with its populations' wall-clock seconds left out.
+fn without_seconds(stdout: &[u8]) -> serde_json::Value {
+    let mut doc: serde_json::Value = serde_json::from_slice(stdout).unwrap();
+    for p in doc["populations"].as_array_mut().unwrap() {
+        p.as_object_mut().unwrap().remove("seconds");
+    }
+    doc
+}
+
 /// `--devices all` on this machine's GPUs (lavapipe alone here: one device) gives the
 /// particles of the one-GPU run, through the command line.
 #[test]
@@ -252,10 +261,7 @@ fn devices_all_gives_the_one_gpu_run() {
             .output()
             .unwrap();
         assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
-        let mut doc: serde_json::Value = serde_json::from_slice(&done.stdout).unwrap();
-        for p in doc["populations"].as_array_mut().unwrap() {
-            p.as_object_mut().unwrap().remove("seconds");
-        }
+        let doc = without_seconds(&done.stdout);
         (
             doc["populations"].clone(),
             String::from_utf8_lossy(&done.stderr).to_string(),
@@ -320,10 +326,7 @@ fn the_environment_names_the_gpu_or_says_why_not() {
             .output()
             .unwrap();
         assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
-        let mut doc: serde_json::Value = serde_json::from_slice(&done.stdout).unwrap();
-        for p in doc["populations"].as_array_mut().unwrap() {
-            p.as_object_mut().unwrap().remove("seconds");
-        }
+        let doc = without_seconds(&done.stdout);
         (doc["populations"].clone(), doc["backend"].clone())
     };
     let plain = run(None, "plain");

@@ -321,23 +321,47 @@ impl Observer for PyObserver {
 }
 
 /// Carries a run's tasks to workers through a Python dispatcher (`bitrock._distributed`): its
-/// `exchange(requests, problem, context)` returns the replies and the payload bytes shipped.
+/// `exchange(requests, problem, context, (problem_key, context_key))` returns the replies and
+/// the payload bytes shipped.
 struct PyTransport {
     dispatcher: Py<PyAny>,
     parallelism: usize,
     /// The Python exception that stopped an exchange (Ctrl-C, a task failing on every try).
     raised: Mutex<Option<PyErr>>,
+    /// The payloads as Python bytes, by key: made once, not copied again every round.
+    payloads: Mutex<Vec<(u64, Py<PyBytes>)>>,
+}
+
+impl PyTransport {
+    /// `bytes` (named `key`) as Python bytes, made on first use; the problem's and the latest
+    /// context's are kept.
+    fn payload(&self, py: Python<'_>, key: u64, bytes: &[u8]) -> Py<PyBytes> {
+        let mut held = self.payloads.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((_, b)) = held.iter().find(|(k, _)| *k == key) {
+            return b.clone_ref(py);
+        }
+        if held.len() >= 2 {
+            held.remove(1); // the previous context; the problem stays first
+        }
+        let made: Py<PyBytes> = PyBytes::new(py, bytes).unbind();
+        held.push((key, made.clone_ref(py)));
+        made
+    }
 }
 
 impl Transport for PyTransport {
     fn exchange(&self, requests: Vec<Vec<u8>>, payloads: &Payloads) -> bitrock::Result<Exchanged> {
         let exchanged = Python::attach(|py| -> PyResult<Exchanged> {
             let requests = PyList::new(py, requests.iter().map(|r| PyBytes::new(py, r)))?;
-            let problem = PyBytes::new(py, payloads.problem);
-            let context = payloads.context.map(|c| PyBytes::new(py, c));
+            let problem = self.payload(py, payloads.problem_key, payloads.problem);
+            let context = payloads
+                .context
+                .zip(payloads.context_key)
+                .map(|(bytes, key)| self.payload(py, key, bytes));
+            let keys = (payloads.problem_key, payloads.context_key);
             let answer = self
                 .dispatcher
-                .call_method1(py, "exchange", (requests, problem, context))?;
+                .call_method1(py, "exchange", (requests, problem, context, keys))?;
             let (replies, payload_bytes): (Vec<Bound<'_, PyBytes>>, u64) = answer.extract(py)?;
             Ok(Exchanged {
                 replies: replies.iter().map(|r| r.as_bytes().to_vec()).collect(),
@@ -369,6 +393,7 @@ fn remote_on<'a>(
         dispatcher,
         parallelism,
         raised: Mutex::new(None),
+        payloads: Mutex::new(Vec::new()),
     });
     move |problem, backend| {
         let transport = transport.take().expect("a run makes its workers once");

@@ -83,7 +83,8 @@ def test_a_process_pool_gives_the_one_process_store(demo, one_process, tmp_path,
         run = bitrock.abc(demo, backend="cpu", out=tmp_path / "pool", progress=False, executor=pool, **SETTINGS[k])
     assert_same_store(one_process[k], tmp_path / "pool")
     traffic = run.traffic
-    assert traffic is not None and (traffic["tasks"] >= traffic["rounds"]).all()
+    # Every population this run scored has its row, and every round brought replies back.
+    assert traffic is not None and len(traffic) > 0 and (traffic["reply_bytes"] > 0).all()
     # The record travels to a worker when it asks, not with every task: a scan task is a
     # range of candidate indices, a few dozen bytes.
     assert traffic["payload_bytes"].sum() > 0

@@ -27,17 +27,20 @@ pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 /// What a driver and its workers must share for a population to be the same on both: the
 /// bitrock version, the platform, and the platform's `ln`, `sin` and `cos` (SMC's proposals go
 /// through them), fingerprinted by their values at a few arguments. Every request carries it.
-pub fn build() -> String {
-    let mut h = std::hash::DefaultHasher::new();
-    for x in [0.3f64, 1e-7, 0.5 + 1e-9, 2.5, 1234.5678, std::f64::consts::TAU] {
-        (x.ln().to_bits(), x.sin().to_bits(), x.cos().to_bits()).hash(&mut h);
-    }
-    format!(
-        "{VERSION} ({}-{}, libm {:016x})",
-        std::env::consts::ARCH,
-        std::env::consts::OS,
-        h.finish()
-    )
+pub fn build() -> &'static str {
+    static BUILD: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    BUILD.get_or_init(|| {
+        let mut h = std::hash::DefaultHasher::new();
+        for x in [0.3f64, 1e-7, 0.5 + 1e-9, 2.5, 1234.5678, std::f64::consts::TAU] {
+            (x.ln().to_bits(), x.sin().to_bits(), x.cos().to_bits()).hash(&mut h);
+        }
+        format!(
+            "{VERSION} ({}-{}, libm {:016x})",
+            std::env::consts::ARCH,
+            std::env::consts::OS,
+            h.finish()
+        )
+    })
 }
 
 /// The environment variable that overrides, on a worker, the backend the driver asked for
@@ -209,10 +212,13 @@ fn worker_backend(name: &str) -> Result<Backend> {
     }
 }
 
-/// The payloads a request may need, for a transport to attach when a worker asks.
+/// The payloads a request may need, for a transport to attach when a worker asks, with the
+/// keys the requests name them by (the same bytes keep their key from round to round).
 pub struct Payloads<'a> {
     pub problem: &'a [u8],
+    pub problem_key: u64,
     pub context: Option<&'a [u8]>,
+    pub context_key: Option<u64>,
 }
 
 /// What a transport sent and got back.
@@ -355,7 +361,7 @@ impl<T: Transport> Workers for Remote<T> {
             .iter()
             .map(|task| {
                 encode(&Request {
-                    version: build(),
+                    version: build().to_string(),
                     problem: self.problem_key,
                     context: context.as_ref().map(|c| c.0),
                     backend: self.backend,
@@ -369,7 +375,9 @@ impl<T: Transport> Workers for Remote<T> {
             requests,
             &Payloads {
                 problem: &self.problem_bytes,
+                problem_key: self.problem_key,
                 context: context.as_ref().map(|c| c.1.as_slice()),
+                context_key: context.as_ref().map(|c| c.0),
             },
         )?;
         let wait_seconds = started.elapsed().as_secs_f64();

@@ -68,7 +68,7 @@ class Dispatcher:
         # A Dask client places the payloads on every worker itself (scatter, broadcast): each
         # travels once per worker, and every task names it.
         self._client = executor if _is_dask_client(executor) else None
-        self._scattered: dict[str, tuple[int, Any]] = {}
+        self._scattered: dict[str, tuple[int | None, Any]] = {}
 
     @property
     def parallelism(self) -> int:
@@ -77,20 +77,26 @@ class Dispatcher:
         slots = sum(self._client.nthreads().values()) if self._client is not None else self._workers
         return max(1, slots * self._tasks_per_worker)
 
-    def _on_every_worker(self, role: str, payload: bytes) -> tuple[Any, int]:
-        """A Dask future of ``payload`` held by every worker, and the bytes that took (0 when
-        the same payload is held already)."""
-        digest = hash(payload)
+    def _on_every_worker(self, role: str, payload: bytes, key: int | None) -> tuple[Any, int]:
+        """A Dask future of ``payload`` (named ``key``) held by every worker, and the bytes
+        that took (0 when the same payload is held already)."""
         held = self._scattered.get(role)
-        if held is not None and held[0] == digest:
+        if held is not None and held[0] == key:
             return held[1], 0
         workers = len(self._client.scheduler_info()["workers"])
         future = self._client.scatter(payload, broadcast=True, hash=False)
-        self._scattered[role] = (digest, future)
+        self._scattered[role] = (key, future)
         return future, len(payload) * workers
 
-    def exchange(self, requests: list[bytes], problem: bytes, context: bytes | None) -> tuple[list[bytes], int]:
-        """The replies to ``requests`` in their order, and the payload bytes shipped."""
+    def exchange(
+        self,
+        requests: list[bytes],
+        problem: bytes,
+        context: bytes | None,
+        keys: tuple[int, int | None] = (0, None),
+    ) -> tuple[list[bytes], int]:
+        """The replies to ``requests`` in their order, and the payload bytes shipped;
+        ``keys`` name the problem and the context (the same key, the same bytes)."""
         replies: list[bytes | None] = [None] * len(requests)
         pending: dict[concurrent.futures.Future, tuple[int, int, bool]] = {}
         shipped = 0
@@ -99,9 +105,9 @@ class Dispatcher:
         def place() -> int:
             """On Dask: the payloads on every worker, named by the tasks; the bytes sent."""
             nonlocal problem, context
-            problem, sent = self._on_every_worker("problem", payloads[0])
+            problem, sent = self._on_every_worker("problem", payloads[0], keys[0])
             if payloads[1] is not None:
-                context, more = self._on_every_worker("context", payloads[1])
+                context, more = self._on_every_worker("context", payloads[1], keys[1])
                 sent += more
             return sent
 
