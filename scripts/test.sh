@@ -24,6 +24,11 @@ if ! has_vulkan_driver; then
 fi
 # Silences a harmless warning of Mesa's device-select layer.
 export NODEVICE_SELECT=1
+# The GPU scoring shapes are measured once per test run, into a cache of its own: the tests
+# neither read nor change the user's.
+BITROCK_CACHE_DIR="$(mktemp -d)"
+export BITROCK_CACHE_DIR
+trap 'rm -rf "$BITROCK_CACHE_DIR"' EXIT
 
 # Slow tests (fits, simulations, ABC runs, GPU parity) run in release.
 cargo test --release --all-targets

@@ -41,6 +41,9 @@ pub struct Throughput {
     pub n: usize,
     /// Data points.
     pub d: usize,
+    /// The GPU scoring shape (the tuning's fastest at N); none on the CPU.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shape: Option<gpu::Shape>,
     /// Candidate × data-point evaluations per second (median).
     pub evals_per_s: f64,
     /// The same, min and max over the repetitions.
@@ -83,8 +86,12 @@ pub struct BenchReport {
     pub cores: usize,
     /// The GPU adapter and driver, or why there is none.
     pub adapter: String,
-    /// The GPU scoring shape used (the adapter's, or `BITROCK_GPU_SHAPE`'s); none without a GPU.
+    /// The GPU scoring shape of runs at the bench's default size (65,536 candidates per
+    /// dispatch): measured, or `BITROCK_GPU_SHAPE`'s; none without a GPU.
     pub shape: Option<gpu::Shape>,
+    /// The adapter's table of scoring shapes (see [`gpu::tune`]); none without a GPU, or where
+    /// `BITROCK_GPU_SHAPE` names the shape or measuring is off.
+    pub tuning: Option<TuningReport>,
     pub repetitions: usize,
     pub throughput: Vec<Throughput>,
     /// Time of one small call (64 candidates, 100 points), s: the fixed cost of a dispatch.
@@ -97,6 +104,17 @@ pub struct BenchReport {
     pub stability: Option<StabilityThroughput>,
     /// `bitrock check-selection` of the embedded record's run (measured with `--selection` only).
     pub selection: Option<SelectionBench>,
+}
+
+/// The adapter's table of scoring shapes, as the bench found it.
+#[derive(Clone, Debug, Serialize)]
+pub struct TuningReport {
+    /// `cached` (an earlier measurement) or `measured` (now).
+    pub source: &'static str,
+    /// The cache file it is kept in; none where there is no cache directory.
+    pub cache_file: Option<std::path::PathBuf>,
+    #[serde(flatten)]
+    pub tuning: gpu::tune::Tuning,
 }
 
 /// `bitrock check-selection` of a run of the embedded record: every law, K replicates each.
@@ -154,6 +172,9 @@ pub struct BenchOptions {
     /// Measure only `bitrock check-selection` ([`selection_check`]) with this many replicates
     /// per law (20 by default), instead of the other sections.
     pub selection_replicates: Option<usize>,
+    /// Measure the GPU scoring shapes again (and keep the new table) even where a table is
+    /// cached.
+    pub retune: bool,
 }
 
 impl Default for BenchOptions {
@@ -167,6 +188,7 @@ impl Default for BenchOptions {
             particles: 25_000,
             stability: (512, 10_000),
             selection_replicates: None,
+            retune: false,
         }
     }
 }
@@ -226,13 +248,15 @@ fn time_calls(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<Vec<f64>
 /// else each other section in turn: evaluator throughput, the small call, the paper-scale run
 /// end to end, rejection against SMC, and the GPU stability grid.
 pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchReport> {
-    let (adapter, shape) = gpu_adapter(log)?;
+    let embedded = EmbeddedRecord::fitted()?;
+    let (adapter, shape, tuning) = gpu_adapter(&embedded.problem(), opts.retune, log)?;
     let reps = opts.repetitions.max(1);
     let report = BenchReport {
         machine: machine(),
         cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         adapter,
         shape,
+        tuning,
         repetitions: reps,
         throughput: Vec::new(),
         small_call_seconds: Vec::new(),
@@ -253,7 +277,6 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
     }
     let throughput = measure_throughput(opts, reps, log)?;
     let small_call_seconds = measure_small_calls(&opts.backends, reps, log)?;
-    let embedded = EmbeddedRecord::fitted()?;
     let config = RejectionConfig {
         particles: opts.particles,
         ..RejectionConfig::default()
@@ -275,17 +298,51 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
     })
 }
 
-/// The GPU adapter's description and the scoring shape it is used with (logged), or why there
-/// is no GPU and no shape.
-fn gpu_adapter(log: &mut dyn FnMut(String)) -> Result<(String, Option<gpu::Shape>)> {
-    let (adapter, shape) = match gpu::context() {
-        Ok(ctx) => (ctx.describe(), Some(gpu::Shape::chosen(ctx)?)),
-        Err(e) => (format!("none ({e})"), None),
+/// The GPU adapter's description, the scoring shape of the default size and the adapter's
+/// table of shapes (measured on `problem` where none is cached, or with `retune`), logged; or
+/// why there is no GPU, and no shape.
+fn gpu_adapter(
+    problem: &AbcProblem,
+    retune: bool,
+    log: &mut dyn FnMut(String),
+) -> Result<(String, Option<gpu::Shape>, Option<TuningReport>)> {
+    use gpu::tune;
+    let ctx = match gpu::context() {
+        Ok(ctx) => ctx,
+        Err(e) => return Ok((format!("none ({e})"), None, None)),
     };
-    if let Some(shape) = shape {
-        log(format!("GPU: {adapter}, {shape} scoring"));
-    }
-    Ok((adapter, shape))
+    let adapter = ctx.describe();
+    let wish = tune::ShapeWish::default();
+    let tuning = match tune::choose(ctx, problem, wish)?.source {
+        tune::Source::Named | tune::Source::Guessed => None,
+        _ if retune => {
+            let tuning = tune::measure(ctx, problem)?;
+            if let Some(path) = tune::cache_path() {
+                tune::write_cache(&path, &tuning)?;
+            }
+            tune::forget_held();
+            Some(("measured", tuning))
+        }
+        _ => {
+            let (tuning, source) = tune::tuning(ctx, problem)?;
+            Some((
+                if source == tune::Source::Cached {
+                    "cached"
+                } else {
+                    "measured"
+                },
+                tuning,
+            ))
+        }
+    };
+    let choice = tune::choose(ctx, problem, wish)?;
+    log(format!("GPU: {adapter}, {} scoring ({})", choice.shape, choice.source));
+    let report = tuning.map(|(source, tuning)| TuningReport {
+        source,
+        cache_file: tune::cache_path(),
+        tuning,
+    });
+    Ok((adapter, Some(choice.shape), report))
 }
 
 /// Evaluator throughput of every backend, size and law, on [`synthetic_problem`]s: one call
@@ -295,7 +352,11 @@ fn measure_throughput(opts: &BenchOptions, reps: usize, log: &mut dyn FnMut(Stri
     for &backend in &opts.backends {
         for &(n, d) in &opts.sizes {
             for &law in &opts.laws {
-                let ev = evaluator(synthetic_problem(law, d, 1), backend, &mut |_| {})?;
+                let wish = gpu::tune::ShapeWish {
+                    recorded: None,
+                    candidates: n,
+                };
+                let ev = evaluator(synthetic_problem(law, d, 1), backend, wish, &mut |_| {})?;
                 let mut rho = vec![0.0; n];
                 let times = time_calls(reps, || ev.score(0, 0, &mut rho))?;
                 let rates: Vec<f64> = times.iter().map(|t| (n * d) as f64 / t).collect();
@@ -310,6 +371,7 @@ fn measure_throughput(opts: &BenchOptions, reps: usize, log: &mut dyn FnMut(Stri
                     law,
                     n,
                     d,
+                    shape: ev.gpu_shape(),
                     evals_per_s: spread.median,
                     evals_per_s_spread: spread,
                 });
@@ -328,7 +390,12 @@ fn measure_small_calls(
 ) -> Result<Vec<(String, Spread)>> {
     let mut small_call_seconds = Vec::new();
     for &backend in backends {
-        let ev = evaluator(synthetic_problem(Law::M2, 100, 1), backend, &mut |_| {})?;
+        let ev = evaluator(
+            synthetic_problem(Law::M2, 100, 1),
+            backend,
+            Default::default(),
+            &mut |_| {},
+        )?;
         let mut rho = vec![0.0; 64];
         let times = time_calls(reps.max(20), || ev.score(0, 0, &mut rho))?;
         let spread = Spread::of(&times);
@@ -360,13 +427,15 @@ impl EmbeddedRecord {
         Ok(Self { data, fits, prior })
     }
 
-    /// An evaluator of the record's calibration samples under the prior (seed 1) on `backend`.
-    fn evaluator(&self, backend: Backend) -> Result<Box<dyn Evaluator>> {
-        evaluator(
-            AbcProblem::new(self.prior.clone(), 1, &self.data.calibration, None),
-            backend,
-            &mut |_| {},
-        )
+    /// The record's calibration samples under the prior, seed 1.
+    fn problem(&self) -> AbcProblem {
+        AbcProblem::new(self.prior.clone(), 1, &self.data.calibration, None)
+    }
+
+    /// An evaluator of [`Self::problem`] on `backend`, for a run of `particles`.
+    fn evaluator(&self, backend: Backend, particles: usize) -> Result<Box<dyn Evaluator>> {
+        let wish = gpu::tune::ShapeWish::for_run(None, particles);
+        evaluator(self.problem(), backend, wish, &mut |_| {})
     }
 }
 
@@ -381,7 +450,7 @@ fn measure_end_to_end(
 ) -> Result<Vec<EndToEnd>> {
     let mut end_to_end = Vec::new();
     for &backend in backends {
-        let ev = embedded.evaluator(backend)?;
+        let ev = embedded.evaluator(backend, config.particles)?;
         let mut last = None;
         let times = time_calls(reps, || {
             last = Some(rejection::run(ev.as_ref(), config)?);
@@ -428,7 +497,7 @@ fn compare_samplers(
         (1.1 * floor, (opts.particles / 5).max(100)),
     ];
     for &backend in &opts.backends {
-        let ev = embedded.evaluator(backend)?;
+        let ev = embedded.evaluator(backend, opts.particles)?;
         for &(eps_min, particles) in &targets {
             let base = RejectionConfig {
                 particles,

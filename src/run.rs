@@ -10,6 +10,7 @@ use crate::abc::smc::{self, SmcConfig, WeightsOn};
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
+use crate::eval::gpu::{Shape, tune::ShapeWish};
 use crate::eval::{AbcProblem, Backend, Evaluator};
 use crate::files;
 use crate::fit::{self, FitOptions};
@@ -41,6 +42,11 @@ pub struct RunConfig {
     /// Every GPU of the machine or one (see [`Devices`]); the populations are the same.
     #[serde(default)]
     pub devices: Devices,
+    /// The GPU scoring shape of the run's last GPU scoring: a resumed run and its selection
+    /// check score in it too, unless `BITROCK_GPU_SHAPE` names another (see
+    /// [`crate::eval::gpu::tune`]). `None` until a GPU scored.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpu_shape: Option<Shape>,
     pub sampler: SamplerConfig,
     /// Replace the sampler's eps_min by the floor the record can reach ([`floor::resolve`]:
     /// the paper's 0.014 where reachable), in [`start`], and store the result. `bitrock abc`
@@ -60,6 +66,7 @@ impl Default for RunConfig {
             seed: 1,
             backend: Backend::Auto,
             devices: Devices::One,
+            gpu_shape: None,
             sampler: SamplerConfig::Rejection(RejectionConfig::default()),
             eps_min_from_record: false,
         }
@@ -235,6 +242,7 @@ impl Settings {
             seed: self.seed.unwrap_or(defaults.seed),
             backend: self.backend.unwrap_or(defaults.backend),
             devices: self.devices.unwrap_or(defaults.devices),
+            gpu_shape: None,
             sampler,
             eps_min_from_record: self.eps_min.is_none() && schedule.is_none(),
         })
@@ -424,8 +432,6 @@ pub fn start(
     prior_file: Option<&PriorFile>,
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
-    let (backend, devices) = (config.backend, config.devices);
-    let mut here = move |problem, note: &mut dyn FnMut(String)| shard::here(problem, backend, devices, note);
     start_on(dir, data, config, prior_file, &mut here, observer)
 }
 
@@ -453,9 +459,23 @@ pub fn start_on(
 /// elsewhere).
 pub type MakeEvaluator<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> + 'a;
 
-/// Makes the workers that run a run's tasks from its problem, saying what the user should
-/// know through the second argument.
-pub type MakeWorkers<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+/// Makes the workers that run a run's tasks from its problem and configuration (a continued
+/// run's with the continuation's backend and devices), saying what the user should know
+/// through the third argument.
+pub type MakeWorkers<'a> =
+    dyn FnMut(AbcProblem, &RunConfig, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+
+/// The workers of this process for a run of `config`: [`shard::here`] with its backend,
+/// devices and GPU scoring shape.
+pub fn here(problem: AbcProblem, config: &RunConfig, note: &mut dyn FnMut(String)) -> Result<Box<dyn Workers>> {
+    shard::here(problem, config.backend, config.devices, shape_wish(config), note)
+}
+
+/// What a run of `config` asks of the GPU scoring shape: its recorded one, for dispatches of
+/// its size.
+pub fn shape_wish(config: &RunConfig) -> ShapeWish {
+    ShapeWish::for_run(config.gpu_shape, config.sampler.base().particles)
+}
 
 /// [`start`] of a run in memory whose record's least-squares fits the caller made
 /// (`fit::fit_record(&config.laws, &data, &config.fit)`) and whose evaluator the caller makes
@@ -470,7 +490,7 @@ pub fn start_fitted_in_memory(
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
     config.validate()?;
-    let mut here = |problem, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers + '_>> {
+    let mut here = |problem, _: &RunConfig, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers + '_>> {
         Ok(Box::new(Local(make_evaluator(problem, note)?)))
     };
     start_with_fits(None, data, config, fits, prior_file, &mut here, observer)
@@ -506,8 +526,9 @@ fn start_with_fits(
     )?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
-    let evaluator = make_workers(problem, &mut |line| observer.note(line))?;
-    let setup = RunSetup {
+    let evaluator = make_workers(problem, &config, &mut |line| observer.note(line))?;
+    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
+    let mut setup = RunSetup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
         data,
         fits,
@@ -534,6 +555,9 @@ fn start_with_fits(
         ),
     };
     let added = run.populations.len();
+    // Workers elsewhere name their shape only once they have scored.
+    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
+    setup.config = serde_json::to_value(&config).expect("the configuration serialises");
     Ok(Outcome {
         config,
         setup,
@@ -641,22 +665,14 @@ const FIRST_EXACT_CANDIDATES_SCHEMA: i64 = 2;
 /// Continues the run in `dir` after its last stored population with the stopping rules of
 /// `more`; the populations are those an uninterrupted run with the same settings gives.
 pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> Result<Outcome> {
-    let mut here = |problem, config: &RunConfig, note: &mut dyn FnMut(String)| {
-        shard::here(problem, config.backend, config.devices, note)
-    };
     resume_on(dir, more, &mut here, observer)
 }
-
-/// Makes the workers of a continued run from its problem and configuration (with the
-/// continuation's backend and devices).
-pub type MakeWorkersFor<'a> =
-    dyn FnMut(AbcProblem, &RunConfig, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
 
 /// [`resume`] with the new populations' tasks run by the workers `make_workers` makes.
 pub fn resume_on(
     dir: &Path,
     more: &Continuation,
-    make_workers: &mut MakeWorkersFor,
+    make_workers: &mut MakeWorkers,
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
     let store = RunStore::open(dir)?;
@@ -692,6 +708,7 @@ pub fn resume_on(
     )
     .with_best_rho(&setup.fits);
     let evaluator = make_workers(problem, &config, &mut |line| observer.note(line))?;
+    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
     let stored = populations.len();
     observer.note(format!(
         "continuing {} after population {} ({} stored)",
@@ -709,6 +726,7 @@ pub fn resume_on(
         observer,
     )?;
     let added = run.populations.len() - stored;
+    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
     if added == 0 {
         // Nothing was run: the stored facts stand, and so does every file made from them.
         config = stored_config;
@@ -845,8 +863,18 @@ fn sample(
     let mut store = store?;
     if let Some(invocation) = invocation {
         let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
-        // The backends that scored, as the workers reported them (a pool may mix them).
-        store.finish_invocation(invocation, stop.as_str().unwrap_or_default(), evaluator.backend())?;
+        // The backends that scored, as the workers reported them (a pool may mix them), and
+        // the GPU scoring shape, which workers elsewhere name only once they have scored.
+        let finished = RunConfig {
+            gpu_shape: evaluator.gpu_shape().or(config.gpu_shape),
+            ..config.clone()
+        };
+        store.finish_invocation(
+            invocation,
+            stop.as_str().unwrap_or_default(),
+            evaluator.backend(),
+            &serde_json::to_value(&finished).expect("the configuration serialises"),
+        )?;
     }
     Ok(run)
 }

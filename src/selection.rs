@@ -25,8 +25,9 @@
 use crate::abc::Silent;
 use crate::data::{FieldData, Samples};
 use crate::error::{Error, Result};
-use crate::eval::Backend;
+use crate::eval::gpu::Shape;
 use crate::eval::records::{RecordBatch, Seat};
+use crate::eval::{AbcProblem, Backend};
 use crate::files;
 use crate::fit::LawFit;
 use crate::laws::Law;
@@ -204,6 +205,9 @@ pub struct SelectionCheck {
     pub particles: usize,
     /// Backend that scored the candidates (`cpu`, `gpu`).
     pub backend: String,
+    /// The GPU scoring shape, where the GPU scored (the run's recorded one when it has one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gpu_shape: Option<Shape>,
     pub rows: Vec<GeneratingLaw>,
     /// Wall time of the check, s.
     pub seconds: f64,
@@ -438,8 +442,16 @@ pub fn check(
     let done = AtomicUsize::new(0);
     let mut results: Vec<Replicate> = Vec::with_capacity(jobs.len());
     let mut backend = "cpu";
+    let mut gpu_shape = None;
     let mut timing = CheckTiming::default();
     let mut notes: Vec<String> = Vec::new();
+    // The GPU scoring shape is measured (where this adapter never was) on the run's problem.
+    let problem = AbcProblem::new(
+        run.stored.setup.prior.clone(),
+        config.seed,
+        &run.stored.setup.data.calibration,
+        config.fit.w_ref_n,
+    );
     for chunk in jobs.chunks(batch) {
         let fitting = Instant::now();
         let fitted: Vec<Result<Fitted>> = chunk.par_iter().map(|&job| fit_replicate(run, job)).collect();
@@ -447,9 +459,12 @@ pub fn check(
         let fitted: Vec<Fitted> = fitted.into_iter().collect::<Result<_>>()?;
         let sampling = Instant::now();
         let mut batch_notes = Vec::new();
-        let records = RecordBatch::new(options.backend.unwrap_or(config.backend), &mut |line| {
-            batch_notes.push(line)
-        })?;
+        let records = RecordBatch::new(
+            options.backend.unwrap_or(config.backend),
+            run::shape_wish(config),
+            &problem,
+            &mut |line| batch_notes.push(line),
+        )?;
         // Every seat is taken before any sampler starts (see RecordBatch::seat).
         let seats: Vec<Seat> = fitted.iter().map(|_| records.seat()).collect();
         let total = jobs.len();
@@ -486,6 +501,7 @@ pub fn check(
         }
         if results.is_empty() {
             backend = records.backend();
+            gpu_shape = records.gpu_shape();
         }
         for outcome in outcomes {
             let outcome = outcome?;
@@ -516,6 +532,7 @@ pub fn check(
         run_seed: config.seed,
         particles: config.sampler.base().particles,
         backend: backend.to_string(),
+        gpu_shape,
         rows,
         seconds: started.elapsed().as_secs_f64(),
         timing,

@@ -508,16 +508,29 @@ impl RunStore {
         Ok(self.conn.last_insert_rowid())
     }
 
-    /// Marks invocation `id` finished with why it stopped and the backend that scored (known
-    /// for certain only once workers have answered).
-    pub fn finish_invocation(&mut self, id: i64, stop_reason: &str, backend: &str) -> Result<()> {
-        self.conn
-            .execute(
-                "UPDATE invocations SET finished_unix_s = ?1, stop_reason = ?2, backend = ?3 WHERE id = ?4",
-                params![unix_seconds(), stop_reason, backend, id],
-            )
-            .map_err(sql_error(&self.path))?;
-        Ok(())
+    /// Marks invocation `id` finished with why it stopped, the backend that scored and the
+    /// run's configuration (both known for certain only once workers have answered: the GPU
+    /// scoring shape is part of the configuration).
+    pub fn finish_invocation(
+        &mut self,
+        id: i64,
+        stop_reason: &str,
+        backend: &str,
+        config: &serde_json::Value,
+    ) -> Result<()> {
+        let err = sql_error(&self.path);
+        let tx = self.conn.transaction().map_err(&err)?;
+        tx.execute(
+            "UPDATE invocations SET finished_unix_s = ?1, stop_reason = ?2, backend = ?3, config_json = ?4 WHERE id = ?5",
+            params![unix_seconds(), stop_reason, backend, config.to_string(), id],
+        )
+        .map_err(&err)?;
+        tx.execute(
+            "UPDATE meta SET value = ?1 WHERE key = 'config'",
+            params![config.to_string()],
+        )
+        .map_err(&err)?;
+        tx.commit().map_err(&err)
     }
 
     /// How the run ended, when not by its own stopping rules, in a sentence for everything made

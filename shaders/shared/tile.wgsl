@@ -20,7 +20,7 @@
 // most 7 passes x (8 blocks + 128 quads) iterations per dispatch, far under lavapipe's limit.
 
 // Invocations per workgroup of `main_tiled` (the host dispatches whole workgroups, one per tile).
-const TILE_WORKGROUP: u32 = 64u;
+override TILE_WORKGROUP: u32 = 64u;
 
 // Parameters of one group of four candidates.
 alias Four = array<array<f32, 6>, 4>;

@@ -28,6 +28,7 @@
 use super::Particle;
 use super::smc::{Kernels, SmcConfig};
 use crate::error::{Error, Result};
+use crate::eval::gpu::{Shape, tune::ShapeWish};
 use crate::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -131,6 +132,10 @@ pub trait Workers: Sync {
     fn parallelism(&self) -> usize {
         1
     }
+    /// The GPU scoring shape the workers score in, where one is known (for the run's record).
+    fn gpu_shape(&self) -> Option<Shape> {
+        None
+    }
     /// One output per task of `round`, in any order.
     fn run(&self, round: &Round) -> Result<Vec<Output>>;
 }
@@ -146,6 +151,10 @@ impl<W: Workers + ?Sized> Workers for &W {
 
     fn parallelism(&self) -> usize {
         (**self).parallelism()
+    }
+
+    fn gpu_shape(&self) -> Option<Shape> {
+        (**self).gpu_shape()
     }
 
     fn run(&self, round: &Round) -> Result<Vec<Output>> {
@@ -167,6 +176,10 @@ where
 
     fn backend(&self) -> &'static str {
         self.0.backend()
+    }
+
+    fn gpu_shape(&self) -> Option<Shape> {
+        self.0.gpu_shape()
     }
 
     fn run(&self, round: &Round) -> Result<Vec<Output>> {
@@ -191,6 +204,10 @@ impl<E: Evaluator> Workers for Several<E> {
 
     fn backend(&self) -> &'static str {
         self.0[0].backend()
+    }
+
+    fn gpu_shape(&self) -> Option<Shape> {
+        self.0[0].gpu_shape()
     }
 
     fn parallelism(&self) -> usize {
@@ -245,24 +262,28 @@ pub fn here(
     problem: AbcProblem,
     backend: crate::eval::Backend,
     devices: Devices,
+    wish: ShapeWish,
     note: &mut dyn FnMut(String),
 ) -> Result<Box<dyn Workers>> {
     use crate::eval::Backend;
     if devices == Devices::All && backend != Backend::Cpu {
-        match crate::eval::gpu::residual::GpuEvaluator::on_every_gpu(&problem) {
+        match crate::eval::gpu::residual::GpuEvaluator::on_every_gpu(&problem, wish) {
             Ok(gpus) => {
-                let names: Vec<String> = gpus
-                    .iter()
-                    .map(|g| format!("{} ({} scoring)", g.adapter(), g.shape()))
-                    .collect();
-                note(format!("GPU backend on {} devices: {}", gpus.len(), names.join("; ")));
+                let names: Vec<String> = gpus.iter().map(|g| g.adapter()).collect();
+                note(format!(
+                    "GPU backend on {} devices ({} scoring, {}): {}",
+                    gpus.len(),
+                    gpus[0].shape(),
+                    gpus[0].shape_source(),
+                    names.join("; ")
+                ));
                 return Ok(Box::new(Several(gpus)));
             }
             Err(e) if backend == Backend::Auto => crate::eval::fall_back_to_cpu(e, note)?,
             Err(e) => return Err(e.into()),
         }
     }
-    Ok(Box::new(Local(crate::eval::evaluator(problem, backend, note)?)))
+    Ok(Box::new(Local(crate::eval::evaluator(problem, backend, wish, note)?)))
 }
 
 /// Runs one task with `evaluator`: what every worker does, here or elsewhere.

@@ -25,6 +25,10 @@ pub struct BenchCmd {
     /// (up to 3 repetitions); K = 20, or 2 with --quick. --backend picks the backend [default: auto].
     #[arg(long)]
     pub selection: bool,
+    /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and
+    /// keep the new table.
+    #[arg(long)]
+    pub retune: bool,
     /// Print JSON instead of lines.
     #[arg(long)]
     pub json: bool,
@@ -37,6 +41,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let mut opts = bitrock::bench::BenchOptions {
         repetitions: cmd.reps,
         laws: cmd.laws.clone(),
+        retune: cmd.retune,
         ..Default::default()
     };
     match cmd.backend {
@@ -69,15 +74,35 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             "machine: {} ({} cores); adapter: {}",
             report.machine, report.cores, report.adapter
         )?;
+        if let Some(t) = &report.tuning {
+            let kept = t
+                .cache_file
+                .as_ref()
+                .map_or(String::new(), |p| format!(", kept in {}", p.display()));
+            writeln!(out, "GPU scoring shapes ({}{kept}):", t.source)?;
+            for line in t.tuning.table().iter().skip(1) {
+                writeln!(out, "  {line}")?;
+            }
+        }
+        if let Some(shape) = report.shape {
+            writeln!(out, "GPU scoring shape at 65,536 candidates per dispatch: {shape}")?;
+        }
         writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
         if !report.throughput.is_empty() {
-            writeln!(out, "backend  law          N        D   evaluations/s (min–max)")?;
+            writeln!(out, "backend  law          N        D   evaluations/s (min–max)  shape")?;
         }
         for t in &report.throughput {
             writeln!(
                 out,
-                "{:<7}  {:<3}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})",
-                t.backend, t.law, t.n, t.d, t.evals_per_s, t.evals_per_s_spread.min, t.evals_per_s_spread.max
+                "{:<7}  {:<3}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})  {}",
+                t.backend,
+                t.law,
+                t.n,
+                t.d,
+                t.evals_per_s,
+                t.evals_per_s_spread.min,
+                t.evals_per_s_spread.max,
+                t.shape.map_or("", |s| s.name())
             )?;
         }
         for (backend, s) in &report.small_call_seconds {

@@ -102,6 +102,11 @@ pub trait Evaluator: Send + Sync {
         cpu::kernel_sums(sums, out);
         Ok(())
     }
+    /// The GPU scoring shape, for a GPU evaluator: its f32 sums depend on it (within the
+    /// parity tolerance), so a run records it.
+    fn gpu_shape(&self) -> Option<gpu::Shape> {
+        None
+    }
 }
 
 /// Which evaluator computes ρ.
@@ -118,19 +123,33 @@ pub enum Backend {
     Cpu,
 }
 
-/// The evaluator for `backend`. With `Auto`, a GPU that cannot be set up is reported through
-/// `note` and the CPU is used instead.
-pub fn evaluator(problem: AbcProblem, backend: Backend, note: &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> {
+/// The evaluator for `backend`, a GPU one in the shape `wish` leads to (see
+/// [`gpu::tune::choose`]). With `Auto`, a GPU that cannot be set up is reported through `note`
+/// and the CPU is used instead.
+pub fn evaluator(
+    problem: AbcProblem,
+    backend: Backend,
+    wish: gpu::tune::ShapeWish,
+    note: &mut dyn FnMut(String),
+) -> Result<Box<dyn Evaluator>> {
+    let said = |gpu: &gpu::residual::GpuEvaluator| {
+        format!(
+            "GPU backend: {} ({} scoring, {})",
+            gpu.adapter(),
+            gpu.shape(),
+            gpu.shape_source()
+        )
+    };
     match backend {
         Backend::Cpu => Ok(Box::new(cpu::CpuEvaluator::new(problem))),
         Backend::Gpu => {
-            let gpu = gpu::residual::GpuEvaluator::new(problem)?;
-            note(format!("GPU backend: {} ({} scoring)", gpu.adapter(), gpu.shape()));
+            let gpu = gpu::residual::GpuEvaluator::wished(problem, wish)?;
+            note(said(&gpu));
             Ok(Box::new(gpu))
         }
-        Backend::Auto => match gpu::residual::GpuEvaluator::new(problem.clone()) {
+        Backend::Auto => match gpu::residual::GpuEvaluator::wished(problem.clone(), wish) {
             Ok(gpu) => {
-                note(format!("GPU backend: {} ({} scoring)", gpu.adapter(), gpu.shape()));
+                note(said(&gpu));
                 Ok(Box::new(gpu))
             }
             Err(e) => {

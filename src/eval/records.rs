@@ -67,15 +67,23 @@ pub struct RecordBatch {
     notes: Mutex<Vec<String>>,
     /// Candidates per GPU dispatch at most (tests split requests with it).
     max_candidates: Option<usize>,
+    /// The GPU scoring shape, while the GPU scores.
+    shape: Option<gpu::Shape>,
     state: Mutex<State>,
     scored: Condvar,
 }
 
 impl RecordBatch {
     /// A batch on `backend` (with `Auto`, the GPU when one can be set up, else the CPU, said
-    /// through `note`).
-    pub fn new(backend: Backend, note: &mut dyn FnMut(String)) -> Result<Arc<Self>> {
-        let setup = || gpu::context().and_then(|ctx| Ok((ctx, gpu::Shape::chosen(ctx)?)));
+    /// through `note`), on the GPU in the shape `wish` leads to ([`gpu::tune::choose`], with
+    /// `problem` to measure on where this adapter was never measured).
+    pub fn new(
+        backend: Backend,
+        wish: gpu::tune::ShapeWish,
+        problem: &AbcProblem,
+        note: &mut dyn FnMut(String),
+    ) -> Result<Arc<Self>> {
+        let setup = || gpu::context().and_then(|ctx| Ok((ctx, gpu::tune::choose(ctx, problem, wish)?)));
         let gpu = match backend {
             Backend::Cpu => None,
             Backend::Gpu => Some(setup()?),
@@ -88,13 +96,15 @@ impl RecordBatch {
             },
         };
         let scorer = match gpu {
-            Some((ctx, shape)) => {
+            Some((ctx, choice)) => {
                 note(format!(
-                    "GPU backend: {} ({shape} scoring, records batched)",
-                    ctx.describe()
+                    "GPU backend: {} ({} scoring, {}; records batched)",
+                    ctx.describe(),
+                    choice.shape,
+                    choice.source
                 ));
                 Scorer::Gpu {
-                    shape,
+                    shape: choice.shape,
                     records: None,
                     fallback: backend == Backend::Auto,
                 }
@@ -115,12 +125,13 @@ impl RecordBatch {
     }
 
     fn with_scorer(scorer: Scorer, max_candidates: Option<usize>) -> Arc<Self> {
-        let backend = match scorer {
-            Scorer::Cpu => "cpu",
-            Scorer::Gpu { .. } => "gpu",
+        let (backend, shape) = match scorer {
+            Scorer::Cpu => ("cpu", None),
+            Scorer::Gpu { shape, .. } => ("gpu", Some(shape)),
         };
         Arc::new(Self {
             backend: Mutex::new(backend),
+            shape,
             notes: Mutex::new(Vec::new()),
             max_candidates,
             state: Mutex::new(State {
@@ -139,6 +150,11 @@ impl RecordBatch {
     /// `cpu` or `gpu` (`cpu` once `auto` fell back to it).
     pub fn backend(&self) -> &'static str {
         *self.backend.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// The GPU scoring shape; `None` where the CPU scores.
+    pub fn gpu_shape(&self) -> Option<gpu::Shape> {
+        (self.backend() == "gpu").then_some(self.shape).flatten()
     }
 
     /// Lines for the user about what happened since [`RecordBatch::new`] (a fallback to the

@@ -114,7 +114,7 @@ pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> R
 pub fn resume_on(
     dir: &Path,
     more: &Continuation,
-    make_workers: Option<&mut run::MakeWorkersFor>,
+    make_workers: Option<&mut run::MakeWorkers>,
     observer: &mut dyn Observer,
 ) -> Result<Analysis> {
     let outcome = match make_workers {

@@ -18,4 +18,5 @@ mod smc;
 mod stability;
 mod store;
 mod support;
+mod tune;
 mod uniform;

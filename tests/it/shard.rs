@@ -116,7 +116,12 @@ fn rejection_through_scrambling_workers_is_the_single_process_run() {
         let config = base(1500, mode);
         let here = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
         for pieces in [2, 7] {
-            let remote = Remote::new(problem.clone(), Backend::Cpu, Scrambling::new(pieces, pieces as u64));
+            let remote = Remote::new(
+                problem.clone(),
+                Backend::Cpu,
+                Default::default(),
+                Scrambling::new(pieces, pieces as u64),
+            );
             let there = rejection::run_on(&remote, &config, Vec::new(), &mut Silent).unwrap();
             assert_same_run(&here, &there);
             let traffic = remote.traffic();
@@ -139,7 +144,7 @@ fn smc_through_scrambling_workers_is_the_single_process_run() {
     };
     let here = smc::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
     assert!(here.populations.len() >= 4, "{}", here.populations.len());
-    let remote = Remote::new(problem.clone(), Backend::Cpu, Scrambling::new(5, 9));
+    let remote = Remote::new(problem.clone(), Backend::Cpu, Default::default(), Scrambling::new(5, 9));
     let there = smc::run_on(&remote, &config, Vec::new(), &mut Silent).unwrap();
     assert_same_run(&here, &there);
     // The previous population travels as a payload when a worker asks for it, not with
@@ -169,6 +174,7 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
             problem,
             context: None,
             backend: Backend::Cpu,
+            shape: Default::default(),
             task: task.clone(),
         })
     };
@@ -181,8 +187,9 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
         Reply::Done {
             output: shard::Output::Found { kept, scored, .. },
             backend,
+            shape,
         } => {
-            assert_eq!((scored, kept.len(), backend.as_str()), (10, 10, "cpu"));
+            assert_eq!((scored, kept.len(), backend.as_str(), shape), (10, 10, "cpu", None));
             let mut rho = [0.0; 10];
             use bitrock::eval::Evaluator;
             CpuEvaluator::new(problem.clone()).score(0, 0, &mut rho).unwrap();

@@ -23,6 +23,7 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
         seed: 11,
         backend: Backend::Cpu,
         devices: Default::default(),
+        gpu_shape: None,
         sampler: SamplerConfig::Rejection(RejectionConfig {
             particles,
             max_populations,

@@ -388,16 +388,19 @@ fn remote_on<'a>(
     cell: &'a OnceLock<Remote<PyTransport>>,
     dispatcher: Py<PyAny>,
     parallelism: usize,
-) -> impl FnMut(bitrock::eval::AbcProblem, Backend) -> bitrock::Result<Box<dyn Workers + 'a>> {
+) -> impl FnMut(bitrock::eval::AbcProblem, &bitrock::run::RunConfig) -> bitrock::Result<Box<dyn Workers + 'a>> {
     let mut transport = Some(PyTransport {
         dispatcher,
         parallelism,
         raised: Mutex::new(None),
         payloads: Mutex::new(Vec::new()),
     });
-    move |problem, backend| {
+    move |problem, config| {
         let transport = transport.take().expect("a run makes its workers once");
-        Ok(Box::new(cell.get_or_init(|| Remote::new(problem, backend, transport))))
+        let (backend, shape) = (config.backend, bitrock::run::shape_wish(config));
+        Ok(Box::new(
+            cell.get_or_init(|| Remote::new(problem, backend, shape, transport)),
+        ))
     }
 }
 
@@ -547,8 +550,13 @@ fn abc(
         None => py.detach(|| job.run(data, &mut observer)),
         Some(dispatcher) => {
             let mut make = remote_on(&cell, dispatcher, parallelism);
-            let backend = job.config.backend;
-            py.detach(|| job.run_on(data, Some(&mut |problem, _note| make(problem, backend)), &mut observer))
+            py.detach(|| {
+                job.run_on(
+                    data,
+                    Some(&mut |problem, config, _note| make(problem, config)),
+                    &mut observer,
+                )
+            })
         }
     };
     finish_run(py, result, observer, cell, out)
@@ -609,7 +617,7 @@ fn resume(
                 bitrock::pipeline::resume_on(
                     &path,
                     &continuation,
-                    Some(&mut |problem, config: &bitrock::run::RunConfig, _note| make(problem, config.backend)),
+                    Some(&mut |problem, config: &bitrock::run::RunConfig, _note| make(problem, config)),
                     &mut observer,
                 )
             })

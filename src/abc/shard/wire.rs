@@ -15,8 +15,10 @@ use super::{Context, Output, Round, Task, Workers};
 use crate::abc::Particle;
 use crate::abc::smc::SmcConfig;
 use crate::error::{Error, Result};
+use crate::eval::gpu::{Shape, tune::ShapeWish};
 use crate::eval::{AbcProblem, Backend, Evaluator};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
 use std::hash::{Hash, Hasher};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -57,14 +59,20 @@ pub struct Request {
     /// Key of the context's payload, for SMC tasks.
     pub context: Option<u64>,
     pub backend: Backend,
+    /// The GPU scoring shape the run recorded, if any, and its dispatch size.
+    pub shape: ShapeWish,
     pub task: Task,
 }
 
 /// A worker's answer.
 #[derive(Debug, Serialize, Deserialize)]
 pub enum Reply {
-    /// The task's output, and the backend that scored it (`cpu`, `gpu`).
-    Done { output: Output, backend: String },
+    /// The task's output, the backend that scored it (`cpu`, `gpu`) and its GPU scoring shape.
+    Done {
+        output: Output,
+        backend: String,
+        shape: Option<Shape>,
+    },
     /// The worker does not hold the request's problem or context: send the request again with
     /// the payloads.
     Missing,
@@ -102,11 +110,14 @@ pub fn key_of(bytes: &[u8]) -> u64 {
     h.finish()
 }
 
+/// What a worker's evaluator is made for: the problem's key, the backend and the shape wish.
+type EvaluatorKey = (u64, Backend, ShapeWish);
+
 /// Payloads and evaluators a worker process keeps, the most recently used last.
 #[derive(Default)]
 struct Held {
     problems: Vec<(u64, Arc<AbcProblem>)>,
-    evaluators: Vec<((u64, Backend), Arc<dyn Evaluator>)>,
+    evaluators: Vec<(EvaluatorKey, Arc<dyn Evaluator>)>,
     contexts: Vec<((u64, u64), Arc<Context>)>,
 }
 
@@ -166,12 +177,17 @@ fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Res
         let Some(the_problem) = find(&mut held.problems, request.problem) else {
             return Ok(Reply::Missing);
         };
-        let evaluator = match find(&mut held.evaluators, (request.problem, backend)) {
+        let key = (request.problem, backend, request.shape);
+        let evaluator = match find(&mut held.evaluators, key) {
             Some(e) => e,
             None => {
-                let made: Arc<dyn Evaluator> =
-                    Arc::from(crate::eval::evaluator((*the_problem).clone(), backend, &mut |_| {})?);
-                hold(&mut held.evaluators, (request.problem, backend), made.clone());
+                let made: Arc<dyn Evaluator> = Arc::from(crate::eval::evaluator(
+                    (*the_problem).clone(),
+                    backend,
+                    request.shape,
+                    &mut |_| {},
+                )?);
+                hold(&mut held.evaluators, key, made.clone());
                 made
             }
         };
@@ -197,6 +213,7 @@ fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Res
     Ok(Reply::Done {
         output,
         backend: evaluator.backend().to_string(),
+        shape: evaluator.gpu_shape(),
     })
 }
 
@@ -263,26 +280,32 @@ pub struct Remote<T> {
     problem_bytes: Vec<u8>,
     problem_key: u64,
     backend: Backend,
+    shape: ShapeWish,
     transport: T,
     /// The context payload of the population in progress.
     context: Mutex<Option<EncodedContext>>,
     /// Backends the workers reported.
     seen: Mutex<(bool, bool)>,
+    /// GPU scoring shapes the workers reported.
+    shapes: Mutex<BTreeSet<Shape>>,
     traffic: Mutex<Vec<Traffic>>,
 }
 
 impl<T: Transport> Remote<T> {
-    /// Workers for `problem` through `transport`, asked to score on `backend`.
-    pub fn new(problem: AbcProblem, backend: Backend, transport: T) -> Self {
+    /// Workers for `problem` through `transport`, asked to score on `backend` (a GPU in the
+    /// shape `shape` leads to on each worker: the same everywhere once the run recorded one).
+    pub fn new(problem: AbcProblem, backend: Backend, shape: ShapeWish, transport: T) -> Self {
         let problem_bytes = encode(&problem);
         Self {
             problem_key: key_of(&problem_bytes),
             problem,
             problem_bytes,
             backend,
+            shape,
             transport,
             context: Mutex::new(None),
             seen: Mutex::new((false, false)),
+            shapes: Mutex::new(BTreeSet::new()),
             traffic: Mutex::new(Vec::new()),
         }
     }
@@ -354,6 +377,15 @@ impl<T: Transport> Workers for Remote<T> {
         self.transport.parallelism().max(1)
     }
 
+    /// The one shape the GPU workers reported; none before any did, or when they differ.
+    fn gpu_shape(&self) -> Option<Shape> {
+        let shapes = self.shapes.lock().expect("shapes");
+        match shapes.len() {
+            1 => shapes.first().copied(),
+            _ => None,
+        }
+    }
+
     fn run(&self, round: &Round) -> Result<Vec<Output>> {
         let context = self.context_payload(round);
         let requests: Vec<Vec<u8>> = round
@@ -365,6 +397,7 @@ impl<T: Transport> Workers for Remote<T> {
                     problem: self.problem_key,
                     context: context.as_ref().map(|c| c.0),
                     backend: self.backend,
+                    shape: self.shape,
                     task: task.clone(),
                 })
             })
@@ -392,7 +425,10 @@ impl<T: Transport> Workers for Remote<T> {
         let mut outputs = Vec::with_capacity(round.tasks.len());
         for reply in &exchanged.replies {
             match decode::<Reply>(reply, "reply")? {
-                Reply::Done { output, backend } => {
+                Reply::Done { output, backend, shape } => {
+                    if let Some(shape) = shape {
+                        self.shapes.lock().expect("shapes").insert(shape);
+                    }
                     let mut seen = self.seen.lock().expect("backends");
                     if backend == "gpu" {
                         seen.1 = true;

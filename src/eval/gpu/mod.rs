@@ -6,13 +6,17 @@
 //! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a
 //! case-insensitive substring of the adapter's name); its own limits are requested. Pipelines
 //! are built once per context (`GpuContext::kernel`). The scoring kernels come in two
-//! [`Shape`]s, chosen by adapter type or by `BITROCK_GPU_SHAPE`.
+//! [`Shape`]s, chosen by measurement per adapter ([`tune`]) or by `BITROCK_GPU_SHAPE`.
 
 pub mod candidates;
 pub mod kernel_sums;
 pub mod records;
 pub mod residual;
+pub mod shape;
 pub mod stability;
+pub mod tune;
+
+pub use shape::{SHAPE_VAR, Shape};
 
 use crate::eval::AbcProblem;
 use crate::prior::Prior;
@@ -42,79 +46,6 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
         ("stability", stability_source(), &["main"]),
         ("test_uniform_between", test_uniform_between_source(), &["main"]),
     ]
-}
-
-/// How the scoring kernels (residual.wgsl, score_params.wgsl) spread candidates over
-/// invocations. Both score the same candidates by the same law code and blocked sums
-/// (shaders/shared/ssr.wgsl); they differ in which invocation evaluates what.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Shape {
-    /// One invocation scores 16 candidates over every sample (register blocking): a SIMD CPU
-    /// driver such as lavapipe, where loads cost more than arithmetic. Entry point `main`.
-    Blocked,
-    /// One workgroup of 64 scores 16 candidates, its invocations striding over the samples,
-    /// the partial sums meeting in a fixed-order tree reduction (shaders/shared/tile.wgsl):
-    /// GPUs, which need many more invocations than candidates / 16. Entry point `main_tiled`.
-    Tiled,
-}
-
-/// Environment variable that overrides the adapter's scoring shape: `blocked` or `tiled`.
-pub const SHAPE_VAR: &str = "BITROCK_GPU_SHAPE";
-
-impl Shape {
-    pub const ALL: [Shape; 2] = [Shape::Blocked, Shape::Tiled];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Shape::Blocked => "blocked",
-            Shape::Tiled => "tiled",
-        }
-    }
-
-    const fn entry_point(self) -> &'static str {
-        match self {
-            Shape::Blocked => "main",
-            Shape::Tiled => "main_tiled",
-        }
-    }
-
-    /// The shape an adapter of `device_type` wants: register blocking on a CPU driver, tiles
-    /// everywhere else.
-    pub fn for_device_type(device_type: wgpu::DeviceType) -> Shape {
-        match device_type {
-            wgpu::DeviceType::Cpu => Shape::Blocked,
-            _ => Shape::Tiled,
-        }
-    }
-
-    /// The shape named by `BITROCK_GPU_SHAPE` when set, else the one `ctx`'s adapter wants.
-    pub fn chosen(ctx: &GpuContext) -> Result<Shape, GpuError> {
-        match std::env::var(SHAPE_VAR) {
-            Ok(value) => value.parse(),
-            Err(_) => Ok(Shape::for_device_type(ctx.info.device_type)),
-        }
-    }
-}
-
-impl std::str::FromStr for Shape {
-    type Err = GpuError;
-
-    fn from_str(value: &str) -> Result<Shape, GpuError> {
-        Shape::ALL
-            .into_iter()
-            .find(|s| s.name() == value.trim().to_lowercase())
-            .ok_or_else(|| GpuError::Setting {
-                name: SHAPE_VAR,
-                message: format!("must be `blocked` or `tiled`, got `{value}`"),
-            })
-    }
-}
-
-impl std::fmt::Display for Shape {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
 }
 
 fn residual_source() -> String {
@@ -828,9 +759,10 @@ fn score_dispatch(
     let count = out.len() as u32;
     let tiles = count.div_ceil(CANDIDATES_PER_TILE);
     // Row width in invocations (blocked) or workgroups (tiled), as the entry point counts.
-    let (x, y, row_width) = match shape {
-        Shape::Blocked => ctx.grid(tiles, WORKGROUP_SIZE),
-        Shape::Tiled => ctx.grid(tiles, 1),
+    let (x, y, row_width) = if shape.is_tiled() {
+        ctx.grid(tiles, 1)
+    } else {
+        ctx.grid(tiles, WORKGROUP_SIZE)
     };
     debug_assert_eq!(job.count, count, "one sum per candidate of the job");
     let job = Job { row_width, ..job };

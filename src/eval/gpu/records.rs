@@ -179,13 +179,13 @@ impl GpuRecords {
             buffer_entry(8, STORAGE_READ),
             buffer_entry(9, STORAGE_READ),
         ];
-        let constants = [("HAS_RATIO", if has_ratio { 1.0 } else { 0.0 })];
+        shape.check_fits(context)?;
         let kernel = context.kernel(
             "records",
             shape.entry_point(),
             super::records_source,
             &entries,
-            &constants,
+            &shape.constants(has_ratio),
         )?;
         let buffers = Bindings {
             priors,

@@ -6,6 +6,7 @@
 //! same shape (set up on first use), and `shaders/kernel_sums.wgsl` computes the SMC weights'
 //! kernel sums (see [`super::kernel_sums`]).
 
+use super::tune::{self, ShapeWish, Source};
 use super::{
     GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, STORAGE_WRITE, ScoringBuffers, Shape, UNIFORM,
     buffer_entry, score_dispatch,
@@ -41,6 +42,8 @@ pub struct GpuEvaluator {
     problem: AbcProblem,
     context: &'static GpuContext,
     shape: Shape,
+    /// Where the shape came from.
+    source: Source,
     data_len: u32,
     /// Candidates per dispatch at most.
     chunk: usize,
@@ -52,11 +55,20 @@ pub struct GpuEvaluator {
 }
 
 impl GpuEvaluator {
-    /// Uploads the data and the prior, on the process's GPU, in the shape its adapter wants
-    /// (or `BITROCK_GPU_SHAPE` names; see [`Shape::chosen`]).
+    /// Uploads the data and the prior, on the process's GPU, in the shape measured fastest
+    /// there for dispatches of 65,536 candidates (or `BITROCK_GPU_SHAPE`'s; see [`tune`]).
     pub fn new(problem: AbcProblem) -> std::result::Result<Self, GpuError> {
+        Self::wished(problem, ShapeWish::default())
+    }
+
+    /// As [`GpuEvaluator::new`], in the shape [`tune::choose`] picks for `wish`.
+    pub fn wished(problem: AbcProblem, wish: ShapeWish) -> std::result::Result<Self, GpuError> {
         let context = super::context()?;
-        Self::with_shape(problem, Shape::chosen(context)?)
+        let choice = tune::choose(context, &problem, wish)?;
+        Ok(Self {
+            source: choice.source,
+            ..Self::on(problem, choice.shape, context)?
+        })
     }
 
     /// As [`GpuEvaluator::new`], scoring in `shape` whatever the adapter (tests, benchmarks).
@@ -64,12 +76,20 @@ impl GpuEvaluator {
         Self::on(problem, shape, super::context()?)
     }
 
-    /// One evaluator per GPU of the machine ([`super::every_context`]), each in the shape its
-    /// adapter wants: `--devices all`.
-    pub fn on_every_gpu(problem: &AbcProblem) -> std::result::Result<Vec<Self>, GpuError> {
-        super::every_context()?
+    /// One evaluator per GPU of the machine ([`super::every_context`]): `--devices all`. All
+    /// score in the shape [`tune::choose`] picks on the first, so that the populations do not
+    /// depend on which GPU scored which task.
+    pub fn on_every_gpu(problem: &AbcProblem, wish: ShapeWish) -> std::result::Result<Vec<Self>, GpuError> {
+        let contexts = super::every_context()?;
+        let choice = tune::choose(contexts[0], problem, wish)?;
+        contexts
             .into_iter()
-            .map(|context| Self::on(problem.clone(), Shape::chosen(context)?, context))
+            .map(|context| {
+                Ok(Self {
+                    source: choice.source,
+                    ..Self::on(problem.clone(), choice.shape, context)?
+                })
+            })
             .collect()
     }
 
@@ -117,13 +137,13 @@ impl GpuEvaluator {
             buffer_entry(4, STORAGE_READ),
             buffer_entry(5, STORAGE_WRITE),
         ];
-        let constants = [("HAS_RATIO", if has_ratio { 1.0 } else { 0.0 })];
+        shape.check_fits(context)?;
         let kernel = context.kernel(
             "residual",
             shape.entry_point(),
             super::residual_source,
             &entries,
-            &constants,
+            &shape.constants(has_ratio),
         )?;
         let bind_group = context.bind_group(
             "residual",
@@ -134,6 +154,7 @@ impl GpuEvaluator {
             problem,
             context,
             shape,
+            source: Source::Given,
             data_len: d as u32,
             chunk,
             params_chunk,
@@ -159,6 +180,11 @@ impl GpuEvaluator {
     /// The scoring shape this evaluator dispatches.
     pub fn shape(&self) -> Shape {
         self.shape
+    }
+
+    /// Where the scoring shape came from.
+    pub fn shape_source(&self) -> Source {
+        self.source
     }
 
     /// Σ(y − r·T)² (f32, as the kernel returns it) of candidates `start ..` into `out`.
@@ -209,13 +235,12 @@ impl GpuEvaluator {
                 buffer_entry(4, STORAGE_READ),
                 buffer_entry(5, STORAGE_WRITE),
             ];
-            let constants = [("HAS_RATIO", if res.has_ratio { 1.0 } else { 0.0 })];
             let kernel = ctx.kernel(
                 "score_params",
                 self.shape.entry_point(),
                 super::score_params_source,
                 &entries,
-                &constants,
+                &self.shape.constants(res.has_ratio),
             )?;
             let bind_group = ctx.bind_group(
                 "score_params",
@@ -261,6 +286,10 @@ impl Evaluator for GpuEvaluator {
 
     fn problem(&self) -> &AbcProblem {
         &self.problem
+    }
+
+    fn gpu_shape(&self) -> Option<Shape> {
+        Some(self.shape)
     }
 
     fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()> {
