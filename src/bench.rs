@@ -313,7 +313,8 @@ fn gpu_adapter(
     };
     let adapter = ctx.describe();
     let wish = tune::ShapeWish::default();
-    let tuning = match tune::choose(ctx, problem, wish)?.source {
+    let mut choice = tune::choose(ctx, problem, wish)?;
+    let tuning = match choice.source {
         tune::Source::Named | tune::Source::Guessed => None,
         _ if retune => {
             let tuning = tune::measure(ctx, problem)?;
@@ -321,21 +322,12 @@ fn gpu_adapter(
                 tune::write_cache(&path, &tuning)?;
             }
             tune::forget_held();
+            choice = tune::choose(ctx, problem, wish)?;
             Some(("measured", tuning))
         }
-        _ => {
-            let (tuning, source) = tune::tuning(ctx, problem)?;
-            Some((
-                if source == tune::Source::Cached {
-                    "cached"
-                } else {
-                    "measured"
-                },
-                tuning,
-            ))
-        }
+        tune::Source::Cached => Some(("cached", tune::tuning(ctx, problem)?.0)),
+        _ => Some(("measured", tune::tuning(ctx, problem)?.0)),
     };
-    let choice = tune::choose(ctx, problem, wish)?;
     log(format!("GPU: {adapter}, {} scoring ({})", choice.shape, choice.source));
     let report = tuning.map(|(source, tuning)| TuningReport {
         source,
