@@ -33,22 +33,22 @@ pub const SIZES: [usize; 3] = [4_096, 65_536, 1_048_576];
 
 /// Samples of the record the tuner scores at most (the shape's speed per evaluation hardly
 /// depends on the record's length past this; the time does).
-const TUNING_SAMPLES: usize = 4_096;
+pub const TUNING_SAMPLES: usize = 4_096;
 
 /// A shape whose time at the next size, projected linearly from its last, exceeds this is not
 /// timed there, seconds: the cost of the measurement stays bounded on a slow adapter (a CPU
 /// driver, where times are linear). A GPU's times grow less than linearly until it is full,
 /// so the projection overestimates there, which is why the cap is well above the times of a
 /// full GPU at these sizes.
-const PROJECTION_CAP_S: f64 = 0.25;
+pub const PROJECTION_CAP_S: f64 = 0.25;
 
 /// Timings per shape and size stop before [`REPEATS`] once they took this long together,
 /// seconds.
-const MEASURE_BUDGET_S: f64 = 0.2;
+pub const MEASURE_BUDGET_S: f64 = 0.2;
 
 /// Timings per shape and size at most (their median is kept); fewer once they took
 /// [`MEASURE_BUDGET_S`].
-const REPEATS: usize = 3;
+pub const REPEATS: usize = 3;
 
 /// One shape's time at one size.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
