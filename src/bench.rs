@@ -111,7 +111,7 @@ pub struct BenchReport {
 pub struct TuningReport {
     /// `cached` (an earlier measurement) or `measured` (now).
     pub source: &'static str,
-    /// The cache file it is kept in; none where there is no cache directory.
+    /// The cache file it is kept in; none where it could not be kept.
     pub cache_file: Option<std::path::PathBuf>,
     #[serde(flatten)]
     pub tuning: gpu::tune::Tuning,
@@ -313,25 +313,27 @@ fn gpu_adapter(
     };
     let adapter = ctx.describe();
     let wish = tune::ShapeWish::default();
-    let mut choice = tune::choose(ctx, problem, wish)?;
-    let tuning = match choice.source {
-        tune::Source::Named | tune::Source::Guessed => None,
-        _ if retune => {
-            let tuning = tune::measure(ctx, problem)?;
-            if let Some(path) = tune::cache_path() {
-                tune::write_cache(&path, &tuning)?;
-            }
-            tune::forget_held();
-            choice = tune::choose(ctx, problem, wish)?;
-            Some(("measured", tuning))
-        }
-        tune::Source::Cached => Some(("cached", tune::tuning(ctx, problem)?.0)),
-        _ => Some(("measured", tune::tuning(ctx, problem)?.0)),
+    // Measured again first, so that the choice below reads the new table.
+    let retuned = if retune && gpu::Shape::from_env(ctx)?.is_none() && tune::tuning_on()? {
+        Some(tune::retune(ctx, problem)?)
+    } else {
+        None
+    };
+    let choice = tune::choose(ctx, problem, wish)?;
+    let tuning = match (retuned, choice.source) {
+        (Some((tuning, source)), _) => Some((source, tuning)),
+        (None, tune::Source::Named | tune::Source::Guessed) => None,
+        (None, source) => Some((source, tune::tuning(ctx, problem)?.0)),
     };
     log(format!("GPU: {adapter}, {} scoring ({})", choice.shape, choice.source));
     let report = tuning.map(|(source, tuning)| TuningReport {
-        source,
-        cache_file: tune::cache_path(),
+        source: match source {
+            tune::Source::Cached => "cached",
+            _ => "measured",
+        },
+        cache_file: (source != tune::Source::MeasuredNotKept)
+            .then(tune::cache_path)
+            .flatten(),
         tuning,
     });
     Ok((adapter, Some(choice.shape), report))

@@ -12,11 +12,11 @@
 //   invocations load adjacent quads, coalesced) and scores each group of four candidates once
 //   per law present in the group (law passes are uniform across the workgroup: no divergence;
 //   a tile of four laws costs about 7 group passes, not 16);
-// - the 64 partial sums of each candidate meet in a fixed-order tree reduction in workgroup
+// - the TILE_WORKGROUP partial sums of each candidate meet in a fixed-order tree reduction in workgroup
 //   memory (deterministic, no atomics).
 // Accumulation stays blocked as in ssr.wgsl: an invocation sums blocks of QUADS_PER_BLOCK of its
 // quads naively and adds the blocks (at most 8 per dispatch of 32,768 samples), the tree adds
-// 64 partial sums pairwise, dispatches are added in order. Each loop of an invocation runs at
+// TILE_WORKGROUP partial sums pairwise, dispatches are added in order. Each loop of an invocation runs at
 // most 7 passes x (8 blocks + 128 quads) iterations per dispatch, far under lavapipe's limit.
 
 // Invocations per workgroup of `main_tiled` (the host dispatches whole workgroups, one per tile).

@@ -22,7 +22,7 @@ pub enum Shape {
     /// As [`Shape::Tiled`] with workgroups of 128: fewer samples per invocation.
     Tiled128,
     /// As [`Shape::Tiled`] with workgroups of 256 (needs 17 KB of workgroup memory, more than
-    /// the 16 KB every adapter has).
+    /// the 16 KB WebGPU guarantees: tried only where the adapter has it).
     Tiled256,
 }
 

@@ -230,7 +230,7 @@ pub fn choose(ctx: &'static GpuContext, problem: &AbcProblem, wish: ShapeWish) -
 }
 
 /// Whether `BITROCK_GPU_TUNING` lets bitrock measure (unset, `on`) or not (`off`).
-fn tuning_on() -> Result<bool, GpuError> {
+pub fn tuning_on() -> Result<bool, GpuError> {
     match std::env::var(TUNING_VAR) {
         Err(_) => Ok(true),
         Ok(value) => match value.trim().to_lowercase().as_str() {
@@ -278,9 +278,24 @@ pub fn tuning(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning,
     ))
 }
 
-/// Forgets the tunings this process holds: the next choice reads the cache again.
-pub fn forget_held() {
-    *HELD.lock().expect("held tunings") = None;
+/// Measures the adapter of `ctx` on `problem` again, whatever is cached, and keeps the new
+/// table (in the cache where it can be written, and for this process): `bitrock bench
+/// --retune`. Returns it and [`Source::Measured`] or [`Source::MeasuredNotKept`].
+pub fn retune(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning, Source), GpuError> {
+    let t = measure(ctx, problem)?;
+    let kept = cache_path().is_some_and(|path| write_cache(&path, &t).is_ok());
+    HELD.lock()
+        .expect("held tunings")
+        .get_or_insert_with(HashMap::new)
+        .insert(adapter_key(ctx), t.clone());
+    Ok((
+        t,
+        if kept {
+            Source::Measured
+        } else {
+            Source::MeasuredNotKept
+        },
+    ))
 }
 
 /// Measures every shape `ctx` can run on `problem` (its first [`TUNING_SAMPLES`] samples).
