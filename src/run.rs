@@ -103,6 +103,12 @@ impl RunConfig {
 }
 
 impl RunConfig {
+    /// Takes the GPU scoring shape `workers` score in, where they name one (workers elsewhere
+    /// do only once they have scored).
+    fn take_shape_of(&mut self, workers: &dyn Workers) {
+        self.gpu_shape = workers.gpu_shape().or(self.gpu_shape);
+    }
+
     /// Refuses a summary population `g` the run can never have (at or beyond
     /// `--max-populations`), before the run rather than after it.
     pub fn check_summary_population(&self, g: Option<usize>) -> Result<()> {
@@ -527,7 +533,7 @@ fn start_with_fits(
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
     let evaluator = make_workers(problem, &config, &mut |line| observer.note(line))?;
-    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
+    config.take_shape_of(evaluator.as_ref());
     let mut setup = RunSetup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
         data,
@@ -556,7 +562,7 @@ fn start_with_fits(
     };
     let added = run.populations.len();
     // Workers elsewhere name their shape only once they have scored.
-    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
+    config.take_shape_of(evaluator.as_ref());
     setup.config = serde_json::to_value(&config).expect("the configuration serialises");
     Ok(Outcome {
         config,
@@ -708,7 +714,7 @@ pub fn resume_on(
     )
     .with_best_rho(&setup.fits);
     let evaluator = make_workers(problem, &config, &mut |line| observer.note(line))?;
-    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
+    config.take_shape_of(evaluator.as_ref());
     let stored = populations.len();
     observer.note(format!(
         "continuing {} after population {} ({} stored)",
@@ -726,7 +732,7 @@ pub fn resume_on(
         observer,
     )?;
     let added = run.populations.len() - stored;
-    config.gpu_shape = evaluator.gpu_shape().or(config.gpu_shape);
+    config.take_shape_of(evaluator.as_ref());
     if added == 0 {
         // Nothing was run: the stored facts stand, and so does every file made from them.
         config = stored_config;
@@ -865,10 +871,8 @@ fn sample(
         let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
         // The backends that scored, as the workers reported them (a pool may mix them), and
         // the GPU scoring shape, which workers elsewhere name only once they have scored.
-        let finished = RunConfig {
-            gpu_shape: evaluator.gpu_shape().or(config.gpu_shape),
-            ..config.clone()
-        };
+        let mut finished = config.clone();
+        finished.take_shape_of(evaluator);
         store.finish_invocation(
             invocation,
             stop.as_str().unwrap_or_default(),

@@ -192,8 +192,8 @@ where
     }
 }
 
-/// Every task run in this process on one of several evaluators (one per GPU: `--devices
-/// all`): a round's tasks are dealt to them in turn and each evaluator runs its share on a
+/// Every task run in this process on one of several evaluators (one per GPU: `devices`
+/// all): a round's tasks are dealt to them in turn and each evaluator runs its share on a
 /// thread of its own.
 pub struct Several<E>(pub Vec<E>);
 

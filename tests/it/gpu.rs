@@ -77,7 +77,7 @@ fn every_shader_parses_and_validates_with_naga() {
 }
 
 /// The demo record in full (5,374 samples ≥ 5,000) and the paper's priors (δ = 0.4) for `laws`.
-fn demo_problem(laws: &[Law], seed: u64) -> AbcProblem {
+pub(crate) fn demo_problem(laws: &[Law], seed: u64) -> AbcProblem {
     let data = demo_field_data(&DataOptions {
         calibration_fraction: 1.0,
         ..Default::default()

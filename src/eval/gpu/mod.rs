@@ -247,7 +247,7 @@ impl AdapterWish {
         Ok(self.pick_all(adapters)?.and_then(|all| all.first().copied()))
     }
 
-    /// The positions in `adapters` of every adapter wished for (`--devices all`): the one
+    /// The positions in `adapters` of every adapter wished for (`devices` all): the one
     /// named, every GPU `CUDA_VISIBLE_DEVICES` lists, or `None` when wgpu chooses.
     pub fn pick_all(&self, adapters: &[wgpu::AdapterInfo]) -> Result<Option<Vec<usize>>, GpuError> {
         let none = |why: String| Err(GpuError::NotNamed(why));
@@ -323,7 +323,7 @@ fn primary_on_bus(adapters: &[wgpu::AdapterInfo], bus: &str) -> usize {
         .expect("the bus came from the list")
 }
 
-/// Every GPU of the machine once (`--devices all` when the environment names none): the
+/// Every GPU of the machine once (`devices` all when the environment names none): the
 /// discrete and integrated adapters, one per device (by PCI bus id, else by name), through a
 /// backend other than OpenGL where the device has one.
 pub fn every_gpu(adapters: &[wgpu::AdapterInfo]) -> Vec<usize> {
@@ -404,7 +404,7 @@ fn create_context() -> Result<GpuContext, GpuError> {
     context_on(adapter)
 }
 
-/// The context of every GPU this process may use, each created once (`--devices all`): those
+/// The context of every GPU this process may use, each created once (`devices` all): those
 /// the environment names ([`AdapterWish::pick_all`]), else every GPU of the machine
 /// ([`every_gpu`]). A machine without a GPU adapter gives the one [`context`] picks (a CPU
 /// driver such as lavapipe).

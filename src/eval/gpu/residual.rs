@@ -76,7 +76,7 @@ impl GpuEvaluator {
         Self::on(problem, shape, super::context()?)
     }
 
-    /// One evaluator per GPU of the machine ([`super::every_context`]): `--devices all`. All
+    /// One evaluator per GPU of the machine ([`super::every_context`]): `devices` all. All
     /// score in the shape [`tune::choose`] picks on the first, so that the populations do not
     /// depend on which GPU scored which task.
     pub fn on_every_gpu(problem: &AbcProblem, wish: ShapeWish) -> std::result::Result<Vec<Self>, GpuError> {

@@ -96,8 +96,8 @@ impl Shape {
         }
     }
 
-    /// The shape `BITROCK_GPU_SHAPE` names, if set; refused (naming the variable) when the
-    /// value is no shape or the adapter of `ctx` cannot run it.
+    /// The shape `BITROCK_GPU_SHAPE` names, if set: a value that is no shape is refused naming
+    /// the variable, a shape the adapter of `ctx` cannot run naming its limits.
     pub fn from_env(ctx: &GpuContext) -> Result<Option<Shape>, GpuError> {
         match std::env::var(SHAPE_VAR) {
             Ok(value) => {

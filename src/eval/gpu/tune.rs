@@ -73,9 +73,13 @@ pub struct SizeBand {
     pub candidates: usize,
     pub timings: Vec<Timing>,
     pub winner: Shape,
-    /// False when no shape was timed at this size (every projection over the budget): the
-    /// winner is the last timed size's.
-    pub measured: bool,
+}
+
+impl SizeBand {
+    /// False when no shape was timed at this size: the winner is the smaller size's.
+    pub fn measured(&self) -> bool {
+        self.timings.iter().any(|t| t.seconds.is_some())
+    }
 }
 
 /// A tuning: one adapter's table.
@@ -120,7 +124,7 @@ impl Tuning {
                     (None, None) => format!("  {:>10}", "-"),
                 });
             }
-            let how = if band.measured {
+            let how = if band.measured() {
                 ""
             } else {
                 " (no shape timed: the smaller size's)"
@@ -256,26 +260,29 @@ pub fn tuning(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning,
     if let Some(t) = held.get(&key) {
         return Ok((t.clone(), Source::Cached));
     }
-    let path = cache_path();
-    if let Some(t) = path
-        .as_ref()
-        .and_then(|p| read_cache(p).ok())
+    if let Some(t) = cache_path()
+        .and_then(|p| read_cache(&p).ok())
         .and_then(|c| c.tunings.into_iter().find(|t| t.key == key))
     {
         held.insert(key, t.clone());
         return Ok((t, Source::Cached));
     }
     let t = measure(ctx, problem)?;
-    let kept = path.as_ref().is_some_and(|path| write_cache(path, &t).is_ok());
-    held.insert(key, t.clone());
-    Ok((
-        t,
-        if kept {
-            Source::Measured
-        } else {
-            Source::MeasuredNotKept
-        },
-    ))
+    let source = keep(held, key, &t);
+    Ok((t, source))
+}
+
+/// Keeps a table just measured: in the cache where it can be written, and for this process
+/// under `key`. [`Source::Measured`], or [`Source::MeasuredNotKept`] where the cache could not
+/// be written.
+fn keep(held: &mut HashMap<String, Tuning>, key: String, tuning: &Tuning) -> Source {
+    let kept = cache_path().is_some_and(|path| write_cache(&path, tuning).is_ok());
+    held.insert(key, tuning.clone());
+    if kept {
+        Source::Measured
+    } else {
+        Source::MeasuredNotKept
+    }
 }
 
 /// Measures the adapter of `ctx` on `problem` again, whatever is cached, and keeps the new
@@ -283,19 +290,9 @@ pub fn tuning(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning,
 /// --retune`. Returns it and [`Source::Measured`] or [`Source::MeasuredNotKept`].
 pub fn retune(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning, Source), GpuError> {
     let t = measure(ctx, problem)?;
-    let kept = cache_path().is_some_and(|path| write_cache(&path, &t).is_ok());
-    HELD.lock()
-        .expect("held tunings")
-        .get_or_insert_with(HashMap::new)
-        .insert(adapter_key(ctx), t.clone());
-    Ok((
-        t,
-        if kept {
-            Source::Measured
-        } else {
-            Source::MeasuredNotKept
-        },
-    ))
+    let mut held = HELD.lock().expect("held tunings");
+    let source = keep(held.get_or_insert_with(HashMap::new), adapter_key(ctx), &t);
+    Ok((t, source))
 }
 
 /// Measures every shape `ctx` can run on `problem` (its first [`TUNING_SAMPLES`] samples).
@@ -399,16 +396,15 @@ pub fn measure_with(
             };
             timings[k] = Some(timing);
         }
-        let (winner, measured) = match (fastest, bands.last()) {
-            (Some((shape, _)), _) => (shape, true),
-            (None, Some(previous)) => (previous.winner, false),
+        let winner = match (fastest, bands.last()) {
+            (Some((shape, _)), _) => shape,
+            (None, Some(previous)) => previous.winner,
             (None, None) => unreachable!("the first size times every shape"),
         };
         bands.push(SizeBand {
             candidates,
             timings: timings.into_iter().map(|t| t.expect("every shape decided")).collect(),
             winner,
-            measured,
         });
     }
     Ok(bands)
@@ -506,7 +502,7 @@ mod tests {
         // 16,777,216: 3.4e-2 against 1.9e-2 (blocked wins from about 1.9 M on).
         let winners: Vec<Shape> = bands.iter().map(|b| b.winner).collect();
         assert_eq!(winners, [Shape::Tiled, Shape::Tiled, Shape::Blocked]);
-        assert!(bands.iter().all(|b| b.measured));
+        assert!(bands.iter().all(|b| b.measured()));
         let seconds = |b: usize, k: usize| bands[b].timings[k].seconds.unwrap();
         assert!((seconds(2, 0) - gpu_like(Shape::Blocked, sizes[2])).abs() < 1e-12);
         assert!((seconds(2, 1) - gpu_like(Shape::Tiled, sizes[2])).abs() < 1e-12);
@@ -541,7 +537,7 @@ mod tests {
             Ok(n as f64 * 4096.0 / rate)
         })
         .unwrap();
-        assert!(bands.iter().all(|b| b.winner == Shape::Blocked && b.measured));
+        assert!(bands.iter().all(|b| b.winner == Shape::Blocked && b.measured()));
         // At 4,096 blocked (faster at 256) goes first, 8.4 ms; tiled's 3.1 ms at 256 is less,
         // so it is timed too: more candidates may cost it little more on a GPU.
         assert!(bands[1].timings.iter().all(|t| t.seconds.is_some()));
@@ -575,10 +571,10 @@ mod tests {
         let count = |shape| timed.iter().filter(|&&(s, n)| s == shape && n == 4_096).count();
         assert_eq!((count(Shape::Blocked), count(Shape::Tiled)), (4, 2));
         // 65,536: blocked projects to 1.3 s, over the cap; tiled is at least 503 ms.
-        assert!(!bands[1].measured && bands[1].timings.iter().all(|t| t.seconds.is_none()));
+        assert!(!bands[1].measured() && bands[1].timings.iter().all(|t| t.seconds.is_none()));
         assert!((bands[1].timings[0].projected_s.unwrap() - 1.342).abs() < 1e-3);
         assert_eq!(bands[1].winner, Shape::Blocked);
-        assert!(!bands[2].measured && bands[2].winner == Shape::Blocked);
+        assert!(!bands[2].measured() && bands[2].winner == Shape::Blocked);
         assert!(timed.iter().all(|&(_, n)| n == 4_096));
     }
 
@@ -626,7 +622,6 @@ mod tests {
                     projected_s: None,
                 }],
                 winner,
-                measured: true,
             }],
         };
         write_cache(&path, &tuning("a", Shape::Tiled)).unwrap();
