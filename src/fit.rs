@@ -18,6 +18,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::cell::Cell;
 use std::collections::HashMap;
 
 /// How to fit.
@@ -134,9 +135,25 @@ pub struct LawFit {
     pub warnings: Vec<String>,
     /// Levenberg-Marquardt runs made (starting points polished).
     pub starts: usize,
+    /// How the runs ended. Counted while fitting; the run store does not keep it.
+    #[serde(skip)]
+    pub endings: RunEndings,
     /// Scales of the calibration samples the law was fitted to.
     #[serde(skip)]
     pub scales: RecordScales,
+}
+
+/// How a fit's Levenberg-Marquardt runs ended, where not converged.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RunEndings {
+    /// Runs that spent their whole budget of evaluations (the optimiser's patience) still
+    /// improving.
+    pub out_of_patience: usize,
+    /// Runs stopped early because they could not reach the misfit a known starting point had
+    /// reached ([`fit_law_from`]).
+    pub abandoned: usize,
+    /// Whether the estimate itself comes from a run that spent its patience.
+    pub estimate_out_of_patience: bool,
 }
 
 impl LawFit {
@@ -154,6 +171,7 @@ impl LawFit {
             correlations: vec![],
             warnings: vec![],
             starts: 1,
+            endings: RunEndings::default(),
             scales: RecordScales {
                 torque: 1.0,
                 speed: 1.0,
@@ -175,7 +193,17 @@ pub fn misfit(law: Law, params: &[f64], w: &[f64], y: &[f64], r: &[f64], sum_y2:
 /// Fits every law in `laws` to a record's calibration samples ([`fit_laws`]); a fit the
 /// samples defeat is refused as bad input naming the record ([`Error::Fit`]).
 pub fn fit_record(laws: &[Law], data: &FieldData, opts: &FitOptions) -> Result<Vec<LawFit>> {
-    fit_laws(laws, &data.calibration, &data.validation, opts).map_err(|e| match e {
+    fit_record_from(laws, data, opts, &[])
+}
+
+/// [`fit_record`] with known starting points, SI, by law ([`fit_law_from`]).
+pub fn fit_record_from(
+    laws: &[Law],
+    data: &FieldData,
+    opts: &FitOptions,
+    known: &[(Law, Vec<f64>)],
+) -> Result<Vec<LawFit>> {
+    fit_laws_from(laws, &data.calibration, &data.validation, opts, known).map_err(|e| match e {
         Error::Fit { law, message, .. } => Error::Fit {
             record: Some(data.source.clone()),
             law,
@@ -189,10 +217,29 @@ pub fn fit_record(laws: &[Law], data: &FieldData, opts: &FitOptions) -> Result<V
 /// Refuses options that cannot fit these samples first ([`FitOptions::validate_for`]); of
 /// several laws that fail, the first in `laws` is reported, whatever the threads' order.
 pub fn fit_laws(laws: &[Law], calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<Vec<LawFit>> {
+    fit_laws_from(laws, calibration, validation, opts, &[])
+}
+
+/// [`fit_laws`] with known starting points, SI, by law: each law is given those of `known`
+/// that name it ([`fit_law_from`]).
+pub fn fit_laws_from(
+    laws: &[Law],
+    calibration: &Samples,
+    validation: &Samples,
+    opts: &FitOptions,
+    known: &[(Law, Vec<f64>)],
+) -> Result<Vec<LawFit>> {
     opts.validate_for(calibration)?;
     let fits: Vec<Result<LawFit>> = laws
         .par_iter()
-        .map(|&law| fit_law(law, calibration, validation, opts))
+        .map(|&law| {
+            let starts: Vec<Vec<f64>> = known
+                .iter()
+                .filter(|(l, _)| *l == law)
+                .map(|(_, p)| p.clone())
+                .collect();
+            fit_law_from(law, calibration, validation, opts, &starts)
+        })
         .collect();
     fits.into_iter().collect()
 }
@@ -271,6 +318,73 @@ struct Problem<'a> {
     r: &'a [f64],
     transforms: Vec<Transform>,
     u: DVector<f64>,
+    /// Where set, the run is stopped once it cannot reach the race's target.
+    race: Option<Race>,
+}
+
+/// A run of Levenberg-Marquardt against a misfit already reached (`target`). Every `window`
+/// evaluations, at the accepted point, the run's progress is extrapolated: its gain per window
+/// over the last window, shrinking no faster than 1/k in the window index k counted from the
+/// run's start (a crawl's gains shrink faster, a run descending into a valley does not
+/// shrink), over all its remaining evaluations. The run is stopped once that would not take it
+/// below the target by more than what counts as an equal fit ([`EQUAL_FIT`]): runs crawling
+/// along a ridge of the law toward a limit at infinity, behind another, stop within a few
+/// windows. The rule only observes: a run it does not stop takes exactly the steps it takes
+/// without it.
+struct Race {
+    /// Sum of squared residuals (scaled) to beat.
+    target: f64,
+    window: usize,
+    max_evaluations: usize,
+    /// Residual evaluations so far, and the sum of squares of the last.
+    evaluations: Cell<usize>,
+    last_ssr: Cell<f64>,
+    /// Evaluations and sum of squares at the start of the current window.
+    checkpoint: Cell<Option<(usize, f64)>>,
+    stopped: Cell<bool>,
+}
+
+impl Race {
+    fn new(target: f64, patience: usize, n: usize) -> Self {
+        Self {
+            target,
+            window: (patience / RACE_WINDOWS).max(1) * (n + 1),
+            max_evaluations: patience * (n + 1),
+            evaluations: Cell::new(0),
+            last_ssr: Cell::new(f64::INFINITY),
+            checkpoint: Cell::new(None),
+            stopped: Cell::new(false),
+        }
+    }
+
+    fn evaluated(&self, residuals: &DVector<f64>) {
+        self.evaluations.set(self.evaluations.get() + 1);
+        self.last_ssr.set(residuals.norm_squared());
+    }
+
+    /// At an accepted point (Levenberg-Marquardt asks for the Jacobian there, right after
+    /// evaluating its residuals): whether to go on.
+    fn goes_on(&self) -> bool {
+        let (evaluations, ssr) = (self.evaluations.get(), self.last_ssr.get());
+        let Some((since, ssr_then)) = self.checkpoint.get() else {
+            self.checkpoint.set(Some((evaluations, ssr)));
+            return true;
+        };
+        if evaluations < since + self.window {
+            return true;
+        }
+        let gain_per_window = (ssr_then - ssr).max(0.0) * self.window as f64 / (evaluations - since) as f64;
+        // Window k of the run gains g·k/(k + j) in its j-th window from now.
+        let k = evaluations as f64 / self.window as f64;
+        let remaining_windows = self.max_evaluations.saturating_sub(evaluations) as f64 / self.window as f64;
+        let reachable_gain = gain_per_window * k * (1.0 + remaining_windows / k).ln();
+        if ssr - reachable_gain > self.target * (1.0 - EQUAL_FIT) {
+            self.stopped.set(true);
+            return false;
+        }
+        self.checkpoint.set(Some((evaluations, ssr)));
+        true
+    }
 }
 
 impl Problem<'_> {
@@ -306,10 +420,18 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
                 .zip(self.r)
                 .map(|((&w, &y), &r)| self.law.torque(&p, w, r) - y),
         );
+        if let Some(race) = &self.race {
+            race.evaluated(&res);
+        }
         res.iter().all(|v| v.is_finite()).then_some(res)
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
+        if let Some(race) = &self.race
+            && !race.goes_on()
+        {
+            return None;
+        }
         let p = self.scaled_params();
         let n = p.len();
         let chain: Vec<f64> = self
@@ -482,6 +604,14 @@ struct Polished {
     params: Vec<f64>,
     ssr: f64,
     termination: TerminationReason,
+    /// Stopped early: it could not reach a known start's misfit ([`Race`]).
+    abandoned: bool,
+}
+
+impl Polished {
+    fn lost_patience(&self) -> bool {
+        matches!(self.termination, TerminationReason::LostPatience)
+    }
 }
 
 /// Fits one law. See the module documentation for the method: samples that cannot determine
@@ -489,6 +619,25 @@ struct Polished {
 /// polished start is the estimate, with its standard errors and what the user must know
 /// before trusting it.
 pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &FitOptions) -> Result<LawFit> {
+    fit_law_from(law, calibration, validation, opts, &[])
+}
+
+/// [`fit_law`] with starting points where the answer is believed to be, SI (a run's own
+/// estimates when its data are re-simulated, say). They are polished first, with the usual
+/// patience; then the grid's starts are polished exactly as [`fit_law`] polishes them, except
+/// that a run is stopped (abandoned) once, improving for the rest of its patience at the rate
+/// of its last stretch of evaluations, it still could not reach the best misfit of the known
+/// starts. A start heading for a minimum that could win is never stopped, so the estimate is
+/// that of [`fit_law`] or a better one, and the runs that crawl along a ridge of the law
+/// (m3's Gaussian sliding to infinite amplitude, its tanh to a straight line) end early.
+/// Known starts of the wrong length are ignored.
+pub fn fit_law_from(
+    law: Law,
+    calibration: &Samples,
+    validation: &Samples,
+    opts: &FitOptions,
+    known_si: &[Vec<f64>],
+) -> Result<LawFit> {
     check_determinable(law, calibration)?;
     let n = law.n_params();
     let sum_y2 = calibration.sum_sq_torque();
@@ -500,20 +649,25 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
 
     let lower = lower_bounds(law, &scales, opts.bounded);
     let starts = select_starts(law, scaled, &lower, opts.starts);
-    if starts.is_empty() {
+    let known = known_starts(law, scaled, &lower, &scales, known_si);
+    if starts.is_empty() && known.is_empty() {
         return Err(refusal(
             law,
             "no starting point of the grid gives a finite misfit on the calibration samples (their torques against speed leave every start's linear parameters undetermined or overflowing)"
                 .into(),
         ));
     }
-    let polished = polish_starts(law, scaled, &lower, &starts);
+    let polished = if known.is_empty() {
+        polish_starts(law, scaled, &lower, &starts)
+    } else {
+        race_starts(law, scaled, &lower, &[known.as_slice(), &starts].concat())
+    };
     if polished.is_empty() {
         return Err(refusal(
             law,
             format!(
                 "Levenberg-Marquardt diverges to non-finite torques from every one of its {} starting points on the calibration samples",
-                starts.len()
+                starts.len() + known.len()
             ),
         ));
     }
@@ -544,7 +698,12 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
         condition_number: covariance.condition_number,
         correlations: covariance.correlations,
         warnings,
-        starts: starts.len(),
+        starts: starts.len() + known.len(),
+        endings: RunEndings {
+            out_of_patience: polished.iter().filter(|p| p.lost_patience()).count(),
+            abandoned: polished.iter().filter(|p| p.abandoned).count(),
+            estimate_out_of_patience: best.lost_patience(),
+        },
         scales,
     })
 }
@@ -617,13 +776,12 @@ fn lower_bounds(law: Law, scales: &RecordScales, bounded: bool) -> Vec<f64> {
 /// bounds, ranked by misfit, and the best `max_starts` (at least one) kept that are not
 /// near-copies of a better one. Empty when no grid point gives a finite misfit.
 fn select_starts(law: Law, data: ScaledData, lower: &[f64], max_starts: usize) -> Vec<Vec<f64>> {
-    let margin = 1e-3;
     let mut candidates: Vec<(f64, Vec<f64>)> = grid_starts(law, data.w, data.y, data.r)
         .into_iter()
         .map(|mut p| {
             for (v, &lb) in p.iter_mut().zip(lower) {
-                if *v < lb + margin {
-                    *v = lb + margin;
+                if *v < lb + START_MARGIN {
+                    *v = lb + START_MARGIN;
                 }
             }
             (data.ssr(law, &p), p)
@@ -633,12 +791,7 @@ fn select_starts(law: Law, data: ScaledData, lower: &[f64], max_starts: usize) -
     candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut starts: Vec<Vec<f64>> = Vec::new();
     for (_, p) in candidates {
-        let distinct = starts.iter().all(|q| {
-            q.iter()
-                .zip(&p)
-                .any(|(a, b)| (a - b).abs() > 1e-3 * (a.abs() + b.abs()).max(1e-6))
-        });
-        if distinct {
+        if starts.iter().all(|q| distinct(q, &p)) {
             starts.push(p);
         }
         if starts.len() >= max_starts.max(1) {
@@ -648,9 +801,75 @@ fn select_starts(law: Law, data: ScaledData, lower: &[f64], max_starts: usize) -
     starts
 }
 
+/// Relative difference of sums of squares within which two fits fit equally well.
+const EQUAL_FIT: f64 = 1e-6;
+
+/// Levenberg-Marquardt's patience: a run ends after patience × (parameters + 1) evaluations.
+const PATIENCE: usize = 400;
+
+/// Windows of a raced run's patience ([`Race`]): how often it is asked whether it can still win.
+const RACE_WINDOWS: usize = 16;
+
+/// How far inside its lower bound a start is pulled (scaled units): the bound itself is where
+/// MINUIT's transform has no gradient.
+const START_MARGIN: f64 = 1e-3;
+
+/// Whether two starts (scaled) differ by more than 0.1 % in some parameter.
+fn distinct(a: &[f64], b: &[f64]) -> bool {
+    a.iter()
+        .zip(b)
+        .any(|(x, y)| (x - y).abs() > 1e-3 * (x.abs() + y.abs()).max(1e-6))
+}
+
 /// Polishes every start by Levenberg-Marquardt, bounds kept by MINUIT's transform; the runs
 /// that end on a finite misfit, best first. Empty when every run diverges.
 fn polish_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>]) -> Vec<Polished> {
+    // The starts are polished in parallel (collected in order: the same result): a start that
+    // loses patience costs seconds, and a lone slow fit would otherwise hold one thread while
+    // others idle (the selection check fits many records side by side).
+    let mut polished: Vec<Polished> = starts
+        .par_iter()
+        .filter_map(|p0| polish(law, data, lower, p0, PATIENCE, None))
+        .collect();
+    polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
+    polished
+}
+
+/// [`polish_starts`] for starts among which some are known to lie near the answer: every
+/// start first gets one window of the patience ([`RACE_WINDOWS`]), in parallel. A run that
+/// ends within it is final, and the same as with the whole patience (the patience only caps
+/// the evaluations). The others are run again from their starts, best first, one after the
+/// other, each racing the best misfit of the runs already final ([`Race`]): one run crawling
+/// along a ridge goes the whole way, those behind it stop. A run that is not stopped takes
+/// exactly the steps of [`polish_starts`].
+fn race_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>]) -> Vec<Polished> {
+    let first: Vec<(usize, Polished)> = starts
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, p0)| polish(law, data, lower, p0, PATIENCE / RACE_WINDOWS, None).map(|p| (i, p)))
+        .collect();
+    let (mut unfinished, mut polished): (Vec<(usize, Polished)>, Vec<(usize, Polished)>) =
+        first.into_iter().partition(|(_, p)| p.lost_patience());
+    let mut polished: Vec<Polished> = polished.drain(..).map(|(_, p)| p).collect();
+    unfinished.sort_by(|a, b| a.1.ssr.total_cmp(&b.1.ssr));
+    for (i, _) in unfinished {
+        let target = polished.iter().map(|p| p.ssr).min_by(f64::total_cmp);
+        polished.extend(polish(law, data, lower, &starts[i], PATIENCE, target));
+    }
+    polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
+    polished
+}
+
+/// One Levenberg-Marquardt run from `p0` (scaled) with `patience`, racing `target` where
+/// given; `None` when it ends on a non-finite misfit.
+fn polish(
+    law: Law,
+    data: ScaledData,
+    lower: &[f64],
+    p0: &[f64],
+    patience: usize,
+    target: Option<f64>,
+) -> Option<Polished> {
     let n = law.n_params();
     let transforms: Vec<Transform> = lower
         .iter()
@@ -662,33 +881,46 @@ fn polish_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>])
             }
         })
         .collect();
-    let solver = LevenbergMarquardt::new().with_patience(400);
-    // The starts are polished in parallel (collected in order: the same result): a start that
-    // loses patience costs seconds, and a lone slow fit would otherwise hold one thread while
-    // others idle (the selection check fits many records side by side).
-    let mut polished: Vec<Polished> = starts
-        .par_iter()
-        .map(|p0| {
-            let problem = Problem {
-                law,
-                w: data.w,
-                y: data.y,
-                r: data.r,
-                u: DVector::from_iterator(n, transforms.iter().zip(p0).map(|(t, &p)| t.to_internal(p))),
-                transforms: transforms.clone(),
-            };
-            let (problem, report) = solver.minimize(problem);
-            let params = problem.scaled_params();
-            Polished {
-                ssr: data.ssr(law, &params),
-                params,
-                termination: report.termination,
-            }
-        })
-        .filter(|p| p.ssr.is_finite())
-        .collect();
-    polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
-    polished
+    let problem = Problem {
+        law,
+        w: data.w,
+        y: data.y,
+        r: data.r,
+        u: DVector::from_iterator(n, transforms.iter().zip(p0).map(|(t, &p)| t.to_internal(p))),
+        transforms,
+        race: target.map(|t| Race::new(t, patience, n)),
+    };
+    let (problem, report) = LevenbergMarquardt::new().with_patience(patience).minimize(problem);
+    let params = problem.scaled_params();
+    let ssr = data.ssr(law, &params);
+    ssr.is_finite().then(|| Polished {
+        ssr,
+        params,
+        termination: report.termination,
+        abandoned: problem.race.is_some_and(|race| race.stopped.get()),
+    })
+}
+
+/// Known starting points (SI) on the scaled problem: pulled just inside the bounds like the
+/// grid's, those of the wrong length, of a non-finite misfit or near-copies of another left out.
+fn known_starts(
+    law: Law,
+    data: ScaledData,
+    lower: &[f64],
+    scales: &RecordScales,
+    known_si: &[Vec<f64>],
+) -> Vec<Vec<f64>> {
+    let n = law.n_params();
+    let mut starts: Vec<Vec<f64>> = Vec::new();
+    for p_si in known_si.iter().filter(|p| p.len() == n) {
+        let p: Vec<f64> = (0..n)
+            .map(|j| (p_si[j] * scales.factor(law, j)).max(lower[j] + START_MARGIN))
+            .collect();
+        if data.ssr(law, &p).is_finite() && starts.iter().all(|q| distinct(q, &p)) {
+            starts.push(p);
+        }
+    }
+    starts
 }
 
 /// The uncertainty of an estimate, from the Jacobian at it.
@@ -775,7 +1007,7 @@ fn fit_warnings(
     }
     // Other starts that fit as well but land elsewhere mean the data do not pin the law down.
     for other in &polished[1..] {
-        if other.ssr <= best.ssr * (1.0 + 1e-6) + 1e-300 {
+        if other.ssr <= best.ssr * (1.0 + EQUAL_FIT) + 1e-300 {
             let differing: Vec<&str> = (0..n)
                 .filter(|&j| (other.params[j] - p[j]).abs() > 1e-2 * p[j].abs().max(1e-3))
                 .map(|j| law.params()[j].name)

@@ -260,6 +260,37 @@ pub struct CheckTiming {
     /// Of the sampling, the wall time spent scoring the batches, s.
     #[serde(default)]
     pub scoring_seconds: f64,
+    /// How the replicates' least-squares fits went.
+    #[serde(default)]
+    pub fits: FitCounts,
+}
+
+/// How many least-squares fits (one law on one record) were made, and how their
+/// Levenberg-Marquardt runs (one per starting point) ended.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FitCounts {
+    pub fits: u64,
+    /// Fits in which at least one run spent its whole patience still improving.
+    pub fits_out_of_patience: u64,
+    /// Fits whose estimate itself comes from such a run (it did not converge).
+    pub estimates_out_of_patience: u64,
+    /// Runs made, runs that spent their patience, and runs stopped early because they could
+    /// not reach a known start's misfit ([`crate::fit::fit_law_from`]).
+    pub runs: u64,
+    pub runs_out_of_patience: u64,
+    pub runs_abandoned: u64,
+}
+
+impl FitCounts {
+    fn count(&mut self, fit: &LawFit) {
+        self.fits += 1;
+        let endings = &fit.endings;
+        self.fits_out_of_patience += u64::from(endings.out_of_patience > 0);
+        self.estimates_out_of_patience += u64::from(endings.estimate_out_of_patience);
+        self.runs += fit.starts as u64;
+        self.runs_out_of_patience += endings.out_of_patience as u64;
+        self.runs_abandoned += endings.abandoned as u64;
+    }
 }
 
 impl SelectionCheck {
@@ -457,6 +488,9 @@ pub fn check(
         let fitted: Vec<Result<Fitted>> = chunk.par_iter().map(|&job| fit_replicate(run, job)).collect();
         timing.fit_seconds += fitting.elapsed().as_secs_f64();
         let fitted: Vec<Fitted> = fitted.into_iter().collect::<Result<_>>()?;
+        for fit in fitted.iter().flat_map(|f| &f.fits) {
+            timing.fits.count(fit);
+        }
         let sampling = Instant::now();
         let mut batch_notes = Vec::new();
         let records = RecordBatch::new(
@@ -633,7 +667,12 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
         warnings: Vec::new(),
         ..data.clone()
     };
-    let fits = crate::fit::fit_record(&config.laws, &synthetic, &config.fit)?;
+    // The fits start where the answers are believed to be, as well as on the grid: the run's
+    // own estimates, and the generating parameters for the generating law.
+    let known: Vec<(Law, Vec<f64>)> = std::iter::once((law, params_si.clone()))
+        .chain(run.stored.setup.fits.iter().map(|f| (f.law, f.params_si.clone())))
+        .collect();
+    let fits = crate::fit::fit_record_from(&config.laws, &synthetic, &config.fit, &known)?;
     Ok(Fitted {
         job,
         seed,

@@ -686,6 +686,7 @@ impl RunStore {
                 correlations: serde_json::from_str(&correlations).map_err(&jerr)?,
                 warnings: serde_json::from_str(&warnings).map_err(&jerr)?,
                 starts: starts as usize,
+                endings: Default::default(),
                 scales,
             });
         }
