@@ -102,8 +102,9 @@ pub struct BenchReport {
     pub samplers: Vec<SamplerRun>,
     /// Stability grid on the GPU: cells × samples per second (median), with the grid size.
     pub stability: Option<StabilityThroughput>,
-    /// `bitrock check-selection` of the embedded record's run (measured with `--selection` only).
-    pub selection: Option<SelectionBench>,
+    /// `bitrock check-selection` of a run of each of [`SelectionRecord::ALL`] (measured with
+    /// `--selection` only).
+    pub selection: Vec<SelectionBench>,
 }
 
 /// The adapter's table of scoring shapes, as the bench found it.
@@ -117,9 +118,14 @@ pub struct TuningReport {
     pub tuning: gpu::tune::Tuning,
 }
 
-/// `bitrock check-selection` of a run of the embedded record: every law, K replicates each.
+/// `bitrock check-selection` of a run of one record: every law, K replicates each.
 #[derive(Clone, Debug, Serialize)]
 pub struct SelectionBench {
+    pub record: SelectionRecord,
+    /// The `bitrock simulate` command that makes the record (none for the embedded one).
+    pub command: Option<&'static str>,
+    /// Calibration samples of the record (each replicate's fits and runs see as many).
+    pub calibration_samples: usize,
     /// Backend asked for, and the one that scored the candidates (`cpu`, `gpu`).
     pub backend_asked: Backend,
     pub backend: String,
@@ -127,6 +133,7 @@ pub struct SelectionBench {
     pub replicates_per_law: usize,
     /// Particles per population of the run and of every replicate.
     pub particles: usize,
+    /// The run's last ε: the record's floor as `bitrock abc` sets it.
     pub eps_min: f64,
     /// Wall time of the check (median over the repetitions), s.
     pub seconds: f64,
@@ -136,7 +143,11 @@ pub struct SelectionBench {
     /// The check's two phases (median over the repetitions), s: the synthetic records with
     /// their least-squares fits, and the samplers.
     pub fit_seconds: f64,
+    /// The fits' share of the check's wall time.
+    pub fit_share: f64,
     pub sampling_seconds: f64,
+    /// How the fits' Levenberg-Marquardt runs ended (the same every repetition).
+    pub fits: crate::selection::FitCounts,
     /// Of the sampling, the time spent scoring the replicates' batched requests (median), s.
     pub scoring_seconds: f64,
     /// Batches the replicates' requests were scored in, and GPU dispatches (the same every
@@ -169,7 +180,7 @@ pub struct BenchOptions {
     pub particles: usize,
     /// Stability grid (side, samples): 512 × 512 cells × 10,000 samples.
     pub stability: (usize, usize),
-    /// Measure only `bitrock check-selection` ([`selection_check`]) with this many replicates
+    /// Measure only `bitrock check-selection` ([`selection_checks`]) with this many replicates
     /// per law (20 by default), instead of the other sections.
     pub selection_replicates: Option<usize>,
     /// Measure the GPU scoring shapes again (and keep the new table) even where a table is
@@ -244,7 +255,7 @@ fn time_calls(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<Vec<f64>
 }
 
 /// Runs the benchmark, reporting progress lines through `log`: with
-/// [`BenchOptions::selection_replicates`] only the selection check ([`selection_check`]),
+/// [`BenchOptions::selection_replicates`] only the selection check ([`selection_checks`]),
 /// else each other section in turn: evaluator throughput, the small call, the paper-scale run
 /// end to end, rejection against SMC, and the GPU stability grid.
 pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchReport> {
@@ -263,7 +274,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         end_to_end: Vec::new(),
         samplers: Vec::new(),
         stability: None,
-        selection: None,
+        selection: Vec::new(),
     };
     if let Some(k) = opts.selection_replicates {
         let backend = match opts.backends.as_slice() {
@@ -271,7 +282,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             _ => Backend::Auto,
         };
         return Ok(BenchReport {
-            selection: Some(selection_check(k, SELECTION_PARTICLES, backend, reps.min(3), log)?),
+            selection: selection_checks(&SelectionRecord::ALL, k, SELECTION_PARTICLES, backend, reps.min(3), log)?,
             ..report
         });
     }
@@ -586,14 +597,133 @@ fn measure_stability(
     })
 }
 
-/// Particles of the selection benchmark's run and of its replicates.
+/// Particles of the selection benchmark's runs and of their replicates.
 pub const SELECTION_PARTICLES: usize = 5_000;
 
-/// Times `bitrock check-selection` `reps` times: a rejection run of every law on the embedded
-/// record (N = `particles`, down to ε = 0.014, `backend`) written to a temporary directory,
-/// then K = `replicates` per law checked with the same backend. The results are the same
-/// every repetition; the time is not.
-pub fn selection_check(
+/// A record the selection benchmark checks a run of: the embedded one, or one `bitrock
+/// simulate` makes (the command is [`SelectionRecord::command`]), read back from its CSV as
+/// `bitrock abc` reads it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SelectionRecord {
+    /// The paper's field record (kN·m).
+    Embedded,
+    /// A laboratory rig: m3 in N·m on a light string at 100 rpm and 500 N, 0.15 N·m torque
+    /// and 2 rpm speed noise, speeds from below zero to above 300 rpm, m2's dynamic torque on
+    /// its bound.
+    Rig,
+    /// m2 at (13, 6.5 kN·m, 0.3 s/rad), 60 rpm, 1 kN·m torque noise (a floor above the paper's).
+    M2,
+    /// m4 at (11.8, −0.93, 0.057, −1.2e−3), 60 rpm, 1 kN·m torque noise.
+    M4,
+}
+
+impl SelectionRecord {
+    pub const ALL: [SelectionRecord; 4] = [Self::Embedded, Self::Rig, Self::M2, Self::M4];
+
+    /// Its name in the report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Embedded => "embedded",
+            Self::Rig => "rig",
+            Self::M2 => "m2",
+            Self::M4 => "m4",
+        }
+    }
+
+    /// The `bitrock simulate` command that writes the record; `None` for the embedded one.
+    pub fn command(self) -> Option<&'static str> {
+        match self {
+            Self::Embedded => None,
+            Self::Rig => Some(
+                "bitrock simulate --law m3 --params 0.3,1.0,0.5,3.0,2.95,0.03 --param-torque-unit nm --inertia-kg-m2 0.02 --omega-n-rad-s 5 --damping-ratio 0.1 --omega-rpm 100 --wob-kn 0.5 --w-ref-kn 0.5 --settle-s 10 --kick-rpm 0 --noise-torque-knm 0.00015 --noise-speed-rpm 2 --wob-fluctuation-kn 0.1 --wob-correlation-s 5 --seed 7 --torque-unit nm",
+            ),
+            Self::M2 => Some(
+                "bitrock simulate --law m2 --params 13,6.5,0.3 --omega-rpm 60 --duration-s 180 --settle-s 40 --noise-torque-knm 1 --wob-fluctuation-kn 12.2 --seed 2024",
+            ),
+            Self::M4 => Some(
+                "bitrock simulate --law m4 --params 11.8,-0.93,0.057,-1.2e-3 --omega-rpm 60 --duration-s 180 --settle-s 40 --noise-torque-knm 1 --wob-fluctuation-kn 12.2 --seed 2025",
+            ),
+        }
+    }
+
+    /// The record, as `bitrock abc` reads it with its defaults.
+    pub fn field_data(self) -> Result<FieldData> {
+        match self.csv()? {
+            None => demo_field_data(&DataOptions::default()),
+            Some(csv) => {
+                let name = format!("{}.csv", self.name());
+                crate::data::parse_field_data(csv.as_slice(), std::path::Path::new(&name), &DataOptions::default())
+            }
+        }
+    }
+
+    /// The CSV file [`Self::command`] writes; `None` for the embedded record.
+    pub fn csv(self) -> Result<Option<Vec<u8>>> {
+        use crate::simulate::{self, Initial, SimConfig};
+        use crate::stability::lumped::Lumped;
+        use crate::units::{RAD_S_PER_RPM, TorqueUnit};
+        let kick = Initial::Equilibrium {
+            speed_perturbation_rad_s: simulate::DEFAULT_KICK_RPM * RAD_S_PER_RPM,
+        };
+        let field = |law: Law, params_knm: &[f64], seed: u64| {
+            let mut c = SimConfig::new(law, law.scale_torque(params_knm, 1000.0), 60.0 * RAD_S_PER_RPM, 244_200.0);
+            c.duration_s = 180.0;
+            c.settle_s = 40.0;
+            c.initial = kick;
+            c.noise_torque_nm = 1000.0;
+            c.wob_fluctuation_n = 12_200.0;
+            c.seed = seed;
+            (c, TorqueUnit::KNm)
+        };
+        let (config, unit) = match self {
+            Self::Embedded => return Ok(None),
+            Self::Rig => {
+                let mut c = SimConfig::new(Law::M3, vec![0.3, 1.0, 0.5, 3.0, 2.95, 0.03], 100.0 * RAD_S_PER_RPM, 500.0);
+                c.structure = Lumped {
+                    inertia_kg_m2: 0.02,
+                    omega_n_rad_s: 5.0,
+                    damping_ratio: 0.1,
+                };
+                c.w_ref_n = 500.0;
+                c.settle_s = 10.0;
+                c.noise_torque_nm = 0.15;
+                c.noise_speed_rad_s = 2.0 * RAD_S_PER_RPM;
+                c.wob_fluctuation_n = 100.0;
+                c.wob_correlation_s = 5.0;
+                c.seed = 7;
+                (c, TorqueUnit::Nm)
+            }
+            Self::M2 => field(Law::M2, &[13.0, 6.5, 0.3], 2024),
+            Self::M4 => field(Law::M4, &[11.8, -0.93, 0.057, -1.2e-3], 2025),
+        };
+        let trace = simulate::simulate(&config)?;
+        let mut csv = Vec::new();
+        simulate::write_csv_in(&trace, unit, &mut csv).expect("writing to memory");
+        Ok(Some(csv))
+    }
+}
+
+/// Times `bitrock check-selection` `reps` times on each of `records`: a rejection run of every
+/// law (N = `particles`, down to the record's floor as `bitrock abc` sets it, `backend`)
+/// written to a temporary directory, then K = `replicates` per law checked with the same
+/// backend. The results are the same every repetition; the time is not.
+pub fn selection_checks(
+    records: &[SelectionRecord],
+    replicates: usize,
+    particles: usize,
+    backend: Backend,
+    reps: usize,
+    log: &mut dyn FnMut(String),
+) -> Result<Vec<SelectionBench>> {
+    records
+        .iter()
+        .map(|&record| selection_check(record, replicates, particles, backend, reps, log))
+        .collect()
+}
+
+fn selection_check(
+    record: SelectionRecord,
     replicates: usize,
     particles: usize,
     backend: Backend,
@@ -610,13 +740,15 @@ pub fn selection_check(
         particles,
         ..RejectionConfig::default()
     };
-    let eps_min = sampler.eps_min;
     let config = RunConfig {
         backend,
         sampler: SamplerConfig::Rejection(sampler),
+        eps_min_from_record: true,
         ..RunConfig::default()
     };
     let laws = config.laws.len();
+    let data = record.field_data()?;
+    let samples = data.calibration.len();
     AbcJob {
         config,
         summary_population: None,
@@ -625,25 +757,35 @@ pub fn selection_check(
             replace: false,
         }),
     }
-    .run(demo_field_data(&DataOptions::default())?, &mut crate::abc::Silent)?;
+    .run(data, &mut crate::abc::Silent)?;
     let run = CheckedRun::open(&run_dir)?;
+    let eps_min = run
+        .stored
+        .populations
+        .last()
+        .and_then(|p| p.record.epsilon)
+        .unwrap_or(f64::INFINITY);
     let options = CheckOptions {
         replicates,
         backend: Some(backend),
         batch: None,
     };
+    let name = record.name();
     let mut checks = Vec::new();
     for rep in 0..reps.max(1) {
         let check = crate::selection::check(&run, &options, &|_, _| {}, &mut |_| {})?;
+        let f = &check.timing.fits;
         log(format!(
-            "check-selection ({}/{}): {laws} laws × {replicates} replicates, N = {particles}, to ε = {eps_min}, backend {}: {:.2} s (records and fits {:.2} s, sampling {:.2} s, of which scoring {:.2} s)",
+            "check-selection of the {name} record ({}/{}): {laws} laws × {replicates} replicates, N = {particles}, to ε = {eps_min:.4}, backend {}: {:.2} s (records and fits {:.2} s, sampling {:.2} s, of which scoring {:.2} s); {} of {} fits had a run out of patience",
             rep + 1,
             reps.max(1),
             check.backend,
             check.seconds,
             check.timing.fit_seconds,
             check.timing.sampling_seconds,
-            check.timing.scoring_seconds
+            check.timing.scoring_seconds,
+            f.fits_out_of_patience,
+            f.fits,
         ));
         checks.push(check);
     }
@@ -651,7 +793,11 @@ pub fn selection_check(
         |f: &dyn Fn(&crate::selection::SelectionCheck) -> f64| quantile(&checks.iter().map(f).collect::<Vec<_>>(), 0.5);
     let seconds_spread = Spread::of(&checks.iter().map(|c| c.seconds).collect::<Vec<_>>());
     let seconds = seconds_spread.median;
+    let fit_seconds = median(&|c| c.timing.fit_seconds);
     Ok(SelectionBench {
+        record,
+        command: record.command(),
+        calibration_samples: samples,
         backend_asked: backend,
         backend: checks[0].backend.clone(),
         laws,
@@ -661,9 +807,11 @@ pub fn selection_check(
         seconds,
         seconds_spread,
         replicates_per_s: (laws * replicates) as f64 / seconds,
-        fit_seconds: median(&|c| c.timing.fit_seconds),
+        fit_seconds,
+        fit_share: fit_seconds / seconds,
         sampling_seconds: median(&|c| c.timing.sampling_seconds),
         scoring_seconds: median(&|c| c.timing.scoring_seconds),
+        fits: checks[0].timing.fits.clone(),
         batches: checks[0].timing.batches,
         dispatches: checks[0].timing.dispatches,
         evaluations: checks[0].timing.evaluations,

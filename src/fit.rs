@@ -848,9 +848,8 @@ fn race_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>]) -
         .enumerate()
         .filter_map(|(i, p0)| polish(law, data, lower, p0, PATIENCE / RACE_WINDOWS, None).map(|p| (i, p)))
         .collect();
-    let (mut unfinished, mut polished): (Vec<(usize, Polished)>, Vec<(usize, Polished)>) =
-        first.into_iter().partition(|(_, p)| p.lost_patience());
-    let mut polished: Vec<Polished> = polished.drain(..).map(|(_, p)| p).collect();
+    let (mut unfinished, finished): (Vec<_>, Vec<_>) = first.into_iter().partition(|(_, p)| p.lost_patience());
+    let mut polished: Vec<Polished> = finished.into_iter().map(|(_, p)| p).collect();
     unfinished.sort_by(|a, b| a.1.ssr.total_cmp(&b.1.ssr));
     for (i, _) in unfinished {
         let target = polished.iter().map(|p| p.ssr).min_by(f64::total_cmp);

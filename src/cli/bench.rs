@@ -20,9 +20,11 @@ pub struct BenchCmd {
     /// Small sizes only (65,536 × 5,000; end-to-end with N = 5,000): a smoke test in seconds.
     #[arg(long)]
     pub quick: bool,
-    /// Measure only `bitrock check-selection`: a run of every law on the
-    /// embedded record (N = 5,000, to ε = 0.014), then K replicates per law checked, timed
-    /// (up to 3 repetitions); K = 20, or 2 with --quick. --backend picks the backend [default: auto].
+    /// Measure only `bitrock check-selection`: on the embedded record, a laboratory rig's
+    /// record (N·m) and records from m2 and m4 (kN·m), all four made as `bitrock simulate`
+    /// makes them, a run of every law (N = 5,000, to the record's floor), then K replicates
+    /// per law checked, timed (up to 3 repetitions); K = 20, or 2 with --quick. --backend
+    /// picks the backend [default: auto].
     #[arg(long)]
     pub selection: bool,
     /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and
@@ -123,27 +125,43 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
                 st.cell_samples_per_s_spread.max
             )?;
         }
-        if let Some(c) = &report.selection {
+        if let Some(first) = report.selection.first() {
             writeln!(
                 out,
-                "{:<7}  check-selection: {} laws × {} replicates, N = {}, to ε = {} (--backend {}): {:.2} s ({:.2}–{:.2}), {:.2} replicates/s; records and fits {:.2} s, sampling {:.2} s (scoring {:.2} s in {} batches, {} GPU dispatches), {:.3e} evaluations",
-                c.backend,
-                c.laws,
-                c.replicates_per_law,
-                c.particles,
+                "check-selection: {} laws × {} replicates, N = {} (--backend {}, scored on {}); medians (min–max)",
+                first.laws,
+                first.replicates_per_law,
+                first.particles,
+                serde_json::to_value(first.backend_asked)?.as_str().unwrap_or_default(),
+                first.backend,
+            )?;
+            writeln!(
+                out,
+                "record    samples  ε_min    check s (min–max)     fits s  share  sampling s  fits out of patience  runs out / abandoned"
+            )?;
+        }
+        for c in &report.selection {
+            writeln!(
+                out,
+                "{:<8}  {:>7}  {:<7.4}  {:>6.2} ({:.2}–{:.2})  {:>6.2}  {:>4.0} %  {:>10.2}  {:>9} of {:<8}  {} / {} of {}",
+                c.record.name(),
+                c.calibration_samples,
                 c.eps_min,
-                serde_json::to_value(c.backend_asked)?.as_str().unwrap_or_default(),
                 c.seconds,
                 c.seconds_spread.min,
                 c.seconds_spread.max,
-                c.replicates_per_s,
                 c.fit_seconds,
+                100.0 * c.fit_share,
                 c.sampling_seconds,
-                c.scoring_seconds,
-                c.batches,
-                c.dispatches,
-                c.evaluations as f64
+                c.fits.fits_out_of_patience,
+                c.fits.fits,
+                c.fits.runs_out_of_patience,
+                c.fits.runs_abandoned,
+                c.fits.runs,
             )?;
+        }
+        for c in report.selection.iter().filter(|c| c.command.is_some()) {
+            writeln!(out, "  {}: {}", c.record.name(), c.command.unwrap_or_default())?;
         }
         for e in &report.end_to_end {
             writeln!(

@@ -75,7 +75,13 @@ pub struct SimulateCmd {
     /// Seed of the noise and fluctuation generator.
     #[arg(long, default_value_t = simulate::DEFAULT_SEED)]
     pub seed: u64,
-    /// Output CSV (time_s, bit_speed_rpm, torque_knm, wob_kn) [default: standard output].
+    /// Scale of the output's torque and weight on bit: knm writes torque_knm and wob_kn (field
+    /// records), nm writes torque_nm and wob_n (laboratory rigs, whose torques of a few N·m
+    /// need the finer resolution).
+    #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
+    pub torque_unit: TorqueUnit,
+    /// Output CSV (time_s, bit_speed_rpm, torque_knm, wob_kn; torque_nm, wob_n with
+    /// --torque-unit nm) [default: standard output].
     #[arg(long, short, value_name = "FILE")]
     pub out: Option<PathBuf>,
 }
@@ -118,8 +124,10 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
     }
     let trace = simulate::simulate(&config)?;
     match &cmd.out {
-        None => simulate::write_csv(&trace, super::print::stdout())?,
-        Some(path) => files::write_whole(path, "out", |file| simulate::write_csv(&trace, file))?,
+        None => simulate::write_csv_in(&trace, cmd.torque_unit, super::print::stdout())?,
+        Some(path) => files::write_whole(path, "out", |file| {
+            simulate::write_csv_in(&trace, cmd.torque_unit, file)
+        })?,
     }
     Ok(ExitCode::SUCCESS)
 }
