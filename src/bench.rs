@@ -667,7 +667,12 @@ impl SelectionRecord {
             speed_perturbation_rad_s: simulate::DEFAULT_KICK_RPM * RAD_S_PER_RPM,
         };
         let field = |law: Law, params_knm: &[f64], seed: u64| {
-            let mut c = SimConfig::new(law, law.scale_torque(params_knm, 1000.0), 60.0 * RAD_S_PER_RPM, 244_200.0);
+            let mut c = SimConfig::new(
+                law,
+                law.scale_torque(params_knm, 1000.0),
+                60.0 * RAD_S_PER_RPM,
+                244_200.0,
+            );
             c.duration_s = 180.0;
             c.settle_s = 40.0;
             c.initial = kick;
@@ -679,7 +684,12 @@ impl SelectionRecord {
         let (config, unit) = match self {
             Self::Embedded => return Ok(None),
             Self::Rig => {
-                let mut c = SimConfig::new(Law::M3, vec![0.3, 1.0, 0.5, 3.0, 2.95, 0.03], 100.0 * RAD_S_PER_RPM, 500.0);
+                let mut c = SimConfig::new(
+                    Law::M3,
+                    vec![0.3, 1.0, 0.5, 3.0, 2.95, 0.03],
+                    100.0 * RAD_S_PER_RPM,
+                    500.0,
+                );
                 c.structure = Lumped {
                     inertia_kg_m2: 0.02,
                     omega_n_rad_s: 5.0,

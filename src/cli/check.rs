@@ -93,6 +93,19 @@ fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
         "synthetic records and fits {:.1} s, sampling {:.1} s (scoring {:.1} s in {} batches; {:.3e} candidate × data-point evaluations)",
         t.fit_seconds, t.sampling_seconds, t.scoring_seconds, t.batches, t.evaluations as f64
     )?;
+    let f = &t.fits;
+    if f.fits > 0 {
+        writeln!(
+            out,
+            "least squares: {} fits, {} Levenberg-Marquardt runs; {} runs spent their patience (in {} fits; {} estimates did not converge), {} stopped early behind a better run",
+            f.fits,
+            f.runs,
+            f.runs_out_of_patience,
+            f.fits_out_of_patience,
+            f.estimates_out_of_patience,
+            f.runs_abandoned
+        )?;
+    }
     writeln!(
         out,
         "\nrows: law that made the data; columns: mean posterior probability (share ranked first)"
