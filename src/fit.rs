@@ -149,8 +149,8 @@ pub struct RunEndings {
     /// Runs that spent their whole budget of evaluations (the optimiser's patience) still
     /// improving.
     pub out_of_patience: usize,
-    /// Runs stopped early because they could not reach the misfit a known starting point had
-    /// reached ([`fit_law_from`]).
+    /// Runs stopped early because they could not beat the misfit of a run already finished
+    /// ([`fit_law_from`]).
     pub abandoned: usize,
     /// Whether the estimate itself comes from a run that spent its patience.
     pub estimate_out_of_patience: bool,
@@ -604,7 +604,7 @@ struct Polished {
     params: Vec<f64>,
     ssr: f64,
     termination: TerminationReason,
-    /// Stopped early: it could not reach a known start's misfit ([`Race`]).
+    /// Stopped early: it could not beat a finished run's misfit ([`Race`]).
     abandoned: bool,
 }
 
@@ -623,14 +623,14 @@ pub fn fit_law(law: Law, calibration: &Samples, validation: &Samples, opts: &Fit
 }
 
 /// [`fit_law`] with starting points where the answer is believed to be, SI (a run's own
-/// estimates when its data are re-simulated, say). They are polished first, with the usual
-/// patience; then the grid's starts are polished exactly as [`fit_law`] polishes them, except
-/// that a run is stopped (abandoned) once, improving for the rest of its patience at the rate
-/// of its last stretch of evaluations, it still could not reach the best misfit of the known
-/// starts. A start heading for a minimum that could win is never stopped, so the estimate is
-/// that of [`fit_law`] or a better one, and the runs that crawl along a ridge of the law
-/// (m3's Gaussian sliding to infinite amplitude, its tanh to a straight line) end early.
-/// Known starts of the wrong length are ignored.
+/// estimates when its data are re-simulated, say), polished together with the grid's starts
+/// that [`fit_law`] polishes: every run that is not stopped takes exactly the
+/// steps it takes in [`fit_law`], and a run is stopped only once, extrapolating its progress,
+/// it could not end below the best misfit already reached by more than an equal fit (10⁻⁶
+/// of it). So the estimate is that of [`fit_law`] or a better one (up to that equal
+/// fit), and the runs that crawl along a ridge of the law behind another (m3's Gaussian
+/// sliding to infinite amplitude, its tanh flattening to a line) end early. Known starts of
+/// the wrong length are ignored.
 pub fn fit_law_from(
     law: Law,
     calibration: &Samples,

@@ -277,7 +277,7 @@ pub struct FitCounts {
     /// Fits whose estimate itself comes from such a run (it did not converge).
     pub estimates_out_of_patience: u64,
     /// Runs made, runs that spent their patience, and runs stopped early because they could
-    /// not reach a known start's misfit ([`crate::fit::fit_law_from`]).
+    /// not beat the misfit of a run already finished ([`crate::fit::fit_law_from`]).
     pub runs: u64,
     pub runs_out_of_patience: u64,
     pub runs_abandoned: u64,
