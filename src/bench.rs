@@ -133,7 +133,7 @@ pub struct SelectionBench {
     pub replicates_per_law: usize,
     /// Particles per population of the run and of every replicate.
     pub particles: usize,
-    /// The run's last ε: the record's floor as `bitrock abc` sets it.
+    /// The run's last ε (the record's floor as `bitrock abc` sets it, where the run reached it).
     pub eps_min: f64,
     /// Wall time of the check (median over the repetitions), s.
     pub seconds: f64,

@@ -779,11 +779,7 @@ fn select_starts(law: Law, data: ScaledData, lower: &[f64], max_starts: usize) -
     let mut candidates: Vec<(f64, Vec<f64>)> = grid_starts(law, data.w, data.y, data.r)
         .into_iter()
         .map(|mut p| {
-            for (v, &lb) in p.iter_mut().zip(lower) {
-                if *v < lb + START_MARGIN {
-                    *v = lb + START_MARGIN;
-                }
-            }
+            pull_inside(&mut p, lower);
             (data.ssr(law, &p), p)
         })
         .filter(|(s, _)| s.is_finite())
@@ -813,6 +809,15 @@ const RACE_WINDOWS: usize = 16;
 /// How far inside its lower bound a start is pulled (scaled units): the bound itself is where
 /// MINUIT's transform has no gradient.
 const START_MARGIN: f64 = 1e-3;
+
+/// Pulls a start (scaled) at or below a lower bound to [`START_MARGIN`] above it.
+fn pull_inside(p: &mut [f64], lower: &[f64]) {
+    for (v, &lb) in p.iter_mut().zip(lower) {
+        if *v < lb + START_MARGIN {
+            *v = lb + START_MARGIN;
+        }
+    }
+}
 
 /// Whether two starts (scaled) differ by more than 0.1 % in some parameter.
 fn distinct(a: &[f64], b: &[f64]) -> bool {
@@ -912,9 +917,8 @@ fn known_starts(
     let n = law.n_params();
     let mut starts: Vec<Vec<f64>> = Vec::new();
     for p_si in known_si.iter().filter(|p| p.len() == n) {
-        let p: Vec<f64> = (0..n)
-            .map(|j| (p_si[j] * scales.factor(law, j)).max(lower[j] + START_MARGIN))
-            .collect();
+        let mut p: Vec<f64> = (0..n).map(|j| p_si[j] * scales.factor(law, j)).collect();
+        pull_inside(&mut p, lower);
         if data.ssr(law, &p).is_finite() && starts.iter().all(|q| distinct(q, &p)) {
             starts.push(p);
         }

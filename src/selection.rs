@@ -9,9 +9,9 @@
 //! of every law, the same prior rule, δ and prior file, the same sampler and stopping rules)
 //! with its own seed, [`replicate_seed`]. Its least-squares fits also start from the run's own
 //! estimates and the generating parameters ([`crate::fit::fit_law_from`]): never worse than
-//! the grid's starts alone, and far cheaper where a law crawls along a ridge. Row i of the confusion matrix is what the pipeline
-//! says about data made by law i: the mean posterior probability of every law, and the share
-//! of replicates in which each law ranks first.
+//! the grid's starts alone, and far cheaper where a law crawls along a ridge. Row i of the
+//! confusion matrix is what the pipeline says about data made by law i: the mean posterior
+//! probability of every law, and the share of replicates in which each law ranks first.
 //!
 //! Replicates are independent runs, and each one's populations depend only on its record and
 //! seed, so they are run `batch` at a time and give the same results for any `batch`, thread

@@ -4,45 +4,29 @@
 //! bound (m2's dynamic torque tcb) and a noise floor far above the paper's ε = 0.014.
 
 use crate::support::bin;
-use bitrock::Law;
-use bitrock::simulate::{self, Initial, SimConfig};
-use bitrock::stability::lumped::Lumped;
-use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
+use bitrock::bench::SelectionRecord;
+use std::io::Write;
 use std::sync::OnceLock;
 
-/// The rig: the new law m3 with a nearly linear velocity weakening (N·m), on a light string
-/// at 100 rpm and 500 N (r = 1), with 0.15 N·m torque noise and 2 rpm speed noise.
-const RIG_PARAMS_NM: [f64; 6] = [0.3, 1.0, 0.5, 3.0, 2.95, 0.03];
-const RIG: Lumped = Lumped {
-    inertia_kg_m2: 0.02,
-    omega_n_rad_s: 5.0,
-    damping_ratio: 0.1,
-};
-
-/// The rig record as a CSV file in N·m and N, written once per test binary.
+/// The rig record as a CSV file in N·m and N, written once per test binary: the selection
+/// benchmark's rig ([`SelectionRecord::Rig`], the new law m3 with a nearly linear velocity
+/// weakening on a light string at 100 rpm and 500 N, r = 1, with 0.15 N·m torque noise and
+/// 2 rpm speed noise).
 fn rig_record() -> &'static std::path::Path {
     static FILE: OnceLock<tempfile::TempPath> = OnceLock::new();
     FILE.get_or_init(|| {
-        let mut config = SimConfig::new(Law::M3, RIG_PARAMS_NM.to_vec(), 100.0 * RAD_S_PER_RPM, 500.0);
-        config.structure = RIG;
-        config.w_ref_n = 500.0;
-        config.settle_s = 10.0;
-        config.initial = Initial::Equilibrium {
-            speed_perturbation_rad_s: 0.0,
-        };
-        config.noise_torque_nm = 0.15;
-        config.noise_speed_rad_s = 2.0 * RAD_S_PER_RPM;
-        config.wob_fluctuation_n = 100.0;
-        config.wob_correlation_s = 5.0;
-        config.seed = 7;
-        let trace = simulate::simulate(&config).unwrap();
-        let (lo, hi) = trace.speed_range_rad_s(0.0).unwrap();
-        assert!(
-            lo < 0.0 && hi > 300.0 * RAD_S_PER_RPM,
-            "not the rig's range: {lo}..{hi} rad/s"
-        );
-        let file = tempfile::Builder::new().suffix(".csv").tempfile().unwrap();
-        simulate::write_csv_in(&trace, TorqueUnit::Nm, file.as_file()).unwrap();
+        let csv = SelectionRecord::Rig.csv().unwrap().unwrap();
+        let speeds_rpm: Vec<f64> = std::str::from_utf8(&csv)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|line| line.split(',').nth(1).unwrap().parse().unwrap())
+            .collect();
+        let lo = speeds_rpm.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = speeds_rpm.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert!(lo < 0.0 && hi > 300.0, "not the rig's range: {lo}..{hi} rpm");
+        let mut file = tempfile::Builder::new().suffix(".csv").tempfile().unwrap();
+        file.write_all(&csv).unwrap();
         file.into_temp_path()
     })
 }
