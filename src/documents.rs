@@ -93,6 +93,7 @@ fn population_json(record: &PopulationRecord) -> Value {
         "evaluations": record.evaluations,
         "near_threshold": record.near_threshold,
         "ess": record.ess,
+        "thin": record.thin(),
         "seconds": record.seconds,
         "stream": record.stream,
     })

@@ -6,7 +6,7 @@
 use crate::abc::floor;
 use crate::abc::rejection::{self, Mode, RejectionConfig};
 use crate::abc::shard::{self, Devices, Local, Workers};
-use crate::abc::smc::{self, SmcConfig, WeightsOn};
+use crate::abc::smc::{self, LawProposal, Refill, SmcConfig, WeightsOn};
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
@@ -185,6 +185,10 @@ pub struct Settings {
     pub kernel_scale: Option<f64>,
     /// SMC only.
     pub smc_weights: Option<WeightsOn>,
+    /// SMC only.
+    pub refill: Option<Refill>,
+    /// SMC only.
+    pub law_proposal: Option<LawProposal>,
     pub seed: Option<u64>,
     pub backend: Option<Backend>,
     pub devices: Option<Devices>,
@@ -231,6 +235,8 @@ impl Settings {
                     p_stay: self.p_stay.unwrap_or(smc.p_stay),
                     kernel_scale: self.kernel_scale.unwrap_or(smc.kernel_scale),
                     weights_on: self.smc_weights.unwrap_or(smc.weights_on),
+                    refill: self.refill.unwrap_or(smc.refill),
+                    law_proposal: self.law_proposal.unwrap_or(smc.law_proposal),
                 })
             }
         };
@@ -262,6 +268,8 @@ impl Settings {
                     ("p_stay", self.p_stay.is_some()),
                     ("kernel_scale", self.kernel_scale.is_some()),
                     ("smc_weights", self.smc_weights.is_some()),
+                    ("refill", self.refill.is_some()),
+                    ("law_proposal", self.law_proposal.is_some()),
                 ];
                 match smc_only.into_iter().find(|&(_, given)| given) {
                     Some((field, _)) => Err(Error::setting(
@@ -275,6 +283,15 @@ impl Settings {
                 "mode",
                 "applies only to the rejection sampler, and this run uses `sampler` smc, which perturbs each population into the next instead of drawing streams; drop `mode`",
             )),
+            Sampler::Smc
+                if self.p_stay.is_some()
+                    && self.law_proposal.unwrap_or(SmcConfig::default().law_proposal) == LawProposal::Worth =>
+            {
+                Err(Error::setting(
+                    "p_stay",
+                    "applies only to `law_proposal` kernel, and this run proposes laws by their worth; drop `p_stay` or use `law_proposal` kernel",
+                ))
+            }
             Sampler::Smc => Ok(()),
         }
     }

@@ -116,7 +116,16 @@ pub struct PopulationRecord {
     pub stream: u32,
 }
 
+/// A population whose effective sample size is below this share of its particles is thin: its
+/// estimates rest on a few heavily weighted particles, and every output says so.
+pub const MIN_ESS_SHARE: f64 = 0.1;
+
 impl PopulationRecord {
+    /// True when the effective sample size is below [`MIN_ESS_SHARE`] of the particles.
+    pub fn thin(&self) -> bool {
+        self.accepted > 0 && self.ess < MIN_ESS_SHARE * self.accepted as f64
+    }
+
     /// P(`law`) in this population; 0 for a law not in it.
     pub fn probability_of(&self, law: Law) -> f64 {
         self.per_law

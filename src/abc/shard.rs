@@ -97,16 +97,22 @@ pub enum Output {
 /// An SMC population's proposal distribution: the previous population and the kernel
 /// settings, with the kernels built from them once.
 pub struct Context {
+    /// The tolerance of the population being drawn.
+    pub(crate) epsilon: f64,
     pub(crate) particles: Vec<Particle>,
     pub(crate) config: SmcConfig,
     pub(crate) kernels: Kernels,
 }
 
 impl Context {
-    /// The proposal distribution of the population after `particles` (with their weights).
-    pub fn new(problem: &AbcProblem, particles: Vec<Particle>, config: SmcConfig) -> Result<Self> {
-        let kernels = Kernels::new(&problem.prior, &particles, &config)?;
+    /// The proposal distribution of the population after `particles` (with their weights),
+    /// drawn at `epsilon`.
+    pub fn new(problem: &AbcProblem, particles: Vec<Particle>, config: SmcConfig, epsilon: f64) -> Result<Self> {
+        let kernels = Kernels::new(&problem.prior, &particles, &config, epsilon, &|law| {
+            problem.can_reach(law, epsilon)
+        })?;
         Ok(Self {
+            epsilon,
             particles,
             config,
             kernels,

@@ -82,17 +82,65 @@ pub enum WeightsOn {
     Evaluator,
 }
 
-/// Configuration of an SMC run.
+/// How population t + 1 is filled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Refill {
+    /// N fresh proposals from the whole previous population (Toni et al. 2009; Beaumont et
+    /// al. 2009).
+    Fresh,
+    /// The previous population's particles below the new ε stay, with their weights, and new
+    /// proposals from them top the population up to N (Lenormand et al. 2013).
+    Survivors,
+}
+
+/// How the law of a proposal is chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum LawProposal {
+    /// A law drawn by its previous probability, then kept with probability `p_stay` or moved
+    /// uniformly to another live law (Toni & Stumpf 2010).
+    Kernel,
+    /// A law drawn in proportion to its probability among the particles below the new ε,
+    /// with a floor of [`WORTH_FLOOR`] shared by the laws; none for a law that cannot reach
+    /// the new ε.
+    Worth,
+}
+
+/// The share of a population's proposals that [`LawProposal::Worth`] spreads evenly over
+/// the laws it proposes, whatever their probabilities.
+pub const WORTH_FLOOR: f64 = 0.05;
+
+/// Configuration of an SMC run. Runs stored before `refill` and `law_proposal` existed read
+/// as `fresh` and `kernel`, which is how they were drawn.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SmcConfig {
     /// N, tolerances, stopping rules, batch limit and wall time, as for rejection (population
     /// 0 is a rejection population; `mode` is not used).
     pub base: RejectionConfig,
-    /// Probability that the model kernel keeps the ancestor's law.
+    /// Probability that the model kernel keeps the ancestor's law (`law_proposal` kernel).
     pub p_stay: f64,
-    /// Perturbation covariance = kernel_scale × the weighted covariance of the law's particles.
+    /// Perturbation covariance = kernel_scale × the weighted covariance of the law's ancestors.
     pub kernel_scale: f64,
     pub weights_on: WeightsOn,
+    #[serde(default = "Refill::stored_default")]
+    pub refill: Refill,
+    #[serde(default = "LawProposal::stored_default")]
+    pub law_proposal: LawProposal,
+}
+
+impl Refill {
+    fn stored_default() -> Self {
+        Refill::Fresh
+    }
+}
+
+impl LawProposal {
+    fn stored_default() -> Self {
+        LawProposal::Kernel
+    }
 }
 
 impl Default for SmcConfig {
@@ -102,6 +150,8 @@ impl Default for SmcConfig {
             p_stay: 0.7,
             kernel_scale: 2.0,
             weights_on: WeightsOn::Host,
+            refill: Refill::Survivors,
+            law_proposal: LawProposal::Worth,
         }
     }
 }
@@ -195,12 +245,13 @@ struct LawKernel {
     chol: Vec<f64>,
     /// log det L = Σ log L_ii.
     log_det_l: f64,
-    /// Indices of the law's particles in the previous population.
+    /// Indices of the law's ancestors in the previous population: its particles, or with
+    /// [`Refill::Survivors`] those below the new ε where it has any.
     members: Vec<usize>,
-    /// Cumulative within-law weights, normalised to end at 1.
+    /// Cumulative weights of the ancestors, normalised to end at 1.
     cdf: Vec<f64>,
-    /// P(m): the law's share of the previous population's weight.
-    share: f64,
+    /// The ancestors' share of the previous population's weight.
+    member_weight: f64,
     /// log of 1 / prior box volume over the free parameters.
     log_prior_density: f64,
 }
@@ -270,7 +321,7 @@ impl LawKernel {
             ))
         })?;
         let log_det_l = (0..k).map(|a| chol[a * k + a].ln()).sum();
-        let share = compensated_sum(weights.iter().copied());
+        let member_weight = compensated_sum(weights.iter().copied());
         let mut running = 0.0;
         let mut cdf: Vec<f64> = weights
             .iter()
@@ -294,7 +345,7 @@ impl LawKernel {
             log_det_l,
             members,
             cdf,
-            share,
+            member_weight,
             log_prior_density,
         })
     }
@@ -319,38 +370,118 @@ pub(crate) struct Proposed {
     pub slots: Vec<u8>,
 }
 
-/// Everything a population's proposals depend on: one kernel per alive law.
+/// Everything a population's proposals depend on: one kernel per law it proposes.
 pub(crate) struct Kernels {
-    /// Per prior slot: the law's kernel, `None` for a dead law.
+    /// Per prior slot: the law's kernel, `None` for a law that gets no proposal.
     laws: Vec<Option<LawKernel>>,
-    /// Slots of the alive laws, ascending.
+    /// Slots of the laws proposed, ascending.
     alive: Vec<usize>,
-    /// Cumulative law probabilities over `alive`, normalised to end at 1.
+    /// Cumulative law probabilities over `alive` (the previous population's with
+    /// [`LawProposal::Kernel`], the proposal probabilities with [`LawProposal::Worth`]),
+    /// normalised to end at 1.
     law_cdf: Vec<f64>,
+    /// Per prior slot, the probability that a proposal is of that law.
+    proposal_probability: Vec<f64>,
+    law_proposal: LawProposal,
     p_stay: f64,
 }
 
 impl Kernels {
-    pub(crate) fn new(prior: &Prior, previous: &[Particle], config: &SmcConfig) -> Result<Self> {
+    /// The kernels of the population after `previous`, drawn at `epsilon`; `can_reach(law)`
+    /// is false for a law whose best least-squares ρ shows it cannot score below `epsilon`.
+    pub(crate) fn new(
+        prior: &Prior,
+        previous: &[Particle],
+        config: &SmcConfig,
+        epsilon: f64,
+        can_reach: &dyn Fn(crate::laws::Law) -> bool,
+    ) -> Result<Self> {
         let mut members = vec![Vec::new(); prior.boxes.len()];
         for (i, p) in previous.iter().enumerate() {
             members[slot_of(prior, p.law)].push(i);
         }
+        // Each law's share of the previous population's weight.
+        let probability: Vec<f64> = members
+            .iter()
+            .map(|m| compensated_sum(m.iter().map(|&i| previous[i].weight)))
+            .collect();
+        let below: Vec<Vec<usize>> = members
+            .iter()
+            .map(|m| m.iter().copied().filter(|&i| previous[i].rho < epsilon).collect())
+            .collect();
+        // A law is proposed when it has particles and, with `worth`, when it can still reach ε.
+        let proposed: Vec<bool> = (0..members.len())
+            .map(|s| {
+                !members[s].is_empty()
+                    && (config.law_proposal == LawProposal::Kernel || !below[s].is_empty() || can_reach(prior.law(s)))
+            })
+            .collect();
+        // Were no law left (a schedule's ε below every particle and every fit), all with
+        // particles are proposed rather than none.
+        let proposed: Vec<bool> = if proposed.iter().any(|&p| p) {
+            proposed
+        } else {
+            members.iter().map(|m| !m.is_empty()).collect()
+        };
         let laws: Vec<Option<LawKernel>> = members
             .into_iter()
+            .zip(&below)
             .enumerate()
-            .map(|(slot, m)| {
-                (!m.is_empty())
-                    .then(|| LawKernel::new(prior, slot, previous, m, config.kernel_scale))
+            .map(|(slot, (all, below))| {
+                let ancestors = match config.refill {
+                    Refill::Survivors if !below.is_empty() => below.clone(),
+                    _ => all,
+                };
+                proposed[slot]
+                    .then(|| LawKernel::new(prior, slot, previous, ancestors, config.kernel_scale))
                     .transpose()
             })
             .collect::<Result<_>>()?;
         let alive: Vec<usize> = (0..laws.len()).filter(|&s| laws[s].is_some()).collect();
+        let mut proposal_probability = vec![0.0; laws.len()];
+        let law_weights: Vec<f64> = match config.law_proposal {
+            LawProposal::Kernel => {
+                let total: f64 = alive.iter().map(|&s| probability[s]).sum();
+                let a = alive.len();
+                let model_kernel = |to: usize, from: usize| match (a, to == from) {
+                    (1, _) => 1.0,
+                    (_, true) => config.p_stay,
+                    (_, false) => (1.0 - config.p_stay) / (a - 1) as f64,
+                };
+                for &to in &alive {
+                    proposal_probability[to] = compensated_sum(
+                        alive
+                            .iter()
+                            .map(|&from| probability[from] / total * model_kernel(to, from)),
+                    );
+                }
+                alive.iter().map(|&s| probability[s]).collect()
+            }
+            LawProposal::Worth => {
+                // The laws' shares of the weight below ε (of all the weight where none is
+                // below), mixed with an even floor.
+                let below_weight: Vec<f64> = alive
+                    .iter()
+                    .map(|&s| compensated_sum(below[s].iter().map(|&i| previous[i].weight)))
+                    .collect();
+                let shares = if below_weight.iter().any(|&w| w > 0.0) {
+                    below_weight
+                } else {
+                    alive.iter().map(|&s| probability[s]).collect()
+                };
+                let total = compensated_sum(shares.iter().copied());
+                let floor = WORTH_FLOOR / alive.len() as f64;
+                for (&s, share) in alive.iter().zip(&shares) {
+                    proposal_probability[s] = (1.0 - WORTH_FLOOR) * share / total + floor;
+                }
+                alive.iter().map(|&s| proposal_probability[s]).collect()
+            }
+        };
         let mut running = 0.0;
-        let mut law_cdf: Vec<f64> = alive
+        let mut law_cdf: Vec<f64> = law_weights
             .iter()
-            .map(|&s| {
-                running += laws[s].as_ref().expect("alive").share;
+            .map(|w| {
+                running += w;
                 running
             })
             .collect();
@@ -362,34 +493,16 @@ impl Kernels {
             laws,
             alive,
             law_cdf,
+            proposal_probability,
+            law_proposal: config.law_proposal,
             p_stay: config.p_stay,
         })
     }
 
-    /// K_M(m | m′) over alive laws.
-    fn model_kernel(&self, to: usize, from: usize) -> f64 {
-        let a = self.alive.len();
-        if a == 1 {
-            1.0
-        } else if to == from {
-            self.p_stay
-        } else {
-            (1.0 - self.p_stay) / (a - 1) as f64
-        }
-    }
-
-    /// Σ_m′ P(m′) K_M(m | m′): the probability that a proposal is of law `slot`.
+    /// The probability that a proposal is of law `slot` (with [`LawProposal::Kernel`],
+    /// Σ_m′ P(m′) K_M(m | m′)).
     fn law_proposal_probability(&self, slot: usize) -> f64 {
-        let total: f64 = self
-            .alive
-            .iter()
-            .map(|&s| self.laws[s].as_ref().expect("alive").share)
-            .sum();
-        compensated_sum(
-            self.alive
-                .iter()
-                .map(|&s| self.laws[s].as_ref().expect("alive").share / total * self.model_kernel(slot, s)),
-        )
+        self.proposal_probability[slot]
     }
 
     /// The law slot of a proposal from its first Philox block (steps 1 and 2 of the module
@@ -397,7 +510,7 @@ impl Kernels {
     fn slot_of_block(&self, b0: [u32; 4]) -> usize {
         let from = self.alive[inverse_cdf(&self.law_cdf, open_unit(b0[0]))];
         let a = self.alive.len();
-        if a > 1 && open_unit(b0[1]) >= self.p_stay {
+        if self.law_proposal == LawProposal::Kernel && a > 1 && open_unit(b0[1]) >= self.p_stay {
             // Uniform among the other alive laws: the j-th of them, j = ⌊w·(a − 1) / 2³²⌋,
             // exact in integers (no list of them made per proposal).
             let j = ((u64::from(b0[2]) * (a as u64 - 1)) >> 32) as usize;
@@ -536,7 +649,11 @@ impl Kernels {
             let targets: Vec<[f64; MAX_PARAMS]> = new.iter().map(|&i| law.whiten(&particles[i].params)).collect();
             let sources: Vec<[f64; MAX_PARAMS]> =
                 law.members.iter().map(|&j| law.whiten(&previous[j].params)).collect();
-            let weights: Vec<f64> = law.members.iter().map(|&j| previous[j].weight / law.share).collect();
+            let weights: Vec<f64> = law
+                .members
+                .iter()
+                .map(|&j| previous[j].weight / law.member_weight)
+                .collect();
             let mut sums = vec![0.0; new.len()];
             sums_on(
                 &KernelSums {
@@ -584,6 +701,36 @@ fn normalise_log_weights(log_w: &[f64]) -> Vec<f64> {
     let w: Vec<f64> = log_w.iter().map(|l| (l - max).exp()).collect();
     let total = compensated_sum(w.iter().copied());
     w.iter().map(|v| v / total).collect()
+}
+
+/// A population's survivors and the normalised weights of its new particles, combined: two
+/// importance samples of the same target, each normalised on its own and mixed in proportion
+/// to its effective sample size (the variance-minimising mix of two independent estimates).
+/// Returns the survivors and the weights of all particles, survivors first; Σ w = 1.
+fn combine_survivors(mut survivors: Vec<Particle>, new: Vec<f64>) -> (Vec<Particle>, Vec<f64>) {
+    if survivors.is_empty() {
+        return (survivors, new);
+    }
+    let total = compensated_sum(survivors.iter().map(|p| p.weight));
+    let old: Vec<f64> = survivors.iter().map(|p| p.weight / total).collect();
+    let (ess_old, ess_new) = (
+        super::effective_sample_size(&old),
+        if new.is_empty() {
+            0.0
+        } else {
+            super::effective_sample_size(&new)
+        },
+    );
+    let share = ess_old / (ess_old + ess_new);
+    let weights: Vec<f64> = old
+        .iter()
+        .map(|w| share * w)
+        .chain(new.iter().map(|w| (1.0 - share) * w))
+        .collect();
+    for (p, w) in survivors.iter_mut().zip(&weights) {
+        p.weight = *w;
+    }
+    (survivors, weights)
 }
 
 /// Runs ABC-SMC with `evaluator` (which fixes prior, seed and data).
@@ -715,14 +862,21 @@ pub fn run_on(
         };
         let t = populations.len();
         let stream = t as u32;
-        let mut fill = Filling::new(t, stream, epsilon, n, prior, d);
         let previous = &mut populations[t - 1];
+        // With survivors, the previous particles below ε stay (in their order, with their
+        // weights) and new proposals top the population up to N.
+        let survivors: Vec<Particle> = match config.refill {
+            Refill::Fresh => Vec::new(),
+            Refill::Survivors => previous.particles.iter().filter(|p| p.rho < epsilon).cloned().collect(),
+        };
+        let mut fill = Filling::new(t, stream, epsilon, n - survivors.len(), prior, d);
         let previous_rate = previous.record.acceptance_rate;
         // The context holds the previous population's particles while this one is drawn.
         let context = Arc::new(Context::new(
             problem,
             std::mem::take(&mut previous.particles),
             config.clone(),
+            epsilon,
         )?);
         // The acceptance rate the first batch is sized by: the last SMC population's, or a
         // guess for the first one. Later batches use this population's own.
@@ -735,7 +889,7 @@ pub fn run_on(
             if budget == 0 {
                 return Ok(ControlFlow::Break(StopReason::MaxDraws));
             }
-            let missing = (n - fill.particles.len()) as f64;
+            let missing = (fill.target - fill.particles.len()) as f64;
             let size = ((1.05 * missing / rate.max(1e-4)).ceil() as u64 + 16)
                 .min(base.max_batch as u64)
                 .min(budget);
@@ -760,6 +914,7 @@ pub fn run_on(
         })?;
         total_scored += fill.scored;
         let weights = match interrupted {
+            None if fill.particles.is_empty() => Some(Vec::new()),
             None => Some(weigh(workers, t, &context, &fill.particles)?),
             Some(_) => None,
         };
@@ -771,15 +926,34 @@ pub fn run_on(
         let Some(weights) = weights else {
             break interrupted.expect("a population without weights was interrupted");
         };
-        for (p, w) in fill.particles.iter_mut().zip(&weights) {
+        let (kept, weights) = combine_survivors(survivors, weights);
+        for (p, w) in fill.particles.iter_mut().zip(&weights[kept.len()..]) {
             p.weight = *w;
         }
+        let new = fill.particles.len();
+        for p in &kept {
+            fill.law_accepted[slot_of(prior, p.law)] += 1;
+        }
+        fill.particles.splice(0..0, kept);
         let per_law = fill.law_records(problem, |s| {
             let law = prior.law(s);
             let probability = compensated_sum(fill.particles.iter().filter(|p| p.law == law).map(|p| p.weight));
             (probability, fill.law_accepted[s] > 0)
         });
-        let population = fill.into_population(per_law, super::effective_sample_size(&weights));
+        let draws = fill.position;
+        let mut population = fill.into_population(per_law, super::effective_sample_size(&weights));
+        if config.refill == Refill::Survivors {
+            // The acceptance rates are the top-up's: new particles per proposal.
+            population.record.acceptance_rate = new as f64 / draws.max(1) as f64;
+            let accepted_new = |law| population.particles[n - new..].iter().filter(|p| p.law == law).count();
+            for r in &mut population.record.per_law {
+                r.acceptance_rate = if r.draws > 0 {
+                    accepted_new(r.law) as f64 / r.draws as f64
+                } else {
+                    0.0
+                };
+            }
+        }
         super::complete_population(&mut populations, population, observer)?;
     };
     Ok(finish(populations, stop, total_scored))
@@ -858,7 +1032,7 @@ mod tests {
         ];
         let k = LawKernel::new(&prior, 0, &previous, vec![0, 2, 3], 2.0).unwrap();
         assert_eq!(k.free, vec![0, 1, 2]);
-        assert!((k.share - 0.8).abs() < 1e-15);
+        assert!((k.member_weight - 0.8).abs() < 1e-15);
         assert!((k.mean[0] - 2.25).abs() < 1e-15 && (k.mean[1] - 2.5).abs() < 1e-15);
         // Σ = L Lᵀ: 2 × covariance plus the floor (10⁻⁴ · width)² on the diagonal.
         let l = &k.chol;
@@ -901,7 +1075,7 @@ mod tests {
             particle(Law::M4, 1, &[3.0, 0.0, 0.0, 0.0], 0.5),
         ];
         let config = SmcConfig::default();
-        let kernels = Kernels::new(&prior, &previous, &config).unwrap();
+        let kernels = Kernels::new(&prior, &previous, &config, f64::INFINITY, &|_| true).unwrap();
         let new = [
             particle(Law::M4, 0, &[2.0, 0.0, 0.0, 0.0], 0.0),
             particle(Law::M4, 1, &[0.5, 0.0, 0.0, 0.0], 0.0),
@@ -947,7 +1121,7 @@ mod tests {
             particle(Law::M4, 2, &[1.0, 0.0, 0.0, 0.0], 0.05),
             particle(Law::M4, 3, &[3.0, 0.0, 0.0, 0.0], 0.05),
         ];
-        let kernels = Kernels::new(&prior, &previous, &SmcConfig::default()).unwrap();
+        let kernels = Kernels::new(&prior, &previous, &SmcConfig::default(), f64::INFINITY, &|_| true).unwrap();
         assert!((kernels.law_proposal_probability(0) - 0.66).abs() < 1e-15);
         assert!((kernels.law_proposal_probability(1) - 0.34).abs() < 1e-15);
         let new = [
@@ -972,7 +1146,7 @@ mod tests {
             particle(Law::M4, 2, &[2.0, 0.0, 0.5, 0.0], 0.3),
         ];
         let config = SmcConfig::default();
-        let kernels = Kernels::new(&prior, &previous, &config).unwrap();
+        let kernels = Kernels::new(&prior, &previous, &config, f64::INFINITY, &|_| true).unwrap();
         let key = key_of_seed(17);
         let n = 100_000;
         let mut m4 = 0usize;
@@ -989,7 +1163,7 @@ mod tests {
         assert!((m4 as f64 - 0.42 * n as f64).abs() < 5.0 * 156.0, "{m4}");
         // A dead law gets no proposal.
         let only_m2 = &previous[..2];
-        let kernels = Kernels::new(&prior, only_m2, &config).unwrap();
+        let kernels = Kernels::new(&prior, only_m2, &config, f64::INFINITY, &|_| true).unwrap();
         assert_eq!(kernels.alive, vec![0]);
         assert!(kernels.laws[1].is_none());
         assert!((0..10_000).all(|i| kernels.propose(&prior, only_m2, key, 1, i).0 == 0));

@@ -8,7 +8,7 @@ use super::progress::RunProgress;
 use bitrock::Error;
 use bitrock::abc::rejection::{Mode, RejectionConfig};
 use bitrock::abc::shard::Devices;
-use bitrock::abc::smc::WeightsOn;
+use bitrock::abc::smc::{LawProposal, Refill, WeightsOn};
 use bitrock::eval::Backend;
 use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
 use bitrock::run::{Continuation, PriorRuleName, RunConfig, Sampler, Settings};
@@ -74,8 +74,8 @@ pub struct AbcArgs {
     /// (population 0 from the prior, then perturbed, importance-weighted populations).
     #[arg(long, value_enum, default_value_t = Sampler::Rejection)]
     pub sampler: Sampler,
-    /// SMC only: probability that the model kernel keeps a particle's law (else it jumps
-    /// uniformly to another law still alive) [default: 0.7].
+    /// SMC only, with --law-proposal kernel: probability that the model kernel keeps a
+    /// particle's law (else it jumps uniformly to another law still alive) [default: 0.7].
     #[arg(long, value_parser = finite_number, value_name = "P", allow_hyphen_values = true)]
     pub p_stay: Option<f64>,
     /// SMC only: the Gaussian perturbation's covariance is this times the weighted covariance
@@ -88,6 +88,17 @@ pub struct AbcArgs {
     /// [default: host].
     #[arg(long, value_enum)]
     pub smc_weights: Option<WeightsOn>,
+    /// SMC only: how a population after the first is filled. fresh: N new proposals from the
+    /// whole previous population; survivors: the previous particles below the new ε stay and
+    /// new proposals from them top the population up to N [default: survivors].
+    #[arg(long, value_enum)]
+    pub refill: Option<Refill>,
+    /// SMC only: how a proposal's law is chosen. kernel: by the previous population's law
+    /// probabilities, then kept with probability --p-stay; worth: in proportion to each law's
+    /// probability below the new ε, with a 5 % floor shared by the laws, and none for a law
+    /// whose best least-squares ρ cannot reach ε [default: worth].
+    #[arg(long, value_enum)]
+    pub law_proposal: Option<LawProposal>,
     /// Seed of the candidate streams: the same seed gives the same populations.
     #[arg(long, default_value_t = RunConfig::default().seed)]
     pub seed: u64,
@@ -127,7 +138,7 @@ pub struct AbcCmd {
         "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
         "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior_rule", "prior_k", "prior", "epsilons",
-        "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights",
+        "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights", "refill", "law_proposal",
     ])]
     pub resume: Option<PathBuf>,
     /// No progress bar or population lines on stderr.
@@ -219,6 +230,8 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
         p_stay: args.p_stay,
         kernel_scale: args.kernel_scale,
         smc_weights: args.smc_weights,
+        refill: args.refill,
+        law_proposal: args.law_proposal,
         seed: Some(args.seed),
         backend: args.backend,
         devices: args.devices,

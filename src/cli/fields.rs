@@ -44,6 +44,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("p_stay", "--p-stay"),
     ("kernel_scale", "--kernel-scale"),
     ("smc_weights", "--smc-weights"),
+    ("refill", "--refill"),
+    ("law_proposal", "--law-proposal"),
     ("backend", "--backend"),
     ("devices", "--devices"),
     ("threads", "--threads"),

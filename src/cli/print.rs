@@ -172,7 +172,15 @@ pub fn population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
                 write!(out, "  {:>7.4}", l.probability)?;
             }
         }
-        writeln!(out, "  {:>8.0}  {:>8.3}", r.ess, r.seconds)?;
+        let ess = format!("{:.0}{}", r.ess, if r.thin() { "!" } else { "" });
+        writeln!(out, "  {ess:>8}  {:>8.3}", r.seconds)?;
+    }
+    if run.populations.iter().any(|p| p.record.thin()) {
+        writeln!(
+            out,
+            "! effective sample size below {:.0} % of the particles: that population rests on a few heavily weighted particles",
+            bitrock::abc::MIN_ESS_SHARE * 100.0
+        )?;
     }
     // Probabilities that are 0 because ε is below a law's best fit, not because of evidence.
     for law in &laws {

@@ -24,8 +24,6 @@ pub use stability::{MapSource, StabilityJob, StabilityMaps};
 const ENVELOPE_SPEEDS: usize = 200;
 /// A least-squares ρ below this is an exact fit (rounding of an exactly representable record).
 const EXACT_FIT_RHO: f64 = 1e-12;
-/// An effective sample size below this share of a population's particles is warned of.
-const MIN_ESS_SHARE: f64 = 0.1;
 
 pub use crate::run::RunDir;
 
@@ -197,13 +195,13 @@ impl Analysis {
             .run
             .populations
             .iter()
-            .filter(|p| p.record.accepted > 0 && p.record.ess < MIN_ESS_SHARE * p.record.accepted as f64)
+            .filter(|p| p.record.thin())
             .map(|p| format!("{} ({:.0} of {})", p.record.index, p.record.ess, p.record.accepted))
             .collect();
         if !thin.is_empty() {
             out.push(format!(
                 "effective sample size below {:.0} % of the particles in population(s) {}: those estimates rest on a few heavily weighted particles (more particles or a wider SMC kernel help)",
-                MIN_ESS_SHARE * 100.0,
+                crate::abc::MIN_ESS_SHARE * 100.0,
                 thin.join(", ")
             ));
         }

@@ -543,18 +543,26 @@ impl Prepared<'_> {
             for p in &r.run.populations {
                 let _ = write!(
                     md,
-                    "| {} | {} | {} | {} | {:.0} |",
+                    "| {} | {} | {} | {} | {:.0}{} |",
                     p.record.index,
                     epsilon_text(p.record.epsilon),
                     p.record.accepted,
                     p.record.draws,
-                    p.record.ess
+                    p.record.ess,
+                    if p.record.thin() { " (thin)" } else { "" }
                 );
                 let zero = record_zero_by_construction(p, &r.run.laws);
                 for ((_, prob), zero) in record_probabilities(p, &r.run.laws).into_iter().zip(zero) {
                     let _ = write!(md, " {} |", probability_text(prob, zero));
                 }
                 let _ = writeln!(md);
+            }
+            if r.run.populations.iter().any(|p| p.record.thin()) {
+                let _ = writeln!(
+                    md,
+                    "\n(thin): effective sample size below {:.0} % of the particles; that population's estimates rest on a few heavily weighted particles.",
+                    crate::abc::MIN_ESS_SHARE * 100.0
+                );
             }
         }
     }

@@ -678,6 +678,8 @@ fn run_settings(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<Settings> {
         p_stay: kwarg(kw, "p_stay")?,
         kernel_scale: kwarg(kw, "kernel_scale")?,
         smc_weights: named(py, "smc_weights", text("smc_weights")?)?,
+        refill: named(py, "refill", text("refill")?)?,
+        law_proposal: named(py, "law_proposal", text("law_proposal")?)?,
         seed: kwarg(kw, "seed")?,
         backend: named(py, "backend", text("backend")?)?,
         devices: named(py, "devices", text("devices")?)?,

@@ -86,6 +86,7 @@ pub enum Reply {
 struct ContextPayload {
     particles: Vec<Particle>,
     config: SmcConfig,
+    epsilon: f64,
 }
 
 /// Postcard bytes of `value`.
@@ -198,7 +199,7 @@ fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Res
                     && find(&mut held.contexts, (request.problem, key)).is_none()
                 {
                     let payload: ContextPayload = decode(bytes, "context")?;
-                    let made = Context::new(&the_problem, payload.particles, payload.config)?;
+                    let made = Context::new(&the_problem, payload.particles, payload.config, payload.epsilon)?;
                     hold(&mut held.contexts, (request.problem, key), Arc::new(made));
                 }
                 match find(&mut held.contexts, (request.problem, key)) {
@@ -330,6 +331,7 @@ impl<T: Transport> Remote<T> {
         let bytes = Arc::new(encode(&ContextPayloadRef {
             particles: &context.particles,
             config: &context.config,
+            epsilon: context.epsilon,
         }));
         let key = key_of(&bytes);
         *cached = Some(EncodedContext {
@@ -353,6 +355,7 @@ struct EncodedContext {
 struct ContextPayloadRef<'a> {
     particles: &'a [Particle],
     config: &'a SmcConfig,
+    epsilon: f64,
 }
 
 impl<T: Transport> Workers for Remote<T> {

@@ -187,6 +187,8 @@ def abc(
     p_stay: float | None = None,
     kernel_scale: float | None = None,
     smc_weights: str | None = None,
+    refill: str | None = None,
+    law_proposal: str | None = None,
     bounds: bool = True,
     starts: int | None = None,
     scale_by_wob: bool = False,
