@@ -14,6 +14,8 @@ use crate::prior::{LawBox, Prior};
 use serde::Serialize;
 use std::time::Instant;
 
+pub mod smc_comparison;
+
 /// Median, min and max of repeated measurements.
 #[derive(Clone, Debug, Serialize)]
 pub struct Spread {
@@ -105,6 +107,8 @@ pub struct BenchReport {
     /// `bitrock check-selection` of a run of each of [`SelectionRecord::ALL`] (measured with
     /// `--selection` only).
     pub selection: Vec<SelectionBench>,
+    /// The SMC schemes against rejection near the noise floor (measured with `--smc` only).
+    pub smc: Vec<smc_comparison::SmcComparison>,
 }
 
 /// The adapter's table of scoring shapes, as the bench found it.
@@ -186,6 +190,9 @@ pub struct BenchOptions {
     /// Measure the GPU scoring shapes again (and keep the new table) even where a table is
     /// cached.
     pub retune: bool,
+    /// Measure only the SMC schemes against rejection ([`smc_comparison::compare`]) on these
+    /// records, with (N, seeds), instead of the other sections.
+    pub smc: Option<(Vec<SelectionRecord>, usize, u64)>,
 }
 
 impl Default for BenchOptions {
@@ -200,6 +207,7 @@ impl Default for BenchOptions {
             stability: (512, 10_000),
             selection_replicates: None,
             retune: false,
+            smc: None,
         }
     }
 }
@@ -275,7 +283,14 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
         samplers: Vec::new(),
         stability: None,
         selection: Vec::new(),
+        smc: Vec::new(),
     };
+    if let Some((records, particles, seeds)) = &opts.smc {
+        return Ok(BenchReport {
+            smc: smc_comparison::compare(records, *particles, *seeds, log)?,
+            ..report
+        });
+    }
     if let Some(k) = opts.selection_replicates {
         let backend = match opts.backends.as_slice() {
             [only] => *only,

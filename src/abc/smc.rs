@@ -1,36 +1,55 @@
 //! ABC-SMC with model selection (Toni et al. 2009; Toni & Stumpf 2010): each population after
 //! the first perturbs the previous one instead of drawing from the prior, and importance
-//! weights correct for the proposal.
+//! weights correct for the proposal. By default the particles of population t − 1 below ε_t
+//! stay in population t and new proposals top it up to N (adaptive population Monte Carlo,
+//! Lenormand et al. 2013; [`Refill::Survivors`]), and laws are proposed by what they are worth
+//! ([`LawProposal::Worth`]); `refill` fresh and `law_proposal` kernel give the classic sampler.
 //!
 //! **Population 0** is the rejection sampler's population 0 at ε_0 (∞ unless a start is
 //! given): the same stream, so the same particles, each of weight 1/N.
 //!
+//! **Survivors.** With [`Refill::Survivors`], population t begins with the particles of
+//! population t − 1 whose ρ is below ε_t, in their order and with their weights: restricted to
+//! ρ < ε_t, a weighted sample of the ABC posterior at ε_{t−1} is one of the posterior at ε_t
+//! (ρ is a deterministic function of the parameters). The N − S new particles follow.
+//!
+//! **Ancestors** of a law: its particles in population t − 1 below ε_t where it has any and
+//! survivors are kept, otherwise all its particles in population t − 1.
+//!
 //! **Proposal i of population t ≥ 1** is a pure function of (seed, t, i), generated once, on
 //! the host, from Philox blocks 0-2 of counter (i, t) (see [`crate::rng`]); u = (w + ½)·2⁻³²
 //! turns a word w into a uniform on (0, 1):
-//! 1. a law m′ by inverse CDF of the previous population's law probabilities P(m′) (word 0);
-//! 2. the model kernel K_M: stay at m′ with probability `p_stay` (default 0.7), otherwise jump
-//!    uniformly to another *alive* law (words 1, 2); with one alive law, always stay;
-//! 3. an ancestor φ_j among the previous particles of the chosen law m, by inverse CDF of their
-//!    weights (word 3);
-//! 4. φ = φ_j + L_m z, z ~ N(0, I) by Box–Muller from words 4-9 in pairs (w_a, w_b):
+//! 1. a law m, by inverse CDF (word 0) of
+//!    - with [`LawProposal::Worth`]: q(m) = (1 − f)·P_<(m) + f/A over the A laws proposed, f =
+//!      [`WORTH_FLOOR`], P_<(m) the law's share of the weight of the particles of t − 1 below
+//!      ε_t (of all of them where none is below). A law is proposed when it has particles in
+//!      t − 1 and either has one below ε_t or its best least-squares ρ is below ε_t;
+//!    - with [`LawProposal::Kernel`]: the previous law probabilities P(m′), then the model
+//!      kernel K_M: stay at m′ with probability `p_stay` (default 0.7), otherwise jump
+//!      uniformly to another *alive* law (words 1, 2); with one alive law, always stay;
+//! 2. an ancestor φ_j among the law's ancestors, by inverse CDF of their weights (word 3);
+//! 3. φ = φ_j + L_m z, z ~ N(0, I) by Box–Muller from words 4-9 in pairs (w_a, w_b):
 //!    u_a = (w_a + ½)·2⁻³², u_b = w_b·2⁻³², z = √(−2 ln u_a) (cos 2πu_b, sin 2πu_b), f64;
-//! 5. φ rounded to f32 (what both backends score, and the particle's parameters). A proposal
+//! 4. φ rounded to f32 (what both backends score, and the particle's parameters). A proposal
 //!    outside the prior box is *counted as rejected*: it is a draw of its law, is not scored,
-//!    and is not accepted. (Equivalent to redrawing: the accepted particles are the first N
+//!    and is not accepted. (Equivalent to redrawing: the accepted particles are the first N − S
 //!    in index order that are inside the box and below ε.)
 //!
 //! **Kernel**: per law, L_m L_mᵀ = Σ_m = `kernel_scale` · C_m + (10⁻⁴ · box width)² I, where C_m
-//! is the weighted covariance (divisor Σw, no bias correction) of the previous particles of m.
+//! is the weighted covariance (divisor Σw, no bias correction) of the law's ancestors.
 //! The default scale 2 is Beaumont et al. (2009)'s choice, twice the covariance; the tiny
 //! diagonal keeps Σ_m positive definite for a law with one particle or a parameter all its
 //! particles share. Parameters with a zero-width box are fixed and take no part.
 //!
-//! **Weights** of particle (m, φ): w ∝ π(m) π(φ|m) / q(m, φ), with the proposal density
-//! q(m, φ) = [Σ_m′ P(m′) K_M(m|m′)] · Σ_{j ∈ m} (w_j / P(m)) N(φ; φ_j, Σ_m) (the model-kernel
-//! term included), normalised per population so that Σw = 1; a law's probability is its
-//! share of the weight. The O(N²) sums Σ_j w_j exp(−|L⁻¹(φ − φ_j)|²/2) are
-//! [`Evaluator::kernel_sums`] on whitened coordinates.
+//! **Weights** of a new particle (m, φ): w ∝ π(m) π(φ|m) / q(m, φ), with the proposal density
+//! q(m, φ) = q(m) · Σ_{j ∈ ancestors(m)} (w_j / Σ w_ancestors) N(φ; φ_j, Σ_m) (q(m) the law's
+//! proposal probability of step 1, with the kernel Σ_m′ P(m′) K_M(m|m′)), normalised over the
+//! new particles. The survivors' weights, normalised over the survivors, and the new ones are
+//! two importance samples of the same posterior; they are mixed in proportion to their
+//! effective sample sizes (the mix of two independent estimates with the least variance), so
+//! that Σw = 1 over the population. A law's probability is its share of the weight. The O(N²)
+//! sums Σ_j w_j exp(−|L⁻¹(φ − φ_j)|²/2) are [`Evaluator::kernel_sums`] on whitened
+//! coordinates.
 //!
 //! **Where the weights are computed, and why on the host by default.** Weights steer the next
 //! population (law probabilities, ancestor choice by inverse CDF, kernel covariance), so a
@@ -47,7 +66,9 @@
 //! computed), or the user's schedule. Stopping rules are the rejection sampler's, in the same
 //! order: eps_min, schedule, stall, max populations, minimum projected acceptance (the fraction of
 //! population t below ε_{t+1} times its acceptance rate), max draws and wall time (the
-//! population in progress is dropped).
+//! population in progress is dropped). With survivors, a population's acceptance rate (its
+//! record's and each law's) is the top-up's: new particles per proposal; `accepted` counts all
+//! the population's particles.
 //!
 //! Populations do not depend on batch size, thread count or backend (up to near-threshold
 //! decisions), and continuing from completed populations gives exactly what an uninterrupted

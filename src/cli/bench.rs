@@ -27,6 +27,13 @@ pub struct BenchCmd {
     /// picks the backend [default: auto].
     #[arg(long)]
     pub selection: bool,
+    /// Measure only the SMC schemes against the rejection sampler near the noise floor (ε_min
+    /// = 1.1 × the record's best least-squares ρ, four laws, N = 4,000, on the CPU): on the
+    /// embedded record, the laboratory rig's and the m2 record of --selection; one run per seed
+    /// 1..=R (--reps); candidates scored per final effective sample size, and agreement with
+    /// rejection. --quick: N = 1,000.
+    #[arg(long, conflicts_with = "selection")]
+    pub smc: bool,
     /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and
     /// keep the new table.
     #[arg(long)]
@@ -59,6 +66,11 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         opts.selection_replicates = Some(if cmd.quick { 2 } else { 20 });
         // The check runs on one backend: the one asked for, auto otherwise.
         opts.backends = vec![cmd.backend.unwrap_or(Backend::Auto)];
+    }
+    if cmd.smc {
+        use bitrock::bench::SelectionRecord;
+        let records = vec![SelectionRecord::Embedded, SelectionRecord::Rig, SelectionRecord::M2];
+        opts.smc = Some((records, if cmd.quick { 1_000 } else { 4_000 }, cmd.reps as u64));
     }
     let quiet = cmd.json;
     let report = bitrock::bench::run(&opts, &mut |line| {
@@ -162,6 +174,32 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         }
         for c in report.selection.iter().filter(|c| c.command.is_some()) {
             writeln!(out, "  {}: {}", c.record.name(), c.command.unwrap_or_default())?;
+        }
+        for c in &report.smc {
+            writeln!(
+                out,
+                "{}: {} samples, best least-squares ρ {:.5}, ε_min {:.5}, N = {}, {} seeds; medians over the seeds",
+                c.record.name(),
+                c.calibration_samples,
+                c.best_least_squares_rho,
+                c.eps_min,
+                c.particles,
+                c.schemes.first().map_or(0, |s| s.runs.len())
+            )?;
+            writeln!(
+                out,
+                "  scheme                 scored/ESS  fewer than rejection  max |ΔP|/SE  max KS/critical"
+            )?;
+            for s in &c.schemes {
+                writeln!(
+                    out,
+                    "  {:<21}  {:>10.1}  {:>19.1}×  {:>11.1}  {:>15.2}",
+                    s.scheme.name, s.scored_per_ess, s.fewer_than_rejection, s.max_probability_z, s.max_ks_ratio
+                )?;
+            }
+            if let Some(command) = c.command {
+                writeln!(out, "  record: {command}")?;
+            }
         }
         for e in &report.end_to_end {
             writeln!(
