@@ -284,7 +284,7 @@ pub fn weighted_ks(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
     while i < all.len() {
         // Ties step together: equal values are one point of both CDFs.
         let x = all[i].0;
-        while i < all.len() && all[i].0 == x {
+        while i < all.len() && all[i].0.to_bits() == x.to_bits() {
             fa += all[i].1;
             fb += all[i].2;
             i += 1;

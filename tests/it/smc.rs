@@ -4,7 +4,7 @@
 use crate::support::paper_m2_problem;
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
-use bitrock::abc::smc::{self, SmcConfig};
+use bitrock::abc::smc::{self, LawProposal, Refill, SmcConfig, WORTH_FLOOR};
 use bitrock::abc::{Observer, Population, Run, StopReason, effective_sample_size};
 use bitrock::data::{DataOptions, Samples, demo_field_data};
 use bitrock::eval::AbcProblem;
@@ -91,6 +91,22 @@ fn smc_config(particles: usize, epsilons: Option<Vec<f64>>, eps_min: f64) -> Smc
     }
 }
 
+/// Every refill with every law proposal: the classic sampler first, the default last.
+const SCHEMES: [(Refill, LawProposal); 4] = [
+    (Refill::Fresh, LawProposal::Kernel),
+    (Refill::Survivors, LawProposal::Kernel),
+    (Refill::Fresh, LawProposal::Worth),
+    (Refill::Survivors, LawProposal::Worth),
+];
+
+fn with_scheme(config: &SmcConfig, (refill, law_proposal): (Refill, LawProposal)) -> SmcConfig {
+    SmcConfig {
+        refill,
+        law_proposal,
+        ..config.clone()
+    }
+}
+
 #[test]
 fn smc_samples_the_closed_form_posterior_and_agrees_with_rejection() {
     // At ε the ABC posterior of c0 is uniform on (1 − √ε, 1 + √ε).
@@ -98,33 +114,48 @@ fn smc_samples_the_closed_form_posterior_and_agrees_with_rejection() {
     // ε falls fourfold per population (the width of the accepted set halves) to 6.1e-5,
     // where a prior draw is accepted with probability √ε = 0.8 %.
     let schedule: Vec<f64> = (1..=7).map(|g| 0.25f64.powi(g)).collect();
-    let smc_run = smc::run(&evaluator, &smc_config(4000, Some(schedule.clone()), 0.0)).unwrap();
+    let rej = rejection::run(&evaluator, &smc_config(4000, Some(schedule.clone()), 0.0).base).unwrap();
+    for scheme in SCHEMES {
+        closed_form_and_rejection_agree(&evaluator, &rej, scheme, &schedule);
+    }
+}
+
+fn closed_form_and_rejection_agree(
+    evaluator: &CpuEvaluator,
+    rej: &Run,
+    scheme: (Refill, LawProposal),
+    schedule: &[f64],
+) {
+    let config = with_scheme(&smc_config(4000, Some(schedule.to_vec()), 0.0), scheme);
+    let smc_run = smc::run(evaluator, &config).unwrap();
     assert_eq!(smc_run.stop, StopReason::ScheduleExhausted);
     assert_eq!(smc_run.populations.len(), 8);
-    let rej = rejection::run(&evaluator, &smc_config(4000, Some(schedule), 0.0).base).unwrap();
     for (g, (s, r)) in smc_run.populations.iter().zip(&rej.populations).enumerate().skip(1) {
         let eps = s.record.epsilon.unwrap();
         let h = eps.sqrt();
         let n_eff = ess(s);
         assert!(
             (s.record.ess - n_eff).abs() < 1e-9 && n_eff > 0.5 * 4000.0,
-            "ESS {n_eff}"
+            "{scheme:?}: ESS {n_eff}"
         );
         // Weighted one-sample KS against the closed form, with the Kish ESS as sample size:
         // critical value at α = 0.001 is 1.95 / √ESS.
         let d = weighted_ks_against(&c0(s), |x| ((x - (1.0 - h)) / (2.0 * h)).clamp(0.0, 1.0));
-        assert!(d < 1.95 / n_eff.sqrt(), "population {g}: KS {d} (ESS {n_eff})");
+        assert!(
+            d < 1.95 / n_eff.sqrt(),
+            "{scheme:?} population {g}: KS {d} (ESS {n_eff})"
+        );
         // Two-sample against rejection at the same ε: 1.95 √(1/ESS + 1/N).
         let d2 = weighted_ks(&c0(s), &c0(r));
         assert!(
             d2 < 1.95 * (1.0 / n_eff + 1.0 / 4000.0).sqrt(),
-            "population {g}: KS {d2}"
+            "{scheme:?} population {g}: KS {d2}"
         );
         // Weighted mean within 4 standard errors (σ = h/√3, n = ESS) of 1.
         let mean: f64 = c0(s).iter().map(|(x, w)| x * w).sum();
         assert!(
             (mean - 1.0).abs() < 4.0 * h / 3f64.sqrt() / n_eff.sqrt(),
-            "population {g}: {mean}"
+            "{scheme:?} population {g}: {mean}"
         );
         assert!(s.particles.iter().all(|p| (p.params[0] - 1.0).abs() < h && p.rho < eps));
         let total: f64 = s.particles.iter().map(|p| p.weight).sum();
@@ -133,7 +164,7 @@ fn smc_samples_the_closed_form_posterior_and_agrees_with_rejection() {
     // SMC scores far fewer candidates: each population accepts about a third of its
     // proposals (measured: see below), while rejection pays 1/0.8 % per particle.
     eprintln!(
-        "one parameter to ε = 6.1e-5: SMC {} evaluations, rejection {}",
+        "one parameter to ε = 6.1e-5, {scheme:?}: SMC {} evaluations, rejection {}",
         smc_run.evaluations, rej.evaluations
     );
     assert!(
@@ -163,17 +194,19 @@ fn same_populations(a: &Run, b: &Run) {
 #[test]
 fn smc_populations_do_not_depend_on_threads_or_batch_size() {
     let (problem, rho) = paper_m2_problem(77);
-    let config = smc_config(500, None, rho * 1.5);
     let evaluator = CpuEvaluator::new(problem);
     let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     let double = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-    let a = single.install(|| smc::run(&evaluator, &config)).unwrap();
-    let mut small = config.clone();
-    small.base.max_batch = 300;
-    let b = double.install(|| smc::run(&evaluator, &small)).unwrap();
-    assert_eq!(a.stop, StopReason::EpsMin);
-    assert!(a.populations.len() >= 4, "{}", a.populations.len());
-    same_populations(&a, &b);
+    for scheme in SCHEMES {
+        let config = with_scheme(&smc_config(500, None, rho * 1.5), scheme);
+        let a = single.install(|| smc::run(&evaluator, &config)).unwrap();
+        let mut small = config.clone();
+        small.base.max_batch = 300;
+        let b = double.install(|| smc::run(&evaluator, &small)).unwrap();
+        assert_eq!(a.stop, StopReason::EpsMin, "{scheme:?}");
+        assert!(a.populations.len() >= 4, "{scheme:?}: {}", a.populations.len());
+        same_populations(&a, &b);
+    }
 }
 
 /// Keeps every completed population, as a run store would.
@@ -191,17 +224,22 @@ impl Observer for Keep {
 fn continuing_from_completed_populations_equals_an_uninterrupted_run() {
     let (problem, rho) = paper_m2_problem(5);
     let evaluator = CpuEvaluator::new(problem);
-    let config = smc_config(400, None, rho * 1.5);
+    for scheme in SCHEMES {
+        continuing_equals_uninterrupted(&evaluator, &with_scheme(&smc_config(400, None, rho * 1.5), scheme));
+    }
+}
+
+fn continuing_equals_uninterrupted(evaluator: &CpuEvaluator, config: &SmcConfig) {
     let mut seen = Keep::default();
-    let whole = smc::run_observed(&evaluator, &config, Vec::new(), &mut seen).unwrap();
+    let whole = smc::run_observed(evaluator, config, Vec::new(), &mut seen).unwrap();
     assert_eq!(seen.0.len(), whole.populations.len());
     assert!(whole.populations.len() >= 4);
     for cut in [1, 3] {
         let mut limited = config.clone();
         limited.base.max_populations = cut;
-        let first = smc::run(&evaluator, &limited).unwrap();
+        let first = smc::run(evaluator, &limited).unwrap();
         assert_eq!((first.populations.len(), first.stop), (cut, StopReason::MaxPopulations));
-        let rest = smc::run_observed(&evaluator, &config, first.populations, &mut Keep::default()).unwrap();
+        let rest = smc::run_observed(evaluator, config, first.populations, &mut Keep::default()).unwrap();
         assert_eq!(rest.stop, whole.stop);
         same_populations(&rest, &whole);
     }
@@ -271,7 +309,7 @@ fn on_the_embedded_record_both_samplers_give_the_same_law_probabilities() {
     let data = demo_field_data(&DataOptions::default()).unwrap();
     let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
     let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
-    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 12, &data.calibration, None));
+    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 12, &data.calibration, None).with_best_rho(&fits));
     let n = 1500;
     // The rejection run's median schedule, given to both: the same ε in every population.
     let rej = rejection::run(
@@ -284,7 +322,14 @@ fn on_the_embedded_record_both_samplers_give_the_same_law_probabilities() {
     )
     .unwrap();
     let schedule: Vec<f64> = rej.populations[1..].iter().map(|p| p.record.epsilon.unwrap()).collect();
-    let smc_run = smc::run(&evaluator, &smc_config(n, Some(schedule), 0.02)).unwrap();
+    for scheme in [SCHEMES[0], SCHEMES[3]] {
+        let config = with_scheme(&smc_config(n, Some(schedule.clone()), 0.02), scheme);
+        law_probabilities_agree(&evaluator, &rej, &config, n);
+    }
+}
+
+fn law_probabilities_agree(evaluator: &CpuEvaluator, rej: &Run, config: &SmcConfig, n: usize) {
+    let smc_run = smc::run(evaluator, config).unwrap();
     assert_eq!(smc_run.populations.len(), rej.populations.len());
     let (s, r) = (smc_run.populations.last().unwrap(), rej.populations.last().unwrap());
     assert_eq!(s.record.epsilon.map(f64::to_bits), r.record.epsilon.map(f64::to_bits));
@@ -294,13 +339,114 @@ fn on_the_embedded_record_both_samplers_give_the_same_law_probabilities() {
         let p = (ps + pr) / 2.0;
         let se = (p * (1.0 - p) * (1.0 / n_eff + 1.0 / n as f64)).sqrt();
         eprintln!("{law}: SMC {ps:.4} rejection {pr:.4} (4 SE {:.4})", 4.0 * se);
-        assert!((ps - pr).abs() <= 4.0 * se.max(1e-3), "{law}: {ps} vs {pr} (SE {se})");
+        assert!(
+            (ps - pr).abs() <= 4.0 * se.max(1e-3),
+            "{:?} {law}: {ps} vs {pr} (SE {se})",
+            (config.refill, config.law_proposal)
+        );
     }
     eprintln!(
-        "embedded record, N = {n}, {} populations to ε = {:.4}: SMC {:.3e} evaluations, rejection {:.3e}",
+        "embedded record, N = {n}, {:?}, {} populations to ε = {:.4}: SMC {:.3e} evaluations, rejection {:.3e}",
+        (config.refill, config.law_proposal),
         s.record.index + 1,
         s.record.epsilon.unwrap(),
         smc_run.evaluations as f64,
         rej.evaluations as f64
     );
+}
+
+#[test]
+fn survivors_stay_with_their_weights_and_the_rates_are_the_top_ups() {
+    let (problem, rho) = paper_m2_problem(9);
+    let evaluator = CpuEvaluator::new(problem);
+    let n = 600;
+    let config = with_scheme(
+        &smc_config(n, None, rho * 1.5),
+        (Refill::Survivors, LawProposal::Kernel),
+    );
+    let run = smc::run(&evaluator, &config).unwrap();
+    assert!(run.populations.len() >= 4);
+    for pair in run.populations.windows(2) {
+        let (before, after) = (&pair[0], &pair[1]);
+        let eps = after.record.epsilon.unwrap();
+        let survivors: Vec<_> = before.particles.iter().filter(|p| p.rho < eps).collect();
+        let s = survivors.len();
+        assert!(s > 0 && s < n, "{s}");
+        assert_eq!(after.particles.len(), n);
+        assert_eq!(after.record.accepted, n);
+        // The leading particles are the survivors, in their order, weights scaled by one factor.
+        let factor = after.particles[0].weight / survivors[0].weight;
+        for (p, q) in after.particles.iter().zip(&survivors) {
+            assert_eq!((p.law, p.index, p.rho.to_bits()), (q.law, q.index, q.rho.to_bits()));
+            assert_eq!(p.params, q.params);
+            assert!(
+                (p.weight / q.weight - factor).abs() < 1e-12 * factor,
+                "{} {}",
+                p.weight,
+                q.weight
+            );
+        }
+        // The new particles lie below ε too; all weights sum to 1.
+        assert!(after.particles.iter().all(|p| p.rho < eps));
+        let total: f64 = after.particles.iter().map(|p| p.weight).sum();
+        assert!((total - 1.0).abs() < 1e-12, "{total}");
+        // The survivors' share of the weight is their ESS's share of the two ESSs.
+        let ess_of = |w: Vec<f64>| effective_sample_size(&w);
+        let (ess_old, ess_new) = (
+            ess_of(survivors.iter().map(|p| p.weight).collect()),
+            ess_of(after.particles[s..].iter().map(|p| p.weight).collect()),
+        );
+        let share: f64 = after.particles[..s].iter().map(|p| p.weight).sum();
+        assert!((share - ess_old / (ess_old + ess_new)).abs() < 1e-9, "{share}");
+        // The acceptance rates are the top-up's.
+        let new = (n - s) as f64;
+        assert!((after.record.acceptance_rate - new / after.record.draws as f64).abs() < 1e-15);
+        let per_law_new: usize = after
+            .record
+            .per_law
+            .iter()
+            .map(|l| (l.acceptance_rate * l.draws as f64).round() as usize)
+            .sum();
+        assert_eq!(per_law_new, n - s);
+        assert_eq!(after.record.per_law.iter().map(|l| l.accepted).sum::<usize>(), n);
+    }
+}
+
+#[test]
+fn worth_proposes_no_law_that_cannot_reach_epsilon_and_floors_the_others() {
+    // m2 cannot fit (ρ ≥ 49²) and its best least-squares ρ says so: proposed by worth, it gets
+    // no proposal after population 0; the kernel still moves 30 % × ½ of them to it.
+    let problem = one_parameter_problem(3, Some(1.0));
+    let mut problem = problem;
+    problem.best_rho[Law::M2.index()] = Some(49.0 * 49.0);
+    let evaluator = CpuEvaluator::new(problem);
+    let draws_of = |run: &Run, g: usize, law: Law| {
+        run.populations[g]
+            .record
+            .per_law
+            .iter()
+            .find(|l| l.law == law)
+            .unwrap()
+            .draws
+    };
+    let config = smc_config(1000, Some(vec![0.5, 0.1]), 0.0);
+    let worth = smc::run(&evaluator, &with_scheme(&config, (Refill::Fresh, LawProposal::Worth))).unwrap();
+    assert_eq!(draws_of(&worth, 1, Law::M2), 0);
+    let kernel = smc::run(&evaluator, &with_scheme(&config, (Refill::Fresh, LawProposal::Kernel))).unwrap();
+    let (m2, all) = (draws_of(&kernel, 1, Law::M2), kernel.populations[1].record.draws);
+    // P(m2) ≈ ½ in population 0: a proposal is m2 with probability ½·0.7 + ½·0.3 = ½.
+    assert!((m2 as f64 / all as f64 - 0.5).abs() < 0.1, "{m2} of {all}");
+    // With two laws that can both reach ε, worth gives the one with no particle below ε its
+    // floor share of the proposals: WORTH_FLOOR / 2.
+    let mut reachable = one_parameter_problem(4, Some(1.0));
+    reachable.best_rho = [None; 4];
+    let run = smc::run(
+        &CpuEvaluator::new(reachable),
+        &with_scheme(&config, (Refill::Fresh, LawProposal::Worth)),
+    )
+    .unwrap();
+    let (m2, all) = (draws_of(&run, 1, Law::M2), run.populations[1].record.draws);
+    let expected = WORTH_FLOOR / 2.0;
+    let sd = (expected * (1.0 - expected) / all as f64).sqrt();
+    assert!((m2 as f64 / all as f64 - expected).abs() < 5.0 * sd, "{m2} of {all}");
 }

@@ -104,6 +104,21 @@ def test_smc_with_a_schedule(demo: bitrock.Record) -> None:
     assert run.document["stop_description"] == "the `epsilons` schedule ran out"
 
 
+def test_the_classic_smc_runs_by_name(demo: bitrock.Record) -> None:
+    settings = {"particles": 300, "sampler": "smc", "seed": 4, "backend": "cpu", "max_populations": 3, "progress": False}
+    classic = bitrock.abc(demo, refill="fresh", law_proposal="kernel", p_stay=0.6, **settings)
+    default = bitrock.abc(demo, **settings)
+    sampler = classic.document["config"]["sampler"]
+    assert (sampler["refill"], sampler["law_proposal"], sampler["p_stay"]) == ("fresh", "kernel", 0.6)
+    assert (default.document["config"]["sampler"]["refill"], default.document["config"]["sampler"]["law_proposal"]) == (
+        "survivors",
+        "worth",
+    )
+    # Population 0 is the rejection sampler's in both; later ones differ with the scheme.
+    assert classic.populations["drawn"].iloc[0] == default.populations["drawn"].iloc[0]
+    assert (classic.populations["drawn"].iloc[1:].to_numpy() != default.populations["drawn"].iloc[1:].to_numpy()).any()
+
+
 def test_progress_goes_to_a_callable(demo: bitrock.Record) -> None:
     seen: list[tuple[int, int, int, int, float | None]] = []
     bitrock.abc(demo, particles=200, seed=2, backend="cpu", max_populations=3, progress=lambda *a: seen.append(a))
@@ -119,6 +134,9 @@ def test_progress_goes_to_a_callable(demo: bitrock.Record) -> None:
         ({"sampler": "gibbs"}, "sampler", "`gibbs` is not one of the accepted values"),
         ({"backend": "tpu"}, "backend", "`tpu` is not one of the accepted values"),
         ({"kernel_scale": 2.0}, "kernel_scale", "kernel_scale: applies only to `sampler` smc"),
+        ({"refill": "fresh"}, "refill", "refill: applies only to `sampler` smc"),
+        ({"sampler": "smc", "refill": "some"}, "refill", "`some` is not one of the accepted values"),
+        ({"sampler": "smc", "p_stay": 0.5}, "p_stay", "p_stay: applies only to `law_proposal` kernel"),
         ({"delta": -0.1}, "delta", "delta:"),
         ({"epsilons": [0.05, 0.08]}, "epsilons", "epsilons:"),
     ],

@@ -510,7 +510,8 @@ class Result:
 
     @property
     def populations(self) -> pd.DataFrame:
-        """One row per population: ε, accepted, drawn, acceptance rate, ESS, seconds."""
+        """One row per population: ε, accepted, drawn, acceptance rate, ESS, whether it is thin
+        (ESS below 10 % of its particles), seconds."""
         rows = [
             {
                 "population": p["index"],
@@ -519,6 +520,7 @@ class Result:
                 "drawn": p["draws"],
                 "acceptance_rate": p["acceptance_rate"],
                 "ess": p["ess"],
+                "thin": p.get("thin", p["ess"] < 0.1 * p["accepted"]),
                 "seconds": p["seconds"],
             }
             for p in self.document["populations"]
