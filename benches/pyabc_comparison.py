@@ -36,11 +36,23 @@ over all recorded populations *including* t = -1; the calibration count is
 also given on its own (``calibration_simulations``) and the per-population
 list starts with the t = -1 entry.
 
+``--unit-box`` samples each free parameter as u ~ U(0, 1) with
+theta = lower + u * (upper - lower) inside the model, instead of
+``RV("uniform", lower, upper - lower)`` on theta. The two are the same
+algorithm (pyABC's defaults are invariant under this diagonal affine map; the
+per-model Jacobians cancel in the importance weights), but the unit box keeps
+the kernel covariance well conditioned: with SciPy >= 1.10 a
+``MultivariateNormalTransition`` whose covariance has eigenvalues below
+about 1e-10 of the largest is treated as singular and gives density 0 to its
+own proposals, so the weights become NaN and pyABC stops with "The
+population total weight nan is not normalized" (the m4 cubic on the N·m
+rig record, where c3 ~ 1e-5 and c0 ~ 3).
+
 Needs a virtual environment with pyABC 0.13 (``pip install "pyabc==0.13.*"``).
 Run it as
 
     /work/pyabc-venv/bin/python benches/pyabc_comparison.py DIR --seed S \\
-        [--out result.json]
+        [--unit-box] [--out result.json]
 
 It prints the result JSON, and writes it to ``--out`` if given.
 """
@@ -96,27 +108,41 @@ def distance(x, x0):
     return float(np.sum((y - x["torque"]) ** 2) / np.sum(y**2))
 
 
-def make_model(law, names, fixed, w):
-    """A pyABC model: parameters -> {"torque": T(w)} at the observed speeds."""
+def make_model(law, names, fixed, boxes, w):
+    """A pyABC model: parameters -> {"torque": T(w)} at the observed speeds.
+
+    ``fixed`` maps fixed parameters to their values; ``boxes`` maps free
+    parameters sampled on the unit box to (lower, width), empty otherwise.
+    """
     fun = LAWS[law]
 
+    def value(pars, n):
+        if n in fixed:
+            return fixed[n]
+        if n in boxes:
+            lo, width = boxes[n]
+            return lo + pars[n] * width
+        return pars[n]
+
     def model(pars):
-        values = [fixed[n] if n in fixed else pars[n] for n in names]
-        return {"torque": fun(w, *values)}
+        return {"torque": fun(w, *[value(pars, n) for n in names])}
 
     model.__name__ = law
     return model
 
 
-def make_prior(names, lower, upper):
+def make_prior(names, lower, upper, unit_box):
     """Uniform prior per free parameter; fixed parameters (lower == upper)."""
-    free, fixed = {}, {}
+    free, fixed, boxes = {}, {}, {}
     for n, lo, hi in zip(names, lower, upper):
-        if hi > lo:
-            free[n] = pyabc.RV("uniform", lo, hi - lo)
-        else:
+        if hi <= lo:
             fixed[n] = lo
-    return pyabc.Distribution(**free), fixed
+        elif unit_box:
+            free[n] = pyabc.RV("uniform", 0.0, 1.0)
+            boxes[n] = (lo, hi - lo)
+        else:
+            free[n] = pyabc.RV("uniform", lo, hi - lo)
+    return pyabc.Distribution(**free), fixed, boxes
 
 
 def main():
@@ -124,6 +150,11 @@ def main():
     parser.add_argument("run_dir", help="bitrock abc --out directory")
     parser.add_argument("--seed", type=int, required=True)
     parser.add_argument("--out", help="write the result JSON here")
+    parser.add_argument(
+        "--unit-box",
+        action="store_true",
+        help="sample free parameters on [0, 1] and map to the box in the model",
+    )
     args = parser.parse_args()
 
     with open(os.path.join(args.run_dir, "run.json")) as f:
@@ -136,9 +167,11 @@ def main():
 
     laws, models, priors, weights = [], [], [], []
     for p in run["priors"]:
-        prior, fixed = make_prior(p["names"], p["lower"], p["upper"])
+        prior, fixed, boxes = make_prior(
+            p["names"], p["lower"], p["upper"], args.unit_box
+        )
         laws.append(p["law"])
-        models.append(make_model(p["law"], p["names"], fixed, w))
+        models.append(make_model(p["law"], p["names"], fixed, boxes, w))
         priors.append(prior)
         weights.append(float(p["weight"]))
     weights = np.array(weights) / np.sum(weights)
@@ -201,6 +234,7 @@ def main():
             "run_dir": os.path.abspath(args.run_dir),
             "seed": args.seed,
             "particles": n_particles,
+            "parametrisation": "unit_box" if args.unit_box else "box",
             "eps_min": eps_min,
             "torque_column": torque_col,
             "calibration_rows": int(len(y)),

@@ -1,7 +1,8 @@
 // Gaussian kernel sums of the SMC importance weights: invocation i writes
-// S_i = Σ_j w_j exp(-|y_i - x_j|² / 2) over the job's slice of sources j, where y (targets,
-// the new particles) and x (sources, the previous population) are whitened coordinates
-// computed on the host (L⁻¹ (φ - μ), unused coordinates 0). The CPU twin is
+// S_i = Σ_j w_j exp(-(|d|² - c_j (d·x_j)²) / 2), d = y_i - x_j, over the job's slice of
+// sources j, where y (targets, the new particles) and x (sources, the previous population)
+// are whitened coordinates computed on the host (L⁻¹ (φ - μ), unused coordinates 0) and c_j
+// gives source j the covariance I + x_j x_jᵀ (0: the identity). The CPU twin is
 // `kernel_sums` in src/eval/cpu.rs. Needs shared/laws.wgsl (exp_f32).
 //
 // Accumulation is blocked as in shared/ssr.wgsl: 64 terms per block, 64 blocks per group,
@@ -28,7 +29,7 @@ struct SumsJob {
 @group(0) @binding(0) var<uniform> job: SumsJob;
 // Two vec4 per target: coordinates 0-3, then 4-5 and two zeros.
 @group(0) @binding(1) var<storage, read> targets: array<vec4<f32>>;
-// Two vec4 per source: coordinates 0-3, then 4-5, the weight w_j and a zero.
+// Two vec4 per source: coordinates 0-3, then 4-5, the weight w_j and c_j.
 @group(0) @binding(2) var<storage, read> sources: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> sums: array<f32>;
 
@@ -40,7 +41,8 @@ fn term(a: vec4<f32>, b: vec4<f32>, j: u32) -> f32 {
     let xw = sources[2u * j + 1u];
     let d0 = a - x;
     let d1 = b.xy - xw.xy;
-    let r2 = dot(d0, d0) + dot(d1, d1);
+    let along = dot(d0, x) + dot(d1, xw.xy);
+    let r2 = dot(d0, d0) + dot(d1, d1) - xw.w * along * along;
     return xw.z * exp_f32(-0.5 * r2);
 }
 

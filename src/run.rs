@@ -6,7 +6,7 @@
 use crate::abc::floor;
 use crate::abc::rejection::{self, Mode, RejectionConfig};
 use crate::abc::shard::{self, Devices, Local, Workers};
-use crate::abc::smc::{self, LawProposal, Refill, SmcConfig, WeightsOn};
+use crate::abc::smc::{self, LawProposal, Perturbation, Refill, SmcConfig, WeightsOn};
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
@@ -189,6 +189,8 @@ pub struct Settings {
     pub refill: Option<Refill>,
     /// SMC only.
     pub law_proposal: Option<LawProposal>,
+    /// SMC only.
+    pub perturbation: Option<Perturbation>,
     pub seed: Option<u64>,
     pub backend: Option<Backend>,
     pub devices: Option<Devices>,
@@ -237,6 +239,7 @@ impl Settings {
                     weights_on: self.smc_weights.unwrap_or(smc.weights_on),
                     refill: self.refill.unwrap_or(smc.refill),
                     law_proposal: self.law_proposal.unwrap_or(smc.law_proposal),
+                    perturbation: self.perturbation.unwrap_or(smc.perturbation),
                 })
             }
         };
@@ -270,6 +273,7 @@ impl Settings {
                     ("smc_weights", self.smc_weights.is_some()),
                     ("refill", self.refill.is_some()),
                     ("law_proposal", self.law_proposal.is_some()),
+                    ("perturbation", self.perturbation.is_some()),
                 ];
                 match smc_only.into_iter().find(|&(_, given)| given) {
                     Some((field, _)) => Err(Error::setting(
@@ -290,6 +294,15 @@ impl Settings {
                 Err(Error::setting(
                     "p_stay",
                     "applies only to `law_proposal` kernel, and this run proposes laws by their worth; drop `p_stay` or use `law_proposal` kernel",
+                ))
+            }
+            Sampler::Smc
+                if self.kernel_scale.is_some()
+                    && self.perturbation.unwrap_or(SmcConfig::default().perturbation) == Perturbation::Local =>
+            {
+                Err(Error::setting(
+                    "kernel_scale",
+                    "applies only to `perturbation` global; the local perturbation takes each ancestor's own covariance; drop `kernel_scale` or use `perturbation` global",
                 ))
             }
             Sampler::Smc => Ok(()),

@@ -130,12 +130,27 @@ pub enum LawProposal {
     Worth,
 }
 
+/// The Gaussian perturbation of an ancestor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Perturbation {
+    /// One covariance per law: `kernel_scale` × the weighted covariance of its ancestors
+    /// (Beaumont et al. 2009).
+    Global,
+    /// One covariance per ancestor, the locally optimal one of Filippi et al. (2013):
+    /// Σ_j = Σ_k w_k (φ_k − φ_j)(φ_k − φ_j)ᵀ over the law's particles below the new ε, that is
+    /// their covariance C plus (φ_j − μ)(φ_j − μ)ᵀ; narrow near the posterior's centre, wide
+    /// at its edges. `kernel_scale` does not apply.
+    Local,
+}
+
 /// The share of a population's proposals that [`LawProposal::Worth`] spreads evenly over
 /// the laws it proposes, whatever their probabilities.
 pub const WORTH_FLOOR: f64 = 0.05;
 
-/// Configuration of an SMC run. Runs stored before `refill` and `law_proposal` existed read
-/// as `fresh` and `kernel`, which is how they were drawn.
+/// Configuration of an SMC run. Runs stored before `refill`, `law_proposal` and
+/// `perturbation` existed read as `fresh`, `kernel` and `global`, which is how they were drawn.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SmcConfig {
     /// N, tolerances, stopping rules, batch limit and wall time, as for rejection (population
@@ -150,6 +165,14 @@ pub struct SmcConfig {
     pub refill: Refill,
     #[serde(default = "LawProposal::stored_default")]
     pub law_proposal: LawProposal,
+    #[serde(default = "Perturbation::stored_default")]
+    pub perturbation: Perturbation,
+}
+
+impl Perturbation {
+    fn stored_default() -> Self {
+        Perturbation::Global
+    }
 }
 
 impl Refill {
@@ -173,6 +196,7 @@ impl Default for SmcConfig {
             weights_on: WeightsOn::Host,
             refill: Refill::Survivors,
             law_proposal: LawProposal::Worth,
+            perturbation: Perturbation::Global,
         }
     }
 }
@@ -275,6 +299,9 @@ struct LawKernel {
     member_weight: f64,
     /// log of 1 / prior box volume over the free parameters.
     log_prior_density: f64,
+    /// [`Perturbation::Local`]: each ancestor's covariance is L (I + e eᵀ) Lᵀ, e its whitened
+    /// coordinates (L and the mean are then those of the law's particles below ε).
+    local: bool,
 }
 
 /// Weighted mean and covariance (divisor Σw) of `points` (k columns), compensated sums.
@@ -320,16 +347,31 @@ fn cholesky(a: &[f64], k: usize) -> Option<Vec<f64>> {
 }
 
 impl LawKernel {
-    fn new(prior: &Prior, slot: usize, previous: &[Particle], members: Vec<usize>, scale: f64) -> Result<Self> {
+    /// The kernel of law `slot` with ancestors `members` (indices into `previous`): global
+    /// with `centre` `None`, the covariance `scale` × the ancestors'; local with `centre` the
+    /// particles whose mean and covariance centre every ancestor's (see [`Perturbation`]).
+    fn new(
+        prior: &Prior,
+        slot: usize,
+        previous: &[Particle],
+        members: Vec<usize>,
+        scale: f64,
+        centre: Option<&[usize]>,
+    ) -> Result<Self> {
         let bx = &prior.boxes[slot];
         let free: Vec<usize> = (0..bx.lower.len()).filter(|&j| bx.upper[j] > bx.lower[j]).collect();
         let k = free.len();
         let weights: Vec<f64> = members.iter().map(|&i| previous[i].weight).collect();
-        let points: Vec<Vec<f64>> = members
-            .iter()
-            .map(|&i| free.iter().map(|&j| previous[i].params[j]).collect())
-            .collect();
-        let (mean, cov) = weighted_moments(&points, &weights);
+        let moments_of = |set: &[usize]| {
+            let points: Vec<Vec<f64>> = set
+                .iter()
+                .map(|&i| free.iter().map(|&j| previous[i].params[j]).collect())
+                .collect();
+            let weights: Vec<f64> = set.iter().map(|&i| previous[i].weight).collect();
+            weighted_moments(&points, &weights)
+        };
+        let (mean, cov) = moments_of(centre.unwrap_or(&members));
+        let scale = if centre.is_some() { 1.0 } else { scale };
         let mut sigma: Vec<f64> = cov.iter().map(|c| scale * c).collect();
         for (a, &j) in free.iter().enumerate() {
             let floor = KERNEL_FLOOR * (f64::from(bx.upper[j]) - f64::from(bx.lower[j]));
@@ -368,6 +410,7 @@ impl LawKernel {
             cdf,
             member_weight,
             log_prior_density,
+            local: centre.is_some(),
         })
     }
 
@@ -444,8 +487,10 @@ impl Kernels {
         } else {
             members.iter().map(|m| !m.is_empty()).collect()
         };
+        let all_of = |slot: usize| members[slot].clone();
         let laws: Vec<Option<LawKernel>> = members
-            .into_iter()
+            .iter()
+            .cloned()
             .zip(&below)
             .enumerate()
             .map(|(slot, (all, below))| {
@@ -453,8 +498,14 @@ impl Kernels {
                     Refill::Survivors if !below.is_empty() => below.clone(),
                     _ => all,
                 };
+                // The local kernel is centred on the particles below ε (all where none is).
+                let centre = match config.perturbation {
+                    Perturbation::Global => None,
+                    Perturbation::Local if below.is_empty() => Some(all_of(slot)),
+                    Perturbation::Local => Some(below.clone()),
+                };
                 proposed[slot]
-                    .then(|| LawKernel::new(prior, slot, previous, ancestors, config.kernel_scale))
+                    .then(|| LawKernel::new(prior, slot, previous, ancestors, config.kernel_scale, centre.as_deref()))
                     .transpose()
             })
             .collect::<Result<_>>()?;
@@ -612,6 +663,19 @@ impl Kernels {
             z[2 * pair + 1] = y;
         }
         let k = law.free.len();
+        if law.local {
+            // The ancestor's own covariance L (I + e eᵀ) Lᵀ: z becomes (I + κ e eᵀ) z, the
+            // symmetric square root of I + e eᵀ, κ = (√(1 + |e|²) − 1) / |e|².
+            let e = law.whiten(&ancestor.params);
+            let e2: f64 = e[..k].iter().map(|v| v * v).sum();
+            if e2 > 0.0 {
+                let kappa = ((1.0 + e2).sqrt() - 1.0) / e2;
+                let ez: f64 = (0..k).map(|a| e[a] * z[a]).sum();
+                for a in 0..k {
+                    z[a] += kappa * e[a] * ez;
+                }
+            }
+        }
         let bx = &prior.boxes[slot];
         let mut params = [0.0f32; MAX_PARAMS];
         for (j, p) in params.iter_mut().enumerate().take(bx.lower.len()) {
@@ -670,17 +734,30 @@ impl Kernels {
             let targets: Vec<[f64; MAX_PARAMS]> = new.iter().map(|&i| law.whiten(&particles[i].params)).collect();
             let sources: Vec<[f64; MAX_PARAMS]> =
                 law.members.iter().map(|&j| law.whiten(&previous[j].params)).collect();
-            let weights: Vec<f64> = law
+            let mut weights: Vec<f64> = law
                 .members
                 .iter()
                 .map(|&j| previous[j].weight / law.member_weight)
                 .collect();
+            // Local: source j's density carries det(I + e eᵀ)^(−½) = (1 + |e|²)^(−½).
+            let rank_one: Option<Vec<f64>> = law.local.then(|| {
+                sources
+                    .iter()
+                    .zip(&mut weights)
+                    .map(|(e, w)| {
+                        let stretch = 1.0 + e.iter().map(|v| v * v).sum::<f64>();
+                        *w /= stretch.sqrt();
+                        1.0 / stretch
+                    })
+                    .collect()
+            });
             let mut sums = vec![0.0; new.len()];
             sums_on(
                 &KernelSums {
                     targets: &targets,
                     sources: &sources,
                     weights: &weights,
+                    rank_one: rank_one.as_deref(),
                 },
                 &mut sums,
             )?;
@@ -986,6 +1063,15 @@ mod tests {
     use crate::laws::Law;
     use crate::prior::LawBox;
 
+    /// The classic sampler: fresh refill, the model kernel, the global perturbation.
+    fn classic() -> SmcConfig {
+        SmcConfig {
+            refill: Refill::Fresh,
+            law_proposal: LawProposal::Kernel,
+            ..SmcConfig::default()
+        }
+    }
+
     #[test]
     fn box_muller_gives_standard_normals() {
         // 2 × 200,000 normals from Philox words: mean 0 ± 5σ/√n, variance 1 ± 5·√(2/n),
@@ -1051,7 +1137,7 @@ mod tests {
             particle(Law::M2, 2, &[2.0, 2.0, 0.5], 0.2),
             particle(Law::M2, 3, &[5.0, 4.0, 0.5], 0.2),
         ];
-        let k = LawKernel::new(&prior, 0, &previous, vec![0, 2, 3], 2.0).unwrap();
+        let k = LawKernel::new(&prior, 0, &previous, vec![0, 2, 3], 2.0, None).unwrap();
         assert_eq!(k.free, vec![0, 1, 2]);
         assert!((k.member_weight - 0.8).abs() < 1e-15);
         assert!((k.mean[0] - 2.25).abs() < 1e-15 && (k.mean[1] - 2.5).abs() < 1e-15);
@@ -1064,7 +1150,7 @@ mod tests {
         assert!((sigma(2, 2) - 1e-8).abs() < 1e-20, "{}", sigma(2, 2));
         assert!((k.cdf[2] - 1.0).abs() < 1e-15 && (k.cdf[0] - 0.5).abs() < 1e-15);
         // m4 has one particle and two fixed parameters: a floor-only kernel on c0, c1.
-        let k4 = LawKernel::new(&prior, 1, &previous, vec![1], 2.0).unwrap();
+        let k4 = LawKernel::new(&prior, 1, &previous, vec![1], 2.0, None).unwrap();
         assert_eq!(k4.free, vec![0, 1]);
         assert!((k4.chol[0] - 4e-4).abs() < 1e-18 && (k4.chol[3] - 2e-4).abs() < 1e-18);
     }
@@ -1095,7 +1181,7 @@ mod tests {
             particle(Law::M4, 0, &[1.0, 0.0, 0.0, 0.0], 0.5),
             particle(Law::M4, 1, &[3.0, 0.0, 0.0, 0.0], 0.5),
         ];
-        let config = SmcConfig::default();
+        let config = classic();
         let kernels = Kernels::new(&prior, &previous, &config, f64::INFINITY, &|_| true).unwrap();
         let new = [
             particle(Law::M4, 0, &[2.0, 0.0, 0.0, 0.0], 0.0),
@@ -1111,6 +1197,72 @@ mod tests {
         let expected = (1.0 / q(2.0)) / (1.0 / q(2.0) + 1.0 / q(0.5));
         assert!((w[0] - expected).abs() < 1e-12, "{} vs {expected}", w[0]);
         assert!((w[0] + w[1] - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn the_local_kernel_gives_each_ancestor_the_covariance_around_it() {
+        // One free parameter, ancestors at 1 and 3 with equal weights, all below ε: centre 2,
+        // C = 1 + (10⁻⁴·4)²; each ancestor's variance is C + (φ_j − 2)² = 2 + 1.6e-7.
+        let prior = Prior::new(
+            vec![LawBox {
+                law: Law::M4,
+                lower: vec![0.0, 0.0, 0.0, 0.0],
+                upper: vec![4.0, 0.0, 0.0, 0.0],
+            }],
+            vec![1.0],
+        )
+        .unwrap();
+        let previous = vec![
+            particle(Law::M4, 0, &[1.0, 0.0, 0.0, 0.0], 0.5),
+            particle(Law::M4, 1, &[3.0, 0.0, 0.0, 0.0], 0.5),
+        ];
+        let config = SmcConfig {
+            perturbation: Perturbation::Local,
+            ..classic()
+        };
+        let kernels = Kernels::new(&prior, &previous, &config, f64::INFINITY, &|_| true).unwrap();
+        let new = [
+            particle(Law::M4, 0, &[2.0, 0.0, 0.0, 0.0], 0.0),
+            particle(Law::M4, 1, &[0.5, 0.0, 0.0, 0.0], 0.0),
+        ];
+        let host = |s: &KernelSums, out: &mut [f64]| -> Result<()> {
+            crate::eval::cpu::kernel_sums(s, out);
+            Ok(())
+        };
+        let w = kernels.weights(&prior, &previous, &new, &host).unwrap();
+        let s2 = 2.0 + 1.6e-7;
+        let q = |x: f64| (-(x - 1.0f64).powi(2) / (2.0 * s2)).exp() + (-(x - 3.0f64).powi(2) / (2.0 * s2)).exp();
+        let expected = (1.0 / q(2.0)) / (1.0 / q(2.0) + 1.0 / q(0.5));
+        assert!((w[0] - expected).abs() < 1e-12, "{} vs {expected}", w[0]);
+        // Proposals: a mixture of N(1, s2) and N(3, s2), variance 1 + s2 (inside the box or not).
+        let key = key_of_seed(5);
+        let n = 200_000u64;
+        let mut steps = Vec::with_capacity(n as usize);
+        for i in 0..n {
+            let b0 = philox4x32_10(candidate_counter(1, i, 0), key);
+            let ancestor = if open_unit(b0[3]) < 0.5 { 1.0 } else { 3.0 };
+            let b1 = philox4x32_10(candidate_counter(1, i, 1), key);
+            let z = box_muller(b1[0], b1[1])[0];
+            // The step the kernel takes for this z: L (1 + κ e²) z, e = (φ_j − 2)/√C.
+            let c: f64 = 1.0 + 1.6e-7;
+            let e2 = (ancestor - 2.0f64).powi(2) / c;
+            let kappa = ((1.0 + e2).sqrt() - 1.0) / e2;
+            steps.push(ancestor + c.sqrt() * (1.0 + kappa * e2) * z);
+            if i < 2_000 {
+                let (_, params) = kernels.propose(&prior, &previous, key, 1, i);
+                if let Some(p) = params {
+                    assert_eq!(
+                        p[0].to_bits(),
+                        (*steps.last().unwrap() as f32).to_bits(),
+                        "proposal {i}"
+                    );
+                }
+            }
+        }
+        let mean = steps.iter().sum::<f64>() / n as f64;
+        let var = steps.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
+        // Var of the sample variance of a two-normal mixture: below 5·(2·var²/n)^½.
+        assert!((var - (1.0 + s2)).abs() < 5.0 * (2.0 * 9.0 / n as f64).sqrt(), "{var}");
     }
 
     #[test]
@@ -1142,7 +1294,7 @@ mod tests {
             particle(Law::M4, 2, &[1.0, 0.0, 0.0, 0.0], 0.05),
             particle(Law::M4, 3, &[3.0, 0.0, 0.0, 0.0], 0.05),
         ];
-        let kernels = Kernels::new(&prior, &previous, &SmcConfig::default(), f64::INFINITY, &|_| true).unwrap();
+        let kernels = Kernels::new(&prior, &previous, &classic(), f64::INFINITY, &|_| true).unwrap();
         assert!((kernels.law_proposal_probability(0) - 0.66).abs() < 1e-15);
         assert!((kernels.law_proposal_probability(1) - 0.34).abs() < 1e-15);
         let new = [
@@ -1166,7 +1318,7 @@ mod tests {
             particle(Law::M2, 1, &[6.0, 4.0, 0.4], 0.35),
             particle(Law::M4, 2, &[2.0, 0.0, 0.5, 0.0], 0.3),
         ];
-        let config = SmcConfig::default();
+        let config = classic();
         let kernels = Kernels::new(&prior, &previous, &config, f64::INFINITY, &|_| true).unwrap();
         let key = key_of_seed(17);
         let n = 100_000;

@@ -7,7 +7,7 @@
 
 use super::SelectionRecord;
 use crate::abc::rejection::RejectionConfig;
-use crate::abc::smc::{LawProposal, Refill, SmcConfig};
+use crate::abc::smc::{LawProposal, Perturbation, Refill, SmcConfig};
 use crate::abc::{Population, Silent};
 use crate::error::Result;
 use crate::eval::{Backend, gpu::tune::ShapeWish};
@@ -22,30 +22,39 @@ use serde::Serialize;
 pub struct Scheme {
     pub name: &'static str,
     /// `None`: the rejection sampler (nested).
-    pub smc: Option<(Refill, LawProposal)>,
+    pub smc: Option<(Refill, LawProposal, Perturbation)>,
 }
 
-/// The schemes compared: rejection, the classic SMC, each change alone, and both (the default).
-pub const SCHEMES: [Scheme; 5] = [
+/// The schemes compared: rejection, the classic SMC, each change alone, survivors and worth
+/// together (the default), and all three.
+pub const SCHEMES: [Scheme; 7] = [
     Scheme {
         name: "rejection",
         smc: None,
     },
     Scheme {
         name: "smc fresh+kernel",
-        smc: Some((Refill::Fresh, LawProposal::Kernel)),
+        smc: Some((Refill::Fresh, LawProposal::Kernel, Perturbation::Global)),
     },
     Scheme {
-        name: "smc survivors+kernel",
-        smc: Some((Refill::Survivors, LawProposal::Kernel)),
+        name: "smc survivors",
+        smc: Some((Refill::Survivors, LawProposal::Kernel, Perturbation::Global)),
     },
     Scheme {
-        name: "smc fresh+worth",
-        smc: Some((Refill::Fresh, LawProposal::Worth)),
+        name: "smc worth",
+        smc: Some((Refill::Fresh, LawProposal::Worth, Perturbation::Global)),
+    },
+    Scheme {
+        name: "smc local",
+        smc: Some((Refill::Fresh, LawProposal::Kernel, Perturbation::Local)),
     },
     Scheme {
         name: "smc survivors+worth",
-        smc: Some((Refill::Survivors, LawProposal::Worth)),
+        smc: Some((Refill::Survivors, LawProposal::Worth, Perturbation::Global)),
+    },
+    Scheme {
+        name: "smc all three",
+        smc: Some((Refill::Survivors, LawProposal::Worth, Perturbation::Local)),
     },
 ];
 
@@ -132,10 +141,11 @@ fn compare_on(
         for seed in 1..=seeds {
             let sampler = match scheme.smc {
                 None => SamplerConfig::Rejection(base.clone()),
-                Some((refill, law_proposal)) => SamplerConfig::Smc(SmcConfig {
+                Some((refill, law_proposal, perturbation)) => SamplerConfig::Smc(SmcConfig {
                     base: base.clone(),
                     refill,
                     law_proposal,
+                    perturbation,
                     ..SmcConfig::default()
                 }),
             };
@@ -180,7 +190,7 @@ fn compare_on(
                 seconds,
             };
             log(format!(
-                "{:<8} {:<21} seed {seed}: {scored} scored, ESS {:.0}, {:.1} per ESS, {} populations, ΔP {:.1} SE, KS/critical {:.2}",
+                "{:<8} {:<20} seed {seed}: {scored} scored, ESS {:.0}, {:.1} per ESS, {} populations, ΔP {:.1} SE, KS/critical {:.2}",
                 record.name(),
                 scheme.name,
                 run.final_ess,

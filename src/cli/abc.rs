@@ -8,7 +8,7 @@ use super::progress::RunProgress;
 use bitrock::Error;
 use bitrock::abc::rejection::{Mode, RejectionConfig};
 use bitrock::abc::shard::Devices;
-use bitrock::abc::smc::{LawProposal, Refill, WeightsOn};
+use bitrock::abc::smc::{LawProposal, Perturbation, Refill, WeightsOn};
 use bitrock::eval::Backend;
 use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
 use bitrock::run::{Continuation, PriorRuleName, RunConfig, Sampler, Settings};
@@ -78,8 +78,8 @@ pub struct AbcArgs {
     /// particle's law (else it jumps uniformly to another law still alive) [default: 0.7].
     #[arg(long, value_parser = finite_number, value_name = "P", allow_hyphen_values = true)]
     pub p_stay: Option<f64>,
-    /// SMC only: the Gaussian perturbation's covariance is this times the weighted covariance
-    /// of the law's previous particles [default: 2, Beaumont et al. 2009].
+    /// SMC only, with --perturbation global: the Gaussian perturbation's covariance is this times
+    /// the weighted covariance of the law's ancestors [default: 2, Beaumont et al. 2009].
     #[arg(long, value_parser = finite_number, value_name = "S", allow_hyphen_values = true)]
     pub kernel_scale: Option<f64>,
     /// SMC only: where the importance weights' O(N²) kernel sums run. host: f64 on the CPU, so
@@ -99,6 +99,12 @@ pub struct AbcArgs {
     /// whose best least-squares ρ cannot reach ε [default: worth].
     #[arg(long, value_enum)]
     pub law_proposal: Option<LawProposal>,
+    /// SMC only: the Gaussian step from an ancestor. global: one covariance per law,
+    /// --kernel-scale × its ancestors' covariance; local: one per ancestor, the covariance of the
+    /// law's particles below the new ε plus the ancestor's offset from their mean (Filippi et
+    /// al. 2013: narrow at the posterior's centre, wide at its edges) [default: global].
+    #[arg(long, value_enum)]
+    pub perturbation: Option<Perturbation>,
     /// Seed of the candidate streams: the same seed gives the same populations.
     #[arg(long, default_value_t = RunConfig::default().seed)]
     pub seed: u64,
@@ -138,7 +144,7 @@ pub struct AbcCmd {
         "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
         "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior_rule", "prior_k", "prior", "epsilons",
-        "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights", "refill", "law_proposal",
+        "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights", "refill", "law_proposal", "perturbation",
     ])]
     pub resume: Option<PathBuf>,
     /// No progress bar or population lines on stderr.
@@ -232,6 +238,7 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
         smc_weights: args.smc_weights,
         refill: args.refill,
         law_proposal: args.law_proposal,
+        perturbation: args.perturbation,
         seed: Some(args.seed),
         backend: args.backend,
         devices: args.devices,

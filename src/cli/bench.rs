@@ -30,8 +30,10 @@ pub struct BenchCmd {
     /// Measure only the SMC schemes against the rejection sampler near the noise floor (ε_min
     /// = 1.1 × the record's best least-squares ρ, four laws, N = 4,000, on the CPU): on the
     /// embedded record, the laboratory rig's and the m2 record of --selection; one run per seed
-    /// 1..=R (--reps); candidates scored per final effective sample size, and agreement with
-    /// rejection. --quick: N = 1,000.
+    /// 1..=R (--reps): rejection, the classic SMC (fresh refill, model kernel, global
+    /// perturbation), each change alone, survivors with worth (the default) and all three;
+    /// candidates scored per final effective sample size, and agreement with rejection.
+    /// --quick: N = 1,000.
     #[arg(long, conflicts_with = "selection")]
     pub smc: bool,
     /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and

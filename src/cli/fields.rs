@@ -46,6 +46,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("smc_weights", "--smc-weights"),
     ("refill", "--refill"),
     ("law_proposal", "--law-proposal"),
+    ("perturbation", "--perturbation"),
     ("backend", "--backend"),
     ("devices", "--devices"),
     ("threads", "--threads"),

@@ -159,22 +159,30 @@ const BLOCKS_PER_GROUP: usize = 64;
 pub fn kernel_sums(sums: &KernelSums, out: &mut [f64]) {
     assert_eq!(sums.targets.len(), out.len(), "one sum per target");
     assert_eq!(sums.sources.len(), sums.weights.len(), "one weight per source");
+    if let Some(c) = sums.rank_one {
+        assert_eq!(c.len(), sums.sources.len(), "one rank-one coefficient per source");
+    }
     out.par_iter_mut()
         .with_min_len(8)
         .zip(sums.targets)
         .for_each(|(slot, y)| {
             let (mut total, mut group, mut blocks) = (0.0f64, 0.0f64, 0usize);
-            for (xs, ws) in sums
+            for (block, (xs, ws)) in sums
                 .sources
                 .chunks(TERMS_PER_BLOCK)
                 .zip(sums.weights.chunks(TERMS_PER_BLOCK))
+                .enumerate()
             {
                 let mut s = 0.0f64;
-                for (x, &w) in xs.iter().zip(ws) {
-                    let mut r2 = 0.0f64;
+                for (j, (x, &w)) in xs.iter().zip(ws).enumerate() {
+                    let (mut r2, mut along) = (0.0f64, 0.0f64);
                     for k in 0..MAX_PARAMS {
                         let d = y[k] - x[k];
                         r2 += d * d;
+                        along += d * x[k];
+                    }
+                    if let Some(c) = sums.rank_one {
+                        r2 -= c[block * TERMS_PER_BLOCK + j] * along * along;
                     }
                     s += w * numerics::exp(-0.5 * r2);
                 }
@@ -195,6 +203,27 @@ mod tests {
     use super::*;
 
     #[test]
+    fn rank_one_sums_are_gaussians_with_covariance_identity_plus_x_xt() {
+        // Source x = (1, 2) with c = 1/6 has covariance Σ = I + x xᵀ = [[2, 2], [2, 5]],
+        // Σ⁻¹ = [[5, −2], [−2, 2]] / 6; a target at (0, 0.5): d = (−1, −1.5), dᵀΣ⁻¹d =
+        // (5 − 6 + 4.5) / 6 = 3.5 / 6.
+        let x = [1.0, 2.0, 0.0, 0.0, 0.0, 0.0];
+        let y = [0.0, 0.5, 0.0, 0.0, 0.0, 0.0];
+        let mut out = [0.0];
+        kernel_sums(
+            &KernelSums {
+                targets: &[y],
+                sources: &[x],
+                weights: &[0.25],
+                rank_one: Some(&[1.0 / 6.0]),
+            },
+            &mut out,
+        );
+        let expected = 0.25 * (-0.5 * 3.5 / 6.0f64).exp();
+        assert!((out[0] - expected).abs() < 1e-15, "{} vs {expected}", out[0]);
+    }
+
+    #[test]
     fn kernel_sums_are_the_weighted_gaussian_sums() {
         // Sources 0, 1, 2 on the first axis with weights 0.5, 0.25, 0.25; target at 1:
         // S = 0.5 e^{-1/2} + 0.25 + 0.25 e^{-1/2}.
@@ -204,6 +233,7 @@ mod tests {
         let mut out = [0.0; 2];
         kernel_sums(
             &KernelSums {
+                rank_one: None,
                 targets: &targets,
                 sources: &sources,
                 weights: &[0.5, 0.25, 0.25],

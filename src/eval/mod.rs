@@ -71,15 +71,20 @@ impl AbcProblem {
     }
 }
 
-/// Gaussian kernel sums S_i = Σ_j w_j exp(−|y_i − x_j|²/2) between targets y_i and weighted
-/// sources x_j, in whitened coordinates (unused coordinates 0): the O(N²) part of the SMC
-/// importance weights (see [`crate::abc::smc`]).
+/// Gaussian kernel sums S_i = Σ_j w_j exp(−(|d_ij|² − c_j (d_ij·x_j)²)/2), d_ij = y_i − x_j,
+/// between targets y_i and weighted sources x_j, in whitened coordinates (unused coordinates
+/// 0): the O(N²) part of the SMC importance weights (see [`crate::abc::smc`]). With c_j = 0
+/// every source has the whitening's covariance; c_j = 1/(1 + |x_j|²) gives source j the
+/// covariance I + x_j x_jᵀ (the locally optimal kernel, whose whitening is centred on the
+/// particles below ε).
 #[derive(Clone, Copy, Debug)]
 pub struct KernelSums<'a> {
     pub targets: &'a [[f64; MAX_PARAMS]],
     pub sources: &'a [[f64; MAX_PARAMS]],
     /// w_j, one per source.
     pub weights: &'a [f64],
+    /// c_j, one per source; `None`: all 0.
+    pub rank_one: Option<&'a [f64]>,
 }
 
 /// Scores candidates: contiguous ranges of the prior's candidate streams, or explicit

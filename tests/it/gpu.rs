@@ -563,6 +563,7 @@ fn kernel_sums_agree_with_the_cpu_twin() {
         targets: &targets,
         sources: &sources,
         weights: &weights,
+        rank_one: None,
     };
     let cpu = CpuEvaluator::new(demo_problem(&[Law::M2], 1));
     let gpu = GpuEvaluator::new(demo_problem(&[Law::M2], 1)).unwrap();
@@ -575,6 +576,20 @@ fn kernel_sums_agree_with_the_cpu_twin() {
     eprintln!("kernel sums: largest relative difference {worst:.2e}, median {median:.2e} (3,000 × 70,000, d = 4)");
     assert!(worst <= KERNEL_SUM_TOLERANCE, "{worst:e}");
     assert!(c.iter().all(|&s| s > 0.0));
+    // The local kernel: each source its own covariance I + x xᵀ (c_j = 1 / (1 + |x_j|²)).
+    let rank_one: Vec<f64> = sources
+        .iter()
+        .map(|x| 1.0 / (1.0 + x.iter().map(|v| v * v).sum::<f64>()))
+        .collect();
+    let local = KernelSums {
+        rank_one: Some(&rank_one),
+        ..sums
+    };
+    cpu.kernel_sums(&local, &mut c).unwrap();
+    gpu.kernel_sums(&local, &mut g).unwrap();
+    let worst = g.iter().zip(&c).map(|(g, c)| ((g - c) / c).abs()).fold(0.0, f64::max);
+    eprintln!("local kernel sums: largest relative difference {worst:.2e}");
+    assert!(worst <= KERNEL_SUM_TOLERANCE, "{worst:e}");
 }
 
 per_shape! {

@@ -680,6 +680,7 @@ fn run_settings(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<Settings> {
         smc_weights: named(py, "smc_weights", text("smc_weights")?)?,
         refill: named(py, "refill", text("refill")?)?,
         law_proposal: named(py, "law_proposal", text("law_proposal")?)?,
+        perturbation: named(py, "perturbation", text("perturbation")?)?,
         seed: kwarg(kw, "seed")?,
         backend: named(py, "backend", text("backend")?)?,
         devices: named(py, "devices", text("devices")?)?,

@@ -26,7 +26,7 @@ struct SumsJob {
 }
 
 /// Two vec4 per point: coordinates 0-3, then 4-5, `extra` and 0.
-fn pack(points: &[[f64; MAX_PARAMS]], extra: impl Fn(usize) -> f64) -> Vec<f32> {
+fn pack(points: &[[f64; MAX_PARAMS]], extra: impl Fn(usize) -> [f64; 2]) -> Vec<f32> {
     points
         .iter()
         .enumerate()
@@ -35,7 +35,9 @@ fn pack(points: &[[f64; MAX_PARAMS]], extra: impl Fn(usize) -> f64) -> Vec<f32> 
             for (dst, &src) in v.iter_mut().zip(p) {
                 *dst = src as f32;
             }
-            v[6] = extra(i) as f32;
+            let [a, b] = extra(i);
+            v[6] = a as f32;
+            v[7] = b as f32;
             v
         })
         .collect()
@@ -137,12 +139,12 @@ impl Scratch {
             )?);
         }
         let buffers = guard.as_ref().expect("sized above");
-        let sources = pack(sums.sources, |j| sums.weights[j]);
+        let sources = pack(sums.sources, |j| [sums.weights[j], sums.rank_one.map_or(0.0, |c| c[j])]);
         ctx.queue
             .write_buffer(&buffers.source, 0, bytemuck::cast_slice(&sources));
         for (targets, dst) in sums.targets.chunks(chunk).zip(out.chunks_mut(chunk)) {
             ctx.queue
-                .write_buffer(&buffers.target, 0, bytemuck::cast_slice(&pack(targets, |_| 0.0)));
+                .write_buffer(&buffers.target, 0, bytemuck::cast_slice(&pack(targets, |_| [0.0, 0.0])));
             let count = targets.len() as u32;
             let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
             let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {

@@ -189,6 +189,7 @@ def abc(
     smc_weights: str | None = None,
     refill: str | None = None,
     law_proposal: str | None = None,
+    perturbation: str | None = None,
     bounds: bool = True,
     starts: int | None = None,
     scale_by_wob: bool = False,
