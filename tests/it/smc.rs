@@ -4,7 +4,7 @@
 use crate::support::paper_m2_problem;
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
-use bitrock::abc::smc::{self, LawProposal, Refill, SmcConfig, WORTH_FLOOR};
+use bitrock::abc::smc::{self, LawProposal, Perturbation, Refill, SmcConfig, WORTH_FLOOR};
 use bitrock::abc::{Observer, Population, Run, StopReason, effective_sample_size};
 use bitrock::data::{DataOptions, Samples, demo_field_data};
 use bitrock::eval::AbcProblem;
@@ -91,18 +91,24 @@ fn smc_config(particles: usize, epsilons: Option<Vec<f64>>, eps_min: f64) -> Smc
     }
 }
 
-/// Every refill with every law proposal: the classic sampler first, the default last.
-const SCHEMES: [(Refill, LawProposal); 4] = [
-    (Refill::Fresh, LawProposal::Kernel),
-    (Refill::Survivors, LawProposal::Kernel),
-    (Refill::Fresh, LawProposal::Worth),
-    (Refill::Survivors, LawProposal::Worth),
+type Scheme = (Refill, LawProposal, Perturbation);
+
+/// Every refill with every law proposal (global perturbation), then the local perturbation
+/// alone and with both: the classic sampler first, the default fourth.
+const SCHEMES: [Scheme; 6] = [
+    (Refill::Fresh, LawProposal::Kernel, Perturbation::Global),
+    (Refill::Survivors, LawProposal::Kernel, Perturbation::Global),
+    (Refill::Fresh, LawProposal::Worth, Perturbation::Global),
+    (Refill::Survivors, LawProposal::Worth, Perturbation::Global),
+    (Refill::Fresh, LawProposal::Kernel, Perturbation::Local),
+    (Refill::Survivors, LawProposal::Worth, Perturbation::Local),
 ];
 
-fn with_scheme(config: &SmcConfig, (refill, law_proposal): (Refill, LawProposal)) -> SmcConfig {
+fn with_scheme(config: &SmcConfig, (refill, law_proposal, perturbation): Scheme) -> SmcConfig {
     SmcConfig {
         refill,
         law_proposal,
+        perturbation,
         ..config.clone()
     }
 }
@@ -120,12 +126,7 @@ fn smc_samples_the_closed_form_posterior_and_agrees_with_rejection() {
     }
 }
 
-fn closed_form_and_rejection_agree(
-    evaluator: &CpuEvaluator,
-    rej: &Run,
-    scheme: (Refill, LawProposal),
-    schedule: &[f64],
-) {
+fn closed_form_and_rejection_agree(evaluator: &CpuEvaluator, rej: &Run, scheme: Scheme, schedule: &[f64]) {
     let config = with_scheme(&smc_config(4000, Some(schedule.to_vec()), 0.0), scheme);
     let smc_run = smc::run(evaluator, &config).unwrap();
     assert_eq!(smc_run.stop, StopReason::ScheduleExhausted);
@@ -322,7 +323,7 @@ fn on_the_embedded_record_both_samplers_give_the_same_law_probabilities() {
     )
     .unwrap();
     let schedule: Vec<f64> = rej.populations[1..].iter().map(|p| p.record.epsilon.unwrap()).collect();
-    for scheme in [SCHEMES[0], SCHEMES[3]] {
+    for scheme in [SCHEMES[0], SCHEMES[3], SCHEMES[5]] {
         let config = with_scheme(&smc_config(n, Some(schedule.clone()), 0.02), scheme);
         law_probabilities_agree(&evaluator, &rej, &config, n);
     }
@@ -342,12 +343,12 @@ fn law_probabilities_agree(evaluator: &CpuEvaluator, rej: &Run, config: &SmcConf
         assert!(
             (ps - pr).abs() <= 4.0 * se.max(1e-3),
             "{:?} {law}: {ps} vs {pr} (SE {se})",
-            (config.refill, config.law_proposal)
+            (config.refill, config.law_proposal, config.perturbation)
         );
     }
     eprintln!(
         "embedded record, N = {n}, {:?}, {} populations to ε = {:.4}: SMC {:.3e} evaluations, rejection {:.3e}",
-        (config.refill, config.law_proposal),
+        (config.refill, config.law_proposal, config.perturbation),
         s.record.index + 1,
         s.record.epsilon.unwrap(),
         smc_run.evaluations as f64,
@@ -362,7 +363,7 @@ fn survivors_stay_with_their_weights_and_the_rates_are_the_top_ups() {
     let n = 600;
     let config = with_scheme(
         &smc_config(n, None, rho * 1.5),
-        (Refill::Survivors, LawProposal::Kernel),
+        (Refill::Survivors, LawProposal::Kernel, Perturbation::Global),
     );
     let run = smc::run(&evaluator, &config).unwrap();
     assert!(run.populations.len() >= 4);
@@ -430,9 +431,17 @@ fn worth_proposes_no_law_that_cannot_reach_epsilon_and_floors_the_others() {
             .draws
     };
     let config = smc_config(1000, Some(vec![0.5, 0.1]), 0.0);
-    let worth = smc::run(&evaluator, &with_scheme(&config, (Refill::Fresh, LawProposal::Worth))).unwrap();
+    let worth = smc::run(
+        &evaluator,
+        &with_scheme(&config, (Refill::Fresh, LawProposal::Worth, Perturbation::Global)),
+    )
+    .unwrap();
     assert_eq!(draws_of(&worth, 1, Law::M2), 0);
-    let kernel = smc::run(&evaluator, &with_scheme(&config, (Refill::Fresh, LawProposal::Kernel))).unwrap();
+    let kernel = smc::run(
+        &evaluator,
+        &with_scheme(&config, (Refill::Fresh, LawProposal::Kernel, Perturbation::Global)),
+    )
+    .unwrap();
     let (m2, all) = (draws_of(&kernel, 1, Law::M2), kernel.populations[1].record.draws);
     // P(m2) ≈ ½ in population 0: a proposal is m2 with probability ½·0.7 + ½·0.3 = ½.
     assert!((m2 as f64 / all as f64 - 0.5).abs() < 0.1, "{m2} of {all}");
@@ -442,7 +451,7 @@ fn worth_proposes_no_law_that_cannot_reach_epsilon_and_floors_the_others() {
     reachable.best_rho = [None; 4];
     let run = smc::run(
         &CpuEvaluator::new(reachable),
-        &with_scheme(&config, (Refill::Fresh, LawProposal::Worth)),
+        &with_scheme(&config, (Refill::Fresh, LawProposal::Worth, Perturbation::Global)),
     )
     .unwrap();
     let (m2, all) = (draws_of(&run, 1, Law::M2), run.populations[1].record.draws);

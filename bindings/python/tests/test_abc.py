@@ -108,8 +108,10 @@ def test_the_classic_smc_runs_by_name(demo: bitrock.Record) -> None:
     settings = {"particles": 300, "sampler": "smc", "seed": 4, "backend": "cpu", "max_populations": 3, "progress": False}
     classic = bitrock.abc(demo, refill="fresh", law_proposal="kernel", p_stay=0.6, **settings)
     default = bitrock.abc(demo, **settings)
+    local = bitrock.abc(demo, perturbation="local", **settings)
     sampler = classic.document["config"]["sampler"]
     assert (sampler["refill"], sampler["law_proposal"], sampler["p_stay"]) == ("fresh", "kernel", 0.6)
+    assert (sampler["perturbation"], local.document["config"]["sampler"]["perturbation"]) == ("global", "local")
     assert (default.document["config"]["sampler"]["refill"], default.document["config"]["sampler"]["law_proposal"]) == (
         "survivors",
         "worth",
@@ -137,6 +139,11 @@ def test_progress_goes_to_a_callable(demo: bitrock.Record) -> None:
         ({"refill": "fresh"}, "refill", "refill: applies only to `sampler` smc"),
         ({"sampler": "smc", "refill": "some"}, "refill", "`some` is not one of the accepted values"),
         ({"sampler": "smc", "p_stay": 0.5}, "p_stay", "p_stay: applies only to `law_proposal` kernel"),
+        (
+            {"sampler": "smc", "perturbation": "local", "kernel_scale": 1.0},
+            "kernel_scale",
+            "kernel_scale: applies only to `perturbation` global",
+        ),
         ({"delta": -0.1}, "delta", "delta:"),
         ({"epsilons": [0.05, 0.08]}, "epsilons", "epsilons:"),
     ],
