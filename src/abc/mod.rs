@@ -312,3 +312,34 @@ pub fn effective_sample_size(weights: &[f64]) -> f64 {
     let sum_sq = crate::numerics::compensated_sum(weights.iter().map(|w| w * w));
     if sum_sq > 0.0 { sum * sum / sum_sq } else { 0.0 }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_population_is_thin_below_a_tenth_of_its_particles_in_effective_size() {
+        let record = |accepted: usize, ess: f64| PopulationRecord {
+            index: 1,
+            epsilon: Some(0.1),
+            draws: 10 * accepted as u64,
+            accepted,
+            acceptance_rate: 0.1,
+            per_law: Vec::new(),
+            candidates_scored: 0,
+            evaluations: 0,
+            near_threshold: 0,
+            ess,
+            seconds: 0.0,
+            stream: 1,
+        };
+        assert!(record(1000, 99.9).thin());
+        assert!(!record(1000, 100.0).thin());
+        assert!(!record(1000, 1000.0).thin());
+        // An empty population has no particles to be thin about.
+        assert!(!record(0, 0.0).thin());
+        // Equal weights: ESS = N.
+        assert!((effective_sample_size(&[0.25; 4]) - 4.0).abs() < 1e-12);
+        assert!((effective_sample_size(&[0.97, 0.01, 0.01, 0.01]) - 1.0 / 0.9412).abs() < 1e-12);
+    }
+}
