@@ -34,17 +34,19 @@ as a population with ``t = History.PRE_TIME = -1``. ``total_simulations``
 in the output is ``History.total_nr_simulations``, the sum of ``nr_samples``
 over all recorded populations *including* t = -1; the calibration count is
 also given on its own (``calibration_simulations``) and the per-population
-list starts with the t = -1 entry.
+list starts with the t = -1 entry. ``wall_seconds`` times ``abc.run`` (the
+calibration sample, all populations and pyABC's sqlite writes).
 
 ``--unit-box`` samples each free parameter as u ~ U(0, 1) with
 theta = lower + u * (upper - lower) inside the model, instead of
 ``RV("uniform", lower, upper - lower)`` on theta. The two are the same
 algorithm (pyABC's defaults are invariant under this diagonal affine map; the
 per-model Jacobians cancel in the importance weights), but the unit box keeps
-the kernel covariance well conditioned: with SciPy >= 1.10 a
-``MultivariateNormalTransition`` whose covariance has eigenvalues below
-about 1e-10 of the largest is treated as singular and gives density 0 to its
-own proposals, so the weights become NaN and pyABC stops with "The
+the kernel covariance well conditioned. With the SciPy pyABC 0.13 gets
+today (1.17), ``multivariate_normal(allow_singular=True)`` treats a kernel
+covariance whose smallest eigenvalue is below about 2e-10 of the largest as
+singular and gives density 0 to the kernel's own proposals (drawn with the
+full covariance), so the weights become NaN and pyABC stops with "The
 population total weight nan is not normalized" (the m4 cubic on the N·m
 rig record, where c3 ~ 1e-5 and c0 ~ 3).
 
@@ -95,7 +97,8 @@ def read_calibration(path):
     """Speed (rad/s) and torque arrays of the calibration rows of data.csv."""
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
-        torque_col = next(c for c in reader.fieldnames if c.startswith("torque"))
+        cols = reader.fieldnames
+        torque_col = next(c for c in cols if c.startswith("torque"))
         rows = [r for r in reader if r["set"] == "calibration"]
     w = np.array([float(r["speed_rad_s"]) for r in rows])
     y = np.array([float(r[torque_col]) for r in rows])
@@ -153,7 +156,7 @@ def main():
     parser.add_argument(
         "--unit-box",
         action="store_true",
-        help="sample free parameters on [0, 1] and map to the box in the model",
+        help="sample free parameters on [0, 1], mapped to the box in the model",
     )
     args = parser.parse_args()
 
@@ -175,7 +178,9 @@ def main():
         priors.append(prior)
         weights.append(float(p["weight"]))
     weights = np.array(weights) / np.sum(weights)
-    model_prior = pyabc.RV("rv_discrete", values=(np.arange(len(laws)), weights))
+    model_prior = pyabc.RV(
+        "rv_discrete", values=(np.arange(len(laws)), weights)
+    )
 
     # Consistency check: our distance at bitrock's least-squares fits.
     fit_check = {}
