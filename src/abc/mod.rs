@@ -211,7 +211,9 @@ impl StopReason {
             StopReason::EpsMin => "the tolerance reached the run's floor ε_min",
             StopReason::ScheduleExhausted => "the `epsilons` schedule ran out",
             StopReason::MaxPopulations => "`max_populations` populations were drawn",
-            StopReason::AcceptanceFloor => "the projected acceptance of the next population's new candidates (for SMC with survivors, of its top-up) fell below `min_acceptance`",
+            StopReason::AcceptanceFloor => {
+                "the projected acceptance of the next population's new candidates (for SMC with survivors, of its top-up) fell below `min_acceptance`"
+            }
             StopReason::MaxDraws => "`max_draws` candidates were scored (the last population was incomplete)",
             StopReason::WallTime => "`max_seconds` ran out (the last population was incomplete)",
             StopReason::Stalled => {
