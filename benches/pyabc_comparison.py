@@ -42,18 +42,20 @@ theta = lower + u * (upper - lower) inside the model, instead of
 ``RV("uniform", lower, upper - lower)`` on theta. The two are the same
 algorithm (pyABC's defaults are invariant under this diagonal affine map; the
 per-model Jacobians cancel in the importance weights), but the unit box keeps
-the kernel covariance well conditioned. With the SciPy pyABC 0.13 gets
-today (1.17), ``multivariate_normal(allow_singular=True)`` treats a kernel
+the kernel covariance well conditioned. With SciPy 1.17 (what
+``pip install "pyabc==0.13.*"`` installs on Python 3.11 in November 2026),
+``multivariate_normal(allow_singular=True)`` treats a kernel
 covariance whose smallest eigenvalue is below about 2e-10 of the largest as
 singular and gives density 0 to the kernel's own proposals (drawn with the
 full covariance), so the weights become NaN and pyABC stops with "The
 population total weight nan is not normalized" (the m4 cubic on the N·m
 rig record, where c3 ~ 1e-5 and c0 ~ 3).
 
-Needs a virtual environment with pyABC 0.13 (``pip install "pyabc==0.13.*"``).
-Run it as
+Needs a virtual environment with pyABC 0.13:
 
-    /work/pyabc-venv/bin/python benches/pyabc_comparison.py DIR --seed S \\
+    python3 -m venv pyabc-venv
+    pyabc-venv/bin/pip install "pyabc==0.13.*"
+    pyabc-venv/bin/python benches/pyabc_comparison.py DIR --seed S \\
         [--unit-box] [--out result.json]
 
 It prints the result JSON, and writes it to ``--out`` if given.

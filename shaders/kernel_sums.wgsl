@@ -42,7 +42,8 @@ fn term(a: vec4<f32>, b: vec4<f32>, j: u32) -> f32 {
     let d0 = a - x;
     let d1 = b.xy - xw.xy;
     let along = dot(d0, x) + dot(d1, xw.xy);
-    let r2 = dot(d0, d0) + dot(d1, d1) - xw.w * along * along;
+    // The difference of two near-equal squares can round below 0.
+    let r2 = max(dot(d0, d0) + dot(d1, d1) - xw.w * along * along, 0.0);
     return xw.z * exp_f32(-0.5 * r2);
 }
 

@@ -145,9 +145,46 @@ pub fn tanh(x: f64) -> f64 {
     a.copysign(x)
 }
 
+/// sup |F − G| between two weighted empirical CDFs of (value, weight) pairs.
+pub fn weighted_ks(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
+    let total = |v: &[(f64, f64)]| v.iter().map(|p| p.1).sum::<f64>();
+    let (ta, tb) = (total(a), total(b));
+    let mut all: Vec<(f64, f64, f64)> = a
+        .iter()
+        .map(|p| (p.0, p.1 / ta, 0.0))
+        .chain(b.iter().map(|p| (p.0, 0.0, p.1 / tb)))
+        .collect();
+    all.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let (mut fa, mut fb, mut d) = (0.0, 0.0, 0.0f64);
+    let mut i = 0;
+    while i < all.len() {
+        // Ties step together: equal values are one point of both CDFs.
+        let x = all[i].0;
+        while i < all.len() && all[i].0.to_bits() == x.to_bits() {
+            fa += all[i].1;
+            fb += all[i].2;
+            i += 1;
+        }
+        d = d.max((fa - fb).abs());
+    }
+    d
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn weighted_ks_is_the_largest_gap_between_the_weighted_cdfs() {
+        // F jumps ½ at 0 and at 1; G ½ at 0 and at 2: the gap is ½ on [1, 2).
+        let d = weighted_ks(&[(0.0, 1.0), (1.0, 1.0)], &[(0.0, 3.0), (2.0, 3.0)]);
+        assert!((d - 0.5).abs() < 1e-15, "{d}");
+        // Ties step together: the same points with any weights' normalisation give 0.
+        assert!(weighted_ks(&[(1.0, 2.0), (1.0, 2.0)], &[(1.0, 5.0)]).abs() < 1e-15);
+        // Weights count: 0.9 of F's mass at 0 against G's 0.1.
+        let d = weighted_ks(&[(0.0, 0.9), (1.0, 0.1)], &[(0.0, 0.1), (1.0, 0.9)]);
+        assert!((d - 0.8).abs() < 1e-12, "{d}");
+    }
 
     #[test]
     fn compensation_recovers_what_naive_summation_loses() {

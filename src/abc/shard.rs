@@ -108,8 +108,10 @@ impl Context {
     /// The proposal distribution of the population after `particles` (with their weights),
     /// drawn at `epsilon`.
     pub fn new(problem: &AbcProblem, particles: Vec<Particle>, config: SmcConfig, epsilon: f64) -> Result<Self> {
+        // A law is out of reach only when its best least-squares ρ is above ε by more than the
+        // margin a GPU's f32 ρ may differ by (as `kept` keeps candidates).
         let kernels = Kernels::new(&problem.prior, &particles, &config, epsilon, &|law| {
-            problem.can_reach(law, epsilon)
+            problem.can_reach(law, epsilon * (1.0 + 2.0 * PARITY_TOLERANCE))
         })?;
         Ok(Self {
             epsilon,

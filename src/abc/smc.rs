@@ -23,7 +23,9 @@
 //!    - with [`LawProposal::Worth`]: q(m) = (1 − f)·P_<(m) + f/A over the A laws proposed, f =
 //!      [`WORTH_FLOOR`], P_<(m) the law's share of the weight of the particles of t − 1 below
 //!      ε_t (of all of them where none is below). A law is proposed when it has particles in
-//!      t − 1 and either has one below ε_t or its best least-squares ρ is below ε_t;
+//!      t − 1 and either has one below ε_t or its best least-squares ρ is below ε_t (with
+//!      the parity margin of [`super::shard::kept`]); were no law left, every law with
+//!      particles is proposed;
 //!    - with [`LawProposal::Kernel`]: the previous law probabilities P(m′), then the model
 //!      kernel K_M: stay at m′ with probability `p_stay` (default 0.7), otherwise jump
 //!      uniformly to another *alive* law (words 1, 2); with one alive law, always stay;
@@ -46,8 +48,9 @@
 //! proposal probability of step 1, with the kernel Σ_m′ P(m′) K_M(m|m′)), normalised over the
 //! new particles. The survivors' weights, normalised over the survivors, and the new ones are
 //! two importance samples of the same posterior; they are mixed in proportion to their
-//! effective sample sizes (the mix of two independent estimates with the least variance), so
-//! that Σw = 1 over the population. A law's probability is its share of the weight. The O(N²)
+//! effective sample sizes (the least-variance mix were they independent; a consistent
+//! heuristic here, since the new particles descend from the survivors), so that Σw = 1 over
+//! the population. A law's probability is its share of the weight. The O(N²)
 //! sums Σ_j w_j exp(−|L⁻¹(φ − φ_j)|²/2) are [`Evaluator::kernel_sums`] on whitened
 //! coordinates.
 //!
@@ -140,8 +143,9 @@ pub enum Perturbation {
     Global,
     /// One covariance per ancestor, the locally optimal one of Filippi et al. (2013):
     /// Σ_j = Σ_k w_k (φ_k − φ_j)(φ_k − φ_j)ᵀ over the law's particles below the new ε, that is
-    /// their covariance C plus (φ_j − μ)(φ_j − μ)ᵀ; narrow near the posterior's centre, wide
-    /// at its edges. `kernel_scale` does not apply.
+    /// their covariance C plus (φ_j − μ)(φ_j − μ)ᵀ (over all the law's particles where none is
+    /// below ε); narrow near the posterior's centre, wide at its edges, and wider still for an
+    /// ancestor above ε (with [`Refill::Fresh`]). `kernel_scale` does not apply.
     Local,
 }
 
@@ -469,9 +473,14 @@ impl Kernels {
             .iter()
             .map(|m| compensated_sum(m.iter().map(|&i| previous[i].weight)))
             .collect();
+        // The particles below ε, where they carry weight (all of a law's may have underflowed).
         let below: Vec<Vec<usize>> = members
             .iter()
-            .map(|m| m.iter().copied().filter(|&i| previous[i].rho < epsilon).collect())
+            .map(|m| {
+                let below: Vec<usize> = m.iter().copied().filter(|&i| previous[i].rho < epsilon).collect();
+                let weight = compensated_sum(below.iter().map(|&i| previous[i].weight));
+                if weight > 0.0 { below } else { Vec::new() }
+            })
             .collect();
         // A law is proposed when it has particles and, with `worth`, when it can still reach ε.
         let proposed: Vec<bool> = (0..members.len())
@@ -487,25 +496,20 @@ impl Kernels {
         } else {
             members.iter().map(|m| !m.is_empty()).collect()
         };
-        let all_of = |slot: usize| members[slot].clone();
         let laws: Vec<Option<LawKernel>> = members
             .iter()
-            .cloned()
             .zip(&below)
             .enumerate()
             .map(|(slot, (all, below))| {
+                // The local kernel is centred on the particles below ε (on all where none is).
+                let near = if below.is_empty() { all } else { below };
                 let ancestors = match config.refill {
-                    Refill::Survivors if !below.is_empty() => below.clone(),
-                    _ => all,
+                    Refill::Survivors => near.clone(),
+                    Refill::Fresh => all.clone(),
                 };
-                // The local kernel is centred on the particles below ε (all where none is).
-                let centre = match config.perturbation {
-                    Perturbation::Global => None,
-                    Perturbation::Local if below.is_empty() => Some(all_of(slot)),
-                    Perturbation::Local => Some(below.clone()),
-                };
+                let centre = (config.perturbation == Perturbation::Local).then_some(near.as_slice());
                 proposed[slot]
-                    .then(|| LawKernel::new(prior, slot, previous, ancestors, config.kernel_scale, centre.as_deref()))
+                    .then(|| LawKernel::new(prior, slot, previous, ancestors, config.kernel_scale, centre))
                     .transpose()
             })
             .collect::<Result<_>>()?;
@@ -803,14 +807,19 @@ fn normalise_log_weights(log_w: &[f64]) -> Vec<f64> {
 
 /// A population's survivors and the normalised weights of its new particles, combined: two
 /// importance samples of the same target, each normalised on its own and mixed in proportion
-/// to its effective sample size (the variance-minimising mix of two independent estimates).
+/// to its effective sample size (the variance-minimising mix were they independent; the new
+/// particles descend from the survivors, so it is a heuristic, consistent as both samples are).
 /// Returns the survivors and the weights of all particles, survivors first; Σ w = 1.
 fn combine_survivors(mut survivors: Vec<Particle>, new: Vec<f64>) -> (Vec<Particle>, Vec<f64>) {
     if survivors.is_empty() {
         return (survivors, new);
     }
     let total = compensated_sum(survivors.iter().map(|p| p.weight));
-    let old: Vec<f64> = survivors.iter().map(|p| p.weight / total).collect();
+    // Survivors whose weights all underflowed to 0 carry no weight (and no ESS).
+    let old: Vec<f64> = survivors
+        .iter()
+        .map(|p| if total > 0.0 { p.weight / total } else { 0.0 })
+        .collect();
     let (ess_old, ess_new) = (
         super::effective_sample_size(&old),
         if new.is_empty() {
@@ -1041,8 +1050,13 @@ pub fn run_on(
         let draws = fill.position;
         let mut population = fill.into_population(per_law, super::effective_sample_size(&weights));
         if config.refill == Refill::Survivors {
-            // The acceptance rates are the top-up's: new particles per proposal.
-            population.record.acceptance_rate = new as f64 / draws.max(1) as f64;
+            // The acceptance rates are the top-up's: new particles per proposal. A population
+            // that needed none (every particle survived a schedule's ε) keeps the last rate.
+            population.record.acceptance_rate = if draws > 0 {
+                new as f64 / draws as f64
+            } else {
+                previous_rate
+            };
             let accepted_new = |law| population.particles[n - new..].iter().filter(|p| p.law == law).count();
             for r in &mut population.record.per_law {
                 r.acceptance_rate = if r.draws > 0 {

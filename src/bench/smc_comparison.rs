@@ -13,7 +13,7 @@ use crate::error::Result;
 use crate::eval::{Backend, gpu::tune::ShapeWish};
 use crate::fit;
 use crate::laws::Law;
-use crate::numerics::quantile;
+use crate::numerics::{quantile, weighted_ks};
 use crate::run::{self, RunConfig, SamplerConfig};
 use serde::Serialize;
 
@@ -73,7 +73,8 @@ pub struct SchemeRun {
     pub final_epsilon: Option<f64>,
     pub probabilities: Vec<(Law, f64)>,
     /// Against the rejection run of the same seed: the largest |ΔP(law)| in standard errors
-    /// √(p(1 − p)(1/ESS + 1/N)), p pooled (0 for rejection itself).
+    /// √(p(1 − p)(1/ESS + 1/N)), p pooled (0 for rejection itself; NaN where the two runs
+    /// ended at different ε, and are not compared).
     pub probability_z: f64,
     /// Against the rejection run of the same seed: the largest weighted two-sample KS statistic
     /// of a parameter over its critical value 1.95 √(1/ESS₁ + 1/ESS₂) (α = 0.001), over the
@@ -170,7 +171,14 @@ fn compare_on(
             let last = populations.last().expect("a run to ε_min has populations").clone();
             let scored: u64 = populations.iter().map(|p| p.record.candidates_scored).sum();
             let (probability_z, ks_ratio) = match rejection_runs.get(seed as usize - 1) {
-                Some(reference) if scheme.smc.is_some() => agreement(&last, reference, &base_config.laws),
+                Some(reference) if scheme.smc.is_some() => {
+                    let at = |p: &Population| p.record.epsilon.map(f64::to_bits);
+                    if at(&last) == at(reference) {
+                        agreement(&last, reference, &base_config.laws)
+                    } else {
+                        (f64::NAN, f64::NAN)
+                    }
+                }
                 _ => (0.0, 0.0),
             };
             let run = SchemeRun {
@@ -232,10 +240,18 @@ fn summarise(scheme: Scheme, runs: Vec<SchemeRun>, rejection: Option<&SchemeSumm
         scheme,
         scored_per_ess: quantile(&per_ess, 0.5),
         fewer_than_rejection: quantile(&ratios, 0.5),
-        max_probability_z: runs.iter().map(|r| r.probability_z).fold(0.0, f64::max),
-        max_ks_ratio: runs.iter().map(|r| r.ks_ratio).fold(0.0, f64::max),
+        max_probability_z: worst(runs.iter().map(|r| r.probability_z)),
+        max_ks_ratio: worst(runs.iter().map(|r| r.ks_ratio)),
         runs,
     }
+}
+
+/// The largest of `values`, NaN if any is (a run not compared shows in the summary).
+fn worst(values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(
+        0.0,
+        |a: f64, b| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) },
+    )
 }
 
 /// (largest |ΔP| in standard errors, largest KS statistic over its critical value) of `smc`
@@ -277,29 +293,4 @@ fn agreement(smc: &Population, rejection: &Population, laws: &[Law]) -> (f64, f6
         }
     }
     (z, ks)
-}
-
-/// sup |F − G| between two weighted empirical CDFs of (value, weight) pairs.
-pub fn weighted_ks(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
-    let total = |v: &[(f64, f64)]| v.iter().map(|p| p.1).sum::<f64>();
-    let (ta, tb) = (total(a), total(b));
-    let mut all: Vec<(f64, f64, f64)> = a
-        .iter()
-        .map(|p| (p.0, p.1 / ta, 0.0))
-        .chain(b.iter().map(|p| (p.0, 0.0, p.1 / tb)))
-        .collect();
-    all.sort_by(|x, y| x.0.total_cmp(&y.0));
-    let (mut fa, mut fb, mut d) = (0.0, 0.0, 0.0f64);
-    let mut i = 0;
-    while i < all.len() {
-        // Ties step together: equal values are one point of both CDFs.
-        let x = all[i].0;
-        while i < all.len() && all[i].0.to_bits() == x.to_bits() {
-            fa += all[i].1;
-            fb += all[i].2;
-            i += 1;
-        }
-        d = d.max((fa - fb).abs());
-    }
-    d
 }

@@ -182,7 +182,8 @@ pub fn kernel_sums(sums: &KernelSums, out: &mut [f64]) {
                         along += d * x[k];
                     }
                     if let Some(c) = sums.rank_one {
-                        r2 -= c[block * TERMS_PER_BLOCK + j] * along * along;
+                        // The difference of two near-equal squares can round below 0.
+                        r2 = (r2 - c[block * TERMS_PER_BLOCK + j] * along * along).max(0.0);
                     }
                     s += w * numerics::exp(-0.5 * r2);
                 }

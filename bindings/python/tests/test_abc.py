@@ -21,8 +21,10 @@ import bitrock
 
 def test_population_and_probability_tables(small_run: bitrock.Result) -> None:
     populations = small_run.populations
-    assert list(populations.columns) == ["epsilon", "accepted", "drawn", "acceptance_rate", "ess", "seconds"]
+    assert list(populations.columns) == ["epsilon", "accepted", "drawn", "acceptance_rate", "ess", "thin", "seconds"]
     assert (populations["accepted"] == 300).all()
+    # A rejection run's weights are equal: ESS = N, never thin.
+    assert (populations["ess"] == 300).all() and not populations["thin"].any()
     assert np.isinf(populations["epsilon"].iloc[0])
     assert (np.diff(populations["epsilon"].to_numpy()[1:]) < 0).all()
     probabilities = small_run.model_probabilities

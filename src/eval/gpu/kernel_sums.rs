@@ -25,7 +25,8 @@ struct SumsJob {
     _pad: [u32; 3],
 }
 
-/// Two vec4 per point: coordinates 0-3, then 4-5, `extra` and 0.
+/// Two vec4 per point: coordinates 0-3, then 4-5 and the two numbers of `extra` (a source's
+/// weight and rank-one coefficient; zeros for a target).
 fn pack(points: &[[f64; MAX_PARAMS]], extra: impl Fn(usize) -> [f64; 2]) -> Vec<f32> {
     points
         .iter()

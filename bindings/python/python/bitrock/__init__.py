@@ -50,6 +50,11 @@ __version__ = _bitrock.version()
 
 Record = _bitrock.Record
 
+
+# A population whose effective sample size is below this share of its particles is thin: the
+# library's `abc::MIN_ESS_SHARE`, applied here to run.json documents that carry no `thin` flag.
+_MIN_ESS_SHARE = 0.1
+
 def read_record(
     source: str | os.PathLike[str] | pd.DataFrame | None = None,
     *,
@@ -521,7 +526,7 @@ class Result:
                 "drawn": p["draws"],
                 "acceptance_rate": p["acceptance_rate"],
                 "ess": p["ess"],
-                "thin": p.get("thin", p["ess"] < 0.1 * p["accepted"]),
+                "thin": p.get("thin", p["ess"] < _MIN_ESS_SHARE * p["accepted"]),
                 "seconds": p["seconds"],
             }
             for p in self.document["populations"]
