@@ -55,8 +55,13 @@ pub struct GpuRecords {
     /// Whether `buffers.proposals` holds `params_chunk` proposals yet (a placeholder until
     /// the first explicit request: a rejection check never needs it).
     proposals_built: bool,
-    kernel: super::Kernel,
-    bind_group: wgpu::BindGroup,
+    /// Whether each record scales by a weight-on-bit ratio that varies (override HAS_RATIO).
+    ratio: Vec<bool>,
+    /// The pipeline and bind group of records without a varying ratio (`[0]`) and with one
+    /// (`[1]`), where there are such records. A record is always scored by the pipeline its
+    /// own evaluator uses: a driver may round the two differently (NVIDIA's does, by an ulp),
+    /// and a record's sums must not depend on what else shares the batch.
+    kernels: [Option<(super::Kernel, wgpu::BindGroup)>; 2],
 }
 
 /// The buffers of bindings 0-8 of shaders/records.wgsl, in order.
@@ -134,7 +139,7 @@ impl GpuRecords {
         let (chunk, params_chunk) = super::candidates_per_dispatch(d, &context.limits);
         let chunk = (chunk.min(max_candidates.unwrap_or(usize::MAX)) / tile).max(1) * tile;
         let params_chunk = params_chunk.min(chunk);
-        let has_ratio = problems.iter().any(|p| super::has_ratio(p));
+        let ratio: Vec<bool> = problems.iter().map(|p| super::has_ratio(p)).collect();
         let copy = wgpu::BufferUsages::COPY_DST;
         let storage = wgpu::BufferUsages::STORAGE | copy;
         let mut columns = Vec::new();
@@ -180,13 +185,6 @@ impl GpuRecords {
             buffer_entry(9, STORAGE_READ),
         ];
         shape.check_fits(context)?;
-        let kernel = context.kernel(
-            "records",
-            shape.entry_point(),
-            super::records_source,
-            &entries,
-            &shape.constants(has_ratio),
-        )?;
         let buffers = Bindings {
             priors,
             job,
@@ -197,6 +195,20 @@ impl GpuRecords {
             proposals: context.buffer("no proposals", size_of::<GpuProposal>() as u64, storage)?,
             offsets: context.buffer("offsets", 4 * chunk as u64, storage)?,
         };
+        let mut kernels = [None, None];
+        for (class, slot) in kernels.iter_mut().enumerate() {
+            if ratio.iter().any(|&r| usize::from(r) == class) {
+                let kernel = context.kernel(
+                    "records",
+                    shape.entry_point(),
+                    super::records_source,
+                    &entries,
+                    &shape.constants(class == 1),
+                )?;
+                let group = buffers.group(context, &kernel)?;
+                *slot = Some((kernel, group));
+            }
+        }
         Ok(Self {
             context,
             shape,
@@ -205,11 +217,11 @@ impl GpuRecords {
             priors: problems.iter().map(|p| (p.prior.clone(), p.seed)).collect(),
             chunk,
             params_chunk,
-            bind_group: buffers.group(context, &kernel)?,
             buffers,
             staging,
             proposals_built: false,
-            kernel,
+            ratio,
+            kernels,
         })
     }
 
@@ -227,15 +239,41 @@ impl GpuRecords {
                 (self.params_chunk * size_of::<GpuProposal>()) as u64,
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             )?;
-            self.bind_group = self.buffers.group(self.context, &self.kernel)?;
+            for (kernel, group) in self.kernels.iter_mut().flatten() {
+                *group = self.buffers.group(self.context, kernel)?;
+            }
             self.proposals_built = true;
         }
         let mut out: Vec<Vec<f32>> = requests.iter().map(|r| vec![0.0; r.candidates.len()]).collect();
         let orders: Vec<Vec<u32>> = requests.iter().map(|r| self.law_order(r)).collect();
+        let mut dispatches = 0;
+        // Records with and without a varying ratio go to their own pipelines, one after the other.
+        for class in [false, true] {
+            let of_class: Vec<usize> = (0..requests.len())
+                .filter(|&i| self.ratio[requests[i].record] == class)
+                .collect();
+            if !of_class.is_empty() {
+                dispatches += self.score_class(usize::from(class), requests, &of_class, &orders, &mut out)?;
+            }
+        }
+        Ok((out, dispatches))
+    }
+
+    /// Scores the requests `of_class` (indices into `requests`), all of records of ratio class
+    /// `class`, into `out`; returns the dispatches made.
+    fn score_class(
+        &self,
+        class: usize,
+        requests: &[Request],
+        of_class: &[usize],
+        orders: &[Vec<u32>],
+        out: &mut [Vec<f32>],
+    ) -> Result<usize, GpuError> {
         let tile = CANDIDATES_PER_TILE as usize;
         let mut plan = Plan::default();
         let mut dispatches = 0;
-        for (index, request) in requests.iter().enumerate() {
+        for &index in of_class {
+            let request = &requests[index];
             let len = request.candidates.len();
             let explicit = matches!(request.candidates, Candidates::Explicit(_));
             let order = &orders[index];
@@ -248,7 +286,7 @@ impl GpuRecords {
                     usize::MAX
                 };
                 if room < tile || proposal_room == 0 || plan.segments.len() == SEGMENTS_PER_DISPATCH {
-                    self.run(&plan, &orders, &mut out)?;
+                    self.run(class, &plan, orders, out)?;
                     dispatches += 1;
                     plan = Plan::default();
                     continue;
@@ -289,10 +327,10 @@ impl GpuRecords {
             }
         }
         if !plan.segments.is_empty() {
-            self.run(&plan, &orders, &mut out)?;
+            self.run(class, &plan, orders, out)?;
             dispatches += 1;
         }
-        Ok((out, dispatches))
+        Ok(dispatches)
     }
 
     /// The request's candidates (offsets from its first) in law order, stable: scored in this
@@ -315,8 +353,12 @@ impl GpuRecords {
         order
     }
 
-    /// One dispatch of `plan`, its sums put back in the requests' own order.
-    fn run(&self, plan: &Plan, orders: &[Vec<u32>], out: &mut [Vec<f32>]) -> Result<(), GpuError> {
+    /// One dispatch of `plan` with the pipeline of ratio class `class`, its sums put back in
+    /// the requests' own order.
+    fn run(&self, class: usize, plan: &Plan, orders: &[Vec<u32>], out: &mut [Vec<f32>]) -> Result<(), GpuError> {
+        let (kernel, bind_group) = self.kernels[class]
+            .as_ref()
+            .expect("a pipeline for every class present");
         let queue = &self.context.queue;
         let b = &self.buffers;
         queue.write_buffer(&b.segments, 0, bytemuck::cast_slice(&plan.segments));
@@ -328,8 +370,8 @@ impl GpuRecords {
             queue.write_buffer(&b.offsets, 0, bytemuck::cast_slice(&plan.offsets));
         }
         let buffers = ScoringBuffers {
-            pipeline: &self.kernel.pipeline,
-            bind_group: &self.bind_group,
+            pipeline: &kernel.pipeline,
+            bind_group,
             job: &b.job,
             ssr: &b.ssr,
             staging: &self.staging,
