@@ -3,8 +3,9 @@
 //! columns and their priors in one array; a dispatch carries segments, one per request (or per
 //! piece of a request too large for one dispatch), each starting on a tile of 16 candidates,
 //! and for every tile the segment it belongs to. A candidate is scored by the same code, blocks
-//! and slices as the single-record kernels use, so its SSR is the one
-//! [`super::residual::GpuEvaluator`] gives for its record, bit for bit.
+//! and slices as the single-record kernels use, in the pipeline they use for its record (with
+//! or without a varying weight-on-bit ratio: the two are dispatched apart), so its SSR is the
+//! one [`super::residual::GpuEvaluator`] gives for its record, bit for bit.
 
 use super::{
     CANDIDATES_PER_TILE, GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, STORAGE_WRITE, ScoringBuffers,
