@@ -263,7 +263,8 @@ impl Settings {
         })
     }
 
-    /// Refuses a setting of the other sampler, naming it and the sampler that runs.
+    /// Refuses a setting of the other sampler, or of an SMC scheme the run does not use, naming
+    /// it and what the run uses.
     fn check_sampler_settings(&self) -> Result<()> {
         match self.sampler {
             Sampler::Rejection => {

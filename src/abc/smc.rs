@@ -297,6 +297,9 @@ struct LawKernel {
     /// Indices of the law's ancestors in the previous population: its particles, or with
     /// [`Refill::Survivors`] those below the new ε where it has any.
     members: Vec<usize>,
+    /// The ancestors' whitened coordinates, in the order of `members`: the kernel sums'
+    /// sources, and each ancestor's e of the local perturbation.
+    sources: Vec<[f64; MAX_PARAMS]>,
     /// Cumulative weights of the ancestors, normalised to end at 1.
     cdf: Vec<f64>,
     /// The ancestors' share of the previous population's weight.
@@ -405,17 +408,24 @@ impl LawKernel {
             .iter()
             .map(|&j| (f64::from(bx.upper[j]) - f64::from(bx.lower[j])).ln())
             .sum::<f64>();
-        Ok(Self {
+        let mut kernel = Self {
             free,
             mean,
             chol,
             log_det_l,
             members,
+            sources: Vec::new(),
             cdf,
             member_weight,
             log_prior_density,
             local: centre.is_some(),
-        })
+        };
+        kernel.sources = kernel
+            .members
+            .iter()
+            .map(|&i| kernel.whiten(&previous[i].params))
+            .collect();
+        Ok(kernel)
     }
 
     /// Whitened coordinates L⁻¹(φ − mean) of the free parameters of `params`, zero-padded.
@@ -658,7 +668,8 @@ impl Kernels {
         let b2 = philox4x32_10(candidate_counter(stream, index, 2), key);
         let slot = self.slot_of_block(b0);
         let law = self.laws[slot].as_ref().expect("proposals go to alive laws");
-        let ancestor = &previous[law.members[inverse_cdf(&law.cdf, open_unit(b0[3]))]];
+        let at = inverse_cdf(&law.cdf, open_unit(b0[3]));
+        let ancestor = &previous[law.members[at]];
         let words = [b1[0], b1[1], b1[2], b1[3], b2[0], b2[1]];
         let mut z = [0.0; MAX_PARAMS];
         for pair in 0..MAX_PARAMS / 2 {
@@ -670,7 +681,7 @@ impl Kernels {
         if law.local {
             // The ancestor's own covariance L (I + e eᵀ) Lᵀ: z becomes (I + κ e eᵀ) z, the
             // symmetric square root of I + e eᵀ, κ = (√(1 + |e|²) − 1) / |e|².
-            let e = law.whiten(&ancestor.params);
+            let e = &law.sources[at];
             let e2: f64 = e[..k].iter().map(|v| v * v).sum();
             if e2 > 0.0 {
                 let kappa = ((1.0 + e2).sqrt() - 1.0) / e2;
@@ -736,8 +747,6 @@ impl Kernels {
                 continue;
             }
             let targets: Vec<[f64; MAX_PARAMS]> = new.iter().map(|&i| law.whiten(&particles[i].params)).collect();
-            let sources: Vec<[f64; MAX_PARAMS]> =
-                law.members.iter().map(|&j| law.whiten(&previous[j].params)).collect();
             let mut weights: Vec<f64> = law
                 .members
                 .iter()
@@ -745,7 +754,7 @@ impl Kernels {
                 .collect();
             // Local: source j's density carries det(I + e eᵀ)^(−½) = (1 + |e|²)^(−½).
             let rank_one: Option<Vec<f64>> = law.local.then(|| {
-                sources
+                law.sources
                     .iter()
                     .zip(&mut weights)
                     .map(|(e, w)| {
@@ -759,7 +768,7 @@ impl Kernels {
             sums_on(
                 &KernelSums {
                     targets: &targets,
-                    sources: &sources,
+                    sources: &law.sources,
                     weights: &weights,
                     rank_one: rank_one.as_deref(),
                 },
@@ -1182,6 +1191,21 @@ mod tests {
         // One law, one free parameter, previous particles at 1 and 3 with equal weight, kernel
         // σ² = 2·1 + (10⁻⁴·4)²: a new particle at x has q ∝ N(x; 1, σ²) + N(x; 3, σ²), so
         // its weight is ∝ 1 / q(x).
+        let (_, _, _, w) = two_ancestors(&classic());
+        assert!((w[0] - two_ancestors_expected()).abs() < 1e-12, "{w:?}");
+        assert!((w[0] + w[1] - 1.0).abs() < 1e-15);
+    }
+
+    /// The host's kernel sums, as `WeightsOn::Host` computes them.
+    fn host_sums(s: &KernelSums, out: &mut [f64]) -> Result<()> {
+        crate::eval::cpu::kernel_sums(s, out);
+        Ok(())
+    }
+
+    /// One law with one free parameter on [0, 4], ancestors at 1 and 3 of equal weight (all
+    /// below ε), the kernels `config` makes of them, and the normalised weights of new
+    /// particles at 2 and 0.5.
+    fn two_ancestors(config: &SmcConfig) -> (Prior, Vec<Particle>, Kernels, Vec<f64>) {
         let prior = Prior::new(
             vec![LawBox {
                 law: Law::M4,
@@ -1195,59 +1219,35 @@ mod tests {
             particle(Law::M4, 0, &[1.0, 0.0, 0.0, 0.0], 0.5),
             particle(Law::M4, 1, &[3.0, 0.0, 0.0, 0.0], 0.5),
         ];
-        let config = classic();
-        let kernels = Kernels::new(&prior, &previous, &config, f64::INFINITY, &|_| true).unwrap();
+        let kernels = Kernels::new(&prior, &previous, config, f64::INFINITY, &|_| true).unwrap();
         let new = [
             particle(Law::M4, 0, &[2.0, 0.0, 0.0, 0.0], 0.0),
             particle(Law::M4, 1, &[0.5, 0.0, 0.0, 0.0], 0.0),
         ];
-        let host = |s: &KernelSums, out: &mut [f64]| -> Result<()> {
-            crate::eval::cpu::kernel_sums(s, out);
-            Ok(())
-        };
-        let w = kernels.weights(&prior, &previous, &new, &host).unwrap();
+        let w = kernels.weights(&prior, &previous, &new, &host_sums).unwrap();
+        assert!((w[0] + w[1] - 1.0).abs() < 1e-15);
+        (prior, previous, kernels, w)
+    }
+
+    /// The weight of the particle at 2 of [`two_ancestors`] when each ancestor's kernel has
+    /// variance 2 + (10⁻⁴·4)²: q(x) ∝ N(x; 1, σ²) + N(x; 3, σ²), w ∝ 1 / q.
+    fn two_ancestors_expected() -> f64 {
         let s2 = 2.0 + 1.6e-7;
         let q = |x: f64| (-(x - 1.0f64).powi(2) / (2.0 * s2)).exp() + (-(x - 3.0f64).powi(2) / (2.0 * s2)).exp();
-        let expected = (1.0 / q(2.0)) / (1.0 / q(2.0) + 1.0 / q(0.5));
-        assert!((w[0] - expected).abs() < 1e-12, "{} vs {expected}", w[0]);
-        assert!((w[0] + w[1] - 1.0).abs() < 1e-15);
+        (1.0 / q(2.0)) / (1.0 / q(2.0) + 1.0 / q(0.5))
     }
 
     #[test]
     fn the_local_kernel_gives_each_ancestor_the_covariance_around_it() {
-        // One free parameter, ancestors at 1 and 3 with equal weights, all below ε: centre 2,
-        // C = 1 + (10⁻⁴·4)²; each ancestor's variance is C + (φ_j − 2)² = 2 + 1.6e-7.
-        let prior = Prior::new(
-            vec![LawBox {
-                law: Law::M4,
-                lower: vec![0.0, 0.0, 0.0, 0.0],
-                upper: vec![4.0, 0.0, 0.0, 0.0],
-            }],
-            vec![1.0],
-        )
-        .unwrap();
-        let previous = vec![
-            particle(Law::M4, 0, &[1.0, 0.0, 0.0, 0.0], 0.5),
-            particle(Law::M4, 1, &[3.0, 0.0, 0.0, 0.0], 0.5),
-        ];
+        // Ancestors at 1 and 3, all below ε: centre 2, C = 1 + (10⁻⁴·4)²; each ancestor's
+        // variance is C + (φ_j − 2)² = 2 + 1.6e-7, the same as the global kernel's 2·C here.
         let config = SmcConfig {
             perturbation: Perturbation::Local,
             ..classic()
         };
-        let kernels = Kernels::new(&prior, &previous, &config, f64::INFINITY, &|_| true).unwrap();
-        let new = [
-            particle(Law::M4, 0, &[2.0, 0.0, 0.0, 0.0], 0.0),
-            particle(Law::M4, 1, &[0.5, 0.0, 0.0, 0.0], 0.0),
-        ];
-        let host = |s: &KernelSums, out: &mut [f64]| -> Result<()> {
-            crate::eval::cpu::kernel_sums(s, out);
-            Ok(())
-        };
-        let w = kernels.weights(&prior, &previous, &new, &host).unwrap();
+        let (prior, previous, kernels, w) = two_ancestors(&config);
+        assert!((w[0] - two_ancestors_expected()).abs() < 1e-12, "{w:?}");
         let s2 = 2.0 + 1.6e-7;
-        let q = |x: f64| (-(x - 1.0f64).powi(2) / (2.0 * s2)).exp() + (-(x - 3.0f64).powi(2) / (2.0 * s2)).exp();
-        let expected = (1.0 / q(2.0)) / (1.0 / q(2.0) + 1.0 / q(0.5));
-        assert!((w[0] - expected).abs() < 1e-12, "{} vs {expected}", w[0]);
         // Proposals: a mixture of N(1, s2) and N(3, s2), variance 1 + s2 (inside the box or not).
         let key = key_of_seed(5);
         let n = 200_000u64;
@@ -1315,11 +1315,7 @@ mod tests {
             particle(Law::M2, 0, &[2.0, 1.0, 1.0], 0.0),
             particle(Law::M4, 1, &[2.0, 0.0, 0.0, 0.0], 0.0),
         ];
-        let host = |s: &KernelSums, out: &mut [f64]| -> Result<()> {
-            crate::eval::cpu::kernel_sums(s, out);
-            Ok(())
-        };
-        let w = kernels.weights(&prior, &previous, &new, &host).unwrap();
+        let w = kernels.weights(&prior, &previous, &new, &host_sums).unwrap();
         assert!((w[1] / w[0] - 0.66 / 0.34).abs() < 1e-12, "{w:?}");
     }
 

@@ -175,13 +175,13 @@ pub fn kernel_sums(sums: &KernelSums, out: &mut [f64]) {
             {
                 let mut s = 0.0f64;
                 for (j, (x, &w)) in xs.iter().zip(ws).enumerate() {
-                    let (mut r2, mut along) = (0.0f64, 0.0f64);
+                    let mut r2 = 0.0f64;
                     for k in 0..MAX_PARAMS {
                         let d = y[k] - x[k];
                         r2 += d * d;
-                        along += d * x[k];
                     }
                     if let Some(c) = sums.rank_one {
+                        let along: f64 = (0..MAX_PARAMS).map(|k| (y[k] - x[k]) * x[k]).sum();
                         // The difference of two near-equal squares can round below 0.
                         r2 = (r2 - c[block * TERMS_PER_BLOCK + j] * along * along).max(0.0);
                     }
