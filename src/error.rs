@@ -26,6 +26,14 @@ pub enum Error {
         line: Option<u64>,
         message: String,
     },
+    /// A text file (a law file) is wrong at a line and column.
+    #[error("{}:{line}:{column}: {message}", path.display())]
+    Syntax {
+        path: PathBuf,
+        line: u64,
+        column: usize,
+        message: String,
+    },
     /// The data read fine but cannot be used (empty after filtering, all-zero torque...).
     #[error("{}: {message}", path.display())]
     Data { path: PathBuf, message: String },
@@ -109,6 +117,7 @@ impl Error {
             Error::Read { .. }
             | Error::Cell { .. }
             | Error::Format { .. }
+            | Error::Syntax { .. }
             | Error::Data { .. }
             | Error::Fit { .. }
             | Error::InvalidSetting { .. }

@@ -41,7 +41,7 @@ pub struct ParamSpec {
 }
 
 impl ParamSpec {
-    const fn new(name: &'static str, torque_power: i32, inverse_speed_power: i32, lower: f64) -> Self {
+    pub(crate) const fn new(name: &'static str, torque_power: i32, inverse_speed_power: i32, lower: f64) -> Self {
         Self {
             name,
             torque_power,

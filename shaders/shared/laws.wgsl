@@ -15,6 +15,42 @@ fn tanh_f32(x: f32) -> f32 {
     return select(t, -t, x < 0.0);
 }
 
+// sin and cos of law files: x reduced by pi/2 in three parts (Cody-Waite), then Cephes' f32
+// polynomials on [-pi/4, pi/4]: errors of a few f32 ulps for |x| up to about 1e4, where the
+// built-ins' are only bounded in absolute terms (2^-11 on Vulkan).
+struct Reduced {
+    y: f32,
+    quadrant: i32,
+}
+
+fn reduce_half_pi(x: f32) -> Reduced {
+    let k = round(x * 0.6366197723675814);
+    let y = ((x - k * 1.5703125) - k * 4.837512969970703125e-4) - k * 7.549789954891882e-8;
+    return Reduced(y, i32(k) & 3);
+}
+
+fn sin_poly(y: f32) -> f32 {
+    let z = y * y;
+    return y + y * z * (-1.6666654611e-1 + z * (8.3321608736e-3 + z * -1.9515295891e-4));
+}
+
+fn cos_poly(y: f32) -> f32 {
+    let z = y * y;
+    return 1.0 - 0.5 * z + z * z * (4.166664568298827e-2 + z * (-1.388731625493765e-3 + z * 2.443315711809948e-5));
+}
+
+fn sin_f32(x: f32) -> f32 {
+    let a = reduce_half_pi(x);
+    let s = select(sin_poly(a.y), cos_poly(a.y), (a.quadrant & 1) == 1);
+    return select(s, -s, a.quadrant >= 2);
+}
+
+fn cos_f32(x: f32) -> f32 {
+    let a = reduce_half_pi(x);
+    let c = select(cos_poly(a.y), sin_poly(a.y), (a.quadrant & 1) == 1);
+    return select(c, -c, a.quadrant == 1 || a.quadrant == 2);
+}
+
 // m1: b0 (tanh(b1 w) + b2 w / (1 + b3 w^2)).
 fn torque_m1(b0: f32, b1: f32, b2: f32, b3: f32, w: f32) -> f32 {
     return b0 * (tanh_f32(b1 * w) + b2 * w / (1.0 + b3 * w * w));

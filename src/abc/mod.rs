@@ -120,10 +120,15 @@ pub struct PopulationRecord {
 /// estimates rest on a few heavily weighted particles, and every output says so.
 pub const MIN_ESS_SHARE: f64 = 0.1;
 
+/// True when `ess` is below [`MIN_ESS_SHARE`] of `particles` (never for an empty population).
+pub fn is_thin(ess: f64, particles: usize) -> bool {
+    particles > 0 && ess < MIN_ESS_SHARE * particles as f64
+}
+
 impl PopulationRecord {
     /// True when the effective sample size is below [`MIN_ESS_SHARE`] of the particles.
     pub fn thin(&self) -> bool {
-        self.accepted > 0 && self.ess < MIN_ESS_SHARE * self.accepted as f64
+        is_thin(self.ess, self.accepted)
     }
 
     /// P(`law`) in this population; 0 for a law not in it.

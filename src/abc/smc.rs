@@ -145,7 +145,9 @@ pub enum Perturbation {
     /// Σ_j = Σ_k w_k (φ_k − φ_j)(φ_k − φ_j)ᵀ over the law's particles below the new ε, that is
     /// their covariance C plus (φ_j − μ)(φ_j − μ)ᵀ (over all the law's particles where none is
     /// below ε); narrow near the posterior's centre, wide at its edges, and wider still for an
-    /// ancestor above ε (with [`Refill::Fresh`]). `kernel_scale` does not apply.
+    /// ancestor above ε (with [`Refill::Fresh`]). `kernel_scale` does not apply. A population
+    /// after a thin one (effective sample size below [`super::MIN_ESS_SHARE`] of N) is drawn
+    /// with the global kernels instead.
     Local,
 }
 
@@ -448,6 +450,12 @@ pub(crate) struct Proposed {
     pub slots: Vec<u8>,
 }
 
+/// Whether `population` is thin ([`super::is_thin`]).
+fn thin(population: &[Particle]) -> bool {
+    let weights: Vec<f64> = population.iter().map(|p| p.weight).collect();
+    super::is_thin(super::effective_sample_size(&weights), population.len())
+}
+
 /// Everything a population's proposals depend on: one kernel per law it proposes.
 pub(crate) struct Kernels {
     /// Per prior slot: the law's kernel, `None` for a law that gets no proposal.
@@ -506,6 +514,10 @@ impl Kernels {
         } else {
             members.iter().map(|m| !m.is_empty()).collect()
         };
+        // The effective-sample-size guard: after a thin population the local kernels, whose
+        // narrow covariances near the centre are what thins the weights, give way to the
+        // global ones for one population.
+        let local = config.perturbation == Perturbation::Local && !thin(previous);
         let laws: Vec<Option<LawKernel>> = members
             .iter()
             .zip(&below)
@@ -517,7 +529,7 @@ impl Kernels {
                     Refill::Survivors => near.clone(),
                     Refill::Fresh => all.clone(),
                 };
-                let centre = (config.perturbation == Perturbation::Local).then_some(near.as_slice());
+                let centre = local.then_some(near.as_slice());
                 proposed[slot]
                     .then(|| LawKernel::new(prior, slot, previous, ancestors, config.kernel_scale, centre))
                     .transpose()
@@ -1277,6 +1289,58 @@ mod tests {
         let var = steps.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
         // Var of the sample variance of a two-normal mixture: below 5·(2·var²/n)^½.
         assert!((var - (1.0 + s2)).abs() < 5.0 * (2.0 * 9.0 / n as f64).sqrt(), "{var}");
+    }
+
+    #[test]
+    fn after_a_thin_population_the_local_kernel_gives_way_to_the_global_one() {
+        // Twenty m4 ancestors on [0, 4] at 0.1, 0.3, …, 3.9. With equal weights (ESS 20) the
+        // kernels are local; with one weight 0.9 and the rest 0.1 / 19 each, ESS = 1 / (0.81 +
+        // 19·(0.1/19)²) ≈ 1.23, below 0.1·20: the global kernel with its scale 2 takes over.
+        let prior = Prior::new(
+            vec![LawBox {
+                law: Law::M4,
+                lower: vec![0.0, 0.0, 0.0, 0.0],
+                upper: vec![4.0, 0.0, 0.0, 0.0],
+            }],
+            vec![1.0],
+        )
+        .unwrap();
+        let population = |heavy: Option<f64>| -> Vec<Particle> {
+            (0..20)
+                .map(|i| {
+                    let w = match heavy {
+                        None => 1.0 / 20.0,
+                        Some(h) if i == 7 => h,
+                        Some(h) => (1.0 - h) / 19.0,
+                    };
+                    particle(Law::M4, i, &[0.1 + 0.2 * i as f64, 0.0, 0.0, 0.0], w)
+                })
+                .collect()
+        };
+        let local = SmcConfig {
+            perturbation: Perturbation::Local,
+            ..classic()
+        };
+        let kernel = |previous: &[Particle], config: &SmcConfig| {
+            let kernels = Kernels::new(&prior, previous, config, f64::INFINITY, &|_| true).unwrap();
+            let k = kernels.laws[0].as_ref().unwrap();
+            (k.local, k.chol.clone())
+        };
+        let even = population(None);
+        assert!(!thin(&even));
+        assert!(kernel(&even, &local).0);
+        let heavy = population(Some(0.9));
+        assert!(thin(&heavy));
+        let (is_local, chol) = kernel(&heavy, &local);
+        assert!(!is_local);
+        assert_eq!(chol, kernel(&heavy, &classic()).1);
+        // Exactly at the share, ESS 2 of 20, the population is not thin: weights 1/2 on two
+        // particles and 0 elsewhere.
+        let mut two = population(None);
+        for (i, p) in two.iter_mut().enumerate() {
+            p.weight = if i < 2 { 0.5 } else { 0.0 };
+        }
+        assert!(!thin(&two));
     }
 
     #[test]

@@ -10,6 +10,7 @@
 
 pub mod candidates;
 pub mod kernel_sums;
+pub mod law_points;
 pub mod records;
 pub mod residual;
 pub mod shape;
@@ -28,7 +29,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 const PHILOX_WGSL: &str = include_str!("../../../shaders/shared/philox.wgsl");
 const JOB_WGSL: &str = include_str!("../../../shaders/shared/job.wgsl");
 const CANDIDATE_WGSL: &str = include_str!("../../../shaders/shared/candidate.wgsl");
-const LAWS_WGSL: &str = include_str!("../../../shaders/shared/laws.wgsl");
+/// The laws and the kernels' shared transcendentals, which a law file's WGSL calls.
+pub(crate) const LAWS_WGSL: &str = include_str!("../../../shaders/shared/laws.wgsl");
 const SSR_WGSL: &str = include_str!("../../../shaders/shared/ssr.wgsl");
 const TILE_WGSL: &str = include_str!("../../../shaders/shared/tile.wgsl");
 const PROPOSAL_WGSL: &str = include_str!("../../../shaders/shared/proposal.wgsl");

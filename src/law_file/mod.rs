@@ -1,0 +1,342 @@
+//! A bit-rock law of the user's own, read from a law file (TOML) and compiled three ways: the
+//! f64 CPU twin, WGSL for the kernels, and the derivatives dT/dw (stability) and ∂T/∂θ (least
+//! squares) obtained symbolically. docs/law-files.md describes the format.
+//!
+//! ```toml
+//! name = "stribeck"
+//! description = "Stribeck friction: static, Coulomb and viscous torque"
+//! torque = "r * (tc + (ts - tc) * exp(-(w / vs)^2) + cv * w)"
+//!
+//! [[parameter]]
+//! name = "ts"
+//! unit = "N·m"
+//! lower = 0
+//! reference = 13000
+//! ```
+//!
+//! A law file's torque is in the torque unit of its torque-valued parameters, like the built-in
+//! laws; parameter values in a file (bounds, references) are SI, N·m-based. The WGSL text is
+//! checked by naga when the file is read, so a law that loads compiles on every backend.
+
+pub mod expr;
+
+use crate::laws::MAX_PARAMS;
+use crate::{Error, Result};
+use expr::{Expr, Var};
+use serde::Deserialize;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// One parameter of a law file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LawParam {
+    pub name: String,
+    /// 1 for a torque-valued parameter (a torque, or a torque per speed power), 0 otherwise.
+    pub torque_power: i32,
+    /// Power of (rad/s)⁻¹ in the parameter's unit (`s/rad` 1, `rad/s` −1).
+    pub inverse_speed_power: i32,
+    /// Physical bounds, SI (−∞ and +∞ where the file gives none).
+    pub lower: f64,
+    pub upper: f64,
+    /// A reference value (a published estimate), SI, where the file gives one.
+    pub reference: Option<f64>,
+}
+
+/// A law read from a law file, compiled.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LawFile {
+    pub name: String,
+    pub description: Option<String>,
+    /// The torque as written.
+    pub formula: String,
+    pub params: Vec<LawParam>,
+    /// T(w, r; θ).
+    pub torque: Expr,
+    /// dT/dw.
+    pub dtorque_dw: Expr,
+    /// ∂T/∂θ_i, one per parameter.
+    pub gradient: Vec<Expr>,
+    /// The file's whole text: what a run stores, so that it never depends on the file again.
+    pub source: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLaw {
+    name: Spanned<String>,
+    description: Option<String>,
+    torque: Spanned<String>,
+    #[serde(default)]
+    parameter: Vec<Spanned<RawParam>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawParam {
+    name: Spanned<String>,
+    unit: Spanned<String>,
+    lower: Option<Spanned<f64>>,
+    upper: Option<Spanned<f64>>,
+    reference: Option<Spanned<f64>>,
+}
+
+/// The built-in laws' names, which a law file may not take.
+const BUILT_IN: [&str; 4] = ["m1", "m2", "m3", "m4"];
+
+/// Line and column (1-based, in characters) of byte `offset` of `text`.
+fn line_column(text: &str, offset: usize) -> (u64, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() as u64 + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
+}
+
+impl LawFile {
+    /// Reads and compiles the law file at `path`.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Compiles the law file text `source`; `path` names it in errors.
+    pub fn parse(source: &str, path: &Path) -> Result<Self> {
+        let at = |offset: usize, message: String| {
+            let (line, column) = line_column(source, offset);
+            Error::Syntax {
+                path: PathBuf::from(path),
+                line,
+                column,
+                message,
+            }
+        };
+        let raw: RawLaw = toml::from_str(source).map_err(|e| {
+            let offset = e.span().map_or(0, |s| s.start);
+            at(offset, e.message().trim().to_string())
+        })?;
+        let name = raw.name.get_ref().trim().to_string();
+        let name_ok = name.len() <= 24
+            && name.starts_with(|c: char| c.is_ascii_lowercase())
+            && name
+                .chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+        if !name_ok {
+            return Err(at(
+                raw.name.span().start,
+                format!("law name '{name}': use up to 24 lower-case letters, digits and '_', starting with a letter"),
+            ));
+        }
+        if BUILT_IN.contains(&name.as_str()) {
+            return Err(at(
+                raw.name.span().start,
+                format!("law name '{name}' is a built-in law's; choose another"),
+            ));
+        }
+        if raw.parameter.len() > MAX_PARAMS {
+            return Err(at(
+                raw.parameter[MAX_PARAMS].span().start,
+                format!(
+                    "a law takes at most {MAX_PARAMS} parameters, this file gives {}",
+                    raw.parameter.len()
+                ),
+            ));
+        }
+        let mut params: Vec<LawParam> = Vec::new();
+        for spanned in &raw.parameter {
+            let p = spanned.get_ref();
+            let pname = p.name.get_ref().trim().to_string();
+            let ident = pname.starts_with(|c: char| c.is_alphabetic())
+                && pname.chars().all(|c| c.is_alphanumeric() || c == '_');
+            if !ident {
+                return Err(at(
+                    p.name.span().start,
+                    format!("parameter name '{pname}': use letters, digits and '_', starting with a letter"),
+                ));
+            }
+            if expr::is_reserved(&pname) {
+                return Err(at(
+                    p.name.span().start,
+                    format!("parameter name '{pname}' is reserved (w, r, pi, e and the functions)"),
+                ));
+            }
+            if params.iter().any(|q| q.name == pname) {
+                return Err(at(p.name.span().start, format!("parameter '{pname}' is given twice")));
+            }
+            let (torque_power, inverse_speed_power) =
+                parse_unit(p.unit.get_ref()).ok_or_else(|| at(p.unit.span().start, unit_error(p.unit.get_ref())))?;
+            let value = |v: &Option<Spanned<f64>>, default: f64, what: &str| -> Result<f64> {
+                match v {
+                    None => Ok(default),
+                    Some(s) if s.get_ref().is_nan() => {
+                        Err(at(s.span().start, format!("{what} of '{pname}' is not a number")))
+                    }
+                    Some(s) => Ok(*s.get_ref()),
+                }
+            };
+            let lower = value(&p.lower, f64::NEG_INFINITY, "lower")?;
+            let upper = value(&p.upper, f64::INFINITY, "upper")?;
+            if lower >= upper {
+                let span = p
+                    .upper
+                    .as_ref()
+                    .or(p.lower.as_ref())
+                    .map_or(spanned.span(), |s| s.span());
+                return Err(at(
+                    span.start,
+                    format!("'{pname}': lower bound {lower} is not below upper bound {upper}"),
+                ));
+            }
+            let reference = match &p.reference {
+                None => None,
+                Some(s) => {
+                    let v = *s.get_ref();
+                    if !(v.is_finite() && lower <= v && v <= upper) {
+                        return Err(at(
+                            s.span().start,
+                            format!("reference of '{pname}' = {v} lies outside its bounds [{lower}, {upper}]"),
+                        ));
+                    }
+                    Some(v)
+                }
+            };
+            params.push(LawParam {
+                name: pname,
+                torque_power,
+                inverse_speed_power,
+                lower,
+                upper,
+                reference,
+            });
+        }
+        let formula = raw.torque.get_ref().clone();
+        let names: Vec<&str> = params.iter().map(|p| p.name.as_str()).collect();
+        let text_start = string_content_start(source, raw.torque.span(), &formula);
+        let (torque, used) = expr::parse(&formula, &names).map_err(|e| {
+            at(
+                text_start.map_or(raw.torque.span().start, |s| s + e.offset),
+                format!("torque: {}", e.message),
+            )
+        })?;
+        if let Some(i) = used.iter().position(|u| !u) {
+            let span = raw.parameter[i].get_ref().name.span();
+            return Err(at(
+                span.start,
+                format!("parameter '{}' is never used in the torque", params[i].name),
+            ));
+        }
+        let dtorque_dw = torque.derivative(Var::Speed);
+        let gradient = (0..params.len()).map(|i| torque.derivative(Var::Param(i))).collect();
+        let law = Self {
+            name,
+            description: raw.description,
+            formula,
+            params,
+            torque,
+            dtorque_dw,
+            gradient,
+            source: source.to_string(),
+        };
+        law.check_wgsl()
+            .map_err(|message| at(raw.torque.span().start, message))?;
+        Ok(law)
+    }
+
+    /// The law's WGSL functions: `torque_<name>(p, w, r)` and `dtorque_dw_<name>(p, w, r)`,
+    /// f32, needing the kernels' shared functions (shaders/shared/laws.wgsl).
+    pub fn wgsl(&self) -> String {
+        format!(
+            "// The law '{name}' of a law file: T = {formula}\n\
+             fn torque_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {t};\n}}\n\
+             fn dtorque_dw_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {d};\n}}\n",
+            name = self.name,
+            formula = self.formula.replace('\n', " "),
+            t = self.torque.wgsl(),
+            d = self.dtorque_dw.wgsl(),
+        )
+    }
+
+    /// Parses and validates the law's WGSL with the kernels' shared functions (naga), so that a
+    /// law that loads compiles on every backend.
+    fn check_wgsl(&self) -> std::result::Result<(), String> {
+        let text = format!("{}\n{}", crate::eval::gpu::LAWS_WGSL, self.wgsl());
+        let module = naga::front::wgsl::parse_str(&text)
+            .map_err(|e| format!("the torque does not compile to WGSL: {}", e.message()))?;
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+            .validate(&module)
+            .map_err(|e| format!("the torque's WGSL does not validate: {}", e.as_inner()))?;
+        Ok(())
+    }
+
+    /// T(w, r; θ) in f64.
+    pub fn torque(&self, p: &[f64], w: f64, r: f64) -> f64 {
+        self.torque.eval(p, w, r)
+    }
+
+    /// dT/dw in f64.
+    pub fn dtorque_dw(&self, p: &[f64], w: f64, r: f64) -> f64 {
+        self.dtorque_dw.eval(p, w, r)
+    }
+
+    /// T and ∂T/∂θ written into `grad`, in f64.
+    pub fn torque_and_gradient(&self, p: &[f64], w: f64, r: f64, grad: &mut [f64]) -> f64 {
+        for (g, e) in grad.iter_mut().zip(&self.gradient) {
+            *g = e.eval(p, w, r);
+        }
+        self.torque.eval(p, w, r)
+    }
+}
+
+/// The byte offset in `source` where the text of the string value at `span` begins, when the
+/// value is written without escapes (so expression offsets map to columns); `None` otherwise.
+fn string_content_start(source: &str, span: Range<usize>, value: &str) -> Option<usize> {
+    let raw = source.get(span.clone())?;
+    for quote in ["\"\"\"", "'''", "\"", "'"] {
+        if let Some(inner) = raw.strip_prefix(quote).and_then(|r| r.strip_suffix(quote)) {
+            // A multi-line string drops the newline right after its opening quotes.
+            let skip = if quote.len() == 3 && inner.starts_with('\n') {
+                1
+            } else {
+                0
+            };
+            if &inner[skip..] == value {
+                return Some(span.start + quote.len() + skip);
+            }
+            return None;
+        }
+    }
+    None
+}
+
+/// (torque power, inverse-speed power) of a unit written as bitrock prints units: `1`, `N·m`,
+/// `s/rad`, `rad/s`, `s^2/rad^2`, `N·m·s/rad`, … (`*` or `.` for `·`, spaces ignored).
+fn parse_unit(text: &str) -> Option<(i32, i32)> {
+    let normal: String = text
+        .chars()
+        .filter(|c| !c.is_whitespace())
+        .map(|c| if c == '*' || c == '.' { '·' } else { c })
+        .collect();
+    for torque_power in [0, 1] {
+        for inverse_speed_power in -3..=3 {
+            let canonical = crate::laws::ParamSpec::new("", torque_power, inverse_speed_power, 0.0).unit("N·m");
+            // rad^k/s^k reads better than s^-k/rad^-k.
+            let k = -inverse_speed_power;
+            let upright = canonical.replace(&format!("s^-{k}/rad^-{k}"), &format!("rad^{k}/s^{k}"));
+            if normal == canonical || normal == upright {
+                return Some((torque_power, inverse_speed_power));
+            }
+        }
+    }
+    None
+}
+
+fn unit_error(text: &str) -> String {
+    format!(
+        "unit '{text}' is not one bitrock knows: write 1, N·m, rad/s, s/rad, s^2/rad^2, rad^2/s^2, N·m·s/rad, N·m·s^2/rad^2, … (SI, N·m-based)"
+    )
+}
+
+#[cfg(test)]
+mod tests;
