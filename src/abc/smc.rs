@@ -202,7 +202,7 @@ impl Default for SmcConfig {
             weights_on: WeightsOn::Host,
             refill: Refill::Survivors,
             law_proposal: LawProposal::Worth,
-            perturbation: Perturbation::Global,
+            perturbation: Perturbation::Local,
         }
     }
 }

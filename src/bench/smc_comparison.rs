@@ -26,7 +26,7 @@ pub struct Scheme {
 }
 
 /// The schemes compared: rejection, the classic SMC, each change alone, survivors and worth
-/// together (the default), and all three.
+/// together, and all three (the default).
 pub const SCHEMES: [Scheme; 7] = [
     Scheme {
         name: "rejection",

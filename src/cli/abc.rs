@@ -102,7 +102,7 @@ pub struct AbcArgs {
     /// SMC only: the Gaussian step from an ancestor. global: one covariance per law,
     /// --kernel-scale × its ancestors' covariance; local: one per ancestor, the covariance of the
     /// law's particles below the new ε plus the ancestor's offset from their mean (Filippi et
-    /// al. 2013: narrow at the posterior's centre, wide at its edges) [default: global].
+    /// al. 2013: narrow at the posterior's centre, wide at its edges) [default: local].
     #[arg(long, value_enum)]
     pub perturbation: Option<Perturbation>,
     /// Seed of the candidate streams: the same seed gives the same populations.

@@ -31,7 +31,7 @@ pub struct BenchCmd {
     /// = 1.1 × the record's best least-squares ρ, four laws, N = 4,000, on the CPU): on the
     /// embedded record, the laboratory rig's and the m2 record of --selection; one run per seed
     /// 1..=R (--reps): rejection, the classic SMC (fresh refill, model kernel, global
-    /// perturbation), each change alone, survivors with worth (the default) and all three;
+    /// perturbation), each change alone, survivors with worth, and all three (the default);
     /// candidates scored per final effective sample size, and agreement with rejection.
     /// --quick: N = 1,000.
     #[arg(long, conflicts_with = "selection")]

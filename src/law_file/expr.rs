@@ -15,7 +15,9 @@
 //!
 //! Names: `w`, `r`, the constants `pi` and `e`, the law's parameters, and the functions `exp`,
 //! `ln`, `sqrt`, `abs`, `sign`, `tanh`, `sin`, `cos` (one argument) and `pow` (two; the same as
-//! `^`). An expression compiles three ways: the f64 CPU twin ([`Expr::eval`]), its derivatives
+//! `^`). A power a^b is defined for every a when b is an integer constant of at most 16 in
+//! size (computed by multiplications), and for a ≥ 0 otherwise (exp2(b·log2 a), as WGSL's pow;
+//! a negative a gives no value). An expression compiles three ways: the f64 CPU twin ([`Expr::eval`]), its derivatives
 //! obtained symbolically ([`Expr::derivative`], simplified as they are built), and a WGSL
 //! expression in f32 ([`Expr::wgsl`]) whose transcendentals are the kernels' own (exp through
 //! exp2, tanh through one exp2, sin and cos reduced by π/2 with polynomials), so that the
@@ -386,8 +388,15 @@ fn neg_literal(a: Expr) -> Expr {
     }
 }
 
+/// A binary node as written, constants folded (in f64, so that 3^2 is the integer power 9).
 fn binary(op: Binary, a: Expr, b: Expr) -> Expr {
-    Expr::Binary(op, Box::new(a), Box::new(b))
+    let node = Expr::Binary(op, Box::new(a), Box::new(b));
+    match &node {
+        Expr::Binary(_, a, b) if matches!((&**a, &**b), (Expr::Const(_), Expr::Const(_))) => {
+            Expr::Const(node.eval(&[], 0.0, 1.0))
+        }
+        _ => node,
+    }
 }
 
 /// The integer value of `e` when it is a small integer constant (a power unrolled into
@@ -499,6 +508,8 @@ impl Expr {
                     Binary::Sub => x - y,
                     Binary::Mul => x * y,
                     Binary::Div => x / y,
+                    // WGSL's pow is exp2(y·log2 x): no value for x < 0.
+                    Binary::Pow if x < 0.0 => f64::NAN,
                     Binary::Pow => x.powf(y),
                 }
             }
@@ -766,8 +777,11 @@ mod tests {
     fn wgsl_text_spells_constants_powers_and_functions() {
         assert_eq!(compile("-2.5e-7 * w").wgsl(), "((-2.5e-7) * w)");
         assert_eq!(compile("-(2 * w)").wgsl(), "-((2.0 * w))");
-        assert_eq!(compile("(0 - 2.5) * w^3").wgsl(), "((0.0 - 2.5) * ((w) * (w) * (w)))");
-        assert_eq!(mul(Expr::Const(-2.5), Expr::Var(Var::Speed)).wgsl(), "((-2.5) * w)");
+        // Constants fold as they are read: 3^2 is the integer power 9.
+        assert_eq!(compile("(0 - 2.5) * w^3").wgsl(), "((-2.5) * ((w) * (w) * (w)))");
+        assert_eq!(compile("w^3^2"), compile("w^9"));
+        // A real power of a negative base has no value, on both paths.
+        assert!(compile("pow(w - 1, a)").eval(&[1.5, 0.0], 0.5, 1.0).is_nan());
         assert_eq!(compile("w^-2").wgsl(), "(1.0 / ((w) * (w)))");
         assert_eq!(compile("w^0").wgsl(), "(1.0)");
         assert_eq!(compile("pow(w, a)").wgsl(), "pow(w, p[0])");

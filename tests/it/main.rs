@@ -6,6 +6,7 @@ mod cli;
 mod fit;
 mod gpu;
 mod hostile;
+mod law_files;
 mod laws;
 mod layers;
 mod messages;

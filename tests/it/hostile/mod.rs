@@ -422,7 +422,18 @@ fn flags_beyond_the_machine_are_refused_before_any_work() {
     );
     assert_refused(small_run(tmp.path(), "D", &["--delta", "1e100"]), &["--delta"]);
     assert_refused(
-        small_run(tmp.path(), "K", &["--sampler", "smc", "--kernel-scale", "1e300"]),
+        small_run(
+            tmp.path(),
+            "K",
+            &[
+                "--sampler",
+                "smc",
+                "--perturbation",
+                "global",
+                "--kernel-scale",
+                "1e300",
+            ],
+        ),
         &["--kernel-scale", "prior box"],
     );
     assert_refused(
