@@ -468,7 +468,167 @@ fn pow(a: Expr, b: Expr) -> Expr {
     }
 }
 
+/// A physical dimension, torque^t · (rad/s)^(−s), both powers doubled so that a square root
+/// stays exact.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dim {
+    pub torque2: i32,
+    pub inverse_speed2: i32,
+}
+
+impl Dim {
+    pub const NONE: Dim = Dim {
+        torque2: 0,
+        inverse_speed2: 0,
+    };
+
+    /// The dimension of a parameter of torque power `t` and inverse-speed power `s`.
+    pub fn of(t: i32, s: i32) -> Dim {
+        Dim {
+            torque2: 2 * t,
+            inverse_speed2: 2 * s,
+        }
+    }
+
+    fn scaled(self, num: i32, den: i32) -> Option<Dim> {
+        let (t, s) = (self.torque2 * num, self.inverse_speed2 * num);
+        (t % den == 0 && s % den == 0).then(|| Dim {
+            torque2: t / den,
+            inverse_speed2: s / den,
+        })
+    }
+
+    /// The dimension written as bitrock writes units (N·m, s/rad, …).
+    pub fn unit(self) -> String {
+        if self.torque2 % 2 != 0 || self.inverse_speed2 % 2 != 0 {
+            return format!(
+                "N·m^{}·(s/rad)^{}",
+                self.torque2 as f64 / 2.0,
+                self.inverse_speed2 as f64 / 2.0
+            );
+        }
+        let (t, s) = (self.torque2 / 2, self.inverse_speed2 / 2);
+        if t == 0 || t == 1 {
+            crate::laws::ParamSpec::new("", t, s, 0.0).unit("N·m")
+        } else {
+            format!("N^{t}·m^{t}·(s/rad)^{s}")
+        }
+    }
+}
+
 impl Expr {
+    /// Infix text of the expression with the parameters' `names`, for messages.
+    pub fn show(&self, names: &[&str]) -> String {
+        match self {
+            Expr::Const(c) => format!("{c}"),
+            Expr::Var(Var::Speed) => "w".into(),
+            Expr::Var(Var::Ratio) => "r".into(),
+            Expr::Var(Var::Param(i)) => names[*i].to_string(),
+            Expr::Unary(Unary::Neg, a) => format!("-{}", a.show(names)),
+            Expr::Unary(op, a) => {
+                let name = format!("{op:?}").to_lowercase();
+                format!("{name}({})", a.show(names))
+            }
+            Expr::Binary(op, a, b) => {
+                let symbol = match op {
+                    Binary::Add => "+",
+                    Binary::Sub => "-",
+                    Binary::Mul => "*",
+                    Binary::Div => "/",
+                    Binary::Pow => "^",
+                };
+                format!("({} {symbol} {})", a.show(names), b.show(names))
+            }
+        }
+    }
+
+    /// The expression's dimension, given the parameters' (`params`) and their `names` for
+    /// messages; refuses sums of unlike dimensions, transcendentals of dimensioned arguments and
+    /// dimensioned exponents. Numbers are dimensionless.
+    pub fn dimension(&self, params: &[Dim], names: &[&str]) -> Result<Dim, String> {
+        let none = |e: &Expr, what: &str| -> Result<(), String> {
+            let d = e.dimension(params, names)?;
+            if d == Dim::NONE {
+                Ok(())
+            } else {
+                Err(format!(
+                    "{what} {} has dimension {}; it must be dimensionless (divide by a parameter of that unit)",
+                    e.show(names),
+                    d.unit()
+                ))
+            }
+        };
+        Ok(match self {
+            Expr::Const(_) | Expr::Var(Var::Ratio) => Dim::NONE,
+            Expr::Var(Var::Speed) => Dim::of(0, -1),
+            Expr::Var(Var::Param(i)) => params[*i],
+            Expr::Unary(Unary::Neg | Unary::Abs, a) => a.dimension(params, names)?,
+            Expr::Unary(Unary::Sign, a) => {
+                a.dimension(params, names)?;
+                Dim::NONE
+            }
+            Expr::Unary(Unary::Sqrt, a) => a
+                .dimension(params, names)?
+                .scaled(1, 2)
+                .ok_or_else(|| format!("sqrt of {} has no dimension bitrock can write", a.show(names)))?,
+            Expr::Unary(op, a) => {
+                none(a, &format!("the argument of {}", format!("{op:?}").to_lowercase()))?;
+                Dim::NONE
+            }
+            Expr::Binary(op @ (Binary::Add | Binary::Sub), a, b) => {
+                let (da, db) = (a.dimension(params, names)?, b.dimension(params, names)?);
+                if da != db {
+                    return Err(format!(
+                        "{} {} {} {}: {} is in {} and {} in {}",
+                        if *op == Binary::Add { "adding" } else { "subtracting" },
+                        b.show(names),
+                        if *op == Binary::Add { "to" } else { "from" },
+                        a.show(names),
+                        a.show(names),
+                        da.unit(),
+                        b.show(names),
+                        db.unit()
+                    ));
+                }
+                da
+            }
+            Expr::Binary(Binary::Mul, a, b) => {
+                let (da, db) = (a.dimension(params, names)?, b.dimension(params, names)?);
+                Dim {
+                    torque2: da.torque2 + db.torque2,
+                    inverse_speed2: da.inverse_speed2 + db.inverse_speed2,
+                }
+            }
+            Expr::Binary(Binary::Div, a, b) => {
+                let (da, db) = (a.dimension(params, names)?, b.dimension(params, names)?);
+                Dim {
+                    torque2: da.torque2 - db.torque2,
+                    inverse_speed2: da.inverse_speed2 - db.inverse_speed2,
+                }
+            }
+            Expr::Binary(Binary::Pow, a, b) => {
+                none(b, "the exponent")?;
+                let da = a.dimension(params, names)?;
+                if da == Dim::NONE {
+                    return Ok(da);
+                }
+                // A dimensioned base needs a rational constant exponent (halves at most).
+                let twice = match **b {
+                    Expr::Const(c) if (2.0 * c).fract() == 0.0 && c.abs() <= 16.0 => (2.0 * c) as i32,
+                    _ => {
+                        return Err(format!(
+                            "{} is in {}: its exponent must be a number (a multiple of 1/2)",
+                            a.show(names),
+                            da.unit()
+                        ));
+                    }
+                };
+                da.scaled(twice, 2)
+                    .ok_or_else(|| format!("{} has no dimension bitrock can write", self.show(names)))?
+            }
+        })
+    }
+
     /// The expression's value in f64 (the CPU twin). `p` holds the law's parameters.
     pub fn eval(&self, p: &[f64], w: f64, r: f64) -> f64 {
         match self {

@@ -22,7 +22,7 @@ pub mod expr;
 
 use crate::laws::MAX_PARAMS;
 use crate::{Error, Result};
-use expr::{Expr, Var};
+use expr::{Dim, Expr, Var};
 use serde::Deserialize;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -36,9 +36,8 @@ pub struct LawParam {
     pub torque_power: i32,
     /// Power of (rad/s)⁻¹ in the parameter's unit (`s/rad` 1, `rad/s` −1).
     pub inverse_speed_power: i32,
-    /// Physical bounds, SI (−∞ and +∞ where the file gives none).
+    /// Physical lower bound, SI (−∞ where the file gives none).
     pub lower: f64,
-    pub upper: f64,
     /// A reference value (a published estimate), SI, where the file gives one.
     pub reference: Option<f64>,
 }
@@ -77,7 +76,6 @@ struct RawParam {
     name: Spanned<String>,
     unit: Spanned<String>,
     lower: Option<Spanned<f64>>,
-    upper: Option<Spanned<f64>>,
     reference: Option<Spanned<f64>>,
 }
 
@@ -177,26 +175,18 @@ impl LawFile {
                 }
             };
             let lower = value(&p.lower, f64::NEG_INFINITY, "lower")?;
-            let upper = value(&p.upper, f64::INFINITY, "upper")?;
-            if lower >= upper {
-                let span = p
-                    .upper
-                    .as_ref()
-                    .or(p.lower.as_ref())
-                    .map_or(spanned.span(), |s| s.span());
-                return Err(at(
-                    span.start,
-                    format!("'{pname}': lower bound {lower} is not below upper bound {upper}"),
-                ));
+            if lower == f64::INFINITY {
+                let start = p.lower.as_ref().map_or(0, |s| s.span().start);
+                return Err(at(start, format!("lower bound of '{pname}' is +∞")));
             }
             let reference = match &p.reference {
                 None => None,
                 Some(s) => {
                     let v = *s.get_ref();
-                    if !(v.is_finite() && lower <= v && v <= upper) {
+                    if !(v.is_finite() && lower <= v) {
                         return Err(at(
                             s.span().start,
-                            format!("reference of '{pname}' = {v} lies outside its bounds [{lower}, {upper}]"),
+                            format!("reference of '{pname}' = {v} lies below its lower bound {lower}"),
                         ));
                     }
                     Some(v)
@@ -207,7 +197,6 @@ impl LawFile {
                 torque_power,
                 inverse_speed_power,
                 lower,
-                upper,
                 reference,
             });
         }
@@ -225,6 +214,33 @@ impl LawFile {
             return Err(at(
                 span.start,
                 format!("parameter '{}' is never used in the torque", params[i].name),
+            ));
+        }
+        let torque_at = text_start.unwrap_or(raw.torque.span().start);
+        let dims: Vec<Dim> = params
+            .iter()
+            .map(|p| Dim::of(p.torque_power, p.inverse_speed_power))
+            .collect();
+        let dim = torque
+            .dimension(&dims, &names)
+            .map_err(|m| at(torque_at, format!("torque: {m}")))?;
+        if dim != Dim::of(1, 0) {
+            return Err(at(
+                torque_at,
+                format!("torque: the expression is in {}, not a torque (N·m)", dim.unit()),
+            ));
+        }
+        // Every law in bitrock scales with the weight-on-bit ratio: T = r · T₁(w).
+        let probe: Vec<f64> = params.iter().map(|p| p.reference.unwrap_or(1.0)).collect();
+        let proportional = !torque.derivative(Var::Ratio).uses(Var::Ratio)
+            && [0.1, 1.0, 5.0].iter().all(|&w| {
+                let t = torque.eval(&probe, w, 0.0);
+                t == 0.0 || !t.is_finite()
+            });
+        if !proportional {
+            return Err(at(
+                torque_at,
+                "torque: must be proportional to the weight-on-bit ratio r: write r * (…)".to_string(),
             ));
         }
         let dtorque_dw = torque.derivative(Var::Speed);

@@ -150,18 +150,53 @@ fn a_refused_file_names_the_line_column_and_what_is_wrong() {
             .contains("twice")
     );
     assert!(refusal("name = \"My Law\"\ntorque = \"w\"\n").2.contains("lower-case"));
-    // Bounds and references.
-    let (_, _, message) = refusal(&format!(
-        "{head}{}[[parameter]]\nname = \"b\"\nunit = \"1\"\nlower = 2\nupper = 1\n",
-        param("a")
-    ));
-    assert!(message.contains("not below upper bound"), "{message}");
+    // References below their bound; a bound of another kind.
     let (line, _, message) = refusal(&format!(
         "{head}{}[[parameter]]\nname = \"b\"\nunit = \"1\"\nlower = 0\nreference = -1\n",
         param("a")
     ));
     assert_eq!(line, 10);
-    assert!(message.contains("outside its bounds"), "{message}");
+    assert!(message.contains("below its lower bound 0"), "{message}");
+    let (_, _, message) = refusal(&format!(
+        "{head}{}[[parameter]]\nname = \"b\"\nunit = \"1\"\nupper = 1\n",
+        param("a")
+    ));
+    assert!(message.contains("upper"), "{message}");
+    // Dimensions: a sum of unlike units, a dimensioned exponential, a result not a torque, and
+    // the ratio r not a factor.
+    let dims = |torque: &str| {
+        refusal(&format!(
+            "name = \"mine\"\ntorque = \"{torque}\"\n[[parameter]]\nname = \"t\"\nunit = \"N·m\"\n[[parameter]]\nname = \"g\"\nunit = \"s/rad\"\n"
+        ))
+    };
+    let (line, column, message) = dims("r * (t + w) * g / g");
+    assert_eq!((line, column), (2, 11));
+    assert!(
+        message.contains("adding w to t: t is in N·m and w in rad/s"),
+        "{message}"
+    );
+    assert!(
+        dims("r * t * exp(-w) * g / g")
+            .2
+            .contains("the argument of exp -w has dimension rad/s")
+    );
+    assert!(
+        dims("r * t * g")
+            .2
+            .contains("the expression is in N·m·s/rad, not a torque")
+    );
+    assert!(
+        dims("t * exp(-g * w)")
+            .2
+            .contains("proportional to the weight-on-bit ratio")
+    );
+    assert!(
+        dims("r * t * exp(-g * w) + t")
+            .2
+            .contains("proportional to the weight-on-bit ratio")
+    );
+    assert!(dims("r * t * (g * w)^w").2.contains("exponent"));
+    assert!(parse("name = \"mine\"\ntorque = \"r * t * exp(-(g * w)^2) * sqrt(g * w)\"\n[[parameter]]\nname = \"t\"\nunit = \"N·m\"\n[[parameter]]\nname = \"g\"\nunit = \"s/rad\"\n").is_ok());
     // Too many parameters.
     let seven: String = (0..7).map(|i| param(&format!("k{i}"))).collect();
     assert!(

@@ -4,8 +4,8 @@
 
 use crate::gpu::require_gpu;
 use bitrock::eval::gpu::law_points::{Point, torques};
-use bitrock::law_file::LawFile;
-use bitrock::law_file::expr::{Binary, Expr, Unary, Var};
+use bitrock::law_file::expr::{Binary, Expr, Unary, Var, parse};
+use bitrock::law_file::{LawFile, LawParam};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use std::path::Path;
@@ -171,12 +171,28 @@ fn random_expressions_agree_on_the_gpu_with_their_twins() {
             .filter(|(_, u)| *u)
             .map(|(n, _)| n)
             .collect();
-        let params: String = names
-            .iter()
-            .map(|n| format!("[[parameter]]\nname = \"{n}\"\nunit = \"1\"\n"))
-            .collect();
-        let file = format!("name = \"random\"\ntorque = \"{text}\"\n{params}");
-        let law = LawFile::parse(&file, Path::new("random.toml")).unwrap_or_else(|e| panic!("{e}\n{file}"));
+        // The compiler alone: random expressions are neither torques nor proportional to r,
+        // which a law file's checks would refuse.
+        let (torque, _) = parse(&text, &names).unwrap_or_else(|e| panic!("{e:?}\n{text}"));
+        let law = LawFile {
+            name: "random".into(),
+            description: None,
+            formula: text.clone(),
+            params: names
+                .iter()
+                .map(|n| LawParam {
+                    name: n.to_string(),
+                    torque_power: 0,
+                    inverse_speed_power: 0,
+                    lower: f64::NEG_INFINITY,
+                    reference: None,
+                })
+                .collect(),
+            dtorque_dw: torque.derivative(Var::Speed),
+            gradient: Vec::new(),
+            torque,
+            source: text.clone(),
+        };
         let points: Vec<Point> = (0..64)
             .map(|_| {
                 let p: Vec<f64> = names.iter().map(|_| rng.random_range(-2.0..2.0)).collect();
