@@ -16,7 +16,7 @@ fn benches(c: &mut Criterion) {
     let mut group = c.benchmark_group("misfit");
     group.throughput(Throughput::Elements(cal.len() as u64));
     for law in Law::ALL {
-        let p = law.scale_torque(law.paper_estimate(), 1000.0);
+        let p = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
         group.bench_function(law.name(), |b| {
             b.iter(|| misfit(law, black_box(&p), &cal.speed_rad_s, &cal.torque_nm, &ones, sum_y2))
         });

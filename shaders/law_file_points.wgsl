@@ -1,5 +1,5 @@
 // A law file's torque and dT/dw at arbitrary points, through the law's generated WGSL (the host
-// appends `fn torque_LAW` and `fn dtorque_dw_LAW` and defines `law_torque` and `law_slope`
+// appends `fn file_torque_LAW` and `fn file_slope_LAW` and defines `law_torque` and `law_slope`
 // calling them). Tests compare it with the f64 CPU twin.
 
 struct Point {

@@ -48,7 +48,7 @@ fn job_candidate(job: Job, k: u32) -> JobCandidate {
     if (s.kind == 0u) {
         let prior = priors[s.record];
         let c = make_candidate(prior, s.population, add_index(s.start, offsets[s.order + local]));
-        return JobCandidate(prior.law_id[c.slot], c.params);
+        return JobCandidate(slot_law(prior, c.slot), c.params);
     }
     let p = proposals[s.start.x + local];
     return JobCandidate(p.law, p.params);

@@ -11,7 +11,7 @@
 
 fn job_candidate(job: Job, k: u32) -> JobCandidate {
     let c = make_candidate(prior, job.population, add_index(job.start, k));
-    return JobCandidate(prior.law_id[c.slot], c.params);
+    return JobCandidate(slot_law(prior, c.slot), c.params);
 }
 
 @compute @workgroup_size(64)

@@ -214,8 +214,10 @@ impl Default for BenchOptions {
 
 /// A single-law problem: `d` samples of the law at the paper's estimate (N·m) with a
 /// deterministic ±5 % ripple, speeds 0.5-20 rad/s, and the paper's ±40 % prior box.
+/// Panics for a law file's law without reference values.
 pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> AbcProblem {
-    let truth = law.scale_torque(law.paper_estimate(), 1000.0);
+    let estimate = law.paper_estimate().expect("a law with reference values");
+    let truth = law.scale_torque(estimate, 1000.0);
     let speed: Vec<f64> = (0..d)
         .map(|i| 0.5 + 19.5 * i as f64 / d.max(2).saturating_sub(1) as f64)
         .collect();
@@ -585,7 +587,7 @@ fn measure_stability(
 ) -> Result<StabilityThroughput> {
     let omega: Vec<f64> = (0..side).map(|i| 20.0 + 200.0 * i as f64 / side as f64).collect();
     let wob: Vec<f64> = (0..side).map(|i| 20.0 + 600.0 * i as f64 / side as f64).collect();
-    let base = Law::M3.scale_torque(Law::M3.paper_estimate(), 1000.0);
+    let base = Law::M3.scale_torque(Law::M3.paper_estimate().expect("a built-in law"), 1000.0);
     let samples: Vec<Vec<f64>> = (0..count)
         .map(|s| {
             base.iter()

@@ -512,6 +512,47 @@ impl<'a> GridColumns<'a> {
     }
 }
 
+/// Points of a law file's law have no grid of their own: its reference values (where the file
+/// gives them all) and a Halton design of [`DESIGN_POINTS`] points, each parameter log-uniform
+/// over [10^−1.5, 10^1.5] of its natural size in the record's scales, negative as often as
+/// positive where the parameter has no lower bound (scaled parameters).
+fn design_starts(law: Law, lower: &[f64], scales: &RecordScales) -> Vec<Vec<f64>> {
+    const BASES: [u32; 12] = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37];
+    let radical_inverse = |mut i: u32, base: u32| {
+        let (mut f, mut x) = (1.0, 0.0);
+        while i > 0 {
+            f /= f64::from(base);
+            x += f * f64::from(i % base);
+            i /= base;
+        }
+        x
+    };
+    let n = law.n_params();
+    let mut out: Vec<Vec<f64>> = law
+        .paper_estimate()
+        .map(|p| {
+            let si = law.scale_torque(p, 1000.0);
+            (0..n).map(|j| si[j] * scales.factor(law, j)).collect()
+        })
+        .into_iter()
+        .collect();
+    for i in 1..=DESIGN_POINTS {
+        out.push(
+            (0..n)
+                .map(|j| {
+                    let magnitude = 10f64.powf(3.0 * radical_inverse(i, BASES[2 * j]) - 1.5);
+                    let negative = lower[j] == f64::NEG_INFINITY && radical_inverse(i, BASES[2 * j + 1]) < 0.5;
+                    if negative { -magnitude } else { magnitude }
+                })
+                .collect(),
+        );
+    }
+    out
+}
+
+/// How many design points a law file's law is started from ([`design_starts`]).
+const DESIGN_POINTS: u32 = 256;
+
 /// Candidate starting points (scaled parameters) from a grid over the nonlinear parameters,
 /// the linear ones solved exactly at each grid point.
 fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
@@ -575,6 +616,8 @@ fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
                 out.push(c);
             }
         }
+        // A law file's law has no grid; it starts from its design (design_starts).
+        Law::File(_) => {}
     }
     out
 }
@@ -648,7 +691,7 @@ pub fn fit_law_from(
     let scaled = ScaledData { w: &w, y: &y, r: &r };
 
     let lower = lower_bounds(law, &scales, opts.bounded);
-    let starts = select_starts(law, scaled, &lower, opts.starts);
+    let starts = select_starts(law, scaled, &lower, &scales, opts.starts);
     let known = known_starts(law, scaled, &lower, &scales, known_si);
     if starts.is_empty() && known.is_empty() {
         return Err(refusal(
@@ -775,8 +818,12 @@ fn lower_bounds(law: Law, scales: &RecordScales, bounded: bool) -> Vec<f64> {
 /// The grid's starting points ([`grid_starts`]) to polish: each pulled just inside the
 /// bounds, ranked by misfit, and the best `max_starts` (at least one) kept that are not
 /// near-copies of a better one. Empty when no grid point gives a finite misfit.
-fn select_starts(law: Law, data: ScaledData, lower: &[f64], max_starts: usize) -> Vec<Vec<f64>> {
-    let mut candidates: Vec<(f64, Vec<f64>)> = grid_starts(law, data.w, data.y, data.r)
+fn select_starts(law: Law, data: ScaledData, lower: &[f64], scales: &RecordScales, max_starts: usize) -> Vec<Vec<f64>> {
+    let grid = match law {
+        Law::File(_) => design_starts(law, lower, scales),
+        _ => grid_starts(law, data.w, data.y, data.r),
+    };
+    let mut candidates: Vec<(f64, Vec<f64>)> = grid
         .into_iter()
         .map(|mut p| {
             pull_inside(&mut p, lower);

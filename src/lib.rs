@@ -71,7 +71,6 @@ pub mod error;
 pub mod eval;
 pub mod files;
 pub mod fit;
-pub mod law_file;
 pub mod laws;
 pub mod limits;
 pub mod numerics;

@@ -16,7 +16,27 @@ use std::io::ErrorKind;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let cli = Cli::parse();
+    let result = match cli.register_law_files() {
+        Err(e) => Err(e),
+        Ok(()) => run(cli.command),
+    };
+    match result {
+        Ok(code) => code,
+        Err(err) if is_closed_pipe(&err) => ExitCode::from(exit::CLOSED_PIPE),
+        Err(err) => {
+            cli::print::note(format_args!("error: {}", message(&err)));
+            let bad_input = err
+                .chain()
+                .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));
+            ExitCode::from(if bad_input { exit::BAD_INPUT } else { exit::FAILURE })
+        }
+    }
+}
+
+/// Runs one command.
+fn run(command: Command) -> anyhow::Result<ExitCode> {
+    match command {
         Command::Fit(cmd) => cli::fit::run(&cmd),
         Command::Abc(cmd) => cli::abc::run(&cmd),
         Command::Export(cmd) => cli::export::run(&cmd),
@@ -29,17 +49,6 @@ fn main() -> ExitCode {
         Command::Fe(cmd) => cli::fe::run(&cmd),
         Command::Stability(cmd) => cli::stability::run(&cmd),
         Command::Devices(cmd) => cli::devices::run(&cmd),
-    };
-    match result {
-        Ok(code) => code,
-        Err(err) if is_closed_pipe(&err) => ExitCode::from(exit::CLOSED_PIPE),
-        Err(err) => {
-            cli::print::note(format_args!("error: {}", message(&err)));
-            let bad_input = err
-                .chain()
-                .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));
-            ExitCode::from(if bad_input { exit::BAD_INPUT } else { exit::FAILURE })
-        }
     }
 }
 

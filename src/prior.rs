@@ -139,6 +139,9 @@ impl PriorRule {
 /// estimate is taken to sit on it; the least-squares fit uses the same threshold.
 const ON_BOUND: f64 = 1e-6;
 
+/// The most laws one prior (one run) compares: the kernels' prior holds this many slots.
+pub const MAX_LAWS: usize = 8;
+
 /// A prior over (law, parameters).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Prior {
@@ -162,18 +165,12 @@ pub struct Candidate {
 
 /// The contents of a prior TOML file (see the module documentation).
 #[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct PriorFile {
     #[serde(default)]
     pub weights: BTreeMap<String, f64>,
-    #[serde(default)]
-    pub m1: BTreeMap<String, Vec<f64>>,
-    #[serde(default)]
-    pub m2: BTreeMap<String, Vec<f64>>,
-    #[serde(default)]
-    pub m3: BTreeMap<String, Vec<f64>>,
-    #[serde(default)]
-    pub m4: BTreeMap<String, Vec<f64>>,
+    /// Per law (`[m2]`, or a law file's law by its name), bounds by parameter name.
+    #[serde(flatten)]
+    pub bounds: BTreeMap<String, BTreeMap<String, Vec<f64>>>,
 }
 
 impl PriorFile {
@@ -191,8 +188,13 @@ impl PriorFile {
                 message: e.message().to_string(),
             }
         })?;
-        for law in Law::ALL {
-            for (name, bound) in file.bounds(law) {
+        for (table, bounds) in &file.bounds {
+            let law = table.parse::<Law>().map_err(|m| Error::Format {
+                path: path.to_path_buf(),
+                line: None,
+                message: format!("[{table}]: {m}"),
+            })?;
+            for (name, bound) in bounds {
                 if bound.len() != 2 {
                     return Err(Error::Format {
                         path: path.to_path_buf(),
@@ -245,27 +247,16 @@ impl PriorFile {
                     (spec.name.to_string(), vec![f64::from(lo) / unit, f64::from(hi) / unit])
                 })
                 .collect();
-            *file.bounds_mut(bx.law) = bounds;
+            if !bounds.is_empty() {
+                file.bounds.insert(bx.law.name().to_string(), bounds);
+            }
         }
         file
     }
 
-    fn bounds_mut(&mut self, law: Law) -> &mut BTreeMap<String, Vec<f64>> {
-        match law {
-            Law::M1 => &mut self.m1,
-            Law::M2 => &mut self.m2,
-            Law::M3 => &mut self.m3,
-            Law::M4 => &mut self.m4,
-        }
-    }
-
-    fn bounds(&self, law: Law) -> &BTreeMap<String, Vec<f64>> {
-        match law {
-            Law::M1 => &self.m1,
-            Law::M2 => &self.m2,
-            Law::M3 => &self.m3,
-            Law::M4 => &self.m4,
-        }
+    /// The bounds the file gives for `law` (none where it has no table for it).
+    fn bounds(&self, law: Law) -> Option<&BTreeMap<String, Vec<f64>>> {
+        self.bounds.get(law.name())
     }
 }
 
@@ -298,7 +289,7 @@ impl Prior {
         let mut weights = Vec::new();
         for fit in fits {
             let law = fit.law;
-            let explicit = file.map(|f| f.bounds(law));
+            let explicit = file.and_then(|f| f.bounds(law));
             let mut lower = Vec::new();
             let mut upper = Vec::new();
             let mut law_rules = Vec::new();
@@ -361,6 +352,12 @@ impl Prior {
     pub fn new(boxes: Vec<LawBox>, weights: Vec<f64>) -> Result<Self> {
         if boxes.is_empty() {
             return Err(Error::setting("laws", "no law to sample"));
+        }
+        if boxes.len() > MAX_LAWS {
+            return Err(Error::setting(
+                "laws",
+                format!("{} laws given; a run compares at most {MAX_LAWS}", boxes.len()),
+            ));
         }
         let total: f64 = weights.iter().sum();
         if !(total.is_finite() && total > 0.0) {

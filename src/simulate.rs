@@ -622,7 +622,7 @@ mod tests {
     use super::*;
 
     fn paper_nm(law: Law) -> Vec<f64> {
-        law.scale_torque(law.paper_estimate(), 1000.0)
+        law.scale_torque(law.paper_estimate().unwrap(), 1000.0)
     }
 
     fn rpm(v: f64) -> f64 {

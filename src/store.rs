@@ -63,6 +63,7 @@ CREATE TABLE samples (
     wob_n REAL,
     PRIMARY KEY (split, position)
 );
+CREATE TABLE law_files (name TEXT PRIMARY KEY, source TEXT NOT NULL);
 CREATE TABLE parameters (
     law TEXT NOT NULL,
     position INTEGER NOT NULL,
@@ -260,7 +261,24 @@ impl RunStore {
         conn.pragma_update(None, "journal_mode", "OFF").map_err(&err)?;
         let tx = conn.transaction().map_err(&err)?;
         tx.execute_batch(SCHEMA).map_err(&err)?;
-        tx.execute_batch(&particles_view()).map_err(&err)?;
+        // The law files' laws of the run: their sources are stored whole, so that the run
+        // never depends on the files again.
+        let file_laws: Vec<Law> = setup
+            .prior
+            .boxes
+            .iter()
+            .map(|b| b.law)
+            .filter(|l| l.file().is_some())
+            .collect();
+        for law in &file_laws {
+            let source = &law.file().expect("a law file's law").source;
+            tx.execute(
+                "INSERT INTO law_files (name, source) VALUES (?1, ?2)",
+                params![law.name(), source],
+            )
+            .map_err(&err)?;
+        }
+        tx.execute_batch(&particles_view(&file_laws)).map_err(&err)?;
         let meta = [
             ("schema_version", SCHEMA_VERSION.to_string()),
             ("bitrock_version", env!("CARGO_PKG_VERSION").to_string()),
@@ -301,10 +319,15 @@ impl RunStore {
             let mut param = tx
                 .prepare("INSERT INTO parameters (law, position, name, unit_si) VALUES (?1, ?2, ?3, ?4)")
                 .map_err(&err)?;
-            for law in Law::ALL {
+            for law in Law::ALL.into_iter().chain(file_laws.iter().copied()) {
                 for (j, spec) in law.params().iter().enumerate() {
                     param
-                        .execute(params![law.name(), j as i64, spec.name, spec.unit("N·m")])
+                        .execute(params![
+                            law.name(),
+                            j as i64,
+                            view_column(law, spec.name),
+                            spec.unit("N·m")
+                        ])
                         .map_err(&err)?;
                 }
             }
@@ -386,16 +409,52 @@ impl RunStore {
             .optional()
             .map_err(|e| not_a_run(format!("{STORE_FILE} is not a bitrock store: {e}")))?;
         match version.as_deref().map(str::parse::<i64>) {
-            Some(Ok(v @ 1..=SCHEMA_VERSION)) => Ok(Self {
-                conn,
-                path,
-                schema_version: v,
-            }),
+            Some(Ok(v @ 1..=SCHEMA_VERSION)) => {
+                let store = Self {
+                    conn,
+                    path,
+                    schema_version: v,
+                };
+                store.register_law_files()?;
+                Ok(store)
+            }
             Some(Ok(v)) => Err(not_a_run(format!(
                 "{STORE_FILE} has schema version {v}; this bitrock reads versions 1 to {SCHEMA_VERSION}"
             ))),
             _ => Err(not_a_run(format!("{STORE_FILE} has no schema version"))),
         }
+    }
+
+    /// Registers the law files' laws the run was made with, from their stored sources, so
+    /// that its configuration, particles and report read without the files.
+    fn register_law_files(&self) -> Result<()> {
+        let err = sql_error(&self.path);
+        let has_table: bool = self
+            .conn
+            .query_row(
+                "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'law_files'",
+                [],
+                |r| r.get::<_, i64>(0),
+            )
+            .map_err(&err)?
+            > 0;
+        if !has_table {
+            return Ok(());
+        }
+        let mut stmt = self
+            .conn
+            .prepare("SELECT name, source FROM law_files ORDER BY name")
+            .map_err(&err)?;
+        let rows: Vec<(String, String)> = stmt
+            .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+            .map_err(&err)?
+            .collect::<std::result::Result<_, _>>()
+            .map_err(&err)?;
+        for (name, source) in rows {
+            let origin = self.path.join(format!("law_files/{name}"));
+            crate::laws::file::register(crate::laws::file::LawFile::parse(&source, &origin)?)?;
+        }
+        Ok(())
     }
 
     /// Path of the database file.
@@ -895,14 +954,18 @@ impl RunStore {
 /// The view `particles` over schema 3's rows: what schema 2 stored as a table, one row per
 /// particle and population (`position` its place in the population), with one column per
 /// parameter name.
-fn particles_view() -> String {
+fn particles_view(file_laws: &[Law]) -> String {
     let parameter_columns: Vec<String> = Law::ALL
         .iter()
+        .chain(file_laws)
         .flat_map(|law| {
-            law.param_names()
-                .into_iter()
-                .enumerate()
-                .map(move |(j, name)| format!("CASE r.law WHEN '{}' THEN r.p{j} END AS {name}", law.name()))
+            law.param_names().into_iter().enumerate().map(move |(j, name)| {
+                format!(
+                    "CASE r.law WHEN '{}' THEN r.p{j} END AS {}",
+                    law.name(),
+                    view_column(*law, name)
+                )
+            })
         })
         .collect();
     format!(
@@ -918,6 +981,16 @@ fn particles_view() -> String {
          JOIN population_rows f ON f.population = r.first_population;",
         parameter_columns.join(",\n                ")
     )
+}
+
+/// The column of the `particles` view (and the name in the `parameters` table) of parameter
+/// `name` of `law`: the name itself for m1..m4, `<law>_<name>` for a law file's law, whose
+/// names may repeat another law's.
+fn view_column(law: Law, name: &str) -> String {
+    match law {
+        Law::File(_) => format!("{}_{name}", law.name()),
+        _ => name.to_string(),
+    }
 }
 
 /// Particles equal to the bit (parameters, ρ and weight compared as bits).

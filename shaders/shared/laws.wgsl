@@ -72,7 +72,8 @@ fn torque_m4(c0: f32, c1: f32, c2: f32, c3: f32, w: f32) -> f32 {
     return c0 + w * (c1 + w * (c2 + w * c3));
 }
 
-// dT/dw of law `law` (0 = m1 .. 3 = m4) at speed w, r = 1: the paper's analytic derivatives.
+// dT/dw of law `law` (0 = m1 .. 3 = m4, then law files' laws) at speed w, r = 1: the paper's
+// analytic derivatives, a law file's symbolic one.
 fn dtorque_dw(law: u32, p: array<f32, 6>, w: f32) -> f32 {
     switch law {
         case 0u: {
@@ -88,8 +89,13 @@ fn dtorque_dw(law: u32, p: array<f32, 6>, w: f32) -> f32 {
             let d = w - p[2];
             return p[4] * p[5] * (t * t - 1.0) + (2.0 * p[2] - 2.0 * w) * p[0] * p[1] * exp_f32(-p[1] * d * d);
         }
-        default: {
+        case 3u: {
             return p[1] + 2.0 * p[2] * w + 3.0 * p[3] * w * w;
+        }
+        // The host writes a case per law file's law at the next line.
+        // FILE_LAW_SLOPES
+        default: {
+            return 0.0;
         }
     }
 }

@@ -36,8 +36,9 @@ override HAS_RATIO: bool = true;
 const QUADS_PER_BLOCK: u32 = 16u;
 const BLOCKS_PER_GROUP: u32 = 64u;
 
-// Law id of an unused candidate slot: matches no law, scores 0.
-const NO_LAW: u32 = 4u;
+// Law id of an unused candidate slot: matches no law, scores 0 (laws are 0 = m1 .. 3 = m4, then
+// law files' laws from 4 on).
+const NO_LAW: u32 = 4294967295u;
 
 // Candidates per invocation (four groups of four). Keep in sync with CANDIDATES_PER_INVOCATION
 // in src/eval/gpu/residual.rs.
@@ -143,7 +144,7 @@ fn block_ssr(law: u32, p: Params, q0: u32, q1: u32, end: u32) -> Sums {
                 s[3] = s[3] + vec4<f32>(quad_m3(p[12], d), quad_m3(p[13], d), quad_m3(p[14], d), quad_m3(p[15], d));
             }
         }
-        default: {
+        case 3u: {
             for (var q = q0; q < q1; q = q + 1u) {
                 let d = load_quad(q, end);
                 s[0] = s[0] + vec4<f32>(quad_m4(p[0], d), quad_m4(p[1], d), quad_m4(p[2], d), quad_m4(p[3], d));
@@ -152,6 +153,9 @@ fn block_ssr(law: u32, p: Params, q0: u32, q1: u32, end: u32) -> Sums {
                 s[3] = s[3] + vec4<f32>(quad_m4(p[12], d), quad_m4(p[13], d), quad_m4(p[14], d), quad_m4(p[15], d));
             }
         }
+        // The host writes a case per law file's law at the next line.
+        // FILE_LAW_BLOCKS
+        default: {}
     }
     return s;
 }
@@ -202,6 +206,8 @@ fn slice_ssr(laws: Laws, p: Params, data_start: u32, data_end: u32) -> Sums {
     out = law_pass(1u, laws, p, data_start, data_end, out);
     out = law_pass(2u, laws, p, data_start, data_end, out);
     out = law_pass(3u, laws, p, data_start, data_end, out);
+    // The host writes a pass per law file's law at the next line.
+    // FILE_LAW_PASSES
     return out;
 }
 

@@ -62,12 +62,15 @@ fn strided_ssr(law: u32, p: Four, lid: u32, data_start: u32, data_end: u32) -> v
                     block = block + vec4<f32>(quad_m3(p[0], d), quad_m3(p[1], d), quad_m3(p[2], d), quad_m3(p[3], d));
                 }
             }
-            default: {
+            case 3u: {
                 for (var q = b; q < block_end; q = q + TILE_WORKGROUP) {
                     let d = load_quad(q, data_end);
                     block = block + vec4<f32>(quad_m4(p[0], d), quad_m4(p[1], d), quad_m4(p[2], d), quad_m4(p[3], d));
                 }
             }
+            // The host writes a case per law file's law at the next line.
+            // FILE_LAW_STRIDED
+            default: {}
         }
         total = total + block;
     }
@@ -109,7 +112,9 @@ fn score_tile(job: Job, first: u32, lid: u32) {
         laws[r / 4u][r % 4u] = tile_law[r];
     }
     var sums: Sums;
-    for (var l = 0u; l < NO_LAW; l = l + 1u) {
+    // law_ids: every law the kernel scores (the host declares it, law files' laws included).
+    for (var i = 0u; i < LAW_COUNT; i = i + 1u) {
+        let l = law_ids[i];
         for (var g = 0u; g < 4u; g = g + 1u) {
             let of_law = laws[g] == vec4<u32>(l);
             if (any(of_law)) {

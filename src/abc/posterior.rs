@@ -64,7 +64,7 @@ pub struct LawSummary {
 pub struct PosteriorSummary {
     /// Number of particles, all laws together.
     pub total: usize,
-    /// Laws with at least one particle, in [`Law::ALL`] order.
+    /// Laws with at least one particle, in [`Law`]'s order (m1..m4, then law files' laws).
     pub laws: Vec<LawSummary>,
     /// P(law | data) for every law in `laws_considered`, in that order; 0 for a law that died
     /// out, so that a report still names it.
@@ -82,9 +82,10 @@ pub fn summarize(particles: &[Particle], laws_considered: &[Law]) -> PosteriorSu
         .iter()
         .all(|p| p.weight.to_bits() == particles[0].weight.to_bits());
     let total_weight = compensated_sum(particles.iter().map(|p| p.weight));
-    let laws: Vec<LawSummary> = Law::ALL
-        .iter()
-        .filter_map(|&law| {
+    let present: std::collections::BTreeSet<Law> = particles.iter().map(|p| p.law).collect();
+    let laws: Vec<LawSummary> = present
+        .into_iter()
+        .filter_map(|law| {
             let members: Vec<&Particle> = particles.iter().filter(|p| p.law == law).collect();
             (!members.is_empty()).then(|| {
                 let probability = if equal {
@@ -1054,7 +1055,7 @@ mod tests {
     #[test]
     fn envelope_bounds_are_ordered() {
         let mut rng = StdRng::seed_from_u64(21);
-        let base = Law::M3.scale_torque(Law::M3.paper_estimate(), 1e3);
+        let base = Law::M3.scale_torque(Law::M3.paper_estimate().unwrap(), 1e3);
         let particles: Vec<Particle> = (0..500)
             .map(|i| {
                 let p: Vec<f64> = base

@@ -217,7 +217,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
 /// settings the run would ignore).
 fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
     let settings = Settings {
-        laws: Some(fit_args.laws.clone()),
+        laws: Some(fit_args.laws()?),
         fit: fit_args.options()?,
         sampler: args.sampler,
         particles: Some(args.particles),

@@ -1,6 +1,7 @@
 //! Argument groups shared by several commands (the record, the fit, the drill strings) and
 //! their conversion into the library's options.
 
+use bitrock::Law;
 use bitrock::data::{self, DataOptions, FieldData, SplitRule};
 use bitrock::fit::FitOptions;
 use bitrock::stability::fe::DrillStringSettings;
@@ -79,9 +80,10 @@ impl DataArgs {
 /// How the least-squares fit runs.
 #[derive(Debug, Args, Clone)]
 pub struct FitArgs {
-    /// Laws to fit, comma-separated.
-    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
-    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Laws to fit, comma-separated: m1..m4 and the laws of --law-file by their names
+    /// [default: m1,m2,m3,m4 and every --law-file's law].
+    #[arg(long, value_name = "LAWS")]
+    pub laws: Option<String>,
     /// Lift the physical bounds (positive static and dynamic torques, positive rates and widths).
     #[arg(long)]
     pub no_bounds: bool,
@@ -98,6 +100,22 @@ pub struct FitArgs {
 }
 
 impl FitArgs {
+    /// The laws of --laws; without it, m1..m4 and every --law-file's law.
+    pub fn laws(&self) -> anyhow::Result<Vec<Law>> {
+        match &self.laws {
+            Some(list) => parse_laws(list),
+            None => {
+                let files = bitrock::laws::file::registered_names()
+                    .into_iter()
+                    .map(str::parse::<Law>);
+                let files = files
+                    .collect::<Result<Vec<Law>, String>>()
+                    .map_err(anyhow::Error::msg)?;
+                Ok(Law::ALL.into_iter().chain(files).collect())
+            }
+        }
+    }
+
     /// The fit options of the flags (the library validates them).
     pub fn options(&self) -> anyhow::Result<FitOptions> {
         Ok(FitOptions::from_settings(
@@ -107,6 +125,11 @@ impl FitArgs {
             self.w_ref_kn,
         )?)
     }
+}
+
+/// The laws of a --laws list (m1..m4 and the --law-file laws by name), refused naming --laws.
+pub fn parse_laws(list: &str) -> anyhow::Result<Vec<Law>> {
+    Ok(bitrock::laws::parse_law_list(list).map_err(|m| bitrock::Error::setting("laws", m))?)
 }
 
 /// The value parser of every floating-point flag: a number, finite. NaN and infinities are

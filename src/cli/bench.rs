@@ -11,9 +11,9 @@ pub struct BenchCmd {
     /// Repetitions per measurement (median, min and max are reported).
     #[arg(long, default_value_t = 5, value_name = "R")]
     pub reps: usize,
-    /// Laws to measure, comma-separated.
-    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
-    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Laws to measure, comma-separated (m1..m4 and --law-file laws with reference values).
+    #[arg(long, default_value = "m1,m2,m3,m4", value_name = "LAWS")]
+    pub laws: String,
     /// Only this backend [default: both].
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
@@ -51,7 +51,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     }
     let mut opts = bitrock::bench::BenchOptions {
         repetitions: cmd.reps,
-        laws: cmd.laws.clone(),
+        laws: super::args::parse_laws(&cmd.laws)?,
         retune: cmd.retune,
         ..Default::default()
     };

@@ -20,6 +20,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("split", "--split"),
     // Least squares.
     ("laws", "--laws"),
+    ("law", "--law"),
+    ("law_file", "--law-file"),
     ("starts", "--starts"),
     ("w_ref_kn", "--w-ref-kn"),
     ("scale_by_wob", "--scale-by-wob"),

@@ -25,7 +25,7 @@ pub struct FitCmd {
 pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
     let opts = cmd.fit.options()?;
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    fit_and_print(&data, &cmd.fit.laws, &opts, cmd.json)?;
+    fit_and_print(&data, &cmd.fit.laws()?, &opts, cmd.json)?;
     Ok(ExitCode::SUCCESS)
 }
 

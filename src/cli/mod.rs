@@ -46,6 +46,22 @@ pub mod exit {
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// A law of your own, for every command that takes laws: a TOML law file (its name,
+    /// parameters with units and bounds, the torque as an expression of w, r and the
+    /// parameters; docs/law-files.md), named by its law's name in --laws and --law. Repeatable.
+    #[arg(long = "law-file", value_name = "FILE", global = true)]
+    pub law_files: Vec<std::path::PathBuf>,
+}
+
+impl Cli {
+    /// Reads and registers every --law-file, so that the commands' --laws and --law name
+    /// their laws.
+    pub fn register_law_files(&self) -> anyhow::Result<()> {
+        for path in &self.law_files {
+            bitrock::laws::file::load_and_register(path)?;
+        }
+        Ok(())
+    }
 }
 
 /// The exit statuses of [`exit`], as `--help` lists them.

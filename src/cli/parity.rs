@@ -13,9 +13,10 @@ pub struct ParityCmd {
     pub data: Option<PathBuf>,
     #[command(flatten)]
     pub data_args: DataArgs,
-    /// Laws to compare, comma-separated (priors from their least-squares fits, δ = 0.4).
-    #[arg(long, default_value = "m1,m2,m3,m4", value_parser = bitrock::laws::parse_law_list)]
-    pub laws: std::vec::Vec<bitrock::Law>,
+    /// Laws to compare, comma-separated, m1..m4 and --law-file laws (priors from their
+    /// least-squares fits, δ = 0.4).
+    #[arg(long, default_value = "m1,m2,m3,m4", value_name = "LAWS")]
+    pub laws: String,
     /// Candidates scored per law on each backend.
     #[arg(long, default_value_t = bitrock::bench::PARITY_CANDIDATES, value_name = "N")]
     pub candidates: usize,
@@ -32,7 +33,13 @@ pub struct ParityCmd {
 
 pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    let report = bitrock::bench::parity_on(&data, &cmd.laws, cmd.candidates, cmd.epsilon, cmd.seed)?;
+    let report = bitrock::bench::parity_on(
+        &data,
+        &super::args::parse_laws(&cmd.laws)?,
+        cmd.candidates,
+        cmd.epsilon,
+        cmd.seed,
+    )?;
     let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;

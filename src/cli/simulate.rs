@@ -21,9 +21,9 @@ pub enum InitialState {
 
 #[derive(Debug, Args)]
 pub struct SimulateCmd {
-    /// Bit-rock law (m1, m2, m3, m4).
+    /// Bit-rock law (m1, m2, m3, m4, or a --law-file's law by its name).
     #[arg(long)]
-    pub law: bitrock::Law,
+    pub law: String,
     /// The law's parameters in its order (m2: tsb,tcb,g), torques in --param-torque-unit
     /// [default: the paper's least-squares estimate].
     #[arg(long, value_parser = finite_number, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
@@ -87,14 +87,21 @@ pub struct SimulateCmd {
 }
 
 pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
-    let law: Law = cmd.law;
-    let params = cmd.params.clone().unwrap_or_else(|| {
-        let p = law.paper_estimate();
-        law.scale_torque(
+    let law: Law = cmd.law.parse().map_err(|m: String| bitrock::Error::setting("law", m))?;
+    let params = match (&cmd.params, law.paper_estimate()) {
+        (Some(params), _) => params.clone(),
+        (None, Some(p)) => law.scale_torque(
             p,
             TorqueUnit::KNm.newton_metres() / cmd.param_torque_unit.newton_metres(),
-        )
-    });
+        ),
+        (None, None) => {
+            return Err(bitrock::Error::setting(
+                "params",
+                format!("law {law} has no reference values to default to; give its parameters"),
+            )
+            .into());
+        }
+    };
     let config = SimConfig {
         law,
         params_nm: law.scale_torque(&params, cmd.param_torque_unit.newton_metres()),

@@ -96,6 +96,14 @@ fn rho_portable(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
             let (c0, c1, c2, c3) = (p[0], p[1], p[2], p[3]);
             sum_sq_residual(w, y, r, |w| c0 + w * (c1 + w * (c2 + w * c3)))
         }
+        Law::File(_) => {
+            // T = r · T(r = 1): the file's torque is checked proportional to r when read.
+            let torque = &law.file().expect("a law file's law").torque;
+            let ssr = sum_sq_residual(w, y, r, |w| torque.eval(p, w, 1.0));
+            // A torque with no value (an overflow, a logarithm of a negative number) rejects
+            // the candidate rather than poisoning sums with NaN.
+            if ssr.is_nan() { f64::INFINITY } else { ssr }
+        }
     };
     ssr / problem.sum_sq_torque
 }

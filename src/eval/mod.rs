@@ -30,9 +30,20 @@ pub struct AbcProblem {
     pub wob_ratio: Vec<f64>,
     /// Σy², (N·m)², summed once on the host in f64 with compensation.
     pub sum_sq_torque: f64,
-    /// Best least-squares ρ of each law on these data (indexed by [`Law::index`]) where known:
-    /// no candidate of the law scores below it, so a tolerance at or below it cannot be reached.
-    pub best_rho: [Option<f64>; Law::ALL.len()],
+    /// Best least-squares ρ of each law on these data where known: no candidate of the law
+    /// scores below it, so a tolerance at or below it cannot be reached.
+    pub best_rho: std::collections::BTreeMap<Law, f64>,
+}
+
+/// ρ of a sum of squared residuals `ssr` (f32, from a kernel): `ssr / sum_sq_torque`, and +∞
+/// where the sum has no value (a law file's torque overflowing or taking a logarithm of a
+/// negative number), so that such a candidate is rejected and never poisons a sum.
+pub(crate) fn rho_of_sum(ssr: f32, sum_sq_torque: f64) -> f64 {
+    if ssr.is_nan() {
+        f64::INFINITY
+    } else {
+        f64::from(ssr) / sum_sq_torque
+    }
 }
 
 impl AbcProblem {
@@ -46,7 +57,7 @@ impl AbcProblem {
             torque_nm: data.torque_nm.clone(),
             wob_ratio: data.wob_ratio(w_ref_n),
             sum_sq_torque: data.sum_sq_torque(),
-            best_rho: [None; Law::ALL.len()],
+            best_rho: Default::default(),
         }
     }
 
@@ -54,7 +65,7 @@ impl AbcProblem {
     /// calibration data).
     pub fn with_best_rho(mut self, fits: &[LawFit]) -> Self {
         for fit in fits {
-            self.best_rho[fit.law.index()] = Some(fit.rho);
+            self.best_rho.insert(fit.law, fit.rho);
         }
         self
     }
@@ -62,7 +73,7 @@ impl AbcProblem {
     /// False when `law`'s best least-squares ρ shows that no candidate of it can score below
     /// `epsilon`; true when it can or when its best ρ is unknown.
     pub fn can_reach(&self, law: Law, epsilon: f64) -> bool {
-        self.best_rho[law.index()].is_none_or(|best| best < epsilon)
+        self.best_rho.get(&law).is_none_or(|&best| best < epsilon)
     }
 
     /// Number of data points D.

@@ -361,9 +361,11 @@ impl<'a> Prepared<'a> {
                 }
             })
             .collect();
-        let deterministic = Law::ALL
-            .iter()
-            .filter_map(|&law| {
+        let laws: std::collections::BTreeSet<Law> =
+            Law::ALL.into_iter().chain(input.fits.iter().map(|f| f.law)).collect();
+        let deterministic = laws
+            .into_iter()
+            .filter_map(|law| {
                 if let Some(m) = map_inputs.iter().find(|m| m.law == law) {
                     Some((law, m.map_si.clone(), false))
                 } else {
@@ -392,12 +394,10 @@ impl<'a> Prepared<'a> {
         law.scale_torque(si, 1.0 / self.torque_scale)
     }
 
-    /// The laws of any run, in [`Law::ALL`] order.
+    /// The laws of any run, in [`Law`]'s order.
     fn all_laws(&self) -> Vec<Law> {
-        Law::ALL
-            .into_iter()
-            .filter(|l| self.runs.iter().any(|r| r.run.laws.contains(l)))
-            .collect()
+        let laws: std::collections::BTreeSet<Law> = self.runs.iter().flat_map(|r| r.run.laws.iter().copied()).collect();
+        laws.into_iter().collect()
     }
 
     /// The stochastic map's laws: those of the reference run with probability ≥ 1 %.

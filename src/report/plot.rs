@@ -82,6 +82,11 @@ pub(crate) fn law_color(law: crate::Law) -> RGBColor {
         crate::Law::M2 => hex(0xff7f0e),
         crate::Law::M3 => hex(0x2ca02c),
         crate::Law::M4 => hex(0x8c564b),
+        // Law files' laws: pink, olive, cyan, grey, then round again.
+        crate::Law::File(_) => {
+            const MORE: [u32; 4] = [0xe377c2, 0xbcbd22, 0x17becf, 0x7f7f7f];
+            hex(MORE[(law.index() - crate::Law::ALL.len()) % MORE.len()])
+        }
     }
 }
 

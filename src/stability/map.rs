@@ -286,7 +286,7 @@ mod tests {
     use super::*;
 
     fn m2_nm() -> Vec<f64> {
-        Law::M2.scale_torque(Law::M2.paper_estimate(), 1000.0)
+        Law::M2.scale_torque(Law::M2.paper_estimate().unwrap(), 1000.0)
     }
 
     #[test]
@@ -316,7 +316,7 @@ mod tests {
         assert!(lumped.growth_rate(w * 1.0001 / 244.2e3 * slope) > 0.0);
         assert!(lumped.growth_rate(w * 0.9999 / 244.2e3 * slope) < 0.0);
         // m3 rises on its bump below a2 = 0.09 rad/s: no weight on bit destabilises there.
-        let m3 = Law::M3.scale_torque(Law::M3.paper_estimate(), 1000.0);
+        let m3 = Law::M3.scale_torque(Law::M3.paper_estimate().unwrap(), 1000.0);
         assert!(Law::M3.dtorque_dw(&m3, 0.01, 1.0) > 0.0);
         assert!(critical_wob_n(Law::M3, &m3, 0.01, c, 244.2e3).is_none());
     }

@@ -218,9 +218,9 @@ fn model_selection_prefers_the_generating_law() {
 #[test]
 fn posterior_intervals_cover_the_generating_parameters() {
     for law in Law::ALL {
-        let truth = law.scale_torque(law.paper_estimate(), 1000.0);
+        let truth = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
         let mut data = samples(law, &truth, 0.5, 20.0, 600);
-        let mut g = rng(31 + law as u64);
+        let mut g = rng(31 + law.index() as u64);
         let noise = Normal::new(0.0, 200.0).unwrap();
         for y in &mut data.torque_nm {
             *y += noise.sample(&mut g);

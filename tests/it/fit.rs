@@ -14,7 +14,7 @@ const SCALES: [(&str, f64); 2] = [("field, kN·m", 1000.0), ("laboratory, N·m",
 fn noise_free_data_give_back_the_papers_estimates_at_any_torque_scale() {
     for (label, scale) in SCALES {
         for law in Law::ALL {
-            let truth = law.scale_torque(law.paper_estimate(), scale);
+            let truth = law.scale_torque(law.paper_estimate().unwrap(), scale);
             let data = samples(law, &truth, 0.1, 22.0, 2000);
             let fit = fit_law(law, &data, &Samples::default(), &FitOptions::default()).unwrap();
             for (j, (got, want)) in fit.params_si.iter().zip(&truth).enumerate() {
@@ -36,7 +36,7 @@ fn with_noise_the_fit_is_no_worse_than_the_generating_parameters() {
     let mut rng = rng(5);
     for (label, scale) in SCALES {
         for law in Law::ALL {
-            let truth = law.scale_torque(law.paper_estimate(), scale);
+            let truth = law.scale_torque(law.paper_estimate().unwrap(), scale);
             let mut data = samples(law, &truth, 0.55, 16.0, 3000);
             // About 8 % of the mean torque, as in field records.
             let noise = Normal::new(0.0, 0.8 * scale).unwrap();
@@ -137,7 +137,7 @@ fn bounds_hold_by_default_and_lift_on_request() {
 
 #[test]
 fn validation_misfit_is_reported() {
-    let truth = Law::M2.scale_torque(Law::M2.paper_estimate(), 1000.0);
+    let truth = Law::M2.scale_torque(Law::M2.paper_estimate().unwrap(), 1000.0);
     let calibration = samples(Law::M2, &truth, 0.6, 15.0, 400);
     let mut validation = samples(Law::M2, &truth, 0.7, 14.0, 300);
     for y in &mut validation.torque_nm {

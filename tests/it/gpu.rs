@@ -427,7 +427,7 @@ fn the_stability_grid_agrees_with_the_cpu_cell_by_cell() {
     let w_ref = 244.2e3;
     for law in Law::ALL {
         // 40,000 samples: more than one slice of 32,768, ±30 % around the paper's estimate.
-        let base = law.scale_torque(law.paper_estimate(), 1000.0);
+        let base = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
         let samples: Vec<Vec<f64>> = (0..40_000u32)
             .map(|i| {
                 base.iter()

@@ -2,10 +2,18 @@
 //! built-in laws written as files and for random expressions. These tests need a GPU adapter,
 //! as tests/it/gpu.rs's do.
 
-use crate::gpu::require_gpu;
+use crate::gpu::{demo_problem, require_gpu};
+use crate::support::bin;
+use bitrock::Law;
+use bitrock::data::{DataOptions, demo_field_data};
+use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::law_points::{Point, torques};
-use bitrock::law_file::expr::{Binary, Expr, Unary, Var, parse};
-use bitrock::law_file::{LawFile, LawParam};
+use bitrock::eval::gpu::{Shape, residual::GpuEvaluator, tune};
+use bitrock::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE};
+use bitrock::fit::{FitOptions, fit_record};
+use bitrock::laws::file::expr::{Binary, Expr, Unary, Var, parse};
+use bitrock::laws::file::register;
+use bitrock::laws::file::{LawFile, LawParam};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use std::path::Path;
@@ -206,4 +214,211 @@ fn random_expressions_agree_on_the_gpu_with_their_twins() {
     // Most points give finite values; the comparison is not vacuous.
     eprintln!("{compared} of {total} points compared over {laws} random laws");
     assert!(compared * 10 >= total * 8, "{compared} of {total}");
+}
+
+/// The built-in laws and their law files (examples/laws), registered.
+fn built_in_pairs() -> Vec<(Law, Law)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws");
+    [
+        (Law::M1, "tucker_wang"),
+        (Law::M2, "navarro_suarez"),
+        (Law::M3, "gaussian_tanh"),
+        (Law::M4, "cubic"),
+    ]
+    .into_iter()
+    .map(|(law, file)| {
+        (
+            law,
+            register(LawFile::load(&dir.join(format!("{file}.toml"))).unwrap()).unwrap(),
+        )
+    })
+    .collect()
+}
+
+#[test]
+fn the_built_in_laws_as_files_fit_the_embedded_record_as_the_built_in_laws_do() {
+    let data = demo_field_data(&DataOptions::default()).unwrap();
+    for (law, file) in built_in_pairs() {
+        let fits = fit_record(&[law, file], &data, &FitOptions::default()).unwrap();
+        let (a, b) = (&fits[0], &fits[1]);
+        assert_eq!((a.law, b.law), (law, file));
+        // The same minimum: ρ within 1e-9; every parameter within a thousandth of its standard
+        // error (LM stops on the flat directions of m1 and m3 a few 1e-7 apart, relative).
+        assert!(
+            (a.rho - b.rho).abs() <= 1e-9 * a.rho,
+            "{law}: ρ {} against {}",
+            a.rho,
+            b.rho
+        );
+        for j in 0..law.n_params() {
+            let (x, y) = (a.params_si[j], b.params_si[j]);
+            let tolerance = a.std_errors_si[j].map_or(1e-6 * x.abs(), |se| 1e-3 * se);
+            assert!((x - y).abs() <= tolerance, "{law} parameter {j}: {x} against {y}");
+        }
+    }
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn a_law_file_scores_as_its_built_in_law_on_both_backends_in_both_shapes() {
+    require_gpu();
+    for (law, file) in built_in_pairs() {
+        // The same boxes and the same seed: the same candidates, of the built-in law or of the file.
+        let built_in = demo_problem(&[law], 17);
+        let mut as_file = built_in.clone();
+        as_file.prior.boxes[0].law = file;
+        let count = 4_096;
+        let score = |problem: &AbcProblem, backend: Backend, shape: Option<Shape>| -> Vec<f64> {
+            let mut rho = vec![0.0; count];
+            match (backend, shape) {
+                (Backend::Gpu, Some(shape)) => GpuEvaluator::with_shape(problem.clone(), shape)
+                    .unwrap()
+                    .score(1, 0, &mut rho)
+                    .unwrap(),
+                _ => CpuEvaluator::new(problem.clone()).score(1, 0, &mut rho).unwrap(),
+            }
+            rho
+        };
+        let reference = score(&built_in, Backend::Cpu, None);
+        // CPU: the twin against the built-in law's hand-written (vectorised) code.
+        for (a, b) in score(&as_file, Backend::Cpu, None).iter().zip(&reference) {
+            assert!((a - b).abs() <= 1e-12 * b, "{law} on the CPU: {a} against {b}");
+        }
+        for shape in [Shape::Blocked, Shape::Tiled] {
+            let gpu = score(&as_file, Backend::Gpu, Some(shape));
+            let worst = gpu
+                .iter()
+                .zip(&reference)
+                .map(|(g, c)| ((g - c) / c).abs())
+                .fold(0.0, f64::max);
+            eprintln!("{file} ({shape}): largest relative difference of ρ from the CPU {worst:.2e}");
+            assert!(worst <= PARITY_TOLERANCE, "{file} ({shape}): {worst:e}");
+        }
+    }
+}
+
+/// Runs the binary with its own cache directory; (status, stdout, stderr).
+fn run(cache: &Path, args: &[&str]) -> (i32, String, String) {
+    let out = bin()
+        .env(tune::CACHE_DIR_VAR, cache)
+        .env("NODEVICE_SELECT", "1")
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The populations of a run directory's run.json.
+fn populations(dir: &Path) -> serde_json::Value {
+    let run: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap();
+    run["populations"].clone()
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn a_run_with_a_law_file_is_the_same_on_both_backends_and_resumes_without_the_file() {
+    require_gpu();
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let law = tmp.path().join("mine.toml");
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws/stribeck.toml"),
+        &law,
+    )
+    .unwrap();
+    let out = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    let common = [
+        "abc",
+        "--law-file",
+        law.to_str().unwrap(),
+        "--particles",
+        "1500",
+        "--seed",
+        "5",
+        "-q",
+    ];
+    let mut runs = Vec::new();
+    for (name, extra) in [
+        ("cpu", vec!["--backend", "cpu"]),
+        ("gpu", vec!["--backend", "gpu"]),
+        ("smc", vec!["--backend", "cpu", "--sampler", "smc"]),
+        ("smc_gpu", vec!["--backend", "gpu", "--sampler", "smc"]),
+        ("part", vec!["--backend", "cpu", "--max-populations", "2"]),
+    ] {
+        let target = out(name);
+        let args: Vec<&str> = common.iter().copied().chain(extra).chain(["--out", &target]).collect();
+        let (code, _, stderr) = run(&cache, &args);
+        assert_eq!(code, 0, "{name}: {stderr}");
+        runs.push(target);
+    }
+    // The law took part: five laws in the populations' table, stribeck among them.
+    let cpu = populations(Path::new(&runs[0]));
+    assert!(cpu.to_string().contains("stribeck"), "{cpu}");
+    // Rejection: the same draws, acceptances and probabilities on both backends (no candidate
+    // fell within the parity tolerance of ε, else the run would say so).
+    let strip = |p: &serde_json::Value| -> Vec<serde_json::Value> {
+        p.as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                let mut p = p.clone();
+                p.as_object_mut()
+                    .unwrap()
+                    .retain(|k, _| !k.contains("seconds") && k != "near_threshold");
+                p
+            })
+            .collect()
+    };
+    assert_eq!(strip(&cpu), strip(&populations(Path::new(&runs[1]))));
+    assert_eq!(
+        strip(&populations(Path::new(&runs[2]))),
+        strip(&populations(Path::new(&runs[3])))
+    );
+    // The law file gone, the stopped run continues to the uninterrupted run's populations.
+    std::fs::remove_file(&law).unwrap();
+    let (code, _, stderr) = run(&cache, &["abc", "--resume", &runs[4], "-q"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(strip(&cpu), strip(&populations(Path::new(&runs[4]))));
+    // And its report is written from the run alone.
+    let report = out("report");
+    let (code, _, stderr) = run(&cache, &["report", &runs[0], "--out", &report]);
+    assert_eq!(code, 0, "{stderr}");
+    let md = std::fs::read_to_string(Path::new(&report).join("report.md")).unwrap();
+    assert!(md.contains("stribeck"), "the report names the law file's law");
+}
+
+#[test]
+fn a_bad_law_file_is_refused_naming_file_line_and_column_and_nothing_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let law = tmp.path().join("bad.toml");
+    std::fs::write(
+        &law,
+        "name = \"bad\"\ntorque = \"r * (k + w)\"\n[[parameter]]\nname = \"k\"\nunit = \"N·m\"\n",
+    )
+    .unwrap();
+    let target = tmp.path().join("run");
+    let (code, _, stderr) = run(
+        &tmp.path().join("cache"),
+        &[
+            "abc",
+            "--law-file",
+            law.to_str().unwrap(),
+            "--out",
+            target.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(&format!("{}:2:11: torque: adding w to k", law.display())),
+        "{stderr}"
+    );
+    assert!(!target.exists());
+    // A law the command line names but no file defines.
+    let (code, _, stderr) = run(&tmp.path().join("cache"), &["fit", "--laws", "m2,stribeck"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--laws: unknown law 'stribeck'"), "{stderr}");
 }

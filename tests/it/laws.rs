@@ -22,7 +22,7 @@ fn torques_at_the_papers_estimates_match_hand_calculation() {
     ];
     for (law, values) in expected {
         for (w, want) in [0.0, 1.0, 10.0].into_iter().zip(values) {
-            let got = law.torque(law.paper_estimate(), w, 1.0);
+            let got = law.torque(law.paper_estimate().unwrap(), w, 1.0);
             assert!(
                 (got - want).abs() <= 1e-12 * want.abs().max(1.0),
                 "{law} at w = {w}: {got} vs {want}"
@@ -34,7 +34,7 @@ fn torques_at_the_papers_estimates_match_hand_calculation() {
 #[test]
 fn weight_on_bit_scales_torque_and_derivative_linearly() {
     for law in Law::ALL {
-        let p = law.paper_estimate();
+        let p = law.paper_estimate().unwrap();
         for w in [0.5, 3.0, 12.0] {
             let t = law.torque(p, w, 1.0);
             let d = law.dtorque_dw(p, w, 1.0);
@@ -106,7 +106,7 @@ fn parameter_gradients_match_central_differences() {
 #[test]
 fn unit_conversion_of_parameters_is_exact_in_torque() {
     for law in Law::ALL {
-        let p = law.paper_estimate();
+        let p = law.paper_estimate().unwrap();
         let p_nm = law.scale_torque(p, 1000.0);
         for w in [0.3, 4.0, 15.0] {
             let kilo = law.torque(p, w, 1.0) * 1000.0;

@@ -401,7 +401,7 @@ fn worth_proposes_no_law_that_cannot_reach_epsilon_and_floors_the_others() {
     // m2 cannot fit (ρ ≥ 49²) and its best least-squares ρ says so: proposed by worth, it gets
     // no proposal after population 0; the model kernel still proposes it half the time.
     let mut problem = one_parameter_problem(3, Some(1.0));
-    problem.best_rho[Law::M2.index()] = Some(49.0 * 49.0);
+    problem.best_rho.insert(Law::M2, 49.0 * 49.0);
     let evaluator = CpuEvaluator::new(problem);
     let draws_of = |run: &Run, g: usize, law: Law| {
         run.populations[g]
@@ -430,7 +430,7 @@ fn worth_proposes_no_law_that_cannot_reach_epsilon_and_floors_the_others() {
     // With two laws that can both reach ε, worth gives the one with no particle below ε its
     // floor share of the proposals: WORTH_FLOOR / 2.
     let mut reachable = one_parameter_problem(4, Some(1.0));
-    reachable.best_rho = [None; 4];
+    reachable.best_rho.clear();
     let run = smc::run(
         &CpuEvaluator::new(reachable),
         &with_scheme(&config, (Refill::Fresh, LawProposal::Worth, Perturbation::Global)),

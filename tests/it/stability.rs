@@ -18,7 +18,7 @@ fn the_reduction_matches_brute_force_fe_eigenvalues_on_every_cell() {
     let omega = parse_axis("20:200:10", "x").unwrap();
     let wob = parse_axis("20:600:10", "y").unwrap();
     for law in [Law::M2, Law::M3] {
-        let p = law.scale_torque(law.paper_estimate(), 1000.0);
+        let p = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
         for &rpm in &omega {
             let w_star = critical_wob_n(law, &p, rpm * RAD_S_PER_RPM, critical, W_REF_N);
             for &kn in &wob {
@@ -43,7 +43,7 @@ fn the_simulator_confirms_the_deterministic_boundary() {
     let lumped = Lumped::default();
     let c = lumped.critical_bit_damping_nms();
     for (law, rpm) in [(Law::M2, 60.0), (Law::M3, 80.0)] {
-        let p = law.scale_torque(law.paper_estimate(), 1000.0);
+        let p = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
         let omega = rpm * RAD_S_PER_RPM;
         let w_star = critical_wob_n(law, &p, omega, c, W_REF_N).unwrap();
         for (factor, unstable) in [(0.9, false), (1.1, true)] {

@@ -11,6 +11,7 @@ use rand_distr::{Distribution, Normal};
 /// Parameters drawn uniformly in [0.5, 1.5] × the paper's estimate (kN·m).
 pub fn random_params(law: Law, rng: &mut StdRng) -> Vec<f64> {
     law.paper_estimate()
+        .unwrap()
         .iter()
         .map(|&p| p * rng.random_range(0.5..1.5))
         .collect()
@@ -44,7 +45,7 @@ pub fn bin() -> std::process::Command {
 /// vanishes at w = 0, cannot mimic m2's static torque), against all four laws with priors from
 /// least squares, δ = 0.4; also m2's least-squares ρ.
 pub fn paper_m2_problem(seed: u64) -> (AbcProblem, f64) {
-    let truth = Law::M2.scale_torque(Law::M2.paper_estimate(), 1000.0);
+    let truth = Law::M2.scale_torque(Law::M2.paper_estimate().unwrap(), 1000.0);
     let mut data = samples(Law::M2, &truth, 0.1, 20.0, 800);
     let mut g = rng(21);
     let noise = Normal::new(0.0, 400.0).unwrap();

@@ -894,7 +894,13 @@ fn simulate(
             }
             law.scale_torque(&params, unit.newton_metres())
         }
-        None => law.scale_torque(law.paper_estimate(), TorqueUnit::KNm.newton_metres()),
+        None => match law.paper_estimate() {
+            Some(p) => law.scale_torque(p, TorqueUnit::KNm.newton_metres()),
+            None => {
+                let message = format!("law {law} has no reference values to default to; give its parameters");
+                return Err(to_py(py, bitrock::Error::setting("params", message)));
+            }
+        },
     };
     let mut c = SimConfig::new(law, params_nm, omega_rpm * RAD_S_PER_RPM, bitrock::laws::PAPER_W_REF_N);
     let kn = |key: &str| -> PyResult<Option<f64>> { Ok(kwarg::<f64>(options, key)?.map(|v| v * 1000.0)) };

@@ -2,7 +2,7 @@
 //! dT/dw in f32 on the GPU, for comparing with the f64 CPU twin.
 
 use super::{GpuError, STORAGE_READ, STORAGE_WRITE, WORKGROUP_SIZE, buffer_entry};
-use crate::law_file::LawFile;
+use crate::laws::file::LawFile;
 
 /// One point: the law's parameters (unused ones 0), bit speed (rad/s) and weight-on-bit ratio.
 #[repr(C)]
@@ -20,8 +20,8 @@ fn source(law: &LawFile) -> String {
         super::LAWS_WGSL.to_string(),
         law.wgsl(),
         format!(
-            "fn law_torque(p: array<f32, 6>, w: f32, r: f32) -> f32 {{ return torque_{name}(p, w, r); }}\n\
-             fn law_slope(p: array<f32, 6>, w: f32, r: f32) -> f32 {{ return dtorque_dw_{name}(p, w, r); }}"
+            "fn law_torque(p: array<f32, 6>, w: f32, r: f32) -> f32 {{ return file_torque_{name}(p, w, r); }}\n\
+             fn law_slope(p: array<f32, 6>, w: f32, r: f32) -> f32 {{ return file_slope_{name}(p, w, r); }}"
         ),
         include_str!("../../../shaders/law_file_points.wgsl").to_string(),
     ]

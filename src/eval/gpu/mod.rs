@@ -9,6 +9,7 @@
 //! [`Shape`]s, chosen by measurement per adapter ([`tune`]) or by `BITROCK_GPU_SHAPE`.
 
 pub mod candidates;
+pub(crate) mod file_laws;
 pub mod kernel_sums;
 pub mod law_points;
 pub mod records;
@@ -29,8 +30,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 const PHILOX_WGSL: &str = include_str!("../../../shaders/shared/philox.wgsl");
 const JOB_WGSL: &str = include_str!("../../../shaders/shared/job.wgsl");
 const CANDIDATE_WGSL: &str = include_str!("../../../shaders/shared/candidate.wgsl");
-/// The laws and the kernels' shared transcendentals, which a law file's WGSL calls.
-pub(crate) const LAWS_WGSL: &str = include_str!("../../../shaders/shared/laws.wgsl");
+use crate::laws::LAWS_WGSL;
 const SSR_WGSL: &str = include_str!("../../../shaders/shared/ssr.wgsl");
 const TILE_WGSL: &str = include_str!("../../../shaders/shared/tile.wgsl");
 const PROPOSAL_WGSL: &str = include_str!("../../../shaders/shared/proposal.wgsl");
@@ -50,8 +50,9 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
     ]
 }
 
-fn residual_source() -> String {
-    [
+/// The residual kernel with the law files' `laws` ([`file_laws::splice`]).
+pub(crate) fn residual_source_for(laws: &[crate::Law]) -> String {
+    let raw = [
         PHILOX_WGSL,
         JOB_WGSL,
         CANDIDATE_WGSL,
@@ -60,11 +61,17 @@ fn residual_source() -> String {
         TILE_WGSL,
         include_str!("../../../shaders/residual.wgsl"),
     ]
-    .join("\n")
+    .join("\n");
+    file_laws::splice(&raw, laws)
 }
 
-fn score_params_source() -> String {
-    [
+fn residual_source() -> String {
+    residual_source_for(&[])
+}
+
+/// The score_params kernel with the law files' `laws` ([`file_laws::splice`]).
+pub(crate) fn score_params_source_for(laws: &[crate::Law]) -> String {
+    let raw = [
         JOB_WGSL,
         PROPOSAL_WGSL,
         LAWS_WGSL,
@@ -72,11 +79,17 @@ fn score_params_source() -> String {
         TILE_WGSL,
         include_str!("../../../shaders/score_params.wgsl"),
     ]
-    .join("\n")
+    .join("\n");
+    file_laws::splice(&raw, laws)
 }
 
-fn records_source() -> String {
-    [
+fn score_params_source() -> String {
+    score_params_source_for(&[])
+}
+
+/// The records kernel with the law files' `laws` ([`file_laws::splice`]).
+pub(crate) fn records_source_for(laws: &[crate::Law]) -> String {
+    let raw = [
         PHILOX_WGSL,
         JOB_WGSL,
         CANDIDATE_WGSL,
@@ -86,15 +99,26 @@ fn records_source() -> String {
         TILE_WGSL,
         include_str!("../../../shaders/records.wgsl"),
     ]
-    .join("\n")
+    .join("\n");
+    file_laws::splice(&raw, laws)
+}
+
+fn records_source() -> String {
+    records_source_for(&[])
 }
 
 fn kernel_sums_source() -> String {
     [LAWS_WGSL, include_str!("../../../shaders/kernel_sums.wgsl")].join("\n")
 }
 
+/// The slopes kernel with the law files' `laws` ([`file_laws::splice`]).
+pub(crate) fn slopes_source_for(laws: &[crate::Law]) -> String {
+    let raw = [LAWS_WGSL, include_str!("../../../shaders/slopes.wgsl")].join("\n");
+    file_laws::splice(&raw, laws)
+}
+
 fn slopes_source() -> String {
-    [LAWS_WGSL, include_str!("../../../shaders/slopes.wgsl")].join("\n")
+    slopes_source_for(&[])
 }
 
 fn stability_source() -> String {
@@ -639,18 +663,21 @@ impl GpuContext {
     }
 }
 
-/// Host twin of `Prior` in shaders/shared/candidate.wgsl. Keep in sync.
+use crate::prior::MAX_LAWS;
+
+/// Host twin of `Prior` in shaders/shared/candidate.wgsl (its per-slot arrays of vec4 are
+/// these flat arrays of [`MAX_LAWS`]). Keep in sync.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct GpuPrior {
     key: [u32; 2],
     n_laws: u32,
     _pad0: u32,
-    thresholds: [u32; 4],
-    law_id: [u32; 4],
-    n_params: [u32; 4],
-    lower: [[f32; 4]; 8],
-    upper: [[f32; 4]; 8],
+    thresholds: [u32; MAX_LAWS],
+    law_id: [u32; MAX_LAWS],
+    n_params: [u32; MAX_LAWS],
+    lower: [[f32; 4]; 2 * MAX_LAWS],
+    upper: [[f32; 4]; 2 * MAX_LAWS],
 }
 
 impl GpuPrior {

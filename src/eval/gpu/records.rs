@@ -13,7 +13,6 @@ use super::{
 };
 use crate::eval::AbcProblem;
 use crate::eval::{Candidates, Request};
-use crate::laws::Law;
 use crate::prior::Prior;
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
@@ -155,6 +154,7 @@ impl GpuRecords {
             }
         }
         let priors_upload: Vec<GpuPrior> = problems.iter().map(|p| GpuPrior::new(&p.prior, p.seed)).collect();
+        let file_laws = super::file_laws::of(problems.iter().flat_map(|p| p.prior.boxes.iter().map(|b| b.law)));
         let priors = context.buffer("priors", (size_of::<GpuPrior>() * records) as u64, storage)?;
         context
             .queue
@@ -200,9 +200,9 @@ impl GpuRecords {
         for (class, slot) in kernels.iter_mut().enumerate() {
             if ratio.iter().any(|&r| usize::from(r) == class) {
                 let kernel = context.kernel(
-                    "records",
+                    &super::file_laws::label("records", &file_laws),
                     shape.entry_point(),
-                    super::records_source,
+                    || super::records_source_for(&file_laws),
                     &entries,
                     &shape.constants(class == 1),
                 )?;
@@ -339,18 +339,16 @@ impl GpuRecords {
     /// first Philox block, as the kernel draws it.
     fn law_order(&self, request: &Request) -> Vec<u32> {
         let (prior, seed) = &self.priors[request.record];
-        let laws: Vec<u8> = match &request.candidates {
+        let laws: Vec<usize> = match &request.candidates {
             Candidates::Stream { population, start, len } => (0..*len as u64)
                 .into_par_iter()
-                .map(|o| prior.law(prior.candidate_slot(*seed, *population, start + o)).index() as u8)
+                .map(|o| prior.law(prior.candidate_slot(*seed, *population, start + o)).index())
                 .collect(),
-            Candidates::Explicit(c) => c.iter().map(|c| prior.law(c.slot).index() as u8).collect(),
+            Candidates::Explicit(c) => c.iter().map(|c| prior.law(c.slot).index()).collect(),
         };
-        let mut order = Vec::with_capacity(laws.len());
-        for law in Law::ALL {
-            let id = law.index() as u8;
-            order.extend((0..laws.len() as u32).filter(|&o| laws[o as usize] == id));
-        }
+        // A stable sort by law id: the candidates of each law in their own order.
+        let mut order: Vec<u32> = (0..laws.len() as u32).collect();
+        order.sort_by_key(|&o| laws[o as usize]);
         order
     }
 

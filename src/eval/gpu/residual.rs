@@ -138,10 +138,11 @@ impl GpuEvaluator {
             buffer_entry(5, STORAGE_WRITE),
         ];
         shape.check_fits(context)?;
+        let file_laws = super::file_laws::of(problem.prior.boxes.iter().map(|b| b.law));
         let kernel = context.kernel(
-            "residual",
+            &super::file_laws::label("residual", &file_laws),
             shape.entry_point(),
-            super::residual_source,
+            || super::residual_source_for(&file_laws),
             &entries,
             &shape.constants(has_ratio),
         )?;
@@ -235,10 +236,11 @@ impl GpuEvaluator {
                 buffer_entry(4, STORAGE_READ),
                 buffer_entry(5, STORAGE_WRITE),
             ];
+            let file_laws = super::file_laws::of(self.problem.prior.boxes.iter().map(|b| b.law));
             let kernel = ctx.kernel(
-                "score_params",
+                &super::file_laws::label("score_params", &file_laws),
                 self.shape.entry_point(),
-                super::score_params_source,
+                || super::score_params_source_for(&file_laws),
                 &entries,
                 &self.shape.constants(res.has_ratio),
             )?;
@@ -296,7 +298,7 @@ impl Evaluator for GpuEvaluator {
         let mut ssr = vec![0.0f32; out.len()];
         self.sum_sq_residuals(population, start, &mut ssr)?;
         for (rho, s) in out.iter_mut().zip(ssr) {
-            *rho = f64::from(s) / self.problem.sum_sq_torque;
+            *rho = crate::eval::rho_of_sum(s, self.problem.sum_sq_torque);
         }
         Ok(())
     }
@@ -306,7 +308,7 @@ impl Evaluator for GpuEvaluator {
         let mut ssr = vec![0.0f32; out.len()];
         self.sum_sq_residuals_of(candidates, &mut ssr)?;
         for (rho, s) in out.iter_mut().zip(ssr) {
-            *rho = f64::from(s) / self.problem.sum_sq_torque;
+            *rho = crate::eval::rho_of_sum(s, self.problem.sum_sq_torque);
         }
         Ok(())
     }

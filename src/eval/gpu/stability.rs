@@ -99,7 +99,14 @@ pub fn stability_grid(
         buffer_entry(2, STORAGE_READ),
         buffer_entry(3, STORAGE_WRITE),
     ];
-    let slope_kernel = ctx.kernel("slopes", "main", super::slopes_source, &slope_entries, &[])?;
+    let file_laws = super::file_laws::of([law]);
+    let slope_kernel = ctx.kernel(
+        &super::file_laws::label("slopes", &file_laws),
+        "main",
+        || super::slopes_source_for(&file_laws),
+        &slope_entries,
+        &[],
+    )?;
     let slope_group = ctx.bind_group(
         "slopes",
         &slope_kernel.layout,

@@ -20,12 +20,13 @@
 
 pub mod expr;
 
-use crate::laws::MAX_PARAMS;
-use crate::{Error, Result};
+use crate::laws::{FileLaw, MAX_PARAMS, ParamSpec};
+use crate::{Error, Law, Result};
 use expr::{Dim, Expr, Var};
 use serde::Deserialize;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::RwLock;
 use toml::Spanned;
 
 /// One parameter of a law file.
@@ -81,6 +82,85 @@ struct RawParam {
 
 /// The built-in laws' names, which a law file may not take.
 const BUILT_IN: [&str; 4] = ["m1", "m2", "m3", "m4"];
+
+/// A law file registered in this process, with the `'static` views [`Law`] hands out.
+pub(crate) struct Registered {
+    pub file: LawFile,
+    pub name: &'static str,
+    pub formula: &'static str,
+    pub specs: &'static [ParamSpec],
+    /// The references in kN·m-based units, where every parameter has one.
+    pub reference_knm: Option<&'static [f64]>,
+}
+
+/// The laws of the law files read by this process. A law is registered once and lives as long
+/// as the process (a handful per run), so that [`Law`] stays a small `Copy` value.
+static REGISTRY: RwLock<Vec<&'static Registered>> = RwLock::new(Vec::new());
+
+/// Registers `file`'s law and returns it as a [`Law`]; the same file registered twice gives the
+/// same law. Refuses a second, different law under a name already registered.
+pub fn register(file: LawFile) -> Result<Law> {
+    let mut registry = REGISTRY.write().expect("law registry");
+    if let Some(k) = registry.iter().position(|r| r.file.name == file.name) {
+        if registry[k].file.source == file.source {
+            return Ok(Law::File(FileLaw(k as u16)));
+        }
+        return Err(Error::setting(
+            "law_file",
+            format!(
+                "two different law files define the law '{}'; give each law its own name",
+                file.name
+            ),
+        ));
+    }
+    if registry.len() >= usize::from(u16::MAX) {
+        return Err(Error::setting("law_file", "too many law files in one process"));
+    }
+    let leak = |s: &str| -> &'static str { Box::leak(s.to_string().into_boxed_str()) };
+    let specs: Vec<ParamSpec> = file
+        .params
+        .iter()
+        .map(|p| ParamSpec::new(leak(&p.name), p.torque_power, p.inverse_speed_power, p.lower))
+        .collect();
+    let reference_knm = file
+        .params
+        .iter()
+        .map(|p| p.reference.map(|v| if p.torque_power == 1 { v / 1000.0 } else { v }))
+        .collect::<Option<Vec<f64>>>()
+        .map(|v| &*Box::leak(v.into_boxed_slice()));
+    let registered = Registered {
+        name: leak(&file.name),
+        formula: leak(&file.formula),
+        specs: Box::leak(specs.into_boxed_slice()),
+        reference_knm,
+        file,
+    };
+    registry.push(Box::leak(Box::new(registered)));
+    Ok(Law::File(FileLaw((registry.len() - 1) as u16)))
+}
+
+/// Reads, compiles and registers the law file at `path`.
+pub fn load_and_register(path: &Path) -> Result<Law> {
+    register(LawFile::load(path)?)
+}
+
+pub(crate) fn registered(id: FileLaw) -> &'static Registered {
+    REGISTRY.read().expect("law registry")[usize::from(id.0)]
+}
+
+/// The registered law named `name`.
+pub(crate) fn find(name: &str) -> Option<Law> {
+    let registry = REGISTRY.read().expect("law registry");
+    registry
+        .iter()
+        .position(|r| r.name == name)
+        .map(|k| Law::File(FileLaw(k as u16)))
+}
+
+/// The names of the registered laws, in registration order.
+pub fn registered_names() -> Vec<&'static str> {
+    REGISTRY.read().expect("law registry").iter().map(|r| r.name).collect()
+}
 
 /// Line and column (1-based, in characters) of byte `offset` of `text`.
 fn line_column(text: &str, offset: usize) -> (u64, usize) {
@@ -260,13 +340,13 @@ impl LawFile {
         Ok(law)
     }
 
-    /// The law's WGSL functions: `torque_<name>(p, w, r)` and `dtorque_dw_<name>(p, w, r)`,
-    /// f32, needing the kernels' shared functions (shaders/shared/laws.wgsl).
+    /// The law's WGSL functions: `file_torque_<name>(p, w, r)` and `file_slope_<name>(p, w, r)`
+    /// (dT/dw), f32, needing the kernels' shared functions (shaders/shared/laws.wgsl).
     pub fn wgsl(&self) -> String {
         format!(
             "// The law '{name}' of a law file: T = {formula}\n\
-             fn torque_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {t};\n}}\n\
-             fn dtorque_dw_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {d};\n}}\n",
+             fn file_torque_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {t};\n}}\n\
+             fn file_slope_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {d};\n}}\n",
             name = self.name,
             formula = self.formula.replace('\n', " "),
             t = self.torque.wgsl(),
@@ -277,7 +357,7 @@ impl LawFile {
     /// Parses and validates the law's WGSL with the kernels' shared functions (naga), so that a
     /// law that loads compiles on every backend.
     fn check_wgsl(&self) -> std::result::Result<(), String> {
-        let text = format!("{}\n{}", crate::eval::gpu::LAWS_WGSL, self.wgsl());
+        let text = format!("{}\n{}", crate::laws::LAWS_WGSL, self.wgsl());
         let module = naga::front::wgsl::parse_str(&text)
             .map_err(|e| format!("the torque does not compile to WGSL: {}", e.message()))?;
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())

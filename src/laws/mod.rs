@@ -8,13 +8,16 @@
 //! [`ParamSpec::torque_power`] and [`ParamSpec::inverse_speed_power`] carry the dimension of
 //! each parameter, which is how the library converts units and rescales problems.
 
+pub mod file;
+
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-/// A bit-rock interaction law of the paper.
+/// A bit-rock interaction law: one of the paper's four, or one read from a law file
+/// ([`crate::laws::file`]), named in files and on the command line by its name either way.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[serde(into = "String", try_from = "String")]
 pub enum Law {
     /// Tucker & Wang: `r b0 (tanh(b1 w) + b2 w / (1 + b3 w²))`.
     M1,
@@ -24,6 +27,25 @@ pub enum Law {
     M3,
     /// Ritto & Aguiar's cubic: `r (c0 + c1 w + c2 w² + c3 w³)`.
     M4,
+    /// A law read from a law file and registered in this process ([`crate::laws::file::register`]).
+    File(FileLaw),
+}
+
+/// The handle of a registered law file: its place in the process's registry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct FileLaw(pub(crate) u16);
+
+impl From<Law> for String {
+    fn from(law: Law) -> String {
+        law.name().to_string()
+    }
+}
+
+impl TryFrom<String> for Law {
+    type Error = String;
+    fn try_from(name: String) -> Result<Self, String> {
+        name.parse()
+    }
 }
 
 /// Name, dimension and physical bound of one parameter of a law.
@@ -113,6 +135,10 @@ const M4_PARAMS: [ParamSpec; 4] = [
 /// and the paper's estimates hold at W = W_ref.
 pub const PAPER_W_REF_N: f64 = 244.2e3;
 
+/// The laws in f32 and the kernels' shared transcendentals (shaders/shared/laws.wgsl), the
+/// WGSL twin of this module that a law file's WGSL is compiled against.
+pub(crate) const LAWS_WGSL: &str = include_str!("../../shaders/shared/laws.wgsl");
+
 /// The largest number of parameters of any law (M3 has six).
 pub const MAX_PARAMS: usize = 6;
 
@@ -120,10 +146,24 @@ impl Law {
     /// All laws in the paper's order.
     pub const ALL: [Law; 4] = [Law::M1, Law::M2, Law::M3, Law::M4];
 
-    /// Position in [`Law::ALL`] (m1 = 0 .. m4 = 3): the law id of the WGSL kernels and the
-    /// order of the run store's parameter columns.
+    /// Position in [`Law::ALL`] (m1 = 0 .. m4 = 3), and 4 + the registry place of a law
+    /// file's law: the law id of the WGSL kernels.
     pub fn index(self) -> usize {
-        self as usize
+        match self {
+            Law::M1 => 0,
+            Law::M2 => 1,
+            Law::M3 => 2,
+            Law::M4 => 3,
+            Law::File(FileLaw(k)) => Law::ALL.len() + usize::from(k),
+        }
+    }
+
+    /// The law file behind a law of a law file; `None` for the built-in laws.
+    pub fn file(self) -> Option<&'static crate::laws::file::LawFile> {
+        match self {
+            Law::File(id) => Some(&crate::laws::file::registered(id).file),
+            _ => None,
+        }
     }
 
     /// Identifier used on the command line and in outputs.
@@ -133,6 +173,7 @@ impl Law {
             Law::M2 => "m2",
             Law::M3 => "m3",
             Law::M4 => "m4",
+            Law::File(id) => crate::laws::file::registered(id).name,
         }
     }
 
@@ -143,6 +184,7 @@ impl Law {
             Law::M2 => &M2_PARAMS,
             Law::M3 => &M3_PARAMS,
             Law::M4 => &M4_PARAMS,
+            Law::File(id) => crate::laws::file::registered(id).specs,
         }
     }
 
@@ -156,13 +198,15 @@ impl Law {
         self.params().iter().map(|p| p.name).collect()
     }
 
-    /// The paper's least-squares estimates (eqs. detM1..detM4), torques in kN·m, speeds in rad/s.
-    pub fn paper_estimate(self) -> &'static [f64] {
+    /// The paper's least-squares estimates (eqs. detM1..detM4), or a law file's reference
+    /// values where it gives one for every parameter; torques in kN·m, speeds in rad/s.
+    pub fn paper_estimate(self) -> Option<&'static [f64]> {
         match self {
-            Law::M1 => &[5.67, 0.48, 8.79, 4.56],
-            Law::M2 => &[13.0, 6.5, 0.3],
-            Law::M3 => &[2.72, 1.0, 0.09, 9.52, 4.0, 0.08],
-            Law::M4 => &[11.8, -0.93, 0.057, -1.2e-3],
+            Law::M1 => Some(&[5.67, 0.48, 8.79, 4.56]),
+            Law::M2 => Some(&[13.0, 6.5, 0.3]),
+            Law::M3 => Some(&[2.72, 1.0, 0.09, 9.52, 4.0, 0.08]),
+            Law::M4 => Some(&[11.8, -0.93, 0.057, -1.2e-3]),
+            Law::File(id) => crate::laws::file::registered(id).reference_knm,
         }
     }
 
@@ -173,6 +217,7 @@ impl Law {
             Law::M2 => "r·((tsb − tcb)·exp(−g·w) + tcb)",
             Law::M3 => "r·(a0·exp(−a1·(w − a2)²) + a3 − a4·tanh(a5·w))",
             Law::M4 => "r·(c0 + c1·w + c2·w² + c3·w³)",
+            Law::File(id) => crate::laws::file::registered(id).formula,
         }
     }
 
@@ -188,6 +233,8 @@ impl Law {
                 p[0] * (-p[1] * d * d).exp() + p[3] - p[4] * (p[5] * w).tanh()
             }
             Law::M4 => p[0] + w * (p[1] + w * (p[2] + w * p[3])),
+            // A law file's torque holds r itself (checked proportional to it).
+            Law::File(id) => return crate::laws::file::registered(id).file.torque(p, w, r),
         }
     }
 
@@ -208,6 +255,7 @@ impl Law {
                 r * (p[4] * p[5] * (t * t - 1.0) + (2.0 * p[2] - 2.0 * w) * p[0] * p[1] * (-p[1] * d * d).exp())
             }
             Law::M4 => r * (p[1] + 2.0 * p[2] * w + 3.0 * p[3] * w * w),
+            Law::File(id) => crate::laws::file::registered(id).file.dtorque_dw(p, w, r),
         }
     }
 
@@ -251,6 +299,9 @@ impl Law {
                 grad[3] = w * w * w;
                 p[0] + w * (p[1] + w * (p[2] + w * p[3]))
             }
+            Law::File(id) => crate::laws::file::registered(id)
+                .file
+                .torque_and_gradient(p, w, 1.0, grad),
         }
     }
 
@@ -326,7 +377,15 @@ impl FromStr for Law {
             "m2" => Ok(Law::M2),
             "m3" => Ok(Law::M3),
             "m4" => Ok(Law::M4),
-            other => Err(format!("unknown law '{other}' (expected m1, m2, m3 or m4)")),
+            other => crate::laws::file::find(other).ok_or_else(|| {
+                let files = crate::laws::file::registered_names();
+                let known = if files.is_empty() {
+                    "m1, m2, m3 or m4, or a law file's law".to_string()
+                } else {
+                    format!("m1, m2, m3, m4 or a law file's law: {}", files.join(", "))
+                };
+                format!("unknown law '{other}' (expected {known})")
+            }),
         }
     }
 }
@@ -379,8 +438,9 @@ mod tests {
     #[test]
     fn paper_estimates_respect_the_bounds() {
         for law in Law::ALL {
-            assert_eq!(law.paper_estimate().len(), law.n_params());
-            assert!(law.bound_violation(law.paper_estimate()).is_none(), "{law}");
+            let p = law.paper_estimate().unwrap();
+            assert_eq!(p.len(), law.n_params());
+            assert!(law.bound_violation(p).is_none(), "{law}");
         }
     }
 }
