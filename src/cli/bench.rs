@@ -104,15 +104,27 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             writeln!(out, "GPU scoring shape at 65,536 candidates per dispatch: {shape}")?;
         }
         writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
+        // Law names: m1..m4 and law files' laws, as wide as the widest.
+        let width = report
+            .throughput
+            .iter()
+            .map(|t| t.law.name().len())
+            .max()
+            .unwrap_or(3)
+            .max(3);
         if !report.throughput.is_empty() {
-            writeln!(out, "backend  law          N        D   evaluations/s (min–max)  shape")?;
+            writeln!(
+                out,
+                "backend  {:<width$}          N        D   evaluations/s (min–max)  shape",
+                "law"
+            )?;
         }
         for t in &report.throughput {
             writeln!(
                 out,
-                "{:<7}  {:<3}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})  {}",
+                "{:<7}  {:<width$}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})  {}",
                 t.backend,
-                t.law,
+                t.law.name(),
                 t.n,
                 t.d,
                 t.evals_per_s,

@@ -23,9 +23,9 @@ pub struct StabilityCmd {
     /// ABC run directory (from `bitrock abc`): MAP, posterior samples and law probabilities.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["law", "params"])]
     pub run: Option<PathBuf>,
-    /// A law for a what-if map without a run.
+    /// A law for a what-if map without a run (m1..m4, or a --law-file's law by its name).
     #[arg(long, requires = "params")]
-    pub law: Option<bitrock::Law>,
+    pub law: Option<String>,
     /// The law's parameters in its order, torques in --torque-unit.
     #[arg(long, value_parser = finite_number, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
     pub params: Option<Vec<f64>>,
@@ -131,9 +131,12 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
 
 /// Whose maps: `--run`, or `--law` at `--params` (in `--torque-unit`, made SI here).
 fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
-    match (&cmd.run, cmd.law, &cmd.params) {
+    match (&cmd.run, &cmd.law, &cmd.params) {
         (Some(dir), _, _) => Ok(MapSource::Run(dir.clone())),
-        (None, Some(law), Some(params)) => Ok(MapSource::law(law, params, cmd.torque_unit)?),
+        (None, Some(law), Some(params)) => {
+            let law: bitrock::Law = law.parse().map_err(|m: String| Error::setting("law", m))?;
+            Ok(MapSource::law(law, params, cmd.torque_unit)?)
+        }
         _ => Err(Error::setting(
             "run",
             "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",

@@ -975,6 +975,14 @@ fn parity(
     serde_json::to_string(&report).map_err(|e| to_py(py, Error::Numerical(e.to_string())))
 }
 
+/// Reads, compiles and registers the law file at `path`; its law's name, for `laws=` and
+/// `law=` everywhere in this process.
+#[pyfunction]
+fn load_law(py: Python<'_>, path: std::path::PathBuf) -> PyResult<String> {
+    let law = check(py, bitrock::laws::file::load_and_register(&path))?;
+    Ok(law.name().to_string())
+}
+
 /// The library's version.
 #[pyfunction]
 fn version() -> &'static str {
@@ -996,6 +1004,7 @@ fn _bitrock(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(parity, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(load_law, m)?)?;
     m.add_function(wrap_pyfunction!(serve, m)?)?;
     m.add_function(wrap_pyfunction!(needs_payloads, m)?)?;
     Ok(())

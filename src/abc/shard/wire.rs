@@ -45,6 +45,28 @@ pub fn build() -> &'static str {
     })
 }
 
+/// The problem's payload: the sources of its law files' laws, then the problem itself (its
+/// laws named), so that a worker registers the laws before it reads their names.
+pub fn encode_problem(problem: &AbcProblem) -> Vec<u8> {
+    let sources: Vec<&str> = problem
+        .prior
+        .boxes
+        .iter()
+        .filter_map(|b| b.law.file().map(|f| f.source.as_str()))
+        .collect();
+    encode(&(sources, encode(problem)))
+}
+
+/// Reads a problem's payload ([`encode_problem`]), registering its law files' laws.
+fn decode_problem(bytes: &[u8]) -> Result<AbcProblem> {
+    let (sources, problem): (Vec<String>, Vec<u8>) = decode(bytes, "problem")?;
+    for source in sources {
+        let file = crate::laws::file::LawFile::parse(&source, std::path::Path::new("law file of the driver"))?;
+        crate::laws::file::register(file)?;
+    }
+    decode(&problem, "problem")
+}
+
 /// The environment variable that overrides, on a worker, the backend the driver asked for
 /// (`cpu`, `gpu` or `auto`): a node without a GPU in a pool of GPU nodes, say.
 pub const WORKER_BACKEND_VAR: &str = "BITROCK_WORKER_BACKEND";
@@ -172,7 +194,7 @@ fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Res
         if let Some(bytes) = problem
             && find(&mut held.problems, request.problem).is_none()
         {
-            let decoded: AbcProblem = decode(bytes, "problem")?;
+            let decoded = decode_problem(bytes)?;
             hold(&mut held.problems, request.problem, Arc::new(decoded));
         }
         let Some(the_problem) = find(&mut held.problems, request.problem) else {
@@ -296,7 +318,7 @@ impl<T: Transport> Remote<T> {
     /// Workers for `problem` through `transport`, asked to score on `backend` (a GPU in the
     /// shape `shape` leads to on each worker: the same everywhere once the run recorded one).
     pub fn new(problem: AbcProblem, backend: Backend, shape: ShapeWish, transport: T) -> Self {
-        let problem_bytes = encode(&problem);
+        let problem_bytes = encode_problem(&problem);
         Self {
             problem_key: key_of(&problem_bytes),
             problem,

@@ -37,6 +37,7 @@ __all__ = [
     "abc",
     "check_selection",
     "fit",
+    "load_law",
     "open_run",
     "parity",
     "ray_executor",
@@ -100,6 +101,15 @@ def _numbers(column: pd.Series) -> np.ndarray | None:
     if pd.api.types.is_bool_dtype(column) or not pd.api.types.is_numeric_dtype(column):
         return None
     return np.ascontiguousarray(column.to_numpy(dtype=np.float64, na_value=np.nan))
+
+
+def load_law(path: str | os.PathLike[str]) -> str:
+    """Reads a law file (TOML: the law's name, its parameters with units and bounds, the torque
+    as an expression of ``w``, ``r`` and the parameters; docs/law-files.md), compiles it for
+    the CPU and the GPU, and returns the law's name, which ``laws=`` and ``law=`` then accept
+    like ``m1``…``m4`` in this process. A run keeps the file's text: reading it back, resuming
+    it or running it on workers does not need the file."""
+    return _bitrock.load_law(os.fspath(path))
 
 
 def fit(
