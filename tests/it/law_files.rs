@@ -412,6 +412,14 @@ fn a_run_with_a_law_file_is_the_same_on_both_backends_and_resumes_without_the_fi
     assert_eq!(code, 0, "{stderr}");
     let md = std::fs::read_to_string(Path::new(&report).join("report.md")).unwrap();
     assert!(md.contains("stribeck"), "the report names the law file's law");
+    // The selection check re-simulates every law of the run, the file's among them (batched
+    // records on the GPU).
+    let (code, stdout, stderr) = run(
+        &cache,
+        &["check-selection", &runs[1], "--replicates", "1", "--backend", "gpu"],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("stribeck data"), "{stdout}");
 }
 
 #[test]
@@ -444,4 +452,105 @@ fn a_bad_law_file_is_refused_naming_file_line_and_column_and_nothing_is_written(
     let (code, _, stderr) = run(&tmp.path().join("cache"), &["fit", "--laws", "m2,stribeck"]);
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--laws: unknown law 'stribeck'"), "{stderr}");
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn the_built_in_laws_as_files_draw_the_same_stability_maps_on_both_backends() {
+    require_gpu();
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws");
+    for (law, file) in [
+        (Law::M1, "tucker_wang"),
+        (Law::M2, "navarro_suarez"),
+        (Law::M3, "gaussian_tanh"),
+        (Law::M4, "cubic"),
+    ] {
+        let params: Vec<String> = law.paper_estimate().unwrap().iter().map(|p| p.to_string()).collect();
+        let params = params.join(",");
+        let path = dir.join(format!("{file}.toml"));
+        for backend in ["cpu", "gpu"] {
+            let map = |name: &str, extra: &[&str]| -> serde_json::Value {
+                let mut args = vec![
+                    "stability",
+                    "--law",
+                    name,
+                    "--params",
+                    &params,
+                    "--backend",
+                    backend,
+                    "--json",
+                ];
+                args.extend_from_slice(extra);
+                let (code, stdout, stderr) = run(&cache, &args);
+                assert_eq!(code, 0, "{name} on {backend}: {stderr}");
+                serde_json::from_str(&stdout).unwrap()
+            };
+            let built_in = map(law.name(), &[]);
+            let as_file = map(file, &["--law-file", path.to_str().unwrap()]);
+            // The unstable cells (dT/dw from the WGSL or the CPU twin), the same, cell for cell.
+            assert_eq!(
+                built_in["probability_unstable"][law.name()],
+                as_file["probability_unstable"][file],
+                "{file} on {backend}"
+            );
+            // The boundary weight on bit at every speed, within 1e-12 (f64 on the host).
+            for key in ["map_wob_kn", "p_wob_kn"] {
+                let a = built_in["boundaries"][law.name()][key].as_array().unwrap();
+                let b = as_file["boundaries"][file][key].as_array().unwrap();
+                assert_eq!(a.len(), b.len());
+                for (x, y) in a.iter().zip(b) {
+                    match (x.as_f64(), y.as_f64()) {
+                        (Some(x), Some(y)) => {
+                            assert!((x - y).abs() <= 1e-12 * x.abs(), "{file} {key}: {x} against {y}")
+                        }
+                        _ => assert_eq!(x, y, "{file} {key}"),
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn simulate_runs_a_law_file_at_its_reference_values_and_refuses_one_without() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws");
+    let simulate = |law: &str, file: &str, extra: &[&str]| {
+        let path = dir.join(file);
+        let mut args = vec![
+            "simulate",
+            "--law-file",
+            path.to_str().unwrap(),
+            "--law",
+            law,
+            "--omega-rpm",
+            "60",
+            "--duration-s",
+            "3",
+        ];
+        args.extend_from_slice(extra);
+        run(&cache, &args)
+    };
+    // navarro_suarez at its references is m2 at the paper's estimate: the same record.
+    let (code, as_file, stderr) = simulate("navarro_suarez", "navarro_suarez.toml", &[]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, built_in, stderr) = run(
+        &cache,
+        &["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "3"],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(as_file, built_in);
+    // stribeck gives no references: its parameters are needed.
+    let (code, _, stderr) = simulate("stribeck", "stribeck.toml", &[]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--params") && stderr.contains("no reference values"),
+        "{stderr}"
+    );
+    let (code, stdout, stderr) = simulate("stribeck", "stribeck.toml", &["--params", "9.5,5,8.8,0.04"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.lines().count() > 100, "{stdout}");
 }
