@@ -554,3 +554,40 @@ fn simulate_runs_a_law_file_at_its_reference_values_and_refuses_one_without() {
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.lines().count() > 100, "{stdout}");
 }
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn a_torque_with_no_value_rejects_its_candidate_on_both_backends() {
+    require_gpu();
+    // sqrt(h / t − 0.7) has no value where h < 0.7 t: about half of m2's prior box (tcb against
+    // tsb) gives such candidates.
+    let text = "name = \"partly_defined\"\ntorque = \"r * (t + h * sqrt(h / t - 0.7) * exp(-g * w))\"\n\
+                [[parameter]]\nname = \"t\"\nunit = \"N·m\"\n[[parameter]]\nname = \"h\"\nunit = \"N·m\"\n\
+                [[parameter]]\nname = \"g\"\nunit = \"s/rad\"\n";
+    let law = register(LawFile::parse(text, Path::new("partly_defined.toml")).unwrap()).unwrap();
+    let mut problem = demo_problem(&[Law::M2], 23);
+    problem.prior.boxes[0].law = law;
+    let count = 4_096;
+    let mut cpu = vec![0.0; count];
+    CpuEvaluator::new(problem.clone()).score(1, 0, &mut cpu).unwrap();
+    let rejected = cpu.iter().filter(|r| **r == f64::INFINITY).count();
+    assert!(cpu.iter().all(|r| !r.is_nan()));
+    assert!(
+        rejected > count / 10 && rejected < count * 9 / 10,
+        "{rejected} of {count}"
+    );
+    for shape in [Shape::Blocked, Shape::Tiled] {
+        let mut gpu = vec![0.0; count];
+        GpuEvaluator::with_shape(problem.clone(), shape)
+            .unwrap()
+            .score(1, 0, &mut gpu)
+            .unwrap();
+        for (g, c) in gpu.iter().zip(&cpu) {
+            if c.is_infinite() {
+                assert_eq!(*g, f64::INFINITY, "{shape}");
+            } else {
+                assert!(((g - c) / c).abs() <= PARITY_TOLERANCE, "{shape}: {g} against {c}");
+            }
+        }
+    }
+}
