@@ -159,7 +159,8 @@ mod tests {
     fn the_table_names_real_flags() {
         let mut longs = std::collections::BTreeSet::new();
         let cli = crate::cli::Cli::command();
-        for command in cli.get_subcommands() {
+        // Global flags (--law-file) are the top level's, every command's.
+        for command in std::iter::once(&cli).chain(cli.get_subcommands()) {
             for arg in command.get_arguments() {
                 if let Some(long) = arg.get_long() {
                     longs.insert(format!("--{long}"));
