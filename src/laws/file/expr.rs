@@ -185,11 +185,15 @@ fn tokens(text: &str) -> Result<Vec<(usize, Token)>, ParseError> {
 /// Parses `text`, resolving names against `params`; every parameter used is marked in the
 /// returned flags.
 pub fn parse(text: &str, params: &[&str]) -> Result<(Expr, Vec<bool>), ParseError> {
+    if text.len() > MAX_LENGTH {
+        return error(MAX_LENGTH, format!("the expression is longer than {MAX_LENGTH} bytes"));
+    }
     let mut parser = Parser {
         tokens: tokens(text)?,
         at: 0,
         params,
         used: vec![false; params.len()],
+        depth: 0,
     };
     if parser.peek() == &Token::End {
         return error(0, "the expression is empty");
@@ -218,11 +222,17 @@ fn describe(token: &Token) -> String {
     }
 }
 
+/// The longest expression read, and the deepest nesting (parentheses, calls, signs, powers):
+/// bounds that keep the recursive parser, twin and differentiator far from the stack's end.
+pub const MAX_LENGTH: usize = 10_000;
+pub const MAX_DEPTH: usize = 64;
+
 struct Parser<'a> {
     tokens: Vec<(usize, Token)>,
     at: usize,
     params: &'a [&'a str],
     used: Vec<bool>,
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -268,6 +278,19 @@ impl Parser<'_> {
     }
 
     fn unary(&mut self) -> Result<Expr, ParseError> {
+        self.depth += 1;
+        if self.depth > MAX_DEPTH {
+            return error(
+                self.tokens[self.at].0,
+                format!("the expression nests deeper than {MAX_DEPTH} levels"),
+            );
+        }
+        let result = self.unary_inner();
+        self.depth -= 1;
+        result
+    }
+
+    fn unary_inner(&mut self) -> Result<Expr, ParseError> {
         match self.peek() {
             Token::Op('-') => {
                 self.next();
@@ -872,6 +895,21 @@ mod tests {
         assert_eq!(err("").message, "the expression is empty");
         assert!(err("tanh + 1").message.contains("is a function"));
         assert!(err("1e999").message.contains("too large"));
+        // Hostile depth and length: refused, not a stack overflow.
+        let deep = format!("{}w{}", "(".repeat(100_000), ")".repeat(100_000));
+        assert!(
+            err(&deep).message.contains("the expression is longer than"),
+            "{:?}",
+            err(&deep)
+        );
+        let nested = format!("{}w{}", "(".repeat(1_000), ")".repeat(1_000));
+        assert!(
+            err(&nested).message.contains("nests deeper than 64"),
+            "{:?}",
+            err(&nested)
+        );
+        assert!(err(&"-".repeat(5_000)).message.contains("nests deeper"));
+        assert!(parse(&format!("{}w{}", "(".repeat(60), ")".repeat(60)), &[]).is_ok());
     }
 
     #[test]
