@@ -1,6 +1,8 @@
-//! Law files on the GPU: the WGSL a law file compiles to against its f64 CPU twin, for the
-//! built-in laws written as files and for random expressions. These tests need a GPU adapter,
-//! as tests/it/gpu.rs's do.
+//! Law files: the WGSL a law file compiles to against its f64 CPU twin (the built-in laws
+//! written as files, random expressions), the built-in laws' fits, scores and stability maps
+//! reproduced from their files, and a law file through every command (a run on both backends,
+//! resumed without the file, reported and checked). The GPU tests need an adapter, as
+//! tests/it/gpu.rs's do.
 
 use crate::gpu::{demo_problem, require_gpu};
 use crate::support::bin;
