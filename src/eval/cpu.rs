@@ -3,6 +3,7 @@
 
 use super::{AbcProblem, Evaluator, KernelSums};
 use crate::error::Result;
+use crate::laws::file::expr::BLOCK;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::numerics;
 use crate::prior::Candidate;
@@ -96,10 +97,16 @@ fn rho_portable(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
             let (c0, c1, c2, c3) = (p[0], p[1], p[2], p[3]);
             sum_sq_residual(w, y, r, |w| c0 + w * (c1 + w * (c2 + w * c3)))
         }
-        Law::File(_) => {
-            // T = r · T(r = 1): the file's torque is checked proportional to r when read.
-            let torque = &law.file().expect("a law file's law").torque;
-            let ssr = sum_sq_residual(w, y, r, |w| torque.eval(p, w, 1.0));
+        Law::File(id) => {
+            // T = r · T(r = 1): the file's torque is checked proportional to r when read. Its
+            // torques are computed block by block, then summed as the built-in laws' are.
+            let program = &crate::laws::file::registered(id).program;
+            let mut torques = vec![0.0; w.len()];
+            let mut registers = Vec::new();
+            for (ws, out) in w.chunks(BLOCK).zip(torques.chunks_mut(BLOCK)) {
+                program.eval_block(p, ws, out, &mut registers);
+            }
+            let ssr = sum_sq_residual(&torques, y, r, |t| t);
             // A torque with no value (an overflow, a logarithm of a negative number) rejects
             // the candidate rather than poisoning sums with NaN.
             if ssr.is_nan() { f64::INFINITY } else { ssr }

@@ -86,6 +86,8 @@ const BUILT_IN: [&str; 4] = ["m1", "m2", "m3", "m4"];
 /// A law file registered in this process, with the `'static` views [`Law`] hands out.
 pub(crate) struct Registered {
     pub file: LawFile,
+    /// The torque flattened for the CPU scoring loop.
+    pub program: expr::Program,
     pub name: &'static str,
     pub formula: &'static str,
     pub specs: &'static [ParamSpec],
@@ -129,6 +131,7 @@ pub fn register(file: LawFile) -> Result<Law> {
         .collect::<Option<Vec<f64>>>()
         .map(|v| &*Box::leak(v.into_boxed_slice()));
     let registered = Registered {
+        program: expr::Program::new(&file.torque),
         name: leak(&file.name),
         formula: leak(&file.formula),
         specs: Box::leak(specs.into_boxed_slice()),
