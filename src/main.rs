@@ -49,6 +49,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Fe(cmd) => cli::fe::run(&cmd),
         Command::Stability(cmd) => cli::stability::run(&cmd),
         Command::Devices(cmd) => cli::devices::run(&cmd),
+        Command::Law(cmd) => cli::law::run(&cmd),
     }
 }
 

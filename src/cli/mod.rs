@@ -13,6 +13,7 @@ pub mod export;
 pub mod fe;
 pub mod fields;
 pub mod fit;
+pub mod law;
 pub mod parity;
 pub mod print;
 pub mod progress;
@@ -102,6 +103,10 @@ pub enum Command {
     /// Natural frequencies, modal damping and critical bit damping of the finite-element
     /// torsional drill string (the paper's appendix).
     Fe(fe::FeCmd),
+    /// Read and compile a law file, and show it as bitrock understood it: parameters, units,
+    /// bounds, the torque and its derivatives (dT/dw, ∂T/∂parameter), and with --wgsl the
+    /// kernels' code.
+    Law(law::LawCmd),
     /// The GPU adapters this machine offers (index, type, PCI bus id), marking the one
     /// BITROCK_ADAPTER, WGPU_ADAPTER_NAME or CUDA_VISIBLE_DEVICES picks.
     Devices(devices::DevicesCmd),

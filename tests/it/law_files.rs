@@ -593,3 +593,36 @@ fn a_torque_with_no_value_rejects_its_candidate_on_both_backends() {
         }
     }
 }
+
+#[test]
+fn the_law_command_shows_a_law_file_as_compiled() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws/stribeck.toml");
+    let (code, stdout, stderr) = run(&cache, &["law", file.to_str().unwrap(), "--wgsl"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("law stribeck"), "{stdout}");
+    // ∂T/∂cv = r·w, printed as the differentiator simplified it.
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l.starts_with("cv") && l.contains("N·m·s/rad") && l.ends_with("(r * w)")),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("fn file_torque_stribeck(p: array<f32, 6>, w: f32, r: f32) -> f32"),
+        "{stdout}"
+    );
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "name = \"bad\"\ntorque = \"r * exp(k)\"\n[[parameter]]\nname = \"k\"\nunit = \"N·m\"\n",
+    )
+    .unwrap();
+    let (code, _, stderr) = run(&cache, &["law", bad.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("bad.toml:2:11: torque: the argument of exp k has dimension N·m"),
+        "{stderr}"
+    );
+}

@@ -43,6 +43,13 @@ pub struct LawParam {
     pub reference: Option<f64>,
 }
 
+impl LawParam {
+    /// The parameter's SI unit, written as bitrock writes units (`N·m·s/rad`).
+    pub fn unit(&self) -> String {
+        ParamSpec::new("", self.torque_power, self.inverse_speed_power, self.lower).unit("N·m")
+    }
+}
+
 /// A law read from a law file, compiled.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LawFile {
