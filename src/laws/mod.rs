@@ -8,7 +8,7 @@
 //! [`ParamSpec::torque_power`] and [`ParamSpec::inverse_speed_power`] carry the dimension of
 //! each parameter, which is how the library converts units and rescales problems.
 //!
-//! A law of the user's own comes from a law file ([`file`]): registered in the process, it is a
+//! A law of the user's own comes from a law file ([`mod@file`]): registered in the process, it is a
 //! [`Law::File`] that every method here answers for from its compiled expression (a law file's
 //! torque is checked dimensionally, so the same homogeneity holds).
 
