@@ -35,9 +35,24 @@ pub enum Law {
     File(FileLaw),
 }
 
-/// The handle of a registered law file: its place in the process's registry.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+/// The handle of a registered law file: its place in the process's registry. Handles order by
+/// their laws' names, so that every process (one that resumes a run registers its laws in
+/// another order) lists them alike.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct FileLaw(pub(crate) u16);
+
+impl Ord for FileLaw {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        let name = |id: &FileLaw| crate::laws::file::registered(*id).name;
+        name(self).cmp(name(other)).then(self.0.cmp(&other.0))
+    }
+}
+
+impl PartialOrd for FileLaw {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
 
 impl From<Law> for String {
     fn from(law: Law) -> String {

@@ -232,3 +232,24 @@ fn a_missing_file_is_a_read_error() {
     assert!(matches!(err, Error::Read { .. }), "{err}");
     assert!(err.is_bad_input());
 }
+
+#[test]
+fn registered_laws_order_by_name_whatever_the_order_they_came_in() {
+    let file = |name: &str| {
+        let text = format!("name = \"{name}\"\ntorque = \"r * t\"\n[[parameter]]\nname = \"t\"\nunit = \"N·m\"\n");
+        register(LawFile::parse(&text, Path::new("order.toml")).unwrap()).unwrap()
+    };
+    let late = file("order_zz");
+    let early = file("order_aa");
+    assert!(early < late && Law::M4 < early);
+    // The same file again is the same law; another file of that name is refused.
+    assert_eq!(file("order_zz"), late);
+    let other = "name = \"order_zz\"\ntorque = \"r * t * 2\"\n[[parameter]]\nname = \"t\"\nunit = \"N·m\"\n";
+    let err = register(LawFile::parse(other, Path::new("other.toml")).unwrap()).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("two different law files define the law 'order_zz'"),
+        "{err}"
+    );
+    assert_eq!("order_aa".parse::<Law>(), Ok(early));
+}
