@@ -421,6 +421,11 @@ impl Prior {
             .unwrap_or(self.boxes.len() - 1)
     }
 
+    /// The laws of the boxes, in slot order.
+    pub fn laws(&self) -> impl Iterator<Item = Law> + '_ {
+        self.boxes.iter().map(|b| b.law)
+    }
+
     /// The law of box `slot`.
     pub fn law(&self, slot: usize) -> Law {
         self.boxes[slot].law

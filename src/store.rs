@@ -263,15 +263,9 @@ impl RunStore {
         tx.execute_batch(SCHEMA).map_err(&err)?;
         // The law files' laws of the run: their sources are stored whole, so that the run
         // never depends on the files again.
-        let file_laws: Vec<Law> = setup
-            .prior
-            .boxes
-            .iter()
-            .map(|b| b.law)
-            .filter(|l| l.file().is_some())
-            .collect();
+        let file_laws = crate::laws::file::among(setup.prior.laws());
         for law in &file_laws {
-            let source = &law.file().expect("a law file's law").source;
+            let source = law.file().map(|f| f.source.as_str());
             tx.execute(
                 "INSERT INTO law_files (name, source) VALUES (?1, ?2)",
                 params![law.name(), source],

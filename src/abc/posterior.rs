@@ -85,16 +85,14 @@ pub fn summarize(particles: &[Particle], laws_considered: &[Law]) -> PosteriorSu
     let present: std::collections::BTreeSet<Law> = particles.iter().map(|p| p.law).collect();
     let laws: Vec<LawSummary> = present
         .into_iter()
-        .filter_map(|law| {
+        .map(|law| {
             let members: Vec<&Particle> = particles.iter().filter(|p| p.law == law).collect();
-            (!members.is_empty()).then(|| {
-                let probability = if equal {
-                    members.len() as f64 / total as f64
-                } else {
-                    compensated_sum(members.iter().map(|p| p.weight)) / total_weight
-                };
-                summarize_law(law, &members, probability)
-            })
+            let probability = if equal {
+                members.len() as f64 / total as f64
+            } else {
+                compensated_sum(members.iter().map(|p| p.weight)) / total_weight
+            };
+            summarize_law(law, &members, probability)
         })
         .collect();
     let model_probabilities = laws_considered

@@ -1214,11 +1214,9 @@ mod tests {
         Ok(())
     }
 
-    /// One law with one free parameter on [0, 4], ancestors at 1 and 3 of equal weight (all
-    /// below ε), the kernels `config` makes of them, and the normalised weights of new
-    /// particles at 2 and 0.5.
-    fn two_ancestors(config: &SmcConfig) -> (Prior, Vec<Particle>, Kernels, Vec<f64>) {
-        let prior = Prior::new(
+    /// m4 with its first parameter free on [0, 4] and the others fixed at 0.
+    fn one_free_parameter_prior() -> Prior {
+        Prior::new(
             vec![LawBox {
                 law: Law::M4,
                 lower: vec![0.0, 0.0, 0.0, 0.0],
@@ -1226,7 +1224,14 @@ mod tests {
             }],
             vec![1.0],
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    /// One law with one free parameter on [0, 4], ancestors at 1 and 3 of equal weight (all
+    /// below ε), the kernels `config` makes of them, and the normalised weights of new
+    /// particles at 2 and 0.5.
+    fn two_ancestors(config: &SmcConfig) -> (Prior, Vec<Particle>, Kernels, Vec<f64>) {
+        let prior = one_free_parameter_prior();
         let previous = vec![
             particle(Law::M4, 0, &[1.0, 0.0, 0.0, 0.0], 0.5),
             particle(Law::M4, 1, &[3.0, 0.0, 0.0, 0.0], 0.5),
@@ -1296,15 +1301,7 @@ mod tests {
         // Twenty m4 ancestors on [0, 4] at 0.1, 0.3, …, 3.9. With equal weights (ESS 20) the
         // kernels are local; with one weight 0.9 and the rest 0.1 / 19 each, ESS = 1 / (0.81 +
         // 19·(0.1/19)²) ≈ 1.23, below 0.1·20: the global kernel with its scale 2 takes over.
-        let prior = Prior::new(
-            vec![LawBox {
-                law: Law::M4,
-                lower: vec![0.0, 0.0, 0.0, 0.0],
-                upper: vec![4.0, 0.0, 0.0, 0.0],
-            }],
-            vec![1.0],
-        )
-        .unwrap();
+        let prior = one_free_parameter_prior();
         let population = |heavy: Option<f64>| -> Vec<Particle> {
             (0..20)
                 .map(|i| {

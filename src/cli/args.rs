@@ -104,15 +104,10 @@ impl FitArgs {
     pub fn laws(&self) -> anyhow::Result<Vec<Law>> {
         match &self.laws {
             Some(list) => parse_laws(list),
-            None => {
-                let files = bitrock::laws::file::registered_names()
-                    .into_iter()
-                    .map(str::parse::<Law>);
-                let files = files
-                    .collect::<Result<Vec<Law>, String>>()
-                    .map_err(anyhow::Error::msg)?;
-                Ok(Law::ALL.into_iter().chain(files).collect())
-            }
+            None => Ok(Law::ALL
+                .into_iter()
+                .chain(bitrock::laws::file::registered_laws())
+                .collect()),
         }
     }
 
@@ -130,6 +125,11 @@ impl FitArgs {
 /// The laws of a --laws list (m1..m4 and the --law-file laws by name), refused naming --laws.
 pub fn parse_laws(list: &str) -> anyhow::Result<Vec<Law>> {
     Ok(bitrock::laws::parse_law_list(list).map_err(|m| bitrock::Error::setting("laws", m))?)
+}
+
+/// The law of a --law flag (m1..m4 or a --law-file law by name), refused naming --law.
+pub fn parse_law(name: &str) -> anyhow::Result<Law> {
+    Ok(name.parse().map_err(|m: String| bitrock::Error::setting("law", m))?)
 }
 
 /// The value parser of every floating-point flag: a number, finite. NaN and infinities are

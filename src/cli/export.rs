@@ -55,7 +55,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     };
     let text = match cmd.format {
         ExportFormat::Csv => {
-            let laws: Vec<bitrock::Law> = setup.prior.boxes.iter().map(|b| b.law).collect();
+            let laws: Vec<bitrock::Law> = setup.prior.laws().collect();
             documents::particles_csv(&populations, &laws, setup.data.torque_unit)
         }
         ExportFormat::Json => {

@@ -87,7 +87,7 @@ pub struct SimulateCmd {
 }
 
 pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
-    let law: Law = cmd.law.parse().map_err(|m: String| bitrock::Error::setting("law", m))?;
+    let law: Law = super::args::parse_law(&cmd.law)?;
     let params = match (&cmd.params, law.paper_estimate()) {
         (Some(params), _) => params.clone(),
         (None, Some(p)) => law.scale_torque(

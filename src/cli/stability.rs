@@ -133,10 +133,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
 fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
     match (&cmd.run, &cmd.law, &cmd.params) {
         (Some(dir), _, _) => Ok(MapSource::Run(dir.clone())),
-        (None, Some(law), Some(params)) => {
-            let law: bitrock::Law = law.parse().map_err(|m: String| Error::setting("law", m))?;
-            Ok(MapSource::law(law, params, cmd.torque_unit)?)
-        }
+        (None, Some(law), Some(params)) => Ok(MapSource::law(super::args::parse_law(law)?, params, cmd.torque_unit)?),
         _ => Err(Error::setting(
             "run",
             "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",

@@ -99,20 +99,29 @@ fn rho_portable(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
         }
         Law::File(id) => {
             // T = r · T(r = 1): the file's torque is checked proportional to r when read. Its
-            // torques are computed block by block, then summed as the built-in laws' are.
+            // torques are computed block by block into this thread's scratch space, then summed
+            // as the built-in laws' are.
             let program = &crate::laws::file::registered(id).program;
-            let mut torques = vec![0.0; w.len()];
-            let mut registers = Vec::new();
+            // Taken and put back rather than borrowed in a closure: the loop stays in this
+            // function, so the AVX2 build covers it.
+            let (mut torques, mut registers) = FILE_LAW_SCRATCH.take();
+            torques.resize(w.len(), 0.0);
             for (ws, out) in w.chunks(BLOCK).zip(torques.chunks_mut(BLOCK)) {
                 program.eval_block(p, ws, out, &mut registers);
             }
             let ssr = sum_sq_residual(&torques, y, r, |t| t);
-            // A torque with no value (an overflow, a logarithm of a negative number) rejects
-            // the candidate rather than poisoning sums with NaN.
-            if ssr.is_nan() { f64::INFINITY } else { ssr }
+            FILE_LAW_SCRATCH.set((torques, registers));
+            ssr
         }
     };
-    ssr / problem.sum_sq_torque
+    super::rho_of_sum(ssr, problem.sum_sq_torque)
+}
+
+thread_local! {
+    /// A law file's torques over the record and its block evaluator's registers, kept from one
+    /// candidate to the next.
+    static FILE_LAW_SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<[f64; BLOCK]>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 impl Evaluator for CpuEvaluator {

@@ -35,14 +35,15 @@ pub struct AbcProblem {
     pub best_rho: std::collections::BTreeMap<Law, f64>,
 }
 
-/// ρ of a sum of squared residuals `ssr` (f32, from a kernel): `ssr / sum_sq_torque`, and +∞
-/// where the sum has no value (a law file's torque overflowing or taking a logarithm of a
-/// negative number), so that such a candidate is rejected and never poisons a sum.
-pub(crate) fn rho_of_sum(ssr: f32, sum_sq_torque: f64) -> f64 {
+/// ρ of a sum of squared residuals `ssr` (a kernel's f32 sum, or the CPU's): `ssr /
+/// sum_sq_torque`, and +∞ where the sum has no value (a torque overflowing, a law file's taking a
+/// logarithm of a negative number), so that such a candidate is rejected on every backend and
+/// never poisons a sum.
+pub(crate) fn rho_of_sum(ssr: f64, sum_sq_torque: f64) -> f64 {
     if ssr.is_nan() {
         f64::INFINITY
     } else {
-        f64::from(ssr) / sum_sq_torque
+        ssr / sum_sq_torque
     }
 }
 

@@ -259,7 +259,7 @@ impl RecordBatch {
                                 .zip(ssr)
                                 .map(|(r, s)| {
                                     let sum_sq = problems[r.record].sum_sq_torque;
-                                    Ok(s.into_iter().map(|v| super::rho_of_sum(v, sum_sq)).collect())
+                                    Ok(s.into_iter().map(|v| super::rho_of_sum(f64::from(v), sum_sq)).collect())
                                 })
                                 .collect();
                             (rho, dispatches)

@@ -43,7 +43,7 @@ pub struct FileLaw(pub(crate) u16);
 
 impl Ord for FileLaw {
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        let name = |id: &FileLaw| crate::laws::file::registered(*id).name;
+        let name = |id: &FileLaw| crate::laws::file::registered(*id).file.name.as_str();
         name(self).cmp(name(other)).then(self.0.cmp(&other.0))
     }
 }
@@ -180,7 +180,7 @@ impl Law {
     /// The law file behind a law of a law file; `None` for the built-in laws.
     pub fn file(self) -> Option<&'static crate::laws::file::LawFile> {
         match self {
-            Law::File(id) => Some(&crate::laws::file::registered(id).file),
+            Law::File(id) => Some(crate::laws::file::registered(id).file),
             _ => None,
         }
     }
@@ -192,7 +192,7 @@ impl Law {
             Law::M2 => "m2",
             Law::M3 => "m3",
             Law::M4 => "m4",
-            Law::File(id) => crate::laws::file::registered(id).name,
+            Law::File(id) => &crate::laws::file::registered(id).file.name,
         }
     }
 
@@ -236,7 +236,7 @@ impl Law {
             Law::M2 => "r·((tsb − tcb)·exp(−g·w) + tcb)",
             Law::M3 => "r·(a0·exp(−a1·(w − a2)²) + a3 − a4·tanh(a5·w))",
             Law::M4 => "r·(c0 + c1·w + c2·w² + c3·w³)",
-            Law::File(id) => crate::laws::file::registered(id).formula,
+            Law::File(id) => &crate::laws::file::registered(id).file.formula,
         }
     }
 
@@ -397,7 +397,10 @@ impl FromStr for Law {
             "m3" => Ok(Law::M3),
             "m4" => Ok(Law::M4),
             other => crate::laws::file::find(other).ok_or_else(|| {
-                let files = crate::laws::file::registered_names();
+                let files: Vec<&str> = crate::laws::file::registered_laws()
+                    .into_iter()
+                    .map(Law::name)
+                    .collect();
                 let known = if files.is_empty() {
                     "m1, m2, m3 or m4, or a law file's law".to_string()
                 } else {

@@ -5,7 +5,7 @@
 //! tests/it/gpu.rs's do.
 
 use crate::gpu::{demo_problem, require_gpu};
-use crate::support::bin;
+use crate::support::{bin, outcome};
 use bitrock::Law;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::cpu::CpuEvaluator;
@@ -301,16 +301,11 @@ fn a_law_file_scores_as_its_built_in_law_on_both_backends_in_both_shapes() {
 
 /// Runs the binary with its own cache directory; (status, stdout, stderr).
 fn run(cache: &Path, args: &[&str]) -> (i32, String, String) {
-    let out = bin()
-        .env(tune::CACHE_DIR_VAR, cache)
-        .env("NODEVICE_SELECT", "1")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
+    outcome(
+        bin()
+            .env(tune::CACHE_DIR_VAR, cache)
+            .env("NODEVICE_SELECT", "1")
+            .args(args),
     )
 }
 

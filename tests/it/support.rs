@@ -41,6 +41,16 @@ pub fn bin() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_bitrock"))
 }
 
+/// Runs `command` to its end: (exit status, standard output, standard error).
+pub fn outcome(command: &mut std::process::Command) -> (i32, String, String) {
+    let out = command.output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// m2 at the paper's estimate with 5 % noise, speeds 0.1-20 rad/s (where m1, whose torque
 /// vanishes at w = 0, cannot mimic m2's static torque), against all four laws with priors from
 /// least squares, δ = 0.4; also m2's least-squares ρ.

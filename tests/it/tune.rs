@@ -3,7 +3,7 @@
 //! These tests need a GPU adapter, as tests/it/gpu.rs's do.
 
 use crate::gpu::{demo_problem, require_gpu};
-use crate::support::bin;
+use crate::support::{bin, outcome};
 use bitrock::Law;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::{self, Shape, residual::GpuEvaluator, tune};
@@ -78,18 +78,13 @@ fn wider_tiles_score_within_the_parity_tolerance_of_the_cpu() {
 
 /// Runs the binary with a cache directory of its own and `env`; (status, stdout, stderr).
 fn run(cache: &Path, env: &[(&str, &str)], args: &[&str]) -> (i32, String, String) {
-    let out = bin()
-        .env(tune::CACHE_DIR_VAR, cache)
-        .env_remove(gpu::SHAPE_VAR)
-        .env_remove(tune::TUNING_VAR)
-        .envs(env.iter().copied())
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
+    outcome(
+        bin()
+            .env(tune::CACHE_DIR_VAR, cache)
+            .env_remove(gpu::SHAPE_VAR)
+            .env_remove(tune::TUNING_VAR)
+            .envs(env.iter().copied())
+            .args(args),
     )
 }
 

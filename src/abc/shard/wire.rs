@@ -48,11 +48,9 @@ pub fn build() -> &'static str {
 /// The problem's payload: the sources of its law files' laws, then the problem itself (its
 /// laws named), so that a worker registers the laws before it reads their names.
 pub fn encode_problem(problem: &AbcProblem) -> Vec<u8> {
-    let sources: Vec<&str> = problem
-        .prior
-        .boxes
-        .iter()
-        .filter_map(|b| b.law.file().map(|f| f.source.as_str()))
+    let sources: Vec<&str> = crate::laws::file::among(problem.prior.laws())
+        .into_iter()
+        .filter_map(|law| law.file().map(|f| f.source.as_str()))
         .collect();
     encode(&(sources, encode(problem)))
 }

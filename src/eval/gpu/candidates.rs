@@ -91,38 +91,13 @@ pub fn uniform_between(triples: &[(f32, f32, u32)]) -> Result<Vec<f32>, GpuError
             .iter()
             .map(|&(lo, hi, word)| [lo.to_bits(), hi.to_bits(), word, 0])
             .collect();
-        let input_bytes = 16 * chunk.len() as u64;
-        let output_bytes = 4 * chunk.len() as u64;
-        let input = ctx.buffer(
-            "uniform_between triples",
-            input_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        )?;
-        let output = ctx.buffer(
-            "uniform_between results",
-            output_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let staging = ctx.buffer(
-            "uniform_between staging",
-            output_bytes,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        )?;
-        ctx.queue.write_buffer(&input, 0, bytemuck::cast_slice(&packed));
-        let bind_group = ctx.bind_group("test_uniform_between", &kernel.layout, &[&input, &output])?;
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("test_uniform_between"),
-        });
-        let (x, y, _) = ctx.grid(chunk.len() as u32, WORKGROUP_SIZE);
-        super::encode_dispatch(
-            &mut encoder,
+        let raw = ctx.map_elements(
             "test_uniform_between",
-            &kernel.pipeline,
-            &bind_group,
-            (x, y),
-        );
-        encoder.copy_buffer_to_buffer(&output, 0, &staging, 0, output_bytes);
-        let raw = ctx.finish_and_read(encoder, &staging, output_bytes)?;
+            &kernel,
+            bytemuck::cast_slice(&packed),
+            chunk.len() as u32,
+            4 * chunk.len() as u64,
+        )?;
         results.extend(bytemuck::cast_slice::<u8, u32>(&raw).iter().map(|&b| f32::from_bits(b)));
     }
     Ok(results)

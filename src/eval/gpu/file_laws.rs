@@ -6,12 +6,6 @@
 use crate::Law;
 use std::fmt::Write;
 
-/// The law files' laws among `laws`, in law-id order, each once.
-pub(crate) fn of(laws: impl IntoIterator<Item = Law>) -> Vec<Law> {
-    let set: std::collections::BTreeSet<Law> = laws.into_iter().filter(|l| l.file().is_some()).collect();
-    set.into_iter().collect()
-}
-
 /// The pipeline cache's label of kernel `kernel` with `laws` (law ids are unique in a process,
 /// and a registered law never changes).
 pub(crate) fn label(kernel: &str, laws: &[Law]) -> String {

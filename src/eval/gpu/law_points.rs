@@ -1,7 +1,7 @@
 //! A law file's WGSL at arbitrary points (`shaders/law_file_points.wgsl`): its torque and
 //! dT/dw in f32 on the GPU, for comparing with the f64 CPU twin.
 
-use super::{GpuError, STORAGE_READ, STORAGE_WRITE, WORKGROUP_SIZE, buffer_entry};
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE, buffer_entry};
 use crate::laws::file::LawFile;
 
 /// One point: the law's parameters (unused ones 0), bit speed (rad/s) and weight-on-bit ratio.
@@ -38,32 +38,13 @@ pub fn torques(law: &LawFile, points: &[Point]) -> Result<Vec<[f32; 2]>, GpuErro
     let mut results = Vec::with_capacity(points.len());
     // Chunks of 2¹⁸ points (8 MiB) stay inside every adapter's storage-binding limit.
     for chunk in points.chunks(1 << 18) {
-        let input_bytes = std::mem::size_of_val(chunk) as u64;
-        let output_bytes = 8 * chunk.len() as u64;
-        let input = ctx.buffer(
-            "law points",
-            input_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        let raw = ctx.map_elements(
+            "law_file_points",
+            &kernel,
+            bytemuck::cast_slice(chunk),
+            chunk.len() as u32,
+            8 * chunk.len() as u64,
         )?;
-        let output = ctx.buffer(
-            "law torques",
-            output_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let staging = ctx.buffer(
-            "law torques staging",
-            output_bytes,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        )?;
-        ctx.queue.write_buffer(&input, 0, bytemuck::cast_slice(chunk));
-        let bind_group = ctx.bind_group("law_file_points", &kernel.layout, &[&input, &output])?;
-        let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("law_file_points"),
-        });
-        let (x, y, _) = ctx.grid(chunk.len() as u32, WORKGROUP_SIZE);
-        super::encode_dispatch(&mut encoder, "law_file_points", &kernel.pipeline, &bind_group, (x, y));
-        encoder.copy_buffer_to_buffer(&output, 0, &staging, 0, output_bytes);
-        let raw = ctx.finish_and_read(encoder, &staging, output_bytes)?;
         results.extend(bytemuck::cast_slice::<u8, [f32; 2]>(&raw).iter().copied());
     }
     Ok(results)

@@ -634,6 +634,43 @@ impl GpuContext {
         }
     }
 
+    /// Runs `kernel` (binding 0 its input, read; binding 1 its output, written; one invocation
+    /// per element, WORKGROUP_SIZE a workgroup) on the `count` elements of `input` and returns
+    /// the `output_bytes` it wrote: the test kernels that compare a WGSL twin with the CPU's.
+    fn map_elements(
+        &self,
+        label: &str,
+        kernel: &Kernel,
+        input: &[u8],
+        count: u32,
+        output_bytes: u64,
+    ) -> Result<Vec<u8>, GpuError> {
+        let input_buffer = self.buffer(
+            label,
+            input.len() as u64,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let output = self.buffer(
+            label,
+            output_bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let staging = self.buffer(
+            label,
+            output_bytes,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        )?;
+        self.queue.write_buffer(&input_buffer, 0, input);
+        let bind_group = self.bind_group(label, &kernel.layout, &[&input_buffer, &output])?;
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        let (x, y, _) = self.grid(count, WORKGROUP_SIZE);
+        encode_dispatch(&mut encoder, label, &kernel.pipeline, &bind_group, (x, y));
+        encoder.copy_buffer_to_buffer(&output, 0, &staging, 0, output_bytes);
+        self.finish_and_read(encoder, &staging, output_bytes)
+    }
+
     /// Submits `encoder`, waits, and copies the first `bytes` of `staging` out.
     fn finish_and_read(
         &self,

@@ -154,7 +154,7 @@ impl GpuRecords {
             }
         }
         let priors_upload: Vec<GpuPrior> = problems.iter().map(|p| GpuPrior::new(&p.prior, p.seed)).collect();
-        let file_laws = super::file_laws::of(problems.iter().flat_map(|p| p.prior.boxes.iter().map(|b| b.law)));
+        let file_laws = crate::laws::file::among(problems.iter().flat_map(|p| p.prior.laws()));
         let priors = context.buffer("priors", (size_of::<GpuPrior>() * records) as u64, storage)?;
         context
             .queue

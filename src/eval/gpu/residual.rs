@@ -138,7 +138,7 @@ impl GpuEvaluator {
             buffer_entry(5, STORAGE_WRITE),
         ];
         shape.check_fits(context)?;
-        let file_laws = super::file_laws::of(problem.prior.boxes.iter().map(|b| b.law));
+        let file_laws = crate::laws::file::among(problem.prior.laws());
         let kernel = context.kernel(
             &super::file_laws::label("residual", &file_laws),
             shape.entry_point(),
@@ -236,7 +236,7 @@ impl GpuEvaluator {
                 buffer_entry(4, STORAGE_READ),
                 buffer_entry(5, STORAGE_WRITE),
             ];
-            let file_laws = super::file_laws::of(self.problem.prior.boxes.iter().map(|b| b.law));
+            let file_laws = crate::laws::file::among(self.problem.prior.laws());
             let kernel = ctx.kernel(
                 &super::file_laws::label("score_params", &file_laws),
                 self.shape.entry_point(),
@@ -298,7 +298,7 @@ impl Evaluator for GpuEvaluator {
         let mut ssr = vec![0.0f32; out.len()];
         self.sum_sq_residuals(population, start, &mut ssr)?;
         for (rho, s) in out.iter_mut().zip(ssr) {
-            *rho = crate::eval::rho_of_sum(s, self.problem.sum_sq_torque);
+            *rho = crate::eval::rho_of_sum(f64::from(s), self.problem.sum_sq_torque);
         }
         Ok(())
     }
@@ -308,7 +308,7 @@ impl Evaluator for GpuEvaluator {
         let mut ssr = vec![0.0f32; out.len()];
         self.sum_sq_residuals_of(candidates, &mut ssr)?;
         for (rho, s) in out.iter_mut().zip(ssr) {
-            *rho = crate::eval::rho_of_sum(s, self.problem.sum_sq_torque);
+            *rho = crate::eval::rho_of_sum(f64::from(s), self.problem.sum_sq_torque);
         }
         Ok(())
     }

@@ -99,7 +99,7 @@ pub fn stability_grid(
         buffer_entry(2, STORAGE_READ),
         buffer_entry(3, STORAGE_WRITE),
     ];
-    let file_laws = super::file_laws::of([law]);
+    let file_laws = crate::laws::file::among([law]);
     let slope_kernel = ctx.kernel(
         &super::file_laws::label("slopes", &file_laws),
         "main",

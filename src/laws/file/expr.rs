@@ -296,7 +296,7 @@ impl Parser<'_> {
                 self.next();
                 // A negated number is a negative constant (exact), so that w^-2 is a power
                 // with an integer exponent.
-                Ok(neg_literal(self.unary()?))
+                Ok(neg(self.unary()?))
             }
             Token::Op('+') => {
                 self.next();
@@ -401,13 +401,6 @@ impl Parser<'_> {
             "cos" => unary(Unary::Cos),
             _ => Ok(binary(Binary::Pow, a.clone(), args.next().expect("arity 2"))),
         }
-    }
-}
-
-fn neg_literal(a: Expr) -> Expr {
-    match a {
-        Expr::Const(c) => Expr::Const(-c),
-        _ => Expr::Unary(Unary::Neg, Box::new(a)),
     }
 }
 

@@ -90,13 +90,12 @@ struct RawParam {
 /// The built-in laws' names, which a law file may not take.
 const BUILT_IN: [&str; 4] = ["m1", "m2", "m3", "m4"];
 
-/// A law file registered in this process, with the `'static` views [`Law`] hands out.
+/// A law file registered in this process, with the views [`Law`] hands out (it lives as long
+/// as the process, so they are `'static`).
 pub(crate) struct Registered {
-    pub file: LawFile,
+    pub file: &'static LawFile,
     /// The torque flattened for the CPU scoring loop.
     pub program: expr::Program,
-    pub name: &'static str,
-    pub formula: &'static str,
     pub specs: &'static [ParamSpec],
     /// The references in kN·m-based units, where every parameter has one.
     pub reference_knm: Option<&'static [f64]>,
@@ -125,11 +124,11 @@ pub fn register(file: LawFile) -> Result<Law> {
     if registry.len() >= usize::from(u16::MAX) {
         return Err(Error::setting("law_file", "too many law files in one process"));
     }
-    let leak = |s: &str| -> &'static str { Box::leak(s.to_string().into_boxed_str()) };
+    let file: &'static LawFile = Box::leak(Box::new(file));
     let specs: Vec<ParamSpec> = file
         .params
         .iter()
-        .map(|p| ParamSpec::new(leak(&p.name), p.torque_power, p.inverse_speed_power, p.lower))
+        .map(|p| ParamSpec::new(&p.name, p.torque_power, p.inverse_speed_power, p.lower))
         .collect();
     let reference_knm = file
         .params
@@ -139,8 +138,6 @@ pub fn register(file: LawFile) -> Result<Law> {
         .map(|v| &*Box::leak(v.into_boxed_slice()));
     let registered = Registered {
         program: expr::Program::new(&file.torque),
-        name: leak(&file.name),
-        formula: leak(&file.formula),
         specs: Box::leak(specs.into_boxed_slice()),
         reference_knm,
         file,
@@ -163,13 +160,20 @@ pub(crate) fn find(name: &str) -> Option<Law> {
     let registry = REGISTRY.read().expect("law registry");
     registry
         .iter()
-        .position(|r| r.name == name)
+        .position(|r| r.file.name == name)
         .map(|k| Law::File(FileLaw(k as u16)))
 }
 
-/// The names of the registered laws, in registration order.
-pub fn registered_names() -> Vec<&'static str> {
-    REGISTRY.read().expect("law registry").iter().map(|r| r.name).collect()
+/// The law files' laws among `laws`, each once, in [`Law`]'s order.
+pub fn among(laws: impl IntoIterator<Item = Law>) -> Vec<Law> {
+    let set: std::collections::BTreeSet<Law> = laws.into_iter().filter(|l| l.file().is_some()).collect();
+    set.into_iter().collect()
+}
+
+/// The registered laws, in registration order.
+pub fn registered_laws() -> Vec<Law> {
+    let count = REGISTRY.read().expect("law registry").len();
+    (0..count).map(|k| Law::File(FileLaw(k as u16))).collect()
 }
 
 /// Line and column (1-based, in characters) of byte `offset` of `text`.
