@@ -223,44 +223,34 @@ pub fn read_field_data(path: &Path, opts: &DataOptions) -> Result<FieldData> {
         path: path.to_path_buf(),
         message,
     };
-    let file = std::fs::File::open(path).map_err(read_error)?;
-    let kind = file.metadata().map_err(read_error)?.file_type();
-    if kind.is_file() {
-        let size = file.metadata().map_err(read_error)?.len();
-        crate::limits::check_memory(
-            "DATA",
-            size as f64 * PARSE_BYTES_PER_BYTE,
-            &format!(
-                "reading {} ({})",
-                path.display(),
-                crate::limits::human_bytes(size as f64)
-            ),
-        )?;
-        return parse_field_data(file, path, opts);
-    }
-    #[cfg(unix)]
-    if std::os::unix::fs::FileTypeExt::is_fifo(&kind) {
-        let cap = MAX_PIPE_BYTES.min(
-            crate::limits::available_memory_bytes().map_or(u64::MAX, |b| (b as f64 / PARSE_BYTES_PER_BYTE) as u64),
-        );
-        let mut text = Vec::new();
-        std::io::Read::read_to_end(&mut std::io::Read::take(file, cap + 1), &mut text).map_err(read_error)?;
-        if text.len() as u64 > cap {
-            return Err(refuse(format!(
-                "the pipe holds more than {}, the most a record read from a pipe may hold here; write the record to a file",
-                crate::limits::human_bytes(cap as f64)
-            )));
+    match crate::files::open_input(path, "a record")? {
+        crate::files::Input::Regular { file, size } => {
+            crate::limits::check_memory(
+                "DATA",
+                size as f64 * PARSE_BYTES_PER_BYTE,
+                &format!(
+                    "reading {} ({})",
+                    path.display(),
+                    crate::limits::human_bytes(size as f64)
+                ),
+            )?;
+            parse_field_data(file, path, opts)
         }
-        return parse_field_data(text.as_slice(), path, opts);
+        crate::files::Input::Pipe(file) => {
+            let cap = MAX_PIPE_BYTES.min(
+                crate::limits::available_memory_bytes().map_or(u64::MAX, |b| (b as f64 / PARSE_BYTES_PER_BYTE) as u64),
+            );
+            let mut text = Vec::new();
+            std::io::Read::read_to_end(&mut std::io::Read::take(file, cap + 1), &mut text).map_err(read_error)?;
+            if text.len() as u64 > cap {
+                return Err(refuse(format!(
+                    "the pipe holds more than {}, the most a record read from a pipe may hold here; write the record to a file",
+                    crate::limits::human_bytes(cap as f64)
+                )));
+            }
+            parse_field_data(text.as_slice(), path, opts)
+        }
     }
-    let what = if kind.is_dir() {
-        "a directory"
-    } else {
-        "a device or socket"
-    };
-    Err(refuse(format!(
-        "is {what}, not a record: give a CSV file (or a pipe such as /dev/stdin)"
-    )))
 }
 
 /// Reads the embedded demo record.

@@ -191,7 +191,8 @@ fn particle_header(laws: &[Law], unit: TorqueUnit) -> Vec<String> {
         .collect();
     for law in laws {
         for spec in law.params() {
-            header.push(format!("{} [{}]", spec.name, spec.unit(unit.label())));
+            // Namespaced by the law: a law file may reuse a built-in law's parameter name.
+            header.push(format!("{}.{} [{}]", law.name(), spec.name, spec.unit(unit.label())));
         }
     }
     header

@@ -5,6 +5,10 @@
 //!
 //! A temporary is live while its writer holds an advisory lock on it (the OS drops the lock
 //! when the writer dies, however it dies), so a stale one is one whose lock can be taken.
+//!
+//! Every file written whole carries a mark (an extended attribute holding the length and CRC-32
+//! of what was written), so bitrock can tell later whether a file is its own, unchanged, and may
+//! be replaced without asking ([`authorship`]).
 
 use crate::error::{Error, Result};
 use std::fs::{File, OpenOptions, TryLockError};
@@ -92,14 +96,116 @@ impl TempFile {
     }
 }
 
+/// An input file opened for reading, by what it is: a regular file (its size known before a
+/// byte is read) or a pipe (read up to a cap). See [`open_input`].
+pub enum Input {
+    Regular { file: File, size: u64 },
+    Pipe(File),
+}
+
+/// Opens the input `path` without blocking on it: a named pipe no process writes to reads as
+/// empty rather than waiting for one. A device (`/dev/zero`), a directory or a socket is
+/// refused naming the path, before a byte is read; `what` says what the file should be
+/// ("a record", "a law file").
+pub fn open_input(path: &Path, what: &str) -> Result<Input> {
+    let read_error = |source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut options = OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc_nonblock());
+    let file = options.open(path).map_err(read_error)?;
+    let meta = file.metadata().map_err(read_error)?;
+    let kind = meta.file_type();
+    if kind.is_file() {
+        return Ok(Input::Regular { file, size: meta.len() });
+    }
+    #[cfg(unix)]
+    if std::os::unix::fs::FileTypeExt::is_fifo(&kind) {
+        // Opened without waiting for a writer; reads now wait for data as a pipe's should.
+        set_blocking(&file).map_err(read_error)?;
+        return Ok(Input::Pipe(file));
+    }
+    let kind = if kind.is_dir() {
+        "a directory"
+    } else {
+        "a device or socket"
+    };
+    Err(Error::Data {
+        path: path.to_path_buf(),
+        message: format!("is {kind}, not {what}: give a file (or a pipe such as /dev/stdin)"),
+    })
+}
+
+/// Reads the text file `path` (`what` it should be, for messages) whole, refusing before it
+/// is read one larger than `max_bytes` (a pipe: as soon as it has sent more), and one that is
+/// not UTF-8.
+pub fn read_text(path: &Path, what: &str, max_bytes: u64) -> Result<String> {
+    let too_big = || Error::Data {
+        path: path.to_path_buf(),
+        message: format!(
+            "is larger than {}, the most {what} may hold",
+            crate::limits::human_bytes(max_bytes as f64)
+        ),
+    };
+    let file = match open_input(path, what)? {
+        Input::Regular { size, .. } if size > max_bytes => return Err(too_big()),
+        Input::Regular { file, .. } | Input::Pipe(file) => file,
+    };
+    let mut bytes = Vec::new();
+    file.take(max_bytes + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|source| Error::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(too_big());
+    }
+    String::from_utf8(bytes).map_err(|e| Error::Data {
+        path: path.to_path_buf(),
+        message: format!("is not UTF-8 text (byte {} is not)", e.utf8_error().valid_up_to()),
+    })
+}
+
+#[cfg(target_os = "linux")]
+fn libc_nonblock() -> i32 {
+    libc::O_NONBLOCK
+}
+#[cfg(all(unix, not(target_os = "linux")))]
+fn libc_nonblock() -> i32 {
+    0
+}
+
+/// Clears `O_NONBLOCK` on an open pipe.
+#[cfg(target_os = "linux")]
+fn set_blocking(file: &File) -> std::io::Result<()> {
+    use std::os::fd::AsRawFd;
+    let fd = file.as_raw_fd();
+    // SAFETY: fcntl on a descriptor this process owns.
+    let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
+    if flags < 0 || unsafe { libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK) } < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+#[cfg(all(unix, not(target_os = "linux")))]
+fn set_blocking(_file: &File) -> std::io::Result<()> {
+    Ok(())
+}
+
 /// Writes the user's output file `target` (named by `flag`) whole or not at all: checked by
-/// [`check_output_file`] (a symbolic link is written through), then [`write_own`].
+/// [`check_output_file`] (a symbolic link is written through; `force` replaces a file bitrock
+/// did not write), then [`write_own`].
 pub fn write_whole(
     target: &Path,
     field: &str,
+    force: bool,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> Result<()> {
-    check_output_file(target, field)?;
+    check_output_file(target, field, force)?;
     write_own(&output_target(target), field, write)
 }
 
@@ -110,20 +216,152 @@ pub fn write_whole(
 pub fn write_own(target: &Path, field: &str, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
     remove_stale(parent_dir(target));
     let mut temp = TempFile::beside(target, field)?;
-    let mut out = std::io::BufWriter::new(temp.file_mut());
+    let mut tally = Tally::new(temp.file_mut());
+    let mut out = std::io::BufWriter::new(&mut tally);
     write(&mut out)
         .and_then(|()| out.flush())
         .map_err(|source| Error::output(field, target, source))?;
     drop(out);
+    let mark = tally.mark();
+    // Best effort: a file system without extended attributes leaves the file unmarked, and
+    // bitrock then asks before replacing it, as it asks for any file it did not write.
+    let _ = xattr::set_on(temp.file_mut(), &mark);
     temp.commit(target)
 }
 
-/// Refuses, naming `flag`, an output file that cannot be written or is not the user's to
+/// A writer that counts and checksums what passes through it: the mark of a file written whole.
+struct Tally<W> {
+    inner: W,
+    crc: crc32fast::Hasher,
+    len: u64,
+}
+
+impl<W: Write> Tally<W> {
+    fn new(inner: W) -> Self {
+        Self {
+            inner,
+            crc: crc32fast::Hasher::new(),
+            len: 0,
+        }
+    }
+
+    fn mark(&self) -> String {
+        mark_of(self.len, self.crc.clone().finalize())
+    }
+}
+
+impl<W: Write> Write for Tally<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        self.len += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// The mark of a file bitrock wrote: its length and the CRC-32 of its bytes.
+fn mark_of(len: u64, crc: u32) -> String {
+    format!("bitrock len={len} crc32={crc:08x}")
+}
+
+/// Whose an existing file is, as far as bitrock can tell ([`authorship`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Authorship {
+    /// Written whole by bitrock and unchanged since: bitrock may replace it.
+    Own,
+    /// Marked by bitrock but changed since (edited, appended to, truncated): the user's now.
+    Changed,
+    /// No mark: a file bitrock did not write (or an older bitrock wrote).
+    Unmarked,
+    /// The file system keeps no extended attributes, so no file on it can carry a mark.
+    Unknowable,
+}
+
+/// Whose the file at `path` is (a symbolic link is followed): bitrock's own only when it
+/// carries the mark written with it and its bytes still match that mark.
+pub fn authorship(path: &Path) -> Authorship {
+    let Ok(mut file) = File::open(path) else {
+        return Authorship::Unmarked;
+    };
+    let mark = match xattr::get_from(&file) {
+        Ok(Some(mark)) => mark,
+        Ok(None) => return Authorship::Unmarked,
+        Err(_) => return Authorship::Unknowable,
+    };
+    // A changed length is a changed file: no need to read it.
+    let len = file.metadata().map(|m| m.len()).unwrap_or(u64::MAX);
+    if !mark.starts_with(&format!("bitrock len={len} ")) {
+        return Authorship::Changed;
+    }
+    let mut tally = Tally::new(std::io::sink());
+    if std::io::copy(&mut file, &mut tally).is_err() || tally.mark() != mark {
+        return Authorship::Changed;
+    }
+    Authorship::Own
+}
+
+/// The extended attribute that holds a file's mark (`user.bitrock.written`).
+mod xattr {
+    use std::fs::File;
+
+    /// Where the OS has no extended attributes, nothing is marked.
+    #[cfg(not(target_os = "linux"))]
+    pub fn set_on(_file: &mut File, _mark: &str) -> std::io::Result<()> {
+        Err(std::io::Error::from(std::io::ErrorKind::Unsupported))
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    pub fn get_from(_file: &File) -> std::io::Result<Option<String>> {
+        Err(std::io::Error::from(std::io::ErrorKind::Unsupported))
+    }
+
+    #[cfg(target_os = "linux")]
+    const NAME: &std::ffi::CStr = c"user.bitrock.written";
+
+    /// Marks the open `file`.
+    #[cfg(target_os = "linux")]
+    pub fn set_on(file: &mut File, mark: &str) -> std::io::Result<()> {
+        use std::os::fd::AsRawFd;
+        // SAFETY: a valid descriptor, a NUL-terminated name and a buffer of the length given.
+        let rc = unsafe { libc::fsetxattr(file.as_raw_fd(), NAME.as_ptr(), mark.as_ptr().cast(), mark.len(), 0) };
+        if rc == 0 {
+            Ok(())
+        } else {
+            Err(std::io::Error::last_os_error())
+        }
+    }
+
+    /// The mark of the open `file`: `None` when it has none, an error when its file system
+    /// keeps no extended attributes.
+    #[cfg(target_os = "linux")]
+    pub fn get_from(file: &File) -> std::io::Result<Option<String>> {
+        use std::os::fd::AsRawFd;
+        let mut buf = [0u8; 128];
+        // SAFETY: a valid descriptor, a NUL-terminated name and a buffer of the length given.
+        let n = unsafe { libc::fgetxattr(file.as_raw_fd(), NAME.as_ptr(), buf.as_mut_ptr().cast(), buf.len()) };
+        if n >= 0 {
+            return Ok(Some(String::from_utf8_lossy(&buf[..n as usize]).into_owned()));
+        }
+        let err = std::io::Error::last_os_error();
+        match err.raw_os_error() {
+            // No such attribute, or one too long to be bitrock's.
+            Some(libc::ENODATA | libc::ERANGE) => Ok(None),
+            _ => Err(err),
+        }
+    }
+}
+
+/// Refuses, naming `flag`, an output file that cannot be written or is not bitrock's to
 /// replace: a directory, a dangling symbolic link, a path in a directory that does not exist,
-/// one of bitrock's own lock or temporary files, and any file inside a run directory (a run
-/// keeps to its own files, its store above all). A symbolic link is written through: the
-/// file it points to is the target, checked by the same rule ([`output_target`]).
-pub fn check_output_file(target: &Path, field: &str) -> Result<()> {
+/// one of bitrock's own lock or temporary files, any file inside a run directory (a run
+/// keeps to its own files, its store above all), and, unless `force`, an existing file that
+/// is not bitrock's own unchanged output ([`authorship`]). A symbolic link is written through:
+/// the file it points to is the target, checked by the same rule ([`output_target`]).
+pub fn check_output_file(target: &Path, field: &str, force: bool) -> Result<()> {
     check_not_dangling(target, field)?;
     let real = output_target(target);
     if real.is_dir() {
@@ -162,11 +400,29 @@ pub fn check_output_file(target: &Path, field: &str) -> Result<()> {
             ),
         ));
     }
-    refuse_inside_run(&real, field)
+    refuse_inside_run(&real, field)?;
+    if force || !real.exists() {
+        return Ok(());
+    }
+    let why = match authorship(&real) {
+        Authorship::Own => return Ok(()),
+        Authorship::Changed => "was written by bitrock but changed since",
+        Authorship::Unmarked => "is not a file bitrock wrote",
+        Authorship::Unknowable => {
+            "lies on a file system that keeps no extended attributes, so bitrock cannot tell whether it wrote it"
+        }
+    };
+    Err(Error::setting(
+        field,
+        format!(
+            "{} exists and {why}; it is not replaced: give another file, or pass `force` to replace it",
+            target.display()
+        ),
+    ))
 }
 
-/// Refuses, naming `flag`, an output path inside a run directory (its parent, or the parent's
-/// parent: a run's `selection/`): a run holds only what bitrock writes there.
+/// Refuses, naming `flag`, an output path inside a run directory (at any depth, a run's
+/// `selection/` included): a run holds only what bitrock writes there.
 pub fn refuse_inside_run(path: &Path, field: &str) -> Result<()> {
     match enclosing_run_dir(path) {
         Some(run) => Err(Error::setting(
@@ -191,14 +447,22 @@ pub fn output_target(target: &Path) -> PathBuf {
     target.to_path_buf()
 }
 
-/// The run directory `path` lies in (its parent or the parent's parent: a run's `selection/`),
-/// if any.
+/// The run directory `path` lies in, at any depth (a run's `selection/` included), if any;
+/// `path` itself is not inside itself. A path that does not exist yet is judged by the
+/// nearest directory above it that does.
 fn enclosing_run_dir(path: &Path) -> Option<PathBuf> {
-    let dir = parent_dir(path).canonicalize().ok()?;
-    dir.ancestors()
-        .take(2)
-        .find(|d| crate::rundir::is_run_dir(d))
-        .map(Path::to_path_buf)
+    let absolute = std::path::absolute(path).ok()?;
+    let mut above = absolute.parent();
+    while let Some(dir) = above {
+        if let Ok(real) = dir.canonicalize() {
+            return real
+                .ancestors()
+                .find(|d| crate::rundir::is_run_dir(d))
+                .map(Path::to_path_buf);
+        }
+        above = dir.parent();
+    }
+    None
 }
 
 /// Everything under `dir` that bitrock did not write, judged by `owned` (relative path,
@@ -427,6 +691,23 @@ impl DirLock {
             Ok(f) => f.try_lock().is_ok(),
             Err(_) => true,
         }
+    }
+
+    /// Who holds the lock of `dir` now: `Some("another process (PID n)")` while another
+    /// process does, `None` when none does, this process does, or `dir` has no lock file.
+    pub fn holder(dir: &Path) -> Option<String> {
+        let mut file = File::open(dir.join(LOCK_FILE)).ok()?;
+        if file.try_lock_shared().is_ok() {
+            return None;
+        }
+        let mut pid = String::new();
+        let _ = file.read_to_string(&mut pid);
+        Some(match pid.trim() {
+            // This process holds it (a check reading the run it locked): no other writer.
+            pid if pid == std::process::id().to_string() => return None,
+            "" => "another process".to_string(),
+            pid => format!("another process (PID {pid})"),
+        })
     }
 
     /// The directory locked (where it was when locked).

@@ -55,6 +55,10 @@ pub fn check_memory(field: &str, bytes: f64, what: &str) -> Result<()> {
     Ok(())
 }
 
+/// The most a settings file (a prior file, a drill-string file) may hold, bytes: a hand-written
+/// TOML of a few kB, with room to spare; a larger one is not what the flag means.
+pub const MAX_SETTINGS_FILE_BYTES: u64 = 1_000_000;
+
 /// The longest work a flag may ask for, s: past a day the request is a typo or a unit error,
 /// not a computation anyone waits for.
 pub const MAX_WORK_SECONDS: f64 = 86_400.0;
@@ -75,6 +79,114 @@ pub fn check_work(field: &str, operations: f64, fastest_per_s: f64, what: &str) 
         ));
     }
     Ok(())
+}
+
+/// How long a serial computation runs before its pace is measured ([`Pace`]).
+const CALIBRATION: std::time::Duration = std::time::Duration::from_millis(20);
+
+/// How often a [`Pace`] reports progress.
+const REPORT_EVERY: std::time::Duration = std::time::Duration::from_millis(250);
+
+/// Refuses, naming `flag`, work estimated at `seconds` on this machine (from a pace measured
+/// here) beyond [`MAX_WORK_SECONDS`].
+pub fn check_estimate(field: &str, seconds: f64, what: &str) -> Result<()> {
+    if seconds.is_nan() || seconds > MAX_WORK_SECONDS {
+        return Err(Error::setting(
+            field,
+            format!(
+                "{what} would take about {} on this machine (its pace measured at the start); the most accepted is a day's work",
+                human_seconds(seconds)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The pace of a long serial computation, measured as it runs: after [`CALIBRATION`] of work
+/// it refuses (naming the flag, through [`check_estimate`]) work whose rest could not finish in
+/// a day on this machine, and it reports `(done, total)` to `report` every [`REPORT_EVERY`].
+pub struct Pace<'a> {
+    field: &'a str,
+    what: String,
+    total: u64,
+    done: u64,
+    next_look: u64,
+    start: std::time::Instant,
+    last_report: std::time::Instant,
+    calibrated: bool,
+    report: Option<&'a mut dyn FnMut(u64, u64)>,
+}
+
+impl<'a> Pace<'a> {
+    /// `total` units of `what` (named by `field` when refused), reported to `report`.
+    pub fn new(field: &'a str, what: String, total: u64, report: &'a mut dyn FnMut(u64, u64)) -> Self {
+        let now = std::time::Instant::now();
+        Self {
+            field,
+            what,
+            total,
+            done: 0,
+            next_look: 1,
+            start: now,
+            last_report: now,
+            calibrated: false,
+            report: Some(report),
+        }
+    }
+
+    /// A pace that only counts: it neither refuses nor reports (for callers that bounded the
+    /// work themselves).
+    pub fn unchecked() -> Self {
+        let now = std::time::Instant::now();
+        Self {
+            field: "",
+            what: String::new(),
+            total: 0,
+            done: 0,
+            next_look: u64::MAX,
+            start: now,
+            last_report: now,
+            calibrated: true,
+            report: None,
+        }
+    }
+
+    /// Counts `units` more done; an error once the measured pace says the rest cannot finish.
+    /// Cheap: the clock is read once every few thousand units.
+    pub fn advance(&mut self, units: u64) -> Result<()> {
+        self.done += units;
+        if self.done < self.next_look {
+            return Ok(());
+        }
+        self.next_look = self.done + 4096;
+        let elapsed = self.start.elapsed();
+        if !self.calibrated && elapsed >= CALIBRATION {
+            self.calibrated = true;
+            let per_s = self.done as f64 / elapsed.as_secs_f64();
+            let rest = self.total.saturating_sub(self.done) as f64;
+            check_estimate(self.field, rest / per_s + elapsed.as_secs_f64(), &self.what)?;
+        }
+        if self.last_report.elapsed() >= REPORT_EVERY {
+            self.last_report = std::time::Instant::now();
+            if let Some(report) = self.report.as_mut() {
+                report(self.done.min(self.total), self.total);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A duration for people: seconds, minutes, hours or days, two significant figures or so.
+pub fn human_seconds(seconds: f64) -> String {
+    if seconds < 90.0 {
+        format!("{seconds:.1} s")
+    } else if seconds < 5400.0 {
+        format!("{:.0} min", seconds / 60.0)
+    } else if seconds < 2.0 * 86_400.0 {
+        format!("{:.1} hours", seconds / 3600.0)
+    } else {
+        format!("{:.0} days", (seconds / 86_400.0).min(1e12))
+    }
 }
 
 /// Bytes in decimal units (B, kB, MB, GB, TB...) with one decimal.

@@ -16,7 +16,10 @@ use std::io::ErrorKind;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return parse_error(&e),
+    };
     let result = match cli.register_law_files() {
         Err(e) => Err(e),
         Ok(()) => run(cli.command),
@@ -31,6 +34,24 @@ fn main() -> ExitCode {
                 .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));
             ExitCode::from(if bad_input { exit::BAD_INPUT } else { exit::FAILURE })
         }
+    }
+}
+
+/// Ends on what clap says instead of a command: help or version text on standard output
+/// (exit 0, or 141 / 3 with the cause named when it cannot be written: `--help > /dev/full`),
+/// or a usage error on standard error (exit 2).
+fn parse_error(e: &clap::Error) -> ExitCode {
+    use std::io::Write;
+    let printed = e.print().and_then(|()| std::io::stdout().flush());
+    match printed {
+        Err(io) if !e.use_stderr() => {
+            if io.kind() == ErrorKind::BrokenPipe {
+                return ExitCode::from(exit::CLOSED_PIPE);
+            }
+            cli::print::note(format_args!("error: standard output: cannot write: {io}"));
+            ExitCode::from(exit::FAILURE)
+        }
+        _ => ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(exit::BAD_INPUT)),
     }
 }
 

@@ -176,10 +176,7 @@ pub struct PriorFile {
 impl PriorFile {
     /// Reads and checks a prior file; errors name the file and, for TOML syntax, line and column.
     pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::files::read_text(path, "a prior file", crate::limits::MAX_SETTINGS_FILE_BYTES)?;
         let file: PriorFile = toml::from_str(&text).map_err(|e| {
             let line = e.span().map(|s| text[..s.start].lines().count().max(1) as u64);
             Error::Format {

@@ -80,6 +80,17 @@ impl RunConfig {
         if self.laws.is_empty() {
             return Err(Error::setting("laws", "give at least one law"));
         }
+        // Before any fit: the prior holds at most this many boxes.
+        if self.laws.len() > crate::prior::MAX_LAWS {
+            return Err(Error::setting(
+                "laws",
+                format!(
+                    "{} laws given; a run compares at most {}",
+                    self.laws.len(),
+                    crate::prior::MAX_LAWS
+                ),
+            ));
+        }
         self.fit.validate()?;
         if !(self.delta.is_finite() && self.delta > 0.0) {
             return Err(Error::setting(
@@ -419,6 +430,7 @@ pub enum DirState {
 pub fn check_new_run_dir(dir: &RunDir, input: Option<&Path>) -> Result<DirState> {
     let path = dir.path.as_path();
     files::check_output_dir(path, "out")?;
+    files::refuse_inside_run(path, "out")?;
     let refuse = |why: String| Err(Error::setting("out", format!("{}: {why}", path.display())));
     let Ok(real) = path.canonicalize() else {
         return Ok(DirState::Fresh);

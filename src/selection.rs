@@ -381,8 +381,9 @@ impl CheckedRun {
     pub fn open(dir: &Path) -> Result<Self> {
         let stored = RunStore::open(dir)?.load_with_last_particles()?;
         // Refused before any work: the check replaces only a check of its own.
-        files::refuse_foreign(&dir.join(SELECTION_DIR), "RUN_DIR", &|rel, is_dir| {
-            crate::rundir::Owned::Selection.owns(rel, is_dir)
+        let selection = dir.join(SELECTION_DIR);
+        files::refuse_foreign(&selection, "RUN_DIR", &|rel, is_dir| {
+            crate::rundir::Owned::Selection.holds(&selection, rel, is_dir)
         })?;
         let refuse = |message: String| Error::Data {
             path: dir.to_path_buf(),
@@ -832,7 +833,7 @@ pub fn write(run: &CheckedRun, check: &SelectionCheck, svg: String, png: Vec<u8>
     files::replace_dir(
         &target,
         "RUN_DIR",
-        &|rel, is_dir| crate::rundir::Owned::Selection.owns(rel, is_dir),
+        &|rel, is_dir| crate::rundir::Owned::Selection.holds(&target, rel, is_dir),
         &contents,
     )?;
     Ok(target)

@@ -295,6 +295,13 @@ pub fn write_csv_in<W: std::io::Write>(trace: &Trace, unit: TorqueUnit, out: W) 
     Ok(())
 }
 
+impl SimConfig {
+    /// RK4 steps of the settling and the recording, about.
+    fn total_steps(&self) -> u64 {
+        ((self.settle_s + self.duration_s) / self.dt_s).ceil().max(1.0) as u64
+    }
+}
+
 /// RK4 steps per second above any machine's: the time estimate is a lower bound.
 const FASTEST_STEPS_PER_S: f64 = 1e9;
 /// Memory of one recorded sample: time, bit speed, torque and weight on bit, f64 each.
@@ -307,7 +314,25 @@ const TRACE_BYTES_PER_SAMPLE: f64 = 4.0 * 8.0;
 /// after each integration step, the WOB fluctuation update. Draws happen whatever the standard
 /// deviations, so switching measurement noise on or off does not change the dynamics.
 pub fn simulate(cfg: &SimConfig) -> Result<Trace> {
+    simulate_with(cfg, &mut |_, _| {})
+}
+
+/// [`simulate`], reporting `(steps done, steps in all)` to `progress` every quarter second
+/// and refusing, once the first 20 ms have measured this machine's pace, a simulation that
+/// could not finish in a day here (naming `dt_s`).
+pub fn simulate_with(cfg: &SimConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Trace> {
     cfg.validate()?;
+    let total_steps = cfg.total_steps();
+    let mut pace = crate::limits::Pace::new(
+        "dt_s",
+        format!(
+            "integrating {} s in steps of {} s ({total_steps:.3e} steps)",
+            cfg.settle_s + cfg.duration_s,
+            cfg.dt_s
+        ),
+        total_steps,
+        progress,
+    );
     let model = Model::new(cfg);
     let mut rng = StdRng::seed_from_u64(cfg.seed);
     let mut wob = Wob::new(cfg, &mut rng);
@@ -331,13 +356,14 @@ pub fn simulate(cfg: &SimConfig) -> Result<Trace> {
     };
     let mut sim = Integrator { model, state, phase };
 
-    let advance = |sim: &mut Integrator, wob: &mut Wob, rng: &mut StdRng, span_s: f64, t_s: f64| -> Result<()> {
+    let mut advance = |sim: &mut Integrator, wob: &mut Wob, rng: &mut StdRng, span_s: f64, t_s: f64| -> Result<()> {
         if span_s <= 0.0 {
             return Ok(());
         }
         let steps = (span_s / cfg.dt_s).ceil().max(1.0);
         let h = span_s / steps;
         for _ in 0..steps as u64 {
+            pace.advance(1)?;
             if let Err(why) = sim.advance(h, wob.ratio(cfg.w_ref_n)) {
                 return Err(Error::Numerical(format!(
                     "{why} (simulated time ≤ {t_s} s, law {}, Ω = {} rad/s)",

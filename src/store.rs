@@ -605,6 +605,11 @@ impl RunStore {
             return Ok(None);
         };
         let Some(stop) = stop else {
+            if let Some(holder) = crate::files::DirLock::holder(&self.path) {
+                return Ok(Some(format!(
+                    "the run is being written by {holder}: its last invocation ({kind}) has not finished, and what is shown is its state so far"
+                )));
+            }
             return Ok(Some(format!(
                 "the run was interrupted: its last invocation ({kind}) did not finish; its populations are whole, and `bitrock abc --resume` continues it"
             )));
@@ -982,7 +987,7 @@ fn particles_view(file_laws: &[Law]) -> String {
 /// names may repeat another law's.
 fn view_column(law: Law, name: &str) -> String {
     match law {
-        Law::File(_) => format!("{}_{name}", law.name()),
+        Law::File(_) => crate::laws::file::store_column(law.name(), name),
         _ => name.to_string(),
     }
 }

@@ -138,6 +138,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
 /// and marker ([`files::refuse_foreign`], the rule of `abc --force`).
 fn check_root(root: &Path) -> anyhow::Result<()> {
     files::check_output_dir(root, "out")?;
+    files::refuse_inside_run(root, "out")?;
     let empty = std::fs::read_dir(root).map_or(true, |mut d| d.next().is_none());
     if empty {
         return Ok(());
@@ -152,12 +153,13 @@ fn check_root(root: &Path) -> anyhow::Result<()> {
         )
         .into());
     }
-    files::refuse_foreign(root, "out", &demo_owns)?;
+    files::refuse_foreign(root, "out", &|rel, is_dir| demo_owns(root, rel, is_dir))?;
     Ok(())
 }
 
-/// What the demo writes in its directory: its marker, one run directory per δ, the report.
-fn demo_owns(rel: &Path, is_dir: bool) -> bool {
+/// What the demo writes in its directory `root`: its marker, one run directory per δ, the
+/// report (its files unchanged since the demo wrote them).
+fn demo_owns(root: &Path, rel: &Path, is_dir: bool) -> bool {
     let mut parts = rel.components();
     let Some(first) = parts.next().and_then(|c| c.as_os_str().to_str()) else {
         return false;
@@ -174,7 +176,11 @@ fn demo_owns(rel: &Path, is_dir: bool) -> bool {
     } else {
         return false;
     };
-    if top { is_dir } else { owned.owns(rest, is_dir) }
+    if top {
+        is_dir
+    } else {
+        owned.holds(&root.join(first), rest, is_dir)
+    }
 }
 
 /// The run directory of the demo's run with prior half-width `delta`.

@@ -31,11 +31,15 @@ pub struct ExportCmd {
     /// Write to FILE instead of stdout.
     #[arg(long, short, value_name = "FILE")]
     pub out: Option<PathBuf>,
+    /// Replace FILE even when bitrock did not write it (or it was changed since); without it
+    /// only bitrock's own unchanged output is replaced.
+    #[arg(long, requires = "out")]
+    pub force: bool,
 }
 
 pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "out")?;
+        files::check_output_file(path, "out", cmd.force)?;
     }
     let store = RunStore::open(&cmd.dir)?;
     let stored = store.load()?;
@@ -66,7 +70,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     };
     match &cmd.out {
         None => super::print::stdout().write_all(&text)?,
-        Some(path) => files::write_whole(path, "out", |file| file.write_all(&text))?,
+        Some(path) => files::write_whole(path, "out", cmd.force, |file| file.write_all(&text))?,
     }
     Ok(ExitCode::SUCCESS)
 }

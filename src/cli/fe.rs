@@ -2,8 +2,10 @@
 //! finite-element drill string.
 
 use super::args::{FeArgs, LumpedArgs};
+use bitrock::stability::fe::{SOLVES_PER_CRITICAL, SOLVES_TO_MATCH_BETA};
 use clap::Args;
 use serde_json::json;
+use std::cell::RefCell;
 use std::io::Write;
 use std::process::ExitCode;
 
@@ -22,17 +24,40 @@ pub struct FeCmd {
     pub json: bool,
 }
 
+/// Work estimated above this many seconds is announced before it starts.
+const NOTE_ABOVE_S: f64 = 10.0;
+
 pub fn run(cmd: &FeCmd) -> anyhow::Result<ExitCode> {
     let mut string = cmd.fe.settings().drill_string()?;
     let lumped = cmd.lumped.validated()?;
     let mut matched_beta = None;
+    let solves = if cmd.match_1dof {
+        SOLVES_TO_MATCH_BETA
+    } else {
+        SOLVES_PER_CRITICAL
+    };
+    let seconds = string.estimate_seconds(solves);
+    if seconds > NOTE_ABOVE_S {
+        super::print::note(format_args!(
+            "note: about {solves:.0} eigenvalue solves of a {}-DOF string: about {} on this machine",
+            string.dofs(),
+            bitrock::limits::human_seconds(seconds)
+        ));
+    }
+    let progress = RefCell::new((0u64, super::progress::WorkProgress::new("eigenvalue solves")));
+    let tick = || {
+        let (done, bar) = &mut *progress.borrow_mut();
+        *done += 1;
+        bar.update(*done, solves as u64);
+    };
     if cmd.match_1dof {
-        let (beta, _) = string.match_lumped_beta(&lumped)?;
+        let (beta, _) = string.match_lumped_beta_with(&lumped, &tick)?;
         string.beta = beta;
         matched_beta = Some(beta);
     }
     let modes = string.modes()?;
-    let critical = string.critical_bit_damping()?;
+    let critical = string.critical_bit_damping_with(&tick)?;
+    drop(progress);
     let mut out = super::print::stdout();
     if cmd.json {
         let v = json!({

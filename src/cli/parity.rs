@@ -78,11 +78,22 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
         for d in &p.first_differences {
             writeln!(out, "  {d}")?;
         }
+        for l in report.laws.iter().filter(|l| l.ill_conditioned_in_f32) {
+            writeln!(
+                out,
+                "law {}: ill-conditioned in f32: its ρ computed in f32 on the CPU differs from f64 by up to {:.3e} (the GPU by {:.3e}); the law loses the digits, not the GPU: score it with --backend cpu, or rewrite it to avoid cancellation",
+                l.law,
+                l.f32_rel_diff.unwrap_or(f64::NAN),
+                l.max_rel_diff
+            )?;
+        }
         writeln!(
             out,
             "{}",
             if report.pass {
                 "PASS: this GPU agrees with the CPU reference"
+            } else if report.gpu_agrees {
+                "FAIL: a law is ill-conditioned in f32 (above); this GPU agrees with the CPU on the others and computes f32 as the CPU does"
             } else {
                 "FAIL: do not trust this GPU's results"
             }

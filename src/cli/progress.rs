@@ -124,3 +124,75 @@ impl Observer for RunProgress {
         }
     }
 }
+
+/// Progress of one long computation that is not a sampler run (a simulation, an FE string's
+/// eigenvalue solves): shown only once it has run [`WorkProgress::AFTER`], as a bar on a
+/// terminal and a line every [`LOG_EVERY`] otherwise.
+pub struct WorkProgress {
+    what: &'static str,
+    start: Instant,
+    last_line: Instant,
+    bar: Option<ProgressBar>,
+    terminal: bool,
+}
+
+impl WorkProgress {
+    /// Short work shows nothing.
+    const AFTER: Duration = Duration::from_secs(2);
+
+    pub fn new(what: &'static str) -> Self {
+        Self {
+            what,
+            start: Instant::now(),
+            last_line: Instant::now(),
+            bar: None,
+            terminal: std::io::stderr().is_terminal(),
+        }
+    }
+
+    /// `done` of `total` units.
+    pub fn update(&mut self, done: u64, total: u64) {
+        if self.start.elapsed() < Self::AFTER {
+            return;
+        }
+        if self.terminal {
+            let what = self.what;
+            let bar = self.bar.get_or_insert_with(|| {
+                let bar = ProgressBar::new(total);
+                bar.set_style(
+                    ProgressStyle::with_template("{prefix} [{bar:20}] {percent} % · ETA {eta}")
+                        .expect("a valid template")
+                        .progress_chars("=> "),
+                );
+                bar.set_prefix(what);
+                bar
+            });
+            bar.set_length(total);
+            bar.set_position(done);
+        } else if self.last_line.elapsed() >= LOG_EVERY {
+            self.last_line = Instant::now();
+            let share = done as f64 / total.max(1) as f64;
+            let elapsed = self.start.elapsed().as_secs_f64();
+            let left = if share > 0.0 {
+                elapsed * (1.0 - share) / share
+            } else {
+                f64::NAN
+            };
+            super::print::note(format_args!(
+                "{}: {:.1} % after {}, about {} left",
+                self.what,
+                100.0 * share,
+                bitrock::limits::human_seconds(elapsed),
+                bitrock::limits::human_seconds(left)
+            ));
+        }
+    }
+}
+
+impl Drop for WorkProgress {
+    fn drop(&mut self) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish_and_clear();
+        }
+    }
+}

@@ -84,6 +84,10 @@ pub struct SimulateCmd {
     /// --torque-unit nm) [default: standard output].
     #[arg(long, short, value_name = "FILE")]
     pub out: Option<PathBuf>,
+    /// Replace FILE even when bitrock did not write it (or it was changed since); without it
+    /// only bitrock's own unchanged output is replaced.
+    #[arg(long, requires = "out")]
+    pub force: bool,
 }
 
 pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
@@ -127,12 +131,14 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
     };
     config.validate()?;
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "out")?;
+        files::check_output_file(path, "out", cmd.force)?;
     }
-    let trace = simulate::simulate(&config)?;
+    let mut progress = super::progress::WorkProgress::new("simulating");
+    let trace = simulate::simulate_with(&config, &mut |done, total| progress.update(done, total))?;
+    drop(progress);
     match &cmd.out {
         None => simulate::write_csv_in(&trace, cmd.torque_unit, super::print::stdout())?,
-        Some(path) => files::write_whole(path, "out", |file| {
+        Some(path) => files::write_whole(path, "out", cmd.force, |file| {
             simulate::write_csv_in(&trace, cmd.torque_unit, file)
         })?,
     }

@@ -59,8 +59,12 @@ pub struct StabilityCmd {
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Write the boundaries as CSV to FILE.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, short, value_name = "FILE")]
     pub out: Option<PathBuf>,
+    /// Replace FILE even when bitrock did not write it (or it was changed since); without it
+    /// only bitrock's own unchanged output is replaced.
+    #[arg(long, requires = "out")]
+    pub force: bool,
     /// Print JSON (boundaries and probability grids) instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -73,7 +77,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let omega = map::parse_axis(&cmd.omega_rpm, "omega_rpm")?;
     let wob = map::parse_axis(&cmd.wob_kn, "wob_kn")?;
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "out")?;
+        files::check_output_file(path, "out", cmd.force)?;
     }
     let job = StabilityJob {
         source: map_source(cmd)?,
@@ -109,7 +113,9 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }
     if let Some(path) = &cmd.out {
-        files::write_whole(path, "out", |file| file.write_all(&boundaries_csv(omega, &columns)))?;
+        files::write_whole(path, "out", cmd.force, |file| {
+            file.write_all(&boundaries_csv(omega, &columns))
+        })?;
     }
     let mut out = super::print::stdout();
     if cmd.json {

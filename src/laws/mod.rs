@@ -178,6 +178,32 @@ impl Law {
     }
 
     /// The law file behind a law of a law file; `None` for the built-in laws.
+    /// How much ρ = Σ(y − T)²/Σy² moves when this law's torque is computed in f32, as the GPU
+    /// computes it (parameters, speeds, torques and residuals rounded to f32), instead of f64:
+    /// |ρ₃₂ − ρ₆₄| / ρ₆₄ at parameters `p` (SI) on the speeds `w` (rad/s) and torques `y` (N·m),
+    /// r = 1. What the law itself loses in f32, whatever the GPU. `None` for the built-in laws,
+    /// whose kernels are written for f32 and tested against the CPU twin.
+    pub fn f32_rho_error(self, p: &[f64], w: &[f64], y: &[f64]) -> Option<f64> {
+        let file = self.file()?;
+        let p32: Vec<f32> = p.iter().map(|&v| v as f32).collect();
+        let (mut exact, mut single, mut norm) = (0.0f64, 0.0f64, 0.0f64);
+        for (&w, &y) in w.iter().zip(y) {
+            let t64 = file.torque(p, w, 1.0);
+            let t32 = file.torque_f32(&p32, w as f32, 1.0);
+            exact += (y - t64).powi(2);
+            single += f64::from(y as f32 - t32).powi(2);
+            norm += y * y;
+        }
+        let (exact, single) = (exact / norm, single / norm);
+        Some(if exact > 0.0 {
+            (single - exact).abs() / exact
+        } else if single == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        })
+    }
+
     pub fn file(self) -> Option<&'static crate::laws::file::LawFile> {
         match self {
             Law::File(id) => Some(crate::laws::file::registered(id).file),

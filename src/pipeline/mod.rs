@@ -24,6 +24,14 @@ pub use stability::{MapSource, StabilityJob, StabilityMaps};
 const ENVELOPE_SPEEDS: usize = 200;
 /// A least-squares ρ below this is an exact fit (rounding of an exactly representable record).
 const EXACT_FIT_RHO: f64 = 1e-12;
+/// Fewer particles than this in the last population and its model probabilities are said to
+/// be coarse: each particle moves a law's probability by 1/N (with one, a law gets 1).
+pub const MIN_PARTICLES_FOR_PROBABILITIES: usize = 100;
+/// A law's particles have collapsed when they hold at most this share of distinct parameter
+/// sets (told apart at [`COLLAPSE_RESOLUTION`] of their prior box).
+const COLLAPSE_SHARE: f64 = 0.1;
+/// Parameters closer than this share of their prior box's width count as one point.
+const COLLAPSE_RESOLUTION: f64 = 1e-9;
 
 pub use crate::run::RunDir;
 
@@ -205,6 +213,34 @@ impl Analysis {
                 thin.join(", ")
             ));
         }
+        if self.outcome.backend == "gpu" {
+            let cal = &setup.data.calibration;
+            for fit in &setup.fits {
+                let Some(error) = fit.law.f32_rho_error(&fit.params_si, &cal.speed_rad_s, &cal.torque_nm) else {
+                    continue;
+                };
+                if error > crate::eval::PARITY_TOLERANCE {
+                    out.push(format!(
+                        "law {}: its torque loses digits in f32, the GPU's float: at its least-squares fit, ρ computed in f32 differs from f64 by {error:.2e} (relative), beyond the {:e} the CPU/GPU parity tolerance allows, so this run's GPU scores of it differ from the CPU's; score it with `backend` cpu, or rewrite the torque to avoid cancellation",
+                        fit.law,
+                        crate::eval::PARITY_TOLERANCE
+                    ));
+                }
+            }
+        }
+        if let Some(last) = self.outcome.run.populations.last() {
+            let n = last.particles.len();
+            if n < MIN_PARTICLES_FOR_PROBABILITIES {
+                out.push(format!(
+                    "the last population has {n} particle(s): each moves a law's probability by 1/{n}, so the model probabilities are that coarse (at least {MIN_PARTICLES_FOR_PROBABILITIES} particles give probabilities worth reading)"
+                ));
+            }
+            for (law, count, distinct) in collapsed_laws(&last.particles, &setup.prior) {
+                out.push(format!(
+                    "law {law}: its {count} particles in the last population hold only {distinct} distinct parameter set(s): its posterior has collapsed onto a point, and its spread and intervals say nothing (a wider SMC kernel, `kernel_scale`, or the local perturbation helps)"
+                ));
+            }
+        }
         out
     }
 
@@ -267,4 +303,35 @@ fn envelopes(particles: &[Particle], laws: &[crate::Law], data: &FieldData) -> V
     laws.iter()
         .filter_map(|&law| predictive_envelope(particles, law, &grid, ENVELOPE_LEVEL, 1.0))
         .collect()
+}
+
+/// The laws whose particles (at least ten) hold at most [`COLLAPSE_SHARE`] of distinct
+/// parameter sets, parameters told apart at [`COLLAPSE_RESOLUTION`] of their prior box: (law,
+/// particles, distinct sets). A rejection sampler never collapses; an SMC kernel far narrower
+/// than the posterior does.
+fn collapsed_laws(particles: &[Particle], prior: &crate::prior::Prior) -> Vec<(crate::Law, usize, usize)> {
+    let mut out = Vec::new();
+    for bx in &prior.boxes {
+        let mine: Vec<&Particle> = particles.iter().filter(|p| p.law == bx.law).collect();
+        if mine.len() < 10 {
+            continue;
+        }
+        let cell = |j: usize, v: f64| -> i64 {
+            let width = f64::from(bx.upper[j]) - f64::from(bx.lower[j]);
+            let scale = if width > 0.0 {
+                width
+            } else {
+                v.abs().max(f64::MIN_POSITIVE)
+            };
+            ((v - f64::from(bx.lower[j])) / (scale * COLLAPSE_RESOLUTION)).round() as i64
+        };
+        let distinct: std::collections::HashSet<Vec<i64>> = mine
+            .iter()
+            .map(|p| p.params.iter().enumerate().map(|(j, &v)| cell(j, v)).collect())
+            .collect();
+        if (distinct.len() as f64) <= COLLAPSE_SHARE * mine.len() as f64 {
+            out.push((bx.law, mine.len(), distinct.len()));
+        }
+    }
+    out
 }

@@ -12,6 +12,11 @@ use crate::stability::map::{self, Boundaries, Criterion, LawSamples};
 use crate::store::RunStore;
 use std::path::PathBuf;
 
+/// A grid computed on the CPU for longer than this says how far it is...
+const PROGRESS_AFTER: std::time::Duration = std::time::Duration::from_secs(2);
+/// ...every this often.
+const PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// The paper's grid of top-drive speeds, rpm, as MIN:MAX:COUNT ([`map::parse_axis`]).
 pub const DEFAULT_OMEGA_RPM: &str = "20:220:101";
 /// The paper's grid of weights on bit, kN, as MIN:MAX:COUNT.
@@ -183,9 +188,33 @@ impl StabilityJob {
         let c = self.criterion.critical_nms();
         let boundaries = map::boundaries(&inputs, &self.omega_rpm, c, self.w_ref_n, self.percentile);
         let mut backend = self.backend;
+        let note = std::cell::RefCell::new(note);
+        let total = (self.cells() * self.samples * inputs.len()) as u64;
+        let (start, mut last) = (std::time::Instant::now(), std::time::Instant::now());
+        let mut report = |done: u64, total: u64| {
+            if start.elapsed() >= PROGRESS_AFTER && last.elapsed() >= PROGRESS_EVERY {
+                last = std::time::Instant::now();
+                (note.borrow_mut())(format!(
+                    "stability grid: {:.1} % of the cell-samples after {}",
+                    100.0 * done as f64 / total.max(1) as f64,
+                    crate::limits::human_seconds(start.elapsed().as_secs_f64())
+                ));
+            }
+        };
+        let mut pace = crate::limits::Pace::new(
+            "samples",
+            format!(
+                "{} cells × {} samples × {} laws on the CPU",
+                self.cells(),
+                self.samples,
+                inputs.len()
+            ),
+            total,
+            &mut report,
+        );
         let grids = inputs
             .iter()
-            .map(|input| self.grid(input, &mut backend, note))
+            .map(|input| self.grid(input, &mut backend, &note, &mut pace))
             .collect::<Result<_>>()?;
         Ok(StabilityMaps {
             inputs,
@@ -198,7 +227,13 @@ impl StabilityJob {
     /// One law's probability grid: the GPU's `stability_grid` unless the backend is the CPU;
     /// under `auto` a GPU that cannot be used is said once and the CPU computes this grid and
     /// the next ones.
-    fn grid(&self, input: &LawSamples, backend: &mut Backend, note: &mut dyn FnMut(String)) -> Result<Vec<f64>> {
+    fn grid(
+        &self,
+        input: &LawSamples,
+        backend: &mut Backend,
+        note: &std::cell::RefCell<&mut dyn FnMut(String)>,
+        pace: &mut crate::limits::Pace,
+    ) -> Result<Vec<f64>> {
         if *backend != Backend::Cpu {
             match crate::eval::gpu::stability::stability_grid(
                 input.law,
@@ -214,18 +249,19 @@ impl StabilityJob {
                 }
                 Err(e) if *backend == Backend::Gpu => return Err(e.into()),
                 Err(e) => {
-                    crate::eval::fall_back_to_cpu(e, note)?;
+                    crate::eval::fall_back_to_cpu(e, *note.borrow_mut())?;
                     *backend = Backend::Cpu;
                 }
             }
         }
-        Ok(map::probability_grid(
+        map::probability_grid_with(
             input.law,
             &input.samples_si,
             &self.omega_rpm,
             &self.wob_kn,
             self.criterion,
             self.w_ref_n,
-        ))
+            pace,
+        )
     }
 }

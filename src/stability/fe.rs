@@ -164,10 +164,7 @@ impl DrillString {
     /// Reads a TOML file overriding any subset of the keys, then validates it. Errors name the
     /// file and, for TOML syntax and unknown keys, the line; invalid values name the key.
     pub fn from_toml_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::files::read_text(path, "a drill-string file", crate::limits::MAX_SETTINGS_FILE_BYTES)?;
         let string: DrillString = toml::from_str(&text).map_err(|e| Error::Format {
             path: path.to_path_buf(),
             // Lines are 1-based: count the newlines before the offending byte.
@@ -325,7 +322,7 @@ impl DrillString {
     /// Natural frequencies and modal damping ratios, ascending.
     pub fn modes(&self) -> Result<Modes> {
         self.validate()?;
-        let (lambdas, _) = Normalised::new(self)?.eigen()?;
+        let (lambdas, _) = Normalised::new(self, &|| {})?.eigen()?;
         let frequencies_rad_s: Vec<f64> = lambdas.iter().map(|l| l.sqrt()).collect();
         let damping_ratios = frequencies_rad_s
             .iter()
@@ -344,7 +341,7 @@ impl DrillString {
         if self.validate().is_err() {
             return f64::NAN;
         }
-        Normalised::new(self)
+        Normalised::new(self, &|| {})
             .ok()
             .and_then(|s| s.max_real(bit_damping_nms))
             .unwrap_or(f64::NAN)
@@ -358,14 +355,22 @@ impl DrillString {
     /// Bisection then narrows the bracket to 1e-10 relative, and a grid over [2·c_lo, 0] checks
     /// that the stability flips exactly once, so that "unstable iff c_b ≤ c_b*" holds there.
     pub fn critical_bit_damping(&self) -> Result<CriticalDamping> {
+        self.critical_bit_damping_with(&|| {})
+    }
+
+    /// [`Self::critical_bit_damping`], calling `tick` after each eigenvalue solve (about
+    /// [`SOLVES_PER_CRITICAL`] of them), and refusing first, naming the element count, a string
+    /// whose solves could not finish in a day on this machine ([`Self::check_cost`]).
+    pub fn critical_bit_damping_with(&self, tick: &dyn Fn()) -> Result<CriticalDamping> {
         self.validate()?;
+        self.check_cost(SOLVES_PER_CRITICAL)?;
         if self.alpha <= 0.0 && self.beta <= 0.0 {
             return Err(Error::setting(
                 "alpha",
                 "alpha and beta are both 0: the undamped string is marginal at c_b = 0, there is no crossing to find",
             ));
         }
-        let s = Normalised::new(self)?;
+        let s = Normalised::new(self, tick)?;
         let (lo, hi) = s.bracket()?;
         let critical = s.bisect(lo, hi)?;
         let sign_changes = s.sign_changes(2.0 * lo)?;
@@ -390,8 +395,15 @@ impl DrillString {
     /// damping to destabilise), which makes the root unique; the test suite checks it on a grid.
     /// Bisection itself only needs continuity and the sign change at the bracket's ends.
     pub fn match_lumped_beta(&self, lumped: &Lumped) -> Result<(f64, CriticalDamping)> {
+        self.match_lumped_beta_with(lumped, &|| {})
+    }
+
+    /// [`Self::match_lumped_beta`], calling `tick` after each eigenvalue solve and refusing
+    /// first a string whose solves could not finish in a day here ([`Self::check_cost`]).
+    pub fn match_lumped_beta_with(&self, lumped: &Lumped, tick: &dyn Fn()) -> Result<(f64, CriticalDamping)> {
         self.validate()?;
         lumped.validate()?;
+        self.check_cost(SOLVES_TO_MATCH_BETA)?;
         let target_nms = lumped.critical_bit_damping_nms();
         let with_beta = |beta: f64| DrillString { beta, ..self.clone() };
         let critical_at = |beta: f64| -> Result<f64> {
@@ -400,7 +412,7 @@ impl DrillString {
                 // Undamped: marginal at c_b = 0, unstable for any c_b < 0.
                 return Ok(0.0);
             }
-            let n = Normalised::new(&s)?;
+            let n = Normalised::new(&s, tick)?;
             let (lo, hi) = n.bracket()?;
             n.bisect(lo, hi)
         };
@@ -441,7 +453,7 @@ impl DrillString {
                 beta_hi = beta;
             }
         }
-        let found = with_beta(beta).critical_bit_damping()?;
+        let found = with_beta(beta).critical_bit_damping_with(tick)?;
         let mismatch = (found.critical_bit_damping_nms - target_nms).abs() / target_nms.abs();
         if mismatch > 1e-6 {
             return Err(Error::Numerical(format!(
@@ -450,6 +462,69 @@ impl DrillString {
             )));
         }
         Ok((beta, found))
+    }
+}
+
+/// Eigenvalue solves of the 2n × 2n Jacobian that finding c_b* takes, about: the bracket's
+/// doublings, the bisection to [`CRITICAL_REL_TOL`] and the [`SIGN_GRID_POINTS`] check.
+pub const SOLVES_PER_CRITICAL: f64 = 10.0 + 40.0 + SIGN_GRID_POINTS as f64;
+/// Eigenvalue solves that matching β to the 1-DOF model takes, about: a bracket and bisection
+/// of c_b* per step of the search on β (doublings and bisection), then one whole c_b*.
+pub const SOLVES_TO_MATCH_BETA: f64 = 45.0 * 50.0 + SOLVES_PER_CRITICAL;
+/// Strings up to this many DOF solve in well under a second: their cost is not measured.
+const UNMEASURED_DOFS: usize = 60;
+/// How a dense eigenvalue solve's time grows with the DOF count n: n³ (measured n^2.8–n^2.9
+/// on a 2-core x86-64 between 62 and 202 DOF, `bitrock fe --dp-elements N`).
+const SOLVE_COST_EXPONENT: f64 = 3.0;
+
+impl DrillString {
+    /// Seconds `solves` eigenvalue solves of this string's Jacobian take on this machine, about:
+    /// one solve of a [`UNMEASURED_DOFS`]-DOF string of the same make is timed and scaled by
+    /// the DOF ratio to [`SOLVE_COST_EXPONENT`]. 0 for strings that small.
+    pub fn estimate_seconds(&self, solves: f64) -> f64 {
+        let n = self.dofs();
+        if n <= UNMEASURED_DOFS {
+            return 0.0;
+        }
+        let share = self.dp_elements as f64 / n as f64;
+        let dp = ((UNMEASURED_DOFS as f64 * share).round() as usize).clamp(1, UNMEASURED_DOFS - 1);
+        let probe = DrillString {
+            dp_elements: dp,
+            bha_elements: UNMEASURED_DOFS - dp,
+            ..self.clone()
+        };
+        let Ok(s) = Normalised::new(&probe, &|| {}) else {
+            return 0.0;
+        };
+        let start = std::time::Instant::now();
+        let mut timed = 0;
+        while timed < 3 || start.elapsed().as_secs_f64() < 0.02 {
+            let _ = s.max_real(-probe.alpha);
+            timed += 1;
+        }
+        let one = start.elapsed().as_secs_f64() / timed as f64;
+        one * (n as f64 / UNMEASURED_DOFS as f64).powf(SOLVE_COST_EXPONENT) * solves
+    }
+
+    /// Refuses, naming the larger element count, a string whose `solves` eigenvalue solves
+    /// could not finish in a day on this machine ([`crate::limits::check_estimate`]).
+    pub fn check_cost(&self, solves: f64) -> Result<()> {
+        let seconds = self.estimate_seconds(solves);
+        let field = if self.dp_elements >= self.bha_elements {
+            "dp_elements"
+        } else {
+            "bha_elements"
+        };
+        crate::limits::check_estimate(
+            field,
+            seconds,
+            &format!(
+                "about {solves:.0} eigenvalue solves of a {}-DOF string ({} + {} elements; the cost grows as n^{SOLVE_COST_EXPONENT})",
+                self.dofs(),
+                self.dp_elements,
+                self.bha_elements
+            ),
+        )
     }
 }
 
@@ -464,7 +539,9 @@ struct Invalid {
 /// C̃ = L⁻¹CL⁻ᵀ and b = L⁻¹e_bit. The Jacobian [[0, I], [−K̃, −(C̃ + c_b b bᵀ)]] is similar to
 /// the appendix's (same eigenvalues) but has symmetric, balanced blocks, which keeps the real
 /// parts accurate near the crossing, and c_b enters as a rank-one update.
-struct Normalised {
+struct Normalised<'t> {
+    /// Called after each eigenvalue solve of the Jacobian: progress of long searches.
+    tick: &'t dyn Fn(),
     /// C at the bit (N·m·s/rad): the first step of the bracket search.
     bit_damping_scale_nms: f64,
     l: DMatrix<f64>,
@@ -473,8 +550,8 @@ struct Normalised {
     bit: DVector<f64>,
 }
 
-impl Normalised {
-    fn new(string: &DrillString) -> Result<Self> {
+impl<'t> Normalised<'t> {
+    fn new(string: &DrillString, tick: &'t dyn Fn()) -> Result<Self> {
         let (m, c, k) = string.matrices();
         let n = m.nrows();
         let not_pd = || Error::Numerical("the mass matrix is not positive definite".to_string());
@@ -489,6 +566,7 @@ impl Normalised {
         e_bit[n - 1] = 1.0;
         let bit = l.solve_lower_triangular(&e_bit).ok_or_else(not_pd)?;
         Ok(Self {
+            tick,
             bit_damping_scale_nms: c[(n - 1, n - 1)],
             k: congruence(&k)?,
             c: congruence(&c)?,
@@ -536,7 +614,9 @@ impl Normalised {
     }
 
     fn growth(&self, bit_damping_nms: f64) -> Result<f64> {
-        self.max_real(bit_damping_nms).ok_or_else(|| {
+        let growth = self.max_real(bit_damping_nms);
+        (self.tick)();
+        growth.ok_or_else(|| {
             Error::Numerical(format!(
                 "the Jacobian's eigenvalues did not converge at c_b = {bit_damping_nms} N·m·s/rad"
             ))
@@ -697,7 +777,7 @@ mod tests {
     fn eigenpairs_satisfy_the_generalised_problem() {
         for string in [DrillString::default(), ten_dof(0.006)] {
             let (m, _, k) = string.matrices();
-            let (lambdas, v) = Normalised::new(&string).unwrap().eigen().unwrap();
+            let (lambdas, v) = Normalised::new(&string, &|| {}).unwrap().eigen().unwrap();
             for (i, lambda) in lambdas.iter().enumerate() {
                 let vi = v.column(i);
                 let kv = &k * vi;
@@ -732,7 +812,7 @@ mod tests {
     #[test]
     fn normalised_jacobian_has_the_literal_jacobians_eigenvalues() {
         let s = ten_dof(0.006);
-        let n = Normalised::new(&s).unwrap();
+        let n = Normalised::new(&s, &|| {}).unwrap();
         for cb in [-1000.0, -150.0, 0.0, 300.0] {
             let literal = s.jacobian(cb).complex_eigenvalues();
             let expected = literal.iter().map(|z| z.re).fold(f64::NEG_INFINITY, f64::max);

@@ -222,8 +222,25 @@ pub fn probability_grid(
     criterion: Criterion,
     w_ref_n: f64,
 ) -> Vec<f64> {
+    let mut pace = crate::limits::Pace::unchecked();
+    probability_grid_with(law, samples, omega_rpm, wob_kn, criterion, w_ref_n, &mut pace)
+        .expect("an unchecked pace never refuses")
+}
+
+/// [`probability_grid`], counting each speed's cell-samples on `pace` (which may refuse the
+/// rest of the work once it has measured this machine's speed).
+pub fn probability_grid_with(
+    law: Law,
+    samples: &[Vec<f64>],
+    omega_rpm: &[f64],
+    wob_kn: &[f64],
+    criterion: Criterion,
+    w_ref_n: f64,
+    pace: &mut crate::limits::Pace,
+) -> Result<Vec<f64>> {
     let mut out = Vec::with_capacity(omega_rpm.len() * wob_kn.len());
     for &rpm in omega_rpm {
+        pace.advance((wob_kn.len() * samples.len()) as u64)?;
         let slopes: Vec<f64> = samples
             .iter()
             .map(|s| law.dtorque_dw(s, rpm * RAD_S_PER_RPM, 1.0))
@@ -234,7 +251,7 @@ pub fn probability_grid(
             out.push(unstable as f64 / samples.len() as f64);
         }
     }
-    out
+    Ok(out)
 }
 
 /// Bytes of one grid cell as the maps hold and print it: the f64 probability per law and the

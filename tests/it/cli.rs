@@ -297,7 +297,7 @@ fn abc_writes_a_run_directory_and_json_with_its_keys() {
         assert_eq!(code, 0, "{stderr}");
         assert_eq!(csv.lines().count(), 1001);
         assert!(
-            csv.starts_with("population,law,candidate,rho,weight,b0 [kN·m]"),
+            csv.starts_with("population,law,candidate,rho,weight,m1.b0 [kN·m],m1.b1 [s/rad]"),
             "{}",
             &csv[..80]
         );

@@ -645,6 +645,17 @@ fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
 fn read_summary(dir: &Path) -> bitrock::Result<String> {
     let path = dir.join(bitrock::rundir::RUN_JSON);
     match std::fs::read_to_string(&path) {
+        Err(e)
+            if e.kind() == std::io::ErrorKind::NotFound
+                && let Some(holder) = bitrock::files::DirLock::holder(dir) =>
+        {
+            Err(Error::Data {
+                path: dir.to_path_buf(),
+                message: format!(
+                    "the run is being written by {holder} and has no run.json yet: open it once its first population is stored"
+                ),
+            })
+        }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && RunStore::open(dir).is_ok() => Err(Error::Data {
             path: dir.to_path_buf(),
             message:

@@ -444,18 +444,26 @@ pub struct Cache {
     pub tunings: Vec<Tuning>,
 }
 
-/// The tunings the cache file at `path` holds (none where there is no file).
+/// The most the cache of scoring shapes may hold, bytes: a tuning is about 1 kB, one per
+/// adapter, law set and record size measured.
+const MAX_CACHE_BYTES: u64 = 4_000_000;
+
+/// The tunings the cache file at `path` holds (none where there is no file). A cache that is
+/// not a regular file of bitrock's (a pipe, a device) is refused, never waited on.
 pub fn read_cache(path: &std::path::Path) -> crate::Result<Cache> {
-    match std::fs::read_to_string(path) {
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(crate::Error::Data {
+            path: path.to_path_buf(),
+            message: "is not a regular file, so not a cache bitrock wrote".into(),
+        });
+    }
+    match crate::files::read_text(path, "a cache of scoring shapes", MAX_CACHE_BYTES) {
         Ok(text) => serde_json::from_str(&text).map_err(|e| crate::Error::Data {
             path: path.to_path_buf(),
             message: format!("not a bitrock cache of scoring shapes: {e}"),
         }),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Cache::default()),
-        Err(source) => Err(crate::Error::Read {
-            path: path.to_path_buf(),
-            source,
-        }),
+        Err(crate::Error::Read { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => Ok(Cache::default()),
+        Err(e) => Err(e),
     }
 }
 

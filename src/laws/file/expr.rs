@@ -645,10 +645,11 @@ impl Expr {
         })
     }
 
-    /// The expression's value in f64 (the CPU twin). `p` holds the law's parameters.
-    pub fn eval(&self, p: &[f64], w: f64, r: f64) -> f64 {
+    /// The expression's value in `T`: f64 (the CPU twin) or f32 (the precision the GPU computes
+    /// in, to measure what a law loses there). `p` holds the law's parameters.
+    pub fn eval<T: num_traits::Float>(&self, p: &[T], w: T, r: T) -> T {
         match self {
-            Expr::Const(c) => *c,
+            Expr::Const(c) => T::from(*c).unwrap_or_else(T::nan),
             Expr::Var(Var::Speed) => w,
             Expr::Var(Var::Ratio) => r,
             Expr::Var(Var::Param(i)) => p[*i],
@@ -662,7 +663,7 @@ impl Expr {
                     Unary::Abs => x.abs(),
                     // sign(0) = 0, as WGSL's sign.
                     Unary::Sign => {
-                        if x == 0.0 || x.is_nan() {
+                        if x.is_zero() || x.is_nan() {
                             x
                         } else {
                             x.signum()
@@ -685,7 +686,7 @@ impl Expr {
                     Binary::Mul => x * y,
                     Binary::Div => x / y,
                     // WGSL's pow is exp2(y·log2 x): no value for x < 0.
-                    Binary::Pow if x < 0.0 => f64::NAN,
+                    Binary::Pow if x < T::zero() => T::nan(),
                     Binary::Pow => x.powf(y),
                 }
             }
@@ -731,10 +732,15 @@ impl Expr {
             }
             Expr::Binary(op, a, b) => {
                 let (da, db) = (a.derivative(var), b.derivative(var));
+                // Sums need no copy of their operands: a left-nested sum of n terms stays O(n).
+                match op {
+                    Binary::Add => return add(da, db),
+                    Binary::Sub => return sub(da, db),
+                    _ => {}
+                }
                 let (a, b) = ((**a).clone(), (**b).clone());
                 match op {
-                    Binary::Add => add(da, db),
-                    Binary::Sub => sub(da, db),
+                    Binary::Add | Binary::Sub => unreachable!("returned above"),
                     Binary::Mul => add(mul(da, b.clone()), mul(a, db)),
                     Binary::Div => sub(div(da, b.clone()), div(mul(a, db), mul(b.clone(), b))),
                     Binary::Pow if db == Expr::Const(0.0) => {
@@ -755,30 +761,39 @@ impl Expr {
         }
     }
 
-    /// The expression in WGSL, f32. Parameters are `p[i]`, speed `w`, ratio `r`; needs the
-    /// kernels' `exp_f32`, `tanh_f32`, `sin_f32` and `cos_f32` (shaders/shared/laws.wgsl).
+    /// The expression in WGSL, f32: the `let` statements it needs (one per line, none for a
+    /// small expression) followed by the value. Parameters are `p[i]`, speed `w`, ratio `r`;
+    /// needs the kernels' `exp_f32`, `tanh_f32`, `sin_f32` and `cos_f32`
+    /// (shaders/shared/laws.wgsl).
     pub fn wgsl(&self) -> String {
-        let mut out = String::new();
-        self.write_wgsl(&mut out);
-        out
+        let (lets, value) = self.wgsl_parts();
+        lets + &value
     }
 
-    fn write_wgsl(&self, out: &mut String) {
+    /// [`Self::wgsl`] as (`let` statements, value): subexpressions nested deeper than
+    /// [`WGSL_MAX_NESTING`], and an unrolled power's base longer than [`WGSL_INLINE_REPEAT`],
+    /// are bound to `let`s, so the text is linear in the expression's size and no WGSL
+    /// compiler meets a deep nesting.
+    pub fn wgsl_parts(&self) -> (String, String) {
+        let mut lets = String::new();
+        let mut count = 0;
+        let (value, _) = self.write_wgsl(&mut lets, &mut count);
+        (lets, value)
+    }
+
+    /// (text, nesting) of this node, hoisting into `lets` as needed.
+    fn write_wgsl(&self, lets: &mut String, count: &mut usize) -> (String, usize) {
         match self {
             Expr::Const(c) => {
                 let v = *c as f32;
                 // `{:?}` prints a shortest round-trip form with a point or exponent ("1.0",
                 // "1e-5"), both WGSL float literals.
                 let text = format!("{:?}", v.abs());
-                if v < 0.0 {
-                    write!(out, "(-{text})").unwrap();
-                } else {
-                    out.push_str(&text);
-                }
+                if v < 0.0 { (format!("(-{text})"), 0) } else { (text, 0) }
             }
-            Expr::Var(Var::Speed) => out.push('w'),
-            Expr::Var(Var::Ratio) => out.push('r'),
-            Expr::Var(Var::Param(i)) => write!(out, "p[{i}]").unwrap(),
+            Expr::Var(Var::Speed) => ("w".into(), 0),
+            Expr::Var(Var::Ratio) => ("r".into(), 0),
+            Expr::Var(Var::Param(i)) => (format!("p[{i}]"), 0),
             Expr::Unary(op, a) => {
                 let name = match op {
                     Unary::Neg => "-",
@@ -791,34 +806,33 @@ impl Expr {
                     Unary::Sin => "sin_f32",
                     Unary::Cos => "cos_f32",
                 };
-                out.push_str(name);
-                out.push('(');
-                a.write_wgsl(out);
-                out.push(')');
+                let (ta, da) = a.write_wgsl(lets, count);
+                hoist(lets, count, format!("{name}({ta})"), da + 1, false)
             }
             Expr::Binary(Binary::Pow, a, b) => match small_integer(b) {
                 Some(n) => {
+                    let (mut ta, mut da) = a.write_wgsl(lets, count);
+                    if ta.len() > WGSL_INLINE_REPEAT && n.unsigned_abs() > 1 {
+                        (ta, da) = hoist(lets, count, ta, da, true);
+                    }
                     // Unrolled: a^n = a·a·…·a, 1 / that for n < 0 (powi's value up to rounding).
-                    out.push_str(if n < 0 { "(1.0 / (" } else { "(" });
+                    let mut text = String::from(if n < 0 { "(1.0 / (" } else { "(" });
                     if n == 0 {
-                        out.push_str("1.0");
+                        text.push_str("1.0");
                     }
                     for k in 0..n.unsigned_abs() {
                         if k > 0 {
-                            out.push_str(" * ");
+                            text.push_str(" * ");
                         }
-                        out.push('(');
-                        a.write_wgsl(out);
-                        out.push(')');
+                        write!(text, "({ta})").unwrap();
                     }
-                    out.push_str(if n < 0 { "))" } else { ")" });
+                    text.push_str(if n < 0 { "))" } else { ")" });
+                    hoist(lets, count, text, da + 2, false)
                 }
                 None => {
-                    out.push_str("pow(");
-                    a.write_wgsl(out);
-                    out.push_str(", ");
-                    b.write_wgsl(out);
-                    out.push(')');
+                    let (ta, da) = a.write_wgsl(lets, count);
+                    let (tb, db) = b.write_wgsl(lets, count);
+                    hoist(lets, count, format!("pow({ta}, {tb})"), da.max(db) + 1, false)
                 }
             },
             Expr::Binary(op, a, b) => {
@@ -829,15 +843,86 @@ impl Expr {
                     Binary::Div => " / ",
                     Binary::Pow => unreachable!("handled above"),
                 };
-                out.push('(');
-                a.write_wgsl(out);
-                out.push_str(symbol);
-                b.write_wgsl(out);
-                out.push(')');
+                let (ta, da) = a.write_wgsl(lets, count);
+                let (tb, db) = b.write_wgsl(lets, count);
+                hoist(lets, count, format!("({ta}{symbol}{tb})"), da.max(db) + 1, false)
             }
         }
     }
+
+    /// Nodes in the tree.
+    pub fn size(&self) -> usize {
+        match self {
+            Expr::Const(_) | Expr::Var(_) => 1,
+            Expr::Unary(_, a) => a.size().saturating_add(1),
+            Expr::Binary(_, a, b) => a.size().saturating_add(b.size()).saturating_add(1),
+        }
+    }
+
+    /// An upper bound on the size of [`Self::derivative`]`(var)`, in one pass over the tree
+    /// (simplification only shrinks the result): a product of n factors has a derivative of
+    /// order n² nodes, which is refused by its bound before any of it is built.
+    pub fn derivative_size_bound(&self) -> usize {
+        self.sizes().1
+    }
+
+    /// (size, bound on the derivative's size).
+    fn sizes(&self) -> (usize, usize) {
+        let add = |terms: &[usize]| terms.iter().fold(0usize, |acc, &t| acc.saturating_add(t));
+        match self {
+            Expr::Const(_) | Expr::Var(_) => (1, 1),
+            Expr::Unary(op, a) => {
+                let (sa, da) = a.sizes();
+                let outer = match op {
+                    Unary::Neg | Unary::Sign => 0,
+                    Unary::Tanh => add(&[2 * sa, 5]),
+                    Unary::Sqrt => add(&[sa, 3]),
+                    _ => add(&[sa, 2]),
+                };
+                (add(&[sa, 1]), add(&[outer, da, 1]))
+            }
+            Expr::Binary(op, a, b) => {
+                let ((sa, da), (sb, db)) = (a.sizes(), b.sizes());
+                let d = match op {
+                    Binary::Add | Binary::Sub => add(&[da, db, 1]),
+                    Binary::Mul => add(&[da, sb, sa, db, 3]),
+                    Binary::Div => add(&[da, sb, sa, db, sb, sb, 5]),
+                    Binary::Pow => add(&[sa, sb, sa, sb, da, db, sa, sb, 9]),
+                };
+                (add(&[sa, sb, 1]), d)
+            }
+        }
+    }
+
+    /// The first constant (folded constants included) that does not fit in an f32, the GPU's
+    /// float: its value.
+    pub fn constant_beyond_f32(&self) -> Option<f64> {
+        match self {
+            Expr::Const(c) if c.is_finite() && c.abs() > f64::from(f32::MAX) => Some(*c),
+            Expr::Const(c) if c.is_infinite() => Some(*c),
+            Expr::Const(_) | Expr::Var(_) => None,
+            Expr::Unary(_, a) => a.constant_beyond_f32(),
+            Expr::Binary(_, a, b) => a.constant_beyond_f32().or_else(|| b.constant_beyond_f32()),
+        }
+    }
 }
+
+/// (text, nesting) of a WGSL subexpression: itself, or, nested [`WGSL_MAX_NESTING`] deep (or
+/// when `force`d), a new `let` in `lets` holding it.
+fn hoist(lets: &mut String, count: &mut usize, text: String, depth: usize, force: bool) -> (String, usize) {
+    if depth < WGSL_MAX_NESTING && !force {
+        return (text, depth);
+    }
+    let name = format!("t{count}");
+    *count += 1;
+    writeln!(lets, "    let {name} = {text};").unwrap();
+    (name, 0)
+}
+
+/// Nesting of a WGSL subexpression beyond which it is bound to a `let`.
+const WGSL_MAX_NESTING: usize = 24;
+/// Characters beyond which an unrolled power's base is bound to a `let` instead of repeated.
+const WGSL_INLINE_REPEAT: usize = 48;
 
 /// Samples a [`Program`] evaluates per instruction.
 pub const BLOCK: usize = 64;
@@ -995,7 +1080,7 @@ mod tests {
 
     #[test]
     fn precedence_and_associativity_follow_arithmetic() {
-        let v = |t: &str| compile(t).eval(&[2.0, 3.0], 0.5, 1.0);
+        let v = |t: &str| compile(t).eval(&[2.0, 3.0], 0.5, 1.0f64);
         assert_eq!(v("1 + 2 * 3"), 7.0);
         assert_eq!(v("(1 + 2) * 3"), 9.0);
         assert_eq!(v("8 / 4 / 2"), 1.0);
@@ -1145,7 +1230,7 @@ mod tests {
         assert_eq!(compile("(0 - 2.5) * w^3").wgsl(), "((-2.5) * ((w) * (w) * (w)))");
         assert_eq!(compile("w^3^2"), compile("w^9"));
         // A real power of a negative base has no value, on both paths.
-        assert!(compile("pow(w - 1, a)").eval(&[1.5, 0.0], 0.5, 1.0).is_nan());
+        assert!(compile("pow(w - 1, a)").eval(&[1.5, 0.0], 0.5, 1.0f64).is_nan());
         assert_eq!(compile("w^-2").wgsl(), "(1.0 / ((w) * (w)))");
         assert_eq!(compile("w^0").wgsl(), "(1.0)");
         assert_eq!(compile("pow(w, a)").wgsl(), "pow(w, p[0])");

@@ -87,8 +87,29 @@ struct RawParam {
     reference: Option<Spanned<f64>>,
 }
 
+/// The most a law file may hold, bytes: its torque is at most [`expr::MAX_LENGTH`] bytes and
+/// its table of at most [`MAX_PARAMS`] parameters a few hundred more; comments and blank
+/// lines get generous room. The file's text is stored with every run that uses it.
+pub const MAX_FILE_BYTES: u64 = 64_000;
+
+/// The most nodes a torque's derivative may hold (an upper bound computed before it is built):
+/// far above any law written by hand, far below what exhausts time or memory.
+pub const MAX_DERIVATIVE_NODES: usize = 200_000;
+
 /// The built-in laws' names, which a law file may not take.
 const BUILT_IN: [&str; 4] = ["m1", "m2", "m3", "m4"];
+/// Words bitrock itself uses where law names go in its outputs and flags (the mixture of laws
+/// in stability maps, `--laws all`, the particle columns), which a law file may not take.
+const OUTPUT_WORDS: [&str; 8] = [
+    "all",
+    "mixture",
+    "population",
+    "position",
+    "law",
+    "candidate",
+    "rho",
+    "weight",
+];
 
 /// A law file registered in this process, with the views [`Law`] hands out (it lives as long
 /// as the process, so they are `'static`).
@@ -121,6 +142,27 @@ pub fn register(file: LawFile) -> Result<Law> {
             ),
         ));
     }
+    // The run store names a law file's parameter columns `<law>_<parameter>`: two laws whose
+    // names meet there (law `x` with `y_z`, law `x_y` with `z`) are refused before any work.
+    for other in registry.iter() {
+        for p in &file.params {
+            let column = store_column(&file.name, &p.name);
+            if let Some(q) = other
+                .file
+                .params
+                .iter()
+                .find(|q| store_column(&other.file.name, &q.name) == column)
+            {
+                return Err(Error::setting(
+                    "law_file",
+                    format!(
+                        "law '{}' parameter '{}' and law '{}' parameter '{}' would share the column '{column}' of the run store; rename one",
+                        file.name, p.name, other.file.name, q.name
+                    ),
+                ));
+            }
+        }
+    }
     if registry.len() >= usize::from(u16::MAX) {
         return Err(Error::setting("law_file", "too many law files in one process"));
     }
@@ -144,6 +186,12 @@ pub fn register(file: LawFile) -> Result<Law> {
     };
     registry.push(Box::leak(Box::new(registered)));
     Ok(Law::File(FileLaw((registry.len() - 1) as u16)))
+}
+
+/// The run store's column of parameter `param` of the law file's law `law`: `<law>_<param>`
+/// (a law file's parameter names may repeat another law's).
+pub fn store_column(law: &str, param: &str) -> String {
+    format!("{law}_{param}")
 }
 
 /// Reads, compiles and registers the law file at `path`.
@@ -187,10 +235,7 @@ fn line_column(text: &str, offset: usize) -> (u64, usize) {
 impl LawFile {
     /// Reads and compiles the law file at `path`.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::files::read_text(path, "a law file", MAX_FILE_BYTES)?;
         Self::parse(&text, path)
     }
 
@@ -225,6 +270,12 @@ impl LawFile {
             return Err(at(
                 raw.name.span().start,
                 format!("law name '{name}' is a built-in law's; choose another"),
+            ));
+        }
+        if OUTPUT_WORDS.contains(&name.as_str()) {
+            return Err(at(
+                raw.name.span().start,
+                format!("law name '{name}' is a word bitrock uses in its outputs; choose another"),
             ));
         }
         if raw.parameter.len() > MAX_PARAMS {
@@ -324,6 +375,25 @@ impl LawFile {
                 format!("torque: the expression is in {}, not a torque (N·m)", dim.unit()),
             ));
         }
+        // Derivatives are built symbolically: bounded before any is built.
+        let bound = torque.derivative_size_bound();
+        if bound > MAX_DERIVATIVE_NODES {
+            return Err(at(
+                torque_at,
+                format!(
+                    "torque: its derivatives could hold {bound} nodes, more than the {MAX_DERIVATIVE_NODES} bitrock builds (the derivative of a product of n factors grows as n²): write a repeated factor as a power (g^12) or simplify the expression"
+                ),
+            ));
+        }
+        if let Some(c) = torque.constant_beyond_f32() {
+            return Err(at(
+                torque_at,
+                format!(
+                    "torque: the constant {c:e} does not fit in f32, the GPU's float (|x| ≤ {:e}): rescale the law's parameters so that its constants stay within it",
+                    f32::MAX
+                ),
+            ));
+        }
         // Every law in bitrock scales with the weight-on-bit ratio: T = r · T₁(w).
         let probe: Vec<f64> = params.iter().map(|p| p.reference.unwrap_or(1.0)).collect();
         let proportional = !torque.derivative(Var::Ratio).uses(Var::Ratio)
@@ -338,6 +408,14 @@ impl LawFile {
             ));
         }
         let dtorque_dw = torque.derivative(Var::Speed);
+        if let Some(c) = dtorque_dw.constant_beyond_f32() {
+            return Err(at(
+                torque_at,
+                format!(
+                    "torque: its derivative dT/dw holds the constant {c:e}, which does not fit in f32, the GPU's float: rescale the law's parameters"
+                ),
+            ));
+        }
         let gradient = (0..params.len()).map(|i| torque.derivative(Var::Param(i))).collect();
         let law = Self {
             name,
@@ -357,14 +435,14 @@ impl LawFile {
     /// The law's WGSL functions: `file_torque_<name>(p, w, r)` and `file_slope_<name>(p, w, r)`
     /// (dT/dw), f32, needing the kernels' shared functions (shaders/shared/laws.wgsl).
     pub fn wgsl(&self) -> String {
+        let (torque_lets, t) = self.torque.wgsl_parts();
+        let (slope_lets, d) = self.dtorque_dw.wgsl_parts();
         format!(
             "// The law '{name}' of a law file: T = {formula}\n\
-             fn file_torque_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {t};\n}}\n\
-             fn file_slope_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n    return {d};\n}}\n",
+             fn file_torque_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n{torque_lets}    return {t};\n}}\n\
+             fn file_slope_{name}(p: array<f32, 6>, w: f32, r: f32) -> f32 {{\n{slope_lets}    return {d};\n}}\n",
             name = self.name,
             formula = self.formula.replace('\n', " "),
-            t = self.torque.wgsl(),
-            d = self.dtorque_dw.wgsl(),
         )
     }
 
@@ -372,8 +450,14 @@ impl LawFile {
     /// law that loads compiles on every backend.
     fn check_wgsl(&self) -> std::result::Result<(), String> {
         let text = format!("{}\n{}", crate::laws::LAWS_WGSL, self.wgsl());
-        let module = naga::front::wgsl::parse_str(&text)
-            .map_err(|e| format!("the torque does not compile to WGSL: {}", e.message()))?;
+        let module = naga::front::wgsl::parse_str(&text).map_err(|e| {
+            let message = e.message();
+            if message.contains("internal") {
+                "the torque is too large or too deeply nested for the WGSL compiler: simplify it".to_string()
+            } else {
+                format!("the torque does not compile to WGSL: {message}")
+            }
+        })?;
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
             .validate(&module)
             .map_err(|e| format!("the torque's WGSL does not validate: {}", e.as_inner()))?;
@@ -382,6 +466,11 @@ impl LawFile {
 
     /// T(w, r; θ) in f64.
     pub fn torque(&self, p: &[f64], w: f64, r: f64) -> f64 {
+        self.torque.eval(p, w, r)
+    }
+
+    /// T(w, r; θ) in f32, as the GPU computes it.
+    pub fn torque_f32(&self, p: &[f32], w: f32, r: f32) -> f32 {
         self.torque.eval(p, w, r)
     }
 

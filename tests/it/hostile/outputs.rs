@@ -1,6 +1,7 @@
 //! Only bitrock's own files are ever replaced, by every command that writes: one rule for
-//! output files (never a lock, a temporary or a file inside a run; a symbolic link is written
-//! through) and one for replacing a directory (anything bitrock did not write refuses it).
+//! output files (never a lock, a temporary or a file inside a run; a file bitrock did not write,
+//! or changed since it wrote it, only with `--force`; a symbolic link is written through) and one
+//! for replacing a directory (anything bitrock did not write refuses it).
 
 use super::{assert_refused, export, names, run_in, small_run};
 use std::path::Path;
@@ -69,9 +70,12 @@ fn report_replaces_only_a_report_and_never_writes_into_a_run() {
     let (code, _, err) = run_in(tmp.path(), &["report", "R", "--out", "Rep"]);
     assert_eq!(code, 0, "{err}");
     let rep = tmp.path().join("Rep");
-    // A stale figure of an earlier report does not survive the next one: the directory is
-    // replaced as a whole.
-    std::fs::write(rep.join("figures/fig99_old.svg"), "<svg/>").unwrap();
+    // A stale figure of an earlier report (written, and marked, as bitrock writes its figures)
+    // does not survive the next one: the directory is replaced as a whole.
+    bitrock::files::write_own(&rep.join("figures/fig99_old.svg"), "out", |w| {
+        std::io::Write::write_all(w, b"<svg/>")
+    })
+    .unwrap();
     assert_eq!(run_in(tmp.path(), &["report", "R", "--out", "Rep"]).0, 0);
     assert!(!rep.join("figures/fig99_old.svg").exists());
     for rel in ["my-notes.md", "figures/sketch.txt"] {
@@ -136,7 +140,16 @@ fn an_output_through_a_symbolic_link_writes_the_file_it_points_to() {
     std::fs::create_dir(tmp.path().join("results")).unwrap();
     std::fs::write(tmp.path().join("results/particles.csv"), "old").unwrap();
     std::os::unix::fs::symlink("results/particles.csv", tmp.path().join("latest.csv")).unwrap();
-    let (code, _, err) = run_in(tmp.path(), &["export", "R", "-o", "latest.csv"]);
+    // The file it points to is the user's: replaced only with --force.
+    assert_refused(
+        run_in(tmp.path(), &["export", "R", "-o", "latest.csv"]),
+        &["--out", "not a file bitrock wrote", "--force"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(tmp.path().join("results/particles.csv")).unwrap(),
+        "old"
+    );
+    let (code, _, err) = run_in(tmp.path(), &["export", "R", "-o", "latest.csv", "--force"]);
     assert_eq!(code, 0, "{err}");
     let link = tmp.path().join("latest.csv");
     assert!(
@@ -170,4 +183,153 @@ fn check_selection_refuses_a_selection_directory_holding_the_users_files_before_
         &["RUN_DIR", "my-matrix.xlsx"],
     );
     assert_eq!(names(&sel), ["my-matrix.xlsx"]);
+}
+
+/// The commands that write one output file, each as (arguments before `-o FILE`).
+fn file_writers() -> Vec<Vec<&'static str>> {
+    vec![
+        vec!["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "1"],
+        vec!["export", "R"],
+        vec![
+            "stability",
+            "--run",
+            "R",
+            "--omega-rpm",
+            "40:120:3",
+            "--wob-kn",
+            "50:300:3",
+            "--samples",
+            "20",
+            "--backend",
+            "cpu",
+        ],
+    ]
+}
+
+#[test]
+fn no_output_file_replaces_a_users_file_without_force() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let record = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/demo.csv")).unwrap();
+    for args in file_writers() {
+        let with = |target: &str, force: bool| {
+            let mut a = args.clone();
+            a.extend(["-o", target]);
+            if force {
+                a.push("--force");
+            }
+            run_in(tmp.path(), &a)
+        };
+        let what = args[0];
+        // The user's record: refused, named, untouched, nothing beside it.
+        std::fs::write(tmp.path().join("data.csv"), &record).unwrap();
+        assert_refused(
+            with("data.csv", false),
+            &["--out", "data.csv", "not a file bitrock wrote", "--force"],
+        );
+        assert_eq!(std::fs::read(tmp.path().join("data.csv")).unwrap(), record, "{what}");
+        assert_eq!(names(tmp.path()), ["R", "data.csv"], "{what}");
+        // An empty file of the user's is the user's too.
+        std::fs::write(tmp.path().join("empty.csv"), "").unwrap();
+        assert_refused(with("empty.csv", false), &["--out", "empty.csv"]);
+        assert_eq!(std::fs::read(tmp.path().join("empty.csv")).unwrap(), b"", "{what}");
+        std::fs::remove_file(tmp.path().join("empty.csv")).unwrap();
+        // A new file is written; written again, it is bitrock's own and is replaced.
+        let (code, _, err) = with("out.csv", false);
+        assert_eq!(code, 0, "{what}: {err}");
+        let first = std::fs::read(tmp.path().join("out.csv")).unwrap();
+        assert_eq!(
+            bitrock::files::authorship(&tmp.path().join("out.csv")),
+            bitrock::files::Authorship::Own,
+            "{what}"
+        );
+        let (code, _, err) = with("out.csv", false);
+        assert_eq!(code, 0, "{what}: {err}");
+        assert_eq!(
+            std::fs::read(tmp.path().join("out.csv")).unwrap(),
+            first,
+            "{what}: same inputs, same file"
+        );
+        // Edited since (one byte appended, or one byte changed in place): the user's now.
+        let mut edited = first.clone();
+        edited.push(b'\n');
+        std::fs::write(tmp.path().join("out.csv"), &edited).unwrap();
+        assert_refused(with("out.csv", false), &["--out", "changed since", "--force"]);
+        assert_eq!(std::fs::read(tmp.path().join("out.csv")).unwrap(), edited, "{what}");
+        let mut same_length = first.clone();
+        same_length[0] ^= 1;
+        std::fs::write(tmp.path().join("out.csv"), &same_length).unwrap();
+        assert_refused(with("out.csv", false), &["--out", "changed since"]);
+        // --force replaces the user's file, and the new file is bitrock's again.
+        let (code, _, err) = with("data.csv", true);
+        assert_eq!(code, 0, "{what}: {err}");
+        assert_ne!(std::fs::read(tmp.path().join("data.csv")).unwrap(), record, "{what}");
+        assert_eq!(with("data.csv", false).0, 0, "{what}");
+        std::fs::remove_file(tmp.path().join("data.csv")).unwrap();
+        std::fs::remove_file(tmp.path().join("out.csv")).unwrap();
+    }
+    // --force alone, with nothing to write to, is a mistake of the command line.
+    let (code, _, err) = run_in(tmp.path(), &["export", "R", "--force"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--out"), "{err}");
+}
+
+#[test]
+fn a_report_directory_holding_a_users_report_is_not_replaced() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    // A directory of the user's that happens to hold a report.md and figures/ by those names.
+    let docs = tmp.path().join("docs");
+    std::fs::create_dir_all(docs.join("figures")).unwrap();
+    std::fs::write(docs.join("report.md"), "# my own report\n").unwrap();
+    std::fs::write(docs.join("figures/plot.svg"), "<svg/>").unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["report", "R", "--out", "docs"]),
+        &["--out", "report.md", "figures/plot.svg"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(docs.join("report.md")).unwrap(),
+        "# my own report\n"
+    );
+    // A report bitrock wrote is replaced; once edited, it is the user's.
+    assert_eq!(run_in(tmp.path(), &["report", "R", "--out", "Rep"]).0, 0);
+    assert_eq!(run_in(tmp.path(), &["report", "R", "--out", "Rep"]).0, 0);
+    let md = tmp.path().join("Rep/report.md");
+    let mut text = std::fs::read_to_string(&md).unwrap();
+    text.push_str("\nMy conclusions.\n");
+    std::fs::write(&md, &text).unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["report", "R", "--out", "Rep"]),
+        &["--out", "report.md"],
+    );
+    assert_eq!(std::fs::read_to_string(&md).unwrap(), text);
+}
+
+#[test]
+fn no_run_is_placed_inside_another_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let before = export(tmp.path(), "R");
+    let files_before = names(&tmp.path().join("R"));
+    for inside in ["R/selection", "R/sub", "R/selection/x"] {
+        assert_refused(
+            small_run(tmp.path(), inside, &[]),
+            &["--out", "inside the run directory"],
+        );
+    }
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &["demo", "--out", "R/demo", "--particles", "200", "--backend", "cpu"],
+        ),
+        &["--out", "inside the run directory"],
+    );
+    assert_eq!(names(&tmp.path().join("R")), files_before);
+    assert_eq!(export(tmp.path(), "R"), before);
+    // The run's own check still has its place.
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &["check-selection", "R", "--replicates", "1", "--backend", "cpu", "-q"],
+    );
+    assert_eq!(code, 0, "{err}");
 }
