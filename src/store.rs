@@ -605,7 +605,8 @@ impl RunStore {
             return Ok(None);
         };
         let Some(stop) = stop else {
-            if let Some(holder) = crate::files::DirLock::holder(&self.path) {
+            // The store lies in its run directory, whose lock a writer holds.
+            if let Some(holder) = crate::files::DirLock::holder(crate::files::parent_dir(&self.path)) {
                 return Ok(Some(format!(
                     "the run is being written by {holder}: its last invocation ({kind}) has not finished, and what is shown is its state so far"
                 )));

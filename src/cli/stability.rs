@@ -100,7 +100,14 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let mut grids = serde_json::Map::new();
     let mut columns: Vec<Column> = Vec::new();
     for ((input, b), grid) in maps.inputs.iter().zip(maps.boundaries.laws).zip(&maps.grids) {
-        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples}));
+        // Unknown boundaries (the torque has no value) are null as "none" is: named here.
+        let unknown: Vec<f64> = omega
+            .iter()
+            .zip(b.map_wob_kn.iter().zip(&b.p_wob_kn))
+            .filter(|(_, (m, p))| m.is_some_and(f64::is_nan) || p.is_some_and(f64::is_nan))
+            .map(|(rpm, _)| *rpm)
+            .collect();
+        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples, "unknown_omega_rpm": unknown}));
         grids.insert(
             input.law.name().into(),
             json!(grid.chunks(wob.len()).collect::<Vec<_>>()),
@@ -148,7 +155,13 @@ fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
     }
 }
 
-/// `--out`: one row per speed, the boundaries in kN to 4 decimals (empty where none).
+/// `text`, or "unknown" where the boundary `v` is unknown (NaN: the torque has no value there).
+fn unknown_or(v: f64, text: String) -> String {
+    if v.is_nan() { "unknown".into() } else { text }
+}
+
+/// `--out`: one row per speed, the boundaries in kN to 4 decimals (empty where none, "unknown"
+/// where the torque has no value).
 fn boundaries_csv(omega_rpm: &[f64], columns: &[Column]) -> Vec<u8> {
     let mut w = csv::Writer::from_writer(Vec::new());
     let mut header = vec!["omega_rpm".to_string()];
@@ -159,7 +172,7 @@ fn boundaries_csv(omega_rpm: &[f64], columns: &[Column]) -> Vec<u8> {
         row.extend(
             columns
                 .iter()
-                .map(|c| c.1[i].map(|v| format!("{v:.4}")).unwrap_or_default()),
+                .map(|c| c.1[i].map(|v| unknown_or(v, format!("{v:.4}"))).unwrap_or_default()),
         );
         w.write_record(&row).expect("CSV into memory");
     }
@@ -194,7 +207,9 @@ fn print_table(
             write!(
                 out,
                 "  {:>18}",
-                values[i].map(|v| format!("{v:.1}")).unwrap_or_else(|| "—".into())
+                values[i]
+                    .map(|v| unknown_or(v, format!("{v:.1}")))
+                    .unwrap_or_else(|| "—".into())
             )?;
         }
         writeln!(out)?;

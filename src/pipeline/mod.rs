@@ -240,6 +240,11 @@ impl Analysis {
                     "law {law}: its {count} particles in the last population hold only {distinct} distinct parameter set(s): its posterior has collapsed onto a point, and its spread and intervals say nothing (a wider SMC kernel, `kernel_scale`, or the local perturbation helps)"
                 ));
             }
+            for (law, count, ess) in thin_laws(&last.particles, &setup.prior) {
+                out.push(format!(
+                    "law {law}: effective sample size {ess:.1} of its {count} particles in the last population: its posterior rests on a few heavily weighted particles, and its spread and intervals say little (more particles, a wider SMC kernel, `kernel_scale`, or the local perturbation help)"
+                ));
+            }
         }
         out
     }
@@ -302,6 +307,23 @@ fn envelopes(particles: &[Particle], laws: &[crate::Law], data: &FieldData) -> V
     let grid = speed_grid(lo, hi, ENVELOPE_SPEEDS);
     laws.iter()
         .filter_map(|&law| predictive_envelope(particles, law, &grid, ENVELOPE_LEVEL, 1.0))
+        .collect()
+}
+
+/// The laws of the last population whose own effective sample size (of their weights) is
+/// below [`crate::abc::MIN_ESS_SHARE`] of their particles, or below 2 with at least two
+/// particles: (law, particles, ESS). The population's ESS can be fine while one law's mass
+/// sits on one particle.
+fn thin_laws(particles: &[Particle], prior: &crate::prior::Prior) -> Vec<(crate::Law, usize, f64)> {
+    prior
+        .boxes
+        .iter()
+        .filter_map(|bx| {
+            let weights: Vec<f64> = particles.iter().filter(|p| p.law == bx.law).map(|p| p.weight).collect();
+            let ess = crate::abc::effective_sample_size(&weights);
+            let n = weights.len();
+            (n >= 2 && (ess < 2.0 || ess < crate::abc::MIN_ESS_SHARE * n as f64)).then_some((bx.law, n, ess))
+        })
         .collect()
 }
 

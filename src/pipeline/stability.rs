@@ -185,6 +185,18 @@ impl StabilityJob {
             ),
         };
         map::check_grid_size(self.cells(), inputs.len(), self.samples)?;
+        for input in &inputs {
+            let unknown = map::unknown_speeds(input.law, &input.samples_si, &self.omega_rpm);
+            let count = unknown.iter().filter(|&&u| u).count();
+            if count > 0 {
+                note(format!(
+                    "warning: law {}: its torque has no value at {count} of the {} speeds for some of its samples (first at {} rpm): its boundaries and map cells there are unknown, not stable",
+                    input.law,
+                    unknown.len(),
+                    self.omega_rpm[unknown.iter().position(|&u| u).expect("one is")]
+                ));
+            }
+        }
         let c = self.criterion.critical_nms();
         let boundaries = map::boundaries(&inputs, &self.omega_rpm, c, self.w_ref_n, self.percentile);
         let mut backend = self.backend;
@@ -245,7 +257,13 @@ impl StabilityJob {
             ) {
                 Ok((counts, _)) => {
                     let n = input.samples_si.len() as f64;
-                    return Ok(counts.iter().map(|&c| f64::from(c) / n).collect());
+                    let unknown = map::unknown_speeds(input.law, &input.samples_si, &self.omega_rpm);
+                    let row = self.wob_kn.len();
+                    return Ok(counts
+                        .iter()
+                        .enumerate()
+                        .map(|(k, &c)| if unknown[k / row] { f64::NAN } else { f64::from(c) / n })
+                        .collect());
                 }
                 Err(e) if *backend == Backend::Gpu => return Err(e.into()),
                 Err(e) => {

@@ -706,7 +706,11 @@ impl Prepared<'_> {
         }
         let columns = 2 * b.laws.len() + usize::from(b.mixture_wob_kn.is_some());
         let _ = writeln!(md, "\n|---|{}", "---|".repeat(columns));
-        let kn = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.1}"));
+        let kn = |v: Option<f64>| match v {
+            None => "—".to_string(),
+            Some(v) if v.is_nan() => "unknown".to_string(),
+            Some(v) => format!("{v:.1}"),
+        };
         for (i, rpm) in s.table_omega_rpm.iter().enumerate() {
             let _ = write!(md, "| {rpm} |");
             for l in &b.laws {

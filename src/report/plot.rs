@@ -104,6 +104,10 @@ pub(crate) const GRID: RGBColor = hex(0xe6e6e6);
 /// The heat map's colour of a probability p ∈ [0, 1]: white to blue, light enough at 1 that
 /// black and coloured curves stay readable on it.
 pub(crate) fn heat_color(p: f64) -> RGBColor {
+    // A cell whose probability is unknown (the torque has no value there): grey, never "stable".
+    if p.is_nan() {
+        return RGBColor(0xbb, 0xbb, 0xbb);
+    }
     const STOPS: [(f64, u32); 4] = [(0.0, 0xffffff), (0.1, 0xdeebf7), (0.5, 0x9ecae1), (1.0, 0x4a90c8)];
     let p = p.clamp(0.0, 1.0);
     let k = STOPS.iter().position(|s| s.0 >= p).unwrap_or(STOPS.len() - 1).max(1);
@@ -143,14 +147,19 @@ pub(crate) fn clip_curve(x: &[f64], y: &[Option<f64>], lo: f64, hi: f64) -> Vec<
     let mut current: Vec<(f64, f64)> = Vec::new();
     let inside = |v: f64| v >= lo && v <= hi;
     for i in 0..x.len() {
-        let Some(v) = y[i] else {
+        // An unknown boundary (NaN: the torque has no value there) is a gap, as no boundary is.
+        let Some(v) = y[i].filter(|v| !v.is_nan()) else {
             if current.len() > 1 {
                 pieces.push(std::mem::take(&mut current));
             }
             current.clear();
             continue;
         };
-        let previous = if i > 0 { y[i - 1].map(|p| (x[i - 1], p)) } else { None };
+        let previous = if i > 0 {
+            y[i - 1].filter(|p| !p.is_nan()).map(|p| (x[i - 1], p))
+        } else {
+            None
+        };
         if inside(v) {
             if let Some((px, pv)) = previous
                 && !inside(pv)

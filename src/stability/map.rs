@@ -43,11 +43,30 @@ pub fn parse_axis(text: &str, field: &str) -> Result<Vec<f64>> {
 }
 
 /// The critical weight on bit W* (N) of one parameter set at top-drive speed `omega_rad_s`:
-/// `None` when dT/dw(Ω) ≥ 0 (no weight on bit destabilises). `params_si` in N·m,
-/// `critical_nms` = c_b* (< 0, N·m·s/rad).
+/// `None` when dT/dw(Ω) ≥ 0 (no weight on bit destabilises), `Some(NaN)` when the law's
+/// torque has no slope there (a law file's torque without a value: stability is unknown,
+/// never assumed). `params_si` in N·m, `critical_nms` = c_b* (< 0, N·m·s/rad).
 pub fn critical_wob_n(law: Law, params_si: &[f64], omega_rad_s: f64, critical_nms: f64, w_ref_n: f64) -> Option<f64> {
     let slope = law.dtorque_dw(params_si, omega_rad_s, 1.0);
+    if !has_value(law, params_si, omega_rad_s) {
+        return Some(f64::NAN);
+    }
     (slope < 0.0).then(|| w_ref_n * critical_nms / slope)
+}
+
+/// Whether the law's torque and its slope both have a value at `omega_rad_s` (a law file's
+/// torque may have none: a logarithm of a negative number).
+fn has_value(law: Law, params_si: &[f64], omega_rad_s: f64) -> bool {
+    law.torque(params_si, omega_rad_s, 1.0).is_finite() && law.dtorque_dw(params_si, omega_rad_s, 1.0).is_finite()
+}
+
+/// Per speed of `omega_rpm`: whether some sample's torque (or its slope) has no value there,
+/// which makes that speed's boundaries and every cell of its row unknown.
+pub fn unknown_speeds(law: Law, samples: &[Vec<f64>], omega_rpm: &[f64]) -> Vec<bool> {
+    omega_rpm
+        .iter()
+        .map(|&rpm| samples.iter().any(|s| !has_value(law, s, rpm * RAD_S_PER_RPM)))
+        .collect()
 }
 
 /// The q-quantile (type 7) of critical weights where `None` (never unstable) counts as +∞;
@@ -80,6 +99,9 @@ pub fn percentile_boundary_kn(
                 .iter()
                 .map(|s| critical_wob_n(law, s, rpm * RAD_S_PER_RPM, critical_nms, w_ref_n).unwrap_or(f64::INFINITY))
                 .collect();
+            if w.iter().any(|v| v.is_nan()) {
+                return Some(f64::NAN);
+            }
             quantile_with_infinity(w, p).map(|v| v / 1000.0)
         })
         .collect()
@@ -117,6 +139,9 @@ pub fn mixture_boundary_kn(
                 let each = weight / total / samples.len() as f64;
                 for s in samples {
                     let w = critical_wob_n(law, s, rpm * RAD_S_PER_RPM, critical_nms, w_ref_n).unwrap_or(f64::INFINITY);
+                    if w.is_nan() {
+                        return Some(f64::NAN);
+                    }
                     weighted.push((w, each));
                 }
             }
@@ -212,7 +237,8 @@ impl Criterion {
     }
 }
 
-/// Share of `samples` unstable at every cell, row-major over (Ω, W): the CPU twin of
+/// Share of `samples` unstable at every cell (NaN, unknown, in a speed's row where a sample's
+/// torque has no slope), row-major over (Ω, W): the CPU twin of
 /// `shaders/stability.wgsl`. Speeds in rpm, weights in kN.
 pub fn probability_grid(
     law: Law,
@@ -245,10 +271,15 @@ pub fn probability_grid_with(
             .iter()
             .map(|s| law.dtorque_dw(s, rpm * RAD_S_PER_RPM, 1.0))
             .collect();
+        let unknown = samples.iter().any(|s| !has_value(law, s, rpm * RAD_S_PER_RPM));
         for &kn in wob_kn {
             let r = kn * 1000.0 / w_ref_n;
             let unstable = slopes.iter().filter(|&&slope| criterion.unstable(r * slope)).count();
-            out.push(unstable as f64 / samples.len() as f64);
+            out.push(if unknown {
+                f64::NAN
+            } else {
+                unstable as f64 / samples.len() as f64
+            });
         }
     }
     Ok(out)

@@ -180,16 +180,29 @@ impl Record {
     }
 }
 
-/// The keyword argument `key` of `kw`, `None` when absent or `None`.
+/// The keyword argument `key` of `kw`, `None` when absent or `None`. A value of the wrong
+/// type or out of range (a negative count, an integer beyond 64 bits, a string for a number)
+/// and a bool where a number belongs (`particles=True`) are `InputError`s naming `key`.
 fn kwarg<'py, T>(kw: &Bound<'py, PyDict>, key: &str) -> PyResult<Option<T>>
 where
-    T: for<'a> FromPyObject<'a, 'py>,
+    T: for<'a> FromPyObject<'a, 'py> + 'static,
     for<'a> <T as FromPyObject<'a, 'py>>::Error: Into<PyErr>,
 {
-    kw.get_item(key)?
-        .filter(|v| !v.is_none())
-        .map(|v| v.extract().map_err(Into::into))
-        .transpose()
+    let Some(value) = kw.get_item(key)?.filter(|v| !v.is_none()) else {
+        return Ok(None);
+    };
+    let py = kw.py();
+    let refuse = |why: String| {
+        let shown = value.repr().map_or_else(|_| "the value".to_string(), |r| r.to_string());
+        to_py(py, Error::setting(key, format!("{shown} is not accepted: {why}")))
+    };
+    if value.is_instance_of::<pyo3::types::PyBool>() && std::any::TypeId::of::<T>() != std::any::TypeId::of::<bool>() {
+        return Err(refuse("a bool is not a number here".into()));
+    }
+    value
+        .extract()
+        .map(Some)
+        .map_err(|e| refuse(Into::<PyErr>::into(e).value(py).to_string()))
 }
 
 /// The record options from `bitrock.read_record`'s keyword arguments (`None`: the library's

@@ -158,6 +158,25 @@ def test_refused_settings_name_their_argument(demo: bitrock.Record, arguments, a
     assert type(back) is bitrock.InputError and back.argument == argument and str(back) == str(caught.value)
 
 
+@pytest.mark.parametrize(
+    "arguments, argument",
+    [
+        ({"particles": -5}, "particles"),
+        ({"particles": True}, "particles"),
+        ({"particles": "2000"}, "particles"),
+        ({"seed": -1}, "seed"),
+        ({"seed": 2**70}, "seed"),
+        ({"max_populations": 1.5}, "max_populations"),
+    ],
+)
+def test_numbers_of_the_wrong_kind_or_range_name_their_argument(demo: bitrock.Record, arguments, argument: str) -> None:
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.abc(demo, progress=False, **{"particles": 50, "backend": "cpu", **arguments})
+    assert caught.value.argument == argument
+    assert str(caught.value).startswith(f"{argument}: ")
+    assert repr(arguments[argument]) in str(caught.value)
+
+
 def test_errors_are_pure_python_classes() -> None:
     assert issubclass(bitrock.InputError, bitrock.BitrockError) and issubclass(bitrock.InputError, ValueError)
     assert issubclass(bitrock.GpuError, bitrock.BitrockError)

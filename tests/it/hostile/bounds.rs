@@ -138,3 +138,135 @@ fn sizes_beyond_memory_or_a_days_work_are_refused_naming_the_flag() {
     );
     assert!(!tmp.path().join("R/selection").exists());
 }
+
+#[test]
+fn a_simulation_beyond_a_days_work_on_this_machine_is_refused_at_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let started = std::time::Instant::now();
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &[
+                "simulate",
+                "--law",
+                "m2",
+                "--params",
+                "13,6.5,0.3",
+                "--omega-rpm",
+                "60",
+                "--dt-s",
+                "1e-12",
+                "--duration-s",
+                "1",
+                "-o",
+                "x.csv",
+            ],
+        ),
+        &["--dt-s", "1.000e12 steps", "on this machine"],
+    );
+    // Refused on the pace of its first steps, not after a day.
+    assert!(started.elapsed().as_secs() < 30, "{:?}", started.elapsed());
+    assert!(!tmp.path().join("x.csv").exists());
+}
+
+#[test]
+fn a_measured_pace_refuses_what_cannot_finish_and_reports_what_can() {
+    // 10¹² units at the pace of this loop (well under 10⁹ per second with the sleeps).
+    let mut reports = 0;
+    let mut report = |_: u64, _: u64| reports += 1;
+    let mut pace = bitrock::limits::Pace::new("dt_s", "a test".into(), 1_000_000_000_000, &mut report);
+    let refused = (0..100_000).find_map(|_| {
+        std::thread::sleep(std::time::Duration::from_micros(50));
+        pace.advance(1000).err()
+    });
+    let e = refused.expect("refused once the pace was measured").to_string();
+    assert!(
+        e.starts_with("`dt_s`: a test would take about") && e.contains("on this machine"),
+        "{e}"
+    );
+    // Work that fits is never refused, whatever its pace.
+    let mut quiet = |_: u64, _: u64| {};
+    let mut pace = bitrock::limits::Pace::new("dt_s", "a test".into(), 50_000, &mut quiet);
+    for _ in 0..50 {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+        pace.advance(1000).unwrap();
+    }
+}
+
+#[test]
+fn a_finite_element_strings_cost_is_measured_and_bounded_by_it() {
+    use bitrock::stability::fe::DrillString;
+    let small = DrillString::default();
+    assert_eq!(small.estimate_seconds(250.0), 0.0, "a small string is not measured");
+    let big = DrillString {
+        dp_elements: 600,
+        bha_elements: 60,
+        ..DrillString::default()
+    };
+    let medium = DrillString {
+        dp_elements: 150,
+        bha_elements: 15,
+        ..DrillString::default()
+    };
+    let (b, m) = (big.estimate_seconds(250.0), medium.estimate_seconds(250.0));
+    // The cube of the size: 4 × the elements, 64 × the time, within the timing's noise.
+    assert!(b > 16.0 * m && m > 0.0, "{b} {m}");
+    // What could not finish in a day is refused naming the larger element count.
+    let e = big.check_cost(1e7).unwrap_err().to_string();
+    assert!(
+        e.starts_with("`dp_elements`: ") && e.contains("660-DOF") && e.contains("on this machine"),
+        "{e}"
+    );
+    assert!(medium.check_cost(250.0).is_ok());
+}
+
+#[test]
+fn every_settings_file_is_bounded_before_it_is_read() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Devices: refused naming the file, before a byte is read (no memory exhausted).
+    for (flag, what) in [("--law-file", "not a law file"), ("--prior", "not a prior file")] {
+        assert_refused(
+            run_in(
+                tmp.path(),
+                &["abc", "--out", "R", "--backend", "cpu", flag, "/dev/zero"],
+            ),
+            &["/dev/zero", what],
+        );
+    }
+    assert_refused(
+        run_in(tmp.path(), &["fe", "--fe-file", "/dev/zero"]),
+        &["/dev/zero", "not a drill-string file"],
+    );
+    // Too large: refused by its size, before it is read.
+    std::fs::write(tmp.path().join("big.toml"), vec![b'#'; 100_000]).unwrap();
+    assert_refused(
+        run_in(tmp.path(), &["law", "big.toml"]),
+        &["big.toml", "larger than 64.0 kB", "law file"],
+    );
+    std::fs::write(tmp.path().join("prior.toml"), vec![b'#'; 1_100_000]).unwrap();
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &["abc", "--out", "R", "--backend", "cpu", "--prior", "prior.toml"],
+        ),
+        &["prior.toml", "larger than 1.0 MB"],
+    );
+    assert!(!tmp.path().join("R").exists());
+    // A named pipe no process writes to is read as empty, at once: never a hang.
+    let fifo = tmp.path().join("law.fifo");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let started = std::time::Instant::now();
+    let (code, _, err) = run_in(tmp.path(), &["law", "law.fifo"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("law.fifo"), "{err}");
+    assert!(started.elapsed().as_secs() < 30);
+    // The same for the library's reader of the shape cache, which must be a regular file.
+    let e = bitrock::eval::gpu::tune::read_cache(&fifo).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+}

@@ -97,3 +97,137 @@ fn a_record_every_law_fits_exactly_is_warned_of() {
             .any(|w| w.contains("fits the record exactly"))
     );
 }
+
+#[test]
+fn probabilities_from_a_few_particles_and_collapsed_laws_are_warned_of() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "abc",
+            "--out",
+            "One",
+            "--particles",
+            "1",
+            "--max-populations",
+            "2",
+            "--backend",
+            "cpu",
+            "-q",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(err.matches("the last population has 1 particle(s)").count(), 1, "{err}");
+    assert!(
+        warnings_of(&tmp.path().join("One"))
+            .iter()
+            .any(|w| w.contains("1 particle(s)"))
+    );
+    // An SMC kernel far narrower than the posterior: a law's weight collapses onto a point.
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "abc",
+            "--out",
+            "Narrow",
+            "--particles",
+            "300",
+            "--sampler",
+            "smc",
+            "--perturbation",
+            "global",
+            "--kernel-scale",
+            "1e-30",
+            "--backend",
+            "cpu",
+            "-q",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("law m4: effective sample size 1.0 of its"), "{err}");
+    // The default kernel, and the paper's sampler, do not collapse.
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "abc",
+            "--out",
+            "Smc",
+            "--particles",
+            "300",
+            "--sampler",
+            "smc",
+            "--backend",
+            "cpu",
+            "-q",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("effective sample size"), "{err}");
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "abc",
+            "--out",
+            "Wide",
+            "--particles",
+            "300",
+            "--max-populations",
+            "2",
+            "--backend",
+            "cpu",
+            "-q",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        !err.contains("collapsed") && !err.contains("particle(s)") && !err.contains("effective"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_map_where_the_torque_has_no_value_is_unknown_never_stable() {
+    let tmp = tempfile::tempdir().unwrap();
+    // ln(g·w − 1) has no value below w = 1/g = 5 rad/s (47.7 rpm).
+    std::fs::write(
+        tmp.path().join("nolog.toml"),
+        "name = \"nolog\"\ntorque = \"r * tc * (1 + 0.1 * ln(g * w - 1))\"\n\n[[parameter]]\nname = \"tc\"\nunit = \"N·m\"\nlower = 0\n\n\
+         [[parameter]]\nname = \"g\"\nunit = \"s/rad\"\nlower = 0\n",
+    )
+    .unwrap();
+    let args = [
+        "stability",
+        "--law-file",
+        "nolog.toml",
+        "--law",
+        "nolog",
+        "--params",
+        "6.5,0.2",
+        "--omega-rpm",
+        "20:200:10",
+        "--wob-kn",
+        "50:300:5",
+        "--backend",
+        "cpu",
+    ];
+    let (code, out, err) = run_in(tmp.path(), &[&args[..], &["-o", "map.csv", "--json"]].concat());
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        err.matches("its torque has no value at 2 of the 10 speeds").count(),
+        1,
+        "{err}"
+    );
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(
+        v["boundaries"]["nolog"]["unknown_omega_rpm"],
+        serde_json::json!([20.0, 40.0])
+    );
+    // Every cell of an unknown speed is unknown (null), none of them stable (0).
+    let grid = v["probability_unstable"]["nolog"].as_array().unwrap();
+    assert!(grid[0].as_array().unwrap().iter().all(|c| c.is_null()), "{}", grid[0]);
+    assert!(grid[2].as_array().unwrap().iter().all(|c| c.is_number()), "{}", grid[2]);
+    let csv = std::fs::read_to_string(tmp.path().join("map.csv")).unwrap();
+    assert!(csv.lines().nth(1).unwrap().ends_with(",unknown,unknown"), "{csv}");
+    let (_, table, _) = run_in(tmp.path(), &args);
+    assert_eq!(table.matches("unknown").count(), 4, "{table}");
+}

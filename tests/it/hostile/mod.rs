@@ -6,6 +6,7 @@
 
 mod bounds;
 mod degenerate;
+mod laws;
 mod numbers;
 mod outputs;
 mod stale;

@@ -149,3 +149,64 @@ fn a_store_edited_by_hand_is_refused_on_resume_naming_the_population() {
         assert_eq!(export(tmp.path(), "R"), before);
     }
 }
+
+#[test]
+fn a_run_another_process_is_writing_is_named_as_such_not_as_interrupted() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(run_of(tmp.path(), "R", "2", &[]).0, 0);
+    // Its last invocation has not finished, and another process holds the run's lock.
+    let db = Connection::open(tmp.path().join("R/run.sqlite")).unwrap();
+    db.execute("UPDATE invocations SET stop_reason = NULL, finished_unix_s = NULL", [])
+        .unwrap();
+    drop(db);
+    std::fs::write(tmp.path().join("R/.bitrock-lock"), "4242").unwrap();
+    // `-o`: the lock is held by flock itself, not by the sleep it runs, so killing it frees it.
+    let mut holder = std::process::Command::new("flock")
+        .arg("-o")
+        .arg(tmp.path().join("R/.bitrock-lock"))
+        .args(["sleep", "60"])
+        .spawn()
+        .expect("flock(1) from util-linux");
+    while bitrock::files::DirLock::is_free(&tmp.path().join("R")) {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "stability",
+            "--run",
+            "R",
+            "--omega-rpm",
+            "20:220:3",
+            "--wob-kn",
+            "20:700:3",
+            "--backend",
+            "cpu",
+        ],
+    );
+    let (report_code, _, report_err) = run_in(tmp.path(), &["report", "R", "--out", "Rep"]);
+    holder.kill().unwrap();
+    holder.wait().unwrap();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("being written by another process (PID 4242)"), "{err}");
+    assert!(!err.contains("interrupted"), "{err}");
+    assert_eq!(report_code, 0, "{report_err}");
+    let md = std::fs::read_to_string(tmp.path().join("Rep/report.md")).unwrap();
+    assert!(md.contains("being written by another process"), "{md}");
+    // Once the writer is gone, the unfinished invocation is an interruption again.
+    let (_, _, err) = run_in(
+        tmp.path(),
+        &[
+            "stability",
+            "--run",
+            "R",
+            "--omega-rpm",
+            "20:220:3",
+            "--wob-kn",
+            "20:700:3",
+            "--backend",
+            "cpu",
+        ],
+    );
+    assert!(err.contains("the run was interrupted"), "{err}");
+}

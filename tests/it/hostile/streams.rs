@@ -50,3 +50,22 @@ fn a_full_standard_error_never_panics_and_keeps_the_exit_status() {
     );
     assert!(code == 0 || code == 3, "exit {code}");
 }
+
+#[test]
+fn help_and_version_that_cannot_be_written_fail_naming_standard_output() {
+    for args in [&["--help"][..], &["--version"], &["abc", "--help"]] {
+        let out = crate::support::bin()
+            .args(args)
+            .stdout(std::fs::File::create("/dev/full").unwrap())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(3), "{args:?}: {err}");
+        assert!(err.contains("standard output: cannot write"), "{err}");
+    }
+    // Written, they exit 0; a usage error still exits 2.
+    let (code, _, _) = crate::support::outcome(crate::support::bin().arg("--version"));
+    assert_eq!(code, 0);
+    let (code, _, err) = crate::support::outcome(crate::support::bin().arg("--no-such-flag"));
+    assert_eq!(code, 2, "{err}");
+}
