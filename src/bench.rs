@@ -884,7 +884,7 @@ pub const F32_PROBE_CANDIDATES: usize = 256;
 /// A GPU's difference on a law ill-conditioned in f32 is the law's when, on the probed
 /// candidates, it stays within this factor of what f32 arithmetic on the CPU loses (the GPU's
 /// own exp, tanh and rounding order add to it).
-const F32_EXPLAINS: f64 = 10.0;
+pub const F32_EXPLAINS: f64 = 10.0;
 
 /// Bit-for-bit agreement of the candidate generator.
 #[derive(Clone, Debug, Serialize)]

@@ -465,6 +465,18 @@ fn enclosing_run_dir(path: &Path) -> Option<PathBuf> {
     None
 }
 
+/// What bitrock owns in a directory of kind `owned` ([`crate::rundir::Owned::owns`]), and for
+/// the files a report or a selection check writes whole, their mark still matching
+/// ([`authorship`]): a `report.md` the user wrote or edited is the user's. `dir` is the
+/// directory `rel` is relative to. A run's files are judged by name (its store is what makes
+/// it a run).
+pub fn owns_unchanged(owned: crate::rundir::Owned, dir: &Path, rel: &Path, is_dir: bool) -> bool {
+    owned.owns(rel, is_dir)
+        && (is_dir
+            || owned == crate::rundir::Owned::Run
+            || matches!(authorship(&dir.join(rel)), Authorship::Own | Authorship::Unknowable))
+}
+
 /// Everything under `dir` that bitrock did not write, judged by `owned` (relative path,
 /// is-a-directory), in sorted order; bitrock's own temporaries and lock are never foreign.
 /// Directories `owned` accepts are searched; symbolic links are judged as files, never followed.
@@ -512,7 +524,7 @@ pub fn refuse_foreign(dir: &Path, field: &str, owned: &dyn Fn(&Path, bool) -> bo
     Err(Error::setting(
         field,
         format!(
-            "{}: holds files bitrock did not write ({}{more}); it is not replaced, even with `force`: give another directory",
+            "{}: holds files bitrock did not write, or changed since it wrote them ({}{more}); it is not replaced, even with `force`: give another directory",
             dir.display(),
             shown.join(", ")
         ),

@@ -102,9 +102,9 @@ pub fn check_estimate(field: &str, seconds: f64, what: &str) -> Result<()> {
     Ok(())
 }
 
-/// The pace of a long serial computation, measured as it runs: after [`CALIBRATION`] of work
+/// The pace of a long serial computation, measured as it runs: after 20 ms of work
 /// it refuses (naming the flag, through [`check_estimate`]) work whose rest could not finish in
-/// a day on this machine, and it reports `(done, total)` to `report` every [`REPORT_EVERY`].
+/// a day on this machine, and it reports `(done, total)` to `report` every quarter second.
 pub struct Pace<'a> {
     field: &'a str,
     what: String,

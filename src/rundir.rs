@@ -72,18 +72,6 @@ impl Owned {
             _ => false,
         }
     }
-
-    /// [`Self::owns`], and for the files a report or a selection check writes whole, their
-    /// mark still matching ([`crate::files::authorship`]): a `report.md` the user wrote or
-    /// edited is the user's. `dir` is the directory `rel` is relative to. A run's files are
-    /// judged by name (its store is what makes it a run).
-    pub fn holds(self, dir: &Path, rel: &Path, is_dir: bool) -> bool {
-        use crate::files::{Authorship, authorship};
-        self.owns(rel, is_dir)
-            && (is_dir
-                || self == Owned::Run
-                || matches!(authorship(&dir.join(rel)), Authorship::Own | Authorship::Unknowable))
-    }
 }
 
 /// True when `dir` holds a run store (a file named [`STORE_FILE`]).

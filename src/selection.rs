@@ -383,7 +383,7 @@ impl CheckedRun {
         // Refused before any work: the check replaces only a check of its own.
         let selection = dir.join(SELECTION_DIR);
         files::refuse_foreign(&selection, "RUN_DIR", &|rel, is_dir| {
-            crate::rundir::Owned::Selection.holds(&selection, rel, is_dir)
+            files::owns_unchanged(crate::rundir::Owned::Selection, &selection, rel, is_dir)
         })?;
         let refuse = |message: String| Error::Data {
             path: dir.to_path_buf(),
@@ -833,7 +833,7 @@ pub fn write(run: &CheckedRun, check: &SelectionCheck, svg: String, png: Vec<u8>
     files::replace_dir(
         &target,
         "RUN_DIR",
-        &|rel, is_dir| crate::rundir::Owned::Selection.holds(&target, rel, is_dir),
+        &|rel, is_dir| files::owns_unchanged(crate::rundir::Owned::Selection, &target, rel, is_dir),
         &contents,
     )?;
     Ok(target)

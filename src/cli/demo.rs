@@ -179,7 +179,7 @@ fn demo_owns(root: &Path, rel: &Path, is_dir: bool) -> bool {
     if top {
         is_dir
     } else {
-        owned.holds(&root.join(first), rest, is_dir)
+        files::owns_unchanged(owned, &root.join(first), rest, is_dir)
     }
 }
 

@@ -188,7 +188,7 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
     crate::files::replace_dir(
         dir,
         "out",
-        &|rel, is_dir| crate::rundir::Owned::Report.holds(dir, rel, is_dir),
+        &|rel, is_dir| crate::files::owns_unchanged(crate::rundir::Owned::Report, dir, rel, is_dir),
         &files,
     )?;
     let mut names: Vec<PathBuf> = files.into_iter().map(|f| f.0).collect();

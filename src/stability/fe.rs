@@ -466,7 +466,8 @@ impl DrillString {
 }
 
 /// Eigenvalue solves of the 2n × 2n Jacobian that finding c_b* takes, about: the bracket's
-/// doublings, the bisection to [`CRITICAL_REL_TOL`] and the [`SIGN_GRID_POINTS`] check.
+/// doublings, the bisection to 10⁻¹⁰ relative and the check of the single crossing on a grid
+/// of 200 points.
 pub const SOLVES_PER_CRITICAL: f64 = 10.0 + 40.0 + SIGN_GRID_POINTS as f64;
 /// Eigenvalue solves that matching β to the 1-DOF model takes, about: a bracket and bisection
 /// of c_b* per step of the search on β (doublings and bisection), then one whole c_b*.
@@ -479,8 +480,8 @@ const SOLVE_COST_EXPONENT: f64 = 3.0;
 
 impl DrillString {
     /// Seconds `solves` eigenvalue solves of this string's Jacobian take on this machine, about:
-    /// one solve of a [`UNMEASURED_DOFS`]-DOF string of the same make is timed and scaled by
-    /// the DOF ratio to [`SOLVE_COST_EXPONENT`]. 0 for strings that small.
+    /// one solve of a 60-DOF string of the same make is timed and scaled by the cube of the DOF
+    /// ratio. 0 for strings that small.
     pub fn estimate_seconds(&self, solves: f64) -> f64 {
         let n = self.dofs();
         if n <= UNMEASURED_DOFS {

@@ -177,6 +177,28 @@ def test_numbers_of_the_wrong_kind_or_range_name_their_argument(demo: bitrock.Re
     assert repr(arguments[argument]) in str(caught.value)
 
 
+def test_a_run_another_process_is_writing_is_said_to_be_so(demo: bitrock.Record, tmp_path) -> None:
+    out = tmp_path / "run"
+    bitrock.abc(demo, particles=200, seed=1, backend="cpu", max_populations=1, out=out, progress=False)
+    # As a run that has stored its store but not yet its summary, its lock held by another
+    # process (flock -o: held by flock itself, freed when it is killed).
+    (out / "run.json").unlink()
+    (out / ".bitrock-lock").write_text("4242")
+    holder = subprocess.Popen(["flock", "-o", str(out / ".bitrock-lock"), "sleep", "60"])
+    try:
+        deadline = time.monotonic() + 10
+        while subprocess.run(["flock", "-n", str(out / ".bitrock-lock"), "true"]).returncode == 0:
+            assert time.monotonic() < deadline, "flock never took the lock"
+            time.sleep(0.01)
+        with pytest.raises(bitrock.InputError, match=r"being written by another process \(PID 4242\)"):
+            bitrock.open_run(out)
+    finally:
+        holder.kill()
+        holder.wait()
+    with pytest.raises(bitrock.InputError, match="stopped before it finished"):
+        bitrock.open_run(out)
+
+
 def test_errors_are_pure_python_classes() -> None:
     assert issubclass(bitrock.InputError, bitrock.BitrockError) and issubclass(bitrock.InputError, ValueError)
     assert issubclass(bitrock.GpuError, bitrock.BitrockError)

@@ -920,9 +920,9 @@ fn hoist(lets: &mut String, count: &mut usize, text: String, depth: usize, force
 }
 
 /// Nesting of a WGSL subexpression beyond which it is bound to a `let`.
-const WGSL_MAX_NESTING: usize = 24;
+pub const WGSL_MAX_NESTING: usize = 24;
 /// Characters beyond which an unrolled power's base is bound to a `let` instead of repeated.
-const WGSL_INLINE_REPEAT: usize = 48;
+pub const WGSL_INLINE_REPEAT: usize = 48;
 
 /// Samples a [`Program`] evaluates per instruction.
 pub const BLOCK: usize = 64;
