@@ -512,8 +512,18 @@ fn assemble(
         wob: indices.wob.map(name),
         time: indices.time.map(name),
     };
+    // Judged on every row read: a unit off by a factor moves rows across the filters.
+    let implausible = unit_warnings(path, &columns, units, &all);
     let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
-    let warnings = record_warnings(path, &columns, backwards, &calibration, &validation, rows_used);
+    let mut warnings = implausible;
+    warnings.extend(record_warnings(
+        path,
+        &columns,
+        backwards,
+        &calibration,
+        &validation,
+        rows_used,
+    ));
     Ok(FieldData {
         source: path.to_path_buf(),
         torque_unit: units.torque,
@@ -732,6 +742,72 @@ fn parse_cell(
     } else {
         Err(fail(format!("'{text}' is not a finite number")))
     }
+}
+
+/// Above this median |torque| a column can hold no drill bit's torque in kN·m (the largest
+/// field bits stay below about 60 kN·m): N·m is likelier.
+pub const IMPLAUSIBLE_TORQUE_KNM: f64 = 100.0;
+/// Below this 95th percentile of |bit speed| in rpm a record can hardly be a drill string's,
+/// which turns at some 40–250 rpm (and stick-slip doubles that): rad/s (÷ 9.55) is likelier.
+pub const IMPLAUSIBLE_LOW_RPM: f64 = 30.0;
+/// Above this 95th percentile of |bit speed| in rad/s (about 955 rpm) rpm is likelier.
+pub const IMPLAUSIBLE_HIGH_RAD_S: f64 = 100.0;
+/// Above this median weight on bit in kN (200 tonnes) N is likelier.
+pub const IMPLAUSIBLE_WOB_KN: f64 = 2000.0;
+
+/// Units and signs that a drill string's record can hardly mean, judged on every row read
+/// (`all`, SI) against the unit each column declares: a torque column in kN·m whose median
+/// exceeds [`IMPLAUSIBLE_TORQUE_KNM`], a speed column in rpm whose 95th percentile of |speed|
+/// is below [`IMPLAUSIBLE_LOW_RPM`] or one in rad/s above [`IMPLAUSIBLE_HIGH_RAD_S`], a weight
+/// on bit in kN whose median exceeds [`IMPLAUSIBLE_WOB_KN`], and most non-zero speeds negative.
+/// Each warning names the column, its unit and the likelier one.
+fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &Samples) -> Vec<String> {
+    let quantile = |values: &[f64], q: f64| -> f64 {
+        let mut v: Vec<f64> = values.iter().map(|x| x.abs()).collect();
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q).round() as usize]
+    };
+    let mut out = Vec::new();
+    let source = path.display();
+    let torque_knm = quantile(&all.torque_nm, 0.5) / 1000.0;
+    if units.torque == TorqueUnit::KNm && torque_knm > IMPLAUSIBLE_TORQUE_KNM {
+        out.push(format!(
+            "{source}: the torques of column '{}' read in kN·m have a median of {torque_knm:.0} kN·m, beyond any drill bit's (above {IMPLAUSIBLE_TORQUE_KNM} kN·m): if the column holds N·m, say so with `torque_unit` nm (or a name ending in _nm)",
+            columns.torque
+        ));
+    }
+    let speed_rad_s = quantile(&all.speed_rad_s, 0.95);
+    let speed_rpm = speed_rad_s / crate::units::RAD_S_PER_RPM;
+    if units.speed == SpeedUnit::Rpm && speed_rpm < IMPLAUSIBLE_LOW_RPM {
+        out.push(format!(
+            "{source}: the bit speeds of column '{}' read in rpm stay below {speed_rpm:.1} rpm (95 % of them), where a drill string turns at some 40–250 rpm: if the column holds rad/s, say so with `speed_unit` rad_s (or a name ending in _rad_s)",
+            columns.speed
+        ));
+    }
+    if units.speed == SpeedUnit::RadS && speed_rad_s > IMPLAUSIBLE_HIGH_RAD_S {
+        out.push(format!(
+            "{source}: the bit speeds of column '{}' read in rad/s reach {speed_rad_s:.0} rad/s ({speed_rpm:.0} rpm) in 5 % of the rows: if the column holds rpm, say so with `speed_unit` rpm (or a name ending in _rpm)",
+            columns.speed
+        ));
+    }
+    if let (Some(ForceUnit::KN), Some(wob), Some(name)) = (units.wob, &all.wob_n, &columns.wob) {
+        let wob_kn = quantile(wob, 0.5) / 1000.0;
+        if wob_kn > IMPLAUSIBLE_WOB_KN {
+            out.push(format!(
+                "{source}: the weights on bit of column '{name}' read in kN have a median of {wob_kn:.0} kN, beyond any drill string's (above {IMPLAUSIBLE_WOB_KN} kN): if the column holds N, say so with `wob_unit` n (or a name ending in _n)"
+            ));
+        }
+    }
+    let negative = all.speed_rad_s.iter().filter(|&&w| w < 0.0).count();
+    let positive = all.speed_rad_s.iter().filter(|&&w| w > 0.0).count();
+    if negative > positive {
+        out.push(format!(
+            "{source}: {negative} of the {} bit speeds of column '{}' are negative: the laws hold for a bit turning forward, and rows below the minimum speed are dropped; check the sign convention of the column",
+            all.len(),
+            columns.speed
+        ));
+    }
+    out
 }
 
 /// What the record looks wrong in without being unusable: a time column that runs backwards

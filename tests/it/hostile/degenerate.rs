@@ -231,3 +231,46 @@ fn a_map_where_the_torque_has_no_value_is_unknown_never_stable() {
     let (_, table, _) = run_in(tmp.path(), &args);
     assert_eq!(table.matches("unknown").count(), 4, "{table}");
 }
+
+#[test]
+fn units_off_by_a_factor_and_flipped_speeds_are_warned_of_naming_the_column() {
+    let tmp = tempfile::tempdir().unwrap();
+    // The embedded record's columns: time_s, bit_speed_rpm, torque_knm, wob_kn.
+    let cases: [(&str, fn(&[f64]) -> Vec<f64>, &str); 4] = [
+        (
+            "nm.csv",
+            |v| vec![v[0], v[1], v[2] * 1000.0, v[3]],
+            "column 'torque_knm' read in kN·m",
+        ),
+        (
+            "rad.csv",
+            |v| vec![v[0], v[1] * 0.104_719_755, v[2], v[3]],
+            "column 'bit_speed_rpm' read in rpm",
+        ),
+        (
+            "n.csv",
+            |v| vec![v[0], v[1], v[2], v[3] * 1000.0],
+            "column 'wob_kn' read in kN",
+        ),
+        (
+            "flip.csv",
+            |v| vec![v[0], -v[1], v[2], v[3]],
+            "bit speeds of column 'bit_speed_rpm' are negative",
+        ),
+    ];
+    for (name, transform, words) in cases {
+        record(&tmp.path().join(name), transform);
+        let (code, _, err) = run_in(tmp.path(), &["fit", name, "--laws", "m2"]);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(err.matches(words).count(), 1, "{name}: {err}");
+        assert_eq!(
+            err.matches("warning: ").count() - err.matches("    warning: ").count(),
+            1,
+            "{name}: {err}"
+        );
+    }
+    // The embedded record, in its stated units, raises none.
+    record(&tmp.path().join("same.csv"), |v| v.to_vec());
+    let (_, _, err) = run_in(tmp.path(), &["fit", "same.csv", "--laws", "m2"]);
+    assert!(!err.contains("warning"), "{err}");
+}
