@@ -236,7 +236,9 @@ fn a_map_where_the_torque_has_no_value_is_unknown_never_stable() {
 fn units_off_by_a_factor_and_flipped_speeds_are_warned_of_naming_the_column() {
     let tmp = tempfile::tempdir().unwrap();
     // The embedded record's columns: time_s, bit_speed_rpm, torque_knm, wob_kn.
-    let cases: [(&str, fn(&[f64]) -> Vec<f64>, &str); 4] = [
+    /// A record's file, how each row is changed, and the words of the warning it raises.
+    type Case = (&'static str, fn(&[f64]) -> Vec<f64>, &'static str);
+    let cases: [Case; 4] = [
         (
             "nm.csv",
             |v| vec![v[0], v[1], v[2] * 1000.0, v[3]],
