@@ -209,8 +209,9 @@ fn a_finite_element_strings_cost_is_measured_and_bounded_by_it() {
         ..DrillString::default()
     };
     let (b, m) = (big.estimate_seconds(250.0), medium.estimate_seconds(250.0));
-    // The cube of the size: 4 × the elements, 64 × the time, within the timing's noise.
-    assert!(b > 16.0 * m && m > 0.0, "{b} {m}");
+    // The cube of the size: 4 × the elements, 64 × the time, times the ratio of two timings of
+    // the same 60-DOF probe (noise on a busy machine, far from 8×).
+    assert!(b > 8.0 * m && m > 0.0, "{b} {m}");
     // What could not finish in a day is refused naming the larger element count.
     let e = big.check_cost(1e7).unwrap_err().to_string();
     assert!(
