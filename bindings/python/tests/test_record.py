@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -115,3 +116,16 @@ def test_arguments_are_named_as_the_caller_wrote_them() -> None:
         bitrock.read_record(calibration_fraction=1.5)
     assert caught.value.argument == "calibration_fraction"
     assert isinstance(caught.value, ValueError)
+
+
+def test_a_torque_in_nm_under_a_knm_name_is_warned_of_where_it_is_read() -> None:
+    frame = pd.read_csv(DEMO_CSV)
+    frame["torque_knm"] *= 1000.0
+    with pytest.warns(bitrock.BitrockWarning, match=r"column 'torque_knm' read in kN·m have a median of \d+ kN·m") as caught:
+        record = bitrock.read_record(frame)
+    assert len(caught) == 1 and caught[0].filename == __file__
+    assert record.warnings == [str(caught[0].message)]
+    # The demo record, in its stated units, raises none.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert bitrock.read_record(None).warnings == []

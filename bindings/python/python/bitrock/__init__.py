@@ -82,13 +82,21 @@ def read_record(
     ``timedelta64`` column is read in seconds, a ``datetime64`` one in seconds from its first
     row. Rows below ``min_speed_rpm`` are dropped, and the rest split into calibration and
     validation samples (``calibration_fraction``, ``split`` ``"block"`` or ``"interleaved"``).
+    What the record looks wrong in (a column whose values its unit can hardly mean, torques or
+    speeds of the wrong sign, time running backwards) is raised as a ``BitrockWarning`` and kept
+    in ``Record.warnings``.
     """
     options = {k: v for k, v in locals().items() if k != "source"}
     if isinstance(source, pd.DataFrame):
         names = [str(c) for c in source.columns]
-        return _bitrock.read_columns(names, [_numbers(source.iloc[:, i]) for i in range(len(names))], "<DataFrame>", options)
-    path = None if source is None else os.fspath(source)
-    return _bitrock.read_csv(path, options)
+        record = _bitrock.read_columns(names, [_numbers(source.iloc[:, i]) for i in range(len(names))], "<DataFrame>", options)
+    else:
+        record = _bitrock.read_csv(None if source is None else os.fspath(source), options)
+    # What the record looks wrong in (a unit off by a thousand, flipped signs) is said where it
+    # is read, once, as the command line says it; it stays in ``record.warnings``.
+    for line in record.warnings:
+        _note(line)
+    return record
 
 
 def _numbers(column: pd.Series) -> np.ndarray | None:
