@@ -466,15 +466,23 @@ fn enclosing_run_dir(path: &Path) -> Option<PathBuf> {
 }
 
 /// What bitrock owns in a directory of kind `owned` ([`crate::rundir::Owned::owns`]), and for
-/// the files a report or a selection check writes whole, their mark still matching
-/// ([`authorship`]): a `report.md` the user wrote or edited is the user's. `dir` is the
-/// directory `rel` is relative to. A run's files are judged by name (its store is what makes
-/// it a run).
+/// the files it writes whole there, their mark: a report's files only while their mark matches
+/// (a `report.md` the user wrote or edited is the user's); a selection check's unless changed
+/// since bitrock wrote them (its five names inside a run are bitrock's, and checks written
+/// before marks existed stay replaceable). `dir` is the directory `rel` is relative to. A run's
+/// files are judged by name (its store is what makes it a run).
 pub fn owns_unchanged(owned: crate::rundir::Owned, dir: &Path, rel: &Path, is_dir: bool) -> bool {
-    owned.owns(rel, is_dir)
-        && (is_dir
-            || owned == crate::rundir::Owned::Run
-            || matches!(authorship(&dir.join(rel)), Authorship::Own | Authorship::Unknowable))
+    use crate::rundir::Owned;
+    if !owned.owns(rel, is_dir) {
+        return false;
+    }
+    if is_dir || owned == Owned::Run {
+        return true;
+    }
+    matches!(
+        (owned, authorship(&dir.join(rel))),
+        (_, Authorship::Own | Authorship::Unknowable) | (Owned::Selection, Authorship::Unmarked)
+    )
 }
 
 /// Everything under `dir` that bitrock did not write, judged by `owned` (relative path,

@@ -333,3 +333,24 @@ fn no_run_is_placed_inside_another_run() {
     );
     assert_eq!(code, 0, "{err}");
 }
+
+#[test]
+fn a_selection_check_replaces_its_own_files_but_not_ones_edited_since() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(small_run(tmp.path(), "R", &[]).0, 0);
+    let check = ["check-selection", "R", "--replicates", "1", "--backend", "cpu", "-q"];
+    // A check written before files carried marks (its names, no mark) is replaced.
+    let sel = tmp.path().join("R/selection");
+    std::fs::create_dir(&sel).unwrap();
+    std::fs::write(sel.join("matrix.csv"), "old check").unwrap();
+    let (code, _, err) = run_in(tmp.path(), &check);
+    assert_eq!(code, 0, "{err}");
+    assert_ne!(std::fs::read_to_string(sel.join("matrix.csv")).unwrap(), "old check");
+    // Its own check, unchanged, is replaced; once edited, it is the user's.
+    assert_eq!(run_in(tmp.path(), &check).0, 0);
+    let mut edited = std::fs::read_to_string(sel.join("selection.json")).unwrap();
+    edited.push(' ');
+    std::fs::write(sel.join("selection.json"), &edited).unwrap();
+    assert_refused(run_in(tmp.path(), &check), &["RUN_DIR", "selection.json"]);
+    assert_eq!(std::fs::read_to_string(sel.join("selection.json")).unwrap(), edited);
+}
