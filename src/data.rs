@@ -763,9 +763,7 @@ pub const IMPLAUSIBLE_WOB_KN: f64 = 2000.0;
 /// Each warning names the column, its unit and the likelier one.
 fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &Samples) -> Vec<String> {
     let quantile = |values: &[f64], q: f64| -> f64 {
-        let mut v: Vec<f64> = values.iter().map(|x| x.abs()).collect();
-        v.sort_by(f64::total_cmp);
-        v[((v.len() - 1) as f64 * q).round() as usize]
+        crate::numerics::quantile(&values.iter().map(|x| x.abs()).collect::<Vec<_>>(), q)
     };
     let mut out = Vec::new();
     let source = path.display();
@@ -777,7 +775,7 @@ fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &
         ));
     }
     let speed_rad_s = quantile(&all.speed_rad_s, 0.95);
-    let speed_rpm = speed_rad_s / crate::units::RAD_S_PER_RPM;
+    let speed_rpm = speed_rad_s / RAD_S_PER_RPM;
     if units.speed == SpeedUnit::Rpm && speed_rpm < IMPLAUSIBLE_LOW_RPM {
         out.push(format!(
             "{source}: the bit speeds of column '{}' read in rpm stay below {speed_rpm:.1} rpm (95 % of them), where a drill string turns at some 40–250 rpm: if the column holds rad/s, say so with `speed_unit` rad_s (or a name ending in _rad_s)",

@@ -679,15 +679,9 @@ impl DirLock {
         match file.try_lock() {
             Ok(()) => {}
             Err(TryLockError::WouldBlock) => {
-                let mut pid = String::new();
-                let _ = file.read_to_string(&mut pid);
-                let holder = match pid.trim() {
-                    "" => "another process".to_string(),
-                    pid => format!("another process (PID {pid})"),
-                };
                 return Err(Error::Busy {
                     path: dir.to_path_buf(),
-                    holder,
+                    holder: holder_named_in(&mut file),
                 });
             }
             Err(TryLockError::Error(source)) => return Err(Error::Write { path, source }),
@@ -720,14 +714,9 @@ impl DirLock {
         if file.try_lock_shared().is_ok() {
             return None;
         }
-        let mut pid = String::new();
-        let _ = file.read_to_string(&mut pid);
-        Some(match pid.trim() {
-            // This process holds it (a check reading the run it locked): no other writer.
-            pid if pid == std::process::id().to_string() => return None,
-            "" => "another process".to_string(),
-            pid => format!("another process (PID {pid})"),
-        })
+        let holder = holder_named_in(&mut file);
+        // This process holds it (a check reading the run it locked): no other writer.
+        (holder != holder_of_pid(&std::process::id().to_string())).then_some(holder)
     }
 
     /// The directory locked (where it was when locked).
@@ -738,6 +727,22 @@ impl DirLock {
     /// The lock file, kept open while the lock is held.
     pub fn file(&self) -> &File {
         &self.file
+    }
+}
+
+/// The process a lock file names: "another process (PID n)", or "another process" when the
+/// file holds no PID.
+fn holder_named_in(file: &mut File) -> String {
+    let mut pid = String::new();
+    let _ = file.read_to_string(&mut pid);
+    holder_of_pid(pid.trim())
+}
+
+fn holder_of_pid(pid: &str) -> String {
+    if pid.is_empty() {
+        "another process".to_string()
+    } else {
+        format!("another process (PID {pid})")
     }
 }
 

@@ -27,11 +27,6 @@ const EXACT_FIT_RHO: f64 = 1e-12;
 /// Fewer particles than this in the last population and its model probabilities are said to
 /// be coarse: each particle moves a law's probability by 1/N (with one, a law gets 1).
 pub const MIN_PARTICLES_FOR_PROBABILITIES: usize = 100;
-/// A law's particles have collapsed when they hold at most this share of distinct parameter
-/// sets (told apart at [`COLLAPSE_RESOLUTION`] of their prior box).
-const COLLAPSE_SHARE: f64 = 0.1;
-/// Parameters closer than this share of their prior box's width count as one point.
-const COLLAPSE_RESOLUTION: f64 = 1e-9;
 
 pub use crate::run::RunDir;
 
@@ -235,11 +230,6 @@ impl Analysis {
                     "the last population has {n} particle(s): each moves a law's probability by 1/{n}, so the model probabilities are that coarse (at least {MIN_PARTICLES_FOR_PROBABILITIES} particles give probabilities worth reading)"
                 ));
             }
-            for (law, count, distinct) in collapsed_laws(&last.particles, &setup.prior) {
-                out.push(format!(
-                    "law {law}: its {count} particles in the last population hold only {distinct} distinct parameter set(s): its posterior has collapsed onto a point, and its spread and intervals say nothing (a wider SMC kernel, `kernel_scale`, or the local perturbation helps)"
-                ));
-            }
             for (law, count, ess) in thin_laws(&last.particles, &setup.prior) {
                 out.push(format!(
                     "law {law}: effective sample size {ess:.1} of its {count} particles in the last population: its posterior rests on a few heavily weighted particles, and its spread and intervals say little (more particles, a wider SMC kernel, `kernel_scale`, or the local perturbation help)"
@@ -325,35 +315,4 @@ fn thin_laws(particles: &[Particle], prior: &crate::prior::Prior) -> Vec<(crate:
             (n >= 2 && (ess < 2.0 || ess < crate::abc::MIN_ESS_SHARE * n as f64)).then_some((bx.law, n, ess))
         })
         .collect()
-}
-
-/// The laws whose particles (at least ten) hold at most [`COLLAPSE_SHARE`] of distinct
-/// parameter sets, parameters told apart at [`COLLAPSE_RESOLUTION`] of their prior box: (law,
-/// particles, distinct sets). A rejection sampler never collapses; an SMC kernel far narrower
-/// than the posterior does.
-fn collapsed_laws(particles: &[Particle], prior: &crate::prior::Prior) -> Vec<(crate::Law, usize, usize)> {
-    let mut out = Vec::new();
-    for bx in &prior.boxes {
-        let mine: Vec<&Particle> = particles.iter().filter(|p| p.law == bx.law).collect();
-        if mine.len() < 10 {
-            continue;
-        }
-        let cell = |j: usize, v: f64| -> i64 {
-            let width = f64::from(bx.upper[j]) - f64::from(bx.lower[j]);
-            let scale = if width > 0.0 {
-                width
-            } else {
-                v.abs().max(f64::MIN_POSITIVE)
-            };
-            ((v - f64::from(bx.lower[j])) / (scale * COLLAPSE_RESOLUTION)).round() as i64
-        };
-        let distinct: std::collections::HashSet<Vec<i64>> = mine
-            .iter()
-            .map(|p| p.params.iter().enumerate().map(|(j, &v)| cell(j, v)).collect())
-            .collect();
-        if (distinct.len() as f64) <= COLLAPSE_SHARE * mine.len() as f64 {
-            out.push((bx.law, mine.len(), distinct.len()));
-        }
-    }
-    out
 }

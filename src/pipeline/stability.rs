@@ -185,8 +185,13 @@ impl StabilityJob {
             ),
         };
         map::check_grid_size(self.cells(), inputs.len(), self.samples)?;
-        for input in &inputs {
-            let unknown = map::unknown_speeds(input.law, &input.samples_si, &self.omega_rpm);
+        // Per law, the speeds where a sample's torque has no value: said once, and masked in
+        // a GPU grid (the CPU twin masks its own).
+        let unknown: Vec<Vec<bool>> = inputs
+            .iter()
+            .map(|input| map::unknown_speeds(input.law, &input.samples_si, &self.omega_rpm))
+            .collect();
+        for (input, unknown) in inputs.iter().zip(&unknown) {
             let count = unknown.iter().filter(|&&u| u).count();
             if count > 0 {
                 note(format!(
@@ -226,7 +231,8 @@ impl StabilityJob {
         );
         let grids = inputs
             .iter()
-            .map(|input| self.grid(input, &mut backend, &note, &mut pace))
+            .zip(&unknown)
+            .map(|(input, unknown)| self.grid(input, unknown, &mut backend, &note, &mut pace))
             .collect::<Result<_>>()?;
         Ok(StabilityMaps {
             inputs,
@@ -242,6 +248,7 @@ impl StabilityJob {
     fn grid(
         &self,
         input: &LawSamples,
+        unknown: &[bool],
         backend: &mut Backend,
         note: &std::cell::RefCell<&mut dyn FnMut(String)>,
         pace: &mut crate::limits::Pace,
@@ -257,7 +264,6 @@ impl StabilityJob {
             ) {
                 Ok((counts, _)) => {
                     let n = input.samples_si.len() as f64;
-                    let unknown = map::unknown_speeds(input.law, &input.samples_si, &self.omega_rpm);
                     let row = self.wob_kn.len();
                     return Ok(counts
                         .iter()

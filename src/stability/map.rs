@@ -48,7 +48,7 @@ pub fn parse_axis(text: &str, field: &str) -> Result<Vec<f64>> {
 /// never assumed). `params_si` in N·m, `critical_nms` = c_b* (< 0, N·m·s/rad).
 pub fn critical_wob_n(law: Law, params_si: &[f64], omega_rad_s: f64, critical_nms: f64, w_ref_n: f64) -> Option<f64> {
     let slope = law.dtorque_dw(params_si, omega_rad_s, 1.0);
-    if !has_value(law, params_si, omega_rad_s) {
+    if !(slope.is_finite() && law.torque(params_si, omega_rad_s, 1.0).is_finite()) {
         return Some(f64::NAN);
     }
     (slope < 0.0).then(|| w_ref_n * critical_nms / slope)
@@ -271,7 +271,10 @@ pub fn probability_grid_with(
             .iter()
             .map(|s| law.dtorque_dw(s, rpm * RAD_S_PER_RPM, 1.0))
             .collect();
-        let unknown = samples.iter().any(|s| !has_value(law, s, rpm * RAD_S_PER_RPM));
+        let unknown = slopes.iter().any(|s| !s.is_finite())
+            || samples
+                .iter()
+                .any(|s| !law.torque(s, rpm * RAD_S_PER_RPM, 1.0).is_finite());
         for &kn in wob_kn {
             let r = kn * 1000.0 / w_ref_n;
             let unstable = slopes.iter().filter(|&&slope| criterion.unstable(r * slope)).count();

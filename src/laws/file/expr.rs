@@ -850,15 +850,6 @@ impl Expr {
         }
     }
 
-    /// Nodes in the tree.
-    pub fn size(&self) -> usize {
-        match self {
-            Expr::Const(_) | Expr::Var(_) => 1,
-            Expr::Unary(_, a) => a.size().saturating_add(1),
-            Expr::Binary(_, a, b) => a.size().saturating_add(b.size()).saturating_add(1),
-        }
-    }
-
     /// An upper bound on the size of [`Self::derivative`]`(var)`, in one pass over the tree
     /// (simplification only shrinks the result): a product of n factors has a derivative of
     /// order n² nodes, which is refused by its bound before any of it is built.
@@ -898,8 +889,7 @@ impl Expr {
     /// float: its value.
     pub fn constant_beyond_f32(&self) -> Option<f64> {
         match self {
-            Expr::Const(c) if c.is_finite() && c.abs() > f64::from(f32::MAX) => Some(*c),
-            Expr::Const(c) if c.is_infinite() => Some(*c),
+            Expr::Const(c) if c.abs() > f64::from(f32::MAX) => Some(*c),
             Expr::Const(_) | Expr::Var(_) => None,
             Expr::Unary(_, a) => a.constant_beyond_f32(),
             Expr::Binary(_, a, b) => a.constant_beyond_f32().or_else(|| b.constant_beyond_f32()),

@@ -167,23 +167,21 @@ fn a_run_another_process_is_writing_is_named_as_such_not_as_interrupted() {
         .args(["sleep", "60"])
         .spawn()
         .expect("flock(1) from util-linux");
+    const STABILITY: [&str; 9] = [
+        "stability",
+        "--run",
+        "R",
+        "--omega-rpm",
+        "20:220:3",
+        "--wob-kn",
+        "20:700:3",
+        "--backend",
+        "cpu",
+    ];
     while bitrock::files::DirLock::is_free(&tmp.path().join("R")) {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
-    let (code, _, err) = run_in(
-        tmp.path(),
-        &[
-            "stability",
-            "--run",
-            "R",
-            "--omega-rpm",
-            "20:220:3",
-            "--wob-kn",
-            "20:700:3",
-            "--backend",
-            "cpu",
-        ],
-    );
+    let (code, _, err) = run_in(tmp.path(), &STABILITY);
     let (report_code, _, report_err) = run_in(tmp.path(), &["report", "R", "--out", "Rep"]);
     holder.kill().unwrap();
     holder.wait().unwrap();
@@ -194,19 +192,6 @@ fn a_run_another_process_is_writing_is_named_as_such_not_as_interrupted() {
     let md = std::fs::read_to_string(tmp.path().join("Rep/report.md")).unwrap();
     assert!(md.contains("being written by another process"), "{md}");
     // Once the writer is gone, the unfinished invocation is an interruption again.
-    let (_, _, err) = run_in(
-        tmp.path(),
-        &[
-            "stability",
-            "--run",
-            "R",
-            "--omega-rpm",
-            "20:220:3",
-            "--wob-kn",
-            "20:700:3",
-            "--backend",
-            "cpu",
-        ],
-    );
+    let (_, _, err) = run_in(tmp.path(), &STABILITY);
     assert!(err.contains("the run was interrupted"), "{err}");
 }
