@@ -12,7 +12,7 @@
 //! each). Wall-clock seconds of one pass each, on all cores.
 
 use bitrock::abc::posterior::{ENVELOPE_LEVEL, predictive_envelope, speed_grid, summarize};
-use bitrock::abc::rejection::median_rho;
+use bitrock::abc::schedule::median_rho;
 use bitrock::store::RunStore;
 use std::time::Instant;
 

@@ -3,6 +3,7 @@
 
 use crate::Law;
 use crate::abc::rejection::{self, RejectionConfig};
+use crate::abc::schedule::Schedule;
 use crate::abc::smc::{self, SmcConfig};
 use crate::data::{DataOptions, FieldData, Samples, demo_field_data};
 use crate::error::{Error, Result};
@@ -314,12 +315,12 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
     }
     let throughput = measure_throughput(opts, reps, log)?;
     let small_call_seconds = measure_small_calls(&opts.backends, reps, log)?;
-    let config = RejectionConfig {
+    let config = RejectionConfig::from(Schedule {
         particles: opts.particles,
-        ..RejectionConfig::default()
-    };
+        ..Schedule::default()
+    });
     let end_to_end = measure_end_to_end(&opts.backends, reps, &embedded, &config, log)?;
-    let samplers = compare_samplers(opts, reps, &embedded, config.eps_min, log)?;
+    let samplers = compare_samplers(opts, reps, &embedded, config.schedule.eps_min, log)?;
     let stability = if opts.backends.contains(&Backend::Gpu) {
         Some(measure_stability(opts.stability, reps, log)?)
     } else {
@@ -481,7 +482,7 @@ fn measure_end_to_end(
 ) -> Result<Vec<EndToEnd>> {
     let mut end_to_end = Vec::new();
     for &backend in backends {
-        let ev = embedded.evaluator(backend, config.particles)?;
+        let ev = embedded.evaluator(backend, config.schedule.particles)?;
         let mut last = None;
         let times = time_calls(reps, || {
             last = Some(rejection::run(ev.as_ref(), config)?);
@@ -493,8 +494,8 @@ fn measure_end_to_end(
         log(format!(
             "{:>3} paper-scale run (N = {}, four laws, embedded record, to ε = {}): {:.3} s, {:.3e} evaluations, {evals_per_s:.3e} evaluations/s",
             ev.backend(),
-            config.particles,
-            config.eps_min,
+            config.schedule.particles,
+            config.schedule.eps_min,
             spread.median,
             run.evaluations as f64
         ));
@@ -530,13 +531,12 @@ fn compare_samplers(
     for &backend in &opts.backends {
         let ev = embedded.evaluator(backend, opts.particles)?;
         for &(eps_min, particles) in &targets {
-            let base = RejectionConfig {
-                particles,
-                eps_min,
-                ..RejectionConfig::default()
-            };
             let smc_config = SmcConfig {
-                base: base.clone(),
+                schedule: Schedule {
+                    particles,
+                    eps_min,
+                    ..Schedule::default()
+                },
                 ..SmcConfig::default()
             };
             for sampler in ["rejection", "smc"] {
@@ -547,8 +547,8 @@ fn compare_samplers(
     Ok(samplers)
 }
 
-/// One sampler (`rejection` or `smc`) run to `smc_config`'s ε_min with its N (rejection takes
-/// its base configuration), timed up to 3 times; the evaluations and populations of the last
+/// One sampler (`rejection` or `smc`) run to `smc_config`'s ε_min with its N (rejection runs
+/// its schedule), timed up to 3 times; the evaluations and populations of the last
 /// run.
 fn time_sampler(
     ev: &dyn Evaluator,
@@ -557,12 +557,13 @@ fn time_sampler(
     reps: usize,
     log: &mut dyn FnMut(String),
 ) -> Result<SamplerRun> {
-    let base = &smc_config.base;
-    let (eps_min, particles) = (base.eps_min, base.particles);
+    let schedule = &smc_config.schedule;
+    let (eps_min, particles) = (schedule.eps_min, schedule.particles);
+    let rejection_config = RejectionConfig::from(schedule.clone());
     let mut last = None;
     let times = time_calls(reps.min(3), || {
         last = Some(match sampler {
-            "rejection" => rejection::run(ev, base)?,
+            "rejection" => rejection::run(ev, &rejection_config)?,
             _ => smc::run(ev, smc_config)?,
         });
         Ok(())
@@ -772,10 +773,10 @@ fn selection_check(
     let dir =
         tempfile::tempdir().map_err(|source| crate::error::Error::output("TMPDIR", &std::env::temp_dir(), source))?;
     let run_dir = dir.path().join("run");
-    let sampler = RejectionConfig {
+    let sampler = RejectionConfig::from(Schedule {
         particles,
-        ..RejectionConfig::default()
-    };
+        ..Schedule::default()
+    });
     let config = RunConfig {
         backend,
         sampler: SamplerConfig::Rejection(sampler),

@@ -427,6 +427,14 @@ impl Prior {
     pub fn law(&self, slot: usize) -> Law {
         self.boxes[slot].law
     }
+
+    /// The slot of `law`'s box; a law outside the prior is a caller's error.
+    pub fn slot_of(&self, law: Law) -> usize {
+        self.boxes
+            .iter()
+            .position(|b| b.law == law)
+            .expect("the law is in the prior")
+    }
 }
 
 /// Refuses a box that f32 candidates cannot span (an end beyond f32's range, as δ = 1e100

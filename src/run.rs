@@ -5,6 +5,7 @@
 
 use crate::abc::floor;
 use crate::abc::rejection::{self, Mode, RejectionConfig};
+use crate::abc::schedule::Schedule;
 use crate::abc::shard::{self, Devices, Local, Workers};
 use crate::abc::smc::{self, LawProposal, Perturbation, Refill, SmcConfig, WeightsOn};
 use crate::abc::{Observer, Population, Progress, Run};
@@ -104,7 +105,7 @@ impl RunConfig {
             let fewest_params = self.laws.iter().map(|l| l.params().len()).min().unwrap_or(0);
             smc.check_kernel_reach(fewest_params)?;
         }
-        let particles = self.sampler.base().particles;
+        let particles = self.sampler.schedule().particles;
         limits::check_memory(
             "particles",
             POPULATIONS_HELD * particles as f64 * PARTICLE_BYTES as f64,
@@ -123,7 +124,7 @@ impl RunConfig {
     /// Refuses a summary population `g` the run can never have (at or beyond
     /// `--max-populations`), before the run rather than after it.
     pub fn check_summary_population(&self, g: Option<usize>) -> Result<()> {
-        let max = self.sampler.base().max_populations;
+        let max = self.sampler.schedule().max_populations;
         match g {
             Some(g) if g >= max => Err(Error::setting(
                 "summary_population",
@@ -221,30 +222,32 @@ impl Settings {
             ));
         }
         let defaults = RunConfig::default();
-        let rejection = RejectionConfig::default();
-        let schedule = self.epsilons.as_ref().map(Vec::len);
-        let base = RejectionConfig {
-            particles: self.particles.unwrap_or(rejection.particles),
+        let shared = Schedule::default();
+        let user_schedule = self.epsilons.as_ref().map(Vec::len);
+        let schedule = Schedule {
+            particles: self.particles.unwrap_or(shared.particles),
             eps_min: self
                 .eps_min
-                .unwrap_or(if schedule.is_some() { 0.0 } else { rejection.eps_min }),
+                .unwrap_or(if user_schedule.is_some() { 0.0 } else { shared.eps_min }),
             max_populations: self
                 .max_populations
-                .unwrap_or(rejection.max_populations.max(schedule.map_or(0, |n| n + 1))),
-            max_draws: self.max_draws.unwrap_or(rejection.max_draws),
-            min_acceptance: self.min_acceptance.unwrap_or(rejection.min_acceptance),
+                .unwrap_or(shared.max_populations.max(user_schedule.map_or(0, |n| n + 1))),
+            max_draws: self.max_draws.unwrap_or(shared.max_draws),
+            min_acceptance: self.min_acceptance.unwrap_or(shared.min_acceptance),
             start_epsilon: self.start_epsilon,
             epsilons: self.epsilons.clone(),
-            mode: self.mode.unwrap_or(rejection.mode),
             max_seconds: self.max_seconds,
-            ..rejection
+            ..shared
         };
         let sampler = match self.sampler {
-            Sampler::Rejection => SamplerConfig::Rejection(base),
+            Sampler::Rejection => SamplerConfig::Rejection(RejectionConfig {
+                schedule,
+                mode: self.mode.unwrap_or(RejectionConfig::default().mode),
+            }),
             Sampler::Smc => {
                 let smc = SmcConfig::default();
                 SamplerConfig::Smc(SmcConfig {
-                    base,
+                    schedule,
                     p_stay: self.p_stay.unwrap_or(smc.p_stay),
                     kernel_scale: self.kernel_scale.unwrap_or(smc.kernel_scale),
                     weights_on: self.smc_weights.unwrap_or(smc.weights_on),
@@ -270,7 +273,7 @@ impl Settings {
             devices: self.devices.unwrap_or(defaults.devices),
             gpu_shape: None,
             sampler,
-            eps_min_from_record: self.eps_min.is_none() && schedule.is_none(),
+            eps_min_from_record: self.eps_min.is_none() && user_schedule.is_none(),
         })
     }
 
@@ -347,23 +350,23 @@ impl SamplerConfig {
     }
 
     /// The stopping rules and tolerances every sampler shares.
-    pub fn base(&self) -> &RejectionConfig {
+    pub fn schedule(&self) -> &Schedule {
         match self {
-            SamplerConfig::Rejection(c) => c,
-            SamplerConfig::Smc(c) => &c.base,
+            SamplerConfig::Rejection(c) => &c.schedule,
+            SamplerConfig::Smc(c) => &c.schedule,
         }
     }
 
     /// The stopping rules and tolerances every sampler shares, to change.
-    pub fn base_mut(&mut self) -> &mut RejectionConfig {
+    pub fn schedule_mut(&mut self) -> &mut Schedule {
         match self {
-            SamplerConfig::Rejection(c) => c,
-            SamplerConfig::Smc(c) => &mut c.base,
+            SamplerConfig::Rejection(c) => &mut c.schedule,
+            SamplerConfig::Smc(c) => &mut c.schedule,
         }
     }
 
     fn apply(&mut self, more: &Continuation) {
-        let c = self.base_mut();
+        let c = self.schedule_mut();
         c.eps_min = more.eps_min.unwrap_or(c.eps_min);
         c.max_populations = more.max_populations.unwrap_or(c.max_populations);
         c.max_draws = more.max_draws.unwrap_or(c.max_draws);
@@ -523,7 +526,7 @@ pub fn here(problem: AbcProblem, config: &RunConfig, note: &mut dyn FnMut(String
 /// What a run of `config` asks of the GPU scoring shape: its recorded one, for dispatches of
 /// its size.
 pub fn shape_wish(config: &RunConfig) -> ShapeWish {
-    ShapeWish::for_run(config.gpu_shape, config.sampler.base().particles)
+    ShapeWish::for_run(config.gpu_shape, config.sampler.schedule().particles)
 }
 
 /// [`start`] of a run in memory whose record's least-squares fits the caller made
@@ -556,7 +559,7 @@ fn start_with_fits(
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
     let input = data.source.clone();
-    let base = config.sampler.base_mut();
+    let base = config.sampler.schedule_mut();
     let floor = floor::resolve(&fits, (!config.eps_min_from_record).then_some(base.eps_min))?;
     base.eps_min = floor.eps_min;
     floor::check_start_epsilon(&fits, base.start_epsilon)?;
@@ -807,7 +810,7 @@ fn check_stored_run(dir: &Path, config: &RunConfig, prior: &Prior, populations: 
             "population {g} {what}; the store was altered and this run cannot be continued (start a new run)"
         ),
     };
-    let n = config.sampler.base().particles;
+    let n = config.sampler.schedule().particles;
     let mut previous_epsilon = f64::INFINITY;
     for (g, p) in populations.iter().enumerate() {
         let r = &p.record;

@@ -90,7 +90,7 @@ const FASTEST_EVALUATIONS_PER_S: f64 = 1e12;
 fn check_size(run: &CheckedRun, options: &CheckOptions) -> Result<()> {
     let laws = run.config.laws.len() as f64;
     let replicates = options.replicates as f64 * laws;
-    let particles = run.config.sampler.base().particles as f64;
+    let particles = run.config.sampler.schedule().particles as f64;
     let samples = run.stored.setup.data.calibration.len() as f64;
     let result_bytes = std::mem::size_of::<Replicate>() as f64 + (laws + crate::laws::MAX_PARAMS as f64) * 8.0;
     crate::limits::check_memory(
@@ -567,7 +567,7 @@ pub fn check(
         prior_rule: config.prior_rule,
         delta: config.delta,
         run_seed: config.seed,
-        particles: config.sampler.base().particles,
+        particles: config.sampler.schedule().particles,
         backend: backend.to_string(),
         gpu_shape,
         rows,
@@ -700,7 +700,7 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
     let mut replicate_config = config.clone();
     replicate_config.seed = seed;
     replicate_config.backend = options.backend.unwrap_or(config.backend);
-    replicate_config.sampler.base_mut().max_seconds = None;
+    replicate_config.sampler.schedule_mut().max_seconds = None;
     let outcome = run::start_fitted_in_memory(
         data,
         replicate_config,

@@ -1,4 +1,4 @@
-//! The population loop both samplers share: batches until N particles are accepted or a run
+//! The population loop the samplers share: batches until N particles are accepted or a run
 //! budget (wall time, draws) interrupts, progress after every batch, and the population's
 //! record. What a batch is (a scan of a candidate stream, or kernel proposals) is the
 //! sampler's own.
@@ -69,7 +69,7 @@ impl Filling {
     /// the progress after every batch, and may interrupt the run there.
     pub fn fill(
         &mut self,
-        limits: &super::rejection::RejectionConfig,
+        limits: &super::schedule::Schedule,
         spent: &Spent,
         observer: &mut dyn Observer,
         mut batch: impl FnMut(&mut Self, u64) -> Result<ControlFlow<StopReason>>,

@@ -11,6 +11,7 @@ mod fill;
 pub mod floor;
 pub mod posterior;
 pub mod rejection;
+pub mod schedule;
 pub mod shard;
 pub mod smc;
 
@@ -203,7 +204,7 @@ pub enum StopReason {
     MaxDraws,
     /// The wall-time budget ran out inside a population (which was dropped).
     WallTime,
-    /// The median rule lowered ε by less than [`rejection::STALL_FRACTION`]: ε is near the
+    /// The median rule lowered ε by less than [`schedule::STALL_FRACTION`]: ε is near the
     /// best ρ the laws can attain, and each further population would cost more draws for
     /// almost no change.
     Stalled,

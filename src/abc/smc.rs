@@ -79,7 +79,8 @@
 //! (particles and weights).
 
 use super::fill::{Filling, Spent};
-use super::rejection::{self, Mode, RejectionConfig, next_epsilon, slot_of};
+use super::rejection::{self, Mode, RejectionConfig};
+use super::schedule::{Schedule, next_epsilon};
 use super::shard::{self, Context, Found, Local, Round, Task, Workers};
 use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
@@ -158,21 +159,66 @@ pub const WORTH_FLOOR: f64 = 0.05;
 /// Configuration of an SMC run. Runs stored before `refill`, `law_proposal` and
 /// `perturbation` existed read as `fresh`, `kernel` and `global`, which is how they were drawn.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(from = "Stored", into = "Stored")]
 pub struct SmcConfig {
-    /// N, tolerances, stopping rules, batch limit and wall time, as for rejection (population
-    /// 0 is a rejection population; `mode` is not used).
-    pub base: RejectionConfig,
+    /// N, tolerances, stopping rules, batch limit and wall time (population 0 is a rejection
+    /// population).
+    pub schedule: Schedule,
     /// Probability that the model kernel keeps the ancestor's law (`law_proposal` kernel).
     pub p_stay: f64,
     /// Perturbation covariance = kernel_scale × the weighted covariance of the law's ancestors.
     pub kernel_scale: f64,
     pub weights_on: WeightsOn,
-    #[serde(default = "Refill::stored_default")]
     pub refill: Refill,
-    #[serde(default = "LawProposal::stored_default")]
     pub law_proposal: LawProposal,
-    #[serde(default = "Perturbation::stored_default")]
     pub perturbation: Perturbation,
+}
+
+/// [`SmcConfig`] as runs store it and workers receive it: the schedule under `base`, written
+/// as the rejection sampler's settings (its `mode` unused), as bitrock has always stored it.
+#[derive(Clone, Serialize, Deserialize)]
+struct Stored {
+    base: RejectionConfig,
+    p_stay: f64,
+    kernel_scale: f64,
+    weights_on: WeightsOn,
+    #[serde(default = "Refill::stored_default")]
+    refill: Refill,
+    #[serde(default = "LawProposal::stored_default")]
+    law_proposal: LawProposal,
+    #[serde(default = "Perturbation::stored_default")]
+    perturbation: Perturbation,
+}
+
+impl From<Stored> for SmcConfig {
+    fn from(s: Stored) -> Self {
+        Self {
+            schedule: s.base.schedule,
+            p_stay: s.p_stay,
+            kernel_scale: s.kernel_scale,
+            weights_on: s.weights_on,
+            refill: s.refill,
+            law_proposal: s.law_proposal,
+            perturbation: s.perturbation,
+        }
+    }
+}
+
+impl From<SmcConfig> for Stored {
+    fn from(c: SmcConfig) -> Self {
+        Self {
+            base: RejectionConfig {
+                schedule: c.schedule,
+                mode: Mode::Nested,
+            },
+            p_stay: c.p_stay,
+            kernel_scale: c.kernel_scale,
+            weights_on: c.weights_on,
+            refill: c.refill,
+            law_proposal: c.law_proposal,
+            perturbation: c.perturbation,
+        }
+    }
 }
 
 impl Perturbation {
@@ -196,7 +242,7 @@ impl LawProposal {
 impl Default for SmcConfig {
     fn default() -> Self {
         Self {
-            base: RejectionConfig::default(),
+            schedule: Schedule::default(),
             p_stay: 0.7,
             kernel_scale: 2.0,
             weights_on: WeightsOn::Host,
@@ -210,7 +256,7 @@ impl Default for SmcConfig {
 impl SmcConfig {
     /// Refuses configurations that cannot run, naming the setting, before any work.
     pub fn validate(&self) -> Result<()> {
-        self.base.validate()?;
+        self.schedule.validate()?;
         if !(0.0..=1.0).contains(&self.p_stay) {
             return Err(Error::setting(
                 "p_stay",
@@ -243,12 +289,12 @@ impl SmcConfig {
     /// fewest parameters (`fewest_params`) would land fewer proposals inside its prior box than
     /// `--min-acceptance` stops at, or than the draw budget needs for N particles.
     pub fn check_kernel_reach(&self, fewest_params: usize) -> Result<()> {
-        if self.base.start_epsilon.is_some() {
+        if self.schedule.start_epsilon.is_some() {
             return Ok(()); // population 0 is narrower than the prior: the bound does not apply
         }
         let share = population_one_in_box_bound(self.kernel_scale, fewest_params);
-        let budget = self.base.particles as f64 / self.base.max_draws as f64;
-        let needed = self.base.min_acceptance.max(budget);
+        let budget = self.schedule.particles as f64 / self.schedule.max_draws as f64;
+        let needed = self.schedule.min_acceptance.max(budget);
         if share < needed {
             return Err(Error::setting(
                 "kernel_scale",
@@ -484,7 +530,7 @@ impl Kernels {
     ) -> Result<Self> {
         let mut members = vec![Vec::new(); prior.boxes.len()];
         for (i, p) in previous.iter().enumerate() {
-            members[slot_of(prior, p.law)].push(i);
+            members[prior.slot_of(p.law)].push(i);
         }
         // Each law's share of the previous population's weight.
         let probability: Vec<f64> = members
@@ -753,7 +799,7 @@ impl Kernels {
         for (slot, law) in self.laws.iter().enumerate() {
             let Some(law) = law else { continue };
             let new: Vec<usize> = (0..particles.len())
-                .filter(|&i| slot_of(prior, particles[i].law) == slot)
+                .filter(|&i| prior.slot_of(particles[i].law) == slot)
                 .collect();
             if new.is_empty() {
                 continue;
@@ -904,7 +950,7 @@ fn accept_found(problem: &AbcProblem, fill: &mut Filling, context: &Context, fou
         })
         .collect();
     for p in &particles {
-        fill.law_accepted[slot_of(prior, p.law)] += 1;
+        fill.law_accepted[prior.slot_of(p.law)] += 1;
     }
     fill.particles.extend(particles);
     found.add_draws(from, consumed, &mut fill.law_draws);
@@ -956,8 +1002,8 @@ pub fn run_on(
     let started = Instant::now();
     let problem = workers.problem();
     let prior = &problem.prior;
-    let base = &config.base;
-    let n = base.particles;
+    let schedule = &config.schedule;
+    let n = schedule.particles;
     let d = problem.data_len() as u64;
     let mut populations = previous;
     let mut total_scored: u64 = populations.iter().map(|p| p.record.candidates_scored).sum();
@@ -970,11 +1016,13 @@ pub fn run_on(
     if populations.is_empty() {
         // Population 0: the rejection sampler's, from the prior at ε_0.
         let first = RejectionConfig {
-            max_populations: 1,
+            schedule: Schedule {
+                max_populations: 1,
+                // Population 0 is drawn at ε_0; the schedule starts with population 1.
+                epsilons: None,
+                ..schedule.clone()
+            },
             mode: Mode::Nested,
-            // Population 0 is drawn at ε_0; the schedule starts with population 1.
-            epsilons: None,
-            ..base.clone()
         };
         let run = rejection::run_on(workers, &first, Vec::new(), observer)?;
         total_scored += run.populations.iter().map(|p| p.record.candidates_scored).sum::<u64>();
@@ -984,7 +1032,7 @@ pub fn run_on(
         populations = run.populations;
     }
     let stop = loop {
-        let epsilon = match next_epsilon(&populations, base) {
+        let epsilon = match next_epsilon(&populations, schedule) {
             Ok(e) => e,
             Err(stop) => break stop,
         };
@@ -1013,13 +1061,13 @@ pub fn run_on(
             started,
             scored: total_scored,
         };
-        let interrupted = fill.fill(base, &spent, observer, |fill, budget| {
+        let interrupted = fill.fill(schedule, &spent, observer, |fill, budget| {
             if budget == 0 {
                 return Ok(ControlFlow::Break(StopReason::MaxDraws));
             }
             let missing = (fill.target - fill.particles.len()) as f64;
             let size = ((1.05 * missing / rate.max(1e-4)).ceil() as u64 + 16)
-                .min(base.max_batch as u64)
+                .min(schedule.max_batch as u64)
                 .min(budget);
             let round = Round {
                 population: t,
@@ -1060,7 +1108,7 @@ pub fn run_on(
         }
         let new = fill.particles.len();
         for p in &kept {
-            fill.law_accepted[slot_of(prior, p.law)] += 1;
+            fill.law_accepted[prior.slot_of(p.law)] += 1;
         }
         fill.particles.splice(0..0, kept);
         let per_law = fill.law_records(problem, |s| {

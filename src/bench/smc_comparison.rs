@@ -6,7 +6,7 @@
 //! two-sample Kolmogorov–Smirnov statistic against its critical value at α = 0.001.
 
 use super::SelectionRecord;
-use crate::abc::rejection::RejectionConfig;
+use crate::abc::schedule::Schedule;
 use crate::abc::smc::{LawProposal, Perturbation, Refill, SmcConfig};
 use crate::abc::{Population, Silent};
 use crate::error::Result;
@@ -130,10 +130,10 @@ fn compare_on(
     let fits = fit::fit_record(&base_config.laws, &data, &base_config.fit)?;
     let best = fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
     let eps_min = FLOOR_FACTOR * best;
-    let base = RejectionConfig {
+    let schedule = Schedule {
         particles,
         eps_min,
-        ..RejectionConfig::default()
+        ..Schedule::default()
     };
     let mut schemes: Vec<SchemeSummary> = Vec::new();
     let mut rejection_runs: Vec<Population> = Vec::new();
@@ -141,9 +141,9 @@ fn compare_on(
         let mut runs = Vec::new();
         for seed in 1..=seeds {
             let sampler = match scheme.smc {
-                None => SamplerConfig::Rejection(base.clone()),
+                None => SamplerConfig::Rejection(schedule.clone().into()),
                 Some((refill, law_proposal, perturbation)) => SamplerConfig::Smc(SmcConfig {
-                    base: base.clone(),
+                    schedule: schedule.clone(),
                     refill,
                     law_proposal,
                     perturbation,

@@ -6,7 +6,8 @@ use super::args::{DataArgs, FitArgs, load_data, set_threads};
 use super::print;
 use super::progress::RunProgress;
 use bitrock::Error;
-use bitrock::abc::rejection::{Mode, RejectionConfig};
+use bitrock::abc::rejection::Mode;
+use bitrock::abc::schedule::Schedule;
 use bitrock::abc::shard::Devices;
 use bitrock::abc::smc::{LawProposal, Perturbation, Refill, WeightsOn};
 use bitrock::eval::Backend;
@@ -21,7 +22,7 @@ use std::process::ExitCode;
 #[derive(Debug, Args, Clone)]
 pub struct AbcArgs {
     /// Particles per population, N (the paper's 25,000).
-    #[arg(long, default_value_t = RejectionConfig::default().particles, value_name = "N")]
+    #[arg(long, default_value_t = Schedule::default().particles, value_name = "N")]
     pub particles: usize,
     /// Prior half-width: each parameter is uniform on [p(1 − δ), p(1 + δ)] around its
     /// least-squares estimate p, clipped to its physical bound.

@@ -6,7 +6,7 @@ use super::fit::fit_and_print;
 use super::print;
 use super::progress::RunProgress;
 use bitrock::abc::posterior::PosteriorSummary;
-use bitrock::abc::rejection::RejectionConfig;
+use bitrock::abc::schedule::Schedule;
 use bitrock::data;
 use bitrock::data::FieldData;
 use bitrock::eval::Backend;
@@ -27,7 +27,7 @@ pub struct DemoCmd {
     #[arg(long, value_name = "DIR", default_value = "bitrock-demo")]
     pub out: PathBuf,
     /// Particles per population (the paper's N is 25,000).
-    #[arg(long, default_value_t = RejectionConfig::default().particles, value_name = "N")]
+    #[arg(long, default_value_t = Schedule::default().particles, value_name = "N")]
     pub particles: usize,
     /// Seed of the candidate streams.
     #[arg(long, default_value_t = RunConfig::default().seed)]
@@ -70,25 +70,25 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     let mut headlines = Vec::new();
     for delta in DEMO_DELTAS {
         let dir = root.join(run_dir_name(delta));
-        let sampler = RejectionConfig {
+        let schedule = Schedule {
             particles: cmd.particles,
-            ..RejectionConfig::default()
+            ..Schedule::default()
         };
         writeln!(
             out,
             "\nABC rejection with model selection: N = {}, δ = {delta}, ε_min = {}, seed {} → {}",
-            sampler.particles,
-            sampler.eps_min,
+            schedule.particles,
+            schedule.eps_min,
             cmd.seed,
             dir.display()
         )?;
-        let eps_min = sampler.eps_min;
+        let eps_min = schedule.eps_min;
         let job = AbcJob {
             config: RunConfig {
                 delta,
                 seed: cmd.seed,
                 backend: cmd.backend,
-                sampler: SamplerConfig::Rejection(sampler),
+                sampler: SamplerConfig::Rejection(schedule.into()),
                 ..RunConfig::default()
             },
             summary_population: None,

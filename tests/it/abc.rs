@@ -4,6 +4,7 @@
 use crate::support::{paper_m2_problem, rng, samples};
 use bitrock::Law;
 use bitrock::abc::rejection::{self, Mode, RejectionConfig};
+use bitrock::abc::schedule::Schedule;
 use bitrock::abc::{Run, StopReason};
 use bitrock::data::Samples;
 use bitrock::eval::cpu::CpuEvaluator;
@@ -50,12 +51,12 @@ fn same_populations(a: &Run, b: &Run) {
 #[test]
 fn populations_do_not_depend_on_threads_or_batch_size() {
     let (problem, rho) = paper_m2_problem(77);
-    let config = RejectionConfig {
+    let config = RejectionConfig::from(Schedule {
         particles: 600,
         eps_min: rho * 1.5,
         max_batch: 1 << 20,
-        ..Default::default()
-    };
+        ..Schedule::default()
+    });
     let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     let double = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
     let evaluator = CpuEvaluator::new(problem);
@@ -64,10 +65,10 @@ fn populations_do_not_depend_on_threads_or_batch_size() {
         .install(|| {
             rejection::run(
                 &evaluator,
-                &RejectionConfig {
+                &RejectionConfig::from(Schedule {
                     max_batch: 1000,
-                    ..config.clone()
-                },
+                    ..config.schedule.clone()
+                }),
             )
         })
         .unwrap();
@@ -81,11 +82,13 @@ fn the_accepted_set_is_the_closed_form_one_and_the_schedule_is_the_median() {
         let problem = one_parameter_problem(5);
         let evaluator = CpuEvaluator::new(problem.clone());
         let config = RejectionConfig {
-            particles: 501,
-            eps_min: 1e-6,
-            max_populations: 6,
+            schedule: Schedule {
+                particles: 501,
+                eps_min: 1e-6,
+                max_populations: 6,
+                ..Schedule::default()
+            },
             mode,
-            ..Default::default()
         };
         let run = rejection::run(&evaluator, &config).unwrap();
         assert_eq!(run.populations.len(), 6);
@@ -140,25 +143,27 @@ fn nested_and_paper_modes_sample_the_same_distribution_with_fewer_evaluations() 
     let problem = one_parameter_problem(8);
     let evaluator = CpuEvaluator::new(problem);
     let epsilons = Some(vec![0.25, 0.04, 0.01]);
-    let base = RejectionConfig {
+    let base = RejectionConfig::from(Schedule {
         particles: 4000,
         eps_min: 0.0,
         epsilons,
-        ..Default::default()
-    };
+        ..Schedule::default()
+    });
     let nested = rejection::run(
         &evaluator,
         &RejectionConfig {
+            schedule: Schedule {
+                ..base.schedule.clone()
+            },
             mode: Mode::Nested,
-            ..base.clone()
         },
     )
     .unwrap();
     let paper = rejection::run(
         &evaluator,
         &RejectionConfig {
+            schedule: Schedule { ..base.schedule },
             mode: Mode::Paper,
-            ..base
         },
     )
     .unwrap();
@@ -194,11 +199,11 @@ fn nested_and_paper_modes_sample_the_same_distribution_with_fewer_evaluations() 
 fn model_selection_prefers_the_generating_law() {
     let (problem, rho) = paper_m2_problem(3);
     let evaluator = CpuEvaluator::new(problem);
-    let config = RejectionConfig {
+    let config = RejectionConfig::from(Schedule {
         particles: 2000,
         eps_min: rho * 1.5,
-        ..Default::default()
-    };
+        ..Schedule::default()
+    });
     let run = rejection::run(&evaluator, &config).unwrap();
     let last = run.populations.last().unwrap();
     let prob = |law: Law| last.record.per_law.iter().find(|l| l.law == law).unwrap().probability;
@@ -229,11 +234,11 @@ fn posterior_intervals_cover_the_generating_parameters() {
         let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
         let rho_fit = fits[0].rho;
         let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 4, &data, None));
-        let config = RejectionConfig {
+        let config = RejectionConfig::from(Schedule {
             particles: 2000,
             eps_min: rho_fit * 1.3,
-            ..Default::default()
-        };
+            ..Schedule::default()
+        });
         let run = rejection::run(&evaluator, &config).unwrap();
         let particles = &run.populations.last().unwrap().particles;
         for (j, &t) in truth.iter().enumerate() {

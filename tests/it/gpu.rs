@@ -6,6 +6,7 @@
 
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
+use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::{self, Shape, candidates, residual::GpuEvaluator};
@@ -153,11 +154,7 @@ fn rho_agrees_with_the_cpu_for_every_law(shape: Shape) {
 fn a_rejection_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     require_gpu();
     let problem = demo_problem(&Law::ALL, 21);
-    let config = RejectionConfig {
-        particles: 2_000,
-        eps_min: 0.014,
-        ..Default::default()
-    };
+    let config = RejectionConfig::from(Schedule { particles: 2_000, eps_min: 0.014, ..Schedule::default() });
     let cpu = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
     let gpu_run = rejection::run(&gpu_evaluator(&problem, shape), &config).unwrap();
     assert_eq!(cpu.populations.len(), gpu_run.populations.len());
@@ -595,11 +592,7 @@ fn an_smc_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     require_gpu();
     let problem = demo_problem(&Law::ALL, 21);
     let config = SmcConfig {
-        base: RejectionConfig {
-            particles: 1000,
-            eps_min: 0.009,
-            ..Default::default()
-        },
+        schedule: Schedule { particles: 1000, eps_min: 0.009, ..Schedule::default() },
         ..Default::default()
     };
     let cpu = smc::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
@@ -667,10 +660,7 @@ fn an_smc_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     // weights), so its particles are the CPU's, and its weights within the kernel tolerance.
     let on_gpu = SmcConfig {
         weights_on: WeightsOn::Evaluator,
-        base: RejectionConfig {
-            max_populations: 2,
-            ..config.base.clone()
-        },
+        schedule: Schedule { max_populations: 2, ..config.schedule.clone() },
         ..config
     };
     let g = smc::run(&gpu_evaluator(&problem, shape), &on_gpu).unwrap();

@@ -3,6 +3,7 @@
 
 use bitrock::abc::Silent;
 use bitrock::abc::rejection::RejectionConfig;
+use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::Backend;
 use bitrock::pipeline::{AbcJob, Analysis, RunDir};
@@ -14,11 +15,11 @@ fn job(particles: usize) -> AbcJob {
         config: RunConfig {
             backend: Backend::Cpu,
             seed: 5,
-            sampler: SamplerConfig::Rejection(RejectionConfig {
+            sampler: SamplerConfig::Rejection(RejectionConfig::from(Schedule {
                 particles,
                 eps_min: 0.03,
-                ..RejectionConfig::default()
-            }),
+                ..Schedule::default()
+            })),
             ..RunConfig::default()
         },
         ..AbcJob::default()

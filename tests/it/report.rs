@@ -5,6 +5,7 @@
 
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
+use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, FieldData, demo_field_data};
 use bitrock::eval::AbcProblem;
 use bitrock::eval::cpu::CpuEvaluator;
@@ -15,12 +16,12 @@ use std::path::Path;
 
 /// The demo record (thinned for speed), its fits and one small rejection run per δ.
 fn runs(particles: usize, deltas: &[f64], thin: usize) -> (FieldData, Vec<LawFit>, Vec<ReportRun>) {
-    let config = RejectionConfig {
+    let config = RejectionConfig::from(Schedule {
         particles,
         eps_min: 0.02,
         max_populations: 4,
-        ..RejectionConfig::default()
-    };
+        ..Schedule::default()
+    });
     runs_with(&config, deltas, thin)
 }
 

@@ -8,6 +8,7 @@ use crate::support::{bin, rng};
 use bitrock::Law;
 use bitrock::abc::Silent;
 use bitrock::abc::rejection::RejectionConfig;
+use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, parse_field_data};
 use bitrock::eval::Backend;
 use bitrock::eval::gpu::{self, Shape};
@@ -43,11 +44,11 @@ fn run_dir(
     eps_min: f64,
     prior_file: Option<PathBuf>,
 ) -> PathBuf {
-    let sampler = SamplerConfig::Rejection(RejectionConfig {
+    let sampler = SamplerConfig::Rejection(RejectionConfig::from(Schedule {
         particles,
         eps_min,
-        ..RejectionConfig::default()
-    });
+        ..Schedule::default()
+    }));
     run_dir_with(dir, data, laws, sampler, prior_file)
 }
 
@@ -154,10 +155,10 @@ fn an_smc_run_is_checked_with_smc_for_any_batch() {
     let dir = tempfile::tempdir().unwrap();
     let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
     let sampler = SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
-        base: RejectionConfig {
+        schedule: Schedule {
             particles: 200,
             eps_min: 1e-3,
-            ..RejectionConfig::default()
+            ..Schedule::default()
         },
         ..Default::default()
     });

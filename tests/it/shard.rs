@@ -3,6 +3,7 @@
 
 use crate::support::paper_m2_problem;
 use bitrock::abc::rejection::{self, Mode, RejectionConfig};
+use bitrock::abc::schedule::Schedule;
 use bitrock::abc::shard::wire::{self, Exchanged, Payloads, Reply, Request};
 use bitrock::abc::shard::{self, Remote, Task, Transport};
 use bitrock::abc::smc::{self, SmcConfig};
@@ -100,12 +101,14 @@ fn assert_same_run(a: &Run, b: &Run) {
 
 fn base(particles: usize, mode: Mode) -> RejectionConfig {
     RejectionConfig {
-        particles,
-        eps_min: 0.0,
-        max_populations: 5,
+        schedule: Schedule {
+            particles,
+            eps_min: 0.0,
+            max_populations: 5,
+            max_batch: 20_000,
+            ..Schedule::default()
+        },
         mode,
-        max_batch: 20_000,
-        ..RejectionConfig::default()
     }
 }
 
@@ -139,7 +142,7 @@ fn rejection_through_scrambling_workers_is_the_single_process_run() {
 fn smc_through_scrambling_workers_is_the_single_process_run() {
     let (problem, _) = paper_m2_problem(32);
     let config = SmcConfig {
-        base: base(1500, Mode::Nested),
+        schedule: base(1500, Mode::Nested).schedule,
         ..SmcConfig::default()
     };
     let here = smc::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
@@ -219,7 +222,7 @@ fn several_evaluators_in_one_process_give_the_one_evaluator_run() {
     let (problem, _) = paper_m2_problem(34);
     let rejection = base(6000, Mode::Nested);
     let smc = SmcConfig {
-        base: base(1500, Mode::Nested),
+        schedule: base(1500, Mode::Nested).schedule,
         ..SmcConfig::default()
     };
     let three = || shard::Several((0..3).map(|_| CpuEvaluator::new(problem.clone())).collect::<Vec<_>>());

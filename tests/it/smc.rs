@@ -4,6 +4,7 @@
 use crate::support::paper_m2_problem;
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
+use bitrock::abc::schedule::Schedule;
 use bitrock::abc::smc::{self, LawProposal, Perturbation, Refill, SmcConfig, WORTH_FLOOR};
 use bitrock::abc::{Observer, Population, Run, StopReason, effective_sample_size};
 use bitrock::data::{DataOptions, Samples, demo_field_data};
@@ -64,11 +65,11 @@ fn ess(p: &Population) -> f64 {
 
 fn smc_config(particles: usize, epsilons: Option<Vec<f64>>, eps_min: f64) -> SmcConfig {
     SmcConfig {
-        base: RejectionConfig {
+        schedule: Schedule {
             particles,
             eps_min,
             epsilons,
-            ..Default::default()
+            ..Schedule::default()
         },
         ..Default::default()
     }
@@ -103,7 +104,11 @@ fn smc_samples_the_closed_form_posterior_and_agrees_with_rejection() {
     // ε falls fourfold per population (the width of the accepted set halves) to 6.1e-5,
     // where a prior draw is accepted with probability √ε = 0.8 %.
     let schedule: Vec<f64> = (1..=7).map(|g| 0.25f64.powi(g)).collect();
-    let rej = rejection::run(&evaluator, &smc_config(4000, Some(schedule.clone()), 0.0).base).unwrap();
+    let rej = rejection::run(
+        &evaluator,
+        &smc_config(4000, Some(schedule.clone()), 0.0).schedule.into(),
+    )
+    .unwrap();
     for scheme in SCHEMES {
         closed_form_and_rejection_agree(&evaluator, &rej, scheme, &schedule);
     }
@@ -185,7 +190,7 @@ fn smc_populations_do_not_depend_on_threads_or_batch_size() {
         let config = with_scheme(&smc_config(500, None, rho * 1.5), scheme);
         let a = single.install(|| smc::run(&evaluator, &config)).unwrap();
         let mut small = config.clone();
-        small.base.max_batch = 300;
+        small.schedule.max_batch = 300;
         let b = double.install(|| smc::run(&evaluator, &small)).unwrap();
         assert_eq!(a.stop, StopReason::EpsMin, "{scheme:?}");
         assert!(a.populations.len() >= 4, "{scheme:?}: {}", a.populations.len());
@@ -220,7 +225,7 @@ fn continuing_equals_uninterrupted(evaluator: &CpuEvaluator, config: &SmcConfig)
     assert!(whole.populations.len() >= 4);
     for cut in [1, 3] {
         let mut limited = config.clone();
-        limited.base.max_populations = cut;
+        limited.schedule.max_populations = cut;
         let first = smc::run(evaluator, &limited).unwrap();
         assert_eq!((first.populations.len(), first.stop), (cut, StopReason::MaxPopulations));
         let rest = smc::run_observed(evaluator, config, first.populations, &mut Keep::default()).unwrap();
@@ -298,11 +303,11 @@ fn on_the_embedded_record_both_samplers_give_the_same_law_probabilities() {
     // The rejection run's median schedule, given to both: the same ε in every population.
     let rej = rejection::run(
         &evaluator,
-        &RejectionConfig {
+        &RejectionConfig::from(Schedule {
             particles: n,
             eps_min: 0.02,
-            ..Default::default()
-        },
+            ..Schedule::default()
+        }),
     )
     .unwrap();
     let schedule: Vec<f64> = rej.populations[1..].iter().map(|p| p.record.epsilon.unwrap()).collect();

@@ -4,6 +4,7 @@
 
 use crate::support::bin;
 use bitrock::abc::rejection::RejectionConfig;
+use bitrock::abc::schedule::Schedule;
 use bitrock::abc::{Population, Silent, StopReason};
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::Backend;
@@ -24,12 +25,12 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
         backend: Backend::Cpu,
         devices: Default::default(),
         gpu_shape: None,
-        sampler: SamplerConfig::Rejection(RejectionConfig {
+        sampler: SamplerConfig::Rejection(RejectionConfig::from(Schedule {
             particles,
             max_populations,
             eps_min,
-            ..RejectionConfig::default()
-        }),
+            ..Schedule::default()
+        })),
         eps_min_from_record: false,
     }
 }
@@ -171,7 +172,7 @@ fn smc(config: RunConfig) -> RunConfig {
     };
     RunConfig {
         sampler: SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
-            base,
+            schedule: base.schedule,
             ..Default::default()
         }),
         ..config
@@ -230,7 +231,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
     // After the stored populations, the median rule with the new floor.
     for g in n..continued.run.populations.len() {
         let previous = &populations[g - 1];
-        let expected = bitrock::abc::rejection::median_rho(&previous.particles).max(0.016);
+        let expected = bitrock::abc::schedule::median_rho(&previous.particles).max(0.016);
         let eps = continued.run.populations[g].record.epsilon.unwrap();
         assert_eq!(eps.to_bits(), expected.to_bits(), "population {g}");
     }
@@ -345,7 +346,7 @@ fn a_wall_time_stop_is_continued_without_the_old_budget() {
     let mut budgeted = config(500, 4, 0.0);
     if let SamplerConfig::Rejection(c) = &mut budgeted.sampler {
         // Spent before the first batch: the run stops with nothing stored.
-        c.max_seconds = Some(1e-9);
+        c.schedule.max_seconds = Some(1e-9);
     }
     let first = start(&run_dir, budgeted);
     assert_eq!(first.run.stop, StopReason::WallTime);
