@@ -14,6 +14,7 @@ pub mod rejection;
 pub mod schedule;
 pub mod shard;
 pub mod smc;
+pub mod worker;
 
 use crate::error::Result;
 use crate::eval::AbcProblem;

@@ -14,29 +14,30 @@
 //! Three kinds of task:
 //! - [`Task::Scan`]: a range of the prior's candidate stream (rejection, and SMC's
 //!   population 0);
-//! - [`Task::Propose`]: a range of SMC proposals, made on the worker from the round's
-//!   [`Context`] (the previous population), so that proposals are never shipped;
-//! - [`Task::Weigh`]: SMC's log importance weights of a range of the new population's
-//!   particles against the whole previous population, the O(N²) kernel-density sums.
+//! - [`Task::Propose`]: a range of proposals, made on the worker from the round's
+//!   [`Proposal`] (for SMC, the previous population and its kernels), so that proposals are
+//!   never shipped;
+//! - [`Task::Weigh`]: the log importance weights of a range of the new population's
+//!   particles against the round's [`Proposal`] (for SMC, the O(N²) kernel-density sums).
+//!
+//! The task layer knows no sampler: a sampler that proposes implements [`Proposal`], and the
+//! worker side ([`super::worker`]) names the samplers whose proposals it can rebuild.
 //!
 //! One process runs every task itself ([`Local`]): the single-process path and a distributed
 //! run go through the same planner ([`split`]) and merge. [`wire`] turns tasks, problems and
-//! contexts into bytes and back, and [`serve`] answers a request on a worker process, keeping
-//! the problem (record, prior, seed), its evaluator (one GPU context and its pipelines per
-//! process) and the context between tasks, so that each is shipped once per worker.
+//! proposals into bytes and back; [`super::worker::serve`] answers a request on a worker
+//! process.
 
 use super::Particle;
-use super::smc::{Kernels, SmcConfig};
 use crate::error::{Error, Result};
 use crate::eval::gpu::{Shape, tune::ShapeWish};
 use crate::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
 
 pub mod wire;
 
-pub use wire::{Remote, Transport, serve};
+pub use wire::{Remote, Transport};
 
 /// True when a task returns a candidate of misfit `rho` at tolerance `epsilon`: below ε, or
 /// within twice the parity tolerance above it. That holds every candidate the acceptance rule
@@ -94,39 +95,40 @@ pub enum Output {
     LogWeights { first: usize, values: Vec<f64> },
 }
 
-/// An SMC population's proposal distribution: the previous population and the kernel
-/// settings, with the kernels built from them once.
-pub struct Context {
-    /// The tolerance of the population being drawn.
-    pub(crate) epsilon: f64,
-    pub(crate) particles: Vec<Particle>,
-    pub(crate) config: SmcConfig,
-    pub(crate) kernels: Kernels,
+/// A population's proposal distribution, built by its sampler from the previous population:
+/// what [`Task::Propose`] and [`Task::Weigh`] run with. Proposals are a pure function of the
+/// proposal, the seed, the stream and the index, so a worker elsewhere rebuilt from
+/// [`Proposal::encode`] makes the very same ones.
+pub trait Proposal: Send + Sync {
+    /// Makes proposals `indexes` of `stream`, scores those inside the prior box with
+    /// `evaluator`, and keeps those [`kept`] at `epsilon`.
+    fn propose_and_score(
+        &self,
+        evaluator: &dyn Evaluator,
+        stream: u32,
+        indexes: std::ops::Range<u64>,
+        epsilon: f64,
+    ) -> Result<Proposed>;
+    /// The log importance weights (unnormalised) of `particles`.
+    fn log_weights(&self, evaluator: &dyn Evaluator, particles: &[Particle]) -> Result<Vec<f64>>;
+    /// The sampler's name and the bytes its worker side rebuilds the proposal from.
+    fn encode(&self) -> (&'static str, Vec<u8>);
 }
 
-impl Context {
-    /// The proposal distribution of the population after `particles` (with their weights),
-    /// drawn at `epsilon`.
-    pub fn new(problem: &AbcProblem, particles: Vec<Particle>, config: SmcConfig, epsilon: f64) -> Result<Self> {
-        // A law is out of reach only when its best least-squares ρ is above ε by more than the
-        // margin a GPU's f32 ρ may differ by (as `kept` keeps candidates).
-        let kernels = Kernels::new(&problem.prior, &particles, &config, epsilon, &|law| {
-            problem.can_reach(law, epsilon * (1.0 + 2.0 * PARITY_TOLERANCE))
-        })?;
-        Ok(Self {
-            epsilon,
-            particles,
-            config,
-            kernels,
-        })
-    }
+/// A range of proposals, scored: how many were inside the prior box and scored, the (index,
+/// ρ) of those kept, and every proposal's law slot.
+pub struct Proposed {
+    pub scored: u64,
+    pub kept: Vec<(u64, f64)>,
+    pub slots: Vec<u8>,
 }
 
-/// A round of a population: its tasks and, for SMC, the context they need.
+/// A round of a population: its tasks and, for proposals and weights, the proposal
+/// distribution they need.
 pub struct Round<'a> {
     /// The population the round belongs to.
     pub population: usize,
-    pub context: Option<&'a Arc<Context>>,
+    pub context: Option<&'a dyn Proposal>,
     pub tasks: Vec<Task>,
 }
 
@@ -191,11 +193,11 @@ where
     }
 
     fn run(&self, round: &Round) -> Result<Vec<Output>> {
-        let context = round.context.map(Arc::as_ref);
+        let evaluator: &E::Target = &self.0;
         round
             .tasks
             .iter()
-            .map(|task| execute(&*self.0, context, task))
+            .map(|task| execute(&evaluator, round.context, task))
             .collect()
     }
 }
@@ -223,7 +225,7 @@ impl<E: Evaluator> Workers for Several<E> {
     }
 
     fn run(&self, round: &Round) -> Result<Vec<Output>> {
-        let context = round.context.map(Arc::as_ref);
+        let context = round.context;
         let n = self.0.len();
         std::thread::scope(|scope| {
             let shares: Vec<_> = self
@@ -295,9 +297,9 @@ pub fn here(
 }
 
 /// Runs one task with `evaluator`: what every worker does, here or elsewhere.
-pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>, task: &Task) -> Result<Output> {
+pub fn execute(evaluator: &dyn Evaluator, context: Option<&dyn Proposal>, task: &Task) -> Result<Output> {
     let needs_context =
-        || context.ok_or_else(|| Error::Numerical("an SMC task arrived without its population's context".into()));
+        || context.ok_or_else(|| Error::Numerical("a proposal task arrived without its population's proposal".into()));
     match *task {
         Task::Scan {
             stream,
@@ -330,14 +332,8 @@ pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>,
             len,
             epsilon,
         } => {
-            let context = needs_context()?;
-            let super::smc::Proposed { scored, kept, slots } = context.kernels.propose_and_score(
-                evaluator,
-                &context.particles,
-                stream,
-                start..start + len,
-                epsilon,
-            )?;
+            let Proposed { scored, kept, slots } =
+                needs_context()?.propose_and_score(evaluator, stream, start..start + len, epsilon)?;
             let (slots, prefix) = slot_counts(evaluator.problem().prior.boxes.len(), start, &slots, &kept);
             Ok(Output::Found {
                 start,
@@ -349,10 +345,7 @@ pub fn execute(evaluator: &(impl Evaluator + ?Sized), context: Option<&Context>,
             })
         }
         Task::Weigh { first, ref particles } => {
-            let context = needs_context()?;
-            let values = context
-                .kernels
-                .log_weights(evaluator, &context.config, &context.particles, particles)?;
+            let values = needs_context()?.log_weights(evaluator, particles)?;
             Ok(Output::LogWeights { first, values })
         }
     }

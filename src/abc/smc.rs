@@ -81,10 +81,10 @@
 use super::fill::{Filling, Spent};
 use super::rejection::{self, Mode, RejectionConfig};
 use super::schedule::{Schedule, next_epsilon};
-use super::shard::{self, Context, Found, Local, Round, Task, Workers};
+use super::shard::{self, Found, Local, Proposal, Proposed, Round, Task, Workers};
 use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
-use crate::eval::{AbcProblem, Evaluator, KernelSums};
+use crate::eval::{AbcProblem, Evaluator, KernelSums, PARITY_TOLERANCE};
 use crate::laws::MAX_PARAMS;
 use crate::numerics::compensated_sum;
 use crate::prior::{Candidate, Prior};
@@ -486,14 +486,6 @@ impl LawKernel {
         }
         y
     }
-}
-
-/// A range of proposals, scored: how many were inside the prior box and scored, the (index,
-/// ρ) of those kept, and every proposal's law slot.
-pub(crate) struct Proposed {
-    pub scored: u64,
-    pub kept: Vec<(u64, f64)>,
-    pub slots: Vec<u8>,
 }
 
 /// Whether `population` is thin ([`super::is_thin`]).
@@ -907,6 +899,86 @@ fn combine_survivors(mut survivors: Vec<Particle>, new: Vec<f64>) -> (Vec<Partic
     (survivors, weights)
 }
 
+/// An SMC population's proposal distribution: the previous population and the kernel
+/// settings, with the kernels built from them once.
+pub struct Context {
+    /// The tolerance of the population being drawn.
+    epsilon: f64,
+    particles: Vec<Particle>,
+    config: SmcConfig,
+    kernels: Kernels,
+}
+
+/// The name workers know SMC's proposals by ([`super::worker`]).
+pub const SAMPLER: &str = "smc";
+
+impl Context {
+    /// The proposal distribution of the population after `particles` (with their weights),
+    /// drawn at `epsilon`.
+    pub fn new(problem: &AbcProblem, particles: Vec<Particle>, config: SmcConfig, epsilon: f64) -> Result<Self> {
+        // A law is out of reach only when its best least-squares ρ is above ε by more than the
+        // margin a GPU's f32 ρ may differ by (as `kept` keeps candidates).
+        let kernels = Kernels::new(&problem.prior, &particles, &config, epsilon, &|law| {
+            problem.can_reach(law, epsilon * (1.0 + 2.0 * PARITY_TOLERANCE))
+        })?;
+        Ok(Self {
+            epsilon,
+            particles,
+            config,
+            kernels,
+        })
+    }
+
+    /// The proposal [`Proposal::encode`] wrote, for `problem`.
+    pub fn decode(problem: &AbcProblem, bytes: &[u8]) -> Result<Self> {
+        let payload: Payload = shard::wire::decode(bytes, "SMC proposal")?;
+        Self::new(problem, payload.particles, payload.config, payload.epsilon)
+    }
+}
+
+/// What a worker rebuilds a [`Context`] from: the previous population and the kernel settings.
+#[derive(Serialize, Deserialize)]
+struct Payload {
+    particles: Vec<Particle>,
+    config: SmcConfig,
+    epsilon: f64,
+}
+
+/// [`Payload`] borrowed, for encoding without a copy.
+#[derive(Serialize)]
+struct PayloadRef<'a> {
+    particles: &'a [Particle],
+    config: &'a SmcConfig,
+    epsilon: f64,
+}
+
+impl Proposal for Context {
+    fn propose_and_score(
+        &self,
+        evaluator: &dyn Evaluator,
+        stream: u32,
+        indexes: std::ops::Range<u64>,
+        epsilon: f64,
+    ) -> Result<Proposed> {
+        self.kernels
+            .propose_and_score(evaluator, &self.particles, stream, indexes, epsilon)
+    }
+
+    fn log_weights(&self, evaluator: &dyn Evaluator, particles: &[Particle]) -> Result<Vec<f64>> {
+        self.kernels
+            .log_weights(evaluator, &self.config, &self.particles, particles)
+    }
+
+    fn encode(&self) -> (&'static str, Vec<u8>) {
+        let payload = PayloadRef {
+            particles: &self.particles,
+            config: &self.config,
+            epsilon: self.epsilon,
+        };
+        (SAMPLER, shard::wire::encode(&payload))
+    }
+}
+
 /// Runs ABC-SMC with `evaluator` (which fixes prior, seed and data).
 pub fn run(evaluator: &dyn Evaluator, config: &SmcConfig) -> Result<Run> {
     run_observed(evaluator, config, Vec::new(), &mut Silent)
@@ -962,7 +1034,7 @@ fn accept_found(problem: &AbcProblem, fill: &mut Filling, context: &Context, fou
 fn weigh(workers: &dyn Workers, population: usize, context: &Arc<Context>, particles: &[Particle]) -> Result<Vec<f64>> {
     let round = Round {
         population,
-        context: Some(context),
+        context: Some(context.as_ref()),
         tasks: shard::split(0, particles.len() as u64, workers.parallelism())
             .into_iter()
             .map(|(first, len)| Task::Weigh {
@@ -1071,7 +1143,7 @@ pub fn run_on(
                 .min(budget);
             let round = Round {
                 population: t,
-                context: Some(&context),
+                context: Some(context.as_ref()),
                 tasks: shard::split(fill.position, size, workers.parallelism())
                     .into_iter()
                     .map(|(start, len)| Task::Propose {

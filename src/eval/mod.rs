@@ -126,6 +126,34 @@ pub trait Evaluator: Send + Sync {
     }
 }
 
+/// A borrowed evaluator is an evaluator: code generic over owners (`Box`, `Arc`, `&`) hands
+/// any of them on as `&dyn Evaluator`.
+impl<T: Evaluator + ?Sized> Evaluator for &T {
+    fn backend(&self) -> &'static str {
+        (**self).backend()
+    }
+
+    fn problem(&self) -> &AbcProblem {
+        (**self).problem()
+    }
+
+    fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()> {
+        (**self).score(population, start, out)
+    }
+
+    fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
+        (**self).score_params(candidates, out)
+    }
+
+    fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {
+        (**self).kernel_sums(sums, out)
+    }
+
+    fn gpu_shape(&self) -> Option<gpu::Shape> {
+        (**self).gpu_shape()
+    }
+}
+
 /// Which evaluator computes ρ.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]

@@ -189,3 +189,94 @@ fn the_readme_layout_table_matches_the_layers() {
     }
     assert!(misplaced.is_empty(), "modules not in their README row: {misplaced:?}");
 }
+
+/// Inside a room (a folder of the library), module → the sibling modules it refers to:
+/// `super::x` and `super::{x, …}` in a file of the folder, and `crate::room::x` anywhere in it.
+/// The room's own file (`mod.rs`, or `shard.rs` for `shard/`) is its front door (shared types,
+/// re-exports) and not a sibling.
+fn sibling_imports() -> BTreeMap<String, BTreeMap<String, BTreeSet<String>>> {
+    let mut rooms: BTreeMap<String, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
+    let files = library_files();
+    for (rel, _) in &files {
+        if let Some((room, file)) = rel.rsplit_once('/')
+            && file != "mod.rs"
+        {
+            let name = file.trim_end_matches(".rs").to_string();
+            rooms.entry(room.to_string()).or_default().entry(name).or_default();
+        }
+    }
+    // A sub-folder is a sibling too (`abc/shard/` is `shard`).
+    let folders: Vec<String> = rooms.keys().cloned().collect();
+    for folder in folders {
+        if let Some((room, name)) = folder.rsplit_once('/') {
+            rooms
+                .entry(room.to_string())
+                .or_default()
+                .entry(name.to_string())
+                .or_default();
+        }
+    }
+    let path_name = |text: &str| -> Vec<String> {
+        // After `super::`: one name, or a `{…}` group's first segments.
+        if let Some(group) = text.strip_prefix('{') {
+            let inner = &group[..group.find('}').unwrap_or(group.len())];
+            inner
+                .split(',')
+                .map(|s| s.trim().split("::").next().unwrap().trim().to_string())
+                .collect()
+        } else {
+            vec![
+                text.chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect(),
+            ]
+        }
+    };
+    for (rel, path) in &files {
+        let Some((room, file)) = rel.rsplit_once('/') else {
+            continue;
+        };
+        if file == "mod.rs" {
+            continue;
+        }
+        let me = file.trim_end_matches(".rs").to_string();
+        let text = code(path);
+        let siblings = rooms[room].keys().cloned().collect::<BTreeSet<_>>();
+        let mut refs = BTreeSet::new();
+        for (i, _) in text.match_indices("super::") {
+            refs.extend(path_name(&text[i + 7..]));
+        }
+        let prefix = format!("crate::{}::", room.replace('/', "::"));
+        for (i, _) in text.match_indices(&prefix) {
+            refs.extend(path_name(&text[i + prefix.len()..]));
+        }
+        refs.retain(|r| siblings.contains(r) && *r != me);
+        rooms.get_mut(room).unwrap().insert(me, refs);
+    }
+    rooms
+}
+
+/// No circle between the modules of one room either: a sampler, a kernel's host or a part of a
+/// run can be read, changed and tested from its own file and the ones below it.
+#[test]
+fn no_two_modules_of_a_room_import_each_other() {
+    let mut circles = Vec::new();
+    for (room, imports) in sibling_imports() {
+        for start in imports.keys() {
+            let mut seen = BTreeSet::new();
+            let mut todo: Vec<&String> = imports[start].iter().collect();
+            while let Some(m) = todo.pop() {
+                if seen.insert(m.clone()) {
+                    todo.extend(imports.get(m).into_iter().flatten());
+                }
+            }
+            if seen.contains(start) {
+                circles.push(format!("{room}/{start}"));
+            }
+        }
+    }
+    assert!(
+        circles.is_empty(),
+        "modules on an import circle inside their room: {circles:?}"
+    );
+}

@@ -7,7 +7,7 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::abc::shard::wire::{self, Exchanged, Payloads, Reply, Request};
 use bitrock::abc::shard::{self, Remote, Task, Transport};
 use bitrock::abc::smc::{self, SmcConfig};
-use bitrock::abc::{Run, Silent};
+use bitrock::abc::{Run, Silent, worker};
 use bitrock::eval::Backend;
 use bitrock::eval::cpu::CpuEvaluator;
 use rand::seq::SliceRandom;
@@ -51,17 +51,17 @@ impl Transport for Scrambling {
             .map(|&(i, lose)| {
                 if lose {
                     // The worker ran it, the reply never came: the task runs again.
-                    let _ = shard::serve(&requests[i], Some(payloads.problem), payloads.context);
+                    let _ = worker::serve(&requests[i], Some(payloads.problem), payloads.context);
                     self.lost.fetch_add(1, Ordering::Relaxed);
                 }
-                let mut reply = shard::serve(&requests[i], None, None);
+                let mut reply = worker::serve(&requests[i], None, None);
                 if wire::needs_payloads(&reply) {
                     self.asked.fetch_add(1, Ordering::Relaxed);
                     payload_bytes.fetch_add(
                         (payloads.problem.len() + payloads.context.map_or(0, <[u8]>::len)) as u64,
                         Ordering::Relaxed,
                     );
-                    reply = shard::serve(&requests[i], Some(payloads.problem), payloads.context);
+                    reply = worker::serve(&requests[i], Some(payloads.problem), payloads.context);
                 }
                 (i, reply)
             })
@@ -183,9 +183,9 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
     };
     let payload = wire::encode_problem(&problem);
     let key = wire::key_of(&payload) ^ 0x5eed; // a key this process has never held
-    let missing = shard::serve(&request(wire::build(), key), None, None);
+    let missing = worker::serve(&request(wire::build(), key), None, None);
     assert!(wire::needs_payloads(&missing));
-    let done = shard::serve(&request(wire::build(), key), Some(&payload), None);
+    let done = worker::serve(&request(wire::build(), key), Some(&payload), None);
     match wire::decode::<Reply>(&done, "reply").unwrap() {
         Reply::Done {
             output: shard::Output::Found { kept, scored, .. },
@@ -201,17 +201,17 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
         other => panic!("{other:?}"),
     }
     // Held now: no payload needed.
-    assert!(!wire::needs_payloads(&shard::serve(
+    assert!(!wire::needs_payloads(&worker::serve(
         &request(wire::build(), key),
         None,
         None
     )));
-    let other = shard::serve(&request("0.0.0-other", key), None, None);
+    let other = worker::serve(&request("0.0.0-other", key), None, None);
     match wire::decode::<Reply>(&other, "reply").unwrap() {
         Reply::Failed(m) => assert!(m.contains("0.0.0-other") && m.contains(wire::VERSION), "{m}"),
         r => panic!("{r:?}"),
     }
-    match wire::decode::<Reply>(&shard::serve(b"\xff\xff", None, None), "reply").unwrap() {
+    match wire::decode::<Reply>(&worker::serve(b"\xff\xff", None, None), "reply").unwrap() {
         Reply::Failed(m) => assert!(m.contains("not a bitrock request"), "{m}"),
         r => panic!("{r:?}"),
     }

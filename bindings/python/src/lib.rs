@@ -441,7 +441,7 @@ fn after_remote(cell: OnceLock<Remote<PyTransport>>) -> (Option<String>, Option<
 #[pyfunction]
 #[pyo3(signature = (request, problem=None, context=None))]
 fn serve<'py>(py: Python<'py>, request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Bound<'py, PyBytes> {
-    let reply = py.detach(|| bitrock::abc::shard::serve(request, problem, context));
+    let reply = py.detach(|| bitrock::abc::worker::serve(request, problem, context));
     PyBytes::new(py, &reply)
 }
 

@@ -1,8 +1,9 @@
-//! Tasks as bytes: what a driver sends to a worker process and what comes back, the worker's
-//! side ([`serve`]) and the driver's ([`Remote`], over any [`Transport`]).
+//! Tasks as bytes: what a driver sends to a worker process and what comes back, and the
+//! driver's side ([`Remote`], over any [`Transport`]); the worker's side is
+//! [`crate::abc::worker`].
 //!
-//! A request names its problem (record, prior, seed) and, for SMC tasks, its context (the
-//! previous population) by key, without their contents. A worker that does not hold them
+//! A request names its problem (record, prior, seed) and, for proposal tasks, its proposal
+//! (for SMC, the previous population) by key, without their contents. A worker that does not hold them
 //! yet answers [`Reply::Missing`], and the transport sends the same request again with both
 //! payloads attached; the worker keeps them (and the problem's evaluator: one GPU context and
 //! its pipelines per process) for the tasks that follow. So the record travels once per
@@ -11,12 +12,10 @@
 //! another bitrock version or platform ([`build`]): SMC proposals go through the platform's
 //! `ln`, `sin` and `cos`.
 
-use super::{Context, Output, Round, Task, Workers};
-use crate::abc::Particle;
-use crate::abc::smc::SmcConfig;
+use super::{Output, Round, Task, Workers};
 use crate::error::{Error, Result};
 use crate::eval::gpu::{Shape, tune::ShapeWish};
-use crate::eval::{AbcProblem, Backend, Evaluator};
+use crate::eval::{AbcProblem, Backend};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
 use std::hash::{Hash, Hasher};
@@ -56,7 +55,7 @@ pub fn encode_problem(problem: &AbcProblem) -> Vec<u8> {
 }
 
 /// Reads a problem's payload ([`encode_problem`]), registering its law files' laws.
-fn decode_problem(bytes: &[u8]) -> Result<AbcProblem> {
+pub fn decode_problem(bytes: &[u8]) -> Result<AbcProblem> {
     let (sources, problem): (Vec<String>, Vec<u8>) = decode(bytes, "problem")?;
     for source in sources {
         let file = crate::laws::file::LawFile::parse(&source, std::path::Path::new("law file of the driver"))?;
@@ -64,10 +63,6 @@ fn decode_problem(bytes: &[u8]) -> Result<AbcProblem> {
     }
     decode(&problem, "problem")
 }
-
-/// The environment variable that overrides, on a worker, the backend the driver asked for
-/// (`cpu`, `gpu` or `auto`): a node without a GPU in a pool of GPU nodes, say.
-pub const WORKER_BACKEND_VAR: &str = "BITROCK_WORKER_BACKEND";
 
 /// A task for a worker.
 #[derive(Debug, Serialize, Deserialize)]
@@ -101,14 +96,6 @@ pub enum Reply {
     Failed(String),
 }
 
-/// The context's payload: the previous population and the kernel settings.
-#[derive(Serialize, Deserialize)]
-struct ContextPayload {
-    particles: Vec<Particle>,
-    config: SmcConfig,
-    epsilon: f64,
-}
-
 /// Postcard bytes of `value`.
 pub fn encode<T: Serialize>(value: &T) -> Vec<u8> {
     postcard::to_stdvec(value).expect("bitrock's messages serialise")
@@ -129,125 +116,6 @@ pub fn key_of(bytes: &[u8]) -> u64 {
     let mut h = std::hash::DefaultHasher::new();
     bytes.hash(&mut h);
     h.finish()
-}
-
-/// What a worker's evaluator is made for: the problem's key, the backend and the shape wish.
-type EvaluatorKey = (u64, Backend, ShapeWish);
-
-/// Payloads and evaluators a worker process keeps, the most recently used last.
-#[derive(Default)]
-struct Held {
-    problems: Vec<(u64, Arc<AbcProblem>)>,
-    evaluators: Vec<(EvaluatorKey, Arc<dyn Evaluator>)>,
-    contexts: Vec<((u64, u64), Arc<Context>)>,
-}
-
-/// Problems and contexts a worker keeps at most (older ones are dropped first): several runs
-/// may share a pool of workers.
-const HELD: usize = 4;
-
-fn find<K: PartialEq + Copy, V: Clone>(list: &mut Vec<(K, V)>, key: K) -> Option<V> {
-    let at = list.iter().position(|(k, _)| *k == key)?;
-    let entry = list.remove(at);
-    let value = entry.1.clone();
-    list.push(entry);
-    Some(value)
-}
-
-fn hold<K, V>(list: &mut Vec<(K, V)>, key: K, value: V) {
-    if list.len() >= HELD {
-        list.remove(0);
-    }
-    list.push((key, value));
-}
-
-static HELD_HERE: Mutex<Option<Held>> = Mutex::new(None);
-
-/// Answers one request on a worker: the task's output, or [`Reply::Missing`] when the
-/// problem or context it names is neither held nor attached. Payloads attached are kept for
-/// later requests. Never fails: a failure is a [`Reply::Failed`].
-pub fn serve(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Vec<u8> {
-    encode(&match answer(request, problem, context) {
-        Ok(reply) => reply,
-        Err(e) => Reply::Failed(e.to_string()),
-    })
-}
-
-fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Result<Reply> {
-    let request: Request = decode(request, "request")?;
-    let here = build();
-    if request.version != here {
-        return Err(Error::Worker(format!(
-            "the driver runs bitrock {} and this worker {here}: driver and workers need the same bitrock on the same platform",
-            request.version
-        )));
-    }
-    let backend = match std::env::var(WORKER_BACKEND_VAR) {
-        Ok(name) => worker_backend(&name)?,
-        Err(_) => request.backend,
-    };
-    let (evaluator, context) = {
-        let mut guard = HELD_HERE.lock().unwrap_or_else(|p| p.into_inner());
-        let held = guard.get_or_insert_with(Held::default);
-        if let Some(bytes) = problem
-            && find(&mut held.problems, request.problem).is_none()
-        {
-            let decoded = decode_problem(bytes)?;
-            hold(&mut held.problems, request.problem, Arc::new(decoded));
-        }
-        let Some(the_problem) = find(&mut held.problems, request.problem) else {
-            return Ok(Reply::Missing);
-        };
-        let key = (request.problem, backend, request.shape);
-        let evaluator = match find(&mut held.evaluators, key) {
-            Some(e) => e,
-            None => {
-                let made: Arc<dyn Evaluator> = Arc::from(crate::eval::evaluator(
-                    (*the_problem).clone(),
-                    backend,
-                    request.shape,
-                    &mut |_| {},
-                )?);
-                hold(&mut held.evaluators, key, made.clone());
-                made
-            }
-        };
-        let context = match request.context {
-            None => None,
-            Some(key) => {
-                if let Some(bytes) = context
-                    && find(&mut held.contexts, (request.problem, key)).is_none()
-                {
-                    let payload: ContextPayload = decode(bytes, "context")?;
-                    let made = Context::new(&the_problem, payload.particles, payload.config, payload.epsilon)?;
-                    hold(&mut held.contexts, (request.problem, key), Arc::new(made));
-                }
-                match find(&mut held.contexts, (request.problem, key)) {
-                    Some(c) => Some(c),
-                    None => return Ok(Reply::Missing),
-                }
-            }
-        };
-        (evaluator, context)
-    };
-    let output = super::execute(evaluator.as_ref(), context.as_deref(), &request.task)?;
-    Ok(Reply::Done {
-        output,
-        backend: evaluator.backend().to_string(),
-        shape: evaluator.gpu_shape(),
-    })
-}
-
-fn worker_backend(name: &str) -> Result<Backend> {
-    match name {
-        "cpu" => Ok(Backend::Cpu),
-        "gpu" => Ok(Backend::Gpu),
-        "auto" => Ok(Backend::Auto),
-        other => Err(Error::setting(
-            WORKER_BACKEND_VAR,
-            format!("must be cpu, gpu or auto, got {other:?}"),
-        )),
-    }
 }
 
 /// The payloads a request may need, for a transport to attach when a worker asks, with the
@@ -348,11 +216,7 @@ impl<T: Transport> Remote<T> {
         if let Some(c) = cached.as_ref().filter(|c| c.population == round.population) {
             return Some((c.key, c.bytes.clone()));
         }
-        let bytes = Arc::new(encode(&ContextPayloadRef {
-            particles: &context.particles,
-            config: &context.config,
-            epsilon: context.epsilon,
-        }));
+        let bytes = Arc::new(encode(&context.encode()));
         let key = key_of(&bytes);
         *cached = Some(EncodedContext {
             population: round.population,
@@ -368,14 +232,6 @@ struct EncodedContext {
     population: usize,
     key: u64,
     bytes: Arc<Vec<u8>>,
-}
-
-/// [`ContextPayload`] borrowed, for encoding without a copy.
-#[derive(Serialize)]
-struct ContextPayloadRef<'a> {
-    particles: &'a [Particle],
-    config: &'a SmcConfig,
-    epsilon: f64,
 }
 
 impl<T: Transport> Workers for Remote<T> {

@@ -6,7 +6,7 @@
 //! same shape (set up on first use), and `shaders/kernel_sums.wgsl` computes the SMC weights'
 //! kernel sums (see [`super::kernel_sums`]).
 
-use super::tune::{self, ShapeWish, Source};
+use super::shape::Source;
 use super::{
     GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, STORAGE_WRITE, ScoringBuffers, Shape, UNIFORM,
     buffer_entry, score_dispatch,
@@ -55,42 +55,9 @@ pub struct GpuEvaluator {
 }
 
 impl GpuEvaluator {
-    /// Uploads the data and the prior, on the process's GPU, in the shape measured fastest
-    /// there for dispatches of 65,536 candidates (or `BITROCK_GPU_SHAPE`'s; see [`tune`]).
-    pub fn new(problem: AbcProblem) -> std::result::Result<Self, GpuError> {
-        Self::wished(problem, ShapeWish::default())
-    }
-
-    /// As [`GpuEvaluator::new`], in the shape [`tune::choose`] picks for `wish`.
-    pub fn wished(problem: AbcProblem, wish: ShapeWish) -> std::result::Result<Self, GpuError> {
-        let context = super::context()?;
-        let choice = tune::choose(context, &problem, wish)?;
-        Ok(Self {
-            source: choice.source,
-            ..Self::on(problem, choice.shape, context)?
-        })
-    }
-
     /// As [`GpuEvaluator::new`], scoring in `shape` whatever the adapter (tests, benchmarks).
     pub fn with_shape(problem: AbcProblem, shape: Shape) -> std::result::Result<Self, GpuError> {
         Self::on(problem, shape, super::context()?)
-    }
-
-    /// One evaluator per GPU of the machine ([`super::every_context`]): `devices` all. All
-    /// score in the shape [`tune::choose`] picks on the first, so that the populations do not
-    /// depend on which GPU scored which task.
-    pub fn on_every_gpu(problem: &AbcProblem, wish: ShapeWish) -> std::result::Result<Vec<Self>, GpuError> {
-        let contexts = super::every_context()?;
-        let choice = tune::choose(contexts[0], problem, wish)?;
-        contexts
-            .into_iter()
-            .map(|context| {
-                Ok(Self {
-                    source: choice.source,
-                    ..Self::on(problem.clone(), choice.shape, context)?
-                })
-            })
-            .collect()
     }
 
     /// As [`GpuEvaluator::with_shape`], on the GPU of `context`.
@@ -186,6 +153,11 @@ impl GpuEvaluator {
     /// Where the scoring shape came from.
     pub fn shape_source(&self) -> Source {
         self.source
+    }
+
+    /// The evaluator, its shape said to come from `source` (the choice of [`super::tune`]).
+    pub(super) fn chosen_by(self, source: Source) -> Self {
+        Self { source, ..self }
     }
 
     /// Σ(y − r·T)² (f32, as the kernel returns it) of candidates `start ..` into `out`.

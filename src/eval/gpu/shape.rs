@@ -209,3 +209,39 @@ mod tests {
         );
     }
 }
+
+/// Where a process's scoring shape came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Source {
+    /// `BITROCK_GPU_SHAPE`.
+    Named,
+    /// The run's record (a resumed run, its selection check).
+    Recorded,
+    /// The adapter type's guess (`BITROCK_GPU_TUNING=off`).
+    Guessed,
+    /// The cached measurement of this adapter.
+    Cached,
+    /// Measured now (and cached).
+    Measured,
+    /// Measured now, and the cache could not be written.
+    MeasuredNotKept,
+    /// Given by the caller (tests, benchmarks of one shape).
+    Given,
+}
+
+impl std::fmt::Display for Source {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Source::Named => "named by BITROCK_GPU_SHAPE",
+            Source::Recorded => "recorded by the run",
+            Source::Guessed => "guessed from the adapter type, measuring off",
+            Source::Cached => "measured fastest on this adapter",
+            Source::Measured => "measured fastest on this adapter just now",
+            Source::MeasuredNotKept => {
+                "measured fastest on this adapter just now, not kept: the cache directory (BITROCK_CACHE_DIR) cannot be written, so the next process measures again"
+            }
+            Source::Given => "as asked",
+        })
+    }
+}

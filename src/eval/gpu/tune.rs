@@ -8,6 +8,7 @@
 //! a measurement now.
 
 use super::residual::GpuEvaluator;
+pub use super::shape::Source;
 use super::{GpuContext, GpuError, Shape};
 use crate::eval::AbcProblem;
 use serde::{Deserialize, Serialize};
@@ -144,42 +145,6 @@ impl Tuning {
     }
 }
 
-/// Where a process's scoring shape came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Source {
-    /// `BITROCK_GPU_SHAPE`.
-    Named,
-    /// The run's record (a resumed run, its selection check).
-    Recorded,
-    /// The adapter type's guess (`BITROCK_GPU_TUNING=off`).
-    Guessed,
-    /// The cached measurement of this adapter.
-    Cached,
-    /// Measured now (and cached).
-    Measured,
-    /// Measured now, and the cache could not be written.
-    MeasuredNotKept,
-    /// Given by the caller (tests, benchmarks of one shape).
-    Given,
-}
-
-impl std::fmt::Display for Source {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Source::Named => "named by BITROCK_GPU_SHAPE",
-            Source::Recorded => "recorded by the run",
-            Source::Guessed => "guessed from the adapter type, measuring off",
-            Source::Cached => "measured fastest on this adapter",
-            Source::Measured => "measured fastest on this adapter just now",
-            Source::MeasuredNotKept => {
-                "measured fastest on this adapter just now, not kept: the cache directory (BITROCK_CACHE_DIR) cannot be written, so the next process measures again"
-            }
-            Source::Given => "as asked",
-        })
-    }
-}
-
 /// What a caller knows about the shape it wants: the run's recorded one, and the candidates
 /// per dispatch it expects (the band of a measured table it uses).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -231,6 +196,35 @@ pub fn choose(ctx: &'static GpuContext, problem: &AbcProblem, wish: ShapeWish) -
     }
     let (tuning, source) = tuning(ctx, problem)?;
     Ok(chosen(tuning.shape_for(wish.candidates), source))
+}
+
+/// The evaluators whose shape is chosen here: by measurement, the run's record or the
+/// environment.
+impl GpuEvaluator {
+    /// Uploads the data and the prior, on the process's GPU, in the shape measured fastest
+    /// there for dispatches of 65,536 candidates (or `BITROCK_GPU_SHAPE`'s; see [`crate::eval::gpu::tune`]).
+    pub fn new(problem: AbcProblem) -> std::result::Result<Self, GpuError> {
+        Self::wished(problem, ShapeWish::default())
+    }
+
+    /// As [`GpuEvaluator::new`], in the shape [`choose`] picks for `wish`.
+    pub fn wished(problem: AbcProblem, wish: ShapeWish) -> std::result::Result<Self, GpuError> {
+        let context = super::context()?;
+        let choice = choose(context, &problem, wish)?;
+        Ok(Self::on(problem, choice.shape, context)?.chosen_by(choice.source))
+    }
+
+    /// One evaluator per GPU of the machine ([`super::every_context`]): `devices` all. All
+    /// score in the shape [`choose`] picks on the first, so that the populations do not
+    /// depend on which GPU scored which task.
+    pub fn on_every_gpu(problem: &AbcProblem, wish: ShapeWish) -> std::result::Result<Vec<Self>, GpuError> {
+        let contexts = super::every_context()?;
+        let choice = choose(contexts[0], problem, wish)?;
+        contexts
+            .into_iter()
+            .map(|context| Ok(Self::on(problem.clone(), choice.shape, context)?.chosen_by(choice.source)))
+            .collect()
+    }
 }
 
 /// Whether `BITROCK_GPU_TUNING` lets bitrock measure (unset, `on`) or not (`off`).
