@@ -13,7 +13,7 @@
 
 use bitrock::abc::posterior::{ENVELOPE_LEVEL, predictive_envelope, speed_grid, summarize};
 use bitrock::abc::schedule::median_rho;
-use bitrock::store::RunStore;
+use bitrock::run;
 use std::time::Instant;
 
 fn main() -> anyhow::Result<()> {
@@ -35,7 +35,7 @@ fn main() -> anyhow::Result<()> {
 
     let t = Instant::now();
     cpu_at_start.set(cpu_seconds());
-    let store = RunStore::open(dir)?;
+    let store = run::Store::open(dir)?;
     let stored = store.load_with_last_particles()?;
     time("read the last population back", t);
     let last = stored
@@ -85,7 +85,7 @@ fn main() -> anyhow::Result<()> {
     let stored = store.load()?;
     time("read every population back", t);
     let scratch = tempfile::tempdir_in(dir.parent().unwrap_or(dir))?;
-    let mut copy = RunStore::create(scratch.path(), &stored.setup)?;
+    let mut copy = run::Store::create(scratch.path(), &stored.setup)?;
     let mut previous = None;
     for p in &stored.populations {
         let t = Instant::now();

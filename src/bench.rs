@@ -767,8 +767,8 @@ fn selection_check(
     reps: usize,
     log: &mut dyn FnMut(String),
 ) -> Result<SelectionBench> {
-    use crate::pipeline::{AbcJob, RunDir};
-    use crate::run::{RunConfig, SamplerConfig};
+    use crate::pipeline::AbcJob;
+    use crate::run::{self, SamplerConfig};
     use crate::selection::{CheckOptions, CheckedRun};
     let dir =
         tempfile::tempdir().map_err(|source| crate::error::Error::output("TMPDIR", &std::env::temp_dir(), source))?;
@@ -777,11 +777,11 @@ fn selection_check(
         particles,
         ..Schedule::default()
     });
-    let config = RunConfig {
+    let config = run::Config {
         backend,
         sampler: SamplerConfig::Rejection(sampler),
         eps_min_from_record: true,
-        ..RunConfig::default()
+        ..run::Config::default()
     };
     let laws = config.laws.len();
     let data = record.field_data()?;
@@ -789,7 +789,7 @@ fn selection_check(
     AbcJob {
         config,
         summary_population: None,
-        out: Some(RunDir {
+        out: Some(run::Dir {
             path: run_dir.clone(),
             replace: false,
         }),
@@ -1068,7 +1068,7 @@ pub fn parity_on(
         return Err(Error::setting("epsilon", format!("must be a positive number, got {e}")));
     }
     let fits = fit_record(laws, data, &FitOptions::default())?;
-    let delta = crate::run::RunConfig::default().delta;
+    let delta = crate::run::Config::default().delta;
     let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).map_err(|e| {
         // Parity has no δ or prior file of its own: the record is what the prior cannot be built from.
         Error::Data {

@@ -10,7 +10,7 @@ use crate::abc::{Population, PopulationRecord, Run};
 use crate::data::FieldData;
 use crate::fit::LawFit;
 use crate::prior::Prior;
-use crate::store::RunSetup;
+use crate::run;
 use crate::units::TorqueUnit;
 use serde_json::{Value, json};
 
@@ -254,7 +254,7 @@ fn population_with_particles_json(population: &Population, unit: TorqueUnit) -> 
 
 /// A stored run as JSON (`export --format json`): configuration, data summary, fits, prior,
 /// and `populations` with their particles.
-pub fn export_json(setup: &RunSetup, populations: &[&Population]) -> Value {
+pub fn export_json(setup: &run::Setup, populations: &[&Population]) -> Value {
     let unit = setup.data.torque_unit;
     let fits = fit_json(&setup.data, &setup.fits);
     json!({

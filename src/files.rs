@@ -196,19 +196,6 @@ fn set_blocking(_file: &File) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Writes the user's output file `target` (named by `flag`) whole or not at all: checked by
-/// [`check_output_file`] (a symbolic link is written through; `force` replaces a file bitrock
-/// did not write), then [`write_own`].
-pub fn write_whole(
-    target: &Path,
-    field: &str,
-    force: bool,
-    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
-) -> Result<()> {
-    check_output_file(target, field, force)?;
-    write_own(&output_target(target), field, write)
-}
-
 /// Writes `target`, a file of a directory bitrock manages (a run's summary files, a staged
 /// report), whole or not at all: `write` fills a temporary beside it, which replaces `target`
 /// only when everything was written. Stale temporaries of bitrock's in that directory are
@@ -355,88 +342,6 @@ mod xattr {
     }
 }
 
-/// Refuses, naming `flag`, an output file that cannot be written or is not bitrock's to
-/// replace: a directory, a dangling symbolic link, a path in a directory that does not exist,
-/// one of bitrock's own lock or temporary files, any file inside a run directory (a run
-/// keeps to its own files, its store above all), and, unless `force`, an existing file that
-/// is not bitrock's own unchanged output ([`authorship`]). A symbolic link is written through:
-/// the file it points to is the target, checked by the same rule ([`output_target`]).
-pub fn check_output_file(target: &Path, field: &str, force: bool) -> Result<()> {
-    check_not_dangling(target, field)?;
-    let real = output_target(target);
-    if real.is_dir() {
-        return Err(Error::setting(
-            field,
-            format!("{} is a directory; give a file name", target.display()),
-        ));
-    }
-    let dir = parent_dir(&real);
-    if !dir.is_dir() {
-        return Err(Error::setting(
-            field,
-            format!("{}: the directory {} does not exist", target.display(), dir.display()),
-        ));
-    }
-    if is_run_store(&real) {
-        return Err(Error::setting(
-            field,
-            format!(
-                "{} is a run's store ({}); it is never overwritten: give another file",
-                target.display(),
-                crate::rundir::STORE_FILE
-            ),
-        ));
-    }
-    if real
-        .file_name()
-        .and_then(|n| n.to_str())
-        .is_some_and(is_bitrock_scratch)
-    {
-        return Err(Error::setting(
-            field,
-            format!(
-                "{} is one of bitrock's lock or temporary files; give another file",
-                target.display()
-            ),
-        ));
-    }
-    refuse_inside_run(&real, field)?;
-    if force || !real.exists() {
-        return Ok(());
-    }
-    let why = match authorship(&real) {
-        Authorship::Own => return Ok(()),
-        Authorship::Changed => "was written by bitrock but changed since",
-        Authorship::Unmarked => "is not a file bitrock wrote",
-        Authorship::Unknowable => {
-            "lies on a file system that keeps no extended attributes, so bitrock cannot tell whether it wrote it"
-        }
-    };
-    Err(Error::setting(
-        field,
-        format!(
-            "{} exists and {why}; it is not replaced: give another file, or pass `force` to replace it",
-            target.display()
-        ),
-    ))
-}
-
-/// Refuses, naming `flag`, an output path inside a run directory (at any depth, a run's
-/// `selection/` included): a run holds only what bitrock writes there.
-pub fn refuse_inside_run(path: &Path, field: &str) -> Result<()> {
-    match enclosing_run_dir(path) {
-        Some(run) => Err(Error::setting(
-            field,
-            format!(
-                "{} lies inside the run directory {}, which holds only what bitrock writes there; write it outside the run",
-                path.display(),
-                run.display()
-            ),
-        )),
-        None => Ok(()),
-    }
-}
-
 /// The file an output path names: the path itself, or where a symbolic link leads (a link is
 /// written through, not replaced by a file).
 pub fn output_target(target: &Path) -> PathBuf {
@@ -445,44 +350,6 @@ pub fn output_target(target: &Path) -> PathBuf {
         return real;
     }
     target.to_path_buf()
-}
-
-/// The run directory `path` lies in, at any depth (a run's `selection/` included), if any;
-/// `path` itself is not inside itself. A path that does not exist yet is judged by the
-/// nearest directory above it that does.
-fn enclosing_run_dir(path: &Path) -> Option<PathBuf> {
-    let absolute = std::path::absolute(path).ok()?;
-    let mut above = absolute.parent();
-    while let Some(dir) = above {
-        if let Ok(real) = dir.canonicalize() {
-            return real
-                .ancestors()
-                .find(|d| crate::rundir::is_run_dir(d))
-                .map(Path::to_path_buf);
-        }
-        above = dir.parent();
-    }
-    None
-}
-
-/// What bitrock owns in a directory of kind `owned` ([`crate::rundir::Owned::owns`]), and for
-/// the files it writes whole there, their mark: a report's files only while their mark matches
-/// (a `report.md` the user wrote or edited is the user's); a selection check's unless changed
-/// since bitrock wrote them (its five names inside a run are bitrock's, and checks written
-/// before marks existed stay replaceable). `dir` is the directory `rel` is relative to. A run's
-/// files are judged by name (its store is what makes it a run).
-pub fn owns_unchanged(owned: crate::rundir::Owned, dir: &Path, rel: &Path, is_dir: bool) -> bool {
-    use crate::rundir::Owned;
-    if !owned.owns(rel, is_dir) {
-        return false;
-    }
-    if is_dir || owned == Owned::Run {
-        return true;
-    }
-    matches!(
-        (owned, authorship(&dir.join(rel))),
-        (_, Authorship::Own | Authorship::Unknowable) | (Owned::Selection, Authorship::Unmarked)
-    )
 }
 
 /// Everything under `dir` that bitrock did not write, judged by `owned` (relative path,
@@ -593,7 +460,7 @@ pub fn check_output_dir(dir: &Path, field: &str) -> Result<()> {
     Ok(())
 }
 
-fn check_not_dangling(path: &Path, field: &str) -> Result<()> {
+pub fn check_not_dangling(path: &Path, field: &str) -> Result<()> {
     let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
     if is_link && !path.exists() {
         let to = std::fs::read_link(path).unwrap_or_default();
@@ -607,18 +474,6 @@ fn check_not_dangling(path: &Path, field: &str) -> Result<()> {
         ));
     }
     Ok(())
-}
-
-/// True when `path` is an existing run store: named like one and holding an SQLite database.
-fn is_run_store(path: &Path) -> bool {
-    let Ok(real) = path.canonicalize() else {
-        return false;
-    };
-    let mut magic = [0u8; 16];
-    real.file_name().is_some_and(|n| n == crate::rundir::STORE_FILE)
-        && File::open(&real)
-            .and_then(|mut f| f.read_exact(&mut magic))
-            .is_ok_and(|()| &magic == b"SQLite format 3\0")
 }
 
 /// Removes bitrock's stale temporaries and staging directories in `dir`: those no process

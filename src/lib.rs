@@ -14,25 +14,28 @@
 //!
 //! ```
 //! use bitrock::abc::Silent;
-//! use bitrock::abc::rejection::RejectionConfig;
+//! use bitrock::abc::schedule::Schedule;
 //! use bitrock::data::{DataOptions, demo_field_data};
 //! use bitrock::eval::Backend;
 //! use bitrock::pipeline::AbcJob;
-//! use bitrock::run::{RunConfig, SamplerConfig};
+//! use bitrock::run::{self, SamplerConfig};
 //!
 //! # fn main() -> bitrock::Result<()> {
 //! let data = demo_field_data(&DataOptions::default())?;
 //! let job = AbcJob {
-//!     config: RunConfig {
+//!     config: run::Config {
 //!         backend: Backend::Cpu,
-//!         sampler: SamplerConfig::Rejection(RejectionConfig {
-//!             particles: 200,
-//!             eps_min: 0.05,
-//!             ..RejectionConfig::default()
-//!         }),
-//!         ..RunConfig::default()
+//!         sampler: SamplerConfig::Rejection(
+//!             Schedule {
+//!                 particles: 200,
+//!                 eps_min: 0.05,
+//!                 ..Schedule::default()
+//!             }
+//!             .into(),
+//!         ),
+//!         ..run::Config::default()
 //!     },
-//!     ..AbcJob::default() // in memory; `out: Some(RunDir { .. })` writes the run directory
+//!     ..AbcJob::default() // in memory; `out: Some(run::Dir { .. })` writes the run directory
 //! };
 //! // `Silent` watches nothing; an `Observer` of your own hears progress, populations and notes.
 //! let analysis = job.run(data, &mut Silent)?;
@@ -52,9 +55,9 @@
 //! | the laws and their least-squares fits | [`Law`], [`fit::fit_record`] → [`fit::LawFit`] |
 //! | the prior | [`prior::Prior`] (boxes around the fits, or a [`prior::PriorFile`]) |
 //! | scoring candidates | the [`eval::Evaluator`] trait, made by [`eval::evaluator`] for a [`eval::Backend`] |
-//! | the samplers | [`abc::rejection`], [`abc::smc`]; a run's [`abc::Population`]s, watched by an [`abc::Observer`] |
+//! | the samplers | [`abc::rejection`], [`abc::smc`], the schedule they share ([`abc::schedule`]); a run's [`abc::Population`]s, watched by an [`abc::Observer`] |
 //! | a whole run | [`pipeline::AbcJob`] → [`pipeline::Analysis`] ([`abc::posterior::PosteriorSummary`], envelopes); [`pipeline::resume`] |
-//! | a run directory | [`run::RunConfig`], [`store::RunStore`] (SQLite), [`rundir`] (what a directory holds) |
+//! | a run directory | [`run`]: [`run::start`] and [`run::resume`], its [`run::Config`], [`run::Dir`] (claim, lock, staging; what a directory holds), [`run::Store`] (SQLite) |
 //! | the selection check | [`selection::check`] → [`selection::SelectionCheck`] |
 //! | stability maps | [`pipeline::StabilityJob`] → [`pipeline::StabilityMaps`]; the physics in [`stability`] |
 //! | a report | [`report::write_report`] |
@@ -79,11 +82,9 @@ pub mod prior;
 pub mod report;
 pub mod rng;
 pub mod run;
-pub mod rundir;
 pub mod selection;
 pub mod simulate;
 pub mod stability;
-pub mod store;
 pub mod units;
 
 pub use error::{Error, Result};

@@ -5,7 +5,7 @@
 //! the law's posterior in the run's last population (its least-squares estimate when the law
 //! died out), plus noise resampled with replacement from that law's calibration residuals (a
 //! bootstrap that keeps the record's noise level and distribution). Each synthetic record goes
-//! through the run's own pipeline ([`run::start`] with the stored [`RunConfig`]: least squares
+//! through the run's own pipeline ([`run::start`] with the stored [`run::Config`]: least squares
 //! of every law, the same prior rule, δ and prior file, the same sampler and stopping rules)
 //! with its own seed, [`replicate_seed`]. Its least-squares fits also start from the run's own
 //! estimates and the generating parameters ([`crate::fit::fit_law_from`]): never worse than
@@ -35,8 +35,8 @@ use crate::fit::LawFit;
 use crate::laws::Law;
 use crate::numerics::quantile;
 use crate::prior::{Prior, PriorFile, PriorRule};
-use crate::run::{self, RunConfig};
-use crate::store::{RunStore, StoredRun};
+use crate::run::{self};
+
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -45,7 +45,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-pub use crate::rundir::{SELECTION_DIR, SELECTION_JSON};
+pub use crate::run::dir::{SELECTION_DIR, SELECTION_JSON};
 
 /// How to check a run's selection. [`Default`] is `bitrock check-selection`'s defaults.
 #[derive(Clone, Debug, PartialEq)]
@@ -234,7 +234,7 @@ pub struct RunState {
 
 impl RunState {
     /// The state of a stored run.
-    pub fn of(stored: &StoredRun) -> Self {
+    pub fn of(stored: &run::Stored) -> Self {
         Self {
             populations: stored.populations.len(),
             last_epsilon: stored.populations.last().and_then(|p| p.record.epsilon),
@@ -366,8 +366,8 @@ pub fn replicate_seed(run_seed: u64, law_slot: usize, replicate: usize) -> u64 {
 /// A run to check: its stored set-up and last population, read and refused before any work.
 pub struct CheckedRun {
     pub dir: PathBuf,
-    pub config: RunConfig,
-    pub stored: StoredRun,
+    pub config: run::Config,
+    pub stored: run::Stored,
     prior_file: Option<PriorFile>,
     /// The run directory's lock, held from [`CheckedRun::open`] until the check is written:
     /// the run cannot be continued or replaced under the check.
@@ -379,17 +379,17 @@ impl CheckedRun {
     /// population (no law has a posterior to draw from), and a run whose every law lacks both
     /// particles and a finite least-squares fit.
     pub fn open(dir: &Path) -> Result<Self> {
-        let stored = RunStore::open(dir)?.load_with_last_particles()?;
+        let stored = run::Store::open(dir)?.load_with_last_particles()?;
         // Refused before any work: the check replaces only a check of its own.
         let selection = dir.join(SELECTION_DIR);
         files::refuse_foreign(&selection, "RUN_DIR", &|rel, is_dir| {
-            files::owns_unchanged(crate::rundir::Owned::Selection, &selection, rel, is_dir)
+            crate::run::dir::owns_unchanged(crate::run::dir::Owned::Selection, &selection, rel, is_dir)
         })?;
         let refuse = |message: String| Error::Data {
             path: dir.to_path_buf(),
             message,
         };
-        let config: RunConfig = serde_json::from_value(stored.setup.config.clone())
+        let config: run::Config = serde_json::from_value(stored.setup.config.clone())
             .map_err(|e| refuse(format!("the stored configuration is not one this bitrock reads: {e}")))?;
         let Some(last) = stored.populations.last() else {
             return Err(refuse(
@@ -425,7 +425,7 @@ impl CheckedRun {
 /// never read from `path`, where it may have moved or changed since. Accepted once it rebuilds
 /// the run's own prior from the run's own fits exactly (boxes, rules and law thresholds); a
 /// store that does not record which boxes the file gave (schema 1) cannot, and is refused.
-fn stored_prior_file(dir: &Path, path: &Path, stored: &StoredRun, config: &RunConfig) -> Result<PriorFile> {
+fn stored_prior_file(dir: &Path, path: &Path, stored: &run::Stored, config: &run::Config) -> Result<PriorFile> {
     let prior = &stored.setup.prior;
     let unit = stored.setup.data.torque_unit.newton_metres();
     let file = PriorFile::of_prior(prior, unit);
@@ -435,7 +435,7 @@ fn stored_prior_file(dir: &Path, path: &Path, stored: &StoredRun, config: &RunCo
         _ => Err(Error::Data {
             path: dir.to_path_buf(),
             message: format!(
-                "the run was made with the prior file {}, and its store does not record that file's boxes in a form the check can reuse (a store written by an older bitrock); run `bitrock abc --prior {}` again and check the new run",
+                "the run was made with the prior file {}, and its store does not record that file's boxes in a form the check can reuse (a store written by an older bitrock); start the run again with that prior file (`bitrock abc --prior {}`, or `prior_file=` in Python) and check the new run",
                 path.display(),
                 path.display()
             ),
@@ -820,7 +820,7 @@ fn synthesize(
 pub fn write(run: &CheckedRun, check: &SelectionCheck, svg: String, png: Vec<u8>) -> Result<PathBuf> {
     let dir = run.dir.as_path();
     let json = serde_json::to_string_pretty(check).expect("the check serialises") + "\n";
-    let names = crate::rundir::SELECTION_FILES;
+    let names = crate::run::dir::SELECTION_FILES;
     let bodies = [
         json.into_bytes(),
         check.matrix_csv(),
@@ -833,7 +833,7 @@ pub fn write(run: &CheckedRun, check: &SelectionCheck, svg: String, png: Vec<u8>
     files::replace_dir(
         &target,
         "RUN_DIR",
-        &|rel, is_dir| files::owns_unchanged(crate::rundir::Owned::Selection, &target, rel, is_dir),
+        &|rel, is_dir| crate::run::dir::owns_unchanged(crate::run::dir::Owned::Selection, &target, rel, is_dir),
         &contents,
     )?;
     Ok(target)

@@ -60,8 +60,8 @@ pub enum Task {
         len: u64,
         epsilon: f64,
     },
-    /// Make SMC proposals `start .. start + len` of stream `stream` from the round's
-    /// [`Context`], score those inside the prior box, return those [`kept`] at `epsilon`.
+    /// Make proposals `start .. start + len` of stream `stream` from the round's
+    /// [`Proposal`], score those inside the prior box, return those [`kept`] at `epsilon`.
     Propose {
         stream: u32,
         start: u64,
@@ -69,7 +69,7 @@ pub enum Task {
         epsilon: f64,
     },
     /// The log importance weights (unnormalised) of the new population's particles `first ..
-    /// first + particles.len()` against the round's [`Context`].
+    /// first + particles.len()` against the round's [`Proposal`].
     Weigh { first: usize, particles: Vec<Particle> },
 }
 

@@ -1,7 +1,7 @@
 //! The worker's side of a distributed run: answers a request ([`serve`]), keeping the
 //! problem (record, prior, seed), its evaluator (one GPU context and its pipelines per
 //! process) and the population's proposal between tasks, so that each is shipped once per
-//! worker. It names the samplers whose proposals a worker can rebuild ([`proposal`]): a
+//! worker. It names the samplers whose proposals a worker can rebuild (`proposal`): a
 //! sampler that proposes registers here.
 
 use super::shard::wire::{Reply, Request, build, decode, decode_problem, encode};

@@ -14,7 +14,7 @@ use crate::eval::{Backend, gpu::tune::ShapeWish};
 use crate::fit;
 use crate::laws::Law;
 use crate::numerics::{quantile, weighted_ks};
-use crate::run::{self, RunConfig, SamplerConfig};
+use crate::run::{self, SamplerConfig};
 use serde::Serialize;
 
 /// A sampler of the comparison: the rejection sampler, or SMC with a refill and a law proposal.
@@ -126,7 +126,7 @@ fn compare_on(
     log: &mut dyn FnMut(String),
 ) -> Result<SmcComparison> {
     let data = record.field_data()?;
-    let base_config = RunConfig::default();
+    let base_config = run::Config::default();
     let fits = fit::fit_record(&base_config.laws, &data, &base_config.fit)?;
     let best = fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
     let eps_min = FLOOR_FACTOR * best;
@@ -150,12 +150,12 @@ fn compare_on(
                     ..SmcConfig::default()
                 }),
             };
-            let config = RunConfig {
+            let config = run::Config {
                 seed,
                 backend: Backend::Cpu,
                 sampler,
                 eps_min_from_record: false,
-                ..RunConfig::default()
+                ..run::Config::default()
             };
             let started = std::time::Instant::now();
             let outcome = run::start_fitted_in_memory(

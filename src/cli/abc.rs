@@ -11,8 +11,8 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::abc::shard::Devices;
 use bitrock::abc::smc::{LawProposal, Perturbation, Refill, WeightsOn};
 use bitrock::eval::Backend;
-use bitrock::pipeline::{self, AbcJob, Analysis, RunDir};
-use bitrock::run::{Continuation, PriorRuleName, RunConfig, Sampler, Settings};
+use bitrock::pipeline::{self, AbcJob, Analysis};
+use bitrock::run::{Continuation, PriorRuleName, Sampler, Settings};
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
@@ -26,7 +26,7 @@ pub struct AbcArgs {
     pub particles: usize,
     /// Prior half-width: each parameter is uniform on [p(1 − δ), p(1 + δ)] around its
     /// least-squares estimate p, clipped to its physical bound.
-    #[arg(long, value_parser = finite_number, default_value_t = RunConfig::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::Config::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
     pub delta: f64,
     /// How the prior boxes are sized: delta = the paper's φ̂(1 ± δ); stderr = φ̂ ± k·σ̂ with σ̂
     /// the least-squares standard error (k = --prior-k), which does not grow with |φ̂| (the
@@ -107,7 +107,7 @@ pub struct AbcArgs {
     #[arg(long, value_enum)]
     pub perturbation: Option<Perturbation>,
     /// Seed of the candidate streams: the same seed gives the same populations.
-    #[arg(long, default_value_t = RunConfig::default().seed)]
+    #[arg(long, default_value_t = bitrock::run::Config::default().seed)]
     pub seed: u64,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
@@ -202,7 +202,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
             let job = AbcJob {
                 config: run_config(&cmd.fit, &cmd.abc)?,
                 summary_population: cmd.abc.summary_population,
-                out: Some(RunDir {
+                out: Some(bitrock::run::Dir {
                     path: dir.clone(),
                     replace: cmd.force,
                 }),
@@ -216,7 +216,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
 
 /// The run configuration the flags describe (the library applies the defaults and refuses
 /// settings the run would ignore).
-fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<RunConfig> {
+fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<bitrock::run::Config> {
     let settings = Settings {
         laws: Some(fit_args.laws()?),
         fit: fit_args.options()?,

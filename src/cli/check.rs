@@ -46,7 +46,7 @@ pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     options.validate()?;
     set_threads(cmd.threads)?;
     let checked = CheckedRun::open(&cmd.run)?;
-    if let Some(why) = bitrock::store::RunStore::open(&cmd.run)?.early_end()? {
+    if let Some(why) = bitrock::run::Store::open(&cmd.run)?.early_end()? {
         super::print::note(format_args!("note: {}: {why}", cmd.run.display()));
     }
     let quiet = cmd.quiet;

@@ -10,11 +10,11 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::data;
 use bitrock::data::FieldData;
 use bitrock::eval::Backend;
-use bitrock::pipeline::{AbcJob, RunDir};
+use bitrock::pipeline::AbcJob;
 use bitrock::report::ReportRun;
 use bitrock::report::ReportSummary;
-use bitrock::run::{RunConfig, SamplerConfig};
-use bitrock::rundir::Owned;
+use bitrock::run::SamplerConfig;
+use bitrock::run::dir::Owned;
 use bitrock::{Error, files};
 use clap::Args;
 use std::io::Write;
@@ -30,7 +30,7 @@ pub struct DemoCmd {
     #[arg(long, default_value_t = Schedule::default().particles, value_name = "N")]
     pub particles: usize,
     /// Seed of the candidate streams.
-    #[arg(long, default_value_t = RunConfig::default().seed)]
+    #[arg(long, default_value_t = bitrock::run::Config::default().seed)]
     pub seed: u64,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
@@ -62,7 +62,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
     )?;
     writeln!(out, "the paper's field data are not public.\n")?;
-    let defaults = RunConfig::default();
+    let defaults = bitrock::run::Config::default();
     fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
     mark_root(root)?;
     let mut report_runs = Vec::new();
@@ -84,15 +84,15 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         )?;
         let eps_min = schedule.eps_min;
         let job = AbcJob {
-            config: RunConfig {
+            config: bitrock::run::Config {
                 delta,
                 seed: cmd.seed,
                 backend: cmd.backend,
                 sampler: SamplerConfig::Rejection(schedule.into()),
-                ..RunConfig::default()
+                ..bitrock::run::Config::default()
             },
             summary_population: None,
-            out: Some(RunDir {
+            out: Some(bitrock::run::Dir {
                 path: dir.clone(),
                 replace: true,
             }),
@@ -138,7 +138,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
 /// and marker ([`files::refuse_foreign`], the rule of `abc --force`).
 fn check_root(root: &Path) -> anyhow::Result<()> {
     files::check_output_dir(root, "out")?;
-    files::refuse_inside_run(root, "out")?;
+    bitrock::run::dir::refuse_inside_run(root, "out")?;
     let empty = std::fs::read_dir(root).map_or(true, |mut d| d.next().is_none());
     if empty {
         return Ok(());
@@ -179,7 +179,7 @@ fn demo_owns(root: &Path, rel: &Path, is_dir: bool) -> bool {
     if top {
         is_dir
     } else {
-        files::owns_unchanged(owned, &root.join(first), rest, is_dir)
+        bitrock::run::dir::owns_unchanged(owned, &root.join(first), rest, is_dir)
     }
 }
 

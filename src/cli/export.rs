@@ -1,10 +1,9 @@
 //! `bitrock export DIR`: the run store's contents as CSV (particles) or JSON (the whole run),
 //! for users who would rather not open run.sqlite themselves.
 
+use bitrock::Error;
 use bitrock::abc::Population;
 use bitrock::documents;
-use bitrock::store::RunStore;
-use bitrock::{Error, files};
 use clap::{Args, ValueEnum};
 use std::io::Write;
 use std::path::PathBuf;
@@ -39,9 +38,9 @@ pub struct ExportCmd {
 
 pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "out", cmd.force)?;
+        bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
-    let store = RunStore::open(&cmd.dir)?;
+    let store = bitrock::run::Store::open(&cmd.dir)?;
     let stored = store.load()?;
     let setup = &stored.setup;
     let populations: Vec<&Population> = match cmd.population {
@@ -70,7 +69,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     };
     match &cmd.out {
         None => super::print::stdout().write_all(&text)?,
-        Some(path) => files::write_whole(path, "out", cmd.force, |file| file.write_all(&text))?,
+        Some(path) => bitrock::run::dir::write_whole(path, "out", cmd.force, |file| file.write_all(&text))?,
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -2,10 +2,10 @@
 
 use super::args::LumpedArgs;
 use super::args::finite_number;
+use bitrock::Law;
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::simulate::{self, Initial, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
-use bitrock::{Law, files};
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -131,14 +131,14 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
     };
     config.validate()?;
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "out", cmd.force)?;
+        bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
     let mut progress = super::progress::WorkProgress::new("simulating");
     let trace = simulate::simulate_with(&config, &mut |done, total| progress.update(done, total))?;
     drop(progress);
     match &cmd.out {
         None => simulate::write_csv_in(&trace, cmd.torque_unit, super::print::stdout())?,
-        Some(path) => files::write_whole(path, "out", cmd.force, |file| {
+        Some(path) => bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
             simulate::write_csv_in(&trace, cmd.torque_unit, file)
         })?,
     }

@@ -3,13 +3,13 @@
 
 use super::args::finite_number;
 use super::args::{FeArgs, LumpedArgs};
+use bitrock::Error;
 use bitrock::eval::Backend;
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::pipeline::stability::{DEFAULT_OMEGA_RPM, DEFAULT_PERCENT, DEFAULT_SAMPLES, DEFAULT_WOB_KN, Structure};
 use bitrock::pipeline::{MapSource, StabilityJob};
 use bitrock::stability::map::{self, Criterion};
 use bitrock::units::TorqueUnit;
-use bitrock::{Error, files};
 use clap::Args;
 use serde_json::json;
 use std::io::Write;
@@ -77,7 +77,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let omega = map::parse_axis(&cmd.omega_rpm, "omega_rpm")?;
     let wob = map::parse_axis(&cmd.wob_kn, "wob_kn")?;
     if let Some(path) = &cmd.out {
-        files::check_output_file(path, "out", cmd.force)?;
+        bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
     let job = StabilityJob {
         source: map_source(cmd)?,
@@ -120,7 +120,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         columns.push(("mixture_p_wob_kn".into(), mixture));
     }
     if let Some(path) = &cmd.out {
-        files::write_whole(path, "out", cmd.force, |file| {
+        bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
             file.write_all(&boundaries_csv(omega, &columns))
         })?;
     }

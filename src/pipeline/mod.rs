@@ -11,9 +11,8 @@ use crate::documents::{self, RunSummary};
 use crate::error::{Error, Result};
 use crate::files;
 use crate::prior::PriorFile;
-use crate::run::{self, Continuation, Outcome, RunConfig};
-use crate::rundir;
-use crate::store::RunStore;
+use crate::run::dir as rundir;
+use crate::run::{self, Continuation, Outcome};
 use std::path::Path;
 
 pub mod stability;
@@ -28,18 +27,16 @@ const EXACT_FIT_RHO: f64 = 1e-12;
 /// be coarse: each particle moves a law's probability by 1/N (with one, a law gets 1).
 pub const MIN_PARTICLES_FOR_PROBABILITIES: usize = 100;
 
-pub use crate::run::RunDir;
-
 /// An ABC job: what defines the run and what to summarise. [`Default`] is `bitrock abc`'s
 /// defaults, in memory (no run directory).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct AbcJob {
     /// Laws, fits, prior width, seed, backend and sampler (stored with the run).
-    pub config: RunConfig,
+    pub config: run::Config,
     /// Population to summarise (statistics, MAP, envelopes); `None`: the last.
     pub summary_population: Option<usize>,
     /// The run directory to write; `None` keeps the run in memory.
-    pub out: Option<RunDir>,
+    pub out: Option<run::Dir>,
 }
 
 /// A finished job: the run (configuration, record, fits, prior, populations) and the summary
@@ -60,7 +57,7 @@ impl AbcJob {
         self.config.validate()?;
         self.config.check_summary_population(self.summary_population)?;
         if let Some(out) = &self.out {
-            run::check_new_run_dir(out, None)?;
+            run::dir::check_new(out, None)?;
         }
         Ok(())
     }
@@ -86,7 +83,7 @@ impl AbcJob {
         self.config.check_summary_population(self.summary_population)?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
         if let Some(out) = &self.out {
-            run::check_new_run_dir(out, Some(&data.source))?;
+            run::dir::check_new(out, Some(&data.source))?;
         }
         let (out, config, prior_file) = (self.out.as_ref(), self.config.clone(), prior_file.as_ref());
         let outcome = match make_workers {
@@ -157,7 +154,7 @@ impl Analysis {
         let stored;
         let particles = match dir {
             Some(dir) if last.particles.is_empty() && last.record.accepted > 0 => {
-                stored = RunStore::open(dir)?.load_particles(last.record.index)?;
+                stored = run::Store::open(dir)?.load_particles(last.record.index)?;
                 &stored
             }
             _ => &last.particles,
@@ -282,10 +279,7 @@ impl Analysis {
 fn no_population(outcome: &Outcome, dir: Option<&Path>) -> Error {
     let stop = outcome.run.stop.describe();
     Error::Incomplete(match dir {
-        Some(dir) => format!(
-            "no population completed: {stop}; continue with `bitrock abc --resume {}`",
-            dir.display()
-        ),
+        Some(dir) => format!("no population completed: {stop}; {}", run::resume_advice(dir)),
         None => format!("no population completed: {stop}"),
     })
 }

@@ -6,10 +6,10 @@
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::laws::Law;
+use crate::run;
 use crate::stability::fe::DrillStringSettings;
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{self, Boundaries, Criterion, LawSamples};
-use crate::store::RunStore;
 use std::path::PathBuf;
 
 /// A grid computed on the CPU for longer than this says how far it is...
@@ -92,7 +92,7 @@ pub struct StabilityMaps {
     pub boundaries: Boundaries,
     /// Each law's share of unstable samples, row-major over (Ω, W), in `inputs` order.
     pub grids: Vec<Vec<f64>>,
-    /// How the run ended when not by its own rules ([`RunStore::early_end`]), for a run source.
+    /// How the run ended when not by its own rules ([`run::Store::early_end`]), for a run source.
     pub early_end: Option<String>,
 }
 
@@ -165,12 +165,12 @@ impl StabilityJob {
         self.validate()?;
         let (inputs, early_end) = match &self.source {
             MapSource::Run(dir) => {
-                let store = RunStore::open(dir)?;
+                let store = run::Store::open(dir)?;
                 let early_end = store.early_end()?;
                 let stored = store.load_with_last_particles()?;
                 let last = stored.populations.last().ok_or_else(|| Error::Data {
                     path: dir.clone(),
-                    message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
+                    message: format!("the run has no completed population yet; {}", run::resume_advice(dir)),
                 })?;
                 (crate::abc::posterior::map_inputs(last, self.samples), early_end)
             }

@@ -70,7 +70,7 @@ pub struct ReportRun {
     /// and why it no longer describes the run when it does not.
     pub selection: Option<(crate::selection::SelectionCheck, Option<String>)>,
     /// How the run ended when not by its own stopping rules (interrupted, or stopped on a
-    /// budget): said in the report ([`crate::store::RunStore::early_end`]).
+    /// budget): said in the report ([`crate::run::Store::early_end`]).
     pub early_end: Option<String>,
 }
 
@@ -178,17 +178,17 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
     let rendered = figures::render_all(&prepared)?;
     let markdown = prepared.markdown(&rendered.iter().map(|r| r.info.clone()).collect::<Vec<_>>());
 
-    let figures = Path::new(crate::rundir::FIGURES_DIR);
-    let mut files: Vec<(PathBuf, Vec<u8>)> = vec![(PathBuf::from(crate::rundir::REPORT_MD), markdown.into_bytes())];
+    let figures = Path::new(crate::run::dir::FIGURES_DIR);
+    let mut files: Vec<(PathBuf, Vec<u8>)> = vec![(PathBuf::from(crate::run::dir::REPORT_MD), markdown.into_bytes())];
     for r in rendered.iter() {
         files.push((figures.join(format!("{}.svg", r.info.stem)), r.svg.as_bytes().to_vec()));
         files.push((figures.join(format!("{}.png", r.info.stem)), r.png.clone()));
     }
-    crate::files::refuse_inside_run(dir, "out")?;
+    crate::run::dir::refuse_inside_run(dir, "out")?;
     crate::files::replace_dir(
         dir,
         "out",
-        &|rel, is_dir| crate::files::owns_unchanged(crate::rundir::Owned::Report, dir, rel, is_dir),
+        &|rel, is_dir| crate::run::dir::owns_unchanged(crate::run::dir::Owned::Report, dir, rel, is_dir),
         &files,
     )?;
     let mut names: Vec<PathBuf> = files.into_iter().map(|f| f.0).collect();

@@ -5,8 +5,8 @@ use super::{ReportInput, ReportRun, ReportSummary, StabilitySettings, write_repo
 use crate::abc::Population;
 use crate::abc::posterior::PosteriorSummary;
 use crate::error::{Error, Result};
-use crate::run::RunConfig;
-use crate::store::{RunSetup, RunStore};
+use crate::run;
+
 use std::path::{Path, PathBuf};
 
 impl ReportRun {
@@ -15,7 +15,7 @@ impl ReportRun {
     pub fn new(
         earlier: &[ReportRun],
         dir: &Path,
-        config: &RunConfig,
+        config: &run::Config,
         populations: Vec<Population>,
         summary: Option<PosteriorSummary>,
     ) -> Self {
@@ -41,21 +41,21 @@ impl ReportRun {
 /// Reads run directories into the report's runs, with the set-up (record, fits) of the first.
 /// Refuses an empty list, a run without a completed population, and runs of different records
 /// (the figures draw one data set).
-pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
+pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::Setup, Vec<ReportRun>)> {
     let mut runs = Vec::new();
-    let mut first: Option<RunSetup> = None;
+    let mut first: Option<run::Setup> = None;
     for dir in dirs {
         // The report draws the last population's particles and every population's record.
-        let store = RunStore::open(dir)?;
+        let store = run::Store::open(dir)?;
         let stored = store.load_with_last_particles()?;
         let early_end = store.early_end()?;
         if stored.populations.is_empty() {
             return Err(Error::Data {
                 path: dir.clone(),
-                message: "the run has no completed population yet; continue it with `bitrock abc --resume`".into(),
+                message: format!("the run has no completed population yet; {}", run::resume_advice(dir)),
             });
         }
-        let config: RunConfig = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
+        let config: run::Config = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
             path: dir.clone(),
             message: format!("the stored configuration is not one this bitrock reads: {e}"),
         })?;
@@ -87,7 +87,7 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(RunSetup, Vec<ReportRun>)> {
 
 /// The report of `runs` (all of the record and fits in `setup`) with the paper's map settings,
 /// written into `out`.
-pub fn write_paper_report(out: &Path, setup: &RunSetup, runs: &[ReportRun]) -> Result<ReportSummary> {
+pub fn write_paper_report(out: &Path, setup: &run::Setup, runs: &[ReportRun]) -> Result<ReportSummary> {
     let input = ReportInput {
         data: &setup.data,
         fits: &setup.fits,

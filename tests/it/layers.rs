@@ -7,14 +7,13 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 /// Each top-level module of the library and its layer, lowest first.
-const LAYERS: [(&str, u8); 22] = [
+const LAYERS: [(&str, u8); 20] = [
     ("error", 0),
     ("units", 0),
     ("rng", 0),
     ("numerics", 0),
     ("limits", 0),
     ("data", 0),
-    ("rundir", 0),
     ("files", 0),
     ("laws", 1),
     ("fit", 1),
@@ -23,7 +22,6 @@ const LAYERS: [(&str, u8); 22] = [
     ("simulate", 1),
     ("eval", 2),
     ("abc", 3),
-    ("store", 4),
     ("run", 4),
     ("pipeline", 5),
     ("selection", 5),

@@ -6,13 +6,12 @@ use bitrock::abc::rejection::RejectionConfig;
 use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::Backend;
-use bitrock::pipeline::{AbcJob, Analysis, RunDir};
-use bitrock::run::{RunConfig, SamplerConfig};
-use bitrock::store::RunStore;
+use bitrock::pipeline::{AbcJob, Analysis};
+use bitrock::run::{self, SamplerConfig};
 
 fn job(particles: usize) -> AbcJob {
     AbcJob {
-        config: RunConfig {
+        config: run::Config {
             backend: Backend::Cpu,
             seed: 5,
             sampler: SamplerConfig::Rejection(RejectionConfig::from(Schedule {
@@ -20,7 +19,7 @@ fn job(particles: usize) -> AbcJob {
                 eps_min: 0.03,
                 ..Schedule::default()
             })),
-            ..RunConfig::default()
+            ..run::Config::default()
         },
         ..AbcJob::default()
     }
@@ -33,7 +32,7 @@ fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run");
     let on_disk = AbcJob {
-        out: Some(RunDir {
+        out: Some(run::Dir {
             path: path.clone(),
             replace: false,
         }),
@@ -46,7 +45,7 @@ fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
     assert_eq!(a.len(), b.len());
     // The stored run holds only its last population's particles in memory; the store has
     // them all.
-    let stored = RunStore::open(&path).unwrap().load_populations().unwrap();
+    let stored = run::Store::open(&path).unwrap().load_populations().unwrap();
     for ((p, q), s) in a.iter().zip(b).zip(&stored) {
         assert_eq!(p.particles, s.particles, "population {}", p.record.index);
         assert_eq!(p.record.per_law, q.record.per_law);
@@ -87,7 +86,7 @@ fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
 fn a_refused_job_names_the_setting_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run");
-    let out = Some(RunDir {
+    let out = Some(run::Dir {
         path: path.clone(),
         replace: false,
     });

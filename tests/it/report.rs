@@ -211,16 +211,49 @@ fn unequal_weights_and_refused_input() {
     };
     let dir = tempfile::tempdir().unwrap();
     write_report(dir.path(), &input).unwrap();
-    assert!(dir.path().join("report.md").exists());
+    let markdown = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    // The posterior means are the weighted means: every parameter without a torque unit (shown
+    // as stored) of every law is the weighted mean of its particles to the 3-4 digits shown,
+    // and for some the equal-weight mean is not.
+    let last = runs[0].populations.last().unwrap();
+    let mut weights_matter = false;
+    for law in Law::ALL {
+        let section = format!("### {} — {law} (", runs[0].label);
+        let at = markdown
+            .find(&section)
+            .unwrap_or_else(|| panic!("no section {section}"));
+        let table = &markdown[at..];
+        let particles: Vec<_> = last.particles.iter().filter(|p| p.law == law).collect();
+        let total: f64 = particles.iter().map(|p| p.weight).sum();
+        for (j, spec) in law.params().iter().enumerate().filter(|(_, s)| s.torque_power == 0) {
+            let weighted = particles.iter().map(|p| p.weight * p.params[j]).sum::<f64>() / total;
+            let plain = particles.iter().map(|p| p.params[j]).sum::<f64>() / particles.len() as f64;
+            let row = table
+                .lines()
+                .find(|l| l.starts_with(&format!("| {} |", spec.name)))
+                .unwrap_or_else(|| panic!("no row for {}", spec.name));
+            let shown: f64 = row.split('|').nth(4).unwrap().trim().parse().unwrap();
+            let close = |v: f64| (shown - v).abs() <= 1e-3 * v.abs() + 1e-4;
+            assert!(
+                close(weighted),
+                "{law} {}: shows {shown}, weighted mean {weighted}",
+                spec.name
+            );
+            weights_matter |= !close(plain);
+        }
+    }
+    assert!(weights_matter, "no mean moved with the weights: the check is blind");
 
-    // No run, or a bad percentile: refused before anything is written.
+    // No run, or a bad percentile: refused before anything is written, naming why.
     let empty = tempfile::tempdir().unwrap();
     let target = empty.path().join("report");
     let none = ReportInput {
         runs: &[],
         ..input.clone()
     };
-    assert!(write_report(&target, &none).is_err());
+    let err = write_report(&target, &none).unwrap_err();
+    assert!(err.is_bad_input(), "{err}");
+    assert!(err.to_string().contains("no run to report"), "{err}");
     let bad = ReportInput {
         stability: StabilitySettings {
             percentile: 2.0,
@@ -228,7 +261,9 @@ fn unequal_weights_and_refused_input() {
         },
         ..input
     };
-    assert!(write_report(&target, &bad).is_err());
+    let err = write_report(&target, &bad).unwrap_err();
+    assert!(err.is_bad_input(), "{err}");
+    assert!(err.to_string().contains("the percentile 2 is not in (0, 1)"), "{err}");
     assert!(!target.exists());
 }
 

@@ -12,8 +12,8 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, parse_field_data};
 use bitrock::eval::Backend;
 use bitrock::eval::gpu::{self, Shape};
-use bitrock::pipeline::{AbcJob, RunDir};
-use bitrock::run::{RunConfig, SamplerConfig};
+use bitrock::pipeline::AbcJob;
+use bitrock::run::{self, SamplerConfig};
 use bitrock::selection::{self, CheckOptions, CheckedRun, ParamSource, SelectionCheck};
 use rand_distr::{Distribution, Normal};
 use std::path::{Path, PathBuf};
@@ -62,16 +62,16 @@ fn run_dir_with(
 ) -> PathBuf {
     let path = dir.join("run");
     AbcJob {
-        config: RunConfig {
+        config: run::Config {
             laws: laws.to_vec(),
             backend: Backend::Cpu,
             seed: 3,
             prior_file,
             sampler,
-            ..RunConfig::default()
+            ..run::Config::default()
         },
         summary_population: None,
-        out: Some(RunDir {
+        out: Some(run::Dir {
             path: path.clone(),
             replace: false,
         }),

@@ -9,13 +9,12 @@ use bitrock::abc::{Population, Silent, StopReason};
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::Backend;
 use bitrock::fit::FitOptions;
-use bitrock::run::{self, Continuation, Outcome, RunConfig, SamplerConfig};
-use bitrock::store::RunStore;
+use bitrock::run::{self, Continuation, Outcome, SamplerConfig};
 use bitrock::{Error, Law};
 use std::path::Path;
 
-fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
-    RunConfig {
+fn config(particles: usize, max_populations: usize, eps_min: f64) -> run::Config {
+    run::Config {
         laws: Law::ALL.to_vec(),
         fit: FitOptions::default(),
         delta: 0.4,
@@ -35,9 +34,9 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> RunConfig {
     }
 }
 
-fn start(dir: &Path, config: RunConfig) -> Outcome {
+fn start(dir: &Path, config: run::Config) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
-    let dir = run::RunDir {
+    let dir = run::Dir {
         path: dir.to_path_buf(),
         replace: false,
     };
@@ -84,11 +83,11 @@ fn assert_same_populations(a: &[Population], b: &[Population]) {
 
 /// The populations of the store in `dir`, with all their particles.
 fn stored(dir: &Path) -> Vec<Population> {
-    RunStore::open(dir).unwrap().load_populations().unwrap()
+    run::Store::open(dir).unwrap().load_populations().unwrap()
 }
 
 /// The run of `config` in memory only: every population keeps its particles.
-fn in_memory(config: RunConfig) -> Outcome {
+fn in_memory(config: run::Config) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
     run::start(None, data, config, None, &mut Silent).unwrap()
 }
@@ -99,7 +98,7 @@ fn store_round_trip_is_bit_exact() {
     let run_dir = dir.path().join("run");
     let outcome = start(&run_dir, config(600, 4, 0.014));
     assert_eq!(outcome.run.populations.len(), 4);
-    let stored = RunStore::open(&run_dir).unwrap().load().unwrap();
+    let stored = run::Store::open(&run_dir).unwrap().load().unwrap();
     // Records (timings included) come back exactly; the stored run kept only the last
     // population's particles in memory, and the store has every population's, those of the
     // same run in memory.
@@ -125,7 +124,7 @@ fn store_round_trip_is_bit_exact() {
         assert_eq!(a.correlations, b.correlations);
         assert_eq!(a.warnings, b.warnings);
     }
-    let config: RunConfig = serde_json::from_value(stored.setup.config).unwrap();
+    let config: run::Config = serde_json::from_value(stored.setup.config).unwrap();
     assert_eq!(config, outcome.config);
     // Weights are 1/N and sum to 1 per population.
     for p in &stored.populations {
@@ -166,11 +165,11 @@ fn store_round_trip_is_bit_exact() {
 }
 
 /// The same run with the SMC sampler.
-fn smc(config: RunConfig) -> RunConfig {
+fn smc(config: run::Config) -> run::Config {
     let SamplerConfig::Rejection(base) = config.sampler else {
         unreachable!("config() builds rejection runs")
     };
-    RunConfig {
+    run::Config {
         sampler: SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
             schedule: base.schedule,
             ..Default::default()
@@ -189,7 +188,7 @@ fn continuing_an_smc_run_equals_the_uninterrupted_run() {
     continuing_equals_uninterrupted(smc);
 }
 
-fn continuing_equals_uninterrupted(sampler: fn(RunConfig) -> RunConfig) {
+fn continuing_equals_uninterrupted(sampler: fn(run::Config) -> run::Config) {
     let dir = tempfile::tempdir().unwrap();
     let whole = start(&dir.path().join("whole"), sampler(config(800, 6, 0.0)));
     assert_eq!(whole.run.stop, StopReason::MaxPopulations);
@@ -241,7 +240,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
 fn a_directory_that_is_not_a_run_is_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
     for target in [dir.path().to_path_buf(), dir.path().join("missing")] {
-        let err = RunStore::open(&target).err().expect("refused");
+        let err = run::Store::open(&target).err().expect("refused");
         assert!(matches!(err, Error::Data { .. }), "{err}");
         assert!(err.to_string().contains("not a bitrock run directory"), "{err}");
         for args in [
@@ -258,7 +257,7 @@ fn a_directory_that_is_not_a_run_is_refused_by_name() {
     }
     // A file named run.sqlite that is not a store.
     std::fs::write(dir.path().join("run.sqlite"), "not a database").unwrap();
-    let err = RunStore::open(dir.path()).err().expect("refused");
+    let err = run::Store::open(dir.path()).err().expect("refused");
     assert!(err.to_string().contains("not a bitrock"), "{err}");
     // Run-defining flags cannot change on --resume.
     let out = bin()
@@ -329,8 +328,8 @@ fn a_run_killed_part_way_resumes_to_the_uninterrupted_result() {
     let out = bin().args(args(&whole)).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    let a = RunStore::open(&killed).unwrap().load_populations().unwrap();
-    let b = RunStore::open(&whole).unwrap().load_populations().unwrap();
+    let a = run::Store::open(&killed).unwrap().load_populations().unwrap();
+    let b = run::Store::open(&whole).unwrap().load_populations().unwrap();
     assert_eq!(a.len(), 9);
     assert_same_populations(&a, &b);
     // The exports are byte-identical.
@@ -493,7 +492,7 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
     )
     .unwrap();
     drop(conn);
-    let stored = RunStore::open(&run_dir).unwrap().load().unwrap();
+    let stored = run::Store::open(&run_dir).unwrap().load().unwrap();
     assert_eq!(stored.setup.prior.boxes, outcome.setup.prior.boxes);
     assert_eq!(stored.setup.prior.thresholds, outcome.setup.prior.thresholds);
     for rules in &stored.setup.prior.rules {
@@ -511,7 +510,7 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
     };
     let e = run::resume(&run_dir, &more, &mut Silent).err().unwrap().to_string();
     assert!(e.contains("store schema 1") && e.contains("start a new run"), "{e}");
-    let again = RunStore::open(&run_dir).unwrap().load().unwrap();
+    let again = run::Store::open(&run_dir).unwrap().load().unwrap();
     assert_eq!(again.populations.len(), 2);
 
     // Another version is refused by name, not misread.
@@ -519,7 +518,7 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
     conn.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'", [])
         .unwrap();
     drop(conn);
-    let e = RunStore::open(&run_dir).err().unwrap().to_string();
+    let e = run::Store::open(&run_dir).err().unwrap().to_string();
     assert!(e.contains("schema version 99") && e.contains("versions 1 to 3"), "{e}");
 }
 

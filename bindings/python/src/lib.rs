@@ -10,9 +10,9 @@ use bitrock::data::{DataOptions, FieldData};
 use bitrock::error::Error;
 use bitrock::eval::Backend;
 use bitrock::fit::FitOptions;
-use bitrock::pipeline::{AbcJob, RunDir};
+use bitrock::pipeline::AbcJob;
+use bitrock::run;
 use bitrock::run::{Continuation, Settings};
-use bitrock::store::RunStore;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use bitrock::{Law, documents};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
@@ -401,7 +401,7 @@ fn remote_on<'a>(
     cell: &'a OnceLock<Remote<PyTransport>>,
     dispatcher: Py<PyAny>,
     parallelism: usize,
-) -> impl FnMut(bitrock::eval::AbcProblem, &bitrock::run::RunConfig) -> bitrock::Result<Box<dyn Workers + 'a>> {
+) -> impl FnMut(bitrock::eval::AbcProblem, &bitrock::run::Config) -> bitrock::Result<Box<dyn Workers + 'a>> {
     let mut transport = Some(PyTransport {
         dispatcher,
         parallelism,
@@ -478,7 +478,7 @@ impl Run {
         let particles = match (&self.path, self.populations.get(g)) {
             (_, Some(p)) if !p.particles.is_empty() => &p.particles,
             (Some(dir), _) => {
-                loaded = check(py, RunStore::open(dir).and_then(|s| s.load_particles(g)))?;
+                loaded = check(py, run::Store::open(dir).and_then(|s| s.load_particles(g)))?;
                 &loaded
             }
             (None, _) => {
@@ -550,7 +550,7 @@ fn abc(
     let job = AbcJob {
         config,
         summary_population: None,
-        out: out.clone().map(|path| RunDir { path, replace: force }),
+        out: out.clone().map(|path| run::Dir { path, replace: force }),
     };
     let mut observer = PyObserver {
         progress,
@@ -630,7 +630,7 @@ fn resume(
                 bitrock::pipeline::resume_on(
                     &path,
                     &continuation,
-                    Some(&mut |problem, config: &bitrock::run::RunConfig, _note| make(problem, config)),
+                    Some(&mut |problem, config: &bitrock::run::Config, _note| make(problem, config)),
                     &mut observer,
                 )
             })
@@ -643,7 +643,7 @@ fn resume(
 #[pyfunction]
 fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
     let summary = as_arguments(&check(py, read_summary(&path))?);
-    let store = check(py, RunStore::open(&path).and_then(|s| s.load()))?;
+    let store = check(py, run::Store::open(&path).and_then(|s| s.load()))?;
     Ok(Run {
         summary,
         path: Some(path),
@@ -656,7 +656,7 @@ fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
 /// The run.json of a run directory; a run stopped before its end has none, and is refused
 /// saying how to continue it.
 fn read_summary(dir: &Path) -> bitrock::Result<String> {
-    let path = dir.join(bitrock::rundir::RUN_JSON);
+    let path = dir.join(bitrock::run::dir::RUN_JSON);
     match std::fs::read_to_string(&path) {
         Err(e)
             if e.kind() == std::io::ErrorKind::NotFound
@@ -669,7 +669,7 @@ fn read_summary(dir: &Path) -> bitrock::Result<String> {
                 ),
             })
         }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound && RunStore::open(dir).is_ok() => Err(Error::Data {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && run::Store::open(dir).is_ok() => Err(Error::Data {
             path: dir.to_path_buf(),
             message:
                 "the run was stopped before it finished (it has no run.json yet): continue it with `bitrock.resume`"
@@ -872,7 +872,7 @@ fn check_selection(
     let mut notes = Vec::new();
     let checked = py.detach(|| {
         let checked = CheckedRun::open(&run)?;
-        notes.extend(bitrock::store::RunStore::open(&run)?.early_end()?);
+        notes.extend(bitrock::run::Store::open(&run)?.early_end()?);
         let check = selection::check(&checked, &options, &report, &mut |line| notes.push(line))?;
         bitrock::report::write_selection(&checked, &check)?;
         Ok::<_, Error>(check)

@@ -30,14 +30,47 @@ def test_parity_passes_and_is_the_command_lines(cli) -> None:
     assert caught.value.argument == "candidates"
 
 
-def test_a_gpu_run_keeps_the_cpu_runs_particles_away_from_epsilon(demo) -> None:
-    cpu = bitrock.abc(demo, particles=300, seed=11, backend="cpu", max_populations=3, progress=False)
-    gpu = bitrock.abc(demo, particles=300, seed=11, backend="gpu", max_populations=3, progress=False)
+PARITY_TOLERANCE = 1e-5  # bitrock's CPU/GPU parity tolerance on ρ, relative
+
+
+def _accepted(result, population):
+    """(law, candidate index) → (parameters, ρ) of a population's particles."""
+    out = {}
+    for law, (_names, params, _weights, rho, index) in result.particles(population).items():
+        for k, i in enumerate(index):
+            out[(law, int(i))] = (params[k], rho[k])
+    return out
+
+
+def test_a_gpu_run_accepts_the_cpu_runs_candidates_except_within_the_parity_tolerance_of_epsilon(demo) -> None:
+    n = 300
+    cpu = bitrock.abc(demo, particles=n, seed=11, backend="cpu", max_populations=3, progress=False)
+    gpu = bitrock.abc(demo, particles=n, seed=11, backend="gpu", max_populations=3, progress=False)
     assert gpu.document["backend"] != "cpu"
-    # The same candidates are drawn on both; ρ agrees within the parity tolerance, so the
-    # populations agree unless a ρ lies that close to ε (counted by the run).
-    near = sum(p["near_threshold"] for p in gpu.document["populations"])
-    if near == 0:
-        for law, (_n, params, *_r) in cpu.particles().items():
-            assert np.array_equal(params, gpu.particles()[law][1])
-    np.testing.assert_allclose(cpu.model_probabilities.iloc[0, :4], gpu.model_probabilities.iloc[0, :4], atol=0)
+    cpu_pops, gpu_pops = cpu.document["populations"], gpu.document["populations"]
+    assert len(cpu_pops) == len(gpu_pops) == 3
+    compared = 0
+    for g in range(3):
+        eps_cpu, eps_gpu = cpu_pops[g]["epsilon"], gpu_pops[g]["epsilon"]
+        if g == 0:
+            assert eps_cpu is None and eps_gpu is None
+        else:
+            # ε is the median of the previous population's ρ: the backends' ρ differ within
+            # the tolerance, and so may ε.
+            assert abs(eps_gpu - eps_cpu) <= PARITY_TOLERANCE * eps_cpu
+        # The same candidates are drawn on both. A candidate within the tolerance of ε may be
+        # accepted by one backend only, and shifts the population's N-th particle by one: at
+        # most two differences per such candidate, counted by both runs.
+        near = max(cpu_pops[g]["near_threshold"], gpu_pops[g]["near_threshold"])
+        a, b = _accepted(cpu, g), _accepted(gpu, g)
+        assert len(a) == len(b) == n
+        assert len(a.keys() ^ b.keys()) <= 2 * near, (g, near)
+        for key in a.keys() & b.keys():
+            (params_a, rho_a), (params_b, rho_b) = a[key], b[key]
+            assert np.array_equal(params_a, params_b), key
+            assert abs(rho_a - rho_b) <= PARITY_TOLERANCE * rho_a, (key, rho_a, rho_b)
+            compared += 1
+        # Each difference moves one law's probability by 1/N at most.
+        gap = np.abs(cpu.model_probabilities.iloc[g, :4].to_numpy() - gpu.model_probabilities.iloc[g, :4].to_numpy())
+        assert gap.max() <= len(a.keys() ^ b.keys()) / n + 1e-12, (g, gap)
+    assert compared >= 3 * n - 2 * sum(p["near_threshold"] for p in gpu_pops)

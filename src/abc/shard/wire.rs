@@ -137,7 +137,7 @@ pub struct Exchanged {
 }
 
 /// Carries requests to workers and their replies back: an executor of Python, Dask or Ray, or
-/// anything that can call [`serve`] elsewhere. It answers [`Reply::Missing`] by sending the
+/// anything that can call [`crate::abc::worker::serve`] elsewhere. It answers [`Reply::Missing`] by sending the
 /// request again with the payloads, and may run a request more than once (a lost worker):
 /// tasks are pure.
 pub trait Transport: Sync {

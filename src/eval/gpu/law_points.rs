@@ -17,7 +17,7 @@ pub struct Point {
 fn source(law: &LawFile) -> String {
     let name = &law.name;
     [
-        super::LAWS_WGSL.to_string(),
+        crate::laws::LAWS_WGSL.to_string(),
         law.wgsl(),
         format!(
             "fn law_torque(p: array<f32, 6>, w: f32, r: f32) -> f32 {{ return file_torque_{name}(p, w, r); }}\n\

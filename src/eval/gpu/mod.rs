@@ -2,7 +2,8 @@
 //! uniform structs.
 //!
 //! Kernels live in `shaders/`, one per file with entry point `main`; the shared code of
-//! `shaders/shared/` is prepended to each (concatenation, never string replacement). The
+//! `shaders/shared/` is prepended to each (concatenation, never string replacement) by build.rs,
+//! which validates every kernel with naga, so that one that does not compile fails the build. The
 //! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a
 //! case-insensitive substring of the adapter's name); its own limits are requested. Pipelines
 //! are built once per context (`GpuContext::kernel`). The scoring kernels come in two
@@ -26,14 +27,21 @@ use bytemuck::{Pod, Zeroable};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
-/// Shared WGSL: Philox, the dispatch record, the prior's candidate generator, the laws.
-const PHILOX_WGSL: &str = include_str!("../../../shaders/shared/philox.wgsl");
-const JOB_WGSL: &str = include_str!("../../../shaders/shared/job.wgsl");
-const CANDIDATE_WGSL: &str = include_str!("../../../shaders/shared/candidate.wgsl");
-use crate::laws::LAWS_WGSL;
-const SSR_WGSL: &str = include_str!("../../../shaders/shared/ssr.wgsl");
-const TILE_WGSL: &str = include_str!("../../../shaders/shared/tile.wgsl");
-const PROPOSAL_WGSL: &str = include_str!("../../../shaders/shared/proposal.wgsl");
+/// A kernel's source as build.rs composed it (its shared files, then its own); naga validated
+/// it at build time as [`built_in_kernel`] holds it.
+macro_rules! kernel {
+    ($name:literal) => {
+        include_str!(concat!(env!("OUT_DIR"), "/shaders/", $name, ".wgsl"))
+    };
+}
+
+/// A kernel's source without law files, as build.rs validated it.
+#[cfg(test)]
+macro_rules! built_in_kernel {
+    ($name:literal) => {
+        include_str!(concat!(env!("OUT_DIR"), "/shaders/", $name, ".built-in.wgsl"))
+    };
+}
 
 /// The complete source of every kernel (shared files, then the kernel) and its entry points.
 pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> {
@@ -52,17 +60,7 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
 
 /// The residual kernel with the law files' `laws` ([`file_laws::splice`]).
 pub(crate) fn residual_source_for(laws: &[crate::Law]) -> String {
-    let raw = [
-        PHILOX_WGSL,
-        JOB_WGSL,
-        CANDIDATE_WGSL,
-        LAWS_WGSL,
-        SSR_WGSL,
-        TILE_WGSL,
-        include_str!("../../../shaders/residual.wgsl"),
-    ]
-    .join("\n");
-    file_laws::splice(&raw, laws)
+    file_laws::splice(kernel!("residual"), laws)
 }
 
 fn residual_source() -> String {
@@ -71,16 +69,7 @@ fn residual_source() -> String {
 
 /// The score_params kernel with the law files' `laws` ([`file_laws::splice`]).
 pub(crate) fn score_params_source_for(laws: &[crate::Law]) -> String {
-    let raw = [
-        JOB_WGSL,
-        PROPOSAL_WGSL,
-        LAWS_WGSL,
-        SSR_WGSL,
-        TILE_WGSL,
-        include_str!("../../../shaders/score_params.wgsl"),
-    ]
-    .join("\n");
-    file_laws::splice(&raw, laws)
+    file_laws::splice(kernel!("score_params"), laws)
 }
 
 fn score_params_source() -> String {
@@ -89,18 +78,7 @@ fn score_params_source() -> String {
 
 /// The records kernel with the law files' `laws` ([`file_laws::splice`]).
 pub(crate) fn records_source_for(laws: &[crate::Law]) -> String {
-    let raw = [
-        PHILOX_WGSL,
-        JOB_WGSL,
-        CANDIDATE_WGSL,
-        PROPOSAL_WGSL,
-        LAWS_WGSL,
-        SSR_WGSL,
-        TILE_WGSL,
-        include_str!("../../../shaders/records.wgsl"),
-    ]
-    .join("\n");
-    file_laws::splice(&raw, laws)
+    file_laws::splice(kernel!("records"), laws)
 }
 
 fn records_source() -> String {
@@ -108,13 +86,12 @@ fn records_source() -> String {
 }
 
 fn kernel_sums_source() -> String {
-    [LAWS_WGSL, include_str!("../../../shaders/kernel_sums.wgsl")].join("\n")
+    kernel!("kernel_sums").to_string()
 }
 
 /// The slopes kernel with the law files' `laws` ([`file_laws::splice`]).
 pub(crate) fn slopes_source_for(laws: &[crate::Law]) -> String {
-    let raw = [LAWS_WGSL, include_str!("../../../shaders/slopes.wgsl")].join("\n");
-    file_laws::splice(&raw, laws)
+    file_laws::splice(kernel!("slopes"), laws)
 }
 
 fn slopes_source() -> String {
@@ -122,21 +99,15 @@ fn slopes_source() -> String {
 }
 
 fn stability_source() -> String {
-    include_str!("../../../shaders/stability.wgsl").to_string()
+    kernel!("stability").to_string()
 }
 
 fn candidates_source() -> String {
-    [
-        PHILOX_WGSL,
-        JOB_WGSL,
-        CANDIDATE_WGSL,
-        include_str!("../../../shaders/candidates.wgsl"),
-    ]
-    .join("\n")
+    kernel!("candidates").to_string()
 }
 
 fn test_uniform_between_source() -> String {
-    [PHILOX_WGSL, include_str!("../../../shaders/test_uniform_between.wgsl")].join("\n")
+    kernel!("test_uniform_between").to_string()
 }
 
 /// What can go wrong on the GPU, as text the user can act on.
@@ -928,6 +899,36 @@ const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage 
 
 /// Invocations per workgroup of every kernel (`@workgroup_size(64)`).
 const WORKGROUP_SIZE: u32 = 64;
+
+#[cfg(test)]
+mod build_tests {
+    /// What build.rs validated is what a process without law files runs: the splice of no law
+    /// files and build.rs's version of it agree.
+    #[test]
+    fn the_kernels_validated_at_build_time_are_the_ones_run() {
+        let pairs = [
+            (super::residual_source(), built_in_kernel!("residual")),
+            (super::score_params_source(), built_in_kernel!("score_params")),
+            (super::records_source(), built_in_kernel!("records")),
+            (super::slopes_source(), built_in_kernel!("slopes")),
+            (
+                super::file_laws::splice(kernel!("kernel_sums"), &[]),
+                built_in_kernel!("kernel_sums"),
+            ),
+            (
+                super::file_laws::splice(kernel!("stability"), &[]),
+                built_in_kernel!("stability"),
+            ),
+            (
+                super::file_laws::splice(kernel!("candidates"), &[]),
+                built_in_kernel!("candidates"),
+            ),
+        ];
+        for (run, validated) in pairs {
+            assert_eq!(run, validated);
+        }
+    }
+}
 
 #[cfg(test)]
 mod adapter_tests {

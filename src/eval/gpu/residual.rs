@@ -297,7 +297,7 @@ mod tests {
     fn the_kernels_score_as_many_candidates_per_tile_as_the_host_dispatches_for() {
         let line = format!("const CANDIDATES: u32 = {}u;", super::super::CANDIDATES_PER_TILE);
         assert!(
-            super::super::SSR_WGSL.contains(&line),
+            include_str!("../../../shaders/shared/ssr.wgsl").contains(&line),
             "shaders/shared/ssr.wgsl lacks `{line}`"
         );
     }

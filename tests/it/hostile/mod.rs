@@ -13,7 +13,7 @@ mod stale;
 mod streams;
 
 use crate::support::bin;
-use bitrock::files::{self, DirLock, TEMP_PREFIX};
+use bitrock::files::{DirLock, TEMP_PREFIX};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -278,7 +278,7 @@ fn a_failed_write_leaves_the_old_file_and_no_temporary() {
     let target = tmp.path().join("map.csv");
     std::fs::write(&target, "old contents\n").unwrap();
     // A full disk mid-write, injected: part of the file is written, then ENOSPC.
-    let err = files::write_whole(&target, "out", true, |w| {
+    let err = bitrock::run::dir::write_whole(&target, "out", true, |w| {
         w.write_all(b"omega_rpm,wob_kn\n20,1")?;
         Err(std::io::Error::from(std::io::ErrorKind::StorageFull))
     })
@@ -289,7 +289,7 @@ fn a_failed_write_leaves_the_old_file_and_no_temporary() {
     assert_eq!(std::fs::read_to_string(&target).unwrap(), "old contents\n");
     assert_eq!(names(tmp.path()), ["map.csv"]);
     // A write that succeeds replaces it whole.
-    files::write_whole(&target, "out", true, |w| w.write_all(b"new\n")).unwrap();
+    bitrock::run::dir::write_whole(&target, "out", true, |w| w.write_all(b"new\n")).unwrap();
     assert_eq!(std::fs::read_to_string(&target).unwrap(), "new\n");
     assert_eq!(names(tmp.path()), ["map.csv"]);
 }

@@ -13,7 +13,7 @@
 //! and storing them again made the store 5 × N rows of about 106 bytes at N = 10⁶. A
 //! population's particles are its own new rows plus the rows it carries: those of the
 //! populations since `population_rows.carried_from_row` whose ρ is below
-//! `population_rows.carried_below` (see [`append_population`](RunStore::append_population)
+//! `population_rows.carried_below` (see [`append_population`](Store::append_population)
 //! for when a population may carry). The view `particles` shows them as schema 2's table did,
 //! one row per particle and population with one column per parameter name (parameter names
 //! are unique across the laws: `b0..b3`, `tsb, tcb, g`, `a0..a5`, `c0..c3`; a particle's
@@ -32,7 +32,12 @@ use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-pub use crate::rundir::STORE_FILE;
+/// The run store's file in a run directory (SQLite): everything that defines a run and every
+/// population.
+pub const STORE_FILE: &str = "run.sqlite";
+
+/// SQLite's companions of the store while it is written.
+pub const STORE_COMPANIONS: [&str; 3] = ["run.sqlite-journal", "run.sqlite-wal", "run.sqlite-shm"];
 
 /// Version of the schema below. Version 1 (no `prior_bounds.rule`) is still read, its box
 /// rules as [`BoxRule::Unrecorded`], and so is version 2 (particles as one table row per
@@ -164,8 +169,8 @@ struct DataMeta {
 
 /// What defines a run besides its populations.
 #[derive(Clone, Debug)]
-pub struct RunSetup {
-    /// The run's configuration as JSON (see `crate::run::RunConfig`), kept opaque here.
+pub struct Setup {
+    /// The run's configuration as JSON (see `crate::run::Config`), kept opaque here.
     pub config: serde_json::Value,
     pub data: FieldData,
     pub fits: Vec<LawFit>,
@@ -174,13 +179,13 @@ pub struct RunSetup {
 
 /// A run read back: its set-up and every completed population.
 #[derive(Clone, Debug)]
-pub struct StoredRun {
-    pub setup: RunSetup,
+pub struct Stored {
+    pub setup: Setup,
     pub populations: Vec<Population>,
 }
 
 /// An open run store.
-pub struct RunStore {
+pub struct Store {
     conn: Connection,
     path: PathBuf,
     /// Schema version of the file (older versions are read, see [`SCHEMA_VERSION`]).
@@ -201,16 +206,16 @@ fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
     }
 }
 
-/// How a store lays out particles ([`RunStore::layout`]).
+/// How a store lays out particles ([`Store::layout`]).
 #[derive(Clone, Copy, Debug)]
-pub struct StoreLayout {
+pub struct Layout {
     schema_version: i64,
 }
 
-impl StoreLayout {
-    /// What [`RunStore::append_population`] writes, taken while the sampler still holds
+impl Layout {
+    /// What [`Store::append_population`] writes, taken while the sampler still holds
     /// `previous`, and owned: it can be written on another thread
-    /// ([`RunStore::write_pending`]) while the next population is drawn. It copies only the
+    /// ([`Store::write_pending`]) while the next population is drawn. It copies only the
     /// particles the store does not hold yet.
     pub fn prepare(self, population: &Population, previous: Option<&Population>) -> PendingPopulation {
         let carried = self.carried(population, previous);
@@ -232,7 +237,7 @@ impl StoreLayout {
     }
 }
 
-/// A population prepared for the store by [`StoreLayout::prepare`]: its record, how
+/// A population prepared for the store by [`Layout::prepare`]: its record, how
 /// many of its leading particles the store holds already (carried from the population before
 /// it), and a copy of the others.
 pub struct PendingPopulation {
@@ -241,13 +246,13 @@ pub struct PendingPopulation {
     new: Vec<Particle>,
 }
 
-impl RunStore {
+impl Store {
     /// Creates `dir/run.sqlite` (which must not exist) whole or not at all: the schema and the
     /// set-up are written in one transaction into a temporary beside it (no journal: a failed
     /// temporary is discarded), which is renamed to run.sqlite once complete. A kill at any
     /// moment leaves no store or a complete one, and the temporary is removed by the next run
     /// in `dir` ([`files::remove_stale`]).
-    pub fn create(dir: &Path, setup: &RunSetup) -> Result<Self> {
+    pub fn create(dir: &Path, setup: &Setup) -> Result<Self> {
         let path = dir.join(STORE_FILE);
         if path.exists() {
             return Err(Error::Store {
@@ -388,7 +393,9 @@ impl RunStore {
         let path = dir.join(STORE_FILE);
         let not_a_run = |why: String| Error::Data {
             path: dir.to_path_buf(),
-            message: format!("not a bitrock run directory ({why}); give a directory written by `bitrock abc --out`"),
+            message: format!(
+                "not a bitrock run directory ({why}); give a directory written by `bitrock abc --out` or by `bitrock.abc(..., out=...)` in Python"
+            ),
         };
         if !dir.is_dir() {
             return Err(not_a_run("no such directory".into()));
@@ -478,13 +485,13 @@ impl RunStore {
 
     /// How this store lays out particles: what prepares populations for it once the store
     /// itself has moved to a writing thread.
-    pub fn layout(&self) -> StoreLayout {
-        StoreLayout {
+    pub fn layout(&self) -> Layout {
+        Layout {
             schema_version: self.schema_version,
         }
     }
 
-    /// Writes a population prepared by [`StoreLayout::prepare`], in the order they were
+    /// Writes a population prepared by [`Layout::prepare`], in the order they were
     /// prepared.
     pub fn write_pending(&mut self, pending: PendingPopulation) -> Result<()> {
         self.write_population(&pending.record, pending.carried, &pending.new)
@@ -612,32 +619,34 @@ impl RunStore {
                 )));
             }
             return Ok(Some(format!(
-                "the run was interrupted: its last invocation ({kind}) did not finish; its populations are whole, and `bitrock abc --resume` continues it"
+                "the run was interrupted: its last invocation ({kind}) did not finish; its populations are whole: {}",
+                super::resume_advice(crate::files::parent_dir(&self.path))
             )));
         };
         let reason: Option<StopReason> = serde_json::from_value(serde_json::Value::String(stop)).ok();
         Ok(match reason {
             Some(r @ (StopReason::MaxDraws | StopReason::WallTime)) => Some(format!(
-                "the run stopped early: {}; `bitrock abc --resume` continues it",
-                r.describe()
+                "the run stopped early: {}; {}",
+                r.describe(),
+                super::resume_advice(crate::files::parent_dir(&self.path))
             )),
             _ => None,
         })
     }
 
     /// Reads the whole run back, bit for bit as it was written.
-    pub fn load(&self) -> Result<StoredRun> {
+    pub fn load(&self) -> Result<Stored> {
         self.load_with(true)
     }
 
     /// As [`load`](Self::load), with the particles of the last population only (the others'
     /// are empty): what continuing the run and its report need, in memory O(N) however many
     /// populations it has.
-    pub fn load_with_last_particles(&self) -> Result<StoredRun> {
+    pub fn load_with_last_particles(&self) -> Result<Stored> {
         self.load_with(false)
     }
 
-    fn load_with(&self, every_population: bool) -> Result<StoredRun> {
+    fn load_with(&self, every_population: bool) -> Result<Stored> {
         let path = &self.path;
         let err = sql_error(path);
         let jerr = json_error(path);
@@ -662,8 +671,8 @@ impl RunStore {
         let fits = self.load_fits(RecordScales::of(&data.calibration))?;
         let prior = self.load_prior()?;
         let populations = self.load_populations_with(every_population)?;
-        Ok(StoredRun {
-            setup: RunSetup {
+        Ok(Stored {
+            setup: Setup {
                 config,
                 data,
                 fits,
@@ -1005,7 +1014,7 @@ fn same_particle(a: &Particle, b: &Particle) -> bool {
 
 /// Schema 3: how many leading particles of `population` are carried from `previous` (the
 /// stored population before it); `None` when it carries nothing (see
-/// [`RunStore::append_population`]). Decided from the particles alone, so that it can be
+/// [`Store::append_population`]). Decided from the particles alone, so that it can be
 /// decided while the sampler still holds `previous` and written later: carrying needs ε no
 /// higher than `previous`'s, which makes ε no higher than the ε every population of the
 /// chain carried with.

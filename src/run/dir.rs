@@ -1,0 +1,398 @@
+//! A run directory's lifecycle and the directories bitrock writes, named in one place: a run
+//! directory (its store, summary files and selection check), a report directory, and what
+//! bitrock counts as its own in each. A new run's directory is checked ([`check_new`]) and
+//! then claimed under its lock, checked again there, and staged beside a run it replaces
+//! (`Claim`); outputs elsewhere are kept out of runs ([`refuse_inside_run`],
+//! [`check_output_file`]). Every command that replaces or writes into such a directory asks
+//! [`Owned`] first, so that only files bitrock wrote are ever replaced
+//! ([`crate::files::refuse_foreign`]).
+
+use super::store::Store;
+pub use super::store::{STORE_COMPANIONS, STORE_FILE};
+use crate::error::{Error, Result};
+use crate::files::{self, Authorship};
+use std::fs::File;
+use std::io::{Read, Write};
+use std::path::{Component, Path, PathBuf};
+
+/// The run's summary document (settings, fits, prior, populations, posterior).
+pub const RUN_JSON: &str = "run.json";
+/// The predictive envelopes of the summarised population.
+pub const ENVELOPES_CSV: &str = "envelopes.csv";
+/// The record as the run used it (SI units, calibration and validation rows).
+pub const DATA_CSV: &str = "data.csv";
+/// The directory of a run's selection check.
+pub const SELECTION_DIR: &str = "selection";
+/// The selection check's document inside [`SELECTION_DIR`].
+pub const SELECTION_JSON: &str = "selection.json";
+/// Every file of a selection check.
+pub const SELECTION_FILES: [&str; 5] = [
+    SELECTION_JSON,
+    "matrix.csv",
+    "replicates.csv",
+    "confusion.svg",
+    "confusion.png",
+];
+/// A report's document.
+pub const REPORT_MD: &str = "report.md";
+/// A report's figures directory (SVG and PNG).
+pub const FIGURES_DIR: &str = "figures";
+
+/// What bitrock wrote in a kind of directory, judged by relative path (`is_dir` for a
+/// directory): anything else in it is the user's and is never replaced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Owned {
+    /// A run directory: the store and its companions, the summary files, the selection check.
+    Run,
+    /// A report directory: report.md and figures/*.svg|png.
+    Report,
+    /// A selection check's directory (inside a run directory).
+    Selection,
+}
+
+impl Owned {
+    /// True when `rel` (relative to the directory) is something bitrock writes there.
+    pub fn owns(self, rel: &Path, is_dir: bool) -> bool {
+        let parts: Vec<&str> = rel
+            .components()
+            .map(|c| match c {
+                Component::Normal(s) => s.to_str().unwrap_or("\u{0}"),
+                _ => "\u{0}",
+            })
+            .collect();
+        match (self, parts.as_slice()) {
+            (Owned::Run, [name]) if !is_dir => {
+                [STORE_FILE, RUN_JSON, ENVELOPES_CSV, DATA_CSV].contains(name) || STORE_COMPANIONS.contains(name)
+            }
+            (Owned::Run, [SELECTION_DIR]) => is_dir,
+            (Owned::Run, [SELECTION_DIR, rest @ ..]) => {
+                Owned::Selection.owns(&rest.iter().collect::<std::path::PathBuf>(), is_dir)
+            }
+            (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
+            (Owned::Report, [REPORT_MD]) => !is_dir,
+            (Owned::Report, [FIGURES_DIR]) => is_dir,
+            (Owned::Report, [FIGURES_DIR, name]) => {
+                !is_dir && (name.ends_with(".svg") || name.ends_with(".png")) && !name.starts_with('.')
+            }
+            _ => false,
+        }
+    }
+}
+
+/// True when `dir` holds a run store (a file named [`STORE_FILE`]).
+pub fn is_run_dir(dir: &Path) -> bool {
+    dir.join(STORE_FILE).is_file()
+}
+
+/// Where a run is written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dir {
+    pub path: PathBuf,
+    /// Replace the bitrock run the directory holds (`--force`); without it such a directory
+    /// is refused before any work. A directory holding anything bitrock did not write is
+    /// refused either way.
+    pub replace: bool,
+}
+
+/// What a run directory holds, once [`check_new`] accepted it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DirState {
+    /// Missing, empty, or holding only bitrock's temporaries: the run is written in place.
+    Fresh,
+    /// A bitrock run, to be replaced (`--force`) once the new run's first population is stored.
+    Replace,
+}
+
+/// Refuses, before any work and naming `--out`, a run directory that cannot be written: one
+/// that holds anything bitrock did not write (even with `replace`), the current directory or
+/// one holding the record `input` (the record is never deleted), a bitrock run without
+/// `replace`, a store that is not a bitrock store.
+pub fn check_new(dir: &Dir, input: Option<&Path>) -> Result<DirState> {
+    let path = dir.path.as_path();
+    files::check_output_dir(path, "out")?;
+    crate::run::dir::refuse_inside_run(path, "out")?;
+    let refuse = |why: String| Err(Error::setting("out", format!("{}: {why}", path.display())));
+    let Ok(real) = path.canonicalize() else {
+        return Ok(DirState::Fresh);
+    };
+    if let Some(input) = input.and_then(|i| i.canonicalize().ok())
+        && input.starts_with(&real)
+    {
+        return refuse(format!(
+            "holds the record {}; write the run to a directory of its own",
+            input.display()
+        ));
+    }
+    let has_store = crate::run::dir::is_run_dir(path);
+    // Without a store nothing in the directory is a run's: only bitrock's temporaries may be there.
+    files::refuse_foreign(path, "out", &|rel, is_dir| {
+        has_store && crate::run::dir::Owned::Run.owns(rel, is_dir)
+    })?;
+    if !has_store {
+        return Ok(DirState::Fresh);
+    }
+    if let Err(e) = Store::open(path) {
+        return refuse(format!(
+            "its {STORE_FILE} cannot be read as a bitrock run ({e}); remove the directory yourself if it can go"
+        ));
+    }
+    if !dir.replace {
+        return refuse("holds a bitrock run; pass `force` to replace it".into());
+    }
+    if std::env::current_dir().is_ok_and(|cwd| cwd.canonicalize().is_ok_and(|cwd| cwd == real)) {
+        return refuse(
+            "is the current directory, which is never replaced; give the run directory's path from its parent".into(),
+        );
+    }
+    Ok(DirState::Replace)
+}
+
+/// A run directory being written: its lock, and for a replacement the staging directory beside
+/// it that the new run is written to until its first population is stored.
+pub(super) struct Claim {
+    pub(super) dir: PathBuf,
+    /// The run directory's lock; `None` once handed to the outcome.
+    lock: Option<files::DirLock>,
+    /// The new run's directory and lock while it is staged; `None` once in place.
+    staged: Option<(PathBuf, files::DirLock)>,
+}
+
+impl Claim {
+    /// Locks `dir` (creating it) and checks again under the lock what it holds; stages the new
+    /// run beside a run it replaces.
+    pub(super) fn new(dir: &Dir, input: Option<&Path>) -> Result<Self> {
+        let path = dir.path.clone();
+        std::fs::create_dir_all(&path).map_err(|source| Error::output("out", &path, source))?;
+        let lock = files::DirLock::acquire(&path)?;
+        // Another process may have written a run here since the first check.
+        let state = check_new(dir, input)?;
+        files::remove_stale(&path);
+        let staged = match state {
+            DirState::Fresh => None,
+            DirState::Replace => {
+                let parent = files::parent_dir(&path);
+                files::remove_stale(parent);
+                let staging = tempfile::Builder::new()
+                    .prefix(files::STAGING_PREFIX)
+                    .tempdir_in(parent)
+                    .map_err(|source| Error::output("out", &path, source))?
+                    .keep();
+                let staging_lock = files::DirLock::acquire(&staging)?;
+                Some((staging, staging_lock))
+            }
+        };
+        Ok(Self {
+            dir: path,
+            lock: Some(lock),
+            staged,
+        })
+    }
+
+    /// Where the store is created: the staging directory, or the run directory itself.
+    pub(super) fn store_dir(&self) -> &Path {
+        self.staged.as_ref().map_or(&self.dir, |(staging, _)| staging)
+    }
+
+    /// Swaps a staged run into place (its first population is stored) and removes the old
+    /// run; the store must then be reopened at its new place. No-op for a run in place.
+    /// True while the new run is staged beside the run it replaces.
+    pub(super) fn is_staged(&self) -> bool {
+        self.staged.is_some()
+    }
+
+    pub(super) fn put_in_place(&mut self) -> Result<bool> {
+        let Some((staging, staging_lock)) = self.staged.take() else {
+            return Ok(false);
+        };
+        files::exchange_dirs(&self.dir, &staging).map_err(|source| Error::output("out", &self.dir, source))?;
+        files::sync_dir(files::parent_dir(&self.dir));
+        // The staging name now holds the old run, still locked by us: gone before the lock is.
+        let old_lock = self.lock.replace(staging_lock);
+        std::fs::remove_dir_all(&staging).map_err(|source| Error::output("out", &staging, source))?;
+        drop(old_lock);
+        Ok(true)
+    }
+
+    /// The lock of the run directory once sampling ended. A staged run that stored no
+    /// population is discarded: the old run stays.
+    pub(super) fn finish(&mut self) -> Result<files::DirLock> {
+        if let Some((staging, staging_lock)) = self.staged.take() {
+            let _ = std::fs::remove_dir_all(&staging);
+            drop(staging_lock);
+            return Err(Error::Incomplete(format!(
+                "the new run stored no population; {} still holds the run it held",
+                self.dir.display()
+            )));
+        }
+        Ok(self.lock.take().expect("the lock is handed over once"))
+    }
+}
+
+impl Drop for Claim {
+    /// A staged run abandoned by an error is removed; the old run stays.
+    fn drop(&mut self) {
+        if let Some((staging, _)) = &self.staged {
+            let _ = std::fs::remove_dir_all(staging);
+        }
+    }
+}
+
+/// Refuses, naming `flag`, an output file that cannot be written or is not bitrock's to
+/// replace: a directory, a dangling symbolic link, a path in a directory that does not exist,
+/// one of bitrock's own lock or temporary files, any file inside a run directory (a run
+/// keeps to its own files, its store above all), and, unless `force`, an existing file that
+/// is not bitrock's own unchanged output ([`files::authorship`]). A symbolic link is written through:
+/// the file it points to is the target, checked by the same rule ([`files::output_target`]).
+pub fn check_output_file(target: &Path, field: &str, force: bool) -> Result<()> {
+    files::check_not_dangling(target, field)?;
+    let real = files::output_target(target);
+    if real.is_dir() {
+        return Err(Error::setting(
+            field,
+            format!("{} is a directory; give a file name", target.display()),
+        ));
+    }
+    let dir = files::parent_dir(&real);
+    if !dir.is_dir() {
+        return Err(Error::setting(
+            field,
+            format!("{}: the directory {} does not exist", target.display(), dir.display()),
+        ));
+    }
+    if is_run_store(&real) {
+        return Err(Error::setting(
+            field,
+            format!(
+                "{} is a run's store ({}); it is never overwritten: give another file",
+                target.display(),
+                STORE_FILE
+            ),
+        ));
+    }
+    if real
+        .file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(files::is_bitrock_scratch)
+    {
+        return Err(Error::setting(
+            field,
+            format!(
+                "{} is one of bitrock's lock or temporary files; give another file",
+                target.display()
+            ),
+        ));
+    }
+    refuse_inside_run(&real, field)?;
+    if force || !real.exists() {
+        return Ok(());
+    }
+    let why = match files::authorship(&real) {
+        Authorship::Own => return Ok(()),
+        Authorship::Changed => "was written by bitrock but changed since",
+        Authorship::Unmarked => "is not a file bitrock wrote",
+        Authorship::Unknowable => {
+            "lies on a file system that keeps no extended attributes, so bitrock cannot tell whether it wrote it"
+        }
+    };
+    Err(Error::setting(
+        field,
+        format!(
+            "{} exists and {why}; it is not replaced: give another file, or pass `force` to replace it",
+            target.display()
+        ),
+    ))
+}
+
+/// Writes the user's output file `target` (named by `flag`) whole or not at all: checked by
+/// [`check_output_file`] (a symbolic link is written through; `force` replaces a file bitrock
+/// did not write), then [`files::write_own`].
+pub fn write_whole(
+    target: &Path,
+    field: &str,
+    force: bool,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<()> {
+    check_output_file(target, field, force)?;
+    files::write_own(&files::output_target(target), field, write)
+}
+
+/// Refuses, naming `flag`, an output path inside a run directory (at any depth, a run's
+/// `selection/` included): a run holds only what bitrock writes there.
+pub fn refuse_inside_run(path: &Path, field: &str) -> Result<()> {
+    match enclosing_run_dir(path) {
+        Some(run) => Err(Error::setting(
+            field,
+            format!(
+                "{} lies inside the run directory {}, which holds only what bitrock writes there; write it outside the run",
+                path.display(),
+                run.display()
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// The run directory `path` lies in, at any depth (a run's `selection/` included), if any;
+/// `path` itself is not inside itself. A path that does not exist yet is judged by the
+/// nearest directory above it that does.
+fn enclosing_run_dir(path: &Path) -> Option<PathBuf> {
+    let absolute = std::path::absolute(path).ok()?;
+    let mut above = absolute.parent();
+    while let Some(dir) = above {
+        if let Ok(real) = dir.canonicalize() {
+            return real.ancestors().find(|d| is_run_dir(d)).map(Path::to_path_buf);
+        }
+        above = dir.parent();
+    }
+    None
+}
+
+/// What bitrock owns in a directory of kind `owned` ([`Owned::owns`]), and for
+/// the files it writes whole there, their mark: a report's files only while their mark matches
+/// (a `report.md` the user wrote or edited is the user's); a selection check's unless changed
+/// since bitrock wrote them (its five names inside a run are bitrock's, and checks written
+/// before marks existed stay replaceable). `dir` is the directory `rel` is relative to. A run's
+/// files are judged by name (its store is what makes it a run).
+pub fn owns_unchanged(owned: Owned, dir: &Path, rel: &Path, is_dir: bool) -> bool {
+    if !owned.owns(rel, is_dir) {
+        return false;
+    }
+    if is_dir || owned == Owned::Run {
+        return true;
+    }
+    matches!(
+        (owned, files::authorship(&dir.join(rel))),
+        (_, Authorship::Own | Authorship::Unknowable) | (Owned::Selection, Authorship::Unmarked)
+    )
+}
+
+/// True when `path` is an existing run store: named like one and holding an SQLite database.
+fn is_run_store(path: &Path) -> bool {
+    let Ok(real) = path.canonicalize() else {
+        return false;
+    };
+    let mut magic = [0u8; 16];
+    real.file_name().is_some_and(|n| n == STORE_FILE)
+        && File::open(&real)
+            .and_then(|mut f| f.read_exact(&mut magic))
+            .is_ok_and(|()| &magic == b"SQLite format 3\0")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ownership_by_kind_of_directory() {
+        let p = Path::new;
+        assert!(Owned::Run.owns(p("run.sqlite"), false));
+        assert!(Owned::Run.owns(p("selection/matrix.csv"), false));
+        assert!(!Owned::Run.owns(p("selection/notes.txt"), false));
+        assert!(!Owned::Run.owns(p("notes.txt"), false));
+        assert!(!Owned::Run.owns(p("run.json"), true));
+        assert!(Owned::Report.owns(p("figures/fits.png"), false));
+        assert!(!Owned::Report.owns(p("figures/my-notes.md"), false));
+        assert!(!Owned::Report.owns(p("my-notes.md"), false));
+        assert!(!Owned::Report.owns(p("figures/sub"), true));
+    }
+}
