@@ -1,0 +1,129 @@
+//! Laws: law files loaded, a law simulated on the drill string, and the GPU's parity with
+//! the CPU per law.
+
+use crate::errors::*;
+use crate::record::*;
+use bitrock::Law;
+use bitrock::data::DataOptions;
+use bitrock::error::Error;
+use bitrock::units::TorqueUnit;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
+/// `bitrock simulate` writes it (CSV text, torques in kN·m).
+#[pyfunction]
+#[pyo3(signature = (law, params, omega_rpm, options))]
+pub(crate) fn simulate(
+    py: Python<'_>,
+    law: String,
+    params: Option<Vec<f64>>,
+    omega_rpm: f64,
+    options: &Bound<'_, PyDict>,
+) -> PyResult<String> {
+    use bitrock::simulate::{self as sim, Initial, SimConfig};
+    use bitrock::units::RAD_S_PER_RPM;
+    let law = self::laws(py, Some(vec![law]))?.expect("one law")[0];
+    let unit = unit(
+        py,
+        "param_torque_unit",
+        kwarg(options, "param_torque_unit")?,
+        TorqueUnit::from_suffix,
+    )?
+    .unwrap_or(TorqueUnit::KNm);
+    let params_nm = match params {
+        Some(params) => {
+            // The count first: scaling takes one value per parameter.
+            if params.len() != law.n_params() {
+                check(py, law.check_params(&params, "params"))?;
+            }
+            law.scale_torque(&params, unit.newton_metres())
+        }
+        None => match law.paper_estimate() {
+            Some(p) => law.scale_torque(p, TorqueUnit::KNm.newton_metres()),
+            None => {
+                let message = format!("law {law} has no reference values to default to; give its parameters");
+                return Err(to_py(py, bitrock::Error::setting("params", message)));
+            }
+        },
+    };
+    let mut c = SimConfig::new(law, params_nm, omega_rpm * RAD_S_PER_RPM, bitrock::laws::PAPER_W_REF_N);
+    let kn = |key: &str| -> PyResult<Option<f64>> { Ok(kwarg::<f64>(options, key)?.map(|v| v * 1000.0)) };
+    c.wob_n = kn("wob_kn")?.unwrap_or(c.wob_n);
+    c.w_ref_n = kn("w_ref_kn")?.unwrap_or(c.w_ref_n);
+    c.structure.inertia_kg_m2 = kwarg(options, "inertia_kg_m2")?.unwrap_or(c.structure.inertia_kg_m2);
+    c.structure.omega_n_rad_s = kwarg(options, "omega_n_rad_s")?.unwrap_or(c.structure.omega_n_rad_s);
+    c.structure.damping_ratio = kwarg(options, "damping_ratio")?.unwrap_or(c.structure.damping_ratio);
+    c.duration_s = kwarg(options, "duration_s")?.unwrap_or(c.duration_s);
+    c.settle_s = kwarg(options, "settle_s")?.unwrap_or(c.settle_s);
+    c.sample_hz = kwarg(options, "sample_hz")?.unwrap_or(c.sample_hz);
+    c.dt_s = kwarg(options, "dt_s")?.unwrap_or(c.dt_s);
+    let kick_rpm = kwarg(options, "kick_rpm")?.unwrap_or(sim::DEFAULT_KICK_RPM);
+    c.initial = match kwarg::<String>(options, "initial")?
+        .as_deref()
+        .map(str::to_lowercase)
+        .as_deref()
+    {
+        None | Some("equilibrium") => Initial::Equilibrium {
+            speed_perturbation_rad_s: kick_rpm * RAD_S_PER_RPM,
+        },
+        Some("rest") => Initial::Rest,
+        Some(other) => {
+            return Err(to_py(
+                py,
+                Error::setting("initial", format!("`{other}` is not one of equilibrium, rest")),
+            ));
+        }
+    };
+    c.noise_torque_nm = kn("noise_torque_knm")?.unwrap_or(c.noise_torque_nm);
+    c.noise_speed_rad_s = kwarg::<f64>(options, "noise_speed_rpm")?.map_or(c.noise_speed_rad_s, |v| v * RAD_S_PER_RPM);
+    c.wob_fluctuation_n = kn("wob_fluctuation_kn")?.unwrap_or(c.wob_fluctuation_n);
+    c.wob_correlation_s = kwarg(options, "wob_correlation_s")?.unwrap_or(c.wob_correlation_s);
+    c.seed = kwarg(options, "seed")?.unwrap_or(sim::DEFAULT_SEED);
+    let text = py.detach(|| {
+        c.validate()?;
+        let trace = sim::simulate(&c)?;
+        let mut text = Vec::new();
+        sim::write_csv(&trace, &mut text).map_err(|e| Error::Numerical(e.to_string()))?;
+        Ok::<_, Error>(String::from_utf8(text).expect("the CSV is ASCII"))
+    });
+    check(py, text)
+}
+
+/// CPU-vs-GPU parity on `record` (`None`: the embedded demo record): `bitrock parity`'s
+/// report as JSON text.
+#[pyfunction]
+#[pyo3(signature = (record, laws, options))]
+pub(crate) fn parity(
+    py: Python<'_>,
+    record: Option<&Record>,
+    laws: Option<Vec<String>>,
+    options: &Bound<'_, PyDict>,
+) -> PyResult<String> {
+    use bitrock::bench;
+    let laws = self::laws(py, laws)?.unwrap_or_else(|| Law::ALL.to_vec());
+    let candidates = kwarg(options, "candidates")?.unwrap_or(bench::PARITY_CANDIDATES);
+    let epsilon = kwarg(options, "epsilon")?;
+    let seed = kwarg(options, "seed")?.unwrap_or(bench::PARITY_SEED);
+    let report = py.detach(|| {
+        let demo;
+        let data = match record {
+            Some(r) => &r.data,
+            None => {
+                demo = bitrock::data::demo_field_data(&DataOptions::default())?;
+                &demo
+            }
+        };
+        bench::parity_on(data, &laws, candidates, epsilon, seed)
+    });
+    let report = check(py, report)?;
+    serde_json::to_string(&report).map_err(|e| to_py(py, Error::Numerical(e.to_string())))
+}
+
+/// Reads, compiles and registers the law file at `path`; its law's name, for `laws=` and
+/// `law=` everywhere in this process.
+#[pyfunction]
+pub(crate) fn load_law(py: Python<'_>, path: std::path::PathBuf) -> PyResult<String> {
+    let law = check(py, bitrock::laws::file::load_and_register(&path))?;
+    Ok(law.name().to_string())
+}

@@ -1,0 +1,118 @@
+//! Records: a CSV file or columns read into SI samples, their units and warnings.
+
+use crate::errors::*;
+use bitrock::data::{DataOptions, FieldData};
+use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use numpy::{PyArray1, PyReadonlyArray1};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::{Path, PathBuf};
+
+/// A field record, read and split into calibration and validation samples (SI inside).
+#[pyclass(frozen, module = "bitrock._bitrock")]
+pub(crate) struct Record {
+    pub(crate) data: FieldData,
+}
+
+#[pymethods]
+impl Record {
+    /// Where the record came from.
+    #[getter]
+    fn source(&self) -> String {
+        self.data.source.display().to_string()
+    }
+    #[getter]
+    fn rows_read(&self) -> usize {
+        self.data.rows_read
+    }
+    #[getter]
+    fn rows_used(&self) -> usize {
+        self.data.rows_used
+    }
+    /// The unit torques are given and reported in (`kN·m`, `N·m`).
+    #[getter]
+    fn torque_unit(&self) -> &'static str {
+        self.data.torque_unit.label()
+    }
+    #[getter]
+    fn speed_unit(&self) -> &'static str {
+        self.data.speed_unit.label()
+    }
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.data.warnings.clone()
+    }
+    /// `{"speed", "torque", "wob", "time"}`: the columns read.
+    #[getter]
+    fn columns(&self) -> (String, String, Option<String>, Option<String>) {
+        let c = &self.data.columns;
+        (c.speed.clone(), c.torque.clone(), c.wob.clone(), c.time.clone())
+    }
+    /// The calibration samples: bit speed (rad/s) and torque (N·m), without copies.
+    fn calibration<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let s = &self.data.calibration;
+        (
+            PyArray1::from_slice(py, &s.speed_rad_s),
+            PyArray1::from_slice(py, &s.torque_nm),
+        )
+    }
+    /// The validation samples: bit speed (rad/s) and torque (N·m).
+    fn validation<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let s = &self.data.validation;
+        (
+            PyArray1::from_slice(py, &s.speed_rad_s),
+            PyArray1::from_slice(py, &s.torque_nm),
+        )
+    }
+}
+
+/// The record options from `bitrock.read_record`'s keyword arguments (`None`: the library's
+/// default).
+pub(crate) fn data_options(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<DataOptions> {
+    let defaults = DataOptions::default();
+    Ok(DataOptions {
+        speed_column: kwarg(kw, "speed_col")?,
+        torque_column: kwarg(kw, "torque_col")?,
+        wob_column: kwarg(kw, "wob_col")?,
+        time_column: kwarg(kw, "time_col")?,
+        speed_unit: unit(py, "speed_unit", kwarg(kw, "speed_unit")?, SpeedUnit::from_suffix)?,
+        torque_unit: unit(py, "torque_unit", kwarg(kw, "torque_unit")?, TorqueUnit::from_suffix)?,
+        wob_unit: unit(py, "wob_unit", kwarg(kw, "wob_unit")?, ForceUnit::from_suffix)?,
+        min_speed_rpm: kwarg(kw, "min_speed_rpm")?.unwrap_or(defaults.min_speed_rpm),
+        t_start_s: kwarg(kw, "t_start_s")?,
+        t_end_s: kwarg(kw, "t_end_s")?,
+        thin: kwarg(kw, "thin")?.unwrap_or(defaults.thin),
+        calibration_fraction: kwarg(kw, "calibration_fraction")?.unwrap_or(defaults.calibration_fraction),
+        split: named(py, "split", kwarg(kw, "split")?)?.unwrap_or(defaults.split),
+    })
+}
+
+/// Reads a CSV record at `path` (`None`: the embedded demo record).
+#[pyfunction]
+pub(crate) fn read_csv(py: Python<'_>, path: Option<PathBuf>, options: &Bound<'_, PyDict>) -> PyResult<Record> {
+    let opts = data_options(py, options)?;
+    let data = py.detach(|| match &path {
+        Some(path) => bitrock::data::read_field_data(path, &opts),
+        None => bitrock::data::demo_field_data(&opts),
+    });
+    Ok(Record { data: check(py, data)? })
+}
+
+/// Reads a record from named float64 columns (a DataFrame's), read without copies; `None`
+/// for a column that holds no numbers.
+#[pyfunction]
+pub(crate) fn read_columns(
+    py: Python<'_>,
+    names: Vec<String>,
+    columns: Vec<Option<PyReadonlyArray1<'_, f64>>>,
+    source: String,
+    options: &Bound<'_, PyDict>,
+) -> PyResult<Record> {
+    let opts = data_options(py, options)?;
+    let slices = columns
+        .iter()
+        .map(|c| c.as_ref().map(|c| c.as_slice()).transpose())
+        .collect::<Result<Vec<Option<&[f64]>>, _>>()?;
+    let data = bitrock::data::field_data_from_columns(&names, &slices, Path::new(&source), &opts);
+    Ok(Record { data: check(py, data)? })
+}

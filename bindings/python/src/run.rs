@@ -1,0 +1,335 @@
+//! Runs: started, resumed or opened, their progress reported to Python, their populations
+//! and summaries handed back.
+
+use crate::distributed::*;
+use crate::errors::*;
+use crate::fit::*;
+use crate::record::*;
+use bitrock::abc::shard::Remote;
+use bitrock::abc::{Observer, Population, Progress};
+use bitrock::error::Error;
+use bitrock::eval::Backend;
+use bitrock::pipeline::AbcJob;
+use bitrock::run;
+use bitrock::run::{Continuation, Settings};
+use bitrock::units::TorqueUnit;
+use bitrock::{Law, documents};
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// Watches a run for Python: progress to a callable, notes to `warnings`-like callable, and
+/// Ctrl-C (checked after every batch) stops it.
+pub(crate) struct PyObserver {
+    progress: Option<Py<PyAny>>,
+    note: Option<Py<PyAny>>,
+    /// A Python exception raised by a callback or by a signal handler.
+    raised: Option<PyErr>,
+}
+
+impl Observer for PyObserver {
+    fn progress(&mut self, p: &Progress) {
+        if self.raised.is_some() {
+            return;
+        }
+        Python::attach(|py| {
+            if let Err(e) = py.check_signals() {
+                self.raised = Some(e);
+                return;
+            }
+            if let Some(callback) = &self.progress
+                && let Err(e) = callback.call1(py, (p.population, p.accepted, p.target, p.draws, p.epsilon))
+            {
+                self.raised = Some(e);
+            }
+        });
+    }
+
+    fn population_done(&mut self, population: &Population, _previous: Option<&Population>) -> bitrock::Result<()> {
+        if let Some(callback) = &self.progress {
+            let r = &population.record;
+            Python::attach(|py| {
+                if let Err(e) = callback.call1(py, (r.index, r.accepted, r.accepted, r.draws, r.epsilon)) {
+                    self.raised.get_or_insert(e);
+                }
+            });
+        }
+        Ok(())
+    }
+
+    fn note(&mut self, line: String) {
+        if let Some(callback) = &self.note {
+            Python::attach(|py| {
+                if let Err(e) = callback.call1(py, (line,)) {
+                    self.raised.get_or_insert(e);
+                }
+            });
+        }
+    }
+
+    fn interrupted(&mut self) -> bool {
+        self.raised.is_some()
+    }
+}
+
+/// A finished run: its `run.json` document, and the particles of any population.
+#[pyclass(frozen, module = "bitrock._bitrock")]
+pub(crate) struct Run {
+    /// The run.json document.
+    #[pyo3(get)]
+    summary: String,
+    /// The run directory; `None` for a run in memory.
+    #[pyo3(get)]
+    path: Option<PathBuf>,
+    /// Every population of a run in memory (with particles); empty for a stored run, whose
+    /// particles are read from its store.
+    populations: Vec<Population>,
+    torque_unit: TorqueUnit,
+    /// Per population of a distributed run: tasks, bytes shipped, seconds waited (JSON).
+    #[pyo3(get)]
+    traffic: Option<String>,
+}
+
+#[pymethods]
+impl Run {
+    /// The particles of population `g` by law: `{law: (params [n, k] in the record's torque
+    /// unit, weights, rho, candidate index)}`.
+    fn particles<'py>(&self, py: Python<'py>, g: usize) -> PyResult<Bound<'py, PyDict>> {
+        let loaded;
+        let particles = match (&self.path, self.populations.get(g)) {
+            (_, Some(p)) if !p.particles.is_empty() => &p.particles,
+            (Some(dir), _) => {
+                loaded = check(py, run::Store::open(dir).and_then(|s| s.load_particles(g)))?;
+                &loaded
+            }
+            (None, _) => {
+                return Err(to_py(
+                    py,
+                    Error::setting("population", format!("the run has no population {g}")),
+                ));
+            }
+        };
+        let out = PyDict::new(py);
+        let mut laws: Vec<Law> = particles.iter().map(|p| p.law).collect();
+        laws.dedup();
+        laws.sort_by_key(|l| l.name());
+        laws.dedup();
+        for law in laws {
+            let of_law: Vec<_> = particles.iter().filter(|p| p.law == law).collect();
+            let k = law.n_params();
+            let flat: Vec<f64> = of_law
+                .iter()
+                .flat_map(|p| documents::to_record_units(law, &p.params, self.torque_unit))
+                .collect();
+            let params = PyArray1::from_vec(py, flat).reshape([of_law.len(), k])?;
+            let weights = PyArray1::from_vec(py, of_law.iter().map(|p| p.weight).collect());
+            let rho = PyArray1::from_vec(py, of_law.iter().map(|p| p.rho).collect());
+            let index = PyArray1::from_vec(py, of_law.iter().map(|p| p.index).collect());
+            let names = PyList::new(py, law.param_names())?;
+            out.set_item(law.name(), (names, params, weights, rho, index))?;
+        }
+        Ok(out)
+    }
+}
+
+/// The `Run` of an analysis: its document and, in memory, its populations.
+pub(crate) fn run_of(analysis: bitrock::pipeline::Analysis, path: Option<PathBuf>) -> Run {
+    let summary = as_arguments(&analysis.json().to_string());
+    let torque_unit = analysis.outcome.setup.data.torque_unit;
+    let populations = if path.is_some() {
+        Vec::new()
+    } else {
+        analysis.outcome.run.populations
+    };
+    Run {
+        summary,
+        path,
+        populations,
+        torque_unit,
+        traffic: None,
+    }
+}
+
+/// Runs the ABC job on `record` with the settings in `settings` (keyword arguments of
+/// `bitrock.abc`), into `out` when given.
+#[pyfunction]
+#[pyo3(signature = (record, settings, out, force, progress, note, dispatcher=None, parallelism=1))]
+#[allow(clippy::too_many_arguments)] // the Python layer's keyword arguments, passed through
+pub(crate) fn abc(
+    py: Python<'_>,
+    record: &Record,
+    settings: &Bound<'_, PyDict>,
+    out: Option<PathBuf>,
+    force: bool,
+    progress: Option<Py<PyAny>>,
+    note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
+) -> PyResult<Run> {
+    let s = run_settings(py, settings)?;
+    let config = check(py, s.config())?;
+    let job = AbcJob {
+        config,
+        summary_population: None,
+        out: out.clone().map(|path| run::Dir { path, replace: force }),
+    };
+    let mut observer = PyObserver {
+        progress,
+        note,
+        raised: None,
+    };
+    let data = record.data.clone();
+    let cell = OnceLock::new();
+    let result = match dispatcher {
+        None => py.detach(|| job.run(data, &mut observer)),
+        Some(dispatcher) => {
+            let mut make = remote_on(&cell, dispatcher, parallelism);
+            py.detach(|| {
+                job.run_on(
+                    data,
+                    Some(&mut |problem, config, _note| make(problem, config)),
+                    &mut observer,
+                )
+            })
+        }
+    };
+    finish_run(py, result, observer, cell, out)
+}
+
+/// The `Run` of a finished job, or the exception that stopped it (a callback's or the
+/// workers' before the library's own).
+pub(crate) fn finish_run(
+    py: Python<'_>,
+    result: bitrock::Result<bitrock::pipeline::Analysis>,
+    mut observer: PyObserver,
+    cell: OnceLock<Remote<PyTransport>>,
+    path: Option<PathBuf>,
+) -> PyResult<Run> {
+    let (traffic, raised) = after_remote(cell);
+    if let Some(e) = raised.or_else(|| observer.raised.take()) {
+        return Err(e);
+    }
+    let analysis = check(py, result)?;
+    let mut run = run_of(analysis, path);
+    run.traffic = traffic;
+    Ok(run)
+}
+
+/// Continues the run in `path` with the stopping rules in `more`.
+#[pyfunction]
+#[pyo3(signature = (path, more, progress, note, dispatcher=None, parallelism=1))]
+pub(crate) fn resume(
+    py: Python<'_>,
+    path: PathBuf,
+    more: &Bound<'_, PyDict>,
+    progress: Option<Py<PyAny>>,
+    note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
+) -> PyResult<Run> {
+    let continuation = Continuation {
+        eps_min: kwarg(more, "eps_min")?,
+        max_populations: kwarg(more, "max_populations")?,
+        max_draws: kwarg(more, "max_draws")?,
+        min_acceptance: kwarg(more, "min_acceptance")?,
+        max_seconds: kwarg(more, "max_seconds")?,
+        backend: named::<Backend>(py, "backend", kwarg(more, "backend")?)?,
+        devices: named(py, "devices", kwarg(more, "devices")?)?,
+        summary_population: None,
+    };
+    let mut observer = PyObserver {
+        progress,
+        note,
+        raised: None,
+    };
+    let cell = OnceLock::new();
+    let result = match dispatcher {
+        None => py.detach(|| bitrock::pipeline::resume(&path, &continuation, &mut observer)),
+        Some(dispatcher) => {
+            let mut make = remote_on(&cell, dispatcher, parallelism);
+            py.detach(|| {
+                bitrock::pipeline::resume_on(
+                    &path,
+                    &continuation,
+                    Some(&mut |problem, config: &bitrock::run::Config, _note| make(problem, config)),
+                    &mut observer,
+                )
+            })
+        }
+    };
+    finish_run(py, result, observer, cell, Some(path))
+}
+
+/// Opens the finished run in `path`: its run.json and its store.
+#[pyfunction]
+pub(crate) fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
+    let summary = as_arguments(&check(py, read_summary(&path))?);
+    let store = check(py, run::Store::open(&path).and_then(|s| s.load()))?;
+    Ok(Run {
+        summary,
+        path: Some(path),
+        populations: Vec::new(),
+        torque_unit: store.setup.data.torque_unit,
+        traffic: None,
+    })
+}
+
+/// The run.json of a run directory; a run stopped before its end has none, and is refused
+/// saying how to continue it.
+pub(crate) fn read_summary(dir: &Path) -> bitrock::Result<String> {
+    let path = dir.join(bitrock::run::dir::RUN_JSON);
+    match std::fs::read_to_string(&path) {
+        Err(e)
+            if e.kind() == std::io::ErrorKind::NotFound
+                && let Some(holder) = bitrock::files::DirLock::holder(dir) =>
+        {
+            Err(Error::Data {
+                path: dir.to_path_buf(),
+                message: format!(
+                    "the run is being written by {holder} and has no run.json yet: open it once its first population is stored"
+                ),
+            })
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && run::Store::open(dir).is_ok() => Err(Error::Data {
+            path: dir.to_path_buf(),
+            message:
+                "the run was stopped before it finished (it has no run.json yet): continue it with `bitrock.resume`"
+                    .into(),
+        }),
+        result => result.map_err(|source| Error::Read { path, source }),
+    }
+}
+
+/// The run settings from `bitrock.abc`'s keyword arguments.
+pub(crate) fn run_settings(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<Settings> {
+    let text = |key: &str| kwarg::<String>(kw, key);
+    Ok(Settings {
+        laws: laws(py, kwarg(kw, "laws")?)?,
+        fit: fit_options(py, kw)?,
+        sampler: named(py, "sampler", text("sampler")?)?.unwrap_or_default(),
+        particles: kwarg(kw, "particles")?,
+        delta: kwarg(kw, "delta")?,
+        prior_rule: named(py, "prior_rule", text("prior_rule")?)?.unwrap_or_default(),
+        prior_k: kwarg(kw, "prior_k")?,
+        prior_file: kwarg(kw, "prior_file")?,
+        eps_min: kwarg(kw, "eps_min")?,
+        epsilons: kwarg(kw, "epsilons")?,
+        start_epsilon: kwarg(kw, "start_epsilon")?,
+        max_populations: kwarg(kw, "max_populations")?,
+        max_draws: kwarg(kw, "max_draws")?,
+        min_acceptance: kwarg(kw, "min_acceptance")?,
+        max_seconds: kwarg(kw, "max_seconds")?,
+        mode: named(py, "mode", text("mode")?)?,
+        p_stay: kwarg(kw, "p_stay")?,
+        kernel_scale: kwarg(kw, "kernel_scale")?,
+        smc_weights: named(py, "smc_weights", text("smc_weights")?)?,
+        refill: named(py, "refill", text("refill")?)?,
+        law_proposal: named(py, "law_proposal", text("law_proposal")?)?,
+        perturbation: named(py, "perturbation", text("perturbation")?)?,
+        seed: kwarg(kw, "seed")?,
+        backend: named(py, "backend", text("backend")?)?,
+        devices: named(py, "devices", text("devices")?)?,
+    })
+}

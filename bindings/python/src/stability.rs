@@ -1,0 +1,138 @@
+//! Stability maps from a run or a law.
+
+use crate::errors::*;
+use bitrock::error::Error;
+use bitrock::units::TorqueUnit;
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+/// Stability maps over (Ω, W) for the run in `run`, or for `law` at `params` (torques in
+/// `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
+#[pyfunction]
+#[pyo3(signature = (run, law, params, options, note))]
+pub(crate) fn stability<'py>(
+    py: Python<'py>,
+    run: Option<PathBuf>,
+    law: Option<String>,
+    params: Option<Vec<f64>>,
+    options: &Bound<'py, PyDict>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use bitrock::pipeline::stability::{self as job, MapSource, StabilityJob, Structure};
+    use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped, map};
+    let source = match (run, law, params) {
+        (Some(dir), None, None) => MapSource::Run(dir),
+        (None, Some(law), Some(params)) => {
+            let law = self::laws(py, Some(vec![law]))?.expect("one law")[0];
+            let unit = unit(
+                py,
+                "torque_unit",
+                kwarg(options, "torque_unit")?,
+                TorqueUnit::from_suffix,
+            )?;
+            check(py, MapSource::law(law, &params, unit.unwrap_or(TorqueUnit::KNm)))?
+        }
+        _ => {
+            return Err(to_py(
+                py,
+                Error::setting(
+                    "source",
+                    "give a run (a Result or its directory) or a law with its params",
+                ),
+            ));
+        }
+    };
+    // An axis: values, or "MIN:MAX:COUNT" as on the command line.
+    let axis = |key: &str, default: &str| -> PyResult<Vec<f64>> {
+        match options.get_item(key)?.filter(|v| !v.is_none()) {
+            None => check(py, map::parse_axis(default, key)),
+            Some(value) => match value.extract::<String>() {
+                Ok(text) => check(py, map::parse_axis(&text, key)),
+                Err(_) => value.extract(),
+            },
+        }
+    };
+    let lumped_defaults = Lumped::default();
+    let lumped = Lumped {
+        inertia_kg_m2: kwarg(options, "inertia_kg_m2")?.unwrap_or(lumped_defaults.inertia_kg_m2),
+        omega_n_rad_s: kwarg(options, "omega_n_rad_s")?.unwrap_or(lumped_defaults.omega_n_rad_s),
+        damping_ratio: kwarg(options, "damping_ratio")?.unwrap_or(lumped_defaults.damping_ratio),
+    };
+    let fe = DrillStringSettings {
+        fe_file: kwarg(options, "fe_file")?,
+        dp_elements: kwarg(options, "dp_elements")?,
+        bha_elements: kwarg(options, "bha_elements")?,
+        alpha: kwarg(options, "alpha")?,
+        beta: kwarg(options, "beta")?,
+    };
+    let structure: Structure = named(py, "structure", kwarg(options, "structure")?)?.unwrap_or_default();
+    let job = StabilityJob {
+        source,
+        omega_rpm: axis("omega_rpm", job::DEFAULT_OMEGA_RPM)?,
+        wob_kn: axis("wob_kn", job::DEFAULT_WOB_KN)?,
+        criterion: map::Criterion::Lumped(lumped),
+        w_ref_n: kwarg::<f64>(options, "w_ref_kn")?.map_or(bitrock::laws::PAPER_W_REF_N, |kn| kn * 1000.0),
+        percentile: kwarg::<f64>(options, "percentile")?.unwrap_or(job::DEFAULT_PERCENT) / 100.0,
+        samples: kwarg(options, "samples")?.unwrap_or(job::DEFAULT_SAMPLES),
+        backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or_default(),
+    };
+    let mut notes = Vec::new();
+    let maps = py.detach(|| {
+        let job = job.on(structure, lumped, &fe)?;
+        let maps = job.run(&mut |line| notes.push(line))?;
+        Ok::<_, Error>((job, maps))
+    });
+    let (job, maps) = check(py, maps)?;
+    if let Some(callback) = &note {
+        for line in notes.into_iter().chain(maps.early_end.clone()) {
+            callback.call1(py, (as_arguments(&line),))?;
+        }
+    }
+    let nan = |v: &Option<f64>| v.unwrap_or(f64::NAN);
+    let (n_omega, n_wob) = (job.omega_rpm.len(), job.wob_kn.len());
+    let out = PyDict::new(py);
+    out.set_item("laws", maps.inputs.iter().map(|i| i.law.name()).collect::<Vec<_>>())?;
+    out.set_item(
+        "probability",
+        maps.inputs.iter().map(|i| i.probability).collect::<Vec<_>>(),
+    )?;
+    out.set_item(
+        "samples",
+        maps.inputs.iter().map(|i| i.samples_si.len()).collect::<Vec<_>>(),
+    )?;
+    out.set_item("omega_rpm", PyArray1::from_slice(py, &job.omega_rpm))?;
+    out.set_item("wob_kn", PyArray1::from_slice(py, &job.wob_kn))?;
+    let grids: Vec<f64> = maps.grids.concat();
+    out.set_item(
+        "probability_unstable",
+        PyArray1::from_vec(py, grids).reshape([maps.inputs.len(), n_omega, n_wob])?,
+    )?;
+    let boundary = |pick: fn(&map::LawBoundaries) -> &Vec<Option<f64>>| -> PyResult<_> {
+        let flat: Vec<f64> = maps
+            .boundaries
+            .laws
+            .iter()
+            .flat_map(|b| pick(b).iter().map(nan))
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([maps.inputs.len(), n_omega])
+    };
+    out.set_item("map_wob_kn", boundary(|b| &b.map_wob_kn)?)?;
+    out.set_item("p_wob_kn", boundary(|b| &b.p_wob_kn)?)?;
+    if let Some(mixture) = &maps.boundaries.mixture_wob_kn {
+        out.set_item(
+            "mixture_p_wob_kn",
+            PyArray1::from_vec(py, mixture.iter().map(nan).collect()),
+        )?;
+    }
+    out.set_item("critical_bit_damping_nms", job.criterion.critical_nms())?;
+    out.set_item("percentile", job.percentile * 100.0)?;
+    out.set_item(
+        "structure",
+        serde_json::to_value(structure)
+            .ok()
+            .and_then(|v| v.as_str().map(String::from)),
+    )?;
+    Ok(out)
+}
