@@ -46,5 +46,15 @@ if [ ! -x "$VENV/bin/python" ] && ! python3 -m venv "$VENV" >/dev/null 2>&1; the
     python3 -m venv "$VENV"
 fi
 "$VENV/bin/python" -m pip install -q --disable-pip-version-check "./bindings/python[test]"
+# The extension's type stubs are generated from its Rust signatures and doc comments (PyO3's
+# introspection), never written by hand: the committed ones must be what the code gives.
+STUBS="$(mktemp -d)"
+(cd bindings/python && "$VENV/bin/maturin" generate-stubs --profile release --out "$STUBS" -q)
+if ! diff -u bindings/python/python/bitrock/_bitrock.pyi "$STUBS/bitrock/_bitrock.pyi"; then
+    echo "bindings/python/python/bitrock/_bitrock.pyi differs from the Rust code's: in bindings/python run" >&2
+    echo "  maturin generate-stubs --profile release --out python" >&2
+    exit 1
+fi
+rm -rf "$STUBS"
 # pytest exits 5 when it collects no test: set -e fails the run then too.
 BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q bindings/python/tests

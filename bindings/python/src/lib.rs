@@ -14,29 +14,29 @@ mod stability;
 
 use pyo3::prelude::*;
 
-/// The library's version.
-#[pyfunction]
-fn version() -> &'static str {
-    env!("CARGO_PKG_VERSION")
-}
-
+/// The extension module: the Rust library's entry points. Use the ``bitrock`` package, which
+/// wraps these in pandas and xarray; signatures here may change between releases.
 #[pymodule]
-fn _bitrock(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<record::Record>()?;
-    m.add_class::<run::Run>()?;
-    m.add_function(wrap_pyfunction!(record::read_csv, m)?)?;
-    m.add_function(wrap_pyfunction!(record::read_columns, m)?)?;
-    m.add_function(wrap_pyfunction!(fit::fit, m)?)?;
-    m.add_function(wrap_pyfunction!(run::abc, m)?)?;
-    m.add_function(wrap_pyfunction!(run::resume, m)?)?;
-    m.add_function(wrap_pyfunction!(run::open_run, m)?)?;
-    m.add_function(wrap_pyfunction!(stability::stability, m)?)?;
-    m.add_function(wrap_pyfunction!(selection::check_selection, m)?)?;
-    m.add_function(wrap_pyfunction!(law::simulate, m)?)?;
-    m.add_function(wrap_pyfunction!(law::parity, m)?)?;
-    m.add_function(wrap_pyfunction!(version, m)?)?;
-    m.add_function(wrap_pyfunction!(law::load_law, m)?)?;
-    m.add_function(wrap_pyfunction!(distributed::serve, m)?)?;
-    m.add_function(wrap_pyfunction!(distributed::needs_payloads, m)?)?;
-    Ok(())
+mod _bitrock {
+    #[pymodule_export]
+    use crate::distributed::{needs_payloads, serve};
+    #[pymodule_export]
+    use crate::fit::fit;
+    #[pymodule_export]
+    use crate::law::{load_law, parity, simulate};
+    #[pymodule_export]
+    use crate::record::{Record, read_columns, read_csv};
+    #[pymodule_export]
+    use crate::run::{Run, abc, open_run, resume};
+    #[pymodule_export]
+    use crate::selection::check_selection;
+    #[pymodule_export]
+    use crate::stability::stability;
+    use pyo3::prelude::*;
+
+    /// The library's version.
+    #[pyfunction]
+    fn version() -> &'static str {
+        env!("CARGO_PKG_VERSION")
+    }
 }

@@ -1,101 +1,151 @@
-"""The extension module: the Rust library's entry points. Use the ``bitrock`` package, which
-wraps these in pandas and xarray; signatures here may change between releases."""
+"""
+The extension module: the Rust library's entry points. Use the ``bitrock`` package, which
+wraps these in pandas and xarray; signatures here may change between releases.
+"""
 
-from collections.abc import Callable
+from _typeshed import Incomplete, SupportsGetItem
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import Any, SupportsFloat, SupportsIndex, final
 
-import numpy as np
-import numpy.typing as npt
+__all__ = ["Record", "Run", "abc", "check_selection", "fit", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "version"]
 
+@final
 class Record:
-    """A field record, read and split into calibration and validation samples (SI inside)."""
+    """
+    A field record, read and split into calibration and validation samples (SI inside).
+    """
+    def calibration(self, /) -> tuple[Incomplete, Incomplete]:
+        """
+        The calibration samples: bit speed (rad/s) and torque (N·m), without copies.
+        """
+    @property
+    def columns(self, /) -> tuple[str, str, str | None, str | None]:
+        """
+        `{"speed", "torque", "wob", "time"}`: the columns read.
+        """
+    @property
+    def rows_read(self, /) -> int: ...
+    @property
+    def rows_used(self, /) -> int: ...
+    @property
+    def source(self, /) -> str:
+        """
+        Where the record came from.
+        """
+    @property
+    def speed_unit(self, /) -> str: ...
+    @property
+    def torque_unit(self, /) -> str:
+        """
+        The unit torques are given and reported in (`kN·m`, `N·m`).
+        """
+    def validation(self, /) -> tuple[Incomplete, Incomplete]:
+        """
+        The validation samples: bit speed (rad/s) and torque (N·m).
+        """
+    @property
+    def warnings(self, /) -> list[str]: ...
 
-    @property
-    def source(self) -> str: ...
-    @property
-    def rows_read(self) -> int: ...
-    @property
-    def rows_used(self) -> int: ...
-    @property
-    def torque_unit(self) -> str: ...
-    @property
-    def speed_unit(self) -> str: ...
-    @property
-    def warnings(self) -> list[str]: ...
-    @property
-    def columns(self) -> tuple[str, str, str | None, str | None]:
-        """(speed, torque, weight on bit, time): the columns read."""
-    def calibration(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Bit speed (rad/s) and torque on bit (N·m) of the calibration samples."""
-    def validation(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Bit speed (rad/s) and torque on bit (N·m) of the validation samples."""
-
-Particles = tuple[list[str], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.uint64]]
-
+@final
 class Run:
-    """A finished run: its run.json document and its particles."""
-
+    """
+    A finished run: its `run.json` document, and the particles of any population.
+    """
+    def particles(self, /, g: SupportsIndex) -> dict:
+        """
+        The particles of population `g` by law: `{law: (params [n, k] in the record's torque
+        unit, weights, rho, candidate index)}`.
+        """
     @property
-    def summary(self) -> str:
-        """The run.json document, as text."""
+    def path(self, /) -> Path | None:
+        """
+        The run directory; `None` for a run in memory.
+        """
     @property
-    def path(self) -> Path | None: ...
+    def summary(self, /) -> str:
+        """
+        The run.json document.
+        """
     @property
-    def traffic(self) -> str | None:
-        """Per population of a run on workers: tasks, bytes shipped, seconds waited (JSON)."""
-    def particles(self, g: int) -> dict[str, Particles]:
-        """Population g's particles by law: (names, params [n, k] in the record's torque unit,
-        weights, rho, candidate index)."""
+    def traffic(self, /) -> str | None:
+        """
+        Per population of a distributed run: tasks, bytes shipped, seconds waited (JSON).
+        """
 
-Progress = Callable[[int, int, int, int, float | None], Any]
+def abc(record: Record, settings: dict, out: str | PathLike[str] | None, force: bool, progress: Any | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> Run:
+    """
+    Runs the ABC job on `record` with the settings in `settings` (keyword arguments of
+    `bitrock.abc`), into `out` when given.
+    """
 
-def read_csv(path: str | PathLike[str] | None, options: dict[str, Any]) -> Record: ...
-def read_columns(
-    names: list[str], columns: list[npt.NDArray[np.float64] | None], source: str, options: dict[str, Any]
-) -> Record: ...
-def fit(record: Record, laws: list[str] | None, options: dict[str, Any]) -> str: ...
-def abc(
-    record: Record,
-    settings: dict[str, Any],
-    out: str | PathLike[str] | None,
-    force: bool,
-    progress: Progress | None,
-    note: Callable[[str], Any] | None,
-    dispatcher: Any = None,
-    parallelism: int = 1,
-) -> Run: ...
-def resume(
-    path: str | PathLike[str],
-    more: dict[str, Any],
-    progress: Progress | None,
-    note: Callable[[str], Any] | None,
-    dispatcher: Any = None,
-    parallelism: int = 1,
-) -> Run: ...
-def open_run(path: str | PathLike[str]) -> Run: ...
-def stability(
-    run: str | PathLike[str] | None,
-    law: str | None,
-    params: list[float] | None,
-    options: dict[str, Any],
-    note: Callable[[str], Any] | None,
-) -> dict[str, Any]:
-    """Boundaries and probability grids as NumPy arrays (law × Ω × W)."""
-def check_selection(
-    run: str | PathLike[str],
-    options: dict[str, Any],
-    progress: Callable[[int, int], Any] | None,
-    note: Callable[[str], Any] | None,
-) -> str:
-    """The selection check's document, as text."""
-def simulate(law: str, params: list[float] | None, omega_rpm: float, options: dict[str, Any]) -> str:
-    """The simulated record as CSV text."""
-def parity(record: Record | None, laws: list[str] | None, options: dict[str, Any]) -> str:
-    """The parity report as JSON text."""
-def version() -> str: ...
-def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:
-    """Answers one task on a worker process."""
+def check_selection(run: str | PathLike[str], options: dict, progress: Any | None, note: Any | None) -> str:
+    """
+    Checks the selection of the run in `run` by re-simulation, writes it into the run's
+    `selection/` (as `bitrock check-selection` does) and returns its document.
+    """
+
+def fit(record: Record, laws: SupportsGetItem[int, str] | None, options: dict) -> str:
+    """
+    Least-squares fits of `laws` (`None`: all) to the record: `fit --json`'s document.
+    """
+
+def load_law(path: str | PathLike[str]) -> str:
+    """
+    Reads, compiles and registers the law file at `path`; its law's name, for `laws=` and
+    `law=` everywhere in this process.
+    """
+
 def needs_payloads(reply: bytes) -> bool:
-    """True when a worker's reply asks for the record and previous population."""
+    """
+    True when a worker's reply asks for the problem and context payloads.
+    """
+
+def open_run(path: str | PathLike[str]) -> Run:
+    """
+    Opens the finished run in `path`: its run.json and its store.
+    """
+
+def parity(record: Record | None, laws: SupportsGetItem[int, str] | None, options: dict) -> str:
+    """
+    CPU-vs-GPU parity on `record` (`None`: the embedded demo record): `bitrock parity`'s
+    report as JSON text.
+    """
+
+def read_columns(names: SupportsGetItem[int, str], columns: SupportsGetItem[int, Incomplete | None], source: str, options: dict) -> Record:
+    """
+    Reads a record from named float64 columns (a DataFrame's), read without copies; `None`
+    for a column that holds no numbers.
+    """
+
+def read_csv(path: str | PathLike[str] | None, options: dict) -> Record:
+    """
+    Reads a CSV record at `path` (`None`: the embedded demo record).
+    """
+
+def resume(path: str | PathLike[str], more: dict, progress: Any | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> Run:
+    """
+    Continues the run in `path` with the stopping rules in `more`.
+    """
+
+def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:
+    """
+    Answers a task on a worker process (see `bitrock::abc::shard::wire`).
+    """
+
+def simulate(law: str, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, omega_rpm: SupportsFloat | SupportsIndex, options: dict) -> str:
+    """
+    Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
+    `bitrock simulate` writes it (CSV text, torques in kN·m).
+    """
+
+def stability(run: str | PathLike[str] | None, law: str | None, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, options: dict, note: Any | None) -> dict:
+    """
+    Stability maps over (Ω, W) for the run in `run`, or for `law` at `params` (torques in
+    `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
+    """
+
+def version() -> str:
+    """
+    The library's version.
+    """
