@@ -14,6 +14,7 @@ import warnings
 
 import numpy as np
 import pandas as pd
+import pandas as pd
 import pytest
 
 import bitrock
@@ -167,6 +168,10 @@ def test_refused_settings_name_their_argument(demo: bitrock.Record, arguments, a
         ({"seed": -1}, "seed"),
         ({"seed": 2**70}, "seed"),
         ({"max_populations": 1.5}, "max_populations"),
+        ({"epsilons": "0.05"}, "epsilons"),
+        ({"epsilons": [0.05, "0.01"]}, "epsilons"),
+        ({"laws": 2}, "laws"),
+        ({"laws": ["m2", 3]}, "laws"),
     ],
 )
 def test_numbers_of_the_wrong_kind_or_range_name_their_argument(demo: bitrock.Record, arguments, argument: str) -> None:
@@ -175,6 +180,25 @@ def test_numbers_of_the_wrong_kind_or_range_name_their_argument(demo: bitrock.Re
     assert caught.value.argument == argument
     assert str(caught.value).startswith(f"{argument}: ")
     assert repr(arguments[argument]) in str(caught.value)
+
+
+def test_one_law_or_one_tolerance_where_a_list_belongs_is_a_list_of_one(demo: bitrock.Record) -> None:
+    one = bitrock.abc(demo, laws="m2", epsilons=0.05, particles=100, backend="cpu", progress=False)
+    assert one.laws == ["m2"]
+    assert [p["epsilon"] for p in one.document["populations"]] == [None, 0.05]
+    listed = bitrock.abc(demo, laws=["m2"], epsilons=[0.05], particles=100, backend="cpu", progress=False)
+    for a, b in zip(listed.document["populations"], one.document["populations"], strict=True):
+        assert (a["epsilon"], a["accepted"], a["draws"]) == (b["epsilon"], b["accepted"], b["draws"])
+
+
+@pytest.mark.parametrize("source", [pd.Series([1.0, 2.0]), "demo.csv", None])
+def test_a_source_that_is_not_a_record_is_refused_naming_the_argument(source) -> None:
+    for call in (lambda: bitrock.abc(source, progress=False), lambda: bitrock.fit(source)):
+        with pytest.raises(bitrock.InputError) as caught:
+            call()
+        assert caught.value.argument == "record"
+        assert "bitrock.read_record" in str(caught.value)
+        assert type(source).__name__ in str(caught.value)
 
 
 def test_a_run_another_process_is_writing_is_said_to_be_so(demo: bitrock.Record, tmp_path) -> None:

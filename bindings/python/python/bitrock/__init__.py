@@ -120,10 +120,56 @@ def load_law(path: str | os.PathLike[str]) -> str:
     return _bitrock.load_law(os.fspath(path))
 
 
+def _law_names(value: Any, argument: str = "laws") -> list[str] | None:
+    """A list of law names from ``value``: ``None``, one name (``"m2"``), or names."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        return [value]
+    try:
+        names = list(value)
+    except TypeError:
+        raise InputError(f"{argument}: give a law name or a list of them, got {value!r}", argument) from None
+    if not all(isinstance(name, str) for name in names):
+        raise InputError(f"{argument}: law names are strings, got {value!r}", argument)
+    return names
+
+
+def _numbers(value: Any, argument: str) -> list[float] | None:
+    """A list of numbers from ``value``: ``None``, one number, or numbers."""
+    if value is None:
+        return None
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return [float(value)]
+    if isinstance(value, (str, bytes)):
+        raise InputError(f"{argument}: give a number or a list of numbers, got {value!r}", argument)
+    try:
+        items = list(value)
+    except TypeError:
+        raise InputError(f"{argument}: give a number or a list of numbers, got {value!r}", argument) from None
+    if any(isinstance(item, bool) or not isinstance(item, (int, float, np.integer, np.floating)) for item in items):
+        raise InputError(f"{argument}: every value must be a number, got {value!r}", argument)
+    return [float(item) for item in items]
+
+
+def _record(record: Any, argument: str = "record", optional: bool = False) -> Any:
+    """``record`` if it is a record (or ``None`` where that is allowed); otherwise the refusal
+    says how to make one."""
+    if record is None and optional:
+        return None
+    if not isinstance(record, _bitrock.Record):
+        raise InputError(
+            f"{argument}: give a record made by bitrock.read_record (from a CSV file or a DataFrame), "
+            f"got {type(record).__name__}",
+            argument,
+        )
+    return record
+
+
 def fit(
     record: Record,
     *,
-    laws: Sequence[str] | None = None,
+    laws: str | Sequence[str] | None = None,
     bounds: bool = True,
     starts: int | None = None,
     scale_by_wob: bool = False,
@@ -135,7 +181,7 @@ def fit(
     samples, and the fit's warnings. ``bounds=False`` lifts the physical bounds;
     ``scale_by_wob`` scales each predicted torque by WOB / W_ref (``w_ref_kn``, kN)."""
     options = {"bounds": bounds, "starts": starts, "scale_by_wob": scale_by_wob, "w_ref_kn": w_ref_kn}
-    doc = json.loads(_bitrock.fit(record, None if laws is None else list(laws), options))
+    doc = json.loads(_bitrock.fit(_record(record), _law_names(laws), options))
     rows = []
     for f in doc["fits"]:
         for name, unit, estimate, se in zip(f["names"], f["units"], f["params"], f["std_errors"]):
@@ -192,10 +238,10 @@ def _note(line: str) -> None:
 def abc(
     record: Record,
     *,
-    laws: Sequence[str] | None = None,
+    laws: str | Sequence[str] | None = None,
     particles: int | None = None,
     sampler: str | None = None,
-    epsilons: Sequence[float] | None = None,
+    epsilons: float | Sequence[float] | None = None,
     eps_min: float | None = None,
     start_epsilon: float | None = None,
     delta: float | None = None,
@@ -246,10 +292,10 @@ def abc(
             "its environment names (BITROCK_ADAPTER, CUDA_VISIBLE_DEVICES)",
             "devices",
         )
+    record = _record(record)
     settings = {k: v for k, v in locals().items() if k not in ("record", "out", "force", "progress", "executor")}
-    for key in ("laws", "epsilons"):
-        if settings[key] is not None:
-            settings[key] = list(settings[key])
+    settings["laws"] = _law_names(laws)
+    settings["epsilons"] = _numbers(epsilons, "epsilons")
     if settings["prior_file"] is not None:
         settings["prior_file"] = os.fspath(settings["prior_file"])
     dispatcher = None if executor is None else Dispatcher(executor)
@@ -498,7 +544,7 @@ def simulate(
 def parity(
     record: Record | None = None,
     *,
-    laws: Sequence[str] | None = None,
+    laws: str | Sequence[str] | None = None,
     candidates: int | None = None,
     epsilon: float | None = None,
     seed: int | None = None,
@@ -508,7 +554,13 @@ def parity(
     tolerance, decisions at ``epsilon`` that differ away from it), and the candidate generator
     compared bit for bit. Returns the report (``pass``, ``adapter``, ``tolerance``, ``laws``,
     ``philox``). Raises :class:`GpuError` without a usable GPU."""
-    return json.loads(_bitrock.parity(record, None if laws is None else list(laws), {"candidates": candidates, "epsilon": epsilon, "seed": seed}))
+    return json.loads(
+        _bitrock.parity(
+            _record(record, optional=True),
+            _law_names(laws),
+            {"candidates": candidates, "epsilon": epsilon, "seed": seed},
+        )
+    )
 
 
 @dataclass(frozen=True)
