@@ -42,7 +42,6 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 pub use crate::run::dir::{SELECTION_DIR, SELECTION_JSON};
@@ -455,7 +454,8 @@ struct Job {
 }
 
 /// Checks the selection of `run`: K replicates per law, each through the run's pipeline.
-/// `progress(done, total)` is called as replicates finish (from any thread); `note` hears what
+/// `progress(done, total)` is called as replicates finish, one call at a time with `done`
+/// counting up 1, 2, … `total` (from whichever thread finished); `note` hears what
 /// the user should know (the backend, a fallback to the CPU), each line once.
 pub fn check(
     run: &CheckedRun,
@@ -473,7 +473,8 @@ pub fn check(
         .flat_map(|slot| (0..k).map(move |replicate| Job { slot, replicate }))
         .collect();
     let batch = options.batch.unwrap_or(jobs.len()).max(1);
-    let done = AtomicUsize::new(0);
+    // Counted and reported under one lock: a progress bar sees one call at a time, in order.
+    let done = std::sync::Mutex::new(0usize);
     let mut results: Vec<Replicate> = Vec::with_capacity(jobs.len());
     let mut backend = "cpu";
     let mut gpu_shape = None;
@@ -514,7 +515,10 @@ pub fn check(
                     scope.spawn(move || {
                         let result = sample_replicate(run, options, fitted, &seat);
                         drop(seat);
-                        progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+                        let mut count = done.lock().unwrap_or_else(|p| p.into_inner());
+                        *count += 1;
+                        progress(*count, total);
+                        drop(count);
                         result
                     })
                 })

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -83,10 +84,21 @@ def test_the_selection_check_is_the_command_lines(cli, demo, tmp_path) -> None:
     bitrock.abc(demo, particles=150, seed=11, backend="cpu", laws=["m2", "m3"], max_populations=3, out=tmp_path / "py", progress=False)
     shutil.copytree(tmp_path / "py", tmp_path / "cli")
     seen: list[tuple[int, int]] = []
-    matrix = bitrock.check_selection(tmp_path / "py", replicates=2, backend="cpu", progress=lambda d, t: seen.append((d, t)))
+    inside = [0]
+
+    def progress(done: int, total: int) -> None:
+        # Replicates finish on several threads; the sleep lets the interpreter switch to
+        # another thread's call, if one could be made meanwhile.
+        inside[0] += 1
+        assert inside[0] == 1, "two progress calls at once"
+        time.sleep(0.05)
+        seen.append((done, total))
+        inside[0] -= 1
+
+    matrix = bitrock.check_selection(tmp_path / "py", replicates=2, backend="cpu", progress=progress)
     assert matrix.shape == (2, 2) and list(matrix.index) == ["m2", "m3"] and list(matrix.columns) == ["m2", "m3"]
     np.testing.assert_allclose(matrix.sum(axis=1), 1.0, atol=1e-9)
-    assert sorted(seen)[-1] == (4, 4)
+    assert seen == [(1, 4), (2, 4), (3, 4), (4, 4)]
     assert (tmp_path / "py" / "selection").is_dir()
     document = json.loads(run_cli(cli, "check-selection", str(tmp_path / "cli"), "--replicates", "2", "--backend", "cpu", "--json", "-q").stdout)
     for ours, theirs in zip(matrix.attrs["document"]["rows"], document["rows"]):
