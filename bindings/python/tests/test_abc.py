@@ -268,6 +268,21 @@ def test_a_callback_that_raises_stops_the_run_and_leaves_it_resumable(demo: bitr
         assert np.array_equal(params, resumed.particles()[law][1])
 
 
+def test_a_callbacks_own_exception_comes_back_and_the_run_stays_resumable(demo: bitrock.Record, tmp_path) -> None:
+    class Enough(Exception):
+        pass
+
+    def stop_in_population_1(population: int, *_rest) -> None:
+        if population == 1:
+            raise Enough("the user's own reason")
+
+    with pytest.raises(Enough, match="the user's own reason"):
+        bitrock.abc(demo, particles=200, seed=5, backend="cpu", out=tmp_path / "cut", progress=stop_in_population_1)
+    with pytest.warns(bitrock.BitrockWarning):
+        resumed = bitrock.resume(tmp_path / "cut", max_populations=3, progress=False)
+    assert [p["index"] for p in resumed.document["populations"]] == [0, 1, 2]
+
+
 def test_ctrl_c_raises_keyboard_interrupt_within_a_second(tmp_path) -> None:
     script = textwrap.dedent(
         f"""
