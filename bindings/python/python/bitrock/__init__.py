@@ -135,7 +135,7 @@ def _law_names(value: Any, argument: str = "laws") -> list[str] | None:
     return names
 
 
-def _numbers(value: Any, argument: str) -> list[float] | None:
+def _number_list(value: Any, argument: str) -> list[float] | None:
     """A list of numbers from ``value``: ``None``, one number, or numbers."""
     if value is None:
         return None
@@ -295,7 +295,7 @@ def abc(
     record = _record(record)
     settings = {k: v for k, v in locals().items() if k not in ("record", "out", "force", "progress", "executor")}
     settings["laws"] = _law_names(laws)
-    settings["epsilons"] = _numbers(epsilons, "epsilons")
+    settings["epsilons"] = _number_list(epsilons, "epsilons")
     if settings["prior_file"] is not None:
         settings["prior_file"] = os.fspath(settings["prior_file"])
     dispatcher = None if executor is None else Dispatcher(executor)
