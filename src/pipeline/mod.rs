@@ -11,7 +11,7 @@ use crate::documents::{self, RunSummary};
 use crate::error::{Error, Result};
 use crate::files;
 use crate::prior::PriorFile;
-use crate::run::dir as rundir;
+
 use crate::run::{self, Continuation, Outcome};
 use std::path::Path;
 
@@ -119,7 +119,7 @@ pub fn resume_on(
         Some(make_workers) => run::resume_on(dir, more, make_workers, observer)?,
         None => run::resume(dir, more, observer)?,
     };
-    let unchanged = outcome.added == 0 && dir.join(rundir::RUN_JSON).is_file();
+    let unchanged = outcome.added == 0 && dir.join(run::dir::RUN_JSON).is_file();
     let mut analysis = Analysis::new(outcome, more.summary_population, Some(dir))?;
     if unchanged {
         observer.note(format!(
@@ -261,12 +261,12 @@ impl Analysis {
         let run_json = serde_json::to_string_pretty(&self.json()).expect("JSON into memory") + "\n";
         let data = &self.outcome.setup.data;
         let files = [
-            (rundir::RUN_JSON, run_json.into_bytes()),
+            (run::dir::RUN_JSON, run_json.into_bytes()),
             (
-                rundir::ENVELOPES_CSV,
+                run::dir::ENVELOPES_CSV,
                 documents::envelopes_csv(&self.envelopes, data.torque_unit),
             ),
-            (rundir::DATA_CSV, documents::data_csv(data)),
+            (run::dir::DATA_CSV, documents::data_csv(data)),
         ];
         for (name, bytes) in &files {
             files::write_own(&dir.join(name), "out", |out| out.write_all(bytes))?;

@@ -8,7 +8,7 @@
 //! ([`crate::files::refuse_foreign`]).
 
 use super::store::Store;
-pub use super::store::{STORE_COMPANIONS, STORE_FILE};
+use super::store::{STORE_COMPANIONS, STORE_FILE};
 use crate::error::{Error, Result};
 use crate::files::{self, Authorship};
 use std::fs::File;
