@@ -72,6 +72,9 @@ pub enum BoxRule {
     StdErr,
     /// Given explicitly (a `--prior` file, or a box built by a program).
     Given,
+    /// k times the record's physical scale of the parameter from its physical bound (or ±k
+    /// scales where it has none): no fit involved ([`Prior::physical`]).
+    Physical,
     /// Not recorded: a run store of schema version 1 kept the boxes but not their rules.
     Unrecorded,
 }
@@ -85,17 +88,19 @@ impl BoxRule {
             BoxRule::RecordScale => "record_scale",
             BoxRule::StdErr => "stderr",
             BoxRule::Given => "given",
+            BoxRule::Physical => "physical",
             BoxRule::Unrecorded => "unrecorded",
         }
     }
 
     /// Every rule.
-    pub const ALL: [BoxRule; 6] = [
+    pub const ALL: [BoxRule; 7] = [
         BoxRule::Delta,
         BoxRule::DeltaNotIdentified,
         BoxRule::RecordScale,
         BoxRule::StdErr,
         BoxRule::Given,
+        BoxRule::Physical,
         BoxRule::Unrecorded,
     ];
 
@@ -154,6 +159,62 @@ pub struct Prior {
     /// Law k is chosen when the first Philox word is below `thresholds[k]` (and not below the
     /// previous one); the last threshold is 2³². Integer comparison: identical on every backend.
     pub thresholds: Vec<u64>,
+}
+
+/// The sizes a record gives a law's parameters without any fit: how large a torque it holds
+/// and over which speeds. A parameter of dimension torque^t·(rad/s)^(−s) has the scale
+/// `torque_max^t / speed^s` with `speed` the highest speed where the parameter multiplies a
+/// power of w in a torque (t = 1: a polynomial coefficient, whose term must stay within the
+/// record's torques up to its highest speed) and the lowest where it is a rate or a width
+/// (t = 0: exp(−g·w), tanh(b·w), a bump's 1/width², which can be as sharp as the slowest
+/// recorded speed resolves); a speed-valued parameter (s < 0) is measured by the highest speed.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PhysicalScales {
+    /// Largest |torque| of the record, N·m.
+    pub torque_max: f64,
+    /// 5th percentile of the bit speed, rad/s (the slowest speeds the record resolves).
+    pub speed_low: f64,
+    /// Largest bit speed, rad/s.
+    pub speed_high: f64,
+}
+
+impl PhysicalScales {
+    /// The scales of `samples` (speeds in rad/s, torques in N·m).
+    pub fn of(samples: &crate::data::Samples) -> Self {
+        let torque_max = samples.torque_nm.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+        let speed_high = samples.speed_rad_s.iter().fold(0.0f64, |m, &w| m.max(w));
+        let speed_low = crate::numerics::quantile(&samples.speed_rad_s, 0.05);
+        let floor = f64::MIN_POSITIVE;
+        Self {
+            torque_max: torque_max.max(floor),
+            speed_low: speed_low.max(speed_high * 1e-6).max(floor),
+            speed_high: speed_high.max(floor),
+        }
+    }
+
+    /// The scale of parameter `j` of `law`, SI (see the type's documentation).
+    pub fn param_scale(&self, law: Law, j: usize) -> f64 {
+        let spec = law.params()[j];
+        let s = spec.inverse_speed_power;
+        let speed = if s > 0 && spec.torque_power == 0 {
+            self.speed_low
+        } else {
+            self.speed_high
+        };
+        self.torque_max.powi(spec.torque_power) / speed.powi(s)
+    }
+
+    /// The box of parameter `j` of `law` at `k` scales (before clipping): from its physical
+    /// bound up, or symmetric about 0 for a free parameter.
+    fn physical_box(&self, law: Law, j: usize, k: f64) -> (f64, f64, BoxRule) {
+        let spec = law.params()[j];
+        let width = k * self.param_scale(law, j);
+        if spec.lower.is_finite() {
+            (spec.lower, spec.lower + width, BoxRule::Physical)
+        } else {
+            (-width, width, BoxRule::Physical)
+        }
+    }
 }
 
 /// A candidate drawn from the prior: which box (index into [`Prior::boxes`]) and its parameters.
@@ -281,11 +342,53 @@ impl Prior {
                 format!("must be a positive number, got {delta}"),
             ));
         }
+        let laws: Vec<Law> = fits.iter().map(|f| f.law).collect();
+        Self::from_boxes_by(&laws, file, torque_unit_nm, "delta", delta, |k, j| match rule {
+            PriorRule::Delta => delta_box(&fits[k], j, delta),
+            PriorRule::Stderr { k: width } => {
+                stderr_box(&fits[k], j, width).unwrap_or_else(|| delta_box(&fits[k], j, delta))
+            }
+        })
+    }
+
+    /// Boxes that use no fit: parameter j of a law spans `k` times its record scale from its
+    /// physical bound ([`BoxRule::Physical`], see [`PhysicalScales`]), replaced where `file`
+    /// gives explicit bounds. The prior of a model evidence, which must not look at the data
+    /// twice: a box centred on the least-squares estimate of the same record rewards each law
+    /// for where the data put it.
+    pub fn physical(
+        laws: &[Law],
+        scales: &PhysicalScales,
+        k: f64,
+        file: Option<&PriorFile>,
+        torque_unit_nm: f64,
+    ) -> Result<Self> {
+        if !(k.is_finite() && k > 0.0) {
+            return Err(Error::setting(
+                "prior_scale",
+                format!("must be a positive number, got {k}"),
+            ));
+        }
+        Self::from_boxes_by(laws, file, torque_unit_nm, "prior_scale", k, |i, j| {
+            scales.physical_box(laws[i], j, k)
+        })
+    }
+
+    /// The prior of `laws` whose boxes come from `file` where it gives them and from
+    /// `rule_box(law's position, parameter)` elsewhere, clipped to the physical bounds;
+    /// `setting` (with its `value`) is what a refused box of the rule names.
+    fn from_boxes_by(
+        laws: &[Law],
+        file: Option<&PriorFile>,
+        torque_unit_nm: f64,
+        setting: &str,
+        value: f64,
+        rule_box: impl Fn(usize, usize) -> (f64, f64, BoxRule),
+    ) -> Result<Self> {
         let mut boxes = Vec::new();
         let mut rules = Vec::new();
         let mut weights = Vec::new();
-        for fit in fits {
-            let law = fit.law;
+        for (k, &law) in laws.iter().enumerate() {
             let explicit = file.and_then(|f| f.bounds(law));
             let mut lower = Vec::new();
             let mut upper = Vec::new();
@@ -304,10 +407,7 @@ impl Prior {
                     }
                     (a * unit, b * unit, BoxRule::Given)
                 } else {
-                    match rule {
-                        PriorRule::Delta => delta_box(fit, j, delta),
-                        PriorRule::Stderr { k } => stderr_box(fit, j, k).unwrap_or_else(|| delta_box(fit, j, delta)),
-                    }
+                    rule_box(k, j)
                 };
                 let lo = lo.max(spec.lower);
                 if rule == BoxRule::Given && lo >= hi {
@@ -322,10 +422,10 @@ impl Prior {
                         ),
                     ));
                 }
-                check_box_reach(law, spec.name, lo, hi, rule, delta)?;
+                check_box_reach(law, spec.name, lo, hi, rule, setting, value)?;
                 if lo >= hi {
                     return Err(Error::setting(
-                        "delta",
+                        setting,
                         format!(
                             "{law}.{}: the box [{lo}, {hi}] (SI) is empty after clipping to the bound {} ≥ {}; give explicit bounds in a `prior` file",
                             spec.name, spec.name, spec.lower
@@ -440,8 +540,8 @@ impl Prior {
 /// Refuses a box that f32 candidates cannot span (an end beyond f32's range, as δ = 1e100
 /// makes) and a δ box that crosses 0 (δ ≥ 1 on a parameter without a physical bound): it
 /// would hold values of the sign opposite to the estimate, another law shape than the fit's.
-fn check_box_reach(law: Law, name: &str, lo: f64, hi: f64, rule: BoxRule, delta: f64) -> Result<()> {
-    let field = if rule == BoxRule::Given { "prior" } else { "delta" };
+fn check_box_reach(law: Law, name: &str, lo: f64, hi: f64, rule: BoxRule, setting: &str, delta: f64) -> Result<()> {
+    let field = if rule == BoxRule::Given { "prior" } else { setting };
     if !((lo as f32).is_finite() && (hi as f32).is_finite()) {
         return Err(Error::setting(
             field,

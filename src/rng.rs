@@ -52,6 +52,20 @@ pub fn candidate_counter(population: u32, index: u64, block: u32) -> [u32; 4] {
     [index as u32, (index >> 32) as u32, population, block]
 }
 
+/// A word as a uniform on (0, 1), f64: (w + ½)·2⁻³² (never 0, so its logarithm is finite).
+#[inline]
+pub fn open_unit(word: u32) -> f64 {
+    (f64::from(word) + 0.5) * (1.0 / 4_294_967_296.0)
+}
+
+/// Two standard normals from two words by Box–Muller.
+#[inline]
+pub fn box_muller(a: u32, b: u32) -> [f64; 2] {
+    let r = (-2.0 * open_unit(a).ln()).sqrt();
+    let angle = std::f64::consts::TAU * (f64::from(b) * (1.0 / 4_294_967_296.0));
+    [r * angle.cos(), r * angle.sin()]
+}
+
 /// A word as a uniform f32 in [0, 1): the top 24 bits times 2⁻²⁴. Every value is exactly
 /// representable in f32, so the WGSL twin produces the same bits.
 #[inline]

@@ -7,6 +7,7 @@
 //! the populations it already has: given the same configuration and the same completed
 //! populations, a sampler continues exactly as an uninterrupted run would.
 
+pub mod evidence;
 mod fill;
 pub mod floor;
 pub mod posterior;

@@ -660,6 +660,14 @@ pub fn equal_weights<'a>(weights: impl IntoIterator<Item = &'a f64>) -> bool {
 /// `count` indices drawn from `weights` by systematic resampling with the fixed offset 1/2
 /// (deterministic: the same weights give the same indices). Indices come out ascending.
 pub fn systematic(weights: &[f64], count: usize) -> Vec<usize> {
+    systematic_from(weights, count, 0.5)
+}
+
+/// Systematic resampling with the comb's offset `offset` in [0, 1): the points
+/// (j + offset)/count of the cumulative weights. A uniformly random offset makes every index's
+/// expected count exactly count·wᵢ/Σw (what an unbiased estimate of a marginal likelihood
+/// needs); [`systematic`] takes the middle of every tooth.
+pub fn systematic_from(weights: &[f64], count: usize, offset: f64) -> Vec<usize> {
     let total: f64 = crate::numerics::compensated_sum(weights.iter().copied());
     let mut out = Vec::with_capacity(count);
     if total.is_nan() || total <= 0.0 || weights.is_empty() {
@@ -667,7 +675,7 @@ pub fn systematic(weights: &[f64], count: usize) -> Vec<usize> {
     }
     let (mut i, mut cumulative) = (0, weights[0]);
     for j in 0..count {
-        let u = (j as f64 + 0.5) / count as f64 * total;
+        let u = (j as f64 + offset) / count as f64 * total;
         while cumulative < u && i + 1 < weights.len() {
             i += 1;
             cumulative += weights[i];

@@ -88,7 +88,7 @@ use crate::eval::{AbcProblem, Evaluator, KernelSums, PARITY_TOLERANCE};
 use crate::laws::MAX_PARAMS;
 use crate::numerics::compensated_sum;
 use crate::prior::{Candidate, Prior};
-use crate::rng::{candidate_counter, key_of_seed, philox4x32_10};
+use crate::rng::{box_muller, candidate_counter, key_of_seed, open_unit, philox4x32_10};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
@@ -310,20 +310,6 @@ impl SmcConfig {
 
 /// Relative floor of the kernel's standard deviation: 10⁻⁴ of the prior box width.
 const KERNEL_FLOOR: f64 = 1e-4;
-
-/// A word as a uniform on (0, 1), f64: (w + ½)·2⁻³².
-#[inline]
-fn open_unit(word: u32) -> f64 {
-    (f64::from(word) + 0.5) * (1.0 / 4_294_967_296.0)
-}
-
-/// Two standard normals from two words by Box–Muller (see the module documentation).
-#[inline]
-fn box_muller(a: u32, b: u32) -> [f64; 2] {
-    let r = (-2.0 * open_unit(a).ln()).sqrt();
-    let angle = std::f64::consts::TAU * (f64::from(b) * (1.0 / 4_294_967_296.0));
-    [r * angle.cos(), r * angle.sin()]
-}
 
 /// The first index whose cumulative value exceeds `u` (inverse CDF; `cdf` ends at ≥ u).
 #[inline]
