@@ -425,7 +425,8 @@ impl Island {
         }
         let target = config.ess_share * n;
         let remaining = 1.0 - self.beta;
-        let step = if ess_of_step(&self.loglik, remaining) >= target {
+        let reaches_one = ess_of_step(&self.loglik, remaining) >= target;
+        let step = if reaches_one {
             remaining
         } else {
             let (mut lo, mut hi) = (0.0, remaining);
@@ -457,7 +458,7 @@ impl Island {
         let picks = systematic_from(&weights, self.theta.len(), self.stream.uniform());
         self.theta = picks.iter().map(|&i| self.theta[i]).collect();
         self.loglik = picks.iter().map(|&i| self.loglik[i]).collect();
-        self.beta = if step == remaining { 1.0 } else { self.beta + step };
+        self.beta = if reaches_one { 1.0 } else { self.beta + step };
         self.stages += 1;
         self.sweeps_done = 0;
         self.sweeps_wanted = 1;
@@ -486,7 +487,7 @@ impl Island {
         cov /= total;
         for j in 0..d {
             let floor = 1e-6 * f64::from(self.upper[j] - self.lower[j]);
-            if !(cov[(j, j)] > floor * floor) {
+            if cov[(j, j)].is_nan() || cov[(j, j)] <= floor * floor {
                 cov[(j, j)] = floor * floor;
             }
         }
@@ -507,11 +508,11 @@ impl Island {
             self.stream.normals(d, &mut z);
             let mut p = [0.0f32; MAX_PARAMS];
             let mut inside = true;
-            for j in 0..d {
+            for (j, slot) in p.iter_mut().enumerate().take(d) {
                 let step: f64 = (0..=j).map(|k| self.factor[(j, k)] * z[k]).sum();
                 let v = (f64::from(self.theta[i][j]) + self.scale * step) as f32;
                 inside &= v >= self.lower[j] && v <= self.upper[j];
-                p[j] = v;
+                *slot = v;
             }
             self.proposals[i] = p;
             self.inside[i] = inside;
@@ -747,7 +748,7 @@ mod tests {
             m4.ln_z,
             m4.ln_z_error
         );
-        assert_eq!(m4.probability, 1.0);
+        assert!((m4.probability - 1.0).abs() < 1e-15);
         let total: f64 = m4.posterior.iter().map(|(_, w)| w).sum();
         assert!((total - 1.0).abs() < 1e-12);
     }
