@@ -64,6 +64,64 @@ pub fn fit_json(data: &FieldData, fits: &[LawFit]) -> Value {
     })
 }
 
+/// The evidence of a record's laws as JSON: the fits, the boxes (record units), and per law
+/// ln Z with its Monte-Carlo error, P(m | y), the sampler's effort and the posterior mean.
+/// `prior` describes the boxes of `boxes` in words.
+pub fn evidence_json(
+    data: &FieldData,
+    fits: &[LawFit],
+    boxes: &crate::prior::Prior,
+    evidence: &crate::abc::evidence::Evidence,
+    prior: &str,
+) -> Value {
+    let torque = data.torque_unit.label();
+    let laws: Vec<Value> = evidence
+        .laws
+        .iter()
+        .zip(&boxes.boxes)
+        .map(|(law, bx)| {
+            let lower: Vec<f64> = bx.lower.iter().map(|&v| f64::from(v)).collect();
+            let upper: Vec<f64> = bx.upper.iter().map(|&v| f64::from(v)).collect();
+            let d = law.law.n_params();
+            let mean_si: Vec<f64> = (0..d)
+                .map(|j| law.posterior.iter().map(|(p, w)| w * p[j]).sum())
+                .collect();
+            json!({
+                "law": law.law,
+                "names": law.law.param_names(),
+                "units": law.law.params().iter().map(|s| s.unit(torque)).collect::<Vec<_>>(),
+                "lower": to_record_units(law.law, &lower, data.torque_unit),
+                "upper": to_record_units(law.law, &upper, data.torque_unit),
+                "ln_z": law.ln_z,
+                "ln_z_error": law.ln_z_error,
+                "island_ln_z": law.island_ln_z,
+                "prior_probability": law.prior_probability,
+                "probability": law.probability,
+                "posterior_mean": to_record_units(law.law, &mean_si, data.torque_unit),
+                "best_rho": law.best_rho,
+                "stages": law.stages,
+                "candidates_scored": law.candidates_scored,
+            })
+        })
+        .collect();
+    json!({
+        "source": data.source.display().to_string(),
+        "torque_unit": torque,
+        "speed_unit_of_params": "rad/s",
+        "data_points": evidence.data_points,
+        "noise_model": "iid_gaussian_jeffreys_sigma",
+        "ln_z_torque_unit": "N·m",
+        "prior": prior,
+        "sampler": evidence.config,
+        "backend": evidence.backend,
+        "candidates_scored": evidence.candidates_scored,
+        "evaluations": evidence.evaluations,
+        "seconds": evidence.seconds,
+        "laws": laws,
+        "fits": fit_json(data, fits)["fits"],
+    })
+}
+
 /// A torque-scaled vector (parameters, their spreads) from SI to the record's torque unit.
 pub fn to_record_units(law: Law, values_si: &[f64], torque_unit: TorqueUnit) -> Vec<f64> {
     law.scale_torque(values_si, 1.0 / torque_unit.newton_metres())

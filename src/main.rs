@@ -60,6 +60,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
         Command::Fit(cmd) => cli::fit::run(&cmd),
         Command::Abc(cmd) => cli::abc::run(&cmd),
+        Command::Evidence(cmd) => cli::evidence::run(&cmd),
         Command::Export(cmd) => cli::export::run(&cmd),
         Command::Report(cmd) => cli::report::run(&cmd),
         Command::Simulate(cmd) => cli::simulate::run(&cmd),

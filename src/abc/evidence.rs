@@ -167,6 +167,23 @@ impl Evidence {
     }
 }
 
+/// How strongly a log Bayes factor `ln_b` (with Monte-Carlo error `error`) favours its law, in
+/// Kass & Raftery's (1995) words: positive from 1 nat, strong from 3, very strong from 5.
+/// Below 1 nat, or within twice its error of 0, the record does not decide between the two
+/// laws: what is reported is set by the priors and the sampling noise.
+pub fn strength(ln_b: f64, error: f64) -> &'static str {
+    let b = ln_b.abs();
+    if b < 1.0 || b < 2.0 * error {
+        "undecided"
+    } else if b < 3.0 {
+        "positive"
+    } else if b < 5.0 {
+        "strong"
+    } else {
+        "very strong"
+    }
+}
+
 /// The words of draw `index` of the stream of (law slot, island): four per call.
 fn words(seed: u64, stream: u32, index: u64) -> [u32; 4] {
     philox4x32_10(

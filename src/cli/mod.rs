@@ -9,6 +9,7 @@ pub mod bench;
 pub mod check;
 pub mod demo;
 pub mod devices;
+pub mod evidence;
 pub mod export;
 pub mod fe;
 pub mod fields;
@@ -78,6 +79,11 @@ pub enum Command {
     /// probabilities and parameter distributions, written to a run directory and its store;
     /// `--resume DIR` continues a killed or finished run.
     Abc(Box<abc::AbcCmd>),
+    /// The model evidence of each law (its marginal likelihood, by tempered SMC with the
+    /// residuals' noise integrated out) and the posterior law probabilities it gives, with
+    /// Monte-Carlo errors and Bayes factors: what the data say about the laws, where the
+    /// paper's ABC probabilities are ratios of prior volumes under a tolerance.
+    Evidence(evidence::EvidenceCmd),
     /// Export a run directory's store: particles as CSV (one row per particle, parameters in
     /// columns, the record's torque unit), or the whole run as JSON.
     Export(export::ExportCmd),

@@ -15,6 +15,7 @@ use crate::prior::PriorFile;
 use crate::run::{self, Continuation, Outcome};
 use std::path::Path;
 
+pub mod evidence;
 pub mod stability;
 
 pub use stability::{MapSource, StabilityJob, StabilityMaps};

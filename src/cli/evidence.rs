@@ -1,0 +1,192 @@
+//! `bitrock evidence`: the marginal likelihood of each law on a record and the posterior law
+//! probabilities it gives, through [`bitrock::pipeline::evidence`]; tables or JSON.
+
+use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
+use super::print;
+use bitrock::abc::evidence::{EvidenceConfig, strength};
+use bitrock::data::FieldData;
+use bitrock::documents::to_record_units;
+use bitrock::eval::Backend;
+use bitrock::pipeline::evidence::{DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceJob, EvidencePrior};
+use clap::{Args, ValueEnum};
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Which boxes the evidence integrates over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Boxes {
+    /// From each parameter's physical bound over --prior-scale times the record's scale of its
+    /// unit (largest torque; slowest and fastest speeds): no fit involved.
+    Physical,
+    /// The paper's φ̂(1 ± δ) around the least-squares estimates (--delta): the data used twice.
+    Delta,
+}
+
+#[derive(Debug, Args)]
+pub struct EvidenceCmd {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    #[command(flatten)]
+    pub fit: FitArgs,
+    /// The prior boxes integrated over.
+    #[arg(long, value_enum, default_value_t = Boxes::Physical)]
+    pub boxes: Boxes,
+    /// Width of the physical boxes, in record scales.
+    #[arg(long, value_parser = finite_number, default_value_t = DEFAULT_PRIOR_SCALE, value_name = "K", allow_hyphen_values = true)]
+    pub prior_scale: f64,
+    /// Half-width of the paper's boxes with --boxes delta.
+    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::Config::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
+    pub delta: f64,
+    /// Prior file (TOML) with explicit bounds or law weights; overrides the boxes where it
+    /// speaks (format in docs/commands.md).
+    #[arg(long, value_name = "FILE")]
+    pub prior: Option<PathBuf>,
+    /// Particles of each independent sampler (island).
+    #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]
+    pub particles: usize,
+    /// Independent samplers per law; their spread gives ln Z's Monte-Carlo error.
+    #[arg(long, default_value_t = EvidenceConfig::default().islands, value_name = "K")]
+    pub islands: usize,
+    /// Seed of the samplers' streams: the same seed gives the same result.
+    #[arg(long, default_value_t = EvidenceConfig::default().seed)]
+    pub seed: u64,
+    /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so),
+    /// gpu = the GPU or an error, cpu = the f64 reference.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Says the user's notes (a fallback to the CPU) on standard error.
+struct Notes;
+
+impl bitrock::abc::Observer for Notes {
+    fn note(&mut self, line: String) {
+        print::note(format_args!("note: {line}"));
+    }
+}
+
+pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
+    set_threads(cmd.threads)?;
+    let job = EvidenceJob {
+        laws: cmd.fit.laws()?,
+        fit: cmd.fit.options()?,
+        prior: match cmd.boxes {
+            Boxes::Physical => EvidencePrior::Physical {
+                scale: cmd.prior_scale,
+            },
+            Boxes::Delta => EvidencePrior::Delta { delta: cmd.delta },
+        },
+        prior_file: cmd.prior.clone(),
+        backend: cmd.backend,
+        sampler: EvidenceConfig {
+            particles: cmd.particles,
+            islands: cmd.islands,
+            seed: cmd.seed,
+            ..EvidenceConfig::default()
+        },
+    };
+    job.sampler.validate()?;
+    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    let analysis = job.run(&data, &mut Notes)?;
+    let mut out = print::stdout();
+    if cmd.json {
+        let document = bitrock::documents::evidence_json(
+            &data,
+            &analysis.fits,
+            &analysis.prior,
+            &analysis.evidence,
+            &job.prior.describe(),
+        );
+        print::json(&mut out, document)?;
+    } else {
+        tables(&mut out, &data, &job, &analysis)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The evidence table, the Bayes factors against the most probable law, and the boxes.
+fn tables(out: &mut impl Write, data: &FieldData, job: &EvidenceJob, analysis: &EvidenceAnalysis) -> std::io::Result<()> {
+    let evidence = &analysis.evidence;
+    let config = &evidence.config;
+    writeln!(
+        out,
+        "data: {}  ({} calibration samples; torque in {})",
+        data.source.display(),
+        evidence.data_points,
+        data.torque_unit.label()
+    )?;
+    writeln!(
+        out,
+        "model evidence: tempered SMC per law, {} islands × {} particles; residuals i.i.d. Gaussian, σ integrated out (Jeffreys prior)",
+        config.islands, config.particles
+    )?;
+    writeln!(out, "prior: {}\n", job.prior.describe())?;
+    writeln!(
+        out,
+        "law       ln Z (N·m)   ± MC error   P(m | y)     best ρ   stages   candidates"
+    )?;
+    for law in &evidence.laws {
+        let stages = law.stages.iter().sum::<usize>() as f64 / law.stages.len() as f64;
+        writeln!(
+            out,
+            "{:<6} {:>14.3} {:>12.3} {:>10.4} {:>10.5} {:>8.1} {:>12}",
+            law.law.name(),
+            law.ln_z,
+            law.ln_z_error,
+            law.probability,
+            law.best_rho,
+            stages,
+            law.candidates_scored
+        )?;
+    }
+    let best = evidence
+        .laws
+        .iter()
+        .max_by(|a, b| a.probability.total_cmp(&b.probability))
+        .expect("at least one law");
+    if evidence.laws.len() > 1 {
+        writeln!(out, "\nBayes factors of {} against each other law:", best.law)?;
+        for law in evidence.laws.iter().filter(|l| l.law != best.law) {
+            let (ln_b, error) = evidence.ln_bayes_factor(best.law, law.law).expect("both compared");
+            writeln!(
+                out,
+                "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {}",
+                best.law,
+                law.law.name(),
+                ln_b,
+                error,
+                strength(ln_b, error)
+            )?;
+        }
+    }
+    writeln!(out, "\nprior boxes ({} for torques, rad/s for speeds):", data.torque_unit.label())?;
+    for bx in &analysis.prior.boxes {
+        let lower: Vec<f64> = bx.lower.iter().map(|&v| f64::from(v)).collect();
+        let upper: Vec<f64> = bx.upper.iter().map(|&v| f64::from(v)).collect();
+        let lower = to_record_units(bx.law, &lower, data.torque_unit);
+        let upper = to_record_units(bx.law, &upper, data.torque_unit);
+        let ranges: Vec<String> = bx
+            .law
+            .param_names()
+            .iter()
+            .zip(lower.iter().zip(&upper))
+            .map(|(name, (a, b))| format!("{name} [{a:.4e}, {b:.4e}]"))
+            .collect();
+        writeln!(out, "  {:<6} {}", bx.law.name(), ranges.join("  "))?;
+    }
+    writeln!(
+        out,
+        "\n{} candidates scored ({:.3e} candidate × data-point evaluations) on {} in {:.2} s",
+        evidence.candidates_scored, evidence.evaluations as f64, evidence.backend, evidence.seconds
+    )?;
+    Ok(())
+}
