@@ -105,8 +105,11 @@ impl EvidenceConfig {
                 format!("must lie in (0, 1), got {}", self.ess_share),
             ));
         }
-        if self.max_sweeps == 0 || self.max_stages == 0 {
-            return Err(Error::setting("max_sweeps", "sweeps and stages must be at least 1"));
+        if self.max_stages == 0 {
+            return Err(Error::setting("max_stages", "must be at least 1"));
+        }
+        if self.max_sweeps == 0 {
+            return Err(Error::setting("max_sweeps", "must be at least 1"));
         }
         Ok(())
     }
@@ -424,7 +427,7 @@ impl Island {
             return Err(Error::setting(
                 "max_stages",
                 format!(
-                    "law {} needed more than {} tempering steps (β = {:.3e}); the likelihood is too narrow for its prior box: narrow the box or raise the limit",
+                    "law {} needed more than {} tempering steps (β = {:.3e}); its likelihood is much narrower than its prior box: narrow the box or raise `max_stages`",
                     self.law, config.max_stages, self.beta
                 ),
             ));

@@ -50,6 +50,10 @@ pub struct EvidenceCmd {
     /// Independent samplers per law; their spread gives ln Z's Monte-Carlo error.
     #[arg(long, default_value_t = EvidenceConfig::default().islands, value_name = "K")]
     pub islands: usize,
+    /// Most tempering steps of one island: a likelihood much narrower than its prior box
+    /// needs many (about one per nat of information the record holds about the law).
+    #[arg(long, default_value_t = EvidenceConfig::default().max_stages, value_name = "COUNT")]
+    pub max_stages: usize,
     /// Seed of the samplers' streams: the same seed gives the same result.
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
     pub seed: u64,
@@ -80,9 +84,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         laws: cmd.fit.laws()?,
         fit: cmd.fit.options()?,
         prior: match cmd.boxes {
-            Boxes::Physical => EvidencePrior::Physical {
-                scale: cmd.prior_scale,
-            },
+            Boxes::Physical => EvidencePrior::Physical { scale: cmd.prior_scale },
             Boxes::Delta => EvidencePrior::Delta { delta: cmd.delta },
         },
         prior_file: cmd.prior.clone(),
@@ -91,6 +93,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             particles: cmd.particles,
             islands: cmd.islands,
             seed: cmd.seed,
+            max_stages: cmd.max_stages,
             ..EvidenceConfig::default()
         },
     };
@@ -114,7 +117,12 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
 }
 
 /// The evidence table, the Bayes factors against the most probable law, and the boxes.
-fn tables(out: &mut impl Write, data: &FieldData, job: &EvidenceJob, analysis: &EvidenceAnalysis) -> std::io::Result<()> {
+fn tables(
+    out: &mut impl Write,
+    data: &FieldData,
+    job: &EvidenceJob,
+    analysis: &EvidenceAnalysis,
+) -> std::io::Result<()> {
     let evidence = &analysis.evidence;
     let config = &evidence.config;
     writeln!(
@@ -168,7 +176,11 @@ fn tables(out: &mut impl Write, data: &FieldData, job: &EvidenceJob, analysis: &
             )?;
         }
     }
-    writeln!(out, "\nprior boxes ({} for torques, rad/s for speeds):", data.torque_unit.label())?;
+    writeln!(
+        out,
+        "\nprior boxes ({} for torques, rad/s for speeds):",
+        data.torque_unit.label()
+    )?;
     for bx in &analysis.prior.boxes {
         let lower: Vec<f64> = bx.lower.iter().map(|&v| f64::from(v)).collect();
         let upper: Vec<f64> = bx.upper.iter().map(|&v| f64::from(v)).collect();

@@ -30,8 +30,11 @@ const FLAGS: &[(&str, &str)] = &[
     ("prior", "--prior"),
     ("delta", "--delta"),
     ("prior_k", "--prior-k"),
+    ("prior_scale", "--prior-scale"),
     // The samplers.
     ("particles", "--particles"),
+    ("islands", "--islands"),
+    ("max_stages", "--max-stages"),
     ("eps_min", "--eps-min"),
     ("epsilons", "--epsilons"),
     ("start_epsilon", "--start-epsilon"),

@@ -92,8 +92,8 @@ impl EvidenceJob {
             )?,
             EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
         };
-        let problem = AbcProblem::new(prior.clone(), self.sampler.seed, &data.calibration, self.fit.w_ref_n)
-            .with_best_rho(&fits);
+        let problem =
+            AbcProblem::new(prior.clone(), self.sampler.seed, &data.calibration, self.fit.w_ref_n).with_best_rho(&fits);
         let evaluator = eval::evaluator(problem, self.backend, Default::default(), &mut |line| {
             observer.note(line)
         })?;

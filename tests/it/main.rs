@@ -3,6 +3,7 @@
 mod abc;
 mod batched;
 mod cli;
+mod evidence;
 mod fit;
 mod gpu;
 mod hostile;

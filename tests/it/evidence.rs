@@ -1,0 +1,219 @@
+//! The model evidence against references computed another way: brute-force quadrature of a
+//! nonlinear law's marginal likelihood, the same result from the same seed, the command line's
+//! tables, JSON and refusals.
+
+use crate::support::{bin, outcome, rng, samples};
+use bitrock::Law;
+use bitrock::abc::Silent;
+use bitrock::abc::evidence::{self, EvidenceConfig, log_likelihood_constant};
+use bitrock::eval::AbcProblem;
+use bitrock::eval::cpu::CpuEvaluator;
+use bitrock::prior::{LawBox, Prior};
+use rand_distr::{Distribution, Normal};
+
+/// An m2 record: 60 speeds over 0.5-15 rad/s, tsb = 13 kN·m, tcb = 6.5 kN·m, g = 0.3 s/rad,
+/// Gaussian noise of 1.5 kN·m (a short, noisy record, so that the posterior is wide enough
+/// for a grid to resolve it).
+fn noisy_m2() -> bitrock::data::Samples {
+    let mut data = samples(Law::M2, &[13_000.0, 6_500.0, 0.3], 0.5, 15.0, 60);
+    let noise = Normal::new(0.0, 1_500.0).unwrap();
+    let mut g = rng(5);
+    for y in &mut data.torque_nm {
+        *y += noise.sample(&mut g);
+    }
+    data
+}
+
+/// ln Z of m2 on `data` over the box by the midpoint rule on a grid of `cells` per axis. m2 is
+/// linear in (a, b) = (tsb − tcb, tcb) for a fixed g, so S = Σ(y − a·e − b)² (e = exp(−g·w))
+/// comes from six sums per g value and every cell costs O(1).
+fn quadrature_ln_z(data: &bitrock::data::Samples, lower: [f64; 3], upper: [f64; 3], cells: usize) -> f64 {
+    let n = data.len();
+    let h: Vec<f64> = (0..3).map(|j| (upper[j] - lower[j]) / cells as f64).collect();
+    let at = |j: usize, i: usize| lower[j] + (i as f64 + 0.5) * h[j];
+    let (syy, sy) = (
+        data.torque_nm.iter().map(|y| y * y).sum::<f64>(),
+        data.torque_nm.iter().sum::<f64>(),
+    );
+    let half_n = n as f64 / 2.0;
+    let mut terms = Vec::with_capacity(cells * cells * cells);
+    for k in 0..cells {
+        let g = at(2, k);
+        let e: Vec<f64> = data.speed_rad_s.iter().map(|w| (-g * w).exp()).collect();
+        let see: f64 = e.iter().map(|v| v * v).sum();
+        let se: f64 = e.iter().sum();
+        let sye: f64 = data.torque_nm.iter().zip(&e).map(|(y, v)| y * v).sum();
+        for i in 0..cells {
+            let tsb = at(0, i);
+            for j in 0..cells {
+                let tcb = at(1, j);
+                let a = tsb - tcb;
+                let b = tcb;
+                let s = syy - 2.0 * a * sye - 2.0 * b * sy + a * a * see + 2.0 * a * b * se + b * b * n as f64;
+                terms.push(-half_n * s.ln());
+            }
+        }
+    }
+    let max = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let sum: f64 = terms.iter().map(|t| (t - max).exp()).sum();
+    // (1/V)·Σ L·h³ = Σ L / cells³.
+    let mean_l = max + (sum / (cells * cells * cells) as f64).ln();
+    // The constant with Σy² = 1 (S, not ρ, is in the sum above).
+    mean_l + log_likelihood_constant(n, 1.0)
+}
+
+#[test]
+fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
+    let data = noisy_m2();
+    let lower = [4_000.0, 0.0, 0.02];
+    let upper = [30_000.0, 12_000.0, 2.0];
+    let reference = quadrature_ln_z(&data, lower, upper, 160);
+    // The reference checks itself: doubling the grid moves it by far less than the tolerance.
+    let finer = quadrature_ln_z(&data, lower, upper, 320);
+    assert!((reference - finer).abs() < 0.01, "quadrature {reference} vs {finer}");
+    let bx = LawBox {
+        law: Law::M2,
+        lower: lower.iter().map(|&v| v as f32).collect(),
+        upper: upper.iter().map(|&v| v as f32).collect(),
+    };
+    let prior = Prior::new(vec![bx], vec![1.0]).unwrap();
+    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None));
+    let config = EvidenceConfig {
+        particles: 400,
+        islands: 8,
+        seed: 11,
+        ..EvidenceConfig::default()
+    };
+    let result = evidence::run(&evaluator, &config, &mut Silent).unwrap();
+    let m2 = result.of(Law::M2).unwrap();
+    eprintln!(
+        "m2: ln Z = {:.3} ± {:.3}, quadrature {finer:.3}; stages {:?}",
+        m2.ln_z, m2.ln_z_error, m2.stages
+    );
+    assert!(m2.ln_z_error > 0.0 && m2.ln_z_error < 0.3, "{}", m2.ln_z_error);
+    assert!(
+        (m2.ln_z - finer).abs() < 3.0 * m2.ln_z_error,
+        "ln Z = {} ± {}, quadrature {finer}",
+        m2.ln_z,
+        m2.ln_z_error
+    );
+    // The posterior mean of the static torque lies where the likelihood puts it.
+    let mean_tsb: f64 = m2.posterior.iter().map(|(p, w)| w * p[0]).sum();
+    assert!((mean_tsb - 13_000.0).abs() < 3_000.0, "{mean_tsb}");
+}
+
+#[test]
+fn the_same_seed_gives_the_same_evidence_and_another_seed_agrees_within_its_error() {
+    let data = noisy_m2();
+    let bx = |law: Law, lower: Vec<f32>, upper: Vec<f32>| LawBox { law, lower, upper };
+    let prior = Prior::new(
+        vec![
+            bx(Law::M2, vec![4e3, 0.0, 0.02], vec![3e4, 1.2e4, 2.0]),
+            bx(Law::M4, vec![0.0, -4e3, -300.0, -15.0], vec![3e4, 4e3, 300.0, 15.0]),
+        ],
+        vec![1.0, 1.0],
+    )
+    .unwrap();
+    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None));
+    let config = |seed| EvidenceConfig {
+        particles: 200,
+        islands: 4,
+        seed,
+        ..EvidenceConfig::default()
+    };
+    let a = evidence::run(&evaluator, &config(2), &mut Silent).unwrap();
+    let b = evidence::run(&evaluator, &config(2), &mut Silent).unwrap();
+    let c = evidence::run(&evaluator, &config(3), &mut Silent).unwrap();
+    for (x, y) in a.laws.iter().zip(&b.laws) {
+        assert_eq!(x.ln_z.to_bits(), y.ln_z.to_bits(), "{}", x.law);
+        assert_eq!(x.posterior, y.posterior, "{}", x.law);
+    }
+    for (x, z) in a.laws.iter().zip(&c.laws) {
+        assert_ne!(
+            x.ln_z.to_bits(),
+            z.ln_z.to_bits(),
+            "{}: another seed, other particles",
+            x.law
+        );
+        let error = x.ln_z_error.hypot(z.ln_z_error);
+        assert!(
+            (x.ln_z - z.ln_z).abs() < 4.0 * error,
+            "{}: {} vs {} (± {error})",
+            x.law,
+            x.ln_z,
+            z.ln_z
+        );
+    }
+    let total: f64 = a.laws.iter().map(|l| l.probability).sum();
+    assert!((total - 1.0).abs() < 1e-12);
+}
+
+/// A record of m2 made by `bitrock simulate` in `dir`, thinned when read.
+fn simulated_record(dir: &std::path::Path) -> std::path::PathBuf {
+    let path = dir.join("m2.csv");
+    let (code, _, err) = outcome(bin().args([
+        "simulate",
+        "--law",
+        "m2",
+        "--omega-rpm",
+        "80",
+        "--duration-s",
+        "60",
+        "--settle-s",
+        "20",
+        "--noise-torque-knm",
+        "0.6",
+        "--noise-speed-rpm",
+        "0.5",
+        "--seed",
+        "3",
+        "--out",
+        path.to_str().unwrap(),
+    ]));
+    assert_eq!(code, 0, "{err}");
+    path
+}
+
+#[test]
+fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulated_record(dir.path());
+    let args = |extra: &[&str]| {
+        let mut cmd = bin();
+        cmd.args(["evidence", record.to_str().unwrap(), "--laws", "m2,m4", "--thin", "4"]);
+        cmd.args(["--backend", "cpu", "--particles", "100", "--islands", "3"]);
+        cmd.args(extra);
+        cmd
+    };
+    let (code, json, err) = outcome(&mut args(&["--json"]));
+    assert_eq!(code, 0, "{err}");
+    let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let laws = doc["laws"].as_array().unwrap();
+    assert_eq!(laws.len(), 2);
+    let total: f64 = laws.iter().map(|l| l["probability"].as_f64().unwrap()).sum();
+    assert!((total - 1.0).abs() < 1e-12, "{total}");
+    for law in laws {
+        assert!(law["ln_z"].as_f64().unwrap().is_finite());
+        assert!(law["ln_z_error"].as_f64().unwrap() > 0.0);
+        assert_eq!(law["island_ln_z"].as_array().unwrap().len(), 3);
+    }
+    // Physical boxes: from the bound 0 of the static torque, in the record's kN·m.
+    assert_eq!(laws[0]["lower"][0].as_f64(), Some(0.0));
+    assert_eq!(doc["torque_unit"], "kN·m");
+    let (code, tables, err) = outcome(&mut args(&[]));
+    assert_eq!(code, 0, "{err}");
+    let p_m2 = laws[0]["probability"].as_f64().unwrap();
+    assert!(tables.contains(&format!("{p_m2:.4}")), "{tables}");
+    assert!(tables.contains("Bayes factors of"), "{tables}");
+    for (flag, value, named) in [
+        ("--islands", "1", "--islands"),
+        ("--prior-scale", "0", "--prior-scale"),
+        ("--particles", "5", "--particles"),
+        ("--max-stages", "0", "--max-stages"),
+    ] {
+        let (code, out, err) = outcome(&mut args(&[flag, value]));
+        assert_eq!(code, 2, "{flag} {value}: {err}");
+        assert!(out.is_empty(), "{out}");
+        assert!(err.contains(named), "{flag} {value}: {err}");
+    }
+}
