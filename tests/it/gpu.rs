@@ -678,3 +678,38 @@ fn an_smc_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     assert!(worst <= KERNEL_SUM_TOLERANCE, "{worst:e}");
 }
 }
+
+per_shape! {
+    /// The model evidence scored on the GPU: the same samplers from the same seed on f32 sums,
+    /// so ln Z of every law agrees with the CPU's within three times their combined Monte-Carlo
+    /// error (in practice far closer: a Metropolis decision flips only where f32 moves the
+    /// log-likelihood across its uniform).
+    fn the_evidence_on_the_gpu_agrees_with_the_cpu(shape: Shape) {
+        use bitrock::abc::Silent;
+        use bitrock::abc::evidence::{self, EvidenceConfig};
+        use bitrock::prior::PhysicalScales;
+        require_gpu();
+        let data = demo_field_data(&DataOptions {
+            thin: 4,
+            ..Default::default()
+        })
+        .unwrap();
+        let laws = [Law::M2, Law::M3];
+        let prior = Prior::physical(&laws, &PhysicalScales::of(&data.calibration), 10.0, None, 1000.0).unwrap();
+        let problem = AbcProblem::new(prior, 1, &data.calibration, None);
+        let config = EvidenceConfig {
+            particles: 200,
+            islands: 3,
+            seed: 4,
+            ..EvidenceConfig::default()
+        };
+        let cpu = evidence::run(&CpuEvaluator::new(problem.clone()), &config, &mut Silent).unwrap();
+        let gpu = evidence::run(&gpu_evaluator(&problem, shape), &config, &mut Silent).unwrap();
+        for (c, g) in cpu.laws.iter().zip(&gpu.laws) {
+            let error = c.ln_z_error.hypot(g.ln_z_error);
+            eprintln!("{}: ln Z cpu {:.4}, gpu {:.4} (± {error:.3})", c.law, c.ln_z, g.ln_z);
+            assert!((c.ln_z - g.ln_z).abs() < 3.0 * error, "{}: {} vs {}", c.law, c.ln_z, g.ln_z);
+            assert!((c.probability - g.probability).abs() < 0.05, "{}", c.law);
+        }
+    }
+}
