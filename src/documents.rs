@@ -99,6 +99,7 @@ pub fn evidence_json(
                 "probability": law.probability,
                 "posterior_mean": to_record_units(law.law, &mean_si, data.torque_unit),
                 "best_rho": law.best_rho,
+                "cut_by_box": law.cut_by_box,
                 "stages": law.stages,
                 "candidates_scored": law.candidates_scored,
             })

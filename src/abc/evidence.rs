@@ -138,6 +138,42 @@ pub struct LawEvidence {
     /// Posterior parameter sets (SI), pooled over the islands; each island's sets weighed by its
     /// share of Z. Weights sum to 1.
     pub posterior: Vec<(Vec<f64>, f64)>,
+    /// The parameters whose posterior reaches an end of its box that is not a physical bound
+    /// ("a1 upper"): there the box, not the data, ends the posterior, and ln Z depends on
+    /// where the box was drawn by more than the Occam factor of [`LN_Z_PER_DOUBLING`].
+    #[serde(default)]
+    pub cut_by_box: Vec<String>,
+}
+
+/// How much ln Z changes when every parameter's box of a law doubles in width, per parameter,
+/// for a posterior that lies inside its boxes: −ln 2 (the prior density halves where the
+/// likelihood is). A Bayes factor between laws of d_a and d_b parameters moves by
+/// (d_b − d_a)·ln 2 per doubling: how much of it the choice of boxes sets.
+pub const LN_Z_PER_DOUBLING: f64 = -std::f64::consts::LN_2;
+
+/// Share of a box's width at each end within which posterior mass counts as reaching the end.
+const EDGE_SHARE: f64 = 0.02;
+/// Posterior mass within [`EDGE_SHARE`] of an end that makes the box cut the posterior.
+const EDGE_MASS: f64 = 0.01;
+
+/// The ends of `law`'s box (`lower`, `upper`, SI) that cut the `posterior`: those, other than
+/// a physical bound, with more than [`EDGE_MASS`] of the weight within [`EDGE_SHARE`] of the
+/// box's width.
+fn box_ends_reached(law: Law, lower: &[f32], upper: &[f32], posterior: &[(Vec<f64>, f64)]) -> Vec<String> {
+    let mut reached = Vec::new();
+    for (j, spec) in law.params().iter().enumerate() {
+        let (a, b) = (f64::from(lower[j]), f64::from(upper[j]));
+        let margin = EDGE_SHARE * (b - a);
+        let mass =
+            |near: &dyn Fn(f64) -> bool| -> f64 { posterior.iter().filter(|(p, _)| near(p[j])).map(|(_, w)| w).sum() };
+        if a > spec.lower && mass(&|v| v <= a + margin) > EDGE_MASS {
+            reached.push(format!("{} lower", spec.name));
+        }
+        if mass(&|v| v >= b - margin) > EDGE_MASS {
+            reached.push(format!("{} upper", spec.name));
+        }
+    }
+    reached
 }
 
 /// The evidence of every law of a prior.
@@ -625,7 +661,9 @@ pub fn run(evaluator: &dyn Evaluator, config: &EvidenceConfig, observer: &mut dy
                 posterior.push((params, weight));
             }
         }
+        let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
         laws.push(LawEvidence {
+            cut_by_box,
             law: bx.law,
             ln_z,
             ln_z_error,
@@ -671,6 +709,26 @@ mod tests {
             "{}",
             ln_gamma(4500.0)
         );
+    }
+
+    #[test]
+    fn a_box_cuts_the_posterior_only_at_an_end_that_is_not_a_physical_bound() {
+        // m2: tsb on [0, 10] (0 is its physical bound), tcb on [1, 10], g on [0, 1].
+        let (lower, upper) = ([0.0f32, 1.0, 0.0], [10.0f32, 10.0, 1.0]);
+        let at = |tsb: f64, tcb: f64, g: f64| (vec![tsb, tcb, g], 0.25);
+        // Mass at tsb = 0 (the bound), tcb = 1 (a drawn end), g = 0.995 (the upper end).
+        let posterior = vec![
+            at(0.0, 1.0, 0.995),
+            at(0.1, 5.0, 0.5),
+            at(5.0, 5.0, 0.5),
+            at(5.0, 5.0, 0.5),
+        ];
+        assert_eq!(
+            box_ends_reached(Law::M2, &lower, &upper, &posterior),
+            vec!["tcb lower".to_string(), "g upper".to_string()]
+        );
+        let inside = vec![at(5.0, 5.0, 0.5); 4];
+        assert!(box_ends_reached(Law::M2, &lower, &upper, &inside).is_empty());
     }
 
     #[test]

@@ -3,7 +3,7 @@
 
 use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
 use super::print;
-use bitrock::abc::evidence::{EvidenceConfig, strength};
+use bitrock::abc::evidence::{EvidenceConfig, LN_Z_PER_DOUBLING, strength};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
@@ -165,14 +165,18 @@ fn tables(
         writeln!(out, "\nBayes factors of {} against each other law:", best.law)?;
         for law in evidence.laws.iter().filter(|l| l.law != best.law) {
             let (ln_b, error) = evidence.ln_bayes_factor(best.law, law.law).expect("both compared");
+            // Every box twice as wide: each parameter costs ln 2 more where the posterior
+            // lies inside its box.
+            let doubled = ln_b + LN_Z_PER_DOUBLING * (best.law.n_params() as f64 - law.law.n_params() as f64);
             writeln!(
                 out,
-                "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {}",
+                "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {:<12} (boxes twice as wide: {:.2})",
                 best.law,
                 law.law.name(),
                 ln_b,
                 error,
-                strength(ln_b, error)
+                strength(ln_b, error),
+                doubled
             )?;
         }
     }
