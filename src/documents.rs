@@ -72,6 +72,7 @@ pub fn evidence_json(
     fits: &[LawFit],
     boxes: &crate::prior::Prior,
     evidence: &crate::abc::evidence::Evidence,
+    separations: &[crate::separation::Separation],
     prior: &str,
 ) -> Value {
     let torque = data.torque_unit.label();
@@ -120,6 +121,7 @@ pub fn evidence_json(
         "seconds": evidence.seconds,
         "laws": laws,
         "fits": fit_json(data, fits)["fits"],
+        "separations": separations,
     })
 }
 

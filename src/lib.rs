@@ -83,6 +83,7 @@ pub mod report;
 pub mod rng;
 pub mod run;
 pub mod selection;
+pub mod separation;
 pub mod simulate;
 pub mod stability;
 pub mod units;

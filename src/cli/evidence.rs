@@ -107,6 +107,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             &analysis.fits,
             &analysis.prior,
             &analysis.evidence,
+            &analysis.separations,
             &job.prior.describe(),
         );
         print::json(&mut out, document)?;
@@ -138,6 +139,7 @@ fn tables(
         config.islands, config.particles
     )?;
     writeln!(out, "prior: {}\n", job.prior.describe())?;
+    print::separation_tables(out, &analysis.separations, &job.laws)?;
     writeln!(
         out,
         "law       ln Z (N·m)   ± MC error   P(m | y)     best ρ   stages   candidates"

@@ -32,11 +32,15 @@ pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
 /// Fits `laws` to `data` and prints them (also the start of `bitrock demo`).
 pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bool) -> anyhow::Result<()> {
     let fits = fit::fit_record(laws, data, opts)?;
+    let separations = bitrock::separation::separations(&fits, &data.calibration, opts)?;
     let mut out = super::print::stdout();
     if json {
-        super::print::json(&mut out, bitrock::documents::fit_json(data, &fits))?;
+        let mut document = bitrock::documents::fit_json(data, &fits);
+        document["separations"] = serde_json::to_value(&separations)?;
+        super::print::json(&mut out, document)?;
     } else {
         print::fit_tables(&mut out, data, &fits)?;
+        print::separation_tables(&mut out, &separations, laws)?;
     }
     Ok(())
 }

@@ -8,6 +8,7 @@ use bitrock::abc::posterior::PosteriorSummary;
 use bitrock::data::FieldData;
 use bitrock::documents::{fit_in_record_units, to_record_units};
 use bitrock::fit::LawFit;
+use bitrock::separation::Separation;
 use bitrock::units::TorqueUnit;
 use std::io::{self, Write};
 
@@ -136,6 +137,87 @@ pub fn fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io
         writeln!(out)?;
     }
     Ok(())
+}
+
+/// Can this record tell the laws apart: the matrix of expected log-likelihood gaps, the pairs
+/// it leaves to the priors (with where a record would have to reach), and where the others'
+/// information lies.
+pub fn separation_tables(out: &mut impl Write, separations: &[Separation], laws: &[Law]) -> io::Result<()> {
+    use bitrock::units::RAD_S_PER_RPM;
+    if laws.len() < 2 {
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "can this record tell the laws apart? expected log-likelihood gap D (nats) if the row's law, as fitted, made it:"
+    )?;
+    write!(out, "    truth \\ rival")?;
+    for law in laws {
+        write!(out, " {:>9}", law.name())?;
+    }
+    writeln!(out)?;
+    let find = |a: Law, b: Law| separations.iter().find(|s| s.truth == a && s.rival == b);
+    for &truth in laws {
+        write!(out, "    {:<13}", truth.name())?;
+        for &rival in laws {
+            match find(truth, rival) {
+                Some(s) => write!(out, " {:>9.1}", s.gap_nats)?,
+                None => write!(out, " {:>9}", "—")?,
+            }
+        }
+        writeln!(out)?;
+    }
+    let rpm = |w: f64| w / RAD_S_PER_RPM;
+    let undecided: Vec<&Separation> = separations.iter().filter(|s| s.undecided()).collect();
+    if !undecided.is_empty() {
+        writeln!(
+            out,
+            "    not separated (D < {} nats: the priors, not the data, decide):",
+            bitrock::separation::UNDECIDED_NATS
+        )?;
+        for s in undecided {
+            let mut reach = Vec::new();
+            if let Some(w) = s.parts_below_rad_s {
+                reach.push(format!("below {:.1} rpm", rpm(w)));
+            }
+            if let Some(w) = s.parts_above_rad_s {
+                reach.push(format!("above {:.0} rpm", rpm(w)));
+            }
+            let reach = if reach.is_empty() {
+                "the fitted curves stay within the noise from 0 to 4 times the fastest recorded speed".to_string()
+            } else {
+                format!("the fitted curves part by more than the noise {}", reach.join(" and "))
+            };
+            writeln!(
+                out,
+                "      {} made it, {} fits as well: D = {:.1}, P(misranked) = {:.2}; {reach}",
+                s.truth, s.rival, s.gap_nats, s.misranking
+            )?;
+        }
+    }
+    let mut lines = Vec::new();
+    for s in separations.iter().filter(|s| !s.undecided()) {
+        if let Some(band) = s.bands.iter().max_by(|a, b| a.share.total_cmp(&b.share)) {
+            lines.push(format!(
+                "      {} against {}: {:.0} % of D at {:.1}–{:.1} rpm",
+                s.truth,
+                s.rival,
+                100.0 * band.share,
+                rpm(band.speed_rad_s.0),
+                rpm(band.speed_rad_s.1)
+            ));
+        }
+    }
+    if !lines.is_empty() {
+        writeln!(
+            out,
+            "    where the separated pairs' information lies (the richest fifth of the speeds):"
+        )?;
+        for line in lines {
+            writeln!(out, "{line}")?;
+        }
+    }
+    writeln!(out)
 }
 
 /// The per-population table of an ABC run.

@@ -10,6 +10,7 @@ use crate::eval::{self, AbcProblem, Backend};
 use crate::fit::{self, FitOptions, LawFit};
 use crate::laws::Law;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
+use crate::separation::{self, Separation};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -71,6 +72,8 @@ pub struct EvidenceAnalysis {
     /// The boxes and law weights integrated over.
     pub prior: Prior,
     pub evidence: Evidence,
+    /// What the fits alone say about telling the laws apart on these samples.
+    pub separations: Vec<Separation>,
 }
 
 impl EvidenceJob {
@@ -97,7 +100,13 @@ impl EvidenceJob {
         let evaluator = eval::evaluator(problem, self.backend, Default::default(), &mut |line| {
             observer.note(line)
         })?;
+        let separations = separation::separations(&fits, &data.calibration, &self.fit)?;
         let evidence = evidence::run(evaluator.as_ref(), &self.sampler, observer)?;
-        Ok(EvidenceAnalysis { fits, prior, evidence })
+        Ok(EvidenceAnalysis {
+            fits,
+            prior,
+            evidence,
+            separations,
+        })
     }
 }

@@ -205,6 +205,14 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
     let p_m2 = laws[0]["probability"].as_f64().unwrap();
     assert!(tables.contains(&format!("{p_m2:.4}")), "{tables}");
     assert!(tables.contains("Bayes factors of"), "{tables}");
+    assert!(tables.contains("can this record tell the laws apart?"), "{tables}");
+    // Both ordered pairs, each with a gap in nats and a probability of misranking.
+    let separations = doc["separations"].as_array().unwrap();
+    assert_eq!(separations.len(), 2);
+    for s in separations {
+        let (gap, misranking) = (s["gap_nats"].as_f64().unwrap(), s["misranking"].as_f64().unwrap());
+        assert!(gap >= 0.0 && (0.0..=0.5).contains(&misranking), "{s}");
+    }
     for (flag, value, named) in [
         ("--islands", "1", "--islands"),
         ("--prior-scale", "0", "--prior-scale"),

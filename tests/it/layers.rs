@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 /// Each top-level module of the library and its layer, lowest first.
-const LAYERS: [(&str, u8); 20] = [
+const LAYERS: [(&str, u8); 21] = [
     ("error", 0),
     ("units", 0),
     ("rng", 0),
@@ -20,6 +20,7 @@ const LAYERS: [(&str, u8); 20] = [
     ("prior", 1),
     ("stability", 1),
     ("simulate", 1),
+    ("separation", 1),
     ("eval", 2),
     ("abc", 3),
     ("run", 4),
