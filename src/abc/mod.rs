@@ -184,6 +184,28 @@ impl PopulationRecord {
     }
 }
 
+/// A tolerance more than this many likelihood scales ρ_best/n above the best fit's ρ_best makes
+/// ABC's model probabilities ratios of prior volumes: ε − ρ_best > 10·ρ_best/n is an
+/// acceptance region about (n/2)·ln(ε/ρ_best) ≥ 5 nats deep in the log-likelihood
+/// −(n/2)·ln ρ, all of it accepted alike.
+pub const LIKELIHOOD_SCALES: f64 = 10.0;
+
+/// What a reader of ABC's model probabilities at tolerance `epsilon` must be told when it lies
+/// far above the likelihood's scale (see [`LIKELIHOOD_SCALES`]); `best_rho` is the best
+/// least-squares ρ of the laws compared on the `data_len` calibration samples.
+pub fn prior_volume_caveat(epsilon: f64, best_rho: f64, data_len: usize) -> Option<String> {
+    let n = data_len as f64;
+    let scale = best_rho / n;
+    if !(best_rho > 0.0 && epsilon - best_rho > LIKELIHOOD_SCALES * scale) {
+        return None;
+    }
+    let depth = n / 2.0 * (epsilon / best_rho).ln();
+    Some(format!(
+        "ε = {epsilon:.5} lies {:.0} likelihood scales above the best fit (ρ_best = {best_rho:.5}, ρ_best/n = {scale:.2e}): every candidate within about {depth:.0} nats of the best likelihood is accepted alike, so these model probabilities are ratios of the laws' prior volumes below ε, not evidence; the model evidence (`bitrock evidence`, `bitrock.evidence` in Python) weighs each candidate by its likelihood",
+        (epsilon - best_rho) / scale
+    ))
+}
+
 /// One population: its record and particles in index order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Population {
@@ -326,6 +348,16 @@ pub fn effective_sample_size(weights: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_tolerance_far_above_the_likelihood_scale_is_said_to_give_prior_volume_ratios() {
+        // n = 1000, ρ_best = 0.01: the scale is 1e-5, ten of them 1e-4.
+        assert!(prior_volume_caveat(0.0100999, 0.01, 1000).is_none());
+        let said = prior_volume_caveat(0.014, 0.01, 1000).unwrap();
+        // (n/2)·ln(1.4) = 168 nats deep; 400 scales above.
+        assert!(said.contains("400 likelihood scales") && said.contains("168 nats"), "{said}");
+        assert!(prior_volume_caveat(0.014, 0.0, 1000).is_none());
+    }
 
     #[test]
     fn a_population_is_thin_below_a_tenth_of_its_particles_in_effective_size() {

@@ -191,6 +191,12 @@ impl Analysis {
                 "every law fits the record exactly (ρ < {EXACT_FIT_RHO:e}): the torque does not depend on the bit speed here (a constant record?), and the model probabilities say nothing"
             ));
         }
+        if let Some(last) = self.outcome.run.populations.last()
+            && let Some(epsilon) = last.record.epsilon
+        {
+            let best = setup.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
+            out.extend(crate::abc::prior_volume_caveat(epsilon, best, setup.data.calibration.len()));
+        }
         let thin: Vec<String> = self
             .outcome
             .run
