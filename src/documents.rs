@@ -96,6 +96,8 @@ pub fn evidence_json(
                 "ln_z": law.ln_z,
                 "ln_z_error": law.ln_z_error,
                 "island_ln_z": law.island_ln_z,
+                "island_spread": law.island_spread,
+                "converged": law.converged(),
                 "prior_probability": law.prior_probability,
                 "probability": law.probability,
                 "posterior_mean": to_record_units(law.law, &mean_si, data.torque_unit),

@@ -162,12 +162,17 @@ pub struct Prior {
 }
 
 /// The sizes a record gives a law's parameters without any fit: how large a torque it holds
-/// and over which speeds. A parameter of dimension torque^t·(rad/s)^(−s) has the scale
-/// `torque_max^t / speed^s` with `speed` the highest speed where the parameter multiplies a
-/// power of w in a torque (t = 1: a polynomial coefficient, whose term must stay within the
-/// record's torques up to its highest speed) and the lowest where it is a rate or a width
-/// (t = 0: exp(−g·w), tanh(b·w), a bump's 1/width², which can be as sharp as the slowest
-/// recorded speed resolves); a speed-valued parameter (s < 0) is measured by the highest speed.
+/// and over which speeds. A parameter's unit scale is, by its dimension torque^t·(rad/s)^(−s):
+///
+/// - a torque (t = 1, s = 0: a static or dynamic torque, a bump's amplitude): a fifth of the
+///   largest recorded torque, so that k = 10 scales reach twice it;
+/// - a polynomial coefficient (t = 1, s > 0): the largest torque over the fastest speed to the
+///   power s (its term stays within the record's torques up to its highest speed);
+/// - a rate or a width (t = 0, s > 0: exp(−g·w), tanh(b·w), a bump's 1/width²): one over the
+///   slowest recorded speeds to the power s (as sharp as the record resolves);
+/// - a speed (s < 0, a bump's centre): a tenth of the fastest speed, so that k = 10 scales keep
+///   it within the recorded speeds (a centre far outside would let a Gaussian's tail pose as
+///   another law's decay).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct PhysicalScales {
     /// Largest |torque| of the record, N·m.
@@ -195,13 +200,13 @@ impl PhysicalScales {
     /// The scale of parameter `j` of `law`, SI (see the type's documentation).
     pub fn param_scale(&self, law: Law, j: usize) -> f64 {
         let spec = law.params()[j];
-        let s = spec.inverse_speed_power;
-        let speed = if s > 0 && spec.torque_power == 0 {
-            self.speed_low
-        } else {
-            self.speed_high
-        };
-        self.torque_max.powi(spec.torque_power) / speed.powi(s)
+        let (t, s) = (spec.torque_power, spec.inverse_speed_power);
+        match (t, s) {
+            (0, s) if s > 0 => 1.0 / self.speed_low.powi(s),
+            (_, s) if s < 0 => self.torque_max.powi(t) * self.speed_high.powi(-s) / 10.0,
+            (1, 0) => self.torque_max / 5.0,
+            (t, s) => self.torque_max.powi(t) / self.speed_high.powi(s),
+        }
     }
 
     /// The box of parameter `j` of `law` at `k` scales (before clipping): from its physical

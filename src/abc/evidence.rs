@@ -75,7 +75,7 @@ impl Default for EvidenceConfig {
             islands: 4,
             seed: 1,
             ess_share: 0.5,
-            max_sweeps: 10,
+            max_sweeps: 30,
             max_stages: 500,
         }
     }
@@ -121,10 +121,15 @@ pub struct LawEvidence {
     pub law: Law,
     /// ln Z, the log marginal likelihood with torques in N·m (see the module documentation).
     pub ln_z: f64,
-    /// Its Monte-Carlo standard error (from the islands' spread).
+    /// Its Monte-Carlo standard error (from the islands' spread: the standard error of the
+    /// mean of their Z, or of their ln Z where that is larger).
     pub ln_z_error: f64,
     /// Each island's own ln Z.
     pub island_ln_z: Vec<f64>,
+    /// Largest difference between two islands' ln Z, nats. Above [`ISLANDS_AGREE_NATS`] the
+    /// samplers have not converged on this law: its ln Z is uncertain by about this much.
+    #[serde(default)]
+    pub island_spread: f64,
     /// The law's prior probability π(m).
     pub prior_probability: f64,
     /// P(m | y) ∝ π(m)·Z_m over the laws compared.
@@ -150,6 +155,19 @@ pub struct LawEvidence {
 /// likelihood is). A Bayes factor between laws of d_a and d_b parameters moves by
 /// (d_b − d_a)·ln 2 per doubling: how much of it the choice of boxes sets.
 pub const LN_Z_PER_DOUBLING: f64 = -std::f64::consts::LN_2;
+
+/// Islands whose ln Z differ by more than this many nats have not converged alike: the law's
+/// posterior is harder than its islands' particles and sweeps can follow (a narrow curved
+/// ridge, say), and every output says so. Four islands of a sampler with an error of one nat
+/// span about two; five is what moves a Bayes factor from one verdict to another.
+pub const ISLANDS_AGREE_NATS: f64 = 5.0;
+
+impl LawEvidence {
+    /// True when the law's islands agree within [`ISLANDS_AGREE_NATS`].
+    pub fn converged(&self) -> bool {
+        self.island_spread <= ISLANDS_AGREE_NATS
+    }
+}
 
 /// Share of a box's width at each end within which posterior mass counts as reaching the end.
 const EDGE_SHARE: f64 = 0.02;
@@ -648,11 +666,16 @@ pub fn run(evaluator: &dyn Evaluator, config: &EvidenceConfig, observer: &mut dy
         let own: Vec<&Island> = islands.iter().filter(|i| i.slot == slot).collect();
         let island_ln_z: Vec<f64> = own.iter().map(|i| i.ln_z + constant).collect();
         let ln_z = log_mean_exp(island_ln_z.iter().copied());
-        // Standard error of the mean of the Z_k, relative to that mean: the error of ln Z.
+        // Standard error of the mean of the Z_k, relative to that mean: the error of ln Z
+        // where the islands agree. Where they disagree by nats, one island carries the mean and
+        // that error saturates near 1 whatever the spread: then the standard error of the
+        // islands' ln Z is the honest one.
         let k = island_ln_z.len() as f64;
         let ratios: Vec<f64> = island_ln_z.iter().map(|v| (v - ln_z).exp()).collect();
         let variance = ratios.iter().map(|r| (r - 1.0).powi(2)).sum::<f64>() / (k - 1.0);
-        let ln_z_error = (variance / k).sqrt();
+        let mean_ln_z = island_ln_z.iter().sum::<f64>() / k;
+        let spread = (island_ln_z.iter().map(|v| (v - mean_ln_z).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+        let ln_z_error = (variance / k).sqrt().max(spread / k.sqrt());
         let mut posterior = Vec::new();
         for (island, share) in own.iter().zip(&ratios) {
             let weight = share / (k * island.theta.len() as f64);
@@ -662,7 +685,10 @@ pub fn run(evaluator: &dyn Evaluator, config: &EvidenceConfig, observer: &mut dy
             }
         }
         let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
+        let highest = island_ln_z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let lowest = island_ln_z.iter().copied().fold(f64::INFINITY, f64::min);
         laws.push(LawEvidence {
+            island_spread: highest - lowest,
             cut_by_box,
             law: bx.law,
             ln_z,

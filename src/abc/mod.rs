@@ -355,7 +355,10 @@ mod tests {
         assert!(prior_volume_caveat(0.0100999, 0.01, 1000).is_none());
         let said = prior_volume_caveat(0.014, 0.01, 1000).unwrap();
         // (n/2)·ln(1.4) = 168 nats deep; 400 scales above.
-        assert!(said.contains("400 likelihood scales") && said.contains("168 nats"), "{said}");
+        assert!(
+            said.contains("400 likelihood scales") && said.contains("168 nats"),
+            "{said}"
+        );
         assert!(prior_volume_caveat(0.014, 0.0, 1000).is_none());
     }
 

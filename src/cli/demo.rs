@@ -5,12 +5,12 @@ use super::args::set_threads;
 use super::fit::fit_and_print;
 use super::print;
 use super::progress::RunProgress;
+use bitrock::abc::evidence::{EvidenceConfig, strength};
 use bitrock::abc::posterior::PosteriorSummary;
 use bitrock::abc::schedule::Schedule;
 use bitrock::data;
 use bitrock::data::FieldData;
 use bitrock::eval::Backend;
-use bitrock::abc::evidence::{EvidenceConfig, strength};
 use bitrock::pipeline::AbcJob;
 use bitrock::pipeline::evidence::{EvidenceAnalysis, EvidenceJob};
 use bitrock::report::ReportRun;
@@ -283,8 +283,17 @@ fn print_headline(
             .iter()
             .filter(|l| l.law != top.law)
             .map(|l| {
-                let (ln_b, error) = evidence.evidence.ln_bayes_factor(top.law, l.law).expect("both compared");
-                format!("{:.1} ± {:.1} against {} ({})", ln_b, error, l.law, strength(ln_b, error))
+                let (ln_b, error) = evidence
+                    .evidence
+                    .ln_bayes_factor(top.law, l.law)
+                    .expect("both compared");
+                format!(
+                    "{:.1} ± {:.1} against {} ({})",
+                    ln_b,
+                    error,
+                    l.law,
+                    strength(ln_b, error)
+                )
             })
             .collect();
         writeln!(out, "    {}: ln B = {}", top.law, factors.join(", "))?;

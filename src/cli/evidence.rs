@@ -54,6 +54,13 @@ pub struct EvidenceCmd {
     /// needs many (about one per nat of information the record holds about the law).
     #[arg(long, default_value_t = EvidenceConfig::default().max_stages, value_name = "COUNT")]
     pub max_stages: usize,
+    /// Share of the particles' effective sample size each tempering step keeps, in (0, 1):
+    /// higher is more, gentler steps.
+    #[arg(long, value_parser = finite_number, default_value_t = EvidenceConfig::default().ess_share, value_name = "SHARE")]
+    pub ess_share: f64,
+    /// Most Metropolis sweeps after each tempering step.
+    #[arg(long, default_value_t = EvidenceConfig::default().max_sweeps, value_name = "COUNT")]
+    pub max_sweeps: usize,
     /// Seed of the samplers' streams: the same seed gives the same result.
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
     pub seed: u64,
@@ -94,7 +101,8 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             islands: cmd.islands,
             seed: cmd.seed,
             max_stages: cmd.max_stages,
-            ..EvidenceConfig::default()
+            ess_share: cmd.ess_share,
+            max_sweeps: cmd.max_sweeps,
         },
     };
     job.sampler.validate()?;
@@ -181,6 +189,21 @@ fn tables(
                 doubled
             )?;
         }
+    }
+    for law in evidence.laws.iter().filter(|l| !l.converged()) {
+        writeln!(
+            out,
+            "warning: the islands of {} disagree by {:.1} nats: its samplers have not converged alike, and its ln Z is uncertain by about that much; more --particles or --max-sweeps narrow it",
+            law.law, law.island_spread
+        )?;
+    }
+    for law in evidence.laws.iter().filter(|l| !l.cut_by_box.is_empty()) {
+        writeln!(
+            out,
+            "warning: the posterior of {} reaches the end of its box ({}): its ln Z depends on where that box ends; widen it (--prior-scale, or a --prior file)",
+            law.law,
+            law.cut_by_box.join(", ")
+        )?;
     }
     writeln!(
         out,

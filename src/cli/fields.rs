@@ -35,6 +35,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("particles", "--particles"),
     ("islands", "--islands"),
     ("max_stages", "--max-stages"),
+    ("ess_share", "--ess-share"),
+    ("max_sweeps", "--max-sweeps"),
     ("eps_min", "--eps-min"),
     ("epsilons", "--epsilons"),
     ("start_epsilon", "--start-epsilon"),

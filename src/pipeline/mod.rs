@@ -195,7 +195,11 @@ impl Analysis {
             && let Some(epsilon) = last.record.epsilon
         {
             let best = setup.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
-            out.extend(crate::abc::prior_volume_caveat(epsilon, best, setup.data.calibration.len()));
+            out.extend(crate::abc::prior_volume_caveat(
+                epsilon,
+                best,
+                setup.data.calibration.len(),
+            ));
         }
         let thin: Vec<String> = self
             .outcome

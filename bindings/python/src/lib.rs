@@ -5,6 +5,7 @@
 
 mod distributed;
 mod errors;
+mod evidence;
 mod fit;
 mod law;
 mod record;
@@ -20,6 +21,8 @@ use pyo3::prelude::*;
 mod _bitrock {
     #[pymodule_export]
     use crate::distributed::{needs_payloads, serve};
+    #[pymodule_export]
+    use crate::evidence::evidence;
     #[pymodule_export]
     use crate::fit::fit;
     #[pymodule_export]

@@ -70,7 +70,30 @@ impl Observer for PyObserver {
     }
 
     fn interrupted(&mut self) -> bool {
+        if self.raised.is_none() {
+            Python::attach(|py| {
+                if let Err(e) = py.check_signals() {
+                    self.raised = Some(e);
+                }
+            });
+        }
         self.raised.is_some()
+    }
+}
+
+impl PyObserver {
+    /// An observer with a progress callable and a note callable (either may be absent).
+    pub(crate) fn new(progress: Option<Py<PyAny>>, note: Option<Py<PyAny>>) -> Self {
+        Self {
+            progress,
+            note,
+            raised: None,
+        }
+    }
+
+    /// The Python exception a callback or a signal raised, if any: it stops the work.
+    pub(crate) fn take_raised(&mut self) -> Option<PyErr> {
+        self.raised.take()
     }
 }
 

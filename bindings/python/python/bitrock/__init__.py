@@ -26,6 +26,7 @@ import pandas as pd
 from . import _bitrock
 from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError
+from ._evidence import Evidence, evidence
 
 __all__ = [
     "BitrockError",
@@ -34,8 +35,10 @@ __all__ = [
     "InputError",
     "Record",
     "Result",
+    "Evidence",
     "abc",
     "check_selection",
+    "evidence",
     "fit",
     "load_law",
     "open_run",

@@ -1,0 +1,91 @@
+//! The model evidence of a record's laws.
+
+use crate::errors::*;
+use crate::fit::fit_options;
+use crate::record::*;
+use crate::run::PyObserver;
+use bitrock::Law;
+use bitrock::abc::evidence::EvidenceConfig;
+use bitrock::documents::{self, to_record_units};
+use bitrock::pipeline::evidence::{DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+/// The evidence of `laws` (`None`: all four) on the record, with the options of
+/// `bitrock.evidence`: `bitrock evidence --json`'s document, with each law's posterior sets
+/// (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added.
+#[pyfunction]
+#[pyo3(signature = (record, laws, options, note))]
+pub(crate) fn evidence(
+    py: Python<'_>,
+    record: &Record,
+    laws: Option<Vec<String>>,
+    options: &Bound<'_, PyDict>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let laws = self::laws(py, laws)?.unwrap_or_else(|| Law::ALL.to_vec());
+    let defaults = EvidenceConfig::default();
+    let boxes: String = kwarg(options, "boxes")?.unwrap_or_else(|| "physical".into());
+    let prior = match boxes.to_lowercase().as_str() {
+        "physical" => EvidencePrior::Physical {
+            scale: kwarg(options, "prior_scale")?.unwrap_or(DEFAULT_PRIOR_SCALE),
+        },
+        "delta" => EvidencePrior::Delta {
+            delta: kwarg(options, "delta")?.unwrap_or(bitrock::run::Config::default().delta),
+        },
+        other => {
+            return Err(to_py(
+                py,
+                bitrock::Error::setting(
+                    "boxes",
+                    format!("`{other}` is not one of the accepted values (physical, delta)"),
+                ),
+            ));
+        }
+    };
+    let job = EvidenceJob {
+        laws,
+        fit: fit_options(py, options)?,
+        prior,
+        prior_file: kwarg::<PathBuf>(options, "prior")?,
+        backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or_default(),
+        sampler: EvidenceConfig {
+            particles: kwarg(options, "particles")?.unwrap_or(defaults.particles),
+            islands: kwarg(options, "islands")?.unwrap_or(defaults.islands),
+            seed: kwarg(options, "seed")?.unwrap_or(defaults.seed),
+            max_stages: kwarg(options, "max_stages")?.unwrap_or(defaults.max_stages),
+            ..defaults
+        },
+    };
+    let mut observer = PyObserver::new(None, note);
+    let data = &record.data;
+    let result = py.detach(|| job.run(data, &mut observer));
+    if let Some(e) = observer.take_raised() {
+        return Err(e);
+    }
+    let analysis = check(py, result)?;
+    let mut document = documents::evidence_json(
+        data,
+        &analysis.fits,
+        &analysis.prior,
+        &analysis.evidence,
+        &analysis.separations,
+        &job.prior.describe(),
+    );
+    for (entry, law) in document["laws"]
+        .as_array_mut()
+        .expect("the document lists its laws")
+        .iter_mut()
+        .zip(&analysis.evidence.laws)
+    {
+        let params: Vec<Vec<f64>> = law
+            .posterior
+            .iter()
+            .map(|(p, _)| to_record_units(law.law, p, data.torque_unit))
+            .collect();
+        let weights: Vec<f64> = law.posterior.iter().map(|(_, w)| *w).collect();
+        entry["posterior"] = serde_json::json!({"params": params, "weights": weights});
+    }
+    Ok(as_arguments(&document.to_string()))
+}

@@ -1,0 +1,72 @@
+"""The model evidence from Python: the command line's numbers bit for bit, its tables as
+DataFrames, posterior sets as pyABC's, and bad arguments refused by name."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import bitrock
+from conftest import DEMO_CSV, run_cli
+
+SMALL = {"laws": ["m2", "m3"], "particles": 60, "islands": 3, "seed": 5, "backend": "cpu"}
+
+
+@pytest.fixture(scope="module")
+def small(demo: bitrock.Record) -> bitrock.Evidence:
+    return bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), **SMALL)
+
+
+def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
+    done = run_cli(
+        cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
+        "--seed", "5", "--backend", "cpu", "--json",
+    )
+    document = json.loads(done.stdout)
+    for a, b in zip(document["laws"], small.document["laws"]):
+        assert a["law"] == b["law"]
+        assert a["ln_z"] == b["ln_z"] and a["island_ln_z"] == b["island_ln_z"]
+        assert a["probability"] == b["probability"]
+    assert document["separations"] == small.document["separations"]
+
+
+def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
+    table = small.table
+    assert list(table.index) == ["m2", "m3"]
+    assert table["probability"].sum() == pytest.approx(1.0, abs=1e-12)
+    assert (table["ln_z_error"] > 0).all()
+    ln_b, error = small.bayes_factor("m3", "m2")
+    assert ln_b == table.loc["m3", "ln_z"] - table.loc["m2", "ln_z"]
+    assert error == pytest.approx(np.hypot(table.loc["m3", "ln_z_error"], table.loc["m2", "ln_z_error"]))
+    # P(m3)/P(m2) = e^{ln B} with equal prior weights.
+    assert np.log(table.loc["m3", "probability"] / table.loc["m2", "probability"]) == pytest.approx(ln_b, abs=1e-6)
+    params, weights = small.posterior("m2")
+    assert list(params.columns) == ["tsb", "tcb", "g"]
+    assert len(params) == len(weights) == 3 * 60
+    assert weights.sum() == pytest.approx(1.0, abs=1e-12)
+    # kN·m, the record's unit: the static torque of the demo record is of order 10 kN·m.
+    assert 1.0 < float(np.average(params["tsb"], weights=weights)) < 100.0
+    separations = small.separations
+    assert len(separations) == 2 and set(separations["truth"]) == {"m2", "m3"}
+    assert "most probable" in repr(small)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "named"),
+    [
+        ({"islands": 1}, "islands"),
+        ({"boxes": "wide"}, "boxes"),
+        ({"prior_scale": -1.0}, "prior_scale"),
+        ({"particles": "many"}, "particles"),
+    ],
+)
+def test_bad_arguments_are_refused_by_name(demo, arguments, named) -> None:
+    with pytest.raises(bitrock.InputError, match=named):
+        bitrock.evidence(demo, **{**SMALL, **arguments})
+
+
+def test_an_unknown_law_is_refused(small) -> None:
+    with pytest.raises(bitrock.InputError, match="m4"):
+        small.posterior("m4")
