@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "fit", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "version"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "version"]
 
 @final
 class Record:
@@ -83,6 +83,13 @@ def check_selection(run: str | PathLike[str], options: dict, progress: Any | Non
     """
     Checks the selection of the run in `run` by re-simulation, writes it into the run's
     `selection/` (as `bitrock check-selection` does) and returns its document.
+    """
+
+def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None) -> str:
+    """
+    The evidence of `laws` (`None`: all four) on the record, with the options of
+    `bitrock.evidence`: `bitrock evidence --json`'s document, with each law's posterior sets
+    (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added.
     """
 
 def fit(record: Record, laws: SupportsGetItem[int, str] | None, options: dict) -> str:
