@@ -147,7 +147,12 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     }
     .run(&data, &mut RunProgress::new(false))?;
     let report_dir = root.join(REPORT_DIR);
-    let report = bitrock::report::write_paper_report(&report_dir, &report_setup.expect("three runs"), &report_runs)?;
+    let report = bitrock::report::write_paper_report(
+        &report_dir,
+        &report_setup.expect("three runs"),
+        &report_runs,
+        Some(&evidence.evidence),
+    )?;
     print_headline(&mut out, &headlines, &evidence, &data, root, &report)?;
     Ok(ExitCode::SUCCESS)
 }

@@ -18,7 +18,7 @@ pub struct ReportCmd {
 
 pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
     let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;
-    let summary = bitrock::report::write_paper_report(&cmd.out, &setup, &runs)?;
+    let summary = bitrock::report::write_paper_report(&cmd.out, &setup, &runs, None)?;
     writeln!(
         super::print::stdout(),
         "report written to {} ({} figures, SVG and PNG)",

@@ -134,6 +134,9 @@ pub struct ReportInput<'a> {
     /// (correlations, envelopes, stability maps) are drawn for, as the paper draws its δ = 0.4.
     pub runs: &'a [ReportRun],
     pub stability: StabilitySettings,
+    /// The model evidence of the record's laws, where it was computed: shown beside the runs'
+    /// probabilities.
+    pub evidence: Option<&'a crate::abc::evidence::Evidence>,
 }
 
 /// One figure as written: `figures/{stem}.svg` and `figures/{stem}.png`.
@@ -429,6 +432,7 @@ impl<'a> Prepared<'a> {
         self.record_markdown(&mut md);
         self.fits_markdown(&mut md);
         self.probabilities_markdown(&mut md);
+        self.evidence_markdown(&mut md);
         self.populations_markdown(&mut md);
         self.posterior_markdown(&mut md);
         self.selection_markdown(&mut md);
@@ -528,6 +532,43 @@ impl Prepared<'_> {
             for caveat in r.last.record.probability_caveats() {
                 let _ = writeln!(md, "\n{}: {caveat}", r.run.label);
             }
+        }
+        let best_rho = self.input.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
+        for r in &self.runs {
+            let caveat = r.last.record.epsilon.and_then(|epsilon| {
+                crate::abc::prior_volume_caveat(epsilon, best_rho, self.input.data.calibration.len())
+            });
+            if let Some(caveat) = caveat {
+                let _ = writeln!(md, "\n{}: {caveat}.", r.run.label);
+            }
+        }
+    }
+
+    /// The model evidence of each law beside the runs' probabilities, where it was computed.
+    fn evidence_markdown(&self, md: &mut String) {
+        let Some(evidence) = self.input.evidence else {
+            return;
+        };
+        let _ = writeln!(md, "\n## Model evidence\n");
+        let _ = writeln!(
+            md,
+            "Marginal likelihood of each law (tempered SMC per law, {} islands × {} particles; residuals i.i.d. Gaussian, \
+             σ integrated out; ln Z with torques in N·m) and the posterior law probabilities it gives.\n",
+            evidence.config.islands, evidence.config.particles
+        );
+        let _ = writeln!(md, "| law | ln Z | ± Monte-Carlo error | P(m \\| y) | islands agree |");
+        let _ = writeln!(md, "|---|---|---|---|---|");
+        for law in &evidence.laws {
+            let agree = if law.converged() {
+                "yes".to_string()
+            } else {
+                format!("no: {:.1} nats apart", law.island_spread)
+            };
+            let _ = writeln!(
+                md,
+                "| {} | {:.3} | {:.3} | {:.4} | {agree} |",
+                law.law, law.ln_z, law.ln_z_error, law.probability
+            );
         }
     }
 

@@ -87,12 +87,18 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::Setup, Vec<ReportRun>)> {
 
 /// The report of `runs` (all of the record and fits in `setup`) with the paper's map settings,
 /// written into `out`.
-pub fn write_paper_report(out: &Path, setup: &run::Setup, runs: &[ReportRun]) -> Result<ReportSummary> {
+pub fn write_paper_report(
+    out: &Path,
+    setup: &run::Setup,
+    runs: &[ReportRun],
+    evidence: Option<&crate::abc::evidence::Evidence>,
+) -> Result<ReportSummary> {
     let input = ReportInput {
         data: &setup.data,
         fits: &setup.fits,
         runs,
         stability: StabilitySettings::default(),
+        evidence,
     };
     write_report(out, &input)
 }

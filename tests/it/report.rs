@@ -96,6 +96,7 @@ fn the_report_has_every_figure_in_both_formats_and_the_tables() {
         fits: &fits,
         runs: &runs,
         stability: StabilitySettings::default(),
+        evidence: None,
     };
     let dir = tempfile::tempdir().unwrap();
     let summary = write_report(dir.path(), &input).unwrap();
@@ -208,6 +209,7 @@ fn unequal_weights_and_refused_input() {
         fits: &fits,
         runs: &runs,
         stability: StabilitySettings::default(),
+        evidence: None,
     };
     let dir = tempfile::tempdir().unwrap();
     write_report(dir.path(), &input).unwrap();
@@ -281,6 +283,7 @@ fn report_at_paper_scale() {
         fits: &fits,
         runs: &runs,
         stability: StabilitySettings::default(),
+        evidence: None,
     };
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/report-paper");
     let summary = write_report(&dir, &input).unwrap();
@@ -290,4 +293,67 @@ fn report_at_paper_scale() {
         summary.files.len(),
         dir.display()
     );
+}
+
+#[test]
+fn the_report_shows_the_model_evidence_beside_the_runs_when_it_was_computed() {
+    use bitrock::abc::evidence::{Evidence, EvidenceConfig, LawEvidence};
+    let (data, fits, runs) = runs(1000, &[0.4], 4);
+    let law = |law: Law, ln_z: f64, island_ln_z: Vec<f64>, probability: f64| LawEvidence {
+        law,
+        ln_z,
+        ln_z_error: 0.5,
+        island_spread: island_ln_z.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - island_ln_z.iter().copied().fold(f64::INFINITY, f64::min),
+        island_ln_z,
+        prior_probability: 0.5,
+        probability,
+        stages: vec![3, 3],
+        candidates_scored: 100,
+        best_rho: 0.01,
+        posterior: Vec::new(),
+        cut_by_box: Vec::new(),
+    };
+    let evidence = Evidence {
+        laws: vec![
+            law(Law::M2, -1234.5678, vec![-1234.0, -1235.0], 0.75),
+            law(Law::M3, -1235.6664, vec![-1230.0, -1237.0], 0.25),
+        ],
+        data_points: 1000,
+        config: EvidenceConfig::default(),
+        candidates_scored: 200,
+        evaluations: 200_000,
+        seconds: 1.0,
+        backend: "cpu".into(),
+    };
+    let input = ReportInput {
+        data: &data,
+        fits: &fits,
+        runs: &runs,
+        stability: StabilitySettings::default(),
+        evidence: Some(&evidence),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    write_report(dir.path(), &input).unwrap();
+    let markdown = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(markdown.contains("## Model evidence"), "{markdown}");
+    assert!(
+        markdown.contains("| m2 | -1234.568 | 0.500 | 0.7500 | yes |"),
+        "{markdown}"
+    );
+    assert!(
+        markdown.contains("| m3 | -1235.666 | 0.500 | 0.2500 | no: 7.0 nats apart |"),
+        "{markdown}"
+    );
+    let without = tempfile::tempdir().unwrap();
+    write_report(
+        without.path(),
+        &ReportInput {
+            evidence: None,
+            ..input
+        },
+    )
+    .unwrap();
+    let plain = std::fs::read_to_string(without.path().join("report.md")).unwrap();
+    assert!(!plain.contains("## Model evidence"));
 }
