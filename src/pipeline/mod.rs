@@ -191,10 +191,12 @@ impl Analysis {
                 "every law fits the record exactly (ρ < {EXACT_FIT_RHO:e}): the torque does not depend on the bit speed here (a constant record?), and the model probabilities say nothing"
             ));
         }
+        // An exact fit has no likelihood scale: the warning above says what matters there.
+        let best = setup.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
         if let Some(last) = self.outcome.run.populations.last()
             && let Some(epsilon) = last.record.epsilon
+            && best >= EXACT_FIT_RHO
         {
-            let best = setup.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
             out.extend(crate::abc::prior_volume_caveat(
                 epsilon,
                 best,

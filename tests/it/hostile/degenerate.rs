@@ -44,10 +44,16 @@ fn a_backwards_time_column_and_negative_torques_are_warned_once_and_recorded() {
     );
     assert_eq!(code, 0, "{err}");
     assert_eq!(err.matches("runs backwards").count(), 1, "{err}");
+    // Beside the record's warning, the run's own statement that at this ε its probabilities
+    // are prior-volume ratios, once.
     let warnings = warnings_of(&tmp.path().join("R"));
-    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
     assert!(warnings[0].contains("runs backwards"));
-    // A record in time order and of positive torque warns of nothing.
+    assert!(
+        warnings[1].contains("ratios of the laws' prior volumes"),
+        "{warnings:?}"
+    );
+    // A record in time order and of positive torque warns of nothing about the record.
     let (code, _, err) = run_in(
         tmp.path(),
         &[
@@ -63,8 +69,13 @@ fn a_backwards_time_column_and_negative_torques_are_warned_once_and_recorded() {
         ],
     );
     assert_eq!(code, 0, "{err}");
-    assert!(!err.contains("warning"), "{err}");
-    assert!(warnings_of(&tmp.path().join("Q")).is_empty());
+    assert_eq!(err.matches("warning").count(), 1, "{err}");
+    let warnings = warnings_of(&tmp.path().join("Q"));
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(
+        warnings[0].contains("ratios of the laws' prior volumes"),
+        "{warnings:?}"
+    );
 }
 
 #[test]
