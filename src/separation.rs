@@ -27,6 +27,9 @@ use serde::{Deserialize, Serialize};
 /// Expected gaps below this many nats leave a pair to the priors.
 pub const UNDECIDED_NATS: f64 = 5.0;
 
+/// A sum of squares at or below this share of Σy² is zero (rounding of an exact fit).
+const EXACT: f64 = 1e-12;
+
 /// Speed bands the gap is split into (equal numbers of samples).
 pub const BANDS: usize = 5;
 
@@ -111,12 +114,18 @@ pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) ->
                 })
                 .collect();
             let s_gap: f64 = crate::numerics::compensated_sum(residual.iter().copied());
-            let gap_nats = if s_truth > 0.0 {
+            // An exact fit of the truth leaves no noise to measure the gap against: a rival that
+            // follows its curve too (to rounding) is not separated, any other is, without limit.
+            // A gap with no value separates nothing.
+            let gap_nats = if s_gap.is_nan() || s_gap <= EXACT * sum_y2 {
+                0.0
+            } else if s_truth > 0.0 {
                 n as f64 / 2.0 * (s_gap / s_truth).ln_1p()
             } else {
                 f64::INFINITY
             };
             let bands = (0..BANDS)
+                .filter(|b| b * n / BANDS < (b + 1) * n / BANDS)
                 .map(|b| {
                     let members = &order[b * n / BANDS..(b + 1) * n / BANDS];
                     let share = if s_gap > 0.0 {
@@ -137,7 +146,9 @@ pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) ->
             };
             let (mut below, mut above) = (None, None);
             if gap_nats < UNDECIDED_NATS {
-                below = (1..=200).map(|i| w_min * (1.0 - i as f64 / 200.0)).find(|&w| apart(w));
+                below = (1..200)
+                    .map(|i| w_min * (1.0 - i as f64 / 200.0))
+                    .find(|&w| w > 0.0 && apart(w));
                 above = (1..=300).map(|i| w_max * (1.0 + i as f64 / 100.0)).find(|&w| apart(w));
             }
             out.push(Separation {
@@ -207,5 +218,30 @@ mod tests {
         let shares: f64 = m2_m4.bands.iter().map(|b| b.share).sum();
         assert!((shares - 1.0).abs() < 1e-9, "{shares}");
         assert_eq!(all.len(), 6);
+    }
+
+    /// Records that a law fits exactly leave no noise to measure a gap against: a rival that
+    /// also fits exactly (every law, on a constant torque) is not separated; one that cannot
+    /// follow the curve (a cubic against a sharp exponential knee) is, by far.
+    #[test]
+    fn an_exact_fit_separates_only_the_laws_that_cannot_follow_it() {
+        let speeds: Vec<f64> = (0..60).map(|i| 0.5 + 14.5 * i as f64 / 59.0).collect();
+        let record = |torque: &dyn Fn(f64) -> f64| Samples {
+            torque_nm: speeds.iter().map(|&w| torque(w)).collect(),
+            speed_rad_s: speeds.clone(),
+            wob_n: None,
+            time_s: None,
+        };
+        let opts = FitOptions::default();
+        let gaps = |data: &Samples| {
+            let fits = fit_laws(&[Law::M2, Law::M4], data, &Samples::default(), &opts).unwrap();
+            separations(&fits, data, &opts).unwrap()
+        };
+        for s in gaps(&record(&|_| 9_000.0)) {
+            assert_eq!(s.gap_nats, 0.0, "{s:?}");
+        }
+        let knee = gaps(&record(&|w| Law::M2.torque(&[13_000.0, 6_500.0, 1.0], w, 1.0)));
+        let m2_m4 = knee.iter().find(|s| s.truth == Law::M2).unwrap();
+        assert!(m2_m4.gap_nats > 100.0 && m2_m4.misranking < 1e-20, "{m2_m4:?}");
     }
 }

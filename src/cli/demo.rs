@@ -283,7 +283,7 @@ fn print_headline(
         "model evidence (physical boxes, i.i.d. Gaussian residuals): {}",
         probabilities.join(", ")
     )?;
-    if let Some(top) = laws.iter().max_by(|a, b| a.probability.total_cmp(&b.probability)) {
+    if let Some(top) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z)) {
         let factors: Vec<String> = laws
             .iter()
             .filter(|l| l.law != top.law)

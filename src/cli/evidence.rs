@@ -169,10 +169,14 @@ fn tables(
     let best = evidence
         .laws
         .iter()
-        .max_by(|a, b| a.probability.total_cmp(&b.probability))
+        .max_by(|a, b| a.ln_z.total_cmp(&b.ln_z))
         .expect("at least one law");
     if evidence.laws.len() > 1 {
-        writeln!(out, "\nBayes factors of {} against each other law:", best.law)?;
+        writeln!(
+            out,
+            "\nBayes factors of {}, the law of the largest evidence, against each other law:",
+            best.law
+        )?;
         for law in evidence.laws.iter().filter(|l| l.law != best.law) {
             let (ln_b, error) = evidence.ln_bayes_factor(best.law, law.law).expect("both compared");
             // Every box twice as wide: each parameter costs ln 2 more where the posterior
