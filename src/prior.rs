@@ -170,9 +170,9 @@ pub struct Prior {
 ///   power s (its term stays within the record's torques up to its highest speed);
 /// - a rate or a width (t = 0, s > 0: exp(−g·w), tanh(b·w), a bump's 1/width²): one over the
 ///   slowest recorded speeds to the power s (as sharp as the record resolves);
-/// - a speed (s < 0, a bump's centre): a tenth of the fastest speed, its box from 0, so that
-///   k = 10 scales keep it within the recorded speeds (a centre outside them would let a
-///   Gaussian's tail pose as another law's decay).
+/// - a speed (s < 0, a bump's centre): a tenth of the fastest speed, its box from a tenth of
+///   its width below 0, so that k = 10 scales keep it within the recorded speeds and a peak at
+///   rest (a centre far below 0 would let a Gaussian's tail pose as another law's decay).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct PhysicalScales {
     /// Largest |torque| of the record, N·m.
@@ -210,15 +210,16 @@ impl PhysicalScales {
     }
 
     /// The box of parameter `j` of `law` at `k` scales (before clipping): from its physical
-    /// bound up; a speed (a bump's centre) from 0 up, since records turn forwards; symmetric
-    /// about 0 for another free parameter.
+    /// bound up; a speed (a bump's centre) from a tenth of its width below 0 (a peak at rest,
+    /// resolved on both sides) up, since records turn forwards; symmetric about 0 for another
+    /// free parameter.
     fn physical_box(&self, law: Law, j: usize, k: f64) -> (f64, f64, BoxRule) {
         let spec = law.params()[j];
         let width = k * self.param_scale(law, j);
         if spec.lower.is_finite() {
             (spec.lower, spec.lower + width, BoxRule::Physical)
         } else if spec.inverse_speed_power < 0 {
-            (0.0, width, BoxRule::Physical)
+            (-0.1 * width, width, BoxRule::Physical)
         } else {
             (-width, width, BoxRule::Physical)
         }
