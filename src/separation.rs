@@ -133,10 +133,10 @@ pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) ->
                     } else {
                         0.0
                     };
+                    // Bands are never empty (filtered above).
                     let speed = |k: usize| calibration.speed_rad_s[k];
-                    let ends = members.first().zip(members.last()).map(|(&a, &z)| (speed(a), speed(z)));
                     Band {
-                        speed_rad_s: ends.unwrap_or((w_min, w_max)),
+                        speed_rad_s: (speed(members[0]), speed(members[members.len() - 1])),
                         share,
                     }
                 })
