@@ -782,7 +782,7 @@ fn generating_params(run: &CheckedRun, law: Law, rng: &mut StdRng) -> Vec<f64> {
 }
 
 /// y − r·T(w) of `law` at `params` on `samples`, N·m.
-fn residuals(law: Law, params: &[f64], samples: &Samples, w_ref_n: Option<f64>) -> Vec<f64> {
+pub(crate) fn residuals(law: Law, params: &[f64], samples: &Samples, w_ref_n: Option<f64>) -> Vec<f64> {
     let r = samples.wob_ratio(w_ref_n);
     samples
         .speed_rad_s
@@ -795,7 +795,7 @@ fn residuals(law: Law, params: &[f64], samples: &Samples, w_ref_n: Option<f64>) 
 
 /// `samples` with its torque replaced by r·T(w) of `law` at `params` plus residuals drawn
 /// with replacement from `residuals`.
-fn synthesize(
+pub(crate) fn synthesize(
     law: Law,
     params: &[f64],
     samples: &Samples,

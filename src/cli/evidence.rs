@@ -7,7 +7,9 @@ use bitrock::abc::evidence::{EvidenceConfig, LN_Z_PER_DOUBLING, strength};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
-use bitrock::pipeline::evidence::{DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceJob, EvidencePrior};
+use bitrock::pipeline::evidence::{
+    self, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidenceJob, EvidencePrior,
+};
 use clap::{Args, ValueEnum};
 use std::io::Write;
 use std::path::PathBuf;
@@ -71,6 +73,15 @@ pub struct EvidenceCmd {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Then check the answer by re-simulation: K synthetic records per law, each made from
+    /// the law's evidence posterior and the record's own residuals, each through the same
+    /// evidence over the same boxes; a confusion matrix with the share decided, undecided and
+    /// decided wrongly (costs K times the evidence per law).
+    #[arg(long, value_name = "K")]
+    pub check: Option<usize>,
+    /// No progress lines on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
     /// Print JSON instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -106,11 +117,26 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         },
     };
     job.sampler.validate()?;
+    if cmd.check == Some(0) {
+        return Err(bitrock::Error::setting("check", "must be at least 1 replicate per law").into());
+    }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     let analysis = job.run(&data, &mut Notes)?;
+    let quiet = cmd.quiet;
+    let check = cmd
+        .check
+        .map(|k| {
+            let mut progress = |done: usize, total: usize| {
+                if !quiet {
+                    print::note(format_args!("evidence check: replicate {done}/{total}"));
+                }
+            };
+            evidence::check(&job, &data, &analysis, k, &mut progress, &mut Notes)
+        })
+        .transpose()?;
     let mut out = print::stdout();
     if cmd.json {
-        let document = bitrock::documents::evidence_json(
+        let mut document = bitrock::documents::evidence_json(
             &data,
             &analysis.fits,
             &analysis.prior,
@@ -118,9 +144,15 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             &analysis.separations,
             &job.prior.describe(),
         );
+        if let Some(check) = &check {
+            document["check"] = serde_json::to_value(check)?;
+        }
         print::json(&mut out, document)?;
     } else {
         tables(&mut out, &data, &job, &analysis)?;
+        if let Some(check) = &check {
+            check_table(&mut out, check)?;
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -233,5 +265,39 @@ fn tables(
         "\n{} candidates scored ({:.3e} candidate × data-point evaluations) on {} in {:.2} s",
         evidence.candidates_scored, evidence.evaluations as f64, evidence.backend, evidence.seconds
     )?;
+    Ok(())
+}
+
+/// The check's confusion matrix and verdicts.
+fn check_table(out: &mut impl Write, check: &EvidenceCheck) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "\nEvidence check: {} synthetic records per law (parameters from its evidence posterior, noise resampled from its fit's residuals), the same boxes; {} candidates scored in {:.1} s",
+        check.replicates, check.candidates_scored, check.seconds
+    )?;
+    writeln!(
+        out,
+        "rows: law that made the data; columns: mean P(m | y) (share ranked first); decided: odds at least positive beyond their error on a pair the record separates"
+    )?;
+    write!(out, "{:<10}", "data from")?;
+    for law in &check.laws {
+        write!(out, " {:>15}", law.to_string())?;
+    }
+    writeln!(out, "   decided right / undecided / decided wrong")?;
+    for row in &check.rows {
+        write!(out, "{:<10}", row.law.to_string())?;
+        for (p, f) in row.mean_probability.iter().zip(&row.first_share) {
+            write!(out, " {:>15}", format!("{p:.3} ({f:.2})"))?;
+        }
+        writeln!(
+            out,
+            "   {:.2} / {:.2} / {:.2}",
+            row.decided_right, row.undecided, row.decided_wrong
+        )?;
+    }
+    writeln!(out)?;
+    for row in &check.rows {
+        writeln!(out, "{}", row.verdict)?;
+    }
     Ok(())
 }

@@ -90,6 +90,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("percentile", "--percentile"),
     ("samples", "--samples"),
     ("replicates", "--replicates"),
+    ("check", "--check"),
     ("batch", "--batch"),
     ("candidates", "--candidates"),
     ("epsilon", "--epsilon"),

@@ -14,6 +14,10 @@ use crate::separation::{self, Separation};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
+pub mod check;
+
+pub use check::{EvidenceCheck, check};
+
 /// The default width of the physical boxes, in record scales ([`PhysicalScales`]).
 pub const DEFAULT_PRIOR_SCALE: f64 = 10.0;
 
@@ -95,13 +99,27 @@ impl EvidenceJob {
             )?,
             EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
         };
-        let problem =
-            AbcProblem::new(prior.clone(), self.sampler.seed, &data.calibration, self.fit.w_ref_n).with_best_rho(&fits);
-        let evaluator = eval::evaluator(problem, self.backend, Default::default(), &mut |line| {
-            observer.note(line)
-        })?;
+        self.sample(data, fits, prior, self.backend, self.sampler.seed, observer)
+    }
+
+    /// The evidence of `fits`' laws on `data` over `prior`, the samplers seeded `seed`.
+    fn sample(
+        &self,
+        data: &FieldData,
+        fits: Vec<LawFit>,
+        prior: Prior,
+        backend: Backend,
+        seed: u64,
+        observer: &mut dyn Observer,
+    ) -> Result<EvidenceAnalysis> {
+        let problem = AbcProblem::new(prior.clone(), seed, &data.calibration, self.fit.w_ref_n).with_best_rho(&fits);
+        let evaluator = eval::evaluator(problem, backend, Default::default(), &mut |line| observer.note(line))?;
         let separations = separation::separations(&fits, &data.calibration, &self.fit)?;
-        let evidence = evidence::run(evaluator.as_ref(), &self.sampler, observer)?;
+        let sampler = EvidenceConfig {
+            seed,
+            ..self.sampler.clone()
+        };
+        let evidence = evidence::run(evaluator.as_ref(), &sampler, observer)?;
         Ok(EvidenceAnalysis {
             fits,
             prior,

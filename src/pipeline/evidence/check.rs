@@ -1,0 +1,272 @@
+//! Can the evidence be trusted on records like this one? A confusion matrix by re-simulation,
+//! as `check-selection` makes one for an ABC run.
+//!
+//! For every law, K synthetic records are made at the record's own calibration speeds (and
+//! weight-on-bit ratios): parameters drawn by weight from the law's evidence posterior, plus
+//! noise resampled with replacement from the law's least-squares residuals (the record's noise
+//! level and distribution). Each synthetic record is fitted (starting from the record's own
+//! estimates and the generating parameters) and its evidence computed over the *same* boxes
+//! as the record's, with its own seed ([`crate::selection::replicate_seed`]).
+//!
+//! A replicate's answer is the law of the largest posterior probability, and it is *decided*
+//! when it beats the runner-up by at least a positive Bayes factor beyond twice its error
+//! ([`strength`]) and the replicate's own fits say that the record separates the two
+//! (the runner-up cannot follow the winner's fitted curve to within [`UNDECIDED_NATS`]).
+//! Otherwise it is *undecided*: whatever the probabilities say, the priors and the sampling
+//! noise set them. A trustworthy evidence is decided and right where the laws differ on the
+//! record, and undecided (never decided and wrong) where they do not.
+
+use super::{EvidenceAnalysis, EvidenceJob};
+use crate::abc::Observer;
+use crate::abc::evidence::strength;
+use crate::data::FieldData;
+use crate::error::{Error, Result};
+use crate::eval::Backend;
+use crate::laws::Law;
+use crate::selection::{replicate_seed, residuals, synthesize};
+use crate::separation::UNDECIDED_NATS;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// One synthetic record and what the evidence said about it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CheckReplicate {
+    pub index: usize,
+    /// Seed of its synthesis and of its samplers.
+    pub seed: u64,
+    /// The generating parameters, SI (torques N·m).
+    pub params_si: Vec<f64>,
+    /// ln Z and P(m | y) of each law of the check, in [`EvidenceCheck::laws`] order.
+    pub ln_z: Vec<f64>,
+    pub probabilities: Vec<f64>,
+    /// The law of the largest probability (the first in law order among equals).
+    pub first: Law,
+    /// The law of the next largest, with ln of the posterior odds of `first` against it and
+    /// that log's Monte-Carlo error; `None` with one law.
+    pub runner_up: Option<Law>,
+    pub ln_odds: f64,
+    pub ln_odds_error: f64,
+    /// The replicate's own expected gap between `first`'s fitted curve and the runner-up, nats.
+    pub gap_nats: f64,
+    /// True when the odds are at least positive beyond their error and the gap separates.
+    pub decided: bool,
+}
+
+/// The records made by one law.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CheckRow {
+    pub law: Law,
+    /// Mean P(m | y) of each law over the replicates.
+    pub mean_probability: Vec<f64>,
+    /// Share of the replicates in which each law ranks first.
+    pub first_share: Vec<f64>,
+    /// Shares of the replicates decided for this law, undecided, and decided for another.
+    pub decided_right: f64,
+    pub undecided: f64,
+    pub decided_wrong: f64,
+    /// One sentence for people.
+    pub verdict: String,
+    pub replicates: Vec<CheckReplicate>,
+}
+
+/// The evidence's confusion matrix on records like the one analysed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvidenceCheck {
+    /// The laws: the columns (and rows) of the matrix.
+    pub laws: Vec<Law>,
+    /// Replicates per law, K.
+    pub replicates: usize,
+    pub rows: Vec<CheckRow>,
+    /// Candidates scored by all replicates' samplers.
+    pub candidates_scored: u64,
+    /// Wall time of the check, s.
+    pub seconds: f64,
+}
+
+/// Checks `analysis`, the evidence `job` computed on `data`: `replicates` synthetic records
+/// per law, each through the same job over the same boxes. `progress(done, total)` hears each
+/// finished replicate; `observer` is asked whether to stop between and within replicates.
+pub fn check(
+    job: &EvidenceJob,
+    data: &FieldData,
+    analysis: &EvidenceAnalysis,
+    replicates: usize,
+    progress: &mut dyn FnMut(usize, usize),
+    observer: &mut dyn Observer,
+) -> Result<EvidenceCheck> {
+    if replicates == 0 {
+        return Err(Error::setting("check", "must be at least 1 replicate per law"));
+    }
+    let started = Instant::now();
+    let laws: Vec<Law> = analysis.evidence.laws.iter().map(|l| l.law).collect();
+    // The backend the analysis ended on: a fallback to the CPU is said once, not per replicate.
+    let backend = if analysis.evidence.backend == "gpu" {
+        Backend::Gpu
+    } else {
+        Backend::Cpu
+    };
+    let total = laws.len() * replicates;
+    let mut candidates_scored = 0;
+    let mut rows = Vec::with_capacity(laws.len());
+    for (slot, &law) in laws.iter().enumerate() {
+        let mut made = Vec::with_capacity(replicates);
+        for index in 0..replicates {
+            if observer.interrupted() {
+                return Err(Error::Interrupted);
+            }
+            let seed = replicate_seed(job.sampler.seed, slot, index);
+            let (replicate, scored) = replicate_of(job, data, analysis, slot, index, seed, backend, observer)?;
+            candidates_scored += scored;
+            made.push(replicate);
+            progress(slot * replicates + index + 1, total);
+        }
+        rows.push(summarize(law, &laws, made));
+    }
+    Ok(EvidenceCheck {
+        laws,
+        replicates,
+        rows,
+        candidates_scored,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Replicate `index` of the law in `slot`: its record, fits and evidence; with the candidates
+/// its samplers scored.
+#[allow(clippy::too_many_arguments)]
+fn replicate_of(
+    job: &EvidenceJob,
+    data: &FieldData,
+    analysis: &EvidenceAnalysis,
+    slot: usize,
+    index: usize,
+    seed: u64,
+    backend: Backend,
+    observer: &mut dyn Observer,
+) -> Result<(CheckReplicate, u64)> {
+    let evidence = &analysis.evidence.laws[slot];
+    let law = evidence.law;
+    let fit = analysis
+        .fits
+        .iter()
+        .find(|f| f.law == law)
+        .ok_or_else(|| Error::Numerical(format!("the evidence check has no least-squares fit of {law}")))?;
+    let mut rng = StdRng::seed_from_u64(seed);
+    let params_si = draw(&evidence.posterior, &mut rng).unwrap_or_else(|| fit.params_si.clone());
+    let w_ref_n = job.fit.w_ref_n;
+    let noise = residuals(law, &fit.params_si, &data.calibration, w_ref_n);
+    let synthetic = FieldData {
+        source: data.source.join(format!("evidence-check/{law}-replicate-{index}")),
+        calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &noise, &mut rng),
+        validation: synthesize(law, &params_si, &data.validation, w_ref_n, &noise, &mut rng),
+        warnings: Vec::new(),
+        ..data.clone()
+    };
+    let known: Vec<(Law, Vec<f64>)> = std::iter::once((law, params_si.clone()))
+        .chain(analysis.fits.iter().map(|f| (f.law, f.params_si.clone())))
+        .collect();
+    let fits = crate::fit::fit_record_from(&job.laws, &synthetic, &job.fit, &known)?;
+    let outcome = job
+        .sample(&synthetic, fits, analysis.prior.clone(), backend, seed, observer)
+        .map_err(|e| match e {
+            Error::Numerical(m) => Error::Numerical(format!("{law} replicate {index}: {m}")),
+            other => other,
+        })?;
+    let laws = &outcome.evidence.laws;
+    let probabilities: Vec<f64> = laws.iter().map(|l| l.probability).collect();
+    let mut order: Vec<usize> = (0..laws.len()).collect();
+    // Largest first; among equals the first in law order.
+    order.sort_by(|&a, &b| probabilities[b].total_cmp(&probabilities[a]).then(a.cmp(&b)));
+    let first = &laws[order[0]];
+    let (runner_up, ln_odds, ln_odds_error, gap_nats) = match order.get(1).map(|&k| &laws[k]) {
+        None => (None, f64::INFINITY, 0.0, f64::INFINITY),
+        Some(second) => {
+            let ln_odds = (first.ln_z + first.prior_probability.ln()) - (second.ln_z + second.prior_probability.ln());
+            let gap = outcome
+                .separations
+                .iter()
+                .find(|s| s.truth == first.law && s.rival == second.law)
+                .map_or(0.0, |s| s.gap_nats);
+            (
+                Some(second.law),
+                ln_odds,
+                first.ln_z_error.hypot(second.ln_z_error),
+                gap,
+            )
+        }
+    };
+    let decided = strength(ln_odds, ln_odds_error) != "undecided" && gap_nats >= UNDECIDED_NATS;
+    Ok((
+        CheckReplicate {
+            index,
+            seed,
+            params_si,
+            ln_z: laws.iter().map(|l| l.ln_z).collect(),
+            probabilities,
+            first: first.law,
+            runner_up,
+            ln_odds,
+            ln_odds_error,
+            gap_nats,
+            decided,
+        },
+        outcome.evidence.candidates_scored,
+    ))
+}
+
+/// A parameter set drawn by weight from a weighted posterior; `None` when it is empty.
+fn draw(posterior: &[(Vec<f64>, f64)], rng: &mut StdRng) -> Option<Vec<f64>> {
+    let total: f64 = posterior.iter().map(|(_, w)| w).sum();
+    let mut u = rng.random::<f64>() * total;
+    for (params, w) in posterior {
+        u -= w;
+        if u < 0.0 {
+            return Some(params.clone());
+        }
+    }
+    posterior.last().map(|(p, _)| p.clone())
+}
+
+/// The row of `law` from its replicates.
+fn summarize(law: Law, laws: &[Law], replicates: Vec<CheckReplicate>) -> CheckRow {
+    let k = replicates.len() as f64;
+    let share = |keep: &dyn Fn(&CheckReplicate) -> bool| replicates.iter().filter(|r| keep(r)).count() as f64 / k;
+    let mean_probability = (0..laws.len())
+        .map(|j| replicates.iter().map(|r| r.probabilities[j]).sum::<f64>() / k)
+        .collect();
+    let first_share: Vec<f64> = laws.iter().map(|&l| share(&|r| r.first == l)).collect();
+    let decided_right = share(&|r| r.decided && r.first == law);
+    let decided_wrong = share(&|r| r.decided && r.first != law);
+    let undecided = share(&|r| !r.decided);
+    let count = |s: f64| (s * k).round() as usize;
+    let mut verdict = format!(
+        "{law} data: decided for {law} in {} of {}, undecided in {}",
+        count(decided_right),
+        replicates.len(),
+        count(undecided)
+    );
+    if decided_wrong > 0.0 {
+        let mut wrong: Vec<(Law, usize)> = laws
+            .iter()
+            .filter(|&&l| l != law)
+            .map(|&l| (l, replicates.iter().filter(|r| r.decided && r.first == l).count()))
+            .filter(|&(_, c)| c > 0)
+            .collect();
+        wrong.sort_by_key(|&(_, c)| std::cmp::Reverse(c));
+        let named: Vec<String> = wrong.iter().map(|(l, c)| format!("{l} in {c}")).collect();
+        verdict.push_str(&format!(", decided wrongly for {}", named.join(", ")));
+    }
+    verdict.push('.');
+    CheckRow {
+        law,
+        mean_probability,
+        first_share,
+        decided_right,
+        undecided,
+        decided_wrong,
+        verdict,
+        replicates,
+    }
+}
