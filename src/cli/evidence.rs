@@ -117,9 +117,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         },
     };
     job.sampler.validate()?;
-    if cmd.check == Some(0) {
-        return Err(bitrock::Error::setting("check", "must be at least 1 replicate per law").into());
-    }
+    cmd.check.map(evidence::check_replicates).transpose()?;
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     let analysis = job.run(&data, &mut Notes)?;
     let quiet = cmd.quiet;

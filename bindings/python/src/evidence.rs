@@ -7,7 +7,9 @@ use crate::run::PyObserver;
 use bitrock::Law;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::documents::{self, to_record_units};
-use bitrock::pipeline::evidence::{DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior};
+use bitrock::pipeline::evidence::{
+    DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, check as check_evidence, check_replicates,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -58,6 +60,10 @@ pub(crate) fn evidence(
             ..defaults
         },
     };
+    let replicates: Option<usize> = kwarg(options, "check")?;
+    if let Some(k) = replicates {
+        check(py, check_replicates(k))?;
+    }
     let mut observer = PyObserver::new(None, note);
     let data = &record.data;
     let result = py.detach(|| job.run(data, &mut observer));
@@ -65,6 +71,16 @@ pub(crate) fn evidence(
         return Err(e);
     }
     let analysis = check(py, result)?;
+    let selection = match replicates {
+        None => None,
+        Some(k) => {
+            let result = py.detach(|| check_evidence(&job, data, &analysis, k, &mut |_, _| {}, &mut observer));
+            if let Some(e) = observer.take_raised() {
+                return Err(e);
+            }
+            Some(check(py, result)?)
+        }
+    };
     let mut document = documents::evidence_json(
         data,
         &analysis.fits,
@@ -86,6 +102,9 @@ pub(crate) fn evidence(
             .collect();
         let weights: Vec<f64> = law.posterior.iter().map(|(_, w)| *w).collect();
         entry["posterior"] = serde_json::json!({"params": params, "weights": weights});
+    }
+    if let Some(selection) = selection {
+        document["check"] = serde_json::to_value(&selection).expect("the check serialises");
     }
     Ok(as_arguments(&document.to_string()))
 }

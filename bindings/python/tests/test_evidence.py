@@ -60,6 +60,7 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
         ({"boxes": "wide"}, "boxes"),
         ({"prior_scale": -1.0}, "prior_scale"),
         ({"particles": "many"}, "particles"),
+        ({"check": 0}, "check"),
     ],
 )
 def test_bad_arguments_are_refused_by_name(demo, arguments, named) -> None:
@@ -70,3 +71,24 @@ def test_bad_arguments_are_refused_by_name(demo, arguments, named) -> None:
 def test_an_unknown_law_is_refused(small) -> None:
     with pytest.raises(bitrock.InputError, match="m4"):
         small.posterior("m4")
+
+
+def test_the_check_by_resimulation_is_the_command_lines(cli) -> None:
+    checked = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), check=2, **SMALL)
+    done = run_cli(
+        cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
+        "--seed", "5", "--backend", "cpu", "--check", "2", "--json", "--quiet",
+    )
+    document = json.loads(done.stdout)["check"]
+    assert document["rows"] == checked.document["check"]["rows"]
+    table = checked.check
+    assert list(table.index) == ["m2", "m3"]
+    shares = table[["decided_right", "undecided", "decided_wrong"]].sum(axis=1)
+    assert np.allclose(shares, 1.0)
+    assert np.allclose(table[["p_m2", "p_m3"]].sum(axis=1), 1.0)
+    for law in ("m2", "m3"):
+        assert table.loc[law, "p_m2"] == document["rows"][["m2", "m3"].index(law)]["mean_probability"][0]
+
+
+def test_no_check_is_none(small) -> None:
+    assert small.check is None

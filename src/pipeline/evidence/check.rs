@@ -85,6 +85,14 @@ pub struct EvidenceCheck {
     pub seconds: f64,
 }
 
+/// Refuses, naming `check`, a check of no replicates (before any work).
+pub fn check_replicates(replicates: usize) -> Result<()> {
+    if replicates == 0 {
+        return Err(Error::setting("check", "must be at least 1 replicate per law"));
+    }
+    Ok(())
+}
+
 /// Checks `analysis`, the evidence `job` computed on `data`: `replicates` synthetic records
 /// per law, each through the same job over the same boxes. `progress(done, total)` hears each
 /// finished replicate; `observer` is asked whether to stop between and within replicates.
@@ -96,9 +104,7 @@ pub fn check(
     progress: &mut dyn FnMut(usize, usize),
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
-    if replicates == 0 {
-        return Err(Error::setting("check", "must be at least 1 replicate per law"));
-    }
+    check_replicates(replicates)?;
     let started = Instant::now();
     let laws: Vec<Law> = analysis.evidence.laws.iter().map(|l| l.law).collect();
     // The backend the analysis ended on: a fallback to the CPU is said once, not per replicate.

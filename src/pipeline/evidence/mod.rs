@@ -16,7 +16,7 @@ use std::path::PathBuf;
 
 pub mod check;
 
-pub use check::{EvidenceCheck, check};
+pub use check::{EvidenceCheck, check, check_replicates};
 
 /// The default width of the physical boxes, in record scales ([`PhysicalScales`]).
 pub const DEFAULT_PRIOR_SCALE: f64 = 10.0;

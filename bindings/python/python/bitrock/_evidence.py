@@ -84,6 +84,30 @@ class Evidence:
         ]
         return pd.DataFrame(rows)
 
+    @property
+    def check(self) -> pd.DataFrame | None:
+        """The check by re-simulation (``check=K``), ``None`` without one: one row per law that
+        made the synthetic records, with the mean P(m | y) of every law (``p_m1``…), the share
+        of replicates ranking each law first (``first_m1``…), and the shares decided for the
+        generating law, undecided, and decided for another law. A replicate is decided when
+        the odds of its first law are at least positive beyond their Monte-Carlo error on a pair
+        the replicate's fits separate by 5 nats or more."""
+        check = self._doc.get("check")
+        if check is None:
+            return None
+        rows = []
+        for row in check["rows"]:
+            entry: dict[str, Any] = {"law": row["law"]}
+            for law, p in zip(check["laws"], row["mean_probability"]):
+                entry[f"p_{law}"] = p
+            for law, f in zip(check["laws"], row["first_share"]):
+                entry[f"first_{law}"] = f
+            entry["decided_right"] = row["decided_right"]
+            entry["undecided"] = row["undecided"]
+            entry["decided_wrong"] = row["decided_wrong"]
+            rows.append(entry)
+        return pd.DataFrame(rows).set_index("law")
+
     def posterior(self, law: str) -> tuple[pd.DataFrame, np.ndarray]:
         """The law's posterior parameter sets (the record's torque unit, one column per
         parameter) and their weights (summing to 1), as pyABC's ``get_distribution``."""
@@ -118,6 +142,7 @@ def evidence(
     starts: int | None = None,
     scale_by_wob: bool = False,
     w_ref_kn: float | None = None,
+    check: int | None = None,
 ) -> Evidence:
     """The model evidence of the laws (``m1``…``m4``; all by default) on the record's
     calibration samples, as ``bitrock evidence``. ``boxes="physical"`` integrates over boxes
@@ -125,7 +150,10 @@ def evidence(
     its unit, no fit involved; ``boxes="delta"`` over the paper's boxes φ̂(1 ± ``delta``) around
     the least-squares estimates (the data used twice). ``prior`` is a prior file; ``particles``
     (500) per island, ``islands`` (4) independent samplers per law whose spread is the
-    Monte-Carlo error; the same ``seed`` gives the same result."""
+    Monte-Carlo error; the same ``seed`` gives the same result. ``check=K`` then checks the
+    answer by re-simulation (K synthetic records per law from its evidence posterior and the
+    record's own residuals, each through the same evidence over the same boxes; K times the
+    cost per law): see :attr:`Evidence.check`."""
     from . import _law_names, _note, _record
 
     options = {
@@ -142,6 +170,7 @@ def evidence(
         "starts": starts,
         "scale_by_wob": scale_by_wob,
         "w_ref_kn": w_ref_kn,
+        "check": check,
     }
     document = _bitrock.evidence(_record(record), _law_names(laws), options, _note)
     return Evidence(json.loads(document))
