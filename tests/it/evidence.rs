@@ -298,7 +298,7 @@ fn the_evidence_ranks_a_separated_generating_law_first_and_never_decides_an_inse
         for r in &row.replicates {
             let total: f64 = r.probabilities.iter().sum();
             assert!((total - 1.0).abs() < 1e-9, "{total}");
-            // Decided only where the record separates the two.
+            // Decided only where the data, not the Occam factor, put the first law ahead.
             assert!(!r.decided || r.gap_nats >= UNDECIDED_NATS, "{r:?}");
         }
     }

@@ -9,11 +9,12 @@
 //! as the record's, with its own seed ([`crate::selection::replicate_seed`]).
 //!
 //! A replicate's answer is the law of the largest posterior probability, and it is *decided*
-//! when it beats the runner-up by at least a positive Bayes factor beyond twice its error
-//! ([`strength`]) and the replicate's own fits say that the record separates the two
-//! (the runner-up cannot follow the winner's fitted curve to within [`UNDECIDED_NATS`]).
-//! Otherwise it is *undecided*: whatever the probabilities say, the priors and the sampling
-//! noise set them. A trustworthy evidence is decided and right where the laws differ on the
+//! when it beats the runner-up by at least positive odds beyond twice their error
+//! ([`strength`]) *and* by the data: its least-squares fit's log-likelihood lies at least
+//! [`UNDECIDED_NATS`] above the runner-up's, (n/2)·ln(ρ_runner-up / ρ_first). Otherwise it is
+//! *undecided*: odds won with fits of equal quality are Occam factors, set by the priors (a
+//! law that holds another, as m3 holds m2, fits any record of it as well and loses only by
+//! the volume of its extra parameters). A trustworthy evidence is decided and right where the laws differ on the
 //! record, and undecided (never decided and wrong) where they do not.
 
 use super::{EvidenceAnalysis, EvidenceJob};
@@ -48,9 +49,12 @@ pub struct CheckReplicate {
     pub runner_up: Option<Law>,
     pub ln_odds: f64,
     pub ln_odds_error: f64,
-    /// The replicate's own expected gap between `first`'s fitted curve and the runner-up, nats.
+    /// How far the least-squares log-likelihood of `first` lies above the runner-up's on this
+    /// replicate, (n/2)·ln(ρ_runner-up / ρ_first), nats (negative where the runner-up fits
+    /// better).
     pub gap_nats: f64,
-    /// True when the odds are at least positive beyond their error and the gap separates.
+    /// True when the odds are at least positive beyond their error and the gap is at least
+    /// [`UNDECIDED_NATS`].
     pub decided: bool,
 }
 
@@ -190,11 +194,9 @@ fn replicate_of(
         None => (None, f64::INFINITY, 0.0, f64::INFINITY),
         Some(second) => {
             let ln_odds = (first.ln_z + first.prior_probability.ln()) - (second.ln_z + second.prior_probability.ln());
-            let gap = outcome
-                .separations
-                .iter()
-                .find(|s| s.truth == first.law && s.rival == second.law)
-                .map_or(0.0, |s| s.gap_nats);
+            let rho = |law: Law| outcome.fits.iter().find(|f| f.law == law).map_or(f64::NAN, |f| f.rho);
+            let n = synthetic.calibration.len() as f64;
+            let gap = n / 2.0 * (rho(second.law) / rho(first.law)).ln();
             (
                 Some(second.law),
                 ln_odds,
@@ -203,6 +205,7 @@ fn replicate_of(
             )
         }
     };
+    // A NaN gap (a fit with no value) decides nothing.
     let decided = strength(ln_odds, ln_odds_error) != "undecided" && gap_nats >= UNDECIDED_NATS;
     Ok((
         CheckReplicate {

@@ -99,10 +99,14 @@ impl EvidenceJob {
             )?,
             EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
         };
-        self.sample(data, fits, prior, self.backend, self.sampler.seed, observer)
+        let separations = separation::separations(&fits, &data.calibration, &self.fit)?;
+        let mut analysis = self.sample(data, fits, prior, self.backend, self.sampler.seed, observer)?;
+        analysis.separations = separations;
+        Ok(analysis)
     }
 
-    /// The evidence of `fits`' laws on `data` over `prior`, the samplers seeded `seed`.
+    /// The evidence of `fits`' laws on `data` over `prior`, the samplers seeded `seed`
+    /// (without the separations, which the caller adds where it wants them).
     fn sample(
         &self,
         data: &FieldData,
@@ -114,7 +118,6 @@ impl EvidenceJob {
     ) -> Result<EvidenceAnalysis> {
         let problem = AbcProblem::new(prior.clone(), seed, &data.calibration, self.fit.w_ref_n).with_best_rho(&fits);
         let evaluator = eval::evaluator(problem, backend, Default::default(), &mut |line| observer.note(line))?;
-        let separations = separation::separations(&fits, &data.calibration, &self.fit)?;
         let sampler = EvidenceConfig {
             seed,
             ..self.sampler.clone()
@@ -124,7 +127,7 @@ impl EvidenceJob {
             fits,
             prior,
             evidence,
-            separations,
+            separations: Vec::new(),
         })
     }
 }
