@@ -217,6 +217,29 @@ impl Evidence {
         self.laws.iter().find(|l| l.law == law)
     }
 
+    /// The posterior over laws and parameters as weighted particles (SI): each law's sets
+    /// weighed by its P(m | y), so that the weights sum to 1 and a law's share is its
+    /// probability; laws of probability 0 are left out. `index` counts within the law, and
+    /// `rho` is not kept (NaN).
+    pub fn particles(&self) -> Vec<crate::abc::Particle> {
+        self.laws
+            .iter()
+            .filter(|law| law.probability > 0.0)
+            .flat_map(|law| {
+                law.posterior
+                    .iter()
+                    .enumerate()
+                    .map(|(i, (params, w))| crate::abc::Particle {
+                        law: law.law,
+                        index: i as u64,
+                        params: params.clone(),
+                        rho: f64::NAN,
+                        weight: law.probability * w,
+                    })
+            })
+            .collect()
+    }
+
     /// ln of the Bayes factor Z_a / Z_b and its Monte-Carlo error (the islands of different
     /// laws are independent).
     pub fn ln_bayes_factor(&self, a: Law, b: Law) -> Option<(f64, f64)> {

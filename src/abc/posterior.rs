@@ -704,8 +704,19 @@ pub fn law_samples(particles: &[Particle], law: Law, count: usize) -> Vec<&Parti
 /// probability and `count` of its particles ([`law_samples`]: the first ones, or a systematic
 /// resample by weight for an SMC population), SI.
 pub fn map_inputs(population: &Population, count: usize) -> Vec<crate::stability::map::LawSamples> {
-    let laws: Vec<Law> = population.record.per_law.iter().map(|l| l.law).collect();
-    let posterior = summarize(&population.particles, &laws);
+    map_inputs_of(&population.particles, count)
+}
+
+/// The stability maps' inputs of weighted `particles` of several laws (weights over all of
+/// them: a law's share is its probability), as [`map_inputs`] makes them of a population.
+pub fn map_inputs_of(particles: &[Particle], count: usize) -> Vec<crate::stability::map::LawSamples> {
+    let laws: Vec<Law> = particles
+        .iter()
+        .map(|p| p.law)
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let posterior = summarize(particles, &laws);
     posterior
         .laws
         .iter()
@@ -713,7 +724,7 @@ pub fn map_inputs(population: &Population, count: usize) -> Vec<crate::stability
             law: summary.law,
             probability: summary.probability,
             map_si: summary.map.clone(),
-            samples_si: law_samples(&population.particles, summary.law, count)
+            samples_si: law_samples(particles, summary.law, count)
                 .into_iter()
                 .map(|p| p.params.clone())
                 .collect(),

@@ -48,6 +48,10 @@ pub enum MapSource {
     Run(PathBuf),
     /// One law at `params_si` (SI, torques in N·m): a what-if map without a run.
     Law { law: Law, params_si: Vec<f64> },
+    /// Weighted posterior particles of one or more laws held in memory (SI; weights over all
+    /// of them, each law's share its probability): the model evidence's
+    /// ([`crate::abc::evidence::Evidence::particles`]), or any sampler's.
+    Posterior(Vec<crate::abc::Particle>),
 }
 
 impl MapSource {
@@ -63,6 +67,29 @@ impl MapSource {
             params_si: law.scale_torque(params, unit.newton_metres()),
         })
     }
+}
+
+/// Refuses, naming `source`, posterior particles that cannot be mapped: none, a weight that is
+/// not a finite number ≥ 0 or all weights 0, or parameters a law cannot take.
+fn check_posterior(particles: &[crate::abc::Particle]) -> Result<()> {
+    if particles.is_empty() {
+        return Err(Error::setting("source", "the posterior holds no particles"));
+    }
+    if let Some(p) = particles.iter().find(|p| !(p.weight.is_finite() && p.weight >= 0.0)) {
+        return Err(Error::setting(
+            "source",
+            format!(
+                "a particle of {} has the weight {}: weights must be finite numbers ≥ 0",
+                p.law, p.weight
+            ),
+        ));
+    }
+    if particles.iter().all(|p| p.weight == 0.0) {
+        return Err(Error::setting("source", "every particle of the posterior has weight 0"));
+    }
+    particles
+        .iter()
+        .try_for_each(|p| p.law.check_params(&p.params, "source"))
 }
 
 /// A stability job: what to map, on which grid, by which criterion.
@@ -128,8 +155,10 @@ impl StabilityJob {
                 ));
             }
         }
-        if let MapSource::Law { law, params_si } = &self.source {
-            law.check_params(params_si, "params")?;
+        match &self.source {
+            MapSource::Law { law, params_si } => law.check_params(params_si, "params")?,
+            MapSource::Posterior(particles) => check_posterior(particles)?,
+            MapSource::Run(_) => {}
         }
         map::check_grid_size(self.cells(), 1, self.samples)
     }
@@ -174,6 +203,7 @@ impl StabilityJob {
                 })?;
                 (crate::abc::posterior::map_inputs(last, self.samples), early_end)
             }
+            MapSource::Posterior(particles) => (crate::abc::posterior::map_inputs_of(particles, self.samples), None),
             MapSource::Law { law, params_si } => (
                 vec![LawSamples {
                     law: *law,

@@ -199,3 +199,115 @@ fn stability_runs_on_an_abc_run_and_on_a_law() {
     assert_eq!(code, 2);
     assert!(stderr.contains("--params"), "{stderr}");
 }
+
+/// A stability job on the paper's 1-DOF string over a small grid, CPU.
+fn job_of(source: bitrock::pipeline::stability::MapSource) -> bitrock::pipeline::stability::StabilityJob {
+    bitrock::pipeline::stability::StabilityJob {
+        source,
+        omega_rpm: parse_axis("20:220:11", "omega_rpm").unwrap(),
+        wob_kn: parse_axis("20:700:9", "wob_kn").unwrap(),
+        criterion: bitrock::stability::map::Criterion::Lumped(Lumped::default()),
+        w_ref_n: W_REF_N,
+        percentile: 0.02,
+        samples: 50,
+        backend: bitrock::eval::Backend::Cpu,
+    }
+}
+
+fn particle(law: Law, params: &[f64], weight: f64) -> bitrock::abc::Particle {
+    bitrock::abc::Particle {
+        law,
+        index: 0,
+        params: params.to_vec(),
+        rho: f64::NAN,
+        weight,
+    }
+}
+
+#[test]
+fn a_posterior_in_memory_maps_as_its_laws_do() {
+    use bitrock::pipeline::stability::MapSource;
+    // One particle of m2 is the law at those parameters: the same boundaries and grid.
+    let m2 = [13_000.0, 6_500.0, 0.3];
+    let alone = job_of(MapSource::Posterior(vec![particle(Law::M2, &m2, 1.0)]))
+        .run(&mut |_| {})
+        .unwrap();
+    let law = job_of(MapSource::Law {
+        law: Law::M2,
+        params_si: m2.to_vec(),
+    })
+    .run(&mut |_| {})
+    .unwrap();
+    assert_eq!(alone.grids, law.grids);
+    assert_eq!(alone.boundaries.laws[0].map_wob_kn, law.boundaries.laws[0].map_wob_kn);
+    assert_eq!(alone.boundaries.laws[0].p_wob_kn, law.boundaries.laws[0].p_wob_kn);
+    // Two laws: each law's probability is its share of the weight, whatever the weights'
+    // total, and the mixture boundary is drawn.
+    let m4 = [11_000.0, -900.0, 40.0, -0.5];
+    let mixed = job_of(MapSource::Posterior(vec![
+        particle(Law::M2, &m2, 0.5),
+        particle(Law::M4, &m4, 1.0),
+        particle(Law::M4, &m4, 0.5),
+    ]))
+    .run(&mut |_| {})
+    .unwrap();
+    let shares: Vec<(Law, f64)> = mixed.inputs.iter().map(|i| (i.law, i.probability)).collect();
+    assert_eq!(shares, vec![(Law::M2, 0.25), (Law::M4, 0.75)]);
+    assert!(mixed.boundaries.mixture_wob_kn.is_some());
+    assert_eq!(mixed.grids[0], law.grids[0]);
+    // What cannot be mapped is refused by name.
+    for (particles, says) in [
+        (vec![], "no particles"),
+        (vec![particle(Law::M2, &m2, f64::NAN)], "weight NaN"),
+        (vec![particle(Law::M2, &m2, 0.0)], "weight 0"),
+        (vec![particle(Law::M2, &m2[..2], 1.0)], "source"),
+    ] {
+        let e = job_of(MapSource::Posterior(particles))
+            .run(&mut |_| {})
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("source") && e.contains(says), "{e}");
+    }
+}
+
+#[test]
+fn the_evidence_posterior_maps_with_its_law_probabilities() {
+    use bitrock::abc::evidence::EvidenceConfig;
+    use bitrock::pipeline::evidence::EvidenceJob;
+    use bitrock::pipeline::stability::MapSource;
+    let data = bitrock::data::demo_field_data(&bitrock::data::DataOptions {
+        thin: 8,
+        ..Default::default()
+    })
+    .unwrap();
+    let analysis = EvidenceJob {
+        laws: vec![Law::M2, Law::M4],
+        backend: bitrock::eval::Backend::Cpu,
+        sampler: EvidenceConfig {
+            particles: 100,
+            islands: 2,
+            ..EvidenceConfig::default()
+        },
+        ..EvidenceJob::default()
+    }
+    .run(&data, &mut bitrock::abc::Silent)
+    .unwrap();
+    let particles = analysis.evidence.particles();
+    let total: f64 = particles.iter().map(|p| p.weight).sum();
+    assert!((total - 1.0).abs() < 1e-9, "{total}");
+    let maps = job_of(MapSource::Posterior(particles)).run(&mut |_| {}).unwrap();
+    for input in &maps.inputs {
+        let p = analysis.evidence.of(input.law).unwrap().probability;
+        assert!(
+            (input.probability - p).abs() < 1e-9,
+            "{} {} {p}",
+            input.law,
+            input.probability
+        );
+        assert_eq!(input.samples_si.len(), 50);
+    }
+    for grid in &maps.grids {
+        assert!(grid.iter().all(|&v| v.is_nan() || (0.0..=1.0).contains(&v)));
+    }
+}

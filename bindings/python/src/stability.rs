@@ -22,7 +22,11 @@ pub(crate) fn stability<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     use bitrock::pipeline::stability::{self as job, MapSource, StabilityJob, Structure};
     use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped, map};
+    let evidence: Option<String> = kwarg(options, "evidence")?;
     let source = match (run, law, params) {
+        (None, None, None) if evidence.is_some() => {
+            MapSource::Posterior(evidence_particles(py, evidence.as_deref().expect("given"))?)
+        }
         (Some(dir), None, None) => MapSource::Run(dir),
         (None, Some(law), Some(params)) => {
             let law = self::laws(py, Some(vec![law]))?.expect("one law")[0];
@@ -39,7 +43,7 @@ pub(crate) fn stability<'py>(
                 py,
                 Error::setting(
                     "source",
-                    "give a run (a Result or its directory) or a law with its params",
+                    "give a run (a Result or its directory), an Evidence, or a law with its params",
                 ),
             ));
         }
@@ -135,4 +139,45 @@ pub(crate) fn stability<'py>(
             .and_then(|v| v.as_str().map(String::from)),
     )?;
     Ok(out)
+}
+
+/// The weighted posterior particles (SI) of an Evidence's document (`bitrock.evidence`'s, with
+/// each law's posterior sets in the record's torque unit).
+fn evidence_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::abc::Particle>> {
+    #[derive(serde::Deserialize)]
+    struct Sets {
+        params: Vec<Vec<f64>>,
+        weights: Vec<f64>,
+    }
+    #[derive(serde::Deserialize)]
+    struct LawEntry {
+        law: String,
+        probability: f64,
+        posterior: Sets,
+    }
+    #[derive(serde::Deserialize)]
+    struct Document {
+        torque_unit: TorqueUnit,
+        laws: Vec<LawEntry>,
+    }
+    let document: Document = serde_json::from_str(document).map_err(|e| {
+        to_py(
+            py,
+            Error::setting("source", format!("the Evidence's document cannot be read: {e}")),
+        )
+    })?;
+    let mut particles = Vec::new();
+    for entry in &document.laws {
+        let law = laws(py, Some(vec![entry.law.clone()]))?.expect("one law")[0];
+        for (i, (params, w)) in entry.posterior.params.iter().zip(&entry.posterior.weights).enumerate() {
+            particles.push(bitrock::abc::Particle {
+                law,
+                index: i as u64,
+                params: law.scale_torque(params, document.torque_unit.newton_metres()),
+                rho: f64::NAN,
+                weight: entry.probability * w,
+            });
+        }
+    }
+    Ok(particles)
 }

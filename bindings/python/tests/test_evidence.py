@@ -92,3 +92,13 @@ def test_the_check_by_resimulation_is_the_command_lines(cli) -> None:
 
 def test_no_check_is_none(small) -> None:
     assert small.check is None
+
+
+def test_the_evidence_posterior_maps_with_its_law_probabilities(small) -> None:
+    maps = bitrock.stability(small, omega_rpm="20:220:11", wob_kn="20:700:9", samples=40, backend="cpu")
+    probabilities = small.probabilities
+    for law in maps["law"].values:
+        assert float(maps["probability"].sel(law=law)) == pytest.approx(probabilities[law], abs=1e-9)
+    grid = maps["probability_unstable"].values
+    assert np.all(np.isnan(grid) | ((grid >= 0) & (grid <= 1)))
+    assert set(maps["law"].values) == {law for law, p in probabilities.items() if p > 0}

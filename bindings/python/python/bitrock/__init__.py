@@ -372,7 +372,7 @@ def open_run(path: str | os.PathLike[str]) -> "Result":
 
 
 def stability(
-    source: "Result | str | os.PathLike[str] | None" = None,
+    source: "Result | Evidence | str | os.PathLike[str] | None" = None,
     *,
     law: str | None = None,
     params: Sequence[float] | None = None,
@@ -395,7 +395,8 @@ def stability(
 ) -> Any:
     """Torsional stick-slip stability over top-drive speed Ω (rpm) and weight on bit W (kN),
     as ``bitrock stability`` computes it: for a run's last population (``source``, a
-    :class:`Result` written to a directory or the directory), or for one ``law`` at ``params``
+    :class:`Result` written to a directory or the directory), for the posterior of an
+    :class:`Evidence` (``source``: each law weighed by its P(m | y)), or for one ``law`` at ``params``
     (its parameters in order, torques in ``torque_unit``, kN·m by default).
 
     Returns an ``xarray.Dataset`` over ``law`` × ``omega_rpm`` × ``wob_kn``:
@@ -408,10 +409,14 @@ def stability(
     values or ``"MIN:MAX:COUNT"``."""
     import xarray as xr
 
+    evidence = None
     if isinstance(source, Result):
         if source.path is None:
             raise InputError("source: a run kept in memory has no store to map; run abc with out=DIR", "source")
         source = source.path
+    elif isinstance(source, Evidence):
+        evidence = json.dumps(source.document)
+        source = None
     run = None if source is None else os.fspath(source)
     options = {k: v for k, v in locals().items() if k not in ("source", "law", "params", "run", "xr")}
     if options["fe_file"] is not None:
