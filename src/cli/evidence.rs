@@ -275,7 +275,7 @@ fn check_table(out: &mut impl Write, check: &EvidenceCheck) -> std::io::Result<(
     )?;
     writeln!(
         out,
-        "rows: law that made the data; columns: mean P(m | y) (share ranked first); decided: odds at least positive beyond their error on a pair the record separates"
+        "rows: law that made the data; columns: mean P(m | y) (share ranked first); decided: odds at least positive beyond their error and a fit at least 5 nats better, against every other law"
     )?;
     write!(out, "{:<10}", "data from")?;
     for law in &check.laws {

@@ -9,9 +9,9 @@
 //! as the record's, with its own seed ([`crate::selection::replicate_seed`]).
 //!
 //! A replicate's answer is the law of the largest posterior probability, and it is *decided*
-//! when it beats the runner-up by at least positive odds beyond twice their error
+//! when it beats every other law by at least positive odds beyond twice their error
 //! ([`strength`]) *and* by the data: its least-squares fit's log-likelihood lies at least
-//! [`UNDECIDED_NATS`] above the runner-up's, (n/2)·ln(ρ_runner-up / ρ_first). Otherwise it is
+//! [`UNDECIDED_NATS`] above each rival's, (n/2)·ln(ρ_rival / ρ_first). Otherwise it is
 //! *undecided*: odds won with fits of equal quality are Occam factors, set by the priors (a
 //! law that holds another, as m3 holds m2, fits any record of it as well and loses only by
 //! the volume of its extra parameters). A trustworthy evidence is decided and right where the laws differ on the
@@ -49,12 +49,13 @@ pub struct CheckReplicate {
     pub runner_up: Option<Law>,
     pub ln_odds: f64,
     pub ln_odds_error: f64,
-    /// How far the least-squares log-likelihood of `first` lies above the runner-up's on this
-    /// replicate, (n/2)·ln(ρ_runner-up / ρ_first), nats (negative where the runner-up fits
-    /// better).
+    /// The rival whose least-squares fit comes closest to `first`'s, and how far `first`'s
+    /// log-likelihood lies above it, (n/2)·ln(ρ_rival / ρ_first), nats (negative where the
+    /// rival fits better).
+    pub closest_fit: Option<Law>,
     pub gap_nats: f64,
-    /// True when the odds are at least positive beyond their error and the gap is at least
-    /// [`UNDECIDED_NATS`].
+    /// True when, against every rival, the odds are at least positive beyond their error and
+    /// the fit lies at least [`UNDECIDED_NATS`] above.
     pub decided: bool,
 }
 
@@ -190,23 +191,30 @@ fn replicate_of(
     // Largest first; among equals the first in law order.
     order.sort_by(|&a, &b| probabilities[b].total_cmp(&probabilities[a]).then(a.cmp(&b)));
     let first = &laws[order[0]];
-    let (runner_up, ln_odds, ln_odds_error, gap_nats) = match order.get(1).map(|&k| &laws[k]) {
-        None => (None, f64::INFINITY, 0.0, f64::INFINITY),
-        Some(second) => {
-            let ln_odds = (first.ln_z + first.prior_probability.ln()) - (second.ln_z + second.prior_probability.ln());
-            let rho = |law: Law| outcome.fits.iter().find(|f| f.law == law).map_or(f64::NAN, |f| f.rho);
-            let n = synthetic.calibration.len() as f64;
-            let gap = n / 2.0 * (rho(second.law) / rho(first.law)).ln();
-            (
-                Some(second.law),
-                ln_odds,
-                first.ln_z_error.hypot(second.ln_z_error),
-                gap,
-            )
-        }
-    };
+    let n = synthetic.calibration.len() as f64;
+    let rho = |law: Law| outcome.fits.iter().find(|f| f.law == law).map_or(f64::NAN, |f| f.rho);
+    // Against every rival: the posterior log-odds with their error, and how far the first
+    // law's fit lies above the rival's.
+    let rivals: Vec<(Law, f64, f64, f64)> = order[1..]
+        .iter()
+        .map(|&k| {
+            let rival = &laws[k];
+            let ln_odds = (first.ln_z + first.prior_probability.ln()) - (rival.ln_z + rival.prior_probability.ln());
+            let gap = n / 2.0 * (rho(rival.law) / rho(first.law)).ln();
+            (rival.law, ln_odds, first.ln_z_error.hypot(rival.ln_z_error), gap)
+        })
+        .collect();
     // A NaN gap (a fit with no value) decides nothing.
-    let decided = strength(ln_odds, ln_odds_error) != "undecided" && gap_nats >= UNDECIDED_NATS;
+    let decided = rivals
+        .iter()
+        .all(|&(_, odds, error, gap)| strength(odds, error) != "undecided" && gap >= UNDECIDED_NATS);
+    let (runner_up, ln_odds, ln_odds_error) = rivals
+        .first()
+        .map_or((None, f64::INFINITY, 0.0), |&(law, odds, error, _)| {
+            (Some(law), odds, error)
+        });
+    let closest = rivals.iter().min_by(|a, b| a.3.total_cmp(&b.3));
+    let (closest_fit, gap_nats) = closest.map_or((None, f64::INFINITY), |&(law, _, _, gap)| (Some(law), gap));
     Ok((
         CheckReplicate {
             index,
@@ -218,6 +226,7 @@ fn replicate_of(
             runner_up,
             ln_odds,
             ln_odds_error,
+            closest_fit,
             gap_nats,
             decided,
         },

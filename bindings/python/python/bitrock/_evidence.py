@@ -90,8 +90,8 @@ class Evidence:
         made the synthetic records, with the mean P(m | y) of every law (``p_m1``…), the share
         of replicates ranking each law first (``first_m1``…), and the shares decided for the
         generating law, undecided, and decided for another law. A replicate is decided when
-        the odds of its first law are at least positive beyond their Monte-Carlo error on a pair
-        the replicate's fits separate by 5 nats or more."""
+        its first law beats every other law by odds at least positive beyond their Monte-Carlo
+        error and by a least-squares fit at least 5 nats of log-likelihood better."""
         check = self._doc.get("check")
         if check is None:
             return None
