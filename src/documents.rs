@@ -6,7 +6,7 @@
 
 use crate::Law;
 use crate::abc::posterior::{ENVELOPE_LEVEL, Envelope, PosteriorSummary};
-use crate::abc::{Population, PopulationRecord, Run};
+use crate::abc::{Particle, Population, PopulationRecord, Run};
 use crate::data::FieldData;
 use crate::fit::LawFit;
 use crate::prior::Prior;
@@ -273,13 +273,27 @@ fn csv_text<R: AsRef<[u8]>>(rows: impl IntoIterator<Item = impl IntoIterator<Ite
 /// Populations' particles as CSV: one row per particle, parameters in columns in the record's
 /// torque unit (empty cells for the other laws' parameters).
 pub fn particles_csv(populations: &[&Population], laws: &[Law], unit: TorqueUnit) -> Vec<u8> {
-    let rows = populations.iter().flat_map(|population| {
-        population.particles.iter().map(move |p| {
+    let groups: Vec<(usize, &[Particle])> = populations
+        .iter()
+        .map(|p| (p.record.index, p.particles.as_slice()))
+        .collect();
+    particle_groups_csv(&groups, laws, unit)
+}
+
+/// Groups of particles (population index, particles) as CSV, as [`particles_csv`] writes
+/// them; a ρ that is not kept (NaN) is an empty cell.
+pub fn particle_groups_csv(groups: &[(usize, &[Particle])], laws: &[Law], unit: TorqueUnit) -> Vec<u8> {
+    let rows = groups.iter().flat_map(|&(population, particles)| {
+        particles.iter().map(move |p| {
             let mut row = vec![
-                population.record.index.to_string(),
+                population.to_string(),
                 p.law.name().to_string(),
                 p.index.to_string(),
-                format!("{:e}", p.rho),
+                if p.rho.is_nan() {
+                    String::new()
+                } else {
+                    format!("{:e}", p.rho)
+                },
                 format!("{:e}", p.weight),
             ];
             for law in laws {
@@ -293,6 +307,132 @@ pub fn particles_csv(populations: &[&Population], laws: &[Law], unit: TorqueUnit
         })
     });
     csv_text(std::iter::once(particle_header(laws, unit)).chain(rows))
+}
+
+/// Weighted particles from a CSV in [`particles_csv`]'s layout (SI): a `law` and a `weight`
+/// column, and per law its parameters as `LAW.NAME [UNIT]` columns, torques in kN·m or N·m as
+/// each column's unit says; `population`, `candidate` and `rho` may be absent, and a file of
+/// several populations is refused (a map is of one). Law files' laws must be registered first.
+/// Refusals name the file, line and column.
+pub fn read_particles_csv(path: &std::path::Path) -> crate::error::Result<Vec<Particle>> {
+    use crate::error::Error;
+    let format = |line: Option<u64>, message: String| Error::Format {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let file = std::fs::File::open(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut reader = csv::ReaderBuilder::new().from_reader(file);
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| format(Some(1), e.to_string()))?
+        .iter()
+        .map(|h| h.trim().to_string())
+        .collect();
+    let column = |name: &str| header.iter().position(|h| h == name);
+    let (Some(law_col), Some(weight_col)) = (column("law"), column("weight")) else {
+        return Err(format(
+            Some(1),
+            format!(
+                "a particle file needs the columns 'law' and 'weight' (and 'LAW.NAME [UNIT]' per parameter); found {}",
+                header.join(", ")
+            ),
+        ));
+    };
+    let (population_col, index_col, rho_col) = (column("population"), column("candidate"), column("rho"));
+    // Per law met: each parameter's column and its scale to SI.
+    let mut layouts: std::collections::HashMap<Law, Vec<(usize, f64)>> = Default::default();
+    let mut population: Option<String> = None;
+    let mut particles = Vec::new();
+    for (i, record) in reader.records().enumerate() {
+        let line = i as u64 + 2;
+        let record = record.map_err(|e| format(Some(line), e.to_string()))?;
+        let cell = |col: usize| record.get(col).unwrap_or("").trim();
+        let bad_cell = |col: usize, message: String| Error::Cell {
+            path: path.to_path_buf(),
+            line,
+            column: col + 1,
+            name: header[col].clone(),
+            message,
+        };
+        let number = |col: usize| -> crate::error::Result<f64> {
+            match cell(col).parse::<f64>() {
+                Ok(v) if v.is_finite() => Ok(v),
+                _ => Err(bad_cell(col, format!("`{}` is not a finite number", cell(col)))),
+            }
+        };
+        if let Some(col) = population_col {
+            match &population {
+                None => population = Some(cell(col).to_string()),
+                Some(first) if first != cell(col) => {
+                    return Err(bad_cell(
+                        col,
+                        format!(
+                            "the file holds population {first} and {}; a map is of one population (bitrock export --population G)",
+                            cell(col)
+                        ),
+                    ));
+                }
+                Some(_) => {}
+            }
+        }
+        let law: Law = cell(law_col).parse().map_err(|e: String| bad_cell(law_col, e))?;
+        if let std::collections::hash_map::Entry::Vacant(entry) = layouts.entry(law) {
+            let mut layout = Vec::new();
+            for spec in law.params() {
+                let found = [TorqueUnit::KNm, TorqueUnit::Nm].into_iter().find_map(|unit| {
+                    let name = format!("{}.{} [{}]", law.name(), spec.name, spec.unit(unit.label()));
+                    column(&name).map(|col| (col, unit))
+                });
+                let Some((col, unit)) = found else {
+                    return Err(format(
+                        Some(line),
+                        format!(
+                            "law {law} needs the column '{}.{} [{}]' (or its N·m twin), which the header lacks",
+                            law.name(),
+                            spec.name,
+                            spec.unit(TorqueUnit::KNm.label())
+                        ),
+                    ));
+                };
+                let scale = if spec.torque_power == 1 {
+                    unit.newton_metres()
+                } else {
+                    1.0
+                };
+                layout.push((col, scale));
+            }
+            entry.insert(layout);
+        }
+        let params = layouts[&law]
+            .iter()
+            .map(|&(col, scale)| number(col).map(|v| v * scale))
+            .collect::<crate::error::Result<Vec<f64>>>()?;
+        let weight = number(weight_col)?;
+        if weight < 0.0 {
+            return Err(bad_cell(weight_col, format!("{weight} is negative; weights are ≥ 0")));
+        }
+        particles.push(Particle {
+            law,
+            index: match index_col {
+                Some(col) => number(col)? as u64,
+                None => i as u64,
+            },
+            params,
+            rho: match rho_col {
+                Some(col) if !cell(col).is_empty() => number(col)?,
+                _ => f64::NAN,
+            },
+            weight,
+        });
+    }
+    if particles.is_empty() {
+        return Err(format(None, "the file holds no particles".into()));
+    }
+    Ok(particles)
 }
 
 /// A population and its particles as JSON, parameters in the record's torque unit.

@@ -79,6 +79,10 @@ pub struct EvidenceCmd {
     /// decided wrongly (costs K times the evidence per law).
     #[arg(long, value_name = "K")]
     pub check: Option<usize>,
+    /// Write the posterior (every law's sets, weighed by its P(m | y)) as particle CSV to FILE,
+    /// parameters in the record's torque unit, for `bitrock stability --posterior FILE`.
+    #[arg(long, value_name = "FILE")]
+    pub posterior_out: Option<PathBuf>,
     /// No progress lines on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -118,8 +122,16 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
     };
     job.sampler.validate()?;
     cmd.check.map(evidence::check_replicates).transpose()?;
+    if let Some(path) = &cmd.posterior_out {
+        bitrock::run::dir::check_output_file(path, "posterior_out", false)?;
+    }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     let analysis = job.run(&data, &mut Notes)?;
+    if let Some(path) = &cmd.posterior_out {
+        let particles = analysis.evidence.particles();
+        let csv = bitrock::documents::particle_groups_csv(&[(0, &particles)], &job.laws, data.torque_unit);
+        bitrock::run::dir::write_whole(path, "posterior_out", false, |file| file.write_all(&csv))?;
+    }
     let quiet = cmd.quiet;
     let check = cmd
         .check

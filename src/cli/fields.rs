@@ -59,6 +59,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("threads", "--threads"),
     // Outputs.
     ("out", "--out"),
+    ("source", "--posterior"),
     ("force", "--force"),
     ("population", "--population"),
     ("run", "--run"),
@@ -91,6 +92,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("samples", "--samples"),
     ("replicates", "--replicates"),
     ("check", "--check"),
+    ("posterior_out", "--posterior-out"),
     ("batch", "--batch"),
     ("candidates", "--candidates"),
     ("epsilon", "--epsilon"),

@@ -1,5 +1,5 @@
-//! `bitrock stability`: maps over (Ω, W) from an ABC run directory or from one law's
-//! parameters: deterministic, percentile and mixture boundaries, and the probability grids.
+//! `bitrock stability`: maps over (Ω, W) from an ABC run directory, a posterior's particles or
+//! one law's parameters: deterministic, percentile and mixture boundaries, and the probability grids.
 
 use super::args::finite_number;
 use super::args::{FeArgs, LumpedArgs};
@@ -21,8 +21,13 @@ use std::process::ExitCode;
 #[derive(Debug, Args)]
 pub struct StabilityCmd {
     /// ABC run directory (from `bitrock abc`): MAP, posterior samples and law probabilities.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["law", "params"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["law", "params", "posterior"])]
     pub run: Option<PathBuf>,
+    /// Weighted posterior particles as CSV (`bitrock evidence --posterior-out`, `bitrock export
+    /// --population G`, or any sampler's in that layout): each law's share of the weight is
+    /// its probability.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["law", "params"])]
+    pub posterior: Option<PathBuf>,
     /// A law for a what-if map without a run (m1..m4, or a --law-file's law by its name).
     #[arg(long, requires = "params")]
     pub law: Option<String>,
@@ -142,14 +147,18 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Whose maps: `--run`, or `--law` at `--params` (in `--torque-unit`, made SI here).
+/// Whose maps: `--run`, `--posterior`, or `--law` at `--params` (in `--torque-unit`, made SI
+/// here).
 fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
+    if let Some(path) = &cmd.posterior {
+        return Ok(MapSource::Posterior(bitrock::documents::read_particles_csv(path)?));
+    }
     match (&cmd.run, &cmd.law, &cmd.params) {
         (Some(dir), _, _) => Ok(MapSource::Run(dir.clone())),
         (None, Some(law), Some(params)) => Ok(MapSource::law(super::args::parse_law(law)?, params, cmd.torque_unit)?),
         _ => Err(Error::setting(
             "run",
-            "give a run directory (--run DIR) or a law (--law L --params P1,P2,...)",
+            "give a run directory (--run DIR), a posterior (--posterior FILE) or a law (--law L --params P1,P2,...)",
         )
         .into()),
     }

@@ -188,11 +188,37 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
         cmd.args(extra);
         cmd
     };
-    let (code, json, err) = outcome(&mut args(&["--json"]));
+    let posterior = dir.path().join("posterior.csv");
+    let (code, json, err) = outcome(&mut args(&["--json", "--posterior-out", posterior.to_str().unwrap()]));
     assert_eq!(code, 0, "{err}");
     let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
     let laws = doc["laws"].as_array().unwrap();
     assert_eq!(laws.len(), 2);
+    // The posterior written maps with each law weighed by its P(m | y).
+    let (code, maps, err) = outcome(
+        bin()
+            .args(["stability", "--posterior", posterior.to_str().unwrap()])
+            .args([
+                "--omega-rpm",
+                "40:200:5",
+                "--wob-kn",
+                "50:500:4",
+                "--samples",
+                "50",
+                "--backend",
+                "cpu",
+                "--json",
+            ]),
+    );
+    assert_eq!(code, 0, "{err}");
+    let maps: serde_json::Value = serde_json::from_str(&maps).unwrap();
+    for law in laws {
+        let p = law["probability"].as_f64().unwrap();
+        let mapped = maps["boundaries"][law["law"].as_str().unwrap()]["probability"].as_f64();
+        if p > 0.0 {
+            assert!((mapped.unwrap() - p).abs() < 1e-9, "{law}: {mapped:?}");
+        }
+    }
     let total: f64 = laws.iter().map(|l| l["probability"].as_f64().unwrap()).sum();
     assert!((total - 1.0).abs() < 1e-12, "{total}");
     for law in laws {

@@ -168,6 +168,80 @@ fn stability_runs_on_an_abc_run_and_on_a_law() {
     }
     assert!(std::fs::read_to_string(&csv).unwrap().starts_with("omega_rpm,"));
 
+    // The run's last population exported as particles maps as the run does (to the rounding of
+    // the kN·m round trip).
+    let (code, export, stderr) = run(&["export", run_dir.to_str().unwrap(), "--format", "json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let last = serde_json::from_str::<serde_json::Value>(&export).unwrap()["populations"]
+        .as_array()
+        .unwrap()
+        .len()
+        - 1;
+    let particles = dir.path().join("last.csv");
+    let (code, _, stderr) = run(&[
+        "export",
+        run_dir.to_str().unwrap(),
+        "--population",
+        &last.to_string(),
+        "--out",
+        particles.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, stderr) = run(&[
+        "stability",
+        "--posterior",
+        particles.to_str().unwrap(),
+        "--omega-rpm",
+        "40:200:17",
+        "--wob-kn",
+        "50:500:10",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let w: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(w["probability_unstable"], v["probability_unstable"]);
+    for law in ["m2", "m3"] {
+        assert_eq!(w["boundaries"][law]["probability"], v["boundaries"][law]["probability"]);
+        for key in ["map_wob_kn", "p_wob_kn"] {
+            let (a, b): (Vec<Option<f64>>, Vec<Option<f64>>) = (
+                serde_json::from_value(w["boundaries"][law][key].clone()).unwrap(),
+                serde_json::from_value(v["boundaries"][law][key].clone()).unwrap(),
+            );
+            for (a, b) in a.iter().zip(&b) {
+                assert_eq!(a.is_some(), b.is_some(), "{law} {key}");
+                if let (Some(a), Some(b)) = (a, b) {
+                    assert!((a - b).abs() <= 1e-9 * b.abs(), "{law} {key}: {a} against {b}");
+                }
+            }
+        }
+    }
+    // A particle file that cannot be read is refused naming the file, line and column.
+    let all = dir.path().join("all.csv");
+    let (code, _, stderr) = run(&["export", run_dir.to_str().unwrap(), "--out", all.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    let text = std::fs::read_to_string(&particles).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let broken = dir.path().join("broken.csv");
+    lines[2] = lines[2].replacen(",m", ",mx", 1);
+    std::fs::write(&broken, lines.join("\n")).unwrap();
+    let no_weight = dir.path().join("no-weight.csv");
+    std::fs::write(&no_weight, text.replacen("weight", "w", 1)).unwrap();
+    for (file, says) in [
+        (
+            &all,
+            "column 'population': the file holds population 0 and 1".to_string(),
+        ),
+        (&broken, format!("{}:3:2: column 'law'", broken.display())),
+        (
+            &no_weight,
+            ":1: a particle file needs the columns 'law' and 'weight'".to_string(),
+        ),
+    ] {
+        let (code, out, err) = run(&["stability", "--posterior", file.to_str().unwrap()]);
+        assert_eq!(code, 2, "{err}");
+        assert!(out.is_empty() && err.contains(&says), "{says}: {err}");
+    }
+
     // A what-if map from a law, and the same map's boundary from the closed form.
     let (code, stdout, stderr) = run(&[
         "stability",
