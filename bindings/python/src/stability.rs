@@ -22,10 +22,10 @@ pub(crate) fn stability<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     use bitrock::pipeline::stability::{self as job, MapSource, StabilityJob, Structure};
     use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped, map};
-    let evidence: Option<String> = kwarg(options, "evidence")?;
+    let posterior: Option<String> = kwarg(options, "posterior")?;
     let source = match (run, law, params) {
-        (None, None, None) if evidence.is_some() => {
-            MapSource::Posterior(evidence_particles(py, evidence.as_deref().expect("given"))?)
+        (None, None, None) if posterior.is_some() => {
+            MapSource::Posterior(posterior_particles(py, posterior.as_deref().expect("given"))?)
         }
         (Some(dir), None, None) => MapSource::Run(dir),
         (None, Some(law), Some(params)) => {
@@ -141,9 +141,10 @@ pub(crate) fn stability<'py>(
     Ok(out)
 }
 
-/// The weighted posterior particles (SI) of an Evidence's document (`bitrock.evidence`'s, with
-/// each law's posterior sets in the record's torque unit).
-fn evidence_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::abc::Particle>> {
+/// The weighted posterior particles (SI) of a document shaped as an Evidence's (`torque_unit`,
+/// and per law its probability and posterior sets in that unit; a run in memory's last
+/// population is passed so too).
+fn posterior_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::abc::Particle>> {
     #[derive(serde::Deserialize)]
     struct Sets {
         params: Vec<Vec<f64>>,
@@ -163,7 +164,7 @@ fn evidence_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::a
     let document: Document = serde_json::from_str(document).map_err(|e| {
         to_py(
             py,
-            Error::setting("source", format!("the Evidence's document cannot be read: {e}")),
+            Error::setting("source", format!("the posterior cannot be read: {e}")),
         )
     })?;
     let mut particles = Vec::new();

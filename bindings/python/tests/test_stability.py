@@ -63,9 +63,21 @@ def test_the_fe_string_and_explicit_axes(cli) -> None:
     assert_same_as_cli(maps, document)
 
 
-def test_refusals_name_their_argument(small_run) -> None:
+def test_a_run_in_memory_maps_as_its_saved_twin(demo, tmp_path) -> None:
+    settings = {"particles": 300, "seed": 11, "backend": "cpu", "max_populations": 3, "progress": False}
+    saved = bitrock.stability(bitrock.abc(demo, out=tmp_path / "run", **settings), samples=40, backend="cpu", **GRID)
+    in_memory = bitrock.stability(bitrock.abc(demo, **settings), samples=40, backend="cpu", **GRID)
+    assert list(in_memory["law"].values) == list(saved["law"].values)
+    np.testing.assert_allclose(in_memory["probability"], saved["probability"], rtol=1e-12)
+    # The particles travel in the record's kN·m and back: boundaries to that rounding.
+    for key in ("map_wob_kn", "p_wob_kn", "mixture_p_wob_kn"):
+        np.testing.assert_allclose(in_memory[key], saved[key], rtol=1e-9)
+    assert np.array_equal(in_memory["probability_unstable"], saved["probability_unstable"])
+
+
+def test_refusals_name_their_argument() -> None:
     with pytest.raises(bitrock.InputError) as caught:
-        bitrock.stability(small_run)
+        bitrock.stability()
     assert caught.value.argument == "source"
     with pytest.raises(bitrock.InputError, match="alpha: applies to `structure` fe only") as caught:
         bitrock.stability(law="m2", params=[13, 6.5, 0.3], alpha=0.1)

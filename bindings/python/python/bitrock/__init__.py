@@ -395,7 +395,7 @@ def stability(
 ) -> Any:
     """Torsional stick-slip stability over top-drive speed Ω (rpm) and weight on bit W (kN),
     as ``bitrock stability`` computes it: for a run's last population (``source``, a
-    :class:`Result` written to a directory or the directory), for the posterior of an
+    :class:`Result`, in memory or written to a directory, or the directory), for the posterior of an
     :class:`Evidence` (``source``: each law weighed by its P(m | y)), or for one ``law`` at ``params``
     (its parameters in order, torques in ``torque_unit``, kN·m by default).
 
@@ -409,13 +409,13 @@ def stability(
     values or ``"MIN:MAX:COUNT"``."""
     import xarray as xr
 
-    evidence = None
+    posterior = None
     if isinstance(source, Result):
         if source.path is None:
-            raise InputError("source: a run kept in memory has no store to map; run abc with out=DIR", "source")
+            posterior = json.dumps(source._last_population())
         source = source.path
     elif isinstance(source, Evidence):
-        evidence = json.dumps(source.document)
+        posterior = json.dumps(source.document)
         source = None
     run = None if source is None else os.fspath(source)
     options = {k: v for k, v in locals().items() if k not in ("source", "law", "params", "run", "xr")}
@@ -647,6 +647,16 @@ class Result:
         """Population ``population``'s particles by law: ``(names, params [n, k] in the
         record's torque unit, weights, rho, candidate index)``."""
         return self._run.particles(self._population(population))
+
+    def _last_population(self) -> dict[str, Any]:
+        """The last population's particles as an Evidence document carries its posterior (each
+        law at probability 1 with the population's own weights: a law's share of them is its
+        probability), for the maps of a run in memory."""
+        laws = [
+            {"law": law, "probability": 1.0, "posterior": {"params": params.tolist(), "weights": weights.tolist()}}
+            for law, (_names, params, weights, _rho, _index) in self.particles(-1).items()
+        ]
+        return {"torque_unit": self.document["data"]["torque_unit"], "laws": laws}
 
     def get_distribution(self, law: str, population: int = -1) -> tuple[pd.DataFrame, np.ndarray]:
         """The law's particles in ``population`` (the last by default) and their weights,
