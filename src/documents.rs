@@ -73,6 +73,7 @@ pub fn evidence_json(
     boxes: &crate::prior::Prior,
     evidence: &crate::abc::evidence::Evidence,
     separations: &[crate::separation::Separation],
+    residual_lag1: &[f64],
     prior: &str,
 ) -> Value {
     let torque = data.torque_unit.label();
@@ -103,6 +104,12 @@ pub fn evidence_json(
                 "posterior_mean": to_record_units(law.law, &mean_si, data.torque_unit),
                 "best_rho": law.best_rho,
                 "cut_by_box": law.cut_by_box,
+                "residual_lag1": fits
+                    .iter()
+                    .zip(residual_lag1)
+                    .find(|(f, _)| f.law == law.law)
+                    .map(|(_, &phi)| phi)
+                    .filter(|phi| phi.is_finite()),
                 "stages": law.stages,
                 "candidates_scored": law.candidates_scored,
             })

@@ -10,6 +10,7 @@ use bitrock::eval::Backend;
 use bitrock::pipeline::evidence::{
     self, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidenceJob, EvidencePrior,
 };
+use bitrock::separation::AUTOCORRELATED;
 use clap::{Args, ValueEnum};
 use std::io::Write;
 use std::path::PathBuf;
@@ -152,6 +153,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             &analysis.prior,
             &analysis.evidence,
             &analysis.separations,
+            &analysis.residual_lag1,
             &job.prior.describe(),
         );
         if let Some(check) = &check {
@@ -235,6 +237,31 @@ fn tables(
                 doubled
             )?;
         }
+    }
+    let lag1: Vec<String> = analysis
+        .fits
+        .iter()
+        .zip(&analysis.residual_lag1)
+        .map(|(fit, phi)| format!("{} {phi:.2}", fit.law))
+        .collect();
+    writeln!(
+        out,
+        "\nresidual lag-1 autocorrelation of the fits (time order): {}",
+        lag1.join(", ")
+    )?;
+    if let Some(phi) = analysis
+        .residual_lag1
+        .iter()
+        .copied()
+        .filter(|phi| phi.is_finite())
+        .reduce(f64::min)
+        .filter(|&phi| phi > AUTOCORRELATED)
+    {
+        writeln!(
+            out,
+            "warning: every law's residuals are autocorrelated (lag-1 at least {phi:.2}): the i.i.d. noise model counts each sample as independent and overstates every Bayes factor, by about (1 + φ)/(1 − φ) = {:.1} times in nats; thin the record (--thin) until the lag-1 falls below {AUTOCORRELATED}",
+            (1.0 + phi) / (1.0 - phi)
+        )?;
     }
     for law in evidence.laws.iter().filter(|l| !l.converged()) {
         writeln!(

@@ -225,6 +225,8 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
         assert!(law["ln_z"].as_f64().unwrap().is_finite());
         assert!(law["ln_z_error"].as_f64().unwrap() > 0.0);
         assert_eq!(law["island_ln_z"].as_array().unwrap().len(), 3);
+        let phi = law["residual_lag1"].as_f64().unwrap();
+        assert!((-1.0..=1.0).contains(&phi), "{phi}");
     }
     // Physical boxes: from the bound 0 of the static torque, in the record's kN·m.
     assert_eq!(laws[0]["lower"][0].as_f64(), Some(0.0));
@@ -239,6 +241,10 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
     assert!(tables.contains(&format!("{p_m2:.4}")), "{tables}");
     assert!(tables.contains("Bayes factors of"), "{tables}");
     assert!(tables.contains("can this record tell the laws apart?"), "{tables}");
+    assert!(
+        tables.contains("residual lag-1 autocorrelation of the fits"),
+        "{tables}"
+    );
     // Both ordered pairs, each with a gap in nats and a probability of misranking.
     let separations = doc["separations"].as_array().unwrap();
     assert_eq!(separations.len(), 2);

@@ -87,6 +87,7 @@ pub(crate) fn evidence(
         &analysis.prior,
         &analysis.evidence,
         &analysis.separations,
+        &analysis.residual_lag1,
         &job.prior.describe(),
     );
     for (entry, law) in document["laws"]

@@ -37,6 +37,7 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
     assert list(table.index) == ["m2", "m3"]
     assert table["probability"].sum() == pytest.approx(1.0, abs=1e-12)
     assert (table["ln_z_error"] > 0).all()
+    assert table["residual_lag1"].between(-1, 1).all()
     ln_b, error = small.bayes_factor("m3", "m2")
     assert ln_b == table.loc["m3", "ln_z"] - table.loc["m2", "ln_z"]
     assert error == pytest.approx(np.hypot(table.loc["m3", "ln_z_error"], table.loc["m2", "ln_z_error"]))

@@ -78,6 +78,9 @@ pub struct EvidenceAnalysis {
     pub evidence: Evidence,
     /// What the fits alone say about telling the laws apart on these samples.
     pub separations: Vec<Separation>,
+    /// The lag-1 autocorrelation of each fit's residuals in time order, in `fits` order
+    /// ([`separation::residual_lag1`]): the check on the i.i.d. noise model.
+    pub residual_lag1: Vec<f64>,
 }
 
 impl EvidenceJob {
@@ -100,13 +103,19 @@ impl EvidenceJob {
             EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
         };
         let separations = separation::separations(&fits, &data.calibration, &self.fit)?;
+        let residual_lag1 = fits
+            .iter()
+            .map(|fit| separation::residual_lag1(fit, &data.calibration, &self.fit))
+            .collect();
         let mut analysis = self.sample(data, fits, prior, self.backend, self.sampler.seed, observer)?;
         analysis.separations = separations;
+        analysis.residual_lag1 = residual_lag1;
         Ok(analysis)
     }
 
     /// The evidence of `fits`' laws on `data` over `prior`, the samplers seeded `seed`
-    /// (without the separations, which the caller adds where it wants them).
+    /// (without the separations and residual autocorrelations, which the caller adds where it
+    /// wants them).
     fn sample(
         &self,
         data: &FieldData,
@@ -128,6 +137,7 @@ impl EvidenceJob {
             prior,
             evidence,
             separations: Vec::new(),
+            residual_lag1: Vec::new(),
         })
     }
 }

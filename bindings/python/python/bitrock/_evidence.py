@@ -34,7 +34,9 @@ class Evidence:
     def table(self) -> pd.DataFrame:
         """One row per law: ln Z (torques in N·m) and its Monte-Carlo error, the prior and
         posterior law probabilities, the best ρ reached, the mean number of tempering steps,
-        candidates scored, and the parameters whose posterior a box end cuts."""
+        candidates scored, the parameters whose posterior a box end cuts, and the lag-1
+        autocorrelation of the law's least-squares residuals in time order (near 0 where the
+        i.i.d. noise model holds)."""
         rows = [
             {
                 "law": law["law"],
@@ -46,6 +48,7 @@ class Evidence:
                 "stages": float(np.mean(law["stages"])),
                 "candidates_scored": law["candidates_scored"],
                 "cut_by_box": list(law["cut_by_box"]),
+                "residual_lag1": law.get("residual_lag1"),
             }
             for law in self._doc["laws"]
         ]
