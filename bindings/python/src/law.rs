@@ -127,3 +127,40 @@ pub(crate) fn load_law(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Str
     let law = check(py, bitrock::laws::file::load_and_register(&path))?;
     Ok(law.name().to_string())
 }
+
+/// The law's torque r·T(w) at the bit speeds `speed_rad_s` (rad/s), its parameters `params` in
+/// its order with torques in `torque_unit` (kN·m by default); the torques in that unit. A
+/// speed where the torque has no value gives NaN.
+#[pyfunction]
+#[pyo3(signature = (law, speed_rad_s, params, r, torque_unit))]
+pub(crate) fn torque(
+    py: Python<'_>,
+    law: String,
+    speed_rad_s: Vec<f64>,
+    params: Vec<f64>,
+    r: f64,
+    torque_unit: Option<String>,
+) -> PyResult<Vec<f64>> {
+    let law = self::laws(py, Some(vec![law]))?.expect("one law")[0];
+    let unit = unit(py, "torque_unit", torque_unit, TorqueUnit::from_suffix)?.unwrap_or(TorqueUnit::KNm);
+    if params.len() != law.n_params() || params.iter().any(|v| !v.is_finite()) {
+        check(py, law.check_params(&params, "params"))?;
+    }
+    if !r.is_finite() {
+        return Err(to_py(
+            py,
+            bitrock::Error::setting("r", format!("must be a finite number, got {r}")),
+        ));
+    }
+    if let Some(w) = speed_rad_s.iter().find(|w| !w.is_finite()) {
+        return Err(to_py(
+            py,
+            bitrock::Error::setting("speed_rad_s", format!("must be finite numbers, got {w}")),
+        ));
+    }
+    let si = law.scale_torque(&params, unit.newton_metres());
+    Ok(speed_rad_s
+        .iter()
+        .map(|&w| law.torque(&si, w, r) / unit.newton_metres())
+        .collect())
+}

@@ -26,7 +26,7 @@ mod _bitrock {
     #[pymodule_export]
     use crate::fit::fit;
     #[pymodule_export]
-    use crate::law::{load_law, parity, simulate};
+    use crate::law::{load_law, parity, simulate, torque};
     #[pymodule_export]
     use crate::record::{Record, read_columns, read_csv};
     #[pymodule_export]

@@ -120,20 +120,8 @@ impl Run {
     /// The particles of population `g` by law: `{law: (params [n, k] in the record's torque
     /// unit, weights, rho, candidate index)}`.
     fn particles<'py>(&self, py: Python<'py>, g: usize) -> PyResult<Bound<'py, PyDict>> {
-        let loaded;
-        let particles = match (&self.path, self.populations.get(g)) {
-            (_, Some(p)) if !p.particles.is_empty() => &p.particles,
-            (Some(dir), _) => {
-                loaded = check(py, run::Store::open(dir).and_then(|s| s.load_particles(g)))?;
-                &loaded
-            }
-            (None, _) => {
-                return Err(to_py(
-                    py,
-                    Error::setting("population", format!("the run has no population {g}")),
-                ));
-            }
-        };
+        let particles = self.population_particles(py, g)?;
+        let particles = particles.as_ref();
         let out = PyDict::new(py);
         let mut laws: Vec<Law> = particles.iter().map(|p| p.law).collect();
         laws.dedup();
@@ -154,6 +142,80 @@ impl Run {
             out.set_item(law.name(), (names, params, weights, rho, index))?;
         }
         Ok(out)
+    }
+
+    /// The `level` posterior predictive band of every law with particles in population `g` at
+    /// the bit speeds `speed_rad_s` and weight-on-bit ratio `r`: `{law: (lower, median,
+    /// upper)}` in the record's torque unit, pointwise quantiles as the run's envelopes.
+    fn predictive<'py>(
+        &self,
+        py: Python<'py>,
+        g: usize,
+        speed_rad_s: Vec<f64>,
+        level: f64,
+        r: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if !(level > 0.0 && level < 1.0) {
+            return Err(to_py(
+                py,
+                Error::setting("level", format!("must lie in (0, 1), got {level}")),
+            ));
+        }
+        if !(r.is_finite() && r > 0.0) {
+            return Err(to_py(
+                py,
+                Error::setting("r", format!("must be a positive number, got {r}")),
+            ));
+        }
+        if let Some(w) = speed_rad_s.iter().find(|w| !w.is_finite()) {
+            return Err(to_py(
+                py,
+                Error::setting("speed_rad_s", format!("must be finite numbers, got {w}")),
+            ));
+        }
+        let particles = self.population_particles(py, g)?;
+        let particles = particles.as_ref();
+        let mut laws: Vec<Law> = particles.iter().map(|p| p.law).collect();
+        laws.sort_by_key(|l| l.name());
+        laws.dedup();
+        let scale = self.torque_unit.newton_metres();
+        let out = PyDict::new(py);
+        for law in laws {
+            let envelope = py
+                .detach(|| bitrock::abc::posterior::predictive_envelope(particles, law, &speed_rad_s, level, r))
+                .expect("the law has particles");
+            let in_unit = |v: &[f64]| v.iter().map(|t| t / scale).collect::<Vec<f64>>();
+            out.set_item(
+                law.name(),
+                (
+                    PyArray1::from_vec(py, in_unit(&envelope.lower)),
+                    PyArray1::from_vec(py, in_unit(&envelope.median)),
+                    PyArray1::from_vec(py, in_unit(&envelope.upper)),
+                ),
+            )?;
+        }
+        Ok(out)
+    }
+}
+
+impl Run {
+    /// Population `g`'s particles: held in memory, or read from the store.
+    fn population_particles(
+        &self,
+        py: Python<'_>,
+        g: usize,
+    ) -> PyResult<std::borrow::Cow<'_, [bitrock::abc::Particle]>> {
+        match (&self.path, self.populations.get(g)) {
+            (_, Some(p)) if !p.particles.is_empty() => Ok(std::borrow::Cow::Borrowed(&p.particles)),
+            (Some(dir), _) => Ok(std::borrow::Cow::Owned(check(
+                py,
+                run::Store::open(dir).and_then(|s| s.load_particles(g)),
+            )?)),
+            (None, _) => Err(to_py(
+                py,
+                Error::setting("population", format!("the run has no population {g}")),
+            )),
+        }
     }
 }
 

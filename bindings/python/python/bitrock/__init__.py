@@ -48,6 +48,7 @@ __all__ = [
     "resume",
     "simulate",
     "stability",
+    "torque",
 ]
 
 __version__ = _bitrock.version()
@@ -513,6 +514,23 @@ def _replicate_progress(progress: bool | Callable[[int, int], Any]) -> tuple[Cal
     return update, close
 
 
+def torque(
+    law: str,
+    speed_rad_s: "float | Sequence[float] | np.ndarray",
+    params: Sequence[float],
+    *,
+    r: float = 1.0,
+    torque_unit: str | None = None,
+) -> np.ndarray:
+    """The law's torque on bit r·T(w) at the bit speeds ``speed_rad_s`` (rad/s, any shape),
+    its ``params`` in its order with torques in ``torque_unit`` (``"knm"``, the default, or
+    ``"nm"``), at the weight-on-bit ratio ``r``; the torques in the same unit and shape (NaN
+    where a law file's torque has no value)."""
+    speeds = np.asarray(speed_rad_s, dtype=float)
+    values = _bitrock.torque(law, [float(w) for w in speeds.ravel()], [float(p) for p in params], float(r), torque_unit)
+    return np.asarray(values, dtype=float).reshape(speeds.shape)
+
+
 def simulate(
     law: str,
     *,
@@ -647,6 +665,36 @@ class Result:
         """Population ``population``'s particles by law: ``(names, params [n, k] in the
         record's torque unit, weights, rho, candidate index)``."""
         return self._run.particles(self._population(population))
+
+    def predictive(
+        self,
+        speed_rad_s: "Sequence[float] | np.ndarray",
+        *,
+        level: float = 0.98,
+        population: int = -1,
+        r: float = 1.0,
+    ) -> Any:
+        """The posterior predictive band of each law with particles in ``population`` (the last
+        by default) at the bit speeds ``speed_rad_s`` (rad/s) and weight-on-bit ratio ``r``: an
+        ``xarray.Dataset`` over ``law`` × ``speed_rad_s`` with ``lower``, ``median`` and
+        ``upper``, the pointwise (1 ∓ ``level``)/2 quantiles and median of the particles'
+        torques (weighted), in the record's torque unit; the run's ``envelopes.csv`` at
+        ``level`` 0.98."""
+        import xarray as xr
+
+        speeds = np.asarray(speed_rad_s, dtype=float).ravel()
+        bands = self._run.predictive(self._population(population), [float(w) for w in speeds], float(level), float(r))
+        laws = list(bands)
+        unit = self.document["data"]["torque_unit"]
+        variables = {
+            name: (("law", "speed_rad_s"), np.stack([bands[law][i] for law in laws]) if laws else np.zeros((0, len(speeds))), {"units": unit})
+            for i, name in enumerate(("lower", "median", "upper"))
+        }
+        return xr.Dataset(
+            variables,
+            coords={"law": laws, "speed_rad_s": ("speed_rad_s", speeds, {"units": "rad/s"})},
+            attrs={"level": level, "wob_ratio": r},
+        )
 
     def _last_population(self) -> dict[str, Any]:
         """The last population's particles as an Evidence document carries its posterior (each

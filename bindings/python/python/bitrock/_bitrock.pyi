@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "version"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "torque", "version"]
 
 @final
 class Record:
@@ -61,6 +61,12 @@ class Run:
     def path(self, /) -> Path | None:
         """
         The run directory; `None` for a run in memory.
+        """
+    def predictive(self, /, g: SupportsIndex, speed_rad_s: SupportsGetItem[int, SupportsFloat | SupportsIndex], level: SupportsFloat | SupportsIndex, r: SupportsFloat | SupportsIndex) -> dict:
+        """
+        The `level` posterior predictive band of every law with particles in population `g` at
+        the bit speeds `speed_rad_s` and weight-on-bit ratio `r`: `{law: (lower, median,
+        upper)}` in the record's torque unit, pointwise quantiles as the run's envelopes.
         """
     @property
     def summary(self, /) -> str:
@@ -150,6 +156,13 @@ def stability(run: str | PathLike[str] | None, law: str | None, params: Supports
     """
     Stability maps over (Ω, W) for the run in `run`, or for `law` at `params` (torques in
     `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
+    """
+
+def torque(law: str, speed_rad_s: SupportsGetItem[int, SupportsFloat | SupportsIndex], params: SupportsGetItem[int, SupportsFloat | SupportsIndex], r: SupportsFloat | SupportsIndex, torque_unit: str | None) -> list[float]:
+    """
+    The law's torque r·T(w) at the bit speeds `speed_rad_s` (rad/s), its parameters `params` in
+    its order with torques in `torque_unit` (kN·m by default); the torques in that unit. A
+    speed where the torque has no value gives NaN.
     """
 
 def version() -> str:

@@ -1,0 +1,53 @@
+"""A law's torque and a run's posterior predictive from Python: the closed form, the run
+directory's envelopes.csv, and refusals by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import bitrock
+
+
+def test_a_laws_torque_is_its_closed_form_in_either_unit() -> None:
+    w = np.array([[0.0, 1.0], [5.0, 20.0]])
+    expected = (13.0 - 6.5) * np.exp(-0.3 * w) + 6.5
+    got = bitrock.torque("m2", w, [13.0, 6.5, 0.3])
+    assert got.shape == w.shape
+    np.testing.assert_allclose(got, expected, rtol=1e-14)
+    # N·m parameters give N·m torques; r scales the torque.
+    np.testing.assert_allclose(bitrock.torque("m2", w, [13e3, 6.5e3, 0.3], torque_unit="nm"), 1e3 * expected, rtol=1e-14)
+    np.testing.assert_allclose(bitrock.torque("m2", w, [13.0, 6.5, 0.3], r=0.5), 0.5 * expected, rtol=1e-14)
+    assert float(bitrock.torque("m4", 2.0, [1.0, 2.0, 3.0, 4.0])) == pytest.approx(1 + 4 + 12 + 32)
+
+
+@pytest.mark.parametrize(
+    ("call", "named"),
+    [
+        (lambda: bitrock.torque("m2", [1.0], [13.0, 6.5]), "params"),
+        (lambda: bitrock.torque("m9", [1.0], [13.0, 6.5, 0.3]), "law"),
+        (lambda: bitrock.torque("m2", [float("nan")], [13.0, 6.5, 0.3]), "speed_rad_s"),
+        (lambda: bitrock.torque("m2", [1.0], [13.0, 6.5, 0.3], torque_unit="lbft"), "torque_unit"),
+    ],
+)
+def test_a_torque_that_cannot_be_computed_is_refused_by_name(call, named) -> None:
+    with pytest.raises(bitrock.InputError, match=named):
+        call()
+
+
+def test_the_predictive_band_is_the_runs_envelopes(demo, tmp_path) -> None:
+    result = bitrock.abc(demo, particles=300, seed=11, backend="cpu", max_populations=3, out=tmp_path / "run", progress=False)
+    envelopes = pd.read_csv(tmp_path / "run" / "envelopes.csv")
+    for law, rows in envelopes.groupby("law"):
+        band = result.predictive(rows["speed_rad_s"].to_numpy())
+        assert band["lower"].attrs["units"] == "kN·m"
+        for name in ("lower", "median", "upper"):
+            np.testing.assert_allclose(band[name].sel(law=law).values, rows[f"{name}_knm"].to_numpy(), rtol=2e-6)
+    band = result.predictive(np.linspace(1.0, 20.0, 7), level=0.5)
+    assert (band["lower"] <= band["median"]).all() and (band["median"] <= band["upper"]).all()
+    with pytest.raises(bitrock.InputError, match="level"):
+        result.predictive([1.0], level=1.5)
+    # A run kept in memory gives the same band as its saved twin.
+    twin = bitrock.abc(demo, particles=300, seed=11, backend="cpu", max_populations=3, progress=False)
+    np.testing.assert_array_equal(twin.predictive([2.0, 8.0])["median"], result.predictive([2.0, 8.0])["median"])
