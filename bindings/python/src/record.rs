@@ -56,6 +56,91 @@ impl Record {
             PyArray1::from_slice(py, &s.torque_nm),
         )
     }
+    fn __repr__(&self) -> String {
+        let d = &self.data;
+        format!(
+            "<bitrock.Record {}: {} of {} rows used ({} calibration, {} validation), torque in {}, {} warning{}>",
+            d.source.display(),
+            d.rows_used,
+            d.rows_read,
+            d.calibration.len(),
+            d.validation.len(),
+            d.torque_unit.label(),
+            d.warnings.len(),
+            if d.warnings.len() == 1 { "" } else { "s" }
+        )
+    }
+    /// A notebook's view: where the record came from, what was used, in which units, the
+    /// speed and torque ranges of the calibration samples, and the warnings.
+    fn _repr_html_(&self) -> String {
+        let d = &self.data;
+        let c = &d.calibration;
+        let range = |v: &[f64]| {
+            let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            });
+            (lo, hi)
+        };
+        let (w_lo, w_hi) = range(&c.speed_rad_s);
+        let (t_lo, t_hi) = range(&c.torque_nm);
+        let unit = d.torque_unit.newton_metres();
+        let rpm = 1.0 / bitrock::units::RAD_S_PER_RPM;
+        let columns = &d.columns;
+        let rows = [
+            ("source", escape(&d.source.display().to_string())),
+            (
+                "rows",
+                format!(
+                    "{} of {} used: {} calibration, {} validation",
+                    d.rows_used,
+                    d.rows_read,
+                    c.len(),
+                    d.validation.len()
+                ),
+            ),
+            (
+                "columns",
+                escape(&format!(
+                    "speed '{}', torque '{}'{}",
+                    columns.speed,
+                    columns.torque,
+                    columns
+                        .wob
+                        .as_ref()
+                        .map_or(String::new(), |w| format!(", weight on bit '{w}'"))
+                )),
+            ),
+            (
+                "bit speed",
+                format!(
+                    "{:.1} to {:.1} rpm (read in {})",
+                    w_lo * rpm,
+                    w_hi * rpm,
+                    d.speed_unit.label()
+                ),
+            ),
+            (
+                "torque",
+                format!("{:.4} to {:.4} {}", t_lo / unit, t_hi / unit, d.torque_unit.label()),
+            ),
+        ];
+        let mut html = String::from("<div><b>bitrock.Record</b><table>");
+        for (name, value) in rows {
+            html.push_str(&format!(
+                "<tr><th style=\"text-align:left\">{name}</th><td style=\"text-align:left\">{value}</td></tr>"
+            ));
+        }
+        html.push_str("</table>");
+        if !d.warnings.is_empty() {
+            html.push_str("<ul>");
+            for w in &d.warnings {
+                html.push_str(&format!("<li>warning: {}</li>", escape(w)));
+            }
+            html.push_str("</ul>");
+        }
+        html.push_str("</div>");
+        html
+    }
     /// The validation samples: bit speed (rad/s) and torque (N·m).
     fn validation<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
         let s = &self.data.validation;
@@ -115,4 +200,12 @@ pub(crate) fn read_columns(
         .collect::<Result<Vec<Option<&[f64]>>, _>>()?;
     let data = bitrock::data::field_data_from_columns(&names, &slices, Path::new(&source), &opts);
     Ok(Record { data: check(py, data)? })
+}
+
+/// `text` safe inside HTML.
+fn escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }

@@ -1,5 +1,6 @@
-"""A law's torque and a run's posterior predictive from Python: the closed form, the run
-directory's envelopes.csv, and refusals by name."""
+"""A law's torque and a run's posterior predictive from Python (the closed form, the run
+directory's envelopes.csv, refusals by name), and how records, runs and evidence show
+themselves in a notebook."""
 
 from __future__ import annotations
 
@@ -51,3 +52,27 @@ def test_the_predictive_band_is_the_runs_envelopes(demo, tmp_path) -> None:
     # A run kept in memory gives the same band as its saved twin.
     twin = bitrock.abc(demo, particles=300, seed=11, backend="cpu", max_populations=3, progress=False)
     np.testing.assert_array_equal(twin.predictive([2.0, 8.0])["median"], result.predictive([2.0, 8.0])["median"])
+
+
+def test_records_runs_and_evidence_show_themselves_in_a_notebook(demo, small_run) -> None:
+    text = repr(demo)
+    assert "bitrock.Record" in text and "0x" not in text
+    assert f"{len(demo.calibration()[0])} calibration" in text
+    page = demo._repr_html_()
+    assert page.startswith("<div>") and "<table>" in page and "kN·m" in page and "rpm" in page
+    page = small_run._repr_html_()
+    assert "in memory" in page and "<table" in page
+    for law, p in small_run.model_probabilities.iloc[-1].drop("epsilon").items():
+        assert law in page and f"{p:.4f}" in page
+    evidence = bitrock.evidence(bitrock.read_record(thin=8), laws=["m2", "m4"], particles=60, islands=2, backend="cpu")
+    page = evidence._repr_html_()
+    assert "bitrock.Evidence" in page and "<table" in page
+    for law, p in evidence.probabilities.items():
+        assert f"{p:.4f}" in page
+
+
+def test_html_escapes_what_a_record_carries(tmp_path) -> None:
+    path = tmp_path / "<b>rig&co.csv"
+    path.write_text("speed_rpm,torque_knm\n" + "".join(f"{10 + i},{12 - 0.01 * i}\n" for i in range(50)))
+    page = bitrock.read_record(path)._repr_html_()
+    assert "&lt;b&gt;rig&amp;co.csv" in page and "<b>rig" not in page

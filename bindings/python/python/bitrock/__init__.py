@@ -797,6 +797,22 @@ class Result:
         where = self.path or "in memory"
         return f"<bitrock.Result {len(doc['populations'])} populations ({where}); {probabilities}>"
 
+    def _repr_html_(self) -> str:
+        """A notebook's view: where the run lives, the model probabilities of every population
+        with its ε, and the run's warnings."""
+        import html
+
+        doc = self.document
+        where = html.escape(str(self.path)) if self.path is not None else "in memory"
+        table = self.model_probabilities.to_html(float_format=lambda v: f"{v:.4f}")
+        warnings = "".join(f"<li>warning: {html.escape(w)}</li>" for w in doc.get("warnings", []))
+        return (
+            f"<div><b>bitrock.Result</b>: {len(doc['populations'])} populations ({where}), "
+            f"model probabilities by population{table}"
+            + (f"<ul>{warnings}</ul>" if warnings else "")
+            + "</div>"
+        )
+
 
 def _param_names(doc: dict[str, Any], law: str) -> list[str]:
     for f in doc["fits"]:

@@ -15,6 +15,12 @@ class Record:
     """
     A field record, read and split into calibration and validation samples (SI inside).
     """
+    def __repr__(self, /) -> str: ...
+    def _repr_html_(self, /) -> str:
+        """
+        A notebook's view: where the record came from, what was used, in which units, the
+        speed and torque ranges of the calibration samples, and the warnings.
+        """
     def calibration(self, /) -> tuple[Incomplete, Incomplete]:
         """
         The calibration samples: bit speed (rad/s) and torque (N·m), without copies.

@@ -122,6 +122,31 @@ class Evidence:
 
         raise InputError(f"law {law!r} was not compared (compared: {', '.join(self.laws)})")
 
+    def _repr_html_(self) -> str:
+        """A notebook's view: the evidence table, the boxes it integrates over, and what the
+        command warns about (islands that disagree, posteriors a box end cuts)."""
+        import html
+
+        doc = self._doc
+        columns = ["ln_z", "ln_z_error", "probability", "best_rho", "residual_lag1"]
+        table = self.table[columns].to_html(float_format=lambda v: f"{v:.4f}")
+        notes = [
+            f"the islands of {law['law']} disagree by {law['island_spread']:.1f} nats"
+            for law in doc["laws"]
+            if not law["converged"]
+        ] + [
+            f"the posterior of {law['law']} reaches the end of its box ({', '.join(law['cut_by_box'])})"
+            for law in doc["laws"]
+            if law["cut_by_box"]
+        ]
+        items = "".join(f"<li>warning: {html.escape(n)}</li>" for n in notes)
+        return (
+            f"<div><b>bitrock.Evidence</b> on {html.escape(doc['source'])} ({doc['data_points']} samples; "
+            f"ln Z with torques in N·m; {html.escape(doc['prior'])}){table}"
+            + (f"<ul>{items}</ul>" if items else "")
+            + "</div>"
+        )
+
     def __repr__(self) -> str:
         best = max(self._doc["laws"], key=lambda law: law["probability"])
         parts = ", ".join(f"P({law['law']}) = {law['probability']:.3f}" for law in self._doc["laws"])
