@@ -113,7 +113,7 @@ impl DataOptions {
 }
 
 /// Samples of a law's input and output, in SI.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Samples {
     /// Bit speed, rad/s.
     pub speed_rad_s: Vec<f64>,
@@ -164,8 +164,9 @@ impl Samples {
     }
 }
 
-/// A field record after reading, filtering and splitting.
-#[derive(Clone, Debug)]
+/// A field record after reading, filtering and splitting (serialisable whole, so that a
+/// Python `Record` pickles and travels to workers as it is).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FieldData {
     /// Where it came from (a path, or `<embedded demo data>`).
     pub source: PathBuf,

@@ -129,3 +129,17 @@ def test_a_torque_in_nm_under_a_knm_name_is_warned_of_where_it_is_read() -> None
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert bitrock.read_record(None).warnings == []
+
+
+def test_a_record_pickles_to_the_bit(demo) -> None:
+    import pickle
+
+    again = pickle.loads(pickle.dumps(demo))
+    assert repr(again) == repr(demo)
+    for a, b in zip(demo.calibration() + demo.validation(), again.calibration() + again.validation()):
+        assert np.array_equal(a, b)
+    assert again.warnings == demo.warnings and again.columns == demo.columns
+    assert again.torque_unit == demo.torque_unit and again.source == demo.source
+    # The same record gives the same run, bit for bit.
+    runs = [bitrock.abc(r, particles=200, seed=3, backend="cpu", max_populations=2, progress=False) for r in (demo, again)]
+    assert runs[0].model_probabilities.equals(runs[1].model_probabilities)

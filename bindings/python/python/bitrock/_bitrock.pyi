@@ -15,7 +15,17 @@ class Record:
     """
     A field record, read and split into calibration and validation samples (SI inside).
     """
+    def __reduce__(self, /) -> tuple[Any, tuple[str]]:
+        """
+        Pickling: the record whole (samples, units, columns, warnings) as JSON, exact to the
+        bit (shortest round-trip decimals), rebuilt by [`Record::_from_state`].
+        """
     def __repr__(self, /) -> str: ...
+    @staticmethod
+    def _from_state(state: str) -> Record:
+        """
+        The record a pickle's state describes.
+        """
     def _repr_html_(self, /) -> str:
         """
         A notebook's view: where the record came from, what was used, in which units, the
