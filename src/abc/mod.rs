@@ -207,7 +207,7 @@ pub fn prior_volume_caveat(epsilon: f64, best_rho: f64, data_len: usize) -> Opti
 }
 
 /// One population: its record and particles in index order.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Population {
     pub record: PopulationRecord,
     pub particles: Vec<Particle>,

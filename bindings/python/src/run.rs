@@ -99,6 +99,7 @@ impl PyObserver {
 
 /// A finished run: its `run.json` document, and the particles of any population.
 #[pyclass(frozen, module = "bitrock._bitrock")]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub(crate) struct Run {
     /// The run.json document.
     #[pyo3(get)]
@@ -117,6 +118,23 @@ pub(crate) struct Run {
 
 #[pymethods]
 impl Run {
+    /// Pickling: the document, the directory, and a run in memory's populations with their
+    /// particles, as JSON exact to the bit; rebuilt by [`Run::_from_state`].
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
+        let state = serde_json::to_string(slf.get())
+            .map_err(|e| to_py(slf.py(), Error::Numerical(format!("the run cannot be pickled: {e}"))))?;
+        Ok((slf.get_type().getattr("_from_state")?, (state,)))
+    }
+    /// The run a pickle's state describes.
+    #[staticmethod]
+    fn _from_state(py: Python<'_>, state: &str) -> PyResult<Self> {
+        serde_json::from_str(state).map_err(|e| {
+            to_py(
+                py,
+                Error::setting("result", format!("the pickled run cannot be read: {e}")),
+            )
+        })
+    }
     /// The particles of population `g` by law: `{law: (params [n, k] in the record's torque
     /// unit, weights, rho, candidate index)}`.
     fn particles<'py>(&self, py: Python<'py>, g: usize) -> PyResult<Bound<'py, PyDict>> {

@@ -76,3 +76,16 @@ def test_html_escapes_what_a_record_carries(tmp_path) -> None:
     path.write_text("speed_rpm,torque_knm\n" + "".join(f"{10 + i},{12 - 0.01 * i}\n" for i in range(50)))
     page = bitrock.read_record(path)._repr_html_()
     assert "&lt;b&gt;rig&amp;co.csv" in page and "<b>rig" not in page
+
+
+def test_a_run_in_memory_pickles_and_maps_as_before(small_run) -> None:
+    import pickle
+
+    again = pickle.loads(pickle.dumps(small_run))
+    assert again.document == small_run.document and again.path is None
+    for law, (names, params, weights, rho, index) in small_run.particles().items():
+        names2, params2, weights2, rho2, index2 = again.particles()[law]
+        assert names == names2 and np.array_equal(params, params2) and np.array_equal(weights, weights2)
+        assert np.array_equal(rho, rho2) and np.array_equal(index, index2)
+    grid = {"omega_rpm": "40:200:5", "wob_kn": "50:500:4", "samples": 30, "backend": "cpu"}
+    assert bitrock.stability(again, **grid).equals(bitrock.stability(small_run, **grid))

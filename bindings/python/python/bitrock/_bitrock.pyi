@@ -68,6 +68,16 @@ class Run:
     """
     A finished run: its `run.json` document, and the particles of any population.
     """
+    def __reduce__(self, /) -> tuple[Any, tuple[str]]:
+        """
+        Pickling: the document, the directory, and a run in memory's populations with their
+        particles, as JSON exact to the bit; rebuilt by [`Run::_from_state`].
+        """
+    @staticmethod
+    def _from_state(state: str) -> Run:
+        """
+        The run a pickle's state describes.
+        """
     def particles(self, /, g: SupportsIndex) -> dict:
         """
         The particles of population `g` by law: `{law: (params [n, k] in the record's torque
