@@ -110,19 +110,16 @@ fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
         out,
         "\nrows: law that made the data; columns: mean posterior probability (share ranked first)"
     )?;
-    write!(out, "{:<10}", "data from")?;
-    for law in &check.laws {
-        write!(out, " {:>15}", law.to_string())?;
-    }
-    writeln!(out, "   P(own) 10% / median / 90%")?;
-    for row in &check.rows {
-        write!(out, "{:<10}", row.law.to_string())?;
-        for (p, f) in row.mean_probability.iter().zip(&row.first_share) {
-            write!(out, " {:>15}", format!("{p:.3} ({f:.2})"))?;
-        }
+    let rows = check.rows.iter().map(|row| {
         let q = &row.own_probability;
-        writeln!(out, "   {:.3} / {:.3} / {:.3}", q.q10, q.median, q.q90)?;
-    }
+        super::print::ConfusionRow {
+            law: row.law,
+            mean_probability: &row.mean_probability,
+            first_share: &row.first_share,
+            tail: format!("{:.3} / {:.3} / {:.3}", q.q10, q.median, q.q90),
+        }
+    });
+    super::print::confusion_matrix(out, &check.laws, "P(own) 10% / median / 90%", rows)?;
     writeln!(out)?;
     for row in &check.rows {
         let source = match row.source {

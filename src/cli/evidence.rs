@@ -316,22 +316,16 @@ fn check_table(out: &mut impl Write, check: &EvidenceCheck) -> std::io::Result<(
         out,
         "rows: law that made the data; columns: mean P(m | y) (share ranked first); decided: odds at least positive beyond their error and a fit at least 5 nats better, against every other law"
     )?;
-    write!(out, "{:<10}", "data from")?;
-    for law in &check.laws {
-        write!(out, " {:>15}", law.to_string())?;
-    }
-    writeln!(out, "   decided right / undecided / decided wrong")?;
-    for row in &check.rows {
-        write!(out, "{:<10}", row.law.to_string())?;
-        for (p, f) in row.mean_probability.iter().zip(&row.first_share) {
-            write!(out, " {:>15}", format!("{p:.3} ({f:.2})"))?;
-        }
-        writeln!(
-            out,
-            "   {:.2} / {:.2} / {:.2}",
+    let rows = check.rows.iter().map(|row| print::ConfusionRow {
+        law: row.law,
+        mean_probability: &row.mean_probability,
+        first_share: &row.first_share,
+        tail: format!(
+            "{:.2} / {:.2} / {:.2}",
             row.decided_right, row.undecided, row.decided_wrong
-        )?;
-    }
+        ),
+    });
+    print::confusion_matrix(out, &check.laws, "decided right / undecided / decided wrong", rows)?;
     writeln!(out)?;
     for row in &check.rows {
         writeln!(out, "{}", row.verdict)?;

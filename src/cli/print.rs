@@ -341,3 +341,35 @@ pub fn posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: Torqu
     }
     Ok(())
 }
+
+/// One row of a confusion matrix: the law that made the data, the mean probability and the
+/// share ranked first of every column law, and the row's own summary after them.
+pub struct ConfusionRow<'a> {
+    pub law: Law,
+    pub mean_probability: &'a [f64],
+    pub first_share: &'a [f64],
+    pub tail: String,
+}
+
+/// A confusion matrix by re-simulation (`check-selection`, `evidence --check`): a header of
+/// the column `laws` then `tail_header`, and one line per row.
+pub fn confusion_matrix<'a>(
+    out: &mut impl Write,
+    laws: &[Law],
+    tail_header: &str,
+    rows: impl IntoIterator<Item = ConfusionRow<'a>>,
+) -> io::Result<()> {
+    write!(out, "{:<10}", "data from")?;
+    for law in laws {
+        write!(out, " {:>15}", law.to_string())?;
+    }
+    writeln!(out, "   {tail_header}")?;
+    for row in rows {
+        write!(out, "{:<10}", row.law.to_string())?;
+        for (p, f) in row.mean_probability.iter().zip(row.first_share) {
+            write!(out, " {:>15}", format!("{p:.3} ({f:.2})"))?;
+        }
+        writeln!(out, "   {}", row.tail)?;
+    }
+    Ok(())
+}
