@@ -74,3 +74,14 @@ def test_a_gpu_run_accepts_the_cpu_runs_candidates_except_within_the_parity_tole
         gap = np.abs(cpu.model_probabilities.iloc[g, :4].to_numpy() - gpu.model_probabilities.iloc[g, :4].to_numpy())
         assert gap.max() <= len(a.keys() ^ b.keys()) / n + 1e-12, (g, gap)
     assert compared >= 3 * n - 2 * sum(p["near_threshold"] for p in gpu_pops)
+
+
+def test_which_gpu_scores_is_logged_not_warned(demo, caplog) -> None:
+    import logging
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", bitrock.BitrockWarning)
+        with caplog.at_level(logging.INFO, logger="bitrock"):
+            bitrock.abc(demo, laws=["m2"], particles=100, seed=1, backend="gpu", max_populations=1, progress=False)
+    assert any(r.name == "bitrock" and r.getMessage().startswith("GPU backend:") for r in caplog.records)

@@ -233,7 +233,18 @@ def _progress(progress: bool | Callable[..., Any]) -> tuple[Callable[..., Any] |
     return update, close
 
 
+#: The start of the library's information lines (which GPU scores, in which shape): logged at
+#: INFO on the ``bitrock`` logger. Every other line names something the user should act on or
+#: know about the result (a fallback to the CPU, a moved floor, a resume) and is a warning.
+_INFORMATION = ("GPU backend:",)
+
+
 def _note(line: str) -> None:
+    if line.startswith(_INFORMATION):
+        import logging
+
+        logging.getLogger("bitrock").info(line)
+        return
     import warnings
 
     warnings.warn(line, BitrockWarning, stacklevel=3)
