@@ -156,6 +156,19 @@ pub struct RunEndings {
     pub estimate_out_of_patience: bool,
 }
 
+/// y − r·T(w) of `law` at `params` on `samples`, N·m: what a fit leaves (and what the
+/// selection check and the evidence check resample as noise).
+pub fn residuals(law: Law, params: &[f64], samples: &Samples, w_ref_n: Option<f64>) -> Vec<f64> {
+    let r = samples.wob_ratio(w_ref_n);
+    samples
+        .speed_rad_s
+        .iter()
+        .zip(&samples.torque_nm)
+        .zip(&r)
+        .map(|((&w, &y), &r)| y - law.torque(params, w, r))
+        .collect()
+}
+
 impl LawFit {
     /// A fit with the given estimates and ρ, no standard errors and unit scales: for tests of
     /// what is built on fits (priors, floors).

@@ -664,7 +664,7 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
         message: format!("the run has no least-squares fit of {law}"),
     })?;
     let w_ref_n = config.fit.w_ref_n;
-    let residuals = residuals(law, &fit.params_si, &data.calibration, w_ref_n);
+    let residuals = crate::fit::residuals(law, &fit.params_si, &data.calibration, w_ref_n);
     let synthetic = FieldData {
         source: run
             .dir
@@ -764,33 +764,36 @@ fn in_replicate(law: Law, replicate: usize, e: Error) -> Error {
 /// least-squares estimate when it has none.
 fn generating_params(run: &CheckedRun, law: Law, rng: &mut StdRng) -> Vec<f64> {
     let last = run.stored.populations.last().expect("checked by CheckedRun::open");
-    let members: Vec<&crate::abc::Particle> = last.particles.iter().filter(|p| p.law == law).collect();
-    if members.is_empty() {
-        return fit_of(&run.stored.setup.fits, law)
+    let members = last
+        .particles
+        .iter()
+        .filter(|p| p.law == law)
+        .map(|p| (p.params.as_slice(), p.weight));
+    draw_by_weight(members, rng).unwrap_or_else(|| {
+        fit_of(&run.stored.setup.fits, law)
             .map(|f| f.params_si.clone())
-            .unwrap_or_default();
-    }
-    let total: f64 = members.iter().map(|p| p.weight).sum();
-    let mut u = rng.random::<f64>() * total;
-    for p in &members {
-        u -= p.weight;
-        if u < 0.0 {
-            return p.params.clone();
-        }
-    }
-    members.last().expect("non-empty").params.clone()
+            .unwrap_or_default()
+    })
 }
 
-/// y − r·T(w) of `law` at `params` on `samples`, N·m.
-pub(crate) fn residuals(law: Law, params: &[f64], samples: &Samples, w_ref_n: Option<f64>) -> Vec<f64> {
-    let r = samples.wob_ratio(w_ref_n);
-    samples
-        .speed_rad_s
-        .iter()
-        .zip(&samples.torque_nm)
-        .zip(&r)
-        .map(|((&w, &y), &r)| y - law.torque(params, w, r))
-        .collect()
+/// One parameter set of weighted `sets` drawn by weight; `None` when there are none.
+pub(crate) fn draw_by_weight<'a>(
+    sets: impl Iterator<Item = (&'a [f64], f64)> + Clone,
+    rng: &mut StdRng,
+) -> Option<Vec<f64>> {
+    // Nothing to draw from takes nothing from the stream.
+    sets.clone().next()?;
+    let total: f64 = sets.clone().map(|(_, w)| w).sum();
+    let mut u = rng.random::<f64>() * total;
+    let mut last = None;
+    for (params, w) in sets {
+        u -= w;
+        if u < 0.0 {
+            return Some(params.to_vec());
+        }
+        last = Some(params);
+    }
+    last.map(<[f64]>::to_vec)
 }
 
 /// `samples` with its torque replaced by r·T(w) of `law` at `params` plus residuals drawn

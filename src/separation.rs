@@ -77,10 +77,7 @@ pub const AUTOCORRELATED: f64 = 0.3;
 /// and then the i.i.d. likelihood counts n samples where the information of about
 /// n·(1 − φ)/(1 + φ) independent ones lies. NaN without two residuals or with all of them 0.
 pub fn residual_lag1(fit: &LawFit, samples: &Samples, opts: &FitOptions) -> f64 {
-    let r = samples.wob_ratio(opts.w_ref_n);
-    let e: Vec<f64> = (0..samples.len())
-        .map(|i| samples.torque_nm[i] - fit.law.torque(&fit.params_si, samples.speed_rad_s[i], r[i]))
-        .collect();
+    let e = crate::fit::residuals(fit.law, &fit.params_si, samples, opts.w_ref_n);
     let lagged = crate::numerics::compensated_sum(e.windows(2).map(|w| w[0] * w[1]));
     let squares = crate::numerics::compensated_sum(e.iter().map(|v| v * v));
     if e.len() < 2 || squares <= 0.0 {

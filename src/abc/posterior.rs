@@ -710,14 +710,8 @@ pub fn map_inputs(population: &Population, count: usize) -> Vec<crate::stability
 /// The stability maps' inputs of weighted `particles` of several laws (weights over all of
 /// them: a law's share is its probability), as [`map_inputs`] makes them of a population.
 pub fn map_inputs_of(particles: &[Particle], count: usize) -> Vec<crate::stability::map::LawSamples> {
-    let laws: Vec<Law> = particles
-        .iter()
-        .map(|p| p.law)
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
-    let posterior = summarize(particles, &laws);
-    posterior
+    // Every law with particles is summarised; the laws considered only list probabilities.
+    summarize(particles, &[])
         .laws
         .iter()
         .map(|summary| crate::stability::map::LawSamples {

@@ -281,7 +281,8 @@ pub fn here(
             Ok(gpus) => {
                 let names: Vec<String> = gpus.iter().map(|g| g.adapter()).collect();
                 note(format!(
-                    "GPU backend on {} devices ({} scoring, {}): {}",
+                    "{} on {} devices ({} scoring, {}): {}",
+                    crate::eval::GPU_BACKEND_NOTE,
                     gpus.len(),
                     gpus[0].shape(),
                     gpus[0].shape_source(),

@@ -168,6 +168,16 @@ pub enum Backend {
     Cpu,
 }
 
+/// How every line that names the GPU scoring a run (adapter, shape) begins.
+pub(crate) const GPU_BACKEND_NOTE: &str = "GPU backend";
+
+/// True for a note that only informs (which GPU scores, in which shape): front ends may log
+/// it rather than warn. Every other note names something the user should act on or know about
+/// the result (a fallback to the CPU, a moved floor, a resume).
+pub fn is_information(note: &str) -> bool {
+    note.starts_with(GPU_BACKEND_NOTE)
+}
+
 /// The evaluator for `backend`, a GPU one in the shape `wish` leads to (see
 /// [`gpu::tune::choose`]). With `Auto`, a GPU that cannot be set up is reported through `note`
 /// and the CPU is used instead.
@@ -179,7 +189,7 @@ pub fn evaluator(
 ) -> Result<Box<dyn Evaluator>> {
     let said = |gpu: &gpu::residual::GpuEvaluator| {
         format!(
-            "GPU backend: {} ({} scoring, {})",
+            "{GPU_BACKEND_NOTE}: {} ({} scoring, {})",
             gpu.adapter(),
             gpu.shape(),
             gpu.shape_source()

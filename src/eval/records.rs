@@ -98,7 +98,8 @@ impl RecordBatch {
         let scorer = match gpu {
             Some((ctx, choice)) => {
                 note(format!(
-                    "GPU backend: {} ({} scoring, {}; records batched)",
+                    "{}: {} ({} scoring, {}; records batched)",
+                    crate::eval::GPU_BACKEND_NOTE,
                     ctx.describe(),
                     choice.shape,
                     choice.source

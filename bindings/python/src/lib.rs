@@ -37,6 +37,12 @@ mod _bitrock {
     use crate::stability::stability;
     use pyo3::prelude::*;
 
+    /// True for a note that only informs (which GPU scores): logged, not warned.
+    #[pyfunction]
+    fn is_information(note: &str) -> bool {
+        bitrock::eval::is_information(note)
+    }
+
     /// The library's version.
     #[pyfunction]
     fn version() -> &'static str {

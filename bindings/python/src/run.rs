@@ -217,6 +217,15 @@ impl Run {
 }
 
 impl Run {
+    /// The last population's particles of a run kept in memory; `None` for a stored run (whose
+    /// store the caller reads) or a run without a population.
+    pub(crate) fn last_particles_in_memory(&self) -> Option<&[bitrock::abc::Particle]> {
+        self.populations
+            .last()
+            .map(|p| p.particles.as_slice())
+            .filter(|p| !p.is_empty())
+    }
+
     /// Population `g`'s particles: held in memory, or read from the store.
     fn population_particles(
         &self,

@@ -23,9 +23,20 @@ pub(crate) fn stability<'py>(
     use bitrock::pipeline::stability::{self as job, MapSource, StabilityJob, Structure};
     use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped, map};
     let posterior: Option<String> = kwarg(options, "posterior")?;
+    let in_memory: Option<Py<crate::run::Run>> = kwarg(options, "run_in_memory")?;
     let source = match (run, law, params) {
         (None, None, None) if posterior.is_some() => {
             MapSource::Posterior(posterior_particles(py, posterior.as_deref().expect("given"))?)
+        }
+        (None, None, None) if in_memory.is_some() => {
+            let run = in_memory.expect("given");
+            let particles = run.get().last_particles_in_memory().ok_or_else(|| {
+                to_py(
+                    py,
+                    Error::setting("source", "the run kept in memory has no completed population"),
+                )
+            })?;
+            MapSource::Posterior(particles.to_vec())
         }
         (Some(dir), None, None) => MapSource::Run(dir),
         (None, Some(law), Some(params)) => {
@@ -141,9 +152,8 @@ pub(crate) fn stability<'py>(
     Ok(out)
 }
 
-/// The weighted posterior particles (SI) of a document shaped as an Evidence's (`torque_unit`,
-/// and per law its probability and posterior sets in that unit; a run in memory's last
-/// population is passed so too).
+/// The weighted posterior particles (SI) of an Evidence's document (`torque_unit`, and per
+/// law its probability and posterior sets in that unit).
 fn posterior_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::abc::Particle>> {
     #[derive(serde::Deserialize)]
     struct Sets {

@@ -23,11 +23,12 @@ use crate::abc::evidence::strength;
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
+use crate::fit::residuals;
 use crate::laws::Law;
-use crate::selection::{replicate_seed, residuals, synthesize};
+use crate::selection::{draw_by_weight, replicate_seed, synthesize};
 use crate::separation::UNDECIDED_NATS;
+use rand::SeedableRng;
 use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -165,7 +166,8 @@ fn replicate_of(
         .find(|f| f.law == law)
         .ok_or_else(|| Error::Numerical(format!("the evidence check has no least-squares fit of {law}")))?;
     let mut rng = StdRng::seed_from_u64(seed);
-    let params_si = draw(&evidence.posterior, &mut rng).unwrap_or_else(|| fit.params_si.clone());
+    let sets = evidence.posterior.iter().map(|(p, w)| (p.as_slice(), *w));
+    let params_si = draw_by_weight(sets, &mut rng).unwrap_or_else(|| fit.params_si.clone());
     let w_ref_n = job.fit.w_ref_n;
     let noise = residuals(law, &fit.params_si, &data.calibration, w_ref_n);
     let synthetic = FieldData {
@@ -232,19 +234,6 @@ fn replicate_of(
         },
         outcome.evidence.candidates_scored,
     ))
-}
-
-/// A parameter set drawn by weight from a weighted posterior; `None` when it is empty.
-fn draw(posterior: &[(Vec<f64>, f64)], rng: &mut StdRng) -> Option<Vec<f64>> {
-    let total: f64 = posterior.iter().map(|(_, w)| w).sum();
-    let mut u = rng.random::<f64>() * total;
-    for (params, w) in posterior {
-        u -= w;
-        if u < 0.0 {
-            return Some(params.clone());
-        }
-    }
-    posterior.last().map(|(p, _)| p.clone())
 }
 
 /// The row of `law` from its replicates.

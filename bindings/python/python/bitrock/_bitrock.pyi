@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "torque", "version"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "torque", "version"]
 
 @final
 class Record:
@@ -127,6 +127,11 @@ def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: di
 def fit(record: Record, laws: SupportsGetItem[int, str] | None, options: dict) -> str:
     """
     Least-squares fits of `laws` (`None`: all) to the record: `fit --json`'s document.
+    """
+
+def is_information(note: str) -> bool:
+    """
+    True for a note that only informs (which GPU scores): logged, not warned.
     """
 
 def load_law(path: str | PathLike[str]) -> str:
