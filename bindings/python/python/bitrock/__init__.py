@@ -704,6 +704,97 @@ class Result:
             attrs={"level": level, "wob_ratio": r},
         )
 
+    def get_distribution(self, law: str, population: int = -1) -> tuple[pd.DataFrame, np.ndarray]:
+        """The law's particles in ``population`` (the last by default) and their weights,
+        normalised within the law: ``(DataFrame of parameters, weights)``, as pyABC's
+        ``History.get_distribution(m, t)`` returns them, so that its plotting functions
+        accept them."""
+        if law not in self.laws:
+            raise InputError(f"law: the run's laws are {', '.join(self.laws)}, got {law!r}", "law")
+        found = self.particles(population).get(law)
+        if found is None:
+            names = _param_names(self.document, law)
+            return pd.DataFrame(columns=names, dtype=float), np.zeros(0)
+        names, params, weights, _rho, _index = found
+        frame = pd.DataFrame(params, columns=names)
+        frame.columns.name = "name"
+        total = weights.sum()
+        return frame, weights / total if total > 0 else weights
+
+    def summary(self) -> pd.DataFrame:
+        """The summarised population's posterior per law and parameter: probability, mean,
+        standard deviation, 1 %, 50 % and 99 % quantiles, MAP, in the record's torque unit."""
+        rows = []
+        for s in self.document["posterior"]["laws"]:
+            for i, name in enumerate(s["names"]):
+                rows.append(
+                    {
+                        "law": s["law"],
+                        "parameter": name,
+                        "unit": s["units"][i],
+                        "probability": s["probability"],
+                        "mean": s["mean"][i],
+                        "std_dev": s["std_dev"][i],
+                        "q01": s["q01"][i],
+                        "q50": s["q50"][i],
+                        "q99": s["q99"][i],
+                        "map": s["map"][i],
+                    }
+                )
+        return pd.DataFrame(rows)
+
+    def to_datatree(self, population: int = -1) -> Any:
+        """The population (the last by default) as an ``xarray.DataTree``: one node per law
+        with the groups ArviZ reads, ``posterior`` (each parameter over ``chain`` × ``draw``,
+        one chain, in the record's torque unit) and ``sample_stats`` (``weight``, normalised
+        within the law, and the misfit ``rho``), and at the root ``model_probabilities``
+        (population × law, with ``epsilon``). ABC particles carry weights (uniform for the
+        rejection sampler, not for SMC): estimates that ignore ``weight`` treat them as equal.
+        ArviZ 1.x reads a law's node directly (``tree["m2"]``); ArviZ 0.23 through
+        ``arviz.InferenceData.from_datatree(tree["m2"])``."""
+        import xarray as xr
+
+        g = self._population(population)
+        doc = self.document
+        probabilities = self.model_probabilities
+        nodes: dict[str, xr.Dataset] = {
+            "/": xr.Dataset(
+                {
+                    "model_probabilities": (("population", "law"), probabilities[self.laws].to_numpy()),
+                    "epsilon": ("population", probabilities["epsilon"].to_numpy()),
+                },
+                coords={"population": probabilities.index.to_numpy(), "law": self.laws},
+                attrs={"source": doc["data"]["source"], "population": g, "torque_unit": doc["data"]["torque_unit"]},
+            )
+        }
+        particles = self.particles(g)
+        for law in self.laws:
+            names, params, weights, rho, _index = particles.get(
+                law, (_param_names(doc, law), np.zeros((0, len(_param_names(doc, law)))), np.zeros(0), np.zeros(0), None)
+            )
+            units = dict(zip(_param_names(doc, law), _param_units(doc, law)))
+            draws = np.arange(len(weights))
+            nodes[f"/{law}/posterior"] = xr.Dataset(
+                {n: (("chain", "draw"), params[None, :, i], {"units": units.get(n, "")}) for i, n in enumerate(names)},
+                coords={"chain": [0], "draw": draws},
+                attrs={"law": law, "population": g, "inference_library": "bitrock", "inference_library_version": __version__},
+            )
+            total = weights.sum()
+            nodes[f"/{law}/sample_stats"] = xr.Dataset(
+                {
+                    "weight": (("chain", "draw"), (weights / total if total > 0 else weights)[None, :]),
+                    "rho": (("chain", "draw"), rho[None, :]),
+                },
+                coords={"chain": [0], "draw": draws},
+            )
+        return xr.DataTree.from_dict(nodes)
+
+    def __repr__(self) -> str:
+        doc = self.document
+        probabilities = ", ".join(f"{k} {v:.3f}" for k, v in doc["posterior"]["model_probabilities"].items())
+        where = self.path or "in memory"
+        return f"<bitrock.Result {len(doc['populations'])} populations ({where}); {probabilities}>"
+
     def _repr_html_(self) -> str:
         """A notebook's view: where the run lives, the model probabilities of every population
         with its ε, and the run's warnings."""
