@@ -13,6 +13,11 @@
 // invocation: 2x the speed of 1; 16: 1.3x that of 4 for m3, 1.6x for m2). The ratio r is read
 // only when the run scales by weight on bit (override HAS_RATIO).
 //
+// The same loops give the lag-1 sum Σ e_t e_(t-1) of the AR(1) noise model (override LAG, a
+// second pass the host dispatches after the squares): each pair of consecutive samples of a
+// record counts in the quad of its later sample, whose first lane reads the sample before it
+// (the last of the previous quad) once more; one torque more per quad, in that pass only.
+//
 // Accumulation is blocked: 64 samples per block (16 quads, a naive f32 sum), 64 blocks per
 // group, groups summed per dispatch, dispatches (32,768 samples each) added in order, so no
 // partial sum holds more than 64 terms for D up to 4 M (worst-case relative error about
@@ -24,6 +29,9 @@
 
 // False when every sample has r = 1 (the paper's assumption): the ratio column is not read.
 override HAS_RATIO: bool = true;
+
+// True for the lag pass: the kernel sums e_t e_(t-1) instead of e_t².
+override LAG: bool = false;
 
 // Samples 4q..4q+3 of bit speed (rad/s), torque (N·m) and weight-on-bit ratio. The last quad
 // is padded (w = 1) and its missing samples are masked out.
@@ -50,12 +58,17 @@ alias Params = array<array<f32, 6>, 16>;
 alias Laws = array<vec4<u32>, 4>;
 alias Sums = array<vec4<f32>, 4>;
 
-// One quad of data: speeds, torques, ratios and which samples exist.
+// One quad of data: speeds, torques, ratios and which samples exist; in the lag pass also the
+// sample before the quad's first (speed, torque, ratio), if the record has one.
 struct Quad {
     w: vec4<f32>,
     y: vec4<f32>,
     r: vec4<f32>,
     valid: vec4<bool>,
+    w_prev: f32,
+    y_prev: f32,
+    r_prev: f32,
+    has_prev: bool,
 }
 
 // First quad of the record being scored: 0 for the single-record kernels; the multi-record
@@ -71,11 +84,22 @@ fn load_quad(q: u32, end: u32) -> Quad {
         d.r = ratio4[record_quad + q];
     }
     d.valid = vec4<u32>(4u * q) + vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(end);
+    if (LAG && q > 0u) {
+        d.has_prev = true;
+        d.w_prev = speed4[record_quad + q - 1u].w;
+        d.y_prev = torque4[record_quad + q - 1u].w;
+        d.r_prev = 1.0;
+        if (HAS_RATIO) {
+            d.r_prev = ratio4[record_quad + q - 1u].w;
+        }
+    }
     return d;
 }
 
-// Σ (y - r T)² over one quad, given the law's torques t at its speeds.
-fn quad_sq(t: vec4<f32>, d: Quad) -> f32 {
+// Σ e² over one quad, e = y - r T, given the law's torques t at its speeds; in the lag pass
+// Σ e_t e_(t-1) of the pairs whose later sample lies in the quad, given also the torque t_prev
+// at the sample before it.
+fn quad_sq(t: vec4<f32>, t_prev: f32, d: Quad) -> f32 {
     var e: vec4<f32>;
     if (HAS_RATIO) {
         e = d.y - d.r * t;
@@ -83,33 +107,53 @@ fn quad_sq(t: vec4<f32>, d: Quad) -> f32 {
         e = d.y - t;
     }
     e = select(vec4<f32>(0.0), e, d.valid);
+    if (LAG) {
+        let e_prev = select(0.0, d.y_prev - d.r_prev * t_prev, d.has_prev);
+        return dot(e, vec4<f32>(e_prev, e.x, e.y, e.z));
+    }
     return dot(e, e);
 }
 
 fn quad_m1(p: array<f32, 6>, d: Quad) -> f32 {
     let w = d.w;
+    var t_prev = 0.0;
+    if (LAG) {
+        t_prev = torque_m1(p[0], p[1], p[2], p[3], d.w_prev);
+    }
     return quad_sq(vec4<f32>(torque_m1(p[0], p[1], p[2], p[3], w.x), torque_m1(p[0], p[1], p[2], p[3], w.y),
-                             torque_m1(p[0], p[1], p[2], p[3], w.z), torque_m1(p[0], p[1], p[2], p[3], w.w)), d);
+                             torque_m1(p[0], p[1], p[2], p[3], w.z), torque_m1(p[0], p[1], p[2], p[3], w.w)), t_prev, d);
 }
 
 fn quad_m2(p: array<f32, 6>, d: Quad) -> f32 {
     let w = d.w;
+    var t_prev = 0.0;
+    if (LAG) {
+        t_prev = torque_m2(p[0], p[1], p[2], d.w_prev);
+    }
     return quad_sq(vec4<f32>(torque_m2(p[0], p[1], p[2], w.x), torque_m2(p[0], p[1], p[2], w.y),
-                             torque_m2(p[0], p[1], p[2], w.z), torque_m2(p[0], p[1], p[2], w.w)), d);
+                             torque_m2(p[0], p[1], p[2], w.z), torque_m2(p[0], p[1], p[2], w.w)), t_prev, d);
 }
 
 fn quad_m3(p: array<f32, 6>, d: Quad) -> f32 {
     let w = d.w;
+    var t_prev = 0.0;
+    if (LAG) {
+        t_prev = torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], d.w_prev);
+    }
     return quad_sq(vec4<f32>(torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.x),
                              torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.y),
                              torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.z),
-                             torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.w)), d);
+                             torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.w)), t_prev, d);
 }
 
 fn quad_m4(p: array<f32, 6>, d: Quad) -> f32 {
     let w = d.w;
+    var t_prev = 0.0;
+    if (LAG) {
+        t_prev = torque_m4(p[0], p[1], p[2], p[3], d.w_prev);
+    }
     return quad_sq(vec4<f32>(torque_m4(p[0], p[1], p[2], p[3], w.x), torque_m4(p[0], p[1], p[2], p[3], w.y),
-                             torque_m4(p[0], p[1], p[2], p[3], w.z), torque_m4(p[0], p[1], p[2], p[3], w.w)), d);
+                             torque_m4(p[0], p[1], p[2], p[3], w.z), torque_m4(p[0], p[1], p[2], p[3], w.w)), t_prev, d);
 }
 
 // Σ (y - r T)² over quads q0..q1 of law `law` for all 16 parameter vectors; the switch sits

@@ -165,11 +165,35 @@ pub fn score_candidates(problem: &AbcProblem, candidates: &[Candidate], out: &mu
 /// ρ of a candidate: f64 arithmetic on its f32 parameters, widened exactly.
 fn rho_of_candidate(problem: &AbcProblem, c: &Candidate) -> f64 {
     let law = problem.prior.law(c.slot);
-    let mut p = [0.0f64; MAX_PARAMS];
-    for (dst, &src) in p.iter_mut().zip(&c.params) {
-        *dst = f64::from(src);
-    }
-    rho(problem, law, &p[..law.n_params()])
+    rho(problem, law, &widened(law, c))
+}
+
+/// A candidate's law parameters in f64 (exactly its f32 values; unused ones 0).
+fn widened(law: Law, c: &Candidate) -> Vec<f64> {
+    c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect()
+}
+
+/// λ = Σ e_t·e_(t−1) / Σy² of explicit candidates of `problem` into `out` (rayon across
+/// candidates): e = y − r·T(w) over consecutive samples of the record, f64 arithmetic on the
+/// f32 parameters, a compensated sum; +∞ where a torque has no value, as for ρ.
+pub fn lag_sums(problem: &AbcProblem, candidates: &[Candidate], out: &mut [f64]) {
+    assert_eq!(candidates.len(), out.len(), "one lag-1 sum per candidate");
+    out.par_iter_mut()
+        .with_min_len(16)
+        .zip(candidates)
+        .for_each(|(slot, c)| {
+            let law = problem.prior.law(c.slot);
+            let p = widened(law, c);
+            let e: Vec<f64> = problem
+                .speed_rad_s
+                .iter()
+                .zip(&problem.torque_nm)
+                .zip(&problem.wob_ratio)
+                .map(|((&w, &y), &r)| y - law.torque(&p, w, r))
+                .collect();
+            let lag = numerics::compensated_sum(e.windows(2).map(|pair| pair[0] * pair[1]));
+            *slot = super::rho_of_sum(lag, problem.sum_sq_torque);
+        });
 }
 
 /// Terms per block of the kernel sums: each block is a plain sum, blocks are added in groups,

@@ -113,6 +113,16 @@ pub trait Evaluator: Send + Sync {
     /// `out` (as long as `candidates`). Every backend scores the same f32 values, so the
     /// parity of [`Evaluator::score`] holds here too.
     fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()>;
+    /// Writes ρ of explicit candidates into `rho` and λ = Σ e_t·e_(t−1) / Σy² into `lag`: the
+    /// lag-1 sum of their residuals e = y − r·T(w) over consecutive samples of the record, the
+    /// statistic of the AR(1) noise model ([`crate::abc::evidence::NoiseModel`]). λ is held to
+    /// the parity contract relative to ρ (it may be near 0 where ρ is not). The default computes
+    /// λ with the CPU twin, [`cpu::lag_sums`].
+    fn score_params_lagged(&self, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) -> Result<()> {
+        self.score_params(candidates, rho)?;
+        cpu::lag_sums(self.problem(), candidates, lag);
+        Ok(())
+    }
     /// Writes the kernel sums of `sums` (one per target) into `out`. The default is the CPU
     /// twin in f64, [`cpu::kernel_sums`].
     fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {
@@ -143,6 +153,10 @@ impl<T: Evaluator + ?Sized> Evaluator for &T {
 
     fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
         (**self).score_params(candidates, out)
+    }
+
+    fn score_params_lagged(&self, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) -> Result<()> {
+        (**self).score_params_lagged(candidates, rho, lag)
     }
 
     fn kernel_sums(&self, sums: &KernelSums, out: &mut [f64]) -> Result<()> {

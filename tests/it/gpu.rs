@@ -721,3 +721,72 @@ per_shape! {
         assert!((a - b).abs() < 3.0 * ea.hypot(eb), "ln B cpu {a} ± {ea}, gpu {b} ± {eb}");
     }
 }
+
+/// Largest difference between the GPU's and the CPU's λ = Σ e_t·e_(t−1) / Σy² over
+/// `candidates`, relative to ρ (λ may be near 0 where ρ is not: the AR(1) likelihood needs
+/// λ to the precision of ρ, not relative to itself).
+fn lag_difference(problem: &AbcProblem, candidates: &[bitrock::prior::Candidate], shape: Shape) -> f64 {
+    let n = candidates.len();
+    let (mut rho_c, mut lag_c, mut rho_g, mut lag_g) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    CpuEvaluator::new(problem.clone())
+        .score_params_lagged(candidates, &mut rho_c, &mut lag_c)
+        .unwrap();
+    gpu_evaluator(problem, shape)
+        .score_params_lagged(candidates, &mut rho_g, &mut lag_g)
+        .unwrap();
+    // The lag pass leaves ρ to the squares' pass: the same ρ as score_params.
+    let mut rho = vec![0.0; n];
+    gpu_evaluator(problem, shape)
+        .score_params(candidates, &mut rho)
+        .unwrap();
+    assert_eq!(rho, rho_g);
+    // Not a vacuous comparison: lags of a tenth of ρ or more.
+    assert!(lag_c.iter().zip(&rho_c).any(|(l, r)| l.abs() > 0.1 * r));
+    lag_g
+        .iter()
+        .zip(&lag_c)
+        .zip(&rho_c)
+        .map(|((g, c), r)| ((g - c) / r).abs())
+        .fold(0.0, f64::max)
+}
+
+per_shape! {
+    /// The AR(1) noise model's lag-1 sums from the kernels' lag pass agree with the CPU twin
+    /// within the parity contract: on the embedded record for every law, with a fluctuating
+    /// weight-on-bit ratio, past the 32,768-sample slicing of a long record (the pair across a
+    /// slice boundary counted once), and for a law file.
+    fn lag_sums_agree_with_the_cpu_twin(shape: Shape) {
+        require_gpu();
+        let problem = demo_problem(&Law::ALL, 5);
+        let candidates = stream_candidates(&problem, 1, 0, 4_096);
+        let worst = lag_difference(&problem, &candidates, shape);
+        eprintln!("{shape} lag sums: largest difference relative to rho {worst:.2e} (four laws)");
+        assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
+
+        let mut scaled = problem.clone();
+        for (i, r) in scaled.wob_ratio.iter_mut().enumerate() {
+            *r = 1.0 + 0.05 * (i as f64 * 0.01).sin();
+        }
+        let worst = lag_difference(&scaled, &candidates, shape);
+        eprintln!("{shape} lag sums with weight-on-bit ratios: {worst:.2e}");
+        assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
+
+        let big = bitrock::bench::synthetic_problem(Law::M3, 100_003, 3);
+        let candidates = stream_candidates(&big, 0, 0, 256);
+        let worst = lag_difference(&big, &candidates, shape);
+        eprintln!("{shape} lag sums, D = 100,003: {worst:.2e}");
+        assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
+
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws");
+        let file = bitrock::laws::file::register(
+            bitrock::laws::file::LawFile::load(&dir.join("gaussian_tanh.toml")).unwrap(),
+        )
+        .unwrap();
+        let mut as_file = demo_problem(&[Law::M3], 5);
+        as_file.prior.boxes[0].law = file;
+        let candidates = stream_candidates(&as_file, 1, 0, 1_024);
+        let worst = lag_difference(&as_file, &candidates, shape);
+        eprintln!("{shape} lag sums of a law file: {worst:.2e}");
+        assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
+    }
+}

@@ -39,7 +39,7 @@ pub(crate) fn splice(source: &str, laws: &[Law]) -> String {
         let quad = |k: usize| format!("file_quad_{name}(p[{k}], d)");
         writeln!(
             functions,
-            "fn file_quad_{name}(p: array<f32, 6>, d: Quad) -> f32 {{\n    let w = d.w;\n    return quad_sq(vec4<f32>(file_torque_{name}(p, w.x, 1.0), file_torque_{name}(p, w.y, 1.0), file_torque_{name}(p, w.z, 1.0), file_torque_{name}(p, w.w, 1.0)), d);\n}}"
+            "fn file_quad_{name}(p: array<f32, 6>, d: Quad) -> f32 {{\n    let w = d.w;\n    var t_prev = 0.0;\n    if (LAG) {{\n        t_prev = file_torque_{name}(p, d.w_prev, 1.0);\n    }}\n    return quad_sq(vec4<f32>(file_torque_{name}(p, w.x, 1.0), file_torque_{name}(p, w.y, 1.0), file_torque_{name}(p, w.z, 1.0), file_torque_{name}(p, w.w, 1.0)), t_prev, d);\n}}"
         )
         .unwrap();
         write!(blocks, "        case {id}u: {{\n            for (var q = q0; q < q1; q = q + 1u) {{\n                let d = load_quad(q, end);\n").unwrap();

@@ -35,6 +35,8 @@ struct ParamsResources {
     proposals: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
+    /// The same kernel's lag pass (override LAG), built on first use.
+    lag: Option<(wgpu::ComputePipeline, wgpu::BindGroup)>,
 }
 
 /// Scores candidates on the GPU.
@@ -191,8 +193,23 @@ impl GpuEvaluator {
         score_dispatch(self.context, self.shape, &buffers, job, self.data_len, out)
     }
 
-    /// Builds the explicit-parameter pipeline on first use (a rejection run never needs it).
-    fn params_resources<'a>(&self, res: &'a mut Resources) -> std::result::Result<&'a ParamsResources, GpuError> {
+    /// Builds the explicit-parameter pipeline on first use (a rejection run never needs it),
+    /// and its lag pass when `lag` asks for it.
+    fn params_resources<'a>(
+        &self,
+        res: &'a mut Resources,
+        lag: bool,
+    ) -> std::result::Result<&'a ParamsResources, GpuError> {
+        let entries = [
+            buffer_entry(0, STORAGE_READ),
+            buffer_entry(1, UNIFORM),
+            buffer_entry(2, STORAGE_READ),
+            buffer_entry(3, STORAGE_READ),
+            buffer_entry(4, STORAGE_READ),
+            buffer_entry(5, STORAGE_WRITE),
+        ];
+        let file_laws = crate::laws::file::among(self.problem.prior.laws());
+        let label = super::file_laws::label("score_params", &file_laws);
         if res.params.is_none() {
             let ctx = self.context;
             let proposals = ctx.buffer(
@@ -200,17 +217,8 @@ impl GpuEvaluator {
                 (self.params_chunk * size_of::<GpuProposal>()) as u64,
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             )?;
-            let entries = [
-                buffer_entry(0, STORAGE_READ),
-                buffer_entry(1, UNIFORM),
-                buffer_entry(2, STORAGE_READ),
-                buffer_entry(3, STORAGE_READ),
-                buffer_entry(4, STORAGE_READ),
-                buffer_entry(5, STORAGE_WRITE),
-            ];
-            let file_laws = crate::laws::file::among(self.problem.prior.laws());
             let kernel = ctx.kernel(
-                &super::file_laws::label("score_params", &file_laws),
+                &label,
                 self.shape.entry_point(),
                 || super::score_params_source_for(&file_laws),
                 &entries,
@@ -225,17 +233,58 @@ impl GpuEvaluator {
                 proposals,
                 pipeline: kernel.pipeline,
                 bind_group,
+                lag: None,
             });
+        }
+        let params = res.params.as_mut().expect("just built");
+        if lag && params.lag.is_none() {
+            let mut constants = self.shape.constants(res.has_ratio);
+            constants.push(("LAG", 1.0));
+            let kernel = self.context.kernel(
+                &label,
+                self.shape.entry_point(),
+                || super::score_params_source_for(&file_laws),
+                &entries,
+                &constants,
+            )?;
+            let bind_group = self.context.bind_group(
+                "score_params lag",
+                &kernel.layout,
+                &[
+                    &params.proposals,
+                    &res.job,
+                    &res.data[0],
+                    &res.data[1],
+                    &res.data[2],
+                    &res.ssr,
+                ],
+            )?;
+            params.lag = Some((kernel.pipeline, bind_group));
         }
         Ok(res.params.as_ref().expect("just built"))
     }
 
     /// Σ(y − r·T)² (f32) of explicit candidates into `out`.
     pub fn sum_sq_residuals_of(&self, candidates: &[Candidate], out: &mut [f32]) -> std::result::Result<(), GpuError> {
+        self.explicit_sums(candidates, out, false)
+    }
+
+    /// The lag-1 sums Σ e_t·e_(t−1) (f32) of explicit candidates into `out`, e = y − r·T over
+    /// consecutive samples of the record (the AR(1) noise model's statistic).
+    pub fn lag_sums_of(&self, candidates: &[Candidate], out: &mut [f32]) -> std::result::Result<(), GpuError> {
+        self.explicit_sums(candidates, out, true)
+    }
+
+    /// The squares' sums of explicit candidates, or with `lag` their lag-1 sums, into `out`.
+    fn explicit_sums(&self, candidates: &[Candidate], out: &mut [f32], lag: bool) -> std::result::Result<(), GpuError> {
         let mut guard = self.resources.lock().expect("GPU resources");
-        self.params_resources(&mut guard)?;
+        self.params_resources(&mut guard, lag)?;
         let res = &*guard;
         let params = res.params.as_ref().expect("built above");
+        let (pipeline, bind_group) = match &params.lag {
+            Some((pipeline, bind_group)) if lag => (pipeline, bind_group),
+            _ => (&params.pipeline, &params.bind_group),
+        };
         for (cands, chunk) in candidates
             .chunks(self.params_chunk)
             .zip(out.chunks_mut(self.params_chunk))
@@ -247,7 +296,7 @@ impl GpuEvaluator {
             self.context
                 .queue
                 .write_buffer(&params.proposals, 0, bytemuck::cast_slice(&upload));
-            self.dispatch_slices(res, &params.pipeline, &params.bind_group, 0, 0, chunk)?;
+            self.dispatch_slices(res, pipeline, bind_group, 0, 0, chunk)?;
         }
         Ok(())
     }
@@ -281,6 +330,17 @@ impl Evaluator for GpuEvaluator {
         self.sum_sq_residuals_of(candidates, &mut ssr)?;
         for (rho, s) in out.iter_mut().zip(ssr) {
             *rho = crate::eval::rho_of_sum(f64::from(s), self.problem.sum_sq_torque);
+        }
+        Ok(())
+    }
+
+    fn score_params_lagged(&self, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) -> Result<()> {
+        assert_eq!(candidates.len(), lag.len(), "one lag-1 sum per candidate");
+        self.score_params(candidates, rho)?;
+        let mut sums = vec![0.0f32; lag.len()];
+        self.lag_sums_of(candidates, &mut sums)?;
+        for (l, s) in lag.iter_mut().zip(sums) {
+            *l = crate::eval::rho_of_sum(f64::from(s), self.problem.sum_sq_torque);
         }
         Ok(())
     }
