@@ -67,6 +67,7 @@ pub fn fit_json(data: &FieldData, fits: &[LawFit]) -> Value {
 /// The evidence of a record's laws as JSON: the fits, the boxes (record units), and per law
 /// ln Z with its Monte-Carlo error, P(m | y), the sampler's effort and the posterior mean.
 /// `prior` describes the boxes of `boxes` in words.
+#[allow(clippy::too_many_arguments)] // The parts of a pipeline's analysis, which this layer cannot name.
 pub fn evidence_json(
     data: &FieldData,
     fits: &[LawFit],
@@ -74,6 +75,7 @@ pub fn evidence_json(
     evidence: &crate::abc::evidence::Evidence,
     separations: &[crate::separation::Separation],
     residual_lag1: &[f64],
+    noise_models: &[crate::abc::evidence::NoiseEvidence],
     prior: &str,
 ) -> Value {
     let torque = data.torque_unit.label();
@@ -120,7 +122,13 @@ pub fn evidence_json(
         "torque_unit": torque,
         "speed_unit_of_params": "rad/s",
         "data_points": evidence.data_points,
-        "noise_model": "iid_gaussian_jeffreys_sigma",
+        "noise_model": evidence.config.noise,
+        // The reported row's W_ref: the posterior's torque parameters are for W = W_ref.
+        "w_ref_kn": noise_models
+            .iter()
+            .max_by(|a, b| a.probability.total_cmp(&b.probability))
+            .and_then(|row| row.w_ref_kn),
+        "noise_models": noise_models,
         "ln_z_torque_unit": "N·m",
         "prior": prior,
         "sampler": evidence.config,

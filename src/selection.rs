@@ -669,8 +669,8 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
         source: run
             .dir
             .join(format!("{SELECTION_DIR}/{law}-replicate-{}", job.replicate)),
-        calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &residuals, &mut rng),
-        validation: synthesize(law, &params_si, &data.validation, w_ref_n, &residuals, &mut rng),
+        calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &residuals, 0.0, &mut rng),
+        validation: synthesize(law, &params_si, &data.validation, w_ref_n, &residuals, 0.0, &mut rng),
         warnings: Vec::new(),
         ..data.clone()
     };
@@ -796,22 +796,35 @@ pub(crate) fn draw_by_weight<'a>(
     last.map(<[f64]>::to_vec)
 }
 
-/// `samples` with its torque replaced by r·T(w) of `law` at `params` plus residuals drawn
-/// with replacement from `residuals`.
+/// `samples` with its torque replaced by r·T(w) of `law` at `params` plus noise e_t drawn
+/// with replacement from `draws`; with `phi` ≠ 0 the draws are the innovations of an AR(1)
+/// filter, e_t = φ·e_(t−1) + u_t, its first value scaled to the stationary spread (a sieve
+/// bootstrap: the residuals' distribution and their lag-1 correlation kept). `phi` = 0 gives
+/// i.i.d. resampling.
 pub(crate) fn synthesize(
     law: Law,
     params: &[f64],
     samples: &Samples,
     w_ref_n: Option<f64>,
-    residuals: &[f64],
+    draws: &[f64],
+    phi: f64,
     rng: &mut StdRng,
 ) -> Samples {
     let r = samples.wob_ratio(w_ref_n);
+    let mut previous: Option<f64> = None;
     let torque_nm = samples
         .speed_rad_s
         .iter()
         .zip(&r)
-        .map(|(&w, &r)| law.torque(params, w, r) + residuals[rng.random_range(0..residuals.len())])
+        .map(|(&w, &r)| {
+            let u = draws[rng.random_range(0..draws.len())];
+            let e = match previous {
+                None => u / (1.0 - phi * phi).sqrt(),
+                Some(e) => phi * e + u,
+            };
+            previous = Some(e);
+            law.torque(params, w, r) + e
+        })
         .collect();
     Samples {
         torque_nm,

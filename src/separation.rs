@@ -77,7 +77,11 @@ pub const AUTOCORRELATED: f64 = 0.3;
 /// and then the i.i.d. likelihood counts n samples where the information of about
 /// n·(1 − φ)/(1 + φ) independent ones lies. NaN without two residuals or with all of them 0.
 pub fn residual_lag1(fit: &LawFit, samples: &Samples, opts: &FitOptions) -> f64 {
-    let e = crate::fit::residuals(fit.law, &fit.params_si, samples, opts.w_ref_n);
+    lag1_of(&crate::fit::residuals(fit.law, &fit.params_si, samples, opts.w_ref_n))
+}
+
+/// Σ e_t·e_(t−1) / Σ e² of residuals `e` in time order; NaN for fewer than two or all zero.
+pub fn lag1_of(e: &[f64]) -> f64 {
     let lagged = crate::numerics::compensated_sum(e.windows(2).map(|w| w[0] * w[1]));
     let squares = crate::numerics::compensated_sum(e.iter().map(|v| v * v));
     if e.len() < 2 || squares <= 0.0 {

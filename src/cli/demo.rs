@@ -132,7 +132,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     }
     writeln!(
         out,
-        "\nmodel evidence: tempered SMC per law over physical boxes (no fit involved), i.i.d. Gaussian residuals"
+        "\nmodel evidence: tempered SMC per law over physical boxes (no fit involved), i.i.d. and AR(1) residuals, the noise model chosen by its evidence"
     )?;
     let evidence = EvidenceJob {
         laws: defaults.laws.clone(),
@@ -280,7 +280,8 @@ fn print_headline(
         .collect();
     writeln!(
         out,
-        "model evidence (physical boxes, i.i.d. Gaussian residuals): {}",
+        "model evidence (physical boxes, {}): {}",
+        evidence.evidence.config.noise.label(),
         probabilities.join(", ")
     )?;
     if let Some(top) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z)) {

@@ -3,7 +3,7 @@
 
 use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
 use super::print;
-use bitrock::abc::evidence::{EvidenceConfig, LN_Z_PER_DOUBLING, strength};
+use bitrock::abc::evidence::{EvidenceConfig, LN_Z_PER_DOUBLING, NoiseModel, strength};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
@@ -24,6 +24,28 @@ pub enum Boxes {
     Physical,
     /// The paper's φ̂(1 ± δ) around the least-squares estimates (--delta): the data used twice.
     Delta,
+}
+
+/// The noise model of the residuals.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Noise {
+    /// Every model's evidence; the data choose (the largest p(y | model)).
+    Auto,
+    /// Independent Gaussian residuals.
+    Iid,
+    /// AR(1) Gaussian residuals (correlated from one sample to the next), φ integrated out.
+    Ar1,
+}
+
+impl Noise {
+    /// The model named, or `None` for the data's choice.
+    pub fn model(self) -> Option<NoiseModel> {
+        match self {
+            Noise::Auto => None,
+            Noise::Iid => Some(NoiseModel::Iid),
+            Noise::Ar1 => Some(NoiseModel::Ar1),
+        }
+    }
 }
 
 #[derive(Debug, Args)]
@@ -47,6 +69,10 @@ pub struct EvidenceCmd {
     /// speaks (format in docs/commands.md).
     #[arg(long, value_name = "FILE")]
     pub prior: Option<PathBuf>,
+    /// The residuals' noise model: auto computes the evidence under each and reports the one
+    /// the data favour (twice the work, and more for ar1's lag pass).
+    #[arg(long, value_enum, default_value_t = Noise::Auto)]
+    pub noise: Noise,
     /// Particles of each independent sampler (island).
     #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]
     pub particles: usize,
@@ -119,7 +145,9 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             max_stages: cmd.max_stages,
             ess_share: cmd.ess_share,
             max_sweeps: cmd.max_sweeps,
+            ..EvidenceConfig::default()
         },
+        noise: cmd.noise.model(),
     };
     job.sampler.validate()?;
     cmd.check.map(evidence::check_replicates).transpose()?;
@@ -132,6 +160,14 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         let particles = analysis.evidence.particles();
         let csv = bitrock::documents::particle_groups_csv(&[(0, &particles)], &job.laws, data.torque_unit);
         bitrock::run::dir::write_whole(path, "posterior_out", false, |file| file.write_all(&csv))?;
+        if let Some(w_ref_n) = analysis.fit.w_ref_n {
+            print::note(format_args!(
+                "note: the posterior's torque parameters are for W = W_ref = {:.3} kN (each predicted torque scaled by WOB / W_ref): map it with `bitrock stability --posterior {} --w-ref-kn {:.3}`",
+                w_ref_n / 1000.0,
+                path.display(),
+                w_ref_n / 1000.0
+            ));
+        }
     }
     let quiet = cmd.quiet;
     let check = cmd
@@ -154,6 +190,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             &analysis.evidence,
             &analysis.separations,
             &analysis.residual_lag1,
+            &analysis.noise_models,
             &job.prior.describe(),
         );
         if let Some(check) = &check {
@@ -187,8 +224,11 @@ fn tables(
     )?;
     writeln!(
         out,
-        "model evidence: tempered SMC per law, {} islands × {} particles; residuals i.i.d. Gaussian, σ integrated out (Jeffreys prior)",
-        config.islands, config.particles
+        "model evidence: tempered SMC per law, {} islands × {} particles; noise model: {}{}",
+        config.islands,
+        config.particles,
+        config.noise.describe(),
+        scaling(analysis.fit.w_ref_n.map(|w| w / 1000.0))
     )?;
     writeln!(out, "prior: {}\n", job.prior.describe())?;
     print::separation_tables(out, &analysis.separations, &job.laws)?;
@@ -249,17 +289,50 @@ fn tables(
         "\nresidual lag-1 autocorrelation of the fits (time order): {}",
         lag1.join(", ")
     )?;
+    if analysis.noise_models.len() > 1 {
+        writeln!(
+            out,
+            "\nmodels of the residuals (equal prior odds):\n  noise  torque            ln p(y | model)   ± MC error   P(model | y)   first law"
+        )?;
+        let reported = analysis
+            .noise_models
+            .iter()
+            .map(|row| row.probability)
+            .fold(f64::NEG_INFINITY, f64::max);
+        for row in &analysis.noise_models {
+            let torque = match row.w_ref_kn {
+                Some(w) => format!("× WOB/{w:.1} kN"),
+                None => "as the law".to_string(),
+            };
+            let mark = if row.probability == reported {
+                "  ← reported"
+            } else {
+                ""
+            };
+            writeln!(
+                out,
+                "  {:<6} {:<16} {:>16.2} {:>12.2} {:>14.4}   {} ({:.3}){mark}",
+                row.model.name(),
+                torque,
+                row.ln_evidence,
+                row.ln_evidence_error,
+                row.probability,
+                row.first_law,
+                row.first_probability,
+            )?;
+        }
+    }
     if let Some(phi) = analysis
         .residual_lag1
         .iter()
         .copied()
         .filter(|phi| phi.is_finite())
         .reduce(f64::min)
-        .filter(|&phi| phi > AUTOCORRELATED)
+        .filter(|&phi| phi > AUTOCORRELATED && config.noise == NoiseModel::Iid)
     {
         writeln!(
             out,
-            "warning: every law's residuals are autocorrelated (lag-1 at least {phi:.2}): the i.i.d. noise model counts each sample as independent and overstates every Bayes factor, by about (1 + φ)/(1 − φ) = {:.1} times in nats; thin the record (--thin) until the lag-1 falls below {AUTOCORRELATED}",
+            "warning: every law's residuals are autocorrelated (lag-1 at least {phi:.2}): the i.i.d. noise model counts each sample as independent and overstates every Bayes factor, by about (1 + φ)/(1 − φ) = {:.1} times in nats; the AR(1) model (--noise ar1) accounts for it",
             (1.0 + phi) / (1.0 - phi)
         )?;
     }
@@ -303,6 +376,13 @@ fn tables(
         evidence.candidates_scored, evidence.evaluations as f64, evidence.backend, evidence.seconds
     )?;
     Ok(())
+}
+
+/// "; each predicted torque scaled by WOB / W_ref" where the evidence scaled it, W_ref in kN.
+fn scaling(w_ref_kn: Option<f64>) -> String {
+    w_ref_kn.map_or(String::new(), |w| {
+        format!("; each predicted torque scaled by WOB / W_ref, W_ref = {w:.1} kN")
+    })
 }
 
 /// The check's confusion matrix and verdicts.

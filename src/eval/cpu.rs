@@ -20,35 +20,70 @@ impl CpuEvaluator {
     }
 }
 
-/// Σ (y − r·T(w))² with four Kahan accumulators over interleaved samples, merged by a
-/// compensated sum: the result is exact to a few ulps for any D.
+/// Four Kahan accumulators over interleaved samples.
+#[derive(Clone, Copy, Default)]
+struct Lanes {
+    sum: [f64; 4],
+    carry: [f64; 4],
+}
+
+impl Lanes {
+    #[inline(always)]
+    fn add(&mut self, terms: [f64; 4]) {
+        for ((sum, carry), term) in self.sum.iter_mut().zip(&mut self.carry).zip(terms) {
+            let term = term - *carry;
+            let t = *sum + term;
+            *carry = (t - *sum) - term;
+            *sum = t;
+        }
+    }
+
+    /// The lanes and `tail` merged by a compensated sum.
+    fn total(self, tail: impl Iterator<Item = f64>) -> f64 {
+        numerics::compensated_sum(self.sum.into_iter().chain(self.carry.iter().map(|c| -c)).chain(tail))
+    }
+}
+
+/// Σ e² and, with `LAG`, Σ e_t·e_(t−1) over consecutive samples (else 0), e = y − r·T(w),
+/// each in four Kahan accumulators over interleaved samples, merged by a compensated sum: exact
+/// to a few ulps for any D.
 #[inline(always)]
-fn sum_sq_residual(w: &[f64], y: &[f64], r: &[f64], torque: impl Fn(f64) -> f64) -> f64 {
+fn residual_sums<const LAG: bool>(w: &[f64], y: &[f64], r: &[f64], torque: impl Fn(f64) -> f64) -> (f64, f64) {
     const LANES: usize = 4;
-    let mut sum = [0.0f64; LANES];
-    let mut carry = [0.0f64; LANES];
+    let (mut squares, mut lags) = (Lanes::default(), Lanes::default());
+    // The residual before the current quad (none before the first sample).
+    let mut previous = 0.0f64;
     let (wc, yc, rc) = (w.chunks_exact(LANES), y.chunks_exact(LANES), r.chunks_exact(LANES));
     // The last D mod 4 samples, summed after the lanes (lazily: no allocation per candidate).
     let (w_tail, y_tail, r_tail) = (wc.remainder(), yc.remainder(), rc.remainder());
     for ((w, y), r) in wc.zip(yc).zip(rc) {
         let (w, y, r): (&[f64; LANES], &[f64; LANES], &[f64; LANES]) =
             (w.try_into().unwrap(), y.try_into().unwrap(), r.try_into().unwrap());
-        let mut term = [0.0f64; LANES];
+        let mut e = [0.0f64; LANES];
         for l in 0..LANES {
-            let e = y[l] - r[l] * torque(w[l]);
-            term[l] = e * e - carry[l];
+            e[l] = y[l] - r[l] * torque(w[l]);
         }
-        for l in 0..LANES {
-            let t = sum[l] + term[l];
-            carry[l] = (t - sum[l]) - term[l];
-            sum[l] = t;
+        squares.add([e[0] * e[0], e[1] * e[1], e[2] * e[2], e[3] * e[3]]);
+        if LAG {
+            lags.add([e[0] * previous, e[1] * e[0], e[2] * e[1], e[3] * e[2]]);
+            previous = e[3];
         }
     }
-    let tail = w_tail.iter().zip(y_tail).zip(r_tail).map(|((&w, &y), &r)| {
-        let e = y - r * torque(w);
-        e * e
+    let mut tail = [0.0f64; LANES];
+    for (k, ((&w, &y), &r)) in w_tail.iter().zip(y_tail).zip(r_tail).enumerate() {
+        tail[k] = y - r * torque(w);
+    }
+    let tail = &tail[..w_tail.len()];
+    let ssr = squares.total(tail.iter().map(|e| e * e));
+    if !LAG {
+        return (ssr, 0.0);
+    }
+    let tail_lags = tail.iter().scan(previous, |before, &e| {
+        let product = e * *before;
+        *before = e;
+        Some(product)
     });
-    numerics::compensated_sum(sum.into_iter().chain(carry.iter().map(|c| -c)).chain(tail))
+    (ssr, lags.total(tail_lags))
 }
 
 /// ρ of one law at f64 parameters `p` against the problem's data.
@@ -58,44 +93,59 @@ fn sum_sq_residual(w: &[f64], y: &[f64], r: &[f64], torque: impl Fn(f64) -> f64)
 /// time. Both paths perform the same IEEE operations (Rust never fuses a multiply-add on its
 /// own), so they return the same bits.
 pub fn rho(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
+    super::rho_of_sum(sums::<false>(problem, law, p).0, problem.sum_sq_torque)
+}
+
+/// ρ and λ = Σ e_t·e_(t−1) / Σy² of one law at f64 parameters `p`, in one pass over the data
+/// (see [`rho`]).
+pub fn rho_and_lag(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
+    let (ssr, lag) = sums::<true>(problem, law, p);
+    (
+        super::rho_of_sum(ssr, problem.sum_sq_torque),
+        super::rho_of_sum(lag, problem.sum_sq_torque),
+    )
+}
+
+/// Σ e² and (with `LAG`) Σ e_t·e_(t−1) of one law at `p`, on AVX2 where the CPU has it.
+fn sums<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2, checked just above.
-        return unsafe { rho_avx2(problem, law, p) };
+        return unsafe { sums_avx2::<LAG>(problem, law, p) };
     }
-    rho_portable(problem, law, p)
+    sums_portable::<LAG>(problem, law, p)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn rho_avx2(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
-    rho_portable(problem, law, p)
+fn sums_avx2<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
+    sums_portable::<LAG>(problem, law, p)
 }
 
 #[inline(always)]
-fn rho_portable(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
+fn sums_portable<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
     let (w, y, r) = (&problem.speed_rad_s[..], &problem.torque_nm[..], &problem.wob_ratio[..]);
     // Parameters are copied into locals first: indexing `p` inside the closure keeps bounds
     // checks in the loop and stops it vectorising (3x slower for m3).
-    let ssr = match law {
+    match law {
         Law::M1 => {
             let (b0, b1, b2, b3) = (p[0], p[1], p[2], p[3]);
-            sum_sq_residual(w, y, r, |w| b0 * (numerics::tanh(b1 * w) + b2 * w / (1.0 + b3 * w * w)))
+            residual_sums::<LAG>(w, y, r, |w| b0 * (numerics::tanh(b1 * w) + b2 * w / (1.0 + b3 * w * w)))
         }
         Law::M2 => {
             let (drop, tcb, g) = (p[0] - p[1], p[1], p[2]);
-            sum_sq_residual(w, y, r, |w| drop * numerics::exp(-g * w) + tcb)
+            residual_sums::<LAG>(w, y, r, |w| drop * numerics::exp(-g * w) + tcb)
         }
         Law::M3 => {
             let (a0, a1, a2, a3, a4, a5) = (p[0], p[1], p[2], p[3], p[4], p[5]);
-            sum_sq_residual(w, y, r, |w| {
+            residual_sums::<LAG>(w, y, r, |w| {
                 let d = w - a2;
                 a0 * numerics::exp(-a1 * d * d) + a3 - a4 * numerics::tanh(a5 * w)
             })
         }
         Law::M4 => {
             let (c0, c1, c2, c3) = (p[0], p[1], p[2], p[3]);
-            sum_sq_residual(w, y, r, |w| c0 + w * (c1 + w * (c2 + w * c3)))
+            residual_sums::<LAG>(w, y, r, |w| c0 + w * (c1 + w * (c2 + w * c3)))
         }
         Law::File(id) => {
             // T = r · T(r = 1): the file's torque is checked proportional to r when read. Its
@@ -109,12 +159,11 @@ fn rho_portable(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
             for (ws, out) in w.chunks(BLOCK).zip(torques.chunks_mut(BLOCK)) {
                 program.eval_block(p, ws, out, &mut registers);
             }
-            let ssr = sum_sq_residual(&torques, y, r, |t| t);
+            let sums = residual_sums::<LAG>(&torques, y, r, |t| t);
             FILE_LAW_SCRATCH.set((torques, registers));
-            ssr
+            sums
         }
-    };
-    super::rho_of_sum(ssr, problem.sum_sq_torque)
+    }
 }
 
 thread_local! {
@@ -140,6 +189,11 @@ impl Evaluator for CpuEvaluator {
 
     fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
         score_candidates(&self.problem, candidates, out);
+        Ok(())
+    }
+
+    fn score_params_lagged(&self, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) -> Result<()> {
+        score_candidates_lagged(&self.problem, candidates, rho, lag);
         Ok(())
     }
 }
@@ -173,27 +227,27 @@ fn widened(law: Law, c: &Candidate) -> Vec<f64> {
     c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect()
 }
 
-/// λ = Σ e_t·e_(t−1) / Σy² of explicit candidates of `problem` into `out` (rayon across
-/// candidates): e = y − r·T(w) over consecutive samples of the record, f64 arithmetic on the
-/// f32 parameters, a compensated sum; +∞ where a torque has no value, as for ρ.
-pub fn lag_sums(problem: &AbcProblem, candidates: &[Candidate], out: &mut [f64]) {
-    assert_eq!(candidates.len(), out.len(), "one lag-1 sum per candidate");
-    out.par_iter_mut()
+/// ρ and λ = Σ e_t·e_(t−1) / Σy² of explicit candidates of `problem` into `rho` and `lag`
+/// (rayon across candidates): e = y − r·T(w) over consecutive samples of the record, f64
+/// arithmetic on the f32 parameters, compensated sums; +∞ where a torque has no value.
+pub fn score_candidates_lagged(problem: &AbcProblem, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) {
+    assert_eq!(candidates.len(), rho.len(), "one ρ per candidate");
+    assert_eq!(candidates.len(), lag.len(), "one lag-1 sum per candidate");
+    rho.par_iter_mut()
+        .zip(lag.par_iter_mut())
         .with_min_len(16)
         .zip(candidates)
-        .for_each(|(slot, c)| {
+        .for_each(|((rho, lag), c)| {
             let law = problem.prior.law(c.slot);
-            let p = widened(law, c);
-            let e: Vec<f64> = problem
-                .speed_rad_s
-                .iter()
-                .zip(&problem.torque_nm)
-                .zip(&problem.wob_ratio)
-                .map(|((&w, &y), &r)| y - law.torque(&p, w, r))
-                .collect();
-            let lag = numerics::compensated_sum(e.windows(2).map(|pair| pair[0] * pair[1]));
-            *slot = super::rho_of_sum(lag, problem.sum_sq_torque);
+            (*rho, *lag) = rho_and_lag(problem, law, &widened(law, c));
         });
+}
+
+/// λ alone of explicit candidates into `out` (see [`score_candidates_lagged`]): the CPU twin
+/// of the kernels' lag pass.
+pub fn lag_sums(problem: &AbcProblem, candidates: &[Candidate], out: &mut [f64]) {
+    let mut rho = vec![0.0; out.len()];
+    score_candidates_lagged(problem, candidates, &mut rho, out);
 }
 
 /// Terms per block of the kernel sums: each block is a plain sum, blocks are added in groups,

@@ -552,9 +552,11 @@ impl Prepared<'_> {
         let _ = writeln!(md, "\n## Model evidence\n");
         let _ = writeln!(
             md,
-            "Marginal likelihood of each law (tempered SMC per law, {} islands × {} particles; residuals i.i.d. Gaussian, \
-             σ integrated out; ln Z with torques in N·m) and the posterior law probabilities it gives.\n",
-            evidence.config.islands, evidence.config.particles
+            "Marginal likelihood of each law (tempered SMC per law, {} islands × {} particles; {}; ln Z with torques \
+             in N·m) and the posterior law probabilities it gives.\n",
+            evidence.config.islands,
+            evidence.config.particles,
+            evidence.config.noise.describe()
         );
         let _ = writeln!(md, "| law | ln Z | ± Monte-Carlo error | P(m \\| y) | islands agree |");
         let _ = writeln!(md, "|---|---|---|---|---|");

@@ -5,7 +5,7 @@
 use crate::support::{bin, outcome, rng, samples};
 use bitrock::Law;
 use bitrock::abc::Silent;
-use bitrock::abc::evidence::{self, EvidenceConfig, log_likelihood_constant};
+use bitrock::abc::evidence::{self, EvidenceConfig, NoiseModel, log_likelihood_constant};
 use bitrock::eval::AbcProblem;
 use bitrock::eval::Backend;
 use bitrock::eval::cpu::CpuEvaluator;
@@ -228,6 +228,28 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
         let phi = law["residual_lag1"].as_f64().unwrap();
         assert!((-1.0..=1.0).contains(&phi), "{phi}");
     }
+    // Both noise models compared (the record's weight on bit is constant: no scaling to
+    // compare); the one reported is the more probable.
+    let models = doc["noise_models"].as_array().unwrap();
+    assert_eq!(models.len(), 2);
+    let best = models
+        .iter()
+        .max_by(|a, b| {
+            a["probability"]
+                .as_f64()
+                .unwrap()
+                .total_cmp(&b["probability"].as_f64().unwrap())
+        })
+        .unwrap();
+    assert_eq!(doc["noise_model"], best["model"]);
+    assert!(doc["w_ref_kn"].is_null() && best["w_ref_kn"].is_null());
+    let total: f64 = models.iter().map(|m| m["probability"].as_f64().unwrap()).sum();
+    assert!((total - 1.0).abs() < 1e-12, "{total}");
+    let (code, named, err) = outcome(&mut args(&["--json", "--noise", "ar1"]));
+    assert_eq!(code, 0, "{err}");
+    let named: serde_json::Value = serde_json::from_str(&named).unwrap();
+    assert_eq!(named["noise_model"], "ar1");
+    assert_eq!(named["noise_models"].as_array().unwrap().len(), 1);
     // Physical boxes: from the bound 0 of the static torque, in the record's kN·m.
     assert_eq!(laws[0]["lower"][0].as_f64(), Some(0.0));
     assert_eq!(doc["torque_unit"], "kN·m");
@@ -258,6 +280,7 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
         ("--particles", "5", "--particles"),
         ("--max-stages", "0", "--max-stages"),
         ("--check", "0", "--check"),
+        ("--noise", "ar2", "--noise"),
     ] {
         let (code, out, err) = outcome(&mut args(&[flag, value]));
         assert_eq!(code, 2, "{flag} {value}: {err}");
@@ -339,4 +362,89 @@ fn the_evidence_ranks_a_separated_generating_law_first_and_never_decides_an_inse
     for (short, long) in shorter.rows.iter().zip(&check_23.rows) {
         assert_eq!(short.replicates[..], long.replicates[..3]);
     }
+}
+
+/// A record of m2 by `bitrock simulate` at 60 rpm, 10 Hz for 240 s with 0.6 kN·m of torque
+/// noise and, with `wob_kn`, a weight on bit fluctuating by that much with a 5 s correlation
+/// time (torque follows it: residuals correlated from one sample to the next).
+fn m2_with_fluctuating_wob(dir: &std::path::Path, wob_kn: &str) -> bitrock::data::FieldData {
+    let path = dir.join(format!("m2-wob-{wob_kn}.csv"));
+    let (code, _, err) = outcome(bin().args([
+        "simulate",
+        "--law",
+        "m2",
+        "--omega-rpm",
+        "60",
+        "--duration-s",
+        "240",
+        "--sample-hz",
+        "10",
+        "--noise-torque-knm",
+        "0.6",
+        "--wob-fluctuation-kn",
+        wob_kn,
+        "--wob-correlation-s",
+        "5",
+        "--seed",
+        "3",
+        "--out",
+        path.to_str().unwrap(),
+    ]));
+    assert_eq!(code, 0, "{err}");
+    bitrock::data::read_field_data(&path, &Default::default()).unwrap()
+}
+
+/// The model of the residuals chosen by its evidence: i.i.d. where they are independent; where
+/// a fluctuating weight on bit drives the torque, the torque scaled by the record's weight on
+/// bit, by tens of nats, and without that scaling AR(1) before i.i.d., again by many nats (the
+/// i.i.d. model counts every sample as independent information).
+#[test]
+fn the_data_choose_the_model_of_the_residuals() {
+    let dir = tempfile::tempdir().unwrap();
+    let job = EvidenceJob {
+        laws: vec![Law::M2, Law::M3],
+        backend: Backend::Cpu,
+        sampler: EvidenceConfig {
+            particles: 200,
+            islands: 3,
+            seed: 2,
+            ..EvidenceConfig::default()
+        },
+        ..EvidenceJob::default()
+    };
+    let steady = job.run(&m2_with_fluctuating_wob(dir.path(), "0"), &mut Silent).unwrap();
+    // A constant weight on bit scales nothing: the two noise models alone.
+    let rows = &steady.noise_models;
+    assert_eq!(rows.len(), 2);
+    assert_eq!((rows[0].model, rows[1].model), (NoiseModel::Iid, NoiseModel::Ar1));
+    assert!(rows.iter().all(|r| r.w_ref_kn.is_none()));
+    // φ's Occam factor, about 4 nats at this length, less what chance correlation buys back.
+    let gap = rows[1].ln_evidence - rows[0].ln_evidence;
+    assert!(gap < -2.0, "{gap}");
+    assert_eq!(steady.evidence.config.noise, NoiseModel::Iid);
+    assert_eq!(steady.fit.w_ref_n, None);
+
+    let driven = job
+        .run(&m2_with_fluctuating_wob(dir.path(), "12"), &mut Silent)
+        .unwrap();
+    let rows = &driven.noise_models;
+    for row in rows {
+        eprintln!(
+            "{} {:?}: ln p(y | model) = {:.2} ± {:.2}, P = {:.4}",
+            row.model, row.w_ref_kn, row.ln_evidence, row.ln_evidence_error, row.probability
+        );
+    }
+    assert_eq!(rows.len(), 4);
+    let (plain_iid, plain_ar1, scaled_iid) = (&rows[0], &rows[1], &rows[2]);
+    assert!(plain_iid.w_ref_kn.is_none() && scaled_iid.w_ref_kn.is_some());
+    assert!(
+        driven.residual_lag1.iter().all(|&phi| phi.abs() < 0.15),
+        "{:?}",
+        driven.residual_lag1
+    );
+    assert!(plain_ar1.ln_evidence - plain_iid.ln_evidence > 10.0);
+    assert!(scaled_iid.ln_evidence - plain_ar1.ln_evidence > 10.0);
+    let w_ref_kn = driven.fit.w_ref_n.expect("the scaled torque reported") / 1000.0;
+    assert_eq!(Some(w_ref_kn), scaled_iid.w_ref_kn);
+    assert!((200.0..300.0).contains(&w_ref_kn), "{w_ref_kn}");
 }

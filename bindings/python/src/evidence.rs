@@ -59,6 +59,14 @@ pub(crate) fn evidence(
             max_stages: kwarg(options, "max_stages")?.unwrap_or(defaults.max_stages),
             ..defaults
         },
+        noise: match kwarg::<String>(options, "noise")?
+            .as_deref()
+            .map(str::to_lowercase)
+            .as_deref()
+        {
+            None | Some("auto") => None,
+            Some(_) => named(py, "noise", kwarg(options, "noise")?)?,
+        },
     };
     let replicates: Option<usize> = kwarg(options, "check")?;
     if let Some(k) = replicates {
@@ -88,6 +96,7 @@ pub(crate) fn evidence(
         &analysis.evidence,
         &analysis.separations,
         &analysis.residual_lag1,
+        &analysis.noise_models,
         &job.prior.describe(),
     );
     for (entry, law) in document["laws"]

@@ -103,3 +103,43 @@ def test_the_evidence_posterior_maps_with_its_law_probabilities(small) -> None:
     grid = maps["probability_unstable"].values
     assert np.all(np.isnan(grid) | ((grid >= 0) & (grid <= 1)))
     assert set(maps["law"].values) == {law for law, p in probabilities.items() if p > 0}
+
+
+def test_the_noise_model_is_compared_or_named(small) -> None:
+    models = small.noise_models
+    # Each noise model with the torque as the laws give it, then scaled by the record's weight
+    # on bit.
+    assert list(models["model"]) == ["iid", "ar1", "iid", "ar1"]
+    assert models["w_ref_kn"].isna().sum() == 2
+    assert models["probability"].sum() == pytest.approx(1.0, abs=1e-12)
+    best = models.loc[models["probability"].idxmax()]
+    assert small.noise_model == best["model"]
+    assert small.w_ref_kn == (None if np.isnan(best["w_ref_kn"]) else pytest.approx(best["w_ref_kn"]))
+    named = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), noise="ar1", **SMALL)
+    assert named.noise_model == "ar1" and list(named.noise_models["model"]) == ["ar1", "ar1"]
+    with pytest.raises(bitrock.InputError, match="noise"):
+        bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), noise="ar2", **SMALL)
+
+
+def test_a_record_with_weight_on_bit_compares_the_torque_scaled_by_it() -> None:
+    # Torque follows a weight on bit that fluctuates by 12 kN with a 5 s correlation time.
+    frame = bitrock.simulate(
+        "m2", omega_rpm=60, duration_s=120, sample_hz=10, noise_torque_knm=0.6, wob_fluctuation_kn=12,
+        wob_correlation_s=5, seed=3,
+    )
+    record = bitrock.read_record(frame)
+    ev = bitrock.evidence(record, laws=["m2", "m4"], particles=60, islands=2, seed=5, backend="cpu")
+    models = ev.noise_models
+    assert len(models) == 4 and models["w_ref_kn"].notna().sum() == 2
+    # W_ref is the calibration samples' mean weight on bit, near the record's.
+    assert models["w_ref_kn"].dropna().iloc[0] == pytest.approx(float(frame["wob_kn"].mean()), rel=0.02)
+    # The data choose the scaled torque, by tens of nats.
+    scaled = models[models["w_ref_kn"].notna()]["ln_evidence"].max()
+    plain = models[models["w_ref_kn"].isna()]["ln_evidence"].max()
+    assert scaled - plain > 10.0
+    assert ev.w_ref_kn == pytest.approx(models["w_ref_kn"].dropna().iloc[0])
+    # Its posterior maps at its own W_ref, not the paper's 244.2 kN.
+    grid = {"omega_rpm": "20:220:6", "wob_kn": "50:600:6", "samples": 20, "backend": "cpu"}
+    maps = bitrock.stability(ev, **grid)
+    assert maps.equals(bitrock.stability(ev, w_ref_kn=ev.w_ref_kn, **grid))
+    assert not maps.equals(bitrock.stability(ev, w_ref_kn=244.2, **grid))

@@ -19,7 +19,7 @@
 
 use super::{EvidenceAnalysis, EvidenceJob};
 use crate::abc::Observer;
-use crate::abc::evidence::strength;
+use crate::abc::evidence::{NoiseModel, strength};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
@@ -168,21 +168,39 @@ fn replicate_of(
     let mut rng = StdRng::seed_from_u64(seed);
     let sets = evidence.posterior.iter().map(|(p, w)| (p.as_slice(), *w));
     let params_si = draw_by_weight(sets, &mut rng).unwrap_or_else(|| fit.params_si.clone());
-    let w_ref_n = job.fit.w_ref_n;
-    let noise = residuals(law, &fit.params_si, &data.calibration, w_ref_n);
+    let w_ref_n = analysis.fit.w_ref_n;
+    let noise_model = analysis.evidence.config.noise;
+    let e = residuals(law, &fit.params_si, &data.calibration, w_ref_n);
+    // Under the AR(1) model the noise keeps the residuals' lag-1 correlation: its innovations
+    // are resampled and filtered again.
+    let phi = match noise_model {
+        NoiseModel::Iid => 0.0,
+        NoiseModel::Ar1 => Some(crate::separation::lag1_of(&e))
+            .filter(|phi| phi.is_finite())
+            .map_or(0.0, |phi| phi.clamp(-0.99, 0.99)),
+    };
+    let draws: Vec<f64> = if phi == 0.0 {
+        e
+    } else {
+        e.windows(2).map(|pair| pair[1] - phi * pair[0]).collect()
+    };
     let synthetic = FieldData {
         source: data.source.join(format!("evidence-check/{law}-replicate-{index}")),
-        calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &noise, &mut rng),
-        validation: synthesize(law, &params_si, &data.validation, w_ref_n, &noise, &mut rng),
+        calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &draws, phi, &mut rng),
+        validation: synthesize(law, &params_si, &data.validation, w_ref_n, &draws, phi, &mut rng),
         warnings: Vec::new(),
         ..data.clone()
     };
     let known: Vec<(Law, Vec<f64>)> = std::iter::once((law, params_si.clone()))
         .chain(analysis.fits.iter().map(|f| (f.law, f.params_si.clone())))
         .collect();
-    let fits = crate::fit::fit_record_from(&job.laws, &synthetic, &job.fit, &known)?;
+    let basis = super::Basis {
+        fits: crate::fit::fit_record_from(&job.laws, &synthetic, &analysis.fit, &known)?,
+        prior: analysis.prior.clone(),
+        fit: analysis.fit,
+    };
     let outcome = job
-        .sample(&synthetic, fits, analysis.prior.clone(), backend, seed, observer)
+        .sample(&synthetic, basis, backend, seed, noise_model, observer)
         .map_err(|e| match e {
             Error::Numerical(m) => Error::Numerical(format!("{law} replicate {index}: {m}")),
             other => other,

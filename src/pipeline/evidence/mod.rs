@@ -3,7 +3,7 @@
 //! [`crate::abc::evidence`]. `bitrock evidence` is its caller.
 
 use crate::abc::Observer;
-use crate::abc::evidence::{self, Evidence, EvidenceConfig};
+use crate::abc::evidence::{self, Evidence, EvidenceConfig, NoiseEvidence, NoiseModel};
 use crate::data::FieldData;
 use crate::error::Result;
 use crate::eval::{self, AbcProblem, Backend};
@@ -65,7 +65,20 @@ pub struct EvidenceJob {
     /// A prior file's explicit boxes and law weights, where it gives them.
     pub prior_file: Option<PathBuf>,
     pub backend: Backend,
+    /// The samplers' settings; their `noise` is set from [`Self::noise`].
     pub sampler: EvidenceConfig,
+    /// The noise model; `None`: every model's evidence is computed and the data choose (the
+    /// model of the largest p(y | noise model) = Σ π(m)·Z_m is reported).
+    pub noise: Option<NoiseModel>,
+}
+
+/// What the samplers of one torque scaling start from: the least-squares fits, the boxes, and
+/// the fit options they were made with.
+#[derive(Clone, Debug)]
+struct Basis {
+    fits: Vec<LawFit>,
+    prior: Prior,
+    fit: FitOptions,
 }
 
 /// A finished evidence job.
@@ -75,12 +88,19 @@ pub struct EvidenceAnalysis {
     pub fits: Vec<LawFit>,
     /// The boxes and law weights integrated over.
     pub prior: Prior,
+    /// The fit options of the reported evidence: the job's, or with each torque scaled by
+    /// WOB / W_ref where the data chose that ([`EvidenceJob::noise`]); the posterior's torque
+    /// parameters are for W = W_ref then.
+    pub fit: FitOptions,
     pub evidence: Evidence,
     /// What the fits alone say about telling the laws apart on these samples.
     pub separations: Vec<Separation>,
     /// The lag-1 autocorrelation of each fit's residuals in time order, in `fits` order
     /// ([`separation::residual_lag1`]): the check on the i.i.d. noise model.
     pub residual_lag1: Vec<f64>,
+    /// Every noise model compared, or the one named ([`EvidenceJob::noise`]); `evidence` is
+    /// the one of the largest probability.
+    pub noise_models: Vec<NoiseEvidence>,
 }
 
 impl EvidenceJob {
@@ -90,54 +110,110 @@ impl EvidenceJob {
         self.sampler.validate()?;
         self.fit.validate_for(&data.calibration)?;
         let file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
-        let fits = fit::fit_record(&self.laws, data, &self.fit)?;
-        let unit = data.torque_unit.newton_metres();
-        let prior = match self.prior {
-            EvidencePrior::Physical { scale } => Prior::physical(
-                &self.laws,
-                &PhysicalScales::of(&data.calibration),
-                scale,
-                file.as_ref(),
-                unit,
-            )?,
-            EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
+        let models = match self.noise {
+            Some(model) => vec![model],
+            None => NoiseModel::ALL.to_vec(),
         };
-        let separations = separation::separations(&fits, &data.calibration, &self.fit)?;
-        let residual_lag1 = fits
+        let mut analyses = Vec::new();
+        for fit_options in self.scalings(data) {
+            let fits = fit::fit_record(&self.laws, data, &fit_options)?;
+            let unit = data.torque_unit.newton_metres();
+            let prior = match self.prior {
+                EvidencePrior::Physical { scale } => Prior::physical(
+                    &self.laws,
+                    &PhysicalScales::of(&data.calibration),
+                    scale,
+                    file.as_ref(),
+                    unit,
+                )?,
+                EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
+            };
+            let separations = separation::separations(&fits, &data.calibration, &fit_options)?;
+            let residual_lag1: Vec<f64> = fits
+                .iter()
+                .map(|fit| separation::residual_lag1(fit, &data.calibration, &fit_options))
+                .collect();
+            let basis = Basis {
+                fits,
+                prior,
+                fit: fit_options,
+            };
+            for &model in &models {
+                let mut analysis =
+                    self.sample(data, basis.clone(), self.backend, self.sampler.seed, model, observer)?;
+                analysis.separations = separations.clone();
+                analysis.residual_lag1 = residual_lag1.clone();
+                analyses.push(analysis);
+            }
+        }
+        let compared: Vec<(&Evidence, Option<f64>)> = analyses.iter().map(|a| (&a.evidence, a.fit.w_ref_n)).collect();
+        let noise_models = NoiseEvidence::compare(&compared);
+        let chosen = noise_models
             .iter()
-            .map(|fit| separation::residual_lag1(fit, &data.calibration, &self.fit))
-            .collect();
-        let mut analysis = self.sample(data, fits, prior, self.backend, self.sampler.seed, observer)?;
-        analysis.separations = separations;
-        analysis.residual_lag1 = residual_lag1;
+            .enumerate()
+            .max_by(|(_, a), (_, b)| a.probability.total_cmp(&b.probability))
+            .map(|(i, _)| i)
+            .expect("at least one noise model");
+        let mut analysis = analyses.swap_remove(chosen);
+        analysis.noise_models = noise_models;
         Ok(analysis)
     }
 
-    /// The evidence of `fits`' laws on `data` over `prior`, the samplers seeded `seed`
-    /// (without the separations and residual autocorrelations, which the caller adds where it
-    /// wants them).
+    /// The fit options of each torque scaling compared: the job's own, and where it leaves
+    /// the weight on bit out of a record that has it, also each torque scaled by WOB / W̄ (W̄
+    /// the calibration samples' mean weight on bit, so that the torque parameters keep the
+    /// record's scale and its boxes fit both): torque proportional to the weight on bit is a
+    /// model of the residuals as much as their noise is, and the evidence judges it alike. A
+    /// constant weight on bit is not compared: it scales nothing.
+    fn scalings(&self, data: &FieldData) -> Vec<FitOptions> {
+        let mut scalings = vec![self.fit];
+        if self.fit.w_ref_n.is_none()
+            && let Some(wob) = &data.calibration.wob_n
+        {
+            let mean = crate::numerics::compensated_sum(wob.iter().copied()) / wob.len() as f64;
+            let (low, high) = wob
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &w| (l.min(w), h.max(w)));
+            // A weight on bit that never changes scales nothing.
+            if mean.is_finite() && mean > 0.0 && high - low > 1e-9 * mean {
+                scalings.push(FitOptions {
+                    w_ref_n: Some(mean),
+                    ..self.fit
+                });
+            }
+        }
+        scalings
+    }
+
+    /// The evidence of `basis`' laws on `data` over its prior under the `noise` model, the
+    /// samplers seeded `seed` (without the separations, residual autocorrelations and noise
+    /// models' comparison, which the caller adds where it wants them).
     fn sample(
         &self,
         data: &FieldData,
-        fits: Vec<LawFit>,
-        prior: Prior,
+        basis: Basis,
         backend: Backend,
         seed: u64,
+        noise: NoiseModel,
         observer: &mut dyn Observer,
     ) -> Result<EvidenceAnalysis> {
-        let problem = AbcProblem::new(prior.clone(), seed, &data.calibration, self.fit.w_ref_n).with_best_rho(&fits);
+        let Basis { fits, prior, fit } = basis;
+        let problem = AbcProblem::new(prior.clone(), seed, &data.calibration, fit.w_ref_n).with_best_rho(&fits);
         let evaluator = eval::evaluator(problem, backend, Default::default(), &mut |line| observer.note(line))?;
         let sampler = EvidenceConfig {
             seed,
+            noise,
             ..self.sampler.clone()
         };
         let evidence = evidence::run(evaluator.as_ref(), &sampler, observer)?;
         Ok(EvidenceAnalysis {
             fits,
             prior,
+            fit,
             evidence,
             separations: Vec::new(),
             residual_lag1: Vec::new(),
+            noise_models: Vec::new(),
         })
     }
 }

@@ -425,6 +425,9 @@ def stability(
         source = source.path
     elif isinstance(source, Evidence):
         posterior = json.dumps(source.document)
+        # Where the evidence scaled each torque by WOB / W_ref, its parameters are for W_ref.
+        if w_ref_kn is None:
+            w_ref_kn = source.document.get("w_ref_kn")
         source = None
     run = None if source is None else os.fspath(source)
     options = {k: v for k, v in locals().items() if k not in ("source", "law", "params", "run", "xr")}

@@ -14,8 +14,8 @@ from . import _bitrock
 
 
 class Evidence:
-    """The marginal likelihood ln Z of each law (tempered SMC per law, residuals i.i.d.
-    Gaussian with σ integrated out), its Monte-Carlo error, the posterior law probabilities
+    """The marginal likelihood ln Z of each law (tempered SMC per law, Gaussian residuals,
+    i.i.d. or AR(1), σ integrated out), its Monte-Carlo error, the posterior law probabilities
     P(m | y) it gives, and what the least-squares fits alone say about telling the laws apart."""
 
     def __init__(self, document: dict[str, Any]) -> None:
@@ -53,6 +53,26 @@ class Evidence:
             for law in self._doc["laws"]
         ]
         return pd.DataFrame(rows).set_index("law")
+
+    @property
+    def noise_model(self) -> str:
+        """The noise model of the reported evidence: ``"iid"`` or ``"ar1"``."""
+        return self._doc["noise_model"]
+
+    @property
+    def w_ref_kn(self) -> float | None:
+        """W_ref, kN, where the reported evidence scaled each predicted torque by WOB / W_ref
+        (its posterior's torque parameters are for W = W_ref); ``None`` where it did not."""
+        return self._doc.get("w_ref_kn")
+
+    @property
+    def noise_models(self) -> pd.DataFrame:
+        """One row per model of the residuals compared: the noise model (``model``: both with
+        ``noise="auto"``) and, for a record with a weight-on-bit column, the torque as the law
+        gives it or scaled by WOB / ``w_ref_kn``; ln p(y | model) = ln Σ π(m)·Z_m and its
+        Monte-Carlo error, the model's probability (equal prior odds), and the law it puts
+        first with that law's probability."""
+        return pd.DataFrame(self._doc["noise_models"])
 
     @property
     def probabilities(self) -> pd.Series:
@@ -171,6 +191,7 @@ def evidence(
     scale_by_wob: bool = False,
     w_ref_kn: float | None = None,
     check: int | None = None,
+    noise: str = "auto",
 ) -> Evidence:
     """The model evidence of the laws (``m1``…``m4``; all by default) on the record's
     calibration samples, as ``bitrock evidence``. ``boxes="physical"`` integrates over boxes
@@ -178,7 +199,10 @@ def evidence(
     its unit, no fit involved; ``boxes="delta"`` over the paper's boxes φ̂(1 ± ``delta``) around
     the least-squares estimates (the data used twice). ``prior`` is a prior file; ``particles``
     (500) per island, ``islands`` (4) independent samplers per law whose spread is the
-    Monte-Carlo error; the same ``seed`` gives the same result. ``check=K`` then checks the
+    Monte-Carlo error; the same ``seed`` gives the same result. ``noise`` is the residuals'
+    model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
+    model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
+    ``check=K`` then checks the
     answer by re-simulation (K synthetic records per law from its evidence posterior and the
     record's own residuals, each through the same evidence over the same boxes; K times the
     cost per law): see :attr:`Evidence.check`."""
@@ -199,6 +223,7 @@ def evidence(
         "scale_by_wob": scale_by_wob,
         "w_ref_kn": w_ref_kn,
         "check": check,
+        "noise": noise,
     }
     document = _bitrock.evidence(_record(record), _law_names(laws), options, _note)
     return Evidence(json.loads(document))
