@@ -109,6 +109,13 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         headlines.push(Headline {
             delta,
             eps_min,
+            best_rho: done
+                .outcome
+                .setup
+                .fits
+                .iter()
+                .map(|f| f.rho)
+                .fold(f64::INFINITY, f64::min),
             populations: done.outcome.run.populations.len(),
             posterior: done.posterior.clone(),
             caveats: done
@@ -229,6 +236,8 @@ fn mark_root(root: &Path) -> anyhow::Result<()> {
 struct Headline {
     delta: f64,
     eps_min: f64,
+    /// The run's best least-squares ρ (its fits, as the run scaled its torques).
+    best_rho: f64,
     populations: usize,
     posterior: PosteriorSummary,
     /// Which final probabilities are 0 by construction, and whether best-fit ρ alone decides.
@@ -269,8 +278,8 @@ fn print_headline(
             writeln!(out, "    {caveat}")?;
         }
     }
-    let best_rho = evidence.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
-    if let Some(caveat) = bitrock::abc::prior_volume_caveat(headlines[0].eps_min, best_rho, data.calibration.len()) {
+    let first = &headlines[0];
+    if let Some(caveat) = bitrock::abc::prior_volume_caveat(first.eps_min, first.best_rho, data.calibration.len()) {
         writeln!(out, "    {caveat}")?;
     }
     let laws = &evidence.evidence.laws;
@@ -280,8 +289,12 @@ fn print_headline(
         .collect();
     writeln!(
         out,
-        "model evidence (physical boxes, {}): {}",
+        "model evidence (physical boxes, {}{}, chosen by its evidence): {}",
         evidence.evidence.config.noise.label(),
+        evidence
+            .fit
+            .w_ref_n
+            .map_or(String::new(), |w| format!(", torque × WOB/{:.1} kN", w / 1000.0)),
         probabilities.join(", ")
     )?;
     if let Some(top) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z)) {

@@ -375,6 +375,16 @@ fn tables(
         "\n{} candidates scored ({:.3e} candidate × data-point evaluations) on {} in {:.2} s",
         evidence.candidates_scored, evidence.evaluations as f64, evidence.backend, evidence.seconds
     )?;
+    if analysis.noise_models.len() > 1 {
+        let models = &analysis.noise_models;
+        writeln!(
+            out,
+            "all {} models of the residuals: {} candidates in {:.2} s",
+            models.len(),
+            models.iter().map(|m| m.candidates_scored).sum::<u64>(),
+            models.iter().map(|m| m.seconds).sum::<f64>()
+        )?;
+    }
     Ok(())
 }
 

@@ -84,6 +84,9 @@ pub struct NoiseEvidence {
     /// The law the model's evidence puts first, and its P(m | y) under the model.
     pub first_law: crate::laws::Law,
     pub first_probability: f64,
+    /// What its samplers cost: candidates scored and seconds.
+    pub candidates_scored: u64,
+    pub seconds: f64,
 }
 
 impl NoiseEvidence {
@@ -107,6 +110,8 @@ impl NoiseEvidence {
                     probability: 0.0,
                     first_law: first.law,
                     first_probability: first.probability,
+                    candidates_scored: e.candidates_scored,
+                    seconds: e.seconds,
                 }
             })
             .collect();

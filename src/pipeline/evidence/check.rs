@@ -199,8 +199,9 @@ fn replicate_of(
         prior: analysis.prior.clone(),
         fit: analysis.fit,
     };
+    let evaluator = EvidenceJob::evaluator(&synthetic, &basis, backend, seed, observer)?;
     let outcome = job
-        .sample(&synthetic, basis, backend, seed, noise_model, observer)
+        .sample(basis, evaluator.as_ref(), noise_model, observer)
         .map_err(|e| match e {
             Error::Numerical(m) => Error::Numerical(format!("{law} replicate {index}: {m}")),
             other => other,

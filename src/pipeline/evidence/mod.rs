@@ -138,9 +138,10 @@ impl EvidenceJob {
                 prior,
                 fit: fit_options,
             };
+            // One evaluator for every noise model of this scaling (the same data, the same ρ).
+            let evaluator = Self::evaluator(data, &basis, self.backend, self.sampler.seed, observer)?;
             for &model in &models {
-                let mut analysis =
-                    self.sample(data, basis.clone(), self.backend, self.sampler.seed, model, observer)?;
+                let mut analysis = self.sample(basis.clone(), evaluator.as_ref(), model, observer)?;
                 analysis.separations = separations.clone();
                 analysis.residual_lag1 = residual_lag1.clone();
                 analyses.push(analysis);
@@ -185,27 +186,38 @@ impl EvidenceJob {
         scalings
     }
 
-    /// The evidence of `basis`' laws on `data` over its prior under the `noise` model, the
-    /// samplers seeded `seed` (without the separations, residual autocorrelations and noise
-    /// models' comparison, which the caller adds where it wants them).
-    fn sample(
-        &self,
+    /// The evaluator of `basis`' prior on `data`'s calibration samples, its candidates seeded
+    /// `seed`; a fallback to the CPU is said through `observer`.
+    fn evaluator(
         data: &FieldData,
-        basis: Basis,
+        basis: &Basis,
         backend: Backend,
         seed: u64,
+        observer: &mut dyn Observer,
+    ) -> Result<Box<dyn eval::Evaluator>> {
+        let problem =
+            AbcProblem::new(basis.prior.clone(), seed, &data.calibration, basis.fit.w_ref_n).with_best_rho(&basis.fits);
+        eval::evaluator(problem, backend, Default::default(), &mut |line| observer.note(line))
+    }
+
+    /// The evidence of `basis`' laws under the `noise` model, scored by `evaluator` (made by
+    /// [`Self::evaluator`] for `basis`; the samplers take its seed), without the separations,
+    /// residual autocorrelations and models' comparison, which the caller adds where it wants
+    /// them.
+    fn sample(
+        &self,
+        basis: Basis,
+        evaluator: &dyn eval::Evaluator,
         noise: NoiseModel,
         observer: &mut dyn Observer,
     ) -> Result<EvidenceAnalysis> {
         let Basis { fits, prior, fit } = basis;
-        let problem = AbcProblem::new(prior.clone(), seed, &data.calibration, fit.w_ref_n).with_best_rho(&fits);
-        let evaluator = eval::evaluator(problem, backend, Default::default(), &mut |line| observer.note(line))?;
         let sampler = EvidenceConfig {
-            seed,
+            seed: evaluator.problem().seed,
             noise,
             ..self.sampler.clone()
         };
-        let evidence = evidence::run(evaluator.as_ref(), &sampler, observer)?;
+        let evidence = evidence::run(evaluator, &sampler, observer)?;
         Ok(EvidenceAnalysis {
             fits,
             prior,
