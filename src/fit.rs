@@ -7,8 +7,9 @@
 //! the same problem to the optimiser. Starting points come from the data: for each law the
 //! parameters that enter linearly are solved exactly on a grid of the nonlinear ones
 //! (variable projection), and Levenberg-Marquardt (the `levenberg-marquardt` crate) polishes
-//! the best few. Physical lower bounds are kept by MINUIT's transform
-//! p = lb − 1 + √(u² + 1), which leaves the optimiser unconstrained.
+//! the best few. Physical bounds are kept by MINUIT's transforms (p = lb − 1 + √(u² + 1) above
+//! a lower bound, its mirror below an upper one, lb + (ub − lb)(sin u + 1)/2 between both),
+//! which leave the optimiser unconstrained.
 
 use crate::data::{FieldData, SAME_SPEED_TOLERANCE, Samples};
 use crate::error::{Error, Result};
@@ -297,6 +298,10 @@ enum Transform {
     Free,
     /// MINUIT's one-sided transform: p = lb − 1 + √(u² + 1) ≥ lb.
     Lower(f64),
+    /// Its mirror: p = ub + 1 − √(u² + 1) ≤ ub.
+    Upper(f64),
+    /// MINUIT's two-sided transform: p = lb + (ub − lb)·(sin u + 1)/2 in [lb, ub].
+    Both(f64, f64),
 }
 
 impl Transform {
@@ -304,6 +309,8 @@ impl Transform {
         match self {
             Transform::Free => u,
             Transform::Lower(lb) => lb - 1.0 + (u * u + 1.0).sqrt(),
+            Transform::Upper(ub) => ub + 1.0 - (u * u + 1.0).sqrt(),
+            Transform::Both(lb, ub) => lb + 0.5 * (ub - lb) * (u.sin() + 1.0),
         }
     }
     fn to_internal(self, p: f64) -> f64 {
@@ -313,12 +320,19 @@ impl Transform {
                 let a = (p - lb + 1.0).max(1.0);
                 (a * a - 1.0).sqrt()
             }
+            Transform::Upper(ub) => {
+                let a = (ub - p + 1.0).max(1.0);
+                (a * a - 1.0).sqrt()
+            }
+            Transform::Both(lb, ub) => (2.0 * (p - lb) / (ub - lb) - 1.0).clamp(-1.0, 1.0).asin(),
         }
     }
     fn derivative(self, u: f64) -> f64 {
         match self {
             Transform::Free => 1.0,
             Transform::Lower(_) => u / (u * u + 1.0).sqrt(),
+            Transform::Upper(_) => -u / (u * u + 1.0).sqrt(),
+            Transform::Both(lb, ub) => 0.5 * (ub - lb) * u.cos(),
         }
     }
 }
@@ -529,7 +543,7 @@ impl<'a> GridColumns<'a> {
 /// gives them all) and a Halton design of [`DESIGN_POINTS`] points, each parameter log-uniform
 /// over [10^−1.5, 10^1.5] of its natural size in the record's scales, negative as often as
 /// positive where the parameter has no lower bound (scaled parameters).
-fn design_starts(law: Law, lower: &[f64], scales: &RecordScales) -> Vec<Vec<f64>> {
+fn design_starts(law: Law, bounds: &[Bound], scales: &RecordScales) -> Vec<Vec<f64>> {
     const BASES: [u32; 12] = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37];
     let radical_inverse = |mut i: u32, base: u32| {
         let (mut f, mut x) = (1.0, 0.0);
@@ -554,7 +568,7 @@ fn design_starts(law: Law, lower: &[f64], scales: &RecordScales) -> Vec<Vec<f64>
             (0..n)
                 .map(|j| {
                     let magnitude = 10f64.powf(3.0 * radical_inverse(i, BASES[2 * j]) - 1.5);
-                    let negative = lower[j] == f64::NEG_INFINITY && radical_inverse(i, BASES[2 * j + 1]) < 0.5;
+                    let negative = bounds[j].lower == f64::NEG_INFINITY && radical_inverse(i, BASES[2 * j + 1]) < 0.5;
                     if negative { -magnitude } else { magnitude }
                 })
                 .collect(),
@@ -703,9 +717,9 @@ pub fn fit_law_from(
     let r = calibration.wob_ratio(opts.w_ref_n);
     let scaled = ScaledData { w: &w, y: &y, r: &r };
 
-    let lower = lower_bounds(law, &scales, opts.bounded);
-    let starts = select_starts(law, scaled, &lower, &scales, opts.starts);
-    let known = known_starts(law, scaled, &lower, &scales, known_si);
+    let bounds = bounds(law, &scales, opts.bounded);
+    let starts = select_starts(law, scaled, &bounds, &scales, opts.starts);
+    let known = known_starts(law, scaled, &bounds, &scales, known_si);
     if starts.is_empty() && known.is_empty() {
         return Err(refusal(
             law,
@@ -714,9 +728,9 @@ pub fn fit_law_from(
         ));
     }
     let polished = if known.is_empty() {
-        polish_starts(law, scaled, &lower, &starts)
+        polish_starts(law, scaled, &bounds, &starts)
     } else {
-        race_starts(law, scaled, &lower, &[known.as_slice(), &starts].concat())
+        race_starts(law, scaled, &bounds, &[known.as_slice(), &starts].concat())
     };
     if polished.is_empty() {
         return Err(refusal(
@@ -730,7 +744,7 @@ pub fn fit_law_from(
     let best = &polished[0];
     let p = &best.params;
 
-    let on_bound: Vec<bool> = (0..n).map(|j| lower[j].is_finite() && p[j] - lower[j] < 1e-6).collect();
+    let on_bound: Vec<bool> = (0..n).map(|j| bounds[j].holds(p[j])).collect();
     let covariance = Covariance::at(law, best, scaled, &on_bound, &scales);
     let params_si: Vec<f64> = (0..n).map(|j| p[j] / scales.factor(law, j)).collect();
     let warnings = fit_warnings(law, &polished, &on_bound, &covariance, &params_si);
@@ -814,15 +828,48 @@ impl ScaledData<'_> {
     }
 }
 
-/// Each parameter's lower bound on the scaled problem: its physical bound when `bounded`, else
-/// −∞ (no bound).
-fn lower_bounds(law: Law, scales: &RecordScales, bounded: bool) -> Vec<f64> {
+/// A parameter's physical bounds on the scaled problem (±∞ where it has none).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Bound {
+    lower: f64,
+    upper: f64,
+}
+
+impl Bound {
+    /// True when scaled value `p` sits on one of the bounds (within 1e-6), where the data push
+    /// it further.
+    fn holds(self, p: f64) -> bool {
+        (self.lower.is_finite() && p - self.lower < 1e-6) || (self.upper.is_finite() && self.upper - p < 1e-6)
+    }
+
+    /// MINUIT's transform that keeps a parameter within these bounds.
+    fn transform(self) -> Transform {
+        match (self.lower.is_finite(), self.upper.is_finite()) {
+            (false, false) => Transform::Free,
+            (true, false) => Transform::Lower(self.lower),
+            (false, true) => Transform::Upper(self.upper),
+            (true, true) => Transform::Both(self.lower, self.upper),
+        }
+    }
+}
+
+/// Each parameter's bounds on the scaled problem: its physical bounds when `bounded`, else
+/// none.
+fn bounds(law: Law, scales: &RecordScales, bounded: bool) -> Vec<Bound> {
     (0..law.n_params())
         .map(|j| {
+            let spec = law.params()[j];
             if bounded {
-                law.params()[j].lower * scales.factor(law, j)
+                let factor = scales.factor(law, j);
+                Bound {
+                    lower: spec.lower * factor,
+                    upper: spec.upper * factor,
+                }
             } else {
-                f64::NEG_INFINITY
+                Bound {
+                    lower: f64::NEG_INFINITY,
+                    upper: f64::INFINITY,
+                }
             }
         })
         .collect()
@@ -831,15 +878,21 @@ fn lower_bounds(law: Law, scales: &RecordScales, bounded: bool) -> Vec<f64> {
 /// The grid's starting points ([`grid_starts`]) to polish: each pulled just inside the
 /// bounds, ranked by misfit, and the best `max_starts` (at least one) kept that are not
 /// near-copies of a better one. Empty when no grid point gives a finite misfit.
-fn select_starts(law: Law, data: ScaledData, lower: &[f64], scales: &RecordScales, max_starts: usize) -> Vec<Vec<f64>> {
+fn select_starts(
+    law: Law,
+    data: ScaledData,
+    bounds: &[Bound],
+    scales: &RecordScales,
+    max_starts: usize,
+) -> Vec<Vec<f64>> {
     let grid = match law {
-        Law::File(_) => design_starts(law, lower, scales),
+        Law::File(_) => design_starts(law, bounds, scales),
         _ => grid_starts(law, data.w, data.y, data.r),
     };
     let mut candidates: Vec<(f64, Vec<f64>)> = grid
         .into_iter()
         .map(|mut p| {
-            pull_inside(&mut p, lower);
+            pull_inside(&mut p, bounds);
             (data.ssr(law, &p), p)
         })
         .filter(|(s, _)| s.is_finite())
@@ -866,15 +919,20 @@ const PATIENCE: usize = 400;
 /// Windows of a raced run's patience ([`Race`]): how often it is asked whether it can still win.
 const RACE_WINDOWS: usize = 16;
 
-/// How far inside its lower bound a start is pulled (scaled units): the bound itself is where
-/// MINUIT's transform has no gradient.
+/// How far inside its bounds a start is pulled (scaled units): a bound itself is where
+/// MINUIT's transforms have no gradient.
 const START_MARGIN: f64 = 1e-3;
 
-/// Pulls a start (scaled) at or below a lower bound to [`START_MARGIN`] above it.
-fn pull_inside(p: &mut [f64], lower: &[f64]) {
-    for (v, &lb) in p.iter_mut().zip(lower) {
-        if *v < lb + START_MARGIN {
-            *v = lb + START_MARGIN;
+/// Pulls a start (scaled) at or beyond a bound to [`START_MARGIN`] inside it (to the middle
+/// of bounds closer than twice that).
+fn pull_inside(p: &mut [f64], bounds: &[Bound]) {
+    for (v, b) in p.iter_mut().zip(bounds) {
+        if b.upper - b.lower < 2.0 * START_MARGIN {
+            *v = 0.5 * (b.lower + b.upper);
+        } else if *v < b.lower + START_MARGIN {
+            *v = b.lower + START_MARGIN;
+        } else if *v > b.upper - START_MARGIN {
+            *v = b.upper - START_MARGIN;
         }
     }
 }
@@ -888,13 +946,13 @@ fn distinct(a: &[f64], b: &[f64]) -> bool {
 
 /// Polishes every start by Levenberg-Marquardt, bounds kept by MINUIT's transform; the runs
 /// that end on a finite misfit, best first. Empty when every run diverges.
-fn polish_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>]) -> Vec<Polished> {
+fn polish_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>]) -> Vec<Polished> {
     // The starts are polished in parallel (collected in order: the same result): a start that
     // loses patience costs seconds, and a lone slow fit would otherwise hold one thread while
     // others idle (the selection check fits many records side by side).
     let mut polished: Vec<Polished> = starts
         .par_iter()
-        .filter_map(|p0| polish(law, data, lower, p0, PATIENCE, None))
+        .filter_map(|p0| polish(law, data, bounds, p0, PATIENCE, None))
         .collect();
     polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
     polished
@@ -907,18 +965,18 @@ fn polish_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>])
 /// other, each racing the best misfit of the runs already final ([`Race`]): one run crawling
 /// along a ridge goes the whole way, those behind it stop. A run that is not stopped takes
 /// exactly the steps of [`polish_starts`].
-fn race_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>]) -> Vec<Polished> {
+fn race_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>]) -> Vec<Polished> {
     let first: Vec<(usize, Polished)> = starts
         .par_iter()
         .enumerate()
-        .filter_map(|(i, p0)| polish(law, data, lower, p0, PATIENCE / RACE_WINDOWS, None).map(|p| (i, p)))
+        .filter_map(|(i, p0)| polish(law, data, bounds, p0, PATIENCE / RACE_WINDOWS, None).map(|p| (i, p)))
         .collect();
     let (mut unfinished, finished): (Vec<_>, Vec<_>) = first.into_iter().partition(|(_, p)| p.lost_patience());
     let mut polished: Vec<Polished> = finished.into_iter().map(|(_, p)| p).collect();
     unfinished.sort_by(|a, b| a.1.ssr.total_cmp(&b.1.ssr));
     for (i, _) in unfinished {
         let target = polished.iter().map(|p| p.ssr).min_by(f64::total_cmp);
-        polished.extend(polish(law, data, lower, &starts[i], PATIENCE, target));
+        polished.extend(polish(law, data, bounds, &starts[i], PATIENCE, target));
     }
     polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
     polished
@@ -929,22 +987,13 @@ fn race_starts(law: Law, data: ScaledData, lower: &[f64], starts: &[Vec<f64>]) -
 fn polish(
     law: Law,
     data: ScaledData,
-    lower: &[f64],
+    bounds: &[Bound],
     p0: &[f64],
     patience: usize,
     target: Option<f64>,
 ) -> Option<Polished> {
     let n = law.n_params();
-    let transforms: Vec<Transform> = lower
-        .iter()
-        .map(|&lb| {
-            if lb.is_finite() {
-                Transform::Lower(lb)
-            } else {
-                Transform::Free
-            }
-        })
-        .collect();
+    let transforms: Vec<Transform> = bounds.iter().map(|b| b.transform()).collect();
     let problem = Problem {
         law,
         w: data.w,
@@ -970,7 +1019,7 @@ fn polish(
 fn known_starts(
     law: Law,
     data: ScaledData,
-    lower: &[f64],
+    bounds: &[Bound],
     scales: &RecordScales,
     known_si: &[Vec<f64>],
 ) -> Vec<Vec<f64>> {
@@ -978,7 +1027,7 @@ fn known_starts(
     let mut starts: Vec<Vec<f64>> = Vec::new();
     for p_si in known_si.iter().filter(|p| p.len() == n) {
         let mut p: Vec<f64> = (0..n).map(|j| p_si[j] * scales.factor(law, j)).collect();
-        pull_inside(&mut p, lower);
+        pull_inside(&mut p, bounds);
         if data.ssr(law, &p).is_finite() && starts.iter().all(|q| distinct(q, &p)) {
             starts.push(p);
         }
@@ -1085,11 +1134,15 @@ fn fit_warnings(
         }
     }
     for j in (0..n).filter(|&j| on_bound[j]) {
+        let spec = law.params()[j];
+        let (relation, bound) = if (params_si[j] - spec.lower).abs() <= (params_si[j] - spec.upper).abs() {
+            ("≥", spec.lower)
+        } else {
+            ("≤", spec.upper)
+        };
         warnings.push(format!(
-            "{} sits on its physical bound ({} ≥ {}): the data push it further; try `no_bounds` to see where",
-            law.params()[j].name,
-            law.params()[j].name,
-            law.params()[j].lower
+            "{} sits on its physical bound ({} {relation} {bound}): the data push it further; try `no_bounds` to see where",
+            spec.name, spec.name
         ));
     }
     warnings.extend(conditioning_warning(law, covariance));

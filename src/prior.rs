@@ -31,7 +31,7 @@
 
 use crate::error::{Error, Result};
 use crate::fit::LawFit;
-use crate::laws::{Law, MAX_PARAMS};
+use crate::laws::{Law, MAX_PARAMS, ParamSpec};
 use crate::rng::{candidate_counter, key_of_seed, philox4x32_10, uniform_between};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -216,8 +216,11 @@ impl PhysicalScales {
     fn physical_box(&self, law: Law, j: usize, k: f64) -> (f64, f64, BoxRule) {
         let spec = law.params()[j];
         let width = k * self.param_scale(law, j);
+        // A law file's upper bound ends the box where it comes first (the caller clips).
         if spec.lower.is_finite() {
             (spec.lower, spec.lower + width, BoxRule::Physical)
+        } else if spec.upper.is_finite() {
+            (spec.upper - width, spec.upper, BoxRule::Physical)
         } else if spec.inverse_speed_power < 0 {
             (-0.1 * width, width, BoxRule::Physical)
         } else {
@@ -418,16 +421,21 @@ impl Prior {
                 } else {
                     rule_box(k, j)
                 };
-                let lo = lo.max(spec.lower);
+                let (lo, hi) = (lo.max(spec.lower), hi.min(spec.upper));
                 if rule == BoxRule::Given && lo >= hi {
                     let unit = if spec.torque_power == 1 { torque_unit_nm } else { 1.0 };
                     return Err(Error::setting(
                         "prior",
                         format!(
-                            "[{law}] {}: the bounds lie at or below its physical bound {} ≥ {} (in the file's units); give an upper bound above it",
+                            "[{law}] {}: the bounds lie outside its physical bounds {} {} (in the file's units); give bounds within them",
                             spec.name,
                             spec.name,
-                            spec.lower / unit
+                            ParamSpec {
+                                lower: spec.lower / unit,
+                                upper: spec.upper / unit,
+                                ..*spec
+                            }
+                            .bounds_text()
                         ),
                     ));
                 }
@@ -436,8 +444,10 @@ impl Prior {
                     return Err(Error::setting(
                         setting,
                         format!(
-                            "{law}.{}: the box [{lo}, {hi}] (SI) is empty after clipping to the bound {} ≥ {}; give explicit bounds in a `prior` file",
-                            spec.name, spec.name, spec.lower
+                            "{law}.{}: the box [{lo}, {hi}] (SI) is empty after clipping to the physical bounds {} {}; give explicit bounds in a `prior` file",
+                            spec.name,
+                            spec.name,
+                            spec.bounds_text()
                         ),
                     ));
                 }
@@ -578,7 +588,8 @@ fn delta_box(fit: &LawFit, j: usize, delta: f64) -> (f64, f64, BoxRule) {
     let scale = fit.scales.param_scale(fit.law, j);
     // Zero width: an estimate of 0 (or one the record's scale cannot tell from 0), or one on
     // its physical bound (the data push it further, so its size says nothing).
-    let on_bound = spec.lower.is_finite() && (estimate - spec.lower) <= ON_BOUND * scale;
+    let on_bound = (spec.lower.is_finite() && (estimate - spec.lower) <= ON_BOUND * scale)
+        || (spec.upper.is_finite() && (spec.upper - estimate) <= ON_BOUND * scale);
     if on_bound || estimate.abs() <= ON_BOUND * scale {
         return (estimate - delta * scale, estimate + delta * scale, BoxRule::RecordScale);
     }

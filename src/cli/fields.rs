@@ -11,6 +11,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("time_column", "--time-col"),
     ("speed_unit", "--speed-unit"),
     ("torque_unit", "--torque-unit"),
+    ("param_torque_unit", "--param-torque-unit"),
     ("wob_unit", "--wob-unit"),
     ("min_speed_rpm", "--min-speed-rpm"),
     ("t_start_s", "--t-start-s"),

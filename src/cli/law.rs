@@ -32,7 +32,7 @@ pub fn run(cmd: &LawCmd) -> anyhow::Result<ExitCode> {
         law.formula.trim()
     )?;
     writeln!(out, "dT/dw  = {}", law.dtorque_dw.show(&names))?;
-    writeln!(out, "param  unit (SI)           lower bound  reference   ∂T/∂param")?;
+    writeln!(out, "param  unit (SI)           bounds       reference   ∂T/∂param")?;
     for (p, gradient) in law.params.iter().zip(&law.gradient) {
         let reference = p.reference.map_or("—".to_string(), |v| format!("{v}"));
         writeln!(
@@ -40,11 +40,7 @@ pub fn run(cmd: &LawCmd) -> anyhow::Result<ExitCode> {
             "{:<6} {:<19} {:<12} {:<11} {}",
             p.name,
             p.unit(),
-            if p.lower == f64::NEG_INFINITY {
-                "none".to_string()
-            } else {
-                format!("{}", p.lower)
-            },
+            p.spec("").bounds_text(),
             reference,
             gradient.show(&names)
         )?;

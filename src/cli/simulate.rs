@@ -106,9 +106,13 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
             .into());
         }
     };
+    let params_nm = law.scale_torque(&params, cmd.param_torque_unit.newton_metres());
+    if let Some(warning) = law.implausible_torque(&params_nm, "param_torque_unit") {
+        super::print::note(format_args!("warning: {warning}"));
+    }
     let config = SimConfig {
         law,
-        params_nm: law.scale_torque(&params, cmd.param_torque_unit.newton_metres()),
+        params_nm,
         structure: cmd.lumped.lumped(),
         omega_rad_s: cmd.omega_rpm * RAD_S_PER_RPM,
         wob_n: cmd.wob_kn * 1000.0,

@@ -79,6 +79,9 @@ pub struct ParamSpec {
     pub inverse_speed_power: i32,
     /// Smallest physically meaningful value (`f64::NEG_INFINITY` when free).
     pub lower: f64,
+    /// Largest physically meaningful value (`f64::INFINITY` when free: every built-in law;
+    /// a law file may give one).
+    pub upper: f64,
 }
 
 impl ParamSpec {
@@ -88,6 +91,22 @@ impl ParamSpec {
             torque_power,
             inverse_speed_power,
             lower,
+            upper: f64::INFINITY,
+        }
+    }
+
+    /// The spec with the physical upper bound `upper`.
+    pub(crate) const fn with_upper(self, upper: f64) -> Self {
+        Self { upper, ..self }
+    }
+
+    /// The physical bounds as a sentence's part: "≥ 0", "≤ 1", "in [0, 1]" (SI).
+    pub fn bounds_text(&self) -> String {
+        match (self.lower.is_finite(), self.upper.is_finite()) {
+            (true, true) => format!("in [{}, {}]", self.lower, self.upper),
+            (true, false) => format!("≥ {}", self.lower),
+            (false, true) => format!("≤ {}", self.upper),
+            (false, false) => "free".to_string(),
         }
     }
 
@@ -107,13 +126,18 @@ impl ParamSpec {
         }
     }
 
-    /// True when `value` respects the physical bound.
+    /// True when `value` respects the physical bounds.
     pub fn admits(&self, value: f64) -> bool {
-        value >= self.lower
+        value >= self.lower && value <= self.upper
     }
 }
 
 const FREE: f64 = f64::NEG_INFINITY;
+
+/// The largest torque on bit any parameter set is taken to mean, N·m: 1,000 kN·m, ten times the
+/// largest top drives' rated torque. Beyond it a value was almost surely given in N·m where
+/// kN·m was read ([`Law::implausible_torque`]).
+pub const MAX_BIT_TORQUE_NM: f64 = 1.0e6;
 
 // Bounds (documented in the README, "The laws"):
 // - M1: the asymptotic torque r·b0 is positive, b1 is a rate, the hump b2·w/(1+b3 w²) adds
@@ -364,7 +388,7 @@ impl Law {
     }
 
     /// Refuses, naming `flag`, parameters (SI, N·m-based) that this law cannot take: the wrong
-    /// count, a value that is not finite, or one below its physical bound.
+    /// count, a value that is not finite, or one outside its physical bounds.
     pub fn check_params(self, params_si: &[f64], field: &str) -> crate::Result<()> {
         let n = self.n_params();
         if params_si.len() != n {
@@ -388,13 +412,38 @@ impl Law {
         if let Some((spec, v)) = self.bound_violation(params_si) {
             return Err(crate::Error::setting(
                 field,
-                format!(
-                    "{} = {v} (SI, N·m-based) is below its physical bound {}",
-                    spec.name, spec.lower
-                ),
+                if v < spec.lower {
+                    format!(
+                        "{} = {v} (SI, N·m-based) is below its physical bound {}",
+                        spec.name, spec.lower
+                    )
+                } else {
+                    format!(
+                        "{} = {v} (SI, N·m-based) is above its physical bound {}",
+                        spec.name, spec.upper
+                    )
+                },
             ));
         }
         Ok(())
+    }
+
+    /// A warning when a torque parameter of `params_si` (N·m) lies beyond any drill bit's
+    /// torque ([`MAX_BIT_TORQUE_NM`]): values meant in N·m but read in kN·m put every torque a
+    /// thousand times too high, and the maps and traces built on them are silently wrong.
+    /// `unit_setting` names the setting that reads them in N·m.
+    pub fn implausible_torque(self, params_si: &[f64], unit_setting: &str) -> Option<String> {
+        let (spec, v) = self
+            .params()
+            .iter()
+            .zip(params_si)
+            .find(|(s, v)| s.torque_power == 1 && s.inverse_speed_power == 0 && v.abs() > MAX_BIT_TORQUE_NM)?;
+        Some(format!(
+            "{} = {} kN·m lies beyond any drill bit's torque (at most {} kN·m): were the parameters given in N·m? (`{unit_setting}` nm reads them so)",
+            spec.name,
+            v / 1000.0,
+            MAX_BIT_TORQUE_NM / 1000.0
+        ))
     }
 
     /// The first parameter that breaks its physical bound, if any.

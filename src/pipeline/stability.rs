@@ -192,6 +192,11 @@ impl StabilityJob {
     /// A GPU that cannot be used under `auto` is told to `note`, and the CPU computes.
     pub fn run(&self, note: &mut dyn FnMut(String)) -> Result<StabilityMaps> {
         self.validate()?;
+        if let MapSource::Law { law, params_si } = &self.source
+            && let Some(warning) = law.implausible_torque(params_si, "torque_unit")
+        {
+            note(format!("warning: {warning}"));
+        }
         let (inputs, early_end) = match &self.source {
             MapSource::Run(dir) => {
                 let store = run::Store::open(dir)?;

@@ -195,6 +195,7 @@ fn random_expressions_agree_on_the_gpu_with_their_twins() {
                     torque_power: 0,
                     inverse_speed_power: 0,
                     lower: f64::NEG_INFINITY,
+                    upper: f64::INFINITY,
                     reference: None,
                 })
                 .collect(),
@@ -620,4 +621,109 @@ fn the_law_command_shows_a_law_file_as_compiled() {
         stderr.contains("bad.toml:2:11: torque: the argument of exp k has dimension N·m"),
         "{stderr}"
     );
+}
+
+/// m2 as a law file named `name`, its decay rate g bounded by `g_bounds` (TOML lines).
+fn capped_m2(name: &str, g_bounds: &str) -> String {
+    format!(
+        "name = \"{name}\"\ntorque = \"r * ((tsb - tcb) * exp(-g * w) + tcb)\"\n\
+         [[parameter]]\nname = \"tsb\"\nunit = \"N·m\"\nlower = 0\n\
+         [[parameter]]\nname = \"tcb\"\nunit = \"N·m\"\nlower = 0\n\
+         [[parameter]]\nname = \"g\"\nunit = \"s/rad\"\n{g_bounds}\n"
+    )
+}
+
+/// A law file's upper bounds: refused where they contradict the lower bound or the reference
+/// (naming the file, line and column); kept by the fit, where a bound below the least-squares
+/// value ends the parameter on it (said in the warnings, at a worse misfit) and one far above
+/// changes nothing; and closing the physical prior box.
+#[test]
+fn a_law_files_upper_bounds_hold_in_the_fit_and_the_prior() {
+    let refused = LawFile::parse(
+        &capped_m2("inverted", "lower = 1\nupper = 0.5"),
+        Path::new("inverted.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        refused
+            .to_string()
+            .contains("inverted.toml:15:9: upper bound of 'g' = 0.5 does not lie above its lower bound 1"),
+        "{refused}"
+    );
+    let refused = LawFile::parse(
+        &capped_m2("beyond", "lower = 0\nupper = 0.5\nreference = 0.7"),
+        Path::new("beyond.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        refused
+            .to_string()
+            .contains("beyond.toml:16:13: reference of 'g' = 0.7 lies above its upper bound 0.5"),
+        "{refused}"
+    );
+
+    let data = demo_field_data(&DataOptions::default()).unwrap();
+    let m2 = fit_record(&[Law::M2], &data, &FitOptions::default()).unwrap().remove(0);
+    let g_hat = m2.params_si[2];
+    let cap = 0.5 * g_hat;
+    let capped = register(
+        LawFile::parse(
+            &capped_m2("capped_g", &format!("lower = 0\nupper = {cap}")),
+            Path::new("capped_g.toml"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let loose = register(
+        LawFile::parse(
+            &capped_m2("loose_g", &format!("lower = 0\nupper = {}", 100.0 * g_hat)),
+            Path::new("loose_g.toml"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let fits = fit_record(&[capped, loose], &data, &FitOptions::default()).unwrap();
+    let (on_cap, free) = (&fits[0], &fits[1]);
+    assert!(
+        (on_cap.params_si[2] - cap).abs() <= 1e-6 * cap,
+        "g = {} against the cap {cap}",
+        on_cap.params_si[2]
+    );
+    assert!(on_cap.rho > m2.rho * (1.0 + 1e-4), "{} against {}", on_cap.rho, m2.rho);
+    assert!(
+        on_cap
+            .warnings
+            .iter()
+            .any(|w| w.contains("g sits on its physical bound (g ≤")),
+        "{:?}",
+        on_cap.warnings
+    );
+    assert!(
+        (free.rho - m2.rho).abs() <= 1e-9 * m2.rho,
+        "{} against {}",
+        free.rho,
+        m2.rho
+    );
+    assert!(
+        !free.warnings.iter().any(|w| w.contains("physical bound")),
+        "{:?}",
+        free.warnings
+    );
+
+    let prior = bitrock::prior::Prior::physical(
+        &[capped],
+        &bitrock::prior::PhysicalScales::of(&data.calibration),
+        10.0,
+        None,
+        1000.0,
+    )
+    .unwrap();
+    let bx = &prior.boxes[0];
+    assert!(
+        f64::from(bx.upper[2]) <= cap * (1.0 + 1e-6) && bx.lower[2] == 0.0,
+        "{bx:?}"
+    );
+    // Values beyond the cap are refused as parameters.
+    let err = capped.check_params(&[13e3, 6.5e3, 2.0 * cap], "params").unwrap_err();
+    assert!(err.to_string().contains("is above its physical bound"), "{err}");
 }

@@ -385,3 +385,31 @@ fn the_evidence_posterior_maps_with_its_law_probabilities() {
         assert!(grid.iter().all(|&v| v.is_nan() || (0.0..=1.0).contains(&v)));
     }
 }
+
+/// Parameters in N·m read as kN·m put every torque a thousand times too high: the map is still
+/// drawn (the values are legal), but never silently. The same values in N·m, said so, map the
+/// boundary a thousand times higher in weight on bit and warn of nothing.
+#[test]
+fn torques_beyond_any_drill_bit_are_said_to_be_in_the_wrong_unit() {
+    let grid = ["--omega-rpm", "60:180:3", "--wob-kn", "20:600:5", "--json"];
+    let map = |extra: &[&str]| {
+        let mut args = vec!["stability", "--law", "m2", "--params", "13000,6500,0.3"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&grid);
+        let (code, out, err) = run(&args);
+        assert_eq!(code, 0, "{err}");
+        let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+        (doc["boundaries"]["m2"]["map_wob_kn"].clone(), err)
+    };
+    let (as_knm, warned) = map(&[]);
+    assert!(
+        warned.contains("warning: tsb = 13000 kN·m lies beyond any drill bit's torque")
+            && warned.contains("--torque-unit nm"),
+        "{warned}"
+    );
+    let (as_nm, quiet) = map(&["--torque-unit", "nm"]);
+    assert!(!quiet.contains("warning"), "{quiet}");
+    // The critical weight on bit scales with the torque: the wrong unit moves it a thousandfold.
+    let (a, b) = (as_knm[0].as_f64().unwrap(), as_nm[0].as_f64().unwrap());
+    assert!((b / a - 1000.0).abs() < 1e-6 * 1000.0, "{a} kN against {b} kN");
+}

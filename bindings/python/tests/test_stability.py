@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -40,6 +41,16 @@ def test_a_what_if_map_is_the_command_lines_and_the_closed_form(cli) -> None:
     slope = -(13e3 - 6.5e3) * 0.3 * np.exp(-0.3 * omega)
     expected_kn = 244.2e3 * maps.attrs["critical_bit_damping_nms"] / slope / 1e3
     np.testing.assert_allclose(maps["map_wob_kn"].sel(law="m2").values, expected_kn, rtol=1e-12)
+
+
+def test_torques_in_newton_metres_read_as_kilonewton_metres_are_said() -> None:
+    with pytest.warns(bitrock.BitrockWarning, match=r"tsb = 13000 kN·m lies beyond any drill bit's torque.*torque_unit"):
+        wrong = bitrock.stability(law="m2", params=[13000, 6500, 0.3], backend="cpu", **GRID)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", bitrock.BitrockWarning)
+        right = bitrock.stability(law="m2", params=[13000, 6500, 0.3], torque_unit="nm", backend="cpu", **GRID)
+    # Read as kN·m the boundary sits a thousand times lower in weight on bit.
+    np.testing.assert_allclose(right["map_wob_kn"].values, 1000 * wrong["map_wob_kn"].values, rtol=1e-12)
 
 
 def test_a_runs_map_is_the_command_lines(cli, demo, tmp_path) -> None:

@@ -198,7 +198,7 @@ fn box_ends_reached(law: Law, lower: &[f32], upper: &[f32], posterior: &[(Vec<f6
         if a > spec.lower && mass(&|v| v <= a + margin) > EDGE_MASS {
             reached.push(format!("{} lower", spec.name));
         }
-        if mass(&|v| v >= b - margin) > EDGE_MASS {
+        if b < spec.upper && mass(&|v| v >= b - margin) > EDGE_MASS {
             reached.push(format!("{} upper", spec.name));
         }
     }

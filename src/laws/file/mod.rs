@@ -39,6 +39,8 @@ pub struct LawParam {
     pub inverse_speed_power: i32,
     /// Physical lower bound, SI (−∞ where the file gives none).
     pub lower: f64,
+    /// Physical upper bound, SI (+∞ where the file gives none).
+    pub upper: f64,
     /// A reference value (a published estimate), SI, where the file gives one.
     pub reference: Option<f64>,
 }
@@ -46,7 +48,12 @@ pub struct LawParam {
 impl LawParam {
     /// The parameter's SI unit, written as bitrock writes units (`N·m·s/rad`).
     pub fn unit(&self) -> String {
-        ParamSpec::new("", self.torque_power, self.inverse_speed_power, self.lower).unit("N·m")
+        self.spec("").unit("N·m")
+    }
+
+    /// The parameter as the laws describe theirs, named `name`.
+    pub fn spec(&self, name: &'static str) -> ParamSpec {
+        ParamSpec::new(name, self.torque_power, self.inverse_speed_power, self.lower).with_upper(self.upper)
     }
 }
 
@@ -84,6 +91,7 @@ struct RawParam {
     name: Spanned<String>,
     unit: Spanned<String>,
     lower: Option<Spanned<f64>>,
+    upper: Option<Spanned<f64>>,
     reference: Option<Spanned<f64>>,
 }
 
@@ -167,11 +175,7 @@ pub fn register(file: LawFile) -> Result<Law> {
         return Err(Error::setting("law_file", "too many law files in one process"));
     }
     let file: &'static LawFile = Box::leak(Box::new(file));
-    let specs: Vec<ParamSpec> = file
-        .params
-        .iter()
-        .map(|p| ParamSpec::new(&p.name, p.torque_power, p.inverse_speed_power, p.lower))
-        .collect();
+    let specs: Vec<ParamSpec> = file.params.iter().map(|p| p.spec(&p.name)).collect();
     let reference_knm = file
         .params
         .iter()
@@ -324,6 +328,15 @@ impl LawFile {
                 let start = p.lower.as_ref().map_or(0, |s| s.span().start);
                 return Err(at(start, format!("lower bound of '{pname}' is +∞")));
             }
+            let upper = value(&p.upper, f64::INFINITY, "upper")?;
+            if let Some(s) = &p.upper
+                && upper <= lower
+            {
+                return Err(at(
+                    s.span().start,
+                    format!("upper bound of '{pname}' = {upper} does not lie above its lower bound {lower}"),
+                ));
+            }
             let reference = match &p.reference {
                 None => None,
                 Some(s) => {
@@ -334,6 +347,12 @@ impl LawFile {
                             format!("reference of '{pname}' = {v} lies below its lower bound {lower}"),
                         ));
                     }
+                    if v > upper {
+                        return Err(at(
+                            s.span().start,
+                            format!("reference of '{pname}' = {v} lies above its upper bound {upper}"),
+                        ));
+                    }
                     Some(v)
                 }
             };
@@ -342,6 +361,7 @@ impl LawFile {
                 torque_power,
                 inverse_speed_power,
                 lower,
+                upper,
                 reference,
             });
         }

@@ -150,7 +150,7 @@ fn a_refused_file_names_the_line_column_and_what_is_wrong() {
             .contains("twice")
     );
     assert!(refusal("name = \"My Law\"\ntorque = \"w\"\n").2.contains("lower-case"));
-    // References below their bound; a bound of another kind.
+    // References below their bound; a bound of a kind that does not exist.
     let (line, _, message) = refusal(&format!(
         "{head}{}[[parameter]]\nname = \"b\"\nunit = \"1\"\nlower = 0\nreference = -1\n",
         param("a")
@@ -158,10 +158,10 @@ fn a_refused_file_names_the_line_column_and_what_is_wrong() {
     assert_eq!(line, 10);
     assert!(message.contains("below its lower bound 0"), "{message}");
     let (_, _, message) = refusal(&format!(
-        "{head}{}[[parameter]]\nname = \"b\"\nunit = \"1\"\nupper = 1\n",
+        "{head}{}[[parameter]]\nname = \"b\"\nunit = \"1\"\nmaximum = 1\n",
         param("a")
     ));
-    assert!(message.contains("upper"), "{message}");
+    assert!(message.contains("maximum"), "{message}");
     // Dimensions: a sum of unlike units, a dimensioned exponential, a result not a torque, and
     // the ratio r not a factor.
     let dims = |torque: &str| {
