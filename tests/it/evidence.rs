@@ -448,3 +448,46 @@ fn the_data_choose_the_model_of_the_residuals() {
     assert_eq!(Some(w_ref_kn), scaled_iid.w_ref_kn);
     assert!((200.0..300.0).contains(&w_ref_kn), "{w_ref_kn}");
 }
+
+/// Which backend scores is said once, however many models of the residuals the evidence
+/// compares (four on a record whose weight on bit varies, on two evaluators).
+#[test]
+fn the_backend_is_said_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m2-wob.csv");
+    let (code, _, err) = outcome(bin().args([
+        "simulate",
+        "--law",
+        "m2",
+        "--omega-rpm",
+        "60",
+        "--duration-s",
+        "60",
+        "--sample-hz",
+        "5",
+        "--wob-fluctuation-kn",
+        "12",
+        "--seed",
+        "3",
+        "--out",
+        path.to_str().unwrap(),
+    ]));
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = outcome(bin().env("NODEVICE_SELECT", "1").args([
+        "evidence",
+        path.to_str().unwrap(),
+        "--laws",
+        "m2",
+        "--particles",
+        "40",
+        "--islands",
+        "2",
+        "--quiet",
+        "--json",
+    ]));
+    assert_eq!(code, 0, "{err}");
+    let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(doc["noise_models"].as_array().unwrap().len(), 4);
+    let said = err.matches("GPU backend").count() + err.matches("computing on the CPU").count();
+    assert_eq!(said, 1, "{err}");
+}

@@ -11,15 +11,17 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 /// Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
-/// `bitrock simulate` writes it (CSV text, torques in kN·m).
+/// `bitrock simulate` writes it (CSV text, torques in kN·m). Parameters that look like the
+/// wrong torque unit are said through `note`.
 #[pyfunction]
-#[pyo3(signature = (law, params, omega_rpm, options))]
+#[pyo3(signature = (law, params, omega_rpm, options, note))]
 pub(crate) fn simulate(
     py: Python<'_>,
     law: String,
     params: Option<Vec<f64>>,
     omega_rpm: f64,
     options: &Bound<'_, PyDict>,
+    note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     use bitrock::simulate::{self as sim, Initial, SimConfig};
     use bitrock::units::RAD_S_PER_RPM;
@@ -47,6 +49,9 @@ pub(crate) fn simulate(
             }
         },
     };
+    if let (Some(callback), Some(warning)) = (&note, law.implausible_torque(&params_nm, "param_torque_unit")) {
+        callback.call1(py, (as_arguments(&format!("warning: {warning}")),))?;
+    }
     let mut c = SimConfig::new(law, params_nm, omega_rpm * RAD_S_PER_RPM, bitrock::laws::PAPER_W_REF_N);
     let kn = |key: &str| -> PyResult<Option<f64>> { Ok(kwarg::<f64>(options, key)?.map(|v| v * 1000.0)) };
     c.wob_n = kn("wob_kn")?.unwrap_or(c.wob_n);

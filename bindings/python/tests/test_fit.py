@@ -63,3 +63,6 @@ def test_a_simulated_record_is_the_command_lines_and_fits_back(cli, tmp_path) ->
     with pytest.raises(bitrock.InputError) as caught:
         bitrock.simulate("m2", omega_rpm=50, initial="sideways")
     assert caught.value.argument == "initial"
+    # N·m values given as kN·m: simulated, but said.
+    with pytest.warns(bitrock.BitrockWarning, match=r"tsb = 13000 kN·m lies beyond any drill bit's torque.*param_torque_unit"):
+        bitrock.simulate("m2", omega_rpm=50, params=[13000, 6500, 0.3], duration_s=2, settle_s=1)

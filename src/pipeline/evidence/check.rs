@@ -199,7 +199,7 @@ fn replicate_of(
         prior: analysis.prior.clone(),
         fit: analysis.fit,
     };
-    let evaluator = EvidenceJob::evaluator(&synthetic, &basis, backend, seed, observer)?;
+    let evaluator = EvidenceJob::evaluator(&synthetic, &basis, backend, seed, &mut |line| observer.note(line))?;
     let outcome = job
         .sample(basis, evaluator.as_ref(), noise_model, observer)
         .map_err(|e| match e {

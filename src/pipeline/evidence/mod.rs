@@ -115,6 +115,7 @@ impl EvidenceJob {
             None => NoiseModel::ALL.to_vec(),
         };
         let mut analyses = Vec::new();
+        let mut said: Vec<String> = Vec::new();
         for fit_options in self.scalings(data) {
             let fits = fit::fit_record(&self.laws, data, &fit_options)?;
             let unit = data.torque_unit.newton_metres();
@@ -138,8 +139,14 @@ impl EvidenceJob {
                 prior,
                 fit: fit_options,
             };
-            // One evaluator for every noise model of this scaling (the same data, the same ρ).
-            let evaluator = Self::evaluator(data, &basis, self.backend, self.sampler.seed, observer)?;
+            // One evaluator for every noise model of this scaling (the same data, the same ρ);
+            // what choosing it says (the backend) is said once for all scalings.
+            let evaluator = Self::evaluator(data, &basis, self.backend, self.sampler.seed, &mut |line| {
+                if !said.contains(&line) {
+                    said.push(line.clone());
+                    observer.note(line);
+                }
+            })?;
             for &model in &models {
                 let mut analysis = self.sample(basis.clone(), evaluator.as_ref(), model, observer)?;
                 analysis.separations = separations.clone();
@@ -187,17 +194,17 @@ impl EvidenceJob {
     }
 
     /// The evaluator of `basis`' prior on `data`'s calibration samples, its candidates seeded
-    /// `seed`; a fallback to the CPU is said through `observer`.
+    /// `seed`; which backend scores (a fallback to the CPU) is said through `note`.
     fn evaluator(
         data: &FieldData,
         basis: &Basis,
         backend: Backend,
         seed: u64,
-        observer: &mut dyn Observer,
+        note: &mut dyn FnMut(String),
     ) -> Result<Box<dyn eval::Evaluator>> {
         let problem =
             AbcProblem::new(basis.prior.clone(), seed, &data.calibration, basis.fit.w_ref_n).with_best_rho(&basis.fits);
-        eval::evaluator(problem, backend, Default::default(), &mut |line| observer.note(line))
+        eval::evaluator(problem, backend, Default::default(), note)
     }
 
     /// The evidence of `basis`' laws under the `noise` model, scored by `evaluator` (made by

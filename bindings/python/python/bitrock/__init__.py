@@ -570,11 +570,12 @@ def simulate(
     by default), as ``bitrock simulate`` writes it: a DataFrame with ``time_s``,
     ``bit_speed_rpm``, ``torque_knm`` and ``wob_kn``, sampled at ``sample_hz`` after
     ``settle_s``, with measurement noise and a fluctuating weight on bit when asked. It reads
-    back with :func:`read_record`."""
+    back with :func:`read_record`. A torque parameter beyond any drill bit's (1,000 kN·m) is
+    simulated but warned of (a ``BitrockWarning``): values in N·m given as kN·m."""
     import io
 
     options = {k: v for k, v in locals().items() if k not in ("law", "params", "omega_rpm", "io")}
-    text = _bitrock.simulate(law, None if params is None else [float(p) for p in params], float(omega_rpm), options)
+    text = _bitrock.simulate(law, None if params is None else [float(p) for p in params], float(omega_rpm), options, _note)
     return pd.read_csv(io.StringIO(text))
 
 

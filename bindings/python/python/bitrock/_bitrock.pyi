@@ -177,10 +177,11 @@ def serve(request: bytes, problem: bytes | None = None, context: bytes | None = 
     Answers a task on a worker process (see `bitrock::abc::shard::wire`).
     """
 
-def simulate(law: str, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, omega_rpm: SupportsFloat | SupportsIndex, options: dict) -> str:
+def simulate(law: str, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, omega_rpm: SupportsFloat | SupportsIndex, options: dict, note: Any | None) -> str:
     """
     Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
-    `bitrock simulate` writes it (CSV text, torques in kN·m).
+    `bitrock simulate` writes it (CSV text, torques in kN·m). Parameters that look like the
+    wrong torque unit are said through `note`.
     """
 
 def stability(run: str | PathLike[str] | None, law: str | None, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, options: dict, note: Any | None) -> dict:
