@@ -236,6 +236,14 @@ pub struct Candidate {
     pub params: [f32; MAX_PARAMS],
 }
 
+impl Candidate {
+    /// The parameters widened exactly to f64 (unused ones 0), on the stack: what the f64
+    /// twins evaluate, with no allocation per candidate.
+    pub fn widened(&self) -> [f64; MAX_PARAMS] {
+        self.params.map(f64::from)
+    }
+}
+
 /// The contents of a prior TOML file (see the module documentation).
 #[derive(Debug, Default, Deserialize)]
 pub struct PriorFile {

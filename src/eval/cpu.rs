@@ -219,12 +219,7 @@ pub fn score_candidates(problem: &AbcProblem, candidates: &[Candidate], out: &mu
 /// ρ of a candidate: f64 arithmetic on its f32 parameters, widened exactly.
 fn rho_of_candidate(problem: &AbcProblem, c: &Candidate) -> f64 {
     let law = problem.prior.law(c.slot);
-    rho(problem, law, &widened(law, c))
-}
-
-/// A candidate's law parameters in f64 (exactly its f32 values; unused ones 0).
-fn widened(law: Law, c: &Candidate) -> Vec<f64> {
-    c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect()
+    rho(problem, law, &c.widened()[..law.n_params()])
 }
 
 /// ρ and λ = Σ e_t·e_(t−1) / Σy² of explicit candidates of `problem` into `rho` and `lag`
@@ -239,7 +234,7 @@ pub fn score_candidates_lagged(problem: &AbcProblem, candidates: &[Candidate], r
         .zip(candidates)
         .for_each(|((rho, lag), c)| {
             let law = problem.prior.law(c.slot);
-            (*rho, *lag) = rho_and_lag(problem, law, &widened(law, c));
+            (*rho, *lag) = rho_and_lag(problem, law, &c.widened()[..law.n_params()]);
         });
 }
 

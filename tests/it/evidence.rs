@@ -364,11 +364,11 @@ fn the_evidence_ranks_a_separated_generating_law_first_and_never_decides_an_inse
     }
 }
 
-/// A record of m2 by `bitrock simulate` at 60 rpm, 10 Hz for 240 s with 0.6 kN·m of torque
-/// noise and, with `wob_kn`, a weight on bit fluctuating by that much with a 5 s correlation
-/// time (torque follows it: residuals correlated from one sample to the next).
-fn m2_with_fluctuating_wob(dir: &std::path::Path, wob_kn: &str) -> bitrock::data::FieldData {
-    let path = dir.join(format!("m2-wob-{wob_kn}.csv"));
+/// A record of m2 by `bitrock simulate` at 60 rpm with 0.6 kN·m of torque noise, `duration_s`
+/// long at `sample_hz`, its weight on bit fluctuating by `wob_kn` with a 5 s correlation time
+/// (torque follows it: residuals correlated from one sample to the next); its path in `dir`.
+fn m2_record_with_wob(dir: &std::path::Path, wob_kn: &str, duration_s: &str, sample_hz: &str) -> std::path::PathBuf {
+    let path = dir.join(format!("m2-wob-{wob_kn}-{duration_s}s.csv"));
     let (code, _, err) = outcome(bin().args([
         "simulate",
         "--law",
@@ -376,9 +376,9 @@ fn m2_with_fluctuating_wob(dir: &std::path::Path, wob_kn: &str) -> bitrock::data
         "--omega-rpm",
         "60",
         "--duration-s",
-        "240",
+        duration_s,
         "--sample-hz",
-        "10",
+        sample_hz,
         "--noise-torque-knm",
         "0.6",
         "--wob-fluctuation-kn",
@@ -391,6 +391,12 @@ fn m2_with_fluctuating_wob(dir: &std::path::Path, wob_kn: &str) -> bitrock::data
         path.to_str().unwrap(),
     ]));
     assert_eq!(code, 0, "{err}");
+    path
+}
+
+/// [`m2_record_with_wob`] over 240 s at 10 Hz, read.
+fn m2_with_fluctuating_wob(dir: &std::path::Path, wob_kn: &str) -> bitrock::data::FieldData {
+    let path = m2_record_with_wob(dir, wob_kn, "240", "10");
     bitrock::data::read_field_data(&path, &Default::default()).unwrap()
 }
 
@@ -454,25 +460,7 @@ fn the_data_choose_the_model_of_the_residuals() {
 #[test]
 fn the_backend_is_said_once() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("m2-wob.csv");
-    let (code, _, err) = outcome(bin().args([
-        "simulate",
-        "--law",
-        "m2",
-        "--omega-rpm",
-        "60",
-        "--duration-s",
-        "60",
-        "--sample-hz",
-        "5",
-        "--wob-fluctuation-kn",
-        "12",
-        "--seed",
-        "3",
-        "--out",
-        path.to_str().unwrap(),
-    ]));
-    assert_eq!(code, 0, "{err}");
+    let path = m2_record_with_wob(dir.path(), "12", "60", "5");
     let (code, out, err) = outcome(bin().env("NODEVICE_SELECT", "1").args([
         "evidence",
         path.to_str().unwrap(),

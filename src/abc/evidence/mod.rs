@@ -636,9 +636,11 @@ impl Island {
 /// the AR(1) likelihood, which the kernels' sums do not hold.
 fn end_residuals_squared(problem: &AbcProblem, c: &Candidate) -> f64 {
     let law = problem.prior.law(c.slot);
-    let p: Vec<f64> = c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect();
+    let p = c.widened();
     let n = problem.data_len();
-    let e = |i: usize| problem.torque_nm[i] - law.torque(&p, problem.speed_rad_s[i], problem.wob_ratio[i]);
+    let e = |i: usize| {
+        problem.torque_nm[i] - law.torque(&p[..law.n_params()], problem.speed_rad_s[i], problem.wob_ratio[i])
+    };
     (e(0).powi(2) + e(n - 1).powi(2)) / problem.sum_sq_torque
 }
 

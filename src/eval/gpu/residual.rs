@@ -200,6 +200,10 @@ impl GpuEvaluator {
         res: &'a mut Resources,
         lag: bool,
     ) -> std::result::Result<&'a ParamsResources, GpuError> {
+        // Built already (every call after the first): nothing to set up per dispatch.
+        if res.params.as_ref().is_some_and(|p| !lag || p.lag.is_some()) {
+            return Ok(res.params.as_ref().expect("checked just above"));
+        }
         let entries = [
             buffer_entry(0, STORAGE_READ),
             buffer_entry(1, UNIFORM),
@@ -266,28 +270,37 @@ impl GpuEvaluator {
 
     /// Σ(y − r·T)² (f32) of explicit candidates into `out`.
     pub fn sum_sq_residuals_of(&self, candidates: &[Candidate], out: &mut [f32]) -> std::result::Result<(), GpuError> {
-        self.explicit_sums(candidates, out, false)
+        self.explicit_sums(candidates, out, None)
     }
 
-    /// The lag-1 sums Σ e_t·e_(t−1) (f32) of explicit candidates into `out`, e = y − r·T over
-    /// consecutive samples of the record (the AR(1) noise model's statistic).
-    pub fn lag_sums_of(&self, candidates: &[Candidate], out: &mut [f32]) -> std::result::Result<(), GpuError> {
-        self.explicit_sums(candidates, out, true)
+    /// Σ(y − r·T)² into `ssr` and the lag-1 sums Σ e_t·e_(t−1) into `lag` (f32) of explicit
+    /// candidates, e = y − r·T over consecutive samples of the record (the AR(1) noise model's
+    /// statistic): each chunk of candidates uploaded once for both passes.
+    pub fn sums_with_lag_of(
+        &self,
+        candidates: &[Candidate],
+        ssr: &mut [f32],
+        lag: &mut [f32],
+    ) -> std::result::Result<(), GpuError> {
+        self.explicit_sums(candidates, ssr, Some(lag))
     }
 
-    /// The squares' sums of explicit candidates, or with `lag` their lag-1 sums, into `out`.
-    fn explicit_sums(&self, candidates: &[Candidate], out: &mut [f32], lag: bool) -> std::result::Result<(), GpuError> {
+    /// The squares' sums of explicit candidates into `ssr`, and where `lag` is given their
+    /// lag-1 sums into it, from one upload per chunk.
+    fn explicit_sums(
+        &self,
+        candidates: &[Candidate],
+        ssr: &mut [f32],
+        lag: Option<&mut [f32]>,
+    ) -> std::result::Result<(), GpuError> {
         let mut guard = self.resources.lock().expect("GPU resources");
-        self.params_resources(&mut guard, lag)?;
+        self.params_resources(&mut guard, lag.is_some())?;
         let res = &*guard;
         let params = res.params.as_ref().expect("built above");
-        let (pipeline, bind_group) = match &params.lag {
-            Some((pipeline, bind_group)) if lag => (pipeline, bind_group),
-            _ => (&params.pipeline, &params.bind_group),
-        };
+        let mut lag_chunks = lag.map(|l| l.chunks_mut(self.params_chunk));
         for (cands, chunk) in candidates
             .chunks(self.params_chunk)
-            .zip(out.chunks_mut(self.params_chunk))
+            .zip(ssr.chunks_mut(self.params_chunk))
         {
             let upload: Vec<GpuProposal> = cands
                 .iter()
@@ -296,7 +309,12 @@ impl GpuEvaluator {
             self.context
                 .queue
                 .write_buffer(&params.proposals, 0, bytemuck::cast_slice(&upload));
-            self.dispatch_slices(res, pipeline, bind_group, 0, 0, chunk)?;
+            self.dispatch_slices(res, &params.pipeline, &params.bind_group, 0, 0, chunk)?;
+            if let Some(chunks) = &mut lag_chunks {
+                let (pipeline, bind_group) = params.lag.as_ref().expect("built above");
+                let out = chunks.next().expect("one lag-1 sum per candidate");
+                self.dispatch_slices(res, pipeline, bind_group, 0, 0, out)?;
+            }
         }
         Ok(())
     }
@@ -335,12 +353,14 @@ impl Evaluator for GpuEvaluator {
     }
 
     fn score_params_lagged(&self, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) -> Result<()> {
+        assert_eq!(candidates.len(), rho.len(), "one ρ per candidate");
         assert_eq!(candidates.len(), lag.len(), "one lag-1 sum per candidate");
-        self.score_params(candidates, rho)?;
-        let mut sums = vec![0.0f32; lag.len()];
-        self.lag_sums_of(candidates, &mut sums)?;
-        for (l, s) in lag.iter_mut().zip(sums) {
-            *l = crate::eval::rho_of_sum(f64::from(s), self.problem.sum_sq_torque);
+        let (mut ssr, mut lags) = (vec![0.0f32; rho.len()], vec![0.0f32; lag.len()]);
+        self.sums_with_lag_of(candidates, &mut ssr, &mut lags)?;
+        for (out, sums) in [(rho, ssr), (lag, lags)] {
+            for (value, s) in out.iter_mut().zip(sums) {
+                *value = crate::eval::rho_of_sum(f64::from(s), self.problem.sum_sq_torque);
+            }
         }
         Ok(())
     }
