@@ -115,7 +115,7 @@ impl FitOptions {
 }
 
 /// The least-squares estimate of one law. Parameters are SI (torques in N·m).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LawFit {
     pub law: Law,
     /// Estimates, SI (torque-valued parameters in N·m).
@@ -124,10 +124,12 @@ pub struct LawFit {
     /// data cannot determine.
     pub std_errors_si: Vec<Option<f64>>,
     /// ρ on the calibration samples.
+    #[serde(with = "crate::numerics::json_f64")]
     pub rho: f64,
     /// ρ on the validation samples, when there are any.
     pub validation_rho: Option<f64>,
     /// Condition number of the column-normalised Jacobian at the estimate.
+    #[serde(with = "crate::numerics::json_f64")]
     pub condition_number: f64,
     /// Pearson correlations of the estimates (row-major, n × n); `None` entries where a
     /// standard error is undefined.
@@ -139,8 +141,9 @@ pub struct LawFit {
     /// How the runs ended. Counted while fitting; the run store does not keep it.
     #[serde(skip)]
     pub endings: RunEndings,
-    /// Scales of the calibration samples the law was fitted to.
-    #[serde(skip)]
+    /// Scales of the calibration samples the law was fitted to; not serialised (a reader
+    /// recomputes them from those samples, as [`crate::run::Setup`] does).
+    #[serde(skip, default = "RecordScales::unknown")]
     pub scales: RecordScales,
 }
 
@@ -270,6 +273,15 @@ pub struct RecordScales {
 }
 
 impl RecordScales {
+    /// Scales not yet known (NaN): what a fit read without its samples holds until they are
+    /// recomputed from them.
+    fn unknown() -> Self {
+        Self {
+            torque: f64::NAN,
+            speed: f64::NAN,
+        }
+    }
+
     /// The scales of the samples a law is fitted to.
     pub fn of(samples: &Samples) -> Self {
         let m = samples.speed_rad_s.len().max(1);

@@ -175,6 +175,18 @@ mod tests {
     use super::*;
 
     #[test]
+    fn non_finite_numbers_survive_json() {
+        #[derive(serde::Serialize, serde::Deserialize)]
+        struct Holder(#[serde(with = "json_f64")] f64);
+        for v in [0.1 + 0.2, -0.0, f64::MAX, f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+            let text = serde_json::to_string(&Holder(v)).unwrap();
+            let back: Holder = serde_json::from_str(&text).unwrap();
+            assert_eq!(back.0.to_bits(), v.to_bits(), "{v} as {text}");
+        }
+        assert!(serde_json::from_str::<Holder>("\"infinite\"").is_err());
+    }
+
+    #[test]
     fn weighted_ks_is_the_largest_gap_between_the_weighted_cdfs() {
         // F jumps ½ at 0 and at 1; G ½ at 0 and at 2: the gap is ½ on [1, 2).
         let d = weighted_ks(&[(0.0, 1.0), (1.0, 1.0)], &[(0.0, 3.0), (2.0, 3.0)]);
@@ -277,5 +289,42 @@ mod tests {
             assert!((got - want).abs() <= tol * want.abs(), "{x}: {got} vs {want}");
         }
         assert_eq!(tanh(0.0).to_bits(), 0.0f64.to_bits());
+    }
+}
+
+/// Serde for an `f64` that may be infinite or NaN, in JSON (which has no number for them and
+/// which serde_json writes as `null`): finite values as numbers, the others as the strings
+/// `"inf"`, `"-inf"` and `"NaN"`; read back exactly.
+pub mod json_f64 {
+    use serde::de::Error as _;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(value: &f64, out: S) -> Result<S::Ok, S::Error> {
+        match *value {
+            v if v.is_finite() => out.serialize_f64(v),
+            v if v.is_nan() => out.serialize_str("NaN"),
+            v if v > 0.0 => out.serialize_str("inf"),
+            _ => out.serialize_str("-inf"),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(input: D) -> Result<f64, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Written {
+            Number(f64),
+            Text(String),
+        }
+        match Written::deserialize(input)? {
+            Written::Number(v) => Ok(v),
+            Written::Text(t) => match t.as_str() {
+                "inf" => Ok(f64::INFINITY),
+                "-inf" => Ok(f64::NEG_INFINITY),
+                "NaN" => Ok(f64::NAN),
+                other => Err(D::Error::custom(format!(
+                    "expected a number, \"inf\", \"-inf\" or \"NaN\", got {other:?}"
+                ))),
+            },
+        }
     }
 }

@@ -191,8 +191,8 @@ pub struct GeneratingLaw {
 /// A run's selection check: the confusion matrix and how it was made.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SelectionCheck {
-    /// The run directory checked.
-    pub run_dir: PathBuf,
+    /// The run directory checked; `None` for a run kept in memory (Python).
+    pub run_dir: Option<PathBuf>,
     /// The run's laws: the columns (and rows) of the matrix.
     pub laws: Vec<Law>,
     /// Replicates per law, K.
@@ -364,13 +364,14 @@ pub fn replicate_seed(run_seed: u64, law_slot: usize, replicate: usize) -> u64 {
 
 /// A run to check: its stored set-up and last population, read and refused before any work.
 pub struct CheckedRun {
-    pub dir: PathBuf,
+    /// The run directory; `None` for a run kept in memory, whose check is returned, not written.
+    pub dir: Option<PathBuf>,
     pub config: run::Config,
     pub stored: run::Stored,
     prior_file: Option<PriorFile>,
     /// The run directory's lock, held from [`CheckedRun::open`] until the check is written:
     /// the run cannot be continued or replaced under the check.
-    _lock: files::DirLock,
+    _lock: Option<files::DirLock>,
 }
 
 impl CheckedRun {
@@ -384,12 +385,42 @@ impl CheckedRun {
         files::refuse_foreign(&selection, "RUN_DIR", &|rel, is_dir| {
             crate::run::dir::owns_unchanged(crate::run::dir::Owned::Selection, &selection, rel, is_dir)
         })?;
-        let refuse = |message: String| Error::Data {
+        let config: run::Config = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
             path: dir.to_path_buf(),
+            message: format!("the stored configuration is not one this bitrock reads: {e}"),
+        })?;
+        let prior_file = match &config.prior_file {
+            Some(path) => Some(stored_prior_file(dir, path, &stored, &config)?),
+            None => None,
+        };
+        let lock = files::DirLock::acquire(dir)?;
+        Self::checked(Some(dir.to_path_buf()), config, stored, prior_file, Some(lock))
+    }
+
+    /// A run kept in memory (its configuration, and its set-up and populations as a store
+    /// would hold them), checked as [`CheckedRun::open`] checks a stored one; its check is
+    /// returned, not written.
+    pub fn in_memory(config: run::Config, stored: run::Stored) -> Result<Self> {
+        let prior_file = config
+            .prior_file
+            .as_ref()
+            .map(|_| PriorFile::of_prior(&stored.setup.prior, stored.setup.data.torque_unit.newton_metres()));
+        Self::checked(None, config, stored, prior_file, None)
+    }
+
+    /// The refusals shared by a stored run and one in memory.
+    fn checked(
+        dir: Option<PathBuf>,
+        config: run::Config,
+        stored: run::Stored,
+        prior_file: Option<PriorFile>,
+        lock: Option<files::DirLock>,
+    ) -> Result<Self> {
+        let source = stored.setup.data.source.clone();
+        let refuse = |message: String| Error::Data {
+            path: dir.clone().unwrap_or(source.clone()),
             message,
         };
-        let config: run::Config = serde_json::from_value(stored.setup.config.clone())
-            .map_err(|e| refuse(format!("the stored configuration is not one this bitrock reads: {e}")))?;
         let Some(last) = stored.populations.last() else {
             return Err(refuse(
                 "the run has no completed population: its laws all died out before one, so none has a posterior to draw synthetic records from".into(),
@@ -405,13 +436,8 @@ impl CheckedRun {
                     .into(),
             ));
         }
-        let prior_file = match &config.prior_file {
-            Some(path) => Some(stored_prior_file(dir, path, &stored, &config)?),
-            None => None,
-        };
-        let lock = files::DirLock::acquire(dir)?;
         Ok(Self {
-            dir: dir.to_path_buf(),
+            dir,
             config,
             stored,
             prior_file,
@@ -660,7 +686,7 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
     let mut rng = StdRng::seed_from_u64(seed);
     let params_si = generating_params(run, law, &mut rng);
     let fit = fit_of(&run.stored.setup.fits, law).ok_or_else(|| Error::Data {
-        path: run.dir.clone(),
+        path: run.dir.clone().unwrap_or(data.source.clone()),
         message: format!("the run has no least-squares fit of {law}"),
     })?;
     let w_ref_n = config.fit.w_ref_n;
@@ -668,6 +694,8 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
     let synthetic = FieldData {
         source: run
             .dir
+            .as_deref()
+            .unwrap_or(&data.source)
             .join(format!("{SELECTION_DIR}/{law}-replicate-{}", job.replicate)),
         calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &residuals, 0.0, &mut rng),
         validation: synthesize(law, &params_si, &data.validation, w_ref_n, &residuals, 0.0, &mut rng),
@@ -838,7 +866,12 @@ pub(crate) fn synthesize(
 /// rename, under the run directory's lock, so the directory holds the previous check or this
 /// one, whole, at every moment.
 pub fn write(run: &CheckedRun, check: &SelectionCheck, svg: String, png: Vec<u8>) -> Result<PathBuf> {
-    let dir = run.dir.as_path();
+    let Some(dir) = run.dir.as_deref() else {
+        return Err(Error::setting(
+            "source",
+            "a run kept in memory has no directory to write its check into; save it first",
+        ));
+    };
     let json = serde_json::to_string_pretty(check).expect("the check serialises") + "\n";
     let names = crate::run::dir::SELECTION_FILES;
     let bodies = [

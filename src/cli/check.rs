@@ -77,7 +77,11 @@ fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
     writeln!(
         out,
         "Selection check of {}: {} replicates per law, N = {}, {} prior, backend {}, {:.1} s",
-        check.run_dir.display(),
+        check
+            .run_dir
+            .as_deref()
+            .unwrap_or(std::path::Path::new("the run"))
+            .display(),
         check.replicates,
         check.particles,
         match check.prior_rule {

@@ -170,6 +170,13 @@ impl Analysis {
         })
     }
 
+    /// Writes a run made in memory to the run directory `dir`, store and summary files, as
+    /// [`AbcJob::run`] with `out` would have written it ([`run::save`]).
+    pub fn save(&self, dir: &run::Dir) -> Result<()> {
+        let _lock = run::save(dir, &self.outcome)?;
+        self.write_summary(&dir.path)
+    }
+
     /// What the user must know about a result that ran but says less than it seems to: the
     /// record's warnings, every law fitting it exactly (ρ = 0: a constant torque, which no
     /// tolerance can tell the laws apart on), and populations whose effective sample size is a

@@ -208,6 +208,51 @@ fn start_with_fits(
     })
 }
 
+/// Writes a run made in memory (`outcome`, whose populations all hold their particles) to the
+/// run directory `dir` as [`start`] would have written it: the same store (set-up, every
+/// population, the invocation that made them), so that export, report, stability and the
+/// selection check read it and [`resume`] continues it exactly. Checked and claimed like a new
+/// run; a run it replaces ([`DirState::Replace`]) stays until the new store is complete.
+/// Returns the directory's lock, under which the caller writes the summary files.
+pub fn save(dir: &Dir, outcome: &Outcome) -> Result<files::DirLock> {
+    let (setup, run) = (&outcome.setup, &outcome.run);
+    let populations = &run.populations;
+    if populations.is_empty() {
+        return Err(Error::Incomplete(format!(
+            "the run has no completed population ({}): nothing to write",
+            run.stop.describe()
+        )));
+    }
+    if let Some(p) = populations.iter().find(|p| p.particles.len() != p.record.accepted) {
+        return Err(Error::Incomplete(format!(
+            "population {} holds {} of its {} particles in memory: only a run kept whole in memory can be written",
+            p.record.index,
+            p.particles.len(),
+            p.record.accepted
+        )));
+    }
+    let input = setup.data.source.clone();
+    check_new(dir, Some(&input))?;
+    let mut claim = Claim::new(dir, Some(&input))?;
+    let mut store = Store::create(claim.store_dir(), setup)?;
+    let invocation = store.begin_invocation("start", outcome.backend, &setup.config)?;
+    let mut previous = None;
+    for population in populations {
+        store.append_population(population, previous)?;
+        previous = Some(population);
+    }
+    let stop = serde_json::to_value(run.stop).expect("a stop reason serialises");
+    store.finish_invocation(
+        invocation,
+        stop.as_str().unwrap_or_default(),
+        outcome.backend,
+        &setup.config,
+    )?;
+    drop(store);
+    claim.put_in_place()?;
+    claim.finish()
+}
+
 /// The first store schema written by bitrock with the integer-exact candidate transform
 /// ([`crate::rng::uniform_between`]); runs of older stores cannot be continued exactly.
 const FIRST_EXACT_CANDIDATES_SCHEMA: i64 = 2;

@@ -167,14 +167,42 @@ struct DataMeta {
     warnings: Vec<String>,
 }
 
-/// What defines a run besides its populations.
-#[derive(Clone, Debug)]
+/// What defines a run besides its populations. Serialisable whole (a run kept in memory by
+/// Python pickles with it); the fits' record scales are recomputed from the calibration
+/// samples when read, as the store does.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(from = "SetupParts")]
 pub struct Setup {
     /// The run's configuration as JSON (see `crate::run::Config`), kept opaque here.
     pub config: serde_json::Value,
     pub data: FieldData,
     pub fits: Vec<LawFit>,
     pub prior: Prior,
+}
+
+/// A [`Setup`] as serialised, before its fits' scales are recomputed.
+#[derive(Deserialize)]
+struct SetupParts {
+    config: serde_json::Value,
+    data: FieldData,
+    fits: Vec<LawFit>,
+    prior: Prior,
+}
+
+impl From<SetupParts> for Setup {
+    fn from(parts: SetupParts) -> Self {
+        let scales = RecordScales::of(&parts.data.calibration);
+        let mut fits = parts.fits;
+        for fit in &mut fits {
+            fit.scales = scales;
+        }
+        Setup {
+            config: parts.config,
+            data: parts.data,
+            fits,
+            prior: parts.prior,
+        }
+    }
 }
 
 /// A run read back: its set-up and every completed population.

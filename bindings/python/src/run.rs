@@ -114,6 +114,48 @@ pub(crate) struct Run {
     /// Per population of a distributed run: tasks, bytes shipped, seconds waited (JSON).
     #[pyo3(get)]
     traffic: Option<String>,
+    /// A run in memory's set-up and ending, from which it can be written to a directory or
+    /// checked; `None` for a stored run.
+    #[serde(default)]
+    kept: Option<Kept>,
+}
+
+/// What a run in memory keeps besides its populations, so that it can become the run
+/// directory `bitrock abc --out` would have written, or be checked by re-simulation.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Kept {
+    setup: run::Setup,
+    stop: bitrock::abc::StopReason,
+    evaluations: u64,
+    seconds: f64,
+    /// The backend that scored (`cpu`, `gpu`, `cpu+gpu`).
+    backend: String,
+    summary_population: usize,
+}
+
+impl Kept {
+    /// The outcome this run in memory was: its configuration, set-up and `populations`.
+    fn outcome(&self, populations: Vec<Population>) -> bitrock::Result<run::Outcome> {
+        let config: run::Config = serde_json::from_value(self.setup.config.clone())
+            .map_err(|e| Error::setting("result", format!("the run's configuration cannot be read: {e}")))?;
+        let backend = ["cpu", "gpu", "cpu+gpu"]
+            .into_iter()
+            .find(|b| *b == self.backend)
+            .unwrap_or("cpu");
+        Ok(run::Outcome {
+            config,
+            setup: self.setup.clone(),
+            added: populations.len(),
+            run: bitrock::abc::Run {
+                populations,
+                stop: self.stop,
+                evaluations: self.evaluations,
+                seconds: self.seconds,
+            },
+            backend,
+            lock: None,
+        })
+    }
 }
 
 #[pymethods]
@@ -135,6 +177,34 @@ impl Run {
             )
         })
     }
+    /// Writes a run kept in memory to the run directory `path` (`force` replaces a run
+    /// there), as `bitrock abc --out` would have written it, and returns the stored run.
+    fn save(&self, py: Python<'_>, path: PathBuf, force: bool) -> PyResult<Run> {
+        let Some(kept) = &self.kept else {
+            let at = self
+                .path
+                .as_deref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default();
+            return Err(to_py(
+                py,
+                Error::setting("result", format!("the run is stored already, in {at}")),
+            ));
+        };
+        let dir = run::Dir {
+            path: path.clone(),
+            replace: force,
+        };
+        let populations = self.populations.clone();
+        let analysis = py.detach(|| {
+            let outcome = kept.outcome(populations)?;
+            let analysis = bitrock::pipeline::Analysis::new(outcome, Some(kept.summary_population), None)?;
+            analysis.save(&dir)?;
+            Ok::<_, Error>(analysis)
+        });
+        Ok(run_of(check(py, analysis)?, Some(path)))
+    }
+
     /// The particles of population `g` by law: `{law: (params [n, k] in the record's torque
     /// unit, weights, rho, candidate index)}`.
     fn particles<'py>(&self, py: Python<'py>, g: usize) -> PyResult<Bound<'py, PyDict>> {
@@ -217,6 +287,21 @@ impl Run {
 }
 
 impl Run {
+    /// A run kept in memory as its configuration and store would read it back (every
+    /// population with its particles); `None` for a stored run.
+    pub(crate) fn in_memory(&self) -> Option<bitrock::Result<(run::Config, run::Stored)>> {
+        let kept = self.kept.as_ref()?;
+        Some(kept.outcome(Vec::new()).map(|outcome| {
+            (
+                outcome.config,
+                run::Stored {
+                    setup: kept.setup.clone(),
+                    populations: self.populations.clone(),
+                },
+            )
+        }))
+    }
+
     /// The last population's particles of a run kept in memory; `None` for a stored run (whose
     /// store the caller reads) or a run without a population.
     pub(crate) fn last_particles_in_memory(&self) -> Option<&[bitrock::abc::Particle]> {
@@ -250,10 +335,19 @@ impl Run {
 pub(crate) fn run_of(analysis: bitrock::pipeline::Analysis, path: Option<PathBuf>) -> Run {
     let summary = as_arguments(&analysis.json().to_string());
     let torque_unit = analysis.outcome.setup.data.torque_unit;
-    let populations = if path.is_some() {
-        Vec::new()
+    let (populations, kept) = if path.is_some() {
+        (Vec::new(), None)
     } else {
-        analysis.outcome.run.populations
+        let outcome = analysis.outcome;
+        let kept = Kept {
+            setup: outcome.setup,
+            stop: outcome.run.stop,
+            evaluations: outcome.run.evaluations,
+            seconds: outcome.run.seconds,
+            backend: outcome.backend.to_string(),
+            summary_population: analysis.summary_population,
+        };
+        (outcome.run.populations, Some(kept))
     };
     Run {
         summary,
@@ -261,6 +355,7 @@ pub(crate) fn run_of(analysis: bitrock::pipeline::Analysis, path: Option<PathBuf
         populations,
         torque_unit,
         traffic: None,
+        kept,
     }
 }
 
@@ -385,6 +480,7 @@ pub(crate) fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
         populations: Vec::new(),
         torque_unit: store.setup.data.torque_unit,
         traffic: None,
+        kept: None,
     })
 }
 

@@ -6,13 +6,15 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
 
-/// Checks the selection of the run in `run` by re-simulation, writes it into the run's
-/// `selection/` (as `bitrock check-selection` does) and returns its document.
+/// Checks the selection of the run in directory `run` by re-simulation, writes it into the
+/// run's `selection/` (as `bitrock check-selection` does) and returns its document; a run kept
+/// in memory (`in_memory`, `run` then `None`) is checked alike and its document only returned.
 #[pyfunction]
-#[pyo3(signature = (run, options, progress, note))]
+#[pyo3(signature = (run, in_memory, options, progress, note))]
 pub(crate) fn check_selection(
     py: Python<'_>,
-    run: PathBuf,
+    run: Option<PathBuf>,
+    in_memory: Option<PyRef<'_, crate::run::Run>>,
     options: &Bound<'_, PyDict>,
     progress: Option<Py<PyAny>>,
     note: Option<Py<PyAny>>,
@@ -35,12 +37,30 @@ pub(crate) fn check_selection(
             });
         }
     };
+    let kept = match (&run, &in_memory) {
+        (None, Some(result)) => Some(check(
+            py,
+            result
+                .in_memory()
+                .unwrap_or_else(|| Err(Error::setting("source", "the result holds no run"))),
+        )?),
+        _ => None,
+    };
     let mut notes = Vec::new();
     let checked = py.detach(|| {
-        let checked = CheckedRun::open(&run)?;
-        notes.extend(bitrock::run::Store::open(&run)?.early_end()?);
+        let checked = match (run, kept) {
+            (Some(run), _) => {
+                let checked = CheckedRun::open(&run)?;
+                notes.extend(bitrock::run::Store::open(&run)?.early_end()?);
+                checked
+            }
+            (None, Some((config, stored))) => CheckedRun::in_memory(config, stored)?,
+            (None, None) => return Err(Error::setting("source", "give a run directory or a result")),
+        };
         let check = selection::check(&checked, &options, &report, &mut |line| notes.push(line))?;
-        bitrock::report::write_selection(&checked, &check)?;
+        if checked.dir.is_some() {
+            bitrock::report::write_selection(&checked, &check)?;
+        }
         Ok::<_, Error>(check)
     });
     if let Some(e) = raised.into_inner().expect("not poisoned") {

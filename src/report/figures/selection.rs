@@ -25,7 +25,13 @@ pub(crate) fn confusion_figure(check: &crate::selection::SelectionCheck) -> Resu
         "confusion".into(),
         String::new(),
         FIGURE_SIZE,
-        &ConfusionMatrix::new(check, &check.run_dir.display().to_string()),
+        &ConfusionMatrix::new(
+            check,
+            &check
+                .run_dir
+                .as_ref()
+                .map_or("a run in memory".into(), |d| d.display().to_string()),
+        ),
     )?;
     Ok((rendered.svg, rendered.png))
 }

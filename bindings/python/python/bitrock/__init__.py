@@ -473,7 +473,8 @@ def check_selection(
     """How far the run's model selection can be trusted, as ``bitrock check-selection``
     measures it: ``replicates`` synthetic records per law, each made from the law's posterior
     (or least-squares estimate when it died out) with the record's noise, each run through the
-    run's own procedure. Writes the check into the run's ``selection/`` directory.
+    run's own procedure. Writes the check into the run's ``selection/`` directory (a run kept
+    in memory is checked alike; its check is only returned).
 
     Returns the confusion matrix: one row per generating law, one column per law, the mean
     posterior probability over its replicates. ``attrs`` holds ``first_share`` (the share of
@@ -481,14 +482,23 @@ def check_selection(
     generating law) and ``document`` (the whole check). ``progress``: a tqdm bar over the
     replicates, ``False``, or a callable ``(done, total)``. The check runs to its end once
     started (Ctrl-C is seen when it returns)."""
+    in_memory = None
     if isinstance(source, Result):
         if source.path is None:
-            raise InputError("source: a run kept in memory has no store to check; run abc with out=DIR", "source")
+            in_memory = source._run
         source = source.path
+    elif not isinstance(source, (str, os.PathLike)):
+        raise InputError(f"source: give a Result or a run directory, got {type(source).__name__}", "source")
     callback, close = _replicate_progress(progress)
     try:
         document = json.loads(
-            _bitrock.check_selection(os.fspath(source), {"replicates": replicates, "batch": batch, "backend": backend}, callback, _note)
+            _bitrock.check_selection(
+                None if source is None else os.fspath(source),
+                in_memory,
+                {"replicates": replicates, "batch": batch, "backend": backend},
+                callback,
+                _note,
+            )
         )
     finally:
         close()
@@ -707,6 +717,15 @@ class Result:
             coords={"law": laws, "speed_rad_s": ("speed_rad_s", speeds, {"units": "rad/s"})},
             attrs={"level": level, "wob_ratio": r},
         )
+
+    def save(self, path: str | os.PathLike[str], *, force: bool = False) -> "Result":
+        """Writes a run kept in memory to the run directory ``path`` (``force`` replaces a run
+        there) as :func:`abc` with ``out=path`` would have written it: the same store, run.json,
+        envelopes and data, so that ``bitrock export``, ``report``, ``stability``,
+        :func:`check_selection` and :func:`resume` read it. Returns the stored run."""
+        if self.path is not None:
+            raise InputError(f"path: the run is stored already, in {self.path}", "path")
+        return Result(self._run.save(os.fspath(path), force))
 
     def get_distribution(self, law: str, population: int = -1) -> tuple[pd.DataFrame, np.ndarray]:
         """The law's particles in ``population`` (the last by default) and their weights,

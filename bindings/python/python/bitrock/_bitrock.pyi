@@ -94,6 +94,11 @@ class Run:
         the bit speeds `speed_rad_s` and weight-on-bit ratio `r`: `{law: (lower, median,
         upper)}` in the record's torque unit, pointwise quantiles as the run's envelopes.
         """
+    def save(self, /, path: str | PathLike[str], force: bool) -> Run:
+        """
+        Writes a run kept in memory to the run directory `path` (`force` replaces a run
+        there), as `bitrock abc --out` would have written it, and returns the stored run.
+        """
     @property
     def summary(self, /) -> str:
         """
@@ -111,10 +116,11 @@ def abc(record: Record, settings: dict, out: str | PathLike[str] | None, force: 
     `bitrock.abc`), into `out` when given.
     """
 
-def check_selection(run: str | PathLike[str], options: dict, progress: Any | None, note: Any | None) -> str:
+def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, options: dict, progress: Any | None, note: Any | None) -> str:
     """
-    Checks the selection of the run in `run` by re-simulation, writes it into the run's
-    `selection/` (as `bitrock check-selection` does) and returns its document.
+    Checks the selection of the run in directory `run` by re-simulation, writes it into the
+    run's `selection/` (as `bitrock check-selection` does) and returns its document; a run kept
+    in memory (`in_memory`, `run` then `None`) is checked alike and its document only returned.
     """
 
 def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None) -> str:
