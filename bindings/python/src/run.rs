@@ -205,6 +205,17 @@ impl Run {
         Ok(run_of(check(py, analysis)?, Some(path)))
     }
 
+    /// The record the run was made from (its calibration and validation samples as the run
+    /// used them).
+    fn record(&self, py: Python<'_>) -> PyResult<Record> {
+        let data = match (&self.kept, &self.path) {
+            (Some(kept), _) => kept.setup.data.clone(),
+            (None, Some(dir)) => check(py, run::Store::open(dir).and_then(|s| s.load()))?.setup.data,
+            (None, None) => return Err(to_py(py, Error::setting("result", "the result holds no run"))),
+        };
+        Ok(Record { data })
+    }
+
     /// The particles of population `g` by law: `{law: (params [n, k] in the record's torque
     /// unit, weights, rho, candidate index)}`.
     fn particles<'py>(&self, py: Python<'py>, g: usize) -> PyResult<Bound<'py, PyDict>> {

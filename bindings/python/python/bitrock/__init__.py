@@ -27,6 +27,7 @@ from . import _bitrock
 from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError
 from ._evidence import Evidence, evidence
+from . import plot
 
 __all__ = [
     "BitrockError",
@@ -43,6 +44,7 @@ __all__ = [
     "load_law",
     "open_run",
     "parity",
+    "plot",
     "ray_executor",
     "read_record",
     "resume",
@@ -631,6 +633,12 @@ class Result:
     @property
     def laws(self) -> list[str]:
         return list(self.document["config"]["laws"])
+
+    @property
+    def record(self) -> Record:
+        """The record the run was made from, its samples as the run used them (read back from
+        the store for a stored run)."""
+        return self._run.record()
 
     @property
     def populations(self) -> pd.DataFrame:

@@ -94,6 +94,11 @@ class Run:
         the bit speeds `speed_rad_s` and weight-on-bit ratio `r`: `{law: (lower, median,
         upper)}` in the record's torque unit, pointwise quantiles as the run's envelopes.
         """
+    def record(self, /) -> Record:
+        """
+        The record the run was made from (its calibration and validation samples as the run
+        used them).
+        """
     def save(self, /, path: str | PathLike[str], force: bool) -> Run:
         """
         Writes a run kept in memory to the run directory `path` (`force` replaces a run
