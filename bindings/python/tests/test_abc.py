@@ -129,6 +129,18 @@ def test_progress_goes_to_a_callable(demo: bitrock.Record) -> None:
     assert all(0 <= accepted <= target == 200 for _g, accepted, target, _d, _e in seen)
 
 
+def test_the_bars_leave_a_line_per_population(demo: bitrock.Record, capsys) -> None:
+    pytest.importorskip("tqdm")
+    run = bitrock.abc(demo, particles=200, seed=2, backend="cpu", max_populations=3, progress=True)
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("population")]
+    table = run.populations
+    assert len(lines) == 3
+    for g, line in enumerate(lines):
+        row = table.loc[g]
+        eps = "∞" if np.isinf(row.epsilon) else f"{row.epsilon:.5g}"
+        assert line == f"population {g} (ε {eps}): 200 particles of {row.drawn} drawn (acceptance {200 / row.drawn:.3g})"
+
+
 @pytest.mark.parametrize(
     ("arguments", "argument", "words"),
     [
@@ -317,3 +329,42 @@ def test_arviz_reads_a_laws_node(small_run: bitrock.Result) -> None:
     assert list(summary.index) == ["tsb", "tcb", "g"]
     # Rejection particles weigh the same: ArviZ's unweighted mean is the weighted one.
     np.testing.assert_allclose(summary.loc["tsb", "mean"], (frame["tsb"] * weights).sum(), atol=1e-3)
+
+
+def test_arviz_summarises_an_smc_run_weighted_after_resampling(demo: bitrock.Record) -> None:
+    import arviz as az
+
+    run = bitrock.abc(demo, particles=400, sampler="smc", laws=["m2"], seed=5, backend="cpu", max_populations=4, progress=False)
+    frame, weights = run.get_distribution("m2")
+    assert weights.std() > 0, "SMC weights differ: the point of the test"
+    node = run.to_datatree(resample=True)["m2"]
+    draws = node["posterior"].to_dataset()["tsb"].values[0]
+    # Systematic resampling draws each particle ⌊N·w⌋ or ⌈N·w⌉ times.
+    values, drawn = np.unique(draws, return_counts=True)
+    for value, n in zip(values, drawn):
+        w = weights[frame["tsb"].to_numpy() == value].sum()
+        assert np.floor(len(weights) * w) - 1e-9 <= n <= np.ceil(len(weights) * w) + 1e-9
+    major = int(az.__version__.split(".")[0])
+    data = node if major >= 1 else az.InferenceData.from_datatree(node)
+    summary = az.summary(data, kind="stats")
+    x = frame["tsb"].to_numpy()
+    weighted = float((x * weights).sum())
+    # Within three standard errors of the weighted mean (systematic resampling is tighter).
+    assert abs(draws.mean() - weighted) <= 3 * x.std() / np.sqrt(len(x))
+    assert summary.loc["tsb", "mean"] == pytest.approx(draws.mean(), abs=1e-3)
+    assert np.array_equal(node["sample_stats"].to_dataset()["weight"].values[0], np.full(len(weights), 1 / len(weights)))
+    assert run.to_datatree(resample=50)["m2"]["posterior"].to_dataset().sizes["draw"] == 50
+    with pytest.raises(bitrock.InputError) as caught:
+        run.to_datatree(resample=0)
+    assert caught.value.argument == "resample"
+
+
+def test_systematic_resampling_draws_each_particle_by_its_weight() -> None:
+    from bitrock import _systematic_resample
+
+    weights = np.array([0.5, 0.0, 0.3, 0.15, 0.05])
+    for count in (1, 7, 20, 1000):
+        drawn = np.bincount(_systematic_resample(weights, count), minlength=len(weights))
+        assert drawn.sum() == count
+        assert (np.floor(count * weights) <= drawn).all() and (drawn <= np.ceil(count * weights)).all(), (count, drawn)
+    assert np.bincount(_systematic_resample(weights * 7.0, 20), minlength=5).tolist() == [10, 0, 6, 3, 1]

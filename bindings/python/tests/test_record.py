@@ -31,6 +31,45 @@ def test_a_dataframe_reads_as_its_csv_bit_for_bit(demo: bitrock.Record) -> None:
         assert np.array_equal(a, b)
 
 
+def test_arrays_read_as_their_csv_bit_for_bit(demo: bitrock.Record) -> None:
+    frame = pd.read_csv(DEMO_CSV)
+    record = bitrock.read_record(
+        speed=frame["bit_speed_rpm"].to_numpy(),
+        torque=frame["torque_knm"].to_list(),
+        wob=frame["wob_kn"].to_numpy(),
+        time=frame["time_s"].to_numpy(),
+        speed_unit="rpm",
+        torque_unit="knm",
+        wob_unit="kn",
+    )
+    assert record.source == "<arrays>"
+    assert (record.rows_read, record.rows_used) == (demo.rows_read, demo.rows_used)
+    for a, b in zip(record.calibration() + record.validation(), demo.calibration() + demo.validation()):
+        assert np.array_equal(a, b)
+    # The same numbers in N·m and rad/s are the same samples.
+    si = bitrock.read_record(speed=frame["bit_speed_rpm"].to_numpy() * np.pi / 30, torque=frame["torque_knm"].to_numpy() * 1000, speed_unit="rad_s", torque_unit="nm")
+    np.testing.assert_allclose(si.calibration()[1], demo.calibration()[1], rtol=1e-15)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "argument"),
+    [
+        ({"speed": [1.0, 2.0], "torque": [3.0, 4.0], "torque_unit": "knm"}, "speed_unit"),
+        ({"speed": [1.0, 2.0], "torque": [3.0, 4.0], "speed_unit": "rpm"}, "torque_unit"),
+        ({"speed": [1.0, 2.0], "speed_unit": "rpm", "torque_unit": "knm"}, "torque"),
+        ({"speed": [1.0, 2.0], "torque": [3.0], "speed_unit": "rpm", "torque_unit": "knm"}, "torque"),
+        ({"speed": [[1.0, 2.0]], "torque": [3.0, 4.0], "speed_unit": "rpm", "torque_unit": "knm"}, "speed"),
+        ({"speed": ["a", "b"], "torque": [3.0, 4.0], "speed_unit": "rpm", "torque_unit": "knm"}, "speed"),
+        ({"speed": [1.0, 2.0], "torque": [3.0, 4.0], "wob": [1.0, 1.0], "speed_unit": "rpm", "torque_unit": "knm"}, "wob_unit"),
+        ({"source": DEMO_CSV, "speed": [1.0], "torque": [1.0], "speed_unit": "rpm", "torque_unit": "knm"}, "source"),
+    ],
+)
+def test_arrays_without_units_or_of_the_wrong_shape_are_refused(arguments, argument) -> None:
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.read_record(**arguments)
+    assert caught.value.argument == argument
+
+
 def test_samples_are_in_si(demo: bitrock.Record) -> None:
     speed, torque = demo.calibration()
     frame = pd.read_csv(DEMO_CSV)

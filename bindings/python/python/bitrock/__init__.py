@@ -78,6 +78,10 @@ def read_record(
     thin: int | None = None,
     calibration_fraction: float | None = None,
     split: str | None = None,
+    speed: Any = None,
+    torque: Any = None,
+    wob: Any = None,
+    time: Any = None,
 ) -> Record:
     """Reads a record of bit speed and torque on bit (and weight on bit, time).
 
@@ -91,11 +95,19 @@ def read_record(
     What the record looks wrong in (a column whose values its unit can hardly mean, torques or
     speeds of the wrong sign, time running backwards) is raised as a ``BitrockWarning`` and kept
     in ``Record.warnings``.
+
+    From arrays: ``read_record(speed=w, torque=t, speed_unit="rad_s", torque_unit="knm")``
+    (and ``wob=`` with ``wob_unit``, ``time=`` in seconds), one-dimensional and of one length;
+    arrays carry no names to read units from, so each unit must be given.
     """
-    options = {k: v for k, v in locals().items() if k != "source"}
+    arrays = {"speed": speed, "torque": torque, "wob": wob, "time": time}
+    options = {k: v for k, v in locals().items() if k not in ("source", "arrays", *arrays)}
+    label = "<DataFrame>"
+    if any(v is not None for v in arrays.values()):
+        source, label = _arrays_frame(source, arrays, options), "<arrays>"
     if isinstance(source, pd.DataFrame):
         names = [str(c) for c in source.columns]
-        record = _bitrock.read_columns(names, [_numbers(source.iloc[:, i]) for i in range(len(names))], "<DataFrame>", options)
+        record = _bitrock.read_columns(names, [_numbers(source.iloc[:, i]) for i in range(len(names))], label, options)
     else:
         record = _bitrock.read_csv(None if source is None else os.fspath(source), options)
     # What the record looks wrong in (a unit off by a thousand, flipped signs) is said where it
@@ -103,6 +115,38 @@ def read_record(
     for line in record.warnings:
         _note(line)
     return record
+
+
+def _arrays_frame(source: Any, arrays: dict[str, Any], options: dict[str, Any]) -> pd.DataFrame:
+    """The columns of ``read_record``'s array entry as a DataFrame read by the usual rules,
+    after refusing what arrays cannot say: a source beside them, a missing speed or torque, a
+    unit not given, a shape that is not one line of the speeds' length."""
+    if source is not None:
+        raise InputError("source: give a source or arrays (speed=, torque=), not both", "source")
+    for name, unit in (("speed", "speed_unit"), ("torque", "torque_unit"), ("wob", "wob_unit")):
+        if name in ("speed", "torque") and arrays[name] is None:
+            raise InputError(f"{name}: the arrays entry needs both speed= and torque=", name)
+        if arrays[name] is not None and options[unit] is None:
+            raise InputError(f"{unit}: arrays have no column names to read units from; name the unit of {name}=", unit)
+    columns = {}
+    for name, values in arrays.items():
+        if values is None:
+            continue
+        try:
+            column = np.asarray(values, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{name}: give an array of numbers, got {type(values).__name__}", name) from None
+        if column.ndim != 1:
+            raise InputError(f"{name}: give a one-dimensional array, got shape {column.shape}", name)
+        if columns and len(column) != len(next(iter(columns.values()))):
+            raise InputError(f"{name}: {len(column)} values where speed has {len(next(iter(columns.values())))}", name)
+        columns[name] = column
+    for name in columns:
+        if options.get(f"{name}_col") is not None:
+            raise InputError(f"{name}_col: names a column of a file or DataFrame; the arrays are named by their keywords", f"{name}_col")
+    if "time" in columns:
+        columns["time_s"] = columns.pop("time")
+    return pd.DataFrame(columns)
 
 
 def _numbers(column: pd.Series) -> np.ndarray | None:
@@ -207,8 +251,9 @@ def fit(
 
 
 def _progress(progress: bool | Callable[..., Any]) -> tuple[Callable[..., Any] | None, Callable[[], None]]:
-    """The progress callback and its closer: a user's callable, a tqdm bar per population when
-    tqdm is installed, or nothing."""
+    """The progress callback and its closer: a user's callable, or (when tqdm is installed) a
+    bar per population that gives way, once the population is complete, to a line that stays:
+    its ε, particles, draws and acceptance rate (in a notebook, a widget with ``ipywidgets``)."""
     if callable(progress):
         return progress, lambda: None
     if not progress:
@@ -218,21 +263,41 @@ def _progress(progress: bool | Callable[..., Any]) -> tuple[Callable[..., Any] |
     except ImportError:
         return None, lambda: None
     bars: dict[int, Any] = {}
+    seen: dict[int, tuple[int, int, int, float | None]] = {}
+
+    def settle(population: int) -> None:
+        bar = bars.pop(population, None)
+        if bar is not None:
+            bar.close()
+        accepted, target, draws, epsilon = seen.pop(population)
+        tqdm.write(_population_line(population, accepted, target, draws, epsilon))
 
     def update(population: int, accepted: int, target: int, draws: int, epsilon: float | None) -> None:
+        for earlier in [g for g in seen if g != population]:
+            settle(earlier)
+        seen[population] = (accepted, target, draws, epsilon)
         bar = bars.get(population)
         if bar is None:
-            for old in bars.values():
-                old.close()
-            eps = "∞" if epsilon is None else f"{epsilon:.5f}"
-            bar = bars[population] = tqdm(total=target, desc=f"population {population} (ε {eps})", leave=False)
+            bar = bars[population] = tqdm(total=target, desc=f"population {population} (ε {_epsilon_text(epsilon)})", leave=False)
         bar.update(accepted - bar.n)
 
     def close() -> None:
-        for bar in bars.values():
-            bar.close()
+        for population in list(seen):
+            settle(population)
 
     return update, close
+
+
+def _epsilon_text(epsilon: float | None) -> str:
+    return "∞" if epsilon is None else f"{epsilon:.5g}"
+
+
+def _population_line(population: int, accepted: int, target: int, draws: int, epsilon: float | None) -> str:
+    """The line a population leaves behind in the output."""
+    if accepted < target:
+        return f"population {population} (ε {_epsilon_text(epsilon)}): stopped at {accepted} of {target} particles, {draws} drawn"
+    rate = accepted / draws if draws else 1.0
+    return f"population {population} (ε {_epsilon_text(epsilon)}): {accepted} particles of {draws} drawn (acceptance {rate:.3g})"
 
 
 def _note(line: str) -> None:
@@ -774,15 +839,18 @@ class Result:
                 )
         return pd.DataFrame(rows)
 
-    def to_datatree(self, population: int = -1) -> Any:
+    def to_datatree(self, population: int = -1, *, resample: bool | int = False) -> Any:
         """The population (the last by default) as an ``xarray.DataTree``: one node per law
         with the groups ArviZ reads, ``posterior`` (each parameter over ``chain`` × ``draw``,
         one chain, in the record's torque unit) and ``sample_stats`` (``weight``, normalised
         within the law, and the misfit ``rho``), and at the root ``model_probabilities``
         (population × law, with ``epsilon``). ABC particles carry weights (uniform for the
         rejection sampler, not for SMC): estimates that ignore ``weight`` treat them as equal.
-        ArviZ 1.x reads a law's node directly (``tree["m2"]``); ArviZ 0.23 through
-        ``arviz.InferenceData.from_datatree(tree["m2"])``."""
+        ``resample=True`` (or a count of draws) replaces each law's particles by an
+        equal-weight systematic resample of them (as many draws as particles, or the count;
+        deterministic), so that ArviZ's summaries, which treat draws as equal, are those of the
+        weighted posterior. ArviZ 1.x reads a law's node directly (``tree["m2"]``); ArviZ 0.23
+        through ``arviz.InferenceData.from_datatree(tree["m2"])``."""
         import xarray as xr
 
         g = self._population(population)
@@ -804,6 +872,10 @@ class Result:
                 law, (_param_names(doc, law), np.zeros((0, len(_param_names(doc, law)))), np.zeros(0), np.zeros(0), None)
             )
             units = dict(zip(_param_names(doc, law), _param_units(doc, law)))
+            if resample is not False and len(weights):
+                count = len(weights) if resample is True else _positive_count(resample, "resample")
+                chosen = _systematic_resample(weights, count)
+                params, rho, weights = params[chosen], rho[chosen], np.ones(count)
             draws = np.arange(len(weights))
             nodes[f"/{law}/posterior"] = xr.Dataset(
                 {n: (("chain", "draw"), params[None, :, i], {"units": units.get(n, "")}) for i, n in enumerate(names)},
@@ -841,6 +913,21 @@ class Result:
             + (f"<ul>{warnings}</ul>" if warnings else "")
             + "</div>"
         )
+
+
+def _systematic_resample(weights: np.ndarray, count: int) -> np.ndarray:
+    """Indices of ``count`` equal-weight draws from particles of ``weights``: systematic
+    resampling at the offsets (i + ½) / count, so each particle is drawn ⌊count·w⌋ or
+    ⌈count·w⌉ times, and the same weights always give the same draws."""
+    cumulative = np.cumsum(weights / weights.sum())
+    cumulative[-1] = 1.0
+    return np.searchsorted(cumulative, (np.arange(count) + 0.5) / count, side="right")
+
+
+def _positive_count(value: Any, argument: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise InputError(f"{argument}: give True or a number of draws (at least 1), got {value!r}", argument)
+    return int(value)
 
 
 def _param_names(doc: dict[str, Any], law: str) -> list[str]:
