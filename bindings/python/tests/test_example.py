@@ -10,7 +10,7 @@ from conftest import REPO
 
 
 def test_the_quickstart_example_runs(tmp_path) -> None:
-    figure = tmp_path / "marginal.png"
+    figure = tmp_path / "fit.png"
     done = subprocess.run(
         [sys.executable, str(REPO / "examples" / "python_quickstart.py"), str(REPO / "data" / "demo.csv"), str(figure)],
         capture_output=True,

@@ -791,6 +791,15 @@ class Result:
             attrs={"level": level, "wob_ratio": r},
         )
 
+    def history(self) -> Any:
+        """The run as pyABC's ``History`` reads (a read-only view): pyABC's
+        ``plot_model_probabilities``, ``plot_epsilons``, ``plot_credible_intervals``,
+        ``plot_effective_sample_sizes`` and ``plot_kde_*`` take it. Models are numbered 0, 1, …
+        in the order of :attr:`laws`."""
+        from ._history import History
+
+        return History(self)
+
     def save(self, path: str | os.PathLike[str], *, force: bool = False) -> "Result":
         """Writes a run kept in memory to the run directory ``path`` (``force`` replaces a run
         there) as :func:`abc` with ``out=path`` would have written it: the same store, run.json,
