@@ -378,13 +378,11 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         .comment(Some(b'#'))
         .from_reader(text.as_slice());
     let headers = rdr.headers().map_err(|e| csv_error(path, e))?.clone();
-    check_headers(&headers, path)?;
-    let indices = ColumnIndices::resolve(&headers, opts, path)?;
-    let units = ColumnUnits::resolve(&headers, &indices, opts, path)?;
-    check_time_window(&indices, opts, path)?;
+    let layout = RowLayout::new(&headers, delimiter, opts, path)?;
+    check_time_window(&layout.indices, opts, path)?;
 
-    let (all, backwards) = read_rows(&mut rdr, &headers, &indices, &units, delimiter, path)?;
-    assemble(all, backwards, &headers, &indices, &units, opts, path)
+    let (all, backwards) = read_rows(&mut rdr, &layout)?;
+    assemble(all, backwards, &headers, &layout.indices, &layout.units, opts, path)
 }
 
 /// A field record from named columns already in memory (a pandas DataFrame's, in the units
@@ -570,6 +568,85 @@ fn check_headers(headers: &csv::StringRecord, path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// One row of a record in SI, as a stream reads it (see [`RowLayout`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Row {
+    /// Time, s, where the record has a time column.
+    pub time_s: Option<f64>,
+    pub speed_rad_s: f64,
+    pub torque_nm: f64,
+    /// Weight on bit, N, where the record has a column for it.
+    pub wob_n: Option<f64>,
+    /// Top-drive (surface) speed, rad/s, where the reader of the stream has a column for it
+    /// (a watch's operating point); `None` from [`RowLayout::row`].
+    pub top_drive_rad_s: Option<f64>,
+}
+
+/// How the rows of a record are read one at a time (a stream that grows): the columns and
+/// their units chosen from its header by the rules that read a whole file.
+pub struct RowLayout {
+    headers: csv::StringRecord,
+    indices: ColumnIndices,
+    units: ColumnUnits,
+    delimiter: u8,
+    path: PathBuf,
+}
+
+impl RowLayout {
+    /// The layout of a record whose header is `headers` (fields separated by `delimiter`);
+    /// refuses what [`parse_field_data`] refuses of a header.
+    pub fn new(headers: &csv::StringRecord, delimiter: u8, opts: &DataOptions, path: &Path) -> Result<Self> {
+        opts.validate()?;
+        check_headers(headers, path)?;
+        let indices = ColumnIndices::resolve(headers, opts, path)?;
+        let units = ColumnUnits::resolve(headers, &indices, opts, path)?;
+        Ok(Self {
+            headers: headers.clone(),
+            indices,
+            units,
+            delimiter,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The columns read and their units' labels.
+    pub fn columns(&self) -> ColumnsUsed {
+        let name = |i: usize| self.headers[i].to_string();
+        ColumnsUsed {
+            speed: name(self.indices.speed),
+            torque: name(self.indices.torque),
+            wob: self.indices.wob.map(name),
+            time: self.indices.time.map(name),
+        }
+    }
+
+    /// The header's names.
+    pub fn headers(&self) -> &csv::StringRecord {
+        &self.headers
+    }
+
+    /// The torque unit of the record's torque column.
+    pub fn torque_unit(&self) -> TorqueUnit {
+        self.units.torque
+    }
+
+    /// Record `record` (on `line`) in SI; a cell that is not a finite number is refused
+    /// naming its line and column, as in a whole file.
+    pub fn row(&self, record: &csv::StringRecord, line: u64) -> Result<Row> {
+        let cell = |i: usize| parse_cell(record, i, line, &self.headers, self.delimiter, &self.path);
+        Ok(Row {
+            speed_rad_s: self.units.speed.to_rad_s(cell(self.indices.speed)?),
+            torque_nm: cell(self.indices.torque)? * self.units.torque.newton_metres(),
+            wob_n: match (self.indices.wob, self.units.wob) {
+                (Some(i), Some(u)) => Some(cell(i)? * u.newtons()),
+                _ => None,
+            },
+            time_s: self.indices.time.map(cell).transpose()?,
+            top_drive_rad_s: None,
+        })
+    }
+}
+
 /// Where the columns read sit in the header (0-based).
 struct ColumnIndices {
     speed: usize,
@@ -676,31 +753,24 @@ type Backwards = (String, f64, f64);
 
 /// Every data row in SI, in file order, and the first place the time column runs backwards.
 /// Refuses the first cell that is not a finite number, naming its line and column.
-fn read_rows(
-    rdr: &mut csv::Reader<&[u8]>,
-    headers: &csv::StringRecord,
-    indices: &ColumnIndices,
-    units: &ColumnUnits,
-    delimiter: u8,
-    path: &Path,
-) -> Result<(Samples, Option<Backwards>)> {
+fn read_rows(rdr: &mut csv::Reader<&[u8]>, layout: &RowLayout) -> Result<(Samples, Option<Backwards>)> {
+    let path = layout.path.as_path();
     let mut all = Samples {
-        wob_n: indices.wob.map(|_| Vec::new()),
-        time_s: indices.time.map(|_| Vec::new()),
+        wob_n: layout.indices.wob.map(|_| Vec::new()),
+        time_s: layout.indices.time.map(|_| Vec::new()),
         ..Samples::default()
     };
     let mut backwards: Option<Backwards> = None;
     let mut record = csv::StringRecord::new();
     while rdr.read_record(&mut record).map_err(|e| csv_error(path, e))? {
         let line = record.position().map(|p| p.line()).unwrap_or(0);
-        let cell = |i: usize| parse_cell(&record, i, line, headers, delimiter, path);
-        all.speed_rad_s.push(units.speed.to_rad_s(cell(indices.speed)?));
-        all.torque_nm.push(cell(indices.torque)? * units.torque.newton_metres());
-        if let (Some(i), Some(u), Some(v)) = (indices.wob, units.wob, all.wob_n.as_mut()) {
-            v.push(cell(i)? * u.newtons());
+        let row = layout.row(&record, line)?;
+        all.speed_rad_s.push(row.speed_rad_s);
+        all.torque_nm.push(row.torque_nm);
+        if let (Some(w), Some(v)) = (row.wob_n, all.wob_n.as_mut()) {
+            v.push(w);
         }
-        if let (Some(i), Some(v)) = (indices.time, all.time_s.as_mut()) {
-            let t = cell(i)?;
+        if let (Some(t), Some(v)) = (row.time_s, all.time_s.as_mut()) {
             if let Some(&previous) = v.last()
                 && t < previous
                 && backwards.is_none()

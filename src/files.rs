@@ -643,3 +643,12 @@ pub fn exchange_dirs(a: &Path, b: &Path) -> std::io::Result<()> {
     std::fs::rename(b, a)?;
     std::fs::rename(&aside, b)
 }
+
+/// Line and column (1-based, in characters) of byte `offset` of `text`: where a refusal of a
+/// file the user wrote (a law file, a well file) points.
+pub(crate) fn line_column(text: &str, offset: usize) -> (u64, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() as u64 + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
+}

@@ -87,6 +87,7 @@ pub mod separation;
 pub mod simulate;
 pub mod stability;
 pub mod units;
+pub mod watch;
 
 pub use error::{Error, Result};
 pub use laws::Law;

@@ -72,6 +72,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Stability(cmd) => cli::stability::run(&cmd),
         Command::Devices(cmd) => cli::devices::run(&cmd),
         Command::Law(cmd) => cli::law::run(&cmd),
+        Command::Watch(cmd) => cli::watch::run(&cmd),
     }
 }
 

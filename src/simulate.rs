@@ -27,6 +27,8 @@
 //! the friction reverses inside the step and can push the speed back above zero, hiding the
 //! crossing and replacing a clean stick by chatter.
 
+pub mod well;
+
 use crate::error::{Error, Result};
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::stability::lumped::Lumped;
@@ -276,30 +278,52 @@ pub fn write_csv<W: std::io::Write>(trace: &Trace, out: W) -> std::io::Result<()
 /// (field records, see [`write_csv`]), or N·m and N for a laboratory rig, whose torques of a
 /// few N·m need 0.1 mN·m (columns `torque_nm`, `wob_n`; WOB to 1 mN).
 pub fn write_csv_in<W: std::io::Write>(trace: &Trace, unit: TorqueUnit, out: W) -> std::io::Result<()> {
+    write_rows(trace, None, unit, out)
+}
+
+/// Writes a well's record as [`write_csv_in`] writes a trace, with two more columns: the
+/// top-drive speed (`top_drive_rpm`, 0.001 rpm) and the segment's name (`segment`).
+pub fn write_well_csv_in<W: std::io::Write>(
+    record: &WellTrace,
+    well: &Well,
+    unit: TorqueUnit,
+    out: W,
+) -> std::io::Result<()> {
+    write_rows(&record.trace, Some((record, well)), unit, out)
+}
+
+fn write_rows<W: std::io::Write>(
+    trace: &Trace,
+    well: Option<(&WellTrace, &Well)>,
+    unit: TorqueUnit,
+    out: W,
+) -> std::io::Result<()> {
     let (torque_column, wob_column) = match unit {
         TorqueUnit::KNm => ("torque_knm", "wob_kn"),
         TorqueUnit::Nm => ("torque_nm", "wob_n"),
     };
     let per_unit = unit.newton_metres();
     let mut writer = csv::Writer::from_writer(out);
-    writer.write_record(["time_s", "bit_speed_rpm", torque_column, wob_column])?;
+    let mut header = vec!["time_s", "bit_speed_rpm", torque_column, wob_column];
+    if well.is_some() {
+        header.extend(["top_drive_rpm", "segment"]);
+    }
+    writer.write_record(&header)?;
     for i in 0..trace.len() {
-        writer.write_record([
+        let mut row = vec![
             format!("{:.4}", trace.time_s[i]),
             format!("{:.3}", trace.bit_speed_rad_s[i] / RAD_S_PER_RPM),
             format!("{:.4}", trace.torque_nm[i] / per_unit),
             format!("{:.3}", trace.wob_n[i] / per_unit),
-        ])?;
+        ];
+        if let Some((record, well)) = well {
+            row.push(format!("{:.3}", record.top_drive_rad_s[i] / RAD_S_PER_RPM));
+            row.push(well.segments[record.segment[i]].name.clone());
+        }
+        writer.write_record(&row)?;
     }
     writer.flush()?;
     Ok(())
-}
-
-impl SimConfig {
-    /// RK4 steps of the settling and the recording, about.
-    fn total_steps(&self) -> u64 {
-        ((self.settle_s + self.duration_s) / self.dt_s).ceil().max(1.0) as u64
-    }
 }
 
 /// RK4 steps per second above any machine's: the time estimate is a lower bound.
@@ -322,28 +346,211 @@ pub fn simulate(cfg: &SimConfig) -> Result<Trace> {
 /// could not finish in a day here (naming `dt_s`).
 pub fn simulate_with(cfg: &SimConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Trace> {
     cfg.validate()?;
-    let total_steps = cfg.total_steps();
+    Ok(record(&Well::of(cfg), progress)?.trace)
+}
+
+/// A well drilled through formations: segments of record, each with its own law at the bit,
+/// parameters, top-drive speed and mean weight on bit (constant or ramped), simulated as one
+/// continuous string (the state runs on across segment boundaries), with the noise, the WOB
+/// fluctuation and the sample clock of the whole well. What `bitrock simulate --well` reads
+/// from a well file ([`well`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Well {
+    pub segments: Vec<Segment>,
+    pub structure: Lumped,
+    /// Reference weight on bit W_ref (N) of every segment's parameters.
+    pub w_ref_n: f64,
+    /// Time simulated before recording starts (s), with the first segment's inputs.
+    pub settle_s: f64,
+    pub sample_hz: f64,
+    pub dt_s: f64,
+    pub initial: Initial,
+    pub noise_torque_nm: f64,
+    pub noise_speed_rad_s: f64,
+    pub wob_fluctuation_n: f64,
+    pub wob_correlation_s: f64,
+    pub seed: u64,
+}
+
+/// One stretch of a well: a formation (law and parameters) and how the rig drives through it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Segment {
+    /// What the record's `segment` column says during it.
+    pub name: String,
+    pub duration_s: f64,
+    pub law: Law,
+    /// Torques in N·m (SI).
+    pub params_nm: Vec<f64>,
+    /// Top-drive speed Ω (rad/s).
+    pub omega_rad_s: Profile,
+    /// Mean weight on bit (N).
+    pub wob_n: Profile,
+}
+
+/// A value over a segment: constant, or a linear ramp from its start to its end (applied at
+/// the samples and held between them).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Profile {
+    Constant(f64),
+    Ramp { from: f64, to: f64 },
+}
+
+impl Profile {
+    /// The value at `fraction` (0 at the segment's start, 1 at its end).
+    pub fn at(self, fraction: f64) -> f64 {
+        match self {
+            Profile::Constant(v) => v,
+            Profile::Ramp { from, to } => from + (to - from) * fraction,
+        }
+    }
+
+    /// Both ends (equal for a constant).
+    pub fn ends(self) -> [f64; 2] {
+        match self {
+            Profile::Constant(v) => [v, v],
+            Profile::Ramp { from, to } => [from, to],
+        }
+    }
+}
+
+/// A recorded well: the trace, and per sample the top-drive speed (rad/s) and the segment.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WellTrace {
+    pub trace: Trace,
+    pub top_drive_rad_s: Vec<f64>,
+    /// Index into [`Well::segments`] of each sample.
+    pub segment: Vec<usize>,
+}
+
+impl Well {
+    /// The one-segment well a configuration describes.
+    fn of(cfg: &SimConfig) -> Self {
+        Self {
+            segments: vec![Segment {
+                name: cfg.law.name().to_string(),
+                duration_s: cfg.duration_s,
+                law: cfg.law,
+                params_nm: cfg.params_nm.clone(),
+                omega_rad_s: Profile::Constant(cfg.omega_rad_s),
+                wob_n: Profile::Constant(cfg.wob_n),
+            }],
+            structure: cfg.structure,
+            w_ref_n: cfg.w_ref_n,
+            settle_s: cfg.settle_s,
+            sample_hz: cfg.sample_hz,
+            dt_s: cfg.dt_s,
+            initial: cfg.initial,
+            noise_torque_nm: cfg.noise_torque_nm,
+            noise_speed_rad_s: cfg.noise_speed_rad_s,
+            wob_fluctuation_n: cfg.wob_fluctuation_n,
+            wob_correlation_s: cfg.wob_correlation_s,
+            seed: cfg.seed,
+        }
+    }
+
+    /// Recorded length (s): the segments' durations.
+    pub fn duration_s(&self) -> f64 {
+        self.segments.iter().map(|s| s.duration_s).sum()
+    }
+
+    /// Each segment checked as `simulate` checks its configuration (law parameters, Ω and WOB
+    /// at both ends of a ramp), naming the segment; the well's own settings with it.
+    pub fn validate(&self) -> Result<()> {
+        if self.segments.is_empty() {
+            return Err(Error::setting("segment", "the well has no segment"));
+        }
+        (0..self.segments.len()).try_for_each(|i| {
+            self.check_segment(i).map_err(|e| {
+                let message = match e {
+                    Error::InvalidSetting { field, message } => format!("{field}: {message}"),
+                    other => other.to_string(),
+                };
+                Error::setting(
+                    "segment",
+                    format!("segment {} ({}): {message}", i + 1, self.segments[i].name),
+                )
+            })
+        })
+    }
+
+    /// Segment `i` and the well's settings, checked as `simulate` checks one configuration.
+    fn check_segment(&self, i: usize) -> Result<()> {
+        let segment = &self.segments[i];
+        for (omega, wob) in segment.omega_rad_s.ends().into_iter().zip(segment.wob_n.ends()) {
+            SimConfig {
+                structure: self.structure,
+                w_ref_n: self.w_ref_n,
+                duration_s: segment.duration_s,
+                settle_s: self.settle_s,
+                sample_hz: self.sample_hz,
+                dt_s: self.dt_s,
+                initial: self.initial,
+                noise_torque_nm: self.noise_torque_nm,
+                noise_speed_rad_s: self.noise_speed_rad_s,
+                wob_fluctuation_n: self.wob_fluctuation_n,
+                wob_correlation_s: self.wob_correlation_s,
+                seed: self.seed,
+                ..SimConfig::new(segment.law, segment.params_nm.clone(), omega, wob)
+            }
+            .validate()?;
+        }
+        Ok(())
+    }
+}
+
+/// Simulates the well and returns its record (see [`simulate`] for the random draws, which a
+/// one-segment well makes exactly as a configuration does).
+pub fn simulate_well_with(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> {
+    well.validate()?;
+    record(well, progress)
+}
+
+/// The one integration loop: settles with the first segment's inputs at t = 0, then records
+/// the samples, the inputs of each interval between samples those at its first sample.
+fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> {
+    let total_s = well.settle_s + well.duration_s();
+    let total_steps = (total_s / well.dt_s).ceil().max(1.0) as u64;
     let mut pace = crate::limits::Pace::new(
         "dt_s",
         format!(
-            "integrating {} s in steps of {} s ({total_steps:.3e} steps)",
-            cfg.settle_s + cfg.duration_s,
-            cfg.dt_s
+            "integrating {total_s} s in steps of {} s ({total_steps:.3e} steps)",
+            well.dt_s
         ),
         total_steps,
         progress,
     );
-    let model = Model::new(cfg);
-    let mut rng = StdRng::seed_from_u64(cfg.seed);
-    let mut wob = Wob::new(cfg, &mut rng);
+    // The segment and the fraction of it elapsed at recorded time t.
+    let starts: Vec<f64> = well
+        .segments
+        .iter()
+        .scan(0.0, |start, s| {
+            let this = *start;
+            *start += s.duration_s;
+            Some(this)
+        })
+        .collect();
+    let segment_at = |t_s: f64| -> (usize, f64) {
+        let i = starts.iter().rposition(|&start| start <= t_s).unwrap_or(0);
+        let s = &well.segments[i];
+        (i, ((t_s - starts[i]) / s.duration_s).clamp(0.0, 1.0))
+    };
+    let drive = |t_s: f64| -> (usize, Model<'_>, f64) {
+        let (i, fraction) = segment_at(t_s);
+        let s = &well.segments[i];
+        let model = Model::new(s.law, &s.params_nm, &well.structure, s.omega_rad_s.at(fraction));
+        (i, model, s.wob_n.at(fraction))
+    };
 
-    let r0 = wob.ratio(cfg.w_ref_n);
-    let state = match cfg.initial {
+    let mut rng = StdRng::seed_from_u64(well.seed);
+    let (_, model, wob_mean_n) = drive(0.0);
+    let mut wob = Wob::new(wob_mean_n, well.wob_fluctuation_n, well.wob_correlation_s, &mut rng);
+    let r0 = wob.ratio(well.w_ref_n);
+    let state = match well.initial {
         Initial::Equilibrium {
             speed_perturbation_rad_s,
         } => State {
-            twist_rad: model.law.torque(model.params, cfg.omega_rad_s, r0) / model.k,
-            w: cfg.omega_rad_s + speed_perturbation_rad_s,
+            twist_rad: model.law.torque(model.params, model.omega_rad_s, r0) / model.k,
+            w: model.omega_rad_s + speed_perturbation_rad_s,
         },
         Initial::Rest => State { twist_rad: 0.0, w: 0.0 },
     };
@@ -360,14 +567,14 @@ pub fn simulate_with(cfg: &SimConfig, progress: &mut dyn FnMut(u64, u64)) -> Res
         if span_s <= 0.0 {
             return Ok(());
         }
-        let steps = (span_s / cfg.dt_s).ceil().max(1.0);
+        let steps = (span_s / well.dt_s).ceil().max(1.0);
         let h = span_s / steps;
         for _ in 0..steps as u64 {
             pace.advance(1)?;
-            if let Err(why) = sim.advance(h, wob.ratio(cfg.w_ref_n)) {
+            if let Err(why) = sim.advance(h, wob.ratio(well.w_ref_n)) {
                 return Err(Error::Numerical(format!(
                     "{why} (simulated time ≤ {t_s} s, law {}, Ω = {} rad/s)",
-                    cfg.law, cfg.omega_rad_s
+                    sim.model.law, sim.model.omega_rad_s
                 )));
             }
             wob.step(h, rng);
@@ -375,33 +582,44 @@ pub fn simulate_with(cfg: &SimConfig, progress: &mut dyn FnMut(u64, u64)) -> Res
         Ok(())
     };
 
-    advance(&mut sim, &mut wob, &mut rng, cfg.settle_s, cfg.settle_s)?;
-    // Samples at k / sample_hz for k = 0, 1, ...: duration_s × sample_hz of them, end excluded.
-    let n_samples = (cfg.duration_s * cfg.sample_hz * (1.0 + 1e-12)).floor() as usize;
-    let mut trace = Trace {
-        time_s: Vec::with_capacity(n_samples),
-        bit_speed_rad_s: Vec::with_capacity(n_samples),
-        torque_nm: Vec::with_capacity(n_samples),
-        wob_n: Vec::with_capacity(n_samples),
+    advance(&mut sim, &mut wob, &mut rng, well.settle_s, well.settle_s)?;
+    // Samples at k / sample_hz for k = 0, 1, ...: duration × sample_hz of them, end excluded.
+    let n_samples = (well.duration_s() * well.sample_hz * (1.0 + 1e-12)).floor() as usize;
+    let mut out = WellTrace {
+        trace: Trace {
+            time_s: Vec::with_capacity(n_samples),
+            bit_speed_rad_s: Vec::with_capacity(n_samples),
+            torque_nm: Vec::with_capacity(n_samples),
+            wob_n: Vec::with_capacity(n_samples),
+        },
+        top_drive_rad_s: Vec::with_capacity(n_samples),
+        segment: Vec::with_capacity(n_samples),
     };
     let mut previous_s = 0.0;
     for k in 0..n_samples {
-        let t_s = k as f64 / cfg.sample_hz;
-        advance(&mut sim, &mut wob, &mut rng, t_s - previous_s, cfg.settle_s + t_s)?;
+        let t_s = k as f64 / well.sample_hz;
+        advance(&mut sim, &mut wob, &mut rng, t_s - previous_s, well.settle_s + t_s)?;
         previous_s = t_s;
-        let r = wob.ratio(cfg.w_ref_n);
+        // The inputs from this sample on (a one-segment, constant well keeps its own).
+        let (segment, model, wob_mean_n) = drive(t_s);
+        sim.model = model;
+        wob.mean_n = wob_mean_n;
+        let r = wob.ratio(well.w_ref_n);
         let z_speed: f64 = StandardNormal.sample(&mut rng);
         let z_torque: f64 = StandardNormal.sample(&mut rng);
+        let trace = &mut out.trace;
         trace.time_s.push(t_s);
         trace
             .bit_speed_rad_s
-            .push(sim.state.w + cfg.noise_speed_rad_s * z_speed);
+            .push(sim.state.w + well.noise_speed_rad_s * z_speed);
         trace
             .torque_nm
-            .push(sim.torque_on_bit_nm(r) + cfg.noise_torque_nm * z_torque);
+            .push(sim.torque_on_bit_nm(r) + well.noise_torque_nm * z_torque);
         trace.wob_n.push(wob.current_n());
+        out.top_drive_rad_s.push(sim.model.omega_rad_s);
+        out.segment.push(segment);
     }
-    Ok(trace)
+    Ok(out)
 }
 
 /// The weight on bit: a mean plus a stationary Ornstein-Uhlenbeck fluctuation, held constant
@@ -414,14 +632,14 @@ struct Wob {
 }
 
 impl Wob {
-    fn new(cfg: &SimConfig, rng: &mut StdRng) -> Self {
+    fn new(mean_n: f64, std_n: f64, correlation_s: f64, rng: &mut StdRng) -> Self {
         let z: f64 = StandardNormal.sample(rng);
         Self {
-            mean_n: cfg.wob_n,
-            std_n: cfg.wob_fluctuation_n,
-            correlation_s: cfg.wob_correlation_s,
+            mean_n,
+            std_n,
+            correlation_s,
             // Start in the stationary distribution, so the trace has no start-up drift.
-            fluctuation_n: cfg.wob_fluctuation_n * z,
+            fluctuation_n: std_n * z,
         }
     }
 
@@ -453,14 +671,14 @@ struct Model<'a> {
 }
 
 impl<'a> Model<'a> {
-    fn new(cfg: &'a SimConfig) -> Self {
+    fn new(law: Law, params: &'a [f64], structure: &Lumped, omega_rad_s: f64) -> Self {
         Self {
-            law: cfg.law,
-            params: &cfg.params_nm,
-            inertia_kg_m2: cfg.structure.inertia_kg_m2,
-            k: cfg.structure.stiffness_nm_per_rad(),
-            c: cfg.structure.damping_nms_per_rad(),
-            omega_rad_s: cfg.omega_rad_s,
+            law,
+            params,
+            inertia_kg_m2: structure.inertia_kg_m2,
+            k: structure.stiffness_nm_per_rad(),
+            c: structure.damping_nms_per_rad(),
+            omega_rad_s,
         }
     }
 
@@ -646,6 +864,7 @@ impl Integrator<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
 
     fn paper_nm(law: Law) -> Vec<f64> {
         law.scale_torque(law.paper_estimate().unwrap(), 1000.0)
@@ -1044,5 +1263,138 @@ mod tests {
             String::from_utf8(out).unwrap(),
             "time_s,bit_speed_rpm,torque_nm,wob_n\n0.0000,60.000,3.2544,512.346\n0.0200,0.000,-0.0000,0.000\n"
         );
+    }
+
+    fn well_of(segments: Vec<Segment>) -> Well {
+        let cfg = SimConfig {
+            noise_torque_nm: 300.0,
+            noise_speed_rad_s: 0.05,
+            wob_fluctuation_n: 5_000.0,
+            seed: 9,
+            ..SimConfig::new(Law::M2, paper_nm(Law::M2), rpm(60.0), PAPER_W_REF_N)
+        };
+        Well {
+            segments,
+            ..Well::of(&cfg)
+        }
+    }
+
+    fn segment(law: Law, duration_s: f64, omega_rpm: Profile, wob_kn: f64) -> Segment {
+        Segment {
+            name: law.name().to_string(),
+            duration_s,
+            law,
+            params_nm: paper_nm(law),
+            omega_rad_s: match omega_rpm {
+                Profile::Constant(v) => Profile::Constant(rpm(v)),
+                Profile::Ramp { from, to } => Profile::Ramp {
+                    from: rpm(from),
+                    to: rpm(to),
+                },
+            },
+            wob_n: Profile::Constant(wob_kn * 1000.0),
+        }
+    }
+
+    #[test]
+    fn a_well_runs_on_across_its_segments() {
+        // Two identical segments are one segment of their summed length, bit for bit: the
+        // string's state, the WOB fluctuation and the noise run on across the boundary.
+        let one = well_of(vec![segment(Law::M2, 20.0, Profile::Constant(60.0), 200.0)]);
+        let two = well_of(vec![
+            segment(Law::M2, 8.0, Profile::Constant(60.0), 200.0),
+            segment(Law::M2, 12.0, Profile::Constant(60.0), 200.0),
+        ]);
+        let (a, b) = (
+            simulate_well_with(&one, &mut |_, _| {}).unwrap(),
+            simulate_well_with(&two, &mut |_, _| {}).unwrap(),
+        );
+        assert_eq!(a.trace, b.trace);
+        assert_eq!(a.trace.len(), 1000);
+        assert_eq!(b.segment.iter().filter(|&&s| s == 0).count(), 400);
+        // A one-segment well is the configuration it was made from.
+        let cfg = SimConfig {
+            duration_s: 20.0,
+            wob_n: 200_000.0,
+            noise_torque_nm: 300.0,
+            noise_speed_rad_s: 0.05,
+            wob_fluctuation_n: 5_000.0,
+            seed: 9,
+            ..SimConfig::new(Law::M2, paper_nm(Law::M2), rpm(60.0), PAPER_W_REF_N)
+        };
+        assert_eq!(simulate(&cfg).unwrap(), a.trace);
+    }
+
+    #[test]
+    fn a_formation_change_changes_the_torque_law_and_ramps_follow_the_clock() {
+        let well = well_of(vec![
+            segment(Law::M2, 10.0, Profile::Constant(120.0), 200.0),
+            segment(Law::M3, 10.0, Profile::Ramp { from: 120.0, to: 60.0 }, 200.0),
+        ]);
+        let record = simulate_well_with(&well, &mut |_, _| {}).unwrap();
+        assert_eq!(record.trace.len(), 1000);
+        for (k, &t) in record.trace.time_s.iter().enumerate() {
+            let expected_rpm = if t < 10.0 {
+                120.0
+            } else {
+                120.0 - 60.0 * (t - 10.0) / 10.0
+            };
+            assert!((record.top_drive_rad_s[k] - rpm(expected_rpm)).abs() < 1e-9, "t = {t}");
+            assert_eq!(record.segment[k], usize::from(t >= 10.0));
+        }
+        let mut csv = Vec::new();
+        write_well_csv_in(&record, &well, TorqueUnit::KNm, &mut csv).unwrap();
+        let text = String::from_utf8(csv).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(
+            lines.next(),
+            Some("time_s,bit_speed_rpm,torque_knm,wob_kn,top_drive_rpm,segment")
+        );
+        assert!(lines.next().unwrap().ends_with(",120.000,m2"));
+        assert!(text.lines().last().unwrap().ends_with(",m3"));
+    }
+
+    #[test]
+    fn a_well_file_reads_and_its_refusals_point_into_it() {
+        let path = Path::new("well.toml");
+        let well = Well::parse(
+            "seed = 3\nnoise_torque_knm = 0.6\n[[segment]]\nduration_s = 30\nlaw = \"m2\"\nomega_rpm = 80\n\n[[segment]]\nname = \"hard\"\nduration_s = 20\nlaw = \"m3\"\nomega_rpm = [80, 120]\nwob_kn = 180\n",
+            path,
+        )
+        .unwrap();
+        assert_eq!(well.segments.len(), 2);
+        assert_eq!(well.segments[1].name, "hard");
+        assert_eq!(well.segments[0].params_nm, paper_nm(Law::M2));
+        assert_eq!(
+            well.segments[1].omega_rad_s,
+            Profile::Ramp {
+                from: rpm(80.0),
+                to: rpm(120.0)
+            }
+        );
+        assert_eq!(well.segments[1].wob_n, Profile::Constant(180_000.0));
+        assert_eq!((well.seed, well.noise_torque_nm), (3, 600.0));
+        let refused = |text: &str| Well::parse(text, path).unwrap_err().to_string();
+        let e = refused("[[segment]]\nduration_s = 30\nlaw = \"m2\"\nomega_rpm = 80\nspeed = 3\n");
+        assert!(
+            e.starts_with("well.toml:5:1:") && e.contains("unknown field `speed`"),
+            "{e}"
+        );
+        let e = refused("[[segment]]\nduration_s = 30\nlaw = \"m9\"\nomega_rpm = 80\n");
+        assert!(e.starts_with("well.toml:3:7:") && e.contains("m9"), "{e}");
+        let e = refused("[[segment]]\nduration_s = 30\nlaw = \"m2\"\nparams = [13, 6.5]\nomega_rpm = 80\n");
+        assert!(e.starts_with("well.toml:4:10:") && e.contains("params"), "{e}");
+        let e = refused("[[segment]]\nduration_s = 30\nlaw = \"m2\"\nparams = [13000, 6500, 0.3]\nomega_rpm = 80\n");
+        assert!(
+            e.starts_with("well.toml:4:10:") && e.contains("param_torque_unit"),
+            "{e}"
+        );
+        let e = refused("seed = 1\n[[segment]]\nduration_s = -30\nlaw = \"m2\"\nomega_rpm = 80\n");
+        assert!(
+            e.starts_with("well.toml:2:1:") && e.contains("segment 1: duration_s"),
+            "{e}"
+        );
+        let e = refused("seed = 1\n");
+        assert!(e.contains("segment"), "{e}");
     }
 }

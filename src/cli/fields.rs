@@ -98,6 +98,15 @@ const FLAGS: &[(&str, &str)] = &[
     ("candidates", "--candidates"),
     ("epsilon", "--epsilon"),
     ("reps", "--reps"),
+    // The watch and the wells it is tried on.
+    ("window_s", "--window-s"),
+    ("step_s", "--step-s"),
+    ("forgetting", "--forgetting"),
+    ("floor", "--floor"),
+    ("change_nats", "--change-nats"),
+    ("risk", "--risk"),
+    ("replay_speed", "--replay-speed"),
+    ("segment", "--well"),
 ];
 
 /// Every string in a JSON document said with flags, as [`as_flags`] says one text.

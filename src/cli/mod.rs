@@ -21,6 +21,7 @@ pub mod progress;
 pub mod report;
 pub mod simulate;
 pub mod stability;
+pub mod watch;
 
 use clap::{Parser, Subcommand};
 
@@ -119,4 +120,9 @@ pub enum Command {
     /// Stability maps over top-drive speed and weight on bit: deterministic (MAP), stochastic
     /// (percentile over posterior samples) and the mixture of laws, from an ABC run or a law.
     Stability(stability::StabilityCmd),
+    /// Follow a growing record window by window (a file, followed or replayed against its time
+    /// column, or standard input): each window's law probabilities from the evidence, carried
+    /// with forgetting, a change of formation noticed, and the top-drive speed and weight on
+    /// bit that avoid stick-slip now.
+    Watch(watch::WatchCmd),
 }

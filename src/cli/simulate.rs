@@ -1,4 +1,5 @@
-//! `bitrock simulate`: the 1-DOF string with a bit-rock law, written as a field-like CSV.
+//! `bitrock simulate`: the 1-DOF string with a bit-rock law, written as a field-like CSV; or a
+//! well of formations (`--well FILE`), one continuous string through them.
 
 use super::args::LumpedArgs;
 use super::args::finite_number;
@@ -21,9 +22,14 @@ pub enum InitialState {
 
 #[derive(Debug, Args)]
 pub struct SimulateCmd {
+    /// A well file (TOML): segments in drilling order, each with its law, parameters, top-drive
+    /// speed and weight on bit (values or ramps), simulated as one string; the record gains the
+    /// columns top_drive_rpm and segment (format in docs/commands.md).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["law", "params", "omega_rpm", "wob_kn", "duration_s", "settle_s", "sample_hz", "dt_s", "initial", "kick_rpm", "noise_torque_knm", "noise_speed_rpm", "wob_fluctuation_kn", "wob_correlation_s", "seed", "w_ref_kn", "param_torque_unit", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio"])]
+    pub well: Option<PathBuf>,
     /// Bit-rock law (m1, m2, m3, m4, or a --law-file's law by its name).
-    #[arg(long)]
-    pub law: String,
+    #[arg(long, required_unless_present = "well")]
+    pub law: Option<String>,
     /// The law's parameters in its order (m2: tsb,tcb,g), torques in --param-torque-unit
     /// [default: the paper's least-squares estimate].
     #[arg(long, value_parser = finite_number, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]
@@ -32,8 +38,8 @@ pub struct SimulateCmd {
     #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
     pub param_torque_unit: TorqueUnit,
     /// Top-drive (rotary table) speed Omega, rpm.
-    #[arg(long, value_parser = finite_number, value_name = "RPM")]
-    pub omega_rpm: f64,
+    #[arg(long, value_parser = finite_number, value_name = "RPM", required_unless_present = "well", allow_hyphen_values = true)]
+    pub omega_rpm: Option<f64>,
     /// Weight on bit W, kN.
     #[arg(long, value_parser = finite_number, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub wob_kn: f64,
@@ -91,7 +97,11 @@ pub struct SimulateCmd {
 }
 
 pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
-    let law: Law = super::args::parse_law(&cmd.law)?;
+    if let Some(path) = &cmd.well {
+        return run_well(cmd, path);
+    }
+    let law: Law = super::args::parse_law(cmd.law.as_deref().expect("clap requires --law without --well"))?;
+    let omega_rpm = cmd.omega_rpm.expect("clap requires --omega-rpm without --well");
     let params = match (&cmd.params, law.paper_estimate()) {
         (Some(params), _) => params.clone(),
         (None, Some(p)) => law.scale_torque(
@@ -114,7 +124,7 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
         law,
         params_nm,
         structure: cmd.lumped.lumped(),
-        omega_rad_s: cmd.omega_rpm * RAD_S_PER_RPM,
+        omega_rad_s: omega_rpm * RAD_S_PER_RPM,
         wob_n: cmd.wob_kn * 1000.0,
         w_ref_n: cmd.w_ref_kn * 1000.0,
         duration_s: cmd.duration_s,
@@ -144,6 +154,24 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
         None => simulate::write_csv_in(&trace, cmd.torque_unit, super::print::stdout())?,
         Some(path) => bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
             simulate::write_csv_in(&trace, cmd.torque_unit, file)
+        })?,
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--well FILE`: the well's record, with its top-drive speed and segment columns.
+fn run_well(cmd: &SimulateCmd, path: &std::path::Path) -> anyhow::Result<ExitCode> {
+    let well = simulate::Well::load(path)?;
+    if let Some(path) = &cmd.out {
+        bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
+    }
+    let mut progress = super::progress::WorkProgress::new("simulating");
+    let record = simulate::simulate_well_with(&well, &mut |done, total| progress.update(done, total))?;
+    drop(progress);
+    match &cmd.out {
+        None => simulate::write_well_csv_in(&record, &well, cmd.torque_unit, super::print::stdout())?,
+        Some(path) => bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
+            simulate::write_well_csv_in(&record, &well, cmd.torque_unit, file)
         })?,
     }
     Ok(ExitCode::SUCCESS)

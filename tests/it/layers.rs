@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 /// Each top-level module of the library and its layer, lowest first.
-const LAYERS: [(&str, u8); 21] = [
+const LAYERS: [(&str, u8); 22] = [
     ("error", 0),
     ("units", 0),
     ("rng", 0),
@@ -29,6 +29,7 @@ const LAYERS: [(&str, u8); 21] = [
     ("report", 5),
     ("bench", 5),
     ("documents", 5),
+    ("watch", 6),
 ];
 
 /// The source of a file without comments and without its test module.
@@ -175,7 +176,15 @@ fn the_library_names_no_flag_and_needs_no_clap() {
 /// stays the one the imports follow.
 #[test]
 fn the_readme_layout_table_matches_the_layers() {
-    const ROWS: [&str; 6] = ["ground", "physics", "scoring", "samplers", "run directory", "pipeline"];
+    const ROWS: [&str; 7] = [
+        "ground",
+        "physics",
+        "scoring",
+        "samplers",
+        "run directory",
+        "pipeline",
+        "watch",
+    ];
     let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
     let row = |name: &str| -> String {
         readme

@@ -22,3 +22,4 @@ mod store;
 mod support;
 mod tune;
 mod uniform;
+mod watch;

@@ -228,14 +228,6 @@ pub fn registered_laws() -> Vec<Law> {
     (0..count).map(|k| Law::File(FileLaw(k as u16))).collect()
 }
 
-/// Line and column (1-based, in characters) of byte `offset` of `text`.
-fn line_column(text: &str, offset: usize) -> (u64, usize) {
-    let before = &text[..offset.min(text.len())];
-    let line = before.matches('\n').count() as u64 + 1;
-    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    (line, column)
-}
-
 impl LawFile {
     /// Reads and compiles the law file at `path`.
     pub fn load(path: &Path) -> Result<Self> {
@@ -246,7 +238,7 @@ impl LawFile {
     /// Compiles the law file text `source`; `path` names it in errors.
     pub fn parse(source: &str, path: &Path) -> Result<Self> {
         let at = |offset: usize, message: String| {
-            let (line, column) = line_column(source, offset);
+            let (line, column) = crate::files::line_column(source, offset);
             Error::Syntax {
                 path: PathBuf::from(path),
                 line,

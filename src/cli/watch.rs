@@ -1,0 +1,231 @@
+//! `bitrock watch`: a growing record followed window by window through
+//! [`bitrock::watch::follow`]; a table line per window, or JSON lines.
+
+use super::args::{finite_number, parse_laws, set_threads};
+use super::print;
+use bitrock::abc::evidence::EvidenceConfig;
+use bitrock::data::DataOptions;
+use bitrock::eval::Backend;
+use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use bitrock::watch::source::{Rows, Source};
+use bitrock::watch::{Update, WatchSettings};
+use clap::Args;
+use std::collections::HashSet;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct WatchCmd {
+    /// The record: a CSV file, or - for standard input. Its columns and units are read as
+    /// `fit` reads them; it needs a time column (s), by which the windows are cut.
+    pub source: PathBuf,
+    /// Follow the file as it grows (like `tail -f`) until stopped (Ctrl-C).
+    #[arg(long, conflicts_with = "replay_speed")]
+    pub follow: bool,
+    /// Replay the file against its own time column at this many times real time (1 = as the
+    /// rig sent it): what the watch would have said while drilling, at its pace.
+    #[arg(long, value_parser = finite_number, value_name = "X")]
+    pub replay_speed: Option<f64>,
+    /// Laws compared (comma-separated).
+    #[arg(long, default_value = "m1,m2,m3,m4", value_name = "LAWS")]
+    pub laws: String,
+    /// Window length, s [default: 10 s or 500 samples, whichever is longer].
+    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
+    pub window_s: Option<f64>,
+    /// Time between window starts, s [default: a fifth of the window].
+    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
+    pub step_s: Option<f64>,
+    /// Weight of the law probabilities carried from the windows before, in (0, 1]: 1 adds up
+    /// every window's evidence, smaller forgets faster.
+    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().forgetting, value_name = "LAMBDA")]
+    pub forgetting: f64,
+    /// No law's probability goes below this: none is ruled out for good.
+    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().floor, value_name = "P")]
+    pub floor: f64,
+    /// Log-likelihood (nats) the previous window's fits may lose on a window, beyond their
+    /// running level, before a change of formation is declared.
+    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().change_nats, value_name = "NATS")]
+    pub change_nats: f64,
+    /// The probability of stick-slip the advice keeps below.
+    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().risk, value_name = "P")]
+    pub risk: f64,
+    /// Particles of each island of each window's evidence.
+    #[arg(long, default_value_t = WatchSettings::default().evidence.particles, value_name = "N")]
+    pub particles: usize,
+    /// Islands of each window's evidence (their spread is ln Z's error).
+    #[arg(long, default_value_t = WatchSettings::default().evidence.islands, value_name = "K")]
+    pub islands: usize,
+    /// Seed of the evidence samplers (window k uses seed + k).
+    #[arg(long, default_value_t = EvidenceConfig::default().seed)]
+    pub seed: u64,
+    /// Bit-speed column [default: the one column whose name contains "speed"].
+    #[arg(long, value_name = "NAME")]
+    pub speed_col: Option<String>,
+    /// Torque-on-bit column [default: the one column whose name contains "torque"].
+    #[arg(long, value_name = "NAME")]
+    pub torque_col: Option<String>,
+    /// Weight-on-bit column [default: the one column whose name contains "wob", if any].
+    #[arg(long, value_name = "NAME")]
+    pub wob_col: Option<String>,
+    /// Time column, s [default: the one column whose name contains "time"].
+    #[arg(long, value_name = "NAME")]
+    pub time_col: Option<String>,
+    /// Unit of the speed column [default: from its suffix].
+    #[arg(long, value_enum)]
+    pub speed_unit: Option<SpeedUnit>,
+    /// Unit of the torque column [default: from its suffix].
+    #[arg(long, value_enum)]
+    pub torque_unit: Option<TorqueUnit>,
+    /// Unit of the weight-on-bit column [default: from its suffix].
+    #[arg(long, value_enum)]
+    pub wob_unit: Option<ForceUnit>,
+    /// Samples below this bit speed, rpm, inform no window (stick phases).
+    #[arg(long, value_parser = finite_number, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
+    pub min_speed_rpm: f64,
+    /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// One JSON line per window instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Says each distinct note once on standard error.
+struct Notes(HashSet<String>);
+
+impl bitrock::abc::Observer for Notes {
+    fn note(&mut self, line: String) {
+        if self.0.insert(line.clone()) {
+            print::note(format_args!(
+                "{}",
+                if line.starts_with("warning:") {
+                    line
+                } else {
+                    format!("note: {line}")
+                }
+            ));
+        }
+    }
+}
+
+pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
+    set_threads(cmd.threads)?;
+    let defaults = WatchSettings::default();
+    let settings = WatchSettings {
+        laws: parse_laws(&cmd.laws)?,
+        data: DataOptions {
+            speed_column: cmd.speed_col.clone(),
+            torque_column: cmd.torque_col.clone(),
+            wob_column: cmd.wob_col.clone(),
+            time_column: cmd.time_col.clone(),
+            speed_unit: cmd.speed_unit,
+            torque_unit: cmd.torque_unit,
+            wob_unit: cmd.wob_unit,
+            min_speed_rpm: cmd.min_speed_rpm,
+            ..DataOptions::default()
+        },
+        window_s: cmd.window_s,
+        step_s: cmd.step_s,
+        evidence: EvidenceConfig {
+            particles: cmd.particles,
+            islands: cmd.islands,
+            seed: cmd.seed,
+            ..defaults.evidence.clone()
+        },
+        forgetting: cmd.forgetting,
+        floor: cmd.floor,
+        change_nats: cmd.change_nats,
+        risk: cmd.risk,
+        backend: cmd.backend,
+        ..defaults
+    };
+    let source = if cmd.source.as_os_str() == "-" {
+        Source::Stdin
+    } else if let Some(speed) = cmd.replay_speed {
+        Source::Replay {
+            path: cmd.source.clone(),
+            speed,
+        }
+    } else {
+        Source::File {
+            path: cmd.source.clone(),
+            follow: cmd.follow,
+        }
+    };
+    let mut rows = Rows::open(&source, &settings.data)?;
+    let unit = rows.layout().torque_unit();
+    let laws = settings.laws.clone();
+    let mut out = print::stdout();
+    if !cmd.json {
+        header(&mut out, &laws)?;
+    }
+    let mut notes = Notes(HashSet::new());
+    let json = cmd.json;
+    // A standard output that cannot be written (a closed pipe) ends the watch with its own
+    // error, which `main` says as for any command.
+    let mut failed: Option<std::io::Error> = None;
+    let followed = bitrock::watch::follow(&mut rows, settings, &mut notes, &mut |update| {
+        let written = if json {
+            serde_json::to_writer(&mut out, update)
+                .map_err(std::io::Error::from)
+                .and_then(|()| writeln!(out))
+        } else {
+            line(&mut out, update, &laws)
+        };
+        match written.and_then(|()| out.flush()) {
+            Ok(()) => Ok(()),
+            Err(e) => {
+                failed = Some(e);
+                Err(bitrock::Error::Incomplete("standard output cannot be written".into()))
+            }
+        }
+    });
+    if let Some(e) = failed {
+        return Err(e.into());
+    }
+    let ended = followed?;
+    if !cmd.json {
+        writeln!(
+            out,
+            "{} windows of {} s every {} s; torques in {}; {} lines skipped",
+            ended.windows,
+            ended.window_s,
+            ended.step_s,
+            unit.label(),
+            ended.skipped_lines
+        )?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn header(out: &mut impl Write, laws: &[bitrock::Law]) -> std::io::Result<()> {
+    write!(out, "{:>6} {:>9} {:>7}", "window", "t (s)", "samples")?;
+    for law in laws {
+        write!(out, " {:>6}", format!("P({law})"))?;
+    }
+    writeln!(out, "  change  advice")
+}
+
+fn line(out: &mut impl Write, u: &Update, laws: &[bitrock::Law]) -> std::io::Result<()> {
+    write!(out, "{:>6} {:>9.1} {:>7}", u.window, u.end_s, u.samples_used)?;
+    for law in laws {
+        match u.laws.iter().find(|l| l.law == *law) {
+            Some(l) => write!(out, " {:>6.3}", l.probability)?,
+            None => write!(out, " {:>6}", "-")?,
+        }
+    }
+    let change = match (u.change, u.change_nats) {
+        (true, Some(nats)) => format!("yes ({nats:.0} nats)"),
+        _ => "-".into(),
+    };
+    let advice = match (&u.uninformative, &u.advice) {
+        (Some(why), _) => format!("window uninformative: {why}"),
+        (None, Some(a)) => a.words.clone(),
+        (None, None) => String::new(),
+    };
+    writeln!(out, "  {change:<6}  {advice}")
+}

@@ -1,0 +1,741 @@
+//! Along the well: a growing record followed window by window ([`window`], by its own time
+//! stamps), each window's law probabilities from the model evidence, carried from window to
+//! window with a forgetting factor and a floor, a change of formation noticed, and the
+//! rotary speed and weight on bit that avoid stick-slip now.
+//!
+//! Per window: the samples below the minimum speed are dropped (as `fit` drops them); a
+//! window with too few samples, or whose bit turned at one speed (no law can be told from
+//! another there), is reported as such and updates nothing. Otherwise the evidence of each law
+//! on the window ([`crate::pipeline::evidence`], physical boxes), then
+//!
+//! - **law probabilities** P_t(m) ∝ P_{t−1}(m)^λ · Z_t(m) (λ the forgetting factor: the
+//!   previous windows' evidence counts λ, λ², … times), no law below the floor;
+//! - **change**: the previous window's fits applied to this window against this window's own
+//!   (the log-likelihood the old formation's laws lose here, (n/2)·ln(ρ_old/ρ_new) of the
+//!   best law); a loss beyond the threshold over its running level declares a change, and the
+//!   probabilities restart from this window's;
+//! - **advice**: the probability of unstable steady rotation at the window's operating point
+//!   (mean top-drive speed, or mean bit speed without that column; mean weight on bit) under
+//!   the mixture posterior (the paper's 1-DOF string), and the nearest top-drive speed at this
+//!   weight on bit, and the nearest weight on bit at this speed, below the risk threshold.
+
+pub mod source;
+pub mod window;
+
+use crate::abc::Observer;
+use crate::abc::evidence::{EvidenceConfig, NoiseModel};
+use crate::data::{DataOptions, FieldData, Row};
+use crate::error::Result;
+use crate::eval::Backend;
+use crate::fit::FitOptions;
+use crate::laws::{Law, PAPER_W_REF_N};
+use crate::pipeline::evidence::{EvidenceJob, EvidencePrior};
+use crate::pipeline::stability::{MapSource, StabilityJob};
+use crate::stability::lumped::Lumped;
+use crate::stability::map::Criterion;
+use crate::units::RAD_S_PER_RPM;
+use serde::Serialize;
+use std::path::PathBuf;
+use window::{Pushed, Window, Windows};
+
+/// What a watch does, besides its source.
+#[derive(Clone, Debug)]
+pub struct WatchSettings {
+    pub laws: Vec<Law>,
+    /// Columns, units and the minimum speed, as `fit` reads them (the split is not used:
+    /// every sample of a window informs it).
+    pub data: DataOptions,
+    /// Window length and step, s; `None`: from the record's rate ([`default_windows`]).
+    pub window_s: Option<f64>,
+    pub step_s: Option<f64>,
+    /// The evidence sampler of each window.
+    pub evidence: EvidenceConfig,
+    /// Width of the physical boxes, in record scales.
+    pub prior_scale: f64,
+    /// λ in (0, 1]: the weight of the probabilities carried from the windows before.
+    pub forgetting: f64,
+    /// No law's carried probability goes below this: none is ruled out for good.
+    pub floor: f64,
+    /// Log-likelihood loss (nats) over its running level that declares a change.
+    pub change_nats: f64,
+    /// P(unstable) the advice keeps below.
+    pub risk: f64,
+    pub structure: Lumped,
+    /// Reference weight on bit of the laws' parameters, N.
+    pub w_ref_n: f64,
+    pub backend: Backend,
+    /// Fewest samples (after the speed filter) a window needs to inform.
+    pub min_samples: usize,
+    /// Least spread of bit speeds (5th to 95th percentile, rpm) a window needs to inform.
+    pub min_speed_span_rpm: f64,
+}
+
+impl Default for WatchSettings {
+    fn default() -> Self {
+        Self {
+            laws: Law::ALL.to_vec(),
+            data: DataOptions::default(),
+            window_s: None,
+            step_s: None,
+            evidence: EvidenceConfig {
+                particles: 300,
+                islands: 2,
+                noise: NoiseModel::Iid,
+                ..EvidenceConfig::default()
+            },
+            prior_scale: crate::pipeline::evidence::DEFAULT_PRIOR_SCALE,
+            forgetting: 0.5,
+            floor: 0.01,
+            change_nats: 30.0,
+            risk: 0.05,
+            structure: Lumped::default(),
+            w_ref_n: PAPER_W_REF_N,
+            backend: Backend::Auto,
+            min_samples: 100,
+            min_speed_span_rpm: 5.0,
+        }
+    }
+}
+
+/// Window length and step for a record sampled at `rate_hz`: at least 500 samples and 10 s
+/// per window, a step of a fifth of it.
+pub fn default_windows(rate_hz: f64) -> (f64, f64) {
+    let length = (500.0 / rate_hz).max(10.0);
+    (length, length / 5.0)
+}
+
+/// One law in a window's update.
+#[derive(Clone, Debug, Serialize)]
+pub struct LawUpdate {
+    pub law: Law,
+    /// The carried probability P_t(m).
+    pub probability: f64,
+    /// This window's alone, P(m | window).
+    pub window_probability: f64,
+    pub ln_z: f64,
+    pub ln_z_error: f64,
+    /// Posterior mean and 1 %, 99 % quantiles of each parameter, in the record's torque unit.
+    pub mean: Vec<f64>,
+    pub q01: Vec<f64>,
+    pub q99: Vec<f64>,
+}
+
+/// The advice of a window.
+#[derive(Clone, Debug, Serialize)]
+pub struct Advice {
+    /// The operating point: top-drive speed (rpm; the mean bit speed where the record has no
+    /// top-drive column) and weight on bit (kN).
+    pub omega_rpm: f64,
+    pub wob_kn: f64,
+    /// P(unstable steady rotation) there, under the mixture posterior.
+    pub p_unstable: f64,
+    /// The nearest top-drive speed at this weight on bit with P below the risk; `None` where
+    /// none within the speeds looked at (10–300 rpm).
+    pub safe_omega_rpm: Option<f64>,
+    /// The nearest weight on bit at this speed with P below the risk; `None` where none within
+    /// 10 %–200 % of this one.
+    pub safe_wob_kn: Option<f64>,
+    /// The same in words.
+    pub words: String,
+}
+
+/// What a watch says of one window: one JSON line.
+#[derive(Clone, Debug, Serialize)]
+pub struct Update {
+    pub window: usize,
+    pub start_s: f64,
+    pub end_s: f64,
+    /// Samples in the window, and those used (above the minimum speed).
+    pub samples: usize,
+    pub samples_used: usize,
+    /// Why the window informs nothing, where it does not.
+    pub uninformative: Option<String>,
+    /// The most probable law (carried probabilities).
+    pub most_probable: Option<Law>,
+    pub laws: Vec<LawUpdate>,
+    /// Whether this window starts a new formation, and the log-likelihood (nats) the previous
+    /// window's fits lose on it, beyond their running level.
+    pub change: bool,
+    pub change_nats: Option<f64>,
+    pub advice: Option<Advice>,
+    pub candidates_scored: u64,
+    /// Seconds from the window's last sample arriving to this update.
+    pub latency_s: f64,
+}
+
+/// A watch in progress.
+pub struct Watch {
+    settings: WatchSettings,
+    windows: Windows,
+    source: PathBuf,
+    /// Carried law probabilities, in `settings.laws` order; `None` before the first
+    /// informative window.
+    carried: Option<Vec<f64>>,
+    /// The last informative window's fits (SI parameters by law) and posterior particles.
+    previous_fits: Option<Vec<(Law, Vec<f64>)>>,
+    previous_posterior: Option<Vec<crate::abc::Particle>>,
+    /// The losses of the windows since the last change (their running level).
+    losses: Vec<f64>,
+    /// When the newest row arrived.
+    last_arrival: Option<std::time::Instant>,
+    /// The record's sample period, s: how far past its last row the record's end reaches.
+    period_s: f64,
+    /// The unit of the record's torques, in which parameters are reported.
+    torque_unit: crate::units::TorqueUnit,
+}
+
+impl Watch {
+    /// A watch of `settings` over a record named `source` sampled at about `rate_hz`, its
+    /// torques in `torque_unit`; the window and step taken from the rate where not given.
+    pub fn new(
+        settings: WatchSettings,
+        source: PathBuf,
+        rate_hz: f64,
+        torque_unit: crate::units::TorqueUnit,
+    ) -> Result<Self> {
+        let (length, step) = default_windows(rate_hz);
+        let length = settings.window_s.unwrap_or(length);
+        let step = settings.step_s.unwrap_or(step);
+        for (field, v) in [("window_s", length), ("step_s", step)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(crate::Error::setting(
+                    field,
+                    format!("must be a positive number of seconds, got {v}"),
+                ));
+            }
+        }
+        if step > length {
+            return Err(crate::Error::setting(
+                "step_s",
+                format!("{step} s exceeds the window ({length} s): samples between windows would be lost"),
+            ));
+        }
+        for (field, v, lo, hi) in [
+            ("forgetting", settings.forgetting, 0.0, 1.0),
+            ("floor", settings.floor, 0.0, 1.0 / settings.laws.len().max(1) as f64),
+            ("risk", settings.risk, 0.0, 1.0),
+        ] {
+            if !(v > lo && v <= hi) {
+                return Err(crate::Error::setting(
+                    field,
+                    format!("must lie in ({lo}, {hi}], got {v}"),
+                ));
+            }
+        }
+        settings.evidence.validate()?;
+        Ok(Self {
+            windows: Windows::new(length, step),
+            settings,
+            source,
+            carried: None,
+            previous_fits: None,
+            previous_posterior: None,
+            losses: Vec::new(),
+            last_arrival: None,
+            period_s: 1.0 / rate_hz,
+            torque_unit,
+        })
+    }
+
+    /// Window length and step, s.
+    pub fn windows(&self) -> (f64, f64) {
+        self.windows.shape()
+    }
+
+    /// Takes a row that arrived at `arrived`; gives the updates of the windows it completes.
+    /// A row whose time runs backwards, or without a time, is said through `observer` and
+    /// skipped.
+    pub fn push(&mut self, row: Row, arrived: std::time::Instant, observer: &mut dyn Observer) -> Result<Vec<Update>> {
+        match self.windows.push(row) {
+            Pushed::Kept(done) => {
+                let mut updates = Vec::new();
+                for window in done {
+                    updates.push(self.update(window, observer)?);
+                }
+                self.last_arrival = Some(arrived);
+                Ok(updates)
+            }
+            Pushed::Backwards { by_s } => {
+                observer.note(format!(
+                    "warning: a row {by_s:.3} s before the one read last (time runs backwards): skipped"
+                ));
+                Ok(Vec::new())
+            }
+            Pushed::NoTime => Err(crate::Error::setting(
+                "time_column",
+                "a watch cuts its windows by the record's time stamps: the record needs a time column",
+            )),
+        }
+    }
+
+    /// At the record's end: the updates of the window that ends with it.
+    pub fn finish(&mut self, observer: &mut dyn Observer) -> Result<Vec<Update>> {
+        let done = self.windows.finish(self.period_s);
+        done.into_iter().map(|window| self.update(window, observer)).collect()
+    }
+
+    /// The update of one complete window.
+    fn update(&mut self, window: Window, observer: &mut dyn Observer) -> Result<Update> {
+        let samples = window.rows.len();
+        let mut update = Update {
+            window: window.index,
+            start_s: window.start_s,
+            end_s: window.end_s,
+            samples,
+            samples_used: 0,
+            uninformative: None,
+            most_probable: None,
+            laws: Vec::new(),
+            change: false,
+            change_nats: None,
+            advice: None,
+            candidates_scored: 0,
+            latency_s: 0.0,
+        };
+        let data = match self.window_data(&window) {
+            Ok(data) => data,
+            Err(why) => {
+                update.uninformative = Some(why);
+                return Ok(self.completed(update, &window, observer));
+            }
+        };
+        update.samples_used = data.calibration.len();
+        if let Some(why) = self.cannot_inform(&data) {
+            update.uninformative = Some(why);
+            return Ok(self.completed(update, &window, observer));
+        }
+        let job = EvidenceJob {
+            laws: self.settings.laws.clone(),
+            fit: FitOptions::default(),
+            prior: EvidencePrior::Physical {
+                scale: self.settings.prior_scale,
+            },
+            prior_file: None,
+            backend: self.settings.backend,
+            sampler: EvidenceConfig {
+                seed: self.settings.evidence.seed.wrapping_add(window.index as u64),
+                ..self.settings.evidence.clone()
+            },
+            noise: Some(self.settings.evidence.noise),
+        };
+        let analysis = job.run(&data, observer)?;
+        update.candidates_scored = analysis.evidence.candidates_scored;
+
+        // The loss of the previous window's fits here, against this window's own.
+        let fits_now: Vec<(Law, Vec<f64>)> = analysis.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
+        let loss = self
+            .previous_fits
+            .as_ref()
+            .and_then(|before| loss_nats(before, &analysis.fits, &data));
+        let level = median(&self.losses);
+        let change = match (loss, level) {
+            (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
+            (Some(loss), None) => loss > self.settings.change_nats,
+            _ => false,
+        };
+        update.change = change;
+        update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
+        if change {
+            self.losses.clear();
+        } else if let Some(loss) = loss {
+            self.losses.push(loss);
+        }
+
+        // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
+        let window_p: Vec<f64> = self
+            .settings
+            .laws
+            .iter()
+            .map(|&law| analysis.evidence.of(law).map_or(0.0, |l| l.probability))
+            .collect();
+        let carried = match (&self.carried, change) {
+            (Some(before), false) => {
+                let joint: Vec<f64> = before
+                    .iter()
+                    .zip(&window_p)
+                    .map(|(b, w)| b.powf(self.settings.forgetting) * w)
+                    .collect();
+                normalise_with_floor(&joint, self.settings.floor)
+            }
+            _ => normalise_with_floor(&window_p, self.settings.floor),
+        };
+        let unit = data.torque_unit;
+        for (k, &law) in self.settings.laws.iter().enumerate() {
+            let Some(e) = analysis.evidence.of(law) else { continue };
+            let (mean, q01, q99) = posterior_summary(law, &e.posterior, unit);
+            update.laws.push(LawUpdate {
+                law,
+                probability: carried[k],
+                window_probability: window_p[k],
+                ln_z: e.ln_z,
+                ln_z_error: e.ln_z_error,
+                mean,
+                q01,
+                q99,
+            });
+        }
+        update.most_probable = self
+            .settings
+            .laws
+            .iter()
+            .zip(&carried)
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(&law, _)| law);
+        // The mixture posterior under the carried probabilities.
+        let posterior: Vec<crate::abc::Particle> = analysis
+            .evidence
+            .particles()
+            .into_iter()
+            .filter_map(|mut p| {
+                let k = self.settings.laws.iter().position(|&l| l == p.law)?;
+                (window_p[k] > 0.0).then(|| {
+                    p.weight *= carried[k] / window_p[k];
+                    p
+                })
+            })
+            .collect();
+        self.carried = Some(carried);
+        self.previous_fits = Some(fits_now);
+        self.previous_posterior = Some(posterior);
+        Ok(self.completed(update, &window, observer))
+    }
+
+    /// Adds the advice (from the latest posterior) and the latency.
+    fn completed(&self, mut update: Update, window: &Window, observer: &mut dyn Observer) -> Update {
+        if let Some(posterior) = &self.previous_posterior {
+            update.advice = self.advise(posterior, window, &mut |line| observer.note(line)).ok();
+        }
+        update.latency_s = self.last_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        update
+    }
+
+    /// The window's samples as a record: every sample above the minimum speed for
+    /// calibration; `Err` says why there is none to use.
+    fn window_data(&self, window: &Window) -> std::result::Result<FieldData, String> {
+        let rows = &window.rows;
+        if rows.is_empty() {
+            return Err("no sample in the window (a gap in the record)".into());
+        }
+        let column = |f: &dyn Fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+        let time = column(&|r| r.time_s.unwrap_or(f64::NAN));
+        let speed = column(&|r| r.speed_rad_s);
+        let torque = column(&|r| r.torque_nm);
+        let wob: Option<Vec<f64>> = rows.iter().map(|r| r.wob_n).collect();
+        let mut names = vec!["time_s".to_string(), "speed_rad_s".into(), "torque_nm".into()];
+        let mut columns: Vec<Option<&[f64]>> = vec![Some(&time), Some(&speed), Some(&torque)];
+        if let Some(wob) = &wob {
+            names.push("wob_n".into());
+            columns.push(Some(wob));
+        }
+        let opts = DataOptions {
+            speed_column: None,
+            torque_column: None,
+            wob_column: None,
+            time_column: None,
+            speed_unit: None,
+            torque_unit: None,
+            wob_unit: None,
+            t_start_s: None,
+            t_end_s: None,
+            thin: 1,
+            calibration_fraction: 1.0,
+            ..self.settings.data.clone()
+        };
+        let source = self.source.join(format!("window-{}", window.index));
+        let mut data =
+            crate::data::field_data_from_columns(&names, &columns, &source, &opts).map_err(|e| e.to_string())?;
+        // Samples are SI; parameters are reported in the record's own torque unit.
+        data.torque_unit = self.torque_unit;
+        Ok(data)
+    }
+
+    /// Why a window's samples cannot tell the laws apart, if they cannot.
+    fn cannot_inform(&self, data: &FieldData) -> Option<String> {
+        let n = data.calibration.len();
+        if n < self.settings.min_samples {
+            return Some(format!(
+                "{n} samples above the minimum speed, fewer than {}",
+                self.settings.min_samples
+            ));
+        }
+        let mut speeds = data.calibration.speed_rad_s.clone();
+        speeds.sort_by(f64::total_cmp);
+        let span_rpm =
+            (crate::numerics::quantile(&speeds, 0.95) - crate::numerics::quantile(&speeds, 0.05)) / RAD_S_PER_RPM;
+        (span_rpm < self.settings.min_speed_span_rpm).then(|| {
+            format!(
+                "the bit turned at one speed (5–95 % of its speeds within {span_rpm:.1} rpm): no law can be told from another here"
+            )
+        })
+    }
+
+    /// P(unstable) at the window's operating point and the nearest safe speed and weight.
+    fn advise(
+        &self,
+        posterior: &[crate::abc::Particle],
+        window: &Window,
+        note: &mut dyn FnMut(String),
+    ) -> Result<Advice> {
+        let rows = &window.rows;
+        let n = rows.len().max(1) as f64;
+        // The top-drive speed where the record has it; its bit speed's mean otherwise.
+        let omega_rpm = rows
+            .iter()
+            .map(|r| r.top_drive_rad_s.unwrap_or(r.speed_rad_s))
+            .sum::<f64>()
+            / n
+            / RAD_S_PER_RPM;
+        let wob_kn = rows
+            .iter()
+            .map(|r| r.wob_n.unwrap_or(self.settings.w_ref_n))
+            .sum::<f64>()
+            / n
+            / 1000.0;
+        let map = |omega: Vec<f64>, wob: Vec<f64>, note: &mut dyn FnMut(String)| -> Result<Vec<f64>> {
+            let job = StabilityJob {
+                source: MapSource::Posterior(posterior.to_vec()),
+                omega_rpm: omega,
+                wob_kn: wob,
+                criterion: Criterion::Lumped(self.settings.structure),
+                w_ref_n: self.settings.w_ref_n,
+                percentile: 0.5,
+                samples: 200,
+                backend: Backend::Cpu,
+            };
+            let maps = job.run(note)?;
+            let cells = maps.grids.first().map_or(0, Vec::len);
+            Ok((0..cells)
+                .map(|c| {
+                    maps.inputs
+                        .iter()
+                        .zip(&maps.grids)
+                        .map(|(i, g)| i.probability * g[c])
+                        .sum()
+                })
+                .collect())
+        };
+        let omega_rpm = omega_rpm.max(1.0);
+        let wob_kn = wob_kn.max(1.0);
+        let p_unstable = map(vec![omega_rpm], vec![wob_kn], note)?[0];
+        let speeds: Vec<f64> = (2..=60).map(|k| 5.0 * k as f64).collect();
+        let by_speed = map(speeds.clone(), vec![wob_kn], note)?;
+        let weights: Vec<f64> = (1..=20).map(|k| wob_kn * 0.1 * k as f64).collect();
+        let by_weight = map(vec![omega_rpm], weights.clone(), note)?;
+        let nearest = |values: &[f64], p: &[f64], at: f64| {
+            values
+                .iter()
+                .zip(p)
+                .filter(|(_, p)| **p < self.settings.risk)
+                .map(|(v, _)| *v)
+                .min_by(|a, b| (a - at).abs().total_cmp(&(b - at).abs()))
+        };
+        let safe_omega_rpm = nearest(&speeds, &by_speed, omega_rpm);
+        let safe_wob_kn = nearest(&weights, &by_weight, wob_kn);
+        let risk = self.settings.risk;
+        let words = if p_unstable < risk {
+            format!(
+                "steady rotation at {omega_rpm:.0} rpm and {wob_kn:.0} kN: P(stick-slip) = {p_unstable:.2}, below {risk}"
+            )
+        } else {
+            let mut ways = Vec::new();
+            if let Some(o) = safe_omega_rpm {
+                ways.push(format!(
+                    "{} the top-drive speed to {o:.0} rpm",
+                    if o > omega_rpm { "raise" } else { "lower" }
+                ));
+            }
+            if let Some(w) = safe_wob_kn {
+                ways.push(format!(
+                    "{} the weight on bit to {w:.0} kN",
+                    if w > wob_kn { "raise" } else { "lower" }
+                ));
+            }
+            let ways = if ways.is_empty() {
+                "no speed of 10–300 rpm nor weight of 10–200 % of this one brings it below the risk".to_string()
+            } else {
+                ways.join(", or ")
+            };
+            format!("stick-slip likely at {omega_rpm:.0} rpm and {wob_kn:.0} kN (P = {p_unstable:.2}): {ways}")
+        };
+        Ok(Advice {
+            omega_rpm,
+            wob_kn,
+            p_unstable,
+            safe_omega_rpm,
+            safe_wob_kn,
+            words,
+        })
+    }
+}
+
+/// Rows read before the watch starts, to measure the record's rate (its median time step).
+const RATE_ROWS: usize = 64;
+
+/// How a watch ended.
+#[derive(Clone, Debug, Serialize)]
+pub struct Ended {
+    /// Windows given.
+    pub windows: usize,
+    /// Lines of the source skipped (not rows of the record).
+    pub skipped_lines: u64,
+    /// Window length and step, s.
+    pub window_s: f64,
+    pub step_s: f64,
+}
+
+/// Follows `rows` to their end: measures the record's rate on its first rows (for the
+/// default window), then gives each window's update to `on_update` as soon as the window is
+/// complete. Skipped lines and what the user should know go to `observer`, each once.
+pub fn follow(
+    rows: &mut source::Rows,
+    settings: WatchSettings,
+    observer: &mut dyn Observer,
+    on_update: &mut dyn FnMut(&Update) -> Result<()>,
+) -> Result<Ended> {
+    let source = rows.name().to_path_buf();
+    let mut first: Vec<(Row, std::time::Instant)> = Vec::new();
+    let mut watch: Option<Watch> = None;
+    let mut given = 0;
+    loop {
+        let next = rows.next_row()?;
+        let ended = matches!(next, source::Next::End);
+        match next {
+            source::Next::Row(row, arrived) => first.push((row, arrived)),
+            source::Next::Skipped(why) => observer.note(format!("warning: {why}: line skipped")),
+            source::Next::End => {}
+        }
+        if watch.is_none() && (first.len() >= RATE_ROWS || (ended && !first.is_empty())) {
+            let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
+            let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+            steps.sort_by(f64::total_cmp);
+            let rate_hz = median(&steps).map_or(1.0, |dt| 1.0 / dt);
+            let made = Watch::new(settings.clone(), source.clone(), rate_hz, rows.layout().torque_unit())?;
+            let (length, step) = made.windows();
+            if settings.window_s.is_none() || settings.step_s.is_none() {
+                observer.note(format!(
+                    "windows of {length} s every {step} s (the record's rate: {rate_hz:.1} Hz); `window_s` and `step_s` set them"
+                ));
+            }
+            watch = Some(made);
+        }
+        if let Some(watch) = watch.as_mut() {
+            for (row, arrived) in first.drain(..) {
+                for update in watch.push(row, arrived, observer)? {
+                    given += 1;
+                    on_update(&update)?;
+                }
+            }
+            if ended {
+                for update in watch.finish(observer)? {
+                    given += 1;
+                    on_update(&update)?;
+                }
+            }
+        }
+        if ended {
+            break;
+        }
+    }
+    let (window_s, step_s) = watch.as_ref().map_or((0.0, 0.0), Watch::windows);
+    Ok(Ended {
+        windows: given,
+        skipped_lines: rows.skipped,
+        window_s,
+        step_s,
+    })
+}
+
+/// The log-likelihood (nats) the previous window's best law, at its previous fit, loses on
+/// this window against its fit here: (n/2)·ln(ρ_before / ρ_now), the law the one of the lowest
+/// ρ now among those fitted both times.
+fn loss_nats(before: &[(Law, Vec<f64>)], now: &[crate::fit::LawFit], data: &FieldData) -> Option<f64> {
+    let samples = &data.calibration;
+    let sum_sq = samples.sum_sq_torque();
+    let best = now
+        .iter()
+        .filter(|f| f.rho.is_finite() && f.rho > 0.0)
+        .filter(|f| before.iter().any(|(law, _)| *law == f.law))
+        .min_by(|a, b| a.rho.total_cmp(&b.rho))?;
+    let (_, old) = before.iter().find(|(law, _)| *law == best.law)?;
+    let residuals = crate::fit::residuals(best.law, old, samples, None);
+    let rho_before = residuals.iter().map(|e| e * e).sum::<f64>() / sum_sq;
+    let n = samples.len() as f64;
+    rho_before.is_finite().then(|| 0.5 * n * (rho_before / best.rho).ln())
+}
+
+fn median(values: &[f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    Some(crate::numerics::quantile(&sorted, 0.5))
+}
+
+/// `weights` normalised to sum 1 with none below `floor` (those raised to it, the others
+/// scaled down to make room).
+fn normalise_with_floor(weights: &[f64], floor: f64) -> Vec<f64> {
+    let total: f64 = weights.iter().sum();
+    let mut p: Vec<f64> = if total > 0.0 && total.is_finite() {
+        weights.iter().map(|w| w / total).collect()
+    } else {
+        vec![1.0 / weights.len() as f64; weights.len()]
+    };
+    // Raise the laws under the floor; take what they gain from the others in proportion.
+    let low: f64 = p.iter().filter(|&&v| v < floor).count() as f64 * floor;
+    let high: f64 = p.iter().filter(|&&v| v >= floor).sum();
+    if high > 0.0 && low > 0.0 {
+        for v in &mut p {
+            *v = if *v < floor { floor } else { *v * (1.0 - low) / high };
+        }
+    }
+    p
+}
+
+/// Posterior mean and 1 %, 99 % quantiles of each parameter (weighted), in `unit`.
+fn posterior_summary(
+    law: Law,
+    posterior: &[(Vec<f64>, f64)],
+    unit: crate::units::TorqueUnit,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let d = law.n_params();
+    let mut mean = vec![0.0; d];
+    let mut q01 = vec![f64::NAN; d];
+    let mut q99 = vec![f64::NAN; d];
+    let total: f64 = posterior.iter().map(|(_, w)| w).sum();
+    if total > 0.0 {
+        for j in 0..d {
+            mean[j] = posterior.iter().map(|(p, w)| p[j] * w).sum::<f64>() / total;
+            let mut pairs: Vec<(f64, f64)> = posterior.iter().map(|(p, w)| (p[j], *w / total)).collect();
+            pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let quantile = |q: f64| {
+                let mut acc = 0.0;
+                pairs
+                    .iter()
+                    .find(|(_, w)| {
+                        acc += w;
+                        acc >= q
+                    })
+                    .map_or(pairs.last().map_or(f64::NAN, |p| p.0), |p| p.0)
+            };
+            q01[j] = quantile(0.01);
+            q99[j] = quantile(0.99);
+        }
+    }
+    let to = |v: Vec<f64>| crate::documents::to_record_units(law, &v, unit);
+    (to(mean), to(q01), to(q99))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn no_law_goes_below_the_floor_and_the_probabilities_sum_to_one() {
+        let p = normalise_with_floor(&[0.97, 0.03, 0.0, 0.0], 0.01);
+        assert!((p.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        assert!((p[2] - 0.01).abs() < 1e-15 && (p[3] - 0.01).abs() < 1e-15);
+        assert!(p[1] > 0.01 && p[0] > 0.9);
+        assert_eq!(normalise_with_floor(&[1.0, 3.0], 0.01), vec![0.25, 0.75]);
+    }
+}

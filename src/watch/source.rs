@@ -1,0 +1,327 @@
+//! Where a watch reads its record: a CSV file (whole, or followed as it grows), standard
+//! input, or a file replayed against its own time column. Rows come one at a time; a line
+//! that cannot be read is skipped and counted, never fatal.
+
+use crate::data::{DataOptions, Row, RowLayout};
+use crate::error::{Error, Result};
+use crate::units::SpeedUnit;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// How often a followed file is looked at again once its end is reached.
+const FOLLOW_POLL: Duration = Duration::from_millis(200);
+
+/// A record's source.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Source {
+    /// A CSV file; with `follow`, read as it grows (like `tail -f`) until the watch is stopped.
+    File { path: PathBuf, follow: bool },
+    /// Standard input, until it closes.
+    Stdin,
+    /// A CSV file given at `speed` times its own pace (its time column), as a rig would send
+    /// it: 1 is real time.
+    Replay { path: PathBuf, speed: f64 },
+}
+
+impl Source {
+    /// The name it is known by in messages.
+    pub fn name(&self) -> PathBuf {
+        match self {
+            Source::File { path, .. } | Source::Replay { path, .. } => path.clone(),
+            Source::Stdin => PathBuf::from("<stdin>"),
+        }
+    }
+}
+
+/// What a [`Rows`] gives next.
+#[derive(Debug)]
+pub enum Next {
+    /// A row, and when its line arrived.
+    Row(Row, Instant),
+    /// A line skipped: where and why (counted by the reader too).
+    Skipped(String),
+    /// The source ended (a file read whole, standard input closed).
+    End,
+}
+
+/// The rows of a source, one at a time.
+pub struct Rows {
+    reader: Box<dyn BufRead + Send>,
+    layout: RowLayout,
+    /// The top-drive speed column and its unit, where the record has one.
+    top_drive: Option<(usize, SpeedUnit)>,
+    delimiter: u8,
+    name: PathBuf,
+    follow: bool,
+    /// Replay speed and the clock it keeps: (speed, started, first row's time).
+    replay: Option<(f64, Option<(Instant, f64)>)>,
+    line: u64,
+    /// A line read up to the file's current end without its newline (a writer mid-line).
+    partial: String,
+    /// Lines skipped so far.
+    pub skipped: u64,
+}
+
+impl Rows {
+    /// Opens `source` and reads its header (the columns and units, by the rules of `fit`).
+    pub fn open(source: &Source, opts: &DataOptions) -> Result<Self> {
+        let name = source.name();
+        let (reader, follow, replay): (Box<dyn BufRead + Send>, bool, _) = match source {
+            Source::File { path, follow } => (Box::new(BufReader::new(open(path)?)), *follow, None),
+            Source::Stdin => (Box::new(BufReader::new(std::io::stdin())), false, None),
+            Source::Replay { path, speed } => {
+                if !(speed.is_finite() && *speed > 0.0) {
+                    return Err(Error::setting(
+                        "replay_speed",
+                        format!("must be a positive number, got {speed}"),
+                    ));
+                }
+                (Box::new(BufReader::new(open(path)?)), false, Some((*speed, None)))
+            }
+        };
+        Self::from_reader(reader, name, follow, replay, opts)
+    }
+
+    fn from_reader(
+        mut reader: Box<dyn BufRead + Send>,
+        name: PathBuf,
+        follow: bool,
+        replay: Option<(f64, Option<(Instant, f64)>)>,
+        opts: &DataOptions,
+    ) -> Result<Self> {
+        let mut header = String::new();
+        let mut line = 0;
+        // Comment lines (`#`) before the header, as a whole file allows.
+        loop {
+            header.clear();
+            let read = reader.read_line(&mut header).map_err(|source| Error::Read {
+                path: name.clone(),
+                source,
+            })?;
+            line += 1;
+            if read == 0 {
+                return Err(Error::Format {
+                    path: name,
+                    line: Some(line),
+                    message: "empty record: expected a header line".into(),
+                });
+            }
+            if !header.trim_start().starts_with('#') && !header.trim().is_empty() {
+                break;
+            }
+        }
+        let delimiter = delimiter_of(&header);
+        let headers = parse_line(header.trim_end(), delimiter).ok_or_else(|| Error::Format {
+            path: name.clone(),
+            line: Some(line),
+            message: "the header line cannot be read as CSV".into(),
+        })?;
+        let layout = RowLayout::new(&headers, delimiter, opts, &name)?;
+        let top_drive = top_drive_column(&headers, &name, line)?;
+        Ok(Self {
+            reader,
+            layout,
+            top_drive,
+            delimiter,
+            name,
+            follow,
+            replay,
+            line,
+            partial: String::new(),
+            skipped: 0,
+        })
+    }
+
+    /// The source's name in messages.
+    pub fn name(&self) -> &Path {
+        &self.name
+    }
+
+    /// The columns read and their units.
+    pub fn layout(&self) -> &RowLayout {
+        &self.layout
+    }
+
+    /// The next row (waiting for it when following or replaying), a line skipped, or the end.
+    pub fn next_row(&mut self) -> Result<Next> {
+        loop {
+            let mut text = std::mem::take(&mut self.partial);
+            let read = self.reader.read_line(&mut text).map_err(|source| Error::Read {
+                path: self.name.clone(),
+                source,
+            })?;
+            if read == 0 || !text.ends_with('\n') {
+                if self.follow {
+                    // At the end for now: wait for the writer (a partial line is kept).
+                    self.partial = text;
+                    std::thread::sleep(FOLLOW_POLL);
+                    continue;
+                }
+                if text.trim().is_empty() {
+                    return Ok(Next::End);
+                }
+            }
+            self.line += 1;
+            let content = text.trim_end_matches(['\n', '\r']);
+            if content.trim().is_empty() || content.trim_start().starts_with('#') {
+                continue;
+            }
+            let arrived = Instant::now();
+            let row = parse_line(content, self.delimiter)
+                .ok_or_else(|| "not a CSV line".to_string())
+                .and_then(|record| {
+                    let mut row = self.layout.row(&record, self.line).map_err(|e| e.to_string())?;
+                    if let Some((i, unit)) = self.top_drive {
+                        let text = record.get(i).unwrap_or("");
+                        let value: f64 = text.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
+                            format!(
+                                "column {} ('{}'): '{text}' is not a number",
+                                i + 1,
+                                &self.layout.headers()[i]
+                            )
+                        })?;
+                        row.top_drive_rad_s = Some(unit.to_rad_s(value));
+                    }
+                    Ok(row)
+                });
+            match row {
+                Ok(row) => {
+                    self.pace(&row);
+                    let arrived = if self.replay.is_some() { Instant::now() } else { arrived };
+                    return Ok(Next::Row(row, arrived));
+                }
+                Err(why) => {
+                    self.skipped += 1;
+                    let at = format!("{}:{}", self.name.display(), self.line);
+                    return Ok(Next::Skipped(if why.starts_with(&at) {
+                        why
+                    } else {
+                        format!("{at}: {why}")
+                    }));
+                }
+            }
+        }
+    }
+
+    /// A replay waits until the row's time, scaled by its speed, has passed since the first.
+    fn pace(&mut self, row: &Row) {
+        let (Some((speed, clock)), Some(t)) = (self.replay.as_mut(), row.time_s) else {
+            return;
+        };
+        let (started, t0) = *clock.get_or_insert((Instant::now(), t));
+        let due = Duration::from_secs_f64(((t - t0) / *speed).max(0.0));
+        if let Some(wait) = due.checked_sub(started.elapsed()) {
+            std::thread::sleep(wait);
+        }
+    }
+}
+
+/// The one column whose name contains "top_drive" (its unit from its suffix, `_rpm` or
+/// `_rad_s`), if any: the operating point's speed. Several, or one without a unit, are refused.
+fn top_drive_column(headers: &csv::StringRecord, name: &Path, line: u64) -> Result<Option<(usize, SpeedUnit)>> {
+    let found: Vec<usize> = headers
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| h.to_ascii_lowercase().contains("top_drive"))
+        .map(|(i, _)| i)
+        .collect();
+    let refuse = |message: String| Error::Format {
+        path: name.to_path_buf(),
+        line: Some(line),
+        message,
+    };
+    match found.as_slice() {
+        [] => Ok(None),
+        [i] => SpeedUnit::from_suffix(&headers[*i])
+            .map(|u| Some((*i, u)))
+            .ok_or_else(|| {
+                refuse(format!(
+                    "the top-drive speed column '{}' has no unit suffix: name it …_rpm or …_rad_s",
+                    &headers[*i]
+                ))
+            }),
+        many => Err(refuse(format!(
+            "several columns name a top-drive speed ({}); keep one",
+            many.iter().map(|&i| &headers[i]).collect::<Vec<_>>().join(", ")
+        ))),
+    }
+}
+
+fn open(path: &Path) -> Result<impl Read + Send + use<>> {
+    std::fs::File::open(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The delimiter of a header line: the one of `,`, `;`, tab that splits it most.
+fn delimiter_of(header: &str) -> u8 {
+    [b',', b';', b'\t']
+        .into_iter()
+        .max_by_key(|&d| header.bytes().filter(|&b| b == d).count())
+        .unwrap_or(b',')
+}
+
+/// One CSV line as a record (fields trimmed), or `None` when it is not one.
+fn parse_line(line: &str, delimiter: u8) -> Option<csv::StringRecord> {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .delimiter(delimiter)
+        .trim(csv::Trim::All)
+        .from_reader(line.as_bytes());
+    let mut record = csv::StringRecord::new();
+    match reader.read_record(&mut record) {
+        Ok(true) => Some(record),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rows_of(text: &'static str) -> Rows {
+        let reader: Box<dyn BufRead + Send> = Box::new(BufReader::new(text.as_bytes()));
+        Rows::from_reader(reader, PathBuf::from("feed.csv"), false, None, &DataOptions::default()).unwrap()
+    }
+
+    #[test]
+    fn rows_are_read_one_at_a_time_and_bad_lines_skipped() {
+        let mut rows =
+            rows_of("# a rig\ntime_s,bit_speed_rpm,torque_knm\n0.0,60,10\n0.02,x,10\n\n0.04,62,11\n0.06,63\n");
+        let Next::Row(row, _) = rows.next_row().unwrap() else {
+            panic!()
+        };
+        assert_eq!(row.time_s, Some(0.0));
+        assert!((row.speed_rad_s - 60.0 * std::f64::consts::PI / 30.0).abs() < 1e-12);
+        assert!((row.torque_nm - 10_000.0).abs() < 1e-9);
+        let Next::Skipped(why) = rows.next_row().unwrap() else {
+            panic!()
+        };
+        assert!(
+            why.starts_with("feed.csv:4") && why.contains("'x' is not a number"),
+            "{why}"
+        );
+        let Next::Row(row, _) = rows.next_row().unwrap() else {
+            panic!()
+        };
+        assert_eq!(row.time_s, Some(0.04));
+        let Next::Skipped(why) = rows.next_row().unwrap() else {
+            panic!()
+        };
+        assert!(why.starts_with("feed.csv:7"), "{why}");
+        assert!(matches!(rows.next_row().unwrap(), Next::End));
+        assert_eq!(rows.skipped, 2);
+    }
+
+    #[test]
+    fn a_header_without_the_columns_is_refused_naming_them() {
+        let reader: Box<dyn BufRead + Send> = Box::new(BufReader::new("time_s,depth_m\n".as_bytes()));
+        let e = Rows::from_reader(reader, PathBuf::from("feed.csv"), false, None, &DataOptions::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("speed"), "{e}");
+    }
+}

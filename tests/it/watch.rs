@@ -1,0 +1,185 @@
+//! `bitrock watch` on simulated wells (`bitrock simulate --well`): windows cut by the record's
+//! time stamps whatever its pace, the generating formation's law found, changes of formation
+//! noticed where they are and nowhere else, and what a stream gets wrong said, not fatal.
+
+use crate::support::{bin, outcome};
+use std::path::Path;
+
+/// m2 at the paper's estimate for 90 s, then m3 for 90 s, sampled at 20 Hz with noise, at a
+/// top-drive speed where the bit sticks and slips.
+const WELL: &str = "sample_hz = 20\nnoise_torque_knm = 0.3\nnoise_speed_rpm = 0.5\nseed = 5\n\n\
+[[segment]]\nname = \"claystone\"\nduration_s = 90\nlaw = \"m2\"\nomega_rpm = 60\n\n\
+[[segment]]\nname = \"sandstone\"\nduration_s = 90\nlaw = \"m3\"\nomega_rpm = 60\n";
+const BOUNDARY_S: f64 = 90.0;
+
+fn simulate_well(dir: &Path) -> std::path::PathBuf {
+    let well = dir.join("well.toml");
+    std::fs::write(&well, WELL).unwrap();
+    let record = dir.join("well.csv");
+    let (code, _, stderr) = outcome(bin().args(["simulate", "--well"]).arg(&well).arg("-o").arg(&record));
+    assert_eq!(code, 0, "{stderr}");
+    record
+}
+
+fn watch(args: &[&str]) -> Vec<serde_json::Value> {
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args([
+                "watch",
+                "--json",
+                "--laws",
+                "m2,m3",
+                "--window-s",
+                "20",
+                "--step-s",
+                "10",
+                "--backend",
+                "cpu",
+            ])
+            .args(args),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+#[test]
+fn the_watch_finds_each_formations_law_and_the_change_between_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let whole = watch(&[record.to_str().unwrap()]);
+    // Windows of 20 s every 10 s over 180 s: starts 0, 10, …, 160.
+    assert_eq!(whole.len(), 17);
+    let end = |u: &serde_json::Value| u["end_s"].as_f64().unwrap();
+    let start = |u: &serde_json::Value| u["start_s"].as_f64().unwrap();
+    for u in &whole {
+        assert!(u["uninformative"].is_null(), "{u}");
+        let laws = u["laws"].as_array().unwrap();
+        let total: f64 = laws.iter().map(|l| l["probability"].as_f64().unwrap()).sum();
+        assert!((total - 1.0).abs() < 1e-9 && laws.iter().all(|l| l["probability"].as_f64().unwrap() >= 0.01 - 1e-12));
+        let advice = &u["advice"];
+        assert!(
+            (advice["omega_rpm"].as_f64().unwrap() - 60.0).abs() < 1e-6,
+            "the top-drive column: {advice}"
+        );
+        assert!(advice["words"].as_str().unwrap().contains("rpm"));
+    }
+    // Inside the first formation: m2 at the parameters that made it (in the record's kN·m),
+    // and no change declared.
+    for u in whole.iter().filter(|u| end(u) <= BOUNDARY_S) {
+        assert_eq!(u["most_probable"], "m2", "{u}");
+        assert_eq!(u["change"], false, "{u}");
+        let m2 = &u["laws"][0];
+        let mean: Vec<f64> = m2["mean"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        for (got, truth) in mean.iter().zip([13.0, 6.5, 0.3]) {
+            assert!(
+                (got / truth - 1.0).abs() < 0.1,
+                "m2 mean {mean:?} against the paper's (13, 6.5, 0.3)"
+            );
+        }
+    }
+    // The change is declared by a window that holds the boundary or by the next one.
+    let declared: Vec<f64> = whole.iter().filter(|u| u["change"] == true).map(start).collect();
+    let near = |s: f64| (BOUNDARY_S - 20.0 + 1e-9..=BOUNDARY_S).contains(&s);
+    assert!(
+        !declared.is_empty() && declared.iter().all(|&s| near(s)),
+        "declared by the windows that hold the boundary or the one just after, nowhere else: {declared:?}"
+    );
+    // Inside the second formation, once the change is behind: m3.
+    for u in whole.iter().filter(|u| start(u) >= BOUNDARY_S + 10.0) {
+        assert_eq!(u["most_probable"], "m3", "{u}");
+    }
+    // The same windows, the same numbers, replayed at 100 times real time.
+    let replayed = watch(&[record.to_str().unwrap(), "--replay-speed", "100"]);
+    let without_latency = |v: &[serde_json::Value]| {
+        v.iter()
+            .map(|u| {
+                let mut u = u.clone();
+                u.as_object_mut().unwrap().remove("latency_s");
+                u
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(without_latency(&whole), without_latency(&replayed));
+}
+
+#[test]
+fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let feed = dir.path().join("feed.csv");
+    let mut text = String::from("time_s,bit_speed_rpm,torque_knm\n");
+    for k in 0..400 {
+        let t = k as f64 * 0.1;
+        let w = 40.0 + 30.0 * (t * 0.7).sin().abs();
+        text.push_str(&format!("{t:.1},{w:.3},{:.4}\n", 6.0 + 6.0 * (-0.05 * w).exp()));
+        if k == 150 {
+            text.push_str("garbage,line\n");
+        }
+        if k == 200 {
+            text.push_str("10.0,50,7\n"); // time runs backwards
+        }
+    }
+    std::fs::write(&feed, &text).unwrap();
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args([
+                "watch",
+                "--laws",
+                "m2",
+                "--window-s",
+                "20",
+                "--step-s",
+                "10",
+                "--backend",
+                "cpu",
+                "--particles",
+                "100",
+            ])
+            .arg(&feed),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("feed.csv:153") && stderr.contains("line skipped"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("time runs backwards"), "{stderr}");
+    assert!(
+        stdout.contains("3 windows of 20 s every 10 s") && stdout.contains("1 lines skipped"),
+        "{stdout}"
+    );
+
+    std::fs::write(&feed, "bit_speed_rpm,torque_knm\n60,7\n").unwrap();
+    let (code, _, stderr) = outcome(bin().args(["watch"]).arg(&feed));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--time-col"), "{stderr}");
+    let (code, _, stderr) = outcome(bin().args(["watch", "--window-s", "10", "--step-s", "20"]).arg(&feed));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--step-s"), "{stderr}");
+}
+
+#[test]
+fn a_well_file_is_one_simulation_and_refuses_the_single_one_s_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let text = std::fs::read_to_string(&record).unwrap();
+    assert_eq!(text.lines().count(), 1 + 180 * 20);
+    assert!(text.starts_with("time_s,bit_speed_rpm,torque_knm,wob_kn,top_drive_rpm,segment\n"));
+    // The record reads as any other (its extra columns are not the fit's).
+    let (code, _, stderr) = outcome(bin().args(["fit", "--laws", "m2"]).arg(&record));
+    assert_eq!(code, 0, "{stderr}");
+    let (code, _, stderr) = outcome(bin().args(["simulate", "--well", "x.toml", "--law", "m2"]));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--law"), "{stderr}");
+    std::fs::write(
+        dir.path().join("bad.toml"),
+        "[[segment]]\nduration_s = 30\nlaw = \"m2\"\nomega = 60\n",
+    )
+    .unwrap();
+    let (code, _, stderr) = outcome(bin().args(["simulate", "--well"]).arg(dir.path().join("bad.toml")));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("bad.toml:4:1") && stderr.contains("omega"), "{stderr}");
+}
