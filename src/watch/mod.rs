@@ -10,10 +10,12 @@
 //!
 //! - **law probabilities** P_t(m) ∝ P_{t−1}(m)^λ · Z_t(m) (λ the forgetting factor: the
 //!   previous windows' evidence counts λ, λ², … times), no law below the floor;
-//! - **change**: the previous window's fits applied to this window against this window's own
-//!   (the log-likelihood the old formation's laws lose here, (n/2)·ln(ρ_old/ρ_new) of the
-//!   best law); a loss beyond the threshold over its running level declares a change, and the
-//!   probabilities restart from this window's;
+//! - **change**: the fits of the latest window that does not overlap this one, applied here,
+//!   against this window's own (the log-likelihood the old formation's laws lose here,
+//!   (n/2)·ln(ρ_old/ρ_new) of the best law); a loss beyond the threshold over its running
+//!   level declares a change, and the probabilities restart from this window's. Windows that
+//!   overlap the change's window are no reference (they may hold both formations): the next
+//!   change can be declared two window lengths later;
 //! - **advice**: the probability of unstable steady rotation at the window's operating point
 //!   (mean top-drive speed, or mean bit speed without that column; mean weight on bit) under
 //!   the mixture posterior (the paper's 1-DOF string), and the nearest top-drive speed at this
@@ -98,10 +100,11 @@ impl Default for WatchSettings {
 }
 
 /// Window length and step for a record sampled at `rate_hz`: at least 500 samples and 10 s
-/// per window, a step of a fifth of it.
+/// per window, a step of a fifth of it, both to 0.1 s.
 pub fn default_windows(rate_hz: f64) -> (f64, f64) {
-    let length = (500.0 / rate_hz).max(10.0);
-    (length, length / 5.0)
+    // To 0.1 s: a rate measured from rounded time stamps is not exact.
+    let length = ((500.0 / rate_hz).max(10.0) * 10.0).round() / 10.0;
+    (length, (length / 5.0 * 10.0).round().max(1.0) / 10.0)
 }
 
 /// One law in a window's update.
@@ -171,8 +174,12 @@ pub struct Watch {
     /// Carried law probabilities, in `settings.laws` order; `None` before the first
     /// informative window.
     carried: Option<Vec<f64>>,
-    /// The last informative window's fits (SI parameters by law) and posterior particles.
-    previous_fits: Option<Vec<(Law, Vec<f64>)>>,
+    /// The fits (SI parameters by law) of the recent informative windows, by window index:
+    /// a window is compared with the latest one it does not overlap.
+    recent_fits: std::collections::VecDeque<(usize, Vec<(Law, Vec<f64>)>)>,
+    /// The window that declared the last change: no window overlapping it is a reference.
+    last_change: Option<usize>,
+    /// The last informative window's posterior particles.
     previous_posterior: Option<Vec<crate::abc::Particle>>,
     /// The losses of the windows since the last change (their running level).
     losses: Vec<f64>,
@@ -228,7 +235,8 @@ impl Watch {
             settings,
             source,
             carried: None,
-            previous_fits: None,
+            recent_fits: std::collections::VecDeque::new(),
+            last_change: None,
             previous_posterior: None,
             losses: Vec::new(),
             last_arrival: None,
@@ -321,12 +329,18 @@ impl Watch {
         let analysis = job.run(&data, observer)?;
         update.candidates_scored = analysis.evidence.candidates_scored;
 
-        // The loss of the previous window's fits here, against this window's own.
+        // The loss of an earlier window's fits here, against this window's own: the latest
+        // window that does not overlap this one, and none that overlaps the last change's
+        // window (which may hold both formations).
         let fits_now: Vec<(Law, Vec<f64>)> = analysis.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
-        let loss = self
-            .previous_fits
-            .as_ref()
-            .and_then(|before| loss_nats(before, &analysis.fits, &data));
+        let span = self.windows.span();
+        let reference = self
+            .recent_fits
+            .iter()
+            .rev()
+            .find(|(k, _)| k + span <= window.index)
+            .filter(|(k, _)| self.last_change.is_none_or(|c| *k >= c + span));
+        let loss = reference.and_then(|(_, before)| loss_nats(before, &analysis.fits, &data));
         let level = median(&self.losses);
         let change = match (loss, level) {
             (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
@@ -337,8 +351,13 @@ impl Watch {
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
         if change {
             self.losses.clear();
+            self.last_change = Some(window.index);
         } else if let Some(loss) = loss {
             self.losses.push(loss);
+        }
+        self.recent_fits.push_back((window.index, fits_now));
+        while self.recent_fits.len() > span + 1 {
+            self.recent_fits.pop_front();
         }
 
         // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
@@ -395,7 +414,6 @@ impl Watch {
             })
             .collect();
         self.carried = Some(carried);
-        self.previous_fits = Some(fits_now);
         self.previous_posterior = Some(posterior);
         Ok(self.completed(update, &window, observer))
     }
@@ -737,5 +755,13 @@ mod tests {
         assert!((p[2] - 0.01).abs() < 1e-15 && (p[3] - 0.01).abs() < 1e-15);
         assert!(p[1] > 0.01 && p[0] > 0.9);
         assert_eq!(normalise_with_floor(&[1.0, 3.0], 0.01), vec![0.25, 0.75]);
+    }
+
+    #[test]
+    fn default_windows_hold_500_samples_and_10_seconds() {
+        assert_eq!(default_windows(50.0), (10.0, 2.0));
+        assert_eq!(default_windows(1.0 / 0.020000000000000004), (10.0, 2.0));
+        assert_eq!(default_windows(20.000000000000004), (25.0, 5.0));
+        assert_eq!(default_windows(1.0), (500.0, 100.0));
     }
 }

@@ -59,6 +59,11 @@ impl Windows {
         }
     }
 
+    /// ⌈length / step⌉: window k + span() is the first that shares no time with window k.
+    pub fn span(&self) -> usize {
+        ((self.length_s / self.step_s - 1e-9).ceil() as usize).max(1)
+    }
+
     /// Window length and step, s.
     pub fn shape(&self) -> (f64, f64) {
         (self.length_s, self.step_s)
@@ -164,6 +169,10 @@ mod tests {
         let starts: Vec<f64> = given.iter().map(|w| w.start_s).collect();
         assert_eq!(starts, [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0]);
         assert!(windows.finish(0.1).is_empty());
+        // Windows 0 and 3 share [6, 5)… none: 3·2 ≥ 5; windows 0 and 2 share [4, 5).
+        assert_eq!(windows.span(), 3);
+        assert_eq!(Windows::new(20.0, 10.0).span(), 2);
+        assert_eq!(Windows::new(5.0, 5.0).span(), 1);
         for w in &given {
             assert_eq!(w.rows.len(), 50, "window {}", w.index);
             assert!(

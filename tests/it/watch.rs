@@ -82,12 +82,12 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
             );
         }
     }
-    // The change is declared by a window that holds the boundary or by the next one.
+    // The change is declared once, by a window that holds the boundary or by the next one.
     let declared: Vec<f64> = whole.iter().filter(|u| u["change"] == true).map(start).collect();
     let near = |s: f64| (BOUNDARY_S - 20.0 + 1e-9..=BOUNDARY_S).contains(&s);
     assert!(
-        !declared.is_empty() && declared.iter().all(|&s| near(s)),
-        "declared by the windows that hold the boundary or the one just after, nowhere else: {declared:?}"
+        declared.len() == 1 && near(declared[0]),
+        "declared once, by a window that holds the boundary or the one just after, nowhere else: {declared:?}"
     );
     // Inside the second formation, once the change is behind: m3.
     for u in whole.iter().filter(|u| start(u) >= BOUNDARY_S + 10.0) {
