@@ -98,7 +98,10 @@ fn without_law_files(source: &str) -> String {
 }
 
 fn compose_kernels() {
-    let shaders = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    // Read when the script runs, not when it was compiled: one compiled script may serve
+    // another checkout of the same sources (a shared target directory).
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
+    let shaders = Path::new(&manifest).join("shaders");
     println!("cargo::rerun-if-changed=shaders");
     let out = Path::new(&std::env::var("OUT_DIR").expect("cargo sets OUT_DIR")).join("shaders");
     std::fs::create_dir_all(&out).expect("OUT_DIR is writable");

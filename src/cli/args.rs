@@ -10,9 +10,10 @@ use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use std::path::{Path, PathBuf};
 
-/// Which columns of the CSV to read, their units, and which rows to use.
+/// Which columns of the CSV to read, their units, and the slowest bit speed kept: what a
+/// record's rows are read by, whole (`fit`, `abc`…) or as a stream (`watch`).
 #[derive(Debug, Args, Clone)]
-pub struct DataArgs {
+pub struct ColumnArgs {
     /// Bit-speed column [default: the one column whose name contains "speed"].
     #[arg(long, value_name = "NAME")]
     pub speed_col: Option<String>,
@@ -38,6 +39,30 @@ pub struct DataArgs {
     /// stick-phase samples say nothing about them.
     #[arg(long, value_parser = finite_number, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
     pub min_speed_rpm: f64,
+}
+
+impl ColumnArgs {
+    /// The library's options for these flags, the others at their defaults.
+    pub fn options(&self) -> DataOptions {
+        DataOptions {
+            speed_column: self.speed_col.clone(),
+            torque_column: self.torque_col.clone(),
+            wob_column: self.wob_col.clone(),
+            time_column: self.time_col.clone(),
+            speed_unit: self.speed_unit,
+            torque_unit: self.torque_unit,
+            wob_unit: self.wob_unit,
+            min_speed_rpm: self.min_speed_rpm,
+            ..DataOptions::default()
+        }
+    }
+}
+
+/// Which columns of the CSV to read, their units, and which rows to use.
+#[derive(Debug, Args, Clone)]
+pub struct DataArgs {
+    #[command(flatten)]
+    pub columns: ColumnArgs,
     /// Use only rows at or after this time, s (needs a time column).
     #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
     pub t_start_s: Option<f64>,
@@ -60,19 +85,12 @@ impl DataArgs {
     /// The library's options for these flags (validated when the record is read).
     pub fn options(&self) -> DataOptions {
         DataOptions {
-            speed_column: self.speed_col.clone(),
-            torque_column: self.torque_col.clone(),
-            wob_column: self.wob_col.clone(),
-            time_column: self.time_col.clone(),
-            speed_unit: self.speed_unit,
-            torque_unit: self.torque_unit,
-            wob_unit: self.wob_unit,
-            min_speed_rpm: self.min_speed_rpm,
             t_start_s: self.t_start_s,
             t_end_s: self.t_end_s,
             thin: self.thin,
             calibration_fraction: self.calibration_fraction,
             split: self.split,
+            ..self.columns.options()
         }
     }
 }

@@ -1,12 +1,10 @@
 //! `bitrock watch`: a growing record followed window by window through
 //! [`bitrock::watch::follow`]; a table line per window, or JSON lines.
 
-use super::args::{finite_number, parse_laws, set_threads};
+use super::args::{ColumnArgs, finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
-use bitrock::data::DataOptions;
 use bitrock::eval::Backend;
-use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::{Update, WatchSettings};
 use clap::Args;
@@ -59,30 +57,8 @@ pub struct WatchCmd {
     /// Seed of the evidence samplers (window k uses seed + k).
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
     pub seed: u64,
-    /// Bit-speed column [default: the one column whose name contains "speed"].
-    #[arg(long, value_name = "NAME")]
-    pub speed_col: Option<String>,
-    /// Torque-on-bit column [default: the one column whose name contains "torque"].
-    #[arg(long, value_name = "NAME")]
-    pub torque_col: Option<String>,
-    /// Weight-on-bit column [default: the one column whose name contains "wob", if any].
-    #[arg(long, value_name = "NAME")]
-    pub wob_col: Option<String>,
-    /// Time column, s [default: the one column whose name contains "time"].
-    #[arg(long, value_name = "NAME")]
-    pub time_col: Option<String>,
-    /// Unit of the speed column [default: from its suffix].
-    #[arg(long, value_enum)]
-    pub speed_unit: Option<SpeedUnit>,
-    /// Unit of the torque column [default: from its suffix].
-    #[arg(long, value_enum)]
-    pub torque_unit: Option<TorqueUnit>,
-    /// Unit of the weight-on-bit column [default: from its suffix].
-    #[arg(long, value_enum)]
-    pub wob_unit: Option<ForceUnit>,
-    /// Samples below this bit speed, rpm, inform no window (stick phases).
-    #[arg(long, value_parser = finite_number, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
-    pub min_speed_rpm: f64,
+    #[command(flatten)]
+    pub columns: ColumnArgs,
     /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
@@ -117,17 +93,7 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
     let defaults = WatchSettings::default();
     let settings = WatchSettings {
         laws: parse_laws(&cmd.laws)?,
-        data: DataOptions {
-            speed_column: cmd.speed_col.clone(),
-            torque_column: cmd.torque_col.clone(),
-            wob_column: cmd.wob_col.clone(),
-            time_column: cmd.time_col.clone(),
-            speed_unit: cmd.speed_unit,
-            torque_unit: cmd.torque_unit,
-            wob_unit: cmd.wob_unit,
-            min_speed_rpm: cmd.min_speed_rpm,
-            ..DataOptions::default()
-        },
+        data: cmd.columns.options(),
         window_s: cmd.window_s,
         step_s: cmd.step_s,
         evidence: EvidenceConfig {

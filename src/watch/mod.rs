@@ -166,6 +166,9 @@ pub struct Update {
     pub latency_s: f64,
 }
 
+/// A window's least-squares estimates by law (SI).
+type Fits = Vec<(Law, Vec<f64>)>;
+
 /// A watch in progress.
 pub struct Watch {
     settings: WatchSettings,
@@ -176,7 +179,7 @@ pub struct Watch {
     carried: Option<Vec<f64>>,
     /// The fits (SI parameters by law) of the recent informative windows, by window index:
     /// a window is compared with the latest one it does not overlap.
-    recent_fits: std::collections::VecDeque<(usize, Vec<(Law, Vec<f64>)>)>,
+    recent_fits: std::collections::VecDeque<(usize, Fits)>,
     /// The window that declared the last change: no window overlapping it is a reference.
     last_change: Option<usize>,
     /// The last informative window's posterior particles.
@@ -332,7 +335,7 @@ impl Watch {
         // The loss of an earlier window's fits here, against this window's own: the latest
         // window that does not overlap this one, and none that overlaps the last change's
         // window (which may hold both formations).
-        let fits_now: Vec<(Law, Vec<f64>)> = analysis.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
+        let fits_now: Fits = analysis.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
         let span = self.windows.span();
         let reference = self
             .recent_fits
@@ -666,7 +669,7 @@ pub fn follow(
 /// The log-likelihood (nats) the previous window's best law, at its previous fit, loses on
 /// this window against its fit here: (n/2)·ln(ρ_before / ρ_now), the law the one of the lowest
 /// ρ now among those fitted both times.
-fn loss_nats(before: &[(Law, Vec<f64>)], now: &[crate::fit::LawFit], data: &FieldData) -> Option<f64> {
+fn loss_nats(before: &Fits, now: &[crate::fit::LawFit], data: &FieldData) -> Option<f64> {
     let samples = &data.calibration;
     let sum_sq = samples.sum_sq_torque();
     let best = now
