@@ -41,8 +41,8 @@ pub struct WatchCmd {
     /// No law's probability goes below this: none is ruled out for good.
     #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().floor, value_name = "P")]
     pub floor: f64,
-    /// Log-likelihood (nats) the previous window's fits may lose on a window, beyond their
-    /// running level, before a change of formation is declared.
+    /// Log-likelihood (nats) the fits of the latest window sharing no time with a window may
+    /// lose on it, beyond their running level, before a change of formation is declared.
     #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().change_nats, value_name = "NATS")]
     pub change_nats: f64,
     /// The probability of stick-slip the advice keeps below.
