@@ -329,7 +329,16 @@ impl Watch {
             },
             noise: Some(self.settings.evidence.noise),
         };
-        let analysis = job.run(&data, observer)?;
+        let analysis = match job.run(&data, observer) {
+            Ok(analysis) => analysis,
+            // What this window's samples cannot give (a fit, a finite likelihood) ends the
+            // window, not the watch: the next window may be fine.
+            Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
+                update.uninformative = Some(e.to_string());
+                return Ok(self.completed(update, &window, observer));
+            }
+            Err(e) => return Err(e),
+        };
         update.candidates_scored = analysis.evidence.candidates_scored;
 
         // The loss of an earlier window's fits here, against this window's own: the latest
@@ -462,7 +471,7 @@ impl Watch {
             calibration_fraction: 1.0,
             ..self.settings.data.clone()
         };
-        let source = self.source.join(format!("window-{}", window.index));
+        let source = PathBuf::from(format!("{} (window {})", self.source.display(), window.index));
         let mut data =
             crate::data::field_data_from_columns(&names, &columns, &source, &opts).map_err(|e| e.to_string())?;
         // Samples are SI; parameters are reported in the record's own torque unit.

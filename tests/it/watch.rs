@@ -152,6 +152,51 @@ fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
         "{stdout}"
     );
 
+    // A window no law can be fitted to (torques of the wrong sign) or whose torques are all
+    // zero says so; the windows around it are watched as before.
+    let mut text = String::from("time_s,bit_speed_rpm,torque_knm\n");
+    for k in 0..600 {
+        let t = k as f64 * 0.1;
+        let w = 40.0 + 30.0 * (t * 0.7).sin().abs();
+        let torque = 6.0 + 6.0 * (-0.05 * w).exp();
+        let torque = match t {
+            t if (20.0..40.0).contains(&t) => -torque,
+            t if (40.0..60.0).contains(&t) => 0.0,
+            _ => torque,
+        };
+        text.push_str(&format!("{t:.1},{w:.3},{torque:.4}\n"));
+    }
+    std::fs::write(&feed, &text).unwrap();
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args([
+                "watch",
+                "--json",
+                "--laws",
+                "m2,m3",
+                "--window-s",
+                "20",
+                "--step-s",
+                "20",
+                "--backend",
+                "cpu",
+                "--particles",
+                "100",
+            ])
+            .arg(&feed),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let updates: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(updates.len(), 3);
+    assert!(updates[0]["uninformative"].is_null() && updates[0]["most_probable"] == "m2");
+    let why = updates[1]["uninformative"].as_str().unwrap();
+    assert!(why.contains("least-squares fit"), "{why}");
+    assert!(
+        updates[2]["uninformative"].as_str().unwrap().contains("is zero"),
+        "{}",
+        updates[2]
+    );
+
     std::fs::write(&feed, "bit_speed_rpm,torque_knm\n60,7\n").unwrap();
     let (code, _, stderr) = outcome(bin().args(["watch"]).arg(&feed));
     assert_eq!(code, 2, "{stderr}");
