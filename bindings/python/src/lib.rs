@@ -12,6 +12,7 @@ mod record;
 mod run;
 mod selection;
 mod stability;
+mod watch;
 
 use pyo3::prelude::*;
 
@@ -35,6 +36,8 @@ mod _bitrock {
     use crate::selection::check_selection;
     #[pymodule_export]
     use crate::stability::stability;
+    #[pymodule_export]
+    use crate::watch::watch;
     use pyo3::prelude::*;
 
     /// True for a note that only informs (which GPU scores): logged, not warned.

@@ -27,6 +27,7 @@ from . import _bitrock
 from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError
 from ._evidence import Evidence, evidence
+from ._watch import Watch, WatchUpdate, watch
 from . import plot
 
 __all__ = [
@@ -51,6 +52,9 @@ __all__ = [
     "simulate",
     "stability",
     "torque",
+    "watch",
+    "Watch",
+    "WatchUpdate",
 ]
 
 __version__ = _bitrock.version()

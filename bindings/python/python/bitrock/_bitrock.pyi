@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "torque", "version"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -211,4 +211,12 @@ def torque(law: str, speed_rad_s: SupportsGetItem[int, SupportsFloat | SupportsI
 def version() -> str:
     """
     The library's version.
+    """
+
+def watch(source: str | PathLike[str], options: dict, on_update: Any, note: Any | None) -> str:
+    """
+    Follows `source` (a CSV path, or `-` for standard input; `follow`, `replay_speed` as the
+    command's flags) with the settings in `options` (`bitrock.watch`'s keyword arguments),
+    calling `on_update(json)` with each window's JSON line; an exception raised by it (or
+    Ctrl-C) stops the watch and is raised again. Returns how the watch ended, as JSON.
     """

@@ -1,0 +1,173 @@
+"""A growing record followed window by window, as ``bitrock watch`` follows it."""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import threading
+from typing import Any, Iterator, Sequence
+
+import pandas as pd
+
+from . import _bitrock
+
+# What the reading thread puts on the queue after the last update.
+_END = object()
+
+
+class WatchUpdate:
+    """One window's update: the fields of ``bitrock watch --json``'s line as attributes
+    (``window``, ``start_s``, ``end_s``, ``samples_used``, ``uninformative``,
+    ``most_probable``, ``change``, ``change_nats``, ``advice``, ``candidates_scored``,
+    ``latency_s``), ``laws`` as a DataFrame indexed by law, and the whole line as
+    ``document``."""
+
+    def __init__(self, document: dict[str, Any]) -> None:
+        self.document = document
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self.__dict__["document"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    @property
+    def laws(self) -> pd.DataFrame:
+        """Per law: the carried ``probability``, this window's alone (``window_probability``),
+        ``ln_z`` and ``ln_z_error``, and the posterior ``mean``, ``q01``, ``q99`` of its
+        parameters (lists, in the record's torque unit)."""
+        frame = pd.DataFrame(self.document["laws"])
+        return frame.set_index("law") if len(frame) else frame
+
+    def __repr__(self) -> str:
+        d = self.document
+        if d["uninformative"] is not None:
+            return f"<bitrock.WatchUpdate window {d['window']} ({d['start_s']:g}–{d['end_s']:g} s): uninformative: {d['uninformative']}>"
+        change = ", change" if d["change"] else ""
+        return f"<bitrock.WatchUpdate window {d['window']} ({d['start_s']:g}–{d['end_s']:g} s): {d['most_probable']}{change}>"
+
+
+class Watch:
+    """An iterator over the updates of a watch (see :func:`watch`); ``history`` holds those
+    given so far as a DataFrame. The record is read on a thread of its own; Ctrl-C in the loop
+    over the updates, or :meth:`close`, stops it after the window in progress."""
+
+    def __init__(self, source: str, options: dict[str, Any]) -> None:
+        self._updates: queue.Queue[Any] = queue.Queue()
+        self._stop = threading.Event()
+        self._given: list[WatchUpdate] = []
+        self.ended: dict[str, Any] | None = None
+
+        def on_update(line: str) -> None:
+            if self._stop.is_set():
+                raise KeyboardInterrupt("the watch was stopped")
+            self._updates.put(WatchUpdate(json.loads(line)))
+
+        def follow() -> None:
+            from . import _note
+
+            try:
+                self.ended = json.loads(_bitrock.watch(source, options, on_update, _note))
+                self._updates.put(_END)
+            except BaseException as error:  # handed to the loop over the updates
+                self._updates.put(error)
+
+        self._thread = threading.Thread(target=follow, name="bitrock-watch", daemon=True)
+        self._thread.start()
+
+    def __iter__(self) -> Iterator[WatchUpdate]:
+        return self
+
+    def close(self) -> None:
+        """Stops the watch after the window in progress (``with bitrock.watch(...) as w:``
+        closes it on leaving the block)."""
+        self._stop.set()
+
+    def __enter__(self) -> "Watch":
+        return self
+
+    def __exit__(self, *_exc: Any) -> None:
+        self.close()
+
+    def __next__(self) -> WatchUpdate:
+        try:
+            while True:
+                try:
+                    item = self._updates.get(timeout=0.1)
+                    break
+                except queue.Empty:
+                    continue
+        except KeyboardInterrupt:
+            self._stop.set()
+            raise
+        if item is _END:
+            raise StopIteration
+        if isinstance(item, BaseException):
+            if isinstance(item, KeyboardInterrupt) and self._stop.is_set():
+                raise StopIteration
+            raise item
+        self._given.append(item)
+        return item
+
+    @property
+    def history(self) -> pd.DataFrame:
+        """One row per window given so far: its times, samples used, the most probable law,
+        each law's carried probability (``p_m1``…), the change flag, P(unstable) at the
+        operating point and the advice in words."""
+        rows = []
+        for u in self._given:
+            d = u.document
+            row = {
+                "window": d["window"],
+                "start_s": d["start_s"],
+                "end_s": d["end_s"],
+                "samples_used": d["samples_used"],
+                "most_probable": d["most_probable"],
+                "change": d["change"],
+            }
+            for law in d["laws"]:
+                row[f"p_{law['law']}"] = law["probability"]
+            advice = d["advice"] or {}
+            row["p_unstable"] = advice.get("p_unstable")
+            row["advice"] = advice.get("words")
+            rows.append(row)
+        frame = pd.DataFrame(rows)
+        return frame.set_index("window") if len(frame) else frame
+
+
+def watch(
+    source: str | os.PathLike[str],
+    *,
+    laws: str | Sequence[str] | None = None,
+    window_s: float | None = None,
+    step_s: float | None = None,
+    follow: bool = False,
+    replay_speed: float | None = None,
+    forgetting: float | None = None,
+    floor: float | None = None,
+    change_nats: float | None = None,
+    risk: float | None = None,
+    particles: int | None = None,
+    islands: int | None = None,
+    seed: int | None = None,
+    backend: str | None = None,
+    speed_col: str | None = None,
+    torque_col: str | None = None,
+    wob_col: str | None = None,
+    time_col: str | None = None,
+    speed_unit: str | None = None,
+    torque_unit: str | None = None,
+    wob_unit: str | None = None,
+    min_speed_rpm: float | None = None,
+) -> Watch:
+    """Follows a record window by window as ``bitrock watch`` does (docs/watch.md): ``source``
+    a CSV path (read whole; ``follow=True`` as it grows; ``replay_speed`` at that many times the
+    pace of its time column) or ``"-"`` for standard input. Returns a :class:`Watch`: iterate
+    it for one :class:`WatchUpdate` per window as each completes; ``.history`` is the
+    DataFrame of those given. Keyword arguments are the command's flags without dashes."""
+    from . import _law_names
+
+    options = {k: v for k, v in locals().items() if k not in ("source", "_law_names")}
+    options["laws"] = _law_names(laws)
+    return Watch(os.fspath(source), options)

@@ -1,0 +1,75 @@
+//! A growing record followed window by window: each window's update handed to Python as it
+//! completes.
+
+use crate::errors::*;
+use crate::record::data_options;
+use crate::run::PyObserver;
+use bitrock::error::Error;
+use bitrock::watch::WatchSettings;
+use bitrock::watch::source::{Rows, Source};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+/// Follows `source` (a CSV path, or `-` for standard input; `follow`, `replay_speed` as the
+/// command's flags) with the settings in `options` (`bitrock.watch`'s keyword arguments),
+/// calling `on_update(json)` with each window's JSON line; an exception raised by it (or
+/// Ctrl-C) stops the watch and is raised again. Returns how the watch ended, as JSON.
+#[pyfunction]
+#[pyo3(signature = (source, options, on_update, note))]
+pub(crate) fn watch(
+    py: Python<'_>,
+    source: PathBuf,
+    options: &Bound<'_, PyDict>,
+    on_update: Py<PyAny>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let defaults = WatchSettings::default();
+    let follow: bool = kwarg(options, "follow")?.unwrap_or(false);
+    let replay_speed: Option<f64> = kwarg(options, "replay_speed")?;
+    let settings = WatchSettings {
+        laws: laws(py, kwarg(options, "laws")?)?.unwrap_or_else(|| defaults.laws.clone()),
+        data: data_options(py, options)?,
+        window_s: kwarg(options, "window_s")?,
+        step_s: kwarg(options, "step_s")?,
+        evidence: bitrock::abc::evidence::EvidenceConfig {
+            particles: kwarg(options, "particles")?.unwrap_or(defaults.evidence.particles),
+            islands: kwarg(options, "islands")?.unwrap_or(defaults.evidence.islands),
+            seed: kwarg(options, "seed")?.unwrap_or(defaults.evidence.seed),
+            ..defaults.evidence.clone()
+        },
+        forgetting: kwarg(options, "forgetting")?.unwrap_or(defaults.forgetting),
+        floor: kwarg(options, "floor")?.unwrap_or(defaults.floor),
+        change_nats: kwarg(options, "change_nats")?.unwrap_or(defaults.change_nats),
+        risk: kwarg(options, "risk")?.unwrap_or(defaults.risk),
+        backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or(defaults.backend),
+        ..defaults
+    };
+    let source = match (source.as_os_str() == "-", replay_speed) {
+        (true, _) => Source::Stdin,
+        (false, Some(speed)) => Source::Replay { path: source, speed },
+        (false, None) => Source::File { path: source, follow },
+    };
+    let mut observer = PyObserver::new(None, note);
+    let mut raised: Option<PyErr> = None;
+    let ended = py.detach(|| {
+        let mut rows = Rows::open(&source, &settings.data)?;
+        bitrock::watch::follow(&mut rows, settings, &mut observer, &mut |update| {
+            let line = serde_json::to_string(update).map_err(|e| Error::Numerical(e.to_string()))?;
+            Python::attach(|py| {
+                let called = py
+                    .check_signals()
+                    .and_then(|()| on_update.call1(py, (line,)).map(|_| ()));
+                called.map_err(|e| {
+                    raised = Some(e);
+                    Error::Interrupted
+                })
+            })
+        })
+    });
+    if let Some(e) = raised.or_else(|| observer.take_raised()) {
+        return Err(e);
+    }
+    let ended = check(py, ended)?;
+    serde_json::to_string(&ended).map_err(|e| to_py(py, Error::Numerical(e.to_string())))
+}

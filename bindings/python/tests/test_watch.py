@@ -1,0 +1,73 @@
+"""bitrock.watch gives the command line's windows, one update at a time, and a history."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import bitrock
+from conftest import run_cli
+
+WELL = """sample_hz = 20
+noise_torque_knm = 0.3
+noise_speed_rpm = 0.5
+seed = 5
+
+[[segment]]
+duration_s = 60
+law = "m2"
+omega_rpm = 60
+
+[[segment]]
+duration_s = 60
+law = "m3"
+omega_rpm = 60
+"""
+
+SETTINGS = ["--laws", "m2,m3", "--window-s", "20", "--step-s", "10", "--backend", "cpu", "--particles", "150"]
+
+
+@pytest.fixture(scope="module")
+def well(cli, tmp_path_factory):
+    directory = tmp_path_factory.mktemp("well")
+    (directory / "well.toml").write_text(WELL)
+    run_cli(cli, "simulate", "--well", str(directory / "well.toml"), "-o", str(directory / "well.csv"))
+    return directory / "well.csv"
+
+
+def test_the_updates_are_the_command_lines(cli, well) -> None:
+    watch = bitrock.watch(well, laws=["m2", "m3"], window_s=20, step_s=10, backend="cpu", particles=150)
+    updates = list(watch)
+    lines = [json.loads(line) for line in run_cli(cli, "watch", str(well), "--json", *SETTINGS).stdout.splitlines()]
+    assert len(updates) == len(lines) == 11
+    for ours, theirs in zip(updates, lines):
+        for key in ("window", "start_s", "end_s", "samples_used", "most_probable", "change", "laws", "advice"):
+            assert ours.document[key] == theirs[key], key
+    history = watch.history
+    assert list(history.index) == list(range(11))
+    assert history.loc[0, "most_probable"] == "m2" and history.loc[10, "most_probable"] == "m3"
+    assert history["change"].sum() == 1
+    assert (history["p_m2"] + history["p_m3"]).round(12).eq(1.0).all()
+    first = updates[0]
+    assert first.most_probable == "m2" and list(first.laws.index) == ["m2", "m3"]
+    assert watch.ended["windows"] == 11
+
+
+def test_a_closed_watch_stops_reading(well) -> None:
+    with bitrock.watch(well, laws="m2", window_s=20, step_s=10, backend="cpu", particles=100) as watch:
+        for update in watch:
+            if update.window == 1:
+                break
+    assert len(watch.history) == 2
+    watch._thread.join(timeout=60)
+    assert not watch._thread.is_alive()
+    assert watch.ended is None, "stopped before the record's end"
+
+
+def test_refusals_name_their_argument(well, tmp_path) -> None:
+    with pytest.raises(bitrock.InputError) as caught:
+        list(bitrock.watch(well, window_s=10, step_s=20, backend="cpu"))
+    assert caught.value.argument == "step_s"
+    with pytest.raises(FileNotFoundError):
+        list(bitrock.watch(tmp_path / "missing.csv"))
