@@ -21,32 +21,25 @@ fn simulate_well(dir: &Path) -> std::path::PathBuf {
     record
 }
 
+/// The JSON lines of `bitrock watch --json --laws m2,m3 --backend cpu` with `args`.
 fn watch(args: &[&str]) -> Vec<serde_json::Value> {
     let (code, stdout, stderr) = outcome(
         bin()
-            .args([
-                "watch",
-                "--json",
-                "--laws",
-                "m2,m3",
-                "--window-s",
-                "20",
-                "--step-s",
-                "10",
-                "--backend",
-                "cpu",
-            ])
+            .args(["watch", "--json", "--laws", "m2,m3", "--backend", "cpu"])
             .args(args),
     );
     assert_eq!(code, 0, "{stderr}");
     stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
 }
 
+/// Windows of 20 s every 10 s.
+const WINDOWS: [&str; 4] = ["--window-s", "20", "--step-s", "10"];
+
 #[test]
 fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     let dir = tempfile::tempdir().unwrap();
     let record = simulate_well(dir.path());
-    let whole = watch(&[record.to_str().unwrap()]);
+    let whole = watch(&[&WINDOWS[..], &[record.to_str().unwrap()]].concat());
     // Windows of 20 s every 10 s over 180 s: starts 0, 10, …, 160.
     assert_eq!(whole.len(), 17);
     let end = |u: &serde_json::Value| u["end_s"].as_f64().unwrap();
@@ -94,7 +87,7 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
         assert_eq!(u["most_probable"], "m3", "{u}");
     }
     // The same windows, the same numbers, replayed at 100 times real time.
-    let replayed = watch(&[record.to_str().unwrap(), "--replay-speed", "100"]);
+    let replayed = watch(&[&WINDOWS[..], &[record.to_str().unwrap(), "--replay-speed", "100"]].concat());
     let without_latency = |v: &[serde_json::Value]| {
         v.iter()
             .map(|u| {
@@ -167,26 +160,15 @@ fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
         text.push_str(&format!("{t:.1},{w:.3},{torque:.4}\n"));
     }
     std::fs::write(&feed, &text).unwrap();
-    let (code, stdout, stderr) = outcome(
-        bin()
-            .args([
-                "watch",
-                "--json",
-                "--laws",
-                "m2,m3",
-                "--window-s",
-                "20",
-                "--step-s",
-                "20",
-                "--backend",
-                "cpu",
-                "--particles",
-                "100",
-            ])
-            .arg(&feed),
-    );
-    assert_eq!(code, 0, "{stderr}");
-    let updates: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let updates = watch(&[
+        "--window-s",
+        "20",
+        "--step-s",
+        "20",
+        "--particles",
+        "100",
+        feed.to_str().unwrap(),
+    ]);
     assert_eq!(updates.len(), 3);
     assert!(updates[0]["uninformative"].is_null() && updates[0]["most_probable"] == "m2");
     let why = updates[1]["uninformative"].as_str().unwrap();
