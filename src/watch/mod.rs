@@ -632,6 +632,11 @@ pub fn follow(
         match next {
             source::Next::Row(row, arrived) => first.push((row, arrived)),
             source::Next::Skipped(why) => observer.note(format!("warning: {why}: line skipped")),
+            source::Next::Stalled(silent) => observer.note(format!(
+                "warning: {}: no row for {:.0} s: the feed has stalled (still following)",
+                source.display(),
+                silent.as_secs_f64()
+            )),
             source::Next::End => {}
         }
         if watch.is_none() && (first.len() >= RATE_ROWS || (ended && !first.is_empty())) {

@@ -11,6 +11,9 @@ use std::time::{Duration, Instant};
 
 /// How often a followed file is looked at again once its end is reached.
 const FOLLOW_POLL: Duration = Duration::from_millis(200);
+/// A followed file that gives no row for this long is said to have stalled (once, until rows
+/// come again).
+pub const STALL_AFTER: Duration = Duration::from_secs(30);
 
 /// A record's source.
 #[derive(Clone, Debug, PartialEq)]
@@ -39,6 +42,8 @@ impl Source {
 pub enum Next {
     /// A row, and when its line arrived.
     Row(Row, Instant),
+    /// A followed file has given no row for this long (said once per silence).
+    Stalled(Duration),
     /// A line skipped: where and why (counted by the reader too).
     Skipped(String),
     /// The source ended (a file read whole, standard input closed).
@@ -61,6 +66,11 @@ pub struct Rows {
     partial: String,
     /// Lines skipped so far.
     pub skipped: u64,
+    /// How long a followed file may be silent before [`Next::Stalled`] says so.
+    pub stall_after: Duration,
+    /// When the last row came, and whether its silence since has been said.
+    last_row: Instant,
+    stall_said: bool,
 }
 
 impl Rows {
@@ -130,6 +140,9 @@ impl Rows {
             line,
             partial: String::new(),
             skipped: 0,
+            stall_after: STALL_AFTER,
+            last_row: Instant::now(),
+            stall_said: false,
         })
     }
 
@@ -155,7 +168,12 @@ impl Rows {
                 if self.follow {
                     // At the end for now: wait for the writer (a partial line is kept).
                     self.partial = text;
-                    std::thread::sleep(FOLLOW_POLL);
+                    let silent = self.last_row.elapsed();
+                    if silent >= self.stall_after && !self.stall_said {
+                        self.stall_said = true;
+                        return Ok(Next::Stalled(silent));
+                    }
+                    std::thread::sleep(FOLLOW_POLL.min(self.stall_after));
                     continue;
                 }
                 if text.trim().is_empty() {
@@ -187,6 +205,8 @@ impl Rows {
                 });
             match row {
                 Ok(row) => {
+                    self.last_row = Instant::now();
+                    self.stall_said = false;
                     self.pace(&row);
                     let arrived = if self.replay.is_some() { Instant::now() } else { arrived };
                     return Ok(Next::Row(row, arrived));
@@ -313,6 +333,44 @@ mod tests {
         assert!(why.starts_with("feed.csv:7"), "{why}");
         assert!(matches!(rows.next_row().unwrap(), Next::End));
         assert_eq!(rows.skipped, 2);
+    }
+
+    #[test]
+    fn a_followed_file_that_falls_silent_is_said_to_have_stalled_once() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("feed.csv");
+        std::fs::write(&path, "time_s,bit_speed_rpm,torque_knm\n0.0,60,7\n").unwrap();
+        let mut rows = Rows::open(
+            &Source::File {
+                path: path.clone(),
+                follow: true,
+            },
+            &DataOptions::default(),
+        )
+        .unwrap();
+        rows.stall_after = Duration::from_millis(300);
+        assert!(matches!(rows.next_row().unwrap(), Next::Row(..)));
+        let Next::Stalled(silent) = rows.next_row().unwrap() else {
+            panic!("a stall")
+        };
+        assert!(silent >= Duration::from_millis(300));
+        // Rows again: read, and the next silence is said again; a line written in two parts
+        // is one row.
+        let mut file = std::fs::OpenOptions::new().append(true).open(&path).unwrap();
+        write!(file, "0.1,6").unwrap();
+        file.flush().unwrap();
+        let writer = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(100));
+            writeln!(file, "1,8").unwrap();
+        });
+        let Next::Row(row, _) = rows.next_row().unwrap() else {
+            panic!("the row")
+        };
+        writer.join().unwrap();
+        assert_eq!(row.time_s, Some(0.1));
+        assert!((row.speed_rad_s - 61.0 * std::f64::consts::PI / 30.0).abs() < 1e-12);
+        assert!(matches!(rows.next_row().unwrap(), Next::Stalled(_)));
     }
 
     #[test]
