@@ -343,7 +343,7 @@ fn resolve_unit<U: Copy + PartialEq>(
 /// blank nor a `#` comment): a comma when the header has one, else a semicolon or a tab (as
 /// spreadsheets in many locales export). A header with both and no comma is refused, naming
 /// them.
-fn detect_delimiter(text: &[u8], path: &Path) -> Result<u8> {
+pub(crate) fn detect_delimiter(text: &[u8], path: &Path) -> Result<u8> {
     let header = text
         .split(|&b| b == b'\n')
         .find(|line| !line.starts_with(b"#") && !line.trim_ascii().is_empty())
@@ -607,17 +607,6 @@ impl RowLayout {
             delimiter,
             path: path.to_path_buf(),
         })
-    }
-
-    /// The columns read and their units' labels.
-    pub fn columns(&self) -> ColumnsUsed {
-        let name = |i: usize| self.headers[i].to_string();
-        ColumnsUsed {
-            speed: name(self.indices.speed),
-            torque: name(self.indices.torque),
-            wob: self.indices.wob.map(name),
-            time: self.indices.time.map(name),
-        }
     }
 
     /// The header's names.

@@ -156,8 +156,8 @@ pub struct Update {
     /// The most probable law (carried probabilities).
     pub most_probable: Option<Law>,
     pub laws: Vec<LawUpdate>,
-    /// Whether this window starts a new formation, and the log-likelihood (nats) the previous
-    /// window's fits lose on it, beyond their running level.
+    /// Whether this window starts a new formation, and the log-likelihood (nats) the fits of
+    /// the latest window sharing no time with it lose on it, beyond their running level.
     pub change: bool,
     pub change_nats: Option<f64>,
     pub advice: Option<Advice>,
@@ -737,24 +737,15 @@ fn posterior_summary(
     let mut mean = vec![0.0; d];
     let mut q01 = vec![f64::NAN; d];
     let mut q99 = vec![f64::NAN; d];
-    let total: f64 = posterior.iter().map(|(_, w)| w).sum();
+    let weights: Vec<f64> = posterior.iter().map(|(_, w)| *w).collect();
+    let total: f64 = weights.iter().sum();
     if total > 0.0 {
         for j in 0..d {
-            mean[j] = posterior.iter().map(|(p, w)| p[j] * w).sum::<f64>() / total;
-            let mut pairs: Vec<(f64, f64)> = posterior.iter().map(|(p, w)| (p[j], *w / total)).collect();
-            pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
-            let quantile = |q: f64| {
-                let mut acc = 0.0;
-                pairs
-                    .iter()
-                    .find(|(_, w)| {
-                        acc += w;
-                        acc >= q
-                    })
-                    .map_or(pairs.last().map_or(f64::NAN, |p| p.0), |p| p.0)
-            };
-            q01[j] = quantile(0.01);
-            q99[j] = quantile(0.99);
+            let values: Vec<f64> = posterior.iter().map(|(p, _)| p[j]).collect();
+            mean[j] = values.iter().zip(&weights).map(|(v, w)| v * w).sum::<f64>() / total;
+            // The rule of a run's posterior summary.
+            q01[j] = crate::numerics::weighted_quantile(&values, &weights, 0.01);
+            q99[j] = crate::numerics::weighted_quantile(&values, &weights, 0.99);
         }
     }
     let to = |v: Vec<f64>| crate::documents::to_record_units(law, &v, unit);

@@ -121,7 +121,7 @@ impl Rows {
                 break;
             }
         }
-        let delimiter = delimiter_of(&header);
+        let delimiter = crate::data::detect_delimiter(header.as_bytes(), &name)?;
         let headers = parse_line(header.trim_end(), delimiter).ok_or_else(|| Error::Format {
             path: name.clone(),
             line: Some(line),
@@ -273,14 +273,6 @@ fn open(path: &Path) -> Result<impl Read + Send + use<>> {
         path: path.to_path_buf(),
         source,
     })
-}
-
-/// The delimiter of a header line: the one of `,`, `;`, tab that splits it most.
-fn delimiter_of(header: &str) -> u8 {
-    [b',', b';', b'\t']
-        .into_iter()
-        .max_by_key(|&d| header.bytes().filter(|&b| b == d).count())
-        .unwrap_or(b',')
 }
 
 /// One CSV line as a record (fields trimmed), or `None` when it is not one.

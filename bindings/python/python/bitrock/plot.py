@@ -51,7 +51,8 @@ def _source_kind(source: Any) -> str:
 
 def _weighted_quantiles(values: np.ndarray, weights: np.ndarray, qs: Sequence[float]) -> np.ndarray:
     """Quantiles ``qs`` of each column of ``values`` (samples × points) under ``weights``,
-    by the inverse of the weighted empirical distribution (the run's envelopes' rule)."""
+    by the inverse of the weighted empirical distribution (the smallest value whose
+    cumulative weight reaches q; a run's envelopes interpolate between values instead)."""
     order = np.argsort(values, axis=0, kind="stable")
     sorted_values = np.take_along_axis(values, order, axis=0)
     cumulative = np.cumsum(weights[order], axis=0)
@@ -92,7 +93,8 @@ def fit(
 ) -> Any:
     """The record's calibration samples (torque against bit speed) with each law's
     least-squares fit (dashed) and its posterior predictive band at ``level`` (pointwise
-    weighted quantiles of the posterior's torque curves), labelled with the law's posterior
+    weighted quantiles of the posterior's torque curves: a run's ``predictive``, the
+    evidence posterior's inverse weighted distribution), labelled with the law's posterior
     probability. ``source``: a :class:`bitrock.Result` (its ``population``, the last by
     default; its record unless ``record`` is given) or a :class:`bitrock.Evidence` (its
     posterior; give the ``record`` it was computed on). Returns the axes."""
