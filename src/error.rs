@@ -69,8 +69,8 @@ pub enum Error {
     /// depend on the GPU module.
     #[error(transparent)]
     Gpu(Box<dyn std::error::Error + Send + Sync + 'static>),
-    /// The run store (SQLite) failed or holds something it should not.
-    #[error("{}: run store: {message}", path.display())]
+    /// A store (SQLite: a run's or a watch's) failed or holds something it should not.
+    #[error("{}: {message}", path.display())]
     Store { path: PathBuf, message: String },
     /// A run stopped (a draw or wall-time budget) before the population asked for was
     /// complete.

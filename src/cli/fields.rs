@@ -106,6 +106,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("change_nats", "--change-nats"),
     ("risk", "--risk"),
     ("replay_speed", "--replay-speed"),
+    ("resume", "--resume"),
     ("segment", "--well"),
 ];
 

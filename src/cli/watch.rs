@@ -6,12 +6,13 @@ use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::eval::Backend;
 use bitrock::watch::source::{Rows, Source};
-use bitrock::watch::{Update, WatchSettings};
+use bitrock::watch::{FollowOptions, Update, WatchSettings};
 use clap::Args;
 use std::collections::HashSet;
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 #[derive(Debug, Args)]
 pub struct WatchCmd {
@@ -68,6 +69,35 @@ pub struct WatchCmd {
     /// One JSON line per window instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Watch directory: every window stored as it finishes (watch.sqlite), to go on with after
+    /// a stop (`--resume`) and to draw (`bitrock report DIR`).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Go on with the watch in `--out DIR` after its last stored window, reading SOURCE again
+    /// from its start: the same windows and numbers as a watch that never stopped. Its
+    /// settings are the stored ones (a flag that differs is refused).
+    #[arg(long, requires = "out")]
+    pub resume: bool,
+}
+
+/// Set by the first Ctrl-C: the watch ends after storing the window in progress. The second
+/// ends the process at once.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+fn stop_on_ctrl_c() {
+    let installed = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        print::note(format_args!(
+            "note: stopping after the window in progress (Ctrl-C again stops at once)"
+        ));
+    });
+    if let Err(e) = installed {
+        print::note(format_args!(
+            "warning: Ctrl-C cannot be caught ({e}): it stops the watch at once"
+        ));
+    }
 }
 
 /// Says each distinct note once on standard error.
@@ -134,7 +164,14 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
     // A standard output that cannot be written (a closed pipe) ends the watch with its own
     // error, which `main` says as for any command.
     let mut failed: Option<std::io::Error> = None;
-    let followed = bitrock::watch::follow(&mut rows, settings, &mut notes, &mut |update| {
+    stop_on_ctrl_c();
+    let stop = || STOP.load(Ordering::SeqCst);
+    let options = FollowOptions {
+        dir: cmd.out.as_deref(),
+        resume: cmd.resume,
+        stop: Some(&stop),
+    };
+    let followed = bitrock::watch::follow(&mut rows, settings, options, &mut notes, &mut |update| {
         let written = if json {
             serde_json::to_writer(&mut out, update)
                 .map_err(std::io::Error::from)
@@ -165,7 +202,20 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
             ended.skipped_lines
         )?;
     }
-    Ok(ExitCode::SUCCESS)
+    if let Some(dir) = &cmd.out {
+        print::note(format_args!(
+            "note: the windows are stored in {} (`bitrock report {}` draws them{})",
+            dir.display(),
+            dir.display(),
+            if ended.stopped { "; `--resume` goes on" } else { "" }
+        ));
+    }
+    // Stopped by Ctrl-C: the shell's status for an interrupted command.
+    Ok(if ended.stopped {
+        ExitCode::from(130)
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 fn header(out: &mut impl Write, laws: &[bitrock::Law]) -> std::io::Result<()> {

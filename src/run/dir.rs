@@ -48,6 +48,8 @@ pub enum Owned {
     Report,
     /// A selection check's directory (inside a run directory).
     Selection,
+    /// A watch directory: the watch store and its companions.
+    Watch,
 }
 
 impl Owned {
@@ -69,6 +71,11 @@ impl Owned {
                 Owned::Selection.owns(&rest.iter().collect::<std::path::PathBuf>(), is_dir)
             }
             (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
+            (Owned::Watch, [name]) => {
+                !is_dir
+                    && (*name == crate::watch::store::WATCH_STORE_FILE
+                        || crate::watch::store::WATCH_STORE_COMPANIONS.contains(name))
+            }
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,
             (Owned::Report, [FIGURES_DIR, name]) => {

@@ -22,6 +22,7 @@
 //!   weight on bit, and the nearest weight on bit at this speed, below the risk threshold.
 
 pub mod source;
+pub mod store;
 pub mod window;
 
 use crate::abc::Observer;
@@ -36,8 +37,8 @@ use crate::pipeline::stability::{MapSource, StabilityJob};
 use crate::stability::lumped::Lumped;
 use crate::stability::map::Criterion;
 use crate::units::RAD_S_PER_RPM;
-use serde::Serialize;
-use std::path::PathBuf;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
 use window::{Pushed, Window, Windows};
 
 /// What a watch does, besides its source.
@@ -108,7 +109,7 @@ pub fn default_windows(rate_hz: f64) -> (f64, f64) {
 }
 
 /// One law in a window's update.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LawUpdate {
     pub law: Law,
     /// The carried probability P_t(m).
@@ -124,7 +125,7 @@ pub struct LawUpdate {
 }
 
 /// The advice of a window.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Advice {
     /// The operating point: top-drive speed (rpm; the mean bit speed where the record has no
     /// top-drive column) and weight on bit (kN).
@@ -143,7 +144,7 @@ pub struct Advice {
 }
 
 /// What a watch says of one window: one JSON line.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Update {
     pub window: usize,
     pub start_s: f64,
@@ -169,23 +170,87 @@ pub struct Update {
 /// A window's least-squares estimates by law (SI).
 type Fits = Vec<(Law, Vec<f64>)>;
 
-/// A watch in progress.
-pub struct Watch {
-    settings: WatchSettings,
-    windows: Windows,
-    source: PathBuf,
+/// The running losses a change is measured against: those of the last this many windows.
+const LOSS_MEMORY: usize = 120;
+
+/// What a watch carries from window to window: all a watch directory needs to go on after
+/// its last stored window as if it had never stopped. Bounded: a few windows' fits, the last
+/// [`LOSS_MEMORY`] losses and one posterior.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Carried {
+    /// The last window given (informative or not).
+    pub window: Option<usize>,
     /// Carried law probabilities, in `settings.laws` order; `None` before the first
     /// informative window.
-    carried: Option<Vec<f64>>,
+    probabilities: Option<Vec<f64>>,
     /// The fits (SI parameters by law) of the recent informative windows, by window index:
     /// a window is compared with the latest one it does not overlap.
     recent_fits: std::collections::VecDeque<(usize, Fits)>,
     /// The window that declared the last change: no window overlapping it is a reference.
     last_change: Option<usize>,
-    /// The last informative window's posterior particles.
-    previous_posterior: Option<Vec<crate::abc::Particle>>,
+    /// The last informative window's posterior particles (the mixture, weighted by the
+    /// carried probabilities).
+    #[serde(with = "posterior_json")]
+    posterior: Option<Vec<crate::abc::Particle>>,
     /// The losses of the windows since the last change (their running level).
-    losses: Vec<f64>,
+    losses: std::collections::VecDeque<f64>,
+}
+
+/// Posterior particles in JSON: the evidence's carry no ρ (NaN), which JSON has no number for.
+mod posterior_json {
+    use crate::abc::Particle;
+    use crate::laws::Law;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    struct Written {
+        law: Law,
+        index: u64,
+        params: Vec<f64>,
+        #[serde(with = "crate::numerics::json_f64")]
+        rho: f64,
+        weight: f64,
+    }
+
+    pub fn serialize<S: Serializer>(value: &Option<Vec<Particle>>, out: S) -> Result<S::Ok, S::Error> {
+        value
+            .as_ref()
+            .map(|ps| {
+                ps.iter()
+                    .map(|p| Written {
+                        law: p.law,
+                        index: p.index,
+                        params: p.params.clone(),
+                        rho: p.rho,
+                        weight: p.weight,
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .serialize(out)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(input: D) -> Result<Option<Vec<Particle>>, D::Error> {
+        let written = Option::<Vec<Written>>::deserialize(input)?;
+        Ok(written.map(|ws| {
+            ws.into_iter()
+                .map(|w| Particle {
+                    law: w.law,
+                    index: w.index,
+                    params: w.params,
+                    rho: w.rho,
+                    weight: w.weight,
+                })
+                .collect()
+        }))
+    }
+}
+
+/// A watch in progress.
+pub struct Watch {
+    settings: WatchSettings,
+    windows: Windows,
+    source: PathBuf,
+    carried: Carried,
     /// When the newest row arrived.
     last_arrival: Option<std::time::Instant>,
     /// The record's sample period, s: how far past its last row the record's end reaches.
@@ -237,11 +302,7 @@ impl Watch {
             windows: Windows::new(length, step),
             settings,
             source,
-            carried: None,
-            recent_fits: std::collections::VecDeque::new(),
-            last_change: None,
-            previous_posterior: None,
-            losses: Vec::new(),
+            carried: Carried::default(),
             last_arrival: None,
             period_s: 1.0 / rate_hz,
             torque_unit,
@@ -251,6 +312,20 @@ impl Watch {
     /// Window length and step, s.
     pub fn windows(&self) -> (f64, f64) {
         self.windows.shape()
+    }
+
+    /// What the watch carries to its next window.
+    pub fn carried(&self) -> &Carried {
+        &self.carried
+    }
+
+    /// Goes on from `carried` (stored after its window): the windows up to that one are
+    /// not given again, and their rows not kept.
+    pub fn resume(&mut self, carried: Carried) {
+        if let Some(k) = carried.window {
+            self.windows.skip_through(k);
+        }
+        self.carried = carried;
     }
 
     /// Takes a row that arrived at `arrived`; gives the updates of the windows it completes.
@@ -347,13 +422,14 @@ impl Watch {
         let fits_now: Fits = analysis.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
         let span = self.windows.span();
         let reference = self
+            .carried
             .recent_fits
             .iter()
             .rev()
             .find(|(k, _)| k + span <= window.index)
-            .filter(|(k, _)| self.last_change.is_none_or(|c| *k >= c + span));
+            .filter(|(k, _)| self.carried.last_change.is_none_or(|c| *k >= c + span));
         let loss = reference.and_then(|(_, before)| loss_nats(before, &analysis.fits, &data));
-        let level = median(&self.losses);
+        let level = median(&self.carried.losses.iter().copied().collect::<Vec<_>>());
         let change = match (loss, level) {
             (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
             (Some(loss), None) => loss > self.settings.change_nats,
@@ -362,14 +438,17 @@ impl Watch {
         update.change = change;
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
         if change {
-            self.losses.clear();
-            self.last_change = Some(window.index);
+            self.carried.losses.clear();
+            self.carried.last_change = Some(window.index);
         } else if let Some(loss) = loss {
-            self.losses.push(loss);
+            if self.carried.losses.len() == LOSS_MEMORY {
+                self.carried.losses.pop_front();
+            }
+            self.carried.losses.push_back(loss);
         }
-        self.recent_fits.push_back((window.index, fits_now));
-        while self.recent_fits.len() > span + 1 {
-            self.recent_fits.pop_front();
+        self.carried.recent_fits.push_back((window.index, fits_now));
+        while self.carried.recent_fits.len() > span + 1 {
+            self.carried.recent_fits.pop_front();
         }
 
         // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
@@ -379,7 +458,7 @@ impl Watch {
             .iter()
             .map(|&law| analysis.evidence.of(law).map_or(0.0, |l| l.probability))
             .collect();
-        let carried = match (&self.carried, change) {
+        let carried = match (&self.carried.probabilities, change) {
             (Some(before), false) => {
                 let joint: Vec<f64> = before
                     .iter()
@@ -425,14 +504,15 @@ impl Watch {
                 })
             })
             .collect();
-        self.carried = Some(carried);
-        self.previous_posterior = Some(posterior);
+        self.carried.probabilities = Some(carried);
+        self.carried.posterior = Some(posterior);
         Ok(self.completed(update, &window, observer))
     }
 
     /// Adds the advice (from the latest posterior) and the latency.
-    fn completed(&self, mut update: Update, window: &Window, observer: &mut dyn Observer) -> Update {
-        if let Some(posterior) = &self.previous_posterior {
+    fn completed(&mut self, mut update: Update, window: &Window, observer: &mut dyn Observer) -> Update {
+        self.carried.window = Some(window.index);
+        if let Some(posterior) = &self.carried.posterior {
             update.advice = self.advise(posterior, window, &mut |line| observer.note(line)).ok();
         }
         update.latency_s = self.last_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
@@ -604,29 +684,75 @@ const RATE_ROWS: usize = 64;
 /// How a watch ended.
 #[derive(Clone, Debug, Serialize)]
 pub struct Ended {
-    /// Windows given.
+    /// Windows given by this watch (a resumed one: since it resumed).
     pub windows: usize,
     /// Lines of the source skipped (not rows of the record).
     pub skipped_lines: u64,
     /// Window length and step, s.
     pub window_s: f64,
     pub step_s: f64,
+    /// Whether it was stopped (`stop` set) before the source ended.
+    pub stopped: bool,
+}
+
+/// Where a watch keeps its windows and how it is stopped.
+#[derive(Clone, Copy, Default)]
+pub struct FollowOptions<'a> {
+    /// A watch directory ([`store`]): each window is stored before it is given.
+    pub dir: Option<&'a Path>,
+    /// Go on with the watch stored in `dir`, after its last window: the same settings, the
+    /// same source read again from its start (its rows up to that window are read, not
+    /// computed).
+    pub resume: bool,
+    /// Asked between rows (and while a followed file is silent); true (after Ctrl-C) ends the
+    /// watch: the window in progress is finished and stored, the rest of the source not read.
+    pub stop: Option<&'a dyn Fn() -> bool>,
 }
 
 /// Follows `rows` to their end: measures the record's rate on its first rows (for the
 /// default window), then gives each window's update to `on_update` as soon as the window is
-/// complete. Skipped lines and what the user should know go to `observer`, each once.
+/// complete (and stored, with `options.dir`). Skipped lines and what the user should know go
+/// to `observer`, each once.
 pub fn follow(
     rows: &mut source::Rows,
-    settings: WatchSettings,
+    mut settings: WatchSettings,
+    options: FollowOptions<'_>,
     observer: &mut dyn Observer,
     on_update: &mut dyn FnMut(&Update) -> Result<()>,
 ) -> Result<Ended> {
     let source = rows.name().to_path_buf();
+    let stopped = || options.stop.is_some_and(|stop| stop());
+    // A resumed watch: its store, checked against these settings, and where it stopped.
+    let mut resumed: Option<(store::WatchStore, store::StoredWatch)> = None;
+    if options.resume {
+        let dir = options
+            .dir
+            .ok_or_else(|| crate::Error::setting("resume", "needs the watch directory (`out`) to go on with"))?;
+        let (kept, stored) = store::WatchStore::resume(dir)?;
+        check_same_watch(&stored.meta, &settings, dir)?;
+        settings.window_s = Some(stored.meta.window_s);
+        settings.step_s = Some(stored.meta.step_s);
+        if let Some(last) = stored.updates.last() {
+            rows.replay_from(last.start_s + stored.meta.step_s);
+            observer.note(format!(
+                "going on with the watch in {} after window {} (t = {} s)",
+                dir.display(),
+                last.window,
+                last.end_s
+            ));
+        }
+        resumed = Some((kept, stored));
+    }
+    let mut kept: Option<store::WatchStore> = None;
     let mut first: Vec<(Row, std::time::Instant)> = Vec::new();
     let mut watch: Option<Watch> = None;
     let mut given = 0;
+    let mut interrupted = false;
     loop {
+        if stopped() {
+            interrupted = true;
+            break;
+        }
         let next = rows.next_row()?;
         let ended = matches!(next, source::Next::End);
         match next {
@@ -637,33 +763,75 @@ pub fn follow(
                 source.display(),
                 silent.as_secs_f64()
             )),
-            source::Next::End => {}
+            source::Next::Waiting | source::Next::End => {}
         }
         if watch.is_none() && (first.len() >= RATE_ROWS || (ended && !first.is_empty())) {
             let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
             let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
             steps.sort_by(f64::total_cmp);
-            let rate_hz = median(&steps).map_or(1.0, |dt| 1.0 / dt);
-            let made = Watch::new(settings.clone(), source.clone(), rate_hz, rows.layout().torque_unit())?;
+            let measured_hz = median(&steps).map_or(1.0, |dt| 1.0 / dt);
+            let rate_hz = resumed.as_ref().map_or(measured_hz, |(_, s)| s.meta.rate_hz);
+            let unit = rows.layout().torque_unit();
+            let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, unit)?;
             let (length, step) = made.windows();
             if settings.window_s.is_none() || settings.step_s.is_none() {
                 observer.note(format!(
                     "windows of {length} s every {step} s (the record's rate: {rate_hz:.1} Hz); `window_s` and `step_s` set them"
                 ));
             }
+            match resumed.take() {
+                Some((store, stored)) => {
+                    if unit != stored.meta.torque_unit {
+                        return Err(crate::Error::setting(
+                            "resume",
+                            format!(
+                                "the record's torques are in {}, the watch's were in {}",
+                                unit.label(),
+                                stored.meta.torque_unit.label()
+                            ),
+                        ));
+                    }
+                    if let Some(carried) = stored.carried {
+                        made.resume(carried);
+                    }
+                    kept = Some(store);
+                }
+                None => {
+                    if let Some(dir) = options.dir {
+                        let meta = store::WatchMeta {
+                            source: source.display().to_string(),
+                            settings: store::settings_json(&settings),
+                            window_s: length,
+                            step_s: step,
+                            rate_hz,
+                            torque_unit: unit,
+                            bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
+                        };
+                        kept = Some(store::WatchStore::create(dir, &meta)?);
+                    }
+                }
+            }
             watch = Some(made);
         }
         if let Some(watch) = watch.as_mut() {
+            let mut give = |update: Update, watch: &Watch| -> Result<()> {
+                if let Some(store) = kept.as_mut() {
+                    store.append(&update, watch.carried())?;
+                }
+                given += 1;
+                on_update(&update)
+            };
             for (row, arrived) in first.drain(..) {
                 for update in watch.push(row, arrived, observer)? {
-                    given += 1;
-                    on_update(&update)?;
+                    give(update, watch)?;
+                }
+                if stopped() {
+                    break;
                 }
             }
-            if ended {
+            if ended && !stopped() {
                 for update in watch.finish(observer)? {
-                    given += 1;
-                    on_update(&update)?;
+                    give(update, watch)?;
                 }
             }
         }
@@ -677,7 +845,37 @@ pub fn follow(
         skipped_lines: rows.skipped,
         window_s,
         step_s,
+        stopped: interrupted || stopped(),
     })
+}
+
+/// Refuses to go on with a stored watch under other settings: its windows would not be the
+/// ones it would have given.
+fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Path) -> Result<()> {
+    let now = store::settings_json(settings);
+    let (Some(stored), Some(now)) = (meta.settings.as_object(), now.as_object()) else {
+        return Ok(());
+    };
+    for (field, value) in now {
+        let was = match field.as_str() {
+            // Window and step: those the watch used (given or its defaults); left out here,
+            // the watch's own.
+            "window_s" if !value.is_null() => &serde_json::json!(meta.window_s),
+            "step_s" if !value.is_null() => &serde_json::json!(meta.step_s),
+            "window_s" | "step_s" => continue,
+            _ => stored.get(field).unwrap_or(&serde_json::Value::Null),
+        };
+        if was != value {
+            return Err(crate::Error::setting(
+                field,
+                format!(
+                    "is {value} here, {was} in the watch in {} (a watch goes on with its own settings)",
+                    dir.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The log-likelihood (nats) the previous window's best law, at its previous fit, loses on

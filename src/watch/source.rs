@@ -46,6 +46,9 @@ pub enum Next {
     Stalled(Duration),
     /// A line skipped: where and why (counted by the reader too).
     Skipped(String),
+    /// A followed file has no new row yet (given after each look, so that a watch can be
+    /// stopped while it waits).
+    Waiting,
     /// The source ended (a file read whole, standard input closed).
     End,
 }
@@ -71,6 +74,8 @@ pub struct Rows {
     /// When the last row came, and whether its silence since has been said.
     last_row: Instant,
     stall_said: bool,
+    /// Rows before this time are given unpaced ([`Rows::replay_from`]).
+    pace_from_s: f64,
 }
 
 impl Rows {
@@ -143,6 +148,7 @@ impl Rows {
             stall_after: STALL_AFTER,
             last_row: Instant::now(),
             stall_said: false,
+            pace_from_s: f64::NEG_INFINITY,
         })
     }
 
@@ -174,7 +180,7 @@ impl Rows {
                         return Ok(Next::Stalled(silent));
                     }
                     std::thread::sleep(FOLLOW_POLL.min(self.stall_after));
-                    continue;
+                    return Ok(Next::Waiting);
                 }
                 if text.trim().is_empty() {
                     return Ok(Next::End);
@@ -224,11 +230,21 @@ impl Rows {
         }
     }
 
-    /// A replay waits until the row's time, scaled by its speed, has passed since the first.
+    /// A replay gives the rows before `t_s` at once and paces from there: a watch going on
+    /// after its stored windows.
+    pub fn replay_from(&mut self, t_s: f64) {
+        self.pace_from_s = t_s;
+    }
+
+    /// A replay waits until the row's time, scaled by its speed, has passed since the first
+    /// paced one.
     fn pace(&mut self, row: &Row) {
         let (Some((speed, clock)), Some(t)) = (self.replay.as_mut(), row.time_s) else {
             return;
         };
+        if t < self.pace_from_s {
+            return;
+        }
         let (started, t0) = *clock.get_or_insert((Instant::now(), t));
         let due = Duration::from_secs_f64(((t - t0) / *speed).max(0.0));
         if let Some(wait) = due.checked_sub(started.elapsed()) {
@@ -327,6 +343,16 @@ mod tests {
         assert_eq!(rows.skipped, 2);
     }
 
+    /// The next row, stall, skip or end of a followed source, past its waits.
+    fn next_event(rows: &mut Rows) -> Next {
+        loop {
+            match rows.next_row().unwrap() {
+                Next::Waiting => continue,
+                next => return next,
+            }
+        }
+    }
+
     #[test]
     fn a_followed_file_that_falls_silent_is_said_to_have_stalled_once() {
         use std::io::Write;
@@ -342,8 +368,8 @@ mod tests {
         )
         .unwrap();
         rows.stall_after = Duration::from_millis(300);
-        assert!(matches!(rows.next_row().unwrap(), Next::Row(..)));
-        let Next::Stalled(silent) = rows.next_row().unwrap() else {
+        assert!(matches!(next_event(&mut rows), Next::Row(..)));
+        let Next::Stalled(silent) = next_event(&mut rows) else {
             panic!("a stall")
         };
         assert!(silent >= Duration::from_millis(300));
@@ -356,13 +382,13 @@ mod tests {
             std::thread::sleep(Duration::from_millis(100));
             writeln!(file, "1,8").unwrap();
         });
-        let Next::Row(row, _) = rows.next_row().unwrap() else {
+        let Next::Row(row, _) = next_event(&mut rows) else {
             panic!("the row")
         };
         writer.join().unwrap();
         assert_eq!(row.time_s, Some(0.1));
         assert!((row.speed_rad_s - 61.0 * std::f64::consts::PI / 30.0).abs() < 1e-12);
-        assert!(matches!(rows.next_row().unwrap(), Next::Stalled(_)));
+        assert!(matches!(next_event(&mut rows), Next::Stalled(_)));
     }
 
     #[test]

@@ -73,6 +73,11 @@ impl Windows {
         self.origin_s.unwrap_or(0.0) + k as f64 * self.step_s
     }
 
+    /// Windows up to `index` are not given: a watch that goes on after them.
+    pub fn skip_through(&mut self, index: usize) {
+        self.next = self.next.max(index + 1);
+    }
+
     /// Takes the next row; gives the windows it completes.
     pub fn push(&mut self, row: Row) -> Pushed {
         let Some(t) = row.time_s else {
@@ -84,7 +89,10 @@ impl Windows {
         self.last_s = t;
         self.origin_s.get_or_insert(t);
         let done = self.complete_before(t);
-        self.rows.push_back(row);
+        // A row before the next window (one skipped) is in none to come.
+        if t >= self.start_of(self.next) {
+            self.rows.push_back(row);
+        }
         Pushed::Kept(done)
     }
 

@@ -100,6 +100,169 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     assert_eq!(without_latency(&whole), without_latency(&replayed));
 }
 
+/// The stored windows of a watch directory, without their latencies (which are the clock's).
+fn stored(dir: &Path) -> (Vec<serde_json::Value>, bitrock::watch::store::StoredWatch) {
+    let watch = bitrock::watch::store::read(dir).unwrap();
+    let updates = watch
+        .updates
+        .iter()
+        .map(|u| {
+            let mut u = serde_json::to_value(u).unwrap();
+            u.as_object_mut().unwrap().remove("latency_s");
+            u
+        })
+        .collect();
+    (updates, watch)
+}
+
+/// Starts a replayed watch into `out` and waits for `lines` of its JSON lines.
+fn watch_until(record: &Path, out: &Path, lines: usize) -> (std::process::Child, Vec<String>) {
+    use std::io::BufRead;
+    let mut child = bin()
+        .args([
+            "watch",
+            "--json",
+            "--laws",
+            "m2,m3",
+            "--backend",
+            "cpu",
+            "--particles",
+            "100",
+        ])
+        .args(WINDOWS)
+        .arg(record)
+        .args(["--replay-speed", "20", "--out"])
+        .arg(out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
+    let mut read = Vec::new();
+    while read.len() < lines {
+        let mut line = String::new();
+        assert!(reader.read_line(&mut line).unwrap() > 0, "the watch ended early");
+        read.push(line);
+    }
+    // Keep the pipe open (a closed one would end the watch) until the caller is done.
+    std::mem::forget(reader);
+    (child, read)
+}
+
+#[test]
+fn a_watch_killed_or_stopped_goes_on_from_its_directory_as_if_it_never_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let record_arg = record.to_str().unwrap();
+    let whole_dir = dir.path().join("whole");
+    let args = |out: &Path, extra: &[&str]| -> Vec<String> {
+        let mut v: Vec<String> = ["--particles", "100"].iter().map(|s| s.to_string()).collect();
+        v.extend(WINDOWS.iter().map(|s| s.to_string()));
+        v.extend([record_arg.to_string(), "--out".into(), out.to_str().unwrap().into()]);
+        v.extend(extra.iter().map(|s| s.to_string()));
+        v
+    };
+    let as_str = |v: &[String]| v.iter().map(String::as_str).collect::<Vec<_>>().join("\u{1}");
+    let whole_args = args(&whole_dir, &[]);
+    let printed = watch(&whole_args.iter().map(String::as_str).collect::<Vec<_>>());
+    let (whole, whole_store) = stored(&whole_dir);
+    assert_eq!(whole.len(), 17);
+    let without_latency = |v: &serde_json::Value| {
+        let mut v = v.clone();
+        v.as_object_mut().unwrap().remove("latency_s");
+        v
+    };
+    assert_eq!(
+        printed.iter().map(without_latency).collect::<Vec<_>>(),
+        whole,
+        "stored as said"
+    );
+
+    // Killed (SIGKILL) after its third window: the directory holds the windows it said, and
+    // the resumed watch gives the rest, the same numbers as the watch that never stopped.
+    let killed = dir.path().join("killed");
+    let (mut child, said) = watch_until(&record, &killed, 3);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let (before, _) = stored(&killed);
+    assert!(
+        before.len() >= 3 && before.len() < 17,
+        "{} windows stored",
+        before.len()
+    );
+    assert_eq!(
+        said.iter()
+            .map(|l| without_latency(&serde_json::from_str(l).unwrap()))
+            .collect::<Vec<_>>(),
+        before[..3]
+    );
+    let resumed = watch(
+        &args(&killed, &["--resume"])
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert_eq!(
+        resumed.len(),
+        17 - before.len(),
+        "only the windows not stored are given"
+    );
+    let (after, after_store) = stored(&killed);
+    assert_eq!(
+        after, whole,
+        "a resumed watch's windows are those of one that never stopped"
+    );
+    // (As JSON: the evidence's particles carry no ρ, NaN, which equals nothing.)
+    let carried = |w: &bitrock::watch::store::StoredWatch| serde_json::to_string(&w.carried).unwrap();
+    assert!(
+        carried(&after_store) == carried(&whole_store),
+        "a resumed watch carries what one that never stopped carries"
+    );
+
+    // Ctrl-C (SIGINT): the window in progress is stored, the status is 130, and resuming
+    // gives the rest.
+    let stopped = dir.path().join("stopped");
+    let (mut child, _) = watch_until(&record, &stopped, 2);
+    let (code, _, _) = outcome(std::process::Command::new("kill").args(["-INT", &child.id().to_string()]));
+    assert_eq!(code, 0);
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130), "{status:?}");
+    let (before, _) = stored(&stopped);
+    assert!(
+        before.len() >= 2 && before.len() < 17,
+        "{} windows stored",
+        before.len()
+    );
+    watch(
+        &args(&stopped, &["--resume"])
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert_eq!(stored(&stopped).0, whole);
+
+    // Another watch's settings, an existing watch without `--resume`, and a resume without
+    // a directory are refused, naming the flag, with nothing written.
+    let refused = [
+        (args(&killed, &["--resume", "--forgetting", "0.9"]), "--forgetting"),
+        (args(&killed, &["--resume", "--particles", "120"]), "--particles"),
+        (args(&killed, &[]), "--resume"),
+    ];
+    for (flags, named) in refused {
+        let (code, _, stderr) = outcome(
+            bin()
+                .args(["watch", "--json", "--laws", "m2,m3", "--backend", "cpu"])
+                .args(&flags),
+        );
+        assert_eq!(code, 2, "{}: {stderr}", as_str(&flags));
+        assert!(stderr.contains(named), "{stderr}");
+        assert_eq!(stored(&killed).0, whole);
+    }
+    let (code, _, stderr) = outcome(bin().args(["watch", record_arg, "--resume"]));
+    assert_eq!(code, 2);
+    assert!(stderr.contains("--out"), "{stderr}");
+}
+
 #[test]
 fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
     let dir = tempfile::tempdir().unwrap();

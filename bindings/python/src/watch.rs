@@ -5,8 +5,8 @@ use crate::errors::*;
 use crate::record::data_options;
 use crate::run::PyObserver;
 use bitrock::error::Error;
-use bitrock::watch::WatchSettings;
 use bitrock::watch::source::{Rows, Source};
+use bitrock::watch::{FollowOptions, WatchSettings};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -14,15 +14,17 @@ use std::path::PathBuf;
 /// Follows `source` (a CSV path, or `-` for standard input; `follow`, `replay_speed` as the
 /// command's flags) with the settings in `options` (`bitrock.watch`'s keyword arguments),
 /// calling `on_update(json)` with each window's JSON line; an exception raised by it (or
-/// Ctrl-C) stops the watch and is raised again. Returns how the watch ended, as JSON.
+/// Ctrl-C) stops the watch and is raised again. `stopped()`, asked between rows, ends the
+/// watch after the window in progress when true. Returns how the watch ended, as JSON.
 #[pyfunction]
-#[pyo3(signature = (source, options, on_update, note))]
+#[pyo3(signature = (source, options, on_update, note, stopped=None))]
 pub(crate) fn watch(
     py: Python<'_>,
     source: PathBuf,
     options: &Bound<'_, PyDict>,
     on_update: Py<PyAny>,
     note: Option<Py<PyAny>>,
+    stopped: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let defaults = WatchSettings::default();
     let follow: bool = kwarg(options, "follow")?.unwrap_or(false);
@@ -50,23 +52,46 @@ pub(crate) fn watch(
         (false, Some(speed)) => Source::Replay { path: source, speed },
         (false, None) => Source::File { path: source, follow },
     };
+    let out: Option<PathBuf> = kwarg(options, "out")?;
+    let resume: bool = kwarg(options, "resume")?.unwrap_or(false);
     let mut observer = PyObserver::new(None, note);
-    let mut raised: Option<PyErr> = None;
+    // What Python raised (Ctrl-C between rows, or in `on_update`): the watch stops after
+    // storing the window in progress, then it is raised again.
+    let raised: std::cell::RefCell<Option<PyErr>> = std::cell::RefCell::new(None);
     let ended = py.detach(|| {
         let mut rows = Rows::open(&source, &settings.data)?;
-        bitrock::watch::follow(&mut rows, settings, &mut observer, &mut |update| {
+        let stop = || {
+            raised.borrow().is_some()
+                || Python::attach(|py| {
+                    let asked = py.check_signals().and_then(|()| match &stopped {
+                        Some(stopped) => stopped.call0(py)?.is_truthy(py),
+                        None => Ok(false),
+                    });
+                    asked.unwrap_or_else(|e| {
+                        *raised.borrow_mut() = Some(e);
+                        true
+                    })
+                })
+        };
+        let options = FollowOptions {
+            dir: out.as_deref(),
+            resume,
+            stop: Some(&stop),
+        };
+        bitrock::watch::follow(&mut rows, settings, options, &mut observer, &mut |update| {
             let line = serde_json::to_string(update).map_err(|e| Error::Numerical(e.to_string()))?;
             Python::attach(|py| {
                 let called = py
                     .check_signals()
                     .and_then(|()| on_update.call1(py, (line,)).map(|_| ()));
                 called.map_err(|e| {
-                    raised = Some(e);
+                    *raised.borrow_mut() = Some(e);
                     Error::Interrupted
                 })
             })
         })
     });
+    let raised = raised.into_inner();
     if let Some(e) = raised.or_else(|| observer.take_raised()) {
         return Err(e);
     }

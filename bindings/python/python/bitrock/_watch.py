@@ -68,7 +68,7 @@ class Watch:
             from . import _note
 
             try:
-                self.ended = json.loads(_bitrock.watch(source, options, on_update, _note))
+                self.ended = json.loads(_bitrock.watch(source, options, on_update, _note, self._stop.is_set))
                 self._updates.put(_END)
             except BaseException as error:  # handed to the loop over the updates
                 self._updates.put(error)
@@ -160,14 +160,20 @@ def watch(
     torque_unit: str | None = None,
     wob_unit: str | None = None,
     min_speed_rpm: float | None = None,
+    out: str | os.PathLike[str] | None = None,
+    resume: bool = False,
 ) -> Watch:
     """Follows a record window by window as ``bitrock watch`` does (docs/watch.md): ``source``
     a CSV path (read whole; ``follow=True`` as it grows; ``replay_speed`` at that many times the
     pace of its time column) or ``"-"`` for standard input. Returns a :class:`Watch`: iterate
     it for one :class:`WatchUpdate` per window as each completes; ``.history`` is the
-    DataFrame of those given. Keyword arguments are the command's flags without dashes."""
+    DataFrame of those given. ``out`` is a watch directory where every window is stored as it
+    finishes (``bitrock report`` draws it); ``resume=True`` goes on with the watch stored there
+    after its last window. Keyword arguments are the command's flags without dashes."""
     from . import _law_names
 
     options = {k: v for k, v in locals().items() if k not in ("source", "_law_names")}
     options["laws"] = _law_names(laws)
+    if out is not None:
+        options["out"] = os.fspath(out)
     return Watch(os.fspath(source), options)

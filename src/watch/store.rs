@@ -1,0 +1,278 @@
+//! A watch directory: one SQLite database (`DIR/watch.sqlite`) holding the watch's settings
+//! and source, one row per finished window (its update, as the JSON line said it) and what the
+//! watch carries after its last window ([`Carried`]: the probabilities, the recent fits and
+//! the last posterior), replaced with each window. Each window is stored in one transaction
+//! before it is given, so a watch killed at any moment has every window it said, and
+//! `bitrock watch --resume` goes on after the last one as if it had never stopped.
+//!
+//! Bytes per window: its update (about 0.6 kB plus 0.3 kB per law) in `windows`; the carried
+//! state is one row whatever the record's length (its posterior: 2 × `particles` per law).
+
+use super::{Carried, Update, WatchSettings};
+use crate::error::{Error, Result};
+use crate::files::DirLock;
+use rusqlite::{Connection, OptionalExtension, params};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The watch store's file in a watch directory.
+pub const WATCH_STORE_FILE: &str = "watch.sqlite";
+/// SQLite's companions of the store while it is written.
+pub const WATCH_STORE_COMPANIONS: [&str; 3] = ["watch.sqlite-journal", "watch.sqlite-wal", "watch.sqlite-shm"];
+
+/// Version of the schema below; any other is refused.
+pub const WATCH_SCHEMA_VERSION: i64 = 1;
+
+const SCHEMA: &str = r#"
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE windows (
+    window INTEGER PRIMARY KEY,
+    start_s REAL NOT NULL,
+    end_s REAL NOT NULL,
+    update_json TEXT NOT NULL
+);
+CREATE TABLE carried (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    window INTEGER NOT NULL,
+    state_json TEXT NOT NULL
+);
+"#;
+
+/// What a watch is, stored when it starts: a resumed watch must be the same one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WatchMeta {
+    /// The source as named when the watch started.
+    pub source: String,
+    /// The settings that shape the numbers (as [`settings_json`] writes them).
+    pub settings: serde_json::Value,
+    /// Window length and step, s; the record's rate it measured, Hz.
+    pub window_s: f64,
+    pub step_s: f64,
+    pub rate_hz: f64,
+    /// The record's torque unit (parameters are reported in it).
+    pub torque_unit: crate::units::TorqueUnit,
+    pub bitrock_version: String,
+}
+
+/// The settings that decide a watch's numbers, as JSON: what a resumed watch must match.
+/// The backend and thread count are not among them (they change no more than the last bits
+/// of ρ, within the parity contract).
+pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
+    serde_json::json!({
+        "laws": settings.laws.iter().map(|l| l.name()).collect::<Vec<_>>(),
+        "speed_column": settings.data.speed_column,
+        "torque_column": settings.data.torque_column,
+        "wob_column": settings.data.wob_column,
+        "time_column": settings.data.time_column,
+        "speed_unit": settings.data.speed_unit.map(|u| format!("{u:?}")),
+        "torque_unit": settings.data.torque_unit.map(|u| format!("{u:?}")),
+        "wob_unit": settings.data.wob_unit.map(|u| format!("{u:?}")),
+        "min_speed_rpm": settings.data.min_speed_rpm,
+        "window_s": settings.window_s,
+        "step_s": settings.step_s,
+        "particles": settings.evidence.particles,
+        "islands": settings.evidence.islands,
+        "seed": settings.evidence.seed,
+        "noise": format!("{:?}", settings.evidence.noise),
+        "prior_scale": settings.prior_scale,
+        "forgetting": settings.forgetting,
+        "floor": settings.floor,
+        "change_nats": settings.change_nats,
+        "risk": settings.risk,
+        "w_ref_n": settings.w_ref_n,
+        "min_samples": settings.min_samples,
+        "min_speed_span_rpm": settings.min_speed_span_rpm,
+    })
+}
+
+/// A watch store open for writing, its directory locked.
+pub struct WatchStore {
+    conn: Connection,
+    path: PathBuf,
+    _lock: DirLock,
+}
+
+/// A watch directory read whole.
+#[derive(Clone, Debug)]
+pub struct StoredWatch {
+    pub dir: PathBuf,
+    pub meta: WatchMeta,
+    /// Every window stored, in order.
+    pub updates: Vec<Update>,
+    /// What the watch carried after its last window.
+    pub carried: Option<Carried>,
+}
+
+fn sql_error(path: &Path) -> impl Fn(rusqlite::Error) -> Error + '_ {
+    move |e| Error::Store {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
+    move |e| Error::Store {
+        path: path.to_path_buf(),
+        message: format!("malformed JSON in the watch store: {e}"),
+    }
+}
+
+/// True when `dir` holds a watch store.
+pub fn is_watch_dir(dir: &Path) -> bool {
+    dir.join(WATCH_STORE_FILE).is_file()
+}
+
+impl WatchStore {
+    /// Makes `dir` a watch directory (created where missing) for the watch `meta` describes.
+    /// A directory that holds a watch already is refused (`resume` goes on with it), and so
+    /// is one that holds anything else.
+    pub fn create(dir: &Path, meta: &WatchMeta) -> Result<Self> {
+        crate::run::dir::refuse_inside_run(dir, "out")?;
+        if is_watch_dir(dir) {
+            return Err(Error::setting(
+                "out",
+                format!(
+                    "{} holds a watch already: `resume` goes on with it, or name another directory",
+                    dir.display()
+                ),
+            ));
+        }
+        if dir.exists() {
+            crate::files::check_output_dir(dir, "out")?;
+            crate::files::refuse_foreign(dir, "out", &|rel, is_dir| {
+                crate::run::dir::Owned::Watch.owns(rel, is_dir)
+            })?;
+        }
+        std::fs::create_dir_all(dir).map_err(|source| Error::output("out", dir, source))?;
+        let lock = DirLock::acquire(dir)?;
+        let path = dir.join(WATCH_STORE_FILE);
+        // Made whole beside its place, then moved there: a directory holds a watch store
+        // with its settings or none.
+        let temp = crate::files::TempFile::beside(&path, "out")?;
+        {
+            let err = sql_error(&path);
+            let mut conn = Connection::open(temp.path()).map_err(&err)?;
+            let tx = conn.transaction().map_err(&err)?;
+            tx.execute_batch(SCHEMA).map_err(&err)?;
+            for (key, value) in [
+                ("schema_version", WATCH_SCHEMA_VERSION.to_string()),
+                ("watch", serde_json::to_string(meta).map_err(json_error(&path))?),
+            ] {
+                tx.execute("INSERT INTO meta (key, value) VALUES (?1, ?2)", params![key, value])
+                    .map_err(&err)?;
+            }
+            tx.commit().map_err(&err)?;
+        }
+        temp.commit(&path)?;
+        Self::open_locked(dir, lock)
+    }
+
+    /// Opens the watch in `dir` to go on with it.
+    pub fn resume(dir: &Path) -> Result<(Self, StoredWatch)> {
+        let stored = read(dir)?;
+        let lock = DirLock::acquire(dir)?;
+        let store = Self::open_locked(dir, lock)?;
+        Ok((store, stored))
+    }
+
+    fn open_locked(dir: &Path, lock: DirLock) -> Result<Self> {
+        let path = dir.join(WATCH_STORE_FILE);
+        let conn = Connection::open_with_flags(&path, rusqlite::OpenFlags::SQLITE_OPEN_READ_WRITE)
+            .map_err(sql_error(&path))?;
+        conn.pragma_update(None, "synchronous", "FULL")
+            .map_err(sql_error(&path))?;
+        Ok(Self {
+            conn,
+            path,
+            _lock: lock,
+        })
+    }
+
+    /// Stores a finished window and what the watch carries after it, in one transaction.
+    pub fn append(&mut self, update: &Update, carried: &Carried) -> Result<()> {
+        let path = self.path.clone();
+        let err = sql_error(&path);
+        let update_json = serde_json::to_string(update).map_err(json_error(&path))?;
+        let state_json = serde_json::to_string(carried).map_err(json_error(&path))?;
+        let tx = self.conn.transaction().map_err(&err)?;
+        tx.execute(
+            "INSERT INTO windows (window, start_s, end_s, update_json) VALUES (?1, ?2, ?3, ?4)",
+            params![update.window as i64, update.start_s, update.end_s, update_json],
+        )
+        .map_err(&err)?;
+        tx.execute(
+            "INSERT OR REPLACE INTO carried (id, window, state_json) VALUES (1, ?1, ?2)",
+            params![update.window as i64, state_json],
+        )
+        .map_err(&err)?;
+        tx.commit().map_err(&err)
+    }
+}
+
+/// Reads the watch in `dir` (read-only: a running watch may be read).
+pub fn read(dir: &Path) -> Result<StoredWatch> {
+    let path = dir.join(WATCH_STORE_FILE);
+    let not_a_watch = |why: String| Error::Data {
+        path: dir.to_path_buf(),
+        message: format!("not a bitrock watch directory ({why}); give a directory written by `bitrock watch --out`"),
+    };
+    if !dir.is_dir() {
+        return Err(not_a_watch("no such directory".into()));
+    }
+    if !path.is_file() {
+        return Err(not_a_watch(format!("it has no {WATCH_STORE_FILE}")));
+    }
+    let conn = Connection::open_with_flags(&path, rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
+        .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE}: {e}")))?;
+    let meta_value = |key: &str| -> Result<Option<String>> {
+        conn.query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
+            .optional()
+            .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE} is not a bitrock watch store: {e}")))
+    };
+    match meta_value("schema_version")?.as_deref().map(str::parse::<i64>) {
+        Some(Ok(WATCH_SCHEMA_VERSION)) => {}
+        Some(Ok(v)) => {
+            return Err(not_a_watch(format!(
+                "{WATCH_STORE_FILE} has schema version {v}; this bitrock reads version {WATCH_SCHEMA_VERSION}"
+            )));
+        }
+        _ => return Err(not_a_watch(format!("{WATCH_STORE_FILE} has no schema version"))),
+    }
+    let err = sql_error(&path);
+    let meta: WatchMeta = serde_json::from_str(
+        &meta_value("watch")?.ok_or_else(|| not_a_watch(format!("{WATCH_STORE_FILE} does not say what it watched")))?,
+    )
+    .map_err(json_error(&path))?;
+    let mut updates = Vec::new();
+    {
+        let mut select = conn
+            .prepare("SELECT update_json FROM windows ORDER BY window")
+            .map_err(&err)?;
+        let rows = select.query_map([], |r| r.get::<_, String>(0)).map_err(&err)?;
+        for text in rows {
+            updates.push(serde_json::from_str(&text.map_err(&err)?).map_err(json_error(&path))?);
+        }
+    }
+    let carried: Option<(i64, String)> = conn
+        .query_row("SELECT window, state_json FROM carried WHERE id = 1", [], |r| {
+            Ok((r.get(0)?, r.get(1)?))
+        })
+        .optional()
+        .map_err(&err)?;
+    let carried: Option<Carried> = carried
+        .map(|(_, text)| serde_json::from_str(&text))
+        .transpose()
+        .map_err(json_error(&path))?;
+    if carried.as_ref().and_then(|c| c.window) != updates.last().map(|u: &Update| u.window) {
+        return Err(Error::Store {
+            path: path.clone(),
+            message: "the carried state is not the last window's".into(),
+        });
+    }
+    Ok(StoredWatch {
+        dir: dir.to_path_buf(),
+        meta,
+        updates,
+        carried,
+    })
+}
