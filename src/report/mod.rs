@@ -17,8 +17,10 @@ mod figures;
 mod plot;
 mod runs;
 mod stats;
+mod watch;
 
 pub use runs::{read_run_dirs, write_paper_report};
+pub use watch::write_watch_report;
 
 use figures::confusion_figure;
 
@@ -180,7 +182,16 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
     let prepared = Prepared::new(input)?;
     let rendered = figures::render_all(&prepared)?;
     let markdown = prepared.markdown(&rendered.iter().map(|r| r.info.clone()).collect::<Vec<_>>());
+    replace_report(dir, markdown, rendered, start)
+}
 
+/// Moves a report rendered in memory into `dir`, replacing it as a whole.
+fn replace_report(
+    dir: &Path,
+    markdown: String,
+    rendered: Vec<figures::Rendered>,
+    start: Instant,
+) -> Result<ReportSummary> {
     let figures = Path::new(crate::run::dir::FIGURES_DIR);
     let mut files: Vec<(PathBuf, Vec<u8>)> = vec![(PathBuf::from(crate::run::dir::REPORT_MD), markdown.into_bytes())];
     for r in rendered.iter() {
@@ -768,7 +779,7 @@ impl Prepared<'_> {
 }
 
 /// The section listing each figure with its caption, size and links to its SVG and PNG.
-fn figures_markdown(md: &mut String, figures: &[FigureInfo]) {
+pub(crate) fn figures_markdown(md: &mut String, figures: &[FigureInfo]) {
     let _ = writeln!(md, "\n## Figures\n");
     for f in figures {
         let _ = writeln!(

@@ -261,6 +261,49 @@ fn a_watch_killed_or_stopped_goes_on_from_its_directory_as_if_it_never_stopped()
     let (code, _, stderr) = outcome(bin().args(["watch", record_arg, "--resume"]));
     assert_eq!(code, 2);
     assert!(stderr.contains("--out"), "{stderr}");
+
+    // The report along the record: the change where the watch declared it, the stretches'
+    // laws, and the figures.
+    let report = dir.path().join("report");
+    let (code, _, stderr) = outcome(bin().arg("report").arg(&killed).arg("--out").arg(&report));
+    assert_eq!(code, 0, "{stderr}");
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    let change = whole.iter().find(|u| u["change"] == true).unwrap();
+    let row = format!(
+        "| {} | {}–{} |",
+        change["window"],
+        change["start_s"].as_f64().unwrap(),
+        change["end_s"].as_f64().unwrap()
+    );
+    assert!(md.contains(&row), "the change's row {row} in:\n{md}");
+    let stretches = md.split("## Stretches").nth(1).unwrap().split("##").next().unwrap();
+    let laws: Vec<&str> = stretches
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| from"))
+        .filter_map(|l| l.split('|').nth(4).map(str::trim))
+        .collect();
+    assert_eq!(laws, ["m2", "m3"], "{stretches}");
+    for stem in [
+        "watch-probabilities",
+        "watch-risk",
+        "watch-parameters-m2",
+        "watch-parameters-m3",
+    ] {
+        for ext in ["svg", "png"] {
+            let file = report.join("figures").join(format!("{stem}.{ext}"));
+            assert!(std::fs::metadata(&file).unwrap().len() > 1000, "{}", file.display());
+        }
+    }
+    let (code, _, stderr) = outcome(
+        bin()
+            .arg("report")
+            .arg(&killed)
+            .arg(&whole_dir)
+            .arg("--out")
+            .arg(&report),
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("watch directory"), "{stderr}");
 }
 
 #[test]

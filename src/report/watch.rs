@@ -1,0 +1,156 @@
+//! The report of a watch directory: what the watch saw along the record, its changes of
+//! formation, the stretches between them and the latest advice, with the figures along the
+//! record.
+
+use super::{ReportSummary, figures, figures_markdown, replace_report};
+use crate::error::Result;
+use crate::watch::store::StoredWatch;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+/// Writes `report.md` and the figures of the watch in `watch` under `dir`, replaced as a whole
+/// (as [`super::write_report`] does).
+pub fn write_watch_report(dir: &Path, watch: &StoredWatch) -> Result<ReportSummary> {
+    let start = Instant::now();
+    let rendered = figures::render_watch(watch)?;
+    let mut md = markdown(watch);
+    figures_markdown(&mut md, &rendered.iter().map(|r| r.info.clone()).collect::<Vec<_>>());
+    replace_report(dir, md, rendered, start)
+}
+
+fn markdown(watch: &StoredWatch) -> String {
+    let meta = &watch.meta;
+    let updates = &watch.updates;
+    let settings = &meta.settings;
+    let mut md = String::new();
+    let _ = writeln!(md, "# bitrock watch report\n");
+    let informative = updates.iter().filter(|u| u.uninformative.is_none()).count();
+    let span = match (updates.first(), updates.last()) {
+        (Some(a), Some(b)) => format!(", from t = {} s to {} s", a.start_s, b.end_s),
+        _ => String::new(),
+    };
+    let _ = writeln!(
+        md,
+        "Record: `{}`, watched in windows of {} s every {} s (its rate: {:.1} Hz); torques in {}. \
+         {} windows stored{span}, {informative} of them informative.\n",
+        meta.source,
+        meta.window_s,
+        meta.step_s,
+        meta.rate_hz,
+        meta.torque_unit.label(),
+        updates.len(),
+    );
+    let _ = writeln!(
+        md,
+        "Settings: laws {}; the evidence of each law per window from {} particles × {} islands (seed {}); \
+         probabilities carried with forgetting {} and floor {}; a change declared beyond {} nats over the \
+         running level; advice below a risk of {}. Watched by bitrock {}.\n",
+        settings["laws"]
+            .as_array()
+            .map(|l| l.iter().filter_map(|v| v.as_str()).collect::<Vec<_>>().join(", "))
+            .unwrap_or_default(),
+        settings["particles"],
+        settings["islands"],
+        settings["seed"],
+        settings["forgetting"],
+        settings["floor"],
+        settings["change_nats"],
+        settings["risk"],
+        meta.bitrock_version,
+    );
+
+    let _ = writeln!(md, "## Changes of formation\n");
+    let changes: Vec<_> = updates.iter().filter(|u| u.change).collect();
+    if changes.is_empty() {
+        let _ = writeln!(md, "None declared.\n");
+    } else {
+        let _ = writeln!(
+            md,
+            "| window | its time (s) | loss over the running level (nats) | most probable after |\n|---|---|---|---|"
+        );
+        for u in &changes {
+            let _ = writeln!(
+                md,
+                "| {} | {}–{} | {} | {} |",
+                u.window,
+                u.start_s,
+                u.end_s,
+                u.change_nats.map_or("–".into(), |n| format!("{n:.1}")),
+                u.most_probable.map_or("–".into(), |l| l.to_string()),
+            );
+        }
+        let _ = writeln!(md);
+    }
+
+    // The stretches between changes: which law each most often ranked first.
+    let _ = writeln!(md, "## Stretches between changes\n");
+    let _ = writeln!(
+        md,
+        "| from (s) | to (s) | informative windows | most often most probable | its share |\n|---|---|---|---|---|"
+    );
+    let mut stretch_start = 0;
+    for k in 0..=updates.len() {
+        let ends = k == updates.len() || (k > stretch_start && updates[k].change);
+        if !ends {
+            continue;
+        }
+        let stretch = &updates[stretch_start..k];
+        let mut counts: Vec<(crate::Law, usize)> = Vec::new();
+        for u in stretch.iter().filter(|u| u.uninformative.is_none()) {
+            if let Some(law) = u.most_probable {
+                match counts.iter_mut().find(|(l, _)| *l == law) {
+                    Some((_, n)) => *n += 1,
+                    None => counts.push((law, 1)),
+                }
+            }
+        }
+        let informative = stretch.iter().filter(|u| u.uninformative.is_none()).count();
+        let top = counts.iter().max_by_key(|(_, n)| *n);
+        if let (Some(first), Some(last)) = (stretch.first(), stretch.last()) {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {informative} | {} | {} |",
+                first.start_s,
+                last.end_s,
+                top.map_or("–".into(), |(l, _)| l.to_string()),
+                top.map_or("–".into(), |(_, n)| format!(
+                    "{:.0} %",
+                    100.0 * *n as f64 / informative.max(1) as f64
+                )),
+            );
+        }
+        stretch_start = k;
+    }
+    let _ = writeln!(md);
+
+    if let Some(last) = updates.last() {
+        let _ = writeln!(md, "## The last window\n");
+        let _ = writeln!(md, "Window {} ({}–{} s).", last.window, last.start_s, last.end_s);
+        if let Some(why) = &last.uninformative {
+            let _ = writeln!(md, "It informs nothing: {why}.");
+        }
+        for l in &last.laws {
+            let _ = writeln!(
+                md,
+                "- {}: P = {:.3} (this window alone {:.3}, ln Z = {:.1} ± {:.1})",
+                l.law, l.probability, l.window_probability, l.ln_z, l.ln_z_error
+            );
+        }
+        if let Some(advice) = &last.advice {
+            let _ = writeln!(md, "\nAdvice: {}.", advice.words);
+        }
+        let _ = writeln!(md);
+    }
+    let mut latencies: Vec<f64> = updates.iter().map(|u| u.latency_s).collect();
+    if !latencies.is_empty() {
+        latencies.sort_by(f64::total_cmp);
+        let _ = writeln!(
+            md,
+            "Latency from a window's last sample to its update: median {:.2} s, 90th percentile {:.2} s.\n",
+            crate::numerics::quantile(&latencies, 0.5),
+            crate::numerics::quantile(&latencies, 0.9)
+        );
+    }
+    md
+}
