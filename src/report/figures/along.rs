@@ -273,7 +273,7 @@ impl Figure for ParametersAlong<'_> {
                 .filter(|p| p.1.is_finite() && p.2.is_finite() && p.3.is_finite())
                 .collect();
             let (lo, hi) = extent(points.iter().flat_map(|p| [p.2, p.3])).unwrap_or((0.0, 1.0));
-            let mut chart = axes(panel, &spec.name.to_string(), a.x, padded(lo, hi, 0.08))?;
+            let mut chart = axes(panel, spec.name, a.x, padded(lo, hi, 0.08))?;
             mesh(
                 &mut chart,
                 "window end (s)",
