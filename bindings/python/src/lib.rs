@@ -37,7 +37,7 @@ mod _bitrock {
     #[pymodule_export]
     use crate::stability::stability;
     #[pymodule_export]
-    use crate::watch::watch;
+    use crate::watch::{read_watch, watch};
     use pyo3::prelude::*;
 
     /// True for a note that only informs (which GPU scores): logged, not warned.

@@ -57,18 +57,18 @@ pub(crate) fn watch(
     let mut observer = PyObserver::new(None, note);
     // What Python raised (Ctrl-C between rows, or in `on_update`): the watch stops after
     // storing the window in progress, then it is raised again.
-    let raised: std::cell::RefCell<Option<PyErr>> = std::cell::RefCell::new(None);
+    let raised: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
     let ended = py.detach(|| {
         let mut rows = Rows::open(&source, &settings.data)?;
         let stop = || {
-            raised.borrow().is_some()
+            raised.lock().unwrap_or_else(|e| e.into_inner()).is_some()
                 || Python::attach(|py| {
                     let asked = py.check_signals().and_then(|()| match &stopped {
                         Some(stopped) => stopped.call0(py)?.is_truthy(py),
                         None => Ok(false),
                     });
                     asked.unwrap_or_else(|e| {
-                        *raised.borrow_mut() = Some(e);
+                        *raised.lock().unwrap_or_else(|e| e.into_inner()) = Some(e);
                         true
                     })
                 })
@@ -85,16 +85,31 @@ pub(crate) fn watch(
                     .check_signals()
                     .and_then(|()| on_update.call1(py, (line,)).map(|_| ()));
                 called.map_err(|e| {
-                    *raised.borrow_mut() = Some(e);
+                    *raised.lock().unwrap_or_else(|e| e.into_inner()) = Some(e);
                     Error::Interrupted
                 })
             })
         })
     });
-    let raised = raised.into_inner();
+    let raised = raised.into_inner().unwrap_or_else(|e| e.into_inner());
     if let Some(e) = raised.or_else(|| observer.take_raised()) {
         return Err(e);
     }
     let ended = check(py, ended)?;
     serde_json::to_string(&ended).map_err(|e| to_py(py, Error::Numerical(e.to_string())))
+}
+
+/// The watch stored in `dir` (written by `bitrock watch --out` or `bitrock.watch(out=...)`):
+/// its description and every window's update, as JSON.
+#[pyfunction]
+pub(crate) fn read_watch(py: Python<'_>, dir: PathBuf) -> PyResult<(String, Vec<String>)> {
+    let stored = check(py, py.detach(|| bitrock::watch::store::read(&dir)))?;
+    let json = |e: serde_json::Error| to_py(py, Error::Numerical(e.to_string()));
+    let meta = serde_json::to_string(&stored.meta).map_err(json)?;
+    let updates = stored
+        .updates
+        .iter()
+        .map(|u| serde_json::to_string(u).map_err(json))
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((meta, updates))
 }

@@ -62,7 +62,38 @@ def test_a_closed_watch_stops_reading(well) -> None:
     assert len(watch.history) == 2
     watch._thread.join(timeout=60)
     assert not watch._thread.is_alive()
-    assert watch.ended is None, "stopped before the record's end"
+    assert watch.ended["stopped"], "stopped before the record's end"
+
+
+def test_a_stored_watch_goes_on_after_a_stop_as_if_it_never_stopped(well, tmp_path) -> None:
+    settings = dict(laws=["m2", "m3"], window_s=20, step_s=10, backend="cpu", particles=100)
+    whole = list(bitrock.watch(well, out=tmp_path / "whole", **settings))
+    with bitrock.watch(well, out=tmp_path / "part", **settings) as watch:
+        for update in watch:
+            if update.window == 2:
+                break
+    watch._thread.join(timeout=60)
+    stored = bitrock.read_watch(tmp_path / "part")
+    # What was given is stored; the window in progress when it stopped may be stored too.
+    assert 3 <= len(stored.updates) < 11
+    resumed = list(bitrock.watch(well, out=tmp_path / "part", resume=True, **settings))
+    assert [u.window for u in resumed] == list(range(len(stored.updates), 11))
+
+    def numbers(updates):
+        return [{k: v for k, v in u.document.items() if k != "latency_s"} for u in updates]
+
+    assert numbers(bitrock.read_watch(tmp_path / "part").updates) == numbers(whole)
+    assert numbers(bitrock.read_watch(tmp_path / "whole").updates) == numbers(whole)
+    history = bitrock.read_watch(tmp_path / "part").history
+    assert list(history.index) == list(range(11)) and history["change"].sum() == 1
+    with pytest.raises(bitrock.InputError) as caught:
+        list(bitrock.watch(well, out=tmp_path / "part", resume=True, **{**settings, "forgetting": 0.9}))
+    assert caught.value.argument == "forgetting"
+    with pytest.raises(bitrock.InputError) as caught:
+        list(bitrock.watch(well, out=tmp_path / "part", **settings))
+    assert caught.value.argument == "out"
+    with pytest.raises(bitrock.InputError):
+        bitrock.read_watch(tmp_path)
 
 
 def test_refusals_name_their_argument(well, tmp_path) -> None:

@@ -27,7 +27,7 @@ from . import _bitrock
 from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError
 from ._evidence import Evidence, evidence
-from ._watch import Watch, WatchUpdate, watch
+from ._watch import StoredWatch, Watch, WatchUpdate, read_watch, watch
 from . import plot
 
 __all__ = [
@@ -53,6 +53,8 @@ __all__ = [
     "stability",
     "torque",
     "watch",
+    "read_watch",
+    "StoredWatch",
     "Watch",
     "WatchUpdate",
 ]

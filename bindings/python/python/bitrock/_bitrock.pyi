@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "resume", "serve", "simulate", "stability", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_watch", "resume", "serve", "simulate", "stability", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -178,6 +178,12 @@ def read_csv(path: str | PathLike[str] | None, options: dict) -> Record:
     Reads a CSV record at `path` (`None`: the embedded demo record).
     """
 
+def read_watch(dir: str | PathLike[str]) -> tuple[str, list[str]]:
+    """
+    The watch stored in `dir` (written by `bitrock watch --out` or `bitrock.watch(out=...)`):
+    its description and every window's update, as JSON.
+    """
+
 def resume(path: str | PathLike[str], more: dict, progress: Any | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> Run:
     """
     Continues the run in `path` with the stopping rules in `more`.
@@ -213,10 +219,11 @@ def version() -> str:
     The library's version.
     """
 
-def watch(source: str | PathLike[str], options: dict, on_update: Any, note: Any | None) -> str:
+def watch(source: str | PathLike[str], options: dict, on_update: Any, note: Any | None, stopped: Any | None = None) -> str:
     """
     Follows `source` (a CSV path, or `-` for standard input; `follow`, `replay_speed` as the
     command's flags) with the settings in `options` (`bitrock.watch`'s keyword arguments),
     calling `on_update(json)` with each window's JSON line; an exception raised by it (or
-    Ctrl-C) stops the watch and is raised again. Returns how the watch ended, as JSON.
+    Ctrl-C) stops the watch and is raised again. `stopped()`, asked between rows, ends the
+    watch after the window in progress when true. Returns how the watch ended, as JSON.
     """

@@ -115,25 +115,53 @@ class Watch:
         """One row per window given so far: its times, samples used, the most probable law,
         each law's carried probability (``p_m1``…), the change flag, P(unstable) at the
         operating point and the advice in words."""
-        rows = []
-        for u in self._given:
-            d = u.document
-            row = {
-                "window": d["window"],
-                "start_s": d["start_s"],
-                "end_s": d["end_s"],
-                "samples_used": d["samples_used"],
-                "most_probable": d["most_probable"],
-                "change": d["change"],
-            }
-            for law in d["laws"]:
-                row[f"p_{law['law']}"] = law["probability"]
-            advice = d["advice"] or {}
-            row["p_unstable"] = advice.get("p_unstable")
-            row["advice"] = advice.get("words")
-            rows.append(row)
-        frame = pd.DataFrame(rows)
-        return frame.set_index("window") if len(frame) else frame
+        return _history([u.document for u in self._given])
+
+
+def _history(documents: list[dict[str, Any]]) -> pd.DataFrame:
+    """The history table of windows' updates (see :attr:`Watch.history`)."""
+    rows = []
+    for d in documents:
+        row = {
+            "window": d["window"],
+            "start_s": d["start_s"],
+            "end_s": d["end_s"],
+            "samples_used": d["samples_used"],
+            "most_probable": d["most_probable"],
+            "change": d["change"],
+        }
+        for law in d["laws"]:
+            row[f"p_{law['law']}"] = law["probability"]
+        advice = d["advice"] or {}
+        row["p_unstable"] = advice.get("p_unstable")
+        row["advice"] = advice.get("words")
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    return frame.set_index("window") if len(frame) else frame
+
+
+class StoredWatch:
+    """A watch directory read back (:func:`read_watch`): ``meta`` (source, settings, window
+    and step, the record's rate and torque unit), ``updates`` (one :class:`WatchUpdate` per
+    stored window) and ``history`` (their table, as :attr:`Watch.history`)."""
+
+    def __init__(self, meta: dict[str, Any], updates: list[WatchUpdate]) -> None:
+        self.meta = meta
+        self.updates = updates
+
+    @property
+    def history(self) -> pd.DataFrame:
+        return _history([u.document for u in self.updates])
+
+    def __repr__(self) -> str:
+        return f"<bitrock.StoredWatch of {self.meta['source']}: {len(self.updates)} windows>"
+
+
+def read_watch(directory: str | os.PathLike[str]) -> StoredWatch:
+    """Reads the watch stored in ``directory`` (``bitrock watch --out`` or
+    ``bitrock.watch(out=...)``), while it runs or after."""
+    meta, updates = _bitrock.read_watch(os.fspath(directory))
+    return StoredWatch(json.loads(meta), [WatchUpdate(json.loads(u)) for u in updates])
 
 
 def watch(
