@@ -107,6 +107,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("risk", "--risk"),
     ("replay_speed", "--replay-speed"),
     ("resume", "--resume"),
+    ("follow", "--follow"),
+    ("wits_items", "--wits-items"),
     ("segment", "--well"),
 ];
 

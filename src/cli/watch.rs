@@ -6,6 +6,7 @@ use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::eval::Backend;
 use bitrock::watch::source::{Rows, Source};
+use bitrock::watch::wits::WitsItems;
 use bitrock::watch::{FollowOptions, Update, WatchSettings};
 use clap::Args;
 use std::collections::HashSet;
@@ -16,8 +17,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 #[derive(Debug, Args)]
 pub struct WatchCmd {
-    /// The record: a CSV file, or - for standard input. Its columns and units are read as
-    /// `fit` reads them; it needs a time column (s), by which the windows are cut.
+    /// The record: a CSV file, - for standard input, or tcp://HOST:PORT for a feed
+    /// (reconnected with back-off when it drops). CSV lines (columns and units read as `fit`
+    /// reads them; a time column, s, by which the windows are cut) or WITS level-0 blocks
+    /// (`--wits-items`), told apart by the first line.
     pub source: PathBuf,
     /// Follow the file as it grows (like `tail -f`) until stopped (Ctrl-C).
     #[arg(long, conflicts_with = "replay_speed")]
@@ -58,6 +61,12 @@ pub struct WatchCmd {
     /// Seed of the evidence samplers (window k uses seed + k).
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
     pub seed: u64,
+    /// WITS item codes over the defaults of record 01 (speed=0120, torque=0118, wob=0116: the
+    /// surface averages; date=0105 YYMMDD, time=0106 HHMMSS), as key=CODE,…: keys speed,
+    /// torque, wob (or wob=none), top_drive, date, time, and seconds (an item in seconds
+    /// instead of date and time). WITS names no units: give --torque-unit and --wob-unit.
+    #[arg(long, value_name = "ITEMS")]
+    pub wits_items: Option<String>,
     #[command(flatten)]
     pub columns: ColumnArgs,
     /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so).
@@ -137,23 +146,17 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         change_nats: cmd.change_nats,
         risk: cmd.risk,
         backend: cmd.backend,
+        wits: cmd
+            .wits_items
+            .as_deref()
+            .map(WitsItems::parse)
+            .transpose()?
+            .unwrap_or_default(),
         ..defaults
     };
-    let source = if cmd.source.as_os_str() == "-" {
-        Source::Stdin
-    } else if let Some(speed) = cmd.replay_speed {
-        Source::Replay {
-            path: cmd.source.clone(),
-            speed,
-        }
-    } else {
-        Source::File {
-            path: cmd.source.clone(),
-            follow: cmd.follow,
-        }
-    };
-    let mut rows = Rows::open(&source, &settings.data)?;
-    let unit = rows.layout().torque_unit();
+    let source = Source::named(&cmd.source, cmd.follow, cmd.replay_speed)?;
+    let mut rows = Rows::open(&source, &settings.data, &settings.wits)?;
+    let unit = rows.torque_unit();
     let laws = settings.laws.clone();
     let mut out = print::stdout();
     if !cmd.json {

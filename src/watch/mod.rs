@@ -24,6 +24,7 @@
 pub mod source;
 pub mod store;
 pub mod window;
+pub mod wits;
 
 use crate::abc::Observer;
 use crate::abc::evidence::{EvidenceConfig, NoiseModel};
@@ -71,6 +72,8 @@ pub struct WatchSettings {
     pub min_samples: usize,
     /// Least spread of bit speeds (5th to 95th percentile, rpm) a window needs to inform.
     pub min_speed_span_rpm: f64,
+    /// The item codes of a source that sends WITS blocks.
+    pub wits: wits::WitsItems,
 }
 
 impl Default for WatchSettings {
@@ -96,6 +99,7 @@ impl Default for WatchSettings {
             backend: Backend::Auto,
             min_samples: 100,
             min_speed_span_rpm: 5.0,
+            wits: wits::WitsItems::default(),
         }
     }
 }
@@ -758,6 +762,7 @@ pub fn follow(
         match next {
             source::Next::Row(row, arrived) => first.push((row, arrived)),
             source::Next::Skipped(why) => observer.note(format!("warning: {why}: line skipped")),
+            source::Next::Said(what) => observer.note(format!("warning: {what}")),
             source::Next::Stalled(silent) => observer.note(format!(
                 "warning: {}: no row for {:.0} s: the feed has stalled (still following)",
                 source.display(),
@@ -771,7 +776,7 @@ pub fn follow(
             steps.sort_by(f64::total_cmp);
             let measured_hz = median(&steps).map_or(1.0, |dt| 1.0 / dt);
             let rate_hz = resumed.as_ref().map_or(measured_hz, |(_, s)| s.meta.rate_hz);
-            let unit = rows.layout().torque_unit();
+            let unit = rows.torque_unit();
             let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, unit)?;
             let (length, step) = made.windows();
             if settings.window_s.is_none() || settings.step_s.is_none() {

@@ -1,19 +1,26 @@
 //! Where a watch reads its record: a CSV file (whole, or followed as it grows), standard
-//! input, or a file replayed against its own time column. Rows come one at a time; a line
-//! that cannot be read is skipped and counted, never fatal.
+//! input, a file replayed against its own time column, or a TCP feed (reconnected with
+//! back-off when it drops). Each carries CSV lines (a header first) or WITS level-0 blocks
+//! ([`super::wits`]), told apart by the first line. Rows come one at a time; a line that
+//! cannot be read is skipped and counted, never fatal.
 
+use super::wits::{WitsItems, WitsReader};
 use crate::data::{DataOptions, Row, RowLayout};
 use crate::error::{Error, Result};
-use crate::units::SpeedUnit;
-use std::io::{BufRead, BufReader, Read};
+use crate::units::{SpeedUnit, TorqueUnit};
+use std::io::{BufRead, BufReader, ErrorKind, Read};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-/// How often a followed file is looked at again once its end is reached.
+/// How often a followed file is looked at again once its end is reached, and how long a
+/// read of a TCP feed waits before the watch may stop.
 const FOLLOW_POLL: Duration = Duration::from_millis(200);
-/// A followed file that gives no row for this long is said to have stalled (once, until rows
-/// come again).
+/// A followed file or feed that gives no row for this long is said to have stalled (once,
+/// until rows come again).
 pub const STALL_AFTER: Duration = Duration::from_secs(30);
+/// The longest wait between two tries to reconnect a TCP feed (the wait doubles from 1 s).
+pub const MAX_BACKOFF: Duration = Duration::from_secs(30);
 
 /// A record's source.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,14 +32,46 @@ pub enum Source {
     /// A CSV file given at `speed` times its own pace (its time column), as a rig would send
     /// it: 1 is real time.
     Replay { path: PathBuf, speed: f64 },
+    /// A TCP feed at `address` (HOST:PORT), read until the watch is stopped; a connection
+    /// lost is tried again with back-off.
+    Tcp { address: String },
 }
 
 impl Source {
+    /// The source a command line names: `-` standard input, `tcp://HOST:PORT` a feed, else a
+    /// file (followed or replayed as asked).
+    pub fn named(name: &Path, follow: bool, replay_speed: Option<f64>) -> Result<Self> {
+        let text = name.to_string_lossy();
+        if let Some(address) = text.strip_prefix("tcp://") {
+            if follow || replay_speed.is_some() {
+                return Err(Error::setting(
+                    if follow { "follow" } else { "replay_speed" },
+                    "applies to a file, not to a TCP feed (which is followed until stopped)",
+                ));
+            }
+            return Ok(Source::Tcp {
+                address: address.trim_end_matches('/').to_string(),
+            });
+        }
+        Ok(match (text == "-", replay_speed) {
+            (true, _) => Source::Stdin,
+            (false, Some(speed)) => Source::Replay {
+                path: name.to_path_buf(),
+                speed,
+            },
+            (false, None) => Source::File {
+                path: name.to_path_buf(),
+                follow,
+            },
+        })
+    }
+
     /// The name it is known by in messages.
     pub fn name(&self) -> PathBuf {
         match self {
             Source::File { path, .. } | Source::Replay { path, .. } => path.clone(),
             Source::Stdin => PathBuf::from("<stdin>"),
+            Source::Tcp { address } => PathBuf::from(format!("tcp://{address}")),
         }
     }
 }
@@ -42,34 +81,55 @@ impl Source {
 pub enum Next {
     /// A row, and when its line arrived.
     Row(Row, Instant),
-    /// A followed file has given no row for this long (said once per silence).
+    /// A followed file or feed has given no row for this long (said once per silence).
     Stalled(Duration),
     /// A line skipped: where and why (counted by the reader too).
     Skipped(String),
-    /// A followed file has no new row yet (given after each look, so that a watch can be
-    /// stopped while it waits).
+    /// What the user should know of the source (a feed lost, reconnected).
+    Said(String),
+    /// A followed file or feed has no new row yet (given after each look, so that a watch can
+    /// be stopped while it waits).
     Waiting,
     /// The source ended (a file read whole, standard input closed).
     End,
 }
 
+/// How the lines of a source are read.
+enum Format {
+    /// CSV: the columns of its header, an optional top-drive column, the delimiter, and the
+    /// header's text (a feed sends it again on each connection).
+    Csv {
+        layout: RowLayout,
+        top_drive: Option<(usize, SpeedUnit)>,
+        delimiter: u8,
+        header: String,
+    },
+    /// WITS level-0 blocks.
+    Wits(WitsReader),
+}
+
+/// A TCP feed's connection state.
+struct Feed {
+    address: String,
+    /// Down since, and when to try again, with the current back-off.
+    down: Option<(Instant, Instant, Duration)>,
+}
+
 /// The rows of a source, one at a time.
 pub struct Rows {
     reader: Box<dyn BufRead + Send>,
-    layout: RowLayout,
-    /// The top-drive speed column and its unit, where the record has one.
-    top_drive: Option<(usize, SpeedUnit)>,
-    delimiter: u8,
+    format: Format,
     name: PathBuf,
     follow: bool,
+    feed: Option<Feed>,
     /// Replay speed and the clock it keeps: (speed, started, first row's time).
     replay: Option<(f64, Option<(Instant, f64)>)>,
     line: u64,
-    /// A line read up to the file's current end without its newline (a writer mid-line).
+    /// A line read up to the source's current end without its newline (a writer mid-line).
     partial: String,
     /// Lines skipped so far.
     pub skipped: u64,
-    /// How long a followed file may be silent before [`Next::Stalled`] says so.
+    /// How long a followed file or feed may be silent before [`Next::Stalled`] says so.
     pub stall_after: Duration,
     /// When the last row came, and whether its silence since has been said.
     last_row: Instant,
@@ -79,12 +139,13 @@ pub struct Rows {
 }
 
 impl Rows {
-    /// Opens `source` and reads its header (the columns and units, by the rules of `fit`).
-    pub fn open(source: &Source, opts: &DataOptions) -> Result<Self> {
+    /// Opens `source` and reads its first line: a CSV header (the columns and units, by the
+    /// rules of `fit`) or a WITS block's start (the items of `wits`, in the units of `opts`).
+    pub fn open(source: &Source, opts: &DataOptions, wits: &WitsItems) -> Result<Self> {
         let name = source.name();
-        let (reader, follow, replay): (Box<dyn BufRead + Send>, bool, _) = match source {
-            Source::File { path, follow } => (Box::new(BufReader::new(open(path)?)), *follow, None),
-            Source::Stdin => (Box::new(BufReader::new(std::io::stdin())), false, None),
+        let (reader, follow, replay, feed): (Box<dyn BufRead + Send>, bool, _, _) = match source {
+            Source::File { path, follow } => (Box::new(BufReader::new(open(path)?)), *follow, None, None),
+            Source::Stdin => (Box::new(BufReader::new(std::io::stdin())), false, None, None),
             Source::Replay { path, speed } => {
                 if !(speed.is_finite() && *speed > 0.0) {
                     return Err(Error::setting(
@@ -92,10 +153,21 @@ impl Rows {
                         format!("must be a positive number, got {speed}"),
                     ));
                 }
-                (Box::new(BufReader::new(open(path)?)), false, Some((*speed, None)))
+                (Box::new(BufReader::new(open(path)?)), false, Some((*speed, None)), None)
+            }
+            Source::Tcp { address } => {
+                let stream = connect(address).map_err(|source| Error::Read {
+                    path: name.clone(),
+                    source,
+                })?;
+                let feed = Feed {
+                    address: address.clone(),
+                    down: None,
+                };
+                (Box::new(BufReader::new(stream)), false, None, Some(feed))
             }
         };
-        Self::from_reader(reader, name, follow, replay, opts)
+        Self::from_reader(reader, name, follow, replay, feed, opts, wits)
     }
 
     fn from_reader(
@@ -103,44 +175,65 @@ impl Rows {
         name: PathBuf,
         follow: bool,
         replay: Option<(f64, Option<(Instant, f64)>)>,
+        feed: Option<Feed>,
         opts: &DataOptions,
+        wits: &WitsItems,
     ) -> Result<Self> {
-        let mut header = String::new();
+        let mut first = String::new();
         let mut line = 0;
         // Comment lines (`#`) before the header, as a whole file allows.
         loop {
-            header.clear();
-            let read = reader.read_line(&mut header).map_err(|source| Error::Read {
-                path: name.clone(),
-                source,
-            })?;
+            first.clear();
+            let read = loop {
+                match reader.read_line(&mut first) {
+                    Ok(n) => break n,
+                    // A feed's first line may take its time.
+                    Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => continue,
+                    Err(source) => {
+                        return Err(Error::Read {
+                            path: name.clone(),
+                            source,
+                        });
+                    }
+                }
+            };
             line += 1;
             if read == 0 {
                 return Err(Error::Format {
                     path: name,
                     line: Some(line),
-                    message: "empty record: expected a header line".into(),
+                    message: "empty record: expected a header line (or a WITS block's &&)".into(),
                 });
             }
-            if !header.trim_start().starts_with('#') && !header.trim().is_empty() {
+            if !first.trim_start().starts_with('#') && !first.trim().is_empty() {
                 break;
             }
         }
-        let delimiter = crate::data::detect_delimiter(header.as_bytes(), &name)?;
-        let headers = parse_line(header.trim_end(), delimiter).ok_or_else(|| Error::Format {
-            path: name.clone(),
-            line: Some(line),
-            message: "the header line cannot be read as CSV".into(),
-        })?;
-        let layout = RowLayout::new(&headers, delimiter, opts, &name)?;
-        let top_drive = top_drive_column(&headers, &name, line)?;
+        let format = if first.trim() == "&&" {
+            let mut reader = WitsReader::new(wits.clone(), opts)?;
+            reader.line(&first);
+            Format::Wits(reader)
+        } else {
+            let delimiter = crate::data::detect_delimiter(first.as_bytes(), &name)?;
+            let header = first.trim_end().to_string();
+            let headers = parse_line(&header, delimiter).ok_or_else(|| Error::Format {
+                path: name.clone(),
+                line: Some(line),
+                message: "the header line cannot be read as CSV".into(),
+            })?;
+            Format::Csv {
+                layout: RowLayout::new(&headers, delimiter, opts, &name)?,
+                top_drive: top_drive_column(&headers, &name, line)?,
+                delimiter,
+                header,
+            }
+        };
         Ok(Self {
             reader,
-            layout,
-            top_drive,
-            delimiter,
+            format,
             name,
             follow,
+            feed,
             replay,
             line,
             partial: String::new(),
@@ -157,26 +250,99 @@ impl Rows {
         &self.name
     }
 
-    /// The columns read and their units.
-    pub fn layout(&self) -> &RowLayout {
-        &self.layout
+    /// The unit of the record's torques.
+    pub fn torque_unit(&self) -> TorqueUnit {
+        match &self.format {
+            Format::Csv { layout, .. } => layout.torque_unit(),
+            Format::Wits(reader) => reader.torque_unit(),
+        }
+    }
+
+    /// A silence so far: said once as [`Next::Stalled`], else [`Next::Waiting`].
+    fn silent(&mut self) -> Next {
+        let silent = self.last_row.elapsed();
+        if silent >= self.stall_after && !self.stall_said {
+            self.stall_said = true;
+            return Next::Stalled(silent);
+        }
+        Next::Waiting
+    }
+
+    /// A feed whose connection is down: waits a little, tries again when its back-off has
+    /// passed (doubling it up to [`MAX_BACKOFF`]).
+    fn reconnect(&mut self) -> Option<Next> {
+        let feed = self.feed.as_mut()?;
+        let (since, next_try, backoff) = feed.down?;
+        let now = Instant::now();
+        if now < next_try {
+            std::thread::sleep((next_try - now).min(FOLLOW_POLL));
+            return Some(self.silent());
+        }
+        match connect(&feed.address) {
+            Ok(stream) => {
+                feed.down = None;
+                self.reader = Box::new(BufReader::new(stream));
+                self.partial.clear();
+                Some(Next::Said(format!(
+                    "{}: connected again after {:.0} s",
+                    self.name.display(),
+                    since.elapsed().as_secs_f64()
+                )))
+            }
+            Err(_) => {
+                let backoff = (backoff * 2).min(MAX_BACKOFF);
+                feed.down = Some((since, Instant::now() + backoff, backoff));
+                Some(self.silent())
+            }
+        }
+    }
+
+    /// A feed's connection lost (`why`): said once, tried again after 1 s.
+    fn lost(&mut self, why: &str) -> Next {
+        let feed = self.feed.as_mut().expect("a feed");
+        let backoff = Duration::from_secs(1);
+        feed.down = Some((Instant::now(), Instant::now() + backoff, backoff));
+        self.partial.clear();
+        if let Format::Wits(reader) = &mut self.format {
+            reader.drop_block();
+        }
+        Next::Said(format!(
+            "{}: {why}; connecting again (waits doubling up to {} s)",
+            self.name.display(),
+            MAX_BACKOFF.as_secs()
+        ))
     }
 
     /// The next row (waiting for it when following or replaying), a line skipped, or the end.
     pub fn next_row(&mut self) -> Result<Next> {
+        if let Some(next) = self.reconnect() {
+            return Ok(next);
+        }
         loop {
             let mut text = std::mem::take(&mut self.partial);
-            let read = self.reader.read_line(&mut text).map_err(|source| Error::Read {
-                path: self.name.clone(),
-                source,
-            })?;
+            let read = match self.reader.read_line(&mut text) {
+                Ok(n) => n,
+                // A feed with nothing yet: the watch may stop while it waits.
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+                    self.partial = text;
+                    return Ok(self.silent());
+                }
+                Err(e) if self.feed.is_some() => return Ok(self.lost(&format!("the connection failed ({e})"))),
+                Err(source) => {
+                    return Err(Error::Read {
+                        path: self.name.clone(),
+                        source,
+                    });
+                }
+            };
+            if read == 0 && self.feed.is_some() {
+                return Ok(self.lost("the feed closed the connection"));
+            }
             if read == 0 || !text.ends_with('\n') {
                 if self.follow {
                     // At the end for now: wait for the writer (a partial line is kept).
                     self.partial = text;
-                    let silent = self.last_row.elapsed();
-                    if silent >= self.stall_after && !self.stall_said {
-                        self.stall_said = true;
+                    if let Next::Stalled(silent) = self.silent() {
                         return Ok(Next::Stalled(silent));
                     }
                     std::thread::sleep(FOLLOW_POLL.min(self.stall_after));
@@ -192,23 +358,24 @@ impl Rows {
                 continue;
             }
             let arrived = Instant::now();
-            let row = parse_line(content, self.delimiter)
-                .ok_or_else(|| "not a CSV line".to_string())
-                .and_then(|record| {
-                    let mut row = self.layout.row(&record, self.line).map_err(|e| e.to_string())?;
-                    if let Some((i, unit)) = self.top_drive {
-                        let text = record.get(i).unwrap_or("");
-                        let value: f64 = text.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
-                            format!(
-                                "column {} ('{}'): '{text}' is not a number",
-                                i + 1,
-                                &self.layout.headers()[i]
-                            )
-                        })?;
-                        row.top_drive_rad_s = Some(unit.to_rad_s(value));
+            let row = match &mut self.format {
+                Format::Csv {
+                    layout,
+                    top_drive,
+                    delimiter,
+                    header,
+                } => {
+                    // A feed sends its header again with each connection.
+                    if self.feed.is_some() && content.trim_end() == header {
+                        continue;
                     }
-                    Ok(row)
-                });
+                    csv_row(content, layout, *top_drive, *delimiter, self.line)
+                }
+                Format::Wits(reader) => match reader.line(content) {
+                    Some(row) => row,
+                    None => continue,
+                },
+            };
             match row {
                 Ok(row) => {
                     self.last_row = Instant::now();
@@ -251,6 +418,46 @@ impl Rows {
             std::thread::sleep(wait);
         }
     }
+}
+
+/// One CSV line of a record as a row in SI (its top-drive speed where the record has one).
+fn csv_row(
+    content: &str,
+    layout: &RowLayout,
+    top_drive: Option<(usize, SpeedUnit)>,
+    delimiter: u8,
+    line: u64,
+) -> std::result::Result<Row, String> {
+    let record = parse_line(content, delimiter).ok_or_else(|| "not a CSV line".to_string())?;
+    let mut row = layout.row(&record, line).map_err(|e| e.to_string())?;
+    if let Some((i, unit)) = top_drive {
+        let text = record.get(i).unwrap_or("");
+        let value: f64 = text.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
+            format!(
+                "column {} ('{}'): '{text}' is not a number",
+                i + 1,
+                &layout.headers()[i]
+            )
+        })?;
+        row.top_drive_rad_s = Some(unit.to_rad_s(value));
+    }
+    Ok(row)
+}
+
+/// A connection to a feed at `address`, its reads waiting at most [`FOLLOW_POLL`].
+fn connect(address: &str) -> std::io::Result<TcpStream> {
+    use std::net::ToSocketAddrs;
+    let mut last = std::io::Error::new(ErrorKind::NotFound, format!("{address} resolves to no address"));
+    for addr in address.to_socket_addrs()? {
+        match TcpStream::connect_timeout(&addr, Duration::from_secs(5)) {
+            Ok(stream) => {
+                stream.set_read_timeout(Some(FOLLOW_POLL))?;
+                return Ok(stream);
+            }
+            Err(e) => last = e,
+        }
+    }
+    Err(last)
 }
 
 /// The one column whose name contains "top_drive" (its unit from its suffix, `_rpm` or
@@ -311,7 +518,16 @@ mod tests {
 
     fn rows_of(text: &'static str) -> Rows {
         let reader: Box<dyn BufRead + Send> = Box::new(BufReader::new(text.as_bytes()));
-        Rows::from_reader(reader, PathBuf::from("feed.csv"), false, None, &DataOptions::default()).unwrap()
+        Rows::from_reader(
+            reader,
+            PathBuf::from("feed.csv"),
+            false,
+            None,
+            None,
+            &DataOptions::default(),
+            &WitsItems::default(),
+        )
+        .unwrap()
     }
 
     #[test]
@@ -365,6 +581,7 @@ mod tests {
                 follow: true,
             },
             &DataOptions::default(),
+            &WitsItems::default(),
         )
         .unwrap();
         rows.stall_after = Duration::from_millis(300);
@@ -394,10 +611,18 @@ mod tests {
     #[test]
     fn a_header_without_the_columns_is_refused_naming_them() {
         let reader: Box<dyn BufRead + Send> = Box::new(BufReader::new("time_s,depth_m\n".as_bytes()));
-        let e = Rows::from_reader(reader, PathBuf::from("feed.csv"), false, None, &DataOptions::default())
-            .err()
-            .unwrap()
-            .to_string();
+        let e = Rows::from_reader(
+            reader,
+            PathBuf::from("feed.csv"),
+            false,
+            None,
+            None,
+            &DataOptions::default(),
+            &WitsItems::default(),
+        )
+        .err()
+        .unwrap()
+        .to_string();
         assert!(e.contains("speed"), "{e}");
     }
 }

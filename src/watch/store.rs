@@ -82,6 +82,7 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
         "w_ref_n": settings.w_ref_n,
         "min_samples": settings.min_samples,
         "min_speed_span_rpm": settings.min_speed_span_rpm,
+        "wits_items": settings.wits,
     })
 }
 

@@ -306,6 +306,127 @@ fn a_watch_killed_or_stopped_goes_on_from_its_directory_as_if_it_never_stopped()
     assert!(stderr.contains("watch directory"), "{stderr}");
 }
 
+/// Serves `connections` one after the other on a local port (each: its text, then closed;
+/// the last held open until the watch is done); returns the port.
+fn serve(connections: Vec<String>) -> u16 {
+    use std::io::Write;
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        let last = connections.len() - 1;
+        for (k, text) in connections.into_iter().enumerate() {
+            let (mut stream, _) = listener.accept().unwrap();
+            let _ = stream.write_all(text.as_bytes());
+            if k == last {
+                std::thread::sleep(std::time::Duration::from_secs(600));
+            }
+        }
+    });
+    port
+}
+
+/// The first `n` JSON lines of `bitrock watch` on a feed with `args`, then Ctrl-C; and its
+/// standard error.
+fn watch_feed(port: u16, args: &[&str], n: usize) -> (Vec<serde_json::Value>, String) {
+    use std::io::{BufRead, Read};
+    let mut child = bin()
+        .args([
+            "watch",
+            "--json",
+            "--laws",
+            "m2,m3",
+            "--backend",
+            "cpu",
+            "--particles",
+            "100",
+        ])
+        .args(WINDOWS)
+        .arg(format!("tcp://127.0.0.1:{port}"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
+    let mut lines = Vec::new();
+    while lines.len() < n {
+        let mut line = String::new();
+        assert!(reader.read_line(&mut line).unwrap() > 0, "the watch ended early");
+        lines.push(serde_json::from_str(&line).unwrap());
+    }
+    let (code, _, _) = outcome(std::process::Command::new("kill").args(["-INT", &child.id().to_string()]));
+    assert_eq!(code, 0);
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    let mut stderr = String::new();
+    child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
+    (lines, stderr)
+}
+
+#[test]
+fn a_tcp_feed_of_csv_or_wits_gives_the_file_s_windows_through_a_dropped_connection() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let text = std::fs::read_to_string(&record).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().to_string();
+    let rows: Vec<&str> = lines.collect();
+    let whole = watch(&[&WINDOWS[..], &["--particles", "100", record.to_str().unwrap()]].concat());
+    let without_latency = |v: &[serde_json::Value]| {
+        v.iter()
+            .map(|u| {
+                let mut u = u.clone();
+                u.as_object_mut().unwrap().remove("latency_s");
+                u
+            })
+            .collect::<Vec<_>>()
+    };
+    // A feed never ends: its last window (which ends with the record) is not given.
+    let n = whole.len() - 1;
+
+    // CSV lines; the connection drops a third of the way (mid-line) and the header comes
+    // again with the next one.
+    let cut = rows.len() / 3;
+    let first = format!("{header}\n{}\n{}", rows[..cut].join("\n"), &rows[cut][..5]);
+    let second = format!("{header}\n{}\n", rows[cut..].join("\n"));
+    let (fed, stderr) = watch_feed(serve(vec![first, second]), &[], n);
+    assert_eq!(without_latency(&fed), without_latency(&whole[..n]));
+    assert!(
+        stderr.contains("the feed closed the connection") && stderr.contains("connected again"),
+        "{stderr}"
+    );
+
+    // The same record as WITS level-0 blocks (the time in an item of seconds, the speeds in
+    // rpm, the torque in kN·m, the weight on bit in kN), with another record's blocks between.
+    let mut wits = String::new();
+    for (k, row) in rows.iter().enumerate() {
+        let v: Vec<&str> = row.split(',').collect();
+        wits.push_str(&format!(
+            "&&\n0901{}\n0902{}\n0118{}\n0116{}\n0120{}\n!!\n",
+            v[0], v[1], v[2], v[3], v[4]
+        ));
+        if k % 50 == 0 {
+            wits.push_str("&&\n0108 1234.5\n0113 12.0\n!!\n");
+        }
+    }
+    let items = ["--wits-items", "seconds=0901,speed=0902,top_drive=0120"];
+    let units = ["--torque-unit", "knm", "--wob-unit", "kn"];
+    let (fed, _) = watch_feed(serve(vec![wits.clone()]), &[&items[..], &units[..]].concat(), n);
+    assert_eq!(without_latency(&fed), without_latency(&whole[..n]));
+
+    // WITS names no units: the torque's is asked for.
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["watch", "--laws", "m2"])
+            .arg(format!("tcp://127.0.0.1:{}", serve(vec![wits])))
+            .args(items),
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--torque-unit"), "{stderr}");
+    let (code, _, stderr) = outcome(bin().args(["watch", "tcp://127.0.0.1:1", "--follow"]));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--follow"), "{stderr}");
+}
+
 #[test]
 fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
     let dir = tempfile::tempdir().unwrap();

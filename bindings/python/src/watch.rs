@@ -45,13 +45,13 @@ pub(crate) fn watch(
         change_nats: kwarg(options, "change_nats")?.unwrap_or(defaults.change_nats),
         risk: kwarg(options, "risk")?.unwrap_or(defaults.risk),
         backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or(defaults.backend),
+        wits: match kwarg::<String>(options, "wits_items")? {
+            Some(spec) => check(py, bitrock::watch::wits::WitsItems::parse(&spec))?,
+            None => defaults.wits.clone(),
+        },
         ..defaults
     };
-    let source = match (source.as_os_str() == "-", replay_speed) {
-        (true, _) => Source::Stdin,
-        (false, Some(speed)) => Source::Replay { path: source, speed },
-        (false, None) => Source::File { path: source, follow },
-    };
+    let source = check(py, Source::named(&source, follow, replay_speed))?;
     let out: Option<PathBuf> = kwarg(options, "out")?;
     let resume: bool = kwarg(options, "resume")?.unwrap_or(false);
     let mut observer = PyObserver::new(None, note);
@@ -59,7 +59,7 @@ pub(crate) fn watch(
     // storing the window in progress, then it is raised again.
     let raised: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
     let ended = py.detach(|| {
-        let mut rows = Rows::open(&source, &settings.data)?;
+        let mut rows = Rows::open(&source, &settings.data, &settings.wits)?;
         let stop = || {
             raised.lock().unwrap_or_else(|e| e.into_inner()).is_some()
                 || Python::attach(|py| {

@@ -190,10 +190,13 @@ def watch(
     min_speed_rpm: float | None = None,
     out: str | os.PathLike[str] | None = None,
     resume: bool = False,
+    wits_items: str | None = None,
 ) -> Watch:
     """Follows a record window by window as ``bitrock watch`` does (docs/watch.md): ``source``
     a CSV path (read whole; ``follow=True`` as it grows; ``replay_speed`` at that many times the
-    pace of its time column) or ``"-"`` for standard input. Returns a :class:`Watch`: iterate
+    pace of its time column), ``"-"`` for standard input, or ``"tcp://HOST:PORT"`` for a feed
+    (CSV lines or WITS level-0 blocks, whose items ``wits_items`` names as the command's
+    ``--wits-items``). Returns a :class:`Watch`: iterate
     it for one :class:`WatchUpdate` per window as each completes; ``.history`` is the
     DataFrame of those given. ``out`` is a watch directory where every window is stored as it
     finishes (``bitrock report`` draws it); ``resume=True`` goes on with the watch stored there

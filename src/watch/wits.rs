@@ -1,0 +1,360 @@
+//! WITS level 0, the rig floor's ASCII format: blocks that open with a line `&&` and close
+//! with `!!`, each line between them an item code of four digits (the record's two, the
+//! item's two) followed by its value (`0120 60.5` or `012060.5`). A block gives one row: the
+//! items named by [`WitsItems`] (defaults from WITS record 01, "General Time-Based": 0120
+//! rotary speed, 0118 rotary torque, 0116 weight on bit, all surface averages; 0105 date
+//! YYMMDD and 0106 time HHMMSS). A block that holds none of them (another record) is passed
+//! over; one that holds some but not the speed, torque and time is skipped, saying which.
+//!
+//! WITS carries no units: the torque's unit (and the weight on bit's, where one is read) must
+//! be named; the speed is in rpm unless named.
+
+use crate::data::{DataOptions, Row};
+use crate::error::{Error, Result};
+use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use serde::{Deserialize, Serialize};
+
+/// How a row's time is read from a block.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum WitsTime {
+    /// A time of day HHMMSS (fractions allowed) and, where the block has it, a date YYMMDD:
+    /// seconds since the first block's midnight (a time of day that runs back by more than
+    /// 12 h without a date is the next day).
+    Clock { date: String, time: String },
+    /// An item that carries seconds.
+    Seconds(String),
+}
+
+/// The item codes a watch reads from WITS blocks.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WitsItems {
+    pub speed: String,
+    pub torque: String,
+    pub wob: Option<String>,
+    pub top_drive: Option<String>,
+    pub time: WitsTime,
+}
+
+impl Default for WitsItems {
+    /// WITS record 01 (General Time-Based): 0120 rotary speed, 0118 rotary torque, 0116
+    /// weight on bit (surface averages), 0105 date, 0106 time.
+    fn default() -> Self {
+        Self {
+            speed: "0120".into(),
+            torque: "0118".into(),
+            wob: Some("0116".into()),
+            top_drive: None,
+            time: WitsTime::Clock {
+                date: "0105".into(),
+                time: "0106".into(),
+            },
+        }
+    }
+}
+
+impl WitsItems {
+    /// Items from `spec`, `key=CODE` pairs separated by commas over the defaults: keys
+    /// `speed`, `torque`, `wob`, `top_drive`, `date`, `time` (HHMMSS) and `seconds` (an item in
+    /// seconds, instead of date and time); `wob=none` reads no weight on bit.
+    pub fn parse(spec: &str) -> Result<Self> {
+        let refuse = |message: String| Error::setting("wits_items", message);
+        let mut items = Self::default();
+        for pair in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (key, code) = pair
+                .split_once('=')
+                .ok_or_else(|| refuse(format!("'{pair}' is not key=CODE")))?;
+            let code = code.trim();
+            if key.trim() == "wob" && code == "none" {
+                items.wob = None;
+                continue;
+            }
+            if code.len() != 4 || !code.bytes().all(|b| b.is_ascii_digit()) {
+                return Err(refuse(format!(
+                    "'{code}' for {key} is not a WITS item code (four digits: record and item)"
+                )));
+            }
+            let code = code.to_string();
+            match key.trim() {
+                "speed" => items.speed = code,
+                "torque" => items.torque = code,
+                "wob" => items.wob = Some(code),
+                "top_drive" => items.top_drive = Some(code),
+                "seconds" => items.time = WitsTime::Seconds(code),
+                "date" | "time" => {
+                    let (mut date, mut time) = match &items.time {
+                        WitsTime::Clock { date, time } => (date.clone(), time.clone()),
+                        WitsTime::Seconds(_) => ("0105".into(), "0106".into()),
+                    };
+                    if key.trim() == "date" {
+                        date = code;
+                    } else {
+                        time = code;
+                    }
+                    items.time = WitsTime::Clock { date, time };
+                }
+                other => {
+                    return Err(refuse(format!(
+                        "unknown key '{other}' (speed, torque, wob, top_drive, date, time, seconds)"
+                    )));
+                }
+            }
+        }
+        Ok(items)
+    }
+
+    fn codes(&self) -> Vec<&str> {
+        let mut codes = vec![self.speed.as_str(), self.torque.as_str()];
+        codes.extend(self.wob.as_deref());
+        codes.extend(self.top_drive.as_deref());
+        match &self.time {
+            WitsTime::Clock { date, time } => codes.extend([date.as_str(), time.as_str()]),
+            WitsTime::Seconds(code) => codes.push(code),
+        }
+        codes
+    }
+}
+
+/// Reads WITS blocks line by line into rows.
+pub struct WitsReader {
+    items: WitsItems,
+    speed_unit: SpeedUnit,
+    torque_unit: TorqueUnit,
+    wob_unit: Option<ForceUnit>,
+    /// The open block's items, `None` outside a block.
+    block: Option<Vec<(String, String)>>,
+    /// Day number of the first block's date, and the last clock reading (day, s of day).
+    first_day: Option<i64>,
+    last_clock: Option<(i64, f64)>,
+}
+
+impl WitsReader {
+    /// A reader of `items` in the units of `opts` (the torque's required; the weight on bit's
+    /// where it is read; rpm for the speed unless named).
+    pub fn new(items: WitsItems, opts: &DataOptions) -> Result<Self> {
+        let torque_unit = opts.torque_unit.ok_or_else(|| {
+            Error::setting(
+                "torque_unit",
+                format!(
+                    "a WITS feed names no units: give the unit of its torque (item {})",
+                    items.torque
+                ),
+            )
+        })?;
+        let wob_unit = match &items.wob {
+            Some(code) => Some(opts.wob_unit.ok_or_else(|| {
+                Error::setting(
+                    "wob_unit",
+                    format!("a WITS feed names no units: give the unit of its weight on bit (item {code}), or read none with wob=none"),
+                )
+            })?),
+            None => None,
+        };
+        Ok(Self {
+            items,
+            speed_unit: opts.speed_unit.unwrap_or(SpeedUnit::Rpm),
+            torque_unit,
+            wob_unit,
+            block: None,
+            first_day: None,
+            last_clock: None,
+        })
+    }
+
+    pub fn torque_unit(&self) -> TorqueUnit {
+        self.torque_unit
+    }
+
+    /// Forgets the open block: one cut by a dropped connection is not a row.
+    pub fn drop_block(&mut self) {
+        self.block = None;
+    }
+
+    /// Takes one line; gives the row of a block it closes (`Err`: why the block is skipped),
+    /// or `None`.
+    pub fn line(&mut self, line: &str) -> Option<std::result::Result<Row, String>> {
+        let line = line.trim();
+        if line == "&&" {
+            self.block = Some(Vec::new());
+            return None;
+        }
+        if line == "!!" {
+            let block = self.block.take()?;
+            return self.row(&block);
+        }
+        let block = self.block.as_mut()?;
+        if line.len() >= 4 && line.is_char_boundary(4) {
+            let (code, value) = line.split_at(4);
+            block.push((code.to_string(), value.trim().to_string()));
+        }
+        None
+    }
+
+    fn row(&mut self, block: &[(String, String)]) -> Option<std::result::Result<Row, String>> {
+        let codes = self.items.codes();
+        if !block.iter().any(|(c, _)| codes.contains(&c.as_str())) {
+            return None;
+        }
+        let value = |code: &str| -> std::result::Result<Option<f64>, String> {
+            match block.iter().rev().find(|(c, _)| c == code) {
+                None => Ok(None),
+                Some((_, text)) => text
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .map(Some)
+                    .ok_or_else(|| format!("item {code}: '{text}' is not a number")),
+            }
+        };
+        let required = |code: &str, what: &str| -> std::result::Result<f64, String> {
+            value(code)?.ok_or_else(|| format!("a WITS block without item {code} ({what})"))
+        };
+        Some((|| {
+            let speed = required(&self.items.speed, "speed")?;
+            let torque = required(&self.items.torque, "torque")?;
+            let wob = match (&self.items.wob, self.wob_unit) {
+                (Some(code), Some(unit)) => Some(required(code, "weight on bit")? * unit.newtons()),
+                _ => None,
+            };
+            let top_drive = match &self.items.top_drive {
+                Some(code) => Some(SpeedUnit::Rpm.to_rad_s(required(code, "top-drive speed")?)),
+                None => None,
+            };
+            let time_s = match self.items.time.clone() {
+                WitsTime::Seconds(code) => required(&code, "time, s")?,
+                WitsTime::Clock { date, time } => {
+                    let of_day = seconds_of_day(required(&time, "time, HHMMSS")?)
+                        .ok_or_else(|| format!("item {time}: not a time HHMMSS"))?;
+                    let day = match value(&date)? {
+                        Some(d) => day_number(d).ok_or_else(|| format!("item {date}: not a date YYMMDD"))?,
+                        // Without a date: the last block's day, the next one where the clock
+                        // ran back by more than half a day (midnight passed).
+                        None => match self.last_clock {
+                            Some((day, last)) if of_day < last - 43_200.0 => day + 1,
+                            Some((day, _)) => day,
+                            None => 0,
+                        },
+                    };
+                    self.last_clock = Some((day, of_day));
+                    let first = *self.first_day.get_or_insert(day);
+                    (day - first) as f64 * 86_400.0 + of_day
+                }
+            };
+            Ok(Row {
+                time_s: Some(time_s),
+                speed_rad_s: self.speed_unit.to_rad_s(speed),
+                torque_nm: torque * self.torque_unit.newton_metres(),
+                wob_n: wob,
+                top_drive_rad_s: top_drive,
+            })
+        })())
+    }
+}
+
+/// Seconds since midnight of a time HHMMSS (fractions of a second allowed).
+fn seconds_of_day(hhmmss: f64) -> Option<f64> {
+    let whole = hhmmss.trunc() as i64;
+    let (h, m, s) = (whole / 10_000, whole / 100 % 100, whole % 100);
+    let fraction = hhmmss - hhmmss.trunc();
+    (hhmmss >= 0.0 && h < 24 && m < 60 && s < 60).then(|| (h * 3600 + m * 60 + s) as f64 + fraction)
+}
+
+/// Days since 1970-01-01 of a date YYMMDD (years 70–99 are the 1900s).
+fn day_number(yymmdd: f64) -> Option<i64> {
+    let whole = yymmdd as i64;
+    if yymmdd < 0.0 || yymmdd.fract() != 0.0 {
+        return None;
+    }
+    let (yy, m, d) = (whole / 10_000, whole / 100 % 100, whole % 100);
+    let y = if yy >= 70 { 1900 + yy } else { 2000 + yy };
+    if !(1..=12).contains(&m) || !(1..=31).contains(&d) {
+        return None;
+    }
+    // Days from civil (proleptic Gregorian), the era-based algorithm.
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let mp = (m + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    Some(era * 146_097 + doe - 719_468)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reader(items: WitsItems) -> WitsReader {
+        let opts = DataOptions {
+            torque_unit: Some(TorqueUnit::KNm),
+            wob_unit: Some(ForceUnit::KN),
+            ..DataOptions::default()
+        };
+        WitsReader::new(items, &opts).unwrap()
+    }
+
+    fn rows(reader: &mut WitsReader, text: &str) -> Vec<std::result::Result<Row, String>> {
+        text.lines().filter_map(|l| reader.line(l)).collect()
+    }
+
+    #[test]
+    fn blocks_give_rows_in_si_and_the_clock_runs_over_midnight() {
+        let mut r = reader(WitsItems::default());
+        let got = rows(
+            &mut r,
+            "&&\n0105261127\n0106235959\n012060\n011810.5\n0116 120\n!!\n\
+             &&\n0201999\n!!\n\
+             &&\n0105261128\n0106000001.5\n012061\n011811\n0116121\n!!\n\
+             &&\n0106000002\n012062\n!!\n\
+             &&\n0105261128\n0106000003\n0120x\n011811\n0116121\n!!\n",
+        );
+        assert_eq!(got.len(), 4, "another record's block is passed over: {got:?}");
+        let first = got[0].as_ref().unwrap();
+        assert_eq!(first.time_s, Some(86_399.0));
+        assert!((first.speed_rad_s - 2.0 * std::f64::consts::PI).abs() < 1e-12);
+        assert!((first.torque_nm - 10_500.0).abs() < 1e-9);
+        assert_eq!(first.wob_n, Some(120_000.0));
+        assert_eq!(got[1].as_ref().unwrap().time_s, Some(86_401.5), "the next day");
+        assert!(
+            got[2].as_ref().unwrap_err().contains("without item 0118"),
+            "{:?}",
+            got[2]
+        );
+        assert!(
+            got[3].as_ref().unwrap_err().contains("'x' is not a number"),
+            "{:?}",
+            got[3]
+        );
+        // Without dates, the clock passing midnight is the next day.
+        let mut r = reader(WitsItems::parse("wob=none").unwrap());
+        let got = rows(
+            &mut r,
+            "&&\n0106235958\n01201\n01181\n!!\n&&\n0106000003\n01201\n01181\n!!\n",
+        );
+        let times: Vec<f64> = got.iter().map(|r| r.as_ref().unwrap().time_s.unwrap()).collect();
+        assert_eq!(times, [86_398.0, 86_403.0]);
+        assert_eq!(day_number(700101.0), Some(0));
+        assert_eq!(day_number(240229.0), Some(19_782));
+        assert_eq!(day_number(241301.0), None);
+    }
+
+    #[test]
+    fn items_are_named_by_key_and_refused_naming_what_is_wrong() {
+        let items = WitsItems::parse("speed=0913, torque=0915, seconds=0999, top_drive=0120").unwrap();
+        assert_eq!(items.speed, "0913");
+        assert_eq!(items.time, WitsTime::Seconds("0999".into()));
+        assert_eq!(items.top_drive.as_deref(), Some("0120"));
+        for (spec, says) in [
+            ("speed=913", "four digits"),
+            ("rpm=0120", "unknown key 'rpm'"),
+            ("speed", "key=CODE"),
+        ] {
+            let e = WitsItems::parse(spec).unwrap_err().to_string();
+            assert!(e.contains(says) && e.contains("wits_items"), "{e}");
+        }
+        let e = WitsReader::new(WitsItems::default(), &DataOptions::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("torque_unit"), "{e}");
+    }
+}
