@@ -148,6 +148,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             ..EvidenceConfig::default()
         },
         noise: cmd.noise.model(),
+        warm: None,
     };
     job.sampler.validate()?;
     cmd.check.map(evidence::check_replicates).transpose()?;

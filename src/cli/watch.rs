@@ -75,6 +75,11 @@ pub struct WatchCmd {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Each window's evidence from the laws' boxes, the whole procedure repeated as the paper
+    /// would (by default each starts from the window before's posterior: the same evidence,
+    /// fewer candidates).
+    #[arg(long)]
+    pub cold_start: bool,
     /// One JSON line per window instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -146,6 +151,7 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         change_nats: cmd.change_nats,
         risk: cmd.risk,
         backend: cmd.backend,
+        warm_start: !cmd.cold_start,
         wits: cmd
             .wits_items
             .as_deref()

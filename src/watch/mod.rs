@@ -27,13 +27,14 @@ pub mod window;
 pub mod wits;
 
 use crate::abc::Observer;
+use crate::abc::evidence::Reference;
 use crate::abc::evidence::{EvidenceConfig, NoiseModel};
 use crate::data::{DataOptions, FieldData, Row};
 use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
-use crate::pipeline::evidence::{EvidenceJob, EvidencePrior};
+use crate::pipeline::evidence::{EvidenceJob, EvidencePrior, WarmStart};
 use crate::pipeline::stability::{MapSource, StabilityJob};
 use crate::stability::lumped::Lumped;
 use crate::stability::map::Criterion;
@@ -74,6 +75,10 @@ pub struct WatchSettings {
     pub min_speed_span_rpm: f64,
     /// The item codes of a source that sends WITS blocks.
     pub wits: wits::WitsItems,
+    /// Each window's evidence samplers start from the last informative window's posterior
+    /// (widened, mixed with the box) instead of the boxes: the same evidence, fewer
+    /// candidates while the rock stays the same.
+    pub warm_start: bool,
 }
 
 impl Default for WatchSettings {
@@ -100,6 +105,7 @@ impl Default for WatchSettings {
             min_samples: 100,
             min_speed_span_rpm: 5.0,
             wits: wits::WitsItems::default(),
+            warm_start: true,
         }
     }
 }
@@ -179,7 +185,7 @@ const LOSS_MEMORY: usize = 120;
 
 /// What a watch carries from window to window: all a watch directory needs to go on after
 /// its last stored window as if it had never stopped. Bounded: a few windows' fits, the last
-/// [`LOSS_MEMORY`] losses and one posterior.
+/// 120 losses and one posterior.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Carried {
     /// The last window given (informative or not).
@@ -196,6 +202,8 @@ pub struct Carried {
     /// carried probabilities).
     #[serde(with = "posterior_json")]
     posterior: Option<Vec<crate::abc::Particle>>,
+    /// Whether that posterior's torque parameters are for the torque scaled by WOB / W_ref.
+    posterior_scaled: bool,
     /// The losses of the windows since the last change (their running level).
     losses: std::collections::VecDeque<f64>,
 }
@@ -407,6 +415,7 @@ impl Watch {
                 ..self.settings.evidence.clone()
             },
             noise: Some(self.settings.evidence.noise),
+            warm: self.warm_start(),
         };
         let analysis = match job.run(&data, observer) {
             Ok(analysis) => analysis,
@@ -510,7 +519,32 @@ impl Watch {
             .collect();
         self.carried.probabilities = Some(carried);
         self.carried.posterior = Some(posterior);
+        self.carried.posterior_scaled = analysis.fit.w_ref_n.is_some();
         Ok(self.completed(update, &window, observer))
+    }
+
+    /// Each law's reference from the last informative window's posterior (widened, mixed
+    /// with its box): its evidence samplers start there instead of from the box. `None` with
+    /// `warm_start` off or before the first informative window.
+    fn warm_start(&self) -> Option<WarmStart> {
+        let posterior = self.carried.posterior.as_ref().filter(|_| self.settings.warm_start)?;
+        let references = self
+            .settings
+            .laws
+            .iter()
+            .filter_map(|&law| {
+                let own: Vec<(&[f64], f64)> = posterior
+                    .iter()
+                    .filter(|p| p.law == law)
+                    .map(|p| (p.params.as_slice(), p.weight))
+                    .collect();
+                Reference::from_posterior(law, &own)
+            })
+            .collect();
+        Some(WarmStart {
+            references,
+            scaled: self.carried.posterior_scaled,
+        })
     }
 
     /// Adds the advice (from the latest posterior) and the latency.

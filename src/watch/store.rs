@@ -83,6 +83,7 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
         "min_samples": settings.min_samples,
         "min_speed_span_rpm": settings.min_speed_span_rpm,
         "wits_items": settings.wits,
+        "warm_start": settings.warm_start,
     })
 }
 

@@ -67,6 +67,7 @@ pub(crate) fn evidence(
             None | Some("auto") => None,
             Some(_) => named(py, "noise", kwarg(options, "noise")?)?,
         },
+        warm: None,
     };
     let replicates: Option<usize> = kwarg(options, "check")?;
     if let Some(k) = replicates {

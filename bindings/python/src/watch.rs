@@ -45,6 +45,7 @@ pub(crate) fn watch(
         change_nats: kwarg(options, "change_nats")?.unwrap_or(defaults.change_nats),
         risk: kwarg(options, "risk")?.unwrap_or(defaults.risk),
         backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or(defaults.backend),
+        warm_start: !kwarg::<bool>(options, "cold_start")?.unwrap_or(false),
         wits: match kwarg::<String>(options, "wits_items")? {
             Some(spec) => check(py, bitrock::watch::wits::WitsItems::parse(&spec))?,
             None => defaults.wits.clone(),

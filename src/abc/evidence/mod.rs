@@ -57,6 +57,111 @@ use std::time::Instant;
 /// so the two never share a counter.
 pub const EVIDENCE_BLOCK: u32 = 0x4576_6964;
 
+/// Share of a warm start's first draws made from the law's box rather than its reference:
+/// the defence that keeps the importance weights bounded where the reference misses the
+/// posterior (a change of formation).
+pub const DEFENSIVE_SHARE: f64 = 0.1;
+
+/// Where a law's samplers start instead of its prior box: a Gaussian (a previous posterior's
+/// mean and covariance, widened), mixed with the box ([`DEFENSIVE_SHARE`]). The tempered path
+/// runs from this reference q to π·L (targets q^(1−β)·(π·L)^β), so ln Z stays the evidence
+/// under the prior π: the reference changes the cost, not what is estimated.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Reference {
+    pub law: Law,
+    /// Mean (SI parameters) and covariance (row-major, d × d).
+    pub mean: Vec<f64>,
+    pub covariance: Vec<f64>,
+}
+
+/// How much wider (in standard deviations) a reference is than the posterior it comes from.
+pub const REFERENCE_WIDENING: f64 = 2.0;
+
+impl Reference {
+    /// The reference of `law` from weighted posterior particles (parameters, weight), its
+    /// covariance widened by [`REFERENCE_WIDENING`]²; `None` with fewer than 2 × d + 1
+    /// particles or no weight.
+    pub fn from_posterior(law: Law, particles: &[(&[f64], f64)]) -> Option<Self> {
+        let d = law.n_params();
+        let total: f64 = particles.iter().map(|(_, w)| w).sum();
+        if particles.len() <= 2 * d || !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
+        let mut mean = vec![0.0; d];
+        for (p, w) in particles {
+            for j in 0..d {
+                mean[j] += w * p[j] / total;
+            }
+        }
+        let mut covariance = vec![0.0; d * d];
+        for (p, w) in particles {
+            for j in 0..d {
+                for k in 0..d {
+                    covariance[j * d + k] += w * (p[j] - mean[j]) * (p[k] - mean[k]) / total;
+                }
+            }
+        }
+        let widen = REFERENCE_WIDENING * REFERENCE_WIDENING;
+        covariance.iter_mut().for_each(|c| *c *= widen);
+        Some(Self { law, mean, covariance })
+    }
+}
+
+/// A reference made ready for one box: its Cholesky factor, log-normaliser and the box's
+/// log-volume.
+#[derive(Clone, Debug)]
+struct Gaussian {
+    mean: Vec<f64>,
+    factor: DMatrix<f64>,
+    /// ln of the Gaussian's normaliser, (2π)^(−d/2)·|Σ|^(−1/2).
+    ln_norm: f64,
+    /// ln of the box's volume (the prior's density is its negative inside).
+    ln_volume: f64,
+}
+
+impl Gaussian {
+    fn new(reference: &Reference, lower: &[f32], upper: &[f32]) -> Self {
+        let d = lower.len();
+        let mut cov = DMatrix::from_row_slice(d, d, &reference.covariance);
+        // A variance the posterior collapsed: a millionth of the box, as the random walk's.
+        for j in 0..d {
+            let floor = 1e-6 * f64::from(upper[j] - lower[j]);
+            if cov[(j, j)].is_nan() || cov[(j, j)] <= floor * floor {
+                cov[(j, j)] = floor * floor;
+            }
+        }
+        let factor = match cov.clone().cholesky() {
+            Some(c) => c.l(),
+            None => DMatrix::from_diagonal(&cov.diagonal().map(f64::sqrt)),
+        };
+        let ln_det: f64 = (0..d).map(|j| factor[(j, j)].ln()).sum();
+        Self {
+            mean: reference.mean.clone(),
+            factor,
+            ln_norm: -0.5 * d as f64 * (2.0 * std::f64::consts::PI).ln() - ln_det,
+            ln_volume: (0..d).map(|j| (f64::from(upper[j]) - f64::from(lower[j])).ln()).sum(),
+        }
+    }
+
+    /// ln q(θ) of the mixture (1 − s)·N(mean, Σ) + s·U(box), `inside` whether θ is in the box.
+    fn ln_q(&self, theta: &[f32], inside: bool) -> f64 {
+        let d = self.mean.len();
+        let x = DVector::from_iterator(d, (0..d).map(|j| f64::from(theta[j]) - self.mean[j]));
+        let z = self
+            .factor
+            .solve_lower_triangular(&x)
+            .unwrap_or_else(|| DVector::from_element(d, f64::INFINITY));
+        let gaussian = (1.0 - DEFENSIVE_SHARE).ln() + self.ln_norm - 0.5 * z.norm_squared();
+        if inside {
+            let uniform = DEFENSIVE_SHARE.ln() - self.ln_volume;
+            let m = gaussian.max(uniform);
+            m + ((gaussian - m).exp() + (uniform - m).exp()).ln()
+        } else {
+            gaussian
+        }
+    }
+}
+
 /// The tempered samplers' settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvidenceConfig {
@@ -388,6 +493,12 @@ struct Island {
     stream: Stream,
     scored: u64,
     best_rho: f64,
+    /// The warm start's reference, where the sampler starts from one: `loglik` is then
+    /// ln L + ln π − ln q (ln L alone from the box, where the last two cancel) and `ln_q`
+    /// each particle's ln q.
+    reference: Option<Gaussian>,
+    ln_q: Vec<f64>,
+    proposal_ln_q: Vec<f64>,
 }
 
 /// Acceptance rate the random walk's scale is adapted towards (Roberts, Gelman & Gilks).
@@ -396,7 +507,15 @@ const TARGET_ACCEPTANCE: f64 = 0.234;
 const UNMOVED: f64 = 0.05;
 
 impl Island {
-    fn new(law: Law, slot: usize, lower: &[f32], upper: &[f32], config: &EvidenceConfig, stream: u32) -> Self {
+    fn new(
+        law: Law,
+        slot: usize,
+        lower: &[f32],
+        upper: &[f32],
+        config: &EvidenceConfig,
+        stream: u32,
+        reference: Option<&Reference>,
+    ) -> Self {
         let dims = law.n_params();
         let mut lo = [0.0f32; MAX_PARAMS];
         let mut hi = [0.0f32; MAX_PARAMS];
@@ -407,18 +526,45 @@ impl Island {
             stream,
             next: 0,
         };
+        let reference = reference.map(|r| Gaussian::new(r, lower, upper));
+        let mut z = [0.0f64; MAX_PARAMS];
+        let mut inside = Vec::with_capacity(config.particles);
         let proposals: Vec<[f32; MAX_PARAMS]> = (0..config.particles)
             .map(|_| {
                 let mut p = [0.0f32; MAX_PARAMS];
-                for block in (0..dims).step_by(4) {
-                    let w = stream.draw();
-                    for (k, &word) in (block..dims.min(block + 4)).zip(&w) {
-                        p[k] = uniform_between(lo[k], hi[k], word);
+                let from_box = match &reference {
+                    None => true,
+                    Some(_) => stream.uniform() < DEFENSIVE_SHARE,
+                };
+                if from_box {
+                    for block in (0..dims).step_by(4) {
+                        let w = stream.draw();
+                        for (k, &word) in (block..dims.min(block + 4)).zip(&w) {
+                            p[k] = uniform_between(lo[k], hi[k], word);
+                        }
                     }
+                    inside.push(true);
+                } else if let Some(g) = &reference {
+                    stream.normals(dims, &mut z);
+                    let mut within = true;
+                    for j in 0..dims {
+                        let step: f64 = (0..=j).map(|k| g.factor[(j, k)] * z[k]).sum();
+                        p[j] = (g.mean[j] + step) as f32;
+                        within &= p[j] >= lo[j] && p[j] <= hi[j];
+                    }
+                    inside.push(within);
                 }
                 p
             })
             .collect();
+        let proposal_ln_q = match &reference {
+            Some(g) => proposals
+                .iter()
+                .zip(&inside)
+                .map(|(p, &inside)| g.ln_q(&p[..dims], inside))
+                .collect(),
+            None => Vec::new(),
+        };
         Self {
             law,
             slot,
@@ -435,12 +581,20 @@ impl Island {
             scale: 1.0,
             sweeps_done: 0,
             sweeps_wanted: 1,
-            inside: vec![true; proposals.len()],
+            inside,
             proposals,
             stream,
             scored: 0,
             best_rho: f64::INFINITY,
+            reference,
+            ln_q: Vec::new(),
+            proposal_ln_q,
         }
+    }
+
+    /// ln π − ln q at a particle inside the box with ln q = `ln_q` (0 without a reference).
+    fn prior_over_reference(&self, ln_q: f64) -> f64 {
+        self.reference.as_ref().map_or(0.0, |g| -g.ln_volume - ln_q)
     }
 
     /// The candidates to score now: the proposals inside the box.
@@ -467,7 +621,17 @@ impl Island {
             Phase::Done => return Ok(()),
             Phase::Prior => {
                 self.theta = std::mem::take(&mut self.proposals);
-                self.loglik = loglik.to_vec();
+                self.ln_q = std::mem::take(&mut self.proposal_ln_q);
+                // Outside the box (a reference's draw): π = 0.
+                self.loglik = (0..self.theta.len())
+                    .map(|i| match self.inside[i] {
+                        true => {
+                            let l = *scores.next().expect("one score per draw");
+                            l + self.ln_q.get(i).map_or(0.0, |&q| self.prior_over_reference(q))
+                        }
+                        false => f64::NEG_INFINITY,
+                    })
+                    .collect();
             }
             Phase::Sweep => {
                 let mut accepted = 0;
@@ -475,12 +639,23 @@ impl Island {
                     if !self.inside[i] {
                         continue;
                     }
-                    let proposed = *scores.next().expect("one score per proposal");
+                    let mut proposed = *scores.next().expect("one score per proposal");
                     let u = self.stream.uniform();
-                    // Uniform prior inside the box: the ratio of tempered targets.
-                    if proposed > f64::NEG_INFINITY && u.ln() < self.beta * (proposed - self.loglik[i]) {
+                    // The ratio of tempered targets q^(1−β)·(π·L)^β = q·exp(β·ℓ), ℓ = ln(π·L/q):
+                    // from the box (q = π uniform), β times the log-likelihoods' difference.
+                    let mut ln_ratio = 0.0;
+                    let mut proposed_ln_q = 0.0;
+                    if let Some(g) = &self.reference {
+                        proposed_ln_q = g.ln_q(&self.proposals[i][..self.dims], true);
+                        proposed += self.prior_over_reference(proposed_ln_q);
+                        ln_ratio = proposed_ln_q - self.ln_q[i];
+                    }
+                    if proposed > f64::NEG_INFINITY && u.ln() < ln_ratio + self.beta * (proposed - self.loglik[i]) {
                         self.theta[i] = self.proposals[i];
                         self.loglik[i] = proposed;
+                        if self.reference.is_some() {
+                            self.ln_q[i] = proposed_ln_q;
+                        }
                         accepted += 1;
                     }
                 }
@@ -569,6 +744,9 @@ impl Island {
         let picks = systematic_from(&weights, self.theta.len(), self.stream.uniform());
         self.theta = picks.iter().map(|&i| self.theta[i]).collect();
         self.loglik = picks.iter().map(|&i| self.loglik[i]).collect();
+        if self.reference.is_some() {
+            self.ln_q = picks.iter().map(|&i| self.ln_q[i]).collect();
+        }
         self.beta = if reaches_one { 1.0 } else { self.beta + step };
         self.stages += 1;
         self.sweeps_done = 0;
@@ -648,6 +826,17 @@ fn end_residuals_squared(problem: &AbcProblem, c: &Candidate) -> f64 {
 /// samplers (see the module documentation). `observer` is asked after every scored batch
 /// whether to stop ([`Error::Interrupted`]).
 pub fn run(evaluator: &dyn Evaluator, config: &EvidenceConfig, observer: &mut dyn Observer) -> Result<Evidence> {
+    run_from(evaluator, config, &[], observer)
+}
+
+/// [`run`], each law of `references` starting from its [`Reference`] instead of its box (a
+/// warm start: the same evidence, at a cost that depends on how near the reference is).
+pub fn run_from(
+    evaluator: &dyn Evaluator,
+    config: &EvidenceConfig,
+    references: &[Reference],
+    observer: &mut dyn Observer,
+) -> Result<Evidence> {
     config.validate()?;
     let started = Instant::now();
     let problem = evaluator.problem();
@@ -658,7 +847,12 @@ pub fn run(evaluator: &dyn Evaluator, config: &EvidenceConfig, observer: &mut dy
     for (slot, bx) in prior.boxes.iter().enumerate() {
         for island in 0..config.islands {
             let stream = (slot * config.islands + island) as u32;
-            islands.push(Island::new(bx.law, slot, &bx.lower, &bx.upper, config, stream));
+            let reference = references
+                .iter()
+                .find(|r| r.law == bx.law && r.mean.len() == bx.law.n_params());
+            islands.push(Island::new(
+                bx.law, slot, &bx.lower, &bx.upper, config, stream, reference,
+            ));
         }
     }
     let (mut batch, mut rho, mut lag, mut loglik) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -882,6 +1076,45 @@ mod tests {
         assert!((m4.probability - 1.0).abs() < 1e-15);
         let total: f64 = m4.posterior.iter().map(|(_, w)| w).sum();
         assert!((total - 1.0).abs() < 1e-12);
+
+        // Warm starts: from this posterior (a window like the last), and from one moved by
+        // four of its standard deviations in every parameter (the rock changed): the same
+        // evidence within its error, the first at a fraction of the candidates.
+        let particles: Vec<(&[f64], f64)> = m4.posterior.iter().map(|(p, w)| (p.as_slice(), *w)).collect();
+        let near = Reference::from_posterior(Law::M4, &particles).unwrap();
+        let mut moved = near.clone();
+        for j in 0..d {
+            let sd = (moved.covariance[j * d + j]).sqrt() / REFERENCE_WIDENING;
+            moved.mean[j] += 4.0 * sd;
+        }
+        for (reference, cheaper) in [(near, true), (moved, false)] {
+            let warm = run_from(
+                &evaluator,
+                &config,
+                std::slice::from_ref(&reference),
+                &mut super::super::Silent,
+            )
+            .unwrap();
+            let w = warm.of(Law::M4).unwrap();
+            eprintln!(
+                "warm: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates (cold {})",
+                w.ln_z, w.ln_z_error, w.stages, w.candidates_scored, m4.candidates_scored
+            );
+            assert!(
+                (w.ln_z - expected).abs() < 3.0 * w.ln_z_error.max(0.05),
+                "warm ln Z = {} ± {}, closed form {expected}",
+                w.ln_z,
+                w.ln_z_error
+            );
+            if cheaper {
+                assert!(
+                    w.candidates_scored * 3 < m4.candidates_scored,
+                    "{} against {}",
+                    w.candidates_scored,
+                    m4.candidates_scored
+                );
+            }
+        }
     }
 
     /// ln Z of a linear law under the AR(1) model against its closed form per φ, integrated

@@ -70,6 +70,18 @@ pub struct EvidenceJob {
     /// The noise model; `None`: every model's evidence is computed and the data choose (the
     /// model of the largest p(y | noise model) = Σ π(m)·Z_m is reported).
     pub noise: Option<NoiseModel>,
+    /// Where the laws' samplers start instead of their boxes (a watch's previous window).
+    pub warm: Option<WarmStart>,
+}
+
+/// A warm start of an evidence job: the references of its laws (each re-centred on the
+/// job's least-squares estimate of its law, its covariance kept), and whether their torque
+/// parameters are for the torque scaled by WOB / W_ref (they start only the samplers of the
+/// same scaling).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WarmStart {
+    pub references: Vec<evidence::Reference>,
+    pub scaled: bool,
 }
 
 /// What the samplers of one torque scaling start from: the least-squares fits, the boxes, and
@@ -224,7 +236,25 @@ impl EvidenceJob {
             noise,
             ..self.sampler.clone()
         };
-        let evidence = evidence::run(evaluator, &sampler, observer)?;
+        // Each reference centred on this record's least-squares estimate (the likelihood's
+        // peak): the window before gives its shape, this one where it lies.
+        let references: Vec<evidence::Reference> = match &self.warm {
+            Some(warm) if warm.scaled == fit.w_ref_n.is_some() => warm
+                .references
+                .iter()
+                .map(|r| match fits.iter().find(|f| f.law == r.law) {
+                    Some(f) if f.params_si.len() == r.mean.len() && f.params_si.iter().all(|v| v.is_finite()) => {
+                        evidence::Reference {
+                            mean: f.params_si.clone(),
+                            ..r.clone()
+                        }
+                    }
+                    _ => r.clone(),
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
+        let evidence = evidence::run_from(evaluator, &sampler, &references, observer)?;
         Ok(EvidenceAnalysis {
             fits,
             prior,

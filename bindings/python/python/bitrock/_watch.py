@@ -191,6 +191,7 @@ def watch(
     out: str | os.PathLike[str] | None = None,
     resume: bool = False,
     wits_items: str | None = None,
+    cold_start: bool = False,
 ) -> Watch:
     """Follows a record window by window as ``bitrock watch`` does (docs/watch.md): ``source``
     a CSV path (read whole; ``follow=True`` as it grows; ``replay_speed`` at that many times the
