@@ -22,7 +22,7 @@ pub struct ReportCmd {
 pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
     let watches: Vec<&PathBuf> = cmd.runs.iter().filter(|d| is_watch_dir(d)).collect();
     let summary = match (watches.as_slice(), cmd.runs.len()) {
-        ([dir], 1) => bitrock::report::write_watch_report(&cmd.out, &bitrock::watch::store::read(dir)?)?,
+        ([dir], 1) => bitrock::watch::report::write(&cmd.out, &bitrock::watch::store::read(dir)?)?,
         ([], _) => {
             let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;
             bitrock::report::write_paper_report(&cmd.out, &setup, &runs, None)?

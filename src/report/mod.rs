@@ -13,14 +13,12 @@
 //! equally weighted particles, get a population with unequal weights (ABC-SMC) as a systematic
 //! resample; a rejection population (weights all 1/N) is used as it is.
 
-mod figures;
-mod plot;
+pub(crate) mod figures;
+pub(crate) mod plot;
 mod runs;
 mod stats;
-mod watch;
 
 pub use runs::{read_run_dirs, write_paper_report};
-pub use watch::write_watch_report;
 
 use figures::confusion_figure;
 
@@ -186,7 +184,7 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
 }
 
 /// Moves a report rendered in memory into `dir`, replacing it as a whole.
-fn replace_report(
+pub(crate) fn replace_report(
     dir: &Path,
     markdown: String,
     rendered: Vec<figures::Rendered>,

@@ -33,6 +33,10 @@ pub const SELECTION_FILES: [&str; 5] = [
     "confusion.svg",
     "confusion.png",
 ];
+/// A watch directory's store (SQLite; see `crate::watch::store`).
+pub const WATCH_STORE_FILE: &str = "watch.sqlite";
+/// SQLite's companions of the watch store while it is written.
+pub const WATCH_STORE_COMPANIONS: [&str; 3] = ["watch.sqlite-journal", "watch.sqlite-wal", "watch.sqlite-shm"];
 /// A report's document.
 pub const REPORT_MD: &str = "report.md";
 /// A report's figures directory (SVG and PNG).
@@ -71,11 +75,7 @@ impl Owned {
                 Owned::Selection.owns(&rest.iter().collect::<std::path::PathBuf>(), is_dir)
             }
             (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
-            (Owned::Watch, [name]) => {
-                !is_dir
-                    && (*name == crate::watch::store::WATCH_STORE_FILE
-                        || crate::watch::store::WATCH_STORE_COMPANIONS.contains(name))
-            }
+            (Owned::Watch, [name]) => !is_dir && (*name == WATCH_STORE_FILE || WATCH_STORE_COMPANIONS.contains(name)),
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,
             (Owned::Report, [FIGURES_DIR, name]) => {

@@ -21,6 +21,8 @@
 //!   the mixture posterior (the paper's 1-DOF string), and the nearest top-drive speed at this
 //!   weight on bit, and the nearest weight on bit at this speed, below the risk threshold.
 
+mod figures;
+pub mod report;
 pub mod source;
 pub mod store;
 pub mod window;

@@ -15,10 +15,7 @@ use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// The watch store's file in a watch directory.
-pub const WATCH_STORE_FILE: &str = "watch.sqlite";
-/// SQLite's companions of the store while it is written.
-pub const WATCH_STORE_COMPANIONS: [&str; 3] = ["watch.sqlite-journal", "watch.sqlite-wal", "watch.sqlite-shm"];
+pub use crate::run::dir::{WATCH_STORE_COMPANIONS, WATCH_STORE_FILE};
 
 /// Version of the schema below; any other is refused.
 pub const WATCH_SCHEMA_VERSION: i64 = 1;

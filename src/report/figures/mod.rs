@@ -2,14 +2,12 @@
 //! unit, kN), drawn by the same code on the SVG and the PNG backend; one file per family, the
 //! drawing helpers they share here.
 
-mod along;
 mod fits;
 mod marginals;
 mod probabilities;
 mod selection;
 mod stability;
 
-pub(super) use along::render_watch;
 use fits::{render_data_and_fits, render_envelopes};
 use marginals::{render_correlations, render_marginals};
 use probabilities::{render_final_probabilities, render_model_probabilities, render_tolerance};
@@ -34,7 +32,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// A figure rendered in memory.
-pub(super) struct Rendered {
+pub(crate) struct Rendered {
     pub info: FigureInfo,
     pub svg: String,
     pub png: Vec<u8>,
@@ -51,7 +49,7 @@ const CURVE_POINTS: usize = 200;
 /// Bins of the marginal histograms.
 const BINS: usize = 40;
 /// Height (px) of the legend strip under multi-panel figures.
-const LEGEND_STRIP: u32 = 56;
+pub(crate) const LEGEND_STRIP: u32 = 56;
 
 /// (law, points, legend label).
 type FitCurve = (Law, Vec<(f64, f64)>, String);
@@ -64,9 +62,9 @@ type BoundaryCurve = (Law, String, Vec<Option<f64>>);
 /// (law, probability, MAP boundary, percentile boundary).
 type MapLaw = (Law, f64, Vec<Option<f64>>, Vec<Option<f64>>);
 
-type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+pub(crate) type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
-fn render_one(stem: String, caption: String, size: (u32, u32), figure: &impl Figure) -> Result<Rendered> {
+pub(crate) fn render_one(stem: String, caption: String, size: (u32, u32), figure: &impl Figure) -> Result<Rendered> {
     let (svg, png) = plot::render(figure, size).map_err(|message| Error::Plot {
         figure: stem.clone(),
         message,
@@ -156,7 +154,7 @@ impl Shared {
 }
 
 /// Axes with the figures' margins and label areas.
-fn axes<'a, DB: DrawingBackend>(
+pub(crate) fn axes<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
     caption: &str,
     x: (f64, f64),
@@ -176,7 +174,7 @@ where
     Ok(b.build_cartesian_2d(x.0..x.1, y.0..y.1)?)
 }
 
-fn mesh<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, x_desc: &str, y_desc: &str) -> DrawResult
+pub(crate) fn mesh<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, x_desc: &str, y_desc: &str) -> DrawResult
 where
     DB::ErrorType: 'static,
 {
@@ -213,7 +211,7 @@ where
 
 /// What a legend entry shows.
 #[derive(Clone, Copy)]
-enum Swatch {
+pub(crate) enum Swatch {
     Line(RGBColor),
     Dashed(RGBColor),
     Bar(RGBColor),
@@ -224,7 +222,7 @@ enum Swatch {
 
 /// A centred row of legend entries (for multi-panel figures, where a legend inside a panel
 /// would cover data).
-fn legend_row<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, items: &[(Swatch, String)]) -> DrawResult
+pub(crate) fn legend_row<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, items: &[(Swatch, String)]) -> DrawResult
 where
     DB::ErrorType: 'static,
 {
@@ -276,7 +274,7 @@ const TITLE_STRIP: u32 = 58;
 /// Clears the figure and writes its title centred in a strip at the top; returns the area under
 /// it. (plotters' own `titled` puts the text flush with the top edge, where ab_glyph's glyph
 /// placement clips it.)
-fn titled<DB: DrawingBackend>(
+pub(crate) fn titled<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     title: &str,
 ) -> std::result::Result<DrawingArea<DB, Shift>, Box<dyn std::error::Error>>
@@ -295,7 +293,7 @@ where
 }
 
 /// Splits `area` into `n` panels: one row up to three, else rows of three (two for four).
-fn panels<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, n: usize) -> Vec<DrawingArea<DB, Shift>> {
+pub(crate) fn panels<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, n: usize) -> Vec<DrawingArea<DB, Shift>> {
     let cols = match n {
         0 | 1 => 1,
         2 | 4 => 2,

@@ -2,18 +2,18 @@
 //! formation, the stretches between them and the latest advice, with the figures along the
 //! record.
 
-use super::{ReportSummary, figures, figures_markdown, replace_report};
+use super::store::StoredWatch;
 use crate::error::Result;
-use crate::watch::store::StoredWatch;
+use crate::report::{ReportSummary, figures_markdown, replace_report};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
 /// Writes `report.md` and the figures of the watch in `watch` under `dir`, replaced as a whole
-/// (as [`super::write_report`] does).
-pub fn write_watch_report(dir: &Path, watch: &StoredWatch) -> Result<ReportSummary> {
+/// (as [`crate::report::write_report`] does).
+pub fn write(dir: &Path, watch: &StoredWatch) -> Result<ReportSummary> {
     let start = Instant::now();
-    let rendered = figures::render_watch(watch)?;
+    let rendered = super::figures::render(watch)?;
     let mut md = markdown(watch);
     figures_markdown(&mut md, &rendered.iter().map(|r| r.info.clone()).collect::<Vec<_>>());
     replace_report(dir, md, rendered, start)

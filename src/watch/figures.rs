@@ -1,17 +1,25 @@
 //! A watch along the record: law probabilities, each law's parameters and the risk of
 //! stick-slip, window by window, with the changes of formation marked.
 
-use super::*;
-use crate::report::plot::extent;
-use crate::watch::Update;
-use crate::watch::store::StoredWatch;
+use super::Update;
+use super::store::StoredWatch;
+use crate::error::Result;
+use crate::laws::Law;
+use crate::report::FIGURE_SIZE;
+use crate::report::figures::{
+    Chart, LEGEND_STRIP, Rendered, Swatch, axes, legend_row, mesh, panels, render_one, titled,
+};
+use crate::report::plot::{self, DrawResult, Figure, extent, law_color, padded};
+use plotters::coord::Shift;
+use plotters::element::DashedPathElement;
+use plotters::prelude::*;
 
 /// Grey of the windows that informed nothing.
 const UNINFORMATIVE: RGBColor = RGBColor(215, 215, 215);
 
 /// Renders the watch's figures: probabilities, P(unstable) and advice, then one figure of
 /// parameters per law.
-pub(in crate::report) fn render_watch(watch: &StoredWatch) -> Result<Vec<Rendered>> {
+pub(super) fn render(watch: &StoredWatch) -> Result<Vec<Rendered>> {
     let along = Along::new(watch);
     let size = FIGURE_SIZE;
     let mut out = vec![
