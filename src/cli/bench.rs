@@ -36,6 +36,11 @@ pub struct BenchCmd {
     /// --quick: N = 1,000.
     #[arg(long, conflicts_with = "selection")]
     pub smc: bool,
+    /// Measure only `bitrock watch`: a simulated well of three formations (two of 60 s with
+    /// --quick), watched with each window started from the one before (the default) and from
+    /// the boxes (--cold-start): per-window latency, candidates, changes declared, agreement.
+    #[arg(long, conflicts_with_all = ["selection", "smc"])]
+    pub watch: bool,
     /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and
     /// keep the new table.
     #[arg(long)]
@@ -48,6 +53,9 @@ pub struct BenchCmd {
 pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     if cmd.reps == 0 {
         return Err(Error::setting("reps", "must be at least 1").into());
+    }
+    if cmd.watch {
+        return watch(cmd);
     }
     let mut opts = bitrock::bench::BenchOptions {
         repetitions: cmd.reps,
@@ -223,5 +231,50 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             )?;
         }
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--watch`: the watch bench ([`bitrock::watch::bench`]), a table or JSON.
+fn watch(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
+    let scratch = tempfile::tempdir()?;
+    let quiet = cmd.json;
+    let backend = cmd.backend.unwrap_or(Backend::Auto);
+    let report = bitrock::watch::bench::run(cmd.quick, backend, scratch.path(), &mut |line| {
+        if !quiet {
+            super::print::note(format_args!("note: {line}"));
+        }
+    })?;
+    let mut out = super::print::stdout();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    writeln!(out, "watch of {}", report.record)?;
+    writeln!(
+        out,
+        "start  windows  latency median   p90     p99   candidates/window (median)  total        changes  whole (s)"
+    )?;
+    for r in &report.runs {
+        writeln!(
+            out,
+            "{:<5}  {:>7}  {:>12.3} s  {:>5.2} s  {:>5.2} s  {:>26}  {:>11}  {:>7}  {:>9.1}",
+            r.start,
+            r.windows,
+            r.latency_median_s,
+            r.latency_p90_s,
+            r.latency_p99_s,
+            r.candidates_median,
+            r.candidates_total,
+            format!("{:?}", r.changes),
+            r.seconds
+        )?;
+    }
+    let windows = report.runs.first().map_or(0, |r| r.windows);
+    writeln!(
+        out,
+        "warm and cold: probabilities within 0.05 in {} of {windows} windows, the same law first in {}",
+        report.agree_within_005, report.same_most_probable
+    )?;
     Ok(ExitCode::SUCCESS)
 }

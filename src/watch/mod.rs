@@ -21,6 +21,7 @@
 //!   the mixture posterior (the paper's 1-DOF string), and the nearest top-drive speed at this
 //!   weight on bit, and the nearest weight on bit at this speed, below the risk threshold.
 
+pub mod bench;
 mod figures;
 pub mod report;
 pub mod source;
@@ -348,11 +349,12 @@ impl Watch {
     pub fn push(&mut self, row: Row, arrived: std::time::Instant, observer: &mut dyn Observer) -> Result<Vec<Update>> {
         match self.windows.push(row) {
             Pushed::Kept(done) => {
+                // The latency of the windows this row completes counts from its arrival.
+                self.last_arrival = Some(arrived);
                 let mut updates = Vec::new();
                 for window in done {
                     updates.push(self.update(window, observer)?);
                 }
-                self.last_arrival = Some(arrived);
                 Ok(updates)
             }
             Pushed::Backwards { by_s } => {
