@@ -220,14 +220,16 @@ pub struct Store {
     schema_version: i64,
 }
 
-fn sql_error(path: &Path) -> impl Fn(rusqlite::Error) -> Error + '_ {
+/// A SQLite error of the store at `path` (a run's or a watch's).
+pub(crate) fn sql_error(path: &Path) -> impl Fn(rusqlite::Error) -> Error + '_ {
     move |e| Error::Store {
         path: path.to_path_buf(),
         message: e.to_string(),
     }
 }
 
-fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
+/// A JSON document of the store at `path` that cannot be read.
+pub(crate) fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
     move |e| Error::Store {
         path: path.to_path_buf(),
         message: format!("malformed JSON in the store: {e}"),

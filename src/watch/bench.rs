@@ -6,7 +6,6 @@
 
 use super::source::{Rows, Source};
 use super::{FollowOptions, Update, WatchSettings, follow};
-use crate::abc::Observer;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use serde::Serialize;
@@ -46,10 +45,6 @@ pub struct WatchBench {
     pub agree_within_005: usize,
     pub same_most_probable: usize,
 }
-
-struct Quiet;
-
-impl Observer for Quiet {}
 
 /// Watches the bench's well (with `quick`, its first two formations cut to 60 s each) from a
 /// file written in `scratch`, warm and cold, on `backend`.
@@ -99,10 +94,16 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
         )?;
         let started = std::time::Instant::now();
         let mut given = Vec::new();
-        follow(&mut rows, settings, FollowOptions::default(), &mut Quiet, &mut |u| {
-            given.push(u.clone());
-            Ok(())
-        })?;
+        follow(
+            &mut rows,
+            settings,
+            FollowOptions::default(),
+            &mut crate::abc::Silent,
+            &mut |u| {
+                given.push(u.clone());
+                Ok(())
+            },
+        )?;
         let mut latencies: Vec<f64> = given.iter().map(|u| u.latency_s).collect();
         latencies.sort_by(f64::total_cmp);
         let mut candidates: Vec<u64> = given.iter().map(|u| u.candidates_scored).collect();

@@ -201,12 +201,12 @@ impl Figure for RiskAlong<'_> {
                 vec![(a.x.0, risk), (a.x.1, risk)],
                 4,
                 4,
-                law_color_neutral().stroke_width(1),
+                RISK.stroke_width(1),
             )))?;
         }
         let p: Vec<(f64, f64)> = advised.iter().map(|(t, v)| (*t, v.p_unstable)).collect();
-        chart.draw_series(LineSeries::new(p.iter().copied(), law_color_neutral().stroke_width(2)))?;
-        chart.draw_series(p.iter().map(|&q| Circle::new(q, 4, law_color_neutral().filled())))?;
+        chart.draw_series(LineSeries::new(p.iter().copied(), RISK.stroke_width(2)))?;
+        chart.draw_series(p.iter().map(|&q| Circle::new(q, 4, RISK.filled())))?;
         a.draw_changes(&mut chart)?;
 
         let speeds = advised
@@ -235,11 +235,8 @@ impl Figure for RiskAlong<'_> {
         legend_row(
             &legend,
             &[
-                (
-                    Swatch::Line(law_color_neutral()),
-                    "P(stick-slip) at the operating point".into(),
-                ),
-                (Swatch::Dashed(law_color_neutral()), "risk".into()),
+                (Swatch::Line(RISK), "P(stick-slip) at the operating point".into()),
+                (Swatch::Dashed(RISK), "risk".into()),
                 (Swatch::Line(BLACK), "top-drive speed".into()),
                 (Swatch::Circle(SAFE), "nearest speed below the risk".into()),
                 (Swatch::Dashed(BLACK), "change".into()),
@@ -248,10 +245,8 @@ impl Figure for RiskAlong<'_> {
     }
 }
 
-/// The risk's line colour and the advised speeds' (neither a law's colour).
-fn law_color_neutral() -> RGBColor {
-    RGBColor(200, 30, 45)
-}
+/// The risk's colour and the advised speeds' (neither a law's colour).
+const RISK: RGBColor = RGBColor(200, 30, 45);
 const SAFE: RGBColor = RGBColor(20, 110, 200);
 
 struct ParametersAlong<'a> {

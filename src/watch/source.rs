@@ -516,7 +516,7 @@ fn parse_line(line: &str, delimiter: u8) -> Option<csv::StringRecord> {
 mod tests {
     use super::*;
 
-    fn rows_of(text: &'static str) -> Rows {
+    fn read(text: &'static str) -> Result<Rows> {
         let reader: Box<dyn BufRead + Send> = Box::new(BufReader::new(text.as_bytes()));
         Rows::from_reader(
             reader,
@@ -527,7 +527,10 @@ mod tests {
             &DataOptions::default(),
             &WitsItems::default(),
         )
-        .unwrap()
+    }
+
+    fn rows_of(text: &'static str) -> Rows {
+        read(text).unwrap()
     }
 
     #[test]
@@ -610,19 +613,7 @@ mod tests {
 
     #[test]
     fn a_header_without_the_columns_is_refused_naming_them() {
-        let reader: Box<dyn BufRead + Send> = Box::new(BufReader::new("time_s,depth_m\n".as_bytes()));
-        let e = Rows::from_reader(
-            reader,
-            PathBuf::from("feed.csv"),
-            false,
-            None,
-            None,
-            &DataOptions::default(),
-            &WitsItems::default(),
-        )
-        .err()
-        .unwrap()
-        .to_string();
+        let e = read("time_s,depth_m\n").err().unwrap().to_string();
         assert!(e.contains("speed"), "{e}");
     }
 }

@@ -11,6 +11,7 @@
 use super::{Carried, Update, WatchSettings};
 use crate::error::{Error, Result};
 use crate::files::DirLock;
+use crate::run::store::{json_error, sql_error};
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -100,20 +101,6 @@ pub struct StoredWatch {
     pub updates: Vec<Update>,
     /// What the watch carried after its last window.
     pub carried: Option<Carried>,
-}
-
-fn sql_error(path: &Path) -> impl Fn(rusqlite::Error) -> Error + '_ {
-    move |e| Error::Store {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    }
-}
-
-fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
-    move |e| Error::Store {
-        path: path.to_path_buf(),
-        message: format!("malformed JSON in the watch store: {e}"),
-    }
 }
 
 /// True when `dir` holds a watch store.
@@ -213,7 +200,9 @@ pub fn read(dir: &Path) -> Result<StoredWatch> {
     let path = dir.join(WATCH_STORE_FILE);
     let not_a_watch = |why: String| Error::Data {
         path: dir.to_path_buf(),
-        message: format!("not a bitrock watch directory ({why}); give a directory written by `bitrock watch --out`"),
+        message: format!(
+            "not a bitrock watch directory ({why}); give a directory written by `bitrock watch --out` or by `bitrock.watch(..., out=...)` in Python"
+        ),
     };
     if !dir.is_dir() {
         return Err(not_a_watch("no such directory".into()));

@@ -21,13 +21,28 @@ fn simulate_well(dir: &Path) -> std::path::PathBuf {
     record
 }
 
-/// The JSON lines of `bitrock watch --json --laws m2,m3 --backend cpu` with `args`.
+/// `bitrock watch --json --laws m2,m3 --backend cpu`.
+fn watch_command() -> std::process::Command {
+    let mut command = bin();
+    command.args(["watch", "--json", "--laws", "m2,m3", "--backend", "cpu"]);
+    command
+}
+
+/// Updates without their latencies (which are the clock's).
+fn without_latency(updates: &[serde_json::Value]) -> Vec<serde_json::Value> {
+    updates
+        .iter()
+        .map(|u| {
+            let mut u = u.clone();
+            u.as_object_mut().unwrap().remove("latency_s");
+            u
+        })
+        .collect()
+}
+
+/// The JSON lines of [`watch_command`] with `args`.
 fn watch(args: &[&str]) -> Vec<serde_json::Value> {
-    let (code, stdout, stderr) = outcome(
-        bin()
-            .args(["watch", "--json", "--laws", "m2,m3", "--backend", "cpu"])
-            .args(args),
-    );
+    let (code, stdout, stderr) = outcome(watch_command().args(args));
     assert_eq!(code, 0, "{stderr}");
     stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
 }
@@ -88,15 +103,6 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     }
     // The same windows, the same numbers, replayed at 100 times real time.
     let replayed = watch(&[&WINDOWS[..], &[record.to_str().unwrap(), "--replay-speed", "100"]].concat());
-    let without_latency = |v: &[serde_json::Value]| {
-        v.iter()
-            .map(|u| {
-                let mut u = u.clone();
-                u.as_object_mut().unwrap().remove("latency_s");
-                u
-            })
-            .collect::<Vec<_>>()
-    };
     assert_eq!(without_latency(&whole), without_latency(&replayed));
 
     // The paper's way, every window's evidence from the boxes: the same law ranked first in
@@ -127,32 +133,15 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
 /// The stored windows of a watch directory, without their latencies (which are the clock's).
 fn stored(dir: &Path) -> (Vec<serde_json::Value>, bitrock::watch::store::StoredWatch) {
     let watch = bitrock::watch::store::read(dir).unwrap();
-    let updates = watch
-        .updates
-        .iter()
-        .map(|u| {
-            let mut u = serde_json::to_value(u).unwrap();
-            u.as_object_mut().unwrap().remove("latency_s");
-            u
-        })
-        .collect();
-    (updates, watch)
+    let updates: Vec<serde_json::Value> = watch.updates.iter().map(|u| serde_json::to_value(u).unwrap()).collect();
+    (without_latency(&updates), watch)
 }
 
 /// Starts a replayed watch into `out` and waits for `lines` of its JSON lines.
 fn watch_until(record: &Path, out: &Path, lines: usize) -> (std::process::Child, Vec<String>) {
     use std::io::BufRead;
-    let mut child = bin()
-        .args([
-            "watch",
-            "--json",
-            "--laws",
-            "m2,m3",
-            "--backend",
-            "cpu",
-            "--particles",
-            "100",
-        ])
+    let mut child = watch_command()
+        .args(["--particles", "100"])
         .args(WINDOWS)
         .arg(record)
         .args(["--replay-speed", "20", "--out"])
@@ -191,16 +180,7 @@ fn a_watch_killed_or_stopped_goes_on_from_its_directory_as_if_it_never_stopped()
     let printed = watch(&whole_args.iter().map(String::as_str).collect::<Vec<_>>());
     let (whole, whole_store) = stored(&whole_dir);
     assert_eq!(whole.len(), 17);
-    let without_latency = |v: &serde_json::Value| {
-        let mut v = v.clone();
-        v.as_object_mut().unwrap().remove("latency_s");
-        v
-    };
-    assert_eq!(
-        printed.iter().map(without_latency).collect::<Vec<_>>(),
-        whole,
-        "stored as said"
-    );
+    assert_eq!(without_latency(&printed), whole, "stored as said");
 
     // Killed (SIGKILL) after its third window: the directory holds the windows it said, and
     // the resumed watch gives the rest, the same numbers as the watch that never stopped.
@@ -214,12 +194,8 @@ fn a_watch_killed_or_stopped_goes_on_from_its_directory_as_if_it_never_stopped()
         "{} windows stored",
         before.len()
     );
-    assert_eq!(
-        said.iter()
-            .map(|l| without_latency(&serde_json::from_str(l).unwrap()))
-            .collect::<Vec<_>>(),
-        before[..3]
-    );
+    let said: Vec<serde_json::Value> = said.iter().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(without_latency(&said), before[..3]);
     let resumed = watch(
         &args(&killed, &["--resume"])
             .iter()
@@ -273,11 +249,7 @@ fn a_watch_killed_or_stopped_goes_on_from_its_directory_as_if_it_never_stopped()
         (args(&killed, &[]), "--resume"),
     ];
     for (flags, named) in refused {
-        let (code, _, stderr) = outcome(
-            bin()
-                .args(["watch", "--json", "--laws", "m2,m3", "--backend", "cpu"])
-                .args(&flags),
-        );
+        let (code, _, stderr) = outcome(watch_command().args(&flags));
         assert_eq!(code, 2, "{}: {stderr}", as_str(&flags));
         assert!(stderr.contains(named), "{stderr}");
         assert_eq!(stored(&killed).0, whole);
@@ -353,17 +325,8 @@ fn serve(connections: Vec<String>) -> u16 {
 /// standard error.
 fn watch_feed(port: u16, args: &[&str], n: usize) -> (Vec<serde_json::Value>, String) {
     use std::io::{BufRead, Read};
-    let mut child = bin()
-        .args([
-            "watch",
-            "--json",
-            "--laws",
-            "m2,m3",
-            "--backend",
-            "cpu",
-            "--particles",
-            "100",
-        ])
+    let mut child = watch_command()
+        .args(["--particles", "100"])
         .args(WINDOWS)
         .arg(format!("tcp://127.0.0.1:{port}"))
         .args(args)
@@ -395,15 +358,6 @@ fn a_tcp_feed_of_csv_or_wits_gives_the_file_s_windows_through_a_dropped_connecti
     let header = lines.next().unwrap().to_string();
     let rows: Vec<&str> = lines.collect();
     let whole = watch(&[&WINDOWS[..], &["--particles", "100", record.to_str().unwrap()]].concat());
-    let without_latency = |v: &[serde_json::Value]| {
-        v.iter()
-            .map(|u| {
-                let mut u = u.clone();
-                u.as_object_mut().unwrap().remove("latency_s");
-                u
-            })
-            .collect::<Vec<_>>()
-    };
     // A feed never ends: its last window (which ends with the record) is not given.
     let n = whole.len() - 1;
 

@@ -107,6 +107,22 @@ impl Reference {
     }
 }
 
+/// The lower Cholesky factor of `cov`, its variances floored at a millionth of the box's width
+/// (squared); a covariance that is not positive definite (particles collapsed onto a line)
+/// falls back to its diagonal.
+fn floored_cholesky(mut cov: DMatrix<f64>, lower: &[f32], upper: &[f32]) -> DMatrix<f64> {
+    for j in 0..cov.nrows() {
+        let floor = 1e-6 * f64::from(upper[j] - lower[j]);
+        if cov[(j, j)].is_nan() || cov[(j, j)] <= floor * floor {
+            cov[(j, j)] = floor * floor;
+        }
+    }
+    match cov.clone().cholesky() {
+        Some(c) => c.l(),
+        None => DMatrix::from_diagonal(&cov.diagonal().map(f64::sqrt)),
+    }
+}
+
 /// A reference made ready for one box: its Cholesky factor, log-normaliser and the box's
 /// log-volume.
 #[derive(Clone, Debug)]
@@ -122,18 +138,7 @@ struct Gaussian {
 impl Gaussian {
     fn new(reference: &Reference, lower: &[f32], upper: &[f32]) -> Self {
         let d = lower.len();
-        let mut cov = DMatrix::from_row_slice(d, d, &reference.covariance);
-        // A variance the posterior collapsed: a millionth of the box, as the random walk's.
-        for j in 0..d {
-            let floor = 1e-6 * f64::from(upper[j] - lower[j]);
-            if cov[(j, j)].is_nan() || cov[(j, j)] <= floor * floor {
-                cov[(j, j)] = floor * floor;
-            }
-        }
-        let factor = match cov.clone().cholesky() {
-            Some(c) => c.l(),
-            None => DMatrix::from_diagonal(&cov.diagonal().map(f64::sqrt)),
-        };
+        let factor = floored_cholesky(DMatrix::from_row_slice(d, d, &reference.covariance), lower, upper);
         let ln_det: f64 = (0..d).map(|j| factor[(j, j)].ln()).sum();
         Self {
             mean: reference.mean.clone(),
@@ -774,17 +779,7 @@ impl Island {
             cov += w * &x * x.transpose();
         }
         cov /= total;
-        for j in 0..d {
-            let floor = 1e-6 * f64::from(self.upper[j] - self.lower[j]);
-            if cov[(j, j)].is_nan() || cov[(j, j)] <= floor * floor {
-                cov[(j, j)] = floor * floor;
-            }
-        }
-        let factor = match cov.clone().cholesky() {
-            Some(c) => c.l(),
-            None => DMatrix::from_diagonal(&cov.diagonal().map(f64::sqrt)),
-        };
-        factor * (2.38 / (d as f64).sqrt())
+        floored_cholesky(cov, &self.lower[..d], &self.upper[..d]) * (2.38 / (d as f64).sqrt())
     }
 
     /// A random-walk proposal per particle; those outside the box are rejected unscored.
