@@ -109,6 +109,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("resume", "--resume"),
     ("follow", "--follow"),
     ("wits_items", "--wits-items"),
+    ("serve", "--serve"),
+    ("address", "--address"),
     ("segment", "--well"),
 ];
 

@@ -19,6 +19,7 @@ pub mod parity;
 pub mod print;
 pub mod progress;
 pub mod report;
+pub mod serve;
 pub mod simulate;
 pub mod stability;
 pub mod watch;
@@ -125,4 +126,7 @@ pub enum Command {
     /// with forgetting, a change of formation noticed, and the top-drive speed and weight on
     /// bit that avoid stick-slip now.
     Watch(watch::WatchCmd),
+    /// Serve the live page of a watch directory (`bitrock watch --out DIR`), finished or still
+    /// being written, read-only: the page follows the windows as the watch stores them.
+    Serve(serve::ServeCmd),
 }

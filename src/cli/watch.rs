@@ -5,6 +5,7 @@ use super::args::{ColumnArgs, finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::eval::Backend;
+use bitrock::watch::serve::{DEFAULT_ADDRESS, Server};
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::wits::WitsItems;
 use bitrock::watch::{FollowOptions, Update, WatchSettings};
@@ -92,20 +93,25 @@ pub struct WatchCmd {
     /// settings are the stored ones (a flag that differs is refused).
     #[arg(long, requires = "out")]
     pub resume: bool,
+    /// Serve a live page of the watch at this address (HOST:PORT; 127.0.0.1:8080, this machine
+    /// only, when none is given): the law probabilities along the record, the window's torque
+    /// cloud, the stability map with the advice, the parameters. Read-only; it stops with the
+    /// watch.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_ADDRESS)]
+    pub serve: Option<String>,
 }
 
 /// Set by the first Ctrl-C: the watch ends after storing the window in progress. The second
 /// ends the process at once.
-static STOP: AtomicBool = AtomicBool::new(false);
+pub(super) static STOP: AtomicBool = AtomicBool::new(false);
 
-fn stop_on_ctrl_c() {
-    let installed = ctrlc::set_handler(|| {
+/// The first Ctrl-C sets [`STOP`] and says `stopping`; the second exits at once.
+pub(super) fn stop_on_ctrl_c(stopping: &'static str) {
+    let installed = ctrlc::set_handler(move || {
         if STOP.swap(true, Ordering::SeqCst) {
             std::process::exit(130);
         }
-        print::note(format_args!(
-            "note: stopping after the window in progress (Ctrl-C again stops at once)"
-        ));
+        print::note(format_args!("note: {stopping} (Ctrl-C again stops at once)"));
     });
     if let Err(e) = installed {
         print::note(format_args!(
@@ -173,12 +179,18 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
     // A standard output that cannot be written (a closed pipe) ends the watch with its own
     // error, which `main` says as for any command.
     let mut failed: Option<std::io::Error> = None;
-    stop_on_ctrl_c();
+    stop_on_ctrl_c("stopping after the window in progress");
     let stop = || STOP.load(Ordering::SeqCst);
+    let server = cmd
+        .serve
+        .as_deref()
+        .map(|address| start_server(address, "serve", &cmd.source))
+        .transpose()?;
     let options = FollowOptions {
         dir: cmd.out.as_deref(),
         resume: cmd.resume,
         stop: Some(&stop),
+        serve: server.as_ref(),
     };
     let followed = bitrock::watch::follow(&mut rows, settings, options, &mut notes, &mut |update| {
         let written = if json {
@@ -200,6 +212,16 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         return Err(e.into());
     }
     let ended = followed?;
+    if let Some(server) = server {
+        let mut said = serde_json::to_value(&ended)?;
+        said["said"] = if ended.stopped {
+            "the watch was stopped"
+        } else {
+            "the watch has ended"
+        }
+        .into();
+        server.end(&said);
+    }
     if !cmd.json {
         writeln!(
             out,
@@ -225,6 +247,25 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// Starts the live page's server at `address` (the setting `field`) and says where it is.
+pub(super) fn start_server(address: &str, field: &'static str, source: &std::path::Path) -> anyhow::Result<Server> {
+    let server = Server::start(
+        address,
+        field,
+        &serde_json::json!({ "source": source.display().to_string() }),
+    )?;
+    let at = server.address();
+    print::note(format_args!(
+        "note: the live page is at http://{at}/{}",
+        if at.ip().is_loopback() {
+            " (this machine only: --serve 0.0.0.0:PORT serves the network)"
+        } else {
+            ""
+        }
+    ));
+    Ok(server)
 }
 
 fn header(out: &mut impl Write, laws: &[bitrock::Law]) -> std::io::Result<()> {

@@ -423,16 +423,13 @@ impl<'a> Prepared<'a> {
     /// P(unstable) of the mixture of the reference run's laws at every (Ω, W), row-major over Ω.
     fn mixture_grid(&self) -> Vec<f64> {
         let s = &self.input.stability;
-        let criterion = Criterion::Lumped(s.lumped);
-        let total: f64 = self.map_inputs.iter().map(|m| m.probability).sum();
-        let mut grid = vec![0.0; s.omega_rpm.len() * s.wob_kn.len()];
-        for m in &self.map_inputs {
-            let g = map::probability_grid(m.law, &m.samples_si, &s.omega_rpm, &s.wob_kn, criterion, self.w_ref_n);
-            for (cell, p) in grid.iter_mut().zip(g) {
-                *cell += m.probability / total * p;
-            }
-        }
-        grid
+        map::mixture_probability_grid(
+            &self.map_inputs,
+            &s.omega_rpm,
+            &s.wob_kn,
+            Criterion::Lumped(s.lumped),
+            self.w_ref_n,
+        )
     }
 
     /// The text of report.md, section by section, with `figures` listed at the end.

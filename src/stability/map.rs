@@ -288,6 +288,26 @@ pub fn probability_grid_with(
     Ok(out)
 }
 
+/// P(unstable) of the mixture of `inputs` (each law weighted by its probability, over their
+/// total) at every (Ω, W), row-major over Ω: [`probability_grid`] of each law, mixed.
+pub fn mixture_probability_grid(
+    inputs: &[LawSamples],
+    omega_rpm: &[f64],
+    wob_kn: &[f64],
+    criterion: Criterion,
+    w_ref_n: f64,
+) -> Vec<f64> {
+    let total: f64 = inputs.iter().map(|m| m.probability).sum();
+    let mut grid = vec![0.0; omega_rpm.len() * wob_kn.len()];
+    for m in inputs {
+        let g = probability_grid(m.law, &m.samples_si, omega_rpm, wob_kn, criterion, w_ref_n);
+        for (cell, p) in grid.iter_mut().zip(g) {
+            *cell += m.probability / total * p;
+        }
+    }
+    grid
+}
+
 /// Bytes of one grid cell as the maps hold and print it: the f64 probability per law and the
 /// mixture, the u32 count the GPU returns, and up to 24 characters of JSON.
 const GRID_CELL_BYTES: f64 = 8.0 + 4.0 + 24.0;

@@ -24,8 +24,10 @@
 pub mod bench;
 mod figures;
 pub mod report;
+pub mod serve;
 pub mod source;
 pub mod store;
+pub mod view;
 pub mod window;
 pub mod wits;
 
@@ -38,9 +40,8 @@ use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::pipeline::evidence::{EvidenceJob, EvidencePrior, WarmStart};
-use crate::pipeline::stability::{MapSource, StabilityJob};
 use crate::stability::lumped::Lumped;
-use crate::stability::map::Criterion;
+use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
 use crate::units::RAD_S_PER_RPM;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -272,6 +273,8 @@ pub struct Watch {
     period_s: f64,
     /// The unit of the record's torques, in which parameters are reported.
     torque_unit: crate::units::TorqueUnit,
+    /// The picture of the latest window given.
+    view: Option<view::View>,
 }
 
 impl Watch {
@@ -321,12 +324,18 @@ impl Watch {
             last_arrival: None,
             period_s: 1.0 / rate_hz,
             torque_unit,
+            view: None,
         })
     }
 
     /// Window length and step, s.
     pub fn windows(&self) -> (f64, f64) {
         self.windows.shape()
+    }
+
+    /// The picture of the latest window given (its cloud, band and map).
+    pub fn view(&self) -> Option<&view::View> {
+        self.view.as_ref()
     }
 
     /// What the watch carries to its next window.
@@ -398,13 +407,13 @@ impl Watch {
             Ok(data) => data,
             Err(why) => {
                 update.uninformative = Some(why);
-                return Ok(self.completed(update, &window, observer));
+                return Ok(self.completed(update, &window));
             }
         };
         update.samples_used = data.calibration.len();
         if let Some(why) = self.cannot_inform(&data) {
             update.uninformative = Some(why);
-            return Ok(self.completed(update, &window, observer));
+            return Ok(self.completed(update, &window));
         }
         let job = EvidenceJob {
             laws: self.settings.laws.clone(),
@@ -427,7 +436,7 @@ impl Watch {
             // window, not the watch: the next window may be fine.
             Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
                 update.uninformative = Some(e.to_string());
-                return Ok(self.completed(update, &window, observer));
+                return Ok(self.completed(update, &window));
             }
             Err(e) => return Err(e),
         };
@@ -524,7 +533,7 @@ impl Watch {
         self.carried.probabilities = Some(carried);
         self.carried.posterior = Some(posterior);
         self.carried.posterior_scaled = analysis.fit.w_ref_n.is_some();
-        Ok(self.completed(update, &window, observer))
+        Ok(self.completed(update, &window))
     }
 
     /// Each law's reference from the last informative window's posterior (widened, mixed
@@ -551,12 +560,25 @@ impl Watch {
         })
     }
 
-    /// Adds the advice (from the latest posterior) and the latency.
-    fn completed(&mut self, mut update: Update, window: &Window, observer: &mut dyn Observer) -> Update {
+    /// Adds the advice (from the latest posterior), the window's picture and the latency.
+    fn completed(&mut self, mut update: Update, window: &Window) -> Update {
         self.carried.window = Some(window.index);
-        if let Some(posterior) = &self.carried.posterior {
-            update.advice = self.advise(posterior, window, &mut |line| observer.note(line)).ok();
+        let (omega_rpm, wob_kn) = operating_point(&window.rows, self.settings.w_ref_n);
+        let inputs = self
+            .carried
+            .posterior
+            .as_ref()
+            .map(|posterior| crate::abc::posterior::map_inputs_of(posterior, ADVICE_SAMPLES));
+        if let Some(inputs) = &inputs {
+            update.advice = Some(self.advise(inputs, omega_rpm, wob_kn));
         }
+        let posterior = inputs.as_deref().map(|inputs| view::Posterior {
+            inputs,
+            criterion: Criterion::Lumped(self.settings.structure),
+            wob_kn,
+            risk: self.settings.risk,
+        });
+        self.view = Some(view::view(window.index, &window.rows, self.torque_unit, posterior));
         update.latency_s = self.last_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
         update
     }
@@ -621,58 +643,17 @@ impl Watch {
         })
     }
 
-    /// P(unstable) at the window's operating point and the nearest safe speed and weight.
-    fn advise(
-        &self,
-        posterior: &[crate::abc::Particle],
-        window: &Window,
-        note: &mut dyn FnMut(String),
-    ) -> Result<Advice> {
-        let rows = &window.rows;
-        let n = rows.len().max(1) as f64;
-        // The top-drive speed where the record has it; its bit speed's mean otherwise.
-        let omega_rpm = rows
-            .iter()
-            .map(|r| r.top_drive_rad_s.unwrap_or(r.speed_rad_s))
-            .sum::<f64>()
-            / n
-            / RAD_S_PER_RPM;
-        let wob_kn = rows
-            .iter()
-            .map(|r| r.wob_n.unwrap_or(self.settings.w_ref_n))
-            .sum::<f64>()
-            / n
-            / 1000.0;
-        let map = |omega: Vec<f64>, wob: Vec<f64>, note: &mut dyn FnMut(String)| -> Result<Vec<f64>> {
-            let job = StabilityJob {
-                source: MapSource::Posterior(posterior.to_vec()),
-                omega_rpm: omega,
-                wob_kn: wob,
-                criterion: Criterion::Lumped(self.settings.structure),
-                w_ref_n: self.settings.w_ref_n,
-                percentile: 0.5,
-                samples: 200,
-                backend: Backend::Cpu,
-            };
-            let maps = job.run(note)?;
-            let cells = maps.grids.first().map_or(0, Vec::len);
-            Ok((0..cells)
-                .map(|c| {
-                    maps.inputs
-                        .iter()
-                        .zip(&maps.grids)
-                        .map(|(i, g)| i.probability * g[c])
-                        .sum()
-                })
-                .collect())
-        };
-        let omega_rpm = omega_rpm.max(1.0);
-        let wob_kn = wob_kn.max(1.0);
-        let p_unstable = map(vec![omega_rpm], vec![wob_kn], note)?[0];
-        let speeds: Vec<f64> = (2..=60).map(|k| 5.0 * k as f64).collect();
-        let by_speed = map(speeds.clone(), vec![wob_kn], note)?;
-        let weights: Vec<f64> = (1..=20).map(|k| wob_kn * 0.1 * k as f64).collect();
-        let by_weight = map(vec![omega_rpm], weights.clone(), note)?;
+    /// P(unstable) at the operating point (`omega_rpm`, `wob_kn`) under the mixture `inputs`,
+    /// and the nearest safe speed and weight. The parameters describe the torque at the
+    /// window's own weight on bit, so that weight is the maps' W_ref.
+    fn advise(&self, inputs: &[LawSamples], omega_rpm: f64, wob_kn: f64) -> Advice {
+        let criterion = Criterion::Lumped(self.settings.structure);
+        let map = |omega: &[f64], wob: &[f64]| mixture_probability_grid(inputs, omega, wob, criterion, wob_kn * 1000.0);
+        let p_unstable = map(&[omega_rpm], &[wob_kn])[0];
+        let speeds = view::map_speeds_rpm();
+        let by_speed = map(&speeds, &[wob_kn]);
+        let weights = view::map_weights_kn(wob_kn);
+        let by_weight = map(&[omega_rpm], &weights);
         let nearest = |values: &[f64], p: &[f64], at: f64| {
             values
                 .iter()
@@ -709,15 +690,33 @@ impl Watch {
             };
             format!("stick-slip likely at {omega_rpm:.0} rpm and {wob_kn:.0} kN (P = {p_unstable:.2}): {ways}")
         };
-        Ok(Advice {
+        Advice {
             omega_rpm,
             wob_kn,
             p_unstable,
             safe_omega_rpm,
             safe_wob_kn,
             words,
-        })
+        }
     }
+}
+
+/// Posterior samples per law behind the advice and the map.
+const ADVICE_SAMPLES: usize = 200;
+
+/// A window's operating point: the mean top-drive speed (the mean bit speed where the
+/// record has no top-drive column), rpm, and the mean weight on bit (`w_ref_n` where the
+/// record has no column for it), kN; each at least 1.
+fn operating_point(rows: &[Row], w_ref_n: f64) -> (f64, f64) {
+    let n = rows.len().max(1) as f64;
+    let omega_rpm = rows
+        .iter()
+        .map(|r| r.top_drive_rad_s.unwrap_or(r.speed_rad_s))
+        .sum::<f64>()
+        / n
+        / RAD_S_PER_RPM;
+    let wob_kn = rows.iter().map(|r| r.wob_n.unwrap_or(w_ref_n)).sum::<f64>() / n / 1000.0;
+    (omega_rpm.max(1.0), wob_kn.max(1.0))
 }
 
 /// Rows read before the watch starts, to measure the record's rate (its median time step).
@@ -749,6 +748,9 @@ pub struct FollowOptions<'a> {
     /// Asked between rows (and while a followed file is silent); true (after Ctrl-C) ends the
     /// watch: the window in progress is finished and stored, the rest of the source not read.
     pub stop: Option<&'a dyn Fn() -> bool>,
+    /// The live page's server: told the watch's meta when its windows are known, and each
+    /// window as it is given.
+    pub serve: Option<&'a serve::Server>,
 }
 
 /// Follows `rows` to their end: measures the record's rate on its first rows (for the
@@ -824,6 +826,12 @@ pub fn follow(
             }
             match resumed.take() {
                 Some((store, stored)) => {
+                    if let Some(server) = options.serve {
+                        server.set_meta(&serve::page_meta(&stored.meta));
+                        for update in &stored.updates {
+                            server.publish(update, None);
+                        }
+                    }
                     if unit != stored.meta.torque_unit {
                         return Err(crate::Error::setting(
                             "resume",
@@ -840,17 +848,20 @@ pub fn follow(
                     kept = Some(store);
                 }
                 None => {
+                    let meta = store::WatchMeta {
+                        source: source.display().to_string(),
+                        settings: store::settings_json(&settings),
+                        window_s: length,
+                        step_s: step,
+                        rate_hz,
+                        torque_unit: unit,
+                        bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
+                    };
                     if let Some(dir) = options.dir {
-                        let meta = store::WatchMeta {
-                            source: source.display().to_string(),
-                            settings: store::settings_json(&settings),
-                            window_s: length,
-                            step_s: step,
-                            rate_hz,
-                            torque_unit: unit,
-                            bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
-                        };
                         kept = Some(store::WatchStore::create(dir, &meta)?);
+                    }
+                    if let Some(server) = options.serve {
+                        server.set_meta(&serve::page_meta(&meta));
                     }
                 }
             }
@@ -859,10 +870,14 @@ pub fn follow(
         if let Some(watch) = watch.as_mut() {
             let mut give = |update: Update, watch: &Watch| -> Result<()> {
                 if let Some(store) = kept.as_mut() {
-                    store.append(&update, watch.carried())?;
+                    store.append(&update, watch.carried(), watch.view())?;
                 }
                 given += 1;
-                on_update(&update)
+                on_update(&update)?;
+                if let Some(server) = options.serve {
+                    server.publish(&update, watch.view());
+                }
+                Ok(())
             };
             for (row, arrived) in first.drain(..) {
                 for update in watch.push(row, arrived, observer)? {

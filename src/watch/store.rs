@@ -6,8 +6,11 @@
 //! `bitrock watch --resume` goes on after the last one as if it had never stopped.
 //!
 //! Bytes per window: its update (about 0.6 kB plus 0.3 kB per law) in `windows`; the carried
-//! state is one row whatever the record's length (its posterior: 2 × `particles` per law).
+//! state and the latest window's picture ([`View`], for the live page) are one row each
+//! whatever the record's length (the posterior: 2 × `particles` per law; the picture about
+//! 40 kB).
 
+use super::view::View;
 use super::{Carried, Update, WatchSettings};
 use crate::error::{Error, Result};
 use crate::files::DirLock;
@@ -33,6 +36,16 @@ CREATE TABLE carried (
     id INTEGER PRIMARY KEY CHECK (id = 1),
     window INTEGER NOT NULL,
     state_json TEXT NOT NULL
+);
+"#;
+
+/// The latest window's picture ([`View`]), replaced with each window. A store made without it
+/// gains it when a watch goes on with it; a reader takes its absence as no picture.
+const VIEW_TABLE: &str = r#"
+CREATE TABLE IF NOT EXISTS view (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    window INTEGER NOT NULL,
+    view_json TEXT NOT NULL
 );
 "#;
 
@@ -101,6 +114,8 @@ pub struct StoredWatch {
     pub updates: Vec<Update>,
     /// What the watch carried after its last window.
     pub carried: Option<Carried>,
+    /// The picture of its last window, where the store has one.
+    pub view: Option<View>,
 }
 
 /// True when `dir` holds a watch store.
@@ -140,6 +155,7 @@ impl WatchStore {
             let mut conn = Connection::open(temp.path()).map_err(&err)?;
             let tx = conn.transaction().map_err(&err)?;
             tx.execute_batch(SCHEMA).map_err(&err)?;
+            tx.execute_batch(VIEW_TABLE).map_err(&err)?;
             for (key, value) in [
                 ("schema_version", WATCH_SCHEMA_VERSION.to_string()),
                 ("watch", serde_json::to_string(meta).map_err(json_error(&path))?),
@@ -167,6 +183,7 @@ impl WatchStore {
             .map_err(sql_error(&path))?;
         conn.pragma_update(None, "synchronous", "FULL")
             .map_err(sql_error(&path))?;
+        conn.execute_batch(VIEW_TABLE).map_err(sql_error(&path))?;
         Ok(Self {
             conn,
             path,
@@ -174,12 +191,14 @@ impl WatchStore {
         })
     }
 
-    /// Stores a finished window and what the watch carries after it, in one transaction.
-    pub fn append(&mut self, update: &Update, carried: &Carried) -> Result<()> {
+    /// Stores a finished window, what the watch carries after it and its picture, in one
+    /// transaction.
+    pub fn append(&mut self, update: &Update, carried: &Carried, view: Option<&View>) -> Result<()> {
         let path = self.path.clone();
         let err = sql_error(&path);
         let update_json = serde_json::to_string(update).map_err(json_error(&path))?;
         let state_json = serde_json::to_string(carried).map_err(json_error(&path))?;
+        let view_json = view.map(serde_json::to_string).transpose().map_err(json_error(&path))?;
         let tx = self.conn.transaction().map_err(&err)?;
         tx.execute(
             "INSERT INTO windows (window, start_s, end_s, update_json) VALUES (?1, ?2, ?3, ?4)",
@@ -191,76 +210,135 @@ impl WatchStore {
             params![update.window as i64, state_json],
         )
         .map_err(&err)?;
+        if let (Some(view), Some(view_json)) = (view, view_json) {
+            tx.execute(
+                "INSERT OR REPLACE INTO view (id, window, view_json) VALUES (1, ?1, ?2)",
+                params![view.window as i64, view_json],
+            )
+            .map_err(&err)?;
+        }
         tx.commit().map_err(&err)
     }
 }
 
 /// Reads the watch in `dir` (read-only: a running watch may be read).
 pub fn read(dir: &Path) -> Result<StoredWatch> {
-    let path = dir.join(WATCH_STORE_FILE);
-    let not_a_watch = |why: String| Error::Data {
-        path: dir.to_path_buf(),
-        message: format!(
-            "not a bitrock watch directory ({why}); give a directory written by `bitrock watch --out` or by `bitrock.watch(..., out=...)` in Python"
-        ),
-    };
-    if !dir.is_dir() {
-        return Err(not_a_watch("no such directory".into()));
-    }
-    if !path.is_file() {
-        return Err(not_a_watch(format!("it has no {WATCH_STORE_FILE}")));
-    }
-    let conn = Connection::open_with_flags(&path, rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
-        .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE}: {e}")))?;
-    let meta_value = |key: &str| -> Result<Option<String>> {
-        conn.query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
-            .optional()
-            .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE} is not a bitrock watch store: {e}")))
-    };
-    match meta_value("schema_version")?.as_deref().map(str::parse::<i64>) {
-        Some(Ok(WATCH_SCHEMA_VERSION)) => {}
-        Some(Ok(v)) => {
-            return Err(not_a_watch(format!(
-                "{WATCH_STORE_FILE} has schema version {v}; this bitrock reads version {WATCH_SCHEMA_VERSION}"
-            )));
-        }
-        _ => return Err(not_a_watch(format!("{WATCH_STORE_FILE} has no schema version"))),
-    }
-    let err = sql_error(&path);
-    let meta: WatchMeta = serde_json::from_str(
-        &meta_value("watch")?.ok_or_else(|| not_a_watch(format!("{WATCH_STORE_FILE} does not say what it watched")))?,
-    )
-    .map_err(json_error(&path))?;
-    let mut updates = Vec::new();
-    {
-        let mut select = conn
-            .prepare("SELECT update_json FROM windows ORDER BY window")
-            .map_err(&err)?;
-        let rows = select.query_map([], |r| r.get::<_, String>(0)).map_err(&err)?;
-        for text in rows {
-            updates.push(serde_json::from_str(&text.map_err(&err)?).map_err(json_error(&path))?);
-        }
-    }
-    let carried: Option<(i64, String)> = conn
-        .query_row("SELECT window, state_json FROM carried WHERE id = 1", [], |r| {
-            Ok((r.get(0)?, r.get(1)?))
-        })
-        .optional()
-        .map_err(&err)?;
-    let carried: Option<Carried> = carried
-        .map(|(_, text)| serde_json::from_str(&text))
-        .transpose()
-        .map_err(json_error(&path))?;
+    let reader = Reader::open(dir)?;
+    let updates = reader.updates_after(None)?;
+    let carried = reader.carried()?;
     if carried.as_ref().and_then(|c| c.window) != updates.last().map(|u: &Update| u.window) {
         return Err(Error::Store {
-            path: path.clone(),
+            path: reader.path.clone(),
             message: "the carried state is not the last window's".into(),
         });
     }
     Ok(StoredWatch {
         dir: dir.to_path_buf(),
-        meta,
+        view: reader.view()?,
+        meta: reader.meta,
         updates,
         carried,
     })
+}
+
+/// A watch store opened read-only: what `bitrock serve` follows while a watch writes it.
+pub struct Reader {
+    conn: Connection,
+    path: PathBuf,
+    pub meta: WatchMeta,
+}
+
+impl Reader {
+    /// Opens the store of the watch directory `dir`, refusing what is not one.
+    pub fn open(dir: &Path) -> Result<Self> {
+        let path = dir.join(WATCH_STORE_FILE);
+        let not_a_watch = |why: String| Error::Data {
+            path: dir.to_path_buf(),
+            message: format!(
+                "not a bitrock watch directory ({why}); give a directory written by `bitrock watch --out` or by `bitrock.watch(..., out=...)` in Python"
+            ),
+        };
+        if !dir.is_dir() {
+            return Err(not_a_watch("no such directory".into()));
+        }
+        if !path.is_file() {
+            return Err(not_a_watch(format!("it has no {WATCH_STORE_FILE}")));
+        }
+        let conn = Connection::open_with_flags(&path, rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
+            .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE}: {e}")))?;
+        // A watch writing its window holds the store for a moment.
+        conn.busy_timeout(std::time::Duration::from_secs(10))
+            .map_err(sql_error(&path))?;
+        let meta_value = |key: &str| -> Result<Option<String>> {
+            conn.query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
+                .optional()
+                .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE} is not a bitrock watch store: {e}")))
+        };
+        match meta_value("schema_version")?.as_deref().map(str::parse::<i64>) {
+            Some(Ok(WATCH_SCHEMA_VERSION)) => {}
+            Some(Ok(v)) => {
+                return Err(not_a_watch(format!(
+                    "{WATCH_STORE_FILE} has schema version {v}; this bitrock reads version {WATCH_SCHEMA_VERSION}"
+                )));
+            }
+            _ => return Err(not_a_watch(format!("{WATCH_STORE_FILE} has no schema version"))),
+        }
+        let meta: WatchMeta = serde_json::from_str(
+            &meta_value("watch")?
+                .ok_or_else(|| not_a_watch(format!("{WATCH_STORE_FILE} does not say what it watched")))?,
+        )
+        .map_err(json_error(&path))?;
+        Ok(Self { conn, path, meta })
+    }
+
+    /// The stored windows after window `after` (all of them with `None`), in order.
+    pub fn updates_after(&self, after: Option<usize>) -> Result<Vec<Update>> {
+        let err = sql_error(&self.path);
+        let mut select = self
+            .conn
+            .prepare("SELECT update_json FROM windows WHERE window > ?1 ORDER BY window")
+            .map_err(&err)?;
+        let rows = select
+            .query_map([after.map_or(-1, |k| k as i64)], |r| r.get::<_, String>(0))
+            .map_err(&err)?;
+        let mut updates = Vec::new();
+        for text in rows {
+            updates.push(serde_json::from_str(&text.map_err(&err)?).map_err(json_error(&self.path))?);
+        }
+        Ok(updates)
+    }
+
+    /// What the watch carried after its last stored window.
+    pub fn carried(&self) -> Result<Option<Carried>> {
+        self.single("SELECT state_json FROM carried WHERE id = 1")
+    }
+
+    /// The picture of the last stored window; `None` where the store has none.
+    pub fn view(&self) -> Result<Option<View>> {
+        let has_table: bool = self
+            .conn
+            .query_row(
+                "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'view'",
+                [],
+                |r| r.get::<_, i64>(0),
+            )
+            .map_err(sql_error(&self.path))?
+            > 0;
+        if !has_table {
+            return Ok(None);
+        }
+        self.single("SELECT view_json FROM view WHERE id = 1")
+    }
+
+    /// The one JSON row `sql` selects, parsed; `None` where there is none.
+    fn single<T: serde::de::DeserializeOwned>(&self, sql: &str) -> Result<Option<T>> {
+        let text: Option<String> = self
+            .conn
+            .query_row(sql, [], |r| r.get(0))
+            .optional()
+            .map_err(sql_error(&self.path))?;
+        text.map(|t| serde_json::from_str(&t))
+            .transpose()
+            .map_err(json_error(&self.path))
+    }
 }

@@ -1,0 +1,522 @@
+// The live page of `bitrock watch --serve` and `bitrock serve`: the history first, then each
+// window as the watch gives it (server-sent events from /events), drawn on canvases. No
+// request leaves the server the page came from.
+'use strict';
+
+const PALETTE = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2', '#17becf'];
+
+const state = {
+  meta: null,
+  updates: [],
+  view: null,
+  ended: null,
+  dropped: 0,
+  // For each window received live: when its event arrived and when the page showed it
+  // (ms since the epoch): what the browser test measures.
+  timings: [],
+  pending: [],
+};
+window.bitrockPage = state;
+
+const $ = (id) => document.getElementById(id);
+
+function lawNames() {
+  if (state.meta && state.meta.laws) return state.meta.laws.map((l) => l.name);
+  const last = state.updates.find((u) => u.laws.length > 0);
+  return last ? last.laws.map((l) => l.law) : [];
+}
+
+function color(law) {
+  const k = lawNames().indexOf(law);
+  return PALETTE[(k < 0 ? 0 : k) % PALETTE.length];
+}
+
+function fixed(v, digits) {
+  return v === null || v === undefined || !Number.isFinite(v) ? '—' : v.toFixed(digits);
+}
+
+function short(v) {
+  if (v === null || v === undefined || !Number.isFinite(v)) return '—';
+  const a = Math.abs(v);
+  if (a !== 0 && (a < 1e-3 || a >= 1e5)) return v.toExponential(2);
+  return Number(v.toPrecision(4)).toString();
+}
+
+// ---- the stream ----
+
+function connect() {
+  const source = new EventSource('events');
+  source.addEventListener('history', (e) => {
+    const h = JSON.parse(e.data);
+    state.meta = h.meta;
+    state.updates = h.updates;
+    state.view = h.view;
+    state.ended = h.ended;
+    setStatus(h.ended ? 'ended' : 'live');
+    if (h.ended) source.close();
+    schedule();
+  });
+  source.addEventListener('meta', (e) => {
+    state.meta = JSON.parse(e.data);
+    schedule();
+  });
+  source.addEventListener('update', (e) => {
+    const u = JSON.parse(e.data);
+    state.updates.push(u);
+    state.pending.push({ window: u.window, received_ms: Date.now() });
+    schedule();
+  });
+  source.addEventListener('view', (e) => {
+    state.view = JSON.parse(e.data);
+    schedule();
+  });
+  source.addEventListener('dropped', (e) => {
+    state.dropped += JSON.parse(e.data).windows;
+    schedule();
+  });
+  source.addEventListener('end', (e) => {
+    state.ended = JSON.parse(e.data);
+    setStatus('ended');
+    source.close();
+    schedule();
+  });
+  source.onerror = () => {
+    if (!state.ended) setStatus('lost');
+  };
+  source.onopen = () => setStatus(state.ended ? 'ended' : 'live');
+}
+
+function setStatus(s) {
+  const el = $('status');
+  el.className = 'status ' + s;
+  el.textContent = {
+    live: 'live',
+    ended: (state.ended && state.ended.said) || 'the watch has ended',
+    lost: 'connection lost: reconnecting…',
+  }[s];
+}
+
+let scheduled = false;
+function schedule() {
+  if (scheduled) return;
+  scheduled = true;
+  requestAnimationFrame(() => {
+    scheduled = false;
+    render();
+    const shown = Date.now();
+    for (const p of state.pending) state.timings.push({ window: p.window, received_ms: p.received_ms, shown_ms: shown });
+    state.pending = [];
+  });
+}
+
+// ---- the header and the tables ----
+
+function render() {
+  if (state.meta) $('source').textContent = state.meta.source;
+  renderLawSelect();
+  const u = state.updates[state.updates.length - 1];
+  if (u) renderNow(u);
+  renderLog();
+  const note = $('note');
+  note.hidden = state.dropped === 0;
+  note.textContent = state.dropped
+    ? `${state.dropped} windows were dropped for this page (it fell behind); reload it for the whole history.`
+    : '';
+  drawAlong($('along'));
+  drawCloud($('cloud'));
+  drawMap($('map'));
+  drawParams($('params'));
+}
+
+function renderNow(u) {
+  $('window').textContent = String(u.window);
+  $('time').textContent = `${fixed(u.start_s, 1)}–${fixed(u.end_s, 1)} s`;
+  $('samples').textContent = `${u.samples_used} of ${u.samples}`;
+  $('latency').textContent = `${fixed(u.latency_s, 2)} s`;
+  $('most-probable').textContent = u.most_probable || '—';
+  const change = $('change');
+  change.textContent = u.change ? `changed here (${fixed(u.change_nats, 0)} nats)` : u.uninformative ? 'this window informs nothing' : 'same';
+  change.className = u.change ? 'changed' : '';
+  const advice = $('advice');
+  if (u.uninformative) {
+    advice.textContent = `${u.uninformative}${u.advice ? '. Last advice: ' + u.advice.words : ''}`;
+  } else {
+    advice.textContent = u.advice ? u.advice.words : 'no advice yet';
+  }
+  const risk = state.meta && state.meta.risk;
+  advice.className = 'advice' + (u.advice && risk ? (u.advice.p_unstable < risk ? ' safe' : ' risky') : '');
+  const body = $('probabilities').tBodies[0];
+  body.replaceChildren(
+    ...u.laws.map((l) => {
+      const tr = document.createElement('tr');
+      tr.dataset.law = l.law;
+      for (const [text, key] of [
+        [l.law, 'law'],
+        [fixed(l.probability, 3), 'probability'],
+        [fixed(l.window_probability, 3), 'window_probability'],
+        [`${fixed(l.ln_z, 1)} ± ${fixed(l.ln_z_error, 1)}`, 'ln_z'],
+      ]) {
+        const td = document.createElement('td');
+        td.textContent = text;
+        td.dataset.key = key;
+        tr.append(td);
+      }
+      tr.cells[0].style.color = color(l.law);
+      return tr;
+    }),
+  );
+}
+
+function renderLog() {
+  const body = $('log').tBodies[0];
+  // Newest first; rows already shown are kept.
+  const shown = body.rows.length;
+  for (const u of state.updates.slice(shown)) {
+    const tr = document.createElement('tr');
+    tr.dataset.window = u.window;
+    const probabilities = u.laws.map((l) => `${l.law} ${fixed(l.probability, 3)}`).join(', ');
+    for (const text of [
+      String(u.window),
+      fixed(u.end_s, 1),
+      u.most_probable || '—',
+      u.uninformative ? 'uninformative' : probabilities,
+      u.change ? 'change' : '',
+      u.advice ? u.advice.words : '',
+    ]) {
+      const td = document.createElement('td');
+      td.textContent = text;
+      tr.append(td);
+    }
+    if (u.change) tr.className = 'changed';
+    body.prepend(tr);
+  }
+  if (state.updates.length < shown) body.replaceChildren();
+}
+
+function renderLawSelect() {
+  const select = $('law-select');
+  const names = lawNames();
+  if (select.options.length !== names.length) {
+    select.replaceChildren(
+      ...names.map((n) => {
+        const o = document.createElement('option');
+        o.value = n;
+        o.textContent = n;
+        return o;
+      }),
+    );
+    select.dataset.chosen = '';
+  }
+  // Follows the most probable law until the viewer picks one.
+  const u = state.updates[state.updates.length - 1];
+  if (!select.dataset.chosen && u && u.most_probable) select.value = u.most_probable;
+}
+
+// ---- drawing ----
+
+// A plot area on a canvas: axes from `x` and `y` ([lo, hi]), labels, and mapping functions.
+function frame(canvas, x, y, xlabel, ylabel) {
+  const ratio = window.devicePixelRatio || 1;
+  const w = canvas.clientWidth || canvas.width;
+  const h = canvas.clientHeight || canvas.height;
+  canvas.width = Math.round(w * ratio);
+  canvas.height = Math.round(h * ratio);
+  const g = canvas.getContext('2d');
+  g.setTransform(ratio, 0, 0, ratio, 0, 0);
+  g.clearRect(0, 0, w, h);
+  const box = { left: 58, right: w - 12, top: 26, bottom: h - 38 };
+  const px = (v) => box.left + ((v - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
+  const py = (v) => box.bottom - ((v - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
+  g.strokeStyle = '#9aa3ad';
+  g.lineWidth = 1;
+  g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
+  g.fillStyle = '#5b6570';
+  g.font = '11px system-ui, sans-serif';
+  g.textAlign = 'center';
+  for (const t of ticks(x[0], x[1], 6)) {
+    g.fillText(short(t), px(t), box.bottom + 14);
+  }
+  g.fillText(xlabel, (box.left + box.right) / 2, box.bottom + 30);
+  g.textAlign = 'right';
+  for (const t of ticks(y[0], y[1], 5)) {
+    g.fillText(short(t), box.left - 4, py(t) + 4);
+  }
+  g.save();
+  g.translate(12, (box.top + box.bottom) / 2);
+  g.rotate(-Math.PI / 2);
+  g.textAlign = 'center';
+  g.fillText(ylabel, 0, 0);
+  g.restore();
+  return { g, box, px, py };
+}
+
+function ticks(lo, hi, count) {
+  if (!(hi > lo)) return [lo];
+  const raw = (hi - lo) / count;
+  const p = Math.pow(10, Math.floor(Math.log10(raw)));
+  const step = [1, 2, 5, 10].map((m) => m * p).find((s) => s >= raw) || raw;
+  const out = [];
+  for (let t = Math.ceil(lo / step) * step; t <= hi + step * 1e-9; t += step) out.push(Math.abs(t) < step * 1e-9 ? 0 : t);
+  return out;
+}
+
+function message(canvas, text) {
+  const { g, box } = frame(canvas, [0, 1], [0, 1], '', '');
+  g.fillStyle = '#5b6570';
+  g.textAlign = 'center';
+  g.fillText(text, (box.left + box.right) / 2, (box.top + box.bottom) / 2);
+}
+
+function extent(values) {
+  let lo = Infinity;
+  let hi = -Infinity;
+  for (const v of values) {
+    if (v === null || !Number.isFinite(v)) continue;
+    if (v < lo) lo = v;
+    if (v > hi) hi = v;
+  }
+  if (!(hi >= lo)) return [0, 1];
+  if (hi === lo) return [lo - 1, hi + 1];
+  const pad = (hi - lo) * 0.05;
+  return [lo - pad, hi + pad];
+}
+
+// A row of swatches above the plot area.
+function legend(g, box, items) {
+  let x = box.left;
+  g.font = '11px system-ui, sans-serif';
+  g.textAlign = 'left';
+  for (const [label, c] of items) {
+    g.fillStyle = c;
+    g.fillRect(x, box.top - 18, 10, 10);
+    g.strokeStyle = '#9aa3ad';
+    g.lineWidth = 0.5;
+    g.strokeRect(x, box.top - 18, 10, 10);
+    g.fillStyle = '#1b1f24';
+    g.fillText(label, x + 13, box.top - 9);
+    x += g.measureText(label).width + 24;
+  }
+}
+
+function changeLines(f, updates, y) {
+  const { g, px, py } = f;
+  g.save();
+  g.strokeStyle = '#b3261e';
+  g.setLineDash([5, 3]);
+  g.lineWidth = 1.5;
+  for (const u of updates) {
+    if (!u.change) continue;
+    g.beginPath();
+    g.moveTo(px(u.start_s), py(y[0]));
+    g.lineTo(px(u.start_s), py(y[1]));
+    g.stroke();
+  }
+  g.restore();
+}
+
+function drawAlong(canvas) {
+  const updates = state.updates;
+  if (updates.length === 0) return message(canvas, 'no window yet');
+  const x = [Math.min(...updates.map((u) => u.start_s)), Math.max(...updates.map((u) => u.end_s))];
+  const f = frame(canvas, x, [0, 1], 'end of the window along the record, s', 'P(law)');
+  const { g, px, py, box } = f;
+  const names = lawNames();
+  // Uninformative windows: grey.
+  g.fillStyle = '#e8eaed';
+  for (const u of updates) {
+    if (u.uninformative) g.fillRect(px(u.end_s) - 1, box.top, 2, box.bottom - box.top);
+  }
+  const informative = updates.filter((u) => !u.uninformative && u.laws.length > 0);
+  let below = informative.map(() => 0);
+  for (const name of names) {
+    const above = informative.map((u, k) => below[k] + (u.laws.find((l) => l.law === name) || { probability: 0 }).probability);
+    g.beginPath();
+    informative.forEach((u, k) => (k === 0 ? g.moveTo(px(u.end_s), py(above[k])) : g.lineTo(px(u.end_s), py(above[k]))));
+    for (let k = informative.length - 1; k >= 0; k--) g.lineTo(px(informative[k].end_s), py(below[k]));
+    g.closePath();
+    g.fillStyle = color(name);
+    g.globalAlpha = 0.8;
+    g.fill();
+    g.globalAlpha = 1;
+    below = above;
+  }
+  changeLines(f, updates, [0, 1]);
+  legend(g, box, names.map((n) => [n, color(n)]).concat([['change', '#b3261e']]));
+}
+
+function drawCloud(canvas) {
+  const v = state.view;
+  if (!v) return message(canvas, 'no window yet');
+  const band = v.band;
+  const ys = v.torque.concat(band ? band.lower.concat(band.upper) : []);
+  const xs = v.speed_rpm.concat(band ? band.speed_rpm : []);
+  const f = frame(canvas, extent(xs), extent(ys), `bit speed, rpm (window ${v.window})`, `torque, ${v.torque_unit}`);
+  const { g, px, py, box } = f;
+  if (band) {
+    g.beginPath();
+    band.speed_rpm.forEach((s, k) => (k === 0 ? g.moveTo(px(s), py(band.upper[k])) : g.lineTo(px(s), py(band.upper[k]))));
+    for (let k = band.speed_rpm.length - 1; k >= 0; k--) g.lineTo(px(band.speed_rpm[k]), py(band.lower[k]));
+    g.closePath();
+    g.fillStyle = 'rgba(31, 119, 180, 0.18)';
+    g.fill();
+  }
+  g.fillStyle = 'rgba(60, 60, 60, 0.45)';
+  v.speed_rpm.forEach((s, k) => g.fillRect(px(s) - 1, py(v.torque[k]) - 1, 2, 2));
+  const items = [];
+  if (band) {
+    for (const c of band.curves) {
+      g.beginPath();
+      band.speed_rpm.forEach((s, k) => (k === 0 ? g.moveTo(px(s), py(c.torque[k])) : g.lineTo(px(s), py(c.torque[k]))));
+      g.strokeStyle = color(c.law);
+      g.lineWidth = 1 + 3 * c.probability;
+      g.stroke();
+      items.push([`${c.law} MAP (P ${c.probability.toFixed(2)})`, color(c.law)]);
+    }
+    items.push([`${Math.round(band.level * 100)} % band of the mixture`, 'rgba(31, 119, 180, 0.35)']);
+  }
+  legend(g, box, items);
+}
+
+// P(stick-slip) as a colour: pale green at 0, deep red at 1.
+function shade(p) {
+  const mix = (a, b) => Math.round(a + (b - a) * p);
+  return `rgb(${mix(226, 200)}, ${mix(242, 30)}, ${mix(226, 35)})`;
+}
+
+function drawMap(canvas) {
+  const v = state.view;
+  const m = v && v.map;
+  if (!m) return message(canvas, 'no posterior yet: the map comes with the first informative window');
+  const nw = m.wob_kn.length;
+  const dx = (m.omega_rpm[m.omega_rpm.length - 1] - m.omega_rpm[0]) / Math.max(m.omega_rpm.length - 1, 1);
+  const dy = (m.wob_kn[nw - 1] - m.wob_kn[0]) / Math.max(nw - 1, 1);
+  const x = [m.omega_rpm[0] - dx / 2, m.omega_rpm[m.omega_rpm.length - 1] + dx / 2];
+  const y = [m.wob_kn[0] - dy / 2, m.wob_kn[nw - 1] + dy / 2];
+  const f = frame(canvas, x, y, 'top-drive speed, rpm', 'weight on bit, kN');
+  const { g, px, py } = f;
+  const p = (i, j) => m.p_unstable[i * nw + j];
+  m.omega_rpm.forEach((o, i) => {
+    m.wob_kn.forEach((w, j) => {
+      const v = p(i, j);
+      g.fillStyle = v === null ? '#c8ccd1' : shade(v);
+      g.fillRect(px(o - dx / 2), py(w + dy / 2), px(o + dx / 2) - px(o - dx / 2) + 0.5, py(w - dy / 2) - py(w + dy / 2) + 0.5);
+    });
+  });
+  // The risk's boundary: the cell edges between P below the risk and P at or above it.
+  g.strokeStyle = '#1b1f24';
+  g.lineWidth = 2;
+  g.beginPath();
+  const risky = (i, j) => p(i, j) !== null && p(i, j) >= m.risk;
+  for (let i = 0; i < m.omega_rpm.length; i++) {
+    for (let j = 0; j < nw; j++) {
+      const o = m.omega_rpm[i];
+      const w = m.wob_kn[j];
+      if (i + 1 < m.omega_rpm.length && risky(i, j) !== risky(i + 1, j)) {
+        g.moveTo(px(o + dx / 2), py(w - dy / 2));
+        g.lineTo(px(o + dx / 2), py(w + dy / 2));
+      }
+      if (j + 1 < nw && risky(i, j) !== risky(i, j + 1)) {
+        g.moveTo(px(o - dx / 2), py(w + dy / 2));
+        g.lineTo(px(o + dx / 2), py(w + dy / 2));
+      }
+    }
+  }
+  g.stroke();
+  const u = state.updates.filter((u) => u.advice).pop();
+  const items = [[`P = 0`, shade(0)], [`P = 1`, shade(1)], [`black line: P = ${m.risk}`, '#1b1f24']];
+  if (u) {
+    const a = u.advice;
+    const mark = (o, w, fill, r) => {
+      g.beginPath();
+      g.arc(px(o), py(w), r, 0, 2 * Math.PI);
+      g.fillStyle = fill;
+      g.fill();
+      g.strokeStyle = '#fff';
+      g.lineWidth = 1.5;
+      g.stroke();
+    };
+    for (const [o, w] of [
+      [a.safe_omega_rpm, a.wob_kn],
+      [a.omega_rpm, a.safe_wob_kn],
+    ]) {
+      if (o === null || w === null || (o === a.omega_rpm && w === a.wob_kn)) continue;
+      g.strokeStyle = '#1b7f3b';
+      g.lineWidth = 1.5;
+      g.beginPath();
+      g.moveTo(px(a.omega_rpm), py(a.wob_kn));
+      g.lineTo(px(o), py(w));
+      g.stroke();
+      mark(o, w, '#1b7f3b', 5);
+    }
+    mark(a.omega_rpm, a.wob_kn, '#1b1f24', 6);
+    items.push([`now: ${a.omega_rpm.toFixed(0)} rpm, ${a.wob_kn.toFixed(0)} kN, P ${a.p_unstable.toFixed(2)}`, '#1b1f24']);
+    if (a.safe_omega_rpm !== null || a.safe_wob_kn !== null) items.push(['advised', '#1b7f3b']);
+  }
+  legend(g, f.box, items);
+}
+
+function drawParams(canvas) {
+  const law = $('law-select').value;
+  const updates = state.updates.filter((u) => u.laws.some((l) => l.law === law));
+  if (!law || updates.length === 0) return message(canvas, 'no posterior yet');
+  const spec = state.meta && state.meta.laws ? state.meta.laws.find((l) => l.name === law) : null;
+  const count = updates[0].laws.find((l) => l.law === law).mean.length;
+  const ratio = window.devicePixelRatio || 1;
+  const w = canvas.clientWidth || canvas.width;
+  const rowHeight = 90;
+  canvas.style.height = `${rowHeight * count + 20}px`;
+  const h = rowHeight * count + 20;
+  canvas.width = Math.round(w * ratio);
+  canvas.height = Math.round(h * ratio);
+  const g = canvas.getContext('2d');
+  g.setTransform(ratio, 0, 0, ratio, 0, 0);
+  g.clearRect(0, 0, w, h);
+  const x = [updates[0].end_s, updates[updates.length - 1].end_s];
+  for (let j = 0; j < count; j++) {
+    const rows = updates.map((u) => u.laws.find((l) => l.law === law));
+    const lo = rows.map((r) => r.q01[j]);
+    const hi = rows.map((r) => r.q99[j]);
+    const y = extent(lo.concat(hi));
+    const box = { left: 58, right: w - 12, top: j * rowHeight + 8, bottom: (j + 1) * rowHeight - 8 };
+    const px = (v) => box.left + ((v - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
+    const py = (v) => box.bottom - ((v - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
+    g.strokeStyle = '#9aa3ad';
+    g.lineWidth = 1;
+    g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
+    g.beginPath();
+    updates.forEach((u, k) => (k === 0 ? g.moveTo(px(u.end_s), py(hi[k])) : g.lineTo(px(u.end_s), py(hi[k]))));
+    for (let k = updates.length - 1; k >= 0; k--) g.lineTo(px(updates[k].end_s), py(lo[k]));
+    g.closePath();
+    g.fillStyle = color(law);
+    g.globalAlpha = 0.25;
+    g.fill();
+    g.globalAlpha = 1;
+    g.beginPath();
+    updates.forEach((u, k) => (k === 0 ? g.moveTo(px(u.end_s), py(rows[k].mean[j])) : g.lineTo(px(u.end_s), py(rows[k].mean[j]))));
+    g.strokeStyle = color(law);
+    g.lineWidth = 1.5;
+    g.stroke();
+    changeLines({ g, px, py }, state.updates, y);
+    const p = spec ? spec.params[j] : null;
+    g.fillStyle = '#1b1f24';
+    g.font = '11px system-ui, sans-serif';
+    g.textAlign = 'left';
+    g.fillText(p ? `${p.name}, ${p.unit}` : `parameter ${j + 1}`, box.left + 4, box.top + 12);
+    g.textAlign = 'right';
+    g.fillStyle = '#5b6570';
+    g.fillText(short(y[1]), box.left - 4, box.top + 10);
+    g.fillText(short(y[0]), box.left - 4, box.bottom);
+  }
+  g.textAlign = 'center';
+  g.fillText('end of the window along the record, s', w / 2, h - 4);
+}
+
+document.addEventListener('DOMContentLoaded', () => {
+  $('print').addEventListener('click', () => window.print());
+  $('law-select').addEventListener('change', (e) => {
+    e.target.dataset.chosen = '1';
+    schedule();
+  });
+  window.addEventListener('resize', schedule);
+  connect();
+});
