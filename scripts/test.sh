@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test of bitrock, installing first what the tests need: Mesa's lavapipe, a software
-# Vulkan driver, so the GPU tests run on machines without a GPU. The GPU tests fail loudly
+# Vulkan driver, so the GPU tests run on machines without a GPU, and Chromium with its
+# WebDriver, in which the live page is tested. The GPU tests fail loudly
 # without an adapter; BITROCK_SKIP_GPU_TESTS=1 compiles them as ignored, so the summary counts
 # them as such (CI never sets it).
 set -euo pipefail
@@ -21,6 +22,10 @@ has_vulkan_driver() {
 if ! has_vulkan_driver; then
     echo "installing Mesa lavapipe (mesa-vulkan-drivers, libvulkan1)..."
     apt_install mesa-vulkan-drivers libvulkan1
+fi
+if ! { command -v chromium && command -v chromedriver; } >/dev/null 2>&1; then
+    echo "installing Chromium and its WebDriver (chromium, chromium-driver)..."
+    apt_install chromium chromium-driver
 fi
 # Silences a harmless warning of Mesa's device-select layer.
 export NODEVICE_SELECT=1
@@ -58,3 +63,8 @@ fi
 rm -rf "$STUBS"
 # pytest exits 5 when it collects no test: set -e fails the run then too.
 BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q bindings/python/tests
+
+# The live page of `bitrock watch --serve` in a real browser: headless Chromium driven through
+# its WebDriver (selenium), against the binary built above.
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check -r tests/browser/requirements.txt
+BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q tests/browser

@@ -73,6 +73,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Devices(cmd) => cli::devices::run(&cmd),
         Command::Law(cmd) => cli::law::run(&cmd),
         Command::Watch(cmd) => cli::watch::run(&cmd),
+        Command::Serve(cmd) => cli::serve::run(&cmd),
     }
 }
 

@@ -179,7 +179,7 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
         r = canvas.rect
         box = tuple(int(v * ratio) for v in (r["x"] + 60, r["y"] + 12, r["x"] + r["width"] - 14, r["y"] + r["height"] - 40))
         area = shot.crop(box)
-        pixels = list(area.getdata())
+        pixels = list(area.get_flattened_data() if hasattr(area, "get_flattened_data") else area.getdata())
         coloured = sum(1 for p in pixels if p != (255, 255, 255))
         assert coloured > 0.9 * len(pixels), f"{coloured} of {len(pixels)} map pixels drawn"
         if os.environ.get("BITROCK_PAGE_SCREENSHOT"):

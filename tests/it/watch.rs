@@ -515,3 +515,66 @@ fn a_well_file_is_one_simulation_and_refuses_the_single_one_s_flags() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("bad.toml:4:1") && stderr.contains("omega"), "{stderr}");
 }
+
+#[test]
+fn stalled_viewers_of_the_live_page_change_nothing_and_bad_addresses_are_refused() {
+    use std::io::{BufRead, Read, Write};
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let args = [
+        "--particles",
+        "100",
+        "--window-s",
+        "20",
+        "--step-s",
+        "10",
+        record.to_str().unwrap(),
+    ];
+    let plain = watch(&args);
+
+    // Fifty viewers that ask for the stream and never read it: the watch gives the same
+    // windows and ends (their queues drop, their writes time out, none is waited for).
+    let mut child = watch_command()
+        .args(args)
+        .args(["--serve", "127.0.0.1:0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    let address = loop {
+        line.clear();
+        assert!(stderr.read_line(&mut line).unwrap() > 0, "no address said");
+        if let Some(at) = line.split("the live page is at http://").nth(1) {
+            break at.split('/').next().unwrap().to_string();
+        }
+    };
+    assert!(line.contains("this machine only"), "{line}");
+    let stalled: Vec<std::net::TcpStream> = (0..50)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(&address).unwrap();
+            s.write_all(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+            s
+        })
+        .collect();
+    let mut stdout = String::new();
+    child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
+    assert!(child.wait().unwrap().success());
+    let served: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(without_latency(&served), without_latency(&plain));
+    drop(stalled);
+
+    // A port in use, and an address that is none, are refused naming the flag.
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let busy = held.local_addr().unwrap().to_string();
+    for bad in [busy.as_str(), "nonsense"] {
+        let (code, _, stderr) = outcome(bin().args(["watch", record.to_str().unwrap(), "--serve", bad]));
+        assert_eq!(code, 2, "{stderr}");
+        assert!(stderr.contains("--serve") && stderr.contains(bad), "{stderr}");
+    }
+    let nowhere = dir.path().join("nowhere");
+    let (code, _, stderr) = outcome(bin().arg("serve").arg(&nowhere));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("not a bitrock watch directory"), "{stderr}");
+}

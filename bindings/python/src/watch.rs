@@ -55,12 +55,26 @@ pub(crate) fn watch(
     let source = check(py, Source::named(&source, follow, replay_speed))?;
     let out: Option<PathBuf> = kwarg(options, "out")?;
     let resume: bool = kwarg(options, "resume")?.unwrap_or(false);
+    let serve: Option<String> = kwarg(options, "serve")?;
     let mut observer = PyObserver::new(None, note);
     // What Python raised (Ctrl-C between rows, or in `on_update`): the watch stops after
     // storing the window in progress, then it is raised again.
     let raised: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
     let ended = py.detach(|| {
         let mut rows = Rows::open(&source, &settings.data, &settings.wits)?;
+        let server = serve
+            .as_deref()
+            .map(|address| {
+                let meta = serde_json::json!({ "source": rows.name().display().to_string() });
+                bitrock::watch::serve::Server::start(address, "serve", &meta)
+            })
+            .transpose()?;
+        if let Some(server) = &server {
+            bitrock::abc::Observer::note(
+                &mut observer,
+                format!("the live page is at http://{}/", server.address()),
+            );
+        }
         let stop = || {
             raised.lock().unwrap_or_else(|e| e.into_inner()).is_some()
                 || Python::attach(|py| {
@@ -78,8 +92,9 @@ pub(crate) fn watch(
             dir: out.as_deref(),
             resume,
             stop: Some(&stop),
+            serve: server.as_ref(),
         };
-        bitrock::watch::follow(&mut rows, settings, options, &mut observer, &mut |update| {
+        let ended = bitrock::watch::follow(&mut rows, settings, options, &mut observer, &mut |update| {
             let line = serde_json::to_string(update).map_err(|e| Error::Numerical(e.to_string()))?;
             Python::attach(|py| {
                 let called = py
@@ -90,7 +105,13 @@ pub(crate) fn watch(
                     Error::Interrupted
                 })
             })
-        })
+        });
+        if let (Some(server), Ok(ended)) = (server, &ended) {
+            let mut said = serde_json::to_value(ended).map_err(|e| Error::Numerical(e.to_string()))?;
+            said["said"] = "the watch has ended".into();
+            server.end(&said);
+        }
+        ended
     });
     let raised = raised.into_inner().unwrap_or_else(|e| e.into_inner());
     if let Some(e) = raised.or_else(|| observer.take_raised()) {

@@ -102,3 +102,24 @@ def test_refusals_name_their_argument(well, tmp_path) -> None:
     assert caught.value.argument == "step_s"
     with pytest.raises(FileNotFoundError):
         list(bitrock.watch(tmp_path / "missing.csv"))
+
+
+def test_the_live_page_serves_the_windows_as_they_come(well) -> None:
+    import socket
+    import urllib.request
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    watch = bitrock.watch(well, laws="m2", window_s=20, step_s=10, backend="cpu", particles=100, serve=f"127.0.0.1:{port}")
+    seen = []
+    for update in watch:
+        seen.append(update.document)
+        if len(seen) == 2:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/state.json", timeout=10) as r:
+                state = json.load(r)
+            # The page's history holds every window given so far (the watch may be ahead).
+            assert state["updates"][:2] == seen
+            assert state["meta"]["laws"][0]["name"] == "m2"
+            assert state["view"] is not None and len(state["view"]["speed_rpm"]) > 0
+    assert len(seen) == 11

@@ -192,6 +192,7 @@ def watch(
     resume: bool = False,
     wits_items: str | None = None,
     cold_start: bool = False,
+    serve: str | None = None,
 ) -> Watch:
     """Follows a record window by window as ``bitrock watch`` does (docs/watch.md): ``source``
     a CSV path (read whole; ``follow=True`` as it grows; ``replay_speed`` at that many times the
@@ -201,7 +202,9 @@ def watch(
     it for one :class:`WatchUpdate` per window as each completes; ``.history`` is the
     DataFrame of those given. ``out`` is a watch directory where every window is stored as it
     finishes (``bitrock report`` draws it); ``resume=True`` goes on with the watch stored there
-    after its last window. Keyword arguments are the command's flags without dashes."""
+    after its last window. ``serve="127.0.0.1:8080"`` serves the live page of the watch there
+    while it runs (its address said through the notes). Keyword arguments are the command's
+    flags without dashes."""
     from . import _law_names
 
     options = {k: v for k, v in locals().items() if k not in ("source", "_law_names")}
