@@ -180,7 +180,8 @@ impl Server {
     /// What the page says of the watch (`page_meta`): its source, windows and laws.
     pub fn set_meta(&self, meta: &serde_json::Value) {
         let meta: Arc<str> = meta.to_string().into();
-        self.hub.history.lock().expect("unpoisoned").meta = meta.to_string();
+        let mut history = self.hub.history.lock().expect("unpoisoned");
+        history.meta = meta.to_string();
         self.hub.send(Event::Meta(meta));
     }
 
@@ -198,12 +199,12 @@ impl Server {
     pub fn publish(&self, update: &super::Update, view: Option<&super::view::View>) {
         let update: Arc<str> = serde_json::to_string(update).expect("an update serialises").into();
         let view: Option<Arc<str>> = view.map(|v| serde_json::to_string(v).expect("a view serialises").into());
-        {
-            let mut history = self.hub.history.lock().expect("unpoisoned");
-            history.updates.push(update.to_string());
-            if let Some(view) = &view {
-                history.view = Some(view.to_string());
-            }
+        // Queued under the history's lock: a viewer that connects now finds the window either
+        // in its history or in its queue, never in both.
+        let mut history = self.hub.history.lock().expect("unpoisoned");
+        history.updates.push(update.to_string());
+        if let Some(view) = &view {
+            history.view = Some(view.to_string());
         }
         self.hub.send(Event::Update(update));
         if let Some(view) = view {
@@ -215,8 +216,11 @@ impl Server {
     /// connection is taken; each viewer's stream is closed once its queue is written.
     pub fn end(mut self, ended: &serde_json::Value) {
         let ended: Arc<str> = ended.to_string().into();
-        self.hub.history.lock().expect("unpoisoned").ended = Some(ended.to_string());
-        self.hub.send(Event::End(ended));
+        {
+            let mut history = self.hub.history.lock().expect("unpoisoned");
+            history.ended = Some(ended.to_string());
+            self.hub.send(Event::End(ended));
+        }
         self.stop();
         // The viewers' threads write what is queued and close; a stalled one is not waited
         // for past the deadline.
@@ -284,6 +288,7 @@ fn accept(listener: TcpListener, hub: Arc<Hub>) {
                         "503 Service Unavailable",
                         "text/plain; charset=utf-8",
                         b"too many connections\n",
+                        false,
                     );
                     continue;
                 }
@@ -308,7 +313,8 @@ fn accept(listener: TcpListener, hub: Arc<Hub>) {
 /// What a request asked for.
 #[derive(Debug, PartialEq)]
 enum Asked {
-    Get(String),
+    /// A path, and whether only the head of the answer is wanted (HEAD).
+    Get(String, bool),
     /// Refused: the status line and why.
     Refused(&'static str, &'static str),
 }
@@ -348,10 +354,11 @@ fn read_request(stream: &mut TcpStream) -> std::io::Result<Asked> {
 
 /// What a parsed request head asks for: a GET or HEAD of a path without a body.
 fn asked(request: &httparse::Request<'_, '_>) -> Asked {
-    match request.method {
-        Some("GET" | "HEAD") => {}
+    let head_only = match request.method {
+        Some("GET") => false,
+        Some("HEAD") => true,
         _ => return Asked::Refused("405 Method Not Allowed", "this server only reads: GET\n"),
-    }
+    };
     let has_body = request.headers.iter().any(|h| {
         h.name.eq_ignore_ascii_case("transfer-encoding")
             || (h.name.eq_ignore_ascii_case("content-length") && h.value.iter().any(|&b| b != b'0'))
@@ -361,49 +368,59 @@ fn asked(request: &httparse::Request<'_, '_>) -> Asked {
     }
     let path = request.path.unwrap_or("/");
     let path = path.split(['?', '#']).next().unwrap_or("/");
-    Asked::Get(path.to_string())
+    Asked::Get(path.to_string(), head_only)
 }
 
 /// Answers one connection: a file of the page, the history, or the stream of events.
 fn serve_connection(mut stream: TcpStream, hub: &Hub) -> std::io::Result<()> {
     stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
-    let path = match read_request(&mut stream)? {
-        Asked::Get(path) => path,
+    let (path, head_only) = match read_request(&mut stream)? {
+        Asked::Get(path, head_only) => (path, head_only),
         Asked::Refused(status, why) => {
-            return respond(&mut stream, status, "text/plain; charset=utf-8", why.as_bytes());
+            return respond(&mut stream, status, "text/plain; charset=utf-8", why.as_bytes(), false);
         }
     };
-    match path.as_str() {
-        "/" | "/index.html" => respond(&mut stream, "200 OK", "text/html; charset=utf-8", PAGE_HTML.as_bytes()),
-        "/page.js" => respond(
-            &mut stream,
-            "200 OK",
-            "text/javascript; charset=utf-8",
-            PAGE_JS.as_bytes(),
-        ),
-        "/page.css" => respond(&mut stream, "200 OK", "text/css; charset=utf-8", PAGE_CSS.as_bytes()),
+    let file = |body: &'static str, content_type| (content_type, std::borrow::Cow::Borrowed(body.as_bytes()));
+    let (content_type, body) = match path.as_str() {
+        "/" | "/index.html" => file(PAGE_HTML, "text/html; charset=utf-8"),
+        "/page.js" => file(PAGE_JS, "text/javascript; charset=utf-8"),
+        "/page.css" => file(PAGE_CSS, "text/css; charset=utf-8"),
         "/state.json" => {
             let json = hub.history.lock().expect("unpoisoned").json();
-            respond(&mut stream, "200 OK", "application/json", json.as_bytes())
+            ("application/json", std::borrow::Cow::Owned(json.into_bytes()))
         }
-        "/events" => stream_events(stream, hub),
-        _ => respond(
-            &mut stream,
-            "404 Not Found",
-            "text/plain; charset=utf-8",
-            b"not found: this server serves /, /events and /state.json\n",
-        ),
-    }
+        "/events" if !head_only => return stream_events(stream, hub),
+        "/events" => ("text/event-stream", std::borrow::Cow::Borrowed(&b""[..])),
+        _ => {
+            let why = b"not found: this server serves /, /events and /state.json\n";
+            return respond(
+                &mut stream,
+                "404 Not Found",
+                "text/plain; charset=utf-8",
+                why,
+                head_only,
+            );
+        }
+    };
+    respond(&mut stream, "200 OK", content_type, &body, head_only)
 }
 
-/// Writes a whole response and closes.
-fn respond(stream: &mut TcpStream, status: &str, content_type: &str, body: &[u8]) -> std::io::Result<()> {
+/// Writes a whole response (its head alone for a HEAD request) and closes.
+fn respond(
+    stream: &mut TcpStream,
+    status: &str,
+    content_type: &str,
+    body: &[u8],
+    head_only: bool,
+) -> std::io::Result<()> {
     let head = format!(
         "HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\nConnection: close\r\n{SAFE_HEADERS}\r\n",
         body.len()
     );
     stream.write_all(head.as_bytes())?;
-    stream.write_all(body)?;
+    if !head_only {
+        stream.write_all(body)?;
+    }
     stream.flush()
 }
 
@@ -494,6 +511,11 @@ mod tests {
         assert!(page.starts_with("HTTP/1.1 200 OK"), "{page}");
         assert!(page.contains("Content-Security-Policy: default-src 'self'"));
         assert!(page.contains("page.js"));
+        let head = request(addr, b"HEAD /page.js HTTP/1.1\r\n\r\n");
+        assert!(
+            head.starts_with("HTTP/1.1 200 OK") && head.ends_with("\r\n\r\n"),
+            "{head}"
+        );
         for (text, status) in [
             (&b"POST / HTTP/1.1\r\nContent-Length: 0\r\n\r\n"[..], "405"),
             (b"GET /../../etc/passwd HTTP/1.1\r\n\r\n", "404"),

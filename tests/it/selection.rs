@@ -378,7 +378,7 @@ fn the_check_does_not_depend_on_the_backend(shape: Shape) {
     for backend in ["cpu", "gpu"] {
         let out = bin()
             .env(gpu::SHAPE_VAR, shape.name())
-            .args(["check-selection", run.to_str().unwrap(), "--replicates", "3", "--backend", backend, "--json", "-q"])
+            .args(["check-selection", run.to_str().unwrap(), "--replicates", "2", "--backend", backend, "--json", "-q"])
             .output()
             .unwrap();
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -400,8 +400,9 @@ fn the_check_does_not_depend_on_the_backend(shape: Shape) {
             }
         }
     }
-    eprintln!("{shape}: {compared} of 6 replicates had no candidate near ε on either backend");
-    assert!(compared >= 3, "only {compared} of 6 replicates comparable");
+    // Two replicates per law: a software driver (CI's) scores the tiled shape slowly.
+    eprintln!("{shape}: {compared} of 4 replicates had no candidate near ε on either backend");
+    assert!(compared >= 2, "only {compared} of 4 replicates comparable");
 }
 }
 
