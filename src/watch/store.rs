@@ -183,6 +183,9 @@ impl WatchStore {
             .map_err(sql_error(&path))?;
         conn.pragma_update(None, "synchronous", "FULL")
             .map_err(sql_error(&path))?;
+        // A reader (`bitrock serve`, `read_watch`) holds the store for a moment now and then.
+        conn.busy_timeout(std::time::Duration::from_secs(10))
+            .map_err(sql_error(&path))?;
         conn.execute_batch(VIEW_TABLE).map_err(sql_error(&path))?;
         Ok(Self {
             conn,

@@ -578,3 +578,74 @@ fn stalled_viewers_of_the_live_page_change_nothing_and_bad_addresses_are_refused
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("not a bitrock watch directory"), "{stderr}");
 }
+
+#[test]
+fn bitrock_serve_follows_a_watch_directory_while_its_watch_writes_it() {
+    use std::io::{BufRead, Read, Write};
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let out = dir.path().join("w");
+    let mut watch = watch_command()
+        .args([
+            "--particles",
+            "100",
+            "--window-s",
+            "20",
+            "--step-s",
+            "10",
+            "--replay-speed",
+            "15",
+        ])
+        .arg(&record)
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while !out.join(bitrock::watch::store::WATCH_STORE_FILE).is_file() {
+        assert!(started.elapsed().as_secs() < 60, "no watch store");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let mut serve = bin()
+        .args(["serve", out.to_str().unwrap(), "--address", "127.0.0.1:0"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = std::io::BufReader::new(serve.stderr.take().unwrap());
+    let mut line = String::new();
+    let address = loop {
+        line.clear();
+        assert!(stderr.read_line(&mut line).unwrap() > 0, "no address said");
+        if let Some(at) = line.split("the live page is at http://").nth(1) {
+            break at.split('/').next().unwrap().to_string();
+        }
+    };
+    let mut stdout = String::new();
+    watch.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
+    assert!(
+        watch.wait().unwrap().success(),
+        "the watch ends well while it is served"
+    );
+    let lines: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 17);
+    // The server reads the store every 250 ms: it has every window soon after the watch ends.
+    let state = loop {
+        let mut s = std::net::TcpStream::connect(&address).unwrap();
+        s.write_all(b"GET /state.json HTTP/1.1\r\n\r\n").unwrap();
+        let mut answer = String::new();
+        s.read_to_string(&mut answer).unwrap();
+        let state: serde_json::Value = serde_json::from_str(answer.split("\r\n\r\n").nth(1).unwrap()).unwrap();
+        if state["updates"].as_array().unwrap().len() == lines.len() || started.elapsed().as_secs() > 300 {
+            break state;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    assert_eq!(state["updates"].as_array().unwrap(), &lines);
+    assert_eq!(state["view"]["window"], 16);
+    assert_eq!(state["meta"]["laws"][1]["name"], "m3");
+    let (code, _, _) = outcome(std::process::Command::new("kill").args(["-INT", &serve.id().to_string()]));
+    assert_eq!(code, 0);
+    assert!(serve.wait().unwrap().success(), "Ctrl-C stops the server cleanly");
+}
