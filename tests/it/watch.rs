@@ -516,9 +516,27 @@ fn a_well_file_is_one_simulation_and_refuses_the_single_one_s_flags() {
     assert!(stderr.contains("bad.toml:4:1") && stderr.contains("omega"), "{stderr}");
 }
 
+/// The live page's address (HOST:PORT) a `--serve` watch or `bitrock serve` says on its
+/// standard error (piped), and the line that says it; the rest of its standard error is read
+/// (and dropped) on a thread, so the child never writes to a closed pipe.
+fn page_address(child: &mut std::process::Child) -> (String, String) {
+    use std::io::BufRead;
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    loop {
+        line.clear();
+        assert!(stderr.read_line(&mut line).unwrap() > 0, "no address said");
+        if let Some(at) = line.split("the live page is at http://").nth(1) {
+            let address = at.split('/').next().unwrap().to_string();
+            std::thread::spawn(move || std::io::copy(&mut stderr, &mut std::io::sink()));
+            return (address, line);
+        }
+    }
+}
+
 #[test]
 fn stalled_viewers_of_the_live_page_change_nothing_and_bad_addresses_are_refused() {
-    use std::io::{BufRead, Read, Write};
+    use std::io::{Read, Write};
     let dir = tempfile::tempdir().unwrap();
     let record = simulate_well(dir.path());
     let args = [
@@ -541,15 +559,7 @@ fn stalled_viewers_of_the_live_page_change_nothing_and_bad_addresses_are_refused
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
-    let mut line = String::new();
-    let address = loop {
-        line.clear();
-        assert!(stderr.read_line(&mut line).unwrap() > 0, "no address said");
-        if let Some(at) = line.split("the live page is at http://").nth(1) {
-            break at.split('/').next().unwrap().to_string();
-        }
-    };
+    let (address, line) = page_address(&mut child);
     assert!(line.contains("this machine only"), "{line}");
     let stalled: Vec<std::net::TcpStream> = (0..50)
         .map(|_| {
@@ -581,7 +591,7 @@ fn stalled_viewers_of_the_live_page_change_nothing_and_bad_addresses_are_refused
 
 #[test]
 fn bitrock_serve_follows_a_watch_directory_while_its_watch_writes_it() {
-    use std::io::{BufRead, Read, Write};
+    use std::io::{Read, Write};
     let dir = tempfile::tempdir().unwrap();
     let record = simulate_well(dir.path());
     let out = dir.path().join("w");
@@ -613,15 +623,7 @@ fn bitrock_serve_follows_a_watch_directory_while_its_watch_writes_it() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut stderr = std::io::BufReader::new(serve.stderr.take().unwrap());
-    let mut line = String::new();
-    let address = loop {
-        line.clear();
-        assert!(stderr.read_line(&mut line).unwrap() > 0, "no address said");
-        if let Some(at) = line.split("the live page is at http://").nth(1) {
-            break at.split('/').next().unwrap().to_string();
-        }
-    };
+    let (address, _) = page_address(&mut serve);
     let mut stdout = String::new();
     watch.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
     assert!(
