@@ -828,8 +828,10 @@ pub fn follow(
                 Some((store, stored)) => {
                     if let Some(server) = options.serve {
                         server.set_meta(&serve::page_meta(&stored.meta));
+                        let last = stored.updates.last().map(|u| u.window);
+                        let view = stored.view.as_ref().filter(|v| Some(v.window) == last);
                         for update in &stored.updates {
-                            server.publish(update, None);
+                            server.publish(update, view.filter(|_| Some(update.window) == last));
                         }
                     }
                     if unit != stored.meta.torque_unit {
