@@ -12,7 +12,7 @@
 //!   previous windows' evidence counts λ, λ², … times), no law below the floor;
 //! - **change**: the fits of the latest window that does not overlap this one, applied here,
 //!   against this window's own (the log-likelihood the old formation's laws lose here,
-//!   (n/2)·ln(ρ_old/ρ_new) of the best law); a loss beyond the threshold over its running
+//!   (n/2)·ln(ρ_old/ρ_new), the best of each); a loss beyond the threshold over its running
 //!   level declares a change, and the probabilities restart from this window's. Windows that
 //!   overlap the change's window are no reference (they may hold both formations): the next
 //!   change can be declared two window lengths later;
@@ -938,22 +938,32 @@ fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Pat
     Ok(())
 }
 
-/// The log-likelihood (nats) the previous window's best law, at its previous fit, loses on
-/// this window against its fit here: (n/2)·ln(ρ_before / ρ_now), the law the one of the lowest
-/// ρ now among those fitted both times.
+/// The log-likelihood (nats) the earlier window's fits lose on this window: (n/2)·ln(ρ_then /
+/// ρ_now), ρ_then the smallest ρ here of any law at its earlier fit, ρ_now the smallest of the
+/// laws fitted here (among the laws fitted both times). The old formation is gone only where
+/// none of its fitted laws still explains the samples: taking one law's fit alone (the best
+/// here) calls a change whenever a law whose parameters lie on a ridge (m3, m4) moved along
+/// it between two windows of the same rock.
 fn loss_nats(before: &Fits, now: &[crate::fit::LawFit], data: &FieldData) -> Option<f64> {
     let samples = &data.calibration;
     let sum_sq = samples.sum_sq_torque();
-    let best = now
+    let rho_now = now
         .iter()
         .filter(|f| f.rho.is_finite() && f.rho > 0.0)
         .filter(|f| before.iter().any(|(law, _)| *law == f.law))
-        .min_by(|a, b| a.rho.total_cmp(&b.rho))?;
-    let (_, old) = before.iter().find(|(law, _)| *law == best.law)?;
-    let residuals = crate::fit::residuals(best.law, old, samples, None);
-    let rho_before = residuals.iter().map(|e| e * e).sum::<f64>() / sum_sq;
+        .map(|f| f.rho)
+        .min_by(f64::total_cmp)?;
+    let rho_then = before
+        .iter()
+        .filter(|(law, _)| now.iter().any(|f| f.law == *law))
+        .map(|(law, old)| {
+            let residuals = crate::fit::residuals(*law, old, samples, None);
+            residuals.iter().map(|e| e * e).sum::<f64>() / sum_sq
+        })
+        .filter(|rho| rho.is_finite())
+        .min_by(f64::total_cmp)?;
     let n = samples.len() as f64;
-    rho_before.is_finite().then(|| 0.5 * n * (rho_before / best.rho).ln())
+    Some(0.5 * n * (rho_then / rho_now).ln())
 }
 
 fn median(values: &[f64]) -> Option<f64> {
