@@ -432,10 +432,15 @@ impl Watch {
         };
         let analysis = match job.run(&data, observer) {
             Ok(analysis) => analysis,
-            // What this window's samples cannot give (a fit, a finite likelihood) ends the
-            // window, not the watch: the next window may be fine.
+            // What this window's samples cannot give (a fit, a finite likelihood, a sampler
+            // that reaches them from the box) ends the window, not the watch: the next window
+            // may be fine.
             Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
                 update.uninformative = Some(e.to_string());
+                return Ok(self.completed(update, &window));
+            }
+            Err(crate::Error::InvalidSetting { field, message }) if field == "prior" || field == "max_stages" => {
+                update.uninformative = Some(message);
                 return Ok(self.completed(update, &window));
             }
             Err(e) => return Err(e),
