@@ -459,7 +459,7 @@ impl Watch {
             .rev()
             .find(|(k, _)| k + span <= window.index)
             .filter(|(k, _)| self.carried.last_change.is_none_or(|c| *k >= c + span));
-        let loss = reference.and_then(|(_, before)| loss_nats(before, &analysis.fits, &data));
+        let loss = reference.and_then(|(_, before)| loss_nats(before, &analysis.fits, &data.calibration));
         let level = median(&self.carried.losses.iter().copied().collect::<Vec<_>>());
         let change = match (loss, level) {
             (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
@@ -949,8 +949,7 @@ fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Pat
 /// none of its fitted laws still explains the samples: taking one law's fit alone (the best
 /// here) calls a change whenever a law whose parameters lie on a ridge (m3, m4) moved along
 /// it between two windows of the same rock.
-fn loss_nats(before: &Fits, now: &[crate::fit::LawFit], data: &FieldData) -> Option<f64> {
-    let samples = &data.calibration;
+fn loss_nats(before: &Fits, now: &[crate::fit::LawFit], samples: &crate::data::Samples) -> Option<f64> {
     let sum_sq = samples.sum_sq_torque();
     let rho_now = now
         .iter()
@@ -1036,6 +1035,51 @@ mod tests {
         assert!((p[2] - 0.01).abs() < 1e-15 && (p[3] - 0.01).abs() < 1e-15);
         assert!(p[1] > 0.01 && p[0] > 0.9);
         assert_eq!(normalise_with_floor(&[1.0, 3.0], 0.01), vec![0.25, 0.75]);
+    }
+
+    #[test]
+    fn a_change_is_where_none_of_the_earlier_fits_explains_the_window() {
+        // m2 samples with a small wiggle, N·m.
+        let m2 = [13_000.0, 6_500.0, 0.3];
+        let speed_rad_s: Vec<f64> = (1..=200).map(|i| 0.1 * i as f64).collect();
+        let torque_nm = speed_rad_s
+            .iter()
+            .enumerate()
+            .map(|(i, &w)| Law::M2.torque(&m2, w, 1.0) + 50.0 * (1.7 * i as f64).sin())
+            .collect();
+        let samples = crate::data::Samples {
+            speed_rad_s,
+            torque_nm,
+            wob_n: None,
+            time_s: None,
+        };
+        let fits = crate::fit::fit_laws(
+            &[Law::M2, Law::M3],
+            &samples,
+            &crate::data::Samples::default(),
+            &FitOptions::default(),
+        )
+        .unwrap();
+        let fitted = |law: Law| fits.iter().find(|f| f.law == law).unwrap();
+        let n = samples.len() as f64;
+        let gap = 0.5 * n * (fitted(Law::M3).rho / fitted(Law::M2).rho).ln();
+        assert!(gap > 0.0, "m2 is the best law here");
+        // The earlier window's m2 lay elsewhere (its static torque 30 % up); its m3, as fitted
+        // then, still explains these samples: no change, the loss is m3's own gap to m2.
+        let mut m2_elsewhere = m2.to_vec();
+        m2_elsewhere[0] *= 1.3;
+        let before = vec![
+            (Law::M2, m2_elsewhere.clone()),
+            (Law::M3, fitted(Law::M3).params_si.clone()),
+        ];
+        let loss = loss_nats(&before, &fits, &samples).unwrap();
+        assert!((loss - gap).abs() < 1e-9, "{loss} nats against {gap}");
+        // Neither explains them: hundreds of nats.
+        let mut m3_elsewhere = fitted(Law::M3).params_si.clone();
+        m3_elsewhere[3] *= 1.3;
+        let before = vec![(Law::M2, m2_elsewhere), (Law::M3, m3_elsewhere)];
+        let loss = loss_nats(&before, &fits, &samples).unwrap();
+        assert!(loss > 100.0 + gap, "{loss} nats");
     }
 
     #[test]
