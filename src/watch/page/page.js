@@ -169,7 +169,9 @@ function renderNow(u) {
 
 function renderLog() {
   const body = $('log').tBodies[0];
-  // Newest first; rows already shown are kept.
+  // Newest first; rows already shown are kept (all redrawn after a reconnection to a shorter
+  // history).
+  if (state.updates.length < body.rows.length) body.replaceChildren();
   const shown = body.rows.length;
   for (const u of state.updates.slice(shown)) {
     const tr = document.createElement('tr');
@@ -190,7 +192,6 @@ function renderLog() {
     if (u.change) tr.className = 'changed';
     body.prepend(tr);
   }
-  if (state.updates.length < shown) body.replaceChildren();
 }
 
 function renderLawSelect() {
