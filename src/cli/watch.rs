@@ -257,12 +257,13 @@ pub(super) fn start_server(address: &str, field: &'static str, source: &std::pat
         &serde_json::json!({ "source": source.display().to_string() }),
     )?;
     let at = server.address();
+    let flag = super::fields::flag_of(field).unwrap_or("--serve");
     print::note(format_args!(
         "note: the live page is at http://{at}/{}",
         if at.ip().is_loopback() {
-            " (this machine only: --serve 0.0.0.0:PORT serves the network)"
+            format!(" (this machine only: {flag} 0.0.0.0:PORT serves the network)")
         } else {
-            ""
+            String::new()
         }
     ));
     Ok(server)

@@ -86,10 +86,10 @@ pub fn page_meta(meta: &super::store::WatchMeta) -> serde_json::Value {
 /// What the watch has said so far, as JSON texts (kept as sent: a late viewer gets the same).
 #[derive(Default)]
 struct History {
-    meta: String,
-    updates: Vec<String>,
-    view: Option<String>,
-    ended: Option<String>,
+    meta: Arc<str>,
+    updates: Vec<Arc<str>>,
+    view: Option<Arc<str>>,
+    ended: Option<Arc<str>>,
 }
 
 impl History {
@@ -98,7 +98,7 @@ impl History {
         format!(
             "{{\"meta\":{},\"updates\":[{}],\"view\":{},\"ended\":{}}}",
             if self.meta.is_empty() { "null" } else { &self.meta },
-            self.updates.join(","),
+            self.updates.iter().map(|u| &**u).collect::<Vec<_>>().join(","),
             self.view.as_deref().unwrap_or("null"),
             self.ended.as_deref().unwrap_or("null")
         )
@@ -162,7 +162,7 @@ impl Server {
             .set_nonblocking(true)
             .map_err(|e| Error::setting(field, e.to_string()))?;
         let hub = Arc::new(Hub::default());
-        hub.history.lock().expect("unpoisoned").meta = meta.to_string();
+        hub.history.lock().expect("unpoisoned").meta = meta.to_string().into();
         let accepting = {
             let hub = hub.clone();
             std::thread::Builder::new()
@@ -181,7 +181,7 @@ impl Server {
     pub fn set_meta(&self, meta: &serde_json::Value) {
         let meta: Arc<str> = meta.to_string().into();
         let mut history = self.hub.history.lock().expect("unpoisoned");
-        history.meta = meta.to_string();
+        history.meta = meta.clone();
         self.hub.send(Event::Meta(meta));
     }
 
@@ -202,9 +202,9 @@ impl Server {
         // Queued under the history's lock: a viewer that connects now finds the window either
         // in its history or in its queue, never in both.
         let mut history = self.hub.history.lock().expect("unpoisoned");
-        history.updates.push(update.to_string());
+        history.updates.push(update.clone());
         if let Some(view) = &view {
-            history.view = Some(view.to_string());
+            history.view = Some(view.clone());
         }
         self.hub.send(Event::Update(update));
         if let Some(view) = view {
@@ -218,7 +218,7 @@ impl Server {
         let ended: Arc<str> = ended.to_string().into();
         {
             let mut history = self.hub.history.lock().expect("unpoisoned");
-            history.ended = Some(ended.to_string());
+            history.ended = Some(ended.clone());
             self.hub.send(Event::End(ended));
         }
         self.stop();
@@ -292,16 +292,16 @@ fn accept(listener: TcpListener, hub: Arc<Hub>) {
                     );
                     continue;
                 }
-                let hub = hub.clone();
+                let shared = hub.clone();
                 let spawned = std::thread::Builder::new()
                     .name("bitrock-viewer".into())
                     .spawn(move || {
-                        let _ = serve_connection(stream, &hub);
-                        hub.connections.fetch_sub(1, Ordering::SeqCst);
+                        let _ = serve_connection(stream, &shared);
+                        shared.connections.fetch_sub(1, Ordering::SeqCst);
                     });
                 if spawned.is_err() {
-                    // No thread for it: the connection is closed as it drops.
-                    continue;
+                    // No thread for it: the connection is closed as it drops, and not counted.
+                    hub.connections.fetch_sub(1, Ordering::SeqCst);
                 }
             }
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(ACCEPT_POLL),

@@ -155,7 +155,6 @@ impl WatchStore {
             let mut conn = Connection::open(temp.path()).map_err(&err)?;
             let tx = conn.transaction().map_err(&err)?;
             tx.execute_batch(SCHEMA).map_err(&err)?;
-            tx.execute_batch(VIEW_TABLE).map_err(&err)?;
             for (key, value) in [
                 ("schema_version", WATCH_SCHEMA_VERSION.to_string()),
                 ("watch", serde_json::to_string(meta).map_err(json_error(&path))?),
@@ -201,7 +200,6 @@ impl WatchStore {
         let err = sql_error(&path);
         let update_json = serde_json::to_string(update).map_err(json_error(&path))?;
         let state_json = serde_json::to_string(carried).map_err(json_error(&path))?;
-        let view_json = view.map(serde_json::to_string).transpose().map_err(json_error(&path))?;
         let tx = self.conn.transaction().map_err(&err)?;
         tx.execute(
             "INSERT INTO windows (window, start_s, end_s, update_json) VALUES (?1, ?2, ?3, ?4)",
@@ -213,7 +211,8 @@ impl WatchStore {
             params![update.window as i64, state_json],
         )
         .map_err(&err)?;
-        if let (Some(view), Some(view_json)) = (view, view_json) {
+        if let Some(view) = view {
+            let view_json = serde_json::to_string(view).map_err(json_error(&path))?;
             tx.execute(
                 "INSERT OR REPLACE INTO view (id, window, view_json) VALUES (1, ?1, ?2)",
                 params![view.window as i64, view_json],

@@ -299,6 +299,23 @@ function legend(g, box, items) {
   }
 }
 
+// The path of the points (xs[k], ys[k]).
+function polyline(g, px, py, xs, ys) {
+  g.beginPath();
+  xs.forEach((x, k) => (k === 0 ? g.moveTo(px(x), py(ys[k])) : g.lineTo(px(x), py(ys[k]))));
+}
+
+// Fills the area between `upper` and `lower` over `xs`.
+function fillBetween(g, px, py, xs, upper, lower, fill, alpha) {
+  polyline(g, px, py, xs, upper);
+  for (let k = xs.length - 1; k >= 0; k--) g.lineTo(px(xs[k]), py(lower[k]));
+  g.closePath();
+  g.fillStyle = fill;
+  g.globalAlpha = alpha;
+  g.fill();
+  g.globalAlpha = 1;
+}
+
 function changeLines(f, updates, y) {
   const { g, px, py } = f;
   g.save();
@@ -331,14 +348,7 @@ function drawAlong(canvas) {
   let below = informative.map(() => 0);
   for (const name of names) {
     const above = informative.map((u, k) => below[k] + (u.laws.find((l) => l.law === name) || { probability: 0 }).probability);
-    g.beginPath();
-    informative.forEach((u, k) => (k === 0 ? g.moveTo(px(u.end_s), py(above[k])) : g.lineTo(px(u.end_s), py(above[k]))));
-    for (let k = informative.length - 1; k >= 0; k--) g.lineTo(px(informative[k].end_s), py(below[k]));
-    g.closePath();
-    g.fillStyle = color(name);
-    g.globalAlpha = 0.8;
-    g.fill();
-    g.globalAlpha = 1;
+    fillBetween(g, px, py, informative.map((u) => u.end_s), above, below, color(name), 0.8);
     below = above;
   }
   changeLines(f, updates, [0, 1]);
@@ -354,20 +364,14 @@ function drawCloud(canvas) {
   const f = frame(canvas, extent(xs), extent(ys), `bit speed, rpm (window ${v.window})`, `torque, ${v.torque_unit}`);
   const { g, px, py, box } = f;
   if (band) {
-    g.beginPath();
-    band.speed_rpm.forEach((s, k) => (k === 0 ? g.moveTo(px(s), py(band.upper[k])) : g.lineTo(px(s), py(band.upper[k]))));
-    for (let k = band.speed_rpm.length - 1; k >= 0; k--) g.lineTo(px(band.speed_rpm[k]), py(band.lower[k]));
-    g.closePath();
-    g.fillStyle = 'rgba(31, 119, 180, 0.18)';
-    g.fill();
+    fillBetween(g, px, py, band.speed_rpm, band.upper, band.lower, 'rgb(31, 119, 180)', 0.18);
   }
   g.fillStyle = 'rgba(60, 60, 60, 0.45)';
   v.speed_rpm.forEach((s, k) => g.fillRect(px(s) - 1, py(v.torque[k]) - 1, 2, 2));
   const items = [];
   if (band) {
     for (const c of band.curves) {
-      g.beginPath();
-      band.speed_rpm.forEach((s, k) => (k === 0 ? g.moveTo(px(s), py(c.torque[k])) : g.lineTo(px(s), py(c.torque[k]))));
+      polyline(g, px, py, band.speed_rpm, c.torque);
       g.strokeStyle = color(c.law);
       g.lineWidth = 1 + 3 * c.probability;
       g.stroke();
@@ -484,16 +488,9 @@ function drawParams(canvas) {
     g.strokeStyle = '#9aa3ad';
     g.lineWidth = 1;
     g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
-    g.beginPath();
-    updates.forEach((u, k) => (k === 0 ? g.moveTo(px(u.end_s), py(hi[k])) : g.lineTo(px(u.end_s), py(hi[k]))));
-    for (let k = updates.length - 1; k >= 0; k--) g.lineTo(px(updates[k].end_s), py(lo[k]));
-    g.closePath();
-    g.fillStyle = color(law);
-    g.globalAlpha = 0.25;
-    g.fill();
-    g.globalAlpha = 1;
-    g.beginPath();
-    updates.forEach((u, k) => (k === 0 ? g.moveTo(px(u.end_s), py(rows[k].mean[j])) : g.lineTo(px(u.end_s), py(rows[k].mean[j]))));
+    const ends = updates.map((u) => u.end_s);
+    fillBetween(g, px, py, ends, hi, lo, color(law), 0.25);
+    polyline(g, px, py, ends, rows.map((r) => r.mean[j]));
     g.strokeStyle = color(law);
     g.lineWidth = 1.5;
     g.stroke();
