@@ -732,7 +732,10 @@ pub fn fit_law_from(
     let bounds = bounds(law, &scales, opts.bounded);
     let starts = select_starts(law, scaled, &bounds, &scales, opts.starts);
     let known = known_starts(law, scaled, &bounds, &scales, known_si);
-    if starts.is_empty() && known.is_empty() {
+    // The grid decides whether the law can describe these samples at all: a known start (an
+    // earlier record's estimate) only speeds the fit, and is not let find a boundary optimum
+    // where no starting point of the law's own would.
+    if starts.is_empty() {
         return Err(refusal(
             law,
             "no starting point of the grid gives a finite misfit on the calibration samples (their torques against speed leave every start's linear parameters undetermined or overflowing)"

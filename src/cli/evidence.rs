@@ -149,6 +149,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         },
         noise: cmd.noise.model(),
         warm: None,
+        separations: true,
     };
     job.sampler.validate()?;
     cmd.check.map(evidence::check_replicates).transpose()?;

@@ -1,10 +1,11 @@
 //! `bitrock watch`: a growing record followed window by window through
 //! [`bitrock::watch::follow`]; a table line per window, or JSON lines.
 
-use super::args::{ColumnArgs, finite_number, parse_laws, set_threads};
+use super::args::{ColumnArgs, FeArgs, LumpedArgs, finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::eval::Backend;
+use bitrock::pipeline::stability::{Structure, criterion};
 use bitrock::watch::serve::{DEFAULT_ADDRESS, Server};
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::wits::WitsItems;
@@ -76,6 +77,14 @@ pub struct WatchCmd {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Structure the advice's stability is judged on: 1dof (the paper's) or fe (the
+    /// finite-element string, its critical bit damping found once before the watch starts).
+    #[arg(long, value_enum, default_value_t = Structure::Lumped)]
+    pub structure: Structure,
+    #[command(flatten)]
+    pub fe: FeArgs,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
     /// Each window's evidence from the laws' boxes, the whole procedure repeated as the paper
     /// would (by default each starts from the window before's posterior: the same evidence,
     /// fewer candidates).
@@ -158,6 +167,14 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         risk: cmd.risk,
         backend: cmd.backend,
         warm_start: !cmd.cold_start,
+        criterion: {
+            if cmd.structure == Structure::Fe {
+                print::note(format_args!(
+                    "note: finding the finite-element string's critical bit damping (its eigenvalues, by bisection)"
+                ));
+            }
+            criterion(cmd.structure, cmd.lumped.lumped(), &cmd.fe.settings())?
+        },
         wits: cmd
             .wits_items
             .as_deref()
@@ -167,7 +184,18 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         ..defaults
     };
     let source = Source::named(&cmd.source, cmd.follow, cmd.replay_speed)?;
-    let mut rows = Rows::open(&source, &settings.data, &settings.wits)?;
+    stop_on_ctrl_c("stopping after the window in progress");
+    let stop = || STOP.load(Ordering::SeqCst);
+    let mut rows = match Rows::open(&source, &settings.data, &settings.wits, &stop) {
+        Err(bitrock::Error::Interrupted) => {
+            print::note(format_args!(
+                "note: stopped before {} sent its first line",
+                cmd.source.display()
+            ));
+            return Ok(ExitCode::from(130));
+        }
+        opened => opened?,
+    };
     let unit = rows.torque_unit();
     let laws = settings.laws.clone();
     let mut out = print::stdout();
@@ -179,8 +207,6 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
     // A standard output that cannot be written (a closed pipe) ends the watch with its own
     // error, which `main` says as for any command.
     let mut failed: Option<std::io::Error> = None;
-    stop_on_ctrl_c("stopping after the window in progress");
-    let stop = || STOP.load(Ordering::SeqCst);
     let server = cmd
         .serve
         .as_deref()

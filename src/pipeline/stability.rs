@@ -167,20 +167,10 @@ impl StabilityJob {
     /// describes, whose critical bit damping is found (a bisection) once the job's cheap checks
     /// passed. Refuses FE settings given for the 1-DOF string.
     pub fn on(mut self, structure: Structure, lumped: Lumped, fe: &DrillStringSettings) -> Result<Self> {
-        if structure == Structure::Lumped
-            && let Some(field) = fe.first_given()
-        {
-            return Err(Error::setting(
-                field,
-                "applies to `structure` fe only (the 1-DOF string has no elements)",
-            ));
-        }
-        lumped.validate()?;
+        check_structure(structure, &lumped, fe)?;
         self.criterion = Criterion::Lumped(lumped);
         self.validate()?;
-        if structure == Structure::Fe {
-            self.criterion = Criterion::Critical(fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms);
-        }
+        self.criterion = criterion(structure, lumped, fe)?;
         Ok(self)
     }
 
@@ -323,4 +313,29 @@ impl StabilityJob {
             pace,
         )
     }
+}
+
+/// Refuses finite-element settings given for the 1-DOF string, and a 1-DOF model that is not
+/// one.
+fn check_structure(structure: Structure, lumped: &Lumped, fe: &DrillStringSettings) -> Result<()> {
+    if structure == Structure::Lumped
+        && let Some(field) = fe.first_given()
+    {
+        return Err(Error::setting(
+            field,
+            "applies to `structure` fe only (the 1-DOF string has no elements)",
+        ));
+    }
+    lumped.validate()
+}
+
+/// What decides stability on `structure`: the 1-DOF model `lumped`, or the critical bit
+/// damping of the finite-element string `fe` describes (a bisection over its eigenvalues:
+/// seconds to minutes, see [`crate::stability::fe`]).
+pub fn criterion(structure: Structure, lumped: Lumped, fe: &DrillStringSettings) -> Result<Criterion> {
+    check_structure(structure, &lumped, fe)?;
+    Ok(match structure {
+        Structure::Lumped => Criterion::Lumped(lumped),
+        Structure::Fe => Criterion::Critical(fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms),
+    })
 }

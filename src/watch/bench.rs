@@ -91,6 +91,7 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
             },
             &settings.data,
             &settings.wits,
+            &|| false,
         )?;
         let started = std::time::Instant::now();
         let mut given = Vec::new();

@@ -37,9 +37,10 @@ pub(super) fn render(watch: &StoredWatch) -> Result<Vec<Rendered>> {
         render_one(
             "watch-risk".into(),
             format!(
-                "P(stick-slip) at each window's operating point under the mixture posterior (the paper's \
-                 1-DOF string), against the risk of {}; below: the top-drive speed and the nearest speed \
-                 below the risk at the same weight on bit.",
+                "P(stick-slip) at each window's operating point under the mixture posterior ({}), \
+                 against the risk of {}; below: the top-drive speed and the nearest speed below the \
+                 risk at the same weight on bit.",
+                super::store::criterion_words(&watch.meta.settings),
                 watch.meta.settings["risk"]
             ),
             size,

@@ -69,7 +69,9 @@ pub struct WatchSettings {
     pub change_nats: f64,
     /// P(unstable) the advice keeps below.
     pub risk: f64,
-    pub structure: Lumped,
+    /// What decides stability for the advice: the 1-DOF model (default) or a finite-element
+    /// string's critical bit damping ([`crate::pipeline::stability::criterion`]).
+    pub criterion: Criterion,
     /// Reference weight on bit of the laws' parameters, N.
     pub w_ref_n: f64,
     pub backend: Backend,
@@ -103,7 +105,7 @@ impl Default for WatchSettings {
             floor: 0.01,
             change_nats: 30.0,
             risk: 0.05,
-            structure: Lumped::default(),
+            criterion: Criterion::Lumped(Lumped::default()),
             w_ref_n: PAPER_W_REF_N,
             backend: Backend::Auto,
             min_samples: 100,
@@ -415,9 +417,19 @@ impl Watch {
             update.uninformative = Some(why);
             return Ok(self.completed(update, &window));
         }
+        let warm = self.warm_start();
+        // From the window before's estimates, the fits need only the grid's best starts
+        // beside them (which still find a minimum that moved away with a change of rock).
+        let fit = match &warm {
+            Some(warm) if !warm.fits.is_empty() => FitOptions {
+                starts: WARM_FIT_STARTS,
+                ..FitOptions::default()
+            },
+            _ => FitOptions::default(),
+        };
         let job = EvidenceJob {
             laws: self.settings.laws.clone(),
-            fit: FitOptions::default(),
+            fit,
             prior: EvidencePrior::Physical {
                 scale: self.settings.prior_scale,
             },
@@ -425,25 +437,19 @@ impl Watch {
             backend: self.settings.backend,
             sampler: EvidenceConfig {
                 seed: self.settings.evidence.seed.wrapping_add(window.index as u64),
+                law_particles: self.particles_by_worth(),
                 ..self.settings.evidence.clone()
             },
             noise: Some(self.settings.evidence.noise),
-            warm: self.warm_start(),
+            warm,
+            separations: false,
         };
-        let analysis = match job.run(&data, observer) {
+        let mut analysis = match window_evidence(&job, &data, observer)? {
             Ok(analysis) => analysis,
-            // What this window's samples cannot give (a fit, a finite likelihood, a sampler
-            // that reaches them from the box) ends the window, not the watch: the next window
-            // may be fine.
-            Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
-                update.uninformative = Some(e.to_string());
+            Err(why) => {
+                update.uninformative = Some(why);
                 return Ok(self.completed(update, &window));
             }
-            Err(crate::Error::InvalidSetting { field, message }) if field == "prior" || field == "max_stages" => {
-                update.uninformative = Some(message);
-                return Ok(self.completed(update, &window));
-            }
-            Err(e) => return Err(e),
         };
         update.candidates_scored = analysis.evidence.candidates_scored;
 
@@ -468,6 +474,31 @@ impl Watch {
         };
         update.change = change;
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
+        if change && job.warm.is_some() {
+            // A change of rock: what the window before carried describes another formation
+            // (its improbable laws kept few particles, its posterior lies elsewhere), so this
+            // window's evidence is found again from the boxes, every law with all its
+            // particles, as the paper would.
+            let cold = EvidenceJob {
+                fit: FitOptions::default(),
+                sampler: EvidenceConfig {
+                    law_particles: Vec::new(),
+                    ..job.sampler.clone()
+                },
+                warm: None,
+                ..job.clone()
+            };
+            match window_evidence(&cold, &data, observer)? {
+                Ok(fresh) => {
+                    update.candidates_scored += fresh.evidence.candidates_scored;
+                    analysis = fresh;
+                }
+                Err(why) => {
+                    update.uninformative = Some(why);
+                    return Ok(self.completed(update, &window));
+                }
+            }
+        }
         if change {
             self.carried.losses.clear();
             self.carried.last_change = Some(window.index);
@@ -542,7 +573,8 @@ impl Watch {
     }
 
     /// Each law's reference from the last informative window's posterior (widened, mixed
-    /// with its box): its evidence samplers start there instead of from the box. `None` with
+    /// with its box): its evidence samplers start there instead of from the box, and its fit
+    /// from that window's estimate as well as from the grid. `None` with
     /// `warm_start` off or before the first informative window.
     fn warm_start(&self) -> Option<WarmStart> {
         let posterior = self.carried.posterior.as_ref().filter(|_| self.settings.warm_start)?;
@@ -561,8 +593,32 @@ impl Watch {
             .collect();
         Some(WarmStart {
             references,
+            fits: self
+                .carried
+                .recent_fits
+                .back()
+                .map(|(_, fits)| fits.clone())
+                .unwrap_or_default(),
             scaled: self.carried.posterior_scaled,
         })
+    }
+
+    /// Each law's particles by what it is worth, with a warm start: as many as the settings
+    /// give a law carried at least as probable as an even share, down to [`LEAST_SHARE`] of
+    /// them for one carried near the floor. Nothing before the first informative window.
+    fn particles_by_worth(&self) -> Vec<(Law, usize)> {
+        let Some(carried) = self.carried.probabilities.as_ref().filter(|_| self.settings.warm_start) else {
+            return Vec::new();
+        };
+        let n = self.settings.evidence.particles as f64;
+        let even = self.settings.laws.len() as f64;
+        self.settings
+            .laws
+            .iter()
+            .zip(carried)
+            .map(|(&law, &p)| (law, (n * (even * p).clamp(LEAST_SHARE, 1.0)).ceil() as usize))
+            .map(|(law, k)| (law, k.max(MIN_ISLAND_PARTICLES).min(n as usize)))
+            .collect()
     }
 
     /// Adds the advice (from the latest posterior), the window's picture and the latency.
@@ -579,7 +635,7 @@ impl Watch {
         }
         let posterior = inputs.as_deref().map(|inputs| view::Posterior {
             inputs,
-            criterion: Criterion::Lumped(self.settings.structure),
+            criterion: self.settings.criterion,
             wob_kn,
             risk: self.settings.risk,
         });
@@ -637,6 +693,14 @@ impl Watch {
                 self.settings.min_samples
             ));
         }
+        // Every law gives a positive torque on bit while the bit turns: a window mostly below
+        // zero is a sign or column mix-up, which a fit would only describe by its bounds.
+        let not_positive = data.calibration.torque_nm.iter().filter(|&&t| t <= 0.0).count();
+        if 2 * not_positive > n {
+            return Some(format!(
+                "{not_positive} of its {n} torques are zero or negative: no law describes them (a torque of the wrong sign, or the wrong column?)"
+            ));
+        }
         let mut speeds = data.calibration.speed_rad_s.clone();
         speeds.sort_by(f64::total_cmp);
         let span_rpm =
@@ -652,7 +716,7 @@ impl Watch {
     /// and the nearest safe speed and weight. The parameters describe the torque at the
     /// window's own weight on bit, so that weight is the maps' W_ref.
     fn advise(&self, inputs: &[LawSamples], omega_rpm: f64, wob_kn: f64) -> Advice {
-        let criterion = Criterion::Lumped(self.settings.structure);
+        let criterion = self.settings.criterion;
         let map = |omega: &[f64], wob: &[f64]| mixture_probability_grid(inputs, omega, wob, criterion, wob_kn * 1000.0);
         let p_unstable = map(&[omega_rpm], &[wob_kn])[0];
         let speeds = view::map_speeds_rpm();
@@ -705,6 +769,15 @@ impl Watch {
         }
     }
 }
+
+/// Grid starts of each law's fit beside the window before's estimate.
+const WARM_FIT_STARTS: usize = 2;
+
+/// Least share of the settings' particles a warm-started law keeps, however improbable.
+const LEAST_SHARE: f64 = 0.25;
+
+/// Fewest particles of an island (what the evidence sampler accepts).
+const MIN_ISLAND_PARTICLES: usize = 20;
 
 /// Posterior samples per law behind the advice and the map.
 const ADVICE_SAMPLES: usize = 200;
@@ -914,10 +987,31 @@ pub fn follow(
     })
 }
 
+/// A window's evidence, or why its samples cannot give one (a fit, a finite likelihood, a
+/// sampler that reaches them from the box): that ends the window, not the watch, since the
+/// next window may be fine.
+fn window_evidence(
+    job: &EvidenceJob,
+    data: &FieldData,
+    observer: &mut dyn Observer,
+) -> Result<std::result::Result<crate::pipeline::evidence::EvidenceAnalysis, String>> {
+    match job.run(data, observer) {
+        Ok(analysis) => Ok(Ok(analysis)),
+        Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
+            Ok(Err(e.to_string()))
+        }
+        Err(crate::Error::InvalidSetting { field, message }) if field == "prior" || field == "max_stages" => {
+            Ok(Err(message))
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// Refuses to go on with a stored watch under other settings: its windows would not be the
 /// ones it would have given.
 fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Path) -> Result<()> {
     let now = store::settings_json(settings);
+    let defaults = store::settings_json(&WatchSettings::default());
     let (Some(stored), Some(now)) = (meta.settings.as_object(), now.as_object()) else {
         return Ok(());
     };
@@ -928,7 +1022,11 @@ fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Pat
             "window_s" if !value.is_null() => &serde_json::json!(meta.window_s),
             "step_s" if !value.is_null() => &serde_json::json!(meta.step_s),
             "window_s" | "step_s" => continue,
-            _ => stored.get(field).unwrap_or(&serde_json::Value::Null),
+            // A setting a watch stored without had the value it has by default then.
+            _ => match stored.get(field) {
+                Some(was) => was,
+                None => &defaults[field],
+            },
         };
         if was != value {
             return Err(crate::Error::setting(

@@ -78,6 +78,7 @@ pub fn page_meta(meta: &super::store::WatchMeta) -> serde_json::Value {
         "rate_hz": meta.rate_hz,
         "torque_unit": meta.torque_unit,
         "risk": meta.settings["risk"],
+        "criterion": super::store::criterion_words(&meta.settings),
         "laws": laws,
         "bitrock_version": meta.bitrock_version,
     })

@@ -141,7 +141,9 @@ pub struct Rows {
 impl Rows {
     /// Opens `source` and reads its first line: a CSV header (the columns and units, by the
     /// rules of `fit`) or a WITS block's start (the items of `wits`, in the units of `opts`).
-    pub fn open(source: &Source, opts: &DataOptions, wits: &WitsItems) -> Result<Self> {
+    /// A feed may take its time to send it: `stop` is asked while it waits, and ends the wait
+    /// with [`Error::Interrupted`].
+    pub fn open(source: &Source, opts: &DataOptions, wits: &WitsItems, stop: &dyn Fn() -> bool) -> Result<Self> {
         let name = source.name();
         let (reader, follow, replay, feed): (Box<dyn BufRead + Send>, bool, _, _) = match source {
             Source::File { path, follow } => (Box::new(BufReader::new(open(path)?)), *follow, None, None),
@@ -167,17 +169,23 @@ impl Rows {
                 (Box::new(BufReader::new(stream)), false, None, Some(feed))
             }
         };
-        Self::from_reader(reader, name, follow, replay, feed, opts, wits)
+        let rows = Self::from_reader(reader, name, opts, wits, stop)?;
+        Ok(Self {
+            follow,
+            replay,
+            feed,
+            ..rows
+        })
     }
 
+    /// The rows of `reader` read to its end (not followed, replayed or a feed), its first line
+    /// read.
     fn from_reader(
         mut reader: Box<dyn BufRead + Send>,
         name: PathBuf,
-        follow: bool,
-        replay: Option<(f64, Option<(Instant, f64)>)>,
-        feed: Option<Feed>,
         opts: &DataOptions,
         wits: &WitsItems,
+        stop: &dyn Fn() -> bool,
     ) -> Result<Self> {
         let mut first = String::new();
         let mut line = 0;
@@ -187,8 +195,13 @@ impl Rows {
             let read = loop {
                 match reader.read_line(&mut first) {
                     Ok(n) => break n,
-                    // A feed's first line may take its time.
-                    Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => continue,
+                    // A feed's first line may take its time; the watch may stop meanwhile.
+                    Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+                        if stop() {
+                            return Err(Error::Interrupted);
+                        }
+                        continue;
+                    }
                     Err(source) => {
                         return Err(Error::Read {
                             path: name.clone(),
@@ -232,9 +245,9 @@ impl Rows {
             reader,
             format,
             name,
-            follow,
-            feed,
-            replay,
+            follow: false,
+            feed: None,
+            replay: None,
             line,
             partial: String::new(),
             skipped: 0,
@@ -521,11 +534,9 @@ mod tests {
         Rows::from_reader(
             reader,
             PathBuf::from("feed.csv"),
-            false,
-            None,
-            None,
             &DataOptions::default(),
             &WitsItems::default(),
+            &|| false,
         )
     }
 
@@ -585,6 +596,7 @@ mod tests {
             },
             &DataOptions::default(),
             &WitsItems::default(),
+            &|| false,
         )
         .unwrap();
         rows.stall_after = Duration::from_millis(300);

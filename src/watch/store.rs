@@ -15,6 +15,7 @@ use super::{Carried, Update, WatchSettings};
 use crate::error::{Error, Result};
 use crate::files::DirLock;
 use crate::run::store::{json_error, sql_error};
+use crate::stability::map::Criterion;
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -95,7 +96,34 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
         "min_speed_span_rpm": settings.min_speed_span_rpm,
         "wits_items": settings.wits,
         "warm_start": settings.warm_start,
+        "criterion": criterion_json(&settings.criterion),
     })
+}
+
+/// What decides the advice's stability, as JSON: the 1-DOF model's constants, or the
+/// finite-element string's critical bit damping.
+fn criterion_json(criterion: &Criterion) -> serde_json::Value {
+    match criterion {
+        Criterion::Lumped(l) => serde_json::json!({
+            "structure": "1dof",
+            "inertia_kg_m2": l.inertia_kg_m2,
+            "omega_n_rad_s": l.omega_n_rad_s,
+            "damping_ratio": l.damping_ratio,
+        }),
+        Criterion::Critical(c) => serde_json::json!({
+            "structure": "fe",
+            "critical_bit_damping_nms": c,
+        }),
+    }
+}
+
+/// In words, for captions: "the paper's 1-DOF string" or "the finite-element string (c_b* = …)",
+/// from a stored watch's settings (a watch stored without them used the 1-DOF string).
+pub fn criterion_words(settings: &serde_json::Value) -> String {
+    match settings["criterion"]["critical_bit_damping_nms"].as_f64() {
+        Some(c) => format!("the finite-element string, critical bit damping {c:.1} N·m·s/rad"),
+        None => "the paper's 1-DOF string".into(),
+    }
 }
 
 /// A watch store open for writing, its directory locked.

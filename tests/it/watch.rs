@@ -107,7 +107,7 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
 
     // The paper's way, every window's evidence from the boxes: the same law ranked first in
     // every window, at more candidates (each window above starts from the one before's
-    // posterior; measured: about half the candidates).
+    // posterior, its improbable law with fewer particles; measured: 0.42 of the candidates).
     let cold = watch(&[&WINDOWS[..], &[record.to_str().unwrap(), "--cold-start"]].concat());
     assert_eq!(cold.len(), whole.len());
     for (warm, cold) in whole.iter().zip(&cold) {
@@ -119,7 +119,7 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     }
     let candidates = |v: &[serde_json::Value]| v.iter().map(|u| u["candidates_scored"].as_u64().unwrap()).sum::<u64>();
     assert!(
-        candidates(&whole) * 3 < candidates(&cold) * 2,
+        candidates(&whole) * 2 < candidates(&cold),
         "warm {} against cold {}",
         candidates(&whole),
         candidates(&cold)
@@ -450,7 +450,7 @@ fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
         "{stdout}"
     );
 
-    // A window no law can be fitted to (torques of the wrong sign) or whose torques are all
+    // A window of torques of the wrong sign (which no law describes) or whose torques are all
     // zero says so; the windows around it are watched as before.
     let mut text = String::from("time_s,bit_speed_rpm,torque_knm\n");
     for k in 0..600 {
@@ -477,7 +477,7 @@ fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
     assert_eq!(updates.len(), 3);
     assert!(updates[0]["uninformative"].is_null() && updates[0]["most_probable"] == "m2");
     let why = updates[1]["uninformative"].as_str().unwrap();
-    assert!(why.contains("least-squares fit"), "{why}");
+    assert!(why.contains("200 of its 200 torques are zero or negative"), "{why}");
     assert!(
         updates[2]["uninformative"].as_str().unwrap().contains("is zero"),
         "{}",

@@ -68,6 +68,7 @@ pub(crate) fn evidence(
             Some(_) => named(py, "noise", kwarg(options, "noise")?)?,
         },
         warm: None,
+        separations: true,
     };
     let replicates: Option<usize> = kwarg(options, "check")?;
     if let Some(k) = replicates {

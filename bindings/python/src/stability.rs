@@ -2,11 +2,37 @@
 
 use crate::errors::*;
 use bitrock::error::Error;
+use bitrock::pipeline::stability::Structure;
+use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped};
 use bitrock::units::TorqueUnit;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
+
+/// The structure stability is judged on, from `structure` ("1dof" or "fe"), the 1-DOF model's
+/// `inertia_kg_m2`, `omega_n_rad_s`, `damping_ratio` and the finite-element string's `fe_file`,
+/// `dp_elements`, `bha_elements`, `alpha`, `beta` (as the command line's flags).
+pub(crate) fn structure_options(
+    py: Python<'_>,
+    options: &Bound<'_, PyDict>,
+) -> PyResult<(Structure, Lumped, DrillStringSettings)> {
+    let lumped_defaults = Lumped::default();
+    let lumped = Lumped {
+        inertia_kg_m2: kwarg(options, "inertia_kg_m2")?.unwrap_or(lumped_defaults.inertia_kg_m2),
+        omega_n_rad_s: kwarg(options, "omega_n_rad_s")?.unwrap_or(lumped_defaults.omega_n_rad_s),
+        damping_ratio: kwarg(options, "damping_ratio")?.unwrap_or(lumped_defaults.damping_ratio),
+    };
+    let fe = DrillStringSettings {
+        fe_file: kwarg(options, "fe_file")?,
+        dp_elements: kwarg(options, "dp_elements")?,
+        bha_elements: kwarg(options, "bha_elements")?,
+        alpha: kwarg(options, "alpha")?,
+        beta: kwarg(options, "beta")?,
+    };
+    let structure: Structure = named(py, "structure", kwarg(options, "structure")?)?.unwrap_or_default();
+    Ok((structure, lumped, fe))
+}
 
 /// Stability maps over (Ω, W) for the run in `run`, or for `law` at `params` (torques in
 /// `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
@@ -20,8 +46,8 @@ pub(crate) fn stability<'py>(
     options: &Bound<'py, PyDict>,
     note: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use bitrock::pipeline::stability::{self as job, MapSource, StabilityJob, Structure};
-    use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped, map};
+    use bitrock::pipeline::stability::{self as job, MapSource, StabilityJob};
+    use bitrock::stability::map;
     let posterior: Option<String> = kwarg(options, "posterior")?;
     let in_memory: Option<Py<crate::run::Run>> = kwarg(options, "run_in_memory")?;
     let source = match (run, law, params) {
@@ -69,20 +95,7 @@ pub(crate) fn stability<'py>(
             },
         }
     };
-    let lumped_defaults = Lumped::default();
-    let lumped = Lumped {
-        inertia_kg_m2: kwarg(options, "inertia_kg_m2")?.unwrap_or(lumped_defaults.inertia_kg_m2),
-        omega_n_rad_s: kwarg(options, "omega_n_rad_s")?.unwrap_or(lumped_defaults.omega_n_rad_s),
-        damping_ratio: kwarg(options, "damping_ratio")?.unwrap_or(lumped_defaults.damping_ratio),
-    };
-    let fe = DrillStringSettings {
-        fe_file: kwarg(options, "fe_file")?,
-        dp_elements: kwarg(options, "dp_elements")?,
-        bha_elements: kwarg(options, "bha_elements")?,
-        alpha: kwarg(options, "alpha")?,
-        beta: kwarg(options, "beta")?,
-    };
-    let structure: Structure = named(py, "structure", kwarg(options, "structure")?)?.unwrap_or_default();
+    let (structure, lumped, fe) = structure_options(py, options)?;
     let job = StabilityJob {
         source,
         omega_rpm: axis("omega_rpm", job::DEFAULT_OMEGA_RPM)?,

@@ -29,7 +29,14 @@ pub(crate) fn watch(
     let defaults = WatchSettings::default();
     let follow: bool = kwarg(options, "follow")?.unwrap_or(false);
     let replay_speed: Option<f64> = kwarg(options, "replay_speed")?;
+    let (structure, lumped, fe) = crate::stability::structure_options(py, options)?;
+    // The finite-element string's critical bit damping is a bisection: off Python's lock.
+    let criterion = check(
+        py,
+        py.detach(|| bitrock::pipeline::stability::criterion(structure, lumped, &fe)),
+    )?;
     let settings = WatchSettings {
+        criterion,
         laws: laws(py, kwarg(options, "laws")?)?.unwrap_or_else(|| defaults.laws.clone()),
         data: data_options(py, options)?,
         window_s: kwarg(options, "window_s")?,
@@ -61,20 +68,6 @@ pub(crate) fn watch(
     // storing the window in progress, then it is raised again.
     let raised: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
     let ended = py.detach(|| {
-        let mut rows = Rows::open(&source, &settings.data, &settings.wits)?;
-        let server = serve
-            .as_deref()
-            .map(|address| {
-                let meta = serde_json::json!({ "source": rows.name().display().to_string() });
-                bitrock::watch::serve::Server::start(address, "serve", &meta)
-            })
-            .transpose()?;
-        if let Some(server) = &server {
-            bitrock::abc::Observer::note(
-                &mut observer,
-                format!("the live page is at http://{}/", server.address()),
-            );
-        }
         let stop = || {
             raised.lock().unwrap_or_else(|e| e.into_inner()).is_some()
                 || Python::attach(|py| {
@@ -88,6 +81,20 @@ pub(crate) fn watch(
                     })
                 })
         };
+        let mut rows = Rows::open(&source, &settings.data, &settings.wits, &stop)?;
+        let server = serve
+            .as_deref()
+            .map(|address| {
+                let meta = serde_json::json!({ "source": rows.name().display().to_string() });
+                bitrock::watch::serve::Server::start(address, "serve", &meta)
+            })
+            .transpose()?;
+        if let Some(server) = &server {
+            bitrock::abc::Observer::note(
+                &mut observer,
+                format!("the live page is at http://{}/", server.address()),
+            );
+        }
         let options = FollowOptions {
             dir: out.as_deref(),
             resume,

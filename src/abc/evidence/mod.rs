@@ -25,9 +25,11 @@
 //! L^(Δβ); the particles are resampled (systematic, random offset) and moved by random-walk
 //! Metropolis sweeps with the covariance of the weighted particles, scaled by (2.38²/d) and
 //! adapted to the acceptance rate, for as many sweeps as make a particle that never moved
-//! unlikely (at most [`EvidenceConfig::max_sweeps`]). Candidates are made on the host (f32
-//! parameters, as the kernels score them) and scored in one call per sweep across every law
-//! and island by either backend.
+//! unlikely (at most [`EvidenceConfig::max_sweeps`]). The step that reaches β = 1 is not
+//! followed by resampling or sweeps: its weighted particles (an effective size of at least
+//! that share) are the posterior. Candidates are made on the host (f32 parameters, as the
+//! kernels score them) and scored in one call per sweep across every law and island by either
+//! backend.
 //!
 //! **Monte-Carlo error**: each law runs [`EvidenceConfig::islands`] independent samplers; Z is
 //! the mean of their estimates (each unbiased) and its error the standard error of that mean,
@@ -62,48 +64,80 @@ pub const EVIDENCE_BLOCK: u32 = 0x4576_6964;
 /// posterior (a change of formation).
 pub const DEFENSIVE_SHARE: f64 = 0.1;
 
-/// Where a law's samplers start instead of its prior box: a Gaussian (a previous posterior's
-/// mean and covariance, widened), mixed with the box ([`DEFENSIVE_SHARE`]). The tempered path
-/// runs from this reference q to π·L (targets q^(1−β)·(π·L)^β), so ln Z stays the evidence
-/// under the prior π: the reference changes the cost, not what is estimated.
+/// Where a law's samplers start instead of its prior box: a kernel density of a previous
+/// posterior's particles (a Gaussian kernel on each, shaped by their covariance and
+/// [`KERNEL_WIDTH`] wide), mixed with the box ([`DEFENSIVE_SHARE`]). The tempered path runs from
+/// this reference q to π·L (targets q^(1−β)·(π·L)^β), so ln Z stays the evidence under the
+/// prior π: the reference changes the cost, not what is estimated. A density of the particles
+/// follows a curved or ridge-shaped posterior, where one Gaussian would leave whole stretches
+/// of it in its tails.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Reference {
     pub law: Law,
-    /// Mean (SI parameters) and covariance (row-major, d × d).
-    pub mean: Vec<f64>,
+    /// The particles (SI parameters) and their weights (summing to 1).
+    pub particles: Vec<Vec<f64>>,
+    pub weights: Vec<f64>,
+    /// Their weighted covariance (row-major, d × d).
     pub covariance: Vec<f64>,
 }
 
-/// How much wider (in standard deviations) a reference is than the posterior it comes from.
-pub const REFERENCE_WIDENING: f64 = 2.0;
+/// The kernels' standard deviations, in the particles' own: wide enough to cover what a
+/// window more or less moves the posterior, narrow enough to keep its shape.
+pub const KERNEL_WIDTH: f64 = 0.8;
+
+/// Most particles a reference keeps (the heaviest): its density costs a term per particle at
+/// every candidate.
+const REFERENCE_PARTICLES: usize = 400;
 
 impl Reference {
-    /// The reference of `law` from weighted posterior particles (parameters, weight), its
-    /// covariance widened by [`REFERENCE_WIDENING`]²; `None` with fewer than 2 × d + 1
-    /// particles or no weight.
+    /// The reference of `law` from weighted posterior particles (parameters, weight): at most
+    /// [`REFERENCE_PARTICLES`] of them, the heaviest; `None` with fewer than 2 × d + 1
+    /// weighted particles.
     pub fn from_posterior(law: Law, particles: &[(&[f64], f64)]) -> Option<Self> {
         let d = law.n_params();
-        let total: f64 = particles.iter().map(|(_, w)| w).sum();
-        if particles.len() <= 2 * d || !(total > 0.0 && total.is_finite()) {
+        let mut kept: Vec<(&[f64], f64)> = particles
+            .iter()
+            .filter(|(p, w)| *w > 0.0 && w.is_finite() && p.len() == d)
+            .copied()
+            .collect();
+        if kept.len() <= 2 * d {
             return None;
         }
+        // Heaviest first, ties in the given order: the same reference on every run.
+        kept.sort_by(|a, b| b.1.total_cmp(&a.1));
+        kept.truncate(REFERENCE_PARTICLES);
+        let total: f64 = kept.iter().map(|(_, w)| w).sum();
         let mut mean = vec![0.0; d];
-        for (p, w) in particles {
+        for (p, w) in &kept {
             for j in 0..d {
                 mean[j] += w * p[j] / total;
             }
         }
         let mut covariance = vec![0.0; d * d];
-        for (p, w) in particles {
+        for (p, w) in &kept {
             for j in 0..d {
                 for k in 0..d {
                     covariance[j * d + k] += w * (p[j] - mean[j]) * (p[k] - mean[k]) / total;
                 }
             }
         }
-        let widen = REFERENCE_WIDENING * REFERENCE_WIDENING;
-        covariance.iter_mut().for_each(|c| *c *= widen);
-        Some(Self { law, mean, covariance })
+        Some(Self {
+            law,
+            particles: kept.iter().map(|(p, _)| p.to_vec()).collect(),
+            weights: kept.iter().map(|(_, w)| w / total).collect(),
+            covariance,
+        })
+    }
+
+    /// The same reference moved by `by` (SI, one value per parameter): where the posterior has
+    /// moved with the law's least-squares estimate.
+    pub fn shifted(mut self, by: &[f64]) -> Self {
+        for p in &mut self.particles {
+            for (v, b) in p.iter_mut().zip(by) {
+                *v += b;
+            }
+        }
+        self
     }
 }
 
@@ -123,48 +157,105 @@ fn floored_cholesky(mut cov: DMatrix<f64>, lower: &[f32], upper: &[f32]) -> DMat
     }
 }
 
-/// A reference made ready for one box: its Cholesky factor, log-normaliser and the box's
-/// log-volume.
+/// A reference made ready for one box: its kernels' Cholesky factor, the centres whitened by
+/// it, the log-normaliser and the box's log-volume.
 #[derive(Clone, Debug)]
-struct Gaussian {
-    mean: Vec<f64>,
+struct Kernels {
+    dims: usize,
+    centres: Vec<[f64; MAX_PARAMS]>,
+    /// L⁻¹·c for each centre c: a kernel's exponent is then one difference of whitened points.
+    whitened: Vec<[f64; MAX_PARAMS]>,
+    ln_weights: Vec<f64>,
+    /// Running sums of the weights, for drawing a kernel.
+    cumulative: Vec<f64>,
     factor: DMatrix<f64>,
-    /// ln of the Gaussian's normaliser, (2π)^(−d/2)·|Σ|^(−1/2).
+    /// ln of one kernel's normaliser, (2π)^(−d/2)·|h²Σ|^(−1/2).
     ln_norm: f64,
     /// ln of the box's volume (the prior's density is its negative inside).
     ln_volume: f64,
 }
 
-impl Gaussian {
+impl Kernels {
     fn new(reference: &Reference, lower: &[f32], upper: &[f32]) -> Self {
         let d = lower.len();
-        let factor = floored_cholesky(DMatrix::from_row_slice(d, d, &reference.covariance), lower, upper);
+        let width = KERNEL_WIDTH * KERNEL_WIDTH;
+        let covariance = DMatrix::from_row_slice(d, d, &reference.covariance) * width;
+        let factor = floored_cholesky(covariance, lower, upper);
         let ln_det: f64 = (0..d).map(|j| factor[(j, j)].ln()).sum();
+        let centres: Vec<[f64; MAX_PARAMS]> = reference
+            .particles
+            .iter()
+            .map(|p| {
+                let mut c = [0.0; MAX_PARAMS];
+                c[..d].copy_from_slice(&p[..d]);
+                c
+            })
+            .collect();
+        let whitened = centres.iter().map(|c| whiten(&factor, &c[..d])).collect();
+        let mut total = 0.0;
+        let cumulative = reference
+            .weights
+            .iter()
+            .map(|w| {
+                total += w;
+                total
+            })
+            .collect();
         Self {
-            mean: reference.mean.clone(),
+            dims: d,
+            centres,
+            whitened,
+            ln_weights: reference.weights.iter().map(|w| w.ln()).collect(),
+            cumulative,
             factor,
             ln_norm: -0.5 * d as f64 * (2.0 * std::f64::consts::PI).ln() - ln_det,
             ln_volume: (0..d).map(|j| (f64::from(upper[j]) - f64::from(lower[j])).ln()).sum(),
         }
     }
 
-    /// ln q(θ) of the mixture (1 − s)·N(mean, Σ) + s·U(box), `inside` whether θ is in the box.
-    fn ln_q(&self, theta: &[f32], inside: bool) -> f64 {
-        let d = self.mean.len();
-        let x = DVector::from_iterator(d, (0..d).map(|j| f64::from(theta[j]) - self.mean[j]));
-        let z = self
-            .factor
-            .solve_lower_triangular(&x)
-            .unwrap_or_else(|| DVector::from_element(d, f64::INFINITY));
-        let gaussian = (1.0 - DEFENSIVE_SHARE).ln() + self.ln_norm - 0.5 * z.norm_squared();
-        if inside {
-            let uniform = DEFENSIVE_SHARE.ln() - self.ln_volume;
-            let m = gaussian.max(uniform);
-            m + ((gaussian - m).exp() + (uniform - m).exp()).ln()
-        } else {
-            gaussian
+    /// A draw from the kernels (not the box): a centre by its weight, plus its kernel's noise.
+    fn draw(&self, stream: &mut Stream, out: &mut [f32]) {
+        let total = self.cumulative.last().copied().unwrap_or(1.0);
+        let u = stream.uniform() * total;
+        let i = self.cumulative.partition_point(|&c| c <= u).min(self.centres.len() - 1);
+        let mut z = [0.0f64; MAX_PARAMS];
+        stream.normals(self.dims, &mut z);
+        for (j, (v, c)) in out.iter_mut().zip(&self.centres[i]).take(self.dims).enumerate() {
+            let step: f64 = (0..=j).map(|k| self.factor[(j, k)] * z[k]).sum();
+            *v = (c + step) as f32;
         }
     }
+
+    /// ln q(θ) of the mixture (1 − s)·Σ w_i·N(c_i, h²Σ) + s·U(box), `inside` whether θ is in
+    /// the box.
+    fn ln_q(&self, theta: &[f32], inside: bool) -> f64 {
+        let d = self.dims;
+        let x: Vec<f64> = theta[..d].iter().map(|&v| f64::from(v)).collect();
+        let v = whiten(&self.factor, &x);
+        let exponents = self.whitened.iter().zip(&self.ln_weights).map(|(u, lw)| {
+            let squared: f64 = (0..d).map(|j| (v[j] - u[j]).powi(2)).sum();
+            lw - 0.5 * squared
+        });
+        let kernels =
+            (1.0 - DEFENSIVE_SHARE).ln() + self.ln_norm + log_mean_exp(exponents) + (self.whitened.len() as f64).ln();
+        if inside {
+            let uniform = DEFENSIVE_SHARE.ln() - self.ln_volume;
+            let m = kernels.max(uniform);
+            m + ((kernels - m).exp() + (uniform - m).exp()).ln()
+        } else {
+            kernels
+        }
+    }
+}
+
+/// L⁻¹·x for the lower-triangular `factor` L (forward substitution).
+fn whiten(factor: &DMatrix<f64>, x: &[f64]) -> [f64; MAX_PARAMS] {
+    let mut z = [0.0; MAX_PARAMS];
+    for j in 0..x.len() {
+        let known: f64 = (0..j).map(|k| factor[(j, k)] * z[k]).sum();
+        z[j] = (x[j] - known) / factor[(j, j)];
+    }
+    z
 }
 
 /// The tempered samplers' settings.
@@ -186,6 +277,11 @@ pub struct EvidenceConfig {
     /// How the residuals are modelled.
     #[serde(default)]
     pub noise: NoiseModel,
+    /// Particles of each island of these laws instead of `particles`: fewer where a law is
+    /// known to be worth less (a watch's improbable laws), its ln Z then less precise (its
+    /// error says by how much).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub law_particles: Vec<(Law, usize)>,
 }
 
 impl Default for EvidenceConfig {
@@ -198,18 +294,29 @@ impl Default for EvidenceConfig {
             max_sweeps: 30,
             max_stages: 500,
             noise: NoiseModel::Iid,
+            law_particles: Vec::new(),
         }
     }
 }
 
 impl EvidenceConfig {
+    /// Particles of each island of `law`.
+    pub fn particles_of(&self, law: Law) -> usize {
+        self.law_particles
+            .iter()
+            .find(|(l, _)| *l == law)
+            .map_or(self.particles, |(_, n)| *n)
+    }
+
     /// Refuses, naming the setting, values that give no estimate.
     pub fn validate(&self) -> Result<()> {
-        if self.particles < 20 {
-            return Err(Error::setting(
-                "particles",
-                format!("an island needs at least 20 particles, got {}", self.particles),
-            ));
+        for n in std::iter::once(self.particles).chain(self.law_particles.iter().map(|(_, n)| *n)) {
+            if n < 20 {
+                return Err(Error::setting(
+                    "particles",
+                    format!("an island needs at least 20 particles, got {n}"),
+                ));
+            }
         }
         if self.islands < 2 {
             return Err(Error::setting(
@@ -469,7 +576,7 @@ enum Phase {
     Prior,
     /// Its proposals of a Metropolis sweep to be scored.
     Sweep,
-    /// Nothing: β reached 1 and the last sweeps are done.
+    /// Nothing: β reached 1, and the particles are weighted by the last step.
     Done,
 }
 
@@ -482,6 +589,8 @@ struct Island {
     upper: [f32; MAX_PARAMS],
     theta: Vec<[f32; MAX_PARAMS]>,
     loglik: Vec<f64>,
+    /// The particles' normalised weights once β reached 1 (empty before).
+    weights: Vec<f64>,
     beta: f64,
     ln_z: f64,
     stages: usize,
@@ -501,7 +610,7 @@ struct Island {
     /// The warm start's reference, where the sampler starts from one: `loglik` is then
     /// ln L + ln π − ln q (ln L alone from the box, where the last two cancel) and `ln_q`
     /// each particle's ln q.
-    reference: Option<Gaussian>,
+    reference: Option<Kernels>,
     ln_q: Vec<f64>,
     proposal_ln_q: Vec<f64>,
 }
@@ -531,10 +640,10 @@ impl Island {
             stream,
             next: 0,
         };
-        let reference = reference.map(|r| Gaussian::new(r, lower, upper));
-        let mut z = [0.0f64; MAX_PARAMS];
-        let mut inside = Vec::with_capacity(config.particles);
-        let proposals: Vec<[f32; MAX_PARAMS]> = (0..config.particles)
+        let reference = reference.map(|r| Kernels::new(r, lower, upper));
+        let particles = config.particles_of(law);
+        let mut inside = Vec::with_capacity(particles);
+        let proposals: Vec<[f32; MAX_PARAMS]> = (0..particles)
             .map(|_| {
                 let mut p = [0.0f32; MAX_PARAMS];
                 let from_box = match &reference {
@@ -549,15 +658,9 @@ impl Island {
                         }
                     }
                     inside.push(true);
-                } else if let Some(g) = &reference {
-                    stream.normals(dims, &mut z);
-                    let mut within = true;
-                    for j in 0..dims {
-                        let step: f64 = (0..=j).map(|k| g.factor[(j, k)] * z[k]).sum();
-                        p[j] = (g.mean[j] + step) as f32;
-                        within &= p[j] >= lo[j] && p[j] <= hi[j];
-                    }
-                    inside.push(within);
+                } else if let Some(kernels) = &reference {
+                    kernels.draw(&mut stream, &mut p);
+                    inside.push((0..dims).all(|j| p[j] >= lo[j] && p[j] <= hi[j]));
                 }
                 p
             })
@@ -578,6 +681,7 @@ impl Island {
             upper: hi,
             theta: Vec::new(),
             loglik: Vec::new(),
+            weights: Vec::new(),
             beta: 0.0,
             ln_z: 0.0,
             stages: 0,
@@ -681,11 +785,6 @@ impl Island {
                     self.propose();
                     return Ok(());
                 }
-                if self.beta >= 1.0 {
-                    self.phase = Phase::Done;
-                    self.proposals.clear();
-                    return Ok(());
-                }
             }
         }
         self.temper(config)
@@ -745,6 +844,18 @@ impl Island {
         self.ln_z += log_mean_exp(increments.iter().copied());
         let max = increments.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let weights: Vec<f64> = increments.iter().map(|&v| (v - max).exp()).collect();
+        self.stages += 1;
+        if reaches_one {
+            // The weighted particles are the posterior: their effective size is at least
+            // `ess_share` of the island's, and resampling and moving them would only spend
+            // candidates on what the weights already say.
+            let total: f64 = weights.iter().sum();
+            self.weights = weights.iter().map(|w| w / total).collect();
+            self.beta = 1.0;
+            self.phase = Phase::Done;
+            self.proposals.clear();
+            return Ok(());
+        }
         self.factor = self.proposal_factor(&weights);
         let picks = systematic_from(&weights, self.theta.len(), self.stream.uniform());
         self.theta = picks.iter().map(|&i| self.theta[i]).collect();
@@ -752,8 +863,7 @@ impl Island {
         if self.reference.is_some() {
             self.ln_q = picks.iter().map(|&i| self.ln_q[i]).collect();
         }
-        self.beta = if reaches_one { 1.0 } else { self.beta + step };
-        self.stages += 1;
+        self.beta += step;
         self.sweeps_done = 0;
         self.sweeps_wanted = 1;
         self.propose();
@@ -844,7 +954,7 @@ pub fn run_from(
             let stream = (slot * config.islands + island) as u32;
             let reference = references
                 .iter()
-                .find(|r| r.law == bx.law && r.mean.len() == bx.law.n_params());
+                .find(|r| r.law == bx.law && r.covariance.len() == bx.law.n_params().pow(2));
             islands.push(Island::new(
                 bx.law, slot, &bx.lower, &bx.upper, config, stream, reference,
             ));
@@ -908,10 +1018,9 @@ pub fn run_from(
         let ln_z_error = (variance / k).sqrt().max(spread / k.sqrt());
         let mut posterior = Vec::new();
         for (island, share) in own.iter().zip(&ratios) {
-            let weight = share / (k * island.theta.len() as f64);
-            for p in &island.theta {
+            for (p, w) in island.theta.iter().zip(&island.weights).filter(|(_, w)| **w > 0.0) {
                 let params = p[..island.dims].iter().map(|&v| f64::from(v)).collect();
-                posterior.push((params, weight));
+                posterior.push((params, share / k * w));
             }
         }
         let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
@@ -1077,11 +1186,8 @@ mod tests {
         // evidence within its error, the first at a fraction of the candidates.
         let particles: Vec<(&[f64], f64)> = m4.posterior.iter().map(|(p, w)| (p.as_slice(), *w)).collect();
         let near = Reference::from_posterior(Law::M4, &particles).unwrap();
-        let mut moved = near.clone();
-        for j in 0..d {
-            let sd = (moved.covariance[j * d + j]).sqrt() / REFERENCE_WIDENING;
-            moved.mean[j] += 4.0 * sd;
-        }
+        let by: Vec<f64> = (0..d).map(|j| 4.0 * near.covariance[j * d + j].sqrt()).collect();
+        let moved = near.clone().shifted(&by);
         for (reference, cheaper) in [(near, true), (moved, false)] {
             let warm = run_from(
                 &evaluator,

@@ -57,7 +57,7 @@ impl EvidencePrior {
 }
 
 /// An evidence job: what to compare, over which prior, on which backend.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct EvidenceJob {
     pub laws: Vec<Law>,
     pub fit: FitOptions,
@@ -72,15 +72,35 @@ pub struct EvidenceJob {
     pub noise: Option<NoiseModel>,
     /// Where the laws' samplers start instead of their boxes (a watch's previous window).
     pub warm: Option<WarmStart>,
+    /// Whether to find [`EvidenceAnalysis::separations`] (a least-squares fit of every law to
+    /// every other's curve, one after the other): a watch's windows do without.
+    pub separations: bool,
+}
+
+impl Default for EvidenceJob {
+    fn default() -> Self {
+        Self {
+            laws: Vec::new(),
+            fit: FitOptions::default(),
+            prior: EvidencePrior::default(),
+            prior_file: None,
+            backend: Backend::default(),
+            sampler: EvidenceConfig::default(),
+            noise: None,
+            warm: None,
+            separations: true,
+        }
+    }
 }
 
 /// A warm start of an evidence job: the references of its laws (each re-centred on the
-/// job's least-squares estimate of its law, its covariance kept), and whether their torque
-/// parameters are for the torque scaled by WOB / W_ref (they start only the samplers of the
-/// same scaling).
+/// job's least-squares estimate of its law, its covariance kept), the least-squares estimates
+/// the job's fits start from besides their grid (SI, by law), and whether both are for the
+/// torque scaled by WOB / W_ref (they start only the fits and samplers of the same scaling).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct WarmStart {
     pub references: Vec<evidence::Reference>,
+    pub fits: Vec<(Law, Vec<f64>)>,
     pub scaled: bool,
 }
 
@@ -129,7 +149,11 @@ impl EvidenceJob {
         let mut analyses = Vec::new();
         let mut said: Vec<String> = Vec::new();
         for fit_options in self.scalings(data) {
-            let fits = fit::fit_record(&self.laws, data, &fit_options)?;
+            let known = match &self.warm {
+                Some(warm) if warm.scaled == fit_options.w_ref_n.is_some() => warm.fits.as_slice(),
+                _ => &[],
+            };
+            let fits = fit::fit_record_from(&self.laws, data, &fit_options, known)?;
             let unit = data.torque_unit.newton_metres();
             let prior = match self.prior {
                 EvidencePrior::Physical { scale } => Prior::physical(
@@ -141,7 +165,6 @@ impl EvidenceJob {
                 )?,
                 EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
             };
-            let separations = separation::separations(&fits, &data.calibration, &fit_options)?;
             let residual_lag1: Vec<f64> = fits
                 .iter()
                 .map(|fit| separation::residual_lag1(fit, &data.calibration, &fit_options))
@@ -161,7 +184,6 @@ impl EvidenceJob {
             })?;
             for &model in &models {
                 let mut analysis = self.sample(basis.clone(), evaluator.as_ref(), model, observer)?;
-                analysis.separations = separations.clone();
                 analysis.residual_lag1 = residual_lag1.clone();
                 analyses.push(analysis);
             }
@@ -176,6 +198,9 @@ impl EvidenceJob {
             .expect("at least one noise model");
         let mut analysis = analyses.swap_remove(chosen);
         analysis.noise_models = noise_models;
+        if self.separations {
+            analysis.separations = separation::separations(&analysis.fits, &data.calibration, &analysis.fit)?;
+        }
         Ok(analysis)
     }
 
@@ -236,20 +261,25 @@ impl EvidenceJob {
             noise,
             ..self.sampler.clone()
         };
-        // Each reference centred on this record's least-squares estimate (the likelihood's
-        // peak): the window before gives its shape, this one where it lies.
+        // Each reference moved as its law's least-squares estimate moved from the window
+        // before to this record: the window before gives the posterior's shape, the estimates
+        // how far it went.
         let references: Vec<evidence::Reference> = match &self.warm {
             Some(warm) if warm.scaled == fit.w_ref_n.is_some() => warm
                 .references
                 .iter()
-                .map(|r| match fits.iter().find(|f| f.law == r.law) {
-                    Some(f) if f.params_si.len() == r.mean.len() && f.params_si.iter().all(|v| v.is_finite()) => {
-                        evidence::Reference {
-                            mean: f.params_si.clone(),
-                            ..r.clone()
+                .map(|r| {
+                    let now = fits.iter().find(|f| f.law == r.law).map(|f| &f.params_si);
+                    let before = warm.fits.iter().find(|(law, _)| *law == r.law).map(|(_, p)| p);
+                    match (now, before) {
+                        (Some(now), Some(before))
+                            if now.len() == before.len() && now.iter().chain(before).all(|v| v.is_finite()) =>
+                        {
+                            let by: Vec<f64> = now.iter().zip(before).map(|(a, b)| a - b).collect();
+                            r.clone().shifted(&by)
                         }
+                        _ => r.clone(),
                     }
-                    _ => r.clone(),
                 })
                 .collect(),
             _ => Vec::new(),

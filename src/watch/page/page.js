@@ -112,7 +112,10 @@ function schedule() {
 // ---- the header and the tables ----
 
 function render() {
-  if (state.meta) $('source').textContent = state.meta.source;
+  if (state.meta) {
+    $('source').textContent = state.meta.source;
+    $('criterion').textContent = `Under the mixture posterior, on ${state.meta.criterion}.`;
+  }
   renderLawSelect();
   const u = state.updates[state.updates.length - 1];
   if (u) renderNow(u);

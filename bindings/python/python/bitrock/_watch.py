@@ -59,9 +59,9 @@ class Watch:
         self._given: list[WatchUpdate] = []
         self.ended: dict[str, Any] | None = None
 
+        # After close() the window in progress is still given (and stored): the watch sees the
+        # stop between rows and ends there, with its `ended` record.
         def on_update(line: str) -> None:
-            if self._stop.is_set():
-                raise KeyboardInterrupt("the watch was stopped")
             self._updates.put(WatchUpdate(json.loads(line)))
 
         def follow() -> None:
@@ -193,6 +193,15 @@ def watch(
     wits_items: str | None = None,
     cold_start: bool = False,
     serve: str | None = None,
+    structure: str | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    fe_file: str | os.PathLike[str] | None = None,
+    dp_elements: int | None = None,
+    bha_elements: int | None = None,
+    alpha: float | None = None,
+    beta: float | None = None,
 ) -> Watch:
     """Follows a record window by window as ``bitrock watch`` does (docs/watch.md): ``source``
     a CSV path (read whole; ``follow=True`` as it grows; ``replay_speed`` at that many times the
@@ -203,12 +212,17 @@ def watch(
     DataFrame of those given. ``out`` is a watch directory where every window is stored as it
     finishes (``bitrock report`` draws it); ``resume=True`` goes on with the watch stored there
     after its last window. ``serve="127.0.0.1:8080"`` serves the live page of the watch there
-    while it runs (its address said through the notes). Keyword arguments are the command's
-    flags without dashes."""
+    while it runs (its address said through the notes). ``structure`` decides the advice's
+    stability as in :func:`stability`: ``"1dof"`` (the paper's, with ``inertia_kg_m2``,
+    ``omega_n_rad_s``, ``damping_ratio``) or ``"fe"`` (the finite-element string, the paper's or
+    ``fe_file``'s, with its overrides; its critical bit damping is found once, before the first
+    window). Keyword arguments are the command's flags without dashes."""
     from . import _law_names
 
     options = {k: v for k, v in locals().items() if k not in ("source", "_law_names")}
     options["laws"] = _law_names(laws)
     if out is not None:
         options["out"] = os.fspath(out)
+    if fe_file is not None:
+        options["fe_file"] = os.fspath(fe_file)
     return Watch(os.fspath(source), options)
