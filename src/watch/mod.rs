@@ -437,7 +437,6 @@ impl Watch {
             backend: self.settings.backend,
             sampler: EvidenceConfig {
                 seed: self.settings.evidence.seed.wrapping_add(window.index as u64),
-                law_particles: self.particles_by_worth(),
                 ..self.settings.evidence.clone()
             },
             noise: Some(self.settings.evidence.noise),
@@ -600,25 +599,14 @@ impl Watch {
                 .map(|(_, fits)| fits.clone())
                 .unwrap_or_default(),
             scaled: self.carried.posterior_scaled,
+            worth: self
+                .settings
+                .laws
+                .iter()
+                .copied()
+                .zip(self.carried.probabilities.iter().flatten().copied())
+                .collect(),
         })
-    }
-
-    /// Each law's particles by what it is worth, with a warm start: as many as the settings
-    /// give a law carried at least as probable as an even share, down to [`LEAST_SHARE`] of
-    /// them for one carried near the floor. Nothing before the first informative window.
-    fn particles_by_worth(&self) -> Vec<(Law, usize)> {
-        let Some(carried) = self.carried.probabilities.as_ref().filter(|_| self.settings.warm_start) else {
-            return Vec::new();
-        };
-        let n = self.settings.evidence.particles as f64;
-        let even = self.settings.laws.len() as f64;
-        self.settings
-            .laws
-            .iter()
-            .zip(carried)
-            .map(|(&law, &p)| (law, (n * (even * p).clamp(LEAST_SHARE, 1.0)).ceil() as usize))
-            .map(|(law, k)| (law, k.max(MIN_ISLAND_PARTICLES).min(n as usize)))
-            .collect()
     }
 
     /// Adds the advice (from the latest posterior), the window's picture and the latency.
@@ -772,12 +760,6 @@ impl Watch {
 
 /// Grid starts of each law's fit beside the window before's estimate.
 const WARM_FIT_STARTS: usize = 2;
-
-/// Least share of the settings' particles a warm-started law keeps, however improbable.
-const LEAST_SHARE: f64 = 0.25;
-
-/// Fewest particles of an island (what the evidence sampler accepts).
-const MIN_ISLAND_PARTICLES: usize = 20;
 
 /// Posterior samples per law behind the advice and the map.
 const ADVICE_SAMPLES: usize = 200;

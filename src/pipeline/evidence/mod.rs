@@ -102,7 +102,47 @@ pub struct WarmStart {
     pub references: Vec<evidence::Reference>,
     pub fits: Vec<(Law, Vec<f64>)>,
     pub scaled: bool,
+    /// What each law was worth before (a watch's carried probabilities, by law): with them,
+    /// each law's samplers get particles by what it is worth ([`particles_by_worth`]).
+    pub worth: Vec<(Law, f64)>,
 }
+
+/// Least share of the sampler's particles a warm-started law keeps, however little it is
+/// worth.
+pub const LEAST_SHARE: f64 = 0.25;
+
+/// Each law's particles by what it is worth: as many as `particles` for a law worth at least
+/// an even share, down to [`LEAST_SHARE`] of them. A law is worth the larger of what it was
+/// worth before (`before`) and the probability its least-squares fit gives it on these
+/// samples (the Bayesian information criterion over `fits`, n samples): a law that was
+/// improbable but fits the new samples best gets all its particles, since fewer particles
+/// under-estimate ln Z (the tempered estimator errs downwards) exactly where it should rise.
+pub fn particles_by_worth(particles: usize, before: &[(Law, f64)], fits: &[LawFit], n: usize) -> Vec<(Law, usize)> {
+    let bic: Vec<f64> = fits
+        .iter()
+        .map(|f| -0.5 * n as f64 * f.rho.ln() - 0.5 * f.law.n_params() as f64 * (n as f64).ln())
+        .collect();
+    let top = bic
+        .iter()
+        .copied()
+        .filter(|b| b.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max);
+    let total: f64 = bic.iter().filter(|b| b.is_finite()).map(|b| (b - top).exp()).sum();
+    let even = fits.len() as f64;
+    fits.iter()
+        .zip(&bic)
+        .map(|(f, b)| {
+            let here = if b.is_finite() { (b - top).exp() / total } else { 0.0 };
+            let was = before.iter().find(|(l, _)| *l == f.law).map_or(1.0, |(_, p)| *p);
+            let share = (even * here.max(was)).clamp(LEAST_SHARE, 1.0);
+            let count = (particles as f64 * share).ceil() as usize;
+            (f.law, count.clamp(MIN_ISLAND_PARTICLES.min(particles), particles))
+        })
+        .collect()
+}
+
+/// Fewest particles of an island (what the evidence sampler accepts).
+const MIN_ISLAND_PARTICLES: usize = 20;
 
 /// What the samplers of one torque scaling start from: the least-squares fits, the boxes, and
 /// the fit options they were made with.
@@ -256,9 +296,19 @@ impl EvidenceJob {
         observer: &mut dyn Observer,
     ) -> Result<EvidenceAnalysis> {
         let Basis { fits, prior, fit } = basis;
+        let law_particles = match &self.warm {
+            Some(warm) if !warm.worth.is_empty() => particles_by_worth(
+                self.sampler.particles,
+                &warm.worth,
+                &fits,
+                evaluator.problem().data_len(),
+            ),
+            _ => self.sampler.law_particles.clone(),
+        };
         let sampler = EvidenceConfig {
             seed: evaluator.problem().seed,
             noise,
+            law_particles,
             ..self.sampler.clone()
         };
         // Each reference moved as its law's least-squares estimate moved from the window
@@ -294,5 +344,39 @@ impl EvidenceJob {
             residual_lag1: Vec::new(),
             noise_models: Vec::new(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fit(law: Law, rho: f64) -> LawFit {
+        let mut fit: LawFit = serde_json::from_value(serde_json::json!({
+            "law": law, "params_si": vec![1.0; law.n_params()], "std_errors_si": [], "rho": 1.0,
+            "validation_rho": null, "condition_number": 1.0, "correlations": [], "warnings": [], "starts": 1,
+        }))
+        .unwrap();
+        fit.rho = rho;
+        fit
+    }
+
+    #[test]
+    fn a_law_improbable_before_that_fits_best_here_keeps_all_its_particles() {
+        // 500 samples: m1 fits best here by about 24 nats, m2 was the carried favourite, m3 is
+        // worth little on both counts.
+        let fits = [fit(Law::M1, 0.010), fit(Law::M2, 0.011), fit(Law::M3, 0.02)];
+        let before = [(Law::M1, 0.01), (Law::M2, 0.98), (Law::M3, 0.01)];
+        assert_eq!(
+            particles_by_worth(300, &before, &fits, 500),
+            vec![(Law::M1, 300), (Law::M2, 300), (Law::M3, 75)]
+        );
+        // A law the fits cannot score (no finite ρ) keeps what it was worth before; none goes
+        // below the sampler's least island.
+        let fits = [fit(Law::M1, f64::NAN), fit(Law::M2, 0.011)];
+        assert_eq!(
+            particles_by_worth(40, &[(Law::M1, 0.3), (Law::M2, 0.7)], &fits, 500),
+            vec![(Law::M1, 24), (Law::M2, 40)]
+        );
     }
 }
