@@ -373,7 +373,10 @@ per_shape! {
 fn the_check_does_not_depend_on_the_backend(shape: Shape) {
     require_gpu();
     let dir = tempfile::tempdir().unwrap();
-    let run = m2_beats_m4(dir.path());
+    // m2_beats_m4's record, its run stopped at ε_min = 1.5e-3: a software driver (CI's) scores
+    // the tiled shape slowly, and the agreement needs no deep tolerance.
+    let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
+    let run = run_dir(dir.path(), data, &[Law::M2, Law::M4], 200, 1.5e-3, None);
     let mut checks = Vec::new();
     for backend in ["cpu", "gpu"] {
         let out = bin()
@@ -401,7 +404,8 @@ fn the_check_does_not_depend_on_the_backend(shape: Shape) {
         }
     }
     // Two replicates per law: a software driver (CI's) scores the tiled shape slowly.
-    eprintln!("{shape}: {compared} of 4 replicates had no candidate near ε on either backend");
+    let populations: Vec<usize> = cpu.rows.iter().flat_map(|r| r.replicates.iter().map(|a| a.populations)).collect();
+    eprintln!("{shape}: {compared} of 4 replicates had no candidate near ε on either backend; populations {populations:?}");
     assert!(compared >= 2, "only {compared} of 4 replicates comparable");
 }
 }
