@@ -83,6 +83,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("damping_ratio", "--damping-ratio"),
     // The finite-element drill string.
     ("structure", "--structure"),
+    // A stored watch's stability criterion: the structure and its constants.
+    ("criterion", "--structure"),
     ("fe_file", "--fe-file"),
     ("dp_elements", "--dp-elements"),
     ("bha_elements", "--bha-elements"),

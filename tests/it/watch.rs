@@ -651,3 +651,90 @@ fn bitrock_serve_follows_a_watch_directory_while_its_watch_writes_it() {
     assert_eq!(code, 0);
     assert!(serve.wait().unwrap().success(), "Ctrl-C stops the server cleanly");
 }
+
+#[test]
+fn the_advice_on_the_finite_element_string_uses_its_critical_bit_damping_and_a_resume_keeps_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let (code, fe, stderr) = outcome(bin().args(["fe", "--json"]));
+    assert_eq!(code, 0, "{stderr}");
+    let fe: serde_json::Value = serde_json::from_str(&fe).unwrap();
+    let windows = ["--window-s", "30", "--step-s", "30", "--particles", "60"];
+    let one_dof = watch(&[&windows[..], &[record.to_str().unwrap()]].concat());
+    let out = dir.path().join("fe-watch");
+    let on_fe = watch(
+        &[
+            &windows[..],
+            &[
+                record.to_str().unwrap(),
+                "--structure",
+                "fe",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+        ]
+        .concat(),
+    );
+    // The structure changes the advice only: the same windows, evidence and probabilities.
+    assert_eq!(one_dof.len(), on_fe.len());
+    for (a, b) in one_dof.iter().zip(&on_fe) {
+        assert_eq!(a["laws"], b["laws"]);
+        assert!(b["advice"]["p_unstable"].as_f64().unwrap().is_finite(), "{b}");
+    }
+    // The watch stores the string's critical bit damping, the number `bitrock fe` gives.
+    let (_, stored) = stored(&out);
+    assert_eq!(
+        stored.meta.settings["criterion"],
+        serde_json::json!({"structure": "fe", "critical_bit_damping_nms": fe["critical_bit_damping_nms"]})
+    );
+    // A resume on another structure is refused, naming the flag; FE settings on the 1-DOF
+    // string are refused before any work.
+    let (code, _, stderr) = outcome(watch_command().args(windows).args([
+        record.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--resume",
+    ]));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--structure") && stderr.contains("critical_bit_damping_nms"),
+        "{stderr}"
+    );
+    let (code, _, stderr) = outcome(watch_command().args([record.to_str().unwrap(), "--dp-elements", "4"]));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--dp-elements") && stderr.contains("--structure fe"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_feed_that_never_sends_its_first_line_is_stopped_by_ctrl_c() {
+    // A listener that accepts and then says nothing.
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        let held = listener.accept();
+        std::thread::sleep(std::time::Duration::from_secs(60));
+        drop(held);
+    });
+    let child = watch_command()
+        .arg(format!("tcp://127.0.0.1:{port}"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let (code, _, _) = outcome(std::process::Command::new("kill").args(["-INT", &child.id().to_string()]));
+    assert_eq!(code, 0);
+    let started = std::time::Instant::now();
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(started.elapsed() < std::time::Duration::from_secs(5));
+    assert!(
+        stderr.contains("stopped before") && stderr.contains("first line"),
+        "{stderr}"
+    );
+    assert!(output.stdout.is_empty());
+}
