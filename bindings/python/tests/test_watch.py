@@ -104,6 +104,19 @@ def test_refusals_name_their_argument(well, tmp_path) -> None:
         list(bitrock.watch(tmp_path / "missing.csv"))
 
 
+def test_the_advice_on_the_finite_element_string(cli, well, tmp_path) -> None:
+    settings = dict(laws="m2", window_s=20, step_s=20, backend="cpu", particles=60)
+    on_fe = list(bitrock.watch(well, structure="fe", out=tmp_path / "fe", **settings))
+    one_dof = list(bitrock.watch(well, **settings))
+    assert [u.document["laws"] for u in on_fe] == [u.document["laws"] for u in one_dof]
+    critical = json.loads(run_cli(cli, "fe", "--json").stdout)["critical_bit_damping_nms"]
+    criterion = bitrock.read_watch(tmp_path / "fe").meta["settings"]["criterion"]
+    assert criterion == {"structure": "fe", "critical_bit_damping_nms": critical}
+    with pytest.raises(bitrock.InputError) as caught:
+        list(bitrock.watch(well, dp_elements=4, **settings))
+    assert caught.value.argument == "dp_elements"
+
+
 def test_the_live_page_serves_the_windows_as_they_come(well) -> None:
     import socket
     import urllib.request
