@@ -4,6 +4,7 @@
 use bitrock::Law;
 use bitrock::data::{self, DataOptions, FieldData, SplitRule};
 use bitrock::fit::FitOptions;
+use bitrock::pipeline::stability::Structure;
 use bitrock::stability::fe::DrillStringSettings;
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -207,6 +208,28 @@ pub struct FeArgs {
     /// Stiffness-proportional Rayleigh damping β, s.
     #[arg(long, value_parser = finite_number, value_name = "BETA")]
     pub beta: Option<f64>,
+}
+
+/// The drill string stability is judged on: the 1-DOF model or the finite-element string,
+/// with the settings of each.
+#[derive(Debug, Args)]
+pub struct StructureArgs {
+    /// Structure: 1dof (the paper's) or fe (the finite-element string, its critical bit
+    /// damping found by bisection before any map).
+    #[arg(long, value_enum, default_value_t = Structure::Lumped)]
+    pub structure: Structure,
+    #[command(flatten)]
+    pub fe: FeArgs,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
+}
+
+impl StructureArgs {
+    /// What decides stability on the structure these flags describe (the finite-element
+    /// string's bisection runs here).
+    pub fn criterion(&self) -> bitrock::Result<bitrock::stability::map::Criterion> {
+        bitrock::pipeline::stability::criterion(self.structure, self.lumped.lumped(), &self.fe.settings())
+    }
 }
 
 /// The equivalent 1-DOF string.

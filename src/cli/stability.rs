@@ -1,8 +1,8 @@
 //! `bitrock stability`: maps over (Ω, W) from an ABC run directory, a posterior's particles or
 //! one law's parameters: deterministic, percentile and mixture boundaries, and the probability grids.
 
+use super::args::StructureArgs;
 use super::args::finite_number;
-use super::args::{FeArgs, LumpedArgs};
 use bitrock::Error;
 use bitrock::eval::Backend;
 use bitrock::laws::PAPER_W_REF_N;
@@ -37,13 +37,8 @@ pub struct StabilityCmd {
     /// Unit of the torque-valued parameters in --params.
     #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
     pub torque_unit: TorqueUnit,
-    /// Structure: 1dof (the paper's) or fe (the finite-element string).
-    #[arg(long, value_enum, default_value_t = Structure::Lumped)]
-    pub structure: Structure,
     #[command(flatten)]
-    pub fe: FeArgs,
-    #[command(flatten)]
-    pub lumped: LumpedArgs,
+    pub string: StructureArgs,
     /// Reference weight on bit W_ref of the law's parameters, kN.
     #[arg(long, value_parser = finite_number, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub w_ref_kn: f64,
@@ -88,13 +83,17 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         source: map_source(cmd)?,
         omega_rpm: omega,
         wob_kn: wob,
-        criterion: Criterion::Lumped(cmd.lumped.lumped()),
+        criterion: Criterion::Lumped(cmd.string.lumped.lumped()),
         w_ref_n: cmd.w_ref_kn * 1000.0,
         percentile: cmd.percentile / 100.0,
         samples: cmd.samples,
         backend: cmd.backend,
     }
-    .on(cmd.structure, cmd.lumped.lumped(), &cmd.fe.settings())?;
+    .on(
+        cmd.string.structure,
+        cmd.string.lumped.lumped(),
+        &cmd.string.fe.settings(),
+    )?;
     let maps = job.run(&mut |line| super::print::note(line))?;
     if let (MapSource::Run(dir), Some(why)) = (&job.source, &maps.early_end) {
         super::print::note(format_args!("note: {}: {why}", dir.display()));
@@ -132,7 +131,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let mut out = super::print::stdout();
     if cmd.json {
         let v = json!({
-            "structure": match cmd.structure { Structure::Lumped => "1dof", Structure::Fe => "fe" },
+            "structure": match cmd.string.structure { Structure::Lumped => "1dof", Structure::Fe => "fe" },
             "critical_bit_damping_nms": c,
             "percentile": cmd.percentile,
             "omega_rpm": omega,
@@ -142,7 +141,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         });
         super::print::json(&mut out, v)?;
     } else {
-        print_table(&mut out, cmd.structure, c, omega, &columns)?;
+        print_table(&mut out, cmd.string.structure, c, omega, &columns)?;
     }
     Ok(ExitCode::SUCCESS)
 }

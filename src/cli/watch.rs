@@ -1,11 +1,11 @@
 //! `bitrock watch`: a growing record followed window by window through
 //! [`bitrock::watch::follow`]; a table line per window, or JSON lines.
 
-use super::args::{ColumnArgs, FeArgs, LumpedArgs, finite_number, parse_laws, set_threads};
+use super::args::{ColumnArgs, StructureArgs, finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::eval::Backend;
-use bitrock::pipeline::stability::{Structure, criterion};
+use bitrock::pipeline::stability::Structure;
 use bitrock::watch::serve::{DEFAULT_ADDRESS, Server};
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::wits::WitsItems;
@@ -77,14 +77,9 @@ pub struct WatchCmd {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
-    /// Structure the advice's stability is judged on: 1dof (the paper's) or fe (the
-    /// finite-element string, its critical bit damping found once before the watch starts).
-    #[arg(long, value_enum, default_value_t = Structure::Lumped)]
-    pub structure: Structure,
+    /// The drill string the advice's stability is judged on.
     #[command(flatten)]
-    pub fe: FeArgs,
-    #[command(flatten)]
-    pub lumped: LumpedArgs,
+    pub string: StructureArgs,
     /// Each window's evidence from the laws' boxes, the whole procedure repeated as the paper
     /// would (by default each starts from the window before's posterior: the same evidence,
     /// fewer candidates).
@@ -168,12 +163,12 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         backend: cmd.backend,
         warm_start: !cmd.cold_start,
         criterion: {
-            if cmd.structure == Structure::Fe {
+            if cmd.string.structure == Structure::Fe {
                 print::note(format_args!(
                     "note: finding the finite-element string's critical bit damping (its eigenvalues, by bisection)"
                 ));
             }
-            criterion(cmd.structure, cmd.lumped.lumped(), &cmd.fe.settings())?
+            cmd.string.criterion()?
         },
         wits: cmd
             .wits_items
