@@ -4,9 +4,12 @@
 //! rotary speed and weight on bit that avoid stick-slip now.
 //!
 //! Per window: the samples below the minimum speed are dropped (as `fit` drops them); a
-//! window with too few samples, or whose bit turned at one speed (no law can be told from
-//! another there), is reported as such and updates nothing. Otherwise the evidence of each law
-//! on the window ([`crate::pipeline::evidence`], physical boxes), then
+//! window with too few samples, whose bit turned at one speed (no law can be told from
+//! another there) or whose torques are mostly not positive, is reported as such and updates
+//! nothing. Otherwise the evidence of each law on the window ([`crate::pipeline::evidence`],
+//! physical boxes; warm-started from the window before: its posterior's kernel density as
+//! the samplers' reference, its estimates as the fits' starts, particles by each law's worth,
+//! and a window that declares a change computed again from the boxes), then
 //!
 //! - **law probabilities** P_t(m) ∝ P_{t−1}(m)^λ · Z_t(m) (λ the forgetting factor: the
 //!   previous windows' evidence counts λ, λ², … times), no law below the floor;
@@ -18,7 +21,8 @@
 //!   change can be declared two window lengths later;
 //! - **advice**: the probability of unstable steady rotation at the window's operating point
 //!   (mean top-drive speed, or mean bit speed without that column; mean weight on bit) under
-//!   the mixture posterior (the paper's 1-DOF string), and the nearest top-drive speed at this
+//!   the mixture posterior (the paper's 1-DOF string, or a finite-element string's critical
+//!   bit damping), and the nearest top-drive speed at this
 //!   weight on bit, and the nearest weight on bit at this speed, below the risk threshold.
 
 pub mod bench;
@@ -571,10 +575,11 @@ impl Watch {
         Ok(self.completed(update, &window))
     }
 
-    /// Each law's reference from the last informative window's posterior (widened, mixed
-    /// with its box): its evidence samplers start there instead of from the box, and its fit
-    /// from that window's estimate as well as from the grid. `None` with
-    /// `warm_start` off or before the first informative window.
+    /// Each law's reference from the last informative window's posterior (a kernel density
+    /// of its particles, mixed with its box): its evidence samplers start there instead of
+    /// from the box, its fit from that window's estimate as well as from the grid, and its
+    /// particles go by its carried probability. `None` with `warm_start` off or before the
+    /// first informative window.
     fn warm_start(&self) -> Option<WarmStart> {
         let posterior = self.carried.posterior.as_ref().filter(|_| self.settings.warm_start)?;
         let references = self
