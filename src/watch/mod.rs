@@ -86,8 +86,8 @@ pub struct WatchSettings {
     /// The item codes of a source that sends WITS blocks.
     pub wits: wits::WitsItems,
     /// Each window's evidence samplers start from the last informative window's posterior
-    /// (widened, mixed with the box) instead of the boxes: the same evidence, fewer
-    /// candidates while the rock stays the same.
+    /// (its kernel density, mixed with the box) instead of the boxes, each law with particles
+    /// by its worth: the same evidence, fewer candidates while the rock stays the same.
     pub warm_start: bool,
 }
 
