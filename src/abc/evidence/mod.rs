@@ -87,7 +87,7 @@ pub const KERNEL_WIDTH: f64 = 0.8;
 
 /// Most particles a reference keeps (the heaviest): its density costs a term per particle at
 /// every candidate.
-const REFERENCE_PARTICLES: usize = 400;
+pub const REFERENCE_PARTICLES: usize = 400;
 
 impl Reference {
     /// The reference of `law` from weighted posterior particles (parameters, weight): at most
