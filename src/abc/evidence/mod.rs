@@ -230,8 +230,11 @@ impl Kernels {
     /// the box.
     fn ln_q(&self, theta: &[f32], inside: bool) -> f64 {
         let d = self.dims;
-        let x: Vec<f64> = theta[..d].iter().map(|&v| f64::from(v)).collect();
-        let v = whiten(&self.factor, &x);
+        let mut x = [0.0f64; MAX_PARAMS];
+        for (x, &t) in x.iter_mut().zip(&theta[..d]) {
+            *x = f64::from(t);
+        }
+        let v = whiten(&self.factor, &x[..d]);
         let exponents = self.whitened.iter().zip(&self.ln_weights).map(|(u, lw)| {
             let squared: f64 = (0..d).map(|j| (v[j] - u[j]).powi(2)).sum();
             lw - 0.5 * squared
@@ -248,7 +251,8 @@ impl Kernels {
     }
 }
 
-/// L⁻¹·x for the lower-triangular `factor` L (forward substitution).
+/// L⁻¹·x for the lower-triangular `factor` L (forward substitution), on the stack: nalgebra's
+/// `solve_lower_triangular` allocates, and this runs for every candidate of a warm start.
 fn whiten(factor: &DMatrix<f64>, x: &[f64]) -> [f64; MAX_PARAMS] {
     let mut z = [0.0; MAX_PARAMS];
     for j in 0..x.len() {
@@ -257,6 +261,9 @@ fn whiten(factor: &DMatrix<f64>, x: &[f64]) -> [f64; MAX_PARAMS] {
     }
     z
 }
+
+/// Fewest particles an island accepts: fewer give no usable effective sample size.
+pub const MIN_ISLAND_PARTICLES: usize = 20;
 
 /// The tempered samplers' settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -311,10 +318,10 @@ impl EvidenceConfig {
     /// Refuses, naming the setting, values that give no estimate.
     pub fn validate(&self) -> Result<()> {
         for n in std::iter::once(self.particles).chain(self.law_particles.iter().map(|(_, n)| *n)) {
-            if n < 20 {
+            if n < MIN_ISLAND_PARTICLES {
                 return Err(Error::setting(
                     "particles",
-                    format!("an island needs at least 20 particles, got {n}"),
+                    format!("an island needs at least {MIN_ISLAND_PARTICLES} particles, got {n}"),
                 ));
             }
         }

@@ -93,8 +93,8 @@ impl Default for EvidenceJob {
     }
 }
 
-/// A warm start of an evidence job: the references of its laws (each re-centred on the
-/// job's least-squares estimate of its law, its covariance kept), the least-squares estimates
+/// A warm start of an evidence job: the references of its laws (each moved as its law's
+/// least-squares estimate moved from `fits` to the job's own), the least-squares estimates
 /// the job's fits start from besides their grid (SI, by law), and whether both are for the
 /// torque scaled by WOB / W_ref (they start only the fits and samplers of the same scaling).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -136,13 +136,13 @@ pub fn particles_by_worth(particles: usize, before: &[(Law, f64)], fits: &[LawFi
             let was = before.iter().find(|(l, _)| *l == f.law).map_or(1.0, |(_, p)| *p);
             let share = (even * here.max(was)).clamp(LEAST_SHARE, 1.0);
             let count = (particles as f64 * share).ceil() as usize;
-            (f.law, count.clamp(MIN_ISLAND_PARTICLES.min(particles), particles))
+            (
+                f.law,
+                count.clamp(evidence::MIN_ISLAND_PARTICLES.min(particles), particles),
+            )
         })
         .collect()
 }
-
-/// Fewest particles of an island (what the evidence sampler accepts).
-const MIN_ISLAND_PARTICLES: usize = 20;
 
 /// What the samplers of one torque scaling start from: the least-squares fits, the boxes, and
 /// the fit options they were made with.
