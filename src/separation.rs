@@ -22,6 +22,7 @@ use crate::data::Samples;
 use crate::error::Result;
 use crate::fit::{FitOptions, LawFit, fit_law_from};
 use crate::laws::Law;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Expected gaps below this many nats leave a pair to the priors.
@@ -109,20 +110,29 @@ pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) ->
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| calibration.speed_rad_s[a].total_cmp(&calibration.speed_rad_s[b]));
     let (w_min, w_max) = (calibration.speed_rad_s[order[0]], calibration.speed_rad_s[order[n - 1]]);
-    let mut out = Vec::new();
-    for truth in fits {
-        let s_truth = truth.rho * sum_y2;
-        let sigma = (s_truth / n as f64).sqrt();
-        let curve = Samples {
-            torque_nm: calibration
-                .speed_rad_s
-                .iter()
-                .zip(&r)
-                .map(|(&w, &r)| truth.law.torque(&truth.params_si, w, r))
-                .collect(),
-            ..calibration.clone()
-        };
-        for rival in fits.iter().filter(|f| f.law != truth.law) {
+    // The pairs are independent fits: they run in parallel, and come back in pair order.
+    let pairs: Vec<(&LawFit, &LawFit)> = fits
+        .iter()
+        .flat_map(|truth| {
+            fits.iter()
+                .filter(|f| f.law != truth.law)
+                .map(move |rival| (truth, rival))
+        })
+        .collect();
+    let separated: Vec<Result<Separation>> = pairs
+        .par_iter()
+        .map(|&(truth, rival)| {
+            let s_truth = truth.rho * sum_y2;
+            let sigma = (s_truth / n as f64).sqrt();
+            let curve = Samples {
+                torque_nm: calibration
+                    .speed_rad_s
+                    .iter()
+                    .zip(&r)
+                    .map(|(&w, &r)| truth.law.torque(&truth.params_si, w, r))
+                    .collect(),
+                ..calibration.clone()
+            };
             let fitted = fit_law_from(
                 rival.law,
                 &curve,
@@ -174,7 +184,7 @@ pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) ->
                     .find(|&w| w > 0.0 && apart(w));
                 above = (1..=300).map(|i| w_max * (1.0 + i as f64 / 100.0)).find(|&w| apart(w));
             }
-            out.push(Separation {
+            Ok(Separation {
                 truth: truth.law,
                 rival: rival.law,
                 gap_nats,
@@ -182,10 +192,10 @@ pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) ->
                 bands,
                 parts_below_rad_s: below,
                 parts_above_rad_s: above,
-            });
-        }
-    }
-    Ok(out)
+            })
+        })
+        .collect();
+    separated.into_iter().collect()
 }
 
 #[cfg(test)]
