@@ -52,6 +52,7 @@ use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::Candidate;
 use crate::rng::{box_muller, key_of_seed, open_unit, philox4x32_10, uniform_between};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -235,12 +236,24 @@ impl Kernels {
             *x = f64::from(t);
         }
         let v = whiten(&self.factor, &x[..d]);
-        let exponents = self.whitened.iter().zip(&self.ln_weights).map(|(u, lw)| {
-            let squared: f64 = (0..d).map(|j| (v[j] - u[j]).powi(2)).sum();
-            lw - 0.5 * squared
-        });
-        let kernels =
-            (1.0 - DEFENSIVE_SHARE).ln() + self.ln_norm + log_mean_exp(exponents) + (self.whitened.len() as f64).ln();
+        let exponents: Vec<f64> = self
+            .whitened
+            .iter()
+            .zip(&self.ln_weights)
+            .map(|(u, lw)| {
+                let squared: f64 = (0..d).map(|j| (v[j] - u[j]).powi(2)).sum();
+                lw - 0.5 * squared
+            })
+            .collect();
+        let max = exponents.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        // Kernels more than NEGLIGIBLE_NATS below the nearest add less than an ulp of the
+        // sum (which the nearest's 1 starts): their exponentials, most of the cost, are skipped.
+        let sum: f64 = exponents
+            .iter()
+            .filter(|&&e| e - max > -NEGLIGIBLE_NATS)
+            .map(|&e| (e - max).exp())
+            .sum();
+        let kernels = (1.0 - DEFENSIVE_SHARE).ln() + self.ln_norm + max + sum.ln();
         if inside {
             let uniform = DEFENSIVE_SHARE.ln() - self.ln_volume;
             let m = kernels.max(uniform);
@@ -250,6 +263,10 @@ impl Kernels {
         }
     }
 }
+
+/// How far below the largest a kernel's log-density term may lie and still be added: e^−50
+/// ≈ 2·10⁻²², so even 400 such terms move the sum (at least 1) by less than an ulp.
+const NEGLIGIBLE_NATS: f64 = 50.0;
 
 /// L⁻¹·x for the lower-triangular `factor` L (forward substitution), on the stack: nalgebra's
 /// `solve_lower_triangular` allocates, and this runs for every candidate of a warm start.
@@ -674,7 +691,7 @@ impl Island {
             .collect();
         let proposal_ln_q = match &reference {
             Some(g) => proposals
-                .iter()
+                .par_iter()
                 .zip(&inside)
                 .map(|(p, &inside)| g.ln_q(&p[..dims], inside))
                 .collect(),
@@ -750,6 +767,18 @@ impl Island {
                     .collect();
             }
             Phase::Sweep => {
+                // The reference's density at every scored proposal, in parallel (a pure
+                // function of the proposal: the same bits in any order).
+                let proposals_ln_q: Vec<f64> = match &self.reference {
+                    Some(g) => (0..self.theta.len())
+                        .into_par_iter()
+                        .map(|i| match self.inside[i] {
+                            true => g.ln_q(&self.proposals[i][..self.dims], true),
+                            false => f64::NEG_INFINITY,
+                        })
+                        .collect(),
+                    None => Vec::new(),
+                };
                 let mut accepted = 0;
                 for i in 0..self.theta.len() {
                     if !self.inside[i] {
@@ -761,8 +790,8 @@ impl Island {
                     // from the box (q = π uniform), β times the log-likelihoods' difference.
                     let mut ln_ratio = 0.0;
                     let mut proposed_ln_q = 0.0;
-                    if let Some(g) = &self.reference {
-                        proposed_ln_q = g.ln_q(&self.proposals[i][..self.dims], true);
+                    if self.reference.is_some() {
+                        proposed_ln_q = proposals_ln_q[i];
                         proposed += self.prior_over_reference(proposed_ln_q);
                         ln_ratio = proposed_ln_q - self.ln_q[i];
                     }
@@ -989,11 +1018,17 @@ pub fn run_from(
             NoiseModel::Ar1 => {
                 lag.resize(batch.len(), 0.0);
                 evaluator.score_params_lagged(&batch, &mut rho, &mut lag)?;
-                loglik.clear();
-                loglik.extend(batch.iter().zip(&rho).zip(&lag).map(|((c, &rho), &lag)| {
-                    let ends = end_residuals_squared(problem, c);
-                    noise::ar1_log_likelihood(&LagSums { rho, lag, ends }, half_n)
-                }));
+                // φ integrated out per candidate (a Newton search and a quadrature): in
+                // parallel, most of this model's time on the host otherwise.
+                batch
+                    .par_iter()
+                    .zip(&rho)
+                    .zip(&lag)
+                    .map(|((c, &rho), &lag)| {
+                        let ends = end_residuals_squared(problem, c);
+                        noise::ar1_log_likelihood(&LagSums { rho, lag, ends }, half_n)
+                    })
+                    .collect_into_vec(&mut loglik);
             }
         }
         if observer.interrupted() {
