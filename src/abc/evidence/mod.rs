@@ -790,10 +790,10 @@ impl Island {
                     // from the box (q = π uniform), β times the log-likelihoods' difference.
                     let mut ln_ratio = 0.0;
                     let mut proposed_ln_q = 0.0;
-                    if self.reference.is_some() {
-                        proposed_ln_q = proposals_ln_q[i];
-                        proposed += self.prior_over_reference(proposed_ln_q);
-                        ln_ratio = proposed_ln_q - self.ln_q[i];
+                    if let Some(&q) = proposals_ln_q.get(i) {
+                        proposed_ln_q = q;
+                        proposed += self.prior_over_reference(q);
+                        ln_ratio = q - self.ln_q[i];
                     }
                     if proposed > f64::NEG_INFINITY && u.ln() < ln_ratio + self.beta * (proposed - self.loglik[i]) {
                         self.theta[i] = self.proposals[i];
