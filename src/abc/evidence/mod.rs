@@ -1034,13 +1034,23 @@ pub fn run_from(
         if observer.interrupted() {
             return Err(Error::Interrupted);
         }
+        // Each island moves on its own stream: in parallel, the same draws in any order.
         let mut at = 0;
-        for (island, count) in islands.iter_mut().zip(counts) {
-            if island.phase != Phase::Done {
-                island.receive(&rho[at..at + count], &loglik[at..at + count], config)?;
-            }
-            at += count;
-        }
+        let shares: Vec<(usize, usize)> = counts
+            .iter()
+            .map(|&count| {
+                at += count;
+                (at - count, at)
+            })
+            .collect();
+        islands
+            .par_iter_mut()
+            .zip(shares)
+            .filter(|(island, _)| island.phase != Phase::Done)
+            .map(|(island, (from, to))| island.receive(&rho[from..to], &loglik[from..to], config))
+            .collect::<Vec<Result<()>>>()
+            .into_iter()
+            .collect::<Result<()>>()?;
     }
     let constant = log_likelihood_constant(n, problem.sum_sq_torque);
     let mut laws = Vec::new();
