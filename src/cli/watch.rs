@@ -34,6 +34,10 @@ pub struct WatchCmd {
     /// Laws compared (comma-separated).
     #[arg(long, default_value = "m1,m2,m3,m4", value_name = "LAWS")]
     pub laws: String,
+    /// Use one row in K, as `fit --thin` does [default: a record faster than 100 Hz thinned
+    /// to at most 50 Hz, the paper's rate; slower ones whole].
+    #[arg(long, value_name = "K")]
+    pub thin: Option<usize>,
     /// Window length, s [default: 10 s or 500 samples, whichever is longer].
     #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
     pub window_s: Option<f64>,
@@ -148,6 +152,7 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
     let settings = WatchSettings {
         laws: parse_laws(&cmd.laws)?,
         data: cmd.columns.options(),
+        thin: cmd.thin,
         window_s: cmd.window_s,
         step_s: cmd.step_s,
         evidence: EvidenceConfig {

@@ -58,7 +58,9 @@ pub struct WatchSettings {
     /// Columns, units and the minimum speed, as `fit` reads them (the split is not used:
     /// every sample of a window informs it).
     pub data: DataOptions,
-    /// Window length and step, s; `None`: from the record's rate ([`default_windows`]).
+    /// Every how many rows one is used; `None`: from the record's rate ([`default_thin`]).
+    pub thin: Option<usize>,
+    /// Window length and step, s; `None`: from the record's rate, thinned ([`default_windows`]).
     pub window_s: Option<f64>,
     pub step_s: Option<f64>,
     /// The evidence sampler of each window.
@@ -96,6 +98,7 @@ impl Default for WatchSettings {
         Self {
             laws: Law::ALL.to_vec(),
             data: DataOptions::default(),
+            thin: None,
             window_s: None,
             step_s: None,
             evidence: EvidenceConfig {
@@ -117,6 +120,23 @@ impl Default for WatchSettings {
             wits: wits::WitsItems::default(),
             warm_start: true,
         }
+    }
+}
+
+/// The rate a fast record is thinned to by default, Hz: the paper's, which resolves the
+/// stick-slip cycles (seconds long) many times over.
+pub const THINNED_RATE_HZ: f64 = 50.0;
+
+/// Every how many rows a record sampled at `rate_hz` is used by default: a record faster
+/// than twice [`THINNED_RATE_HZ`] is thinned to at most that rate (a 1 kHz logger's to 50 Hz:
+/// the same windows at a twentieth of the cost); slower ones are used whole.
+pub fn default_thin(rate_hz: f64) -> usize {
+    let ratio = rate_hz / THINNED_RATE_HZ;
+    // A rate measured from rounded time stamps is not exact: 1000.0000001 Hz is 1 kHz.
+    if ratio.is_finite() && ratio >= 2.0 - 1e-6 {
+        (ratio - 1e-6).ceil() as usize
+    } else {
+        1
     }
 }
 
@@ -285,14 +305,19 @@ pub struct Watch {
 
 impl Watch {
     /// A watch of `settings` over a record named `source` sampled at about `rate_hz`, its
-    /// torques in `torque_unit`; the window and step taken from the rate where not given.
+    /// torques in `torque_unit`; the thinning, window and step taken from the rate where not
+    /// given.
     pub fn new(
         settings: WatchSettings,
         source: PathBuf,
         rate_hz: f64,
         torque_unit: crate::units::TorqueUnit,
     ) -> Result<Self> {
-        let (length, step) = default_windows(rate_hz);
+        let thin = settings.thin.unwrap_or_else(|| default_thin(rate_hz));
+        if thin == 0 {
+            return Err(crate::Error::setting("thin", "must be at least 1 (1 uses every row)"));
+        }
+        let (length, step) = default_windows(rate_hz / thin as f64);
         let length = settings.window_s.unwrap_or(length);
         let step = settings.step_s.unwrap_or(step);
         for (field, v) in [("window_s", length), ("step_s", step)] {
@@ -323,7 +348,7 @@ impl Watch {
         }
         settings.evidence.validate()?;
         Ok(Self {
-            windows: Windows::new(length, step),
+            windows: Windows::new(length, step).thinned(thin),
             settings,
             source,
             carried: Carried::default(),
@@ -337,6 +362,11 @@ impl Watch {
     /// Window length and step, s.
     pub fn windows(&self) -> (f64, f64) {
         self.windows.shape()
+    }
+
+    /// Every how many of the record's rows one is used.
+    pub fn thin(&self) -> usize {
+        self.windows.thin()
     }
 
     /// The picture of the latest window given (its cloud, band and map).
@@ -884,6 +914,13 @@ pub fn follow(
             let unit = rows.torque_unit();
             let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, unit)?;
             let (length, step) = made.windows();
+            let thin = made.thin();
+            if settings.thin.is_none() && thin > 1 {
+                observer.note(format!(
+                    "one row in {thin} used ({rate_hz:.1} Hz thinned to {:.1} Hz); `thin` sets it",
+                    rate_hz / thin as f64
+                ));
+            }
             if settings.window_s.is_none() || settings.step_s.is_none() {
                 observer.note(format!(
                     "windows of {length} s every {step} s (the record's rate: {rate_hz:.1} Hz); `window_s` and `step_s` set them"
@@ -1173,5 +1210,28 @@ mod tests {
         assert_eq!(default_windows(1.0 / 0.020000000000000004), (10.0, 2.0));
         assert_eq!(default_windows(20.000000000000004), (25.0, 5.0));
         assert_eq!(default_windows(1.0), (500.0, 100.0));
+    }
+
+    #[test]
+    fn records_faster_than_100_hz_are_thinned_to_at_most_50_hz() {
+        for (rate, thin) in [
+            (20.0, 1),
+            (50.0, 1),
+            (99.9, 1),
+            (100.0, 2),
+            (1.0 / 0.005000000000000001, 4),
+            (1000.0, 20),
+            (1000.0000001, 20),
+            (999.5, 20),
+            (150.0, 3),
+        ] {
+            assert_eq!(default_thin(rate), thin, "at {rate} Hz");
+            assert!(
+                rate / thin as f64 <= THINNED_RATE_HZ * (1.0 + 1e-6) || thin == 1,
+                "at {rate} Hz"
+            );
+        }
+        assert_eq!(default_thin(f64::NAN), 1);
+        assert_eq!(default_thin(f64::INFINITY), 1);
     }
 }

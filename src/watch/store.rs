@@ -80,6 +80,7 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
         "torque_unit": settings.data.torque_unit.map(|u| format!("{u:?}")),
         "wob_unit": settings.data.wob_unit.map(|u| format!("{u:?}")),
         "min_speed_rpm": settings.data.min_speed_rpm,
+        "thin": settings.thin,
         "window_s": settings.window_s,
         "step_s": settings.step_s,
         "particles": settings.evidence.particles,

@@ -19,8 +19,10 @@ pub struct Window {
 /// window is complete once a row at or after its end has arrived: only complete windows are
 /// given, so a window never changes once given; at the record's end, [`Windows::finish`]
 /// gives the window that ends with it (a last, partial window is none). Rows whose
-/// time runs backwards are refused ([`Windows::push`] says so) and change nothing. Memory:
-/// the rows of one window.
+/// time runs backwards are refused ([`Windows::push`] says so) and change nothing. Thinned
+/// ([`Windows::thinned`]), a window holds every k-th row of the record, counted from its
+/// first, and still completes when the record's time passes its end. Memory: the rows of
+/// one window.
 #[derive(Clone, Debug)]
 pub struct Windows {
     length_s: f64,
@@ -31,6 +33,9 @@ pub struct Windows {
     /// The rows at or after the next window's start.
     rows: VecDeque<Row>,
     last_s: f64,
+    /// Every `thin`-th row is held; `seen` rows have been taken.
+    thin: usize,
+    seen: u64,
 }
 
 /// What [`Windows::push`] did with a row.
@@ -56,7 +61,15 @@ impl Windows {
             next: 0,
             rows: VecDeque::new(),
             last_s: f64::NEG_INFINITY,
+            thin: 1,
+            seen: 0,
         }
+    }
+
+    /// Holding every `thin`-th row (at least 1) of the record, as `fit --thin` does.
+    pub fn thinned(mut self, thin: usize) -> Self {
+        self.thin = thin.max(1);
+        self
     }
 
     /// ⌈length / step⌉: window k + span() is the first that shares no time with window k.
@@ -67,6 +80,11 @@ impl Windows {
     /// Window length and step, s.
     pub fn shape(&self) -> (f64, f64) {
         (self.length_s, self.step_s)
+    }
+
+    /// Every how many rows one is held.
+    pub fn thin(&self) -> usize {
+        self.thin
     }
 
     fn start_of(&self, k: usize) -> f64 {
@@ -89,8 +107,10 @@ impl Windows {
         self.last_s = t;
         self.origin_s.get_or_insert(t);
         let done = self.complete_before(t);
+        let held = self.seen.is_multiple_of(self.thin as u64);
+        self.seen += 1;
         // A row before the next window (one skipped) is in none to come.
-        if t >= self.start_of(self.next) {
+        if held && t >= self.start_of(self.next) {
             self.rows.push_back(row);
         }
         Pushed::Kept(done)
@@ -197,5 +217,31 @@ mod tests {
             panic!()
         };
         assert_eq!(done.iter().map(|w| w.rows.len()).collect::<Vec<_>>(), [1, 0, 0]);
+    }
+
+    #[test]
+    fn a_thinned_record_holds_every_kth_row_and_gives_the_same_windows() {
+        // 20 s at 100 Hz thinned by 10 against the same 20 s at 10 Hz: the same windows, the
+        // same rows, each window given on the same row's arrival.
+        let (mut thinned, mut plain) = (Windows::new(5.0, 2.0).thinned(10), Windows::new(5.0, 2.0));
+        let (mut from_thinned, mut from_plain) = (Vec::new(), Vec::new());
+        for k in 0..2000 {
+            let t = k as f64 / 100.0;
+            let Pushed::Kept(done) = thinned.push(row(t)) else {
+                panic!()
+            };
+            if k % 10 == 0 {
+                let Pushed::Kept(expected) = plain.push(row(t)) else {
+                    panic!()
+                };
+                from_plain.extend(expected);
+            }
+            from_thinned.extend(done);
+            assert_eq!(from_thinned.len(), from_plain.len(), "at t = {t}");
+        }
+        from_thinned.extend(thinned.finish(0.01));
+        from_plain.extend(plain.finish(0.1));
+        assert_eq!(from_thinned.len(), 8);
+        assert_eq!(from_thinned, from_plain);
     }
 }

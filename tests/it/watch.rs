@@ -738,3 +738,41 @@ fn a_feed_that_never_sends_its_first_line_is_stopped_by_ctrl_c() {
     );
     assert!(output.stdout.is_empty());
 }
+
+#[test]
+fn a_fast_record_is_thinned_to_fifty_hertz_and_watched_as_its_thinned_copy() {
+    let dir = tempfile::tempdir().unwrap();
+    let well = dir.path().join("fast.toml");
+    std::fs::write(
+        &well,
+        "sample_hz = 200\nnoise_torque_knm = 0.3\nnoise_speed_rpm = 0.5\nseed = 3\n\n\
+         [[segment]]\nname = \"claystone\"\nduration_s = 40\nlaw = \"m2\"\nomega_rpm = 60\n",
+    )
+    .unwrap();
+    let record = dir.path().join("fast.csv");
+    let (code, _, stderr) = outcome(bin().args(["simulate", "--well"]).arg(&well).arg("-o").arg(&record));
+    assert_eq!(code, 0, "{stderr}");
+    // The same record with one row in 4 written: what a 50 Hz logger would have sent.
+    let text = std::fs::read_to_string(&record).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let kept: Vec<&str> = std::iter::once(header).chain(lines.step_by(4)).collect();
+    let copy = dir.path().join("copy.csv");
+    std::fs::write(&copy, kept.join("\n") + "\n").unwrap();
+
+    let (code, stdout, stderr) = outcome(watch_command().args(WINDOWS).arg(&record));
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("one row in 4 used (200.0 Hz thinned to 50.0 Hz)"),
+        "{stderr}"
+    );
+    let thinned: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let copied = watch(&[&WINDOWS[..], &[copy.to_str().unwrap()]].concat());
+    assert_eq!(thinned.len(), 3);
+    assert_eq!(without_latency(&thinned), without_latency(&copied));
+    assert!(thinned.iter().all(|u| u["samples"] == 1000), "{thinned:?}");
+
+    // `--thin 1` uses every row.
+    let whole = watch(&[&WINDOWS[..], &["--thin", "1", record.to_str().unwrap()]].concat());
+    assert!(whole.iter().all(|u| u["samples"] == 4000), "{whole:?}");
+}

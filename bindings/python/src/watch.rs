@@ -39,6 +39,7 @@ pub(crate) fn watch(
         criterion,
         laws: laws(py, kwarg(options, "laws")?)?.unwrap_or_else(|| defaults.laws.clone()),
         data: data_options(py, options)?,
+        thin: kwarg(options, "thin")?,
         window_s: kwarg(options, "window_s")?,
         step_s: kwarg(options, "step_s")?,
         evidence: bitrock::abc::evidence::EvidenceConfig {

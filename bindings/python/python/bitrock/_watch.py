@@ -168,6 +168,7 @@ def watch(
     source: str | os.PathLike[str],
     *,
     laws: str | Sequence[str] | None = None,
+    thin: int | None = None,
     window_s: float | None = None,
     step_s: float | None = None,
     follow: bool = False,
