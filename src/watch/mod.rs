@@ -43,7 +43,7 @@ use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
-use crate::pipeline::evidence::{EvidenceJob, EvidencePrior, WarmStart};
+use crate::pipeline::evidence::{EvidenceAnalysis, EvidenceJob, EvidencePrior, WarmStart};
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
 use crate::units::RAD_S_PER_RPM;
@@ -507,11 +507,12 @@ impl Watch {
         };
         update.change = change;
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
-        if change && job.warm.is_some() {
+        if (change || missed_mode(&analysis, data.calibration.len())) && job.warm.is_some() {
             // A change of rock: what the window before carried describes another formation
             // (its improbable laws kept few particles, its posterior lies elsewhere), so this
             // window's evidence is found again from the boxes, every law with all its
-            // particles, as the paper would.
+            // particles, as the paper would. So too where a law's warm samplers missed the
+            // posterior that its fit shows (a mode the window before did not have).
             let cold = EvidenceJob {
                 fit: FitOptions::default(),
                 sampler: EvidenceConfig {
@@ -1018,7 +1019,7 @@ fn window_evidence(
     job: &EvidenceJob,
     data: &FieldData,
     observer: &mut dyn Observer,
-) -> Result<std::result::Result<crate::pipeline::evidence::EvidenceAnalysis, String>> {
+) -> Result<std::result::Result<EvidenceAnalysis, String>> {
     match job.run(data, observer) {
         Ok(analysis) => Ok(Ok(analysis)),
         Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
@@ -1063,6 +1064,41 @@ fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Pat
         }
     }
     Ok(())
+}
+
+/// How far (nats of log-likelihood) a warm-started law's best particle may lie below its
+/// window's least-squares fit: a posterior sampled where it lies comes within a few nats of
+/// its peak, so a larger gap says the samplers started from the window before's posterior
+/// missed this window's (and the law's evidence came out low, with an error that cannot show
+/// it: a proposal blind to a mode is confident).
+const MISSED_NATS: f64 = 10.0;
+
+/// Whether a law's warm samplers missed its posterior where it matters: its best particle
+/// more than [`MISSED_NATS`] below its fit (a fit inside the law's box, which the samplers
+/// can reach), and its evidence raised by about that gap would reach the best law's (a law
+/// that stays below it cannot become the most probable; a law whose posterior is a funnel
+/// keeps its best particle nats below its peak, which alone is no miss). `n`: the samples the
+/// window's evidence used.
+fn missed_mode(analysis: &EvidenceAnalysis, n: usize) -> bool {
+    let best = analysis
+        .evidence
+        .laws
+        .iter()
+        .map(|e| e.ln_z)
+        .fold(f64::NEG_INFINITY, f64::max);
+    analysis.fits.iter().any(|fit| {
+        let Some(e) = analysis.evidence.of(fit.law) else {
+            return false;
+        };
+        let reachable = analysis
+            .prior
+            .boxes
+            .iter()
+            .find(|b| b.law == fit.law)
+            .is_some_and(|b| b.contains(&fit.params_si));
+        let gap = n as f64 / 2.0 * (e.best_rho / fit.rho).ln();
+        reachable && fit.rho > 0.0 && gap > MISSED_NATS && e.ln_z + gap >= best
+    })
 }
 
 /// The log-likelihood (nats) the earlier window's fits lose on this window: (n/2)·ln(ρ_then /

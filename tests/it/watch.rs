@@ -776,3 +776,53 @@ fn a_fast_record_is_thinned_to_fifty_hertz_and_watched_as_its_thinned_copy() {
     let whole = watch(&[&WINDOWS[..], &["--thin", "1", record.to_str().unwrap()]].concat());
     assert!(whole.iter().all(|u| u["samples"] == 4000), "{whole:?}");
 }
+
+/// m2 for 60 s then m3 for 60 s, logged at 1 kHz: thinned to 50 Hz by default, windows of
+/// 10 s every 2 s.
+const LOGGER_WELL: &str = "sample_hz = 1000\nnoise_torque_knm = 0.3\nnoise_speed_rpm = 0.5\nseed = 7\n\n\
+[[segment]]\nname = \"claystone\"\nduration_s = 60\nlaw = \"m2\"\nomega_rpm = 60\nwob_kn = 244.2\n\n\
+[[segment]]\nname = \"sandstone\"\nduration_s = 60\nlaw = \"m3\"\nomega_rpm = 60\nwob_kn = 244.2\n";
+
+#[test]
+fn a_logger_s_record_ranks_each_formation_s_law_first_in_every_window_inside_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let well = dir.path().join("logger.toml");
+    std::fs::write(&well, LOGGER_WELL).unwrap();
+    let record = dir.path().join("logger.csv");
+    let (code, _, stderr) = outcome(bin().args(["simulate", "--well"]).arg(&well).arg("-o").arg(&record));
+    assert_eq!(code, 0, "{stderr}");
+    let mut command = bin();
+    command.args(["watch", "--json", "--backend", "cpu"]).arg(&record);
+    let (code, stdout, stderr) = outcome(&mut command);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("one row in 20 used (1000.0 Hz thinned to 50.0 Hz)"),
+        "{stderr}"
+    );
+    let updates: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(updates.len(), 56);
+    let start = |u: &serde_json::Value| u["start_s"].as_f64().unwrap();
+    // Every window inside a formation (after the first 10 s, the simulation's start-up
+    // before the bit sticks) ranks its law first: a warm start that misses a posterior the
+    // window before did not have (m3's, in the sandstone) is found again from the boxes.
+    for u in &updates {
+        let want = if start(u) >= 10.0 && start(u) + 10.0 <= 60.0 {
+            "m2"
+        } else if start(u) >= 60.0 {
+            "m3"
+        } else {
+            continue;
+        };
+        assert_eq!(u["most_probable"], want, "window {} at {} s", u["window"], start(u));
+    }
+    // A change where the start-up ends, and one within two windows of the first that holds
+    // the sandstone (window 26, [52, 62) s); none elsewhere.
+    let changes: Vec<u64> = updates
+        .iter()
+        .filter(|u| u["change"] == true)
+        .map(|u| u["window"].as_u64().unwrap())
+        .collect();
+    assert_eq!(changes.len(), 2, "{changes:?}");
+    assert_eq!(changes[0], 5);
+    assert!((26..=28).contains(&changes[1]), "{changes:?}");
+}
