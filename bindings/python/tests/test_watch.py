@@ -54,6 +54,16 @@ def test_the_updates_are_the_command_lines(cli, well) -> None:
     assert watch.ended["windows"] == 11
 
 
+def test_thin_keeps_one_row_in_k_as_the_command_does(cli, well) -> None:
+    # The 20 Hz well thinned by 2: windows of 20 s hold 200 rows, as `--thin 2` gives them.
+    updates = list(bitrock.watch(well, laws="m2", thin=2, window_s=20, step_s=10, backend="cpu", particles=100))
+    lines = run_cli(cli, "watch", str(well), "--json", "--thin", "2", "--laws", "m2", "--window-s", "20",
+                    "--step-s", "10", "--backend", "cpu", "--particles", "100").stdout.splitlines()
+    assert [u.document["samples"] for u in updates] == [json.loads(line)["samples"] for line in lines]
+    assert all(u.document["samples"] == 200 for u in updates)
+    assert [u.document["laws"] for u in updates] == [json.loads(line)["laws"] for line in lines]
+
+
 def test_a_closed_watch_stops_reading(well) -> None:
     with bitrock.watch(well, laws="m2", window_s=20, step_s=10, backend="cpu", particles=100) as watch:
         for update in watch:
