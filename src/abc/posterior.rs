@@ -126,7 +126,9 @@ fn relative_weights(members: &[&Particle]) -> Vec<f64> {
     }
 }
 
-fn summarize_law(law: Law, members: &[&Particle], probability: f64) -> LawSummary {
+/// The summary of one law's particles (weighted or not), `probability` its share: what
+/// [`summarize`] gives per law, and a watch per window.
+pub(crate) fn summarize_law(law: Law, members: &[&Particle], probability: f64) -> LawSummary {
     let d = law.n_params();
     let n = members.len();
     for p in members {

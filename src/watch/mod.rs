@@ -158,10 +158,17 @@ pub struct LawUpdate {
     pub window_probability: f64,
     pub ln_z: f64,
     pub ln_z_error: f64,
-    /// Posterior mean and 1 %, 99 % quantiles of each parameter, in the record's torque unit.
+    /// Posterior mean, MAP (the mode of a kernel density of the particles, as a run's
+    /// summary finds it) and 1 %, 99 % quantiles of each parameter, in the record's torque
+    /// unit.
     pub mean: Vec<f64>,
+    #[serde(default)]
+    pub map: Vec<f64>,
     pub q01: Vec<f64>,
     pub q99: Vec<f64>,
+    /// Kish's effective sample size of the law's weighted posterior particles.
+    #[serde(default)]
+    pub ess: f64,
 }
 
 /// The advice of a window.
@@ -568,16 +575,38 @@ impl Watch {
         let unit = data.torque_unit;
         for (k, &law) in self.settings.laws.iter().enumerate() {
             let Some(e) = analysis.evidence.of(law) else { continue };
-            let (mean, q01, q99) = posterior_summary(law, &e.posterior, unit);
+            let particles: Vec<crate::abc::Particle> = e
+                .posterior
+                .iter()
+                .enumerate()
+                .map(|(i, (params, weight))| crate::abc::Particle {
+                    law,
+                    index: i as u64,
+                    params: params.clone(),
+                    rho: f64::NAN,
+                    weight: *weight,
+                })
+                .collect();
+            let members: Vec<&crate::abc::Particle> = particles.iter().collect();
+            let weights: Vec<f64> = e.posterior.iter().map(|(_, w)| *w).collect();
+            let summary =
+                (!members.is_empty()).then(|| crate::abc::posterior::summarize_law(law, &members, e.probability));
+            let ess = crate::abc::effective_sample_size(&weights);
+            let in_unit = |v: Option<&Vec<f64>>| match v {
+                Some(v) => crate::documents::to_record_units(law, v, unit),
+                None => vec![f64::NAN; law.n_params()],
+            };
             update.laws.push(LawUpdate {
                 law,
                 probability: carried[k],
                 window_probability: window_p[k],
                 ln_z: e.ln_z,
                 ln_z_error: e.ln_z_error,
-                mean,
-                q01,
-                q99,
+                mean: in_unit(summary.as_ref().map(|s| &s.mean)),
+                map: in_unit(summary.as_ref().map(|s| &s.map)),
+                q01: in_unit(summary.as_ref().map(|s| &s.q01)),
+                q99: in_unit(summary.as_ref().map(|s| &s.q99)),
+                ess,
             });
         }
         update.most_probable = self
@@ -1155,31 +1184,6 @@ fn normalise_with_floor(weights: &[f64], floor: f64) -> Vec<f64> {
         }
     }
     p
-}
-
-/// Posterior mean and 1 %, 99 % quantiles of each parameter (weighted), in `unit`.
-fn posterior_summary(
-    law: Law,
-    posterior: &[(Vec<f64>, f64)],
-    unit: crate::units::TorqueUnit,
-) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let d = law.n_params();
-    let mut mean = vec![0.0; d];
-    let mut q01 = vec![f64::NAN; d];
-    let mut q99 = vec![f64::NAN; d];
-    let weights: Vec<f64> = posterior.iter().map(|(_, w)| *w).collect();
-    let total: f64 = weights.iter().sum();
-    if total > 0.0 {
-        for j in 0..d {
-            let values: Vec<f64> = posterior.iter().map(|(p, _)| p[j]).collect();
-            mean[j] = values.iter().zip(&weights).map(|(v, w)| v * w).sum::<f64>() / total;
-            // The rule of a run's posterior summary.
-            q01[j] = crate::numerics::weighted_quantile(&values, &weights, 0.01);
-            q99[j] = crate::numerics::weighted_quantile(&values, &weights, 0.99);
-        }
-    }
-    let to = |v: Vec<f64>| crate::documents::to_record_units(law, &v, unit);
-    (to(mean), to(q01), to(q99))
 }
 
 #[cfg(test)]

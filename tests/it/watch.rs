@@ -77,18 +77,23 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
         assert_eq!(u["most_probable"], "m2", "{u}");
         assert_eq!(u["change"], false, "{u}");
         let m2 = &u["laws"][0];
-        let mean: Vec<f64> = m2["mean"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
-        for (got, truth) in mean.iter().zip([13.0, 6.5, 0.3]) {
-            assert!(
-                (got / truth - 1.0).abs() < 0.1,
-                "m2 mean {mean:?} against the paper's (13, 6.5, 0.3)"
-            );
+        for key in ["mean", "map"] {
+            let estimate: Vec<f64> = m2[key]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
+            for (got, truth) in estimate.iter().zip([13.0, 6.5, 0.3]) {
+                assert!(
+                    (got / truth - 1.0).abs() < 0.1,
+                    "m2 {key} {estimate:?} against the paper's (13, 6.5, 0.3)"
+                );
+            }
         }
+        // Kish's ESS of the law's weighted particles: at least one, at most all (2 × 300).
+        let ess = m2["ess"].as_f64().unwrap();
+        assert!((1.0..=600.0 + 1e-9).contains(&ess), "ess {ess}");
     }
     // The change is declared once, by a window that holds the boundary or by the next one.
     let declared: Vec<f64> = whole.iter().filter(|u| u["change"] == true).map(start).collect();

@@ -35,8 +35,9 @@ class WatchUpdate:
     @property
     def laws(self) -> pd.DataFrame:
         """Per law: the carried ``probability``, this window's alone (``window_probability``),
-        ``ln_z`` and ``ln_z_error``, and the posterior ``mean``, ``q01``, ``q99`` of its
-        parameters (lists, in the record's torque unit)."""
+        ``ln_z`` and ``ln_z_error``, the posterior ``mean``, ``map``, ``q01``, ``q99`` of its
+        parameters (lists, in the record's torque unit) and ``ess``, the effective sample size
+        of its weighted posterior particles."""
         frame = pd.DataFrame(self.document["laws"])
         return frame.set_index("law") if len(frame) else frame
 
