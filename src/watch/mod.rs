@@ -37,7 +37,7 @@ pub mod wits;
 
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
-use crate::abc::evidence::{EvidenceConfig, NoiseModel};
+use crate::abc::evidence::{EvidenceConfig, LawEvidence, NoiseModel};
 use crate::data::{DataOptions, FieldData, Row};
 use crate::error::Result;
 use crate::eval::Backend;
@@ -575,39 +575,7 @@ impl Watch {
         let unit = data.torque_unit;
         for (k, &law) in self.settings.laws.iter().enumerate() {
             let Some(e) = analysis.evidence.of(law) else { continue };
-            let particles: Vec<crate::abc::Particle> = e
-                .posterior
-                .iter()
-                .enumerate()
-                .map(|(i, (params, weight))| crate::abc::Particle {
-                    law,
-                    index: i as u64,
-                    params: params.clone(),
-                    rho: f64::NAN,
-                    weight: *weight,
-                })
-                .collect();
-            let members: Vec<&crate::abc::Particle> = particles.iter().collect();
-            let weights: Vec<f64> = e.posterior.iter().map(|(_, w)| *w).collect();
-            let summary =
-                (!members.is_empty()).then(|| crate::abc::posterior::summarize_law(law, &members, e.probability));
-            let ess = crate::abc::effective_sample_size(&weights);
-            let in_unit = |v: Option<&Vec<f64>>| match v {
-                Some(v) => crate::documents::to_record_units(law, v, unit),
-                None => vec![f64::NAN; law.n_params()],
-            };
-            update.laws.push(LawUpdate {
-                law,
-                probability: carried[k],
-                window_probability: window_p[k],
-                ln_z: e.ln_z,
-                ln_z_error: e.ln_z_error,
-                mean: in_unit(summary.as_ref().map(|s| &s.mean)),
-                map: in_unit(summary.as_ref().map(|s| &s.map)),
-                q01: in_unit(summary.as_ref().map(|s| &s.q01)),
-                q99: in_unit(summary.as_ref().map(|s| &s.q99)),
-                ess,
-            });
+            update.laws.push(law_update(e, carried[k], window_p[k], unit));
         }
         update.most_probable = self
             .settings
@@ -1128,6 +1096,44 @@ fn missed_mode(analysis: &EvidenceAnalysis, n: usize) -> bool {
         let gap = n as f64 / 2.0 * (e.best_rho / fit.rho).ln();
         reachable && fit.rho > 0.0 && gap > MISSED_NATS && e.ln_z + gap >= best
     })
+}
+
+/// One law's line of a window's update: its evidence `e`, carried and window probabilities,
+/// and its posterior summarised by a run summary's rule (mean, MAP, 1 % and 99 % quantiles,
+/// in the record's torque `unit`) with Kish's ESS of its weighted particles.
+fn law_update(e: &LawEvidence, probability: f64, window_probability: f64, unit: crate::units::TorqueUnit) -> LawUpdate {
+    let law = e.law;
+    let particles: Vec<crate::abc::Particle> = e
+        .posterior
+        .iter()
+        .enumerate()
+        .map(|(i, (params, weight))| crate::abc::Particle {
+            law,
+            index: i as u64,
+            params: params.clone(),
+            rho: f64::NAN,
+            weight: *weight,
+        })
+        .collect();
+    let members: Vec<&crate::abc::Particle> = particles.iter().collect();
+    let summary = (!members.is_empty()).then(|| crate::abc::posterior::summarize_law(law, &members, e.probability));
+    let weights: Vec<f64> = e.posterior.iter().map(|(_, w)| *w).collect();
+    let in_unit = |v: Option<&Vec<f64>>| match v {
+        Some(v) => crate::documents::to_record_units(law, v, unit),
+        None => vec![f64::NAN; law.n_params()],
+    };
+    LawUpdate {
+        law,
+        probability,
+        window_probability,
+        ln_z: e.ln_z,
+        ln_z_error: e.ln_z_error,
+        mean: in_unit(summary.as_ref().map(|s| &s.mean)),
+        map: in_unit(summary.as_ref().map(|s| &s.map)),
+        q01: in_unit(summary.as_ref().map(|s| &s.q01)),
+        q99: in_unit(summary.as_ref().map(|s| &s.q99)),
+        ess: crate::abc::effective_sample_size(&weights),
+    }
 }
 
 /// The log-likelihood (nats) the earlier window's fits lose on this window: (n/2)·ln(ρ_then /
