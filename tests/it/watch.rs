@@ -13,9 +13,14 @@ const WELL: &str = "sample_hz = 20\nnoise_torque_knm = 0.3\nnoise_speed_rpm = 0.
 const BOUNDARY_S: f64 = 90.0;
 
 fn simulate_well(dir: &Path) -> std::path::PathBuf {
-    let well = dir.join("well.toml");
-    std::fs::write(&well, WELL).unwrap();
-    let record = dir.join("well.csv");
+    simulate(dir, "well", WELL)
+}
+
+/// The record `bitrock simulate --well` makes of the well file `text`, as `dir/name.csv`.
+fn simulate(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let well = dir.join(format!("{name}.toml"));
+    std::fs::write(&well, text).unwrap();
+    let record = dir.join(format!("{name}.csv"));
     let (code, _, stderr) = outcome(bin().args(["simulate", "--well"]).arg(&well).arg("-o").arg(&record));
     assert_eq!(code, 0, "{stderr}");
     record
@@ -747,16 +752,12 @@ fn a_feed_that_never_sends_its_first_line_is_stopped_by_ctrl_c() {
 #[test]
 fn a_fast_record_is_thinned_to_fifty_hertz_and_watched_as_its_thinned_copy() {
     let dir = tempfile::tempdir().unwrap();
-    let well = dir.path().join("fast.toml");
-    std::fs::write(
-        &well,
+    let record = simulate(
+        dir.path(),
+        "fast",
         "sample_hz = 200\nnoise_torque_knm = 0.3\nnoise_speed_rpm = 0.5\nseed = 3\n\n\
          [[segment]]\nname = \"claystone\"\nduration_s = 40\nlaw = \"m2\"\nomega_rpm = 60\n",
-    )
-    .unwrap();
-    let record = dir.path().join("fast.csv");
-    let (code, _, stderr) = outcome(bin().args(["simulate", "--well"]).arg(&well).arg("-o").arg(&record));
-    assert_eq!(code, 0, "{stderr}");
+    );
     // The same record with one row in 4 written: what a 50 Hz logger would have sent.
     let text = std::fs::read_to_string(&record).unwrap();
     let mut lines = text.lines();
@@ -791,11 +792,7 @@ const LOGGER_WELL: &str = "sample_hz = 1000\nnoise_torque_knm = 0.3\nnoise_speed
 #[test]
 fn a_logger_s_record_ranks_each_formation_s_law_first_in_every_window_inside_it() {
     let dir = tempfile::tempdir().unwrap();
-    let well = dir.path().join("logger.toml");
-    std::fs::write(&well, LOGGER_WELL).unwrap();
-    let record = dir.path().join("logger.csv");
-    let (code, _, stderr) = outcome(bin().args(["simulate", "--well"]).arg(&well).arg("-o").arg(&record));
-    assert_eq!(code, 0, "{stderr}");
+    let record = simulate(dir.path(), "logger", LOGGER_WELL);
     let mut command = bin();
     command.args(["watch", "--json", "--backend", "cpu"]).arg(&record);
     let (code, stdout, stderr) = outcome(&mut command);

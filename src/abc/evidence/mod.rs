@@ -236,22 +236,20 @@ impl Kernels {
             *x = f64::from(t);
         }
         let v = whiten(&self.factor, &x[..d]);
-        let exponents: Vec<f64> = self
-            .whitened
-            .iter()
-            .zip(&self.ln_weights)
-            .map(|(u, lw)| {
+        // Two passes over the kernels, nothing allocated (this runs for every candidate of a
+        // warm start): the largest exponent, then the sum.
+        let exponents = || {
+            self.whitened.iter().zip(&self.ln_weights).map(|(u, lw)| {
                 let squared: f64 = (0..d).map(|j| (v[j] - u[j]).powi(2)).sum();
                 lw - 0.5 * squared
             })
-            .collect();
-        let max = exponents.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        };
+        let max = exponents().fold(f64::NEG_INFINITY, f64::max);
         // Kernels more than NEGLIGIBLE_NATS below the nearest add less than an ulp of the
         // sum (which the nearest's 1 starts): their exponentials, most of the cost, are skipped.
-        let sum: f64 = exponents
-            .iter()
-            .filter(|&&e| e - max > -NEGLIGIBLE_NATS)
-            .map(|&e| (e - max).exp())
+        let sum: f64 = exponents()
+            .filter(|&e| e - max > -NEGLIGIBLE_NATS)
+            .map(|e| (e - max).exp())
             .sum();
         let kernels = (1.0 - DEFENSIVE_SHARE).ln() + self.ln_norm + max + sum.ln();
         if inside {
