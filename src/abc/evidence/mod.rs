@@ -236,21 +236,25 @@ impl Kernels {
             *x = f64::from(t);
         }
         let v = whiten(&self.factor, &x[..d]);
-        // Two passes over the kernels, nothing allocated (this runs for every candidate of a
-        // warm start): the largest exponent, then the sum.
-        let exponents = || {
-            self.whitened.iter().zip(&self.ln_weights).map(|(u, lw)| {
+        // Each kernel's exponent once, into this thread's buffer (nothing allocated per
+        // candidate: this runs for every candidate of a warm start).
+        let (max, sum) = EXPONENTS.with_borrow_mut(|exponents| {
+            exponents.clear();
+            exponents.extend(self.whitened.iter().zip(&self.ln_weights).map(|(u, lw)| {
                 let squared: f64 = (0..d).map(|j| (v[j] - u[j]).powi(2)).sum();
                 lw - 0.5 * squared
-            })
-        };
-        let max = exponents().fold(f64::NEG_INFINITY, f64::max);
-        // Kernels more than NEGLIGIBLE_NATS below the nearest add less than an ulp of the
-        // sum (which the nearest's 1 starts): their exponentials, most of the cost, are skipped.
-        let sum: f64 = exponents()
-            .filter(|&e| e - max > -NEGLIGIBLE_NATS)
-            .map(|e| (e - max).exp())
-            .sum();
+            }));
+            let max = exponents.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            // Kernels more than NEGLIGIBLE_NATS below the nearest add less than an ulp of the
+            // sum (which the nearest's 1 starts): their exponentials, most of the cost, are
+            // skipped.
+            let sum: f64 = exponents
+                .iter()
+                .filter(|&&e| e - max > -NEGLIGIBLE_NATS)
+                .map(|&e| (e - max).exp())
+                .sum();
+            (max, sum)
+        });
         let kernels = (1.0 - DEFENSIVE_SHARE).ln() + self.ln_norm + max + sum.ln();
         if inside {
             let uniform = DEFENSIVE_SHARE.ln() - self.ln_volume;
@@ -260,6 +264,11 @@ impl Kernels {
             kernels
         }
     }
+}
+
+thread_local! {
+    /// The kernels' exponents of the candidate [`Kernels::ln_q`] is at, per thread.
+    static EXPONENTS: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// How far below the largest a kernel's log-density term may lie and still be added: e^−50
