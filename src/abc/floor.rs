@@ -61,7 +61,7 @@ pub fn resolve(fits: &[LawFit], requested: Option<f64>) -> Result<EpsFloor> {
             best,
             note: (eps_min <= rho).then(|| {
                 format!(
-                    "no law can reach `eps_min` {eps_min} (the best least-squares ρ is {law}'s {rho:.5}); the run will end when ε stalls"
+                    "{UNREACHABLE_NOTE} {eps_min} (the best least-squares ρ is {law}'s {rho:.5}); the run will end when ε stalls"
                 )
             }),
         },
@@ -78,12 +78,21 @@ pub fn resolve(fits: &[LawFit], requested: Option<f64>) -> Result<EpsFloor> {
                 source: FloorSource::BestFit,
                 best,
                 note: Some(format!(
-                    "ε floor {eps_min:.5} = {FLOOR_MULTIPLE} × the best least-squares ρ ({law}: {rho:.5}): the paper's {PAPER_EPS_MIN} is out of this record's reach (`eps_min` sets the floor)"
+                    "{MOVED_NOTE}{eps_min:.5} = {FLOOR_MULTIPLE} × the best least-squares ρ ({law}: {rho:.5}): the paper's {PAPER_EPS_MIN} is out of this record's reach (`eps_min` sets the floor)"
                 )),
             }
         }
     })
 }
+
+/// Whether `line` is a note of [`resolve`] (a floor moved to the record's reach, or one no
+/// law reaches): a caller that reports each run's floor itself need not say it again.
+pub fn is_floor_note(line: &str) -> bool {
+    line.starts_with(UNREACHABLE_NOTE) || line.starts_with(MOVED_NOTE)
+}
+
+const UNREACHABLE_NOTE: &str = "no law can reach `eps_min`";
+const MOVED_NOTE: &str = "ε floor ";
 
 /// Refuses a start tolerance that no law can reach (population 0 could never fill).
 pub fn check_start_epsilon(fits: &[LawFit], start: Option<f64>) -> Result<()> {

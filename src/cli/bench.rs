@@ -37,8 +37,9 @@ pub struct BenchCmd {
     #[arg(long, conflicts_with = "selection")]
     pub smc: bool,
     /// Measure only `bitrock watch`: a simulated well of three formations (two of 60 s with
-    /// --quick), watched with each window started from the one before (the default) and from
-    /// the boxes (--cold-start): per-window latency, candidates, changes declared, agreement.
+    /// --quick), watched with each window's evidence started from the one before (the
+    /// default) and from the boxes (--cold-start), and by the paper's ABC (--abc): per-window
+    /// latency, candidates, changes declared, agreement.
     #[arg(long, conflicts_with_all = ["selection", "smc"])]
     pub watch: bool,
     /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and

@@ -6,10 +6,11 @@ use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::eval::Backend;
 use bitrock::pipeline::stability::Structure;
+use bitrock::run::Sampler;
 use bitrock::watch::serve::{DEFAULT_ADDRESS, Server};
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::wits::WitsItems;
-use bitrock::watch::{FollowOptions, Update, WatchSettings};
+use bitrock::watch::{FollowOptions, Update, WatchSettings, abc_config};
 use clap::Args;
 use std::collections::HashSet;
 use std::io::Write;
@@ -58,13 +59,30 @@ pub struct WatchCmd {
     /// The probability of stick-slip the advice keeps below.
     #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().risk, value_name = "P")]
     pub risk: f64,
-    /// Particles of each island of each window's evidence.
-    #[arg(long, default_value_t = WatchSettings::default().evidence.particles, value_name = "N")]
-    pub particles: usize,
-    /// Islands of each window's evidence (their spread is ln Z's error).
-    #[arg(long, default_value_t = WatchSettings::default().evidence.islands, value_name = "K")]
-    pub islands: usize,
-    /// Seed of the evidence samplers (window k uses seed + k).
+    /// Particles of each island of each window's evidence [default: 300]; with --abc, of each
+    /// window's ABC population [default: 4,000].
+    #[arg(long, value_name = "N")]
+    pub particles: Option<usize>,
+    /// Islands of each window's evidence (their spread is ln Z's error) [default: 2].
+    #[arg(long, value_name = "K", conflicts_with = "abc")]
+    pub islands: Option<usize>,
+    /// Each window's law probabilities by the paper's ABC instead of the evidence: the
+    /// sampler of `bitrock abc` (--sampler) on δ boxes around the window's fits (--delta), down
+    /// to the floor the window reaches (--eps-min), each window's ε in its update. Its
+    /// probabilities are ratios of the laws' prior volumes below ε, not evidence.
+    #[arg(long)]
+    pub abc: bool,
+    /// With --abc: rejection = the paper's Algorithm 1; smc = ABC-SMC with model selection.
+    #[arg(long, value_enum, requires = "abc")]
+    pub sampler: Option<Sampler>,
+    /// With --abc: the prior half-width δ around each window's fits [default: 0.4].
+    #[arg(long, value_parser = finite_number, value_name = "DELTA", requires = "abc")]
+    pub delta: Option<f64>,
+    /// With --abc: the smallest tolerance [default: 0.014, the paper's, where the window
+    /// reaches it; else 1.1 × its best least-squares ρ].
+    #[arg(long, value_parser = finite_number, value_name = "EPS", requires = "abc")]
+    pub eps_min: Option<f64>,
+    /// Seed of each window's samplers (window k uses seed + k).
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
     pub seed: u64,
     /// WITS item codes over the defaults of record 01 (speed=0120, torque=0118, wob=0116: the
@@ -156,11 +174,18 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         window_s: cmd.window_s,
         step_s: cmd.step_s,
         evidence: EvidenceConfig {
-            particles: cmd.particles,
-            islands: cmd.islands,
+            particles: match cmd.abc {
+                true => defaults.evidence.particles,
+                false => cmd.particles.unwrap_or(defaults.evidence.particles),
+            },
+            islands: cmd.islands.unwrap_or(defaults.evidence.islands),
             seed: cmd.seed,
             ..defaults.evidence.clone()
         },
+        abc: cmd
+            .abc
+            .then(|| abc_config(cmd.sampler.unwrap_or_default(), cmd.particles, cmd.delta, cmd.eps_min))
+            .transpose()?,
         forgetting: cmd.forgetting,
         floor: cmd.floor,
         change_nats: cmd.change_nats,

@@ -1,8 +1,8 @@
 //! `bitrock bench --watch`: a watch on a simulated well of three formations
-//! (`examples/wells/formations.toml`), started warm (each window from the one before's
-//! posterior, the default) and cold (every window from the boxes, the paper's procedure on
-//! each window): per-window latency, candidates scored, the changes declared, and how far the
-//! two starts' law probabilities lie apart.
+//! (`examples/wells/formations.toml`), its evidence started warm (each window from the one
+//! before's posterior, the default) and cold (every window from the boxes), and by the paper's
+//! ABC on each window (rejection, 4,000 particles): per-window latency, candidates scored, the
+//! changes declared, and how far the two starts' law probabilities lie apart.
 
 use super::source::{Rows, Source};
 use super::{FollowOptions, Update, WatchSettings, follow};
@@ -17,7 +17,7 @@ const WELL: &str = include_str!("../../examples/wells/formations.toml");
 /// One start's watch of the well.
 #[derive(Clone, Debug, Serialize)]
 pub struct WatchRun {
-    /// "warm" or "cold".
+    /// "warm" or "cold" (the evidence), or "abc" (the paper's ABC).
     pub start: String,
     pub windows: usize,
     /// Seconds from a window's last row to its update (rows read as fast as the file gives
@@ -74,16 +74,15 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
     })?;
     let mut runs = Vec::new();
     let mut updates: Vec<Vec<Update>> = Vec::new();
-    for warm in [true, false] {
+    let abc = super::abc_config(crate::run::Sampler::Rejection, None, None, None)?;
+    for (start, warm, abc) in [("warm", true, None), ("cold", false, None), ("abc", true, Some(abc))] {
         let settings = WatchSettings {
             backend,
             warm_start: warm,
+            abc,
             ..WatchSettings::default()
         };
-        note(format!(
-            "watching the bench well ({} start)",
-            if warm { "warm" } else { "cold" }
-        ));
+        note(format!("watching the bench well ({start})"));
         let mut rows = Rows::open(
             &Source::File {
                 path: path.clone(),
@@ -111,7 +110,7 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
         candidates.sort_unstable();
         let q = |p: f64| crate::numerics::quantile(&latencies, p);
         runs.push(WatchRun {
-            start: if warm { "warm" } else { "cold" }.into(),
+            start: start.into(),
             windows: given.len(),
             latency_median_s: q(0.5),
             latency_p90_s: q(0.9),
@@ -139,7 +138,7 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
     );
     Ok(WatchBench {
         record: format!(
-            "examples/wells/formations.toml{} ({} s at {} Hz), windows of {length} s every {step} s, four laws, {} × {} particles",
+            "examples/wells/formations.toml{} ({} s at {} Hz), windows of {length} s every {step} s, four laws, evidence of {} × {} particles, ABC of {}",
             if quick {
                 ", its first two formations cut to 60 s"
             } else {
@@ -149,6 +148,7 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
             well.sample_hz,
             WatchSettings::default().evidence.islands,
             WatchSettings::default().evidence.particles,
+            super::ABC_PARTICLES,
         ),
         runs,
         agree_within_005,

@@ -37,7 +37,7 @@ pub mod wits;
 
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
-use crate::abc::evidence::{EvidenceConfig, LawEvidence, NoiseModel};
+use crate::abc::evidence::{EvidenceConfig, NoiseModel};
 use crate::data::{DataOptions, FieldData, Row};
 use crate::error::Result;
 use crate::eval::Backend;
@@ -91,6 +91,10 @@ pub struct WatchSettings {
     /// (its kernel density, mixed with the box) instead of the boxes, each law with particles
     /// by its worth: the same evidence, fewer candidates while the rock stays the same.
     pub warm_start: bool,
+    /// The paper's ABC on each window instead of the evidence: this run's sampler, particles,
+    /// δ and floor (its laws, seed and backend are the watch's; window k is seeded seed + k).
+    /// Its law probabilities are ratios of the laws' prior volumes below ε, not evidence.
+    pub abc: Option<crate::run::Config>,
 }
 
 impl Default for WatchSettings {
@@ -119,8 +123,33 @@ impl Default for WatchSettings {
             min_speed_span_rpm: 5.0,
             wits: wits::WitsItems::default(),
             warm_start: true,
+            abc: None,
         }
     }
+}
+
+/// Particles of a window's ABC population by default: its law probabilities to within
+/// 0.008 (one binomial standard error, √(p(1 − p)/N) at p = ½).
+pub const ABC_PARTICLES: usize = 4_000;
+
+/// The run configuration of the paper's ABC on each window ([`WatchSettings::abc`]): `sampler`
+/// with `particles` (default [`ABC_PARTICLES`]), prior half-width `delta` (default 0.4) and
+/// floor `eps_min` (default: the paper's 0.014 where the window reaches it, else 1.1 × its
+/// best least-squares ρ).
+pub fn abc_config(
+    sampler: crate::run::Sampler,
+    particles: Option<usize>,
+    delta: Option<f64>,
+    eps_min: Option<f64>,
+) -> Result<crate::run::Config> {
+    crate::run::Settings {
+        sampler,
+        particles: Some(particles.unwrap_or(ABC_PARTICLES)),
+        delta,
+        eps_min,
+        ..crate::run::Settings::default()
+    }
+    .config()
 }
 
 /// The rate a fast record is thinned to by default, Hz: the paper's, which resolves the
@@ -156,8 +185,9 @@ pub struct LawUpdate {
     pub probability: f64,
     /// This window's alone, P(m | window).
     pub window_probability: f64,
-    pub ln_z: f64,
-    pub ln_z_error: f64,
+    /// The law's ln Z on the window and its Monte-Carlo error; none by the paper's ABC.
+    pub ln_z: Option<f64>,
+    pub ln_z_error: Option<f64>,
     /// Posterior mean, MAP (the mode of a kernel density of the particles, as a run's
     /// summary finds it) and 1 %, 99 % quantiles of each parameter, in the record's torque
     /// unit.
@@ -210,12 +240,67 @@ pub struct Update {
     pub change_nats: Option<f64>,
     pub advice: Option<Advice>,
     pub candidates_scored: u64,
+    /// The tolerance the window's ABC ended at (the paper's procedure); none for the evidence.
+    #[serde(default)]
+    pub epsilon: Option<f64>,
     /// Seconds from the window's last sample arriving to this update.
     pub latency_s: f64,
 }
 
 /// A window's least-squares estimates by law (SI).
 type Fits = Vec<(Law, Vec<f64>)>;
+
+/// A window's model selection, by either procedure.
+struct Selection {
+    /// The window's least-squares fits: what its change was judged by, and what later windows
+    /// compare with.
+    fits: Vec<crate::fit::LawFit>,
+    /// Each law compared, in the watch's order.
+    laws: Vec<Selected>,
+    candidates: u64,
+    /// The ABC's last tolerance; `None` for the evidence.
+    epsilon: Option<f64>,
+    /// Whether the posterior's torque parameters are for the torque scaled by WOB / W_ref.
+    scaled: bool,
+}
+
+impl Selection {
+    fn of(&self, law: Law) -> Option<&Selected> {
+        self.laws.iter().find(|l| l.law == law)
+    }
+}
+
+/// One law of a window's selection.
+struct Selected {
+    law: Law,
+    /// P(m | window).
+    probability: f64,
+    /// Its posterior particles (SI), weighted within the law.
+    posterior: Vec<crate::abc::Particle>,
+    /// ln Z and its Monte-Carlo error (the evidence's; the paper's ABC has none).
+    ln_z: Option<(f64, f64)>,
+}
+
+/// What the fits of the window before say of this one.
+struct Judged {
+    /// Nats of log-likelihood the earlier fits lose here; `None` without an earlier window.
+    loss: Option<f64>,
+    /// The running level of that loss since the last change.
+    level: Option<f64>,
+    change: bool,
+}
+
+/// A window's run says its notes through the watch's observer, but not the tolerance floor
+/// it chose: each window's ε is in its update.
+struct WindowNotes<'a>(&'a mut dyn Observer);
+
+impl Observer for WindowNotes<'_> {
+    fn note(&mut self, line: String) {
+        if !crate::abc::floor::is_floor_note(&line) {
+            self.0.note(line);
+        }
+    }
+}
 
 /// The running losses a change is measured against: those of the last this many windows.
 const LOSS_MEMORY: usize = 120;
@@ -353,7 +438,10 @@ impl Watch {
                 ));
             }
         }
-        settings.evidence.validate()?;
+        match &settings.abc {
+            Some(config) => config.validate()?,
+            None => settings.evidence.validate()?,
+        }
         Ok(Self {
             windows: Windows::new(length, step).thinned(thin),
             settings,
@@ -444,6 +532,7 @@ impl Watch {
             change_nats: None,
             advice: None,
             candidates_scored: 0,
+            epsilon: None,
             latency_s: 0.0,
         };
         let data = match self.window_data(&window) {
@@ -458,6 +547,124 @@ impl Watch {
             update.uninformative = Some(why);
             return Ok(self.completed(update, &window));
         }
+        let selected = match &self.settings.abc {
+            None => self.by_evidence(&window, &data, observer)?,
+            Some(config) => self.by_abc(config, &window, &data, observer)?,
+        };
+        let (selection, judged) = match selected {
+            Ok(selected) => selected,
+            Err(why) => {
+                update.uninformative = Some(why);
+                return Ok(self.completed(update, &window));
+            }
+        };
+        let Judged { loss, level, change } = judged;
+        update.candidates_scored = selection.candidates;
+        update.epsilon = selection.epsilon;
+        update.change = change;
+        update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
+        let fits_now: Fits = selection.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
+        let span = self.windows.span();
+        if change {
+            self.carried.losses.clear();
+            self.carried.last_change = Some(window.index);
+        } else if let Some(loss) = loss {
+            if self.carried.losses.len() == LOSS_MEMORY {
+                self.carried.losses.pop_front();
+            }
+            self.carried.losses.push_back(loss);
+        }
+        self.carried.recent_fits.push_back((window.index, fits_now));
+        while self.carried.recent_fits.len() > span + 1 {
+            self.carried.recent_fits.pop_front();
+        }
+
+        // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
+        let window_p: Vec<f64> = self
+            .settings
+            .laws
+            .iter()
+            .map(|&law| selection.of(law).map_or(0.0, |l| l.probability))
+            .collect();
+        let carried = match (&self.carried.probabilities, change) {
+            (Some(before), false) => {
+                let joint: Vec<f64> = before
+                    .iter()
+                    .zip(&window_p)
+                    .map(|(b, w)| b.powf(self.settings.forgetting) * w)
+                    .collect();
+                normalise_with_floor(&joint, self.settings.floor)
+            }
+            _ => normalise_with_floor(&window_p, self.settings.floor),
+        };
+        let unit = data.torque_unit;
+        for (k, &law) in self.settings.laws.iter().enumerate() {
+            let Some(selected) = selection.of(law) else { continue };
+            update.laws.push(law_update(selected, carried[k], unit));
+        }
+        update.most_probable = self
+            .settings
+            .laws
+            .iter()
+            .zip(&carried)
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(&law, _)| law);
+        // The mixture posterior under the carried probabilities: each law's particles weighed
+        // by its share of the window's posterior, then by its carried probability over it.
+        let posterior: Vec<crate::abc::Particle> = selection
+            .laws
+            .into_iter()
+            .filter_map(|selected| {
+                let k = self.settings.laws.iter().position(|&l| l == selected.law)?;
+                let (p, share) = (selected.probability, carried[k]);
+                (p > 0.0).then(|| {
+                    selected.posterior.into_iter().map(move |mut particle| {
+                        particle.weight *= p;
+                        particle.weight *= share / p;
+                        particle
+                    })
+                })
+            })
+            .flatten()
+            .collect();
+        self.carried.probabilities = Some(carried);
+        self.carried.posterior = Some(posterior);
+        self.carried.posterior_scaled = selection.scaled;
+        Ok(self.completed(update, &window))
+    }
+
+    /// The loss of an earlier window's fits here, against this window's own `fits`: the
+    /// latest window that does not overlap this one, and none that overlaps the last change's
+    /// window (which may hold both formations); a change where it exceeds its running level
+    /// by the threshold.
+    fn judge(&self, window: &Window, fits: &[crate::fit::LawFit], samples: &crate::data::Samples) -> Judged {
+        let span = self.windows.span();
+        let reference = self
+            .carried
+            .recent_fits
+            .iter()
+            .rev()
+            .find(|(k, _)| k + span <= window.index)
+            .filter(|(k, _)| self.carried.last_change.is_none_or(|c| *k >= c + span));
+        let loss = reference.and_then(|(_, before)| loss_nats(before, fits, samples));
+        let level = median(&self.carried.losses.iter().copied().collect::<Vec<_>>());
+        let change = match (loss, level) {
+            (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
+            (Some(loss), None) => loss > self.settings.change_nats,
+            _ => false,
+        };
+        Judged { loss, level, change }
+    }
+
+    /// The window's law probabilities by the evidence, warm-started from the window before
+    /// where there is one; computed again from the boxes where the window declares a change
+    /// or a law's warm samplers missed its posterior. `Err`: why the window cannot inform.
+    fn by_evidence(
+        &self,
+        window: &Window,
+        data: &FieldData,
+        observer: &mut dyn Observer,
+    ) -> Result<std::result::Result<(Selection, Judged), String>> {
         let warm = self.warm_start();
         // From the window before's estimates, the fits need only the grid's best starts
         // beside them (which still find a minimum that moved away with a change of rock).
@@ -484,37 +691,15 @@ impl Watch {
             warm,
             separations: false,
         };
-        let mut analysis = match window_evidence(&job, &data, observer)? {
+        let mut analysis = match window_evidence(&job, data, observer)? {
             Ok(analysis) => analysis,
-            Err(why) => {
-                update.uninformative = Some(why);
-                return Ok(self.completed(update, &window));
-            }
+            Err(why) => return Ok(Err(why)),
         };
-        update.candidates_scored = analysis.evidence.candidates_scored;
-
-        // The loss of an earlier window's fits here, against this window's own: the latest
-        // window that does not overlap this one, and none that overlaps the last change's
-        // window (which may hold both formations).
-        let fits_now: Fits = analysis.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
-        let span = self.windows.span();
-        let reference = self
-            .carried
-            .recent_fits
-            .iter()
-            .rev()
-            .find(|(k, _)| k + span <= window.index)
-            .filter(|(k, _)| self.carried.last_change.is_none_or(|c| *k >= c + span));
-        let loss = reference.and_then(|(_, before)| loss_nats(before, &analysis.fits, &data.calibration));
-        let level = median(&self.carried.losses.iter().copied().collect::<Vec<_>>());
-        let change = match (loss, level) {
-            (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
-            (Some(loss), None) => loss > self.settings.change_nats,
-            _ => false,
-        };
-        update.change = change;
-        update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
-        if (change || missed_mode(&analysis, data.calibration.len())) && job.warm.is_some() {
+        let mut candidates = analysis.evidence.candidates_scored;
+        let judged = self.judge(window, &analysis.fits, &data.calibration);
+        // The fits the change was judged by are the ones the next windows compare with.
+        let fits = analysis.fits.clone();
+        if (judged.change || missed_mode(&analysis, data.calibration.len())) && job.warm.is_some() {
             // A change of rock: what the window before carried describes another formation
             // (its improbable laws kept few particles, its posterior lies elsewhere), so this
             // window's evidence is found again from the boxes, every law with all its
@@ -529,78 +714,143 @@ impl Watch {
                 warm: None,
                 ..job.clone()
             };
-            match window_evidence(&cold, &data, observer)? {
+            match window_evidence(&cold, data, observer)? {
                 Ok(fresh) => {
-                    update.candidates_scored += fresh.evidence.candidates_scored;
+                    candidates += fresh.evidence.candidates_scored;
                     analysis = fresh;
                 }
-                Err(why) => {
-                    update.uninformative = Some(why);
-                    return Ok(self.completed(update, &window));
-                }
+                Err(why) => return Ok(Err(why)),
             }
         }
-        if change {
-            self.carried.losses.clear();
-            self.carried.last_change = Some(window.index);
-        } else if let Some(loss) = loss {
-            if self.carried.losses.len() == LOSS_MEMORY {
-                self.carried.losses.pop_front();
-            }
-            self.carried.losses.push_back(loss);
-        }
-        self.carried.recent_fits.push_back((window.index, fits_now));
-        while self.carried.recent_fits.len() > span + 1 {
-            self.carried.recent_fits.pop_front();
-        }
-
-        // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
-        let window_p: Vec<f64> = self
-            .settings
-            .laws
-            .iter()
-            .map(|&law| analysis.evidence.of(law).map_or(0.0, |l| l.probability))
-            .collect();
-        let carried = match (&self.carried.probabilities, change) {
-            (Some(before), false) => {
-                let joint: Vec<f64> = before
-                    .iter()
-                    .zip(&window_p)
-                    .map(|(b, w)| b.powf(self.settings.forgetting) * w)
-                    .collect();
-                normalise_with_floor(&joint, self.settings.floor)
-            }
-            _ => normalise_with_floor(&window_p, self.settings.floor),
-        };
-        let unit = data.torque_unit;
-        for (k, &law) in self.settings.laws.iter().enumerate() {
-            let Some(e) = analysis.evidence.of(law) else { continue };
-            update.laws.push(law_update(e, carried[k], window_p[k], unit));
-        }
-        update.most_probable = self
-            .settings
-            .laws
-            .iter()
-            .zip(&carried)
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(&law, _)| law);
-        // The mixture posterior under the carried probabilities.
-        let posterior: Vec<crate::abc::Particle> = analysis
+        let laws = analysis
             .evidence
-            .particles()
-            .into_iter()
-            .filter_map(|mut p| {
-                let k = self.settings.laws.iter().position(|&l| l == p.law)?;
-                (window_p[k] > 0.0).then(|| {
-                    p.weight *= carried[k] / window_p[k];
-                    p
-                })
+            .laws
+            .iter()
+            .map(|e| Selected {
+                law: e.law,
+                probability: e.probability,
+                posterior: e
+                    .posterior
+                    .iter()
+                    .enumerate()
+                    .map(|(i, (params, weight))| crate::abc::Particle {
+                        law: e.law,
+                        index: i as u64,
+                        params: params.clone(),
+                        rho: f64::NAN,
+                        weight: *weight,
+                    })
+                    .collect(),
+                ln_z: Some((e.ln_z, e.ln_z_error)),
             })
             .collect();
-        self.carried.probabilities = Some(carried);
-        self.carried.posterior = Some(posterior);
-        self.carried.posterior_scaled = analysis.fit.w_ref_n.is_some();
-        Ok(self.completed(update, &window))
+        let selection = Selection {
+            fits,
+            laws,
+            candidates,
+            epsilon: None,
+            scaled: analysis.fit.w_ref_n.is_some(),
+        };
+        Ok(Ok((selection, judged)))
+    }
+
+    /// The window's law probabilities by the paper's ABC: `config`'s sampler on δ boxes around
+    /// the window's fits (started from the window before's estimates beside the grid's best),
+    /// down to the floor the window reaches; seeded by the watch's seed + the window's index.
+    /// `Err`: why the window cannot inform.
+    fn by_abc(
+        &self,
+        config: &crate::run::Config,
+        window: &Window,
+        data: &FieldData,
+        observer: &mut dyn Observer,
+    ) -> Result<std::result::Result<(Selection, Judged), String>> {
+        let known: Fits = match self.settings.warm_start {
+            true => self
+                .carried
+                .recent_fits
+                .back()
+                .map(|(_, f)| f.clone())
+                .unwrap_or_default(),
+            false => Vec::new(),
+        };
+        let fit = match known.is_empty() {
+            true => config.fit,
+            false => FitOptions {
+                starts: WARM_FIT_STARTS,
+                ..config.fit
+            },
+        };
+        let fits = match crate::fit::fit_record_from(&self.settings.laws, data, &fit, &known) {
+            Ok(fits) => fits,
+            Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
+                return Ok(Err(e.to_string()));
+            }
+            Err(e) => return Err(e),
+        };
+        let judged = self.judge(window, &fits, &data.calibration);
+        let config = crate::run::Config {
+            laws: self.settings.laws.clone(),
+            seed: self.settings.evidence.seed.wrapping_add(window.index as u64),
+            backend: self.settings.backend,
+            ..config.clone()
+        };
+        let backend = config.backend;
+        let scaled = config.fit.w_ref_n.is_some();
+        let outcome = crate::run::start_fitted_in_memory(
+            data.clone(),
+            config,
+            fits.clone(),
+            None,
+            &mut |problem, note| crate::eval::evaluator(problem, backend, Default::default(), note),
+            &mut WindowNotes(observer),
+        );
+        let outcome = match outcome {
+            Ok(outcome) => outcome,
+            Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
+                return Ok(Err(e.to_string()));
+            }
+            Err(e) => return Err(e),
+        };
+        let run = outcome.run;
+        let candidates = run.populations.iter().map(|p| p.record.candidates_scored).sum();
+        let Some(last) = run.populations.into_iter().last() else {
+            return Ok(Err(format!(
+                "no population of its ABC completed ({})",
+                run.stop.describe()
+            )));
+        };
+        let laws = self
+            .settings
+            .laws
+            .iter()
+            .map(|&law| {
+                let probability = last.record.probability_of(law);
+                Selected {
+                    law,
+                    probability,
+                    // Weights relative to the law's own: its share of the population's.
+                    posterior: last
+                        .particles
+                        .iter()
+                        .filter(|p| p.law == law)
+                        .map(|p| crate::abc::Particle {
+                            weight: p.weight / probability,
+                            ..p.clone()
+                        })
+                        .collect(),
+                    ln_z: None,
+                }
+            })
+            .collect();
+        let selection = Selection {
+            fits,
+            laws,
+            candidates,
+            epsilon: last.record.epsilon,
+            scaled,
+        };
+        Ok(Ok((selection, judged)))
     }
 
     /// Each law's reference from the last informative window's posterior (a kernel density
@@ -919,6 +1169,17 @@ pub fn follow(
                     rate_hz / thin as f64
                 ));
             }
+            if let Some(config) = &settings.abc {
+                observer.note(format!(
+                    "each window's law probabilities by the paper's ABC ({} sampler, {} particles, δ = {}): ratios of the laws' prior volumes below each window's ε, not evidence",
+                    match config.sampler {
+                        crate::run::SamplerConfig::Rejection(_) => "rejection",
+                        crate::run::SamplerConfig::Smc(_) => "SMC",
+                    },
+                    config.sampler.schedule().particles,
+                    config.delta
+                ));
+            }
             if settings.window_s.is_none() || settings.step_s.is_none() {
                 observer.note(format!(
                     "windows of {length} s every {step} s (the record's rate: {rate_hz:.1} Hz); `window_s` and `step_s` set them"
@@ -1098,26 +1359,16 @@ fn missed_mode(analysis: &EvidenceAnalysis, n: usize) -> bool {
     })
 }
 
-/// One law's line of a window's update: its evidence `e`, carried and window probabilities,
-/// and its posterior summarised by a run summary's rule (mean, MAP, 1 % and 99 % quantiles,
-/// in the record's torque `unit`) with Kish's ESS of its weighted particles.
-fn law_update(e: &LawEvidence, probability: f64, window_probability: f64, unit: crate::units::TorqueUnit) -> LawUpdate {
-    let law = e.law;
-    let particles: Vec<crate::abc::Particle> = e
-        .posterior
-        .iter()
-        .enumerate()
-        .map(|(i, (params, weight))| crate::abc::Particle {
-            law,
-            index: i as u64,
-            params: params.clone(),
-            rho: f64::NAN,
-            weight: *weight,
-        })
-        .collect();
-    let members: Vec<&crate::abc::Particle> = particles.iter().collect();
-    let summary = (!members.is_empty()).then(|| crate::abc::posterior::summarize_law(law, &members, e.probability));
-    let weights: Vec<f64> = e.posterior.iter().map(|(_, w)| *w).collect();
+/// One law's line of a window's update: its selection (window probability, ln Z where the
+/// evidence gave one), carried probability, and its posterior summarised by a run summary's
+/// rule (mean, MAP, 1 % and 99 % quantiles, in the record's torque `unit`) with Kish's ESS of
+/// its weighted particles.
+fn law_update(selected: &Selected, probability: f64, unit: crate::units::TorqueUnit) -> LawUpdate {
+    let law = selected.law;
+    let members: Vec<&crate::abc::Particle> = selected.posterior.iter().collect();
+    let summary =
+        (!members.is_empty()).then(|| crate::abc::posterior::summarize_law(law, &members, selected.probability));
+    let weights: Vec<f64> = selected.posterior.iter().map(|p| p.weight).collect();
     let in_unit = |v: Option<&Vec<f64>>| match v {
         Some(v) => crate::documents::to_record_units(law, v, unit),
         None => vec![f64::NAN; law.n_params()],
@@ -1125,9 +1376,9 @@ fn law_update(e: &LawEvidence, probability: f64, window_probability: f64, unit: 
     LawUpdate {
         law,
         probability,
-        window_probability,
-        ln_z: e.ln_z,
-        ln_z_error: e.ln_z_error,
+        window_probability: selected.probability,
+        ln_z: selected.ln_z.map(|(ln_z, _)| ln_z),
+        ln_z_error: selected.ln_z.map(|(_, error)| error),
         mean: in_unit(summary.as_ref().map(|s| &s.mean)),
         map: in_unit(summary.as_ref().map(|s| &s.map)),
         q01: in_unit(summary.as_ref().map(|s| &s.q01)),

@@ -131,11 +131,18 @@ fn markdown(watch: &StoredWatch) -> String {
             let _ = writeln!(md, "It informs nothing: {why}.");
         }
         for l in &last.laws {
+            let ln_z = match (l.ln_z, l.ln_z_error) {
+                (Some(ln_z), Some(error)) => format!(", ln Z = {ln_z:.1} ± {error:.1}"),
+                _ => String::new(),
+            };
             let _ = writeln!(
                 md,
-                "- {}: P = {:.3} (this window alone {:.3}, ln Z = {:.1} ± {:.1})",
-                l.law, l.probability, l.window_probability, l.ln_z, l.ln_z_error
+                "- {}: P = {:.3} (this window alone {:.3}{ln_z})",
+                l.law, l.probability, l.window_probability
             );
+        }
+        if let Some(epsilon) = last.epsilon {
+            let _ = writeln!(md, "\nThe window's ABC ended at ε = {epsilon:.5}.");
         }
         if let Some(advice) = &last.advice {
             let _ = writeln!(md, "\nAdvice: {}.", advice.words);

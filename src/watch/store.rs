@@ -97,6 +97,15 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
         "min_speed_span_rpm": settings.min_speed_span_rpm,
         "wits_items": settings.wits,
         "warm_start": settings.warm_start,
+        // The paper's ABC on each window: what of its run configuration is the watch's own
+        // (its laws, seed and backend are the watch's).
+        "abc": settings.abc.as_ref().map(|c| serde_json::json!({
+            "sampler": c.sampler,
+            "delta": c.delta,
+            "prior_rule": c.prior_rule,
+            "eps_min_from_record": c.eps_min_from_record,
+            "fit": c.fit,
+        })),
         "criterion": criterion_json(&settings.criterion),
     })
 }

@@ -828,3 +828,105 @@ fn a_logger_s_record_ranks_each_formation_s_law_first_in_every_window_inside_it(
     assert_eq!(changes[0], 5);
     assert!((26..=28).contains(&changes[1]), "{changes:?}");
 }
+
+/// The rows of `record` (a CSV with a `time_s` column first) with `start` ≤ t < `end`, as a
+/// CSV of their own.
+fn rows_between(record: &Path, start: f64, end: f64, to: &Path) {
+    let text = std::fs::read_to_string(record).unwrap();
+    let mut lines = text.lines();
+    let mut kept = vec![lines.next().unwrap().to_string()];
+    kept.extend(
+        lines
+            .filter(|l| {
+                let t: f64 = l.split(',').next().unwrap().parse().unwrap();
+                (start..end).contains(&t)
+            })
+            .map(str::to_string),
+    );
+    std::fs::write(to, kept.join("\n") + "\n").unwrap();
+}
+
+#[test]
+fn the_paper_s_abc_on_each_window_is_bitrock_abc_on_the_window_s_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let args = ["--abc", "--cold-start", "--seed", "3"];
+    let updates = watch(&[&WINDOWS[..], &args[..], &[record.to_str().unwrap()]].concat());
+    assert_eq!(updates.len(), 17);
+    for u in &updates {
+        assert!(u["uninformative"].is_null(), "{u}");
+        let laws = u["laws"].as_array().unwrap();
+        let window: f64 = laws.iter().map(|l| l["window_probability"].as_f64().unwrap()).sum();
+        assert!((window - 1.0).abs() < 1e-9, "{u}");
+        assert!(
+            laws.iter().all(|l| l["ln_z"].is_null() && l["ln_z_error"].is_null()),
+            "{u}"
+        );
+        // The paper's floor, which every window of this well reaches.
+        assert_eq!(u["epsilon"].as_f64(), Some(0.014), "{u}");
+        assert!(u["candidates_scored"].as_u64().unwrap() >= 4000, "{u}");
+    }
+    // A change is judged by the fits, whichever procedure selects: declared once, near the
+    // boundary.
+    let declared: Vec<f64> = updates
+        .iter()
+        .filter(|u| u["change"] == true)
+        .map(|u| u["start_s"].as_f64().unwrap())
+        .collect();
+    assert!(
+        declared.len() == 1 && (BOUNDARY_S - 20.0 + 1e-9..=BOUNDARY_S).contains(&declared[0]),
+        "{declared:?}"
+    );
+    // Window k's probabilities are those of `bitrock abc` on its rows (every row calibrates,
+    // seed 3 + k, 4,000 particles): one window in each formation.
+    for k in [2usize, 12] {
+        let (start, end) = (10.0 * k as f64, 10.0 * k as f64 + 20.0);
+        let rows = dir.path().join(format!("window-{k}.csv"));
+        rows_between(&record, start, end, &rows);
+        let out = dir.path().join(format!("run-{k}"));
+        let seed = (3 + k).to_string();
+        let (code, _, stderr) = outcome(
+            bin()
+                .args([
+                    "abc",
+                    "--laws",
+                    "m2,m3",
+                    "--backend",
+                    "cpu",
+                    "--quiet",
+                    "--particles",
+                    "4000",
+                ])
+                .args(["--calibration-fraction", "1", "--seed", &seed, "--out"])
+                .arg(&out)
+                .arg(&rows),
+        );
+        assert_eq!(code, 0, "{stderr}");
+        let run: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+        let last = run["populations"].as_array().unwrap().last().unwrap().clone();
+        let u = &updates[k];
+        assert_eq!(u["epsilon"], last["epsilon"], "window {k}");
+        for l in u["laws"].as_array().unwrap() {
+            let law = l["law"].as_str().unwrap();
+            assert_eq!(
+                l["window_probability"], last["model_probabilities"][law],
+                "window {k}, {law}"
+            );
+        }
+        let scored: u64 = run["populations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["candidates_scored"].as_u64().unwrap())
+            .sum();
+        assert_eq!(u["candidates_scored"].as_u64(), Some(scored), "window {k}");
+    }
+    // Settings of the procedure not used are refused, naming the flag.
+    let (code, _, stderr) = outcome(watch_command().args(["--delta", "0.2"]).arg(&record));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--abc"), "{stderr}");
+    let (code, _, stderr) = outcome(watch_command().args(["--abc", "--islands", "3"]).arg(&record));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--islands"), "{stderr}");
+}

@@ -35,16 +35,46 @@ pub(crate) fn watch(
         py,
         py.detach(|| bitrock::pipeline::stability::criterion(structure, lumped, &fe)),
     )?;
+    let abc: bool = kwarg(options, "abc")?.unwrap_or(false);
+    let sampler: Option<bitrock::run::Sampler> = named(py, "sampler", kwarg(options, "sampler")?)?;
+    let delta: Option<f64> = kwarg(options, "delta")?;
+    let eps_min: Option<f64> = kwarg(options, "eps_min")?;
+    let particles: Option<usize> = kwarg(options, "particles")?;
+    let islands: Option<usize> = kwarg(options, "islands")?;
+    // As the command refuses them: settings of the procedure not used.
+    let unused = match abc {
+        true => islands
+            .is_some()
+            .then_some(("islands", "applies only to the evidence; drop it or `abc`")),
+        false => [
+            ("sampler", sampler.is_some()),
+            ("delta", delta.is_some()),
+            ("eps_min", eps_min.is_some()),
+        ]
+        .into_iter()
+        .find(|(_, given)| *given)
+        .map(|(field, _)| (field, "applies only to `abc=True` (the paper's ABC on each window)")),
+    };
+    if let Some((field, why)) = unused {
+        return Err(to_py(py, Error::setting(field, why)));
+    }
     let settings = WatchSettings {
         criterion,
+        abc: match abc {
+            true => Some(check(
+                py,
+                bitrock::watch::abc_config(sampler.unwrap_or_default(), particles, delta, eps_min),
+            )?),
+            false => None,
+        },
         laws: laws(py, kwarg(options, "laws")?)?.unwrap_or_else(|| defaults.laws.clone()),
         data: data_options(py, options)?,
         thin: kwarg(options, "thin")?,
         window_s: kwarg(options, "window_s")?,
         step_s: kwarg(options, "step_s")?,
         evidence: bitrock::abc::evidence::EvidenceConfig {
-            particles: kwarg(options, "particles")?.unwrap_or(defaults.evidence.particles),
-            islands: kwarg(options, "islands")?.unwrap_or(defaults.evidence.islands),
+            particles: particles.filter(|_| !abc).unwrap_or(defaults.evidence.particles),
+            islands: islands.unwrap_or(defaults.evidence.islands),
             seed: kwarg(options, "seed")?.unwrap_or(defaults.evidence.seed),
             ..defaults.evidence.clone()
         },

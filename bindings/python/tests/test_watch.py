@@ -114,6 +114,27 @@ def test_refusals_name_their_argument(well, tmp_path) -> None:
         list(bitrock.watch(tmp_path / "missing.csv"))
 
 
+def test_the_paper_s_abc_on_each_window_is_the_command_s(cli, well) -> None:
+    watch = bitrock.watch(
+        well, laws="m2,m3", window_s=20, step_s=10, backend="cpu", abc=True, particles=1000, sampler="smc", seed=4
+    )
+    updates = list(watch)
+    lines = run_cli(
+        cli, "watch", str(well), "--json", "--laws", "m2,m3", "--window-s", "20", "--step-s", "10",
+        "--backend", "cpu", "--abc", "--particles", "1000", "--sampler", "smc", "--seed", "4",
+    ).stdout.splitlines()
+    assert [u.document["laws"] for u in updates] == [json.loads(line)["laws"] for line in lines]
+    for u in updates:
+        assert u.epsilon == pytest.approx(0.014, abs=0) and u.laws["ln_z"].isna().all()
+        assert u.laws["window_probability"].sum() == pytest.approx(1.0, abs=1e-12)
+    assert watch.history["epsilon"].eq(0.014).all()
+    # Settings of the procedure not used are refused, naming them.
+    for wrong, argument in ((dict(delta=0.2), "delta"), (dict(abc=True, islands=3), "islands")):
+        with pytest.raises(bitrock.InputError) as caught:
+            list(bitrock.watch(well, laws="m2", backend="cpu", **wrong))
+        assert caught.value.argument == argument
+
+
 def test_the_advice_on_the_finite_element_string(cli, well, tmp_path) -> None:
     settings = dict(laws="m2", window_s=20, step_s=20, backend="cpu", particles=60)
     on_fe = list(bitrock.watch(well, structure="fe", out=tmp_path / "fe", **settings))

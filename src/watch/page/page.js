@@ -157,7 +157,7 @@ function renderNow(u) {
         [l.law, 'law'],
         [fixed(l.probability, 3), 'probability'],
         [fixed(l.window_probability, 3), 'window_probability'],
-        [`${fixed(l.ln_z, 1)} ± ${fixed(l.ln_z_error, 1)}`, 'ln_z'],
+        [l.ln_z === null ? '— (ABC)' : `${fixed(l.ln_z, 1)} ± ${fixed(l.ln_z_error, 1)}`, 'ln_z'],
       ]) {
         const td = document.createElement('td');
         td.textContent = text;

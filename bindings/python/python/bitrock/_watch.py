@@ -20,8 +20,8 @@ class WatchUpdate:
     """One window's update: the fields of ``bitrock watch --json``'s line as attributes
     (``window``, ``start_s``, ``end_s``, ``samples_used``, ``uninformative``,
     ``most_probable``, ``change``, ``change_nats``, ``advice``, ``candidates_scored``,
-    ``latency_s``), ``laws`` as a DataFrame indexed by law, and the whole line as
-    ``document``."""
+    ``epsilon`` (the tolerance of the window's ABC, ``None`` for the evidence), ``latency_s``),
+    ``laws`` as a DataFrame indexed by law, and the whole line as ``document``."""
 
     def __init__(self, document: dict[str, Any]) -> None:
         self.document = document
@@ -35,7 +35,7 @@ class WatchUpdate:
     @property
     def laws(self) -> pd.DataFrame:
         """Per law: the carried ``probability``, this window's alone (``window_probability``),
-        ``ln_z`` and ``ln_z_error``, the posterior ``mean``, ``map``, ``q01``, ``q99`` of its
+        ``ln_z`` and ``ln_z_error`` (``None`` by the paper's ABC), the posterior ``mean``, ``map``, ``q01``, ``q99`` of its
         parameters (lists, in the record's torque unit) and ``ess``, the effective sample size
         of its weighted posterior particles."""
         frame = pd.DataFrame(self.document["laws"])
@@ -114,7 +114,8 @@ class Watch:
     @property
     def history(self) -> pd.DataFrame:
         """One row per window given so far: its times, samples used, the most probable law,
-        each law's carried probability (``p_m1``…), the change flag, P(unstable) at the
+        each law's carried probability (``p_m1``…), the change flag, the window's ABC tolerance
+        ``epsilon`` (``None`` for the evidence), P(unstable) at the
         operating point and the advice in words."""
         return _history([u.document for u in self._given])
 
@@ -130,6 +131,7 @@ def _history(documents: list[dict[str, Any]]) -> pd.DataFrame:
             "samples_used": d["samples_used"],
             "most_probable": d["most_probable"],
             "change": d["change"],
+            "epsilon": d.get("epsilon"),
         }
         for law in d["laws"]:
             row[f"p_{law['law']}"] = law["probability"]
@@ -180,6 +182,10 @@ def watch(
     risk: float | None = None,
     particles: int | None = None,
     islands: int | None = None,
+    abc: bool = False,
+    sampler: str | None = None,
+    delta: float | None = None,
+    eps_min: float | None = None,
     seed: int | None = None,
     backend: str | None = None,
     speed_col: str | None = None,
@@ -218,7 +224,10 @@ def watch(
     stability as in :func:`stability`: ``"1dof"`` (the paper's, with ``inertia_kg_m2``,
     ``omega_n_rad_s``, ``damping_ratio``) or ``"fe"`` (the finite-element string, the paper's or
     ``fe_file``'s, with its overrides; its critical bit damping is found once, before the first
-    window). Keyword arguments are the command's flags without dashes."""
+    window). ``abc=True`` gives each window's law probabilities by the paper's ABC instead of
+    the evidence (``sampler``, ``particles``, ``delta``, ``eps_min`` as for :func:`abc`; each
+    update's ``epsilon`` is the tolerance its window ended at, and its laws have no ``ln_z``).
+    Keyword arguments are the command's flags without dashes."""
     from . import _law_names
 
     options = {k: v for k, v in locals().items() if k not in ("source", "_law_names")}
