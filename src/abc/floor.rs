@@ -153,6 +153,16 @@ mod tests {
     }
 
     #[test]
+    fn the_floor_s_notes_are_told_from_others() {
+        let fits = [fit(Law::M3, 0.0273)];
+        for requested in [None, Some(0.02)] {
+            let note = resolve(&fits, requested).unwrap().note.unwrap();
+            assert!(is_floor_note(&note), "{note}");
+        }
+        assert!(!is_floor_note("no usable GPU (no adapter); computing on the CPU"));
+    }
+
+    #[test]
     fn a_start_epsilon_below_every_best_fit_is_refused() {
         let fits = [fit(Law::M1, 0.03), fit(Law::M3, 0.0273)];
         assert!(check_start_epsilon(&fits, Some(0.028)).is_ok());

@@ -9,7 +9,8 @@
 //! nothing. Otherwise the evidence of each law on the window ([`crate::pipeline::evidence`],
 //! physical boxes; warm-started from the window before: its posterior's kernel density as
 //! the samplers' reference, its estimates as the fits' starts, particles by each law's worth,
-//! and a window that declares a change computed again from the boxes), then
+//! and a window that declares a change computed again from the boxes; or, by flag, the
+//! paper's ABC on the window, [`WatchSettings::abc`]), then
 //!
 //! - **law probabilities** P_t(m) ∝ P_{t−1}(m)^λ · Z_t(m) (λ the forgetting factor: the
 //!   previous windows' evidence counts λ, λ², … times), no law below the floor;
