@@ -110,6 +110,14 @@ pub struct EvidenceCmd {
     /// parameters in the record's torque unit, for `bitrock stability --posterior FILE`.
     #[arg(long, value_name = "FILE")]
     pub posterior_out: Option<PathBuf>,
+    /// Evidence directory: evidence.json (this document with each law's posterior sets, what
+    /// `bitrock.read_evidence` reads) and posterior.csv (what `bitrock stability --run DIR`
+    /// maps), written together once the evidence (and its check) is done.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Replace the evidence --out holds.
+    #[arg(long, requires = "out")]
+    pub force: bool,
     /// No progress lines on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -156,11 +164,13 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.posterior_out {
         bitrock::run::dir::check_output_file(path, "posterior_out", false)?;
     }
+    if let Some(dir) = &cmd.out {
+        evidence::dir::check_out(dir, cmd.force)?;
+    }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     let analysis = job.run(&data, &mut Notes)?;
     if let Some(path) = &cmd.posterior_out {
-        let particles = analysis.evidence.particles();
-        let csv = bitrock::documents::particle_groups_csv(&[(0, &particles)], &job.laws, data.torque_unit);
+        let csv = analysis.posterior_csv(&job.laws, &data);
         bitrock::run::dir::write_whole(path, "posterior_out", false, |file| file.write_all(&csv))?;
         if let Some(w_ref_n) = analysis.fit.w_ref_n {
             print::note(format_args!(
@@ -183,18 +193,21 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             evidence::check(&job, &data, &analysis, k, &mut progress, &mut Notes)
         })
         .transpose()?;
+    if let Some(dir) = &cmd.out {
+        let mut document = analysis.document(&data, &job.prior.describe(), true);
+        if let Some(check) = &check {
+            document["check"] = serde_json::to_value(check)?;
+        }
+        evidence::dir::save(dir, cmd.force, &document, analysis.posterior_csv(&job.laws, &data))?;
+        print::note(format_args!(
+            "note: evidence written to {} (`bitrock stability --run {}` maps its posterior)",
+            dir.display(),
+            dir.display()
+        ));
+    }
     let mut out = print::stdout();
     if cmd.json {
-        let mut document = bitrock::documents::evidence_json(
-            &data,
-            &analysis.fits,
-            &analysis.prior,
-            &analysis.evidence,
-            &analysis.separations,
-            &analysis.residual_lag1,
-            &analysis.noise_models,
-            &job.prior.describe(),
-        );
+        let mut document = analysis.document(&data, &job.prior.describe(), false);
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
         }

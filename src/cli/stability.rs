@@ -20,7 +20,8 @@ use std::process::ExitCode;
 
 #[derive(Debug, Args)]
 pub struct StabilityCmd {
-    /// ABC run directory (from `bitrock abc`): MAP, posterior samples and law probabilities.
+    /// ABC run directory (from `bitrock abc`): MAP, posterior samples and law probabilities;
+    /// or an evidence directory (`bitrock evidence --out`): its posterior.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["law", "params", "posterior"])]
     pub run: Option<PathBuf>,
     /// Weighted posterior particles as CSV (`bitrock evidence --posterior-out`, `bitrock export
@@ -39,9 +40,10 @@ pub struct StabilityCmd {
     pub torque_unit: TorqueUnit,
     #[command(flatten)]
     pub string: StructureArgs,
-    /// Reference weight on bit W_ref of the law's parameters, kN.
-    #[arg(long, value_parser = finite_number, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
-    pub w_ref_kn: f64,
+    /// Reference weight on bit W_ref of the law's parameters, kN [default: the paper's 244.2;
+    /// an evidence directory's own where its evidence scaled each torque by WOB / W_ref].
+    #[arg(long, value_parser = finite_number, value_name = "KN")]
+    pub w_ref_kn: Option<f64>,
     /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value = DEFAULT_OMEGA_RPM, value_name = "MIN:MAX:COUNT")]
     pub omega_rpm: String,
@@ -79,12 +81,24 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
+    let (source, own_w_ref_n) = map_source(cmd)?;
+    let w_ref_n = match (cmd.w_ref_kn, own_w_ref_n) {
+        (Some(kn), _) => kn * 1000.0,
+        (None, Some(n)) => {
+            super::print::note(format_args!(
+                "note: the posterior's torque parameters are for W_ref = {:.3} kN (its evidence scaled each torque by WOB / W_ref): mapped at that reference",
+                n / 1000.0
+            ));
+            n
+        }
+        (None, None) => PAPER_W_REF_N,
+    };
     let job = StabilityJob {
-        source: map_source(cmd)?,
+        source,
         omega_rpm: omega,
         wob_kn: wob,
         criterion: Criterion::Lumped(cmd.string.lumped.lumped()),
-        w_ref_n: cmd.w_ref_kn * 1000.0,
+        w_ref_n,
         percentile: cmd.percentile / 100.0,
         samples: cmd.samples,
         backend: cmd.backend,
@@ -146,15 +160,26 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Whose maps: `--run`, `--posterior`, or `--law` at `--params` (in `--torque-unit`, made SI
-/// here).
-fn map_source(cmd: &StabilityCmd) -> anyhow::Result<MapSource> {
+/// Whose maps: `--run` (a run or an evidence directory), `--posterior`, or `--law` at
+/// `--params` (in `--torque-unit`, made SI here); and the W_ref (N) an evidence directory's
+/// torque parameters are for, where its evidence scaled them.
+fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<f64>)> {
     if let Some(path) = &cmd.posterior {
-        return Ok(MapSource::Posterior(bitrock::documents::read_particles_csv(path)?));
+        return Ok((
+            MapSource::Posterior(bitrock::documents::read_particles_csv(path)?),
+            None,
+        ));
     }
     match (&cmd.run, &cmd.law, &cmd.params) {
-        (Some(dir), _, _) => Ok(MapSource::Run(dir.clone())),
-        (None, Some(law), Some(params)) => Ok(MapSource::law(super::args::parse_law(law)?, params, cmd.torque_unit)?),
+        (Some(dir), _, _) if bitrock::run::dir::is_evidence_dir(dir) => {
+            let (particles, w_ref_n) = bitrock::pipeline::evidence::dir::posterior(dir)?;
+            Ok((MapSource::Posterior(particles), w_ref_n))
+        }
+        (Some(dir), _, _) => Ok((MapSource::Run(dir.clone()), None)),
+        (None, Some(law), Some(params)) => Ok((
+            MapSource::law(super::args::parse_law(law)?, params, cmd.torque_unit)?,
+            None,
+        )),
         _ => Err(Error::setting(
             "run",
             "give a run directory (--run DIR), a posterior (--posterior FILE) or a law (--law L --params P1,P2,...)",

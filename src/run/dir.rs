@@ -37,6 +37,12 @@ pub const SELECTION_FILES: [&str; 5] = [
 pub const WATCH_STORE_FILE: &str = "watch.sqlite";
 /// SQLite's companions of the watch store while it is written.
 pub const WATCH_STORE_COMPANIONS: [&str; 3] = ["watch.sqlite-journal", "watch.sqlite-wal", "watch.sqlite-shm"];
+/// An evidence directory's document (`bitrock evidence --out`): the evidence, its fits, boxes
+/// and each law's posterior sets.
+pub const EVIDENCE_JSON: &str = "evidence.json";
+/// An evidence directory's posterior particles (every law's sets weighed by its P(m | y)), the
+/// particle CSV `bitrock stability` reads.
+pub const POSTERIOR_CSV: &str = "posterior.csv";
 /// A report's document.
 pub const REPORT_MD: &str = "report.md";
 /// A report's figures directory (SVG and PNG).
@@ -54,6 +60,8 @@ pub enum Owned {
     Selection,
     /// A watch directory: the watch store and its companions.
     Watch,
+    /// An evidence directory: evidence.json and posterior.csv.
+    Evidence,
 }
 
 impl Owned {
@@ -76,6 +84,7 @@ impl Owned {
             }
             (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
             (Owned::Watch, [name]) => !is_dir && (*name == WATCH_STORE_FILE || WATCH_STORE_COMPANIONS.contains(name)),
+            (Owned::Evidence, [name]) => !is_dir && [EVIDENCE_JSON, POSTERIOR_CSV].contains(name),
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,
             (Owned::Report, [FIGURES_DIR, name]) => {
@@ -84,6 +93,11 @@ impl Owned {
             _ => false,
         }
     }
+}
+
+/// True when `dir` holds an evidence (a file named [`EVIDENCE_JSON`]) and no run store.
+pub fn is_evidence_dir(dir: &Path) -> bool {
+    dir.join(EVIDENCE_JSON).is_file() && !is_run_dir(dir)
 }
 
 /// True when `dir` holds a run store (a file named [`STORE_FILE`]).
@@ -397,6 +411,9 @@ mod tests {
         assert!(!Owned::Run.owns(p("selection/notes.txt"), false));
         assert!(!Owned::Run.owns(p("notes.txt"), false));
         assert!(!Owned::Run.owns(p("run.json"), true));
+        assert!(Owned::Evidence.owns(p("evidence.json"), false));
+        assert!(Owned::Evidence.owns(p("posterior.csv"), false));
+        assert!(!Owned::Evidence.owns(p("run.sqlite"), false) && !Owned::Evidence.owns(p("evidence.json"), true));
         assert!(Owned::Report.owns(p("figures/fits.png"), false));
         assert!(!Owned::Report.owns(p("figures/my-notes.md"), false));
         assert!(!Owned::Report.owns(p("my-notes.md"), false));

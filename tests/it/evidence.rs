@@ -479,3 +479,89 @@ fn the_backend_is_said_once() {
     let said = err.matches("GPU backend").count() + err.matches("computing on the CPU").count();
     assert_eq!(said, 1, "{err}");
 }
+
+#[test]
+fn an_evidence_directory_holds_the_document_and_its_posterior_and_stability_maps_it() {
+    let dir = tempfile::tempdir().unwrap();
+    // A weight on bit that fluctuates by 20 kN: the torque scaled by WOB / W_ref is compared
+    // (and chosen where the data favour it), so the posterior may be for a W_ref of its own.
+    let record = m2_record_with_wob(dir.path(), "20", "120", "10");
+    let out = dir.path().join("ev");
+    let evidence = |extra: &[&str]| {
+        let mut cmd = bin();
+        cmd.args([
+            "evidence",
+            record.to_str().unwrap(),
+            "--laws",
+            "m2,m3",
+            "--noise",
+            "iid",
+        ]);
+        cmd.args(["--backend", "cpu", "--particles", "100", "--islands", "2", "--quiet"]);
+        cmd.args(extra);
+        outcome(&mut cmd)
+    };
+    let (code, json, err) = evidence(&["--json", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let printed: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evidence.json")).unwrap()).unwrap();
+    // The stored document is the printed one with each law's posterior sets added.
+    let mut without_sets = stored.clone();
+    for law in without_sets["laws"].as_array_mut().unwrap() {
+        let sets = law
+            .as_object_mut()
+            .unwrap()
+            .remove("posterior")
+            .expect("posterior sets stored");
+        let weights: f64 = sets["weights"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|w| w.as_f64().unwrap())
+            .sum();
+        assert!((weights - 1.0).abs() < 1e-9, "{} weights sum to {weights}", law["law"]);
+    }
+    assert_eq!(without_sets, printed);
+
+    // `stability --run` on the directory is `--posterior` on its posterior.csv at the W_ref
+    // its evidence chose (the paper's where it scaled nothing).
+    let maps = |source: &[&str], w_ref: Option<String>| {
+        let mut cmd = bin();
+        cmd.args(["stability", "--json", "--backend", "cpu", "--samples", "50"]);
+        cmd.args(["--omega-rpm", "40:160:4", "--wob-kn", "100:300:3"]);
+        cmd.args(source);
+        if let Some(w) = w_ref {
+            cmd.args(["--w-ref-kn", &w]);
+        }
+        let (code, stdout, err) = outcome(&mut cmd);
+        assert_eq!(code, 0, "{err}");
+        (serde_json::from_str::<serde_json::Value>(&stdout).unwrap(), err)
+    };
+    let w_ref = stored["w_ref_kn"].as_f64().map(|w| w.to_string());
+    let (from_dir, said) = maps(&["--run", out.to_str().unwrap()], None);
+    let posterior = out.join("posterior.csv");
+    let (from_csv, _) = maps(&["--posterior", posterior.to_str().unwrap()], w_ref.clone());
+    assert_eq!(from_dir, from_csv);
+    assert_eq!(said.contains("mapped at that reference"), w_ref.is_some(), "{said}");
+
+    // An evidence directory is not replaced without --force, and with it holds the new one.
+    let (code, _, err) = evidence(&["--out", out.to_str().unwrap(), "--seed", "2"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--out") && err.contains("force"), "{err}");
+    let (code, _, err) = evidence(&["--out", out.to_str().unwrap(), "--seed", "2", "--force"]);
+    assert_eq!(code, 0, "{err}");
+    let replaced: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evidence.json")).unwrap()).unwrap();
+    assert_eq!(replaced["sampler"]["seed"], 2);
+    // Files bitrock did not write there are never replaced, even with --force.
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let (code, _, err) = evidence(&["--out", out.to_str().unwrap(), "--force"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("notes.txt"), "{err}");
+    assert_eq!(std::fs::read_to_string(out.join("notes.txt")).unwrap(), "mine");
+    assert_eq!(
+        std::fs::read_to_string(out.join("evidence.json")).unwrap(),
+        serde_json::to_string_pretty(&replaced).unwrap() + "\n"
+    );
+}

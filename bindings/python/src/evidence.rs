@@ -6,7 +6,6 @@ use crate::record::*;
 use crate::run::PyObserver;
 use bitrock::Law;
 use bitrock::abc::evidence::EvidenceConfig;
-use bitrock::documents::{self, to_record_units};
 use bitrock::pipeline::evidence::{
     DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, check as check_evidence, check_replicates,
 };
@@ -74,6 +73,11 @@ pub(crate) fn evidence(
     if let Some(k) = replicates {
         check(py, check_replicates(k))?;
     }
+    let out: Option<PathBuf> = kwarg(options, "out")?;
+    let force: bool = kwarg(options, "force")?.unwrap_or(false);
+    if let Some(dir) = &out {
+        check(py, bitrock::pipeline::evidence::dir::check_out(dir, force))?;
+    }
     let mut observer = PyObserver::new(None, note);
     let data = &record.data;
     let result = py.detach(|| job.run(data, &mut observer));
@@ -91,32 +95,30 @@ pub(crate) fn evidence(
             Some(check(py, result)?)
         }
     };
-    let mut document = documents::evidence_json(
-        data,
-        &analysis.fits,
-        &analysis.prior,
-        &analysis.evidence,
-        &analysis.separations,
-        &analysis.residual_lag1,
-        &analysis.noise_models,
-        &job.prior.describe(),
-    );
-    for (entry, law) in document["laws"]
-        .as_array_mut()
-        .expect("the document lists its laws")
-        .iter_mut()
-        .zip(&analysis.evidence.laws)
-    {
-        let params: Vec<Vec<f64>> = law
-            .posterior
-            .iter()
-            .map(|(p, _)| to_record_units(law.law, p, data.torque_unit))
-            .collect();
-        let weights: Vec<f64> = law.posterior.iter().map(|(_, w)| *w).collect();
-        entry["posterior"] = serde_json::json!({"params": params, "weights": weights});
-    }
+    let mut document = analysis.document(data, &job.prior.describe(), true);
     if let Some(selection) = selection {
         document["check"] = serde_json::to_value(&selection).expect("the check serialises");
     }
+    if let Some(dir) = &out {
+        let csv = analysis.posterior_csv(&job.laws, data);
+        check(
+            py,
+            py.detach(|| bitrock::pipeline::evidence::dir::save(dir, force, &document, csv)),
+        )?;
+    }
     Ok(as_arguments(&document.to_string()))
+}
+
+/// The document of the evidence directory `dir` (`bitrock evidence --out`, `bitrock.evidence(...,
+/// out=...)`), as JSON.
+#[pyfunction]
+pub(crate) fn read_evidence(py: Python<'_>, dir: PathBuf) -> PyResult<String> {
+    let document = check(py, py.detach(|| bitrock::pipeline::evidence::dir::read(&dir)))?;
+    Ok(document.to_string())
+}
+
+/// True when `dir` is an evidence directory.
+#[pyfunction]
+pub(crate) fn is_evidence_dir(dir: PathBuf) -> bool {
+    bitrock::run::dir::is_evidence_dir(&dir)
 }

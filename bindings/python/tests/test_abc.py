@@ -201,6 +201,8 @@ def test_one_law_or_one_tolerance_where_a_list_belongs_is_a_list_of_one(demo: bi
     listed = bitrock.abc(demo, laws=["m2"], epsilons=[0.05], particles=100, backend="cpu", progress=False)
     for a, b in zip(listed.document["populations"], one.document["populations"], strict=True):
         assert (a["epsilon"], a["accepted"], a["draws"]) == (b["epsilon"], b["accepted"], b["draws"])
+    # The command's comma-separated list reads as its laws.
+    assert bitrock.abc(demo, laws="m2, m3", epsilons=0.05, particles=100, backend="cpu", progress=False).laws == ["m2", "m3"]
 
 
 @pytest.mark.parametrize("source", [pd.Series([1.0, 2.0]), "demo.csv", None])

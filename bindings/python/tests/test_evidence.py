@@ -32,6 +32,29 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
     assert document["separations"] == small.document["separations"]
 
 
+def test_an_evidence_directory_reads_back_and_maps_as_the_evidence_in_memory(cli, tmp_path) -> None:
+    record = bitrock.read_record(DEMO_CSV, thin=4)
+    kept = bitrock.evidence(record, **SMALL, out=tmp_path / "ev")
+    read = bitrock.read_evidence(tmp_path / "ev")
+    assert read.document == json.loads(json.dumps(kept.document))
+    assert read.table.equals(kept.table)
+    axes = {"omega_rpm": "40:160:4", "wob_kn": "100:300:3", "samples": 40, "backend": "cpu"}
+    from_dir = bitrock.stability(tmp_path / "ev", **axes)
+    from_memory = bitrock.stability(kept, **axes)
+    np.testing.assert_array_equal(from_dir["probability_unstable"], from_memory["probability_unstable"])
+    # The command's --run maps the same directory alike.
+    done = run_cli(cli, "stability", "--run", str(tmp_path / "ev"), "--json", "--omega-rpm", "40:160:4",
+                   "--wob-kn", "100:300:3", "--samples", "40", "--backend", "cpu")
+    grids = json.loads(done.stdout)["probability_unstable"]
+    for law in ("m2", "m3"):
+        np.testing.assert_array_equal(np.array(grids[law]), from_dir["probability_unstable"].sel(law=law).values)
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.evidence(record, **SMALL, out=tmp_path / "ev")
+    assert caught.value.argument == "out"
+    bitrock.evidence(record, **{**SMALL, "seed": 6}, out=tmp_path / "ev", force=True)
+    assert bitrock.read_evidence(tmp_path / "ev").document["sampler"]["seed"] == 6
+
+
 def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
     table = small.table
     assert list(table.index) == ["m2", "m3"]

@@ -116,7 +116,7 @@ def test_refusals_name_their_argument(well, tmp_path) -> None:
 
 def test_the_paper_s_abc_on_each_window_is_the_command_s(cli, well) -> None:
     watch = bitrock.watch(
-        well, laws=["m2", "m3"], window_s=20, step_s=10, backend="cpu", abc=True, particles=1000, sampler="smc", seed=4
+        well, laws="m2,m3", window_s=20, step_s=10, backend="cpu", abc=True, particles=1000, sampler="smc", seed=4
     )
     updates = list(watch)
     lines = run_cli(

@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 pub mod check;
+pub mod dir;
 
 pub use check::{EvidenceCheck, check, check_replicates};
 
@@ -173,6 +174,48 @@ pub struct EvidenceAnalysis {
     /// Every noise model compared, or the one named ([`EvidenceJob::noise`]); `evidence` is
     /// the one of the largest probability.
     pub noise_models: Vec<NoiseEvidence>,
+}
+
+impl EvidenceAnalysis {
+    /// `bitrock evidence --json`'s document of the analysis of `data` (`prior` describing its
+    /// boxes); with `posterior_sets`, each law's posterior sets too (`"posterior": {"params",
+    /// "weights"}`, in the record's torque unit), as an evidence directory and Python keep it.
+    pub fn document(&self, data: &FieldData, prior: &str, posterior_sets: bool) -> serde_json::Value {
+        let mut document = crate::documents::evidence_json(
+            data,
+            &self.fits,
+            &self.prior,
+            &self.evidence,
+            &self.separations,
+            &self.residual_lag1,
+            &self.noise_models,
+            prior,
+        );
+        if posterior_sets {
+            for (entry, law) in document["laws"]
+                .as_array_mut()
+                .expect("the document lists its laws")
+                .iter_mut()
+                .zip(&self.evidence.laws)
+            {
+                let params: Vec<Vec<f64>> = law
+                    .posterior
+                    .iter()
+                    .map(|(p, _)| crate::documents::to_record_units(law.law, p, data.torque_unit))
+                    .collect();
+                let weights: Vec<f64> = law.posterior.iter().map(|(_, w)| *w).collect();
+                entry["posterior"] = serde_json::json!({"params": params, "weights": weights});
+            }
+        }
+        document
+    }
+
+    /// The posterior particles (every law's sets weighed by its P(m | y)) as the particle CSV
+    /// `bitrock stability --posterior` reads, parameters in the record's torque unit.
+    pub fn posterior_csv(&self, laws: &[Law], data: &FieldData) -> Vec<u8> {
+        let particles = self.evidence.particles();
+        crate::documents::particle_groups_csv(&[(0, &particles)], laws, data.torque_unit)
+    }
 }
 
 impl EvidenceJob {

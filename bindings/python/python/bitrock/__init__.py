@@ -26,7 +26,7 @@ import pandas as pd
 from . import _bitrock
 from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError
-from ._evidence import Evidence, evidence
+from ._evidence import Evidence, evidence, read_evidence
 from ._watch import StoredWatch, Watch, WatchUpdate, read_watch, watch
 from . import plot
 
@@ -47,6 +47,7 @@ __all__ = [
     "parity",
     "plot",
     "ray_executor",
+    "read_evidence",
     "read_record",
     "resume",
     "simulate",
@@ -177,11 +178,12 @@ def load_law(path: str | os.PathLike[str]) -> str:
 
 
 def _law_names(value: Any, argument: str = "laws") -> list[str] | None:
-    """A list of law names from ``value``: ``None``, one name (``"m2"``), or names."""
+    """A list of law names from ``value``: ``None``, one name (``"m2"``), names separated by
+    commas as the command takes them (``"m2,m3"``; no law's name holds a comma), or names."""
     if value is None:
         return None
     if isinstance(value, str):
-        return [value]
+        return [name.strip() for name in value.split(",")]
     try:
         names = list(value)
     except TypeError:
@@ -477,7 +479,7 @@ def stability(
     """Torsional stick-slip stability over top-drive speed Ω (rpm) and weight on bit W (kN),
     as ``bitrock stability`` computes it: for a run's last population (``source``, a
     :class:`Result`, in memory or written to a directory, or the directory), for the posterior of an
-    :class:`Evidence` (``source``: each law weighed by its P(m | y)), or for one ``law`` at ``params``
+    :class:`Evidence` (``source``, or its evidence directory: each law weighed by its P(m | y)), or for one ``law`` at ``params``
     (its parameters in order, torques in ``torque_unit``, kN·m by default).
 
     Returns an ``xarray.Dataset`` over ``law`` × ``omega_rpm`` × ``wob_kn``:
@@ -496,7 +498,9 @@ def stability(
         if source.path is None:
             run_in_memory = source._run
         source = source.path
-    elif isinstance(source, Evidence):
+    elif isinstance(source, (str, os.PathLike)) and _bitrock.is_evidence_dir(os.fspath(source)):
+        source = read_evidence(source)
+    if isinstance(source, Evidence):
         posterior = json.dumps(source.document)
         # Where the evidence scaled each torque by WOB / W_ref, its parameters are for W_ref.
         if w_ref_kn is None:

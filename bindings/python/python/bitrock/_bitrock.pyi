@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_watch", "resume", "serve", "simulate", "stability", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "serve", "simulate", "stability", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -140,6 +140,11 @@ def fit(record: Record, laws: SupportsGetItem[int, str] | None, options: dict) -
     Least-squares fits of `laws` (`None`: all) to the record: `fit --json`'s document.
     """
 
+def is_evidence_dir(dir: str | PathLike[str]) -> bool:
+    """
+    True when `dir` is an evidence directory.
+    """
+
 def is_information(note: str) -> bool:
     """
     True for a note that only informs (which GPU scores): logged, not warned.
@@ -176,6 +181,12 @@ def read_columns(names: SupportsGetItem[int, str], columns: SupportsGetItem[int,
 def read_csv(path: str | PathLike[str] | None, options: dict) -> Record:
     """
     Reads a CSV record at `path` (`None`: the embedded demo record).
+    """
+
+def read_evidence(dir: str | PathLike[str]) -> str:
+    """
+    The document of the evidence directory `dir` (`bitrock evidence --out`, `bitrock.evidence(...,
+    out=...)`), as JSON.
     """
 
 def read_watch(dir: str | PathLike[str]) -> tuple[str, list[str]]:

@@ -192,6 +192,8 @@ def evidence(
     w_ref_kn: float | None = None,
     check: int | None = None,
     noise: str = "auto",
+    out: str | os.PathLike[str] | None = None,
+    force: bool = False,
 ) -> Evidence:
     """The model evidence of the laws (``m1``…``m4``; all by default) on the record's
     calibration samples, as ``bitrock evidence``. ``boxes="physical"`` integrates over boxes
@@ -205,7 +207,9 @@ def evidence(
     ``check=K`` then checks the
     answer by re-simulation (K synthetic records per law from its evidence posterior and the
     record's own residuals, each through the same evidence over the same boxes; K times the
-    cost per law): see :attr:`Evidence.check`."""
+    cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
+    ``bitrock evidence --out``: :func:`read_evidence` reads it back and
+    :func:`stability` maps it (``force=True`` replaces the evidence it holds)."""
     from . import _law_names, _note, _record
 
     options = {
@@ -224,6 +228,14 @@ def evidence(
         "w_ref_kn": w_ref_kn,
         "check": check,
         "noise": noise,
+        "out": None if out is None else os.fspath(out),
+        "force": force,
     }
     document = _bitrock.evidence(_record(record), _law_names(laws), options, _note)
     return Evidence(json.loads(document))
+
+
+def read_evidence(directory: str | os.PathLike[str]) -> Evidence:
+    """The evidence stored in ``directory`` (``bitrock evidence --out`` or
+    ``bitrock.evidence(..., out=...)``), each law's posterior sets included."""
+    return Evidence(json.loads(_bitrock.read_evidence(os.fspath(directory))))
