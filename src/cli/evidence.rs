@@ -198,9 +198,10 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
         }
-        evidence::dir::save(dir, cmd.force, &document, analysis.posterior_csv(&job.laws, &data))?;
+        evidence::dir::save(dir, cmd.force, &document, &analysis, &job.laws, &data)?;
         print::note(format_args!(
-            "note: evidence written to {} (`bitrock stability --run {}` maps its posterior)",
+            "note: evidence written to {} (`bitrock stability --run {}` maps its posterior, `bitrock report {}` draws it)",
+            dir.display(),
             dir.display(),
             dir.display()
         ));

@@ -1,4 +1,5 @@
-//! `bitrock report`: the paper's figures and report.md from run directories.
+//! `bitrock report`: the paper's figures and report.md from run directories; a watch's or an
+//! evidence's report from its directory.
 
 use bitrock::watch::store::is_watch_dir;
 use clap::Args;
@@ -10,7 +11,9 @@ use std::process::ExitCode;
 pub struct ReportCmd {
     /// Run directories (written by `bitrock abc --out`), all calibrated on the same record; or
     /// one watch directory (written by `bitrock watch --out`): the law probabilities,
-    /// parameters and risk of stick-slip along its record, changes marked.
+    /// parameters and risk of stick-slip along its record, changes marked; or one evidence
+    /// directory (written by `bitrock evidence --out`): each law's evidence, its posterior
+    /// predictive envelope over the samples, the Bayes factors.
     #[arg(required = true, value_name = "DIR")]
     pub runs: Vec<PathBuf>,
     /// Report directory: report.md and figures/, replaced as a whole (a directory holding
@@ -20,19 +23,33 @@ pub struct ReportCmd {
 }
 
 pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
-    let watches: Vec<&PathBuf> = cmd.runs.iter().filter(|d| is_watch_dir(d)).collect();
-    let summary = match (watches.as_slice(), cmd.runs.len()) {
-        ([dir], 1) => bitrock::watch::report::write(&cmd.out, &bitrock::watch::store::read(dir)?)?,
+    // A watch or an evidence is reported alone.
+    let alone: Vec<(&PathBuf, &str)> = cmd
+        .runs
+        .iter()
+        .filter_map(|d| {
+            if is_watch_dir(d) {
+                Some((d, "a watch"))
+            } else if bitrock::run::dir::is_evidence_dir(d) {
+                Some((d, "an evidence"))
+            } else {
+                None
+            }
+        })
+        .collect();
+    let summary = match (alone.as_slice(), cmd.runs.len()) {
+        ([(dir, "a watch")], 1) => bitrock::watch::report::write(&cmd.out, &bitrock::watch::store::read(dir)?)?,
+        ([(dir, _)], 1) => bitrock::report::write_evidence_report(&cmd.out, dir)?,
         ([], _) => {
             let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;
             bitrock::report::write_paper_report(&cmd.out, &setup, &runs, None)?
         }
-        _ => {
+        ([(dir, what), ..], _) => {
             return Err(bitrock::Error::setting(
                 "runs",
                 format!(
-                    "{} is a watch directory: a watch is reported alone, not with other directories",
-                    watches[0].display()
+                    "{} holds {what}: it is reported alone, not with other directories",
+                    dir.display()
                 ),
             )
             .into());

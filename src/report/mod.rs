@@ -13,11 +13,13 @@
 //! equally weighted particles, get a population with unequal weights (ABC-SMC) as a systematic
 //! resample; a rejection population (weights all 1/N) is used as it is.
 
+mod evidence;
 pub(crate) mod figures;
 pub(crate) mod plot;
 mod runs;
 mod stats;
 
+pub use evidence::write_evidence_report;
 pub use runs::{read_run_dirs, write_paper_report};
 
 use figures::confusion_figure;

@@ -60,7 +60,7 @@ pub enum Owned {
     Selection,
     /// A watch directory: the watch store and its companions.
     Watch,
-    /// An evidence directory: evidence.json and posterior.csv.
+    /// An evidence directory: evidence.json, posterior.csv and data.csv.
     Evidence,
 }
 
@@ -84,7 +84,7 @@ impl Owned {
             }
             (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
             (Owned::Watch, [name]) => !is_dir && (*name == WATCH_STORE_FILE || WATCH_STORE_COMPANIONS.contains(name)),
-            (Owned::Evidence, [name]) => !is_dir && [EVIDENCE_JSON, POSTERIOR_CSV].contains(name),
+            (Owned::Evidence, [name]) => !is_dir && [EVIDENCE_JSON, POSTERIOR_CSV, DATA_CSV].contains(name),
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,
             (Owned::Report, [FIGURES_DIR, name]) => {

@@ -545,6 +545,43 @@ fn an_evidence_directory_holds_the_document_and_its_posterior_and_stability_maps
     assert_eq!(from_dir, from_csv);
     assert_eq!(said.contains("mapped at that reference"), w_ref.is_some(), "{said}");
 
+    // `bitrock report` draws it: each law's ln Z and P(m | y) as the document says them, the
+    // posterior envelopes over the samples of data.csv, and P(m | y).
+    let report = dir.path().join("report");
+    let (code, _, err) = outcome(bin().args(["report", out.to_str().unwrap(), "--out", report.to_str().unwrap()]));
+    assert_eq!(code, 0, "{err}");
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    for law in stored["laws"].as_array().unwrap() {
+        let line = format!(
+            "| {} | {:.3} | {:.3} | {:.4} |",
+            law["law"].as_str().unwrap(),
+            law["ln_z"].as_f64().unwrap(),
+            law["ln_z_error"].as_f64().unwrap(),
+            law["probability"].as_f64().unwrap()
+        );
+        assert!(md.contains(&line), "{line} not in\n{md}");
+    }
+    let data = std::fs::read_to_string(out.join("data.csv")).unwrap();
+    assert_eq!(
+        data.lines().filter(|l| l.starts_with("calibration,")).count() as u64,
+        stored["data_points"].as_u64().unwrap()
+    );
+    for stem in ["fig01_evidence_envelopes", "fig02_evidence_probabilities"] {
+        for ext in ["svg", "png"] {
+            assert!(
+                report.join("figures").join(format!("{stem}.{ext}")).is_file(),
+                "{stem}.{ext}"
+            );
+        }
+    }
+    // An evidence is reported alone.
+    let (code, _, err) = outcome(bin().args(["report", out.to_str().unwrap(), record.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("holds an evidence") && err.contains("reported alone"),
+        "{err}"
+    );
+
     // An evidence directory is not replaced without --force, and with it holds the new one.
     let (code, _, err) = evidence(&["--out", out.to_str().unwrap(), "--seed", "2"]);
     assert_eq!(code, 2, "{err}");

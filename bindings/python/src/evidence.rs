@@ -100,11 +100,9 @@ pub(crate) fn evidence(
         document["check"] = serde_json::to_value(&selection).expect("the check serialises");
     }
     if let Some(dir) = &out {
-        let csv = analysis.posterior_csv(&job.laws, data);
-        check(
-            py,
-            py.detach(|| bitrock::pipeline::evidence::dir::save(dir, force, &document, csv)),
-        )?;
+        let saved =
+            py.detach(|| bitrock::pipeline::evidence::dir::save(dir, force, &document, &analysis, &job.laws, data));
+        check(py, saved)?;
     }
     Ok(as_arguments(&document.to_string()))
 }

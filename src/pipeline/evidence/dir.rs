@@ -1,12 +1,17 @@
 //! An evidence directory (`bitrock evidence --out DIR`, `bitrock.evidence(..., out=DIR)`): the
 //! evidence's document with each law's posterior sets (`evidence.json`, what
-//! `bitrock.read_evidence` reads) and the posterior particles (`posterior.csv`, what
-//! `bitrock stability --run DIR` maps), written together or not at all.
+//! `bitrock.read_evidence` reads), the posterior particles (`posterior.csv`, what
+//! `bitrock stability --run DIR` maps) and the samples it was computed on (`data.csv`, what
+//! `bitrock report DIR` draws them against), written together or not at all.
 
+use super::EvidenceAnalysis;
 use crate::abc::Particle;
+use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::files;
-use crate::run::dir::{EVIDENCE_JSON, Owned, POSTERIOR_CSV, is_run_dir, owns_unchanged, refuse_inside_run};
+use crate::laws::Law;
+use crate::run::dir::{DATA_CSV, EVIDENCE_JSON, Owned, POSTERIOR_CSV, is_run_dir, owns_unchanged, refuse_inside_run};
+use crate::units::TorqueUnit;
 use std::path::{Path, PathBuf};
 
 /// Refuses, before any work and naming `out`, a directory the evidence cannot be written to:
@@ -36,16 +41,25 @@ pub fn check_out(dir: &Path, force: bool) -> Result<()> {
     Ok(())
 }
 
-/// Writes the evidence directory `dir` (checked by [`check_out`]): `document` (the evidence's
-/// document with each law's posterior sets) and `posterior_csv` (its particle CSV), replacing
-/// what an earlier evidence wrote there in one step.
-pub fn save(dir: &Path, force: bool, document: &serde_json::Value, posterior_csv: Vec<u8>) -> Result<()> {
+/// Writes the evidence directory `dir` (checked by [`check_out`]) of `analysis` on `data`
+/// (`laws` in order): `document` (the evidence's document with each law's posterior sets),
+/// the posterior's particle CSV and the samples, replacing what an earlier evidence wrote
+/// there in one step.
+pub fn save(
+    dir: &Path,
+    force: bool,
+    document: &serde_json::Value,
+    analysis: &EvidenceAnalysis,
+    laws: &[Law],
+    data: &FieldData,
+) -> Result<()> {
     check_out(dir, force)?;
     let mut json = serde_json::to_vec_pretty(document).map_err(|e| Error::Numerical(e.to_string()))?;
     json.push(b'\n');
     let contents = [
         (PathBuf::from(EVIDENCE_JSON), json),
-        (PathBuf::from(POSTERIOR_CSV), posterior_csv),
+        (PathBuf::from(POSTERIOR_CSV), analysis.posterior_csv(laws, data)),
+        (PathBuf::from(DATA_CSV), crate::documents::data_csv(data)),
     ];
     files::replace_dir(
         dir,
@@ -72,4 +86,64 @@ pub fn posterior(dir: &Path) -> Result<(Vec<Particle>, Option<f64>)> {
     let w_ref_n = document["w_ref_kn"].as_f64().map(|kn| kn * 1000.0);
     let particles = crate::documents::read_particles_csv(&dir.join(POSTERIOR_CSV))?;
     Ok((particles, w_ref_n))
+}
+
+/// The samples an evidence directory's evidence was computed on, as `data.csv` keeps them: bit
+/// speed (rad/s) and torque (in `unit`, the record's) of the calibration and validation rows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredSamples {
+    pub unit: TorqueUnit,
+    pub calibration: Vec<(f64, f64)>,
+    pub validation: Vec<(f64, f64)>,
+}
+
+/// The samples of the evidence directory `dir` ([`StoredSamples`]).
+pub fn samples(dir: &Path) -> Result<StoredSamples> {
+    let path = dir.join(DATA_CSV);
+    let text = files::read_text(&path, "samples", 1 << 30)?;
+    let format = |line: usize, message: String| Error::Format {
+        path: path.clone(),
+        line: Some(line as u64),
+        message,
+    };
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let unit = match header.as_slice() {
+        ["set", "speed_rad_s", torque] => TorqueUnit::from_suffix(torque)
+            .filter(|_| torque.starts_with("torque_"))
+            .ok_or_else(|| format(1, format!("`{torque}` is not a torque column of data.csv")))?,
+        _ => {
+            return Err(format(
+                1,
+                "not the header of an evidence's data.csv (set,speed_rad_s,torque_UNIT)".into(),
+            ));
+        }
+    };
+    let mut stored = StoredSamples {
+        unit,
+        calibration: Vec::new(),
+        validation: Vec::new(),
+    };
+    for (i, line) in lines.enumerate() {
+        let cells: Vec<&str> = line.split(',').collect();
+        let number = |cell: &str| {
+            cell.parse::<f64>()
+                .map_err(|_| format(i + 2, format!("`{cell}` is not a number")))
+        };
+        let [set, speed, torque] = cells.as_slice() else {
+            return Err(format(i + 2, format!("{} cells, 3 expected", cells.len())));
+        };
+        let sample = (number(speed)?, number(torque)?);
+        match *set {
+            "calibration" => stored.calibration.push(sample),
+            "validation" => stored.validation.push(sample),
+            other => {
+                return Err(format(
+                    i + 2,
+                    format!("set `{other}` is neither calibration nor validation"),
+                ));
+            }
+        }
+    }
+    Ok(stored)
 }

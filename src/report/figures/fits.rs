@@ -124,13 +124,13 @@ impl Figure for DataFits {
 }
 
 /// Figure 7: predictive envelopes with the data, one panel per law.
-struct Envelopes {
+pub(super) struct Envelopes {
     /// (law, probability, [(rpm, lower, median, upper)]) in the display unit.
-    panels: Vec<EnvelopePanel>,
-    cal: Vec<(f64, f64)>,
-    val: Vec<(f64, f64)>,
-    unit: &'static str,
-    run: String,
+    pub(super) panels: Vec<EnvelopePanel>,
+    pub(super) cal: Vec<(f64, f64)>,
+    pub(super) val: Vec<(f64, f64)>,
+    pub(super) unit: &'static str,
+    pub(super) run: String,
 }
 
 impl Figure for Envelopes {

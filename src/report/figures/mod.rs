@@ -2,12 +2,14 @@
 //! unit, kN), drawn by the same code on the SVG and the PNG backend; one file per family, the
 //! drawing helpers they share here.
 
+mod evidence;
 mod fits;
 mod marginals;
 mod probabilities;
 mod selection;
 mod stability;
 
+pub(crate) use evidence::{EvidenceFigures, render_evidence};
 use fits::{render_data_and_fits, render_envelopes};
 use marginals::{render_correlations, render_marginals};
 use probabilities::{render_final_probabilities, render_model_probabilities, render_tolerance};

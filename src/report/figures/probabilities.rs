@@ -158,11 +158,11 @@ impl Figure for ModelProbabilities {
 }
 
 /// Figure 3: P(law) at the last population of each run.
-struct FinalProbabilities {
-    laws: Vec<Law>,
-    runs: Vec<(String, Vec<f64>)>,
+pub(super) struct FinalProbabilities {
+    pub(super) laws: Vec<Law>,
+    pub(super) runs: Vec<(String, Vec<f64>)>,
     /// Per run and law: the probability is 0 by construction (labelled `0*`).
-    zero_by_construction: Vec<Vec<bool>>,
+    pub(super) zero_by_construction: Vec<Vec<bool>>,
 }
 
 impl Figure for FinalProbabilities {

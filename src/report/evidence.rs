@@ -1,0 +1,200 @@
+//! The report of an evidence directory (`bitrock report DIR` where DIR holds an evidence,
+//! [`crate::pipeline::evidence::dir`]): report.md (each law's evidence, the Bayes factors, the
+//! models of the residuals compared, which pairs the record can tell apart, the boxes) and two
+//! figures: each law's 98 % posterior predictive envelope over the samples, and P(m | y).
+
+use super::figures::{self, EvidenceFigures};
+use super::{ReportSummary, figures_markdown, replace_report};
+use crate::abc::evidence::strength;
+use crate::error::{Error, Result};
+use crate::laws::Law;
+use crate::pipeline::evidence::dir;
+use crate::run::dir::POSTERIOR_CSV;
+use serde_json::Value;
+use std::fmt::Write;
+use std::path::Path;
+use std::time::Instant;
+
+/// One law's line of the evidence document.
+struct LawLine {
+    law: Law,
+    ln_z: f64,
+    ln_z_error: f64,
+    probability: f64,
+    best_rho: f64,
+    converged: bool,
+    island_spread: f64,
+    cut_by_box: Vec<String>,
+}
+
+/// Writes the report of the evidence directory `evidence_dir` to `out` (replaced as a whole,
+/// as every report is).
+pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSummary> {
+    let start = Instant::now();
+    let document = dir::read(evidence_dir)?;
+    let laws = law_lines(&document, evidence_dir)?;
+    let particles = crate::documents::read_particles_csv(&evidence_dir.join(POSTERIOR_CSV))?;
+    let samples = dir::samples(evidence_dir)?;
+    let source = document["source"].as_str().unwrap_or("the record").to_string();
+    let w_ref_kn = document["w_ref_kn"].as_f64();
+    let rendered = figures::render_evidence(&EvidenceFigures {
+        particles: &particles,
+        laws: laws.iter().map(|l| (l.law, l.probability)).collect(),
+        samples: &samples,
+        w_ref_kn,
+    })?;
+    let mut md = String::new();
+    let _ = writeln!(md, "# Model evidence of {source}\n");
+    let sampler = &document["sampler"];
+    let _ = writeln!(
+        md,
+        "Marginal likelihood ln Z of each law on {} calibration samples (tempered SMC per law, {} islands × {} \
+         particles, seed {}; {} noise model{}; ln Z with torques in N·m), on {} in {:.2} s. Prior: {}.\n",
+        document["data_points"],
+        sampler["islands"],
+        sampler["particles"],
+        sampler["seed"],
+        document["noise_model"].as_str().unwrap_or("?"),
+        w_ref_kn.map_or(String::new(), |w| format!(
+            ", each predicted torque scaled by WOB / W_ref, W_ref = {w:.1} kN"
+        )),
+        document["backend"].as_str().unwrap_or("?"),
+        document["seconds"].as_f64().unwrap_or(f64::NAN),
+        document["prior"].as_str().unwrap_or("?"),
+    );
+    let _ = writeln!(
+        md,
+        "| law | ln Z | ± Monte-Carlo error | P(m \\| y) | best ρ | islands agree | posterior cut by its box |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    for l in &laws {
+        let agree = if l.converged {
+            "yes".to_string()
+        } else {
+            format!("no: {:.1} nats apart", l.island_spread)
+        };
+        let cut = if l.cut_by_box.is_empty() {
+            "no".to_string()
+        } else {
+            l.cut_by_box.join(", ")
+        };
+        let _ = writeln!(
+            md,
+            "| {} | {:.3} | {:.3} | {:.4} | {:.5} | {agree} | {cut} |",
+            l.law, l.ln_z, l.ln_z_error, l.probability, l.best_rho
+        );
+    }
+    if let Some(best) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z))
+        && laws.len() > 1
+    {
+        let _ = writeln!(
+            md,
+            "\nBayes factors of {}, the law of the largest evidence, against each other law (Kass & Raftery's words; \
+             undecided below 1 nat or within twice the error):\n",
+            best.law
+        );
+        for l in laws.iter().filter(|l| l.law != best.law) {
+            let (ln_b, error) = (best.ln_z - l.ln_z, best.ln_z_error.hypot(l.ln_z_error));
+            let _ = writeln!(
+                md,
+                "- {} against {}: ln B = {ln_b:.2} ± {error:.2}, {}",
+                best.law,
+                l.law,
+                strength(ln_b, error)
+            );
+        }
+    }
+    noise_models_markdown(&mut md, &document);
+    separations_markdown(&mut md, &document);
+    let infos: Vec<super::FigureInfo> = rendered.iter().map(|r| r.info.clone()).collect();
+    figures_markdown(&mut md, &infos);
+    replace_report(out, md, rendered, start)
+}
+
+/// Each law's line of `document` (read from `dir`).
+fn law_lines(document: &Value, dir: &Path) -> Result<Vec<LawLine>> {
+    let bad = |message: String| Error::Data {
+        path: dir.join(crate::run::dir::EVIDENCE_JSON),
+        message,
+    };
+    let laws = document["laws"]
+        .as_array()
+        .ok_or_else(|| bad("no `laws` in the evidence document".into()))?;
+    laws.iter()
+        .map(|entry| {
+            let law: Law =
+                serde_json::from_value(entry["law"].clone()).map_err(|e| bad(format!("law {}: {e}", entry["law"])))?;
+            let number = |key: &str| {
+                entry[key]
+                    .as_f64()
+                    .ok_or_else(|| bad(format!("law {law}: `{key}` is not a number")))
+            };
+            Ok(LawLine {
+                law,
+                ln_z: number("ln_z")?,
+                ln_z_error: number("ln_z_error")?,
+                probability: number("probability")?,
+                best_rho: number("best_rho")?,
+                converged: entry["converged"].as_bool().unwrap_or(true),
+                island_spread: entry["island_spread"].as_f64().unwrap_or(0.0),
+                cut_by_box: entry["cut_by_box"]
+                    .as_array()
+                    .map(|a| a.iter().filter_map(|v| v.as_str().map(str::to_string)).collect())
+                    .unwrap_or_default(),
+            })
+        })
+        .collect()
+}
+
+/// The models of the residuals compared, where there were several.
+fn noise_models_markdown(md: &mut String, document: &Value) {
+    let Some(models) = document["noise_models"].as_array().filter(|m| m.len() > 1) else {
+        return;
+    };
+    let _ = writeln!(md, "\n## Models of the residuals (equal prior odds)\n");
+    let _ = writeln!(
+        md,
+        "| noise | torque | ln p(y \\| model) | ± Monte-Carlo error | P(model \\| y) | first law |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|");
+    for m in models {
+        let torque = m["w_ref_kn"]
+            .as_f64()
+            .map_or("as the law".to_string(), |w| format!("× WOB / {w:.1} kN"));
+        let _ = writeln!(
+            md,
+            "| {} | {torque} | {:.2} | {:.2} | {:.4} | {} ({:.3}) |",
+            m["model"].as_str().unwrap_or("?"),
+            m["ln_evidence"].as_f64().unwrap_or(f64::NAN),
+            m["ln_evidence_error"].as_f64().unwrap_or(f64::NAN),
+            m["probability"].as_f64().unwrap_or(f64::NAN),
+            m["first_law"].as_str().unwrap_or("?"),
+            m["first_probability"].as_f64().unwrap_or(f64::NAN),
+        );
+    }
+}
+
+/// Which pairs of laws the record can tell apart, from the least-squares fits alone.
+fn separations_markdown(md: &mut String, document: &Value) {
+    let Some(pairs) = document["separations"].as_array().filter(|p| !p.is_empty()) else {
+        return;
+    };
+    let _ = writeln!(
+        md,
+        "\n## Can this record tell the laws apart?\n\nExpected log-likelihood gap D (nats) if the first law, as fitted, made the \
+         record, and the chance that the second is ranked above it; below {} nats the priors, not the data, decide.\n",
+        crate::separation::UNDECIDED_NATS
+    );
+    let _ = writeln!(md, "| made by | against | D (nats) | P(misranked) |");
+    let _ = writeln!(md, "|---|---|---|---|");
+    for s in pairs {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.1} | {:.3} |",
+            s["truth"].as_str().unwrap_or("?"),
+            s["rival"].as_str().unwrap_or("?"),
+            s["gap_nats"].as_f64().unwrap_or(f64::NAN),
+            s["misranking"].as_f64().unwrap_or(f64::NAN),
+        );
+    }
+}
