@@ -48,7 +48,7 @@ pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
             return Err(bitrock::Error::setting(
                 "runs",
                 format!(
-                    "{} holds {what}: it is reported alone, not with other directories",
+                    "{} is {what} directory: {what} is reported alone, not with other directories",
                     dir.display()
                 ),
             )

@@ -578,7 +578,7 @@ fn an_evidence_directory_holds_the_document_and_its_posterior_and_stability_maps
     let (code, _, err) = outcome(bin().args(["report", out.to_str().unwrap(), record.to_str().unwrap()]));
     assert_eq!(code, 2, "{err}");
     assert!(
-        err.contains("holds an evidence") && err.contains("reported alone"),
+        err.contains("is an evidence directory") && err.contains("reported alone"),
         "{err}"
     );
 
