@@ -5,7 +5,7 @@
 
 use super::figures::{self, EvidenceFigures};
 use super::{ReportSummary, figures_markdown, replace_report};
-use crate::abc::evidence::strength;
+use crate::abc::evidence::{ln_bayes_factor, strength};
 use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::pipeline::evidence::dir;
@@ -94,7 +94,7 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
             best.law
         );
         for l in laws.iter().filter(|l| l.law != best.law) {
-            let (ln_b, error) = (best.ln_z - l.ln_z, best.ln_z_error.hypot(l.ln_z_error));
+            let (ln_b, error) = ln_bayes_factor((best.ln_z, best.ln_z_error), (l.ln_z, l.ln_z_error));
             let _ = writeln!(
                 md,
                 "- {} against {}: ln B = {ln_b:.2} ± {error:.2}, {}",

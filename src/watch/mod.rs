@@ -692,7 +692,7 @@ impl Watch {
             warm,
             separations: false,
         };
-        let mut analysis = match window_evidence(&job, data, observer)? {
+        let mut analysis = match of_window(job.run(data, observer))? {
             Ok(analysis) => analysis,
             Err(why) => return Ok(Err(why)),
         };
@@ -715,7 +715,7 @@ impl Watch {
                 warm: None,
                 ..job.clone()
             };
-            match window_evidence(&cold, data, observer)? {
+            match of_window(cold.run(data, observer))? {
                 Ok(fresh) => {
                     candidates += fresh.evidence.candidates_scored;
                     analysis = fresh;
@@ -782,12 +782,9 @@ impl Watch {
                 ..config.fit
             },
         };
-        let fits = match crate::fit::fit_record_from(&self.settings.laws, data, &fit, &known) {
+        let fits = match of_window(crate::fit::fit_record_from(&self.settings.laws, data, &fit, &known))? {
             Ok(fits) => fits,
-            Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
-                return Ok(Err(e.to_string()));
-            }
-            Err(e) => return Err(e),
+            Err(why) => return Ok(Err(why)),
         };
         let judged = self.judge(window, &fits, &data.calibration);
         let config = crate::run::Config {
@@ -806,12 +803,9 @@ impl Watch {
             &mut |problem, note| crate::eval::evaluator(problem, backend, Default::default(), note),
             &mut WindowNotes(observer),
         );
-        let outcome = match outcome {
+        let outcome = match of_window(outcome)? {
             Ok(outcome) => outcome,
-            Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
-                return Ok(Err(e.to_string()));
-            }
-            Err(e) => return Err(e),
+            Err(why) => return Ok(Err(why)),
         };
         let run = outcome.run;
         let candidates = run.populations.iter().map(|p| p.record.candidates_scored).sum();
@@ -1271,16 +1265,12 @@ pub fn follow(
     })
 }
 
-/// A window's evidence, or why its samples cannot give one (a fit, a finite likelihood, a
-/// sampler that reaches them from the box): that ends the window, not the watch, since the
-/// next window may be fine.
-fn window_evidence(
-    job: &EvidenceJob,
-    data: &FieldData,
-    observer: &mut dyn Observer,
-) -> Result<std::result::Result<EvidenceAnalysis, String>> {
-    match job.run(data, observer) {
-        Ok(analysis) => Ok(Ok(analysis)),
+/// What a window's fits, evidence or ABC give, or why its samples cannot give it (a fit, a
+/// finite likelihood, boxes a sampler reaches): that ends the window, not the watch, since the
+/// next window may be fine. Any other error ends the watch.
+fn of_window<T>(result: Result<T>) -> Result<std::result::Result<T, String>> {
+    match result {
+        Ok(value) => Ok(Ok(value)),
         Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
             Ok(Err(e.to_string()))
         }

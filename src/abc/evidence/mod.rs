@@ -517,8 +517,14 @@ impl Evidence {
     /// laws are independent).
     pub fn ln_bayes_factor(&self, a: Law, b: Law) -> Option<(f64, f64)> {
         let (a, b) = (self.of(a)?, self.of(b)?);
-        Some((a.ln_z - b.ln_z, a.ln_z_error.hypot(b.ln_z_error)))
+        Some(ln_bayes_factor((a.ln_z, a.ln_z_error), (b.ln_z, b.ln_z_error)))
     }
+}
+
+/// ln of the Bayes factor Z_a / Z_b from each law's (ln Z, Monte-Carlo error), and its error
+/// (the islands of different laws are independent).
+pub fn ln_bayes_factor(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    (a.0 - b.0, a.1.hypot(b.1))
 }
 
 /// How strongly a log Bayes factor `ln_b` (with Monte-Carlo error `error`) favours its law, in

@@ -97,52 +97,68 @@ pub struct StoredSamples {
     pub validation: Vec<(f64, f64)>,
 }
 
-/// The samples of the evidence directory `dir` ([`StoredSamples`]).
+/// The samples of the evidence directory `dir` ([`StoredSamples`]); refusals name the file,
+/// line and column.
 pub fn samples(dir: &Path) -> Result<StoredSamples> {
     let path = dir.join(DATA_CSV);
-    let text = files::read_text(&path, "samples", 1 << 30)?;
-    let format = |line: usize, message: String| Error::Format {
+    let file = std::fs::File::open(&path).map_err(|source| Error::Read {
         path: path.clone(),
-        line: Some(line as u64),
-        message,
-    };
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+        source,
+    })?;
+    let mut reader = csv::ReaderBuilder::new().from_reader(file);
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| Error::Format {
+            path: path.clone(),
+            line: Some(1),
+            message: e.to_string(),
+        })?
+        .iter()
+        .map(str::to_string)
+        .collect();
     let unit = match header.as_slice() {
-        ["set", "speed_rad_s", torque] => TorqueUnit::from_suffix(torque)
-            .filter(|_| torque.starts_with("torque_"))
-            .ok_or_else(|| format(1, format!("`{torque}` is not a torque column of data.csv")))?,
-        _ => {
-            return Err(format(
-                1,
-                "not the header of an evidence's data.csv (set,speed_rad_s,torque_UNIT)".into(),
-            ));
+        [set, speed, torque] if set == "set" && speed == "speed_rad_s" && torque.starts_with("torque_") => {
+            TorqueUnit::from_suffix(torque)
         }
-    };
+        _ => None,
+    }
+    .ok_or_else(|| Error::Format {
+        path: path.clone(),
+        line: Some(1),
+        message: format!(
+            "not the header of an evidence's data.csv (set,speed_rad_s,torque_knm or torque_nm): {}",
+            header.join(",")
+        ),
+    })?;
     let mut stored = StoredSamples {
         unit,
         calibration: Vec::new(),
         validation: Vec::new(),
     };
-    for (i, line) in lines.enumerate() {
-        let cells: Vec<&str> = line.split(',').collect();
-        let number = |cell: &str| {
+    for (i, record) in reader.records().enumerate() {
+        let line = i as u64 + 2;
+        let record = record.map_err(|e| Error::Format {
+            path: path.clone(),
+            line: Some(line),
+            message: e.to_string(),
+        })?;
+        let bad_cell = |column: usize, message: String| Error::Cell {
+            path: path.clone(),
+            line,
+            column: column + 1,
+            name: header[column].clone(),
+            message,
+        };
+        let number = |column: usize| {
+            let cell = record.get(column).unwrap_or("");
             cell.parse::<f64>()
-                .map_err(|_| format(i + 2, format!("`{cell}` is not a number")))
+                .map_err(|_| bad_cell(column, format!("`{cell}` is not a number")))
         };
-        let [set, speed, torque] = cells.as_slice() else {
-            return Err(format(i + 2, format!("{} cells, 3 expected", cells.len())));
-        };
-        let sample = (number(speed)?, number(torque)?);
-        match *set {
+        let sample = (number(1)?, number(2)?);
+        match record.get(0).unwrap_or("") {
             "calibration" => stored.calibration.push(sample),
             "validation" => stored.validation.push(sample),
-            other => {
-                return Err(format(
-                    i + 2,
-                    format!("set `{other}` is neither calibration nor validation"),
-                ));
-            }
+            other => return Err(bad_cell(0, format!("`{other}` is neither calibration nor validation"))),
         }
     }
     Ok(stored)

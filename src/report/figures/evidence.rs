@@ -1,7 +1,7 @@
 //! The figures of an evidence directory's report: each law's 98 % posterior predictive
 //! envelope over the samples, and the posterior law probabilities.
 
-use super::fits::Envelopes;
+use super::fits::{Envelopes, envelope_panel};
 use super::probabilities::FinalProbabilities;
 use super::*;
 use crate::abc::Particle;
@@ -18,37 +18,19 @@ pub(crate) struct EvidenceFigures<'a> {
     pub w_ref_kn: Option<f64>,
 }
 
-/// Speeds of the envelopes, evenly spaced over the samples' range.
-const ENVELOPE_SPEEDS: usize = 200;
-
 /// The evidence's two figures.
 pub(crate) fn render_evidence(input: &EvidenceFigures) -> Result<Vec<Rendered>> {
     let samples = input.samples;
-    let to_unit = 1.0 / samples.unit.newton_metres();
     let speeds = samples.calibration.iter().chain(&samples.validation).map(|s| s.0);
     let (lo, hi) = super::super::plot::extent(speeds).unwrap_or((0.0, 1.0));
-    let grid = speed_grid(lo, hi, ENVELOPE_SPEEDS);
+    let grid = speed_grid(lo, hi, CURVE_POINTS);
     let points = |set: &[(f64, f64)]| set.iter().map(|&(w, t)| (super::super::rpm(w), t)).collect::<Vec<_>>();
     let envelopes = Envelopes {
         panels: input
             .laws
             .iter()
             .filter_map(|&(law, probability)| {
-                let e = predictive_envelope(input.particles, law, &grid, ENVELOPE_LEVEL, 1.0)?;
-                let band = e
-                    .speed_rad_s
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &w)| {
-                        (
-                            super::super::rpm(w),
-                            e.lower[i] * to_unit,
-                            e.median[i] * to_unit,
-                            e.upper[i] * to_unit,
-                        )
-                    })
-                    .collect();
-                Some((law, probability, band))
+                envelope_panel(input.particles, law, probability, &grid, samples.unit.newton_metres())
             })
             .take(4)
             .collect(),

@@ -45,26 +45,12 @@ pub(super) fn render_envelopes(p: &Prepared, shared: &Shared) -> Result<Rendered
             .laws
             .iter()
             .filter_map(|ls| {
-                let e = predictive_envelope(&reference.particles, ls.law, &shared.grid, ENVELOPE_LEVEL, 1.0)?;
                 let prob = reference
                     .probabilities
                     .iter()
                     .find(|x| x.0 == ls.law)
                     .map_or(0.0, |x| x.1);
-                let band = e
-                    .speed_rad_s
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &w)| {
-                        (
-                            rpm(w),
-                            e.lower[i] / p.torque_scale,
-                            e.median[i] / p.torque_scale,
-                            e.upper[i] / p.torque_scale,
-                        )
-                    })
-                    .collect();
-                Some((ls.law, prob, band))
+                envelope_panel(&reference.particles, ls.law, prob, &shared.grid, p.torque_scale)
             })
             .take(4)
             .collect(),
@@ -83,6 +69,32 @@ pub(super) fn render_envelopes(p: &Prepared, shared: &Shared) -> Result<Rendered
         FIGURE_SIZE,
         &envelopes,
     )
+}
+
+/// The panel of `law`'s 98 % predictive envelope of `particles` (SI) over `grid` (rad/s), its
+/// torques divided by `torque_scale` (N·m per display unit); `None` without particles of `law`.
+pub(super) fn envelope_panel(
+    particles: &[crate::abc::Particle],
+    law: Law,
+    probability: f64,
+    grid: &[f64],
+    torque_scale: f64,
+) -> Option<EnvelopePanel> {
+    let e = predictive_envelope(particles, law, grid, ENVELOPE_LEVEL, 1.0)?;
+    let band = e
+        .speed_rad_s
+        .iter()
+        .enumerate()
+        .map(|(i, &w)| {
+            (
+                rpm(w),
+                e.lower[i] / torque_scale,
+                e.median[i] / torque_scale,
+                e.upper[i] / torque_scale,
+            )
+        })
+        .collect();
+    Some((law, probability, band))
 }
 
 /// Figure 1: the record and the least-squares curves.
