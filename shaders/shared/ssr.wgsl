@@ -114,91 +114,14 @@ fn quad_sq(t: vec4<f32>, t_prev: f32, d: Quad) -> f32 {
     return dot(e, e);
 }
 
-fn quad_m1(p: array<f32, 6>, d: Quad) -> f32 {
-    let w = d.w;
-    var t_prev = 0.0;
-    if (LAG) {
-        t_prev = torque_m1(p[0], p[1], p[2], p[3], d.w_prev);
-    }
-    return quad_sq(vec4<f32>(torque_m1(p[0], p[1], p[2], p[3], w.x), torque_m1(p[0], p[1], p[2], p[3], w.y),
-                             torque_m1(p[0], p[1], p[2], p[3], w.z), torque_m1(p[0], p[1], p[2], p[3], w.w)), t_prev, d);
-}
-
-fn quad_m2(p: array<f32, 6>, d: Quad) -> f32 {
-    let w = d.w;
-    var t_prev = 0.0;
-    if (LAG) {
-        t_prev = torque_m2(p[0], p[1], p[2], d.w_prev);
-    }
-    return quad_sq(vec4<f32>(torque_m2(p[0], p[1], p[2], w.x), torque_m2(p[0], p[1], p[2], w.y),
-                             torque_m2(p[0], p[1], p[2], w.z), torque_m2(p[0], p[1], p[2], w.w)), t_prev, d);
-}
-
-fn quad_m3(p: array<f32, 6>, d: Quad) -> f32 {
-    let w = d.w;
-    var t_prev = 0.0;
-    if (LAG) {
-        t_prev = torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], d.w_prev);
-    }
-    return quad_sq(vec4<f32>(torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.x),
-                             torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.y),
-                             torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.z),
-                             torque_m3(p[0], p[1], p[2], p[3], p[4], p[5], w.w)), t_prev, d);
-}
-
-fn quad_m4(p: array<f32, 6>, d: Quad) -> f32 {
-    let w = d.w;
-    var t_prev = 0.0;
-    if (LAG) {
-        t_prev = torque_m4(p[0], p[1], p[2], p[3], d.w_prev);
-    }
-    return quad_sq(vec4<f32>(torque_m4(p[0], p[1], p[2], p[3], w.x), torque_m4(p[0], p[1], p[2], p[3], w.y),
-                             torque_m4(p[0], p[1], p[2], p[3], w.z), torque_m4(p[0], p[1], p[2], p[3], w.w)), t_prev, d);
-}
-
 // Σ (y - r T)² over quads q0..q1 of law `law` for all 16 parameter vectors; the switch sits
 // outside the loops, each loaded quad serves every candidate.
 fn block_ssr(law: u32, p: Params, q0: u32, q1: u32, end: u32) -> Sums {
     var s: Sums;
     switch law {
-        case 0u: {
-            for (var q = q0; q < q1; q = q + 1u) {
-                let d = load_quad(q, end);
-                s[0] = s[0] + vec4<f32>(quad_m1(p[0], d), quad_m1(p[1], d), quad_m1(p[2], d), quad_m1(p[3], d));
-                s[1] = s[1] + vec4<f32>(quad_m1(p[4], d), quad_m1(p[5], d), quad_m1(p[6], d), quad_m1(p[7], d));
-                s[2] = s[2] + vec4<f32>(quad_m1(p[8], d), quad_m1(p[9], d), quad_m1(p[10], d), quad_m1(p[11], d));
-                s[3] = s[3] + vec4<f32>(quad_m1(p[12], d), quad_m1(p[13], d), quad_m1(p[14], d), quad_m1(p[15], d));
-            }
-        }
-        case 1u: {
-            for (var q = q0; q < q1; q = q + 1u) {
-                let d = load_quad(q, end);
-                s[0] = s[0] + vec4<f32>(quad_m2(p[0], d), quad_m2(p[1], d), quad_m2(p[2], d), quad_m2(p[3], d));
-                s[1] = s[1] + vec4<f32>(quad_m2(p[4], d), quad_m2(p[5], d), quad_m2(p[6], d), quad_m2(p[7], d));
-                s[2] = s[2] + vec4<f32>(quad_m2(p[8], d), quad_m2(p[9], d), quad_m2(p[10], d), quad_m2(p[11], d));
-                s[3] = s[3] + vec4<f32>(quad_m2(p[12], d), quad_m2(p[13], d), quad_m2(p[14], d), quad_m2(p[15], d));
-            }
-        }
-        case 2u: {
-            for (var q = q0; q < q1; q = q + 1u) {
-                let d = load_quad(q, end);
-                s[0] = s[0] + vec4<f32>(quad_m3(p[0], d), quad_m3(p[1], d), quad_m3(p[2], d), quad_m3(p[3], d));
-                s[1] = s[1] + vec4<f32>(quad_m3(p[4], d), quad_m3(p[5], d), quad_m3(p[6], d), quad_m3(p[7], d));
-                s[2] = s[2] + vec4<f32>(quad_m3(p[8], d), quad_m3(p[9], d), quad_m3(p[10], d), quad_m3(p[11], d));
-                s[3] = s[3] + vec4<f32>(quad_m3(p[12], d), quad_m3(p[13], d), quad_m3(p[14], d), quad_m3(p[15], d));
-            }
-        }
-        case 3u: {
-            for (var q = q0; q < q1; q = q + 1u) {
-                let d = load_quad(q, end);
-                s[0] = s[0] + vec4<f32>(quad_m4(p[0], d), quad_m4(p[1], d), quad_m4(p[2], d), quad_m4(p[3], d));
-                s[1] = s[1] + vec4<f32>(quad_m4(p[4], d), quad_m4(p[5], d), quad_m4(p[6], d), quad_m4(p[7], d));
-                s[2] = s[2] + vec4<f32>(quad_m4(p[8], d), quad_m4(p[9], d), quad_m4(p[10], d), quad_m4(p[11], d));
-                s[3] = s[3] + vec4<f32>(quad_m4(p[12], d), quad_m4(p[13], d), quad_m4(p[14], d), quad_m4(p[15], d));
-            }
-        }
-        // The host writes a case per law file's law at the next line.
-        // FILE_LAW_BLOCKS
+        // The build writes a case per built-in law (laws/*.toml), the host one per law file's
+        // law, at the next line.
+        // LAW_BLOCKS
         default: {}
     }
     return s;
@@ -246,12 +169,9 @@ fn law_pass(law: u32, laws: Laws, p: Params, data_start: u32, data_end: u32, out
 // is no larger.
 fn slice_ssr(laws: Laws, p: Params, data_start: u32, data_end: u32) -> Sums {
     var out: Sums;
-    out = law_pass(0u, laws, p, data_start, data_end, out);
-    out = law_pass(1u, laws, p, data_start, data_end, out);
-    out = law_pass(2u, laws, p, data_start, data_end, out);
-    out = law_pass(3u, laws, p, data_start, data_end, out);
-    // The host writes a pass per law file's law at the next line.
-    // FILE_LAW_PASSES
+    // The build writes a pass per built-in law (laws/*.toml), the host one per law file's law,
+    // at the next line.
+    // LAW_PASSES
     return out;
 }
 

@@ -44,32 +44,9 @@ fn strided_ssr(law: u32, p: Four, lid: u32, data_start: u32, data_end: u32) -> v
         let block_end = min(b + span, quads);
         var block = vec4<f32>();
         switch law {
-            case 0u: {
-                for (var q = b; q < block_end; q = q + TILE_WORKGROUP) {
-                    let d = load_quad(q, data_end);
-                    block = block + vec4<f32>(quad_m1(p[0], d), quad_m1(p[1], d), quad_m1(p[2], d), quad_m1(p[3], d));
-                }
-            }
-            case 1u: {
-                for (var q = b; q < block_end; q = q + TILE_WORKGROUP) {
-                    let d = load_quad(q, data_end);
-                    block = block + vec4<f32>(quad_m2(p[0], d), quad_m2(p[1], d), quad_m2(p[2], d), quad_m2(p[3], d));
-                }
-            }
-            case 2u: {
-                for (var q = b; q < block_end; q = q + TILE_WORKGROUP) {
-                    let d = load_quad(q, data_end);
-                    block = block + vec4<f32>(quad_m3(p[0], d), quad_m3(p[1], d), quad_m3(p[2], d), quad_m3(p[3], d));
-                }
-            }
-            case 3u: {
-                for (var q = b; q < block_end; q = q + TILE_WORKGROUP) {
-                    let d = load_quad(q, data_end);
-                    block = block + vec4<f32>(quad_m4(p[0], d), quad_m4(p[1], d), quad_m4(p[2], d), quad_m4(p[3], d));
-                }
-            }
-            // The host writes a case per law file's law at the next line.
-            // FILE_LAW_STRIDED
+            // The build writes a case per built-in law (laws/*.toml), the host one per law
+            // file's law, at the next line.
+            // LAW_STRIDED
             default: {}
         }
         total = total + block;

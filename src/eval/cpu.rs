@@ -3,7 +3,7 @@
 
 use super::{AbcProblem, Evaluator, KernelSums};
 use crate::error::Result;
-use crate::laws::file::expr::BLOCK;
+use crate::laws::file::program::BLOCK;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::numerics;
 use crate::prior::Candidate;
@@ -125,28 +125,9 @@ fn sums_avx2<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64
 #[inline(always)]
 fn sums_portable<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
     let (w, y, r) = (&problem.speed_rad_s[..], &problem.torque_nm[..], &problem.wob_ratio[..]);
-    // Parameters are copied into locals first: indexing `p` inside the closure keeps bounds
-    // checks in the loop and stops it vectorising (3x slower for m3).
+    // A built-in law's parameters are copied into locals first: indexing `p` inside the
+    // closure keeps bounds checks in the loop and stops it vectorising (3x slower for m3).
     match law {
-        Law::M1 => {
-            let (b0, b1, b2, b3) = (p[0], p[1], p[2], p[3]);
-            residual_sums::<LAG>(w, y, r, |w| b0 * (numerics::tanh(b1 * w) + b2 * w / (1.0 + b3 * w * w)))
-        }
-        Law::M2 => {
-            let (drop, tcb, g) = (p[0] - p[1], p[1], p[2]);
-            residual_sums::<LAG>(w, y, r, |w| drop * numerics::exp(-g * w) + tcb)
-        }
-        Law::M3 => {
-            let (a0, a1, a2, a3, a4, a5) = (p[0], p[1], p[2], p[3], p[4], p[5]);
-            residual_sums::<LAG>(w, y, r, |w| {
-                let d = w - a2;
-                a0 * numerics::exp(-a1 * d * d) + a3 - a4 * numerics::tanh(a5 * w)
-            })
-        }
-        Law::M4 => {
-            let (c0, c1, c2, c3) = (p[0], p[1], p[2], p[3]);
-            residual_sums::<LAG>(w, y, r, |w| c0 + w * (c1 + w * (c2 + w * c3)))
-        }
         Law::File(id) => {
             // T = r · T(r = 1): the file's torque is checked proportional to r when read. Its
             // torques are computed block by block into this thread's scratch space, then summed
@@ -163,6 +144,8 @@ fn sums_portable<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> 
             FILE_LAW_SCRATCH.set((torques, registers));
             sums
         }
+        // The built-in law's torque at r = 1 (its file's, compiled by the build), inlined.
+        built_in => crate::laws::with_built_in_torque!(built_in, p, |torque| residual_sums::<LAG>(w, y, r, torque)),
     }
 }
 

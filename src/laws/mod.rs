@@ -1,6 +1,11 @@
-//! The paper's four bit-rock interaction laws M1..M4: torque on bit T(w), its analytic
-//! derivative dT/dw (the section "Stability analysis"), the gradient with respect to the
-//! parameters (for least squares) and the physical bounds of each parameter.
+//! The bit-rock interaction laws: torque on bit T(w), its derivative dT/dw (the paper's section
+//! "Stability analysis"), the gradient with respect to the parameters (for least squares) and
+//! the physical bounds of each parameter.
+//!
+//! The built-in laws (the paper's four, m1..m4) are defined once each, in `laws/<name>.toml`:
+//! the build compiles each file into the [`Law`] variant, its entry in the table of names,
+//! parameters, units, bounds and estimates, its f64 code here and in the CPU scorer, and its
+//! f32 WGSL in the kernels (`build/laws.rs`). Adding a built-in law is adding a file.
 //!
 //! Every law is scaled by the weight-on-bit ratio r = W / W_ref. Bit speed w is in rad/s.
 //! The laws are homogeneous of degree one in their torque-valued parameters, so one set of
@@ -18,21 +23,24 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-/// A bit-rock interaction law: one of the paper's four, or one read from a law file
-/// ([`crate::laws::file`]), named in files and on the command line by its name either way.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(into = "String", try_from = "String")]
-pub enum Law {
-    /// Tucker & Wang: `r b0 (tanh(b1 w) + b2 w / (1 + b3 w²))`.
-    M1,
-    /// Navarro-Lopez & Suarez: `r ((tsb - tcb) exp(-g w) + tcb)`.
-    M2,
-    /// The paper's new law: `r (a0 exp(-a1 (w - a2)²) + a3 - a4 tanh(a5 w))`.
-    M3,
-    /// Ritto & Aguiar's cubic: `r (c0 + c1 w + c2 w² + c3 w³)`.
-    M4,
-    /// A law read from a law file and registered in this process ([`crate::laws::file::register`]).
-    File(FileLaw),
+// The `Law` enum, `BUILT_INS`, `Law::ALL` and the built-in laws' code, written by the build
+// from laws/*.toml.
+include!(concat!(env!("OUT_DIR"), "/laws.rs"));
+
+/// A built-in law as its file (`laws/<name>.toml`) defines it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BuiltIn {
+    pub name: &'static str,
+    /// Whose law it is, for documentation.
+    #[allow(dead_code)]
+    pub title: &'static str,
+    /// The torque as every output prints it.
+    pub formula: &'static str,
+    pub params: &'static [ParamSpec],
+    /// The paper's least-squares estimates, in the kN·m-based units.
+    pub paper_estimate: Option<&'static [f64]>,
+    /// The law's colour in every figure (0xRRGGBB).
+    pub colour: u32,
 }
 
 /// The handle of a registered law file: its place in the process's registry. Handles order by
@@ -112,18 +120,7 @@ impl ParamSpec {
 
     /// The parameter's unit, written with the given torque unit (`kN·m`, `N·m`).
     pub fn unit(&self, torque_unit: &str) -> String {
-        let speed = match self.inverse_speed_power {
-            0 => String::new(),
-            -1 => "rad/s".to_string(),
-            1 => "s/rad".to_string(),
-            p => format!("s^{p}/rad^{p}"),
-        };
-        match (self.torque_power, speed.is_empty()) {
-            (0, true) => "1".to_string(),
-            (0, false) => speed,
-            (_, true) => torque_unit.to_string(),
-            (_, false) => format!("{torque_unit}·{speed}"),
-        }
+        file::expr::unit_text(self.torque_power, self.inverse_speed_power, torque_unit)
     }
 
     /// True when `value` respects the physical bounds.
@@ -132,47 +129,10 @@ impl ParamSpec {
     }
 }
 
-const FREE: f64 = f64::NEG_INFINITY;
-
 /// The largest torque on bit any parameter set is taken to mean, N·m: 1,000 kN·m, ten times the
 /// largest top drives' rated torque. Beyond it a value was almost surely given in N·m where
 /// kN·m was read ([`Law::implausible_torque`]).
 pub const MAX_BIT_TORQUE_NM: f64 = 1.0e6;
-
-// Bounds (documented in the README, "The laws"):
-// - M1: the asymptotic torque r·b0 is positive, b1 is a rate, the hump b2·w/(1+b3 w²) adds
-//   torque (b2 ≥ 0) and b3 ≥ 0 keeps its denominator from vanishing.
-// - M2: static torque tsb and dynamic torque tcb are positive, the decay rate g is positive.
-// - M3: the bump amplitude a0 and its sharpness a1 are non-negative (a1 < 0 is not a bump but
-//   a blow-up), the static gain a3 is positive, and a5 ≥ 0 removes the exact symmetry
-//   (a4, a5) ↔ (-a4, -a5) of the tanh term. a2 (bump centre) and a4 (tanh amplitude; negative
-//   means velocity strengthening) are free.
-// - M4: the static torque c0 is positive; the polynomial coefficients are free.
-const M1_PARAMS: [ParamSpec; 4] = [
-    ParamSpec::new("b0", 1, 0, 0.0),
-    ParamSpec::new("b1", 0, 1, 0.0),
-    ParamSpec::new("b2", 0, 1, 0.0),
-    ParamSpec::new("b3", 0, 2, 0.0),
-];
-const M2_PARAMS: [ParamSpec; 3] = [
-    ParamSpec::new("tsb", 1, 0, 0.0),
-    ParamSpec::new("tcb", 1, 0, 0.0),
-    ParamSpec::new("g", 0, 1, 0.0),
-];
-const M3_PARAMS: [ParamSpec; 6] = [
-    ParamSpec::new("a0", 1, 0, 0.0),
-    ParamSpec::new("a1", 0, 2, 0.0),
-    ParamSpec::new("a2", 0, -1, FREE),
-    ParamSpec::new("a3", 1, 0, 0.0),
-    ParamSpec::new("a4", 1, 0, FREE),
-    ParamSpec::new("a5", 0, 1, 0.0),
-];
-const M4_PARAMS: [ParamSpec; 4] = [
-    ParamSpec::new("c0", 1, 0, 0.0),
-    ParamSpec::new("c1", 1, 1, FREE),
-    ParamSpec::new("c2", 1, 2, FREE),
-    ParamSpec::new("c3", 1, 3, FREE),
-];
 
 /// The paper's reference weight on bit W_ref (N): every law's torque is scaled by r = W / W_ref,
 /// and the paper's estimates hold at W = W_ref.
@@ -186,18 +146,12 @@ pub(crate) const LAWS_WGSL: &str = include_str!("../../shaders/shared/laws.wgsl"
 pub const MAX_PARAMS: usize = 6;
 
 impl Law {
-    /// All laws in the paper's order.
-    pub const ALL: [Law; 4] = [Law::M1, Law::M2, Law::M3, Law::M4];
-
     /// Position in [`Law::ALL`] (m1 = 0 .. m4 = 3), and 4 + the registry place of a law
     /// file's law: the law id of the WGSL kernels.
     pub fn index(self) -> usize {
         match self {
-            Law::M1 => 0,
-            Law::M2 => 1,
-            Law::M3 => 2,
-            Law::M4 => 3,
             Law::File(FileLaw(k)) => Law::ALL.len() + usize::from(k),
+            built_in => built_in.built_in_index().expect("a built-in law"),
         }
     }
 
@@ -237,22 +191,21 @@ impl Law {
     /// Identifier used on the command line and in outputs.
     pub fn name(self) -> &'static str {
         match self {
-            Law::M1 => "m1",
-            Law::M2 => "m2",
-            Law::M3 => "m3",
-            Law::M4 => "m4",
             Law::File(id) => &crate::laws::file::registered(id).file.name,
+            built_in => built_in.built_in().name,
         }
+    }
+
+    /// The built-in law's definition; panics for a law file's.
+    pub(crate) fn built_in(self) -> &'static BuiltIn {
+        &BUILT_INS[self.built_in_index().expect("a built-in law")]
     }
 
     /// The law's parameters, in the order used everywhere (CLI, JSON, CSV).
     pub fn params(self) -> &'static [ParamSpec] {
         match self {
-            Law::M1 => &M1_PARAMS,
-            Law::M2 => &M2_PARAMS,
-            Law::M3 => &M3_PARAMS,
-            Law::M4 => &M4_PARAMS,
             Law::File(id) => crate::laws::file::registered(id).specs,
+            built_in => built_in.built_in().params,
         }
     }
 
@@ -270,22 +223,16 @@ impl Law {
     /// values where it gives one for every parameter; torques in kN·m, speeds in rad/s.
     pub fn paper_estimate(self) -> Option<&'static [f64]> {
         match self {
-            Law::M1 => Some(&[5.67, 0.48, 8.79, 4.56]),
-            Law::M2 => Some(&[13.0, 6.5, 0.3]),
-            Law::M3 => Some(&[2.72, 1.0, 0.09, 9.52, 4.0, 0.08]),
-            Law::M4 => Some(&[11.8, -0.93, 0.057, -1.2e-3]),
             Law::File(id) => crate::laws::file::registered(id).reference_knm,
+            built_in => built_in.built_in().paper_estimate,
         }
     }
 
     /// A short formula for help texts and reports.
     pub fn formula(self) -> &'static str {
         match self {
-            Law::M1 => "r·b0·(tanh(b1·w) + b2·w/(1 + b3·w²))",
-            Law::M2 => "r·((tsb − tcb)·exp(−g·w) + tcb)",
-            Law::M3 => "r·(a0·exp(−a1·(w − a2)²) + a3 − a4·tanh(a5·w))",
-            Law::M4 => "r·(c0 + c1·w + c2·w² + c3·w³)",
             Law::File(id) => &crate::laws::file::registered(id).file.formula,
+            built_in => built_in.built_in().formula,
         }
     }
 
@@ -293,37 +240,21 @@ impl Law {
     /// of the torque-valued parameters.
     #[inline]
     pub fn torque(self, p: &[f64], w: f64, r: f64) -> f64 {
-        r * match self {
-            Law::M1 => p[0] * ((p[1] * w).tanh() + p[2] * w / (1.0 + p[3] * w * w)),
-            Law::M2 => (p[0] - p[1]) * (-p[2] * w).exp() + p[1],
-            Law::M3 => {
-                let d = w - p[2];
-                p[0] * (-p[1] * d * d).exp() + p[3] - p[4] * (p[5] * w).tanh()
-            }
-            Law::M4 => p[0] + w * (p[1] + w * (p[2] + w * p[3])),
-            // A law file's torque holds r itself (checked proportional to it).
-            Law::File(id) => return crate::laws::file::registered(id).file.torque(p, w, r),
+        match self {
+            // A law file's torque holds r itself (checked proportional to it), as a built-in's.
+            Law::File(id) => crate::laws::file::registered(id).file.torque(p, w, r),
+            built_in => built_in.built_in_torque(p, w, r),
         }
     }
 
-    /// dT/dw at bit speed `w` (rad/s): the paper's analytic derivatives, scaled by `r`.
-    /// The unit is the torque unit per rad/s (kN·m·s/rad for the paper's parameters).
+    /// dT/dw at bit speed `w` (rad/s): the paper's analytic derivatives (a law file's symbolic
+    /// one), scaled by `r`. The unit is the torque unit per rad/s (kN·m·s/rad for the paper's
+    /// parameters).
     #[inline]
     pub fn dtorque_dw(self, p: &[f64], w: f64, r: f64) -> f64 {
         match self {
-            Law::M1 => {
-                let t = (p[1] * w).tanh();
-                let q = 1.0 + p[3] * w * w;
-                -r * p[0] * (p[1] * (t * t - 1.0) - p[2] / q + 2.0 * p[2] * p[3] * w * w / (q * q))
-            }
-            Law::M2 => -r * (p[0] - p[1]) * p[2] * (-p[2] * w).exp(),
-            Law::M3 => {
-                let t = (p[5] * w).tanh();
-                let d = w - p[2];
-                r * (p[4] * p[5] * (t * t - 1.0) + (2.0 * p[2] - 2.0 * w) * p[0] * p[1] * (-p[1] * d * d).exp())
-            }
-            Law::M4 => r * (p[1] + 2.0 * p[2] * w + 3.0 * p[3] * w * w),
             Law::File(id) => crate::laws::file::registered(id).file.dtorque_dw(p, w, r),
+            built_in => built_in.built_in_dtorque_dw(p, w, r),
         }
     }
 
@@ -331,45 +262,10 @@ impl Law {
     /// into `grad` (length = number of parameters). Used by the least-squares Jacobian.
     pub fn torque_and_gradient(self, p: &[f64], w: f64, grad: &mut [f64]) -> f64 {
         match self {
-            Law::M1 => {
-                let t = (p[1] * w).tanh();
-                let q = 1.0 + p[3] * w * w;
-                let h = p[2] * w / q;
-                grad[0] = t + h;
-                grad[1] = p[0] * w * (1.0 - t * t);
-                grad[2] = p[0] * w / q;
-                grad[3] = -p[0] * p[2] * w * w * w / (q * q);
-                p[0] * (t + h)
-            }
-            Law::M2 => {
-                let e = (-p[2] * w).exp();
-                grad[0] = e;
-                grad[1] = 1.0 - e;
-                grad[2] = -(p[0] - p[1]) * w * e;
-                (p[0] - p[1]) * e + p[1]
-            }
-            Law::M3 => {
-                let d = w - p[2];
-                let e = (-p[1] * d * d).exp();
-                let t = (p[5] * w).tanh();
-                grad[0] = e;
-                grad[1] = -p[0] * d * d * e;
-                grad[2] = 2.0 * p[0] * p[1] * d * e;
-                grad[3] = 1.0;
-                grad[4] = -t;
-                grad[5] = -p[4] * w * (1.0 - t * t);
-                p[0] * e + p[3] - p[4] * t
-            }
-            Law::M4 => {
-                grad[0] = 1.0;
-                grad[1] = w;
-                grad[2] = w * w;
-                grad[3] = w * w * w;
-                p[0] + w * (p[1] + w * (p[2] + w * p[3]))
-            }
             Law::File(id) => crate::laws::file::registered(id)
                 .file
                 .torque_and_gradient(p, w, 1.0, grad),
+            built_in => built_in.built_in_torque_and_gradient(p, w, grad),
         }
     }
 
@@ -465,24 +361,22 @@ impl fmt::Display for Law {
 impl FromStr for Law {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "m1" => Ok(Law::M1),
-            "m2" => Ok(Law::M2),
-            "m3" => Ok(Law::M3),
-            "m4" => Ok(Law::M4),
-            other => crate::laws::file::find(other).ok_or_else(|| {
-                let files: Vec<&str> = crate::laws::file::registered_laws()
-                    .into_iter()
-                    .map(Law::name)
-                    .collect();
-                let known = if files.is_empty() {
-                    "m1, m2, m3 or m4, or a law file's law".to_string()
-                } else {
-                    format!("m1, m2, m3, m4 or a law file's law: {}", files.join(", "))
-                };
-                format!("unknown law '{other}' (expected {known})")
-            }),
+        let name = s.trim().to_ascii_lowercase();
+        if let Some(law) = Law::ALL.into_iter().find(|law| law.name() == name) {
+            return Ok(law);
         }
+        crate::laws::file::find(&name).ok_or_else(|| {
+            let built_in: Vec<&str> = Law::ALL.iter().map(|law| law.name()).collect();
+            let files: Vec<&str> = crate::laws::file::registered_laws()
+                .into_iter()
+                .map(Law::name)
+                .collect();
+            let known = match built_in.split_last() {
+                Some((last, rest)) if files.is_empty() => format!("{} or {last}, or a law file's law", rest.join(", ")),
+                _ => format!("{} or a law file's law: {}", built_in.join(", "), files.join(", ")),
+            };
+            format!("unknown law '{name}' (expected {known})")
+        })
     }
 }
 
@@ -516,11 +410,11 @@ mod tests {
     #[test]
     fn units_read_like_a_paper() {
         let torque = "kN·m";
-        assert_eq!(M2_PARAMS[0].unit(torque), "kN·m");
-        assert_eq!(M2_PARAMS[2].unit(torque), "s/rad");
-        assert_eq!(M3_PARAMS[1].unit(torque), "s^2/rad^2");
-        assert_eq!(M3_PARAMS[2].unit(torque), "rad/s");
-        assert_eq!(M4_PARAMS[1].unit(torque), "kN·m·s/rad");
+        assert_eq!(Law::M2.params()[0].unit(torque), "kN·m");
+        assert_eq!(Law::M2.params()[2].unit(torque), "s/rad");
+        assert_eq!(Law::M3.params()[1].unit(torque), "s^2/rad^2");
+        assert_eq!(Law::M3.params()[2].unit(torque), "rad/s");
+        assert_eq!(Law::M4.params()[1].unit(torque), "kN·m·s/rad");
     }
 
     #[test]
@@ -529,6 +423,63 @@ mod tests {
         assert!(parse_law_list("m2,m2").is_err());
         assert!(parse_law_list("m5").unwrap_err().contains("m5"));
         assert!(parse_law_list("").is_err());
+    }
+
+    /// The parts of a built-in law's file that carry its mathematics.
+    #[derive(serde::Deserialize)]
+    struct Definition {
+        torque: String,
+        dtorque_dw: Option<String>,
+        gradient: Option<Vec<String>>,
+    }
+
+    #[test]
+    fn the_built_in_laws_compute_what_their_files_say_bit_for_bit() {
+        use file::expr::{Expr, Var, parse};
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        for (law, text) in Law::ALL.into_iter().zip(BUILT_IN_FILES) {
+            let definition: Definition = toml::from_str(text).unwrap_or_else(|_| panic!("{law}: its file"));
+            let names = law.param_names();
+            let compile = |text: &str| parse(text, &names).unwrap().0;
+            let torque = compile(&definition.torque);
+            let slope = definition.dtorque_dw.as_deref().map_or_else(|| torque.derivative(Var::Speed), compile);
+            let gradient: Vec<Expr> = match &definition.gradient {
+                Some(texts) => texts.iter().map(|t| compile(t)).collect(),
+                None => (0..names.len()).map(|i| torque.derivative(Var::Param(i))).collect(),
+            };
+            let paper = law.paper_estimate().unwrap();
+            let mut grad = vec![0.0; names.len()];
+            for _ in 0..2_000 {
+                // Parameters from a tenth to ten times the paper's, of either sign where free;
+                // speeds negative, near zero and far beyond a rig's; ratios 0 to 2; N·m and kN·m.
+                let unit = if rng.random_bool(0.5) { 1.0 } else { 1000.0 };
+                let p: Vec<f64> = law
+                    .scale_torque(paper, unit)
+                    .iter()
+                    .zip(law.params())
+                    .map(|(v, spec)| {
+                        let v = v * 10f64.powf(rng.random_range(-1.0..1.0));
+                        if spec.lower.is_finite() || rng.random_bool(0.5) { v } else { -v }
+                    })
+                    .collect();
+                let w = match rng.random_range(0..3) {
+                    0 => rng.random_range(-5.0..40.0),
+                    1 => rng.random_range(-1e-6..1e-6),
+                    _ => 0.0,
+                };
+                let r = rng.random_range(0.0..2.0);
+                let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+                let at = format!("{law} at p = {p:?}, w = {w}, r = {r}");
+                assert!(same(law.torque(&p, w, r), torque.eval(&p, w, r)), "T of {at}");
+                assert!(same(law.dtorque_dw(&p, w, r), slope.eval(&p, w, r)), "dT/dw of {at}");
+                let t = law.torque_and_gradient(&p, w, &mut grad);
+                assert!(same(t, torque.eval(&p, w, 1.0)), "T(r = 1) of {at}");
+                for (i, (g, e)) in grad.iter().zip(&gradient).enumerate() {
+                    assert!(same(*g, e.eval(&p, w, 1.0)), "∂T/∂{} of {at}", names[i]);
+                }
+            }
+        }
     }
 
     #[test]

@@ -74,19 +74,16 @@ const fn hex(c: u32) -> RGBColor {
     RGBColor((c >> 16) as u8, (c >> 8) as u8, c as u8)
 }
 
-/// One colour per law, fixed across figures (m1 purple, m2 orange, m3 green, m4 brown), none of
-/// them the data's red and blue.
+/// One colour per law, fixed across figures: a built-in law's its file's (m1 purple, m2
+/// orange, m3 green, m4 brown), none of them the data's red and blue.
 pub(crate) fn law_color(law: crate::Law) -> RGBColor {
     match law {
-        crate::Law::M1 => hex(0x9467bd),
-        crate::Law::M2 => hex(0xff7f0e),
-        crate::Law::M3 => hex(0x2ca02c),
-        crate::Law::M4 => hex(0x8c564b),
         // Law files' laws: pink, olive, cyan, grey, then round again.
         crate::Law::File(_) => {
             const MORE: [u32; 4] = [0xe377c2, 0xbcbd22, 0x17becf, 0x7f7f7f];
             hex(MORE[(law.index() - crate::Law::ALL.len()) % MORE.len()])
         }
+        built_in => hex(built_in.built_in().colour),
     }
 }
 

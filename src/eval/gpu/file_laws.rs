@@ -3,6 +3,7 @@
 //! scored by the same blocked and tiled loops, batched-records kernel and stability slopes as
 //! the built-in laws, compiled rather than interpreted.
 
+use super::law_cases::LawCases;
 use crate::Law;
 use std::fmt::Write;
 
@@ -17,58 +18,26 @@ pub(crate) fn label(kernel: &str, laws: &[Law]) -> String {
 }
 
 /// `source` with the law files' `laws` spliced in: their functions, one case or pass per law at
-/// each marker, and the list of law ids the tiled shape loops over (m1..m4 alone without
-/// laws).
+/// each marker (after the built-in laws' that the build wrote there), and the list of law ids
+/// the tiled shape loops over (the built-in laws alone without laws).
 pub(crate) fn splice(source: &str, laws: &[Law]) -> String {
-    let (mut blocks, mut passes, mut strided, mut slopes, mut functions) = (
-        String::new(),
-        String::new(),
-        String::new(),
-        String::new(),
-        String::new(),
-    );
+    let mut cases = LawCases::default();
     let scores = source.contains("fn quad_sq(");
     for &law in laws {
         let file = law.file().expect("a law file's law");
-        let (id, name) = (law.index(), &file.name);
-        functions.push_str(&file.wgsl());
-        writeln!(slopes, "        case {id}u: {{ return file_slope_{name}(p, w, 1.0); }}").unwrap();
-        if !scores {
-            continue;
-        }
-        let quad = |k: usize| format!("file_quad_{name}(p[{k}], d)");
-        writeln!(
-            functions,
-            "fn file_quad_{name}(p: array<f32, 6>, d: Quad) -> f32 {{\n    let w = d.w;\n    var t_prev = 0.0;\n    if (LAG) {{\n        t_prev = file_torque_{name}(p, d.w_prev, 1.0);\n    }}\n    return quad_sq(vec4<f32>(file_torque_{name}(p, w.x, 1.0), file_torque_{name}(p, w.y, 1.0), file_torque_{name}(p, w.z, 1.0), file_torque_{name}(p, w.w, 1.0)), t_prev, d);\n}}"
-        )
-        .unwrap();
-        write!(blocks, "        case {id}u: {{\n            for (var q = q0; q < q1; q = q + 1u) {{\n                let d = load_quad(q, end);\n").unwrap();
-        for g in 0..4 {
-            let four: Vec<String> = (4 * g..4 * g + 4).map(quad).collect();
-            writeln!(
-                blocks,
-                "                s[{g}] = s[{g}] + vec4<f32>({});",
-                four.join(", ")
-            )
-            .unwrap();
-        }
-        blocks.push_str("            }\n        }\n");
-        writeln!(passes, "    out = law_pass({id}u, laws, p, data_start, data_end, out);").unwrap();
-        let four: Vec<String> = (0..4).map(quad).collect();
-        write!(
-            strided,
-            "            case {id}u: {{\n                for (var q = b; q < block_end; q = q + TILE_WORKGROUP) {{\n                    let d = load_quad(q, data_end);\n                    block = block + vec4<f32>({});\n                }}\n            }}\n",
-            four.join(", ")
-        )
-        .unwrap();
+        let name = &file.name;
+        cases.functions.push_str(&file.wgsl());
+        cases.add(
+            law.index(),
+            &format!("file_quad_{name}"),
+            &|p, w| format!("file_torque_{name}({p}, {w}, 1.0)"),
+            &format!("file_slope_{name}(p, w, 1.0)"),
+            scores,
+        );
     }
-    let ids: Vec<String> = Law::ALL.iter().chain(laws).map(|l| format!("{}u", l.index())).collect();
-    let mut out = source
-        .replace("// FILE_LAW_BLOCKS", &blocks)
-        .replace("// FILE_LAW_PASSES", &passes)
-        .replace("// FILE_LAW_STRIDED", &strided)
-        .replace("// FILE_LAW_SLOPES", &slopes);
+    let mut out = LawCases::close(&cases.splice(source));
     if source.contains("law_ids[") {
+        let ids: Vec<String> = Law::ALL.iter().chain(laws).map(|l| format!("{}u", l.index())).collect();
         // Declared first: naga processes a pipeline's overrides in declaration order, and the
         // tiled shape's override-sized arrays follow.
         out = format!(
@@ -77,7 +46,5 @@ pub(crate) fn splice(source: &str, laws: &[Law]) -> String {
             n = ids.len()
         );
     }
-    out.push('\n');
-    out.push_str(&functions);
     out
 }

@@ -12,6 +12,7 @@
 pub mod candidates;
 pub(crate) mod file_laws;
 pub mod kernel_sums;
+pub(crate) mod law_cases;
 pub mod law_points;
 pub mod records;
 pub mod residual;

@@ -417,7 +417,7 @@ fn binary(op: Binary, a: Expr, b: Expr) -> Expr {
 
 /// The integer value of `e` when it is a small integer constant (a power unrolled into
 /// multiplications on both paths).
-fn small_integer(e: &Expr) -> Option<i32> {
+pub(crate) fn small_integer(e: &Expr) -> Option<i32> {
     match e {
         Expr::Const(c) if c.fract() == 0.0 && c.abs() <= 16.0 => Some(*c as i32),
         _ => None,
@@ -525,11 +525,51 @@ impl Dim {
         }
         let (t, s) = (self.torque2 / 2, self.inverse_speed2 / 2);
         if t == 0 || t == 1 {
-            crate::laws::ParamSpec::new("", t, s, 0.0).unit("N·m")
+            unit_text(t, s, "N·m")
         } else {
             format!("N^{t}·m^{t}·(s/rad)^{s}")
         }
     }
+}
+
+/// A unit of torque power `torque_power` (0 or 1) and inverse-speed power
+/// `inverse_speed_power`, written with the given torque unit (`kN·m`, `N·m`): `s/rad`,
+/// `N·m·s^2/rad^2`, … as bitrock writes units.
+pub fn unit_text(torque_power: i32, inverse_speed_power: i32, torque_unit: &str) -> String {
+    let speed = match inverse_speed_power {
+        0 => String::new(),
+        -1 => "rad/s".to_string(),
+        1 => "s/rad".to_string(),
+        p => format!("s^{p}/rad^{p}"),
+    };
+    match (torque_power, speed.is_empty()) {
+        (0, true) => "1".to_string(),
+        (0, false) => speed,
+        (_, true) => torque_unit.to_string(),
+        (_, false) => format!("{torque_unit}·{speed}"),
+    }
+}
+
+/// (torque power, inverse-speed power) of a unit written as bitrock prints units: `1`, `N·m`,
+/// `s/rad`, `rad/s`, `s^2/rad^2`, `N·m·s/rad`, … (`*` or `.` for `·`, spaces ignored).
+pub fn parse_unit(text: &str) -> Option<(i32, i32)> {
+    let normal: String = text
+        .chars()
+        .filter(|c| !c.is_whitespace())
+        .map(|c| if c == '*' || c == '.' { '·' } else { c })
+        .collect();
+    for torque_power in [0, 1] {
+        for inverse_speed_power in -3..=3 {
+            let canonical = unit_text(torque_power, inverse_speed_power, "N·m");
+            // rad^k/s^k reads better than s^-k/rad^-k.
+            let k = -inverse_speed_power;
+            let upright = canonical.replace(&format!("s^-{k}/rad^-{k}"), &format!("rad^{k}/s^{k}"));
+            if normal == canonical || normal == upright {
+                return Some((torque_power, inverse_speed_power));
+            }
+        }
+    }
+    None
 }
 
 impl Expr {
@@ -850,6 +890,80 @@ impl Expr {
         }
     }
 
+    /// The expression at r = 1, simplified as it is rebuilt (`r·x` becomes `x`, `−r·x` becomes
+    /// `−x`): the same IEEE operations as the expression evaluated at r = 1, less the exact
+    /// multiplications by ±1. The kernels and the CPU scorer compute torques at r = 1 and
+    /// multiply by r themselves.
+    pub fn at_unit_ratio(&self) -> Expr {
+        match self {
+            Expr::Var(Var::Ratio) => Expr::Const(1.0),
+            Expr::Const(_) | Expr::Var(_) => self.clone(),
+            Expr::Unary(Unary::Neg, a) => neg(a.at_unit_ratio()),
+            Expr::Unary(op, a) => apply(*op, a.at_unit_ratio()),
+            Expr::Binary(op, a, b) => {
+                let (a, b) = (a.at_unit_ratio(), b.at_unit_ratio());
+                match op {
+                    Binary::Add => add(a, b),
+                    Binary::Sub => sub(a, b),
+                    Binary::Mul => mul(a, b),
+                    Binary::Div => div(a, b),
+                    Binary::Pow => pow(a, b),
+                }
+            }
+        }
+    }
+
+    /// The expression as Rust source in f64 (the built-in laws' code, written by the build):
+    /// parameter `i` is `p{i}`, the speed `w`, the ratio `r`; exp and tanh are the functions
+    /// named by `exp` and `tanh` (libm's, or [`crate::numerics`]' vectorisable ones), the others
+    /// libm's. One IEEE operation per node, in the order written: the value of [`Self::eval`]
+    /// (bit for bit, with libm's exp and tanh).
+    pub fn rust(&self, exp: &str, tanh: &str) -> String {
+        match self {
+            Expr::Const(c) if *c < 0.0 => format!("(-{:?}_f64)", -c),
+            Expr::Const(c) => format!("{c:?}_f64"),
+            Expr::Var(Var::Speed) => "w".into(),
+            Expr::Var(Var::Ratio) => "r".into(),
+            Expr::Var(Var::Param(i)) => format!("p{i}"),
+            Expr::Unary(op, a) => {
+                let a = a.rust(exp, tanh);
+                match op {
+                    Unary::Neg => format!("(-{a})"),
+                    Unary::Exp => format!("{exp}({a})"),
+                    Unary::Tanh => format!("{tanh}({a})"),
+                    Unary::Ln => format!("f64::ln({a})"),
+                    Unary::Sqrt => format!("f64::sqrt({a})"),
+                    Unary::Abs => format!("f64::abs({a})"),
+                    Unary::Sin => format!("f64::sin({a})"),
+                    Unary::Cos => format!("f64::cos({a})"),
+                    // sign(0) = 0, as WGSL's sign.
+                    Unary::Sign => {
+                        format!("{{ let v: f64 = {a}; if v == 0.0 || v.is_nan() {{ v }} else {{ v.signum() }} }}")
+                    }
+                }
+            }
+            Expr::Binary(Binary::Pow, a, b) => match small_integer(b) {
+                Some(n) => format!("f64::powi({}, {n})", a.rust(exp, tanh)),
+                // WGSL's pow is exp2(y·log2 x): no value for x < 0.
+                None => format!(
+                    "{{ let (x, y): (f64, f64) = ({}, {}); if x < 0.0 {{ f64::NAN }} else {{ x.powf(y) }} }}",
+                    a.rust(exp, tanh),
+                    b.rust(exp, tanh)
+                ),
+            },
+            Expr::Binary(op, a, b) => {
+                let symbol = match op {
+                    Binary::Add => "+",
+                    Binary::Sub => "-",
+                    Binary::Mul => "*",
+                    Binary::Div => "/",
+                    Binary::Pow => unreachable!("handled above"),
+                };
+                format!("({} {symbol} {})", a.rust(exp, tanh), b.rust(exp, tanh))
+            }
+        }
+    }
+
     /// An upper bound on the size of [`Self::derivative`]`(var)`, in one pass over the tree
     /// (simplification only shrinks the result): a product of n factors has a derivative of
     /// order n² nodes, which is refused by its bound before any of it is built.
@@ -913,152 +1027,6 @@ fn hoist(lets: &mut String, count: &mut usize, text: String, depth: usize, force
 pub const WGSL_MAX_NESTING: usize = 24;
 /// Characters beyond which an unrolled power's base is bound to a `let` instead of repeated.
 pub const WGSL_INLINE_REPEAT: usize = 48;
-
-/// Samples a [`Program`] evaluates per instruction.
-pub const BLOCK: usize = 64;
-
-/// An operand of a [`Program`] instruction: a register, a constant, a parameter or the speed.
-#[derive(Clone, Copy, Debug)]
-enum Operand {
-    Register(usize),
-    Const(f64),
-    Param(usize),
-    Speed,
-}
-
-/// An expression flattened for the CPU scoring loop: one instruction per node, each applied to
-/// a block of [`BLOCK`] speeds at once (loops the compiler vectorises), exp and tanh the
-/// vectorisable [`crate::numerics`] ones the built-in laws' CPU scoring uses. `r` is 1: the
-/// scoring loop multiplies by r (a law file's torque is proportional to it).
-#[derive(Clone, Debug)]
-pub struct Program {
-    steps: Vec<(Step, Operand, Operand)>,
-    result: Operand,
-}
-
-#[derive(Clone, Copy, Debug)]
-enum Step {
-    Unary(Unary),
-    Binary(Binary),
-    /// a^n, n a small integer (multiplications, as [`Expr::eval`]'s powi).
-    PowI(i32),
-}
-
-impl Program {
-    /// `expr` with r = 1, flattened.
-    pub fn new(expr: &Expr) -> Self {
-        let mut steps = Vec::new();
-        let result = Self::flatten(expr, &mut steps);
-        Self { steps, result }
-    }
-
-    fn flatten(e: &Expr, steps: &mut Vec<(Step, Operand, Operand)>) -> Operand {
-        match e {
-            Expr::Const(c) => Operand::Const(*c),
-            Expr::Var(Var::Speed) => Operand::Speed,
-            Expr::Var(Var::Ratio) => Operand::Const(1.0),
-            Expr::Var(Var::Param(i)) => Operand::Param(*i),
-            Expr::Unary(op, a) => {
-                let a = Self::flatten(a, steps);
-                steps.push((Step::Unary(*op), a, a));
-                Operand::Register(steps.len() - 1)
-            }
-            Expr::Binary(Binary::Pow, a, b) if small_integer(b).is_some() => {
-                let a = Self::flatten(a, steps);
-                let n = small_integer(b).expect("checked");
-                steps.push((Step::PowI(n), a, a));
-                Operand::Register(steps.len() - 1)
-            }
-            Expr::Binary(op, a, b) => {
-                let a = Self::flatten(a, steps);
-                let b = Self::flatten(b, steps);
-                steps.push((Step::Binary(*op), a, b));
-                Operand::Register(steps.len() - 1)
-            }
-        }
-    }
-
-    /// The torques at `w` (up to [`BLOCK`] speeds) with parameters `p`, into `out`; `registers`
-    /// is scratch space kept between calls. Inlined, so that the CPU scorer's AVX2 build of its
-    /// loop (`eval::cpu`) covers these loops too.
-    #[inline(always)]
-    pub fn eval_block(&self, p: &[f64], w: &[f64], out: &mut [f64], registers: &mut Vec<[f64; BLOCK]>) {
-        let n = w.len();
-        registers.resize(self.steps.len(), [0.0; BLOCK]);
-        let mut speed = [0.0; BLOCK];
-        speed[..n].copy_from_slice(w);
-        // Each instruction writes its own register from earlier ones (post-order).
-        for (k, &(step, a, b)) in self.steps.iter().enumerate() {
-            let (done, rest) = registers.split_at_mut(k);
-            let z = &mut rest[0];
-            let (mut a_buf, mut b_buf) = ([0.0; BLOCK], [0.0; BLOCK]);
-            let x = operand(done, a, p, &speed, &mut a_buf);
-            macro_rules! each {
-                ($f:expr) => {
-                    for l in 0..BLOCK {
-                        z[l] = $f(x[l]);
-                    }
-                };
-            }
-            match step {
-                Step::Unary(Unary::Neg) => each!(|v: f64| -v),
-                Step::Unary(Unary::Exp) => each!(crate::numerics::exp),
-                Step::Unary(Unary::Ln) => each!(f64::ln),
-                Step::Unary(Unary::Sqrt) => each!(f64::sqrt),
-                Step::Unary(Unary::Abs) => each!(f64::abs),
-                Step::Unary(Unary::Sign) => each!(|v: f64| if v == 0.0 || v.is_nan() { v } else { v.signum() }),
-                Step::Unary(Unary::Tanh) => each!(crate::numerics::tanh),
-                Step::Unary(Unary::Sin) => each!(f64::sin),
-                Step::Unary(Unary::Cos) => each!(f64::cos),
-                Step::PowI(e) => each!(|v: f64| v.powi(e)),
-                Step::Binary(op) => {
-                    let y = operand(done, b, p, &speed, &mut b_buf);
-                    for l in 0..BLOCK {
-                        z[l] = match op {
-                            Binary::Add => x[l] + y[l],
-                            Binary::Sub => x[l] - y[l],
-                            Binary::Mul => x[l] * y[l],
-                            Binary::Div => x[l] / y[l],
-                            // WGSL's pow is exp2(y·log2 x): no value for x < 0.
-                            Binary::Pow if x[l] < 0.0 => f64::NAN,
-                            Binary::Pow => x[l].powf(y[l]),
-                        };
-                    }
-                }
-            }
-        }
-        let mut buf = [0.0; BLOCK];
-        let result = operand(registers, self.result, p, &speed, &mut buf);
-        out[..n].copy_from_slice(&result[..n]);
-    }
-}
-
-/// The block of values of operand `o`: a register of `done`, or `buf` filled with a constant,
-/// a parameter or the speeds.
-#[inline(always)]
-fn operand<'a>(
-    done: &'a [[f64; BLOCK]],
-    o: Operand,
-    p: &[f64],
-    speed: &[f64; BLOCK],
-    buf: &'a mut [f64; BLOCK],
-) -> &'a [f64; BLOCK] {
-    match o {
-        Operand::Register(k) => &done[k],
-        Operand::Const(c) => {
-            *buf = [c; BLOCK];
-            buf
-        }
-        Operand::Param(i) => {
-            *buf = [p[i]; BLOCK];
-            buf
-        }
-        Operand::Speed => {
-            *buf = *speed;
-            buf
-        }
-    }
-}
 
 #[cfg(test)]
 mod tests {
@@ -1172,33 +1140,6 @@ mod tests {
                         "d/d{var:?} of {text} at w = {w}: {exact} against {numeric}"
                     );
                 }
-            }
-        }
-    }
-
-    #[test]
-    fn a_program_gives_the_twin_s_values_block_by_block() {
-        let texts = [
-            "a * (tanh(b * w) + 2 * w / (1 + b * w^2))",
-            "(a - b) * exp(-b * w) + b",
-            "sqrt(a + w^2) * ln(b + w) / (1 + abs(w - 0.7)) - sign(w - 1) * cos(w) * sin(b)",
-            "pow(w, a) - w^-3 + (w - 2)^3 + pow(w - 2, 0.5)",
-        ];
-        let p = [1.3, 0.6];
-        let w: Vec<f64> = (0..150).map(|i| -0.5 + 0.05 * f64::from(i)).collect();
-        let mut registers = Vec::new();
-        for text in texts {
-            let e = compile(text);
-            let program = Program::new(&e);
-            let mut got = vec![0.0; w.len()];
-            for (ws, out) in w.chunks(BLOCK).zip(got.chunks_mut(BLOCK)) {
-                program.eval_block(&p, ws, out, &mut registers);
-            }
-            for (&x, g) in w.iter().zip(&got) {
-                let want = e.eval(&p, x, 1.0);
-                // exp and tanh are numerics' (within a few ulp of libm).
-                let close = (want.is_nan() && g.is_nan()) || (g - want).abs() <= 1e-13 * want.abs().max(1.0);
-                assert!(close, "{text} at w = {x}: {g} against {want}");
             }
         }
     }

@@ -19,10 +19,11 @@
 //! checked by naga when the file is read, so a law that loads compiles on every backend.
 
 pub mod expr;
+pub mod program;
 
 use crate::laws::{FileLaw, MAX_PARAMS, ParamSpec};
 use crate::{Error, Law, Result};
-use expr::{Dim, Expr, Var};
+use expr::{Dim, Expr, Var, parse_unit};
 use serde::Deserialize;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -104,8 +105,6 @@ pub const MAX_FILE_BYTES: u64 = 64_000;
 /// far above any law written by hand, far below what exhausts time or memory.
 pub const MAX_DERIVATIVE_NODES: usize = 200_000;
 
-/// The built-in laws' names, which a law file may not take.
-const BUILT_IN: [&str; 4] = ["m1", "m2", "m3", "m4"];
 /// Words bitrock itself uses where law names go in its outputs and flags (the mixture of laws
 /// in stability maps, `--laws all`, the particle columns), which a law file may not take.
 const OUTPUT_WORDS: [&str; 8] = [
@@ -124,7 +123,7 @@ const OUTPUT_WORDS: [&str; 8] = [
 pub(crate) struct Registered {
     pub file: &'static LawFile,
     /// The torque flattened for the CPU scoring loop.
-    pub program: expr::Program,
+    pub program: program::Program,
     pub specs: &'static [ParamSpec],
     /// The references in kN·m-based units, where every parameter has one.
     pub reference_knm: Option<&'static [f64]>,
@@ -183,7 +182,7 @@ pub fn register(file: LawFile) -> Result<Law> {
         .collect::<Option<Vec<f64>>>()
         .map(|v| &*Box::leak(v.into_boxed_slice()));
     let registered = Registered {
-        program: expr::Program::new(&file.torque),
+        program: program::Program::new(&file.torque),
         specs: Box::leak(specs.into_boxed_slice()),
         reference_knm,
         file,
@@ -262,7 +261,7 @@ impl LawFile {
                 format!("law name '{name}': use up to 24 lower-case letters, digits and '_', starting with a letter"),
             ));
         }
-        if BUILT_IN.contains(&name.as_str()) {
+        if Law::ALL.iter().any(|law| law.name() == name.as_str()) {
             return Err(at(
                 raw.name.span().start,
                 format!("law name '{name}' is a built-in law's; choose another"),
@@ -516,28 +515,6 @@ fn string_content_start(source: &str, span: Range<usize>, value: &str) -> Option
                 return Some(span.start + quote.len() + skip);
             }
             return None;
-        }
-    }
-    None
-}
-
-/// (torque power, inverse-speed power) of a unit written as bitrock prints units: `1`, `N·m`,
-/// `s/rad`, `rad/s`, `s^2/rad^2`, `N·m·s/rad`, … (`*` or `.` for `·`, spaces ignored).
-fn parse_unit(text: &str) -> Option<(i32, i32)> {
-    let normal: String = text
-        .chars()
-        .filter(|c| !c.is_whitespace())
-        .map(|c| if c == '*' || c == '.' { '·' } else { c })
-        .collect();
-    for torque_power in [0, 1] {
-        for inverse_speed_power in -3..=3 {
-            let canonical = crate::laws::ParamSpec::new("", torque_power, inverse_speed_power, 0.0).unit("N·m");
-            // rad^k/s^k reads better than s^-k/rad^-k.
-            let k = -inverse_speed_power;
-            let upright = canonical.replace(&format!("s^-{k}/rad^-{k}"), &format!("rad^{k}/s^{k}"));
-            if normal == canonical || normal == upright {
-                return Some((torque_power, inverse_speed_power));
-            }
         }
     }
     None
