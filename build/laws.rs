@@ -326,6 +326,13 @@ pub fn rust(laws: &[BuiltIn]) -> String {
         files.join(", ")
     )
     .unwrap();
+    let list: Vec<&str> = laws.iter().map(|l| l.name.as_str()).collect();
+    writeln!(
+        out,
+        "/// The built-in laws' names, comma-separated, as a string literal (`\"{list}\"`): for help\n/// texts and defaults, with `concat!`.\n#[macro_export]\nmacro_rules! built_in_law_list {{\n    () => {{\n        \"{list}\"\n    }};\n}}\n",
+        list = list.join(",")
+    )
+    .unwrap();
     out.push_str("impl Law {\n");
     let variants: Vec<String> = laws.iter().map(|l| format!("Law::{}", l.variant())).collect();
     writeln!(

@@ -589,12 +589,13 @@ fn design_starts(law: Law, bounds: &[Bound], scales: &RecordScales) -> Vec<Vec<f
     out
 }
 
-/// How many design points a law file's law is started from ([`design_starts`]).
+/// How many design points a law without a grid is started from ([`design_starts`]).
 const DESIGN_POINTS: u32 = 256;
 
 /// Candidate starting points (scaled parameters) from a grid over the nonlinear parameters,
-/// the linear ones solved exactly at each grid point.
-fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
+/// the linear ones solved exactly at each grid point: the paper's four laws have one, other
+/// laws (`None`) start from their design ([`design_starts`]).
+fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Option<Vec<Vec<f64>>> {
     let col = |f: &dyn Fn(f64) -> f64| -> Vec<f64> { w.iter().zip(r).map(|(&w, &r)| r * f(w)).collect() };
     let mut grid = GridColumns::new(y);
     let mut out = Vec::new();
@@ -655,10 +656,9 @@ fn grid_starts(law: Law, w: &[f64], y: &[f64], r: &[f64]) -> Vec<Vec<f64>> {
                 out.push(c);
             }
         }
-        // A law file's law has no grid; it starts from its design (design_starts).
-        Law::File(_) => {}
+        _ => return None,
     }
-    out
+    Some(out)
 }
 
 /// Bit speeds among `speeds` that differ by more than [`SAME_SPEED_TOLERANCE`] of the largest:
@@ -900,10 +900,7 @@ fn select_starts(
     scales: &RecordScales,
     max_starts: usize,
 ) -> Vec<Vec<f64>> {
-    let grid = match law {
-        Law::File(_) => design_starts(law, bounds, scales),
-        _ => grid_starts(law, data.w, data.y, data.r),
-    };
+    let grid = grid_starts(law, data.w, data.y, data.r).unwrap_or_else(|| design_starts(law, bounds, scales));
     let mut candidates: Vec<(f64, Vec<f64>)> = grid
         .into_iter()
         .map(|mut p| {

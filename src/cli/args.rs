@@ -99,9 +99,11 @@ impl DataArgs {
 /// How the least-squares fit runs.
 #[derive(Debug, Args, Clone)]
 pub struct FitArgs {
-    /// Laws to fit, comma-separated: m1..m4 and the laws of --law-file by their names
-    /// [default: m1,m2,m3,m4 and every --law-file's law].
-    #[arg(long, value_name = "LAWS")]
+    #[arg(long, value_name = "LAWS", help = concat!(
+        "Laws to fit, comma-separated: the built-in laws (",
+        bitrock::built_in_law_list!(),
+        ") and the laws of --law-file by their names [default: every built-in law and every --law-file's law]"
+    ))]
     pub laws: Option<String>,
     /// Lift the physical bounds (positive static and dynamic torques, positive rates and widths).
     #[arg(long)]
@@ -119,7 +121,7 @@ pub struct FitArgs {
 }
 
 impl FitArgs {
-    /// The laws of --laws; without it, m1..m4 and every --law-file's law.
+    /// The laws of --laws; without it, every built-in law and every --law-file's law.
     pub fn laws(&self) -> anyhow::Result<Vec<Law>> {
         match &self.laws {
             Some(list) => parse_laws(list),
@@ -141,12 +143,12 @@ impl FitArgs {
     }
 }
 
-/// The laws of a --laws list (m1..m4 and the --law-file laws by name), refused naming --laws.
+/// The laws of a --laws list (built-in laws and --law-file laws by name), refused naming --laws.
 pub fn parse_laws(list: &str) -> anyhow::Result<Vec<Law>> {
     Ok(bitrock::laws::parse_law_list(list).map_err(|m| bitrock::Error::setting("laws", m))?)
 }
 
-/// The law of a --law flag (m1..m4 or a --law-file law by name), refused naming --law.
+/// The law of a --law flag (a built-in law or a --law-file law by name), refused naming --law.
 pub fn parse_law(name: &str) -> anyhow::Result<Law> {
     Ok(name.parse().map_err(|m: String| bitrock::Error::setting("law", m))?)
 }

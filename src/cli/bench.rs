@@ -11,8 +11,8 @@ pub struct BenchCmd {
     /// Repetitions per measurement (median, min and max are reported).
     #[arg(long, default_value_t = 5, value_name = "R")]
     pub reps: usize,
-    /// Laws to measure, comma-separated (m1..m4 and --law-file laws with reference values).
-    #[arg(long, default_value = "m1,m2,m3,m4", value_name = "LAWS")]
+    /// Laws to measure, comma-separated (built-in laws and --law-file laws with reference values).
+    #[arg(long, default_value = bitrock::built_in_law_list!(), value_name = "LAWS")]
     pub laws: String,
     /// Only this backend [default: both].
     #[arg(long, value_enum)]
@@ -113,7 +113,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             writeln!(out, "GPU scoring shape at 65,536 candidates per dispatch: {shape}")?;
         }
         writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
-        // Law names: m1..m4 and law files' laws, as wide as the widest.
+        // Law names: built-in and law files' laws, as wide as the widest.
         let width = report
             .throughput
             .iter()

@@ -13,9 +13,9 @@ pub struct ParityCmd {
     pub data: Option<PathBuf>,
     #[command(flatten)]
     pub data_args: DataArgs,
-    /// Laws to compare, comma-separated, m1..m4 and --law-file laws (priors from their
+    /// Laws to compare, comma-separated, built-in and --law-file laws (priors from their
     /// least-squares fits, δ = 0.4).
-    #[arg(long, default_value = "m1,m2,m3,m4", value_name = "LAWS")]
+    #[arg(long, default_value = bitrock::built_in_law_list!(), value_name = "LAWS")]
     pub laws: String,
     /// Candidates scored per law on each backend.
     #[arg(long, default_value_t = bitrock::bench::PARITY_CANDIDATES, value_name = "N")]

@@ -27,8 +27,11 @@ pub struct SimulateCmd {
     /// columns top_drive_rpm and segment (format in docs/commands.md).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["law", "params", "omega_rpm", "wob_kn", "duration_s", "settle_s", "sample_hz", "dt_s", "initial", "kick_rpm", "noise_torque_knm", "noise_speed_rpm", "wob_fluctuation_kn", "wob_correlation_s", "seed", "w_ref_kn", "param_torque_unit", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio"])]
     pub well: Option<PathBuf>,
-    /// Bit-rock law (m1, m2, m3, m4, or a --law-file's law by its name).
-    #[arg(long, required_unless_present = "well")]
+    #[arg(long, required_unless_present = "well", help = concat!(
+        "Bit-rock law (one of ",
+        bitrock::built_in_law_list!(),
+        ", or a --law-file's law by its name)"
+    ))]
     pub law: Option<String>,
     /// The law's parameters in its order (m2: tsb,tcb,g), torques in --param-torque-unit
     /// [default: the paper's least-squares estimate].

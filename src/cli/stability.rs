@@ -29,8 +29,11 @@ pub struct StabilityCmd {
     /// its probability.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["law", "params"])]
     pub posterior: Option<PathBuf>,
-    /// A law for a what-if map without a run (m1..m4, or a --law-file's law by its name).
-    #[arg(long, requires = "params")]
+    #[arg(long, requires = "params", help = concat!(
+        "A law for a what-if map without a run (one of ",
+        bitrock::built_in_law_list!(),
+        ", or a --law-file's law by its name)"
+    ))]
     pub law: Option<String>,
     /// The law's parameters in its order, torques in --torque-unit.
     #[arg(long, value_parser = finite_number, value_delimiter = ',', allow_hyphen_values = true, value_name = "P1,P2,...")]

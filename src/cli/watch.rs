@@ -33,7 +33,7 @@ pub struct WatchCmd {
     #[arg(long, value_parser = finite_number, value_name = "X")]
     pub replay_speed: Option<f64>,
     /// Laws compared (comma-separated).
-    #[arg(long, default_value = "m1,m2,m3,m4", value_name = "LAWS")]
+    #[arg(long, default_value = bitrock::built_in_law_list!(), value_name = "LAWS")]
     pub laws: String,
     /// Use one row in K, as `fit --thin` does [default: a record faster than 100 Hz thinned
     /// to at most 50 Hz, the paper's rate; slower ones whole].
