@@ -319,7 +319,10 @@ pub fn rust(laws: &[BuiltIn]) -> String {
         .unwrap();
     }
     out.push_str("];\n\n");
-    let files: Vec<String> = laws.iter().map(|l| format!("include_str!({:?})", l.path.display().to_string())).collect();
+    let files: Vec<String> = laws
+        .iter()
+        .map(|l| format!("include_str!({:?})", l.path.display().to_string()))
+        .collect();
     writeln!(
         out,
         "/// The built-in laws' files, in the order of [`Law::ALL`]: what the tests check the compiled\n/// code against.\n#[cfg(test)]\npub(crate) const BUILT_IN_FILES: [&str; {n}] = [{}];\n",

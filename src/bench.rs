@@ -794,7 +794,7 @@ fn selection_check(
             replace: false,
         }),
     }
-    .run(data, &mut crate::abc::Silent)?;
+    .run(data, Default::default(), &mut crate::abc::Silent)?;
     let run = CheckedRun::open(&run_dir)?;
     let eps_min = run
         .stored

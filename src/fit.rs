@@ -140,7 +140,7 @@ pub struct LawFit {
     pub starts: usize,
     /// How the runs ended. Counted while fitting; the run store does not keep it.
     #[serde(skip)]
-    pub endings: RunEndings,
+    pub endings: Endings,
     /// Scales of the calibration samples the law was fitted to; not serialised (a reader
     /// recomputes them from those samples, as [`crate::run::Setup`] does).
     #[serde(skip, default = "RecordScales::unknown")]
@@ -149,7 +149,7 @@ pub struct LawFit {
 
 /// How a fit's Levenberg-Marquardt runs ended, where not converged.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RunEndings {
+pub struct Endings {
     /// Runs that spent their whole budget of evaluations (the optimiser's patience) still
     /// improving.
     pub out_of_patience: usize,
@@ -188,7 +188,7 @@ impl LawFit {
             correlations: vec![],
             warnings: vec![],
             starts: 1,
-            endings: RunEndings::default(),
+            endings: Endings::default(),
             scales: RecordScales {
                 torque: 1.0,
                 speed: 1.0,
@@ -784,7 +784,7 @@ pub fn fit_law_from(
         correlations: covariance.correlations,
         warnings,
         starts: starts.len() + known.len(),
-        endings: RunEndings {
+        endings: Endings {
             out_of_patience: polished.iter().filter(|p| p.lost_patience()).count(),
             abandoned: polished.iter().filter(|p| p.abandoned).count(),
             estimate_out_of_patience: best.lost_patience(),

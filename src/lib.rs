@@ -37,8 +37,10 @@
 //!     },
 //!     ..AbcJob::default() // in memory; `out: Some(run::Dir { .. })` writes the run directory
 //! };
-//! // `Silent` watches nothing; an `Observer` of your own hears progress, populations and notes.
-//! let analysis = job.run(data, &mut Silent)?;
+//! // Scored here (`run::Scoring::Workers` hands the populations to a pool of processes or
+//! // machines); `Silent` watches nothing, an `Observer` of your own hears progress,
+//! // populations and notes.
+//! let analysis = job.run(data, run::Scoring::Here, &mut Silent)?;
 //! let probabilities = &analysis.posterior.model_probabilities;
 //! let total: f64 = probabilities.iter().map(|(_, p)| p).sum();
 //! assert!((total - 1.0).abs() < 1e-12);

@@ -17,7 +17,7 @@
 //! seed, so they are run `batch` at a time and give the same results for any `batch`, thread
 //! count and order of completion. A batch runs in two phases, each over all its replicates at
 //! once: the synthetic records and their least-squares fits (on the rayon pool), then the
-//! samplers ([`run::start_fitted_in_memory`]), one thread each, whose candidates are scored
+//! samplers ([`run::start`]), one thread each, whose candidates are scored
 //! together: one GPU dispatch, or one rayon pass on the CPU, for the requests of all of them
 //! ([`crate::eval::records`]). The check reports each phase's wall time ([`CheckTiming`]).
 //!
@@ -219,27 +219,7 @@ pub struct SelectionCheck {
     /// resume added populations or changed its settings) is stale ([`SelectionCheck::stale`]).
     /// `None` for checks written before it was recorded.
     #[serde(default)]
-    pub describes: Option<RunState>,
-}
-
-/// What a derived output records of the run it was made from: how many populations the run
-/// had, its last ε and its stored settings.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RunState {
-    pub populations: usize,
-    pub last_epsilon: Option<f64>,
-    pub config: serde_json::Value,
-}
-
-impl RunState {
-    /// The state of a stored run.
-    pub fn of(stored: &run::Stored) -> Self {
-        Self {
-            populations: stored.populations.len(),
-            last_epsilon: stored.populations.last().and_then(|p| p.record.epsilon),
-            config: stored.setup.config.clone(),
-        }
-    }
+    pub describes: Option<run::State>,
 }
 
 /// Where the check's wall time went. Every batch first synthesises and fits its replicates'
@@ -297,7 +277,7 @@ impl FitCounts {
 impl SelectionCheck {
     /// Why this check no longer describes the run now in `now`, in a sentence; `None` when it
     /// does. A check that did not record its run's state is said to be of unknown age.
-    pub fn stale(&self, now: &RunState) -> Option<String> {
+    pub fn stale(&self, now: &run::State) -> Option<String> {
         let Some(then) = &self.describes else {
             return Some("this check does not record which populations it describes (written by an older bitrock); run `bitrock check-selection` again".into());
         };
@@ -603,7 +583,7 @@ pub fn check(
         rows,
         seconds: started.elapsed().as_secs_f64(),
         timing,
-        describes: Some(RunState::of(&run.stored)),
+        describes: Some(run.stored.state()),
     })
 }
 
@@ -733,17 +713,19 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
     replicate_config.seed = seed;
     replicate_config.backend = options.backend.unwrap_or(config.backend);
     replicate_config.sampler.schedule_mut().max_seconds = None;
-    let outcome = run::start_fitted_in_memory(
-        data,
-        replicate_config,
-        fits,
-        run.prior_file.as_ref(),
-        &mut |problem, _| Ok(Box::new(seat.evaluator(problem))),
-        // Notes about the synthetic record's own floor differ per replicate and are not
-        // repeated; the backend's come from the batch.
-        &mut Silent,
-    )
-    .map_err(|e| in_replicate(law, job.replicate, e))?;
+    let mut evaluator = |problem, _: &mut dyn FnMut(String)| -> Result<Box<dyn crate::eval::Evaluator>> {
+        Ok(Box::new(seat.evaluator(problem)))
+    };
+    let how = run::Start {
+        dir: None,
+        prior_file: run.prior_file.as_ref(),
+        fits: Some(fits),
+        scoring: run::Scoring::Evaluator(&mut evaluator),
+    };
+    // Notes about the synthetic record's own floor differ per replicate and are not repeated;
+    // the backend's come from the batch.
+    let outcome =
+        run::start(data, replicate_config, how, &mut Silent).map_err(|e| in_replicate(law, job.replicate, e))?;
     let last = outcome.run.populations.last().ok_or_else(|| {
         Error::Incomplete(format!(
             "{law} replicate {}: no population completed ({})",

@@ -158,14 +158,15 @@ fn compare_on(
                 ..run::Config::default()
             };
             let started = std::time::Instant::now();
-            let outcome = run::start_fitted_in_memory(
-                data.clone(),
-                config,
-                fits.clone(),
-                None,
-                &mut |problem, note| crate::eval::evaluator(problem, Backend::Cpu, ShapeWish::default(), note),
-                &mut Silent,
-            )?;
+            let mut evaluator = |problem, note: &mut dyn FnMut(String)| {
+                crate::eval::evaluator(problem, Backend::Cpu, ShapeWish::default(), note)
+            };
+            let how = run::Start {
+                fits: Some(fits.clone()),
+                scoring: run::Scoring::Evaluator(&mut evaluator),
+                ..Default::default()
+            };
+            let outcome = run::start(data.clone(), config, how, &mut Silent)?;
             let seconds = started.elapsed().as_secs_f64();
             let populations = &outcome.run.populations;
             let last = populations.last().expect("a run to ε_min has populations").clone();

@@ -196,7 +196,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                 devices: cmd.abc.devices,
                 summary_population: cmd.abc.summary_population,
             };
-            Ok(pipeline::resume(dir, &more, &mut progress)?)
+            Ok(pipeline::resume(dir, &more, Default::default(), &mut progress)?)
         }
         (None, Some(dir)) => {
             let job = AbcJob {
@@ -208,7 +208,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                 }),
             };
             let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-            Ok(job.run(data, &mut progress)?)
+            Ok(job.run(data, Default::default(), &mut progress)?)
         }
         (None, None) => Err(Error::setting("out", "give the run directory to write").into()),
     }

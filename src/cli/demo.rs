@@ -100,7 +100,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
                 replace: true,
             }),
         };
-        let done = job.run(data.clone(), &mut RunProgress::new(false))?;
+        let done = job.run(data.clone(), Default::default(), &mut RunProgress::new(false))?;
         for warning in done.run_warnings() {
             super::print::note(format_args!("warning: {warning}"));
         }

@@ -443,7 +443,10 @@ mod tests {
             let names = law.param_names();
             let compile = |text: &str| parse(text, &names).unwrap().0;
             let torque = compile(&definition.torque);
-            let slope = definition.dtorque_dw.as_deref().map_or_else(|| torque.derivative(Var::Speed), compile);
+            let slope = definition
+                .dtorque_dw
+                .as_deref()
+                .map_or_else(|| torque.derivative(Var::Speed), compile);
             let gradient: Vec<Expr> = match &definition.gradient {
                 Some(texts) => texts.iter().map(|t| compile(t)).collect(),
                 None => (0..names.len()).map(|i| torque.derivative(Var::Param(i))).collect(),
@@ -460,7 +463,11 @@ mod tests {
                     .zip(law.params())
                     .map(|(v, spec)| {
                         let v = v * 10f64.powf(rng.random_range(-1.0..1.0));
-                        if spec.lower.is_finite() || rng.random_bool(0.5) { v } else { -v }
+                        if spec.lower.is_finite() || rng.random_bool(0.5) {
+                            v
+                        } else {
+                            -v
+                        }
                     })
                     .collect();
                 let w = match rng.random_range(0..3) {

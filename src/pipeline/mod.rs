@@ -63,34 +63,25 @@ impl AbcJob {
         Ok(())
     }
 
-    /// Runs the job on `data`: validates, reads the prior file, fits, samples (reporting its
-    /// progress and what the user should know, such as a fallback to the CPU, to `observer`),
-    /// summarises, and writes the run directory when there is one. Nothing is written when
-    /// something is refused.
-    pub fn run(&self, data: FieldData, observer: &mut dyn Observer) -> Result<Analysis> {
-        self.run_on(data, None, observer)
-    }
-
-    /// As [`Self::run`], with the populations' tasks run by the workers `make_workers` makes
-    /// (a pool of processes or machines, see [`crate::abc::shard`]); `None` runs them here.
-    /// The result is the same.
-    pub fn run_on(
-        &self,
-        data: FieldData,
-        make_workers: Option<&mut run::MakeWorkers>,
-        observer: &mut dyn Observer,
-    ) -> Result<Analysis> {
+    /// Runs the job on `data`: validates, reads the prior file, fits, samples (scored where
+    /// `scoring` says, reporting its progress and what the user should know, such as a
+    /// fallback to the CPU, to `observer`), summarises, and writes the run directory when there
+    /// is one. Nothing is written when something is refused. Workers elsewhere
+    /// ([`run::Scoring::Workers`]) give the result scoring here gives.
+    pub fn run(&self, data: FieldData, scoring: run::Scoring, observer: &mut dyn Observer) -> Result<Analysis> {
         self.config.validate()?;
         self.config.check_summary_population(self.summary_population)?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
         if let Some(out) = &self.out {
             run::dir::check_new(out, Some(&data.source))?;
         }
-        let (out, config, prior_file) = (self.out.as_ref(), self.config.clone(), prior_file.as_ref());
-        let outcome = match make_workers {
-            Some(make_workers) => run::start_on(out, data, config, prior_file, make_workers, observer)?,
-            None => run::start(out, data, config, prior_file, observer)?,
+        let how = run::Start {
+            dir: self.out.as_ref(),
+            prior_file: prior_file.as_ref(),
+            fits: None,
+            scoring,
         };
+        let outcome = run::start(data, self.config.clone(), how, observer)?;
         let dir = self.out.as_ref().map(|out| out.path.as_path());
         let mut analysis = Analysis::new(outcome, self.summary_population, dir)?;
         if let Some(dir) = dir {
@@ -101,25 +92,12 @@ impl AbcJob {
     }
 }
 
-/// Continues the run in `dir` ([`run::resume`]), then summarises population
-/// `more.summary_population` (default: the last) and rewrites the directory's summary files.
-/// A resume that adds no population changes nothing on disk (the summary is only returned).
-pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> Result<Analysis> {
-    resume_on(dir, more, None, observer)
-}
-
-/// As [`resume`], with the new populations' tasks run by the workers `make_workers` makes;
-/// `None` runs them here.
-pub fn resume_on(
-    dir: &Path,
-    more: &Continuation,
-    make_workers: Option<&mut run::MakeWorkers>,
-    observer: &mut dyn Observer,
-) -> Result<Analysis> {
-    let outcome = match make_workers {
-        Some(make_workers) => run::resume_on(dir, more, make_workers, observer)?,
-        None => run::resume(dir, more, observer)?,
-    };
+/// Continues the run in `dir` ([`run::resume`], scored where `scoring` says), then summarises
+/// population `more.summary_population` (default: the last) and rewrites the directory's
+/// summary files. A resume that adds no population changes nothing on disk (the summary is
+/// only returned).
+pub fn resume(dir: &Path, more: &Continuation, scoring: run::Scoring, observer: &mut dyn Observer) -> Result<Analysis> {
+    let outcome = run::resume(dir, more, scoring, observer)?;
     let unchanged = outcome.added == 0 && dir.join(run::dir::RUN_JSON).is_file();
     let mut analysis = Analysis::new(outcome, more.summary_population, Some(dir))?;
     if unchanged {

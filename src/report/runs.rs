@@ -71,7 +71,7 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::Setup, Vec<ReportRun>)> {
                 ),
             });
         }
-        let now = crate::selection::RunState::of(&stored);
+        let now = stored.state();
         let mut run = ReportRun::new(&runs, dir, &config, stored.populations, None);
         run.early_end = early_end;
         run.selection = crate::selection::read(dir)?.map(|check| {

@@ -9,7 +9,8 @@
 //!   population is written to;
 //! - here: the two entry points, [`start`] (fits, prior, evaluator, sampler, in a fresh
 //!   directory or in memory) and [`resume`] (continues a killed or finished run from its store
-//!   and gives exactly the populations an uninterrupted run would).
+//!   and gives exactly the populations an uninterrupted run would), each scoring where its
+//!   [`Scoring`] says.
 
 pub mod config;
 pub mod dir;
@@ -17,7 +18,7 @@ pub mod store;
 
 pub use config::{Config, Continuation, DEFAULT_PRIOR_K, PriorRuleName, Sampler, SamplerConfig, Settings};
 pub use dir::{Dir, DirState};
-pub use store::{Setup, Store, Stored};
+pub use store::{Setup, State, Store, Stored};
 
 use crate::abc::floor;
 use crate::abc::rejection;
@@ -59,40 +60,52 @@ pub struct Outcome {
     pub added: usize,
 }
 
+/// Where a run's candidates are scored.
+#[derive(Default)]
+pub enum Scoring<'a, 'w> {
+    /// In this process, on the run's backend and devices ([`here`]).
+    #[default]
+    Here,
+    /// By the workers the function makes from the run's problem (a pool of processes or
+    /// machines: [`crate::abc::shard`]); the populations are those [`Scoring::Here`] gives.
+    Workers(&'a mut MakeWorkers<'w>),
+    /// By the evaluator the function makes from the run's problem, in this process (the
+    /// selection check scores its replicates' candidates together, [`crate::eval::records`]).
+    Evaluator(&'a mut MakeEvaluator<'w>),
+}
+
+/// How a run starts, besides its record and configuration. [`Default`]: in memory, fitted and
+/// scored here, without a prior file.
+#[derive(Default)]
+pub struct Start<'a, 'w> {
+    /// The run directory to create; `None` keeps the run in memory.
+    pub dir: Option<&'a Dir>,
+    /// The parsed `config.prior_file`.
+    pub prior_file: Option<&'a PriorFile>,
+    /// The record's least-squares fits, where the caller made them
+    /// (`fit::fit_record(&config.laws, &data, &config.fit)`: the selection check fits all its
+    /// replicates' records before sampling any); `None`: fitted here.
+    pub fits: Option<Vec<fit::LawFit>>,
+    pub scoring: Scoring<'a, 'w>,
+}
+
 /// Fits, builds the prior and the evaluator, then samples. With a `dir`, the run directory is
 /// claimed (locked, one writer at a time) with its store first, and every population is
 /// stored as it completes; without one the run lives in memory only. A run replacing another
 /// ([`DirState::Replace`]) is staged beside it and swapped in once its first population is
-/// stored, so that the directory holds the old run or the new one at every moment.
-/// `prior_file` is the parsed `config.prior_file`. The directory is created only once
-/// everything that can be refused has been.
-pub fn start(
-    dir: Option<&Dir>,
-    data: FieldData,
-    config: Config,
-    prior_file: Option<&PriorFile>,
-    observer: &mut dyn Observer,
-) -> Result<Outcome> {
-    start_on(dir, data, config, prior_file, &mut here, observer)
-}
-
-/// [`start`] with the populations' tasks run by the workers `make_workers` makes from the
-/// run's problem (a pool of processes or machines: [`crate::abc::shard`]); the result is the
-/// one [`start`] gives.
-pub fn start_on(
-    dir: Option<&Dir>,
-    data: FieldData,
-    config: Config,
-    prior_file: Option<&PriorFile>,
-    make_workers: &mut MakeWorkers,
-    observer: &mut dyn Observer,
-) -> Result<Outcome> {
+/// stored, so that the directory holds the old run or the new one at every moment. The
+/// directory is created only once everything that can be refused has been.
+pub fn start(data: FieldData, config: Config, how: Start, observer: &mut dyn Observer) -> Result<Outcome> {
     config.validate()?;
-    if let Some(dir) = dir {
+    if let Some(dir) = how.dir {
         check_new(dir, Some(&data.source))?;
     }
-    let fits = fit::fit_record(&config.laws, &data, &config.fit)?;
-    start_with_fits(dir, data, config, fits, prior_file, make_workers, observer)
+    let fits = match how.fits {
+        Some(fits) => fits,
+        None => fit::fit_record(&config.laws, &data, &config.fit)?,
+    };
+    let mut workers = how.scoring;
+    start_with_fits(how.dir, data, config, fits, how.prior_file, &mut workers, observer)
 }
 
 /// Makes a run's evaluator from its problem, saying what the user should know through the
@@ -104,6 +117,22 @@ pub type MakeEvaluator<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Re
 /// run's with the continuation's backend and devices), saying what the user should know
 /// through the third argument.
 pub type MakeWorkers<'a> = dyn FnMut(AbcProblem, &Config, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+
+impl Scoring<'_, '_> {
+    /// The workers that score a run of `config` on `problem`.
+    fn workers(
+        &mut self,
+        problem: AbcProblem,
+        config: &Config,
+        note: &mut dyn FnMut(String),
+    ) -> Result<Box<dyn Workers + '_>> {
+        match self {
+            Scoring::Here => here(problem, config, note),
+            Scoring::Workers(make) => make(problem, config, note),
+            Scoring::Evaluator(make) => Ok(Box::new(Local(make(problem, note)?))),
+        }
+    }
+}
 
 /// The workers of this process for a run of `config`: [`shard::here`] with its backend,
 /// devices and GPU scoring shape.
@@ -117,25 +146,6 @@ pub fn shape_wish(config: &Config) -> ShapeWish {
     ShapeWish::for_run(config.gpu_shape, config.sampler.schedule().particles)
 }
 
-/// [`start`] of a run in memory whose record's least-squares fits the caller made
-/// (`fit::fit_record(&config.laws, &data, &config.fit)`) and whose evaluator the caller makes
-/// from the run's problem: the selection check fits all its replicates' records before
-/// sampling any, and scores their candidates together ([`crate::eval::records`]).
-pub fn start_fitted_in_memory(
-    data: FieldData,
-    config: Config,
-    fits: Vec<fit::LawFit>,
-    prior_file: Option<&PriorFile>,
-    make_evaluator: &mut MakeEvaluator,
-    observer: &mut dyn Observer,
-) -> Result<Outcome> {
-    config.validate()?;
-    let mut here = |problem, _: &Config, note: &mut dyn FnMut(String)| -> Result<Box<dyn Workers + '_>> {
-        Ok(Box::new(Local(make_evaluator(problem, note)?)))
-    };
-    start_with_fits(None, data, config, fits, prior_file, &mut here, observer)
-}
-
 /// [`start`] after the fits: the floor, the prior, the evaluator, the sampler.
 fn start_with_fits(
     dir: Option<&Dir>,
@@ -143,7 +153,7 @@ fn start_with_fits(
     mut config: Config,
     fits: Vec<fit::LawFit>,
     prior_file: Option<&PriorFile>,
-    make_workers: &mut MakeWorkers,
+    scoring: &mut Scoring,
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
     let input = data.source.clone();
@@ -166,7 +176,7 @@ fn start_with_fits(
     )?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
-    let evaluator = make_workers(problem, &config, &mut |line| observer.note(line))?;
+    let evaluator = scoring.workers(problem, &config, &mut |line| observer.note(line))?;
     config.take_shape_of(evaluator.as_ref());
     let mut setup = Setup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
@@ -258,18 +268,9 @@ pub fn save(dir: &Dir, outcome: &Outcome) -> Result<files::DirLock> {
 const FIRST_EXACT_CANDIDATES_SCHEMA: i64 = 2;
 
 /// Continues the run in `dir` after its last stored population with the stopping rules of
-/// `more`; the populations are those an uninterrupted run with the same settings gives.
-pub fn resume(dir: &Path, more: &Continuation, observer: &mut dyn Observer) -> Result<Outcome> {
-    resume_on(dir, more, &mut here, observer)
-}
-
-/// [`resume`] with the new populations' tasks run by the workers `make_workers` makes.
-pub fn resume_on(
-    dir: &Path,
-    more: &Continuation,
-    make_workers: &mut MakeWorkers,
-    observer: &mut dyn Observer,
-) -> Result<Outcome> {
+/// `more`, scored where `scoring` says; the populations are those an uninterrupted run with
+/// the same settings gives.
+pub fn resume(dir: &Path, more: &Continuation, mut scoring: Scoring, observer: &mut dyn Observer) -> Result<Outcome> {
     let store = Store::open(dir)?;
     if store.schema_version() < FIRST_EXACT_CANDIDATES_SCHEMA {
         return Err(Error::Data {
@@ -302,7 +303,7 @@ pub fn resume_on(
         config.fit.w_ref_n,
     )
     .with_best_rho(&setup.fits);
-    let evaluator = make_workers(problem, &config, &mut |line| observer.note(line))?;
+    let evaluator = scoring.workers(problem, &config, &mut |line| observer.note(line))?;
     config.take_shape_of(evaluator.as_ref());
     let stored = populations.len();
     observer.note(format!(

@@ -205,6 +205,27 @@ impl From<SetupParts> for Setup {
     }
 }
 
+/// What a derived output (a selection check) records of the run it was made from: how many
+/// populations the run had, its last ε and its stored settings. A run that has moved on since
+/// (a resume added populations or changed its settings) no longer matches it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct State {
+    pub populations: usize,
+    pub last_epsilon: Option<f64>,
+    pub config: serde_json::Value,
+}
+
+impl Stored {
+    /// The run's state now.
+    pub fn state(&self) -> State {
+        State {
+            populations: self.populations.len(),
+            last_epsilon: self.populations.last().and_then(|p| p.record.epsilon),
+            config: self.setup.config.clone(),
+        }
+    }
+}
+
 /// A run read back: its set-up and every completed population.
 #[derive(Clone, Debug)]
 pub struct Stored {

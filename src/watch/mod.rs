@@ -795,14 +795,14 @@ impl Watch {
         };
         let backend = config.backend;
         let scaled = config.fit.w_ref_n.is_some();
-        let outcome = crate::run::start_fitted_in_memory(
-            data.clone(),
-            config,
-            fits.clone(),
-            None,
-            &mut |problem, note| crate::eval::evaluator(problem, backend, Default::default(), note),
-            &mut WindowNotes(observer),
-        );
+        let mut evaluator =
+            |problem, note: &mut dyn FnMut(String)| crate::eval::evaluator(problem, backend, Default::default(), note);
+        let how = crate::run::Start {
+            fits: Some(fits.clone()),
+            scoring: crate::run::Scoring::Evaluator(&mut evaluator),
+            ..Default::default()
+        };
+        let outcome = crate::run::start(data.clone(), config, how, &mut WindowNotes(observer));
         let outcome = match of_window(outcome)? {
             Ok(outcome) => outcome,
             Err(why) => return Ok(Err(why)),

@@ -28,7 +28,7 @@ fn job(particles: usize) -> AbcJob {
 #[test]
 fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
     let data = || demo_field_data(&DataOptions::default()).unwrap();
-    let in_memory = job(300).run(data(), &mut Silent).unwrap();
+    let in_memory = job(300).run(data(), Default::default(), &mut Silent).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run");
     let on_disk = AbcJob {
@@ -38,7 +38,7 @@ fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
         }),
         ..job(300)
     }
-    .run(data(), &mut Silent)
+    .run(data(), Default::default(), &mut Silent)
     .unwrap();
     let (a, b) = (&in_memory.outcome.run.populations, &on_disk.outcome.run.populations);
     assert!(a.len() >= 2, "{} populations", a.len());
@@ -100,7 +100,7 @@ fn a_refused_job_names_the_setting_and_writes_nothing() {
     for (job, flag) in [(zero_delta, "`delta`:"), (no_starts, "`starts`:")] {
         assert!(job.validate().unwrap_err().to_string().starts_with(flag));
         let data = demo_field_data(&DataOptions::default()).unwrap();
-        let err = job.run(data, &mut Silent).err().expect("refused");
+        let err = job.run(data, Default::default(), &mut Silent).err().expect("refused");
         assert!(err.is_bad_input() && err.to_string().starts_with(flag), "{err}");
         assert!(!path.exists());
     }
@@ -110,7 +110,7 @@ fn a_refused_job_names_the_setting_and_writes_nothing() {
         summary_population: Some(99),
         ..job(100)
     }
-    .run(data, &mut Silent)
+    .run(data, Default::default(), &mut Silent)
     .err()
     .expect("refused");
     assert!(err.to_string().starts_with("`summary_population`:"), "{err}");

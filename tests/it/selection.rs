@@ -76,7 +76,7 @@ fn run_dir_with(
             replace: false,
         }),
     }
-    .run(data, &mut Silent)
+    .run(data, Default::default(), &mut Silent)
     .unwrap();
     path
 }

@@ -40,7 +40,18 @@ fn start(dir: &Path, config: run::Config) -> Outcome {
         path: dir.to_path_buf(),
         replace: false,
     };
-    released(run::start(Some(&dir), data, config, None, &mut Silent).unwrap())
+    released(
+        run::start(
+            data,
+            config,
+            run::Start {
+                dir: Some(&dir),
+                ..Default::default()
+            },
+            &mut Silent,
+        )
+        .unwrap(),
+    )
 }
 
 /// `outcome` without its run directory's lock, which it holds while it lives (one writer per
@@ -89,7 +100,7 @@ fn stored(dir: &Path) -> Vec<Population> {
 /// The run of `config` in memory only: every population keeps its particles.
 fn in_memory(config: run::Config) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
-    run::start(None, data, config, None, &mut Silent).unwrap()
+    run::start(data, config, run::Start::default(), &mut Silent).unwrap()
 }
 
 #[test]
@@ -200,12 +211,12 @@ fn continuing_equals_uninterrupted(sampler: fn(run::Config) -> run::Config) {
         max_populations: Some(6),
         ..Continuation::default()
     };
-    let continued = released(run::resume(&part_dir, &more, &mut Silent).unwrap());
+    let continued = released(run::resume(&part_dir, &more, Default::default(), &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     assert_same_populations(&continued.run.populations, &whole.run.populations);
     assert_same_populations(&stored(&part_dir), &stored(&dir.path().join("whole")));
     // Continuing a finished run with the same rules adds nothing.
-    let again = released(run::resume(&part_dir, &Continuation::default(), &mut Silent).unwrap());
+    let again = released(run::resume(&part_dir, &Continuation::default(), Default::default(), &mut Silent).unwrap());
     assert_eq!(again.run.populations.len(), 6);
     assert_eq!(again.run.stop, StopReason::MaxPopulations);
 }
@@ -222,7 +233,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
         eps_min: Some(0.016),
         ..Continuation::default()
     };
-    let continued = released(run::resume(&run_dir, &more, &mut Silent).unwrap());
+    let continued = released(run::resume(&run_dir, &more, Default::default(), &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::EpsMin);
     assert!(continued.run.populations.len() > n);
     let populations = stored(&run_dir);
@@ -350,7 +361,7 @@ fn a_wall_time_stop_is_continued_without_the_old_budget() {
     let first = start(&run_dir, budgeted);
     assert_eq!(first.run.stop, StopReason::WallTime);
     assert!(first.run.populations.is_empty());
-    let continued = released(run::resume(&run_dir, &Continuation::default(), &mut Silent).unwrap());
+    let continued = released(run::resume(&run_dir, &Continuation::default(), Default::default(), &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     let whole = start(&dir.path().join("whole"), config(500, 4, 0.0));
     assert_same_populations(&continued.run.populations, &whole.run.populations);
@@ -397,7 +408,7 @@ fn a_store_of_schema_2_is_read_and_continued_in_its_own_layout() {
         max_populations: Some(4),
         ..Default::default()
     };
-    let resumed = run::resume(&run_dir, &more, &mut Silent).unwrap();
+    let resumed = run::resume(&run_dir, &more, Default::default(), &mut Silent).unwrap();
     let direct_dir = dir.path().join("direct");
     let direct = start(&direct_dir, config(500, 4, 0.014));
     assert_same_populations(&resumed.run.populations, &direct.run.populations);
@@ -508,7 +519,10 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
         max_populations: Some(3),
         ..Default::default()
     };
-    let e = run::resume(&run_dir, &more, &mut Silent).err().unwrap().to_string();
+    let e = run::resume(&run_dir, &more, Default::default(), &mut Silent)
+        .err()
+        .unwrap()
+        .to_string();
     assert!(e.contains("store schema 1") && e.contains("start a new run"), "{e}");
     let again = run::Store::open(&run_dir).unwrap().load().unwrap();
     assert_eq!(again.populations.len(), 2);
@@ -540,7 +554,7 @@ fn a_write_that_fails_on_the_store_thread_ends_the_run_with_its_error() {
         max_populations: Some(6),
         ..Continuation::default()
     };
-    let e = run::resume(&run_dir, &more, &mut Silent)
+    let e = run::resume(&run_dir, &more, Default::default(), &mut Silent)
         .err()
         .expect("the failed write ends the run")
         .to_string();

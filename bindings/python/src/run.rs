@@ -11,6 +11,7 @@ use bitrock::error::Error;
 use bitrock::eval::Backend;
 use bitrock::pipeline::AbcJob;
 use bitrock::run;
+use bitrock::run::Scoring;
 use bitrock::run::{Continuation, Settings};
 use bitrock::units::TorqueUnit;
 use bitrock::{Law, documents};
@@ -401,16 +402,12 @@ pub(crate) fn abc(
     let data = record.data.clone();
     let cell = OnceLock::new();
     let result = match dispatcher {
-        None => py.detach(|| job.run(data, &mut observer)),
+        None => py.detach(|| job.run(data, Scoring::Here, &mut observer)),
         Some(dispatcher) => {
             let mut make = remote_on(&cell, dispatcher, parallelism);
-            py.detach(|| {
-                job.run_on(
-                    data,
-                    Some(&mut |problem, config, _note| make(problem, config)),
-                    &mut observer,
-                )
-            })
+            let mut workers =
+                |problem, config: &bitrock::run::Config, _note: &mut dyn FnMut(String)| make(problem, config);
+            py.detach(|| job.run(data, Scoring::Workers(&mut workers), &mut observer))
         }
     };
     finish_run(py, result, observer, cell, out)
@@ -464,17 +461,12 @@ pub(crate) fn resume(
     };
     let cell = OnceLock::new();
     let result = match dispatcher {
-        None => py.detach(|| bitrock::pipeline::resume(&path, &continuation, &mut observer)),
+        None => py.detach(|| bitrock::pipeline::resume(&path, &continuation, Scoring::Here, &mut observer)),
         Some(dispatcher) => {
             let mut make = remote_on(&cell, dispatcher, parallelism);
-            py.detach(|| {
-                bitrock::pipeline::resume_on(
-                    &path,
-                    &continuation,
-                    Some(&mut |problem, config: &bitrock::run::Config, _note| make(problem, config)),
-                    &mut observer,
-                )
-            })
+            let mut workers =
+                |problem, config: &bitrock::run::Config, _note: &mut dyn FnMut(String)| make(problem, config);
+            py.detach(|| bitrock::pipeline::resume(&path, &continuation, Scoring::Workers(&mut workers), &mut observer))
         }
     };
     finish_run(py, result, observer, cell, Some(path))
