@@ -602,3 +602,68 @@ fn an_evidence_directory_holds_the_document_and_its_posterior_and_stability_maps
         serde_json::to_string_pretty(&replaced).unwrap() + "\n"
     );
 }
+
+#[test]
+fn an_evidence_directory_of_a_law_file_s_law_is_read_reported_and_mapped_without_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let law_file = dir.path().join("mine.toml");
+    std::fs::copy(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws/stribeck.toml"),
+        &law_file,
+    )
+    .unwrap();
+    let out = dir.path().join("ev");
+    let (code, _, err) = outcome(bin().args([
+        "evidence",
+        "--law-file",
+        law_file.to_str().unwrap(),
+        "--laws",
+        "m2,stribeck",
+        "--thin",
+        "4",
+        "--backend",
+        "cpu",
+        "--particles",
+        "100",
+        "--islands",
+        "2",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    assert_eq!(code, 0, "{err}");
+    // The law file is gone: the directory holds its text.
+    let source = std::fs::read_to_string(&law_file).unwrap();
+    std::fs::remove_file(&law_file).unwrap();
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evidence.json")).unwrap()).unwrap();
+    assert_eq!(stored["law_files"]["stribeck"].as_str(), Some(source.as_str()));
+    assert_eq!(
+        stored["law_files"].as_object().unwrap().len(),
+        1,
+        "only law files' laws"
+    );
+    let report = dir.path().join("report");
+    let (code, _, err) = outcome(bin().args(["report", out.to_str().unwrap(), "--out", report.to_str().unwrap()]));
+    assert_eq!(code, 0, "{err}");
+    let markdown = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(markdown.contains("stribeck"), "{markdown}");
+    let (code, json, err) = outcome(bin().args([
+        "stability",
+        "--run",
+        out.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--json",
+    ]));
+    assert_eq!(code, 0, "{err}");
+    let maps: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!(maps["boundaries"].get("stribeck").is_some(), "{}", maps["boundaries"]);
+    // A stored law file that no longer compiles is refused, naming the file in the directory.
+    let mut broken = stored.clone();
+    broken["law_files"]["stribeck"] = "name = \"stribeck\"\ntorque = \"r * (\"\n".into();
+    std::fs::write(out.join("evidence.json"), serde_json::to_string(&broken).unwrap()).unwrap();
+    let (code, _, err) = outcome(bin().args(["report", out.to_str().unwrap(), "--out", report.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("law_files/stribeck"), "{err}");
+}

@@ -2,7 +2,9 @@
 //! evidence's document with each law's posterior sets (`evidence.json`, what
 //! `bitrock.read_evidence` reads), the posterior particles (`posterior.csv`, what
 //! `bitrock stability --run DIR` maps) and the samples it was computed on (`data.csv`, what
-//! `bitrock report DIR` draws them against), written together or not at all.
+//! `bitrock report DIR` draws them against), written together or not at all. The document
+//! keeps the text of every law file whose law it compares (`law_files`), so that the directory
+//! is read, reported and mapped without the files.
 
 use super::EvidenceAnalysis;
 use crate::abc::Particle;
@@ -43,8 +45,8 @@ pub fn check_out(dir: &Path, force: bool) -> Result<()> {
 
 /// Writes the evidence directory `dir` (checked by [`check_out`]) of `analysis` on `data`
 /// (`laws` in order): `document` (the evidence's document with each law's posterior sets),
-/// the posterior's particle CSV and the samples, replacing what an earlier evidence wrote
-/// there in one step.
+/// with the text of the law files of `laws` where there are any, the posterior's particle CSV
+/// and the samples, replacing what an earlier evidence wrote there in one step.
 pub fn save(
     dir: &Path,
     force: bool,
@@ -54,7 +56,16 @@ pub fn save(
     data: &FieldData,
 ) -> Result<()> {
     check_out(dir, force)?;
-    let mut json = serde_json::to_vec_pretty(document).map_err(|e| Error::Numerical(e.to_string()))?;
+    let law_files: serde_json::Map<String, serde_json::Value> = laws
+        .iter()
+        .filter_map(|law| law.file())
+        .map(|file| (file.name.clone(), file.source.clone().into()))
+        .collect();
+    let mut document = document.clone();
+    if !law_files.is_empty() {
+        document[LAW_FILES] = law_files.into();
+    }
+    let mut json = serde_json::to_vec_pretty(&document).map_err(|e| Error::Numerical(e.to_string()))?;
     json.push(b'\n');
     let contents = [
         (PathBuf::from(EVIDENCE_JSON), json),
@@ -69,14 +80,33 @@ pub fn save(
     )
 }
 
-/// The document of the evidence directory `dir`.
+/// The key of the document's law files: each law file's text by its law's name.
+const LAW_FILES: &str = "law_files";
+
+/// The document of the evidence directory `dir`, its law files' laws registered in this
+/// process (a file's law read from the directory).
 pub fn read(dir: &Path) -> Result<serde_json::Value> {
     let path = dir.join(EVIDENCE_JSON);
     let text = files::read_text(&path, "evidence", 1 << 30)?;
-    serde_json::from_str(&text).map_err(|e| Error::Data {
-        path,
+    let document: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Data {
+        path: path.clone(),
         message: format!("not an evidence document: {e}"),
-    })
+    })?;
+    if let Some(law_files) = document.get(LAW_FILES) {
+        let law_files = law_files.as_object().ok_or_else(|| Error::Data {
+            path: path.clone(),
+            message: format!("'{LAW_FILES}' is not a table of law files' texts by name"),
+        })?;
+        for (name, source) in law_files {
+            let source = source.as_str().ok_or_else(|| Error::Data {
+                path: path.clone(),
+                message: format!("{LAW_FILES}: the law file of '{name}' is not a text"),
+            })?;
+            let origin = path.join(format!("{LAW_FILES}/{name}"));
+            crate::laws::file::register(crate::laws::file::LawFile::parse(source, &origin)?)?;
+        }
+    }
+    Ok(document)
 }
 
 /// The posterior particles of the evidence directory `dir` (SI) and the weight on bit its
