@@ -1,6 +1,7 @@
-//! `bitrock check-selection RUN_DIR`: how far the run's model selection can be trusted, by
-//! re-simulation ([`bitrock::selection`]); the confusion matrix on stdout (or JSON), the
-//! results in `RUN_DIR/selection/`.
+//! `bitrock check-selection DIR`: how far the model selection of a run or an evidence can be
+//! trusted, by re-simulation ([`bitrock::selection`], [`bitrock::pipeline::evidence::check`]);
+//! the confusion matrix on stdout (or JSON), the results in `DIR/selection/` (a run) or the
+//! evidence's document (an evidence).
 
 use super::args::set_threads;
 use bitrock::eval::Backend;
@@ -12,8 +13,11 @@ use std::process::ExitCode;
 
 #[derive(Debug, Args)]
 pub struct CheckCmd {
-    /// Run directory (written by `bitrock abc --out`) whose selection is checked; the results
-    /// go to RUN_DIR/selection/ (selection.json, matrix.csv, replicates.csv, confusion.svg/png).
+    /// Run directory (written by `bitrock abc --out`) whose selection is checked, the results
+    /// in RUN_DIR/selection/ (selection.json, matrix.csv, replicates.csv, confusion.svg/png);
+    /// or evidence directory (written by `bitrock evidence --out`), its evidence computed again
+    /// and checked as `bitrock evidence --check K` checks it, the check written into its
+    /// evidence.json.
     #[arg(value_name = "RUN_DIR")]
     pub run: PathBuf,
     /// Synthetic records per law, K.
@@ -38,6 +42,9 @@ pub struct CheckCmd {
 }
 
 pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
+    if bitrock::run::dir::is_evidence_dir(&cmd.run) {
+        return check_evidence(cmd);
+    }
     let options = CheckOptions {
         replicates: cmd.replicates,
         backend: cmd.backend,
@@ -68,6 +75,46 @@ pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     } else {
         table(&mut out, &check)?;
         writeln!(out, "\ncheck written to {}", written.display())?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The check of an evidence directory: its evidence computed again, checked, the check
+/// written into its document.
+fn check_evidence(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
+    if cmd.batch.is_some() {
+        return Err(bitrock::Error::setting(
+            "batch",
+            "an evidence's check runs its replicates one after the other: leave --batch out",
+        )
+        .into());
+    }
+    set_threads(cmd.threads)?;
+    let quiet = cmd.quiet;
+    let mut progress = |done: usize, total: usize| {
+        if !quiet {
+            super::print::note(format_args!("evidence check: replicate {done}/{total}"));
+        }
+    };
+    let check = bitrock::pipeline::evidence::dir::check_dir(
+        &cmd.run,
+        cmd.replicates,
+        cmd.backend,
+        &mut progress,
+        &mut super::evidence::Notes,
+    )?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &check)?;
+        writeln!(out)?;
+    } else {
+        super::evidence::check_table(&mut out, &check)?;
+        writeln!(
+            out,
+            "
+check written to {}",
+            cmd.run.join("evidence.json").display()
+        )?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -127,7 +127,7 @@ pub struct EvidenceCmd {
 }
 
 /// Says the user's notes (a fallback to the CPU) on standard error.
-struct Notes;
+pub(super) struct Notes;
 
 impl bitrock::abc::Observer for Notes {
     fn note(&mut self, line: String) {
@@ -198,7 +198,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
         }
-        evidence::dir::save(dir, cmd.force, &document, &analysis, &job.laws, &data)?;
+        evidence::dir::save(dir, cmd.force, &document, &analysis, &job, &data)?;
         print::note(format_args!(
             "note: evidence written to {} (`bitrock stability --run {}` maps its posterior, `bitrock report {}` draws it)",
             dir.display(),
@@ -412,7 +412,7 @@ fn scaling(w_ref_kn: Option<f64>) -> String {
 }
 
 /// The check's confusion matrix and verdicts.
-fn check_table(out: &mut impl Write, check: &EvidenceCheck) -> std::io::Result<()> {
+pub(super) fn check_table(out: &mut impl Write, check: &EvidenceCheck) -> std::io::Result<()> {
     writeln!(
         out,
         "\nEvidence check: {} synthetic records per law (parameters from its evidence posterior, noise resampled from its fit's residuals), the same boxes; {} candidates scored in {:.1} s",

@@ -667,3 +667,64 @@ fn an_evidence_directory_of_a_law_file_s_law_is_read_reported_and_mapped_without
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("law_files/stribeck"), "{err}");
 }
+
+#[test]
+fn check_selection_of_an_evidence_directory_is_the_evidence_s_own_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ev");
+    let evidence = |extra: &[&str]| {
+        let mut cmd = bin();
+        cmd.args(["evidence", "--laws", "m2,m3", "--thin", "4", "--backend", "cpu"]);
+        cmd.args(["--particles", "100", "--islands", "2", "--quiet"]);
+        cmd.args(extra);
+        outcome(&mut cmd)
+    };
+    let (code, direct, err) = evidence(&["--check", "2", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = evidence(&["--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let posterior = std::fs::read(out.join("posterior.csv")).unwrap();
+    let check = |extra: &[&str]| {
+        let mut cmd = bin();
+        cmd.args(["check-selection", out.to_str().unwrap(), "--replicates", "2", "--quiet"]);
+        cmd.args(extra);
+        outcome(&mut cmd)
+    };
+    let (code, json, err) = check(&["--json"]);
+    assert_eq!(code, 0, "{err}");
+    // The check of the directory is the one `evidence --check` makes at the start, replicate
+    // for replicate (its seconds aside), and it is written into the directory's document.
+    let without_seconds = |mut v: serde_json::Value| {
+        v.as_object_mut().unwrap().remove("seconds");
+        v
+    };
+    let direct: serde_json::Value = serde_json::from_str(&direct).unwrap();
+    let printed: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(
+        without_seconds(direct["check"].clone()),
+        without_seconds(printed.clone())
+    );
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evidence.json")).unwrap()).unwrap();
+    assert_eq!(stored["check"], printed);
+    assert_eq!(
+        std::fs::read(out.join("posterior.csv")).unwrap(),
+        posterior,
+        "the rest is kept"
+    );
+    // The directory is still bitrock's own: replaced with --force, reported.
+    let (code, _, err) = evidence(&["--out", out.to_str().unwrap(), "--force", "--seed", "9"]);
+    assert_eq!(code, 0, "{err}");
+    // Settings the evidence's check does not have are refused, naming them.
+    let (code, _, err) = check(&["--batch", "2"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--batch"), "{err}");
+    // A directory without its job (an earlier bitrock's) is refused, naming its document.
+    let mut old: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evidence.json")).unwrap()).unwrap();
+    old.as_object_mut().unwrap().remove("job");
+    std::fs::write(out.join("evidence.json"), serde_json::to_string(&old).unwrap()).unwrap();
+    let (code, _, err) = check(&[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("evidence.json") && err.contains("keeps no job"), "{err}");
+}

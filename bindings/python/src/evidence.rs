@@ -100,8 +100,7 @@ pub(crate) fn evidence(
         document["check"] = serde_json::to_value(&selection).expect("the check serialises");
     }
     if let Some(dir) = &out {
-        let saved =
-            py.detach(|| bitrock::pipeline::evidence::dir::save(dir, force, &document, &analysis, &job.laws, data));
+        let saved = py.detach(|| bitrock::pipeline::evidence::dir::save(dir, force, &document, &analysis, &job, data));
         check(py, saved)?;
     }
     Ok(as_arguments(&document.to_string()))

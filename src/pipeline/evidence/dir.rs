@@ -1,18 +1,24 @@
 //! An evidence directory (`bitrock evidence --out DIR`, `bitrock.evidence(..., out=DIR)`): the
 //! evidence's document with each law's posterior sets (`evidence.json`, what
 //! `bitrock.read_evidence` reads), the posterior particles (`posterior.csv`, what
-//! `bitrock stability --run DIR` maps) and the samples it was computed on (`data.csv`, what
-//! `bitrock report DIR` draws them against), written together or not at all. The document
-//! keeps the text of every law file whose law it compares (`law_files`), so that the directory
-//! is read, reported and mapped without the files.
+//! `bitrock stability --run DIR` maps), the samples it was computed on (`data.csv`, what
+//! `bitrock report DIR` draws them against) and the record whole (`record.json`), written
+//! together or not at all. The document keeps the text of every law file whose law it compares
+//! (`law_files`), so that the directory is read, reported and mapped without the files, and
+//! the job (`job`), so that it is computed again and checked by re-simulation ([`check_dir`],
+//! `bitrock check-selection DIR`).
 
-use super::EvidenceAnalysis;
+use super::check::{EvidenceCheck, check, check_replicates};
+use super::{EvidenceAnalysis, EvidenceJob};
+use crate::abc::Observer;
 use crate::abc::Particle;
 use crate::data::FieldData;
 use crate::error::{Error, Result};
+use crate::eval::Backend;
 use crate::files;
-use crate::laws::Law;
-use crate::run::dir::{DATA_CSV, EVIDENCE_JSON, Owned, POSTERIOR_CSV, is_run_dir, owns_unchanged, refuse_inside_run};
+use crate::run::dir::{
+    DATA_CSV, EVIDENCE_JSON, Owned, POSTERIOR_CSV, RECORD_JSON, is_run_dir, owns_unchanged, refuse_inside_run,
+};
 use crate::units::TorqueUnit;
 use std::path::{Path, PathBuf};
 
@@ -43,19 +49,20 @@ pub fn check_out(dir: &Path, force: bool) -> Result<()> {
     Ok(())
 }
 
-/// Writes the evidence directory `dir` (checked by [`check_out`]) of `analysis` on `data`
-/// (`laws` in order): `document` (the evidence's document with each law's posterior sets),
-/// with the text of the law files of `laws` where there are any, the posterior's particle CSV
-/// and the samples, replacing what an earlier evidence wrote there in one step.
+/// Writes the evidence directory `dir` (checked by [`check_out`]) of `job`'s `analysis` on
+/// `data`: `document` (the evidence's document with each law's posterior sets), with the job
+/// and the text of its law files where there are any, the posterior's particle CSV, the
+/// samples and the record, replacing what an earlier evidence wrote there in one step.
 pub fn save(
     dir: &Path,
     force: bool,
     document: &serde_json::Value,
     analysis: &EvidenceAnalysis,
-    laws: &[Law],
+    job: &EvidenceJob,
     data: &FieldData,
 ) -> Result<()> {
     check_out(dir, force)?;
+    let laws = &job.laws;
     let law_files: serde_json::Map<String, serde_json::Value> = laws
         .iter()
         .filter_map(|law| law.file())
@@ -65,12 +72,13 @@ pub fn save(
     if !law_files.is_empty() {
         document[LAW_FILES] = law_files.into();
     }
-    let mut json = serde_json::to_vec_pretty(&document).map_err(|e| Error::Numerical(e.to_string()))?;
-    json.push(b'\n');
+    document[JOB] = serde_json::to_value(job).expect("a job serialises");
+    let record = serde_json::to_vec(data).expect("a record serialises");
     let contents = [
-        (PathBuf::from(EVIDENCE_JSON), json),
+        (PathBuf::from(EVIDENCE_JSON), pretty(&document)),
         (PathBuf::from(POSTERIOR_CSV), analysis.posterior_csv(laws, data)),
         (PathBuf::from(DATA_CSV), crate::documents::data_csv(data)),
+        (PathBuf::from(RECORD_JSON), record),
     ];
     files::replace_dir(
         dir,
@@ -82,6 +90,88 @@ pub fn save(
 
 /// The key of the document's law files: each law file's text by its law's name.
 const LAW_FILES: &str = "law_files";
+/// The key of the document's job ([`EvidenceJob`]).
+const JOB: &str = "job";
+
+fn pretty(document: &serde_json::Value) -> Vec<u8> {
+    let mut json = serde_json::to_vec_pretty(document).expect("a document serialises");
+    json.push(b'\n');
+    json
+}
+
+/// Checks the evidence of the evidence directory `dir` by re-simulation ([`check`]):
+/// `replicates` synthetic records per law, on `backend` (default: the evidence's). The
+/// evidence is computed again from the job and the record the directory keeps (the same
+/// numbers on the same backend; said where they differ), then checked, and the check written
+/// into the document (`check`, as `bitrock evidence --check` writes it), the rest of the
+/// directory unchanged. Returns the check.
+pub fn check_dir(
+    dir: &Path,
+    replicates: usize,
+    backend: Option<Backend>,
+    progress: &mut dyn FnMut(usize, usize),
+    observer: &mut dyn Observer,
+) -> Result<EvidenceCheck> {
+    check_replicates(replicates)?;
+    let mut document = read(dir)?;
+    let path = dir.join(EVIDENCE_JSON);
+    let refuse = |message: String| Error::Data {
+        path: path.clone(),
+        message,
+    };
+    let mut job: EvidenceJob = match document.get(JOB) {
+        Some(job) => serde_json::from_value(job.clone()).map_err(|e| refuse(format!("its job does not read: {e}")))?,
+        None => {
+            return Err(refuse(
+                "it keeps no job (an earlier bitrock wrote it): compute the evidence again with `--check K`".into(),
+            ));
+        }
+    };
+    if let Some(prior_file) = &job.prior_file {
+        return Err(refuse(format!(
+            "its boxes came from the prior file {}, which the directory does not keep: check it with `bitrock evidence --prior {} --check K`",
+            prior_file.display(),
+            prior_file.display()
+        )));
+    }
+    let record_path = dir.join(RECORD_JSON);
+    let text = files::read_text(&record_path, "record", 1 << 34)?;
+    let data: FieldData = serde_json::from_str(&text).map_err(|e| Error::Data {
+        path: record_path.clone(),
+        message: format!("not a record bitrock wrote: {e}"),
+    })?;
+    if let Some(backend) = backend {
+        job.backend = backend;
+    }
+    let analysis = job.run(&data, observer)?;
+    let stored_ln_z: Vec<Option<f64>> = document["laws"]
+        .as_array()
+        .map(|laws| laws.iter().map(|law| law["ln_z"].as_f64()).collect())
+        .unwrap_or_default();
+    let now_ln_z: Vec<Option<f64>> = analysis.evidence.laws.iter().map(|law| Some(law.ln_z)).collect();
+    if stored_ln_z != now_ln_z {
+        observer.note(format!(
+            "the evidence computed again on {} differs from the one stored in {} (another backend or build): the check is of the evidence computed now",
+            analysis.evidence.backend,
+            dir.display()
+        ));
+    }
+    let check = check(&job, &data, &analysis, replicates, progress, observer)?;
+    document["check"] = serde_json::to_value(&check).expect("a check serialises");
+    let mut contents = vec![(PathBuf::from(EVIDENCE_JSON), pretty(&document))];
+    for name in [POSTERIOR_CSV, DATA_CSV, RECORD_JSON] {
+        let kept = dir.join(name);
+        let bytes = std::fs::read(&kept).map_err(|source| Error::Read { path: kept, source })?;
+        contents.push((PathBuf::from(name), bytes));
+    }
+    files::replace_dir(
+        dir,
+        "run",
+        &|rel, is_dir| owns_unchanged(Owned::Evidence, dir, rel, is_dir),
+        &contents,
+    )?;
+    Ok(check)
+}
 
 /// The document of the evidence directory `dir`, its law files' laws registered in this
 /// process (a file's law read from the directory).

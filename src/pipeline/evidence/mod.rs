@@ -57,8 +57,9 @@ impl EvidencePrior {
     }
 }
 
-/// An evidence job: what to compare, over which prior, on which backend.
-#[derive(Clone, Debug, PartialEq)]
+/// An evidence job: what to compare, over which prior, on which backend. An evidence directory
+/// keeps it (without its warm start), to compute the evidence again for its check.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvidenceJob {
     pub laws: Vec<Law>,
     pub fit: FitOptions,
@@ -72,6 +73,7 @@ pub struct EvidenceJob {
     /// model of the largest p(y | noise model) = Σ π(m)·Z_m is reported).
     pub noise: Option<NoiseModel>,
     /// Where the laws' samplers start instead of their boxes (a watch's previous window).
+    #[serde(skip)]
     pub warm: Option<WarmStart>,
     /// Whether to find [`EvidenceAnalysis::separations`] (a least-squares fit of every law to
     /// every other's curve, one after the other): a watch's windows do without.
