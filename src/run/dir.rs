@@ -46,6 +46,8 @@ pub const POSTERIOR_CSV: &str = "posterior.csv";
 /// An evidence directory's record, whole (the samples and their units and columns), to
 /// compute the evidence again: its check by re-simulation.
 pub const RECORD_JSON: &str = "record.json";
+/// An evidence directory's job and the text of its law files: what computes it again.
+pub const JOB_JSON: &str = "job.json";
 /// A report's document.
 pub const REPORT_MD: &str = "report.md";
 /// A report's figures directory (SVG and PNG).
@@ -88,7 +90,7 @@ impl Owned {
             (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
             (Owned::Watch, [name]) => !is_dir && (*name == WATCH_STORE_FILE || WATCH_STORE_COMPANIONS.contains(name)),
             (Owned::Evidence, [name]) => {
-                !is_dir && [EVIDENCE_JSON, POSTERIOR_CSV, DATA_CSV, RECORD_JSON].contains(name)
+                !is_dir && [EVIDENCE_JSON, POSTERIOR_CSV, DATA_CSV, RECORD_JSON, JOB_JSON].contains(name)
             }
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,

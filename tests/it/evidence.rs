@@ -636,7 +636,7 @@ fn an_evidence_directory_of_a_law_file_s_law_is_read_reported_and_mapped_without
     let source = std::fs::read_to_string(&law_file).unwrap();
     std::fs::remove_file(&law_file).unwrap();
     let stored: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("evidence.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join("job.json")).unwrap()).unwrap();
     assert_eq!(stored["law_files"]["stribeck"].as_str(), Some(source.as_str()));
     assert_eq!(
         stored["law_files"].as_object().unwrap().len(),
@@ -662,7 +662,7 @@ fn an_evidence_directory_of_a_law_file_s_law_is_read_reported_and_mapped_without
     // A stored law file that no longer compiles is refused, naming the file in the directory.
     let mut broken = stored.clone();
     broken["law_files"]["stribeck"] = "name = \"stribeck\"\ntorque = \"r * (\"\n".into();
-    std::fs::write(out.join("evidence.json"), serde_json::to_string(&broken).unwrap()).unwrap();
+    std::fs::write(out.join("job.json"), serde_json::to_string(&broken).unwrap()).unwrap();
     let (code, _, err) = outcome(bin().args(["report", out.to_str().unwrap(), "--out", report.to_str().unwrap()]));
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("law_files/stribeck"), "{err}");
@@ -719,12 +719,9 @@ fn check_selection_of_an_evidence_directory_is_the_evidence_s_own_check() {
     let (code, _, err) = check(&["--batch", "2"]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--batch"), "{err}");
-    // A directory without its job (an earlier bitrock's) is refused, naming its document.
-    let mut old: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("evidence.json")).unwrap()).unwrap();
-    old.as_object_mut().unwrap().remove("job");
-    std::fs::write(out.join("evidence.json"), serde_json::to_string(&old).unwrap()).unwrap();
+    // A directory without its job (an earlier bitrock's) is refused, naming the file.
+    std::fs::remove_file(out.join("job.json")).unwrap();
     let (code, _, err) = check(&[]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("evidence.json") && err.contains("keeps no job"), "{err}");
+    assert!(err.contains("job.json") && err.contains("without its job"), "{err}");
 }

@@ -9,6 +9,8 @@ use std::path::PathBuf;
 /// Checks the selection of the run in directory `run` by re-simulation, writes it into the
 /// run's `selection/` (as `bitrock check-selection` does) and returns its document; a run kept
 /// in memory (`in_memory`, `run` then `None`) is checked alike and its document only returned.
+/// An evidence directory's evidence is computed again and checked, the check written into its
+/// document and returned.
 #[pyfunction]
 #[pyo3(signature = (run, in_memory, options, progress, note))]
 pub(crate) fn check_selection(
@@ -37,6 +39,9 @@ pub(crate) fn check_selection(
             });
         }
     };
+    if let Some(dir) = run.as_deref().filter(|dir| bitrock::run::dir::is_evidence_dir(dir)) {
+        return check_evidence(py, dir, &options, &report, &raised, note);
+    }
     let kept = match (&run, &in_memory) {
         (None, Some(result)) => Some(check(
             py,
@@ -69,6 +74,53 @@ pub(crate) fn check_selection(
     let check = check(py, checked)?;
     if let Some(callback) = &note {
         for line in notes {
+            callback.call1(py, (as_arguments(&line),))?;
+        }
+    }
+    serde_json::to_string(&check).map_err(|e| to_py(py, Error::Numerical(e.to_string())))
+}
+
+/// The check of the evidence directory `dir` ([`bitrock::pipeline::evidence::dir::check_dir`]),
+/// as JSON.
+fn check_evidence(
+    py: Python<'_>,
+    dir: &std::path::Path,
+    options: &bitrock::selection::CheckOptions,
+    report: &(dyn Fn(usize, usize) + Sync),
+    raised: &std::sync::Mutex<Option<PyErr>>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    if options.batch.is_some() {
+        return Err(to_py(
+            py,
+            Error::setting(
+                "batch",
+                "an evidence's check runs its replicates one after the other: leave batch out",
+            ),
+        ));
+    }
+    struct Notes(Vec<String>);
+    impl bitrock::abc::Observer for Notes {
+        fn note(&mut self, line: String) {
+            self.0.push(line);
+        }
+    }
+    let mut notes = Notes(Vec::new());
+    let checked = py.detach(|| {
+        bitrock::pipeline::evidence::dir::check_dir(
+            dir,
+            options.replicates,
+            options.backend,
+            &mut |done, total| report(done, total),
+            &mut notes,
+        )
+    });
+    if let Some(e) = raised.lock().expect("not poisoned").take() {
+        return Err(e);
+    }
+    let check = check(py, checked)?;
+    if let Some(callback) = &note {
+        for line in notes.0 {
             callback.call1(py, (as_arguments(&line),))?;
         }
     }

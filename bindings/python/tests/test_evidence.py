@@ -166,3 +166,19 @@ def test_a_record_with_weight_on_bit_compares_the_torque_scaled_by_it() -> None:
     maps = bitrock.stability(ev, **grid)
     assert maps.equals(bitrock.stability(ev, w_ref_kn=ev.w_ref_kn, **grid))
     assert not maps.equals(bitrock.stability(ev, w_ref_kn=244.2, **grid))
+
+
+def test_check_selection_of_an_evidence_directory_is_the_evidence_s_own_check(tmp_path) -> None:
+    record = bitrock.read_record(DEMO_CSV, thin=4)
+    checked = bitrock.evidence(record, **SMALL, check=2)
+    bitrock.evidence(record, **SMALL, out=tmp_path / "ev")
+    matrix = bitrock.check_selection(tmp_path / "ev", replicates=2, progress=False)
+    # The same replicates as the evidence's own check, written into the directory.
+    document = matrix.attrs["document"]
+    assert document["rows"] == checked.document["check"]["rows"]
+    assert bitrock.read_evidence(tmp_path / "ev").document["check"] == document
+    assert list(matrix.index) == ["m2", "m3"] and list(matrix.columns) == ["m2", "m3"]
+    np.testing.assert_allclose(matrix.sum(axis=1), 1.0, atol=1e-12)
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.check_selection(tmp_path / "ev", replicates=2, batch=2, progress=False)
+    assert caught.value.argument == "batch"

@@ -2,10 +2,10 @@
 //! evidence's document with each law's posterior sets (`evidence.json`, what
 //! `bitrock.read_evidence` reads), the posterior particles (`posterior.csv`, what
 //! `bitrock stability --run DIR` maps), the samples it was computed on (`data.csv`, what
-//! `bitrock report DIR` draws them against) and the record whole (`record.json`), written
-//! together or not at all. The document keeps the text of every law file whose law it compares
-//! (`law_files`), so that the directory is read, reported and mapped without the files, and
-//! the job (`job`), so that it is computed again and checked by re-simulation ([`check_dir`],
+//! `bitrock report DIR` draws them against), and what computes it again: the record whole
+//! (`record.json`), the job and the text of every law file whose law it compares (`job.json`),
+//! written together or not at all. The directory is read, reported and mapped without the law
+//! files, and computed again and checked by re-simulation ([`check_dir`],
 //! `bitrock check-selection DIR`).
 
 use super::check::{EvidenceCheck, check, check_replicates};
@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::files;
 use crate::run::dir::{
-    DATA_CSV, EVIDENCE_JSON, Owned, POSTERIOR_CSV, RECORD_JSON, is_run_dir, owns_unchanged, refuse_inside_run,
+    DATA_CSV, EVIDENCE_JSON, JOB_JSON, Owned, POSTERIOR_CSV, RECORD_JSON, is_run_dir, owns_unchanged, refuse_inside_run,
 };
 use crate::units::TorqueUnit;
 use std::path::{Path, PathBuf};
@@ -50,9 +50,9 @@ pub fn check_out(dir: &Path, force: bool) -> Result<()> {
 }
 
 /// Writes the evidence directory `dir` (checked by [`check_out`]) of `job`'s `analysis` on
-/// `data`: `document` (the evidence's document with each law's posterior sets), with the job
-/// and the text of its law files where there are any, the posterior's particle CSV, the
-/// samples and the record, replacing what an earlier evidence wrote there in one step.
+/// `data`: `document` (the evidence's document with each law's posterior sets), the
+/// posterior's particle CSV, the samples, the record, and the job with the text of its law
+/// files, replacing what an earlier evidence wrote there in one step.
 pub fn save(
     dir: &Path,
     force: bool,
@@ -68,17 +68,14 @@ pub fn save(
         .filter_map(|law| law.file())
         .map(|file| (file.name.clone(), file.source.clone().into()))
         .collect();
-    let mut document = document.clone();
-    if !law_files.is_empty() {
-        document[LAW_FILES] = law_files.into();
-    }
-    document[JOB] = serde_json::to_value(job).expect("a job serialises");
+    let job = serde_json::json!({ JOB: job, LAW_FILES: law_files });
     let record = serde_json::to_vec(data).expect("a record serialises");
     let contents = [
-        (PathBuf::from(EVIDENCE_JSON), pretty(&document)),
+        (PathBuf::from(EVIDENCE_JSON), pretty(document)),
         (PathBuf::from(POSTERIOR_CSV), analysis.posterior_csv(laws, data)),
         (PathBuf::from(DATA_CSV), crate::documents::data_csv(data)),
         (PathBuf::from(RECORD_JSON), record),
+        (PathBuf::from(JOB_JSON), pretty(&job)),
     ];
     files::replace_dir(
         dir,
@@ -88,9 +85,9 @@ pub fn save(
     )
 }
 
-/// The key of the document's law files: each law file's text by its law's name.
+/// The key of [`JOB_JSON`]'s law files: each law file's text by its law's name.
 const LAW_FILES: &str = "law_files";
-/// The key of the document's job ([`EvidenceJob`]).
+/// The key of [`JOB_JSON`]'s job ([`EvidenceJob`]).
 const JOB: &str = "job";
 
 fn pretty(document: &serde_json::Value) -> Vec<u8> {
@@ -113,17 +110,18 @@ pub fn check_dir(
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
     check_replicates(replicates)?;
-    let mut document = read(dir)?;
-    let path = dir.join(EVIDENCE_JSON);
+    let stored = stored_job(dir)?;
+    let mut document = read_json(&dir.join(EVIDENCE_JSON), "an evidence document")?;
+    let path = dir.join(JOB_JSON);
     let refuse = |message: String| Error::Data {
         path: path.clone(),
         message,
     };
-    let mut job: EvidenceJob = match document.get(JOB) {
-        Some(job) => serde_json::from_value(job.clone()).map_err(|e| refuse(format!("its job does not read: {e}")))?,
+    let mut job: EvidenceJob = match stored {
+        Some(job) => serde_json::from_value(job).map_err(|e| refuse(format!("its job does not read: {e}")))?,
         None => {
             return Err(refuse(
-                "it keeps no job (an earlier bitrock wrote it): compute the evidence again with `--check K`".into(),
+                "missing: an earlier bitrock wrote this evidence without its job; compute it again with `bitrock evidence --check K`".into(),
             ));
         }
     };
@@ -159,7 +157,7 @@ pub fn check_dir(
     let check = check(&job, &data, &analysis, replicates, progress, observer)?;
     document["check"] = serde_json::to_value(&check).expect("a check serialises");
     let mut contents = vec![(PathBuf::from(EVIDENCE_JSON), pretty(&document))];
-    for name in [POSTERIOR_CSV, DATA_CSV, RECORD_JSON] {
+    for name in [POSTERIOR_CSV, DATA_CSV, RECORD_JSON, JOB_JSON] {
         let kept = dir.join(name);
         let bytes = std::fs::read(&kept).map_err(|source| Error::Read { path: kept, source })?;
         contents.push((PathBuf::from(name), bytes));
@@ -174,15 +172,29 @@ pub fn check_dir(
 }
 
 /// The document of the evidence directory `dir`, its law files' laws registered in this
-/// process (a file's law read from the directory).
+/// process (read from its job, where it keeps one).
 pub fn read(dir: &Path) -> Result<serde_json::Value> {
-    let path = dir.join(EVIDENCE_JSON);
-    let text = files::read_text(&path, "evidence", 1 << 30)?;
-    let document: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Data {
-        path: path.clone(),
-        message: format!("not an evidence document: {e}"),
-    })?;
-    if let Some(law_files) = document.get(LAW_FILES) {
+    stored_job(dir)?;
+    read_json(&dir.join(EVIDENCE_JSON), "an evidence document")
+}
+
+fn read_json(path: &Path, what: &str) -> Result<serde_json::Value> {
+    let text = files::read_text(path, "evidence", 1 << 34)?;
+    serde_json::from_str(&text).map_err(|e| Error::Data {
+        path: path.to_path_buf(),
+        message: format!("not {what}: {e}"),
+    })
+}
+
+/// The job of the evidence directory `dir`, its law files' laws registered in this process;
+/// `None` for a directory an earlier bitrock wrote without one.
+fn stored_job(dir: &Path) -> Result<Option<serde_json::Value>> {
+    let path = dir.join(JOB_JSON);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let mut stored = read_json(&path, "an evidence's job")?;
+    if let Some(law_files) = stored.get(LAW_FILES) {
         let law_files = law_files.as_object().ok_or_else(|| Error::Data {
             path: path.clone(),
             message: format!("'{LAW_FILES}' is not a table of law files' texts by name"),
@@ -196,7 +208,7 @@ pub fn read(dir: &Path) -> Result<serde_json::Value> {
             crate::laws::file::register(crate::laws::file::LawFile::parse(source, &origin)?)?;
         }
     }
-    Ok(document)
+    Ok(stored.get_mut(JOB).map(serde_json::Value::take))
 }
 
 /// The posterior particles of the evidence directory `dir` (SI) and the weight on bit its

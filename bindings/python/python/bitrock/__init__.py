@@ -551,7 +551,10 @@ def check_selection(
     measures it: ``replicates`` synthetic records per law, each made from the law's posterior
     (or least-squares estimate when it died out) with the record's noise, each run through the
     run's own procedure. Writes the check into the run's ``selection/`` directory (a run kept
-    in memory is checked alike; its check is only returned).
+    in memory is checked alike; its check is only returned). ``source`` may also be an
+    evidence directory (``evidence(..., out=DIR)``): its evidence is computed again and checked
+    as ``evidence(check=K)`` checks it, the check written into its document (``batch`` does not
+    apply).
 
     Returns the confusion matrix: one row per generating law, one column per law, the mean
     posterior probability over its replicates. ``attrs`` holds ``first_share`` (the share of
@@ -565,7 +568,7 @@ def check_selection(
             in_memory = source._run
         source = source.path
     elif not isinstance(source, (str, os.PathLike)):
-        raise InputError(f"source: give a Result or a run directory, got {type(source).__name__}", "source")
+        raise InputError(f"source: give a Result, a run directory or an evidence directory, got {type(source).__name__}", "source")
     callback, close = _replicate_progress(progress)
     try:
         document = json.loads(
