@@ -126,6 +126,8 @@ def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, opti
     Checks the selection of the run in directory `run` by re-simulation, writes it into the
     run's `selection/` (as `bitrock check-selection` does) and returns its document; a run kept
     in memory (`in_memory`, `run` then `None`) is checked alike and its document only returned.
+    An evidence directory's evidence is computed again and checked, the check written into its
+    document and returned.
     """
 
 def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None) -> str:
