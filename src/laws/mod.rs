@@ -31,9 +31,6 @@ include!(concat!(env!("OUT_DIR"), "/laws.rs"));
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct BuiltIn {
     pub name: &'static str,
-    /// Whose law it is, for documentation.
-    #[allow(dead_code)]
-    pub title: &'static str,
     /// The torque as every output prints it.
     pub formula: &'static str,
     pub params: &'static [ParamSpec],

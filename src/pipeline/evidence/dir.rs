@@ -133,7 +133,7 @@ pub fn check_dir(
         )));
     }
     let record_path = dir.join(RECORD_JSON);
-    let text = files::read_text(&record_path, "record", 1 << 34)?;
+    let text = files::read_text(&record_path, "an evidence's record", MAX_RECORD_BYTES)?;
     let data: FieldData = serde_json::from_str(&text).map_err(|e| Error::Data {
         path: record_path.clone(),
         message: format!("not a record bitrock wrote: {e}"),
@@ -178,8 +178,15 @@ pub fn read(dir: &Path) -> Result<serde_json::Value> {
     read_json(&dir.join(EVIDENCE_JSON), "an evidence document")
 }
 
+/// The most an evidence directory's document or job may hold, bytes (the document holds the
+/// posterior sets; it is read whole as a JSON tree).
+const MAX_DOCUMENT_BYTES: u64 = 1 << 30;
+/// The most its record may hold, bytes (every sample, 40 bytes a row or so: a day at 1 kHz is
+/// 3.5 GB; read straight into the record's columns).
+const MAX_RECORD_BYTES: u64 = 1 << 33;
+
 fn read_json(path: &Path, what: &str) -> Result<serde_json::Value> {
-    let text = files::read_text(path, "evidence", 1 << 34)?;
+    let text = files::read_text(path, what, MAX_DOCUMENT_BYTES)?;
     serde_json::from_str(&text).map_err(|e| Error::Data {
         path: path.to_path_buf(),
         message: format!("not {what}: {e}"),
