@@ -229,8 +229,11 @@ impl BuiltIn {
         Ok(())
     }
 
+    /// The `Law` variant: the name with its first letter in capitals (`m1` → `M1`).
     fn variant(&self) -> String {
-        self.name.to_ascii_uppercase()
+        let mut variant = self.name.clone();
+        variant[..1].make_ascii_uppercase();
+        variant
     }
 
     /// `let pK = p[K];` for every parameter `exprs` use (locals keep the loops free of bounds

@@ -448,7 +448,9 @@ mod tests {
                 Some(texts) => texts.iter().map(|t| compile(t)).collect(),
                 None => (0..names.len()).map(|i| torque.derivative(Var::Param(i))).collect(),
             };
-            let paper = law.paper_estimate().unwrap();
+            // Around the paper's estimates, or around 1 for a law the paper does not have.
+            let ones = vec![1.0; names.len()];
+            let paper = law.paper_estimate().unwrap_or(&ones);
             let mut grad = vec![0.0; names.len()];
             for _ in 0..2_000 {
                 // Parameters from a tenth to ten times the paper's, of either sign where free;
@@ -489,7 +491,7 @@ mod tests {
     #[test]
     fn paper_estimates_respect_the_bounds() {
         for law in Law::ALL {
-            let p = law.paper_estimate().unwrap();
+            let Some(p) = law.paper_estimate() else { continue };
             assert_eq!(p.len(), law.n_params());
             assert!(law.bound_violation(p).is_none(), "{law}");
         }
