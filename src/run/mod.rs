@@ -104,8 +104,8 @@ pub fn start(data: FieldData, config: Config, how: Start, observer: &mut dyn Obs
         Some(fits) => fits,
         None => fit::fit_record(&config.laws, &data, &config.fit)?,
     };
-    let mut workers = how.scoring;
-    start_with_fits(how.dir, data, config, fits, how.prior_file, &mut workers, observer)
+    let mut scoring = how.scoring;
+    start_with_fits(how.dir, data, config, fits, how.prior_file, &mut scoring, observer)
 }
 
 /// Makes a run's evaluator from its problem, saying what the user should know through the

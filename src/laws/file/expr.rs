@@ -60,6 +60,19 @@ pub enum Binary {
     Pow,
 }
 
+impl Binary {
+    /// The operator as written infix (`^` for a power, which WGSL and Rust write as calls).
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Binary::Add => "+",
+            Binary::Sub => "-",
+            Binary::Mul => "*",
+            Binary::Div => "/",
+            Binary::Pow => "^",
+        }
+    }
+}
+
 /// A compiled expression tree.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Expr {
@@ -585,16 +598,7 @@ impl Expr {
                 let name = format!("{op:?}").to_lowercase();
                 format!("{name}({})", a.show(names))
             }
-            Expr::Binary(op, a, b) => {
-                let symbol = match op {
-                    Binary::Add => "+",
-                    Binary::Sub => "-",
-                    Binary::Mul => "*",
-                    Binary::Div => "/",
-                    Binary::Pow => "^",
-                };
-                format!("({} {symbol} {})", a.show(names), b.show(names))
-            }
+            Expr::Binary(op, a, b) => format!("({} {} {})", a.show(names), op.symbol(), b.show(names)),
         }
     }
 
@@ -876,16 +880,15 @@ impl Expr {
                 }
             },
             Expr::Binary(op, a, b) => {
-                let symbol = match op {
-                    Binary::Add => " + ",
-                    Binary::Sub => " - ",
-                    Binary::Mul => " * ",
-                    Binary::Div => " / ",
-                    Binary::Pow => unreachable!("handled above"),
-                };
                 let (ta, da) = a.write_wgsl(lets, count);
                 let (tb, db) = b.write_wgsl(lets, count);
-                hoist(lets, count, format!("({ta}{symbol}{tb})"), da.max(db) + 1, false)
+                hoist(
+                    lets,
+                    count,
+                    format!("({ta} {} {tb})", op.symbol()),
+                    da.max(db) + 1,
+                    false,
+                )
             }
         }
     }
@@ -951,16 +954,7 @@ impl Expr {
                     b.rust(exp, tanh)
                 ),
             },
-            Expr::Binary(op, a, b) => {
-                let symbol = match op {
-                    Binary::Add => "+",
-                    Binary::Sub => "-",
-                    Binary::Mul => "*",
-                    Binary::Div => "/",
-                    Binary::Pow => unreachable!("handled above"),
-                };
-                format!("({} {symbol} {})", a.rust(exp, tanh), b.rust(exp, tanh))
-            }
+            Expr::Binary(op, a, b) => format!("({} {} {})", a.rust(exp, tanh), op.symbol(), b.rust(exp, tanh)),
         }
     }
 

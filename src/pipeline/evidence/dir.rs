@@ -121,14 +121,13 @@ pub fn check_dir(
         Some(job) => serde_json::from_value(job).map_err(|e| refuse(format!("its job does not read: {e}")))?,
         None => {
             return Err(refuse(
-                "missing: an earlier bitrock wrote this evidence without its job; compute it again with `bitrock evidence --check K`".into(),
+                "missing: an earlier bitrock wrote this evidence without its job; compute it again with its check (`bitrock evidence --check K`, or `check=K` in Python)".into(),
             ));
         }
     };
     if let Some(prior_file) = &job.prior_file {
         return Err(refuse(format!(
-            "its boxes came from the prior file {}, which the directory does not keep: check it with `bitrock evidence --prior {} --check K`",
-            prior_file.display(),
+            "its boxes came from the prior file {0}, which the directory does not keep: compute it again with its check (`bitrock evidence --prior {0} --check K`, or `prior=\"{0}\", check=K` in Python)",
             prior_file.display()
         )));
     }
@@ -156,18 +155,12 @@ pub fn check_dir(
     }
     let check = check(&job, &data, &analysis, replicates, progress, observer)?;
     document["check"] = serde_json::to_value(&check).expect("a check serialises");
-    let mut contents = vec![(PathBuf::from(EVIDENCE_JSON), pretty(&document))];
-    for name in [POSTERIOR_CSV, DATA_CSV, RECORD_JSON, JOB_JSON] {
-        let kept = dir.join(name);
-        let bytes = std::fs::read(&kept).map_err(|source| Error::Read { path: kept, source })?;
-        contents.push((PathBuf::from(name), bytes));
-    }
-    files::replace_dir(
-        dir,
-        "run",
-        &|rel, is_dir| owns_unchanged(Owned::Evidence, dir, rel, is_dir),
-        &contents,
-    )?;
+    // The directory is still the evidence's alone; only its document changes (written whole).
+    files::refuse_foreign(dir, "run", &|rel, is_dir| {
+        owns_unchanged(Owned::Evidence, dir, rel, is_dir)
+    })?;
+    let json = pretty(&document);
+    files::write_own(&dir.join(EVIDENCE_JSON), "run", |out| out.write_all(&json))?;
     Ok(check)
 }
 
