@@ -230,7 +230,7 @@ impl PhysicalScales {
 }
 
 /// A candidate drawn from the prior: which box (index into [`Prior::boxes`]) and its parameters.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Candidate {
     pub slot: usize,
     pub params: [f32; MAX_PARAMS],

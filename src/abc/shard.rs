@@ -11,14 +11,16 @@
 //! results arrive in, or a task run twice. Candidates a task scored past the N-th acceptance
 //! are discarded by the merge (or, in nested rejection, kept for the next population).
 //!
-//! Three kinds of task:
+//! Four kinds of task:
 //! - [`Task::Scan`]: a range of the prior's candidate stream (rejection, and SMC's
 //!   population 0);
 //! - [`Task::Propose`]: a range of proposals, made on the worker from the round's
 //!   [`Proposal`] (for SMC, the previous population and its kernels), so that proposals are
 //!   never shipped;
 //! - [`Task::Weigh`]: the log importance weights of a range of the new population's
-//!   particles against the round's [`Proposal`] (for SMC, the O(N²) kernel-density sums).
+//!   particles against the round's [`Proposal`] (for SMC, the O(N²) kernel-density sums);
+//! - [`Task::Score`]: explicit candidates made by the driver (the evidence sampler's
+//!   Metropolis moves), scored as they are ([`score_candidates`]).
 //!
 //! The task layer knows no sampler: a sampler that proposes implements [`Proposal`], and the
 //! worker side ([`super::worker`]) names the samplers whose proposals it can rebuild.
@@ -32,6 +34,7 @@ use super::Particle;
 use crate::error::{Error, Result};
 use crate::eval::gpu::{Shape, tune::ShapeWish};
 use crate::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
+use crate::prior::Candidate;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -71,6 +74,13 @@ pub enum Task {
     /// The log importance weights (unnormalised) of the new population's particles `first ..
     /// first + particles.len()` against the round's [`Proposal`].
     Weigh { first: usize, particles: Vec<Particle> },
+    /// The misfit ρ of explicit candidates `first ..` of a batch and, when `lagged`, their
+    /// lag-1 sums ([`Evaluator::score_params_lagged`]).
+    Score {
+        first: usize,
+        candidates: Vec<Candidate>,
+        lagged: bool,
+    },
 }
 
 /// What a task returns.
@@ -93,6 +103,9 @@ pub enum Output {
     },
     /// The result of a [`Task::Weigh`]: one log weight per particle from `first` on.
     LogWeights { first: usize, values: Vec<f64> },
+    /// The result of a [`Task::Score`]: ρ of each candidate from `first` on, and their lag-1
+    /// sums (empty unless asked for).
+    Scores { first: usize, rho: Vec<f64>, lag: Vec<f64> },
 }
 
 /// A population's proposal distribution, built by its sampler from the previous population:
@@ -349,6 +362,21 @@ pub fn execute(evaluator: &dyn Evaluator, context: Option<&dyn Proposal>, task: 
             let values = needs_context()?.log_weights(evaluator, particles)?;
             Ok(Output::LogWeights { first, values })
         }
+        Task::Score {
+            first,
+            ref candidates,
+            lagged,
+        } => {
+            let mut rho = vec![0.0; candidates.len()];
+            let mut lag = Vec::new();
+            if lagged {
+                lag.resize(candidates.len(), 0.0);
+                evaluator.score_params_lagged(candidates, &mut rho, &mut lag)?;
+            } else {
+                evaluator.score_params(candidates, &mut rho)?;
+            }
+            Ok(Output::Scores { first, rho, lag })
+        }
     }
 }
 
@@ -392,7 +420,17 @@ pub const MIN_TASK: u64 = 4096;
 /// Cuts `start .. start + len` into at most `pieces` contiguous ranges of near-equal length,
 /// none shorter than [`MIN_TASK`] unless the whole is.
 pub fn split(start: u64, len: u64, pieces: usize) -> Vec<(u64, u64)> {
-    let pieces = (pieces.max(1) as u64).min(len.div_ceil(MIN_TASK)).max(1);
+    split_from(start, len, pieces, MIN_TASK)
+}
+
+/// Explicit candidates a [`Task::Score`] holds at least, unless the batch is smaller: a
+/// candidate is shipped (28 bytes) rather than named, and a batch of them (a sweep of the
+/// evidence sampler) is a few thousand, which should still reach every worker.
+pub const MIN_SCORE_TASK: u64 = 256;
+
+/// [`split`] with pieces no shorter than `least` unless the whole is.
+fn split_from(start: u64, len: u64, pieces: usize, least: u64) -> Vec<(u64, u64)> {
+    let pieces = (pieces.max(1) as u64).min(len.div_ceil(least.max(1))).max(1);
     let (base, extra) = (len / pieces, len % pieces);
     let mut ranges = Vec::with_capacity(pieces as usize);
     let mut at = start;
@@ -464,7 +502,7 @@ pub(crate) fn run_found(workers: &dyn Workers, round: &Round, start: u64, len: u
     let mut outputs: Vec<Output> = workers.run(round)?;
     outputs.sort_by_key(|o| match o {
         Output::Found { start, .. } => *start,
-        Output::LogWeights { .. } => 0,
+        Output::LogWeights { .. } | Output::Scores { .. } => 0,
     });
     let mut merged = Found {
         start,
@@ -486,7 +524,7 @@ pub(crate) fn run_found(workers: &dyn Workers, round: &Round, start: u64, len: u
             prefix,
         } = output
         else {
-            return Err(unexpected("log weights for a scan"));
+            return Err(unexpected("another task's result for a scan"));
         };
         let end = s + n;
         if s != at
@@ -520,7 +558,7 @@ pub(crate) fn run_log_weights(workers: &dyn Workers, round: &Round, n: usize) ->
         .into_iter()
         .map(|o| match o {
             Output::LogWeights { first, values } => Ok((first, values)),
-            Output::Found { .. } => Err(unexpected("candidates for a weighing")),
+            _ => Err(unexpected("another task's result for a weighing")),
         })
         .collect::<Result<_>>()?;
     outputs.sort_by_key(|o| o.0);
@@ -538,6 +576,54 @@ pub(crate) fn run_log_weights(workers: &dyn Workers, round: &Round, n: usize) ->
         return Err(unexpected(&format!("{} weights for {n} particles", merged.len())));
     }
     Ok(merged)
+}
+
+/// ρ of `candidates` (and, when `lagged`, their lag-1 sums) scored by `workers`, in order:
+/// the batch cut into [`Task::Score`]s, a task per piece. Each candidate's score depends on it
+/// alone, so the cut does not change a bit of the result. `round` names the round in the
+/// workers' traffic.
+pub fn score_candidates(
+    workers: &dyn Workers,
+    round: usize,
+    candidates: &[Candidate],
+    lagged: bool,
+    rho: &mut Vec<f64>,
+    lag: &mut Vec<f64>,
+) -> Result<()> {
+    let tasks = split_from(0, candidates.len() as u64, workers.parallelism(), MIN_SCORE_TASK)
+        .into_iter()
+        .map(|(first, len)| Task::Score {
+            first: first as usize,
+            candidates: candidates[first as usize..(first + len) as usize].to_vec(),
+            lagged,
+        })
+        .collect();
+    let mut outputs: Vec<(usize, Vec<f64>, Vec<f64>)> = workers
+        .run(&Round {
+            population: round,
+            context: None,
+            tasks,
+        })?
+        .into_iter()
+        .map(|o| match o {
+            Output::Scores { first, rho, lag } => Ok((first, rho, lag)),
+            _ => Err(unexpected("another task's result for explicit candidates")),
+        })
+        .collect::<Result<_>>()?;
+    outputs.sort_by_key(|o| o.0);
+    rho.clear();
+    lag.clear();
+    for (first, values, lags) in outputs {
+        if first != rho.len() || (lagged && lags.len() != values.len()) {
+            return Err(unexpected(&format!("scores from candidate {first} where {} was next", rho.len())));
+        }
+        rho.extend(values);
+        lag.extend(lags);
+    }
+    if rho.len() != candidates.len() {
+        return Err(unexpected(&format!("{} scores for {} candidates", rho.len(), candidates.len())));
+    }
+    Ok(())
 }
 
 fn unexpected(what: &str) -> Error {

@@ -152,7 +152,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         },
         ..EvidenceJob::default()
     }
-    .run(&data, &mut RunProgress::new(false))?;
+    .run(&data, Default::default(), &mut RunProgress::new(false))?;
     let report_dir = root.join(REPORT_DIR);
     let report = bitrock::report::write_paper_report(
         &report_dir,

@@ -168,7 +168,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         evidence::dir::check_out(dir, cmd.force)?;
     }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    let analysis = job.run(&data, &mut Notes)?;
+    let analysis = job.run(&data, Default::default(), &mut Notes)?;
     if let Some(path) = &cmd.posterior_out {
         let csv = analysis.posterior_csv(&job.laws, &data);
         bitrock::run::dir::write_whole(path, "posterior_out", false, |file| file.write_all(&csv))?;

@@ -28,7 +28,8 @@ use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::gpu::tune::ShapeWish;
-use crate::eval::{AbcProblem, Evaluator};
+use crate::abc::shard::Devices;
+use crate::eval::{AbcProblem, Backend, Evaluator};
 use crate::files;
 use crate::fit;
 use crate::prior::{Prior, PriorFile};
@@ -113,31 +114,47 @@ pub fn start(data: FieldData, config: Config, how: Start, observer: &mut dyn Obs
 /// elsewhere).
 pub type MakeEvaluator<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> + 'a;
 
-/// Makes the workers that run a run's tasks from its problem and configuration (a continued
-/// run's with the continuation's backend and devices), saying what the user should know
-/// through the third argument.
-pub type MakeWorkers<'a> = dyn FnMut(AbcProblem, &Config, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+/// Makes the workers that run a job's tasks from its problem and where the job asks them to
+/// score (a continued run's with the continuation's backend and devices), saying what the
+/// user should know through the third argument.
+pub type MakeWorkers<'a> =
+    dyn FnMut(AbcProblem, &Placement, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
 
-impl Scoring<'_, '_> {
-    /// The workers that score a run of `config` on `problem`.
-    fn workers(
-        &mut self,
-        problem: AbcProblem,
-        config: &Config,
-        note: &mut dyn FnMut(String),
-    ) -> Result<Box<dyn Workers + '_>> {
-        match self {
-            Scoring::Here => here(problem, config, note),
-            Scoring::Workers(make) => make(problem, config, note),
-            Scoring::Evaluator(make) => Ok(Box::new(Local(make(problem, note)?))),
+/// Where a job asks its candidates to be scored: the backend, this machine's devices and the
+/// GPU scoring shape. A pool of workers takes the backend and shape to each worker.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Placement {
+    pub backend: Backend,
+    pub devices: Devices,
+    pub shape: ShapeWish,
+}
+
+impl Placement {
+    /// A run's: its backend, devices, and its recorded GPU scoring shape for dispatches of its
+    /// size ([`shape_wish`]).
+    pub fn of(config: &Config) -> Self {
+        Self {
+            backend: config.backend,
+            devices: config.devices,
+            shape: shape_wish(config),
         }
     }
 }
 
-/// The workers of this process for a run of `config`: [`shard::here`] with its backend,
-/// devices and GPU scoring shape.
-pub fn here(problem: AbcProblem, config: &Config, note: &mut dyn FnMut(String)) -> Result<Box<dyn Workers>> {
-    shard::here(problem, config.backend, config.devices, shape_wish(config), note)
+impl Scoring<'_, '_> {
+    /// The workers that score `problem` where `placement` says.
+    pub fn workers(
+        &mut self,
+        problem: AbcProblem,
+        placement: &Placement,
+        note: &mut dyn FnMut(String),
+    ) -> Result<Box<dyn Workers + '_>> {
+        match self {
+            Scoring::Here => shard::here(problem, placement.backend, placement.devices, placement.shape, note),
+            Scoring::Workers(make) => make(problem, placement, note),
+            Scoring::Evaluator(make) => Ok(Box::new(Local(make(problem, note)?))),
+        }
+    }
 }
 
 /// What a run of `config` asks of the GPU scoring shape: its recorded one, for dispatches of
@@ -176,7 +193,7 @@ fn start_with_fits(
     )?;
     let problem =
         AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
-    let evaluator = scoring.workers(problem, &config, &mut |line| observer.note(line))?;
+    let evaluator = scoring.workers(problem, &Placement::of(&config), &mut |line| observer.note(line))?;
     config.take_shape_of(evaluator.as_ref());
     let mut setup = Setup {
         config: serde_json::to_value(&config).expect("the configuration serialises"),
@@ -303,7 +320,7 @@ pub fn resume(dir: &Path, more: &Continuation, mut scoring: Scoring, observer: &
         config.fit.w_ref_n,
     )
     .with_best_rho(&setup.fits);
-    let evaluator = scoring.workers(problem, &config, &mut |line| observer.note(line))?;
+    let evaluator = scoring.workers(problem, &Placement::of(&config), &mut |line| observer.note(line))?;
     config.take_shape_of(evaluator.as_ref());
     let stored = populations.len();
     observer.note(format!(

@@ -692,7 +692,7 @@ impl Watch {
             warm,
             separations: false,
         };
-        let mut analysis = match of_window(job.run(data, observer))? {
+        let mut analysis = match of_window(job.run(data, crate::run::Scoring::Here, observer))? {
             Ok(analysis) => analysis,
             Err(why) => return Ok(Err(why)),
         };
@@ -715,7 +715,7 @@ impl Watch {
                 warm: None,
                 ..job.clone()
             };
-            match of_window(cold.run(data, observer))? {
+            match of_window(cold.run(data, crate::run::Scoring::Here, observer))? {
                 Ok(fresh) => {
                     candidates += fresh.evidence.candidates_scored;
                     analysis = fresh;

@@ -687,6 +687,7 @@ per_shape! {
     fn the_evidence_on_the_gpu_agrees_with_the_cpu(shape: Shape) {
         use bitrock::abc::Silent;
         use bitrock::abc::evidence::{self, EvidenceConfig};
+        use bitrock::abc::shard::Local;
         use bitrock::prior::PhysicalScales;
         require_gpu();
         let data = demo_field_data(&DataOptions {
@@ -703,8 +704,8 @@ per_shape! {
             seed: 4,
             ..EvidenceConfig::default()
         };
-        let cpu = evidence::run(&CpuEvaluator::new(problem.clone()), &config, &mut Silent).unwrap();
-        let gpu = evidence::run(&gpu_evaluator(&problem, shape), &config, &mut Silent).unwrap();
+        let cpu = evidence::run(&Local(Box::new(CpuEvaluator::new(problem.clone()))), &config, &mut Silent).unwrap();
+        let gpu = evidence::run(&Local(Box::new(gpu_evaluator(&problem, shape))), &config, &mut Silent).unwrap();
         for (c, g) in cpu.laws.iter().zip(&gpu.laws) {
             eprintln!(
                 "{}: ln Z cpu {:.4} ± {:.3}, gpu {:.4} ± {:.3}",

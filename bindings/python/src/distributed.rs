@@ -4,6 +4,7 @@
 use bitrock::abc::shard::wire::{Exchanged, Payloads, Traffic};
 use bitrock::abc::shard::{Remote, Transport, Workers};
 use bitrock::error::Error;
+use bitrock::run::Placement;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
 use std::sync::{Mutex, OnceLock};
@@ -21,6 +22,21 @@ pub(crate) struct PyTransport {
 }
 
 impl PyTransport {
+    /// The transport of `dispatcher`, `parallelism` tasks a round unless it says otherwise.
+    pub(crate) fn new(dispatcher: Py<PyAny>, parallelism: usize) -> Self {
+        Self {
+            dispatcher,
+            parallelism,
+            raised: Mutex::new(None),
+            payloads: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The Python exception that stopped an exchange, if one did.
+    pub(crate) fn take_raised(&self) -> Option<PyErr> {
+        self.raised.lock().unwrap_or_else(|p| p.into_inner()).take()
+    }
+
     /// `bytes` (named `key`) as Python bytes, made on first use; the problem's and the latest
     /// context's are kept.
     fn payload(&self, py: Python<'_>, key: u64, bytes: &[u8]) -> Py<PyBytes> {
@@ -76,19 +92,29 @@ pub(crate) fn remote_on<'a>(
     cell: &'a OnceLock<Remote<PyTransport>>,
     dispatcher: Py<PyAny>,
     parallelism: usize,
-) -> impl FnMut(bitrock::eval::AbcProblem, &bitrock::run::Config) -> bitrock::Result<Box<dyn Workers + 'a>> {
-    let mut transport = Some(PyTransport {
-        dispatcher,
-        parallelism,
-        raised: Mutex::new(None),
-        payloads: Mutex::new(Vec::new()),
-    });
-    move |problem, config| {
+) -> impl FnMut(bitrock::eval::AbcProblem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
+    let mut transport = Some(PyTransport::new(dispatcher, parallelism));
+    move |problem, placement| {
         let transport = transport.take().expect("a run makes its workers once");
-        let (backend, shape) = (config.backend, bitrock::run::shape_wish(config));
         Ok(Box::new(
-            cell.get_or_init(|| Remote::new(problem, backend, shape, transport)),
+            cell.get_or_init(|| Remote::new(problem, placement.backend, placement.shape, transport)),
         ))
+    }
+}
+
+/// Makes workers on `transport`'s pool for each problem a job asks for (an evidence job asks
+/// once per torque scaling).
+#[allow(clippy::needless_lifetimes)] // eliding 'a leaves the boxed workers' lifetime unnamed
+pub(crate) fn remote_each<'a>(
+    transport: &'a PyTransport,
+) -> impl FnMut(bitrock::eval::AbcProblem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
+    move |problem, placement| {
+        Ok(Box::new(Remote::new(
+            problem,
+            placement.backend,
+            placement.shape,
+            transport,
+        )))
     }
 }
 
@@ -98,12 +124,7 @@ pub(crate) fn after_remote(cell: OnceLock<Remote<PyTransport>>) -> (Option<Strin
         None => (None, None),
         Some(remote) => {
             let traffic: Vec<Traffic> = remote.traffic();
-            let raised = remote
-                .transport()
-                .raised
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .take();
+            let raised = remote.transport().take_raised();
             (
                 Some(serde_json::to_string(&traffic).expect("traffic serialises")),
                 raised,

@@ -1,11 +1,13 @@
 //! The model evidence of a record's laws.
 
+use crate::distributed::{PyTransport, remote_each};
 use crate::errors::*;
 use crate::fit::fit_options;
 use crate::record::*;
 use crate::run::PyObserver;
 use bitrock::Law;
 use bitrock::abc::evidence::EvidenceConfig;
+use bitrock::run::{Placement, Scoring};
 use bitrock::pipeline::evidence::{
     DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, check as check_evidence, check_replicates,
 };
@@ -15,15 +17,19 @@ use std::path::PathBuf;
 
 /// The evidence of `laws` (`None`: all four) on the record, with the options of
 /// `bitrock.evidence`: `bitrock evidence --json`'s document, with each law's posterior sets
-/// (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added.
+/// (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added. With
+/// a `dispatcher` (`bitrock._distributed.Dispatcher`), the samplers' candidates are scored by
+/// its workers, `parallelism` tasks a batch unless it says otherwise.
 #[pyfunction]
-#[pyo3(signature = (record, laws, options, note))]
+#[pyo3(signature = (record, laws, options, note, dispatcher=None, parallelism=1))]
 pub(crate) fn evidence(
     py: Python<'_>,
     record: &Record,
     laws: Option<Vec<String>>,
     options: &Bound<'_, PyDict>,
     note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
 ) -> PyResult<String> {
     let laws = self::laws(py, laws)?.unwrap_or_else(|| Law::ALL.to_vec());
     let defaults = EvidenceConfig::default();
@@ -80,7 +86,19 @@ pub(crate) fn evidence(
     }
     let mut observer = PyObserver::new(None, note);
     let data = &record.data;
-    let result = py.detach(|| job.run(data, &mut observer));
+    let result = match dispatcher {
+        None => py.detach(|| job.run(data, Scoring::Here, &mut observer)),
+        Some(dispatcher) => {
+            let transport = PyTransport::new(dispatcher, parallelism);
+            let mut make = remote_each(&transport);
+            let mut workers = |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement);
+            let result = py.detach(|| job.run(data, Scoring::Workers(&mut workers), &mut observer));
+            if let Some(e) = transport.take_raised() {
+                return Err(e);
+            }
+            result
+        }
+    };
     if let Some(e) = observer.take_raised() {
         return Err(e);
     }

@@ -11,7 +11,7 @@ use bitrock::error::Error;
 use bitrock::eval::Backend;
 use bitrock::pipeline::AbcJob;
 use bitrock::run;
-use bitrock::run::Scoring;
+use bitrock::run::{Placement, Scoring};
 use bitrock::run::{Continuation, Settings};
 use bitrock::units::TorqueUnit;
 use bitrock::{Law, documents};
@@ -405,8 +405,7 @@ pub(crate) fn abc(
         None => py.detach(|| job.run(data, Scoring::Here, &mut observer)),
         Some(dispatcher) => {
             let mut make = remote_on(&cell, dispatcher, parallelism);
-            let mut workers =
-                |problem, config: &bitrock::run::Config, _note: &mut dyn FnMut(String)| make(problem, config);
+            let mut workers = |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement);
             py.detach(|| job.run(data, Scoring::Workers(&mut workers), &mut observer))
         }
     };
@@ -464,8 +463,7 @@ pub(crate) fn resume(
         None => py.detach(|| bitrock::pipeline::resume(&path, &continuation, Scoring::Here, &mut observer)),
         Some(dispatcher) => {
             let mut make = remote_on(&cell, dispatcher, parallelism);
-            let mut workers =
-                |problem, config: &bitrock::run::Config, _note: &mut dyn FnMut(String)| make(problem, config);
+            let mut workers = |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement);
             py.detach(|| bitrock::pipeline::resume(&path, &continuation, Scoring::Workers(&mut workers), &mut observer))
         }
     };

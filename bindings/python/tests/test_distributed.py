@@ -1,6 +1,6 @@
-"""A run's populations on a pool of workers (concurrent.futures, Dask, Ray): the run store of
-one process, bit for bit, whatever the number of workers, the order tasks finish in, tasks
-lost and run again, or workers killed."""
+"""A run's populations and an evidence's samplers on a pool of workers (concurrent.futures,
+Dask, Ray): the run store and the evidence of one process, bit for bit, whatever the number of
+workers, the order tasks finish in, tasks lost and run again, or workers killed."""
 
 from __future__ import annotations
 
@@ -294,7 +294,53 @@ def test_a_dask_worker_killed_mid_population_changes_nothing(demo, one_process, 
     assert_same_store(one_process[1], tmp_path / "killed")
 
 
-def test_ray_actors_give_the_one_process_store(demo, one_process, tmp_path) -> None:
+#: An evidence small enough for a test: two laws, every model of the residuals (the embedded
+#: record's weight on bit varies, so four in all), each batch of a few hundred candidates.
+EVIDENCE = {"laws": ["m2", "m4"], "particles": 150, "islands": 2, "seed": 3, "backend": "cpu"}
+
+
+@pytest.fixture(scope="module")
+def one_process_evidence(demo: bitrock.Record) -> dict[str, Any]:
+    return _without_clock(bitrock.evidence(demo, **EVIDENCE).document)
+
+
+def assert_same_evidence(one_process: dict[str, Any], evidence: bitrock.Evidence) -> None:
+    document = _without_clock(evidence.document)
+    assert len(document["noise_models"]) == 4
+    assert document == one_process
+
+
+@pytest.mark.parametrize("executor", ["process pool", "scrambled", "dask"])
+def test_the_evidence_on_workers_is_the_one_process_evidence(demo, one_process_evidence, executor, request) -> None:
+    if executor == "dask":
+        pool = request.getfixturevalue("dask_client")
+        assert_same_evidence(one_process_evidence, bitrock.evidence(demo, executor=pool, **EVIDENCE))
+        return
+    made = (
+        concurrent.futures.ProcessPoolExecutor(2, mp_context=SPAWN) if executor == "process pool" else Scrambled(seed=7)
+    )
+    with made as pool:
+        evidence = bitrock.evidence(demo, executor=pool, **EVIDENCE)
+    assert_same_evidence(one_process_evidence, evidence)
+    if isinstance(made, Scrambled):
+        # Batches were cut into several tasks, and replies lost and sent again.
+        assert made.lost > 0 and made._submitted > 100
+
+
+def test_a_failing_pool_stops_the_evidence_with_the_workers_error(demo) -> None:
+    class Failing(Scrambled):
+        def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]
+            def task():
+                raise ConnectionError("every worker lost")
+
+            return self._pool.submit(task)
+
+    with Failing(seed=1) as pool:
+        with pytest.raises(bitrock.BitrockError, match="every worker lost"):
+            bitrock.evidence(demo, executor=pool, **EVIDENCE)
+
+
+def test_ray_actors_give_the_one_process_store(demo, one_process, one_process_evidence, tmp_path) -> None:
     import ray
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
@@ -303,6 +349,7 @@ def test_ray_actors_give_the_one_process_store(demo, one_process, tmp_path) -> N
         for k, settings in enumerate(SETTINGS):
             bitrock.abc(demo, backend="cpu", out=tmp_path / f"ray{k}", progress=False, executor=executor, **settings)
             assert_same_store(one_process[k], tmp_path / f"ray{k}")
+        assert_same_evidence(one_process_evidence, bitrock.evidence(demo, executor=executor, **EVIDENCE))
         executor.shutdown()
     finally:
         ray.shutdown()

@@ -47,7 +47,8 @@ pub use noise::{LagSums, NoiseEvidence, NoiseModel, log_likelihood_constant};
 use super::Observer;
 use super::posterior::systematic_from;
 use crate::error::{Error, Result};
-use crate::eval::{AbcProblem, Evaluator};
+use super::shard::{Workers, score_candidates};
+use crate::eval::AbcProblem;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::Candidate;
 use crate::rng::{box_muller, key_of_seed, open_unit, philox4x32_10, uniform_between};
@@ -976,24 +977,28 @@ fn end_residuals_squared(problem: &AbcProblem, c: &Candidate) -> f64 {
     (e(0).powi(2) + e(n - 1).powi(2)) / problem.sum_sq_torque
 }
 
-/// The evidence of every law in the evaluator's prior, by [`EvidenceConfig`]'s tempered
-/// samplers (see the module documentation). `observer` is asked after every scored batch
+/// The evidence of every law in the workers' prior, by [`EvidenceConfig`]'s tempered
+/// samplers (see the module documentation), each batch scored by `workers` (one evaluator
+/// here, [`Local`](super::shard::Local), or a pool of processes: the same result, since a
+/// candidate's score depends on it alone). `observer` is asked after every scored batch
 /// whether to stop ([`Error::Interrupted`]).
-pub fn run(evaluator: &dyn Evaluator, config: &EvidenceConfig, observer: &mut dyn Observer) -> Result<Evidence> {
-    run_from(evaluator, config, &[], observer)
+pub fn run(workers: &dyn Workers, config: &EvidenceConfig, observer: &mut dyn Observer) -> Result<Evidence> {
+    run_from(workers, config, &[], observer)
 }
 
 /// [`run`], each law of `references` starting from its [`Reference`] instead of its box (a
 /// warm start: the same evidence, at a cost that depends on how near the reference is).
 pub fn run_from(
-    evaluator: &dyn Evaluator,
+    workers: &dyn Workers,
     config: &EvidenceConfig,
     references: &[Reference],
     observer: &mut dyn Observer,
 ) -> Result<Evidence> {
     config.validate()?;
     let started = Instant::now();
-    let problem = evaluator.problem();
+    let problem = workers.problem();
+    // The workers' traffic is counted per noise model.
+    let round = NoiseModel::ALL.iter().position(|&m| m == config.noise).unwrap_or(0);
     let n = problem.data_len();
     let half_n = n as f64 / 2.0;
     let prior = &problem.prior;
@@ -1021,16 +1026,14 @@ pub fn run_from(
         if islands.iter().all(|i| i.phase == Phase::Done) {
             break;
         }
-        rho.resize(batch.len(), 0.0);
+        let lagged = config.noise == NoiseModel::Ar1;
+        score_candidates(workers, round, &batch, lagged, &mut rho, &mut lag)?;
         match config.noise {
             NoiseModel::Iid => {
-                evaluator.score_params(&batch, &mut rho)?;
                 loglik.clear();
                 loglik.extend(rho.iter().map(|&r| noise::iid_log_likelihood(r, half_n)));
             }
             NoiseModel::Ar1 => {
-                lag.resize(batch.len(), 0.0);
-                evaluator.score_params_lagged(&batch, &mut rho, &mut lag)?;
                 // φ integrated out per candidate (a Newton search and a quadrature): in
                 // parallel, most of this model's time on the host otherwise.
                 batch
@@ -1119,7 +1122,7 @@ pub fn run_from(
         candidates_scored,
         evaluations: candidates_scored * n as u64,
         seconds: started.elapsed().as_secs_f64(),
-        backend: evaluator.backend().to_string(),
+        backend: workers.backend().to_string(),
     })
 }
 
@@ -1163,6 +1166,7 @@ mod tests {
 
     use crate::data::Samples;
     use crate::eval::AbcProblem;
+    use crate::abc::shard::Local;
     use crate::eval::cpu::CpuEvaluator;
     use crate::prior::{LawBox, Prior};
 
@@ -1222,7 +1226,7 @@ mod tests {
             vec![1.0],
         )
         .unwrap();
-        let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None));
+        let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
         let config = EvidenceConfig {
             particles: 400,
             islands: 8,
@@ -1368,7 +1372,7 @@ mod tests {
             vec![1.0],
         )
         .unwrap();
-        let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None));
+        let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
         let config = EvidenceConfig {
             particles: 3_000,
             islands: 8,

@@ -147,6 +147,16 @@ pub trait Transport: Sync {
     fn parallelism(&self) -> usize;
 }
 
+impl<T: Transport + ?Sized> Transport for &T {
+    fn exchange(&self, requests: Vec<Vec<u8>>, payloads: &Payloads) -> Result<Exchanged> {
+        (**self).exchange(requests, payloads)
+    }
+
+    fn parallelism(&self) -> usize {
+        (**self).parallelism()
+    }
+}
+
 /// What one population cost in traffic and waiting.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Traffic {

@@ -18,6 +18,7 @@
 //! record, and undecided (never decided and wrong) where they do not.
 
 use super::{EvidenceAnalysis, EvidenceJob};
+use crate::run::{Placement, Scoring};
 use crate::abc::Observer;
 use crate::abc::evidence::{NoiseModel, strength};
 use crate::data::FieldData;
@@ -199,9 +200,15 @@ fn replicate_of(
         prior: analysis.prior.clone(),
         fit: analysis.fit,
     };
-    let evaluator = EvidenceJob::evaluator(&synthetic, &basis, backend, seed, &mut |line| observer.note(line))?;
+    let placement = Placement {
+        backend,
+        ..job.placement()
+    };
+    let problem = EvidenceJob::problem(&synthetic, &basis, seed);
+    let mut here = Scoring::Here;
+    let workers = here.workers(problem, &placement, &mut |line| observer.note(line))?;
     let outcome = job
-        .sample(basis, evaluator.as_ref(), noise_model, observer)
+        .sample(basis, workers.as_ref(), noise_model, observer)
         .map_err(|e| match e {
             Error::Numerical(m) => Error::Numerical(format!("{law} replicate {index}: {m}")),
             other => other,

@@ -140,7 +140,7 @@ pub fn check_dir(
     if let Some(backend) = backend {
         job.backend = backend;
     }
-    let analysis = job.run(&data, observer)?;
+    let analysis = job.run(&data, crate::run::Scoring::Here, observer)?;
     let stored_ln_z: Vec<Option<f64>> = document["laws"]
         .as_array()
         .map(|laws| laws.iter().map(|law| law["ln_z"].as_f64()).collect())

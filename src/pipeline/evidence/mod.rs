@@ -6,7 +6,9 @@ use crate::abc::Observer;
 use crate::abc::evidence::{self, Evidence, EvidenceConfig, NoiseEvidence, NoiseModel};
 use crate::data::FieldData;
 use crate::error::Result;
-use crate::eval::{self, AbcProblem, Backend};
+use crate::abc::shard::Workers;
+use crate::eval::{AbcProblem, Backend};
+use crate::run::{Placement, Scoring};
 use crate::fit::{self, FitOptions, LawFit};
 use crate::laws::Law;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
@@ -222,8 +224,9 @@ impl EvidenceAnalysis {
 
 impl EvidenceJob {
     /// Fits, builds the prior and scores the tempered samplers on `data`'s calibration
-    /// samples; a fallback to the CPU is said through `observer`.
-    pub fn run(&self, data: &FieldData, observer: &mut dyn Observer) -> Result<EvidenceAnalysis> {
+    /// samples where `scoring` says (here, on the job's backend, or on a pool of workers: the
+    /// same evidence); a fallback to the CPU is said through `observer`.
+    pub fn run(&self, data: &FieldData, mut scoring: Scoring, observer: &mut dyn Observer) -> Result<EvidenceAnalysis> {
         self.sampler.validate()?;
         self.fit.validate_for(&data.calibration)?;
         let file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
@@ -261,14 +264,15 @@ impl EvidenceJob {
             };
             // One evaluator for every noise model of this scaling (the same data, the same ρ);
             // what choosing it says (the backend) is said once for all scalings.
-            let evaluator = Self::evaluator(data, &basis, self.backend, self.sampler.seed, &mut |line| {
+            let problem = Self::problem(data, &basis, self.sampler.seed);
+            let workers = scoring.workers(problem, &self.placement(), &mut |line| {
                 if !said.contains(&line) {
                     said.push(line.clone());
                     observer.note(line);
                 }
             })?;
             for &model in &models {
-                let mut analysis = self.sample(basis.clone(), evaluator.as_ref(), model, observer)?;
+                let mut analysis = self.sample(basis.clone(), workers.as_ref(), model, observer)?;
                 analysis.residual_lag1 = residual_lag1.clone();
                 analyses.push(analysis);
             }
@@ -315,28 +319,29 @@ impl EvidenceJob {
         scalings
     }
 
-    /// The evaluator of `basis`' prior on `data`'s calibration samples, its candidates seeded
-    /// `seed`; which backend scores (a fallback to the CPU) is said through `note`.
-    fn evaluator(
-        data: &FieldData,
-        basis: &Basis,
-        backend: Backend,
-        seed: u64,
-        note: &mut dyn FnMut(String),
-    ) -> Result<Box<dyn eval::Evaluator>> {
-        let problem =
-            AbcProblem::new(basis.prior.clone(), seed, &data.calibration, basis.fit.w_ref_n).with_best_rho(&basis.fits);
-        eval::evaluator(problem, backend, Default::default(), note)
+    /// The problem of `basis`' prior on `data`'s calibration samples, its candidates seeded
+    /// `seed`.
+    fn problem(data: &FieldData, basis: &Basis, seed: u64) -> AbcProblem {
+        AbcProblem::new(basis.prior.clone(), seed, &data.calibration, basis.fit.w_ref_n).with_best_rho(&basis.fits)
     }
 
-    /// The evidence of `basis`' laws under the `noise` model, scored by `evaluator` (made by
-    /// [`Self::evaluator`] for `basis`; the samplers take its seed), without the separations,
+    /// Where the job's candidates are scored: on its backend, one device, the default GPU
+    /// scoring shape.
+    fn placement(&self) -> Placement {
+        Placement {
+            backend: self.backend,
+            ..Placement::default()
+        }
+    }
+
+    /// The evidence of `basis`' laws under the `noise` model, scored by `workers` (made for
+    /// [`Self::problem`] of `basis`; the samplers take its seed), without the separations,
     /// residual autocorrelations and models' comparison, which the caller adds where it wants
     /// them.
     fn sample(
         &self,
         basis: Basis,
-        evaluator: &dyn eval::Evaluator,
+        workers: &dyn Workers,
         noise: NoiseModel,
         observer: &mut dyn Observer,
     ) -> Result<EvidenceAnalysis> {
@@ -346,12 +351,12 @@ impl EvidenceJob {
                 self.sampler.particles,
                 &warm.worth,
                 &fits,
-                evaluator.problem().data_len(),
+                workers.problem().data_len(),
             ),
             _ => self.sampler.law_particles.clone(),
         };
         let sampler = EvidenceConfig {
-            seed: evaluator.problem().seed,
+            seed: workers.problem().seed,
             noise,
             law_particles,
             ..self.sampler.clone()
@@ -379,7 +384,7 @@ impl EvidenceJob {
                 .collect(),
             _ => Vec::new(),
         };
-        let evidence = evidence::run_from(evaluator, &sampler, &references, observer)?;
+        let evidence = evidence::run_from(workers, &sampler, &references, observer)?;
         Ok(EvidenceAnalysis {
             fits,
             prior,

@@ -194,6 +194,7 @@ def evidence(
     noise: str = "auto",
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
+    executor: Any = None,
 ) -> Evidence:
     """The model evidence of the laws (``m1``…``m4``; all by default) on the record's
     calibration samples, as ``bitrock evidence``. ``boxes="physical"`` integrates over boxes
@@ -209,8 +210,14 @@ def evidence(
     record's own residuals, each through the same evidence over the same boxes; K times the
     cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
     ``bitrock evidence --out``: :func:`read_evidence` reads it back and
-    :func:`stability` maps it (``force=True`` replaces the evidence it holds)."""
+    :func:`stability` maps it (``force=True`` replaces the evidence it holds).
+
+    ``executor`` scores the samplers' candidates on a pool of workers (a
+    ``concurrent.futures`` executor, a ``dask.distributed.Client`` or :func:`ray_executor`;
+    each worker on ``backend``): the evidence is the one computed here, bit for bit where the
+    workers score on the CPU. The check (``check=K``) runs in this process."""
     from . import _law_names, _note, _record
+    from ._distributed import Dispatcher
 
     options = {
         "boxes": boxes,
@@ -231,7 +238,15 @@ def evidence(
         "out": None if out is None else os.fspath(out),
         "force": force,
     }
-    document = _bitrock.evidence(_record(record), _law_names(laws), options, _note)
+    dispatcher = None if executor is None else Dispatcher(executor)
+    document = _bitrock.evidence(
+        _record(record),
+        _law_names(laws),
+        options,
+        _note,
+        dispatcher,
+        1 if dispatcher is None else dispatcher.parallelism,
+    )
     return Evidence(json.loads(document))
 
 
