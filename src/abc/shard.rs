@@ -615,13 +615,20 @@ pub fn score_candidates(
     lag.clear();
     for (first, values, lags) in outputs {
         if first != rho.len() || (lagged && lags.len() != values.len()) {
-            return Err(unexpected(&format!("scores from candidate {first} where {} was next", rho.len())));
+            return Err(unexpected(&format!(
+                "scores from candidate {first} where {} was next",
+                rho.len()
+            )));
         }
         rho.extend(values);
         lag.extend(lags);
     }
     if rho.len() != candidates.len() {
-        return Err(unexpected(&format!("{} scores for {} candidates", rho.len(), candidates.len())));
+        return Err(unexpected(&format!(
+            "{} scores for {} candidates",
+            rho.len(),
+            candidates.len()
+        )));
     }
     Ok(())
 }

@@ -94,9 +94,10 @@ pub struct EvidenceCmd {
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
     pub seed: u64,
     /// Where ρ is computed: auto = the GPU when an adapter exists (else the CPU, saying so),
-    /// gpu = the GPU or an error, cpu = the f64 reference.
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
-    pub backend: Backend,
+    /// gpu = the GPU or an error, cpu = the f64 reference [default: auto; with --resume: the
+    /// evidence's].
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
@@ -112,12 +113,23 @@ pub struct EvidenceCmd {
     pub posterior_out: Option<PathBuf>,
     /// Evidence directory: evidence.json (this document with each law's posterior sets, what
     /// `bitrock.read_evidence` reads) and posterior.csv (what `bitrock stability --run DIR`
-    /// maps), written together once the evidence (and its check) is done.
+    /// maps), written together once the evidence (and its check) is done; meanwhile DIR
+    /// keeps the evidence under way (unfinished/), which --resume continues.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Replace the evidence --out holds.
+    /// Replace the evidence --out holds (finished or under way).
     #[arg(long, requires = "out")]
     pub force: bool,
+    /// Continue the evidence under way in DIR (killed or stopped part-way) from its last saved
+    /// state, with its record and settings: the evidence the uninterrupted command gives, bit
+    /// for bit on the same backend. Then written to DIR as --out writes it.
+    #[arg(long, value_name = "DIR", conflicts_with_all = [
+        "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
+        "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
+        "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "boxes", "prior_scale", "delta", "prior", "noise",
+        "particles", "islands", "max_stages", "ess_share", "max_sweeps", "seed",
+    ])]
+    pub resume: Option<PathBuf>,
     /// No progress lines on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -137,6 +149,71 @@ impl bitrock::abc::Observer for Notes {
 
 pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
     set_threads(cmd.threads)?;
+    cmd.check.map(evidence::check_replicates).transpose()?;
+    if let Some(path) = &cmd.posterior_out {
+        bitrock::run::dir::check_output_file(path, "posterior_out", false)?;
+    }
+    let (job, data, analysis, unfinished) = start_or_resume(cmd)?;
+    let dir = cmd.resume.as_ref().or(cmd.out.as_ref());
+    finish(cmd, &job, &data, &analysis, unfinished).inspect_err(|_| {
+        if let Some(dir) = dir {
+            still_under_way(dir);
+        }
+    })
+}
+
+/// Says where the evidence under way is kept after a failure, and how to continue it.
+fn still_under_way(dir: &std::path::Path) {
+    if bitrock::run::dir::is_unfinished_evidence_dir(dir) {
+        print::note(format_args!(
+            "note: the evidence so far is kept in {0}; continue it with `bitrock evidence --resume {0}`",
+            dir.display()
+        ));
+    }
+}
+
+/// The evidence of a new job (kept under way in --out, when given, as it goes) or of the one
+/// --resume continues: its job, record and analysis, and its directory under way.
+fn start_or_resume(
+    cmd: &EvidenceCmd,
+) -> anyhow::Result<(
+    EvidenceJob,
+    FieldData,
+    EvidenceAnalysis,
+    Option<evidence::dir::Unfinished>,
+)> {
+    if let Some(dir) = &cmd.resume {
+        let (unfinished, mut job, data, progress) = evidence::dir::Unfinished::open(dir)?;
+        if let Some(backend) = cmd.backend {
+            job.backend = backend;
+        }
+        let analysis = unfinished
+            .run(&job, &data, progress, Default::default(), &mut Notes)
+            .inspect_err(|_| still_under_way(dir))?;
+        return Ok((job, data, analysis, Some(unfinished)));
+    }
+    let job = new_job(cmd)?;
+    if let Some(dir) = &cmd.out {
+        evidence::dir::check_out(dir, cmd.force)?;
+    }
+    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    match &cmd.out {
+        None => {
+            let analysis = job.run(&data, Default::default(), &mut Notes)?;
+            Ok((job, data, analysis, None))
+        }
+        Some(dir) => {
+            let unfinished = evidence::dir::Unfinished::start(dir, cmd.force, &job, &data)?;
+            let analysis = unfinished
+                .run(&job, &data, Default::default(), Default::default(), &mut Notes)
+                .inspect_err(|_| still_under_way(dir))?;
+            Ok((job, data, analysis, Some(unfinished)))
+        }
+    }
+}
+
+/// The job the flags describe.
+fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<EvidenceJob> {
     let job = EvidenceJob {
         laws: cmd.fit.laws()?,
         fit: cmd.fit.options()?,
@@ -145,7 +222,7 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
             Boxes::Delta => EvidencePrior::Delta { delta: cmd.delta },
         },
         prior_file: cmd.prior.clone(),
-        backend: cmd.backend,
+        backend: cmd.backend.unwrap_or_default(),
         sampler: EvidenceConfig {
             particles: cmd.particles,
             islands: cmd.islands,
@@ -160,17 +237,19 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
         separations: true,
     };
     job.sampler.validate()?;
-    cmd.check.map(evidence::check_replicates).transpose()?;
+    Ok(job)
+}
+
+/// The evidence's check, its directory and posterior written, its tables or JSON printed.
+fn finish(
+    cmd: &EvidenceCmd,
+    job: &EvidenceJob,
+    data: &FieldData,
+    analysis: &EvidenceAnalysis,
+    unfinished: Option<evidence::dir::Unfinished>,
+) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.posterior_out {
-        bitrock::run::dir::check_output_file(path, "posterior_out", false)?;
-    }
-    if let Some(dir) = &cmd.out {
-        evidence::dir::check_out(dir, cmd.force)?;
-    }
-    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
-    let analysis = job.run(&data, Default::default(), &mut Notes)?;
-    if let Some(path) = &cmd.posterior_out {
-        let csv = analysis.posterior_csv(&job.laws, &data);
+        let csv = analysis.posterior_csv(&job.laws, data);
         bitrock::run::dir::write_whole(path, "posterior_out", false, |file| file.write_all(&csv))?;
         if let Some(w_ref_n) = analysis.fit.w_ref_n {
             print::note(format_args!(
@@ -190,15 +269,16 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
                     print::note(format_args!("evidence check: replicate {done}/{total}"));
                 }
             };
-            evidence::check(&job, &data, &analysis, k, &mut progress, &mut Notes)
+            evidence::check(job, data, analysis, k, &mut progress, &mut Notes)
         })
         .transpose()?;
-    if let Some(dir) = &cmd.out {
-        let mut document = analysis.document(&data, &job.prior.describe(), true);
+    if let Some(unfinished) = unfinished {
+        let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("a directory under way");
+        let mut document = analysis.document(data, &job.prior.describe(), true);
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
         }
-        evidence::dir::save(dir, cmd.force, &document, &analysis, &job, &data)?;
+        unfinished.finish(&document, analysis, job, data)?;
         print::note(format_args!(
             "note: evidence written to {} (`bitrock stability --run {}` maps its posterior, `bitrock report {}` draws it)",
             dir.display(),
@@ -208,13 +288,13 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
     }
     let mut out = print::stdout();
     if cmd.json {
-        let mut document = analysis.document(&data, &job.prior.describe(), false);
+        let mut document = analysis.document(data, &job.prior.describe(), false);
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
         }
         print::json(&mut out, document)?;
     } else {
-        tables(&mut out, &data, &job, &analysis)?;
+        tables(&mut out, data, job, analysis)?;
         if let Some(check) = &check {
             check_table(&mut out, check)?;
         }

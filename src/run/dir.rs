@@ -48,6 +48,12 @@ pub const POSTERIOR_CSV: &str = "posterior.csv";
 pub const RECORD_JSON: &str = "record.json";
 /// An evidence directory's job and the text of its law files: what computes it again.
 pub const JOB_JSON: &str = "job.json";
+/// Where an evidence directory keeps an evidence under way: its job and record (as
+/// [`JOB_JSON`] and [`RECORD_JSON`]) and the samplers' progress ([`PROGRESS_BIN`]), gone once
+/// the evidence is written.
+pub const UNFINISHED_DIR: &str = "unfinished";
+/// The samplers' progress of an evidence under way (postcard bytes).
+pub const PROGRESS_BIN: &str = "progress.bin";
 /// A report's document.
 pub const REPORT_MD: &str = "report.md";
 /// A report's figures directory (SVG and PNG).
@@ -90,7 +96,11 @@ impl Owned {
             (Owned::Selection, [name]) => !is_dir && SELECTION_FILES.contains(name),
             (Owned::Watch, [name]) => !is_dir && (*name == WATCH_STORE_FILE || WATCH_STORE_COMPANIONS.contains(name)),
             (Owned::Evidence, [name]) => {
-                !is_dir && [EVIDENCE_JSON, POSTERIOR_CSV, DATA_CSV, RECORD_JSON, JOB_JSON].contains(name)
+                (!is_dir && [EVIDENCE_JSON, POSTERIOR_CSV, DATA_CSV, RECORD_JSON, JOB_JSON].contains(name))
+                    || (is_dir && *name == UNFINISHED_DIR)
+            }
+            (Owned::Evidence, [UNFINISHED_DIR, name]) => {
+                !is_dir && [JOB_JSON, RECORD_JSON, PROGRESS_BIN].contains(name)
             }
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,
@@ -100,6 +110,12 @@ impl Owned {
             _ => false,
         }
     }
+}
+
+/// True when `dir` holds an evidence under way (its [`UNFINISHED_DIR`] with a job) and no run
+/// store.
+pub fn is_unfinished_evidence_dir(dir: &Path) -> bool {
+    dir.join(UNFINISHED_DIR).join(JOB_JSON).is_file() && !is_run_dir(dir)
 }
 
 /// True when `dir` holds an evidence (a file named [`EVIDENCE_JSON`]) and no run store.
@@ -421,6 +437,12 @@ mod tests {
         assert!(Owned::Evidence.owns(p("evidence.json"), false));
         assert!(Owned::Evidence.owns(p("posterior.csv"), false));
         assert!(!Owned::Evidence.owns(p("run.sqlite"), false) && !Owned::Evidence.owns(p("evidence.json"), true));
+        assert!(
+            Owned::Evidence.owns(p("unfinished"), true) && Owned::Evidence.owns(p("unfinished/progress.bin"), false)
+        );
+        assert!(
+            !Owned::Evidence.owns(p("unfinished/notes.txt"), false) && !Owned::Evidence.owns(p("unfinished"), false)
+        );
         assert!(Owned::Report.owns(p("figures/fits.png"), false));
         assert!(!Owned::Report.owns(p("figures/my-notes.md"), false));
         assert!(!Owned::Report.owns(p("my-notes.md"), false));

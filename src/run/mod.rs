@@ -22,13 +22,13 @@ pub use store::{Setup, State, Store, Stored};
 
 use crate::abc::floor;
 use crate::abc::rejection;
+use crate::abc::shard::Devices;
 use crate::abc::shard::{self, Local, Workers};
 use crate::abc::smc;
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::gpu::tune::ShapeWish;
-use crate::abc::shard::Devices;
 use crate::eval::{AbcProblem, Backend, Evaluator};
 use crate::files;
 use crate::fit;

@@ -6,6 +6,7 @@ use crate::support::{bin, outcome, rng, samples};
 use bitrock::Law;
 use bitrock::abc::Silent;
 use bitrock::abc::evidence::{self, EvidenceConfig, NoiseModel, log_likelihood_constant};
+use bitrock::abc::shard::Local;
 use bitrock::eval::AbcProblem;
 use bitrock::eval::Backend;
 use bitrock::eval::cpu::CpuEvaluator;
@@ -80,7 +81,7 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         upper: upper.iter().map(|&v| v as f32).collect(),
     };
     let prior = Prior::new(vec![bx], vec![1.0]).unwrap();
-    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None));
+    let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
     let config = EvidenceConfig {
         particles: 400,
         islands: 8,
@@ -117,7 +118,7 @@ fn the_same_seed_gives_the_same_evidence_and_another_seed_agrees_within_its_erro
         vec![1.0, 1.0],
     )
     .unwrap();
-    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None));
+    let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
     let config = |seed| EvidenceConfig {
         particles: 200,
         islands: 4,
@@ -321,7 +322,7 @@ fn checked(laws: &[Law], data: &bitrock::data::FieldData, replicates: usize) -> 
         },
         ..EvidenceJob::default()
     };
-    let analysis = job.run(data, &mut Silent).unwrap();
+    let analysis = job.run(data, Default::default(), &mut Silent).unwrap();
     let check = check(&job, data, &analysis, replicates, &mut |_, _| {}, &mut Silent).unwrap();
     (analysis, check)
 }
@@ -418,7 +419,13 @@ fn the_data_choose_the_model_of_the_residuals() {
         },
         ..EvidenceJob::default()
     };
-    let steady = job.run(&m2_with_fluctuating_wob(dir.path(), "0"), &mut Silent).unwrap();
+    let steady = job
+        .run(
+            &m2_with_fluctuating_wob(dir.path(), "0"),
+            Default::default(),
+            &mut Silent,
+        )
+        .unwrap();
     // A constant weight on bit scales nothing: the two noise models alone.
     let rows = &steady.noise_models;
     assert_eq!(rows.len(), 2);
@@ -431,7 +438,11 @@ fn the_data_choose_the_model_of_the_residuals() {
     assert_eq!(steady.fit.w_ref_n, None);
 
     let driven = job
-        .run(&m2_with_fluctuating_wob(dir.path(), "12"), &mut Silent)
+        .run(
+            &m2_with_fluctuating_wob(dir.path(), "12"),
+            Default::default(),
+            &mut Silent,
+        )
         .unwrap();
     let rows = &driven.noise_models;
     for row in rows {
@@ -724,4 +735,158 @@ fn check_selection_of_an_evidence_directory_is_the_evidence_s_own_check() {
     let (code, _, err) = check(&[]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("job.json") && err.contains("without its job"), "{err}");
+}
+
+/// The document of the evidence directory `out`, without its wall-clock seconds (the one thing
+/// two computations of an evidence do not share).
+fn stored_evidence(out: &std::path::Path) -> serde_json::Value {
+    fn without_seconds(v: &mut serde_json::Value) {
+        match v {
+            serde_json::Value::Object(map) => {
+                map.remove("seconds");
+                map.values_mut().for_each(without_seconds);
+            }
+            serde_json::Value::Array(items) => items.iter_mut().for_each(without_seconds),
+            _ => {}
+        }
+    }
+    let text = std::fs::read_to_string(out.join("evidence.json")).unwrap();
+    let mut stored: serde_json::Value = serde_json::from_str(&text).unwrap();
+    without_seconds(&mut stored);
+    stored
+}
+
+/// Counts an evidence's scored batches, and stops it after `stop` of them as a kill would (the
+/// batch just scored lost, what was saved before it kept); `stop` 0 lets it run.
+struct StopAfter {
+    stop: usize,
+    scored: usize,
+}
+
+impl StopAfter {
+    fn new(stop: usize) -> Self {
+        Self { stop, scored: 0 }
+    }
+}
+
+impl bitrock::abc::Observer for StopAfter {
+    fn interrupted(&mut self) -> bool {
+        self.scored += 1;
+        self.scored == self.stop
+    }
+}
+
+/// An evidence stopped part-way keeps what it did in its directory, and `--resume` continues it
+/// to the evidence of the uninterrupted job, bit for bit: stopped in its first part (one of
+/// four: two models of the residuals, the torque scaled by the weight on bit or not), then
+/// again in a later one, its state saved after every batch, then finished, scoring only the
+/// batches not done (one lost per stop); stopped once and finished by the command. The
+/// directory under way is refused as a new evidence's `--out`, and a finished one by
+/// `--resume`; a progress file that does not read is named.
+#[test]
+fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
+    use bitrock::pipeline::evidence::dir::Unfinished;
+    let dir = tempfile::tempdir().unwrap();
+    let record = m2_record_with_wob(dir.path(), "20", "60", "10");
+    let data = bitrock::data::read_field_data(&record, &Default::default()).unwrap();
+    let job = EvidenceJob {
+        laws: vec![Law::M2, Law::M3],
+        backend: Backend::Cpu,
+        sampler: EvidenceConfig {
+            particles: 100,
+            islands: 2,
+            seed: 4,
+            ..EvidenceConfig::default()
+        },
+        ..EvidenceJob::default()
+    };
+    let finished = |out: &std::path::Path, unfinished: Unfinished, analysis: &EvidenceAnalysis| {
+        let document = analysis.document(&data, &job.prior.describe(), true);
+        unfinished.finish(&document, analysis, &job, &data).unwrap();
+        stored_evidence(out)
+    };
+
+    let whole = dir.path().join("whole");
+    let unfinished = Unfinished::start(&whole, false, &job, &data).unwrap();
+    let mut all = StopAfter::new(0);
+    let analysis = unfinished
+        .run(&job, &data, Default::default(), Default::default(), &mut all)
+        .unwrap();
+    assert_eq!(analysis.noise_models.len(), 4);
+    let uninterrupted = finished(&whole, unfinished, &analysis);
+    assert!(!whole.join("unfinished").exists());
+
+    // Stopped after 5 batches, then after 300 more, then finished.
+    let stop = |out: &std::path::Path, batches: usize| {
+        let (mut unfinished, stored_job, stored_data, progress) = Unfinished::open(out).unwrap();
+        assert_eq!(stored_job, job);
+        unfinished.every_s = 0.0;
+        let stopped = unfinished.run(
+            &job,
+            &stored_data,
+            progress,
+            Default::default(),
+            &mut StopAfter::new(batches),
+        );
+        assert!(matches!(stopped, Err(bitrock::Error::Interrupted)), "{stopped:?}");
+    };
+    let twice = dir.path().join("twice");
+    drop(Unfinished::start(&twice, false, &job, &data).unwrap());
+    stop(&twice, 5);
+    let progress = |out: &std::path::Path| Unfinished::open(out).unwrap().3;
+    assert!(progress(&twice).done.is_empty() && progress(&twice).current.is_some());
+    stop(&twice, 300);
+    let done = progress(&twice).done.len();
+    assert!((1..4).contains(&done), "stopped in part {} of 4", done + 1);
+    let (unfinished, _, _, saved) = Unfinished::open(&twice).unwrap();
+    let mut rest = StopAfter::new(0);
+    let analysis = unfinished
+        .run(&job, &data, saved, Default::default(), &mut rest)
+        .unwrap();
+    assert_eq!(finished(&twice, unfinished, &analysis), uninterrupted);
+    assert_eq!(
+        rest.scored,
+        all.scored - (5 - 1) - (300 - 1),
+        "{} batches in all",
+        all.scored
+    );
+
+    // Stopped, then finished by the command.
+    let out = dir.path().join("ev");
+    drop(Unfinished::start(&out, false, &job, &data).unwrap());
+    stop(&out, 40);
+
+    // Under way: not a new evidence's --out, nor read as an evidence.
+    let (code, _, err) = outcome(bin().args(["evidence", record.to_str().unwrap(), "--out", out.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("under way") && err.contains("--resume"), "{err}");
+    let (code, _, err) = outcome(bin().args(["evidence", "--resume", out.to_str().unwrap(), "--seed", "3"]));
+    assert_eq!(code, 2, "{err}");
+
+    let (code, json, err) = outcome(bin().args(["evidence", "--resume", out.to_str().unwrap(), "--json", "--quiet"]));
+    assert_eq!(code, 0, "{err}");
+    let printed: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(printed["laws"].as_array().unwrap().len(), 2);
+    let resumed = stored_evidence(&out);
+    assert_eq!(resumed, uninterrupted);
+    assert!(!out.join("unfinished").exists());
+    for file in ["posterior.csv", "data.csv", "record.json", "job.json"] {
+        assert_eq!(
+            std::fs::read(out.join(file)).unwrap(),
+            std::fs::read(whole.join(file)).unwrap(),
+            "{file}"
+        );
+    }
+    let (code, _, err) = outcome(bin().args(["evidence", "--resume", out.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("finished evidence"), "{err}");
+
+    // A progress file that does not read is named.
+    let broken = dir.path().join("broken");
+    let unfinished = Unfinished::start(&broken, false, &job, &data).unwrap();
+    drop(unfinished);
+    std::fs::write(broken.join("unfinished/progress.bin"), b"\x05not postcard").unwrap();
+    let (code, _, err) = outcome(bin().args(["evidence", "--resume", broken.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("progress.bin"), "{err}");
 }

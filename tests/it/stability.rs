@@ -365,7 +365,7 @@ fn the_evidence_posterior_maps_with_its_law_probabilities() {
         },
         ..EvidenceJob::default()
     }
-    .run(&data, &mut bitrock::abc::Silent)
+    .run(&data, Default::default(), &mut bitrock::abc::Silent)
     .unwrap();
     let particles = analysis.evidence.particles();
     let total: f64 = particles.iter().map(|p| p.weight).sum();

@@ -96,9 +96,9 @@ pub(crate) fn remote_on<'a>(
     let mut transport = Some(PyTransport::new(dispatcher, parallelism));
     move |problem, placement| {
         let transport = transport.take().expect("a run makes its workers once");
-        Ok(Box::new(
-            cell.get_or_init(|| Remote::new(problem, placement.backend, placement.shape, transport)),
-        ))
+        Ok(Box::new(cell.get_or_init(|| {
+            Remote::new(problem, placement.backend, placement.shape, transport)
+        })))
     }
 }
 

@@ -7,10 +7,10 @@ use crate::record::*;
 use crate::run::PyObserver;
 use bitrock::Law;
 use bitrock::abc::evidence::EvidenceConfig;
-use bitrock::run::{Placement, Scoring};
 use bitrock::pipeline::evidence::{
     DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, check as check_evidence, check_replicates,
 };
+use bitrock::run::{Placement, Scoring};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;

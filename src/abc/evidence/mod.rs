@@ -46,8 +46,8 @@ pub use noise::{LagSums, NoiseEvidence, NoiseModel, log_likelihood_constant};
 
 use super::Observer;
 use super::posterior::systematic_from;
-use crate::error::{Error, Result};
 use super::shard::{Workers, score_candidates};
+use crate::error::{Error, Result};
 use crate::eval::AbcProblem;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::Candidate;
@@ -554,6 +554,7 @@ fn words(seed: u64, stream: u32, index: u64) -> [u32; 4] {
 }
 
 /// A sequential stream of Philox words for one island.
+#[derive(Serialize, Deserialize)]
 struct Stream {
     seed: u64,
     stream: u32,
@@ -608,7 +609,7 @@ fn ess_of_step(loglik: &[f64], step: f64) -> f64 {
 }
 
 /// What an island is waiting for.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 enum Phase {
     /// Its draws from the prior to be scored.
     Prior,
@@ -618,7 +619,9 @@ enum Phase {
     Done,
 }
 
-/// One tempered sampler of one law.
+/// One tempered sampler of one law; everything it holds between two scored batches is its
+/// state ([`Checkpoints`]), less a warm start's reference, which is made again from the job.
+#[derive(Serialize, Deserialize)]
 struct Island {
     law: Law,
     slot: usize,
@@ -648,6 +651,7 @@ struct Island {
     /// The warm start's reference, where the sampler starts from one: `loglik` is then
     /// ln L + ln π − ln q (ln L alone from the box, where the last two cancel) and `ln_q`
     /// each particle's ln q.
+    #[serde(skip)]
     reference: Option<Kernels>,
     ln_q: Vec<f64>,
     proposal_ln_q: Vec<f64>,
@@ -977,21 +981,80 @@ fn end_residuals_squared(problem: &AbcProblem, c: &Candidate) -> f64 {
     (e(0).powi(2) + e(n - 1).powi(2)) / problem.sum_sq_torque
 }
 
+/// Where the samplers save their state as they go, and the state an interrupted sampling of
+/// the same job resumes from: the islands between two scored batches (particles, weights,
+/// tempering, proposal scales, each island's position in its random stream), so that a
+/// resumed sampling scores the very candidates the uninterrupted one would, and ends with its
+/// evidence bit for bit.
+pub struct Checkpoints<'a> {
+    /// The bytes [`Checkpoints::save`] was last given by an interrupted sampling of the same
+    /// job (prior, seed, settings and references); `None`: from the start.
+    pub from: Option<&'a [u8]>,
+    /// Least seconds between two saves; the state with every sampler done is always saved.
+    pub every_s: f64,
+    /// Keeps the state's bytes (an evidence directory writes them to disk).
+    pub save: &'a mut dyn FnMut(&[u8]) -> Result<()>,
+}
+
+/// How a saved state that is not the job's is refused (the start of the message).
+pub const NOT_THIS_JOB: &str = "the saved state of the evidence's samplers is not this job's";
+
+/// The state [`Checkpoints::save`] is given: seconds spent so far and the islands.
+fn encode_state(seconds: f64, islands: &[Island]) -> Vec<u8> {
+    postcard::to_stdvec(&(seconds, islands)).expect("the samplers' state serialises")
+}
+
+/// The islands of a saved state, checked against `fresh` (those the job makes at its start):
+/// the same laws, slots, streams and particle counts, or the state is another job's.
+fn decode_state(bytes: &[u8], fresh: &[Island]) -> Result<(f64, Vec<Island>)> {
+    let refuse = |why: &str| Error::Numerical(format!("{NOT_THIS_JOB}: {why}"));
+    let (seconds, mut islands): (f64, Vec<Island>) =
+        postcard::from_bytes(bytes).map_err(|e| refuse(&format!("it does not read ({e})")))?;
+    if islands.len() != fresh.len() {
+        return Err(refuse(&format!(
+            "{} samplers where the job runs {}",
+            islands.len(),
+            fresh.len()
+        )));
+    }
+    for (saved, new) in islands.iter_mut().zip(fresh) {
+        let particles = |i: &Island| i.theta.len().max(i.proposals.len());
+        if saved.law != new.law
+            || saved.slot != new.slot
+            || saved.dims != new.dims
+            || saved.lower.map(f32::to_bits) != new.lower.map(f32::to_bits)
+            || saved.upper.map(f32::to_bits) != new.upper.map(f32::to_bits)
+            || saved.stream.seed != new.stream.seed
+            || saved.stream.stream != new.stream.stream
+            || particles(saved) != particles(new)
+            || new.reference.is_some()
+        {
+            return Err(refuse(&format!(
+                "its sampler {} of law {} differs",
+                saved.stream.stream, saved.law
+            )));
+        }
+    }
+    Ok((seconds, islands))
+}
+
 /// The evidence of every law in the workers' prior, by [`EvidenceConfig`]'s tempered
 /// samplers (see the module documentation), each batch scored by `workers` (one evaluator
 /// here, [`Local`](super::shard::Local), or a pool of processes: the same result, since a
 /// candidate's score depends on it alone). `observer` is asked after every scored batch
 /// whether to stop ([`Error::Interrupted`]).
 pub fn run(workers: &dyn Workers, config: &EvidenceConfig, observer: &mut dyn Observer) -> Result<Evidence> {
-    run_from(workers, config, &[], observer)
+    run_from(workers, config, &[], None, observer)
 }
 
 /// [`run`], each law of `references` starting from its [`Reference`] instead of its box (a
-/// warm start: the same evidence, at a cost that depends on how near the reference is).
+/// warm start: the same evidence, at a cost that depends on how near the reference is), its
+/// state saved and resumed by `checkpoints` (without references: a warm start is not saved).
 pub fn run_from(
     workers: &dyn Workers,
     config: &EvidenceConfig,
     references: &[Reference],
+    mut checkpoints: Option<Checkpoints>,
     observer: &mut dyn Observer,
 ) -> Result<Evidence> {
     config.validate()?;
@@ -1014,8 +1077,21 @@ pub fn run_from(
             ));
         }
     }
+    let mut seconds_before = 0.0;
+    if let Some(from) = checkpoints.as_ref().and_then(|c| c.from) {
+        (seconds_before, islands) = decode_state(from, &islands)?;
+    }
+    let seconds = |started: Instant| seconds_before + started.elapsed().as_secs_f64();
+    let mut saved = Instant::now();
     let (mut batch, mut rho, mut lag, mut loglik) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     loop {
+        let done = islands.iter().all(|i| i.phase == Phase::Done);
+        if let Some(c) = checkpoints.as_mut()
+            && (done || saved.elapsed().as_secs_f64() >= c.every_s)
+        {
+            (c.save)(&encode_state(seconds(started), &islands))?;
+            saved = Instant::now();
+        }
         batch.clear();
         let mut counts = Vec::with_capacity(islands.len());
         for island in &islands {
@@ -1121,7 +1197,7 @@ pub fn run_from(
         config: config.clone(),
         candidates_scored,
         evaluations: candidates_scored * n as u64,
-        seconds: started.elapsed().as_secs_f64(),
+        seconds: seconds(started),
         backend: workers.backend().to_string(),
     })
 }
@@ -1164,9 +1240,9 @@ mod tests {
         assert!((ess_of_step(&[0.0, f64::NEG_INFINITY], 0.5) - 1.0).abs() < 1e-12);
     }
 
+    use crate::abc::shard::Local;
     use crate::data::Samples;
     use crate::eval::AbcProblem;
-    use crate::abc::shard::Local;
     use crate::eval::cpu::CpuEvaluator;
     use crate::prior::{LawBox, Prior};
 
@@ -1262,6 +1338,7 @@ mod tests {
                 &evaluator,
                 &config,
                 std::slice::from_ref(&reference),
+                None,
                 &mut super::super::Silent,
             )
             .unwrap();

@@ -18,7 +18,6 @@
 //! record, and undecided (never decided and wrong) where they do not.
 
 use super::{EvidenceAnalysis, EvidenceJob};
-use crate::run::{Placement, Scoring};
 use crate::abc::Observer;
 use crate::abc::evidence::{NoiseModel, strength};
 use crate::data::FieldData;
@@ -26,6 +25,7 @@ use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::fit::residuals;
 use crate::laws::Law;
+use crate::run::{Placement, Scoring};
 use crate::selection::{draw_by_weight, replicate_seed, synthesize};
 use crate::separation::UNDECIDED_NATS;
 use rand::SeedableRng;
@@ -208,7 +208,7 @@ fn replicate_of(
     let mut here = Scoring::Here;
     let workers = here.workers(problem, &placement, &mut |line| observer.note(line))?;
     let outcome = job
-        .sample(basis, workers.as_ref(), noise_model, observer)
+        .sample(basis, workers.as_ref(), noise_model, None, observer)
         .map_err(|e| match e {
             Error::Numerical(m) => Error::Numerical(format!("{law} replicate {index}: {m}")),
             other => other,

@@ -7,17 +7,24 @@
 //! written together or not at all. The directory is read, reported and mapped without the law
 //! files, and computed again and checked by re-simulation ([`check_dir`],
 //! `bitrock check-selection DIR`).
+//!
+//! While the evidence is computed, the directory keeps it under way in `unfinished/`
+//! ([`Unfinished`]): its job and record at the start, the samplers' progress as they go. An
+//! evidence killed part-way is continued from there (`bitrock evidence --resume DIR`) to the
+//! evidence the uninterrupted job gives, bit for bit; writing the finished evidence removes it.
 
 use super::check::{EvidenceCheck, check, check_replicates};
-use super::{EvidenceAnalysis, EvidenceJob};
+use super::{EvidenceAnalysis, EvidenceJob, Progress, Saving};
 use crate::abc::Observer;
 use crate::abc::Particle;
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::files;
+use crate::run::Scoring;
 use crate::run::dir::{
-    DATA_CSV, EVIDENCE_JSON, JOB_JSON, Owned, POSTERIOR_CSV, RECORD_JSON, is_run_dir, owns_unchanged, refuse_inside_run,
+    DATA_CSV, EVIDENCE_JSON, JOB_JSON, Owned, POSTERIOR_CSV, PROGRESS_BIN, RECORD_JSON, UNFINISHED_DIR, is_run_dir,
+    is_unfinished_evidence_dir, owns_unchanged, refuse_inside_run,
 };
 use crate::units::TorqueUnit;
 use std::path::{Path, PathBuf};
@@ -40,6 +47,15 @@ pub fn check_out(dir: &Path, force: bool) -> Result<()> {
     files::refuse_foreign(dir, "out", &|rel, is_dir| {
         owns_unchanged(Owned::Evidence, dir, rel, is_dir)
     })?;
+    if is_unfinished_evidence_dir(dir) && !force {
+        return Err(Error::setting(
+            "out",
+            format!(
+                "{0} holds an evidence under way; continue it with `bitrock evidence --resume {0}` (Python: `bitrock.resume_evidence`), or pass `force` to start again",
+                dir.display()
+            ),
+        ));
+    }
     if dir.join(EVIDENCE_JSON).is_file() && !force {
         return Err(Error::setting(
             "out",
@@ -47,6 +63,157 @@ pub fn check_out(dir: &Path, force: bool) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+/// Least seconds between two saves of an evidence's progress within one of its parts.
+pub const SAVE_EVERY_S: f64 = 10.0;
+
+/// An evidence under way in its directory: the directory locked (one writer at a time), the
+/// job and record kept in `unfinished/`, the samplers' progress saved there as they go.
+pub struct Unfinished {
+    dir: PathBuf,
+    _lock: files::DirLock,
+    /// Least seconds between two saves ([`SAVE_EVERY_S`]).
+    pub every_s: f64,
+}
+
+impl Unfinished {
+    /// Starts `job`'s evidence on `data` in `dir` (refused as [`check_out`] refuses): the
+    /// directory created and locked, the job and record written to `unfinished/`, any
+    /// progress of an earlier evidence there dropped. An evidence the directory already holds
+    /// stays until this one is written ([`Self::finish`]).
+    pub fn start(dir: &Path, force: bool, job: &EvidenceJob, data: &FieldData) -> Result<Self> {
+        check_out(dir, force)?;
+        std::fs::create_dir_all(dir.join(UNFINISHED_DIR)).map_err(|source| Error::output("out", dir, source))?;
+        let lock = files::DirLock::acquire(dir)?;
+        let unfinished = dir.join(UNFINISHED_DIR);
+        match std::fs::remove_file(unfinished.join(PROGRESS_BIN)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::output("out", dir, e)),
+            _ => {}
+        }
+        files::write_own(&unfinished.join(RECORD_JSON), "out", |out| {
+            out.write_all(&serde_json::to_vec(data).expect("a record serialises"))
+        })?;
+        files::write_own(&unfinished.join(JOB_JSON), "out", |out| out.write_all(&job_json(job)))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            _lock: lock,
+            every_s: SAVE_EVERY_S,
+        })
+    }
+
+    /// The evidence under way in `dir`, locked: with its job (its law files' laws registered
+    /// in this process), its record and its progress (none yet where it was killed before its
+    /// first save).
+    pub fn open(dir: &Path) -> Result<(Self, EvidenceJob, FieldData, Progress)> {
+        let unfinished = dir.join(UNFINISHED_DIR);
+        if !is_unfinished_evidence_dir(dir) {
+            let message = if dir.join(EVIDENCE_JSON).is_file() {
+                "holds a finished evidence, with nothing under way to continue"
+            } else {
+                "holds no evidence under way (`bitrock evidence --out DIR` starts one)"
+            };
+            return Err(Error::setting("resume", format!("{} {message}", dir.display())));
+        }
+        let lock = files::DirLock::acquire(dir)?;
+        let job_path = unfinished.join(JOB_JSON);
+        let stored = stored_job(&job_path)?.ok_or_else(|| Error::Data {
+            path: job_path.clone(),
+            message: format!("no '{JOB}' in it"),
+        })?;
+        let job: EvidenceJob = serde_json::from_value(stored).map_err(|e| Error::Data {
+            path: job_path.clone(),
+            message: format!("its job does not read: {e}"),
+        })?;
+        let data = read_record(&unfinished.join(RECORD_JSON))?;
+        let progress_path = unfinished.join(PROGRESS_BIN);
+        let progress = match std::fs::read(&progress_path) {
+            Ok(bytes) => postcard::from_bytes(&bytes).map_err(|e| Error::Data {
+                path: progress_path.clone(),
+                message: format!("not the progress of an evidence bitrock wrote: {e}"),
+            })?,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Progress::default(),
+            Err(source) => {
+                return Err(Error::Read {
+                    path: progress_path,
+                    source,
+                });
+            }
+        };
+        Ok((
+            Self {
+                dir: dir.to_path_buf(),
+                _lock: lock,
+                every_s: SAVE_EVERY_S,
+            },
+            job,
+            data,
+            progress,
+        ))
+    }
+
+    /// Computes `job`'s evidence on `data` from `progress` where `scoring` says, saving its
+    /// progress as it goes ([`EvidenceJob::run_saving`]).
+    pub fn run(
+        &self,
+        job: &EvidenceJob,
+        data: &FieldData,
+        progress: Progress,
+        scoring: Scoring,
+        observer: &mut dyn Observer,
+    ) -> Result<EvidenceAnalysis> {
+        let path = self.dir.join(UNFINISHED_DIR).join(PROGRESS_BIN);
+        let mut save = |progress: &Progress| {
+            let bytes = postcard::to_stdvec(progress).expect("an evidence's progress serialises");
+            files::write_own(&path, "out", |out| out.write_all(&bytes))
+        };
+        let saving = Saving {
+            progress,
+            every_s: self.every_s,
+            save: &mut save,
+        };
+        job.run_saving(data, scoring, Some(saving), observer)
+            .map_err(|e| match e {
+                // A saved state that does not fit the job names the file it came from.
+                Error::Numerical(message) if message.starts_with(crate::abc::evidence::NOT_THIS_JOB) => Error::Data {
+                    path: path.clone(),
+                    message,
+                },
+                other => other,
+            })
+    }
+
+    /// Writes the finished evidence ([`save`]), replacing what the directory held: the
+    /// evidence under way goes with it.
+    pub fn finish(
+        self,
+        document: &serde_json::Value,
+        analysis: &EvidenceAnalysis,
+        job: &EvidenceJob,
+        data: &FieldData,
+    ) -> Result<()> {
+        save(&self.dir, true, document, analysis, job, data)
+    }
+}
+
+/// [`JOB_JSON`]'s bytes: the job and the text of each law file whose law it compares.
+fn job_json(job: &EvidenceJob) -> Vec<u8> {
+    let law_files: serde_json::Map<String, serde_json::Value> = job
+        .laws
+        .iter()
+        .filter_map(|law| law.file())
+        .map(|file| (file.name.clone(), file.source.clone().into()))
+        .collect();
+    pretty(&serde_json::json!({ JOB: job, LAW_FILES: law_files }))
+}
+
+/// The record of an evidence directory's [`RECORD_JSON`] at `path`.
+fn read_record(path: &Path) -> Result<FieldData> {
+    let text = files::read_text(path, "an evidence's record", MAX_RECORD_BYTES)?;
+    serde_json::from_str(&text).map_err(|e| Error::Data {
+        path: path.to_path_buf(),
+        message: format!("not a record bitrock wrote: {e}"),
+    })
 }
 
 /// Writes the evidence directory `dir` (checked by [`check_out`]) of `job`'s `analysis` on
@@ -62,20 +229,13 @@ pub fn save(
     data: &FieldData,
 ) -> Result<()> {
     check_out(dir, force)?;
-    let laws = &job.laws;
-    let law_files: serde_json::Map<String, serde_json::Value> = laws
-        .iter()
-        .filter_map(|law| law.file())
-        .map(|file| (file.name.clone(), file.source.clone().into()))
-        .collect();
-    let job = serde_json::json!({ JOB: job, LAW_FILES: law_files });
     let record = serde_json::to_vec(data).expect("a record serialises");
     let contents = [
         (PathBuf::from(EVIDENCE_JSON), pretty(document)),
-        (PathBuf::from(POSTERIOR_CSV), analysis.posterior_csv(laws, data)),
+        (PathBuf::from(POSTERIOR_CSV), analysis.posterior_csv(&job.laws, data)),
         (PathBuf::from(DATA_CSV), crate::documents::data_csv(data)),
         (PathBuf::from(RECORD_JSON), record),
-        (PathBuf::from(JOB_JSON), pretty(&job)),
+        (PathBuf::from(JOB_JSON), job_json(job)),
     ];
     files::replace_dir(
         dir,
@@ -110,7 +270,7 @@ pub fn check_dir(
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
     check_replicates(replicates)?;
-    let stored = stored_job(dir)?;
+    let stored = stored_job(&dir.join(JOB_JSON))?;
     let mut document = read_json(&dir.join(EVIDENCE_JSON), "an evidence document")?;
     let path = dir.join(JOB_JSON);
     let refuse = |message: String| Error::Data {
@@ -131,12 +291,7 @@ pub fn check_dir(
             prior_file.display()
         )));
     }
-    let record_path = dir.join(RECORD_JSON);
-    let text = files::read_text(&record_path, "an evidence's record", MAX_RECORD_BYTES)?;
-    let data: FieldData = serde_json::from_str(&text).map_err(|e| Error::Data {
-        path: record_path.clone(),
-        message: format!("not a record bitrock wrote: {e}"),
-    })?;
+    let data = read_record(&dir.join(RECORD_JSON))?;
     if let Some(backend) = backend {
         job.backend = backend;
     }
@@ -167,7 +322,7 @@ pub fn check_dir(
 /// The document of the evidence directory `dir`, its law files' laws registered in this
 /// process (read from its job, where it keeps one).
 pub fn read(dir: &Path) -> Result<serde_json::Value> {
-    stored_job(dir)?;
+    stored_job(&dir.join(JOB_JSON))?;
     read_json(&dir.join(EVIDENCE_JSON), "an evidence document")
 }
 
@@ -186,10 +341,10 @@ fn read_json(path: &Path, what: &str) -> Result<serde_json::Value> {
     })
 }
 
-/// The job of the evidence directory `dir`, its law files' laws registered in this process;
-/// `None` for a directory an earlier bitrock wrote without one.
-fn stored_job(dir: &Path) -> Result<Option<serde_json::Value>> {
-    let path = dir.join(JOB_JSON);
+/// The job of an evidence directory's [`JOB_JSON`] at `path`, its law files' laws registered in
+/// this process; `None` for a directory an earlier bitrock wrote without one.
+fn stored_job(path: &Path) -> Result<Option<serde_json::Value>> {
+    let path = path.to_path_buf();
     if !path.exists() {
         return Ok(None);
     }

@@ -4,14 +4,14 @@
 
 use crate::abc::Observer;
 use crate::abc::evidence::{self, Evidence, EvidenceConfig, NoiseEvidence, NoiseModel};
+use crate::abc::shard::Workers;
 use crate::data::FieldData;
 use crate::error::Result;
-use crate::abc::shard::Workers;
 use crate::eval::{AbcProblem, Backend};
-use crate::run::{Placement, Scoring};
 use crate::fit::{self, FitOptions, LawFit};
 use crate::laws::Law;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
+use crate::run::{Placement, Scoring};
 use crate::separation::{self, Separation};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -149,6 +149,25 @@ pub fn particles_by_worth(particles: usize, before: &[(Law, f64)], fits: &[LawFi
         .collect()
 }
 
+/// An evidence under way: the samplers' state at the end of each part done (a torque scaling
+/// under a noise model, in the order the job computes them) and the last one saved of the part
+/// in progress ([`evidence::Checkpoints`]). An evidence directory keeps it while the evidence
+/// is computed, and a resumed evidence ([`EvidenceJob::run_saving`]) goes on from it to the
+/// evidence the uninterrupted job gives, bit for bit.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Progress {
+    pub done: Vec<Vec<u8>>,
+    pub current: Option<Vec<u8>>,
+}
+
+/// Where an evidence's [`Progress`] is kept as it goes: from what, how often, by what.
+pub struct Saving<'a> {
+    pub progress: Progress,
+    /// Least seconds between two saves within a part; each part done is saved at once.
+    pub every_s: f64,
+    pub save: &'a mut dyn FnMut(&Progress) -> Result<()>,
+}
+
 /// What the samplers of one torque scaling start from: the least-squares fits, the boxes, and
 /// the fit options they were made with.
 #[derive(Clone, Debug)]
@@ -226,8 +245,26 @@ impl EvidenceJob {
     /// Fits, builds the prior and scores the tempered samplers on `data`'s calibration
     /// samples where `scoring` says (here, on the job's backend, or on a pool of workers: the
     /// same evidence); a fallback to the CPU is said through `observer`.
-    pub fn run(&self, data: &FieldData, mut scoring: Scoring, observer: &mut dyn Observer) -> Result<EvidenceAnalysis> {
+    pub fn run(&self, data: &FieldData, scoring: Scoring, observer: &mut dyn Observer) -> Result<EvidenceAnalysis> {
+        self.run_saving(data, scoring, None, observer)
+    }
+
+    /// [`Self::run`], its progress kept by `saving` and resumed from its `progress` (a job
+    /// without a warm start: a warm start's samplers are not saved).
+    pub fn run_saving(
+        &self,
+        data: &FieldData,
+        mut scoring: Scoring,
+        mut saving: Option<Saving>,
+        observer: &mut dyn Observer,
+    ) -> Result<EvidenceAnalysis> {
         self.sampler.validate()?;
+        if saving.is_some() && self.warm.is_some() {
+            return Err(crate::error::Error::Numerical(
+                "an evidence started from a previous posterior is not saved as it goes".into(),
+            ));
+        }
+        let mut part = 0;
         self.fit.validate_for(&data.calibration)?;
         let file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
         let models = match self.noise {
@@ -272,7 +309,42 @@ impl EvidenceJob {
                 }
             })?;
             for &model in &models {
-                let mut analysis = self.sample(basis.clone(), workers.as_ref(), model, observer)?;
+                let mut analysis = match saving.as_mut() {
+                    None => self.sample(basis.clone(), workers.as_ref(), model, None, observer)?,
+                    Some(saving) => {
+                        let Saving {
+                            progress,
+                            every_s,
+                            save,
+                        } = saving;
+                        if let Some(state) = progress.done.get(part).cloned() {
+                            // Done before: its final state gives its evidence without a score.
+                            let checkpoints = evidence::Checkpoints {
+                                from: Some(&state),
+                                every_s: f64::INFINITY,
+                                save: &mut |_| Ok(()),
+                            };
+                            self.sample(basis.clone(), workers.as_ref(), model, Some(checkpoints), observer)?
+                        } else {
+                            let from = progress.current.take();
+                            let checkpoints = evidence::Checkpoints {
+                                from: from.as_deref(),
+                                every_s: *every_s,
+                                save: &mut |bytes| {
+                                    progress.current = Some(bytes.to_vec());
+                                    save(progress)
+                                },
+                            };
+                            let analysis =
+                                self.sample(basis.clone(), workers.as_ref(), model, Some(checkpoints), observer)?;
+                            let last = progress.current.take().expect("a finished sampling saves its state");
+                            progress.done.push(last);
+                            save(progress)?;
+                            analysis
+                        }
+                    }
+                };
+                part += 1;
                 analysis.residual_lag1 = residual_lag1.clone();
                 analyses.push(analysis);
             }
@@ -343,16 +415,14 @@ impl EvidenceJob {
         basis: Basis,
         workers: &dyn Workers,
         noise: NoiseModel,
+        checkpoints: Option<evidence::Checkpoints>,
         observer: &mut dyn Observer,
     ) -> Result<EvidenceAnalysis> {
         let Basis { fits, prior, fit } = basis;
         let law_particles = match &self.warm {
-            Some(warm) if !warm.worth.is_empty() => particles_by_worth(
-                self.sampler.particles,
-                &warm.worth,
-                &fits,
-                workers.problem().data_len(),
-            ),
+            Some(warm) if !warm.worth.is_empty() => {
+                particles_by_worth(self.sampler.particles, &warm.worth, &fits, workers.problem().data_len())
+            }
             _ => self.sampler.law_particles.clone(),
         };
         let sampler = EvidenceConfig {
@@ -384,7 +454,7 @@ impl EvidenceJob {
                 .collect(),
             _ => Vec::new(),
         };
-        let evidence = evidence::run_from(workers, &sampler, &references, observer)?;
+        let evidence = evidence::run_from(workers, &sampler, &references, checkpoints, observer)?;
         Ok(EvidenceAnalysis {
             fits,
             prior,

@@ -130,11 +130,13 @@ def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, opti
     document and returned.
     """
 
-def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None) -> str:
+def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
     """
     The evidence of `laws` (`None`: all four) on the record, with the options of
     `bitrock.evidence`: `bitrock evidence --json`'s document, with each law's posterior sets
-    (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added.
+    (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added. With
+    a `dispatcher` (`bitrock._distributed.Dispatcher`), the samplers' candidates are scored by
+    its workers, `parallelism` tasks a batch unless it says otherwise.
     """
 
 def fit(record: Record, laws: SupportsGetItem[int, str] | None, options: dict) -> str:
