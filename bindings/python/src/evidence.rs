@@ -7,8 +7,10 @@ use crate::record::*;
 use crate::run::PyObserver;
 use bitrock::Law;
 use bitrock::abc::evidence::EvidenceConfig;
+use bitrock::data::FieldData;
+use bitrock::pipeline::evidence::dir::Unfinished;
 use bitrock::pipeline::evidence::{
-    DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, check as check_evidence, check_replicates,
+    DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, Progress, check as check_evidence, check_replicates,
 };
 use bitrock::run::{Placement, Scoring};
 use pyo3::prelude::*;
@@ -81,18 +83,80 @@ pub(crate) fn evidence(
     }
     let out: Option<PathBuf> = kwarg(options, "out")?;
     let force: bool = kwarg(options, "force")?.unwrap_or(false);
-    if let Some(dir) = &out {
-        check(py, bitrock::pipeline::evidence::dir::check_out(dir, force))?;
-    }
-    let mut observer = PyObserver::new(None, note);
     let data = &record.data;
-    let result = match dispatcher {
-        None => py.detach(|| job.run(data, Scoring::Here, &mut observer)),
+    let unfinished = match &out {
+        None => None,
+        Some(dir) => Some(check(
+            py,
+            py.detach(|| Unfinished::start(dir, force, &job, data)),
+        )?),
+    };
+    let workers = Workers {
+        dispatcher,
+        parallelism,
+    };
+    compute(py, &job, data, unfinished, Progress::default(), replicates, workers, note)
+}
+
+/// Continues the evidence under way in `dir` (on `backend`, default its own), checks it with
+/// `check` replicates per law where given, and writes the directory: the document, as
+/// [`evidence`] returns it.
+#[pyfunction]
+#[pyo3(signature = (dir, backend, check, note, dispatcher=None, parallelism=1))]
+pub(crate) fn resume_evidence(
+    py: Python<'_>,
+    dir: PathBuf,
+    backend: Option<String>,
+    check: Option<usize>,
+    note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
+) -> PyResult<String> {
+    if let Some(k) = check {
+        crate::errors::check(py, check_replicates(k))?;
+    }
+    let (unfinished, mut job, data, progress) = crate::errors::check(py, py.detach(|| Unfinished::open(&dir)))?;
+    if let Some(backend) = named(py, "backend", backend)? {
+        job.backend = backend;
+    }
+    let workers = Workers {
+        dispatcher,
+        parallelism,
+    };
+    compute(py, &job, &data, Some(unfinished), progress, check, workers, note)
+}
+
+/// The pool of workers an evidence's candidates are scored by, if any.
+struct Workers {
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
+}
+
+/// `job`'s evidence on `data` from `progress` (kept as it goes in `unfinished`, and written
+/// there once done), checked with `replicates` per law where given: its document.
+#[allow(clippy::too_many_arguments)]
+fn compute(
+    py: Python<'_>,
+    job: &EvidenceJob,
+    data: &FieldData,
+    unfinished: Option<Unfinished>,
+    progress: Progress,
+    replicates: Option<usize>,
+    workers: Workers,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let mut observer = PyObserver::new(None, note);
+    let run = |scoring: Scoring, observer: &mut PyObserver| match &unfinished {
+        None => job.run(data, scoring, observer),
+        Some(unfinished) => unfinished.run(job, data, progress, scoring, observer),
+    };
+    let result = match workers.dispatcher {
+        None => py.detach(|| run(Scoring::Here, &mut observer)),
         Some(dispatcher) => {
-            let transport = PyTransport::new(dispatcher, parallelism);
+            let transport = PyTransport::new(dispatcher, workers.parallelism);
             let mut make = remote_each(&transport);
-            let mut workers = |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement);
-            let result = py.detach(|| job.run(data, Scoring::Workers(&mut workers), &mut observer));
+            let mut make = |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement);
+            let result = py.detach(|| run(Scoring::Workers(&mut make), &mut observer));
             if let Some(e) = transport.take_raised() {
                 return Err(e);
             }
@@ -106,7 +170,7 @@ pub(crate) fn evidence(
     let selection = match replicates {
         None => None,
         Some(k) => {
-            let result = py.detach(|| check_evidence(&job, data, &analysis, k, &mut |_, _| {}, &mut observer));
+            let result = py.detach(|| check_evidence(job, data, &analysis, k, &mut |_, _| {}, &mut observer));
             if let Some(e) = observer.take_raised() {
                 return Err(e);
             }
@@ -117,9 +181,8 @@ pub(crate) fn evidence(
     if let Some(selection) = selection {
         document["check"] = serde_json::to_value(&selection).expect("the check serialises");
     }
-    if let Some(dir) = &out {
-        let saved = py.detach(|| bitrock::pipeline::evidence::dir::save(dir, force, &document, &analysis, &job, data));
-        check(py, saved)?;
+    if let Some(unfinished) = unfinished {
+        check(py, py.detach(|| unfinished.finish(&document, &analysis, job, data)))?;
     }
     Ok(as_arguments(&document.to_string()))
 }

@@ -23,7 +23,7 @@ mod _bitrock {
     #[pymodule_export]
     use crate::distributed::{needs_payloads, serve};
     #[pymodule_export]
-    use crate::evidence::{evidence, is_evidence_dir, read_evidence};
+    use crate::evidence::{evidence, is_evidence_dir, read_evidence, resume_evidence};
     #[pymodule_export]
     use crate::fit::fit;
     #[pymodule_export]

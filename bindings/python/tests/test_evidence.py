@@ -182,3 +182,41 @@ def test_check_selection_of_an_evidence_directory_is_the_evidence_s_own_check(tm
     with pytest.raises(bitrock.InputError) as caught:
         bitrock.check_selection(tmp_path / "ev", replicates=2, batch=2, progress=False)
     assert caught.value.argument == "batch"
+
+
+def _without_seconds(value):
+    if isinstance(value, dict):
+        return {k: _without_seconds(v) for k, v in value.items() if k != "seconds"}
+    if isinstance(value, list):
+        return [_without_seconds(v) for v in value]
+    return value
+
+
+def test_an_evidence_stopped_by_ctrl_c_is_resumed_to_the_uninterrupted_one(demo, tmp_path) -> None:
+    import os
+    import signal
+    import threading
+
+    settings = {"laws": ["m2", "m3"], "particles": 300, "islands": 2, "seed": 2, "backend": "cpu"}
+    whole = bitrock.evidence(demo, **settings, out=tmp_path / "whole")
+    assert not (tmp_path / "whole" / "unfinished").exists()
+    # Ctrl-C half a second in (the fits and samplers take seconds): the evidence stops, kept
+    # under way in its directory.
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        bitrock.evidence(demo, **settings, out=tmp_path / "ev")
+    timer.join()
+    assert (tmp_path / "ev" / "unfinished" / "job.json").is_file()
+    with pytest.raises(bitrock.InputError, match="resume_evidence") as caught:
+        bitrock.evidence(demo, **settings, out=tmp_path / "ev")
+    assert caught.value.argument == "out"
+    resumed = bitrock.resume_evidence(tmp_path / "ev", check=1)
+    assert resumed.check is not None
+    document = _without_seconds(resumed.document)
+    del document["check"]
+    assert document == _without_seconds(whole.document)
+    assert _without_seconds(bitrock.read_evidence(tmp_path / "ev").document) == _without_seconds(resumed.document)
+    with pytest.raises(bitrock.InputError, match="finished evidence") as caught:
+        bitrock.resume_evidence(tmp_path / "ev")
+    assert caught.value.argument == "resume"

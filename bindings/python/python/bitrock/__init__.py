@@ -26,7 +26,7 @@ import pandas as pd
 from . import _bitrock
 from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError
-from ._evidence import Evidence, evidence, read_evidence
+from ._evidence import Evidence, evidence, read_evidence, resume_evidence
 from ._watch import StoredWatch, Watch, WatchUpdate, read_watch, watch
 from . import plot
 
@@ -48,6 +48,7 @@ __all__ = [
     "plot",
     "ray_executor",
     "read_evidence",
+    "resume_evidence",
     "read_record",
     "resume",
     "simulate",

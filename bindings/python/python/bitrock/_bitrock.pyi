@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "serve", "simulate", "stability", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "simulate", "stability", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -202,6 +202,13 @@ def read_watch(dir: str | PathLike[str]) -> tuple[str, list[str]]:
 def resume(path: str | PathLike[str], more: dict, progress: Any | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> Run:
     """
     Continues the run in `path` with the stopping rules in `more`.
+    """
+
+def resume_evidence(dir: str | PathLike[str], backend: str | None, check: SupportsIndex | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
+    """
+    Continues the evidence under way in `dir` (on `backend`, default its own), checks it with
+    `check` replicates per law where given, and writes the directory: the document, as
+    [`evidence`] returns it.
     """
 
 def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:

@@ -210,7 +210,9 @@ def evidence(
     record's own residuals, each through the same evidence over the same boxes; K times the
     cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
     ``bitrock evidence --out``: :func:`read_evidence` reads it back and
-    :func:`stability` maps it (``force=True`` replaces the evidence it holds).
+    :func:`stability` maps it (``force=True`` replaces the evidence it holds); meanwhile the
+    directory keeps the evidence under way, which :func:`resume_evidence` continues if the call
+    is stopped or its process killed.
 
     ``executor`` scores the samplers' candidates on a pool of workers (a
     ``concurrent.futures`` executor, a ``dask.distributed.Client`` or :func:`ray_executor`;
@@ -243,6 +245,34 @@ def evidence(
         _record(record),
         _law_names(laws),
         options,
+        _note,
+        dispatcher,
+        1 if dispatcher is None else dispatcher.parallelism,
+    )
+    return Evidence(json.loads(document))
+
+
+def resume_evidence(
+    directory: str | os.PathLike[str],
+    *,
+    backend: str | None = None,
+    check: int | None = None,
+    executor: Any = None,
+) -> Evidence:
+    """Continues the evidence under way in ``directory`` (one that ``bitrock.evidence(...,
+    out=directory)`` or ``bitrock evidence --out`` started and that was stopped or killed
+    part-way) from its last saved state, with its record and settings, then writes the
+    directory: the evidence the uninterrupted call gives, bit for bit on the same backend.
+    ``backend`` (default: the evidence's), ``check`` and ``executor`` as for :func:`evidence`.
+    As ``bitrock evidence --resume``."""
+    from . import _note
+    from ._distributed import Dispatcher
+
+    dispatcher = None if executor is None else Dispatcher(executor)
+    document = _bitrock.resume_evidence(
+        os.fspath(directory),
+        backend,
+        check,
         _note,
         dispatcher,
         1 if dispatcher is None else dispatcher.parallelism,
