@@ -86,16 +86,22 @@ pub(crate) fn evidence(
     let data = &record.data;
     let unfinished = match &out {
         None => None,
-        Some(dir) => Some(check(
-            py,
-            py.detach(|| Unfinished::start(dir, force, &job, data)),
-        )?),
+        Some(dir) => Some(check(py, py.detach(|| Unfinished::start(dir, force, &job, data)))?),
     };
     let workers = Workers {
         dispatcher,
         parallelism,
     };
-    compute(py, &job, data, unfinished, Progress::default(), replicates, workers, note)
+    compute(
+        py,
+        &job,
+        data,
+        unfinished,
+        Progress::default(),
+        replicates,
+        workers,
+        note,
+    )
 }
 
 /// Continues the evidence under way in `dir` (on `backend`, default its own), checks it with
