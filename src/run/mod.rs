@@ -64,7 +64,7 @@ pub struct Outcome {
 /// Where a run's candidates are scored.
 #[derive(Default)]
 pub enum Scoring<'a, 'w> {
-    /// In this process, on the run's backend and devices ([`here`]).
+    /// In this process, on the run's backend and devices ([`shard::here`]).
     #[default]
     Here,
     /// By the workers the function makes from the run's problem (a pool of processes or
