@@ -862,6 +862,9 @@ fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
     assert!(err.contains("under way") && err.contains("--resume"), "{err}");
     let (code, _, err) = outcome(bin().args(["evidence", "--resume", out.to_str().unwrap(), "--seed", "3"]));
     assert_eq!(code, 2, "{err}");
+    let (code, _, err) = outcome(bin().args(["stability", "--run", out.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("under way") && err.contains("--resume"), "{err}");
 
     let (code, json, err) = outcome(bin().args(["evidence", "--resume", out.to_str().unwrap(), "--json", "--quiet"]));
     assert_eq!(code, 0, "{err}");

@@ -264,7 +264,6 @@ impl EvidenceJob {
                 "an evidence started from a previous posterior is not saved as it goes".into(),
             ));
         }
-        let mut part = 0;
         self.fit.validate_for(&data.calibration)?;
         let file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
         let models = match self.noise {
@@ -273,6 +272,9 @@ impl EvidenceJob {
         };
         let mut analyses = Vec::new();
         let mut said: Vec<String> = Vec::new();
+        // Parts (a torque scaling under a noise model) in the order computed: what a saved
+        // progress counts.
+        let mut part = 0;
         for fit_options in self.scalings(data) {
             let known = match &self.warm {
                 Some(warm) if warm.scaled == fit_options.w_ref_n.is_some() => warm.fits.as_slice(),
@@ -309,41 +311,8 @@ impl EvidenceJob {
                 }
             })?;
             for &model in &models {
-                let mut analysis = match saving.as_mut() {
-                    None => self.sample(basis.clone(), workers.as_ref(), model, None, observer)?,
-                    Some(saving) => {
-                        let Saving {
-                            progress,
-                            every_s,
-                            save,
-                        } = saving;
-                        if let Some(state) = progress.done.get(part).cloned() {
-                            // Done before: its final state gives its evidence without a score.
-                            let checkpoints = evidence::Checkpoints {
-                                from: Some(&state),
-                                every_s: f64::INFINITY,
-                                save: &mut |_| Ok(()),
-                            };
-                            self.sample(basis.clone(), workers.as_ref(), model, Some(checkpoints), observer)?
-                        } else {
-                            let from = progress.current.take();
-                            let checkpoints = evidence::Checkpoints {
-                                from: from.as_deref(),
-                                every_s: *every_s,
-                                save: &mut |bytes| {
-                                    progress.current = Some(bytes.to_vec());
-                                    save(progress)
-                                },
-                            };
-                            let analysis =
-                                self.sample(basis.clone(), workers.as_ref(), model, Some(checkpoints), observer)?;
-                            let last = progress.current.take().expect("a finished sampling saves its state");
-                            progress.done.push(last);
-                            save(progress)?;
-                            analysis
-                        }
-                    }
-                };
+                let mut analysis =
+                    self.sample_saved(basis.clone(), workers.as_ref(), model, part, saving.as_mut(), observer)?;
                 part += 1;
                 analysis.residual_lag1 = residual_lag1.clone();
                 analyses.push(analysis);
@@ -404,6 +373,50 @@ impl EvidenceJob {
             backend: self.backend,
             ..Placement::default()
         }
+    }
+
+    /// [`Self::sample`] of part `part` of the job, saved by `saving` where given: a part done
+    /// before is read from its final state (nothing scored), the part under way goes on from
+    /// its last state, and each is saved as it goes and once done.
+    fn sample_saved(
+        &self,
+        basis: Basis,
+        workers: &dyn Workers,
+        noise: NoiseModel,
+        part: usize,
+        saving: Option<&mut Saving>,
+        observer: &mut dyn Observer,
+    ) -> Result<EvidenceAnalysis> {
+        let Some(Saving {
+            progress,
+            every_s,
+            save,
+        }) = saving
+        else {
+            return self.sample(basis, workers, noise, None, observer);
+        };
+        if let Some(state) = progress.done.get(part) {
+            let checkpoints = evidence::Checkpoints {
+                from: Some(state),
+                every_s: f64::INFINITY,
+                save: &mut |_| Ok(()),
+            };
+            return self.sample(basis, workers, noise, Some(checkpoints), observer);
+        }
+        let from = progress.current.take();
+        let checkpoints = evidence::Checkpoints {
+            from: from.as_deref(),
+            every_s: *every_s,
+            save: &mut |bytes| {
+                progress.current = Some(bytes.to_vec());
+                save(progress)
+            },
+        };
+        let analysis = self.sample(basis, workers, noise, Some(checkpoints), observer)?;
+        let last = progress.current.take().expect("a finished sampling saves its state");
+        progress.done.push(last);
+        save(progress)?;
+        Ok(analysis)
     }
 
     /// The evidence of `basis`' laws under the `noise` model, scored by `workers` (made for
