@@ -257,8 +257,17 @@ pub struct PriorFile {
 impl PriorFile {
     /// Reads and checks a prior file; errors name the file and, for TOML syntax, line and column.
     pub fn read(path: &Path) -> Result<Self> {
-        let text = crate::files::read_text(path, "a prior file", crate::limits::MAX_SETTINGS_FILE_BYTES)?;
-        let file: PriorFile = toml::from_str(&text).map_err(|e| {
+        Self::parse(&Self::read_text(path)?, path)
+    }
+
+    /// The text of the prior file at `path`, refused when it is too large to be one.
+    pub fn read_text(path: &Path) -> Result<String> {
+        crate::files::read_text(path, "a prior file", crate::limits::MAX_SETTINGS_FILE_BYTES)
+    }
+
+    /// Checks the text of a prior file read from `path` (named in errors); see [`Self::read`].
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        let file: PriorFile = toml::from_str(text).map_err(|e| {
             let line = e.span().map(|s| text[..s.start].lines().count().max(1) as u64);
             Error::Format {
                 path: path.to_path_buf(),

@@ -214,7 +214,7 @@ fn start_or_resume(
 
 /// The job the flags describe.
 fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<EvidenceJob> {
-    let job = EvidenceJob {
+    let mut job = EvidenceJob {
         laws: cmd.fit.laws()?,
         fit: cmd.fit.options()?,
         prior: match cmd.boxes {
@@ -222,6 +222,7 @@ fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<EvidenceJob> {
             Boxes::Delta => EvidencePrior::Delta { delta: cmd.delta },
         },
         prior_file: cmd.prior.clone(),
+        prior_text: None,
         backend: cmd.backend.unwrap_or_default(),
         sampler: EvidenceConfig {
             particles: cmd.particles,
@@ -237,6 +238,7 @@ fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<EvidenceJob> {
         separations: true,
     };
     job.sampler.validate()?;
+    job.keep_prior_text()?;
     Ok(job)
 }
 

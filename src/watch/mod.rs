@@ -683,6 +683,7 @@ impl Watch {
                 scale: self.settings.prior_scale,
             },
             prior_file: None,
+            prior_text: None,
             backend: self.settings.backend,
             sampler: EvidenceConfig {
                 seed: self.settings.evidence.seed.wrapping_add(window.index as u64),

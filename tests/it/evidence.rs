@@ -737,6 +737,63 @@ fn check_selection_of_an_evidence_directory_is_the_evidence_s_own_check() {
     assert!(err.contains("job.json") && err.contains("without its job"), "{err}");
 }
 
+/// An evidence whose boxes and law weights come from a prior file keeps the file's text: its
+/// directory is checked from it as `--check` checks it at the start, after the file is gone.
+#[test]
+fn an_evidence_directory_keeps_its_prior_file_and_is_checked_without_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let prior = dir.path().join("prior.toml");
+    std::fs::write(&prior, "[weights]\nm2 = 3.0\nm3 = 1.0\n[m2]\ng = [0.05, 2.0]\n").unwrap();
+    let out = dir.path().join("ev");
+    let evidence = |extra: &[&str]| {
+        let mut cmd = bin();
+        cmd.args([
+            "evidence",
+            "--laws",
+            "m2,m3",
+            "--thin",
+            "4",
+            "--backend",
+            "cpu",
+            "--noise",
+            "iid",
+        ]);
+        cmd.args([
+            "--particles",
+            "100",
+            "--islands",
+            "2",
+            "--quiet",
+            "--prior",
+            prior.to_str().unwrap(),
+        ]);
+        cmd.args(extra);
+        outcome(&mut cmd)
+    };
+    let (code, direct, err) = evidence(&["--check", "2", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = evidence(&["--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let job: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("job.json")).unwrap()).unwrap();
+    assert_eq!(
+        job["job"]["prior_text"],
+        std::fs::read_to_string(&prior).unwrap().as_str()
+    );
+    // The file changes after the evidence: what the directory computes again is the one it
+    // was made with.
+    std::fs::write(&prior, "[weights]\nm2 = 1.0\n").unwrap();
+    let (code, json, err) =
+        outcome(bin().args(["check-selection", out.to_str().unwrap(), "--replicates", "2", "--json"]));
+    assert_eq!(code, 0, "{err}");
+    let direct: serde_json::Value = serde_json::from_str(&direct).unwrap();
+    let mut printed: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let mut expected = direct["check"].clone();
+    printed.as_object_mut().unwrap().remove("seconds");
+    expected.as_object_mut().unwrap().remove("seconds");
+    assert_eq!(printed, expected);
+    assert!(!err.contains("differs"), "{err}");
+}
+
 /// The document of the evidence directory `out`, without its wall-clock seconds (the one thing
 /// two computations of an evidence do not share).
 fn stored_evidence(out: &std::path::Path) -> serde_json::Value {

@@ -53,11 +53,12 @@ pub(crate) fn evidence(
             ));
         }
     };
-    let job = EvidenceJob {
+    let mut job = EvidenceJob {
         laws,
         fit: fit_options(py, options)?,
         prior,
         prior_file: kwarg::<PathBuf>(options, "prior")?,
+        prior_text: None,
         backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or_default(),
         sampler: EvidenceConfig {
             particles: kwarg(options, "particles")?.unwrap_or(defaults.particles),
@@ -77,6 +78,7 @@ pub(crate) fn evidence(
         warm: None,
         separations: true,
     };
+    check(py, job.keep_prior_text())?;
     let replicates: Option<usize> = kwarg(options, "check")?;
     if let Some(k) = replicates {
         check(py, check_replicates(k))?;

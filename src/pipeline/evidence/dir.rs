@@ -285,9 +285,9 @@ pub fn check_dir(
             ));
         }
     };
-    if let Some(prior_file) = &job.prior_file {
+    if let Some(prior_file) = job.prior_file.as_ref().filter(|_| job.prior_text.is_none()) {
         return Err(refuse(format!(
-            "its boxes came from the prior file {0}, which the directory does not keep: compute it again with its check (`bitrock evidence --prior {0} --check K`, or `prior=\"{0}\", check=K` in Python)",
+            "its boxes came from the prior file {0}, which an earlier bitrock did not keep in the directory: compute it again with its check (`bitrock evidence --prior {0} --check K`, or `prior=\"{0}\", check=K` in Python)",
             prior_file.display()
         )));
     }

@@ -68,6 +68,11 @@ pub struct EvidenceJob {
     pub prior: EvidencePrior,
     /// A prior file's explicit boxes and law weights, where it gives them.
     pub prior_file: Option<PathBuf>,
+    /// The prior file's text, read once ([`Self::keep_prior_text`]): what the job's prior is
+    /// made from, and what an evidence directory keeps of it, so that the directory's evidence
+    /// is computed again from the file as it was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior_text: Option<String>,
     pub backend: Backend,
     /// The samplers' settings; their `noise` is set from [`Self::noise`].
     pub sampler: EvidenceConfig,
@@ -89,6 +94,7 @@ impl Default for EvidenceJob {
             fit: FitOptions::default(),
             prior: EvidencePrior::default(),
             prior_file: None,
+            prior_text: None,
             backend: Backend::default(),
             sampler: EvidenceConfig::default(),
             noise: None,
@@ -265,7 +271,7 @@ impl EvidenceJob {
             ));
         }
         self.fit.validate_for(&data.calibration)?;
-        let file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        let file = self.prior()?;
         let models = match self.noise {
             Some(model) => vec![model],
             None => NoiseModel::ALL.to_vec(),
@@ -332,6 +338,28 @@ impl EvidenceJob {
             analysis.separations = separation::separations(&analysis.fits, &data.calibration, &analysis.fit)?;
         }
         Ok(analysis)
+    }
+
+    /// Reads the prior file's text into the job ([`Self::prior_text`]), where it names one.
+    pub fn keep_prior_text(&mut self) -> Result<()> {
+        if let Some(path) = &self.prior_file
+            && self.prior_text.is_none()
+        {
+            self.prior_text = Some(PriorFile::read_text(path)?);
+        }
+        Ok(())
+    }
+
+    /// The prior file of the job, from its kept text where it has it.
+    fn prior(&self) -> Result<Option<PriorFile>> {
+        match (&self.prior_text, &self.prior_file) {
+            (Some(text), path) => {
+                let path = path.as_deref().unwrap_or(std::path::Path::new("the prior file kept"));
+                PriorFile::parse(text, path).map(Some)
+            }
+            (None, Some(path)) => PriorFile::read(path).map(Some),
+            (None, None) => Ok(None),
+        }
     }
 
     /// The fit options of each torque scaling compared: the job's own, and where it leaves
