@@ -271,7 +271,15 @@ fn finish(
                     print::note(format_args!("evidence check: replicate {done}/{total}"));
                 }
             };
-            evidence::check(job, data, analysis, k, &mut progress, &mut Notes)
+            evidence::check(
+                job,
+                data,
+                analysis,
+                k,
+                &mut Default::default(),
+                &mut progress,
+                &mut Notes,
+            )
         })
         .transpose()?;
     if let Some(unfinished) = unfinished {

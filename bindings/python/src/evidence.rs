@@ -12,7 +12,7 @@ use bitrock::pipeline::evidence::dir::Unfinished;
 use bitrock::pipeline::evidence::{
     DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, Progress, check as check_evidence, check_replicates,
 };
-use bitrock::run::{Placement, Scoring};
+use bitrock::run::{MakeWorkers, Placement, Scoring};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -134,6 +134,14 @@ pub(crate) fn resume_evidence(
     compute(py, &job, &data, Some(unfinished), progress, check, workers, note)
 }
 
+/// Scoring by the workers `make` makes, or here.
+fn scoring<'a, 'w>(make: &'a mut Option<Box<MakeWorkers<'w>>>) -> Scoring<'a, 'w> {
+    match make {
+        None => Scoring::Here,
+        Some(make) => Scoring::Workers(make.as_mut()),
+    }
+}
+
 /// The pool of workers an evidence's candidates are scored by, if any.
 struct Workers {
     dispatcher: Option<Py<PyAny>>,
@@ -154,37 +162,34 @@ fn compute(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let mut observer = PyObserver::new(None, note);
-    let run = |scoring: Scoring, observer: &mut PyObserver| match &unfinished {
-        None => job.run(data, scoring, observer),
-        Some(unfinished) => unfinished.run(job, data, progress, scoring, observer),
-    };
-    let result = match workers.dispatcher {
-        None => py.detach(|| run(Scoring::Here, &mut observer)),
-        Some(dispatcher) => {
-            let transport = PyTransport::new(dispatcher, workers.parallelism);
-            let mut make = remote_each(&transport);
-            let mut make = |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement);
-            let result = py.detach(|| run(Scoring::Workers(&mut make), &mut observer));
-            if let Some(e) = transport.take_raised() {
-                return Err(e);
-            }
-            result
-        }
-    };
+    let transport = workers
+        .dispatcher
+        .map(|dispatcher| PyTransport::new(dispatcher, workers.parallelism));
+    let result = py.detach(|| {
+        let mut make: Option<Box<MakeWorkers>> = transport.as_ref().map(|transport| {
+            let mut make = remote_each(transport);
+            Box::new(move |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement))
+                as Box<MakeWorkers>
+        });
+        let analysis = match &unfinished {
+            None => job.run(data, scoring(&mut make), &mut observer),
+            Some(unfinished) => unfinished.run(job, data, progress, scoring(&mut make), &mut observer),
+        }?;
+        let checked = replicates
+            .map(|k| {
+                let mut scoring = scoring(&mut make);
+                check_evidence(job, data, &analysis, k, &mut scoring, &mut |_, _| {}, &mut observer)
+            })
+            .transpose()?;
+        Ok((analysis, checked))
+    });
+    if let Some(e) = transport.as_ref().and_then(PyTransport::take_raised) {
+        return Err(e);
+    }
     if let Some(e) = observer.take_raised() {
         return Err(e);
     }
-    let analysis = check(py, result)?;
-    let selection = match replicates {
-        None => None,
-        Some(k) => {
-            let result = py.detach(|| check_evidence(job, data, &analysis, k, &mut |_, _| {}, &mut observer));
-            if let Some(e) = observer.take_raised() {
-                return Err(e);
-            }
-            Some(check(py, result)?)
-        }
-    };
+    let (analysis, selection) = check(py, result)?;
     let mut document = analysis.document(data, &job.prior.describe(), true);
     if let Some(selection) = selection {
         document["check"] = serde_json::to_value(&selection).expect("the check serialises");

@@ -295,8 +295,9 @@ def test_a_dask_worker_killed_mid_population_changes_nothing(demo, one_process, 
 
 
 #: An evidence small enough for a test: two laws, every model of the residuals (the embedded
-#: record's weight on bit varies, so four in all), each batch of a few hundred candidates.
-EVIDENCE = {"laws": ["m2", "m4"], "particles": 150, "islands": 2, "seed": 3, "backend": "cpu"}
+#: record's weight on bit varies, so four in all), each batch of a few hundred candidates, and
+#: its check by one replicate per law.
+EVIDENCE = {"laws": ["m2", "m4"], "particles": 150, "islands": 2, "seed": 3, "backend": "cpu", "check": 1}
 
 
 @pytest.fixture(scope="module")
@@ -306,7 +307,7 @@ def one_process_evidence(demo: bitrock.Record) -> dict[str, Any]:
 
 def assert_same_evidence(one_process: dict[str, Any], evidence: bitrock.Evidence) -> None:
     document = _without_clock(evidence.document)
-    assert len(document["noise_models"]) == 4
+    assert len(document["noise_models"]) == 4 and len(document["check"]["rows"]) == 2
     assert document == one_process
 
 

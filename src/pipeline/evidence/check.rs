@@ -101,13 +101,15 @@ pub fn check_replicates(replicates: usize) -> Result<()> {
 }
 
 /// Checks `analysis`, the evidence `job` computed on `data`: `replicates` synthetic records
-/// per law, each through the same job over the same boxes. `progress(done, total)` hears each
-/// finished replicate; `observer` is asked whether to stop between and within replicates.
+/// per law, each through the same job over the same boxes, its samplers scored where
+/// `scoring` says (the same check here or on a pool of workers). `progress(done, total)` hears
+/// each finished replicate; `observer` is asked whether to stop between and within replicates.
 pub fn check(
     job: &EvidenceJob,
     data: &FieldData,
     analysis: &EvidenceAnalysis,
     replicates: usize,
+    scoring: &mut Scoring,
     progress: &mut dyn FnMut(usize, usize),
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
@@ -130,7 +132,7 @@ pub fn check(
                 return Err(Error::Interrupted);
             }
             let seed = replicate_seed(job.sampler.seed, slot, index);
-            let (replicate, scored) = replicate_of(job, data, analysis, slot, index, seed, backend, observer)?;
+            let (replicate, scored) = replicate_of(job, data, analysis, slot, index, seed, backend, scoring, observer)?;
             candidates_scored += scored;
             made.push(replicate);
             progress(slot * replicates + index + 1, total);
@@ -157,6 +159,7 @@ fn replicate_of(
     index: usize,
     seed: u64,
     backend: Backend,
+    scoring: &mut Scoring,
     observer: &mut dyn Observer,
 ) -> Result<(CheckReplicate, u64)> {
     let evidence = &analysis.evidence.laws[slot];
@@ -205,8 +208,7 @@ fn replicate_of(
         ..job.placement()
     };
     let problem = EvidenceJob::problem(&synthetic, &basis, seed);
-    let mut here = Scoring::Here;
-    let workers = here.workers(problem, &placement, &mut |line| observer.note(line))?;
+    let workers = scoring.workers(problem, &placement, &mut |line| observer.note(line))?;
     let outcome = job
         .sample(basis, workers.as_ref(), noise_model, None, observer)
         .map_err(|e| match e {

@@ -295,7 +295,7 @@ pub fn check_dir(
     if let Some(backend) = backend {
         job.backend = backend;
     }
-    let analysis = job.run(&data, crate::run::Scoring::Here, observer)?;
+    let analysis = job.run(&data, Scoring::Here, observer)?;
     let stored_ln_z: Vec<Option<f64>> = document["laws"]
         .as_array()
         .map(|laws| laws.iter().map(|law| law["ln_z"].as_f64()).collect())
@@ -308,7 +308,15 @@ pub fn check_dir(
             dir.display()
         ));
     }
-    let check = check(&job, &data, &analysis, replicates, progress, observer)?;
+    let check = check(
+        &job,
+        &data,
+        &analysis,
+        replicates,
+        &mut Scoring::Here,
+        progress,
+        observer,
+    )?;
     document["check"] = serde_json::to_value(&check).expect("a check serialises");
     // The directory is still the evidence's alone; only its document changes (written whole).
     files::refuse_foreign(dir, "run", &|rel, is_dir| {

@@ -216,8 +216,8 @@ def evidence(
 
     ``executor`` scores the samplers' candidates on a pool of workers (a
     ``concurrent.futures`` executor, a ``dask.distributed.Client`` or :func:`ray_executor`;
-    each worker on ``backend``): the evidence is the one computed here, bit for bit where the
-    workers score on the CPU. The check (``check=K``) runs in this process."""
+    each worker on ``backend``), and its check's too: the evidence is the one computed here,
+    bit for bit where the workers score on the CPU."""
     from . import _law_names, _note, _record
     from ._distributed import Dispatcher
 
