@@ -323,7 +323,16 @@ fn checked(laws: &[Law], data: &bitrock::data::FieldData, replicates: usize) -> 
         ..EvidenceJob::default()
     };
     let analysis = job.run(data, Default::default(), &mut Silent).unwrap();
-    let check = check(&job, data, &analysis, replicates, &mut |_, _| {}, &mut Silent).unwrap();
+    let check = check(
+        &job,
+        data,
+        &analysis,
+        replicates,
+        &mut Default::default(),
+        &mut |_, _| {},
+        &mut Silent,
+    )
+    .unwrap();
     (analysis, check)
 }
 
