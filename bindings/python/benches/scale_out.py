@@ -4,9 +4,12 @@ ProcessPoolExecutor), and on a local Dask cluster of 2 single-threaded workers. 
 set-up, the median seconds of ``--reps`` runs and, per population of the first repetition, the
 tasks, the bytes shipped and the driver's serial seconds (the population's seconds less the time
 it waited for the workers). A warm-up run ships the record to the workers; its bytes are
-printed once. Every run's particles are checked against the one-process run's.
+printed once. Every run's particles are checked against the one-process run's. With
+``--evidence``, the model evidence of the four laws instead (i.i.d. residuals, ``--particles``
+per island, 4 islands), each checked against the one-process evidence.
 
     python bindings/python/benches/scale_out.py --particles 1000000 --populations 2 --reps 3
+    python bindings/python/benches/scale_out.py --evidence --particles 500 --reps 3
 """
 
 from __future__ import annotations
@@ -46,9 +49,13 @@ def main() -> None:
     parser.add_argument("--populations", type=int, default=2)
     parser.add_argument("--reps", type=int, default=3)
     parser.add_argument("--sampler", default="rejection")
+    parser.add_argument("--evidence", action="store_true", help="the model evidence instead of a run")
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args()
     record = bitrock.read_record()
+    if args.evidence:
+        evidence_scale_out(record, args)
+        return
     settings = dict(
         particles=args.particles,
         max_populations=args.populations,
@@ -152,6 +159,50 @@ def main() -> None:
     meta = {
         "command": "python bindings/python/benches/scale_out.py "
         + f"--particles {args.particles} --populations {args.populations} --reps {args.reps} --sampler {args.sampler}",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
+        "bitrock": bitrock.__version__,
+        "date": time.strftime("%Y-%m-%d"),
+    }
+    print(json.dumps(meta))
+    if args.json:
+        with open(args.json, "w") as out:
+            json.dump({"meta": meta, "figures": figures}, out, indent=2)
+
+
+def _without_seconds(value):
+    if isinstance(value, dict):
+        return {k: _without_seconds(v) for k, v in value.items() if k != "seconds"}
+    if isinstance(value, list):
+        return [_without_seconds(v) for v in value]
+    return value
+
+
+def evidence_scale_out(record: bitrock.Record, args: argparse.Namespace) -> None:
+    """The evidence of the four laws in one process and on 1 and 2 single-threaded worker
+    processes: median seconds of ``args.reps``, each checked against the one-process one."""
+    settings = dict(particles=args.particles, islands=4, seed=1, backend="cpu", noise="iid")
+    spawn = multiprocessing.get_context("spawn")
+    reference = _without_seconds(bitrock.evidence(record, **settings).document)
+    figures = []
+    for name, workers in [("one process (rayon, all cores)", 0), ("ProcessPool, 1 worker × 1 thread", 1),
+                          ("ProcessPool, 2 workers × 1 thread", 2)]:
+        executor = None
+        if workers:
+            executor = concurrent.futures.ProcessPoolExecutor(workers, mp_context=spawn, initializer=_single_threaded)
+            bitrock.evidence(record, **{**settings, "particles": 50}, executor=executor)  # warm the workers
+        seconds, identical = [], True
+        for _ in range(args.reps):
+            started = time.perf_counter()
+            done = bitrock.evidence(record, **settings, executor=executor)
+            seconds.append(time.perf_counter() - started)
+            identical &= _without_seconds(done.document) == reference
+        if executor is not None:
+            executor.shutdown()
+        figures.append({"setup": name, "median_s": statistics.median(seconds), "runs_s": seconds, "identical": identical})
+        print(f"{name}: median {statistics.median(seconds):.2f} s of {[round(s, 2) for s in seconds]}, "
+              f"identical: {identical}", flush=True)
+    meta = {
+        "command": f"python bindings/python/benches/scale_out.py --evidence --particles {args.particles} --reps {args.reps}",
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
         "bitrock": bitrock.__version__,
         "date": time.strftime("%Y-%m-%d"),
