@@ -201,12 +201,17 @@ def test_an_evidence_stopped_by_ctrl_c_is_resumed_to_the_uninterrupted_one(demo,
     whole = bitrock.evidence(demo, **settings, out=tmp_path / "whole")
     assert not (tmp_path / "whole" / "unfinished").exists()
     # Ctrl-C half a second in (the fits and samplers take seconds): the evidence stops, kept
-    # under way in its directory.
-    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
-    timer.start()
-    with pytest.raises(KeyboardInterrupt):
-        bitrock.evidence(demo, **settings, out=tmp_path / "ev")
-    timer.join()
+    # under way in its directory. Taken as an interactive session takes it: a test runner
+    # started in the background inherits SIGINT ignored.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+        timer.start()
+        with pytest.raises(KeyboardInterrupt):
+            bitrock.evidence(demo, **settings, out=tmp_path / "ev")
+        timer.join()
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert (tmp_path / "ev" / "unfinished" / "job.json").is_file()
     with pytest.raises(bitrock.InputError, match="resume_evidence") as caught:
         bitrock.evidence(demo, **settings, out=tmp_path / "ev")
