@@ -301,8 +301,14 @@ EVIDENCE = {"laws": ["m2", "m4"], "particles": 150, "islands": 2, "seed": 3, "ba
 
 
 @pytest.fixture(scope="module")
-def one_process_evidence(demo: bitrock.Record) -> dict[str, Any]:
-    return _without_clock(bitrock.evidence(demo, **EVIDENCE).document)
+def thinned() -> bitrock.Record:
+    """The embedded record, every fourth row: 672 calibration samples."""
+    return bitrock.read_record(thin=4)
+
+
+@pytest.fixture(scope="module")
+def one_process_evidence(thinned: bitrock.Record) -> dict[str, Any]:
+    return _without_clock(bitrock.evidence(thinned, **EVIDENCE).document)
 
 
 def assert_same_evidence(one_process: dict[str, Any], evidence: bitrock.Evidence) -> None:
@@ -312,23 +318,23 @@ def assert_same_evidence(one_process: dict[str, Any], evidence: bitrock.Evidence
 
 
 @pytest.mark.parametrize("executor", ["process pool", "scrambled", "dask"])
-def test_the_evidence_on_workers_is_the_one_process_evidence(demo, one_process_evidence, executor, request) -> None:
+def test_the_evidence_on_workers_is_the_one_process_evidence(thinned, one_process_evidence, executor, request) -> None:
     if executor == "dask":
         pool = request.getfixturevalue("dask_client")
-        assert_same_evidence(one_process_evidence, bitrock.evidence(demo, executor=pool, **EVIDENCE))
+        assert_same_evidence(one_process_evidence, bitrock.evidence(thinned, executor=pool, **EVIDENCE))
         return
     made = (
         concurrent.futures.ProcessPoolExecutor(2, mp_context=SPAWN) if executor == "process pool" else Scrambled(seed=7)
     )
     with made as pool:
-        evidence = bitrock.evidence(demo, executor=pool, **EVIDENCE)
+        evidence = bitrock.evidence(thinned, executor=pool, **EVIDENCE)
     assert_same_evidence(one_process_evidence, evidence)
     if isinstance(made, Scrambled):
         # Batches were cut into several tasks, and replies lost and sent again.
         assert made.lost > 0 and made._submitted > 100
 
 
-def test_a_failing_pool_stops_the_evidence_with_the_workers_error(demo) -> None:
+def test_a_failing_pool_stops_the_evidence_with_the_workers_error(thinned) -> None:
     class Failing(Scrambled):
         def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]
             def task():
@@ -338,10 +344,10 @@ def test_a_failing_pool_stops_the_evidence_with_the_workers_error(demo) -> None:
 
     with Failing(seed=1) as pool:
         with pytest.raises(bitrock.BitrockError, match="every worker lost"):
-            bitrock.evidence(demo, executor=pool, **EVIDENCE)
+            bitrock.evidence(thinned, executor=pool, **EVIDENCE)
 
 
-def test_ray_actors_give_the_one_process_store(demo, one_process, one_process_evidence, tmp_path) -> None:
+def test_ray_actors_give_the_one_process_store(demo, thinned, one_process, one_process_evidence, tmp_path) -> None:
     import ray
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
@@ -350,7 +356,7 @@ def test_ray_actors_give_the_one_process_store(demo, one_process, one_process_ev
         for k, settings in enumerate(SETTINGS):
             bitrock.abc(demo, backend="cpu", out=tmp_path / f"ray{k}", progress=False, executor=executor, **settings)
             assert_same_store(one_process[k], tmp_path / f"ray{k}")
-        assert_same_evidence(one_process_evidence, bitrock.evidence(demo, executor=executor, **EVIDENCE))
+        assert_same_evidence(one_process_evidence, bitrock.evidence(thinned, executor=executor, **EVIDENCE))
         executor.shutdown()
     finally:
         ray.shutdown()

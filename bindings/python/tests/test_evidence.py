@@ -192,29 +192,34 @@ def _without_seconds(value):
     return value
 
 
-def test_an_evidence_stopped_by_ctrl_c_is_resumed_to_the_uninterrupted_one(demo, tmp_path) -> None:
+def test_an_evidence_stopped_by_ctrl_c_is_resumed_to_the_uninterrupted_one(tmp_path) -> None:
     import os
     import signal
     import threading
 
-    settings = {"laws": ["m2", "m3"], "particles": 300, "islands": 2, "seed": 2, "backend": "cpu"}
-    whole = bitrock.evidence(demo, **settings, out=tmp_path / "whole")
+    import time
+
+    record = bitrock.read_record(DEMO_CSV, thin=4)
+    settings = {"laws": ["m2", "m3"], "particles": 200, "islands": 2, "seed": 2, "backend": "cpu"}
+    started = time.monotonic()
+    whole = bitrock.evidence(record, **settings, out=tmp_path / "whole")
+    took = time.monotonic() - started
     assert not (tmp_path / "whole" / "unfinished").exists()
-    # Ctrl-C half a second in (the fits and samplers take seconds): the evidence stops, kept
-    # under way in its directory. Taken as an interactive session takes it: a test runner
-    # started in the background inherits SIGINT ignored.
+    # Ctrl-C a third of the way in: the evidence stops, kept under way in its directory. Taken
+    # as an interactive session takes it: a test runner started in the background inherits
+    # SIGINT ignored.
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+        timer = threading.Timer(took / 3, os.kill, (os.getpid(), signal.SIGINT))
         timer.start()
         with pytest.raises(KeyboardInterrupt):
-            bitrock.evidence(demo, **settings, out=tmp_path / "ev")
+            bitrock.evidence(record, **settings, out=tmp_path / "ev")
         timer.join()
     finally:
         signal.signal(signal.SIGINT, previous)
     assert (tmp_path / "ev" / "unfinished" / "job.json").is_file()
     with pytest.raises(bitrock.InputError, match="resume_evidence") as caught:
-        bitrock.evidence(demo, **settings, out=tmp_path / "ev")
+        bitrock.evidence(record, **settings, out=tmp_path / "ev")
     assert caught.value.argument == "out"
     resumed = bitrock.resume_evidence(tmp_path / "ev", check=1)
     assert resumed.check is not None
