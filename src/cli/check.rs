@@ -52,6 +52,7 @@ pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     };
     options.validate()?;
     set_threads(cmd.threads)?;
+    bitrock::run::dir::refuse_unfinished_evidence(&cmd.run)?;
     let checked = CheckedRun::open(&cmd.run)?;
     if let Some(why) = bitrock::run::Store::open(&cmd.run)?.early_end()? {
         super::print::note(format_args!("note: {}: {why}", cmd.run.display()));

@@ -155,16 +155,17 @@ pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
     }
     let (job, data, analysis, unfinished) = start_or_resume(cmd)?;
     let dir = cmd.resume.as_ref().or(cmd.out.as_ref());
-    finish(cmd, &job, &data, &analysis, unfinished).inspect_err(|_| {
+    finish(cmd, &job, &data, &analysis, unfinished).inspect_err(|e| {
         if let Some(dir) = dir {
-            still_under_way(dir);
+            still_under_way(dir, e.downcast_ref());
         }
     })
 }
 
-/// Says where the evidence under way is kept after a failure, and how to continue it.
-fn still_under_way(dir: &std::path::Path) {
-    if bitrock::run::dir::is_unfinished_evidence_dir(dir) {
+/// Says where the evidence under way is kept after a failure that continuing it can mend (a
+/// machine's or a device's, not the user's input, which would fail again), and how.
+fn still_under_way(dir: &std::path::Path, error: Option<&bitrock::Error>) {
+    if error.is_none_or(|e| !e.is_bad_input()) && bitrock::run::dir::is_unfinished_evidence_dir(dir) {
         print::note(format_args!(
             "note: the evidence so far is kept in {0}; continue it with `bitrock evidence --resume {0}`",
             dir.display()
@@ -189,7 +190,7 @@ fn start_or_resume(
         }
         let analysis = unfinished
             .run(&job, &data, progress, Default::default(), &mut Notes)
-            .inspect_err(|_| still_under_way(dir))?;
+            .inspect_err(|e| still_under_way(dir, Some(e)))?;
         return Ok((job, data, analysis, Some(unfinished)));
     }
     let job = new_job(cmd)?;
@@ -206,7 +207,7 @@ fn start_or_resume(
             let unfinished = evidence::dir::Unfinished::start(dir, cmd.force, &job, &data)?;
             let analysis = unfinished
                 .run(&job, &data, Default::default(), Default::default(), &mut Notes)
-                .inspect_err(|_| still_under_way(dir))?;
+                .inspect_err(|e| still_under_way(dir, Some(e)))?;
             Ok((job, data, analysis, Some(unfinished)))
         }
     }

@@ -40,6 +40,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
+    bitrock::run::dir::refuse_unfinished_evidence(&cmd.dir)?;
     let store = bitrock::run::Store::open(&cmd.dir)?;
     let stored = store.load()?;
     let setup = &stored.setup;

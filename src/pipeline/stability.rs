@@ -189,6 +189,7 @@ impl StabilityJob {
         }
         let (inputs, early_end) = match &self.source {
             MapSource::Run(dir) => {
+                run::dir::refuse_unfinished_evidence(dir)?;
                 let store = run::Store::open(dir)?;
                 let early_end = store.early_end()?;
                 let stored = store.load_with_last_particles()?;

@@ -46,6 +46,7 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::Setup, Vec<ReportRun>)> {
     let mut first: Option<run::Setup> = None;
     for dir in dirs {
         // The report draws the last population's particles and every population's record.
+        run::dir::refuse_unfinished_evidence(dir)?;
         let store = run::Store::open(dir)?;
         let stored = store.load_with_last_particles()?;
         let early_end = store.early_end()?;

@@ -118,6 +118,21 @@ pub fn is_unfinished_evidence_dir(dir: &Path) -> bool {
     dir.join(UNFINISHED_DIR).join(JOB_JSON).is_file() && !is_run_dir(dir)
 }
 
+/// Refuses, naming it, a directory that holds an evidence under way where a finished run or
+/// evidence is wanted: it says how to continue it.
+pub fn refuse_unfinished_evidence(dir: &Path) -> Result<()> {
+    if is_unfinished_evidence_dir(dir) && !dir.join(EVIDENCE_JSON).is_file() {
+        return Err(Error::Data {
+            path: dir.to_path_buf(),
+            message: format!(
+                "holds an evidence under way, not finished; continue it with `bitrock evidence --resume {}` (Python: `bitrock.resume_evidence`)",
+                dir.display()
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// True when `dir` holds an evidence (a file named [`EVIDENCE_JSON`]) and no run store.
 pub fn is_evidence_dir(dir: &Path) -> bool {
     dir.join(EVIDENCE_JSON).is_file() && !is_run_dir(dir)

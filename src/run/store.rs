@@ -451,15 +451,6 @@ impl Store {
         if !dir.is_dir() {
             return Err(not_a_run("no such directory".into()));
         }
-        if !path.is_file() && super::dir::is_unfinished_evidence_dir(dir) {
-            return Err(Error::Data {
-                path: dir.to_path_buf(),
-                message: format!(
-                    "holds an evidence under way, not finished; continue it with `bitrock evidence --resume {}` (Python: `bitrock.resume_evidence`)",
-                    dir.display()
-                ),
-            });
-        }
         if !path.is_file() {
             return Err(not_a_run(format!("it has no {STORE_FILE}")));
         }

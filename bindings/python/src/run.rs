@@ -473,6 +473,7 @@ pub(crate) fn resume(
 /// Opens the finished run in `path`: its run.json and its store.
 #[pyfunction]
 pub(crate) fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
+    check(py, run::dir::refuse_unfinished_evidence(&path))?;
     let summary = as_arguments(&check(py, read_summary(&path))?);
     let store = check(py, run::Store::open(&path).and_then(|s| s.load()))?;
     Ok(Run {

@@ -1092,15 +1092,15 @@ pub fn run_from(
             (c.save)(&encode_state(seconds(started), &islands))?;
             saved = Instant::now();
         }
+        if done {
+            break;
+        }
         batch.clear();
         let mut counts = Vec::with_capacity(islands.len());
         for island in &islands {
             let before = batch.len();
             island.candidates(&mut batch);
             counts.push(batch.len() - before);
-        }
-        if islands.iter().all(|i| i.phase == Phase::Done) {
-            break;
         }
         let lagged = config.noise == NoiseModel::Ar1;
         score_candidates(workers, round, &batch, lagged, &mut rho, &mut lag)?;
