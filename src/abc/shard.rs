@@ -424,7 +424,7 @@ pub fn split(start: u64, len: u64, pieces: usize) -> Vec<(u64, u64)> {
 }
 
 /// Explicit candidates a [`Task::Score`] holds at least, unless the batch is smaller: a
-/// candidate is shipped (28 bytes) rather than named, and a batch of them (a sweep of the
+/// candidate is shipped (its law slot and six f32, about 25 bytes of postcard) rather than named, and a batch of them (a sweep of the
 /// evidence sampler) is a few thousand, which should still reach every worker.
 pub const MIN_SCORE_TASK: u64 = 256;
 

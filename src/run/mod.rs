@@ -22,8 +22,7 @@ pub use store::{Setup, State, Store, Stored};
 
 use crate::abc::floor;
 use crate::abc::rejection;
-use crate::abc::shard::Devices;
-use crate::abc::shard::{self, Local, Workers};
+use crate::abc::shard::{self, Devices, Local, Workers};
 use crate::abc::smc;
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;

@@ -156,16 +156,25 @@ def main() -> None:
                 f"driver serial {p['driver_serial_s']:.3f} s of {p['population_s']:.2f} s",
                 flush=True,
             )
+    _report(
+        f"--particles {args.particles} --populations {args.populations} --reps {args.reps} --sampler {args.sampler}",
+        figures,
+        args.json,
+    )
+
+
+def _report(flags: str, figures: list, path: str | None) -> None:
+    """Prints the command, machine, version and date, and writes them with ``figures`` to
+    ``path`` where given."""
     meta = {
-        "command": "python bindings/python/benches/scale_out.py "
-        + f"--particles {args.particles} --populations {args.populations} --reps {args.reps} --sampler {args.sampler}",
+        "command": f"python bindings/python/benches/scale_out.py {flags}",
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
         "bitrock": bitrock.__version__,
         "date": time.strftime("%Y-%m-%d"),
     }
     print(json.dumps(meta))
-    if args.json:
-        with open(args.json, "w") as out:
+    if path:
+        with open(path, "w") as out:
             json.dump({"meta": meta, "figures": figures}, out, indent=2)
 
 
@@ -201,16 +210,7 @@ def evidence_scale_out(record: bitrock.Record, args: argparse.Namespace) -> None
         figures.append({"setup": name, "median_s": statistics.median(seconds), "runs_s": seconds, "identical": identical})
         print(f"{name}: median {statistics.median(seconds):.2f} s of {[round(s, 2) for s in seconds]}, "
               f"identical: {identical}", flush=True)
-    meta = {
-        "command": f"python bindings/python/benches/scale_out.py --evidence --particles {args.particles} --reps {args.reps}",
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
-        "bitrock": bitrock.__version__,
-        "date": time.strftime("%Y-%m-%d"),
-    }
-    print(json.dumps(meta))
-    if args.json:
-        with open(args.json, "w") as out:
-            json.dump({"meta": meta, "figures": figures}, out, indent=2)
+    _report(f"--evidence --particles {args.particles} --reps {args.reps}", figures, args.json)
 
 
 if __name__ == "__main__":

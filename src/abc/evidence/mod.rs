@@ -990,24 +990,27 @@ pub struct Checkpoints<'a> {
     /// The bytes [`Checkpoints::save`] was last given by an interrupted sampling of the same
     /// job (prior, seed, settings and references); `None`: from the start.
     pub from: Option<&'a [u8]>,
+    /// Where the saved state is kept: named when the state is refused.
+    pub origin: &'a std::path::Path,
     /// Least seconds between two saves; the state with every sampler done is always saved.
     pub every_s: f64,
     /// Keeps the state's bytes (an evidence directory writes them to disk).
     pub save: &'a mut dyn FnMut(&[u8]) -> Result<()>,
 }
 
-/// How a saved state that is not the job's is refused (the start of the message).
-pub const NOT_THIS_JOB: &str = "the saved state of the evidence's samplers is not this job's";
-
 /// The state [`Checkpoints::save`] is given: seconds spent so far and the islands.
 fn encode_state(seconds: f64, islands: &[Island]) -> Vec<u8> {
     postcard::to_stdvec(&(seconds, islands)).expect("the samplers' state serialises")
 }
 
-/// The islands of a saved state, checked against `fresh` (those the job makes at its start):
-/// the same laws, slots, streams and particle counts, or the state is another job's.
-fn decode_state(bytes: &[u8], fresh: &[Island]) -> Result<(f64, Vec<Island>)> {
-    let refuse = |why: &str| Error::Numerical(format!("{NOT_THIS_JOB}: {why}"));
+/// The islands of a saved state (kept in `origin`), checked against `fresh` (those the job
+/// makes at its start): the same laws, slots, streams and particle counts, or the state is
+/// another job's.
+fn decode_state(bytes: &[u8], origin: &std::path::Path, fresh: &[Island]) -> Result<(f64, Vec<Island>)> {
+    let refuse = |why: &str| Error::Data {
+        path: origin.to_path_buf(),
+        message: format!("the saved state of the evidence's samplers is not this job's: {why}"),
+    };
     let (seconds, mut islands): (f64, Vec<Island>) =
         postcard::from_bytes(bytes).map_err(|e| refuse(&format!("it does not read ({e})")))?;
     if islands.len() != fresh.len() {
@@ -1078,8 +1081,10 @@ pub fn run_from(
         }
     }
     let mut seconds_before = 0.0;
-    if let Some(from) = checkpoints.as_ref().and_then(|c| c.from) {
-        (seconds_before, islands) = decode_state(from, &islands)?;
+    if let Some(c) = &checkpoints
+        && let Some(from) = c.from
+    {
+        (seconds_before, islands) = decode_state(from, c.origin, &islands)?;
     }
     let seconds = |started: Instant| seconds_before + started.elapsed().as_secs_f64();
     let mut saved = Instant::now();

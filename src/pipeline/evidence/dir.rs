@@ -91,8 +91,9 @@ impl Unfinished {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::output("out", dir, e)),
             _ => {}
         }
+        // Streamed: a long record is not held twice in memory.
         files::write_own(&unfinished.join(RECORD_JSON), "out", |out| {
-            out.write_all(&serde_json::to_vec(data).expect("a record serialises"))
+            serde_json::to_writer(out, data).map_err(std::io::Error::from)
         })?;
         files::write_own(&unfinished.join(JOB_JSON), "out", |out| out.write_all(&job_json(job)))?;
         Ok(Self {
@@ -111,7 +112,7 @@ impl Unfinished {
             let message = if dir.join(EVIDENCE_JSON).is_file() {
                 "holds a finished evidence, with nothing under way to continue"
             } else {
-                "holds no evidence under way (`bitrock evidence --out DIR` starts one)"
+                "holds no evidence under way (`bitrock evidence --out DIR` starts one; Python: `bitrock.evidence(..., out=DIR)`)"
             };
             return Err(Error::setting("resume", format!("{} {message}", dir.display())));
         }
@@ -169,18 +170,11 @@ impl Unfinished {
         };
         let saving = Saving {
             progress,
+            origin: &path,
             every_s: self.every_s,
             save: &mut save,
         };
         job.run_saving(data, scoring, Some(saving), observer)
-            .map_err(|e| match e {
-                // A saved state that does not fit the job names the file it came from.
-                Error::Numerical(message) if message.starts_with(crate::abc::evidence::NOT_THIS_JOB) => Error::Data {
-                    path: path.clone(),
-                    message,
-                },
-                other => other,
-            })
     }
 
     /// Writes the finished evidence ([`save`]), replacing what the directory held: the
@@ -352,19 +346,18 @@ fn read_json(path: &Path, what: &str) -> Result<serde_json::Value> {
 /// The job of an evidence directory's [`JOB_JSON`] at `path`, its law files' laws registered in
 /// this process; `None` for a directory an earlier bitrock wrote without one.
 fn stored_job(path: &Path) -> Result<Option<serde_json::Value>> {
-    let path = path.to_path_buf();
     if !path.exists() {
         return Ok(None);
     }
-    let mut stored = read_json(&path, "an evidence's job")?;
+    let mut stored = read_json(path, "an evidence's job")?;
     if let Some(law_files) = stored.get(LAW_FILES) {
         let law_files = law_files.as_object().ok_or_else(|| Error::Data {
-            path: path.clone(),
+            path: path.to_path_buf(),
             message: format!("'{LAW_FILES}' is not a table of law files' texts by name"),
         })?;
         for (name, source) in law_files {
             let source = source.as_str().ok_or_else(|| Error::Data {
-                path: path.clone(),
+                path: path.to_path_buf(),
                 message: format!("{LAW_FILES}: the law file of '{name}' is not a text"),
             })?;
             let origin = path.join(format!("{LAW_FILES}/{name}"));

@@ -169,6 +169,8 @@ pub struct Progress {
 /// Where an evidence's [`Progress`] is kept as it goes: from what, how often, by what.
 pub struct Saving<'a> {
     pub progress: Progress,
+    /// Where it is kept: named when a saved state is refused.
+    pub origin: &'a std::path::Path,
     /// Least seconds between two saves within a part; each part done is saved at once.
     pub every_s: f64,
     pub save: &'a mut dyn FnMut(&Progress) -> Result<()>,
@@ -417,6 +419,7 @@ impl EvidenceJob {
     ) -> Result<EvidenceAnalysis> {
         let Some(Saving {
             progress,
+            origin,
             every_s,
             save,
         }) = saving
@@ -426,6 +429,7 @@ impl EvidenceJob {
         if let Some(state) = progress.done.get(part) {
             let checkpoints = evidence::Checkpoints {
                 from: Some(state),
+                origin,
                 every_s: f64::INFINITY,
                 save: &mut |_| Ok(()),
             };
@@ -434,6 +438,7 @@ impl EvidenceJob {
         let from = progress.current.take();
         let checkpoints = evidence::Checkpoints {
             from: from.as_deref(),
+            origin,
             every_s: *every_s,
             save: &mut |bytes| {
                 progress.current = Some(bytes.to_vec());
