@@ -357,7 +357,8 @@ struct Problem<'a> {
     r: &'a [f64],
     transforms: Vec<Transform>,
     u: DVector<f64>,
-    /// Where set, the run is stopped once it cannot reach the race's target.
+    /// Where set, the run is stopped once it cannot reach the race's target, or once what is
+    /// left of it no longer matters.
     race: Option<Race>,
 }
 
@@ -368,11 +369,15 @@ struct Problem<'a> {
 /// shrink), over all its remaining evaluations. The run is stopped once that would not take it
 /// below the target by more than what counts as an equal fit ([`EQUAL_FIT`]): runs crawling
 /// along a ridge of the law toward a limit at infinity, behind another, stop within a few
-/// windows. The rule only observes: a run it does not stop takes exactly the steps it takes
-/// without it.
+/// windows. A fit that needs its misfit only to a `resolution` also stops a run whose
+/// extrapolated gain falls below it, and one that cannot beat the target by more than it. The rule only observes: a run it does not
+/// stop takes exactly the steps it takes without it.
 struct Race {
-    /// Sum of squared residuals (scaled) to beat.
-    target: f64,
+    /// Sum of squared residuals (scaled) to beat, where a finished run has set one.
+    target: Option<f64>,
+    /// Gain in the sum of squares (scaled) below which the rest of a run does not matter
+    /// (0: every gain matters).
+    resolution: f64,
     window: usize,
     max_evaluations: usize,
     /// Residual evaluations so far, and the sum of squares of the last.
@@ -384,9 +389,10 @@ struct Race {
 }
 
 impl Race {
-    fn new(target: f64, patience: usize, n: usize) -> Self {
+    fn new(stop: Stop, patience: usize, n: usize) -> Self {
         Self {
-            target,
+            target: stop.target,
+            resolution: stop.resolution,
             window: (patience / RACE_WINDOWS).max(1) * (n + 1),
             max_evaluations: patience * (n + 1),
             evaluations: Cell::new(0),
@@ -417,7 +423,10 @@ impl Race {
         let k = evaluations as f64 / self.window as f64;
         let remaining_windows = self.max_evaluations.saturating_sub(evaluations) as f64 / self.window as f64;
         let reachable_gain = gain_per_window * k * (1.0 + remaining_windows / k).ln();
-        if ssr - reachable_gain > self.target * (1.0 - EQUAL_FIT) {
+        let cannot_win = self
+            .target
+            .is_some_and(|target| ssr - reachable_gain > target * (1.0 - EQUAL_FIT) - self.resolution);
+        if cannot_win || reachable_gain < self.resolution {
             self.stopped.set(true);
             return false;
         }
@@ -720,6 +729,41 @@ pub fn fit_law_from(
     opts: &FitOptions,
     known_si: &[Vec<f64>],
 ) -> Result<LawFit> {
+    fit_law_to(law, calibration, validation, opts, known_si, 0.0)
+}
+
+/// [`fit_law_from`] for a fit whose sum of squared residuals matters only to within
+/// `resolution_nm2` (N·m², > 0): every run also stops once, extrapolating its progress, the
+/// rest of it would lower its sum of squares by less than that, and the runs that outlast
+/// their first window go on side by side. Ridges the law can follow toward a limit at
+/// infinity (m3 fitted to m2's or m4's curve) cost a few windows instead of a whole patience.
+/// Validation samples are not used.
+pub fn fit_law_within(
+    law: Law,
+    calibration: &Samples,
+    opts: &FitOptions,
+    known_si: &[Vec<f64>],
+    resolution_nm2: f64,
+) -> Result<LawFit> {
+    fit_law_to(
+        law,
+        calibration,
+        &Samples::default(),
+        opts,
+        known_si,
+        resolution_nm2.max(0.0),
+    )
+}
+
+/// [`fit_law_from`], each run stopped once its gain falls below `resolution_nm2` where > 0.
+fn fit_law_to(
+    law: Law,
+    calibration: &Samples,
+    validation: &Samples,
+    opts: &FitOptions,
+    known_si: &[Vec<f64>],
+    resolution_nm2: f64,
+) -> Result<LawFit> {
     check_determinable(law, calibration)?;
     let n = law.n_params();
     let sum_y2 = calibration.sum_sq_torque();
@@ -742,10 +786,11 @@ pub fn fit_law_from(
                 .into(),
         ));
     }
+    let resolution = resolution_nm2 / (scales.torque * scales.torque);
     let polished = if known.is_empty() {
-        polish_starts(law, scaled, &bounds, &starts)
+        polish_starts(law, scaled, &bounds, &starts, resolution)
     } else {
-        race_starts(law, scaled, &bounds, &[known.as_slice(), &starts].concat())
+        race_starts(law, scaled, &bounds, &[known.as_slice(), &starts].concat(), resolution)
     };
     if polished.is_empty() {
         return Err(refusal(
@@ -956,15 +1001,28 @@ fn distinct(a: &[f64], b: &[f64]) -> bool {
         .any(|(x, y)| (x - y).abs() > 1e-3 * (x.abs() + y.abs()).max(1e-6))
 }
 
-/// Polishes every start by Levenberg-Marquardt, bounds kept by MINUIT's transform; the runs
-/// that end on a finite misfit, best first. Empty when every run diverges.
-fn polish_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>]) -> Vec<Polished> {
+/// Polishes every start by Levenberg-Marquardt, bounds kept by MINUIT's transform, each
+/// stopped once its gain falls below `resolution` where > 0; the runs that end on a finite
+/// misfit, best first. Empty when every run diverges.
+fn polish_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>], resolution: f64) -> Vec<Polished> {
     // The starts are polished in parallel (collected in order: the same result): a start that
     // loses patience costs seconds, and a lone slow fit would otherwise hold one thread while
     // others idle (the selection check fits many records side by side).
     let mut polished: Vec<Polished> = starts
         .par_iter()
-        .filter_map(|p0| polish(law, data, bounds, p0, PATIENCE, None))
+        .filter_map(|p0| {
+            polish(
+                law,
+                data,
+                bounds,
+                p0,
+                PATIENCE,
+                Stop {
+                    target: None,
+                    resolution,
+                },
+            )
+        })
         .collect();
     polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
     polished
@@ -977,33 +1035,54 @@ fn polish_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64
 /// other, each racing the best misfit of the runs already final ([`Race`]): one run crawling
 /// along a ridge goes the whole way, those behind it stop. A run that is not stopped takes
 /// exactly the steps of [`polish_starts`].
-fn race_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>]) -> Vec<Polished> {
+///
+/// With a `resolution` (> 0), the runs run again all stop once their gain falls below it, and
+/// so go on side by side, racing the best misfit of the first window's finished runs: no run
+/// waits for another, and the result is the same on any number of threads.
+fn race_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>], resolution: f64) -> Vec<Polished> {
     let first: Vec<(usize, Polished)> = starts
         .par_iter()
         .enumerate()
-        .filter_map(|(i, p0)| polish(law, data, bounds, p0, PATIENCE / RACE_WINDOWS, None).map(|p| (i, p)))
+        .filter_map(|(i, p0)| polish(law, data, bounds, p0, PATIENCE / RACE_WINDOWS, Stop::default()).map(|p| (i, p)))
         .collect();
     let (mut unfinished, finished): (Vec<_>, Vec<_>) = first.into_iter().partition(|(_, p)| p.lost_patience());
     let mut polished: Vec<Polished> = finished.into_iter().map(|(_, p)| p).collect();
     unfinished.sort_by(|a, b| a.1.ssr.total_cmp(&b.1.ssr));
-    for (i, _) in unfinished {
-        let target = polished.iter().map(|p| p.ssr).min_by(f64::total_cmp);
-        polished.extend(polish(law, data, bounds, &starts[i], PATIENCE, target));
+    let best = |polished: &[Polished]| polished.iter().map(|p| p.ssr).min_by(f64::total_cmp);
+    if resolution > 0.0 {
+        let stop = Stop {
+            target: best(&polished),
+            resolution,
+        };
+        let again: Vec<Polished> = unfinished
+            .par_iter()
+            .filter_map(|(_, first)| polish(law, data, bounds, &first.params, PATIENCE, stop))
+            .collect();
+        polished.extend(again);
+    } else {
+        for (i, _) in unfinished {
+            let stop = Stop {
+                target: best(&polished),
+                resolution,
+            };
+            polished.extend(polish(law, data, bounds, &starts[i], PATIENCE, stop));
+        }
     }
     polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
     polished
 }
 
-/// One Levenberg-Marquardt run from `p0` (scaled) with `patience`, racing `target` where
-/// given; `None` when it ends on a non-finite misfit.
-fn polish(
-    law: Law,
-    data: ScaledData,
-    bounds: &[Bound],
-    p0: &[f64],
-    patience: usize,
+/// When a run may end before its patience ([`Race`]): once it cannot beat `target`, or once
+/// the rest of it would gain less than `resolution` (scaled sum of squares; 0: never).
+#[derive(Clone, Copy, Default)]
+struct Stop {
     target: Option<f64>,
-) -> Option<Polished> {
+    resolution: f64,
+}
+
+/// One Levenberg-Marquardt run from `p0` (scaled) with `patience`, stopped early as `stop`
+/// says; `None` when it ends on a non-finite misfit.
+fn polish(law: Law, data: ScaledData, bounds: &[Bound], p0: &[f64], patience: usize, stop: Stop) -> Option<Polished> {
     let n = law.n_params();
     let transforms: Vec<Transform> = bounds.iter().map(|b| b.transform()).collect();
     let problem = Problem {
@@ -1013,7 +1092,7 @@ fn polish(
         r: data.r,
         u: DVector::from_iterator(n, transforms.iter().zip(p0).map(|(t, &p)| t.to_internal(p))),
         transforms,
-        race: target.map(|t| Race::new(t, patience, n)),
+        race: (stop.target.is_some() || stop.resolution > 0.0).then(|| Race::new(stop, patience, n)),
     };
     let (problem, report) = LevenbergMarquardt::new().with_patience(patience).minimize(problem);
     let params = problem.scaled_params();
@@ -1204,4 +1283,62 @@ fn ill_conditioned(law: Law, condition_number: f64, correlations: &[Vec<Option<f
         String::new()
     };
     format!("ill-conditioned (condition number {condition_number:.2e}){pair}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs the stopping rule on a made-up run of one parameter (patience 160: windows of 20
+    /// evaluations, 320 in all), every evaluation an accepted point: the evaluation it stops
+    /// at, if any.
+    fn stops_at(stop: Stop, ssr_at: impl Fn(usize) -> f64) -> Option<usize> {
+        let race = Race::new(stop, 160, 1);
+        (0..320).find(|&e| {
+            race.evaluated(&DVector::from_element(1, ssr_at(e).sqrt()));
+            !race.goes_on()
+        })
+    }
+
+    /// A run that gains more than the resolution per window goes on; a crawl whose gains
+    /// shrink (geometrically, faster than the 1/k the rule extrapolates) stops, with less than
+    /// the resolution left to gain; without a resolution or a target nothing stops; against a
+    /// target, a run stops once it cannot beat it by more than the resolution.
+    #[test]
+    fn a_run_stops_once_what_is_left_of_it_does_not_matter() {
+        let resolution = 0.01;
+        let only = Stop {
+            target: None,
+            resolution,
+        };
+        let descent = |e: usize| 10.0 - 0.001 * e as f64; // 0.02 per window
+        assert_eq!(stops_at(only, descent), None);
+        let crawl = |e: usize| 1.0 + 0.5 * 0.97f64.powi(e as i32);
+        let at = stops_at(only, crawl).expect("a crawl stops");
+        let left = crawl(at) - 1.0;
+        assert!(left < resolution, "stopped at {at} with {left} left");
+        assert!(at < 319, "{at}");
+        assert_eq!(stops_at(Stop::default(), crawl), None);
+        // The descent cannot reach a target of 5 within its patience and stops at its first
+        // window; it can beat 9.95 by more than the resolution, and goes on.
+        let raced = |target: f64| Stop {
+            target: Some(target),
+            resolution,
+        };
+        assert_eq!(stops_at(raced(5.0), descent), Some(20));
+        assert_eq!(stops_at(raced(9.95), descent), None);
+        // Extrapolated from its first window (9.98 − 0.02·ln 16 ≈ 9.925), it beats 9.93 but not
+        // by the resolution: stopped there.
+        assert_eq!(stops_at(raced(9.93), descent), Some(20));
+        assert_eq!(
+            stops_at(
+                Stop {
+                    target: Some(9.93),
+                    resolution: 0.0
+                },
+                descent
+            ),
+            None
+        );
+    }
 }
