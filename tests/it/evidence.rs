@@ -268,12 +268,17 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
         tables.contains("residual lag-1 autocorrelation of the fits"),
         "{tables}"
     );
-    // Both ordered pairs, each with a gap in nats and a probability of misranking.
+    // Both ordered pairs, each with a gap in nats and a probability of misranking; a rival of
+    // fewer parameters (m2 against m4) gains less from the noise than the truth, and wins less
+    // than half the records however small the gap.
     let separations = doc["separations"].as_array().unwrap();
     assert_eq!(separations.len(), 2);
     for s in separations {
         let (gap, misranking) = (s["gap_nats"].as_f64().unwrap(), s["misranking"].as_f64().unwrap());
-        assert!(gap >= 0.0 && (0.0..=0.5).contains(&misranking), "{s}");
+        assert!(gap >= 0.0 && (0.0..=1.0).contains(&misranking), "{s}");
+        if s["truth"] == "m4" {
+            assert!(misranking < 0.5, "{s}");
+        }
     }
     for (flag, value, named) in [
         ("--islands", "1", "--islands"),
