@@ -370,8 +370,8 @@ struct Problem<'a> {
 /// below the target by more than what counts as an equal fit ([`EQUAL_FIT`]): runs crawling
 /// along a ridge of the law toward a limit at infinity, behind another, stop within a few
 /// windows. A fit that needs its misfit only to a `resolution` also stops a run whose
-/// extrapolated gain falls below it, and one that cannot beat the target by more than it. The rule only observes: a run it does not
-/// stop takes exactly the steps it takes without it.
+/// extrapolated gain falls below it, and one that cannot beat the target by more than it. The
+/// rule only observes: a run it does not stop takes exactly the steps it takes without it.
 struct Race {
     /// Sum of squared residuals (scaled) to beat, where a finished run has set one.
     target: Option<f64>,
@@ -735,7 +735,7 @@ pub fn fit_law_from(
 /// [`fit_law_from`] for a fit whose sum of squared residuals matters only to within
 /// `resolution_nm2` (N·m², > 0): every run also stops once, extrapolating its progress, the
 /// rest of it would lower its sum of squares by less than that, and the runs that outlast
-/// their first window go on side by side. Ridges the law can follow toward a limit at
+/// their first window go on from where it ended, side by side. Ridges the law can follow toward a limit at
 /// infinity (m3 fitted to m2's or m4's curve) cost a few windows instead of a whole patience.
 /// Validation samples are not used.
 pub fn fit_law_within(
@@ -1036,9 +1036,10 @@ fn polish_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64
 /// along a ridge goes the whole way, those behind it stop. A run that is not stopped takes
 /// exactly the steps of [`polish_starts`].
 ///
-/// With a `resolution` (> 0), the runs run again all stop once their gain falls below it, and
-/// so go on side by side, racing the best misfit of the first window's finished runs: no run
-/// waits for another, and the result is the same on any number of threads.
+/// With a `resolution` (> 0), the runs that outlast their first window go on from where it
+/// ended, side by side, each stopped once its gain falls below the resolution or once it
+/// cannot beat the best misfit of the first window's finished runs by more: no run waits for
+/// another, and the result is the same on any number of threads.
 fn race_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>], resolution: f64) -> Vec<Polished> {
     let first: Vec<(usize, Polished)> = starts
         .par_iter()
