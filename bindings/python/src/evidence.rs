@@ -8,6 +8,7 @@ use crate::run::PyObserver;
 use bitrock::Law;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::data::FieldData;
+use bitrock::error::Error;
 use bitrock::pipeline::evidence::dir::Unfinished;
 use bitrock::pipeline::evidence::{
     DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, Progress, check as check_evidence, check_replicates,
@@ -123,7 +124,15 @@ pub(crate) fn resume_evidence(
     if let Some(k) = check {
         crate::errors::check(py, check_replicates(k))?;
     }
-    let (unfinished, mut job, data, progress) = crate::errors::check(py, py.detach(|| Unfinished::open(&dir)))?;
+    // The library names the directory by the command line's flag; here it is the argument.
+    let opened = py.detach(|| Unfinished::open(&dir)).map_err(|err| match err {
+        Error::InvalidSetting { field, message } if field == "resume" => Error::InvalidSetting {
+            field: "directory".into(),
+            message,
+        },
+        err => err,
+    });
+    let (unfinished, mut job, data, progress) = crate::errors::check(py, opened)?;
     if let Some(backend) = named(py, "backend", backend)? {
         job.backend = backend;
     }

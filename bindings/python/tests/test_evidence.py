@@ -229,4 +229,4 @@ def test_an_evidence_stopped_by_ctrl_c_is_resumed_to_the_uninterrupted_one(tmp_p
     assert _without_seconds(bitrock.read_evidence(tmp_path / "ev").document) == _without_seconds(resumed.document)
     with pytest.raises(bitrock.InputError, match="finished evidence") as caught:
         bitrock.resume_evidence(tmp_path / "ev")
-    assert caught.value.argument == "resume"
+    assert caught.value.argument == "directory"
