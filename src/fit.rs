@@ -1127,6 +1127,34 @@ fn known_starts(
     starts
 }
 
+/// The Jacobian of r·T(w) with respect to the parameters `columns` of `p`, at the speeds `w`
+/// and weight-on-bit ratios `r` (in the units of `p` and `w`), each column scaled to unit norm
+/// where it has one; and the columns' norms.
+pub(crate) fn normalised_jacobian(
+    law: Law,
+    p: &[f64],
+    w: &[f64],
+    r: &[f64],
+    columns: &[usize],
+) -> (DMatrix<f64>, Vec<f64>) {
+    let n = law.n_params();
+    let mut jacobian = DMatrix::<f64>::zeros(w.len(), columns.len());
+    let mut gradient = [0.0; crate::laws::MAX_PARAMS];
+    for (i, (&w, &r)) in w.iter().zip(r).enumerate() {
+        law.torque_and_gradient(p, w, &mut gradient[..n]);
+        for (c, &j) in columns.iter().enumerate() {
+            jacobian[(i, c)] = r * gradient[j];
+        }
+    }
+    let norms: Vec<f64> = jacobian.column_iter().map(|column| column.norm()).collect();
+    for (mut column, &norm) in jacobian.column_iter_mut().zip(&norms) {
+        if norm > 0.0 {
+            column.scale_mut(1.0 / norm);
+        }
+    }
+    (jacobian, norms)
+}
+
 /// The uncertainty of an estimate, from the Jacobian at it.
 struct Covariance {
     /// Standard errors, SI; `None` for a parameter on its bound or one the data cannot
@@ -1146,23 +1174,11 @@ impl Covariance {
         let (m, n) = (data.w.len(), law.n_params());
         let p = &best.params;
         let free: Vec<usize> = (0..n).filter(|&j| !on_bound[j]).collect();
-        let mut jac = DMatrix::<f64>::zeros(m, free.len());
-        let mut grad = [0.0; crate::laws::MAX_PARAMS];
-        for i in 0..m {
-            law.torque_and_gradient(p, data.w[i], &mut grad[..n]);
-            for (c, &j) in free.iter().enumerate() {
-                jac[(i, c)] = data.r[i] * grad[j];
-            }
-        }
-        let norms: Vec<f64> = (0..free.len()).map(|c| jac.column(c).norm()).collect();
+        let (normalised, norms) = normalised_jacobian(law, p, data.w, data.r, &free);
         let mut std_errors_si = vec![None; n];
         let mut correlations = vec![vec![None; n]; n];
         let mut condition_number = f64::INFINITY;
         if norms.iter().all(|&v| v > 0.0) && !free.is_empty() {
-            let mut normalised = jac.clone();
-            for (c, &norm) in norms.iter().enumerate() {
-                normalised.column_mut(c).scale_mut(1.0 / norm);
-            }
             let sv = normalised.singular_values();
             let (smax, smin) = (sv.max(), sv.min());
             condition_number = if smin > 0.0 { smax / smin } else { f64::INFINITY };

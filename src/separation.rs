@@ -31,7 +31,7 @@
 
 use crate::data::Samples;
 use crate::error::Result;
-use crate::fit::{FitOptions, LawFit, fit_law_within};
+use crate::fit::{FitOptions, LawFit, fit_law_within, normalised_jacobian};
 use crate::laws::Law;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -129,21 +129,8 @@ fn normal_cdf(x: f64) -> f64 {
 /// `w` (rad/s) and weight-on-bit ratios `r`: the left singular vectors of the column-normalised
 /// Jacobian whose singular values exceed [`RIDGE`] of the largest.
 fn tangent_basis(law: Law, params_si: &[f64], w: &[f64], r: &[f64]) -> DMatrix<f64> {
-    let k = law.n_params();
-    let mut jacobian = DMatrix::zeros(w.len(), k);
-    let mut gradient = vec![0.0; k];
-    for (i, (&w, &r)) in w.iter().zip(r).enumerate() {
-        law.torque_and_gradient(params_si, w, &mut gradient);
-        for (c, g) in gradient.iter().enumerate() {
-            jacobian[(i, c)] = r * g;
-        }
-    }
-    for mut column in jacobian.column_iter_mut() {
-        let norm = column.norm();
-        if norm > 0.0 && norm.is_finite() {
-            column /= norm;
-        }
-    }
+    let every: Vec<usize> = (0..law.n_params()).collect();
+    let (jacobian, _) = normalised_jacobian(law, params_si, w, r, &every);
     let svd = jacobian.svd(true, false);
     let largest = svd.singular_values.max();
     let kept: Vec<usize> = (0..svd.singular_values.len())
