@@ -424,8 +424,9 @@ pub fn split(start: u64, len: u64, pieces: usize) -> Vec<(u64, u64)> {
 }
 
 /// Explicit candidates a [`Task::Score`] holds at least, unless the batch is smaller: a
-/// candidate is shipped (its law slot and six f32, about 25 bytes of postcard) rather than named, and a batch of them (a sweep of the
-/// evidence sampler) is a few thousand, which should still reach every worker.
+/// candidate is shipped (its law slot and six f32, about 25 bytes of postcard) rather than
+/// named, and a batch of them (a sweep of the evidence sampler) is a few thousand, which
+/// should still reach every worker.
 pub const MIN_SCORE_TASK: u64 = 256;
 
 /// [`split`] with pieces no shorter than `least` unless the whole is.
