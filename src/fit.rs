@@ -422,7 +422,8 @@ impl Race {
         // Window k of the run gains g·k/(k + j) in its j-th window from now.
         let k = evaluations as f64 / self.window as f64;
         let remaining_windows = self.max_evaluations.saturating_sub(evaluations) as f64 / self.window as f64;
-        let reachable_gain = gain_per_window * k * (1.0 + remaining_windows / k).ln();
+        // A sum of squares cannot fall below zero: no run gains more than it has left.
+        let reachable_gain = (gain_per_window * k * (1.0 + remaining_windows / k).ln()).min(ssr);
         let cannot_win = self
             .target
             .is_some_and(|target| ssr - reachable_gain > target * (1.0 - EQUAL_FIT) - self.resolution);
@@ -700,8 +701,9 @@ struct Polished {
 }
 
 impl Polished {
+    /// Whether the run ran out of patience (not one the race ended on purpose).
     fn lost_patience(&self) -> bool {
-        matches!(self.termination, TerminationReason::LostPatience)
+        matches!(self.termination, TerminationReason::LostPatience) && !self.abandoned
     }
 }
 
@@ -1055,6 +1057,15 @@ fn race_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>]
             target: best(&polished),
             resolution,
         };
+        if stop.beyond_reach() {
+            // A finished run already fits within the resolution of zero: the others end here.
+            polished.extend(unfinished.into_iter().map(|(_, first)| Polished {
+                abandoned: true,
+                ..first
+            }));
+            polished.sort_by(|a, b| a.ssr.total_cmp(&b.ssr));
+            return polished;
+        }
         let again: Vec<Polished> = unfinished
             .par_iter()
             .filter_map(|(_, first)| polish(law, data, bounds, &first.params, PATIENCE, stop))
@@ -1079,6 +1090,17 @@ fn race_starts(law: Law, data: ScaledData, bounds: &[Bound], starts: &[Vec<f64>]
 struct Stop {
     target: Option<f64>,
     resolution: f64,
+}
+
+impl Stop {
+    /// Whether no run can beat the target by more than the resolution, however far it went:
+    /// that would take a sum of squares below zero.
+    fn beyond_reach(&self) -> bool {
+        self.resolution > 0.0
+            && self
+                .target
+                .is_some_and(|target| target * (1.0 - EQUAL_FIT) - self.resolution <= 0.0)
+    }
 }
 
 /// One Levenberg-Marquardt run from `p0` (scaled) with `patience`, stopped early as `stop`
@@ -1320,7 +1342,8 @@ mod tests {
     /// A run that gains more than the resolution per window goes on; a crawl whose gains
     /// shrink (geometrically, faster than the 1/k the rule extrapolates) stops, with less than
     /// the resolution left to gain; without a resolution or a target nothing stops; against a
-    /// target, a run stops once it cannot beat it by more than the resolution.
+    /// target, a run stops once it cannot beat it by more than the resolution, no sum of
+    /// squares falling below zero.
     #[test]
     fn a_run_stops_once_what_is_left_of_it_does_not_matter() {
         let resolution = 0.01;
@@ -1357,5 +1380,12 @@ mod tests {
             ),
             None
         );
+        // A run on its way to zero cannot gain more than its sum of squares: against a
+        // finished run within the resolution of zero it stops at its first window, however
+        // fast it descends; against one further from zero it goes on.
+        let to_zero = |e: usize| 0.3 * 0.9f64.powi(e as i32);
+        assert!(raced(0.005).beyond_reach() && !raced(0.05).beyond_reach());
+        assert_eq!(stops_at(raced(0.005), to_zero), Some(20));
+        assert_eq!(stops_at(raced(0.05), to_zero), Some(40));
     }
 }
