@@ -101,6 +101,7 @@ fn check_evidence(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
         &cmd.run,
         cmd.replicates,
         cmd.backend,
+        &mut bitrock::run::Scoring::Here,
         &mut progress,
         &mut super::evidence::Notes,
     )?;

@@ -140,7 +140,16 @@ impl Placement {
     }
 }
 
-impl Scoring<'_, '_> {
+impl<'w> Scoring<'_, 'w> {
+    /// The same scoring for one call that takes it by value, kept for the next.
+    pub fn reborrow(&mut self) -> Scoring<'_, 'w> {
+        match self {
+            Scoring::Here => Scoring::Here,
+            Scoring::Workers(make) => Scoring::Workers(&mut **make),
+            Scoring::Evaluator(make) => Scoring::Evaluator(&mut **make),
+        }
+    }
+
     /// The workers that score `problem` where `placement` says.
     pub fn workers(
         &mut self,

@@ -144,7 +144,7 @@ pub(crate) fn resume_evidence(
 }
 
 /// Scoring by the workers `make` makes, or here.
-fn scoring<'a, 'w>(make: &'a mut Option<Box<MakeWorkers<'w>>>) -> Scoring<'a, 'w> {
+pub(crate) fn scoring<'a, 'w>(make: &'a mut Option<Box<MakeWorkers<'w>>>) -> Scoring<'a, 'w> {
     match make {
         None => Scoring::Here,
         Some(make) => Scoring::Workers(make.as_mut()),
@@ -152,9 +152,23 @@ fn scoring<'a, 'w>(make: &'a mut Option<Box<MakeWorkers<'w>>>) -> Scoring<'a, 'w
 }
 
 /// The pool of workers an evidence's candidates are scored by, if any.
-struct Workers {
-    dispatcher: Option<Py<PyAny>>,
-    parallelism: usize,
+pub(crate) struct Workers {
+    pub(crate) dispatcher: Option<Py<PyAny>>,
+    pub(crate) parallelism: usize,
+}
+
+impl Workers {
+    /// The transport to the pool, where there is one.
+    pub(crate) fn transport(self) -> Option<PyTransport> {
+        self.dispatcher
+            .map(|dispatcher| PyTransport::new(dispatcher, self.parallelism))
+    }
+}
+
+/// Workers on `transport`'s pool for each problem an evidence job asks for.
+pub(crate) fn make_workers(transport: &PyTransport) -> Box<MakeWorkers<'_>> {
+    let mut make = remote_each(transport);
+    Box::new(move |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement))
 }
 
 /// `job`'s evidence on `data` from `progress` (kept as it goes in `unfinished`, and written
@@ -171,15 +185,9 @@ fn compute(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let mut observer = PyObserver::new(None, note);
-    let transport = workers
-        .dispatcher
-        .map(|dispatcher| PyTransport::new(dispatcher, workers.parallelism));
+    let transport = workers.transport();
     let result = py.detach(|| {
-        let mut make: Option<Box<MakeWorkers>> = transport.as_ref().map(|transport| {
-            let mut make = remote_each(transport);
-            Box::new(move |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement))
-                as Box<MakeWorkers>
-        });
+        let mut make = transport.as_ref().map(make_workers);
         let analysis = match &unfinished {
             None => job.run(data, scoring(&mut make), &mut observer),
             Some(unfinished) => unfinished.run(job, data, progress, scoring(&mut make), &mut observer),

@@ -10,9 +10,11 @@ use std::path::PathBuf;
 /// run's `selection/` (as `bitrock check-selection` does) and returns its document; a run kept
 /// in memory (`in_memory`, `run` then `None`) is checked alike and its document only returned.
 /// An evidence directory's evidence is computed again and checked, the check written into its
-/// document and returned.
+/// document and returned; with a `dispatcher` (`bitrock._distributed.Dispatcher`) its
+/// candidates are scored by the dispatcher's workers, `parallelism` tasks a batch.
 #[pyfunction]
-#[pyo3(signature = (run, in_memory, options, progress, note))]
+#[pyo3(signature = (run, in_memory, options, progress, note, dispatcher=None, parallelism=1))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn check_selection(
     py: Python<'_>,
     run: Option<PathBuf>,
@@ -20,6 +22,8 @@ pub(crate) fn check_selection(
     options: &Bound<'_, PyDict>,
     progress: Option<Py<PyAny>>,
     note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
 ) -> PyResult<String> {
     use bitrock::selection::{self, CheckOptions, CheckedRun};
     let defaults = CheckOptions::default();
@@ -39,8 +43,21 @@ pub(crate) fn check_selection(
             });
         }
     };
+    let workers = crate::evidence::Workers {
+        dispatcher,
+        parallelism,
+    };
     if let Some(dir) = run.as_deref().filter(|dir| bitrock::run::dir::is_evidence_dir(dir)) {
-        return check_evidence(py, dir, &options, &report, &raised, note);
+        return check_evidence(py, dir, &options, &report, &raised, note, workers);
+    }
+    if workers.dispatcher.is_some() {
+        return Err(to_py(
+            py,
+            Error::setting(
+                "executor",
+                "applies to an evidence directory's check; a run's check scores its replicates together in this process (`batch`)",
+            ),
+        ));
     }
     let kept = match (&run, &in_memory) {
         (None, Some(result)) => Some(check(
@@ -89,6 +106,7 @@ fn check_evidence(
     report: &(dyn Fn(usize, usize) + Sync),
     raised: &std::sync::Mutex<Option<PyErr>>,
     note: Option<Py<PyAny>>,
+    workers: crate::evidence::Workers,
 ) -> PyResult<String> {
     if options.batch.is_some() {
         return Err(to_py(
@@ -106,15 +124,24 @@ fn check_evidence(
         }
     }
     let mut notes = Notes(Vec::new());
+    let transport = workers.transport();
     let checked = py.detach(|| {
+        let mut make = transport.as_ref().map(crate::evidence::make_workers);
         bitrock::pipeline::evidence::dir::check_dir(
             dir,
             options.replicates,
             options.backend,
+            &mut crate::evidence::scoring(&mut make),
             &mut |done, total| report(done, total),
             &mut notes,
         )
     });
+    if let Some(e) = transport
+        .as_ref()
+        .and_then(crate::distributed::PyTransport::take_raised)
+    {
+        return Err(e);
+    }
     if let Some(e) = raised.lock().expect("not poisoned").take() {
         return Err(e);
     }

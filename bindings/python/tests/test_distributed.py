@@ -334,6 +334,25 @@ def test_the_evidence_on_workers_is_the_one_process_evidence(thinned, one_proces
         assert made.lost > 0 and made._submitted > 100
 
 
+def test_an_evidence_directory_is_checked_on_workers_as_the_evidence_checks_itself(
+    thinned, one_process_evidence, one_process, tmp_path
+) -> None:
+    """check_selection of an evidence directory on a pool scores on the pool, and its check
+    is the one the evidence computed in one process with check=1; a run's check takes no pool."""
+    settings = {k: v for k, v in EVIDENCE.items() if k != "check"}
+    bitrock.evidence(thinned, out=tmp_path / "ev", **settings)
+    with Scrambled(seed=5) as pool:
+        matrix = bitrock.check_selection(tmp_path / "ev", replicates=1, progress=False, executor=pool)
+    assert pool._submitted > 100 and pool.lost > 0
+    document = _without_clock(matrix.attrs["document"])
+    assert document["rows"] == one_process_evidence["check"]["rows"]
+    assert _without_clock(bitrock.read_evidence(tmp_path / "ev").document["check"]) == document
+    with Scrambled(seed=5) as pool:
+        with pytest.raises(bitrock.InputError) as caught:
+            bitrock.check_selection(one_process[0], replicates=1, progress=False, executor=pool)
+    assert caught.value.argument == "executor" and pool._submitted == 0
+
+
 def test_a_failing_pool_stops_the_evidence_with_the_workers_error(thinned) -> None:
     class Failing(Scrambled):
         def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]

@@ -251,15 +251,17 @@ fn pretty(document: &serde_json::Value) -> Vec<u8> {
 }
 
 /// Checks the evidence of the evidence directory `dir` by re-simulation ([`check`]):
-/// `replicates` synthetic records per law, on `backend` (default: the evidence's). The
-/// evidence is computed again from the job and the record the directory keeps (the same
-/// numbers on the same backend; said where they differ), then checked, and the check written
-/// into the document (`check`, as `bitrock evidence --check` writes it), the rest of the
-/// directory unchanged. Returns the check.
+/// `replicates` synthetic records per law, on `backend` (default: the evidence's), scored
+/// where `scoring` says (here, or on a pool of workers: the same check). The evidence is
+/// computed again from the job and the record the directory keeps (the same numbers on the
+/// same backend; said where they differ), then checked, and the check written into the
+/// document (`check`, as `bitrock evidence --check` writes it), the rest of the directory
+/// unchanged. Returns the check.
 pub fn check_dir(
     dir: &Path,
     replicates: usize,
     backend: Option<Backend>,
+    scoring: &mut Scoring,
     progress: &mut dyn FnMut(usize, usize),
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
@@ -289,7 +291,7 @@ pub fn check_dir(
     if let Some(backend) = backend {
         job.backend = backend;
     }
-    let analysis = job.run(&data, Scoring::Here, observer)?;
+    let analysis = job.run(&data, scoring.reborrow(), observer)?;
     let stored_ln_z: Vec<Option<f64>> = document["laws"]
         .as_array()
         .map(|laws| laws.iter().map(|law| law["ln_z"].as_f64()).collect())
@@ -302,15 +304,7 @@ pub fn check_dir(
             dir.display()
         ));
     }
-    let check = check(
-        &job,
-        &data,
-        &analysis,
-        replicates,
-        &mut Scoring::Here,
-        progress,
-        observer,
-    )?;
+    let check = check(&job, &data, &analysis, replicates, scoring, progress, observer)?;
     document["check"] = serde_json::to_value(&check).expect("a check serialises");
     // The directory is still the evidence's alone; only its document changes (written whole).
     files::refuse_foreign(dir, "run", &|rel, is_dir| {

@@ -547,6 +547,7 @@ def check_selection(
     batch: int | None = None,
     backend: str | None = None,
     progress: bool | Callable[[int, int], Any] = True,
+    executor: Any = None,
 ) -> pd.DataFrame:
     """How far the run's model selection can be trusted, as ``bitrock check-selection``
     measures it: ``replicates`` synthetic records per law, each made from the law's posterior
@@ -555,7 +556,8 @@ def check_selection(
     in memory is checked alike; its check is only returned). ``source`` may also be an
     evidence directory (``evidence(..., out=DIR)``): its evidence is computed again and checked
     as ``evidence(check=K)`` checks it, the check written into its document (``batch`` does not
-    apply).
+    apply); ``executor`` (as for :func:`evidence`) then scores its candidates on a pool of
+    workers, the same check as here.
 
     Returns the confusion matrix: one row per generating law, one column per law, the mean
     posterior probability over its replicates. ``attrs`` holds ``first_share`` (the share of
@@ -570,6 +572,7 @@ def check_selection(
         source = source.path
     elif not isinstance(source, (str, os.PathLike)):
         raise InputError(f"source: give a Result, a run directory or an evidence directory, got {type(source).__name__}", "source")
+    dispatcher = None if executor is None else Dispatcher(executor)
     callback, close = _replicate_progress(progress)
     try:
         document = json.loads(
@@ -579,6 +582,8 @@ def check_selection(
                 {"replicates": replicates, "batch": batch, "backend": backend},
                 callback,
                 _note,
+                dispatcher,
+                1 if dispatcher is None else dispatcher.parallelism,
             )
         )
     finally:

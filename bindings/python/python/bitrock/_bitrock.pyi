@@ -121,13 +121,14 @@ def abc(record: Record, settings: dict, out: str | PathLike[str] | None, force: 
     `bitrock.abc`), into `out` when given.
     """
 
-def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, options: dict, progress: Any | None, note: Any | None) -> str:
+def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, options: dict, progress: Any | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
     """
     Checks the selection of the run in directory `run` by re-simulation, writes it into the
     run's `selection/` (as `bitrock check-selection` does) and returns its document; a run kept
     in memory (`in_memory`, `run` then `None`) is checked alike and its document only returned.
     An evidence directory's evidence is computed again and checked, the check written into its
-    document and returned.
+    document and returned; with a `dispatcher` (`bitrock._distributed.Dispatcher`) its
+    candidates are scored by the dispatcher's workers, `parallelism` tasks a batch.
     """
 
 def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
