@@ -10,7 +10,7 @@ use bitrock::abc::shard::Local;
 use bitrock::eval::AbcProblem;
 use bitrock::eval::Backend;
 use bitrock::eval::cpu::CpuEvaluator;
-use bitrock::pipeline::evidence::{EvidenceAnalysis, EvidenceCheck, EvidenceJob, check};
+use bitrock::pipeline::evidence::{EvidenceAnalysis, EvidenceCheck, EvidenceJob, check, fit_reference};
 use bitrock::prior::{LawBox, Prior};
 use bitrock::separation::UNDECIDED_NATS;
 use rand_distr::{Distribution, Normal};
@@ -104,6 +104,29 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
     // The posterior mean of the static torque lies where the likelihood puts it.
     let mean_tsb: f64 = m2.posterior.iter().map(|(p, w)| w * p[0]).sum();
     assert!((mean_tsb - 13_000.0).abs() < 3_000.0, "{mean_tsb}");
+
+    // Started from the least-squares fit, as `bitrock evidence` starts (the default): the same
+    // integral, at the default particles and islands, in a fraction of the candidates.
+    let fit = bitrock::fit::fit_law(Law::M2, &data, &Default::default(), &Default::default()).unwrap();
+    let lag1 = bitrock::separation::residual_lag1(&fit, &data, &Default::default());
+    let reference = fit_reference(&fit, NoiseModel::Iid, lag1).expect("m2's fit has a covariance");
+    let started = evidence::run_from(&evaluator, &EvidenceConfig::default(), &[reference], None, &mut Silent).unwrap();
+    let from_fit = started.of(Law::M2).unwrap();
+    eprintln!(
+        "m2 from its fit: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates against {}",
+        from_fit.ln_z, from_fit.ln_z_error, from_fit.stages, from_fit.candidates_scored, m2.candidates_scored
+    );
+    assert!(
+        from_fit.ln_z_error > 0.0 && from_fit.ln_z_error < 0.3,
+        "{}",
+        from_fit.ln_z_error
+    );
+    assert!(
+        (from_fit.ln_z - finer).abs() < 3.0 * from_fit.ln_z_error,
+        "ln Z = {} ± {}, quadrature {finer}",
+        from_fit.ln_z,
+        from_fit.ln_z_error
+    );
 }
 
 #[test]

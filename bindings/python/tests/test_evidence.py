@@ -32,6 +32,23 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
     assert document["separations"] == small.document["separations"]
 
 
+def test_the_samplers_start_from_the_fits_or_the_boxes_as_on_the_command_line(cli) -> None:
+    record = bitrock.read_record(DEMO_CSV, thin=4)
+    from_fits = bitrock.evidence(record, **SMALL, noise="iid")
+    from_boxes = bitrock.evidence(record, **SMALL, start="box", noise="iid")
+    done = run_cli(
+        cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
+        "--seed", "5", "--backend", "cpu", "--noise", "iid", "--start", "box", "--json",
+    )
+    document = json.loads(done.stdout)
+    assert from_fits.document["sampler"]["start"] == "fit"
+    assert document["sampler"]["start"] == from_boxes.document["sampler"]["start"] == "box"
+    assert [law["island_ln_z"] for law in document["laws"]] == [law["island_ln_z"] for law in from_boxes.document["laws"]]
+    # From the boxes the tempered path is longer: more steps, more candidates.
+    for fit, box in zip(from_fits.document["laws"], from_boxes.document["laws"]):
+        assert sum(fit["stages"]) < sum(box["stages"]) and fit["candidates_scored"] < box["candidates_scored"]
+
+
 def test_an_evidence_directory_reads_back_and_maps_as_the_evidence_in_memory(cli, tmp_path) -> None:
     record = bitrock.read_record(DEMO_CSV, thin=4)
     kept = bitrock.evidence(record, **SMALL, out=tmp_path / "ev")
@@ -85,6 +102,7 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
         ({"prior_scale": -1.0}, "prior_scale"),
         ({"particles": "many"}, "particles"),
         ({"check": 0}, "check"),
+        ({"start": "prior"}, "start"),
     ],
 )
 def test_bad_arguments_are_refused_by_name(demo, arguments, named) -> None:

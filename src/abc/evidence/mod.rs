@@ -131,6 +131,19 @@ impl Reference {
         })
     }
 
+    /// A Gaussian reference: one kernel at `mean` (SI) of covariance `covariance` (row-major,
+    /// d × d, SI), such as a fit's Laplace approximation of the posterior, widened.
+    pub fn gaussian(law: Law, mean: Vec<f64>, covariance: &[f64]) -> Self {
+        // Kernels are KERNEL_WIDTH of the covariance wide: undone here.
+        let unwidened = 1.0 / (KERNEL_WIDTH * KERNEL_WIDTH);
+        Self {
+            law,
+            particles: vec![mean],
+            weights: vec![1.0],
+            covariance: covariance.iter().map(|c| c * unwidened).collect(),
+        }
+    }
+
     /// The same reference moved by `by` (SI, one value per parameter): where the posterior has
     /// moved with the law's least-squares estimate.
     pub fn shifted(mut self, by: &[f64]) -> Self {
@@ -314,6 +327,33 @@ pub struct EvidenceConfig {
     /// error says by how much).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub law_particles: Vec<(Law, usize)>,
+    /// Where each law's samplers start (a job stored without it started from the box).
+    #[serde(default = "Start::stored")]
+    pub start: Start,
+}
+
+/// Where a law's samplers start their tempered path to the posterior. Either way ln Z is the
+/// evidence under the law's prior box: the start changes the cost and the variance, not what
+/// is estimated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Start {
+    /// From a Gaussian at the law's least-squares estimate, its covariance the fit's widened
+    /// (a [`Reference`] made by the caller, who has the fit), mixed with the box: a few
+    /// tempering steps, and the posterior's mode found by the fit's many starts rather than
+    /// by particles crossing the box. A law whose fit gives no covariance starts from its box.
+    #[default]
+    Fit,
+    /// From the prior box: the whole path from π to π·L, which loses modes a curved, narrow
+    /// posterior hides unless the islands hold many particles (ln Z then errs low).
+    Box,
+}
+
+impl Start {
+    /// What a stored job that does not say started from.
+    fn stored() -> Self {
+        Start::Box
+    }
 }
 
 impl Default for EvidenceConfig {
@@ -327,6 +367,7 @@ impl Default for EvidenceConfig {
             max_stages: 500,
             noise: NoiseModel::Iid,
             law_particles: Vec::new(),
+            start: Start::Fit,
         }
     }
 }
@@ -620,7 +661,7 @@ enum Phase {
 }
 
 /// One tempered sampler of one law; everything it holds between two scored batches is its
-/// state ([`Checkpoints`]), less a warm start's reference, which is made again from the job.
+/// state ([`Checkpoints`]), less its reference, which the job makes again.
 #[derive(Serialize, Deserialize)]
 struct Island {
     law: Law,
@@ -998,6 +1039,12 @@ pub struct Checkpoints<'a> {
     pub save: &'a mut dyn FnMut(&[u8]) -> Result<()>,
 }
 
+/// Whether a saved island started from a reference: it then keeps each particle's (or first
+/// draw's) reference density.
+fn started_from_reference(island: &Island) -> bool {
+    !island.ln_q.is_empty() || !island.proposal_ln_q.is_empty()
+}
+
 /// The state [`Checkpoints::save`] is given: seconds spent so far and the islands.
 fn encode_state(seconds: f64, islands: &[Island]) -> Vec<u8> {
     postcard::to_stdvec(&(seconds, islands)).expect("the samplers' state serialises")
@@ -1030,13 +1077,15 @@ fn decode_state(bytes: &[u8], origin: &std::path::Path, fresh: &[Island]) -> Res
             || saved.stream.seed != new.stream.seed
             || saved.stream.stream != new.stream.stream
             || particles(saved) != particles(new)
-            || new.reference.is_some()
+            || started_from_reference(saved) != new.reference.is_some()
         {
             return Err(refuse(&format!(
                 "its sampler {} of law {} differs",
                 saved.stream.stream, saved.law
             )));
         }
+        // The reference is not saved: the job makes it again, the same.
+        saved.reference = new.reference.clone();
     }
     Ok((seconds, islands))
 }
@@ -1052,7 +1101,8 @@ pub fn run(workers: &dyn Workers, config: &EvidenceConfig, observer: &mut dyn Ob
 
 /// [`run`], each law of `references` starting from its [`Reference`] instead of its box (a
 /// warm start: the same evidence, at a cost that depends on how near the reference is), its
-/// state saved and resumed by `checkpoints` (without references: a warm start is not saved).
+/// state saved and resumed by `checkpoints` (the references are not saved: a resumed job
+/// passes the same ones again).
 pub fn run_from(
     workers: &dyn Workers,
     config: &EvidenceConfig,
@@ -1328,6 +1378,28 @@ mod tests {
             m4.ln_z_error
         );
         assert!((m4.probability - 1.0).abs() < 1e-15);
+        // Started from the Laplace approximation (exact for a linear law) twice as wide, as a
+        // fit's reference is: the same integral, in a few tempering steps.
+        let covariance: Vec<f64> = (0..d * d).map(|i| 4.0 * sigma2 * inverse[(i / d, i % d)]).collect();
+        let reference = Reference::gaussian(Law::M4, theta.iter().copied().collect(), &covariance);
+        let started = run_from(&evaluator, &config, &[reference], None, &mut super::super::Silent).unwrap();
+        let from_fit = started.of(Law::M4).unwrap();
+        eprintln!(
+            "from the fit: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates",
+            from_fit.ln_z, from_fit.ln_z_error, from_fit.stages, from_fit.candidates_scored
+        );
+        assert!(
+            from_fit.ln_z_error > 0.0 && from_fit.ln_z_error < 0.3,
+            "{}",
+            from_fit.ln_z_error
+        );
+        assert!(
+            (from_fit.ln_z - expected).abs() < 3.0 * from_fit.ln_z_error,
+            "ln Z = {} ± {}, closed form {expected}",
+            from_fit.ln_z,
+            from_fit.ln_z_error
+        );
+        assert!(from_fit.candidates_scored < m4.candidates_scored / 2);
         let total: f64 = m4.posterior.iter().map(|(_, w)| w).sum();
         assert!((total - 1.0).abs() < 1e-12);
 
@@ -1469,7 +1541,7 @@ mod tests {
             &EvidenceConfig {
                 noise: NoiseModel::Iid,
                 particles: 400,
-                ..config
+                ..config.clone()
             },
             &mut super::super::Silent,
         )
@@ -1485,6 +1557,45 @@ mod tests {
             "ln Z = {} ± {}, closed form {expected}",
             m4.ln_z,
             m4.ln_z_error
+        );
+        // Started at the least-squares estimate with the i.i.d. fit's covariance twice as wide,
+        // widened again by (1 + φ̂)/(1 − φ̂) of the residuals' lag-1 autocorrelation, as the
+        // pipeline's reference of an AR(1) evidence is: the same integral at default particles.
+        let ols = xx.clone().try_inverse().unwrap();
+        let theta_ols = &ols * &xy;
+        let e: Vec<f64> = (0..n).map(|i| y[i] - (x.row(i) * &theta_ols)[(0, 0)]).collect();
+        let s_ols: f64 = e.iter().map(|v| v * v).sum();
+        let phi_hat = e.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / s_ols;
+        let widen = 4.0 * s_ols / (n - d) as f64 * (1.0 + phi_hat) / (1.0 - phi_hat);
+        let covariance: Vec<f64> = (0..d * d).map(|i| widen * ols[(i / d, i % d)]).collect();
+        let reference = Reference::gaussian(Law::M4, theta_ols.iter().copied().collect(), &covariance);
+        let started = run_from(
+            &evaluator,
+            &EvidenceConfig {
+                particles: 500,
+                islands: 4,
+                ..config.clone()
+            },
+            &[reference],
+            None,
+            &mut super::super::Silent,
+        )
+        .unwrap();
+        let from_fit = started.of(Law::M4).unwrap();
+        eprintln!(
+            "AR(1) from the fit (φ̂ = {phi_hat:.3}): ln Z = {:.3} ± {:.3}; islands {:?}, {} candidates",
+            from_fit.ln_z, from_fit.ln_z_error, from_fit.island_ln_z, from_fit.candidates_scored
+        );
+        assert!(
+            from_fit.ln_z_error > 0.0 && from_fit.ln_z_error < 0.3,
+            "{}",
+            from_fit.ln_z_error
+        );
+        assert!(
+            (from_fit.ln_z - expected).abs() < 3.0 * from_fit.ln_z_error,
+            "ln Z = {} ± {}, closed form {expected}",
+            from_fit.ln_z,
+            from_fit.ln_z_error
         );
         // Correlated residuals: the data prefer the AR(1) model by tens of nats (about
         // (n/2)·ln(1/(1 − φ²)) = 45 less its Occam factor).

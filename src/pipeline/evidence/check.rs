@@ -198,11 +198,12 @@ fn replicate_of(
     let known: Vec<(Law, Vec<f64>)> = std::iter::once((law, params_si.clone()))
         .chain(analysis.fits.iter().map(|f| (f.law, f.params_si.clone())))
         .collect();
-    let basis = super::Basis {
-        fits: crate::fit::fit_record_from(&job.laws, &synthetic, &analysis.fit, &known)?,
-        prior: analysis.prior.clone(),
-        fit: analysis.fit,
-    };
+    let basis = super::Basis::new(
+        crate::fit::fit_record_from(&job.laws, &synthetic, &analysis.fit, &known)?,
+        analysis.prior.clone(),
+        analysis.fit,
+        &synthetic,
+    );
     let placement = Placement {
         backend,
         ..job.placement()

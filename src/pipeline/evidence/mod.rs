@@ -176,13 +176,70 @@ pub struct Saving<'a> {
     pub save: &'a mut dyn FnMut(&Progress) -> Result<()>,
 }
 
-/// What the samplers of one torque scaling start from: the least-squares fits, the boxes, and
-/// the fit options they were made with.
+/// What the samplers of one torque scaling start from: the least-squares fits, the boxes, the
+/// fit options they were made with, and the lag-1 autocorrelation of each fit's residuals.
 #[derive(Clone, Debug)]
 struct Basis {
     fits: Vec<LawFit>,
     prior: Prior,
     fit: FitOptions,
+    residual_lag1: Vec<f64>,
+}
+
+impl Basis {
+    /// The basis of `fits` on `data`'s calibration samples.
+    fn new(fits: Vec<LawFit>, prior: Prior, fit: FitOptions, data: &FieldData) -> Self {
+        let residual_lag1 = fits
+            .iter()
+            .map(|f| separation::residual_lag1(f, &data.calibration, &fit))
+            .collect();
+        Self {
+            fits,
+            prior,
+            fit,
+            residual_lag1,
+        }
+    }
+}
+
+/// How much wider (in standard deviations) than the fit's Laplace approximation of the
+/// posterior a fit's reference is ([`fit_reference`]): the approximation misses the curvature
+/// of a nonlinear law's posterior and σ's uncertainty, and a reference narrower than the
+/// posterior gives heavy-tailed weights, a wider one only a tempering step more.
+pub const FIT_REFERENCE_WIDTH: f64 = 2.0;
+
+/// Most lag-1 autocorrelation of the residuals the reference of an AR(1) evidence widens for.
+const MOST_LAG1: f64 = 0.9;
+
+/// The reference a law's samplers start from ([`evidence::Start::Fit`]): a Gaussian at its
+/// least-squares estimate whose covariance is the fit's, [`FIT_REFERENCE_WIDTH`] times as
+/// wide, and under AR(1) residuals of lag-1 autocorrelation φ̂ (`lag1`) (1 + φ̂)/(1 − φ̂) times
+/// the variance more (correlated residuals hold less information about a smooth curve than
+/// as many independent ones); `None` where the fit gives no covariance (a parameter on its
+/// bound, a singular Jacobian): that law starts from its box.
+pub fn fit_reference(fit: &LawFit, noise: NoiseModel, lag1: f64) -> Option<evidence::Reference> {
+    let d = fit.law.n_params();
+    let sd: Vec<f64> = (0..d)
+        .map(|j| fit.std_errors_si.get(j).copied().flatten())
+        .collect::<Option<_>>()?;
+    let correlation = |j: usize, k: usize| match j == k {
+        true => Some(1.0),
+        false => fit.correlations.get(j).and_then(|row| row.get(k)).copied().flatten(),
+    };
+    let phi = if noise == NoiseModel::Ar1 && lag1.is_finite() {
+        lag1.clamp(0.0, MOST_LAG1)
+    } else {
+        0.0
+    };
+    let widen = FIT_REFERENCE_WIDTH * FIT_REFERENCE_WIDTH * (1.0 + phi) / (1.0 - phi);
+    let mut covariance = Vec::with_capacity(d * d);
+    for j in 0..d {
+        for k in 0..d {
+            covariance.push(correlation(j, k)? * sd[j] * sd[k] * widen);
+        }
+    }
+    let usable = sd.iter().chain(&fit.params_si).all(|v| v.is_finite()) && sd.iter().all(|&v| v > 0.0);
+    usable.then(|| evidence::Reference::gaussian(fit.law, fit.params_si.clone(), &covariance))
 }
 
 /// A finished evidence job.
@@ -300,15 +357,7 @@ impl EvidenceJob {
                 )?,
                 EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
             };
-            let residual_lag1: Vec<f64> = fits
-                .iter()
-                .map(|fit| separation::residual_lag1(fit, &data.calibration, &fit_options))
-                .collect();
-            let basis = Basis {
-                fits,
-                prior,
-                fit: fit_options,
-            };
+            let basis = Basis::new(fits, prior, fit_options, data);
             // One evaluator for every noise model of this scaling (the same data, the same ρ);
             // what choosing it says (the backend) is said once for all scalings.
             let problem = Self::problem(data, &basis, self.sampler.seed);
@@ -322,7 +371,7 @@ impl EvidenceJob {
                 let mut analysis =
                     self.sample_saved(basis.clone(), workers.as_ref(), model, part, saving.as_mut(), observer)?;
                 part += 1;
-                analysis.residual_lag1 = residual_lag1.clone();
+                analysis.residual_lag1 = basis.residual_lag1.clone();
                 analyses.push(analysis);
             }
         }
@@ -464,7 +513,12 @@ impl EvidenceJob {
         checkpoints: Option<evidence::Checkpoints>,
         observer: &mut dyn Observer,
     ) -> Result<EvidenceAnalysis> {
-        let Basis { fits, prior, fit } = basis;
+        let Basis {
+            fits,
+            prior,
+            fit,
+            residual_lag1,
+        } = basis;
         let law_particles = match &self.warm {
             Some(warm) if !warm.worth.is_empty() => {
                 particles_by_worth(self.sampler.particles, &warm.worth, &fits, workers.problem().data_len())
@@ -480,7 +534,7 @@ impl EvidenceJob {
         // Each reference moved as its law's least-squares estimate moved from the window
         // before to this record: the window before gives the posterior's shape, the estimates
         // how far it went.
-        let references: Vec<evidence::Reference> = match &self.warm {
+        let mut references: Vec<evidence::Reference> = match &self.warm {
             Some(warm) if warm.scaled == fit.w_ref_n.is_some() => warm
                 .references
                 .iter()
@@ -500,6 +554,16 @@ impl EvidenceJob {
                 .collect(),
             _ => Vec::new(),
         };
+        // The other laws start from their fits, where the job says so.
+        if sampler.start == evidence::Start::Fit {
+            for (fit, &lag1) in fits.iter().zip(&residual_lag1) {
+                if !references.iter().any(|r| r.law == fit.law)
+                    && let Some(reference) = fit_reference(fit, noise, lag1)
+                {
+                    references.push(reference);
+                }
+            }
+        }
         let evidence = evidence::run_from(workers, &sampler, &references, checkpoints, observer)?;
         Ok(EvidenceAnalysis {
             fits,

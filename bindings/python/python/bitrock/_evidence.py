@@ -192,6 +192,7 @@ def evidence(
     w_ref_kn: float | None = None,
     check: int | None = None,
     noise: str = "auto",
+    start: str = "fit",
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     executor: Any = None,
@@ -205,7 +206,10 @@ def evidence(
     Monte-Carlo error; the same ``seed`` gives the same result. ``noise`` is the residuals'
     model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
-    ``check=K`` then checks the
+    ``start`` is where each law's samplers start: ``"fit"``, a Gaussian at its least-squares
+    estimate (the fit's covariance, twice as wide) mixed with its box, or ``"box"``, the box
+    alone (the whole tempered path; it needs many particles on a curved posterior); the
+    evidence is of the boxes either way. ``check=K`` then checks the
     answer by re-simulation (K synthetic records per law from its evidence posterior and the
     record's own residuals, each through the same evidence over the same boxes; K times the
     cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
@@ -237,6 +241,7 @@ def evidence(
         "w_ref_kn": w_ref_kn,
         "check": check,
         "noise": noise,
+        "start": start,
         "out": None if out is None else os.fspath(out),
         "force": force,
     }
