@@ -51,13 +51,15 @@ impl Noise {
 /// Where each law's samplers start.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum StartAt {
-    /// From a Gaussian at the law's least-squares estimate (the fit's covariance, twice as
-    /// wide), mixed with the box: a few tempering steps; a law whose fit has no covariance
-    /// starts from its box.
-    Fit,
-    /// From the prior box: the whole tempered path, which needs many particles on a curved
-    /// posterior (fewer under-estimate ln Z).
+    /// From the prior box: the whole tempered path, which needs many particles on a narrow
+    /// curved posterior (fewer under-estimate ln Z, their islands disagreeing).
     Box,
+    /// From a Gaussian at the law's least-squares estimate (the fit's covariance, twice as
+    /// wide), mixed with the box: a few tempering steps, a tenth of the candidates; it
+    /// under-estimates a law whose posterior is a funnel far wider than its fit's covariance
+    /// (m3 on a record of the law it nests). A law whose fit has no covariance starts from
+    /// its box.
+    Fit,
 }
 
 impl StartAt {
@@ -96,7 +98,7 @@ pub struct EvidenceCmd {
     pub noise: Noise,
     /// Where each law's samplers start their tempered path (the evidence is of the boxes
     /// either way).
-    #[arg(long, value_enum, default_value_t = StartAt::Fit)]
+    #[arg(long, value_enum, default_value_t = StartAt::Box)]
     pub start: StartAt,
     /// Particles of each independent sampler (island).
     #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]

@@ -102,9 +102,9 @@ pub struct WatchCmd {
     /// The drill string the advice's stability is judged on.
     #[command(flatten)]
     pub string: StructureArgs,
-    /// Each window's evidence afresh, each law's samplers started from its fit on the window
-    /// (by default each starts from the window before's posterior: the same evidence, fewer
-    /// candidates).
+    /// Each window's evidence from the laws' boxes, the whole procedure repeated as the paper
+    /// would (by default each starts from the window before's posterior: the same evidence,
+    /// fewer candidates).
     #[arg(long)]
     pub cold_start: bool,
     /// One JSON line per window instead of the table.

@@ -105,7 +105,7 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
     let mean_tsb: f64 = m2.posterior.iter().map(|(p, w)| w * p[0]).sum();
     assert!((mean_tsb - 13_000.0).abs() < 3_000.0, "{mean_tsb}");
 
-    // Started from the least-squares fit, as `bitrock evidence` starts (the default): the same
+    // Started from the least-squares fit, as `bitrock evidence --start fit` starts: the same
     // integral, at the default particles and islands, in a fraction of the candidates.
     let fit = bitrock::fit::fit_law(Law::M2, &data, &Default::default(), &Default::default()).unwrap();
     let lag1 = bitrock::separation::residual_lag1(&fit, &data, &Default::default());

@@ -115,10 +115,9 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     let replayed = watch(&[&WINDOWS[..], &[record.to_str().unwrap(), "--replay-speed", "100"]].concat());
     assert_eq!(without_latency(&whole), without_latency(&replayed));
 
-    // Every window's evidence afresh (each law from its fit on the window, nothing carried):
-    // the same law ranked first in every window, at more candidates (each window above starts
-    // from the one before's posterior, its improbable law with fewer particles; measured: 0.90
-    // of the candidates).
+    // The paper's way, every window's evidence from the boxes: the same law ranked first in
+    // every window, at more candidates (each window above starts from the one before's
+    // posterior, its improbable law with fewer particles; measured: 0.42 of the candidates).
     let cold = watch(&[&WINDOWS[..], &[record.to_str().unwrap(), "--cold-start"]].concat());
     assert_eq!(cold.len(), whole.len());
     for (warm, cold) in whole.iter().zip(&cold) {
@@ -130,7 +129,7 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     }
     let candidates = |v: &[serde_json::Value]| v.iter().map(|u| u["candidates_scored"].as_u64().unwrap()).sum::<u64>();
     assert!(
-        candidates(&whole) < candidates(&cold),
+        candidates(&whole) * 2 < candidates(&cold),
         "warm {} against cold {}",
         candidates(&whole),
         candidates(&cold)

@@ -34,11 +34,11 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
 
 def test_the_samplers_start_from_the_fits_or_the_boxes_as_on_the_command_line(cli) -> None:
     record = bitrock.read_record(DEMO_CSV, thin=4)
-    from_fits = bitrock.evidence(record, **SMALL, noise="iid")
-    from_boxes = bitrock.evidence(record, **SMALL, start="box", noise="iid")
+    from_fits = bitrock.evidence(record, **SMALL, start="fit", noise="iid")
+    from_boxes = bitrock.evidence(record, **SMALL, noise="iid")
     done = run_cli(
         cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
-        "--seed", "5", "--backend", "cpu", "--noise", "iid", "--start", "box", "--json",
+        "--seed", "5", "--backend", "cpu", "--noise", "iid", "--json",
     )
     document = json.loads(done.stdout)
     assert from_fits.document["sampler"]["start"] == "fit"

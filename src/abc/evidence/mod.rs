@@ -327,8 +327,8 @@ pub struct EvidenceConfig {
     /// error says by how much).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub law_particles: Vec<(Law, usize)>,
-    /// Where each law's samplers start (a job stored without it started from the box).
-    #[serde(default = "Start::stored")]
+    /// Where each law's samplers start.
+    #[serde(default)]
     pub start: Start,
 }
 
@@ -338,22 +338,19 @@ pub struct EvidenceConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Start {
+    /// From the prior box: the whole path from π to π·L. A narrow curved posterior splits
+    /// into modes that an island's particles lose as β grows, unless each holds thousands
+    /// (ln Z then errs low, its islands disagreeing).
+    #[default]
+    Box,
     /// From a Gaussian at the law's least-squares estimate, its covariance the fit's widened
     /// (a [`Reference`] made by the caller, who has the fit), mixed with the box: a few
     /// tempering steps, and the posterior's mode found by the fit's many starts rather than
-    /// by particles crossing the box. A law whose fit gives no covariance starts from its box.
-    #[default]
+    /// by particles crossing the box. Where the posterior is a funnel far wider than the
+    /// fit's covariance (a law nesting the record's: m3's bump of near-zero amplitude, its
+    /// centre and width free) the path never reaches the funnel, and ln Z errs low with an
+    /// error that does not show it. A law whose fit gives no covariance starts from its box.
     Fit,
-    /// From the prior box: the whole path from π to π·L, which loses modes a curved, narrow
-    /// posterior hides unless the islands hold many particles (ln Z then errs low).
-    Box,
-}
-
-impl Start {
-    /// What a stored job that does not say started from.
-    fn stored() -> Self {
-        Start::Box
-    }
 }
 
 impl Default for EvidenceConfig {
@@ -367,7 +364,7 @@ impl Default for EvidenceConfig {
             max_stages: 500,
             noise: NoiseModel::Iid,
             law_particles: Vec::new(),
-            start: Start::Fit,
+            start: Start::Box,
         }
     }
 }

@@ -192,7 +192,7 @@ def evidence(
     w_ref_kn: float | None = None,
     check: int | None = None,
     noise: str = "auto",
-    start: str = "fit",
+    start: str = "box",
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     executor: Any = None,
@@ -206,10 +206,11 @@ def evidence(
     Monte-Carlo error; the same ``seed`` gives the same result. ``noise`` is the residuals'
     model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
-    ``start`` is where each law's samplers start: ``"fit"``, a Gaussian at its least-squares
-    estimate (the fit's covariance, twice as wide) mixed with its box, or ``"box"``, the box
-    alone (the whole tempered path; it needs many particles on a curved posterior); the
-    evidence is of the boxes either way. ``check=K`` then checks the
+    ``start`` is where each law's samplers start: ``"box"``, the box (the whole tempered path;
+    it needs many particles on a narrow curved posterior), or ``"fit"``, a Gaussian at its
+    least-squares estimate (the fit's covariance, twice as wide) mixed with its box (a tenth of
+    the candidates; it under-estimates a law whose posterior is a funnel wider than its fit's
+    covariance, m3 on a record of the law it nests); the evidence is of the boxes either way. ``check=K`` then checks the
     answer by re-simulation (K synthetic records per law from its evidence posterior and the
     record's own residuals, each through the same evidence over the same boxes; K times the
     cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
