@@ -987,3 +987,75 @@ fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("progress.bin"), "{err}");
 }
+
+/// An evidence whose samplers start from the fits is saved and resumed alike: its references
+/// are not saved but made again from the job, and the resumed evidence is the uninterrupted
+/// one, bit for bit, having scored only the batches not done before.
+#[test]
+fn an_evidence_started_from_the_fits_resumes_to_the_uninterrupted_evidence() {
+    use bitrock::abc::evidence::Start;
+    use bitrock::pipeline::evidence::dir::Unfinished;
+    let dir = tempfile::tempdir().unwrap();
+    let record = m2_record_with_wob(dir.path(), "20", "60", "10");
+    let data = bitrock::data::read_field_data(&record, &Default::default()).unwrap();
+    let job = EvidenceJob {
+        laws: vec![Law::M2, Law::M3],
+        backend: Backend::Cpu,
+        sampler: EvidenceConfig {
+            particles: 100,
+            islands: 2,
+            seed: 4,
+            start: Start::Fit,
+            ..EvidenceConfig::default()
+        },
+        ..EvidenceJob::default()
+    };
+    let finished = |out: &std::path::Path, unfinished: Unfinished, analysis: &EvidenceAnalysis| {
+        let document = analysis.document(&data, &job.prior.describe(), true);
+        unfinished.finish(&document, analysis, &job, &data).unwrap();
+        stored_evidence(out)
+    };
+    let whole = dir.path().join("whole");
+    let unfinished = Unfinished::start(&whole, false, &job, &data).unwrap();
+    let mut all = StopAfter::new(0);
+    let analysis = unfinished
+        .run(&job, &data, Default::default(), Default::default(), &mut all)
+        .unwrap();
+    // From the fits: a few tempering steps per island.
+    assert!(
+        analysis.evidence.laws.iter().all(|l| l.stages.iter().all(|&s| s <= 6)),
+        "{:?}",
+        analysis.evidence.laws.iter().map(|l| &l.stages).collect::<Vec<_>>()
+    );
+    let uninterrupted = finished(&whole, unfinished, &analysis);
+
+    let twice = dir.path().join("twice");
+    drop(Unfinished::start(&twice, false, &job, &data).unwrap());
+    let later = all.scored / 2;
+    for batches in [3, later] {
+        let (mut unfinished, stored_job, stored_data, progress) = Unfinished::open(&twice).unwrap();
+        assert_eq!(stored_job, job);
+        unfinished.every_s = 0.0;
+        let stopped = unfinished.run(
+            &job,
+            &stored_data,
+            progress,
+            Default::default(),
+            &mut StopAfter::new(batches),
+        );
+        assert!(matches!(stopped, Err(bitrock::Error::Interrupted)), "{stopped:?}");
+    }
+    let (unfinished, _, _, saved) = Unfinished::open(&twice).unwrap();
+    assert!(!saved.done.is_empty(), "the second stop lies past the first part");
+    let mut rest = StopAfter::new(0);
+    let analysis = unfinished
+        .run(&job, &data, saved, Default::default(), &mut rest)
+        .unwrap();
+    assert_eq!(finished(&twice, unfinished, &analysis), uninterrupted);
+    assert_eq!(
+        rest.scored,
+        all.scored - (3 - 1) - (later - 1),
+        "{} batches in all",
+        all.scored
+    );
+}
