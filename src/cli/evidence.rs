@@ -55,7 +55,7 @@ pub enum StartAt {
     /// curved posterior (fewer under-estimate ln Z, their islands disagreeing).
     Box,
     /// From a Gaussian at the law's least-squares estimate (the fit's covariance, twice as
-    /// wide), mixed with the box: a few tempering steps, a tenth of the candidates; it
+    /// wide), mixed with the box: a few tempering steps, far fewer candidates; it
     /// under-estimates a law whose posterior is a funnel far wider than its fit's covariance
     /// (m3 on a record of the law it nests). A law whose fit has no covariance starts from
     /// its box.

@@ -208,8 +208,8 @@ def evidence(
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
     ``start`` is where each law's samplers start: ``"box"``, the box (the whole tempered path;
     it needs many particles on a narrow curved posterior), or ``"fit"``, a Gaussian at its
-    least-squares estimate (the fit's covariance, twice as wide) mixed with its box (a tenth of
-    the candidates; it under-estimates a law whose posterior is a funnel wider than its fit's
+    least-squares estimate (the fit's covariance, twice as wide) mixed with its box (far fewer
+    candidates; it under-estimates a law whose posterior is a funnel wider than its fit's
     covariance, m3 on a record of the law it nests); the evidence is of the boxes either way. ``check=K`` then checks the
     answer by re-simulation (K synthetic records per law from its evidence posterior and the
     record's own residuals, each through the same evidence over the same boxes; K times the
