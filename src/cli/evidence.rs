@@ -98,7 +98,7 @@ pub struct EvidenceCmd {
     pub noise: Noise,
     /// Where each law's samplers start their tempered path (the evidence is of the boxes
     /// either way).
-    #[arg(long, value_enum, default_value_t = StartAt::Box)]
+    #[arg(long = "start-from", value_enum, default_value_t = StartAt::Box, value_name = "START")]
     pub start: StartAt,
     /// Particles of each independent sampler (island).
     #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]

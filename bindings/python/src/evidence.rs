@@ -66,7 +66,7 @@ pub(crate) fn evidence(
             islands: kwarg(options, "islands")?.unwrap_or(defaults.islands),
             seed: kwarg(options, "seed")?.unwrap_or(defaults.seed),
             max_stages: kwarg(options, "max_stages")?.unwrap_or(defaults.max_stages),
-            start: named(py, "start", kwarg(options, "start")?)?.unwrap_or(defaults.start),
+            start: named(py, "start_from", kwarg(options, "start_from")?)?.unwrap_or(defaults.start),
             ..defaults
         },
         noise: match kwarg::<String>(options, "noise")?

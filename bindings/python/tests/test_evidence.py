@@ -34,7 +34,7 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
 
 def test_the_samplers_start_from_the_fits_or_the_boxes_as_on_the_command_line(cli) -> None:
     record = bitrock.read_record(DEMO_CSV, thin=4)
-    from_fits = bitrock.evidence(record, **SMALL, start="fit", noise="iid")
+    from_fits = bitrock.evidence(record, **SMALL, start_from="fit", noise="iid")
     from_boxes = bitrock.evidence(record, **SMALL, noise="iid")
     done = run_cli(
         cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
@@ -102,7 +102,7 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
         ({"prior_scale": -1.0}, "prior_scale"),
         ({"particles": "many"}, "particles"),
         ({"check": 0}, "check"),
-        ({"start": "prior"}, "start"),
+        ({"start_from": "prior"}, "start_from"),
     ],
 )
 def test_bad_arguments_are_refused_by_name(demo, arguments, named) -> None:

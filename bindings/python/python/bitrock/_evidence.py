@@ -192,7 +192,7 @@ def evidence(
     w_ref_kn: float | None = None,
     check: int | None = None,
     noise: str = "auto",
-    start: str = "box",
+    start_from: str = "box",
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     executor: Any = None,
@@ -206,7 +206,7 @@ def evidence(
     Monte-Carlo error; the same ``seed`` gives the same result. ``noise`` is the residuals'
     model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
-    ``start`` is where each law's samplers start: ``"box"``, the box (the whole tempered path;
+    ``start_from`` is where each law's samplers start: ``"box"``, the box (the whole tempered path;
     it needs many particles on a narrow curved posterior), or ``"fit"``, a Gaussian at its
     least-squares estimate (the fit's covariance, twice as wide) mixed with its box (far fewer
     candidates; it under-estimates a law whose posterior is a funnel wider than its fit's
@@ -242,7 +242,7 @@ def evidence(
         "w_ref_kn": w_ref_kn,
         "check": check,
         "noise": noise,
-        "start": start,
+        "start_from": start_from,
         "out": None if out is None else os.fspath(out),
         "force": force,
     }
