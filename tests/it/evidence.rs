@@ -66,6 +66,18 @@ fn quadrature_ln_z(data: &bitrock::data::Samples, lower: [f64; 3], upper: [f64; 
     mean_l + log_likelihood_constant(n, 1.0)
 }
 
+/// Asserts that `law`'s ln Z lies within three of its Monte-Carlo errors of the quadrature's
+/// `reference`, an error that is positive and below 0.3 nats.
+fn assert_within_errors(law: &evidence::LawEvidence, reference: f64) {
+    assert!(law.ln_z_error > 0.0 && law.ln_z_error < 0.3, "{}", law.ln_z_error);
+    assert!(
+        (law.ln_z - reference).abs() < 3.0 * law.ln_z_error,
+        "ln Z = {} ± {}, quadrature {reference}",
+        law.ln_z,
+        law.ln_z_error
+    );
+}
+
 #[test]
 fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
     let data = noisy_m2();
@@ -94,18 +106,12 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         "m2: ln Z = {:.3} ± {:.3}, quadrature {finer:.3}; stages {:?}",
         m2.ln_z, m2.ln_z_error, m2.stages
     );
-    assert!(m2.ln_z_error > 0.0 && m2.ln_z_error < 0.3, "{}", m2.ln_z_error);
-    assert!(
-        (m2.ln_z - finer).abs() < 3.0 * m2.ln_z_error,
-        "ln Z = {} ± {}, quadrature {finer}",
-        m2.ln_z,
-        m2.ln_z_error
-    );
+    assert_within_errors(m2, finer);
     // The posterior mean of the static torque lies where the likelihood puts it.
     let mean_tsb: f64 = m2.posterior.iter().map(|(p, w)| w * p[0]).sum();
     assert!((mean_tsb - 13_000.0).abs() < 3_000.0, "{mean_tsb}");
 
-    // Started from the least-squares fit, as `bitrock evidence --start fit` starts: the same
+    // Started from the least-squares fit, as `bitrock evidence --start-from fit` starts: the same
     // integral, at the default particles and islands, in a fraction of the candidates.
     let fit = bitrock::fit::fit_law(Law::M2, &data, &Default::default(), &Default::default()).unwrap();
     let lag1 = bitrock::separation::residual_lag1(&fit, &data, &Default::default());
@@ -116,17 +122,7 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         "m2 from its fit: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates against {}",
         from_fit.ln_z, from_fit.ln_z_error, from_fit.stages, from_fit.candidates_scored, m2.candidates_scored
     );
-    assert!(
-        from_fit.ln_z_error > 0.0 && from_fit.ln_z_error < 0.3,
-        "{}",
-        from_fit.ln_z_error
-    );
-    assert!(
-        (from_fit.ln_z - finer).abs() < 3.0 * from_fit.ln_z_error,
-        "ln Z = {} ± {}, quadrature {finer}",
-        from_fit.ln_z,
-        from_fit.ln_z_error
-    );
+    assert_within_errors(from_fit, finer);
 }
 
 #[test]
@@ -870,6 +866,54 @@ impl bitrock::abc::Observer for StopAfter {
     }
 }
 
+/// The evidence job the resume tests stop and continue: m2 and m3 on the CPU, 2 × 100
+/// particles, seed 4, each law's samplers started from `start`.
+fn resumable_job(start: bitrock::abc::evidence::Start) -> EvidenceJob {
+    EvidenceJob {
+        laws: vec![Law::M2, Law::M3],
+        backend: Backend::Cpu,
+        sampler: EvidenceConfig {
+            particles: 100,
+            islands: 2,
+            seed: 4,
+            start,
+            ..EvidenceConfig::default()
+        },
+        ..EvidenceJob::default()
+    }
+}
+
+/// Opens the evidence of `job` under way in `out`, saves it after every batch and stops it
+/// after `batches` of them.
+fn stop_after(out: &std::path::Path, job: &EvidenceJob, batches: usize) {
+    use bitrock::pipeline::evidence::dir::Unfinished;
+    let (mut unfinished, stored_job, stored_data, progress) = Unfinished::open(out).unwrap();
+    assert_eq!(&stored_job, job);
+    unfinished.every_s = 0.0;
+    let stopped = unfinished.run(
+        job,
+        &stored_data,
+        progress,
+        Default::default(),
+        &mut StopAfter::new(batches),
+    );
+    assert!(matches!(stopped, Err(bitrock::Error::Interrupted)), "{stopped:?}");
+}
+
+/// Writes `analysis` of `job` on `data` into the directory under way in `out`, and returns
+/// the stored evidence.
+fn finish(
+    out: &std::path::Path,
+    unfinished: bitrock::pipeline::evidence::dir::Unfinished,
+    analysis: &EvidenceAnalysis,
+    job: &EvidenceJob,
+    data: &bitrock::data::FieldData,
+) -> serde_json::Value {
+    let document = analysis.document(data, &job.prior.describe(), true);
+    unfinished.finish(&document, analysis, job, data).unwrap();
+    stored_evidence(out)
+}
+
 /// An evidence stopped part-way keeps what it did in its directory, and `--resume` continues it
 /// to the evidence of the uninterrupted job, bit for bit: stopped in its first part (one of
 /// four: two models of the residuals, the torque scaled by the weight on bit or not), then
@@ -883,21 +927,9 @@ fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
     let dir = tempfile::tempdir().unwrap();
     let record = m2_record_with_wob(dir.path(), "20", "60", "10");
     let data = bitrock::data::read_field_data(&record, &Default::default()).unwrap();
-    let job = EvidenceJob {
-        laws: vec![Law::M2, Law::M3],
-        backend: Backend::Cpu,
-        sampler: EvidenceConfig {
-            particles: 100,
-            islands: 2,
-            seed: 4,
-            ..EvidenceConfig::default()
-        },
-        ..EvidenceJob::default()
-    };
+    let job = resumable_job(bitrock::abc::evidence::Start::Box);
     let finished = |out: &std::path::Path, unfinished: Unfinished, analysis: &EvidenceAnalysis| {
-        let document = analysis.document(&data, &job.prior.describe(), true);
-        unfinished.finish(&document, analysis, &job, &data).unwrap();
-        stored_evidence(out)
+        finish(out, unfinished, analysis, &job, &data)
     };
 
     let whole = dir.path().join("whole");
@@ -911,19 +943,7 @@ fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
     assert!(!whole.join("unfinished").exists());
 
     // Stopped after 5 batches, then after 300 more, then finished.
-    let stop = |out: &std::path::Path, batches: usize| {
-        let (mut unfinished, stored_job, stored_data, progress) = Unfinished::open(out).unwrap();
-        assert_eq!(stored_job, job);
-        unfinished.every_s = 0.0;
-        let stopped = unfinished.run(
-            &job,
-            &stored_data,
-            progress,
-            Default::default(),
-            &mut StopAfter::new(batches),
-        );
-        assert!(matches!(stopped, Err(bitrock::Error::Interrupted)), "{stopped:?}");
-    };
+    let stop = |out: &std::path::Path, batches: usize| stop_after(out, &job, batches);
     let twice = dir.path().join("twice");
     drop(Unfinished::start(&twice, false, &job, &data).unwrap());
     stop(&twice, 5);
@@ -998,23 +1018,7 @@ fn an_evidence_started_from_the_fits_resumes_to_the_uninterrupted_evidence() {
     let dir = tempfile::tempdir().unwrap();
     let record = m2_record_with_wob(dir.path(), "20", "60", "10");
     let data = bitrock::data::read_field_data(&record, &Default::default()).unwrap();
-    let job = EvidenceJob {
-        laws: vec![Law::M2, Law::M3],
-        backend: Backend::Cpu,
-        sampler: EvidenceConfig {
-            particles: 100,
-            islands: 2,
-            seed: 4,
-            start: Start::Fit,
-            ..EvidenceConfig::default()
-        },
-        ..EvidenceJob::default()
-    };
-    let finished = |out: &std::path::Path, unfinished: Unfinished, analysis: &EvidenceAnalysis| {
-        let document = analysis.document(&data, &job.prior.describe(), true);
-        unfinished.finish(&document, analysis, &job, &data).unwrap();
-        stored_evidence(out)
-    };
+    let job = resumable_job(Start::Fit);
     let whole = dir.path().join("whole");
     let unfinished = Unfinished::start(&whole, false, &job, &data).unwrap();
     let mut all = StopAfter::new(0);
@@ -1027,23 +1031,13 @@ fn an_evidence_started_from_the_fits_resumes_to_the_uninterrupted_evidence() {
         "{:?}",
         analysis.evidence.laws.iter().map(|l| &l.stages).collect::<Vec<_>>()
     );
-    let uninterrupted = finished(&whole, unfinished, &analysis);
+    let uninterrupted = finish(&whole, unfinished, &analysis, &job, &data);
 
     let twice = dir.path().join("twice");
     drop(Unfinished::start(&twice, false, &job, &data).unwrap());
     let later = all.scored / 2;
     for batches in [3, later] {
-        let (mut unfinished, stored_job, stored_data, progress) = Unfinished::open(&twice).unwrap();
-        assert_eq!(stored_job, job);
-        unfinished.every_s = 0.0;
-        let stopped = unfinished.run(
-            &job,
-            &stored_data,
-            progress,
-            Default::default(),
-            &mut StopAfter::new(batches),
-        );
-        assert!(matches!(stopped, Err(bitrock::Error::Interrupted)), "{stopped:?}");
+        stop_after(&twice, &job, batches);
     }
     let (unfinished, _, _, saved) = Unfinished::open(&twice).unwrap();
     assert!(!saved.done.is_empty(), "the second stop lies past the first part");
@@ -1051,7 +1045,7 @@ fn an_evidence_started_from_the_fits_resumes_to_the_uninterrupted_evidence() {
     let analysis = unfinished
         .run(&job, &data, saved, Default::default(), &mut rest)
         .unwrap();
-    assert_eq!(finished(&twice, unfinished, &analysis), uninterrupted);
+    assert_eq!(finish(&twice, unfinished, &analysis, &job, &data), uninterrupted);
     assert_eq!(
         rest.scored,
         all.scored - (3 - 1) - (later - 1),

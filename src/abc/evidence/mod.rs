@@ -1299,6 +1299,22 @@ mod tests {
     use crate::prior::{LawBox, Prior};
 
     /// A cubic (m4) record, n samples over 1-20 rad/s with Gaussian noise of `sigma` N·m.
+    /// Asserts that `law`'s ln Z lies within three of its Monte-Carlo errors of `expected`, an
+    /// error that is positive and below `most_error`.
+    fn assert_within_errors(law: &LawEvidence, expected: f64, most_error: f64) {
+        assert!(
+            law.ln_z_error > 0.0 && law.ln_z_error < most_error,
+            "{}",
+            law.ln_z_error
+        );
+        assert!(
+            (law.ln_z - expected).abs() < 3.0 * law.ln_z_error,
+            "ln Z = {} ± {}, expected {expected}",
+            law.ln_z,
+            law.ln_z_error
+        );
+    }
+
     fn cubic_record(n: usize, sigma: f64) -> Samples {
         let speed: Vec<f64> = (0..n).map(|i| 1.0 + 19.0 * i as f64 / (n - 1) as f64).collect();
         let torque = speed
@@ -1367,13 +1383,7 @@ mod tests {
             "ln Z = {:.3} ± {:.3}, closed form {expected:.3}; islands {:?}, stages {:?}, {} candidates",
             m4.ln_z, m4.ln_z_error, m4.island_ln_z, m4.stages, m4.candidates_scored
         );
-        assert!(m4.ln_z_error > 0.0 && m4.ln_z_error < 0.3, "{}", m4.ln_z_error);
-        assert!(
-            (m4.ln_z - expected).abs() < 3.0 * m4.ln_z_error,
-            "ln Z = {} ± {}, closed form {expected}",
-            m4.ln_z,
-            m4.ln_z_error
-        );
+        assert_within_errors(m4, expected, 0.3);
         assert!((m4.probability - 1.0).abs() < 1e-15);
         // Started from the Laplace approximation (exact for a linear law) twice as wide, as a
         // fit's reference is: the same integral, in a few tempering steps.
@@ -1385,17 +1395,7 @@ mod tests {
             "from the fit: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates",
             from_fit.ln_z, from_fit.ln_z_error, from_fit.stages, from_fit.candidates_scored
         );
-        assert!(
-            from_fit.ln_z_error > 0.0 && from_fit.ln_z_error < 0.3,
-            "{}",
-            from_fit.ln_z_error
-        );
-        assert!(
-            (from_fit.ln_z - expected).abs() < 3.0 * from_fit.ln_z_error,
-            "ln Z = {} ± {}, closed form {expected}",
-            from_fit.ln_z,
-            from_fit.ln_z_error
-        );
+        assert_within_errors(from_fit, expected, 0.3);
         assert!(from_fit.candidates_scored < m4.candidates_scored / 2);
         let total: f64 = m4.posterior.iter().map(|(_, w)| w).sum();
         assert!((total - 1.0).abs() < 1e-12);
@@ -1548,13 +1548,7 @@ mod tests {
             m4.ln_z, m4.ln_z_error, iid.laws[0].ln_z, m4.island_ln_z
         );
         // An error that says something (the islands spread by about two nats).
-        assert!(m4.ln_z_error > 0.0 && m4.ln_z_error < 1.0, "{}", m4.ln_z_error);
-        assert!(
-            (m4.ln_z - expected).abs() < 3.0 * m4.ln_z_error,
-            "ln Z = {} ± {}, closed form {expected}",
-            m4.ln_z,
-            m4.ln_z_error
-        );
+        assert_within_errors(m4, expected, 1.0);
         // Started at the least-squares estimate with the i.i.d. fit's covariance twice as wide,
         // widened again by (1 + φ̂)/(1 − φ̂) of the residuals' lag-1 autocorrelation, as the
         // pipeline's reference of an AR(1) evidence is: the same integral at default particles.
@@ -1583,17 +1577,7 @@ mod tests {
             "AR(1) from the fit (φ̂ = {phi_hat:.3}): ln Z = {:.3} ± {:.3}; islands {:?}, {} candidates",
             from_fit.ln_z, from_fit.ln_z_error, from_fit.island_ln_z, from_fit.candidates_scored
         );
-        assert!(
-            from_fit.ln_z_error > 0.0 && from_fit.ln_z_error < 0.3,
-            "{}",
-            from_fit.ln_z_error
-        );
-        assert!(
-            (from_fit.ln_z - expected).abs() < 3.0 * from_fit.ln_z_error,
-            "ln Z = {} ± {}, closed form {expected}",
-            from_fit.ln_z,
-            from_fit.ln_z_error
-        );
+        assert_within_errors(from_fit, expected, 0.3);
         // Correlated residuals: the data prefer the AR(1) model by tens of nats (about
         // (n/2)·ln(1/(1 − φ²)) = 45 less its Occam factor).
         assert!(
