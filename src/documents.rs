@@ -106,6 +106,7 @@ pub fn evidence_json(
                 "posterior_mean": to_record_units(law.law, &mean_si, data.torque_unit),
                 "best_rho": law.best_rho,
                 "cut_by_box": law.cut_by_box,
+                "starts": law.starts,
                 "residual_lag1": fits
                     .iter()
                     .zip(residual_lag1)

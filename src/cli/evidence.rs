@@ -3,7 +3,9 @@
 
 use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
 use super::print;
-use bitrock::abc::evidence::{EvidenceConfig, LN_Z_PER_DOUBLING, NoiseModel, Start, strength};
+use bitrock::abc::evidence::{
+    Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, NoiseModel, Start, describe_starts, strength,
+};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
@@ -60,6 +62,9 @@ pub enum StartAt {
     /// (m3 on a record of the law it nests). A law whose fit has no covariance starts from
     /// its box.
     Fit,
+    /// From both, as many islands from each (the box's cost plus the fit's): pooled where
+    /// they agree, the higher ln Z kept where they do not (each start errs only low).
+    Both,
 }
 
 impl StartAt {
@@ -67,6 +72,7 @@ impl StartAt {
         match self {
             StartAt::Fit => Start::Fit,
             StartAt::Box => Start::Box,
+            StartAt::Both => Start::Both,
         }
     }
 }
@@ -98,7 +104,7 @@ pub struct EvidenceCmd {
     pub noise: Noise,
     /// Where each law's samplers start their tempered path (the evidence is of the boxes
     /// either way).
-    #[arg(long = "start-from", value_enum, default_value_t = StartAt::Box, value_name = "START")]
+    #[arg(long = "start-from", value_enum, default_value_t = StartAt::Both, value_name = "START")]
     pub start: StartAt,
     /// Particles of each independent sampler (island).
     #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]
@@ -341,6 +347,23 @@ fn finish(
     Ok(ExitCode::SUCCESS)
 }
 
+/// Each law's estimate from each start, where its samplers started from both.
+fn starts_table(out: &mut impl Write, evidence: &Evidence) -> std::io::Result<()> {
+    if evidence.laws.iter().all(|l| l.starts.is_empty()) {
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "\neach start's ln Z (N·m; each errs only low, where it misses part of the posterior):"
+    )?;
+    for law in &evidence.laws {
+        if let Some(line) = describe_starts(&law.starts) {
+            writeln!(out, "  {:<6} {line}", law.law.name())?;
+        }
+    }
+    Ok(())
+}
+
 /// The evidence table, the Bayes factors against the most probable law, and the boxes.
 fn tables(
     out: &mut impl Write,
@@ -359,9 +382,10 @@ fn tables(
     )?;
     writeln!(
         out,
-        "model evidence: tempered SMC per law, {} islands × {} particles; noise model: {}{}",
+        "model evidence: tempered SMC per law, {} islands × {} particles {}; noise model: {}{}",
         config.islands,
         config.particles,
+        config.start.describe(),
         config.noise.describe(),
         scaling(analysis.fit.w_ref_n.map(|w| w / 1000.0))
     )?;
@@ -385,6 +409,7 @@ fn tables(
             law.candidates_scored
         )?;
     }
+    starts_table(out, evidence)?;
     let best = evidence
         .laws
         .iter()

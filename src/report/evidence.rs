@@ -5,7 +5,7 @@
 
 use super::figures::{self, EvidenceFigures};
 use super::{ReportSummary, figures_markdown, replace_report};
-use crate::abc::evidence::{ln_bayes_factor, strength};
+use crate::abc::evidence::{StartEstimate, describe_starts, ln_bayes_factor, strength};
 use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::pipeline::evidence::dir;
@@ -25,6 +25,8 @@ struct LawLine {
     converged: bool,
     island_spread: f64,
     cut_by_box: Vec<String>,
+    /// Each start's estimate, where the law's samplers started from both.
+    starts: Vec<StartEstimate>,
 }
 
 /// Writes the report of the evidence directory `evidence_dir` to `out` (replaced as a whole,
@@ -84,6 +86,18 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
             l.law, l.ln_z, l.ln_z_error, l.probability, l.best_rho
         );
     }
+    if laws.iter().any(|l| !l.starts.is_empty()) {
+        let _ = writeln!(
+            md,
+            "\nEach start's ln Z (each errs only low, where it misses part of the posterior; the higher kept where \
+             they differ beyond their errors or a start's islands disagree):\n"
+        );
+        for l in &laws {
+            if let Some(line) = describe_starts(&l.starts) {
+                let _ = writeln!(md, "- {}: {line}", l.law);
+            }
+        }
+    }
     if let Some(best) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z))
         && laws.len() > 1
     {
@@ -141,6 +155,11 @@ fn law_lines(document: &Value, dir: &Path) -> Result<Vec<LawLine>> {
                     .as_array()
                     .map(|a| a.iter().filter_map(|v| v.as_str().map(str::to_string)).collect())
                     .unwrap_or_default(),
+                starts: match entry.get("starts") {
+                    Some(starts) => serde_json::from_value(starts.clone())
+                        .map_err(|e| bad(format!("law {law}: `starts` does not read ({e})")))?,
+                    None => Vec::new(),
+                },
             })
         })
         .collect()

@@ -38,7 +38,7 @@ pub mod wits;
 
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
-use crate::abc::evidence::{EvidenceConfig, NoiseModel};
+use crate::abc::evidence::{EvidenceConfig, NoiseModel, Start};
 use crate::data::{DataOptions, FieldData, Row};
 use crate::error::Result;
 use crate::eval::Backend;
@@ -110,6 +110,9 @@ impl Default for WatchSettings {
                 particles: 300,
                 islands: 2,
                 noise: NoiseModel::Iid,
+                // Each window from the window before; a cold one (the first, or after a
+                // change of rock) from the boxes.
+                start: Start::Box,
                 ..EvidenceConfig::default()
             },
             prior_scale: crate::pipeline::evidence::DEFAULT_PRIOR_SCALE,

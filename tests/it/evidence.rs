@@ -5,7 +5,7 @@
 use crate::support::{bin, outcome, rng, samples};
 use bitrock::Law;
 use bitrock::abc::Silent;
-use bitrock::abc::evidence::{self, EvidenceConfig, NoiseModel, log_likelihood_constant};
+use bitrock::abc::evidence::{self, EvidenceConfig, NoiseModel, Start, log_likelihood_constant};
 use bitrock::abc::shard::Local;
 use bitrock::eval::AbcProblem;
 use bitrock::eval::Backend;
@@ -116,13 +116,41 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
     let fit = bitrock::fit::fit_law(Law::M2, &data, &Default::default(), &Default::default()).unwrap();
     let lag1 = bitrock::separation::residual_lag1(&fit, &data, &Default::default());
     let reference = fit_reference(&fit, NoiseModel::Iid, lag1).expect("m2's fit has a covariance");
-    let started = evidence::run_from(&evaluator, &EvidenceConfig::default(), &[reference], None, &mut Silent).unwrap();
+    let from_fit_only = EvidenceConfig {
+        start: Start::Fit,
+        ..EvidenceConfig::default()
+    };
+    let started = evidence::run_from(
+        &evaluator,
+        &from_fit_only,
+        std::slice::from_ref(&reference),
+        None,
+        &mut Silent,
+    )
+    .unwrap();
     let from_fit = started.of(Law::M2).unwrap();
     eprintln!(
         "m2 from its fit: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates against {}",
         from_fit.ln_z, from_fit.ln_z_error, from_fit.stages, from_fit.candidates_scored, m2.candidates_scored
     );
     assert_within_errors(from_fit, finer);
+
+    // From both, as `bitrock evidence` starts by default: each start's estimate, and the one
+    // kept, the quadrature's.
+    let both = evidence::run_from(&evaluator, &EvidenceConfig::default(), &[reference], None, &mut Silent).unwrap();
+    let m2_both = both.of(Law::M2).unwrap();
+    eprintln!(
+        "m2 from both: ln Z = {:.3} ± {:.3}; {:?}",
+        m2_both.ln_z, m2_both.ln_z_error, m2_both.starts
+    );
+    assert_eq!(m2_both.starts.len(), 2);
+    for start in &m2_both.starts {
+        assert!(
+            (start.ln_z - finer).abs() < 3.0 * start.ln_z_error,
+            "{start:?} against {finer}"
+        );
+    }
+    assert_within_errors(m2_both, finer);
 }
 
 #[test]
@@ -241,10 +269,16 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
     }
     let total: f64 = laws.iter().map(|l| l["probability"].as_f64().unwrap()).sum();
     assert!((total - 1.0).abs() < 1e-12, "{total}");
+    assert!(laws.iter().any(|l| l["starts"].as_array().unwrap().len() == 2));
     for law in laws {
         assert!(law["ln_z"].as_f64().unwrap().is_finite());
         assert!(law["ln_z_error"].as_f64().unwrap() > 0.0);
-        assert_eq!(law["island_ln_z"].as_array().unwrap().len(), 3);
+        // From both starts (the default), 3 islands each, those of each start kept; from the
+        // box alone where the fit has no covariance (a parameter on its bound).
+        let starts = law["starts"].as_array().unwrap();
+        let kept = starts.iter().filter(|s| s["kept"].as_bool().unwrap()).count();
+        assert!(starts.is_empty() || (starts.len() == 2 && kept >= 1), "{law}");
+        assert_eq!(law["island_ln_z"].as_array().unwrap().len(), 3 * kept.max(1));
         let phi = law["residual_lag1"].as_f64().unwrap();
         assert!((-1.0..=1.0).contains(&phi), "{phi}");
     }

@@ -313,6 +313,7 @@ fn the_report_shows_the_model_evidence_beside_the_runs_when_it_was_computed() {
         best_rho: 0.01,
         posterior: Vec::new(),
         cut_by_box: Vec::new(),
+        starts: Vec::new(),
     };
     let evidence = Evidence {
         laws: vec![

@@ -32,21 +32,36 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
     assert document["separations"] == small.document["separations"]
 
 
-def test_the_samplers_start_from_the_fits_or_the_boxes_as_on_the_command_line(cli) -> None:
+def test_the_samplers_start_from_the_boxes_the_fits_or_both_as_on_the_command_line(cli) -> None:
     record = bitrock.read_record(DEMO_CSV, thin=4)
     from_fits = bitrock.evidence(record, **SMALL, start_from="fit", noise="iid")
-    from_boxes = bitrock.evidence(record, **SMALL, noise="iid")
+    from_boxes = bitrock.evidence(record, **SMALL, start_from="box", noise="iid")
+    from_both = bitrock.evidence(record, **SMALL, noise="iid")
     done = run_cli(
         cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
         "--seed", "5", "--backend", "cpu", "--noise", "iid", "--json",
     )
     document = json.loads(done.stdout)
     assert from_fits.document["sampler"]["start"] == "fit"
-    assert document["sampler"]["start"] == from_boxes.document["sampler"]["start"] == "box"
-    assert [law["island_ln_z"] for law in document["laws"]] == [law["island_ln_z"] for law in from_boxes.document["laws"]]
+    assert from_boxes.document["sampler"]["start"] == "box"
+    assert document["sampler"]["start"] == from_both.document["sampler"]["start"] == "both"
+    assert [law["island_ln_z"] for law in document["laws"]] == [law["island_ln_z"] for law in from_both.document["laws"]]
     # From the boxes the tempered path is longer: more steps, more candidates.
     for fit, box in zip(from_fits.document["laws"], from_boxes.document["laws"]):
         assert sum(fit["stages"]) < sum(box["stages"]) and fit["candidates_scored"] < box["candidates_scored"]
+    # From both, the box's islands are the box's alone (the same random streams), and the
+    # law's ln Z is one start's or both pooled, as each start's row says.
+    starts = from_both.starts
+    assert sorted(starts["law"].unique()) == ["m2", "m3"] and len(starts) == 4
+    assert from_boxes.starts.empty
+    for law, box in zip(from_both.laws, from_boxes.document["laws"]):
+        rows = starts[starts["law"] == law].set_index("start")
+        assert rows.loc["box", "ln_z"] == box["ln_z"]
+        assert rows["kept"].any()
+        if not rows["kept"].all():
+            kept = rows[rows["kept"]].iloc[0]
+            assert from_both.table.loc[law, "ln_z"] == kept["ln_z"]
+            assert kept["ln_z"] > rows[~rows["kept"]].iloc[0]["ln_z"]
 
 
 def test_an_evidence_directory_reads_back_and_maps_as_the_evidence_in_memory(cli, tmp_path) -> None:

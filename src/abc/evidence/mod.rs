@@ -327,7 +327,8 @@ pub struct EvidenceConfig {
     /// error says by how much).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub law_particles: Vec<(Law, usize)>,
-    /// Where each law's samplers start.
+    /// Where each law's samplers start ([`Start::Both`] by default); a stored job that names
+    /// none ran from the box, and reads so.
     #[serde(default)]
     pub start: Start,
 }
@@ -351,6 +352,97 @@ pub enum Start {
     /// centre and width free) the path never reaches the funnel, and ln Z errs low with an
     /// error that does not show it. A law whose fit gives no covariance starts from its box.
     Fit,
+    /// Both: [`EvidenceConfig::islands`] from the box and as many again from the fit (the
+    /// box's cost plus the fit's). Where the two estimates agree within
+    /// [`STARTS_AGREE_ERRORS`] of their joint error every island is pooled; where they do not,
+    /// the higher is kept ([`kept_start`]): each start errs only low, where it misses part of
+    /// the posterior.
+    Both,
+}
+
+impl Start {
+    /// The start's name, as the command line and Python name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Start::Box => "box",
+            Start::Fit => "fit",
+            Start::Both => "both",
+        }
+    }
+
+    /// Where the samplers start, in words.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Start::Box => "from each law's box",
+            Start::Fit => "from each law's least-squares fit",
+            Start::Both => "from each law's box and as many from its fit, the higher kept where they differ",
+        }
+    }
+}
+
+/// The estimates of ln Z from each start of a law's samplers ([`Start::Both`]) differ by more
+/// than this many of their joint Monte-Carlo errors where one of them missed part of the
+/// posterior.
+pub const STARTS_AGREE_ERRORS: f64 = 3.0;
+
+/// One start's estimate of a law's ln Z ([`Start::Both`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StartEstimate {
+    pub start: Start,
+    /// ln Z from this start's islands alone, N·m, and its Monte-Carlo error.
+    pub ln_z: f64,
+    pub ln_z_error: f64,
+    /// Largest difference between two of its islands' ln Z, nats.
+    pub island_spread: f64,
+    /// Whether the law's reported ln Z includes these islands.
+    pub kept: bool,
+}
+
+/// One law's estimates from each start and which were kept, in words ("from the box
+/// −20852.17 ± 14.67 (islands 60.0 nats apart), from the fit …: the fit's kept"); `None`
+/// where the law started from one.
+pub fn describe_starts(starts: &[StartEstimate]) -> Option<String> {
+    if starts.is_empty() {
+        return None;
+    }
+    let estimates: Vec<String> = starts
+        .iter()
+        .map(|e| {
+            format!(
+                "from the {} {:.2} ± {:.2} (islands {:.1} nats apart)",
+                e.start.name(),
+                e.ln_z,
+                e.ln_z_error,
+                e.island_spread
+            )
+        })
+        .collect();
+    let verdict = match starts.iter().filter(|e| e.kept).collect::<Vec<_>>()[..] {
+        [kept] => format!("the {}'s kept", kept.start.name()),
+        _ => "pooled".to_string(),
+    };
+    Some(format!("{}: {verdict}", estimates.join(", ")))
+}
+
+/// Which start's islands a law's evidence keeps, given the box's and the fit's estimates:
+/// `None` where both converged ([`ISLANDS_AGREE_NATS`]) and they agree within
+/// [`STARTS_AGREE_ERRORS`] of their joint error (every island pooled), else the higher.
+/// Each island's Z is unbiased, so by Markov's inequality a start over-estimates ln Z by t
+/// nats with probability at most e^(−t), while one that misses part of the posterior (a mode
+/// some of its islands lost, a funnel its reference never reached) under-estimates it by nats,
+/// with an error that need not show it: the higher estimate is the one to trust, and islands
+/// that disagree among themselves are not pooled with a start that converged.
+pub fn kept_start(from_box: &StartEstimate, from_fit: &StartEstimate) -> Option<Start> {
+    let gap = from_fit.ln_z - from_box.ln_z;
+    let joint = from_box.ln_z_error.hypot(from_fit.ln_z_error);
+    let converged = |e: &StartEstimate| e.island_spread <= ISLANDS_AGREE_NATS;
+    if converged(from_box) && converged(from_fit) && gap.abs() <= STARTS_AGREE_ERRORS * joint {
+        None
+    } else if gap > 0.0 {
+        Some(Start::Fit)
+    } else {
+        Some(Start::Box)
+    }
 }
 
 impl Default for EvidenceConfig {
@@ -364,7 +456,7 @@ impl Default for EvidenceConfig {
             max_stages: 500,
             noise: NoiseModel::Iid,
             law_particles: Vec::new(),
-            start: Start::Box,
+            start: Start::Both,
         }
     }
 }
@@ -446,6 +538,10 @@ pub struct LawEvidence {
     /// where the box was drawn by more than the Occam factor of [`LN_Z_PER_DOUBLING`].
     #[serde(default)]
     pub cut_by_box: Vec<String>,
+    /// Each start's estimate where the law's samplers started from both ([`Start::Both`]);
+    /// empty otherwise. `ln_z`, its error, the islands and the posterior are those kept.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub starts: Vec<StartEstimate>,
 }
 
 /// How much ln Z changes when every parameter's box of a law doubles in width, per parameter,
@@ -619,6 +715,30 @@ impl Stream {
             pair.copy_from_slice(&z[..pair.len()]);
         }
     }
+}
+
+/// ln Z from independent islands' estimates (`island_ln_z`) and its Monte-Carlo error: ln of
+/// the mean of their Z, and the standard error of that mean relative to it, where the islands
+/// agree. Where they disagree by nats, one island carries the mean and that error saturates
+/// near 1 whatever the spread: then the standard error of the islands' ln Z is the honest one.
+fn pooled_ln_z(island_ln_z: &[f64]) -> (f64, f64) {
+    let ln_z = log_mean_exp(island_ln_z.iter().copied());
+    let k = island_ln_z.len() as f64;
+    let variance = island_ln_z
+        .iter()
+        .map(|v| ((v - ln_z).exp() - 1.0).powi(2))
+        .sum::<f64>()
+        / (k - 1.0);
+    let mean_ln_z = island_ln_z.iter().sum::<f64>() / k;
+    let spread = (island_ln_z.iter().map(|v| (v - mean_ln_z).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+    (ln_z, (variance / k).sqrt().max(spread / k.sqrt()))
+}
+
+/// Largest difference between two islands' ln Z, nats.
+fn spread_of(island_ln_z: &[f64]) -> f64 {
+    let highest = island_ln_z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let lowest = island_ln_z.iter().copied().fold(f64::INFINITY, f64::min);
+    highest - lowest
 }
 
 /// ln of the mean of exp(values) (−∞ entries count as 0).
@@ -1097,7 +1217,8 @@ pub fn run(workers: &dyn Workers, config: &EvidenceConfig, observer: &mut dyn Ob
 }
 
 /// [`run`], each law of `references` starting from its [`Reference`] instead of its box (a
-/// warm start: the same evidence, at a cost that depends on how near the reference is), its
+/// warm start: the same evidence, at a cost that depends on how near the reference is), or
+/// from both where the `config` says [`Start::Both`], its
 /// state saved and resumed by `checkpoints` (the references are not saved: a resumed job
 /// passes the same ones again).
 pub fn run_from(
@@ -1116,15 +1237,24 @@ pub fn run_from(
     let half_n = n as f64 / 2.0;
     let prior = &problem.prior;
     let mut islands: Vec<Island> = Vec::new();
+    let laws = prior.boxes.len();
     for (slot, bx) in prior.boxes.iter().enumerate() {
-        for island in 0..config.islands {
-            let stream = (slot * config.islands + island) as u32;
-            let reference = references
-                .iter()
-                .find(|r| r.law == bx.law && r.covariance.len() == bx.law.n_params().pow(2));
-            islands.push(Island::new(
-                bx.law, slot, &bx.lower, &bx.upper, config, stream, reference,
-            ));
+        let reference = references
+            .iter()
+            .find(|r| r.law == bx.law && r.covariance.len() == bx.law.n_params().pow(2));
+        // From both starts, the box's islands on the streams the box alone uses and the
+        // reference's on streams after every law's.
+        let starts = match (config.start, reference) {
+            (Start::Both, Some(reference)) => vec![None, Some(reference)],
+            (_, reference) => vec![reference],
+        };
+        for (group, reference) in starts.into_iter().enumerate() {
+            for island in 0..config.islands {
+                let stream = ((group * laws + slot) * config.islands + island) as u32;
+                islands.push(Island::new(
+                    bx.law, slot, &bx.lower, &bx.upper, config, stream, reference,
+                ));
+            }
         }
     }
     let mut seconds_before = 0.0;
@@ -1199,19 +1329,35 @@ pub fn run_from(
     let constant = log_likelihood_constant(n, problem.sum_sq_torque);
     let mut laws = Vec::new();
     for (slot, bx) in prior.boxes.iter().enumerate() {
-        let own: Vec<&Island> = islands.iter().filter(|i| i.slot == slot).collect();
-        let island_ln_z: Vec<f64> = own.iter().map(|i| i.ln_z + constant).collect();
-        let ln_z = log_mean_exp(island_ln_z.iter().copied());
-        // Standard error of the mean of the Z_k, relative to that mean: the error of ln Z
-        // where the islands agree. Where they disagree by nats, one island carries the mean and
-        // that error saturates near 1 whatever the spread: then the standard error of the
-        // islands' ln Z is the honest one.
+        let all: Vec<&Island> = islands.iter().filter(|i| i.slot == slot).collect();
+        let ln_z_of = |group: &[&Island]| group.iter().map(|i| i.ln_z + constant).collect::<Vec<f64>>();
+        let (from_box, from_fit): (Vec<&Island>, Vec<&Island>) = all.iter().partition(|i| i.reference.is_none());
+        let mut starts = Vec::new();
+        let mut own = all.clone();
+        if config.start == Start::Both && !from_box.is_empty() && !from_fit.is_empty() {
+            let estimate = |start: Start, group: &[&Island]| {
+                let island_ln_z = ln_z_of(group);
+                let (ln_z, ln_z_error) = pooled_ln_z(&island_ln_z);
+                StartEstimate {
+                    start,
+                    ln_z,
+                    ln_z_error,
+                    island_spread: spread_of(&island_ln_z),
+                    kept: true,
+                }
+            };
+            starts = vec![estimate(Start::Box, &from_box), estimate(Start::Fit, &from_fit)];
+            if let Some(kept) = kept_start(&starts[0], &starts[1]) {
+                own = if kept == Start::Box { from_box } else { from_fit };
+                for estimate in &mut starts {
+                    estimate.kept = estimate.start == kept;
+                }
+            }
+        }
+        let island_ln_z = ln_z_of(&own);
+        let (ln_z, ln_z_error) = pooled_ln_z(&island_ln_z);
         let k = island_ln_z.len() as f64;
         let ratios: Vec<f64> = island_ln_z.iter().map(|v| (v - ln_z).exp()).collect();
-        let variance = ratios.iter().map(|r| (r - 1.0).powi(2)).sum::<f64>() / (k - 1.0);
-        let mean_ln_z = island_ln_z.iter().sum::<f64>() / k;
-        let spread = (island_ln_z.iter().map(|v| (v - mean_ln_z).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
-        let ln_z_error = (variance / k).sqrt().max(spread / k.sqrt());
         let mut posterior = Vec::new();
         for (island, share) in own.iter().zip(&ratios) {
             for (p, w) in island.theta.iter().zip(&island.weights).filter(|(_, w)| **w > 0.0) {
@@ -1220,10 +1366,8 @@ pub fn run_from(
             }
         }
         let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
-        let highest = island_ln_z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let lowest = island_ln_z.iter().copied().fold(f64::INFINITY, f64::min);
         laws.push(LawEvidence {
-            island_spread: highest - lowest,
+            island_spread: spread_of(&island_ln_z),
             cut_by_box,
             law: bx.law,
             ln_z,
@@ -1232,9 +1376,10 @@ pub fn run_from(
             prior_probability: prior.weights[slot],
             probability: 0.0,
             stages: own.iter().map(|i| i.stages).collect(),
-            candidates_scored: own.iter().map(|i| i.scored).sum(),
-            best_rho: own.iter().map(|i| i.best_rho).fold(f64::INFINITY, f64::min),
+            candidates_scored: all.iter().map(|i| i.scored).sum(),
+            best_rho: all.iter().map(|i| i.best_rho).fold(f64::INFINITY, f64::min),
             posterior,
+            starts,
         });
     }
     let log_joint: Vec<f64> = laws.iter().map(|l| l.prior_probability.ln() + l.ln_z).collect();
@@ -1276,6 +1421,43 @@ mod tests {
         );
         let inside = vec![at(5.0, 5.0, 0.5); 4];
         assert!(box_ends_reached(Law::M2, &lower, &upper, &inside).is_empty());
+    }
+
+    #[test]
+    fn of_two_starts_the_higher_is_kept_unless_both_converged_and_agree() {
+        let estimate = |start, ln_z, ln_z_error, island_spread| StartEstimate {
+            start,
+            ln_z,
+            ln_z_error,
+            island_spread,
+            kept: true,
+        };
+        // Within three joint errors (0.5 here), both converged: pooled.
+        let from_box = estimate(Start::Box, -100.0, 0.3, 1.0);
+        assert_eq!(kept_start(&from_box, &estimate(Start::Fit, -101.4, 0.4, 0.2)), None);
+        assert_eq!(kept_start(&from_box, &estimate(Start::Fit, -98.6, 0.4, 0.2)), None);
+        // Beyond: the higher, either way round.
+        assert_eq!(
+            kept_start(&from_box, &estimate(Start::Fit, -101.6, 0.4, 0.2)),
+            Some(Start::Box)
+        );
+        assert_eq!(
+            kept_start(&from_box, &estimate(Start::Fit, -98.4, 0.4, 0.2)),
+            Some(Start::Fit)
+        );
+        // Islands that disagree among themselves are not pooled, however large their error.
+        let scattered = estimate(Start::Box, -105.0, 15.0, ISLANDS_AGREE_NATS + 0.1);
+        assert_eq!(
+            kept_start(&scattered, &estimate(Start::Fit, -100.0, 0.05, 0.1)),
+            Some(Start::Fit)
+        );
+        assert_eq!(
+            kept_start(
+                &estimate(Start::Box, -99.0, 1.0, 1.0),
+                &estimate(Start::Fit, -100.0, 2.0, 6.0)
+            ),
+            Some(Start::Box)
+        );
     }
 
     #[test]
@@ -1389,7 +1571,18 @@ mod tests {
         // fit's reference is: the same integral, in a few tempering steps.
         let covariance: Vec<f64> = (0..d * d).map(|i| 4.0 * sigma2 * inverse[(i / d, i % d)]).collect();
         let reference = Reference::gaussian(Law::M4, theta.iter().copied().collect(), &covariance);
-        let started = run_from(&evaluator, &config, &[reference], None, &mut super::super::Silent).unwrap();
+        let from_reference = EvidenceConfig {
+            start: Start::Fit,
+            ..config.clone()
+        };
+        let started = run_from(
+            &evaluator,
+            &from_reference,
+            std::slice::from_ref(&reference),
+            None,
+            &mut super::super::Silent,
+        )
+        .unwrap();
         let from_fit = started.of(Law::M4).unwrap();
         eprintln!(
             "from the fit: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates",
@@ -1399,6 +1592,22 @@ mod tests {
         assert!(from_fit.candidates_scored < m4.candidates_scored / 2);
         let total: f64 = m4.posterior.iter().map(|(_, w)| w).sum();
         assert!((total - 1.0).abs() < 1e-12);
+
+        // From both starts: the box's islands are the box's alone (the same streams), the
+        // fit's on streams of their own; on this Gaussian posterior they agree and are pooled.
+        let both = run_from(&evaluator, &config, &[reference], None, &mut super::super::Silent).unwrap();
+        let pooled = both.of(Law::M4).unwrap();
+        eprintln!(
+            "from both: ln Z = {:.3} ± {:.3}; {:?}",
+            pooled.ln_z, pooled.ln_z_error, pooled.starts
+        );
+        assert_eq!(config.start, Start::Both);
+        assert_eq!(pooled.starts.len(), 2);
+        assert!(pooled.starts.iter().all(|e| e.kept));
+        assert_eq!(pooled.island_ln_z.len(), 2 * config.islands);
+        assert_eq!(pooled.island_ln_z[..config.islands], m4.island_ln_z[..]);
+        assert_eq!(pooled.starts[0].ln_z.to_bits(), m4.ln_z.to_bits());
+        assert_within_errors(pooled, expected, 0.3);
 
         // Warm starts: from this posterior (a window like the last), and from one moved by
         // four of its standard deviations in every parameter (the rock changed): the same
@@ -1410,7 +1619,7 @@ mod tests {
         for (reference, cheaper) in [(near, true), (moved, false)] {
             let warm = run_from(
                 &evaluator,
-                &config,
+                &from_reference,
                 std::slice::from_ref(&reference),
                 None,
                 &mut super::super::Silent,
@@ -1565,6 +1774,7 @@ mod tests {
             &EvidenceConfig {
                 particles: 500,
                 islands: 4,
+                start: Start::Fit,
                 ..config.clone()
             },
             &[reference],

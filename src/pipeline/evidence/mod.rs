@@ -555,7 +555,7 @@ impl EvidenceJob {
             _ => Vec::new(),
         };
         // The other laws start from their fits, where the job says so.
-        if sampler.start == evidence::Start::Fit {
+        if matches!(sampler.start, evidence::Start::Fit | evidence::Start::Both) {
             for (fit, &lag1) in fits.iter().zip(&residual_lag1) {
                 if !references.iter().any(|r| r.law == fit.law)
                     && let Some(reference) = fit_reference(fit, noise, lag1)

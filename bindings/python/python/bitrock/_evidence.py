@@ -55,6 +55,20 @@ class Evidence:
         return pd.DataFrame(rows).set_index("law")
 
     @property
+    def starts(self) -> pd.DataFrame:
+        """Where each law's samplers started from both its box and its fit
+        (``start_from="both"``): one row per law and start, its own ln Z (N·m), Monte-Carlo error
+        and islands' spread (nats), and whether the law's ln Z kept its islands (both where they
+        agree, else the higher: each start errs only low). Empty for a single start."""
+        rows = [
+            {"law": law["law"], **estimate}
+            for law in self._doc["laws"]
+            for estimate in law.get("starts", [])
+        ]
+        columns = ["law", "start", "ln_z", "ln_z_error", "island_spread", "kept"]
+        return pd.DataFrame(rows, columns=columns)
+
+    @property
     def noise_model(self) -> str:
         """The noise model of the reported evidence: ``"iid"`` or ``"ar1"``."""
         return self._doc["noise_model"]
@@ -192,7 +206,7 @@ def evidence(
     w_ref_kn: float | None = None,
     check: int | None = None,
     noise: str = "auto",
-    start_from: str = "box",
+    start_from: str = "both",
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     executor: Any = None,
@@ -207,10 +221,12 @@ def evidence(
     model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
     ``start_from`` is where each law's samplers start: ``"box"``, the box (the whole tempered path;
-    it needs many particles on a narrow curved posterior), or ``"fit"``, a Gaussian at its
+    it needs many particles on a narrow curved posterior), ``"fit"``, a Gaussian at its
     least-squares estimate (the fit's covariance, twice as wide) mixed with its box (far fewer
     candidates; it under-estimates a law whose posterior is a funnel wider than its fit's
-    covariance, m3 on a record of the law it nests); the evidence is of the boxes either way. ``check=K`` then checks the
+    covariance, m3 on a record of the law it nests), or ``"both"``, as many islands from each,
+    pooled where they agree and the higher kept where they do not (:attr:`Evidence.starts`);
+    the evidence is of the boxes either way. ``check=K`` then checks the
     answer by re-simulation (K synthetic records per law from its evidence posterior and the
     record's own residuals, each through the same evidence over the same boxes; K times the
     cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
