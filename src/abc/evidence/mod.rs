@@ -353,10 +353,10 @@ pub enum Start {
     /// error that does not show it. A law whose fit gives no covariance starts from its box.
     Fit,
     /// Both: [`EvidenceConfig::islands`] from the box and as many again from the fit (the
-    /// box's cost plus the fit's). Where the two estimates agree within
-    /// [`STARTS_AGREE_ERRORS`] of their joint error every island is pooled; where they do not,
-    /// the higher is kept ([`kept_start`]): each start errs only low, where it misses part of
-    /// the posterior.
+    /// box's cost plus the fit's). Where the two estimates agree ([`kept_start`]) ln Z is
+    /// their mean weighed by their inverse variances and the posterior pools every island;
+    /// where they do not, the higher is kept: each start errs only low, where it misses part
+    /// of the posterior.
     Both,
 }
 
@@ -539,7 +539,8 @@ pub struct LawEvidence {
     #[serde(default)]
     pub cut_by_box: Vec<String>,
     /// Each start's estimate where the law's samplers started from both ([`Start::Both`]);
-    /// empty otherwise. `ln_z`, its error, the islands and the posterior are those kept.
+    /// empty otherwise. The islands and the posterior are those kept; `ln_z` and its error
+    /// the kept start's, or both's weighed by their inverse variances.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub starts: Vec<StartEstimate>,
 }
@@ -732,6 +733,16 @@ fn pooled_ln_z(island_ln_z: &[f64]) -> (f64, f64) {
     let mean_ln_z = island_ln_z.iter().sum::<f64>() / k;
     let spread = (island_ln_z.iter().map(|v| (v - mean_ln_z).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
     (ln_z, (variance / k).sqrt().max(spread / k.sqrt()))
+}
+
+/// The mean of independent estimates (value, standard error) weighed by their inverse
+/// variances, and its standard error.
+fn inverse_variance_mean(estimates: &[(f64, f64)]) -> (f64, f64) {
+    // An error of exactly zero (islands that agree to the last bit) weighs as a tiny one.
+    let weight = |error: f64| error.max(1e-9).powi(-2);
+    let total: f64 = estimates.iter().map(|&(_, e)| weight(e)).sum();
+    let mean = estimates.iter().map(|&(v, e)| v * weight(e)).sum::<f64>() / total;
+    (mean, total.sqrt().recip())
 }
 
 /// Largest difference between two islands' ln Z, nats.
@@ -1355,9 +1366,15 @@ pub fn run_from(
             }
         }
         let island_ln_z = ln_z_of(&own);
-        let (ln_z, ln_z_error) = pooled_ln_z(&island_ln_z);
+        // The islands' mean Z weighs their particles; where both starts are kept, ln Z is
+        // their estimates weighed by their inverse variances (the precise start's, mostly).
+        let (mean_ln_z, mean_error) = pooled_ln_z(&island_ln_z);
+        let (ln_z, ln_z_error) = match &starts[..] {
+            [a, b] if a.kept && b.kept => inverse_variance_mean(&[(a.ln_z, a.ln_z_error), (b.ln_z, b.ln_z_error)]),
+            _ => (mean_ln_z, mean_error),
+        };
         let k = island_ln_z.len() as f64;
-        let ratios: Vec<f64> = island_ln_z.iter().map(|v| (v - ln_z).exp()).collect();
+        let ratios: Vec<f64> = island_ln_z.iter().map(|v| (v - mean_ln_z).exp()).collect();
         let mut posterior = Vec::new();
         for (island, share) in own.iter().zip(&ratios) {
             for (p, w) in island.theta.iter().zip(&island.weights).filter(|(_, w)| **w > 0.0) {
@@ -1458,6 +1475,9 @@ mod tests {
             ),
             Some(Start::Box)
         );
+        // Two kept: weighed by their inverse variances.
+        let (mean, error) = inverse_variance_mean(&[(1.0, 1.0), (4.0, 2.0)]);
+        assert!((mean - 1.6).abs() < 1e-12 && (error - 0.8f64.sqrt()).abs() < 1e-12);
     }
 
     #[test]
@@ -1607,6 +1627,7 @@ mod tests {
         assert_eq!(pooled.island_ln_z.len(), 2 * config.islands);
         assert_eq!(pooled.island_ln_z[..config.islands], m4.island_ln_z[..]);
         assert_eq!(pooled.starts[0].ln_z.to_bits(), m4.ln_z.to_bits());
+        assert!(pooled.starts.iter().all(|e| pooled.ln_z_error < e.ln_z_error));
         assert_within_errors(pooled, expected, 0.3);
 
         // Warm starts: from this posterior (a window like the last), and from one moved by
@@ -1769,25 +1790,37 @@ mod tests {
         let widen = 4.0 * s_ols / (n - d) as f64 * (1.0 + phi_hat) / (1.0 - phi_hat);
         let covariance: Vec<f64> = (0..d * d).map(|i| widen * ols[(i / d, i % d)]).collect();
         let reference = Reference::gaussian(Law::M4, theta_ols.iter().copied().collect(), &covariance);
-        let started = run_from(
-            &evaluator,
-            &EvidenceConfig {
+        let at_default = |start: Start| {
+            let config = EvidenceConfig {
                 particles: 500,
                 islands: 4,
-                start: Start::Fit,
+                start,
                 ..config.clone()
-            },
-            &[reference],
-            None,
-            &mut super::super::Silent,
-        )
-        .unwrap();
+            };
+            run_from(
+                &evaluator,
+                &config,
+                std::slice::from_ref(&reference),
+                None,
+                &mut super::super::Silent,
+            )
+            .unwrap()
+        };
+        let started = at_default(Start::Fit);
         let from_fit = started.of(Law::M4).unwrap();
         eprintln!(
             "AR(1) from the fit (φ̂ = {phi_hat:.3}): ln Z = {:.3} ± {:.3}; islands {:?}, {} candidates",
             from_fit.ln_z, from_fit.ln_z_error, from_fit.island_ln_z, from_fit.candidates_scored
         );
         assert_within_errors(from_fit, expected, 0.3);
+        // From both at the default particles, where the box's islands alone come out low.
+        let both = at_default(Start::Both);
+        let from_both = both.of(Law::M4).unwrap();
+        eprintln!(
+            "AR(1) from both: ln Z = {:.3} ± {:.3}; {:?}",
+            from_both.ln_z, from_both.ln_z_error, from_both.starts
+        );
+        assert_within_errors(from_both, expected, 0.3);
         // Correlated residuals: the data prefer the AR(1) model by tens of nats (about
         // (n/2)·ln(1/(1 − φ²)) = 45 less its Occam factor).
         assert!(
