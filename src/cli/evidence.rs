@@ -62,8 +62,9 @@ pub enum StartAt {
     /// (m3 on a record of the law it nests). A law whose fit has no covariance starts from
     /// its box.
     Fit,
-    /// From both, as many islands from each (the box's cost plus the fit's): pooled where
-    /// they agree, the higher ln Z kept where they do not (each start errs only low).
+    /// From both, as many islands from each (the box's cost plus the fit's): weighed by their
+    /// inverse variances where they agree, the higher ln Z kept where they do not (each start
+    /// errs only low).
     Both,
 }
 
@@ -109,7 +110,7 @@ pub struct EvidenceCmd {
     /// Particles of each independent sampler (island).
     #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]
     pub particles: usize,
-    /// Independent samplers per law; their spread gives ln Z's Monte-Carlo error.
+    /// Independent samplers per law and start; their spread gives ln Z's Monte-Carlo error.
     #[arg(long, default_value_t = EvidenceConfig::default().islands, value_name = "K")]
     pub islands: usize,
     /// Most tempering steps of one island: a likelihood much narrower than its prior box

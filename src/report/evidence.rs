@@ -5,7 +5,7 @@
 
 use super::figures::{self, EvidenceFigures};
 use super::{ReportSummary, figures_markdown, replace_report};
-use crate::abc::evidence::{StartEstimate, describe_starts, ln_bayes_factor, strength};
+use crate::abc::evidence::{Start, StartEstimate, describe_starts, ln_bayes_factor, strength};
 use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::pipeline::evidence::dir;
@@ -51,10 +51,14 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
     let _ = writeln!(
         md,
         "Marginal likelihood ln Z of each law on {} calibration samples (tempered SMC per law, {} islands × {} \
-         particles, seed {}; {} noise model{}; ln Z with torques in N·m), on {} in {:.2} s. Prior: {}.\n",
+         particles {}, seed {}; {} noise model{}; ln Z with torques in N·m), on {} in {:.2} s. Prior: {}.\n",
         document["data_points"],
         sampler["islands"],
         sampler["particles"],
+        // A document that names no start ran from the boxes.
+        serde_json::from_value::<Start>(sampler["start"].clone())
+            .unwrap_or_default()
+            .describe(),
         sampler["seed"],
         document["noise_model"].as_str().unwrap_or("?"),
         w_ref_kn.map_or(String::new(), |w| format!(

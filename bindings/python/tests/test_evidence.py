@@ -52,7 +52,7 @@ def test_the_samplers_start_from_the_boxes_the_fits_or_both_as_on_the_command_li
     for fit, box in zip(from_fits.document["laws"], from_boxes.document["laws"]):
         assert sum(fit["stages"]) < sum(box["stages"]) and fit["candidates_scored"] < box["candidates_scored"]
     # From both, the box's islands are the box's alone (the same random streams), and the
-    # law's ln Z is one start's or both pooled, as each start's row says.
+    # law's ln Z is one start's or both weighed, as each start's row says.
     starts = from_both.starts
     assert sorted(starts["law"].unique()) == ["m2", "m3"] and len(starts) == 4
     assert from_boxes.starts.empty

@@ -34,7 +34,9 @@
 //! **Monte-Carlo error**: each law runs [`EvidenceConfig::islands`] independent samplers; Z is
 //! the mean of their estimates (each unbiased) and its error the standard error of that mean,
 //! carried to ln Z, or the standard error of the islands' ln Z where that is larger (islands
-//! that disagree by nats; [`LawEvidence::island_spread`] says by how much).
+//! that disagree by nats; [`LawEvidence::island_spread`] says by how much). From both starts
+//! ([`Start::Both`], the default) each start's islands give their own estimate, and the law
+//! keeps the higher or, where they agree, both ([`kept_start`]).
 //!
 //! Random numbers come from Philox ([`crate::rng`]) on counters of their own (block
 //! [`EVIDENCE_BLOCK`]), one stream per (law, island): the result depends on the seed only,
@@ -308,7 +310,8 @@ pub const MIN_ISLAND_PARTICLES: usize = 20;
 pub struct EvidenceConfig {
     /// Particles of each island.
     pub particles: usize,
-    /// Independent samplers per law; their spread is the Monte-Carlo error (at least 2).
+    /// Independent samplers per law and start; their spread is the Monte-Carlo error (at
+    /// least 2).
     pub islands: usize,
     /// Seed of every stream.
     pub seed: u64,
@@ -419,19 +422,19 @@ pub fn describe_starts(starts: &[StartEstimate]) -> Option<String> {
         .collect();
     let verdict = match starts.iter().filter(|e| e.kept).collect::<Vec<_>>()[..] {
         [kept] => format!("the {}'s kept", kept.start.name()),
-        _ => "pooled".to_string(),
+        _ => "both kept, weighed by their inverse variances".to_string(),
     };
     Some(format!("{}: {verdict}", estimates.join(", ")))
 }
 
 /// Which start's islands a law's evidence keeps, given the box's and the fit's estimates:
 /// `None` where both converged ([`ISLANDS_AGREE_NATS`]) and they agree within
-/// [`STARTS_AGREE_ERRORS`] of their joint error (every island pooled), else the higher.
-/// Each island's Z is unbiased, so by Markov's inequality a start over-estimates ln Z by t
+/// [`STARTS_AGREE_ERRORS`] of their joint error (both kept: ln Z their inverse-variance mean,
+/// the posterior every island's), else the higher. Each island's Z is unbiased, so by Markov's inequality a start over-estimates ln Z by t
 /// nats with probability at most e^(−t), while one that misses part of the posterior (a mode
 /// some of its islands lost, a funnel its reference never reached) under-estimates it by nats,
 /// with an error that need not show it: the higher estimate is the one to trust, and islands
-/// that disagree among themselves are not pooled with a start that converged.
+/// that disagree among themselves are not weighed with a start that converged.
 pub fn kept_start(from_box: &StartEstimate, from_fit: &StartEstimate) -> Option<Start> {
     let gap = from_fit.ln_z - from_box.ln_z;
     let joint = from_box.ln_z_error.hypot(from_fit.ln_z_error);
@@ -1449,7 +1452,7 @@ mod tests {
             island_spread,
             kept: true,
         };
-        // Within three joint errors (0.5 here), both converged: pooled.
+        // Within three joint errors (0.5 here), both converged: both kept.
         let from_box = estimate(Start::Box, -100.0, 0.3, 1.0);
         assert_eq!(kept_start(&from_box, &estimate(Start::Fit, -101.4, 0.4, 0.2)), None);
         assert_eq!(kept_start(&from_box, &estimate(Start::Fit, -98.6, 0.4, 0.2)), None);
@@ -1614,7 +1617,7 @@ mod tests {
         assert!((total - 1.0).abs() < 1e-12);
 
         // From both starts: the box's islands are the box's alone (the same streams), the
-        // fit's on streams of their own; on this Gaussian posterior they agree and are pooled.
+        // fit's on streams of their own; on this Gaussian posterior they agree and both are kept.
         let both = run_from(&evaluator, &config, &[reference], None, &mut super::super::Silent).unwrap();
         let pooled = both.of(Law::M4).unwrap();
         eprintln!(

@@ -216,7 +216,7 @@ def evidence(
     from each parameter's physical bound over ``prior_scale`` (10) times the record's scale of
     its unit, no fit involved; ``boxes="delta"`` over the paper's boxes φ̂(1 ± ``delta``) around
     the least-squares estimates (the data used twice). ``prior`` is a prior file; ``particles``
-    (500) per island, ``islands`` (4) independent samplers per law whose spread is the
+    (500) per island, ``islands`` (4) independent samplers per law and start whose spread is the
     Monte-Carlo error; the same ``seed`` gives the same result. ``noise`` is the residuals'
     model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
@@ -224,9 +224,9 @@ def evidence(
     it needs many particles on a narrow curved posterior), ``"fit"``, a Gaussian at its
     least-squares estimate (the fit's covariance, twice as wide) mixed with its box (far fewer
     candidates; it under-estimates a law whose posterior is a funnel wider than its fit's
-    covariance, m3 on a record of the law it nests), or ``"both"``, as many islands from each,
-    pooled where they agree and the higher kept where they do not (:attr:`Evidence.starts`);
-    the evidence is of the boxes either way. ``check=K`` then checks the
+    covariance, m3 on a record of the law it nests), or ``"both"`` (the default), as many
+    islands from each, weighed by their inverse variances where they agree and the higher
+    kept where they do not (:attr:`Evidence.starts`); the evidence is of the boxes either way. ``check=K`` then checks the
     answer by re-simulation (K synthetic records per law from its evidence posterior and the
     record's own residuals, each through the same evidence over the same boxes; K times the
     cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
