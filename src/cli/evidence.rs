@@ -50,34 +50,6 @@ impl Noise {
     }
 }
 
-/// Where each law's samplers start.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum StartAt {
-    /// From the prior box: the whole tempered path, which needs many particles on a narrow
-    /// curved posterior (fewer under-estimate ln Z, their islands disagreeing).
-    Box,
-    /// From a Gaussian at the law's least-squares estimate (the fit's covariance, twice as
-    /// wide), mixed with the box: a few tempering steps, far fewer candidates; it
-    /// under-estimates a law whose posterior is a funnel far wider than its fit's covariance
-    /// (m3 on a record of the law it nests). A law whose fit has no covariance starts from
-    /// its box.
-    Fit,
-    /// From both, as many islands from each (the box's cost plus the fit's): weighed by their
-    /// inverse variances where they agree, the higher ln Z kept where they do not (each start
-    /// errs only low).
-    Both,
-}
-
-impl StartAt {
-    fn start(self) -> Start {
-        match self {
-            StartAt::Fit => Start::Fit,
-            StartAt::Box => Start::Box,
-            StartAt::Both => Start::Both,
-        }
-    }
-}
-
 #[derive(Debug, Args)]
 pub struct EvidenceCmd {
     /// Field record (CSV with a header) [default: the embedded demo record].
@@ -105,8 +77,8 @@ pub struct EvidenceCmd {
     pub noise: Noise,
     /// Where each law's samplers start their tempered path (the evidence is of the boxes
     /// either way).
-    #[arg(long = "start-from", value_enum, default_value_t = StartAt::Both, value_name = "START")]
-    pub start: StartAt,
+    #[arg(long = "start-from", value_enum, default_value_t = EvidenceConfig::default().start, value_name = "START")]
+    pub start: Start,
     /// Particles of each independent sampler (island).
     #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]
     pub particles: usize,
@@ -266,7 +238,7 @@ fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<EvidenceJob> {
             max_stages: cmd.max_stages,
             ess_share: cmd.ess_share,
             max_sweeps: cmd.max_sweeps,
-            start: cmd.start.start(),
+            start: cmd.start,
             ..EvidenceConfig::default()
         },
         noise: cmd.noise.model(),

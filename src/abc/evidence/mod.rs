@@ -338,28 +338,28 @@ pub struct EvidenceConfig {
 
 /// Where a law's samplers start their tempered path to the posterior. Either way ln Z is the
 /// evidence under the law's prior box: the start changes the cost and the variance, not what
-/// is estimated.
+/// is estimated. From the fit, the caller, who has the fit, makes the [`Reference`]; from
+/// both, each start runs [`EvidenceConfig::islands`] and [`kept_start`] says which estimate
+/// the law keeps. The variants' texts are the command line's help.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Start {
-    /// From the prior box: the whole path from π to π·L. A narrow curved posterior splits
-    /// into modes that an island's particles lose as β grows, unless each holds thousands
-    /// (ln Z then errs low, its islands disagreeing).
+    /// From the prior box: the whole tempered path. A narrow curved posterior splits into
+    /// modes that an island's particles lose as β grows, unless each holds thousands (ln Z then
+    /// errs low, its islands disagreeing).
     #[default]
     Box,
-    /// From a Gaussian at the law's least-squares estimate, its covariance the fit's widened
-    /// (a [`Reference`] made by the caller, who has the fit), mixed with the box: a few
-    /// tempering steps, and the posterior's mode found by the fit's many starts rather than
-    /// by particles crossing the box. Where the posterior is a funnel far wider than the
-    /// fit's covariance (a law nesting the record's: m3's bump of near-zero amplitude, its
+    /// From a Gaussian at the law's least-squares estimate (the fit's covariance, twice as
+    /// wide), mixed with the box: a few tempering steps, far fewer candidates, the posterior's
+    /// mode found by the fit's many starts. Where the posterior is a funnel far wider than the
+    /// fit's covariance (m3 on a record of a law it nests: its bump's amplitude near zero, its
     /// centre and width free) the path never reaches the funnel, and ln Z errs low with an
-    /// error that does not show it. A law whose fit gives no covariance starts from its box.
+    /// error that does not show it. A law whose fit has no covariance starts from its box.
     Fit,
-    /// Both: [`EvidenceConfig::islands`] from the box and as many again from the fit (the
-    /// box's cost plus the fit's). Where the two estimates agree ([`kept_start`]) ln Z is
-    /// their mean weighed by their inverse variances and the posterior pools every island;
-    /// where they do not, the higher is kept: each start errs only low, where it misses part
-    /// of the posterior.
+    /// From both, as many islands from each (the box's cost plus the fit's): weighed by their
+    /// inverse variances where they agree, the higher ln Z kept where they do not (each start
+    /// errs only low, where it misses part of the posterior).
     Both,
 }
 
@@ -1598,14 +1598,17 @@ mod tests {
             start: Start::Fit,
             ..config.clone()
         };
-        let started = run_from(
-            &evaluator,
-            &from_reference,
-            std::slice::from_ref(&reference),
-            None,
-            &mut super::super::Silent,
-        )
-        .unwrap();
+        let run_with = |config: &EvidenceConfig, reference: &Reference| {
+            run_from(
+                &evaluator,
+                config,
+                std::slice::from_ref(reference),
+                None,
+                &mut super::super::Silent,
+            )
+            .unwrap()
+        };
+        let started = run_with(&from_reference, &reference);
         let from_fit = started.of(Law::M4).unwrap();
         eprintln!(
             "from the fit: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates",
@@ -1618,7 +1621,7 @@ mod tests {
 
         // From both starts: the box's islands are the box's alone (the same streams), the
         // fit's on streams of their own; on this Gaussian posterior they agree and both are kept.
-        let both = run_from(&evaluator, &config, &[reference], None, &mut super::super::Silent).unwrap();
+        let both = run_with(&config, &reference);
         let pooled = both.of(Law::M4).unwrap();
         eprintln!(
             "from both: ln Z = {:.3} ± {:.3}; {:?}",
@@ -1641,14 +1644,7 @@ mod tests {
         let by: Vec<f64> = (0..d).map(|j| 4.0 * near.covariance[j * d + j].sqrt()).collect();
         let moved = near.clone().shifted(&by);
         for (reference, cheaper) in [(near, true), (moved, false)] {
-            let warm = run_from(
-                &evaluator,
-                &from_reference,
-                std::slice::from_ref(&reference),
-                None,
-                &mut super::super::Silent,
-            )
-            .unwrap();
+            let warm = run_with(&from_reference, &reference);
             let w = warm.of(Law::M4).unwrap();
             eprintln!(
                 "warm: ln Z = {:.3} ± {:.3}; stages {:?}, {} candidates (cold {})",
