@@ -430,11 +430,12 @@ pub fn describe_starts(starts: &[StartEstimate]) -> Option<String> {
 /// Which start's islands a law's evidence keeps, given the box's and the fit's estimates:
 /// `None` where both converged ([`ISLANDS_AGREE_NATS`]) and they agree within
 /// [`STARTS_AGREE_ERRORS`] of their joint error (both kept: ln Z their inverse-variance mean,
-/// the posterior every island's), else the higher. Each island's Z is unbiased, so by Markov's inequality a start over-estimates ln Z by t
-/// nats with probability at most e^(−t), while one that misses part of the posterior (a mode
-/// some of its islands lost, a funnel its reference never reached) under-estimates it by nats,
-/// with an error that need not show it: the higher estimate is the one to trust, and islands
-/// that disagree among themselves are not weighed with a start that converged.
+/// the posterior every island's), else the higher. A start's mean of its islands' Z is
+/// unbiased, so by Markov's inequality it over-estimates ln Z by t nats with probability at
+/// most e^(−t), while a start that misses part of the posterior (a mode some of its islands
+/// lost, a funnel its reference never reached) under-estimates it by nats, with an error that
+/// need not show it: the higher estimate is the one to trust, and islands that disagree among
+/// themselves are not weighed with a start that converged.
 pub fn kept_start(from_box: &StartEstimate, from_fit: &StartEstimate) -> Option<Start> {
     let gap = from_fit.ln_z - from_box.ln_z;
     let joint = from_box.ln_z_error.hypot(from_fit.ln_z_error);
