@@ -27,12 +27,12 @@ with the law's torque T from ``bitrock.torque`` (the library's own, law files in
 sampling, S at each law's least-squares estimate is checked against the ρ = S / Σy² that
 bitrock reported for it (relative 1e-9): the data, the scaling and the torque are bitrock's.
 
-Needs the Python package (built by ``./scripts/test.sh`` into ``target/python-venv``) and
-dynesty:
+Needs the Python package with dynesty (both installed by ``./scripts/test.sh`` into
+``target/python-venv``: dynesty is among the package's test extras), or:
 
     target/python-venv/bin/pip install "dynesty==2.1.*"
     target/python-venv/bin/python benches/evidence_nested.py DIR [--nlive 500] \\
-        [--dlogz 0.05] [--seed 1] [--laws m1,m3] [--out result.json]
+        [--dlogz 0.05] [--sample rwalk] [--seed 1] [--laws m1,m3] [--out result.json]
 """
 
 import argparse
@@ -94,6 +94,7 @@ def main() -> None:
     parser.add_argument("dir", type=pathlib.Path, help="an evidence directory (bitrock evidence --noise iid --out DIR)")
     parser.add_argument("--nlive", type=int, default=500, help="live points (default 500)")
     parser.add_argument("--dlogz", type=float, default=0.05, help="dynesty's stopping criterion (default 0.05 nats)")
+    parser.add_argument("--sample", default="rwalk", help="dynesty's way of sampling within its bounds (default rwalk; rslice, slice, unif)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--laws", help="comma-separated laws (default: every law of the evidence)")
     parser.add_argument("--out", type=pathlib.Path, help="write the results as JSON here")
@@ -141,7 +142,7 @@ def main() -> None:
             len(lower),
             nlive=args.nlive,
             bound="multi",
-            sample="rwalk",
+            sample=args.sample,
             rstate=np.random.default_rng(args.seed),
         )
         started = time.perf_counter()
@@ -174,6 +175,7 @@ def main() -> None:
         "nlive": args.nlive,
         "dlogz": args.dlogz,
         "seed": args.seed,
+        "sample": args.sample,
         "dynesty": dynesty.__version__,
         "bitrock_seconds": evidence.get("seconds"),
         "bitrock_backend": evidence.get("backend"),

@@ -327,7 +327,7 @@ fn starts_table(out: &mut impl Write, evidence: &Evidence) -> std::io::Result<()
     }
     writeln!(
         out,
-        "\neach start's ln Z (N·m; each errs only low, where it misses part of the posterior):"
+        "\neach start's ln Z (N·m; a start errs low where it misses part of the posterior):"
     )?;
     for law in &evidence.laws {
         if let Some(line) = describe_starts(&law.starts) {

@@ -93,7 +93,7 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
     if laws.iter().any(|l| !l.starts.is_empty()) {
         let _ = writeln!(
             md,
-            "\nEach start's ln Z (each errs only low, where it misses part of the posterior; the higher kept where \
+            "\nEach start's ln Z (a start errs low where it misses part of the posterior; the higher kept where \
              they differ beyond their errors or a start's islands disagree):\n"
         );
         for l in &laws {

@@ -358,8 +358,8 @@ pub enum Start {
     /// error that does not show it. A law whose fit has no covariance starts from its box.
     Fit,
     /// From both, as many islands from each (the box's cost plus the fit's): weighed by their
-    /// inverse variances where they agree, the higher ln Z kept where they do not (each start
-    /// errs only low, where it misses part of the posterior).
+    /// inverse variances where they agree, the higher ln Z kept where they do not (a start
+    /// errs low where it misses part of the posterior; [`kept_start`]).
     Both,
 }
 
@@ -740,13 +740,17 @@ fn pooled_ln_z(island_ln_z: &[f64]) -> (f64, f64) {
 }
 
 /// The mean of independent estimates (value, standard error) weighed by their inverse
-/// variances, and its standard error.
+/// variances, and its standard error, scaled up by the Birge ratio √(χ²/(k − 1)) where the k
+/// estimates scatter more than their errors allow (the Particle Data Group's scale factor):
+/// errors from a few islands each are rough, and where two disagree the mean's error says so.
 fn inverse_variance_mean(estimates: &[(f64, f64)]) -> (f64, f64) {
     // An error of exactly zero (islands that agree to the last bit) weighs as a tiny one.
     let weight = |error: f64| error.max(1e-9).powi(-2);
     let total: f64 = estimates.iter().map(|&(_, e)| weight(e)).sum();
     let mean = estimates.iter().map(|&(v, e)| v * weight(e)).sum::<f64>() / total;
-    (mean, total.sqrt().recip())
+    let chi2: f64 = estimates.iter().map(|&(v, e)| (v - mean).powi(2) * weight(e)).sum();
+    let birge = (chi2 / (estimates.len() as f64 - 1.0).max(1.0)).sqrt().max(1.0);
+    (mean, birge / total.sqrt())
 }
 
 /// Largest difference between two islands' ln Z, nats.
@@ -1479,9 +1483,15 @@ mod tests {
             ),
             Some(Start::Box)
         );
-        // Two kept: weighed by their inverse variances.
+        // Two kept: weighed by their inverse variances; the error as the inverse variances
+        // give it where they agree (χ² = 0.5 below 1), scaled by the Birge ratio √χ² where
+        // they do not (χ² = 1.8: 1.2 = √0.8·√1.8; and for equal errors, half the gap).
+        let (mean, error) = inverse_variance_mean(&[(1.0, 1.0), (2.0, 1.0)]);
+        assert!((mean - 1.5).abs() < 1e-12 && (error - 0.5f64.sqrt()).abs() < 1e-12);
         let (mean, error) = inverse_variance_mean(&[(1.0, 1.0), (4.0, 2.0)]);
-        assert!((mean - 1.6).abs() < 1e-12 && (error - 0.8f64.sqrt()).abs() < 1e-12);
+        assert!((mean - 1.6).abs() < 1e-12 && (error - 1.2).abs() < 1e-12);
+        let (mean, error) = inverse_variance_mean(&[(-100.0, 0.05), (-99.7, 0.05)]);
+        assert!((mean + 99.85).abs() < 1e-9 && (error - 0.15).abs() < 1e-9);
     }
 
     #[test]

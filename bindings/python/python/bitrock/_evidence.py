@@ -59,7 +59,7 @@ class Evidence:
         """Where each law's samplers started from both its box and its fit
         (``start_from="both"``): one row per law and start, its own ln Z (N·m), Monte-Carlo error
         and islands' spread (nats), and whether the law's ln Z kept its islands (both where they
-        agree, else the higher: each start errs only low). Empty for a single start."""
+        agree, else the higher: a start that misses part of the posterior errs low). Empty for a single start."""
         rows = [
             {"law": law["law"], **estimate}
             for law in self._doc["laws"]
