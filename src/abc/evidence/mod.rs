@@ -435,7 +435,9 @@ pub fn describe_starts(starts: &[StartEstimate]) -> Option<String> {
 /// most e^(−t), while a start that misses part of the posterior (a mode some of its islands
 /// lost, a funnel its reference never reached) under-estimates it by nats, with an error that
 /// need not show it: the higher estimate is the one to trust, and islands that disagree among
-/// themselves are not weighed with a start that converged.
+/// themselves are not weighed with a start that converged. The price: where both converged
+/// and differ by chance (an error from a few islands is rough), the higher keeps its upward
+/// scatter (measured in docs/evidence.md).
 pub fn kept_start(from_box: &StartEstimate, from_fit: &StartEstimate) -> Option<Start> {
     let gap = from_fit.ln_z - from_box.ln_z;
     let joint = from_box.ln_z_error.hypot(from_fit.ln_z_error);
