@@ -27,6 +27,7 @@
 //! the friction reverses inside the step and can push the speed back above zero, hiding the
 //! crossing and replacing a clean stick by chatter.
 
+pub mod strings;
 pub mod well;
 
 use crate::error::{Error, Result};

@@ -65,3 +65,14 @@ fn dtorque_dw(law: u32, p: array<f32, 6>, w: f32) -> f32 {
         }
     }
 }
+
+// T(w) of law `law` at r = 1 (the simulated strings).
+fn torque_at(law: u32, p: array<f32, 6>, w: f32) -> f32 {
+    switch law {
+        // The build writes a case per built-in law, the host one per law file's law.
+        // LAW_TORQUES
+        default: {
+            return 0.0;
+        }
+    }
+}

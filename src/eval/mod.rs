@@ -4,6 +4,7 @@
 pub mod cpu;
 pub mod gpu;
 pub mod records;
+pub mod strings;
 
 use crate::data::Samples;
 use crate::error::Result;

@@ -19,6 +19,7 @@ mod shard;
 mod smc;
 mod stability;
 mod store;
+mod strings;
 mod support;
 mod tune;
 mod uniform;

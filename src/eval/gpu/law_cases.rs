@@ -20,6 +20,8 @@ pub struct LawCases {
     pub strided: String,
     /// Cases of `dtorque_dw`'s switch (the stability slopes).
     pub slopes: String,
+    /// Cases of `torque_at`'s switch (the simulated strings).
+    pub torques: String,
 }
 
 impl LawCases {
@@ -28,6 +30,7 @@ impl LawCases {
     /// `p` and `w`. `scores` is false for kernels that only take slopes.
     pub fn add(&mut self, id: usize, quad: &str, torque: &dyn Fn(&str, &str) -> String, slope: &str, scores: bool) {
         writeln!(self.slopes, "        case {id}u: {{ return {slope}; }}").unwrap();
+        writeln!(self.torques, "        case {id}u: {{ return {}; }}", torque("p", "w")).unwrap();
         if !scores {
             return;
         }
@@ -84,6 +87,7 @@ impl LawCases {
             ("// LAW_PASSES", &self.passes),
             ("// LAW_STRIDED", &self.strided),
             ("// LAW_SLOPES", &self.slopes),
+            ("// LAW_TORQUES", &self.torques),
         ] {
             out = out.replace(marker, &format!("{}{marker}", text.trim_start()));
         }
@@ -94,8 +98,14 @@ impl LawCases {
 
     /// `source` without the markers: no more laws to come.
     pub fn close(source: &str) -> String {
-        ["// LAW_BLOCKS", "// LAW_PASSES", "// LAW_STRIDED", "// LAW_SLOPES"]
-            .iter()
-            .fold(source.to_string(), |text, marker| text.replace(marker, ""))
+        [
+            "// LAW_BLOCKS",
+            "// LAW_PASSES",
+            "// LAW_STRIDED",
+            "// LAW_SLOPES",
+            "// LAW_TORQUES",
+        ]
+        .iter()
+        .fold(source.to_string(), |text, marker| text.replace(marker, ""))
     }
 }

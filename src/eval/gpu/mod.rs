@@ -18,6 +18,7 @@ pub mod records;
 pub mod residual;
 pub mod shape;
 pub mod stability;
+pub mod strings;
 pub mod tune;
 
 pub use shape::{SHAPE_VAR, Shape};
@@ -55,6 +56,7 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
         ("kernel_sums", kernel_sums_source(), &["main"]),
         ("slopes", slopes_source(), &["main"]),
         ("stability", stability_source(), &["main"]),
+        ("strings", strings_source(), &["main"]),
         ("test_uniform_between", test_uniform_between_source(), &["main"]),
     ]
 }
@@ -97,6 +99,15 @@ pub(crate) fn slopes_source_for(laws: &[crate::Law]) -> String {
 
 fn slopes_source() -> String {
     slopes_source_for(&[])
+}
+
+/// The strings kernel with the law files' `laws` ([`file_laws::splice`]).
+pub(crate) fn strings_source_for(laws: &[crate::Law]) -> String {
+    file_laws::splice(kernel!("strings"), laws)
+}
+
+fn strings_source() -> String {
+    strings_source_for(&[])
 }
 
 fn stability_source() -> String {

@@ -1,0 +1,313 @@
+// The batched string integrator: one drill string per invocation, integrated with a fixed step
+// and the Karnopp stick rule, reduced to a summary on the device. The twin of
+// `src/simulate/strings.rs` (f64), loop for loop: read its doc comment for the equations.
+// Needs shared/laws.wgsl (torque_at).
+
+const MAX_NODES: u32 = 16u;
+// Words per string of the inputs, the state and the summary. Keep in sync with
+// src/eval/gpu/strings.rs.
+const INPUT_WORDS: u32 = 12u;
+const STATE_WORDS: u32 = 34u;
+const SUMMARY_WORDS: u32 = 16u;
+const EVENT_PASSES: u32 = 4u;
+
+// Nodes of the chain (the bit the last): fixed per pipeline, so that the loops over nodes
+// unroll and a 1-DOF string keeps its state in registers.
+override NODES: u32 = 1u;
+
+// Keep in sync with `StringsJob` in src/eval/gpu/strings.rs.
+struct StringsJob {
+    first: u32,
+    count: u32,
+    row_width: u32,
+    steps_per_sample: u32,
+    settle_samples: u32,
+    record_samples: u32,
+    _pad0: u32,
+    _pad1: u32,
+    dt_s: f32,
+    alpha: f32,
+    beta: f32,
+    stuck_speed: f32,
+    inertia: array<vec4<f32>, 4>,
+    stiffness: array<vec4<f32>, 4>,
+}
+
+@group(0) @binding(0) var<uniform> job: StringsJob;
+// Per string: law id (bits), Ω (rad/s), r, unused, six parameters (N·m), two unused.
+@group(0) @binding(1) var<storage, read> inputs: array<f32>;
+// Per string: 16 lags (rad), 16 speeds (rad/s), stuck (0/1), slip direction (±1); read as the
+// start, written back as the end.
+@group(0) @binding(2) var<storage, read_write> states: array<f32>;
+// Per string: samples, stuck, onsets, first onset, last onset (u32 bits), speed min, max, sum
+// (rad/s), bit torque min, max, surface torque min, max (N·m), diverged, last stuck (u32 bits).
+@group(0) @binding(3) var<storage, read_write> summaries: array<f32>;
+
+struct State {
+    u: array<f32, 16>,
+    w: array<f32, 16>,
+}
+
+struct Deriv {
+    du: array<f32, 16>,
+    dw: array<f32, 16>,
+}
+
+var<private> law: u32;
+var<private> params: array<f32, 6>;
+var<private> omega: f32;
+var<private> ratio: f32;
+var<private> static_nm: f32;
+
+fn inertia(j: u32) -> f32 {
+    return job.inertia[j / 4u][j % 4u];
+}
+
+fn stiffness(j: u32) -> f32 {
+    return job.stiffness[j / 4u][j % 4u];
+}
+
+// dir·r·T(dir·w): the smooth branch of the law for the direction of slip.
+fn law_torque(dir: f32, w: f32) -> f32 {
+    return dir * ratio * torque_at(law, params, dir * w);
+}
+
+// F_j = (K u)_j + (C v)_j with v = Ω − w.
+fn string_torque(s: State, j: u32) -> f32 {
+    var u_above = 0.0;
+    var v_above = 0.0;
+    if (j > 0u) {
+        u_above = s.u[j - 1u];
+        v_above = omega - s.w[j - 1u];
+    }
+    let v = omega - s.w[j];
+    let k = stiffness(j);
+    var f = k * (s.u[j] - u_above) + job.beta * k * (v - v_above) + job.alpha * inertia(j) * v;
+    if (j + 1u < NODES) {
+        let kb = stiffness(j + 1u);
+        f = f - (kb * (s.u[j + 1u] - s.u[j]) + job.beta * kb * ((omega - s.w[j + 1u]) - v));
+    }
+    return f;
+}
+
+fn derivative(s: State, stuck: bool, dir: f32) -> Deriv {
+    var d: Deriv;
+    for (var j = 0u; j < NODES; j = j + 1u) {
+        d.du[j] = omega - s.w[j];
+        var f = string_torque(s, j);
+        if (j == NODES - 1u) {
+            if (stuck) {
+                d.dw[j] = 0.0;
+                continue;
+            }
+            f = f - law_torque(dir, s.w[j]);
+        }
+        d.dw[j] = f / inertia(j);
+    }
+    return d;
+}
+
+fn along(s: State, d: Deriv, f: f32) -> State {
+    var t = s;
+    for (var j = 0u; j < NODES; j = j + 1u) {
+        t.u[j] = s.u[j] + f * d.du[j];
+        t.w[j] = s.w[j] + f * d.dw[j];
+    }
+    return t;
+}
+
+fn rk4(s: State, stuck: bool, dir: f32, h: f32) -> State {
+    let k1 = derivative(s, stuck, dir);
+    let k2 = derivative(along(s, k1, 0.5 * h), stuck, dir);
+    let k3 = derivative(along(s, k2, 0.5 * h), stuck, dir);
+    let k4 = derivative(along(s, k3, h), stuck, dir);
+    var out = s;
+    for (var j = 0u; j < NODES; j = j + 1u) {
+        out.u[j] = s.u[j] + h / 6.0 * (k1.du[j] + 2.0 * (k2.du[j] + k3.du[j]) + k4.du[j]);
+        out.w[j] = s.w[j] + h / 6.0 * (k1.dw[j] + 2.0 * (k2.dw[j] + k3.dw[j]) + k4.dw[j]);
+    }
+    return out;
+}
+
+fn bit_drive(s: State) -> f32 {
+    return string_torque(s, NODES - 1u);
+}
+
+struct Motion {
+    s: State,
+    stuck: bool,
+    dir: f32,
+}
+
+// A bit at rest: stuck while the string's torque is within ±T_s, else slipping its way.
+fn at_rest(m: Motion) -> Motion {
+    var out = m;
+    let f = bit_drive(m.s);
+    out.stuck = abs(f) <= static_nm;
+    if (!out.stuck) {
+        out.dir = select(-1.0, 1.0, f > 0.0);
+    }
+    return out;
+}
+
+// One step of h through any stop or release inside it.
+fn step(m0: Motion, h: f32) -> Motion {
+    let bit = NODES - 1u;
+    var m = m0;
+    var remaining = h;
+    for (var event = 0u; event < EVENT_PASSES; event = event + 1u) {
+        if (remaining <= 0.0) {
+            break;
+        }
+        let start = m.s;
+        if (m.stuck) {
+            let end = rk4(start, true, m.dir, remaining);
+            let f0 = bit_drive(start);
+            let f1 = bit_drive(end);
+            if (abs(f1) <= static_nm) {
+                m.s = end;
+                break;
+            }
+            let bound = select(-static_nm, static_nm, f1 > 0.0);
+            var fraction = 0.0;
+            if (abs(f1 - f0) > 0.0) {
+                fraction = clamp((bound - f0) / (f1 - f0), 0.0, 1.0);
+            }
+            let to_release = fraction * remaining;
+            m.s = rk4(start, true, m.dir, to_release);
+            m.stuck = false;
+            m.dir = select(-1.0, 1.0, f1 > 0.0);
+            remaining = remaining - to_release;
+        } else {
+            let end = rk4(start, false, m.dir, remaining);
+            let w0 = m.dir * start.w[bit];
+            let w1 = m.dir * end.w[bit];
+            if (w1 > 0.0) {
+                m.s = end;
+                break;
+            }
+            if (w0 <= 0.0) {
+                m.s = end;
+                m.s.w[bit] = 0.0;
+                m = at_rest(m);
+                break;
+            }
+            let to_zero = remaining * w0 / (w0 - w1);
+            m.s = rk4(start, false, m.dir, to_zero);
+            m.s.w[bit] = 0.0;
+            remaining = remaining - to_zero;
+            m = at_rest(m);
+        }
+    }
+    return m;
+}
+
+fn bit_torque(m: Motion) -> f32 {
+    if (m.stuck) {
+        return clamp(bit_drive(m.s), -static_nm, static_nm);
+    }
+    return law_torque(m.dir, m.s.w[NODES - 1u]);
+}
+
+fn surface_torque(m: Motion) -> f32 {
+    let k = stiffness(0u);
+    return k * m.s.u[0] + job.beta * k * (omega - m.s.w[0]);
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let local = gid.x + gid.y * job.row_width;
+    if (local >= job.count) {
+        return;
+    }
+    let i = job.first + local;
+    let b = INPUT_WORDS * i;
+    law = bitcast<u32>(inputs[b]);
+    omega = inputs[b + 1u];
+    ratio = inputs[b + 2u];
+    params = array<f32, 6>(inputs[b + 4u], inputs[b + 5u], inputs[b + 6u], inputs[b + 7u], inputs[b + 8u], inputs[b + 9u]);
+    static_nm = max(ratio * torque_at(law, params, 0.0), 0.0);
+    let runaway = 1000.0 * max(abs(omega), 1.0);
+
+    let sb = STATE_WORDS * i;
+    var m: Motion;
+    for (var j = 0u; j < MAX_NODES; j = j + 1u) {
+        m.s.u[j] = states[sb + j];
+        m.s.w[j] = states[sb + MAX_NODES + j];
+    }
+    m.stuck = states[sb + 2u * MAX_NODES] != 0.0;
+    m.dir = select(1.0, -1.0, m.s.w[NODES - 1u] < 0.0);
+
+    var samples = 0u;
+    var stuck_count = 0u;
+    var onsets = 0u;
+    var first_onset = 0u;
+    var last_onset = 0u;
+    var last_stuck = false;
+    var speed_min = 3.0e38;
+    var speed_max = -3.0e38;
+    var speed_sum = 0.0;
+    var bit_min = 3.0e38;
+    var bit_max = -3.0e38;
+    var surface_min = 3.0e38;
+    var surface_max = -3.0e38;
+    var diverged = false;
+    let periods = job.settle_samples + job.record_samples;
+    for (var period = 0u; period < periods; period = period + 1u) {
+        for (var k = 0u; k < job.steps_per_sample; k = k + 1u) {
+            m = step(m, job.dt_s);
+        }
+        let w = m.s.w[NODES - 1u];
+        // A NaN fails both comparisons: diverged.
+        if (!(abs(w) <= runaway) || !(abs(m.s.u[NODES - 1u]) < 3.0e38)) {
+            diverged = true;
+            break;
+        }
+        if (period >= job.settle_samples) {
+            let stuck = abs(w) < job.stuck_speed;
+            if (stuck) {
+                if (!(samples > 0u && last_stuck)) {
+                    if (onsets == 0u) {
+                        first_onset = samples;
+                    }
+                    last_onset = samples;
+                    onsets = onsets + 1u;
+                }
+                stuck_count = stuck_count + 1u;
+            }
+            let tb = bit_torque(m);
+            let ts = surface_torque(m);
+            speed_min = min(speed_min, w);
+            speed_max = max(speed_max, w);
+            speed_sum = speed_sum + w;
+            bit_min = min(bit_min, tb);
+            bit_max = max(bit_max, tb);
+            surface_min = min(surface_min, ts);
+            surface_max = max(surface_max, ts);
+            samples = samples + 1u;
+            last_stuck = stuck;
+        }
+    }
+
+    for (var j = 0u; j < MAX_NODES; j = j + 1u) {
+        states[sb + j] = m.s.u[j];
+        states[sb + MAX_NODES + j] = m.s.w[j];
+    }
+    states[sb + 2u * MAX_NODES] = select(0.0, 1.0, m.stuck);
+    states[sb + 2u * MAX_NODES + 1u] = m.dir;
+    let o = SUMMARY_WORDS * i;
+    summaries[o] = bitcast<f32>(samples);
+    summaries[o + 1u] = bitcast<f32>(stuck_count);
+    summaries[o + 2u] = bitcast<f32>(onsets);
+    summaries[o + 3u] = bitcast<f32>(first_onset);
+    summaries[o + 4u] = bitcast<f32>(last_onset);
+    summaries[o + 5u] = speed_min;
+    summaries[o + 6u] = speed_max;
+    summaries[o + 7u] = speed_sum;
+    summaries[o + 8u] = bit_min;
+    summaries[o + 9u] = bit_max;
+    summaries[o + 10u] = surface_min;
+    summaries[o + 11u] = surface_max;
+    summaries[o + 12u] = bitcast<f32>(select(0u, 1u, diverged));
+    summaries[o + 13u] = bitcast<f32>(select(0u, 1u, last_stuck));
+}

@@ -1,0 +1,710 @@
+//! The batched string integrator: many independent drill strings, each from its own law,
+//! parameters, operating point (Ω, W) and initial state, integrated with one fixed step and one
+//! stick rule, reduced on the fly to a [`Summary`]. This is the CPU twin (f64) of
+//! `shaders/strings.wgsl` (f32): the same chain, the same step, the same event rule, the same
+//! summary, loop for loop.
+//!
+//! The string is a [`Chain`] of lumped inertias below the top drive, which turns at the imposed
+//! Ω: one node for the paper's 1-DOF string, one per finite element for a string lumped from
+//! `fe`'s (row sums of the consistent mass matrix, the same element stiffnesses, Rayleigh damping
+//! C = αM + βK acting on the speeds relative to the top drive, so that steady rotation carries no
+//! damping torque and the linearisation is the FE model's). In the lags u_j = Ωt − θ_j and bit
+//! speeds w_j:
+//!
+//! ```text
+//! u_j' = Ω − w_j,   m_j w_j' = F_j − [j = bit]·T_bit,   F = K u + C (Ω − w)
+//! ```
+//!
+//! F at the bit is the torque the string drives the bit with. The stick rule (Karnopp): a bit at
+//! rest stays at w = 0 while |F_bit| ≤ T_s = max(r·T(0), 0); its torque is then the reaction
+//! F_bit. Slip is integrated with classical RK4 on the smooth branch `dir·r·T(dir·w)` of the
+//! law for the current direction. Inside a step, a bit speed that crosses zero is located by one
+//! secant on the step's two ends and the step re-integrated to it; a stuck bit's release is
+//! located the same way on F_bit (exact for the 1-DOF string, where F grows linearly while
+//! stuck). Both are well posed in f32: no stiff regularisation, no bisection to a tolerance.
+
+use crate::error::{Error, Result};
+use crate::laws::Law;
+use crate::stability::fe::DrillString;
+use crate::stability::lumped::Lumped;
+use crate::units::RAD_S_PER_RPM;
+
+/// Most nodes in a chain: the kernel's per-string arrays hold this many.
+pub const MAX_NODES: usize = 16;
+
+/// Bit speed below which a sample counts as stuck (rad/s): 1 rpm, as downhole tools count it.
+pub const STUCK_SPEED_RAD_S: f64 = RAD_S_PER_RPM;
+
+/// Largest |λ|·dt of the chain's linear modes: inside RK4's stability region (2.83 on the
+/// imaginary axis, 2.78 on the real one) with a margin.
+pub const MAX_STEP_TIMES_RATE: f64 = 2.5;
+
+/// Passes of the event rule in one step: a stop and a release, with room to spare.
+const EVENT_PASSES: usize = 4;
+
+/// A drill string as the batched integrator sees it: lumped inertias from the top down, the
+/// last one the bit, joined by torsional springs (element j joins node j − 1 to node j, node 0
+/// being the top drive), with Rayleigh damping C = αM + βK.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Chain {
+    /// Lumped inertia of each node (kg·m²), top first, the bit last.
+    pub inertia_kg_m2: Vec<f64>,
+    /// Stiffness of each element (N·m/rad), element j above node j.
+    pub stiffness_nm_per_rad: Vec<f64>,
+    /// Mass-proportional damping α (1/s).
+    pub alpha_per_s: f64,
+    /// Stiffness-proportional damping β (s).
+    pub beta_s: f64,
+}
+
+/// The chain's fastest linear mode, for the step-size rule.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastestMode {
+    /// 1-based mode number, ascending in frequency.
+    pub mode: usize,
+    /// Undamped frequency ω (rad/s).
+    pub frequency_rad_s: f64,
+    /// Modal damping ratio ξ = (α/ω + βω)/2.
+    pub damping_ratio: f64,
+    /// |λ| of the mode's fastest eigenvalue (1/s): ω when underdamped, ω(ξ + √(ξ² − 1)) when not.
+    pub rate_per_s: f64,
+}
+
+impl Chain {
+    /// The paper's 1-DOF string: one node of inertia I, one spring k, its damping c as βk (the
+    /// damping acts on the twist rate Ω − w, as the paper's equation has it).
+    pub fn one_dof(s: &Lumped) -> Self {
+        let k = s.stiffness_nm_per_rad();
+        Self {
+            inertia_kg_m2: vec![s.inertia_kg_m2],
+            stiffness_nm_per_rad: vec![k],
+            alpha_per_s: 0.0,
+            beta_s: s.damping_nms_per_rad() / k,
+        }
+    }
+
+    /// The finite-element string lumped: each node's inertia the row sum of the consistent mass
+    /// matrix, the element stiffnesses and Rayleigh coefficients kept.
+    pub fn lumped_fe(s: &DrillString) -> Result<Self> {
+        s.validate()?;
+        let n = s.dofs();
+        if n > MAX_NODES {
+            return Err(Error::setting(
+                "dp_elements",
+                format!(
+                    "the simulated string holds at most {MAX_NODES} elements, this one has {n} \
+                     (--dp-elements {} and --bha-elements {})",
+                    s.dp_elements, s.bha_elements
+                ),
+            ));
+        }
+        let (m, _, k) = s.matrices();
+        let inertia_kg_m2 = (0..n).map(|i| m.row(i).sum()).collect();
+        // K is tridiagonal with K[i][i+1] = −k_{i+1}; the bit's element is K[n−1][n−1] − k_{n−1}.
+        let mut stiffness_nm_per_rad = vec![0.0; n];
+        stiffness_nm_per_rad[n - 1] = if n == 1 { k[(0, 0)] } else { -k[(n - 2, n - 1)] };
+        for j in (0..n - 1).rev() {
+            stiffness_nm_per_rad[j] = k[(j, j)] - stiffness_nm_per_rad[j + 1];
+        }
+        Ok(Self {
+            inertia_kg_m2,
+            stiffness_nm_per_rad,
+            alpha_per_s: s.alpha,
+            beta_s: s.beta,
+        })
+    }
+
+    /// Nodes (the bit included).
+    pub fn nodes(&self) -> usize {
+        self.inertia_kg_m2.len()
+    }
+
+    /// The bit's inertia (kg·m²).
+    pub fn bit_inertia_kg_m2(&self) -> f64 {
+        self.inertia_kg_m2[self.nodes() - 1]
+    }
+
+    /// The fastest mode of the chain's linear part (M⁻¹K symmetrised by the diagonal M).
+    pub fn fastest_mode(&self) -> FastestMode {
+        let n = self.nodes();
+        let mut a = nalgebra::DMatrix::zeros(n, n);
+        for j in 0..n {
+            let below = self.stiffness_nm_per_rad.get(j + 1).copied().unwrap_or(0.0);
+            a[(j, j)] = (self.stiffness_nm_per_rad[j] + below) / self.inertia_kg_m2[j];
+            if j + 1 < n {
+                let off = -below / (self.inertia_kg_m2[j] * self.inertia_kg_m2[j + 1]).sqrt();
+                a[(j, j + 1)] = off;
+                a[(j + 1, j)] = off;
+            }
+        }
+        let mut lambdas: Vec<f64> = a.symmetric_eigenvalues().iter().map(|l| l.max(0.0)).collect();
+        lambdas.sort_by(f64::total_cmp);
+        let mut fastest = None::<FastestMode>;
+        for (i, l) in lambdas.iter().enumerate() {
+            let omega = l.sqrt();
+            let xi = 0.5 * (self.alpha_per_s / omega.max(f64::MIN_POSITIVE) + self.beta_s * omega);
+            let rate = if xi <= 1.0 {
+                omega
+            } else {
+                omega * (xi + (xi * xi - 1.0).sqrt())
+            };
+            if fastest.is_none_or(|f| rate > f.rate_per_s) {
+                fastest = Some(FastestMode {
+                    mode: i + 1,
+                    frequency_rad_s: omega,
+                    damping_ratio: xi,
+                    rate_per_s: rate,
+                });
+            }
+        }
+        fastest.expect("a chain has a node")
+    }
+
+    /// Refuses a step that cannot resolve the chain's fastest mode, naming `dt_s` and the mode.
+    pub fn check_step(&self, dt_s: f64) -> Result<()> {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(Error::setting(
+                "dt_s",
+                format!("must be positive and finite, got {dt_s}"),
+            ));
+        }
+        let f = self.fastest_mode();
+        if dt_s * f.rate_per_s > MAX_STEP_TIMES_RATE {
+            return Err(Error::setting(
+                "dt_s",
+                format!(
+                    "a step of {dt_s} s cannot resolve the string's mode {} ({:.4} rad/s, damping \
+                     ratio {:.3}): RK4 needs dt ≤ {:.3e} s for it",
+                    f.mode,
+                    f.frequency_rad_s,
+                    f.damping_ratio,
+                    MAX_STEP_TIMES_RATE / f.rate_per_s
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Lags (rad) of steady rotation under a bit torque `torque_nm`: every element carries it.
+    pub fn steady_lags_rad(&self, torque_nm: f64) -> Vec<f64> {
+        self.stiffness_nm_per_rad
+            .iter()
+            .scan(0.0, |lag, k| {
+                *lag += torque_nm / k;
+                Some(*lag)
+            })
+            .collect()
+    }
+}
+
+/// The state of one string: each node's lag u_j = Ωt − θ_j (rad) and speed w_j (rad/s), and
+/// whether the bit is stuck. Nodes past the chain's are zero.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StringState {
+    pub lag_rad: [f64; MAX_NODES],
+    pub speed_rad_s: [f64; MAX_NODES],
+    pub stuck: bool,
+}
+
+/// What one string is: its law and parameters (torques in N·m), operating point and start.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StringJob {
+    pub law: Law,
+    /// Parameters, torques in N·m (SI); unused ones zero.
+    pub params_nm: [f64; 6],
+    /// Top-drive speed Ω (rad/s).
+    pub omega_rad_s: f64,
+    /// Weight-on-bit ratio r = W / W_ref.
+    pub ratio: f64,
+    pub start: StringState,
+}
+
+/// How long and how finely every string of a batch is integrated, and what is recorded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Schedule {
+    /// Integration step (s).
+    pub dt_s: f64,
+    /// Steps per recorded sample.
+    pub steps_per_sample: u32,
+    /// Sample periods integrated before recording starts.
+    pub settle_samples: u32,
+    /// Samples recorded into the summary.
+    pub record_samples: u32,
+}
+
+/// Most samples or settling periods in one schedule: lavapipe ends a loop after 65,535 passes.
+pub const MAX_SAMPLES: u32 = 65_535;
+
+impl Schedule {
+    /// A schedule of `settle_s` then `record_s` at `sample_hz`, each sample period split into
+    /// equal steps no longer than `dt_s`.
+    pub fn new(dt_s: f64, sample_hz: f64, settle_s: f64, record_s: f64) -> Result<Self> {
+        for (field, v) in [("dt_s", dt_s), ("sample_hz", sample_hz), ("record_s", record_s)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::setting(field, format!("must be positive and finite, got {v}")));
+            }
+        }
+        if !(settle_s.is_finite() && settle_s >= 0.0) {
+            return Err(Error::setting(
+                "settle_s",
+                format!("must be finite and not negative, got {settle_s}"),
+            ));
+        }
+        let period = 1.0 / sample_hz;
+        if dt_s > period {
+            return Err(Error::setting(
+                "dt_s",
+                format!("the integration step {dt_s} s exceeds the sample period {period} s"),
+            ));
+        }
+        let steps_per_sample = (period / dt_s).ceil();
+        let settle_samples = (settle_s * sample_hz).round();
+        let record_samples = (record_s * sample_hz).round().max(1.0);
+        for (field, n) in [
+            ("settle_s", settle_samples),
+            ("record_s", record_samples),
+            ("dt_s", steps_per_sample),
+        ] {
+            if n > MAX_SAMPLES as f64 {
+                return Err(Error::setting(
+                    field,
+                    format!("{n} periods at {sample_hz} Hz: at most {MAX_SAMPLES} per string"),
+                ));
+            }
+        }
+        Ok(Self {
+            dt_s: period / steps_per_sample,
+            steps_per_sample: steps_per_sample as u32,
+            settle_samples: settle_samples as u32,
+            record_samples: record_samples as u32,
+        })
+    }
+
+    /// Steps integrated per string.
+    pub fn steps(&self) -> u64 {
+        u64::from(self.steps_per_sample) * u64::from(self.settle_samples + self.record_samples)
+    }
+
+    /// Simulated seconds per string.
+    pub fn seconds(&self) -> f64 {
+        self.steps() as f64 * self.dt_s
+    }
+
+    /// Sample period (s).
+    pub fn sample_period_s(&self) -> f64 {
+        self.dt_s * f64::from(self.steps_per_sample)
+    }
+}
+
+/// What a string did while recorded: the same reduction of a record's samples
+/// ([`Summary::push`]) whether they come from a simulated string or from a rig.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Summary {
+    pub samples: u32,
+    /// Samples with |bit speed| below [`STUCK_SPEED_RAD_S`].
+    pub stuck: u32,
+    /// Stuck samples that follow a sample that was not: the stick phases begun.
+    pub stick_onsets: u32,
+    /// Sample index of the first and the last stick onset.
+    pub first_onset: u32,
+    pub last_onset: u32,
+    pub speed_min_rad_s: f64,
+    pub speed_max_rad_s: f64,
+    pub speed_sum_rad_s: f64,
+    pub bit_torque_min_nm: f64,
+    pub bit_torque_max_nm: f64,
+    pub surface_torque_min_nm: f64,
+    pub surface_torque_max_nm: f64,
+    /// The integration left physical bounds (a speed past the runaway limit, or not finite):
+    /// every other field is then meaningless.
+    pub diverged: bool,
+    /// Whether the last sample pushed was stuck (for counting onsets).
+    pub last_stuck: bool,
+}
+
+impl Default for Summary {
+    fn default() -> Self {
+        Self {
+            samples: 0,
+            stuck: 0,
+            stick_onsets: 0,
+            first_onset: 0,
+            last_onset: 0,
+            speed_min_rad_s: f64::INFINITY,
+            speed_max_rad_s: f64::NEG_INFINITY,
+            speed_sum_rad_s: 0.0,
+            bit_torque_min_nm: f64::INFINITY,
+            bit_torque_max_nm: f64::NEG_INFINITY,
+            surface_torque_min_nm: f64::INFINITY,
+            surface_torque_max_nm: f64::NEG_INFINITY,
+            diverged: false,
+            last_stuck: false,
+        }
+    }
+}
+
+impl Summary {
+    /// Adds one sample: bit speed (rad/s), torque on bit and surface torque (N·m; NaN where a
+    /// record has no such channel, which then stays at ±∞).
+    pub fn push(&mut self, speed_rad_s: f64, bit_torque_nm: f64, surface_torque_nm: f64) {
+        let stuck = speed_rad_s.abs() < STUCK_SPEED_RAD_S;
+        let was_stuck = self.samples > 0 && self.last_stuck;
+        if stuck {
+            if !was_stuck {
+                if self.stick_onsets == 0 {
+                    self.first_onset = self.samples;
+                }
+                self.last_onset = self.samples;
+                self.stick_onsets += 1;
+            }
+            self.stuck += 1;
+        }
+        self.speed_min_rad_s = self.speed_min_rad_s.min(speed_rad_s);
+        self.speed_max_rad_s = self.speed_max_rad_s.max(speed_rad_s);
+        self.speed_sum_rad_s += speed_rad_s;
+        self.bit_torque_min_nm = self.bit_torque_min_nm.min(bit_torque_nm);
+        self.bit_torque_max_nm = self.bit_torque_max_nm.max(bit_torque_nm);
+        self.surface_torque_min_nm = self.surface_torque_min_nm.min(surface_torque_nm);
+        self.surface_torque_max_nm = self.surface_torque_max_nm.max(surface_torque_nm);
+        self.samples += 1;
+        self.last_stuck = stuck;
+    }
+}
+
+/// Stuck share at or above which a string (or a record) is stick-slipping, not turning
+/// steadily: a bit stuck a hundredth of the time is already in the cycle.
+pub const STICK_SLIP_STUCK_SHARE: f64 = 0.01;
+
+impl Summary {
+    /// Share of the samples stuck.
+    pub fn stuck_share(&self) -> f64 {
+        if self.samples == 0 {
+            0.0
+        } else {
+            f64::from(self.stuck) / f64::from(self.samples)
+        }
+    }
+
+    /// Mean bit speed (rad/s).
+    pub fn speed_mean_rad_s(&self) -> f64 {
+        self.speed_sum_rad_s / f64::from(self.samples.max(1))
+    }
+
+    /// Stick-slip severity (max − min) / (2·mean) of the bit speed: 0 for steady rotation, 1 or
+    /// more for a bit that stops.
+    pub fn severity(&self) -> f64 {
+        let mean = self.speed_mean_rad_s();
+        if self.samples == 0 || mean.abs() <= f64::MIN_POSITIVE {
+            return f64::NAN;
+        }
+        (self.speed_max_rad_s - self.speed_min_rad_s) / (2.0 * mean.abs())
+    }
+
+    /// Period of the stick-slip cycle (s) at `sample_hz`: the mean time between stick onsets,
+    /// `None` with fewer than two.
+    pub fn period_s(&self, sample_hz: f64) -> Option<f64> {
+        (self.stick_onsets >= 2)
+            .then(|| f64::from(self.last_onset - self.first_onset) / f64::from(self.stick_onsets - 1) / sample_hz)
+    }
+
+    /// True when the recorded string (or record) is stick-slipping: stuck at least
+    /// [`STICK_SLIP_STUCK_SHARE`] of the time.
+    pub fn stick_slips(&self) -> bool {
+        !self.diverged && self.stuck_share() >= STICK_SLIP_STUCK_SHARE
+    }
+}
+
+/// One string being integrated: the chain, the law at its operating point, and the state.
+struct Integrator<'a> {
+    chain: &'a Chain,
+    law: Law,
+    params: &'a [f64],
+    omega: f64,
+    ratio: f64,
+    /// Static torque T_s = max(r·T(0), 0) (N·m).
+    static_nm: f64,
+    /// Bit speed beyond which the motion has run away (rad/s), as `simulate` has it.
+    runaway: f64,
+    state: StringState,
+    /// Direction of slip (±1) while not stuck.
+    dir: f64,
+}
+
+impl<'a> Integrator<'a> {
+    fn new(chain: &'a Chain, job: &'a StringJob) -> Self {
+        let n = job.law.n_params();
+        let params = &job.params_nm[..n];
+        let static_nm = job.law.torque(params, 0.0, job.ratio).max(0.0);
+        let w_bit = job.start.speed_rad_s[chain.nodes() - 1];
+        Self {
+            chain,
+            law: job.law,
+            params,
+            omega: job.omega_rad_s,
+            ratio: job.ratio,
+            static_nm,
+            runaway: 1e3 * job.omega_rad_s.abs().max(1.0),
+            state: job.start,
+            dir: if w_bit < 0.0 { -1.0 } else { 1.0 },
+        }
+    }
+
+    /// F_j = (K u)_j + (C v)_j with v = Ω − w, at node `j` (N·m).
+    fn string_torque(&self, u: &[f64; MAX_NODES], w: &[f64; MAX_NODES], j: usize) -> f64 {
+        let c = self.chain;
+        let n = c.nodes();
+        let (u_above, v_above) = if j == 0 {
+            (0.0, 0.0)
+        } else {
+            (u[j - 1], self.omega - w[j - 1])
+        };
+        let v = self.omega - w[j];
+        let k = c.stiffness_nm_per_rad[j];
+        let mut f = k * (u[j] - u_above) + c.beta_s * k * (v - v_above) + c.alpha_per_s * c.inertia_kg_m2[j] * v;
+        if j + 1 < n {
+            let kb = c.stiffness_nm_per_rad[j + 1];
+            f -= kb * (u[j + 1] - u[j]) + c.beta_s * kb * ((self.omega - w[j + 1]) - v);
+        }
+        f
+    }
+
+    /// The time derivative of (u, w): the bit held at rest when `stuck`, slipping in `dir`
+    /// otherwise.
+    fn derivative(&self, s: &StringState, stuck: bool, dir: f64) -> ([f64; MAX_NODES], [f64; MAX_NODES]) {
+        let n = self.chain.nodes();
+        let mut du = [0.0; MAX_NODES];
+        let mut dw = [0.0; MAX_NODES];
+        for j in 0..n {
+            du[j] = self.omega - s.speed_rad_s[j];
+            let mut f = self.string_torque(&s.lag_rad, &s.speed_rad_s, j);
+            if j == n - 1 {
+                if stuck {
+                    continue;
+                }
+                f -= dir * self.law.torque(self.params, dir * s.speed_rad_s[j], self.ratio);
+            }
+            dw[j] = f / self.chain.inertia_kg_m2[j];
+        }
+        (du, dw)
+    }
+
+    /// One classical RK4 step of `h` (s) from `s`.
+    fn rk4(&self, s: &StringState, stuck: bool, dir: f64, h: f64) -> StringState {
+        let n = self.chain.nodes();
+        let along = |d: &([f64; MAX_NODES], [f64; MAX_NODES]), f: f64| {
+            let mut t = *s;
+            for j in 0..n {
+                t.lag_rad[j] += f * d.0[j];
+                t.speed_rad_s[j] += f * d.1[j];
+            }
+            t
+        };
+        let k1 = self.derivative(s, stuck, dir);
+        let k2 = self.derivative(&along(&k1, 0.5 * h), stuck, dir);
+        let k3 = self.derivative(&along(&k2, 0.5 * h), stuck, dir);
+        let k4 = self.derivative(&along(&k3, h), stuck, dir);
+        let mut out = *s;
+        for j in 0..n {
+            out.lag_rad[j] += h / 6.0 * (k1.0[j] + 2.0 * (k2.0[j] + k3.0[j]) + k4.0[j]);
+            out.speed_rad_s[j] += h / 6.0 * (k1.1[j] + 2.0 * (k2.1[j] + k3.1[j]) + k4.1[j]);
+        }
+        out
+    }
+
+    /// The torque the string drives the bit with (N·m).
+    fn bit_drive(&self, s: &StringState) -> f64 {
+        self.string_torque(&s.lag_rad, &s.speed_rad_s, self.chain.nodes() - 1)
+    }
+
+    /// Stuck or slipping, for a bit at rest in state `s`.
+    fn settle_at_rest(&mut self) {
+        let f = self.bit_drive(&self.state);
+        self.state.stuck = f.abs() <= self.static_nm;
+        if !self.state.stuck {
+            self.dir = if f > 0.0 { 1.0 } else { -1.0 };
+        }
+    }
+
+    /// Advances one step of `h` (s).
+    fn step(&mut self, h: f64) {
+        let bit = self.chain.nodes() - 1;
+        let mut remaining = h;
+        for _ in 0..EVENT_PASSES {
+            if remaining <= 0.0 {
+                break;
+            }
+            let start = self.state;
+            if start.stuck {
+                let end = self.rk4(&start, true, self.dir, remaining);
+                let (f0, f1) = (self.bit_drive(&start), self.bit_drive(&end));
+                if f1.abs() <= self.static_nm {
+                    self.state = end;
+                    break;
+                }
+                // Released inside the step, where F_bit reaches ±T_s (linear in between).
+                let bound = if f1 > 0.0 { self.static_nm } else { -self.static_nm };
+                let fraction = if (f1 - f0).abs() > 0.0 {
+                    ((bound - f0) / (f1 - f0)).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let to_release = fraction * remaining;
+                self.state = self.rk4(&start, true, self.dir, to_release);
+                self.state.stuck = false;
+                self.dir = if f1 > 0.0 { 1.0 } else { -1.0 };
+                remaining -= to_release;
+            } else {
+                let end = self.rk4(&start, false, self.dir, remaining);
+                let (w0, w1) = (self.dir * start.speed_rad_s[bit], self.dir * end.speed_rad_s[bit]);
+                if w1 > 0.0 {
+                    self.state = end;
+                    break;
+                }
+                if w0 <= 0.0 {
+                    // Released at rest, yet not moving forward at the step's end: at rest again.
+                    self.state = end;
+                    self.state.speed_rad_s[bit] = 0.0;
+                    self.settle_at_rest();
+                    break;
+                }
+                // The bit speed crosses zero inside the step: one secant, then re-integrate to it.
+                let to_zero = remaining * w0 / (w0 - w1);
+                self.state = self.rk4(&start, false, self.dir, to_zero);
+                self.state.speed_rad_s[bit] = 0.0;
+                remaining -= to_zero;
+                self.settle_at_rest();
+            }
+        }
+    }
+
+    /// True while the motion stays within physical bounds (checked once per sample period, as
+    /// the kernel does).
+    fn in_bounds(&self) -> bool {
+        let bit = self.chain.nodes() - 1;
+        self.state.speed_rad_s[bit].abs() <= self.runaway && self.state.lag_rad[bit].abs() < 3.0e38
+    }
+
+    /// Torque on bit (N·m): the reaction while stuck, the law's torque while slipping.
+    fn bit_torque(&self) -> f64 {
+        let bit = self.chain.nodes() - 1;
+        if self.state.stuck {
+            self.bit_drive(&self.state).clamp(-self.static_nm, self.static_nm)
+        } else {
+            self.dir
+                * self
+                    .law
+                    .torque(self.params, self.dir * self.state.speed_rad_s[bit], self.ratio)
+        }
+    }
+
+    /// Torque the top drive applies (N·m): the top element's spring and its β-damping.
+    fn surface_torque(&self) -> f64 {
+        let c = self.chain;
+        let k = c.stiffness_nm_per_rad[0];
+        k * self.state.lag_rad[0] + c.beta_s * k * (self.omega - self.state.speed_rad_s[0])
+    }
+}
+
+/// Integrates one string through `schedule`: its summary and its final state.
+pub fn integrate(chain: &Chain, schedule: &Schedule, job: &StringJob) -> (Summary, StringState) {
+    let mut sim = Integrator::new(chain, job);
+    let mut summary = Summary::default();
+    let h = schedule.dt_s;
+    let bit = chain.nodes() - 1;
+    for period in 0..schedule.settle_samples + schedule.record_samples {
+        for _ in 0..schedule.steps_per_sample {
+            sim.step(h);
+        }
+        if !sim.in_bounds() {
+            summary.diverged = true;
+            break;
+        }
+        if period >= schedule.settle_samples {
+            summary.push(sim.state.speed_rad_s[bit], sim.bit_torque(), sim.surface_torque());
+        }
+    }
+    (summary, sim.state)
+}
+
+/// The state of steady rotation at Ω under the law's torque r·T(Ω), its bit speed kicked by
+/// `kick_rad_s` (a kick of zero stays on the equilibrium).
+pub fn steady_start(
+    chain: &Chain,
+    law: Law,
+    params_nm: &[f64],
+    omega_rad_s: f64,
+    ratio: f64,
+    kick_rad_s: f64,
+) -> StringState {
+    let torque = law.torque(&params_nm[..law.n_params()], omega_rad_s, ratio);
+    let mut state = StringState {
+        lag_rad: [0.0; MAX_NODES],
+        speed_rad_s: [0.0; MAX_NODES],
+        stuck: false,
+    };
+    for (j, lag) in chain.steady_lags_rad(torque).into_iter().enumerate() {
+        state.lag_rad[j] = lag;
+        state.speed_rad_s[j] = omega_rad_s;
+    }
+    state.speed_rad_s[chain.nodes() - 1] += kick_rad_s;
+    state
+}
+
+/// Parameters padded to the kernels' six.
+pub fn padded(params_nm: &[f64]) -> [f64; 6] {
+    let mut p = [0.0; 6];
+    p[..params_nm.len()].copy_from_slice(params_nm);
+    p
+}
+
+/// Every string of a batch on the CPU (rayon), in the batch's order.
+pub fn integrate_batch(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) -> Vec<(Summary, StringState)> {
+    use rayon::prelude::*;
+    jobs.par_iter().map(|job| integrate(chain, schedule, job)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::laws::PAPER_W_REF_N;
+
+    fn paper_nm(law: Law) -> [f64; 6] {
+        padded(&law.scale_torque(law.paper_estimate().unwrap(), 1000.0))
+    }
+
+    fn job(law: Law, chain: &Chain, rpm: f64, ratio: f64, kick: f64) -> StringJob {
+        let p = paper_nm(law);
+        let omega = rpm * RAD_S_PER_RPM;
+        StringJob {
+            law,
+            params_nm: p,
+            omega_rad_s: omega,
+            ratio,
+            start: steady_start(chain, law, &p, omega, ratio, kick * omega),
+        }
+    }
+
+    #[test]
+    fn explore() {
+        let chain = Chain::one_dof(&Lumped::default());
+        for dt in [1e-3, 4e-3, 1e-2, 2e-2] {
+            let settle = Schedule::new(dt, 50.0, 60.0, 20.0).unwrap();
+            let (s, state) = integrate(&chain, &settle, &job(Law::M2, &chain, 60.0, 1.0, 0.1));
+            print!(
+                "dt {dt}: 60 rpm share {:.3} period {:?} max {:.2} |",
+                s.stuck_share(),
+                s.period_s(50.0),
+                s.speed_max_rad_s / RAD_S_PER_RPM
+            );
+            for rpm in [85.0, 100.0, 120.0, 150.0] {
+                let after = Schedule::new(dt, 50.0, 60.0, 60.0).unwrap();
+                let mut j = job(Law::M2, &chain, rpm, 1.0, 0.0);
+                j.start = state;
+                let (s, _) = integrate(&chain, &after, &j);
+                print!(" {rpm}: {:.3}", s.stuck_share());
+            }
+            println!();
+        }
+        let _ = PAPER_W_REF_N;
+    }
+}
