@@ -16,6 +16,7 @@ use serde::Serialize;
 use std::time::Instant;
 
 pub mod smc_comparison;
+pub mod strings;
 
 /// Median, min and max of repeated measurements.
 #[derive(Clone, Debug, Serialize)]

@@ -42,6 +42,14 @@ pub struct BenchCmd {
     /// latency, candidates, changes declared, agreement.
     #[arg(long, conflicts_with_all = ["selection", "smc"])]
     pub watch: bool,
+    /// Measure only the simulated strings: string-seconds per second on the 1-DOF string and
+    /// the paper's 10-element string lumped (65,536 strings × 60 s; 4,096 with --quick), and an
+    /// escape map of 50 × 50 cells × 100 posterior samples (10 × 10 × 20 with --quick).
+    #[arg(long, conflicts_with_all = ["selection", "smc", "watch"])]
+    pub strings: bool,
+    /// Strings per batch of --strings [default: 65,536; 4,096 with --quick].
+    #[arg(long, requires = "strings", value_name = "N")]
+    pub strings_n: Option<usize>,
     /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and
     /// keep the new table.
     #[arg(long)]
@@ -57,6 +65,9 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     }
     if cmd.watch {
         return watch(cmd);
+    }
+    if cmd.strings {
+        return strings(cmd);
     }
     let mut opts = bitrock::bench::BenchOptions {
         repetitions: cmd.reps,
@@ -277,5 +288,56 @@ fn watch(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         "warm and cold: probabilities within 0.05 in {} of {windows} windows, the same law first in {}",
         report.agree_within_005, report.same_most_probable
     )?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--strings`: the simulator's throughput and an escape map's time, per backend.
+fn strings(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
+    let opts = bitrock::bench::strings::StringsBenchOptions {
+        strings: cmd.strings_n.unwrap_or(if cmd.quick { 4_096 } else { 65_536 }),
+        seconds: 60.0,
+        dt_s: bitrock::pipeline::strings::DEFAULT_DT_S,
+        map: if cmd.quick { (10, 10, 20) } else { (50, 50, 100) },
+        backends: match cmd.backend {
+            Some(Backend::Auto) | None => vec![Backend::Gpu, Backend::Cpu],
+            Some(b) => vec![b],
+        },
+        repetitions: cmd.reps,
+    };
+    if opts.strings == 0 {
+        return Err(Error::setting("strings_n", "must be at least 1").into());
+    }
+    let quiet = cmd.json;
+    let report = bitrock::bench::strings::run(&opts, &mut |line| {
+        if !quiet {
+            super::print::note(line);
+        }
+    })?;
+    let mut out = super::print::stdout();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    writeln!(
+        out,
+        "simulated strings, dt = {} s, medians of {} repetitions (min–max)",
+        opts.dt_s, opts.repetitions
+    )?;
+    for m in &report {
+        writeln!(
+            out,
+            "{:<22} {:<5} {:<40} {:>8} strings × {:>5.1} s  {:>8.3} s ({:.3}–{:.3})  {:.3e} string-s/s",
+            m.what,
+            m.string,
+            m.backend,
+            m.strings,
+            m.seconds_per_string,
+            m.wall_s.median,
+            m.wall_s.min,
+            m.wall_s.max,
+            m.string_seconds_per_s
+        )?;
+    }
     Ok(ExitCode::SUCCESS)
 }

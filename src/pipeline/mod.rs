@@ -17,6 +17,7 @@ use std::path::Path;
 
 pub mod evidence;
 pub mod stability;
+pub mod strings;
 
 pub use stability::{MapSource, StabilityJob, StabilityMaps};
 

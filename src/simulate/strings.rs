@@ -124,8 +124,9 @@ impl Chain {
         self.inertia_kg_m2[self.nodes() - 1]
     }
 
-    /// The fastest mode of the chain's linear part (M⁻¹K symmetrised by the diagonal M).
-    pub fn fastest_mode(&self) -> FastestMode {
+    /// Undamped frequencies of the chain's linear part (rad/s), ascending (M⁻¹K symmetrised by
+    /// the diagonal M).
+    pub fn frequencies_rad_s(&self) -> Vec<f64> {
         let n = self.nodes();
         let mut a = nalgebra::DMatrix::zeros(n, n);
         for j in 0..n {
@@ -137,11 +138,20 @@ impl Chain {
                 a[(j + 1, j)] = off;
             }
         }
-        let mut lambdas: Vec<f64> = a.symmetric_eigenvalues().iter().map(|l| l.max(0.0)).collect();
-        lambdas.sort_by(f64::total_cmp);
+        let mut omegas: Vec<f64> = a.symmetric_eigenvalues().iter().map(|l| l.max(0.0).sqrt()).collect();
+        omegas.sort_by(f64::total_cmp);
+        omegas
+    }
+
+    /// The fundamental (slowest) frequency (rad/s): the stick-slip cycle's time scale.
+    pub fn fundamental_rad_s(&self) -> f64 {
+        self.frequencies_rad_s()[0]
+    }
+
+    /// The mode with the fastest eigenvalue, for the step-size rule.
+    pub fn fastest_mode(&self) -> FastestMode {
         let mut fastest = None::<FastestMode>;
-        for (i, l) in lambdas.iter().enumerate() {
-            let omega = l.sqrt();
+        for (i, omega) in self.frequencies_rad_s().into_iter().enumerate() {
             let xi = 0.5 * (self.alpha_per_s / omega.max(f64::MIN_POSITIVE) + self.beta_s * omega);
             let rate = if xi <= 1.0 {
                 omega
@@ -696,9 +706,16 @@ mod tests {
                 s.period_s(50.0),
                 s.speed_max_rad_s / RAD_S_PER_RPM
             );
-            for rpm in [85.0, 100.0, 120.0, 150.0] {
+            for (rpm, r) in [
+                (85.0, 1.0),
+                (100.0, 1.0),
+                (120.0, 1.0),
+                (150.0, 1.0),
+                (60.0, 0.5),
+                (60.0, 0.3),
+            ] {
                 let after = Schedule::new(dt, 50.0, 60.0, 60.0).unwrap();
-                let mut j = job(Law::M2, &chain, rpm, 1.0, 0.0);
+                let mut j = job(Law::M2, &chain, rpm, r, 0.0);
                 j.start = state;
                 let (s, _) = integrate(&chain, &after, &j);
                 print!(" {rpm}: {:.3}", s.stuck_share());

@@ -1,0 +1,501 @@
+//! Stick-slip maps by simulation and the advice drawn from them: for every posterior sample and
+//! every cell of an (Ω, W) grid, a drill string integrated in time ([`crate::eval::strings`]).
+//!
+//! - **Onset**: from steady rotation at the cell, kicked by a share of Ω: does stick-slip
+//!   develop? The simulated counterpart of the linear criterion, which it refines where the
+//!   kick is large enough to reach the cycle's basin.
+//! - **Escape**: from the state the bit is in at the operating point (the string started from
+//!   rest there, settled into its cycle or its steady rotation), the top drive moved to the
+//!   cell: does stick-slip persist? The driller's question.
+//! - The **bistable band**: cells where steady rotation survives the kick but the cycle
+//!   persists: stick-slip is not started there, but once in it the bit stays in it.
+//!
+//! A cell's probability weighs each law's samples by the law's probability (the mixture of
+//! laws); a cell where any sample's string diverged is unknown (NaN), never stable.
+
+use crate::error::{Error, Result};
+use crate::eval::Backend;
+use crate::eval::strings::Ran;
+use crate::simulate::strings::{Chain, MAX_NODES, Schedule, StringJob, StringState, Summary, padded, steady_start};
+use crate::stability::map::LawSamples;
+use crate::units::RAD_S_PER_RPM;
+
+/// The integration step of the maps (s): step-size independent to the third decimal of the
+/// stuck share on the paper's strings (1 ms to 20 ms, measured in the tests).
+pub const DEFAULT_DT_S: f64 = 0.01;
+/// The kick of the onset maps: a tenth of Ω added to the bit speed.
+pub const DEFAULT_KICK: f64 = 0.1;
+/// Time the string at the operating point settles from rest into its cycle (s).
+pub const DEFAULT_SETTLE_S: f64 = 60.0;
+/// Time after a change before the verdict window (s): the transient of a bit leaving its cycle.
+pub const DEFAULT_TRANSIENT_S: f64 = 40.0;
+/// The verdict window (s): stick-slip persists if the bit is stuck in it at least
+/// [`crate::simulate::strings::STICK_SLIP_STUCK_SHARE`] of the time.
+pub const DEFAULT_VERDICT_S: f64 = 20.0;
+/// Summary samples per second of simulated time.
+const SAMPLE_HZ: f64 = 50.0;
+/// Probability of ending stick-slip that advice asks of a change.
+pub const ADVICE_CONFIDENCE: f64 = 0.9;
+/// Strings per batch on the CPU: progress is said between batches.
+const CPU_BATCH: usize = 2048;
+/// Strings per batch on a GPU.
+const GPU_BATCH: usize = 1 << 20;
+/// Most string-steps any machine integrates per second: the day's-work bound is a lower one.
+const FASTEST_STRING_STEPS_PER_S: f64 = 1e12;
+
+/// How the simulated maps are made.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimulatedSettings {
+    pub chain: Chain,
+    /// Integration step (s).
+    pub dt_s: f64,
+    /// The onset maps' kick, a share of Ω.
+    pub kick: f64,
+    pub settle_s: f64,
+    pub transient_s: f64,
+    pub verdict_s: f64,
+    /// Reference weight on bit W_ref of the laws' parameters (N).
+    pub w_ref_n: f64,
+    pub backend: Backend,
+}
+
+impl SimulatedSettings {
+    /// The defaults on `chain`, for parameters referred to `w_ref_n`.
+    pub fn new(chain: Chain, w_ref_n: f64, backend: Backend) -> Self {
+        Self {
+            chain,
+            dt_s: DEFAULT_DT_S,
+            kick: DEFAULT_KICK,
+            settle_s: DEFAULT_SETTLE_S,
+            transient_s: DEFAULT_TRANSIENT_S,
+            verdict_s: DEFAULT_VERDICT_S,
+            w_ref_n,
+            backend,
+        }
+    }
+
+    /// Refuses, naming the setting, a step the string's fastest mode forbids and durations
+    /// that are not positive.
+    pub fn validate(&self) -> Result<()> {
+        self.chain.check_step(self.dt_s)?;
+        if !(self.kick.is_finite() && self.kick >= 0.0) {
+            return Err(Error::setting(
+                "kick",
+                format!("must be a share of Ω ≥ 0, got {}", self.kick),
+            ));
+        }
+        if !(self.w_ref_n.is_finite() && self.w_ref_n > 0.0) {
+            return Err(Error::setting(
+                "w_ref_kn",
+                format!("must be positive, got {}", self.w_ref_n / 1000.0),
+            ));
+        }
+        self.after_change()?;
+        self.settling(0.0)?;
+        Ok(())
+    }
+
+    /// The schedule after a change: the transient, then the verdict window.
+    fn after_change(&self) -> Result<Schedule> {
+        Schedule::new(self.dt_s, SAMPLE_HZ, self.transient_s, self.verdict_s)
+    }
+
+    /// The schedule of the operating point's settling, lengthened by `extra_s` (the phase of
+    /// the cycle the change meets).
+    fn settling(&self, extra_s: f64) -> Result<Schedule> {
+        Schedule::new(self.dt_s, SAMPLE_HZ, self.settle_s + extra_s, self.verdict_s)
+    }
+}
+
+/// Where the rig is: top-drive speed (rpm) and weight on bit (kN).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OperatingPoint {
+    pub omega_rpm: f64,
+    pub wob_kn: f64,
+}
+
+/// One weighted string model: a law's sample and its weight in the mixture.
+#[derive(Clone, Debug)]
+struct Member {
+    law: crate::laws::Law,
+    params_nm: [f64; 6],
+    weight: f64,
+}
+
+/// The mixture's members: each law's samples, each weighing its law's probability over its
+/// sample count.
+fn members(inputs: &[LawSamples]) -> Vec<Member> {
+    let total: f64 = inputs.iter().map(|i| i.probability).sum();
+    inputs
+        .iter()
+        .filter(|i| !i.samples_si.is_empty() && i.probability > 0.0)
+        .flat_map(|i| {
+            let w = i.probability / total / i.samples_si.len() as f64;
+            i.samples_si.iter().map(move |p| Member {
+                law: i.law,
+                params_nm: padded(p),
+                weight: w,
+            })
+        })
+        .collect()
+}
+
+/// Phases each member's cycle is met at: enough that a cell weighs at least 32 strings, at
+/// most 8.
+pub fn phases(members: usize) -> usize {
+    32usize.div_ceil(members.max(1)).clamp(1, 8)
+}
+
+/// Probabilities over a grid, row-major over (Ω, W): NaN where any member's string diverged.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grid {
+    pub omega_rpm: Vec<f64>,
+    pub wob_kn: Vec<f64>,
+    pub probability: Vec<f64>,
+    /// Strings that diverged (their cells unknown).
+    pub diverged: usize,
+}
+
+impl Grid {
+    /// The probability at speed index `i` and weight index `j`.
+    pub fn at(&self, i: usize, j: usize) -> f64 {
+        self.probability[i * self.wob_kn.len() + j]
+    }
+}
+
+/// The state the bit is in at the operating point, per member: its summary there (settled from
+/// rest) and its state when the driller changes something.
+pub struct AtPoint {
+    pub point: OperatingPoint,
+    /// P(stick-slip at the operating point) under the mixture.
+    pub stick_slip_probability: f64,
+    /// The members, each once per phase.
+    replicas: Vec<Member>,
+    summaries: Vec<Summary>,
+    states: Vec<StringState>,
+}
+
+impl AtPoint {
+    /// Members' summaries at the operating point, each member's phases together.
+    pub fn summaries(&self) -> &[Summary] {
+        &self.summaries
+    }
+}
+
+/// Every simulated map of a posterior.
+pub struct Simulator<'a> {
+    settings: &'a SimulatedSettings,
+    members: Vec<Member>,
+    note: &'a mut dyn FnMut(String),
+    /// Where the last batch ran.
+    pub ran: Option<Ran>,
+    /// Strings integrated so far, and their simulated seconds.
+    pub strings: u64,
+    pub simulated_s: f64,
+}
+
+impl<'a> Simulator<'a> {
+    /// The mixture of `inputs` on `settings`, checked.
+    pub fn new(
+        settings: &'a SimulatedSettings,
+        inputs: &[LawSamples],
+        note: &'a mut dyn FnMut(String),
+    ) -> Result<Self> {
+        settings.validate()?;
+        let members = members(inputs);
+        if members.is_empty() {
+            return Err(Error::setting("samples", "no posterior sample to simulate"));
+        }
+        Ok(Self {
+            settings,
+            members,
+            note,
+            ran: None,
+            strings: 0,
+            simulated_s: 0.0,
+        })
+    }
+
+    /// Posterior members simulated per cell.
+    pub fn members(&self) -> usize {
+        self.members.len()
+    }
+
+    fn job(&self, m: &Member, omega_rpm: f64, wob_kn: f64, start: Option<StringState>) -> StringJob {
+        let omega = omega_rpm * RAD_S_PER_RPM;
+        let ratio = wob_kn * 1000.0 / self.settings.w_ref_n;
+        let start = start.unwrap_or_else(|| {
+            steady_start(
+                &self.settings.chain,
+                m.law,
+                &m.params_nm,
+                omega,
+                ratio,
+                self.settings.kick * omega,
+            )
+        });
+        StringJob {
+            law: m.law,
+            params_nm: m.params_nm,
+            omega_rad_s: omega,
+            ratio,
+            start,
+        }
+    }
+
+    /// Integrates `jobs` in batches on the settings' backend, saying the progress of long runs.
+    fn integrate(&mut self, schedule: &Schedule, jobs: &[StringJob]) -> Result<Vec<(Summary, StringState)>> {
+        let steps = jobs.len() as f64 * schedule.steps() as f64;
+        crate::limits::check_work(
+            "omega_rpm",
+            steps,
+            FASTEST_STRING_STEPS_PER_S,
+            &format!("simulating {} strings of {} s", jobs.len(), schedule.seconds()),
+        )?;
+        let start = std::time::Instant::now();
+        let mut last = start;
+        let mut out = Vec::with_capacity(jobs.len());
+        let mut backend = self.settings.backend;
+        let batch = if backend == Backend::Cpu { CPU_BATCH } else { GPU_BATCH };
+        for part in jobs.chunks(batch) {
+            let (results, ran) =
+                crate::eval::strings::integrate(&self.settings.chain, schedule, part, backend, self.note)?;
+            if ran == Ran::Cpu {
+                backend = Backend::Cpu;
+            }
+            self.ran = Some(ran);
+            out.extend(results);
+            let elapsed = start.elapsed().as_secs_f64();
+            if elapsed > 2.0 && last.elapsed().as_secs_f64() >= 10.0 {
+                last = std::time::Instant::now();
+                let done = out.len() as f64 / jobs.len() as f64;
+                (self.note)(format!(
+                    "simulated strings: {:.0} % of {} after {} (about {} to go)",
+                    100.0 * done,
+                    jobs.len(),
+                    crate::limits::human_seconds(elapsed),
+                    crate::limits::human_seconds(elapsed * (1.0 - done) / done.max(1e-9))
+                ));
+            }
+        }
+        self.strings += jobs.len() as u64;
+        self.simulated_s += jobs.len() as f64 * schedule.seconds();
+        Ok(out)
+    }
+
+    /// Weighted probability of stick-slip over the members, cell by cell: `summaries` is
+    /// cell-major, members inner.
+    fn probabilities(members: &[Member], summaries: &[Summary], cells: usize) -> (Vec<f64>, usize) {
+        let n = members.len();
+        let mut diverged = 0;
+        let probability = (0..cells)
+            .map(|c| {
+                let cell = &summaries[c * n..(c + 1) * n];
+                let bad = cell.iter().filter(|s| s.diverged).count();
+                diverged += bad;
+                if bad > 0 {
+                    return f64::NAN;
+                }
+                0.0 + cell
+                    .iter()
+                    .zip(members)
+                    .filter(|(s, _)| s.stick_slips())
+                    .map(|(_, m)| m.weight)
+                    .sum::<f64>()
+                    .min(1.0)
+            })
+            .collect();
+        (probability, diverged)
+    }
+
+    /// The onset map: P(stick-slip develops from steady rotation kicked) per cell.
+    pub fn onset(&mut self, omega_rpm: &[f64], wob_kn: &[f64]) -> Result<Grid> {
+        let schedule = self.settings.after_change()?;
+        let mut jobs = Vec::with_capacity(omega_rpm.len() * wob_kn.len() * self.members.len());
+        for &o in omega_rpm {
+            for &w in wob_kn {
+                jobs.extend(self.members.iter().map(|m| self.job(m, o, w, None)));
+            }
+        }
+        let summaries: Vec<Summary> = self.integrate(&schedule, &jobs)?.into_iter().map(|r| r.0).collect();
+        let (probability, diverged) = Self::probabilities(&self.members, &summaries, omega_rpm.len() * wob_kn.len());
+        Ok(Grid {
+            omega_rpm: omega_rpm.to_vec(),
+            wob_kn: wob_kn.to_vec(),
+            probability,
+            diverged,
+        })
+    }
+
+    /// Each member's string at the operating point, started from rest (a bit on bottom at the
+    /// start of rotation: the cycle's basin where the cycle exists) and settled. A change meets
+    /// the cycle at any phase, and near the escape boundary the phase decides: each member is
+    /// settled [`phases`] times, for lengths spread over one period of the string's fundamental
+    /// mode, and the probabilities weigh the phases alike.
+    pub fn at_point(&mut self, point: OperatingPoint) -> Result<AtPoint> {
+        let rest = StringState {
+            lag_rad: [0.0; MAX_NODES],
+            speed_rad_s: [0.0; MAX_NODES],
+            stuck: true,
+        };
+        let phases = phases(self.members.len());
+        let replicas: Vec<Member> = self
+            .members
+            .iter()
+            .flat_map(|m| {
+                (0..phases).map(move |_| Member {
+                    weight: m.weight / phases as f64,
+                    ..m.clone()
+                })
+            })
+            .collect();
+        let period_s = 2.0 * std::f64::consts::PI / self.settings.chain.fundamental_rad_s();
+        let mut summaries = vec![Summary::default(); replicas.len()];
+        let mut states = vec![rest; replicas.len()];
+        for phase in 0..phases {
+            let schedule = self.settings.settling(period_s * phase as f64 / phases as f64)?;
+            let idx: Vec<usize> = (phase..replicas.len()).step_by(phases).collect();
+            let jobs: Vec<StringJob> = idx
+                .iter()
+                .map(|&i| self.job(&replicas[i], point.omega_rpm, point.wob_kn, Some(rest)))
+                .collect();
+            for (k, (s, state)) in self.integrate(&schedule, &jobs)?.into_iter().enumerate() {
+                summaries[idx[k]] = s;
+                states[idx[k]] = state;
+            }
+        }
+        let (p, _) = Self::probabilities(&replicas, &summaries, 1);
+        Ok(AtPoint {
+            point,
+            stick_slip_probability: p[0],
+            replicas,
+            summaries,
+            states,
+        })
+    }
+
+    /// The escape map: from the state at the operating point, P(stick-slip persists) once the
+    /// top drive is at each cell's Ω and the weight on bit at its W.
+    pub fn escape(&mut self, from: &AtPoint, omega_rpm: &[f64], wob_kn: &[f64]) -> Result<Grid> {
+        let schedule = self.settings.after_change()?;
+        let mut jobs = Vec::with_capacity(omega_rpm.len() * wob_kn.len() * from.replicas.len());
+        for &o in omega_rpm {
+            for &w in wob_kn {
+                jobs.extend(
+                    from.replicas
+                        .iter()
+                        .zip(&from.states)
+                        .map(|(m, s)| self.job(m, o, w, Some(*s))),
+                );
+            }
+        }
+        let summaries: Vec<Summary> = self.integrate(&schedule, &jobs)?.into_iter().map(|r| r.0).collect();
+        let (probability, diverged) = Self::probabilities(&from.replicas, &summaries, omega_rpm.len() * wob_kn.len());
+        Ok(Grid {
+            omega_rpm: omega_rpm.to_vec(),
+            wob_kn: wob_kn.to_vec(),
+            probability,
+            diverged,
+        })
+    }
+
+    /// What ends stick-slip from the operating point: the nearest top-drive speed above it (at
+    /// the same weight) and the nearest weight on bit below it (at the same speed) whose
+    /// P(stick-slip ends) reaches [`ADVICE_CONFIDENCE`], each with that probability, searched
+    /// on `speeds_rpm` and `weights_kn`.
+    pub fn escape_advice(&mut self, from: &AtPoint, speeds_rpm: &[f64], weights_kn: &[f64]) -> Result<EscapeAdvice> {
+        let p = from.point;
+        let by_speed = self.escape(from, speeds_rpm, &[p.wob_kn])?;
+        let by_weight = self.escape(from, &[p.omega_rpm], weights_kn)?;
+        let first = |axis: &[f64], probs: &[f64]| {
+            axis.iter()
+                .zip(probs)
+                .find(|(_, q)| 1.0 - **q >= ADVICE_CONFIDENCE)
+                .map(|(v, q)| (*v, 1.0 - q))
+        };
+        let speed = first(speeds_rpm, &by_speed.probability);
+        let mut weights: Vec<(f64, f64)> = weights_kn
+            .iter()
+            .copied()
+            .zip(by_weight.probability.iter().copied())
+            .collect();
+        // Nearest first: the weights below the operating point, heaviest first.
+        weights.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let (w_axis, w_probs): (Vec<f64>, Vec<f64>) = weights.into_iter().unzip();
+        Ok(EscapeAdvice {
+            point: p,
+            stick_slip_probability: from.stick_slip_probability,
+            speed_rpm: speed,
+            wob_kn: first(&w_axis, &w_probs),
+            speed_scan: by_speed,
+            wob_scan: by_weight,
+        })
+    }
+}
+
+/// What ends stick-slip from an operating point, by simulation.
+#[derive(Clone, Debug)]
+pub struct EscapeAdvice {
+    pub point: OperatingPoint,
+    /// P(the bit stick-slips at the operating point), simulated.
+    pub stick_slip_probability: f64,
+    /// The nearest speed (rpm) that ends it, with P(it ends); `None` when none scanned does.
+    pub speed_rpm: Option<(f64, f64)>,
+    /// The nearest lighter weight (kN) that ends it, with P(it ends).
+    pub wob_kn: Option<(f64, f64)>,
+    /// P(stick-slip persists) along the speeds at the operating weight.
+    pub speed_scan: Grid,
+    /// P(stick-slip persists) along the weights at the operating speed.
+    pub wob_scan: Grid,
+}
+
+impl EscapeAdvice {
+    /// The advice as a driller reads it.
+    pub fn text(&self) -> String {
+        let p = self.point;
+        let mut parts = Vec::new();
+        match self.speed_rpm {
+            Some((rpm, q)) => parts.push(format!(
+                "raise the top-drive speed to {rpm:.0} rpm (P(it ends) = {q:.2})"
+            )),
+            None => parts.push(format!(
+                "no top-drive speed up to {:.0} rpm ends it",
+                self.speed_scan.omega_rpm.last().copied().unwrap_or(p.omega_rpm)
+            )),
+        }
+        match self.wob_kn {
+            Some((kn, q)) => parts.push(format!(
+                "or lower the weight on bit to {kn:.0} kN (P(it ends) = {q:.2})"
+            )),
+            None => parts.push(format!(
+                "no weight on bit down to {:.0} kN ends it",
+                self.wob_scan.wob_kn.first().copied().unwrap_or(p.wob_kn)
+            )),
+        }
+        format!(
+            "stick-slip at {:.0} rpm and {:.0} kN (simulated P = {:.2}): {}",
+            p.omega_rpm,
+            p.wob_kn,
+            self.stick_slip_probability,
+            parts.join(", ")
+        )
+    }
+}
+
+/// The speeds advice scans above `omega_rpm`: every 5 rpm up to three times it (and at least
+/// 60 rpm more), at most 400 rpm.
+pub fn advice_speeds_rpm(omega_rpm: f64) -> Vec<f64> {
+    let top = (3.0 * omega_rpm).max(omega_rpm + 60.0).min(400.0);
+    let mut v = Vec::new();
+    let mut s = (omega_rpm / 5.0).floor() * 5.0 + 5.0;
+    while s <= top + 1e-9 {
+        v.push(s);
+        s += 5.0;
+    }
+    v
+}
+
+/// The weights advice scans below `wob_kn`: every 5 % of it down to a fifth of it.
+pub fn advice_weights_kn(wob_kn: f64) -> Vec<f64> {
+    (4..20).map(|k| wob_kn * f64::from(k) / 20.0).collect()
+}
