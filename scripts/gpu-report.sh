@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Measurements on a machine with a GPU, results under $OUT (default ./gpu-report): parity of the
+# scorers, the simulated strings' throughput, the simulated maps on GPU and CPU (compared
+# afterwards cell by cell), the evidence's timing and the benchmark with the scoring shapes
+# re-measured. Run from the project's root with the release binary built
+# (`cargo build --release`); see docs/benchmarks.md for how it is run on a lent NVIDIA machine.
+set -u
+OUT=${OUT:-gpu-report}
+mkdir -p "$OUT"
+B=${BITROCK:-target/release/bitrock}
+export NODEVICE_SELECT=1 BITROCK_CACHE_DIR=${BITROCK_CACHE_DIR:-$(mktemp -d)}
+step() { # name timeout command...
+    local name=$1 limit=$2; shift 2
+    local t0=$(date +%s%N)
+    timeout "$limit" "$@" >"$OUT/$name.out" 2>"$OUT/$name.err"
+    local rc=$?
+    echo "$name rc=$rc wall_ms=$(( ($(date +%s%N) - t0) / 1000000 ))" | tee -a "$OUT/steps.txt"
+}
+nproc >"$OUT/machine.txt"; date -u >>"$OUT/machine.txt"
+step devices 30 "$B" devices
+step parity 120 "$B" parity
+step strings_gpu 150 "$B" bench --strings --backend gpu --reps 3 --strings-n 131072 --json
+step strings_cpu 120 "$B" bench --strings --backend cpu --reps 1 --strings-n 16384 --quick --json
+step map_100x100x200_gpu 120 "$B" stability --law m2 --params 13,6.5,0.3 --simulate --at-rpm 60 --at-kn 244.2 \
+    --sim-omega-rpm 20:220:100 --sim-wob-kn 20:700:100 --sim-samples 200 --backend gpu --json
+for b in gpu cpu; do
+    step "sim_posterior_$b" 120 "$B" stability --run "${RUN_DIR:-tests/it/fixtures/runs/smc}" --simulate --at-rpm 60 --at-kn 244.2 \
+        --sim-omega-rpm 20:220:21 --sim-wob-kn 20:700:18 --sim-samples 20 --backend "$b" --json
+done
+for i in 1 2 3; do step "evidence_gpu_$i" 60 "$B" evidence --backend gpu --start-from box; done
+step bench_retune 200 "$B" bench --retune --reps 3 --json
