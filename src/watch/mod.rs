@@ -45,6 +45,8 @@ use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::pipeline::evidence::{EvidenceAnalysis, EvidenceJob, EvidencePrior, WarmStart};
+use crate::pipeline::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn};
+use crate::simulate::strings::{Chain, Summary};
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
 use crate::units::RAD_S_PER_RPM;
@@ -222,6 +224,23 @@ pub struct Advice {
     pub safe_wob_kn: Option<f64>,
     /// The same in words.
     pub words: String,
+    /// Share of the window's samples with the bit below 1 rpm (every sample, those under
+    /// the fit's minimum speed included).
+    #[serde(default)]
+    pub stuck_share: f64,
+    /// Stick-slip severity of the window, (max − min) / (2·mean) of the bit speed.
+    #[serde(default)]
+    pub severity: Option<f64>,
+    /// The bit stick-slips in this window (stuck at least 1 % of it): never called steady.
+    #[serde(default)]
+    pub stick_slip_now: bool,
+    /// From the state the bit is in, by simulated strings: the nearest higher top-drive speed
+    /// (rpm) that ends the stick-slip, with P(it ends).
+    #[serde(default)]
+    pub escape_omega_rpm: Option<(f64, f64)>,
+    /// The nearest lighter weight on bit (kN) that ends it, with P(it ends).
+    #[serde(default)]
+    pub escape_wob_kn: Option<(f64, f64)>,
 }
 
 /// What a watch says of one window: one JSON line.
@@ -901,7 +920,9 @@ impl Watch {
             .as_ref()
             .map(|posterior| crate::abc::posterior::map_inputs_of(posterior, ADVICE_SAMPLES));
         if let Some(inputs) = &inputs {
-            update.advice = Some(self.advise(inputs, omega_rpm, wob_kn));
+            let mut advice = self.advise(inputs, omega_rpm, wob_kn);
+            self.observe_stick_slip(&mut advice, &window.rows, inputs);
+            update.advice = Some(advice);
         }
         let posterior = inputs.as_deref().map(|inputs| view::Posterior {
             inputs,
@@ -982,6 +1003,75 @@ impl Watch {
         })
     }
 
+    /// What the window's bit speed shows: a window stuck at least 1 % of the time
+    /// stick-slips whatever the linear criterion says of steady rotation there, and its advice
+    /// becomes what ends the cycle from the state the bit is in, by simulated strings (the
+    /// 1-DOF string; on a finite-element criterion the advice says the stick-slip and the
+    /// linear maps' answer, which concerns steady rotation only).
+    fn observe_stick_slip(&self, advice: &mut Advice, rows: &[Row], inputs: &[LawSamples]) {
+        let mut seen = Summary::default();
+        for r in rows {
+            seen.push(r.speed_rad_s, r.torque_nm, f64::NAN);
+        }
+        advice.stuck_share = seen.stuck_share();
+        advice.severity = Some(seen.severity()).filter(|v| v.is_finite());
+        advice.stick_slip_now = seen.stick_slips();
+        if !advice.stick_slip_now {
+            return;
+        }
+        let (omega_rpm, wob_kn) = (advice.omega_rpm, advice.wob_kn);
+        let now = format!(
+            "stick-slip now at {omega_rpm:.0} rpm and {wob_kn:.0} kN (bit stuck {:.0} % of the window{})",
+            100.0 * advice.stuck_share,
+            advice.severity.map_or(String::new(), |s| format!(", severity {s:.2}"))
+        );
+        let Criterion::Lumped(lumped) = self.settings.criterion else {
+            advice.words = format!("{now}: the maps of steady rotation do not say what ends it on this string");
+            return;
+        };
+        // The likely laws, a few samples each: the advice keeps to the window's latency.
+        let inputs: Vec<LawSamples> = inputs
+            .iter()
+            .filter(|i| i.probability >= ESCAPE_MIN_PROBABILITY)
+            .map(|i| {
+                let step = i.samples_si.len().div_ceil(ESCAPE_SAMPLES).max(1);
+                LawSamples {
+                    samples_si: i.samples_si.iter().step_by(step).cloned().collect(),
+                    ..i.clone()
+                }
+            })
+            .collect();
+        let settings = SimulatedSettings::new(Chain::one_dof(&lumped), wob_kn * 1000.0, Backend::Cpu);
+        let mut quiet = |_: String| {};
+        let escape = Simulator::new(&settings, &inputs, &mut quiet).and_then(|mut sim| {
+            let at = sim.at_point(OperatingPoint { omega_rpm, wob_kn })?;
+            sim.escape_advice(&at, &advice_speeds_rpm(omega_rpm), &advice_weights_kn(wob_kn))
+        });
+        match escape {
+            Ok(e) => {
+                advice.escape_omega_rpm = e.speed_rpm;
+                advice.escape_wob_kn = e.wob_kn;
+                let mut ways = Vec::new();
+                if let Some((o, p)) = e.speed_rpm {
+                    ways.push(format!("raise the top-drive speed to {o:.0} rpm (P(it ends) = {p:.2})"));
+                }
+                if let Some((w, p)) = e.wob_kn {
+                    ways.push(format!("lower the weight on bit to {w:.0} kN (P(it ends) = {p:.2})"));
+                }
+                advice.words = if ways.is_empty() {
+                    format!(
+                        "{now}: no speed up to {:.0} rpm nor weight down to {:.0} kN ends it in the simulated strings",
+                        advice_speeds_rpm(omega_rpm).last().copied().unwrap_or(omega_rpm),
+                        wob_kn * 0.2
+                    )
+                } else {
+                    format!("{now}: {}", ways.join(", or "))
+                };
+            }
+            Err(e) => advice.words = format!("{now}: the simulated strings failed ({e})"),
+        }
+    }
+
     /// P(unstable) at the operating point (`omega_rpm`, `wob_kn`) under the mixture `inputs`,
     /// and the nearest safe speed and weight. The parameters describe the torque at the
     /// window's own weight on bit, so that weight is the maps' W_ref.
@@ -1036,12 +1126,22 @@ impl Watch {
             safe_omega_rpm,
             safe_wob_kn,
             words,
+            stuck_share: 0.0,
+            severity: None,
+            stick_slip_now: false,
+            escape_omega_rpm: None,
+            escape_wob_kn: None,
         }
     }
 }
 
 /// Grid starts of each law's fit beside the window before's estimate.
 const WARM_FIT_STARTS: usize = 2;
+
+/// Posterior samples per law simulated for the escape advice of a stick-slipping window.
+const ESCAPE_SAMPLES: usize = 8;
+/// Laws less probable than this are left out of the escape advice's simulations.
+const ESCAPE_MIN_PROBABILITY: f64 = 0.05;
 
 /// Posterior samples per law behind the advice and the map.
 const ADVICE_SAMPLES: usize = 200;
