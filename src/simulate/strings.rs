@@ -93,7 +93,7 @@ impl Chain {
                 "dp_elements",
                 format!(
                     "the simulated string holds at most {MAX_NODES} elements, this one has {n} \
-                     (--dp-elements {} and --bha-elements {})",
+                     ({} in the drill pipe and {} in the BHA)",
                     s.dp_elements, s.bha_elements
                 ),
             ));
