@@ -140,10 +140,10 @@ fn members(inputs: &[LawSamples]) -> Vec<Member> {
         .collect()
 }
 
-/// Phases each member's cycle is met at: enough that a cell weighs at least 32 strings, at
+/// Phases each member's cycle is met at: enough that a cell weighs at least 16 strings, at
 /// most 8.
 pub fn phases(members: usize) -> usize {
-    32usize.div_ceil(members.max(1)).clamp(1, 8)
+    16usize.div_ceil(members.max(1)).clamp(1, 8)
 }
 
 /// Probabilities over a grid, row-major over (Ω, W): NaN where any member's string diverged.

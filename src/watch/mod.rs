@@ -1139,7 +1139,7 @@ impl Watch {
 const WARM_FIT_STARTS: usize = 2;
 
 /// Posterior samples per law simulated for the escape advice of a stick-slipping window.
-const ESCAPE_SAMPLES: usize = 8;
+const ESCAPE_SAMPLES: usize = 4;
 /// Laws less probable than this are left out of the escape advice's simulations.
 const ESCAPE_MIN_PROBABILITY: f64 = 0.05;
 
