@@ -93,6 +93,12 @@ const FLAGS: &[(&str, &str)] = &[
     // Stability maps, the selection check, parity and benchmarks.
     ("percentile", "--percentile"),
     ("samples", "--samples"),
+    ("sim_samples", "--sim-samples"),
+    ("sim_omega_rpm", "--sim-omega-rpm"),
+    ("sim_wob_kn", "--sim-wob-kn"),
+    ("at_rpm", "--at-rpm"),
+    ("at_kn", "--at-kn"),
+    ("strings_n", "--strings-n"),
     ("replicates", "--replicates"),
     ("check", "--check"),
     ("posterior_out", "--posterior-out"),

@@ -12,6 +12,7 @@ mod record;
 mod run;
 mod selection;
 mod stability;
+mod strings;
 mod watch;
 
 use pyo3::prelude::*;
@@ -36,6 +37,8 @@ mod _bitrock {
     use crate::selection::check_selection;
     #[pymodule_export]
     use crate::stability::stability;
+    #[pymodule_export]
+    use crate::strings::simulate_strings;
     #[pymodule_export]
     use crate::watch::{read_watch, watch};
     use pyo3::prelude::*;

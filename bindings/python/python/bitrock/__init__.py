@@ -52,6 +52,7 @@ __all__ = [
     "read_record",
     "resume",
     "simulate",
+    "simulate_strings",
     "stability",
     "torque",
     "watch",
@@ -673,6 +674,66 @@ def simulate(
     options = {k: v for k, v in locals().items() if k not in ("law", "params", "omega_rpm", "io")}
     text = _bitrock.simulate(law, None if params is None else [float(p) for p in params], float(omega_rpm), options, _note)
     return pd.read_csv(io.StringIO(text))
+
+
+def simulate_strings(
+    law: str,
+    *,
+    omega_rpm: "float | Sequence[float]",
+    wob_kn: "float | Sequence[float]",
+    params: "Sequence[float] | Sequence[Sequence[float]] | None" = None,
+    param_torque_unit: str | None = None,
+    w_ref_kn: float | None = None,
+    structure: str | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    fe_file: str | os.PathLike[str] | None = None,
+    dp_elements: int | None = None,
+    bha_elements: int | None = None,
+    alpha: float | None = None,
+    beta: float | None = None,
+    start: str | None = None,
+    kick: float | None = None,
+    dt_s: float | None = None,
+    settle_s: float | None = None,
+    record_s: float | None = None,
+    backend: str | None = None,
+) -> pd.DataFrame:
+    """Drill strings simulated in time, one per top-drive speed ``omega_rpm`` and weight on
+    bit ``wob_kn`` (scalars are repeated; ``params`` one set for all, or one row per string,
+    torques in ``param_torque_unit``, the paper's estimate by default), as ``bitrock stability
+    --simulate`` simulates them: the 1-DOF string or the finite-element string lumped
+    (``structure="fe"``), Karnopp stick, RK4 at ``dt_s`` (0.01 s), from steady rotation kicked
+    by ``kick`` × Ω (``start="steady"``, a tenth by default) or from rest (``start="rest"``),
+    ``settle_s`` (60) then summarised over ``record_s`` (60) at 50 Hz. One row per string:
+    ``stuck_share`` (bit below 1 rpm), ``period_s`` (between stick onsets; NaN with fewer than
+    two), ``speed_min_rpm``, ``speed_max_rpm``, ``speed_mean_rpm``, ``severity``, bit and surface
+    torque extremes in the parameters' torque unit, ``stick_slips`` and ``diverged``, on
+    ``backend`` (auto: the GPU where one is usable)."""
+    speeds = np.atleast_1d(np.asarray(omega_rpm, dtype=float))
+    weights = np.atleast_1d(np.asarray(wob_kn, dtype=float))
+    n = max(len(speeds), len(weights))
+    if len(speeds) == 1:
+        speeds = np.repeat(speeds, n)
+    if len(weights) == 1:
+        weights = np.repeat(weights, n)
+    rows = None
+    if params is not None:
+        table = np.atleast_2d(np.asarray(params, dtype=float))
+        rows = [list(map(float, r)) for r in (np.repeat(table, n, axis=0) if len(table) == 1 else table)]
+    options = {
+        k: v
+        for k, v in locals().items()
+        if k not in ("law", "params", "omega_rpm", "wob_kn", "speeds", "weights", "n", "table", "rows")
+    }
+    if options["fe_file"] is not None:
+        options["fe_file"] = os.fspath(options["fe_file"])
+    out = _bitrock.simulate_strings(law, rows, [float(v) for v in speeds], [float(v) for v in weights], options, _note)
+    unit = out.pop("torque_unit")
+    frame = pd.DataFrame({"omega_rpm": speeds, "wob_kn": weights, **out})
+    frame.attrs["torque_unit"] = unit
+    return frame
 
 
 def parity(

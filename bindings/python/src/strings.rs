@@ -1,0 +1,143 @@
+//! Simulated drill strings: a batch of strings integrated to their summaries, on the backend
+//! asked for (the kernel or its CPU twin).
+
+use crate::errors::*;
+use bitrock::error::Error;
+use bitrock::pipeline::stability::Structure;
+use bitrock::simulate::strings::{Chain, MAX_NODES, Schedule, StringJob, StringState, padded, steady_start};
+use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
+use numpy::PyArray1;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Strings of `law`, one per row of `params` (torques in `param_torque_unit`; `None`: the law's
+/// reference values for every string), `omega_rpm` and
+/// `wob_kn` (equal lengths), started from steady rotation kicked by `kick` × Ω or from rest,
+/// integrated for `settle_s` then summarised over `record_s` at 50 Hz: a dict of NumPy arrays.
+#[pyfunction]
+#[pyo3(signature = (law, params, omega_rpm, wob_kn, options, note))]
+pub(crate) fn simulate_strings<'py>(
+    py: Python<'py>,
+    law: String,
+    params: Option<Vec<Vec<f64>>>,
+    omega_rpm: Vec<f64>,
+    wob_kn: Vec<f64>,
+    options: &Bound<'py, PyDict>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let law = laws(py, Some(vec![law]))?.expect("one law")[0];
+    let unit = unit(
+        py,
+        "param_torque_unit",
+        kwarg(options, "param_torque_unit")?,
+        TorqueUnit::from_suffix,
+    )?
+    .unwrap_or(TorqueUnit::KNm);
+    let n = omega_rpm.len();
+    let params = match params {
+        Some(rows) => rows,
+        None => match law.paper_estimate() {
+            Some(p) => vec![law.scale_torque(p, 1000.0 / unit.newton_metres()); n],
+            None => {
+                let message = format!("law {law} has no reference values to default to; give its parameters");
+                return Err(to_py(py, Error::setting("params", message)));
+            }
+        },
+    };
+    if wob_kn.len() != n || params.len() != n {
+        let message = format!(
+            "params, omega_rpm and wob_kn give one value per string: {} rows, {n} speeds, {} weights",
+            params.len(),
+            wob_kn.len()
+        );
+        return Err(to_py(py, Error::setting("params", message)));
+    }
+    let (structure, lumped, fe) = crate::stability::structure_options(py, options)?;
+    let chain = check(
+        py,
+        match structure {
+            Structure::Lumped => lumped.validate().map(|()| Chain::one_dof(&lumped)),
+            Structure::Fe => fe.drill_string().and_then(|s| Chain::lumped_fe(&s)),
+        },
+    )?;
+    let dt_s = kwarg(options, "dt_s")?.unwrap_or(bitrock::pipeline::strings::DEFAULT_DT_S);
+    check(py, chain.check_step(dt_s))?;
+    let schedule = check(
+        py,
+        Schedule::new(
+            dt_s,
+            50.0,
+            kwarg(options, "settle_s")?.unwrap_or(60.0),
+            kwarg(options, "record_s")?.unwrap_or(60.0),
+        ),
+    )?;
+    let w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map_or(bitrock::laws::PAPER_W_REF_N, |kn| kn * 1000.0);
+    let kick = kwarg(options, "kick")?.unwrap_or(bitrock::pipeline::strings::DEFAULT_KICK);
+    let from_rest = match kwarg::<String>(options, "start")?.as_deref() {
+        None | Some("steady") => false,
+        Some("rest") => true,
+        Some(other) => {
+            let message = format!("must be \"steady\" or \"rest\", got {other:?}");
+            return Err(to_py(py, Error::setting("start", message)));
+        }
+    };
+    let mut jobs = Vec::with_capacity(n);
+    for i in 0..n {
+        if params[i].len() != law.n_params() {
+            check(py, law.check_params(&params[i], "params"))?;
+        }
+        let p = padded(&law.scale_torque(&params[i], unit.newton_metres()));
+        check(py, law.check_params(&p[..law.n_params()], "params"))?;
+        let omega = omega_rpm[i] * RAD_S_PER_RPM;
+        let ratio = wob_kn[i] * 1000.0 / w_ref_n;
+        let start = if from_rest {
+            StringState {
+                lag_rad: [0.0; MAX_NODES],
+                speed_rad_s: [0.0; MAX_NODES],
+                stuck: true,
+            }
+        } else {
+            steady_start(&chain, law, &p, omega, ratio, kick * omega)
+        };
+        jobs.push(StringJob {
+            law,
+            params_nm: p,
+            omega_rad_s: omega,
+            ratio,
+            start,
+        });
+    }
+    let backend = named(py, "backend", kwarg(options, "backend")?)?.unwrap_or_default();
+    let mut notes = Vec::new();
+    let results = py
+        .detach(|| bitrock::eval::strings::integrate(&chain, &schedule, &jobs, backend, &mut |line| notes.push(line)));
+    let (results, _) = check(py, results)?;
+    if let Some(callback) = &note {
+        for line in notes {
+            callback.call1(py, (as_arguments(&line),))?;
+        }
+    }
+    let per_unit = unit.newton_metres();
+    let column = |f: &dyn Fn(&bitrock::simulate::strings::Summary) -> f64| -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, results.iter().map(|(s, _)| f(s)).collect())
+    };
+    let out = PyDict::new(py);
+    out.set_item("stuck_share", column(&|s| s.stuck_share()))?;
+    out.set_item("period_s", column(&|s| s.period_s(50.0).unwrap_or(f64::NAN)))?;
+    out.set_item("stick_onsets", column(&|s| f64::from(s.stick_onsets)))?;
+    out.set_item("speed_min_rpm", column(&|s| s.speed_min_rad_s / RAD_S_PER_RPM))?;
+    out.set_item("speed_max_rpm", column(&|s| s.speed_max_rad_s / RAD_S_PER_RPM))?;
+    out.set_item("speed_mean_rpm", column(&|s| s.speed_mean_rad_s() / RAD_S_PER_RPM))?;
+    out.set_item("severity", column(&|s| s.severity()))?;
+    out.set_item("bit_torque_min", column(&|s| s.bit_torque_min_nm / per_unit))?;
+    out.set_item("bit_torque_max", column(&|s| s.bit_torque_max_nm / per_unit))?;
+    out.set_item("surface_torque_min", column(&|s| s.surface_torque_min_nm / per_unit))?;
+    out.set_item("surface_torque_max", column(&|s| s.surface_torque_max_nm / per_unit))?;
+    out.set_item(
+        "stick_slips",
+        results.iter().map(|(s, _)| s.stick_slips()).collect::<Vec<_>>(),
+    )?;
+    out.set_item("diverged", results.iter().map(|(s, _)| s.diverged).collect::<Vec<_>>())?;
+    out.set_item("torque_unit", unit.label())?;
+    Ok(out)
+}
