@@ -83,8 +83,9 @@ impl Chain {
         }
     }
 
-    /// The finite-element string lumped: each node's inertia the row sum of the consistent mass
-    /// matrix, the element stiffnesses and Rayleigh coefficients kept.
+    /// The finite-element string lumped: each node's inertia half of each element it joins (the
+    /// row sums of the consistent mass matrix), the element stiffnesses and Rayleigh
+    /// coefficients kept.
     pub fn lumped_fe(s: &DrillString) -> Result<Self> {
         s.validate()?;
         let n = s.dofs();
@@ -98,8 +99,8 @@ impl Chain {
                 ),
             ));
         }
-        let (m, _, k) = s.matrices();
-        let inertia_kg_m2 = (0..n).map(|i| m.row(i).sum()).collect();
+        let (_, _, k) = s.matrices();
+        let inertia_kg_m2 = s.lumped_inertias_kg_m2();
         // K is tridiagonal with K[i][i+1] = −k_{i+1}; the bit's element is K[n−1][n−1] − k_{n−1}.
         let mut stiffness_nm_per_rad = vec![0.0; n];
         stiffness_nm_per_rad[n - 1] = if n == 1 { k[(0, 0)] } else { -k[(n - 2, n - 1)] };
@@ -763,11 +764,18 @@ mod tests {
             ..DrillString::default()
         };
         let chain = Chain::lumped_fe(&fe).unwrap();
-        let (m, _, k) = fe.matrices();
+        let (_, _, k) = fe.matrices();
         assert_eq!(chain.nodes(), 10);
-        // Row-sum lumping keeps the total inertia of the free nodes.
+        // Half of each element's inertia to each of its nodes: the string's inertia less the
+        // half of the top element that the rotary table carries.
+        let inertia = |length_m: f64, outer: f64, inner: f64| {
+            fe.density_kg_m3 * std::f64::consts::PI / 32.0 * (outer.powi(4) - inner.powi(4)) * length_m
+        };
+        let dp = inertia(fe.dp_length_m, fe.dp_outer_m, fe.dp_inner_m);
+        let bha = inertia(fe.bha_length_m, fe.bha_outer_m, fe.bha_inner_m);
         let total: f64 = chain.inertia_kg_m2.iter().sum();
-        assert!((total - m.sum()).abs() < 1e-9 * total);
+        assert!((total - (dp + bha - dp / 16.0)).abs() < 1e-9 * total, "{total}");
+        assert!((chain.bit_inertia_kg_m2() - bha / 4.0).abs() < 1e-9 * bha);
         // The chain's tridiagonal K is the FE one, entry by entry.
         for i in 0..10 {
             let below = chain.stiffness_nm_per_rad.get(i + 1).copied().unwrap_or(0.0);

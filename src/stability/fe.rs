@@ -256,8 +256,24 @@ impl DrillString {
     /// Mass, damping and stiffness matrices (M, C, K), n×n over the free DOFs, numbered from the
     /// top, the last one the bit. Assumes [`DrillString::validate`] passed.
     pub fn matrices(&self) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
-        // Assemble over all n + 1 nodes, node 0 the rotary table, then drop node 0: the top
-        // turns at the imposed Ω, so its perturbation is zero (the appendix's u(0) = 0).
+        // The top turns at the imposed Ω, so its perturbation is zero (the appendix's u(0) = 0).
+        let (m, k) = self.assembled();
+        let m = m.remove_row(0).remove_column(0);
+        let k = k.remove_row(0).remove_column(0);
+        let c = &m * self.alpha + &k * self.beta;
+        (m, c, k)
+    }
+
+    /// Each free node's share of the string's inertia (kg·m²): the row sums of the consistent
+    /// mass matrix over all n + 1 nodes (half of each element's inertia to each of its nodes),
+    /// the rotary table's left out.
+    pub fn lumped_inertias_kg_m2(&self) -> Vec<f64> {
+        let (m, _) = self.assembled();
+        (1..m.nrows()).map(|i| m.row(i).sum()).collect()
+    }
+
+    /// Consistent mass and stiffness matrices over all n + 1 nodes, node 0 the rotary table.
+    fn assembled(&self) -> (DMatrix<f64>, DMatrix<f64>) {
         let nodes = self.dofs() + 1;
         let mut m = DMatrix::zeros(nodes, nodes);
         let mut k = DMatrix::zeros(nodes, nodes);
@@ -294,10 +310,7 @@ impl DrillString {
                 top = bottom;
             }
         }
-        let m = m.remove_row(0).remove_column(0);
-        let k = k.remove_row(0).remove_column(0);
-        let c = &m * self.alpha + &k * self.beta;
-        (m, c, k)
+        (m, k)
     }
 
     /// The appendix's Jacobian A = [[0, I], [−M⁻¹K, −M⁻¹C_NL]] (2n×2n), C_NL being C with

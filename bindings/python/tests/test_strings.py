@@ -107,7 +107,8 @@ def reference(chain, law, p_nm, omega, ratio, settle_s, record_s):
         inside = times[(times >= t) & (times <= end)]
         sol = solve_ivp(rhs(stuck, direction), (t, end), y, method="LSODA", rtol=1e-9, atol=1e-9,
                         t_eval=inside, events=events, max_step=0.05)
-        speeds[np.searchsorted(times, sol.t)] = sol.y[n * 2 - 1] if stuck is False else 0.0
+        if len(sol.t):
+            speeds[np.searchsorted(times, sol.t)] = 0.0 if stuck else np.asarray(sol.y)[2 * n - 1]
         if sol.status == 1:
             t = sol.t_events[0][0]
             y = sol.y_events[0][0].copy()
@@ -133,14 +134,20 @@ def reference(chain, law, p_nm, omega, ratio, settle_s, record_s):
     return is_stuck.mean(), period, speeds.max()
 
 
+# Top-drive speeds where each law's cycle and its steady rotation both occur, rpm: m1 has no
+# static torque (tanh(0) = 0), so its bit slows below 1 rpm only at low speeds.
+SPEEDS = {"m1": (15.0, 60.0), "m2": (40.0, 120.0), "m3": (40.0, 120.0), "m4": (20.0, 80.0)}
+
+
 def parameter_sets(law, count, seed):
-    """The paper's estimate scaled by 0.85–1.15 per parameter, 40–120 rpm, r 0.6–1.4."""
+    """The paper's estimate scaled by 0.85–1.15 per parameter, speeds in the law's range, r
+    0.6–1.4."""
     values, is_torque = PAPER[law]
     rng = np.random.default_rng(seed)
     for _ in range(count):
         p_knm = np.array(values) * rng.uniform(0.85, 1.15, len(values))
         p_nm = np.where(is_torque, p_knm * 1000.0, p_knm)
-        yield p_nm, rng.uniform(40.0, 120.0), rng.uniform(0.6, 1.4)
+        yield p_nm, rng.uniform(*SPEEDS[law]), rng.uniform(0.6, 1.4)
 
 
 @pytest.mark.parametrize("string", ["1dof", "fe"])
@@ -167,7 +174,7 @@ def test_the_strings_agree_with_an_independent_integrator(law, string):
         assert not row.diverged, where
         assert abs(row.stuck_share - share) <= 0.02, f"{where}: stuck share {row.stuck_share} vs {share}"
         assert abs(row.speed_max_rpm * RPM - peak) <= 0.02 * peak, f"{where}: peak {row.speed_max_rpm * RPM} vs {peak}"
-        if np.isfinite(period) and share > 0.05:
+        if np.isfinite(period) and share >= 0.01:
             assert abs(row.period_s - period) <= 0.02 * period, f"{where}: period {row.period_s} vs {period}"
             slipping += 1
     # The sets reach the cycle: the comparison is not of steady rotation alone.
