@@ -10,10 +10,10 @@ use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// Strings of `law`, one per row of `params` (torques in `param_torque_unit`; `None`: the law's
-/// reference values for every string), `omega_rpm` and
-/// `wob_kn` (equal lengths), started from steady rotation kicked by `kick` × Ω or from rest,
-/// integrated for `settle_s` then summarised over `record_s` at 50 Hz: a dict of NumPy arrays.
+/// Strings of `law`, one per row of `params` (torques in `param_torque_unit`; `None`: the
+/// law's reference values for every string), `omega_rpm` and `wob_kn` (equal lengths), started
+/// from steady rotation kicked by `kick` × Ω or from rest, integrated for `settle_s` then
+/// summarised over `record_s` at 50 Hz: a dict of NumPy arrays.
 #[pyfunction]
 #[pyo3(signature = (law, params, omega_rpm, wob_kn, options, note))]
 pub(crate) fn simulate_strings<'py>(

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "simulate", "stability", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "simulate", "simulate_strings", "stability", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -222,6 +222,14 @@ def simulate(law: str, params: SupportsGetItem[int, SupportsFloat | SupportsInde
     Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
     `bitrock simulate` writes it (CSV text, torques in kN·m). Parameters that look like the
     wrong torque unit are said through `note`.
+    """
+
+def simulate_strings(law: str, params: SupportsGetItem[int, SupportsGetItem[int, SupportsFloat | SupportsIndex]] | None, omega_rpm: SupportsGetItem[int, SupportsFloat | SupportsIndex], wob_kn: SupportsGetItem[int, SupportsFloat | SupportsIndex], options: dict, note: Any | None) -> dict:
+    """
+    Strings of `law`, one per row of `params` (torques in `param_torque_unit`; `None`: the
+    law's reference values for every string), `omega_rpm` and `wob_kn` (equal lengths), started
+    from steady rotation kicked by `kick` × Ω or from rest, integrated for `settle_s` then
+    summarised over `record_s` at 50 Hz: a dict of NumPy arrays.
     """
 
 def stability(run: str | PathLike[str] | None, law: str | None, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, options: dict, note: Any | None) -> dict:
