@@ -211,20 +211,6 @@ struct Simulated {
     ran: String,
 }
 
-/// Every `step`-th sample of each law, `count` at most.
-fn thinned(inputs: &[LawSamples], count: usize) -> Vec<LawSamples> {
-    inputs
-        .iter()
-        .map(|i| {
-            let step = i.samples_si.len().div_ceil(count.max(1)).max(1);
-            LawSamples {
-                samples_si: i.samples_si.iter().step_by(step).cloned().collect(),
-                ..i.clone()
-            }
-        })
-        .collect()
-}
-
 fn simulate(cmd: &StabilityCmd, inputs: &[LawSamples], w_ref_n: f64) -> anyhow::Result<Simulated> {
     if cmd.sim_samples == 0 {
         return Err(Error::setting("sim_samples", "must be at least 1").into());
@@ -239,7 +225,7 @@ fn simulate(cmd: &StabilityCmd, inputs: &[LawSamples], w_ref_n: f64) -> anyhow::
         dt_s: cmd.dt_s,
         ..SimulatedSettings::new(chain, w_ref_n, cmd.backend)
     };
-    let inputs = thinned(inputs, cmd.sim_samples);
+    let inputs = strings::thinned(inputs, cmd.sim_samples, 0.0);
     let started = std::time::Instant::now();
     let mut note = |line: String| super::print::note(line);
     let mut sim = Simulator::new(&settings, &inputs, &mut note)?;

@@ -140,6 +140,22 @@ fn members(inputs: &[LawSamples]) -> Vec<Member> {
         .collect()
 }
 
+/// Each law of `inputs` at least `min_probability` probable, with at most `count` of its
+/// samples, evenly spaced: the strings simulated per cell cost in proportion.
+pub fn thinned(inputs: &[LawSamples], count: usize, min_probability: f64) -> Vec<LawSamples> {
+    inputs
+        .iter()
+        .filter(|i| i.probability >= min_probability)
+        .map(|i| {
+            let step = i.samples_si.len().div_ceil(count.max(1)).max(1);
+            LawSamples {
+                samples_si: i.samples_si.iter().step_by(step).cloned().collect(),
+                ..i.clone()
+            }
+        })
+        .collect()
+}
+
 /// Phases each member's cycle is met at: enough that a cell weighs at least 16 strings, at
 /// most 8.
 pub fn phases(members: usize) -> usize {
@@ -163,23 +179,15 @@ impl Grid {
     }
 }
 
-/// The state the bit is in at the operating point, per member: its summary there (settled from
-/// rest) and its state when the driller changes something.
+/// The state the bit is in at the operating point, per member and phase (settled from rest).
 pub struct AtPoint {
     pub point: OperatingPoint,
     /// P(stick-slip at the operating point) under the mixture.
     pub stick_slip_probability: f64,
     /// The members, each once per phase.
     replicas: Vec<Member>,
-    summaries: Vec<Summary>,
+    /// Their states when the driller changes something.
     states: Vec<StringState>,
-}
-
-impl AtPoint {
-    /// Members' summaries at the operating point, each member's phases together.
-    pub fn summaries(&self) -> &[Summary] {
-        &self.summaries
-    }
 }
 
 /// Every simulated map of a posterior.
@@ -214,11 +222,6 @@ impl<'a> Simulator<'a> {
             strings: 0,
             simulated_s: 0.0,
         })
-    }
-
-    /// Posterior members simulated per cell.
-    pub fn members(&self) -> usize {
-        self.members.len()
     }
 
     fn job(&self, m: &Member, omega_rpm: f64, wob_kn: f64, start: Option<StringState>) -> StringJob {
@@ -296,12 +299,10 @@ impl<'a> Simulator<'a> {
                 if bad > 0 {
                     return f64::NAN;
                 }
-                0.0 + cell
-                    .iter()
+                cell.iter()
                     .zip(members)
                     .filter(|(s, _)| s.stick_slips())
-                    .map(|(_, m)| m.weight)
-                    .sum::<f64>()
+                    .fold(0.0, |p, (_, m)| p + m.weight)
                     .min(1.0)
             })
             .collect();
@@ -369,7 +370,6 @@ impl<'a> Simulator<'a> {
             point,
             stick_slip_probability: p[0],
             replicas,
-            summaries,
             states,
         })
     }
@@ -450,34 +450,38 @@ pub struct EscapeAdvice {
 }
 
 impl EscapeAdvice {
+    /// What ends it, as a driller reads it: the speed, then the weight, each with P(it ends);
+    /// where neither does, how far the scans went.
+    pub fn ways(&self) -> String {
+        let mut ways = Vec::new();
+        if let Some((rpm, q)) = self.speed_rpm {
+            ways.push(format!(
+                "raise the top-drive speed to {rpm:.0} rpm (P(it ends) = {q:.2})"
+            ));
+        }
+        if let Some((kn, q)) = self.wob_kn {
+            ways.push(format!("lower the weight on bit to {kn:.0} kN (P(it ends) = {q:.2})"));
+        }
+        if ways.is_empty() {
+            let p = self.point;
+            return format!(
+                "no top-drive speed up to {:.0} rpm nor weight on bit down to {:.0} kN ends it in the simulated strings",
+                self.speed_scan.omega_rpm.last().copied().unwrap_or(p.omega_rpm),
+                self.wob_scan.wob_kn.iter().copied().fold(p.wob_kn, f64::min)
+            );
+        }
+        ways.join(", or ")
+    }
+
     /// The advice as a driller reads it.
     pub fn text(&self) -> String {
         let p = self.point;
-        let mut parts = Vec::new();
-        match self.speed_rpm {
-            Some((rpm, q)) => parts.push(format!(
-                "raise the top-drive speed to {rpm:.0} rpm (P(it ends) = {q:.2})"
-            )),
-            None => parts.push(format!(
-                "no top-drive speed up to {:.0} rpm ends it",
-                self.speed_scan.omega_rpm.last().copied().unwrap_or(p.omega_rpm)
-            )),
-        }
-        match self.wob_kn {
-            Some((kn, q)) => parts.push(format!(
-                "or lower the weight on bit to {kn:.0} kN (P(it ends) = {q:.2})"
-            )),
-            None => parts.push(format!(
-                "no weight on bit down to {:.0} kN ends it",
-                self.wob_scan.wob_kn.first().copied().unwrap_or(p.wob_kn)
-            )),
-        }
         format!(
             "stick-slip at {:.0} rpm and {:.0} kN (simulated P = {:.2}): {}",
             p.omega_rpm,
             p.wob_kn,
             self.stick_slip_probability,
-            parts.join(", ")
+            self.ways()
         )
     }
 }

@@ -45,7 +45,9 @@ use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::pipeline::evidence::{EvidenceAnalysis, EvidenceJob, EvidencePrior, WarmStart};
-use crate::pipeline::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn};
+use crate::pipeline::strings::{
+    OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn, thinned,
+};
 use crate::simulate::strings::{Chain, Summary};
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
@@ -1030,17 +1032,7 @@ impl Watch {
             return;
         };
         // The likely laws, a few samples each: the advice keeps to the window's latency.
-        let inputs: Vec<LawSamples> = inputs
-            .iter()
-            .filter(|i| i.probability >= ESCAPE_MIN_PROBABILITY)
-            .map(|i| {
-                let step = i.samples_si.len().div_ceil(ESCAPE_SAMPLES).max(1);
-                LawSamples {
-                    samples_si: i.samples_si.iter().step_by(step).cloned().collect(),
-                    ..i.clone()
-                }
-            })
-            .collect();
+        let inputs = thinned(inputs, ESCAPE_SAMPLES, ESCAPE_MIN_PROBABILITY);
         let settings = SimulatedSettings::new(Chain::one_dof(&lumped), wob_kn * 1000.0, Backend::Cpu);
         let mut quiet = |_: String| {};
         let escape = Simulator::new(&settings, &inputs, &mut quiet).and_then(|mut sim| {
@@ -1051,22 +1043,7 @@ impl Watch {
             Ok(e) => {
                 advice.escape_omega_rpm = e.speed_rpm;
                 advice.escape_wob_kn = e.wob_kn;
-                let mut ways = Vec::new();
-                if let Some((o, p)) = e.speed_rpm {
-                    ways.push(format!("raise the top-drive speed to {o:.0} rpm (P(it ends) = {p:.2})"));
-                }
-                if let Some((w, p)) = e.wob_kn {
-                    ways.push(format!("lower the weight on bit to {w:.0} kN (P(it ends) = {p:.2})"));
-                }
-                advice.words = if ways.is_empty() {
-                    format!(
-                        "{now}: no speed up to {:.0} rpm nor weight down to {:.0} kN ends it in the simulated strings",
-                        advice_speeds_rpm(omega_rpm).last().copied().unwrap_or(omega_rpm),
-                        wob_kn * 0.2
-                    )
-                } else {
-                    format!("{now}: {}", ways.join(", or "))
-                };
+                advice.words = format!("{now}: {}", e.ways());
             }
             Err(e) => advice.words = format!("{now}: the simulated strings failed ({e})"),
         }
