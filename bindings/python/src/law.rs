@@ -10,6 +10,43 @@ use bitrock::units::TorqueUnit;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+/// The unit of the torque-valued parameters: `param_torque_unit`, kN·m by default.
+pub(crate) fn param_torque_unit(py: Python<'_>, options: &Bound<'_, PyDict>) -> PyResult<TorqueUnit> {
+    Ok(unit(
+        py,
+        "param_torque_unit",
+        kwarg(options, "param_torque_unit")?,
+        TorqueUnit::from_suffix,
+    )?
+    .unwrap_or(TorqueUnit::KNm))
+}
+
+/// `law`'s parameters in N·m: `params` in `unit` (their count checked), or the law's reference
+/// values where none are given.
+pub(crate) fn params_nm(
+    py: Python<'_>,
+    law: bitrock::Law,
+    params: Option<Vec<f64>>,
+    unit: TorqueUnit,
+) -> PyResult<Vec<f64>> {
+    match params {
+        Some(params) => {
+            // The count first: scaling takes one value per parameter.
+            if params.len() != law.n_params() {
+                check(py, law.check_params(&params, "params"))?;
+            }
+            Ok(law.scale_torque(&params, unit.newton_metres()))
+        }
+        None => match law.paper_estimate() {
+            Some(p) => Ok(law.scale_torque(p, TorqueUnit::KNm.newton_metres())),
+            None => {
+                let message = format!("law {law} has no reference values to default to; give its parameters");
+                Err(to_py(py, bitrock::Error::setting("params", message)))
+            }
+        },
+    }
+}
+
 /// Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
 /// `bitrock simulate` writes it (CSV text, torques in kN·m). Parameters that look like the
 /// wrong torque unit are said through `note`.
@@ -26,29 +63,7 @@ pub(crate) fn simulate(
     use bitrock::simulate::{self as sim, Initial, SimConfig};
     use bitrock::units::RAD_S_PER_RPM;
     let law = self::laws(py, Some(vec![law]))?.expect("one law")[0];
-    let unit = unit(
-        py,
-        "param_torque_unit",
-        kwarg(options, "param_torque_unit")?,
-        TorqueUnit::from_suffix,
-    )?
-    .unwrap_or(TorqueUnit::KNm);
-    let params_nm = match params {
-        Some(params) => {
-            // The count first: scaling takes one value per parameter.
-            if params.len() != law.n_params() {
-                check(py, law.check_params(&params, "params"))?;
-            }
-            law.scale_torque(&params, unit.newton_metres())
-        }
-        None => match law.paper_estimate() {
-            Some(p) => law.scale_torque(p, TorqueUnit::KNm.newton_metres()),
-            None => {
-                let message = format!("law {law} has no reference values to default to; give its parameters");
-                return Err(to_py(py, bitrock::Error::setting("params", message)));
-            }
-        },
-    };
+    let params_nm = params_nm(py, law, params, param_torque_unit(py, options)?)?;
     if let (Some(callback), Some(warning)) = (&note, law.implausible_torque(&params_nm, "param_torque_unit")) {
         callback.call1(py, (as_arguments(&format!("warning: {warning}")),))?;
     }

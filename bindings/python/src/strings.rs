@@ -5,7 +5,7 @@ use crate::errors::*;
 use bitrock::error::Error;
 use bitrock::pipeline::stability::Structure;
 use bitrock::simulate::strings::{Chain, MAX_NODES, Schedule, StringJob, StringState, padded, steady_start};
-use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
+use bitrock::units::RAD_S_PER_RPM;
 use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -26,23 +26,11 @@ pub(crate) fn simulate_strings<'py>(
     note: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let law = laws(py, Some(vec![law]))?.expect("one law")[0];
-    let unit = unit(
-        py,
-        "param_torque_unit",
-        kwarg(options, "param_torque_unit")?,
-        TorqueUnit::from_suffix,
-    )?
-    .unwrap_or(TorqueUnit::KNm);
+    let unit = crate::law::param_torque_unit(py, options)?;
     let n = omega_rpm.len();
-    let params = match params {
-        Some(rows) => rows,
-        None => match law.paper_estimate() {
-            Some(p) => vec![law.scale_torque(p, 1000.0 / unit.newton_metres()); n],
-            None => {
-                let message = format!("law {law} has no reference values to default to; give its parameters");
-                return Err(to_py(py, Error::setting("params", message)));
-            }
-        },
+    let params: Vec<Option<Vec<f64>>> = match params {
+        Some(rows) => rows.into_iter().map(Some).collect(),
+        None => vec![None; n],
     };
     if wob_kn.len() != n || params.len() != n {
         let message = format!(
@@ -83,10 +71,7 @@ pub(crate) fn simulate_strings<'py>(
     };
     let mut jobs = Vec::with_capacity(n);
     for i in 0..n {
-        if params[i].len() != law.n_params() {
-            check(py, law.check_params(&params[i], "params"))?;
-        }
-        let p = padded(&law.scale_torque(&params[i], unit.newton_metres()));
+        let p = padded(&crate::law::params_nm(py, law, params[i].clone(), unit)?);
         check(py, law.check_params(&p[..law.n_params()], "params"))?;
         let omega = omega_rpm[i] * RAD_S_PER_RPM;
         let ratio = wob_kn[i] * 1000.0 / w_ref_n;
