@@ -1,10 +1,14 @@
 """The simulated strings against an independent integrator: scipy's LSODA at tight tolerances,
 with its own stick handling (an event at zero bit speed, the stuck bit held until the string's
 torque reaches the static torque, found by a second event), on the 1-DOF string and the paper's
-finite-element string lumped, derived here from the string's dimensions."""
+finite-element string lumped, derived here from the string's dimensions; and bitrock's advice
+applied in that integrator from a stick-slipping bit."""
+
+import json
 
 import numpy as np
 import pytest
+from conftest import run_cli
 from scipy.integrate import solve_ivp
 
 import bitrock
@@ -55,10 +59,11 @@ def lumped_fe():
     return masses[1:], np.array(stiffness), 0.5, 0.006
 
 
-def reference(chain, law, p_nm, omega, ratio, settle_s, record_s):
-    """Stuck share, stick-onset period and peak bit speed over the record; None where the bit
-    runs away (faster than a thousand times Ω, as bitrock bounds it: m4's cubic turns negative
-    at high speed)."""
+def integrate(chain, law, p_nm, omega, ratio, start, settle_s, record_s):
+    """The string from `start` (lags, speeds, stuck, direction) for `settle_s` then `record_s`:
+    the bit speeds sampled at 50 Hz over the record and the state at its end; None where the
+    bit runs away (faster than a thousand times Ω, as bitrock bounds it: m4's cubic turns
+    negative at high speed)."""
     m, k, alpha, beta = chain
     n = len(m)
     torque = torque_law(law)
@@ -85,15 +90,16 @@ def reference(chain, law, p_nm, omega, ratio, settle_s, record_s):
 
         return f
 
-    # Steady rotation kicked by a tenth of the speed, as the strings start.
-    t0 = ratio * torque(p_nm, omega)
-    y = np.concatenate((np.cumsum(t0 / k), np.full(n, omega)))
-    y[-1] += 0.1 * omega
-    stuck, direction = False, 1.0
+    y, stuck, direction = start
+    y = np.array(y, dtype=float)
     t, end = 0.0, settle_s + record_s
     times = np.arange(int(round(record_s * SAMPLE_HZ))) / SAMPLE_HZ + settle_s
     speeds = np.full(len(times), np.nan)
     while t < end - 1e-12:
+        if stuck and abs(string_torque(y[:n], y[n:])[-1]) > static:
+            # The load already exceeds the static torque (a lighter weight on bit): it slips.
+            stuck = False
+            direction = 1.0 if string_torque(y[:n], y[n:])[-1] > 0 else -1.0
         if stuck:
             def release(_, yy):
                 return abs(string_torque(yy[:n], yy[n:])[-1]) - static
@@ -106,12 +112,15 @@ def reference(chain, law, p_nm, omega, ratio, settle_s, record_s):
 
             stop.terminal, stop.direction = True, -1
             events = [stop]
-        inside = times[(times >= t) & (times <= end)]
+        inside = np.append(times[(times >= t) & (times < end)], end)
         sol = solve_ivp(rhs(stuck, direction), (t, end), y, method="LSODA", rtol=1e-9, atol=1e-9,
                         t_eval=inside, events=events, max_step=0.05)
-        if len(sol.t):
-            speeds[np.searchsorted(times, sol.t)] = 0.0 if stuck else np.asarray(sol.y)[2 * n - 1]
-        w_end = sol.y[2 * n - 1][-1] if len(sol.t) else y[-1]
+        at = np.asarray(sol.t, dtype=float)
+        recorded = at < end
+        if recorded.any():
+            w = 0.0 if stuck else np.asarray(sol.y)[2 * n - 1][recorded]
+            speeds[np.searchsorted(times, at[recorded])] = w
+        w_end = np.asarray(sol.y)[2 * n - 1][-1] if len(at) else y[-1]
         if sol.status == -1 or not np.isfinite(w_end) or abs(w_end) > 1000.0 * max(omega, 1.0):
             return None
         if sol.status == 1:
@@ -127,12 +136,30 @@ def reference(chain, law, p_nm, omega, ratio, settle_s, record_s):
                 if not stuck:
                     direction = 1.0 if force > 0 else -1.0
             # Leave the event's surface before looking for the next one.
-            t_next = t + 1e-9
             y = y + 1e-9 * rhs(stuck, direction)(t, y)
-            t = t_next
+            t += 1e-9
         else:
+            y = np.asarray(sol.y)[:, -1].copy()
             t = end
     assert not np.isnan(speeds).any()
+    return speeds, (y, stuck, direction)
+
+
+def stuck_share(speeds):
+    return float(np.mean(np.abs(speeds) < STUCK_RAD_S))
+
+
+def reference(chain, law, p_nm, omega, ratio, settle_s, record_s):
+    """From steady rotation kicked by a tenth of the speed, as the strings start: stuck share,
+    stick-onset period and peak bit speed over the record; None where the bit runs away."""
+    k = chain[1]
+    t0 = ratio * torque_law(law)(p_nm, omega)
+    y = np.concatenate((np.cumsum(t0 / k), np.full(len(k), omega)))
+    y[-1] += 0.1 * omega
+    done = integrate(chain, law, p_nm, omega, ratio, (y, False, 1.0), settle_s, record_s)
+    if done is None:
+        return None
+    speeds = done[0]
     is_stuck = np.abs(speeds) < STUCK_RAD_S
     onsets = np.flatnonzero(is_stuck & ~np.concatenate(([False], is_stuck[:-1])))
     period = (onsets[-1] - onsets[0]) / (len(onsets) - 1) / SAMPLE_HZ if len(onsets) >= 2 else np.nan
@@ -199,3 +226,43 @@ def test_the_strings_agree_with_an_independent_integrator(law, string):
             slipping += 1
     # The sets reach the cycle: the comparison is not of steady rotation alone.
     assert slipping >= 3, f"only {slipping} of 20 sets stick-slip"
+
+
+def cycles_at(chain, law, p_nm, omega, ratio, phases=8):
+    """The string started from rest at (Ω, r) and settled 60 s plus a share of its fundamental
+    period, at `phases` phases: each state, and the stuck share of the settling's last 20 s."""
+    n = len(chain[0])
+    rest = (np.zeros(2 * n), True, 1.0)
+    period_s = 2.0 * np.pi / 0.85
+    out = []
+    for phase in range(phases):
+        speeds, state = integrate(chain, law, p_nm, omega, ratio, rest, 40.0 + period_s * phase / phases, 20.0)
+        out.append((stuck_share(speeds), state))
+    return out
+
+
+def after_change(chain, law, p_nm, omega, ratio, state):
+    """From `state`, the top drive at Ω and the weight at r: the stuck share of the verdict
+    window, the last 20 s of a minute."""
+    speeds, _ = integrate(chain, law, p_nm, omega, ratio, state, 40.0, 20.0)
+    return stuck_share(speeds)
+
+
+def test_the_advice_ends_the_stick_slip_in_an_independent_integrator(cli):
+    # m2 at the paper's estimate, stick-slipping at 60 rpm and 244 kN: the speed and the weight
+    # that bitrock advises, applied from the cycle at eight phases in the LSODA string.
+    done = run_cli(cli, "stability", "--law", "m2", "--params", "13,6.5,0.3", "--simulate", "--at-rpm", "60",
+                   "--at-kn", "244.2", "--sim-omega-rpm", "60:80:2", "--sim-wob-kn", "200:240:2", "--backend", "cpu",
+                   "--json")
+    advice = json.loads(done.stdout)["simulated"]["advice"]
+    assert advice["stick_slip_probability"] == 1.0
+    assert advice["speed_end_probability"] >= 0.9 and advice["wob_end_probability"] >= 0.9
+    chain, p_nm = one_dof(), np.array([13e3, 6.5e3, 0.3])
+    cycles = cycles_at(chain, "m2", p_nm, 60.0 * RPM, 1.0)
+    for share, state in cycles:
+        assert share > 0.3, f"stuck {share} of the time at 60 rpm: not the cycle"
+        assert after_change(chain, "m2", p_nm, advice["speed_rpm"] * RPM, 1.0, state) == 0.0
+        assert after_change(chain, "m2", p_nm, 60.0 * RPM, advice["wob_kn"] / 244.2, state) == 0.0
+        # The linear criterion's answer, 85 rpm, where steady rotation is stable, leaves the bit
+        # in the cycle.
+        assert after_change(chain, "m2", p_nm, 85.0 * RPM, 1.0, state) > 0.2
