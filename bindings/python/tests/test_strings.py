@@ -266,3 +266,27 @@ def test_the_advice_ends_the_stick_slip_in_an_independent_integrator(cli):
         # The linear criterion's answer, 85 rpm, where steady rotation is stable, leaves the bit
         # in the cycle.
         assert after_change(chain, "m2", p_nm, 85.0 * RPM, 1.0, state) > 0.2
+
+
+def test_the_watch_calls_a_stuck_bit_stick_slipping_and_its_advice_ends_it(tmp_path):
+    # m2 at 85 rpm started from rest: the cycle the linear criterion says cannot be (steady
+    # rotation is stable there), the bit stuck a third of the time.
+    record = bitrock.simulate("m2", omega_rpm=85.0, initial="rest", settle_s=60.0, duration_s=100.0,
+                              noise_torque_knm=0.3, noise_speed_rpm=0.5, seed=3)
+    path = tmp_path / "stuck.csv"
+    record.to_csv(path, index=False)
+    updates = list(bitrock.watch(path, laws="m2", window_s=25, step_s=25, backend="cpu", particles=150))
+    assert len(updates) >= 3
+    speeds = []
+    for u in updates:
+        advice = u.advice
+        assert advice["stick_slip_now"] and advice["stuck_share"] > 0.2, advice
+        assert "steady" not in advice["words"], advice["words"]
+        assert advice["escape_omega_rpm"] is not None, advice["words"]
+        speeds.append(advice["escape_omega_rpm"][0])
+    # The advised speeds, applied in the LSODA string from the cycle at 85 rpm at eight phases.
+    chain, p_nm = one_dof(), np.array([13e3, 6.5e3, 0.3])
+    for share, state in cycles_at(chain, "m2", p_nm, 85.0 * RPM, 1.0):
+        assert share > 0.2
+        for rpm in set(speeds):
+            assert after_change(chain, "m2", p_nm, rpm * RPM, 1.0, state) == 0.0, rpm

@@ -116,7 +116,8 @@ class Watch:
         """One row per window given so far: its times, samples used, the most probable law,
         each law's carried probability (``p_m1``…), the change flag, the window's ABC tolerance
         ``epsilon`` (``None`` for the evidence), P(unstable) at the
-        operating point and the advice in words."""
+        operating point, the window's ``stuck_share`` (bit below 1 rpm) and ``stick_slip_now``
+        (stuck 1 % of the time or more: never called steady), and the advice in words."""
         return _history([u.document for u in self._given])
 
 
@@ -137,6 +138,8 @@ def _history(documents: list[dict[str, Any]]) -> pd.DataFrame:
             row[f"p_{law['law']}"] = law["probability"]
         advice = d["advice"] or {}
         row["p_unstable"] = advice.get("p_unstable")
+        row["stuck_share"] = advice.get("stuck_share")
+        row["stick_slip_now"] = advice.get("stick_slip_now")
         row["advice"] = advice.get("words")
         rows.append(row)
     frame = pd.DataFrame(rows)
