@@ -8,9 +8,8 @@ use bitrock::eval::Backend;
 use bitrock::eval::strings::Ran;
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::pipeline::stability::{DEFAULT_OMEGA_RPM, DEFAULT_PERCENT, DEFAULT_SAMPLES, DEFAULT_WOB_KN, Structure};
-use bitrock::pipeline::strings::{self, EscapeAdvice, Grid, OperatingPoint, SimulatedSettings, Simulator};
+use bitrock::pipeline::strings::{self, Grid, OperatingPoint, SimulatedJob, SimulatedMaps, SimulatedSettings};
 use bitrock::pipeline::{MapSource, StabilityJob};
-use bitrock::simulate::strings::Chain;
 use bitrock::stability::map::{self, Criterion, LawSamples};
 use bitrock::units::TorqueUnit;
 use clap::Args;
@@ -89,13 +88,13 @@ pub struct StabilityCmd {
     #[arg(long, value_parser = finite_number, requires_all = ["simulate", "at_rpm"], value_name = "KN")]
     pub at_kn: Option<f64>,
     /// Top-drive speeds of the simulated maps, rpm, as MIN:MAX:COUNT.
-    #[arg(long, default_value = "20:220:21", value_name = "MIN:MAX:COUNT")]
+    #[arg(long, default_value = strings::DEFAULT_OMEGA_RPM, value_name = "MIN:MAX:COUNT")]
     pub sim_omega_rpm: String,
     /// Weights on bit of the simulated maps, kN, as MIN:MAX:COUNT.
-    #[arg(long, default_value = "20:700:18", value_name = "MIN:MAX:COUNT")]
+    #[arg(long, default_value = strings::DEFAULT_WOB_KN, value_name = "MIN:MAX:COUNT")]
     pub sim_wob_kn: String,
     /// Posterior samples per law simulated in every cell.
-    #[arg(long, default_value_t = 50, value_name = "S")]
+    #[arg(long, default_value_t = strings::DEFAULT_SAMPLES, value_name = "S")]
     pub sim_samples: usize,
     /// Integration step of the simulated strings, s (checked against the string's fastest mode).
     #[arg(long, value_parser = finite_number, default_value_t = bitrock::pipeline::strings::DEFAULT_DT_S, value_name = "S")]
@@ -189,96 +188,46 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
             "probability_unstable": grids,
         });
         if let Some(sim) = &simulated {
-            v["simulated"] = sim.json();
+            v["simulated"] = simulated_json(sim);
         }
         super::print::json(&mut out, v)?;
     } else {
         print_table(&mut out, cmd.string.structure, c, omega, &columns)?;
         if let Some(sim) = &simulated {
-            sim.print(&mut out)?;
+            print_simulated(sim, &mut out)?;
         }
     }
     Ok(ExitCode::SUCCESS)
 }
 
-/// The simulated maps of a stability command.
-struct Simulated {
-    onset: Grid,
-    escape: Option<(Grid, EscapeAdvice)>,
-    strings: u64,
-    simulated_s: f64,
-    seconds: f64,
-    ran: String,
+fn simulate(cmd: &StabilityCmd, inputs: &[LawSamples], w_ref_n: f64) -> anyhow::Result<SimulatedMaps> {
+    let chain = strings::chain(
+        cmd.string.structure,
+        &cmd.string.lumped.lumped(),
+        &cmd.string.fe.settings(),
+    )?;
+    let job = SimulatedJob {
+        settings: SimulatedSettings {
+            dt_s: cmd.dt_s,
+            ..SimulatedSettings::new(chain, w_ref_n, cmd.backend)
+        },
+        omega_rpm: map::parse_axis(&cmd.sim_omega_rpm, "sim_omega_rpm")?,
+        wob_kn: map::parse_axis(&cmd.sim_wob_kn, "sim_wob_kn")?,
+        samples: cmd.sim_samples,
+        at: cmd
+            .at_rpm
+            .zip(cmd.at_kn)
+            .map(|(omega_rpm, wob_kn)| OperatingPoint { omega_rpm, wob_kn }),
+    };
+    Ok(job.run(inputs, &mut |line| super::print::note(line))?)
 }
 
-fn simulate(cmd: &StabilityCmd, inputs: &[LawSamples], w_ref_n: f64) -> anyhow::Result<Simulated> {
-    if cmd.sim_samples == 0 {
-        return Err(Error::setting("sim_samples", "must be at least 1").into());
-    }
-    let omega = map::parse_axis(&cmd.sim_omega_rpm, "sim_omega_rpm")?;
-    let wob = map::parse_axis(&cmd.sim_wob_kn, "sim_wob_kn")?;
-    let chain = match cmd.string.structure {
-        Structure::Lumped => Chain::one_dof(&cmd.string.lumped.validated()?),
-        Structure::Fe => Chain::lumped_fe(&cmd.string.fe.settings().drill_string()?)?,
-    };
-    let settings = SimulatedSettings {
-        dt_s: cmd.dt_s,
-        ..SimulatedSettings::new(chain, w_ref_n, cmd.backend)
-    };
-    let inputs = strings::thinned(inputs, cmd.sim_samples, 0.0);
-    let started = std::time::Instant::now();
-    let mut note = |line: String| super::print::note(line);
-    let mut sim = Simulator::new(&settings, &inputs, &mut note)?;
-    let onset = sim.onset(&omega, &wob)?;
-    let escape = match (cmd.at_rpm, cmd.at_kn) {
-        (Some(omega_rpm), Some(wob_kn)) => {
-            for (field, v) in [("at_rpm", omega_rpm), ("at_kn", wob_kn)] {
-                if v <= 0.0 {
-                    return Err(Error::setting(field, format!("must be positive, got {v}")).into());
-                }
-            }
-            let at = sim.at_point(OperatingPoint { omega_rpm, wob_kn })?;
-            let grid = sim.escape(&at, &omega, &wob)?;
-            let advice = sim.escape_advice(
-                &at,
-                &strings::advice_speeds_rpm(omega_rpm),
-                &strings::advice_weights_kn(wob_kn),
-            )?;
-            Some((grid, advice))
-        }
-        _ => None,
-    };
-    let ran = match &sim.ran {
+/// Where the strings ran, in words.
+fn ran(maps: &SimulatedMaps) -> String {
+    match &maps.ran {
         Some(Ran::Gpu(name)) => format!("GPU {name}"),
         _ => "CPU".to_string(),
-    };
-    Ok(Simulated {
-        onset,
-        escape,
-        strings: sim.strings,
-        simulated_s: sim.simulated_s,
-        seconds: started.elapsed().as_secs_f64(),
-        ran,
-    })
-}
-
-/// Per speed, the lightest weight on bit at which P ≥ 0.5 (`None`: none on the grid; NaN:
-/// unknown on the way).
-fn half_boundary(grid: &Grid) -> Vec<Option<f64>> {
-    (0..grid.omega_rpm.len())
-        .map(|i| {
-            for j in 0..grid.wob_kn.len() {
-                let p = grid.at(i, j);
-                if p.is_nan() {
-                    return Some(f64::NAN);
-                }
-                if p >= 0.5 {
-                    return Some(grid.wob_kn[j]);
-                }
-            }
-            None
-        })
-        .collect()
+    }
 }
 
 fn grid_json(grid: &Grid) -> serde_json::Value {
@@ -290,77 +239,81 @@ fn grid_json(grid: &Grid) -> serde_json::Value {
     json!({"omega_rpm": grid.omega_rpm, "wob_kn": grid.wob_kn, "probability": rows, "diverged_strings": grid.diverged})
 }
 
-impl Simulated {
-    fn json(&self) -> serde_json::Value {
-        let mut v = json!({
-            "onset": grid_json(&self.onset),
-            "onset_boundary_wob_kn": half_boundary(&self.onset),
-            "strings": self.strings,
-            "simulated_string_s": self.simulated_s,
-            "wall_s": self.seconds,
-            "backend": self.ran,
+/// The simulated maps in `--json`.
+fn simulated_json(maps: &SimulatedMaps) -> serde_json::Value {
+    let mut v = json!({
+        "onset": grid_json(&maps.onset),
+        "onset_boundary_wob_kn": maps.onset.boundary_wob_kn(0.5),
+        "strings": maps.strings,
+        "simulated_string_s": maps.simulated_s,
+        "wall_s": maps.wall_s,
+        "backend": ran(maps),
+    });
+    if let Some((grid, advice)) = &maps.escape {
+        v["escape"] = grid_json(grid);
+        v["escape_boundary_wob_kn"] = json!(grid.boundary_wob_kn(0.5));
+        v["advice"] = json!({
+            "at_rpm": advice.point.omega_rpm,
+            "at_kn": advice.point.wob_kn,
+            "stick_slip_probability": advice.stick_slip_probability,
+            "speed_rpm": advice.speed_rpm.map(|s| s.0),
+            "speed_end_probability": advice.speed_rpm.map(|s| s.1),
+            "wob_kn": advice.wob_kn.map(|s| s.0),
+            "wob_end_probability": advice.wob_kn.map(|s| s.1),
+            "text": advice.text(),
         });
-        if let Some((grid, advice)) = &self.escape {
-            v["escape"] = grid_json(grid);
-            v["escape_boundary_wob_kn"] = json!(half_boundary(grid));
-            v["advice"] = json!({
-                "at_rpm": advice.point.omega_rpm,
-                "at_kn": advice.point.wob_kn,
-                "stick_slip_probability": advice.stick_slip_probability,
-                "speed_rpm": advice.speed_rpm.map(|s| s.0),
-                "speed_end_probability": advice.speed_rpm.map(|s| s.1),
-                "wob_kn": advice.wob_kn.map(|s| s.0),
-                "wob_end_probability": advice.wob_kn.map(|s| s.1),
-                "text": advice.text(),
-            });
-        }
-        v
     }
+    v
+}
 
-    fn print(&self, out: &mut impl Write) -> std::io::Result<()> {
-        writeln!(
-            out,
-            "\nsimulated strings ({} strings, {:.3e} string-seconds in {:.1} s on the {}): weight on bit (kN) from which stick-slip",
-            self.strings, self.simulated_s, self.seconds, self.ran
-        )?;
-        let onset = half_boundary(&self.onset);
-        let escape = self.escape.as_ref().map(|(g, _)| half_boundary(g));
-        write!(out, "{:>9}  {:>22}", "omega_rpm", "develops (P ≥ 0.5)")?;
-        if escape.is_some() {
-            write!(out, "  {:>22}", "persists (P ≥ 0.5)")?;
+/// The simulated maps as a table: per speed, the lightest weight from which stick-slip
+/// develops and persists, and the advice.
+fn print_simulated(maps: &SimulatedMaps, out: &mut impl Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "\nsimulated strings ({} strings, {:.3e} string-seconds in {:.1} s on the {}): weight on bit (kN) from which stick-slip",
+        maps.strings,
+        maps.simulated_s,
+        maps.wall_s,
+        ran(maps)
+    )?;
+    let onset = maps.onset.boundary_wob_kn(0.5);
+    let escape = maps.escape.as_ref().map(|(g, _)| g.boundary_wob_kn(0.5));
+    write!(out, "{:>9}  {:>22}", "omega_rpm", "develops (P ≥ 0.5)")?;
+    if escape.is_some() {
+        write!(out, "  {:>22}", "persists (P ≥ 0.5)")?;
+    }
+    writeln!(out)?;
+    let cell = |v: Option<f64>| {
+        v.map(|v| unknown_or(v, format!("{v:.0}")))
+            .unwrap_or_else(|| "—".into())
+    };
+    for (i, rpm) in maps.onset.omega_rpm.iter().enumerate() {
+        write!(out, "{rpm:>9.1}  {:>22}", cell(onset[i]))?;
+        if let Some(e) = &escape {
+            write!(out, "  {:>22}", cell(e[i]))?;
         }
         writeln!(out)?;
-        let cell = |v: Option<f64>| {
-            v.map(|v| unknown_or(v, format!("{v:.0}")))
-                .unwrap_or_else(|| "—".into())
-        };
-        for (i, rpm) in self.onset.omega_rpm.iter().enumerate() {
-            write!(out, "{rpm:>9.1}  {:>22}", cell(onset[i]))?;
-            if let Some(e) = &escape {
-                write!(out, "  {:>22}", cell(e[i]))?;
-            }
-            writeln!(out)?;
-        }
-        if let Some((_, advice)) = &self.escape {
-            if escape.is_some() {
-                writeln!(
-                    out,
-                    "(persists: from the state the bit is in at {:.0} rpm and {:.0} kN; between the columns lies the bistable band)",
-                    advice.point.omega_rpm, advice.point.wob_kn
-                )?;
-            }
-            if advice.stick_slip_probability >= 0.5 {
-                writeln!(out, "advice: {}", advice.text())?;
-            } else {
-                writeln!(
-                    out,
-                    "advice: steady rotation at {:.0} rpm and {:.0} kN (simulated P(stick-slip) = {:.2})",
-                    advice.point.omega_rpm, advice.point.wob_kn, advice.stick_slip_probability
-                )?;
-            }
-        }
-        Ok(())
     }
+    if let Some((_, advice)) = &maps.escape {
+        if escape.is_some() {
+            writeln!(
+                out,
+                "(persists: from the state the bit is in at {:.0} rpm and {:.0} kN; between the columns lies the bistable band)",
+                advice.point.omega_rpm, advice.point.wob_kn
+            )?;
+        }
+        if advice.stick_slip_probability >= 0.5 {
+            writeln!(out, "advice: {}", advice.text())?;
+        } else {
+            writeln!(
+                out,
+                "advice: steady rotation at {:.0} rpm and {:.0} kN (simulated P(stick-slip) = {:.2})",
+                advice.point.omega_rpm, advice.point.wob_kn, advice.stick_slip_probability
+            )?;
+        }
+    }
+    Ok(())
 }
 
 /// Whose maps: `--run` (a run or an evidence directory), `--posterior`, or `--law` at

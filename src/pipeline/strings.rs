@@ -16,7 +16,10 @@
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::eval::strings::Ran;
+use crate::pipeline::stability::Structure;
 use crate::simulate::strings::{Chain, MAX_NODES, Schedule, StringJob, StringState, Summary, padded, steady_start};
+use crate::stability::fe::DrillStringSettings;
+use crate::stability::lumped::Lumped;
 use crate::stability::map::LawSamples;
 use crate::units::RAD_S_PER_RPM;
 
@@ -32,6 +35,12 @@ pub const DEFAULT_TRANSIENT_S: f64 = 40.0;
 /// The verdict window (s): stick-slip persists if the bit is stuck in it at least
 /// [`crate::simulate::strings::STICK_SLIP_STUCK_SHARE`] of the time.
 pub const DEFAULT_VERDICT_S: f64 = 20.0;
+/// The simulated maps' grid of top-drive speeds, rpm, as MIN:MAX:COUNT.
+pub const DEFAULT_OMEGA_RPM: &str = "20:220:21";
+/// The simulated maps' grid of weights on bit, kN, as MIN:MAX:COUNT.
+pub const DEFAULT_WOB_KN: &str = "20:700:18";
+/// Posterior samples per law simulated in every cell.
+pub const DEFAULT_SAMPLES: usize = 50;
 /// Summary samples per second of simulated time.
 const SAMPLE_HZ: f64 = 50.0;
 /// Probability of ending stick-slip that advice asks of a change.
@@ -176,6 +185,106 @@ impl Grid {
     /// The probability at speed index `i` and weight index `j`.
     pub fn at(&self, i: usize, j: usize) -> f64 {
         self.probability[i * self.wob_kn.len() + j]
+    }
+
+    /// Per speed, the lightest weight on bit at which the probability reaches `p` (`None`: none
+    /// on the grid; NaN: an unknown cell comes first).
+    pub fn boundary_wob_kn(&self, p: f64) -> Vec<Option<f64>> {
+        (0..self.omega_rpm.len())
+            .map(|i| {
+                (0..self.wob_kn.len()).find_map(|j| {
+                    let q = self.at(i, j);
+                    if q.is_nan() {
+                        Some(f64::NAN)
+                    } else {
+                        (q >= p).then_some(self.wob_kn[j])
+                    }
+                })
+            })
+            .collect()
+    }
+}
+
+/// The string the strings are simulated on: the 1-DOF model `lumped`, or the finite-element
+/// string `fe` describes, lumped.
+pub fn chain(structure: Structure, lumped: &Lumped, fe: &DrillStringSettings) -> Result<Chain> {
+    match structure {
+        Structure::Lumped => {
+            lumped.validate()?;
+            Ok(Chain::one_dof(lumped))
+        }
+        Structure::Fe => Chain::lumped_fe(&fe.drill_string()?),
+    }
+}
+
+/// The simulated maps of a posterior: what `stability --simulate` and Python's
+/// `stability(simulate=True)` ask for.
+#[derive(Clone, Debug)]
+pub struct SimulatedJob {
+    pub settings: SimulatedSettings,
+    /// The grid, rpm and kN.
+    pub omega_rpm: Vec<f64>,
+    pub wob_kn: Vec<f64>,
+    /// Posterior samples per law simulated in every cell.
+    pub samples: usize,
+    /// Where the bit is now: the escape map and the advice start there.
+    pub at: Option<OperatingPoint>,
+}
+
+/// The maps of a [`SimulatedJob`].
+#[derive(Clone, Debug)]
+pub struct SimulatedMaps {
+    pub onset: Grid,
+    /// The escape map and the advice, where the job has an operating point.
+    pub escape: Option<(Grid, EscapeAdvice)>,
+    /// Strings integrated, their simulated seconds, the wall time and where they ran.
+    pub strings: u64,
+    pub simulated_s: f64,
+    pub wall_s: f64,
+    pub ran: Option<Ran>,
+}
+
+impl SimulatedJob {
+    /// Refuses, naming the setting, what cannot be simulated.
+    pub fn validate(&self) -> Result<()> {
+        if self.samples == 0 {
+            return Err(Error::setting("sim_samples", "must be at least 1"));
+        }
+        if let Some(at) = self.at {
+            for (field, v) in [("at_rpm", at.omega_rpm), ("at_kn", at.wob_kn)] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(Error::setting(field, format!("must be positive, got {v}")));
+                }
+            }
+        }
+        self.settings.validate()
+    }
+
+    /// The maps of `inputs` (each law's samples thinned to the job's count).
+    pub fn run(&self, inputs: &[LawSamples], note: &mut dyn FnMut(String)) -> Result<SimulatedMaps> {
+        self.validate()?;
+        let inputs = thinned(inputs, self.samples, 0.0);
+        let started = std::time::Instant::now();
+        let mut sim = Simulator::new(&self.settings, &inputs, note)?;
+        let onset = sim.onset(&self.omega_rpm, &self.wob_kn)?;
+        let escape = match self.at {
+            Some(at) => {
+                let state = sim.at_point(at)?;
+                let grid = sim.escape(&state, &self.omega_rpm, &self.wob_kn)?;
+                let advice =
+                    sim.escape_advice(&state, &advice_speeds_rpm(at.omega_rpm), &advice_weights_kn(at.wob_kn))?;
+                Some((grid, advice))
+            }
+            None => None,
+        };
+        Ok(SimulatedMaps {
+            onset,
+            escape,
+            strings: sim.strings,
+            simulated_s: sim.simulated_s,
+            wall_s: started.elapsed().as_secs_f64(),
+            ran: sim.ran.clone(),
+        })
     }
 }
 

@@ -154,6 +154,9 @@ pub(crate) fn stability<'py>(
             PyArray1::from_vec(py, mixture.iter().map(nan).collect()),
         )?;
     }
+    if kwarg::<bool>(options, "simulate")?.unwrap_or(false) {
+        simulated(py, options, &job, &maps.inputs, (structure, &lumped, &fe), &note, &out)?;
+    }
     out.set_item("critical_bit_damping_nms", job.criterion.critical_nms())?;
     out.set_item("percentile", job.percentile * 100.0)?;
     out.set_item(
@@ -204,4 +207,87 @@ fn posterior_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::
         }
     }
     Ok(particles)
+}
+
+/// The maps by simulated strings (`simulate=True`): the onset grid and, with `at_rpm` and
+/// `at_kn`, the escape grid and the advice, added to `out`.
+fn simulated<'py>(
+    py: Python<'py>,
+    options: &Bound<'py, PyDict>,
+    job: &bitrock::pipeline::stability::StabilityJob,
+    inputs: &[bitrock::stability::map::LawSamples],
+    (structure, lumped, fe): (Structure, &Lumped, &DrillStringSettings),
+    note: &Option<Py<PyAny>>,
+    out: &Bound<'py, PyDict>,
+) -> PyResult<()> {
+    use bitrock::pipeline::strings::{self, OperatingPoint, SimulatedJob, SimulatedSettings};
+    use bitrock::stability::map;
+    let axis = |key: &str, default: &str| -> PyResult<Vec<f64>> {
+        match options.get_item(key)?.filter(|v| !v.is_none()) {
+            None => check(py, map::parse_axis(default, key)),
+            Some(value) => match value.extract::<String>() {
+                Ok(text) => check(py, map::parse_axis(&text, key)),
+                Err(_) => value.extract(),
+            },
+        }
+    };
+    let at = match (kwarg::<f64>(options, "at_rpm")?, kwarg::<f64>(options, "at_kn")?) {
+        (Some(omega_rpm), Some(wob_kn)) => Some(OperatingPoint { omega_rpm, wob_kn }),
+        (None, None) => None,
+        (given, _) => {
+            let (field, other) = if given.is_some() {
+                ("at_rpm", "at_kn")
+            } else {
+                ("at_kn", "at_rpm")
+            };
+            return Err(to_py(
+                py,
+                Error::setting(field, format!("needs {other} too: where the bit is now")),
+            ));
+        }
+    };
+    let chain = check(py, strings::chain(structure, lumped, fe))?;
+    let sim = SimulatedJob {
+        settings: SimulatedSettings {
+            dt_s: kwarg(options, "dt_s")?.unwrap_or(strings::DEFAULT_DT_S),
+            ..SimulatedSettings::new(chain, job.w_ref_n, job.backend)
+        },
+        omega_rpm: axis("sim_omega_rpm", strings::DEFAULT_OMEGA_RPM)?,
+        wob_kn: axis("sim_wob_kn", strings::DEFAULT_WOB_KN)?,
+        samples: kwarg(options, "sim_samples")?.unwrap_or(strings::DEFAULT_SAMPLES),
+        at,
+    };
+    let mut notes = Vec::new();
+    let maps = py.detach(|| sim.run(inputs, &mut |line| notes.push(line)));
+    if let Some(callback) = note {
+        for line in notes {
+            callback.call1(py, (as_arguments(&line),))?;
+        }
+    }
+    let maps = check(py, maps)?;
+    let shape = [sim.omega_rpm.len(), sim.wob_kn.len()];
+    out.set_item("sim_omega_rpm", PyArray1::from_slice(py, &sim.omega_rpm))?;
+    out.set_item("sim_wob_kn", PyArray1::from_slice(py, &sim.wob_kn))?;
+    out.set_item(
+        "onset_probability",
+        PyArray1::from_slice(py, &maps.onset.probability).reshape(shape)?,
+    )?;
+    if let Some((grid, advice)) = &maps.escape {
+        out.set_item(
+            "escape_probability",
+            PyArray1::from_slice(py, &grid.probability).reshape(shape)?,
+        )?;
+        let a = PyDict::new(py);
+        a.set_item("at_rpm", advice.point.omega_rpm)?;
+        a.set_item("at_kn", advice.point.wob_kn)?;
+        a.set_item("stick_slip_probability", advice.stick_slip_probability)?;
+        a.set_item("speed_rpm", advice.speed_rpm.map(|s| s.0))?;
+        a.set_item("speed_end_probability", advice.speed_rpm.map(|s| s.1))?;
+        a.set_item("wob_kn", advice.wob_kn.map(|s| s.0))?;
+        a.set_item("wob_end_probability", advice.wob_kn.map(|s| s.1))?;
+        a.set_item("text", advice.text())?;
+        out.set_item("advice", a)?;
+    }
+    out.set_item("simulated_strings", maps.strings)?;
+    Ok(())
 }

@@ -3,8 +3,7 @@
 
 use crate::errors::*;
 use bitrock::error::Error;
-use bitrock::pipeline::stability::Structure;
-use bitrock::simulate::strings::{Chain, MAX_NODES, Schedule, StringJob, StringState, padded, steady_start};
+use bitrock::simulate::strings::{MAX_NODES, Schedule, StringJob, StringState, padded, steady_start};
 use bitrock::units::RAD_S_PER_RPM;
 use numpy::PyArray1;
 use pyo3::prelude::*;
@@ -41,13 +40,7 @@ pub(crate) fn simulate_strings<'py>(
         return Err(to_py(py, Error::setting("params", message)));
     }
     let (structure, lumped, fe) = crate::stability::structure_options(py, options)?;
-    let chain = check(
-        py,
-        match structure {
-            Structure::Lumped => lumped.validate().map(|()| Chain::one_dof(&lumped)),
-            Structure::Fe => fe.drill_string().and_then(|s| Chain::lumped_fe(&s)),
-        },
-    )?;
+    let chain = check(py, bitrock::pipeline::strings::chain(structure, &lumped, &fe))?;
     let dt_s = kwarg(options, "dt_s")?.unwrap_or(bitrock::pipeline::strings::DEFAULT_DT_S);
     check(py, chain.check_step(dt_s))?;
     let schedule = check(

@@ -290,3 +290,21 @@ def test_the_watch_calls_a_stuck_bit_stick_slipping_and_its_advice_ends_it(tmp_p
         assert share > 0.2
         for rpm in set(speeds):
             assert after_change(chain, "m2", p_nm, rpm * RPM, 1.0, state) == 0.0, rpm
+
+
+def test_python_s_simulated_maps_are_the_command_s(cli):
+    # The same maps and advice through either surface.
+    flags = ["--sim-omega-rpm", "60:140:5", "--sim-wob-kn", "100:300:3", "--sim-samples", "1"]
+    done = run_cli(cli, "stability", "--law", "m2", "--params", "13,6.5,0.3", "--omega-rpm", "20:220:5",
+                   "--wob-kn", "20:700:5", "--simulate", "--at-rpm", "60", "--at-kn", "244.2", "--backend", "cpu",
+                   "--json", *flags)
+    theirs = json.loads(done.stdout)["simulated"]
+    ours = bitrock.stability(law="m2", params=[13, 6.5, 0.3], omega_rpm="20:220:5", wob_kn="20:700:5",
+                             simulate=True, at_rpm=60, at_kn=244.2, sim_omega_rpm="60:140:5",
+                             sim_wob_kn="100:300:3", sim_samples=1, backend="cpu")
+    assert ours["onset_probability"].values.tolist() == theirs["onset"]["probability"]
+    assert ours["escape_probability"].values.tolist() == theirs["escape"]["probability"]
+    for key in ("speed_rpm", "wob_kn", "speed_end_probability", "wob_end_probability", "text"):
+        assert ours.attrs["advice"][key] == theirs["advice"][key], key
+    with pytest.raises(bitrock.InputError, match="at_kn"):
+        bitrock.stability(law="m2", params=[13, 6.5, 0.3], simulate=True, at_rpm=60, backend="cpu")

@@ -477,6 +477,13 @@ def stability(
     percentile: float | None = None,
     samples: int | None = None,
     backend: str | None = None,
+    simulate: bool = False,
+    at_rpm: float | None = None,
+    at_kn: float | None = None,
+    sim_omega_rpm: "Sequence[float] | str | None" = None,
+    sim_wob_kn: "Sequence[float] | str | None" = None,
+    sim_samples: int | None = None,
+    dt_s: float | None = None,
 ) -> Any:
     """Torsional stick-slip stability over top-drive speed Ω (rpm) and weight on bit W (kN),
     as ``bitrock stability`` computes it: for a run's last population (``source``, a
@@ -491,7 +498,15 @@ def stability(
     when the run has several laws, and each law's ``probability``. ``structure``: ``"1dof"``
     (the paper's, with ``inertia_kg_m2``, ``omega_n_rad_s``, ``damping_ratio``) or ``"fe"``
     (the finite-element string, the paper's or ``fe_file``'s, with its overrides). Axes are
-    values or ``"MIN:MAX:COUNT"``."""
+    values or ``"MIN:MAX:COUNT"``.
+
+    With ``simulate=True``, also the maps by simulated strings, as ``bitrock stability
+    --simulate`` makes them, over ``sim_omega_rpm`` × ``sim_wob_kn`` with ``sim_samples``
+    posterior samples per law and step ``dt_s``: ``onset_probability`` (stick-slip develops from
+    steady rotation kicked by a tenth of Ω) and, with ``at_rpm`` and ``at_kn`` (where the bit
+    is now), ``escape_probability`` (stick-slip persists from the state the bit is in there)
+    and the advice in ``attrs["advice"]`` (``speed_rpm``, ``speed_end_probability``,
+    ``wob_kn``, ``wob_end_probability``, ``stick_slip_probability``, ``text``)."""
     import xarray as xr
 
     posterior = None
@@ -512,7 +527,7 @@ def stability(
     options = {k: v for k, v in locals().items() if k not in ("source", "law", "params", "run", "xr")}
     if options["fe_file"] is not None:
         options["fe_file"] = os.fspath(options["fe_file"])
-    for key in ("omega_rpm", "wob_kn"):
+    for key in ("omega_rpm", "wob_kn", "sim_omega_rpm", "sim_wob_kn"):
         if options[key] is not None and not isinstance(options[key], str):
             options[key] = [float(v) for v in options[key]]
     maps = _bitrock.stability(run, law, None if params is None else [float(p) for p in params], options, _note)
@@ -526,19 +541,26 @@ def stability(
     }
     if "mixture_p_wob_kn" in maps:
         variables["mixture_p_wob_kn"] = ("omega_rpm", maps["mixture_p_wob_kn"], {"units": "kN"})
-    return xr.Dataset(
-        variables,
-        coords={
-            "law": laws,
-            "omega_rpm": ("omega_rpm", maps["omega_rpm"], {"units": "rpm"}),
-            "wob_kn": ("wob_kn", maps["wob_kn"], {"units": "kN"}),
-        },
-        attrs={
-            "structure": maps["structure"],
-            "critical_bit_damping_nms": maps["critical_bit_damping_nms"],
-            "percentile": maps["percentile"],
-        },
-    )
+    coords = {
+        "law": laws,
+        "omega_rpm": ("omega_rpm", maps["omega_rpm"], {"units": "rpm"}),
+        "wob_kn": ("wob_kn", maps["wob_kn"], {"units": "kN"}),
+    }
+    attrs = {
+        "structure": maps["structure"],
+        "critical_bit_damping_nms": maps["critical_bit_damping_nms"],
+        "percentile": maps["percentile"],
+    }
+    if "onset_probability" in maps:
+        coords["sim_omega_rpm"] = ("sim_omega_rpm", maps["sim_omega_rpm"], {"units": "rpm"})
+        coords["sim_wob_kn"] = ("sim_wob_kn", maps["sim_wob_kn"], {"units": "kN"})
+        for key in ("onset_probability", "escape_probability"):
+            if key in maps:
+                variables[key] = (("sim_omega_rpm", "sim_wob_kn"), maps[key])
+        attrs["simulated_strings"] = maps["simulated_strings"]
+        if "advice" in maps:
+            attrs["advice"] = maps["advice"]
+    return xr.Dataset(variables, coords=coords, attrs=attrs)
 
 
 def check_selection(
