@@ -6,8 +6,8 @@ use super::{Backend, fall_back_to_cpu, gpu};
 use crate::error::Result;
 use crate::simulate::strings::{self, Chain, Schedule, StringJob, StringState, Summary};
 
-/// Strings a GPU integrates per call at most: memory on the host stays bounded (≈ 450 B a string
-/// in and out) while each call keeps the device busy.
+/// Strings a GPU integrates per call at most: memory on the host stays bounded (the jobs and
+/// their results, under 1 kB a string) while each call keeps the device busy.
 pub const STRINGS_PER_CALL: usize = 1 << 20;
 
 /// Where a batch ran, for the notes and the benchmarks.

@@ -359,7 +359,7 @@ impl<'a> Simulator<'a> {
     fn integrate(&mut self, schedule: &Schedule, jobs: &[StringJob]) -> Result<Vec<(Summary, StringState)>> {
         let steps = jobs.len() as f64 * schedule.steps() as f64;
         crate::limits::check_work(
-            "omega_rpm",
+            "sim_omega_rpm",
             steps,
             FASTEST_STRING_STEPS_PER_S,
             &format!("simulating {} strings of {} s", jobs.len(), schedule.seconds()),

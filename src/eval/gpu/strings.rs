@@ -11,8 +11,8 @@ const INPUT_WORDS: usize = 12;
 const STATE_WORDS: usize = 2 * MAX_NODES + 2;
 const SUMMARY_WORDS: usize = 16;
 
-/// Strings held on the device at once: memory stays bounded (≈ 210 B a string) whatever the
-/// batch.
+/// Strings held on the device at once: memory stays bounded (448 B a string: inputs 48, state
+/// 136, summary 64, and the read-back of state and summary) whatever the batch.
 const STRINGS_PER_CHUNK: usize = 1 << 18;
 
 /// Strings per dispatch: each dispatch is its own submission, so that no single one runs long
