@@ -188,6 +188,67 @@ pub struct FieldData {
     /// backwards, torques mostly of the wrong sign): said once by every command that reads it
     /// and kept in the run's record.
     pub warnings: Vec<String>,
+    /// What the bit did over the record's time window, every row counted (those below the
+    /// minimum speed too): whether it stick-slipped, and where the rig drilled. `None` in
+    /// records stored without it.
+    #[serde(default)]
+    pub bit: Option<BitSeen>,
+}
+
+/// Bit speed below which a sample counts as stuck (rad/s): 1 rpm, as downhole tools count it.
+pub const STUCK_SPEED_RAD_S: f64 = RAD_S_PER_RPM;
+/// Share of the time stuck from which a bit stick-slips, not turning steadily (a record, a
+/// window, a simulated string's verdict window): a bit stuck a hundredth of the time is
+/// already in the cycle.
+pub const STICK_SLIP_STUCK_SHARE: f64 = 0.01;
+
+/// What a record's bit speed shows: how often the bit stuck, how hard it swung, and the mean
+/// speed and weight on bit it drilled at (its operating point: a stick-slip cycle's mean bit
+/// speed is the top drive's).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BitSeen {
+    /// Samples looked at.
+    pub samples: usize,
+    /// Share of them with |bit speed| below [`STUCK_SPEED_RAD_S`].
+    pub stuck_share: f64,
+    /// Stick-slip severity, (max − min) / (2·mean) of the bit speed; `None` where the mean is 0.
+    pub severity: Option<f64>,
+    /// Mean bit speed, rpm.
+    pub mean_speed_rpm: f64,
+    /// Mean weight on bit, kN, where recorded.
+    pub mean_wob_kn: Option<f64>,
+}
+
+impl BitSeen {
+    /// What `speeds_rad_s` (with the weights on bit `wob_n`, N, where recorded) show; `None`
+    /// without a sample.
+    pub fn of(speeds_rad_s: &[f64], wob_n: Option<&[f64]>) -> Option<Self> {
+        if speeds_rad_s.is_empty() {
+            return None;
+        }
+        let n = speeds_rad_s.len() as f64;
+        let stuck = speeds_rad_s.iter().filter(|v| v.abs() < STUCK_SPEED_RAD_S).count();
+        let mean = crate::numerics::compensated_sum(speeds_rad_s.iter().copied()) / n;
+        let (lo, hi) = speeds_rad_s
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(*v), hi.max(*v))
+            });
+        Some(Self {
+            samples: speeds_rad_s.len(),
+            stuck_share: stuck as f64 / n,
+            severity: (mean.abs() > f64::MIN_POSITIVE).then(|| (hi - lo) / (2.0 * mean.abs())),
+            mean_speed_rpm: mean / RAD_S_PER_RPM,
+            mean_wob_kn: wob_n
+                .filter(|w| !w.is_empty())
+                .map(|w| crate::numerics::compensated_sum(w.iter().copied()) / w.len() as f64 / 1000.0),
+        })
+    }
+
+    /// The bit stick-slipped: stuck at least [`STICK_SLIP_STUCK_SHARE`] of the time.
+    pub fn stick_slips(&self) -> bool {
+        self.stuck_share >= STICK_SLIP_STUCK_SHARE
+    }
 }
 
 /// Names of the columns read.
@@ -514,6 +575,7 @@ fn assemble(
     // Judged on every row read: a unit off by a factor moves rows across the filters.
     let implausible = unit_warnings(path, &columns, units, &all);
     let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
+    let bit = seen_in_window(&all, opts);
     let mut warnings = implausible;
     warnings.extend(record_warnings(
         path,
@@ -533,7 +595,22 @@ fn assemble(
         calibration,
         validation,
         warnings,
+        bit,
     })
+}
+
+/// Whether row `i` of `all` lies in the options' time window (every row without a time column).
+fn in_time_window(all: &Samples, opts: &DataOptions, i: usize) -> bool {
+    match &all.time_s {
+        Some(t) => opts.t_start_s.is_none_or(|a| t[i] >= a) && opts.t_end_s.is_none_or(|b| t[i] <= b),
+        None => true,
+    }
+}
+
+/// What the bit did in the record's time window, every row counted.
+fn seen_in_window(all: &Samples, opts: &DataOptions) -> Option<BitSeen> {
+    let window = all.pick(|i| in_time_window(all, opts, i));
+    BitSeen::of(&window.speed_rad_s, window.wob_n.as_deref())
 }
 
 /// A CSV reader's error as a format error of `path`, at its line where known.
@@ -909,11 +986,7 @@ fn filter_and_split(
     let torque_column = &columns.torque;
     let rows_read = all.len();
     // Filters: time window, then thinning, then the minimum bit speed.
-    let in_window = |i: usize| match &all.time_s {
-        Some(t) => opts.t_start_s.is_none_or(|a| t[i] >= a) && opts.t_end_s.is_none_or(|b| t[i] <= b),
-        None => true,
-    };
-    let window: Vec<usize> = (0..rows_read).filter(|&i| in_window(i)).collect();
+    let window: Vec<usize> = (0..rows_read).filter(|&i| in_time_window(all, opts, i)).collect();
     let min_speed = SpeedUnit::Rpm.to_rad_s(opts.min_speed_rpm);
     let kept: Vec<usize> = window
         .iter()

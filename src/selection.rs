@@ -680,6 +680,7 @@ fn fit_replicate(run: &CheckedRun, job: Job) -> Result<Fitted> {
         calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &residuals, 0.0, &mut rng),
         validation: synthesize(law, &params_si, &data.validation, w_ref_n, &residuals, 0.0, &mut rng),
         warnings: Vec::new(),
+        bit: None,
         ..data.clone()
     };
     // The fits start where the answers are believed to be, as well as on the grid: the run's

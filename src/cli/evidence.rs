@@ -304,17 +304,29 @@ fn finish(
             dir.display()
         ));
     }
+    let advice = analysis.record_advice(data, job.backend);
     let mut out = print::stdout();
     if cmd.json {
         let mut document = analysis.document(data, &job.prior.describe(), false);
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
         }
+        if let Some(advice) = &advice {
+            document["record_bit"] = serde_json::to_value(data.bit)?;
+            document["advice"] = serde_json::to_value(advice)?;
+        }
         print::json(&mut out, document)?;
     } else {
         tables(&mut out, data, job, analysis)?;
         if let Some(check) = &check {
             check_table(&mut out, check)?;
+        }
+        if let Some(advice) = &advice {
+            writeln!(
+                out,
+                "\nadvice at the record's operating point (the paper's 1-DOF string): {}",
+                advice.words
+            )?;
         }
     }
     Ok(ExitCode::SUCCESS)

@@ -4,12 +4,15 @@
 use super::args::StructureArgs;
 use super::args::finite_number;
 use bitrock::Error;
+use bitrock::data::BitSeen;
 use bitrock::eval::Backend;
 use bitrock::eval::strings::Ran;
 use bitrock::laws::PAPER_W_REF_N;
+use bitrock::pipeline::advice::{self, Adviser};
 use bitrock::pipeline::stability::{DEFAULT_OMEGA_RPM, DEFAULT_PERCENT, DEFAULT_SAMPLES, DEFAULT_WOB_KN, Structure};
 use bitrock::pipeline::strings::{self, Grid, OperatingPoint, SimulatedJob, SimulatedMaps, SimulatedSettings};
 use bitrock::pipeline::{MapSource, StabilityJob};
+use bitrock::simulate::strings::Chain;
 use bitrock::stability::map::{self, Criterion, LawSamples};
 use bitrock::units::TorqueUnit;
 use clap::Args;
@@ -76,12 +79,14 @@ pub struct StabilityCmd {
     #[arg(long)]
     pub json: bool,
     /// Also map stick-slip by simulating the string in time for every posterior sample and
-    /// cell: the onset from steady rotation kicked by a tenth of the speed, and with --at-rpm
-    /// and --at-kn the escape from the state the bit is in there, the bistable band between
-    /// them, and the nearest speed and weight on bit that end the stick-slip.
+    /// cell: the onset from steady rotation kicked by a tenth of the speed, and from the
+    /// operating point (--at-rpm and --at-kn, or the record's) the escape from the state the
+    /// bit is in there, the bistable band between them, and the nearest speed and weight on
+    /// bit that end the stick-slip.
     #[arg(long)]
     pub simulate: bool,
-    /// Top-drive speed the rig turns at now, rpm: where the escape map and the advice start.
+    /// Top-drive speed the rig turns at now, rpm: where the escape map and the advice start
+    /// [default: a run's or an evidence's record's mean bit speed and weight on bit].
     #[arg(long, value_parser = finite_number, requires_all = ["simulate", "at_kn"], value_name = "RPM")]
     pub at_rpm: Option<f64>,
     /// Weight on bit the rig drills with now, kN.
@@ -110,7 +115,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
-    let (source, own_w_ref_n) = map_source(cmd)?;
+    let (source, own_w_ref_n, evidence_bit) = map_source(cmd)?;
     let w_ref_n = match (cmd.w_ref_kn, own_w_ref_n) {
         (Some(kn), _) => kn * 1000.0,
         (None, Some(n)) => {
@@ -171,8 +176,32 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
             file.write_all(&boundaries_csv(omega, &columns))
         })?;
     }
+    let record_bit = maps.record_bit.or(evidence_bit);
+    if cmd.run.is_some() && record_bit.is_none() {
+        super::print::note(format_args!(
+            "note: the directory's record was kept without what its bit did (stored by an older bitrock): no advice for its operating point"
+        ));
+    }
+    let chain = strings::chain(
+        cmd.string.structure,
+        &cmd.string.lumped.lumped(),
+        &cmd.string.fe.settings(),
+    )?;
+    // At the record, the parameters are for the W_ref its posterior was scaled to, or for
+    // the weight on bit it drilled with.
+    let scaled_w_ref_n = cmd.w_ref_kn.map(|kn| kn * 1000.0).or(own_w_ref_n).or(maps.run_w_ref_n);
+    let at_record = record_bit.map(|seen| (seen, advice::params_w_ref_n(scaled_w_ref_n, &seen, w_ref_n)));
+    let advice = at_record.map(|(seen, record_w_ref_n)| {
+        let adviser = Adviser::for_record(job.criterion, chain.clone(), cmd.backend);
+        (seen, adviser.advise_record(&maps.inputs, record_w_ref_n, &seen))
+    });
     let simulated = if cmd.simulate {
-        Some(simulate(cmd, &maps.inputs, w_ref_n)?)
+        let (at, sim_w_ref_n) = match (cmd.at_rpm, cmd.at_kn, at_record) {
+            (Some(omega_rpm), Some(wob_kn), _) => (Some(OperatingPoint { omega_rpm, wob_kn }), w_ref_n),
+            (_, _, Some((seen, record_w_ref_n))) => (Some(advice::record_point(&seen, record_w_ref_n)), record_w_ref_n),
+            _ => (None, w_ref_n),
+        };
+        Some(simulate(cmd, chain, at, &maps.inputs, sim_w_ref_n)?)
     } else {
         None
     };
@@ -190,22 +219,31 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         if let Some(sim) = &simulated {
             v["simulated"] = simulated_json(sim);
         }
+        if let Some((seen, advice)) = &advice {
+            v["record"] = json!(seen);
+            v["advice"] = json!(advice);
+        }
         super::print::json(&mut out, v)?;
     } else {
         print_table(&mut out, cmd.string.structure, c, omega, &columns)?;
         if let Some(sim) = &simulated {
             print_simulated(sim, &mut out)?;
         }
+        if let Some((_, advice)) = &advice {
+            writeln!(out, "\nadvice at the record's operating point: {}", advice.words)?;
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn simulate(cmd: &StabilityCmd, inputs: &[LawSamples], w_ref_n: f64) -> anyhow::Result<SimulatedMaps> {
-    let chain = strings::chain(
-        cmd.string.structure,
-        &cmd.string.lumped.lumped(),
-        &cmd.string.fe.settings(),
-    )?;
+/// The simulated maps on `chain`, the escape map and its advice from `at` where known.
+fn simulate(
+    cmd: &StabilityCmd,
+    chain: Chain,
+    at: Option<OperatingPoint>,
+    inputs: &[LawSamples],
+    w_ref_n: f64,
+) -> anyhow::Result<SimulatedMaps> {
     let job = SimulatedJob {
         settings: SimulatedSettings {
             dt_s: cmd.dt_s,
@@ -214,10 +252,7 @@ fn simulate(cmd: &StabilityCmd, inputs: &[LawSamples], w_ref_n: f64) -> anyhow::
         omega_rpm: map::parse_axis(&cmd.sim_omega_rpm, "sim_omega_rpm")?,
         wob_kn: map::parse_axis(&cmd.sim_wob_kn, "sim_wob_kn")?,
         samples: cmd.sim_samples,
-        at: cmd
-            .at_rpm
-            .zip(cmd.at_kn)
-            .map(|(omega_rpm, wob_kn)| OperatingPoint { omega_rpm, wob_kn }),
+        at,
     };
     Ok(job.run(inputs, &mut |line| super::print::note(line))?)
 }
@@ -236,7 +271,8 @@ fn grid_json(grid: &Grid) -> serde_json::Value {
         .chunks(grid.wob_kn.len())
         .map(|r| r.iter().map(|p| (!p.is_nan()).then_some(*p)).collect())
         .collect();
-    json!({"omega_rpm": grid.omega_rpm, "wob_kn": grid.wob_kn, "probability": rows, "diverged_strings": grid.diverged})
+    let diverged: Vec<&[f64]> = grid.diverged_weight.chunks(grid.wob_kn.len()).collect();
+    json!({"omega_rpm": grid.omega_rpm, "wob_kn": grid.wob_kn, "probability": rows, "diverged_strings": grid.diverged, "diverged_share": diverged})
 }
 
 /// The simulated maps in `--json`.
@@ -256,10 +292,12 @@ fn simulated_json(maps: &SimulatedMaps) -> serde_json::Value {
             "at_rpm": advice.point.omega_rpm,
             "at_kn": advice.point.wob_kn,
             "stick_slip_probability": advice.stick_slip_probability,
-            "speed_rpm": advice.speed_rpm.map(|s| s.0),
-            "speed_end_probability": advice.speed_rpm.map(|s| s.1),
-            "wob_kn": advice.wob_kn.map(|s| s.0),
-            "wob_end_probability": advice.wob_kn.map(|s| s.1),
+            "speed_rpm": advice.speed_rpm.map(|w| w.to),
+            "speed_end_probability": advice.speed_rpm.map(|w| w.ends_probability),
+            "speed_diverged_share": advice.speed_rpm.map(|w| w.diverged_share),
+            "wob_kn": advice.wob_kn.map(|w| w.to),
+            "wob_end_probability": advice.wob_kn.map(|w| w.ends_probability),
+            "wob_diverged_share": advice.wob_kn.map(|w| w.diverged_share),
             "text": advice.text(),
         });
     }
@@ -317,23 +355,26 @@ fn print_simulated(maps: &SimulatedMaps, out: &mut impl Write) -> std::io::Resul
 }
 
 /// Whose maps: `--run` (a run or an evidence directory), `--posterior`, or `--law` at
-/// `--params` (in `--torque-unit`, made SI here); and the W_ref (N) an evidence directory's
-/// torque parameters are for, where its evidence scaled them.
-fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<f64>)> {
+/// `--params` (in `--torque-unit`, made SI here); the W_ref (N) an evidence directory's
+/// torque parameters are for, where its evidence scaled them; and what its record's bit did.
+fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<f64>, Option<BitSeen>)> {
     if let Some(path) = &cmd.posterior {
         return Ok((
             MapSource::Posterior(bitrock::documents::read_particles_csv(path)?),
+            None,
             None,
         ));
     }
     match (&cmd.run, &cmd.law, &cmd.params) {
         (Some(dir), _, _) if bitrock::run::dir::is_evidence_dir(dir) => {
             let (particles, w_ref_n) = bitrock::pipeline::evidence::dir::posterior(dir)?;
-            Ok((MapSource::Posterior(particles), w_ref_n))
+            let bit = bitrock::pipeline::evidence::dir::record(dir)?.bit;
+            Ok((MapSource::Posterior(particles), w_ref_n, bit))
         }
-        (Some(dir), _, _) => Ok((MapSource::Run(dir.clone()), None)),
+        (Some(dir), _, _) => Ok((MapSource::Run(dir.clone()), None, None)),
         (None, Some(law), Some(params)) => Ok((
             MapSource::law(super::args::parse_law(law)?, params, cmd.torque_unit)?,
+            None,
             None,
         )),
         _ => Err(Error::setting(

@@ -15,6 +15,7 @@ use crate::prior::PriorFile;
 use crate::run::{self, Continuation, Outcome};
 use std::path::Path;
 
+pub mod advice;
 pub mod evidence;
 pub mod stability;
 pub mod strings;

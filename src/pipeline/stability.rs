@@ -121,6 +121,10 @@ pub struct StabilityMaps {
     pub grids: Vec<Vec<f64>>,
     /// How the run ended when not by its own rules ([`run::Store::early_end`]), for a run source.
     pub early_end: Option<String>,
+    /// What the run's record showed of its bit (a run source whose store keeps it).
+    pub record_bit: Option<crate::data::BitSeen>,
+    /// The W_ref (N) a run's parameters are for where its fit scaled each torque by WOB / W_ref.
+    pub run_w_ref_n: Option<f64>,
 }
 
 impl StabilityJob {
@@ -187,7 +191,7 @@ impl StabilityJob {
         {
             note(format!("warning: {warning}"));
         }
-        let (inputs, early_end) = match &self.source {
+        let (inputs, early_end, record_bit, run_w_ref_n) = match &self.source {
             MapSource::Run(dir) => {
                 run::dir::refuse_unfinished_evidence(dir)?;
                 let store = run::Store::open(dir)?;
@@ -197,9 +201,22 @@ impl StabilityJob {
                     path: dir.clone(),
                     message: format!("the run has no completed population yet; {}", run::resume_advice(dir)),
                 })?;
-                (crate::abc::posterior::map_inputs(last, self.samples), early_end)
+                let run_w_ref_n = serde_json::from_value::<run::Config>(stored.setup.config.clone())
+                    .ok()
+                    .and_then(|c| c.fit.w_ref_n);
+                (
+                    crate::abc::posterior::map_inputs(last, self.samples),
+                    early_end,
+                    stored.setup.data.bit,
+                    run_w_ref_n,
+                )
             }
-            MapSource::Posterior(particles) => (crate::abc::posterior::map_inputs_of(particles, self.samples), None),
+            MapSource::Posterior(particles) => (
+                crate::abc::posterior::map_inputs_of(particles, self.samples),
+                None,
+                None,
+                None,
+            ),
             MapSource::Law { law, params_si } => (
                 vec![LawSamples {
                     law: *law,
@@ -207,6 +224,8 @@ impl StabilityJob {
                     map_si: params_si.clone(),
                     samples_si: vec![params_si.clone()],
                 }],
+                None,
+                None,
                 None,
             ),
         };
@@ -265,6 +284,8 @@ impl StabilityJob {
             boundaries,
             grids,
             early_end,
+            record_bit,
+            run_w_ref_n,
         })
     }
 

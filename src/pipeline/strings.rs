@@ -177,6 +177,11 @@ pub struct Grid {
     pub omega_rpm: Vec<f64>,
     pub wob_kn: Vec<f64>,
     pub probability: Vec<f64>,
+    /// Per cell, the mixture's weight of the strings that stick-slipped and stayed in bounds:
+    /// the probability where none diverged, its lower bound where some did.
+    pub stick_slip_weight: Vec<f64>,
+    /// Per cell, the mixture's weight of the strings that diverged (left physical bounds).
+    pub diverged_weight: Vec<f64>,
     /// Strings that diverged (their cells unknown).
     pub diverged: usize,
 }
@@ -395,27 +400,36 @@ impl<'a> Simulator<'a> {
         Ok(out)
     }
 
-    /// Weighted probability of stick-slip over the members, cell by cell: `summaries` is
-    /// cell-major, members inner.
-    fn probabilities(members: &[Member], summaries: &[Summary], cells: usize) -> (Vec<f64>, usize) {
+    /// Weighted probability of stick-slip over the members, cell by cell, on the grid
+    /// (`omega_rpm`, `wob_kn`): `summaries` is cell-major, members inner.
+    fn grid(members: &[Member], summaries: &[Summary], omega_rpm: &[f64], wob_kn: &[f64]) -> Grid {
         let n = members.len();
-        let mut diverged = 0;
-        let probability = (0..cells)
-            .map(|c| {
-                let cell = &summaries[c * n..(c + 1) * n];
-                let bad = cell.iter().filter(|s| s.diverged).count();
-                diverged += bad;
-                if bad > 0 {
-                    return f64::NAN;
-                }
+        let cells = omega_rpm.len() * wob_kn.len();
+        let mut grid = Grid {
+            omega_rpm: omega_rpm.to_vec(),
+            wob_kn: wob_kn.to_vec(),
+            probability: Vec::with_capacity(cells),
+            stick_slip_weight: Vec::with_capacity(cells),
+            diverged_weight: Vec::with_capacity(cells),
+            diverged: 0,
+        };
+        for cell in summaries.chunks(n).take(cells) {
+            let weight_of = |keep: &dyn Fn(&Summary) -> bool| {
                 cell.iter()
                     .zip(members)
-                    .filter(|(s, _)| s.stick_slips())
+                    .filter(|(s, _)| keep(s))
                     .fold(0.0, |p, (_, m)| p + m.weight)
                     .min(1.0)
-            })
-            .collect();
-        (probability, diverged)
+            };
+            let stick_slip = weight_of(&|s| s.stick_slips());
+            let diverged = weight_of(&|s| s.diverged);
+            grid.diverged += cell.iter().filter(|s| s.diverged).count();
+            grid.probability
+                .push(if diverged > 0.0 { f64::NAN } else { stick_slip });
+            grid.stick_slip_weight.push(stick_slip);
+            grid.diverged_weight.push(diverged);
+        }
+        grid
     }
 
     /// The onset map: P(stick-slip develops from steady rotation kicked) per cell.
@@ -428,13 +442,7 @@ impl<'a> Simulator<'a> {
             }
         }
         let summaries: Vec<Summary> = self.integrate(&schedule, &jobs)?.into_iter().map(|r| r.0).collect();
-        let (probability, diverged) = Self::probabilities(&self.members, &summaries, omega_rpm.len() * wob_kn.len());
-        Ok(Grid {
-            omega_rpm: omega_rpm.to_vec(),
-            wob_kn: wob_kn.to_vec(),
-            probability,
-            diverged,
-        })
+        Ok(Self::grid(&self.members, &summaries, omega_rpm, wob_kn))
     }
 
     /// Each member's string at the operating point, started from rest (a bit on bottom at the
@@ -474,10 +482,10 @@ impl<'a> Simulator<'a> {
                 states[idx[k]] = state;
             }
         }
-        let (p, _) = Self::probabilities(&replicas, &summaries, 1);
+        let here = Self::grid(&replicas, &summaries, &[point.omega_rpm], &[point.wob_kn]);
         Ok(AtPoint {
             point,
-            stick_slip_probability: p[0],
+            stick_slip_probability: here.probability[0],
             replicas,
             states,
         })
@@ -499,13 +507,7 @@ impl<'a> Simulator<'a> {
             }
         }
         let summaries: Vec<Summary> = self.integrate(&schedule, &jobs)?.into_iter().map(|r| r.0).collect();
-        let (probability, diverged) = Self::probabilities(&from.replicas, &summaries, omega_rpm.len() * wob_kn.len());
-        Ok(Grid {
-            omega_rpm: omega_rpm.to_vec(),
-            wob_kn: wob_kn.to_vec(),
-            probability,
-            diverged,
-        })
+        Ok(Self::grid(&from.replicas, &summaries, omega_rpm, wob_kn))
     }
 
     /// What ends stick-slip from the operating point: the nearest top-drive speed above it (at
@@ -516,29 +518,61 @@ impl<'a> Simulator<'a> {
         let p = from.point;
         let by_speed = self.escape(from, speeds_rpm, &[p.wob_kn])?;
         let by_weight = self.escape(from, &[p.omega_rpm], weights_kn)?;
-        let first = |axis: &[f64], probs: &[f64]| {
-            axis.iter()
-                .zip(probs)
-                .find(|(_, q)| 1.0 - **q >= ADVICE_CONFIDENCE)
-                .map(|(v, q)| (*v, 1.0 - q))
-        };
-        let speed = first(speeds_rpm, &by_speed.probability);
-        let mut weights: Vec<(f64, f64)> = weights_kn
-            .iter()
-            .copied()
-            .zip(by_weight.probability.iter().copied())
-            .collect();
-        // Nearest first: the weights below the operating point, heaviest first.
-        weights.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let (w_axis, w_probs): (Vec<f64>, Vec<f64>) = weights.into_iter().unzip();
         Ok(EscapeAdvice {
             point: p,
             stick_slip_probability: from.stick_slip_probability,
-            speed_rpm: speed,
-            wob_kn: first(&w_axis, &w_probs),
+            speed_rpm: Way::nearest(speeds_rpm, &by_speed, false),
+            wob_kn: Way::nearest(weights_kn, &by_weight, true),
             speed_scan: by_speed,
             wob_scan: by_weight,
         })
+    }
+}
+
+/// A change that ends stick-slip: where to, and how surely.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Way {
+    /// The top-drive speed (rpm) or weight on bit (kN) to change to.
+    pub to: f64,
+    /// P(stick-slip ends) there: the mixture's weight of the strings that settled out of it.
+    /// A string that left physical bounds has not been seen to end it, so where some did this
+    /// is a lower bound.
+    pub ends_probability: f64,
+    /// The mixture's weight of the strings that left physical bounds there.
+    pub diverged_share: f64,
+}
+
+impl Way {
+    /// The first value of `axis` (the scan `grid` along it, in its order, or `reversed`) whose
+    /// P(it ends) reaches [`ADVICE_CONFIDENCE`].
+    fn nearest(axis: &[f64], grid: &Grid, reversed: bool) -> Option<Way> {
+        let mut cells: Vec<Way> = axis
+            .iter()
+            .zip(grid.stick_slip_weight.iter().zip(&grid.diverged_weight))
+            .map(|(v, (s, d))| Way {
+                to: *v,
+                ends_probability: (1.0 - s - d).max(0.0),
+                diverged_share: *d,
+            })
+            .collect();
+        if reversed {
+            cells.reverse();
+        }
+        cells.into_iter().find(|w| w.ends_probability >= ADVICE_CONFIDENCE)
+    }
+
+    /// P(it ends) in words: "P(it ends) = 0.97", or a lower bound with the strings that left
+    /// physical bounds.
+    fn probability_text(&self) -> String {
+        if self.diverged_share > 0.0 {
+            format!(
+                "P(it ends) ≥ {:.2}; {:.0} % of the strings left physical bounds there",
+                self.ends_probability,
+                100.0 * self.diverged_share
+            )
+        } else {
+            format!("P(it ends) = {:.2}", self.ends_probability)
+        }
     }
 }
 
@@ -548,10 +582,10 @@ pub struct EscapeAdvice {
     pub point: OperatingPoint,
     /// P(the bit stick-slips at the operating point), simulated.
     pub stick_slip_probability: f64,
-    /// The nearest speed (rpm) that ends it, with P(it ends); `None` when none scanned does.
-    pub speed_rpm: Option<(f64, f64)>,
-    /// The nearest lighter weight (kN) that ends it, with P(it ends).
-    pub wob_kn: Option<(f64, f64)>,
+    /// The nearest speed (rpm) that ends it; `None` when none scanned does.
+    pub speed_rpm: Option<Way>,
+    /// The nearest lighter weight (kN) that ends it.
+    pub wob_kn: Option<Way>,
     /// P(stick-slip persists) along the speeds at the operating weight.
     pub speed_scan: Grid,
     /// P(stick-slip persists) along the weights at the operating speed.
@@ -563,13 +597,19 @@ impl EscapeAdvice {
     /// where neither does, how far the scans went.
     pub fn ways(&self) -> String {
         let mut ways = Vec::new();
-        if let Some((rpm, q)) = self.speed_rpm {
+        if let Some(w) = self.speed_rpm {
             ways.push(format!(
-                "raise the top-drive speed to {rpm:.0} rpm (P(it ends) = {q:.2})"
+                "raise the top-drive speed to {:.0} rpm ({})",
+                w.to,
+                w.probability_text()
             ));
         }
-        if let Some((kn, q)) = self.wob_kn {
-            ways.push(format!("lower the weight on bit to {kn:.0} kN (P(it ends) = {q:.2})"));
+        if let Some(w) = self.wob_kn {
+            ways.push(format!(
+                "lower the weight on bit to {:.0} kN ({})",
+                w.to,
+                w.probability_text()
+            ));
         }
         if ways.is_empty() {
             let p = self.point;

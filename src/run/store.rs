@@ -165,6 +165,9 @@ struct DataMeta {
     /// The record's warnings (stores written before they were kept read as none).
     #[serde(default)]
     warnings: Vec<String>,
+    /// What the bit did over the record (stores written before it was kept read as unknown).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    bit: Option<crate::data::BitSeen>,
 }
 
 /// What defines a run besides its populations. Serialisable whole (a run kept in memory by
@@ -718,6 +721,7 @@ impl Store {
             calibration: self.load_samples("calibration")?,
             validation: self.load_samples("validation")?,
             warnings: data_meta.warnings,
+            bit: data_meta.bit,
         };
         let fits = self.load_fits(RecordScales::of(&data.calibration))?;
         let prior = self.load_prior()?;
@@ -1245,6 +1249,7 @@ fn data_meta(data: &FieldData) -> DataMeta {
         rows_read: data.rows_read,
         rows_used: data.rows_used,
         warnings: data.warnings.clone(),
+        bit: data.bit,
     }
 }
 

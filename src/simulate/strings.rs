@@ -27,13 +27,11 @@ use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::stability::fe::DrillString;
 use crate::stability::lumped::Lumped;
-use crate::units::RAD_S_PER_RPM;
 
 /// Most nodes in a chain: the kernel's per-string arrays hold this many.
 pub const MAX_NODES: usize = 16;
 
-/// Bit speed below which a sample counts as stuck (rad/s): 1 rpm, as downhole tools count it.
-pub const STUCK_SPEED_RAD_S: f64 = RAD_S_PER_RPM;
+pub use crate::data::{STICK_SLIP_STUCK_SHARE, STUCK_SPEED_RAD_S};
 
 /// Largest |λ|·dt of the chain's linear modes: inside RK4's stability region (2.83 on the
 /// imaginary axis, 2.78 on the real one) with a margin.
@@ -381,10 +379,6 @@ impl Summary {
         self.last_stuck = stuck;
     }
 }
-
-/// Stuck share at or above which a string (or a record) is stick-slipping, not turning
-/// steadily: a bit stuck a hundredth of the time is already in the cycle.
-pub const STICK_SLIP_STUCK_SHARE: f64 = 0.01;
 
 impl Summary {
     /// Share of the samples stuck.

@@ -39,18 +39,17 @@ pub mod wits;
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
 use crate::abc::evidence::{EvidenceConfig, NoiseModel, Start};
-use crate::data::{DataOptions, FieldData, Row};
+use crate::data::{BitSeen, DataOptions, FieldData, Row};
 use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
+use crate::pipeline::advice::{Adviser, EscapeSettings};
 use crate::pipeline::evidence::{EvidenceAnalysis, EvidenceJob, EvidencePrior, WarmStart};
-use crate::pipeline::strings::{
-    OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn, thinned,
-};
-use crate::simulate::strings::{Chain, Summary};
+use crate::pipeline::strings::OperatingPoint;
+use crate::simulate::strings::Chain;
 use crate::stability::lumped::Lumped;
-use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
+use crate::stability::map::Criterion;
 use crate::units::RAD_S_PER_RPM;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -123,7 +122,7 @@ impl Default for WatchSettings {
             forgetting: 0.5,
             floor: 0.01,
             change_nats: 30.0,
-            risk: 0.05,
+            risk: crate::pipeline::advice::DEFAULT_RISK,
             criterion: Criterion::Lumped(Lumped::default()),
             w_ref_n: PAPER_W_REF_N,
             backend: Backend::Auto,
@@ -210,40 +209,7 @@ pub struct LawUpdate {
 }
 
 /// The advice of a window.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Advice {
-    /// The operating point: top-drive speed (rpm; the mean bit speed where the record has no
-    /// top-drive column) and weight on bit (kN).
-    pub omega_rpm: f64,
-    pub wob_kn: f64,
-    /// P(unstable steady rotation) there, under the mixture posterior.
-    pub p_unstable: f64,
-    /// The nearest top-drive speed at this weight on bit with P below the risk; `None` where
-    /// none within the speeds looked at (10–300 rpm).
-    pub safe_omega_rpm: Option<f64>,
-    /// The nearest weight on bit at this speed with P below the risk; `None` where none within
-    /// 10 %–200 % of this one.
-    pub safe_wob_kn: Option<f64>,
-    /// The same in words.
-    pub words: String,
-    /// Share of the window's samples with the bit below 1 rpm (every sample, those under
-    /// the fit's minimum speed included).
-    #[serde(default)]
-    pub stuck_share: f64,
-    /// Stick-slip severity of the window, (max − min) / (2·mean) of the bit speed.
-    #[serde(default)]
-    pub severity: Option<f64>,
-    /// The bit stick-slips in this window (stuck at least 1 % of it): never called steady.
-    #[serde(default)]
-    pub stick_slip_now: bool,
-    /// From the state the bit is in, by simulated strings: the nearest higher top-drive speed
-    /// (rpm) that ends the stick-slip, with P(it ends).
-    #[serde(default)]
-    pub escape_omega_rpm: Option<(f64, f64)>,
-    /// The nearest lighter weight on bit (kN) that ends it, with P(it ends).
-    #[serde(default)]
-    pub escape_wob_kn: Option<(f64, f64)>,
-}
+pub use crate::pipeline::advice::Advice;
 
 /// What a watch says of one window: one JSON line.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -912,6 +878,26 @@ impl Watch {
         })
     }
 
+    /// The windows' advice: the watch's criterion and risk; a stick-slipping window's way out
+    /// by the 1-DOF string simulated for a few samples of the likely laws, on the CPU (within
+    /// the window's latency), where the criterion is the 1-DOF string's.
+    fn adviser(&self) -> Adviser {
+        let criterion = self.settings.criterion;
+        Adviser {
+            criterion,
+            risk: self.settings.risk,
+            escape: match criterion {
+                Criterion::Lumped(lumped) => Some(EscapeSettings {
+                    chain: Chain::one_dof(&lumped),
+                    samples: ESCAPE_SAMPLES,
+                    min_probability: ESCAPE_MIN_PROBABILITY,
+                    backend: Backend::Cpu,
+                }),
+                Criterion::Critical(_) => None,
+            },
+        }
+    }
+
     /// Adds the advice (from the latest posterior), the window's picture and the latency.
     fn completed(&mut self, mut update: Update, window: &Window) -> Update {
         self.carried.window = Some(window.index);
@@ -922,9 +908,16 @@ impl Watch {
             .as_ref()
             .map(|posterior| crate::abc::posterior::map_inputs_of(posterior, ADVICE_SAMPLES));
         if let Some(inputs) = &inputs {
-            let mut advice = self.advise(inputs, omega_rpm, wob_kn);
-            self.observe_stick_slip(&mut advice, &window.rows, inputs);
-            update.advice = Some(advice);
+            let speeds: Vec<f64> = window.rows.iter().map(|r| r.speed_rad_s).collect();
+            let seen = BitSeen::of(&speeds, None);
+            // The parameters describe the torque at the window's own weight on bit: that
+            // weight is the advice's W_ref.
+            update.advice = Some(self.adviser().advise(
+                inputs,
+                wob_kn * 1000.0,
+                OperatingPoint { omega_rpm, wob_kn },
+                seen.as_ref().map(|s| (s, "window")),
+            ));
         }
         let posterior = inputs.as_deref().map(|inputs| view::Posterior {
             inputs,
@@ -1003,112 +996,6 @@ impl Watch {
                 "the bit turned at one speed (5–95 % of its speeds within {span_rpm:.1} rpm): no law can be told from another here"
             )
         })
-    }
-
-    /// What the window's bit speed shows: a window stuck at least 1 % of the time
-    /// stick-slips whatever the linear criterion says of steady rotation there, and its advice
-    /// becomes what ends the cycle from the state the bit is in, by simulated strings (the
-    /// 1-DOF string; on a finite-element criterion the advice says the stick-slip and the
-    /// linear maps' answer, which concerns steady rotation only).
-    fn observe_stick_slip(&self, advice: &mut Advice, rows: &[Row], inputs: &[LawSamples]) {
-        let mut seen = Summary::default();
-        for r in rows {
-            seen.push(r.speed_rad_s, r.torque_nm, f64::NAN);
-        }
-        advice.stuck_share = seen.stuck_share();
-        advice.severity = Some(seen.severity()).filter(|v| v.is_finite());
-        advice.stick_slip_now = seen.stick_slips();
-        if !advice.stick_slip_now {
-            return;
-        }
-        let (omega_rpm, wob_kn) = (advice.omega_rpm, advice.wob_kn);
-        let now = format!(
-            "stick-slip now at {omega_rpm:.0} rpm and {wob_kn:.0} kN (bit stuck {:.0} % of the window{})",
-            100.0 * advice.stuck_share,
-            advice.severity.map_or(String::new(), |s| format!(", severity {s:.2}"))
-        );
-        let Criterion::Lumped(lumped) = self.settings.criterion else {
-            advice.words = format!("{now}: the maps of steady rotation do not say what ends it on this string");
-            return;
-        };
-        // The likely laws, a few samples each: the advice keeps to the window's latency.
-        let inputs = thinned(inputs, ESCAPE_SAMPLES, ESCAPE_MIN_PROBABILITY);
-        let settings = SimulatedSettings::new(Chain::one_dof(&lumped), wob_kn * 1000.0, Backend::Cpu);
-        let mut quiet = |_: String| {};
-        let escape = Simulator::new(&settings, &inputs, &mut quiet).and_then(|mut sim| {
-            let at = sim.at_point(OperatingPoint { omega_rpm, wob_kn })?;
-            sim.escape_advice(&at, &advice_speeds_rpm(omega_rpm), &advice_weights_kn(wob_kn))
-        });
-        match escape {
-            Ok(e) => {
-                advice.escape_omega_rpm = e.speed_rpm;
-                advice.escape_wob_kn = e.wob_kn;
-                advice.words = format!("{now}: {}", e.ways());
-            }
-            Err(e) => advice.words = format!("{now}: the simulated strings failed ({e})"),
-        }
-    }
-
-    /// P(unstable) at the operating point (`omega_rpm`, `wob_kn`) under the mixture `inputs`,
-    /// and the nearest safe speed and weight. The parameters describe the torque at the
-    /// window's own weight on bit, so that weight is the maps' W_ref.
-    fn advise(&self, inputs: &[LawSamples], omega_rpm: f64, wob_kn: f64) -> Advice {
-        let criterion = self.settings.criterion;
-        let map = |omega: &[f64], wob: &[f64]| mixture_probability_grid(inputs, omega, wob, criterion, wob_kn * 1000.0);
-        let p_unstable = map(&[omega_rpm], &[wob_kn])[0];
-        let speeds = view::map_speeds_rpm();
-        let by_speed = map(&speeds, &[wob_kn]);
-        let weights = view::map_weights_kn(wob_kn);
-        let by_weight = map(&[omega_rpm], &weights);
-        let nearest = |values: &[f64], p: &[f64], at: f64| {
-            values
-                .iter()
-                .zip(p)
-                .filter(|(_, p)| **p < self.settings.risk)
-                .map(|(v, _)| *v)
-                .min_by(|a, b| (a - at).abs().total_cmp(&(b - at).abs()))
-        };
-        let safe_omega_rpm = nearest(&speeds, &by_speed, omega_rpm);
-        let safe_wob_kn = nearest(&weights, &by_weight, wob_kn);
-        let risk = self.settings.risk;
-        let words = if p_unstable < risk {
-            format!(
-                "steady rotation at {omega_rpm:.0} rpm and {wob_kn:.0} kN: P(stick-slip) = {p_unstable:.2}, below {risk}"
-            )
-        } else {
-            let mut ways = Vec::new();
-            if let Some(o) = safe_omega_rpm {
-                ways.push(format!(
-                    "{} the top-drive speed to {o:.0} rpm",
-                    if o > omega_rpm { "raise" } else { "lower" }
-                ));
-            }
-            if let Some(w) = safe_wob_kn {
-                ways.push(format!(
-                    "{} the weight on bit to {w:.0} kN",
-                    if w > wob_kn { "raise" } else { "lower" }
-                ));
-            }
-            let ways = if ways.is_empty() {
-                "no speed of 10–300 rpm nor weight of 10–200 % of this one brings it below the risk".to_string()
-            } else {
-                ways.join(", or ")
-            };
-            format!("stick-slip likely at {omega_rpm:.0} rpm and {wob_kn:.0} kN (P = {p_unstable:.2}): {ways}")
-        };
-        Advice {
-            omega_rpm,
-            wob_kn,
-            p_unstable,
-            safe_omega_rpm,
-            safe_wob_kn,
-            words,
-            stuck_share: 0.0,
-            severity: None,
-            stick_slip_now: false,
-            escape_omega_rpm: None,
-            escape_wob_kn: None,
-        }
     }
 }
 

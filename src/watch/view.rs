@@ -17,10 +17,8 @@ pub const CLOUD_POINTS: usize = 600;
 pub const BAND_SPEEDS: usize = 60;
 /// The band's level: the paper's predictive envelope's.
 pub const BAND_LEVEL: f64 = crate::abc::posterior::ENVELOPE_LEVEL;
-/// The map's top-drive speeds, rpm: the speeds the advice looks at.
-pub const MAP_SPEEDS_RPM: (f64, f64, usize) = (10.0, 300.0, 59);
-/// The map's weights on bit: 10 % to 200 % of the window's, in steps of 10 %.
-pub const MAP_WEIGHTS: usize = 20;
+/// The map's top-drive speeds, rpm, and its weights on bit: the advice's.
+pub use crate::pipeline::advice::{SPEEDS_RPM as MAP_SPEEDS_RPM, WEIGHTS as MAP_WEIGHTS};
 
 /// The picture of one window.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -70,16 +68,7 @@ pub struct MapView {
     pub risk: f64,
 }
 
-/// The map's weights on bit around `wob_kn` (the advice's).
-pub fn map_weights_kn(wob_kn: f64) -> Vec<f64> {
-    (1..=MAP_WEIGHTS).map(|k| wob_kn * 0.1 * k as f64).collect()
-}
-
-/// The map's top-drive speeds (the advice's), rpm.
-pub fn map_speeds_rpm() -> Vec<f64> {
-    let (lo, hi, count) = MAP_SPEEDS_RPM;
-    crate::abc::posterior::speed_grid(lo, hi, count)
-}
+pub use crate::pipeline::advice::{speeds_rpm as map_speeds_rpm, weights_kn as map_weights_kn};
 
 /// What the view is made from besides the window's rows.
 pub(super) struct Posterior<'a> {

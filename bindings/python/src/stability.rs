@@ -154,8 +154,26 @@ pub(crate) fn stability<'py>(
             PyArray1::from_vec(py, mixture.iter().map(nan).collect()),
         )?;
     }
+    let chain = check(py, bitrock::pipeline::strings::chain(structure, &lumped, &fe))?;
+    let given_w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map(|kn| kn * 1000.0);
+    let record_w_ref_n = maps
+        .record_bit
+        .map(|seen| bitrock::pipeline::advice::params_w_ref_n(given_w_ref_n.or(maps.run_w_ref_n), &seen, job.w_ref_n));
+    if let (Some(seen), Some(w_ref_n)) = (&maps.record_bit, record_w_ref_n) {
+        use bitrock::pipeline::advice::Adviser;
+        let adviser = Adviser::for_record(job.criterion, chain.clone(), job.backend);
+        let advice = py.detach(|| adviser.advise_record(&maps.inputs, w_ref_n, seen));
+        out.set_item(
+            "record_advice",
+            serde_json::json!({"record": seen, "advice": advice}).to_string(),
+        )?;
+    }
     if kwarg::<bool>(options, "simulate")?.unwrap_or(false) {
-        simulated(py, options, &job, &maps.inputs, (structure, &lumped, &fe), &note, &out)?;
+        let record_at = maps
+            .record_bit
+            .zip(record_w_ref_n)
+            .map(|(seen, w_ref_n)| (bitrock::pipeline::advice::record_point(&seen, w_ref_n), w_ref_n));
+        simulated(py, options, &job, &maps.inputs, chain, record_at, &note, &out)?;
     }
     out.set_item("critical_bit_damping_nms", job.criterion.critical_nms())?;
     out.set_item("percentile", job.percentile * 100.0)?;
@@ -209,14 +227,18 @@ fn posterior_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::
     Ok(particles)
 }
 
-/// The maps by simulated strings (`simulate=True`): the onset grid and, with `at_rpm` and
-/// `at_kn`, the escape grid and the advice, added to `out`.
+/// The maps by simulated strings (`simulate=True`) on `chain`: the onset grid and, from
+/// `at_rpm` and `at_kn` (or `record_at`, the run's record's operating point with the W_ref its
+/// parameters are for there), the escape grid
+/// and the advice, added to `out`.
+#[allow(clippy::too_many_arguments)]
 fn simulated<'py>(
     py: Python<'py>,
     options: &Bound<'py, PyDict>,
     job: &bitrock::pipeline::stability::StabilityJob,
     inputs: &[bitrock::stability::map::LawSamples],
-    (structure, lumped, fe): (Structure, &Lumped, &DrillStringSettings),
+    chain: bitrock::simulate::strings::Chain,
+    record_at: Option<(bitrock::pipeline::strings::OperatingPoint, f64)>,
     note: &Option<Py<PyAny>>,
     out: &Bound<'py, PyDict>,
 ) -> PyResult<()> {
@@ -231,9 +253,9 @@ fn simulated<'py>(
             },
         }
     };
-    let at = match (kwarg::<f64>(options, "at_rpm")?, kwarg::<f64>(options, "at_kn")?) {
-        (Some(omega_rpm), Some(wob_kn)) => Some(OperatingPoint { omega_rpm, wob_kn }),
-        (None, None) => None,
+    let (at, w_ref_n) = match (kwarg::<f64>(options, "at_rpm")?, kwarg::<f64>(options, "at_kn")?) {
+        (Some(omega_rpm), Some(wob_kn)) => (Some(OperatingPoint { omega_rpm, wob_kn }), job.w_ref_n),
+        (None, None) => record_at.map_or((None, job.w_ref_n), |(at, w)| (Some(at), w)),
         (given, _) => {
             let (field, other) = if given.is_some() {
                 ("at_rpm", "at_kn")
@@ -246,11 +268,10 @@ fn simulated<'py>(
             ));
         }
     };
-    let chain = check(py, strings::chain(structure, lumped, fe))?;
     let sim = SimulatedJob {
         settings: SimulatedSettings {
             dt_s: kwarg(options, "dt_s")?.unwrap_or(strings::DEFAULT_DT_S),
-            ..SimulatedSettings::new(chain, job.w_ref_n, job.backend)
+            ..SimulatedSettings::new(chain, w_ref_n, job.backend)
         },
         omega_rpm: axis("sim_omega_rpm", strings::DEFAULT_OMEGA_RPM)?,
         wob_kn: axis("sim_wob_kn", strings::DEFAULT_WOB_KN)?,
@@ -281,10 +302,12 @@ fn simulated<'py>(
         a.set_item("at_rpm", advice.point.omega_rpm)?;
         a.set_item("at_kn", advice.point.wob_kn)?;
         a.set_item("stick_slip_probability", advice.stick_slip_probability)?;
-        a.set_item("speed_rpm", advice.speed_rpm.map(|s| s.0))?;
-        a.set_item("speed_end_probability", advice.speed_rpm.map(|s| s.1))?;
-        a.set_item("wob_kn", advice.wob_kn.map(|s| s.0))?;
-        a.set_item("wob_end_probability", advice.wob_kn.map(|s| s.1))?;
+        a.set_item("speed_rpm", advice.speed_rpm.map(|w| w.to))?;
+        a.set_item("speed_end_probability", advice.speed_rpm.map(|w| w.ends_probability))?;
+        a.set_item("speed_diverged_share", advice.speed_rpm.map(|w| w.diverged_share))?;
+        a.set_item("wob_kn", advice.wob_kn.map(|w| w.to))?;
+        a.set_item("wob_end_probability", advice.wob_kn.map(|w| w.ends_probability))?;
+        a.set_item("wob_diverged_share", advice.wob_kn.map(|w| w.diverged_share))?;
         a.set_item("text", advice.text())?;
         out.set_item("advice", a)?;
     }

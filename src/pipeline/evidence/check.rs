@@ -193,6 +193,7 @@ fn replicate_of(
         calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &draws, phi, &mut rng),
         validation: synthesize(law, &params_si, &data.validation, w_ref_n, &draws, phi, &mut rng),
         warnings: Vec::new(),
+        bit: None,
         ..data.clone()
     };
     let known: Vec<(Law, Vec<f64>)> = std::iter::once((law, params_si.clone()))

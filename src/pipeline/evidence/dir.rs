@@ -201,6 +201,11 @@ fn job_json(job: &EvidenceJob) -> Vec<u8> {
     pretty(&serde_json::json!({ JOB: job, LAW_FILES: law_files }))
 }
 
+/// The record an evidence directory's evidence was computed on, whole.
+pub fn record(dir: &Path) -> Result<FieldData> {
+    read_record(&dir.join(RECORD_JSON))
+}
+
 /// The record of an evidence directory's [`RECORD_JSON`] at `path`.
 fn read_record(path: &Path) -> Result<FieldData> {
     let text = files::read_text(path, "an evidence's record", MAX_RECORD_BYTES)?;

@@ -242,6 +242,9 @@ pub fn fit_reference(fit: &LawFit, noise: NoiseModel, lag1: f64) -> Option<evide
     usable.then(|| evidence::Reference::gaussian(fit.law, fit.params_si.clone(), &covariance))
 }
 
+/// Posterior samples per law behind a record's advice.
+const ADVICE_SAMPLES: usize = 200;
+
 /// A finished evidence job.
 #[derive(Clone, Debug)]
 pub struct EvidenceAnalysis {
@@ -265,6 +268,23 @@ pub struct EvidenceAnalysis {
 }
 
 impl EvidenceAnalysis {
+    /// The advice at `data`'s own operating point from the posterior, on the paper's 1-DOF
+    /// string (its way out of stick-slip simulated on `backend`); `None` where the record
+    /// keeps no account of its bit.
+    pub fn record_advice(&self, data: &FieldData, backend: Backend) -> Option<crate::pipeline::advice::Advice> {
+        use crate::pipeline::advice::{Adviser, params_w_ref_n};
+        let seen = data.bit?;
+        let lumped = crate::stability::lumped::Lumped::default();
+        let adviser = Adviser::for_record(
+            crate::stability::map::Criterion::Lumped(lumped),
+            crate::simulate::strings::Chain::one_dof(&lumped),
+            backend,
+        );
+        let inputs = crate::abc::posterior::map_inputs_of(&self.evidence.particles(), ADVICE_SAMPLES);
+        let w_ref_n = params_w_ref_n(self.fit.w_ref_n, &seen, crate::laws::PAPER_W_REF_N);
+        Some(adviser.advise_record(&inputs, w_ref_n, &seen))
+    }
+
     /// `bitrock evidence --json`'s document of the analysis of `data` (`prior` describing its
     /// boxes); with `posterior_sets`, each law's posterior sets too (`"posterior": {"params",
     /// "weights"}`, in the record's torque unit), as an evidence directory and Python keep it.

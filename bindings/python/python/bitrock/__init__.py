@@ -503,10 +503,20 @@ def stability(
     With ``simulate=True``, also the maps by simulated strings, as ``bitrock stability
     --simulate`` makes them, over ``sim_omega_rpm`` × ``sim_wob_kn`` with ``sim_samples``
     posterior samples per law and step ``dt_s``: ``onset_probability`` (stick-slip develops from
-    steady rotation kicked by a tenth of Ω) and, with ``at_rpm`` and ``at_kn`` (where the bit
-    is now), ``escape_probability`` (stick-slip persists from the state the bit is in there)
-    and the advice in ``attrs["advice"]`` (``speed_rpm``, ``speed_end_probability``,
-    ``wob_kn``, ``wob_end_probability``, ``stick_slip_probability``, ``text``)."""
+    steady rotation kicked by a tenth of Ω) and, from ``at_rpm`` and ``at_kn`` (where the bit
+    is now; a run's own record's operating point by default), ``escape_probability``
+    (stick-slip persists from the state the bit is in there) and the advice in
+    ``attrs["advice"]`` (``speed_rpm``, ``speed_end_probability``, ``wob_kn``,
+    ``wob_end_probability``, the share of strings that left physical bounds there
+    (``speed_diverged_share``, ``wob_diverged_share``: P(it ends) is then a lower bound),
+    ``stick_slip_probability``, ``text``).
+
+    For a run, ``attrs["record_advice"]`` is the advice at its record's own operating point
+    (mean bit speed and weight on bit), as ``bitrock stability --run`` prints it: ``record``
+    (``stuck_share``, ``severity``, ``mean_speed_rpm``, ``mean_wob_kn``, ``samples``) and
+    ``advice`` (``words``, ``stick_slip_now``, ``escape_omega_rpm`` and ``escape_wob_kn`` as
+    [value, P(it ends)] from the state the bit is in, ``p_unstable``, ``safe_omega_rpm``,
+    ``safe_wob_kn``)."""
     import xarray as xr
 
     posterior = None
@@ -560,6 +570,8 @@ def stability(
         attrs["simulated_strings"] = maps["simulated_strings"]
         if "advice" in maps:
             attrs["advice"] = maps["advice"]
+    if "record_advice" in maps:
+        attrs["record_advice"] = json.loads(maps["record_advice"])
     return xr.Dataset(variables, coords=coords, attrs=attrs)
 
 
