@@ -20,6 +20,11 @@ pub struct ReportCmd {
     /// anything else is refused).
     #[arg(long, value_name = "DIR", default_value = "bitrock-report")]
     pub out: PathBuf,
+    /// Also map stick-slip by simulating the 1-DOF string in time for the reference run's
+    /// posterior samples: where it develops from steady rotation, where it persists from the
+    /// record's operating point, the bistable band between them (a table and a figure).
+    #[arg(long)]
+    pub simulate: bool,
 }
 
 pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
@@ -42,7 +47,7 @@ pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
         ([(dir, _)], 1) => bitrock::report::write_evidence_report(&cmd.out, dir)?,
         ([], _) => {
             let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;
-            bitrock::report::write_paper_report(&cmd.out, &setup, &runs, None)?
+            bitrock::report::write_paper_report(&cmd.out, &setup, &runs, None, cmd.simulate.then(Default::default))?
         }
         ([(dir, what), ..], _) => {
             return Err(bitrock::Error::setting(

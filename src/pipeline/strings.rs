@@ -193,16 +193,22 @@ impl Grid {
     }
 
     /// Per speed, the lightest weight on bit at which the probability reaches `p` (`None`: none
-    /// on the grid; NaN: an unknown cell comes first).
+    /// on the grid; NaN: unknown). A cell with strings that left physical bounds holds a
+    /// probability between its stick-slipping strings' weight and that plus theirs: it reaches
+    /// `p` when the lower bound does, and is unknown only when the bounds straddle `p`.
     pub fn boundary_wob_kn(&self, p: f64) -> Vec<Option<f64>> {
+        let n = self.wob_kn.len();
         (0..self.omega_rpm.len())
             .map(|i| {
-                (0..self.wob_kn.len()).find_map(|j| {
-                    let q = self.at(i, j);
-                    if q.is_nan() {
+                (0..n).find_map(|j| {
+                    let lower = self.stick_slip_weight[i * n + j];
+                    let upper = lower + self.diverged_weight[i * n + j];
+                    if lower >= p {
+                        Some(self.wob_kn[j])
+                    } else if upper >= p {
                         Some(f64::NAN)
                     } else {
-                        (q >= p).then_some(self.wob_kn[j])
+                        None
                     }
                 })
             })

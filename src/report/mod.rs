@@ -40,6 +40,8 @@ use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::fit::LawFit;
 use crate::laws::{Law, PAPER_W_REF_N};
+use crate::pipeline::advice::Advice;
+use crate::pipeline::strings::SimulatedMaps;
 use crate::stability::fe::DrillString;
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{self, Criterion, LawSamples};
@@ -95,6 +97,32 @@ pub struct StabilitySettings {
     pub samples_per_law: usize,
     /// Speeds (rpm) of the boundary table in report.md.
     pub table_omega_rpm: Vec<f64>,
+    /// Where the strings of the record's advice (and the simulated maps) are integrated.
+    pub backend: crate::eval::Backend,
+    /// The maps by simulated strings (onset, escape from the record's operating point, the
+    /// bistable band) and their figure; `None`: the advice line only.
+    pub simulated: Option<SimulatedReport>,
+}
+
+/// The report's maps by simulated strings, on the 1-DOF string.
+#[derive(Clone, Debug)]
+pub struct SimulatedReport {
+    /// Top-drive speeds (rpm) and weights on bit (kN) of the maps, ascending.
+    pub omega_rpm: Vec<f64>,
+    pub wob_kn: Vec<f64>,
+    /// Posterior samples per law simulated in every cell.
+    pub samples: usize,
+}
+
+impl Default for SimulatedReport {
+    /// 21 speeds of 20–220 rpm × 18 weights of 20–700 kN, 8 samples per law.
+    fn default() -> Self {
+        Self {
+            omega_rpm: axis(20.0, 220.0, 21),
+            wob_kn: axis(20.0, 700.0, 18),
+            samples: 8,
+        }
+    }
 }
 
 impl Default for StabilitySettings {
@@ -117,6 +145,8 @@ impl Default for StabilitySettings {
             percentile: 0.02,
             samples_per_law: 700,
             table_omega_rpm: vec![40.0, 60.0, 80.0, 100.0, 120.0, 160.0, 200.0],
+            backend: crate::eval::Backend::Auto,
+            simulated: None,
         }
     }
 }
@@ -215,6 +245,45 @@ pub(crate) fn replace_report(
     })
 }
 
+/// The advice at the record's operating point under the reference run's `inputs` (torque
+/// parameters for `scaled_w_ref_n` where its fit scaled them), and the maps by simulated strings
+/// where the settings ask for them (escape from the record's operating point where known).
+fn simulated_advice(
+    input: &ReportInput,
+    scaled_w_ref_n: Option<f64>,
+    inputs: &[LawSamples],
+) -> Result<(Option<(crate::data::BitSeen, Advice)>, Option<SimulatedMaps>)> {
+    use crate::pipeline::advice::{Adviser, params_w_ref_n, record_point};
+    use crate::pipeline::strings::{SimulatedJob, SimulatedSettings};
+    let s = &input.stability;
+    let chain = crate::simulate::strings::Chain::one_dof(&s.lumped);
+    let inputs: Vec<LawSamples> = inputs
+        .iter()
+        .filter(|m| m.probability >= MIN_MAP_PROBABILITY)
+        .cloned()
+        .collect();
+    let at_record = input
+        .data
+        .bit
+        .map(|seen| (seen, params_w_ref_n(scaled_w_ref_n, &seen, s.w_ref_n)));
+    let advice = at_record.map(|(seen, w_ref_n)| {
+        let adviser = Adviser::for_record(Criterion::Lumped(s.lumped), chain.clone(), s.backend);
+        (seen, adviser.advise_record(&inputs, w_ref_n, &seen))
+    });
+    let Some(sim) = &s.simulated else {
+        return Ok((advice, None));
+    };
+    let w_ref_n = at_record.map_or(scaled_w_ref_n.unwrap_or(s.w_ref_n), |a| a.1);
+    let job = SimulatedJob {
+        settings: SimulatedSettings::new(chain, w_ref_n, s.backend),
+        omega_rpm: sim.omega_rpm.clone(),
+        wob_kn: sim.wob_kn.clone(),
+        samples: sim.samples,
+        at: at_record.map(|(seen, w)| record_point(&seen, w)),
+    };
+    Ok((advice, Some(job.run(&inputs, &mut |_| {})?)))
+}
+
 /// One run with its posterior read off.
 struct RunView<'a> {
     run: &'a ReportRun,
@@ -251,6 +320,11 @@ struct Prepared<'a> {
     /// estimate for a law that died out (flagged `true`).
     deterministic: Vec<(Law, Vec<f64>, bool)>,
     w_ref_n: f64,
+    /// What the record's bit did and the advice at its operating point, where the record
+    /// keeps an account of its bit.
+    record_advice: Option<(crate::data::BitSeen, Advice)>,
+    /// The maps by simulated strings, where asked for.
+    simulated: Option<SimulatedMaps>,
 }
 
 /// For each of `laws`, whether its probability in the population is 0 by construction (ε at
@@ -391,15 +465,19 @@ impl<'a> Prepared<'a> {
                 }
             })
             .collect();
+        let w_ref_n = reference.run.w_ref_n.unwrap_or(s.w_ref_n);
+        let (record_advice, simulated) = simulated_advice(input, reference.run.w_ref_n, &map_inputs)?;
         Ok(Self {
             input,
             torque_scale: input.data.torque_unit.newton_metres(),
             unit: input.data.torque_unit.label(),
-            w_ref_n: reference.run.w_ref_n.unwrap_or(s.w_ref_n),
+            w_ref_n,
             runs,
             structures,
             map_inputs,
             deterministic,
+            record_advice,
+            simulated,
         })
     }
 
@@ -730,6 +808,63 @@ impl Prepared<'_> {
         let _ = writeln!(md, "|---|---|");
         for st in &self.structures {
             let _ = writeln!(md, "| {} | {:.2} |", st.label, st.critical_nms);
+        }
+        self.advice_markdown(md);
+    }
+
+    /// The advice at the record's operating point, and the simulated maps' table.
+    fn advice_markdown(&self, md: &mut String) {
+        if let Some((seen, advice)) = &self.record_advice {
+            let _ = writeln!(
+                md,
+                "\n**Advice at the record's operating point** (its mean bit speed and weight on bit, over its {} \
+                 samples): {}.",
+                seen.samples, advice.words
+            );
+            let _ = writeln!(
+                md,
+                "\nA bit stuck at least 1 % of the time stick-slips, whatever the linear criterion says of steady \
+                 rotation; what ends it is found by simulating the 1-DOF string from the state the bit is in \
+                 (the settled cycle), for {} posterior samples of each law at least {} probable.",
+                crate::pipeline::advice::RECORD_ESCAPE_SAMPLES,
+                crate::pipeline::advice::RECORD_ESCAPE_MIN_PROBABILITY
+            );
+        }
+        let Some(sim) = &self.simulated else {
+            return;
+        };
+        let onset = sim.onset.boundary_wob_kn(0.5);
+        let escape = sim.escape.as_ref().map(|(g, _)| g.boundary_wob_kn(0.5));
+        let _ = writeln!(
+            md,
+            "\nStick-slip by simulated strings ({} strings of the 1-DOF string, {:.2e} string-seconds): the weight on \
+             bit (kN) from which it develops from steady rotation kicked by a tenth of the speed (P ≥ 0.5){}; \
+             between the two lies the bistable band (— : none on the grid, unknown: strings left physical bounds).\n",
+            sim.strings,
+            sim.simulated_s,
+            if escape.is_some() {
+                " and from which it persists once the bit is in it at the record's operating point"
+            } else {
+                ""
+            }
+        );
+        let kn = |v: Option<f64>| match v {
+            None => "—".to_string(),
+            Some(v) if v.is_nan() => "unknown".to_string(),
+            Some(v) => format!("{v:.0}"),
+        };
+        let _ = writeln!(
+            md,
+            "| Ω (rpm) | develops |{}\n|---|---|{}",
+            if escape.is_some() { " persists |" } else { "" },
+            if escape.is_some() { "---|" } else { "" }
+        );
+        for (i, rpm) in sim.onset.omega_rpm.iter().enumerate() {
+            let _ = write!(md, "| {rpm} | {} |", kn(onset[i]));
+            if let Some(e) = &escape {
+                let _ = write!(md, " {} |", kn(e[i]));
+            }
+            let _ = writeln!(md);
         }
     }
 

@@ -15,7 +15,7 @@ use marginals::{render_correlations, render_marginals};
 use probabilities::{render_final_probabilities, render_model_probabilities, render_tolerance};
 pub(crate) use selection::confusion_figure;
 use selection::render_selection_checks;
-use stability::{render_deterministic_map, render_stochastic_map, render_structures};
+use stability::{render_deterministic_map, render_simulated_map, render_stochastic_map, render_structures};
 
 use super::plot::{
     self, AXIS, CALIBRATION, DrawResult, Figure, GRID, LEGEND, TICK, TITLE, VALIDATION, clip_curve, font, heat_color,
@@ -99,6 +99,7 @@ pub(super) fn render_all(p: &Prepared) -> Result<Vec<Rendered>> {
     out.push(render_deterministic_map(p)?);
     out.push(render_stochastic_map(p)?);
     out.push(render_structures(p)?);
+    out.extend(render_simulated_map(p)?);
     out.extend(render_selection_checks(p)?);
     Ok(out)
 }

@@ -319,27 +319,213 @@ impl Figure for StochasticMap {
         }
         legend_box(&mut chart, SeriesLabelPosition::UpperLeft)?;
 
-        // Colour bar.
-        let mut scale = ChartBuilder::on(&bar)
-            .margin_top(40)
-            .margin_bottom(76)
-            .margin_right(12)
-            .y_label_area_size(86)
-            .build_cartesian_2d(0.0..1.0, 0.0..1.0)?;
-        scale
-            .configure_mesh()
-            .disable_mesh()
-            .x_labels(0)
-            .y_labels(6)
-            .y_desc("P(unstable)")
-            .axis_desc_style(font(AXIS))
-            .label_style(font(TICK))
-            .y_label_formatter(&|y| format!("{y:.1}"))
-            .draw()?;
-        scale.draw_series((0..100).map(|k| {
-            let (a, b) = (k as f64 / 100.0, (k + 1) as f64 / 100.0);
-            Rectangle::new([(0.0, a), (1.0, b)], heat_color(0.5 * (a + b)).filled())
-        }))?;
-        Ok(())
+        colour_bar(&bar, "P(unstable)")
     }
+}
+
+/// The maps by simulated strings: P(stick-slip persists) from the record's operating point (P
+/// of it developing from steady rotation where the record's point is unknown), the onset and
+/// escape boundaries, the bistable band between them, the operating point and the advice.
+pub(super) fn render_simulated_map(p: &Prepared) -> Result<Option<Rendered>> {
+    let Some(sim) = &p.simulated else {
+        return Ok(None);
+    };
+    let (heat, point, advised) = match &sim.escape {
+        Some((grid, advice)) => {
+            let mut advised = Vec::new();
+            if let Some(w) = advice.speed_rpm {
+                advised.push(((w.to, advice.point.wob_kn), format!("raise to {:.0} rpm", w.to)));
+            }
+            if let Some(w) = advice.wob_kn {
+                advised.push(((advice.point.omega_rpm, w.to), format!("lower to {:.0} kN", w.to)));
+            }
+            (grid, Some((advice.point.omega_rpm, advice.point.wob_kn)), advised)
+        }
+        None => (&sim.onset, None, Vec::new()),
+    };
+    let figure = SimulatedMap {
+        omega: sim.onset.omega_rpm.clone(),
+        wob: sim.onset.wob_kn.clone(),
+        // Among the strings that stayed in bounds; cells where some left them are marked.
+        heat: heat
+            .stick_slip_weight
+            .iter()
+            .zip(&heat.diverged_weight)
+            .map(|(s, d)| if *d < 1.0 { s / (1.0 - d) } else { f64::NAN })
+            .collect(),
+        diverged: heat.diverged_weight.iter().map(|d| *d > 0.0).collect(),
+        heat_label: if sim.escape.is_some() {
+            "P(persists)"
+        } else {
+            "P(develops)"
+        },
+        onset: sim.onset.boundary_wob_kn(0.5),
+        escape: sim.escape.as_ref().map(|(g, _)| g.boundary_wob_kn(0.5)),
+        bistable: match &sim.escape {
+            Some((escape, _)) => escape
+                .stick_slip_weight
+                .iter()
+                .zip(&sim.onset.stick_slip_weight)
+                .zip(&sim.onset.diverged_weight)
+                .map(|((e, o), d)| *e >= 0.5 && o + d < 0.5)
+                .collect(),
+            None => Vec::new(),
+        },
+        point,
+        advised,
+        title: format!(
+            "Stick-slip by simulated strings, {}, {}",
+            p.runs[0].run.label, p.structures[0].label
+        ),
+    };
+    Ok(Some(render_one(
+        "fig10_stick_slip_simulated".into(),
+        "Stick-slip by simulated strings: where it develops from steady rotation kicked by a tenth of the speed \
+         (dashed), where it persists once the bit is in it at the record's operating point (solid, the colours), \
+         and the bistable band between them (hatched orange): operating points where steady rotation survives, \
+         but a stick-slipping bit stays stuck in its cycle. Colours: the share of the strings that stayed in \
+         physical bounds; a grey × marks cells where some left them (a law extrapolated past its data)."
+            .into(),
+        FIGURE_SIZE,
+        &figure,
+    )?))
+}
+
+/// The maps by simulated strings, drawn.
+struct SimulatedMap {
+    omega: Vec<f64>,
+    wob: Vec<f64>,
+    /// The probability coloured, row-major over Ω (NaN: unknown).
+    heat: Vec<f64>,
+    /// Cells where some strings left physical bounds, row-major over Ω.
+    diverged: Vec<bool>,
+    heat_label: &'static str,
+    onset: Vec<Option<f64>>,
+    escape: Option<Vec<Option<f64>>>,
+    /// Cells of the bistable band, row-major over Ω.
+    bistable: Vec<bool>,
+    /// The record's operating point (rpm, kN), and the advised points with their labels.
+    point: Option<(f64, f64)>,
+    advised: Vec<((f64, f64), String)>,
+    title: String,
+}
+
+/// The bistable band's colour.
+const BISTABLE: RGBColor = RGBColor(0xe6, 0x85, 0x0e);
+
+impl Figure for SimulatedMap {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        let area = titled(root, &self.title)?;
+        let (main, bar) = area.split_horizontally(area.dim_in_pixel().0 - 150);
+        let (x0, x1) = (self.omega[0], self.omega[self.omega.len() - 1]);
+        let (y0, y1) = (self.wob[0], self.wob[self.wob.len() - 1]);
+        let mut chart = axes(&main, "", (x0, x1), (y0, y1))?;
+        let (xe, ye) = (edges(&self.omega), edges(&self.wob));
+        let nw = self.wob.len();
+        let cell = |i: usize, j: usize| [(xe[i], ye[j]), (xe[i + 1], ye[j + 1])];
+        chart.draw_series(
+            (0..self.omega.len())
+                .flat_map(|i| (0..nw).map(move |j| (i, j)))
+                .map(|(i, j)| Rectangle::new(cell(i, j), heat_color(self.heat[i * nw + j]).filled())),
+        )?;
+        // The band hatched: diagonal strokes across each of its cells.
+        chart.draw_series(
+            (0..self.omega.len())
+                .flat_map(|i| (0..nw).map(move |j| (i, j)))
+                .filter(|(i, j)| self.bistable.get(i * nw + j).copied().unwrap_or(false))
+                .flat_map(|(i, j)| {
+                    let [(a, b), (c, d)] = cell(i, j);
+                    (0..4).map(move |k| {
+                        let t = f64::from(k) / 4.0;
+                        PathElement::new(
+                            vec![(a + t * (c - a), b), (c, d - t * (d - b))],
+                            BISTABLE.stroke_width(2),
+                        )
+                    })
+                }),
+        )?;
+        chart.draw_series(
+            (0..self.omega.len())
+                .flat_map(|i| (0..nw).map(move |j| (i, j)))
+                .filter(|(i, j)| self.diverged[i * nw + j])
+                .map(|(i, j)| {
+                    Cross::new(
+                        (self.omega[i], self.wob[j]),
+                        4,
+                        RGBColor(0x77, 0x77, 0x77).stroke_width(2),
+                    )
+                }),
+        )?;
+        mesh(&mut chart, "top-drive speed Ω (rpm)", "weight on bit W (kN)")?;
+        draw_boundary(
+            &mut chart,
+            &self.omega,
+            &self.onset,
+            BLACK,
+            true,
+            Some("develops from steady rotation (P ≥ 0.5)"),
+        )?;
+        if let Some(escape) = &self.escape {
+            draw_boundary(
+                &mut chart,
+                &self.omega,
+                escape,
+                BLACK,
+                false,
+                Some("persists from the cycle (P ≥ 0.5)"),
+            )?;
+        }
+        if self.bistable.iter().any(|b| *b) {
+            chart
+                .draw_series(std::iter::once(PathElement::new(vec![(x0, y0), (x0, y0)], BISTABLE)))?
+                .label("bistable band")
+                .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 24, y + 6)], BISTABLE.mix(0.6).filled()));
+        }
+        if let Some(point) = self.point {
+            chart
+                .draw_series(std::iter::once(Circle::new(point, 9, BLACK.filled())))?
+                .label(format!("the record: {:.0} rpm, {:.0} kN", point.0, point.1))
+                .legend(|(x, y)| Circle::new((x + 12, y), 6, BLACK.filled()));
+        }
+        for (at, label) in &self.advised {
+            let style = RGBColor(0x2c, 0xa0, 0x2c);
+            chart
+                .draw_series(std::iter::once(TriangleMarker::new(*at, 12, style.filled())))?
+                .label(format!("advice: {label}"))
+                .legend(move |(x, y)| TriangleMarker::new((x + 12, y), 8, style.filled()));
+        }
+        legend_box(&mut chart, SeriesLabelPosition::UpperLeft)?;
+        colour_bar(&bar, self.heat_label)
+    }
+}
+
+/// The probability colour bar of a heat map, labelled `label`.
+fn colour_bar<DB: DrawingBackend>(bar: &DrawingArea<DB, Shift>, label: &str) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let mut scale = ChartBuilder::on(bar)
+        .margin_top(40)
+        .margin_bottom(76)
+        .margin_right(12)
+        .y_label_area_size(86)
+        .build_cartesian_2d(0.0..1.0, 0.0..1.0)?;
+    scale
+        .configure_mesh()
+        .disable_mesh()
+        .x_labels(0)
+        .y_labels(6)
+        .y_desc(label)
+        .axis_desc_style(font(AXIS))
+        .label_style(font(TICK))
+        .y_label_formatter(&|y| format!("{y:.1}"))
+        .draw()?;
+    scale.draw_series((0..100).map(|k| {
+        let (a, b) = (k as f64 / 100.0, (k + 1) as f64 / 100.0);
+        Rectangle::new([(0.0, a), (1.0, b)], heat_color(0.5 * (a + b)).filled())
+    }))?;
+    Ok(())
 }
