@@ -658,3 +658,59 @@ pub fn advice_speeds_rpm(omega_rpm: f64) -> Vec<f64> {
 pub fn advice_weights_kn(wob_kn: f64) -> Vec<f64> {
     (4..20).map(|k| wob_kn * f64::from(k) / 20.0).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One speed, four weights: stick-slip weights and diverged weights per cell.
+    fn grid(stick_slip: [f64; 4], diverged: [f64; 4]) -> Grid {
+        Grid {
+            omega_rpm: vec![100.0],
+            wob_kn: vec![100.0, 200.0, 300.0, 400.0],
+            probability: stick_slip
+                .iter()
+                .zip(&diverged)
+                .map(|(s, d)| if *d > 0.0 { f64::NAN } else { *s })
+                .collect(),
+            stick_slip_weight: stick_slip.to_vec(),
+            diverged_weight: diverged.to_vec(),
+            diverged: diverged.iter().filter(|d| **d > 0.0).count(),
+        }
+    }
+
+    #[test]
+    fn a_boundary_is_decided_by_the_bounds_strings_that_left_physical_bounds_leave() {
+        // 300 kN: at least 0.6 stick-slip whatever the diverged 0.1 did: the boundary.
+        let g = grid([0.0, 0.2, 0.6, 1.0], [0.0, 0.1, 0.1, 0.0]);
+        assert_eq!(g.boundary_wob_kn(0.5), vec![Some(300.0)]);
+        // 200 kN: between 0.45 and 0.55: unknown, and it comes first.
+        let g = grid([0.0, 0.45, 0.6, 1.0], [0.0, 0.1, 0.0, 0.0]);
+        assert!(g.boundary_wob_kn(0.5)[0].unwrap().is_nan());
+        // Nowhere reaching it, even with every diverged string counted: none.
+        let g = grid([0.0, 0.1, 0.2, 0.3], [0.0, 0.1, 0.1, 0.1]);
+        assert_eq!(g.boundary_wob_kn(0.5), vec![None]);
+    }
+
+    #[test]
+    fn a_way_out_counts_strings_that_left_physical_bounds_as_not_ending_it() {
+        // P(it ends) = 1 − stick-slip − diverged: 0.85 at 200 kN (below 0.9), 0.95 at 100 kN.
+        let g = grid([0.0, 0.05, 0.6, 1.0], [0.05, 0.1, 0.0, 0.0]);
+        let axis = g.wob_kn.clone();
+        let way = Way::nearest(&axis, &g, true).unwrap();
+        assert_eq!(way.to, 100.0);
+        assert!((way.ends_probability - 0.95).abs() < 1e-12, "{way:?}");
+        assert_eq!(way.diverged_share, 0.05);
+        assert!(
+            way.probability_text().starts_with("P(it ends) ≥ 0.95; 5 %"),
+            "{}",
+            way.probability_text()
+        );
+        // Scanned upwards from the lightest, the first that ends it is the same here.
+        assert_eq!(Way::nearest(&axis, &g, false).unwrap().to, 100.0);
+        assert_eq!(
+            Way::nearest(&axis[2..], &grid([0.6, 1.0, 0.6, 1.0], [0.0; 4]), false),
+            None
+        );
+    }
+}

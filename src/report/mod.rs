@@ -245,6 +245,9 @@ pub(crate) fn replace_report(
     })
 }
 
+/// What the record's bit did, and the advice at its operating point.
+type RecordAdvice = (crate::data::BitSeen, Advice);
+
 /// The advice at the record's operating point under the reference run's `inputs` (torque
 /// parameters for `scaled_w_ref_n` where its fit scaled them), and the maps by simulated strings
 /// where the settings ask for them (escape from the record's operating point where known).
@@ -252,7 +255,7 @@ fn simulated_advice(
     input: &ReportInput,
     scaled_w_ref_n: Option<f64>,
     inputs: &[LawSamples],
-) -> Result<(Option<(crate::data::BitSeen, Advice)>, Option<SimulatedMaps>)> {
+) -> Result<(Option<RecordAdvice>, Option<SimulatedMaps>)> {
     use crate::pipeline::advice::{Adviser, params_w_ref_n, record_point};
     use crate::pipeline::strings::{SimulatedJob, SimulatedSettings};
     let s = &input.stability;
@@ -322,7 +325,7 @@ struct Prepared<'a> {
     w_ref_n: f64,
     /// What the record's bit did and the advice at its operating point, where the record
     /// keeps an account of its bit.
-    record_advice: Option<(crate::data::BitSeen, Advice)>,
+    record_advice: Option<RecordAdvice>,
     /// The maps by simulated strings, where asked for.
     simulated: Option<SimulatedMaps>,
 }

@@ -672,6 +672,7 @@ pub fn integrate_batch(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) -
 mod tests {
     use super::*;
     use crate::laws::PAPER_W_REF_N;
+    use crate::units::RAD_S_PER_RPM;
 
     fn paper_nm(law: Law) -> [f64; 6] {
         padded(&law.scale_torque(law.paper_estimate().unwrap(), 1000.0))

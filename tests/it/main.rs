@@ -1,6 +1,7 @@
 //! One integration-test binary; each module covers one part of the pipeline.
 
 mod abc;
+mod advice;
 mod batched;
 mod cli;
 mod evidence;

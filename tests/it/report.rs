@@ -11,7 +11,7 @@ use bitrock::eval::AbcProblem;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::fit::{FitOptions, LawFit, fit_laws};
 use bitrock::prior::Prior;
-use bitrock::report::{ReportInput, ReportRun, StabilitySettings, write_report};
+use bitrock::report::{ReportInput, ReportRun, SimulatedReport, StabilitySettings, write_report};
 use std::path::Path;
 
 /// The demo record (thinned for speed), its fits and one small rejection run per δ.
@@ -95,7 +95,14 @@ fn the_report_has_every_figure_in_both_formats_and_the_tables() {
         data: &data,
         fits: &fits,
         runs: &runs,
-        stability: StabilitySettings::default(),
+        stability: StabilitySettings {
+            simulated: Some(SimulatedReport {
+                omega_rpm: vec![40.0, 80.0, 160.0],
+                wob_kn: vec![100.0, 250.0, 500.0],
+                samples: 2,
+            }),
+            ..StabilitySettings::default()
+        },
         evidence: None,
     };
     let dir = tempfile::tempdir().unwrap();
@@ -111,6 +118,7 @@ fn the_report_has_every_figure_in_both_formats_and_the_tables() {
         "fig08_map_deterministic",
         "fig08_map_stochastic",
         "fig09_structures",
+        "fig10_stick_slip_simulated",
     ] {
         assert!(stems.contains(&expected), "{expected} missing from {stems:?}");
     }
@@ -171,11 +179,19 @@ fn the_report_has_every_figure_in_both_formats_and_the_tables() {
         }
         assert!((printed.iter().sum::<f64>() - 1.0).abs() <= 4.0 * 5e-7, "{row}");
     }
+    // The demo record stick-slips: its advice says so and the way out, never "steady".
+    let advice = markdown
+        .lines()
+        .find(|l| l.starts_with("**Advice at the record's operating point**"))
+        .unwrap_or_else(|| panic!("no advice line in {markdown}"));
+    assert!(advice.contains("stick-slip now at 80 rpm and 243 kN"), "{advice}");
+    assert!(!advice.contains("steady"), "{advice}");
     for section in [
         "## Least-squares fits",
         "## Posterior estimates",
         "## Stability",
         "| Ω (rpm) |",
+        "| Ω (rpm) | develops | persists |",
     ] {
         assert!(markdown.contains(section), "{section}");
     }
