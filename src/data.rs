@@ -215,6 +215,9 @@ pub struct BitSeen {
     pub severity: Option<f64>,
     /// Mean bit speed, rpm.
     pub mean_speed_rpm: f64,
+    /// Peak bit speed, rpm (`None` in records stored without it).
+    #[serde(default)]
+    pub peak_speed_rpm: Option<f64>,
     /// Mean weight on bit, kN, where recorded.
     pub mean_wob_kn: Option<f64>,
 }
@@ -239,6 +242,7 @@ impl BitSeen {
             stuck_share: stuck as f64 / n,
             severity: (mean.abs() > f64::MIN_POSITIVE).then(|| (hi - lo) / (2.0 * mean.abs())),
             mean_speed_rpm: mean / RAD_S_PER_RPM,
+            peak_speed_rpm: Some(hi / RAD_S_PER_RPM),
             mean_wob_kn: wob_n
                 .filter(|w| !w.is_empty())
                 .map(|w| crate::numerics::compensated_sum(w.iter().copied()) / w.len() as f64 / 1000.0),

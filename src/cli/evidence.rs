@@ -290,9 +290,17 @@ fn finish(
             )
         })
         .transpose()?;
+    let advice = analysis.record_advice(data, job.backend);
+    let document = |sets: bool| {
+        EvidenceAnalysis::with_advice(
+            analysis.document(data, &job.prior.describe(), sets),
+            data,
+            advice.as_ref(),
+        )
+    };
     if let Some(unfinished) = unfinished {
         let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("a directory under way");
-        let mut document = analysis.document(data, &job.prior.describe(), true);
+        let mut document = document(true);
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
         }
@@ -304,16 +312,11 @@ fn finish(
             dir.display()
         ));
     }
-    let advice = analysis.record_advice(data, job.backend);
     let mut out = print::stdout();
     if cmd.json {
-        let mut document = analysis.document(data, &job.prior.describe(), false);
+        let mut document = document(false);
         if let Some(check) = &check {
             document["check"] = serde_json::to_value(check)?;
-        }
-        if let Some(advice) = &advice {
-            document["record_bit"] = serde_json::to_value(data.bit)?;
-            document["advice"] = serde_json::to_value(advice)?;
         }
         print::json(&mut out, document)?;
     } else {

@@ -71,6 +71,51 @@ pub struct Advice {
     /// The nearest lighter weight on bit (kN) that ends it, with P(it ends).
     #[serde(default)]
     pub escape_wob_kn: Option<(f64, f64)>,
+    /// Whether the posterior's strings reproduce the cycle the bit was seen in, where it
+    /// stick-slipped and both are known.
+    #[serde(default)]
+    pub cycle: Option<CycleCheck>,
+}
+
+/// The cycle the bit was seen in against the posterior's simulated strings at the same
+/// operating point: a posterior that does not reproduce the record's cycle misdescribes the
+/// torque where the cycle lives (the slow and stuck samples a fit leaves out), and its way out
+/// may fall short.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CycleCheck {
+    /// The bit's peak speed seen, rpm.
+    pub seen_peak_rpm: f64,
+    /// The lowest and highest peak bit speed of the settled simulated strings, rpm.
+    pub simulated_peak_rpm: (f64, f64),
+    /// The seen peak lies within [`PEAK_TOLERANCE`] of the simulated range.
+    pub reproduced: bool,
+}
+
+/// How far (a share) a seen peak bit speed may lie outside the simulated strings' range and
+/// still count as reproduced: room for a downhole tool's speed noise.
+pub const PEAK_TOLERANCE: f64 = 0.1;
+
+impl CycleCheck {
+    fn new(seen_peak_rpm: f64, (lo, hi): (f64, f64)) -> Self {
+        Self {
+            seen_peak_rpm,
+            simulated_peak_rpm: (lo, hi),
+            reproduced: seen_peak_rpm >= lo / (1.0 + PEAK_TOLERANCE) && seen_peak_rpm <= hi * (1.0 + PEAK_TOLERANCE),
+        }
+    }
+
+    /// The check in words where it fails; empty where the cycle is reproduced.
+    fn warning(&self) -> String {
+        if self.reproduced {
+            return String::new();
+        }
+        let (lo, hi) = self.simulated_peak_rpm;
+        format!(
+            "; but the posterior's simulated strings peak at {lo:.0}–{hi:.0} rpm there where the bit peaked at {:.0} rpm: \
+             they do not reproduce its cycle, and their way out may fall short",
+            self.seen_peak_rpm
+        )
+    }
 }
 
 /// How a stick-slipping bit's advice is simulated.
@@ -174,6 +219,7 @@ impl Adviser {
             stick_slip_now: false,
             escape_omega_rpm: None,
             escape_wob_kn: None,
+            cycle: None,
         }
     }
 
@@ -217,7 +263,15 @@ impl Adviser {
             Ok(e) => {
                 advice.escape_omega_rpm = e.speed_rpm.map(|w| (w.to, w.ends_probability));
                 advice.escape_wob_kn = e.wob_kn.map(|w| (w.to, w.ends_probability));
-                advice.words = format!("{now}: {}", e.ways());
+                advice.cycle = seen
+                    .peak_speed_rpm
+                    .zip(e.peak_speed_rpm)
+                    .map(|(seen, simulated)| CycleCheck::new(seen, simulated));
+                advice.words = format!(
+                    "{now}: {}{}",
+                    e.ways(),
+                    advice.cycle.map_or(String::new(), |c| c.warning())
+                );
             }
             Err(e) => advice.words = format!("{now}: the simulated strings failed ({e})"),
         }

@@ -304,6 +304,10 @@ pub struct AtPoint {
     pub point: OperatingPoint,
     /// P(stick-slip at the operating point) under the mixture.
     pub stick_slip_probability: f64,
+    /// The range of the settled strings' peak bit speeds there (rpm), the lowest and the
+    /// highest of the strings that stayed in bounds: what the posterior says the record's
+    /// cycle should look like.
+    pub peak_speed_rpm: Option<(f64, f64)>,
     /// The members, each once per phase.
     replicas: Vec<Member>,
     /// Their states when the driller changes something.
@@ -489,9 +493,17 @@ impl<'a> Simulator<'a> {
             }
         }
         let here = Self::grid(&replicas, &summaries, &[point.omega_rpm], &[point.wob_kn]);
+        let peaks = summaries
+            .iter()
+            .filter(|s| !s.diverged && s.samples > 0)
+            .map(|s| s.speed_max_rad_s / RAD_S_PER_RPM);
+        let peak_speed_rpm = peaks.fold(None, |range: Option<(f64, f64)>, v| {
+            Some(range.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))))
+        });
         Ok(AtPoint {
             point,
             stick_slip_probability: here.probability[0],
+            peak_speed_rpm,
             replicas,
             states,
         })
@@ -527,6 +539,7 @@ impl<'a> Simulator<'a> {
         Ok(EscapeAdvice {
             point: p,
             stick_slip_probability: from.stick_slip_probability,
+            peak_speed_rpm: from.peak_speed_rpm,
             speed_rpm: Way::nearest(speeds_rpm, &by_speed, false),
             wob_kn: Way::nearest(weights_kn, &by_weight, true),
             speed_scan: by_speed,
@@ -588,6 +601,8 @@ pub struct EscapeAdvice {
     pub point: OperatingPoint,
     /// P(the bit stick-slips at the operating point), simulated.
     pub stick_slip_probability: f64,
+    /// The settled strings' peak bit speeds at the operating point (rpm, lowest and highest).
+    pub peak_speed_rpm: Option<(f64, f64)>,
     /// The nearest speed (rpm) that ends it; `None` when none scanned does.
     pub speed_rpm: Option<Way>,
     /// The nearest lighter weight (kN) that ends it.

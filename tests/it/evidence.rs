@@ -617,9 +617,23 @@ fn an_evidence_directory_holds_the_document_and_its_posterior_and_stability_maps
         (serde_json::from_str::<serde_json::Value>(&stdout).unwrap(), err)
     };
     let w_ref = stored["w_ref_kn"].as_f64().map(|w| w.to_string());
-    let (from_dir, said) = maps(&["--run", out.to_str().unwrap()], None);
+    let (mut from_dir, said) = maps(&["--run", out.to_str().unwrap()], None);
     let posterior = out.join("posterior.csv");
     let (from_csv, _) = maps(&["--posterior", posterior.to_str().unwrap()], w_ref.clone());
+    // The directory keeps its record: the advice at the record's operating point comes with
+    // the maps, which are the posterior's.
+    let bit = from_dir
+        .as_object_mut()
+        .unwrap()
+        .remove("record")
+        .expect("the record's bit");
+    let advice = from_dir
+        .as_object_mut()
+        .unwrap()
+        .remove("advice")
+        .expect("the record's advice");
+    assert!(bit["samples"].as_u64().unwrap() > 0, "{bit}");
+    assert!(advice["words"].as_str().is_some(), "{advice}");
     assert_eq!(from_dir, from_csv);
     assert_eq!(said.contains("mapped at that reference"), w_ref.is_some(), "{said}");
 

@@ -118,7 +118,7 @@ fn the_report_has_every_figure_in_both_formats_and_the_tables() {
         "fig08_map_deterministic",
         "fig08_map_stochastic",
         "fig09_structures",
-        "fig10_stick_slip_simulated",
+        "fig11_stick_slip_simulated",
     ] {
         assert!(stems.contains(&expected), "{expected} missing from {stems:?}");
     }

@@ -208,7 +208,12 @@ fn compute(
         return Err(e);
     }
     let (analysis, selection) = check(py, result)?;
-    let mut document = analysis.document(data, &job.prior.describe(), true);
+    let advice = py.detach(|| analysis.record_advice(data, job.backend));
+    let mut document = bitrock::pipeline::evidence::EvidenceAnalysis::with_advice(
+        analysis.document(data, &job.prior.describe(), true),
+        data,
+        advice.as_ref(),
+    );
     if let Some(selection) = selection {
         document["check"] = serde_json::to_value(&selection).expect("the check serialises");
     }

@@ -308,3 +308,24 @@ def test_python_s_simulated_maps_are_the_command_s(cli):
         assert ours.attrs["advice"][key] == theirs["advice"][key], key
     with pytest.raises(bitrock.InputError, match="at_kn"):
         bitrock.stability(law="m2", params=[13, 6.5, 0.3], simulate=True, at_rpm=60, backend="cpu")
+
+
+def test_a_runs_record_advice_is_the_command_s_and_its_way_out_ends_the_demo_string(cli, tmp_path):
+    # The demo record stick-slips (m3 on the paper's 1-DOF string at 80 rpm and 244.2 kN):
+    # Python's advice at its operating point is the command's, and its ways out, applied from
+    # the demo string's settled cycle at eight phases in the LSODA string, end it.
+    run = tmp_path / "run"
+    run_cli(cli, "abc", "--particles", "2000", "--backend", "cpu", "--out", str(run))
+    theirs = json.loads(run_cli(cli, "stability", "--run", str(run), "--backend", "cpu", "--json").stdout)
+    ours = bitrock.stability(run, backend="cpu").attrs["record_advice"]
+    assert ours["advice"] == theirs["advice"] and ours["record"] == theirs["record"]
+    advice = ours["advice"]
+    assert advice["stick_slip_now"] and "steady" not in advice["words"], advice["words"]
+    assert ours["record"]["stuck_share"] > 0.1 and abs(ours["record"]["mean_speed_rpm"] - 80.0) < 1.0
+    chain = one_dof()
+    p_nm = np.array([2.72e3, 1.0, 0.09, 9.52e3, 4e3, 0.08])
+    ratio = advice["wob_kn"] / 244.2
+    for share, state in cycles_at(chain, "m3", p_nm, 80.0 * RPM, ratio):
+        assert share > 0.3, f"stuck {share} of the time at 80 rpm: not the demo's cycle"
+        assert after_change(chain, "m3", p_nm, advice["escape_omega_rpm"][0] * RPM, ratio, state) == 0.0
+        assert after_change(chain, "m3", p_nm, 80.0 * RPM, advice["escape_wob_kn"][0] / 244.2, state) == 0.0

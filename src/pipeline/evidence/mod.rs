@@ -285,6 +285,21 @@ impl EvidenceAnalysis {
         Some(adviser.advise_record(&inputs, w_ref_n, &seen))
     }
 
+    /// `document` with what `data`'s bit did (`"record_bit"`) and `advice` (from
+    /// [`record_advice`](Self::record_advice)) where there is one: what `bitrock evidence
+    /// --json` prints, an evidence directory keeps and Python's `Evidence.document` holds.
+    pub fn with_advice(
+        mut document: serde_json::Value,
+        data: &FieldData,
+        advice: Option<&crate::pipeline::advice::Advice>,
+    ) -> serde_json::Value {
+        if let Some(advice) = advice {
+            document["record_bit"] = serde_json::to_value(data.bit).expect("a record's bit serialises");
+            document["advice"] = serde_json::to_value(advice).expect("advice serialises");
+        }
+        document
+    }
+
     /// `bitrock evidence --json`'s document of the analysis of `data` (`prior` describing its
     /// boxes); with `posterior_sets`, each law's posterior sets too (`"posterior": {"params",
     /// "weights"}`, in the record's torque unit), as an evidence directory and Python keep it.

@@ -379,7 +379,7 @@ pub(super) fn render_simulated_map(p: &Prepared) -> Result<Option<Rendered>> {
         ),
     };
     Ok(Some(render_one(
-        "fig10_stick_slip_simulated".into(),
+        "fig11_stick_slip_simulated".into(),
         "Stick-slip by simulated strings: where it develops from steady rotation kicked by a tenth of the speed \
          (dashed), where it persists once the bit is in it at the record's operating point (solid, the colours), \
          and the bistable band between them (hatched orange): operating points where steady rotation survives, \
