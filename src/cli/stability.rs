@@ -182,17 +182,19 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
             "note: the directory's record was kept without what its bit did (stored by an older bitrock): no advice for its operating point"
         ));
     }
+    // A string the simulator cannot hold is refused where the simulated maps are asked for;
+    // the record's advice then says only what the linear maps can.
     let chain = strings::chain(
         cmd.string.structure,
         &cmd.string.lumped.lumped(),
         &cmd.string.fe.settings(),
-    )?;
+    );
     // At the record, the parameters are for the W_ref its posterior was scaled to, or for
     // the weight on bit it drilled with.
     let scaled_w_ref_n = cmd.w_ref_kn.map(|kn| kn * 1000.0).or(own_w_ref_n).or(maps.run_w_ref_n);
     let at_record = record_bit.map(|seen| (seen, advice::params_w_ref_n(scaled_w_ref_n, &seen, w_ref_n)));
     let advice = at_record.map(|(seen, record_w_ref_n)| {
-        let adviser = Adviser::for_record(job.criterion, chain.clone(), cmd.backend);
+        let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), cmd.backend);
         (seen, adviser.advise_record(&maps.inputs, record_w_ref_n, &seen))
     });
     let simulated = if cmd.simulate {
@@ -201,7 +203,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
             (_, _, Some((seen, record_w_ref_n))) => (Some(advice::record_point(&seen, record_w_ref_n)), record_w_ref_n),
             _ => (None, w_ref_n),
         };
-        Some(simulate(cmd, chain, at, &maps.inputs, sim_w_ref_n)?)
+        Some(simulate(cmd, chain?, at, &maps.inputs, sim_w_ref_n)?)
     } else {
         None
     };

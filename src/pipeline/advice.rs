@@ -306,12 +306,13 @@ pub fn params_w_ref_n(scaled: Option<f64>, seen: &BitSeen, fallback_n: f64) -> f
 
 impl Adviser {
     /// The advice for a whole record under `criterion`: a stick-slipping record's way out by
-    /// `chain` simulated for [`RECORD_ESCAPE_SAMPLES`] samples of the likely laws on `backend`.
-    pub fn for_record(criterion: Criterion, chain: Chain, backend: Backend) -> Self {
+    /// `chain` simulated for [`RECORD_ESCAPE_SAMPLES`] samples of the likely laws on `backend`
+    /// (none where the string cannot be simulated: longer than the simulator's chains).
+    pub fn for_record(criterion: Criterion, chain: Option<Chain>, backend: Backend) -> Self {
         Self {
             criterion,
             risk: DEFAULT_RISK,
-            escape: Some(EscapeSettings {
+            escape: chain.map(|chain| EscapeSettings {
                 chain,
                 samples: RECORD_ESCAPE_SAMPLES,
                 min_probability: RECORD_ESCAPE_MIN_PROBABILITY,

@@ -270,7 +270,7 @@ fn simulated_advice(
         .bit
         .map(|seen| (seen, params_w_ref_n(scaled_w_ref_n, &seen, s.w_ref_n)));
     let advice = at_record.map(|(seen, w_ref_n)| {
-        let adviser = Adviser::for_record(Criterion::Lumped(s.lumped), chain.clone(), s.backend);
+        let adviser = Adviser::for_record(Criterion::Lumped(s.lumped), Some(chain.clone()), s.backend);
         (seen, adviser.advise_record(&inputs, w_ref_n, &seen))
     });
     let Some(sim) = &s.simulated else {

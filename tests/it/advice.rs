@@ -136,7 +136,7 @@ fn demo_advice(params_knm: &[f64]) -> bitrock::pipeline::advice::Advice {
         samples_si: vec![params],
     }];
     let lumped = Lumped::default();
-    let adviser = Adviser::for_record(Criterion::Lumped(lumped), Chain::one_dof(&lumped), Backend::Cpu);
+    let adviser = Adviser::for_record(Criterion::Lumped(lumped), Some(Chain::one_dof(&lumped)), Backend::Cpu);
     adviser.advise_record(&inputs, 244.2e3, &seen)
 }
 

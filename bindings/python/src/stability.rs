@@ -154,14 +154,16 @@ pub(crate) fn stability<'py>(
             PyArray1::from_vec(py, mixture.iter().map(nan).collect()),
         )?;
     }
-    let chain = check(py, bitrock::pipeline::strings::chain(structure, &lumped, &fe))?;
+    // A string the simulator cannot hold is refused where the simulated maps are asked for;
+    // the record's advice then says only what the linear maps can.
+    let chain = bitrock::pipeline::strings::chain(structure, &lumped, &fe);
     let given_w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map(|kn| kn * 1000.0);
     let record_w_ref_n = maps
         .record_bit
         .map(|seen| bitrock::pipeline::advice::params_w_ref_n(given_w_ref_n.or(maps.run_w_ref_n), &seen, job.w_ref_n));
     if let (Some(seen), Some(w_ref_n)) = (&maps.record_bit, record_w_ref_n) {
         use bitrock::pipeline::advice::Adviser;
-        let adviser = Adviser::for_record(job.criterion, chain.clone(), job.backend);
+        let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), job.backend);
         let advice = py.detach(|| adviser.advise_record(&maps.inputs, w_ref_n, seen));
         out.set_item(
             "record_advice",
@@ -173,7 +175,16 @@ pub(crate) fn stability<'py>(
             .record_bit
             .zip(record_w_ref_n)
             .map(|(seen, w_ref_n)| (bitrock::pipeline::advice::record_point(&seen, w_ref_n), w_ref_n));
-        simulated(py, options, &job, &maps.inputs, chain, record_at, &note, &out)?;
+        simulated(
+            py,
+            options,
+            &job,
+            &maps.inputs,
+            check(py, chain)?,
+            record_at,
+            &note,
+            &out,
+        )?;
     }
     out.set_item("critical_bit_damping_nms", job.criterion.critical_nms())?;
     out.set_item("percentile", job.percentile * 100.0)?;

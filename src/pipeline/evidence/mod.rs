@@ -277,7 +277,7 @@ impl EvidenceAnalysis {
         let lumped = crate::stability::lumped::Lumped::default();
         let adviser = Adviser::for_record(
             crate::stability::map::Criterion::Lumped(lumped),
-            crate::simulate::strings::Chain::one_dof(&lumped),
+            Some(crate::simulate::strings::Chain::one_dof(&lumped)),
             backend,
         );
         let inputs = crate::abc::posterior::map_inputs_of(&self.evidence.particles(), ADVICE_SAMPLES);
