@@ -342,10 +342,17 @@ fn print_headline(
             named.join(", ")
         )?;
     }
+    if let Some(advice) = &report.advice {
+        writeln!(
+            out,
+            "advice at the record's operating point (δ = {}'s posterior, simulated strings): {advice}",
+            first.delta
+        )?;
+    }
     writeln!(out, "runs: {}", root.display())?;
     writeln!(
         out,
-        "report: {} ({} figures as SVG and PNG: fits, model probabilities, tolerances, marginals, correlations, envelopes, stability maps 1-DOF and FE)",
+        "report: {} ({} figures as SVG and PNG: fits, model probabilities, tolerances, marginals, correlations, envelopes, stability maps 1-DOF and FE, stick-slip by simulated strings)",
         report.dir.join("report.md").display(),
         report.figures.len()
     )

@@ -191,6 +191,8 @@ pub struct ReportSummary {
     pub figures: Vec<FigureInfo>,
     /// Wall time of [`write_report`] (s).
     pub seconds: f64,
+    /// The advice at the record's operating point, in words, where the report gives one.
+    pub advice: Option<String>,
 }
 
 /// Figure size (px) of the single- and multi-panel figures.
@@ -212,7 +214,10 @@ pub fn write_report(dir: &Path, input: &ReportInput) -> Result<ReportSummary> {
     let prepared = Prepared::new(input)?;
     let rendered = figures::render_all(&prepared)?;
     let markdown = prepared.markdown(&rendered.iter().map(|r| r.info.clone()).collect::<Vec<_>>());
-    replace_report(dir, markdown, rendered, start)
+    Ok(ReportSummary {
+        advice: prepared.record_advice.as_ref().map(|(_, a)| a.words.clone()),
+        ..replace_report(dir, markdown, rendered, start)?
+    })
 }
 
 /// Moves a report rendered in memory into `dir`, replacing it as a whole.
@@ -242,6 +247,7 @@ pub(crate) fn replace_report(
         files: names,
         figures: rendered.into_iter().map(|r| r.info).collect(),
         seconds: start.elapsed().as_secs_f64(),
+        advice: None,
     })
 }
 
