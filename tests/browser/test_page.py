@@ -2,6 +2,7 @@
 chromium and chromium-driver) driven through WebDriver, on a simulated well that changes
 formation. What the page shows is checked against the watch's own JSON lines."""
 
+import base64
 import io
 import json
 import os
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import pytest
 from PIL import Image
+from pypdf import PdfReader
 from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
@@ -185,9 +187,34 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
         if os.environ.get("BITROCK_PAGE_SCREENSHOT"):
             shot.save(os.environ["BITROCK_PAGE_SCREENSHOT"])
 
-        # The print view of the current state.
+        # Every panel is drawn: each canvas holds coloured pixels, read from the canvas itself
+        # (the share of its pixels that are neither blank nor white), whatever is on screen.
+        drawn = driver.execute_script(
+            """
+            const out = {};
+            for (const c of document.querySelectorAll('canvas')) {
+              const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+              let inked = 0;
+              for (let i = 0; i < d.length; i += 4) {
+                if (d[i + 3] > 0 && !(d[i] > 245 && d[i + 1] > 245 && d[i + 2] > 245)) inked++;
+              }
+              out[c.id] = inked / (c.width * c.height);
+            }
+            return out;
+            """
+        )
+        assert sorted(drawn) == ["along", "cloud", "map", "params"], drawn
+        # Lines and points ink a few per cent of a panel; the map's cells most of it.
+        for panel, share in drawn.items():
+            assert share > (0.5 if panel == "map" else 0.02), f"{panel}: {share:.4f} of its pixels drawn"
+
+        # The print view of the current state: its pages hold the page's text.
         pdf = driver.execute_cdp_cmd("Page.printToPDF", {"printBackground": True})
-        assert len(pdf["data"]) > 10_000
+        reader = PdfReader(io.BytesIO(base64.b64decode(pdf["data"])))
+        # Compared without white space: a printed line wraps where the screen's does not.
+        printed = "".join("".join((page.extract_text() or "").split()) for page in reader.pages)
+        for text in (last["advice"]["words"], "bitrock watch", f"window{last['window']}"):
+            assert "".join(text.split()) in printed, f"{text!r} not in the printed pages: {printed[:3000]}"
 
         # Self-contained: everything the page loaded came from its server, and it is light.
         resources = driver.execute_script("return performance.getEntriesByType('resource').map(e => e.name)")
