@@ -12,8 +12,10 @@ const SUMMARY_WORDS: u32 = 16u;
 const EVENT_PASSES: u32 = 4u;
 
 // Nodes of the chain (the bit the last): fixed per pipeline, so that the loops over nodes
-// unroll and a 1-DOF string keeps its state in registers.
+// unroll. The state's arrays are as long as the chain (the host writes its length here when it
+// builds the pipeline), so that a short chain's state lives in registers, not in memory.
 override NODES: u32 = 1u;
+const CHAIN_NODES: u32 = 16u;
 
 // Keep in sync with `StringsJob` in src/eval/gpu/strings.rs.
 struct StringsJob {
@@ -44,13 +46,13 @@ struct StringsJob {
 @group(0) @binding(3) var<storage, read_write> summaries: array<f32>;
 
 struct State {
-    u: array<f32, 16>,
-    w: array<f32, 16>,
+    u: array<f32, CHAIN_NODES>,
+    w: array<f32, CHAIN_NODES>,
 }
 
 struct Deriv {
-    du: array<f32, 16>,
-    dw: array<f32, 16>,
+    du: array<f32, CHAIN_NODES>,
+    dw: array<f32, CHAIN_NODES>,
 }
 
 var<private> law: u32;
@@ -231,7 +233,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     let sb = STATE_WORDS * i;
     var m: Motion;
-    for (var j = 0u; j < MAX_NODES; j = j + 1u) {
+    for (var j = 0u; j < NODES; j = j + 1u) {
         m.s.u[j] = states[sb + j];
         m.s.w[j] = states[sb + MAX_NODES + j];
     }
@@ -289,7 +291,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
 
-    for (var j = 0u; j < MAX_NODES; j = j + 1u) {
+    // The nodes past the chain's keep what they held.
+    for (var j = 0u; j < NODES; j = j + 1u) {
         states[sb + j] = m.s.u[j];
         states[sb + MAX_NODES + j] = m.s.w[j];
     }

@@ -102,12 +102,20 @@ fn slopes_source() -> String {
 }
 
 /// The strings kernel with the law files' `laws` ([`file_laws::splice`]).
-pub(crate) fn strings_source_for(laws: &[crate::Law]) -> String {
-    file_laws::splice(kernel!("strings"), laws)
+/// The string kernel for `laws`, its state arrays as long as a chain of `nodes` (at most
+/// [`crate::simulate::strings::MAX_NODES`]).
+pub(crate) fn strings_source_for(laws: &[crate::Law], nodes: usize) -> String {
+    const CHAIN_NODES: &str = "const CHAIN_NODES: u32 = 16u;";
+    let source = file_laws::splice(kernel!("strings"), laws);
+    debug_assert!(
+        source.contains(CHAIN_NODES),
+        "shaders/strings.wgsl declares CHAIN_NODES"
+    );
+    source.replace(CHAIN_NODES, &format!("const CHAIN_NODES: u32 = {nodes}u;"))
 }
 
 fn strings_source() -> String {
-    strings_source_for(&[])
+    strings_source_for(&[], crate::simulate::strings::MAX_NODES)
 }
 
 fn stability_source() -> String {

@@ -54,12 +54,13 @@ pub fn integrate_batch(
         buffer_entry(2, STORAGE_WRITE),
         buffer_entry(3, STORAGE_WRITE),
     ];
+    let nodes = chain.nodes();
     let kernel = ctx.kernel(
-        &super::file_laws::label("strings", &laws),
+        &format!("{} ({nodes} nodes)", super::file_laws::label("strings", &laws)),
         "main",
-        || super::strings_source_for(&laws),
+        || super::strings_source_for(&laws, nodes),
         &entries,
-        &[("NODES", chain.nodes() as f64)],
+        &[("NODES", nodes as f64)],
     )?;
     let mut job = StringsJob::zeroed();
     job.steps_per_sample = schedule.steps_per_sample;
