@@ -957,7 +957,13 @@ fn finish(
     job: &EvidenceJob,
     data: &bitrock::data::FieldData,
 ) -> serde_json::Value {
-    let document = analysis.document(data, &job.prior.describe(), true);
+    // As `bitrock evidence --out` writes it: with the advice at the record's operating point.
+    let advice = analysis.record_advice(data, job.backend);
+    let document = EvidenceAnalysis::with_advice(
+        analysis.document(data, &job.prior.describe(), true),
+        data,
+        advice.as_ref(),
+    );
     unfinished.finish(&document, analysis, job, data).unwrap();
     stored_evidence(out)
 }
