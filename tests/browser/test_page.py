@@ -204,17 +204,20 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
             """
         )
         assert sorted(drawn) == ["along", "cloud", "map", "params"], drawn
-        # Lines and points ink a few per cent of a panel; the map's cells most of it.
+        # Measured on this well: along 0.65 (stacked probabilities), cloud 0.07 (points and band),
+        # map 0.73 (cells), params 0.25 (bands); axes and labels alone ink about 0.02.
+        least = {"along": 0.3, "cloud": 0.04, "map": 0.5, "params": 0.1}
         for panel, share in drawn.items():
-            assert share > (0.5 if panel == "map" else 0.02), f"{panel}: {share:.4f} of its pixels drawn"
+            assert share > least[panel], f"{panel}: {share:.4f} of its pixels drawn"
 
         # The print view of the current state: its pages hold the page's text.
         pdf = driver.execute_cdp_cmd("Page.printToPDF", {"printBackground": True})
         reader = PdfReader(io.BytesIO(base64.b64decode(pdf["data"])))
-        # Compared without white space: a printed line wraps where the screen's does not.
-        printed = "".join("".join((page.extract_text() or "").split()) for page in reader.pages)
-        for text in (last["advice"]["words"], "bitrock watch", f"window{last['window']}"):
-            assert "".join(text.split()) in printed, f"{text!r} not in the printed pages: {printed[:3000]}"
+        # Compared without white space and case: a printed line wraps where the screen's does
+        # not, and the labels print in capitals.
+        printed = "".join("".join((page.extract_text() or "").split()) for page in reader.pages).lower()
+        for text in (last["advice"]["words"], "bitrock watch", f"window {last['window']}", "most probable law m3"):
+            assert "".join(text.split()).lower() in printed, f"{text!r} not in the printed pages: {printed[:3000]}"
 
         # Self-contained: everything the page loaded came from its server, and it is light.
         resources = driver.execute_script("return performance.getEntriesByType('resource').map(e => e.name)")
