@@ -205,7 +205,7 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
         )
         assert sorted(drawn) == ["along", "cloud", "map", "params"], drawn
         # Measured on this well: along 0.65 (stacked probabilities), cloud 0.07 (points and band),
-        # map 0.73 (cells), params 0.25 (bands); axes and labels alone ink about 0.02.
+        # map 0.73 (cells), params 0.25 (bands): each must keep about half of that.
         least = {"along": 0.3, "cloud": 0.04, "map": 0.5, "params": 0.1}
         for panel, share in drawn.items():
             assert share > least[panel], f"{panel}: {share:.4f} of its pixels drawn"
