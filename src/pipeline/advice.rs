@@ -11,7 +11,9 @@
 //!   higher speed and lighter weight that end the cycle *from the state the bit is in*, by
 //!   simulated strings ([`crate::pipeline::strings`]), each with P(it ends).
 
-use super::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn, thinned};
+use super::strings::{
+    OperatingPoint, Peaks, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn, thinned,
+};
 use crate::data::BitSeen;
 use crate::eval::Backend;
 use crate::simulate::strings::Chain;
@@ -87,21 +89,31 @@ pub struct CycleCheck {
     pub seen_peak_rpm: f64,
     /// The lowest and highest peak bit speed of the settled simulated strings, rpm.
     pub simulated_peak_rpm: (f64, f64),
-    /// The seen peak lies within [`PEAK_TOLERANCE`] of the simulated range.
+    /// The posterior's share (by weight) of strings whose peak lies within [`PEAK_TOLERANCE`]
+    /// of the seen one.
+    pub reproducing_share: f64,
+    /// At least [`REPRODUCING_SHARE`] of the posterior reproduces the seen peak.
     pub reproduced: bool,
 }
 
-/// How far (a share) a seen peak bit speed may lie outside the simulated strings' range and
-/// still count as reproduced: room for a downhole tool's speed noise.
+/// How far (a share) a simulated peak bit speed may lie from the seen one and still reproduce
+/// it: room for a downhole tool's speed noise.
 pub const PEAK_TOLERANCE: f64 = 0.1;
+/// The share of the posterior that must reproduce the seen peak for the cycle to count as
+/// reproduced.
+pub const REPRODUCING_SHARE: f64 = 0.5;
 
 impl CycleCheck {
-    fn new(seen_peak_rpm: f64, (lo, hi): (f64, f64)) -> Self {
-        Self {
+    /// The check of `seen_peak_rpm` against the simulated `peaks`; `None` without a string.
+    fn new(seen_peak_rpm: f64, peaks: &Peaks) -> Option<Self> {
+        let simulated_peak_rpm = peaks.range()?;
+        let reproducing_share = peaks.share_within(seen_peak_rpm, PEAK_TOLERANCE);
+        Some(Self {
             seen_peak_rpm,
-            simulated_peak_rpm: (lo, hi),
-            reproduced: seen_peak_rpm >= lo / (1.0 + PEAK_TOLERANCE) && seen_peak_rpm <= hi * (1.0 + PEAK_TOLERANCE),
-        }
+            simulated_peak_rpm,
+            reproducing_share,
+            reproduced: reproducing_share >= REPRODUCING_SHARE,
+        })
     }
 
     /// The check in words where it fails; empty where the cycle is reproduced.
@@ -111,8 +123,10 @@ impl CycleCheck {
         }
         let (lo, hi) = self.simulated_peak_rpm;
         format!(
-            "; but the posterior's simulated strings peak at {lo:.0}–{hi:.0} rpm there where the bit peaked at {:.0} rpm: \
-             they do not reproduce its cycle, and their way out may fall short",
+            "; but only {:.0} % of the posterior's simulated strings peak within {:.0} % of the bit's {:.0} rpm there \
+             (they peak at {lo:.0}–{hi:.0} rpm): they do not reproduce its cycle, and their way out may fall short",
+            100.0 * self.reproducing_share,
+            100.0 * PEAK_TOLERANCE,
             self.seen_peak_rpm
         )
     }
@@ -263,10 +277,7 @@ impl Adviser {
             Ok(e) => {
                 advice.escape_omega_rpm = e.speed_rpm.map(|w| (w.to, w.ends_probability));
                 advice.escape_wob_kn = e.wob_kn.map(|w| (w.to, w.ends_probability));
-                advice.cycle = seen
-                    .peak_speed_rpm
-                    .zip(e.peak_speed_rpm)
-                    .map(|(seen, simulated)| CycleCheck::new(seen, simulated));
+                advice.cycle = seen.peak_speed_rpm.and_then(|seen| CycleCheck::new(seen, &e.peaks));
                 advice.words = format!(
                     "{now}: {}{}",
                     e.ways(),

@@ -304,14 +304,38 @@ pub struct AtPoint {
     pub point: OperatingPoint,
     /// P(stick-slip at the operating point) under the mixture.
     pub stick_slip_probability: f64,
-    /// The range of the settled strings' peak bit speeds there (rpm), the lowest and the
-    /// highest of the strings that stayed in bounds: what the posterior says the record's
-    /// cycle should look like.
-    pub peak_speed_rpm: Option<(f64, f64)>,
+    /// The settled strings' peak bit speeds there (rpm), each with its weight in the mixture,
+    /// of the strings that stayed in bounds: what the posterior says the record's cycle
+    /// should look like.
+    pub peaks: Peaks,
     /// The members, each once per phase.
     replicas: Vec<Member>,
     /// Their states when the driller changes something.
     states: Vec<StringState>,
+}
+
+/// Peak bit speeds of simulated strings (rpm), each with its weight in the mixture.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Peaks(pub Vec<(f64, f64)>);
+
+impl Peaks {
+    /// The lowest and the highest peak; `None` without a string.
+    pub fn range(&self) -> Option<(f64, f64)> {
+        self.0.iter().fold(None, |range, (v, _)| {
+            Some(range.map_or((*v, *v), |(lo, hi): (f64, f64)| (lo.min(*v), hi.max(*v))))
+        })
+    }
+
+    /// The share of the weight whose peak lies within `tolerance` (a share) of `seen_rpm`.
+    pub fn share_within(&self, seen_rpm: f64, tolerance: f64) -> f64 {
+        let weight =
+            |near: &dyn Fn(f64) -> bool| self.0.iter().filter(|(v, _)| near(*v)).fold(0.0, |sum, (_, w)| sum + w);
+        let total = weight(&|_| true);
+        if total <= 0.0 {
+            return 0.0;
+        }
+        weight(&|v| (v - seen_rpm).abs() <= tolerance * seen_rpm.abs()) / total
+    }
 }
 
 /// Every simulated map of a posterior.
@@ -493,17 +517,18 @@ impl<'a> Simulator<'a> {
             }
         }
         let here = Self::grid(&replicas, &summaries, &[point.omega_rpm], &[point.wob_kn]);
-        let peaks = summaries
-            .iter()
-            .filter(|s| !s.diverged && s.samples > 0)
-            .map(|s| s.speed_max_rad_s / RAD_S_PER_RPM);
-        let peak_speed_rpm = peaks.fold(None, |range: Option<(f64, f64)>, v| {
-            Some(range.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))))
-        });
+        let peaks = Peaks(
+            summaries
+                .iter()
+                .zip(&replicas)
+                .filter(|(s, _)| !s.diverged && s.samples > 0)
+                .map(|(s, m)| (s.speed_max_rad_s / RAD_S_PER_RPM, m.weight))
+                .collect(),
+        );
         Ok(AtPoint {
             point,
             stick_slip_probability: here.probability[0],
-            peak_speed_rpm,
+            peaks,
             replicas,
             states,
         })
@@ -539,7 +564,7 @@ impl<'a> Simulator<'a> {
         Ok(EscapeAdvice {
             point: p,
             stick_slip_probability: from.stick_slip_probability,
-            peak_speed_rpm: from.peak_speed_rpm,
+            peaks: from.peaks.clone(),
             speed_rpm: Way::nearest(speeds_rpm, &by_speed, false),
             wob_kn: Way::nearest(weights_kn, &by_weight, true),
             speed_scan: by_speed,
@@ -601,8 +626,8 @@ pub struct EscapeAdvice {
     pub point: OperatingPoint,
     /// P(the bit stick-slips at the operating point), simulated.
     pub stick_slip_probability: f64,
-    /// The settled strings' peak bit speeds at the operating point (rpm, lowest and highest).
-    pub peak_speed_rpm: Option<(f64, f64)>,
+    /// The settled strings' peak bit speeds at the operating point (rpm), weighted.
+    pub peaks: Peaks,
     /// The nearest speed (rpm) that ends it; `None` when none scanned does.
     pub speed_rpm: Option<Way>,
     /// The nearest lighter weight (kN) that ends it.
@@ -728,5 +753,17 @@ mod tests {
             Way::nearest(&axis[2..], &grid([0.6, 1.0, 0.6, 1.0], [0.0; 4]), false),
             None
         );
+    }
+
+    #[test]
+    fn peaks_are_weighed_by_the_mixture() {
+        let peaks = Peaks(vec![(200.0, 0.25), (215.0, 0.25), (250.0, 0.5)]);
+        assert_eq!(peaks.range(), Some((200.0, 250.0)));
+        // Within 10 % of 220 rpm: 200 and 215 (22 rpm of room), a half of the weight.
+        assert!((peaks.share_within(220.0, 0.1) - 0.5).abs() < 1e-15);
+        assert!((peaks.share_within(250.0, 0.01) - 0.5).abs() < 1e-15);
+        assert_eq!(peaks.share_within(100.0, 0.1).to_bits(), 0f64.to_bits(), "+0, never −0");
+        assert_eq!(Peaks::default().range(), None);
+        assert_eq!(Peaks::default().share_within(100.0, 0.1).to_bits(), 0f64.to_bits());
     }
 }

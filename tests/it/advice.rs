@@ -146,7 +146,7 @@ fn a_posterior_that_misses_the_records_cycle_is_told_apart_from_the_truth() {
     // record's 228): no warning, and its way out is the truth's own.
     let truth = demo_advice(&[2.72, 1.0, 0.09, 9.52, 4.0, 0.08]);
     let cycle = truth.cycle.expect("a stick-slipping record is checked");
-    assert!(cycle.reproduced, "{truth:?}");
+    assert!(cycle.reproduced && cycle.reproducing_share == 1.0, "{truth:?}");
     assert!(!truth.words.contains("fall short"), "{}", truth.words);
     let speed = truth.escape_omega_rpm.unwrap().0;
     assert!((110.0..=140.0).contains(&speed), "{}", truth.words);
@@ -156,5 +156,6 @@ fn a_posterior_that_misses_the_records_cycle_is_told_apart_from_the_truth() {
     let biased = demo_advice(&[1.63, 2.99, 0.68, 9.58, 4.04, 0.082]);
     let cycle = biased.cycle.unwrap();
     assert!(!cycle.reproduced && cycle.simulated_peak_rpm.1 < 205.0, "{biased:?}");
+    assert_eq!(cycle.reproducing_share, 0.0, "{biased:?}");
     assert!(biased.words.contains("do not reproduce its cycle"), "{}", biased.words);
 }
