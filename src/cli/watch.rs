@@ -200,6 +200,13 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
             }
             cmd.string.criterion()?
         },
+        fe_chain: match cmd.string.structure {
+            Structure::Fe => {
+                bitrock::pipeline::strings::chain(Structure::Fe, &cmd.string.lumped.lumped(), &cmd.string.fe.settings())
+                    .ok()
+            }
+            Structure::Lumped => None,
+        },
         wits: cmd
             .wits_items
             .as_deref()

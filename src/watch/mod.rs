@@ -82,6 +82,10 @@ pub struct WatchSettings {
     /// What decides stability for the advice: the 1-DOF model (default) or a finite-element
     /// string's critical bit damping ([`crate::pipeline::stability::criterion`]).
     pub criterion: Criterion,
+    /// The string a stick-slipping window's way out is simulated on where the criterion is a
+    /// finite-element string's critical damping: that string lumped ([`Chain::lumped_fe`]);
+    /// `None` there: no way out is simulated. A 1-DOF criterion's own string otherwise.
+    pub fe_chain: Option<Chain>,
     /// Reference weight on bit of the laws' parameters, N.
     pub w_ref_n: f64,
     pub backend: Backend,
@@ -124,6 +128,7 @@ impl Default for WatchSettings {
             change_nats: 30.0,
             risk: crate::pipeline::advice::DEFAULT_RISK,
             criterion: Criterion::Lumped(Lumped::default()),
+            fe_chain: None,
             w_ref_n: PAPER_W_REF_N,
             backend: Backend::Auto,
             min_samples: 100,
@@ -879,22 +884,23 @@ impl Watch {
     }
 
     /// The windows' advice: the watch's criterion and risk; a stick-slipping window's way out
-    /// by the 1-DOF string simulated for a few samples of the likely laws, on the CPU (within
-    /// the window's latency), where the criterion is the 1-DOF string's.
+    /// by its string simulated for a few samples of the likely laws, on the CPU (within the
+    /// window's latency).
     fn adviser(&self) -> Adviser {
         let criterion = self.settings.criterion;
         Adviser {
             criterion,
             risk: self.settings.risk,
             escape: match criterion {
-                Criterion::Lumped(lumped) => Some(EscapeSettings {
-                    chain: Chain::one_dof(&lumped),
-                    samples: ESCAPE_SAMPLES,
-                    min_probability: ESCAPE_MIN_PROBABILITY,
-                    backend: Backend::Cpu,
-                }),
-                Criterion::Critical(_) => None,
-            },
+                Criterion::Lumped(lumped) => Some(Chain::one_dof(&lumped)),
+                Criterion::Critical(_) => self.settings.fe_chain.clone(),
+            }
+            .map(|chain| EscapeSettings {
+                chain,
+                samples: ESCAPE_SAMPLES,
+                min_probability: ESCAPE_MIN_PROBABILITY,
+                backend: Backend::Cpu,
+            }),
         }
     }
 

@@ -691,6 +691,18 @@ fn the_advice_on_the_finite_element_string_uses_its_critical_bit_damping_and_a_r
         assert_eq!(a["laws"], b["laws"]);
         assert!(b["advice"]["p_unstable"].as_f64().unwrap().is_finite(), "{b}");
     }
+    // The well stick-slips at 60 rpm: on the finite-element string too, each such window's way
+    // out is simulated, on that string.
+    let stuck: Vec<&serde_json::Value> = on_fe.iter().filter(|u| u["advice"]["stick_slip_now"] == true).collect();
+    assert!(!stuck.is_empty());
+    for u in stuck {
+        let advice = &u["advice"];
+        assert!(
+            advice["escape_omega_rpm"].is_array() || advice["escape_wob_kn"].is_array(),
+            "{advice}"
+        );
+        assert!(!advice["words"].as_str().unwrap().contains("steady"), "{advice}");
+    }
     // The watch stores the string's critical bit damping, the number `bitrock fe` gives.
     let (_, stored) = stored(&out);
     assert_eq!(

@@ -5,6 +5,7 @@ use crate::errors::*;
 use crate::record::data_options;
 use crate::run::PyObserver;
 use bitrock::error::Error;
+use bitrock::pipeline::stability::Structure;
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::{FollowOptions, WatchSettings};
 use pyo3::prelude::*;
@@ -35,6 +36,11 @@ pub(crate) fn watch(
         py,
         py.detach(|| bitrock::pipeline::stability::criterion(structure, lumped, &fe)),
     )?;
+    // A stick-slipping window's way out on the finite-element string, where it can be simulated.
+    let fe_chain = match structure {
+        Structure::Fe => bitrock::pipeline::strings::chain(structure, &lumped, &fe).ok(),
+        Structure::Lumped => None,
+    };
     let abc: bool = kwarg(options, "abc")?.unwrap_or(false);
     let sampler: Option<bitrock::run::Sampler> = named(py, "sampler", kwarg(options, "sampler")?)?;
     let delta: Option<f64> = kwarg(options, "delta")?;
@@ -60,6 +66,7 @@ pub(crate) fn watch(
     }
     let settings = WatchSettings {
         criterion,
+        fe_chain,
         abc: match abc {
             true => Some(check(
                 py,
