@@ -323,6 +323,17 @@ impl Run {
             .filter(|p| !p.is_empty())
     }
 
+    /// What a run kept in memory's record showed of its bit, and the W_ref (N) its parameters
+    /// are for where its fit scaled each torque by WOB / W_ref; `None` for a stored run (whose
+    /// store the caller reads).
+    pub(crate) fn record_in_memory(&self) -> Option<(Option<bitrock::data::BitSeen>, Option<f64>)> {
+        let setup = &self.kept.as_ref()?.setup;
+        let w_ref_n = serde_json::from_value::<run::Config>(setup.config.clone())
+            .ok()
+            .and_then(|c| c.fit.w_ref_n);
+        Some((setup.data.bit, w_ref_n))
+    }
+
     /// Population `g`'s particles: held in memory, or read from the store.
     fn population_particles(
         &self,

@@ -50,6 +50,11 @@ pub(crate) fn stability<'py>(
     use bitrock::stability::map;
     let posterior: Option<String> = kwarg(options, "posterior")?;
     let in_memory: Option<Py<crate::run::Run>> = kwarg(options, "run_in_memory")?;
+    // A run kept in memory keeps its record too: its bit and W_ref, for the record's advice.
+    let (memory_bit, memory_w_ref_n) = in_memory
+        .as_ref()
+        .and_then(|run| run.get().record_in_memory())
+        .unwrap_or((None, None));
     let source = match (run, law, params) {
         (None, None, None) if posterior.is_some() => {
             MapSource::Posterior(posterior_particles(py, posterior.as_deref().expect("given"))?)
@@ -158,10 +163,12 @@ pub(crate) fn stability<'py>(
     // the record's advice then says only what the linear maps can.
     let chain = bitrock::pipeline::strings::chain(structure, &lumped, &fe);
     let given_w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map(|kn| kn * 1000.0);
-    let record_w_ref_n = maps
-        .record_bit
-        .map(|seen| bitrock::pipeline::advice::params_w_ref_n(given_w_ref_n.or(maps.run_w_ref_n), &seen, job.w_ref_n));
-    if let (Some(seen), Some(w_ref_n)) = (&maps.record_bit, record_w_ref_n) {
+    let record_bit = maps.record_bit.or(memory_bit);
+    let record_w_ref_n = record_bit.map(|seen| {
+        let scaled = given_w_ref_n.or(maps.run_w_ref_n).or(memory_w_ref_n);
+        bitrock::pipeline::advice::params_w_ref_n(scaled, &seen, job.w_ref_n)
+    });
+    if let (Some(seen), Some(w_ref_n)) = (&record_bit, record_w_ref_n) {
         use bitrock::pipeline::advice::Adviser;
         let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), job.backend);
         let advice = py.detach(|| adviser.advise_record(&maps.inputs, w_ref_n, seen));
@@ -171,8 +178,7 @@ pub(crate) fn stability<'py>(
         )?;
     }
     if kwarg::<bool>(options, "simulate")?.unwrap_or(false) {
-        let record_at = maps
-            .record_bit
+        let record_at = record_bit
             .zip(record_w_ref_n)
             .map(|(seen, w_ref_n)| (bitrock::pipeline::advice::record_point(&seen, w_ref_n), w_ref_n));
         simulated(

@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_cli
+from conftest import REPO, run_cli
 from scipy.integrate import solve_ivp
 
 import bitrock
@@ -319,6 +319,9 @@ def test_a_runs_record_advice_is_the_command_s_and_its_way_out_ends_the_demo_str
     theirs = json.loads(run_cli(cli, "stability", "--run", str(run), "--backend", "cpu", "--json").stdout)
     ours = bitrock.stability(run, backend="cpu").attrs["record_advice"]
     assert ours["advice"] == theirs["advice"] and ours["record"] == theirs["record"]
+    # The same run kept in memory keeps its record, and advises alike.
+    kept = bitrock.abc(bitrock.read_record(REPO / "data" / "demo.csv"), particles=2000, backend="cpu", progress=False)
+    assert bitrock.stability(kept, backend="cpu").attrs["record_advice"] == ours
     advice = ours["advice"]
     assert advice["stick_slip_now"] and "steady" not in advice["words"], advice["words"]
     assert ours["record"]["stuck_share"] > 0.1 and abs(ours["record"]["mean_speed_rpm"] - 80.0) < 1.0

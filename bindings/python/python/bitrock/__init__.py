@@ -511,12 +511,13 @@ def stability(
     (``speed_diverged_share``, ``wob_diverged_share``: P(it ends) is then a lower bound),
     ``stick_slip_probability``, ``text``).
 
-    For a run, ``attrs["record_advice"]`` is the advice at its record's own operating point
-    (mean bit speed and weight on bit), as ``bitrock stability --run`` prints it: ``record``
-    (``stuck_share``, ``severity``, ``mean_speed_rpm``, ``mean_wob_kn``, ``samples``) and
-    ``advice`` (``words``, ``stick_slip_now``, ``escape_omega_rpm`` and ``escape_wob_kn`` as
-    [value, P(it ends)] from the state the bit is in, ``p_unstable``, ``safe_omega_rpm``,
-    ``safe_wob_kn``)."""
+    For a run (written or kept in memory), ``attrs["record_advice"]`` is the advice at its
+    record's own operating point (mean bit speed and weight on bit), as ``bitrock stability
+    --run`` prints it: ``record`` (``stuck_share``, ``severity``, ``peak_speed_rpm``,
+    ``mean_speed_rpm``, ``mean_wob_kn``, ``samples``) and ``advice`` (``words``,
+    ``stick_slip_now``, ``escape_omega_rpm`` and ``escape_wob_kn`` as [value, P(it ends)] from
+    the state the bit is in, ``cycle``: whether the posterior's strings reproduce the record's
+    peak bit speed, ``p_unstable``, ``safe_omega_rpm``, ``safe_wob_kn``)."""
     import xarray as xr
 
     posterior = None
