@@ -94,6 +94,13 @@ pub struct CycleCheck {
     pub reproducing_share: f64,
     /// At least [`REPRODUCING_SHARE`] of the posterior reproduces the seen peak.
     pub reproduced: bool,
+    /// Where it is not reproduced, the ways out that the strings which do reproduce it advise
+    /// (the posterior conditioned on the cycle): the nearest higher speed (rpm) and lighter
+    /// weight (kN), each with P(it ends) among them.
+    #[serde(default)]
+    pub escape_omega_rpm: Option<(f64, f64)>,
+    #[serde(default)]
+    pub escape_wob_kn: Option<(f64, f64)>,
 }
 
 /// How far (a share) a simulated peak bit speed may lie from the seen one and still reproduce
@@ -113,6 +120,8 @@ impl CycleCheck {
             simulated_peak_rpm,
             reproducing_share,
             reproduced: reproducing_share >= REPRODUCING_SHARE,
+            escape_omega_rpm: None,
+            escape_wob_kn: None,
         })
     }
 
@@ -265,21 +274,35 @@ impl Adviser {
         let inputs = thinned(inputs, escape.samples, escape.min_probability);
         let settings = SimulatedSettings::new(escape.chain.clone(), w_ref_n, escape.backend);
         let mut quiet = |_: String| {};
+        let (speeds, weights) = (advice_speeds_rpm(point.omega_rpm), advice_weights_kn(point.wob_kn));
         let simulated = Simulator::new(&settings, &inputs, &mut quiet).and_then(|mut sim| {
             let at = sim.at_point(point)?;
-            sim.escape_advice(
-                &at,
-                &advice_speeds_rpm(point.omega_rpm),
-                &advice_weights_kn(point.wob_kn),
-            )
+            let all = sim.escape_advice(&at, &speeds, &weights)?;
+            // Where most of the posterior misses the cycle the bit is in, the strings that
+            // reproduce it (the posterior conditioned on the cycle) advise too.
+            let conditioned = match seen.peak_speed_rpm {
+                Some(peak) if at.peaks.share_within(peak, PEAK_TOLERANCE) < REPRODUCING_SHARE => at
+                    .reproducing(peak, PEAK_TOLERANCE)
+                    .map(|c| sim.escape_advice(&c, &speeds, &weights))
+                    .transpose()?,
+                _ => None,
+            };
+            Ok((all, conditioned))
         });
         match simulated {
-            Ok(e) => {
+            Ok((e, conditioned)) => {
                 advice.escape_omega_rpm = e.speed_rpm.map(|w| (w.to, w.ends_probability));
                 advice.escape_wob_kn = e.wob_kn.map(|w| (w.to, w.ends_probability));
                 advice.cycle = seen.peak_speed_rpm.and_then(|seen| CycleCheck::new(seen, &e.peaks));
+                if let (Some(cycle), Some(c)) = (advice.cycle.as_mut(), &conditioned) {
+                    cycle.escape_omega_rpm = c.speed_rpm.map(|w| (w.to, w.ends_probability));
+                    cycle.escape_wob_kn = c.wob_kn.map(|w| (w.to, w.ends_probability));
+                }
+                let among = conditioned.map_or(String::new(), |c| {
+                    format!("; the strings that do reproduce it: {}", c.ways())
+                });
                 advice.words = format!(
-                    "{now}: {}{}",
+                    "{now}: {}{}{among}",
                     e.ways(),
                     advice.cycle.map_or(String::new(), |c| c.warning())
                 );

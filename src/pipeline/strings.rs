@@ -312,6 +312,54 @@ pub struct AtPoint {
     replicas: Vec<Member>,
     /// Their states when the driller changes something.
     states: Vec<StringState>,
+    /// Their peak bit speeds (rpm) settled there; `None` for a string that left bounds.
+    replica_peaks: Vec<Option<f64>>,
+    /// Whether each stick-slips there.
+    replica_stick_slips: Vec<bool>,
+}
+
+impl AtPoint {
+    /// The strings whose settled peak bit speed lies within `tolerance` (a share) of
+    /// `seen_rpm`, their weights scaled to one: the posterior conditioned on the cycle the
+    /// bit was seen in. `None` where no string reproduces it.
+    pub fn reproducing(&self, seen_rpm: f64, tolerance: f64) -> Option<AtPoint> {
+        let keep: Vec<usize> = (0..self.replicas.len())
+            .filter(|&i| self.replica_peaks[i].is_some_and(|v| (v - seen_rpm).abs() <= tolerance * seen_rpm.abs()))
+            .collect();
+        let total = keep.iter().fold(0.0, |sum, &i| sum + self.replicas[i].weight);
+        if keep.is_empty() || total <= 0.0 {
+            return None;
+        }
+        let replicas: Vec<Member> = keep
+            .iter()
+            .map(|&i| Member {
+                weight: self.replicas[i].weight / total,
+                ..self.replicas[i].clone()
+            })
+            .collect();
+        let replica_peaks: Vec<Option<f64>> = keep.iter().map(|&i| self.replica_peaks[i]).collect();
+        let replica_stick_slips: Vec<bool> = keep.iter().map(|&i| self.replica_stick_slips[i]).collect();
+        Some(AtPoint {
+            point: self.point,
+            stick_slip_probability: replicas
+                .iter()
+                .zip(&replica_stick_slips)
+                .filter(|(_, s)| **s)
+                .fold(0.0, |p, (m, _)| p + m.weight)
+                .min(1.0),
+            peaks: Peaks(
+                replica_peaks
+                    .iter()
+                    .zip(&replicas)
+                    .filter_map(|(p, m)| p.map(|p| (p, m.weight)))
+                    .collect(),
+            ),
+            states: keep.iter().map(|&i| self.states[i]).collect(),
+            replicas,
+            replica_peaks,
+            replica_stick_slips,
+        })
+    }
 }
 
 /// Peak bit speeds of simulated strings (rpm), each with its weight in the mixture.
@@ -517,20 +565,25 @@ impl<'a> Simulator<'a> {
             }
         }
         let here = Self::grid(&replicas, &summaries, &[point.omega_rpm], &[point.wob_kn]);
+        let replica_peaks: Vec<Option<f64>> = summaries
+            .iter()
+            .map(|s| (!s.diverged && s.samples > 0).then(|| s.speed_max_rad_s / RAD_S_PER_RPM))
+            .collect();
         let peaks = Peaks(
-            summaries
+            replica_peaks
                 .iter()
                 .zip(&replicas)
-                .filter(|(s, _)| !s.diverged && s.samples > 0)
-                .map(|(s, m)| (s.speed_max_rad_s / RAD_S_PER_RPM, m.weight))
+                .filter_map(|(p, m)| p.map(|p| (p, m.weight)))
                 .collect(),
         );
         Ok(AtPoint {
             point,
             stick_slip_probability: here.probability[0],
             peaks,
+            replica_stick_slips: summaries.iter().map(Summary::stick_slips).collect(),
             replicas,
             states,
+            replica_peaks,
         })
     }
 

@@ -102,6 +102,21 @@ fn stability_of_the_demo_run_says_stick_slip_now_and_its_advice_ends_it_in_the_d
     assert!(advice["escape_omega_rpm"][1].as_f64().unwrap() >= 0.9, "{advice}");
     assert_eq!(truth_persists(&[speed], &[244.2]), vec![0.0], "{speed} rpm");
     assert_eq!(truth_persists(&[80.0], &[weight]), vec![0.0], "{weight} kN");
+    // Fewer than half of this mixture's strings swing the bit as the record does; those that do
+    // advise on their own, and their ways out end it too.
+    let cycle = &advice["cycle"];
+    assert_eq!(cycle["reproduced"], false, "{cycle}");
+    let share = cycle["reproducing_share"].as_f64().unwrap();
+    assert!(share > 0.2 && share < 0.5, "{cycle}");
+    let speed = cycle["escape_omega_rpm"][0]
+        .as_f64()
+        .expect("the reproducing strings' speed");
+    let weight = cycle["escape_wob_kn"][0]
+        .as_f64()
+        .expect("the reproducing strings' weight");
+    assert_eq!(truth_persists(&[speed], &[244.2]), vec![0.0], "{speed} rpm");
+    assert_eq!(truth_persists(&[80.0], &[weight]), vec![0.0], "{weight} kN");
+    assert!(words.contains("the strings that do reproduce it: raise"), "{words}");
     // The linear criterion's answer is kept beside it, and the table says it in words.
     assert!(advice["p_unstable"].as_f64().is_some(), "{advice}");
     let (code, out, err) = outcome(bin().args(["stability", "--backend", "cpu", "--run"]).arg(&run));
@@ -157,5 +172,11 @@ fn a_posterior_that_misses_the_records_cycle_is_told_apart_from_the_truth() {
     let cycle = biased.cycle.unwrap();
     assert!(!cycle.reproduced && cycle.simulated_peak_rpm.1 < 205.0, "{biased:?}");
     assert_eq!(cycle.reproducing_share, 0.0, "{biased:?}");
+    assert!(
+        cycle.escape_omega_rpm.is_none() && cycle.escape_wob_kn.is_none(),
+        "no string to advise"
+    );
+    // The truth reproduces its own cycle: no second advice.
+    assert!(truth.cycle.unwrap().escape_omega_rpm.is_none());
     assert!(biased.words.contains("do not reproduce its cycle"), "{}", biased.words);
 }
