@@ -202,6 +202,12 @@ pub const STUCK_SPEED_RAD_S: f64 = RAD_S_PER_RPM;
 /// already in the cycle.
 pub const STICK_SLIP_STUCK_SHARE: f64 = 0.01;
 
+/// Stick-slip severity of a bit speed that ranged from `lo` to `hi` about `mean` (any one
+/// unit): (max − min) / (2·|mean|); `None` where the mean is zero.
+pub fn severity(lo: f64, hi: f64, mean: f64) -> Option<f64> {
+    (mean.abs() > f64::MIN_POSITIVE).then(|| (hi - lo) / (2.0 * mean.abs()))
+}
+
 /// What a record's bit speed shows: how often the bit stuck, how hard it swung, and the mean
 /// speed and weight on bit it drilled at (its operating point: a stick-slip cycle's mean bit
 /// speed is the top drive's).
@@ -240,7 +246,7 @@ impl BitSeen {
         Some(Self {
             samples: speeds_rad_s.len(),
             stuck_share: stuck as f64 / n,
-            severity: (mean.abs() > f64::MIN_POSITIVE).then(|| (hi - lo) / (2.0 * mean.abs())),
+            severity: severity(lo, hi, mean),
             mean_speed_rpm: mean / RAD_S_PER_RPM,
             peak_speed_rpm: Some(hi / RAD_S_PER_RPM),
             mean_wob_kn: wob_n

@@ -25,6 +25,8 @@ use serde::{Deserialize, Serialize};
 pub const SPEEDS_RPM: (f64, f64, usize) = (10.0, 300.0, 59);
 /// The weights on bit it looks at: 10 % to 200 % of the operating point's, in steps of 10 %.
 pub const WEIGHTS: usize = 20;
+/// Posterior samples per law behind the linear advice (and the watch's map).
+pub const ADVICE_SAMPLES: usize = 200;
 /// The risk the linear advice keeps below, by default.
 pub const DEFAULT_RISK: f64 = 0.05;
 
@@ -278,22 +280,23 @@ impl Adviser {
         let simulated = Simulator::new(&settings, &inputs, &mut quiet).and_then(|mut sim| {
             let at = sim.at_point(point)?;
             let all = sim.escape_advice(&at, &speeds, &weights)?;
+            let peaks = at.peaks();
             // Where most of the posterior misses the cycle the bit is in, the strings that
             // reproduce it (the posterior conditioned on the cycle) advise too.
             let conditioned = match seen.peak_speed_rpm {
-                Some(peak) if at.peaks.share_within(peak, PEAK_TOLERANCE) < REPRODUCING_SHARE => at
+                Some(peak) if peaks.share_within(peak, PEAK_TOLERANCE) < REPRODUCING_SHARE => at
                     .reproducing(peak, PEAK_TOLERANCE)
                     .map(|c| sim.escape_advice(&c, &speeds, &weights))
                     .transpose()?,
                 _ => None,
             };
-            Ok((all, conditioned))
+            Ok((all, peaks, conditioned))
         });
         match simulated {
-            Ok((e, conditioned)) => {
+            Ok((e, peaks, conditioned)) => {
                 advice.escape_omega_rpm = e.speed_rpm.map(|w| (w.to, w.ends_probability));
                 advice.escape_wob_kn = e.wob_kn.map(|w| (w.to, w.ends_probability));
-                advice.cycle = seen.peak_speed_rpm.and_then(|seen| CycleCheck::new(seen, &e.peaks));
+                advice.cycle = seen.peak_speed_rpm.and_then(|seen| CycleCheck::new(seen, &peaks));
                 if let (Some(cycle), Some(c)) = (advice.cycle.as_mut(), &conditioned) {
                     cycle.escape_omega_rpm = c.speed_rpm.map(|w| (w.to, w.ends_probability));
                     cycle.escape_wob_kn = c.wob_kn.map(|w| (w.to, w.ends_probability));

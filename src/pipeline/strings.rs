@@ -304,10 +304,6 @@ pub struct AtPoint {
     pub point: OperatingPoint,
     /// P(stick-slip at the operating point) under the mixture.
     pub stick_slip_probability: f64,
-    /// The settled strings' peak bit speeds there (rpm), each with its weight in the mixture,
-    /// of the strings that stayed in bounds: what the posterior says the record's cycle
-    /// should look like.
-    pub peaks: Peaks,
     /// The members, each once per phase.
     replicas: Vec<Member>,
     /// Their states when the driller changes something.
@@ -319,12 +315,24 @@ pub struct AtPoint {
 }
 
 impl AtPoint {
+    /// The settled strings' peak bit speeds there (rpm), each with its weight in the mixture,
+    /// of the strings that stayed in bounds: what the posterior says the bit's cycle looks like.
+    pub fn peaks(&self) -> Peaks {
+        Peaks(
+            self.replica_peaks
+                .iter()
+                .zip(&self.replicas)
+                .filter_map(|(p, m)| p.map(|p| (p, m.weight)))
+                .collect(),
+        )
+    }
+
     /// The strings whose settled peak bit speed lies within `tolerance` (a share) of
     /// `seen_rpm`, their weights scaled to one: the posterior conditioned on the cycle the
     /// bit was seen in. `None` where no string reproduces it.
     pub fn reproducing(&self, seen_rpm: f64, tolerance: f64) -> Option<AtPoint> {
         let keep: Vec<usize> = (0..self.replicas.len())
-            .filter(|&i| self.replica_peaks[i].is_some_and(|v| (v - seen_rpm).abs() <= tolerance * seen_rpm.abs()))
+            .filter(|&i| self.replica_peaks[i].is_some_and(|v| near(v, seen_rpm, tolerance)))
             .collect();
         let total = keep.iter().fold(0.0, |sum, &i| sum + self.replicas[i].weight);
         if keep.is_empty() || total <= 0.0 {
@@ -347,19 +355,17 @@ impl AtPoint {
                 .filter(|(_, s)| **s)
                 .fold(0.0, |p, (m, _)| p + m.weight)
                 .min(1.0),
-            peaks: Peaks(
-                replica_peaks
-                    .iter()
-                    .zip(&replicas)
-                    .filter_map(|(p, m)| p.map(|p| (p, m.weight)))
-                    .collect(),
-            ),
             states: keep.iter().map(|&i| self.states[i]).collect(),
             replicas,
             replica_peaks,
             replica_stick_slips,
         })
     }
+}
+
+/// Whether the peak `v` lies within `tolerance` (a share) of `seen`.
+fn near(v: f64, seen: f64, tolerance: f64) -> bool {
+    (v - seen).abs() <= tolerance * seen.abs()
 }
 
 /// Peak bit speeds of simulated strings (rpm), each with its weight in the mixture.
@@ -382,7 +388,7 @@ impl Peaks {
         if total <= 0.0 {
             return 0.0;
         }
-        weight(&|v| (v - seen_rpm).abs() <= tolerance * seen_rpm.abs()) / total
+        weight(&|v| near(v, seen_rpm, tolerance)) / total
     }
 }
 
@@ -569,17 +575,9 @@ impl<'a> Simulator<'a> {
             .iter()
             .map(|s| (!s.diverged && s.samples > 0).then(|| s.speed_max_rad_s / RAD_S_PER_RPM))
             .collect();
-        let peaks = Peaks(
-            replica_peaks
-                .iter()
-                .zip(&replicas)
-                .filter_map(|(p, m)| p.map(|p| (p, m.weight)))
-                .collect(),
-        );
         Ok(AtPoint {
             point,
             stick_slip_probability: here.probability[0],
-            peaks,
             replica_stick_slips: summaries.iter().map(Summary::stick_slips).collect(),
             replicas,
             states,
@@ -617,7 +615,6 @@ impl<'a> Simulator<'a> {
         Ok(EscapeAdvice {
             point: p,
             stick_slip_probability: from.stick_slip_probability,
-            peaks: from.peaks.clone(),
             speed_rpm: Way::nearest(speeds_rpm, &by_speed, false),
             wob_kn: Way::nearest(weights_kn, &by_weight, true),
             speed_scan: by_speed,
@@ -679,8 +676,6 @@ pub struct EscapeAdvice {
     pub point: OperatingPoint,
     /// P(the bit stick-slips at the operating point), simulated.
     pub stick_slip_probability: f64,
-    /// The settled strings' peak bit speeds at the operating point (rpm), weighted.
-    pub peaks: Peaks,
     /// The nearest speed (rpm) that ends it; `None` when none scanned does.
     pub speed_rpm: Option<Way>,
     /// The nearest lighter weight (kN) that ends it.

@@ -398,11 +398,10 @@ impl Summary {
     /// Stick-slip severity (max − min) / (2·mean) of the bit speed: 0 for steady rotation, 1 or
     /// more for a bit that stops.
     pub fn severity(&self) -> f64 {
-        let mean = self.speed_mean_rad_s();
-        if self.samples == 0 || mean.abs() <= f64::MIN_POSITIVE {
+        if self.samples == 0 {
             return f64::NAN;
         }
-        (self.speed_max_rad_s - self.speed_min_rad_s) / (2.0 * mean.abs())
+        crate::data::severity(self.speed_min_rad_s, self.speed_max_rad_s, self.speed_mean_rad_s()).unwrap_or(f64::NAN)
     }
 
     /// Period of the stick-slip cycle (s) at `sample_hz`: the mean time between stick onsets,

@@ -908,11 +908,10 @@ impl Watch {
     fn completed(&mut self, mut update: Update, window: &Window) -> Update {
         self.carried.window = Some(window.index);
         let (omega_rpm, wob_kn) = operating_point(&window.rows, self.settings.w_ref_n);
-        let inputs = self
-            .carried
-            .posterior
-            .as_ref()
-            .map(|posterior| crate::abc::posterior::map_inputs_of(posterior, ADVICE_SAMPLES));
+        let inputs =
+            self.carried.posterior.as_ref().map(|posterior| {
+                crate::abc::posterior::map_inputs_of(posterior, crate::pipeline::advice::ADVICE_SAMPLES)
+            });
         if let Some(inputs) = &inputs {
             let speeds: Vec<f64> = window.rows.iter().map(|r| r.speed_rad_s).collect();
             let seen = BitSeen::of(&speeds, None);
@@ -1012,9 +1011,6 @@ const WARM_FIT_STARTS: usize = 2;
 const ESCAPE_SAMPLES: usize = 4;
 /// Laws less probable than this are left out of the escape advice's simulations.
 const ESCAPE_MIN_PROBABILITY: f64 = 0.05;
-
-/// Posterior samples per law behind the advice and the map.
-const ADVICE_SAMPLES: usize = 200;
 
 /// A window's operating point: the mean top-drive speed (the mean bit speed where the
 /// record has no top-drive column), rpm, and the mean weight on bit (`w_ref_n` where the

@@ -165,9 +165,9 @@ fn a_posterior_that_misses_the_records_cycle_is_told_apart_from_the_truth() {
     assert!(!truth.words.contains("fall short"), "{}", truth.words);
     let speed = truth.escape_omega_rpm.unwrap().0;
     assert!((110.0..=140.0).contains(&speed), "{}", truth.words);
-    // A set that fits the record's turning samples as well but swings the bit only to about
-    // 196 rpm (the demo evidence's m3, biased by the tool's speed noise at low speeds): its
-    // advice says it does not reproduce the cycle.
+    // The demo evidence's m3 posterior mean (biased by the tool's speed noise at low speeds),
+    // whose string swings the bit only to about 196 rpm: its advice says it does not reproduce
+    // the cycle.
     let biased = demo_advice(&[1.63, 2.99, 0.68, 9.58, 4.04, 0.082]);
     let cycle = biased.cycle.unwrap();
     assert!(!cycle.reproduced && cycle.simulated_peak_rpm.1 < 205.0, "{biased:?}");

@@ -34,6 +34,18 @@ pub(crate) fn structure_options(
     Ok((structure, lumped, fe))
 }
 
+/// The axis `options[key]`: values, or "MIN:MAX:COUNT" as on the command line; `default`'s
+/// where not given.
+fn axis(py: Python<'_>, options: &Bound<'_, PyDict>, key: &str, default: &str) -> PyResult<Vec<f64>> {
+    match options.get_item(key)?.filter(|v| !v.is_none()) {
+        None => check(py, bitrock::stability::map::parse_axis(default, key)),
+        Some(value) => match value.extract::<String>() {
+            Ok(text) => check(py, bitrock::stability::map::parse_axis(&text, key)),
+            Err(_) => value.extract(),
+        },
+    }
+}
+
 /// Stability maps over (Ω, W) for the run in `run`, or for `law` at `params` (torques in
 /// `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
 #[pyfunction]
@@ -90,16 +102,7 @@ pub(crate) fn stability<'py>(
             ));
         }
     };
-    // An axis: values, or "MIN:MAX:COUNT" as on the command line.
-    let axis = |key: &str, default: &str| -> PyResult<Vec<f64>> {
-        match options.get_item(key)?.filter(|v| !v.is_none()) {
-            None => check(py, map::parse_axis(default, key)),
-            Some(value) => match value.extract::<String>() {
-                Ok(text) => check(py, map::parse_axis(&text, key)),
-                Err(_) => value.extract(),
-            },
-        }
-    };
+    let axis = |key: &str, default: &str| axis(py, options, key, default);
     let (structure, lumped, fe) = structure_options(py, options)?;
     let job = StabilityJob {
         source,
@@ -260,16 +263,7 @@ fn simulated<'py>(
     out: &Bound<'py, PyDict>,
 ) -> PyResult<()> {
     use bitrock::pipeline::strings::{self, OperatingPoint, SimulatedJob, SimulatedSettings};
-    use bitrock::stability::map;
-    let axis = |key: &str, default: &str| -> PyResult<Vec<f64>> {
-        match options.get_item(key)?.filter(|v| !v.is_none()) {
-            None => check(py, map::parse_axis(default, key)),
-            Some(value) => match value.extract::<String>() {
-                Ok(text) => check(py, map::parse_axis(&text, key)),
-                Err(_) => value.extract(),
-            },
-        }
-    };
+    let axis = |key: &str, default: &str| axis(py, options, key, default);
     let (at, w_ref_n) = match (kwarg::<f64>(options, "at_rpm")?, kwarg::<f64>(options, "at_kn")?) {
         (Some(omega_rpm), Some(wob_kn)) => (Some(OperatingPoint { omega_rpm, wob_kn }), job.w_ref_n),
         (None, None) => record_at.map_or((None, job.w_ref_n), |(at, w)| (Some(at), w)),

@@ -242,9 +242,6 @@ pub fn fit_reference(fit: &LawFit, noise: NoiseModel, lag1: f64) -> Option<evide
     usable.then(|| evidence::Reference::gaussian(fit.law, fit.params_si.clone(), &covariance))
 }
 
-/// Posterior samples per law behind a record's advice.
-const ADVICE_SAMPLES: usize = 200;
-
 /// A finished evidence job.
 #[derive(Clone, Debug)]
 pub struct EvidenceAnalysis {
@@ -280,7 +277,8 @@ impl EvidenceAnalysis {
             Some(crate::simulate::strings::Chain::one_dof(&lumped)),
             backend,
         );
-        let inputs = crate::abc::posterior::map_inputs_of(&self.evidence.particles(), ADVICE_SAMPLES);
+        let inputs =
+            crate::abc::posterior::map_inputs_of(&self.evidence.particles(), crate::pipeline::advice::ADVICE_SAMPLES);
         let w_ref_n = params_w_ref_n(self.fit.w_ref_n, &seen, crate::laws::PAPER_W_REF_N);
         Some(adviser.advise_record(&inputs, w_ref_n, &seen))
     }

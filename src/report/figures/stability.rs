@@ -258,6 +258,25 @@ struct StochasticMap {
     title: String,
 }
 
+/// The cells of a map over (Ω, W) coloured by `grid` (row-major over Ω; NaN grey).
+fn heat_cells<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, omega: &[f64], wob: &[f64], grid: &[f64]) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let (xe, ye) = (edges(omega), edges(wob));
+    let nw = wob.len();
+    chart.draw_series((0..omega.len()).flat_map(|i| {
+        let (xe, ye) = (&xe, &ye);
+        (0..nw).map(move |j| {
+            Rectangle::new(
+                [(xe[i], ye[j]), (xe[i + 1], ye[j + 1])],
+                heat_color(grid[i * nw + j]).filled(),
+            )
+        })
+    }))?;
+    Ok(())
+}
+
 /// Cell edges of an axis of cell centres: midpoints, the ends at the first and last value.
 fn edges(centres: &[f64]) -> Vec<f64> {
     let mut e = vec![centres[0]];
@@ -276,17 +295,7 @@ impl Figure for StochasticMap {
         let (x0, x1) = (self.omega[0], self.omega[self.omega.len() - 1]);
         let (y0, y1) = (self.wob[0], self.wob[self.wob.len() - 1]);
         let mut chart = axes(&main, "", (x0, x1), (y0, y1))?;
-        let (xe, ye) = (edges(&self.omega), edges(&self.wob));
-        let nw = self.wob.len();
-        chart.draw_series((0..self.omega.len()).flat_map(|i| {
-            let (xe, ye) = (&xe, &ye);
-            (0..nw).map(move |j| {
-                Rectangle::new(
-                    [(xe[i], ye[j]), (xe[i + 1], ye[j + 1])],
-                    heat_color(self.grid[i * nw + j]).filled(),
-                )
-            })
-        }))?;
+        heat_cells(&mut chart, &self.omega, &self.wob, &self.grid)?;
         mesh(&mut chart, "top-drive speed Ω (rpm)", "weight on bit W (kN)")?;
         for (law, prob, map_wob, p_wob) in &self.laws {
             let c = law_color(*law);
@@ -423,14 +432,10 @@ impl Figure for SimulatedMap {
         let (x0, x1) = (self.omega[0], self.omega[self.omega.len() - 1]);
         let (y0, y1) = (self.wob[0], self.wob[self.wob.len() - 1]);
         let mut chart = axes(&main, "", (x0, x1), (y0, y1))?;
+        heat_cells(&mut chart, &self.omega, &self.wob, &self.heat)?;
         let (xe, ye) = (edges(&self.omega), edges(&self.wob));
         let nw = self.wob.len();
         let cell = |i: usize, j: usize| [(xe[i], ye[j]), (xe[i + 1], ye[j + 1])];
-        chart.draw_series(
-            (0..self.omega.len())
-                .flat_map(|i| (0..nw).map(move |j| (i, j)))
-                .map(|(i, j)| Rectangle::new(cell(i, j), heat_color(self.heat[i * nw + j]).filled())),
-        )?;
         // The band hatched: diagonal strokes across each of its cells.
         chart.draw_series(
             (0..self.omega.len())
