@@ -418,9 +418,42 @@ impl Summary {
     }
 }
 
-/// One string being integrated: the chain, the law at its operating point, and the state.
-struct Integrator<'a> {
+/// A string's state inside the integrator: `N` nodes' lags (rad) and speeds (rad/s). The
+/// 1-DOF string gets arrays of one, so that a step copies and zeroes 16 bytes, not 256.
+#[derive(Clone, Copy)]
+struct Nodes<const N: usize> {
+    lag: [f64; N],
+    speed: [f64; N],
+    stuck: bool,
+}
+
+impl<const N: usize> Nodes<N> {
+    fn of(s: &StringState) -> Self {
+        Self {
+            lag: std::array::from_fn(|j| s.lag_rad[j]),
+            speed: std::array::from_fn(|j| s.speed_rad_s[j]),
+            stuck: s.stuck,
+        }
+    }
+
+    fn state(&self) -> StringState {
+        let mut s = StringState {
+            lag_rad: [0.0; MAX_NODES],
+            speed_rad_s: [0.0; MAX_NODES],
+            stuck: self.stuck,
+        };
+        s.lag_rad[..N].copy_from_slice(&self.lag);
+        s.speed_rad_s[..N].copy_from_slice(&self.speed);
+        s
+    }
+}
+
+/// One string being integrated: the chain (of at most `N` nodes), the law at its operating
+/// point, and the state.
+struct Integrator<'a, const N: usize> {
     chain: &'a Chain,
+    /// The chain's nodes (≤ N).
+    n: usize,
     law: Law,
     params: &'a [f64],
     omega: f64,
@@ -429,34 +462,35 @@ struct Integrator<'a> {
     static_nm: f64,
     /// Bit speed beyond which the motion has run away (rad/s), as `simulate` has it.
     runaway: f64,
-    state: StringState,
+    state: Nodes<N>,
     /// Direction of slip (±1) while not stuck.
     dir: f64,
 }
 
-impl<'a> Integrator<'a> {
+impl<'a, const N: usize> Integrator<'a, N> {
     fn new(chain: &'a Chain, job: &'a StringJob) -> Self {
-        let n = job.law.n_params();
-        let params = &job.params_nm[..n];
+        let n = chain.nodes();
+        debug_assert!(n <= N);
+        let params = &job.params_nm[..job.law.n_params()];
         let static_nm = job.law.torque(params, 0.0, job.ratio).max(0.0);
-        let w_bit = job.start.speed_rad_s[chain.nodes() - 1];
+        let w_bit = job.start.speed_rad_s[n - 1];
         Self {
             chain,
+            n: if N == 1 { 1 } else { n },
             law: job.law,
             params,
             omega: job.omega_rad_s,
             ratio: job.ratio,
             static_nm,
             runaway: 1e3 * job.omega_rad_s.abs().max(1.0),
-            state: job.start,
+            state: Nodes::of(&job.start),
             dir: if w_bit < 0.0 { -1.0 } else { 1.0 },
         }
     }
 
     /// F_j = (K u)_j + (C v)_j with v = Ω − w, at node `j` (N·m).
-    fn string_torque(&self, u: &[f64; MAX_NODES], w: &[f64; MAX_NODES], j: usize) -> f64 {
+    fn string_torque(&self, u: &[f64; N], w: &[f64; N], j: usize) -> f64 {
         let c = self.chain;
-        let n = c.nodes();
         let (u_above, v_above) = if j == 0 {
             (0.0, 0.0)
         } else {
@@ -465,7 +499,7 @@ impl<'a> Integrator<'a> {
         let v = self.omega - w[j];
         let k = c.stiffness_nm_per_rad[j];
         let mut f = k * (u[j] - u_above) + c.beta_s * k * (v - v_above) + c.alpha_per_s * c.inertia_kg_m2[j] * v;
-        if j + 1 < n {
+        if j + 1 < self.n {
             let kb = c.stiffness_nm_per_rad[j + 1];
             f -= kb * (u[j + 1] - u[j]) + c.beta_s * kb * ((self.omega - w[j + 1]) - v);
         }
@@ -474,18 +508,18 @@ impl<'a> Integrator<'a> {
 
     /// The time derivative of (u, w): the bit held at rest when `stuck`, slipping in `dir`
     /// otherwise.
-    fn derivative(&self, s: &StringState, stuck: bool, dir: f64) -> ([f64; MAX_NODES], [f64; MAX_NODES]) {
-        let n = self.chain.nodes();
-        let mut du = [0.0; MAX_NODES];
-        let mut dw = [0.0; MAX_NODES];
+    fn derivative(&self, s: &Nodes<N>, stuck: bool, dir: f64) -> ([f64; N], [f64; N]) {
+        let n = self.n;
+        let mut du = [0.0; N];
+        let mut dw = [0.0; N];
         for j in 0..n {
-            du[j] = self.omega - s.speed_rad_s[j];
-            let mut f = self.string_torque(&s.lag_rad, &s.speed_rad_s, j);
+            du[j] = self.omega - s.speed[j];
+            let mut f = self.string_torque(&s.lag, &s.speed, j);
             if j == n - 1 {
                 if stuck {
                     continue;
                 }
-                f -= dir * self.law.torque(self.params, dir * s.speed_rad_s[j], self.ratio);
+                f -= dir * self.law.torque(self.params, dir * s.speed[j], self.ratio);
             }
             dw[j] = f / self.chain.inertia_kg_m2[j];
         }
@@ -493,13 +527,13 @@ impl<'a> Integrator<'a> {
     }
 
     /// One classical RK4 step of `h` (s) from `s`.
-    fn rk4(&self, s: &StringState, stuck: bool, dir: f64, h: f64) -> StringState {
-        let n = self.chain.nodes();
-        let along = |d: &([f64; MAX_NODES], [f64; MAX_NODES]), f: f64| {
+    fn rk4(&self, s: &Nodes<N>, stuck: bool, dir: f64, h: f64) -> Nodes<N> {
+        let n = self.n;
+        let along = |d: &([f64; N], [f64; N]), f: f64| {
             let mut t = *s;
             for j in 0..n {
-                t.lag_rad[j] += f * d.0[j];
-                t.speed_rad_s[j] += f * d.1[j];
+                t.lag[j] += f * d.0[j];
+                t.speed[j] += f * d.1[j];
             }
             t
         };
@@ -509,15 +543,15 @@ impl<'a> Integrator<'a> {
         let k4 = self.derivative(&along(&k3, h), stuck, dir);
         let mut out = *s;
         for j in 0..n {
-            out.lag_rad[j] += h / 6.0 * (k1.0[j] + 2.0 * (k2.0[j] + k3.0[j]) + k4.0[j]);
-            out.speed_rad_s[j] += h / 6.0 * (k1.1[j] + 2.0 * (k2.1[j] + k3.1[j]) + k4.1[j]);
+            out.lag[j] += h / 6.0 * (k1.0[j] + 2.0 * (k2.0[j] + k3.0[j]) + k4.0[j]);
+            out.speed[j] += h / 6.0 * (k1.1[j] + 2.0 * (k2.1[j] + k3.1[j]) + k4.1[j]);
         }
         out
     }
 
     /// The torque the string drives the bit with (N·m).
-    fn bit_drive(&self, s: &StringState) -> f64 {
-        self.string_torque(&s.lag_rad, &s.speed_rad_s, self.chain.nodes() - 1)
+    fn bit_drive(&self, s: &Nodes<N>) -> f64 {
+        self.string_torque(&s.lag, &s.speed, self.n - 1)
     }
 
     /// Stuck or slipping, for a bit at rest in state `s`.
@@ -531,7 +565,7 @@ impl<'a> Integrator<'a> {
 
     /// Advances one step of `h` (s).
     fn step(&mut self, h: f64) {
-        let bit = self.chain.nodes() - 1;
+        let bit = self.n - 1;
         let mut remaining = h;
         for _ in 0..EVENT_PASSES {
             if remaining <= 0.0 {
@@ -559,7 +593,7 @@ impl<'a> Integrator<'a> {
                 remaining -= to_release;
             } else {
                 let end = self.rk4(&start, false, self.dir, remaining);
-                let (w0, w1) = (self.dir * start.speed_rad_s[bit], self.dir * end.speed_rad_s[bit]);
+                let (w0, w1) = (self.dir * start.speed[bit], self.dir * end.speed[bit]);
                 if w1 > 0.0 {
                     self.state = end;
                     break;
@@ -567,14 +601,14 @@ impl<'a> Integrator<'a> {
                 if w0 <= 0.0 {
                     // Released at rest, yet not moving forward at the step's end: at rest again.
                     self.state = end;
-                    self.state.speed_rad_s[bit] = 0.0;
+                    self.state.speed[bit] = 0.0;
                     self.settle_at_rest();
                     break;
                 }
                 // The bit speed crosses zero inside the step: one secant, then re-integrate to it.
                 let to_zero = remaining * w0 / (w0 - w1);
                 self.state = self.rk4(&start, false, self.dir, to_zero);
-                self.state.speed_rad_s[bit] = 0.0;
+                self.state.speed[bit] = 0.0;
                 remaining -= to_zero;
                 self.settle_at_rest();
             }
@@ -584,20 +618,20 @@ impl<'a> Integrator<'a> {
     /// True while the motion stays within physical bounds (checked once per sample period, as
     /// the kernel does).
     fn in_bounds(&self) -> bool {
-        let bit = self.chain.nodes() - 1;
-        self.state.speed_rad_s[bit].abs() <= self.runaway && self.state.lag_rad[bit].abs() < 3.0e38
+        let bit = self.n - 1;
+        self.state.speed[bit].abs() <= self.runaway && self.state.lag[bit].abs() < 3.0e38
     }
 
     /// Torque on bit (N·m): the reaction while stuck, the law's torque while slipping.
     fn bit_torque(&self) -> f64 {
-        let bit = self.chain.nodes() - 1;
+        let bit = self.n - 1;
         if self.state.stuck {
             self.bit_drive(&self.state).clamp(-self.static_nm, self.static_nm)
         } else {
             self.dir
                 * self
                     .law
-                    .torque(self.params, self.dir * self.state.speed_rad_s[bit], self.ratio)
+                    .torque(self.params, self.dir * self.state.speed[bit], self.ratio)
         }
     }
 
@@ -605,29 +639,39 @@ impl<'a> Integrator<'a> {
     fn surface_torque(&self) -> f64 {
         let c = self.chain;
         let k = c.stiffness_nm_per_rad[0];
-        k * self.state.lag_rad[0] + c.beta_s * k * (self.omega - self.state.speed_rad_s[0])
+        k * self.state.lag[0] + c.beta_s * k * (self.omega - self.state.speed[0])
+    }
+
+    /// Integrates the string through `schedule`: its summary and its final state.
+    fn run(mut self, schedule: &Schedule) -> (Summary, StringState) {
+        let mut summary = Summary::default();
+        let h = schedule.dt_s;
+        let bit = self.n - 1;
+        for period in 0..schedule.settle_samples + schedule.record_samples {
+            for _ in 0..schedule.steps_per_sample {
+                self.step(h);
+            }
+            if !self.in_bounds() {
+                summary.diverged = true;
+                break;
+            }
+            if period >= schedule.settle_samples {
+                summary.push(self.state.speed[bit], self.bit_torque(), self.surface_torque());
+            }
+        }
+        (summary, self.state.state())
     }
 }
 
-/// Integrates one string through `schedule`: its summary and its final state.
+/// Integrates one string through `schedule`: its summary and its final state. The 1-DOF
+/// string runs on arrays of one node, a chain on arrays of [`MAX_NODES`]; the arithmetic is
+/// the same.
 pub fn integrate(chain: &Chain, schedule: &Schedule, job: &StringJob) -> (Summary, StringState) {
-    let mut sim = Integrator::new(chain, job);
-    let mut summary = Summary::default();
-    let h = schedule.dt_s;
-    let bit = chain.nodes() - 1;
-    for period in 0..schedule.settle_samples + schedule.record_samples {
-        for _ in 0..schedule.steps_per_sample {
-            sim.step(h);
-        }
-        if !sim.in_bounds() {
-            summary.diverged = true;
-            break;
-        }
-        if period >= schedule.settle_samples {
-            summary.push(sim.state.speed_rad_s[bit], sim.bit_torque(), sim.surface_torque());
-        }
+    if chain.nodes() == 1 {
+        Integrator::<1>::new(chain, job).run(schedule)
+    } else {
+        Integrator::<MAX_NODES>::new(chain, job).run(schedule)
     }
-    (summary, sim.state)
 }
 
 /// The state of steady rotation at Ω under the law's torque r·T(Ω), its bit speed kicked by
