@@ -105,6 +105,9 @@ pub fn evidence_json(
                 "probability": law.probability,
                 "posterior_mean": to_record_units(law.law, &mean_si, data.torque_unit),
                 "best_rho": law.best_rho,
+                // ⟨ln L⟩ over the posterior and the Occam factor ln Z − ⟨ln L⟩ (N·m, nats).
+                "mean_ln_l": law.mean_ln_l,
+                "occam_nats": law.mean_ln_l.map(|m| law.ln_z - m),
                 "cut_by_box": law.cut_by_box,
                 "starts": law.starts,
                 "residual_lag1": fits
@@ -140,6 +143,7 @@ pub fn evidence_json(
         "laws": laws,
         "fits": fit_json(data, fits)["fits"],
         "separations": separations,
+        "bayes_factors": evidence.bayes_factors(separations),
     })
 }
 

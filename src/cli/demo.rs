@@ -5,7 +5,7 @@ use super::args::set_threads;
 use super::fit::fit_and_print;
 use super::print;
 use super::progress::RunProgress;
-use bitrock::abc::evidence::{EvidenceConfig, strength};
+use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::abc::posterior::PosteriorSummary;
 use bitrock::abc::schedule::Schedule;
 use bitrock::data;
@@ -298,25 +298,13 @@ fn print_headline(
             .map_or(String::new(), |w| format!(", torque × WOB/{:.1} kN", w / 1000.0)),
         probabilities.join(", ")
     )?;
-    if let Some(top) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z)) {
-        let factors: Vec<String> = laws
+    let factors = evidence.evidence.bayes_factors(&evidence.separations);
+    if let [top, ..] = &factors[..] {
+        let factors: Vec<String> = factors
             .iter()
-            .filter(|l| l.law != top.law)
-            .map(|l| {
-                let (ln_b, error) = evidence
-                    .evidence
-                    .ln_bayes_factor(top.law, l.law)
-                    .expect("both compared");
-                format!(
-                    "{:.1} ± {:.1} against {} ({})",
-                    ln_b,
-                    error,
-                    l.law,
-                    strength(ln_b, error)
-                )
-            })
+            .map(|f| format!("{:.1} ± {:.1} against {} ({})", f.ln_b, f.error, f.against, f.strength))
             .collect();
-        writeln!(out, "    {}: ln B = {}", top.law, factors.join(", "))?;
+        writeln!(out, "    {}: ln B = {}", top.favoured, factors.join(", "))?;
     }
     let first = &headlines[0];
     if let Some(best) = first

@@ -3,9 +3,7 @@
 
 use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
 use super::print;
-use bitrock::abc::evidence::{
-    Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, NoiseModel, Start, describe_starts, strength,
-};
+use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, NoiseModel, Start, describe_starts};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
@@ -398,30 +396,28 @@ fn tables(
         )?;
     }
     starts_table(out, evidence)?;
-    let best = evidence
-        .laws
-        .iter()
-        .max_by(|a, b| a.ln_z.total_cmp(&b.ln_z))
-        .expect("at least one law");
-    if evidence.laws.len() > 1 {
+    let factors = evidence.bayes_factors(&analysis.separations);
+    if let [first, ..] = &factors[..] {
         writeln!(
             out,
-            "\nBayes factors of {}, the law of the largest evidence, against each other law:",
-            best.law
+            "\nBayes factors of {}, the law of the largest evidence, against each other law: the data's part \
+             (⟨ln L⟩ over the posteriors) and the boxes' (Occam factors); the word is the data's:",
+            first.favoured
         )?;
-        for law in evidence.laws.iter().filter(|l| l.law != best.law) {
-            let (ln_b, error) = evidence.ln_bayes_factor(best.law, law.law).expect("both compared");
+        for factor in &factors {
             // Every box twice as wide: each parameter costs ln 2 more where the posterior
             // lies inside its box.
-            let doubled = ln_b + LN_Z_PER_DOUBLING * (best.law.n_params() as f64 - law.law.n_params() as f64);
+            let doubled = factor.ln_b
+                + LN_Z_PER_DOUBLING * (factor.favoured.n_params() as f64 - factor.against.n_params() as f64);
             writeln!(
                 out,
-                "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {:<12} (boxes twice as wide: {:.2})",
-                best.law,
-                law.law.name(),
-                ln_b,
-                error,
-                strength(ln_b, error),
+                "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {:<20} ({}; boxes twice as wide: ln B {:.2})",
+                factor.favoured,
+                factor.against.name(),
+                factor.ln_b,
+                factor.error,
+                factor.strength.words(),
+                factor.parts(),
                 doubled
             )?;
         }

@@ -5,7 +5,7 @@
 
 use super::figures::{self, EvidenceFigures};
 use super::{ReportSummary, figures_markdown, replace_report};
-use crate::abc::evidence::{Start, StartEstimate, describe_starts, ln_bayes_factor, strength};
+use crate::abc::evidence::{BayesFactor, Start, StartEstimate, Strength, describe_starts, ln_bayes_factor};
 use crate::error::{Error, Result};
 use crate::laws::Law;
 use crate::pipeline::evidence::dir;
@@ -102,23 +102,33 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
             }
         }
     }
-    if let Some(best) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z))
-        && laws.len() > 1
-    {
+    let factors = bayes_factors(&document, &laws, evidence_dir)?;
+    if let [first, ..] = &factors[..] {
         let _ = writeln!(
             md,
-            "\nBayes factors of {}, the law of the largest evidence, against each other law (Kass & Raftery's words; \
-             undecided below 1 nat or within twice the error):\n",
-            best.law
+            "\nBayes factors of {}, the law of the largest evidence, against each other law, split into the data's \
+             part (⟨ln L⟩ over the posteriors) and the boxes' part (the Occam factors, which boxes twice as wide move \
+             by ln 2 per parameter). Kass & Raftery's words, on the data's part: undecided below 1 nat or within \
+             twice the error; decided by the boxes where the data's part is below {} nat or the fits do not \
+             separate the pair:\n",
+            first.favoured,
+            crate::abc::evidence::DATA_DECIDES_NATS
         );
-        for l in laws.iter().filter(|l| l.law != best.law) {
-            let (ln_b, error) = ln_bayes_factor((best.ln_z, best.ln_z_error), (l.ln_z, l.ln_z_error));
+        for f in &factors {
+            let parts = f.parts();
             let _ = writeln!(
                 md,
-                "- {} against {}: ln B = {ln_b:.2} ± {error:.2}, {}",
-                best.law,
-                l.law,
-                strength(ln_b, error)
+                "- {} against {}: ln B = {:.2} ± {:.2}, {}{}",
+                f.favoured,
+                f.against,
+                f.ln_b,
+                f.error,
+                f.strength,
+                if parts.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({parts})")
+                }
             );
         }
     }
@@ -127,6 +137,37 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
     let infos: Vec<super::FigureInfo> = rendered.iter().map(|r| r.info.clone()).collect();
     figures_markdown(&mut md, &infos);
     replace_report(out, md, rendered, start)
+}
+
+/// The document's Bayes factors; a document written without them gets the plain factors of
+/// its laws' ln Z, worded without the data's part.
+fn bayes_factors(document: &Value, laws: &[LawLine], dir: &Path) -> Result<Vec<BayesFactor>> {
+    if let Some(factors) = document.get("bayes_factors") {
+        return serde_json::from_value(factors.clone()).map_err(|e| Error::Data {
+            path: dir.join(crate::run::dir::EVIDENCE_JSON),
+            message: format!("`bayes_factors` does not read ({e})"),
+        });
+    }
+    let Some(best) = laws.iter().max_by(|a, b| a.ln_z.total_cmp(&b.ln_z)) else {
+        return Ok(Vec::new());
+    };
+    Ok(laws
+        .iter()
+        .filter(|l| l.law != best.law)
+        .map(|l| {
+            let (ln_b, error) = ln_bayes_factor((best.ln_z, best.ln_z_error), (l.ln_z, l.ln_z_error));
+            BayesFactor {
+                favoured: best.law,
+                against: l.law,
+                ln_b,
+                error,
+                data_nats: None,
+                boxes_nats: None,
+                separation_nats: None,
+                strength: Strength::of(ln_b, error, None, None),
+            }
+        })
+        .collect())
 }
 
 /// Each law's line of `document` (read from `dir`).

@@ -28,10 +28,11 @@ fn noisy_m2() -> bitrock::data::Samples {
     data
 }
 
-/// ln Z of m2 on `data` over the box by the midpoint rule on a grid of `cells` per axis. m2 is
-/// linear in (a, b) = (tsb − tcb, tcb) for a fixed g, so S = Σ(y − a·e − b)² (e = exp(−g·w))
-/// comes from six sums per g value and every cell costs O(1).
-fn quadrature_ln_z(data: &bitrock::data::Samples, lower: [f64; 3], upper: [f64; 3], cells: usize) -> f64 {
+/// ln Z of m2 on `data` over the box, and ⟨ln L⟩ over its posterior, by the midpoint rule on a
+/// grid of `cells` per axis: (ln Z, ⟨ln L⟩). m2 is linear in (a, b) = (tsb − tcb, tcb) for a
+/// fixed g, so S = Σ(y − a·e − b)² (e = exp(−g·w)) comes from six sums per g value and every
+/// cell costs O(1).
+fn quadrature(data: &bitrock::data::Samples, lower: [f64; 3], upper: [f64; 3], cells: usize) -> (f64, f64) {
     let n = data.len();
     let h: Vec<f64> = (0..3).map(|j| (upper[j] - lower[j]) / cells as f64).collect();
     let at = |j: usize, i: usize| lower[j] + (i as f64 + 0.5) * h[j];
@@ -62,8 +63,11 @@ fn quadrature_ln_z(data: &bitrock::data::Samples, lower: [f64; 3], upper: [f64; 
     let sum: f64 = terms.iter().map(|t| (t - max).exp()).sum();
     // (1/V)·Σ L·h³ = Σ L / cells³.
     let mean_l = max + (sum / (cells * cells * cells) as f64).ln();
+    // The posterior's mean of ln L: each cell's ln L weighed by its L.
+    let mean_ln_l = terms.iter().map(|t| (t - max).exp() * t).sum::<f64>() / sum;
     // The constant with Σy² = 1 (S, not ρ, is in the sum above).
-    mean_l + log_likelihood_constant(n, 1.0)
+    let constant = log_likelihood_constant(n, 1.0);
+    (mean_l + constant, mean_ln_l + constant)
 }
 
 /// Asserts that `law`'s ln Z lies within three of its Monte-Carlo errors of the quadrature's
@@ -78,15 +82,32 @@ fn assert_within_errors(law: &evidence::LawEvidence, reference: f64) {
     );
 }
 
+/// Asserts that `law`'s ln Z split into the data's part ⟨ln L⟩ and the boxes' part, the Occam
+/// factor ln Z − ⟨ln L⟩, has each within 0.1 nats of the quadrature's (ln Z, ⟨ln L⟩).
+fn assert_split(law: &evidence::LawEvidence, (ln_z, mean_ln_l): (f64, f64)) {
+    let sampled = law.mean_ln_l.expect("a new evidence keeps ⟨ln L⟩");
+    let (occam, reference_occam) = (law.ln_z - sampled, ln_z - mean_ln_l);
+    eprintln!("⟨ln L⟩ = {sampled:.3} (quadrature {mean_ln_l:.3}), Occam {occam:.3} (quadrature {reference_occam:.3})");
+    assert!((sampled - mean_ln_l).abs() < 0.1, "⟨ln L⟩ {sampled} vs {mean_ln_l}");
+    assert!(
+        (occam - reference_occam).abs() < 0.1,
+        "Occam {occam} vs {reference_occam}"
+    );
+}
+
 #[test]
 fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
     let data = noisy_m2();
     let lower = [4_000.0, 0.0, 0.02];
     let upper = [30_000.0, 12_000.0, 2.0];
-    let reference = quadrature_ln_z(&data, lower, upper, 160);
+    let (reference, reference_mean_ln_l) = quadrature(&data, lower, upper, 160);
     // The reference checks itself: doubling the grid moves it by far less than the tolerance.
-    let finer = quadrature_ln_z(&data, lower, upper, 320);
+    let (finer, finer_mean_ln_l) = quadrature(&data, lower, upper, 320);
     assert!((reference - finer).abs() < 0.01, "quadrature {reference} vs {finer}");
+    assert!(
+        (reference_mean_ln_l - finer_mean_ln_l).abs() < 0.01,
+        "quadrature ⟨ln L⟩ {reference_mean_ln_l} vs {finer_mean_ln_l}"
+    );
     let bx = LawBox {
         law: Law::M2,
         lower: lower.iter().map(|&v| v as f32).collect(),
@@ -107,6 +128,7 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         m2.ln_z, m2.ln_z_error, m2.stages
     );
     assert_within_errors(m2, finer);
+    assert_split(m2, (finer, finer_mean_ln_l));
     // The posterior mean of the static torque lies where the likelihood puts it.
     let mean_tsb: f64 = m2.posterior.iter().map(|(p, w)| w * p[0]).sum();
     assert!((mean_tsb - 13_000.0).abs() < 3_000.0, "{mean_tsb}");
@@ -134,6 +156,8 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         from_fit.ln_z, from_fit.ln_z_error, from_fit.stages, from_fit.candidates_scored, m2.candidates_scored
     );
     assert_within_errors(from_fit, finer);
+    // From the fit's reference too, its ln π − ln q taken back out of ⟨ln L⟩.
+    assert_split(from_fit, (finer, finer_mean_ln_l));
 
     // From both, as `bitrock evidence` starts by default: each start's estimate, and the one
     // kept, the quadrature's.
@@ -151,6 +175,7 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         );
     }
     assert_within_errors(m2_both, finer);
+    assert_split(m2_both, (finer, finer_mean_ln_l));
 }
 
 #[test]
@@ -1105,5 +1130,81 @@ fn an_evidence_started_from_the_fits_resumes_to_the_uninterrupted_evidence() {
         all.scored - (3 - 1) - (later - 1),
         "{} batches in all",
         all.scored
+    );
+}
+
+/// On a record made by m4 (its paper estimate, 60 rpm, 0.6 kN·m of noise, a fluctuating weight
+/// on bit) m2 has the larger evidence, but only through its boxes: m4's curves follow the record
+/// better (the data's part points to m4), and m2's smaller Occam penalty outweighs that. The
+/// pair is "decided by the boxes"; m2 against m1, which cannot follow the record, is decided by
+/// the data.
+#[test]
+fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("m4.csv");
+    let (code, _, err) = outcome(bin().args([
+        "simulate",
+        "--law",
+        "m4",
+        "--omega-rpm",
+        "60",
+        "--duration-s",
+        "240",
+        "--sample-hz",
+        "10",
+        "--noise-torque-knm",
+        "0.6",
+        "--wob-fluctuation-kn",
+        "10",
+        "--wob-correlation-s",
+        "5",
+        "--seed",
+        "3",
+        "--out",
+        record.to_str().unwrap(),
+    ]));
+    assert_eq!(code, 0, "{err}");
+    let args = [
+        "evidence",
+        "--backend",
+        "cpu",
+        "--noise",
+        "iid",
+        "--scale-by-wob",
+        "--laws",
+        "m1,m2,m4",
+    ];
+    let (code, stdout, err) = outcome(bin().args(args).arg(&record).arg("--json"));
+    assert_eq!(code, 0, "{err}");
+    let document: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let factors = document["bayes_factors"].as_array().unwrap();
+    let pair = |against: &str| factors.iter().find(|f| f["against"] == against).unwrap();
+    let number = |f: &serde_json::Value, key: &str| f[key].as_f64().unwrap();
+    for f in factors {
+        assert_eq!(f["favoured"], "m2", "{f}");
+        // The parts add up to ln B, and each law's Occam factor is its ln Z less its ⟨ln L⟩.
+        assert!(
+            (number(f, "data_nats") + number(f, "boxes_nats") - number(f, "ln_b")).abs() < 1e-9,
+            "{f}"
+        );
+    }
+    for law in document["laws"].as_array().unwrap() {
+        let (ln_z, mean_ln_l, occam) = (number(law, "ln_z"), number(law, "mean_ln_l"), number(law, "occam_nats"));
+        assert!((ln_z - mean_ln_l - occam).abs() < 1e-9 && occam < 0.0, "{law}");
+    }
+    let m4 = pair("m4");
+    assert!(number(m4, "ln_b") >= 1.0, "{m4}");
+    assert!(number(m4, "data_nats") < -1.0 && number(m4, "boxes_nats") > 1.0, "{m4}");
+    assert_eq!(m4["strength"], "decided_by_the_boxes", "{m4}");
+    let m1 = pair("m1");
+    assert!(number(m1, "data_nats") >= 5.0, "{m1}");
+    assert_eq!(m1["strength"], "very_strong", "{m1}");
+    // The table says the same, with both parts beside the word.
+    let (code, stdout, err) = outcome(bin().args(args).arg(&record));
+    assert_eq!(code, 0, "{err}");
+    let line = stdout.lines().find(|l| l.trim_start().starts_with("m2 vs m4")).unwrap();
+    assert!(
+        line.contains("decided by the boxes") && line.contains("data -") && line.contains("boxes "),
+        "{line}"
     );
 }

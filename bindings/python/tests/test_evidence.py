@@ -32,6 +32,7 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
         assert a["ln_z"] == b["ln_z"] and a["island_ln_z"] == b["island_ln_z"]
         assert a["probability"] == b["probability"]
     assert document["separations"] == small.document["separations"]
+    assert document["bayes_factors"] == small.document["bayes_factors"]
 
 
 def test_the_samplers_start_from_the_boxes_the_fits_or_both_as_on_the_command_line(cli) -> None:
@@ -102,6 +103,17 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
     assert error == pytest.approx(np.hypot(table.loc["m3", "ln_z_error"], table.loc["m2", "ln_z_error"]))
     # P(m3)/P(m2) = e^{ln B} with equal prior weights.
     assert np.log(table.loc["m3", "probability"] / table.loc["m2", "probability"]) == pytest.approx(ln_b, abs=1e-6)
+    # The split: the favoured law's ln B = the data's part + the boxes' part, each law's Occam
+    # factor its ln Z less its ⟨ln L⟩.
+    (factor,) = small.bayes_factors.itertuples()
+    favoured, against = factor.favoured, factor.against
+    assert factor.ln_b == table.loc[favoured, "ln_z"] - table.loc[against, "ln_z"] >= 0
+    laws = {law["law"]: law for law in small.document["laws"]}
+    assert factor.data_nats == laws[favoured]["mean_ln_l"] - laws[against]["mean_ln_l"]
+    assert factor.data_nats + factor.boxes_nats == pytest.approx(factor.ln_b, abs=1e-9)
+    assert factor.strength in {"undecided", "decided_by_the_boxes", "positive", "strong", "very_strong"}
+    for law in laws.values():
+        assert law["ln_z"] - law["mean_ln_l"] == pytest.approx(law["occam_nats"], abs=1e-9)
     params, weights = small.posterior("m2")
     assert list(params.columns) == ["tsb", "tcb", "g"]
     assert len(params) == len(weights) == 3 * 60

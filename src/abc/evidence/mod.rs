@@ -549,6 +549,11 @@ pub struct LawEvidence {
     /// the kept start's, or both's weighed by their inverse variances.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub starts: Vec<StartEstimate>,
+    /// ⟨ln L⟩, the log-likelihood's mean over the posterior (N·m, the constant of `ln_z`): what
+    /// the record says of the law. `ln_z − mean_ln_l` = −KL(posterior ‖ prior) is the law's
+    /// Occam factor, what its boxes say ([`BayesFactor`]). `None` in documents written without it.
+    #[serde(default)]
+    pub mean_ln_l: Option<f64>,
 }
 
 /// How much ln Z changes when every parameter's box of a law doubles in width, per parameter,
@@ -661,6 +666,19 @@ impl Evidence {
         let (a, b) = (self.of(a)?, self.of(b)?);
         Some(ln_bayes_factor((a.ln_z, a.ln_z_error), (b.ln_z, b.ln_z_error)))
     }
+
+    /// The Bayes factors of the law of the largest evidence against each other law, largest
+    /// evidence first, split into the data's and the boxes' parts ([`BayesFactor`]).
+    pub fn bayes_factors(&self, separations: &[crate::separation::Separation]) -> Vec<BayesFactor> {
+        let mut order: Vec<&LawEvidence> = self.laws.iter().collect();
+        order.sort_by(|a, b| b.ln_z.total_cmp(&a.ln_z));
+        let Some((best, rest)) = order.split_first() else {
+            return Vec::new();
+        };
+        rest.iter()
+            .map(|other| BayesFactor::between(best, other, separations))
+            .collect()
+    }
 }
 
 /// ln of the Bayes factor Z_a / Z_b from each law's (ln Z, Monte-Carlo error), and its error
@@ -669,20 +687,137 @@ pub fn ln_bayes_factor(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
     (a.0 - b.0, a.1.hypot(b.1))
 }
 
-/// How strongly a log Bayes factor `ln_b` (with Monte-Carlo error `error`) favours its law, in
-/// Kass & Raftery's (1995) words: positive from 1 nat, strong from 3, very strong from 5.
-/// Below 1 nat, or within twice its error of 0, the record does not decide between the two
-/// laws: what is reported is set by the priors and the sampling noise.
-pub fn strength(ln_b: f64, error: f64) -> &'static str {
-    let b = ln_b.abs();
-    if b < 1.0 || b < 2.0 * error {
-        "undecided"
-    } else if b < 3.0 {
-        "positive"
-    } else if b < 5.0 {
-        "strong"
-    } else {
-        "very strong"
+/// Below this many nats of ⟨ln L⟩ between two laws the record prefers neither: a Bayes factor
+/// beyond it is made by the laws' Occam factors, which their boxes set (Kass & Raftery's
+/// threshold of a preference worth stating).
+pub const DATA_DECIDES_NATS: f64 = 1.0;
+
+/// How strongly the record favours one law over another ([`Strength::of`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Strength {
+    /// Below 1 nat, or within twice its error of 0: neither data nor boxes decide.
+    Undecided,
+    /// A Bayes factor the boxes make: the record's own part is below [`DATA_DECIDES_NATS`] or
+    /// points the other way, or its fits do not separate the pair.
+    DecidedByTheBoxes,
+    Positive,
+    Strong,
+    VeryStrong,
+}
+
+impl Strength {
+    /// How strongly a log Bayes factor `ln_b` (Monte-Carlo error `error`) favours its law,
+    /// given the record's part of it, `data_nats` (⟨ln L⟩ of the favoured law less the
+    /// other's), and the fits' expected gap `separation_nats` (the favoured law as the truth;
+    /// [`crate::separation`]), either unknown as `None`. Kass & Raftery's (1995) words, positive
+    /// from 1 nat, strong from 3, very strong from 5, on the smaller of |ln B| and the data's
+    /// part: boxes twice as wide move ln B by ln 2 per parameter, and a word must not change
+    /// with them.
+    pub fn of(ln_b: f64, error: f64, data_nats: Option<f64>, separation_nats: Option<f64>) -> Self {
+        let b = ln_b.abs();
+        if b.is_nan() || b < 1.0 || b < 2.0 * error {
+            return Self::Undecided;
+        }
+        // The data's part in the favoured law's direction.
+        let data = data_nats.map(|d| d * ln_b.signum());
+        // A NaN part (a fit with no value) decides nothing.
+        let below = |x: f64, threshold: f64| x.is_nan() || x < threshold;
+        let boxes_decide = data.is_some_and(|d| below(d, DATA_DECIDES_NATS))
+            || separation_nats.is_some_and(|g| below(g, crate::separation::UNDECIDED_NATS));
+        if boxes_decide {
+            return Self::DecidedByTheBoxes;
+        }
+        match b.min(data.unwrap_or(f64::INFINITY)) {
+            x if x < 3.0 => Self::Positive,
+            x if x < 5.0 => Self::Strong,
+            _ => Self::VeryStrong,
+        }
+    }
+
+    /// True where the record, not the boxes, puts the favoured law ahead.
+    pub fn decides(self) -> bool {
+        matches!(self, Self::Positive | Self::Strong | Self::VeryStrong)
+    }
+
+    pub fn words(self) -> &'static str {
+        match self {
+            Self::Undecided => "undecided",
+            Self::DecidedByTheBoxes => "decided by the boxes",
+            Self::Positive => "positive",
+            Self::Strong => "strong",
+            Self::VeryStrong => "very strong",
+        }
+    }
+}
+
+impl std::fmt::Display for Strength {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.words())
+    }
+}
+
+/// A Bayes factor split into what the record says and what the boxes say. With
+/// ln Z = ⟨ln L⟩_posterior − KL(posterior ‖ prior),
+///
+/// ```text
+/// ln B = (⟨ln L⟩_a − ⟨ln L⟩_b)  +  (KL_b − KL_a)
+///         the data's part          the boxes' part (Occam factors)
+/// ```
+///
+/// The data's part is how much better law a's plausible curves follow the record than law
+/// b's; the boxes' part is how much less of its box law a's posterior leaves out, which grows
+/// by ln 2 per parameter each time its boxes double.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BayesFactor {
+    /// The law of the larger evidence.
+    pub favoured: Law,
+    pub against: Law,
+    /// ln(Z_favoured / Z_against) ≥ 0, and its Monte-Carlo error.
+    pub ln_b: f64,
+    pub error: f64,
+    /// ⟨ln L⟩_favoured − ⟨ln L⟩_against, nats: the record's part of ln B.
+    pub data_nats: Option<f64>,
+    /// ln B less the data's part: the Occam factors' part, which the boxes set.
+    pub boxes_nats: Option<f64>,
+    /// The fits' expected gap D with the favoured law as the truth, where it was computed.
+    pub separation_nats: Option<f64>,
+    pub strength: Strength,
+}
+
+impl BayesFactor {
+    /// The Bayes factor between `a` and `b`, the larger evidence favoured, with the pair's
+    /// expected gap from `separations` where they hold it.
+    pub fn between(a: &LawEvidence, b: &LawEvidence, separations: &[crate::separation::Separation]) -> Self {
+        let (favoured, against) = if a.ln_z >= b.ln_z { (a, b) } else { (b, a) };
+        let (ln_b, error) = ln_bayes_factor((favoured.ln_z, favoured.ln_z_error), (against.ln_z, against.ln_z_error));
+        let data_nats = favoured.mean_ln_l.zip(against.mean_ln_l).map(|(x, y)| x - y);
+        let separation_nats = separations
+            .iter()
+            .find(|s| s.truth == favoured.law && s.rival == against.law)
+            .map(|s| s.gap_nats);
+        Self {
+            favoured: favoured.law,
+            against: against.law,
+            ln_b,
+            error,
+            data_nats,
+            boxes_nats: data_nats.map(|d| ln_b - d),
+            separation_nats,
+            strength: Strength::of(ln_b, error, data_nats, separation_nats),
+        }
+    }
+
+    /// "data 0.4, boxes 3.6 nats; fits' gap 5.0 nats": the parts known, for a table or a line.
+    pub fn parts(&self) -> String {
+        let mut parts = Vec::new();
+        if let (Some(d), Some(b)) = (self.data_nats, self.boxes_nats) {
+            parts.push(format!("data {d:.2}, boxes {b:.2} nats"));
+        }
+        if let Some(g) = self.separation_nats {
+            parts.push(format!("fits' gap {g:.1} nats"));
+        }
+        parts.join("; ")
     }
 }
 
@@ -925,6 +1060,17 @@ impl Island {
     /// ln π − ln q at a particle inside the box with ln q = `ln_q` (0 without a reference).
     fn prior_over_reference(&self, ln_q: f64) -> f64 {
         self.reference.as_ref().map_or(0.0, |g| -g.ln_volume - ln_q)
+    }
+
+    /// ⟨ln L⟩ over the island's posterior (β = 1), without the likelihood's constant: the
+    /// weighted particles' log-likelihoods, a warm start's ln π − ln q taken back out.
+    fn posterior_mean_ln_l(&self) -> f64 {
+        self.weights
+            .iter()
+            .enumerate()
+            .filter(|(_, w)| **w > 0.0)
+            .map(|(i, w)| w * (self.loglik[i] - self.ln_q.get(i).map_or(0.0, |&q| self.prior_over_reference(q))))
+            .sum()
     }
 
     /// The candidates to score now: the proposals inside the box.
@@ -1393,7 +1539,14 @@ pub fn run_from(
             }
         }
         let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
+        let mean_ln_l = constant
+            + own
+                .iter()
+                .zip(&ratios)
+                .map(|(island, share)| share / k * island.posterior_mean_ln_l())
+                .sum::<f64>();
         laws.push(LawEvidence {
+            mean_ln_l: Some(mean_ln_l),
             island_spread: spread_of(&island_ln_z),
             cut_by_box,
             law: bx.law,
@@ -1448,6 +1601,64 @@ mod tests {
         );
         let inside = vec![at(5.0, 5.0, 0.5); 4];
         assert!(box_ends_reached(Law::M2, &lower, &upper, &inside).is_empty());
+    }
+
+    #[test]
+    fn a_bayes_factor_s_word_is_the_data_s_and_never_stronger_than_either_part() {
+        use Strength::*;
+        // Below 1 nat, or within twice the error of 0: undecided, whatever the parts.
+        assert_eq!(Strength::of(0.9, 0.0, Some(10.0), Some(50.0)), Undecided);
+        assert_eq!(Strength::of(3.0, 1.6, Some(3.0), None), Undecided);
+        assert_eq!(Strength::of(f64::NAN, 0.0, None, None), Undecided);
+        // Without the parts known, Kass & Raftery's words on |ln B|, either sign.
+        assert_eq!(Strength::of(2.9, 0.1, None, None), Positive);
+        assert_eq!(Strength::of(-4.0, 0.1, None, None), Strong);
+        assert_eq!(Strength::of(5.0, 0.1, None, None), VeryStrong);
+        // The word is the smaller part's: a large ln B on a small data part is not very strong.
+        assert_eq!(Strength::of(12.0, 0.1, Some(3.5), None), Strong);
+        assert_eq!(Strength::of(-12.0, 0.1, Some(-1.5), None), Positive);
+        // A data part below DATA_DECIDES_NATS, or pointing the other way: the boxes decide.
+        assert_eq!(Strength::of(4.0, 0.1, Some(0.99), None), DecidedByTheBoxes);
+        assert_eq!(Strength::of(1.73, 0.02, Some(-4.6), Some(0.9)), DecidedByTheBoxes);
+        assert_eq!(Strength::of(-8.0, 0.1, Some(2.0), None), DecidedByTheBoxes);
+        // Fits that do not separate the pair: the boxes decide, whatever the data's part.
+        assert_eq!(Strength::of(8.0, 0.1, Some(6.0), Some(4.9)), DecidedByTheBoxes);
+        assert_eq!(Strength::of(8.0, 0.1, Some(6.0), Some(5.0)), VeryStrong);
+        assert!(!DecidedByTheBoxes.decides() && !Undecided.decides() && Positive.decides());
+        assert_eq!(
+            serde_json::to_value(DecidedByTheBoxes).unwrap(),
+            serde_json::json!("decided_by_the_boxes")
+        );
+    }
+
+    #[test]
+    fn a_bayes_factor_s_parts_add_up_and_favour_the_larger_evidence() {
+        let law = |law: Law, ln_z: f64, mean_ln_l: Option<f64>| LawEvidence {
+            law,
+            ln_z,
+            ln_z_error: 0.1,
+            island_ln_z: vec![ln_z],
+            island_spread: 0.0,
+            prior_probability: 0.5,
+            probability: 0.5,
+            stages: vec![1],
+            candidates_scored: 1,
+            best_rho: 0.1,
+            posterior: Vec::new(),
+            cut_by_box: Vec::new(),
+            starts: Vec::new(),
+            mean_ln_l,
+        };
+        let (m2, m4) = (law(Law::M2, -100.0, Some(-90.0)), law(Law::M4, -104.0, Some(-86.5)));
+        let f = BayesFactor::between(&m4, &m2, &[]);
+        assert_eq!((f.favoured, f.against), (Law::M2, Law::M4));
+        assert_eq!((f.ln_b, f.data_nats, f.boxes_nats), (4.0, Some(-3.5), Some(7.5)));
+        assert_eq!(f.strength, Strength::DecidedByTheBoxes);
+        assert_eq!(f.parts(), "data -3.50, boxes 7.50 nats");
+        // A document without ⟨ln L⟩: the plain ln B and its word.
+        let f = BayesFactor::between(&law(Law::M2, -100.0, None), &m4, &[]);
+        assert_eq!((f.data_nats, f.boxes_nats, f.strength), (None, None, Strength::Strong));
+        assert_eq!(f.parts(), "");
     }
 
     #[test]

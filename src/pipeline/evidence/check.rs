@@ -9,9 +9,11 @@
 //! as the record's, with its own seed ([`crate::selection::replicate_seed`]).
 //!
 //! A replicate's answer is the law of the largest posterior probability, and it is *decided*
-//! when it beats every other law by at least positive odds beyond twice their error
-//! ([`strength`]) *and* by the data: its least-squares fit's log-likelihood lies at least
-//! [`UNDECIDED_NATS`] above each rival's, (n/2)·ln(ρ_rival / ρ_first). Otherwise it is
+//! when it beats every other law by at least positive odds beyond twice their error *and* by
+//! the data ([`Strength::decides`]): its posterior's mean log-likelihood lies at least
+//! [`DATA_DECIDES_NATS`](crate::abc::evidence::DATA_DECIDES_NATS) and its least-squares fit's
+//! log-likelihood at least [`UNDECIDED_NATS`](crate::separation::UNDECIDED_NATS) above each
+//! rival's, (n/2)·ln(ρ_rival / ρ_first). Otherwise it is
 //! *undecided*: odds won with fits of equal quality are Occam factors, set by the priors (a
 //! law that holds another, as m3 holds m2, fits any record of it as well and loses only by
 //! the volume of its extra parameters). A trustworthy evidence is decided and right where the laws differ on the
@@ -19,7 +21,7 @@
 
 use super::{EvidenceAnalysis, EvidenceJob};
 use crate::abc::Observer;
-use crate::abc::evidence::{NoiseModel, strength};
+use crate::abc::evidence::{NoiseModel, Strength};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
@@ -27,7 +29,6 @@ use crate::fit::residuals;
 use crate::laws::Law;
 use crate::run::{Placement, Scoring};
 use crate::selection::{draw_by_weight, replicate_seed, synthesize};
-use crate::separation::UNDECIDED_NATS;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::{Deserialize, Serialize};
@@ -57,7 +58,7 @@ pub struct CheckReplicate {
     pub closest_fit: Option<Law>,
     pub gap_nats: f64,
     /// True when, against every rival, the odds are at least positive beyond their error and
-    /// the fit lies at least [`UNDECIDED_NATS`] above.
+    /// the data, not the boxes, decide ([`Strength::decides`]).
     pub decided: bool,
 }
 
@@ -227,26 +228,32 @@ fn replicate_of(
     let rho = |law: Law| outcome.fits.iter().find(|f| f.law == law).map_or(f64::NAN, |f| f.rho);
     // Against every rival: the posterior log-odds with their error, and how far the first
     // law's fit lies above the rival's.
-    let rivals: Vec<(Law, f64, f64, f64)> = order[1..]
+    let rivals: Vec<(Law, f64, f64, f64, Strength)> = order[1..]
         .iter()
         .map(|&k| {
             let rival = &laws[k];
             let ln_odds = (first.ln_z + first.prior_probability.ln()) - (rival.ln_z + rival.prior_probability.ln());
             let gap = n / 2.0 * (rho(rival.law) / rho(first.law)).ln();
-            (rival.law, ln_odds, first.ln_z_error.hypot(rival.ln_z_error), gap)
+            let data = first.mean_ln_l.zip(rival.mean_ln_l).map(|(a, b)| a - b);
+            let error = first.ln_z_error.hypot(rival.ln_z_error);
+            (
+                rival.law,
+                ln_odds,
+                error,
+                gap,
+                Strength::of(ln_odds, error, data, Some(gap)),
+            )
         })
         .collect();
     // A NaN gap (a fit with no value) decides nothing.
-    let decided = rivals
-        .iter()
-        .all(|&(_, odds, error, gap)| strength(odds, error) != "undecided" && gap >= UNDECIDED_NATS);
+    let decided = rivals.iter().all(|r| r.4.decides());
     let (runner_up, ln_odds, ln_odds_error) = rivals
         .first()
-        .map_or((None, f64::INFINITY, 0.0), |&(law, odds, error, _)| {
+        .map_or((None, f64::INFINITY, 0.0), |&(law, odds, error, _, _)| {
             (Some(law), odds, error)
         });
     let closest = rivals.iter().min_by(|a, b| a.3.total_cmp(&b.3));
-    let (closest_fit, gap_nats) = closest.map_or((None, f64::INFINITY), |&(law, _, _, gap)| (Some(law), gap));
+    let (closest_fit, gap_nats) = closest.map_or((None, f64::INFINITY), |&(law, _, _, gap, _)| (Some(law), gap));
     Ok((
         CheckReplicate {
             index,

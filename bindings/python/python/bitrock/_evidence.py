@@ -105,6 +105,18 @@ class Evidence:
         return x["ln_z"] - y["ln_z"], math.hypot(x["ln_z_error"], y["ln_z_error"])
 
     @property
+    def bayes_factors(self) -> pd.DataFrame:
+        """The law of the largest evidence against each other law, one row per pair: ln B and
+        its Monte-Carlo error split into the data's part (``data_nats``: ⟨ln L⟩ over the
+        favoured law's posterior less the other's) and the boxes' part (``boxes_nats``: the
+        Occam factors, which boxes twice as wide move by ln 2 per parameter), the fits' expected
+        gap (``separation_nats``), and the word (``strength``): Kass & Raftery's on the data's
+        part, ``decided_by_the_boxes`` where that part is below 1 nat, points the other way, or
+        the fits do not separate the pair. Empty for a document written without them."""
+        columns = ["favoured", "against", "ln_b", "error", "data_nats", "boxes_nats", "separation_nats", "strength"]
+        return pd.DataFrame(self._doc.get("bayes_factors", []), columns=columns)
+
+    @property
     def separations(self) -> pd.DataFrame:
         """Per ordered pair (truth, rival): the expected log-likelihood gap in nats if the
         truth's fitted curve made the record, the probability of ranking the rival first, and
