@@ -8,9 +8,8 @@ use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
 use bitrock::pipeline::evidence::{
-    self, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidenceJob, EvidencePrior,
+    self, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidenceJob, EvidencePrior, EvidenceWarning,
 };
-use bitrock::separation::AUTOCORRELATED;
 use clap::{Args, ValueEnum};
 use std::io::Write;
 use std::path::PathBuf;
@@ -466,34 +465,15 @@ fn tables(
             )?;
         }
     }
-    if let Some(phi) = analysis
-        .residual_lag1
-        .iter()
-        .copied()
-        .filter(|phi| phi.is_finite())
-        .reduce(f64::min)
-        .filter(|&phi| phi > AUTOCORRELATED && config.noise == NoiseModel::Iid)
-    {
-        writeln!(
-            out,
-            "warning: every law's residuals are autocorrelated (lag-1 at least {phi:.2}): the i.i.d. noise model counts each sample as independent and overstates every Bayes factor, by about (1 + φ)/(1 − φ) = {:.1} times in nats; the AR(1) model (--noise ar1) accounts for it",
-            (1.0 + phi) / (1.0 - phi)
-        )?;
-    }
-    for law in evidence.laws.iter().filter(|l| !l.converged()) {
-        writeln!(
-            out,
-            "warning: the islands of {} disagree by {:.1} nats: its samplers have not converged alike, and its ln Z is uncertain by about that much; more --particles or --max-sweeps narrow it",
-            law.law, law.island_spread
-        )?;
-    }
-    for law in evidence.laws.iter().filter(|l| !l.cut_by_box.is_empty()) {
-        writeln!(
-            out,
-            "warning: the posterior of {} reaches the end of its box ({}): its ln Z depends on where that box ends; widen it (--prior-scale, or a --prior file)",
-            law.law,
-            law.cut_by_box.join(", ")
-        )?;
+    for warning in analysis.warnings() {
+        // Where a flag of this command changes what the warning is about.
+        let hint = match warning {
+            EvidenceWarning::Autocorrelated { .. } => " (--noise ar1)",
+            EvidenceWarning::IslandsDisagree { .. } => "; more --particles or --max-sweeps narrow it",
+            EvidenceWarning::CutByBox { .. } => "; widen it (--prior-scale, or a --prior file)",
+            EvidenceWarning::DecidedByTheBoxes { .. } => " (--prior-scale, or a --prior file)",
+        };
+        writeln!(out, "warning: {warning}{hint}")?;
     }
     writeln!(
         out,

@@ -1196,6 +1196,26 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
     assert!(number(m4, "ln_b") >= 1.0, "{m4}");
     assert!(number(m4, "data_nats") < -1.0 && number(m4, "boxes_nats") > 1.0, "{m4}");
     assert_eq!(m4["strength"], "decided_by_the_boxes", "{m4}");
+    // Said as a warning, with its words, beside the numbers.
+    let warned: Vec<&serde_json::Value> = document["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|w| w["kind"] == "decided_by_the_boxes")
+        .collect();
+    assert_eq!(warned.len(), 1, "{}", document["warnings"]);
+    assert_eq!(
+        (&warned[0]["favoured"], &warned[0]["against"]),
+        (&"m2".into(), &"m4".into())
+    );
+    assert!(
+        warned[0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("m2 leads m4 by ln B = "),
+        "{}",
+        warned[0]
+    );
     let m1 = pair("m1");
     assert!(number(m1, "data_nats") >= 5.0, "{m1}");
     assert_eq!(m1["strength"], "very_strong", "{m1}");
@@ -1206,5 +1226,9 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
     assert!(
         line.contains("decided by the boxes") && line.contains("data -") && line.contains("boxes "),
         "{line}"
+    );
+    assert!(
+        stdout.contains("warning: m2 leads m4 by ln B = ") && stdout.contains("through the boxes, not the data"),
+        "{stdout}"
     );
 }

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -33,6 +34,19 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
         assert a["probability"] == b["probability"]
     assert document["separations"] == small.document["separations"]
     assert document["bayes_factors"] == small.document["bayes_factors"]
+    assert document["warnings"] == small.document["warnings"]
+
+
+def test_the_evidence_warns_what_its_document_warns() -> None:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ev = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), **SMALL)
+    said = [str(w.message) for w in caught if issubclass(w.category, bitrock.BitrockWarning)]
+    # m3's posterior runs to the end of a box on this short run: said, and kept in the document.
+    assert any("the posterior of m3 reaches the end of its box" in m for m in ev.warnings), ev.warnings
+    for message in ev.warnings:
+        assert message in said
+    assert [w["kind"] for w in ev.document["warnings"]] == ["cut_by_box"] * len(ev.warnings)
 
 
 def test_the_samplers_start_from_the_boxes_the_fits_or_both_as_on_the_command_line(cli) -> None:

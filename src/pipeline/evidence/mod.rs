@@ -264,7 +264,113 @@ pub struct EvidenceAnalysis {
     pub noise_models: Vec<NoiseEvidence>,
 }
 
+/// What the evidence's numbers do not say by themselves, said beside them on every surface
+/// (the command's table, the JSON's `warnings`, the report, Python's warnings).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum EvidenceWarning {
+    /// Every fit's residuals autocorrelated beyond [`separation::AUTOCORRELATED`] under the
+    /// i.i.d. model (its smallest lag-1).
+    Autocorrelated { lag1: f64 },
+    /// A law's islands disagree beyond [`evidence::ISLANDS_AGREE_NATS`].
+    IslandsDisagree { law: Law, nats: f64 },
+    /// A law's posterior reaches box ends that are not physical bounds.
+    CutByBox { law: Law, ends: Vec<String> },
+    /// The first law leads a rival by the boxes' Occam factors, not by the data.
+    DecidedByTheBoxes {
+        favoured: Law,
+        against: Law,
+        ln_b: f64,
+        data_nats: Option<f64>,
+    },
+}
+
+impl std::fmt::Display for EvidenceWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Autocorrelated { lag1 } => write!(
+                f,
+                "every law's residuals are autocorrelated (lag-1 at least {lag1:.2}): the i.i.d. noise model counts each \
+                 sample as independent and overstates every Bayes factor, by about (1 + φ)/(1 − φ) = {:.1} times in \
+                 nats; the AR(1) model accounts for it",
+                (1.0 + lag1) / (1.0 - lag1)
+            ),
+            Self::IslandsDisagree { law, nats } => write!(
+                f,
+                "the islands of {law} disagree by {nats:.1} nats: its samplers have not converged alike, and its ln Z \
+                 is uncertain by about that much"
+            ),
+            Self::CutByBox { law, ends } => write!(
+                f,
+                "the posterior of {law} reaches the end of its box ({}): its ln Z depends on where that box ends",
+                ends.join(", ")
+            ),
+            Self::DecidedByTheBoxes {
+                favoured,
+                against,
+                ln_b,
+                data_nats,
+            } => write!(
+                f,
+                "{favoured} leads {against} by ln B = {ln_b:.2} through the boxes, not the data{}: with other boxes the \
+                 order may change",
+                data_nats.map_or(String::new(), |d| format!(" (the data's part {d:.2} nats)"))
+            ),
+        }
+    }
+}
+
 impl EvidenceAnalysis {
+    /// What the reported evidence's numbers do not say by themselves ([`EvidenceWarning`]).
+    pub fn warnings(&self) -> Vec<EvidenceWarning> {
+        let evidence = &self.evidence;
+        let mut warnings = Vec::new();
+        if evidence.config.noise == NoiseModel::Iid
+            && let Some(lag1) = self
+                .residual_lag1
+                .iter()
+                .copied()
+                .filter(|phi| phi.is_finite())
+                .reduce(f64::min)
+                .filter(|&phi| phi > separation::AUTOCORRELATED)
+        {
+            warnings.push(EvidenceWarning::Autocorrelated { lag1 });
+        }
+        warnings.extend(
+            evidence
+                .laws
+                .iter()
+                .filter(|l| !l.converged())
+                .map(|l| EvidenceWarning::IslandsDisagree {
+                    law: l.law,
+                    nats: l.island_spread,
+                }),
+        );
+        warnings.extend(
+            evidence
+                .laws
+                .iter()
+                .filter(|l| !l.cut_by_box.is_empty())
+                .map(|l| EvidenceWarning::CutByBox {
+                    law: l.law,
+                    ends: l.cut_by_box.clone(),
+                }),
+        );
+        warnings.extend(
+            evidence
+                .bayes_factors(&self.separations)
+                .into_iter()
+                .filter(|f| f.strength == evidence::Strength::DecidedByTheBoxes)
+                .map(|f| EvidenceWarning::DecidedByTheBoxes {
+                    favoured: f.favoured,
+                    against: f.against,
+                    ln_b: f.ln_b,
+                    data_nats: f.data_nats,
+                }),
+        );
+        warnings
+    }
+
     /// The advice at `data`'s own operating point from the posterior, on the paper's 1-DOF
     /// string (its way out of stick-slip simulated on `backend`); `None` where the record
     /// keeps no account of its bit.
@@ -312,6 +418,16 @@ impl EvidenceAnalysis {
             &self.noise_models,
             prior,
         );
+        // Each warning with its words (`message`) beside its fields.
+        document["warnings"] = self
+            .warnings()
+            .iter()
+            .map(|w| {
+                let mut entry = serde_json::to_value(w).expect("a warning serialises");
+                entry["message"] = w.to_string().into();
+                entry
+            })
+            .collect();
         if posterior_sets {
             for (entry, law) in document["laws"]
                 .as_array_mut()

@@ -105,6 +105,13 @@ class Evidence:
         return x["ln_z"] - y["ln_z"], math.hypot(x["ln_z_error"], y["ln_z_error"])
 
     @property
+    def warnings(self) -> list[str]:
+        """What the numbers do not say by themselves, as the command says it beside its table:
+        residuals too autocorrelated for the i.i.d. model, islands that disagree, posteriors a
+        box end cuts, a lead the boxes make rather than the data."""
+        return [w["message"] for w in self._doc.get("warnings", [])]
+
+    @property
     def bayes_factors(self) -> pd.DataFrame:
         """The law of the largest evidence against each other law, one row per pair: ln B and
         its Monte-Carlo error split into the data's part (``data_nats``: ⟨ln L⟩ over the
@@ -170,21 +177,13 @@ class Evidence:
 
     def _repr_html_(self) -> str:
         """A notebook's view: the evidence table, the boxes it integrates over, and what the
-        command warns about (islands that disagree, posteriors a box end cuts)."""
+        command warns about (:attr:`warnings`)."""
         import html
 
         doc = self._doc
         columns = ["ln_z", "ln_z_error", "probability", "best_rho", "residual_lag1"]
         table = self.table[columns].to_html(float_format=lambda v: f"{v:.4f}")
-        notes = [
-            f"the islands of {law['law']} disagree by {law['island_spread']:.1f} nats"
-            for law in doc["laws"]
-            if not law["converged"]
-        ] + [
-            f"the posterior of {law['law']} reaches the end of its box ({', '.join(law['cut_by_box'])})"
-            for law in doc["laws"]
-            if law["cut_by_box"]
-        ]
+        notes = self.warnings
         items = "".join(f"<li>warning: {html.escape(n)}</li>" for n in notes)
         return (
             f"<div><b>bitrock.Evidence</b> on {html.escape(doc['source'])} ({doc['data_points']} samples; "
@@ -283,7 +282,19 @@ def evidence(
         dispatcher,
         1 if dispatcher is None else dispatcher.parallelism,
     )
-    return Evidence(json.loads(document))
+    return _warned(Evidence(json.loads(document)))
+
+
+def _warned(result: Evidence) -> Evidence:
+    """``result``, each of its warnings said as a ``BitrockWarning`` (as the command says them
+    beside its table)."""
+    import warnings
+
+    from ._errors import BitrockWarning
+
+    for message in result.warnings:
+        warnings.warn(message, BitrockWarning, stacklevel=3)
+    return result
 
 
 def resume_evidence(
@@ -311,7 +322,7 @@ def resume_evidence(
         dispatcher,
         1 if dispatcher is None else dispatcher.parallelism,
     )
-    return Evidence(json.loads(document))
+    return _warned(Evidence(json.loads(document)))
 
 
 def read_evidence(directory: str | os.PathLike[str]) -> Evidence:
