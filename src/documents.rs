@@ -108,6 +108,22 @@ pub fn evidence_json(
                 // ⟨ln L⟩ over the posterior and the Occam factor ln Z − ⟨ln L⟩ (N·m, nats).
                 "mean_ln_l": law.mean_ln_l,
                 "occam_nats": law.mean_ln_l.map(|m| law.ln_z - m),
+                // Each parameter's box widened and narrowed, its ends in the record's units.
+                "box_changes": law.box_changes.iter().map(|c| {
+                    let j = law.law.param_names().iter().position(|n| *n == c.parameter).unwrap_or(0);
+                    let in_record_units = |v: f64| {
+                        let mut values = vec![0.0; d];
+                        values[j] = v;
+                        to_record_units(law.law, &values, data.torque_unit)[j]
+                    };
+                    json!({
+                        "parameter": c.parameter,
+                        "factor": c.factor,
+                        "lower": in_record_units(c.lower),
+                        "upper": in_record_units(c.upper),
+                        "ln_z_shift": c.ln_z_shift,
+                    })
+                }).collect::<Vec<_>>(),
                 "cut_by_box": law.cut_by_box,
                 "starts": law.starts,
                 "residual_lag1": fits

@@ -419,6 +419,9 @@ fn tables(
                 factor.parts(),
                 doubled
             )?;
+            if let Some(range) = &factor.sensitivity {
+                writeln!(out, "                   {}", range.describe())?;
+            }
         }
     }
     let lag1: Vec<String> = analysis

@@ -130,6 +130,9 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
                     format!(" ({parts})")
                 }
             );
+            if let Some(range) = &f.sensitivity {
+                let _ = writeln!(md, "  - {}", range.describe());
+            }
         }
     }
     noise_models_markdown(&mut md, &document);
@@ -165,6 +168,7 @@ fn bayes_factors(document: &Value, laws: &[LawLine], dir: &Path) -> Result<Vec<B
                 boxes_nats: None,
                 separation_nats: None,
                 strength: Strength::of(ln_b, error, None, None),
+                sensitivity: None,
             }
         })
         .collect())

@@ -1231,4 +1231,65 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
         stdout.contains("warning: m2 leads m4 by ln B = ") && stdout.contains("through the boxes, not the data"),
         "{stdout}"
     );
+    // One box changed at a time, by reweighting the posterior: a single box of m4 narrowed
+    // brings the pair within a nat or so, a box of m1 does not reach m2.
+    let range = &m4["sensitivity"];
+    assert!(
+        number(range, "lowest") < number(m4, "ln_b") && number(range, "highest") > number(m4, "ln_b"),
+        "{range}"
+    );
+    assert!(number(&m1["sensitivity"], "lowest") > 10.0, "{m1}");
+
+    // The reweighted changes are what sampling again with the changed box gives: m2's static
+    // torque's box narrowed (it cuts the posterior: ln 2 plus the log of the mass kept) and its
+    // decay rate's widened (−ln 2), each sampled again from a prior file.
+    let m2 = document["laws"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|l| l["law"] == "m2")
+        .unwrap();
+    let change = |parameter: &str, factor: f64| {
+        m2["box_changes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["parameter"] == parameter && c["factor"] == factor)
+            .unwrap()
+            .clone()
+    };
+    for c in [change("tsb", 0.5), change("g", 2.0)] {
+        let shift = number(&c, "ln_z_shift");
+        let prior = dir.path().join(format!("{}.toml", c["parameter"].as_str().unwrap()));
+        std::fs::write(
+            &prior,
+            format!(
+                "[m2]\n{} = [{}, {}]\n",
+                c["parameter"].as_str().unwrap(),
+                c["lower"],
+                c["upper"]
+            ),
+        )
+        .unwrap();
+        let (code, stdout, err) = outcome(bin().args(args).arg(&record).arg("--json").arg("--prior").arg(&prior));
+        assert_eq!(code, 0, "{err}");
+        let again: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        let m2_again = again["laws"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|l| l["law"] == "m2")
+            .unwrap();
+        let sampled = number(m2_again, "ln_z") - number(m2, "ln_z");
+        let error = number(m2_again, "ln_z_error").hypot(number(m2, "ln_z_error"));
+        eprintln!("{c}: reweighted {shift:.3}, sampled again {sampled:.3} ± {error:.3}");
+        assert!(
+            (sampled - shift).abs() < 0.1 + 3.0 * error,
+            "{c}: sampled again {sampled} ± {error}"
+        );
+    }
+    assert!(
+        number(&change("tsb", 0.5), "ln_z_shift") < 0.6,
+        "the narrowed box cuts the posterior"
+    );
 }

@@ -43,8 +43,10 @@
 //! not on threads or batching, and is the same on every run with the CPU backend.
 
 pub mod noise;
+pub mod sensitivity;
 
 pub use noise::{LagSums, NoiseEvidence, NoiseModel, log_likelihood_constant};
+pub use sensitivity::{BoxChange, Sensitivity};
 
 use super::Observer;
 use super::posterior::systematic_from;
@@ -554,6 +556,10 @@ pub struct LawEvidence {
     /// Occam factor, what its boxes say ([`BayesFactor`]). `None` in documents written without it.
     #[serde(default)]
     pub mean_ln_l: Option<f64>,
+    /// Each parameter's box widened and narrowed, one at a time, and ln Z's change
+    /// ([`sensitivity`]); empty in documents written without them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub box_changes: Vec<BoxChange>,
 }
 
 /// How much ln Z changes when every parameter's box of a law doubles in width, per parameter,
@@ -576,9 +582,9 @@ impl LawEvidence {
 }
 
 /// Share of a box's width at each end within which posterior mass counts as reaching the end.
-const EDGE_SHARE: f64 = 0.02;
+pub(crate) const EDGE_SHARE: f64 = 0.02;
 /// Posterior mass within [`EDGE_SHARE`] of an end that makes the box cut the posterior.
-const EDGE_MASS: f64 = 0.01;
+pub(crate) const EDGE_MASS: f64 = 0.01;
 
 /// The ends of `law`'s box (`lower`, `upper`, SI) that cut the `posterior`: those, other than
 /// a physical bound, with more than [`EDGE_MASS`] of the weight within [`EDGE_SHARE`] of the
@@ -783,6 +789,10 @@ pub struct BayesFactor {
     /// The fits' expected gap D with the favoured law as the truth, where it was computed.
     pub separation_nats: Option<f64>,
     pub strength: Strength,
+    /// ln B over either law's boxes widened or narrowed one parameter at a time, where the
+    /// evidence kept its box changes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<Sensitivity>,
 }
 
 impl BayesFactor {
@@ -805,6 +815,7 @@ impl BayesFactor {
             boxes_nats: data_nats.map(|d| ln_b - d),
             separation_nats,
             strength: Strength::of(ln_b, error, data_nats, separation_nats),
+            sensitivity: Sensitivity::of(favoured, against, ln_b, error),
         }
     }
 
@@ -1545,8 +1556,9 @@ pub fn run_from(
                 .zip(&ratios)
                 .map(|(island, share)| share / k * island.posterior_mean_ln_l())
                 .sum::<f64>();
-        laws.push(LawEvidence {
+        let mut law = LawEvidence {
             mean_ln_l: Some(mean_ln_l),
+            box_changes: Vec::new(),
             island_spread: spread_of(&island_ln_z),
             cut_by_box,
             law: bx.law,
@@ -1560,7 +1572,9 @@ pub fn run_from(
             best_rho: all.iter().map(|i| i.best_rho).fold(f64::INFINITY, f64::min),
             posterior,
             starts,
-        });
+        };
+        law.box_changes = sensitivity::box_changes(&law, &bx.lower, &bx.upper);
+        laws.push(law);
     }
     let log_joint: Vec<f64> = laws.iter().map(|l| l.prior_probability.ln() + l.ln_z).collect();
     let total = log_mean_exp(log_joint.iter().copied()) + (log_joint.len() as f64).ln();
@@ -1648,6 +1662,7 @@ mod tests {
             cut_by_box: Vec::new(),
             starts: Vec::new(),
             mean_ln_l,
+            box_changes: Vec::new(),
         };
         let (m2, m4) = (law(Law::M2, -100.0, Some(-90.0)), law(Law::M4, -104.0, Some(-86.5)));
         let f = BayesFactor::between(&m4, &m2, &[]);

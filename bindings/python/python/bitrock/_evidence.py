@@ -119,8 +119,14 @@ class Evidence:
         Occam factors, which boxes twice as wide move by ln 2 per parameter), the fits' expected
         gap (``separation_nats``), and the word (``strength``): Kass & Raftery's on the data's
         part, ``decided_by_the_boxes`` where that part is below 1 nat, points the other way, or
-        the fits do not separate the pair. Empty for a document written without them."""
-        columns = ["favoured", "against", "ln_b", "error", "data_nats", "boxes_nats", "separation_nats", "strength"]
+        the fits do not separate the pair; ``sensitivity``: ln B's range with one box of either
+        law widened or narrowed 2× (``lowest``, ``highest``, the change at each, and
+        ``prior_dependent`` where that range changes which law leads). Empty for a document
+        written without them."""
+        columns = [
+            "favoured", "against", "ln_b", "error", "data_nats", "boxes_nats", "separation_nats", "strength",
+            "sensitivity",
+        ]
         return pd.DataFrame(self._doc.get("bayes_factors", []), columns=columns)
 
     @property

@@ -1,0 +1,260 @@
+//! How much of a Bayes factor the boxes set, one parameter at a time: each parameter's box
+//! widened and narrowed [`FACTOR`]× (the others kept), ln Z's change got from the posterior
+//! particles by importance reweighting, without sampling again.
+//!
+//! With uniform boxes the prior density is 1/V. A box B' ⊂ B (narrowed) changes the evidence by
+//! Z'/Z = (V/V')·P(θ ∈ B' | y), the posterior mass it keeps; a box B' ⊃ B (widened) by V/V'
+//! exactly where the posterior lies inside B (no mass near the ends that move). A widened box
+//! whose moved end the posterior reaches, and a narrowed one that keeps too little of it, cannot
+//! be reweighted: they are named, not guessed.
+
+use super::{EDGE_MASS, EDGE_SHARE, LawEvidence};
+use crate::laws::Law;
+use serde::{Deserialize, Serialize};
+
+/// How much each box is widened and narrowed.
+pub const FACTOR: f64 = 2.0;
+
+/// Posterior mass a narrowed box must keep, and particles inside it, for its reweighting to
+/// count: below, its estimate rests on a handful of particles.
+const MIN_KEPT_MASS: f64 = 0.02;
+const MIN_KEPT_PARTICLES: usize = 20;
+
+/// One parameter's box widened or narrowed, and what that does to its law's ln Z.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BoxChange {
+    /// The parameter's name (`c1`).
+    pub parameter: String,
+    /// New width over old: [`FACTOR`] (widened; less where a physical bound stops it) or
+    /// 1/[`FACTOR`] (narrowed).
+    pub factor: f64,
+    /// The new box's ends (SI).
+    pub lower: f64,
+    pub upper: f64,
+    /// ln Z′ − ln Z, nats; `None` where the posterior cannot be reweighted to it.
+    pub ln_z_shift: Option<f64>,
+}
+
+/// The box changes of `law`'s evidence over its box (`lower`, `upper`, SI): each parameter's
+/// widened and narrowed. A box keeps its end at a physical bound and grows or shrinks away
+/// from it; a box with no end at a bound (or both) about its centre.
+pub fn box_changes(law: &LawEvidence, lower: &[f32], upper: &[f32]) -> Vec<BoxChange> {
+    let mut changes = Vec::new();
+    for (j, spec) in law.law.params().iter().enumerate() {
+        let (a, b) = (f64::from(lower[j]), f64::from(upper[j]));
+        let width = b - a;
+        if width.is_nan() || width <= 0.0 {
+            continue;
+        }
+        let at_lower_bound = a <= spec.lower;
+        let at_upper_bound = b >= spec.upper;
+        let resized = |factor: f64| -> (f64, f64) {
+            let w = width * factor;
+            let (lo, hi) = match (at_lower_bound, at_upper_bound) {
+                (true, false) => (a, a + w),
+                (false, true) => (b - w, b),
+                _ => (0.5 * (a + b) - 0.5 * w, 0.5 * (a + b) + 0.5 * w),
+            };
+            (lo.max(spec.lower), hi.min(spec.upper))
+        };
+        let mass = |inside: &dyn Fn(f64) -> bool| -> (f64, usize) {
+            law.posterior
+                .iter()
+                .filter(|(p, w)| *w > 0.0 && inside(p[j]))
+                .fold((0.0, 0), |(m, k), (_, w)| (m + w, k + 1))
+        };
+        // Widened: exact where the posterior keeps away from every end that moves.
+        let (lo, hi) = resized(FACTOR);
+        let margin = EDGE_SHARE * width;
+        let reaches_moved_end = (lo < a && mass(&|v| v <= a + margin).0 > EDGE_MASS)
+            || (hi > b && mass(&|v| v >= b - margin).0 > EDGE_MASS);
+        changes.push(BoxChange {
+            parameter: spec.name.to_string(),
+            factor: (hi - lo) / width,
+            lower: lo,
+            upper: hi,
+            ln_z_shift: (!reaches_moved_end).then(|| -((hi - lo) / width).ln()),
+        });
+        // Narrowed: the posterior mass the smaller box keeps.
+        let (lo, hi) = resized(1.0 / FACTOR);
+        let (kept, particles) = mass(&|v| (lo..=hi).contains(&v));
+        changes.push(BoxChange {
+            parameter: spec.name.to_string(),
+            factor: (hi - lo) / width,
+            lower: lo,
+            upper: hi,
+            ln_z_shift: (kept >= MIN_KEPT_MASS && particles >= MIN_KEPT_PARTICLES)
+                .then(|| (width / (hi - lo)).ln() + kept.ln()),
+        });
+    }
+    changes
+}
+
+/// A Bayes factor over the boxes changed one at a time (either law's, one parameter, widened
+/// or narrowed).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sensitivity {
+    /// The lowest and highest ln B (favoured over the other) over the changes reweighted, the
+    /// unchanged boxes included, and the change that gives each ("m4 c1 ×0.5").
+    pub lowest: f64,
+    pub lowest_change: Option<String>,
+    pub highest: f64,
+    pub highest_change: Option<String>,
+    /// True where the order of the pair (either law ahead by at least 1 nat beyond twice the
+    /// error, or neither) differs between the lowest and the highest.
+    pub prior_dependent: bool,
+    /// The changes that could not be reweighted ("m4 c1 ×2"): the range leaves them out.
+    pub not_reweighted: Vec<String>,
+}
+
+impl Sensitivity {
+    /// The range of `ln_b` (of `favoured` over `against`, error `error`) over both laws' box
+    /// changes; `None` where neither has any.
+    pub fn of(favoured: &LawEvidence, against: &LawEvidence, ln_b: f64, error: f64) -> Option<Self> {
+        if favoured.box_changes.is_empty() && against.box_changes.is_empty() {
+            return None;
+        }
+        let named = |law: Law, c: &BoxChange| format!("{law} {} ×{:.2}", c.parameter, c.factor);
+        let mut range = Self {
+            lowest: ln_b,
+            lowest_change: None,
+            highest: ln_b,
+            highest_change: None,
+            prior_dependent: false,
+            not_reweighted: Vec::new(),
+        };
+        let sides = [(favoured, 1.0), (against, -1.0)];
+        for (law, sign) in sides {
+            for change in &law.box_changes {
+                let Some(shift) = change.ln_z_shift else {
+                    range.not_reweighted.push(named(law.law, change));
+                    continue;
+                };
+                let moved = ln_b + sign * shift;
+                if moved < range.lowest {
+                    range.lowest = moved;
+                    range.lowest_change = Some(named(law.law, change));
+                }
+                if moved > range.highest {
+                    range.highest = moved;
+                    range.highest_change = Some(named(law.law, change));
+                }
+            }
+        }
+        let threshold = 1.0f64.max(2.0 * error);
+        let lead = |x: f64| (x >= threshold) as i8 - (x <= -threshold) as i8;
+        range.prior_dependent = lead(range.lowest) != lead(range.highest);
+        Some(range)
+    }
+
+    /// "ln B 0.95 (m4 c1 ×0.50) to 2.33 (m4 c1 ×2.00), prior-dependent" for a table or a line.
+    pub fn describe(&self) -> String {
+        let end = |v: f64, change: &Option<String>| match change {
+            Some(c) => format!("{v:.2} ({c})"),
+            None => format!("{v:.2}"),
+        };
+        format!(
+            "one box ×{FACTOR} or ×1/{FACTOR}: ln B {} to {}{}{}",
+            end(self.lowest, &self.lowest_change),
+            end(self.highest, &self.highest_change),
+            if self.prior_dependent { ", prior-dependent" } else { "" },
+            if self.not_reweighted.is_empty() {
+                String::new()
+            } else {
+                format!("; not reweighted: {}", self.not_reweighted.join(", "))
+            }
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// m2's evidence with `ln_z` and a posterior of 100 equal particles spread ±`spread`
+    /// around `at` (SI).
+    fn m2(ln_z: f64, at: [f64; 3], spread: f64) -> LawEvidence {
+        let posterior = (0..100)
+            .map(|i| {
+                let d = spread * (f64::from(i) / 99.0 - 0.5);
+                (at.iter().map(|v| v + d).collect(), 0.01)
+            })
+            .collect();
+        LawEvidence {
+            law: Law::M2,
+            ln_z,
+            ln_z_error: 0.1,
+            island_ln_z: vec![ln_z],
+            island_spread: 0.0,
+            prior_probability: 0.5,
+            probability: 0.5,
+            stages: vec![1],
+            candidates_scored: 1,
+            best_rho: 0.1,
+            posterior,
+            cut_by_box: Vec::new(),
+            starts: Vec::new(),
+            mean_ln_l: None,
+            box_changes: Vec::new(),
+        }
+    }
+
+    const LOWER: [f32; 3] = [0.0, 0.0, 0.0];
+    const UPPER: [f32; 3] = [10.0, 10.0, 4.0];
+
+    #[test]
+    fn a_posterior_inside_both_boxes_moves_ln_z_by_the_volume_ratio_alone() {
+        let law = m2(0.0, [2.0, 3.0, 1.0], 0.2);
+        let changes = box_changes(&law, &LOWER, &UPPER);
+        assert_eq!(changes.len(), 6);
+        for pair in changes.chunks(2) {
+            let (wide, narrow) = (&pair[0], &pair[1]);
+            // Each box keeps its end at the physical bound 0 and grows or shrinks away from it.
+            assert_eq!(
+                (wide.lower, narrow.lower, wide.factor, narrow.factor),
+                (0.0, 0.0, 2.0, 0.5)
+            );
+            assert_eq!(wide.ln_z_shift.unwrap().to_bits(), (-(2.0f64.ln())).to_bits());
+            // Every particle kept: ln 2 + ln 1.
+            assert!((narrow.ln_z_shift.unwrap() - 2.0f64.ln()).abs() < 1e-12, "{narrow:?}");
+        }
+    }
+
+    #[test]
+    fn a_narrowed_box_keeps_the_posterior_mass_inside_it_and_the_rest_is_named() {
+        // tsb's particles spread over 4 to 6: the half box [0, 5] keeps half of them.
+        let law = m2(0.0, [5.0, 3.0, 1.0], 2.0);
+        let changes = box_changes(&law, &LOWER, &UPPER);
+        let narrow_tsb = &changes[1];
+        assert_eq!((narrow_tsb.parameter.as_str(), narrow_tsb.upper), ("tsb", 5.0));
+        assert!((narrow_tsb.ln_z_shift.unwrap() - (2.0f64.ln() + 0.5f64.ln())).abs() < 1e-12);
+        // A posterior outside the narrowed box, and one at the end a widened box moves, are not
+        // reweighted.
+        let law = m2(0.0, [9.9, 3.0, 1.0], 0.1);
+        let changes = box_changes(&law, &LOWER, &UPPER);
+        assert_eq!((changes[0].ln_z_shift, changes[1].ln_z_shift), (None, None));
+    }
+
+    #[test]
+    fn a_pair_whose_order_a_single_box_can_change_is_prior_dependent() {
+        let mut favoured = m2(-100.0, [2.0, 3.0, 1.0], 0.2);
+        favoured.box_changes = box_changes(&favoured, &LOWER, &UPPER);
+        let mut against = m2(-101.2, [2.0, 3.0, 1.0], 0.2);
+        against.law = Law::M1;
+        against.box_changes = vec![BoxChange {
+            parameter: "b1".into(),
+            factor: 0.5,
+            lower: 0.0,
+            upper: 1.0,
+            ln_z_shift: Some(0.69),
+        }];
+        let range = Sensitivity::of(&favoured, &against, 1.2, 0.1).unwrap();
+        assert!((range.lowest - (1.2 - 2.0f64.ln())).abs() < 1e-12, "{range:?}");
+        assert!((range.highest - (1.2 + 2.0f64.ln())).abs() < 1e-12, "{range:?}");
+        assert_eq!(range.lowest_change.as_deref(), Some("m2 tsb ×2.00"));
+        assert!(range.prior_dependent, "{range:?}");
+        // Far apart, no single box changes the order.
+        let range = Sensitivity::of(&favoured, &against, 8.0, 0.1).unwrap();
+        assert!(!range.prior_dependent && range.not_reweighted.is_empty(), "{range:?}");
+    }
+}
