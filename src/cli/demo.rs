@@ -170,7 +170,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
 /// and marker ([`files::refuse_foreign`], the rule of `abc --force`).
 fn check_root(root: &Path) -> anyhow::Result<()> {
     files::check_output_dir(root, "out")?;
-    bitrock::run::dir::refuse_inside_run(root, "out")?;
+    bitrock::run::dir::refuse_inside_kept_dir(root, "out")?;
     let empty = std::fs::read_dir(root).map_or(true, |mut d| d.next().is_none());
     if empty {
         return Ok(());

@@ -233,7 +233,7 @@ pub(crate) fn replace_report(
         files.push((figures.join(format!("{}.svg", r.info.stem)), r.svg.as_bytes().to_vec()));
         files.push((figures.join(format!("{}.png", r.info.stem)), r.png.clone()));
     }
-    crate::run::dir::refuse_inside_run(dir, "out")?;
+    crate::run::dir::refuse_inside_kept_dir(dir, "out")?;
     crate::files::replace_dir(
         dir,
         "out",

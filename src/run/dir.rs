@@ -2,7 +2,7 @@
 //! directory (its store, summary files and selection check), a report directory, and what
 //! bitrock counts as its own in each. A new run's directory is checked ([`check_new`]) and
 //! then claimed under its lock, checked again there, and staged beside a run it replaces
-//! (`Claim`); outputs elsewhere are kept out of runs ([`refuse_inside_run`],
+//! (`Claim`); outputs elsewhere are kept out of runs ([`refuse_inside_kept_dir`],
 //! [`check_output_file`]). Every command that replaces or writes into such a directory asks
 //! [`Owned`] first, so that only files bitrock wrote are ever replaced
 //! ([`crate::files::refuse_foreign`]).
@@ -169,7 +169,7 @@ pub enum DirState {
 pub fn check_new(dir: &Dir, input: Option<&Path>) -> Result<DirState> {
     let path = dir.path.as_path();
     files::check_output_dir(path, "out")?;
-    crate::run::dir::refuse_inside_run(path, "out")?;
+    crate::run::dir::refuse_inside_kept_dir(path, "out")?;
     let refuse = |why: String| Err(Error::setting("out", format!("{}: {why}", path.display())));
     let Ok(real) = path.canonicalize() else {
         return Ok(DirState::Fresh);
@@ -298,8 +298,9 @@ impl Drop for Claim {
 
 /// Refuses, naming `flag`, an output file that cannot be written or is not bitrock's to
 /// replace: a directory, a dangling symbolic link, a path in a directory that does not exist,
-/// one of bitrock's own lock or temporary files, any file inside a run directory (a run
-/// keeps to its own files, its store above all), and, unless `force`, an existing file that
+/// one of bitrock's own lock or temporary files, any file inside a run, evidence or watch
+/// directory (each keeps to its own files, its store above all; [`refuse_inside_kept_dir`]),
+/// and, unless `force`, an existing file that
 /// is not bitrock's own unchanged output ([`files::authorship`]). A symbolic link is written through:
 /// the file it points to is the target, checked by the same rule ([`files::output_target`]).
 pub fn check_output_file(target: &Path, field: &str, force: bool) -> Result<()> {
@@ -341,7 +342,7 @@ pub fn check_output_file(target: &Path, field: &str, force: bool) -> Result<()> 
             ),
         ));
     }
-    refuse_inside_run(&real, field)?;
+    refuse_inside_kept_dir(&real, field)?;
     if force || !real.exists() {
         return Ok(());
     }
@@ -375,31 +376,49 @@ pub fn write_whole(
     files::write_own(&files::output_target(target), field, write)
 }
 
-/// Refuses, naming `flag`, an output path inside a run directory (at any depth, a run's
-/// `selection/` included): a run holds only what bitrock writes there.
-pub fn refuse_inside_run(path: &Path, field: &str) -> Result<()> {
-    match enclosing_run_dir(path) {
-        Some(run) => Err(Error::setting(
+/// Refuses, naming `field`, an output path inside a directory bitrock keeps whole (at any
+/// depth): a run's (its `selection/` included), an evidence's (finished or under way) or a
+/// watch's. Each holds only what bitrock writes there as that kind of directory; an output of
+/// another command would replace or lie beside its files.
+pub fn refuse_inside_kept_dir(path: &Path, field: &str) -> Result<()> {
+    match enclosing_kept_dir(path) {
+        Some((dir, kind)) => Err(Error::setting(
             field,
             format!(
-                "{} lies inside the run directory {}, which holds only what bitrock writes there; write it outside the run",
+                "{} lies inside the {kind} directory {}, which holds only what bitrock writes there as {kind}; write it outside that directory",
                 path.display(),
-                run.display()
+                dir.display()
             ),
         )),
         None => Ok(()),
     }
 }
 
-/// The run directory `path` lies in, at any depth (a run's `selection/` included), if any;
-/// `path` itself is not inside itself. A path that does not exist yet is judged by the
-/// nearest directory above it that does.
-fn enclosing_run_dir(path: &Path) -> Option<PathBuf> {
+/// The kind of directory bitrock keeps whole that `dir` is ("a run", "an evidence", "a
+/// watch"), if any.
+fn kept_kind(dir: &Path) -> Option<&'static str> {
+    if is_run_dir(dir) {
+        Some("run")
+    } else if is_evidence_dir(dir) || is_unfinished_evidence_dir(dir) {
+        Some("evidence")
+    } else if dir.join(WATCH_STORE_FILE).is_file() {
+        Some("watch")
+    } else {
+        None
+    }
+}
+
+/// The directory bitrock keeps whole that `path` lies in, at any depth, and its kind, if any;
+/// `path` itself is not inside itself. A path that does not exist yet is judged by the nearest
+/// directory above it that does.
+fn enclosing_kept_dir(path: &Path) -> Option<(PathBuf, &'static str)> {
     let absolute = std::path::absolute(path).ok()?;
     let mut above = absolute.parent();
     while let Some(dir) = above {
         if let Ok(real) = dir.canonicalize() {
-            return real.ancestors().find(|d| is_run_dir(d)).map(Path::to_path_buf);
+            return real
+                .ancestors()
+                .find_map(|d| kept_kind(d).map(|kind| (d.to_path_buf(), kind)));
         }
         above = dir.parent();
     }

@@ -166,7 +166,7 @@ impl WatchStore {
     /// A directory that holds a watch already is refused (`resume` goes on with it), and so
     /// is one that holds anything else.
     pub fn create(dir: &Path, meta: &WatchMeta) -> Result<Self> {
-        crate::run::dir::refuse_inside_run(dir, "out")?;
+        crate::run::dir::refuse_inside_kept_dir(dir, "out")?;
         if is_watch_dir(dir) {
             return Err(Error::setting(
                 "out",

@@ -24,7 +24,7 @@ use crate::files;
 use crate::run::Scoring;
 use crate::run::dir::{
     DATA_CSV, EVIDENCE_JSON, JOB_JSON, Owned, POSTERIOR_CSV, PROGRESS_BIN, RECORD_JSON, UNFINISHED_DIR, is_run_dir,
-    is_unfinished_evidence_dir, owns_unchanged, refuse_inside_run,
+    is_unfinished_evidence_dir, owns_unchanged, refuse_inside_kept_dir,
 };
 use crate::units::TorqueUnit;
 use std::path::{Path, PathBuf};
@@ -34,7 +34,7 @@ use std::path::{Path, PathBuf};
 /// there, and an evidence directory without `force`.
 pub fn check_out(dir: &Path, force: bool) -> Result<()> {
     files::check_output_dir(dir, "out")?;
-    refuse_inside_run(dir, "out")?;
+    refuse_inside_kept_dir(dir, "out")?;
     if is_run_dir(dir) {
         return Err(Error::setting(
             "out",

@@ -354,3 +354,133 @@ fn a_selection_check_replaces_its_own_files_but_not_ones_edited_since() {
     assert_refused(run_in(tmp.path(), &check), &["RUN_DIR", "selection.json"]);
     assert_eq!(std::fs::read_to_string(sel.join("selection.json")).unwrap(), edited);
 }
+
+/// Every file of `dir` (one level) with its bytes.
+fn contents(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    names(dir)
+        .into_iter()
+        .map(|n| {
+            let bytes = std::fs::read(dir.join(&n)).unwrap_or_default();
+            (n, bytes)
+        })
+        .collect()
+}
+
+#[test]
+fn no_output_lands_inside_an_evidence_or_a_watch_directory_even_with_force() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "simulate",
+            "--law",
+            "m2",
+            "--omega-rpm",
+            "60",
+            "--duration-s",
+            "40",
+            "--sample-hz",
+            "20",
+            "-o",
+            "rec.csv",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "evidence",
+            "rec.csv",
+            "--laws",
+            "m2",
+            "--particles",
+            "60",
+            "--islands",
+            "2",
+            "--noise",
+            "iid",
+            "--backend",
+            "cpu",
+            "--out",
+            "EV",
+            "-q",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run_in(
+        tmp.path(),
+        &[
+            "watch",
+            "rec.csv",
+            "--laws",
+            "m2",
+            "--particles",
+            "60",
+            "--backend",
+            "cpu",
+            "--out",
+            "W",
+            "--window-s",
+            "20",
+            "--step-s",
+            "20",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (evidence, watch) = (contents(&tmp.path().join("EV")), contents(&tmp.path().join("W")));
+    let simulate = |target: &str| {
+        run_in(
+            tmp.path(),
+            &[
+                "simulate",
+                "--law",
+                "m2",
+                "--omega-rpm",
+                "60",
+                "--duration-s",
+                "1",
+                "-o",
+                target,
+                "--force",
+            ],
+        )
+    };
+    for (target, kind) in [
+        ("W/watch.sqlite", "watch"),
+        ("W/notes.csv", "watch"),
+        ("EV/posterior.csv", "evidence"),
+        ("EV/evidence.json", "evidence"),
+        ("EV/new.csv", "evidence"),
+    ] {
+        let refused = simulate(target);
+        // Refused by name, and never with the advice that would destroy.
+        assert!(!refused.2.contains("--force"), "{}", refused.2);
+        assert_refused(refused, &["--out", &format!("inside the {kind} directory")]);
+    }
+    for inside in ["EV/report", "W/report"] {
+        assert_refused(
+            run_in(tmp.path(), &["report", "EV", "--out", inside]),
+            &["--out", "inside the"],
+        );
+    }
+    assert_refused(
+        run_in(
+            tmp.path(),
+            &[
+                "evidence",
+                "rec.csv",
+                "--laws",
+                "m2",
+                "--particles",
+                "60",
+                "--backend",
+                "cpu",
+                "--out",
+                "W/ev",
+            ],
+        ),
+        &["--out", "inside the watch directory"],
+    );
+    assert_eq!(contents(&tmp.path().join("EV")), evidence);
+    assert_eq!(contents(&tmp.path().join("W")), watch);
+}
