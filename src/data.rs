@@ -126,6 +126,27 @@ pub struct Samples {
 }
 
 impl Samples {
+    /// The mean weight on bit (N) of the samples, where they carry a positive one.
+    pub fn mean_wob_n(&self) -> Option<f64> {
+        let wob = self.wob_n.as_ref().filter(|w| !w.is_empty())?;
+        let mean = crate::numerics::compensated_sum(wob.iter().copied()) / wob.len() as f64;
+        (mean.is_finite() && mean > 0.0).then_some(mean)
+    }
+
+    /// True where the samples' weight on bit changes beyond rounding: one that never changes
+    /// scales nothing.
+    pub fn wob_varies(&self) -> bool {
+        let Some(mean) = self.mean_wob_n() else {
+            return false;
+        };
+        let (low, high) = self
+            .wob_n
+            .iter()
+            .flatten()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &w| (l.min(w), h.max(w)));
+        high - low > 1e-9 * mean
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.speed_rad_s.len()

@@ -256,8 +256,9 @@ struct Selection {
     candidates: u64,
     /// The ABC's last tolerance; `None` for the evidence.
     epsilon: Option<f64>,
-    /// Whether the posterior's torque parameters are for the torque scaled by WOB / W_ref.
-    scaled: bool,
+    /// The W_ref (N) of the posterior's torque parameters where they are for the torque scaled
+    /// by WOB / W_ref; `None` for the torque as the laws give it.
+    w_ref_n: Option<f64>,
 }
 
 impl Selection {
@@ -314,6 +315,12 @@ pub struct Carried {
     /// The fits (SI parameters by law) of the recent informative windows, by window index:
     /// a window is compared with the latest one it does not overlap.
     recent_fits: std::collections::VecDeque<(usize, Fits)>,
+    /// The weight on bit (N) each of `recent_fits` holds at, by window index: a fit to the
+    /// torque scaled by WOB / W_ref holds at W_ref, one to the torque as the law gives it at its
+    /// window's mean WOB. Empty for records without a WOB column and in stores written without
+    /// it: their fits are compared as the laws give the torque.
+    #[serde(default)]
+    recent_wob_n: std::collections::VecDeque<(usize, f64)>,
     /// The window that declared the last change: no window overlapping it is a reference.
     last_change: Option<usize>,
     /// The last informative window's posterior particles (the mixture, weighted by the
@@ -574,6 +581,11 @@ impl Watch {
         while self.carried.recent_fits.len() > span + 1 {
             self.carried.recent_fits.pop_front();
         }
+        if let Some(wob_n) = selection.w_ref_n.or_else(|| data.calibration.mean_wob_n()) {
+            self.carried.recent_wob_n.push_back((window.index, wob_n));
+        }
+        let oldest = self.carried.recent_fits.front().map_or(window.index, |(k, _)| *k);
+        self.carried.recent_wob_n.retain(|(k, _)| *k >= oldest);
 
         // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
         let window_p: Vec<f64> = self
@@ -625,7 +637,7 @@ impl Watch {
             .collect();
         self.carried.probabilities = Some(carried);
         self.carried.posterior = Some(posterior);
-        self.carried.posterior_scaled = selection.scaled;
+        self.carried.posterior_scaled = selection.w_ref_n.is_some();
         Ok(self.completed(update, &window))
     }
 
@@ -642,7 +654,10 @@ impl Watch {
             .rev()
             .find(|(k, _)| k + span <= window.index)
             .filter(|(k, _)| self.carried.last_change.is_none_or(|c| *k >= c + span));
-        let loss = reference.and_then(|(_, before)| loss_nats(before, fits, samples));
+        let loss = reference.and_then(|(k, before)| {
+            let holds_at_n = self.carried.recent_wob_n.iter().find(|(i, _)| i == k).map(|(_, w)| *w);
+            loss_nats(before, holds_at_n, fits, samples)
+        });
         let level = median(&self.carried.losses.iter().copied().collect::<Vec<_>>());
         let change = match (loss, level) {
             (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
@@ -746,7 +761,7 @@ impl Watch {
             laws,
             candidates,
             epsilon: None,
-            scaled: analysis.fit.w_ref_n.is_some(),
+            w_ref_n: analysis.fit.w_ref_n,
         };
         Ok(Ok((selection, judged)))
     }
@@ -790,7 +805,7 @@ impl Watch {
             ..config.clone()
         };
         let backend = config.backend;
-        let scaled = config.fit.w_ref_n.is_some();
+        let w_ref_n = config.fit.w_ref_n;
         let mut evaluator =
             |problem, note: &mut dyn FnMut(String)| crate::eval::evaluator(problem, backend, Default::default(), note);
         let how = crate::run::Start {
@@ -839,7 +854,7 @@ impl Watch {
             laws,
             candidates,
             epsilon: last.record.epsilon,
-            scaled,
+            w_ref_n,
         };
         Ok(Ok((selection, judged)))
     }
@@ -1353,8 +1368,16 @@ fn law_update(selected: &Selected, probability: f64, unit: crate::units::TorqueU
 /// laws fitted here (among the laws fitted both times). The old formation is gone only where
 /// none of its fitted laws still explains the samples: taking one law's fit alone (the best
 /// here) calls a change whenever a law whose parameters lie on a ridge (m3, m4) moved along
-/// it between two windows of the same rock.
-fn loss_nats(before: &Fits, now: &[crate::fit::LawFit], samples: &crate::data::Samples) -> Option<f64> {
+/// it between two windows of the same rock. The earlier fits held at the weight on bit
+/// `holds_at_n` (N): here their torque is scaled by each sample's WOB over it, as the
+/// evidence's WOB-scaled model has it, so that a change of weight on bit in one rock is not a
+/// change of rock.
+fn loss_nats(
+    before: &Fits,
+    holds_at_n: Option<f64>,
+    now: &[crate::fit::LawFit],
+    samples: &crate::data::Samples,
+) -> Option<f64> {
     let sum_sq = samples.sum_sq_torque();
     let rho_now = now
         .iter()
@@ -1366,7 +1389,7 @@ fn loss_nats(before: &Fits, now: &[crate::fit::LawFit], samples: &crate::data::S
         .iter()
         .filter(|(law, _)| now.iter().any(|f| f.law == *law))
         .map(|(law, old)| {
-            let residuals = crate::fit::residuals(*law, old, samples, None);
+            let residuals = crate::fit::residuals(*law, old, samples, holds_at_n);
             residuals.iter().map(|e| e * e).sum::<f64>() / sum_sq
         })
         .filter(|rho| rho.is_finite())
@@ -1452,13 +1475,13 @@ mod tests {
             (Law::M2, m2_elsewhere.clone()),
             (Law::M3, fitted(Law::M3).params_si.clone()),
         ];
-        let loss = loss_nats(&before, &fits, &samples).unwrap();
+        let loss = loss_nats(&before, None, &fits, &samples).unwrap();
         assert!((loss - gap).abs() < 1e-9, "{loss} nats against {gap}");
         // Neither explains them: hundreds of nats.
         let mut m3_elsewhere = fitted(Law::M3).params_si.clone();
         m3_elsewhere[3] *= 1.3;
         let before = vec![(Law::M2, m2_elsewhere), (Law::M3, m3_elsewhere)];
-        let loss = loss_nats(&before, &fits, &samples).unwrap();
+        let loss = loss_nats(&before, None, &fits, &samples).unwrap();
         assert!(loss > 100.0 + gap, "{loss} nats");
     }
 

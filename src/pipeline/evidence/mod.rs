@@ -570,20 +570,14 @@ impl EvidenceJob {
     /// constant weight on bit is not compared: it scales nothing.
     fn scalings(&self, data: &FieldData) -> Vec<FitOptions> {
         let mut scalings = vec![self.fit];
+        // A weight on bit that never changes scales nothing.
         if self.fit.w_ref_n.is_none()
-            && let Some(wob) = &data.calibration.wob_n
+            && let Some(mean) = data.calibration.mean_wob_n().filter(|_| data.calibration.wob_varies())
         {
-            let mean = crate::numerics::compensated_sum(wob.iter().copied()) / wob.len() as f64;
-            let (low, high) = wob
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &w| (l.min(w), h.max(w)));
-            // A weight on bit that never changes scales nothing.
-            if mean.is_finite() && mean > 0.0 && high - low > 1e-9 * mean {
-                scalings.push(FitOptions {
-                    w_ref_n: Some(mean),
-                    ..self.fit
-                });
-            }
+            scalings.push(FitOptions {
+                w_ref_n: Some(mean),
+                ..self.fit
+            });
         }
         scalings
     }
