@@ -490,7 +490,18 @@ impl Watch {
     /// A row whose time runs backwards, or without a time, is said through `observer` and
     /// skipped.
     pub fn push(&mut self, row: Row, arrived: std::time::Instant, observer: &mut dyn Observer) -> Result<Vec<Update>> {
-        match self.windows.push(row) {
+        let pushed = self.windows.push(row);
+        self.taken(pushed, arrived, observer)
+    }
+
+    /// The updates of what the windows did with a row that arrived at `arrived`.
+    fn taken(
+        &mut self,
+        pushed: Pushed,
+        arrived: std::time::Instant,
+        observer: &mut dyn Observer,
+    ) -> Result<Vec<Update>> {
+        match pushed {
             Pushed::Kept(done) => {
                 // The latency of the windows this row completes counts from its arrival.
                 self.last_arrival = Some(arrived);
@@ -510,17 +521,43 @@ impl Watch {
                 "time_column",
                 "a watch cuts its windows by the record's time stamps: the record needs a time column",
             )),
+            Pushed::Held => Ok(Vec::new()),
+            Pushed::Glitch { at_s, ahead_s, then } => {
+                observer.note(format!(
+                    "warning: a row stamped {at_s} s, {ahead_s:.3} s after the row before it, is followed by rows from before it: a glitch of the time column, skipped"
+                ));
+                self.taken(*then, arrived, observer)
+            }
         }
     }
 
     /// At the record's end: the updates of the window that ends with it.
     pub fn finish(&mut self, observer: &mut dyn Observer) -> Result<Vec<Update>> {
-        let done = self.windows.finish(self.period_s);
+        let (done, dropped) = self.windows.finish(self.period_s);
+        if let Some(at_s) = dropped {
+            observer.note(format!(
+                "warning: the last row, stamped {at_s} s, jumps forward by more than a window and no row follows to tell a gap from a glitch of the time column: skipped"
+            ));
+        }
         done.into_iter().map(|window| self.update(window, observer)).collect()
     }
 
     /// The update of one complete window.
     fn update(&mut self, window: Window, observer: &mut dyn Observer) -> Result<Update> {
+        if let Some(last) = self.carried.window
+            && window.index > last + 1
+        {
+            let (skipped_from, skipped_to) = (last + 1, window.index - 1);
+            observer.note(format!(
+                "warning: no rows in window{} {skipped_from}{} (the record has a gap): not given",
+                if skipped_to > skipped_from { "s" } else { "" },
+                if skipped_to > skipped_from {
+                    format!("–{skipped_to}")
+                } else {
+                    String::new()
+                },
+            ));
+        }
         let samples = window.rows.len();
         let mut update = Update {
             window: window.index,

@@ -19,7 +19,11 @@ pub struct Window {
 /// window is complete once a row at or after its end has arrived: only complete windows are
 /// given, so a window never changes once given; at the record's end, [`Windows::finish`]
 /// gives the window that ends with it (a last, partial window is none). Rows whose
-/// time runs backwards are refused ([`Windows::push`] says so) and change nothing. Thinned
+/// time runs backwards are refused ([`Windows::push`] says so) and change nothing. A row whose
+/// time jumps forward by more than a window is held until the next row says what it was: a
+/// glitch of the time column where the record goes on from before it (dropped, and said), a
+/// gap where it goes on after it. Windows that no row falls in (a gap) are not given: a gap of
+/// any length costs nothing. Thinned
 /// ([`Windows::thinned`]), a window holds every k-th row of the record, counted from its
 /// first, and still completes when the record's time passes its end. Memory: the rows of
 /// one window.
@@ -36,6 +40,8 @@ pub struct Windows {
     /// Every `thin`-th row is held; `seen` rows have been taken.
     thin: usize,
     seen: u64,
+    /// A row whose time jumped forward by more than a window, until the next row decides.
+    pending: Option<Row>,
 }
 
 /// What [`Windows::push`] did with a row.
@@ -47,6 +53,13 @@ pub enum Pushed {
     Backwards { by_s: f64 },
     /// The row had no time stamp: windows need one.
     NoTime,
+    /// Its time jumps forward by more than a window: held until the next row says whether it
+    /// is a glitch or a gap.
+    Held,
+    /// The row held before this one was a glitch of the time column (stamped `at_s`, `ahead_s`
+    /// after the row before it, and followed by rows from before it): dropped. `then`: what
+    /// became of this row.
+    Glitch { at_s: f64, ahead_s: f64, then: Box<Pushed> },
 }
 
 impl Windows {
@@ -63,6 +76,7 @@ impl Windows {
             last_s: f64::NEG_INFINITY,
             thin: 1,
             seen: 0,
+            pending: None,
         }
     }
 
@@ -101,9 +115,32 @@ impl Windows {
         let Some(t) = row.time_s else {
             return Pushed::NoTime;
         };
+        if let Some(held) = self.pending.take() {
+            let held_s = held.time_s.expect("a held row has a time");
+            if t < held_s {
+                return Pushed::Glitch {
+                    at_s: held_s,
+                    ahead_s: held_s - self.last_s,
+                    then: Box::new(self.push(row)),
+                };
+            }
+            // A gap: the held row, then this one.
+            let mut done = self.accept(held, held_s);
+            done.extend(self.accept(row, t));
+            return Pushed::Kept(done);
+        }
         if t < self.last_s {
             return Pushed::Backwards { by_s: self.last_s - t };
         }
+        if self.origin_s.is_some() && t - self.last_s > self.length_s {
+            self.pending = Some(row);
+            return Pushed::Held;
+        }
+        Pushed::Kept(self.accept(row, t))
+    }
+
+    /// Takes `row`, at time `t` (not before the last row's); gives the windows it completes.
+    fn accept(&mut self, row: Row, t: f64) -> Vec<Window> {
         self.last_s = t;
         self.origin_s.get_or_insert(t);
         let done = self.complete_before(t);
@@ -113,17 +150,20 @@ impl Windows {
         if held && t >= self.start_of(self.next) {
             self.rows.push_back(row);
         }
-        Pushed::Kept(done)
+        done
     }
 
     /// At the record's end: the windows its last row completes, one sample period (`period_s`)
-    /// after it (the window ending with the record); none later is given.
-    pub fn finish(&mut self, period_s: f64) -> Vec<Window> {
+    /// after it (the window ending with the record); none later is given. A last row held for
+    /// its jump forward has no row after it to tell a gap from a glitch: it is dropped, and its
+    /// time returned.
+    pub fn finish(&mut self, period_s: f64) -> (Vec<Window>, Option<f64>) {
+        let dropped = self.pending.take().and_then(|r| r.time_s);
         if self.origin_s.is_none() {
-            return Vec::new();
+            return (Vec::new(), dropped);
         }
         let reach = self.last_s + period_s * (1.0 + 1e-9);
-        self.complete_before(reach)
+        (self.complete_before(reach), dropped)
     }
 
     /// Gives every window whose end is at or before `t`, dropping the rows no later window
@@ -131,6 +171,10 @@ impl Windows {
     fn complete_before(&mut self, t: f64) -> Vec<Window> {
         let mut out = Vec::new();
         loop {
+            // Windows no row falls in are skipped: the next one given is the first that can
+            // hold the earliest row held, or, with none held, a row at `t` or later.
+            let first = self.rows.front().and_then(|r| r.time_s).unwrap_or(t);
+            self.next = self.next.max(self.first_ending_after(first));
             let start = self.start_of(self.next);
             let end = start + self.length_s;
             if t < end {
@@ -159,6 +203,22 @@ impl Windows {
             }
         }
         out
+    }
+
+    /// The first window whose end lies after `t` (s): the first that can hold a row at `t`.
+    fn first_ending_after(&self, t: f64) -> usize {
+        let origin = self.origin_s.unwrap_or(0.0);
+        let estimate = ((t - origin - self.length_s) / self.step_s).floor() + 1.0;
+        // Below 0, or not a number (a time of ±∞ is refused where rows are read): the first.
+        let mut k = if estimate >= 0.0 { estimate as usize } else { 0 };
+        // The same arithmetic as the windows' own ends decides, past the estimate's rounding.
+        while self.start_of(k) + self.length_s <= t {
+            k += 1;
+        }
+        while k > 0 && self.start_of(k - 1) + self.length_s > t {
+            k -= 1;
+        }
+        k
     }
 
     /// The rows held now (at most about a window's).
@@ -193,10 +253,10 @@ mod tests {
             }
             assert!(windows.held() <= 51, "{}", windows.held());
         }
-        given.extend(windows.finish(0.1));
+        given.extend(windows.finish(0.1).0);
         let starts: Vec<f64> = given.iter().map(|w| w.start_s).collect();
         assert_eq!(starts, [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0]);
-        assert!(windows.finish(0.1).is_empty());
+        assert!(windows.finish(0.1).0.is_empty());
         // Windows 0 and 3 share [6, 5)… none: 3·2 ≥ 5; windows 0 and 2 share [4, 5).
         assert_eq!(windows.span(), 3);
         assert_eq!(Windows::new(20.0, 10.0).span(), 2);
@@ -210,13 +270,78 @@ mod tests {
             );
         }
         assert_eq!(windows.push(row(3.0)), Pushed::Backwards { by_s: 19.9 - 3.0 });
-        // A gap gives its windows, empty where no row fell.
+        // A gap gives the windows its rows fall in, none where no row fell.
         let mut gap = Windows::new(1.0, 1.0);
         gap.push(row(0.0));
-        let Pushed::Kept(done) = gap.push(row(3.5)) else {
+        assert_eq!(gap.push(row(0.5)), Pushed::Kept(Vec::new()));
+        // (A jump of more than a window is held until the next row shows it a gap.)
+        assert_eq!(gap.push(row(3.5)), Pushed::Held);
+        let Pushed::Kept(done) = gap.push(row(4.2)) else {
             panic!()
         };
-        assert_eq!(done.iter().map(|w| w.rows.len()).collect::<Vec<_>>(), [1, 0, 0]);
+        assert_eq!(
+            done.iter().map(|w| (w.index, w.rows.len())).collect::<Vec<_>>(),
+            [(0, 2), (3, 1)]
+        );
+    }
+
+    #[test]
+    fn a_time_stamp_far_ahead_is_a_glitch_where_the_record_goes_on_from_before_it() {
+        // 10 Hz; windows of 2 s every 1 s. Row 30 is stamped 10⁶ s, the rows after it go on
+        // at 3.1 s: a glitch, dropped, and no window between is computed.
+        let mut windows = Windows::new(2.0, 1.0);
+        let mut given = Vec::new();
+        for k in 0..60 {
+            let t = if k == 30 { 1e6 } else { k as f64 / 10.0 };
+            match windows.push(row(t)) {
+                Pushed::Kept(done) => given.extend(done),
+                Pushed::Held => assert_eq!(k, 30),
+                Pushed::Glitch { at_s, ahead_s, then } => {
+                    assert_eq!((k, at_s), (31, 1e6));
+                    assert!((ahead_s - (1e6 - 2.9)).abs() < 1e-6, "{ahead_s}");
+                    let Pushed::Kept(done) = *then else { panic!() };
+                    given.extend(done);
+                }
+                other => panic!("{other:?} at row {k}"),
+            }
+        }
+        let (last, dropped) = windows.finish(0.1);
+        given.extend(last);
+        assert_eq!(dropped, None);
+        let starts: Vec<f64> = given.iter().map(|w| w.start_s).collect();
+        assert_eq!(starts, [0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert!(given.iter().all(|w| w.rows.iter().all(|r| r.time_s.unwrap() < 10.0)));
+        assert_eq!(given[2].rows.len(), 19, "the glitch's row is in no window");
+
+        // A gap: the rows go on after the jump. The held row and the next are both kept,
+        // and the windows of the gap are skipped.
+        let mut windows = Windows::new(2.0, 1.0);
+        let mut given = Vec::new();
+        for k in 0..40 {
+            let t = if k < 20 {
+                k as f64 / 10.0
+            } else {
+                500.0 + k as f64 / 10.0
+            };
+            match windows.push(row(t)) {
+                Pushed::Kept(done) => given.extend(done),
+                Pushed::Held => assert_eq!(k, 20),
+                other => panic!("{other:?} at row {k}"),
+            }
+        }
+        given.extend(windows.finish(0.1).0);
+        let starts: Vec<f64> = given.iter().map(|w| w.start_s).collect();
+        assert_eq!(starts, [0.0, 1.0, 501.0, 502.0], "{starts:?}");
+        assert_eq!(given[3].rows.len(), 20);
+        // A last row held for its jump has no row after it: dropped, and said.
+        let mut windows = Windows::new(2.0, 1.0);
+        for k in 0..30 {
+            windows.push(row(k as f64 / 10.0));
+        }
+        assert_eq!(windows.push(row(1e9)), Pushed::Held);
+        let (last, dropped) = windows.finish(0.1);
+        assert_eq!(dropped, Some(1e9));
+        assert_eq!(last.iter().map(|w| w.start_s).collect::<Vec<_>>(), [1.0]);
     }
 
     #[test]
@@ -239,8 +364,8 @@ mod tests {
             from_thinned.extend(done);
             assert_eq!(from_thinned.len(), from_plain.len(), "at t = {t}");
         }
-        from_thinned.extend(thinned.finish(0.01));
-        from_plain.extend(plain.finish(0.1));
+        from_thinned.extend(thinned.finish(0.01).0);
+        from_plain.extend(plain.finish(0.1).0);
         assert_eq!(from_thinned.len(), 8);
         assert_eq!(from_thinned, from_plain);
     }

@@ -971,3 +971,70 @@ fn a_change_of_weight_on_bit_in_one_rock_is_not_a_change_of_rock() {
     assert!(losses.len() >= 12, "{losses:?}");
     assert!(losses.iter().all(|l| *l < 10.0), "{losses:?}");
 }
+
+/// The lines of `record` with `edit` applied to each data row (its index among the rows, its
+/// fields), written as `dir/name.csv`; `None` drops the row.
+fn edited(
+    record: &Path,
+    dir: &Path,
+    name: &str,
+    edit: impl Fn(usize, Vec<String>) -> Option<Vec<String>>,
+) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(record).unwrap();
+    let mut lines = text.lines();
+    let mut out = vec![lines.next().unwrap().to_string()];
+    for (k, line) in lines.enumerate() {
+        if let Some(fields) = edit(k, line.split(',').map(str::to_string).collect()) {
+            out.push(fields.join(","));
+        }
+    }
+    let path = dir.join(format!("{name}.csv"));
+    std::fs::write(&path, out.join("\n") + "\n").unwrap();
+    path
+}
+
+#[test]
+fn a_time_stamp_far_ahead_is_a_glitch_and_a_gap_costs_no_windows() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let args = |path: &Path| -> Vec<String> {
+        let mut v: Vec<String> = WINDOWS.iter().map(|s| s.to_string()).collect();
+        v.extend(["--particles".into(), "100".into(), path.to_str().unwrap().into()]);
+        v
+    };
+    let run = |path: &Path| {
+        let (code, stdout, stderr) = outcome(watch_command().args(args(path)));
+        assert_eq!(code, 0, "{stderr}");
+        let updates: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        (without_latency(&updates), stderr)
+    };
+    // Row 600 (30 s) stamped 10⁶ s: a glitch, skipped and said; the windows are those of the
+    // record without that row.
+    let glitch = edited(&record, dir.path(), "glitch", |k, mut f| {
+        if k == 600 {
+            f[0] = "1000000".into();
+        }
+        Some(f)
+    });
+    let without = edited(&record, dir.path(), "without", |k, f| (k != 600).then_some(f));
+    let (with_glitch, said) = run(&glitch);
+    assert!(
+        said.contains("a row stamped 1000000 s") && said.contains("a glitch of the time column"),
+        "{said}"
+    );
+    assert_eq!(with_glitch, run(&without).0);
+    assert_eq!(with_glitch.len(), 17);
+    // A logger gap from 60 s to 120 s: the windows that hold no row are not given, and said.
+    let gap = edited(&record, dir.path(), "gap", |_, f| {
+        let t: f64 = f[0].parse().unwrap();
+        (!(60.0..120.0).contains(&t)).then_some(f)
+    });
+    let (updates, said) = run(&gap);
+    let windows: Vec<u64> = updates.iter().map(|u| u["window"].as_u64().unwrap()).collect();
+    assert_eq!(windows, [0, 1, 2, 3, 4, 5, 11, 12, 13, 14, 15, 16], "{said}");
+    assert!(
+        said.contains("no rows in windows 6–10 (the record has a gap)"),
+        "{said}"
+    );
+    assert!(updates.iter().all(|u| u["samples"].as_u64().unwrap() > 0));
+}
