@@ -390,6 +390,8 @@ pub struct Watch {
     carried: Carried,
     /// When the newest row arrived.
     last_arrival: Option<std::time::Instant>,
+    /// The time stamp at which the record's clock was last said to have stopped.
+    stopped_at_s: Option<f64>,
     /// The record's sample period, s: how far past its last row the record's end reaches.
     period_s: f64,
     /// The unit of the record's torques, in which parameters are reported.
@@ -451,6 +453,7 @@ impl Watch {
             source,
             carried: Carried::default(),
             last_arrival: None,
+            stopped_at_s: None,
             period_s: 1.0 / rate_hz,
             torque_unit,
             view: None,
@@ -522,6 +525,17 @@ impl Watch {
                 "a watch cuts its windows by the record's time stamps: the record needs a time column",
             )),
             Pushed::Held => Ok(Vec::new()),
+            Pushed::Stopped { at_s } => {
+                // Said once per stop: the first row past the bound.
+                if self.stopped_at_s != Some(at_s) {
+                    self.stopped_at_s = Some(at_s);
+                    observer.note(format!(
+                        "warning: the time column stopped at {at_s} s ({} rows with that stamp): rows with it are skipped until it moves",
+                        crate::watch::window::MAX_ROWS_AT_ONE_STAMP
+                    ));
+                }
+                Ok(Vec::new())
+            }
             Pushed::Glitch { at_s, ahead_s, then } => {
                 observer.note(format!(
                     "warning: a row stamped {at_s} s, {ahead_s:.3} s after the row before it, is followed by rows from before it: a glitch of the time column, skipped"

@@ -42,7 +42,14 @@ pub struct Windows {
     seen: u64,
     /// A row whose time jumped forward by more than a window, until the next row decides.
     pending: Option<Row>,
+    /// Rows taken in a row with the last row's time stamp.
+    same_stamp: usize,
 }
+
+/// Rows with one time stamp beyond which the clock has stopped: they are skipped until it moves
+/// (held, they would complete no window and grow without bound). Far above any record whose
+/// stamps are rounded (20 rows per second at 20 Hz, 1,000 at 1 kHz).
+pub const MAX_ROWS_AT_ONE_STAMP: usize = 65_536;
 
 /// What [`Windows::push`] did with a row.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,6 +63,9 @@ pub enum Pushed {
     /// Its time jumps forward by more than a window: held until the next row says whether it
     /// is a glitch or a gap.
     Held,
+    /// More than [`MAX_ROWS_AT_ONE_STAMP`] rows carry the time stamp `at_s`: the clock has
+    /// stopped, and this row is skipped.
+    Stopped { at_s: f64 },
     /// The row held before this one was a glitch of the time column (stamped `at_s`, `ahead_s`
     /// after the row before it, and followed by rows from before it): dropped. `then`: what
     /// became of this row.
@@ -77,6 +87,7 @@ impl Windows {
             thin: 1,
             seen: 0,
             pending: None,
+            same_stamp: 0,
         }
     }
 
@@ -132,6 +143,9 @@ impl Windows {
         if t < self.last_s {
             return Pushed::Backwards { by_s: self.last_s - t };
         }
+        if t == self.last_s && self.same_stamp >= MAX_ROWS_AT_ONE_STAMP {
+            return Pushed::Stopped { at_s: t };
+        }
         if self.origin_s.is_some() && t - self.last_s > self.length_s {
             self.pending = Some(row);
             return Pushed::Held;
@@ -141,6 +155,7 @@ impl Windows {
 
     /// Takes `row`, at time `t` (not before the last row's); gives the windows it completes.
     fn accept(&mut self, row: Row, t: f64) -> Vec<Window> {
+        self.same_stamp = if t == self.last_s { self.same_stamp + 1 } else { 1 };
         self.last_s = t;
         self.origin_s.get_or_insert(t);
         let done = self.complete_before(t);
@@ -342,6 +357,35 @@ mod tests {
         let (last, dropped) = windows.finish(0.1);
         assert_eq!(dropped, Some(1e9));
         assert_eq!(last.iter().map(|w| w.start_s).collect::<Vec<_>>(), [1.0]);
+    }
+
+    #[test]
+    fn a_clock_that_stops_holds_a_bounded_number_of_rows() {
+        let mut windows = Windows::new(2.0, 1.0);
+        for k in 0..30 {
+            windows.push(row(k as f64 / 10.0));
+        }
+        // The clock stops at 3 s: rows beyond the bound are skipped, not held.
+        let mut stopped = 0;
+        for _ in 0..MAX_ROWS_AT_ONE_STAMP + 1000 {
+            match windows.push(row(3.0)) {
+                Pushed::Kept(_) => {}
+                Pushed::Stopped { at_s } => {
+                    assert_eq!(at_s, 3.0);
+                    stopped += 1;
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(stopped, 1000, "every row past the bound");
+        assert!(windows.held() <= MAX_ROWS_AT_ONE_STAMP + 20, "{}", windows.held());
+        // It moves again: rows are taken, and the windows complete.
+        assert_eq!(windows.push(row(3.1)), Pushed::Kept(Vec::new()));
+        let Pushed::Kept(done) = windows.push(row(4.0)) else {
+            panic!()
+        };
+        assert_eq!(done.iter().map(|w| w.start_s).collect::<Vec<_>>(), [2.0]);
+        assert_eq!(done[0].rows.len(), 10 + MAX_ROWS_AT_ONE_STAMP + 1);
     }
 
     #[test]
