@@ -527,7 +527,7 @@ impl Watch {
             Pushed::Held => Ok(Vec::new()),
             Pushed::Stopped { at_s } => {
                 // Said once per stop: the first row past the bound.
-                if self.stopped_at_s != Some(at_s) {
+                if self.stopped_at_s.map(f64::to_bits) != Some(at_s.to_bits()) {
                     self.stopped_at_s = Some(at_s);
                     observer.note(format!(
                         "warning: the time column stopped at {at_s} s ({} rows with that stamp): rows with it are skipped until it moves",

@@ -143,7 +143,8 @@ impl Windows {
         if t < self.last_s {
             return Pushed::Backwards { by_s: self.last_s - t };
         }
-        if t == self.last_s && self.same_stamp >= MAX_ROWS_AT_ONE_STAMP {
+        // (Not before the last row's: the same stamp.)
+        if t <= self.last_s && self.same_stamp >= MAX_ROWS_AT_ONE_STAMP {
             return Pushed::Stopped { at_s: t };
         }
         if self.origin_s.is_some() && t - self.last_s > self.length_s {
@@ -155,7 +156,8 @@ impl Windows {
 
     /// Takes `row`, at time `t` (not before the last row's); gives the windows it completes.
     fn accept(&mut self, row: Row, t: f64) -> Vec<Window> {
-        self.same_stamp = if t == self.last_s { self.same_stamp + 1 } else { 1 };
+        // `t` is never before the last row's: not after it is the same stamp.
+        self.same_stamp = if t <= self.last_s { self.same_stamp + 1 } else { 1 };
         self.last_s = t;
         self.origin_s.get_or_insert(t);
         let done = self.complete_before(t);
