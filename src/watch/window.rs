@@ -373,7 +373,7 @@ mod tests {
             match windows.push(row(3.0)) {
                 Pushed::Kept(_) => {}
                 Pushed::Stopped { at_s } => {
-                    assert_eq!(at_s, 3.0);
+                    assert_eq!(at_s.to_bits(), 3.0f64.to_bits());
                     stopped += 1;
                 }
                 other => panic!("{other:?}"),
