@@ -110,17 +110,13 @@ pub fn evidence_json(
                 "occam_nats": law.mean_ln_l.map(|m| law.ln_z - m),
                 // Each parameter's box widened and narrowed, its ends in the record's units.
                 "box_changes": law.box_changes.iter().map(|c| {
-                    let j = law.law.param_names().iter().position(|n| *n == c.parameter).unwrap_or(0);
-                    let in_record_units = |v: f64| {
-                        let mut values = vec![0.0; d];
-                        values[j] = v;
-                        to_record_units(law.law, &values, data.torque_unit)[j]
-                    };
+                    let torque_valued = law.law.params().iter().any(|s| s.name == c.parameter && s.torque_power == 1);
+                    let per_unit = if torque_valued { 1.0 / data.torque_unit.newton_metres() } else { 1.0 };
                     json!({
                         "parameter": c.parameter,
                         "factor": c.factor,
-                        "lower": in_record_units(c.lower),
-                        "upper": in_record_units(c.upper),
+                        "lower": c.lower * per_unit,
+                        "upper": c.upper * per_unit,
                         "ln_z_shift": c.ln_z_shift,
                     })
                 }).collect::<Vec<_>>(),

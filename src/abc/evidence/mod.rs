@@ -575,6 +575,29 @@ pub const LN_Z_PER_DOUBLING: f64 = -std::f64::consts::LN_2;
 pub const ISLANDS_AGREE_NATS: f64 = 5.0;
 
 impl LawEvidence {
+    /// A law's evidence of one island with `ln_z` (error 0.1), the weighted `posterior` and
+    /// `mean_ln_l`: for tests of what is built on evidences (Bayes factors, box changes).
+    #[cfg(test)]
+    pub(crate) fn for_tests(law: Law, ln_z: f64, posterior: Vec<(Vec<f64>, f64)>, mean_ln_l: Option<f64>) -> Self {
+        Self {
+            law,
+            ln_z,
+            ln_z_error: 0.1,
+            island_ln_z: vec![ln_z],
+            island_spread: 0.0,
+            prior_probability: 0.5,
+            probability: 0.5,
+            stages: vec![1],
+            candidates_scored: 1,
+            best_rho: 0.1,
+            posterior,
+            cut_by_box: Vec::new(),
+            starts: Vec::new(),
+            mean_ln_l,
+            box_changes: Vec::new(),
+        }
+    }
+
     /// True when the law's islands agree within [`ISLANDS_AGREE_NATS`].
     pub fn converged(&self) -> bool {
         self.island_spread <= ISLANDS_AGREE_NATS
@@ -713,10 +736,10 @@ pub enum Strength {
 }
 
 impl Strength {
-    /// How strongly a log Bayes factor `ln_b` (Monte-Carlo error `error`) favours its law,
-    /// given the record's part of it, `data_nats` (⟨ln L⟩ of the favoured law less the
-    /// other's), and the fits' expected gap `separation_nats` (the favoured law as the truth;
-    /// [`crate::separation`]), either unknown as `None`. Kass & Raftery's (1995) words, positive
+    /// How strongly a log Bayes factor `ln_b` = ln Z_a − ln Z_b (Monte-Carlo error `error`)
+    /// favours its law, given the record's part of it, `data_nats` = ⟨ln L⟩_a − ⟨ln L⟩_b, and
+    /// the fits' gap `separation_nats` (the expected D with the favoured law as the truth,
+    /// [`crate::separation`], or the fits' own log-likelihood gap), either unknown as `None`. Kass & Raftery's (1995) words, positive
     /// from 1 nat, strong from 3, very strong from 5, on the smaller of |ln B| and the data's
     /// part: boxes twice as wide move ln B by ln 2 per parameter, and a word must not change
     /// with them.
@@ -1647,23 +1670,8 @@ mod tests {
 
     #[test]
     fn a_bayes_factor_s_parts_add_up_and_favour_the_larger_evidence() {
-        let law = |law: Law, ln_z: f64, mean_ln_l: Option<f64>| LawEvidence {
-            law,
-            ln_z,
-            ln_z_error: 0.1,
-            island_ln_z: vec![ln_z],
-            island_spread: 0.0,
-            prior_probability: 0.5,
-            probability: 0.5,
-            stages: vec![1],
-            candidates_scored: 1,
-            best_rho: 0.1,
-            posterior: Vec::new(),
-            cut_by_box: Vec::new(),
-            starts: Vec::new(),
-            mean_ln_l,
-            box_changes: Vec::new(),
-        };
+        let law =
+            |law: Law, ln_z: f64, mean_ln_l: Option<f64>| LawEvidence::for_tests(law, ln_z, Vec::new(), mean_ln_l);
         let (m2, m4) = (law(Law::M2, -100.0, Some(-90.0)), law(Law::M4, -104.0, Some(-86.5)));
         let f = BayesFactor::between(&m4, &m2, &[]);
         assert_eq!((f.favoured, f.against), (Law::M2, Law::M4));

@@ -147,7 +147,8 @@ impl Sensitivity {
         Some(range)
     }
 
-    /// "ln B 0.95 (m4 c1 ×0.50) to 2.33 (m4 c1 ×2.00), prior-dependent" for a table or a line.
+    /// "one box ×2 or ×1/2: ln B 0.96 (m4 c1 ×0.50) to 2.34 (m2 tcb ×0.50), prior-dependent",
+    /// for a table or a line.
     pub fn describe(&self) -> String {
         let end = |v: f64, change: &Option<String>| match change {
             Some(c) => format!("{v:.2} ({c})"),
@@ -180,23 +181,7 @@ mod tests {
                 (at.iter().map(|v| v + d).collect(), 0.01)
             })
             .collect();
-        LawEvidence {
-            law: Law::M2,
-            ln_z,
-            ln_z_error: 0.1,
-            island_ln_z: vec![ln_z],
-            island_spread: 0.0,
-            prior_probability: 0.5,
-            probability: 0.5,
-            stages: vec![1],
-            candidates_scored: 1,
-            best_rho: 0.1,
-            posterior,
-            cut_by_box: Vec::new(),
-            starts: Vec::new(),
-            mean_ln_l: None,
-            box_changes: Vec::new(),
-        }
+        LawEvidence::for_tests(Law::M2, ln_z, posterior, None)
     }
 
     const LOWER: [f32; 3] = [0.0, 0.0, 0.0];

@@ -264,8 +264,8 @@ pub struct EvidenceAnalysis {
     pub noise_models: Vec<NoiseEvidence>,
 }
 
-/// What the evidence's numbers do not say by themselves, said beside them on every surface
-/// (the command's table, the JSON's `warnings`, the report, Python's warnings).
+/// What the evidence's numbers do not say by themselves, said beside them: in the command's
+/// table, the JSON's `warnings` (an evidence directory's document too) and Python's warnings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum EvidenceWarning {

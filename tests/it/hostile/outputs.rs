@@ -429,21 +429,8 @@ fn no_output_lands_inside_an_evidence_or_a_watch_directory_even_with_force() {
     assert_eq!(code, 0, "{err}");
     let (evidence, watch) = (contents(&tmp.path().join("EV")), contents(&tmp.path().join("W")));
     let simulate = |target: &str| {
-        run_in(
-            tmp.path(),
-            &[
-                "simulate",
-                "--law",
-                "m2",
-                "--omega-rpm",
-                "60",
-                "--duration-s",
-                "1",
-                "-o",
-                target,
-                "--force",
-            ],
-        )
+        let args = [&file_writers()[0][..], &["-o", target, "--force"]].concat();
+        run_in(tmp.path(), &args)
     };
     for (target, kind) in [
         ("W/watch.sqlite", "watch"),
