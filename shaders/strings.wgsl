@@ -16,6 +16,10 @@ const EVENT_PASSES: u32 = 4u;
 // builds the pipeline), so that a short chain's state lives in registers, not in memory.
 override NODES: u32 = 1u;
 const CHAIN_NODES: u32 = 16u;
+// The law of every string of the batch where they share one (its index), so that the law's
+// switch folds away; ANY_LAW where they differ.
+const ANY_LAW: u32 = 4294967295u;
+override LAW: u32 = ANY_LAW;
 
 // Keep in sync with `StringsJob` in src/eval/gpu/strings.rs.
 struct StringsJob {
@@ -224,7 +228,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let i = job.first + local;
     let b = INPUT_WORDS * i;
-    law = bitcast<u32>(inputs[b]);
+    law = select(bitcast<u32>(inputs[b]), LAW, LAW != ANY_LAW);
     omega = inputs[b + 1u];
     ratio = inputs[b + 2u];
     params = array<f32, 6>(inputs[b + 4u], inputs[b + 5u], inputs[b + 6u], inputs[b + 7u], inputs[b + 8u], inputs[b + 9u]);

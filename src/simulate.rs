@@ -14,17 +14,15 @@
 //! are autonomous and the angles stay bounded: φ' = Ω − w, I w' = D(φ, w) − T_bit with the
 //! driving torque D = kφ + c(Ω − w).
 //!
-//! Friction is Karnopp-style with a true stick phase. While w = 0 the bit stays at rest as
-//! long as the driving torque at rest, kφ + cΩ, is at most the static torque T_s = r·T(0)
-//! (clamped at ≥ 0); the torque on bit is then the reaction, equal to the driving torque.
-//! During a stick phase the driving torque grows linearly (φ' = Ω), so the release time within
-//! a step has a closed form. Slip is integrated with fixed-step classical RK4 on the smooth
-//! branch of the law for the current direction of rotation, `dir·r·T(dir·w)`; when a step
-//! would carry the bit speed through zero the crossing is located by bisection on the
-//! sub-step length (re-integrating RK4 from the step start) and the stick condition decides
-//! what follows. Integrating the smooth branch across the step (rather than the sign-switching
-//! law) is what makes the end-of-step sign a reliable crossing test: with `sign(w)·T(|w|)`
-//! the friction reverses inside the step and can push the speed back above zero, hiding the
+//! Friction is Karnopp-style with a true stick phase: while w = 0 the bit stays at rest as
+//! long as the string's torque on it, kφ + cΩ, is at most the static torque T_s = r·T(0)
+//! (clamped at ≥ 0); the torque on bit is then the reaction. The integrator is the batched
+//! strings' ([`strings::Stepper`]): fixed-step RK4 on the smooth branch of the law for the
+//! current direction, `dir·r·T(dir·w)`, a stop or a release inside a step located and the step
+//! re-integrated to it, so that a trace here and a summary of the GPU's strings come from the
+//! same steps. Integrating the smooth branch across the step (rather than the sign-switching
+//! law) is what makes the end-of-step sign a reliable crossing test: with `sign(w)·T(|w|)` the
+//! friction reverses inside the step and can push the speed back above zero, hiding the
 //! crossing and replacing a clean stick by chatter.
 
 pub mod strings;
@@ -37,6 +35,7 @@ use crate::units::{RAD_S_PER_RPM, TorqueUnit};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+use strings::{Chain, MAX_NODES, Stepper, StringJob, StringState, padded, steady_start};
 
 /// How the string starts at t = 0.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -535,36 +534,47 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         let s = &well.segments[i];
         (i, ((t_s - starts[i]) / s.duration_s).clamp(0.0, 1.0))
     };
-    let drive = |t_s: f64| -> (usize, Model<'_>, f64) {
+    // The segment at recorded time t: its index, law, parameters, Ω and mean WOB there.
+    let drive = |t_s: f64| -> (usize, &Segment, f64, f64) {
         let (i, fraction) = segment_at(t_s);
         let s = &well.segments[i];
-        let model = Model::new(s.law, &s.params_nm, &well.structure, s.omega_rad_s.at(fraction));
-        (i, model, s.wob_n.at(fraction))
+        (i, s, s.omega_rad_s.at(fraction), s.wob_n.at(fraction))
     };
 
     let mut rng = StdRng::seed_from_u64(well.seed);
-    let (_, model, wob_mean_n) = drive(0.0);
+    let (_, first, omega0, wob_mean_n) = drive(0.0);
     let mut wob = Wob::new(wob_mean_n, well.wob_fluctuation_n, well.wob_correlation_s, &mut rng);
     let r0 = wob.ratio(well.w_ref_n);
-    let state = match well.initial {
+    let chain = Chain::one_dof(&well.structure);
+    let start = match well.initial {
         Initial::Equilibrium {
             speed_perturbation_rad_s,
-        } => State {
-            twist_rad: model.law.torque(model.params, model.omega_rad_s, r0) / model.k,
-            w: model.omega_rad_s + speed_perturbation_rad_s,
+        } => steady_start(
+            &chain,
+            first.law,
+            &first.params_nm,
+            omega0,
+            r0,
+            speed_perturbation_rad_s,
+        ),
+        // A bit on bottom at rest: held there while the string's torque stays within T_s.
+        Initial::Rest => StringState {
+            lag_rad: [0.0; MAX_NODES],
+            speed_rad_s: [0.0; MAX_NODES],
+            stuck: true,
         },
-        Initial::Rest => State { twist_rad: 0.0, w: 0.0 },
     };
-    let phase = if state.w > 0.0 {
-        Phase::Slip(1.0)
-    } else if state.w < 0.0 {
-        Phase::Slip(-1.0)
-    } else {
-        model.phase_at_rest(state.twist_rad, r0)
+    let job = StringJob {
+        law: first.law,
+        params_nm: padded(&first.params_nm),
+        omega_rad_s: omega0,
+        ratio: r0,
+        start,
     };
-    let mut sim = Integrator { model, state, phase };
+    let mut sim = Stepper::new(&chain, &job);
+    let mut law_now = (first.law, &first.params_nm);
 
-    let mut advance = |sim: &mut Integrator, wob: &mut Wob, rng: &mut StdRng, span_s: f64, t_s: f64| -> Result<()> {
+    let mut advance = |sim: &mut Stepper, wob: &mut Wob, rng: &mut StdRng, span_s: f64, t_s: f64, omega: f64| {
         if span_s <= 0.0 {
             return Ok(());
         }
@@ -572,10 +582,14 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         let h = span_s / steps;
         for _ in 0..steps as u64 {
             pace.advance(1)?;
-            if let Err(why) = sim.advance(h, wob.ratio(well.w_ref_n)) {
+            sim.set_operating_point(omega, wob.ratio(well.w_ref_n));
+            sim.step(h);
+            if !sim.in_bounds() {
+                // A law whose torque turns negative at high speed (m4's cubic beyond its
+                // fitted range) accelerates the bit without bound.
                 return Err(Error::Numerical(format!(
-                    "{why} (simulated time ≤ {t_s} s, law {}, Ω = {} rad/s)",
-                    sim.model.law, sim.model.omega_rad_s
+                    "the bit speed diverged: does the law's torque turn negative at high speed? \
+                     (simulated time ≤ {t_s} s, Ω = {omega} rad/s)"
                 )));
             }
             wob.step(h, rng);
@@ -583,7 +597,8 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         Ok(())
     };
 
-    advance(&mut sim, &mut wob, &mut rng, well.settle_s, well.settle_s)?;
+    let mut omega = omega0;
+    advance(&mut sim, &mut wob, &mut rng, well.settle_s, well.settle_s, omega)?;
     // Samples at k / sample_hz for k = 0, 1, ...: duration × sample_hz of them, end excluded.
     let n_samples = (well.duration_s() * well.sample_hz * (1.0 + 1e-12)).floor() as usize;
     let mut out = WellTrace {
@@ -599,25 +614,36 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
     let mut previous_s = 0.0;
     for k in 0..n_samples {
         let t_s = k as f64 / well.sample_hz;
-        advance(&mut sim, &mut wob, &mut rng, t_s - previous_s, well.settle_s + t_s)?;
+        advance(
+            &mut sim,
+            &mut wob,
+            &mut rng,
+            t_s - previous_s,
+            well.settle_s + t_s,
+            omega,
+        )?;
         previous_s = t_s;
         // The inputs from this sample on (a one-segment, constant well keeps its own).
-        let (segment, model, wob_mean_n) = drive(t_s);
-        sim.model = model;
+        let (segment, s, omega_now, wob_mean_n) = drive(t_s);
+        if (s.law, &s.params_nm) != law_now {
+            sim.set_law(s.law, &s.params_nm);
+            law_now = (s.law, &s.params_nm);
+        }
+        omega = omega_now;
         wob.mean_n = wob_mean_n;
-        let r = wob.ratio(well.w_ref_n);
+        sim.set_operating_point(omega, wob.ratio(well.w_ref_n));
         let z_speed: f64 = StandardNormal.sample(&mut rng);
         let z_torque: f64 = StandardNormal.sample(&mut rng);
         let trace = &mut out.trace;
         trace.time_s.push(t_s);
         trace
             .bit_speed_rad_s
-            .push(sim.state.w + well.noise_speed_rad_s * z_speed);
+            .push(sim.bit_speed_rad_s() + well.noise_speed_rad_s * z_speed);
         trace
             .torque_nm
-            .push(sim.torque_on_bit_nm(r) + well.noise_torque_nm * z_torque);
+            .push(sim.bit_torque_nm() + well.noise_torque_nm * z_torque);
         trace.wob_n.push(wob.current_n());
-        out.top_drive_rad_s.push(sim.model.omega_rad_s);
+        out.top_drive_rad_s.push(omega);
         out.segment.push(segment);
     }
     Ok(out)
@@ -658,207 +684,6 @@ impl Wob {
         let z: f64 = StandardNormal.sample(rng);
         let rho = (-h_s / self.correlation_s).exp();
         self.fluctuation_n = rho * self.fluctuation_n + self.std_n * (1.0 - rho * rho).sqrt() * z;
-    }
-}
-
-/// The structure's coefficients and the law, in SI.
-struct Model<'a> {
-    law: Law,
-    params: &'a [f64],
-    inertia_kg_m2: f64,
-    k: f64,
-    c: f64,
-    omega_rad_s: f64,
-}
-
-impl<'a> Model<'a> {
-    fn new(law: Law, params: &'a [f64], structure: &Lumped, omega_rad_s: f64) -> Self {
-        Self {
-            law,
-            params,
-            inertia_kg_m2: structure.inertia_kg_m2,
-            k: structure.stiffness_nm_per_rad(),
-            c: structure.damping_nms_per_rad(),
-            omega_rad_s,
-        }
-    }
-
-    /// Bit speed beyond which the motion has run away (rad/s): a thousand times the rotary
-    /// speed, and never under 1,000 rad/s (≈ 9,550 rpm), far above any stick-slip peak (a few
-    /// times Ω) yet far below where f64 overflows, so a law whose torque turns negative at high
-    /// speed is reported instead of producing a finite trace of absurd speeds.
-    fn runaway_speed_rad_s(&self) -> f64 {
-        1e3 * self.omega_rad_s.abs().max(1.0)
-    }
-
-    /// Static torque T_s = r·T(0), clamped at ≥ 0 (N·m).
-    fn static_torque_nm(&self, r: f64) -> f64 {
-        self.law.torque(self.params, 0.0, r).max(0.0)
-    }
-
-    /// Driving torque on a bit at rest, kφ + cΩ (N·m): what the bit must resist to stay stuck.
-    fn driving_torque_at_rest_nm(&self, twist_rad: f64) -> f64 {
-        self.k * twist_rad + self.c * self.omega_rad_s
-    }
-
-    /// What a bit at rest does next: stay stuck while the driving torque is within ±T_s,
-    /// otherwise slip in the direction of the driving torque.
-    fn phase_at_rest(&self, twist_rad: f64, r: f64) -> Phase {
-        let d = self.driving_torque_at_rest_nm(twist_rad);
-        if d.abs() <= self.static_torque_nm(r) {
-            Phase::Stick
-        } else {
-            Phase::Slip(d.signum())
-        }
-    }
-
-    /// Time derivative of the state while slipping in direction `dir` (±1), with the smooth
-    /// branch `dir·r·T(dir·w)` of the law (continued analytically past w = 0 inside a step).
-    fn slip_derivative(&self, s: State, dir: f64, r: f64) -> State {
-        let driving = self.k * s.twist_rad + self.c * (self.omega_rad_s - s.w);
-        let bit = dir * self.law.torque(self.params, dir * s.w, r);
-        State {
-            twist_rad: self.omega_rad_s - s.w,
-            w: (driving - bit) / self.inertia_kg_m2,
-        }
-    }
-
-    /// One classical RK4 step of length `h_s` while slipping in direction `dir`.
-    fn rk4(&self, s: State, dir: f64, r: f64, h_s: f64) -> State {
-        let k1 = self.slip_derivative(s, dir, r);
-        let k2 = self.slip_derivative(s.plus(0.5 * h_s, k1), dir, r);
-        let k3 = self.slip_derivative(s.plus(0.5 * h_s, k2), dir, r);
-        let k4 = self.slip_derivative(s.plus(h_s, k3), dir, r);
-        State {
-            twist_rad: s.twist_rad + h_s / 6.0 * (k1.twist_rad + 2.0 * (k2.twist_rad + k3.twist_rad) + k4.twist_rad),
-            w: s.w + h_s / 6.0 * (k1.w + 2.0 * (k2.w + k3.w) + k4.w),
-        }
-    }
-}
-
-/// Twist φ = Ωt − θ (rad) and bit speed w (rad/s); also used for their time derivatives.
-#[derive(Clone, Copy, Debug)]
-struct State {
-    twist_rad: f64,
-    w: f64,
-}
-
-impl State {
-    fn plus(self, h: f64, d: State) -> State {
-        State {
-            twist_rad: self.twist_rad + h * d.twist_rad,
-            w: self.w + h * d.w,
-        }
-    }
-}
-
-/// Stick (w = 0, torque on bit = reaction) or slip in a direction (+1 forward, −1 backward).
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Phase {
-    Stick,
-    Slip(f64),
-}
-
-struct Integrator<'a> {
-    model: Model<'a>,
-    state: State,
-    phase: Phase,
-}
-
-impl Integrator<'_> {
-    /// Relative precision of the located zero crossing, as a fraction of the step.
-    const CROSSING_TOLERANCE: f64 = 1e-12;
-
-    /// Torque on bit now (N·m): the reaction while stuck, the law's torque while slipping.
-    fn torque_on_bit_nm(&self, r: f64) -> f64 {
-        match self.phase {
-            Phase::Stick => {
-                let ts = self.model.static_torque_nm(r);
-                self.model
-                    .driving_torque_at_rest_nm(self.state.twist_rad)
-                    .clamp(-ts, ts)
-            }
-            Phase::Slip(dir) => dir * self.model.law.torque(self.model.params, dir * self.state.w, r),
-        }
-    }
-
-    /// Advances the state by `h_s` at weight ratio `r`, through any number of stick/slip
-    /// transitions inside the step (in practice at most a stop and a release). The error says
-    /// what went wrong; the caller adds where.
-    fn advance(&mut self, h_s: f64, r: f64) -> std::result::Result<(), String> {
-        let m = &self.model;
-        let mut remaining_s = h_s;
-        // Each pass either finishes the step or consumes one transition; a handful suffices.
-        for _ in 0..16 {
-            if !(self.state.twist_rad.is_finite() && self.state.w.abs() <= m.runaway_speed_rad_s()) {
-                // A law whose torque turns negative at high speed (M4's cubic beyond its fitted
-                // range) accelerates the bit without bound.
-                return Err("the bit speed diverged: does the law's torque turn negative at \
-                            high speed?"
-                    .to_string());
-            }
-            if remaining_s <= 0.0 {
-                return Ok(());
-            }
-            match self.phase {
-                Phase::Stick => {
-                    let ts = m.static_torque_nm(r);
-                    let d = m.driving_torque_at_rest_nm(self.state.twist_rad);
-                    if d.abs() > ts {
-                        // The static torque fell under the load (WOB change): release now.
-                        self.phase = Phase::Slip(d.signum());
-                        continue;
-                    }
-                    // While stuck φ' = Ω, so D grows at kΩ: release when it reaches T_s.
-                    let to_release_s = (ts - d) / (m.k * m.omega_rad_s);
-                    if to_release_s >= remaining_s {
-                        self.state.twist_rad += m.omega_rad_s * remaining_s;
-                        return Ok(());
-                    }
-                    self.state.twist_rad += m.omega_rad_s * to_release_s;
-                    remaining_s -= to_release_s;
-                    self.phase = Phase::Slip(1.0);
-                }
-                Phase::Slip(dir) => {
-                    let start = self.state;
-                    let end = m.rk4(start, dir, r, remaining_s);
-                    if dir * end.w > 0.0 {
-                        self.state = end;
-                        return Ok(());
-                    }
-                    if dir * start.w <= 0.0 {
-                        // Released at rest but the step ends not moving forward (rounding at
-                        // the exact release): the bit is at rest again.
-                        self.state = State {
-                            twist_rad: end.twist_rad,
-                            w: 0.0,
-                        };
-                        self.phase = m.phase_at_rest(self.state.twist_rad, r);
-                        return Ok(());
-                    }
-                    // The speed reaches zero inside the step: bisect on the sub-step length.
-                    let (mut lo, mut hi) = (0.0, remaining_s);
-                    while hi - lo > Self::CROSSING_TOLERANCE * remaining_s {
-                        let mid = 0.5 * (lo + hi);
-                        if dir * m.rk4(start, dir, r, mid).w > 0.0 {
-                            lo = mid;
-                        } else {
-                            hi = mid;
-                        }
-                    }
-                    let at_zero = m.rk4(start, dir, r, hi);
-                    self.state = State {
-                        twist_rad: at_zero.twist_rad,
-                        w: 0.0,
-                    };
-                    remaining_s -= hi;
-                    self.phase = m.phase_at_rest(self.state.twist_rad, r);
-                }
-            }
-        }
-        Err(format!(
-            "stick/slip switching did not settle within one step of {h_s} s"
-        ))
     }
 }
 
@@ -1035,8 +860,9 @@ mod tests {
         let d_coarse = max_diff(&coarse, &mid);
         let d_fine = max_diff(&mid, &fine);
         // Measured: d(2e-3, 1e-3) = 1.69e-9 rad/s, d(1e-3, 5e-4) = 1.07e-10 rad/s, ratio 15.7,
-        // i.e. RK4's fourth order (16) survives the stick/slip switching because stops are
-        // located by bisection and releases in closed form. The run has a release at 6.44 s,
+        // i.e. RK4's fourth order (16) survives the stick/slip switching because stops and
+        // releases are located inside the step (one secant: the state at a stop has w = 0,
+        // where the located time's error moves the twist by w·δt ≈ 0; a release is exact). The run has a release at 6.44 s,
         // a stop at 11.66 s and a release at 16.0 s; peak speed 20.4 rad/s.
         assert!(d_coarse / d_fine > 12.0, "{d_coarse:e} / {d_fine:e}");
         assert!(d_fine < 1e-9, "{d_fine:e}");

@@ -77,7 +77,11 @@ fn compare(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) {
         "{disagree} of {} verdicts differ",
         jobs.len()
     );
-    // Both kinds of string are in the batch.
+}
+
+/// Both kinds of string are in the batch: the comparison sees cycles and steady rotation.
+fn assert_both_kinds(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) {
+    let (cpu, _) = strings::integrate(chain, schedule, jobs, Backend::Cpu, &mut |_| {}).unwrap();
     let slipping = cpu.iter().filter(|r| r.0.stick_slips()).count();
     assert!(
         slipping > jobs.len() / 5 && slipping < jobs.len() * 4 / 5,
@@ -91,7 +95,16 @@ fn compare(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) {
 fn the_kernel_integrates_the_1dof_string_as_its_cpu_twin_does() {
     require_gpu();
     let chain = Chain::one_dof(&Lumped::default());
-    compare(&chain, &Schedule::new(0.01, 50.0, 40.0, 20.0).unwrap(), &jobs(&chain));
+    let schedule = Schedule::new(0.01, 50.0, 40.0, 20.0).unwrap();
+    let all = jobs(&chain);
+    assert_both_kinds(&chain, &schedule, &all);
+    // Every law in one batch (the law read per string), then each law's own batch (the law
+    // compiled into the kernel).
+    compare(&chain, &schedule, &all);
+    for law in Law::ALL {
+        let own: Vec<StringJob> = all.iter().filter(|j| j.law == law).cloned().collect();
+        compare(&chain, &schedule, &own);
+    }
 }
 
 #[test]
@@ -102,7 +115,9 @@ fn the_kernel_integrates_the_lumped_fe_string_as_its_cpu_twin_does() {
     // arrays slowly; the 10-element string is the benchmark's).
     let chain = Chain::lumped_fe(&DrillString::default()).unwrap();
     let jobs: Vec<StringJob> = jobs(&chain).into_iter().step_by(2).collect();
-    compare(&chain, &Schedule::new(0.01, 50.0, 30.0, 20.0).unwrap(), &jobs);
+    let schedule = Schedule::new(0.01, 50.0, 30.0, 20.0).unwrap();
+    assert_both_kinds(&chain, &schedule, &jobs);
+    compare(&chain, &schedule, &jobs);
 }
 
 /// m2 at the paper's estimate and 244 kN, in stick-slip at 60 rpm: the simulated escape.

@@ -55,12 +55,22 @@ pub fn integrate_batch(
         buffer_entry(3, STORAGE_WRITE),
     ];
     let nodes = chain.nodes();
+    // One law for the whole batch (the usual case) is compiled in.
+    let single = jobs
+        .first()
+        .map(|j| j.law)
+        .filter(|law| jobs.iter().all(|j| j.law == *law));
+    let law_override = single.map_or(f64::from(u32::MAX), |l| l.index() as f64);
     let kernel = ctx.kernel(
-        &format!("{} ({nodes} nodes)", super::file_laws::label("strings", &laws)),
+        &format!(
+            "{} ({nodes} nodes, law {})",
+            super::file_laws::label("strings", &laws),
+            single.map_or("any".to_string(), |l| l.index().to_string())
+        ),
         "main",
         || super::strings_source_for(&laws, nodes),
         &entries,
-        &[("NODES", nodes as f64)],
+        &[("NODES", nodes as f64), ("LAW", law_override)],
     )?;
     let mut job = StringsJob::zeroed();
     job.steps_per_sample = schedule.steps_per_sample;
