@@ -706,7 +706,7 @@ pub struct Stepper<'a>(Nodal<'a>);
 /// The 1-DOF string on arrays of one node, a chain on arrays of [`MAX_NODES`].
 enum Nodal<'a> {
     One(Integrator<'a, 1>),
-    Chain(Integrator<'a, MAX_NODES>),
+    Chain(Box<Integrator<'a, MAX_NODES>>),
 }
 
 /// `$body` with `$i` bound to the stepper's integrator, whichever its width.
@@ -725,7 +725,7 @@ impl<'a> Stepper<'a> {
         Self(if chain.nodes() == 1 {
             Nodal::One(Integrator::new(chain, job))
         } else {
-            Nodal::Chain(Integrator::new(chain, job))
+            Nodal::Chain(Box::new(Integrator::new(chain, job)))
         })
     }
 

@@ -1,0 +1,71 @@
+//! The samplers' state saved between scored batches and resumed bit for bit.
+
+use super::*;
+
+/// Where the samplers save their state as they go, and the state an interrupted sampling of
+/// the same job resumes from: the islands between two scored batches (particles, weights,
+/// tempering, proposal scales, each island's position in its random stream), so that a
+/// resumed sampling scores the very candidates the uninterrupted one would, and ends with its
+/// evidence bit for bit.
+pub struct Checkpoints<'a> {
+    /// The bytes [`Checkpoints::save`] was last given by an interrupted sampling of the same
+    /// job (prior, seed, settings and references); `None`: from the start.
+    pub from: Option<&'a [u8]>,
+    /// Where the saved state is kept: named when the state is refused.
+    pub origin: &'a std::path::Path,
+    /// Least seconds between two saves; the state with every sampler done is always saved.
+    pub every_s: f64,
+    /// Keeps the state's bytes (an evidence directory writes them to disk).
+    pub save: &'a mut dyn FnMut(&[u8]) -> Result<()>,
+}
+
+/// Whether a saved island started from a reference: it then keeps each particle's (or first
+/// draw's) reference density.
+pub(super) fn started_from_reference(island: &Island) -> bool {
+    !island.ln_q.is_empty() || !island.proposal_ln_q.is_empty()
+}
+
+/// The state [`Checkpoints::save`] is given: seconds spent so far and the islands.
+pub(super) fn encode_state(seconds: f64, islands: &[Island]) -> Vec<u8> {
+    postcard::to_stdvec(&(seconds, islands)).expect("the samplers' state serialises")
+}
+
+/// The islands of a saved state (kept in `origin`), checked against `fresh` (those the job
+/// makes at its start): the same laws, slots, streams and particle counts, or the state is
+/// another job's.
+pub(super) fn decode_state(bytes: &[u8], origin: &std::path::Path, fresh: &[Island]) -> Result<(f64, Vec<Island>)> {
+    let refuse = |why: &str| Error::Data {
+        path: origin.to_path_buf(),
+        message: format!("the saved state of the evidence's samplers is not this job's: {why}"),
+    };
+    let (seconds, mut islands): (f64, Vec<Island>) =
+        postcard::from_bytes(bytes).map_err(|e| refuse(&format!("it does not read ({e})")))?;
+    if islands.len() != fresh.len() {
+        return Err(refuse(&format!(
+            "{} samplers where the job runs {}",
+            islands.len(),
+            fresh.len()
+        )));
+    }
+    for (saved, new) in islands.iter_mut().zip(fresh) {
+        let particles = |i: &Island| i.theta.len().max(i.proposals.len());
+        if saved.law != new.law
+            || saved.slot != new.slot
+            || saved.dims != new.dims
+            || saved.lower.map(f32::to_bits) != new.lower.map(f32::to_bits)
+            || saved.upper.map(f32::to_bits) != new.upper.map(f32::to_bits)
+            || saved.stream.seed != new.stream.seed
+            || saved.stream.stream != new.stream.stream
+            || particles(saved) != particles(new)
+            || started_from_reference(saved) != new.reference.is_some()
+        {
+            return Err(refuse(&format!(
+                "its sampler {} of law {} differs",
+                saved.stream.stream, saved.law
+            )));
+        }
+        // The reference is not saved: the job makes it again, the same.
+        saved.reference = new.reference.clone();
+    }
+    Ok((seconds, islands))
+}
