@@ -1,0 +1,78 @@
+//! A window's advice: the linear criterion where the bit turns steadily, the simulated
+//! strings' escape where it stick-slips, at the window's operating point.
+
+use super::*;
+
+/// Posterior samples per law simulated for the escape advice of a stick-slipping window.
+pub(super) const ESCAPE_SAMPLES: usize = 4;
+/// Laws less probable than this are left out of the escape advice's simulations.
+pub(super) const ESCAPE_MIN_PROBABILITY: f64 = 0.05;
+
+/// A window's operating point: the mean top-drive speed (the mean bit speed where the
+/// record has no top-drive column), rpm, and the mean weight on bit (`w_ref_n` where the
+/// record has no column for it), kN; each at least 1.
+pub(super) fn operating_point(rows: &[Row], w_ref_n: f64) -> (f64, f64) {
+    let n = rows.len().max(1) as f64;
+    let omega_rpm = rows
+        .iter()
+        .map(|r| r.top_drive_rad_s.unwrap_or(r.speed_rad_s))
+        .sum::<f64>()
+        / n
+        / RAD_S_PER_RPM;
+    let wob_kn = rows.iter().map(|r| r.wob_n.unwrap_or(w_ref_n)).sum::<f64>() / n / 1000.0;
+    (omega_rpm.max(1.0), wob_kn.max(1.0))
+}
+
+impl Watch {
+    /// The windows' advice: the watch's criterion and risk; a stick-slipping window's way out
+    /// by its string simulated for a few samples of the likely laws, on the CPU (within the
+    /// window's latency).
+    pub(super) fn adviser(&self) -> Adviser {
+        let criterion = self.settings.criterion;
+        Adviser {
+            criterion,
+            risk: self.settings.risk,
+            escape: match criterion {
+                Criterion::Lumped(lumped) => Some(Chain::one_dof(&lumped)),
+                Criterion::Critical(_) => self.settings.fe_chain.clone(),
+            }
+            .map(|chain| EscapeSettings {
+                chain,
+                samples: ESCAPE_SAMPLES,
+                min_probability: ESCAPE_MIN_PROBABILITY,
+                backend: Backend::Cpu,
+            }),
+        }
+    }
+
+    /// Adds the advice (from the latest posterior), the window's picture and the latency.
+    pub(super) fn completed(&mut self, mut update: Update, window: &Window) -> Update {
+        self.carried.window = Some(window.index);
+        let (omega_rpm, wob_kn) = operating_point(&window.rows, self.settings.w_ref_n);
+        let inputs =
+            self.carried.posterior.as_ref().map(|posterior| {
+                crate::abc::posterior::map_inputs_of(posterior, crate::pipeline::advice::ADVICE_SAMPLES)
+            });
+        if let Some(inputs) = &inputs {
+            let speeds: Vec<f64> = window.rows.iter().map(|r| r.speed_rad_s).collect();
+            let seen = BitSeen::of(&speeds, None);
+            // The parameters describe the torque at the window's own weight on bit: that
+            // weight is the advice's W_ref.
+            update.advice = Some(self.adviser().advise(
+                inputs,
+                wob_kn * 1000.0,
+                OperatingPoint { omega_rpm, wob_kn },
+                seen.as_ref().map(|s| (s, "window")),
+            ));
+        }
+        let posterior = inputs.as_deref().map(|inputs| view::Posterior {
+            inputs,
+            criterion: self.settings.criterion,
+            wob_kn,
+            risk: self.settings.risk,
+        });
+        self.view = Some(view::view(window.index, &window.rows, self.torque_unit, posterior));
+        update.latency_s = self.last_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        update
+    }
+}

@@ -1,0 +1,262 @@
+//! Following a source to its end (or to a stop): rows in, windows out, each stored as it is
+//! finished, a stored watch resumed.
+
+use super::*;
+
+/// Rows read before the watch starts, to measure the record's rate (its median time step).
+pub(super) const RATE_ROWS: usize = 64;
+
+/// How a watch ended.
+#[derive(Clone, Debug, Serialize)]
+pub struct Ended {
+    /// Windows given by this watch (a resumed one: since it resumed).
+    pub windows: usize,
+    /// Lines of the source skipped (not rows of the record).
+    pub skipped_lines: u64,
+    /// Window length and step, s.
+    pub window_s: f64,
+    pub step_s: f64,
+    /// Whether it was stopped (`stop` set) before the source ended.
+    pub stopped: bool,
+}
+
+/// Where a watch keeps its windows and how it is stopped.
+#[derive(Clone, Copy, Default)]
+pub struct FollowOptions<'a> {
+    /// A watch directory ([`store`]): each window is stored before it is given.
+    pub dir: Option<&'a Path>,
+    /// Go on with the watch stored in `dir`, after its last window: the same settings, the
+    /// same source read again from its start (its rows up to that window are read, not
+    /// computed).
+    pub resume: bool,
+    /// Asked between rows (and while a followed file is silent); true (after Ctrl-C) ends the
+    /// watch: the window in progress is finished and stored, the rest of the source not read.
+    pub stop: Option<&'a dyn Fn() -> bool>,
+    /// The live page's server: told the watch's meta when its windows are known, and each
+    /// window as it is given.
+    pub serve: Option<&'a serve::Server>,
+}
+
+/// Follows `rows` to their end: measures the record's rate on its first rows (for the
+/// default window), then gives each window's update to `on_update` as soon as the window is
+/// complete (and stored, with `options.dir`). Skipped lines and what the user should know go
+/// to `observer`, each once.
+pub fn follow(
+    rows: &mut source::Rows,
+    mut settings: WatchSettings,
+    options: FollowOptions<'_>,
+    observer: &mut dyn Observer,
+    on_update: &mut dyn FnMut(&Update) -> Result<()>,
+) -> Result<Ended> {
+    let source = rows.name().to_path_buf();
+    let stopped = || options.stop.is_some_and(|stop| stop());
+    // A resumed watch: its store, checked against these settings, and where it stopped.
+    let mut resumed: Option<(store::WatchStore, store::StoredWatch)> = None;
+    if options.resume {
+        let dir = options
+            .dir
+            .ok_or_else(|| crate::Error::setting("resume", "needs the watch directory (`out`) to go on with"))?;
+        let (kept, stored) = store::WatchStore::resume(dir)?;
+        check_same_watch(&stored.meta, &settings, dir)?;
+        settings.window_s = Some(stored.meta.window_s);
+        settings.step_s = Some(stored.meta.step_s);
+        if let Some(last) = stored.updates.last() {
+            rows.replay_from(last.start_s + stored.meta.step_s);
+            observer.note(format!(
+                "going on with the watch in {} after window {} (t = {} s)",
+                dir.display(),
+                last.window,
+                last.end_s
+            ));
+        }
+        resumed = Some((kept, stored));
+    }
+    let mut kept: Option<store::WatchStore> = None;
+    let mut first: Vec<(Row, std::time::Instant)> = Vec::new();
+    let mut watch: Option<Watch> = None;
+    let mut given = 0;
+    let mut interrupted = false;
+    loop {
+        if stopped() {
+            interrupted = true;
+            break;
+        }
+        let next = rows.next_row()?;
+        let ended = matches!(next, source::Next::End);
+        match next {
+            source::Next::Row(row, arrived) => first.push((row, arrived)),
+            source::Next::Skipped(why) => observer.note(format!("warning: {why}: line skipped")),
+            source::Next::Said(what) => observer.note(format!("warning: {what}")),
+            source::Next::Stalled(silent) => observer.note(format!(
+                "warning: {}: no row for {:.0} s: the feed has stalled (still following)",
+                source.display(),
+                silent.as_secs_f64()
+            )),
+            source::Next::Waiting | source::Next::End => {}
+        }
+        if watch.is_none() && (first.len() >= RATE_ROWS || (ended && !first.is_empty())) {
+            let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
+            let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+            steps.sort_by(f64::total_cmp);
+            let measured_hz = median(&steps).map_or(1.0, |dt| 1.0 / dt);
+            let rate_hz = resumed.as_ref().map_or(measured_hz, |(_, s)| s.meta.rate_hz);
+            let unit = rows.torque_unit();
+            let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, unit)?;
+            let (length, step) = made.windows();
+            let thin = made.thin();
+            if settings.thin.is_none() && thin > 1 {
+                observer.note(format!(
+                    "one row in {thin} used ({rate_hz:.1} Hz thinned to {:.1} Hz); `thin` sets it",
+                    rate_hz / thin as f64
+                ));
+            }
+            if let Some(config) = &settings.abc {
+                observer.note(format!(
+                    "each window's law probabilities by the paper's ABC ({} sampler, {} particles, δ = {}): ratios of the laws' prior volumes below each window's ε, not evidence",
+                    match config.sampler {
+                        crate::run::SamplerConfig::Rejection(_) => "rejection",
+                        crate::run::SamplerConfig::Smc(_) => "SMC",
+                    },
+                    config.sampler.schedule().particles,
+                    config.delta
+                ));
+            }
+            if settings.window_s.is_none() || settings.step_s.is_none() {
+                observer.note(format!(
+                    "windows of {length} s every {step} s (the record's rate: {rate_hz:.1} Hz); `window_s` and `step_s` set them"
+                ));
+            }
+            match resumed.take() {
+                Some((store, stored)) => {
+                    if let Some(server) = options.serve {
+                        server.set_meta(&serve::page_meta(&stored.meta));
+                        let last = stored.updates.last().map(|u| u.window);
+                        let view = stored.view.as_ref().filter(|v| Some(v.window) == last);
+                        for update in &stored.updates {
+                            server.publish(update, view.filter(|_| Some(update.window) == last));
+                        }
+                    }
+                    if unit != stored.meta.torque_unit {
+                        return Err(crate::Error::setting(
+                            "resume",
+                            format!(
+                                "the record's torques are in {}, the watch's were in {}",
+                                unit.label(),
+                                stored.meta.torque_unit.label()
+                            ),
+                        ));
+                    }
+                    if let Some(carried) = stored.carried {
+                        made.resume(carried);
+                    }
+                    kept = Some(store);
+                }
+                None => {
+                    let meta = store::WatchMeta {
+                        source: source.display().to_string(),
+                        settings: store::settings_json(&settings),
+                        window_s: length,
+                        step_s: step,
+                        rate_hz,
+                        torque_unit: unit,
+                        bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
+                    };
+                    if let Some(dir) = options.dir {
+                        kept = Some(store::WatchStore::create(dir, &meta)?);
+                    }
+                    if let Some(server) = options.serve {
+                        server.set_meta(&serve::page_meta(&meta));
+                    }
+                }
+            }
+            watch = Some(made);
+        }
+        if let Some(watch) = watch.as_mut() {
+            let mut give = |update: Update, watch: &Watch| -> Result<()> {
+                if let Some(store) = kept.as_mut() {
+                    store.append(&update, watch.carried(), watch.view())?;
+                }
+                given += 1;
+                on_update(&update)?;
+                if let Some(server) = options.serve {
+                    server.publish(&update, watch.view());
+                }
+                Ok(())
+            };
+            for (row, arrived) in first.drain(..) {
+                for update in watch.push(row, arrived, observer)? {
+                    give(update, watch)?;
+                }
+                if stopped() {
+                    break;
+                }
+            }
+            if ended && !stopped() {
+                for update in watch.finish(observer)? {
+                    give(update, watch)?;
+                }
+            }
+        }
+        if ended {
+            break;
+        }
+    }
+    let (window_s, step_s) = watch.as_ref().map_or((0.0, 0.0), Watch::windows);
+    Ok(Ended {
+        windows: given,
+        skipped_lines: rows.skipped,
+        window_s,
+        step_s,
+        stopped: interrupted || stopped(),
+    })
+}
+
+/// What a window's fits, evidence or ABC give, or why its samples cannot give it (a fit, a
+/// finite likelihood, boxes a sampler reaches): that ends the window, not the watch, since the
+/// next window may be fine. Any other error ends the watch.
+pub(super) fn of_window<T>(result: Result<T>) -> Result<std::result::Result<T, String>> {
+    match result {
+        Ok(value) => Ok(Ok(value)),
+        Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
+            Ok(Err(e.to_string()))
+        }
+        Err(crate::Error::InvalidSetting { field, message }) if field == "prior" || field == "max_stages" => {
+            Ok(Err(message))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// Refuses to go on with a stored watch under other settings: its windows would not be the
+/// ones it would have given.
+pub(super) fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Path) -> Result<()> {
+    let now = store::settings_json(settings);
+    let defaults = store::settings_json(&WatchSettings::default());
+    let (Some(stored), Some(now)) = (meta.settings.as_object(), now.as_object()) else {
+        return Ok(());
+    };
+    for (field, value) in now {
+        let was = match field.as_str() {
+            // Window and step: those the watch used (given or its defaults); left out here,
+            // the watch's own.
+            "window_s" if !value.is_null() => &serde_json::json!(meta.window_s),
+            "step_s" if !value.is_null() => &serde_json::json!(meta.step_s),
+            "window_s" | "step_s" => continue,
+            // A setting a watch stored without had the value it has by default then.
+            _ => match stored.get(field) {
+                Some(was) => was,
+                None => &defaults[field],
+            },
+        };
+        if was != value {
+            return Err(crate::Error::setting(
+                field,
+                format!(
+                    "is {value} here, {was} in the watch in {} (a watch goes on with its own settings)",
+                    dir.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
