@@ -1,5 +1,5 @@
 //! The library's layers, kept true: every module imports only from its own layer or the layers
-//! below it (the README's layout table), and no two top-level modules import each other
+//! below it (the layout table of docs/layout.md), and no two top-level modules import each other
 //! through any path. Read from the source itself: `crate::` and `super::` paths outside
 //! comments and test modules.
 
@@ -108,7 +108,7 @@ fn every_module_imports_only_from_its_layer_or_below() {
     assert_eq!(
         imports.keys().map(String::as_str).collect::<BTreeSet<_>>(),
         layer.keys().copied().collect::<BTreeSet<_>>(),
-        "every top-level module has a layer here and in the README"
+        "every top-level module has a layer here and in docs/layout.md"
     );
     let mut up = Vec::new();
     for (module, refs) in &imports {
@@ -172,10 +172,10 @@ fn the_library_names_no_flag_and_needs_no_clap() {
     );
 }
 
-/// The README's layout table names every module in its layer's row: the map a newcomer reads
-/// stays the one the imports follow.
+/// The layout table (docs/layout.md) names every module in its layer's row: the map a
+/// newcomer reads stays the one the imports follow.
 #[test]
-fn the_readme_layout_table_matches_the_layers() {
+fn the_layout_table_matches_the_layers() {
     const ROWS: [&str; 7] = [
         "ground",
         "physics",
@@ -185,12 +185,12 @@ fn the_readme_layout_table_matches_the_layers() {
         "pipeline",
         "watch",
     ];
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let layout = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/layout.md")).unwrap();
     let row = |name: &str| -> String {
-        readme
+        layout
             .lines()
             .find(|l| l.starts_with(&format!("| {name} |")))
-            .unwrap_or_else(|| panic!("README layout table has no `{name}` row"))
+            .unwrap_or_else(|| panic!("the layout table has no `{name}` row"))
             .to_string()
     };
     let mut misplaced = Vec::new();
@@ -200,7 +200,7 @@ fn the_readme_layout_table_matches_the_layers() {
             misplaced.push(format!("{module} (layer {})", ROWS[layer as usize]));
         }
     }
-    assert!(misplaced.is_empty(), "modules not in their README row: {misplaced:?}");
+    assert!(misplaced.is_empty(), "modules not in their layout row: {misplaced:?}");
 }
 
 /// Inside a room (a folder of the library), module → the sibling modules it refers to:
