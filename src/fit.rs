@@ -1226,6 +1226,26 @@ impl Covariance {
     }
 }
 
+/// Why Levenberg-Marquardt stopped short, in the user's words.
+fn why_not_converged(reason: &TerminationReason) -> String {
+    match reason {
+        TerminationReason::LostPatience => {
+            "it ran out of evaluations while still improving (a ridge, or a limit at infinity)".to_string()
+        }
+        TerminationReason::Numerical(what) => format!("the {what} became infinite or not a number"),
+        TerminationReason::NoImprovementPossible(what) => {
+            format!("no step improves the fit within the machine's precision ({what})")
+        }
+        TerminationReason::User(what) => format!("the law could not be evaluated ({what})"),
+        TerminationReason::WrongDimensions(what) => format!("the problem's shape is wrong ({what})"),
+        TerminationReason::NoParameters => "the law has no parameter".to_string(),
+        TerminationReason::NoResiduals => "no sample to fit".to_string(),
+        TerminationReason::ResidualsZero | TerminationReason::Orthogonal | TerminationReason::Converged { .. } => {
+            "it converged".to_string()
+        }
+    }
+}
+
 /// What the user must know before trusting the estimate `polished[0]` (the polished starts,
 /// best first): an optimiser that did not converge, other starts that fit as well elsewhere,
 /// parameters on their bounds, an ill-conditioned Jacobian, standard errors above half the
@@ -1243,8 +1263,8 @@ fn fit_warnings(
     let mut warnings = Vec::new();
     if !best.termination.was_successful() {
         warnings.push(format!(
-            "the optimiser stopped without converging ({:?})",
-            best.termination
+            "the optimiser stopped without converging: {}",
+            why_not_converged(&best.termination)
         ));
     }
     // Other starts that fit as well but land elsewhere mean the data do not pin the law down.
@@ -1344,6 +1364,22 @@ mod tests {
     /// the resolution left to gain; without a resolution or a target nothing stops; against a
     /// target, a run stops once it cannot beat it by more than the resolution, no sum of
     /// squares falling below zero.
+    #[test]
+    fn an_optimiser_that_stops_short_is_said_in_words_not_in_rust_names() {
+        for reason in [
+            TerminationReason::LostPatience,
+            TerminationReason::Numerical("jacobian"),
+            TerminationReason::NoImprovementPossible("gtol"),
+            TerminationReason::NoResiduals,
+        ] {
+            let words = why_not_converged(&reason);
+            let debug = format!("{reason:?}");
+            let name = debug.split(['(', ' ']).next().unwrap();
+            assert!(!words.contains(name), "{words}");
+        }
+        assert!(why_not_converged(&TerminationReason::LostPatience).contains("ran out of evaluations"));
+    }
+
     #[test]
     fn a_run_stops_once_what_is_left_of_it_does_not_matter() {
         let resolution = 0.01;
