@@ -55,6 +55,10 @@ pub fn check_memory(field: &str, bytes: f64, what: &str) -> Result<()> {
     Ok(())
 }
 
+/// Candidate × sample evaluations per second above any machine's (the fastest GPU measured
+/// scores under 10¹²): a work estimate at this rate is a lower bound.
+pub const FASTEST_EVALUATIONS_PER_S: f64 = 1e12;
+
 /// The most a settings file (a prior file, a drill-string file) may hold, bytes: a hand-written
 /// TOML of a few kB, with room to spare; a larger one is not what the flag means.
 pub const MAX_SETTINGS_FILE_BYTES: u64 = 1_000_000;
@@ -185,7 +189,22 @@ pub fn human_seconds(seconds: f64) -> String {
     } else if seconds < 2.0 * 86_400.0 {
         format!("{:.1} hours", seconds / 3600.0)
     } else {
-        format!("{:.0} days", (seconds / 86_400.0).min(1e12))
+        let days = seconds / 86_400.0;
+        if days < 1e6 {
+            format!("{days:.0} days")
+        } else {
+            format!("{days:.1e} days")
+        }
+    }
+}
+
+/// A number as a user typed it: plain where that reads (0.02, 150), in scientific notation
+/// where plain would run to dozens of digits (1e-300).
+pub fn readable(value: f64) -> String {
+    if value != 0.0 && !(1e-4..1e9).contains(&value.abs()) {
+        format!("{value:e}")
+    } else {
+        format!("{value}")
     }
 }
 

@@ -80,9 +80,6 @@ impl CheckOptions {
     }
 }
 
-/// Candidate evaluations per second above any device's: the time estimate is a lower bound.
-const FASTEST_EVALUATIONS_PER_S: f64 = 1e12;
-
 /// Refuses, naming `--replicates` or `--batch`, a check that cannot fit in memory (the
 /// results of every replicate, and a batch of replicate runs held at once) or could not finish
 /// in a day (every replicate draws at least its N particles against the whole record).
@@ -110,7 +107,7 @@ fn check_size(run: &CheckedRun, options: &CheckOptions) -> Result<()> {
     crate::limits::check_work(
         "replicates",
         replicates * particles * samples,
-        FASTEST_EVALUATIONS_PER_S,
+        crate::limits::FASTEST_EVALUATIONS_PER_S,
         &format!("{replicates} replicate runs of N = {particles} on {samples} samples"),
     )
 }

@@ -191,6 +191,7 @@ fn start_or_resume(
         if let Some(backend) = cmd.backend {
             job.backend = backend;
         }
+        cmd.check.map(|k| evidence::check_size(k, &job, &data)).transpose()?;
         let analysis = unfinished
             .run(&job, &data, progress, Default::default(), &mut Notes)
             .inspect_err(|e| still_under_way(dir, Some(e)))?;
@@ -201,6 +202,8 @@ fn start_or_resume(
         evidence::dir::check_out(dir, cmd.force)?;
     }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    cmd.check.map(|k| evidence::check_size(k, &job, &data)).transpose()?;
+    job.sampler.check_memory(&job.laws)?;
     match &cmd.out {
         None => {
             let analysis = job.run(&data, Default::default(), &mut Notes)?;

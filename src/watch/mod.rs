@@ -112,6 +112,20 @@ impl Watch {
                 ));
             }
         }
+        // Bounded before any work: a step shorter than the rows' period gives windows that
+        // repeat the same rows, as many per second of record as the step is short.
+        let period_s = thin as f64 / rate_hz;
+        if step < period_s {
+            return Err(crate::Error::setting(
+                "step_s",
+                format!(
+                    "{} s is shorter than the record's sample period ({} s, one row in {thin} of \
+                     {rate_hz:.1} Hz): windows would repeat the same rows",
+                    crate::limits::readable(step),
+                    crate::limits::readable(period_s)
+                ),
+            ));
+        }
         if step > length {
             return Err(crate::Error::setting(
                 "step_s",
@@ -132,7 +146,10 @@ impl Watch {
         }
         match &settings.abc {
             Some(config) => config.validate()?,
-            None => settings.evidence.validate()?,
+            None => {
+                settings.evidence.validate()?;
+                settings.evidence.check_memory(&settings.laws)?;
+            }
         }
         Ok(Self {
             windows: Windows::new(length, step).thinned(thin),

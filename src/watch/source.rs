@@ -155,6 +155,17 @@ impl Rows {
                         format!("must be a positive number, got {speed}"),
                     ));
                 }
+                // Bounded before any work: a second of record replayed in at most a day.
+                if 1.0 / speed > crate::limits::MAX_WORK_SECONDS {
+                    return Err(Error::setting(
+                        "replay_speed",
+                        format!(
+                            "{} replays each second of record in {}: more than a day",
+                            crate::limits::readable(*speed),
+                            crate::limits::human_seconds(1.0 / speed)
+                        ),
+                    ));
+                }
                 (Box::new(BufReader::new(open(path)?)), false, Some((*speed, None)), None)
             }
             Source::Tcp { address } => {
@@ -426,7 +437,8 @@ impl Rows {
             return;
         }
         let (started, t0) = *clock.get_or_insert((Instant::now(), t));
-        let due = Duration::from_secs_f64(((t - t0) / *speed).max(0.0));
+        // A time stamp so far ahead that its wait overflows waits as long as a wait can.
+        let due = Duration::try_from_secs_f64(((t - t0) / *speed).max(0.0)).unwrap_or(Duration::MAX);
         if let Some(wait) = due.checked_sub(started.elapsed()) {
             std::thread::sleep(wait);
         }

@@ -11,7 +11,7 @@ use bitrock::data::FieldData;
 use bitrock::error::Error;
 use bitrock::pipeline::evidence::dir::Unfinished;
 use bitrock::pipeline::evidence::{
-    DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, Progress, check as check_evidence, check_replicates,
+    DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, Progress, check as check_evidence, check_replicates, check_size,
 };
 use bitrock::run::{MakeWorkers, Placement, Scoring};
 use pyo3::prelude::*;
@@ -88,6 +88,10 @@ pub(crate) fn evidence(
     let out: Option<PathBuf> = kwarg(options, "out")?;
     let force: bool = kwarg(options, "force")?.unwrap_or(false);
     let data = &record.data;
+    if let Some(k) = replicates {
+        check(py, check_size(k, &job, data))?;
+    }
+    check(py, job.sampler.check_memory(&job.laws))?;
     let unfinished = match &out {
         None => None,
         Some(dir) => Some(check(py, py.detach(|| Unfinished::start(dir, force, &job, data)))?),

@@ -5,6 +5,10 @@ use super::*;
 /// Fewest particles an island accepts: fewer give no usable effective sample size.
 pub const MIN_ISLAND_PARTICLES: usize = 20;
 
+/// Memory of one particle of an island, bytes: its f32 parameters, log-likelihood and weight,
+/// its proposal and the candidate scored for it, and its share of the posterior returned.
+pub const BYTES_PER_PARTICLE: f64 = 192.0;
+
 /// The tempered samplers' settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvidenceConfig {
@@ -174,6 +178,30 @@ impl EvidenceConfig {
             .iter()
             .find(|(l, _)| *l == law)
             .map_or(self.particles, |(_, n)| *n)
+    }
+
+    /// Refuses, naming the setting, samplers whose particles for `laws` laws would not fit in
+    /// this machine's memory (estimated at [`BYTES_PER_PARTICLE`] each, every island of every
+    /// law and start held at once), before any work.
+    pub fn check_memory(&self, laws: &[Law]) -> Result<()> {
+        let starts = if self.start == Start::Both { 2.0 } else { 1.0 };
+        let particles: f64 =
+            laws.iter().map(|&law| self.particles_of(law) as f64).sum::<f64>() * self.islands as f64 * starts;
+        let field = if self.islands > self.particles {
+            "islands"
+        } else {
+            "particles"
+        };
+        crate::limits::check_memory(
+            field,
+            particles * BYTES_PER_PARTICLE,
+            &format!(
+                "{particles:.3e} particles ({} per island, {} islands per law and start, {} laws)",
+                self.particles,
+                self.islands,
+                laws.len()
+            ),
+        )
     }
 
     /// Refuses, naming the setting, values that give no estimate.

@@ -101,6 +101,28 @@ pub fn check_replicates(replicates: usize) -> Result<()> {
     Ok(())
 }
 
+/// Refuses, naming `check`, a check of `replicates` records per law that could not finish in a
+/// day (each record gets the whole evidence `job` on `data`'s calibration samples: at least
+/// two scored batches of every island of every law), before any work.
+pub fn check_size(replicates: usize, job: &EvidenceJob, data: &FieldData) -> Result<()> {
+    check_replicates(replicates)?;
+    let sampler = &job.sampler;
+    let starts = if sampler.start == crate::abc::evidence::Start::Both {
+        2.0
+    } else {
+        1.0
+    };
+    let particles: f64 = job.laws.iter().map(|&law| sampler.particles_of(law) as f64).sum();
+    let records = replicates as f64 * job.laws.len() as f64;
+    let samples = data.calibration.len() as f64;
+    crate::limits::check_work(
+        "check",
+        records * particles * sampler.islands as f64 * starts * samples * 2.0,
+        crate::limits::FASTEST_EVALUATIONS_PER_S,
+        &format!("the evidence of {records:.3e} synthetic records ({samples} samples each)"),
+    )
+}
+
 /// Checks `analysis`, the evidence `job` computed on `data`: `replicates` synthetic records
 /// per law, each through the same job over the same boxes, its samplers scored where
 /// `scoring` says (the same check here or on a pool of workers). `progress(done, total)` hears
@@ -114,7 +136,7 @@ pub fn check(
     progress: &mut dyn FnMut(usize, usize),
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
-    check_replicates(replicates)?;
+    check_size(replicates, job, data)?;
     let started = Instant::now();
     let laws: Vec<Law> = analysis.evidence.laws.iter().map(|l| l.law).collect();
     // The backend the analysis ended on: a fallback to the CPU is said once, not per replicate.

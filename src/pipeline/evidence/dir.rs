@@ -13,7 +13,7 @@
 //! evidence killed part-way is continued from there (`bitrock evidence --resume DIR`) to the
 //! evidence the uninterrupted job gives, bit for bit; writing the finished evidence removes it.
 
-use super::check::{EvidenceCheck, check, check_replicates};
+use super::check::{EvidenceCheck, check, check_replicates, check_size};
 use super::{EvidenceAnalysis, EvidenceJob, Progress, Saving};
 use crate::abc::Observer;
 use crate::abc::Particle;
@@ -293,6 +293,7 @@ pub fn check_dir(
         )));
     }
     let data = read_record(&dir.join(RECORD_JSON))?;
+    check_size(replicates, &job, &data)?;
     if let Some(backend) = backend {
         job.backend = backend;
     }

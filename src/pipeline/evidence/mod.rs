@@ -19,7 +19,7 @@ use std::path::PathBuf;
 pub mod check;
 pub mod dir;
 
-pub use check::{EvidenceCheck, check, check_replicates};
+pub use check::{EvidenceCheck, check, check_replicates, check_size};
 
 /// The default width of the physical boxes, in record scales ([`PhysicalScales`]).
 pub const DEFAULT_PRIOR_SCALE: f64 = 10.0;
@@ -473,6 +473,7 @@ impl EvidenceJob {
         observer: &mut dyn Observer,
     ) -> Result<EvidenceAnalysis> {
         self.sampler.validate()?;
+        self.sampler.check_memory(&self.laws)?;
         if saving.is_some() && self.warm.is_some() {
             return Err(crate::error::Error::Numerical(
                 "an evidence started from a previous posterior is not saved as it goes".into(),

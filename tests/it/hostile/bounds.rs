@@ -271,3 +271,56 @@ fn every_settings_file_is_bounded_before_it_is_read() {
     let e = bitrock::eval::gpu::tune::read_cache(&fifo).unwrap_err().to_string();
     assert!(e.contains("not a regular file"), "{e}");
 }
+
+#[test]
+fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("rec.csv"), bitrock::data::DEMO_CSV).unwrap();
+    let cpu = ["--backend", "cpu"];
+    let refused = |args: &[&str], needles: &[&str]| {
+        let args: Vec<&str> = args.iter().chain(&cpu).copied().collect();
+        assert_refused(run_in(tmp.path(), &args), needles);
+    };
+    // Windows that repeat the same rows, as many per second of record as the step is short.
+    refused(
+        &[
+            "watch",
+            "rec.csv",
+            "--window-s",
+            "1e-300",
+            "--step-s",
+            "1e-300",
+            "--out",
+            "W",
+        ],
+        &[
+            "--step-s",
+            "1e-300 s is shorter than the record's sample period",
+            "repeat the same rows",
+        ],
+    );
+    // A replay slower than a second of record per day.
+    refused(
+        &["watch", "rec.csv", "--replay-speed", "1e-300"],
+        &[
+            "--replay-speed",
+            "1e-300 replays each second of record in",
+            "more than a day",
+        ],
+    );
+    // Samplers beyond memory, in the watch's windows and in the evidence.
+    refused(
+        &["watch", "rec.csv", "--particles", "100000000", "--out", "W"],
+        &["--particles", "8.000e8 particles", "memory"],
+    );
+    refused(
+        &["evidence", "rec.csv", "--islands", "100000000", "--out", "E"],
+        &["--islands", "islands per law and start", "memory"],
+    );
+    // A check of more records than a day computes, refused before the evidence itself.
+    refused(
+        &["evidence", "rec.csv", "--check", "1000000000", "--out", "E"],
+        &["--check", "synthetic records", "a day's work"],
+    );
+    assert!(!tmp.path().join("W").exists() && !tmp.path().join("E").exists());
+}
