@@ -1359,11 +1359,6 @@ mod tests {
         })
     }
 
-    /// A run that gains more than the resolution per window goes on; a crawl whose gains
-    /// shrink (geometrically, faster than the 1/k the rule extrapolates) stops, with less than
-    /// the resolution left to gain; without a resolution or a target nothing stops; against a
-    /// target, a run stops once it cannot beat it by more than the resolution, no sum of
-    /// squares falling below zero.
     #[test]
     fn an_optimiser_that_stops_short_is_said_in_words_not_in_rust_names() {
         for reason in [
@@ -1380,6 +1375,11 @@ mod tests {
         assert!(why_not_converged(&TerminationReason::LostPatience).contains("ran out of evaluations"));
     }
 
+    /// A run that gains more than the resolution per window goes on; a crawl whose gains
+    /// shrink (geometrically, faster than the 1/k the rule extrapolates) stops, with less than
+    /// the resolution left to gain; without a resolution or a target nothing stops; against a
+    /// target, a run stops once it cannot beat it by more than the resolution, no sum of
+    /// squares falling below zero.
     #[test]
     fn a_run_stops_once_what_is_left_of_it_does_not_matter() {
         let resolution = 0.01;

@@ -572,7 +572,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         start,
     };
     let mut sim = Stepper::new(&chain, &job);
-    let mut law_now = (first.law, &first.params_nm);
+    let mut segment_now = 0;
 
     let mut advance = |sim: &mut Stepper, wob: &mut Wob, rng: &mut StdRng, span_s: f64, t_s: f64, omega: f64| {
         if span_s <= 0.0 {
@@ -625,9 +625,9 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         previous_s = t_s;
         // The inputs from this sample on (a one-segment, constant well keeps its own).
         let (segment, s, omega_now, wob_mean_n) = drive(t_s);
-        if (s.law, &s.params_nm) != law_now {
+        if segment != segment_now {
             sim.set_law(s.law, &s.params_nm);
-            law_now = (s.law, &s.params_nm);
+            segment_now = segment;
         }
         omega = omega_now;
         wob.mean_n = wob_mean_n;

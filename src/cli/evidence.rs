@@ -203,7 +203,6 @@ fn start_or_resume(
     }
     let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
     cmd.check.map(|k| evidence::check_size(k, &job, &data)).transpose()?;
-    job.sampler.check_memory(&job.laws)?;
     match &cmd.out {
         None => {
             let analysis = job.run(&data, Default::default(), &mut Notes)?;

@@ -6,7 +6,7 @@ use bitrock::Law;
 use bitrock::eval::{Backend, strings};
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::pipeline::strings::{Grid, OperatingPoint, SimulatedSettings, Simulator};
-use bitrock::simulate::strings::{Chain, Schedule, StringJob, padded, steady_start};
+use bitrock::simulate::strings::{Chain, Schedule, StringJob, StringState, Summary, padded, steady_start};
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
 use bitrock::stability::map::LawSamples;
@@ -38,7 +38,7 @@ fn jobs(chain: &Chain) -> Vec<StringJob> {
 /// strings; where both are steady or both stick-slip, the stuck share within 0.01 and the
 /// speed extremes within 1 % of the largest speed (f32 against f64 through a chaotic cycle:
 /// measured, every verdict agrees and the shares within 0.001 on lavapipe).
-fn compare(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) {
+fn compare(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) -> Vec<(Summary, StringState)> {
     let (cpu, _) = strings::integrate(chain, schedule, jobs, Backend::Cpu, &mut |_| {}).unwrap();
     let (gpu, ran) = strings::integrate(chain, schedule, jobs, Backend::Gpu, &mut |_| {}).unwrap();
     assert!(matches!(ran, strings::Ran::Gpu(_)));
@@ -77,16 +77,17 @@ fn compare(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) {
         "{disagree} of {} verdicts differ",
         jobs.len()
     );
+    cpu
 }
 
-/// Both kinds of string are in the batch: the comparison sees cycles and steady rotation.
-fn assert_both_kinds(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) {
-    let (cpu, _) = strings::integrate(chain, schedule, jobs, Backend::Cpu, &mut |_| {}).unwrap();
+/// Both kinds of string are in the batch the CPU twin integrated: the comparison saw cycles
+/// and steady rotation.
+fn assert_both_kinds(cpu: &[(Summary, StringState)]) {
     let slipping = cpu.iter().filter(|r| r.0.stick_slips()).count();
     assert!(
-        slipping > jobs.len() / 5 && slipping < jobs.len() * 4 / 5,
+        slipping > cpu.len() / 5 && slipping < cpu.len() * 4 / 5,
         "{slipping} of {}",
-        jobs.len()
+        cpu.len()
     );
 }
 
@@ -97,10 +98,9 @@ fn the_kernel_integrates_the_1dof_string_as_its_cpu_twin_does() {
     let chain = Chain::one_dof(&Lumped::default());
     let schedule = Schedule::new(0.01, 50.0, 40.0, 20.0).unwrap();
     let all = jobs(&chain);
-    assert_both_kinds(&chain, &schedule, &all);
     // Every law in one batch (the law read per string), then each law's own batch (the law
     // compiled into the kernel).
-    compare(&chain, &schedule, &all);
+    assert_both_kinds(&compare(&chain, &schedule, &all));
     for law in Law::ALL {
         let own: Vec<StringJob> = all.iter().filter(|j| j.law == law).cloned().collect();
         compare(&chain, &schedule, &own);
@@ -116,8 +116,7 @@ fn the_kernel_integrates_the_lumped_fe_string_as_its_cpu_twin_does() {
     let chain = Chain::lumped_fe(&DrillString::default()).unwrap();
     let jobs: Vec<StringJob> = jobs(&chain).into_iter().step_by(2).collect();
     let schedule = Schedule::new(0.01, 50.0, 30.0, 20.0).unwrap();
-    assert_both_kinds(&chain, &schedule, &jobs);
-    compare(&chain, &schedule, &jobs);
+    assert_both_kinds(&compare(&chain, &schedule, &jobs));
 }
 
 /// m2 at the paper's estimate and 244 kN, in stick-slip at 60 rpm: the simulated escape.

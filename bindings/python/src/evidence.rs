@@ -91,7 +91,6 @@ pub(crate) fn evidence(
     if let Some(k) = replicates {
         check(py, check_size(k, &job, data))?;
     }
-    check(py, job.sampler.check_memory(&job.laws))?;
     let unfinished = match &out {
         None => None,
         Some(dir) => Some(check(py, py.detach(|| Unfinished::start(dir, force, &job, data)))?),

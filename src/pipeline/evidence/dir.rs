@@ -83,6 +83,8 @@ impl Unfinished {
     /// progress of an earlier evidence there dropped. An evidence the directory already holds
     /// stays until this one is written ([`Self::finish`]).
     pub fn start(dir: &Path, force: bool, job: &EvidenceJob, data: &FieldData) -> Result<Self> {
+        // Refused before the directory exists (the job checks again when it runs).
+        job.sampler.check_memory(&job.laws)?;
         check_out(dir, force)?;
         std::fs::create_dir_all(dir.join(UNFINISHED_DIR)).map_err(|source| Error::output("out", dir, source))?;
         let lock = files::DirLock::acquire(dir)?;
