@@ -35,7 +35,7 @@ fn main() -> anyhow::Result<()> {
 
     let t = Instant::now();
     cpu_at_start.set(cpu_seconds());
-    let store = run::Store::open(dir)?;
+    let store = run::abc::Store::open(dir)?;
     let stored = store.load_with_last_particles()?;
     time("read the last population back", t);
     let last = stored
@@ -85,7 +85,7 @@ fn main() -> anyhow::Result<()> {
     let stored = store.load()?;
     time("read every population back", t);
     let scratch = tempfile::tempdir_in(dir.parent().unwrap_or(dir))?;
-    let mut copy = run::Store::create(scratch.path(), &stored.setup)?;
+    let mut copy = run::abc::Store::create(scratch.path(), &stored.setup)?;
     let mut previous = None;
     for p in &stored.populations {
         let t = Instant::now();

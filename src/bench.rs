@@ -153,7 +153,7 @@ pub struct SelectionBench {
     pub fit_share: f64,
     pub sampling_seconds: f64,
     /// How the fits' Levenberg-Marquardt runs ended (the same every repetition).
-    pub fits: crate::selection::FitCounts,
+    pub fits: crate::run::selection::FitCounts,
     /// Of the sampling, the time spent scoring the replicates' batched requests (median), s.
     pub scoring_seconds: f64,
     /// Batches the replicates' requests were scored in, and GPU dispatches (the same every
@@ -768,9 +768,8 @@ fn selection_check(
     reps: usize,
     log: &mut dyn FnMut(String),
 ) -> Result<SelectionBench> {
-    use crate::pipeline::AbcJob;
-    use crate::run::{self, SamplerConfig};
-    use crate::selection::{CheckOptions, CheckedRun};
+    use crate::run::selection::{CheckOptions, CheckedRun};
+    use crate::run::{self, abc::SamplerConfig};
     let dir =
         tempfile::tempdir().map_err(|source| crate::error::Error::output("TMPDIR", &std::env::temp_dir(), source))?;
     let run_dir = dir.path().join("run");
@@ -778,16 +777,16 @@ fn selection_check(
         particles,
         ..Schedule::default()
     });
-    let config = run::Config {
+    let config = run::abc::Config {
         backend,
         sampler: SamplerConfig::Rejection(sampler),
         eps_min_from_record: true,
-        ..run::Config::default()
+        ..run::abc::Config::default()
     };
     let laws = config.laws.len();
     let data = record.field_data()?;
     let samples = data.calibration.len();
-    AbcJob {
+    run::abc::Job {
         config,
         summary_population: None,
         out: Some(run::Dir {
@@ -811,7 +810,7 @@ fn selection_check(
     let name = record.name();
     let mut checks = Vec::new();
     for rep in 0..reps.max(1) {
-        let check = crate::selection::check(&run, &options, &|_, _| {}, &mut |_| {})?;
+        let check = crate::run::selection::check(&run, &options, &|_, _| {}, &mut |_| {})?;
         let f = &check.timing.fits;
         log(format!(
             "check-selection of the {name} record ({}/{}): {laws} laws × {replicates} replicates, N = {particles}, to ε = {eps_min:.4}, backend {}: {:.2} s (records and fits {:.2} s, sampling {:.2} s, of which scoring {:.2} s); {} of {} fits had a run out of patience",
@@ -827,8 +826,9 @@ fn selection_check(
         ));
         checks.push(check);
     }
-    let median =
-        |f: &dyn Fn(&crate::selection::SelectionCheck) -> f64| quantile(&checks.iter().map(f).collect::<Vec<_>>(), 0.5);
+    let median = |f: &dyn Fn(&crate::run::selection::SelectionCheck) -> f64| {
+        quantile(&checks.iter().map(f).collect::<Vec<_>>(), 0.5)
+    };
     let seconds_spread = Spread::of(&checks.iter().map(|c| c.seconds).collect::<Vec<_>>());
     let seconds = seconds_spread.median;
     let fit_seconds = median(&|c| c.timing.fit_seconds);
@@ -1069,7 +1069,7 @@ pub fn parity_on(
         return Err(Error::setting("epsilon", format!("must be a positive number, got {e}")));
     }
     let fits = fit_record(laws, data, &FitOptions::default())?;
-    let delta = crate::run::Config::default().delta;
+    let delta = crate::run::abc::Config::default().delta;
     let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).map_err(|e| {
         // Parity has no δ or prior file of its own: the record is what the prior cannot be built from.
         Error::Data {

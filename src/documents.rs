@@ -10,7 +10,6 @@ use crate::abc::{Particle, Population, PopulationRecord, Run};
 use crate::data::FieldData;
 use crate::fit::LawFit;
 use crate::prior::Prior;
-use crate::run;
 use crate::units::TorqueUnit;
 use serde_json::{Value, json};
 
@@ -67,7 +66,7 @@ pub fn fit_json(data: &FieldData, fits: &[LawFit]) -> Value {
 /// The evidence of a record's laws as JSON: the fits, the boxes (record units), and per law
 /// ln Z with its Monte-Carlo error, P(m | y), the sampler's effort and the posterior mean.
 /// `prior` describes the boxes of `boxes` in words.
-#[allow(clippy::too_many_arguments)] // The parts of a pipeline's analysis, which this layer cannot name.
+#[allow(clippy::too_many_arguments)] // The parts of an evidence's analysis (`run::evidence`), which this layer, below the runs, cannot name.
 pub fn evidence_json(
     data: &FieldData,
     fits: &[LawFit],
@@ -223,7 +222,7 @@ pub struct RunSummary<'a> {
 }
 
 impl RunSummary<'_> {
-    /// The run.json document, with the result's `warnings` ([`crate::pipeline::Analysis::warnings`]).
+    /// The run.json document, with the result's `warnings` ([`crate::run::abc::Analysis::warnings`]).
     pub fn json(&self, warnings: Vec<String>) -> Value {
         let unit = self.data.torque_unit;
         let priors = prior_json(self.prior, unit);
@@ -487,17 +486,23 @@ fn population_with_particles_json(population: &Population, unit: TorqueUnit) -> 
     value
 }
 
-/// A stored run as JSON (`export --format json`): configuration, data summary, fits, prior,
-/// and `populations` with their particles.
-pub fn export_json(setup: &run::Setup, populations: &[&Population]) -> Value {
-    let unit = setup.data.torque_unit;
-    let fits = fit_json(&setup.data, &setup.fits);
+/// A stored run as JSON (`export --format json`): its configuration (as stored), data summary,
+/// fits, prior, and `populations` with their particles.
+pub fn export_json(
+    config: &Value,
+    data: &FieldData,
+    fits: &[LawFit],
+    prior: &Prior,
+    populations: &[&Population],
+) -> Value {
+    let unit = data.torque_unit;
+    let fits = fit_json(data, fits);
     json!({
         "version": env!("CARGO_PKG_VERSION"),
-        "config": setup.config,
-        "data": data_json(&setup.data, &fits),
+        "config": config,
+        "data": data_json(data, &fits),
         "fits": fits["fits"],
-        "priors": prior_json(&setup.prior, unit),
+        "priors": prior_json(prior, unit),
         "populations": populations
             .iter()
             .map(|p| population_with_particles_json(p, unit))

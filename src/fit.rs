@@ -142,7 +142,7 @@ pub struct LawFit {
     #[serde(skip)]
     pub endings: Endings,
     /// Scales of the calibration samples the law was fitted to; not serialised (a reader
-    /// recomputes them from those samples, as [`crate::run::Setup`] does).
+    /// recomputes them from those samples, as [`crate::run::abc::Setup`] does).
     #[serde(skip, default = "RecordScales::unknown")]
     pub scales: RecordScales,
 }

@@ -8,7 +8,7 @@
 //!
 //! # The whole job in one call
 //!
-//! [`pipeline::AbcJob`] is what `bitrock abc` runs: a record → least-squares fits → prior →
+//! [`run::abc::Job`] is what `bitrock abc` runs: a record → least-squares fits → prior →
 //! ABC populations → posterior summary and predictive envelopes, optionally written to a run
 //! directory. Its [`Default`] is the command line's defaults:
 //!
@@ -17,13 +17,12 @@
 //! use bitrock::abc::schedule::Schedule;
 //! use bitrock::data::{DataOptions, demo_field_data};
 //! use bitrock::eval::Backend;
-//! use bitrock::pipeline::AbcJob;
-//! use bitrock::run::{self, SamplerConfig};
+//! use bitrock::run::{self, abc::SamplerConfig};
 //!
 //! # fn main() -> bitrock::Result<()> {
 //! let data = demo_field_data(&DataOptions::default())?;
-//! let job = AbcJob {
-//!     config: run::Config {
+//! let job = run::abc::Job {
+//!     config: run::abc::Config {
 //!         backend: Backend::Cpu,
 //!         sampler: SamplerConfig::Rejection(
 //!             Schedule {
@@ -33,9 +32,9 @@
 //!             }
 //!             .into(),
 //!         ),
-//!         ..run::Config::default()
+//!         ..run::abc::Config::default()
 //!     },
-//!     ..AbcJob::default() // in memory; `out: Some(run::Dir { .. })` writes the run directory
+//!     ..run::abc::Job::default() // in memory; `out: Some(run::Dir { .. })` writes the run directory
 //! };
 //! // Scored here (`run::Scoring::Workers` hands the populations to a pool of processes or
 //! // machines); `Silent` watches nothing, an `Observer` of your own hears progress,
@@ -58,10 +57,10 @@
 //! | the prior | [`prior::Prior`] (boxes around the fits, or a [`prior::PriorFile`]) |
 //! | scoring candidates | the [`eval::Evaluator`] trait, made by [`eval::evaluator`] for a [`eval::Backend`] |
 //! | the samplers | [`abc::rejection`], [`abc::smc`], the schedule they share ([`abc::schedule`]); a run's [`abc::Population`]s, watched by an [`abc::Observer`] |
-//! | a whole run | [`pipeline::AbcJob`] → [`pipeline::Analysis`] ([`abc::posterior::PosteriorSummary`], envelopes); [`pipeline::resume`] |
-//! | a run directory | [`run`]: [`run::start`] and [`run::resume`], its [`run::Config`], [`run::Dir`] (claim, lock, staging; what a directory holds), [`run::Store`] (SQLite) |
-//! | the selection check | [`selection::check`] → [`selection::SelectionCheck`] |
-//! | stability maps | [`pipeline::StabilityJob`] → [`pipeline::StabilityMaps`]; the physics in [`stability`] |
+//! | a whole run | [`run::abc::Job`] → [`run::abc::Analysis`] ([`abc::posterior::PosteriorSummary`], envelopes); [`run::abc::resume`] |
+//! | every kind of run | [`run`]: the ABC run ([`run::abc`]: [`run::abc::start`] and [`run::abc::populations::resume`], its [`run::abc::Config`], [`run::abc::Store`] (SQLite)), the evidence ([`run::evidence::Job`]), maps and simulated strings; [`run::Dir`] (claim, lock, staging; what a directory holds), [`run::Scoring`] |
+//! | the selection check | [`run::selection::check`] → [`run::selection::SelectionCheck`] |
+//! | stability maps | [`run::stability::StabilityJob`] → [`run::stability::StabilityMaps`]; the physics in [`stability`] |
 //! | a report | [`report::write_report`] |
 //! | errors | [`Error`]: bad input ([`Error::is_bad_input`]) names the file, line, column or setting |
 #![deny(clippy::float_cmp)]
@@ -79,12 +78,10 @@ pub mod fit;
 pub mod laws;
 pub mod limits;
 pub mod numerics;
-pub mod pipeline;
 pub mod prior;
 pub mod report;
 pub mod rng;
 pub mod run;
-pub mod selection;
 pub mod separation;
 pub mod simulate;
 pub mod stability;

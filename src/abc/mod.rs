@@ -255,7 +255,7 @@ impl StopReason {
 
 /// The result of a run: every population (those it was continued from included). A run
 /// written to a store holds only the last population's particles (see
-/// `complete_population`); read the others with [`crate::run::Store::load_particles`].
+/// `complete_population`); read the others with [`crate::run::abc::Store::load_particles`].
 #[derive(Clone, Debug)]
 pub struct Run {
     pub populations: Vec<Population>,

@@ -14,7 +14,7 @@ use crate::eval::{Backend, gpu::tune::ShapeWish};
 use crate::fit;
 use crate::laws::Law;
 use crate::numerics::{quantile, weighted_ks};
-use crate::run::{self, SamplerConfig};
+use crate::run::{self, abc::SamplerConfig};
 use serde::Serialize;
 
 /// A sampler of the comparison: the rejection sampler, or SMC with a refill and a law proposal.
@@ -126,7 +126,7 @@ fn compare_on(
     log: &mut dyn FnMut(String),
 ) -> Result<SmcComparison> {
     let data = record.field_data()?;
-    let base_config = run::Config::default();
+    let base_config = run::abc::Config::default();
     let fits = fit::fit_record(&base_config.laws, &data, &base_config.fit)?;
     let best = fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
     let eps_min = FLOOR_FACTOR * best;
@@ -150,23 +150,23 @@ fn compare_on(
                     ..SmcConfig::default()
                 }),
             };
-            let config = run::Config {
+            let config = run::abc::Config {
                 seed,
                 backend: Backend::Cpu,
                 sampler,
                 eps_min_from_record: false,
-                ..run::Config::default()
+                ..run::abc::Config::default()
             };
             let started = std::time::Instant::now();
             let mut evaluator = |problem, note: &mut dyn FnMut(String)| {
                 crate::eval::evaluator(problem, Backend::Cpu, ShapeWish::default(), note)
             };
-            let how = run::Start {
+            let how = run::abc::Start {
                 fits: Some(fits.clone()),
                 scoring: run::Scoring::Evaluator(&mut evaluator),
                 ..Default::default()
             };
-            let outcome = run::start(data.clone(), config, how, &mut Silent)?;
+            let outcome = run::abc::start(data.clone(), config, how, &mut Silent)?;
             let seconds = started.elapsed().as_secs_f64();
             let populations = &outcome.run.populations;
             let last = populations.last().expect("a run to ε_min has populations").clone();

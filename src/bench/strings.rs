@@ -6,7 +6,7 @@ use crate::error::Result;
 use crate::eval::Backend;
 use crate::eval::strings::Ran;
 use crate::laws::{Law, PAPER_W_REF_N};
-use crate::pipeline::strings::{OperatingPoint, SimulatedSettings, Simulator};
+use crate::run::strings::{OperatingPoint, SimulatedSettings, Simulator};
 use crate::simulate::strings::{Chain, Schedule, StringJob, padded, steady_start};
 use crate::stability::fe::DrillString;
 use crate::stability::lumped::Lumped;

@@ -1,5 +1,5 @@
 //! `bitrock abc`: a new run into `--out`, or `--resume DIR`, through the library's
-//! [`bitrock::pipeline`]; then the population table and posterior, or run.json on stdout.
+//! [`bitrock::run::abc`]; then the population table and posterior, or run.json on stdout.
 
 use super::args::finite_number;
 use super::args::{DataArgs, FitArgs, load_data, set_threads};
@@ -11,8 +11,8 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::abc::shard::Devices;
 use bitrock::abc::smc::{LawProposal, Perturbation, Refill, WeightsOn};
 use bitrock::eval::Backend;
-use bitrock::pipeline::{self, AbcJob, Analysis};
-use bitrock::run::{Continuation, PriorRuleName, Sampler, Settings};
+use bitrock::run::abc::{self, Analysis};
+use bitrock::run::{abc::Continuation, abc::PriorRuleName, abc::Sampler, abc::Settings};
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
@@ -26,7 +26,7 @@ pub struct AbcArgs {
     pub particles: usize,
     /// Prior half-width: each parameter is uniform on [p(1 − δ), p(1 + δ)] around its
     /// least-squares estimate p, clipped to its physical bound.
-    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::Config::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::abc::Config::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
     pub delta: f64,
     /// How the prior boxes are sized: delta = the paper's φ̂(1 ± δ); stderr = φ̂ ± k·σ̂ with σ̂
     /// the least-squares standard error (k = --prior-k), which does not grow with |φ̂| (the
@@ -107,7 +107,7 @@ pub struct AbcArgs {
     #[arg(long, value_enum)]
     pub perturbation: Option<Perturbation>,
     /// Seed of the candidate streams: the same seed gives the same populations.
-    #[arg(long, default_value_t = bitrock::run::Config::default().seed)]
+    #[arg(long, default_value_t = bitrock::run::abc::Config::default().seed)]
     pub seed: u64,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
@@ -196,10 +196,10 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                 devices: cmd.abc.devices,
                 summary_population: cmd.abc.summary_population,
             };
-            Ok(pipeline::resume(dir, &more, Default::default(), &mut progress)?)
+            Ok(abc::resume(dir, &more, Default::default(), &mut progress)?)
         }
         (None, Some(dir)) => {
-            let job = AbcJob {
+            let job = abc::Job {
                 config: run_config(&cmd.fit, &cmd.abc)?,
                 summary_population: cmd.abc.summary_population,
                 out: Some(bitrock::run::Dir {
@@ -216,7 +216,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
 
 /// The run configuration the flags describe (the library applies the defaults and refuses
 /// settings the run would ignore).
-fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<bitrock::run::Config> {
+fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<bitrock::run::abc::Config> {
     let settings = Settings {
         laws: Some(fit_args.laws()?),
         fit: fit_args.options()?,

@@ -4,7 +4,7 @@
 use bitrock::Law;
 use bitrock::data::{self, DataOptions, FieldData, SplitRule};
 use bitrock::fit::FitOptions;
-use bitrock::pipeline::stability::Structure;
+use bitrock::run::stability::Structure;
 use bitrock::stability::fe::DrillStringSettings;
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -230,7 +230,7 @@ impl StructureArgs {
     /// What decides stability on the structure these flags describe (the finite-element
     /// string's bisection runs here).
     pub fn criterion(&self) -> bitrock::Result<bitrock::stability::map::Criterion> {
-        bitrock::pipeline::stability::criterion(self.structure, self.lumped.lumped(), &self.fe.settings())
+        bitrock::run::stability::criterion(self.structure, self.lumped.lumped(), &self.fe.settings())
     }
 }
 

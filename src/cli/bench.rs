@@ -296,7 +296,7 @@ fn strings(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let opts = bitrock::bench::strings::StringsBenchOptions {
         strings: cmd.strings_n.unwrap_or(if cmd.quick { 4_096 } else { 65_536 }),
         seconds: 60.0,
-        dt_s: bitrock::pipeline::strings::DEFAULT_DT_S,
+        dt_s: bitrock::run::strings::DEFAULT_DT_S,
         map: if cmd.quick { (10, 10, 20) } else { (50, 50, 100) },
         backends: match cmd.backend {
             Some(Backend::Auto) | None => vec![Backend::Gpu, Backend::Cpu],

@@ -1,11 +1,11 @@
 //! `bitrock check-selection DIR`: how far the model selection of a run or an evidence can be
-//! trusted, by re-simulation ([`bitrock::selection`], [`bitrock::pipeline::evidence::check`]);
+//! trusted, by re-simulation ([`bitrock::run::selection`], [`bitrock::run::evidence::check`]);
 //! the confusion matrix on stdout (or JSON), the results in `DIR/selection/` (a run) or the
 //! evidence's document (an evidence).
 
 use super::args::set_threads;
 use bitrock::eval::Backend;
-use bitrock::selection::{self, CheckOptions, CheckedRun, SelectionCheck};
+use bitrock::run::selection::{self, CheckOptions, CheckedRun, SelectionCheck};
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
@@ -54,7 +54,7 @@ pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     set_threads(cmd.threads)?;
     bitrock::run::dir::refuse_unfinished_evidence(&cmd.run)?;
     let checked = CheckedRun::open(&cmd.run)?;
-    if let Some(why) = bitrock::run::Store::open(&cmd.run)?.early_end()? {
+    if let Some(why) = bitrock::run::abc::Store::open(&cmd.run)?.early_end()? {
         super::print::note(format_args!("note: {}: {why}", cmd.run.display()));
     }
     let quiet = cmd.quiet;
@@ -97,7 +97,7 @@ fn check_evidence(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
             super::print::note(format_args!("evidence check: replicate {done}/{total}"));
         }
     };
-    let check = bitrock::pipeline::evidence::dir::check_dir(
+    let check = bitrock::run::evidence::dir::check_dir(
         &cmd.run,
         cmd.replicates,
         cmd.backend,

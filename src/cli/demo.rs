@@ -11,12 +11,12 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::data;
 use bitrock::data::FieldData;
 use bitrock::eval::Backend;
-use bitrock::pipeline::AbcJob;
-use bitrock::pipeline::evidence::{EvidenceAnalysis, EvidenceJob};
 use bitrock::report::ReportRun;
 use bitrock::report::ReportSummary;
-use bitrock::run::SamplerConfig;
+use bitrock::run;
+use bitrock::run::abc::SamplerConfig;
 use bitrock::run::dir::Owned;
+use bitrock::run::evidence::EvidenceAnalysis;
 use bitrock::{Error, files};
 use clap::Args;
 use std::io::Write;
@@ -33,7 +33,7 @@ pub struct DemoCmd {
     #[arg(long, default_value_t = Schedule::default().particles, value_name = "N")]
     pub particles: usize,
     /// Seed of the candidate streams.
-    #[arg(long, default_value_t = bitrock::run::Config::default().seed)]
+    #[arg(long, default_value_t = bitrock::run::abc::Config::default().seed)]
     pub seed: u64,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
@@ -65,7 +65,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
     )?;
     writeln!(out, "the paper's field data are not public.\n")?;
-    let defaults = bitrock::run::Config::default();
+    let defaults = bitrock::run::abc::Config::default();
     fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
     mark_root(root)?;
     let mut report_runs = Vec::new();
@@ -86,13 +86,13 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             dir.display()
         )?;
         let eps_min = schedule.eps_min;
-        let job = AbcJob {
-            config: bitrock::run::Config {
+        let job = run::abc::Job {
+            config: bitrock::run::abc::Config {
                 delta,
                 seed: cmd.seed,
                 backend: cmd.backend,
                 sampler: SamplerConfig::Rejection(schedule.into()),
-                ..bitrock::run::Config::default()
+                ..bitrock::run::abc::Config::default()
             },
             summary_population: None,
             out: Some(bitrock::run::Dir {
@@ -127,7 +127,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         });
         // The report takes the runs as they are, with their summaries (no store reload, no
         // second kernel density estimate).
-        let bitrock::run::Outcome { config, setup, run, .. } = done.outcome;
+        let bitrock::run::abc::Outcome { config, setup, run, .. } = done.outcome;
         report_runs.push(ReportRun::new(
             &report_runs,
             &dir,
@@ -141,7 +141,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         out,
         "\nmodel evidence: tempered SMC per law over physical boxes (no fit involved), i.i.d. and AR(1) residuals, the noise model chosen by its evidence"
     )?;
-    let evidence = EvidenceJob {
+    let evidence = run::evidence::Job {
         laws: defaults.laws.clone(),
         fit: defaults.fit,
         backend: cmd.backend,
@@ -150,7 +150,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             seed: cmd.seed,
             ..EvidenceConfig::default()
         },
-        ..EvidenceJob::default()
+        ..run::evidence::Job::default()
     }
     .run(&data, Default::default(), &mut RunProgress::new(false))?;
     let report_dir = root.join(REPORT_DIR);

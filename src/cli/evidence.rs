@@ -1,5 +1,5 @@
 //! `bitrock evidence`: the marginal likelihood of each law on a record and the posterior law
-//! probabilities it gives, through [`bitrock::pipeline::evidence`]; tables or JSON.
+//! probabilities it gives, through [`bitrock::run::evidence`]; tables or JSON.
 
 use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
 use super::print;
@@ -7,8 +7,9 @@ use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, NoiseM
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
-use bitrock::pipeline::evidence::{
-    self, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidenceJob, EvidencePrior, EvidenceWarning,
+use bitrock::run;
+use bitrock::run::evidence::{
+    self, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidencePrior, EvidenceWarning,
 };
 use clap::{Args, ValueEnum};
 use std::io::Write;
@@ -62,7 +63,7 @@ pub struct EvidenceCmd {
     #[arg(long, value_parser = finite_number, default_value_t = DEFAULT_PRIOR_SCALE, value_name = "K", allow_hyphen_values = true)]
     pub prior_scale: f64,
     /// Half-width of the paper's boxes with --boxes delta.
-    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::Config::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
+    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::abc::Config::default().delta, value_name = "DELTA", allow_hyphen_values = true)]
     pub delta: f64,
     /// Prior file (TOML) with explicit bounds or law weights; overrides the boxes where it
     /// speaks (format in docs/commands.md).
@@ -181,7 +182,7 @@ fn still_under_way(dir: &std::path::Path, error: Option<&bitrock::Error>) {
 fn start_or_resume(
     cmd: &EvidenceCmd,
 ) -> anyhow::Result<(
-    EvidenceJob,
+    run::evidence::Job,
     FieldData,
     EvidenceAnalysis,
     Option<evidence::dir::Unfinished>,
@@ -219,8 +220,8 @@ fn start_or_resume(
 }
 
 /// The job the flags describe.
-fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<EvidenceJob> {
-    let mut job = EvidenceJob {
+fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<run::evidence::Job> {
+    let mut job = run::evidence::Job {
         laws: cmd.fit.laws()?,
         fit: cmd.fit.options()?,
         prior: match cmd.boxes {
@@ -252,7 +253,7 @@ fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<EvidenceJob> {
 /// The evidence's check, its directory and posterior written, its tables or JSON printed.
 fn finish(
     cmd: &EvidenceCmd,
-    job: &EvidenceJob,
+    job: &run::evidence::Job,
     data: &FieldData,
     analysis: &EvidenceAnalysis,
     unfinished: Option<evidence::dir::Unfinished>,
@@ -355,7 +356,7 @@ fn starts_table(out: &mut impl Write, evidence: &Evidence) -> std::io::Result<()
 fn tables(
     out: &mut impl Write,
     data: &FieldData,
-    job: &EvidenceJob,
+    job: &run::evidence::Job,
     analysis: &EvidenceAnalysis,
 ) -> std::io::Result<()> {
     let evidence = &analysis.evidence;

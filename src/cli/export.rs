@@ -41,7 +41,7 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
     bitrock::run::dir::refuse_unfinished_evidence(&cmd.dir)?;
-    let store = bitrock::run::Store::open(&cmd.dir)?;
+    let store = bitrock::run::abc::Store::open(&cmd.dir)?;
     let stored = store.load()?;
     let setup = &stored.setup;
     let populations: Vec<&Population> = match cmd.population {
@@ -63,7 +63,13 @@ pub fn run(cmd: &ExportCmd) -> anyhow::Result<ExitCode> {
             documents::particles_csv(&populations, &laws, setup.data.torque_unit)
         }
         ExportFormat::Json => {
-            let mut text = serde_json::to_vec_pretty(&documents::export_json(setup, &populations))?;
+            let mut text = serde_json::to_vec_pretty(&documents::export_json(
+                &setup.config,
+                &setup.data,
+                &setup.fits,
+                &setup.prior,
+                &populations,
+            ))?;
             text.push(b'\n');
             text
         }

@@ -8,10 +8,10 @@ use bitrock::data::BitSeen;
 use bitrock::eval::Backend;
 use bitrock::eval::strings::Ran;
 use bitrock::laws::PAPER_W_REF_N;
-use bitrock::pipeline::advice::{self, Adviser};
-use bitrock::pipeline::stability::{DEFAULT_OMEGA_RPM, DEFAULT_PERCENT, DEFAULT_SAMPLES, DEFAULT_WOB_KN, Structure};
-use bitrock::pipeline::strings::{self, Grid, OperatingPoint, SimulatedJob, SimulatedMaps, SimulatedSettings};
-use bitrock::pipeline::{MapSource, StabilityJob};
+use bitrock::run::advice::{self, Adviser};
+use bitrock::run::stability::{DEFAULT_OMEGA_RPM, DEFAULT_PERCENT, DEFAULT_SAMPLES, DEFAULT_WOB_KN, Structure};
+use bitrock::run::stability::{MapSource, StabilityJob};
+use bitrock::run::strings::{self, Grid, OperatingPoint, SimulatedJob, SimulatedMaps, SimulatedSettings};
 use bitrock::simulate::strings::Chain;
 use bitrock::stability::map::{self, Criterion, LawSamples};
 use bitrock::units::TorqueUnit;
@@ -102,7 +102,7 @@ pub struct StabilityCmd {
     #[arg(long, default_value_t = strings::DEFAULT_SAMPLES, value_name = "S")]
     pub sim_samples: usize,
     /// Integration step of the simulated strings, s (checked against the string's fastest mode).
-    #[arg(long, value_parser = finite_number, default_value_t = bitrock::pipeline::strings::DEFAULT_DT_S, value_name = "S")]
+    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::strings::DEFAULT_DT_S, value_name = "S")]
     pub dt_s: f64,
 }
 
@@ -369,8 +369,8 @@ fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<f64>, Opt
     }
     match (&cmd.run, &cmd.law, &cmd.params) {
         (Some(dir), _, _) if bitrock::run::dir::is_evidence_dir(dir) => {
-            let (particles, w_ref_n) = bitrock::pipeline::evidence::dir::posterior(dir)?;
-            let bit = bitrock::pipeline::evidence::dir::record(dir)?.bit;
+            let (particles, w_ref_n) = bitrock::run::evidence::dir::posterior(dir)?;
+            let bit = bitrock::run::evidence::dir::record(dir)?.bit;
             Ok((MapSource::Posterior(particles), w_ref_n, bit))
         }
         (Some(dir), _, _) => Ok((MapSource::Run(dir.clone()), None, None)),

@@ -5,8 +5,8 @@ use super::args::{ColumnArgs, StructureArgs, finite_number, parse_laws, set_thre
 use super::print;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::eval::Backend;
-use bitrock::pipeline::stability::Structure;
-use bitrock::run::Sampler;
+use bitrock::run::abc::Sampler;
+use bitrock::run::stability::Structure;
 use bitrock::watch::serve::{DEFAULT_ADDRESS, Server};
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::wits::WitsItems;
@@ -202,8 +202,7 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         },
         fe_chain: match cmd.string.structure {
             Structure::Fe => {
-                bitrock::pipeline::strings::chain(Structure::Fe, &cmd.string.lumped.lumped(), &cmd.string.fe.settings())
-                    .ok()
+                bitrock::run::strings::chain(Structure::Fe, &cmd.string.lumped.lumped(), &cmd.string.fe.settings()).ok()
             }
             Structure::Lumped => None,
         },

@@ -1,5 +1,5 @@
 //! The report of an evidence directory (`bitrock report DIR` where DIR holds an evidence,
-//! [`crate::pipeline::evidence::dir`]): report.md (each law's evidence, the Bayes factors, the
+//! [`crate::run::evidence::dir`]): report.md (each law's evidence, the Bayes factors, the
 //! models of the residuals compared, which pairs the record can tell apart, the boxes) and two
 //! figures: each law's 98 % posterior predictive envelope over the samples, and P(m | y).
 
@@ -8,8 +8,8 @@ use super::{ReportSummary, figures_markdown, replace_report};
 use crate::abc::evidence::{BayesFactor, Start, StartEstimate, Strength, describe_starts, ln_bayes_factor};
 use crate::error::{Error, Result};
 use crate::laws::Law;
-use crate::pipeline::evidence::dir;
 use crate::run::dir::POSTERIOR_CSV;
+use crate::run::evidence::dir;
 use serde_json::Value;
 use std::fmt::Write;
 use std::path::Path;

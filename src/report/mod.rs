@@ -25,13 +25,13 @@ pub use runs::{read_run_dirs, write_paper_report};
 use figures::confusion_figure;
 
 /// Draws a selection check's heat map and writes the check into its run directory
-/// ([`crate::selection::write`]); returns the check's directory.
+/// ([`crate::run::selection::write`]); returns the check's directory.
 pub fn write_selection(
-    run: &crate::selection::CheckedRun,
-    check: &crate::selection::SelectionCheck,
+    run: &crate::run::selection::CheckedRun,
+    check: &crate::run::selection::SelectionCheck,
 ) -> Result<PathBuf> {
     let (svg, png) = confusion_figure(check)?;
-    crate::selection::write(run, check, svg, png)
+    crate::run::selection::write(run, check, svg, png)
 }
 
 use crate::abc::Population;
@@ -40,8 +40,8 @@ use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::fit::LawFit;
 use crate::laws::{Law, PAPER_W_REF_N};
-use crate::pipeline::advice::Advice;
-use crate::pipeline::strings::SimulatedMaps;
+use crate::run::advice::Advice;
+use crate::run::strings::SimulatedMaps;
 use crate::stability::fe::DrillString;
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{self, Criterion, LawSamples};
@@ -72,9 +72,9 @@ pub struct ReportRun {
     pub summary: Option<PosteriorSummary>,
     /// The run's selection check (`bitrock check-selection`), when its directory holds one,
     /// and why it no longer describes the run when it does not.
-    pub selection: Option<(crate::selection::SelectionCheck, Option<String>)>,
+    pub selection: Option<(crate::run::selection::SelectionCheck, Option<String>)>,
     /// How the run ended when not by its own stopping rules (interrupted, or stopped on a
-    /// budget): said in the report ([`crate::run::Store::early_end`]).
+    /// budget): said in the report ([`crate::run::abc::Store::early_end`]).
     pub early_end: Option<String>,
 }
 
@@ -262,8 +262,8 @@ fn simulated_advice(
     scaled_w_ref_n: Option<f64>,
     inputs: &[LawSamples],
 ) -> Result<(Option<RecordAdvice>, Option<SimulatedMaps>)> {
-    use crate::pipeline::advice::{Adviser, params_w_ref_n, record_point};
-    use crate::pipeline::strings::{SimulatedJob, SimulatedSettings};
+    use crate::run::advice::{Adviser, params_w_ref_n, record_point};
+    use crate::run::strings::{SimulatedJob, SimulatedSettings};
     let s = &input.stability;
     let chain = crate::simulate::strings::Chain::one_dof(&s.lumped);
     let inputs: Vec<LawSamples> = inputs
@@ -755,7 +755,7 @@ impl Prepared<'_> {
     /// The section of the runs that hold a selection check: the confusion matrix, the
     /// distribution of the generating law's own probability and the verdicts.
     fn selection_markdown(&self, md: &mut String) {
-        let checked: Vec<(&RunView, &crate::selection::SelectionCheck, &Option<String>)> = self
+        let checked: Vec<(&RunView, &crate::run::selection::SelectionCheck, &Option<String>)> = self
             .runs
             .iter()
             .filter_map(|r| r.run.selection.as_ref().map(|(c, stale)| (r, c, stale)))
@@ -835,8 +835,8 @@ impl Prepared<'_> {
                 "\nA bit stuck at least 1 % of the time stick-slips, whatever the linear criterion says of steady \
                  rotation; what ends it is found by simulating the 1-DOF string from the state the bit is in \
                  (the settled cycle), for {} posterior samples of each law at least {} probable.",
-                crate::pipeline::advice::RECORD_ESCAPE_SAMPLES,
-                crate::pipeline::advice::RECORD_ESCAPE_MIN_PROBABILITY
+                crate::run::advice::RECORD_ESCAPE_SAMPLES,
+                crate::run::advice::RECORD_ESCAPE_MIN_PROBABILITY
             );
         }
         let Some(sim) = &self.simulated else {

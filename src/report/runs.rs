@@ -15,7 +15,7 @@ impl ReportRun {
     pub fn new(
         earlier: &[ReportRun],
         dir: &Path,
-        config: &run::Config,
+        config: &run::abc::Config,
         populations: Vec<Population>,
         summary: Option<PosteriorSummary>,
     ) -> Self {
@@ -41,25 +41,29 @@ impl ReportRun {
 /// Reads run directories into the report's runs, with the set-up (record, fits) of the first.
 /// Refuses an empty list, a run without a completed population, and runs of different records
 /// (the figures draw one data set).
-pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::Setup, Vec<ReportRun>)> {
+pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::abc::Setup, Vec<ReportRun>)> {
     let mut runs = Vec::new();
-    let mut first: Option<run::Setup> = None;
+    let mut first: Option<run::abc::Setup> = None;
     for dir in dirs {
         // The report draws the last population's particles and every population's record.
         run::dir::refuse_unfinished_evidence(dir)?;
-        let store = run::Store::open(dir)?;
+        let store = run::abc::Store::open(dir)?;
         let stored = store.load_with_last_particles()?;
         let early_end = store.early_end()?;
         if stored.populations.is_empty() {
             return Err(Error::Data {
                 path: dir.clone(),
-                message: format!("the run has no completed population yet; {}", run::resume_advice(dir)),
+                message: format!(
+                    "the run has no completed population yet; {}",
+                    run::abc::resume_advice(dir)
+                ),
             });
         }
-        let config: run::Config = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
-            path: dir.clone(),
-            message: format!("the stored configuration is not one this bitrock reads: {e}"),
-        })?;
+        let config: run::abc::Config =
+            serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
+                path: dir.clone(),
+                message: format!("the stored configuration is not one this bitrock reads: {e}"),
+            })?;
         if let Some(reference) = &first
             && (reference.data.calibration != stored.setup.data.calibration
                 || reference.data.validation != stored.setup.data.validation)
@@ -75,7 +79,7 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::Setup, Vec<ReportRun>)> {
         let now = stored.state();
         let mut run = ReportRun::new(&runs, dir, &config, stored.populations, None);
         run.early_end = early_end;
-        run.selection = crate::selection::read(dir)?.map(|check| {
+        run.selection = crate::run::selection::read(dir)?.map(|check| {
             let stale = check.stale(&now);
             (check, stale)
         });
@@ -90,7 +94,7 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::Setup, Vec<ReportRun>)> {
 /// (and the maps by simulated strings where `simulated` asks for them), written into `out`.
 pub fn write_paper_report(
     out: &Path,
-    setup: &run::Setup,
+    setup: &run::abc::Setup,
     runs: &[ReportRun],
     evidence: Option<&crate::abc::evidence::Evidence>,
     simulated: Option<SimulatedReport>,

@@ -7,8 +7,8 @@
 //! [`Owned`] first, so that only files bitrock wrote are ever replaced
 //! ([`crate::files::refuse_foreign`]).
 
-use super::store::Store;
-use super::store::{STORE_COMPANIONS, STORE_FILE};
+use super::abc::store::Store;
+use super::abc::store::{STORE_COMPANIONS, STORE_FILE};
 use crate::error::{Error, Result};
 use crate::files::{self, Authorship};
 use std::fs::File;

@@ -49,10 +49,11 @@ impl Watch {
     pub(super) fn completed(&mut self, mut update: Update, window: &Window) -> Update {
         self.carried.window = Some(window.index);
         let (omega_rpm, wob_kn) = operating_point(&window.rows, self.settings.w_ref_n);
-        let inputs =
-            self.carried.posterior.as_ref().map(|posterior| {
-                crate::abc::posterior::map_inputs_of(posterior, crate::pipeline::advice::ADVICE_SAMPLES)
-            });
+        let inputs = self
+            .carried
+            .posterior
+            .as_ref()
+            .map(|posterior| crate::abc::posterior::map_inputs_of(posterior, crate::run::advice::ADVICE_SAMPLES));
         if let Some(inputs) = &inputs {
             let speeds: Vec<f64> = window.rows.iter().map(|r| r.speed_rad_s).collect();
             let seen = BitSeen::of(&speeds, None);

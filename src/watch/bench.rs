@@ -74,7 +74,7 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
     })?;
     let mut runs = Vec::new();
     let mut updates: Vec<Vec<Update>> = Vec::new();
-    let abc = super::abc_config(crate::run::Sampler::Rejection, None, None, None)?;
+    let abc = super::abc_config(crate::run::abc::Sampler::Rejection, None, None, None)?;
     for (start, warm, abc) in [("warm", true, None), ("cold", false, None), ("abc", true, Some(abc))] {
         let settings = WatchSettings {
             backend,

@@ -114,8 +114,8 @@ pub fn follow(
                 observer.note(format!(
                     "each window's law probabilities by the paper's ABC ({} sampler, {} particles, δ = {}): ratios of the laws' prior volumes below each window's ε, not evidence",
                     match config.sampler {
-                        crate::run::SamplerConfig::Rejection(_) => "rejection",
-                        crate::run::SamplerConfig::Smc(_) => "SMC",
+                        crate::run::abc::SamplerConfig::Rejection(_) => "rejection",
+                        crate::run::abc::SamplerConfig::Smc(_) => "SMC",
                     },
                     config.sampler.schedule().particles,
                     config.delta

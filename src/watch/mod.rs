@@ -6,7 +6,7 @@
 //! Per window: the samples below the minimum speed are dropped (as `fit` drops them); a
 //! window with too few samples, whose bit turned at one speed (no law can be told from
 //! another there) or whose torques are mostly not positive, is reported as such and updates
-//! nothing. Otherwise the evidence of each law on the window ([`crate::pipeline::evidence`],
+//! nothing. Otherwise the evidence of each law on the window ([`crate::run::evidence`],
 //! physical boxes; warm-started from the window before: its posterior's kernel density as
 //! the samplers' reference, its estimates as the fits' starts, particles by each law's worth,
 //! and a window that declares a change computed again from the boxes; or, by flag, the
@@ -44,9 +44,9 @@ use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
-use crate::pipeline::advice::{Adviser, EscapeSettings};
-use crate::pipeline::evidence::{EvidenceAnalysis, EvidenceJob, EvidencePrior, WarmStart};
-use crate::pipeline::strings::OperatingPoint;
+use crate::run::advice::{Adviser, EscapeSettings};
+use crate::run::evidence::{EvidenceAnalysis, EvidencePrior, WarmStart};
+use crate::run::strings::OperatingPoint;
 use crate::simulate::strings::Chain;
 use crate::stability::lumped::Lumped;
 use crate::stability::map::Criterion;

@@ -1,6 +1,7 @@
 //! A window's model selection, by the evidence or by the paper's ABC, and its judgement.
 
 use super::*;
+use crate::run;
 
 /// A window's least-squares estimates by law (SI).
 pub(super) type Fits = Vec<(Law, Vec<f64>)>;
@@ -104,7 +105,7 @@ impl Watch {
             },
             _ => FitOptions::default(),
         };
-        let job = EvidenceJob {
+        let job = run::evidence::Job {
             laws: self.settings.laws.clone(),
             fit,
             prior: EvidencePrior::Physical {
@@ -135,7 +136,7 @@ impl Watch {
             // window's evidence is found again from the boxes, every law with all its
             // particles, as the paper would. So too where a law's warm samplers missed the
             // posterior that its fit shows (a mode the window before did not have).
-            let cold = EvidenceJob {
+            let cold = run::evidence::Job {
                 fit: FitOptions::default(),
                 sampler: EvidenceConfig {
                     law_particles: Vec::new(),
@@ -190,7 +191,7 @@ impl Watch {
     /// `Err`: why the window cannot inform.
     pub(super) fn by_abc(
         &self,
-        config: &crate::run::Config,
+        config: &crate::run::abc::Config,
         window: &Window,
         data: &FieldData,
         observer: &mut dyn Observer,
@@ -216,7 +217,7 @@ impl Watch {
             Err(why) => return Ok(Err(why)),
         };
         let judged = self.judge(window, &fits, &data.calibration);
-        let config = crate::run::Config {
+        let config = crate::run::abc::Config {
             laws: self.settings.laws.clone(),
             seed: self.settings.evidence.seed.wrapping_add(window.index as u64),
             backend: self.settings.backend,
@@ -226,12 +227,12 @@ impl Watch {
         let w_ref_n = config.fit.w_ref_n;
         let mut evaluator =
             |problem, note: &mut dyn FnMut(String)| crate::eval::evaluator(problem, backend, Default::default(), note);
-        let how = crate::run::Start {
+        let how = crate::run::abc::Start {
             fits: Some(fits.clone()),
             scoring: crate::run::Scoring::Evaluator(&mut evaluator),
             ..Default::default()
         };
-        let outcome = crate::run::start(data.clone(), config, how, &mut WindowNotes(observer));
+        let outcome = crate::run::abc::start(data.clone(), config, how, &mut WindowNotes(observer));
         let outcome = match of_window(outcome)? {
             Ok(outcome) => outcome,
             Err(why) => return Ok(Err(why)),

@@ -27,7 +27,7 @@ pub struct WatchSettings {
     /// P(unstable) the advice keeps below.
     pub risk: f64,
     /// What decides stability for the advice: the 1-DOF model (default) or a finite-element
-    /// string's critical bit damping ([`crate::pipeline::stability::criterion`]).
+    /// string's critical bit damping ([`crate::run::stability::criterion`]).
     pub criterion: Criterion,
     /// The string a stick-slipping window's way out is simulated on where the criterion is a
     /// finite-element string's critical damping: that string lumped ([`Chain::lumped_fe`]);
@@ -49,7 +49,7 @@ pub struct WatchSettings {
     /// The paper's ABC on each window instead of the evidence: this run's sampler, particles,
     /// δ and floor (its laws, seed and backend are the watch's; window k is seeded seed + k).
     /// Its law probabilities are ratios of the laws' prior volumes below ε, not evidence.
-    pub abc: Option<crate::run::Config>,
+    pub abc: Option<crate::run::abc::Config>,
 }
 
 impl Default for WatchSettings {
@@ -69,11 +69,11 @@ impl Default for WatchSettings {
                 start: Start::Box,
                 ..EvidenceConfig::default()
             },
-            prior_scale: crate::pipeline::evidence::DEFAULT_PRIOR_SCALE,
+            prior_scale: crate::run::evidence::DEFAULT_PRIOR_SCALE,
             forgetting: 0.5,
             floor: 0.01,
             change_nats: 30.0,
-            risk: crate::pipeline::advice::DEFAULT_RISK,
+            risk: crate::run::advice::DEFAULT_RISK,
             criterion: Criterion::Lumped(Lumped::default()),
             fe_chain: None,
             w_ref_n: PAPER_W_REF_N,
@@ -96,17 +96,17 @@ pub const ABC_PARTICLES: usize = 4_000;
 /// floor `eps_min` (default: the paper's 0.014 where the window reaches it, else 1.1 × its
 /// best least-squares ρ).
 pub fn abc_config(
-    sampler: crate::run::Sampler,
+    sampler: crate::run::abc::Sampler,
     particles: Option<usize>,
     delta: Option<f64>,
     eps_min: Option<f64>,
-) -> Result<crate::run::Config> {
-    crate::run::Settings {
+) -> Result<crate::run::abc::Config> {
+    crate::run::abc::Settings {
         sampler,
         particles: Some(particles.unwrap_or(ABC_PARTICLES)),
         delta,
         eps_min,
-        ..crate::run::Settings::default()
+        ..crate::run::abc::Settings::default()
     }
     .config()
 }

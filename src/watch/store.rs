@@ -14,7 +14,7 @@ use super::view::View;
 use super::{Carried, Update, WatchSettings};
 use crate::error::{Error, Result};
 use crate::files::DirLock;
-use crate::run::store::{json_error, sql_error};
+use crate::run::abc::store::{json_error, sql_error};
 use crate::stability::map::Criterion;
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};

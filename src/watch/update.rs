@@ -27,7 +27,7 @@ pub struct LawUpdate {
 }
 
 /// The advice of a window.
-pub use crate::pipeline::advice::Advice;
+pub use crate::run::advice::Advice;
 
 /// What a watch says of one window: one JSON line.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -18,7 +18,7 @@ pub const BAND_SPEEDS: usize = 60;
 /// The band's level: the paper's predictive envelope's.
 pub const BAND_LEVEL: f64 = crate::abc::posterior::ENVELOPE_LEVEL;
 /// The map's top-drive speeds, rpm, and its weights on bit: the advice's.
-pub use crate::pipeline::advice::{SPEEDS_RPM as MAP_SPEEDS_RPM, WEIGHTS as MAP_WEIGHTS};
+pub use crate::run::advice::{SPEEDS_RPM as MAP_SPEEDS_RPM, WEIGHTS as MAP_WEIGHTS};
 
 /// The picture of one window.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -68,7 +68,7 @@ pub struct MapView {
     pub risk: f64,
 }
 
-pub use crate::pipeline::advice::{speeds_rpm as map_speeds_rpm, weights_kn as map_weights_kn};
+pub use crate::run::advice::{speeds_rpm as map_speeds_rpm, weights_kn as map_weights_kn};
 
 /// What the view is made from besides the window's rows.
 pub(super) struct Posterior<'a> {

@@ -6,7 +6,7 @@ use crate::support::{bin, outcome};
 use bitrock::Law;
 use bitrock::data::{BitSeen, DataOptions, demo_field_data};
 use bitrock::eval::Backend;
-use bitrock::pipeline::strings::{OperatingPoint, SimulatedSettings, Simulator};
+use bitrock::run::strings::{OperatingPoint, SimulatedSettings, Simulator};
 use bitrock::simulate::strings::Chain;
 use bitrock::stability::lumped::Lumped;
 use bitrock::stability::map::LawSamples;
@@ -139,8 +139,8 @@ fn the_demo_strings_escape_lies_between_110_and_140_rpm() {
 }
 
 /// The advice at the demo record's own operating point from one m3 parameter set (kN·m).
-fn demo_advice(params_knm: &[f64]) -> bitrock::pipeline::advice::Advice {
-    use bitrock::pipeline::advice::Adviser;
+fn demo_advice(params_knm: &[f64]) -> bitrock::run::advice::Advice {
+    use bitrock::run::advice::Adviser;
     use bitrock::stability::map::Criterion;
     let seen = demo_field_data(&DataOptions::default()).unwrap().bit.unwrap();
     let params = Law::M3.scale_torque(params_knm, 1000.0);

@@ -10,8 +10,9 @@ use bitrock::abc::shard::Local;
 use bitrock::eval::AbcProblem;
 use bitrock::eval::Backend;
 use bitrock::eval::cpu::CpuEvaluator;
-use bitrock::pipeline::evidence::{EvidenceAnalysis, EvidenceCheck, EvidenceJob, check, fit_reference};
 use bitrock::prior::{LawBox, Prior};
+use bitrock::run;
+use bitrock::run::evidence::{EvidenceAnalysis, EvidenceCheck, check, fit_reference};
 use bitrock::separation::UNDECIDED_NATS;
 use rand_distr::{Distribution, Normal};
 
@@ -394,7 +395,7 @@ fn noisy_record(law: Law, params: &[f64], seed: u64) -> bitrock::data::FieldData
 /// The evidence of `laws` on `data` (CPU, physical boxes, 2 × 200 particles) and its check
 /// with `replicates` records per law.
 fn checked(laws: &[Law], data: &bitrock::data::FieldData, replicates: usize) -> (EvidenceAnalysis, EvidenceCheck) {
-    let job = EvidenceJob {
+    let job = run::evidence::Job {
         laws: laws.to_vec(),
         backend: Backend::Cpu,
         sampler: EvidenceConfig {
@@ -403,7 +404,7 @@ fn checked(laws: &[Law], data: &bitrock::data::FieldData, replicates: usize) -> 
             seed: 11,
             ..EvidenceConfig::default()
         },
-        ..EvidenceJob::default()
+        ..run::evidence::Job::default()
     };
     let analysis = job.run(data, Default::default(), &mut Silent).unwrap();
     let check = check(
@@ -500,7 +501,7 @@ fn m2_with_fluctuating_wob(dir: &std::path::Path, wob_kn: &str) -> bitrock::data
 #[test]
 fn the_data_choose_the_model_of_the_residuals() {
     let dir = tempfile::tempdir().unwrap();
-    let job = EvidenceJob {
+    let job = run::evidence::Job {
         laws: vec![Law::M2, Law::M3],
         backend: Backend::Cpu,
         sampler: EvidenceConfig {
@@ -509,7 +510,7 @@ fn the_data_choose_the_model_of_the_residuals() {
             seed: 2,
             ..EvidenceConfig::default()
         },
-        ..EvidenceJob::default()
+        ..run::evidence::Job::default()
     };
     let steady = job
         .run(
@@ -941,8 +942,8 @@ impl bitrock::abc::Observer for StopAfter {
 
 /// The evidence job the resume tests stop and continue: m2 and m3 on the CPU, 2 × 100
 /// particles, seed 4, each law's samplers started from `start`.
-fn resumable_job(start: bitrock::abc::evidence::Start) -> EvidenceJob {
-    EvidenceJob {
+fn resumable_job(start: bitrock::abc::evidence::Start) -> run::evidence::Job {
+    run::evidence::Job {
         laws: vec![Law::M2, Law::M3],
         backend: Backend::Cpu,
         sampler: EvidenceConfig {
@@ -952,14 +953,14 @@ fn resumable_job(start: bitrock::abc::evidence::Start) -> EvidenceJob {
             start,
             ..EvidenceConfig::default()
         },
-        ..EvidenceJob::default()
+        ..run::evidence::Job::default()
     }
 }
 
 /// Opens the evidence of `job` under way in `out`, saves it after every batch and stops it
 /// after `batches` of them.
-fn stop_after(out: &std::path::Path, job: &EvidenceJob, batches: usize) {
-    use bitrock::pipeline::evidence::dir::Unfinished;
+fn stop_after(out: &std::path::Path, job: &run::evidence::Job, batches: usize) {
+    use bitrock::run::evidence::dir::Unfinished;
     let (mut unfinished, stored_job, stored_data, progress) = Unfinished::open(out).unwrap();
     assert_eq!(&stored_job, job);
     unfinished.every_s = 0.0;
@@ -977,9 +978,9 @@ fn stop_after(out: &std::path::Path, job: &EvidenceJob, batches: usize) {
 /// the stored evidence.
 fn finish(
     out: &std::path::Path,
-    unfinished: bitrock::pipeline::evidence::dir::Unfinished,
+    unfinished: bitrock::run::evidence::dir::Unfinished,
     analysis: &EvidenceAnalysis,
-    job: &EvidenceJob,
+    job: &run::evidence::Job,
     data: &bitrock::data::FieldData,
 ) -> serde_json::Value {
     // As `bitrock evidence --out` writes it: with the advice at the record's operating point.
@@ -1002,7 +1003,7 @@ fn finish(
 /// `--resume`; a progress file that does not read is named.
 #[test]
 fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
-    use bitrock::pipeline::evidence::dir::Unfinished;
+    use bitrock::run::evidence::dir::Unfinished;
     let dir = tempfile::tempdir().unwrap();
     let record = m2_record_with_wob(dir.path(), "20", "60", "10");
     let data = bitrock::data::read_field_data(&record, &Default::default()).unwrap();
@@ -1093,7 +1094,7 @@ fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
 #[test]
 fn an_evidence_started_from_the_fits_resumes_to_the_uninterrupted_evidence() {
     use bitrock::abc::evidence::Start;
-    use bitrock::pipeline::evidence::dir::Unfinished;
+    use bitrock::run::evidence::dir::Unfinished;
     let dir = tempfile::tempdir().unwrap();
     let record = m2_record_with_wob(dir.path(), "20", "60", "10");
     let data = bitrock::data::read_field_data(&record, &Default::default()).unwrap();

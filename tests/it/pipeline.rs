@@ -6,12 +6,12 @@ use bitrock::abc::rejection::RejectionConfig;
 use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::Backend;
-use bitrock::pipeline::{AbcJob, Analysis};
-use bitrock::run::{self, SamplerConfig};
+use bitrock::run::abc::Analysis;
+use bitrock::run::{self, abc::SamplerConfig};
 
-fn job(particles: usize) -> AbcJob {
-    AbcJob {
-        config: run::Config {
+fn job(particles: usize) -> run::abc::Job {
+    run::abc::Job {
+        config: run::abc::Config {
             backend: Backend::Cpu,
             seed: 5,
             sampler: SamplerConfig::Rejection(RejectionConfig::from(Schedule {
@@ -19,9 +19,9 @@ fn job(particles: usize) -> AbcJob {
                 eps_min: 0.03,
                 ..Schedule::default()
             })),
-            ..run::Config::default()
+            ..run::abc::Config::default()
         },
-        ..AbcJob::default()
+        ..run::abc::Job::default()
     }
 }
 
@@ -31,7 +31,7 @@ fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
     let in_memory = job(300).run(data(), Default::default(), &mut Silent).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run");
-    let on_disk = AbcJob {
+    let on_disk = run::abc::Job {
         out: Some(run::Dir {
             path: path.clone(),
             replace: false,
@@ -45,7 +45,7 @@ fn a_job_in_memory_equals_the_job_written_to_its_run_directory() {
     assert_eq!(a.len(), b.len());
     // The stored run holds only its last population's particles in memory; the store has
     // them all.
-    let stored = run::Store::open(&path).unwrap().load_populations().unwrap();
+    let stored = run::abc::Store::open(&path).unwrap().load_populations().unwrap();
     for ((p, q), s) in a.iter().zip(b).zip(&stored) {
         assert_eq!(p.particles, s.particles, "population {}", p.record.index);
         assert_eq!(p.record.per_law, q.record.per_law);
@@ -90,12 +90,12 @@ fn a_refused_job_names_the_setting_and_writes_nothing() {
         path: path.clone(),
         replace: false,
     });
-    let mut zero_delta = AbcJob {
+    let mut zero_delta = run::abc::Job {
         out: out.clone(),
         ..job(100)
     };
     zero_delta.config.delta = 0.0;
-    let mut no_starts = AbcJob { out, ..job(100) };
+    let mut no_starts = run::abc::Job { out, ..job(100) };
     no_starts.config.fit.starts = 0;
     for (job, flag) in [(zero_delta, "`delta`:"), (no_starts, "`starts`:")] {
         assert!(job.validate().unwrap_err().to_string().starts_with(flag));
@@ -106,7 +106,7 @@ fn a_refused_job_names_the_setting_and_writes_nothing() {
     }
     // A summary population the run does not have.
     let data = demo_field_data(&DataOptions::default()).unwrap();
-    let err = AbcJob {
+    let err = run::abc::Job {
         summary_population: Some(99),
         ..job(100)
     }

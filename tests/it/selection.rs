@@ -12,9 +12,8 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, parse_field_data};
 use bitrock::eval::Backend;
 use bitrock::eval::gpu::{self, Shape};
-use bitrock::pipeline::AbcJob;
-use bitrock::run::{self, SamplerConfig};
-use bitrock::selection::{self, CheckOptions, CheckedRun, ParamSource, SelectionCheck};
+use bitrock::run::selection::{self, CheckOptions, CheckedRun, ParamSource, SelectionCheck};
+use bitrock::run::{self, abc::SamplerConfig};
 use rand_distr::{Distribution, Normal};
 use std::path::{Path, PathBuf};
 
@@ -61,14 +60,14 @@ fn run_dir_with(
     prior_file: Option<PathBuf>,
 ) -> PathBuf {
     let path = dir.join("run");
-    AbcJob {
-        config: run::Config {
+    run::abc::Job {
+        config: run::abc::Config {
             laws: laws.to_vec(),
             backend: Backend::Cpu,
             seed: 3,
             prior_file,
             sampler,
-            ..run::Config::default()
+            ..run::abc::Config::default()
         },
         summary_population: None,
         out: Some(run::Dir {

@@ -3,6 +3,7 @@
 
 use crate::support::bin;
 use bitrock::Law;
+use bitrock::run;
 use bitrock::simulate::{Initial, SimConfig, simulate};
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
@@ -275,8 +276,8 @@ fn stability_runs_on_an_abc_run_and_on_a_law() {
 }
 
 /// A stability job on the paper's 1-DOF string over a small grid, CPU.
-fn job_of(source: bitrock::pipeline::stability::MapSource) -> bitrock::pipeline::stability::StabilityJob {
-    bitrock::pipeline::stability::StabilityJob {
+fn job_of(source: bitrock::run::stability::MapSource) -> bitrock::run::stability::StabilityJob {
+    bitrock::run::stability::StabilityJob {
         source,
         omega_rpm: parse_axis("20:220:11", "omega_rpm").unwrap(),
         wob_kn: parse_axis("20:700:9", "wob_kn").unwrap(),
@@ -300,7 +301,7 @@ fn particle(law: Law, params: &[f64], weight: f64) -> bitrock::abc::Particle {
 
 #[test]
 fn a_posterior_in_memory_maps_as_its_laws_do() {
-    use bitrock::pipeline::stability::MapSource;
+    use bitrock::run::stability::MapSource;
     // One particle of m2 is the law at those parameters: the same boundaries and grid.
     let m2 = [13_000.0, 6_500.0, 0.3];
     let alone = job_of(MapSource::Posterior(vec![particle(Law::M2, &m2, 1.0)]))
@@ -348,14 +349,13 @@ fn a_posterior_in_memory_maps_as_its_laws_do() {
 #[test]
 fn the_evidence_posterior_maps_with_its_law_probabilities() {
     use bitrock::abc::evidence::EvidenceConfig;
-    use bitrock::pipeline::evidence::EvidenceJob;
-    use bitrock::pipeline::stability::MapSource;
+    use bitrock::run::stability::MapSource;
     let data = bitrock::data::demo_field_data(&bitrock::data::DataOptions {
         thin: 8,
         ..Default::default()
     })
     .unwrap();
-    let analysis = EvidenceJob {
+    let analysis = run::evidence::Job {
         laws: vec![Law::M2, Law::M4],
         backend: bitrock::eval::Backend::Cpu,
         sampler: EvidenceConfig {
@@ -363,7 +363,7 @@ fn the_evidence_posterior_maps_with_its_law_probabilities() {
             islands: 2,
             ..EvidenceConfig::default()
         },
-        ..EvidenceJob::default()
+        ..run::evidence::Job::default()
     }
     .run(&data, Default::default(), &mut bitrock::abc::Silent)
     .unwrap();

@@ -9,12 +9,12 @@ use bitrock::abc::{Population, Silent, StopReason};
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::Backend;
 use bitrock::fit::FitOptions;
-use bitrock::run::{self, Continuation, Outcome, SamplerConfig};
+use bitrock::run::{self, abc::Continuation, abc::Outcome, abc::SamplerConfig};
 use bitrock::{Error, Law};
 use std::path::Path;
 
-fn config(particles: usize, max_populations: usize, eps_min: f64) -> run::Config {
-    run::Config {
+fn config(particles: usize, max_populations: usize, eps_min: f64) -> run::abc::Config {
+    run::abc::Config {
         laws: Law::ALL.to_vec(),
         fit: FitOptions::default(),
         delta: 0.4,
@@ -34,17 +34,17 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> run::Config
     }
 }
 
-fn start(dir: &Path, config: run::Config) -> Outcome {
+fn start(dir: &Path, config: run::abc::Config) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
     let dir = run::Dir {
         path: dir.to_path_buf(),
         replace: false,
     };
     released(
-        run::start(
+        run::abc::start(
             data,
             config,
-            run::Start {
+            run::abc::Start {
                 dir: Some(&dir),
                 ..Default::default()
             },
@@ -94,13 +94,13 @@ fn assert_same_populations(a: &[Population], b: &[Population]) {
 
 /// The populations of the store in `dir`, with all their particles.
 fn stored(dir: &Path) -> Vec<Population> {
-    run::Store::open(dir).unwrap().load_populations().unwrap()
+    run::abc::Store::open(dir).unwrap().load_populations().unwrap()
 }
 
 /// The run of `config` in memory only: every population keeps its particles.
-fn in_memory(config: run::Config) -> Outcome {
+fn in_memory(config: run::abc::Config) -> Outcome {
     let data = demo_field_data(&DataOptions::default()).unwrap();
-    run::start(data, config, run::Start::default(), &mut Silent).unwrap()
+    run::abc::start(data, config, run::abc::Start::default(), &mut Silent).unwrap()
 }
 
 #[test]
@@ -109,7 +109,7 @@ fn store_round_trip_is_bit_exact() {
     let run_dir = dir.path().join("run");
     let outcome = start(&run_dir, config(600, 4, 0.014));
     assert_eq!(outcome.run.populations.len(), 4);
-    let stored = run::Store::open(&run_dir).unwrap().load().unwrap();
+    let stored = run::abc::Store::open(&run_dir).unwrap().load().unwrap();
     // Records (timings included) come back exactly; the stored run kept only the last
     // population's particles in memory, and the store has every population's, those of the
     // same run in memory.
@@ -135,7 +135,7 @@ fn store_round_trip_is_bit_exact() {
         assert_eq!(a.correlations, b.correlations);
         assert_eq!(a.warnings, b.warnings);
     }
-    let config: run::Config = serde_json::from_value(stored.setup.config).unwrap();
+    let config: run::abc::Config = serde_json::from_value(stored.setup.config).unwrap();
     assert_eq!(config, outcome.config);
     // Weights are 1/N and sum to 1 per population.
     for p in &stored.populations {
@@ -176,11 +176,11 @@ fn store_round_trip_is_bit_exact() {
 }
 
 /// The same run with the SMC sampler.
-fn smc(config: run::Config) -> run::Config {
+fn smc(config: run::abc::Config) -> run::abc::Config {
     let SamplerConfig::Rejection(base) = config.sampler else {
         unreachable!("config() builds rejection runs")
     };
-    run::Config {
+    run::abc::Config {
         sampler: SamplerConfig::Smc(bitrock::abc::smc::SmcConfig {
             schedule: base.schedule,
             ..Default::default()
@@ -199,7 +199,7 @@ fn continuing_an_smc_run_equals_the_uninterrupted_run() {
     continuing_equals_uninterrupted(smc);
 }
 
-fn continuing_equals_uninterrupted(sampler: fn(run::Config) -> run::Config) {
+fn continuing_equals_uninterrupted(sampler: fn(run::abc::Config) -> run::abc::Config) {
     let dir = tempfile::tempdir().unwrap();
     let whole = start(&dir.path().join("whole"), sampler(config(800, 6, 0.0)));
     assert_eq!(whole.run.stop, StopReason::MaxPopulations);
@@ -211,12 +211,14 @@ fn continuing_equals_uninterrupted(sampler: fn(run::Config) -> run::Config) {
         max_populations: Some(6),
         ..Continuation::default()
     };
-    let continued = released(run::resume(&part_dir, &more, Default::default(), &mut Silent).unwrap());
+    let continued = released(run::abc::populations::resume(&part_dir, &more, Default::default(), &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     assert_same_populations(&continued.run.populations, &whole.run.populations);
     assert_same_populations(&stored(&part_dir), &stored(&dir.path().join("whole")));
     // Continuing a finished run with the same rules adds nothing.
-    let again = released(run::resume(&part_dir, &Continuation::default(), Default::default(), &mut Silent).unwrap());
+    let again = released(
+        run::abc::populations::resume(&part_dir, &Continuation::default(), Default::default(), &mut Silent).unwrap(),
+    );
     assert_eq!(again.run.populations.len(), 6);
     assert_eq!(again.run.stop, StopReason::MaxPopulations);
 }
@@ -233,7 +235,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
         eps_min: Some(0.016),
         ..Continuation::default()
     };
-    let continued = released(run::resume(&run_dir, &more, Default::default(), &mut Silent).unwrap());
+    let continued = released(run::abc::populations::resume(&run_dir, &more, Default::default(), &mut Silent).unwrap());
     assert_eq!(continued.run.stop, StopReason::EpsMin);
     assert!(continued.run.populations.len() > n);
     let populations = stored(&run_dir);
@@ -251,7 +253,7 @@ fn a_finished_run_continues_to_a_lower_eps_min() {
 fn a_directory_that_is_not_a_run_is_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
     for target in [dir.path().to_path_buf(), dir.path().join("missing")] {
-        let err = run::Store::open(&target).err().expect("refused");
+        let err = run::abc::Store::open(&target).err().expect("refused");
         assert!(matches!(err, Error::Data { .. }), "{err}");
         assert!(err.to_string().contains("not a bitrock run directory"), "{err}");
         for args in [
@@ -268,7 +270,7 @@ fn a_directory_that_is_not_a_run_is_refused_by_name() {
     }
     // A file named run.sqlite that is not a store.
     std::fs::write(dir.path().join("run.sqlite"), "not a database").unwrap();
-    let err = run::Store::open(dir.path()).err().expect("refused");
+    let err = run::abc::Store::open(dir.path()).err().expect("refused");
     assert!(err.to_string().contains("not a bitrock"), "{err}");
     // Run-defining flags cannot change on --resume.
     let out = bin()
@@ -339,8 +341,8 @@ fn a_run_killed_part_way_resumes_to_the_uninterrupted_result() {
     let out = bin().args(args(&whole)).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    let a = run::Store::open(&killed).unwrap().load_populations().unwrap();
-    let b = run::Store::open(&whole).unwrap().load_populations().unwrap();
+    let a = run::abc::Store::open(&killed).unwrap().load_populations().unwrap();
+    let b = run::abc::Store::open(&whole).unwrap().load_populations().unwrap();
     assert_eq!(a.len(), 9);
     assert_same_populations(&a, &b);
     // The exports are byte-identical.
@@ -361,7 +363,9 @@ fn a_wall_time_stop_is_continued_without_the_old_budget() {
     let first = start(&run_dir, budgeted);
     assert_eq!(first.run.stop, StopReason::WallTime);
     assert!(first.run.populations.is_empty());
-    let continued = released(run::resume(&run_dir, &Continuation::default(), Default::default(), &mut Silent).unwrap());
+    let continued = released(
+        run::abc::populations::resume(&run_dir, &Continuation::default(), Default::default(), &mut Silent).unwrap(),
+    );
     assert_eq!(continued.run.stop, StopReason::MaxPopulations);
     let whole = start(&dir.path().join("whole"), config(500, 4, 0.0));
     assert_same_populations(&continued.run.populations, &whole.run.populations);
@@ -408,7 +412,7 @@ fn a_store_of_schema_2_is_read_and_continued_in_its_own_layout() {
         max_populations: Some(4),
         ..Default::default()
     };
-    let resumed = run::resume(&run_dir, &more, Default::default(), &mut Silent).unwrap();
+    let resumed = run::abc::populations::resume(&run_dir, &more, Default::default(), &mut Silent).unwrap();
     let direct_dir = dir.path().join("direct");
     let direct = start(&direct_dir, config(500, 4, 0.014));
     assert_same_populations(&resumed.run.populations, &direct.run.populations);
@@ -503,7 +507,7 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
     )
     .unwrap();
     drop(conn);
-    let stored = run::Store::open(&run_dir).unwrap().load().unwrap();
+    let stored = run::abc::Store::open(&run_dir).unwrap().load().unwrap();
     assert_eq!(stored.setup.prior.boxes, outcome.setup.prior.boxes);
     assert_eq!(stored.setup.prior.thresholds, outcome.setup.prior.thresholds);
     for rules in &stored.setup.prior.rules {
@@ -519,12 +523,12 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
         max_populations: Some(3),
         ..Default::default()
     };
-    let e = run::resume(&run_dir, &more, Default::default(), &mut Silent)
+    let e = run::abc::populations::resume(&run_dir, &more, Default::default(), &mut Silent)
         .err()
         .unwrap()
         .to_string();
     assert!(e.contains("store schema 1") && e.contains("start a new run"), "{e}");
-    let again = run::Store::open(&run_dir).unwrap().load().unwrap();
+    let again = run::abc::Store::open(&run_dir).unwrap().load().unwrap();
     assert_eq!(again.populations.len(), 2);
 
     // Another version is refused by name, not misread.
@@ -532,7 +536,7 @@ fn a_store_of_schema_1_is_read_with_its_box_rules_unrecorded_but_not_continued()
     conn.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'", [])
         .unwrap();
     drop(conn);
-    let e = run::Store::open(&run_dir).err().unwrap().to_string();
+    let e = run::abc::Store::open(&run_dir).err().unwrap().to_string();
     assert!(e.contains("schema version 99") && e.contains("versions 1 to 3"), "{e}");
 }
 
@@ -554,7 +558,7 @@ fn a_write_that_fails_on_the_store_thread_ends_the_run_with_its_error() {
         max_populations: Some(6),
         ..Continuation::default()
     };
-    let e = run::resume(&run_dir, &more, Default::default(), &mut Silent)
+    let e = run::abc::populations::resume(&run_dir, &more, Default::default(), &mut Silent)
         .err()
         .expect("the failed write ends the run")
         .to_string();

@@ -5,7 +5,7 @@ use crate::gpu::require_gpu;
 use bitrock::Law;
 use bitrock::eval::{Backend, strings};
 use bitrock::laws::PAPER_W_REF_N;
-use bitrock::pipeline::strings::{Grid, OperatingPoint, SimulatedSettings, Simulator};
+use bitrock::run::strings::{Grid, OperatingPoint, SimulatedSettings, Simulator};
 use bitrock::simulate::strings::{Chain, Schedule, StringJob, StringState, Summary, padded, steady_start};
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;

@@ -9,11 +9,11 @@ use bitrock::Law;
 use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::data::FieldData;
 use bitrock::error::Error;
-use bitrock::pipeline::evidence::dir::Unfinished;
-use bitrock::pipeline::evidence::{
-    DEFAULT_PRIOR_SCALE, EvidenceJob, EvidencePrior, Progress, check as check_evidence, check_replicates, check_size,
+use bitrock::run::evidence::dir::Unfinished;
+use bitrock::run::evidence::{
+    DEFAULT_PRIOR_SCALE, EvidencePrior, Progress, check as check_evidence, check_replicates, check_size,
 };
-use bitrock::run::{MakeWorkers, Placement, Scoring};
+use bitrock::run::{self, MakeWorkers, Placement, Scoring};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -42,7 +42,7 @@ pub(crate) fn evidence(
             scale: kwarg(options, "prior_scale")?.unwrap_or(DEFAULT_PRIOR_SCALE),
         },
         "delta" => EvidencePrior::Delta {
-            delta: kwarg(options, "delta")?.unwrap_or(bitrock::run::Config::default().delta),
+            delta: kwarg(options, "delta")?.unwrap_or(bitrock::run::abc::Config::default().delta),
         },
         other => {
             return Err(to_py(
@@ -54,7 +54,7 @@ pub(crate) fn evidence(
             ));
         }
     };
-    let mut job = EvidenceJob {
+    let mut job = run::evidence::Job {
         laws,
         fit: fit_options(py, options)?,
         prior,
@@ -180,7 +180,7 @@ pub(crate) fn make_workers(transport: &PyTransport) -> Box<MakeWorkers<'_>> {
 #[allow(clippy::too_many_arguments)]
 fn compute(
     py: Python<'_>,
-    job: &EvidenceJob,
+    job: &run::evidence::Job,
     data: &FieldData,
     unfinished: Option<Unfinished>,
     progress: Progress,
@@ -212,7 +212,7 @@ fn compute(
     }
     let (analysis, selection) = check(py, result)?;
     let advice = py.detach(|| analysis.record_advice(data, job.backend));
-    let mut document = bitrock::pipeline::evidence::EvidenceAnalysis::with_advice(
+    let mut document = bitrock::run::evidence::EvidenceAnalysis::with_advice(
         analysis.document(data, &job.prior.describe(), true),
         data,
         advice.as_ref(),
@@ -230,7 +230,7 @@ fn compute(
 /// out=...)`), as JSON.
 #[pyfunction]
 pub(crate) fn read_evidence(py: Python<'_>, dir: PathBuf) -> PyResult<String> {
-    let document = check(py, py.detach(|| bitrock::pipeline::evidence::dir::read(&dir)))?;
+    let document = check(py, py.detach(|| bitrock::run::evidence::dir::read(&dir)))?;
     Ok(document.to_string())
 }
 

@@ -9,9 +9,8 @@ use bitrock::abc::shard::Remote;
 use bitrock::abc::{Observer, Population, Progress};
 use bitrock::error::Error;
 use bitrock::eval::Backend;
-use bitrock::pipeline::AbcJob;
 use bitrock::run;
-use bitrock::run::{Continuation, Settings};
+use bitrock::run::abc::{Continuation, Settings};
 use bitrock::run::{Placement, Scoring};
 use bitrock::units::TorqueUnit;
 use bitrock::{Law, documents};
@@ -125,7 +124,7 @@ pub(crate) struct Run {
 /// directory `bitrock abc --out` would have written, or be checked by re-simulation.
 #[derive(serde::Serialize, serde::Deserialize)]
 struct Kept {
-    setup: run::Setup,
+    setup: run::abc::Setup,
     stop: bitrock::abc::StopReason,
     evaluations: u64,
     seconds: f64,
@@ -136,14 +135,14 @@ struct Kept {
 
 impl Kept {
     /// The outcome this run in memory was: its configuration, set-up and `populations`.
-    fn outcome(&self, populations: Vec<Population>) -> bitrock::Result<run::Outcome> {
-        let config: run::Config = serde_json::from_value(self.setup.config.clone())
+    fn outcome(&self, populations: Vec<Population>) -> bitrock::Result<run::abc::Outcome> {
+        let config: run::abc::Config = serde_json::from_value(self.setup.config.clone())
             .map_err(|e| Error::setting("result", format!("the run's configuration cannot be read: {e}")))?;
         let backend = ["cpu", "gpu", "cpu+gpu"]
             .into_iter()
             .find(|b| *b == self.backend)
             .unwrap_or("cpu");
-        Ok(run::Outcome {
+        Ok(run::abc::Outcome {
             config,
             setup: self.setup.clone(),
             added: populations.len(),
@@ -199,7 +198,7 @@ impl Run {
         let populations = self.populations.clone();
         let analysis = py.detach(|| {
             let outcome = kept.outcome(populations)?;
-            let analysis = bitrock::pipeline::Analysis::new(outcome, Some(kept.summary_population), None)?;
+            let analysis = bitrock::run::abc::Analysis::new(outcome, Some(kept.summary_population), None)?;
             analysis.save(&dir)?;
             Ok::<_, Error>(analysis)
         });
@@ -211,7 +210,7 @@ impl Run {
     fn record(&self, py: Python<'_>) -> PyResult<Record> {
         let data = match (&self.kept, &self.path) {
             (Some(kept), _) => kept.setup.data.clone(),
-            (None, Some(dir)) => check(py, run::Store::open(dir).and_then(|s| s.load()))?.setup.data,
+            (None, Some(dir)) => check(py, run::abc::Store::open(dir).and_then(|s| s.load()))?.setup.data,
             (None, None) => return Err(to_py(py, Error::setting("result", "the result holds no run"))),
         };
         Ok(Record { data })
@@ -301,12 +300,12 @@ impl Run {
 impl Run {
     /// A run kept in memory as its configuration and store would read it back (every
     /// population with its particles); `None` for a stored run.
-    pub(crate) fn in_memory(&self) -> Option<bitrock::Result<(run::Config, run::Stored)>> {
+    pub(crate) fn in_memory(&self) -> Option<bitrock::Result<(run::abc::Config, run::abc::Stored)>> {
         let kept = self.kept.as_ref()?;
         Some(kept.outcome(Vec::new()).map(|outcome| {
             (
                 outcome.config,
-                run::Stored {
+                run::abc::Stored {
                     setup: kept.setup.clone(),
                     populations: self.populations.clone(),
                 },
@@ -328,7 +327,7 @@ impl Run {
     /// store the caller reads).
     pub(crate) fn record_in_memory(&self) -> Option<(Option<bitrock::data::BitSeen>, Option<f64>)> {
         let setup = &self.kept.as_ref()?.setup;
-        let w_ref_n = serde_json::from_value::<run::Config>(setup.config.clone())
+        let w_ref_n = serde_json::from_value::<run::abc::Config>(setup.config.clone())
             .ok()
             .and_then(|c| c.fit.w_ref_n);
         Some((setup.data.bit, w_ref_n))
@@ -344,7 +343,7 @@ impl Run {
             (_, Some(p)) if !p.particles.is_empty() => Ok(std::borrow::Cow::Borrowed(&p.particles)),
             (Some(dir), _) => Ok(std::borrow::Cow::Owned(check(
                 py,
-                run::Store::open(dir).and_then(|s| s.load_particles(g)),
+                run::abc::Store::open(dir).and_then(|s| s.load_particles(g)),
             )?)),
             (None, _) => Err(to_py(
                 py,
@@ -355,7 +354,7 @@ impl Run {
 }
 
 /// The `Run` of an analysis: its document and, in memory, its populations.
-pub(crate) fn run_of(analysis: bitrock::pipeline::Analysis, path: Option<PathBuf>) -> Run {
+pub(crate) fn run_of(analysis: bitrock::run::abc::Analysis, path: Option<PathBuf>) -> Run {
     let summary = as_arguments(&analysis.json().to_string());
     let torque_unit = analysis.outcome.setup.data.torque_unit;
     let (populations, kept) = if path.is_some() {
@@ -400,7 +399,7 @@ pub(crate) fn abc(
 ) -> PyResult<Run> {
     let s = run_settings(py, settings)?;
     let config = check(py, s.config())?;
-    let job = AbcJob {
+    let job = run::abc::Job {
         config,
         summary_population: None,
         out: out.clone().map(|path| run::Dir { path, replace: force }),
@@ -427,7 +426,7 @@ pub(crate) fn abc(
 /// workers' before the library's own).
 pub(crate) fn finish_run(
     py: Python<'_>,
-    result: bitrock::Result<bitrock::pipeline::Analysis>,
+    result: bitrock::Result<bitrock::run::abc::Analysis>,
     mut observer: PyObserver,
     cell: OnceLock<Remote<PyTransport>>,
     path: Option<PathBuf>,
@@ -471,11 +470,11 @@ pub(crate) fn resume(
     };
     let cell = OnceLock::new();
     let result = match dispatcher {
-        None => py.detach(|| bitrock::pipeline::resume(&path, &continuation, Scoring::Here, &mut observer)),
+        None => py.detach(|| bitrock::run::abc::resume(&path, &continuation, Scoring::Here, &mut observer)),
         Some(dispatcher) => {
             let mut make = remote_on(&cell, dispatcher, parallelism);
             let mut workers = |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement);
-            py.detach(|| bitrock::pipeline::resume(&path, &continuation, Scoring::Workers(&mut workers), &mut observer))
+            py.detach(|| bitrock::run::abc::resume(&path, &continuation, Scoring::Workers(&mut workers), &mut observer))
         }
     };
     finish_run(py, result, observer, cell, Some(path))
@@ -486,7 +485,7 @@ pub(crate) fn resume(
 pub(crate) fn open_run(py: Python<'_>, path: PathBuf) -> PyResult<Run> {
     check(py, run::dir::refuse_unfinished_evidence(&path))?;
     let summary = as_arguments(&check(py, read_summary(&path))?);
-    let store = check(py, run::Store::open(&path).and_then(|s| s.load()))?;
+    let store = check(py, run::abc::Store::open(&path).and_then(|s| s.load()))?;
     Ok(Run {
         summary,
         path: Some(path),
@@ -513,7 +512,7 @@ pub(crate) fn read_summary(dir: &Path) -> bitrock::Result<String> {
                 ),
             })
         }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound && run::Store::open(dir).is_ok() => Err(Error::Data {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && run::abc::Store::open(dir).is_ok() => Err(Error::Data {
             path: dir.to_path_buf(),
             message:
                 "the run was stopped before it finished (it has no run.json yet): continue it with `bitrock.resume`"

@@ -25,7 +25,7 @@ pub(crate) fn check_selection(
     dispatcher: Option<Py<PyAny>>,
     parallelism: usize,
 ) -> PyResult<String> {
-    use bitrock::selection::{self, CheckOptions, CheckedRun};
+    use bitrock::run::selection::{self, CheckOptions, CheckedRun};
     let defaults = CheckOptions::default();
     let options = CheckOptions {
         replicates: kwarg(options, "replicates")?.unwrap_or(defaults.replicates),
@@ -73,7 +73,7 @@ pub(crate) fn check_selection(
         let checked = match (run, kept) {
             (Some(run), _) => {
                 let checked = CheckedRun::open(&run)?;
-                notes.extend(bitrock::run::Store::open(&run)?.early_end()?);
+                notes.extend(bitrock::run::abc::Store::open(&run)?.early_end()?);
                 checked
             }
             (None, Some((config, stored))) => CheckedRun::in_memory(config, stored)?,
@@ -97,12 +97,12 @@ pub(crate) fn check_selection(
     serde_json::to_string(&check).map_err(|e| to_py(py, Error::Numerical(e.to_string())))
 }
 
-/// The check of the evidence directory `dir` ([`bitrock::pipeline::evidence::dir::check_dir`]),
+/// The check of the evidence directory `dir` ([`bitrock::run::evidence::dir::check_dir`]),
 /// as JSON.
 fn check_evidence(
     py: Python<'_>,
     dir: &std::path::Path,
-    options: &bitrock::selection::CheckOptions,
+    options: &bitrock::run::selection::CheckOptions,
     report: &(dyn Fn(usize, usize) + Sync),
     raised: &std::sync::Mutex<Option<PyErr>>,
     note: Option<Py<PyAny>>,
@@ -127,7 +127,7 @@ fn check_evidence(
     let transport = workers.transport();
     let checked = py.detach(|| {
         let mut make = transport.as_ref().map(crate::evidence::make_workers);
-        bitrock::pipeline::evidence::dir::check_dir(
+        bitrock::run::evidence::dir::check_dir(
             dir,
             options.replicates,
             options.backend,

@@ -2,7 +2,7 @@
 
 use crate::errors::*;
 use bitrock::error::Error;
-use bitrock::pipeline::stability::Structure;
+use bitrock::run::stability::Structure;
 use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped};
 use bitrock::units::TorqueUnit;
 use numpy::{PyArray1, PyArrayMethods};
@@ -58,7 +58,7 @@ pub(crate) fn stability<'py>(
     options: &Bound<'py, PyDict>,
     note: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use bitrock::pipeline::stability::{self as job, MapSource, StabilityJob};
+    use bitrock::run::stability::{self as job, MapSource, StabilityJob};
     use bitrock::stability::map;
     let posterior: Option<String> = kwarg(options, "posterior")?;
     let in_memory: Option<Py<crate::run::Run>> = kwarg(options, "run_in_memory")?;
@@ -164,15 +164,15 @@ pub(crate) fn stability<'py>(
     }
     // A string the simulator cannot hold is refused where the simulated maps are asked for;
     // the record's advice then says only what the linear maps can.
-    let chain = bitrock::pipeline::strings::chain(structure, &lumped, &fe);
+    let chain = bitrock::run::strings::chain(structure, &lumped, &fe);
     let given_w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map(|kn| kn * 1000.0);
     let record_bit = maps.record_bit.or(memory_bit);
     let record_w_ref_n = record_bit.map(|seen| {
         let scaled = given_w_ref_n.or(maps.run_w_ref_n).or(memory_w_ref_n);
-        bitrock::pipeline::advice::params_w_ref_n(scaled, &seen, job.w_ref_n)
+        bitrock::run::advice::params_w_ref_n(scaled, &seen, job.w_ref_n)
     });
     if let (Some(seen), Some(w_ref_n)) = (&record_bit, record_w_ref_n) {
-        use bitrock::pipeline::advice::Adviser;
+        use bitrock::run::advice::Adviser;
         let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), job.backend);
         let advice = py.detach(|| adviser.advise_record(&maps.inputs, w_ref_n, seen));
         out.set_item(
@@ -183,7 +183,7 @@ pub(crate) fn stability<'py>(
     if kwarg::<bool>(options, "simulate")?.unwrap_or(false) {
         let record_at = record_bit
             .zip(record_w_ref_n)
-            .map(|(seen, w_ref_n)| (bitrock::pipeline::advice::record_point(&seen, w_ref_n), w_ref_n));
+            .map(|(seen, w_ref_n)| (bitrock::run::advice::record_point(&seen, w_ref_n), w_ref_n));
         simulated(
             py,
             options,
@@ -255,14 +255,14 @@ fn posterior_particles(py: Python<'_>, document: &str) -> PyResult<Vec<bitrock::
 fn simulated<'py>(
     py: Python<'py>,
     options: &Bound<'py, PyDict>,
-    job: &bitrock::pipeline::stability::StabilityJob,
+    job: &bitrock::run::stability::StabilityJob,
     inputs: &[bitrock::stability::map::LawSamples],
     chain: bitrock::simulate::strings::Chain,
-    record_at: Option<(bitrock::pipeline::strings::OperatingPoint, f64)>,
+    record_at: Option<(bitrock::run::strings::OperatingPoint, f64)>,
     note: &Option<Py<PyAny>>,
     out: &Bound<'py, PyDict>,
 ) -> PyResult<()> {
-    use bitrock::pipeline::strings::{self, OperatingPoint, SimulatedJob, SimulatedSettings};
+    use bitrock::run::strings::{self, OperatingPoint, SimulatedJob, SimulatedSettings};
     let axis = |key: &str, default: &str| axis(py, options, key, default);
     let (at, w_ref_n) = match (kwarg::<f64>(options, "at_rpm")?, kwarg::<f64>(options, "at_kn")?) {
         (Some(omega_rpm), Some(wob_kn)) => (Some(OperatingPoint { omega_rpm, wob_kn }), job.w_ref_n),

@@ -40,8 +40,8 @@ pub(crate) fn simulate_strings<'py>(
         return Err(to_py(py, Error::setting("params", message)));
     }
     let (structure, lumped, fe) = crate::stability::structure_options(py, options)?;
-    let chain = check(py, bitrock::pipeline::strings::chain(structure, &lumped, &fe))?;
-    let dt_s = kwarg(options, "dt_s")?.unwrap_or(bitrock::pipeline::strings::DEFAULT_DT_S);
+    let chain = check(py, bitrock::run::strings::chain(structure, &lumped, &fe))?;
+    let dt_s = kwarg(options, "dt_s")?.unwrap_or(bitrock::run::strings::DEFAULT_DT_S);
     check(py, chain.check_step(dt_s))?;
     let schedule = check(
         py,
@@ -53,7 +53,7 @@ pub(crate) fn simulate_strings<'py>(
         ),
     )?;
     let w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map_or(bitrock::laws::PAPER_W_REF_N, |kn| kn * 1000.0);
-    let kick = kwarg(options, "kick")?.unwrap_or(bitrock::pipeline::strings::DEFAULT_KICK);
+    let kick = kwarg(options, "kick")?.unwrap_or(bitrock::run::strings::DEFAULT_KICK);
     let from_rest = match kwarg::<String>(options, "start")?.as_deref() {
         None | Some("steady") => false,
         Some("rest") => true,

@@ -5,7 +5,7 @@ use crate::errors::*;
 use crate::record::data_options;
 use crate::run::PyObserver;
 use bitrock::error::Error;
-use bitrock::pipeline::stability::Structure;
+use bitrock::run::stability::Structure;
 use bitrock::watch::source::{Rows, Source};
 use bitrock::watch::{FollowOptions, WatchSettings};
 use pyo3::prelude::*;
@@ -34,15 +34,15 @@ pub(crate) fn watch(
     // The finite-element string's critical bit damping is a bisection: off Python's lock.
     let criterion = check(
         py,
-        py.detach(|| bitrock::pipeline::stability::criterion(structure, lumped, &fe)),
+        py.detach(|| bitrock::run::stability::criterion(structure, lumped, &fe)),
     )?;
     // A stick-slipping window's way out on the finite-element string, where it can be simulated.
     let fe_chain = match structure {
-        Structure::Fe => bitrock::pipeline::strings::chain(structure, &lumped, &fe).ok(),
+        Structure::Fe => bitrock::run::strings::chain(structure, &lumped, &fe).ok(),
         Structure::Lumped => None,
     };
     let abc: bool = kwarg(options, "abc")?.unwrap_or(false);
-    let sampler: Option<bitrock::run::Sampler> = named(py, "sampler", kwarg(options, "sampler")?)?;
+    let sampler: Option<bitrock::run::abc::Sampler> = named(py, "sampler", kwarg(options, "sampler")?)?;
     let delta: Option<f64> = kwarg(options, "delta")?;
     let eps_min: Option<f64> = kwarg(options, "eps_min")?;
     let particles: Option<usize> = kwarg(options, "particles")?;

@@ -5,7 +5,7 @@ use super::fits::{Envelopes, envelope_panel};
 use super::probabilities::FinalProbabilities;
 use super::*;
 use crate::abc::Particle;
-use crate::pipeline::evidence::dir::StoredSamples;
+use crate::run::evidence::dir::StoredSamples;
 
 /// What the evidence's figures are drawn from.
 pub(crate) struct EvidenceFigures<'a> {

@@ -20,7 +20,7 @@ pub(super) fn render_selection_checks(p: &Prepared) -> Result<Vec<Rendered>> {
 }
 
 /// The heat map of a selection check (`bitrock check-selection`), SVG text and PNG bytes.
-pub(crate) fn confusion_figure(check: &crate::selection::SelectionCheck) -> Result<(String, Vec<u8>)> {
+pub(crate) fn confusion_figure(check: &crate::run::selection::SelectionCheck) -> Result<(String, Vec<u8>)> {
     let rendered = render_one(
         "confusion".into(),
         String::new(),
@@ -53,7 +53,7 @@ impl ConfusionMatrix {
          law the ABC run favours; left the mean posterior probability, right the share of replicates in which the \
          law ranks first. A trustworthy selection has its weight on the diagonal.";
 
-    fn new(check: &crate::selection::SelectionCheck, run: &str) -> Self {
+    fn new(check: &crate::run::selection::SelectionCheck, run: &str) -> Self {
         Self {
             title: format!(
                 "Selection check, {run}: {} replicates per law, N = {}",

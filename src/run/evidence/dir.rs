@@ -14,7 +14,7 @@
 //! evidence the uninterrupted job gives, bit for bit; writing the finished evidence removes it.
 
 use super::check::{EvidenceCheck, check, check_replicates, check_size};
-use super::{EvidenceAnalysis, EvidenceJob, Progress, Saving};
+use super::{EvidenceAnalysis, Job, Progress, Saving};
 use crate::abc::Observer;
 use crate::abc::Particle;
 use crate::data::FieldData;
@@ -82,7 +82,7 @@ impl Unfinished {
     /// directory created and locked, the job and record written to `unfinished/`, any
     /// progress of an earlier evidence there dropped. An evidence the directory already holds
     /// stays until this one is written ([`Self::finish`]).
-    pub fn start(dir: &Path, force: bool, job: &EvidenceJob, data: &FieldData) -> Result<Self> {
+    pub fn start(dir: &Path, force: bool, job: &Job, data: &FieldData) -> Result<Self> {
         // Refused before the directory exists (the job checks again when it runs).
         job.sampler.check_memory(&job.laws)?;
         check_out(dir, force)?;
@@ -108,7 +108,7 @@ impl Unfinished {
     /// The evidence under way in `dir`, locked: with its job (its law files' laws registered
     /// in this process), its record and its progress (none yet where it was killed before its
     /// first save).
-    pub fn open(dir: &Path) -> Result<(Self, EvidenceJob, FieldData, Progress)> {
+    pub fn open(dir: &Path) -> Result<(Self, Job, FieldData, Progress)> {
         let unfinished = dir.join(UNFINISHED_DIR);
         if !is_unfinished_evidence_dir(dir) {
             let message = if dir.join(EVIDENCE_JSON).is_file() {
@@ -124,7 +124,7 @@ impl Unfinished {
             path: job_path.clone(),
             message: format!("no '{JOB}' in it"),
         })?;
-        let job: EvidenceJob = serde_json::from_value(stored).map_err(|e| Error::Data {
+        let job: Job = serde_json::from_value(stored).map_err(|e| Error::Data {
             path: job_path.clone(),
             message: format!("its job does not read: {e}"),
         })?;
@@ -156,10 +156,10 @@ impl Unfinished {
     }
 
     /// Computes `job`'s evidence on `data` from `progress` where `scoring` says, saving its
-    /// progress as it goes ([`EvidenceJob::run_saving`]).
+    /// progress as it goes ([`Job::run_saving`]).
     pub fn run(
         &self,
-        job: &EvidenceJob,
+        job: &Job,
         data: &FieldData,
         progress: Progress,
         scoring: Scoring,
@@ -185,7 +185,7 @@ impl Unfinished {
         self,
         document: &serde_json::Value,
         analysis: &EvidenceAnalysis,
-        job: &EvidenceJob,
+        job: &Job,
         data: &FieldData,
     ) -> Result<()> {
         save(&self.dir, true, document, analysis, job, data)
@@ -193,7 +193,7 @@ impl Unfinished {
 }
 
 /// [`JOB_JSON`]'s bytes: the job and the text of each law file whose law it compares.
-fn job_json(job: &EvidenceJob) -> Vec<u8> {
+fn job_json(job: &Job) -> Vec<u8> {
     let law_files: serde_json::Map<String, serde_json::Value> = job
         .laws
         .iter()
@@ -226,7 +226,7 @@ pub fn save(
     force: bool,
     document: &serde_json::Value,
     analysis: &EvidenceAnalysis,
-    job: &EvidenceJob,
+    job: &Job,
     data: &FieldData,
 ) -> Result<()> {
     check_out(dir, force)?;
@@ -248,7 +248,7 @@ pub fn save(
 
 /// The key of [`JOB_JSON`]'s law files: each law file's text by its law's name.
 const LAW_FILES: &str = "law_files";
-/// The key of [`JOB_JSON`]'s job ([`EvidenceJob`]).
+/// The key of [`JOB_JSON`]'s job ([`Job`]).
 const JOB: &str = "job";
 
 fn pretty(document: &serde_json::Value) -> Vec<u8> {
@@ -280,7 +280,7 @@ pub fn check_dir(
         path: path.clone(),
         message,
     };
-    let mut job: EvidenceJob = match stored {
+    let mut job: Job = match stored {
         Some(job) => serde_json::from_value(job).map_err(|e| refuse(format!("its job does not read: {e}")))?,
         None => {
             return Err(refuse(

@@ -119,7 +119,7 @@ pub struct StabilityMaps {
     pub boundaries: Boundaries,
     /// Each law's share of unstable samples, row-major over (Ω, W), in `inputs` order.
     pub grids: Vec<Vec<f64>>,
-    /// How the run ended when not by its own rules ([`run::Store::early_end`]), for a run source.
+    /// How the run ended when not by its own rules ([`run::abc::Store::early_end`]), for a run source.
     pub early_end: Option<String>,
     /// What the run's record showed of its bit (a run source whose store keeps it).
     pub record_bit: Option<crate::data::BitSeen>,
@@ -194,14 +194,17 @@ impl StabilityJob {
         let (inputs, early_end, record_bit, run_w_ref_n) = match &self.source {
             MapSource::Run(dir) => {
                 run::dir::refuse_unfinished_evidence(dir)?;
-                let store = run::Store::open(dir)?;
+                let store = run::abc::Store::open(dir)?;
                 let early_end = store.early_end()?;
                 let stored = store.load_with_last_particles()?;
                 let last = stored.populations.last().ok_or_else(|| Error::Data {
                     path: dir.clone(),
-                    message: format!("the run has no completed population yet; {}", run::resume_advice(dir)),
+                    message: format!(
+                        "the run has no completed population yet; {}",
+                        run::abc::resume_advice(dir)
+                    ),
                 })?;
-                let run_w_ref_n = serde_json::from_value::<run::Config>(stored.setup.config.clone())
+                let run_w_ref_n = serde_json::from_value::<run::abc::Config>(stored.setup.config.clone())
                     .ok()
                     .and_then(|c| c.fit.w_ref_n);
                 (

@@ -1,7 +1,7 @@
 //! The whole ABC job in one call: a loaded record → least-squares fits → prior → populations
 //! → posterior summary → predictive envelopes, optionally written to a run directory
 //! (run.sqlite as each population completes, then run.json, envelopes.csv and data.csv).
-//! `bitrock abc` and `bitrock demo` are two callers of [`AbcJob::run`] and [`resume`]; a
+//! `bitrock abc` and `bitrock demo` are two callers of [`Job::run`] and [`resume`]; a
 //! program that wants what `bitrock abc` does calls them too.
 
 use crate::abc::posterior::{ENVELOPE_LEVEL, Envelope, PosteriorSummary, predictive_envelope, speed_grid, summarize};
@@ -12,15 +12,16 @@ use crate::error::{Error, Result};
 use crate::files;
 use crate::prior::PriorFile;
 
-use crate::run::{self, Continuation, Outcome};
+use crate::run::{self, Scoring};
 use std::path::Path;
 
-pub mod advice;
-pub mod evidence;
-pub mod stability;
-pub mod strings;
+pub mod config;
+pub mod populations;
+pub mod store;
 
-pub use stability::{MapSource, StabilityJob, StabilityMaps};
+pub use config::{Config, Continuation, DEFAULT_PRIOR_K, PriorRuleName, Sampler, SamplerConfig, Settings};
+pub use populations::{Outcome, Start, resume_advice, save, start};
+pub use store::{Setup, State, Store, Stored};
 
 /// Speeds of the predictive envelopes, evenly spaced over the record's range.
 const ENVELOPE_SPEEDS: usize = 200;
@@ -33,9 +34,9 @@ pub const MIN_PARTICLES_FOR_PROBABILITIES: usize = 100;
 /// An ABC job: what defines the run and what to summarise. [`Default`] is `bitrock abc`'s
 /// defaults, in memory (no run directory).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct AbcJob {
+pub struct Job {
     /// Laws, fits, prior width, seed, backend and sampler (stored with the run).
-    pub config: run::Config,
+    pub config: Config,
     /// Population to summarise (statistics, MAP, envelopes); `None`: the last.
     pub summary_population: Option<usize>,
     /// The run directory to write; `None` keeps the run in memory.
@@ -53,7 +54,7 @@ pub struct Analysis {
     pub envelopes: Vec<Envelope>,
 }
 
-impl AbcJob {
+impl Job {
     /// Refuses, naming the setting, a configuration that cannot run, and a run directory that
     /// would be overwritten without `replace`, before any work.
     pub fn validate(&self) -> Result<()> {
@@ -69,21 +70,21 @@ impl AbcJob {
     /// `scoring` says, reporting its progress and what the user should know, such as a
     /// fallback to the CPU, to `observer`), summarises, and writes the run directory when there
     /// is one. Nothing is written when something is refused. Workers elsewhere
-    /// ([`run::Scoring::Workers`]) give the result scoring here gives.
-    pub fn run(&self, data: FieldData, scoring: run::Scoring, observer: &mut dyn Observer) -> Result<Analysis> {
+    /// ([`Scoring::Workers`]) give the result scoring here gives.
+    pub fn run(&self, data: FieldData, scoring: Scoring, observer: &mut dyn Observer) -> Result<Analysis> {
         self.config.validate()?;
         self.config.check_summary_population(self.summary_population)?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
         if let Some(out) = &self.out {
             run::dir::check_new(out, Some(&data.source))?;
         }
-        let how = run::Start {
+        let how = Start {
             dir: self.out.as_ref(),
             prior_file: prior_file.as_ref(),
             fits: None,
             scoring,
         };
-        let outcome = run::start(data, self.config.clone(), how, observer)?;
+        let outcome = start(data, self.config.clone(), how, observer)?;
         let dir = self.out.as_ref().map(|out| out.path.as_path());
         let mut analysis = Analysis::new(outcome, self.summary_population, dir)?;
         if let Some(dir) = dir {
@@ -94,12 +95,12 @@ impl AbcJob {
     }
 }
 
-/// Continues the run in `dir` ([`run::resume`], scored where `scoring` says), then summarises
+/// Continues the run in `dir` ([`populations::resume`], scored where `scoring` says), then summarises
 /// population `more.summary_population` (default: the last) and rewrites the directory's
 /// summary files. A resume that adds no population changes nothing on disk (the summary is
 /// only returned).
-pub fn resume(dir: &Path, more: &Continuation, scoring: run::Scoring, observer: &mut dyn Observer) -> Result<Analysis> {
-    let outcome = run::resume(dir, more, scoring, observer)?;
+pub fn resume(dir: &Path, more: &Continuation, scoring: Scoring, observer: &mut dyn Observer) -> Result<Analysis> {
+    let outcome = populations::resume(dir, more, scoring, observer)?;
     let unchanged = outcome.added == 0 && dir.join(run::dir::RUN_JSON).is_file();
     let mut analysis = Analysis::new(outcome, more.summary_population, Some(dir))?;
     if unchanged {
@@ -135,7 +136,7 @@ impl Analysis {
         let stored;
         let particles = match dir {
             Some(dir) if last.particles.is_empty() && last.record.accepted > 0 => {
-                stored = run::Store::open(dir)?.load_particles(last.record.index)?;
+                stored = Store::open(dir)?.load_particles(last.record.index)?;
                 &stored
             }
             _ => &last.particles,
@@ -151,9 +152,9 @@ impl Analysis {
     }
 
     /// Writes a run made in memory to the run directory `dir`, store and summary files, as
-    /// [`AbcJob::run`] with `out` would have written it ([`run::save`]).
+    /// [`Job::run`] with `out` would have written it ([`save`]).
     pub fn save(&self, dir: &run::Dir) -> Result<()> {
-        let _lock = run::save(dir, &self.outcome)?;
+        let _lock = save(dir, &self.outcome)?;
         self.write_summary(&dir.path)
     }
 
@@ -279,7 +280,7 @@ impl Analysis {
 fn no_population(outcome: &Outcome, dir: Option<&Path>) -> Error {
     let stop = outcome.run.stop.describe();
     Error::Incomplete(match dir {
-        Some(dir) => format!("no population completed: {stop}; {}", run::resume_advice(dir)),
+        Some(dir) => format!("no population completed: {stop}; {}", resume_advice(dir)),
         None => format!("no population completed: {stop}"),
     })
 }

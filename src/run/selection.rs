@@ -5,7 +5,7 @@
 //! the law's posterior in the run's last population (its least-squares estimate when the law
 //! died out), plus noise resampled with replacement from that law's calibration residuals (a
 //! bootstrap that keeps the record's noise level and distribution). Each synthetic record goes
-//! through the run's own pipeline ([`run::start`] with the stored [`run::Config`]: least squares
+//! through the run's own pipeline ([`run::abc::start`] with the stored [`run::abc::Config`]: least squares
 //! of every law, the same prior rule, δ and prior file, the same sampler and stopping rules)
 //! with its own seed, [`replicate_seed`]. Its least-squares fits also start from the run's own
 //! estimates and the generating parameters ([`crate::fit::fit_law_from`]): never worse than
@@ -17,7 +17,7 @@
 //! seed, so they are run `batch` at a time and give the same results for any `batch`, thread
 //! count and order of completion. A batch runs in two phases, each over all its replicates at
 //! once: the synthetic records and their least-squares fits (on the rayon pool), then the
-//! samplers ([`run::start`]), one thread each, whose candidates are scored
+//! samplers ([`run::abc::start`]), one thread each, whose candidates are scored
 //! together: one GPU dispatch, or one rayon pass on the CPU, for the requests of all of them
 //! ([`crate::eval::records`]). The check reports each phase's wall time ([`CheckTiming`]).
 //!
@@ -216,7 +216,7 @@ pub struct SelectionCheck {
     /// resume added populations or changed its settings) is stale ([`SelectionCheck::stale`]).
     /// `None` for checks written before it was recorded.
     #[serde(default)]
-    pub describes: Option<run::State>,
+    pub describes: Option<run::abc::State>,
 }
 
 /// Where the check's wall time went. Every batch first synthesises and fits its replicates'
@@ -274,7 +274,7 @@ impl FitCounts {
 impl SelectionCheck {
     /// Why this check no longer describes the run now in `now`, in a sentence; `None` when it
     /// does. A check that did not record its run's state is said to be of unknown age.
-    pub fn stale(&self, now: &run::State) -> Option<String> {
+    pub fn stale(&self, now: &run::abc::State) -> Option<String> {
         let Some(then) = &self.describes else {
             return Some("this check does not record which populations it describes (written by an older bitrock); run `bitrock check-selection` again".into());
         };
@@ -343,8 +343,8 @@ pub fn replicate_seed(run_seed: u64, law_slot: usize, replicate: usize) -> u64 {
 pub struct CheckedRun {
     /// The run directory; `None` for a run kept in memory, whose check is returned, not written.
     pub dir: Option<PathBuf>,
-    pub config: run::Config,
-    pub stored: run::Stored,
+    pub config: run::abc::Config,
+    pub stored: run::abc::Stored,
     prior_file: Option<PriorFile>,
     /// The run directory's lock, held from [`CheckedRun::open`] until the check is written:
     /// the run cannot be continued or replaced under the check.
@@ -356,16 +356,17 @@ impl CheckedRun {
     /// population (no law has a posterior to draw from), and a run whose every law lacks both
     /// particles and a finite least-squares fit.
     pub fn open(dir: &Path) -> Result<Self> {
-        let stored = run::Store::open(dir)?.load_with_last_particles()?;
+        let stored = run::abc::Store::open(dir)?.load_with_last_particles()?;
         // Refused before any work: the check replaces only a check of its own.
         let selection = dir.join(SELECTION_DIR);
         files::refuse_foreign(&selection, "RUN_DIR", &|rel, is_dir| {
             crate::run::dir::owns_unchanged(crate::run::dir::Owned::Selection, &selection, rel, is_dir)
         })?;
-        let config: run::Config = serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
-            path: dir.to_path_buf(),
-            message: format!("the stored configuration is not one this bitrock reads: {e}"),
-        })?;
+        let config: run::abc::Config =
+            serde_json::from_value(stored.setup.config.clone()).map_err(|e| Error::Data {
+                path: dir.to_path_buf(),
+                message: format!("the stored configuration is not one this bitrock reads: {e}"),
+            })?;
         let prior_file = match &config.prior_file {
             Some(path) => Some(stored_prior_file(dir, path, &stored, &config)?),
             None => None,
@@ -377,7 +378,7 @@ impl CheckedRun {
     /// A run kept in memory (its configuration, and its set-up and populations as a store
     /// would hold them), checked as [`CheckedRun::open`] checks a stored one; its check is
     /// returned, not written.
-    pub fn in_memory(config: run::Config, stored: run::Stored) -> Result<Self> {
+    pub fn in_memory(config: run::abc::Config, stored: run::abc::Stored) -> Result<Self> {
         let prior_file = config
             .prior_file
             .as_ref()
@@ -388,8 +389,8 @@ impl CheckedRun {
     /// The refusals shared by a stored run and one in memory.
     fn checked(
         dir: Option<PathBuf>,
-        config: run::Config,
-        stored: run::Stored,
+        config: run::abc::Config,
+        stored: run::abc::Stored,
         prior_file: Option<PriorFile>,
         lock: Option<files::DirLock>,
     ) -> Result<Self> {
@@ -427,7 +428,12 @@ impl CheckedRun {
 /// never read from `path`, where it may have moved or changed since. Accepted once it rebuilds
 /// the run's own prior from the run's own fits exactly (boxes, rules and law thresholds); a
 /// store that does not record which boxes the file gave (schema 1) cannot, and is refused.
-fn stored_prior_file(dir: &Path, path: &Path, stored: &run::Stored, config: &run::Config) -> Result<PriorFile> {
+fn stored_prior_file(
+    dir: &Path,
+    path: &Path,
+    stored: &run::abc::Stored,
+    config: &run::abc::Config,
+) -> Result<PriorFile> {
     let prior = &stored.setup.prior;
     let unit = stored.setup.data.torque_unit.newton_metres();
     let file = PriorFile::of_prior(prior, unit);
@@ -502,7 +508,7 @@ pub fn check(
         let mut batch_notes = Vec::new();
         let records = RecordBatch::new(
             options.backend.unwrap_or(config.backend),
-            run::shape_wish(config),
+            run::scoring::shape_wish(config),
             &problem,
             &mut |line| batch_notes.push(line),
         )?;
@@ -714,7 +720,7 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
     let mut evaluator = |problem, _: &mut dyn FnMut(String)| -> Result<Box<dyn crate::eval::Evaluator>> {
         Ok(Box::new(seat.evaluator(problem)))
     };
-    let how = run::Start {
+    let how = run::abc::Start {
         dir: None,
         prior_file: run.prior_file.as_ref(),
         fits: Some(fits),
@@ -723,7 +729,7 @@ fn sample_replicate(run: &CheckedRun, options: &CheckOptions, fitted: Fitted, se
     // Notes about the synthetic record's own floor differ per replicate and are not repeated;
     // the backend's come from the batch.
     let outcome =
-        run::start(data, replicate_config, how, &mut Silent).map_err(|e| in_replicate(law, job.replicate, e))?;
+        run::abc::start(data, replicate_config, how, &mut Silent).map_err(|e| in_replicate(law, job.replicate, e))?;
     let last = outcome.run.populations.last().ok_or_else(|| {
         Error::Incomplete(format!(
             "{law} replicate {}: no population completed ({})",

@@ -62,7 +62,7 @@ impl EvidencePrior {
 /// An evidence job: what to compare, over which prior, on which backend. An evidence directory
 /// keeps it (without its warm start), to compute the evidence again for its check.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EvidenceJob {
+pub struct Job {
     pub laws: Vec<Law>,
     pub fit: FitOptions,
     pub prior: EvidencePrior,
@@ -87,7 +87,7 @@ pub struct EvidenceJob {
     pub separations: bool,
 }
 
-impl Default for EvidenceJob {
+impl Default for Job {
     fn default() -> Self {
         Self {
             laws: Vec::new(),
@@ -158,7 +158,7 @@ pub fn particles_by_worth(particles: usize, before: &[(Law, f64)], fits: &[LawFi
 /// An evidence under way: the samplers' state at the end of each part done (a torque scaling
 /// under a noise model, in the order the job computes them) and the last one saved of the part
 /// in progress ([`evidence::Checkpoints`]). An evidence directory keeps it while the evidence
-/// is computed, and a resumed evidence ([`EvidenceJob::run_saving`]) goes on from it to the
+/// is computed, and a resumed evidence ([`Job::run_saving`]) goes on from it to the
 /// evidence the uninterrupted job gives, bit for bit.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Progress {
@@ -250,7 +250,7 @@ pub struct EvidenceAnalysis {
     /// The boxes and law weights integrated over.
     pub prior: Prior,
     /// The fit options of the reported evidence: the job's, or with each torque scaled by
-    /// WOB / W_ref where the data chose that ([`EvidenceJob::noise`]); the posterior's torque
+    /// WOB / W_ref where the data chose that ([`Job::noise`]); the posterior's torque
     /// parameters are for W = W_ref then.
     pub fit: FitOptions,
     pub evidence: Evidence,
@@ -259,7 +259,7 @@ pub struct EvidenceAnalysis {
     /// The lag-1 autocorrelation of each fit's residuals in time order, in `fits` order
     /// ([`separation::residual_lag1`]): the check on the i.i.d. noise model.
     pub residual_lag1: Vec<f64>,
-    /// Every noise model compared, or the one named ([`EvidenceJob::noise`]); `evidence` is
+    /// Every noise model compared, or the one named ([`Job::noise`]); `evidence` is
     /// the one of the largest probability.
     pub noise_models: Vec<NoiseEvidence>,
 }
@@ -374,8 +374,8 @@ impl EvidenceAnalysis {
     /// The advice at `data`'s own operating point from the posterior, on the paper's 1-DOF
     /// string (its way out of stick-slip simulated on `backend`); `None` where the record
     /// keeps no account of its bit.
-    pub fn record_advice(&self, data: &FieldData, backend: Backend) -> Option<crate::pipeline::advice::Advice> {
-        use crate::pipeline::advice::{Adviser, params_w_ref_n};
+    pub fn record_advice(&self, data: &FieldData, backend: Backend) -> Option<crate::run::advice::Advice> {
+        use crate::run::advice::{Adviser, params_w_ref_n};
         let seen = data.bit?;
         let lumped = crate::stability::lumped::Lumped::default();
         let adviser = Adviser::for_record(
@@ -384,7 +384,7 @@ impl EvidenceAnalysis {
             backend,
         );
         let inputs =
-            crate::abc::posterior::map_inputs_of(&self.evidence.particles(), crate::pipeline::advice::ADVICE_SAMPLES);
+            crate::abc::posterior::map_inputs_of(&self.evidence.particles(), crate::run::advice::ADVICE_SAMPLES);
         let w_ref_n = params_w_ref_n(self.fit.w_ref_n, &seen, crate::laws::PAPER_W_REF_N);
         Some(adviser.advise_record(&inputs, w_ref_n, &seen))
     }
@@ -395,7 +395,7 @@ impl EvidenceAnalysis {
     pub fn with_advice(
         mut document: serde_json::Value,
         data: &FieldData,
-        advice: Option<&crate::pipeline::advice::Advice>,
+        advice: Option<&crate::run::advice::Advice>,
     ) -> serde_json::Value {
         if let Some(advice) = advice {
             document["record_bit"] = serde_json::to_value(data.bit).expect("a record's bit serialises");
@@ -455,7 +455,7 @@ impl EvidenceAnalysis {
     }
 }
 
-impl EvidenceJob {
+impl Job {
     /// Fits, builds the prior and scores the tempered samplers on `data`'s calibration
     /// samples where `scoring` says (here, on the job's backend, or on a pool of workers: the
     /// same evidence); a fallback to the CPU is said through `observer`.

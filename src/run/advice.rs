@@ -9,7 +9,7 @@
 //!   criterion says when steady rotation *starts* to stick-slip, not what gets a stick-slipping
 //!   bit out (the cycle persists far above its boundary), so the advice becomes the nearest
 //!   higher speed and lighter weight that end the cycle *from the state the bit is in*, by
-//!   simulated strings ([`crate::pipeline::strings`]), each with P(it ends).
+//!   simulated strings ([`crate::run::strings`]), each with P(it ends).
 
 use super::strings::{
     OperatingPoint, Peaks, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn, thinned,

@@ -6,7 +6,7 @@
 //! noise resampled with replacement from the law's least-squares residuals (the record's noise
 //! level and distribution). Each synthetic record is fitted (starting from the record's own
 //! estimates and the generating parameters) and its evidence computed over the *same* boxes
-//! as the record's, with its own seed ([`crate::selection::replicate_seed`]).
+//! as the record's, with its own seed ([`crate::run::selection::replicate_seed`]).
 //!
 //! A replicate's answer is the law of the largest posterior probability, and it is *decided*
 //! when it beats every other law by at least positive odds beyond twice their error *and* by
@@ -19,7 +19,7 @@
 //! the volume of its extra parameters). A trustworthy evidence is decided and right where the laws differ on the
 //! record, and undecided (never decided and wrong) where they do not.
 
-use super::{EvidenceAnalysis, EvidenceJob};
+use super::{EvidenceAnalysis, Job};
 use crate::abc::Observer;
 use crate::abc::evidence::{NoiseModel, Strength};
 use crate::data::FieldData;
@@ -27,8 +27,8 @@ use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::fit::residuals;
 use crate::laws::Law;
+use crate::run::selection::{draw_by_weight, replicate_seed, synthesize};
 use crate::run::{Placement, Scoring};
-use crate::selection::{draw_by_weight, replicate_seed, synthesize};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::{Deserialize, Serialize};
@@ -104,7 +104,7 @@ pub fn check_replicates(replicates: usize) -> Result<()> {
 /// Refuses, naming `check`, a check of `replicates` records per law that could not finish in a
 /// day (each record gets the whole evidence `job` on `data`'s calibration samples: at least
 /// two scored batches of every island of every law), before any work.
-pub fn check_size(replicates: usize, job: &EvidenceJob, data: &FieldData) -> Result<()> {
+pub fn check_size(replicates: usize, job: &Job, data: &FieldData) -> Result<()> {
     check_replicates(replicates)?;
     let sampler = &job.sampler;
     let starts = if sampler.start == crate::abc::evidence::Start::Both {
@@ -128,7 +128,7 @@ pub fn check_size(replicates: usize, job: &EvidenceJob, data: &FieldData) -> Res
 /// `scoring` says (the same check here or on a pool of workers). `progress(done, total)` hears
 /// each finished replicate; `observer` is asked whether to stop between and within replicates.
 pub fn check(
-    job: &EvidenceJob,
+    job: &Job,
     data: &FieldData,
     analysis: &EvidenceAnalysis,
     replicates: usize,
@@ -175,7 +175,7 @@ pub fn check(
 /// its samplers scored.
 #[allow(clippy::too_many_arguments)]
 fn replicate_of(
-    job: &EvidenceJob,
+    job: &Job,
     data: &FieldData,
     analysis: &EvidenceAnalysis,
     slot: usize,
@@ -232,7 +232,7 @@ fn replicate_of(
         backend,
         ..job.placement()
     };
-    let problem = EvidenceJob::problem(&synthetic, &basis, seed);
+    let problem = Job::problem(&synthetic, &basis, seed);
     let workers = scoring.workers(problem, &placement, &mut |line| observer.note(line))?;
     let outcome = job
         .sample(basis, workers.as_ref(), noise_model, None, observer)

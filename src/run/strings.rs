@@ -16,7 +16,7 @@
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::eval::strings::Ran;
-use crate::pipeline::stability::Structure;
+use crate::run::stability::Structure;
 use crate::simulate::strings::{Chain, MAX_NODES, Schedule, StringJob, StringState, Summary, padded, steady_start};
 use crate::stability::fe::DrillStringSettings;
 use crate::stability::lumped::Lumped;

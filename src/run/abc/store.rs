@@ -176,7 +176,7 @@ struct DataMeta {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(from = "SetupParts")]
 pub struct Setup {
-    /// The run's configuration as JSON (see `crate::run::Config`), kept opaque here.
+    /// The run's configuration as JSON (see `crate::run::abc::Config`), kept opaque here.
     pub config: serde_json::Value,
     pub data: FieldData,
     pub fits: Vec<LawFit>,
