@@ -14,7 +14,7 @@ use super::view::View;
 use super::{Carried, Update, WatchSettings};
 use crate::error::{Error, Result};
 use crate::files::DirLock;
-use crate::run::abc::store::{json_error, sql_error};
+use crate::run::sqlite::{self, json_error, sql_error};
 use crate::stability::map::Criterion;
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
@@ -187,22 +187,16 @@ impl WatchStore {
         let path = dir.join(WATCH_STORE_FILE);
         // Made whole beside its place, then moved there: a directory holds a watch store
         // with its settings or none.
-        let temp = crate::files::TempFile::beside(&path, "out")?;
-        {
-            let err = sql_error(&path);
-            let mut conn = Connection::open(temp.path()).map_err(&err)?;
-            let tx = conn.transaction().map_err(&err)?;
-            tx.execute_batch(SCHEMA).map_err(&err)?;
+        sqlite::create_whole(&path, SCHEMA, |tx| {
             for (key, value) in [
                 ("schema_version", WATCH_SCHEMA_VERSION.to_string()),
                 ("watch", serde_json::to_string(meta).map_err(json_error(&path))?),
             ] {
                 tx.execute("INSERT INTO meta (key, value) VALUES (?1, ?2)", params![key, value])
-                    .map_err(&err)?;
+                    .map_err(sql_error(&path))?;
             }
-            tx.commit().map_err(&err)?;
-        }
-        temp.commit(&path)?;
+            Ok(())
+        })?;
         Self::open_locked(dir, lock)
     }
 
@@ -292,42 +286,22 @@ impl Reader {
     /// Opens the store of the watch directory `dir`, refusing what is not one.
     pub fn open(dir: &Path) -> Result<Self> {
         let path = dir.join(WATCH_STORE_FILE);
-        let not_a_watch = |why: String| Error::Data {
+        let kind = sqlite::Kind {
+            file: WATCH_STORE_FILE,
+            what: "watch",
+            made_by: "a directory written by `bitrock watch --out` or by `bitrock.watch(..., out=...)` in Python",
+            versions: WATCH_SCHEMA_VERSION..=WATCH_SCHEMA_VERSION,
+        };
+        let (conn, _) = sqlite::open(dir, &kind, rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)?;
+        let missing = || Error::Data {
             path: dir.to_path_buf(),
-            message: format!(
-                "not a bitrock watch directory ({why}); give a directory written by `bitrock watch --out` or by `bitrock.watch(..., out=...)` in Python"
-            ),
+            message: format!("not a bitrock watch directory ({WATCH_STORE_FILE} does not say what it watched)"),
         };
-        if !dir.is_dir() {
-            return Err(not_a_watch("no such directory".into()));
-        }
-        if !path.is_file() {
-            return Err(not_a_watch(format!("it has no {WATCH_STORE_FILE}")));
-        }
-        let conn = Connection::open_with_flags(&path, rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
-            .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE}: {e}")))?;
-        // A watch writing its window holds the store for a moment.
-        conn.busy_timeout(std::time::Duration::from_secs(10))
+        let text: Option<String> = conn
+            .query_row("SELECT value FROM meta WHERE key = 'watch'", [], |r| r.get(0))
+            .optional()
             .map_err(sql_error(&path))?;
-        let meta_value = |key: &str| -> Result<Option<String>> {
-            conn.query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
-                .optional()
-                .map_err(|e| not_a_watch(format!("{WATCH_STORE_FILE} is not a bitrock watch store: {e}")))
-        };
-        match meta_value("schema_version")?.as_deref().map(str::parse::<i64>) {
-            Some(Ok(WATCH_SCHEMA_VERSION)) => {}
-            Some(Ok(v)) => {
-                return Err(not_a_watch(format!(
-                    "{WATCH_STORE_FILE} has schema version {v}; this bitrock reads version {WATCH_SCHEMA_VERSION}"
-                )));
-            }
-            _ => return Err(not_a_watch(format!("{WATCH_STORE_FILE} has no schema version"))),
-        }
-        let meta: WatchMeta = serde_json::from_str(
-            &meta_value("watch")?
-                .ok_or_else(|| not_a_watch(format!("{WATCH_STORE_FILE} does not say what it watched")))?,
-        )
-        .map_err(json_error(&path))?;
+        let meta: WatchMeta = serde_json::from_str(&text.ok_or_else(missing)?).map_err(json_error(&path))?;
         Ok(Self { conn, path, meta })
     }
 

@@ -23,10 +23,10 @@
 use crate::abc::{Particle, Population, PopulationRecord};
 use crate::data::{ColumnsUsed, FieldData, Samples};
 use crate::error::{Error, Result};
-use crate::files;
 use crate::fit::{LawFit, RecordScales};
 use crate::laws::Law;
 use crate::prior::{BoxRule, LawBox, Prior};
+use crate::run::sqlite::{self, json_error, sql_error};
 use crate::units::{SpeedUnit, TorqueUnit};
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::{Deserialize, Serialize};
@@ -244,22 +244,6 @@ pub struct Store {
     schema_version: i64,
 }
 
-/// A SQLite error of the store at `path` (a run's or a watch's).
-pub(crate) fn sql_error(path: &Path) -> impl Fn(rusqlite::Error) -> Error + '_ {
-    move |e| Error::Store {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    }
-}
-
-/// A JSON document of the store at `path` that cannot be read.
-pub(crate) fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> Error + '_ {
-    move |e| Error::Store {
-        path: path.to_path_buf(),
-        message: format!("malformed JSON in the store: {e}"),
-    }
-}
-
 /// How a store lays out particles ([`Store::layout`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Layout {
@@ -314,79 +298,75 @@ impl Store {
                 message: "a run store already exists here".into(),
             });
         }
-        let temp = files::TempFile::beside(&path, "out")?;
         let err = sql_error(&path);
-        let mut conn = Connection::open(temp.path()).map_err(&err)?;
-        conn.pragma_update(None, "journal_mode", "OFF").map_err(&err)?;
-        let tx = conn.transaction().map_err(&err)?;
-        tx.execute_batch(SCHEMA).map_err(&err)?;
-        // The law files' laws of the run: their sources are stored whole, so that the run
-        // never depends on the files again.
-        let file_laws = crate::laws::file::among(setup.prior.laws());
-        for law in &file_laws {
-            let source = law.file().map(|f| f.source.as_str());
-            tx.execute(
-                "INSERT INTO law_files (name, source) VALUES (?1, ?2)",
-                params![law.name(), source],
-            )
-            .map_err(&err)?;
-        }
-        tx.execute_batch(&particles_view(&file_laws)).map_err(&err)?;
-        let meta = [
-            ("schema_version", SCHEMA_VERSION.to_string()),
-            ("bitrock_version", env!("CARGO_PKG_VERSION").to_string()),
-            ("config", setup.config.to_string()),
-            (
-                "data",
-                serde_json::to_string(&data_meta(&setup.data)).map_err(json_error(&path))?,
-            ),
-        ];
-        for (key, value) in meta {
-            tx.execute("INSERT INTO meta (key, value) VALUES (?1, ?2)", params![key, value])
-                .map_err(&err)?;
-        }
-        {
-            let mut insert = tx
-                .prepare(
-                    "INSERT INTO samples (split, position, time_s, speed_rad_s, torque_nm, wob_n)
-                     VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+        sqlite::create_whole(&path, SCHEMA, |tx| {
+            // The law files' laws of the run: their sources are stored whole, so that the run
+            // never depends on the files again.
+            let file_laws = crate::laws::file::among(setup.prior.laws());
+            for law in &file_laws {
+                let source = law.file().map(|f| f.source.as_str());
+                tx.execute(
+                    "INSERT INTO law_files (name, source) VALUES (?1, ?2)",
+                    params![law.name(), source],
                 )
                 .map_err(&err)?;
-            for (split, s) in [
-                ("calibration", &setup.data.calibration),
-                ("validation", &setup.data.validation),
-            ] {
-                for i in 0..s.len() {
-                    insert
-                        .execute(params![
-                            split,
-                            i as i64,
-                            s.time_s.as_ref().map(|t| t[i]),
-                            s.speed_rad_s[i],
-                            s.torque_nm[i],
-                            s.wob_n.as_ref().map(|w| w[i]),
-                        ])
-                        .map_err(&err)?;
+            }
+            tx.execute_batch(&particles_view(&file_laws)).map_err(&err)?;
+            let meta = [
+                ("schema_version", SCHEMA_VERSION.to_string()),
+                ("bitrock_version", env!("CARGO_PKG_VERSION").to_string()),
+                ("config", setup.config.to_string()),
+                (
+                    "data",
+                    serde_json::to_string(&data_meta(&setup.data)).map_err(json_error(&path))?,
+                ),
+            ];
+            for (key, value) in meta {
+                tx.execute("INSERT INTO meta (key, value) VALUES (?1, ?2)", params![key, value])
+                    .map_err(&err)?;
+            }
+            {
+                let mut insert = tx
+                    .prepare(
+                        "INSERT INTO samples (split, position, time_s, speed_rad_s, torque_nm, wob_n)
+                     VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                    )
+                    .map_err(&err)?;
+                for (split, s) in [
+                    ("calibration", &setup.data.calibration),
+                    ("validation", &setup.data.validation),
+                ] {
+                    for i in 0..s.len() {
+                        insert
+                            .execute(params![
+                                split,
+                                i as i64,
+                                s.time_s.as_ref().map(|t| t[i]),
+                                s.speed_rad_s[i],
+                                s.torque_nm[i],
+                                s.wob_n.as_ref().map(|w| w[i]),
+                            ])
+                            .map_err(&err)?;
+                    }
+                }
+                let mut param = tx
+                    .prepare("INSERT INTO parameters (law, position, name, unit_si) VALUES (?1, ?2, ?3, ?4)")
+                    .map_err(&err)?;
+                for law in Law::ALL.into_iter().chain(file_laws.iter().copied()) {
+                    for (j, spec) in law.params().iter().enumerate() {
+                        param
+                            .execute(params![
+                                law.name(),
+                                j as i64,
+                                view_column(law, spec.name),
+                                spec.unit("N·m")
+                            ])
+                            .map_err(&err)?;
+                    }
                 }
             }
-            let mut param = tx
-                .prepare("INSERT INTO parameters (law, position, name, unit_si) VALUES (?1, ?2, ?3, ?4)")
-                .map_err(&err)?;
-            for law in Law::ALL.into_iter().chain(file_laws.iter().copied()) {
-                for (j, spec) in law.params().iter().enumerate() {
-                    param
-                        .execute(params![
-                            law.name(),
-                            j as i64,
-                            view_column(law, spec.name),
-                            spec.unit("N·m")
-                        ])
-                        .map_err(&err)?;
-                }
-            }
-        }
-        for fit in &setup.fits {
-            tx.execute(
+            for fit in &setup.fits {
+                tx.execute(
                 "INSERT INTO fits (law, rho, validation_rho, condition_number, starts, warnings_json, correlations_json)
                  VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
                 params![
@@ -400,38 +380,37 @@ impl Store {
                 ],
             )
             .map_err(&err)?;
-            for (j, (estimate, std_error)) in fit.params_si.iter().zip(&fit.std_errors_si).enumerate() {
+                for (j, (estimate, std_error)) in fit.params_si.iter().zip(&fit.std_errors_si).enumerate() {
+                    tx.execute(
+                        "INSERT INTO fit_params (law, position, estimate_si, std_error_si) VALUES (?1, ?2, ?3, ?4)",
+                        params![fit.law.name(), j as i64, estimate, std_error],
+                    )
+                    .map_err(&err)?;
+                }
+            }
+            let prior = &setup.prior;
+            for (slot, ((b, probability), threshold)) in prior
+                .boxes
+                .iter()
+                .zip(&prior.weights)
+                .zip(&prior.thresholds)
+                .enumerate()
+            {
                 tx.execute(
-                    "INSERT INTO fit_params (law, position, estimate_si, std_error_si) VALUES (?1, ?2, ?3, ?4)",
-                    params![fit.law.name(), j as i64, estimate, std_error],
+                    "INSERT INTO prior_laws (slot, law, probability, threshold) VALUES (?1, ?2, ?3, ?4)",
+                    params![slot as i64, b.law.name(), probability, *threshold as i64],
                 )
                 .map_err(&err)?;
-            }
-        }
-        let prior = &setup.prior;
-        for (slot, ((b, probability), threshold)) in prior
-            .boxes
-            .iter()
-            .zip(&prior.weights)
-            .zip(&prior.thresholds)
-            .enumerate()
-        {
-            tx.execute(
-                "INSERT INTO prior_laws (slot, law, probability, threshold) VALUES (?1, ?2, ?3, ?4)",
-                params![slot as i64, b.law.name(), probability, *threshold as i64],
-            )
-            .map_err(&err)?;
-            for (j, ((lo, hi), rule)) in b.lower.iter().zip(&b.upper).zip(&prior.rules[slot]).enumerate() {
-                tx.execute(
+                for (j, ((lo, hi), rule)) in b.lower.iter().zip(&b.upper).zip(&prior.rules[slot]).enumerate() {
+                    tx.execute(
                     "INSERT INTO prior_bounds (law, position, lower_si, upper_si, rule) VALUES (?1, ?2, ?3, ?4, ?5)",
                     params![b.law.name(), j as i64, f64::from(*lo), f64::from(*hi), rule.name()],
                 )
                 .map_err(&err)?;
+                }
             }
-        }
-        tx.commit().map_err(&err)?;
-        conn.close().map_err(|(_, e)| err(e))?;
-        temp.commit(&path)?;
+            Ok(())
+        })?;
         let conn = Connection::open(&path).map_err(&err)?;
         drop(err);
         Ok(Self {
@@ -444,40 +423,20 @@ impl Store {
     /// Opens the store of run directory `dir`; a directory without one, or with a store of
     /// another schema, is refused with a message naming it.
     pub fn open(dir: &Path) -> Result<Self> {
-        let path = dir.join(STORE_FILE);
-        let not_a_run = |why: String| Error::Data {
-            path: dir.to_path_buf(),
-            message: format!(
-                "not a bitrock run directory ({why}); give a directory written by `bitrock abc --out` or by `bitrock.abc(..., out=...)` in Python"
-            ),
+        let kind = sqlite::Kind {
+            file: STORE_FILE,
+            what: "run",
+            made_by: "a directory written by `bitrock abc --out` or by `bitrock.abc(..., out=...)` in Python",
+            versions: 1..=SCHEMA_VERSION,
         };
-        if !dir.is_dir() {
-            return Err(not_a_run("no such directory".into()));
-        }
-        if !path.is_file() {
-            return Err(not_a_run(format!("it has no {STORE_FILE}")));
-        }
-        let conn = Connection::open_with_flags(&path, rusqlite::OpenFlags::SQLITE_OPEN_READ_WRITE)
-            .map_err(|e| not_a_run(format!("{STORE_FILE}: {e}")))?;
-        let version: Option<String> = conn
-            .query_row("SELECT value FROM meta WHERE key = 'schema_version'", [], |r| r.get(0))
-            .optional()
-            .map_err(|e| not_a_run(format!("{STORE_FILE} is not a bitrock store: {e}")))?;
-        match version.as_deref().map(str::parse::<i64>) {
-            Some(Ok(v @ 1..=SCHEMA_VERSION)) => {
-                let store = Self {
-                    conn,
-                    path,
-                    schema_version: v,
-                };
-                store.register_law_files()?;
-                Ok(store)
-            }
-            Some(Ok(v)) => Err(not_a_run(format!(
-                "{STORE_FILE} has schema version {v}; this bitrock reads versions 1 to {SCHEMA_VERSION}"
-            ))),
-            _ => Err(not_a_run(format!("{STORE_FILE} has no schema version"))),
-        }
+        let (conn, schema_version) = sqlite::open(dir, &kind, rusqlite::OpenFlags::SQLITE_OPEN_READ_WRITE)?;
+        let store = Self {
+            conn,
+            path: dir.join(STORE_FILE),
+            schema_version,
+        };
+        store.register_law_files()?;
+        Ok(store)
     }
 
     /// Registers the law files' laws the run was made with, from their stored sources, so
