@@ -289,7 +289,7 @@ impl Store {
     /// set-up are written in one transaction into a temporary beside it (no journal: a failed
     /// temporary is discarded), which is renamed to run.sqlite once complete. A kill at any
     /// moment leaves no store or a complete one, and the temporary is removed by the next run
-    /// in `dir` ([`files::remove_stale`]).
+    /// in `dir` ([`crate::files::remove_stale`]).
     pub fn create(dir: &Path, setup: &Setup) -> Result<Self> {
         let path = dir.join(STORE_FILE);
         if path.exists() {
