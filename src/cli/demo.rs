@@ -141,17 +141,13 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         out,
         "\nmodel evidence: tempered SMC per law over physical boxes (no fit involved), i.i.d. and AR(1) residuals, the noise model chosen by its evidence"
     )?;
-    let evidence = run::evidence::Job {
-        laws: defaults.laws.clone(),
-        fit: defaults.fit,
+    let evidence = run::evidence::Settings {
+        particles: (cmd.particles / 50).clamp(20, EvidenceConfig::default().particles),
+        seed: cmd.seed,
         backend: cmd.backend,
-        sampler: EvidenceConfig {
-            particles: (cmd.particles / 50).clamp(20, EvidenceConfig::default().particles),
-            seed: cmd.seed,
-            ..EvidenceConfig::default()
-        },
-        ..run::evidence::Job::default()
+        ..Default::default()
     }
+    .job(defaults.laws.clone(), defaults.fit)?
     .run(&data, Default::default(), &mut RunProgress::new(false))?;
     let report_dir = root.join(REPORT_DIR);
     let report = bitrock::report::write_paper_report(

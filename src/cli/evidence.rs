@@ -3,50 +3,18 @@
 
 use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
 use super::print;
-use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, NoiseModel, Start, describe_starts};
+use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, Start, describe_starts};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
 use bitrock::run;
 use bitrock::run::evidence::{
-    self, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidencePrior, EvidenceWarning,
+    self, Boxes, DEFAULT_PRIOR_SCALE, EvidenceAnalysis, EvidenceCheck, EvidenceWarning, Noise,
 };
-use clap::{Args, ValueEnum};
+use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
-
-/// Which boxes the evidence integrates over.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Boxes {
-    /// From each parameter's physical bound over --prior-scale times the record's scale of its
-    /// unit (largest torque; slowest and fastest speeds): no fit involved.
-    Physical,
-    /// The paper's φ̂(1 ± δ) around the least-squares estimates (--delta): the data used twice.
-    Delta,
-}
-
-/// The noise model of the residuals.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Noise {
-    /// Every model's evidence; the data choose (the largest p(y | model)).
-    Auto,
-    /// Independent Gaussian residuals.
-    Iid,
-    /// AR(1) Gaussian residuals (correlated from one sample to the next), φ integrated out.
-    Ar1,
-}
-
-impl Noise {
-    /// The model named, or `None` for the data's choice.
-    pub fn model(self) -> Option<NoiseModel> {
-        match self {
-            Noise::Auto => None,
-            Noise::Iid => Some(NoiseModel::Iid),
-            Noise::Ar1 => Some(NoiseModel::Ar1),
-        }
-    }
-}
 
 #[derive(Debug, Args)]
 pub struct EvidenceCmd {
@@ -75,8 +43,8 @@ pub struct EvidenceCmd {
     pub noise: Noise,
     /// Where each law's samplers start their tempered path (the evidence is of the boxes
     /// either way).
-    #[arg(long = "start-from", value_enum, default_value_t = EvidenceConfig::default().start, value_name = "START")]
-    pub start: Start,
+    #[arg(long, value_enum, default_value_t = EvidenceConfig::default().start, value_name = "START")]
+    pub start_from: Start,
     /// Particles of each independent sampler (island).
     #[arg(long, default_value_t = EvidenceConfig::default().particles, value_name = "N")]
     pub particles: usize,
@@ -221,33 +189,22 @@ fn start_or_resume(
 
 /// The job the flags describe.
 fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<run::evidence::Job> {
-    let mut job = run::evidence::Job {
-        laws: cmd.fit.laws()?,
-        fit: cmd.fit.options()?,
-        prior: match cmd.boxes {
-            Boxes::Physical => EvidencePrior::Physical { scale: cmd.prior_scale },
-            Boxes::Delta => EvidencePrior::Delta { delta: cmd.delta },
-        },
-        prior_file: cmd.prior.clone(),
-        prior_text: None,
+    let settings = evidence::Settings {
+        boxes: cmd.boxes,
+        prior_scale: cmd.prior_scale,
+        delta: cmd.delta,
+        prior: cmd.prior.clone(),
+        noise: cmd.noise,
+        start_from: cmd.start_from,
+        particles: cmd.particles,
+        islands: cmd.islands,
+        max_stages: cmd.max_stages,
+        ess_share: cmd.ess_share,
+        max_sweeps: cmd.max_sweeps,
+        seed: cmd.seed,
         backend: cmd.backend.unwrap_or_default(),
-        sampler: EvidenceConfig {
-            particles: cmd.particles,
-            islands: cmd.islands,
-            seed: cmd.seed,
-            max_stages: cmd.max_stages,
-            ess_share: cmd.ess_share,
-            max_sweeps: cmd.max_sweeps,
-            start: cmd.start,
-            ..EvidenceConfig::default()
-        },
-        noise: cmd.noise.model(),
-        warm: None,
-        separations: true,
     };
-    job.sampler.validate()?;
-    job.keep_prior_text()?;
-    Ok(job)
+    Ok(settings.job(cmd.fit.laws()?, cmd.fit.options()?)?)
 }
 
 /// The evidence's check, its directory and posterior written, its tables or JSON printed.

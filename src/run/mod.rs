@@ -4,7 +4,7 @@
 //! On the ground floor, what every kind shares: [`scoring`] (here, on workers, or on an
 //! evaluator of the caller's) and [`dir`] (a directory checked before any work, claimed under
 //! its lock, checked again there, staged beside what it replaces; the names of what each kind
-//! holds), and [`sqlite`] (a store made whole, opened behind its schema gate). A folder or file per kind:
+//! holds), [`sqlite`] (a store made whole, opened behind its schema gate) and [`settings`] (the gate each kind's settings pass, once, whichever surface filled them). A folder or file per kind:
 //!
 //! - [`abc`]: the paper's ABC run (rejection or SMC): [`abc::Job`], its populations in
 //!   `run.sqlite`, resumed by [`abc::resume`];
@@ -21,6 +21,7 @@ pub mod dir;
 pub mod evidence;
 pub mod scoring;
 pub mod selection;
+pub mod settings;
 pub mod sqlite;
 pub mod stability;
 pub mod strings;

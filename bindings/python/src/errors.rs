@@ -135,3 +135,41 @@ where
         .map(Some)
         .map_err(|e| refuse(Into::<PyErr>::into(e).value(py).to_string()))
 }
+
+/// A kind of run's settings `S` from the keyword arguments of `kw` that are its fields (the
+/// library's gate, [`bitrock::run::settings`]); `None` values take the defaults. A value its
+/// field cannot take is an `InputError` naming the field.
+pub(crate) fn settings<S>(kw: &Bound<'_, PyDict>) -> PyResult<S>
+where
+    S: serde::Serialize + serde::de::DeserializeOwned + Default,
+{
+    let py = kw.py();
+    let dumps = py.import("json")?.getattr("dumps")?;
+    let mut named = serde_json::Map::new();
+    for field in bitrock::run::settings::fields::<S>() {
+        let Some(value) = kw.get_item(&field)?.filter(|v| !v.is_none()) else {
+            continue;
+        };
+        let refuse = |why: String| to_py(py, Error::setting(&field, why));
+        let text: String = dumps
+            .call1((value,))
+            .and_then(|t| t.extract())
+            .map_err(|e| refuse(format!("is not a plain value ({e})")))?;
+        let value = serde_json::from_str(&text).map_err(|_| refuse(format!("{text} is not a finite value")))?;
+        named.insert(field, value);
+    }
+    check(py, bitrock::run::settings::from_named(named))
+}
+
+/// The fields of a kind of run's settings (`evidence`): the keyword arguments its Python
+/// function must take, as the command takes their flags.
+#[pyfunction]
+pub(crate) fn settings_fields(py: Python<'_>, kind: &str) -> PyResult<Vec<String>> {
+    match kind {
+        "evidence" => Ok(bitrock::run::settings::fields::<bitrock::run::evidence::Settings>()),
+        other => Err(to_py(
+            py,
+            Error::setting("kind", format!("no kind of run `{other}`; the kinds are evidence")),
+        )),
+    }
+}

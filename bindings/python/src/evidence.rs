@@ -6,13 +6,10 @@ use crate::fit::fit_options;
 use crate::record::*;
 use crate::run::PyObserver;
 use bitrock::Law;
-use bitrock::abc::evidence::EvidenceConfig;
 use bitrock::data::FieldData;
 use bitrock::error::Error;
 use bitrock::run::evidence::dir::Unfinished;
-use bitrock::run::evidence::{
-    DEFAULT_PRIOR_SCALE, EvidencePrior, Progress, check as check_evidence, check_replicates, check_size,
-};
+use bitrock::run::evidence::{Progress, check as check_evidence, check_replicates, check_size};
 use bitrock::run::{self, MakeWorkers, Placement, Scoring};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -35,52 +32,8 @@ pub(crate) fn evidence(
     parallelism: usize,
 ) -> PyResult<String> {
     let laws = self::laws(py, laws)?.unwrap_or_else(|| Law::ALL.to_vec());
-    let defaults = EvidenceConfig::default();
-    let boxes: String = kwarg(options, "boxes")?.unwrap_or_else(|| "physical".into());
-    let prior = match boxes.to_lowercase().as_str() {
-        "physical" => EvidencePrior::Physical {
-            scale: kwarg(options, "prior_scale")?.unwrap_or(DEFAULT_PRIOR_SCALE),
-        },
-        "delta" => EvidencePrior::Delta {
-            delta: kwarg(options, "delta")?.unwrap_or(bitrock::run::abc::Config::default().delta),
-        },
-        other => {
-            return Err(to_py(
-                py,
-                bitrock::Error::setting(
-                    "boxes",
-                    format!("`{other}` is not one of the accepted values (physical, delta)"),
-                ),
-            ));
-        }
-    };
-    let mut job = run::evidence::Job {
-        laws,
-        fit: fit_options(py, options)?,
-        prior,
-        prior_file: kwarg::<PathBuf>(options, "prior")?,
-        prior_text: None,
-        backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or_default(),
-        sampler: EvidenceConfig {
-            particles: kwarg(options, "particles")?.unwrap_or(defaults.particles),
-            islands: kwarg(options, "islands")?.unwrap_or(defaults.islands),
-            seed: kwarg(options, "seed")?.unwrap_or(defaults.seed),
-            max_stages: kwarg(options, "max_stages")?.unwrap_or(defaults.max_stages),
-            start: named(py, "start_from", kwarg(options, "start_from")?)?.unwrap_or(defaults.start),
-            ..defaults
-        },
-        noise: match kwarg::<String>(options, "noise")?
-            .as_deref()
-            .map(str::to_lowercase)
-            .as_deref()
-        {
-            None | Some("auto") => None,
-            Some(_) => named(py, "noise", kwarg(options, "noise")?)?,
-        },
-        warm: None,
-        separations: true,
-    };
-    check(py, job.keep_prior_text())?;
+    let settings: run::evidence::Settings = crate::errors::settings(options)?;
+    let job = check(py, settings.job(laws, fit_options(py, options)?))?;
     let replicates: Option<usize> = kwarg(options, "check")?;
     if let Some(k) = replicates {
         check(py, check_replicates(k))?;

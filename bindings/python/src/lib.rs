@@ -24,6 +24,8 @@ mod _bitrock {
     #[pymodule_export]
     use crate::distributed::{needs_payloads, serve};
     #[pymodule_export]
+    use crate::errors::settings_fields;
+    #[pymodule_export]
     use crate::evidence::{evidence, is_evidence_dir, read_evidence, resume_evidence};
     #[pymodule_export]
     use crate::fit::fit;

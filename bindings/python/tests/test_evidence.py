@@ -3,6 +3,7 @@ DataFrames, posterior sets as pyABC's, and bad arguments refused by name."""
 
 from __future__ import annotations
 
+import inspect
 import json
 import subprocess
 import sys
@@ -35,6 +36,32 @@ def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
     assert document["separations"] == small.document["separations"]
     assert document["bayes_factors"] == small.document["bayes_factors"]
     assert document["warnings"] == small.document["warnings"]
+
+
+def test_every_evidence_setting_is_a_keyword_and_a_flag(cli) -> None:
+    """The evidence's settings pass one gate in the library: each of its fields is a keyword of
+    ``bitrock.evidence`` and a flag of ``bitrock evidence``, so that none exists on one
+    surface alone."""
+    fields = bitrock._bitrock.settings_fields("evidence")
+    assert {"particles", "ess_share", "max_sweeps", "start_from", "noise"} <= set(fields)
+    keywords = inspect.signature(bitrock.evidence).parameters
+    flags = run_cli(cli, "evidence", "--help").stdout
+    assert [f for f in fields if f not in keywords] == []
+    assert [f for f in fields if f"--{f.replace('_', '-')}" not in flags] == []
+
+
+def test_the_sampler_s_step_settings_give_the_command_s_evidence(cli) -> None:
+    settings = {**SMALL, "ess_share": 0.7, "max_sweeps": 5, "max_stages": 300}
+    mine = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), **settings)
+    done = run_cli(
+        cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
+        "--seed", "5", "--backend", "cpu", "--ess-share", "0.7", "--max-sweeps", "5", "--max-stages", "300", "--json",
+    )
+    document = json.loads(done.stdout)
+    assert [law["ln_z"] for law in document["laws"]] == [law["ln_z"] for law in mine.document["laws"]]
+    # The settings reach the sampler: the default steps give another estimate.
+    default = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), **SMALL)
+    assert [law["ln_z"] for law in default.document["laws"]] != [law["ln_z"] for law in mine.document["laws"]]
 
 
 def test_the_evidence_warns_what_its_document_warns() -> None:
@@ -148,6 +175,9 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
         ({"particles": "many"}, "particles"),
         ({"check": 0}, "check"),
         ({"start_from": "prior"}, "start_from"),
+        ({"ess_share": 1.5}, "ess_share"),
+        ({"max_sweeps": True}, "max_sweeps"),
+        ({"noise": 2}, "noise"),
     ],
 )
 def test_bad_arguments_are_refused_by_name(demo, arguments, named) -> None:

@@ -18,8 +18,10 @@ use std::path::PathBuf;
 
 pub mod check;
 pub mod dir;
+pub mod settings;
 
 pub use check::{EvidenceCheck, check, check_replicates, check_size};
+pub use settings::{Boxes, Noise, Settings};
 
 /// The default width of the physical boxes, in record scales ([`PhysicalScales`]).
 pub const DEFAULT_PRIOR_SCALE: f64 = 10.0;

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "simulate", "simulate_strings", "stability", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -215,6 +215,12 @@ def resume_evidence(dir: str | PathLike[str], backend: str | None, check: Suppor
 def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:
     """
     Answers a task on a worker process (see `bitrock::abc::shard::wire`).
+    """
+
+def settings_fields(kind: str) -> list[str]:
+    """
+    The fields of a kind of run's settings (`evidence`): the keyword arguments its Python
+    function must take, as the command takes their flags.
     """
 
 def simulate(law: str, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, omega_rpm: SupportsFloat | SupportsIndex, options: dict, note: Any | None) -> str:

@@ -217,6 +217,8 @@ def evidence(
     seed: int | None = None,
     backend: str = "auto",
     max_stages: int | None = None,
+    ess_share: float | None = None,
+    max_sweeps: int | None = None,
     bounds: bool = True,
     starts: int | None = None,
     scale_by_wob: bool = False,
@@ -234,7 +236,10 @@ def evidence(
     its unit, no fit involved; ``boxes="delta"`` over the paper's boxes φ̂(1 ± ``delta``) around
     the least-squares estimates (the data used twice). ``prior`` is a prior file; ``particles``
     (500) per island, ``islands`` (4) independent samplers per law and start whose spread is the
-    Monte-Carlo error; the same ``seed`` gives the same result. ``noise`` is the residuals'
+    Monte-Carlo error; the same ``seed`` gives the same result. ``max_stages`` (500) bounds an
+    island's tempering steps, ``ess_share`` (0.5) is the share of the effective sample size each
+    step keeps (higher: more, gentler steps) and ``max_sweeps`` (30) bounds the Metropolis sweeps
+    after each. ``noise`` is the residuals'
     model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
     ``start_from`` is where each law's samplers start: ``"box"``, the box (the whole tempered path;
@@ -269,6 +274,8 @@ def evidence(
         "seed": seed,
         "backend": backend,
         "max_stages": max_stages,
+        "ess_share": ess_share,
+        "max_sweeps": max_sweeps,
         "bounds": bounds,
         "starts": starts,
         "scale_by_wob": scale_by_wob,
