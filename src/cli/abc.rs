@@ -218,8 +218,6 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
 /// settings the run would ignore).
 fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<bitrock::run::abc::Config> {
     let settings = Settings {
-        laws: Some(fit_args.laws()?),
-        fit: fit_args.options()?,
         sampler: args.sampler,
         particles: Some(args.particles),
         delta: Some(args.delta),
@@ -244,5 +242,5 @@ fn run_config(fit_args: &FitArgs, args: &AbcArgs) -> anyhow::Result<bitrock::run
         backend: args.backend,
         devices: args.devices,
     };
-    Ok(settings.config()?)
+    Ok(settings.config(Some(fit_args.laws()?), fit_args.options()?)?)
 }

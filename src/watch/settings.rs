@@ -108,7 +108,7 @@ pub fn abc_config(
         eps_min,
         ..crate::run::abc::Settings::default()
     }
-    .config()
+    .config(None, crate::fit::FitOptions::default())
 }
 
 /// The rate a fast record is thinned to by default, Hz: the paper's, which resolves the

@@ -1294,19 +1294,3 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
         "the narrowed box cuts the posterior"
     );
 }
-
-/// The evidence's settings pass one gate in the library ([`bitrock::run::evidence::Settings`]):
-/// each of its fields is a flag of the command (and, in the Python package's tests, a keyword
-/// of `bitrock.evidence`), so that no setting exists on one surface alone.
-#[test]
-fn every_evidence_setting_is_a_flag_of_the_command() {
-    let fields = bitrock::run::settings::fields::<bitrock::run::evidence::Settings>();
-    assert!(fields.len() >= 13, "{fields:?}");
-    let (code, help, _) = crate::support::outcome(crate::support::bin().args(["evidence", "--help"]));
-    assert_eq!(code, 0);
-    let missing: Vec<&String> = fields
-        .iter()
-        .filter(|f| !help.contains(&format!("--{}", f.replace('_', "-"))))
-        .collect();
-    assert!(missing.is_empty(), "settings without a flag: {missing:?}");
-}

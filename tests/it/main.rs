@@ -16,6 +16,7 @@ mod pipeline;
 mod records;
 mod report;
 mod selection;
+mod settings;
 mod shard;
 mod smc;
 mod stability;

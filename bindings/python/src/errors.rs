@@ -138,38 +138,63 @@ where
 
 /// A kind of run's settings `S` from the keyword arguments of `kw` that are its fields (the
 /// library's gate, [`bitrock::run::settings`]); `None` values take the defaults. A value its
-/// field cannot take is an `InputError` naming the field.
+/// field cannot take is an `InputError` naming the field and showing the value, as [`kwarg`]'s
+/// are; a name of one of the library's enums is read in any case, as [`named`] reads it.
 pub(crate) fn settings<S>(kw: &Bound<'_, PyDict>) -> PyResult<S>
 where
     S: serde::Serialize + serde::de::DeserializeOwned + Default,
 {
+    use bitrock::run::settings::{fields, from_named};
     let py = kw.py();
     let dumps = py.import("json")?.getattr("dumps")?;
     let mut named = serde_json::Map::new();
-    for field in bitrock::run::settings::fields::<S>() {
+    for field in fields::<S>() {
         let Some(value) = kw.get_item(&field)?.filter(|v| !v.is_none()) else {
             continue;
         };
-        let refuse = |why: String| to_py(py, Error::setting(&field, why));
+        let shown = value.repr().map_or_else(|_| "the value".to_string(), |r| r.to_string());
+        let refuse = |why: String| to_py(py, Error::setting(&field, format!("{shown} is not accepted: {why}")));
         let text: String = dumps
-            .call1((value,))
+            .call1((&value,))
             .and_then(|t| t.extract())
-            .map_err(|e| refuse(format!("is not a plain value ({e})")))?;
-        let value = serde_json::from_str(&text).map_err(|_| refuse(format!("{text} is not a finite value")))?;
-        named.insert(field, value);
+            .map_err(|_| refuse("not a number, string, or list of them".into()))?;
+        let json: serde_json::Value = serde_json::from_str(&text).map_err(|_| refuse("not a finite number".into()))?;
+        let alone = |json: serde_json::Value| from_named::<S>(serde_json::Map::from_iter([(field.clone(), json)]));
+        let json = match alone(json.clone()) {
+            Ok(_) => json,
+            Err(error) => match json.as_str().map(str::to_lowercase).map(serde_json::Value::String) {
+                Some(lower) if alone(lower.clone()).is_ok() => lower,
+                Some(_) if error.to_string().contains("unknown variant") => {
+                    let v = value.extract::<String>()?;
+                    return Err(to_py(
+                        py,
+                        Error::setting(&field, format!("`{v}` is not one of the accepted values")),
+                    ));
+                }
+                _ => {
+                    let why = match error {
+                        Error::InvalidSetting { message, .. } => message,
+                        other => other.to_string(),
+                    };
+                    return Err(refuse(why));
+                }
+            },
+        };
+        named.insert(field, json);
     }
-    check(py, bitrock::run::settings::from_named(named))
+    check(py, from_named(named))
 }
 
-/// The fields of a kind of run's settings (`evidence`): the keyword arguments its Python
+/// The fields of a kind of run's settings (`abc`, `evidence`): the keyword arguments its Python
 /// function must take, as the command takes their flags.
 #[pyfunction]
 pub(crate) fn settings_fields(py: Python<'_>, kind: &str) -> PyResult<Vec<String>> {
     match kind {
+        "abc" => Ok(bitrock::run::settings::fields::<bitrock::run::abc::Settings>()),
         "evidence" => Ok(bitrock::run::settings::fields::<bitrock::run::evidence::Settings>()),
         other => Err(to_py(
             py,
-            Error::setting("kind", format!("no kind of run `{other}`; the kinds are evidence")),
+            Error::setting("kind", format!("no kind of run `{other}`; the kinds are abc, evidence")),
         )),
     }
 }

@@ -397,8 +397,7 @@ pub(crate) fn abc(
     dispatcher: Option<Py<PyAny>>,
     parallelism: usize,
 ) -> PyResult<Run> {
-    let s = run_settings(py, settings)?;
-    let config = check(py, s.config())?;
+    let config = run_config(py, settings)?;
     let job = run::abc::Job {
         config,
         summary_population: None,
@@ -522,34 +521,10 @@ pub(crate) fn read_summary(dir: &Path) -> bitrock::Result<String> {
     }
 }
 
-/// The run settings from `bitrock.abc`'s keyword arguments.
-pub(crate) fn run_settings(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<Settings> {
-    let text = |key: &str| kwarg::<String>(kw, key);
-    Ok(Settings {
-        laws: laws(py, kwarg(kw, "laws")?)?,
-        fit: fit_options(py, kw)?,
-        sampler: named(py, "sampler", text("sampler")?)?.unwrap_or_default(),
-        particles: kwarg(kw, "particles")?,
-        delta: kwarg(kw, "delta")?,
-        prior_rule: named(py, "prior_rule", text("prior_rule")?)?.unwrap_or_default(),
-        prior_k: kwarg(kw, "prior_k")?,
-        prior_file: kwarg(kw, "prior_file")?,
-        eps_min: kwarg(kw, "eps_min")?,
-        epsilons: kwarg(kw, "epsilons")?,
-        start_epsilon: kwarg(kw, "start_epsilon")?,
-        max_populations: kwarg(kw, "max_populations")?,
-        max_draws: kwarg(kw, "max_draws")?,
-        min_acceptance: kwarg(kw, "min_acceptance")?,
-        max_seconds: kwarg(kw, "max_seconds")?,
-        mode: named(py, "mode", text("mode")?)?,
-        p_stay: kwarg(kw, "p_stay")?,
-        kernel_scale: kwarg(kw, "kernel_scale")?,
-        smc_weights: named(py, "smc_weights", text("smc_weights")?)?,
-        refill: named(py, "refill", text("refill")?)?,
-        law_proposal: named(py, "law_proposal", text("law_proposal")?)?,
-        perturbation: named(py, "perturbation", text("perturbation")?)?,
-        seed: kwarg(kw, "seed")?,
-        backend: named(py, "backend", text("backend")?)?,
-        devices: named(py, "devices", text("devices")?)?,
-    })
+/// The run's configuration from `bitrock.abc`'s keyword arguments: its settings through the
+/// library's gate, with the laws and the least squares' options.
+pub(crate) fn run_config(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<run::abc::Config> {
+    let settings: Settings = crate::errors::settings(kw)?;
+    let laws = laws(py, kwarg(kw, "laws")?)?;
+    check(py, settings.config(laws, fit_options(py, kw)?))
 }

@@ -194,6 +194,24 @@ def test_numbers_of_the_wrong_kind_or_range_name_their_argument(demo: bitrock.Re
     assert repr(arguments[argument]) in str(caught.value)
 
 
+def test_every_run_setting_is_a_keyword() -> None:
+    """A run's settings pass one gate in the library: each of its fields is a keyword of
+    ``bitrock.abc`` (the command's flags are checked beside the command)."""
+    import inspect
+
+    fields = bitrock._bitrock.settings_fields("abc")
+    assert {"sampler", "particles", "perturbation", "devices", "prior_file"} <= set(fields)
+    keywords = inspect.signature(bitrock.abc).parameters
+    assert [f for f in fields if f not in keywords] == []
+
+
+def test_a_named_value_is_read_in_any_case(demo: bitrock.Record) -> None:
+    upper = bitrock.abc(demo, laws="m2", particles=50, sampler="Rejection", backend="CPU", progress=False, seed=3)
+    lower = bitrock.abc(demo, laws="m2", particles=50, sampler="rejection", backend="cpu", progress=False, seed=3)
+    untimed = [[{k: v for k, v in p.items() if k != "seconds"} for p in r.document["populations"]] for r in (upper, lower)]
+    assert untimed[0] == untimed[1]
+
+
 def test_one_law_or_one_tolerance_where_a_list_belongs_is_a_list_of_one(demo: bitrock.Record) -> None:
     one = bitrock.abc(demo, laws="m2", epsilons=0.05, particles=100, backend="cpu", progress=False)
     assert one.laws == ["m2"]

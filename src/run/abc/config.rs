@@ -159,46 +159,60 @@ pub enum PriorRuleName {
 pub const DEFAULT_PRIOR_K: f64 = 3.0;
 
 /// A new run's settings as a user gives them (the command line's flags, the Python package's
-/// keyword arguments): every `None` takes the library's default, and [`Settings::config`]
-/// turns them into the [`Config`] the run stores, refusing settings that the run would
-/// ignore.
-#[derive(Clone, Debug, Default)]
+/// keyword arguments, a watch's window; the gate of [`crate::run::settings`]): every `None`
+/// takes the library's default, and [`Settings::config`] turns them, with the laws and the
+/// least squares' options every kind shares, into the [`Config`] the run stores, refusing
+/// settings that the run would ignore.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct Settings {
-    /// Laws competing; `None` is every law.
-    pub laws: Option<Vec<Law>>,
-    pub fit: FitOptions,
+    /// The sampler: the paper's rejection or ABC-SMC.
     pub sampler: Sampler,
+    /// Particles of each population.
     pub particles: Option<usize>,
+    /// Half-width of the paper's prior boxes φ̂(1 ± δ).
     pub delta: Option<f64>,
+    /// How the prior boxes are sized around the least-squares estimates.
     pub prior_rule: PriorRuleName,
+    /// Standard errors each side with `prior_rule` stderr.
     pub prior_k: Option<f64>,
+    /// Prior file (TOML) with explicit bounds or law weights.
     pub prior_file: Option<PathBuf>,
     /// The floor ε_min; `None` is the record's reachable floor (the paper's 0.014 where the
     /// record reaches it), or 0 under a schedule.
     pub eps_min: Option<f64>,
     /// A tolerance schedule for populations 1, 2, …, which then ends the run.
     pub epsilons: Option<Vec<f64>>,
+    /// ε of population 0 (∞ when `None`).
     pub start_epsilon: Option<f64>,
+    /// Most populations (including population 0).
     pub max_populations: Option<usize>,
+    /// Most candidates scored over the whole run.
     pub max_draws: Option<u64>,
+    /// Stop when the projected acceptance rate of the next population is below this.
     pub min_acceptance: Option<f64>,
+    /// Wall-time budget of one invocation, seconds; the population in progress is dropped.
     pub max_seconds: Option<f64>,
-    /// Rejection sampler only.
+    /// Rejection sampler only: nested or as published.
     pub mode: Option<Mode>,
-    /// SMC only.
+    /// SMC only: probability that the model kernel keeps the ancestor's law.
     pub p_stay: Option<f64>,
-    /// SMC only.
+    /// SMC only: the perturbation's covariance over the weighted covariance of the law's
+    /// ancestors.
     pub kernel_scale: Option<f64>,
-    /// SMC only.
+    /// SMC only: what the importance weights are computed on.
     pub smc_weights: Option<WeightsOn>,
-    /// SMC only.
+    /// SMC only: how a population is filled.
     pub refill: Option<Refill>,
-    /// SMC only.
+    /// SMC only: how a candidate's law is proposed.
     pub law_proposal: Option<LawProposal>,
-    /// SMC only.
+    /// SMC only: how a candidate's parameters are perturbed.
     pub perturbation: Option<Perturbation>,
+    /// Seed of every stream: the same seed gives the same run.
     pub seed: Option<u64>,
+    /// Where ρ is computed.
     pub backend: Option<Backend>,
+    /// Which of this machine's GPUs score.
     pub devices: Option<Devices>,
 }
 
@@ -207,7 +221,7 @@ impl Settings {
     /// floor below it unless `eps_min` is given) and has room for all its populations unless
     /// `max_populations` says less. Settings of the other sampler, and `prior_k` with the δ
     /// rule, are refused: the run would ignore them.
-    pub fn config(&self) -> Result<Config> {
+    pub fn config(&self, laws: Option<Vec<Law>>, fit: FitOptions) -> Result<Config> {
         self.check_sampler_settings()?;
         if self.prior_rule == PriorRuleName::Delta && self.prior_k.is_some() {
             return Err(Error::setting(
@@ -252,8 +266,8 @@ impl Settings {
             }
         };
         Ok(Config {
-            laws: self.laws.clone().unwrap_or(defaults.laws),
-            fit: self.fit,
+            laws: laws.unwrap_or(defaults.laws),
+            fit,
             delta: self.delta.unwrap_or(defaults.delta),
             prior_rule: match self.prior_rule {
                 PriorRuleName::Delta => PriorRule::Delta,

@@ -1,0 +1,38 @@
+//! Every kind of run's settings pass one gate in the library (`run::settings`): each field of a
+//! kind's `Settings` is a flag of its command here, and a keyword of its Python function in the
+//! Python package's tests, so that no setting exists on one surface alone.
+
+use crate::support::{bin, outcome};
+
+/// The fields of `S` that `bitrock <command> --help` does not offer as flags. A field's flag is
+/// its name in dashes, except where `renamed` gives it.
+fn missing_flags<S: serde::Serialize + Default>(command: &str, renamed: &[(&str, &str)]) -> Vec<String> {
+    let (code, help, _) = outcome(bin().args([command, "--help"]));
+    assert_eq!(code, 0);
+    bitrock::run::settings::fields::<S>()
+        .into_iter()
+        .filter(|field| {
+            let flag = renamed.iter().find(|(f, _)| f == field).map_or_else(
+                || format!("--{}", field.replace('_', "-")),
+                |(_, flag)| (*flag).to_string(),
+            );
+            !help.contains(&format!("{flag} "))
+        })
+        .collect()
+}
+
+#[test]
+fn every_setting_of_every_kind_is_a_flag_of_its_command() {
+    let abc = bitrock::run::settings::fields::<bitrock::run::abc::Settings>();
+    assert!(abc.len() >= 20 && abc.contains(&"perturbation".to_string()), "{abc:?}");
+    // The run's prior file is `--prior` on the command line, as every command names it.
+    let missing = missing_flags::<bitrock::run::abc::Settings>("abc", &[("prior_file", "--prior")]);
+    assert!(missing.is_empty(), "abc settings without a flag: {missing:?}");
+    let evidence = bitrock::run::settings::fields::<bitrock::run::evidence::Settings>();
+    assert!(
+        evidence.len() >= 13 && evidence.contains(&"ess_share".to_string()),
+        "{evidence:?}"
+    );
+    let missing = missing_flags::<bitrock::run::evidence::Settings>("evidence", &[]);
+    assert!(missing.is_empty(), "evidence settings without a flag: {missing:?}");
+}
