@@ -69,6 +69,25 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     if cmd.strings {
         return strings(cmd);
     }
+    let opts = options(cmd)?;
+    let quiet = cmd.json;
+    let report = bitrock::bench::run(&opts, &mut |line| {
+        if !quiet {
+            super::print::note(line);
+        }
+    })?;
+    let mut out = super::print::stdout();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+    } else {
+        print_tables(&mut out, &report)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The bench's options from the flags.
+fn options(cmd: &BenchCmd) -> anyhow::Result<bitrock::bench::BenchOptions> {
     let mut opts = bitrock::bench::BenchOptions {
         repetitions: cmd.reps,
         laws: super::args::parse_laws(&cmd.laws)?,
@@ -94,156 +113,163 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         let records = vec![SelectionRecord::Embedded, SelectionRecord::Rig, SelectionRecord::M2];
         opts.smc = Some((records, if cmd.quick { 1_000 } else { 4_000 }, cmd.reps as u64));
     }
-    let quiet = cmd.json;
-    let report = bitrock::bench::run(&opts, &mut |line| {
-        if !quiet {
-            super::print::note(line);
-        }
-    })?;
-    let mut out = super::print::stdout();
-    if cmd.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
-    } else {
-        writeln!(
-            out,
-            "machine: {} ({} cores); adapter: {}",
-            report.machine, report.cores, report.adapter
-        )?;
-        if let Some(t) = &report.tuning {
-            let kept = t
-                .cache_file
-                .as_ref()
-                .map_or(String::new(), |p| format!(", kept in {}", p.display()));
-            writeln!(out, "GPU scoring shapes ({}{kept}):", t.source)?;
-            for line in t.tuning.table().iter().skip(1) {
-                writeln!(out, "  {line}")?;
-            }
-        }
-        if let Some(shape) = report.shape {
-            writeln!(out, "GPU scoring shape at 65,536 candidates per dispatch: {shape}")?;
-        }
-        writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
-        // Law names: built-in and law files' laws, as wide as the widest.
-        let width = report
-            .throughput
-            .iter()
-            .map(|t| t.law.name().len())
-            .max()
-            .unwrap_or(3)
-            .max(3);
-        if !report.throughput.is_empty() {
-            writeln!(
-                out,
-                "backend  {:<width$}          N        D   evaluations/s (min–max)  shape",
-                "law"
-            )?;
-        }
-        for t in &report.throughput {
-            writeln!(
-                out,
-                "{:<7}  {:<width$}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})  {}",
-                t.backend,
-                t.law.name(),
-                t.n,
-                t.d,
-                t.evals_per_s,
-                t.evals_per_s_spread.min,
-                t.evals_per_s_spread.max,
-                t.shape.map_or("", |s| s.name())
-            )?;
-        }
-        for (backend, s) in &report.small_call_seconds {
-            writeln!(
-                out,
-                "{backend:<7}  small call (64 × 100): {:.3e} s ({:.2e}–{:.2e})",
-                s.median, s.min, s.max
-            )?;
-        }
-        if let Some(st) = &report.stability {
-            writeln!(
-                out,
-                "gpu      stability grid: {} cells × {} samples: {:.3e} cell-samples/s ({:.2e}–{:.2e})",
-                st.cells,
-                st.samples,
-                st.cell_samples_per_s,
-                st.cell_samples_per_s_spread.min,
-                st.cell_samples_per_s_spread.max
-            )?;
-        }
-        if let Some(first) = report.selection.first() {
-            writeln!(
-                out,
-                "check-selection: {} laws × {} replicates, N = {} (--backend {}, scored on {}); medians (min–max)",
-                first.laws,
-                first.replicates_per_law,
-                first.particles,
-                serde_json::to_value(first.backend_asked)?.as_str().unwrap_or_default(),
-                first.backend,
-            )?;
-            writeln!(
-                out,
-                "record    samples  ε_min    check s (min–max)     fits s  share  sampling s  fits out of patience  runs out / abandoned"
-            )?;
-        }
-        for c in &report.selection {
-            writeln!(
-                out,
-                "{:<8}  {:>7}  {:<7.4}  {:>6.2} ({:.2}–{:.2})  {:>6.2}  {:>4.0} %  {:>10.2}  {:>9} of {:<8}  {} / {} of {}",
-                c.record.name(),
-                c.calibration_samples,
-                c.eps_min,
-                c.seconds,
-                c.seconds_spread.min,
-                c.seconds_spread.max,
-                c.fit_seconds,
-                100.0 * c.fit_share,
-                c.sampling_seconds,
-                c.fits.fits_out_of_patience,
-                c.fits.fits,
-                c.fits.runs_out_of_patience,
-                c.fits.runs_abandoned,
-                c.fits.runs,
-            )?;
-        }
-        for c in report.selection.iter().filter(|c| c.command.is_some()) {
-            writeln!(out, "  {}: {}", c.record.name(), c.command.unwrap_or_default())?;
-        }
-        for c in &report.smc {
-            writeln!(
-                out,
-                "{}: {} samples, best least-squares ρ {:.5}, ε_min {:.5}, N = {}, {} seeds; medians over the seeds",
-                c.record.name(),
-                c.calibration_samples,
-                c.best_least_squares_rho,
-                c.eps_min,
-                c.particles,
-                c.schemes.first().map_or(0, |s| s.runs.len())
-            )?;
-            writeln!(
-                out,
-                "  scheme                 scored/ESS  fewer than rejection  max |ΔP|/SE  max KS/critical"
-            )?;
-            for s in &c.schemes {
-                writeln!(
-                    out,
-                    "  {:<21}  {:>10.1}  {:>19.1}×  {:>11.1}  {:>15.2}",
-                    s.scheme.name, s.scored_per_ess, s.fewer_than_rejection, s.max_probability_z, s.max_ks_ratio
-                )?;
-            }
-            if let Some(command) = c.command {
-                writeln!(out, "  record: {command}")?;
-            }
-        }
-        for e in &report.end_to_end {
-            writeln!(
-                out,
-                "{:<7}  paper-scale run: {:.3} s ({:.3}–{:.3}), {} populations, {:.3e} evaluations",
-                e.backend, e.seconds, e.seconds_spread.min, e.seconds_spread.max, e.populations, e.evaluations as f64
-            )?;
+    Ok(opts)
+}
+
+/// The bench's report as tables: the machine, the scoring shapes, throughput per backend and
+/// law, the small call, the stability grid, the selection check, the SMC schemes and the
+/// paper-scale run.
+fn print_tables(out: &mut impl Write, report: &bitrock::bench::BenchReport) -> anyhow::Result<()> {
+    writeln!(
+        out,
+        "machine: {} ({} cores); adapter: {}",
+        report.machine, report.cores, report.adapter
+    )?;
+    if let Some(t) = &report.tuning {
+        let kept = t
+            .cache_file
+            .as_ref()
+            .map_or(String::new(), |p| format!(", kept in {}", p.display()));
+        writeln!(out, "GPU scoring shapes ({}{kept}):", t.source)?;
+        for line in t.tuning.table().iter().skip(1) {
+            writeln!(out, "  {line}")?;
         }
     }
-    Ok(ExitCode::SUCCESS)
+    if let Some(shape) = report.shape {
+        writeln!(out, "GPU scoring shape at 65,536 candidates per dispatch: {shape}")?;
+    }
+    writeln!(out, "medians of {} repetitions (min–max)", report.repetitions)?;
+    // Law names: built-in and law files' laws, as wide as the widest.
+    let width = report
+        .throughput
+        .iter()
+        .map(|t| t.law.name().len())
+        .max()
+        .unwrap_or(3)
+        .max(3);
+    if !report.throughput.is_empty() {
+        writeln!(
+            out,
+            "backend  {:<width$}          N        D   evaluations/s (min–max)  shape",
+            "law"
+        )?;
+    }
+    for t in &report.throughput {
+        writeln!(
+            out,
+            "{:<7}  {:<width$}  {:>9}  {:>7}   {:.3e} ({:.2e}–{:.2e})  {}",
+            t.backend,
+            t.law.name(),
+            t.n,
+            t.d,
+            t.evals_per_s,
+            t.evals_per_s_spread.min,
+            t.evals_per_s_spread.max,
+            t.shape.map_or("", |s| s.name())
+        )?;
+    }
+    for (backend, s) in &report.small_call_seconds {
+        writeln!(
+            out,
+            "{backend:<7}  small call (64 × 100): {:.3e} s ({:.2e}–{:.2e})",
+            s.median, s.min, s.max
+        )?;
+    }
+    if let Some(st) = &report.stability {
+        writeln!(
+            out,
+            "gpu      stability grid: {} cells × {} samples: {:.3e} cell-samples/s ({:.2e}–{:.2e})",
+            st.cells,
+            st.samples,
+            st.cell_samples_per_s,
+            st.cell_samples_per_s_spread.min,
+            st.cell_samples_per_s_spread.max
+        )?;
+    }
+    print_selection(out, &report.selection)?;
+    print_smc(out, &report.smc)?;
+    for e in &report.end_to_end {
+        writeln!(
+            out,
+            "{:<7}  paper-scale run: {:.3} s ({:.3}–{:.3}), {} populations, {:.3e} evaluations",
+            e.backend, e.seconds, e.seconds_spread.min, e.seconds_spread.max, e.populations, e.evaluations as f64
+        )?;
+    }
+    Ok(())
+}
+
+/// The selection check's table: one row per record.
+fn print_selection(out: &mut impl Write, selection: &[bitrock::bench::SelectionBench]) -> anyhow::Result<()> {
+    if let Some(first) = selection.first() {
+        writeln!(
+            out,
+            "check-selection: {} laws × {} replicates, N = {} (--backend {}, scored on {}); medians (min–max)",
+            first.laws,
+            first.replicates_per_law,
+            first.particles,
+            serde_json::to_value(first.backend_asked)?.as_str().unwrap_or_default(),
+            first.backend,
+        )?;
+        writeln!(
+            out,
+            "record    samples  ε_min    check s (min–max)     fits s  share  sampling s  fits out of patience  runs out / abandoned"
+        )?;
+    }
+    for c in selection {
+        writeln!(
+            out,
+            "{:<8}  {:>7}  {:<7.4}  {:>6.2} ({:.2}–{:.2})  {:>6.2}  {:>4.0} %  {:>10.2}  {:>9} of {:<8}  {} / {} of {}",
+            c.record.name(),
+            c.calibration_samples,
+            c.eps_min,
+            c.seconds,
+            c.seconds_spread.min,
+            c.seconds_spread.max,
+            c.fit_seconds,
+            100.0 * c.fit_share,
+            c.sampling_seconds,
+            c.fits.fits_out_of_patience,
+            c.fits.fits,
+            c.fits.runs_out_of_patience,
+            c.fits.runs_abandoned,
+            c.fits.runs,
+        )?;
+    }
+    for c in selection.iter().filter(|c| c.command.is_some()) {
+        writeln!(out, "  {}: {}", c.record.name(), c.command.unwrap_or_default())?;
+    }
+    Ok(())
+}
+
+/// The SMC schemes against rejection: one table per record.
+fn print_smc(out: &mut impl Write, smc: &[bitrock::bench::smc_comparison::SmcComparison]) -> anyhow::Result<()> {
+    for c in smc {
+        writeln!(
+            out,
+            "{}: {} samples, best least-squares ρ {:.5}, ε_min {:.5}, N = {}, {} seeds; medians over the seeds",
+            c.record.name(),
+            c.calibration_samples,
+            c.best_least_squares_rho,
+            c.eps_min,
+            c.particles,
+            c.schemes.first().map_or(0, |s| s.runs.len())
+        )?;
+        writeln!(
+            out,
+            "  scheme                 scored/ESS  fewer than rejection  max |ΔP|/SE  max KS/critical"
+        )?;
+        for s in &c.schemes {
+            writeln!(
+                out,
+                "  {:<21}  {:>10.1}  {:>19.1}×  {:>11.1}  {:>15.2}",
+                s.scheme.name, s.scored_per_ess, s.fewer_than_rejection, s.max_probability_z, s.max_ks_ratio
+            )?;
+        }
+        if let Some(command) = c.command {
+            writeln!(out, "  record: {command}")?;
+        }
+    }
+    Ok(())
 }
 
 /// `--watch`: the watch bench ([`bitrock::watch::bench`]), a table or JSON.

@@ -103,29 +103,8 @@ pub fn run_from(
     // The workers' traffic is counted per noise model.
     let round = NoiseModel::ALL.iter().position(|&m| m == config.noise).unwrap_or(0);
     let n = problem.data_len();
-    let half_n = n as f64 / 2.0;
     let prior = &problem.prior;
-    let mut islands: Vec<Island> = Vec::new();
-    let laws = prior.boxes.len();
-    for (slot, bx) in prior.boxes.iter().enumerate() {
-        let reference = references
-            .iter()
-            .find(|r| r.law == bx.law && r.covariance.len() == bx.law.n_params().pow(2));
-        // From both starts, the box's islands on the streams the box alone uses and the
-        // reference's on streams after every law's.
-        let starts = match (config.start, reference) {
-            (Start::Both, Some(reference)) => vec![None, Some(reference)],
-            (_, reference) => vec![reference],
-        };
-        for (group, reference) in starts.into_iter().enumerate() {
-            for island in 0..config.islands {
-                let stream = ((group * laws + slot) * config.islands + island) as u32;
-                islands.push(Island::new(
-                    bx.law, slot, &bx.lower, &bx.upper, config, stream, reference,
-                ));
-            }
-        }
-    }
+    let mut islands = new_islands(prior, config, references);
     let mut seconds_before = 0.0;
     if let Some(c) = &checkpoints
         && let Some(from) = c.from
@@ -155,25 +134,7 @@ pub fn run_from(
         }
         let lagged = config.noise == NoiseModel::Ar1;
         score_candidates(workers, round, &batch, lagged, &mut rho, &mut lag)?;
-        match config.noise {
-            NoiseModel::Iid => {
-                loglik.clear();
-                loglik.extend(rho.iter().map(|&r| noise::iid_log_likelihood(r, half_n)));
-            }
-            NoiseModel::Ar1 => {
-                // φ integrated out per candidate (a Newton search and a quadrature): in
-                // parallel, most of this model's time on the host otherwise.
-                batch
-                    .par_iter()
-                    .zip(&rho)
-                    .zip(&lag)
-                    .map(|((c, &rho), &lag)| {
-                        let ends = end_residuals_squared(problem, c);
-                        noise::ar1_log_likelihood(&LagSums { rho, lag, ends }, half_n)
-                    })
-                    .collect_into_vec(&mut loglik);
-            }
-        }
+        log_likelihoods(problem, config.noise, &batch, &rho, &lag, &mut loglik);
         if observer.interrupted() {
             return Err(Error::Interrupted);
         }
@@ -198,74 +159,7 @@ pub fn run_from(
     let constant = log_likelihood_constant(n, problem.sum_sq_torque);
     let mut laws = Vec::new();
     for (slot, bx) in prior.boxes.iter().enumerate() {
-        let all: Vec<&Island> = islands.iter().filter(|i| i.slot == slot).collect();
-        let ln_z_of = |group: &[&Island]| group.iter().map(|i| i.ln_z + constant).collect::<Vec<f64>>();
-        let (from_box, from_fit): (Vec<&Island>, Vec<&Island>) = all.iter().partition(|i| i.reference.is_none());
-        let mut starts = Vec::new();
-        let mut own = all.clone();
-        if config.start == Start::Both && !from_box.is_empty() && !from_fit.is_empty() {
-            let estimate = |start: Start, group: &[&Island]| {
-                let island_ln_z = ln_z_of(group);
-                let (ln_z, ln_z_error) = pooled_ln_z(&island_ln_z);
-                StartEstimate {
-                    start,
-                    ln_z,
-                    ln_z_error,
-                    island_spread: spread_of(&island_ln_z),
-                    kept: true,
-                }
-            };
-            starts = vec![estimate(Start::Box, &from_box), estimate(Start::Fit, &from_fit)];
-            if let Some(kept) = kept_start(&starts[0], &starts[1]) {
-                own = if kept == Start::Box { from_box } else { from_fit };
-                for estimate in &mut starts {
-                    estimate.kept = estimate.start == kept;
-                }
-            }
-        }
-        let island_ln_z = ln_z_of(&own);
-        // The islands' mean Z weighs their particles; where both starts are kept, ln Z is
-        // their estimates weighed by their inverse variances (the precise start's, mostly).
-        let (mean_ln_z, mean_error) = pooled_ln_z(&island_ln_z);
-        let (ln_z, ln_z_error) = match &starts[..] {
-            [a, b] if a.kept && b.kept => inverse_variance_mean(&[(a.ln_z, a.ln_z_error), (b.ln_z, b.ln_z_error)]),
-            _ => (mean_ln_z, mean_error),
-        };
-        let k = island_ln_z.len() as f64;
-        let ratios: Vec<f64> = island_ln_z.iter().map(|v| (v - mean_ln_z).exp()).collect();
-        let mut posterior = Vec::new();
-        for (island, share) in own.iter().zip(&ratios) {
-            for (p, w) in island.theta.iter().zip(&island.weights).filter(|(_, w)| **w > 0.0) {
-                let params = p[..island.dims].iter().map(|&v| f64::from(v)).collect();
-                posterior.push((params, share / k * w));
-            }
-        }
-        let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
-        let mean_ln_l = constant
-            + own
-                .iter()
-                .zip(&ratios)
-                .map(|(island, share)| share / k * island.posterior_mean_ln_l())
-                .sum::<f64>();
-        let mut law = LawEvidence {
-            mean_ln_l: Some(mean_ln_l),
-            box_changes: Vec::new(),
-            island_spread: spread_of(&island_ln_z),
-            cut_by_box,
-            law: bx.law,
-            ln_z,
-            ln_z_error,
-            island_ln_z,
-            prior_probability: prior.weights[slot],
-            probability: 0.0,
-            stages: own.iter().map(|i| i.stages).collect(),
-            candidates_scored: all.iter().map(|i| i.scored).sum(),
-            best_rho: all.iter().map(|i| i.best_rho).fold(f64::INFINITY, f64::min),
-            posterior,
-            starts,
-        };
-        law.box_changes = sensitivity::box_changes(&law, &bx.lower, &bx.upper);
-        laws.push(law);
+        laws.push(law_evidence(slot, bx, prior.weights[slot], &islands, config, constant));
     }
     let log_joint: Vec<f64> = laws.iter().map(|l| l.prior_probability.ln() + l.ln_z).collect();
     let total = log_mean_exp(log_joint.iter().copied()) + (log_joint.len() as f64).ln();
@@ -282,6 +176,148 @@ pub fn run_from(
         seconds: seconds(started),
         backend: workers.backend().to_string(),
     })
+}
+
+/// The islands of every law of `prior`: `config.islands` from its box, from its reference
+/// where `references` has one, or from both; each on its own stream (the box's islands on the
+/// streams the box alone uses, the reference's on streams after every law's).
+fn new_islands(prior: &crate::prior::Prior, config: &EvidenceConfig, references: &[Reference]) -> Vec<Island> {
+    let mut islands: Vec<Island> = Vec::new();
+    let laws = prior.boxes.len();
+    for (slot, bx) in prior.boxes.iter().enumerate() {
+        let reference = references
+            .iter()
+            .find(|r| r.law == bx.law && r.covariance.len() == bx.law.n_params().pow(2));
+        // From both starts, the box's islands on the streams the box alone uses and the
+        // reference's on streams after every law's.
+        let starts = match (config.start, reference) {
+            (Start::Both, Some(reference)) => vec![None, Some(reference)],
+            (_, reference) => vec![reference],
+        };
+        for (group, reference) in starts.into_iter().enumerate() {
+            for island in 0..config.islands {
+                let stream = ((group * laws + slot) * config.islands + island) as u32;
+                islands.push(Island::new(
+                    bx.law, slot, &bx.lower, &bx.upper, config, stream, reference,
+                ));
+            }
+        }
+    }
+    islands
+}
+
+/// Each candidate's log-likelihood under the noise model, from its ρ (and, for AR(1), its
+/// lag sum), into `loglik`.
+fn log_likelihoods(
+    problem: &AbcProblem,
+    model: NoiseModel,
+    batch: &[Candidate],
+    rho: &[f64],
+    lag: &[f64],
+    loglik: &mut Vec<f64>,
+) {
+    let half_n = problem.data_len() as f64 / 2.0;
+    match model {
+        NoiseModel::Iid => {
+            loglik.clear();
+            loglik.extend(rho.iter().map(|&r| noise::iid_log_likelihood(r, half_n)));
+        }
+        NoiseModel::Ar1 => {
+            // φ integrated out per candidate (a Newton search and a quadrature): in
+            // parallel, most of this model's time on the host otherwise.
+            batch
+                .par_iter()
+                .zip(rho)
+                .zip(lag)
+                .map(|((c, &rho), &lag)| {
+                    let ends = end_residuals_squared(problem, c);
+                    noise::ar1_log_likelihood(&LagSums { rho, lag, ends }, half_n)
+                })
+                .collect_into_vec(loglik);
+        }
+    }
+}
+
+/// The evidence of the law in prior slot `slot` (box `bx`, prior probability
+/// `prior_probability`) from its finished islands: its ln Z (the kept start's, or both
+/// starts' weighed), its posterior, and what its box does to it. `constant` is the
+/// likelihood's constant the islands leave out; the law's probability is set by the caller.
+fn law_evidence(
+    slot: usize,
+    bx: &crate::prior::LawBox,
+    prior_probability: f64,
+    islands: &[Island],
+    config: &EvidenceConfig,
+    constant: f64,
+) -> LawEvidence {
+    let all: Vec<&Island> = islands.iter().filter(|i| i.slot == slot).collect();
+    let ln_z_of = |group: &[&Island]| group.iter().map(|i| i.ln_z + constant).collect::<Vec<f64>>();
+    let (from_box, from_fit): (Vec<&Island>, Vec<&Island>) = all.iter().partition(|i| i.reference.is_none());
+    let mut starts = Vec::new();
+    let mut own = all.clone();
+    if config.start == Start::Both && !from_box.is_empty() && !from_fit.is_empty() {
+        let estimate = |start: Start, group: &[&Island]| {
+            let island_ln_z = ln_z_of(group);
+            let (ln_z, ln_z_error) = pooled_ln_z(&island_ln_z);
+            StartEstimate {
+                start,
+                ln_z,
+                ln_z_error,
+                island_spread: spread_of(&island_ln_z),
+                kept: true,
+            }
+        };
+        starts = vec![estimate(Start::Box, &from_box), estimate(Start::Fit, &from_fit)];
+        if let Some(kept) = kept_start(&starts[0], &starts[1]) {
+            own = if kept == Start::Box { from_box } else { from_fit };
+            for estimate in &mut starts {
+                estimate.kept = estimate.start == kept;
+            }
+        }
+    }
+    let island_ln_z = ln_z_of(&own);
+    // The islands' mean Z weighs their particles; where both starts are kept, ln Z is
+    // their estimates weighed by their inverse variances (the precise start's, mostly).
+    let (mean_ln_z, mean_error) = pooled_ln_z(&island_ln_z);
+    let (ln_z, ln_z_error) = match &starts[..] {
+        [a, b] if a.kept && b.kept => inverse_variance_mean(&[(a.ln_z, a.ln_z_error), (b.ln_z, b.ln_z_error)]),
+        _ => (mean_ln_z, mean_error),
+    };
+    let k = island_ln_z.len() as f64;
+    let ratios: Vec<f64> = island_ln_z.iter().map(|v| (v - mean_ln_z).exp()).collect();
+    let mut posterior = Vec::new();
+    for (island, share) in own.iter().zip(&ratios) {
+        for (p, w) in island.theta.iter().zip(&island.weights).filter(|(_, w)| **w > 0.0) {
+            let params = p[..island.dims].iter().map(|&v| f64::from(v)).collect();
+            posterior.push((params, share / k * w));
+        }
+    }
+    let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
+    let mean_ln_l = constant
+        + own
+            .iter()
+            .zip(&ratios)
+            .map(|(island, share)| share / k * island.posterior_mean_ln_l())
+            .sum::<f64>();
+    let mut law = LawEvidence {
+        mean_ln_l: Some(mean_ln_l),
+        box_changes: Vec::new(),
+        island_spread: spread_of(&island_ln_z),
+        cut_by_box,
+        law: bx.law,
+        ln_z,
+        ln_z_error,
+        island_ln_z,
+        prior_probability,
+        probability: 0.0,
+        stages: own.iter().map(|i| i.stages).collect(),
+        candidates_scored: all.iter().map(|i| i.scored).sum(),
+        best_rho: all.iter().map(|i| i.best_rho).fold(f64::INFINITY, f64::min),
+        posterior,
+        starts,
+    };
+    law.box_changes = sensitivity::box_changes(&law, &bx.lower, &bx.upper);
+    law
 }
 
 #[cfg(test)]

@@ -227,6 +227,154 @@ pub fn registered_laws() -> Vec<Law> {
     (0..count).map(|k| Law::File(FileLaw(k as u16))).collect()
 }
 
+/// A law file's `name`, checked: lower-case letters, digits and `_`, and not a built-in law's
+/// nor a word of bitrock's outputs.
+fn law_name(raw_name: &Spanned<String>, at: &dyn Fn(usize, String) -> Error) -> Result<String> {
+    let name = raw_name.get_ref().trim().to_string();
+    let name_ok = name.len() <= 24
+        && name.starts_with(|c: char| c.is_ascii_lowercase())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+    if !name_ok {
+        return Err(at(
+            raw_name.span().start,
+            format!("law name '{name}': use up to 24 lower-case letters, digits and '_', starting with a letter"),
+        ));
+    }
+    if Law::ALL.iter().any(|law| law.name() == name.as_str()) {
+        return Err(at(
+            raw_name.span().start,
+            format!("law name '{name}' is a built-in law's; choose another"),
+        ));
+    }
+    if OUTPUT_WORDS.contains(&name.as_str()) {
+        return Err(at(
+            raw_name.span().start,
+            format!("law name '{name}' is a word bitrock uses in its outputs; choose another"),
+        ));
+    }
+    Ok(name)
+}
+
+/// One `[[parameter]]` of a law file, checked against the ones before it (`params`): its
+/// name, unit, bounds and reference.
+fn parameter(p: &RawParam, params: &[LawParam], at: &dyn Fn(usize, String) -> Error) -> Result<LawParam> {
+    let pname = p.name.get_ref().trim().to_string();
+    let ident =
+        pname.starts_with(|c: char| c.is_alphabetic()) && pname.chars().all(|c| c.is_alphanumeric() || c == '_');
+    if !ident {
+        return Err(at(
+            p.name.span().start,
+            format!("parameter name '{pname}': use letters, digits and '_', starting with a letter"),
+        ));
+    }
+    if expr::is_reserved(&pname) {
+        return Err(at(
+            p.name.span().start,
+            format!("parameter name '{pname}' is reserved (w, r, pi, e and the functions)"),
+        ));
+    }
+    if params.iter().any(|q| q.name == pname) {
+        return Err(at(p.name.span().start, format!("parameter '{pname}' is given twice")));
+    }
+    let (torque_power, inverse_speed_power) =
+        parse_unit(p.unit.get_ref()).ok_or_else(|| at(p.unit.span().start, unit_error(p.unit.get_ref())))?;
+    let value = |v: &Option<Spanned<f64>>, default: f64, what: &str| -> Result<f64> {
+        match v {
+            None => Ok(default),
+            Some(s) if s.get_ref().is_nan() => Err(at(s.span().start, format!("{what} of '{pname}' is not a number"))),
+            Some(s) => Ok(*s.get_ref()),
+        }
+    };
+    let lower = value(&p.lower, f64::NEG_INFINITY, "lower")?;
+    if lower == f64::INFINITY {
+        let start = p.lower.as_ref().map_or(0, |s| s.span().start);
+        return Err(at(start, format!("lower bound of '{pname}' is +∞")));
+    }
+    let upper = value(&p.upper, f64::INFINITY, "upper")?;
+    if let Some(s) = &p.upper
+        && upper <= lower
+    {
+        return Err(at(
+            s.span().start,
+            format!("upper bound of '{pname}' = {upper} does not lie above its lower bound {lower}"),
+        ));
+    }
+    let reference = match &p.reference {
+        None => None,
+        Some(s) => {
+            let v = *s.get_ref();
+            if !(v.is_finite() && lower <= v) {
+                return Err(at(
+                    s.span().start,
+                    format!("reference of '{pname}' = {v} lies below its lower bound {lower}"),
+                ));
+            }
+            if v > upper {
+                return Err(at(
+                    s.span().start,
+                    format!("reference of '{pname}' = {v} lies above its upper bound {upper}"),
+                ));
+            }
+            Some(v)
+        }
+    };
+    Ok(LawParam {
+        name: pname,
+        torque_power,
+        inverse_speed_power,
+        lower,
+        upper,
+        reference,
+    })
+}
+
+/// The torque's checks before its derivatives are built: a torque (N·m) in dimension, its
+/// derivatives of a size bitrock builds, its constants within f32, and proportional to the
+/// weight-on-bit ratio r. `at` places a message at the torque's text.
+fn check_torque(torque: &Expr, params: &[LawParam], names: &[&str], at: &dyn Fn(String) -> Error) -> Result<()> {
+    let dims: Vec<Dim> = params
+        .iter()
+        .map(|p| Dim::of(p.torque_power, p.inverse_speed_power))
+        .collect();
+    let dim = torque
+        .dimension(&dims, &names)
+        .map_err(|m| at(format!("torque: {m}")))?;
+    if dim != Dim::of(1, 0) {
+        return Err(at(format!(
+            "torque: the expression is in {}, not a torque (N·m)",
+            dim.unit()
+        )));
+    }
+    // Derivatives are built symbolically: bounded before any is built.
+    let bound = torque.derivative_size_bound();
+    if bound > MAX_DERIVATIVE_NODES {
+        return Err(at(format!(
+            "torque: its derivatives could hold {bound} nodes, more than the {MAX_DERIVATIVE_NODES} bitrock builds (the derivative of a product of n factors grows as n²): write a repeated factor as a power (g^12) or simplify the expression"
+        )));
+    }
+    if let Some(c) = torque.constant_beyond_f32() {
+        return Err(at(format!(
+            "torque: the constant {c:e} does not fit in f32, the GPU's float (|x| ≤ {:e}): rescale the law's parameters so that its constants stay within it",
+            f32::MAX
+        )));
+    }
+    // Every law in bitrock scales with the weight-on-bit ratio: T = r · T₁(w).
+    let probe: Vec<f64> = params.iter().map(|p| p.reference.unwrap_or(1.0)).collect();
+    let proportional = !torque.derivative(Var::Ratio).uses(Var::Ratio)
+        && [0.1, 1.0, 5.0].iter().all(|&w| {
+            let t = torque.eval(&probe, w, 0.0);
+            t == 0.0 || !t.is_finite()
+        });
+    if !proportional {
+        return Err(at(
+            "torque: must be proportional to the weight-on-bit ratio r: write r * (…)".to_string(),
+        ));
+    }
+    Ok(())
+}
+
 impl LawFile {
     /// Reads and compiles the law file at `path`.
     pub fn load(path: &Path) -> Result<Self> {
@@ -249,30 +397,7 @@ impl LawFile {
             let offset = e.span().map_or(0, |s| s.start);
             at(offset, e.message().trim().to_string())
         })?;
-        let name = raw.name.get_ref().trim().to_string();
-        let name_ok = name.len() <= 24
-            && name.starts_with(|c: char| c.is_ascii_lowercase())
-            && name
-                .chars()
-                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
-        if !name_ok {
-            return Err(at(
-                raw.name.span().start,
-                format!("law name '{name}': use up to 24 lower-case letters, digits and '_', starting with a letter"),
-            ));
-        }
-        if Law::ALL.iter().any(|law| law.name() == name.as_str()) {
-            return Err(at(
-                raw.name.span().start,
-                format!("law name '{name}' is a built-in law's; choose another"),
-            ));
-        }
-        if OUTPUT_WORDS.contains(&name.as_str()) {
-            return Err(at(
-                raw.name.span().start,
-                format!("law name '{name}' is a word bitrock uses in its outputs; choose another"),
-            ));
-        }
+        let name = law_name(&raw.name, &at)?;
         if raw.parameter.len() > MAX_PARAMS {
             return Err(at(
                 raw.parameter[MAX_PARAMS].span().start,
@@ -284,77 +409,8 @@ impl LawFile {
         }
         let mut params: Vec<LawParam> = Vec::new();
         for spanned in &raw.parameter {
-            let p = spanned.get_ref();
-            let pname = p.name.get_ref().trim().to_string();
-            let ident = pname.starts_with(|c: char| c.is_alphabetic())
-                && pname.chars().all(|c| c.is_alphanumeric() || c == '_');
-            if !ident {
-                return Err(at(
-                    p.name.span().start,
-                    format!("parameter name '{pname}': use letters, digits and '_', starting with a letter"),
-                ));
-            }
-            if expr::is_reserved(&pname) {
-                return Err(at(
-                    p.name.span().start,
-                    format!("parameter name '{pname}' is reserved (w, r, pi, e and the functions)"),
-                ));
-            }
-            if params.iter().any(|q| q.name == pname) {
-                return Err(at(p.name.span().start, format!("parameter '{pname}' is given twice")));
-            }
-            let (torque_power, inverse_speed_power) =
-                parse_unit(p.unit.get_ref()).ok_or_else(|| at(p.unit.span().start, unit_error(p.unit.get_ref())))?;
-            let value = |v: &Option<Spanned<f64>>, default: f64, what: &str| -> Result<f64> {
-                match v {
-                    None => Ok(default),
-                    Some(s) if s.get_ref().is_nan() => {
-                        Err(at(s.span().start, format!("{what} of '{pname}' is not a number")))
-                    }
-                    Some(s) => Ok(*s.get_ref()),
-                }
-            };
-            let lower = value(&p.lower, f64::NEG_INFINITY, "lower")?;
-            if lower == f64::INFINITY {
-                let start = p.lower.as_ref().map_or(0, |s| s.span().start);
-                return Err(at(start, format!("lower bound of '{pname}' is +∞")));
-            }
-            let upper = value(&p.upper, f64::INFINITY, "upper")?;
-            if let Some(s) = &p.upper
-                && upper <= lower
-            {
-                return Err(at(
-                    s.span().start,
-                    format!("upper bound of '{pname}' = {upper} does not lie above its lower bound {lower}"),
-                ));
-            }
-            let reference = match &p.reference {
-                None => None,
-                Some(s) => {
-                    let v = *s.get_ref();
-                    if !(v.is_finite() && lower <= v) {
-                        return Err(at(
-                            s.span().start,
-                            format!("reference of '{pname}' = {v} lies below its lower bound {lower}"),
-                        ));
-                    }
-                    if v > upper {
-                        return Err(at(
-                            s.span().start,
-                            format!("reference of '{pname}' = {v} lies above its upper bound {upper}"),
-                        ));
-                    }
-                    Some(v)
-                }
-            };
-            params.push(LawParam {
-                name: pname,
-                torque_power,
-                inverse_speed_power,
-                lower,
-                upper,
-                reference,
-            });
+            let param = parameter(spanned.get_ref(), &params, &at)?;
+            params.push(param);
         }
         let formula = raw.torque.get_ref().clone();
         let names: Vec<&str> = params.iter().map(|p| p.name.as_str()).collect();
@@ -373,51 +429,7 @@ impl LawFile {
             ));
         }
         let torque_at = text_start.unwrap_or(raw.torque.span().start);
-        let dims: Vec<Dim> = params
-            .iter()
-            .map(|p| Dim::of(p.torque_power, p.inverse_speed_power))
-            .collect();
-        let dim = torque
-            .dimension(&dims, &names)
-            .map_err(|m| at(torque_at, format!("torque: {m}")))?;
-        if dim != Dim::of(1, 0) {
-            return Err(at(
-                torque_at,
-                format!("torque: the expression is in {}, not a torque (N·m)", dim.unit()),
-            ));
-        }
-        // Derivatives are built symbolically: bounded before any is built.
-        let bound = torque.derivative_size_bound();
-        if bound > MAX_DERIVATIVE_NODES {
-            return Err(at(
-                torque_at,
-                format!(
-                    "torque: its derivatives could hold {bound} nodes, more than the {MAX_DERIVATIVE_NODES} bitrock builds (the derivative of a product of n factors grows as n²): write a repeated factor as a power (g^12) or simplify the expression"
-                ),
-            ));
-        }
-        if let Some(c) = torque.constant_beyond_f32() {
-            return Err(at(
-                torque_at,
-                format!(
-                    "torque: the constant {c:e} does not fit in f32, the GPU's float (|x| ≤ {:e}): rescale the law's parameters so that its constants stay within it",
-                    f32::MAX
-                ),
-            ));
-        }
-        // Every law in bitrock scales with the weight-on-bit ratio: T = r · T₁(w).
-        let probe: Vec<f64> = params.iter().map(|p| p.reference.unwrap_or(1.0)).collect();
-        let proportional = !torque.derivative(Var::Ratio).uses(Var::Ratio)
-            && [0.1, 1.0, 5.0].iter().all(|&w| {
-                let t = torque.eval(&probe, w, 0.0);
-                t == 0.0 || !t.is_finite()
-            });
-        if !proportional {
-            return Err(at(
-                torque_at,
-                "torque: must be proportional to the weight-on-bit ratio r: write r * (…)".to_string(),
-            ));
-        }
+        check_torque(&torque, &params, &names, &|m| at(torque_at, m))?;
         let dtorque_dw = torque.derivative(Var::Speed);
         if let Some(c) = dtorque_dw.constant_beyond_f32() {
             return Err(at(
