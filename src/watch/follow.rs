@@ -51,26 +51,11 @@ pub fn follow(
     let source = rows.name().to_path_buf();
     let stopped = || options.stop.is_some_and(|stop| stop());
     // A resumed watch: its store, checked against these settings, and where it stopped.
-    let mut resumed: Option<(store::WatchStore, store::StoredWatch)> = None;
-    if options.resume {
-        let dir = options
-            .dir
-            .ok_or_else(|| crate::Error::setting("resume", "needs the watch directory (`out`) to go on with"))?;
-        let (kept, stored) = store::WatchStore::resume(dir)?;
-        check_same_watch(&stored.meta, &settings, dir)?;
-        settings.window_s = Some(stored.meta.window_s);
-        settings.step_s = Some(stored.meta.step_s);
-        if let Some(last) = stored.updates.last() {
-            rows.replay_from(last.start_s + stored.meta.step_s);
-            observer.note(format!(
-                "going on with the watch in {} after window {} (t = {} s)",
-                dir.display(),
-                last.window,
-                last.end_s
-            ));
-        }
-        resumed = Some((kept, stored));
-    }
+    let mut resumed = if options.resume {
+        Some(resume_stored(rows, &mut settings, options.dir, observer)?)
+    } else {
+        None
+    };
     let mut kept: Option<store::WatchStore> = None;
     let mut first: Vec<(Row, std::time::Instant)> = Vec::new();
     let mut watch: Option<Watch> = None;
@@ -95,80 +80,11 @@ pub fn follow(
             source::Next::Waiting | source::Next::End => {}
         }
         if watch.is_none() && (first.len() >= RATE_ROWS || (ended && !first.is_empty())) {
-            let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
-            let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
-            steps.sort_by(f64::total_cmp);
-            let measured_hz = median(&steps).map_or(1.0, |dt| 1.0 / dt);
-            let rate_hz = resumed.as_ref().map_or(measured_hz, |(_, s)| s.meta.rate_hz);
-            let unit = rows.torque_unit();
-            let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, unit)?;
-            let (length, step) = made.windows();
-            let thin = made.thin();
-            if settings.thin.is_none() && thin > 1 {
-                observer.note(format!(
-                    "one row in {thin} used ({rate_hz:.1} Hz thinned to {:.1} Hz); `thin` sets it",
-                    rate_hz / thin as f64
-                ));
-            }
-            if let Some(config) = &settings.abc {
-                observer.note(format!(
-                    "each window's law probabilities by the paper's ABC ({} sampler, {} particles, δ = {}): ratios of the laws' prior volumes below each window's ε, not evidence",
-                    match config.sampler {
-                        crate::run::abc::SamplerConfig::Rejection(_) => "rejection",
-                        crate::run::abc::SamplerConfig::Smc(_) => "SMC",
-                    },
-                    config.sampler.schedule().particles,
-                    config.delta
-                ));
-            }
-            if settings.window_s.is_none() || settings.step_s.is_none() {
-                observer.note(format!(
-                    "windows of {length} s every {step} s (the record's rate: {rate_hz:.1} Hz); `window_s` and `step_s` set them"
-                ));
-            }
-            match resumed.take() {
-                Some((store, stored)) => {
-                    if let Some(server) = options.serve {
-                        server.set_meta(&serve::page_meta(&stored.meta));
-                        let last = stored.updates.last().map(|u| u.window);
-                        let view = stored.view.as_ref().filter(|v| Some(v.window) == last);
-                        for update in &stored.updates {
-                            server.publish(update, view.filter(|_| Some(update.window) == last));
-                        }
-                    }
-                    if unit != stored.meta.torque_unit {
-                        return Err(crate::Error::setting(
-                            "resume",
-                            format!(
-                                "the record's torques are in {}, the watch's were in {}",
-                                unit.label(),
-                                stored.meta.torque_unit.label()
-                            ),
-                        ));
-                    }
-                    if let Some(carried) = stored.carried {
-                        made.resume(carried);
-                    }
-                    kept = Some(store);
-                }
-                None => {
-                    let meta = store::WatchMeta {
-                        source: source.display().to_string(),
-                        settings: store::settings_json(&settings),
-                        window_s: length,
-                        step_s: step,
-                        rate_hz,
-                        torque_unit: unit,
-                        bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
-                    };
-                    if let Some(dir) = options.dir {
-                        kept = Some(store::WatchStore::create(dir, &meta)?);
-                    }
-                    if let Some(server) = options.serve {
-                        server.set_meta(&serve::page_meta(&meta));
-                    }
-                }
-            }
+            let rate_hz = resumed
+                .as_ref()
+                .map_or_else(|| measured_rate_hz(&first), |(_, s)| s.meta.rate_hz);
+            let (made, store) = start_watch(&settings, rows, rate_hz, resumed.take(), &options, observer)?;
+            kept = store;
             watch = Some(made);
         }
         if let Some(watch) = watch.as_mut() {
@@ -209,6 +125,125 @@ pub fn follow(
         step_s,
         stopped: interrupted || stopped(),
     })
+}
+
+/// Opens the watch stored in `dir` to go on with it: checked against `settings`, which take
+/// its windows, and `rows` moved past its last window.
+fn resume_stored(
+    rows: &mut source::Rows,
+    settings: &mut WatchSettings,
+    dir: Option<&Path>,
+    observer: &mut dyn Observer,
+) -> Result<(store::WatchStore, store::StoredWatch)> {
+    let dir = dir.ok_or_else(|| crate::Error::setting("resume", "needs the watch directory (`out`) to go on with"))?;
+    let (kept, stored) = store::WatchStore::resume(dir)?;
+    check_same_watch(&stored.meta, &settings, dir)?;
+    settings.window_s = Some(stored.meta.window_s);
+    settings.step_s = Some(stored.meta.step_s);
+    if let Some(last) = stored.updates.last() {
+        rows.replay_from(last.start_s + stored.meta.step_s);
+        observer.note(format!(
+            "going on with the watch in {} after window {} (t = {} s)",
+            dir.display(),
+            last.window,
+            last.end_s
+        ));
+    }
+    Ok((kept, stored))
+}
+
+/// The record's rate from its first rows' time stamps (the median step), Hz; 1 Hz without
+/// two distinct stamps.
+fn measured_rate_hz(first: &[(Row, std::time::Instant)]) -> f64 {
+    let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
+    let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    steps.sort_by(f64::total_cmp);
+    median(&steps).map_or(1.0, |dt| 1.0 / dt)
+}
+
+/// The watch of `rows` at `rate_hz`, what the user should know of its windows said, and its
+/// store: the `resumed` one (its windows published again, its carried state taken), or a new
+/// one in `options.dir`.
+fn start_watch(
+    settings: &WatchSettings,
+    rows: &source::Rows,
+    rate_hz: f64,
+    resumed: Option<(store::WatchStore, store::StoredWatch)>,
+    options: &FollowOptions<'_>,
+    observer: &mut dyn Observer,
+) -> Result<(Watch, Option<store::WatchStore>)> {
+    let unit = rows.torque_unit();
+    let source = rows.name().to_path_buf();
+    let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, unit)?;
+    let (length, step) = made.windows();
+    let thin = made.thin();
+    if settings.thin.is_none() && thin > 1 {
+        observer.note(format!(
+            "one row in {thin} used ({rate_hz:.1} Hz thinned to {:.1} Hz); `thin` sets it",
+            rate_hz / thin as f64
+        ));
+    }
+    if let Some(config) = &settings.abc {
+        observer.note(format!(
+            "each window's law probabilities by the paper's ABC ({} sampler, {} particles, δ = {}): ratios of the laws' prior volumes below each window's ε, not evidence",
+            match config.sampler {
+                crate::run::abc::SamplerConfig::Rejection(_) => "rejection",
+                crate::run::abc::SamplerConfig::Smc(_) => "SMC",
+            },
+            config.sampler.schedule().particles,
+            config.delta
+        ));
+    }
+    if settings.window_s.is_none() || settings.step_s.is_none() {
+        observer.note(format!(
+            "windows of {length} s every {step} s (the record's rate: {rate_hz:.1} Hz); `window_s` and `step_s` set them"
+        ));
+    }
+    let mut kept = None;
+    match resumed {
+        Some((store, stored)) => {
+            if let Some(server) = options.serve {
+                server.set_meta(&serve::page_meta(&stored.meta));
+                let last = stored.updates.last().map(|u| u.window);
+                let view = stored.view.as_ref().filter(|v| Some(v.window) == last);
+                for update in &stored.updates {
+                    server.publish(update, view.filter(|_| Some(update.window) == last));
+                }
+            }
+            if unit != stored.meta.torque_unit {
+                return Err(crate::Error::setting(
+                    "resume",
+                    format!(
+                        "the record's torques are in {}, the watch's were in {}",
+                        unit.label(),
+                        stored.meta.torque_unit.label()
+                    ),
+                ));
+            }
+            if let Some(carried) = stored.carried {
+                made.resume(carried);
+            }
+            kept = Some(store);
+        }
+        None => {
+            let meta = store::WatchMeta {
+                source: source.display().to_string(),
+                settings: store::settings_json(&settings),
+                window_s: length,
+                step_s: step,
+                rate_hz,
+                torque_unit: unit,
+                bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
+            };
+            if let Some(dir) = options.dir {
+                kept = Some(store::WatchStore::create(dir, &meta)?);
+            }
+            if let Some(server) = options.serve {
+                server.set_meta(&serve::page_meta(&meta));
+            }
+        }
+    }
+    Ok((made, kept))
 }
 
 /// What a window's fits, evidence or ABC give, or why its samples cannot give it (a fit, a
