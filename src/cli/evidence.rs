@@ -355,6 +355,52 @@ fn tables(
         )?;
     }
     starts_table(out, evidence)?;
+    bayes_factor_table(out, analysis)?;
+    let lag1: Vec<String> = analysis
+        .fits
+        .iter()
+        .zip(&analysis.residual_lag1)
+        .map(|(fit, phi)| format!("{} {phi:.2}", fit.law))
+        .collect();
+    writeln!(
+        out,
+        "\nresidual lag-1 autocorrelation of the fits (time order): {}",
+        lag1.join(", ")
+    )?;
+    noise_model_table(out, analysis)?;
+    for warning in analysis.warnings() {
+        // Where a flag of this command changes what the warning is about.
+        let hint = match warning {
+            EvidenceWarning::Autocorrelated { .. } => " (--noise ar1)",
+            EvidenceWarning::IslandsDisagree { .. } => "; more --particles or --max-sweeps narrow it",
+            EvidenceWarning::CutByBox { .. } => "; widen it (--prior-scale, or a --prior file)",
+            EvidenceWarning::DecidedByTheBoxes { .. } => " (--prior-scale, or a --prior file)",
+        };
+        writeln!(out, "warning: {warning}{hint}")?;
+    }
+    boxes_table(out, data, analysis)?;
+    writeln!(
+        out,
+        "\n{} candidates scored ({:.3e} candidate × data-point evaluations) on {} in {:.2} s",
+        evidence.candidates_scored, evidence.evaluations as f64, evidence.backend, evidence.seconds
+    )?;
+    if analysis.noise_models.len() > 1 {
+        let models = &analysis.noise_models;
+        writeln!(
+            out,
+            "all {} models of the residuals: {} candidates in {:.2} s",
+            models.len(),
+            models.iter().map(|m| m.candidates_scored).sum::<u64>(),
+            models.iter().map(|m| m.seconds).sum::<f64>()
+        )?;
+    }
+    Ok(())
+}
+
+/// The Bayes factors of the law of the largest evidence against each other law: the data's
+/// part and the boxes', the word the data's, and how the boxes change them.
+fn bayes_factor_table(out: &mut impl Write, analysis: &EvidenceAnalysis) -> std::io::Result<()> {
+    let evidence = &analysis.evidence;
     let factors = evidence.bayes_factors(&analysis.separations);
     if let [first, ..] = &factors[..] {
         writeln!(
@@ -384,17 +430,12 @@ fn tables(
             }
         }
     }
-    let lag1: Vec<String> = analysis
-        .fits
-        .iter()
-        .zip(&analysis.residual_lag1)
-        .map(|(fit, phi)| format!("{} {phi:.2}", fit.law))
-        .collect();
-    writeln!(
-        out,
-        "\nresidual lag-1 autocorrelation of the fits (time order): {}",
-        lag1.join(", ")
-    )?;
+    Ok(())
+}
+
+/// The models of the residuals, where more than one was computed: each one's evidence, and
+/// the one reported.
+fn noise_model_table(out: &mut impl Write, analysis: &EvidenceAnalysis) -> std::io::Result<()> {
     if analysis.noise_models.len() > 1 {
         writeln!(
             out,
@@ -428,16 +469,11 @@ fn tables(
             )?;
         }
     }
-    for warning in analysis.warnings() {
-        // Where a flag of this command changes what the warning is about.
-        let hint = match warning {
-            EvidenceWarning::Autocorrelated { .. } => " (--noise ar1)",
-            EvidenceWarning::IslandsDisagree { .. } => "; more --particles or --max-sweeps narrow it",
-            EvidenceWarning::CutByBox { .. } => "; widen it (--prior-scale, or a --prior file)",
-            EvidenceWarning::DecidedByTheBoxes { .. } => " (--prior-scale, or a --prior file)",
-        };
-        writeln!(out, "warning: {warning}{hint}")?;
-    }
+    Ok(())
+}
+
+/// The prior boxes in the record's units.
+fn boxes_table(out: &mut impl Write, data: &FieldData, analysis: &EvidenceAnalysis) -> std::io::Result<()> {
     writeln!(
         out,
         "\nprior boxes ({} for torques, rad/s for speeds):",
@@ -456,21 +492,6 @@ fn tables(
             .map(|(name, (a, b))| format!("{name} [{a:.4e}, {b:.4e}]"))
             .collect();
         writeln!(out, "  {:<6} {}", bx.law.name(), ranges.join("  "))?;
-    }
-    writeln!(
-        out,
-        "\n{} candidates scored ({:.3e} candidate × data-point evaluations) on {} in {:.2} s",
-        evidence.candidates_scored, evidence.evaluations as f64, evidence.backend, evidence.seconds
-    )?;
-    if analysis.noise_models.len() > 1 {
-        let models = &analysis.noise_models;
-        writeln!(
-            out,
-            "all {} models of the residuals: {} candidates in {:.2} s",
-            models.len(),
-            models.iter().map(|m| m.candidates_scored).sum::<u64>(),
-            models.iter().map(|m| m.seconds).sum::<f64>()
-        )?;
     }
     Ok(())
 }
