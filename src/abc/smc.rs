@@ -1072,17 +1072,7 @@ pub fn run_on(
         seconds: started.elapsed().as_secs_f64(),
     };
     if populations.is_empty() {
-        // Population 0: the rejection sampler's, from the prior at ε_0.
-        let first = RejectionConfig {
-            schedule: Schedule {
-                max_populations: 1,
-                // Population 0 is drawn at ε_0; the schedule starts with population 1.
-                epsilons: None,
-                ..schedule.clone()
-            },
-            mode: Mode::Nested,
-        };
-        let run = rejection::run_on(workers, &first, Vec::new(), observer)?;
+        let run = first_population(workers, schedule, observer)?;
         total_scored += run.populations.iter().map(|p| p.record.candidates_scored).sum::<u64>();
         if matches!(run.stop, StopReason::MaxDraws | StopReason::WallTime) {
             return Ok(finish(run.populations, run.stop, total_scored));
@@ -1127,18 +1117,11 @@ pub fn run_on(
             let size = ((1.05 * missing / rate.max(1e-4)).ceil() as u64 + 16)
                 .min(schedule.max_batch as u64)
                 .min(budget);
+            let tasks = shard::split(fill.position, size, workers.parallelism());
             let round = Round {
                 population: t,
                 context: Some(context.as_ref()),
-                tasks: shard::split(fill.position, size, workers.parallelism())
-                    .into_iter()
-                    .map(|(start, len)| Task::Propose {
-                        stream,
-                        start,
-                        len,
-                        epsilon,
-                    })
-                    .collect(),
+                tasks: proposals(stream, epsilon, tasks),
             };
             let found = shard::run_found(workers, &round, fill.position, size)?;
             fill.scored += found.scored;
@@ -1160,42 +1143,88 @@ pub fn run_on(
         let Some(weights) = weights else {
             break interrupted.expect("a population without weights was interrupted");
         };
-        let (kept, weights) = combine_survivors(survivors, weights);
-        for (p, w) in fill.particles.iter_mut().zip(&weights[kept.len()..]) {
-            p.weight = *w;
-        }
-        let new = fill.particles.len();
-        for p in &kept {
-            fill.law_accepted[prior.slot_of(p.law)] += 1;
-        }
-        fill.particles.splice(0..0, kept);
-        let per_law = fill.law_records(problem, |s| {
-            let law = prior.law(s);
-            let probability = compensated_sum(fill.particles.iter().filter(|p| p.law == law).map(|p| p.weight));
-            (probability, fill.law_accepted[s] > 0)
-        });
-        let draws = fill.position;
-        let mut population = fill.into_population(per_law, super::effective_sample_size(&weights));
-        if config.refill == Refill::Survivors {
-            // The acceptance rates are the top-up's: new particles per proposal. A population
-            // that needed none (every particle survived a schedule's ε) keeps the last rate.
-            population.record.acceptance_rate = if draws > 0 {
-                new as f64 / draws as f64
-            } else {
-                previous_rate
-            };
-            let accepted_new = |law| population.particles[n - new..].iter().filter(|p| p.law == law).count();
-            for r in &mut population.record.per_law {
-                r.acceptance_rate = if r.draws > 0 {
-                    accepted_new(r.law) as f64 / r.draws as f64
-                } else {
-                    0.0
-                };
-            }
-        }
+        let population = population_of(fill, survivors, weights, config, problem, previous_rate);
         super::complete_population(&mut populations, population, observer)?;
     };
     Ok(finish(populations, stop, total_scored))
+}
+
+/// The proposal tasks of a round: each share of candidates (start, count) on the
+/// population's `stream`, scored against `epsilon`.
+fn proposals(stream: u32, epsilon: f64, shares: Vec<(u64, u64)>) -> Vec<Task> {
+    shares
+        .into_iter()
+        .map(|(start, len)| Task::Propose {
+            stream,
+            start,
+            len,
+            epsilon,
+        })
+        .collect()
+}
+
+/// Population 0 of an SMC run: the rejection sampler's, from the prior at ε_0 (the schedule's
+/// tolerances start with population 1).
+fn first_population(workers: &dyn Workers, schedule: &Schedule, observer: &mut dyn Observer) -> Result<Run> {
+    let first = RejectionConfig {
+        schedule: Schedule {
+            max_populations: 1,
+            epsilons: None,
+            ..schedule.clone()
+        },
+        mode: Mode::Nested,
+    };
+    rejection::run_on(workers, &first, Vec::new(), observer)
+}
+
+/// Population `fill` completed: the survivors kept before the new particles, every particle
+/// weighed (`weights`: the survivors' then the new ones'), the laws' records, and, with
+/// survivors, the acceptance rates of the top-up (new particles per proposal; a population
+/// that needed none keeps `previous_rate`).
+fn population_of(
+    mut fill: Filling,
+    survivors: Vec<Particle>,
+    weights: Vec<f64>,
+    config: &SmcConfig,
+    problem: &AbcProblem,
+    previous_rate: f64,
+) -> Population {
+    let prior = &problem.prior;
+    let n = config.schedule.particles;
+    let (kept, weights) = combine_survivors(survivors, weights);
+    for (p, w) in fill.particles.iter_mut().zip(&weights[kept.len()..]) {
+        p.weight = *w;
+    }
+    let new = fill.particles.len();
+    for p in &kept {
+        fill.law_accepted[prior.slot_of(p.law)] += 1;
+    }
+    fill.particles.splice(0..0, kept);
+    let per_law = fill.law_records(problem, |s| {
+        let law = prior.law(s);
+        let probability = compensated_sum(fill.particles.iter().filter(|p| p.law == law).map(|p| p.weight));
+        (probability, fill.law_accepted[s] > 0)
+    });
+    let draws = fill.position;
+    let mut population = fill.into_population(per_law, super::effective_sample_size(&weights));
+    if config.refill == Refill::Survivors {
+        // The acceptance rates are the top-up's: new particles per proposal. A population
+        // that needed none (every particle survived a schedule's ε) keeps the last rate.
+        population.record.acceptance_rate = if draws > 0 {
+            new as f64 / draws as f64
+        } else {
+            previous_rate
+        };
+        let accepted_new = |law| population.particles[n - new..].iter().filter(|p| p.law == law).count();
+        for r in &mut population.record.per_law {
+            r.acceptance_rate = if r.draws > 0 {
+                accepted_new(r.law) as f64 / r.draws as f64
+            } else {
+                0.0
+            };
+        }
+    }
+    population
 }
 
 #[cfg(test)]
