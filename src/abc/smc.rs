@@ -560,45 +560,8 @@ impl Kernels {
             })
             .collect::<Result<_>>()?;
         let alive: Vec<usize> = (0..laws.len()).filter(|&s| laws[s].is_some()).collect();
-        let mut proposal_probability = vec![0.0; laws.len()];
-        let law_weights: Vec<f64> = match config.law_proposal {
-            LawProposal::Kernel => {
-                let total: f64 = alive.iter().map(|&s| probability[s]).sum();
-                let a = alive.len();
-                let model_kernel = |to: usize, from: usize| match (a, to == from) {
-                    (1, _) => 1.0,
-                    (_, true) => config.p_stay,
-                    (_, false) => (1.0 - config.p_stay) / (a - 1) as f64,
-                };
-                for &to in &alive {
-                    proposal_probability[to] = compensated_sum(
-                        alive
-                            .iter()
-                            .map(|&from| probability[from] / total * model_kernel(to, from)),
-                    );
-                }
-                alive.iter().map(|&s| probability[s]).collect()
-            }
-            LawProposal::Worth => {
-                // The laws' shares of the weight below ε (of all the weight where none is
-                // below), mixed with an even floor.
-                let below_weight: Vec<f64> = alive
-                    .iter()
-                    .map(|&s| compensated_sum(below[s].iter().map(|&i| previous[i].weight)))
-                    .collect();
-                let shares = if below_weight.iter().any(|&w| w > 0.0) {
-                    below_weight
-                } else {
-                    alive.iter().map(|&s| probability[s]).collect()
-                };
-                let total = compensated_sum(shares.iter().copied());
-                let floor = WORTH_FLOOR / alive.len() as f64;
-                for (&s, share) in alive.iter().zip(&shares) {
-                    proposal_probability[s] = (1.0 - WORTH_FLOOR) * share / total + floor;
-                }
-                alive.iter().map(|&s| proposal_probability[s]).collect()
-            }
-        };
+        let (law_weights, proposal_probability) =
+            law_weights(config, &alive, laws.len(), &probability, &below, previous);
         let mut running = 0.0;
         let mut law_cdf: Vec<f64> = law_weights
             .iter()
@@ -1147,6 +1110,59 @@ pub fn run_on(
         super::complete_population(&mut populations, population, observer)?;
     };
     Ok(finish(populations, stop, total_scored))
+}
+
+/// The weights the alive laws are drawn by, and each slot's probability that a proposal is
+/// of its law (0 for the laws not proposed): the previous population's law probabilities
+/// through the model kernel, or the laws' shares of the weight below ε with an even floor.
+fn law_weights(
+    config: &SmcConfig,
+    alive: &[usize],
+    slots: usize,
+    probability: &[f64],
+    below: &[Vec<usize>],
+    previous: &[Particle],
+) -> (Vec<f64>, Vec<f64>) {
+    let mut proposal_probability = vec![0.0; slots];
+    let law_weights: Vec<f64> = match config.law_proposal {
+        LawProposal::Kernel => {
+            let total: f64 = alive.iter().map(|&s| probability[s]).sum();
+            let a = alive.len();
+            let model_kernel = |to: usize, from: usize| match (a, to == from) {
+                (1, _) => 1.0,
+                (_, true) => config.p_stay,
+                (_, false) => (1.0 - config.p_stay) / (a - 1) as f64,
+            };
+            for &to in &alive {
+                proposal_probability[to] = compensated_sum(
+                    alive
+                        .iter()
+                        .map(|&from| probability[from] / total * model_kernel(to, from)),
+                );
+            }
+            alive.iter().map(|&s| probability[s]).collect()
+        }
+        LawProposal::Worth => {
+            // The laws' shares of the weight below ε (of all the weight where none is
+            // below), mixed with an even floor.
+            let below_weight: Vec<f64> = alive
+                .iter()
+                .map(|&s| compensated_sum(below[s].iter().map(|&i| previous[i].weight)))
+                .collect();
+            let shares = if below_weight.iter().any(|&w| w > 0.0) {
+                below_weight
+            } else {
+                alive.iter().map(|&s| probability[s]).collect()
+            };
+            let total = compensated_sum(shares.iter().copied());
+            let floor = WORTH_FLOOR / alive.len() as f64;
+            for (&s, share) in alive.iter().zip(&shares) {
+                proposal_probability[s] = (1.0 - WORTH_FLOOR) * share / total + floor;
+            }
+            alive.iter().map(|&s| proposal_probability[s]).collect()
+        }
+    };
+    (law_weights, proposal_probability)
 }
 
 /// The proposal tasks of a round: each share of candidates (start, count) on the
