@@ -1133,7 +1133,7 @@ fn law_weights(
                 (_, true) => config.p_stay,
                 (_, false) => (1.0 - config.p_stay) / (a - 1) as f64,
             };
-            for &to in &alive {
+            for &to in alive {
                 proposal_probability[to] = compensated_sum(
                     alive
                         .iter()
