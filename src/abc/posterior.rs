@@ -188,40 +188,11 @@ pub(crate) fn summarize_law(law: Law, members: &[&Particle], probability: f64) -
     // Every quantile of the full population, exact: one sorted copy of a column at a time
     // (sorted on all cores; the order of a total order is unique, so any sort gives the same
     // values).
-    let levels = [Q_LOW, 0.25, 0.5, 0.75, Q_HIGH];
-    let column_quantiles: Vec<[f64; 5]> = columns
-        .iter()
-        .map(|c| {
-            if weighted {
-                levels.map(|q| weighted_quantile(c, &w, q))
-            } else {
-                let mut sorted = c.clone();
-                sorted.par_sort_unstable_by(f64::total_cmp);
-                levels.map(|q| quantile_of_sorted(&sorted, q))
-            }
-        })
-        .collect();
+    let column_quantiles = column_quantiles(&columns, &w, weighted);
     let quantiles = |level: usize| -> Vec<f64> { column_quantiles.iter().map(|q| q[level]).collect() };
     let (q01, q50, q99) = (quantiles(0), quantiles(2), quantiles(4));
 
-    let pairs: Vec<(usize, usize)> = (0..d)
-        .flat_map(|j| (j + 1..d).map(move |k| (j, k)))
-        .filter(|&(j, k)| varies[j] && varies[k])
-        .collect();
-    let products: Vec<f64> = pairs
-        .par_iter()
-        .map(|&(j, k)| weighted_sum(&deviations[j], &deviations[k]))
-        .collect();
-    let mut correlation = vec![vec![None; d]; d];
-    for j in (0..d).filter(|&j| varies[j]) {
-        correlation[j][j] = Some(1.0);
-    }
-    for (&(j, k), &sxy) in pairs.iter().zip(&products) {
-        // Rounding can push |r| a hair past 1 for an exactly linear pair.
-        let r = (sxy / (squares[j].sqrt() * squares[k].sqrt())).clamp(-1.0, 1.0);
-        correlation[j][k] = Some(r);
-        correlation[k][j] = Some(r);
-    }
+    let correlation = correlations(&deviations, &squares, &varies, &w);
 
     let best = members
         .iter()
@@ -242,16 +213,7 @@ pub(crate) fn summarize_law(law: Law, members: &[&Particle], probability: f64) -
             }
         })
         .collect();
-    let (map, map_bandwidth) = if n <= KDE_POINTS {
-        kde_mode(&columns, &mean, &scale, &w, true)
-    } else {
-        // A systematic subsample: the particles are in index order, i.i.d. draws of the
-        // posterior, so every stride-th of them is an i.i.d. sample of it too.
-        let stride = n.div_ceil(KDE_POINTS);
-        let thin = |v: &[f64]| -> Vec<f64> { v.iter().step_by(stride).copied().collect() };
-        let sub_columns: Vec<Vec<f64>> = columns.iter().map(|c| thin(c)).collect();
-        kde_mode(&sub_columns, &mean, &scale, &thin(&w), false)
-    };
+    let (map, map_bandwidth) = map_estimate(&columns, &mean, &scale, &w);
 
     LawSummary {
         law,
@@ -267,6 +229,67 @@ pub(crate) fn summarize_law(law: Law, members: &[&Particle], probability: f64) -
         best,
         map,
         map_bandwidth,
+    }
+}
+
+/// Each column's quantiles at Q_LOW, the quartiles, the median and Q_HIGH, exact: weighted
+/// where the particles are, else one sorted copy of a column at a time (sorted on all cores;
+/// the order of a total order is unique, so any sort gives the same values).
+fn column_quantiles(columns: &[Vec<f64>], w: &[f64], weighted: bool) -> Vec<[f64; 5]> {
+    let levels = [Q_LOW, 0.25, 0.5, 0.75, Q_HIGH];
+    columns
+        .iter()
+        .map(|c| {
+            if weighted {
+                levels.map(|q| weighted_quantile(c, w, q))
+            } else {
+                let mut sorted = c.clone();
+                sorted.par_sort_unstable_by(f64::total_cmp);
+                levels.map(|q| quantile_of_sorted(&sorted, q))
+            }
+        })
+        .collect()
+}
+
+/// The weighted correlations of the parameters that vary (`None` for one that does not),
+/// from their deviations from the mean and their weighted sums of squares.
+fn correlations(deviations: &[Vec<f64>], squares: &[f64], varies: &[bool], w: &[f64]) -> Vec<Vec<Option<f64>>> {
+    let d = deviations.len();
+    let weighted_sum = |a: &[f64], b: &[f64]| compensated_sum(w.iter().zip(a).zip(b).map(|((w, x), y)| w * (x * y)));
+    let pairs: Vec<(usize, usize)> = (0..d)
+        .flat_map(|j| (j + 1..d).map(move |k| (j, k)))
+        .filter(|&(j, k)| varies[j] && varies[k])
+        .collect();
+    let products: Vec<f64> = pairs
+        .par_iter()
+        .map(|&(j, k)| weighted_sum(&deviations[j], &deviations[k]))
+        .collect();
+    let mut correlation = vec![vec![None; d]; d];
+    for j in (0..d).filter(|&j| varies[j]) {
+        correlation[j][j] = Some(1.0);
+    }
+    for (&(j, k), &sxy) in pairs.iter().zip(&products) {
+        // Rounding can push |r| a hair past 1 for an exactly linear pair.
+        let r = (sxy / (squares[j].sqrt() * squares[k].sqrt())).clamp(-1.0, 1.0);
+        correlation[j][k] = Some(r);
+        correlation[k][j] = Some(r);
+    }
+    correlation
+}
+
+/// The posterior's mode by kernel density and its bandwidth: on every particle, or on a
+/// systematic subsample of [`KDE_POINTS`] where there are more.
+fn map_estimate(columns: &[Vec<f64>], mean: &[f64], scale: &[f64], w: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let n = w.len();
+    if n <= KDE_POINTS {
+        kde_mode(columns, mean, scale, w, true)
+    } else {
+        // A systematic subsample: the particles are in index order, i.i.d. draws of the
+        // posterior, so every stride-th of them is an i.i.d. sample of it too.
+        let stride = n.div_ceil(KDE_POINTS);
+        let thin = |v: &[f64]| -> Vec<f64> { v.iter().step_by(stride).copied().collect() };
+        let sub_columns: Vec<Vec<f64>> = columns.iter().map(|c| thin(c)).collect();
+        kde_mode(&sub_columns, mean, scale, &thin(w), false)
     }
 }
 

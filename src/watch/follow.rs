@@ -137,7 +137,7 @@ fn resume_stored(
 ) -> Result<(store::WatchStore, store::StoredWatch)> {
     let dir = dir.ok_or_else(|| crate::Error::setting("resume", "needs the watch directory (`out`) to go on with"))?;
     let (kept, stored) = store::WatchStore::resume(dir)?;
-    check_same_watch(&stored.meta, &settings, dir)?;
+    check_same_watch(&stored.meta, settings, dir)?;
     settings.window_s = Some(stored.meta.window_s);
     settings.step_s = Some(stored.meta.step_s);
     if let Some(last) = stored.updates.last() {
@@ -228,7 +228,7 @@ fn start_watch(
         None => {
             let meta = store::WatchMeta {
                 source: source.display().to_string(),
-                settings: store::settings_json(&settings),
+                settings: store::settings_json(settings),
                 window_s: length,
                 step_s: step,
                 rate_hz,
