@@ -2,6 +2,7 @@
 //! formation, the stretches between them and the latest advice, with the figures along the
 //! record.
 
+use super::Update;
 use super::store::StoredWatch;
 use crate::error::Result;
 use crate::report::{ReportSummary, figures_markdown, replace_report};
@@ -60,6 +61,28 @@ fn markdown(watch: &StoredWatch) -> String {
         meta.bitrock_version,
     );
 
+    changes_section(&mut md, updates);
+
+    stretches_section(&mut md, updates);
+
+    if let Some(last) = updates.last() {
+        last_window_section(&mut md, last);
+    }
+    let mut latencies: Vec<f64> = updates.iter().map(|u| u.latency_s).collect();
+    if !latencies.is_empty() {
+        latencies.sort_by(f64::total_cmp);
+        let _ = writeln!(
+            md,
+            "Latency from a window's last sample to its update: median {:.2} s, 90th percentile {:.2} s.\n",
+            crate::numerics::quantile(&latencies, 0.5),
+            crate::numerics::quantile(&latencies, 0.9)
+        );
+    }
+    md
+}
+
+/// The windows where a change of formation was declared.
+fn changes_section(md: &mut String, updates: &[Update]) {
     let _ = writeln!(md, "## Changes of formation\n");
     let changes: Vec<_> = updates.iter().filter(|u| u.change).collect();
     if changes.is_empty() {
@@ -82,7 +105,10 @@ fn markdown(watch: &StoredWatch) -> String {
         }
         let _ = writeln!(md);
     }
+}
 
+/// The stretches between changes: which law each most often ranked first.
+fn stretches_section(md: &mut String, updates: &[Update]) {
     // The stretches between changes: which law each most often ranked first.
     let _ = writeln!(md, "## Stretches between changes\n");
     let _ = writeln!(
@@ -123,41 +149,31 @@ fn markdown(watch: &StoredWatch) -> String {
         stretch_start = k;
     }
     let _ = writeln!(md);
+}
 
-    if let Some(last) = updates.last() {
-        let _ = writeln!(md, "## The last window\n");
-        let _ = writeln!(md, "Window {} ({}–{} s).", last.window, last.start_s, last.end_s);
-        if let Some(why) = &last.uninformative {
-            let _ = writeln!(md, "It informs nothing: {why}.");
-        }
-        for l in &last.laws {
-            let ln_z = match (l.ln_z, l.ln_z_error) {
-                (Some(ln_z), Some(error)) => format!(", ln Z = {ln_z:.1} ± {error:.1}"),
-                _ => String::new(),
-            };
-            let _ = writeln!(
-                md,
-                "- {}: P = {:.3} (this window alone {:.3}{ln_z})",
-                l.law, l.probability, l.window_probability
-            );
-        }
-        if let Some(epsilon) = last.epsilon {
-            let _ = writeln!(md, "\nThe window's ABC ended at ε = {epsilon:.5}.");
-        }
-        if let Some(advice) = &last.advice {
-            let _ = writeln!(md, "\nAdvice: {}.", advice.words);
-        }
-        let _ = writeln!(md);
+/// The last window: its law probabilities, its ABC's tolerance and its advice.
+fn last_window_section(md: &mut String, last: &Update) {
+    let _ = writeln!(md, "## The last window\n");
+    let _ = writeln!(md, "Window {} ({}–{} s).", last.window, last.start_s, last.end_s);
+    if let Some(why) = &last.uninformative {
+        let _ = writeln!(md, "It informs nothing: {why}.");
     }
-    let mut latencies: Vec<f64> = updates.iter().map(|u| u.latency_s).collect();
-    if !latencies.is_empty() {
-        latencies.sort_by(f64::total_cmp);
+    for l in &last.laws {
+        let ln_z = match (l.ln_z, l.ln_z_error) {
+            (Some(ln_z), Some(error)) => format!(", ln Z = {ln_z:.1} ± {error:.1}"),
+            _ => String::new(),
+        };
         let _ = writeln!(
             md,
-            "Latency from a window's last sample to its update: median {:.2} s, 90th percentile {:.2} s.\n",
-            crate::numerics::quantile(&latencies, 0.5),
-            crate::numerics::quantile(&latencies, 0.9)
+            "- {}: P = {:.3} (this window alone {:.3}{ln_z})",
+            l.law, l.probability, l.window_probability
         );
     }
-    md
+    if let Some(epsilon) = last.epsilon {
+        let _ = writeln!(md, "\nThe window's ABC ended at ε = {epsilon:.5}.");
+    }
+    if let Some(advice) = &last.advice {
+        let _ = writeln!(md, "\nAdvice: {}.", advice.words);
+    }
+    let _ = writeln!(md);
 }

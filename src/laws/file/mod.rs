@@ -338,9 +338,7 @@ fn check_torque(torque: &Expr, params: &[LawParam], names: &[&str], at: &dyn Fn(
         .iter()
         .map(|p| Dim::of(p.torque_power, p.inverse_speed_power))
         .collect();
-    let dim = torque
-        .dimension(&dims, names)
-        .map_err(|m| at(format!("torque: {m}")))?;
+    let dim = torque.dimension(&dims, names).map_err(|m| at(format!("torque: {m}")))?;
     if dim != Dim::of(1, 0) {
         return Err(at(format!(
             "torque: the expression is in {}, not a torque (N·m)",
