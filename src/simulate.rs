@@ -423,6 +423,18 @@ pub struct WellTrace {
 }
 
 impl Well {
+    /// Each segment's start in recorded time, s.
+    fn segment_starts_s(&self) -> Vec<f64> {
+        self.segments
+            .iter()
+            .scan(0.0, |start, s| {
+                let this = *start;
+                *start += s.duration_s;
+                Some(this)
+            })
+            .collect()
+    }
+
     /// The one-segment well a configuration describes.
     fn of(cfg: &SimConfig) -> Self {
         Self {
@@ -520,15 +532,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         progress,
     );
     // The segment and the fraction of it elapsed at recorded time t.
-    let starts: Vec<f64> = well
-        .segments
-        .iter()
-        .scan(0.0, |start, s| {
-            let this = *start;
-            *start += s.duration_s;
-            Some(this)
-        })
-        .collect();
+    let starts = well.segment_starts_s();
     let segment_at = |t_s: f64| -> (usize, f64) {
         let i = starts.iter().rposition(|&start| start <= t_s).unwrap_or(0);
         let s = &well.segments[i];
@@ -546,31 +550,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
     let mut wob = Wob::new(wob_mean_n, well.wob_fluctuation_n, well.wob_correlation_s, &mut rng);
     let r0 = wob.ratio(well.w_ref_n);
     let chain = Chain::one_dof(&well.structure);
-    let start = match well.initial {
-        Initial::Equilibrium {
-            speed_perturbation_rad_s,
-        } => steady_start(
-            &chain,
-            first.law,
-            &first.params_nm,
-            omega0,
-            r0,
-            speed_perturbation_rad_s,
-        ),
-        // A bit on bottom at rest: held there while the string's torque stays within T_s.
-        Initial::Rest => StringState {
-            lag_rad: [0.0; MAX_NODES],
-            speed_rad_s: [0.0; MAX_NODES],
-            stuck: true,
-        },
-    };
-    let job = StringJob {
-        law: first.law,
-        params_nm: padded(&first.params_nm),
-        omega_rad_s: omega0,
-        ratio: r0,
-        start,
-    };
+    let job = first_job(well, &chain, first, omega0, r0);
     let mut sim = Stepper::new(&chain, &job);
     let mut segment_now = 0;
 
@@ -601,16 +581,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
     advance(&mut sim, &mut wob, &mut rng, well.settle_s, well.settle_s, omega)?;
     // Samples at k / sample_hz for k = 0, 1, ...: duration × sample_hz of them, end excluded.
     let n_samples = (well.duration_s() * well.sample_hz * (1.0 + 1e-12)).floor() as usize;
-    let mut out = WellTrace {
-        trace: Trace {
-            time_s: Vec::with_capacity(n_samples),
-            bit_speed_rad_s: Vec::with_capacity(n_samples),
-            torque_nm: Vec::with_capacity(n_samples),
-            wob_n: Vec::with_capacity(n_samples),
-        },
-        top_drive_rad_s: Vec::with_capacity(n_samples),
-        segment: Vec::with_capacity(n_samples),
-    };
+    let mut out = WellTrace::with_capacity(n_samples);
     let mut previous_s = 0.0;
     for k in 0..n_samples {
         let t_s = k as f64 / well.sample_hz;
@@ -634,19 +605,72 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         sim.set_operating_point(omega, wob.ratio(well.w_ref_n));
         let z_speed: f64 = StandardNormal.sample(&mut rng);
         let z_torque: f64 = StandardNormal.sample(&mut rng);
-        let trace = &mut out.trace;
-        trace.time_s.push(t_s);
-        trace
-            .bit_speed_rad_s
-            .push(sim.bit_speed_rad_s() + well.noise_speed_rad_s * z_speed);
-        trace
-            .torque_nm
-            .push(sim.bit_torque_nm() + well.noise_torque_nm * z_torque);
-        trace.wob_n.push(wob.current_n());
-        out.top_drive_rad_s.push(omega);
-        out.segment.push(segment);
+        out.push(
+            t_s,
+            sim.bit_speed_rad_s() + well.noise_speed_rad_s * z_speed,
+            sim.bit_torque_nm() + well.noise_torque_nm * z_torque,
+            wob.current_n(),
+            (omega, segment),
+        );
     }
     Ok(out)
+}
+
+/// The string's first job: the first segment's law at its speed and WOB ratio `r0`, from the
+/// well's initial state (steady rotation, perturbed, or a bit at rest on bottom).
+fn first_job(well: &Well, chain: &Chain, first: &Segment, omega0: f64, r0: f64) -> StringJob {
+    let start = match well.initial {
+        Initial::Equilibrium {
+            speed_perturbation_rad_s,
+        } => steady_start(chain, first.law, &first.params_nm, omega0, r0, speed_perturbation_rad_s),
+        // A bit on bottom at rest: held there while the string's torque stays within T_s.
+        Initial::Rest => StringState {
+            lag_rad: [0.0; MAX_NODES],
+            speed_rad_s: [0.0; MAX_NODES],
+            stuck: true,
+        },
+    };
+    StringJob {
+        law: first.law,
+        params_nm: padded(&first.params_nm),
+        omega_rad_s: omega0,
+        ratio: r0,
+        start,
+    }
+}
+
+impl WellTrace {
+    /// An empty trace with room for `n` samples.
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            trace: Trace {
+                time_s: Vec::with_capacity(n),
+                bit_speed_rad_s: Vec::with_capacity(n),
+                torque_nm: Vec::with_capacity(n),
+                wob_n: Vec::with_capacity(n),
+            },
+            top_drive_rad_s: Vec::with_capacity(n),
+            segment: Vec::with_capacity(n),
+        }
+    }
+
+    /// One sample: at `t_s`, the bit's speed and torque (noise added), the WOB, and the top
+    /// drive's speed with the segment it belongs to.
+    fn push(
+        &mut self,
+        t_s: f64,
+        bit_speed_rad_s: f64,
+        torque_nm: f64,
+        wob_n: f64,
+        (omega_rad_s, segment): (f64, usize),
+    ) {
+        self.trace.time_s.push(t_s);
+        self.trace.bit_speed_rad_s.push(bit_speed_rad_s);
+        self.trace.torque_nm.push(torque_nm);
+        self.trace.wob_n.push(wob_n);
+        self.top_drive_rad_s.push(omega_rad_s);
+        self.segment.push(segment);
+    }
 }
 
 /// The weight on bit: a mean plus a stationary Ornstein-Uhlenbeck fluctuation, held constant
