@@ -166,54 +166,7 @@ impl bitrock::abc::Observer for Notes {
 
 pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
     set_threads(cmd.threads)?;
-    let defaults = WatchSettings::default();
-    let settings = WatchSettings {
-        laws: parse_laws(&cmd.laws)?,
-        data: cmd.columns.options(),
-        thin: cmd.thin,
-        window_s: cmd.window_s,
-        step_s: cmd.step_s,
-        evidence: EvidenceConfig {
-            particles: match cmd.abc {
-                true => defaults.evidence.particles,
-                false => cmd.particles.unwrap_or(defaults.evidence.particles),
-            },
-            islands: cmd.islands.unwrap_or(defaults.evidence.islands),
-            seed: cmd.seed,
-            ..defaults.evidence.clone()
-        },
-        abc: cmd
-            .abc
-            .then(|| abc_config(cmd.sampler.unwrap_or_default(), cmd.particles, cmd.delta, cmd.eps_min))
-            .transpose()?,
-        forgetting: cmd.forgetting,
-        floor: cmd.floor,
-        change_nats: cmd.change_nats,
-        risk: cmd.risk,
-        backend: cmd.backend,
-        warm_start: !cmd.cold_start,
-        criterion: {
-            if cmd.string.structure == Structure::Fe {
-                print::note(format_args!(
-                    "note: finding the finite-element string's critical bit damping (its eigenvalues, by bisection)"
-                ));
-            }
-            cmd.string.criterion()?
-        },
-        fe_chain: match cmd.string.structure {
-            Structure::Fe => {
-                bitrock::run::strings::chain(Structure::Fe, &cmd.string.lumped.lumped(), &cmd.string.fe.settings()).ok()
-            }
-            Structure::Lumped => None,
-        },
-        wits: cmd
-            .wits_items
-            .as_deref()
-            .map(WitsItems::parse)
-            .transpose()?
-            .unwrap_or_default(),
-        ..defaults
-    };
+    let settings = settings(cmd)?;
     let source = Source::named(&cmd.source, cmd.follow, cmd.replay_speed)?;
     stop_on_ctrl_c("stopping after the window in progress");
     let stop = || STOP.load(Ordering::SeqCst);
@@ -269,8 +222,78 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         return Err(e.into());
     }
     let ended = followed?;
+    say_ended(&mut out, cmd, &ended, unit, server)?;
+    // Stopped by Ctrl-C: the shell's status for an interrupted command.
+    Ok(if ended.stopped {
+        ExitCode::from(130)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+/// The watch's settings from the flags.
+fn settings(cmd: &WatchCmd) -> anyhow::Result<WatchSettings> {
+    let defaults = WatchSettings::default();
+    Ok(WatchSettings {
+        laws: parse_laws(&cmd.laws)?,
+        data: cmd.columns.options(),
+        thin: cmd.thin,
+        window_s: cmd.window_s,
+        step_s: cmd.step_s,
+        evidence: EvidenceConfig {
+            particles: match cmd.abc {
+                true => defaults.evidence.particles,
+                false => cmd.particles.unwrap_or(defaults.evidence.particles),
+            },
+            islands: cmd.islands.unwrap_or(defaults.evidence.islands),
+            seed: cmd.seed,
+            ..defaults.evidence.clone()
+        },
+        abc: cmd
+            .abc
+            .then(|| abc_config(cmd.sampler.unwrap_or_default(), cmd.particles, cmd.delta, cmd.eps_min))
+            .transpose()?,
+        forgetting: cmd.forgetting,
+        floor: cmd.floor,
+        change_nats: cmd.change_nats,
+        risk: cmd.risk,
+        backend: cmd.backend,
+        warm_start: !cmd.cold_start,
+        criterion: {
+            if cmd.string.structure == Structure::Fe {
+                print::note(format_args!(
+                    "note: finding the finite-element string's critical bit damping (its eigenvalues, by bisection)"
+                ));
+            }
+            cmd.string.criterion()?
+        },
+        fe_chain: match cmd.string.structure {
+            Structure::Fe => {
+                bitrock::run::strings::chain(Structure::Fe, &cmd.string.lumped.lumped(), &cmd.string.fe.settings()).ok()
+            }
+            Structure::Lumped => None,
+        },
+        wits: cmd
+            .wits_items
+            .as_deref()
+            .map(WitsItems::parse)
+            .transpose()?
+            .unwrap_or_default(),
+        ..defaults
+    })
+}
+
+/// The end of a watch said: to the live page's viewers, in the table's last line, and where
+/// its windows are stored.
+fn say_ended(
+    out: &mut impl Write,
+    cmd: &WatchCmd,
+    ended: &bitrock::watch::Ended,
+    unit: bitrock::units::TorqueUnit,
+    server: Option<Server>,
+) -> anyhow::Result<()> {
     if let Some(server) = server {
-        let mut said = serde_json::to_value(&ended)?;
+        let mut said = serde_json::to_value(ended)?;
         said["said"] = if ended.stopped {
             "the watch was stopped"
         } else {
@@ -298,12 +321,7 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
             if ended.stopped { "; `--resume` goes on" } else { "" }
         ));
     }
-    // Stopped by Ctrl-C: the shell's status for an interrupted command.
-    Ok(if ended.stopped {
-        ExitCode::from(130)
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(())
 }
 
 /// Starts the live page's server at `address` (the setting `field`) and says where it is.
