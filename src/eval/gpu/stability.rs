@@ -41,6 +41,91 @@ struct StabilityJob {
 /// Samples per dispatch: lavapipe ends loops after 65,535 iterations.
 const SAMPLES_PER_DISPATCH: usize = 32_768;
 
+/// The slopes pass: its kernel (for `law`) and bind group over `buffers` (job, speeds,
+/// samples, slopes), its job written, and its grid, for `n_omega` speeds × `n_samples`.
+fn slope_pass(
+    ctx: &super::GpuContext,
+    law: Law,
+    buffers: [&wgpu::Buffer; 4],
+    (n_omega, n_samples): (usize, usize),
+) -> Result<(super::Kernel, wgpu::BindGroup, (u32, u32)), GpuError> {
+    let slope_entries = [
+        buffer_entry(0, UNIFORM),
+        buffer_entry(1, STORAGE_READ),
+        buffer_entry(2, STORAGE_READ),
+        buffer_entry(3, STORAGE_WRITE),
+    ];
+    let file_laws = crate::laws::file::among([law]);
+    let slope_kernel = ctx.kernel(
+        &super::file_laws::label("slopes", &file_laws),
+        "main",
+        || super::slopes_source_for(&file_laws),
+        &slope_entries,
+        &[],
+    )?;
+    let slope_group = ctx.bind_group("slopes", &slope_kernel.layout, &buffers)?;
+    let (sx, sy, slope_row) = ctx.grid((n_omega * n_samples) as u32, WORKGROUP_SIZE);
+    let sjob = SlopeJob {
+        n_omega: n_omega as u32,
+        n_samples: n_samples as u32,
+        law: law.index() as u32,
+        row_width: slope_row,
+    };
+    ctx.queue.write_buffer(buffers[0], 0, bytemuck::bytes_of(&sjob));
+    Ok((slope_kernel, slope_group, (sx, sy)))
+}
+
+/// The samples' parameters in f32, six words per sample (unused ones 0).
+fn flat_samples(samples: &[Vec<f64>]) -> Vec<f32> {
+    let mut flat = vec![0.0f32; 6 * samples.len()];
+    for (s, p) in samples.iter().enumerate() {
+        for (j, &v) in p.iter().enumerate() {
+            flat[6 * s + j] = v as f32;
+        }
+    }
+    flat
+}
+
+impl StabilityJob {
+    /// The count kernel's job over the samples `slice` (first, end) of a grid of `n_omega` ×
+    /// `n_wob` cells and `n_samples` samples, judged by `criterion`; a slice after the first
+    /// adds to the counts.
+    fn new(
+        (start, end): (usize, usize),
+        (n_omega, n_wob, n_samples): (usize, usize, usize),
+        row_width: u32,
+        criterion: Criterion,
+        w_ref_n: f64,
+    ) -> Self {
+        let (mode, critical, inertia, two_omega_n_xi, omega_n_sq) = match criterion {
+            Criterion::Lumped(l) => (
+                0,
+                0.0,
+                l.inertia_kg_m2,
+                2.0 * l.omega_n_rad_s * l.damping_ratio,
+                l.omega_n_rad_s * l.omega_n_rad_s,
+            ),
+            Criterion::Critical(c) => (1, c, 1.0, 0.0, 0.0),
+        };
+        Self {
+            n_omega: n_omega as u32,
+            n_wob: n_wob as u32,
+            sample_start: start as u32,
+            sample_end: end as u32,
+            n_samples: n_samples as u32,
+            row_width,
+            mode,
+            accumulate: u32::from(start > 0),
+            inertia_kg_m2: inertia as f32,
+            two_omega_n_xi: two_omega_n_xi as f32,
+            omega_n_sq: omega_n_sq as f32,
+            critical_nms: critical as f32,
+            w_ref_n: w_ref_n as f32,
+            _pad: [0.0; 3],
+        }
+    }
+}
+
 /// Unstable counts (row-major over Ω, W) and the growth rates of the first sample (1-DOF
 /// criterion only; zeros otherwise). Speeds rpm, weights kN, samples SI. Two kernels: the
 /// slopes dT/dw per (speed, sample), then the count per cell.
@@ -59,12 +144,7 @@ pub fn stability_grid(
     }
     let omega: Vec<f32> = omega_rpm.iter().map(|&r| (r * RAD_S_PER_RPM) as f32).collect();
     let wob: Vec<f32> = wob_kn.iter().map(|&k| (k * 1000.0) as f32).collect();
-    let mut flat = vec![0.0f32; 6 * samples.len()];
-    for (s, p) in samples.iter().enumerate() {
-        for (j, &v) in p.iter().enumerate() {
-            flat[6 * s + j] = v as f32;
-        }
-    }
+    let flat = flat_samples(samples);
     let slope_count = omega.len() * samples.len();
     let slope_bytes = 4 * slope_count as u64;
     if slope_bytes > ctx.limits.max_storage_buffer_binding_size {
@@ -91,35 +171,13 @@ pub fn stability_grid(
     ctx.queue.write_buffer(&omega_buffer, 0, bytemuck::cast_slice(&omega));
     ctx.queue.write_buffer(&wob_buffer, 0, bytemuck::cast_slice(&wob));
     ctx.queue.write_buffer(&sample_buffer, 0, bytemuck::cast_slice(&flat));
-    let law_id = law.index() as u32;
 
-    let slope_entries = [
-        buffer_entry(0, UNIFORM),
-        buffer_entry(1, STORAGE_READ),
-        buffer_entry(2, STORAGE_READ),
-        buffer_entry(3, STORAGE_WRITE),
-    ];
-    let file_laws = crate::laws::file::among([law]);
-    let slope_kernel = ctx.kernel(
-        &super::file_laws::label("slopes", &file_laws),
-        "main",
-        || super::slopes_source_for(&file_laws),
-        &slope_entries,
-        &[],
+    let (slope_kernel, slope_group, (sx, sy)) = slope_pass(
+        ctx,
+        law,
+        [&slope_job, &omega_buffer, &sample_buffer, &slopes],
+        (omega.len(), samples.len()),
     )?;
-    let slope_group = ctx.bind_group(
-        "slopes",
-        &slope_kernel.layout,
-        &[&slope_job, &omega_buffer, &sample_buffer, &slopes],
-    )?;
-    let (sx, sy, slope_row) = ctx.grid(slope_count as u32, WORKGROUP_SIZE);
-    let sjob = SlopeJob {
-        n_omega: omega.len() as u32,
-        n_samples: samples.len() as u32,
-        law: law_id,
-        row_width: slope_row,
-    };
-    ctx.queue.write_buffer(&slope_job, 0, bytemuck::bytes_of(&sjob));
 
     let entries = [
         buffer_entry(0, UNIFORM),
@@ -135,37 +193,19 @@ pub fn stability_grid(
         &[&job_buffer, &wob_buffer, &slopes, &counts, &growth],
     )?;
     let (x, y, row_width) = ctx.grid(cells as u32, WORKGROUP_SIZE);
-    let (mode, critical, inertia, two_omega_n_xi, omega_n_sq) = match criterion {
-        Criterion::Lumped(l) => (
-            0,
-            0.0,
-            l.inertia_kg_m2,
-            2.0 * l.omega_n_rad_s * l.damping_ratio,
-            l.omega_n_rad_s * l.omega_n_rad_s,
-        ),
-        Criterion::Critical(c) => (1, c, 1.0, 0.0, 0.0),
-    };
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("stability"),
     });
     super::encode_dispatch(&mut encoder, "slopes", &slope_kernel.pipeline, &slope_group, (sx, sy));
     for s0 in (0..samples.len()).step_by(SAMPLES_PER_DISPATCH) {
-        let job = StabilityJob {
-            n_omega: omega.len() as u32,
-            n_wob: wob.len() as u32,
-            sample_start: s0 as u32,
-            sample_end: (s0 + SAMPLES_PER_DISPATCH).min(samples.len()) as u32,
-            n_samples: samples.len() as u32,
+        let slice = (s0, (s0 + SAMPLES_PER_DISPATCH).min(samples.len()));
+        let job = StabilityJob::new(
+            slice,
+            (omega.len(), wob.len(), samples.len()),
             row_width,
-            mode,
-            accumulate: u32::from(s0 > 0),
-            inertia_kg_m2: inertia as f32,
-            two_omega_n_xi: two_omega_n_xi as f32,
-            omega_n_sq: omega_n_sq as f32,
-            critical_nms: critical as f32,
-            w_ref_n: w_ref_n as f32,
-            _pad: [0.0; 3],
-        };
+            criterion,
+            w_ref_n,
+        );
         ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
         super::encode_dispatch(&mut encoder, "stability", &kernel.pipeline, &bind_group, (x, y));
         if s0 + SAMPLES_PER_DISPATCH < samples.len() {
