@@ -170,6 +170,12 @@ pub fn run_on(
     let started = Instant::now();
     let mut populations = previous;
     let mut total_scored: u64 = populations.iter().map(|p| p.record.candidates_scored).sum();
+    let finish = |populations: Vec<Population>, stop: StopReason, scored: u64| Run {
+        populations,
+        stop,
+        evaluations: scored * d,
+        seconds: started.elapsed().as_secs_f64(),
+    };
     let mut pending: Option<Scored> = None;
     // Nested mode: where the previous population stopped scanning its stream.
     let mut scanned_to = populations.last().map_or(0, |p| p.record.draws);
@@ -177,14 +183,7 @@ pub fn run_on(
         None => schedule.start_epsilon.unwrap_or(f64::INFINITY),
         Some(_) => match next_epsilon(&populations, schedule) {
             Ok(e) => e,
-            Err(stop) => {
-                return Ok(Run {
-                    populations,
-                    stop,
-                    evaluations: total_scored * d,
-                    seconds: started.elapsed().as_secs_f64(),
-                });
-            }
+            Err(stop) => return Ok(finish(populations, stop, total_scored)),
         },
     };
     let stop = loop {
@@ -196,36 +195,13 @@ pub fn run_on(
         let mut fill = Filling::new(g, stream, epsilon, n, prior, d);
         let weight = 1.0 / n as f64;
         if config.mode == Mode::Nested && g > 0 {
-            // Stream positions before `scanned_to` are known: the previous population's
-            // particles are all candidates there below ε_{g-1} > ε_g.
-            let previous = &populations[g - 1].particles;
-            fill.particles.par_extend(
-                previous
-                    .par_iter()
-                    .filter(|p| p.rho < epsilon)
-                    .map(|p| Particle { weight, ..p.clone() }),
-            );
-            fill.near += previous.par_iter().filter(|p| fill.near_threshold(p.rho)).count() as u64;
-            // The previous population ended at its N-th particle, at stream position
-            // `scanned_to`, so even when all of them pass, every position before it is a draw
-            // of this population too, with the previous population's per-law draws.
-            debug_assert_eq!(previous.last().map(|p| p.index + 1), Some(scanned_to));
-            fill.position = scanned_to;
-            for (count, law) in fill.law_draws.iter_mut().zip(&populations[g - 1].record.per_law) {
-                *count = law.draws;
-            }
+            carry_nested(&mut fill, &populations[g - 1], scanned_to, weight);
         }
         // Acceptance rate of this population's fresh candidates: the share of the previous
         // population below ε times its acceptance rate (the projection of the stopping rules);
         // half, a guess, for population 0. Batches are sized by it with a 10 % margin, so a
         // population rarely needs a second round trip nor scores much past its N-th particle.
-        let projected_acceptance = match populations.last() {
-            None => 0.5,
-            Some(p) => {
-                p.particles.iter().filter(|q| q.rho < epsilon).count() as f64 / p.particles.len() as f64
-                    * p.record.acceptance_rate
-            }
-        };
+        let projected_acceptance = projected_acceptance(populations.last(), epsilon);
         let spent = Spent {
             started,
             scored: total_scored,
@@ -243,18 +219,11 @@ pub fn run_on(
                         schedule.max_batch,
                         budget,
                     );
+                    let shares = shard::split(fill.position, size, workers.parallelism());
                     let round = Round {
                         population: g,
                         context: None,
-                        tasks: shard::split(fill.position, size, workers.parallelism())
-                            .into_iter()
-                            .map(|(start, len)| Task::Scan {
-                                stream,
-                                start,
-                                len,
-                                epsilon,
-                            })
-                            .collect(),
+                        tasks: scans(stream, epsilon, shares),
                     };
                     let found = shard::run_found(workers, &round, fill.position, size)?;
                     fill.scored += found.scored;
@@ -283,12 +252,60 @@ pub fn run_on(
             Err(stop) => break stop,
         }
     };
-    Ok(Run {
-        populations,
-        stop,
-        evaluations: total_scored * d,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+    Ok(finish(populations, stop, total_scored))
+}
+
+/// The scan tasks of a round: each share of candidates (start, count) on the population's
+/// `stream`, kept below `epsilon`.
+fn scans(stream: u32, epsilon: f64, shares: Vec<(u64, u64)>) -> Vec<Task> {
+    shares
+        .into_iter()
+        .map(|(start, len)| Task::Scan {
+            stream,
+            start,
+            len,
+            epsilon,
+        })
+        .collect()
+}
+
+/// Nested mode: population `fill` starts with what the one `before` it scanned. Stream
+/// positions before `scanned_to` are known: the previous population's particles are all
+/// candidates there below ε_{g-1} > ε_g, and every position before it is a draw of this
+/// population too, with the previous population's per-law draws.
+fn carry_nested(fill: &mut Filling, before: &Population, scanned_to: u64, weight: f64) {
+    // Stream positions before `scanned_to` are known: the previous population's
+    // particles are all candidates there below ε_{g-1} > ε_g.
+    let epsilon = fill.epsilon;
+    let previous = &before.particles;
+    fill.particles.par_extend(
+        previous
+            .par_iter()
+            .filter(|p| p.rho < epsilon)
+            .map(|p| Particle { weight, ..p.clone() }),
+    );
+    fill.near += previous.par_iter().filter(|p| fill.near_threshold(p.rho)).count() as u64;
+    // The previous population ended at its N-th particle, at stream position
+    // `scanned_to`, so even when all of them pass, every position before it is a draw
+    // of this population too, with the previous population's per-law draws.
+    debug_assert_eq!(previous.last().map(|p| p.index + 1), Some(scanned_to));
+    fill.position = scanned_to;
+    for (count, law) in fill.law_draws.iter_mut().zip(&before.record.per_law) {
+        *count = law.draws;
+    }
+}
+
+/// Acceptance rate of a population's fresh candidates at `epsilon`: the share of the
+/// previous population below ε times its acceptance rate (the projection of the stopping
+/// rules); half, a guess, for population 0.
+fn projected_acceptance(previous: Option<&Population>, epsilon: f64) -> f64 {
+    match previous {
+        None => 0.5,
+        Some(p) => {
+            p.particles.iter().filter(|q| q.rho < epsilon).count() as f64 / p.particles.len() as f64
+                * p.record.acceptance_rate
+        }
+    }
 }
 
 /// Candidates to score for the `missing` particles at the `projected_acceptance` rate with a
