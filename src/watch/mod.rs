@@ -262,37 +262,8 @@ impl Watch {
 
     /// The update of one complete window.
     fn update(&mut self, window: Window, observer: &mut dyn Observer) -> Result<Update> {
-        if let Some(last) = self.carried.window
-            && window.index > last + 1
-        {
-            let (skipped_from, skipped_to) = (last + 1, window.index - 1);
-            observer.note(format!(
-                "warning: no rows in window{} {skipped_from}{} (the record has a gap): not given",
-                if skipped_to > skipped_from { "s" } else { "" },
-                if skipped_to > skipped_from {
-                    format!("–{skipped_to}")
-                } else {
-                    String::new()
-                },
-            ));
-        }
-        let samples = window.rows.len();
-        let mut update = Update {
-            window: window.index,
-            start_s: window.start_s,
-            end_s: window.end_s,
-            samples,
-            samples_used: 0,
-            uninformative: None,
-            most_probable: None,
-            laws: Vec::new(),
-            change: false,
-            change_nats: None,
-            advice: None,
-            candidates_scored: 0,
-            epsilon: None,
-            latency_s: 0.0,
-        };
+        note_gap(self.carried.window, &window, observer);
+        let mut update = Update::empty(&window);
         let data = match self.window_data(&window) {
             Ok(data) => data,
             Err(why) => {
@@ -321,26 +292,7 @@ impl Watch {
         update.epsilon = selection.epsilon;
         update.change = change;
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
-        let fits_now: Fits = selection.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
-        let span = self.windows.span();
-        if change {
-            self.carried.losses.clear();
-            self.carried.last_change = Some(window.index);
-        } else if let Some(loss) = loss {
-            if self.carried.losses.len() == LOSS_MEMORY {
-                self.carried.losses.pop_front();
-            }
-            self.carried.losses.push_back(loss);
-        }
-        self.carried.recent_fits.push_back((window.index, fits_now));
-        while self.carried.recent_fits.len() > span + 1 {
-            self.carried.recent_fits.pop_front();
-        }
-        if let Some(wob_n) = selection.w_ref_n.or_else(|| data.calibration.mean_wob_n()) {
-            self.carried.recent_wob_n.push_back((window.index, wob_n));
-        }
-        let oldest = self.carried.recent_fits.front().map_or(window.index, |(k, _)| *k);
-        self.carried.recent_wob_n.retain(|(k, _)| *k >= oldest);
+        self.carry_window(&window, &selection, &data, (loss, change));
 
         // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
         let window_p: Vec<f64> = self
@@ -372,28 +324,42 @@ impl Watch {
             .zip(&carried)
             .max_by(|a, b| a.1.total_cmp(b.1))
             .map(|(&law, _)| law);
-        // The mixture posterior under the carried probabilities: each law's particles weighed
-        // by its share of the window's posterior, then by its carried probability over it.
-        let posterior: Vec<crate::abc::Particle> = selection
-            .laws
-            .into_iter()
-            .filter_map(|selected| {
-                let k = self.settings.laws.iter().position(|&l| l == selected.law)?;
-                let (p, share) = (selected.probability, carried[k]);
-                (p > 0.0).then(|| {
-                    selected.posterior.into_iter().map(move |mut particle| {
-                        particle.weight *= p;
-                        particle.weight *= share / p;
-                        particle
-                    })
-                })
-            })
-            .flatten()
-            .collect();
+        let posterior = mixture_posterior(selection.laws, &self.settings.laws, &carried);
         self.carried.probabilities = Some(carried);
         self.carried.posterior = Some(posterior);
         self.carried.posterior_scaled = selection.w_ref_n.is_some();
         Ok(self.completed(update, &window))
+    }
+
+    /// What the watch carries on from a window: its losses (cleared at a change), its fits
+    /// and WOB among the recent windows the change rule compares with.
+    fn carry_window(
+        &mut self,
+        window: &Window,
+        selection: &Selection,
+        data: &FieldData,
+        (loss, change): (Option<f64>, bool),
+    ) {
+        let fits_now: Fits = selection.fits.iter().map(|f| (f.law, f.params_si.clone())).collect();
+        let span = self.windows.span();
+        if change {
+            self.carried.losses.clear();
+            self.carried.last_change = Some(window.index);
+        } else if let Some(loss) = loss {
+            if self.carried.losses.len() == LOSS_MEMORY {
+                self.carried.losses.pop_front();
+            }
+            self.carried.losses.push_back(loss);
+        }
+        self.carried.recent_fits.push_back((window.index, fits_now));
+        while self.carried.recent_fits.len() > span + 1 {
+            self.carried.recent_fits.pop_front();
+        }
+        if let Some(wob_n) = selection.w_ref_n.or_else(|| data.calibration.mean_wob_n()) {
+            self.carried.recent_wob_n.push_back((window.index, wob_n));
+        }
+        let oldest = self.carried.recent_fits.front().map_or(window.index, |(k, _)| *k);
+        self.carried.recent_wob_n.retain(|(k, _)| *k >= oldest);
     }
 
     /// The window's samples as a record: every sample above the minimum speed for
@@ -467,6 +433,68 @@ impl Watch {
 
 /// Grid starts of each law's fit beside the window before's estimate.
 const WARM_FIT_STARTS: usize = 2;
+
+/// Says the windows a gap of the record skipped, between the `last` window given and `window`.
+fn note_gap(last: Option<usize>, window: &Window, observer: &mut dyn Observer) {
+    if let Some(last) = last
+        && window.index > last + 1
+    {
+        let (skipped_from, skipped_to) = (last + 1, window.index - 1);
+        observer.note(format!(
+            "warning: no rows in window{} {skipped_from}{} (the record has a gap): not given",
+            if skipped_to > skipped_from { "s" } else { "" },
+            if skipped_to > skipped_from {
+                format!("–{skipped_to}")
+            } else {
+                String::new()
+            },
+        ));
+    }
+}
+
+impl Update {
+    /// The update of `window` before anything is known of it.
+    fn empty(window: &Window) -> Self {
+        Update {
+            window: window.index,
+            start_s: window.start_s,
+            end_s: window.end_s,
+            samples: window.rows.len(),
+            samples_used: 0,
+            uninformative: None,
+            most_probable: None,
+            laws: Vec::new(),
+            change: false,
+            change_nats: None,
+            advice: None,
+            candidates_scored: 0,
+            epsilon: None,
+            latency_s: 0.0,
+        }
+    }
+}
+
+/// The mixture posterior under the `carried` probabilities of `laws`: each law's particles
+/// weighed by its share of the window's posterior, then by its carried probability over it.
+fn mixture_posterior(selected_laws: Vec<Selected>, laws: &[crate::Law], carried: &[f64]) -> Vec<crate::abc::Particle> {
+    // The mixture posterior under the carried probabilities: each law's particles weighed
+    // by its share of the window's posterior, then by its carried probability over it.
+    selected_laws
+        .into_iter()
+        .filter_map(|selected| {
+            let k = laws.iter().position(|&l| l == selected.law)?;
+            let (p, share) = (selected.probability, carried[k]);
+            (p > 0.0).then(|| {
+                selected.posterior.into_iter().map(move |mut particle| {
+                    particle.weight *= p;
+                    particle.weight *= share / p;
+                    particle
+                })
+            })
+        })
+        .flatten()
+        .collect()
+}
 
 #[cfg(test)]
 mod tests {
