@@ -325,90 +325,9 @@ impl Store {
                 tx.execute("INSERT INTO meta (key, value) VALUES (?1, ?2)", params![key, value])
                     .map_err(&err)?;
             }
-            {
-                let mut insert = tx
-                    .prepare(
-                        "INSERT INTO samples (split, position, time_s, speed_rad_s, torque_nm, wob_n)
-                     VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-                    )
-                    .map_err(&err)?;
-                for (split, s) in [
-                    ("calibration", &setup.data.calibration),
-                    ("validation", &setup.data.validation),
-                ] {
-                    for i in 0..s.len() {
-                        insert
-                            .execute(params![
-                                split,
-                                i as i64,
-                                s.time_s.as_ref().map(|t| t[i]),
-                                s.speed_rad_s[i],
-                                s.torque_nm[i],
-                                s.wob_n.as_ref().map(|w| w[i]),
-                            ])
-                            .map_err(&err)?;
-                    }
-                }
-                let mut param = tx
-                    .prepare("INSERT INTO parameters (law, position, name, unit_si) VALUES (?1, ?2, ?3, ?4)")
-                    .map_err(&err)?;
-                for law in Law::ALL.into_iter().chain(file_laws.iter().copied()) {
-                    for (j, spec) in law.params().iter().enumerate() {
-                        param
-                            .execute(params![
-                                law.name(),
-                                j as i64,
-                                view_column(law, spec.name),
-                                spec.unit("N·m")
-                            ])
-                            .map_err(&err)?;
-                    }
-                }
-            }
-            for fit in &setup.fits {
-                tx.execute(
-                "INSERT INTO fits (law, rho, validation_rho, condition_number, starts, warnings_json, correlations_json)
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-                params![
-                    fit.law.name(),
-                    fit.rho,
-                    fit.validation_rho,
-                    fit.condition_number,
-                    fit.starts as i64,
-                    serde_json::to_string(&fit.warnings).map_err(json_error(&path))?,
-                    serde_json::to_string(&fit.correlations).map_err(json_error(&path))?,
-                ],
-            )
-            .map_err(&err)?;
-                for (j, (estimate, std_error)) in fit.params_si.iter().zip(&fit.std_errors_si).enumerate() {
-                    tx.execute(
-                        "INSERT INTO fit_params (law, position, estimate_si, std_error_si) VALUES (?1, ?2, ?3, ?4)",
-                        params![fit.law.name(), j as i64, estimate, std_error],
-                    )
-                    .map_err(&err)?;
-                }
-            }
-            let prior = &setup.prior;
-            for (slot, ((b, probability), threshold)) in prior
-                .boxes
-                .iter()
-                .zip(&prior.weights)
-                .zip(&prior.thresholds)
-                .enumerate()
-            {
-                tx.execute(
-                    "INSERT INTO prior_laws (slot, law, probability, threshold) VALUES (?1, ?2, ?3, ?4)",
-                    params![slot as i64, b.law.name(), probability, *threshold as i64],
-                )
-                .map_err(&err)?;
-                for (j, ((lo, hi), rule)) in b.lower.iter().zip(&b.upper).zip(&prior.rules[slot]).enumerate() {
-                    tx.execute(
-                    "INSERT INTO prior_bounds (law, position, lower_si, upper_si, rule) VALUES (?1, ?2, ?3, ?4, ?5)",
-                    params![b.law.name(), j as i64, f64::from(*lo), f64::from(*hi), rule.name()],
-                )
-                .map_err(&err)?;
-                }
-            }
+            insert_samples(tx, &setup.data, &file_laws, &path)?;
+            insert_fits(tx, &setup.fits, &path)?;
+            insert_prior(tx, &setup.prior, &path)?;
             Ok(())
         })?;
         let conn = Connection::open(&path).map_err(&err)?;
@@ -976,6 +895,103 @@ impl Store {
 
 /// The view `particles` over schema 3's rows: what schema 2 stored as a table, one row per
 /// particle and population (`position` its place in the population), with one column per
+/// The record's samples of a new store, and the parameters' names and units of every law it
+/// may hold (the built-in laws and `file_laws`).
+fn insert_samples(tx: &rusqlite::Transaction, data: &FieldData, file_laws: &[Law], path: &Path) -> Result<()> {
+    let err = sql_error(path);
+    let mut insert = tx
+        .prepare(
+            "INSERT INTO samples (split, position, time_s, speed_rad_s, torque_nm, wob_n)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+        )
+        .map_err(&err)?;
+    for (split, s) in [("calibration", &data.calibration), ("validation", &data.validation)] {
+        for i in 0..s.len() {
+            insert
+                .execute(params![
+                    split,
+                    i as i64,
+                    s.time_s.as_ref().map(|t| t[i]),
+                    s.speed_rad_s[i],
+                    s.torque_nm[i],
+                    s.wob_n.as_ref().map(|w| w[i]),
+                ])
+                .map_err(&err)?;
+        }
+    }
+    let mut param = tx
+        .prepare("INSERT INTO parameters (law, position, name, unit_si) VALUES (?1, ?2, ?3, ?4)")
+        .map_err(&err)?;
+    for law in Law::ALL.into_iter().chain(file_laws.iter().copied()) {
+        for (j, spec) in law.params().iter().enumerate() {
+            param
+                .execute(params![
+                    law.name(),
+                    j as i64,
+                    view_column(law, spec.name),
+                    spec.unit("N·m")
+                ])
+                .map_err(&err)?;
+        }
+    }
+    Ok(())
+}
+
+/// The least-squares fits of a new store, with their estimates and standard errors.
+fn insert_fits(tx: &rusqlite::Transaction, fits: &[LawFit], path: &Path) -> Result<()> {
+    let err = sql_error(path);
+    for fit in fits {
+        tx.execute(
+            "INSERT INTO fits (law, rho, validation_rho, condition_number, starts, warnings_json, correlations_json)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+            params![
+                fit.law.name(),
+                fit.rho,
+                fit.validation_rho,
+                fit.condition_number,
+                fit.starts as i64,
+                serde_json::to_string(&fit.warnings).map_err(json_error(&path))?,
+                serde_json::to_string(&fit.correlations).map_err(json_error(&path))?,
+            ],
+        )
+        .map_err(&err)?;
+        for (j, (estimate, std_error)) in fit.params_si.iter().zip(&fit.std_errors_si).enumerate() {
+            tx.execute(
+                "INSERT INTO fit_params (law, position, estimate_si, std_error_si) VALUES (?1, ?2, ?3, ?4)",
+                params![fit.law.name(), j as i64, estimate, std_error],
+            )
+            .map_err(&err)?;
+        }
+    }
+    Ok(())
+}
+
+/// The prior of a new store: each law's slot, probability and threshold, and its bounds.
+fn insert_prior(tx: &rusqlite::Transaction, prior: &Prior, path: &Path) -> Result<()> {
+    let err = sql_error(path);
+    for (slot, ((b, probability), threshold)) in prior
+        .boxes
+        .iter()
+        .zip(&prior.weights)
+        .zip(&prior.thresholds)
+        .enumerate()
+    {
+        tx.execute(
+            "INSERT INTO prior_laws (slot, law, probability, threshold) VALUES (?1, ?2, ?3, ?4)",
+            params![slot as i64, b.law.name(), probability, *threshold as i64],
+        )
+        .map_err(&err)?;
+        for (j, ((lo, hi), rule)) in b.lower.iter().zip(&b.upper).zip(&prior.rules[slot]).enumerate() {
+            tx.execute(
+                "INSERT INTO prior_bounds (law, position, lower_si, upper_si, rule) VALUES (?1, ?2, ?3, ?4, ?5)",
+                params![b.law.name(), j as i64, f64::from(*lo), f64::from(*hi), rule.name()],
+            )
+            .map_err(&err)?;
+        }
+    }
+    Ok(())
+}
+
 /// parameter name.
 fn particles_view(file_laws: &[Law]) -> String {
     let parameter_columns: Vec<String> = Law::ALL
