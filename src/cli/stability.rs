@@ -116,17 +116,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
     let (source, own_w_ref_n, evidence_bit) = map_source(cmd)?;
-    let w_ref_n = match (cmd.w_ref_kn, own_w_ref_n) {
-        (Some(kn), _) => kn * 1000.0,
-        (None, Some(n)) => {
-            super::print::note(format_args!(
-                "note: the posterior's torque parameters are for W_ref = {:.3} kN (its evidence scaled each torque by WOB / W_ref): mapped at that reference",
-                n / 1000.0
-            ));
-            n
-        }
-        (None, None) => PAPER_W_REF_N,
-    };
+    let w_ref_n = map_w_ref_n(cmd.w_ref_kn, own_w_ref_n);
     let job = StabilityJob {
         source,
         omega_rpm: omega,
@@ -148,29 +138,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     }
     let (omega, wob) = (&job.omega_rpm, &job.wob_kn);
     let c = job.criterion.critical_nms();
-    let mut boundaries = serde_json::Map::new();
-    let mut grids = serde_json::Map::new();
-    let mut columns: Vec<Column> = Vec::new();
-    for ((input, b), grid) in maps.inputs.iter().zip(maps.boundaries.laws).zip(&maps.grids) {
-        // Unknown boundaries (the torque has no value) are null as "none" is: named here.
-        let unknown: Vec<f64> = omega
-            .iter()
-            .zip(b.map_wob_kn.iter().zip(&b.p_wob_kn))
-            .filter(|(_, (m, p))| m.is_some_and(f64::is_nan) || p.is_some_and(f64::is_nan))
-            .map(|(rpm, _)| *rpm)
-            .collect();
-        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples, "unknown_omega_rpm": unknown}));
-        grids.insert(
-            input.law.name().into(),
-            json!(grid.chunks(wob.len()).collect::<Vec<_>>()),
-        );
-        columns.push((format!("{}_map_wob_kn", input.law), b.map_wob_kn));
-        columns.push((format!("{}_p_wob_kn", input.law), b.p_wob_kn));
-    }
-    if let Some(mixture) = maps.boundaries.mixture_wob_kn {
-        boundaries.insert("mixture".into(), json!({"p_wob_kn": mixture}));
-        columns.push(("mixture_p_wob_kn".into(), mixture));
-    }
+    let (boundaries, grids, columns) = boundary_columns(&maps, omega, wob.len());
     if let Some(path) = &cmd.out {
         bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
             file.write_all(&boundaries_csv(omega, &columns))
@@ -236,6 +204,56 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// W_ref of the maps, N: the one given, else the posterior's own (said), else the paper's.
+fn map_w_ref_n(w_ref_kn: Option<f64>, own_w_ref_n: Option<f64>) -> f64 {
+    match (w_ref_kn, own_w_ref_n) {
+        (Some(kn), _) => kn * 1000.0,
+        (None, Some(n)) => {
+            super::print::note(format_args!(
+                "note: the posterior's torque parameters are for W_ref = {:.3} kN (its evidence scaled each torque by WOB / W_ref): mapped at that reference",
+                n / 1000.0
+            ));
+            n
+        }
+        (None, None) => PAPER_W_REF_N,
+    }
+}
+
+/// Each law's boundaries (and the mixture's) as JSON and as the table's columns, and each
+/// law's probability grid over `omega` × `n_wob` cells; an unknown boundary (the torque has
+/// no value there) named by its speed.
+fn boundary_columns(
+    maps: &bitrock::run::stability::StabilityMaps,
+    omega: &[f64],
+    n_wob: usize,
+) -> (
+    serde_json::Map<String, serde_json::Value>,
+    serde_json::Map<String, serde_json::Value>,
+    Vec<Column>,
+) {
+    let mut boundaries = serde_json::Map::new();
+    let mut grids = serde_json::Map::new();
+    let mut columns: Vec<Column> = Vec::new();
+    for ((input, b), grid) in maps.inputs.iter().zip(maps.boundaries.laws.clone()).zip(&maps.grids) {
+        // Unknown boundaries (the torque has no value) are null as "none" is: named here.
+        let unknown: Vec<f64> = omega
+            .iter()
+            .zip(b.map_wob_kn.iter().zip(&b.p_wob_kn))
+            .filter(|(_, (m, p))| m.is_some_and(f64::is_nan) || p.is_some_and(f64::is_nan))
+            .map(|(rpm, _)| *rpm)
+            .collect();
+        boundaries.insert(input.law.name().into(), json!({"map_wob_kn": b.map_wob_kn, "p_wob_kn": b.p_wob_kn, "probability": b.probability, "samples": b.samples, "unknown_omega_rpm": unknown}));
+        grids.insert(input.law.name().into(), json!(grid.chunks(n_wob).collect::<Vec<_>>()));
+        columns.push((format!("{}_map_wob_kn", input.law), b.map_wob_kn));
+        columns.push((format!("{}_p_wob_kn", input.law), b.p_wob_kn));
+    }
+    if let Some(mixture) = maps.boundaries.mixture_wob_kn.clone() {
+        boundaries.insert("mixture".into(), json!({"p_wob_kn": mixture}));
+        columns.push(("mixture_p_wob_kn".into(), mixture));
+    }
+    (boundaries, grids, columns)
 }
 
 /// The simulated maps on `chain`, the escape map and its advice from `at` where known.
