@@ -950,8 +950,8 @@ fn insert_fits(tx: &rusqlite::Transaction, fits: &[LawFit], path: &Path) -> Resu
                 fit.validation_rho,
                 fit.condition_number,
                 fit.starts as i64,
-                serde_json::to_string(&fit.warnings).map_err(json_error(&path))?,
-                serde_json::to_string(&fit.correlations).map_err(json_error(&path))?,
+                serde_json::to_string(&fit.warnings).map_err(json_error(path))?,
+                serde_json::to_string(&fit.correlations).map_err(json_error(path))?,
             ],
         )
         .map_err(&err)?;
