@@ -462,6 +462,59 @@ struct Job {
     replicate: usize,
 }
 
+/// The check's rows: per generating law its `k` replicates (in `results`, law after law),
+/// their parameters from the posterior where the run's last population has the law, else from
+/// its least squares.
+fn rows_of(results: Vec<Replicate>, laws: &[Law], k: usize, run: &CheckedRun) -> Vec<GeneratingLaw> {
+    let mut results = results.into_iter();
+    let last = run.stored.populations.last().expect("checked by CheckedRun::open");
+    laws.iter()
+        .map(|&law| {
+            let replicates: Vec<Replicate> = results.by_ref().take(k).collect();
+            let source = if last.particles.iter().any(|p| p.law == law) {
+                ParamSource::Posterior
+            } else {
+                ParamSource::LeastSquares
+            };
+            summarize_row(law, source, laws, replicates)
+        })
+        .collect()
+}
+
+/// Samples the `fitted` replicates of a batch, one thread each on its `seats` of the batched
+/// scorer; each finished replicate counts up `done` (of `total`) and is reported to
+/// `progress` under its lock, one call at a time.
+fn sample_batch(
+    run: &CheckedRun,
+    options: &CheckOptions,
+    fitted: Vec<Fitted>,
+    seats: Vec<Seat>,
+    (done, total): (&std::sync::Mutex<usize>, usize),
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Vec<Result<ReplicateOutcome>> {
+    std::thread::scope(|scope| {
+        let threads: Vec<_> = fitted
+            .into_iter()
+            .zip(seats)
+            .map(|(fitted, seat)| {
+                scope.spawn(move || {
+                    let result = sample_replicate(run, options, fitted, &seat);
+                    drop(seat);
+                    let mut count = done.lock().unwrap_or_else(|p| p.into_inner());
+                    *count += 1;
+                    progress(*count, total);
+                    drop(count);
+                    result
+                })
+            })
+            .collect();
+        threads
+            .into_iter()
+            .map(|t| t.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+            .collect()
+    })
+}
+
 /// Checks the selection of `run`: K replicates per law, each through the run's pipeline.
 /// `progress(done, total)` is called as replicates finish, one call at a time with `done`
 /// counting up 1, 2, … `total` (from whichever thread finished); `note` hears what
@@ -514,29 +567,7 @@ pub fn check(
         )?;
         // Every seat is taken before any sampler starts (see RecordBatch::seat).
         let seats: Vec<Seat> = fitted.iter().map(|_| records.seat()).collect();
-        let total = jobs.len();
-        let outcomes: Vec<Result<ReplicateOutcome>> = std::thread::scope(|scope| {
-            let done = &done;
-            let threads: Vec<_> = fitted
-                .into_iter()
-                .zip(seats)
-                .map(|(fitted, seat)| {
-                    scope.spawn(move || {
-                        let result = sample_replicate(run, options, fitted, &seat);
-                        drop(seat);
-                        let mut count = done.lock().unwrap_or_else(|p| p.into_inner());
-                        *count += 1;
-                        progress(*count, total);
-                        drop(count);
-                        result
-                    })
-                })
-                .collect();
-            threads
-                .into_iter()
-                .map(|t| t.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
-                .collect()
-        });
+        let outcomes = sample_batch(run, options, fitted, seats, (&done, jobs.len()), progress);
         timing.sampling_seconds += sampling.elapsed().as_secs_f64();
         batch_notes.extend(records.take_notes());
         let counts = records.counts();
@@ -559,20 +590,7 @@ pub fn check(
             results.push(outcome.replicate);
         }
     }
-    let mut results = results.into_iter();
-    let last = run.stored.populations.last().expect("checked by CheckedRun::open");
-    let rows = laws
-        .iter()
-        .map(|&law| {
-            let replicates: Vec<Replicate> = results.by_ref().take(k).collect();
-            let source = if last.particles.iter().any(|p| p.law == law) {
-                ParamSource::Posterior
-            } else {
-                ParamSource::LeastSquares
-            };
-            summarize_row(law, source, laws, replicates)
-        })
-        .collect();
+    let rows = rows_of(results, laws, k, run);
     Ok(SelectionCheck {
         run_dir: run.dir.clone(),
         laws: laws.clone(),
