@@ -197,28 +197,14 @@ fn replicate_of(
     let params_si = draw_by_weight(sets, &mut rng).unwrap_or_else(|| fit.params_si.clone());
     let w_ref_n = analysis.fit.w_ref_n;
     let noise_model = analysis.evidence.config.noise;
-    let e = residuals(law, &fit.params_si, &data.calibration, w_ref_n);
-    // Under the AR(1) model the noise keeps the residuals' lag-1 correlation: its innovations
-    // are resampled and filtered again.
-    let phi = match noise_model {
-        NoiseModel::Iid => 0.0,
-        NoiseModel::Ar1 => Some(crate::separation::lag1_of(&e))
-            .filter(|phi| phi.is_finite())
-            .map_or(0.0, |phi| phi.clamp(-0.99, 0.99)),
-    };
-    let draws: Vec<f64> = if phi == 0.0 {
-        e
-    } else {
-        e.windows(2).map(|pair| pair[1] - phi * pair[0]).collect()
-    };
-    let synthetic = FieldData {
-        source: data.source.join(format!("evidence-check/{law}-replicate-{index}")),
-        calibration: synthesize(law, &params_si, &data.calibration, w_ref_n, &draws, phi, &mut rng),
-        validation: synthesize(law, &params_si, &data.validation, w_ref_n, &draws, phi, &mut rng),
-        warnings: Vec::new(),
-        bit: None,
-        ..data.clone()
-    };
+    let synthetic = synthetic_record(
+        data,
+        (law, &fit.params_si, &params_si),
+        w_ref_n,
+        noise_model,
+        index,
+        &mut rng,
+    );
     let known: Vec<(Law, Vec<f64>)> = std::iter::once((law, params_si.clone()))
         .chain(analysis.fits.iter().map(|f| (f.law, f.params_si.clone())))
         .collect();
@@ -246,27 +232,7 @@ fn replicate_of(
     // Largest first; among equals the first in law order.
     order.sort_by(|&a, &b| probabilities[b].total_cmp(&probabilities[a]).then(a.cmp(&b)));
     let first = &laws[order[0]];
-    let n = synthetic.calibration.len() as f64;
-    let rho = |law: Law| outcome.fits.iter().find(|f| f.law == law).map_or(f64::NAN, |f| f.rho);
-    // Against every rival: the posterior log-odds with their error, and how far the first
-    // law's fit lies above the rival's.
-    let rivals: Vec<(Law, f64, f64, f64, Strength)> = order[1..]
-        .iter()
-        .map(|&k| {
-            let rival = &laws[k];
-            let ln_odds = (first.ln_z + first.prior_probability.ln()) - (rival.ln_z + rival.prior_probability.ln());
-            let gap = n / 2.0 * (rho(rival.law) / rho(first.law)).ln();
-            let data = first.mean_ln_l.zip(rival.mean_ln_l).map(|(a, b)| a - b);
-            let error = first.ln_z_error.hypot(rival.ln_z_error);
-            (
-                rival.law,
-                ln_odds,
-                error,
-                gap,
-                Strength::of(ln_odds, error, data, Some(gap)),
-            )
-        })
-        .collect();
+    let rivals = rivals_of(laws, &order, &outcome.fits, synthetic.calibration.len());
     // A NaN gap (a fit with no value) decides nothing.
     let decided = rivals.iter().all(|r| r.4.decides());
     let (runner_up, ln_odds, ln_odds_error) = rivals
@@ -293,6 +259,75 @@ fn replicate_of(
         },
         outcome.evidence.candidates_scored,
     ))
+}
+
+/// The first law (`order[0]`) against every rival, in `order`: the posterior log-odds with
+/// their error, how far the first law's fit lies above the rival's over `n` samples (nats),
+/// and the strength these give.
+fn rivals_of(
+    laws: &[crate::abc::evidence::LawEvidence],
+    order: &[usize],
+    fits: &[crate::fit::LawFit],
+    n: usize,
+) -> Vec<(Law, f64, f64, f64, Strength)> {
+    let first = &laws[order[0]];
+    let n = n as f64;
+    let rho = |law: Law| fits.iter().find(|f| f.law == law).map_or(f64::NAN, |f| f.rho);
+    // Against every rival: the posterior log-odds with their error, and how far the first
+    // law's fit lies above the rival's.
+    order[1..]
+        .iter()
+        .map(|&k| {
+            let rival = &laws[k];
+            let ln_odds = (first.ln_z + first.prior_probability.ln()) - (rival.ln_z + rival.prior_probability.ln());
+            let gap = n / 2.0 * (rho(rival.law) / rho(first.law)).ln();
+            let data = first.mean_ln_l.zip(rival.mean_ln_l).map(|(a, b)| a - b);
+            let error = first.ln_z_error.hypot(rival.ln_z_error);
+            (
+                rival.law,
+                ln_odds,
+                error,
+                gap,
+                Strength::of(ln_odds, error, data, Some(gap)),
+            )
+        })
+        .collect()
+}
+
+/// Replicate `index` of `law` at `params_si`: its model on the record's speeds plus noise
+/// drawn from the residuals of the law's fit (`fit_si`) to `data`; under the AR(1) model the
+/// noise keeps the residuals' lag-1 correlation (their innovations resampled and filtered
+/// again).
+fn synthetic_record(
+    data: &FieldData,
+    (law, fit_si, params_si): (Law, &[f64], &[f64]),
+    w_ref_n: Option<f64>,
+    noise_model: NoiseModel,
+    index: usize,
+    rng: &mut StdRng,
+) -> FieldData {
+    let e = residuals(law, fit_si, &data.calibration, w_ref_n);
+    // Under the AR(1) model the noise keeps the residuals' lag-1 correlation: its innovations
+    // are resampled and filtered again.
+    let phi = match noise_model {
+        NoiseModel::Iid => 0.0,
+        NoiseModel::Ar1 => Some(crate::separation::lag1_of(&e))
+            .filter(|phi| phi.is_finite())
+            .map_or(0.0, |phi| phi.clamp(-0.99, 0.99)),
+    };
+    let draws: Vec<f64> = if phi == 0.0 {
+        e
+    } else {
+        e.windows(2).map(|pair| pair[1] - phi * pair[0]).collect()
+    };
+    FieldData {
+        source: data.source.join(format!("evidence-check/{law}-replicate-{index}")),
+        calibration: synthesize(law, params_si, &data.calibration, w_ref_n, &draws, phi, rng),
+        validation: synthesize(law, params_si, &data.validation, w_ref_n, &draws, phi, rng),
+        warnings: Vec::new(),
+        bit: None,
+        ..data.clone()
+    }
 }
 
 /// The row of `law` from its replicates.
