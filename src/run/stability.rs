@@ -192,28 +192,7 @@ impl StabilityJob {
             note(format!("warning: {warning}"));
         }
         let (inputs, early_end, record_bit, run_w_ref_n) = match &self.source {
-            MapSource::Run(dir) => {
-                run::dir::refuse_unfinished_evidence(dir)?;
-                let store = run::abc::Store::open(dir)?;
-                let early_end = store.early_end()?;
-                let stored = store.load_with_last_particles()?;
-                let last = stored.populations.last().ok_or_else(|| Error::Data {
-                    path: dir.clone(),
-                    message: format!(
-                        "the run has no completed population yet; {}",
-                        run::abc::resume_advice(dir)
-                    ),
-                })?;
-                let run_w_ref_n = serde_json::from_value::<run::abc::Config>(stored.setup.config.clone())
-                    .ok()
-                    .and_then(|c| c.fit.w_ref_n);
-                (
-                    crate::abc::posterior::map_inputs(last, self.samples),
-                    early_end,
-                    stored.setup.data.bit,
-                    run_w_ref_n,
-                )
-            }
+            MapSource::Run(dir) => from_run(dir, self.samples)?,
             MapSource::Posterior(particles) => (
                 crate::abc::posterior::map_inputs_of(particles, self.samples),
                 None,
@@ -363,4 +342,38 @@ pub fn criterion(structure: Structure, lumped: Lumped, fe: &DrillStringSettings)
         Structure::Lumped => Criterion::Lumped(lumped),
         Structure::Fe => Criterion::Critical(fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms),
     })
+}
+
+/// What a map's source gives besides its grid: the inputs (samples per law), why a run ended
+/// early, what its record's bit did, and the W_ref its torques were scaled by.
+type SourceParts = (
+    Vec<LawSamples>,
+    Option<String>,
+    Option<crate::data::BitSeen>,
+    Option<f64>,
+);
+
+/// The map inputs of the ABC run in `dir` (its last population, `samples` per law), why it
+/// ended early if it did, what its record's bit did, and the W_ref its torques were scaled by.
+fn from_run(dir: &std::path::Path, samples: usize) -> Result<SourceParts> {
+    run::dir::refuse_unfinished_evidence(dir)?;
+    let store = run::abc::Store::open(dir)?;
+    let early_end = store.early_end()?;
+    let stored = store.load_with_last_particles()?;
+    let last = stored.populations.last().ok_or_else(|| Error::Data {
+        path: dir.to_path_buf(),
+        message: format!(
+            "the run has no completed population yet; {}",
+            run::abc::resume_advice(dir)
+        ),
+    })?;
+    let run_w_ref_n = serde_json::from_value::<run::abc::Config>(stored.setup.config.clone())
+        .ok()
+        .and_then(|c| c.fit.w_ref_n);
+    Ok((
+        crate::abc::posterior::map_inputs(last, samples),
+        early_end,
+        stored.setup.data.bit,
+        run_w_ref_n,
+    ))
 }
