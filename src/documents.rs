@@ -412,31 +412,7 @@ pub fn read_particles_csv(path: &std::path::Path) -> crate::error::Result<Vec<Pa
         }
         let law: Law = cell(law_col).parse().map_err(|e: String| bad_cell(law_col, e))?;
         if let std::collections::hash_map::Entry::Vacant(entry) = layouts.entry(law) {
-            let mut layout = Vec::new();
-            for spec in law.params() {
-                let found = [TorqueUnit::KNm, TorqueUnit::Nm].into_iter().find_map(|unit| {
-                    let name = format!("{}.{} [{}]", law.name(), spec.name, spec.unit(unit.label()));
-                    column(&name).map(|col| (col, unit))
-                });
-                let Some((col, unit)) = found else {
-                    return Err(format(
-                        Some(line),
-                        format!(
-                            "law {law} needs the column '{}.{} [{}]' (or its N·m twin), which the header lacks",
-                            law.name(),
-                            spec.name,
-                            spec.unit(TorqueUnit::KNm.label())
-                        ),
-                    ));
-                };
-                let scale = if spec.torque_power == 1 {
-                    unit.newton_metres()
-                } else {
-                    1.0
-                };
-                layout.push((col, scale));
-            }
-            entry.insert(layout);
+            entry.insert(param_layout(law, &column).map_err(|message| format(Some(line), message))?);
         }
         let params = layouts[&law]
             .iter()
@@ -464,6 +440,33 @@ pub fn read_particles_csv(path: &std::path::Path) -> crate::error::Result<Vec<Pa
         return Err(format(None, "the file holds no particles".into()));
     }
     Ok(particles)
+}
+
+/// Each parameter's column of `law` in a particle file (found by `column`) and its scale to
+/// SI, torques in kN·m or N·m as the column's unit says; `Err` names the column it lacks.
+fn param_layout(law: Law, column: &dyn Fn(&str) -> Option<usize>) -> Result<Vec<(usize, f64)>, String> {
+    let mut layout = Vec::new();
+    for spec in law.params() {
+        let found = [TorqueUnit::KNm, TorqueUnit::Nm].into_iter().find_map(|unit| {
+            let name = format!("{}.{} [{}]", law.name(), spec.name, spec.unit(unit.label()));
+            column(&name).map(|col| (col, unit))
+        });
+        let Some((col, unit)) = found else {
+            return Err(format!(
+                "law {law} needs the column '{}.{} [{}]' (or its N·m twin), which the header lacks",
+                law.name(),
+                spec.name,
+                spec.unit(TorqueUnit::KNm.label())
+            ));
+        };
+        let scale = if spec.torque_power == 1 {
+            unit.newton_metres()
+        } else {
+            1.0
+        };
+        layout.push((col, scale));
+    }
+    Ok(layout)
 }
 
 /// A population and its particles as JSON, parameters in the record's torque unit.

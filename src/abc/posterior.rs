@@ -200,19 +200,7 @@ pub(crate) fn summarize_law(law: Law, members: &[&Particle], probability: f64) -
         .map(|p| (*p).clone())
         .expect("a law summary needs at least one particle");
 
-    let scale: Vec<f64> = (0..d)
-        .map(|j| {
-            if !varies[j] {
-                return 0.0;
-            }
-            let iqr = column_quantiles[j][3] - column_quantiles[j][1];
-            if iqr > 0.0 {
-                std_dev[j].min(iqr / IQR_PER_SIGMA)
-            } else {
-                std_dev[j]
-            }
-        })
-        .collect();
+    let scale = robust_scale(&std_dev, &column_quantiles, &varies);
     let (map, map_bandwidth) = map_estimate(&columns, &mean, &scale, &w);
 
     LawSummary {
@@ -275,6 +263,25 @@ fn correlations(deviations: &[Vec<f64>], squares: &[f64], varies: &[bool], w: &[
         correlation[k][j] = Some(r);
     }
     correlation
+}
+
+/// Each parameter's robust scale for the mode's kernel: its standard deviation, or its
+/// interquartile range over that of a unit normal where smaller (Silverman's); 0 for one that
+/// does not vary.
+fn robust_scale(std_dev: &[f64], column_quantiles: &[[f64; 5]], varies: &[bool]) -> Vec<f64> {
+    (0..std_dev.len())
+        .map(|j| {
+            if !varies[j] {
+                return 0.0;
+            }
+            let iqr = column_quantiles[j][3] - column_quantiles[j][1];
+            if iqr > 0.0 {
+                std_dev[j].min(iqr / IQR_PER_SIGMA)
+            } else {
+                std_dev[j]
+            }
+        })
+        .collect()
 }
 
 /// The posterior's mode by kernel density and its bandwidth: on every particle, or on a
