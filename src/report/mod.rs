@@ -369,30 +369,66 @@ fn record_probabilities(population: &Population, laws: &[Law]) -> Vec<(Law, f64)
         .collect()
 }
 
+/// Refuses, naming the report, what cannot be reported: no run, a percentile outside (0, 1),
+/// no samples per law, an axis that is not ascending and positive.
+fn check_settings(input: &ReportInput) -> Result<()> {
+    let s = &input.stability;
+    let bad = |message: String| Error::setting("report", message);
+    if input.runs.is_empty() {
+        return Err(bad("no run to report".into()));
+    }
+    if !(s.percentile > 0.0 && s.percentile < 1.0) {
+        return Err(bad(format!("the percentile {} is not in (0, 1)", s.percentile)));
+    }
+    if s.samples_per_law == 0 {
+        return Err(bad("samples_per_law must be at least 1".into()));
+    }
+    for (name, axis) in [("omega_rpm", &s.omega_rpm), ("wob_kn", &s.wob_kn)] {
+        if axis.len() < 2
+            || axis.iter().any(|v| !v.is_finite())
+            || axis.windows(2).any(|w| w[1] <= w[0])
+            || axis[0] <= 0.0
+        {
+            return Err(bad(format!(
+                "the {name} axis must hold at least two ascending positive values"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The strings the report maps: the 1-DOF string and each finite-element string, with their
+/// critical bit damping.
+fn structures(s: &StabilitySettings) -> Result<Vec<StructureView>> {
+    let mut structures = vec![StructureView {
+        label: format!(
+            "1-DOF (ω_n = {} rad/s, ξ = {})",
+            s.lumped.omega_n_rad_s, s.lumped.damping_ratio
+        ),
+        short_label: "1-DOF".into(),
+        critical_nms: s.lumped.critical_bit_damping_nms(),
+    }];
+    for string in &s.strings {
+        structures.push(StructureView {
+            label: format!(
+                "FE {} + {} elements, α = {} 1/s, β = {} s",
+                string.dp_elements, string.bha_elements, string.alpha, string.beta
+            ),
+            short_label: format!(
+                "FE {}+{}, β = {} s",
+                string.dp_elements, string.bha_elements, string.beta
+            ),
+            critical_nms: string.critical_bit_damping()?.critical_bit_damping_nms,
+        });
+    }
+    Ok(structures)
+}
+
 impl<'a> Prepared<'a> {
     fn new(input: &'a ReportInput<'a>) -> Result<Self> {
         let s = &input.stability;
         let bad = |message: String| Error::setting("report", message);
-        if input.runs.is_empty() {
-            return Err(bad("no run to report".into()));
-        }
-        if !(s.percentile > 0.0 && s.percentile < 1.0) {
-            return Err(bad(format!("the percentile {} is not in (0, 1)", s.percentile)));
-        }
-        if s.samples_per_law == 0 {
-            return Err(bad("samples_per_law must be at least 1".into()));
-        }
-        for (name, axis) in [("omega_rpm", &s.omega_rpm), ("wob_kn", &s.wob_kn)] {
-            if axis.len() < 2
-                || axis.iter().any(|v| !v.is_finite())
-                || axis.windows(2).any(|w| w[1] <= w[0])
-                || axis[0] <= 0.0
-            {
-                return Err(bad(format!(
-                    "the {name} axis must hold at least two ascending positive values"
-                )));
-            }
-        }
+        check_settings(input)?;
         s.lumped.validate()?;
         let mut runs = Vec::with_capacity(input.runs.len());
         for run in input.runs {
@@ -414,27 +450,7 @@ impl<'a> Prepared<'a> {
                 summary,
             });
         }
-        let mut structures = vec![StructureView {
-            label: format!(
-                "1-DOF (ω_n = {} rad/s, ξ = {})",
-                s.lumped.omega_n_rad_s, s.lumped.damping_ratio
-            ),
-            short_label: "1-DOF".into(),
-            critical_nms: s.lumped.critical_bit_damping_nms(),
-        }];
-        for string in &s.strings {
-            structures.push(StructureView {
-                label: format!(
-                    "FE {} + {} elements, α = {} 1/s, β = {} s",
-                    string.dp_elements, string.bha_elements, string.alpha, string.beta
-                ),
-                short_label: format!(
-                    "FE {}+{}, β = {} s",
-                    string.dp_elements, string.bha_elements, string.beta
-                ),
-                critical_nms: string.critical_bit_damping()?.critical_bit_damping_nms,
-            });
-        }
+        let structures = structures(s)?;
         let reference = &runs[0];
         let map_inputs: Vec<LawSamples> = reference
             .summary
