@@ -68,12 +68,24 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
         document["seconds"].as_f64().unwrap_or(f64::NAN),
         document["prior"].as_str().unwrap_or("?"),
     );
+    laws_markdown(&mut md, &laws);
+    let factors = bayes_factors(&document, &laws, evidence_dir)?;
+    bayes_factors_markdown(&mut md, &factors);
+    noise_models_markdown(&mut md, &document);
+    separations_markdown(&mut md, &document);
+    let infos: Vec<super::FigureInfo> = rendered.iter().map(|r| r.info.clone()).collect();
+    figures_markdown(&mut md, &infos);
+    replace_report(out, md, rendered, start)
+}
+
+/// The table of each law's evidence, and each start's ln Z where both starts ran.
+fn laws_markdown(md: &mut String, laws: &[LawLine]) {
     let _ = writeln!(
         md,
         "| law | ln Z | ± Monte-Carlo error | P(m \\| y) | best ρ | islands agree | posterior cut by its box |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|");
-    for l in &laws {
+    for l in laws {
         let agree = if l.converged {
             "yes".to_string()
         } else {
@@ -96,14 +108,17 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
             "\nEach start's ln Z (a start errs low where it misses part of the posterior; the higher kept where \
              they differ beyond their errors or a start's islands disagree):\n"
         );
-        for l in &laws {
+        for l in laws {
             if let Some(line) = describe_starts(&l.starts) {
                 let _ = writeln!(md, "- {}: {line}", l.law);
             }
         }
     }
-    let factors = bayes_factors(&document, &laws, evidence_dir)?;
-    if let [first, ..] = &factors[..] {
+}
+
+/// The Bayes factors of the law of the largest evidence against each other law, in words.
+fn bayes_factors_markdown(md: &mut String, factors: &[BayesFactor]) {
+    if let [first, ..] = factors {
         let _ = writeln!(
             md,
             "\nBayes factors of {}, the law of the largest evidence, against each other law, split into the data's \
@@ -114,7 +129,7 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
             first.favoured,
             crate::abc::evidence::DATA_DECIDES_NATS
         );
-        for f in &factors {
+        for f in factors {
             let parts = f.parts();
             let _ = writeln!(
                 md,
@@ -135,11 +150,6 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
             }
         }
     }
-    noise_models_markdown(&mut md, &document);
-    separations_markdown(&mut md, &document);
-    let infos: Vec<super::FigureInfo> = rendered.iter().map(|r| r.info.clone()).collect();
-    figures_markdown(&mut md, &infos);
-    replace_report(out, md, rendered, start)
 }
 
 /// The document's Bayes factors; a document written without them gets the plain factors of
