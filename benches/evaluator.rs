@@ -6,14 +6,14 @@
 use bitrock::Law;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::residual::GpuEvaluator;
-use bitrock::eval::{AbcProblem, Evaluator};
+use bitrock::eval::{Evaluator, Problem};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 const D: usize = 5_000;
 const CANDIDATES: usize = 8_192;
 
 /// One-law problem: the paper's estimate with a ±5 % ripple, ±40 % prior box.
-fn problem(law: Law) -> AbcProblem {
+fn problem(law: Law) -> Problem {
     bitrock::bench::synthetic_problem(law, D, 1)
 }
 

@@ -8,7 +8,7 @@ use crate::abc::smc::{self, SmcConfig};
 use crate::data::{DataOptions, FieldData, Samples, demo_field_data};
 use crate::error::{Error, Result};
 use crate::eval::gpu::candidates::GpuCandidate;
-use crate::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE, cpu::CpuEvaluator, evaluator, gpu};
+use crate::eval::{Backend, Evaluator, PARITY_TOLERANCE, Problem, cpu::CpuEvaluator, evaluator, gpu};
 use crate::fit::{FitOptions, LawFit, fit_record};
 use crate::numerics::quantile;
 use crate::prior::{LawBox, Prior};
@@ -217,7 +217,7 @@ impl Default for BenchOptions {
 /// A single-law problem: `d` samples of the law at the paper's estimate (N·m) with a
 /// deterministic ±5 % ripple, speeds 0.5-20 rad/s, and the paper's ±40 % prior box.
 /// Panics for a law file's law without reference values.
-pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> AbcProblem {
+pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> Problem {
     let estimate = law.paper_estimate().expect("a law with reference values");
     let truth = law.scale_torque(estimate, 1000.0);
     let speed: Vec<f64> = (0..d)
@@ -239,7 +239,7 @@ pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> AbcProblem {
         .map(|&p| ((p * 0.6).min(p * 1.4) as f32, (p * 0.6).max(p * 1.4) as f32))
         .unzip();
     let prior = Prior::new(vec![LawBox { law, lower, upper }], vec![1.0]).expect("one positive weight");
-    AbcProblem::new(prior, seed, &data, None)
+    Problem::new(prior, seed, &data, None)
 }
 
 /// The CPU model, from /proc/cpuinfo where there is one.
@@ -341,7 +341,7 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
 /// table of shapes (measured on `problem` where none is cached, or with `retune`), logged; or
 /// why there is no GPU, and no shape.
 fn gpu_adapter(
-    problem: &AbcProblem,
+    problem: &Problem,
     retune: bool,
     log: &mut dyn FnMut(String),
 ) -> Result<(String, Option<gpu::Shape>, Option<TuningReport>)> {
@@ -461,8 +461,8 @@ impl EmbeddedRecord {
     }
 
     /// The record's calibration samples under the prior, seed 1.
-    fn problem(&self) -> AbcProblem {
-        AbcProblem::new(self.prior.clone(), 1, &self.data.calibration, None)
+    fn problem(&self) -> Problem {
+        Problem::new(self.prior.clone(), 1, &self.data.calibration, None)
     }
 
     /// An evaluator of [`Self::problem`] on `backend`, for a run of `particles`.
@@ -1077,16 +1077,12 @@ pub fn parity_on(
             message: format!("the prior parity draws from (δ = {delta} around the fits) cannot be built: {e}"),
         }
     })?;
-    parity(
-        &AbcProblem::new(prior, seed, &data.calibration, None),
-        candidates,
-        epsilon,
-    )
+    parity(&Problem::new(prior, seed, &data.calibration, None), candidates, epsilon)
 }
 
 /// Scores the same candidates on both backends for each law's prior in `prior` (one law at a
 /// time), and compares the candidate generators bit for bit.
-pub fn parity(problem: &AbcProblem, candidates: usize, epsilon: Option<f64>) -> Result<ParityReport> {
+pub fn parity(problem: &Problem, candidates: usize, epsilon: Option<f64>) -> Result<ParityReport> {
     // ρ on both backends, their relative differences and a sorted copy for the median.
     crate::limits::check_memory(
         "candidates",
@@ -1102,7 +1098,7 @@ pub fn parity(problem: &AbcProblem, candidates: usize, epsilon: Option<f64>) -> 
     let ctx = gpu::context()?;
     let mut laws = Vec::new();
     for (slot, bx) in problem.prior.boxes.iter().enumerate() {
-        let single = AbcProblem {
+        let single = Problem {
             prior: Prior::new(vec![bx.clone()], vec![problem.prior.weights[slot]])?,
             ..problem.clone()
         };

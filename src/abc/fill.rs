@@ -5,7 +5,7 @@
 
 use super::{LawRecord, Observer, Particle, Population, PopulationRecord, Progress, StopReason};
 use crate::error::Result;
-use crate::eval::{AbcProblem, PARITY_TOLERANCE};
+use crate::eval::{PARITY_TOLERANCE, Problem};
 use crate::prior::Prior;
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -107,7 +107,7 @@ impl Filling {
     }
 
     /// Each law's record, with the probability and liveness `of_slot` gives for its slot.
-    pub fn law_records(&self, problem: &AbcProblem, of_slot: impl Fn(usize) -> (f64, bool)) -> Vec<LawRecord> {
+    pub fn law_records(&self, problem: &Problem, of_slot: impl Fn(usize) -> (f64, bool)) -> Vec<LawRecord> {
         let prior = &problem.prior;
         prior
             .boxes

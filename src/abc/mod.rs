@@ -18,7 +18,7 @@ pub mod smc;
 pub mod worker;
 
 use crate::error::Result;
-use crate::eval::AbcProblem;
+use crate::eval::Problem;
 use crate::laws::Law;
 use serde::{Deserialize, Serialize};
 
@@ -70,7 +70,7 @@ impl LawRecord {
         accepted: usize,
         probability: f64,
         alive: bool,
-        problem: &AbcProblem,
+        problem: &Problem,
         epsilon: f64,
     ) -> Self {
         Self {

@@ -320,7 +320,7 @@ fn batch_size(missing: usize, projected_acceptance: f64, max_batch: usize, budge
 /// past the last candidate considered. `batch` holds every candidate of its range that either
 /// rule looks at ([`shard::kept`]), so the scan is the scan of every ρ of the range. It only
 /// picks the accepted candidates; they are regenerated after it, in parallel and in index order.
-fn scan(problem: &crate::eval::AbcProblem, fill: &mut Filling, batch: &Found, weight: f64) {
+fn scan(problem: &crate::eval::Problem, fill: &mut Filling, batch: &Found, weight: f64) {
     let prior = &problem.prior;
     let from = fill.position;
     let mut consumed = batch.end();

@@ -33,7 +33,7 @@
 use super::Particle;
 use crate::error::{Error, Result};
 use crate::eval::gpu::{Shape, tune::ShapeWish};
-use crate::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
+use crate::eval::{Evaluator, PARITY_TOLERANCE, Problem};
 use crate::prior::Candidate;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -148,7 +148,7 @@ pub struct Round<'a> {
 /// Runs rounds of tasks: in this process ([`Local`]), or on workers elsewhere.
 pub trait Workers: Sync {
     /// The problem every task is scored against.
-    fn problem(&self) -> &AbcProblem;
+    fn problem(&self) -> &Problem;
     /// The backend that scores, for records (`cpu`, `gpu`, or both for a mixed pool).
     fn backend(&self) -> &'static str;
     /// Tasks a round is cut into at most (1: one task per round).
@@ -164,7 +164,7 @@ pub trait Workers: Sync {
 }
 
 impl<W: Workers + ?Sized> Workers for &W {
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         (**self).problem()
     }
 
@@ -193,7 +193,7 @@ where
     E: std::ops::Deref + Sync,
     E::Target: Evaluator,
 {
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         self.0.problem()
     }
 
@@ -221,7 +221,7 @@ where
 pub struct Several<E>(pub Vec<E>);
 
 impl<E: Evaluator> Workers for Several<E> {
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         self.0[0].problem()
     }
 
@@ -282,7 +282,7 @@ pub enum Devices {
 /// The workers of this process: one evaluator on `backend`, or with [`Devices::All`] one per
 /// GPU (under `auto`, the CPU when there is none, said through `note`).
 pub fn here(
-    problem: AbcProblem,
+    problem: Problem,
     backend: crate::eval::Backend,
     devices: Devices,
     wish: ShapeWish,

@@ -84,7 +84,7 @@ use super::schedule::{Schedule, next_epsilon};
 use super::shard::{self, Found, Local, Proposal, Proposed, Round, Task, Workers};
 use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
-use crate::eval::{AbcProblem, Evaluator, KernelSums, PARITY_TOLERANCE};
+use crate::eval::{Evaluator, KernelSums, PARITY_TOLERANCE, Problem};
 use crate::laws::MAX_PARAMS;
 use crate::numerics::compensated_sum;
 use crate::prior::{Candidate, Prior};
@@ -864,7 +864,7 @@ pub const SAMPLER: &str = "smc";
 impl Context {
     /// The proposal distribution of the population after `particles` (with their weights),
     /// drawn at `epsilon`.
-    pub fn new(problem: &AbcProblem, particles: Vec<Particle>, config: SmcConfig, epsilon: f64) -> Result<Self> {
+    pub fn new(problem: &Problem, particles: Vec<Particle>, config: SmcConfig, epsilon: f64) -> Result<Self> {
         // A law is out of reach only when its best least-squares ρ is above ε by more than the
         // margin a GPU's f32 ρ may differ by (as `kept` keeps candidates).
         let kernels = Kernels::new(&problem.prior, &particles, &config, epsilon, &|law| {
@@ -879,7 +879,7 @@ impl Context {
     }
 
     /// The proposal [`Proposal::encode`] wrote, for `problem`.
-    pub fn decode(problem: &AbcProblem, bytes: &[u8]) -> Result<Self> {
+    pub fn decode(problem: &Problem, bytes: &[u8]) -> Result<Self> {
         let payload: Payload = shard::wire::decode(bytes, "SMC proposal")?;
         Self::new(problem, payload.particles, payload.config, payload.epsilon)
     }
@@ -937,7 +937,7 @@ pub fn run(evaluator: &dyn Evaluator, config: &SmcConfig) -> Result<Run> {
 /// prior box that the acceptance and near-threshold rules look at): accepts those below ε
 /// until N, and counts every proposal up to the last one considered as a draw of its law. The
 /// accepted proposals are made again here, in parallel, from their indices.
-fn accept_found(problem: &AbcProblem, fill: &mut Filling, context: &Context, found: &Found) {
+fn accept_found(problem: &Problem, fill: &mut Filling, context: &Context, found: &Found) {
     let prior = &problem.prior;
     let key = key_of_seed(problem.seed);
     let from = fill.position;
@@ -1202,7 +1202,7 @@ fn population_of(
     survivors: Vec<Particle>,
     weights: Vec<f64>,
     config: &SmcConfig,
-    problem: &AbcProblem,
+    problem: &Problem,
     previous_rate: f64,
 ) -> Population {
     let prior = &problem.prior;

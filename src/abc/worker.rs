@@ -9,7 +9,7 @@ use super::shard::{self, Proposal};
 use super::smc;
 use crate::error::{Error, Result};
 use crate::eval::gpu::tune::ShapeWish;
-use crate::eval::{AbcProblem, Backend, Evaluator};
+use crate::eval::{Backend, Evaluator, Problem};
 use std::sync::{Arc, Mutex};
 
 /// The environment variable that overrides, on a worker, the backend the driver asked for
@@ -22,7 +22,7 @@ type EvaluatorKey = (u64, Backend, ShapeWish);
 /// Payloads and evaluators a worker process keeps, the most recently used last.
 #[derive(Default)]
 struct Held {
-    problems: Vec<(u64, Arc<AbcProblem>)>,
+    problems: Vec<(u64, Arc<Problem>)>,
     evaluators: Vec<(EvaluatorKey, Arc<dyn Evaluator>)>,
     contexts: Vec<((u64, u64), Arc<dyn Proposal>)>,
 }
@@ -135,7 +135,7 @@ fn worker_backend(name: &str) -> Result<Backend> {
 }
 
 /// The proposal a driver's [`Proposal::encode`] wrote, rebuilt for `problem`.
-fn proposal(problem: &AbcProblem, bytes: &[u8]) -> Result<Arc<dyn Proposal>> {
+fn proposal(problem: &Problem, bytes: &[u8]) -> Result<Arc<dyn Proposal>> {
     let (sampler, payload): (String, Vec<u8>) = decode(bytes, "proposal")?;
     match sampler.as_str() {
         smc::SAMPLER => Ok(Arc::new(smc::Context::decode(problem, &payload)?)),

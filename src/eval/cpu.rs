@@ -1,7 +1,7 @@
 //! The CPU reference evaluator: f64 arithmetic on the f32 candidate parameters, rayon across
 //! candidates, compensated (Kahan) summation in four interleaved lanes per candidate.
 
-use super::{AbcProblem, Evaluator, KernelSums};
+use super::{Evaluator, KernelSums, Problem};
 use crate::error::Result;
 use crate::laws::file::program::BLOCK;
 use crate::laws::{Law, MAX_PARAMS};
@@ -11,11 +11,11 @@ use rayon::prelude::*;
 
 /// Scores candidates on the CPU. Thread count follows the ambient rayon pool.
 pub struct CpuEvaluator {
-    problem: AbcProblem,
+    problem: Problem,
 }
 
 impl CpuEvaluator {
-    pub fn new(problem: AbcProblem) -> Self {
+    pub fn new(problem: Problem) -> Self {
         Self { problem }
     }
 }
@@ -92,13 +92,13 @@ fn residual_sums<const LAG: bool>(w: &[f64], y: &[f64], r: &[f64], torque: impl 
 /// vectorisable); where the CPU has AVX2 the same code is compiled for it and chosen at run
 /// time. Both paths perform the same IEEE operations (Rust never fuses a multiply-add on its
 /// own), so they return the same bits.
-pub fn rho(problem: &AbcProblem, law: Law, p: &[f64]) -> f64 {
+pub fn rho(problem: &Problem, law: Law, p: &[f64]) -> f64 {
     super::rho_of_sum(sums::<false>(problem, law, p).0, problem.sum_sq_torque)
 }
 
 /// ρ and λ = Σ e_t·e_(t−1) / Σy² of one law at f64 parameters `p`, in one pass over the data
 /// (see [`rho`]).
-pub fn rho_and_lag(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
+pub fn rho_and_lag(problem: &Problem, law: Law, p: &[f64]) -> (f64, f64) {
     let (ssr, lag) = sums::<true>(problem, law, p);
     (
         super::rho_of_sum(ssr, problem.sum_sq_torque),
@@ -107,7 +107,7 @@ pub fn rho_and_lag(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
 }
 
 /// Σ e² and (with `LAG`) Σ e_t·e_(t−1) of one law at `p`, on AVX2 where the CPU has it.
-fn sums<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
+fn sums<const LAG: bool>(problem: &Problem, law: Law, p: &[f64]) -> (f64, f64) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2, checked just above.
@@ -118,12 +118,12 @@ fn sums<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn sums_avx2<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
+fn sums_avx2<const LAG: bool>(problem: &Problem, law: Law, p: &[f64]) -> (f64, f64) {
     sums_portable::<LAG>(problem, law, p)
 }
 
 #[inline(always)]
-fn sums_portable<const LAG: bool>(problem: &AbcProblem, law: Law, p: &[f64]) -> (f64, f64) {
+fn sums_portable<const LAG: bool>(problem: &Problem, law: Law, p: &[f64]) -> (f64, f64) {
     let (w, y, r) = (&problem.speed_rad_s[..], &problem.torque_nm[..], &problem.wob_ratio[..]);
     // A built-in law's parameters are copied into locals first: indexing `p` inside the
     // closure keeps bounds checks in the loop and stops it vectorising (3x slower for m3).
@@ -161,7 +161,7 @@ impl Evaluator for CpuEvaluator {
         "cpu"
     }
 
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         &self.problem
     }
 
@@ -183,7 +183,7 @@ impl Evaluator for CpuEvaluator {
 
 /// ρ of candidates `start .. start + out.len()` of stream `population` of `problem`, into
 /// `out` (rayon across candidates).
-pub fn score_stream(problem: &AbcProblem, population: u32, start: u64, out: &mut [f64]) {
+pub fn score_stream(problem: &Problem, population: u32, start: u64, out: &mut [f64]) {
     out.par_iter_mut().with_min_len(16).enumerate().for_each(|(k, slot)| {
         let c = problem.prior.candidate(problem.seed, population, start + k as u64);
         *slot = rho_of_candidate(problem, &c);
@@ -191,7 +191,7 @@ pub fn score_stream(problem: &AbcProblem, population: u32, start: u64, out: &mut
 }
 
 /// ρ of explicit candidates of `problem` into `out` (as long as `candidates`).
-pub fn score_candidates(problem: &AbcProblem, candidates: &[Candidate], out: &mut [f64]) {
+pub fn score_candidates(problem: &Problem, candidates: &[Candidate], out: &mut [f64]) {
     assert_eq!(candidates.len(), out.len(), "one ρ per candidate");
     out.par_iter_mut()
         .with_min_len(16)
@@ -200,7 +200,7 @@ pub fn score_candidates(problem: &AbcProblem, candidates: &[Candidate], out: &mu
 }
 
 /// ρ of a candidate: f64 arithmetic on its f32 parameters, widened exactly.
-fn rho_of_candidate(problem: &AbcProblem, c: &Candidate) -> f64 {
+fn rho_of_candidate(problem: &Problem, c: &Candidate) -> f64 {
     let law = problem.prior.law(c.slot);
     rho(problem, law, &c.widened()[..law.n_params()])
 }
@@ -208,7 +208,7 @@ fn rho_of_candidate(problem: &AbcProblem, c: &Candidate) -> f64 {
 /// ρ and λ = Σ e_t·e_(t−1) / Σy² of explicit candidates of `problem` into `rho` and `lag`
 /// (rayon across candidates): e = y − r·T(w) over consecutive samples of the record, f64
 /// arithmetic on the f32 parameters, compensated sums; +∞ where a torque has no value.
-pub fn score_candidates_lagged(problem: &AbcProblem, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) {
+pub fn score_candidates_lagged(problem: &Problem, candidates: &[Candidate], rho: &mut [f64], lag: &mut [f64]) {
     assert_eq!(candidates.len(), rho.len(), "one ρ per candidate");
     assert_eq!(candidates.len(), lag.len(), "one lag-1 sum per candidate");
     rho.par_iter_mut()
@@ -223,7 +223,7 @@ pub fn score_candidates_lagged(problem: &AbcProblem, candidates: &[Candidate], r
 
 /// λ alone of explicit candidates into `out` (see [`score_candidates_lagged`]): the CPU twin
 /// of the kernels' lag pass.
-pub fn lag_sums(problem: &AbcProblem, candidates: &[Candidate], out: &mut [f64]) {
+pub fn lag_sums(problem: &Problem, candidates: &[Candidate], out: &mut [f64]) {
     let mut rho = vec![0.0; out.len()];
     score_candidates_lagged(problem, candidates, &mut rho, out);
 }

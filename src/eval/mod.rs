@@ -1,40 +1,22 @@
-//! Scoring candidates: the [`Evaluator`] trait the samplers call, and the problem every backend
-//! scores against. The CPU evaluator (f64) is the reference; the GPU one must match it.
+//! Scoring candidates: the [`Evaluator`] trait the samplers call, and the [`Problem`] every
+//! backend scores against. The CPU evaluator (f64) is the reference; the GPU one must match it.
 
 pub mod cpu;
 pub mod gpu;
+mod problem;
 pub mod records;
 pub mod strings;
 
-use crate::data::Samples;
+pub use problem::Problem;
+
 use crate::error::Result;
-use crate::fit::LawFit;
-use crate::laws::{Law, MAX_PARAMS};
-use crate::prior::{Candidate, Prior};
+use crate::laws::MAX_PARAMS;
+use crate::prior::Candidate;
 
 /// Largest relative difference of ρ between the GPU (f32) and the CPU (f64) that bitrock
 /// accepts; candidates whose ρ lies this close to ε may be accepted by one backend only.
 /// Measured on lavapipe: about 1e-6 on the embedded record (tests/it/gpu.rs prints it).
 pub const PARITY_TOLERANCE: f64 = 1e-5;
-
-/// Everything that determines ρ of a candidate: the prior and seed (which generate it) and
-/// the calibration data (which score it).
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct AbcProblem {
-    pub prior: Prior,
-    pub seed: u64,
-    /// Bit speed, rad/s.
-    pub speed_rad_s: Vec<f64>,
-    /// Torque on bit, N·m.
-    pub torque_nm: Vec<f64>,
-    /// Weight-on-bit ratio r per sample.
-    pub wob_ratio: Vec<f64>,
-    /// Σy², (N·m)², summed once on the host in f64 with compensation.
-    pub sum_sq_torque: f64,
-    /// Best least-squares ρ of each law on these data where known: no candidate of the law
-    /// scores below it, so a tolerance at or below it cannot be reached.
-    pub best_rho: std::collections::BTreeMap<Law, f64>,
-}
 
 /// ρ of a sum of squared residuals `ssr` (a kernel's f32 sum, or the CPU's): `ssr /
 /// sum_sq_torque`, and +∞ where the sum has no value (a torque overflowing, a law file's taking a
@@ -45,42 +27,6 @@ pub(crate) fn rho_of_sum(ssr: f64, sum_sq_torque: f64) -> f64 {
         f64::INFINITY
     } else {
         ssr / sum_sq_torque
-    }
-}
-
-impl AbcProblem {
-    /// The problem of calibrating against `data` with r per sample from `w_ref_n` (see
-    /// [`Samples::wob_ratio`]).
-    pub fn new(prior: Prior, seed: u64, data: &Samples, w_ref_n: Option<f64>) -> Self {
-        Self {
-            prior,
-            seed,
-            speed_rad_s: data.speed_rad_s.clone(),
-            torque_nm: data.torque_nm.clone(),
-            wob_ratio: data.wob_ratio(w_ref_n),
-            sum_sq_torque: data.sum_sq_torque(),
-            best_rho: Default::default(),
-        }
-    }
-
-    /// The problem with the laws' best least-squares ρ taken from `fits` (made on the same
-    /// calibration data).
-    pub fn with_best_rho(mut self, fits: &[LawFit]) -> Self {
-        for fit in fits {
-            self.best_rho.insert(fit.law, fit.rho);
-        }
-        self
-    }
-
-    /// False when `law`'s best least-squares ρ shows that no candidate of it can score below
-    /// `epsilon`; true when it can or when its best ρ is unknown.
-    pub fn can_reach(&self, law: Law, epsilon: f64) -> bool {
-        self.best_rho.get(&law).is_none_or(|&best| best < epsilon)
-    }
-
-    /// Number of data points D.
-    pub fn data_len(&self) -> usize {
-        self.speed_rad_s.len()
     }
 }
 
@@ -107,7 +53,7 @@ pub trait Evaluator: Send + Sync {
     /// Backend name for records (`cpu`, `gpu`).
     fn backend(&self) -> &'static str;
     /// The problem being scored.
-    fn problem(&self) -> &AbcProblem;
+    fn problem(&self) -> &Problem;
     /// Writes ρ of candidates `start .. start + out.len()` of `population` into `out`.
     fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()>;
     /// Writes ρ of explicit candidates (prior slot and f32 parameters, unused ones 0) into
@@ -144,7 +90,7 @@ impl<T: Evaluator + ?Sized> Evaluator for &T {
         (**self).backend()
     }
 
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         (**self).problem()
     }
 
@@ -197,7 +143,7 @@ pub fn is_information(note: &str) -> bool {
 /// [`gpu::tune::choose`]). With `Auto`, a GPU that cannot be set up is reported through `note`
 /// and the CPU is used instead.
 pub fn evaluator(
-    problem: AbcProblem,
+    problem: Problem,
     backend: Backend,
     wish: gpu::tune::ShapeWish,
     note: &mut dyn FnMut(String),

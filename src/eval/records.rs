@@ -13,7 +13,7 @@
 //! Every sampler holds a [`Seat`], taken before any of them starts: a seat given up (the run
 //! ended, failed or panicked) no longer holds the others back.
 
-use super::{AbcProblem, Backend, Candidates, Evaluator, KernelSums, Request, cpu, gpu};
+use super::{Backend, Candidates, Evaluator, KernelSums, Problem, Request, cpu, gpu};
 use crate::error::Result;
 use crate::prior::Candidate;
 use rayon::prelude::*;
@@ -48,7 +48,7 @@ enum Scorer {
 
 /// What the samplers share: the records, the requests waiting, the results not yet collected.
 struct State {
-    problems: Vec<Arc<AbcProblem>>,
+    problems: Vec<Arc<Problem>>,
     /// Seats not given up.
     seated: usize,
     pending: Vec<(u64, Request)>,
@@ -80,7 +80,7 @@ impl RecordBatch {
     pub fn new(
         backend: Backend,
         wish: gpu::tune::ShapeWish,
-        problem: &AbcProblem,
+        problem: &Problem,
         note: &mut dyn FnMut(String),
     ) -> Result<Arc<Self>> {
         let setup = || gpu::context().and_then(|ctx| Ok((ctx, gpu::tune::choose(ctx, problem, wish)?)));
@@ -232,7 +232,7 @@ impl RecordBatch {
     fn score_all(
         &self,
         scorer: &mut Scorer,
-        problems: &[Arc<AbcProblem>],
+        problems: &[Arc<Problem>],
         requests: &[Request],
     ) -> (Vec<std::result::Result<Vec<f64>, gpu::GpuError>>, usize) {
         let fail = |e: &gpu::GpuError| requests.iter().map(|_| Err(e.clone())).collect();
@@ -247,7 +247,7 @@ impl RecordBatch {
             let built = match records.take() {
                 Some(built) if built.records() == problems.len() => Ok(built),
                 _ => {
-                    let all: Vec<&AbcProblem> = problems.iter().map(|p| p.as_ref()).collect();
+                    let all: Vec<&Problem> = problems.iter().map(|p| p.as_ref()).collect();
                     gpu::records::GpuRecords::new(&all, *shape, self.max_candidates).map(Box::new)
                 }
             };
@@ -306,7 +306,7 @@ pub struct Seat {
 
 impl Seat {
     /// The evaluator of `problem`, a record of the batch (of the same length as the others).
-    pub fn evaluator(&self, problem: AbcProblem) -> RecordEvaluator {
+    pub fn evaluator(&self, problem: Problem) -> RecordEvaluator {
         let problem = Arc::new(problem);
         let mut state = self.batch.lock();
         if let Some(first) = state.problems.first() {
@@ -341,7 +341,7 @@ impl Drop for Seat {
 pub struct RecordEvaluator {
     batch: Arc<RecordBatch>,
     record: usize,
-    problem: Arc<AbcProblem>,
+    problem: Arc<Problem>,
     /// Buffers of the SMC kernel sums on the GPU (computed per record, not batched).
     kernel_sums: gpu::kernel_sums::Scratch,
 }
@@ -351,7 +351,7 @@ impl Evaluator for RecordEvaluator {
         self.batch.backend()
     }
 
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         &self.problem
     }
 

@@ -5,7 +5,7 @@ use super::abc::Config;
 use crate::abc::shard::{self, Devices, Local, Workers};
 use crate::error::Result;
 use crate::eval::gpu::tune::ShapeWish;
-use crate::eval::{AbcProblem, Backend, Evaluator};
+use crate::eval::{Backend, Evaluator, Problem};
 
 /// Where a run's candidates are scored.
 #[derive(Default)]
@@ -24,13 +24,12 @@ pub enum Scoring<'a, 'w> {
 /// Makes a run's evaluator from its problem, saying what the user should know through the
 /// second argument ([`crate::eval::evaluator`] of the run's backend, unless the caller scores
 /// elsewhere).
-pub type MakeEvaluator<'a> = dyn FnMut(AbcProblem, &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> + 'a;
+pub type MakeEvaluator<'a> = dyn FnMut(Problem, &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> + 'a;
 
 /// Makes the workers that run a job's tasks from its problem and where the job asks them to
 /// score (a continued run's with the continuation's backend and devices), saying what the
 /// user should know through the third argument.
-pub type MakeWorkers<'a> =
-    dyn FnMut(AbcProblem, &Placement, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+pub type MakeWorkers<'a> = dyn FnMut(Problem, &Placement, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
 
 /// Where a job asks its candidates to be scored: the backend, this machine's devices and the
 /// GPU scoring shape. A pool of workers takes the backend and shape to each worker.
@@ -66,7 +65,7 @@ impl<'w> Scoring<'_, 'w> {
     /// The workers that score `problem` where `placement` says.
     pub fn workers(
         &mut self,
-        problem: AbcProblem,
+        problem: Problem,
         placement: &Placement,
         note: &mut dyn FnMut(String),
     ) -> Result<Box<dyn Workers + '_>> {

@@ -29,7 +29,7 @@ use crate::data::{FieldData, Samples};
 use crate::error::{Error, Result};
 use crate::eval::gpu::Shape;
 use crate::eval::records::{RecordBatch, Seat};
-use crate::eval::{AbcProblem, Backend};
+use crate::eval::{Backend, Problem};
 use crate::files;
 use crate::fit::LawFit;
 use crate::laws::Law;
@@ -543,7 +543,7 @@ pub fn check(
     let mut timing = CheckTiming::default();
     let mut notes: Vec<String> = Vec::new();
     // The GPU scoring shape is measured (where this adapter never was) on the run's problem.
-    let problem = AbcProblem::new(
+    let problem = Problem::new(
         run.stored.setup.prior.clone(),
         config.seed,
         &run.stored.setup.data.calibration,

@@ -8,14 +8,14 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::abc::{Run, StopReason};
 use bitrock::data::Samples;
 use bitrock::eval::cpu::CpuEvaluator;
-use bitrock::eval::{AbcProblem, Evaluator};
+use bitrock::eval::{Evaluator, Problem};
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::{LawBox, Prior};
 use rand_distr::{Distribution, Normal};
 
 /// One free parameter: m4 with c0 ~ U[0, 2] and c1..c3 fixed at 0, against y ≡ 1 N·m, so
 /// ρ(c0) = (1 − c0)² and the accepted set at ε is |c0 − 1| < √ε.
-fn one_parameter_problem(seed: u64) -> AbcProblem {
+fn one_parameter_problem(seed: u64) -> Problem {
     let prior = Prior::new(
         vec![LawBox {
             law: Law::M4,
@@ -31,7 +31,7 @@ fn one_parameter_problem(seed: u64) -> AbcProblem {
         wob_n: None,
         time_s: None,
     };
-    AbcProblem::new(prior, seed, &data, None)
+    Problem::new(prior, seed, &data, None)
 }
 
 fn same_populations(a: &Run, b: &Run) {
@@ -233,7 +233,7 @@ fn posterior_intervals_cover_the_generating_parameters() {
         let fits = fit_laws(&[law], &data, &Samples::default(), &FitOptions::default()).unwrap();
         let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
         let rho_fit = fits[0].rho;
-        let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 4, &data, None));
+        let evaluator = CpuEvaluator::new(Problem::new(prior, 4, &data, None));
         let config = RejectionConfig::from(Schedule {
             particles: 2000,
             eps_min: rho_fit * 1.3,

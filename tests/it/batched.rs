@@ -10,7 +10,7 @@ use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::records::GpuRecords;
 use bitrock::eval::gpu::{Shape, residual::GpuEvaluator};
 use bitrock::eval::records::RecordBatch;
-use bitrock::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE};
+use bitrock::eval::{Backend, Evaluator, PARITY_TOLERANCE, Problem};
 use bitrock::eval::{Candidates, Request};
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::{Candidate, Prior};
@@ -18,14 +18,14 @@ use bitrock::prior::{Candidate, Prior};
 /// Five records of the demo record's length and speeds, each its own: torques scaled by
 /// 1 + 2 % per record, seeds, δ (0.4, 0.6) and so the four laws' boxes; record 2 scales by a
 /// weight-on-bit ratio that varies from sample to sample (the others have r = 1).
-fn mixed_records() -> Vec<AbcProblem> {
+fn mixed_records() -> Vec<Problem> {
     let data = demo_field_data(&DataOptions::default()).unwrap();
     let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
     (0..5)
         .map(|r| {
             let delta = if r % 2 == 0 { 0.4 } else { 0.6 };
             let prior = Prior::from_fits(&fits, delta, None, 1000.0).unwrap();
-            let mut problem = AbcProblem::new(prior, 1000 + r as u64, &data.calibration, None);
+            let mut problem = Problem::new(prior, 1000 + r as u64, &data.calibration, None);
             for y in &mut problem.torque_nm {
                 *y *= 1.0 + 0.02 * r as f64;
             }
@@ -40,7 +40,7 @@ fn mixed_records() -> Vec<AbcProblem> {
         .collect()
 }
 
-fn stream_candidates(problem: &AbcProblem, population: u32, start: u64, count: usize) -> Vec<Candidate> {
+fn stream_candidates(problem: &Problem, population: u32, start: u64, count: usize) -> Vec<Candidate> {
     (0..count as u64)
         .map(|k| problem.prior.candidate(problem.seed, population, start + k))
         .collect()
@@ -49,7 +49,7 @@ fn stream_candidates(problem: &AbcProblem, population: u32, start: u64, count: u
 /// Requests of every kind and awkward size: stream ranges of 1, 15, 16, 1,000 and 3,333
 /// candidates (one per record, on its own population and start), and two explicit requests,
 /// one of them a second request of record 3.
-fn requests(problems: &[AbcProblem]) -> Vec<Request> {
+fn requests(problems: &[Problem]) -> Vec<Request> {
     let sizes = [1, 15, 16, 1000, 3333];
     let mut requests: Vec<Request> = sizes
         .iter()
@@ -73,7 +73,7 @@ fn requests(problems: &[AbcProblem]) -> Vec<Request> {
 }
 
 /// SSR of `request` from the record's own GPU evaluator.
-fn own_ssr(problem: &AbcProblem, shape: Shape, request: &Request) -> Vec<f32> {
+fn own_ssr(problem: &Problem, shape: Shape, request: &Request) -> Vec<f32> {
     let gpu = GpuEvaluator::with_shape(problem.clone(), shape).unwrap();
     let mut out = vec![0.0f32; request.candidates.len()];
     match &request.candidates {
@@ -84,7 +84,7 @@ fn own_ssr(problem: &AbcProblem, shape: Shape, request: &Request) -> Vec<f32> {
 }
 
 /// ρ of `request` from the CPU reference.
-fn cpu_rho(problem: &AbcProblem, request: &Request) -> Vec<f64> {
+fn cpu_rho(problem: &Problem, request: &Request) -> Vec<f64> {
     let cpu = CpuEvaluator::new(problem.clone());
     let mut out = vec![0.0; request.candidates.len()];
     match &request.candidates {
@@ -101,7 +101,7 @@ per_shape! {
 fn a_dispatch_of_many_records_scores_each_as_its_own_evaluator(shape: Shape) {
     require_gpu();
     let problems = mixed_records();
-    let refs: Vec<&AbcProblem> = problems.iter().collect();
+    let refs: Vec<&Problem> = problems.iter().collect();
     let requests = requests(&problems);
     let own: Vec<Vec<f32>> = requests.iter().map(|r| own_ssr(&problems[r.record], shape, r)).collect();
     for max_candidates in [None, Some(64)] {
@@ -132,11 +132,11 @@ fn a_dispatch_of_many_records_scores_each_as_its_own_evaluator(shape: Shape) {
 /// every slice.
 fn long_records_are_scored_slice_by_slice_at_their_own_offsets(shape: Shape) {
     require_gpu();
-    let problems: Vec<AbcProblem> = [(Law::M3, 1), (Law::M1, 2), (Law::M3, 3)]
+    let problems: Vec<Problem> = [(Law::M3, 1), (Law::M1, 2), (Law::M3, 3)]
         .iter()
         .map(|&(law, seed)| bitrock::bench::synthetic_problem(law, 40_000, seed))
         .collect();
-    let refs: Vec<&AbcProblem> = problems.iter().collect();
+    let refs: Vec<&Problem> = problems.iter().collect();
     let requests: Vec<Request> = (0..3)
         .map(|record| Request {
             record,
@@ -176,7 +176,7 @@ fn samplers_on_the_gpu_get_their_own_evaluators_results(shape: Shape) {
 
 /// Call `k` of sampler `r`: a stream range (even k) or explicit candidates (odd k) of a size
 /// that differs by sampler and call.
-fn call(problem: &AbcProblem, r: usize, k: usize) -> Candidates {
+fn call(problem: &Problem, r: usize, k: usize) -> Candidates {
     let len = 37 * (r + 1) + 101 * k;
     if k.is_multiple_of(2) {
         Candidates::Stream {
@@ -202,7 +202,7 @@ fn expected_call(evaluator: &dyn Evaluator, r: usize, k: usize) -> Vec<f64> {
 
 /// Five samplers on threads, sampler r making r + 1 calls and leaving, and a sixth seat given
 /// up before registering (a run refused before its evaluator): every sampler's results.
-fn run_samplers(batch: &std::sync::Arc<RecordBatch>, problems: &[AbcProblem]) -> Vec<Vec<Vec<f64>>> {
+fn run_samplers(batch: &std::sync::Arc<RecordBatch>, problems: &[Problem]) -> Vec<Vec<Vec<f64>>> {
     let seats: Vec<_> = (0..6).map(|_| batch.seat()).collect();
     std::thread::scope(|scope| {
         let threads: Vec<_> = seats

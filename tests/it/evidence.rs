@@ -7,8 +7,8 @@ use bitrock::Law;
 use bitrock::abc::Silent;
 use bitrock::abc::evidence::{self, EvidenceConfig, NoiseModel, Start, log_likelihood_constant};
 use bitrock::abc::shard::Local;
-use bitrock::eval::AbcProblem;
 use bitrock::eval::Backend;
+use bitrock::eval::Problem;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::prior::{LawBox, Prior};
 use bitrock::run;
@@ -115,7 +115,7 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         upper: upper.iter().map(|&v| v as f32).collect(),
     };
     let prior = Prior::new(vec![bx], vec![1.0]).unwrap();
-    let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
+    let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &data, None))));
     let config = EvidenceConfig {
         particles: 400,
         islands: 8,
@@ -191,7 +191,7 @@ fn the_same_seed_gives_the_same_evidence_and_another_seed_agrees_within_its_erro
         vec![1.0, 1.0],
     )
     .unwrap();
-    let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
+    let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &data, None))));
     let config = |seed| EvidenceConfig {
         particles: 200,
         islands: 4,

@@ -10,7 +10,7 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::{self, Shape, candidates, residual::GpuEvaluator};
-use bitrock::eval::{AbcProblem, Evaluator, PARITY_TOLERANCE};
+use bitrock::eval::{Evaluator, PARITY_TOLERANCE, Problem};
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::Prior;
 
@@ -56,7 +56,7 @@ macro_rules! per_shape {
 pub(crate) use per_shape;
 
 /// The evaluator of `problem` in `shape`.
-fn gpu_evaluator(problem: &AbcProblem, shape: Shape) -> GpuEvaluator {
+fn gpu_evaluator(problem: &Problem, shape: Shape) -> GpuEvaluator {
     GpuEvaluator::with_shape(problem.clone(), shape).unwrap()
 }
 
@@ -78,7 +78,7 @@ fn every_shader_parses_and_validates_with_naga() {
 }
 
 /// The demo record in full (5,374 samples ≥ 5,000) and the paper's priors (δ = 0.4) for `laws`.
-pub(crate) fn demo_problem(laws: &[Law], seed: u64) -> AbcProblem {
+pub(crate) fn demo_problem(laws: &[Law], seed: u64) -> Problem {
     let data = demo_field_data(&DataOptions {
         calibration_fraction: 1.0,
         ..Default::default()
@@ -86,7 +86,7 @@ pub(crate) fn demo_problem(laws: &[Law], seed: u64) -> AbcProblem {
     .unwrap();
     let fits = fit_laws(laws, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
     let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
-    AbcProblem::new(prior, seed, &data.calibration, None)
+    Problem::new(prior, seed, &data.calibration, None)
 }
 
 #[test]
@@ -120,7 +120,7 @@ fn philox_words_and_candidates_are_identical_bit_for_bit() {
 }
 
 /// Largest and median relative difference of ρ between backends over `count` candidates.
-fn rho_difference(problem: &AbcProblem, count: usize, shape: Shape) -> (f64, f64) {
+fn rho_difference(problem: &Problem, count: usize, shape: Shape) -> (f64, f64) {
     let gpu = gpu_evaluator(problem, shape);
     let cpu = CpuEvaluator::new(problem.clone());
     let (mut a, mut b) = (vec![0.0; count], vec![0.0; count]);
@@ -405,7 +405,7 @@ fn mixed_laws_over_a_long_record_agree_with_the_cpu(shape: Shape) {
     let n = data.calibration.speed_rad_s.len();
     long.speed_rad_s = (0..1 << 20).map(|i| data.calibration.speed_rad_s[i % n]).collect();
     long.torque_nm = (0..1 << 20).map(|i| data.calibration.torque_nm[i % n]).collect();
-    let problem = AbcProblem::new(prior, 17, &long, None);
+    let problem = Problem::new(prior, 17, &long, None);
     let (max, _) = rho_difference(&problem, 1_001, shape);
     eprintln!("{shape} four laws mixed, D = 2^20: largest relative difference of rho {max:.2e}");
     assert!(max <= PARITY_TOLERANCE, "{max:e}");
@@ -480,12 +480,7 @@ fn the_stability_grid_agrees_with_the_cpu_cell_by_cell() {
 }
 
 /// Candidates of the prior stream, as explicit parameter vectors.
-fn stream_candidates(
-    problem: &AbcProblem,
-    population: u32,
-    start: u64,
-    count: usize,
-) -> Vec<bitrock::prior::Candidate> {
+fn stream_candidates(problem: &Problem, population: u32, start: u64, count: usize) -> Vec<bitrock::prior::Candidate> {
     (0..count as u64)
         .map(|k| problem.prior.candidate(problem.seed, population, start + k))
         .collect()
@@ -697,7 +692,7 @@ per_shape! {
         .unwrap();
         let laws = [Law::M2, Law::M3];
         let prior = Prior::physical(&laws, &PhysicalScales::of(&data.calibration), 10.0, None, 1000.0).unwrap();
-        let problem = AbcProblem::new(prior, 1, &data.calibration, None);
+        let problem = Problem::new(prior, 1, &data.calibration, None);
         let config = EvidenceConfig {
             particles: 200,
             islands: 3,
@@ -726,7 +721,7 @@ per_shape! {
 /// Largest difference between the GPU's and the CPU's λ = Σ e_t·e_(t−1) / Σy² over
 /// `candidates`, relative to ρ (λ may be near 0 where ρ is not: the AR(1) likelihood needs
 /// λ to the precision of ρ, not relative to itself).
-fn lag_difference(problem: &AbcProblem, candidates: &[bitrock::prior::Candidate], shape: Shape) -> f64 {
+fn lag_difference(problem: &Problem, candidates: &[bitrock::prior::Candidate], shape: Shape) -> f64 {
     let n = candidates.len();
     let (mut rho_c, mut lag_c, mut rho_g, mut lag_g) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
     CpuEvaluator::new(problem.clone())

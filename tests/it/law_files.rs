@@ -11,7 +11,7 @@ use bitrock::data::{DataOptions, demo_field_data};
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::law_points::{Point, torques};
 use bitrock::eval::gpu::{Shape, residual::GpuEvaluator, tune};
-use bitrock::eval::{AbcProblem, Backend, Evaluator, PARITY_TOLERANCE};
+use bitrock::eval::{Backend, Evaluator, PARITY_TOLERANCE, Problem};
 use bitrock::fit::{FitOptions, fit_record};
 use bitrock::laws::file::expr::{Binary, Expr, Unary, Var, parse};
 use bitrock::laws::file::register;
@@ -271,7 +271,7 @@ fn a_law_file_scores_as_its_built_in_law_on_both_backends_in_both_shapes() {
         let mut as_file = built_in.clone();
         as_file.prior.boxes[0].law = file;
         let count = 4_096;
-        let score = |problem: &AbcProblem, backend: Backend, shape: Option<Shape>| -> Vec<f64> {
+        let score = |problem: &Problem, backend: Backend, shape: Option<Shape>| -> Vec<f64> {
             let mut rho = vec![0.0; count];
             match (backend, shape) {
                 (Backend::Gpu, Some(shape)) => GpuEvaluator::with_shape(problem.clone(), shape)

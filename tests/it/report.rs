@@ -7,7 +7,7 @@ use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
 use bitrock::abc::schedule::Schedule;
 use bitrock::data::{DataOptions, FieldData, demo_field_data};
-use bitrock::eval::AbcProblem;
+use bitrock::eval::Problem;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::fit::{FitOptions, LawFit, fit_laws};
 use bitrock::prior::Prior;
@@ -37,7 +37,7 @@ fn runs_with(config: &RejectionConfig, deltas: &[f64], thin: usize) -> (FieldDat
         .iter()
         .map(|&delta| {
             let prior = Prior::from_fits(&fits, delta, None, data.torque_unit.newton_metres()).unwrap();
-            let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 2023, &data.calibration, None));
+            let evaluator = CpuEvaluator::new(Problem::new(prior, 2023, &data.calibration, None));
             let run = rejection::run(&evaluator, config).unwrap();
             ReportRun {
                 label: format!("δ = {delta}"),

@@ -8,7 +8,7 @@ use bitrock::abc::schedule::Schedule;
 use bitrock::abc::smc::{self, LawProposal, Perturbation, Refill, SmcConfig, WORTH_FLOOR};
 use bitrock::abc::{Observer, Population, Run, StopReason, effective_sample_size};
 use bitrock::data::{DataOptions, Samples, demo_field_data};
-use bitrock::eval::AbcProblem;
+use bitrock::eval::Problem;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::numerics::weighted_ks;
@@ -16,7 +16,7 @@ use bitrock::prior::{LawBox, Prior};
 
 /// m4 with c0 ~ U[0, 2] and c1..c3 fixed at 0 against y ≡ 1 (ρ = (1 − c0)²), plus, with
 /// prior weight `other`, an m2 law whose torque is ≥ 50 everywhere (ρ ≥ 49²): it cannot fit.
-fn one_parameter_problem(seed: u64, other: Option<f64>) -> AbcProblem {
+fn one_parameter_problem(seed: u64, other: Option<f64>) -> Problem {
     let mut boxes = vec![LawBox {
         law: Law::M4,
         lower: vec![0.0, 0.0, 0.0, 0.0],
@@ -37,7 +37,7 @@ fn one_parameter_problem(seed: u64, other: Option<f64>) -> AbcProblem {
         wob_n: None,
         time_s: None,
     };
-    AbcProblem::new(Prior::new(boxes, weights).unwrap(), seed, &data, None)
+    Problem::new(Prior::new(boxes, weights).unwrap(), seed, &data, None)
 }
 
 /// sup |F − G| between the weighted empirical CDF of (x, w) and the CDF `g`.
@@ -298,7 +298,7 @@ fn on_the_embedded_record_both_samplers_give_the_same_law_probabilities() {
     let data = demo_field_data(&DataOptions::default()).unwrap();
     let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
     let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
-    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 12, &data.calibration, None).with_best_rho(&fits));
+    let evaluator = CpuEvaluator::new(Problem::new(prior, 12, &data.calibration, None).with_best_rho(&fits));
     let n = 1500;
     // The rejection run's median schedule, given to both: the same ε in every population.
     let rej = rejection::run(
@@ -498,7 +498,7 @@ fn near_the_floor_smc_keeps_a_ridge_law_as_rejection_does() {
     let fits = fit_laws(&Law::ALL, &data.calibration, &data.validation, &FitOptions::default()).unwrap();
     let best = fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
     let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
-    let evaluator = CpuEvaluator::new(AbcProblem::new(prior, 5, &data.calibration, None).with_best_rho(&fits));
+    let evaluator = CpuEvaluator::new(Problem::new(prior, 5, &data.calibration, None).with_best_rho(&fits));
     let n = 600;
     let schedule = vec![0.02, 0.0095, 0.0075, 0.007, 1.02 * best];
     let rej = rejection::run(

@@ -2,7 +2,7 @@
 
 use bitrock::Law;
 use bitrock::data::Samples;
-use bitrock::eval::AbcProblem;
+use bitrock::eval::Problem;
 use bitrock::fit::{FitOptions, fit_laws};
 use bitrock::prior::Prior;
 use rand::{Rng, SeedableRng, rngs::StdRng};
@@ -54,7 +54,7 @@ pub fn outcome(command: &mut std::process::Command) -> (i32, String, String) {
 /// m2 at the paper's estimate with 5 % noise, speeds 0.1-20 rad/s (where m1, whose torque
 /// vanishes at w = 0, cannot mimic m2's static torque), against all four laws with priors from
 /// least squares, δ = 0.4; also m2's least-squares ρ.
-pub fn paper_m2_problem(seed: u64) -> (AbcProblem, f64) {
+pub fn paper_m2_problem(seed: u64) -> (Problem, f64) {
     let truth = Law::M2.scale_torque(Law::M2.paper_estimate().unwrap(), 1000.0);
     let mut data = samples(Law::M2, &truth, 0.1, 20.0, 800);
     let mut g = rng(21);
@@ -65,5 +65,5 @@ pub fn paper_m2_problem(seed: u64) -> (AbcProblem, f64) {
     let fits = fit_laws(&Law::ALL, &data, &Samples::default(), &FitOptions::default()).unwrap();
     let rho = fits[1].rho;
     let prior = Prior::from_fits(&fits, 0.4, None, 1000.0).unwrap();
-    (AbcProblem::new(prior, seed, &data, None), rho)
+    (Problem::new(prior, seed, &data, None), rho)
 }

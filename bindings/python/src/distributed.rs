@@ -92,7 +92,7 @@ pub(crate) fn remote_on<'a>(
     cell: &'a OnceLock<Remote<PyTransport>>,
     dispatcher: Py<PyAny>,
     parallelism: usize,
-) -> impl FnMut(bitrock::eval::AbcProblem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
+) -> impl FnMut(bitrock::eval::Problem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
     let mut transport = Some(PyTransport::new(dispatcher, parallelism));
     move |problem, placement| {
         let transport = transport.take().expect("a run makes its workers once");
@@ -107,7 +107,7 @@ pub(crate) fn remote_on<'a>(
 #[allow(clippy::needless_lifetimes)] // eliding 'a leaves the boxed workers' lifetime unnamed
 pub(crate) fn remote_each<'a>(
     transport: &'a PyTransport,
-) -> impl FnMut(bitrock::eval::AbcProblem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
+) -> impl FnMut(bitrock::eval::Problem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
     move |problem, placement| {
         Ok(Box::new(Remote::new(
             problem,

@@ -478,7 +478,7 @@ impl Island {
 
 /// (e_0² + e_(n−1)²) / Σy² of candidate `c` on `problem`'s record, in f64: the end terms of
 /// the AR(1) likelihood, which the kernels' sums do not hold.
-pub(super) fn end_residuals_squared(problem: &AbcProblem, c: &Candidate) -> f64 {
+pub(super) fn end_residuals_squared(problem: &Problem, c: &Candidate) -> f64 {
     let law = problem.prior.law(c.slot);
     let p = c.widened();
     let n = problem.data_len();

@@ -52,7 +52,7 @@ use super::Observer;
 use super::posterior::systematic_from;
 use super::shard::{Workers, score_candidates};
 use crate::error::{Error, Result};
-use crate::eval::AbcProblem;
+use crate::eval::Problem;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::Candidate;
 use crate::rng::{box_muller, key_of_seed, open_unit, philox4x32_10, uniform_between};
@@ -209,7 +209,7 @@ fn new_islands(prior: &crate::prior::Prior, config: &EvidenceConfig, references:
 /// Each candidate's log-likelihood under the noise model, from its ρ (and, for AR(1), its
 /// lag sum), into `loglik`.
 fn log_likelihoods(
-    problem: &AbcProblem,
+    problem: &Problem,
     model: NoiseModel,
     batch: &[Candidate],
     rho: &[f64],
@@ -450,7 +450,7 @@ mod tests {
 
     use crate::abc::shard::Local;
     use crate::data::Samples;
-    use crate::eval::AbcProblem;
+    use crate::eval::Problem;
     use crate::eval::cpu::CpuEvaluator;
     use crate::prior::{LawBox, Prior};
 
@@ -526,7 +526,7 @@ mod tests {
             vec![1.0],
         )
         .unwrap();
-        let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
+        let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &data, None))));
         let config = EvidenceConfig {
             particles: 400,
             islands: 8,
@@ -703,7 +703,7 @@ mod tests {
             vec![1.0],
         )
         .unwrap();
-        let evaluator = Local(Box::new(CpuEvaluator::new(AbcProblem::new(prior, 1, &data, None))));
+        let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &data, None))));
         let config = EvidenceConfig {
             particles: 3_000,
             islands: 8,

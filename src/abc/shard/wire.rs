@@ -15,7 +15,7 @@
 use super::{Output, Round, Task, Workers};
 use crate::error::{Error, Result};
 use crate::eval::gpu::{Shape, tune::ShapeWish};
-use crate::eval::{AbcProblem, Backend};
+use crate::eval::{Backend, Problem};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
 use std::hash::{Hash, Hasher};
@@ -46,7 +46,7 @@ pub fn build() -> &'static str {
 
 /// The problem's payload: the sources of its law files' laws, then the problem itself (its
 /// laws named), so that a worker registers the laws before it reads their names.
-pub fn encode_problem(problem: &AbcProblem) -> Vec<u8> {
+pub fn encode_problem(problem: &Problem) -> Vec<u8> {
     let sources: Vec<&str> = crate::laws::file::among(problem.prior.laws())
         .into_iter()
         .filter_map(|law| law.file().map(|f| f.source.as_str()))
@@ -55,7 +55,7 @@ pub fn encode_problem(problem: &AbcProblem) -> Vec<u8> {
 }
 
 /// Reads a problem's payload ([`encode_problem`]), registering its law files' laws.
-pub fn decode_problem(bytes: &[u8]) -> Result<AbcProblem> {
+pub fn decode_problem(bytes: &[u8]) -> Result<Problem> {
     let (sources, problem): (Vec<String>, Vec<u8>) = decode(bytes, "problem")?;
     for source in sources {
         let file = crate::laws::file::LawFile::parse(&source, std::path::Path::new("law file of the driver"))?;
@@ -175,7 +175,7 @@ pub struct Traffic {
 
 /// Workers reached through a [`Transport`]: the driver's side of a distributed run.
 pub struct Remote<T> {
-    problem: AbcProblem,
+    problem: Problem,
     problem_bytes: Vec<u8>,
     problem_key: u64,
     backend: Backend,
@@ -193,7 +193,7 @@ pub struct Remote<T> {
 impl<T: Transport> Remote<T> {
     /// Workers for `problem` through `transport`, asked to score on `backend` (a GPU in the
     /// shape `shape` leads to on each worker: the same everywhere once the run recorded one).
-    pub fn new(problem: AbcProblem, backend: Backend, shape: ShapeWish, transport: T) -> Self {
+    pub fn new(problem: Problem, backend: Backend, shape: ShapeWish, transport: T) -> Self {
         let problem_bytes = encode_problem(&problem);
         Self {
             problem_key: key_of(&problem_bytes),
@@ -245,7 +245,7 @@ struct EncodedContext {
 }
 
 impl<T: Transport> Workers for Remote<T> {
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         &self.problem
     }
 

@@ -23,7 +23,7 @@ pub mod tune;
 
 pub use shape::{SHAPE_VAR, Shape};
 
-use crate::eval::AbcProblem;
+use crate::eval::Problem;
 use crate::prior::Prior;
 use bytemuck::{Pod, Zeroable};
 use std::collections::HashMap;
@@ -761,7 +761,7 @@ const CANDIDATES_PER_TILE: u32 = 16;
 /// The data columns of the scoring kernels (bindings 2-4): bit speed, torque and weight-on-bit
 /// ratio of `problem` in f32, padded to whole quads (w = 1 keeps every law finite; the kernels
 /// mask the padding).
-fn data_columns(problem: &AbcProblem) -> [Vec<f32>; 3] {
+fn data_columns(problem: &Problem) -> [Vec<f32>; 3] {
     let len = 4 * problem.data_len().div_ceil(4);
     let column = |v: &[f64], pad: f32| {
         let mut c: Vec<f32> = v.iter().map(|&x| x as f32).collect();
@@ -777,7 +777,7 @@ fn data_columns(problem: &AbcProblem) -> [Vec<f32>; 3] {
 
 /// False when every sample has r = 1 (the paper's assumption): the kernels then skip the ratio
 /// column (override HAS_RATIO).
-fn has_ratio(problem: &AbcProblem) -> bool {
+fn has_ratio(problem: &Problem) -> bool {
     problem.wob_ratio.iter().any(|&r| r.to_bits() != 1.0f64.to_bits())
 }
 

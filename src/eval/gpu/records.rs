@@ -11,7 +11,7 @@ use super::{
     CANDIDATES_PER_TILE, GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, STORAGE_WRITE, ScoringBuffers,
     Shape, UNIFORM, buffer_entry, score_dispatch,
 };
-use crate::eval::AbcProblem;
+use crate::eval::Problem;
 use crate::eval::{Candidates, Request};
 use crate::prior::Prior;
 use bytemuck::{Pod, Zeroable};
@@ -118,7 +118,7 @@ impl GpuRecords {
     /// Uploads `problems` (records of equal length; record i is `problems[i]`) on the process's
     /// GPU for scoring in `shape`, at most `max_candidates` per dispatch (`None`: as many as
     /// the single-record evaluator dispatches; tests set fewer to split requests).
-    pub fn new(problems: &[&AbcProblem], shape: Shape, max_candidates: Option<usize>) -> Result<Self, GpuError> {
+    pub fn new(problems: &[&Problem], shape: Shape, max_candidates: Option<usize>) -> Result<Self, GpuError> {
         let context = super::context()?;
         let d = problems.first().map_or(0, |p| p.data_len());
         assert!(

@@ -12,7 +12,7 @@ use super::{
     buffer_entry, score_dispatch,
 };
 use crate::error::Result;
-use crate::eval::{AbcProblem, Evaluator, KernelSums};
+use crate::eval::{Evaluator, KernelSums, Problem};
 use crate::prior::Candidate;
 use std::sync::Mutex;
 
@@ -41,7 +41,7 @@ struct ParamsResources {
 
 /// Scores candidates on the GPU.
 pub struct GpuEvaluator {
-    problem: AbcProblem,
+    problem: Problem,
     context: &'static GpuContext,
     shape: Shape,
     /// Where the shape came from.
@@ -58,12 +58,12 @@ pub struct GpuEvaluator {
 
 impl GpuEvaluator {
     /// As [`GpuEvaluator::new`], scoring in `shape` whatever the adapter (tests, benchmarks).
-    pub fn with_shape(problem: AbcProblem, shape: Shape) -> std::result::Result<Self, GpuError> {
+    pub fn with_shape(problem: Problem, shape: Shape) -> std::result::Result<Self, GpuError> {
         Self::on(problem, shape, super::context()?)
     }
 
     /// As [`GpuEvaluator::with_shape`], on the GPU of `context`.
-    pub fn on(problem: AbcProblem, shape: Shape, context: &'static GpuContext) -> std::result::Result<Self, GpuError> {
+    pub fn on(problem: Problem, shape: Shape, context: &'static GpuContext) -> std::result::Result<Self, GpuError> {
         let d = problem.data_len();
         let quads = d.div_ceil(4);
         let columns = super::data_columns(&problem);
@@ -325,7 +325,7 @@ impl Evaluator for GpuEvaluator {
         "gpu"
     }
 
-    fn problem(&self) -> &AbcProblem {
+    fn problem(&self) -> &Problem {
         &self.problem
     }
 

@@ -10,7 +10,7 @@
 use super::residual::GpuEvaluator;
 pub use super::shape::Source;
 use super::{GpuContext, GpuError, Shape};
-use crate::eval::AbcProblem;
+use crate::eval::Problem;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -182,7 +182,7 @@ pub struct Choice {
 }
 
 /// The scoring shape for `problem` on `ctx`, in the order of the module documentation.
-pub fn choose(ctx: &'static GpuContext, problem: &AbcProblem, wish: ShapeWish) -> Result<Choice, GpuError> {
+pub fn choose(ctx: &'static GpuContext, problem: &Problem, wish: ShapeWish) -> Result<Choice, GpuError> {
     let chosen = |shape, source| Choice { shape, source };
     if let Some(shape) = Shape::from_env(ctx)? {
         return Ok(chosen(shape, Source::Named));
@@ -203,12 +203,12 @@ pub fn choose(ctx: &'static GpuContext, problem: &AbcProblem, wish: ShapeWish) -
 impl GpuEvaluator {
     /// Uploads the data and the prior, on the process's GPU, in the shape measured fastest
     /// there for dispatches of 65,536 candidates (or `BITROCK_GPU_SHAPE`'s; see [`crate::eval::gpu::tune`]).
-    pub fn new(problem: AbcProblem) -> std::result::Result<Self, GpuError> {
+    pub fn new(problem: Problem) -> std::result::Result<Self, GpuError> {
         Self::wished(problem, ShapeWish::default())
     }
 
     /// As [`GpuEvaluator::new`], in the shape [`choose`] picks for `wish`.
-    pub fn wished(problem: AbcProblem, wish: ShapeWish) -> std::result::Result<Self, GpuError> {
+    pub fn wished(problem: Problem, wish: ShapeWish) -> std::result::Result<Self, GpuError> {
         let context = super::context()?;
         let choice = choose(context, &problem, wish)?;
         Ok(Self::on(problem, choice.shape, context)?.chosen_by(choice.source))
@@ -217,7 +217,7 @@ impl GpuEvaluator {
     /// One evaluator per GPU of the machine ([`super::every_context`]): `devices` all. All
     /// score in the shape [`choose`] picks on the first, so that the populations do not
     /// depend on which GPU scored which task.
-    pub fn on_every_gpu(problem: &AbcProblem, wish: ShapeWish) -> std::result::Result<Vec<Self>, GpuError> {
+    pub fn on_every_gpu(problem: &Problem, wish: ShapeWish) -> std::result::Result<Vec<Self>, GpuError> {
         let contexts = super::every_context()?;
         let choice = choose(contexts[0], problem, wish)?;
         contexts
@@ -247,7 +247,7 @@ static HELD: Mutex<Option<HashMap<String, Tuning>>> = Mutex::new(None);
 
 /// The adapter's tuning (held, cached or measured now on `problem`) and where it came from. A
 /// cache that cannot be read or written is passed over: measuring again is the worst it costs.
-pub fn tuning(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning, Source), GpuError> {
+pub fn tuning(ctx: &'static GpuContext, problem: &Problem) -> Result<(Tuning, Source), GpuError> {
     let key = adapter_key(ctx);
     let mut held = HELD.lock().expect("held tunings");
     let held = held.get_or_insert_with(HashMap::new);
@@ -282,7 +282,7 @@ fn keep(held: &mut HashMap<String, Tuning>, key: String, tuning: &Tuning) -> Sou
 /// Measures the adapter of `ctx` on `problem` again, whatever is cached, and keeps the new
 /// table (in the cache where it can be written, and for this process): `bitrock bench
 /// --retune`. Returns it and [`Source::Measured`] or [`Source::MeasuredNotKept`].
-pub fn retune(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning, Source), GpuError> {
+pub fn retune(ctx: &'static GpuContext, problem: &Problem) -> Result<(Tuning, Source), GpuError> {
     let t = measure(ctx, problem)?;
     let mut held = HELD.lock().expect("held tunings");
     let source = keep(held.get_or_insert_with(HashMap::new), adapter_key(ctx), &t);
@@ -290,7 +290,7 @@ pub fn retune(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<(Tuning,
 }
 
 /// Measures every shape `ctx` can run on `problem` (its first [`TUNING_SAMPLES`] samples).
-pub fn measure(ctx: &'static GpuContext, problem: &AbcProblem) -> Result<Tuning, GpuError> {
+pub fn measure(ctx: &'static GpuContext, problem: &Problem) -> Result<Tuning, GpuError> {
     let started = Instant::now();
     let mut sample = problem.clone();
     let d = problem.data_len().min(TUNING_SAMPLES);

@@ -12,7 +12,7 @@ use crate::abc::smc;
 use crate::abc::{Observer, Population, Progress, Run};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
-use crate::eval::AbcProblem;
+use crate::eval::Problem;
 use crate::files;
 use crate::fit;
 use crate::prior::{Prior, PriorFile};
@@ -106,8 +106,7 @@ fn start_with_fits(
         prior_file,
         data.torque_unit.newton_metres(),
     )?;
-    let problem =
-        AbcProblem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
+    let problem = Problem::new(prior.clone(), config.seed, &data.calibration, config.fit.w_ref_n).with_best_rho(&fits);
     let evaluator = scoring.workers(problem, &Placement::of(&config), &mut |line| observer.note(line))?;
     config.take_shape_of(evaluator.as_ref());
     let mut setup = Setup {
@@ -228,7 +227,7 @@ pub fn resume(dir: &Path, more: &Continuation, mut scoring: Scoring, observer: &
     config.devices = more.devices.unwrap_or(config.devices);
     config.validate()?;
     config.check_summary_population(more.summary_population)?;
-    let problem = AbcProblem::new(
+    let problem = Problem::new(
         setup.prior.clone(),
         config.seed,
         &setup.data.calibration,

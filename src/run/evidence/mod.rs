@@ -7,7 +7,7 @@ use crate::abc::evidence::{self, Evidence, EvidenceConfig, NoiseEvidence, NoiseM
 use crate::abc::shard::Workers;
 use crate::data::FieldData;
 use crate::error::Result;
-use crate::eval::{AbcProblem, Backend};
+use crate::eval::{Backend, Problem};
 use crate::fit::{self, FitOptions, LawFit};
 use crate::laws::Law;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
@@ -587,8 +587,8 @@ impl Job {
 
     /// The problem of `basis`' prior on `data`'s calibration samples, its candidates seeded
     /// `seed`.
-    fn problem(data: &FieldData, basis: &Basis, seed: u64) -> AbcProblem {
-        AbcProblem::new(basis.prior.clone(), seed, &data.calibration, basis.fit.w_ref_n).with_best_rho(&basis.fits)
+    fn problem(data: &FieldData, basis: &Basis, seed: u64) -> Problem {
+        Problem::new(basis.prior.clone(), seed, &data.calibration, basis.fit.w_ref_n).with_best_rho(&basis.fits)
     }
 
     /// Where the job's candidates are scored: on its backend, one device, the default GPU
