@@ -588,8 +588,7 @@ fn assemble(
     opts: &DataOptions,
     path: &Path,
 ) -> Result<FieldData> {
-    let rows_read = all.len();
-    if rows_read == 0 {
+    if all.is_empty() {
         return Err(Error::Data {
             path: path.to_path_buf(),
             message: "no data rows after the header".into(),
@@ -603,6 +602,19 @@ fn assemble(
         wob: indices.wob.map(name),
         time: indices.time.map(name),
     };
+    assemble_columns(all, backwards, columns, units, opts, path)
+}
+
+/// [`assemble`] of the columns `columns` names.
+fn assemble_columns(
+    all: Samples,
+    backwards: Option<Backwards>,
+    columns: ColumnsUsed,
+    units: &ColumnUnits,
+    opts: &DataOptions,
+    path: &Path,
+) -> Result<FieldData> {
+    let rows_read = all.len();
     // Judged on every row read: a unit off by a factor moves rows across the filters.
     let implausible = unit_warnings(path, &columns, units, &all);
     let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
@@ -628,6 +640,35 @@ fn assemble(
         warnings,
         bit,
     })
+}
+
+/// A record from samples already in SI (a watch's window): the options' filters, split and
+/// checks, as for a file's rows, its columns named by their SI quantities. A time column that
+/// runs backwards is said as in a file, by its row.
+pub fn field_data_from_samples(all: Samples, source: &Path, opts: &DataOptions) -> Result<FieldData> {
+    opts.validate()?;
+    if all.is_empty() {
+        return Err(Error::Data {
+            path: source.to_path_buf(),
+            message: "no data rows".into(),
+        });
+    }
+    let backwards = all.time_s.as_ref().and_then(|t| {
+        let row = t.windows(2).position(|w| w[1] < w[0])? + 1;
+        Some((format!("{} row {row}", source.display()), t[row - 1], t[row]))
+    });
+    let columns = ColumnsUsed {
+        speed: "speed_rad_s".into(),
+        torque: "torque_nm".into(),
+        wob: all.wob_n.as_ref().map(|_| "wob_n".into()),
+        time: all.time_s.as_ref().map(|_| "time_s".into()),
+    };
+    let units = ColumnUnits {
+        speed: SpeedUnit::RadS,
+        torque: TorqueUnit::Nm,
+        wob: all.wob_n.as_ref().map(|_| ForceUnit::N),
+    };
+    assemble_columns(all, backwards, columns, &units, opts, source)
 }
 
 /// Whether row `i` of `all` lies in the options' time window (every row without a time column).

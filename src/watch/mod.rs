@@ -39,7 +39,7 @@ pub mod wits;
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
 use crate::abc::evidence::{EvidenceConfig, NoiseModel, Start};
-use crate::data::{BitSeen, DataOptions, FieldData, Row};
+use crate::data::{BitSeen, DataOptions, FieldData, Row, Samples};
 use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;
@@ -369,17 +369,13 @@ impl Watch {
         if rows.is_empty() {
             return Err("no sample in the window (a gap in the record)".into());
         }
-        let column = |f: &dyn Fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
-        let time = column(&|r| r.time_s.unwrap_or(f64::NAN));
-        let speed = column(&|r| r.speed_rad_s);
-        let torque = column(&|r| r.torque_nm);
-        let wob: Option<Vec<f64>> = rows.iter().map(|r| r.wob_n).collect();
-        let mut names = vec!["time_s".to_string(), "speed_rad_s".into(), "torque_nm".into()];
-        let mut columns: Vec<Option<&[f64]>> = vec![Some(&time), Some(&speed), Some(&torque)];
-        if let Some(wob) = &wob {
-            names.push("wob_n".into());
-            columns.push(Some(wob));
-        }
+        // The rows are SI already: handed to the record's filters and checks as they are.
+        let samples = Samples {
+            speed_rad_s: rows.iter().map(|r| r.speed_rad_s).collect(),
+            torque_nm: rows.iter().map(|r| r.torque_nm).collect(),
+            wob_n: rows.iter().map(|r| r.wob_n).collect(),
+            time_s: rows.iter().map(|r| r.time_s).collect(),
+        };
         let opts = DataOptions {
             speed_column: None,
             torque_column: None,
@@ -395,8 +391,7 @@ impl Watch {
             ..self.settings.data.clone()
         };
         let source = PathBuf::from(format!("{} (window {})", self.source.display(), window.index));
-        let mut data =
-            crate::data::field_data_from_columns(&names, &columns, &source, &opts).map_err(|e| e.to_string())?;
+        let mut data = crate::data::field_data_from_samples(samples, &source, &opts).map_err(|e| e.to_string())?;
         // Samples are SI; parameters are reported in the record's own torque unit.
         data.torque_unit = self.torque_unit;
         Ok(data)
