@@ -643,9 +643,21 @@ fn assemble_columns(
 }
 
 /// A record from samples already in SI (a watch's window): the options' filters, split and
-/// checks, as for a file's rows, its columns named by their SI quantities. A time column that
+/// checks, as for a file's rows (the options' columns and units left out), its columns named
+/// by their SI quantities. A time column that
 /// runs backwards is said as in a file, by its row.
 pub fn field_data_from_samples(all: Samples, source: &Path, opts: &DataOptions) -> Result<FieldData> {
+    // Columns and units describe a file: these samples have neither.
+    let opts = &DataOptions {
+        speed_column: None,
+        torque_column: None,
+        wob_column: None,
+        time_column: None,
+        speed_unit: None,
+        torque_unit: None,
+        wob_unit: None,
+        ..opts.clone()
+    };
     opts.validate()?;
     if all.is_empty() {
         return Err(Error::Data {

@@ -426,18 +426,7 @@ impl LawKernel {
         })?;
         let log_det_l = (0..k).map(|a| chol[a * k + a].ln()).sum();
         let member_weight = compensated_sum(weights.iter().copied());
-        let mut running = 0.0;
-        let mut cdf: Vec<f64> = weights
-            .iter()
-            .map(|w| {
-                running += w;
-                running
-            })
-            .collect();
-        let last = *cdf.last().expect("an alive law has a particle");
-        for c in &mut cdf {
-            *c /= last;
-        }
+        let cdf = normalised_cdf(&weights);
         let log_prior_density = -free
             .iter()
             .map(|&j| (f64::from(bx.upper[j]) - f64::from(bx.lower[j])).ln())
@@ -562,18 +551,7 @@ impl Kernels {
         let alive: Vec<usize> = (0..laws.len()).filter(|&s| laws[s].is_some()).collect();
         let (law_weights, proposal_probability) =
             law_weights(config, &alive, laws.len(), &probability, &below, previous);
-        let mut running = 0.0;
-        let mut law_cdf: Vec<f64> = law_weights
-            .iter()
-            .map(|w| {
-                running += w;
-                running
-            })
-            .collect();
-        let last = *law_cdf.last().expect("a population has particles");
-        for c in &mut law_cdf {
-            *c /= last;
-        }
+        let law_cdf = normalised_cdf(&law_weights);
         Ok(Self {
             laws,
             alive,
@@ -1110,6 +1088,24 @@ pub fn run_on(
         super::complete_population(&mut populations, population, observer)?;
     };
     Ok(finish(populations, stop, total_scored))
+}
+
+/// The cumulative sums of `weights` over their total, the last exactly 1: what a draw by
+/// weight searches. `weights` is not empty (an alive law has a particle; a population, a law).
+fn normalised_cdf(weights: &[f64]) -> Vec<f64> {
+    let mut running = 0.0;
+    let mut cdf: Vec<f64> = weights
+        .iter()
+        .map(|w| {
+            running += w;
+            running
+        })
+        .collect();
+    let last = *cdf.last().expect("weights to draw by");
+    for c in &mut cdf {
+        *c /= last;
+    }
+    cdf
 }
 
 /// The weights the alive laws are drawn by, and each slot's probability that a proposal is

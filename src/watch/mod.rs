@@ -377,13 +377,6 @@ impl Watch {
             time_s: rows.iter().map(|r| r.time_s).collect(),
         };
         let opts = DataOptions {
-            speed_column: None,
-            torque_column: None,
-            wob_column: None,
-            time_column: None,
-            speed_unit: None,
-            torque_unit: None,
-            wob_unit: None,
             t_start_s: None,
             t_end_s: None,
             thin: 1,
