@@ -5,6 +5,11 @@ use super::*;
 
 /// Rows read before the watch starts, to measure the record's rate (its median time step).
 pub(super) const RATE_ROWS: usize = 64;
+/// Distinct time stamps the rate is measured over where stamps repeat (a logger that rounds
+/// its clock to a coarser tick than its rate: whole seconds at 20 Hz).
+const RATE_STAMPS: usize = 5;
+/// Rows at most before the rate is measured, however the stamps repeat.
+const RATE_ROWS_MOST: usize = 10_000;
 
 /// How a watch ended.
 #[derive(Clone, Debug, Serialize)]
@@ -79,10 +84,17 @@ pub fn follow(
             )),
             source::Next::Waiting | source::Next::End => {}
         }
-        if watch.is_none() && (first.len() >= RATE_ROWS || (ended && !first.is_empty())) {
-            let rate_hz = resumed
-                .as_ref()
-                .map_or_else(|| measured_rate_hz(&first), |(_, s)| s.meta.rate_hz);
+        if watch.is_none() && (enough_to_measure(&first) || (ended && !first.is_empty())) {
+            let rate_hz = match &resumed {
+                Some((_, stored)) => stored.meta.rate_hz,
+                None => {
+                    let (rate_hz, repeated) = measured_rate_hz(&first);
+                    if let Some(words) = repeated {
+                        observer.note(format!("warning: {words}"));
+                    }
+                    rate_hz
+                }
+            };
             let (made, store) = start_watch(&settings, rows, rate_hz, resumed.take(), &options, observer)?;
             kept = store;
             watch = Some(made);
@@ -152,13 +164,44 @@ fn resume_stored(
     Ok((kept, stored))
 }
 
-/// The record's rate from its first rows' time stamps (the median step), Hz; 1 Hz without
-/// two distinct stamps.
-fn measured_rate_hz(first: &[(Row, std::time::Instant)]) -> f64 {
+/// Whether the first rows are enough to measure the record's rate: [`RATE_ROWS`] of them, over
+/// [`RATE_STAMPS`] distinct time stamps where stamps repeat (at most [`RATE_ROWS_MOST`]).
+fn enough_to_measure(first: &[(Row, std::time::Instant)]) -> bool {
+    if first.len() < RATE_ROWS {
+        return false;
+    }
+    let distinct = 1 + first
+        .windows(2)
+        .filter(|w| w[0].0.time_s != w[1].0.time_s || w[1].0.time_s.is_none())
+        .count();
+    distinct >= RATE_STAMPS || first.len() >= RATE_ROWS_MOST
+}
+
+/// The record's rate from its first rows' time stamps, Hz: one over the median step; where
+/// most stamps repeat (a clock rounded to a coarser tick than the rate), the rows per second
+/// of the stamps strictly between the first and the last, each a whole tick, with words that
+/// say so. 1 Hz without two distinct stamps.
+fn measured_rate_hz(first: &[(Row, std::time::Instant)]) -> (f64, Option<String>) {
     let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
-    let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    let all_steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut steps: Vec<f64> = all_steps.iter().copied().filter(|d| *d > 0.0).collect();
     steps.sort_by(f64::total_cmp);
-    median(&steps).map_or(1.0, |dt| 1.0 / dt)
+    let Some(tick) = median(&steps) else {
+        return (1.0, None);
+    };
+    let repeated = all_steps.iter().filter(|d| **d == 0.0).count();
+    let (t0, t1) = (times[0], times[times.len() - 1]);
+    let inner = times.iter().filter(|&&t| t > t0 && t < t1).count();
+    let inner_s = t1 - t0 - tick;
+    if 2 * repeated <= all_steps.len() || inner == 0 || inner_s <= 0.0 {
+        return (1.0 / tick, None);
+    }
+    let rate_hz = inner as f64 / inner_s;
+    let words = format!(
+        "time stamps repeat: about {:.0} rows share each stamp, {tick} s apart (a clock rounded to whole ticks?); the record's rate is taken as its rows per second, {rate_hz:.1} Hz, and its windows are cut by the stamps as they are",
+        rate_hz * tick
+    );
+    (rate_hz, Some(words))
 }
 
 /// The watch of `rows` at `rate_hz`, what the user should know of its windows said, and its

@@ -1038,3 +1038,43 @@ fn a_time_stamp_far_ahead_is_a_glitch_and_a_gap_costs_no_windows() {
     );
     assert!(updates.iter().all(|u| u["samples"].as_u64().unwrap() > 0));
 }
+
+/// A logger that rounds its clock to whole seconds at 20 Hz: twenty rows share each stamp.
+/// The rate is the rows per second (said), so the default windows are the record's own, and
+/// each window holds the rows the precise stamps put in it (floor rounding keeps every row in
+/// its whole-second window), with the same evidence.
+#[test]
+fn stamps_rounded_to_whole_seconds_give_the_record_s_rate_and_windows() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let first_40_s = |f: Vec<String>| (f[0].parse::<f64>().unwrap() < 40.0).then_some(f);
+    let precise = edited(&record, dir.path(), "precise", |_, f| first_40_s(f));
+    let rounded = edited(&record, dir.path(), "rounded", |_, mut f| {
+        f[0] = format!("{}", f[0].parse::<f64>().unwrap().floor());
+        first_40_s(f)
+    });
+    let run = |path: &Path| {
+        let (code, stdout, stderr) = outcome(watch_command().args(["--particles", "100"]).arg(path));
+        assert_eq!(code, 0, "{stderr}");
+        let updates: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        (without_latency(&updates), stderr)
+    };
+    let (exact, said_exact) = run(&precise);
+    let (from_rounded, said) = run(&rounded);
+    assert!(!said_exact.contains("time stamps repeat"), "{said_exact}");
+    assert!(
+        said.contains("about 20 rows share each stamp, 1 s apart") && said.contains("20.0 Hz"),
+        "{said}"
+    );
+    assert!(said.contains("windows of 25 s every 5 s"), "{said}");
+    // Windows of 25 s every 5 s over 40 s: starts 0, 5, 10, 15. The rounded stamps end at
+    // 39 s: they do not show the last window complete, which is not given.
+    assert_eq!((exact.len(), from_rounded.len()), (4, 3));
+    let laws = |updates: &[serde_json::Value]| -> Vec<(u64, u64, serde_json::Value)> {
+        updates
+            .iter()
+            .map(|u| (u["window"].as_u64().unwrap(), u["samples"].as_u64().unwrap(), u["laws"].clone()))
+            .collect()
+    };
+    assert_eq!(laws(&from_rounded), laws(&exact[..3]));
+}
