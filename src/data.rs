@@ -552,7 +552,7 @@ pub fn field_data_from_columns(
             v.push(value(i, row)? * u.newtons());
         }
         if let (Some(i), Some(v)) = (indices.time, all.time_s.as_mut()) {
-            let t = value(i, row)?;
+            let t = value(i, row)? * units.time_s_per_unit();
             if let Some(&previous) = v.last()
                 && t < previous
                 && backwards.is_none()
@@ -679,6 +679,7 @@ pub fn field_data_from_samples(all: Samples, source: &Path, opts: &DataOptions) 
         speed: SpeedUnit::RadS,
         torque: TorqueUnit::Nm,
         wob: all.wob_n.as_ref().map(|_| ForceUnit::N),
+        time_in_ms: false,
     };
     assemble_columns(all, backwards, columns, &units, opts, source)
 }
@@ -791,7 +792,12 @@ impl RowLayout {
                 (Some(i), Some(u)) => Some(cell(i)? * u.newtons()),
                 _ => None,
             },
-            time_s: self.indices.time.map(cell).transpose()?,
+            time_s: self
+                .indices
+                .time
+                .map(cell)
+                .transpose()?
+                .map(|t| t * self.units.time_s_per_unit()),
             top_drive_rad_s: None,
         })
     }
@@ -861,6 +867,15 @@ struct ColumnUnits {
     speed: SpeedUnit,
     torque: TorqueUnit,
     wob: Option<ForceUnit>,
+    /// Whether the time column's name says milliseconds (else seconds).
+    time_in_ms: bool,
+}
+
+impl ColumnUnits {
+    /// Seconds per unit of the time column.
+    fn time_s_per_unit(&self) -> f64 {
+        if self.time_in_ms { 1e-3 } else { 1.0 }
+    }
 }
 
 impl ColumnUnits {
@@ -894,8 +909,22 @@ impl ColumnUnits {
             )?),
             None => None,
         };
-        Ok(Self { speed, torque, wob })
+        Ok(Self {
+            speed,
+            torque,
+            wob,
+            time_in_ms: indices.time.is_some_and(|i| names_milliseconds(&headers[i])),
+        })
     }
+}
+
+/// Whether a time column's name says milliseconds (as many loggers stamp): it ends in `_ms`,
+/// `[ms]` or `(ms)`.
+fn names_milliseconds(name: &str) -> bool {
+    let name = name.trim().to_ascii_lowercase();
+    ["_ms", "[ms]", "(ms)", " ms"]
+        .iter()
+        .any(|suffix| name.ends_with(suffix))
 }
 
 /// The first place the time column runs backwards: (where, previous time, time), s.
@@ -976,6 +1005,10 @@ pub const IMPLAUSIBLE_HIGH_RAD_S: f64 = 100.0;
 /// Above this median weight on bit in kN (200 tonnes) N is likelier.
 pub const IMPLAUSIBLE_WOB_KN: f64 = 2000.0;
 
+/// A median step between time stamps this long (s) is no record of stick-slip (cycles of
+/// seconds): more likely a time column in milliseconds read as seconds.
+const IMPLAUSIBLE_STEP_S: f64 = 5.0;
+
 /// Units and signs that a drill string's record can hardly mean, judged on every row read
 /// (`all`, SI) against the unit each column declares: a torque column in kN·m whose median
 /// exceeds [`IMPLAUSIBLE_TORQUE_KNM`], a speed column in rpm whose 95th percentile of |speed|
@@ -1014,6 +1047,23 @@ fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &
         if wob_kn > IMPLAUSIBLE_WOB_KN {
             out.push(format!(
                 "{source}: the weights on bit of column '{name}' read in kN have a median of {wob_kn:.0} kN, beyond any drill string's (above {IMPLAUSIBLE_WOB_KN} kN): if the column holds N, say so with `wob_unit` n (or a name ending in _n)"
+            ));
+        }
+    }
+    if let (Some(time), Some(name)) = (&all.time_s, &columns.time)
+        && !units.time_in_ms
+    {
+        let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+        steps.sort_by(f64::total_cmp);
+        let step = if steps.is_empty() {
+            0.0
+        } else {
+            crate::numerics::quantile_of_sorted(&steps, 0.5)
+        };
+        if step >= IMPLAUSIBLE_STEP_S {
+            out.push(format!(
+                "{source}: the time stamps of column '{name}' read in seconds step by {step} s (a median; {:.3} Hz), where a record of stick-slip samples many times a second: if the column holds milliseconds, name it '{name}_ms'",
+                1.0 / step
             ));
         }
     }

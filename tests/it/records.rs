@@ -193,3 +193,38 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         "P(unstable) at 100 rpm, 50 N and 500 N: {p:?}"
     );
 }
+
+/// A time column in milliseconds: read as such where its name says so (its time window set in
+/// seconds as always), and hinted at where a name without a unit steps by tens of "seconds".
+#[test]
+fn a_time_column_in_milliseconds_is_read_by_its_name_and_hinted_at_without_one() {
+    use bitrock::data::{DataOptions, parse_field_data};
+    let rows: String = (0..400)
+        .map(|k| {
+            let w = 40.0 + 40.0 * (k as f64 * 0.05).sin().abs();
+            format!("{},{w},{}\n", 50 * k, 8.0 + 4.0 / (1.0 + w / 20.0))
+        })
+        .collect();
+    let path = std::path::Path::new("logger.csv");
+    let within = DataOptions {
+        t_start_s: Some(5.0),
+        t_end_s: Some(10.0),
+        ..DataOptions::default()
+    };
+    let named = format!("time_ms,bit_speed_rpm,torque_knm\n{rows}");
+    let data = parse_field_data(named.as_bytes(), path, &within).unwrap();
+    // Rows at 5.00, 5.05, …, 10.00 s: 101 of them, stamped 5000 … 10000 ms.
+    assert_eq!(data.rows_used, 101);
+    let times = data.calibration.time_s.iter().chain(&data.validation.time_s).flatten();
+    assert!(times.clone().all(|t| (5.0..=10.0).contains(t)), "{:?}", times.collect::<Vec<_>>());
+    assert!(data.warnings.iter().all(|w| !w.contains("milliseconds")), "{:?}", data.warnings);
+    let unnamed = format!("time,bit_speed_rpm,torque_knm\n{rows}");
+    let data = parse_field_data(unnamed.as_bytes(), path, &DataOptions::default()).unwrap();
+    assert!(
+        data.warnings
+            .iter()
+            .any(|w| w.contains("step by 50 s") && w.contains("name it 'time_ms'")),
+        "{:?}",
+        data.warnings
+    );
+}

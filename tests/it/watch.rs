@@ -1073,7 +1073,13 @@ fn stamps_rounded_to_whole_seconds_give_the_record_s_rate_and_windows() {
     let laws = |updates: &[serde_json::Value]| -> Vec<(u64, u64, serde_json::Value)> {
         updates
             .iter()
-            .map(|u| (u["window"].as_u64().unwrap(), u["samples"].as_u64().unwrap(), u["laws"].clone()))
+            .map(|u| {
+                (
+                    u["window"].as_u64().unwrap(),
+                    u["samples"].as_u64().unwrap(),
+                    u["laws"].clone(),
+                )
+            })
             .collect()
     };
     assert_eq!(laws(&from_rounded), laws(&exact[..3]));
