@@ -9,8 +9,10 @@ pub(super) const ESCAPE_SAMPLES: usize = 4;
 pub(super) const ESCAPE_MIN_PROBABILITY: f64 = 0.05;
 
 /// A window's operating point: the mean top-drive speed (the mean bit speed where the
-/// record has no top-drive column), rpm, and the mean weight on bit (`w_ref_n` where the
-/// record has no column for it), kN; each at least 1.
+/// record has no top-drive column: the string's twist stays bounded, so the bit turns at the
+/// top drive's speed on average, stuck or not), rpm, and the median weight on bit (`w_ref_n`
+/// where the record has no column for it), kN, which a glitch of the WOB channel over less than
+/// half the window does not move; each at least 1.
 pub(super) fn operating_point(rows: &[Row], w_ref_n: f64) -> (f64, f64) {
     let n = rows.len().max(1) as f64;
     let omega_rpm = rows
@@ -19,8 +21,21 @@ pub(super) fn operating_point(rows: &[Row], w_ref_n: f64) -> (f64, f64) {
         .sum::<f64>()
         / n
         / RAD_S_PER_RPM;
-    let wob_kn = rows.iter().map(|r| r.wob_n.unwrap_or(w_ref_n)).sum::<f64>() / n / 1000.0;
+    let wob: Vec<f64> = rows.iter().map(|r| r.wob_n.unwrap_or(w_ref_n)).collect();
+    let wob_kn = super::change::median(&wob).unwrap_or(w_ref_n) / 1000.0;
     (omega_rpm.max(1.0), wob_kn.max(1.0))
+}
+
+/// The share of a window's rows whose weight on bit lies beyond three times its median or
+/// below a third of it: a glitch of the WOB channel where it is large (said, and left out of
+/// the operating point by the median).
+pub(super) fn wob_glitch_share(rows: &[Row]) -> f64 {
+    let wob: Vec<f64> = rows.iter().filter_map(|r| r.wob_n).collect();
+    let Some(median) = super::change::median(&wob).filter(|m| *m > 0.0) else {
+        return 0.0;
+    };
+    let off = wob.iter().filter(|&&w| w > 3.0 * median || w < median / 3.0).count();
+    off as f64 / wob.len() as f64
 }
 
 impl Watch {

@@ -263,6 +263,15 @@ impl Watch {
     /// The update of one complete window.
     fn update(&mut self, window: Window, observer: &mut dyn Observer) -> Result<Update> {
         note_gap(self.carried.window, &window, observer);
+        let glitch = advice::wob_glitch_share(&window.rows);
+        if glitch > 0.0 {
+            let (_, wob_kn) = advice::operating_point(&window.rows, self.settings.w_ref_n);
+            observer.note(format!(
+                "warning: window {}: {:.0} % of its weights on bit lie beyond three times their median or below a third of it (a glitch of the WOB channel?): its operating point takes the median, {wob_kn:.0} kN",
+                window.index,
+                100.0 * glitch
+            ));
+        }
         let mut update = Update::empty(&window);
         let data = match self.window_data(&window) {
             Ok(data) => data,

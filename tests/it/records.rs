@@ -216,8 +216,16 @@ fn a_time_column_in_milliseconds_is_read_by_its_name_and_hinted_at_without_one()
     // Rows at 5.00, 5.05, …, 10.00 s: 101 of them, stamped 5000 … 10000 ms.
     assert_eq!(data.rows_used, 101);
     let times = data.calibration.time_s.iter().chain(&data.validation.time_s).flatten();
-    assert!(times.clone().all(|t| (5.0..=10.0).contains(t)), "{:?}", times.collect::<Vec<_>>());
-    assert!(data.warnings.iter().all(|w| !w.contains("milliseconds")), "{:?}", data.warnings);
+    assert!(
+        times.clone().all(|t| (5.0..=10.0).contains(t)),
+        "{:?}",
+        times.collect::<Vec<_>>()
+    );
+    assert!(
+        data.warnings.iter().all(|w| !w.contains("milliseconds")),
+        "{:?}",
+        data.warnings
+    );
     let unnamed = format!("time,bit_speed_rpm,torque_knm\n{rows}");
     let data = parse_field_data(unnamed.as_bytes(), path, &DataOptions::default()).unwrap();
     assert!(

@@ -1084,3 +1084,43 @@ fn stamps_rounded_to_whole_seconds_give_the_record_s_rate_and_windows() {
     };
     assert_eq!(laws(&from_rounded), laws(&exact[..3]));
 }
+
+/// A glitch of the WOB channel (24,000 kN for 10 s, 40 % of a window at most) moves neither
+/// the operating point nor the advice: the window's weight on bit is its median, and the
+/// glitch is said for each window it touches.
+#[test]
+fn a_wob_glitch_is_said_and_moves_neither_the_operating_point_nor_the_advice() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("m2.csv");
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "40"])
+            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "3", "-o"])
+            .arg(&record),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let glitch = edited(&record, dir.path(), "glitch", |k, mut f| {
+        if (200..400).contains(&k) {
+            f[3] = "24000".into();
+        }
+        Some(f)
+    });
+    let run = |path: &Path| {
+        let (code, stdout, stderr) = outcome(watch_command().args(["--particles", "100"]).arg(path));
+        assert_eq!(code, 0, "{stderr}");
+        let updates: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        (without_latency(&updates), stderr)
+    };
+    let (clean, said_clean) = run(&record);
+    let (glitched, said) = run(&glitch);
+    assert!(!said_clean.contains("glitch of the WOB channel"), "{said_clean}");
+    // Windows of 25 s every 5 s from 0 s: each of the four holds some of 10–20 s.
+    assert_eq!(said.matches("a glitch of the WOB channel?").count(), 4, "{said}");
+    assert!(said.contains("window 1: 40 % of its weights on bit"), "{said}");
+    assert!(said.contains("its operating point takes the median, 244 kN"), "{said}");
+    assert_eq!(clean.len(), 4);
+    for (a, b) in clean.iter().zip(&glitched) {
+        assert_eq!(a["advice"], b["advice"]);
+        assert!(a["advice"]["words"].as_str().unwrap().contains("244 kN"), "{a}");
+    }
+}
