@@ -1,8 +1,8 @@
-//! The gate every kind of run's settings pass: each kind has one serde `Settings` (a doc
-//! comment per field, defaults in its `Default`), which the command's flags, Python's keyword
-//! arguments and the watch's per-window jobs all fill, and which turns into what the kind runs
-//! only after it is validated, once. A setting therefore exists on every surface or on none:
-//! [`fields`] lists a kind's, and the tests check that the command and Python take each.
+//! The gate a kind of run's settings pass: the kind has one serde `Settings` (a doc comment per
+//! field, defaults in its `Default`; the ABC run's and the evidence's), which the command's
+//! flags and Python's keyword arguments fill, and which turns into what the kind runs only after
+//! it is validated, once. A setting therefore exists on every surface or on none: [`fields`]
+//! lists a kind's, and the tests check that the command and Python take each.
 
 use crate::error::{Error, Result};
 use serde::Serialize;
