@@ -352,17 +352,7 @@ pub fn read_particles_csv(path: &std::path::Path) -> crate::error::Result<Vec<Pa
         line,
         message,
     };
-    let file = std::fs::File::open(path).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let mut reader = csv::ReaderBuilder::new().from_reader(file);
-    let header: Vec<String> = reader
-        .headers()
-        .map_err(|e| format(Some(1), e.to_string()))?
-        .iter()
-        .map(|h| h.trim().to_string())
-        .collect();
+    let (mut reader, header) = crate::files::csv_with_header(path)?;
     let column = |name: &str| header.iter().position(|h| h == name);
     let (Some(law_col), Some(weight_col)) = (column("law"), column("weight")) else {
         return Err(format(

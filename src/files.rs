@@ -139,6 +139,27 @@ pub fn open_input(path: &Path, what: &str) -> Result<Input> {
     })
 }
 
+/// A CSV file opened for its records, with its header's names (trimmed); a file that cannot be
+/// opened, or whose header cannot be read, is refused naming it (and line 1).
+pub fn csv_with_header(path: &Path) -> Result<(csv::Reader<File>, Vec<String>)> {
+    let file = File::open(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut reader = csv::ReaderBuilder::new().from_reader(file);
+    let header = reader
+        .headers()
+        .map_err(|e| Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: e.to_string(),
+        })?
+        .iter()
+        .map(|h| h.trim().to_string())
+        .collect();
+    Ok((reader, header))
+}
+
 /// Reads the text file `path` (`what` it should be, for messages) whole, refusing before it
 /// is read one larger than `max_bytes` (a pipe: as soon as it has sent more), and one that is
 /// not UTF-8.

@@ -596,6 +596,17 @@ impl GpuContext {
     }
 
     /// A buffer, with allocation failures reported as typed errors.
+    /// A kernel's output buffer of `bytes` and the staging buffer it is read back through.
+    fn output_and_staging(&self, label: &str, bytes: u64) -> Result<(wgpu::Buffer, wgpu::Buffer), GpuError> {
+        let output = self.buffer(label, bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC)?;
+        let staging = self.buffer(
+            &format!("{label} staging"),
+            bytes,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        )?;
+        Ok((output, staging))
+    }
+
     fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer, GpuError> {
         let max = self.limits.max_buffer_size;
         if size > max {

@@ -161,12 +161,7 @@ impl GpuRecords {
             .write_buffer(&priors, 0, bytemuck::cast_slice(&priors_upload));
         let job = context.buffer("job", size_of::<Job>() as u64, wgpu::BufferUsages::UNIFORM | copy)?;
         let ssr_bytes = 4 * chunk as u64;
-        let ssr = context.buffer(
-            "ssr",
-            ssr_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let staging = context.buffer("ssr staging", ssr_bytes, wgpu::BufferUsages::MAP_READ | copy)?;
+        let (ssr, staging) = context.output_and_staging("ssr", ssr_bytes)?;
         let segments = context.buffer(
             "segments",
             (size_of::<GpuSegment>() * SEGMENTS_PER_DISPATCH) as u64,

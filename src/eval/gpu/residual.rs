@@ -91,12 +91,7 @@ impl GpuEvaluator {
             data.push(buffer);
         }
         let ssr_bytes = 4 * chunk as u64;
-        let ssr = context.buffer(
-            "ssr",
-            ssr_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let staging = context.buffer("ssr staging", ssr_bytes, wgpu::BufferUsages::MAP_READ | copy)?;
+        let (ssr, staging) = context.output_and_staging("ssr", ssr_bytes)?;
         context.queue.write_buffer(&prior_buffer, 0, bytemuck::bytes_of(&prior));
         let entries = [
             buffer_entry(0, UNIFORM),

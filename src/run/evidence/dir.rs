@@ -391,21 +391,7 @@ pub struct StoredSamples {
 /// line and column.
 pub fn samples(dir: &Path) -> Result<StoredSamples> {
     let path = dir.join(DATA_CSV);
-    let file = std::fs::File::open(&path).map_err(|source| Error::Read {
-        path: path.clone(),
-        source,
-    })?;
-    let mut reader = csv::ReaderBuilder::new().from_reader(file);
-    let header: Vec<String> = reader
-        .headers()
-        .map_err(|e| Error::Format {
-            path: path.clone(),
-            line: Some(1),
-            message: e.to_string(),
-        })?
-        .iter()
-        .map(str::to_string)
-        .collect();
+    let (mut reader, header) = crate::files::csv_with_header(&path)?;
     let unit = match header.as_slice() {
         [set, speed, torque] if set == "set" && speed == "speed_rad_s" && torque.starts_with("torque_") => {
             TorqueUnit::from_suffix(torque)
