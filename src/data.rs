@@ -1053,13 +1053,8 @@ fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &
     if let (Some(time), Some(name)) = (&all.time_s, &columns.time)
         && !units.time_in_ms
     {
-        let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
-        steps.sort_by(f64::total_cmp);
-        let step = if steps.is_empty() {
-            0.0
-        } else {
-            crate::numerics::quantile_of_sorted(&steps, 0.5)
-        };
+        let steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+        let step = crate::numerics::median(&steps).unwrap_or(0.0);
         if step >= IMPLAUSIBLE_STEP_S {
             out.push(format!(
                 "{source}: the time stamps of column '{name}' read in seconds step by {step} s (a median; {:.3} Hz), where a record of stick-slip samples many times a second: if the column holds milliseconds, name it '{name}_ms'",

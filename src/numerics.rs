@@ -17,6 +17,11 @@ pub fn compensated_sum(values: impl IntoIterator<Item = f64>) -> f64 {
     sum + carry
 }
 
+/// The median of `values` ([`quantile`] at ½), `None` for none.
+pub fn median(values: &[f64]) -> Option<f64> {
+    (!values.is_empty()).then(|| quantile(values, 0.5))
+}
+
 /// The q-quantile (0 ≤ q ≤ 1) of `values` by linear interpolation between order statistics
 /// (type 7, as numpy's default). `values` need not be sorted; NaNs are not expected. O(n):
 /// the two order statistics are found by selection, not by sorting.

@@ -70,12 +70,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         return strings(cmd);
     }
     let opts = options(cmd)?;
-    let quiet = cmd.json;
-    let report = bitrock::bench::run(&opts, &mut |line| {
-        if !quiet {
-            super::print::note(line);
-        }
-    })?;
+    let report = bitrock::bench::run(&opts, &mut say(cmd, ""))?;
     let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;
@@ -84,6 +79,17 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         print_tables(&mut out, &report)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// What a bench says while it runs, each line after `prefix`, on standard error; nothing with
+/// `--json`, whose document alone goes out.
+fn say(cmd: &BenchCmd, prefix: &'static str) -> impl FnMut(String) {
+    let quiet = cmd.json;
+    move |line| {
+        if !quiet {
+            super::print::note(format_args!("{prefix}{line}"));
+        }
+    }
 }
 
 /// The bench's options from the flags.
@@ -275,13 +281,8 @@ fn print_smc(out: &mut impl Write, smc: &[bitrock::bench::smc_comparison::SmcCom
 /// `--watch`: the watch bench ([`bitrock::watch::bench`]), a table or JSON.
 fn watch(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let scratch = tempfile::tempdir()?;
-    let quiet = cmd.json;
     let backend = cmd.backend.unwrap_or(Backend::Auto);
-    let report = bitrock::watch::bench::run(cmd.quick, backend, scratch.path(), &mut |line| {
-        if !quiet {
-            super::print::note(format_args!("note: {line}"));
-        }
-    })?;
+    let report = bitrock::watch::bench::run(cmd.quick, backend, scratch.path(), &mut say(cmd, "note: "))?;
     let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;
@@ -333,12 +334,7 @@ fn strings(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     if opts.strings == 0 {
         return Err(Error::setting("strings_n", "must be at least 1").into());
     }
-    let quiet = cmd.json;
-    let report = bitrock::bench::strings::run(&opts, &mut |line| {
-        if !quiet {
-            super::print::note(line);
-        }
-    })?;
+    let report = bitrock::bench::strings::run(&opts, &mut say(cmd, ""))?;
     let mut out = super::print::stdout();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &report)?;

@@ -22,7 +22,7 @@ pub(super) fn operating_point(rows: &[Row], w_ref_n: f64) -> (f64, f64) {
         / n
         / RAD_S_PER_RPM;
     let wob: Vec<f64> = rows.iter().map(|r| r.wob_n.unwrap_or(w_ref_n)).collect();
-    let wob_kn = super::change::median(&wob).unwrap_or(w_ref_n) / 1000.0;
+    let wob_kn = crate::numerics::median(&wob).unwrap_or(w_ref_n) / 1000.0;
     (omega_rpm.max(1.0), wob_kn.max(1.0))
 }
 
@@ -31,7 +31,7 @@ pub(super) fn operating_point(rows: &[Row], w_ref_n: f64) -> (f64, f64) {
 /// the operating point by the median).
 pub(super) fn wob_glitch_share(rows: &[Row]) -> f64 {
     let wob: Vec<f64> = rows.iter().filter_map(|r| r.wob_n).collect();
-    let Some(median) = super::change::median(&wob).filter(|m| *m > 0.0) else {
+    let Some(median) = crate::numerics::median(&wob).filter(|m| *m > 0.0) else {
         return 0.0;
     };
     let off = wob.iter().filter(|&&w| w > 3.0 * median || w < median / 3.0).count();

@@ -101,15 +101,6 @@ pub(super) fn loss_nats(
     Some(0.5 * n * (rho_then / rho_now).ln())
 }
 
-pub(super) fn median(values: &[f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    Some(crate::numerics::quantile(&sorted, 0.5))
-}
-
 /// `weights` normalised to sum 1 with none below `floor` (those raised to it, the others
 /// scaled down to make room).
 pub(super) fn normalise_with_floor(weights: &[f64], floor: f64) -> Vec<f64> {

@@ -9,7 +9,7 @@ pub(super) const RATE_ROWS: usize = 64;
 /// its clock to a coarser tick than its rate: whole seconds at 20 Hz).
 const RATE_STAMPS: usize = 5;
 /// Rows at most before the rate is measured, however the stamps repeat.
-const RATE_ROWS_MOST: usize = 10_000;
+const RATE_ROWS_MOST: usize = 160 * RATE_ROWS;
 
 /// How a watch ended.
 #[derive(Clone, Debug, Serialize)]
@@ -167,7 +167,8 @@ fn resume_stored(
 /// Whether the first rows are enough to measure the record's rate: [`RATE_ROWS`] of them, over
 /// [`RATE_STAMPS`] distinct time stamps where stamps repeat (at most [`RATE_ROWS_MOST`]).
 fn enough_to_measure(first: &[(Row, std::time::Instant)]) -> bool {
-    if first.len() < RATE_ROWS {
+    // Judged every RATE_ROWS rows: the count runs over all of them.
+    if first.len() < RATE_ROWS || !first.len().is_multiple_of(RATE_ROWS) {
         return false;
     }
     let distinct = 1 + first
@@ -184,9 +185,8 @@ fn enough_to_measure(first: &[(Row, std::time::Instant)]) -> bool {
 fn measured_rate_hz(first: &[(Row, std::time::Instant)]) -> (f64, Option<String>) {
     let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
     let all_steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
-    let mut steps: Vec<f64> = all_steps.iter().copied().filter(|d| *d > 0.0).collect();
-    steps.sort_by(f64::total_cmp);
-    let Some(tick) = median(&steps) else {
+    let steps: Vec<f64> = all_steps.iter().copied().filter(|d| *d > 0.0).collect();
+    let Some(tick) = crate::numerics::median(&steps) else {
         return (1.0, None);
     };
     let repeated = all_steps.iter().filter(|d| **d == 0.0).count();

@@ -77,7 +77,7 @@ impl Watch {
             let holds_at_n = self.carried.recent_wob_n.iter().find(|(i, _)| i == k).map(|(_, w)| *w);
             loss_nats(before, holds_at_n, fits, samples)
         });
-        let level = median(&self.carried.losses.iter().copied().collect::<Vec<_>>());
+        let level = crate::numerics::median(&self.carried.losses.iter().copied().collect::<Vec<_>>());
         let change = match (loss, level) {
             (Some(loss), Some(level)) => loss - level > self.settings.change_nats,
             (Some(loss), None) => loss > self.settings.change_nats,
