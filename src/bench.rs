@@ -228,12 +228,7 @@ pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> Problem {
         .enumerate()
         .map(|(i, &w)| law.torque(&truth, w, 1.0) * (1.0 + 0.05 * ((i * 7919 % 101) as f64 / 50.0 - 1.0)))
         .collect();
-    let data = Samples {
-        speed_rad_s: speed,
-        torque_nm: torque,
-        wob_n: None,
-        time_s: None,
-    };
+    let data = Samples::new(speed, torque);
     let (lower, upper) = truth
         .iter()
         .map(|&p| ((p * 0.6).min(p * 1.4) as f32, (p * 0.6).max(p * 1.4) as f32))
@@ -608,7 +603,14 @@ fn measure_stability(
         .collect();
     let criterion = crate::stability::map::Criterion::Lumped(crate::stability::lumped::Lumped::default());
     let times = time_calls(reps, || {
-        gpu::stability::stability_grid(Law::M3, &samples, &omega, &wob, criterion, 244.2e3)?;
+        gpu::stability::stability_grid(&crate::stability::map::Grid {
+            law: Law::M3,
+            samples: &samples,
+            omega_rpm: &omega,
+            wob_kn: &wob,
+            criterion,
+            w_ref_n: 244.2e3,
+        })?;
         Ok(())
     })?;
     let rates: Vec<f64> = times.iter().map(|t| (side * side * count) as f64 / t).collect();

@@ -126,6 +126,16 @@ pub struct Samples {
 }
 
 impl Samples {
+    /// Bit speed (rad/s) and torque on bit (N·m) alone: no weight on bit, no clock.
+    pub fn new(speed_rad_s: Vec<f64>, torque_nm: Vec<f64>) -> Self {
+        Self {
+            speed_rad_s,
+            torque_nm,
+            wob_n: None,
+            time_s: None,
+        }
+    }
+
     /// The mean weight on bit (N) of the samples, where they carry a positive one.
     pub fn mean_wob_n(&self) -> Option<f64> {
         let wob = self.wob_n.as_ref().filter(|w| !w.is_empty())?;
@@ -404,15 +414,14 @@ fn resolve_column(
 
 /// The unit of a column: the flag's when given (and not contradicting the suffix), else the
 /// suffix's.
-fn resolve_unit<U: Copy + PartialEq>(
+fn resolve_unit<U: crate::units::ColumnUnit>(
     column: &str,
     flag_value: Option<U>,
-    from_suffix: fn(&str) -> Option<U>,
-    label: fn(U) -> &'static str,
     field: &str,
     path: &Path,
 ) -> Result<U> {
-    match (flag_value, from_suffix(column)) {
+    let label = U::symbol;
+    match (flag_value, U::declared_by(column)) {
         (Some(f), Some(s)) if f != s => Err(Error::Format {
             path: path.to_path_buf(),
             line: Some(1),
@@ -643,21 +652,11 @@ fn assemble_columns(
 }
 
 /// A record from samples already in SI (a watch's window): the options' filters, split and
-/// checks, as for a file's rows (the options' columns and units left out), its columns named
+/// checks, as for a file's rows (the options' columns and units describe a file and are not
+/// read), its columns named
 /// by their SI quantities. A time column that
 /// runs backwards is said as in a file, by its row.
 pub fn field_data_from_samples(all: Samples, source: &Path, opts: &DataOptions) -> Result<FieldData> {
-    // Columns and units describe a file: these samples have neither.
-    let opts = &DataOptions {
-        speed_column: None,
-        torque_column: None,
-        wob_column: None,
-        time_column: None,
-        speed_unit: None,
-        torque_unit: None,
-        wob_unit: None,
-        ..opts.clone()
-    };
     opts.validate()?;
     if all.is_empty() {
         return Err(Error::Data {
@@ -882,31 +881,10 @@ impl ColumnUnits {
     /// The unit of each column read ([`resolve_unit`]), in the order speed, torque, weight on
     /// bit.
     fn resolve(headers: &csv::StringRecord, indices: &ColumnIndices, opts: &DataOptions, path: &Path) -> Result<Self> {
-        let speed = resolve_unit(
-            &headers[indices.speed],
-            opts.speed_unit,
-            SpeedUnit::from_suffix,
-            SpeedUnit::label,
-            "speed_unit",
-            path,
-        )?;
-        let torque = resolve_unit(
-            &headers[indices.torque],
-            opts.torque_unit,
-            TorqueUnit::from_suffix,
-            TorqueUnit::label,
-            "torque_unit",
-            path,
-        )?;
+        let speed = resolve_unit(&headers[indices.speed], opts.speed_unit, "speed_unit", path)?;
+        let torque = resolve_unit(&headers[indices.torque], opts.torque_unit, "torque_unit", path)?;
         let wob = match indices.wob {
-            Some(i) => Some(resolve_unit(
-                &headers[i],
-                opts.wob_unit,
-                ForceUnit::from_suffix,
-                ForceUnit::label,
-                "wob_unit",
-                path,
-            )?),
+            Some(i) => Some(resolve_unit(&headers[i], opts.wob_unit, "wob_unit", path)?),
             None => None,
         };
         Ok(Self {

@@ -368,59 +368,47 @@ pub fn read_particles_csv(path: &std::path::Path) -> crate::error::Result<Vec<Pa
     let mut layouts: std::collections::HashMap<Law, Vec<(usize, f64)>> = Default::default();
     let mut population: Option<String> = None;
     let mut particles = Vec::new();
-    for (i, record) in reader.records().enumerate() {
-        let line = i as u64 + 2;
-        let record = record.map_err(|e| format(Some(line), e.to_string()))?;
-        let cell = |col: usize| record.get(col).unwrap_or("").trim();
-        let bad_cell = |col: usize, message: String| Error::Cell {
-            path: path.to_path_buf(),
-            line,
-            column: col + 1,
-            name: header[col].clone(),
-            message,
-        };
-        let number = |col: usize| -> crate::error::Result<f64> {
-            match cell(col).parse::<f64>() {
-                Ok(v) if v.is_finite() => Ok(v),
-                _ => Err(bad_cell(col, format!("`{}` is not a finite number", cell(col)))),
-            }
-        };
+    for (i, row) in crate::files::csv_rows(&mut reader, path, &header).enumerate() {
+        let row = row?;
         if let Some(col) = population_col {
             match &population {
-                None => population = Some(cell(col).to_string()),
-                Some(first) if first != cell(col) => {
-                    return Err(bad_cell(
+                None => population = Some(row.cell(col).to_string()),
+                Some(first) if first != row.cell(col) => {
+                    return Err(row.bad_cell(
                         col,
                         format!(
                             "the file holds population {first} and {}; a map is of one population (bitrock export --population G)",
-                            cell(col)
+                            row.cell(col)
                         ),
                     ));
                 }
                 Some(_) => {}
             }
         }
-        let law: Law = cell(law_col).parse().map_err(|e: String| bad_cell(law_col, e))?;
+        let law: Law = row
+            .cell(law_col)
+            .parse()
+            .map_err(|e: String| row.bad_cell(law_col, e))?;
         if let std::collections::hash_map::Entry::Vacant(entry) = layouts.entry(law) {
-            entry.insert(param_layout(law, &column).map_err(|message| format(Some(line), message))?);
+            entry.insert(param_layout(law, &column).map_err(|message| format(Some(row.line), message))?);
         }
         let params = layouts[&law]
             .iter()
-            .map(|&(col, scale)| number(col).map(|v| v * scale))
+            .map(|&(col, scale)| row.number(col).map(|v| v * scale))
             .collect::<crate::error::Result<Vec<f64>>>()?;
-        let weight = number(weight_col)?;
+        let weight = row.number(weight_col)?;
         if weight < 0.0 {
-            return Err(bad_cell(weight_col, format!("{weight} is negative; weights are ≥ 0")));
+            return Err(row.bad_cell(weight_col, format!("{weight} is negative; weights are ≥ 0")));
         }
         particles.push(Particle {
             law,
             index: match index_col {
-                Some(col) => number(col)? as u64,
+                Some(col) => row.number(col)? as u64,
                 None => i as u64,
             },
             params,
             rho: match rho_col {
-                Some(col) if !cell(col).is_empty() => number(col)?,
+                Some(col) if !row.cell(col).is_empty() => row.number(col)?,
                 _ => f64::NAN,
             },
             weight,

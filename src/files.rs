@@ -160,6 +160,65 @@ pub fn csv_with_header(path: &Path) -> Result<(csv::Reader<File>, Vec<String>)> 
     Ok((reader, header))
 }
 
+/// The data rows of a CSV file opened with [`csv_with_header`], each knowing its line (the
+/// header is line 1) so that a refusal names the file, line and column; a row the CSV reader
+/// cannot read is refused naming its line.
+pub fn csv_rows<'a>(
+    reader: &'a mut csv::Reader<File>,
+    path: &'a Path,
+    header: &'a [String],
+) -> impl Iterator<Item = Result<CsvRow<'a>>> + 'a {
+    reader.records().enumerate().map(move |(i, record)| {
+        let line = i as u64 + 2;
+        let record = record.map_err(|e| Error::Format {
+            path: path.to_path_buf(),
+            line: Some(line),
+            message: e.to_string(),
+        })?;
+        Ok(CsvRow {
+            path,
+            header,
+            line,
+            record,
+        })
+    })
+}
+
+/// One data row of a CSV file ([`csv_rows`]).
+pub struct CsvRow<'a> {
+    path: &'a Path,
+    header: &'a [String],
+    /// Line in the file (the header is line 1).
+    pub line: u64,
+    record: csv::StringRecord,
+}
+
+impl CsvRow<'_> {
+    /// The cell of column `col` (0-based), trimmed; empty where the row is short.
+    pub fn cell(&self, col: usize) -> &str {
+        self.record.get(col).unwrap_or("").trim()
+    }
+
+    /// The refusal of column `col`'s cell, naming the file, line, column and its name.
+    pub fn bad_cell(&self, col: usize, message: String) -> Error {
+        Error::Cell {
+            path: self.path.to_path_buf(),
+            line: self.line,
+            column: col + 1,
+            name: self.header.get(col).cloned().unwrap_or_default(),
+            message,
+        }
+    }
+
+    /// Column `col`'s cell as a finite number, or its refusal.
+    pub fn number(&self, col: usize) -> Result<f64> {
+        match self.cell(col).parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(self.bad_cell(col, format!("`{}` is not a finite number", self.cell(col)))),
+        }
+    }
+}
+
 /// Reads the text file `path` (`what` it should be, for messages) whole, refusing before it
 /// is read one larger than `max_bytes` (a pipe: as soon as it has sent more), and one that is
 /// not UTF-8.

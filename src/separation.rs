@@ -303,12 +303,7 @@ mod tests {
                 .enumerate()
                 .map(|(i, &w)| Law::M2.torque(&truth, w, 1.0) + 300.0 * if i % 2 == 0 { 1.0 } else { -1.0 })
                 .collect();
-            let data = Samples {
-                speed_rad_s: speeds.clone(),
-                torque_nm: torque,
-                wob_n: None,
-                time_s: None,
-            };
+            let data = Samples::new(speeds.clone(), torque);
             let opts = FitOptions::default();
             let fits = fit_laws(&[Law::M2, Law::M3, Law::M4], &data, &Samples::default(), &opts).unwrap();
             separations(&fits, &data, &opts).unwrap()
@@ -355,24 +350,14 @@ mod tests {
                     Law::M2.torque(&[13_000.0, 6_500.0, 0.3], w, 1.0) + e
                 })
                 .collect();
-            let data = Samples {
-                speed_rad_s: speeds.clone(),
-                torque_nm: torque,
-                wob_n: None,
-                time_s: None,
-            };
+            let data = Samples::new(speeds.clone(), torque);
             let opts = FitOptions::default();
             let fit = &fit_laws(&[Law::M2], &data, &Samples::default(), &opts).unwrap()[0];
             let got = residual_lag1(fit, &data, &opts);
             assert!((got - phi).abs() < 0.05, "φ = {phi}: {got}");
             last = Some(fit.clone());
         }
-        let one = Samples {
-            speed_rad_s: vec![1.0],
-            torque_nm: vec![1.0],
-            wob_n: None,
-            time_s: None,
-        };
+        let one = Samples::new(vec![1.0], vec![1.0]);
         assert!(residual_lag1(&last.expect("fitted"), &one, &FitOptions::default()).is_nan());
     }
 

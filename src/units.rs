@@ -133,6 +133,29 @@ impl ForceUnit {
     }
 }
 
+/// A unit a record's column may be in: declared by the column name's suffix, or by a setting.
+pub trait ColumnUnit: Copy + PartialEq {
+    /// The unit the suffix of the column name `column` declares, if any.
+    fn declared_by(column: &str) -> Option<Self>;
+    /// The unit's symbol, for messages.
+    fn symbol(self) -> &'static str;
+}
+
+/// Implements [`ColumnUnit`] by the unit's own `from_suffix` and `label`.
+macro_rules! column_unit {
+    ($($unit:ty),*) => {$(
+        impl ColumnUnit for $unit {
+            fn declared_by(column: &str) -> Option<Self> {
+                Self::from_suffix(column)
+            }
+            fn symbol(self) -> &'static str {
+                self.label()
+            }
+        }
+    )*};
+}
+column_unit!(SpeedUnit, TorqueUnit, ForceUnit);
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -39,6 +39,27 @@ pub(crate) struct Spent {
     pub scored: u64,
 }
 
+impl Spent {
+    /// A run starting now after the completed populations `previous`, whose candidates count.
+    pub fn after(previous: &[Population]) -> Self {
+        Spent {
+            started: Instant::now(),
+            scored: previous.iter().map(|p| p.record.candidates_scored).sum(),
+        }
+    }
+
+    /// The run's result: its `populations`, why it stopped, its evaluations (candidates
+    /// scored × `data_len`) and its wall time.
+    pub fn finish(&self, populations: Vec<Population>, stop: StopReason, data_len: u64) -> super::Run {
+        super::Run {
+            populations,
+            stop,
+            evaluations: self.scored * data_len,
+            seconds: self.started.elapsed().as_secs_f64(),
+        }
+    }
+}
+
 impl Filling {
     pub fn new(index: usize, stream: u32, epsilon: f64, target: usize, prior: &Prior, data_len: u64) -> Self {
         Filling {
@@ -61,6 +82,23 @@ impl Filling {
     /// decide differently; ε = ∞ decides nothing near a threshold.
     pub fn near_threshold(&self, rho: f64) -> bool {
         self.epsilon.is_finite() && (rho - self.epsilon).abs() <= PARITY_TOLERANCE * self.epsilon
+    }
+
+    /// Goes through `kept` (candidates in index order, each with its ρ): counts those near ε,
+    /// picks those below ε until N particles would be reached. Returns the picked (index, ρ)
+    /// and the index one past the last candidate considered (`end` when all of them were).
+    pub fn pick_below_epsilon(&mut self, kept: &[(u64, f64)], end: u64) -> (Vec<(u64, f64)>, u64) {
+        let mut picked = Vec::new();
+        for &(index, rho) in kept {
+            self.near += u64::from(self.near_threshold(rho));
+            if rho < self.epsilon {
+                picked.push((index, rho));
+                if self.particles.len() + picked.len() == self.target {
+                    return (picked, index + 1);
+                }
+            }
+        }
+        (picked, end)
     }
 
     /// Calls `batch` with the draw budget left until N particles are accepted; stops early,

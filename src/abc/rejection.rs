@@ -26,7 +26,6 @@ use crate::eval::Evaluator;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
-use std::time::Instant;
 
 /// How populations relate to the candidate streams.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -136,17 +135,7 @@ struct Scored {
 
 /// Runs the sampler with `evaluator` (which fixes prior, seed and data).
 pub fn run(evaluator: &dyn Evaluator, config: &RejectionConfig) -> Result<Run> {
-    run_observed(evaluator, config, Vec::new(), &mut Silent)
-}
-
-/// As [`run_on`], every task scored in this process by `evaluator`.
-pub fn run_observed(
-    evaluator: &dyn Evaluator,
-    config: &RejectionConfig,
-    previous: Vec<Population>,
-    observer: &mut dyn Observer,
-) -> Result<Run> {
-    run_on(&Local(evaluator), config, previous, observer)
+    run_on(&Local(evaluator), config, Vec::new(), &mut Silent)
 }
 
 /// As [`run`], with every round's tasks run by `workers` (see [`super::shard`]), continuing
@@ -167,15 +156,8 @@ pub fn run_on(
     let prior = &problem.prior;
     let n = schedule.particles;
     let d = problem.data_len() as u64;
-    let started = Instant::now();
     let mut populations = previous;
-    let mut total_scored: u64 = populations.iter().map(|p| p.record.candidates_scored).sum();
-    let finish = |populations: Vec<Population>, stop: StopReason, scored: u64| Run {
-        populations,
-        stop,
-        evaluations: scored * d,
-        seconds: started.elapsed().as_secs_f64(),
-    };
+    let mut spent = Spent::after(&populations);
     let mut pending: Option<Scored> = None;
     // Nested mode: where the previous population stopped scanning its stream.
     let mut scanned_to = populations.last().map_or(0, |p| p.record.draws);
@@ -183,7 +165,7 @@ pub fn run_on(
         None => schedule.start_epsilon.unwrap_or(f64::INFINITY),
         Some(_) => match next_epsilon(&populations, schedule) {
             Ok(e) => e,
-            Err(stop) => return Ok(finish(populations, stop, total_scored)),
+            Err(stop) => return Ok(spent.finish(populations, stop, d)),
         },
     };
     let stop = loop {
@@ -202,10 +184,6 @@ pub fn run_on(
         // half, a guess, for population 0. Batches are sized by it with a 10 % margin, so a
         // population rarely needs a second round trip nor scores much past its N-th particle.
         let projected_acceptance = projected_acceptance(populations.last(), epsilon);
-        let spent = Spent {
-            started,
-            scored: total_scored,
-        };
         let interrupted = fill.fill(schedule, &spent, observer, |fill, budget| {
             let batch = match pending.take() {
                 Some(s) if s.stream == stream && s.found.start <= fill.position && fill.position < s.found.end() => s,
@@ -236,7 +214,7 @@ pub fn run_on(
             }
             Ok(ControlFlow::Continue(()))
         })?;
-        total_scored += fill.scored;
+        spent.scored += fill.scored;
         if let Some(stop) = interrupted {
             break stop;
         }
@@ -252,7 +230,7 @@ pub fn run_on(
             Err(stop) => break stop,
         }
     };
-    Ok(finish(populations, stop, total_scored))
+    Ok(spent.finish(populations, stop, d))
 }
 
 /// The scan tasks of a round: each share of candidates (start, count) on the population's
@@ -323,19 +301,8 @@ fn batch_size(missing: usize, projected_acceptance: f64, max_batch: usize, budge
 fn scan(problem: &crate::eval::Problem, fill: &mut Filling, batch: &Found, weight: f64) {
     let prior = &problem.prior;
     let from = fill.position;
-    let mut consumed = batch.end();
-    let mut accepted: Vec<(u64, f64)> = Vec::new();
     let first = batch.kept.partition_point(|&(index, _)| index < from);
-    for &(index, rho) in &batch.kept[first..] {
-        fill.near += u64::from(fill.near_threshold(rho));
-        if rho < fill.epsilon {
-            accepted.push((index, rho));
-            if fill.particles.len() + accepted.len() == fill.target {
-                consumed = index + 1;
-                break;
-            }
-        }
-    }
+    let (accepted, consumed) = fill.pick_below_epsilon(&batch.kept[first..], batch.end());
     let stream = fill.stream;
     fill.particles.par_extend(accepted.into_par_iter().map(|(index, rho)| {
         let c = prior.candidate(problem.seed, stream, index);

@@ -93,7 +93,6 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
 use std::sync::Arc;
-use std::time::Instant;
 
 /// Where the importance weights' kernel sums are computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -767,20 +766,6 @@ impl Kernels {
         }
         Ok(log_w)
     }
-
-    /// Normalised importance weights of `particles`, the kernel sums by `sums_on`.
-    #[cfg(test)]
-    fn weights(
-        &self,
-        prior: &Prior,
-        previous: &[Particle],
-        particles: &[Particle],
-        sums_on: &dyn Fn(&KernelSums, &mut [f64]) -> Result<()>,
-    ) -> Result<Vec<f64>> {
-        Ok(normalise_log_weights(
-            &self.log_weights_with(prior, previous, particles, sums_on)?,
-        ))
-    }
 }
 
 /// exp(log w − max), divided by its compensated sum: Σ w = 1 to rounding.
@@ -908,7 +893,7 @@ impl Proposal for Context {
 
 /// Runs ABC-SMC with `evaluator` (which fixes prior, seed and data).
 pub fn run(evaluator: &dyn Evaluator, config: &SmcConfig) -> Result<Run> {
-    run_observed(evaluator, config, Vec::new(), &mut Silent)
+    run_on(&Local(evaluator), config, Vec::new(), &mut Silent)
 }
 
 /// Goes through the proposals of a round in index order (`found` holds those inside the
@@ -919,18 +904,7 @@ fn accept_found(problem: &Problem, fill: &mut Filling, context: &Context, found:
     let prior = &problem.prior;
     let key = key_of_seed(problem.seed);
     let from = fill.position;
-    let mut consumed = found.end();
-    let mut accepted: Vec<(u64, f64)> = Vec::new();
-    for &(index, rho) in &found.kept {
-        fill.near += u64::from(fill.near_threshold(rho));
-        if rho < fill.epsilon {
-            accepted.push((index, rho));
-            if fill.particles.len() + accepted.len() == fill.target {
-                consumed = index + 1;
-                break;
-            }
-        }
-    }
+    let (accepted, consumed) = fill.pick_below_epsilon(&found.kept, found.end());
     let stream = fill.stream;
     let kernels = &context.kernels;
     let particles: Vec<Particle> = accepted
@@ -977,16 +951,6 @@ fn weigh(workers: &dyn Workers, population: usize, context: &Arc<Context>, parti
     )?))
 }
 
-/// As [`run_on`], every task scored in this process by `evaluator`.
-pub fn run_observed(
-    evaluator: &dyn Evaluator,
-    config: &SmcConfig,
-    previous: Vec<Population>,
-    observer: &mut dyn Observer,
-) -> Result<Run> {
-    run_on(&Local(evaluator), config, previous, observer)
-}
-
 /// As [`run`], with every round's tasks run by `workers` (see [`super::shard`]), continuing
 /// after the completed populations `previous` (empty for a fresh run) and reporting to
 /// `observer`. Continuing gives exactly the populations an uninterrupted run with `config`
@@ -998,25 +962,18 @@ pub fn run_on(
     observer: &mut dyn Observer,
 ) -> Result<Run> {
     config.validate()?;
-    let started = Instant::now();
     let problem = workers.problem();
     let prior = &problem.prior;
     let schedule = &config.schedule;
     let n = schedule.particles;
     let d = problem.data_len() as u64;
     let mut populations = previous;
-    let mut total_scored: u64 = populations.iter().map(|p| p.record.candidates_scored).sum();
-    let finish = |populations: Vec<Population>, stop: StopReason, scored: u64| Run {
-        populations,
-        stop,
-        evaluations: scored * d,
-        seconds: started.elapsed().as_secs_f64(),
-    };
+    let mut spent = Spent::after(&populations);
     if populations.is_empty() {
         let run = first_population(workers, schedule, observer)?;
-        total_scored += run.populations.iter().map(|p| p.record.candidates_scored).sum::<u64>();
+        spent.scored += run.populations.iter().map(|p| p.record.candidates_scored).sum::<u64>();
         if matches!(run.stop, StopReason::MaxDraws | StopReason::WallTime) {
-            return Ok(finish(run.populations, run.stop, total_scored));
+            return Ok(spent.finish(run.populations, run.stop, d));
         }
         populations = run.populations;
     }
@@ -1046,10 +1003,6 @@ pub fn run_on(
         // The acceptance rate the first batch is sized by: the last SMC population's, or a
         // guess for the first one. Later batches use this population's own.
         let mut rate = if t >= 2 { previous_rate } else { 0.25 };
-        let spent = Spent {
-            started,
-            scored: total_scored,
-        };
         let interrupted = fill.fill(schedule, &spent, observer, |fill, budget| {
             if budget == 0 {
                 return Ok(ControlFlow::Break(StopReason::MaxDraws));
@@ -1070,7 +1023,7 @@ pub fn run_on(
             rate = fill.particles.len().max(1) as f64 / fill.position as f64;
             Ok(ControlFlow::Continue(()))
         })?;
-        total_scored += fill.scored;
+        spent.scored += fill.scored;
         let weights = match interrupted {
             None if fill.particles.is_empty() => Some(Vec::new()),
             None => Some(weigh(workers, t, &context, &fill.particles)?),
@@ -1087,7 +1040,7 @@ pub fn run_on(
         let population = population_of(fill, survivors, weights, config, problem, previous_rate);
         super::complete_population(&mut populations, population, observer)?;
     };
-    Ok(finish(populations, stop, total_scored))
+    Ok(spent.finish(populations, stop, d))
 }
 
 /// The cumulative sums of `weights` over their total, the last exactly 1: what a draw by
@@ -1288,19 +1241,21 @@ mod tests {
 
     /// m2 and m4 boxes; m4's last two parameters fixed (zero width).
     fn two_law_prior() -> Prior {
+        m2_and_m4(
+            [[0.0, 0.0, 0.0], [10.0, 10.0, 1.0]],
+            [[0.0, -1.0, 0.5, 0.0], [4.0, 1.0, 0.5, 0.0]],
+        )
+    }
+
+    /// Equally likely m2 and m4 on the boxes `[lower, upper]` given.
+    fn m2_and_m4(m2: [[f32; 3]; 2], m4: [[f32; 4]; 2]) -> Prior {
+        let law_box = |law, [lower, upper]: [&[f32]; 2]| LawBox {
+            law,
+            lower: lower.to_vec(),
+            upper: upper.to_vec(),
+        };
         Prior::new(
-            vec![
-                LawBox {
-                    law: Law::M2,
-                    lower: vec![0.0, 0.0, 0.0],
-                    upper: vec![10.0, 10.0, 1.0],
-                },
-                LawBox {
-                    law: Law::M4,
-                    lower: vec![0.0, -1.0, 0.5, 0.0],
-                    upper: vec![4.0, 1.0, 0.5, 0.0],
-                },
-            ],
+            vec![law_box(Law::M2, [&m2[0], &m2[1]]), law_box(Law::M4, [&m4[0], &m4[1]])],
             vec![1.0, 1.0],
         )
         .unwrap()
@@ -1388,7 +1343,7 @@ mod tests {
             particle(Law::M4, 0, &[2.0, 0.0, 0.0, 0.0], 0.0),
             particle(Law::M4, 1, &[0.5, 0.0, 0.0, 0.0], 0.0),
         ];
-        let w = kernels.weights(&prior, &previous, &new, &host_sums).unwrap();
+        let w = normalise_log_weights(&kernels.log_weights_with(&prior, &previous, &new, &host_sums).unwrap());
         assert!((w[0] + w[1] - 1.0).abs() < 1e-15);
         (prior, previous, kernels, w)
     }
@@ -1494,22 +1449,10 @@ mod tests {
         // probability 0.9·0.7 + 0.1·0.3 = 0.66, m4 with 0.34; with equal priors, identical
         // boxes and identical relative positions, the weights differ by 0.66 / 0.34 only
         // through that term and P(m) inside the within-law density.
-        let prior = Prior::new(
-            vec![
-                LawBox {
-                    law: Law::M2,
-                    lower: vec![0.0, 1.0, 1.0],
-                    upper: vec![4.0, 1.0, 1.0],
-                },
-                LawBox {
-                    law: Law::M4,
-                    lower: vec![0.0, 0.0, 0.0, 0.0],
-                    upper: vec![4.0, 0.0, 0.0, 0.0],
-                },
-            ],
-            vec![1.0, 1.0],
-        )
-        .unwrap();
+        let prior = m2_and_m4(
+            [[0.0, 1.0, 1.0], [4.0, 1.0, 1.0]],
+            [[0.0, 0.0, 0.0, 0.0], [4.0, 0.0, 0.0, 0.0]],
+        );
         let previous = vec![
             particle(Law::M2, 0, &[1.0, 1.0, 1.0], 0.45),
             particle(Law::M2, 1, &[3.0, 1.0, 1.0], 0.45),
@@ -1523,7 +1466,7 @@ mod tests {
             particle(Law::M2, 0, &[2.0, 1.0, 1.0], 0.0),
             particle(Law::M4, 1, &[2.0, 0.0, 0.0, 0.0], 0.0),
         ];
-        let w = kernels.weights(&prior, &previous, &new, &host_sums).unwrap();
+        let w = normalise_log_weights(&kernels.log_weights_with(&prior, &previous, &new, &host_sums).unwrap());
         assert!((w[1] / w[0] - 0.66 / 0.34).abs() < 1e-12, "{w:?}");
     }
 

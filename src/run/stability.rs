@@ -282,15 +282,16 @@ impl StabilityJob {
         note: &std::cell::RefCell<&mut dyn FnMut(String)>,
         pace: &mut crate::limits::Pace,
     ) -> Result<Vec<f64>> {
+        let grid = map::Grid {
+            law: input.law,
+            samples: &input.samples_si,
+            omega_rpm: &self.omega_rpm,
+            wob_kn: &self.wob_kn,
+            criterion: self.criterion,
+            w_ref_n: self.w_ref_n,
+        };
         if *backend != Backend::Cpu {
-            match crate::eval::gpu::stability::stability_grid(
-                input.law,
-                &input.samples_si,
-                &self.omega_rpm,
-                &self.wob_kn,
-                self.criterion,
-                self.w_ref_n,
-            ) {
+            match crate::eval::gpu::stability::stability_grid(&grid) {
                 Ok((counts, _)) => {
                     let n = input.samples_si.len() as f64;
                     let row = self.wob_kn.len();
@@ -307,15 +308,7 @@ impl StabilityJob {
                 }
             }
         }
-        map::probability_grid_with(
-            input.law,
-            &input.samples_si,
-            &self.omega_rpm,
-            &self.wob_kn,
-            self.criterion,
-            self.w_ref_n,
-            pace,
-        )
+        map::probability_grid_with(&grid, pace)
     }
 }
 

@@ -237,36 +237,34 @@ impl Criterion {
     }
 }
 
+/// One law's stability grid as asked of either backend: its `samples` (SI parameter vectors)
+/// judged by `criterion` at every top-drive speed (rpm) × weight on bit (kN), the law's torque
+/// scaled by W / `w_ref_n` (N).
+#[derive(Clone, Copy, Debug)]
+pub struct Grid<'a> {
+    pub law: Law,
+    pub samples: &'a [Vec<f64>],
+    pub omega_rpm: &'a [f64],
+    pub wob_kn: &'a [f64],
+    pub criterion: Criterion,
+    pub w_ref_n: f64,
+}
+
 /// Share of `samples` unstable at every cell (NaN, unknown, in a speed's row where a sample's
 /// torque has no slope), row-major over (Ω, W): the CPU twin of
 /// `shaders/stability.wgsl`. Speeds in rpm, weights in kN.
-pub fn probability_grid(
-    law: Law,
-    samples: &[Vec<f64>],
-    omega_rpm: &[f64],
-    wob_kn: &[f64],
-    criterion: Criterion,
-    w_ref_n: f64,
-) -> Vec<f64> {
+pub fn probability_grid(grid: &Grid) -> Vec<f64> {
     let mut pace = crate::limits::Pace::unchecked();
-    probability_grid_with(law, samples, omega_rpm, wob_kn, criterion, w_ref_n, &mut pace)
-        .expect("an unchecked pace never refuses")
+    probability_grid_with(grid, &mut pace).expect("an unchecked pace never refuses")
 }
 
 /// [`probability_grid`], counting each speed's cell-samples on `pace` (which may refuse the
 /// rest of the work once it has measured this machine's speed).
-pub fn probability_grid_with(
-    law: Law,
-    samples: &[Vec<f64>],
-    omega_rpm: &[f64],
-    wob_kn: &[f64],
-    criterion: Criterion,
-    w_ref_n: f64,
-    pace: &mut crate::limits::Pace,
-) -> Result<Vec<f64>> {
-    let mut out = Vec::with_capacity(omega_rpm.len() * wob_kn.len());
-    for &rpm in omega_rpm {
-        pace.advance((wob_kn.len() * samples.len()) as u64)?;
+pub fn probability_grid_with(grid: &Grid, pace: &mut crate::limits::Pace) -> Result<Vec<f64>> {
+    let (law, samples) = (grid.law, grid.samples);
+    let mut out = Vec::with_capacity(grid.omega_rpm.len() * grid.wob_kn.len());
+    for &rpm in grid.omega_rpm {
+        pace.advance((grid.wob_kn.len() * samples.len()) as u64)?;
         let slopes: Vec<f64> = samples
             .iter()
             .map(|s| law.dtorque_dw(s, rpm * RAD_S_PER_RPM, 1.0))
@@ -275,9 +273,12 @@ pub fn probability_grid_with(
             || samples
                 .iter()
                 .any(|s| !law.torque(s, rpm * RAD_S_PER_RPM, 1.0).is_finite());
-        for &kn in wob_kn {
-            let r = kn * 1000.0 / w_ref_n;
-            let unstable = slopes.iter().filter(|&&slope| criterion.unstable(r * slope)).count();
+        for &kn in grid.wob_kn {
+            let r = kn * 1000.0 / grid.w_ref_n;
+            let unstable = slopes
+                .iter()
+                .filter(|&&slope| grid.criterion.unstable(r * slope))
+                .count();
             out.push(if unknown {
                 f64::NAN
             } else {
@@ -300,7 +301,14 @@ pub fn mixture_probability_grid(
     let total: f64 = inputs.iter().map(|m| m.probability).sum();
     let mut grid = vec![0.0; omega_rpm.len() * wob_kn.len()];
     for m in inputs {
-        let g = probability_grid(m.law, &m.samples_si, omega_rpm, wob_kn, criterion, w_ref_n);
+        let g = probability_grid(&Grid {
+            law: m.law,
+            samples: &m.samples_si,
+            omega_rpm,
+            wob_kn,
+            criterion,
+            w_ref_n,
+        });
         for (cell, p) in grid.iter_mut().zip(g) {
             *cell += m.probability / total * p;
         }
@@ -400,7 +408,14 @@ mod tests {
         let samples: Vec<Vec<f64>> = (0..50)
             .map(|i| Law::M2.scale_torque(&[13.0, 6.5, 0.2 + 0.004 * i as f64], 1000.0))
             .collect();
-        let grid = probability_grid(Law::M2, &samples, &omega, &wob, Criterion::Lumped(lumped), 244.2e3);
+        let grid = probability_grid(&Grid {
+            law: Law::M2,
+            samples: &samples,
+            omega_rpm: &omega,
+            wob_kn: &wob,
+            criterion: Criterion::Lumped(lumped),
+            w_ref_n: 244.2e3,
+        });
         let c = lumped.critical_bit_damping_nms();
         for (i, &rpm) in omega.iter().enumerate() {
             for (j, &kn) in wob.iter().enumerate() {

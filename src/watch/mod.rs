@@ -516,12 +516,7 @@ mod tests {
             .enumerate()
             .map(|(i, &w)| Law::M2.torque(&m2, w, 1.0) + 50.0 * (1.7 * i as f64).sin())
             .collect();
-        let samples = crate::data::Samples {
-            speed_rad_s,
-            torque_nm,
-            wob_n: None,
-            time_s: None,
-        };
+        let samples = crate::data::Samples::new(speed_rad_s, torque_nm);
         let fits = crate::fit::fit_laws(
             &[Law::M2, Law::M3],
             &samples,

@@ -25,12 +25,7 @@ fn one_parameter_problem(seed: u64) -> Problem {
         vec![1.0],
     )
     .unwrap();
-    let data = Samples {
-        speed_rad_s: (0..64).map(|i| 1.0 + i as f64 * 0.25).collect(),
-        torque_nm: vec![1.0; 64],
-        wob_n: None,
-        time_s: None,
-    };
+    let data = Samples::new((0..64).map(|i| 1.0 + i as f64 * 0.25).collect(), vec![1.0; 64]);
     Problem::new(prior, seed, &data, None)
 }
 

@@ -79,12 +79,7 @@ fn a_law_the_data_cannot_identify_says_so() {
     let noise = Normal::new(0.0, 300.0).unwrap();
     let w: Vec<f64> = (0..2000).map(|i| 0.6 + 15.0 * i as f64 / 1999.0).collect();
     let y = w.iter().map(|_| 10_000.0 + noise.sample(&mut rng)).collect();
-    let data = Samples {
-        speed_rad_s: w,
-        torque_nm: y,
-        wob_n: None,
-        time_s: None,
-    };
+    let data = Samples::new(w, y);
     let fit = fit_law(Law::M2, &data, &Samples::default(), &FitOptions::default()).unwrap();
     assert!(
         !fit.warnings.is_empty(),

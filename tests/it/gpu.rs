@@ -416,7 +416,7 @@ fn mixed_laws_over_a_long_record_agree_with_the_cpu(shape: Shape) {
 #[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
 fn the_stability_grid_agrees_with_the_cpu_cell_by_cell() {
     use bitrock::stability::lumped::Lumped;
-    use bitrock::stability::map::{Criterion, growth_rate_grid, parse_axis, probability_grid};
+    use bitrock::stability::map::{Criterion, Grid, growth_rate_grid, parse_axis, probability_grid};
     require_gpu();
     let omega = parse_axis("10:250:61", "x").unwrap();
     let wob = parse_axis("10:700:71", "y").unwrap();
@@ -439,8 +439,16 @@ fn the_stability_grid_agrees_with_the_cpu_cell_by_cell() {
             })
             .collect();
         for criterion in [Criterion::Lumped(lumped), Criterion::Critical(-200.0)] {
-            let cpu = probability_grid(law, &samples, &omega, &wob, criterion, w_ref);
-            let (gpu, growth) = gpu::stability::stability_grid(law, &samples, &omega, &wob, criterion, w_ref).unwrap();
+            let grid = Grid {
+                law,
+                samples: &samples,
+                omega_rpm: &omega,
+                wob_kn: &wob,
+                criterion,
+                w_ref_n: w_ref,
+            };
+            let cpu = probability_grid(&grid);
+            let (gpu, growth) = gpu::stability::stability_grid(&grid).unwrap();
             let c = criterion.critical_nms();
             let mut differing = 0;
             for (cell, (&p, &count)) in cpu.iter().zip(&gpu).enumerate() {

@@ -5,6 +5,7 @@ use crate::support::paper_m2_problem;
 use bitrock::Law;
 use bitrock::abc::rejection::{self, RejectionConfig};
 use bitrock::abc::schedule::Schedule;
+use bitrock::abc::shard::Local;
 use bitrock::abc::smc::{self, LawProposal, Perturbation, Refill, SmcConfig, WORTH_FLOOR};
 use bitrock::abc::{Observer, Population, Run, StopReason, effective_sample_size};
 use bitrock::data::{DataOptions, Samples, demo_field_data};
@@ -31,12 +32,7 @@ fn one_parameter_problem(seed: u64, other: Option<f64>) -> Problem {
         });
         weights.push(w);
     }
-    let data = Samples {
-        speed_rad_s: (0..64).map(|i| 1.0 + i as f64 * 0.25).collect(),
-        torque_nm: vec![1.0; 64],
-        wob_n: None,
-        time_s: None,
-    };
+    let data = Samples::new((0..64).map(|i| 1.0 + i as f64 * 0.25).collect(), vec![1.0; 64]);
     Problem::new(Prior::new(boxes, weights).unwrap(), seed, &data, None)
 }
 
@@ -220,7 +216,7 @@ fn continuing_from_completed_populations_equals_an_uninterrupted_run() {
 
 fn continuing_equals_uninterrupted(evaluator: &CpuEvaluator, config: &SmcConfig) {
     let mut seen = Keep::default();
-    let whole = smc::run_observed(evaluator, config, Vec::new(), &mut seen).unwrap();
+    let whole = smc::run_on(&Local(evaluator), config, Vec::new(), &mut seen).unwrap();
     assert_eq!(seen.0.len(), whole.populations.len());
     assert!(whole.populations.len() >= 4);
     for cut in [1, 3] {
@@ -228,7 +224,7 @@ fn continuing_equals_uninterrupted(evaluator: &CpuEvaluator, config: &SmcConfig)
         limited.schedule.max_populations = cut;
         let first = smc::run(evaluator, &limited).unwrap();
         assert_eq!((first.populations.len(), first.stop), (cut, StopReason::MaxPopulations));
-        let rest = smc::run_observed(evaluator, config, first.populations, &mut Keep::default()).unwrap();
+        let rest = smc::run_on(&Local(evaluator), config, first.populations, &mut Keep::default()).unwrap();
         assert_eq!(rest.stop, whole.stop);
         same_populations(&rest, &whole);
     }

@@ -28,12 +28,7 @@ pub fn samples(law: Law, params: &[f64], w_lo: f64, w_hi: f64, count: usize) -> 
         .map(|i| w_lo + (w_hi - w_lo) * i as f64 / (count - 1) as f64)
         .collect();
     let y = w.iter().map(|&w| law.torque(params, w, 1.0)).collect();
-    Samples {
-        speed_rad_s: w,
-        torque_nm: y,
-        wob_n: None,
-        time_s: None,
-    }
+    Samples::new(w, y)
 }
 
 /// Path of the built `bitrock` binary.

@@ -454,7 +454,6 @@ mod tests {
     use crate::eval::cpu::CpuEvaluator;
     use crate::prior::{LawBox, Prior};
 
-    /// A cubic (m4) record, n samples over 1-20 rad/s with Gaussian noise of `sigma` N·m.
     /// Asserts that `law`'s ln Z lies within three of its Monte-Carlo errors of `expected`, an
     /// error that is positive and below `most_error`.
     fn assert_within_errors(law: &LawEvidence, expected: f64, most_error: f64) {
@@ -471,6 +470,7 @@ mod tests {
         );
     }
 
+    /// A cubic (m4) record, n samples over 1-20 rad/s with Gaussian noise of `sigma` N·m.
     fn cubic_record(n: usize, sigma: f64) -> Samples {
         let speed: Vec<f64> = (0..n).map(|i| 1.0 + 19.0 * i as f64 / (n - 1) as f64).collect();
         let torque = speed
@@ -481,12 +481,36 @@ mod tests {
                 11_800.0 - 930.0 * w + 57.0 * w * w - 1.2 * w * w * w + sigma * z
             })
             .collect();
-        Samples {
-            speed_rad_s: speed,
-            torque_nm: torque,
-            wob_n: None,
-            time_s: None,
-        }
+        Samples::new(speed, torque)
+    }
+
+    /// m4 alone on the box [`lower`, `upper`], scored on the CPU against `data`.
+    fn m4_alone(lower: Vec<f32>, upper: Vec<f32>, data: &Samples) -> Local<Box<CpuEvaluator>> {
+        let prior = Prior::new(
+            vec![LawBox {
+                law: Law::M4,
+                lower,
+                upper,
+            }],
+            vec![1.0],
+        )
+        .unwrap();
+        Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, data, None))))
+    }
+
+    /// The box θ̂ ± 12 standard errors (σ² times the diagonal of `inverse`, the inverse normal
+    /// matrix) as f32 ends, and the log of its volume.
+    fn twelve_standard_errors(theta: &[f64], inverse: &DMatrix<f64>, sigma2: f64) -> (Vec<f32>, Vec<f32>, f64) {
+        let d = theta.len();
+        let half: Vec<f64> = (0..d).map(|j| 12.0 * (sigma2 * inverse[(j, j)]).sqrt()).collect();
+        let lower: Vec<f32> = (0..d).map(|j| (theta[j] - half[j]) as f32).collect();
+        let upper: Vec<f32> = (0..d).map(|j| (theta[j] + half[j]) as f32).collect();
+        let ln_volume = lower
+            .iter()
+            .zip(&upper)
+            .map(|(&a, &b)| (f64::from(b) - f64::from(a)).ln())
+            .sum();
+        (lower, upper, ln_volume)
     }
 
     /// ln Z of a linear model with a box prior that holds all of the likelihood: the integral
@@ -504,29 +528,13 @@ mod tests {
         let s_min = (&y - &x * &theta).norm_squared();
         // A box of ±12 standard errors: the likelihood outside it is below e^-70 of its peak.
         let sigma2 = s_min / (n - d) as f64;
-        let half: Vec<f64> = (0..d).map(|j| 12.0 * (sigma2 * inverse[(j, j)]).sqrt()).collect();
-        let lower: Vec<f32> = (0..d).map(|j| (theta[j] - half[j]) as f32).collect();
-        let upper: Vec<f32> = (0..d).map(|j| (theta[j] + half[j]) as f32).collect();
-        let ln_volume: f64 = lower
-            .iter()
-            .zip(&upper)
-            .map(|(&a, &b)| (f64::from(b) - f64::from(a)).ln())
-            .sum();
+        let (lower, upper, ln_volume) = twelve_standard_errors(theta.as_slice(), &inverse, sigma2);
         let m = (n - d) as f64 / 2.0;
         let expected = -std::f64::consts::LN_2 - m * std::f64::consts::PI.ln() + noise::ln_gamma(m)
             - m * s_min.ln()
             - 0.5 * xtx.determinant().ln()
             - ln_volume;
-        let prior = Prior::new(
-            vec![LawBox {
-                law: Law::M4,
-                lower,
-                upper,
-            }],
-            vec![1.0],
-        )
-        .unwrap();
-        let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &data, None))));
+        let evaluator = m4_alone(lower, upper, &data);
         let config = EvidenceConfig {
             particles: 400,
             islands: 8,
@@ -669,15 +677,7 @@ mod tests {
         // A box of ±12 GLS standard errors at the true φ (and wide enough for every φ that
         // carries the integral, whose θ̂ moves by less).
         let (theta, q_min, _, inverse) = gls(phi_true);
-        let sigma2 = q_min / (n - d) as f64;
-        let half: Vec<f64> = (0..d).map(|j| 12.0 * (sigma2 * inverse[(j, j)]).sqrt()).collect();
-        let lower: Vec<f32> = (0..d).map(|j| (theta[j] - half[j]) as f32).collect();
-        let upper: Vec<f32> = (0..d).map(|j| (theta[j] + half[j]) as f32).collect();
-        let ln_volume: f64 = lower
-            .iter()
-            .zip(&upper)
-            .map(|(&a, &b)| (f64::from(b) - f64::from(a)).ln())
-            .sum();
+        let (lower, upper, ln_volume) = twelve_standard_errors(theta.as_slice(), &inverse, q_min / (n - d) as f64);
         let m = (n - d) as f64 / 2.0;
         let cells = 20_000;
         let h = 2.0 / cells as f64;
@@ -694,16 +694,7 @@ mod tests {
             })
             .collect();
         let expected = log_mean_exp(terms.iter().copied()) + (cells as f64).ln() + h.ln() - ln_volume;
-        let prior = Prior::new(
-            vec![LawBox {
-                law: Law::M4,
-                lower,
-                upper,
-            }],
-            vec![1.0],
-        )
-        .unwrap();
-        let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &data, None))));
+        let evaluator = m4_alone(lower, upper, &data);
         let config = EvidenceConfig {
             particles: 3_000,
             islands: 8,

@@ -2,7 +2,7 @@
 //! for bit-for-bit comparison with the CPU (tests, `bitrock parity`); and
 //! `shaders/test_uniform_between.wgsl`, the WGSL candidate transform on arbitrary inputs (tests).
 
-use super::{GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use super::{GpuError, GpuPrior, Job, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
 use crate::prior::Prior;
 
 /// What the GPU made of one candidate index.
@@ -47,12 +47,8 @@ pub fn generate(
         0,
         bytemuck::bytes_of(&Job::new(population, start, count, row_width)),
     );
-    let entries = [
-        buffer_entry(0, UNIFORM),
-        buffer_entry(1, UNIFORM),
-        buffer_entry(2, STORAGE_WRITE),
-    ];
-    let kernel = ctx.kernel("candidates", "main", super::candidates_source, &entries, &[])?;
+    let bindings = [UNIFORM, UNIFORM, STORAGE_WRITE];
+    let kernel = ctx.kernel("candidates", "main", super::candidates_source, &bindings, &[])?;
     let bind_group = ctx.bind_group("candidates", &kernel.layout, &[&prior_buffer, &job_buffer, &out])?;
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("candidates"),
@@ -76,12 +72,12 @@ pub fn generate(
 /// [`crate::rng::uniform_between`] on inputs no prior box produces.
 pub fn uniform_between(triples: &[(f32, f32, u32)]) -> Result<Vec<f32>, GpuError> {
     let ctx = super::context()?;
-    let entries = [buffer_entry(0, STORAGE_READ), buffer_entry(1, STORAGE_WRITE)];
+    let bindings = [STORAGE_READ, STORAGE_WRITE];
     let kernel = ctx.kernel(
         "test_uniform_between",
         "main",
         super::test_uniform_between_source,
-        &entries,
+        &bindings,
         &[],
     )?;
     // Chunks of 2²⁰ triples (16 MiB) stay inside every adapter's storage-binding limit.

@@ -2,7 +2,7 @@
 //! S_i = Σ_j w_j exp(−|y_i − x_j|²/2), in f32 with blocked accumulation. The CPU twin is
 //! [`crate::eval::cpu::kernel_sums`] (f64); tests/it/gpu.rs measures their agreement.
 
-use super::{GpuContext, GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use super::{GpuContext, GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
 use crate::eval::KernelSums;
 use crate::laws::MAX_PARAMS;
 use bytemuck::{Pod, Zeroable};
@@ -61,13 +61,8 @@ struct Buffers {
     bind_group: wgpu::BindGroup,
 }
 
-fn entries() -> [wgpu::BindGroupLayoutEntry; 4] {
-    [
-        buffer_entry(0, UNIFORM),
-        buffer_entry(1, STORAGE_READ),
-        buffer_entry(2, STORAGE_READ),
-        buffer_entry(3, STORAGE_WRITE),
-    ]
+fn bindings() -> [wgpu::BufferBindingType; 4] {
+    [UNIFORM, STORAGE_READ, STORAGE_READ, STORAGE_WRITE]
 }
 
 impl Buffers {
@@ -121,7 +116,7 @@ impl Scratch {
             out.fill(0.0);
             return Ok(());
         }
-        let kernel = ctx.kernel("kernel_sums", "main", super::kernel_sums_source, &entries(), &[])?;
+        let kernel = ctx.kernel("kernel_sums", "main", super::kernel_sums_source, &bindings(), &[])?;
         // Targets per dispatch: within the binding limit (32 bytes each) and 2²² at most.
         let chunk = (ctx.limits.max_storage_buffer_binding_size / 32).clamp(1, 1 << 22) as usize;
         let chunk = chunk.min(out.len());

@@ -1,7 +1,7 @@
 //! A law file's WGSL at arbitrary points (`shaders/law_file_points.wgsl`): its torque and
 //! dT/dw in f32 on the GPU, for comparing with the f64 CPU twin.
 
-use super::{GpuError, STORAGE_READ, STORAGE_WRITE, buffer_entry};
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE};
 use crate::laws::file::LawFile;
 
 /// One point: the law's parameters (unused ones 0), bit speed (rad/s) and weight-on-bit ratio.
@@ -31,10 +31,10 @@ fn source(law: &LawFile) -> String {
 /// (T, dT/dw) of `law` at every point, f32, on the GPU.
 pub fn torques(law: &LawFile, points: &[Point]) -> Result<Vec<[f32; 2]>, GpuError> {
     let ctx = super::context()?;
-    let entries = [buffer_entry(0, STORAGE_READ), buffer_entry(1, STORAGE_WRITE)];
+    let bindings = [STORAGE_READ, STORAGE_WRITE];
     // The cache key holds the generated text, so that two laws of one name never share a kernel.
     let label = format!("law_file_points {}", law.wgsl());
-    let kernel = ctx.kernel(&label, "main", || source(law), &entries, &[])?;
+    let kernel = ctx.kernel(&label, "main", || source(law), &bindings, &[])?;
     let mut results = Vec::with_capacity(points.len());
     // Chunks of 2¹⁸ points (8 MiB) stay inside every adapter's storage-binding limit.
     for chunk in points.chunks(1 << 18) {

@@ -514,14 +514,15 @@ impl GpuContext {
     }
 
     /// The compute pipeline of entry point `entry` of `source` (called only when the pipeline
-    /// is not built yet: once per context) with an explicit layout of `entries` in group 0 and
+    /// is not built yet: once per context) with an explicit layout in group 0, a buffer of each
+    /// kind of `bindings` bound in order to bindings 0, 1, ..., and
     /// values for its `override` constants. One label names one source and layout.
     fn kernel(
         &self,
         label: &str,
         entry: &str,
         source: impl FnOnce() -> String,
-        entries: &[wgpu::BindGroupLayoutEntry],
+        bindings: &[wgpu::BufferBindingType],
         constants: &[(&str, f64)],
     ) -> Result<Kernel, GpuError> {
         let key = format!("{label}:{entry}:{constants:?}");
@@ -529,7 +530,7 @@ impl GpuContext {
         if let Some(kernel) = kernels.get(&key) {
             return Ok(kernel.clone());
         }
-        let kernel = self.build_kernel(label, entry, &source(), entries, constants)?;
+        let kernel = self.build_kernel(label, entry, &source(), bindings, constants)?;
         kernels.insert(key, kernel.clone());
         Ok(kernel)
     }
@@ -539,9 +540,11 @@ impl GpuContext {
         label: &str,
         entry: &str,
         source: &str,
-        entries: &[wgpu::BindGroupLayoutEntry],
+        bindings: &[wgpu::BufferBindingType],
         constants: &[(&str, f64)],
     ) -> Result<Kernel, GpuError> {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> =
+            (0u32..).zip(bindings).map(|(i, &ty)| buffer_entry(i, ty)).collect();
         self.scoped(|| {
             let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(label),
@@ -549,7 +552,7 @@ impl GpuContext {
             });
             let layout = self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some(label),
-                entries,
+                entries: &entries,
             });
             let pipeline_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some(label),
@@ -927,6 +930,17 @@ fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLay
 const UNIFORM: wgpu::BufferBindingType = wgpu::BufferBindingType::Uniform;
 const STORAGE_READ: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage { read_only: true };
 const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage { read_only: false };
+/// The bindings a scoring kernel that reads its candidates from a buffer starts with: the
+/// candidates (proposals, or the records' priors), the job, the speed, torque and ratio
+/// columns, the sums of squares it writes.
+const STORED_CANDIDATE_BINDINGS: [wgpu::BufferBindingType; 6] = [
+    STORAGE_READ,
+    UNIFORM,
+    STORAGE_READ,
+    STORAGE_READ,
+    STORAGE_READ,
+    STORAGE_WRITE,
+];
 
 /// Invocations per workgroup of every kernel (`@workgroup_size(64)`).
 const WORKGROUP_SIZE: u32 = 64;

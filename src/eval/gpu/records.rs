@@ -8,8 +8,8 @@
 //! one [`super::residual::GpuEvaluator`] gives for its record, bit for bit.
 
 use super::{
-    CANDIDATES_PER_TILE, GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, STORAGE_WRITE, ScoringBuffers,
-    Shape, UNIFORM, buffer_entry, score_dispatch,
+    CANDIDATES_PER_TILE, GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, ScoringBuffers, Shape,
+    score_dispatch,
 };
 use crate::eval::Problem;
 use crate::eval::{Candidates, Request};
@@ -168,18 +168,11 @@ impl GpuRecords {
             storage,
         )?;
         let tile_segment = context.buffer("tile segments", 4 * (chunk / tile) as u64, storage)?;
-        let entries = [
-            buffer_entry(0, STORAGE_READ),
-            buffer_entry(1, UNIFORM),
-            buffer_entry(2, STORAGE_READ),
-            buffer_entry(3, STORAGE_READ),
-            buffer_entry(4, STORAGE_READ),
-            buffer_entry(5, STORAGE_WRITE),
-            buffer_entry(6, STORAGE_READ),
-            buffer_entry(7, STORAGE_READ),
-            buffer_entry(8, STORAGE_READ),
-            buffer_entry(9, STORAGE_READ),
-        ];
+        // Then the segments, the tiles' segments, the proposals and the offsets.
+        let bindings: Vec<_> = super::STORED_CANDIDATE_BINDINGS
+            .into_iter()
+            .chain([STORAGE_READ; 4])
+            .collect();
         shape.check_fits(context)?;
         let buffers = Bindings {
             priors,
@@ -198,7 +191,7 @@ impl GpuRecords {
                     &super::file_laws::label("records", &file_laws),
                     shape.entry_point(),
                     || super::records_source_for(&file_laws),
-                    &entries,
+                    &bindings,
                     &shape.constants(class == 1),
                 )?;
                 let group = buffers.group(context, &kernel)?;

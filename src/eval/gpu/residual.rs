@@ -9,7 +9,7 @@
 use super::shape::Source;
 use super::{
     GpuContext, GpuError, GpuPrior, GpuProposal, Job, STORAGE_READ, STORAGE_WRITE, ScoringBuffers, Shape, UNIFORM,
-    buffer_entry, score_dispatch,
+    score_dispatch,
 };
 use crate::error::Result;
 use crate::eval::{Evaluator, KernelSums, Problem};
@@ -93,13 +93,13 @@ impl GpuEvaluator {
         let ssr_bytes = 4 * chunk as u64;
         let (ssr, staging) = context.output_and_staging("ssr", ssr_bytes)?;
         context.queue.write_buffer(&prior_buffer, 0, bytemuck::bytes_of(&prior));
-        let entries = [
-            buffer_entry(0, UNIFORM),
-            buffer_entry(1, UNIFORM),
-            buffer_entry(2, STORAGE_READ),
-            buffer_entry(3, STORAGE_READ),
-            buffer_entry(4, STORAGE_READ),
-            buffer_entry(5, STORAGE_WRITE),
+        let bindings = [
+            UNIFORM,
+            UNIFORM,
+            STORAGE_READ,
+            STORAGE_READ,
+            STORAGE_READ,
+            STORAGE_WRITE,
         ];
         shape.check_fits(context)?;
         let file_laws = crate::laws::file::among(problem.prior.laws());
@@ -107,7 +107,7 @@ impl GpuEvaluator {
             &super::file_laws::label("residual", &file_laws),
             shape.entry_point(),
             || super::residual_source_for(&file_laws),
-            &entries,
+            &bindings,
             &shape.constants(has_ratio),
         )?;
         let bind_group = context.bind_group(
@@ -199,14 +199,7 @@ impl GpuEvaluator {
         if res.params.as_ref().is_some_and(|p| !lag || p.lag.is_some()) {
             return Ok(res.params.as_ref().expect("checked just above"));
         }
-        let entries = [
-            buffer_entry(0, STORAGE_READ),
-            buffer_entry(1, UNIFORM),
-            buffer_entry(2, STORAGE_READ),
-            buffer_entry(3, STORAGE_READ),
-            buffer_entry(4, STORAGE_READ),
-            buffer_entry(5, STORAGE_WRITE),
-        ];
+        let bindings = super::STORED_CANDIDATE_BINDINGS;
         let file_laws = crate::laws::file::among(self.problem.prior.laws());
         let label = super::file_laws::label("score_params", &file_laws);
         if res.params.is_none() {
@@ -220,7 +213,7 @@ impl GpuEvaluator {
                 &label,
                 self.shape.entry_point(),
                 || super::score_params_source_for(&file_laws),
-                &entries,
+                &bindings,
                 &self.shape.constants(res.has_ratio),
             )?;
             let bind_group = ctx.bind_group(
@@ -243,7 +236,7 @@ impl GpuEvaluator {
                 &label,
                 self.shape.entry_point(),
                 || super::score_params_source_for(&file_laws),
-                &entries,
+                &bindings,
                 &constants,
             )?;
             let bind_group = self.context.bind_group(

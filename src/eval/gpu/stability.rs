@@ -2,9 +2,9 @@
 //! many of S parameter samples are unstable, and the growth rate of the first. The GPU twin of
 //! `crate::stability::map::probability_grid` and `growth_rate_grid`.
 
-use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
 use crate::laws::Law;
-use crate::stability::map::Criterion;
+use crate::stability::map::{Criterion, Grid};
 use crate::units::RAD_S_PER_RPM;
 use bytemuck::{Pod, Zeroable};
 
@@ -49,18 +49,13 @@ fn slope_pass(
     buffers: [&wgpu::Buffer; 4],
     (n_omega, n_samples): (usize, usize),
 ) -> Result<(super::Kernel, wgpu::BindGroup, (u32, u32)), GpuError> {
-    let slope_entries = [
-        buffer_entry(0, UNIFORM),
-        buffer_entry(1, STORAGE_READ),
-        buffer_entry(2, STORAGE_READ),
-        buffer_entry(3, STORAGE_WRITE),
-    ];
+    let slope_bindings = [UNIFORM, STORAGE_READ, STORAGE_READ, STORAGE_WRITE];
     let file_laws = crate::laws::file::among([law]);
     let slope_kernel = ctx.kernel(
         &super::file_laws::label("slopes", &file_laws),
         "main",
         || super::slopes_source_for(&file_laws),
-        &slope_entries,
+        &slope_bindings,
         &[],
     )?;
     let slope_group = ctx.bind_group("slopes", &slope_kernel.layout, &buffers)?;
@@ -129,14 +124,15 @@ impl StabilityJob {
 /// Unstable counts (row-major over Ω, W) and the growth rates of the first sample (1-DOF
 /// criterion only; zeros otherwise). Speeds rpm, weights kN, samples SI. Two kernels: the
 /// slopes dT/dw per (speed, sample), then the count per cell.
-pub fn stability_grid(
-    law: Law,
-    samples: &[Vec<f64>],
-    omega_rpm: &[f64],
-    wob_kn: &[f64],
-    criterion: Criterion,
-    w_ref_n: f64,
-) -> Result<(Vec<u32>, Vec<f32>), GpuError> {
+pub fn stability_grid(grid: &Grid) -> Result<(Vec<u32>, Vec<f32>), GpuError> {
+    let Grid {
+        law,
+        samples,
+        omega_rpm,
+        wob_kn,
+        criterion,
+        w_ref_n,
+    } = *grid;
     let ctx = super::context()?;
     let cells = omega_rpm.len() * wob_kn.len();
     if samples.is_empty() || cells == 0 {
@@ -179,14 +175,8 @@ pub fn stability_grid(
         (omega.len(), samples.len()),
     )?;
 
-    let entries = [
-        buffer_entry(0, UNIFORM),
-        buffer_entry(1, STORAGE_READ),
-        buffer_entry(2, STORAGE_READ),
-        buffer_entry(3, STORAGE_WRITE),
-        buffer_entry(4, STORAGE_WRITE),
-    ];
-    let kernel = ctx.kernel("stability", "main", super::stability_source, &entries, &[])?;
+    let bindings = [UNIFORM, STORAGE_READ, STORAGE_READ, STORAGE_WRITE, STORAGE_WRITE];
+    let kernel = ctx.kernel("stability", "main", super::stability_source, &bindings, &[])?;
     let bind_group = ctx.bind_group(
         "stability",
         &kernel.layout,

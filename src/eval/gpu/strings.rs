@@ -2,7 +2,7 @@
 //! law, parameters, operating point and start, to its summary and final state. The GPU twin of
 //! [`crate::simulate::strings::integrate_batch`].
 
-use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE, buffer_entry};
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
 use crate::simulate::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Schedule, StringJob, StringState, Summary};
 use bytemuck::{Pod, Zeroable};
 
@@ -48,12 +48,7 @@ pub fn integrate_batch(
     let ctx = super::context()?;
     let mut out = Vec::with_capacity(jobs.len());
     let laws = crate::laws::file::among(jobs.iter().map(|j| j.law));
-    let entries = [
-        buffer_entry(0, UNIFORM),
-        buffer_entry(1, STORAGE_READ),
-        buffer_entry(2, STORAGE_WRITE),
-        buffer_entry(3, STORAGE_WRITE),
-    ];
+    let bindings = [UNIFORM, STORAGE_READ, STORAGE_WRITE, STORAGE_WRITE];
     let nodes = chain.nodes();
     // One law for the whole batch (the usual case) is compiled in.
     let single = jobs
@@ -69,7 +64,7 @@ pub fn integrate_batch(
         ),
         "main",
         || super::strings_source_for(&laws, nodes),
-        &entries,
+        &bindings,
         &[("NODES", nodes as f64), ("LAW", law_override)],
     )?;
     let mut job = StringsJob::zeroed();

@@ -109,6 +109,40 @@ fn law_legend(laws: &[Law]) -> Vec<(Swatch, String)> {
         .collect()
 }
 
+/// The mesh of a bar chart of model probabilities: groups along x (`x_labels` of them named by
+/// `x_label`), P(M_k | y) in tenths up to 1 (headroom above 1 left unlabelled).
+fn probability_mesh<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    x_desc: &str,
+    x_labels: usize,
+    x_label: &dyn Fn(&f64) -> String,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc("P(M_k | y)")
+        .axis_desc_style(font(AXIS))
+        .label_style(font(TICK))
+        .max_light_lines(0)
+        .bold_line_style(GRID)
+        .disable_x_mesh()
+        .x_labels(x_labels)
+        .x_label_formatter(x_label)
+        .y_labels(6)
+        .y_label_formatter(&|y| {
+            if *y <= 1.0 + 1e-9 {
+                format!("{y:.1}")
+            } else {
+                String::new()
+            }
+        })
+        .draw()?;
+    Ok(())
+}
+
 /// Grouped bars: one group per x position, one bar per law.
 fn grouped_bars<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, laws: &[Law], groups: &[Vec<f64>]) -> DrawResult
 where
@@ -137,20 +171,7 @@ impl Figure for ModelProbabilities {
         for (panel, (label, groups)) in panels(&main, self.runs.len()).iter().zip(&self.runs) {
             let n = groups.len().max(1) as f64;
             let mut chart = axes(panel, label, (-0.6, n - 0.4), (0.0, 1.0))?;
-            chart
-                .configure_mesh()
-                .x_desc("population")
-                .y_desc("P(M_k | y)")
-                .axis_desc_style(font(AXIS))
-                .label_style(font(TICK))
-                .max_light_lines(0)
-                .bold_line_style(GRID)
-                .disable_x_mesh()
-                .x_labels(groups.len().clamp(2, 12))
-                .x_label_formatter(&integer_label)
-                .y_labels(6)
-                .y_label_formatter(&|y| format!("{y:.1}"))
-                .draw()?;
+            probability_mesh(&mut chart, "population", groups.len().clamp(2, 12), &integer_label)?;
             grouped_bars(&mut chart, &self.laws, groups)?;
         }
         legend_row(&strip, &law_legend(&self.laws))
@@ -182,26 +203,7 @@ impl Figure for FinalProbabilities {
                 .and_then(|i| labels.get(i).cloned())
                 .unwrap_or_default()
         };
-        chart
-            .configure_mesh()
-            .x_desc("prior width")
-            .y_desc("P(M_k | y)")
-            .axis_desc_style(font(AXIS))
-            .label_style(font(TICK))
-            .max_light_lines(0)
-            .bold_line_style(GRID)
-            .disable_x_mesh()
-            .x_labels(self.runs.len().max(2))
-            .x_label_formatter(&formatter)
-            .y_labels(6)
-            .y_label_formatter(&|y| {
-                if *y <= 1.0 + 1e-9 {
-                    format!("{y:.1}")
-                } else {
-                    String::new()
-                }
-            })
-            .draw()?;
+        probability_mesh(&mut chart, "prior width", self.runs.len().max(2), &formatter)?;
         let groups: Vec<Vec<f64>> = self.runs.iter().map(|r| r.1.clone()).collect();
         grouped_bars(&mut chart, &self.laws, &groups)?;
         let width = 0.8 / self.laws.len().max(1) as f64;

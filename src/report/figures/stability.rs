@@ -258,11 +258,20 @@ struct StochasticMap {
     title: String,
 }
 
-/// The cells of a map over (Ω, W) coloured by `grid` (row-major over Ω; NaN grey).
-fn heat_cells<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, omega: &[f64], wob: &[f64], grid: &[f64]) -> DrawResult
+/// A map's axes over (Ω, W) on `area`, its cells coloured by `grid` (row-major over Ω; NaN
+/// grey).
+fn heat_map<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    omega: &[f64],
+    wob: &[f64],
+    grid: &[f64],
+) -> std::result::Result<Chart<'a, DB>, Box<dyn std::error::Error>>
 where
     DB::ErrorType: 'static,
 {
+    let (x0, x1) = (omega[0], omega[omega.len() - 1]);
+    let (y0, y1) = (wob[0], wob[wob.len() - 1]);
+    let mut chart = axes(area, "", (x0, x1), (y0, y1))?;
     let (xe, ye) = (edges(omega), edges(wob));
     let nw = wob.len();
     chart.draw_series((0..omega.len()).flat_map(|i| {
@@ -274,7 +283,7 @@ where
             )
         })
     }))?;
-    Ok(())
+    Ok(chart)
 }
 
 /// Cell edges of an axis of cell centres: midpoints, the ends at the first and last value.
@@ -292,10 +301,7 @@ impl Figure for StochasticMap {
     {
         let area = titled(root, &self.title)?;
         let (main, bar) = area.split_horizontally(area.dim_in_pixel().0 - 150);
-        let (x0, x1) = (self.omega[0], self.omega[self.omega.len() - 1]);
-        let (y0, y1) = (self.wob[0], self.wob[self.wob.len() - 1]);
-        let mut chart = axes(&main, "", (x0, x1), (y0, y1))?;
-        heat_cells(&mut chart, &self.omega, &self.wob, &self.grid)?;
+        let mut chart = heat_map(&main, &self.omega, &self.wob, &self.grid)?;
         mesh(&mut chart, "top-drive speed Ω (rpm)", "weight on bit W (kN)")?;
         for (law, prob, map_wob, p_wob) in &self.laws {
             let c = law_color(*law);
@@ -429,10 +435,7 @@ impl Figure for SimulatedMap {
     {
         let area = titled(root, &self.title)?;
         let (main, bar) = area.split_horizontally(area.dim_in_pixel().0 - 150);
-        let (x0, x1) = (self.omega[0], self.omega[self.omega.len() - 1]);
-        let (y0, y1) = (self.wob[0], self.wob[self.wob.len() - 1]);
-        let mut chart = axes(&main, "", (x0, x1), (y0, y1))?;
-        heat_cells(&mut chart, &self.omega, &self.wob, &self.heat)?;
+        let mut chart = heat_map(&main, &self.omega, &self.wob, &self.heat)?;
         let (xe, ye) = (edges(&self.omega), edges(&self.wob));
         let nw = self.wob.len();
         let cell = |i: usize, j: usize| [(xe[i], ye[j]), (xe[i + 1], ye[j + 1])];
@@ -484,6 +487,8 @@ impl Figure for SimulatedMap {
             )?;
         }
         if self.bistable.iter().any(|b| *b) {
+            // A path of one point: an entry in the legend, nothing on the map.
+            let (x0, y0) = (self.omega[0], self.wob[0]);
             chart
                 .draw_series(std::iter::once(PathElement::new(vec![(x0, y0), (x0, y0)], BISTABLE)))?
                 .label("bistable band")

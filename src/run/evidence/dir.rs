@@ -411,30 +411,13 @@ pub fn samples(dir: &Path) -> Result<StoredSamples> {
         calibration: Vec::new(),
         validation: Vec::new(),
     };
-    for (i, record) in reader.records().enumerate() {
-        let line = i as u64 + 2;
-        let record = record.map_err(|e| Error::Format {
-            path: path.clone(),
-            line: Some(line),
-            message: e.to_string(),
-        })?;
-        let bad_cell = |column: usize, message: String| Error::Cell {
-            path: path.clone(),
-            line,
-            column: column + 1,
-            name: header[column].clone(),
-            message,
-        };
-        let number = |column: usize| {
-            let cell = record.get(column).unwrap_or("");
-            cell.parse::<f64>()
-                .map_err(|_| bad_cell(column, format!("`{cell}` is not a number")))
-        };
-        let sample = (number(1)?, number(2)?);
-        match record.get(0).unwrap_or("") {
+    for row in crate::files::csv_rows(&mut reader, &path, &header) {
+        let row = row?;
+        let sample = (row.number(1)?, row.number(2)?);
+        match row.cell(0) {
             "calibration" => stored.calibration.push(sample),
             "validation" => stored.validation.push(sample),
-            other => return Err(bad_cell(0, format!("`{other}` is neither calibration nor validation"))),
+            other => return Err(row.bad_cell(0, format!("`{other}` is neither calibration nor validation"))),
         }
     }
     Ok(stored)
