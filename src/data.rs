@@ -651,12 +651,17 @@ fn assemble_columns(
     })
 }
 
-/// A record from samples already in SI (a watch's window): the options' filters, split and
-/// checks, as for a file's rows (the options' columns and units describe a file and are not
-/// read), its columns named
-/// by their SI quantities. A time column that
-/// runs backwards is said as in a file, by its row.
-pub fn field_data_from_samples(all: Samples, source: &Path, opts: &DataOptions) -> Result<FieldData> {
+/// A record from samples already in SI (a watch's window) of a source that `declared` its
+/// channels' names and units: the options' filters, split and checks, as for a file's rows
+/// (the options' columns and units are the source's business, and are not read), the values
+/// judged in the units the source declared. A time column that runs backwards is said as in a
+/// file, by its row.
+pub fn field_data_from_samples(
+    all: Samples,
+    source: &Path,
+    declared: &Declared,
+    opts: &DataOptions,
+) -> Result<FieldData> {
     opts.validate()?;
     if all.is_empty() {
         return Err(Error::Data {
@@ -668,17 +673,11 @@ pub fn field_data_from_samples(all: Samples, source: &Path, opts: &DataOptions) 
         let row = t.windows(2).position(|w| w[1] < w[0])? + 1;
         Some((format!("{} row {row}", source.display()), t[row - 1], t[row]))
     });
+    let Declared { columns, units } = declared.clone();
     let columns = ColumnsUsed {
-        speed: "speed_rad_s".into(),
-        torque: "torque_nm".into(),
-        wob: all.wob_n.as_ref().map(|_| "wob_n".into()),
-        time: all.time_s.as_ref().map(|_| "time_s".into()),
-    };
-    let units = ColumnUnits {
-        speed: SpeedUnit::RadS,
-        torque: TorqueUnit::Nm,
-        wob: all.wob_n.as_ref().map(|_| ForceUnit::N),
-        time_in_ms: false,
+        wob: columns.wob.filter(|_| all.wob_n.is_some()),
+        time: columns.time.filter(|_| all.time_s.is_some()),
+        ..columns
     };
     assemble_columns(all, backwards, columns, &units, opts, source)
 }
@@ -780,6 +779,20 @@ impl RowLayout {
         self.units.torque
     }
 
+    /// The columns read and their units.
+    pub fn declared(&self) -> Declared {
+        let name = |i: usize| self.headers[i].trim().to_string();
+        Declared {
+            columns: ColumnsUsed {
+                speed: name(self.indices.speed),
+                torque: name(self.indices.torque),
+                wob: self.indices.wob.map(name),
+                time: self.indices.time.map(name),
+            },
+            units: self.units,
+        }
+    }
+
     /// Record `record` (on `line`) in SI; a cell that is not a finite number is refused
     /// naming its line and column, as in a whole file.
     pub fn row(&self, record: &csv::StringRecord, line: u64) -> Result<Row> {
@@ -862,12 +875,22 @@ impl ColumnIndices {
 }
 
 /// Units of the columns read.
-struct ColumnUnits {
-    speed: SpeedUnit,
-    torque: TorqueUnit,
-    wob: Option<ForceUnit>,
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColumnUnits {
+    pub speed: SpeedUnit,
+    pub torque: TorqueUnit,
+    pub wob: Option<ForceUnit>,
     /// Whether the time column's name says milliseconds (else seconds).
-    time_in_ms: bool,
+    pub time_in_ms: bool,
+}
+
+/// What a record's source declares of its channels: their names and their units. The record
+/// checks judge its values in these units ([`field_data_from_samples`]), so that a channel whose
+/// values do not fit its declared unit is said whether the record is read whole or watched.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Declared {
+    pub columns: ColumnsUsed,
+    pub units: ColumnUnits,
 }
 
 impl ColumnUnits {

@@ -74,6 +74,7 @@ pub fn evidence_json(
     evidence: &crate::abc::evidence::Evidence,
     separations: &[crate::separation::Separation],
     residual_lag1: &[f64],
+    ar1_preference_nats: &[f64],
     noise_models: &[crate::abc::evidence::NoiseEvidence],
     prior: &str,
 ) -> Value {
@@ -83,6 +84,14 @@ pub fn evidence_json(
         .iter()
         .zip(&boxes.boxes)
         .map(|(law, bx)| {
+            // The value of `law`'s fit in `per_fit` (in `fits` order), where it has one.
+            let of_fit = |per_fit: &[f64]| {
+                fits.iter()
+                    .zip(per_fit)
+                    .find(|(f, _)| f.law == law.law)
+                    .map(|(_, &v)| v)
+                    .filter(|v| v.is_finite())
+            };
             let lower: Vec<f64> = bx.lower.iter().map(|&v| f64::from(v)).collect();
             let upper: Vec<f64> = bx.upper.iter().map(|&v| f64::from(v)).collect();
             let d = law.law.n_params();
@@ -121,12 +130,9 @@ pub fn evidence_json(
                 }).collect::<Vec<_>>(),
                 "cut_by_box": law.cut_by_box,
                 "starts": law.starts,
-                "residual_lag1": fits
-                    .iter()
-                    .zip(residual_lag1)
-                    .find(|(f, _)| f.law == law.law)
-                    .map(|(_, &phi)| phi)
-                    .filter(|phi| phi.is_finite()),
+                "residual_lag1": of_fit(residual_lag1),
+                // ln p(y | AR(1)) − ln p(y | i.i.d.) at the fit (nats).
+                "ar1_preference_nats": of_fit(ar1_preference_nats),
                 "stages": law.stages,
                 "candidates_scored": law.candidates_scored,
             })

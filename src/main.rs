@@ -28,7 +28,16 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(err) if is_closed_pipe(&err) => ExitCode::from(exit::CLOSED_PIPE),
         Err(err) => {
-            cli::print::note(format_args!("error: {}", message(&err)));
+            // A file's error speaks of its keys (a well file's `params`), not of the flags
+            // that share their names.
+            let in_a_file = err
+                .chain()
+                .any(|e| matches!(e.downcast_ref::<Error>(), Some(Error::Syntax { .. })));
+            if in_a_file {
+                cli::print::note_verbatim(format_args!("error: {}", message(&err)));
+            } else {
+                cli::print::note(format_args!("error: {}", message(&err)));
+            }
             let bad_input = err
                 .chain()
                 .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));

@@ -91,10 +91,6 @@ impl Separation {
     }
 }
 
-/// Residuals whose lag-1 autocorrelation exceeds this make the i.i.d. likelihood over-confident
-/// by a factor (1 + φ)/(1 − φ) ≈ 1.9 or more in nats: said with the evidence.
-pub const AUTOCORRELATED: f64 = 0.3;
-
 /// The lag-1 autocorrelation φ̂ = Σ e_t·e_{t−1} / Σ e_t² of `fit`'s residuals on `samples`, in
 /// their order (a record's time order). Independent noise gives about 0; noise that lasts
 /// longer than a sample (a fluctuating weight on bit, an unresolved vibration) gives φ̂ near 1,

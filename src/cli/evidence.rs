@@ -360,11 +360,13 @@ fn tables(
         .fits
         .iter()
         .zip(&analysis.residual_lag1)
-        .map(|(fit, phi)| format!("{} {phi:.2}", fit.law))
+        .zip(&analysis.ar1_preference_nats)
+        .map(|((fit, phi), nats)| format!("{} {phi:.2} ({nats:+.1})", fit.law))
         .collect();
     writeln!(
         out,
-        "\nresidual lag-1 autocorrelation of the fits (time order): {}",
+        "\nresidual lag-1 autocorrelation of the fits (time order), and in brackets the nats by which the data prefer \
+         AR(1) residuals to i.i.d. ones there: {}",
         lag1.join(", ")
     )?;
     noise_model_table(out, analysis)?;

@@ -51,6 +51,11 @@ pub fn note(line: impl std::fmt::Display) {
     let _ = writeln!(io::stderr().lock(), "{}", super::fields::as_flags(&line.to_string()));
 }
 
+/// [`note`] as written, its backticked names kept as they are (a file's keys).
+pub fn note_verbatim(line: impl std::fmt::Display) {
+    let _ = writeln!(io::stderr().lock(), "{line}");
+}
+
 /// Numbers in a table: fixed notation where it reads well, scientific otherwise.
 fn number(v: f64) -> String {
     let a = v.abs();

@@ -45,8 +45,8 @@ pub struct WatchCmd {
     /// Time between window starts, s [default: a fifth of the window].
     #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
     pub step_s: Option<f64>,
-    /// Weight of the law probabilities carried from the windows before, in (0, 1]: 1 adds up
-    /// every window's evidence, smaller forgets faster.
+    /// Weight of the law probabilities carried from one window length before, in (0, 1]: 1
+    /// adds up the evidence of every sample once, smaller forgets faster.
     #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().forgetting, value_name = "LAMBDA")]
     pub forgetting: f64,
     /// No law's probability goes below this: none is ruled out for good.
@@ -180,7 +180,7 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
         }
         opened => opened?,
     };
-    let unit = rows.torque_unit();
+    let unit = rows.declared().units.torque;
     let laws = settings.laws.clone();
     let mut out = print::stdout();
     if !cmd.json {

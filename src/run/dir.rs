@@ -206,6 +206,20 @@ pub fn check_new(dir: &Dir, input: Option<&Path>) -> Result<DirState> {
     Ok(DirState::Replace)
 }
 
+/// Claims the directory `dir` (named by the setting `field`) for a new output of any kind: what
+/// `check` refuses is refused before the directory exists, then the directory is created and
+/// locked (one writer at a time) and `check` runs again under the lock, where another process
+/// may have written since; the temporaries of an interrupted writer are removed. Returns the
+/// lock and what the check under the lock found.
+pub fn claim<T>(dir: &Path, field: &str, check: impl Fn() -> Result<T>) -> Result<(files::DirLock, T)> {
+    check()?;
+    std::fs::create_dir_all(dir).map_err(|source| Error::output(field, dir, source))?;
+    let lock = files::DirLock::acquire(dir)?;
+    let found = check()?;
+    files::remove_stale(dir);
+    Ok((lock, found))
+}
+
 /// A run directory being written: its lock, and for a replacement the staging directory beside
 /// it that the new run is written to until its first population is stored.
 pub(super) struct Claim {
@@ -217,15 +231,11 @@ pub(super) struct Claim {
 }
 
 impl Claim {
-    /// Locks `dir` (creating it) and checks again under the lock what it holds; stages the new
-    /// run beside a run it replaces.
+    /// Claims `dir` ([`claim`]: checked, created, locked, checked again); stages the new run
+    /// beside a run it replaces.
     pub(super) fn new(dir: &Dir, input: Option<&Path>) -> Result<Self> {
         let path = dir.path.clone();
-        std::fs::create_dir_all(&path).map_err(|source| Error::output("out", &path, source))?;
-        let lock = files::DirLock::acquire(&path)?;
-        // Another process may have written a run here since the first check.
-        let state = check_new(dir, input)?;
-        files::remove_stale(&path);
+        let (lock, state) = claim(&path, "out", || check_new(dir, input))?;
         let staged = match state {
             DirState::Fresh => None,
             DirState::Replace => {
@@ -459,6 +469,34 @@ fn is_run_store(path: &Path) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A claim refuses before the directory exists what its check refuses, and refuses again
+    /// under the lock what another writer put there in between; a claim that holds the lock
+    /// keeps every other claim out until it is dropped.
+    #[test]
+    fn a_claim_checks_before_the_directory_exists_and_again_under_its_lock() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("out");
+        let refused = claim(&dir, "out", || Err::<(), _>(Error::setting("out", "refused")));
+        assert!(refused.is_err());
+        assert!(!dir.exists(), "nothing made for a refused claim");
+        // Passes the first check; the second finds what another writer wrote meanwhile.
+        let calls = std::cell::Cell::new(0);
+        let raced = claim(&dir, "out", || {
+            calls.set(calls.get() + 1);
+            match calls.get() {
+                1 => Ok(()),
+                _ => Err(Error::setting("out", "written meanwhile")),
+            }
+        });
+        assert_eq!(calls.get(), 2);
+        assert!(raced.unwrap_err().to_string().contains("written meanwhile"));
+        let (held, found) = claim(&dir, "out", || Ok(7)).unwrap();
+        assert_eq!(found, 7);
+        assert!(claim(&dir, "out", || Ok(())).is_err(), "a second writer is kept out");
+        drop(held);
+        assert!(claim(&dir, "out", || Ok(())).is_ok());
+    }
 
     #[test]
     fn ownership_by_kind_of_directory() {

@@ -87,7 +87,12 @@ impl Watch {
             wob_kn,
             risk: self.settings.risk,
         });
-        self.view = Some(view::view(window.index, &window.rows, self.torque_unit, posterior));
+        self.view = Some(view::view(
+            window.index,
+            &window.rows,
+            self.declared.units.torque,
+            posterior,
+        ));
         update.latency_s = self.last_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
         update
     }

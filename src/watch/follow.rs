@@ -54,6 +54,16 @@ pub fn follow(
     on_update: &mut dyn FnMut(&Update) -> Result<()>,
 ) -> Result<Ended> {
     let source = rows.name().to_path_buf();
+    // Windows are cut by the record's time stamps: refused before any store is made.
+    if rows.declared().columns.time.is_none() {
+        return Err(crate::Error::setting(
+            "time_column",
+            format!(
+                "a watch cuts its windows by the record's time stamps, and {} has no time column (no column's name contains 'time'; `time_column` names one)",
+                source.display()
+            ),
+        ));
+    }
     let stopped = || options.stop.is_some_and(|stop| stop());
     // A resumed watch: its store, checked against these settings, and where it stopped.
     let mut resumed = if options.resume {
@@ -215,9 +225,10 @@ fn start_watch(
     options: &FollowOptions<'_>,
     observer: &mut dyn Observer,
 ) -> Result<(Watch, Option<store::WatchStore>)> {
-    let unit = rows.torque_unit();
+    let declared = rows.declared();
+    let unit = declared.units.torque;
     let source = rows.name().to_path_buf();
-    let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, unit)?;
+    let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, declared)?;
     let (length, step) = made.windows();
     let thin = made.thin();
     if settings.thin.is_none() && thin > 1 {
@@ -305,6 +316,26 @@ pub(super) fn of_window<T>(result: Result<T>) -> Result<std::result::Result<T, S
     }
 }
 
+/// Refuses to go on with a stored watch whose law files' texts (`was`, by law name) differ
+/// from those given now (`now`), naming the law.
+fn check_same_law_files(was: &serde_json::Value, now: &serde_json::Value, dir: &Path) -> Result<()> {
+    let (Some(was), Some(now)) = (was.as_object(), now.as_object()) else {
+        return Ok(());
+    };
+    for (law, text) in now {
+        if was.get(law).is_some_and(|before| before != text) {
+            return Err(crate::Error::setting(
+                "law_file",
+                format!(
+                    "the law file of {law} is not the one the watch in {} started with: its windows would compare another law under the same name; restore that file, or start a new watch",
+                    dir.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Refuses to go on with a stored watch under other settings: its windows would not be the
 /// ones it would have given.
 pub(super) fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Path) -> Result<()> {
@@ -320,6 +351,14 @@ pub(super) fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings
             "window_s" if !value.is_null() => &serde_json::json!(meta.window_s),
             "step_s" if !value.is_null() => &serde_json::json!(meta.step_s),
             "window_s" | "step_s" => continue,
+            // A watch stored without its law files' texts cannot tell; one with them names
+            // the law whose file changed.
+            "law_files" => {
+                if let Some(was) = stored.get(field) {
+                    check_same_law_files(was, value, dir)?;
+                }
+                continue;
+            }
             // A setting a watch stored without had the value it has by default then.
             _ => match stored.get(field) {
                 Some(was) => was,

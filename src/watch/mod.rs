@@ -12,8 +12,10 @@
 //! and a window that declares a change computed again from the boxes; or, by flag, the
 //! paper's ABC on the window, [`WatchSettings::abc`]), then
 //!
-//! - **law probabilities** P_t(m) ∝ P_{t−1}(m)^λ · Z_t(m) (λ the forgetting factor: the
-//!   previous windows' evidence counts λ, λ², … times), no law below the floor;
+//! - **law probabilities** P_t(m) ∝ P_{t−1}(m)^(λ^γ) · Z_t(m)^γ, γ = step / window (the share
+//!   of a window its step brings in: overlapping windows count each sample once) and λ the
+//!   forgetting factor (the evidence of one window length ago counts λ, of two λ², …), no law
+//!   below the floor;
 //! - **change**: the fits of the latest window that does not overlap this one, applied here,
 //!   against this window's own (the log-likelihood the old formation's laws lose here,
 //!   (n/2)·ln(ρ_old/ρ_new), the best of each); a loss beyond the threshold over its running
@@ -81,21 +83,24 @@ pub struct Watch {
     stopped_at_s: Option<f64>,
     /// The record's sample period, s: how far past its last row the record's end reaches.
     period_s: f64,
-    /// The unit of the record's torques, in which parameters are reported.
-    torque_unit: crate::units::TorqueUnit,
+    /// The channels the source declared and their units: the record checks judge each window
+    /// in them, and parameters are reported in its torque unit.
+    declared: crate::data::Declared,
+    /// The record checks' warnings said so far, their numbers left out: each said once.
+    said: std::collections::HashSet<String>,
     /// The picture of the latest window given.
     view: Option<view::View>,
 }
 
 impl Watch {
-    /// A watch of `settings` over a record named `source` sampled at about `rate_hz`, its
-    /// torques in `torque_unit`; the thinning, window and step taken from the rate where not
-    /// given.
+    /// A watch of `settings` over a record named `source` sampled at about `rate_hz`, whose
+    /// channels and units the source `declared`; the thinning, window and step taken from the
+    /// rate where not given.
     pub fn new(
         settings: WatchSettings,
         source: PathBuf,
         rate_hz: f64,
-        torque_unit: crate::units::TorqueUnit,
+        declared: crate::data::Declared,
     ) -> Result<Self> {
         let thin = settings.thin.unwrap_or_else(|| default_thin(rate_hz));
         if thin == 0 {
@@ -159,7 +164,8 @@ impl Watch {
             last_arrival: None,
             stopped_at_s: None,
             period_s: 1.0 / rate_hz,
-            torque_unit,
+            declared,
+            said: Default::default(),
             view: None,
         })
     }
@@ -280,6 +286,15 @@ impl Watch {
                 return Ok(self.completed(update, &window));
             }
         };
+        for warning in &data.warnings {
+            // The same check on another window differs only by its numbers.
+            if self
+                .said
+                .insert(warning.chars().filter(|c| !c.is_ascii_digit()).collect())
+            {
+                observer.note(format!("warning: {warning}"));
+            }
+        }
         update.samples_used = data.calibration.len();
         if let Some(why) = self.cannot_inform(&data) {
             update.uninformative = Some(why);
@@ -303,7 +318,9 @@ impl Watch {
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
         self.carry_window(&window, &selection, &data, (loss, change));
 
-        // Carried law probabilities: P_t ∝ P_{t−1}^λ · P(m | window), floored.
+        // Carried law probabilities: P_t ∝ P_{t−1}^(λ^γ) · P(m | window)^γ, floored, γ the
+        // share of a window its step brings in (each sample counted once however the windows
+        // overlap; the evidence of a window length ago weighs λ).
         let window_p: Vec<f64> = self
             .settings
             .laws
@@ -312,10 +329,13 @@ impl Watch {
             .collect();
         let carried = match (&self.carried.probabilities, change) {
             (Some(before), false) => {
+                let (length, step) = self.windows.shape();
+                let new_share = (step / length).min(1.0);
+                let kept = self.settings.forgetting.powf(new_share);
                 let joint: Vec<f64> = before
                     .iter()
                     .zip(&window_p)
-                    .map(|(b, w)| b.powf(self.settings.forgetting) * w)
+                    .map(|(b, w)| b.powf(kept) * w.powf(new_share))
                     .collect();
                 normalise_with_floor(&joint, self.settings.floor)
             }
@@ -393,10 +413,7 @@ impl Watch {
             ..self.settings.data.clone()
         };
         let source = PathBuf::from(format!("{} (window {})", self.source.display(), window.index));
-        let mut data = crate::data::field_data_from_samples(samples, &source, &opts).map_err(|e| e.to_string())?;
-        // Samples are SI; parameters are reported in the record's own torque unit.
-        data.torque_unit = self.torque_unit;
-        Ok(data)
+        crate::data::field_data_from_samples(samples, &source, &self.declared, &opts).map_err(|e| e.to_string())
     }
 
     /// Why a window's samples cannot tell the laws apart, if they cannot.

@@ -18,7 +18,8 @@ pub struct WatchSettings {
     pub evidence: EvidenceConfig,
     /// Width of the physical boxes, in record scales.
     pub prior_scale: f64,
-    /// λ in (0, 1]: the weight of the probabilities carried from the windows before.
+    /// λ in (0, 1]: the weight of the probabilities carried from one window length before
+    /// (overlapping windows each bring in their step's share of it).
     pub forgetting: f64,
     /// No law's carried probability goes below this: none is ruled out for good.
     pub floor: f64,

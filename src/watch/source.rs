@@ -7,7 +7,7 @@
 use super::wits::{WitsItems, WitsReader};
 use crate::data::{DataOptions, Row, RowLayout};
 use crate::error::{Error, Result};
-use crate::units::{SpeedUnit, TorqueUnit};
+use crate::units::SpeedUnit;
 use std::io::{BufRead, BufReader, ErrorKind, Read};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -274,11 +274,11 @@ impl Rows {
         &self.name
     }
 
-    /// The unit of the record's torques.
-    pub fn torque_unit(&self) -> TorqueUnit {
+    /// The channels read and their units.
+    pub fn declared(&self) -> crate::data::Declared {
         match &self.format {
-            Format::Csv { layout, .. } => layout.torque_unit(),
-            Format::Wits(reader) => reader.torque_unit(),
+            Format::Csv { layout, .. } => layout.declared(),
+            Format::Wits(reader) => reader.declared(),
         }
     }
 

@@ -72,6 +72,14 @@ pub struct WatchMeta {
 pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
     serde_json::json!({
         "laws": settings.laws.iter().map(|l| l.name()).collect::<Vec<_>>(),
+        // The text of each law file whose law the watch compares: a resumed watch must compare
+        // the same laws, not others under their names.
+        "law_files": settings
+            .laws
+            .iter()
+            .filter_map(|l| l.file())
+            .map(|f| (f.name.clone(), serde_json::Value::from(f.source.clone())))
+            .collect::<serde_json::Map<_, _>>(),
         "speed_column": settings.data.speed_column,
         "torque_column": settings.data.torque_column,
         "wob_column": settings.data.wob_column,
@@ -164,26 +172,29 @@ pub fn is_watch_dir(dir: &Path) -> bool {
 impl WatchStore {
     /// Makes `dir` a watch directory (created where missing) for the watch `meta` describes.
     /// A directory that holds a watch already is refused (`resume` goes on with it), and so
-    /// is one that holds anything else.
+    /// is one that holds anything else, before it is created and again under its lock
+    /// ([`crate::run::dir::claim`]).
     pub fn create(dir: &Path, meta: &WatchMeta) -> Result<Self> {
-        crate::run::dir::refuse_inside_kept_dir(dir, "out")?;
-        if is_watch_dir(dir) {
-            return Err(Error::setting(
-                "out",
-                format!(
-                    "{} holds a watch already: `resume` goes on with it, or name another directory",
-                    dir.display()
-                ),
-            ));
-        }
-        if dir.exists() {
-            crate::files::check_output_dir(dir, "out")?;
-            crate::files::refuse_foreign(dir, "out", &|rel, is_dir| {
-                crate::run::dir::Owned::Watch.owns(rel, is_dir)
-            })?;
-        }
-        std::fs::create_dir_all(dir).map_err(|source| Error::output("out", dir, source))?;
-        let lock = DirLock::acquire(dir)?;
+        let check = || {
+            crate::run::dir::refuse_inside_kept_dir(dir, "out")?;
+            if is_watch_dir(dir) {
+                return Err(Error::setting(
+                    "out",
+                    format!(
+                        "{} holds a watch already: `resume` goes on with it, or name another directory",
+                        dir.display()
+                    ),
+                ));
+            }
+            if dir.exists() {
+                crate::files::check_output_dir(dir, "out")?;
+                crate::files::refuse_foreign(dir, "out", &|rel, is_dir| {
+                    crate::run::dir::Owned::Watch.owns(rel, is_dir)
+                })?;
+            }
+            Ok(())
+        };
+        let (lock, ()) = crate::run::dir::claim(dir, "out", check)?;
         let path = dir.join(WATCH_STORE_FILE);
         // Made whole beside its place, then moved there: a directory holds a watch store
         // with its settings or none.

@@ -164,6 +164,28 @@ impl WitsReader {
         self.torque_unit
     }
 
+    /// The items read, named by their codes, and their units (the time in seconds).
+    pub fn declared(&self) -> crate::data::Declared {
+        let item = |code: &str| format!("item {code}");
+        crate::data::Declared {
+            columns: crate::data::ColumnsUsed {
+                speed: item(&self.items.speed),
+                torque: item(&self.items.torque),
+                wob: self.items.wob.as_deref().map(item),
+                time: Some(match &self.items.time {
+                    WitsTime::Clock { date, time } => format!("items {date} and {time}"),
+                    WitsTime::Seconds(code) => item(code),
+                }),
+            },
+            units: crate::data::ColumnUnits {
+                speed: self.speed_unit,
+                torque: self.torque_unit,
+                wob: self.wob_unit,
+                time_in_ms: false,
+            },
+        }
+    }
+
     /// Forgets the open block: one cut by a dropped connection is not a row.
     pub fn drop_block(&mut self) {
         self.block = None;

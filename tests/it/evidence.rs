@@ -12,7 +12,7 @@ use bitrock::eval::Problem;
 use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::prior::{LawBox, Prior};
 use bitrock::run;
-use bitrock::run::evidence::{EvidenceAnalysis, EvidenceCheck, check, fit_reference};
+use bitrock::run::evidence::{EvidenceAnalysis, EvidenceCheck, EvidenceWarning, check, fit_reference};
 use bitrock::separation::UNDECIDED_NATS;
 use rand_distr::{Distribution, Normal};
 
@@ -497,7 +497,10 @@ fn m2_with_fluctuating_wob(dir: &std::path::Path, wob_kn: &str) -> bitrock::data
 /// The model of the residuals chosen by its evidence: i.i.d. where they are independent; where
 /// a fluctuating weight on bit drives the torque, the torque scaled by the record's weight on
 /// bit, by tens of nats, and without that scaling AR(1) before i.i.d., again by many nats (the
-/// i.i.d. model counts every sample as independent information).
+/// i.i.d. model counts every sample as independent information). An i.i.d. evidence asked of
+/// residuals the data would model as AR(1) is said to be so, by the data's preference, not by
+/// a fixed lag-1 (the weight on bit unseen: lag-1 about 0.24, AR(1) preferred by 15 nats);
+/// one of independent residuals is not.
 #[test]
 fn the_data_choose_the_model_of_the_residuals() {
     let dir = tempfile::tempdir().unwrap();
@@ -529,14 +532,21 @@ fn the_data_choose_the_model_of_the_residuals() {
     assert!(gap < -2.0, "{gap}");
     assert_eq!(steady.evidence.config.noise, NoiseModel::Iid);
     assert_eq!(steady.fit.w_ref_n, None);
+    assert!(
+        steady.ar1_preference_nats.iter().all(|&n| n < 0.0),
+        "{:?}",
+        steady.ar1_preference_nats
+    );
+    let autocorrelated = |analysis: &EvidenceAnalysis| {
+        analysis.warnings().into_iter().find_map(|w| match w {
+            EvidenceWarning::Autocorrelated { nats, lag1 } => Some((nats, lag1)),
+            _ => None,
+        })
+    };
+    assert_eq!(autocorrelated(&steady), None);
 
-    let driven = job
-        .run(
-            &m2_with_fluctuating_wob(dir.path(), "12"),
-            Default::default(),
-            &mut Silent,
-        )
-        .unwrap();
+    let driven_data = m2_with_fluctuating_wob(dir.path(), "12");
+    let driven = job.run(&driven_data, Default::default(), &mut Silent).unwrap();
     let rows = &driven.noise_models;
     for row in rows {
         eprintln!(
@@ -557,6 +567,21 @@ fn the_data_choose_the_model_of_the_residuals() {
     let w_ref_kn = driven.fit.w_ref_n.expect("the scaled torque reported") / 1000.0;
     assert_eq!(Some(w_ref_kn), scaled_iid.w_ref_kn);
     assert!((200.0..300.0).contains(&w_ref_kn), "{w_ref_kn}");
+    // The reported model (the scaled torque) leaves independent residuals: nothing to say.
+    assert_eq!(autocorrelated(&driven), None);
+
+    let mut unseen = driven_data;
+    unseen.calibration.wob_n = None;
+    unseen.validation.wob_n = None;
+    let forced = run::evidence::Job {
+        noise: Some(NoiseModel::Iid),
+        ..job
+    }
+    .run(&unseen, Default::default(), &mut Silent)
+    .unwrap();
+    let (nats, lag1) = autocorrelated(&forced).expect("the i.i.d. model said to be misspecified");
+    // Decisive for AR(1), at a lag-1 below the 0.3 that a rule of lag-1 alone would wait for.
+    assert!(nats > 10.0 && lag1 < 0.3, "{nats} nats, lag-1 {lag1}");
 }
 
 /// Which backend scores is said once, however many models of the residuals the evidence

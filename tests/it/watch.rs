@@ -498,6 +498,7 @@ fn a_stream_s_bad_lines_are_skipped_and_a_record_without_time_refused() {
     let (code, _, stderr) = outcome(bin().args(["watch"]).arg(&feed));
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--time-col"), "{stderr}");
+    std::fs::write(&feed, "time_s,bit_speed_rpm,torque_knm\n0,60,7\n").unwrap();
     let (code, _, stderr) = outcome(bin().args(["watch", "--window-s", "10", "--step-s", "20"]).arg(&feed));
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--step-s"), "{stderr}");
@@ -1123,4 +1124,206 @@ fn a_wob_glitch_is_said_and_moves_neither_the_operating_point_nor_the_advice() {
         assert_eq!(a["advice"], b["advice"]);
         assert!(a["advice"]["words"].as_str().unwrap().contains("244 kN"), "{a}");
     }
+}
+
+/// A channel whose values do not fit the unit its name declares (N·m under `_knm`, rad/s
+/// under `_rpm`) is said by the watch as `fit` says it of the whole record, once however many
+/// windows hold it; the clean record says nothing of the kind.
+#[test]
+fn the_watch_says_a_channel_in_another_unit_than_its_name_once_as_fit_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("m2.csv");
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "40"])
+            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "3", "-o"])
+            .arg(&record),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let header = std::fs::read_to_string(&record)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .to_string();
+    let column = |name: &str| header.split(',').position(|h| h == name).expect(name);
+    let (speed, torque) = (column("bit_speed_rpm"), column("torque_knm"));
+    let scaled = |name: &str, col: usize, by: f64| {
+        edited(&record, dir.path(), name, |_, mut f| {
+            f[col] = (f[col].parse::<f64>().unwrap() * by).to_string();
+            Some(f)
+        })
+    };
+    let said_by = |command: &mut std::process::Command| {
+        let (code, _, stderr) = outcome(command);
+        assert_eq!(code, 0, "{stderr}");
+        stderr
+    };
+    let clean = said_by(watch_command().args(["--particles", "100"]).arg(&record));
+    assert!(!clean.contains("say so with"), "{clean}");
+    for (path, words) in [
+        (scaled("newton_metres", torque, 1000.0), "read in kN·m have a median of"),
+        (
+            scaled("radians", speed, std::f64::consts::PI / 30.0),
+            "read in rpm stay below",
+        ),
+    ] {
+        let watched = said_by(watch_command().args(["--particles", "100"]).arg(&path));
+        assert_eq!(watched.matches(words).count(), 1, "{watched}");
+        let fitted = said_by(bin().args(["fit", "--laws", "m2"]).arg(&path));
+        assert!(fitted.contains(words), "{fitted}");
+    }
+}
+
+/// A record without a time column is refused before the watch's directory is made, naming the
+/// setting that names one.
+#[test]
+fn a_record_without_time_is_refused_before_its_directory_is_made() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("untimed.csv");
+    let rows: String = (0..400)
+        .map(|i| format!("{},{}\n", 60.0 + (i % 7) as f64, 9.0 + 0.01 * (i % 11) as f64))
+        .collect();
+    std::fs::write(&record, format!("speed_rpm,torque_knm\n{rows}")).unwrap();
+    let out = dir.path().join("watch");
+    let (code, _, stderr) = outcome(watch_command().arg("--out").arg(&out).arg(&record));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--time-col") && stderr.contains("has no time column"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+}
+
+/// A watch resumed with a law file edited since it started is refused, naming the law and the
+/// flag, before any window; with the file as it was, it goes on.
+#[test]
+fn a_watch_resumed_with_an_edited_law_file_is_refused_naming_the_law() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("m2.csv");
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "30"])
+            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "3", "-o"])
+            .arg(&record),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let law_file = dir.path().join("stribeck.toml");
+    let original =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws/stribeck.toml")).unwrap();
+    std::fs::write(&law_file, &original).unwrap();
+    let out = dir.path().join("watch");
+    let run = |extra: &[&str]| {
+        outcome(
+            bin()
+                .args([
+                    "watch",
+                    "--json",
+                    "--laws",
+                    "m2,stribeck",
+                    "--backend",
+                    "cpu",
+                    "--particles",
+                    "100",
+                ])
+                .arg("--law-file")
+                .arg(&law_file)
+                .arg("--out")
+                .arg(&out)
+                .args(extra)
+                .arg(&record),
+        )
+    };
+    let (code, _, stderr) = run(&[]);
+    assert_eq!(code, 0, "{stderr}");
+    let stored = std::fs::read(out.join("watch.sqlite")).unwrap();
+    let edited = original.replace("exp(-(w / vs)^2)", "exp(-(w / vs))");
+    assert_ne!(edited, original);
+    std::fs::write(&law_file, &edited).unwrap();
+    let (code, _, stderr) = run(&["--resume"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--law-file") && stderr.contains("the law file of stribeck is not the one"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("watch.sqlite")).unwrap(),
+        stored,
+        "nothing written"
+    );
+    std::fs::write(&law_file, &original).unwrap();
+    let (code, _, stderr) = run(&["--resume"]);
+    assert_eq!(code, 0, "{stderr}");
+}
+
+/// A sample counts once however many overlapping windows hold it: on one rock, with nothing
+/// forgotten (λ = 1), windows of 20 s every 5 s carry the first window's log-odds of m2
+/// against m3 whole and each later window's at a quarter (each sample lies in four windows),
+/// exactly; per window length of record brought in (1 + 20 × ¼ = 6) that is what windows of
+/// 20 s every 20 s carry per window (6 of them), within the Monte-Carlo spread of m3's
+/// evidence (30 %), where each window's evidence counted whole would carry nearly three times it.
+#[test]
+fn overlapping_windows_carry_each_sample_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("m2.csv");
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "120"])
+            .args([
+                "--sample-hz",
+                "20",
+                "--noise-torque-knm",
+                "0.6",
+                "--noise-speed-rpm",
+                "0.5",
+            ])
+            .args(["--seed", "4", "-o"])
+            .arg(&record),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    // The carried and the window's own log-odds of m2 against m3, per window.
+    let log_odds = |step: &str| -> Vec<(f64, f64)> {
+        let updates = watch(&[
+            "--window-s",
+            "20",
+            "--step-s",
+            step,
+            "--forgetting",
+            "1",
+            "--floor",
+            "1e-300",
+            "--particles",
+            "200",
+            record.to_str().unwrap(),
+        ]);
+        updates
+            .iter()
+            .map(|u| {
+                assert!(u["uninformative"].is_null(), "{u}");
+                let p = |law: &str, key: &str| {
+                    u["laws"].as_array().unwrap().iter().find(|l| l["law"] == law).unwrap()[key]
+                        .as_f64()
+                        .unwrap()
+                };
+                let odds = |key: &str| (p("m2", key) / p("m3", key)).ln();
+                (odds("probability"), odds("window_probability"))
+            })
+            .collect()
+    };
+    let overlapping = log_odds("5");
+    let disjoint = log_odds("20");
+    assert_eq!((overlapping.len(), disjoint.len()), (21, 6));
+    let formula = overlapping[0].1 + 0.25 * overlapping[1..].iter().map(|o| o.1).sum::<f64>();
+    let carried = overlapping.last().unwrap().0;
+    assert!(
+        (carried - formula).abs() < 1e-6 * formula.abs(),
+        "{carried} vs {formula}"
+    );
+    let per_window = carried / 6.0;
+    let disjoint_per_window = disjoint.last().unwrap().0 / 6.0;
+    assert!(disjoint_per_window > 2.0, "{disjoint_per_window}");
+    assert!(
+        (per_window - disjoint_per_window).abs() < 0.3 * disjoint_per_window,
+        "per window length: overlapping {per_window}, disjoint {disjoint_per_window}"
+    );
 }

@@ -97,16 +97,17 @@ pub(crate) fn unit<T>(
         .transpose()
 }
 
-/// The laws named in `laws`, or `None` for every law.
+/// The laws named in `laws`, or `None` for every law; refused as the command refuses its
+/// `--laws` (an unknown law, one listed twice, none).
 pub(crate) fn laws(py: Python<'_>, laws: Option<Vec<String>>) -> PyResult<Option<Vec<Law>>> {
     laws.map(|names| {
-        names
-            .iter()
-            .map(|n| {
-                n.parse::<Law>()
-                    .map_err(|e| to_py(py, Error::setting("laws", e.to_string())))
-            })
-            .collect()
+        if let Some(name) = names.iter().find(|n| n.contains(',')) {
+            return Err(to_py(
+                py,
+                Error::setting("laws", format!("`{name}` is not one law's name")),
+            ));
+        }
+        bitrock::laws::parse_law_list(&names.join(",")).map_err(|e| to_py(py, Error::setting("laws", e)))
     })
     .transpose()
 }

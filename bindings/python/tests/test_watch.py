@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gc
 import json
+import signal
 
 import pytest
 
@@ -167,3 +169,35 @@ def test_the_live_page_serves_the_windows_as_they_come(well) -> None:
             assert state["meta"]["laws"][0]["name"] == "m2"
             assert state["view"] is not None and len(state["view"]["speed_rpm"]) > 0
     assert len(seen) == 11
+
+
+def test_laws_are_refused_as_the_command_refuses_them(well) -> None:
+    for laws in (["m2", "m2"], []):
+        with pytest.raises(bitrock.InputError) as caught:
+            list(bitrock.watch(well, laws=laws, backend="cpu", particles=100))
+        assert caught.value.argument == "laws"
+    with pytest.raises(bitrock.InputError, match="listed twice"):
+        bitrock.fit(bitrock.read_record(), laws=["m2", "m2"])
+
+
+def test_ctrl_c_in_the_loop_body_stops_the_watch(well) -> None:
+    watch = bitrock.watch(well, laws="m2", window_s=20, step_s=10, backend="cpu", particles=100)
+    with pytest.raises(KeyboardInterrupt):
+        for _ in watch:
+            # As a Ctrl-C in the user's code between two updates: no code of the watch runs.
+            signal.raise_signal(signal.SIGINT)
+    watch._thread.join(timeout=60)
+    assert not watch._thread.is_alive()
+    assert watch.ended["stopped"] and watch.ended["windows"] < 11, watch.ended
+
+
+def test_a_watch_no_one_holds_stops_reading(well) -> None:
+    watch = bitrock.watch(well, laws="m2", window_s=20, step_s=10, backend="cpu", particles=100)
+    next(watch)
+    thread, outcome = watch._thread, watch._outcome
+    del watch
+    gc.collect()
+    thread.join(timeout=60)
+    assert not thread.is_alive()
+    assert outcome["ended"]["stopped"] and outcome["ended"]["windows"] < 11, outcome
+

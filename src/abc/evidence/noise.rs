@@ -256,9 +256,83 @@ pub fn ar1_log_likelihood(s: &LagSums, half_n: f64) -> f64 {
     max + values.iter().map(|v| (v - max).exp()).sum::<f64>().ln() + spacing.ln()
 }
 
+/// Nats by which the data must prefer AR(1) residuals to i.i.d. ones at every law's best fit
+/// ([`ar1_preference_nats`]) for the i.i.d. model's evidence to be said to be misspecified: a
+/// Bayes factor of e³ ≈ 20, "strong" on Kass and Raftery's scale.
+pub const AR1_PREFERRED_NATS: f64 = 3.0;
+
+/// ln p(y | AR(1)) − ln p(y | i.i.d.) at `fit`'s parameters on `samples` (time order): the
+/// log Bayes factor of the two noise models with σ (and AR(1)'s φ) integrated out as the
+/// evidence integrates them, so that φ pays its Occam factor: about −3 nats for independent
+/// noise of a few thousand samples, about −(n/2)·ln(1 − φ̂²) for noise that lasts. NaN with
+/// fewer than three residuals or no torque.
+pub fn ar1_preference_nats(
+    fit: &crate::fit::LawFit,
+    samples: &crate::data::Samples,
+    opts: &crate::fit::FitOptions,
+) -> f64 {
+    use crate::numerics::compensated_sum;
+    let e = crate::fit::residuals(fit.law, &fit.params_si, samples, opts.w_ref_n);
+    let sum_sq = compensated_sum(samples.torque_nm.iter().map(|y| y * y));
+    if e.len() < 3 || sum_sq.is_nan() || sum_sq <= 0.0 {
+        return f64::NAN;
+    }
+    let sums = LagSums {
+        rho: compensated_sum(e.iter().map(|v| v * v)) / sum_sq,
+        lag: compensated_sum(e.windows(2).map(|w| w[0] * w[1])) / sum_sq,
+        ends: (e[0] * e[0] + e[e.len() - 1] * e[e.len() - 1]) / sum_sq,
+    };
+    let half_n = e.len() as f64 / 2.0;
+    ar1_log_likelihood(&sums, half_n) - iid_log_likelihood(sums.rho, half_n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// AR(1) noise e_t = φ·e_{t−1} + η_t on an m2 record of 4,000 samples in time order: the
+    /// data's preference for AR(1) residuals at the fit is negative for independent noise (φ's
+    /// Occam factor, about ½·ln(2π/n) − ln 2 ≈ −4.6 nats, less what chance correlation buys
+    /// back), and for lasting noise the profile likelihood ratio −(n/2)·ln(1 − φ̂²) within the
+    /// same few nats; a record of too few residuals has none.
+    #[test]
+    fn the_data_prefer_ar1_residuals_by_their_profile_likelihood_less_phi_s_occam_factor() {
+        use crate::data::Samples;
+        use crate::fit::{FitOptions, fit_laws};
+        use crate::laws::Law;
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let n = 4000;
+        let speeds: Vec<f64> = (0..n)
+            .map(|i| 0.5 + 14.5 * ((i * 7919) % n) as f64 / n as f64)
+            .collect();
+        let opts = FitOptions::default();
+        for phi in [0.0, 0.2, 0.5] {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+            let normal = Normal::new(0.0, 300.0).unwrap();
+            let mut e = 0.0;
+            let torque = speeds
+                .iter()
+                .map(|&w| {
+                    e = phi * e + normal.sample(&mut rng);
+                    Law::M2.torque(&[13_000.0, 6_500.0, 0.3], w, 1.0) + e
+                })
+                .collect();
+            let data = Samples::new(speeds.clone(), torque);
+            let fit = &fit_laws(&[Law::M2], &data, &Samples::default(), &opts).unwrap()[0];
+            let prefers = ar1_preference_nats(fit, &data, &opts);
+            let lag1 = crate::separation::residual_lag1(fit, &data, &opts);
+            if phi == 0.0 {
+                assert!(prefers < 0.0 && prefers > -6.0, "independent noise: {prefers}");
+            } else {
+                let profile = -(n as f64 / 2.0) * (1.0 - lag1 * lag1).ln();
+                assert!(prefers > AR1_PREFERRED_NATS, "φ = {phi}: {prefers}");
+                assert!((prefers - profile).abs() < 6.0, "φ = {phi}: {prefers} vs {profile}");
+            }
+            let two = Samples::new(speeds[..2].to_vec(), data.torque_nm[..2].to_vec());
+            assert!(ar1_preference_nats(fit, &two, &opts).is_nan());
+        }
+    }
 
     #[test]
     fn ln_gamma_matches_known_values() {

@@ -78,17 +78,17 @@ pub struct Unfinished {
 }
 
 impl Unfinished {
-    /// Starts `job`'s evidence on `data` in `dir` (refused as [`check_out`] refuses): the
-    /// directory created and locked, the job and record written to `unfinished/`, any
+    /// Starts `job`'s evidence on `data` in `dir` (refused as [`check_out`] refuses, before the
+    /// directory exists and again under its lock: [`crate::run::dir::claim`]): the job and
+    /// record written to `unfinished/`, any
     /// progress of an earlier evidence there dropped. An evidence the directory already holds
     /// stays until this one is written ([`Self::finish`]).
     pub fn start(dir: &Path, force: bool, job: &Job, data: &FieldData) -> Result<Self> {
         // Refused before the directory exists (the job checks again when it runs).
         job.sampler.check_memory(&job.laws)?;
-        check_out(dir, force)?;
-        std::fs::create_dir_all(dir.join(UNFINISHED_DIR)).map_err(|source| Error::output("out", dir, source))?;
-        let lock = files::DirLock::acquire(dir)?;
+        let (lock, ()) = crate::run::dir::claim(dir, "out", || check_out(dir, force))?;
         let unfinished = dir.join(UNFINISHED_DIR);
+        std::fs::create_dir_all(&unfinished).map_err(|source| Error::output("out", dir, source))?;
         match std::fs::remove_file(unfinished.join(PROGRESS_BIN)) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::output("out", dir, e)),
             _ => {}

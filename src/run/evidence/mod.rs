@@ -179,13 +179,15 @@ pub struct Saving<'a> {
 }
 
 /// What the samplers of one torque scaling start from: the least-squares fits, the boxes, the
-/// fit options they were made with, and the lag-1 autocorrelation of each fit's residuals.
+/// fit options they were made with, and the lag-1 autocorrelation of each fit's residuals and
+/// the data's preference for AR(1) residuals there.
 #[derive(Clone, Debug)]
 struct Basis {
     fits: Vec<LawFit>,
     prior: Prior,
     fit: FitOptions,
     residual_lag1: Vec<f64>,
+    ar1_preference_nats: Vec<f64>,
 }
 
 impl Basis {
@@ -195,11 +197,16 @@ impl Basis {
             .iter()
             .map(|f| separation::residual_lag1(f, &data.calibration, &fit))
             .collect();
+        let ar1_preference_nats = fits
+            .iter()
+            .map(|f| evidence::noise::ar1_preference_nats(f, &data.calibration, &fit))
+            .collect();
         Self {
             fits,
             prior,
             fit,
             residual_lag1,
+            ar1_preference_nats,
         }
     }
 }
@@ -259,8 +266,11 @@ pub struct EvidenceAnalysis {
     /// What the fits alone say about telling the laws apart on these samples.
     pub separations: Vec<Separation>,
     /// The lag-1 autocorrelation of each fit's residuals in time order, in `fits` order
-    /// ([`separation::residual_lag1`]): the check on the i.i.d. noise model.
+    /// ([`separation::residual_lag1`]).
     pub residual_lag1: Vec<f64>,
+    /// The nats by which the data prefer AR(1) residuals to i.i.d. ones at each fit, in `fits`
+    /// order ([`evidence::noise::ar1_preference_nats`]): the check on the i.i.d. noise model.
+    pub ar1_preference_nats: Vec<f64>,
     /// Every noise model compared, or the one named ([`Job::noise`]); `evidence` is
     /// the one of the largest probability.
     pub noise_models: Vec<NoiseEvidence>,
@@ -271,9 +281,10 @@ pub struct EvidenceAnalysis {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum EvidenceWarning {
-    /// Every fit's residuals autocorrelated beyond [`separation::AUTOCORRELATED`] under the
-    /// i.i.d. model (its smallest lag-1).
-    Autocorrelated { lag1: f64 },
+    /// Under the i.i.d. model, the data prefer AR(1) residuals at every fit by more than
+    /// [`evidence::noise::AR1_PREFERRED_NATS`] (the least of those preferences, and the least
+    /// lag-1 autocorrelation of the residuals).
+    Autocorrelated { nats: f64, lag1: f64 },
     /// A law's islands disagree beyond [`evidence::ISLANDS_AGREE_NATS`].
     IslandsDisagree { law: Law, nats: f64 },
     /// A law's posterior reaches box ends that are not physical bounds.
@@ -290,11 +301,12 @@ pub enum EvidenceWarning {
 impl std::fmt::Display for EvidenceWarning {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Self::Autocorrelated { lag1 } => write!(
+            Self::Autocorrelated { nats, lag1 } => write!(
                 f,
-                "every law's residuals are autocorrelated (lag-1 at least {lag1:.2}): the i.i.d. noise model counts each \
-                 sample as independent and overstates every Bayes factor, by about (1 + φ)/(1 − φ) = {:.1} times in \
-                 nats; the AR(1) model accounts for it",
+                "the data prefer AR(1) residuals to i.i.d. ones by at least {nats:.1} nats at every law's best fit \
+                 (lag-1 autocorrelation at least {lag1:.2}): the i.i.d. noise model counts each sample as independent \
+                 and overstates every Bayes factor, by about (1 + φ)/(1 − φ) = {:.1} times in nats; the AR(1) model \
+                 accounts for it",
                 (1.0 + lag1) / (1.0 - lag1)
             ),
             Self::IslandsDisagree { law, nats } => write!(
@@ -327,16 +339,12 @@ impl EvidenceAnalysis {
     pub fn warnings(&self) -> Vec<EvidenceWarning> {
         let evidence = &self.evidence;
         let mut warnings = Vec::new();
+        let least = |values: &[f64]| values.iter().copied().filter(|v| v.is_finite()).reduce(f64::min);
         if evidence.config.noise == NoiseModel::Iid
-            && let Some(lag1) = self
-                .residual_lag1
-                .iter()
-                .copied()
-                .filter(|phi| phi.is_finite())
-                .reduce(f64::min)
-                .filter(|&phi| phi > separation::AUTOCORRELATED)
+            && let Some(nats) = least(&self.ar1_preference_nats).filter(|&n| n > evidence::noise::AR1_PREFERRED_NATS)
         {
-            warnings.push(EvidenceWarning::Autocorrelated { lag1 });
+            let lag1 = least(&self.residual_lag1).unwrap_or(f64::NAN);
+            warnings.push(EvidenceWarning::Autocorrelated { nats, lag1 });
         }
         warnings.extend(
             evidence
@@ -417,6 +425,7 @@ impl EvidenceAnalysis {
             &self.evidence,
             &self.separations,
             &self.residual_lag1,
+            &self.ar1_preference_nats,
             &self.noise_models,
             prior,
         );
@@ -524,6 +533,7 @@ impl Job {
                     self.sample_saved(basis.clone(), workers.as_ref(), model, part, saving.as_mut(), observer)?;
                 part += 1;
                 analysis.residual_lag1 = basis.residual_lag1.clone();
+                analysis.ar1_preference_nats = basis.ar1_preference_nats.clone();
                 analyses.push(analysis);
             }
         }
@@ -664,6 +674,7 @@ impl Job {
             prior,
             fit,
             residual_lag1,
+            ..
         } = basis;
         let law_particles = match &self.warm {
             Some(warm) if !warm.worth.is_empty() => {
@@ -718,6 +729,7 @@ impl Job {
             evidence,
             separations: Vec::new(),
             residual_lag1: Vec::new(),
+            ar1_preference_nats: Vec::new(),
             noise_models: Vec::new(),
         })
     }

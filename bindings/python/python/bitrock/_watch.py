@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 import os
 import queue
+import signal
 import threading
+import weakref
 from typing import Any, Iterator, Sequence
 
 import pandas as pd
@@ -14,6 +16,33 @@ from . import _bitrock
 
 # What the reading thread puts on the queue after the last update.
 _END = object()
+
+# The stop events of the watches reading now, set by Ctrl-C wherever the main thread is.
+_READING: "weakref.WeakSet[threading.Event]" = weakref.WeakSet()
+_INTERRUPT_HANDLER_INSTALLED = False
+
+
+def _stop_on_interrupt(stop: threading.Event) -> None:
+    """Makes Ctrl-C stop the watch whose event is `stop`, then act as it did before (by
+    default, KeyboardInterrupt in the main thread): a Ctrl-C in the body of a loop over the
+    updates, which no code of the watch's sees, stops it too. Signal handlers are the main
+    thread's: a watch made on another thread stops by close() or garbage collection."""
+    global _INTERRUPT_HANDLER_INSTALLED
+    _READING.add(stop)
+    if _INTERRUPT_HANDLER_INSTALLED or threading.current_thread() is not threading.main_thread():
+        return
+    previous = signal.getsignal(signal.SIGINT)
+
+    def on_interrupt(signum: int, frame: Any) -> None:
+        for event in list(_READING):
+            event.set()
+        if callable(previous):
+            previous(signum, frame)
+        elif previous == signal.SIG_DFL:
+            signal.default_int_handler(signum, frame)
+
+    signal.signal(signal.SIGINT, on_interrupt)
+    _INTERRUPT_HANDLER_INSTALLED = True
 
 
 class WatchUpdate:
@@ -51,31 +80,45 @@ class WatchUpdate:
 
 class Watch:
     """An iterator over the updates of a watch (see :func:`watch`); ``history`` holds those
-    given so far as a DataFrame. The record is read on a thread of its own; Ctrl-C in the loop
-    over the updates, or :meth:`close`, stops it after the window in progress."""
+    given so far as a DataFrame. The record is read on a thread of its own, which stops after
+    the window in progress on :meth:`close` (``with`` closes on leaving the block), on Ctrl-C
+    (in the loop over the updates or in its body, as the command stops on it), and when the
+    watch object is garbage collected."""
 
     def __init__(self, source: str, options: dict[str, Any]) -> None:
-        self._updates: queue.Queue[Any] = queue.Queue()
-        self._stop = threading.Event()
+        updates: queue.Queue[Any] = queue.Queue()
+        stop = threading.Event()
+        outcome: dict[str, Any] = {}
+        self._updates = updates
+        self._stop = stop
+        self._outcome = outcome
         self._given: list[WatchUpdate] = []
-        self.ended: dict[str, Any] | None = None
 
-        # After close() the window in progress is still given (and stored): the watch sees the
-        # stop between rows and ends there, with its `ended` record.
+        # The thread holds only the queue, the stop event and the outcome, never the watch
+        # object: a watch no one holds any more is collected, and its finaliser stops the
+        # thread. After a stop the window in progress is still given (and stored): the watch
+        # sees the stop between rows and ends there, with its `ended` record.
         def on_update(line: str) -> None:
-            self._updates.put(WatchUpdate(json.loads(line)))
+            updates.put(WatchUpdate(json.loads(line)))
 
         def follow() -> None:
             from . import _note
 
             try:
-                self.ended = json.loads(_bitrock.watch(source, options, on_update, _note, self._stop.is_set))
-                self._updates.put(_END)
+                outcome["ended"] = json.loads(_bitrock.watch(source, options, on_update, _note, stop.is_set))
+                updates.put(_END)
             except BaseException as error:  # handed to the loop over the updates
-                self._updates.put(error)
+                updates.put(error)
 
+        weakref.finalize(self, stop.set)
+        _stop_on_interrupt(stop)
         self._thread = threading.Thread(target=follow, name="bitrock-watch", daemon=True)
         self._thread.start()
+
+    @property
+    def ended(self) -> dict[str, Any] | None:
+        """How the watch ended (``windows``, ``stopped``, …), once it has."""
+        return self._outcome.get("ended")
 
     def __iter__(self) -> Iterator[WatchUpdate]:
         return self
