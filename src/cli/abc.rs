@@ -42,14 +42,14 @@ pub struct AbcArgs {
     pub prior: Option<PathBuf>,
     /// Smallest tolerance on ρ: the population that reaches it is the last [default: 0.014,
     /// the paper's; with --resume: the run's].
-    #[arg(long, value_parser = finite_number, value_name = "EPS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "EPS")]
     pub eps_min: Option<f64>,
     /// Tolerance schedule ε_1 > ε_2 > ... instead of the median rule (ε_0 stays ∞), run as
     /// given: the run ends with its last tolerance (values below --eps-min are refused).
-    #[arg(long, value_parser = finite_number, value_delimiter = ',', value_name = "E1,E2,...")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_delimiter = ',', value_name = "E1,E2,...")]
     pub epsilons: Option<Vec<f64>>,
     /// Tolerance of population 0 [default: ∞, the first N prior draws].
-    #[arg(long, value_parser = finite_number, value_name = "EPS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "EPS")]
     pub start_epsilon: Option<f64>,
     /// Most populations, population 0 included [default: 30; with --resume: the run's].
     #[arg(long, value_name = "G")]
@@ -59,11 +59,11 @@ pub struct AbcArgs {
     pub max_draws: Option<u64>,
     /// Stop when the projected acceptance rate of the next population falls below this
     /// [default: 1e-5; with --resume: the run's].
-    #[arg(long, value_parser = finite_number, value_name = "RATE")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "RATE")]
     pub min_acceptance: Option<f64>,
     /// Wall-time budget of this invocation in seconds; the population in progress is dropped
     /// and the run can be continued with --resume (which has no budget unless given again).
-    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
     /// Rejection sampler only. nested: one candidate stream, each population keeps the previous
     /// particles below its tolerance (same distribution, 0.38× the evaluations on the demo

@@ -38,7 +38,7 @@ pub struct ColumnArgs {
     pub wob_unit: Option<ForceUnit>,
     /// Drop rows whose bit speed is below this, rpm: the laws hold for a turning bit, and
     /// stick-phase samples say nothing about them.
-    #[arg(long, value_parser = finite_number, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
     pub min_speed_rpm: f64,
 }
 
@@ -65,16 +65,16 @@ pub struct DataArgs {
     #[command(flatten)]
     pub columns: ColumnArgs,
     /// Use only rows at or after this time, s (needs a time column).
-    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
     pub t_start_s: Option<f64>,
     /// Use only rows at or before this time, s (needs a time column).
-    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
     pub t_end_s: Option<f64>,
     /// Keep every K-th row of the time window (applied before the speed filter).
     #[arg(long, default_value_t = DataOptions::default().thin, value_name = "K")]
     pub thin: usize,
     /// Fraction of the kept rows used for calibration; the rest validates the fit.
-    #[arg(long, value_parser = finite_number, default_value_t = DataOptions::default().calibration_fraction, value_name = "F")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = DataOptions::default().calibration_fraction, value_name = "F")]
     pub calibration_fraction: f64,
     /// How calibration rows are chosen: block = the first part of the record, interleaved =
     /// spread evenly through it.
@@ -116,7 +116,7 @@ pub struct FitArgs {
     #[arg(long)]
     pub scale_by_wob: bool,
     /// Reference weight on bit W_ref, kN, of --scale-by-wob [default: 244.2, the paper's].
-    #[arg(long, value_parser = finite_number, value_name = "KN")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KN")]
     pub w_ref_kn: Option<f64>,
 }
 
@@ -205,10 +205,10 @@ pub struct FeArgs {
     #[arg(long, value_name = "N")]
     pub bha_elements: Option<usize>,
     /// Mass-proportional Rayleigh damping α, 1/s.
-    #[arg(long, value_parser = finite_number, value_name = "ALPHA")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "ALPHA")]
     pub alpha: Option<f64>,
     /// Stiffness-proportional Rayleigh damping β, s.
-    #[arg(long, value_parser = finite_number, value_name = "BETA")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "BETA")]
     pub beta: Option<f64>,
 }
 
@@ -230,7 +230,9 @@ impl StructureArgs {
     /// What decides stability on the structure these flags describe (the finite-element
     /// string's bisection runs here).
     pub fn criterion(&self) -> bitrock::Result<bitrock::stability::map::Criterion> {
-        bitrock::run::stability::criterion(self.structure, self.lumped.lumped(), &self.fe.settings())
+        bitrock::run::stability::criterion(self.structure, self.lumped.lumped(), &self.fe.settings(), &mut |line| {
+            super::print::note(line)
+        })
     }
 }
 
@@ -238,13 +240,13 @@ impl StructureArgs {
 #[derive(Debug, Args, Clone)]
 pub struct LumpedArgs {
     /// Equivalent moment of inertia I_eq, kg·m².
-    #[arg(long, value_parser = finite_number, default_value_t = Lumped::default().inertia_kg_m2, value_name = "KG_M2")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Lumped::default().inertia_kg_m2, value_name = "KG_M2")]
     pub inertia_kg_m2: f64,
     /// Natural frequency omega_n, rad/s.
-    #[arg(long, value_parser = finite_number, default_value_t = Lumped::default().omega_n_rad_s, value_name = "RAD_S")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Lumped::default().omega_n_rad_s, value_name = "RAD_S")]
     pub omega_n_rad_s: f64,
     /// Damping ratio xi.
-    #[arg(long, value_parser = finite_number, default_value_t = Lumped::default().damping_ratio, value_name = "XI")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Lumped::default().damping_ratio, value_name = "XI")]
     pub damping_ratio: f64,
 }
 

@@ -57,7 +57,7 @@ pub struct EvidenceCmd {
     pub max_stages: usize,
     /// Share of the particles' effective sample size each tempering step keeps, in (0, 1):
     /// higher is more, gentler steps.
-    #[arg(long, value_parser = finite_number, default_value_t = EvidenceConfig::default().ess_share, value_name = "SHARE")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = EvidenceConfig::default().ess_share, value_name = "SHARE")]
     pub ess_share: f64,
     /// Most Metropolis sweeps after each tempering step.
     #[arg(long, default_value_t = EvidenceConfig::default().max_sweeps, value_name = "COUNT")]

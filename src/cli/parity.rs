@@ -21,7 +21,7 @@ pub struct ParityCmd {
     #[arg(long, default_value_t = bitrock::bench::PARITY_CANDIDATES, value_name = "N")]
     pub candidates: usize,
     /// Tolerance at which accept/reject decisions are compared [default: each law's median ρ].
-    #[arg(long, value_parser = finite_number, value_name = "EPS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "EPS")]
     pub epsilon: Option<f64>,
     /// Seed of the candidate stream.
     #[arg(long, default_value_t = bitrock::bench::PARITY_SEED)]

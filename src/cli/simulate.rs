@@ -44,24 +44,24 @@ pub struct SimulateCmd {
     #[arg(long, value_parser = finite_number, value_name = "RPM", required_unless_present = "well", allow_hyphen_values = true)]
     pub omega_rpm: Option<f64>,
     /// Weight on bit W, kN.
-    #[arg(long, value_parser = finite_number, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub wob_kn: f64,
     /// Reference weight on bit W_ref at which the law's parameters hold, kN.
-    #[arg(long, value_parser = finite_number, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = PAPER_W_REF_N / 1000.0, value_name = "KN")]
     pub w_ref_kn: f64,
     #[command(flatten)]
     pub lumped: LumpedArgs,
     /// Recorded duration, s.
-    #[arg(long, value_parser = finite_number, default_value_t = 60.0, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 60.0, value_name = "SECONDS")]
     pub duration_s: f64,
     /// Simulated time discarded before recording starts (lets a limit cycle settle), s.
-    #[arg(long, value_parser = finite_number, default_value_t = 0.0, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 0.0, value_name = "SECONDS")]
     pub settle_s: f64,
     /// Output sample rate, Hz (the paper's downhole tool records at 50 Hz).
-    #[arg(long, value_parser = finite_number, default_value_t = 50.0, value_name = "HZ")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 50.0, value_name = "HZ")]
     pub sample_hz: f64,
     /// Integration step of the RK4 scheme, s.
-    #[arg(long, value_parser = finite_number, default_value_t = 1e-3, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 1e-3, value_name = "SECONDS")]
     pub dt_s: f64,
     /// Initial state.
     #[arg(long, value_enum, default_value_t = InitialState::Equilibrium)]
@@ -70,16 +70,16 @@ pub struct SimulateCmd {
     #[arg(long, value_parser = finite_number, default_value_t = simulate::DEFAULT_KICK_RPM, value_name = "RPM", allow_hyphen_values = true)]
     pub kick_rpm: f64,
     /// Standard deviation of Gaussian noise added to the recorded torque, kN·m.
-    #[arg(long, value_parser = finite_number, default_value_t = 0.0, value_name = "KNM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 0.0, value_name = "KNM")]
     pub noise_torque_knm: f64,
     /// Standard deviation of Gaussian noise added to the recorded bit speed, rpm.
-    #[arg(long, value_parser = finite_number, default_value_t = 0.0, value_name = "RPM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 0.0, value_name = "RPM")]
     pub noise_speed_rpm: f64,
     /// Standard deviation of a slow random fluctuation of the weight on bit, kN.
-    #[arg(long, value_parser = finite_number, default_value_t = 0.0, value_name = "KN")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 0.0, value_name = "KN")]
     pub wob_fluctuation_kn: f64,
     /// Correlation time of the weight-on-bit fluctuation, s.
-    #[arg(long, value_parser = finite_number, default_value_t = 20.0, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 20.0, value_name = "SECONDS")]
     pub wob_correlation_s: f64,
     /// Seed of the noise and fluctuation generator.
     #[arg(long, default_value_t = simulate::DEFAULT_SEED)]

@@ -50,7 +50,7 @@ pub struct StabilityCmd {
     pub string: StructureArgs,
     /// Reference weight on bit W_ref of the law's parameters, kN [default: the paper's 244.2;
     /// an evidence directory's own where its evidence scaled each torque by WOB / W_ref].
-    #[arg(long, value_parser = finite_number, value_name = "KN")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KN")]
     pub w_ref_kn: Option<f64>,
     /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value = DEFAULT_OMEGA_RPM, value_name = "MIN:MAX:COUNT")]
@@ -60,7 +60,7 @@ pub struct StabilityCmd {
     pub wob_kn: String,
     /// Percentile of the stochastic boundary, %: the weight on bit above which at least this
     /// share of the posterior samples is unstable (the paper's 2 %).
-    #[arg(long, value_parser = finite_number, default_value_t = DEFAULT_PERCENT, value_name = "PERCENT")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = DEFAULT_PERCENT, value_name = "PERCENT")]
     pub percentile: f64,
     /// Posterior samples per law for the stochastic maps (the paper's 700).
     #[arg(long, default_value_t = DEFAULT_SAMPLES, value_name = "S")]
@@ -87,10 +87,10 @@ pub struct StabilityCmd {
     pub simulate: bool,
     /// Top-drive speed the rig turns at now, rpm: where the escape map and the advice start
     /// [default: a run's or an evidence's record's mean bit speed and weight on bit].
-    #[arg(long, value_parser = finite_number, requires_all = ["simulate", "at_kn"], value_name = "RPM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, requires_all = ["simulate", "at_kn"], value_name = "RPM")]
     pub at_rpm: Option<f64>,
     /// Weight on bit the rig drills with now, kN.
-    #[arg(long, value_parser = finite_number, requires_all = ["simulate", "at_rpm"], value_name = "KN")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, requires_all = ["simulate", "at_rpm"], value_name = "KN")]
     pub at_kn: Option<f64>,
     /// Top-drive speeds of the simulated maps, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value = strings::DEFAULT_OMEGA_RPM, value_name = "MIN:MAX:COUNT")]
@@ -102,7 +102,7 @@ pub struct StabilityCmd {
     #[arg(long, default_value_t = strings::DEFAULT_SAMPLES, value_name = "S")]
     pub sim_samples: usize,
     /// Integration step of the simulated strings, s (checked against the string's fastest mode).
-    #[arg(long, value_parser = finite_number, default_value_t = bitrock::run::strings::DEFAULT_DT_S, value_name = "S")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = bitrock::run::strings::DEFAULT_DT_S, value_name = "S")]
     pub dt_s: f64,
 }
 
@@ -131,6 +131,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         cmd.string.structure,
         cmd.string.lumped.lumped(),
         &cmd.string.fe.settings(),
+        &mut |line| super::print::note(line),
     )?;
     let maps = job.run(&mut |line| super::print::note(line))?;
     if let (MapSource::Run(dir), Some(why)) = (&job.source, &maps.early_end) {

@@ -30,7 +30,7 @@ pub struct WatchCmd {
     pub follow: bool,
     /// Replay the file against its own time column at this many times real time (1 = as the
     /// rig sent it): what the watch would have said while drilling, at its pace.
-    #[arg(long, value_parser = finite_number, value_name = "X")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "X")]
     pub replay_speed: Option<f64>,
     /// Laws compared (comma-separated).
     #[arg(long, default_value = bitrock::built_in_law_list!(), value_name = "LAWS")]
@@ -40,24 +40,24 @@ pub struct WatchCmd {
     #[arg(long, value_name = "K")]
     pub thin: Option<usize>,
     /// Window length, s [default: 10 s or 500 samples, whichever is longer].
-    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
     pub window_s: Option<f64>,
     /// Time between window starts, s [default: a fifth of the window].
-    #[arg(long, value_parser = finite_number, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
     pub step_s: Option<f64>,
     /// Weight of the law probabilities carried from one window length before, in (0, 1]: 1
     /// adds up the evidence of every sample once, smaller forgets faster.
-    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().forgetting, value_name = "LAMBDA")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = WatchSettings::default().forgetting, value_name = "LAMBDA")]
     pub forgetting: f64,
     /// No law's probability goes below this: none is ruled out for good.
-    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().floor, value_name = "P")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = WatchSettings::default().floor, value_name = "P")]
     pub floor: f64,
     /// Log-likelihood (nats) the fits of the latest window sharing no time with a window may
     /// lose on it, beyond their running level, before a change of formation is declared.
-    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().change_nats, value_name = "NATS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = WatchSettings::default().change_nats, value_name = "NATS")]
     pub change_nats: f64,
     /// The probability of stick-slip the advice keeps below.
-    #[arg(long, value_parser = finite_number, default_value_t = WatchSettings::default().risk, value_name = "P")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = WatchSettings::default().risk, value_name = "P")]
     pub risk: f64,
     /// Particles of each island of each window's evidence [default: 300]; with --abc, of each
     /// window's ABC population [default: 4,000].
@@ -76,11 +76,11 @@ pub struct WatchCmd {
     #[arg(long, value_enum, requires = "abc")]
     pub sampler: Option<Sampler>,
     /// With --abc: the prior half-width δ around each window's fits [default: 0.4].
-    #[arg(long, value_parser = finite_number, value_name = "DELTA", requires = "abc")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "DELTA", requires = "abc")]
     pub delta: Option<f64>,
     /// With --abc: the smallest tolerance [default: 0.014, the paper's, where the window
     /// reaches it; else 1.1 × its best least-squares ρ].
-    #[arg(long, value_parser = finite_number, value_name = "EPS", requires = "abc")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "EPS", requires = "abc")]
     pub eps_min: Option<f64>,
     /// Seed of each window's samplers (window k uses seed + k).
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
@@ -302,7 +302,9 @@ fn say_ended(
         .into();
         server.end(&said);
     }
-    if !cmd.json {
+    if !cmd.json && ended.window_s == 0.0 {
+        writeln!(out, "no window: no data row; {} lines skipped", ended.skipped_lines)?;
+    } else if !cmd.json {
         writeln!(
             out,
             "{} windows of {} s every {} s; torques in {}; {} lines skipped",

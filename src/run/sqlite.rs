@@ -69,7 +69,12 @@ pub(crate) fn open(dir: &Path, kind: &Kind, flags: OpenFlags) -> Result<(Connect
         message: format!("not a bitrock {} directory ({why}); give {}", kind.what, kind.made_by),
     };
     if !dir.is_dir() {
-        return Err(refuse("no such directory".into()));
+        let why = if dir.exists() {
+            "a file, not a directory"
+        } else {
+            "no such directory"
+        };
+        return Err(refuse(why.into()));
     }
     if !path.is_file() {
         return Err(refuse(format!("it has no {file}")));

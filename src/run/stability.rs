@@ -169,12 +169,19 @@ impl StabilityJob {
 
     /// The job on `structure`: the 1-DOF model `lumped`, or the finite-element string `fe`
     /// describes, whose critical bit damping is found (a bisection) once the job's cheap checks
-    /// passed. Refuses FE settings given for the 1-DOF string.
-    pub fn on(mut self, structure: Structure, lumped: Lumped, fe: &DrillStringSettings) -> Result<Self> {
+    /// passed (a long search said through `note`). Refuses FE settings given for the 1-DOF
+    /// string.
+    pub fn on(
+        mut self,
+        structure: Structure,
+        lumped: Lumped,
+        fe: &DrillStringSettings,
+        note: &mut dyn FnMut(String),
+    ) -> Result<Self> {
         check_structure(structure, &lumped, fe)?;
         self.criterion = Criterion::Lumped(lumped);
         self.validate()?;
-        self.criterion = criterion(structure, lumped, fe)?;
+        self.criterion = criterion(structure, lumped, fe, note)?;
         Ok(self)
     }
 
@@ -326,14 +333,37 @@ fn check_structure(structure: Structure, lumped: &Lumped, fe: &DrillStringSettin
     lumped.validate()
 }
 
+/// Seconds of eigenvalue solves above which the search for a string's critical bit damping
+/// is said before it starts.
+const SAY_CRITICAL_AFTER_S: f64 = 5.0;
+
 /// What decides stability on `structure`: the 1-DOF model `lumped`, or the critical bit
 /// damping of the finite-element string `fe` describes (a bisection over its eigenvalues:
-/// seconds to minutes, see [`crate::stability::fe`]).
-pub fn criterion(structure: Structure, lumped: Lumped, fe: &DrillStringSettings) -> Result<Criterion> {
+/// seconds to minutes, see [`crate::stability::fe`]; said through `note`, with its time
+/// estimated, before a search of more than a few seconds).
+pub fn criterion(
+    structure: Structure,
+    lumped: Lumped,
+    fe: &DrillStringSettings,
+    note: &mut dyn FnMut(String),
+) -> Result<Criterion> {
     check_structure(structure, &lumped, fe)?;
     Ok(match structure {
         Structure::Lumped => Criterion::Lumped(lumped),
-        Structure::Fe => Criterion::Critical(fe.drill_string()?.critical_bit_damping()?.critical_bit_damping_nms),
+        Structure::Fe => {
+            let string = fe.drill_string()?;
+            let solves = crate::stability::fe::SOLVES_PER_CRITICAL;
+            let seconds = string.estimate_seconds(solves);
+            if seconds > SAY_CRITICAL_AFTER_S {
+                note(format!(
+                    "note: the critical bit damping of the {}-element string: about {solves:.0} eigenvalue solves of a {}-DOF Jacobian, about {} on this machine",
+                    string.dp_elements + string.bha_elements,
+                    string.dofs(),
+                    crate::limits::human_seconds(seconds)
+                ));
+            }
+            Criterion::Critical(string.critical_bit_damping()?.critical_bit_damping_nms)
+        }
     })
 }
 

@@ -140,6 +140,17 @@ pub fn follow(
         }
     }
     let (window_s, step_s) = watch.as_ref().map_or((0.0, 0.0), Watch::windows);
+    // A record too short for one window, or with no row at all, said as such (a resumed watch
+    // may rightly give none: its windows were stored before).
+    if given == 0 && !options.resume && !interrupted && !stopped() {
+        observer.note(match &watch {
+            None => format!("warning: {}: no data row: nothing to watch", source.display()),
+            Some(_) => format!(
+                "warning: {} ended before a window of {window_s} s was complete: no window to give (`window_s` sets a shorter one)",
+                source.display()
+            ),
+        });
+    }
     Ok(Ended {
         windows: given,
         skipped_lines: rows.skipped,

@@ -116,7 +116,7 @@ pub(crate) fn stability<'py>(
     };
     let mut notes = Vec::new();
     let maps = py.detach(|| {
-        let job = job.on(structure, lumped, &fe)?;
+        let job = job.on(structure, lumped, &fe, &mut |line| notes.push(line))?;
         let maps = job.run(&mut |line| notes.push(line))?;
         Ok::<_, Error>((job, maps))
     });

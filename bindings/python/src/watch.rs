@@ -32,9 +32,10 @@ pub(crate) fn watch(
     let replay_speed: Option<f64> = kwarg(options, "replay_speed")?;
     let (structure, lumped, fe) = crate::stability::structure_options(py, options)?;
     // The finite-element string's critical bit damping is a bisection: off Python's lock.
+    let mut said = Vec::new();
     let criterion = check(
         py,
-        py.detach(|| bitrock::run::stability::criterion(structure, lumped, &fe)),
+        py.detach(|| bitrock::run::stability::criterion(structure, lumped, &fe, &mut |line| said.push(line))),
     )?;
     // A stick-slipping window's way out on the finite-element string, where it can be simulated.
     let fe_chain = match structure {
@@ -102,6 +103,9 @@ pub(crate) fn watch(
     let resume: bool = kwarg(options, "resume")?.unwrap_or(false);
     let serve: Option<String> = kwarg(options, "serve")?;
     let mut observer = PyObserver::new(None, note);
+    for line in said {
+        bitrock::abc::Observer::note(&mut observer, line);
+    }
     // What Python raised (Ctrl-C between rows, or in `on_update`): the watch stops after
     // storing the window in progress, then it is raised again.
     let raised: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);

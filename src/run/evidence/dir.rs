@@ -273,6 +273,10 @@ pub fn check_dir(
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
     check_replicates(replicates)?;
+    // The check is written into the directory's document: a directory bitrock may not write
+    // (files copied without their marks, or changed) is refused before the work.
+    let owned = |rel: &Path, is_dir: bool| owns_unchanged(Owned::Evidence, dir, rel, is_dir);
+    files::refuse_foreign(dir, "run", &owned)?;
     let stored = stored_job(&dir.join(JOB_JSON))?;
     let mut document = read_json(&dir.join(EVIDENCE_JSON), "an evidence document")?;
     let path = dir.join(JOB_JSON);
@@ -314,10 +318,8 @@ pub fn check_dir(
     }
     let check = check(&job, &data, &analysis, replicates, scoring, progress, observer)?;
     document["check"] = serde_json::to_value(&check).expect("a check serialises");
-    // The directory is still the evidence's alone; only its document changes (written whole).
-    files::refuse_foreign(dir, "run", &|rel, is_dir| {
-        owns_unchanged(Owned::Evidence, dir, rel, is_dir)
-    })?;
+    // Still the evidence's alone after the work; only its document changes (written whole).
+    files::refuse_foreign(dir, "run", &owned)?;
     let json = pretty(&document);
     files::write_own(&dir.join(EVIDENCE_JSON), "run", |out| out.write_all(&json))?;
     Ok(check)
