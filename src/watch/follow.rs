@@ -76,6 +76,9 @@ pub fn follow(
     let mut watch: Option<Watch> = None;
     let mut given = 0;
     let mut interrupted = false;
+    let started = std::time::Instant::now();
+    // The record's first and latest time stamps read, for the estimate of its windows.
+    let mut span_s: Option<(f64, f64)> = None;
     loop {
         if stopped() {
             interrupted = true;
@@ -84,7 +87,12 @@ pub fn follow(
         let next = rows.next_row()?;
         let ended = matches!(next, source::Next::End);
         match next {
-            source::Next::Row(row, arrived) => first.push((row, arrived)),
+            source::Next::Row(row, arrived) => {
+                if let Some(t) = row.time_s {
+                    span_s = Some(span_s.map_or((t, t), |(a, _)| (a, t)));
+                }
+                first.push((row, arrived));
+            }
             source::Next::Skipped(why) => observer.note(format!("warning: {why}: line skipped")),
             source::Next::Said(what) => observer.note(format!("warning: {what}")),
             source::Next::Stalled(silent) => observer.note(format!(
@@ -110,11 +118,15 @@ pub fn follow(
             watch = Some(made);
         }
         if let Some(watch) = watch.as_mut() {
-            let mut give = |update: Update, watch: &Watch| -> Result<()> {
+            let share = rows.share_read();
+            let mut give = |update: Update, watch: &Watch, observer: &mut dyn Observer| -> Result<()> {
                 if let Some(store) = kept.as_mut() {
                     store.append(&update, watch.carried(), watch.view())?;
                 }
                 given += 1;
+                if given == 1 && !options.resume {
+                    say_estimate(share, span_s, watch.windows(), started.elapsed(), observer);
+                }
                 on_update(&update)?;
                 if let Some(server) = options.serve {
                     server.publish(&update, watch.view());
@@ -123,7 +135,7 @@ pub fn follow(
             };
             for (row, arrived) in first.drain(..) {
                 for update in watch.push(row, arrived, observer)? {
-                    give(update, watch)?;
+                    give(update, watch, observer)?;
                 }
                 if stopped() {
                     break;
@@ -131,7 +143,7 @@ pub fn follow(
             }
             if ended && !stopped() {
                 for update in watch.finish(observer)? {
-                    give(update, watch)?;
+                    give(update, watch, observer)?;
                 }
             }
         }
@@ -158,6 +170,38 @@ pub fn follow(
         step_s,
         stopped: interrupted || stopped(),
     })
+}
+
+/// Seconds of work past which the watch of a file says how many windows it holds and how
+/// long they take.
+const SAY_ESTIMATE_AFTER_S: f64 = 60.0;
+
+/// After a file's first window: its windows and their time at the first one's pace, from the
+/// share of the file read (`share`) over the record's time stamps so far (`span_s`), said
+/// where they take more than a minute. Sources whose end is not known say nothing.
+fn say_estimate(
+    share: Option<f64>,
+    span_s: Option<(f64, f64)>,
+    (length, step): (f64, f64),
+    first_took: std::time::Duration,
+    observer: &mut dyn Observer,
+) {
+    let (Some(share), Some((t0, t1))) = (share, span_s) else {
+        return;
+    };
+    if share <= 0.0 || share >= 1.0 || t1 <= t0 {
+        return;
+    }
+    let record_s = (t1 - t0) / share;
+    let windows = ((record_s - length) / step).floor().max(0.0) + 1.0;
+    let seconds = windows * first_took.as_secs_f64();
+    if seconds > SAY_ESTIMATE_AFTER_S {
+        observer.note(format!(
+            "about {windows:.0} windows in this record (about {} of record, from the file's size), about {} at the first window's pace",
+            crate::limits::human_seconds(record_s),
+            crate::limits::human_seconds(seconds)
+        ));
+    }
 }
 
 /// Opens the watch stored in `dir` to go on with it: checked against `settings`, which take

@@ -120,7 +120,9 @@ impl Watch {
         // Bounded before any work: a step shorter than the rows' period gives windows that
         // repeat the same rows, as many per second of record as the step is short.
         let period_s = thin as f64 / rate_hz;
-        if step < period_s {
+        // A step of one period as the user writes it (0.05 s at 20 Hz) is one period, whatever
+        // the last bits of the measured rate.
+        if step < period_s * (1.0 - 1e-9) {
             return Err(crate::Error::setting(
                 "step_s",
                 format!(

@@ -16,6 +16,28 @@ use std::time::{Duration, Instant};
 /// How often a followed file is looked at again once its end is reached, and how long a
 /// read of a TCP feed waits before the watch may stop.
 const FOLLOW_POLL: Duration = Duration::from_millis(200);
+
+/// Longest line a source may send, bytes: a rig export's row of hundreds of channels fits many
+/// times over; a stream without newlines (`/dev/zero`, a feed that never ends its line) is
+/// refused at it instead of being held whole.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// `read_line` into `text` (which may hold the start of the line already), refusing a line
+/// longer than [`MAX_LINE_BYTES`] as invalid data.
+fn read_line_bounded(reader: &mut (dyn BufRead + Send), text: &mut String) -> std::io::Result<usize> {
+    let room = (MAX_LINE_BYTES + 1).saturating_sub(text.len()) as u64;
+    let read = reader.take(room).read_line(text)?;
+    if text.len() > MAX_LINE_BYTES && !text.ends_with('\n') {
+        return Err(std::io::Error::new(
+            ErrorKind::InvalidData,
+            format!(
+                "a line of more than {} without a newline: not a line of a record",
+                crate::limits::human_bytes(MAX_LINE_BYTES as f64)
+            ),
+        ));
+    }
+    Ok(read)
+}
 /// A followed file or feed that gives no row for this long is said to have stalled (once,
 /// until rows come again).
 pub const STALL_AFTER: Duration = Duration::from_secs(30);
@@ -136,6 +158,9 @@ pub struct Rows {
     stall_said: bool,
     /// Rows before this time are given unpaced ([`Rows::replay_from`]).
     pace_from_s: f64,
+    /// Bytes read so far, and the size of a file read to its end (not followed).
+    bytes_read: u64,
+    size: Option<u64>,
 }
 
 impl Rows {
@@ -180,11 +205,18 @@ impl Rows {
                 (Box::new(BufReader::new(stream)), false, None, Some(feed))
             }
         };
+        let size = match source {
+            Source::File { path, follow: false } | Source::Replay { path, .. } => {
+                std::fs::metadata(path).ok().filter(|m| m.is_file()).map(|m| m.len())
+            }
+            _ => None,
+        };
         let rows = Self::from_reader(reader, name, opts, wits, stop)?;
         Ok(Self {
             follow,
             replay,
             feed,
+            size,
             ..rows
         })
     }
@@ -200,11 +232,12 @@ impl Rows {
     ) -> Result<Self> {
         let mut first = String::new();
         let mut line = 0;
+        let mut bytes_read = 0;
         // Comment lines (`#`) before the header, as a whole file allows.
         loop {
             first.clear();
             let read = loop {
-                match reader.read_line(&mut first) {
+                match read_line_bounded(reader.as_mut(), &mut first) {
                     Ok(n) => break n,
                     // A feed's first line may take its time; the watch may stop meanwhile.
                     Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
@@ -212,6 +245,13 @@ impl Rows {
                             return Err(Error::Interrupted);
                         }
                         continue;
+                    }
+                    Err(e) if e.kind() == ErrorKind::InvalidData => {
+                        return Err(Error::Format {
+                            path: name,
+                            line: Some(line + 1),
+                            message: e.to_string(),
+                        });
                     }
                     Err(source) => {
                         return Err(Error::Read {
@@ -222,6 +262,7 @@ impl Rows {
                 }
             };
             line += 1;
+            bytes_read += read as u64;
             if read == 0 {
                 return Err(Error::Format {
                     path: name,
@@ -266,7 +307,17 @@ impl Rows {
             last_row: Instant::now(),
             stall_said: false,
             pace_from_s: f64::NEG_INFINITY,
+            bytes_read,
+            size: None,
         })
+    }
+
+    /// The share of a file read to its end (not followed) read so far; `None` for other
+    /// sources, whose end is not known.
+    pub fn share_read(&self) -> Option<f64> {
+        self.size
+            .filter(|&size| size > 0)
+            .map(|size| (self.bytes_read as f64 / size as f64).min(1.0))
     }
 
     /// The source's name in messages.
@@ -344,7 +395,7 @@ impl Rows {
         }
         loop {
             let mut text = std::mem::take(&mut self.partial);
-            let read = match self.reader.read_line(&mut text) {
+            let read = match read_line_bounded(self.reader.as_mut(), &mut text) {
                 Ok(n) => n,
                 // A feed with nothing yet: the watch may stop while it waits.
                 Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
@@ -352,6 +403,13 @@ impl Rows {
                     return Ok(self.silent());
                 }
                 Err(e) if self.feed.is_some() => return Ok(self.lost(&format!("the connection failed ({e})"))),
+                Err(e) if e.kind() == ErrorKind::InvalidData => {
+                    return Err(Error::Format {
+                        path: self.name.clone(),
+                        line: Some(self.line + 1),
+                        message: e.to_string(),
+                    });
+                }
                 Err(source) => {
                     return Err(Error::Read {
                         path: self.name.clone(),
@@ -359,6 +417,7 @@ impl Rows {
                     });
                 }
             };
+            self.bytes_read += read as u64;
             if read == 0 && self.feed.is_some() {
                 return Ok(self.lost("the feed closed the connection"));
             }

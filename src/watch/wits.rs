@@ -114,6 +114,10 @@ impl WitsItems {
     }
 }
 
+/// Most items a WITS block may hold before its `!!`: a record has some tens; a block never
+/// closed is given up at this many instead of growing without end.
+pub const MAX_BLOCK_ITEMS: usize = 4096;
+
 /// Reads WITS blocks line by line into rows.
 pub struct WitsReader {
     items: WitsItems,
@@ -204,6 +208,12 @@ impl WitsReader {
             return self.row(&block);
         }
         let block = self.block.as_mut()?;
+        if block.len() >= MAX_BLOCK_ITEMS {
+            self.block = None;
+            return Some(Err(format!(
+                "a WITS block of more than {MAX_BLOCK_ITEMS} items without its closing !!: skipped"
+            )));
+        }
         if line.len() >= 4 && line.is_char_boundary(4) {
             let (code, value) = line.split_at(4);
             block.push((code.to_string(), value.trim().to_string()));

@@ -1327,3 +1327,78 @@ fn overlapping_windows_carry_each_sample_once() {
         "per window length: overlapping {per_window}, disjoint {disjoint_per_window}"
     );
 }
+
+/// Every line bounded on every source, and the work of a long file said: a stream without a
+/// newline (`/dev/zero`, a line of 2 MB) is refused naming its line, a WITS block never closed
+/// is given up after 4,096 items and said, and a file whose windows take more than a minute at
+/// the first one's pace says how many there are, from its size, before the rest.
+#[test]
+fn lines_are_bounded_and_a_long_file_s_work_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let (code, _, stderr) = outcome(bin().args(["watch", "/dev/zero"]));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("/dev/zero:1: a line of more than 1.0 MB without a newline"),
+        "{stderr}"
+    );
+    let long = dir.path().join("long-line.csv");
+    std::fs::write(
+        &long,
+        format!("time_s,bit_speed_rpm,torque_knm\n0,60,7\n{}", "7".repeat(2_000_000)),
+    )
+    .unwrap();
+    let (code, _, stderr) = outcome(bin().arg("watch").arg(&long));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("long-line.csv:3: a line of more than 1.0 MB"),
+        "{stderr}"
+    );
+    let wits = dir.path().join("open.wits");
+    std::fs::write(&wits, format!("&&\n{}", "0120 60\n".repeat(5000))).unwrap();
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["watch", "--torque-unit", "knm", "--wob-unit", "kn"])
+            .arg(&wits),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("a WITS block of more than 4096 items without its closing !!"),
+        "{stderr}"
+    );
+
+    let record = dir.path().join("ten-minutes.csv");
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "600"])
+            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "2", "-o"])
+            .arg(&record),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    // Windows of 10 s every sample (0.05 s): 11,801 of them.
+    let mut child = bin()
+        .args([
+            "watch",
+            "--laws",
+            "m2,m3",
+            "--backend",
+            "cpu",
+            "--window-s",
+            "10",
+            "--step-s",
+            "0.05",
+        ])
+        .arg(&record)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let said = std::io::BufRead::lines(stderr)
+        .map_while(Result::ok)
+        .find(|l| l.contains("windows in this record"));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let said = said.expect("the estimate said");
+    let windows: f64 = said.split_whitespace().nth(2).unwrap().parse().unwrap();
+    assert!((11_000.0..12_500.0).contains(&windows), "{said}");
+}
