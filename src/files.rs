@@ -598,6 +598,21 @@ pub struct DirLock {
 }
 
 impl DirLock {
+    /// Whether a process holds the lock of `dir` now (read without taking it from anyone: a
+    /// shared lock taken and let go at once).
+    pub fn is_held(dir: &Path) -> bool {
+        let Ok(file) = File::open(dir.join(LOCK_FILE)) else {
+            return false;
+        };
+        match file.try_lock_shared() {
+            Ok(()) => {
+                let _ = file.unlock();
+                false
+            }
+            Err(_) => true,
+        }
+    }
+
     /// Takes the lock of `dir` (which must exist), or refuses naming the process holding it.
     pub fn acquire(dir: &Path) -> Result<Self> {
         let path = dir.join(LOCK_FILE);

@@ -38,6 +38,21 @@ pub fn run(cmd: &ServeCmd) -> anyhow::Result<ExitCode> {
                 server.publish(update, view.as_ref().filter(|_| newest));
             }
             last = Some(newest.window);
+        } else if !server.is_ended() {
+            // The page says how the watch ended: as it recorded, or killed where no watch
+            // writes the directory and none recorded its end.
+            if let Some(mut ended) = reader.ended()? {
+                ended["said"] = serde_json::Value::from(if ended["stopped"] == true {
+                    "the watch was stopped"
+                } else {
+                    "the watch has ended"
+                });
+                server.mark_ended(&ended);
+            } else if !reader.is_written() {
+                server.mark_ended(&serde_json::json!({
+                    "said": "the watch is not running and recorded no end (killed?): its windows so far"
+                }));
+            }
         }
         std::thread::sleep(POLL);
     }

@@ -163,13 +163,17 @@ pub fn follow(
             ),
         });
     }
-    Ok(Ended {
+    let ended = Ended {
         windows: given,
         skipped_lines: rows.skipped,
         window_s,
         step_s,
         stopped: interrupted || stopped(),
-    })
+    };
+    if let Some(store) = kept.as_mut() {
+        store.record_end(&serde_json::to_value(&ended).expect("an end serialises"))?;
+    }
+    Ok(ended)
 }
 
 /// Seconds of work past which the watch of a file says how many windows it holds and how

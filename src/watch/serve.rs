@@ -5,9 +5,13 @@
 //!   (first the history: every window so far, the latest picture and whether the watch has
 //!   ended; then each window as it is given), `GET /state.json` the history at once. Nothing
 //!   else: any other path is 404, any other method 405. No endpoint changes anything.
-//! - A request head is at most [`MAX_HEAD_BYTES`] and must arrive within [`READ_TIMEOUT`];
-//!   a request with a body is refused. At most [`MAX_CONNECTIONS`] connections at once
-//!   (503 past that).
+//! - A request head is at most [`MAX_HEAD_BYTES`] and must arrive whole within
+//!   [`READ_TIMEOUT`], a response be read whole within [`WRITE_TIMEOUT`] (and each event of
+//!   a stream within it); a request with a body is refused. At most [`MAX_CONNECTIONS`]
+//!   connections at once (503 past that).
+//! - A watch that has ended (as its store records, or killed: no watch writes its directory)
+//!   is said so on the page, and its viewers let go: a stream gives the history with the end
+//!   and closes.
 //! - The watch never waits for a viewer: publishing puts each event on every viewer's queue
 //!   (at most [`QUEUE_EVENTS`] windows; past that the oldest is dropped for that viewer and
 //!   its page says how many) and wakes that viewer's own thread, which writes. A newer picture
@@ -213,15 +217,25 @@ impl Server {
         }
     }
 
-    /// Tells every viewer the watch has ended (`ended`, JSON) and stops serving: no new
-    /// connection is taken; each viewer's stream is closed once its queue is written.
-    pub fn end(mut self, ended: &serde_json::Value) {
+    /// Tells every viewer the watch has ended (`ended`, JSON, its `said` the page's status)
+    /// and lets them go (each stream is closed once its queue is written); the page is still
+    /// served, and a viewer who comes later gets the history with its end and is let go too.
+    pub fn mark_ended(&self, ended: &serde_json::Value) {
         let ended: Arc<str> = ended.to_string().into();
-        {
-            let mut history = self.hub.history.lock().expect("unpoisoned");
-            history.ended = Some(ended.clone());
-            self.hub.send(Event::End(ended));
-        }
+        let mut history = self.hub.history.lock().expect("unpoisoned");
+        history.ended = Some(ended.clone());
+        self.hub.send(Event::End(ended));
+    }
+
+    /// Whether the page says the watch has ended.
+    pub fn is_ended(&self) -> bool {
+        self.hub.history.lock().expect("unpoisoned").ended.is_some()
+    }
+
+    /// Tells every viewer the watch has ended ([`Self::mark_ended`]) and stops serving: no new
+    /// connection is taken.
+    pub fn end(mut self, ended: &serde_json::Value) {
+        self.mark_ended(ended);
         self.stop();
         // The viewers' threads write what is queued and close; a stalled one is not waited
         // for past the deadline.
@@ -320,9 +334,10 @@ enum Asked {
     Refused(&'static str, &'static str),
 }
 
-/// Reads one request head (bounded in size and time) and says what it asks for.
+/// Reads one request head (bounded in size, and in time as a whole: a client that trickles
+/// it is let go after [`READ_TIMEOUT`]) and says what it asks for.
 fn read_request(stream: &mut TcpStream) -> std::io::Result<Asked> {
-    stream.set_read_timeout(Some(READ_TIMEOUT))?;
+    let deadline = std::time::Instant::now() + READ_TIMEOUT;
     let mut buf = vec![0u8; MAX_HEAD_BYTES];
     let mut filled = 0;
     loop {
@@ -332,6 +347,7 @@ fn read_request(stream: &mut TcpStream) -> std::io::Result<Asked> {
                 "the request head is too long\n",
             ));
         }
+        stream.set_read_timeout(Some(until(deadline)?))?;
         let n = stream.read(&mut buf[filled..])?;
         if n == 0 {
             return Err(std::io::ErrorKind::UnexpectedEof.into());
@@ -406,7 +422,20 @@ fn serve_connection(mut stream: TcpStream, hub: &Hub) -> std::io::Result<()> {
     respond(&mut stream, "200 OK", content_type, &body, head_only)
 }
 
-/// Writes a whole response (its head alone for a HEAD request) and closes.
+/// The time left before `deadline`, or a timed-out error once it has passed.
+fn until(deadline: std::time::Instant) -> std::io::Result<Duration> {
+    let left = deadline.saturating_duration_since(std::time::Instant::now());
+    if left.is_zero() {
+        return Err(std::io::ErrorKind::TimedOut.into());
+    }
+    Ok(left)
+}
+
+/// Bytes written to a client at a time: each piece within the time left to the response.
+const WRITE_PIECE: usize = 64 * 1024;
+
+/// Writes a whole response (its head alone for a HEAD request) within [`WRITE_TIMEOUT`] as a
+/// whole (a client that reads slowly is let go), and closes.
 fn respond(
     stream: &mut TcpStream,
     status: &str,
@@ -418,9 +447,11 @@ fn respond(
         "HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\nConnection: close\r\n{SAFE_HEADERS}\r\n",
         body.len()
     );
-    stream.write_all(head.as_bytes())?;
-    if !head_only {
-        stream.write_all(body)?;
+    let deadline = std::time::Instant::now() + WRITE_TIMEOUT;
+    let body = if head_only { &[][..] } else { body };
+    for piece in head.as_bytes().chunks(WRITE_PIECE).chain(body.chunks(WRITE_PIECE)) {
+        stream.set_write_timeout(Some(until(deadline)?))?;
+        stream.write_all(piece)?;
     }
     stream.flush()
 }
@@ -430,17 +461,22 @@ fn respond(
 fn stream_events(mut stream: TcpStream, hub: &Hub) -> std::io::Result<()> {
     let viewer = Arc::new(Viewer::default());
     // Registered under the history's lock: no window is both in the history and queued, none
-    // is missed.
-    let history = {
+    // is missed. A watch that has ended gives its history, its end with it, and lets go.
+    let (history, ended) = {
         let history = hub.history.lock().expect("unpoisoned");
-        hub.viewers.lock().expect("unpoisoned").push(viewer.clone());
-        history.json()
+        if history.ended.is_none() {
+            hub.viewers.lock().expect("unpoisoned").push(viewer.clone());
+        }
+        (history.json(), history.ended.is_some())
     };
     let result = (|| {
         let head =
             format!("HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nConnection: close\r\n{SAFE_HEADERS}\r\n");
         stream.write_all(head.as_bytes())?;
         write_event(&mut stream, "history", &history)?;
+        if ended {
+            return Ok(());
+        }
         loop {
             let (events, dropped) = {
                 let mut queue = viewer.queue.lock().expect("unpoisoned");
@@ -502,6 +538,44 @@ mod tests {
         let mut out = String::new();
         let _ = s.read_to_string(&mut out);
         out
+    }
+
+    /// A client that trickles its request head, a byte a second (each read well within the
+    /// read timeout), is let go once the head as a whole has taken the timeout; a watch marked
+    /// ended gives a new viewer its history with the end and closes the stream.
+    #[test]
+    fn a_trickled_head_is_let_go_and_an_ended_watch_lets_its_viewers_go() {
+        let server = Server::start("127.0.0.1:0", "serve", &serde_json::json!({"source": "x"})).unwrap();
+        let addr = server.address();
+        let mut s = TcpStream::connect(addr).unwrap();
+        let started = std::time::Instant::now();
+        let mut closed = false;
+        for byte in b"GET / HTTP/1.1\r\nX-Slow: ".iter().cycle().take(60) {
+            if s.write_all(&[*byte]).is_err() {
+                closed = true;
+                break;
+            }
+            std::thread::sleep(Duration::from_secs(1));
+            if started.elapsed() > READ_TIMEOUT + Duration::from_secs(3) {
+                let mut rest = Vec::new();
+                s.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+                closed = matches!(s.read_to_end(&mut rest), Ok(_)) && rest.is_empty();
+                break;
+            }
+        }
+        assert!(
+            closed,
+            "the trickling client is still held after {:?}",
+            started.elapsed()
+        );
+
+        server.mark_ended(&serde_json::json!({"said": "the watch has ended"}));
+        let events = request(addr, b"GET /events HTTP/1.1\r\n\r\n");
+        assert!(
+            events.contains("event: history") && events.contains("the watch has ended"),
+            "{events}"
+        );
+        assert_eq!(server.viewers(), 0);
     }
 
     #[test]

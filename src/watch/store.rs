@@ -211,12 +211,28 @@ impl WatchStore {
         Self::open_locked(dir, lock)
     }
 
-    /// Opens the watch in `dir` to go on with it.
+    /// Opens the watch in `dir` to go on with it: running again, it has not ended.
     pub fn resume(dir: &Path) -> Result<(Self, StoredWatch)> {
         let stored = read(dir)?;
         let lock = DirLock::acquire(dir)?;
         let store = Self::open_locked(dir, lock)?;
+        store
+            .conn
+            .execute("DELETE FROM meta WHERE key = 'ended'", [])
+            .map_err(sql_error(&store.path))?;
         Ok((store, stored))
+    }
+
+    /// Records how the watch ended (`ended`, JSON): what a page of its directory says of it
+    /// (`bitrock serve`). A watch killed records nothing.
+    pub fn record_end(&mut self, ended: &serde_json::Value) -> Result<()> {
+        self.conn
+            .execute(
+                "INSERT OR REPLACE INTO meta (key, value) VALUES ('ended', ?1)",
+                params![ended.to_string()],
+            )
+            .map_err(sql_error(&self.path))?;
+        Ok(())
     }
 
     fn open_locked(dir: &Path, lock: DirLock) -> Result<Self> {
@@ -314,6 +330,23 @@ impl Reader {
             .map_err(sql_error(&path))?;
         let meta: WatchMeta = serde_json::from_str(&text.ok_or_else(missing)?).map_err(json_error(&path))?;
         Ok(Self { conn, path, meta })
+    }
+
+    /// How the watch ended, where it recorded it ([`WatchStore::record_end`]).
+    pub fn ended(&self) -> Result<Option<serde_json::Value>> {
+        let text: Option<String> = self
+            .conn
+            .query_row("SELECT value FROM meta WHERE key = 'ended'", [], |r| r.get(0))
+            .optional()
+            .map_err(sql_error(&self.path))?;
+        text.map(|t| serde_json::from_str(&t).map_err(json_error(&self.path)))
+            .transpose()
+    }
+
+    /// Whether a watch writes the directory now (holds its lock).
+    pub fn is_written(&self) -> bool {
+        let dir = self.path.parent().unwrap_or(Path::new("."));
+        crate::files::DirLock::is_held(dir)
     }
 
     /// The stored windows after window `after` (all of them with `None`), in order.

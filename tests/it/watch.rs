@@ -658,9 +658,63 @@ fn bitrock_serve_follows_a_watch_directory_while_its_watch_writes_it() {
     assert_eq!(state["updates"].as_array().unwrap(), &lines);
     assert_eq!(state["view"]["window"], 16);
     assert_eq!(state["meta"]["laws"][1]["name"], "m3");
+    // The page says the watch has ended, as its store recorded, and a viewer who comes now
+    // gets the history with its end and is let go.
+    let get = |path: &str| {
+        let mut s = std::net::TcpStream::connect(&address).unwrap();
+        s.set_read_timeout(Some(std::time::Duration::from_secs(30))).unwrap();
+        s.write_all(format!("GET {path} HTTP/1.1\r\n\r\n").as_bytes()).unwrap();
+        let mut answer = String::new();
+        s.read_to_string(&mut answer).expect("the server closes the stream");
+        answer
+    };
+    let ended = loop {
+        let state: serde_json::Value =
+            serde_json::from_str(get("/state.json").split("\r\n\r\n").nth(1).unwrap()).unwrap();
+        if !state["ended"].is_null() || started.elapsed().as_secs() > 300 {
+            break state["ended"].clone();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    assert_eq!(ended["said"], "the watch has ended", "{ended}");
+    assert_eq!(ended["windows"], 17);
+    let events = get("/events");
+    assert!(
+        events.contains("event: history") && events.contains("the watch has ended"),
+        "{events}"
+    );
     let (code, _, _) = outcome(std::process::Command::new("kill").args(["-INT", &serve.id().to_string()]));
     assert_eq!(code, 0);
     assert!(serve.wait().unwrap().success(), "Ctrl-C stops the server cleanly");
+
+    // A watch killed mid-way records no end: its page says it is not running.
+    let killed = dir.path().join("killed");
+    let (mut child, _) = watch_until(&record, &killed, 1);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let mut serve = bin()
+        .args(["serve", killed.to_str().unwrap(), "--address", "127.0.0.1:0"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (address, _) = page_address(&mut serve);
+    let said = loop {
+        let mut s = std::net::TcpStream::connect(&address).unwrap();
+        s.write_all(b"GET /state.json HTTP/1.1\r\n\r\n").unwrap();
+        let mut answer = String::new();
+        s.read_to_string(&mut answer).unwrap();
+        let state: serde_json::Value = serde_json::from_str(answer.split("\r\n\r\n").nth(1).unwrap()).unwrap();
+        if !state["ended"].is_null() || started.elapsed().as_secs() > 300 {
+            break state["ended"]["said"].clone();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    assert!(
+        said.as_str().unwrap().contains("not running and recorded no end"),
+        "{said}"
+    );
+    serve.kill().unwrap();
+    serve.wait().unwrap();
 }
 
 #[test]
