@@ -103,17 +103,21 @@ pub fn follow(
             source::Next::Waiting | source::Next::End => {}
         }
         if watch.is_none() && (enough_to_measure(&first) || (ended && !first.is_empty())) {
+            let measured = measured_rate_hz(&first);
             let rate_hz = match &resumed {
                 Some((_, stored)) => stored.meta.rate_hz,
                 None => {
-                    let (rate_hz, repeated) = measured_rate_hz(&first);
-                    if let Some(words) = repeated {
+                    if let Some(words) = &measured.repeated {
                         observer.note(format!("warning: {words}"));
                     }
-                    rate_hz
+                    measured.rate_hz
                 }
             };
-            let (made, store) = start_watch(&settings, rows, rate_hz, resumed.take(), &options, observer)?;
+            let (mut made, store) = start_watch(&settings, rows, rate_hz, resumed.take(), &options, observer)?;
+            // A clock rounded to whole ticks: the last stamp's rows reach a tick past it.
+            if measured.repeated.is_some() {
+                made.reach_past_last_stamp(measured.tick_s);
+            }
             kept = store;
             watch = Some(made);
         }
@@ -251,26 +255,48 @@ fn enough_to_measure(first: &[(Row, std::time::Instant)]) -> bool {
 /// most stamps repeat (a clock rounded to a coarser tick than the rate), the rows per second
 /// of the stamps strictly between the first and the last, each a whole tick, with words that
 /// say so. 1 Hz without two distinct stamps.
-fn measured_rate_hz(first: &[(Row, std::time::Instant)]) -> (f64, Option<String>) {
+fn measured_rate_hz(first: &[(Row, std::time::Instant)]) -> Measured {
     let times: Vec<f64> = first.iter().filter_map(|(r, _)| r.time_s).collect();
     let all_steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
     let steps: Vec<f64> = all_steps.iter().copied().filter(|d| *d > 0.0).collect();
-    let Some(tick) = crate::numerics::median(&steps) else {
-        return (1.0, None);
+    let Some(tick_s) = crate::numerics::median(&steps) else {
+        return Measured {
+            rate_hz: 1.0,
+            tick_s: 1.0,
+            repeated: None,
+        };
     };
     let repeated = all_steps.iter().filter(|d| **d == 0.0).count();
     let (t0, t1) = (times[0], times[times.len() - 1]);
     let inner = times.iter().filter(|&&t| t > t0 && t < t1).count();
-    let inner_s = t1 - t0 - tick;
+    let inner_s = t1 - t0 - tick_s;
     if 2 * repeated <= all_steps.len() || inner == 0 || inner_s <= 0.0 {
-        return (1.0 / tick, None);
+        return Measured {
+            rate_hz: 1.0 / tick_s,
+            tick_s,
+            repeated: None,
+        };
     }
     let rate_hz = inner as f64 / inner_s;
     let words = format!(
-        "time stamps repeat: about {:.0} rows share each stamp, {tick} s apart (a clock rounded to whole ticks?); the record's rate is taken as its rows per second, {rate_hz:.1} Hz, and its windows are cut by the stamps as they are",
-        rate_hz * tick
+        "time stamps repeat: about {:.0} rows share each stamp, {tick_s} s apart (a clock rounded to whole ticks?); the record's rate is taken as its rows per second, {rate_hz:.1} Hz, and its windows are cut by the stamps as they are",
+        rate_hz * tick_s
     );
-    (rate_hz, Some(words))
+    Measured {
+        rate_hz,
+        tick_s,
+        repeated: Some(words),
+    }
+}
+
+/// What a record's first time stamps say of its clock.
+struct Measured {
+    /// Rows per second.
+    rate_hz: f64,
+    /// The stamps' step, s (the median of the positive ones).
+    tick_s: f64,
+    /// Words that say the stamps repeat (a clock rounded to whole ticks), where they do.
+    repeated: Option<String>,
 }
 
 /// The watch of `rows` at `rate_hz`, what the user should know of its windows said, and its

@@ -172,6 +172,12 @@ impl Watch {
         })
     }
 
+    /// A record whose stamps are whole ticks of `tick_s` (a rounded clock): its end reaches a
+    /// tick past its last stamp, not one row's period, so that its last window is given.
+    pub fn reach_past_last_stamp(&mut self, tick_s: f64) {
+        self.period_s = self.period_s.max(tick_s);
+    }
+
     /// Window length and step, s.
     pub fn windows(&self) -> (f64, f64) {
         self.windows.shape()
