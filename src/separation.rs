@@ -273,6 +273,30 @@ fn separations_to(
     separated.into_iter().collect()
 }
 
+/// An m2 record of 4,000 samples over 0.5–15 rad/s (N·m) in time order whose noise is AR(1),
+/// e_t = φ·e_{t−1} + η_t with η of 300 N·m: what the checks on the residuals' noise model are
+/// tested on.
+#[cfg(test)]
+pub(crate) fn ar1_m2_record(phi: f64) -> Samples {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let n = 4000;
+    let speeds: Vec<f64> = (0..n)
+        .map(|i| 0.5 + 14.5 * ((i * 7919) % n) as f64 / n as f64)
+        .collect();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    let normal = Normal::new(0.0, 300.0).unwrap();
+    let mut e = 0.0;
+    let torque = speeds
+        .iter()
+        .map(|&w| {
+            e = phi * e + normal.sample(&mut rng);
+            Law::M2.torque(&[13_000.0, 6_500.0, 0.3], w, 1.0) + e
+        })
+        .collect();
+    Samples::new(speeds, torque)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -328,25 +352,9 @@ mod tests {
     /// for φ = 0.8, 0.016 for φ = 0); a record holding too few residuals has none.
     #[test]
     fn the_residual_lag1_recovers_an_ar1_noise_coefficient() {
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, Normal};
-        let n = 4000;
         let mut last = None;
-        let speeds: Vec<f64> = (0..n)
-            .map(|i| 0.5 + 14.5 * ((i * 7919) % n) as f64 / n as f64)
-            .collect();
         for phi in [0.0, 0.5, 0.8] {
-            let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-            let normal = Normal::new(0.0, 300.0).unwrap();
-            let mut e = 0.0;
-            let torque = speeds
-                .iter()
-                .map(|&w| {
-                    e = phi * e + normal.sample(&mut rng);
-                    Law::M2.torque(&[13_000.0, 6_500.0, 0.3], w, 1.0) + e
-                })
-                .collect();
-            let data = Samples::new(speeds.clone(), torque);
+            let data = ar1_m2_record(phi);
             let opts = FitOptions::default();
             let fit = &fit_laws(&[Law::M2], &data, &Samples::default(), &opts).unwrap()[0];
             let got = residual_lag1(fit, &data, &opts);

@@ -26,6 +26,30 @@ fn simulate(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
     record
 }
 
+/// The record `bitrock simulate` makes of m2 at its paper estimate at 60 rpm for `duration_s`
+/// at 20 Hz, with the further flags `extra` (noise, seed), as `dir/name.csv`.
+fn m2_record(dir: &Path, name: &str, duration_s: &str, extra: &[&str]) -> std::path::PathBuf {
+    let record = dir.join(format!("{name}.csv"));
+    let (code, _, stderr) = outcome(
+        bin()
+            .args([
+                "simulate",
+                "--law",
+                "m2",
+                "--omega-rpm",
+                "60",
+                "--duration-s",
+                duration_s,
+            ])
+            .args(["--sample-hz", "20"])
+            .args(extra)
+            .arg("-o")
+            .arg(&record),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    record
+}
+
 /// `bitrock watch --json --laws m2,m3 --backend cpu`.
 fn watch_command() -> std::process::Command {
     let mut command = bin();
@@ -1147,14 +1171,7 @@ fn stamps_rounded_to_whole_seconds_give_the_record_s_rate_and_windows() {
 #[test]
 fn a_wob_glitch_is_said_and_moves_neither_the_operating_point_nor_the_advice() {
     let dir = tempfile::tempdir().unwrap();
-    let record = dir.path().join("m2.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "40"])
-            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "3", "-o"])
-            .arg(&record),
-    );
-    assert_eq!(code, 0, "{stderr}");
+    let record = m2_record(dir.path(), "m2", "40", &["--noise-torque-knm", "0.3", "--seed", "3"]);
     let glitch = edited(&record, dir.path(), "glitch", |k, mut f| {
         if (200..400).contains(&k) {
             f[3] = "24000".into();
@@ -1187,14 +1204,7 @@ fn a_wob_glitch_is_said_and_moves_neither_the_operating_point_nor_the_advice() {
 #[test]
 fn the_watch_says_a_channel_in_another_unit_than_its_name_once_as_fit_does() {
     let dir = tempfile::tempdir().unwrap();
-    let record = dir.path().join("m2.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "40"])
-            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "3", "-o"])
-            .arg(&record),
-    );
-    assert_eq!(code, 0, "{stderr}");
+    let record = m2_record(dir.path(), "m2", "40", &["--noise-torque-knm", "0.3", "--seed", "3"]);
     let header = std::fs::read_to_string(&record)
         .unwrap()
         .lines()
@@ -1255,14 +1265,7 @@ fn a_record_without_time_is_refused_before_its_directory_is_made() {
 #[test]
 fn a_watch_resumed_with_an_edited_law_file_is_refused_naming_the_law() {
     let dir = tempfile::tempdir().unwrap();
-    let record = dir.path().join("m2.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "30"])
-            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "3", "-o"])
-            .arg(&record),
-    );
-    assert_eq!(code, 0, "{stderr}");
+    let record = m2_record(dir.path(), "m2", "30", &["--noise-torque-knm", "0.3", "--seed", "3"]);
     let law_file = dir.path().join("stribeck.toml");
     let original =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws/stribeck.toml")).unwrap();
@@ -1320,22 +1323,12 @@ fn a_watch_resumed_with_an_edited_law_file_is_refused_naming_the_law() {
 #[test]
 fn overlapping_windows_carry_each_sample_once() {
     let dir = tempfile::tempdir().unwrap();
-    let record = dir.path().join("m2.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "120"])
-            .args([
-                "--sample-hz",
-                "20",
-                "--noise-torque-knm",
-                "0.6",
-                "--noise-speed-rpm",
-                "0.5",
-            ])
-            .args(["--seed", "4", "-o"])
-            .arg(&record),
+    let record = m2_record(
+        dir.path(),
+        "m2",
+        "120",
+        &["--noise-torque-knm", "0.6", "--noise-speed-rpm", "0.5", "--seed", "4"],
     );
-    assert_eq!(code, 0, "{stderr}");
     // The carried and the window's own log-odds of m2 against m3, per window.
     let log_odds = |step: &str| -> Vec<(f64, f64)> {
         let updates = watch(&[
@@ -1421,14 +1414,12 @@ fn lines_are_bounded_and_a_long_file_s_work_is_said() {
         "{stderr}"
     );
 
-    let record = dir.path().join("ten-minutes.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "600"])
-            .args(["--sample-hz", "20", "--noise-torque-knm", "0.3", "--seed", "2", "-o"])
-            .arg(&record),
+    let record = m2_record(
+        dir.path(),
+        "ten-minutes",
+        "600",
+        &["--noise-torque-knm", "0.3", "--seed", "2"],
     );
-    assert_eq!(code, 0, "{stderr}");
     // Windows of 10 s every sample (0.05 s): 11,801 of them.
     let mut child = bin()
         .args([

@@ -300,25 +300,10 @@ mod tests {
         use crate::data::Samples;
         use crate::fit::{FitOptions, fit_laws};
         use crate::laws::Law;
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, Normal};
         let n = 4000;
-        let speeds: Vec<f64> = (0..n)
-            .map(|i| 0.5 + 14.5 * ((i * 7919) % n) as f64 / n as f64)
-            .collect();
         let opts = FitOptions::default();
         for phi in [0.0, 0.2, 0.5] {
-            let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-            let normal = Normal::new(0.0, 300.0).unwrap();
-            let mut e = 0.0;
-            let torque = speeds
-                .iter()
-                .map(|&w| {
-                    e = phi * e + normal.sample(&mut rng);
-                    Law::M2.torque(&[13_000.0, 6_500.0, 0.3], w, 1.0) + e
-                })
-                .collect();
-            let data = Samples::new(speeds.clone(), torque);
+            let data = crate::separation::ar1_m2_record(phi);
             let fit = &fit_laws(&[Law::M2], &data, &Samples::default(), &opts).unwrap()[0];
             let prefers = ar1_preference_nats(fit, &data, &opts);
             let lag1 = crate::separation::residual_lag1(fit, &data, &opts);
@@ -329,7 +314,7 @@ mod tests {
                 assert!(prefers > AR1_PREFERRED_NATS, "φ = {phi}: {prefers}");
                 assert!((prefers - profile).abs() < 6.0, "φ = {phi}: {prefers} vs {profile}");
             }
-            let two = Samples::new(speeds[..2].to_vec(), data.torque_nm[..2].to_vec());
+            let two = Samples::new(data.speed_rad_s[..2].to_vec(), data.torque_nm[..2].to_vec());
             assert!(ar1_preference_nats(fit, &two, &opts).is_nan());
         }
     }
