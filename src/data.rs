@@ -673,7 +673,7 @@ pub fn field_data_from_samples(
         let row = t.windows(2).position(|w| w[1] < w[0])? + 1;
         Some((format!("{} row {row}", source.display()), t[row - 1], t[row]))
     });
-    let Declared { columns, units } = declared.clone();
+    let Declared { columns, units, .. } = declared.clone();
     let columns = ColumnsUsed {
         wob: columns.wob.filter(|_| all.wob_n.is_some()),
         time: columns.time.filter(|_| all.time_s.is_some()),
@@ -790,6 +790,7 @@ impl RowLayout {
                 time: self.indices.time.map(name),
             },
             units: self.units,
+            top_drive: None,
         }
     }
 
@@ -891,6 +892,9 @@ pub struct ColumnUnits {
 pub struct Declared {
     pub columns: ColumnsUsed,
     pub units: ColumnUnits,
+    /// A top-drive speed column and its unit, where the source has one (a watch's operating
+    /// point; `fit` reads none).
+    pub top_drive: Option<(String, SpeedUnit)>,
 }
 
 impl ColumnUnits {
@@ -1029,20 +1033,13 @@ fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &
             columns.torque
         ));
     }
-    let speed_rad_s = quantile(&all.speed_rad_s, 0.95);
-    let speed_rpm = speed_rad_s / RAD_S_PER_RPM;
-    if units.speed == SpeedUnit::Rpm && speed_rpm < IMPLAUSIBLE_LOW_RPM {
-        out.push(format!(
-            "{source}: the bit speeds of column '{}' read in rpm stay below {speed_rpm:.1} rpm (95 % of them), where a drill string turns at some 40–250 rpm: if the column holds rad/s, say so with `speed_unit` rad_s (or a name ending in _rad_s)",
-            columns.speed
-        ));
-    }
-    if units.speed == SpeedUnit::RadS && speed_rad_s > IMPLAUSIBLE_HIGH_RAD_S {
-        out.push(format!(
-            "{source}: the bit speeds of column '{}' read in rad/s reach {speed_rad_s:.0} rad/s ({speed_rpm:.0} rpm) in 5 % of the rows: if the column holds rpm, say so with `speed_unit` rpm (or a name ending in _rpm)",
-            columns.speed
-        ));
-    }
+    let bit = SpeedChannel {
+        what: "bit speeds",
+        column: &columns.speed,
+        unit: units.speed,
+        setting: Some("speed_unit"),
+    };
+    out.extend(bit.unit_warning(&source.to_string(), &all.speed_rad_s));
     if let (Some(ForceUnit::KN), Some(wob), Some(name)) = (units.wob, &all.wob_n, &columns.wob) {
         let wob_kn = quantile(wob, 0.5) / 1000.0;
         if wob_kn > IMPLAUSIBLE_WOB_KN {
@@ -1073,6 +1070,42 @@ fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &
         ));
     }
     out
+}
+
+/// A speed channel as a source declares it: what it measures (for messages), its column, its
+/// unit and the setting that names the unit (`None`: its name's suffix alone).
+pub struct SpeedChannel<'a> {
+    pub what: &'a str,
+    pub column: &'a str,
+    pub unit: SpeedUnit,
+    pub setting: Option<&'a str>,
+}
+
+impl SpeedChannel<'_> {
+    /// What `speeds_rad_s` (read in the declared unit) say of that unit, where a drill string
+    /// can hardly mean it (`source` names the record): rpm whose 95th percentile of |speed| is
+    /// below 30 rpm (rad/s?), rad/s whose 95th percentile exceeds 100 rad/s (rpm?).
+    pub fn unit_warning(&self, source: &str, speeds_rad_s: &[f64]) -> Option<String> {
+        let abs: Vec<f64> = speeds_rad_s.iter().map(|x| x.abs()).collect();
+        let speed_rad_s = crate::numerics::quantile(&abs, 0.95);
+        let speed_rpm = speed_rad_s / RAD_S_PER_RPM;
+        let (what, column) = (self.what, self.column);
+        let say = |unit: &str, suffix: &str| match self.setting {
+            Some(setting) => format!("say so with `{setting}` {unit} (or a name ending in {suffix})"),
+            None => format!("name it …{suffix}"),
+        };
+        match self.unit {
+            SpeedUnit::Rpm if speed_rpm < IMPLAUSIBLE_LOW_RPM => Some(format!(
+                "{source}: the {what} of column '{column}' read in rpm stay below {speed_rpm:.1} rpm (95 % of them), where a drill string turns at some 40–250 rpm: if the column holds rad/s, {}",
+                say("rad_s", "_rad_s")
+            )),
+            SpeedUnit::RadS if speed_rad_s > IMPLAUSIBLE_HIGH_RAD_S => Some(format!(
+                "{source}: the {what} of column '{column}' read in rad/s reach {speed_rad_s:.0} rad/s ({speed_rpm:.0} rpm) in 5 % of the rows: if the column holds rpm, {}",
+                say("rpm", "_rpm")
+            )),
+            _ => None,
+        }
+    }
 }
 
 /// What the record looks wrong in without being unusable: a time column that runs backwards

@@ -117,6 +117,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("resume", "--resume"),
     ("follow", "--follow"),
     ("wits_items", "--wits-items"),
+    ("cold_start", "--cold-start"),
     ("serve", "--serve"),
     ("address", "--address"),
     ("segment", "--well"),

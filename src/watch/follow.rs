@@ -362,6 +362,8 @@ fn start_watch(
             if let Some(carried) = stored.carried {
                 made.resume(carried);
             }
+            let mut store = store;
+            store.clear_end()?;
             kept = Some(store);
         }
         None => {
@@ -451,13 +453,28 @@ pub(super) fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings
             },
         };
         if was != value {
-            return Err(crate::Error::setting(
-                field,
+            // In the user's words: the setting as the user gives it (`cold_start`, not the
+            // stored `warm_start`), and a setting made of parts said to differ, not dumped.
+            let (field, value, was) = match field.as_str() {
+                "warm_start" => (
+                    "cold_start",
+                    serde_json::json!(value == false),
+                    serde_json::json!(was == false),
+                ),
+                _ => (field.as_str(), value.clone(), was.clone()),
+            };
+            let message = if value.is_object() || was.is_object() {
+                format!(
+                    "differs from the one the watch in {} started with (a watch goes on with its own settings)",
+                    dir.display()
+                )
+            } else {
                 format!(
                     "is {value} here, {was} in the watch in {} (a watch goes on with its own settings)",
                     dir.display()
-                ),
-            ));
+                )
+            };
+            return Err(crate::Error::setting(field, message));
         }
     }
     Ok(())

@@ -294,7 +294,17 @@ impl Watch {
                 return Ok(self.completed(update, &window));
             }
         };
-        for warning in &data.warnings {
+        let top_drive = self.declared.top_drive.as_ref().and_then(|(column, unit)| {
+            let speeds: Vec<f64> = window.rows.iter().filter_map(|r| r.top_drive_rad_s).collect();
+            let channel = crate::data::SpeedChannel {
+                what: "top-drive speeds",
+                column,
+                unit: *unit,
+                setting: None,
+            };
+            channel.unit_warning(&data.source.display().to_string(), &speeds)
+        });
+        for warning in data.warnings.iter().chain(&top_drive) {
             // The same check on another window differs only by its numbers.
             if self
                 .said

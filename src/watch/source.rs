@@ -328,7 +328,10 @@ impl Rows {
     /// The channels read and their units.
     pub fn declared(&self) -> crate::data::Declared {
         match &self.format {
-            Format::Csv { layout, .. } => layout.declared(),
+            Format::Csv { layout, top_drive, .. } => crate::data::Declared {
+                top_drive: top_drive.map(|(i, unit)| (layout.headers()[i].trim().to_string(), unit)),
+                ..layout.declared()
+            },
             Format::Wits(reader) => reader.declared(),
         }
     }

@@ -211,16 +211,20 @@ impl WatchStore {
         Self::open_locked(dir, lock)
     }
 
-    /// Opens the watch in `dir` to go on with it: running again, it has not ended.
+    /// Opens the watch in `dir` to go on with it.
     pub fn resume(dir: &Path) -> Result<(Self, StoredWatch)> {
         let stored = read(dir)?;
         let lock = DirLock::acquire(dir)?;
         let store = Self::open_locked(dir, lock)?;
-        store
-            .conn
-            .execute("DELETE FROM meta WHERE key = 'ended'", [])
-            .map_err(sql_error(&store.path))?;
         Ok((store, stored))
+    }
+
+    /// Forgets how the watch ended: going on again (after the resume's checks), it has not.
+    pub fn clear_end(&mut self) -> Result<()> {
+        self.conn
+            .execute("DELETE FROM meta WHERE key = 'ended'", [])
+            .map_err(sql_error(&self.path))?;
+        Ok(())
     }
 
     /// Records how the watch ended (`ended`, JSON): what a page of its directory says of it

@@ -187,6 +187,11 @@ impl WitsReader {
                 wob: self.wob_unit,
                 time_in_ms: false,
             },
+            top_drive: self
+                .items
+                .top_drive
+                .as_deref()
+                .map(|code| (item(code), self.speed_unit)),
         }
     }
 
