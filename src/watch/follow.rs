@@ -54,16 +54,7 @@ pub fn follow(
     on_update: &mut dyn FnMut(&Update) -> Result<()>,
 ) -> Result<Ended> {
     let source = rows.name().to_path_buf();
-    // Windows are cut by the record's time stamps: refused before any store is made.
-    if rows.declared().columns.time.is_none() {
-        return Err(crate::Error::setting(
-            "time_column",
-            format!(
-                "a watch cuts its windows by the record's time stamps, and {} has no time column (no column's name contains 'time'; `time_column` names one)",
-                source.display()
-            ),
-        ));
-    }
+    refuse_untimed(rows)?;
     let stopped = || options.stop.is_some_and(|stop| stop());
     // A resumed watch: its store, checked against these settings, and where it stopped.
     let mut resumed = if options.resume {
@@ -86,38 +77,9 @@ pub fn follow(
         }
         let next = rows.next_row()?;
         let ended = matches!(next, source::Next::End);
-        match next {
-            source::Next::Row(row, arrived) => {
-                if let Some(t) = row.time_s {
-                    span_s = Some(span_s.map_or((t, t), |(a, _)| (a, t)));
-                }
-                first.push((row, arrived));
-            }
-            source::Next::Skipped(why) => observer.note(format!("warning: {why}: line skipped")),
-            source::Next::Said(what) => observer.note(format!("warning: {what}")),
-            source::Next::Stalled(silent) => observer.note(format!(
-                "warning: {}: no row for {:.0} s: the feed has stalled (still following)",
-                source.display(),
-                silent.as_secs_f64()
-            )),
-            source::Next::Waiting | source::Next::End => {}
-        }
+        take(next, &mut first, &mut span_s, &source, observer);
         if watch.is_none() && (enough_to_measure(&first) || (ended && !first.is_empty())) {
-            let measured = measured_rate_hz(&first);
-            let rate_hz = match &resumed {
-                Some((_, stored)) => stored.meta.rate_hz,
-                None => {
-                    if let Some(words) = &measured.repeated {
-                        observer.note(format!("warning: {words}"));
-                    }
-                    measured.rate_hz
-                }
-            };
-            let (mut made, store) = start_watch(&settings, rows, rate_hz, resumed.take(), &options, observer)?;
-            // A clock rounded to whole ticks: the last stamp's rows reach a tick past it.
-            if measured.repeated.is_some() {
-                made.reach_past_last_stamp(measured.tick_s);
-            }
+            let (made, store) = start_watch(&settings, rows, &first, resumed.take(), &options, observer)?;
             kept = store;
             watch = Some(made);
         }
@@ -156,16 +118,9 @@ pub fn follow(
         }
     }
     let (window_s, step_s) = watch.as_ref().map_or((0.0, 0.0), Watch::windows);
-    // A record too short for one window, or with no row at all, said as such (a resumed watch
-    // may rightly give none: its windows were stored before).
+    // A resumed watch may rightly give none: its windows were stored before.
     if given == 0 && !options.resume && !interrupted && !stopped() {
-        observer.note(match &watch {
-            None => format!("warning: {}: no data row: nothing to watch", source.display()),
-            Some(_) => format!(
-                "warning: {} ended before a window of {window_s} s was complete: no window to give (`window_s` sets a shorter one)",
-                source.display()
-            ),
-        });
+        say_no_window(watch.is_some(), window_s, &source, observer);
     }
     let ended = Ended {
         windows: given,
@@ -178,6 +133,61 @@ pub fn follow(
         store.record_end(&serde_json::to_value(&ended).expect("an end serialises"))?;
     }
     Ok(ended)
+}
+
+/// Refuses, before any store is made, a record without time stamps: a watch cuts its windows
+/// by them.
+fn refuse_untimed(rows: &source::Rows) -> Result<()> {
+    if rows.declared().columns.time.is_none() {
+        return Err(crate::Error::setting(
+            "time_column",
+            format!(
+                "a watch cuts its windows by the record's time stamps, and {} has no time column (no column's name contains 'time'; `time_column` names one)",
+                rows.name().display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// What the source gave next: a row kept in `first` (the record's first and latest stamps in
+/// `span_s`), or what it said, said through `observer`.
+fn take(
+    next: source::Next,
+    first: &mut Vec<(Row, std::time::Instant)>,
+    span_s: &mut Option<(f64, f64)>,
+    source: &Path,
+    observer: &mut dyn Observer,
+) {
+    match next {
+        source::Next::Row(row, arrived) => {
+            if let Some(t) = row.time_s {
+                *span_s = Some(span_s.map_or((t, t), |(a, _)| (a, t)));
+            }
+            first.push((row, arrived));
+        }
+        source::Next::Skipped(why) => observer.note(format!("warning: {why}: line skipped")),
+        source::Next::Said(what) => observer.note(format!("warning: {what}")),
+        source::Next::Stalled(silent) => observer.note(format!(
+            "warning: {}: no row for {:.0} s: the feed has stalled (still following)",
+            source.display(),
+            silent.as_secs_f64()
+        )),
+        source::Next::Waiting | source::Next::End => {}
+    }
+}
+
+/// A record too short for one window of `window_s` (a watch was made), or with no row at all,
+/// said as such.
+fn say_no_window(made: bool, window_s: f64, source: &Path, observer: &mut dyn Observer) {
+    observer.note(if made {
+        format!(
+            "warning: {} ended before a window of {window_s} s was complete: no window to give (`window_s` sets a shorter one)",
+            source.display()
+        )
+    } else {
+        format!("warning: {}: no data row: nothing to watch", source.display())
+    });
 }
 
 /// Seconds of work past which the watch of a file says how many windows it holds and how
@@ -299,21 +309,35 @@ struct Measured {
     repeated: Option<String>,
 }
 
-/// The watch of `rows` at `rate_hz`, what the user should know of its windows said, and its
-/// store: the `resumed` one (its windows published again, its carried state taken), or a new
-/// one in `options.dir`.
+/// The watch of `rows` at the rate its `first` rows show (a resumed watch: its stored rate),
+/// what the user should know of its windows said, and its store: the `resumed` one (its
+/// windows published again, its carried state taken), or a new one in `options.dir`.
 fn start_watch(
     settings: &WatchSettings,
     rows: &source::Rows,
-    rate_hz: f64,
+    first: &[(Row, std::time::Instant)],
     resumed: Option<(store::WatchStore, store::StoredWatch)>,
     options: &FollowOptions<'_>,
     observer: &mut dyn Observer,
 ) -> Result<(Watch, Option<store::WatchStore>)> {
+    let measured = measured_rate_hz(first);
+    let rate_hz = match &resumed {
+        Some((_, stored)) => stored.meta.rate_hz,
+        None => {
+            if let Some(words) = &measured.repeated {
+                observer.note(format!("warning: {words}"));
+            }
+            measured.rate_hz
+        }
+    };
     let declared = rows.declared();
     let unit = declared.units.torque;
     let source = rows.name().to_path_buf();
     let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, declared)?;
+    // A clock rounded to whole ticks: the last stamp's rows reach a tick past it.
+    if measured.repeated.is_some() {
+        made.reach_past_last_stamp(measured.tick_s);
+    }
     let (length, step) = made.windows();
     let thin = made.thin();
     if settings.thin.is_none() && thin > 1 {

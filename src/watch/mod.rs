@@ -294,25 +294,7 @@ impl Watch {
                 return Ok(self.completed(update, &window));
             }
         };
-        let top_drive = self.declared.top_drive.as_ref().and_then(|(column, unit)| {
-            let speeds: Vec<f64> = window.rows.iter().filter_map(|r| r.top_drive_rad_s).collect();
-            let channel = crate::data::SpeedChannel {
-                what: "top-drive speeds",
-                column,
-                unit: *unit,
-                setting: None,
-            };
-            channel.unit_warning(&data.source.display().to_string(), &speeds)
-        });
-        for warning in data.warnings.iter().chain(&top_drive) {
-            // The same check on another window differs only by its numbers.
-            if self
-                .said
-                .insert(warning.chars().filter(|c| !c.is_ascii_digit()).collect())
-            {
-                observer.note(format!("warning: {warning}"));
-            }
-        }
+        self.say_record_checks(&window, &data, observer);
         update.samples_used = data.calibration.len();
         if let Some(why) = self.cannot_inform(&data) {
             update.uninformative = Some(why);
@@ -407,6 +389,30 @@ impl Watch {
         }
         let oldest = self.carried.recent_fits.front().map_or(window.index, |(k, _)| *k);
         self.carried.recent_wob_n.retain(|(k, _)| *k >= oldest);
+    }
+
+    /// The record checks' warnings of a window's samples (`data`) and of its top-drive
+    /// column, each said once, at the first window it fires in.
+    fn say_record_checks(&mut self, window: &Window, data: &FieldData, observer: &mut dyn Observer) {
+        let top_drive = self.declared.top_drive.as_ref().and_then(|(column, unit)| {
+            let speeds: Vec<f64> = window.rows.iter().filter_map(|r| r.top_drive_rad_s).collect();
+            let channel = crate::data::SpeedChannel {
+                what: "top-drive speeds",
+                column,
+                unit: *unit,
+                setting: None,
+            };
+            channel.unit_warning(&data.source.display().to_string(), &speeds)
+        });
+        for warning in data.warnings.iter().chain(&top_drive) {
+            // The same check on another window differs only by its numbers.
+            if self
+                .said
+                .insert(warning.chars().filter(|c| !c.is_ascii_digit()).collect())
+            {
+                observer.note(format!("warning: {warning}"));
+            }
+        }
     }
 
     /// The window's samples as a record: every sample above the minimum speed for
