@@ -41,12 +41,7 @@ pub fn run(cmd: &ServeCmd) -> anyhow::Result<ExitCode> {
         } else if !server.is_ended() {
             // The page says how the watch ended: as it recorded, or killed where no watch
             // writes the directory and none recorded its end.
-            if let Some(mut ended) = reader.ended()? {
-                ended["said"] = serde_json::Value::from(if ended["stopped"] == true {
-                    "the watch was stopped"
-                } else {
-                    "the watch has ended"
-                });
+            if let Some(ended) = reader.ended()? {
                 server.mark_ended(&ended);
             } else if !reader.is_written() {
                 server.mark_ended(&serde_json::json!({

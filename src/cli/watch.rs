@@ -293,14 +293,7 @@ fn say_ended(
     server: Option<Server>,
 ) -> anyhow::Result<()> {
     if let Some(server) = server {
-        let mut said = serde_json::to_value(ended)?;
-        said["said"] = if ended.stopped {
-            "the watch was stopped"
-        } else {
-            "the watch has ended"
-        }
-        .into();
-        server.end(&said);
+        server.end(&ended.page_json());
     }
     if !cmd.json && ended.window_s == 0.0 {
         writeln!(out, "no window: no data row; {} lines skipped", ended.skipped_lines)?;

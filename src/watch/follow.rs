@@ -25,6 +25,20 @@ pub struct Ended {
     pub stopped: bool,
 }
 
+impl Ended {
+    /// How the watch ended as its page says it (and its store keeps it): these fields and
+    /// `said`, the page's status in words.
+    pub fn page_json(&self) -> serde_json::Value {
+        let mut json = serde_json::to_value(self).expect("an end serialises");
+        json["said"] = serde_json::Value::from(if self.stopped {
+            "the watch was stopped"
+        } else {
+            "the watch has ended"
+        });
+        json
+    }
+}
+
 /// Where a watch keeps its windows and how it is stopped.
 #[derive(Clone, Copy, Default)]
 pub struct FollowOptions<'a> {
@@ -130,7 +144,7 @@ pub fn follow(
         stopped: interrupted || stopped(),
     };
     if let Some(store) = kept.as_mut() {
-        store.record_end(&serde_json::to_value(&ended).expect("an end serialises"))?;
+        store.record_end(&ended.page_json())?;
     }
     Ok(ended)
 }

@@ -227,8 +227,8 @@ impl WatchStore {
         Ok(())
     }
 
-    /// Records how the watch ended (`ended`, JSON): what a page of its directory says of it
-    /// (`bitrock serve`). A watch killed records nothing.
+    /// Records how the watch ended (`ended`, JSON: [`super::Ended::page_json`]): what a page of
+    /// its directory says of it (`bitrock serve`). A watch killed records nothing.
     pub fn record_end(&mut self, ended: &serde_json::Value) -> Result<()> {
         self.conn
             .execute(

@@ -261,26 +261,21 @@ pub fn ar1_log_likelihood(s: &LagSums, half_n: f64) -> f64 {
 /// Bayes factor of e³ ≈ 20, "strong" on Kass and Raftery's scale.
 pub const AR1_PREFERRED_NATS: f64 = 3.0;
 
-/// ln p(y | AR(1)) − ln p(y | i.i.d.) at `fit`'s parameters on `samples` (time order): the
-/// log Bayes factor of the two noise models with σ (and AR(1)'s φ) integrated out as the
-/// evidence integrates them, so that φ pays its Occam factor: about −3 nats for independent
-/// noise of a few thousand samples, about −(n/2)·ln(1 − φ̂²) for noise that lasts. NaN with
-/// fewer than three residuals or no torque.
-pub fn ar1_preference_nats(
-    fit: &crate::fit::LawFit,
-    samples: &crate::data::Samples,
-    opts: &crate::fit::FitOptions,
-) -> f64 {
+/// ln p(y | AR(1)) − ln p(y | i.i.d.) of residuals `e` (time order) of a record whose torques'
+/// squares sum to `sum_sq_torque` (N·m²): the log Bayes factor of the two noise models at the
+/// parameters the residuals are of, with σ (and AR(1)'s φ) integrated out as the evidence
+/// integrates them, so that φ pays its Occam factor: about −3 nats for independent noise of a
+/// few thousand samples, about −(n/2)·ln(1 − φ̂²) for noise that lasts. NaN with fewer than
+/// three residuals or no torque.
+pub fn ar1_preference_nats(e: &[f64], sum_sq_torque: f64) -> f64 {
     use crate::numerics::compensated_sum;
-    let e = crate::fit::residuals(fit.law, &fit.params_si, samples, opts.w_ref_n);
-    let sum_sq = compensated_sum(samples.torque_nm.iter().map(|y| y * y));
-    if e.len() < 3 || sum_sq.is_nan() || sum_sq <= 0.0 {
+    if e.len() < 3 || sum_sq_torque.is_nan() || sum_sq_torque <= 0.0 {
         return f64::NAN;
     }
     let sums = LagSums {
-        rho: compensated_sum(e.iter().map(|v| v * v)) / sum_sq,
-        lag: compensated_sum(e.windows(2).map(|w| w[0] * w[1])) / sum_sq,
-        ends: (e[0] * e[0] + e[e.len() - 1] * e[e.len() - 1]) / sum_sq,
+        rho: compensated_sum(e.iter().map(|v| v * v)) / sum_sq_torque,
+        lag: compensated_sum(e.windows(2).map(|w| w[0] * w[1])) / sum_sq_torque,
+        ends: (e[0] * e[0] + e[e.len() - 1] * e[e.len() - 1]) / sum_sq_torque,
     };
     let half_n = e.len() as f64 / 2.0;
     ar1_log_likelihood(&sums, half_n) - iid_log_likelihood(sums.rho, half_n)
@@ -305,8 +300,10 @@ mod tests {
         for phi in [0.0, 0.2, 0.5] {
             let data = crate::separation::ar1_m2_record(phi);
             let fit = &fit_laws(&[Law::M2], &data, &Samples::default(), &opts).unwrap()[0];
-            let prefers = ar1_preference_nats(fit, &data, &opts);
-            let lag1 = crate::separation::residual_lag1(fit, &data, &opts);
+            let e = crate::fit::residuals(fit.law, &fit.params_si, &data, opts.w_ref_n);
+            let sum_sq: f64 = data.torque_nm.iter().map(|y| y * y).sum();
+            let prefers = ar1_preference_nats(&e, sum_sq);
+            let lag1 = crate::separation::lag1_of(&e);
             if phi == 0.0 {
                 assert!(prefers < 0.0 && prefers > -6.0, "independent noise: {prefers}");
             } else {
@@ -314,8 +311,8 @@ mod tests {
                 assert!(prefers > AR1_PREFERRED_NATS, "φ = {phi}: {prefers}");
                 assert!((prefers - profile).abs() < 6.0, "φ = {phi}: {prefers} vs {profile}");
             }
-            let two = Samples::new(data.speed_rad_s[..2].to_vec(), data.torque_nm[..2].to_vec());
-            assert!(ar1_preference_nats(fit, &two, &opts).is_nan());
+            assert!(ar1_preference_nats(&e[..2], sum_sq).is_nan());
+            assert!(ar1_preference_nats(&e, 0.0).is_nan());
         }
     }
 

@@ -61,9 +61,8 @@ struct Buffers {
     bind_group: wgpu::BindGroup,
 }
 
-fn bindings() -> [wgpu::BufferBindingType; 4] {
-    [UNIFORM, STORAGE_READ, STORAGE_READ, STORAGE_WRITE]
-}
+/// The kernel's buffers: its job, the particles, the targets, the sums it writes.
+const BINDINGS: [wgpu::BufferBindingType; 4] = [UNIFORM, STORAGE_READ, STORAGE_READ, STORAGE_WRITE];
 
 impl Buffers {
     fn new(ctx: &GpuContext, layout: &wgpu::BindGroupLayout, sources: usize, targets: usize) -> Result<Self, GpuError> {
@@ -116,7 +115,7 @@ impl Scratch {
             out.fill(0.0);
             return Ok(());
         }
-        let kernel = ctx.kernel("kernel_sums", "main", super::kernel_sums_source, &bindings(), &[])?;
+        let kernel = ctx.kernel("kernel_sums", "main", super::kernel_sums_source, &BINDINGS, &[])?;
         // Targets per dispatch: within the binding limit (32 bytes each) and 2²² at most.
         let chunk = (ctx.limits.max_storage_buffer_binding_size / 32).clamp(1, 1 << 22) as usize;
         let chunk = chunk.min(out.len());

@@ -193,14 +193,18 @@ struct Basis {
 impl Basis {
     /// The basis of `fits` on `data`'s calibration samples.
     fn new(fits: Vec<LawFit>, prior: Prior, fit: FitOptions, data: &FieldData) -> Self {
-        let residual_lag1 = fits
+        // Each fit's residuals once, for both checks on the noise model.
+        let sum_sq = crate::numerics::compensated_sum(data.calibration.torque_nm.iter().map(|y| y * y));
+        let (residual_lag1, ar1_preference_nats) = fits
             .iter()
-            .map(|f| separation::residual_lag1(f, &data.calibration, &fit))
-            .collect();
-        let ar1_preference_nats = fits
-            .iter()
-            .map(|f| evidence::noise::ar1_preference_nats(f, &data.calibration, &fit))
-            .collect();
+            .map(|f| {
+                let e = crate::fit::residuals(f.law, &f.params_si, &data.calibration, fit.w_ref_n);
+                (
+                    separation::lag1_of(&e),
+                    evidence::noise::ar1_preference_nats(&e, sum_sq),
+                )
+            })
+            .unzip();
         Self {
             fits,
             prior,
