@@ -156,9 +156,7 @@ pub(crate) fn watch(
             })
         });
         if let (Some(server), Ok(ended)) = (server, &ended) {
-            let mut said = serde_json::to_value(ended).map_err(|e| Error::Numerical(e.to_string()))?;
-            said["said"] = "the watch has ended".into();
-            server.end(&said);
+            server.end(&ended.page_json());
         }
         ended
     });
