@@ -6,6 +6,8 @@
 //! `_kn`, `_n`, time `_s`). Every refusal names the file, and where it applies the line and the
 //! column.
 
+pub mod surface;
+
 use crate::error::{Error, Result};
 use crate::units::{ForceUnit, RAD_S_PER_RPM, SpeedUnit, TorqueUnit};
 use serde::{Deserialize, Serialize};
@@ -362,6 +364,15 @@ pub fn demo_field_data(opts: &DataOptions) -> Result<FieldData> {
 }
 
 /// Index of the column named `wanted`, or of the single column whose name contains `hint`.
+/// True for a column a rig measures at the surface (its name holds `surface`, `top_drive` or
+/// `rotary`): never read as the bit's speed or torque unless named.
+pub fn is_surface_channel(name: &str) -> bool {
+    let name = name.to_ascii_lowercase();
+    ["surface", "top_drive", "rotary"]
+        .iter()
+        .any(|mark| name.contains(mark))
+}
+
 fn resolve_column(
     headers: &csv::StringRecord,
     wanted: Option<&str>,
@@ -384,15 +395,25 @@ fn resolve_column(
             }),
         };
     }
-    let matches: Vec<usize> = headers
+    let (surface, matches): (Vec<usize>, Vec<usize>) = headers
         .iter()
         .enumerate()
         .filter(|(_, h)| h.to_ascii_lowercase().contains(hint))
         .map(|(i, _)| i)
-        .collect();
+        .partition(|&i| is_surface_channel(&headers[i]));
     match matches.as_slice() {
         [i] => Ok(Some(*i)),
         [] if !required => Ok(None),
+        [] if !surface.is_empty() => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: format!(
+                "column '{}' is a surface channel, and the bit's {hint} is never taken from the surface; \
+                 give the bit's column with `{field}`, or infer the law from the surface channels with \
+                 `bitrock surface`",
+                headers[surface[0]].to_string()
+            ),
+        }),
         [] => Err(Error::Format {
             path: path.to_path_buf(),
             line: Some(1),
@@ -414,7 +435,7 @@ fn resolve_column(
 
 /// The unit of a column: the flag's when given (and not contradicting the suffix), else the
 /// suffix's.
-fn resolve_unit<U: crate::units::ColumnUnit>(
+pub(crate) fn resolve_unit<U: crate::units::ColumnUnit>(
     column: &str,
     flag_value: Option<U>,
     field: &str,
@@ -925,7 +946,7 @@ impl ColumnUnits {
 
 /// Whether a time column's name says milliseconds (as many loggers stamp): it ends in `_ms`,
 /// `[ms]` or `(ms)`.
-fn names_milliseconds(name: &str) -> bool {
+pub(crate) fn names_milliseconds(name: &str) -> bool {
     let name = name.trim().to_ascii_lowercase();
     ["_ms", "[ms]", "(ms)", " ms"]
         .iter()

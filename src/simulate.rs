@@ -26,6 +26,7 @@
 //! crossing and replacing a clean stick by chatter.
 
 pub mod strings;
+pub mod surface;
 pub mod well;
 
 use crate::error::{Error, Result};
@@ -278,7 +279,13 @@ pub fn write_csv<W: std::io::Write>(trace: &Trace, out: W) -> std::io::Result<()
 /// (field records, see [`write_csv`]), or N·m and N for a laboratory rig, whose torques of a
 /// few N·m need 0.1 mN·m (columns `torque_nm`, `wob_n`; WOB to 1 mN).
 pub fn write_csv_in<W: std::io::Write>(trace: &Trace, unit: TorqueUnit, out: W) -> std::io::Result<()> {
-    write_rows(trace, None, unit, out)
+    let columns = Columns::of(Channels::Bit, unit);
+    let mut writer = csv::Writer::from_writer(out);
+    writer.write_record(&columns.header)?;
+    for i in 0..trace.len() {
+        writer.write_record(columns.bit_row(trace, i))?;
+    }
+    writer.flush()
 }
 
 /// Writes a well's record as [`write_csv_in`] writes a trace, with two more columns: the
@@ -289,41 +296,114 @@ pub fn write_well_csv_in<W: std::io::Write>(
     unit: TorqueUnit,
     out: W,
 ) -> std::io::Result<()> {
-    write_rows(&record.trace, Some((record, well)), unit, out)
+    write_record_csv(record, Some(well), Channels::Bit, unit, out)
 }
 
-fn write_rows<W: std::io::Write>(
-    trace: &Trace,
-    well: Option<(&WellTrace, &Well)>,
+/// Which channels a simulated record holds: what a downhole memory tool records, what a rig
+/// streams from the surface, or both.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Channels {
+    /// Bit speed, torque on bit and weight on bit (`time_s,bit_speed_rpm,torque_knm,wob_kn`).
+    #[default]
+    Bit,
+    /// Top-drive speed, surface torque and weight on bit
+    /// (`time_s,top_drive_rpm,surface_torque_knm,wob_kn`).
+    Surface,
+    /// Both: the bit's columns, then `top_drive_rpm,surface_torque_knm`.
+    All,
+}
+
+/// The header of a record's channels and how each row is written.
+struct Columns {
+    channels: Channels,
+    header: Vec<&'static str>,
+    per_unit: f64,
+}
+
+impl Columns {
+    fn of(channels: Channels, unit: TorqueUnit) -> Self {
+        let (torque, surface_torque, wob) = match unit {
+            TorqueUnit::KNm => ("torque_knm", "surface_torque_knm", "wob_kn"),
+            TorqueUnit::Nm => ("torque_nm", "surface_torque_nm", "wob_n"),
+        };
+        let header = match channels {
+            Channels::Bit => vec!["time_s", "bit_speed_rpm", torque, wob],
+            Channels::Surface => vec!["time_s", "top_drive_rpm", surface_torque, wob],
+            Channels::All => vec!["time_s", "bit_speed_rpm", torque, wob, "top_drive_rpm", surface_torque],
+        };
+        Self {
+            channels,
+            header,
+            per_unit: unit.newton_metres(),
+        }
+    }
+
+    /// Sample `i`'s time, bit speed, torque and WOB.
+    fn bit_row(&self, trace: &Trace, i: usize) -> Vec<String> {
+        vec![
+            format!("{:.4}", trace.time_s[i]),
+            format!("{:.3}", trace.bit_speed_rad_s[i] / RAD_S_PER_RPM),
+            format!("{:.4}", trace.torque_nm[i] / self.per_unit),
+            format!("{:.3}", trace.wob_n[i] / self.per_unit),
+        ]
+    }
+
+    /// Sample `i` of a record in these columns.
+    fn row(&self, record: &WellTrace, i: usize) -> Vec<String> {
+        let trace = &record.trace;
+        let top_drive = format!("{:.3}", record.top_drive_rad_s[i] / RAD_S_PER_RPM);
+        let surface = format!("{:.4}", record.surface_torque_nm[i] / self.per_unit);
+        match self.channels {
+            Channels::Bit => self.bit_row(trace, i),
+            Channels::Surface => vec![
+                format!("{:.4}", trace.time_s[i]),
+                top_drive,
+                surface,
+                format!("{:.3}", trace.wob_n[i] / self.per_unit),
+            ],
+            Channels::All => {
+                let mut row = self.bit_row(trace, i);
+                row.extend([top_drive, surface]);
+                row
+            }
+        }
+    }
+}
+
+/// Writes a record's `channels` as CSV, torques and WOB in the scale of `unit` (see
+/// [`write_csv_in`]; surface torque at 0.1 N·m in kN·m), with the segment's name (`segment`)
+/// where a `well` is given, and then the top-drive speed with the bit's channels too, since a
+/// well's speed changes.
+pub fn write_record_csv<W: std::io::Write>(
+    record: &WellTrace,
+    well: Option<&Well>,
+    channels: Channels,
     unit: TorqueUnit,
     out: W,
 ) -> std::io::Result<()> {
-    let (torque_column, wob_column) = match unit {
-        TorqueUnit::KNm => ("torque_knm", "wob_kn"),
-        TorqueUnit::Nm => ("torque_nm", "wob_n"),
-    };
-    let per_unit = unit.newton_metres();
+    let columns = Columns::of(channels, unit);
     let mut writer = csv::Writer::from_writer(out);
-    let mut header = vec!["time_s", "bit_speed_rpm", torque_column, wob_column];
+    let mut header = columns.header.clone();
+    let bit_only = channels == Channels::Bit;
     if well.is_some() {
-        header.extend(["top_drive_rpm", "segment"]);
+        if bit_only {
+            header.push("top_drive_rpm");
+        }
+        header.push("segment");
     }
     writer.write_record(&header)?;
-    for i in 0..trace.len() {
-        let mut row = vec![
-            format!("{:.4}", trace.time_s[i]),
-            format!("{:.3}", trace.bit_speed_rad_s[i] / RAD_S_PER_RPM),
-            format!("{:.4}", trace.torque_nm[i] / per_unit),
-            format!("{:.3}", trace.wob_n[i] / per_unit),
-        ];
-        if let Some((record, well)) = well {
-            row.push(format!("{:.3}", record.top_drive_rad_s[i] / RAD_S_PER_RPM));
+    for i in 0..record.trace.len() {
+        let mut row = columns.row(record, i);
+        if let Some(well) = well {
+            if bit_only {
+                row.push(format!("{:.3}", record.top_drive_rad_s[i] / RAD_S_PER_RPM));
+            }
             row.push(well.segments[record.segment[i]].name.clone());
         }
         writer.write_record(&row)?;
     }
-    writer.flush()?;
-    Ok(())
+    writer.flush()
 }
 
 /// RK4 steps per second above any machine's: the time estimate is a lower bound.
@@ -345,9 +425,17 @@ pub fn simulate(cfg: &SimConfig) -> Result<Trace> {
 /// and refusing, once the first 20 ms have measured this machine's pace, a simulation that
 /// could not finish in a day here (naming `dt_s`).
 pub fn simulate_with(cfg: &SimConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Trace> {
-    cfg.validate()?;
-    Ok(record(&Well::of(cfg), progress)?.trace)
+    Ok(simulate_record_with(cfg, progress)?.trace)
 }
+
+/// [`simulate_with`], the record with its surface channels (top-drive speed and torque).
+pub fn simulate_record_with(cfg: &SimConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> {
+    cfg.validate()?;
+    record(&Well::of(cfg), progress)
+}
+
+/// Added to a simulation's seed for the generator of its surface torque's noise.
+const SURFACE_NOISE_STREAM: u64 = 0x5355_5246_4143_4521;
 
 /// A well drilled through formations: segments of record, each with its own law at the bit,
 /// parameters, top-drive speed and mean weight on bit (constant or ramped), simulated as one
@@ -418,6 +506,9 @@ impl Profile {
 pub struct WellTrace {
     pub trace: Trace,
     pub top_drive_rad_s: Vec<f64>,
+    /// Torque the top drive applies (N·m), with its own measurement noise of the torque
+    /// noise's size, drawn from a generator of its own so that the bit channels do not change.
+    pub surface_torque_nm: Vec<f64>,
     /// Index into [`Well::segments`] of each sample.
     pub segment: Vec<usize>,
 }
@@ -546,6 +637,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
     };
 
     let mut rng = StdRng::seed_from_u64(well.seed);
+    let mut surface_rng = StdRng::seed_from_u64(well.seed ^ SURFACE_NOISE_STREAM);
     let (_, first, omega0, wob_mean_n) = drive(0.0);
     let mut wob = Wob::new(wob_mean_n, well.wob_fluctuation_n, well.wob_correlation_s, &mut rng);
     let r0 = wob.ratio(well.w_ref_n);
@@ -605,12 +697,17 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         sim.set_operating_point(omega, wob.ratio(well.w_ref_n));
         let z_speed: f64 = StandardNormal.sample(&mut rng);
         let z_torque: f64 = StandardNormal.sample(&mut rng);
+        let z_surface: f64 = StandardNormal.sample(&mut surface_rng);
         out.push(
             t_s,
             sim.bit_speed_rad_s() + well.noise_speed_rad_s * z_speed,
             sim.bit_torque_nm() + well.noise_torque_nm * z_torque,
             wob.current_n(),
-            (omega, segment),
+            (
+                omega,
+                sim.surface_torque_nm() + well.noise_torque_nm * z_surface,
+                segment,
+            ),
         );
     }
     Ok(out)
@@ -650,20 +747,22 @@ impl WellTrace {
                 wob_n: Vec::with_capacity(n),
             },
             top_drive_rad_s: Vec::with_capacity(n),
+            surface_torque_nm: Vec::with_capacity(n),
             segment: Vec::with_capacity(n),
         }
     }
 
     /// One sample: at `t_s`, the bit's speed and torque (noise added), the WOB, and the top
-    /// drive's speed with the segment it belongs to.
+    /// drive's speed and torque (noise added) with the segment it belongs to.
     fn push(
         &mut self,
         t_s: f64,
         bit_speed_rad_s: f64,
         torque_nm: f64,
         wob_n: f64,
-        (omega_rad_s, segment): (f64, usize),
+        (omega_rad_s, surface_torque_nm, segment): (f64, f64, usize),
     ) {
+        self.surface_torque_nm.push(surface_torque_nm);
         self.trace.time_s.push(t_s);
         self.trace.bit_speed_rad_s.push(bit_speed_rad_s);
         self.trace.torque_nm.push(torque_nm);

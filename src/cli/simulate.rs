@@ -89,8 +89,12 @@ pub struct SimulateCmd {
     /// need the finer resolution).
     #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
     pub torque_unit: TorqueUnit,
+    /// Channels recorded: the bit's (a downhole memory tool's), the surface's (what a rig
+    /// streams: top_drive_rpm, surface_torque_knm, wob_kn) or all of them.
+    #[arg(long, value_enum, default_value_t = simulate::Channels::Bit)]
+    pub channels: simulate::Channels,
     /// Output CSV (time_s, bit_speed_rpm, torque_knm, wob_kn; torque_nm, wob_n with
-    /// --torque-unit nm) [default: standard output].
+    /// --torque-unit nm; see --channels) [default: standard output].
     #[arg(long, short, value_name = "FILE")]
     pub out: Option<PathBuf>,
     /// Replace FILE even when bitrock did not write it (or it was changed since); without it
@@ -151,13 +155,18 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
     let mut progress = super::progress::WorkProgress::new("simulating");
-    let trace = simulate::simulate_with(&config, &mut |done, total| progress.update(done, total))?;
+    let record = simulate::simulate_record_with(&config, &mut |done, total| progress.update(done, total))?;
     drop(progress);
+    write(cmd, &record, None)
+}
+
+/// The record's chosen channels to `--out` or standard output.
+fn write(cmd: &SimulateCmd, record: &simulate::WellTrace, well: Option<&simulate::Well>) -> anyhow::Result<ExitCode> {
+    let csv =
+        |out: &mut dyn std::io::Write| simulate::write_record_csv(record, well, cmd.channels, cmd.torque_unit, out);
     match &cmd.out {
-        None => simulate::write_csv_in(&trace, cmd.torque_unit, super::print::stdout())?,
-        Some(path) => bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
-            simulate::write_csv_in(&trace, cmd.torque_unit, file)
-        })?,
+        None => csv(&mut super::print::stdout())?,
+        Some(path) => bitrock::run::dir::write_whole(path, "out", cmd.force, |file| csv(file))?,
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -171,11 +180,5 @@ fn run_well(cmd: &SimulateCmd, path: &std::path::Path) -> anyhow::Result<ExitCod
     let mut progress = super::progress::WorkProgress::new("simulating");
     let record = simulate::simulate_well_with(&well, &mut |done, total| progress.update(done, total))?;
     drop(progress);
-    match &cmd.out {
-        None => simulate::write_well_csv_in(&record, &well, cmd.torque_unit, super::print::stdout())?,
-        Some(path) => bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
-            simulate::write_well_csv_in(&record, &well, cmd.torque_unit, file)
-        })?,
-    }
-    Ok(ExitCode::SUCCESS)
+    write(cmd, &record, Some(&well))
 }

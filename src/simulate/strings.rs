@@ -740,6 +740,12 @@ impl<'a> Stepper<'a> {
     pub fn bit_torque_nm(&self) -> f64 {
         self.0.bit_torque()
     }
+
+    /// Torque the top drive applies to the string (N·m): what a rig's surface torque channel
+    /// measures.
+    pub fn surface_torque_nm(&self) -> f64 {
+        self.0.surface_torque()
+    }
 }
 
 /// The state of steady rotation at Ω under the law's torque r·T(Ω), its bit speed kicked by

@@ -1,0 +1,434 @@
+//! Records of what a rig streams from the surface: top-drive speed, surface torque and,
+//! where present, weight on bit, on a regular clock. Columns are found by role: a name holding
+//! `top_drive` or `rotary` (and not `torque`) is the top drive's speed, one holding `torque`
+//! and `surface` (or `top_drive`, `rotary`) the surface torque, one holding `wob` the weight on
+//! bit, one holding `time` the clock; each can be named instead. Units come from the names'
+//! suffixes or the options, as for a bit record. The bit's channels, where a record also holds
+//! them, are listed and left alone: surface torque is never read as torque on bit, nor the
+//! reverse.
+
+use super::{is_surface_channel, names_milliseconds, resolve_unit};
+use crate::error::{Error, Result};
+use crate::files::{csv_rows, csv_with_header};
+use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Which columns of a surface record to read, and in which units.
+#[derive(Clone, Debug, Default)]
+pub struct SurfaceOptions {
+    /// Time column (s, or ms by its name); `None` finds the one whose name holds `time`.
+    pub time_column: Option<String>,
+    /// Top-drive speed column; `None` finds the one whose name holds `top_drive` or `rotary`.
+    pub top_drive_column: Option<String>,
+    /// Surface torque column; `None` finds the one surface channel whose name holds `torque`.
+    pub surface_torque_column: Option<String>,
+    /// Weight-on-bit column; `None` uses the one whose name holds `wob`, if any.
+    pub wob_column: Option<String>,
+    pub top_drive_unit: Option<SpeedUnit>,
+    pub torque_unit: Option<TorqueUnit>,
+    pub wob_unit: Option<ForceUnit>,
+}
+
+/// The columns a surface record was read from, by role.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceColumns {
+    pub time: String,
+    pub top_drive: String,
+    pub surface_torque: String,
+    pub wob: Option<String>,
+    /// Bit channels the record also holds (bit speed, torque on bit), not read here.
+    pub bit: Vec<String>,
+}
+
+/// A surface record in SI on its regular clock.
+#[derive(Clone, Debug)]
+pub struct SurfaceRecord {
+    pub source: PathBuf,
+    pub columns: SurfaceColumns,
+    pub top_drive_unit: SpeedUnit,
+    pub torque_unit: TorqueUnit,
+    /// Sample times (s) from the record's first.
+    pub time_s: Vec<f64>,
+    /// Top-drive speed Ω (rad/s).
+    pub top_drive_rad_s: Vec<f64>,
+    /// Surface torque (N·m).
+    pub surface_torque_nm: Vec<f64>,
+    /// Weight on bit (N), where recorded.
+    pub wob_n: Option<Vec<f64>>,
+    /// The clock's period (s): the median spacing of the stamps.
+    pub sample_period_s: f64,
+}
+
+/// Most a stamp's spacing may differ from the clock's period, as a share of it: the string is
+/// simulated on the record's clock, so a record with gaps or jitter beyond this is refused.
+pub const CLOCK_TOLERANCE: f64 = 0.01;
+
+/// Fewest samples a surface record must hold: summaries of fewer say nothing of a cycle.
+pub const MIN_SAMPLES: usize = 30;
+
+impl SurfaceRecord {
+    /// Reads the surface record at `path` (a CSV with a header).
+    pub fn read(path: &Path, opts: &SurfaceOptions) -> Result<Self> {
+        let (mut reader, header) = csv_with_header(path)?;
+        let roles = Roles::resolve(&header, opts, path)?;
+        let mut time_s = Vec::new();
+        let mut top_drive_rad_s = Vec::new();
+        let mut surface_torque_nm = Vec::new();
+        let mut wob_n = roles.wob.map(|_| Vec::new());
+        let mut lines = Vec::new();
+        for row in csv_rows(&mut reader, path, &header) {
+            let row = row?;
+            time_s.push(row.number(roles.time)? * roles.time_s_per_unit);
+            top_drive_rad_s.push(roles.top_drive_unit.to_rad_s(row.number(roles.top_drive)?));
+            surface_torque_nm.push(row.number(roles.surface_torque)? * roles.torque_unit.newton_metres());
+            if let (Some((i, unit)), Some(w)) = (roles.wob, wob_n.as_mut()) {
+                w.push(row.number(i)? * unit.newtons());
+            }
+            lines.push(row.line);
+        }
+        let name = |i: usize| header[i].clone();
+        let columns = SurfaceColumns {
+            time: name(roles.time),
+            top_drive: name(roles.top_drive),
+            surface_torque: name(roles.surface_torque),
+            wob: roles.wob.map(|(i, _)| name(i)),
+            bit: roles.bit.iter().map(|&i| name(i)).collect(),
+        };
+        let sample_period_s = check_clock(&time_s, path, &|k| format!("line {}", lines[k]))?;
+        let t0 = time_s[0];
+        time_s.iter_mut().for_each(|t| *t -= t0);
+        Ok(Self {
+            source: path.to_path_buf(),
+            columns,
+            top_drive_unit: roles.top_drive_unit,
+            torque_unit: roles.torque_unit,
+            time_s,
+            top_drive_rad_s,
+            surface_torque_nm,
+            wob_n,
+            sample_period_s,
+        })
+    }
+
+    /// Samples.
+    pub fn len(&self) -> usize {
+        self.time_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.time_s.is_empty()
+    }
+
+    /// Sample rate (Hz).
+    pub fn sample_hz(&self) -> f64 {
+        1.0 / self.sample_period_s
+    }
+
+    /// Recorded length (s): samples times the period.
+    pub fn duration_s(&self) -> f64 {
+        self.len() as f64 * self.sample_period_s
+    }
+
+    /// Mean top-drive speed (rad/s).
+    pub fn mean_top_drive_rad_s(&self) -> f64 {
+        self.top_drive_rad_s.iter().sum::<f64>() / self.len().max(1) as f64
+    }
+
+    /// Weight-on-bit ratio r = W/W_ref per sample: 1 where no weight is recorded or no
+    /// reference is given.
+    pub fn wob_ratio(&self, w_ref_n: Option<f64>) -> Vec<f64> {
+        match (&self.wob_n, w_ref_n) {
+            (Some(w), Some(w_ref)) => w.iter().map(|w| w / w_ref).collect(),
+            _ => vec![1.0; self.len()],
+        }
+    }
+
+    /// The roles found, in words: which column is what, in which unit, and what is left alone.
+    pub fn roles_text(&self) -> String {
+        let c = &self.columns;
+        let mut text = format!(
+            "top-drive speed from '{}' ({}), surface torque from '{}' ({}), ",
+            c.top_drive,
+            self.top_drive_unit.label(),
+            c.surface_torque,
+            self.torque_unit.label()
+        );
+        match &c.wob {
+            Some(w) => text.push_str(&format!("weight on bit from '{w}'")),
+            None => text.push_str("no weight on bit (the law's parameters hold at the record's weight)"),
+        }
+        text.push_str(&format!(
+            "; {} samples every {} s ({} s)",
+            self.len(),
+            self.sample_period_s,
+            self.duration_s()
+        ));
+        if !c.bit.is_empty() {
+            text.push_str(&format!(
+                "; the bit's channels ({}) are not read: a record with them is calibrated by `fit` and `abc`",
+                c.bit.join(", ")
+            ));
+        }
+        text
+    }
+}
+
+/// The clock's period (s), refusing a record too short, a clock that does not run forwards, or
+/// one whose spacing departs from its median by more than [`CLOCK_TOLERANCE`]; `place(k)` names
+/// sample k for the messages.
+pub fn check_clock(time_s: &[f64], path: &Path, place: &dyn Fn(usize) -> String) -> Result<f64> {
+    let refuse = |message: String| Error::Data {
+        path: path.to_path_buf(),
+        message,
+    };
+    if time_s.len() < MIN_SAMPLES {
+        return Err(refuse(format!(
+            "{} samples: a surface record needs at least {MIN_SAMPLES} to show a stick-slip cycle",
+            time_s.len()
+        )));
+    }
+    let steps: Vec<f64> = time_s.windows(2).map(|w| w[1] - w[0]).collect();
+    if let Some(k) = steps.iter().position(|&d| d <= 0.0) {
+        return Err(refuse(format!(
+            "{}: the time {} s does not follow {} s; a surface record's clock runs forwards",
+            place(k + 1),
+            time_s[k + 1],
+            time_s[k]
+        )));
+    }
+    let period = crate::numerics::median(&steps).expect("two samples or more");
+    if let Some(k) = steps
+        .iter()
+        .position(|&d| (d - period).abs() > CLOCK_TOLERANCE * period)
+    {
+        return Err(refuse(format!(
+            "{}: {} s after the previous stamp, on a clock of {period} s: the string is simulated \
+             on the record's clock, which must be regular; cut the record at the gap",
+            place(k + 1),
+            steps[k]
+        )));
+    }
+    Ok(period)
+}
+
+/// The columns of each role and their units.
+struct Roles {
+    time: usize,
+    time_s_per_unit: f64,
+    top_drive: usize,
+    top_drive_unit: SpeedUnit,
+    surface_torque: usize,
+    torque_unit: TorqueUnit,
+    wob: Option<(usize, ForceUnit)>,
+    bit: Vec<usize>,
+}
+
+impl Roles {
+    fn resolve(header: &[String], opts: &SurfaceOptions, path: &Path) -> Result<Self> {
+        let lower = |i: usize| header[i].to_ascii_lowercase();
+        let is_top_drive = |i: usize| {
+            let n = lower(i);
+            (n.contains("top_drive") || n.contains("rotary")) && !n.contains("torque")
+        };
+        let is_surface_torque = |i: usize| lower(i).contains("torque") && is_surface_channel(&header[i]);
+        let time = pick(header, opts.time_column.as_deref(), "time", "time_column", path, &|i| {
+            lower(i).contains("time")
+        })?
+        .ok_or_else(|| missing(header, path, "a time", "time", "time_column"))?;
+        let top_drive = pick(
+            header,
+            opts.top_drive_column.as_deref(),
+            "top_drive",
+            "top_drive_column",
+            path,
+            &is_top_drive,
+        )?
+        .ok_or_else(|| {
+            missing(
+                header,
+                path,
+                "a top-drive speed",
+                "top_drive' or 'rotary",
+                "top_drive_column",
+            )
+        })?;
+        let surface_torque = pick(
+            header,
+            opts.surface_torque_column.as_deref(),
+            "surface torque",
+            "surface_torque_column",
+            path,
+            &is_surface_torque,
+        )?
+        .ok_or_else(|| {
+            missing(
+                header,
+                path,
+                "a surface torque",
+                "torque' and 'surface",
+                "surface_torque_column",
+            )
+        })?;
+        let wob = pick(header, opts.wob_column.as_deref(), "wob", "wob_column", path, &|i| {
+            lower(i).contains("wob")
+        })?;
+        let chosen = [Some(time), Some(top_drive), Some(surface_torque), wob];
+        if let Some(i) = [top_drive, surface_torque].into_iter().find(|&i| i == time) {
+            return Err(format_error(
+                path,
+                format!("column '{}' is chosen for the time and another role", header[i]),
+            ));
+        }
+        if top_drive == surface_torque {
+            return Err(format_error(
+                path,
+                format!(
+                    "column '{}' is chosen for both the top-drive speed and the surface torque",
+                    header[top_drive]
+                ),
+            ));
+        }
+        let bit = (0..header.len())
+            .filter(|&i| !chosen.contains(&Some(i)) && !is_surface_channel(&header[i]))
+            .filter(|&i| {
+                let n = lower(i);
+                n.contains("speed") || n.contains("torque")
+            })
+            .collect();
+        Ok(Self {
+            time,
+            time_s_per_unit: if names_milliseconds(&header[time]) { 1e-3 } else { 1.0 },
+            top_drive,
+            top_drive_unit: resolve_unit(&header[top_drive], opts.top_drive_unit, "top_drive_unit", path)?,
+            surface_torque,
+            torque_unit: resolve_unit(&header[surface_torque], opts.torque_unit, "torque_unit", path)?,
+            wob: match wob {
+                Some(i) => Some((i, resolve_unit(&header[i], opts.wob_unit, "wob_unit", path)?)),
+                None => None,
+            },
+            bit,
+        })
+    }
+}
+
+fn format_error(path: &Path, message: String) -> Error {
+    Error::Format {
+        path: path.to_path_buf(),
+        line: Some(1),
+        message,
+    }
+}
+
+/// The column named `wanted` (refused where the header lacks it), else the one column that
+/// `accept`s (`None` when none does, refused when several do).
+fn pick(
+    header: &[String],
+    wanted: Option<&str>,
+    role: &str,
+    field: &str,
+    path: &Path,
+    accept: &dyn Fn(usize) -> bool,
+) -> Result<Option<usize>> {
+    let listing = || header.join(", ");
+    if let Some(name) = wanted {
+        return match header.iter().position(|h| h == name) {
+            Some(i) => Ok(Some(i)),
+            None => Err(format_error(
+                path,
+                format!(
+                    "no column named '{name}' (given by `{field}`); the header has: {}",
+                    listing()
+                ),
+            )),
+        };
+    }
+    let matches: Vec<usize> = (0..header.len()).filter(|&i| accept(i)).collect();
+    match matches.as_slice() {
+        [] => Ok(None),
+        [i] => Ok(Some(*i)),
+        many => Err(format_error(
+            path,
+            format!(
+                "several columns could be the {role} ({}); choose one with `{field}`",
+                many.iter().map(|&i| header[i].as_str()).collect::<Vec<_>>().join(", ")
+            ),
+        )),
+    }
+}
+
+/// The refusal of a record without a column of a required role.
+fn missing(header: &[String], path: &Path, what: &str, hint: &str, field: &str) -> Error {
+    format_error(
+        path,
+        format!(
+            "no column is {what} (a name holding '{hint}'); name it with `{field}` (the header has: {})",
+            header.join(", ")
+        ),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(text: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rig.csv");
+        std::fs::write(&path, text).unwrap();
+        (dir, path)
+    }
+
+    fn rows(header: &str, row: impl Fn(usize) -> String, n: usize) -> String {
+        let mut text = format!("{header}\n");
+        for k in 0..n {
+            text.push_str(&row(k));
+            text.push('\n');
+        }
+        text
+    }
+
+    #[test]
+    fn roles_are_found_by_name_and_the_bit_channels_left_alone() {
+        let text = rows(
+            "time_s,bit_speed_rpm,torque_knm,wob_kn,top_drive_rpm,surface_torque_knm",
+            |k| format!("{k},50,8,200,60,{}", 9.0 + (k % 7) as f64),
+            40,
+        );
+        let (_dir, path) = write(&text);
+        let r = SurfaceRecord::read(&path, &SurfaceOptions::default()).unwrap();
+        assert_eq!(r.columns.top_drive, "top_drive_rpm");
+        assert_eq!(r.columns.surface_torque, "surface_torque_knm");
+        assert_eq!(r.columns.wob.as_deref(), Some("wob_kn"));
+        assert_eq!(r.columns.bit, ["bit_speed_rpm", "torque_knm"]);
+        assert!((r.top_drive_rad_s[0] - 60.0 * crate::units::RAD_S_PER_RPM).abs() < 1e-12);
+        assert_eq!(r.surface_torque_nm[3], 12_000.0);
+        assert_eq!(r.wob_ratio(Some(100_000.0))[0], 2.0);
+        assert_eq!(r.sample_period_s, 1.0);
+        assert!(r.roles_text().contains("not read"), "{}", r.roles_text());
+    }
+
+    #[test]
+    fn a_bit_record_is_refused_naming_the_missing_role() {
+        let text = rows("time_s,bit_speed_rpm,torque_knm", |k| format!("{k},50,8"), 40);
+        let (_dir, path) = write(&text);
+        let e = SurfaceRecord::read(&path, &SurfaceOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("top-drive speed") && e.contains("top_drive_column"), "{e}");
+    }
+
+    #[test]
+    fn a_gap_in_the_clock_is_refused_naming_its_line() {
+        let text = rows(
+            "time_ms,top_drive_rpm,surface_torque_nm",
+            |k| format!("{},60,{}", if k < 20 { k * 500 } else { k * 500 + 2000 }, 9000 + k),
+            40,
+        );
+        let (_dir, path) = write(&text);
+        let e = SurfaceRecord::read(&path, &SurfaceOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 22") && e.contains("2.5 s after"), "{e}");
+    }
+}
