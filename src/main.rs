@@ -73,6 +73,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Export(cmd) => cli::export::run(&cmd),
         Command::Report(cmd) => cli::report::run(&cmd),
         Command::Simulate(cmd) => cli::simulate::run(&cmd),
+        Command::Surface(cmd) => cli::surface::run(&cmd),
         Command::Demo(cmd) => cli::demo::run(&cmd),
         Command::Parity(cmd) => cli::parity::run(&cmd),
         Command::Bench(cmd) => cli::bench::run(&cmd),

@@ -245,7 +245,7 @@ impl Candidate {
 }
 
 /// The contents of a prior TOML file (see the module documentation).
-#[derive(Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize)]
 pub struct PriorFile {
     #[serde(default)]
     pub weights: BTreeMap<String, f64>,

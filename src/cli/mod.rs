@@ -22,6 +22,7 @@ pub mod report;
 pub mod serve;
 pub mod simulate;
 pub mod stability;
+pub mod surface;
 pub mod watch;
 
 use clap::{Parser, Subcommand};
@@ -95,6 +96,10 @@ pub enum Command {
     Report(report::ReportCmd),
     /// Simulate the 1-DOF torsional drill string with a bit-rock law; writes a field-like CSV.
     Simulate(simulate::SimulateCmd),
+    /// The law at the bit from what the rig streams (top-drive speed and surface torque),
+    /// through strings simulated per candidate (ABC-SMC on the cycle's summaries); the model
+    /// choice checked by re-simulation, and what the surface implies at the bit.
+    Surface(Box<surface::SurfaceCmd>),
     /// The whole paper on the embedded (synthetic) demo record: fits, ABC for δ = 0.4, 0.6, 0.8,
     /// stability maps (1-DOF and FE) and the report, ending with the headline numbers.
     Demo(demo::DemoCmd),

@@ -6,6 +6,7 @@ pub mod gpu;
 mod problem;
 pub mod records;
 pub mod strings;
+pub mod surface;
 
 pub use problem::Problem;
 

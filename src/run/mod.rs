@@ -25,6 +25,7 @@ pub mod settings;
 pub mod sqlite;
 pub mod stability;
 pub mod strings;
+pub mod surface;
 
 pub use dir::{Dir, DirState};
 pub use scoring::{MakeEvaluator, MakeWorkers, Placement, Scoring};

@@ -11,7 +11,10 @@
 //! blind to the cycle's phase: the torque's mean and spread, its quantiles, the share of samples
 //! at which it rises (the bit sticks while the string winds up: the rise share tracks the stuck
 //! share), its autocorrelation at 1, 2 and 4 s, and the cycle's period (the first peak of the
-//! autocorrelation past its first zero, refined by a parabola; 0 where there is none).
+//! autocorrelation past its first zero, refined by a parabola; 0 where there is none) and the
+//! quantiles of its steps from sample to sample (while the bit is stuck the string winds up at
+//! the top drive's speed, so its torque climbs in equal steps: a law that holds the bit shows
+//! them, one that only slows it does not).
 
 use super::strings::{Chain, MAX_NODES, Stepper, StringJob, StringState, padded};
 use crate::laws::Law;
@@ -117,7 +120,7 @@ pub fn simulate_on_clock(
 }
 
 /// How many summaries a surface torque record is reduced to.
-pub const N_SUMMARIES: usize = 13;
+pub const N_SUMMARIES: usize = 18;
 
 /// The summaries' names, in order (torques in N·m, times in s).
 pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
@@ -134,6 +137,11 @@ pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
     "acf_4s",
     "period_s",
     "period_strength",
+    "step_q10_nm",
+    "step_q25_nm",
+    "step_q50_nm",
+    "step_q75_nm",
+    "step_q90_nm",
 ];
 
 /// The summaries of a surface torque record (N·m) sampled every `period_s` (see the module
@@ -148,7 +156,10 @@ pub fn summaries(torque_nm: &[f64], period_s: f64) -> [f64; N_SUMMARIES] {
     let q = |p: f64| crate::numerics::quantile_of_sorted(&sorted, p);
     let rises = torque_nm.windows(2).filter(|w| w[1] > w[0]).count();
     let at_seconds = |t: f64| acf.at(((t / period_s).round() as usize).max(1));
-    let (cycle_lags, strength) = acf.first_peak().unwrap_or((0.0, 0.0));
+    let (cycle_s, strength) = cycle(&centred, period_s);
+    let mut steps: Vec<f64> = torque_nm.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let step = |p: f64| if steps.is_empty() { 0.0 } else { crate::numerics::quantile_of_sorted(&steps, p) };
     [
         mean,
         acf.variance.sqrt(),
@@ -161,26 +172,59 @@ pub fn summaries(torque_nm: &[f64], period_s: f64) -> [f64; N_SUMMARIES] {
         at_seconds(1.0),
         at_seconds(2.0),
         at_seconds(4.0),
-        cycle_lags * period_s,
+        cycle_s,
         strength,
+        step(0.1),
+        step(0.25),
+        step(0.5),
+        step(0.75),
+        step(0.9),
     ]
 }
 
+/// The resolution the cycle's period is sought at (s): a finer clock is averaged in blocks to it.
+const CYCLE_RESOLUTION_S: f64 = 0.25;
+/// The longest cycle sought (s): torsional stick-slip cycles last seconds to tens of seconds.
+pub const MAX_CYCLE_S: f64 = 120.0;
+
+/// The cycle's period (s) and the autocorrelation there, (0, 0) where none is seen: sought on
+/// block means at [`CYCLE_RESOLUTION_S`] up to [`MAX_CYCLE_S`] (the search costs the record's
+/// length times the lags).
+fn cycle(centred: &[f64], period_s: f64) -> (f64, f64) {
+    let block = ((CYCLE_RESOLUTION_S / period_s).round() as usize).max(1);
+    let means: Vec<f64> = centred
+        .chunks_exact(block)
+        .map(|c| c.iter().sum::<f64>() / block as f64)
+        .collect();
+    let block_s = block as f64 * period_s;
+    let longest = (MAX_CYCLE_S / block_s) as usize;
+    Autocorrelation::of(&means)
+        .first_peak(longest)
+        .map_or((0.0, 0.0), |(lags, strength)| (lags * block_s, strength))
+}
+
 /// The standard deviation of white noise on a smooth record (N·m): the record's variance less
-/// its signal's, the signal's autocovariance at lag 0 extrapolated from lags 1 and 2 by its
-/// even Taylor series, γ_s(0) ≈ (4γ(1) − γ(2))/3 (exact for a signal whose autocovariance is
-/// quadratic over two samples). A string's torque is smooth between samples a cycle's tenth or
-/// less apart; on a coarser clock the estimate carries part of the signal.
+/// its signal's, the signal's autocovariance at lag 0 extrapolated from lags 1 to 3 by its
+/// even Taylor series, γ_s(0) ≈ (15γ(1) − 6γ(2) + γ(3))/10 (exact for an autocovariance
+/// a + bh² + ch⁴ over three samples). A string's torque is smooth between samples a cycle's
+/// twentieth or less apart; on a coarser clock the estimate carries part of the signal.
 pub fn noise_sd(torque_nm: &[f64]) -> f64 {
+    noise_variance_raw(torque_nm).max(0.0).sqrt()
+}
+
+/// The variance [`noise_sd`] squares, before it is floored at 0 ((N·m)²): linear in the
+/// record's autocovariances, so that for a signal plus independent noise it is the signal's
+/// part plus the noise's variance.
+pub fn noise_variance_raw(torque_nm: &[f64]) -> f64 {
     let n = torque_nm.len();
-    if n < 4 {
+    if n < 5 {
         return 0.0;
     }
     let mean = torque_nm.iter().sum::<f64>() / n as f64;
     let centred: Vec<f64> = torque_nm.iter().map(|y| y - mean).collect();
     let gamma = |lag: usize| centred.iter().zip(&centred[lag..]).map(|(a, b)| a * b).sum::<f64>() / (n - lag) as f64;
-    let signal = (4.0 * gamma(1) - gamma(2)) / 3.0;
-    (gamma(0) - signal).max(0.0).sqrt()
+    let signal = (15.0 * gamma(1) - 6.0 * gamma(2) + gamma(3)) / 10.0;
+    gamma(0) - signal
 }
 
 /// The sample autocorrelation of a centred record.
@@ -210,10 +254,14 @@ impl<'a> Autocorrelation<'a> {
         sum / n as f64 / self.variance
     }
 
-    /// The first peak past the first zero crossing within a third of the record: its lag
-    /// (samples, refined by the parabola through the peak and its neighbours) and height.
-    fn first_peak(&self) -> Option<(f64, f64)> {
-        let last = self.centred.len() / 3;
+    /// The first peak past the first zero crossing within a third of the record and `longest`
+    /// lags: its lag (samples, refined by the parabola through the peak and its neighbours) and
+    /// height.
+    fn first_peak(&self, longest: usize) -> Option<(f64, f64)> {
+        let last = (self.centred.len() / 3).min(longest);
+        if last < 2 {
+            return None;
+        }
         let values: Vec<f64> = (0..=last + 1).map(|lag| self.at(lag)).collect();
         let zero = values.iter().position(|&v| v < 0.0)?;
         let peak = (zero.max(1)..last)

@@ -1,0 +1,277 @@
+//! `bitrock surface`: the law at the bit inferred from what the rig streams (top-drive speed
+//! and surface torque) through simulated strings; what the surface implies at the bit.
+
+use super::args::{LumpedArgs, finite_number, parse_laws, set_threads};
+use super::print;
+use bitrock::Law;
+use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
+use bitrock::prior::PriorFile;
+use bitrock::run::surface::{self, SurfaceResult, SurfaceSettings};
+use bitrock::simulate::surface::Integration;
+use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
+use clap::Args;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct SurfaceCmd {
+    /// Surface record (CSV with a header): a time column, the top-drive speed, the surface
+    /// torque and, where recorded, the weight on bit, on a regular clock.
+    pub data: PathBuf,
+    /// Time column (s; ms where its name ends in _ms) [default: the one whose name holds "time"].
+    #[arg(long = "time-col", value_name = "NAME")]
+    pub time_column: Option<String>,
+    /// Top-drive speed column [default: the one whose name holds "top_drive" or "rotary"].
+    #[arg(long = "top-drive-col", value_name = "NAME")]
+    pub top_drive_column: Option<String>,
+    /// Surface torque column [default: the surface channel whose name holds "torque"].
+    #[arg(long = "surface-torque-col", value_name = "NAME")]
+    pub surface_torque_column: Option<String>,
+    /// Weight-on-bit column [default: the one whose name holds "wob", if any].
+    #[arg(long = "wob-col", value_name = "NAME")]
+    pub wob_column: Option<String>,
+    /// Unit of the top-drive speed [default: from the column's suffix].
+    #[arg(long, value_enum)]
+    pub top_drive_unit: Option<SpeedUnit>,
+    /// Unit of the surface torque (and of torque bounds in --prior) [default: from the column's suffix].
+    #[arg(long, value_enum)]
+    pub torque_unit: Option<TorqueUnit>,
+    /// Unit of the weight on bit [default: from the column's suffix].
+    #[arg(long, value_enum)]
+    pub wob_unit: Option<ForceUnit>,
+    #[arg(long, value_name = "LAWS", help = concat!(
+        "Laws to infer, comma-separated: the built-in laws (",
+        bitrock::built_in_law_list!(),
+        ") and the laws of --law-file by their names [default: every built-in law and every --law-file's law]"
+    ))]
+    pub laws: Option<String>,
+    /// A prior file (TOML) with bounds per law and law weights, torques in the record's unit.
+    #[arg(long, value_name = "FILE")]
+    pub prior: Option<PathBuf>,
+    /// Width of the prior boxes: k of each parameter's scale from its physical bound.
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = surface::DEFAULT_PRIOR_SCALE, value_name = "K")]
+    pub prior_scale: f64,
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
+    /// Reference weight on bit W_ref of the laws' parameters, kN: the recorded weight scales the
+    /// law's torque by r = W/W_ref [default: r = 1 throughout].
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KN")]
+    pub w_ref_kn: Option<f64>,
+    /// Standard deviation of the surface torque's noise, kN·m [default: estimated from the record].
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KNM")]
+    pub noise_sd_knm: Option<f64>,
+    /// Particles per population.
+    #[arg(long, default_value_t = 2000, value_name = "N")]
+    pub particles: usize,
+    /// Most populations, the first included.
+    #[arg(long, default_value_t = 8, value_name = "COUNT")]
+    pub max_populations: usize,
+    /// Wall-time budget of the sampler, s (the population in progress is dropped).
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
+    pub max_seconds: Option<f64>,
+    /// Prior simulations that scale the distance and classify the check's records.
+    #[arg(long, default_value_t = surface::DEFAULT_PILOT, value_name = "N")]
+    pub pilot: usize,
+    /// Records re-simulated per law to check the model choice.
+    #[arg(long, default_value_t = surface::DEFAULT_CHECK_REPLICATES, value_name = "K")]
+    pub check_replicates: usize,
+    /// Posterior draws simulated for the bit's predicted speed.
+    #[arg(long, default_value_t = surface::DEFAULT_PREDICTIVE_DRAWS, value_name = "N")]
+    pub predictive_draws: usize,
+    /// Skip the simulated escape advice.
+    #[arg(long)]
+    pub no_advice: bool,
+    /// Largest integration step of the simulated strings, s.
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Integration::default().dt_s, value_name = "SECONDS")]
+    pub dt_s: f64,
+    /// Time each simulated string settles before the record's first sample, s.
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Integration::default().settle_s, value_name = "SECONDS")]
+    pub settle_s: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// The bit's predicted speed per sample (time_s, bit_speed_rpm_p05, _p50, _p95) as CSV.
+    #[arg(long, value_name = "FILE")]
+    pub bit_out: Option<PathBuf>,
+    /// The whole result as JSON to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Replace --out and --bit-out files even when bitrock did not write them.
+    #[arg(long)]
+    pub force: bool,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl SurfaceCmd {
+    fn laws(&self) -> anyhow::Result<Vec<Law>> {
+        match &self.laws {
+            Some(list) => parse_laws(list),
+            None => Ok(Law::ALL.into_iter().chain(bitrock::laws::file::registered_laws()).collect()),
+        }
+    }
+
+    fn settings(&self) -> anyhow::Result<SurfaceSettings> {
+        let mut s = SurfaceSettings::new(self.laws()?);
+        s.prior_file = self.prior.as_deref().map(PriorFile::read).transpose()?;
+        s.prior_scale = self.prior_scale;
+        s.structure = self.lumped.validated()?;
+        s.w_ref_n = self.w_ref_kn.map(|w| w * 1000.0);
+        s.noise_sd_nm = self.noise_sd_knm.map(|n| n * 1000.0);
+        s.pilot = self.pilot;
+        s.check_replicates = self.check_replicates;
+        s.predictive_draws = self.predictive_draws;
+        s.advice = !self.no_advice;
+        s.integration = Integration {
+            dt_s: self.dt_s,
+            settle_s: self.settle_s,
+        };
+        s.smc.schedule.particles = self.particles;
+        s.smc.schedule.max_populations = self.max_populations;
+        s.smc.schedule.max_seconds = self.max_seconds;
+        s.validate()?;
+        Ok(s)
+    }
+}
+
+pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
+    set_threads(cmd.threads)?;
+    let settings = cmd.settings()?;
+    for (path, field) in [(&cmd.out, "out"), (&cmd.bit_out, "bit_out")] {
+        if let Some(path) = path {
+            bitrock::run::dir::check_output_file(path, field, cmd.force)?;
+        }
+    }
+    let options = SurfaceOptions {
+        time_column: cmd.time_column.clone(),
+        top_drive_column: cmd.top_drive_column.clone(),
+        surface_torque_column: cmd.surface_torque_column.clone(),
+        wob_column: cmd.wob_column.clone(),
+        top_drive_unit: cmd.top_drive_unit,
+        torque_unit: cmd.torque_unit,
+        wob_unit: cmd.wob_unit,
+    };
+    let record = SurfaceRecord::read(&cmd.data, &options)?;
+    print::note(format_args!("{}: {}", cmd.data.display(), record.roles_text()));
+    print::note(format_args!(
+        "simulating the string for every candidate: {} particles, up to {} populations",
+        settings.smc.schedule.particles, settings.smc.schedule.max_populations
+    ));
+    let result = surface::infer(&record, &settings, cmd.seed, &mut |line| print::note(format_args!("note: {line}")))?;
+    let document = serde_json::to_value(&result)?;
+    if let Some(path) = &cmd.out {
+        bitrock::run::dir::write_whole(path, "out", cmd.force, |mut file| print::json(&mut file, document.clone()))?;
+    }
+    if let Some(path) = &cmd.bit_out {
+        bitrock::run::dir::write_whole(path, "bit_out", cmd.force, |file| bit_csv(file, &record, &result))?;
+    }
+    let mut out = print::stdout();
+    if cmd.json {
+        print::json(&mut out, document)?;
+    } else {
+        tables(&mut out, &record, &result)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The bit's predicted speed per sample.
+fn bit_csv(out: &mut dyn Write, record: &SurfaceRecord, result: &SurfaceResult) -> std::io::Result<()> {
+    let mut writer = csv::Writer::from_writer(out);
+    writer.write_record(["time_s", "bit_speed_rpm_p05", "bit_speed_rpm_p50", "bit_speed_rpm_p95"])?;
+    for (t, q) in record.time_s.iter().zip(&result.at_the_bit.speed_rpm) {
+        writer.write_record([t, &q[0], &q[1], &q[2]].map(|v| format!("{v:.4}")))?;
+    }
+    writer.flush()
+}
+
+/// The result as people read it: what the record shows, the laws with the check, the
+/// posteriors and the bit.
+fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> std::io::Result<()> {
+    let unit = record.torque_unit;
+    let per_unit = unit.newton_metres();
+    writeln!(
+        out,
+        "surface torque noise: {:.4} {} ({})",
+        r.noise_sd_nm / per_unit,
+        unit.label(),
+        if r.noise_estimated { "estimated from the record" } else { "given" }
+    )?;
+    match r.cycle.period_s {
+        Some(p) => writeln!(
+            out,
+            "stick-slip cycle at the surface: period {p:.2} s, {:.1} cycles in the record",
+            r.cycle.cycles
+        )?,
+        None => writeln!(out, "no stick-slip cycle at the surface")?,
+    }
+    writeln!(
+        out,
+        "mean surface torque {:.3} {} at {:.1} rpm: T(Ω) at the record's speed",
+        r.mean_torque_nm / per_unit,
+        unit.label(),
+        r.mean_top_drive_rpm
+    )?;
+    writeln!(
+        out,
+        "ABC-SMC on simulated strings: {} populations, final ε {}, {} strings simulated in {:.1} s ({})",
+        r.populations,
+        r.final_epsilon.map_or("∞".into(), |e| format!("{e:.4}")),
+        r.simulations,
+        r.seconds,
+        r.stop
+    )?;
+    writeln!(out)?;
+    writeln!(out, "law   P(law)   re-simulated records recognised as it")?;
+    for law in &r.laws {
+        let row = r.check.rows.iter().find(|c| c.law == law.law);
+        let recognised = row.map_or("no particle".to_string(), |c| {
+            format!("{:.0} % of {}", 100.0 * c.recognised, c.replicates)
+        });
+        writeln!(out, "{:<5} {:>6.3}   {recognised}", law.law.to_string(), law.probability)?;
+    }
+    writeln!(out, "verdict: {}", r.check.verdict)?;
+    writeln!(out)?;
+    for law in r.laws.iter().filter(|l| l.particles > 0) {
+        let params: Vec<String> = law
+            .params
+            .iter()
+            .zip(law.law.params())
+            .map(|((name, lo, mid, hi), spec)| {
+                let scale = per_unit.powi(spec.torque_power);
+                let unit_text = spec.unit(unit.label());
+                format!(
+                    "{name} {:.4} [{:.4}, {:.4}] {unit_text}",
+                    mid / scale,
+                    lo / scale,
+                    hi / scale
+                )
+            })
+            .collect();
+        writeln!(out, "{} (P = {:.3}): {}", law.law, law.probability, params.join(", "))?;
+    }
+    let b = &r.at_the_bit;
+    writeln!(out)?;
+    writeln!(
+        out,
+        "at the bit ({} posterior draws): stuck {:.2} [{:.2}, {:.2}] of the time, severity {:.2} [{:.2}, {:.2}], P(stick-slip) {:.2}",
+        b.draws,
+        b.stuck_share[1],
+        b.stuck_share[0],
+        b.stuck_share[2],
+        b.severity[1],
+        b.severity[0],
+        b.severity[2],
+        b.stick_slip_probability
+    )?;
+    if b.diverged > 0 {
+        writeln!(out, "{} draws' strings left physical bounds and are not counted", b.diverged)?;
+    }
+    if let Some(advice) = &b.advice {
+        writeln!(out, "advice: {advice}")?;
+    }
+    Ok(())
+}

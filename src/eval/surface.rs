@@ -1,0 +1,241 @@
+//! Scoring candidates by simulation: each candidate's string is driven on the surface record's
+//! clock ([`crate::simulate::surface`]), the record's own noise added to its surface torque,
+//! and ρ is the distance between its summaries and the record's.
+//!
+//! **Noise.** The simulated torque gets white Gaussian noise of the record's size, drawn from
+//! Philox under a key made of the run's seed and the candidate's law and f32 parameters: ρ is
+//! then a function of the parameters, as for a bit record, so that a particle keeps its ρ from
+//! one population to the next and a run is reproduced exactly.
+//!
+//! **Distance.** ρ = √(mean_j ((s_j − s_j^obs)/σ_j)²) over the [`N_SUMMARIES`] summaries, σ_j
+//! the median absolute deviation (×1.4826) of summary j over a pilot of prior simulations
+//! (their standard deviation where the MAD is 0, 1 where both are): each summary counts by
+//! how much it varies across the prior, not by its unit (Prangle 2017's scaling, fixed after
+//! the pilot so that ρ stays a function of the parameters). A diverged string scores +∞.
+
+use super::{Evaluator, Problem};
+use crate::error::Result;
+use crate::laws::Law;
+use crate::prior::{Candidate, Prior};
+use crate::rng::{box_muller, key_of_seed, philox4x32_10};
+use crate::simulate::strings::Chain;
+use crate::simulate::surface::{Drive, Integration, N_SUMMARIES, OnClock, simulate_on_clock, summaries};
+use rayon::prelude::*;
+
+/// A record's summaries.
+pub type Summaries = [f64; N_SUMMARIES];
+
+/// The string and drive every candidate is simulated with, and the noise added.
+#[derive(Clone, Debug)]
+pub struct SurfaceModel {
+    pub chain: Chain,
+    pub drive: Drive,
+    pub integration: Integration,
+    /// Standard deviation of the white noise on the surface torque (N·m).
+    pub noise_sd_nm: f64,
+}
+
+/// Which noise a simulation gets: a candidate's own ([`NoiseKey::of`]) or a re-simulation's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NoiseKey(pub u64);
+
+impl NoiseKey {
+    /// The key of `candidate` under `seed`: its slot and f32 parameters' bits mixed (splitmix64).
+    pub fn of(seed: u64, candidate: &Candidate) -> Self {
+        let mut h = splitmix(seed ^ 0x5355_5246);
+        h = splitmix(h ^ candidate.slot as u64);
+        for p in candidate.params {
+            h = splitmix(h ^ u64::from(p.to_bits()));
+        }
+        Self(h)
+    }
+
+    /// Key `index` of a stream of re-simulations under `seed`.
+    pub fn replicate(seed: u64, index: u64) -> Self {
+        Self(splitmix(splitmix(seed ^ 0x5245_5349) ^ index))
+    }
+}
+
+/// Adds white Gaussian noise of `sd_nm` drawn under `key` to a torque record (N·m).
+pub fn add_noise(torque_nm: &mut [f64], sd_nm: f64, key: NoiseKey) {
+    if sd_nm <= 0.0 {
+        return;
+    }
+    let key = key_of_seed(key.0);
+    for (pair, torque) in torque_nm.chunks_mut(2).enumerate() {
+        let words = philox4x32_10([pair as u32, (pair >> 32) as u32, 0, 0], key);
+        let z = box_muller(words[0], words[1]);
+        for (t, z) in torque.iter_mut().zip(z) {
+            *t += sd_nm * z;
+        }
+    }
+}
+
+fn splitmix(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+impl SurfaceModel {
+    /// The string of `law` with `params_nm` on the record's clock, its surface torque with the
+    /// noise of `key`.
+    pub fn simulate(&self, law: Law, params_nm: &[f64], key: NoiseKey) -> OnClock {
+        let mut run = simulate_on_clock(&self.chain, &self.drive, law, params_nm, self.integration);
+        if !run.diverged {
+            add_noise(&mut run.surface_torque_nm, self.noise_sd_nm, key);
+        }
+        run
+    }
+
+    /// The summaries of `candidate`'s simulation under `seed` (`None` where it diverged).
+    pub fn summaries_of(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> Option<Summaries> {
+        let law = prior.law(candidate.slot);
+        let params = candidate.widened();
+        let run = self.simulate(law, &params[..law.n_params()], NoiseKey::of(seed, candidate));
+        (!run.diverged).then(|| summaries(&run.surface_torque_nm, self.drive.period_s))
+    }
+}
+
+/// The distance between summaries, scaled per summary (see the module documentation).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Distance {
+    pub observed: Summaries,
+    pub scales: Summaries,
+}
+
+impl Distance {
+    /// Scales from the summaries of a pilot's simulations that did not diverge: first over the
+    /// whole pilot, then, [`LOCAL_ROUNDS`] times, over its [`LOCAL_SHARE`] nearest the record
+    /// (a summary that does not vary there keeps its scale of the round before). A prior is
+    /// mostly strings far from the record (steady ones, for a stick-slipping record): scales
+    /// over all of it would measure how steady strings differ from stick-slipping ones, not
+    /// how candidates near the record differ from each other.
+    pub fn from_pilot(observed: Summaries, pilot: &[Summaries]) -> Self {
+        let mut distance = Self {
+            observed,
+            scales: scales_over(pilot.iter(), &[1.0; N_SUMMARIES]),
+        };
+        let keep = ((pilot.len() as f64 * LOCAL_SHARE) as usize).max(LOCAL_LEAST).min(pilot.len());
+        for _ in 0..LOCAL_ROUNDS {
+            if keep == 0 {
+                break;
+            }
+            let mut near: Vec<(f64, &Summaries)> = pilot.iter().map(|s| (distance.rho(s), s)).collect();
+            near.select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
+            distance.scales = scales_over(near[..keep].iter().map(|n| n.1), &distance.scales);
+        }
+        distance
+    }
+
+
+
+    /// ρ of summaries `s`.
+    pub fn rho(&self, s: &Summaries) -> f64 {
+        self.between(s, &self.observed)
+    }
+
+    /// The scaled distance between two sets of summaries.
+    pub fn between(&self, a: &Summaries, b: &Summaries) -> f64 {
+        let sum: f64 = (0..N_SUMMARIES).map(|j| ((a[j] - b[j]) / self.scales[j]).powi(2)).sum();
+        (sum / N_SUMMARIES as f64).sqrt()
+    }
+}
+
+/// Share of the pilot nearest the record whose spread scales the distance.
+pub const LOCAL_SHARE: f64 = 0.2;
+/// Fewest pilot strings the local scales are taken over.
+pub const LOCAL_LEAST: usize = 50;
+/// Rounds of the local scales.
+pub const LOCAL_ROUNDS: usize = 2;
+
+/// Each summary's spread over `set`: its MAD (×1.4826), its standard deviation where the MAD
+/// is 0, and `fallback`'s where both are.
+fn scales_over<'a>(set: impl Iterator<Item = &'a Summaries> + Clone, fallback: &Summaries) -> Summaries {
+    let mut scales = *fallback;
+    for (j, scale) in scales.iter_mut().enumerate() {
+        let values: Vec<f64> = set.clone().map(|s| s[j]).collect();
+        let Some(median) = crate::numerics::median(&values) else {
+            continue;
+        };
+        let deviations: Vec<f64> = values.iter().map(|v| (v - median).abs()).collect();
+        let mad = 1.4826 * crate::numerics::median(&deviations).unwrap_or(0.0);
+        let mean = values.iter().sum::<f64>() / values.len() as f64;
+        let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
+        if mad > 0.0 {
+            *scale = mad;
+        } else if sd > 0.0 {
+            *scale = sd;
+        }
+    }
+    scales
+}
+
+/// Scores candidates by simulating their strings on the record's clock (CPU, rayon across
+/// candidates).
+pub struct SurfaceEvaluator {
+    problem: Problem,
+    model: SurfaceModel,
+    distance: Distance,
+}
+
+impl SurfaceEvaluator {
+    /// The evaluator of candidates of `prior` under `seed`.
+    pub fn new(prior: Prior, seed: u64, model: SurfaceModel, distance: Distance) -> Self {
+        Self {
+            problem: Problem {
+                prior,
+                seed,
+                speed_rad_s: Vec::new(),
+                torque_nm: Vec::new(),
+                wob_ratio: Vec::new(),
+                sum_sq_torque: 1.0,
+                best_rho: Default::default(),
+            },
+            model,
+            distance,
+        }
+    }
+
+    pub fn model(&self) -> &SurfaceModel {
+        &self.model
+    }
+
+    pub fn distance(&self) -> &Distance {
+        &self.distance
+    }
+}
+
+impl Evaluator for SurfaceEvaluator {
+    fn backend(&self) -> &'static str {
+        "cpu"
+    }
+
+    fn problem(&self) -> &Problem {
+        &self.problem
+    }
+
+    fn score(&self, population: u32, start: u64, out: &mut [f64]) -> Result<()> {
+        let p = &self.problem;
+        let candidates: Vec<Candidate> = (0..out.len() as u64)
+            .map(|i| p.prior.candidate(p.seed, population, start + i))
+            .collect();
+        self.score_params(&candidates, out)
+    }
+
+    fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
+        let p = &self.problem;
+        candidates
+            .par_iter()
+            .zip(out.par_iter_mut())
+            .with_max_len(1)
+            .for_each(|(c, rho)| {
+                *rho = self
+                    .model
+                    .summaries_of(&p.prior, p.seed, c)
+                    .map_or(f64::INFINITY, |s| self.distance.rho(&s));
+            });
+        Ok(())
+    }
+}
