@@ -111,7 +111,10 @@ impl SurfaceCmd {
     fn laws(&self) -> anyhow::Result<Vec<Law>> {
         match &self.laws {
             Some(list) => parse_laws(list),
-            None => Ok(Law::ALL.into_iter().chain(bitrock::laws::file::registered_laws()).collect()),
+            None => Ok(Law::ALL
+                .into_iter()
+                .chain(bitrock::laws::file::registered_laws())
+                .collect()),
         }
     }
 
@@ -161,10 +164,14 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
         "simulating the string for every candidate: {} particles, up to {} populations",
         settings.smc.schedule.particles, settings.smc.schedule.max_populations
     ));
-    let result = surface::infer(&record, &settings, cmd.seed, &mut |line| print::note(format_args!("note: {line}")))?;
+    let result = surface::infer(&record, &settings, cmd.seed, &mut |line| {
+        print::note(format_args!("note: {line}"))
+    })?;
     let document = serde_json::to_value(&result)?;
     if let Some(path) = &cmd.out {
-        bitrock::run::dir::write_whole(path, "out", cmd.force, |mut file| print::json(&mut file, document.clone()))?;
+        bitrock::run::dir::write_whole(path, "out", cmd.force, |mut file| {
+            print::json(&mut file, document.clone())
+        })?;
     }
     if let Some(path) = &cmd.bit_out {
         bitrock::run::dir::write_whole(path, "bit_out", cmd.force, |file| bit_csv(file, &record, &result))?;
@@ -193,12 +200,18 @@ fn bit_csv(out: &mut dyn Write, record: &SurfaceRecord, result: &SurfaceResult) 
 fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> std::io::Result<()> {
     let unit = record.torque_unit;
     let per_unit = unit.newton_metres();
+    let how = match r.noise.how {
+        "bounded" => {
+            "bounded above: the clock is too coarse for the cycle to tell noise from signal; give --noise-sd-knm where the tool's noise is known"
+        }
+        "estimated" => "estimated from the record",
+        _ => "given",
+    };
     writeln!(
         out,
-        "surface torque noise: {:.4} {} ({})",
-        r.noise_sd_nm / per_unit,
-        unit.label(),
-        if r.noise_estimated { "estimated from the record" } else { "given" }
+        "surface torque noise: {:.4} {} ({how})",
+        r.noise.sd_nm / per_unit,
+        unit.label()
     )?;
     match r.cycle.period_s {
         Some(p) => writeln!(
@@ -231,7 +244,12 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
         let recognised = row.map_or("no particle".to_string(), |c| {
             format!("{:.0} % of {}", 100.0 * c.recognised, c.replicates)
         });
-        writeln!(out, "{:<5} {:>6.3}   {recognised}", law.law.to_string(), law.probability)?;
+        writeln!(
+            out,
+            "{:<5} {:>6.3}   {recognised}",
+            law.law.to_string(),
+            law.probability
+        )?;
     }
     writeln!(out, "verdict: {}", r.check.verdict)?;
     writeln!(out)?;
@@ -240,14 +258,20 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
             .params
             .iter()
             .zip(law.law.params())
-            .map(|((name, lo, mid, hi), spec)| {
+            .map(|(p, spec)| {
                 let scale = per_unit.powi(spec.torque_power);
-                let unit_text = spec.unit(unit.label());
                 format!(
-                    "{name} {:.4} [{:.4}, {:.4}] {unit_text}",
-                    mid / scale,
-                    lo / scale,
-                    hi / scale
+                    "{} {:.4} [{:.4}, {:.4}] {}{}",
+                    p.name,
+                    p.median / scale,
+                    p.q05 / scale,
+                    p.q95 / scale,
+                    spec.unit(unit.label()),
+                    if p.identified {
+                        ""
+                    } else {
+                        " (not identified: the prior box sets it)"
+                    }
                 )
             })
             .collect();
@@ -267,8 +291,20 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
         b.severity[2],
         b.stick_slip_probability
     )?;
+    if b.stuck_share_by_law.len() > 1 {
+        let by_law: Vec<String> = b
+            .stuck_share_by_law
+            .iter()
+            .map(|(law, n, q)| format!("{law} {:.2} [{:.2}, {:.2}] ({n} draws)", q[1], q[0], q[2]))
+            .collect();
+        writeln!(out, "stuck share by law: {}", by_law.join(", "))?;
+    }
     if b.diverged > 0 {
-        writeln!(out, "{} draws' strings left physical bounds and are not counted", b.diverged)?;
+        writeln!(
+            out,
+            "{} draws' strings left physical bounds and are not counted",
+            b.diverged
+        )?;
     }
     if let Some(advice) = &b.advice {
         writeln!(out, "advice: {advice}")?;

@@ -108,28 +108,33 @@ pub struct Distance {
 impl Distance {
     /// Scales from the summaries of a pilot's simulations that did not diverge: first over the
     /// whole pilot, then, [`LOCAL_ROUNDS`] times, over its [`LOCAL_SHARE`] nearest the record
-    /// (a summary that does not vary there keeps its scale of the round before). A prior is
+    /// (a summary that does not vary there keeps its scale of the round before; none narrower
+    /// than [`LOCAL_NARROWEST`] of the whole pilot's). A prior is
     /// mostly strings far from the record (steady ones, for a stick-slipping record): scales
     /// over all of it would measure how steady strings differ from stick-slipping ones, not
     /// how candidates near the record differ from each other.
     pub fn from_pilot(observed: Summaries, pilot: &[Summaries]) -> Self {
+        let global = scales_over(pilot.iter(), &[1.0; N_SUMMARIES]);
         let mut distance = Self {
             observed,
-            scales: scales_over(pilot.iter(), &[1.0; N_SUMMARIES]),
+            scales: global,
         };
-        let keep = ((pilot.len() as f64 * LOCAL_SHARE) as usize).max(LOCAL_LEAST).min(pilot.len());
+        let keep = ((pilot.len() as f64 * LOCAL_SHARE) as usize)
+            .max(LOCAL_LEAST)
+            .min(pilot.len());
         for _ in 0..LOCAL_ROUNDS {
             if keep == 0 {
                 break;
             }
             let mut near: Vec<(f64, &Summaries)> = pilot.iter().map(|s| (distance.rho(s), s)).collect();
             near.select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
-            distance.scales = scales_over(near[..keep].iter().map(|n| n.1), &distance.scales);
+            let local = scales_over(near[..keep].iter().map(|n| n.1), &distance.scales);
+            for j in 0..N_SUMMARIES {
+                distance.scales[j] = local[j].max(LOCAL_NARROWEST * global[j]);
+            }
         }
         distance
     }
-
-
 
     /// ρ of summaries `s`.
     pub fn rho(&self, s: &Summaries) -> f64 {
@@ -149,10 +154,14 @@ pub const LOCAL_SHARE: f64 = 0.2;
 pub const LOCAL_LEAST: usize = 50;
 /// Rounds of the local scales.
 pub const LOCAL_ROUNDS: usize = 2;
+/// The narrowest a local scale may be, as a share of the whole pilot's: strings near the
+/// record may agree on a summary (a steady string's steps are all 0), and a scale of 0 would
+/// make that summary the whole distance.
+pub const LOCAL_NARROWEST: f64 = 0.1;
 
 /// Each summary's spread over `set`: its MAD (×1.4826), its standard deviation where the MAD
 /// is 0, and `fallback`'s where both are.
-fn scales_over<'a>(set: impl Iterator<Item = &'a Summaries> + Clone, fallback: &Summaries) -> Summaries {
+pub fn scales_over<'a>(set: impl Iterator<Item = &'a Summaries> + Clone, fallback: &Summaries) -> Summaries {
     let mut scales = *fallback;
     for (j, scale) in scales.iter_mut().enumerate() {
         let values: Vec<f64> = set.clone().map(|s| s[j]).collect();

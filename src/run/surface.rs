@@ -23,7 +23,7 @@ use crate::abc::{Particle, Run};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
-use crate::eval::surface::{Distance, NoiseKey, SurfaceEvaluator, SurfaceModel, Summaries, add_noise};
+use crate::eval::surface::{Distance, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
 use crate::laws::Law;
 use crate::numerics::weighted_quantile;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
@@ -128,10 +128,16 @@ impl SurfaceSettings {
         if let Some(w) = self.w_ref_n
             && !(w.is_finite() && w > 0.0)
         {
-            return Err(Error::setting("w_ref_kn", format!("must be positive, got {}", w / 1000.0)));
+            return Err(Error::setting(
+                "w_ref_kn",
+                format!("must be positive, got {}", w / 1000.0),
+            ));
         }
         if !(self.integration.dt_s.is_finite() && self.integration.dt_s > 0.0) {
-            return Err(Error::setting("dt_s", format!("must be positive, got {}", self.integration.dt_s)));
+            return Err(Error::setting(
+                "dt_s",
+                format!("must be positive, got {}", self.integration.dt_s),
+            ));
         }
         if !(self.integration.settle_s.is_finite() && self.integration.settle_s >= 0.0) {
             return Err(Error::setting(
@@ -179,9 +185,24 @@ pub struct LawPosterior {
     pub law: Law,
     pub probability: f64,
     pub particles: usize,
-    /// (name, 5 %, median, 95 %), SI (torques N·m).
-    pub params: Vec<(String, f64, f64, f64)>,
+    pub params: Vec<ParamPosterior>,
 }
+
+/// One parameter's posterior, SI (torques N·m).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ParamPosterior {
+    pub name: String,
+    pub q05: f64,
+    pub median: f64,
+    pub q95: f64,
+    /// False when the central 90 % still spans [`UNIDENTIFIED_SHARE`] of the prior box or
+    /// more: the record has not narrowed the prior, which then sets the interval.
+    pub identified: bool,
+}
+
+/// The share of its prior box a parameter's central 90 % must fall below to count as
+/// identified (the prior's own central 90 % spans 0.9 of it).
+pub const UNIDENTIFIED_SHARE: f64 = 0.7;
 
 /// How the re-simulated records of one law were classified.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -220,6 +241,9 @@ pub struct AtTheBit {
     pub severity: [f64; 3],
     /// P(the bit stick-slips) over the draws.
     pub stick_slip_probability: f64,
+    /// Per law drawn: its draws and their stuck share's 5 %, median and 95 % (laws that
+    /// hold the bit and laws that only slow it agree at the surface and not at the bit).
+    pub stuck_share_by_law: Vec<(Law, usize, [f64; 3])>,
     /// Draws whose string left physical bounds (not counted above).
     pub diverged: usize,
     /// What ends the stick-slip, by simulated strings (where the bit stick-slips).
@@ -230,9 +254,7 @@ pub struct AtTheBit {
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfaceResult {
     pub roles: String,
-    pub noise_sd_nm: f64,
-    /// Whether the noise was estimated from the record.
-    pub noise_estimated: bool,
+    pub noise: Noise,
     pub summary_names: Vec<&'static str>,
     pub observed: Vec<f64>,
     pub scales: Vec<f64>,
@@ -244,6 +266,9 @@ pub struct SurfaceResult {
     pub check: ModelCheck,
     pub at_the_bit: AtTheBit,
     pub populations: usize,
+    /// ε of each population (`None` for ∞) and the strings it simulated.
+    pub epsilons: Vec<Option<f64>>,
+    pub strings_per_population: Vec<u64>,
     pub final_epsilon: Option<f64>,
     pub stop: String,
     /// Strings simulated in all (pilot, sampler, check, predictive).
@@ -251,6 +276,39 @@ pub struct SurfaceResult {
     pub seconds: f64,
     #[serde(skip)]
     pub run: Option<Run>,
+}
+
+/// Samples per cycle from which the noise estimate reads noise, not signal.
+pub const FINE_CLOCK_SAMPLES_PER_CYCLE: f64 = 20.0;
+
+/// The surface torque's noise the simulations get, and how it was found.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Noise {
+    /// Standard deviation (N·m).
+    pub sd_nm: f64,
+    /// `given`, `estimated` (from a clock fine enough for the cycle) or `bounded` (a coarse
+    /// clock, where the estimate also holds part of the signal: an upper bound).
+    pub how: &'static str,
+}
+
+impl Noise {
+    /// The noise given, or read from the record by [`noise_variance_raw`]: an estimate where
+    /// the clock gives the cycle [`FINE_CLOCK_SAMPLES_PER_CYCLE`] samples or more (or shows
+    /// none), else an upper bound. A bound adds more noise to the simulations than the record
+    /// holds, widening the posterior rather than narrowing it wrongly.
+    pub fn of(given: Option<f64>, torque_nm: &[f64], cycle: &Cycle, period_s: f64) -> Self {
+        if let Some(sd_nm) = given {
+            return Self { sd_nm, how: "given" };
+        }
+        let sd_nm = noise_variance_raw(torque_nm).max(0.0).sqrt();
+        let fine = cycle
+            .period_s
+            .is_none_or(|p| p / period_s >= FINE_CLOCK_SAMPLES_PER_CYCLE);
+        Self {
+            sd_nm,
+            how: if fine { "estimated" } else { "bounded" },
+        }
+    }
 }
 
 /// The model a record drives: its string, its clock and its noise.
@@ -285,7 +343,12 @@ const PILOT_STREAM: u64 = 0x5049_4c4f_5400_0000;
 
 /// Infers the laws from `record` (see the module documentation); `note` hears what the user
 /// should know as it happens.
-pub fn infer(record: &SurfaceRecord, settings: &SurfaceSettings, seed: u64, note: &mut dyn FnMut(String)) -> Result<SurfaceResult> {
+pub fn infer(
+    record: &SurfaceRecord,
+    settings: &SurfaceSettings,
+    seed: u64,
+    note: &mut dyn FnMut(String),
+) -> Result<SurfaceResult> {
     settings.validate()?;
     let started = std::time::Instant::now();
     let chain = Chain::one_dof(&settings.structure);
@@ -302,19 +365,14 @@ pub fn infer(record: &SurfaceRecord, settings: &SurfaceSettings, seed: u64, note
     let mut model = model(record, settings, 0.0);
     let mut simulations = settings.pilot as u64;
     let pilot = Pilot::simulate(&model, &prior, seed ^ PILOT_STREAM, settings.pilot)?;
-    let (noise_sd_nm, noise_estimated) = match settings.noise_sd_nm {
-        Some(s) => (s, false),
-        None => {
-            let first = pilot.noise_sd_nm(&record.surface_torque_nm, &observed, model.drive.period_s);
-            let (refined, spent) = refine_noise(record, &pilot, &model, &prior, settings, seed, first, &observed)?;
-            simulations += spent;
-            (refined, true)
-        }
-    };
+    let period_s = model.drive.period_s;
+    let noise = Noise::of(settings.noise_sd_nm, &record.surface_torque_nm, &cycle, period_s);
+    let noise_sd_nm = noise.sd_nm;
+    let scout = Scout::run(&pilot, &model, &prior, settings, seed, noise_sd_nm, &observed)?;
+    simulations += scout.simulations;
     model.noise_sd_nm = noise_sd_nm;
-    let table = pilot.table(noise_sd_nm, model.drive.period_s);
-    let summaries_only: Vec<Summaries> = table.iter().map(|t| t.1).collect();
-    let distance = Distance::from_pilot(observed, &summaries_only);
+    let (table, pilot_distance) = pilot.distance(noise_sd_nm, period_s, &observed);
+    let distance = scout.distance(&pilot_distance, noise_sd_nm, period_s);
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
     let run = smc::run(&evaluator, &settings.smc)?;
@@ -323,7 +381,17 @@ pub fn infer(record: &SurfaceRecord, settings: &SurfaceSettings, seed: u64, note
     let particles = &last.particles;
     let laws = posteriors(&prior, particles);
 
-    let check = check(&prior, &model, &distance, &table, &laws, particles, settings.check_replicates, seed, &cycle);
+    let check = check(
+        &prior,
+        &model,
+        &distance,
+        &table,
+        &laws,
+        particles,
+        settings.check_replicates,
+        seed,
+        &cycle,
+    );
     simulations += check.rows.iter().map(|r| r.replicates as u64).sum::<u64>();
     let mut at_the_bit = at_the_bit(&model, particles, settings.predictive_draws, seed);
     simulations += at_the_bit.draws as u64;
@@ -333,8 +401,7 @@ pub fn infer(record: &SurfaceRecord, settings: &SurfaceSettings, seed: u64, note
     let ratio_mean = model.drive.ratio.iter().sum::<f64>() / model.drive.ratio.len() as f64;
     Ok(SurfaceResult {
         roles: record.roles_text(),
-        noise_sd_nm,
-        noise_estimated,
+        noise,
         summary_names: SUMMARY_NAMES.to_vec(),
         observed: observed.to_vec(),
         scales: distance.scales.to_vec(),
@@ -345,6 +412,8 @@ pub fn infer(record: &SurfaceRecord, settings: &SurfaceSettings, seed: u64, note
         check,
         at_the_bit,
         populations: run.populations.len(),
+        epsilons: run.populations.iter().map(|p| p.record.epsilon).collect(),
+        strings_per_population: run.populations.iter().map(|p| p.record.candidates_scored).collect(),
         final_epsilon: last.record.epsilon,
         stop: run.stop.describe().to_string(),
         simulations,
@@ -361,9 +430,9 @@ struct Pilot {
     runs: Vec<(usize, NoiseKey, Vec<f64>)>,
 }
 
-/// Rounds of the noise estimate: each finds the pilot strings nearest the record with the
-/// noise of the round before.
-const NOISE_ROUNDS: usize = 2;
+/// Pilot strings, and noise draws on each, that measure the summaries' spread under the noise.
+const NOISE_NEIGHBOURS: usize = 20;
+const NOISE_REPLICATES: usize = 5;
 
 impl Pilot {
     fn simulate(model: &SurfaceModel, prior: &Prior, seed: u64, count: usize) -> Result<Self> {
@@ -400,81 +469,165 @@ impl Pilot {
             .collect()
     }
 
-    /// The record's noise (N·m): the estimator of [`noise_variance_raw`] on the record less
-    /// what it reads as noise on the pilot strings nearest the record, which are noise-free:
-    /// the share of a coarse clock's signal it takes for noise.
-    fn noise_sd_nm(&self, torque_nm: &[f64], observed: &Summaries, period_s: f64) -> f64 {
-        let raw = noise_variance_raw(torque_nm);
-        let leaks: Vec<f64> = self.runs.par_iter().map(|r| noise_variance_raw(&r.2)).collect();
-        let neighbours = (self.runs.len() / 20).max(10).min(self.runs.len());
-        let mut sd = 0.0;
-        for _ in 0..NOISE_ROUNDS {
-            let table = self.table(sd, period_s);
-            let distance = Distance::from_pilot(*observed, &table.iter().map(|t| t.1).collect::<Vec<_>>());
-            let mut near: Vec<(f64, usize)> = table.iter().enumerate().map(|(i, t)| (distance.rho(&t.1), i)).collect();
-            near.select_nth_unstable_by(neighbours - 1, |a, b| a.0.total_cmp(&b.0));
-            let leak: Vec<f64> = near[..neighbours].iter().map(|&(_, i)| leaks[i]).collect();
-            let leak = crate::numerics::median(&leak).unwrap_or(0.0);
-            sd = (raw - leak).max(0.0).sqrt();
+    /// The reference table with noise of `sd_nm` and the distance it scales, each scale no
+    /// narrower than the summary's spread under the noise alone (see [`Pilot::noise_spread`]).
+    fn distance(&self, sd_nm: f64, period_s: f64, observed: &Summaries) -> (Vec<(usize, Summaries)>, Distance) {
+        let table = self.table(sd_nm, period_s);
+        let mut distance = Distance::from_pilot(*observed, &table.iter().map(|t| t.1).collect::<Vec<_>>());
+        let mut near: Vec<(f64, usize)> = table.iter().enumerate().map(|(i, t)| (distance.rho(&t.1), i)).collect();
+        let k = NOISE_NEIGHBOURS.min(near.len());
+        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+        let traces: Vec<(NoiseKey, &[f64])> = near[..k]
+            .iter()
+            .map(|&(_, i)| (self.runs[i].1, self.runs[i].2.as_slice()))
+            .collect();
+        let spread = noise_spread(&traces, sd_nm, period_s);
+        for (scale, spread) in distance.scales.iter_mut().zip(spread) {
+            *scale = scale.max(spread);
         }
-        sd
+        (table, distance)
     }
 }
 
-/// Particles and populations of the short run that refines the noise estimate.
-const NOISE_RUN_PARTICLES: usize = 300;
-const NOISE_RUN_POPULATIONS: usize = 4;
-/// Posterior strings whose noise-free torque measures the estimator's share of signal.
-const NOISE_RUN_DRAWS: usize = 40;
-
-/// The record's noise refined at the posterior: a short ABC-SMC with the pilot's estimate
-/// `first` finds the strings near the record, and the estimator's reading of their noise-free
-/// torque is taken off its reading of the record (see [`noise_variance_raw`]). Returns the
-/// noise (N·m) and the strings simulated.
-#[allow(clippy::too_many_arguments)]
-fn refine_noise(
-    record: &SurfaceRecord,
-    pilot: &Pilot,
-    model: &SurfaceModel,
-    prior: &Prior,
-    settings: &SurfaceSettings,
-    seed: u64,
-    first: f64,
-    observed: &Summaries,
-) -> Result<(f64, u64)> {
-    let period_s = model.drive.period_s;
-    let table = pilot.table(first, period_s);
-    let distance = Distance::from_pilot(*observed, &table.iter().map(|t| t.1).collect::<Vec<_>>());
-    let noisy = SurfaceModel {
-        noise_sd_nm: first,
-        ..model.clone()
-    };
-    let mut short = settings.smc.clone();
-    short.schedule.particles = NOISE_RUN_PARTICLES.min(settings.smc.schedule.particles);
-    short.schedule.max_populations = NOISE_RUN_POPULATIONS;
-    short.schedule.max_seconds = None;
-    let evaluator = SurfaceEvaluator::new(prior.clone(), seed ^ NOISE_STREAM, noisy, distance);
-    let run = smc::run(&evaluator, &short)?;
-    let spent: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();
-    let particles: Vec<&Particle> = run.populations.last().map(|p| p.particles.iter().collect()).unwrap_or_default();
-    let drawn = resample(&particles, NOISE_RUN_DRAWS, seed ^ NOISE_STREAM);
-    let leaks: Vec<f64> = drawn
+/// Each summary's spread (standard deviation) over [`NOISE_REPLICATES`] draws of noise of
+/// `sd_nm` on each noise-free torque of `traces`, averaged: how far a string's summaries move
+/// by the noise alone. Differences below it say nothing of the law.
+fn noise_spread(traces: &[(NoiseKey, &[f64])], sd_nm: f64, period_s: f64) -> Summaries {
+    let mut spread = [0.0; N_SUMMARIES];
+    if sd_nm <= 0.0 || traces.is_empty() {
+        return spread;
+    }
+    let per_string: Vec<Summaries> = traces
         .par_iter()
-        .with_max_len(1)
-        .filter_map(|p| {
-            let run = crate::simulate::surface::simulate_on_clock(&model.chain, &model.drive, p.law, &p.params, model.integration);
-            (!run.diverged).then(|| noise_variance_raw(&run.surface_torque_nm))
+        .map(|(key, torque)| {
+            let draws: Vec<Summaries> = (0..NOISE_REPLICATES as u64)
+                .map(|r| {
+                    let mut noisy = torque.to_vec();
+                    add_noise(
+                        &mut noisy,
+                        sd_nm,
+                        NoiseKey(key.0 ^ (r + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15)),
+                    );
+                    summaries(&noisy, period_s)
+                })
+                .collect();
+            let mut sd = [0.0; N_SUMMARIES];
+            for (j, sd) in sd.iter_mut().enumerate() {
+                let mean = draws.iter().map(|d| d[j]).sum::<f64>() / draws.len() as f64;
+                *sd = (draws.iter().map(|d| (d[j] - mean).powi(2)).sum::<f64>() / (draws.len() - 1) as f64).sqrt();
+            }
+            sd
         })
         .collect();
-    let Some(leak) = crate::numerics::median(&leaks) else {
-        return Ok((first, spent));
-    };
-    let raw = noise_variance_raw(&record.surface_torque_nm);
-    Ok(((raw - leak).max(0.0).sqrt(), spent + drawn.len() as u64))
+    for (j, spread) in spread.iter_mut().enumerate() {
+        *spread = per_string.iter().map(|s| s[j]).sum::<f64>() / per_string.len() as f64;
+    }
+    spread
 }
 
-/// Seed offset of the noise's short run.
-const NOISE_STREAM: u64 = 0x4e4f_4953_4500_0000;
+/// Particles and populations of the scout run.
+const SCOUT_PARTICLES: usize = 300;
+const SCOUT_POPULATIONS: usize = 4;
+/// Posterior strings the scout keeps.
+const SCOUT_DRAWS: usize = 40;
+/// The narrowest a scout's scale may be, as a share of the pilot's.
+const SCOUT_NARROWEST: f64 = 0.02;
+
+/// A short ABC-SMC on the pilot's distance that finds the strings near the record: their
+/// summaries, with the noise, scale the main run's distance (how candidates near the record
+/// differ, as an adaptive distance's scales would be after its first populations; fixed for
+/// the main run so that ρ stays a function of the parameters).
+struct Scout {
+    /// The posterior strings' noise-free surface torque (N·m) and noise keys.
+    draws: Vec<(NoiseKey, Vec<f64>)>,
+    simulations: u64,
+}
+
+impl Scout {
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        pilot: &Pilot,
+        model: &SurfaceModel,
+        prior: &Prior,
+        settings: &SurfaceSettings,
+        seed: u64,
+        noise_sd_nm: f64,
+        observed: &Summaries,
+    ) -> Result<Self> {
+        let (_, distance) = pilot.distance(noise_sd_nm, model.drive.period_s, observed);
+        let noisy = SurfaceModel {
+            noise_sd_nm,
+            ..model.clone()
+        };
+        let mut short = settings.smc.clone();
+        short.schedule.particles = SCOUT_PARTICLES.min(settings.smc.schedule.particles);
+        short.schedule.max_populations = SCOUT_POPULATIONS;
+        short.schedule.max_seconds = None;
+        let evaluator = SurfaceEvaluator::new(prior.clone(), seed ^ SCOUT_STREAM, noisy, distance);
+        let run = smc::run(&evaluator, &short)?;
+        let scored: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();
+        let particles: Vec<&Particle> = run
+            .populations
+            .last()
+            .map(|p| p.particles.iter().collect())
+            .unwrap_or_default();
+        let drawn = resample(&particles, SCOUT_DRAWS, seed ^ SCOUT_STREAM);
+        let draws: Vec<(NoiseKey, Vec<f64>)> = drawn
+            .par_iter()
+            .enumerate()
+            .with_max_len(1)
+            .filter_map(|(k, p)| {
+                let run = crate::simulate::surface::simulate_on_clock(
+                    &model.chain,
+                    &model.drive,
+                    p.law,
+                    &p.params,
+                    model.integration,
+                );
+                (!run.diverged).then(|| {
+                    (
+                        NoiseKey::replicate(seed ^ SCOUT_STREAM, k as u64),
+                        run.surface_torque_nm,
+                    )
+                })
+            })
+            .collect();
+        Ok(Self {
+            draws,
+            simulations: scored + drawn.len() as u64,
+        })
+    }
+
+    /// The main run's distance: the scales of the scout's strings' summaries with noise of
+    /// `sd_nm`, none narrower than [`SCOUT_NARROWEST`] of `pilot`'s.
+    fn distance(&self, pilot: &Distance, sd_nm: f64, period_s: f64) -> Distance {
+        if self.draws.len() < 10 {
+            return pilot.clone();
+        }
+        let set: Vec<Summaries> = self
+            .draws
+            .iter()
+            .map(|(key, torque)| {
+                let mut noisy = torque.clone();
+                add_noise(&mut noisy, sd_nm, *key);
+                summaries(&noisy, period_s)
+            })
+            .collect();
+        let mut scales = crate::eval::surface::scales_over(set.iter(), &pilot.scales);
+        let traces: Vec<(NoiseKey, &[f64])> = self.draws.iter().map(|(k, t)| (*k, t.as_slice())).collect();
+        let spread = noise_spread(&traces, sd_nm, period_s);
+        for j in 0..N_SUMMARIES {
+            scales[j] = scales[j].max(SCOUT_NARROWEST * pilot.scales[j]).max(spread[j]);
+        }
+        Distance {
+            observed: pilot.observed,
+            scales,
+        }
+    }
+}
+
+/// Seed offset of the scout run.
+const SCOUT_STREAM: u64 = 0x5343_4f55_5400_0000;
 
 /// Each law's probability and parameter quantiles in the final population.
 fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
@@ -483,6 +636,7 @@ fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
         .map(|law| {
             let own: Vec<&Particle> = particles.iter().filter(|p| p.law == law).collect();
             let weights: Vec<f64> = own.iter().map(|p| p.weight).collect();
+            let bx = &prior.boxes[prior.slot_of(law)];
             let params = law
                 .params()
                 .iter()
@@ -491,12 +645,20 @@ fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
                 .map(|(j, spec)| {
                     let values: Vec<f64> = own.iter().map(|p| p.params[j]).collect();
                     let q = |p: f64| weighted_quantile(&values, &weights, p);
-                    (spec.name.to_string(), q(0.05), q(0.5), q(0.95))
+                    let width = f64::from(bx.upper[j]) - f64::from(bx.lower[j]);
+                    ParamPosterior {
+                        name: spec.name.to_string(),
+                        q05: q(0.05),
+                        median: q(0.5),
+                        q95: q(0.95),
+                        identified: q(0.95) - q(0.05) < UNIDENTIFIED_SHARE * width,
+                    }
                 })
                 .collect();
             LawPosterior {
                 law,
-                probability: weights.iter().sum(),
+                // Σ of no weights is −0 under IEEE addition order; a law without particles has 0.
+                probability: weights.iter().sum::<f64>() + 0.0,
                 particles: own.len(),
                 params,
             }
@@ -510,7 +672,8 @@ fn resample<'a>(particles: &[&'a Particle], count: usize, seed: u64) -> Vec<&'a 
     if particles.is_empty() || total <= 0.0 {
         return Vec::new();
     }
-    let offset = crate::rng::open_unit(crate::rng::philox4x32_10([0, 0, 0, 0x5245_5341], crate::rng::key_of_seed(seed))[0]);
+    let offset =
+        crate::rng::open_unit(crate::rng::philox4x32_10([0, 0, 0, 0x5245_5341], crate::rng::key_of_seed(seed))[0]);
     let mut out = Vec::with_capacity(count);
     let mut cumulative = 0.0;
     let mut i = 0;
@@ -547,7 +710,9 @@ fn check(
             votes[*slot] += 1;
         }
         // Ties go to the earlier law: deterministic.
-        (0..votes.len()).max_by_key(|&k| (votes[k], std::cmp::Reverse(k))).expect("a law")
+        (0..votes.len())
+            .max_by_key(|&k| (votes[k], std::cmp::Reverse(k)))
+            .expect("a law")
     };
     let mut rows = Vec::new();
     for (slot, posterior) in laws.iter().enumerate() {
@@ -561,7 +726,11 @@ fn check(
             .enumerate()
             .with_max_len(1)
             .map(|(k, p)| {
-                let run = model.simulate(p.law, &p.params, NoiseKey::replicate(seed, (slot * replicates + k) as u64));
+                let run = model.simulate(
+                    p.law,
+                    &p.params,
+                    NoiseKey::replicate(seed, (slot * replicates + k) as u64),
+                );
                 (!run.diverged).then(|| classify(&summaries(&run.surface_torque_nm, model.drive.period_s)))
             })
             .collect();
@@ -607,7 +776,10 @@ fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<L
     let recognised = |law: Law| rows.iter().find(|r| r.law == law).map_or(0.0, |r| r.recognised);
     let taken_for_best = |r: &CheckRow| {
         let n: usize = r.classified_as.iter().map(|c| c.1).sum();
-        r.classified_as.iter().find(|c| c.0 == best.law).map_or(0.0, |c| c.1 as f64 / n.max(1) as f64)
+        r.classified_as
+            .iter()
+            .find(|c| c.0 == best.law)
+            .map_or(0.0, |c| c.1 as f64 / n.max(1) as f64)
     };
     let confused: Vec<Law> = rows
         .iter()
@@ -674,22 +846,47 @@ fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: 
     let speed_rpm = (0..n)
         .map(|k| three(good.iter().map(|r| r.bit_speed_rad_s[k] / RAD_S_PER_RPM).collect()))
         .collect();
-    let reductions: Vec<Summary> = good
+    let reduced: Vec<(Law, Summary)> = drawn
         .iter()
-        .map(|r| {
+        .zip(&runs)
+        .filter(|(_, r)| !r.diverged)
+        .map(|(p, r)| {
             let mut s = Summary::default();
             for (w, t) in r.bit_speed_rad_s.iter().zip(&r.surface_torque_nm) {
                 s.push(*w, f64::NAN, *t);
             }
-            s
+            (p.law, s)
+        })
+        .collect();
+    let reductions: Vec<Summary> = reduced.iter().map(|r| r.1).collect();
+    let mut laws: Vec<Law> = reduced.iter().map(|r| r.0).collect();
+    laws.sort();
+    laws.dedup();
+    let stuck_share_by_law = laws
+        .into_iter()
+        .map(|law| {
+            let shares: Vec<f64> = reduced
+                .iter()
+                .filter(|r| r.0 == law)
+                .map(|r| r.1.stuck_share())
+                .collect();
+            (law, shares.len(), three(shares))
         })
         .collect();
     AtTheBit {
         draws: drawn.len(),
         speed_rpm,
         stuck_share: three(reductions.iter().map(Summary::stuck_share).collect()),
-        severity: three(reductions.iter().map(Summary::severity).filter(|s| s.is_finite()).collect()),
-        stick_slip_probability: reductions.iter().filter(|s| s.stick_slips()).count() as f64 / reductions.len().max(1) as f64,
+        severity: three(
+            reductions
+                .iter()
+                .map(Summary::severity)
+                .filter(|s| s.is_finite())
+                .collect(),
+        ),
+        stick_slip_probability: reductions.iter().filter(|s| s.stick_slips()).count() as f64
+            / reductions.len().max(1) as f64,
+        stuck_share_by_law,
         diverged: runs.len() - good.len(),
         advice: None,
     }
@@ -718,11 +915,14 @@ fn escape_advice(
         .filter(|l| l.particles > 0)
         .map(|l| {
             let own: Vec<&Particle> = particles.iter().filter(|p| p.law == l.law).collect();
-            let samples_si = resample(&own, ADVICE_SAMPLES, 0x4144_5649).iter().map(|p| p.params.clone()).collect();
+            let samples_si = resample(&own, ADVICE_SAMPLES, 0x4144_5649)
+                .iter()
+                .map(|p| p.params.clone())
+                .collect();
             LawSamples {
                 law: l.law,
                 probability: l.probability,
-                map_si: l.params.iter().map(|p| p.2).collect(),
+                map_si: l.params.iter().map(|p| p.median).collect(),
                 samples_si,
             }
         })
@@ -734,7 +934,11 @@ fn escape_advice(
         wob_kn: wob_n / 1000.0,
     };
     let at = simulator.at_point(point)?;
-    let advice = simulator.escape_advice(&at, &advice_speeds_rpm(point.omega_rpm), &advice_weights_kn(point.wob_kn))?;
+    let advice = simulator.escape_advice(
+        &at,
+        &advice_speeds_rpm(point.omega_rpm),
+        &advice_weights_kn(point.wob_kn),
+    )?;
     Ok(advice.text())
 }
 

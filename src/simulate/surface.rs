@@ -8,13 +8,13 @@
 //! clock: its surface torque (what the rig measures) and its bit speed (what the rig does not).
 //!
 //! **The summaries** ([`SUMMARY_NAMES`]) are the stick-slip cycle seen from the surface, each
-//! blind to the cycle's phase: the torque's mean and spread, its quantiles, the share of samples
-//! at which it rises (the bit sticks while the string winds up: the rise share tracks the stuck
-//! share), its autocorrelation at 1, 2 and 4 s, and the cycle's period (the first peak of the
-//! autocorrelation past its first zero, refined by a parabola; 0 where there is none) and the
-//! quantiles of its steps from sample to sample (while the bit is stuck the string winds up at
-//! the top drive's speed, so its torque climbs in equal steps: a law that holds the bit shows
-//! them, one that only slows it does not).
+//! blind to the cycle's phase and, where it can be, to white noise: the torque's mean, its
+//! signal's spread √γ(1) (the autocovariance one sample apart, which holds no white noise), its
+//! quantiles, the share of samples at which it rises (the bit sticks while the string winds
+//! up: the rise share tracks the stuck share), its autocovariance at 2, 4 and 6 s relative to
+//! γ(1), the cycle's period (the first peak of the autocorrelation past its first zero,
+//! refined by a parabola; 0 where there is none) and its time asymmetry over 1 and 2 s (a
+//! slow wind-up and a fast release).
 
 use super::strings::{Chain, MAX_NODES, Stepper, StringJob, StringState, padded};
 use crate::laws::Law;
@@ -120,28 +120,25 @@ pub fn simulate_on_clock(
 }
 
 /// How many summaries a surface torque record is reduced to.
-pub const N_SUMMARIES: usize = 18;
+pub const N_SUMMARIES: usize = 15;
 
 /// The summaries' names, in order (torques in N·m, times in s).
 pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
     "mean_nm",
-    "sd_nm",
+    "signal_sd_nm",
     "q05_nm",
     "q25_nm",
     "q50_nm",
     "q75_nm",
     "q95_nm",
     "rise_share",
-    "acf_1s",
     "acf_2s",
     "acf_4s",
+    "acf_6s",
     "period_s",
     "period_strength",
-    "step_q10_nm",
-    "step_q25_nm",
-    "step_q50_nm",
-    "step_q75_nm",
-    "step_q90_nm",
+    "asymmetry_1s",
+    "asymmetry_2s",
 ];
 
 /// The summaries of a surface torque record (N·m) sampled every `period_s` (see the module
@@ -155,31 +152,49 @@ pub fn summaries(torque_nm: &[f64], period_s: f64) -> [f64; N_SUMMARIES] {
     sorted.sort_by(f64::total_cmp);
     let q = |p: f64| crate::numerics::quantile_of_sorted(&sorted, p);
     let rises = torque_nm.windows(2).filter(|w| w[1] > w[0]).count();
-    let at_seconds = |t: f64| acf.at(((t / period_s).round() as usize).max(1));
+    let lag_of = |t: f64| ((t / period_s).round() as usize).max(1);
+    // Autocovariances past lag 0 hold no white noise: the signal's spread and correlations
+    // are read from them, relative to lag 1.
+    let signal = acf.covariance(1).max(0.0);
+    let relative = |t: f64| {
+        if signal > 0.0 {
+            acf.covariance(lag_of(t)) / signal
+        } else {
+            0.0
+        }
+    };
     let (cycle_s, strength) = cycle(&centred, period_s);
-    let mut steps: Vec<f64> = torque_nm.windows(2).map(|w| w[1] - w[0]).collect();
-    steps.sort_by(f64::total_cmp);
-    let step = |p: f64| if steps.is_empty() { 0.0 } else { crate::numerics::quantile_of_sorted(&steps, p) };
     [
         mean,
-        acf.variance.sqrt(),
+        signal.sqrt(),
         q(0.05),
         q(0.25),
         q(0.5),
         q(0.75),
         q(0.95),
         rises as f64 / (n.max(2) - 1) as f64,
-        at_seconds(1.0),
-        at_seconds(2.0),
-        at_seconds(4.0),
+        relative(2.0),
+        relative(4.0),
+        relative(6.0),
         cycle_s,
         strength,
-        step(0.1),
-        step(0.25),
-        step(0.5),
-        step(0.75),
-        step(0.9),
+        asymmetry(torque_nm, lag_of(1.0), signal),
+        asymmetry(torque_nm, lag_of(2.0), signal),
     ]
+}
+
+/// The time asymmetry of a record over `lag` samples: the mean cubed change over the lag, over
+/// the signal's variance `signal` to the power 3/2. A slow rise and a fast drop (the string
+/// winding up while the bit is stuck, unwinding as it slips) make it negative; white noise
+/// adds nothing to it in expectation (its odd moments vanish, and the record's mean change is
+/// nil over a stationary record).
+fn asymmetry(torque_nm: &[f64], lag: usize, signal: f64) -> f64 {
+    if signal <= 0.0 || torque_nm.len() <= lag {
+        return 0.0;
+    }
+    let changes = &torque_nm[lag..];
+    let cubes: f64 = changes.iter().zip(torque_nm).map(|(b, a)| (b - a).powi(3)).sum();
+    cubes / changes.len() as f64 / signal.powf(1.5)
 }
 
 /// The resolution the cycle's period is sought at (s): a finer clock is averaged in blocks to it.
@@ -243,15 +258,23 @@ impl<'a> Autocorrelation<'a> {
         }
     }
 
-    /// ρ(lag) (divisor n, the usual biased estimate that keeps the sequence positive definite);
-    /// 0 for a constant record or a lag past half of it.
-    fn at(&self, lag: usize) -> f64 {
+    /// γ(lag) (divisor n, the usual biased estimate that keeps the sequence positive
+    /// definite); 0 for a lag past half of the record.
+    fn covariance(&self, lag: usize) -> f64 {
         let n = self.centred.len();
-        if self.variance <= 0.0 || lag >= n / 2 {
+        if lag >= n / 2 {
             return 0.0;
         }
         let sum: f64 = self.centred.iter().zip(&self.centred[lag..]).map(|(a, b)| a * b).sum();
-        sum / n as f64 / self.variance
+        sum / n as f64
+    }
+
+    /// ρ(lag) = γ(lag)/γ(0); 0 for a constant record.
+    fn at(&self, lag: usize) -> f64 {
+        if self.variance <= 0.0 {
+            return 0.0;
+        }
+        self.covariance(lag) / self.variance
     }
 
     /// The first peak past the first zero crossing within a third of the record and `longest`
@@ -304,6 +327,13 @@ mod tests {
         assert!((s[11] - 10.0).abs() < 1e-9, "period {}", s[11]);
         assert!(s[12] > 0.9, "strength {}", s[12]);
         assert!((s[4] - 4.0).abs() < 1e-12, "median {}", s[4]);
+        // Eight rises of 1 and two drops of 4 per cycle: cubes 8 − 128 per whole cycle, 99 of
+        // them and the last cycle's eight rises and first drop (8 − 64) over 999 changes.
+        let centred: Vec<f64> = torque.iter().map(|y| y - mean).collect();
+        let gamma1 = centred.iter().zip(&centred[1..]).map(|(a, b)| a * b).sum::<f64>() / 1000.0;
+        assert!((s[1] - gamma1.sqrt()).abs() < 1e-12);
+        let expected = (99.0 * (8.0 - 128.0) + (8.0 - 64.0)) / 999.0 / gamma1.powf(1.5);
+        assert!((s[13] - expected).abs() < 1e-9 * expected.abs(), "{} {expected}", s[13]);
     }
 
     #[test]
