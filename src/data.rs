@@ -404,6 +404,20 @@ fn resolve_column(
     match matches.as_slice() {
         [i] => Ok(Some(*i)),
         [] if !required => Ok(None),
+        [] if surface.is_empty() && headers.iter().any(is_surface_channel) => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(1),
+            message: format!(
+                "no column of the bit's {hint}: this record holds surface channels ({}), and the bit's \
+                 speed and torque are never taken from the surface; infer the law from them with \
+                 `bitrock surface`, or name the bit's column with `{field}`",
+                headers
+                    .iter()
+                    .filter(|h| is_surface_channel(h))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }),
         [] if !surface.is_empty() => Err(Error::Format {
             path: path.to_path_buf(),
             line: Some(1),

@@ -23,6 +23,7 @@ mod stability;
 mod store;
 mod strings;
 mod support;
+mod surface;
 mod tune;
 mod uniform;
 mod watch;
