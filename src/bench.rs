@@ -17,6 +17,7 @@ use std::time::Instant;
 
 pub mod smc_comparison;
 pub mod strings;
+pub mod surface;
 
 /// Median, min and max of repeated measurements.
 #[derive(Clone, Debug, Serialize)]

@@ -47,6 +47,11 @@ pub struct BenchCmd {
     /// escape map of 50 × 50 cells × 100 posterior samples (10 × 10 × 20 with --quick).
     #[arg(long, conflicts_with_all = ["selection", "smc", "watch"])]
     pub strings: bool,
+    /// Measure only a surface record's inference (`bitrock surface`): ten minutes of m2 at 60
+    /// rpm at 1 Hz, four laws, N = 2,000 (two minutes and N = 300 with --quick), on the CPU:
+    /// wall time, strings per particle and rejection ABC's to the same tolerance.
+    #[arg(long, conflicts_with_all = ["selection", "smc", "watch", "strings"])]
+    pub surface: bool,
     /// Strings per batch of --strings [default: 65,536; 4,096 with --quick].
     #[arg(long, requires = "strings", value_name = "N")]
     pub strings_n: Option<usize>,
@@ -68,6 +73,9 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     }
     if cmd.strings {
         return strings(cmd);
+    }
+    if cmd.surface {
+        return surface(cmd);
     }
     let opts = options(cmd)?;
     let report = bitrock::bench::run(&opts, &mut say(cmd, ""))?;
@@ -315,6 +323,39 @@ fn watch(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         "warm and cold: probabilities within 0.05 in {} of {windows} windows, the same law first in {}",
         report.agree_within_005, report.same_most_probable
     )?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--surface`: a surface record's inference end to end.
+fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
+    let opts = bitrock::bench::surface::SurfaceBenchOptions {
+        record_s: if cmd.quick { 120.0 } else { 600.0 },
+        particles: if cmd.quick { 300 } else { 2000 },
+        repetitions: cmd.reps,
+    };
+    let report = bitrock::bench::surface::run(&opts, &mut say(cmd, ""))?;
+    let mut out = super::print::stdout();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &report)?;
+        writeln!(out)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    writeln!(out, "surface inference: {}, four laws, N = {}", report.record, report.particles)?;
+    writeln!(
+        out,
+        "wall time {:.1} s (median of {}; {:.1}–{:.1}), {} strings simulated",
+        report.wall_s.median, cmd.reps, report.wall_s.min, report.wall_s.max, report.strings
+    )?;
+    writeln!(
+        out,
+        "strings per particle: {:.1}; rejection ABC to the same ε: {}",
+        report.strings_per_particle,
+        report
+            .rejection_strings_per_particle
+            .map_or("more than the pilot".to_string(), |n| format!("{n:.0}"))
+    )?;
+    let probabilities: Vec<String> = report.probabilities.iter().map(|(l, p)| format!("{l} {p:.3}")).collect();
+    writeln!(out, "P(law): {}; {}", probabilities.join(", "), report.verdict)?;
     Ok(ExitCode::SUCCESS)
 }
 

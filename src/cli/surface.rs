@@ -237,6 +237,16 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
         r.seconds,
         r.stop
     )?;
+    let c = &r.cost;
+    writeln!(
+        out,
+        "strings per particle: {:.1}; rejection ABC to the same ε: {}",
+        c.strings_per_particle,
+        match c.rejection_strings_per_particle {
+            Some(n) => format!("{n:.0} ({} of {} pilot strings below it)", c.pilot_below, c.pilot),
+            None => format!("more than {} (no pilot string below it)", c.pilot),
+        }
+    )?;
     writeln!(out)?;
     writeln!(out, "law   P(law)   re-simulated records recognised as it")?;
     for law in &r.laws {

@@ -271,8 +271,9 @@ pub struct SurfaceResult {
     pub strings_per_population: Vec<u64>,
     pub final_epsilon: Option<f64>,
     pub stop: String,
-    /// Strings simulated in all (pilot, sampler, check, predictive).
+    /// Strings simulated in all (pilot, scout, sampler, check, predictive).
     pub simulations: u64,
+    pub cost: Cost,
     pub seconds: f64,
     #[serde(skip)]
     pub run: Option<Run>,
@@ -307,6 +308,32 @@ impl Noise {
         Self {
             sd_nm,
             how: if fine { "estimated" } else { "bounded" },
+        }
+    }
+}
+
+/// What the final population cost, against rejection ABC on the same distance.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Cost {
+    /// Strings the sampler simulated per particle of its final population.
+    pub strings_per_particle: f64,
+    /// Prior strings per particle that rejection ABC would simulate to the same ε: one over
+    /// the share of the pilot below it. `None` where no pilot string is (more than the pilot).
+    pub rejection_strings_per_particle: Option<f64>,
+    /// Pilot strings below the final ε, of the pilot's.
+    pub pilot_below: usize,
+    pub pilot: usize,
+}
+
+impl Cost {
+    fn of(sampler_strings: u64, last: &crate::abc::Population, table: &[(usize, Summaries)], distance: &Distance) -> Self {
+        let epsilon = last.record.epsilon.unwrap_or(f64::INFINITY);
+        let below = table.iter().filter(|t| distance.rho(&t.1) < epsilon).count();
+        Self {
+            strings_per_particle: sampler_strings as f64 / last.particles.len().max(1) as f64,
+            rejection_strings_per_particle: (below > 0).then(|| table.len() as f64 / below as f64),
+            pilot_below: below,
+            pilot: table.len(),
         }
     }
 }
@@ -376,8 +403,10 @@ pub fn infer(
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
     let run = smc::run(&evaluator, &settings.smc)?;
-    simulations += run.populations.iter().map(|p| p.record.candidates_scored).sum::<u64>();
+    let sampler_strings: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();
+    simulations += sampler_strings;
     let last = run.populations.last().expect("a run has a population");
+    let cost = Cost::of(sampler_strings, last, &table, &distance);
     let particles = &last.particles;
     let laws = posteriors(&prior, particles);
 
@@ -417,6 +446,7 @@ pub fn infer(
         final_epsilon: last.record.epsilon,
         stop: run.stop.describe().to_string(),
         simulations,
+        cost,
         seconds: started.elapsed().as_secs_f64(),
         run: Some(run),
     })
