@@ -425,7 +425,7 @@ fn resolve_column(
                 "column '{}' is a surface channel, and the bit's {hint} is never taken from the surface; \
                  give the bit's column with `{field}`, or infer the law from the surface channels with \
                  `bitrock surface`",
-                headers[surface[0]].to_string()
+                &headers[surface[0]]
             ),
         }),
         [] => Err(Error::Format {

@@ -340,7 +340,11 @@ fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         writeln!(out)?;
         return Ok(ExitCode::SUCCESS);
     }
-    writeln!(out, "surface inference: {}, four laws, N = {}", report.record, report.particles)?;
+    writeln!(
+        out,
+        "surface inference: {}, four laws, N = {}",
+        report.record, report.particles
+    )?;
     writeln!(
         out,
         "wall time {:.1} s (median of {}; {:.1}–{:.1}), {} strings simulated",
@@ -354,7 +358,11 @@ fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
             .rejection_strings_per_particle
             .map_or("more than the pilot".to_string(), |n| format!("{n:.0}"))
     )?;
-    let probabilities: Vec<String> = report.probabilities.iter().map(|(l, p)| format!("{l} {p:.3}")).collect();
+    let probabilities: Vec<String> = report
+        .probabilities
+        .iter()
+        .map(|(l, p)| format!("{l} {p:.3}"))
+        .collect();
     writeln!(out, "P(law): {}; {}", probabilities.join(", "), report.verdict)?;
     Ok(ExitCode::SUCCESS)
 }

@@ -402,9 +402,9 @@ mod tests {
         assert_eq!(r.columns.wob.as_deref(), Some("wob_kn"));
         assert_eq!(r.columns.bit, ["bit_speed_rpm", "torque_knm"]);
         assert!((r.top_drive_rad_s[0] - 60.0 * crate::units::RAD_S_PER_RPM).abs() < 1e-12);
-        assert_eq!(r.surface_torque_nm[3], 12_000.0);
-        assert_eq!(r.wob_ratio(Some(100_000.0))[0], 2.0);
-        assert_eq!(r.sample_period_s, 1.0);
+        assert!((r.surface_torque_nm[3] - 12_000.0).abs() < 1e-9);
+        assert!((r.wob_ratio(Some(100_000.0))[0] - 2.0).abs() < 1e-15);
+        assert!((r.sample_period_s - 1.0).abs() < 1e-15);
         assert!(r.roles_text().contains("not read"), "{}", r.roles_text());
     }
 

@@ -326,7 +326,12 @@ pub struct Cost {
 }
 
 impl Cost {
-    fn of(sampler_strings: u64, last: &crate::abc::Population, table: &[(usize, Summaries)], distance: &Distance) -> Self {
+    fn of(
+        sampler_strings: u64,
+        last: &crate::abc::Population,
+        table: &[(usize, Summaries)],
+        distance: &Distance,
+    ) -> Self {
         let epsilon = last.record.epsilon.unwrap_or(f64::INFINITY);
         let below = table.iter().filter(|t| distance.rho(&t.1) < epsilon).count();
         Self {
@@ -395,10 +400,10 @@ pub fn infer(
     let period_s = model.drive.period_s;
     let noise = Noise::of(settings.noise_sd_nm, &record.surface_torque_nm, &cycle, period_s);
     let noise_sd_nm = noise.sd_nm;
-    let scout = Scout::run(&pilot, &model, &prior, settings, seed, noise_sd_nm, &observed)?;
-    simulations += scout.simulations;
     model.noise_sd_nm = noise_sd_nm;
     let (table, pilot_distance) = pilot.distance(noise_sd_nm, period_s, &observed);
+    let scout = Scout::run(&model, &prior, settings, seed, &pilot_distance)?;
+    simulations += scout.simulations;
     let distance = scout.distance(&pilot_distance, noise_sd_nm, period_s);
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
@@ -574,26 +579,19 @@ struct Scout {
 }
 
 impl Scout {
-    #[allow(clippy::too_many_arguments)]
+    /// The scout of `model` (its noise set) on the pilot's `distance`.
     fn run(
-        pilot: &Pilot,
         model: &SurfaceModel,
         prior: &Prior,
         settings: &SurfaceSettings,
         seed: u64,
-        noise_sd_nm: f64,
-        observed: &Summaries,
+        distance: &Distance,
     ) -> Result<Self> {
-        let (_, distance) = pilot.distance(noise_sd_nm, model.drive.period_s, observed);
-        let noisy = SurfaceModel {
-            noise_sd_nm,
-            ..model.clone()
-        };
         let mut short = settings.smc.clone();
         short.schedule.particles = SCOUT_PARTICLES.min(settings.smc.schedule.particles);
         short.schedule.max_populations = SCOUT_POPULATIONS;
         short.schedule.max_seconds = None;
-        let evaluator = SurfaceEvaluator::new(prior.clone(), seed ^ SCOUT_STREAM, noisy, distance);
+        let evaluator = SurfaceEvaluator::new(prior.clone(), seed ^ SCOUT_STREAM, model.clone(), distance.clone());
         let run = smc::run(&evaluator, &short)?;
         let scored: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();
         let particles: Vec<&Particle> = run
@@ -935,11 +933,13 @@ fn escape_advice(
     note: &mut dyn FnMut(String),
 ) -> Result<String> {
     use crate::run::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn};
-    let w_ref_n = settings.w_ref_n.unwrap_or(crate::laws::PAPER_W_REF_N);
-    let wob_n = record
-        .wob_n
-        .as_ref()
-        .map_or(w_ref_n, |w| w.iter().sum::<f64>() / w.len() as f64);
+    // Without a reference weight the laws were inferred at r = 1: their parameters hold at the
+    // record's own mean weight, which is then the reference.
+    let wob_n = record.wob_n.as_ref().map_or_else(
+        || settings.w_ref_n.unwrap_or(crate::laws::PAPER_W_REF_N),
+        |w| w.iter().sum::<f64>() / w.len() as f64,
+    );
+    let w_ref_n = settings.w_ref_n.unwrap_or(wob_n);
     let inputs: Vec<LawSamples> = laws
         .iter()
         .filter(|l| l.particles > 0)

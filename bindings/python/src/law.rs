@@ -48,7 +48,7 @@ pub(crate) fn params_nm(
 }
 
 /// Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
-/// `bitrock simulate` writes it (CSV text, torques in kN·m). Parameters that look like the
+/// `bitrock simulate` writes it (CSV text, torques in kN·m, the `channels` asked for). Parameters that look like the
 /// wrong torque unit are said through `note`.
 #[pyfunction]
 #[pyo3(signature = (law, params, omega_rpm, options, note))]
@@ -100,11 +100,27 @@ pub(crate) fn simulate(
     c.wob_fluctuation_n = kn("wob_fluctuation_kn")?.unwrap_or(c.wob_fluctuation_n);
     c.wob_correlation_s = kwarg(options, "wob_correlation_s")?.unwrap_or(c.wob_correlation_s);
     c.seed = kwarg(options, "seed")?.unwrap_or(sim::DEFAULT_SEED);
+    let channels = match kwarg::<String>(options, "channels")?
+        .as_deref()
+        .map(str::to_lowercase)
+        .as_deref()
+    {
+        None | Some("bit") => sim::Channels::Bit,
+        Some("surface") => sim::Channels::Surface,
+        Some("all") => sim::Channels::All,
+        Some(other) => {
+            return Err(to_py(
+                py,
+                Error::setting("channels", format!("`{other}` is not one of bit, surface, all")),
+            ));
+        }
+    };
     let text = py.detach(|| {
         c.validate()?;
-        let trace = sim::simulate(&c)?;
+        let record = sim::simulate_record_with(&c, &mut |_, _| {})?;
         let mut text = Vec::new();
-        sim::write_csv(&trace, &mut text).map_err(|e| Error::Numerical(e.to_string()))?;
+        sim::write_record_csv(&record, None, channels, TorqueUnit::KNm, &mut text)
+            .map_err(|e| Error::Numerical(e.to_string()))?;
         Ok::<_, Error>(String::from_utf8(text).expect("the CSV is ASCII"))
     });
     check(py, text)

@@ -13,6 +13,7 @@ mod run;
 mod selection;
 mod stability;
 mod strings;
+mod surface;
 mod watch;
 
 use pyo3::prelude::*;
@@ -41,6 +42,8 @@ mod _bitrock {
     use crate::stability::stability;
     #[pymodule_export]
     use crate::strings::simulate_strings;
+    #[pymodule_export]
+    use crate::surface::surface;
     #[pymodule_export]
     use crate::watch::{read_watch, watch};
     use pyo3::prelude::*;

@@ -59,11 +59,12 @@ def lumped_fe():
     return masses[1:], np.array(stiffness), 0.5, 0.006
 
 
-def integrate(chain, law, p_nm, omega, ratio, start, settle_s, record_s):
+def integrate(chain, law, p_nm, omega, ratio, start, settle_s, record_s, sample_hz=SAMPLE_HZ, surface=None):
     """The string from `start` (lags, speeds, stuck, direction) for `settle_s` then `record_s`:
-    the bit speeds sampled at 50 Hz over the record and the state at its end; None where the
-    bit runs away (faster than a thousand times Ω, as bitrock bounds it: m4's cubic turns
-    negative at high speed)."""
+    the bit speeds sampled at `sample_hz` over the record and the state at its end; None where
+    the bit runs away (faster than a thousand times Ω, as bitrock bounds it: m4's cubic turns
+    negative at high speed). A list given as `surface` receives the torque the top drive
+    applies at each sample, k·u + β·k·(Ω − w) of the top element."""
     m, k, alpha, beta = chain
     n = len(m)
     torque = torque_law(law)
@@ -93,8 +94,9 @@ def integrate(chain, law, p_nm, omega, ratio, start, settle_s, record_s):
     y, stuck, direction = start
     y = np.array(y, dtype=float)
     t, end = 0.0, settle_s + record_s
-    times = np.arange(int(round(record_s * SAMPLE_HZ))) / SAMPLE_HZ + settle_s
+    times = np.arange(int(round(record_s * sample_hz))) / sample_hz + settle_s
     speeds = np.full(len(times), np.nan)
+    tops = np.full(len(times), np.nan)
     while t < end - 1e-12:
         if stuck and abs(string_torque(y[:n], y[n:])[-1]) > static:
             # The load already exceeds the static torque (a lighter weight on bit): it slips.
@@ -120,6 +122,10 @@ def integrate(chain, law, p_nm, omega, ratio, start, settle_s, record_s):
         if recorded.any():
             w = 0.0 if stuck else np.asarray(sol.y)[2 * n - 1][recorded]
             speeds[np.searchsorted(times, at[recorded])] = w
+            u0, w0 = np.asarray(sol.y)[0][recorded], np.asarray(sol.y)[n][recorded]
+            if stuck and n == 1:
+                w0 = np.zeros_like(u0)
+            tops[np.searchsorted(times, at[recorded])] = k[0] * u0 + beta * k[0] * (omega - w0)
         w_end = np.asarray(sol.y)[2 * n - 1][-1] if len(at) else y[-1]
         if sol.status == -1 or not np.isfinite(w_end) or abs(w_end) > 1000.0 * max(omega, 1.0):
             return None
@@ -142,6 +148,8 @@ def integrate(chain, law, p_nm, omega, ratio, start, settle_s, record_s):
             y = np.asarray(sol.y)[:, -1].copy()
             t = end
     assert not np.isnan(speeds).any()
+    if surface is not None:
+        surface.extend(tops.tolist())
     return speeds, (y, stuck, direction)
 
 

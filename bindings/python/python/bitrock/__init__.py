@@ -53,6 +53,7 @@ __all__ = [
     "resume",
     "simulate",
     "simulate_strings",
+    "surface",
     "stability",
     "torque",
     "watch",
@@ -696,6 +697,7 @@ def simulate(
     wob_fluctuation_kn: float | None = None,
     wob_correlation_s: float | None = None,
     seed: int | None = None,
+    channels: str | None = None,
 ) -> pd.DataFrame:
     """A synthetic record of the paper's 1-DOF drill string driven at ``omega_rpm`` with
     ``law`` (at ``params`` in its order, torques in ``param_torque_unit``; the paper's estimate
@@ -703,12 +705,61 @@ def simulate(
     ``bit_speed_rpm``, ``torque_knm`` and ``wob_kn``, sampled at ``sample_hz`` after
     ``settle_s``, with measurement noise and a fluctuating weight on bit when asked. It reads
     back with :func:`read_record`. A torque parameter beyond any drill bit's (1,000 kN·m) is
-    simulated but warned of (a ``BitrockWarning``): values in N·m given as kN·m."""
+    simulated but warned of (a ``BitrockWarning``): values in N·m given as kN·m. ``channels``
+    ``"surface"`` gives what a rig streams instead (``time_s``, ``top_drive_rpm``,
+    ``surface_torque_knm``, ``wob_kn``), ``"all"`` both, for :func:`surface`."""
     import io
 
     options = {k: v for k, v in locals().items() if k not in ("law", "params", "omega_rpm", "io")}
     text = _bitrock.simulate(law, None if params is None else [float(p) for p in params], float(omega_rpm), options, _note)
     return pd.read_csv(io.StringIO(text))
+
+
+def surface(
+    path: str | os.PathLike[str],
+    *,
+    laws: Sequence[str] | None = None,
+    prior_file: str | os.PathLike[str] | None = None,
+    prior_scale: float | None = None,
+    time_col: str | None = None,
+    top_drive_col: str | None = None,
+    surface_torque_col: str | None = None,
+    wob_col: str | None = None,
+    top_drive_unit: str | None = None,
+    torque_unit: str | None = None,
+    wob_unit: str | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    w_ref_kn: float | None = None,
+    noise_sd_knm: float | None = None,
+    particles: int | None = None,
+    max_populations: int | None = None,
+    max_seconds: float | None = None,
+    pilot: int | None = None,
+    check_replicates: int | None = None,
+    predictive_draws: int | None = None,
+    advice: bool | None = None,
+    dt_s: float | None = None,
+    settle_s: float | None = None,
+    seed: int | None = None,
+) -> dict:
+    """The law at the bit from a surface record (top-drive speed, surface torque and weight on
+    bit on a regular clock, a CSV file) through drill strings simulated per candidate, as
+    ``bitrock surface`` infers it: a dict with the noise and how it was found, the cycle, each
+    law's probability and parameters (SI, those the record leaves to the prior marked
+    ``identified: False``), the check of the model choice by re-simulation and its verdict
+    (``check["decided"]`` is ``None`` where the record cannot tell the laws apart), and
+    ``at_the_bit``: the bit's speed band per sample of ``time_s`` (rpm), its stuck share overall
+    and per law, P(stick-slip) and the escape advice. docs/surface.md says what a surface record
+    can and cannot tell."""
+    import json
+
+    options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json")}
+    text = _bitrock.surface(
+        os.fspath(path), None if laws is None else [str(law) for law in laws], options, _note
+    )
+    return json.loads(text)
 
 
 def simulate_strings(

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -226,7 +226,7 @@ def settings_fields(kind: str) -> list[str]:
 def simulate(law: str, params: SupportsGetItem[int, SupportsFloat | SupportsIndex] | None, omega_rpm: SupportsFloat | SupportsIndex, options: dict, note: Any | None) -> str:
     """
     Simulates the 1-DOF string with `law` at top-drive speed `omega_rpm`: the record as
-    `bitrock simulate` writes it (CSV text, torques in kN·m). Parameters that look like the
+    `bitrock simulate` writes it (CSV text, torques in kN·m, the `channels` asked for). Parameters that look like the
     wrong torque unit are said through `note`.
     """
 
@@ -242,6 +242,12 @@ def stability(run: str | PathLike[str] | None, law: str | None, params: Supports
     """
     Stability maps over (Ω, W) for the run in `run`, or for `law` at `params` (torques in
     `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
+    """
+
+def surface(path: str | PathLike[str], laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None) -> str:
+    """
+    `bitrock surface` on the record at `path`: the whole result as JSON text. The notes of the
+    run (a GPU fallback of the advice's strings, say) go to `note` once it is done.
     """
 
 def torque(law: str, speed_rad_s: SupportsGetItem[int, SupportsFloat | SupportsIndex], params: SupportsGetItem[int, SupportsFloat | SupportsIndex], r: SupportsFloat | SupportsIndex, torque_unit: str | None) -> list[float]:

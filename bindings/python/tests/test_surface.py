@@ -1,0 +1,73 @@
+"""Laws from a surface record, judged on records of an independent integrator (scipy's LSODA
+with its own stick handling, the twin of test_strings.py): the surface channels inferred from,
+the bit's speed kept as the truth."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_strings import RPM, STUCK_RAD_S, integrate, one_dof, torque_law
+
+import bitrock
+
+M2_NM = [13000.0, 6500.0, 0.3]
+
+
+def twin_record(path, rpm=60.0, seconds=300.0, noise_nm=200.0, seed=5):
+    """m2 at the paper's estimate at `rpm`: a surface record at 1 Hz (top-drive speed, surface
+    torque with white noise, weight on bit) written to `path`, and the bit's true speeds."""
+    chain = one_dof()
+    omega = rpm * RPM
+    t0 = torque_law("m2")(M2_NM, omega)
+    y = np.array([t0 / chain[1][0], omega + 0.1 * omega])
+    surface = []
+    speeds, _ = integrate(chain, "m2", M2_NM, omega, 1.0, (y, False, 1.0), 60.0, seconds, sample_hz=1.0, surface=surface)
+    noise = np.random.default_rng(seed).normal(0.0, noise_nm, len(surface))
+    pd.DataFrame(
+        {
+            "time_s": np.arange(len(surface), dtype=float),
+            "top_drive_rpm": rpm,
+            "surface_torque_knm": (np.array(surface) + noise) / 1000.0,
+            "wob_kn": 244.2,
+        }
+    ).to_csv(path, index=False)
+    return speeds
+
+
+SMALL = dict(particles=300, max_populations=6, pilot=300, check_replicates=4, predictive_draws=40, advice=False)
+
+
+def test_an_independent_string_s_surface_gives_its_torques_and_stuck_share(tmp_path):
+    path = tmp_path / "rig.csv"
+    speeds = twin_record(path)
+    true_share = float(np.mean(np.abs(speeds) < STUCK_RAD_S))
+    assert true_share > 0.4
+    result = bitrock.surface(path, laws=["m2"], seed=2, **SMALL)
+    assert result["cycle"]["period_s"] == pytest.approx(9.75, abs=0.3)
+    (m2,) = result["laws"]
+    for p, truth in zip(m2["params"], M2_NM):
+        covered = p["q05"] <= truth <= p["q95"]
+        assert covered or (p["name"] == "g" and not p["identified"]), p
+    stuck = result["at_the_bit"]["stuck_share"]
+    assert abs(stuck[1] - true_share) <= 0.05, (stuck, true_share)
+    band = np.array(result["at_the_bit"]["speed_rpm"])
+    rpm = speeds / RPM
+    inside = np.mean((band[:, 0] - 0.5 <= rpm) & (rpm <= band[:, 2] + 0.5))
+    assert inside >= 0.85, inside
+    assert len(result["time_s"]) == len(rpm)
+
+
+def test_a_simulated_surface_record_goes_through_and_bad_settings_name_their_argument(tmp_path):
+    frame = bitrock.simulate("m2", omega_rpm=60, duration_s=120, settle_s=60, sample_hz=1, channels="surface", seed=2)
+    assert list(frame.columns) == ["time_s", "top_drive_rpm", "surface_torque_knm", "wob_kn"]
+    path = tmp_path / "surface.csv"
+    frame.to_csv(path, index=False)
+    small = dict(SMALL, particles=100, max_populations=2, pilot=100, check_replicates=2, predictive_draws=10)
+    result = bitrock.surface(path, laws=["m1", "m2"], **small)
+    assert {law["law"] for law in result["laws"]} == {"m1", "m2"}
+    assert result["noise"]["how"] in ("estimated", "bounded")
+    with pytest.raises(bitrock.InputError, match="pilot"):
+        bitrock.surface(path, laws=["m2"], pilot=10)
+    with pytest.raises(bitrock.InputError, match="top_drive_col"):
+        bitrock.surface(path, top_drive_col="rotary")
+    with pytest.raises(bitrock.InputError, match="channels"):
+        bitrock.simulate("m2", omega_rpm=60, channels="downhole")
