@@ -2,12 +2,14 @@
 //! strings: simulation-based ABC-SMC, the model choice checked by re-simulation, and what the
 //! surface implies at the bit.
 //!
-//! 1. **The record's noise**: given, or estimated from the surface torque ([`noise_sd`]).
+//! 1. **The record's noise**: given, or read from the surface torque ([`Noise::of`]): an
+//!    estimate on a clock fine enough for the cycle, an upper bound on a coarser one.
 //! 2. **The prior**: per law, boxes k scales wide from the physical bounds ([`Prior::physical`]),
 //!    the scales from the record (the largest surface torque; speeds from the top drive's, the
 //!    bit's peaks taken as three times it), replaced where a prior file gives bounds.
-//! 3. **The pilot**: prior simulations that scale the distance per summary
-//!    ([`Distance::from_pilot`]) and form the reference table of the check.
+//! 3. **The pilot and the scout**: prior simulations give first scales of the distance and the
+//!    reference table of the check; a short ABC-SMC on them finds the strings near the record,
+//!    whose spread scales the main run's distance (see `Scout`).
 //! 4. **ABC-SMC** ([`crate::abc::smc`]) on ρ = the scaled distance of summaries, every candidate a
 //!    string simulated on the record's clock ([`SurfaceEvaluator`]).
 //! 5. **The check**: records re-simulated from each law's posterior are classified by their
@@ -970,11 +972,4 @@ fn escape_advice(
         &advice_weights_kn(point.wob_kn),
     )?;
     Ok(advice.text())
-}
-
-/// The summaries' names with the record's values and scales, for reports.
-pub fn summary_table(result: &SurfaceResult) -> Vec<(&'static str, f64, f64)> {
-    (0..N_SUMMARIES)
-        .map(|j| (SUMMARY_NAMES[j], result.observed[j], result.scales[j]))
-        .collect()
 }
