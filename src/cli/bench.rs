@@ -292,9 +292,7 @@ fn watch(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let backend = cmd.backend.unwrap_or(Backend::Auto);
     let report = bitrock::watch::bench::run(cmd.quick, backend, scratch.path(), &mut say(cmd, "note: "))?;
     let mut out = super::print::stdout();
-    if cmd.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+    if json_report(cmd, &mut out, &report)? {
         return Ok(ExitCode::SUCCESS);
     }
     writeln!(out, "watch of {}", report.record)?;
@@ -326,6 +324,15 @@ fn watch(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// With `--json`, `report` as JSON to `out` (true: nothing else to print).
+fn json_report(cmd: &BenchCmd, out: &mut impl Write, report: &impl serde::Serialize) -> anyhow::Result<bool> {
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut *out, report)?;
+        writeln!(out)?;
+    }
+    Ok(cmd.json)
+}
+
 /// `--surface`: a surface record's inference end to end.
 fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let opts = bitrock::bench::surface::SurfaceBenchOptions {
@@ -335,9 +342,7 @@ fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     };
     let report = bitrock::bench::surface::run(&opts, &mut say(cmd, ""))?;
     let mut out = super::print::stdout();
-    if cmd.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+    if json_report(cmd, &mut out, &report)? {
         return Ok(ExitCode::SUCCESS);
     }
     writeln!(
@@ -385,9 +390,7 @@ fn strings(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     }
     let report = bitrock::bench::strings::run(&opts, &mut say(cmd, ""))?;
     let mut out = super::print::stdout();
-    if cmd.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
+    if json_report(cmd, &mut out, &report)? {
         return Ok(ExitCode::SUCCESS);
     }
     writeln!(

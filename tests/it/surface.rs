@@ -158,27 +158,20 @@ fn the_same_seed_gives_the_same_inference() {
 fn surface_and_bit_records_each_go_to_their_own_command() {
     let (_dir, path, _) = record(Law::M2, 60.0, 60.0, 1.0, 0.0, 1);
     let dir = path.parent().unwrap();
+    // 40 s of m2 at 60 rpm at 1 Hz, with `channels`.
+    let simulated = |channels: &str, name: &str| {
+        let path = dir.join(name);
+        let (code, _, err) = outcome(
+            bin()
+                .args(["simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "40"])
+                .args(["--sample-hz", "1", "--channels", channels, "--out"])
+                .arg(&path),
+        );
+        assert_eq!(code, 0, "{err}");
+        path
+    };
     // A surface-only record: `fit` finds no bit torque in it.
-    let surface = dir.join("surface.csv");
-    let (code, _, err) = outcome(
-        bin()
-            .args([
-                "simulate",
-                "--law",
-                "m2",
-                "--omega-rpm",
-                "60",
-                "--duration-s",
-                "40",
-                "--sample-hz",
-                "1",
-                "--channels",
-                "surface",
-                "--out",
-            ])
-            .arg(&surface),
-    );
-    assert_eq!(code, 0, "{err}");
+    let surface = simulated("surface", "surface.csv");
     let header = std::fs::read_to_string(&surface).unwrap();
     assert!(
         header.starts_with("time_s,top_drive_rpm,surface_torque_knm,wob_kn\n"),
@@ -196,24 +189,7 @@ fn surface_and_bit_records_each_go_to_their_own_command() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("'surface_torque_knm' is a surface channel"), "{err}");
     // A bit record: `surface` finds no top drive in it, and names the flag.
-    let bit = dir.join("bit.csv");
-    let (code, _, err) = outcome(
-        bin()
-            .args([
-                "simulate",
-                "--law",
-                "m2",
-                "--omega-rpm",
-                "60",
-                "--duration-s",
-                "40",
-                "--sample-hz",
-                "1",
-                "--out",
-            ])
-            .arg(&bit),
-    );
-    assert_eq!(code, 0, "{err}");
+    let bit = simulated("bit", "bit.csv");
     let (code, _, err) = outcome(bin().arg("surface").arg(&bit));
     assert_eq!(code, 2, "{err}");
     assert!(
