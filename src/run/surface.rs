@@ -76,10 +76,11 @@ pub const MIN_CYCLES: f64 = 3.0;
 /// Least autocorrelation at the cycle's period for the cycle to count as seen.
 pub const MIN_CYCLE_STRENGTH: f64 = 0.3;
 /// A law is called when its own re-simulations are recognised at least this often and no
-/// other plausible law's are taken for it more often than `1 −` this.
+/// other law's (any law with particles, however improbable: the probabilities are what the
+/// check checks) are taken for it more often than [`CHECK_CONFUSED`].
 pub const CHECK_RECOGNISED: f64 = 0.8;
-/// A law at least this probable takes part in the verdict.
-pub const PLAUSIBLE: f64 = 0.05;
+/// See [`CHECK_RECOGNISED`].
+pub const CHECK_CONFUSED: f64 = 0.2;
 
 impl SurfaceSettings {
     /// The defaults for `laws`: N = 2,000 particles, at most 8 populations, the sampler's
@@ -814,8 +815,7 @@ fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<L
     let confused: Vec<Law> = rows
         .iter()
         .filter(|r| r.law != best.law)
-        .filter(|r| laws.iter().any(|l| l.law == r.law && l.probability >= PLAUSIBLE))
-        .filter(|r| taken_for_best(r) > 1.0 - CHECK_RECOGNISED)
+        .filter(|r| taken_for_best(r) > CHECK_CONFUSED)
         .map(|r| r.law)
         .collect();
     let own = recognised(best.law);
@@ -847,7 +847,7 @@ fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<L
     (
         Some(best.law),
         format!(
-            "{} (P = {:.2}); {:.0} % of the records re-simulated from it are recognised as it, and no other plausible law's are taken for it",
+            "{} (P = {:.2}); {:.0} % of the records re-simulated from it are recognised as it, and no other law's are taken for it",
             best.law,
             best.probability,
             100.0 * own
@@ -972,4 +972,74 @@ fn escape_advice(
         &advice_weights_kn(point.wob_kn),
     )?;
     Ok(advice.text())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn posterior(law: Law, probability: f64) -> LawPosterior {
+        LawPosterior {
+            law,
+            probability,
+            particles: 1,
+            params: Vec::new(),
+        }
+    }
+
+    fn row(law: Law, as_m1: usize, as_m2: usize) -> CheckRow {
+        let n = as_m1 + as_m2;
+        CheckRow {
+            law,
+            replicates: n,
+            classified_as: vec![(Law::M1, as_m1), (Law::M2, as_m2)],
+            recognised: if law == Law::M1 { as_m1 } else { as_m2 } as f64 / n as f64,
+        }
+    }
+
+    const CYCLING: Cycle = Cycle {
+        period_s: Some(9.75),
+        cycles: 60.0,
+        strength: 0.9,
+    };
+
+    #[test]
+    fn an_improbable_law_taken_for_the_leader_leaves_the_choice_undecided() {
+        // m1 holds 0.97 and its own records are all recognised, but m2's are all taken for m1:
+        // the probabilities cannot excuse m2 from the check.
+        let laws = [posterior(Law::M1, 0.97), posterior(Law::M2, 0.03)];
+        let (decided, text) = verdict(&laws, &[row(Law::M1, 10, 0), row(Law::M2, 10, 0)], &CYCLING);
+        assert_eq!(decided, None, "{text}");
+        assert!(text.contains("undecided between m1 and m2"), "{text}");
+        // With m2's records recognised as m2 (two of ten taken for m1), m1 is called.
+        let (decided, text) = verdict(&laws, &[row(Law::M1, 10, 0), row(Law::M2, 2, 8)], &CYCLING);
+        assert_eq!(decided, Some(Law::M1), "{text}");
+        // A leader whose own records are recognised seven times in ten is not called.
+        let (decided, _) = verdict(&laws, &[row(Law::M1, 7, 3), row(Law::M2, 0, 10)], &CYCLING);
+        assert_eq!(decided, None);
+    }
+
+    #[test]
+    fn a_record_without_enough_cycles_calls_no_law() {
+        let laws = [posterior(Law::M1, 0.97), posterior(Law::M2, 0.03)];
+        let rows = [row(Law::M1, 10, 0), row(Law::M2, 0, 10)];
+        let few = Cycle {
+            period_s: Some(40.0),
+            cycles: 2.5,
+            strength: 0.9,
+        };
+        let (decided, text) = verdict(&laws, &rows, &few);
+        assert_eq!(decided, None);
+        assert!(text.contains("2.5 cycles") && text.contains("fewer than 3"), "{text}");
+        let none = Cycle {
+            period_s: None,
+            cycles: 0.0,
+            strength: 0.1,
+        };
+        assert!(verdict_text(&laws, &rows, &none).contains("only through T(Ω)"));
+    }
+
+    fn verdict_text(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> String {
+        verdict(laws, rows, cycle).1
+    }
 }
