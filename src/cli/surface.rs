@@ -167,6 +167,9 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
     let result = surface::infer(&record, &settings, cmd.seed, &mut |line| {
         print::note(format_args!("note: {line}"))
     })?;
+    for warning in &result.warnings {
+        print::note(format_args!("warning: {}", super::fields::as_flags(warning)));
+    }
     let document = serde_json::to_value(&result)?;
     if let Some(path) = &cmd.out {
         bitrock::run::dir::write_whole(path, "out", cmd.force, |mut file| {
@@ -230,9 +233,10 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
     )?;
     writeln!(
         out,
-        "ABC-SMC on simulated strings: {} populations, final ε {}, {} strings simulated in {:.1} s ({})",
+        "ABC-SMC on simulated strings: {} populations, final ε {} (the noise's own distance {:.4}), {} strings simulated in {:.1} s ({})",
         r.populations,
         r.final_epsilon.map_or("∞".into(), |e| format!("{e:.4}")),
+        r.noise_floor,
         r.simulations,
         r.seconds,
         r.stop

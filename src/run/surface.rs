@@ -277,6 +277,11 @@ pub struct SurfaceResult {
     /// Strings simulated in all (pilot, scout, sampler, check, predictive).
     pub simulations: u64,
     pub cost: Cost,
+    /// ρ between two noise draws on one string near the record: the least a tolerance can
+    /// usefully reach, since the record itself is one such draw.
+    pub noise_floor: f64,
+    /// What the user should know about the result (a sampler stopped far above the floor).
+    pub warnings: Vec<String>,
     pub seconds: f64,
     #[serde(skip)]
     pub run: Option<Run>,
@@ -408,6 +413,7 @@ pub fn infer(
     let scout = Scout::run(&model, &prior, settings, seed, &pilot_distance)?;
     simulations += scout.simulations;
     let distance = scout.distance(&pilot_distance, noise_sd_nm, period_s);
+    let noise_floor = scout.noise_floor(&distance, noise_sd_nm, period_s);
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
     let run = smc::run(&evaluator, &settings.smc)?;
@@ -455,6 +461,10 @@ pub fn infer(
         stop: run.stop.describe().to_string(),
         simulations,
         cost,
+        noise_floor,
+        warnings: convergence_warning(last.record.epsilon, noise_floor)
+            .into_iter()
+            .collect(),
         seconds: started.elapsed().as_secs_f64(),
         run: Some(run),
     })
@@ -629,6 +639,28 @@ impl Scout {
         })
     }
 
+    /// The median ρ between two noise draws on each of the scout's strings (see
+    /// [`SurfaceResult::noise_floor`]); 0 without strings or noise.
+    fn noise_floor(&self, distance: &Distance, sd_nm: f64, period_s: f64) -> f64 {
+        let apart: Vec<f64> = self
+            .draws
+            .par_iter()
+            .map(|(key, torque)| {
+                let draw = |r: u64| {
+                    let mut noisy = torque.clone();
+                    add_noise(
+                        &mut noisy,
+                        sd_nm,
+                        NoiseKey(key.0 ^ r.wrapping_mul(0x9e37_79b9_7f4a_7c15)),
+                    );
+                    summaries(&noisy, period_s)
+                };
+                distance.between(&draw(1), &draw(2))
+            })
+            .collect();
+        crate::numerics::median(&apart).unwrap_or(0.0)
+    }
+
     /// The main run's distance: the scales of the scout's strings' summaries with noise of
     /// `sd_nm`, none narrower than [`SCOUT_NARROWEST`] of `pilot`'s.
     fn distance(&self, pilot: &Distance, sd_nm: f64, period_s: f64) -> Distance {
@@ -659,6 +691,21 @@ impl Scout {
 
 /// Seed offset of the scout run.
 const SCOUT_STREAM: u64 = 0x5343_4f55_5400_0000;
+
+/// A final tolerance this many times the noise floor or more: the posterior is still wider
+/// than the record allows.
+pub const UNCONVERGED_FACTOR: f64 = 4.0;
+
+/// The warning of a sampler that stopped at `epsilon` far above the noise floor.
+fn convergence_warning(epsilon: Option<f64>, floor: f64) -> Option<String> {
+    let epsilon = epsilon.unwrap_or(f64::INFINITY);
+    (floor > 0.0 && epsilon >= UNCONVERGED_FACTOR * floor).then(|| {
+        format!(
+            "the sampler stopped at ε = {epsilon:.3}, {:.1} times the noise's own distance {floor:.3}: the strings do not yet reproduce the record, and the posterior and the bit's figures are wider or further off than the record allows; raise `max_populations` or `particles`",
+            epsilon / floor
+        )
+    })
+}
 
 /// Each law's probability and parameter quantiles in the final population.
 fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
