@@ -89,11 +89,16 @@ impl SurfaceModel {
         run
     }
 
-    /// The summaries of `candidate`'s simulation under `seed` (`None` where it diverged).
-    pub fn summaries_of(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> Option<Summaries> {
+    /// `candidate`'s string (a candidate of `prior`), with its own noise under `seed`.
+    pub fn simulate_candidate(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> OnClock {
         let law = prior.law(candidate.slot);
         let params = candidate.widened();
-        let run = self.simulate(law, &params[..law.n_params()], NoiseKey::of(seed, candidate));
+        self.simulate(law, &params[..law.n_params()], NoiseKey::of(seed, candidate))
+    }
+
+    /// The summaries of `candidate`'s simulation under `seed` (`None` where it diverged).
+    pub fn summaries_of(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> Option<Summaries> {
+        let run = self.simulate_candidate(prior, seed, candidate);
         (!run.diverged).then(|| summaries(&run.surface_torque_nm, self.drive.period_s))
     }
 }
@@ -205,14 +210,6 @@ impl SurfaceEvaluator {
             model,
             distance,
         }
-    }
-
-    pub fn model(&self) -> &SurfaceModel {
-        &self.model
-    }
-
-    pub fn distance(&self) -> &Distance {
-        &self.distance
     }
 }
 

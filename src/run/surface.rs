@@ -30,7 +30,10 @@ use crate::laws::Law;
 use crate::numerics::weighted_quantile;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
 use crate::simulate::strings::{Chain, Summary};
-use crate::simulate::surface::{Drive, Integration, N_SUMMARIES, SUMMARY_NAMES, noise_variance_raw, summaries};
+use crate::simulate::surface::{
+    Drive, Integration, MEAN, N_SUMMARIES, PERIOD, PERIOD_STRENGTH, SUMMARY_NAMES, noise_sd, simulate_on_clock,
+    summaries,
+};
 use crate::stability::lumped::Lumped;
 use crate::stability::map::LawSamples;
 use crate::units::RAD_S_PER_RPM;
@@ -165,8 +168,8 @@ pub struct Cycle {
 
 impl Cycle {
     fn of(observed: &Summaries, duration_s: f64) -> Self {
-        let period = observed[11];
-        let strength = observed[12];
+        let period = observed[PERIOD];
+        let strength = observed[PERIOD_STRENGTH];
         let period_s = (period > 0.0 && strength >= MIN_CYCLE_STRENGTH).then_some(period);
         Self {
             period_s,
@@ -301,7 +304,7 @@ pub struct Noise {
 }
 
 impl Noise {
-    /// The noise given, or read from the record by [`noise_variance_raw`]: an estimate where
+    /// The noise given, or read from the record by [`noise_sd`]: an estimate where
     /// the clock gives the cycle [`FINE_CLOCK_SAMPLES_PER_CYCLE`] samples or more (or shows
     /// none), else an upper bound. A bound adds more noise to the simulations than the record
     /// holds, widening the posterior rather than narrowing it wrongly.
@@ -309,7 +312,7 @@ impl Noise {
         if let Some(sd_nm) = given {
             return Self { sd_nm, how: "given" };
         }
-        let sd_nm = noise_variance_raw(torque_nm).max(0.0).sqrt();
+        let sd_nm = noise_sd(torque_nm);
         let fine = cycle
             .period_s
             .is_none_or(|p| p / period_s >= FINE_CLOCK_SAMPLES_PER_CYCLE);
@@ -449,7 +452,7 @@ pub fn infer(
         observed: observed.to_vec(),
         scales: distance.scales.to_vec(),
         cycle,
-        mean_torque_nm: observed[0] / ratio_mean,
+        mean_torque_nm: observed[MEAN] / ratio_mean,
         mean_top_drive_rpm: record.mean_top_drive_rad_s() / RAD_S_PER_RPM,
         laws,
         check,
@@ -489,9 +492,7 @@ impl Pilot {
             .with_max_len(1)
             .map(|i| {
                 let c = prior.candidate(seed, 0, i as u64);
-                let law = prior.law(c.slot);
-                let params = c.widened();
-                let run = model.simulate(law, &params[..law.n_params()], NoiseKey::of(seed, &c));
+                let run = model.simulate_candidate(prior, seed, &c);
                 (!run.diverged).then(|| (c.slot, NoiseKey::of(seed, &c), run.surface_torque_nm))
             })
             .collect();
@@ -618,13 +619,7 @@ impl Scout {
             .enumerate()
             .with_max_len(1)
             .filter_map(|(k, p)| {
-                let run = crate::simulate::surface::simulate_on_clock(
-                    &model.chain,
-                    &model.drive,
-                    p.law,
-                    &p.params,
-                    model.integration,
-                );
+                let run = simulate_on_clock(&model.chain, &model.drive, p.law, &p.params, model.integration);
                 (!run.diverged).then(|| {
                     (
                         NoiseKey::replicate(seed ^ SCOUT_STREAM, k as u64),
@@ -906,10 +901,11 @@ fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<L
 fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: u64) -> AtTheBit {
     let all: Vec<&Particle> = particles.iter().collect();
     let drawn = resample(&all, draws, seed ^ 0x4249_5400);
+    // The bit's speed and stuck share carry no measurement noise: the strings as they are.
     let runs: Vec<_> = drawn
         .par_iter()
         .with_max_len(1)
-        .map(|p| model.simulate(p.law, &p.params, NoiseKey::replicate(seed ^ 0x4249_5400, p.index)))
+        .map(|p| simulate_on_clock(&model.chain, &model.drive, p.law, &p.params, model.integration))
         .collect();
     let good: Vec<_> = runs.iter().filter(|r| !r.diverged).collect();
     let n = model.drive.omega_rad_s.len();

@@ -122,6 +122,11 @@ pub fn simulate_on_clock(
 /// How many summaries a surface torque record is reduced to.
 pub const N_SUMMARIES: usize = 15;
 
+/// Where the mean torque, the cycle's period and its autocorrelation stand among the summaries.
+pub const MEAN: usize = 0;
+pub const PERIOD: usize = 11;
+pub const PERIOD_STRENGTH: usize = 12;
+
 /// The summaries' names, in order (torques in N·m, times in s).
 pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
     "mean_nm",
