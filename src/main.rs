@@ -74,6 +74,7 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Report(cmd) => cli::report::run(&cmd),
         Command::Simulate(cmd) => cli::simulate::run(&cmd),
         Command::Surface(cmd) => cli::surface::run(&cmd),
+        Command::Coupled(cmd) => cli::coupled::run(&cmd),
         Command::Demo(cmd) => cli::demo::run(&cmd),
         Command::Parity(cmd) => cli::parity::run(&cmd),
         Command::Bench(cmd) => cli::bench::run(&cmd),

@@ -25,6 +25,7 @@
 //! friction reverses inside the step and can push the speed back above zero, hiding the
 //! crossing and replacing a clean stick by chatter.
 
+pub mod coupled;
 pub mod strings;
 pub mod surface;
 pub mod well;

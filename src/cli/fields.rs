@@ -4,6 +4,22 @@
 
 /// Each setting the library can name, with the flag that sets it.
 const FLAGS: &[(&str, &str)] = &[
+    // The coupled bit.
+    ("radius_m", "--radius-m"),
+    ("intrinsic_energy_mpa", "--intrinsic-energy-mpa"),
+    ("zeta", "--zeta"),
+    ("contact_stress_mpa", "--contact-stress-mpa"),
+    ("wear_flat_mm", "--wear-flat-mm"),
+    ("friction", "--friction"),
+    ("gamma", "--gamma"),
+    ("blades", "--blades"),
+    ("mass_kg", "--mass-kg"),
+    ("axial_stiffness_n_per_m", "--axial-stiffness-kn-m"),
+    ("axial_damping_ns_per_m", "--axial-damping-kns-m"),
+    ("map_rpm", "--map-rpm"),
+    ("map_wob_kn", "--map-wob-kn"),
+    ("map_feed_m_h", "--map-feed-m-h"),
+    ("feed_m_h", "--feed-m-h"),
     // The record and its columns.
     ("speed_column", "--speed-col"),
     ("torque_column", "--torque-col"),

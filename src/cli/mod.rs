@@ -7,6 +7,7 @@ pub mod abc;
 pub mod args;
 pub mod bench;
 pub mod check;
+pub mod coupled;
 pub mod demo;
 pub mod devices;
 pub mod evidence;
@@ -96,6 +97,11 @@ pub enum Command {
     Report(report::ReportCmd),
     /// Simulate the 1-DOF torsional drill string with a bit-rock law; writes a field-like CSV.
     Simulate(simulate::SimulateCmd),
+    /// The coupled axial-torsional bit (Richard, Germay & Detournay): cutting and friction
+    /// carried by a depth of cut that the bit's own rotation sets, simulated on the 1-DOF
+    /// string; one string's record and regime, or `--map` the regimes (steady, stick-slip, bit
+    /// bounce) over top-drive speed and weight on bit or feed.
+    Coupled(Box<coupled::CoupledCmd>),
     /// The law at the bit from what the rig streams (top-drive speed and surface torque),
     /// through strings simulated per candidate (ABC-SMC on the cycle's summaries); the model
     /// choice checked by re-simulation, and what the surface implies at the bit.
