@@ -70,6 +70,7 @@ const KERNELS: &[(&str, &[&str])] = &[
     ("kernel_sums", &["shared/laws.wgsl", "kernel_sums.wgsl"]),
     ("slopes", &["shared/laws.wgsl", "slopes.wgsl"]),
     ("stability", &["stability.wgsl"]),
+    ("coupled", &["coupled.wgsl"]),
     ("strings", &["shared/laws.wgsl", "strings.wgsl"]),
     (
         "candidates",

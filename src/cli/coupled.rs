@@ -3,6 +3,8 @@
 //! (or feed), one simulated string per cell.
 
 use super::args::{LumpedArgs, finite_number};
+use bitrock::eval::Backend;
+use bitrock::eval::strings::Ran;
 use bitrock::simulate::coupled::{self, Assembly, Axial, Bit, CoupledJob, CoupledSummary, Sample, Schedule};
 use bitrock::stability::map;
 use bitrock::units::RAD_S_PER_RPM;
@@ -88,6 +90,10 @@ pub struct CoupledCmd {
     /// The map's feeds, m/h, as MIN:MAX:COUNT (with --feed-m-h).
     #[arg(long, default_value = "10:60:6", value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_feed_m_h: String,
+    /// Where the map's strings are integrated: gpu, cpu, or auto (the GPU when an adapter
+    /// exists, else the CPU, saying so).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
     /// The record (one string: time, bit speed, torque, WOB, axial speed, rate of penetration)
     /// or the map (one row per cell) as CSV.
     #[arg(long, value_name = "FILE")]
@@ -167,7 +173,7 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_record(&samples, file))?;
     }
-    let steady = job.steady();
+    let steady = job.steady(&assembly);
     let mut out = super::print::stdout();
     if cmd.json {
         let mut value = summary_json(&summary, cmd.sample_hz);
@@ -270,7 +276,13 @@ fn run_map(cmd: &CoupledCmd, assembly: &Assembly, schedule: &Schedule) -> anyhow
             jobs.push(cmd.job(r, Some(a))?);
         }
     }
-    let summaries = coupled::integrate_batch(assembly, schedule, &jobs);
+    let (summaries, ran) = bitrock::eval::coupled::integrate(assembly, schedule, &jobs, cmd.backend, &mut |line| {
+        super::print::note(format_args!("{line}"))
+    })?;
+    let ran = match ran {
+        Ran::Gpu(name) => format!("GPU {name}"),
+        Ran::Cpu => "CPU".to_string(),
+    };
     if let Some(path) = &cmd.out {
         bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
             let mut w = csv::Writer::from_writer(file);
@@ -309,14 +321,16 @@ fn run_map(cmd: &CoupledCmd, assembly: &Assembly, schedule: &Schedule) -> anyhow
         writeln!(
             out,
             "{}",
-            serde_json::to_string_pretty(&json!({"omega_rpm": rpm, axis_name: axis, "cells": grid}))?
+            serde_json::to_string_pretty(&json!({"omega_rpm": rpm, axis_name: axis, "cells": grid, "backend": ran}))?
         )?;
         return Ok(ExitCode::SUCCESS);
     }
     writeln!(
         out,
-        "regimes ({} s after {} s settling; . steady, S stick-slip, B bit bounce, X both, ! diverged)",
-        cmd.duration_s, cmd.settle_s
+        "regimes ({} s after {} s settling, {} strings on the {ran}; . steady, S stick-slip, B bit bounce, X both, ! diverged)",
+        cmd.duration_s,
+        cmd.settle_s,
+        jobs.len()
     )?;
     write!(out, "{:>9}", format!("rpm\\{axis_unit}"))?;
     for a in &axis {

@@ -5,6 +5,7 @@ pub mod cpu;
 pub mod gpu;
 mod problem;
 pub mod records;
+pub mod coupled;
 pub mod strings;
 pub mod surface;
 

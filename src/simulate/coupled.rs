@@ -300,18 +300,23 @@ impl CoupledJob {
         }
     }
 
-    /// Steady drilling at this drive: under a weight, d = (W₀ − a·l·σ)/(N·a·ζ·ε), none where W₀
-    /// does not exceed the wear flats' contact; under a feed, d = 2π·V_f/(N·Ω₀).
-    pub fn steady(&self) -> Steady {
+    /// Steady drilling at this drive on `assembly`: under a weight W₀, part of it spent on the
+    /// axial damping at the rate of penetration, N·d_n·(a·ζ·ε + C_a·Ω₀/2π) = W₀ − a·l·σ, none
+    /// where W₀ does not exceed the wear flats' contact; under a feed, d_n = 2π·V_f/(N·Ω₀).
+    pub fn steady(&self, assembly: &Assembly) -> Steady {
         let b = &self.bit;
         let n = f64::from(b.blades);
+        let turns_per_s = self.omega_rad_s / std::f64::consts::TAU;
         let depth = match self.axial {
-            Axial::Weight { wob_n } => ((wob_n - b.contact_weight_n()) / (n * b.cutting_weight_n_per_m())).max(0.0),
-            Axial::Feed { rate_m_s } => std::f64::consts::TAU * rate_m_s / (n * self.omega_rad_s),
+            Axial::Weight { wob_n } => ((wob_n - b.contact_weight_n())
+                / (n * (b.cutting_weight_n_per_m() + assembly.axial_damping_ns_per_m * turns_per_s)))
+                .max(0.0),
+            Axial::Feed { rate_m_s } => rate_m_s / (n * turns_per_s),
         };
         let d = n * depth;
+        let rate_m_s = d * turns_per_s;
         let wob_n = match self.axial {
-            Axial::Weight { wob_n } => wob_n,
+            Axial::Weight { wob_n } => wob_n - assembly.axial_damping_ns_per_m * rate_m_s,
             Axial::Feed { .. } => b.cutting_weight_n_per_m() * d + b.contact_weight_n(),
         };
         // The wear flats carry what the cutting does not (all of their contact where the bit
@@ -319,7 +324,7 @@ impl CoupledJob {
         let contact = wob_n - b.cutting_weight_n_per_m() * d;
         Steady {
             depth_per_blade_m: depth,
-            rate_m_s: d * self.omega_rad_s / std::f64::consts::TAU,
+            rate_m_s,
             wob_n,
             torque_nm: b.cutting_torque_nm_per_m() * d + b.friction_arm_m() * contact,
         }
@@ -504,7 +509,7 @@ impl CoupledString {
     /// A string drilling steadily at its drive, its bit speed kicked by the job's kick.
     pub fn new(assembly: &Assembly, job: &CoupledJob) -> Self {
         let b = &job.bit;
-        let steady = job.steady();
+        let steady = job.steady(assembly);
         let sector = b.sector_rad();
         let cell = sector / RING_CELLS as f64;
         let k_t = assembly.torsion.stiffness_nm_per_rad();
@@ -849,7 +854,7 @@ mod tests {
     fn steady_drilling_has_the_closed_form_forces_and_stays() {
         // The public set at 30 rpm and 30 m/h: d = 2π·V/Ω₀ = 16.67 mm a turn.
         let j = job(30.0, FEED_30_M_H, 0.0);
-        let s = j.steady();
+        let s = j.steady(&Assembly::default());
         let d = 4.0 * s.depth_per_blade_m;
         assert!((d - 0.016_667).abs() < 1e-6, "{d}");
         let b = Bit::default();
@@ -863,8 +868,12 @@ mod tests {
             assert!((f.torque_nm - s.torque_nm).abs() < 1e-6 * s.torque_nm, "{f:?}");
             assert!((f.depth_per_blade_m - s.depth_per_blade_m).abs() < 1e-9);
         }
-        // A weight gives back the depth its feed gave.
-        let w = job(30.0, Axial::Weight { wob_n: s.wob_n }, 0.0).steady();
+        // A weight gives back the depth its feed gave, undamped.
+        let undamped = Assembly {
+            axial_damping_ns_per_m: 0.0,
+            ..Assembly::default()
+        };
+        let w = job(30.0, Axial::Weight { wob_n: s.wob_n }, 0.0).steady(&undamped);
         assert!((w.depth_per_blade_m - s.depth_per_blade_m).abs() < 1e-12);
         assert!((w.rate_m_s - 30.0 / 3600.0).abs() < 1e-12);
     }
@@ -873,7 +882,7 @@ mod tests {
     fn a_weight_within_the_wear_flats_contact_does_not_drill() {
         let b = Bit::default();
         let j = job(60.0, Axial::Weight { wob_n: 0.5 * b.contact_weight_n() }, 0.0);
-        let st = j.steady();
+        let st = j.steady(&Assembly::default());
         assert!(st.depth_per_blade_m == 0.0 && st.rate_m_s == 0.0);
         let sched = Schedule::new(1e-3, 10.0, 1.0, 5.0).unwrap();
         let s = integrate(&Assembly::default(), &sched, &j);

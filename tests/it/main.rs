@@ -4,6 +4,7 @@ mod abc;
 mod advice;
 mod batched;
 mod cli;
+mod coupled;
 mod evidence;
 mod fit;
 mod gpu;

@@ -38,9 +38,10 @@ def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60
     feed = feed_m_h is not None
     drive = feed_m_h / 3600.0 if feed else wob_kn * 1e3
     # Steady drilling at the drive.
-    dn0 = 2.0 * math.pi * drive / (n * omega) if feed else max((drive - contact) / (n * cut_w), 0.0)
-    v0 = n * dn0 * omega / (2.0 * math.pi)
-    w0 = cut_w * n * dn0 + contact if feed else drive
+    turns = omega / (2.0 * math.pi)
+    dn0 = drive / (n * turns) if feed else max((drive - contact) / (n * (cut_w + s["c_a"] * turns)), 0.0)
+    v0 = n * dn0 * turns
+    w0 = cut_w * n * dn0 + contact if feed else drive - s["c_a"] * v0
     t0 = cut_t * n * dn0 + arm * (w0 - cut_w * n * dn0)
 
     # The history: times' angles φ_k and the surface S_k left at each, steady before t = 0.

@@ -10,6 +10,7 @@
 //! [`Shape`]s, chosen by measurement per adapter ([`tune`]) or by `BITROCK_GPU_SHAPE`.
 
 pub mod candidates;
+pub mod coupled;
 pub(crate) mod file_laws;
 pub mod kernel_sums;
 pub(crate) mod law_cases;
@@ -57,6 +58,7 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
         ("slopes", slopes_source(), &["main"]),
         ("stability", stability_source(), &["main"]),
         ("strings", strings_source(), &["main"]),
+        ("coupled", coupled_source(), &["main"]),
         ("test_uniform_between", test_uniform_between_source(), &["main"]),
     ]
 }
@@ -120,6 +122,10 @@ fn strings_source() -> String {
 
 fn stability_source() -> String {
     kernel!("stability").to_string()
+}
+
+fn coupled_source() -> String {
+    kernel!("coupled").to_string()
 }
 
 fn candidates_source() -> String {

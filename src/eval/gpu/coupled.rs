@@ -1,0 +1,199 @@
+//! Runs `shaders/coupled.wgsl`: a batch of coupled axial-torsional strings (RGD), one per
+//! invocation, each from its own bit, top-drive speed and axial drive, to its summary. The GPU
+//! twin of [`crate::simulate::coupled::integrate_batch`].
+
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
+use crate::simulate::coupled::{Assembly, CoupledJob, CoupledSummary, STUCK_SPEED_RAD_S, Schedule};
+use bytemuck::{Pod, Zeroable};
+
+/// Words per string of the kernel's buffers. Keep in sync with shaders/coupled.wgsl.
+const INPUT_WORDS: usize = 12;
+const STATE_WORDS: usize = 7 + crate::simulate::coupled::RING_CELLS;
+const SUMMARY_WORDS: usize = 23;
+
+/// Strings held on the device at once: 1,128 B a string (inputs 48, state and ring 988,
+/// summary 92), 296 MB for the chunk.
+const STRINGS_PER_CHUNK: usize = 1 << 18;
+
+/// Most steps one invocation integrates per dispatch: lavapipe stops an invocation's loops
+/// after 65,535 iterations together, and a step runs up to about six (the step, the cells it
+/// crosses, a share of a rebase), so each dispatch integrates a slice of the sample periods.
+pub const STEPS_PER_SLICE: u32 = 6_000;
+
+/// Strings per dispatch: each dispatch is its own submission, so that no single one runs long
+/// enough for a driver's watchdog.
+const STRINGS_PER_DISPATCH: usize = 1 << 14;
+
+/// Host twin of `CoupledJob` in shaders/coupled.wgsl. Keep in sync.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct KernelJob {
+    first: u32,
+    count: u32,
+    row_width: u32,
+    steps_per_sample: u32,
+    settle_samples: u32,
+    record_samples: u32,
+    feed: u32,
+    first_period: u32,
+    end_period: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+    dt_s: f32,
+    mass_kg: f32,
+    inertia_kg_m2: f32,
+    k_t: f32,
+    c_t: f32,
+    k_a: f32,
+    c_a: f32,
+    stuck_speed: f32,
+}
+
+/// Integrates every string of `jobs` on the GPU: their summaries, in order. Every job must
+/// share one kind of axial drive (a weight or a feed).
+pub fn integrate_batch(
+    assembly: &Assembly,
+    schedule: &Schedule,
+    jobs: &[CoupledJob],
+) -> Result<Vec<CoupledSummary>, GpuError> {
+    let feed = jobs.first().is_some_and(|j| j.axial.is_feed());
+    assert!(
+        jobs.iter().all(|j| j.axial.is_feed() == feed),
+        "one batch, one kind of axial drive"
+    );
+    if schedule.steps_per_sample > STEPS_PER_SLICE {
+        return Err(GpuError::TooLarge(format!(
+            "{} steps per sample period: the GPU integrates at most {STEPS_PER_SLICE} per \
+             dispatch; sample more often or take a longer step",
+            schedule.steps_per_sample
+        )));
+    }
+    let ctx = super::context()?;
+    let kernel = ctx.kernel(
+        "coupled",
+        "main",
+        super::coupled_source,
+        &[UNIFORM, STORAGE_READ, STORAGE_WRITE, STORAGE_WRITE],
+        &[],
+    )?;
+    let t = &assembly.torsion;
+    let job = KernelJob {
+        steps_per_sample: schedule.steps_per_sample,
+        settle_samples: schedule.settle_samples,
+        record_samples: schedule.record_samples,
+        feed: u32::from(feed),
+        dt_s: schedule.dt_s as f32,
+        mass_kg: assembly.mass_kg as f32,
+        inertia_kg_m2: t.inertia_kg_m2 as f32,
+        k_t: t.stiffness_nm_per_rad() as f32,
+        c_t: t.damping_nms_per_rad() as f32,
+        k_a: assembly.axial_stiffness_n_per_m as f32,
+        c_a: assembly.axial_damping_ns_per_m as f32,
+        stuck_speed: STUCK_SPEED_RAD_S as f32,
+        ..KernelJob::zeroed()
+    };
+    let mut out = Vec::with_capacity(jobs.len());
+    for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
+        out.extend(run_chunk(ctx, &kernel, job, chunk)?);
+    }
+    Ok(out)
+}
+
+fn run_chunk(
+    ctx: &super::GpuContext,
+    kernel: &super::Kernel,
+    mut job: KernelJob,
+    jobs: &[CoupledJob],
+) -> Result<Vec<CoupledSummary>, GpuError> {
+    let n = jobs.len();
+    let mut inputs = vec![0.0f32; INPUT_WORDS * n];
+    for (j, row) in jobs.iter().zip(inputs.chunks_mut(INPUT_WORDS)) {
+        for (slot, v) in row.iter_mut().zip(j.bit.values()) {
+            *slot = v as f32;
+        }
+        row[8] = j.omega_rad_s as f32;
+        row[9] = j.axial.value() as f32;
+        row[10] = j.kick_rad_s as f32;
+    }
+    let copy = wgpu::BufferUsages::COPY_DST;
+    let storage = wgpu::BufferUsages::STORAGE;
+    let state_bytes = 4 * (STATE_WORDS * n) as u64;
+    let summary_bytes = 4 * (SUMMARY_WORDS * n) as u64;
+    let job_buffer = ctx.buffer(
+        "coupled job",
+        size_of::<KernelJob>() as u64,
+        wgpu::BufferUsages::UNIFORM | copy,
+    )?;
+    let input_buffer = ctx.buffer("coupled inputs", 4 * inputs.len() as u64, storage | copy)?;
+    let state_buffer = ctx.buffer("coupled states", state_bytes, storage)?;
+    let summary_buffer = ctx.buffer(
+        "coupled summaries",
+        summary_bytes,
+        storage | wgpu::BufferUsages::COPY_SRC,
+    )?;
+    let staging = ctx.buffer("coupled staging", summary_bytes, wgpu::BufferUsages::MAP_READ | copy)?;
+    ctx.queue.write_buffer(&input_buffer, 0, bytemuck::cast_slice(&inputs));
+    let group = ctx.bind_group(
+        "coupled",
+        &kernel.layout,
+        &[&job_buffer, &input_buffer, &state_buffer, &summary_buffer],
+    )?;
+    let new_encoder = || {
+        ctx.device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("coupled") })
+    };
+    let mut encoder = new_encoder();
+    let periods = job.settle_samples + job.record_samples;
+    let per_slice = (STEPS_PER_SLICE / job.steps_per_sample).max(1);
+    let mut first_period = 0;
+    while first_period < periods {
+        job.first_period = first_period;
+        job.end_period = (first_period + per_slice).min(periods);
+        for first in (0..n).step_by(STRINGS_PER_DISPATCH) {
+            let count = STRINGS_PER_DISPATCH.min(n - first);
+            let (x, y, row_width) = ctx.grid(count as u32, WORKGROUP_SIZE);
+            job.first = first as u32;
+            job.count = count as u32;
+            job.row_width = row_width;
+            ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
+            super::encode_dispatch(&mut encoder, "coupled", &kernel.pipeline, &group, (x, y));
+            if job.end_period < periods || first + STRINGS_PER_DISPATCH < n {
+                // The next dispatch rewrites the job uniform: submit this one first.
+                ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
+                encoder = new_encoder();
+            }
+        }
+        first_period = job.end_period;
+    }
+    encoder.copy_buffer_to_buffer(&summary_buffer, 0, &staging, 0, summary_bytes);
+    let raw = ctx.finish_and_read(encoder, &staging, summary_bytes)?;
+    let sums: &[f32] = bytemuck::cast_slice(&raw);
+    Ok(sums
+        .chunks(SUMMARY_WORDS)
+        .map(|o| {
+            let count = |k: usize| o[k].to_bits();
+            let value = |k: usize| f64::from(o[k]);
+            CoupledSummary {
+                samples: count(0),
+                stuck: count(1),
+                stick_onsets: count(2),
+                first_onset: count(3),
+                last_onset: count(4),
+                off_bottom: count(5),
+                backward: count(6),
+                speed_min_rad_s: value(7),
+                speed_max_rad_s: value(8),
+                speed_sum_rad_s: value(9),
+                axial_speed_sum_m_s: value(10),
+                wob_min_n: value(11),
+                wob_max_n: value(12),
+                wob_sum_n: value(13),
+                torque_min_nm: value(14),
+                torque_max_nm: value(15),
+                torque_sum_nm: value(16),
+                diverged: count(17) != 0,
+            }
+        })
+        .collect())
+}
