@@ -150,7 +150,7 @@ CASES = [
     (dict(rpm=45.0, wob_kn=150.0), BIT, ()),
     (dict(rpm=60.0, wob_kn=160.0), BIT, ()),
     (dict(rpm=80.0, wob_kn=220.0), BIT, ()),
-    (dict(rpm=40.0, wob_kn=260.0), *SOFT),
+    (dict(rpm=60.0, wob_kn=260.0), *SOFT),
     (dict(rpm=30.0, feed_m_h=30.0), BIT, ()),
 ]
 DT_S = 1e-4
