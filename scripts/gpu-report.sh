@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Measurements on a machine with a GPU, results under $OUT (default ./gpu-report): parity of the
-# scorers, the simulated strings' throughput, the simulated maps on GPU and CPU (compared
+# scorers, the simulated strings' throughput (the torsional and the coupled bit's), the simulated maps on GPU and CPU (compared
 # afterwards cell by cell), the evidence's timing and the benchmark with the scoring shapes
 # re-measured. Run from the project's root with the release binary built
 # (`cargo build --release`); see docs/benchmarks.md for how it is run on a lent NVIDIA machine.
@@ -21,6 +21,8 @@ step devices 30 "$B" devices
 step parity 120 "$B" parity
 step strings_gpu 150 "$B" bench --strings --backend gpu --reps 3 --strings-n 131072 --json
 step strings_cpu 120 "$B" bench --strings --backend cpu --reps 1 --strings-n 16384 --quick --json
+step coupled_gpu 150 "$B" bench --coupled --backend gpu --reps 3 --strings-n 100000 --json
+step coupled_map_gpu 60 "$B" coupled --map --wob-kn 150 --map-rpm 20:220:41 --map-wob-kn 60:300:25 --backend gpu --json
 step map_100x100x200_gpu 120 "$B" stability --law m2 --params 13,6.5,0.3 --simulate --at-rpm 60 --at-kn 244.2 \
     --sim-omega-rpm 20:220:100 --sim-wob-kn 20:700:100 --sim-samples 200 --backend gpu --json
 for b in gpu cpu; do

@@ -15,6 +15,7 @@ use crate::prior::{LawBox, Prior};
 use serde::Serialize;
 use std::time::Instant;
 
+pub mod coupled;
 pub mod smc_comparison;
 pub mod strings;
 pub mod surface;

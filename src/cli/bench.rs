@@ -52,8 +52,14 @@ pub struct BenchCmd {
     /// wall time, strings per particle and rejection ABC's to the same tolerance.
     #[arg(long, conflicts_with_all = ["selection", "smc", "watch", "strings"])]
     pub surface: bool,
-    /// Strings per batch of --strings [default: 65,536; 4,096 with --quick].
-    #[arg(long, requires = "strings", value_name = "N")]
+    /// Measure only the coupled axial-torsional bit's simulator (`bitrock coupled`):
+    /// string-seconds per second, 16,384 strings × 60 s at 1e-4 s (1,024 with --quick), on
+    /// 40–160 rpm and 100–260 kN.
+    #[arg(long, conflicts_with_all = ["selection", "smc", "watch", "strings", "surface"])]
+    pub coupled: bool,
+    /// Strings per batch of --strings or --coupled [default: 65,536 and 16,384; 4,096 and
+    /// 1,024 with --quick].
+    #[arg(long, value_name = "N")]
     pub strings_n: Option<usize>,
     /// Measure the GPU scoring shapes again, even where this adapter's table is cached, and
     /// keep the new table.
@@ -73,6 +79,9 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     }
     if cmd.strings {
         return strings(cmd);
+    }
+    if cmd.coupled {
+        return coupled(cmd);
     }
     if cmd.surface {
         return surface(cmd);
@@ -369,6 +378,51 @@ fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         .map(|(l, p)| format!("{l} {p:.3}"))
         .collect();
     writeln!(out, "P(law): {}; {}", probabilities.join(", "), report.verdict)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--coupled`: the coupled bit's simulator throughput, per backend.
+fn coupled(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
+    let opts = bitrock::bench::coupled::CoupledBenchOptions {
+        strings: cmd.strings_n.unwrap_or(if cmd.quick { 1_024 } else { 16_384 }),
+        seconds: 60.0,
+        dt_s: 1e-4,
+        backends: match cmd.backend {
+            Some(Backend::Auto) | None => vec![Backend::Gpu, Backend::Cpu],
+            Some(b) => vec![b],
+        },
+        repetitions: cmd.reps,
+    };
+    if opts.strings == 0 {
+        return Err(Error::setting("strings_n", "must be at least 1").into());
+    }
+    let report = bitrock::bench::coupled::run(&opts, &mut say(cmd, ""))?;
+    let mut out = super::print::stdout();
+    if json_report(cmd, &mut out, &report)? {
+        return Ok(ExitCode::SUCCESS);
+    }
+    writeln!(
+        out,
+        "coupled bit (RGD) strings, dt = {} s, medians of {} repetitions (min–max)",
+        opts.dt_s, opts.repetitions
+    )?;
+    for m in &report {
+        writeln!(
+            out,
+            "{:<40} {:>8} strings × {:>5.1} s  {:>8.3} s ({:.3}–{:.3})  {:.3e} string-s/s  steady {:.2}, stick-slip {:.2}, bounce {:.2}, both {:.2}",
+            m.backend,
+            m.strings,
+            m.seconds_per_string,
+            m.wall_s.median,
+            m.wall_s.min,
+            m.wall_s.max,
+            m.string_seconds_per_s,
+            m.regimes[0],
+            m.regimes[1],
+            m.regimes[2],
+            m.regimes[3]
+        )?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 
