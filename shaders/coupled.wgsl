@@ -327,7 +327,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 stuck_count = stuck_count + 1u;
             }
             last_stuck = stuck;
-            off_bottom = off_bottom + select(0u, 1u, f.dn <= 0.0);
+            off_bottom = off_bottom + select(0u, 1u, f.dn < 0.0);
             backward = backward + select(0u, 1u, s.speed < 0.0);
             speed_min = min(speed_min, s.speed);
             speed_max = max(speed_max, s.speed);

@@ -11,7 +11,7 @@
 //!
 //! ```text
 //! M V' = F_a − W,   I Ω' = k u + c (Ω₀ − Ω) − T,   U' = V,   u' = Ω₀ − Ω
-//! W = W_c + g_a·W_f,   T = T_c + g_t·T_f     (on bottom: d > 0; off bottom W = T = 0)
+//! W = W_c + g_a·W_f,   T = T_c + g_t·T_f     (on bottom: d ≥ 0; off bottom W = T = 0)
 //! W_c = a·ζ·ε·d,   T_c = ½·a²·ε·d,   W_f = a·l·σ,   T_f = ½·a·μ·γ·g_a·W_f
 //! ```
 //!
@@ -341,7 +341,7 @@ pub struct CoupledSummary {
     pub stick_onsets: u32,
     pub first_onset: u32,
     pub last_onset: u32,
-    /// Samples with the bit off bottom (depth of cut ≤ 0): bit bounce.
+    /// Samples with the bit off bottom (depth of cut < 0): bit bounce.
     pub off_bottom: u32,
     /// Samples with the bit turning backward.
     pub backward: u32,
@@ -456,7 +456,7 @@ pub struct Sample {
     pub axial_speed_m_s: f64,
     /// Rate at which the blades deepen the hole: N·d_n·Ω/2π while cutting (m/s).
     pub cutting_rate_m_s: f64,
-    /// Depth of cut per blade (m); ≤ 0 off bottom.
+    /// Depth of cut per blade (m); negative off bottom.
     pub depth_per_blade_m: f64,
 }
 
@@ -795,7 +795,7 @@ impl Accumulator {
             o.stuck += 1;
         }
         self.last_stuck = stuck;
-        o.off_bottom += u32::from(s.depth_per_blade_m <= 0.0);
+        o.off_bottom += u32::from(s.depth_per_blade_m < 0.0);
         o.backward += u32::from(s.bit_speed_rad_s < 0.0);
         o.speed_min_rad_s = o.speed_min_rad_s.min(s.bit_speed_rad_s);
         o.speed_max_rad_s = o.speed_max_rad_s.max(s.bit_speed_rad_s);

@@ -117,7 +117,7 @@ def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60
                     onsets += 1
                 stuck += 1
             last_stuck = is_stuck
-            off += dn <= 0.0
+            off += dn < 0.0
             v_sum += v
             samples += 1
         # Keep the history to a few sectors behind the bit.
