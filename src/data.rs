@@ -6,6 +6,7 @@
 //! `_kn`, `_n`, time `_s`). Every refusal names the file, and where it applies the line and the
 //! column.
 
+pub mod drilling;
 pub mod surface;
 
 use crate::error::{Error, Result};

@@ -11,6 +11,8 @@
 //! a lower bound, its mirror below an upper one, lb + (ub − lb)(sin u + 1)/2 between both),
 //! which leave the optimiser unconstrained.
 
+pub mod coupled;
+
 use crate::data::{FieldData, SAME_SPEED_TOLERANCE, Samples};
 use crate::error::{Error, Result};
 use crate::laws::{Law, PAPER_W_REF_N};

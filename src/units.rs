@@ -133,6 +133,56 @@ impl ForceUnit {
     }
 }
 
+/// Unit of an axial speed or rate of penetration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum RateUnit {
+    /// Metres per hour (drilling's).
+    #[cfg_attr(feature = "cli", value(name = "m_h"))]
+    #[serde(rename = "m/h")]
+    MH,
+    /// Metres per second.
+    #[cfg_attr(feature = "cli", value(name = "m_s"))]
+    #[serde(rename = "m/s")]
+    MS,
+    /// Feet per hour.
+    #[cfg_attr(feature = "cli", value(name = "ft_h"))]
+    #[serde(rename = "ft/h")]
+    FtH,
+}
+
+impl RateUnit {
+    /// m/s per one of this unit.
+    pub fn metres_per_second(self) -> f64 {
+        match self {
+            RateUnit::MH => 1.0 / 3600.0,
+            RateUnit::MS => 1.0,
+            RateUnit::FtH => 0.3048 / 3600.0,
+        }
+    }
+    /// Printed name.
+    pub fn label(self) -> &'static str {
+        match self {
+            RateUnit::MH => "m/h",
+            RateUnit::MS => "m/s",
+            RateUnit::FtH => "ft/h",
+        }
+    }
+    /// The unit a column name's suffix declares (`rop_m_h`, `axial_speed_m_s`, `rop_ft_h`).
+    pub fn from_suffix(column: &str) -> Option<Self> {
+        let c = column.to_ascii_lowercase();
+        if c.ends_with("_m_h") {
+            Some(RateUnit::MH)
+        } else if c.ends_with("_m_s") {
+            Some(RateUnit::MS)
+        } else if c.ends_with("_ft_h") {
+            Some(RateUnit::FtH)
+        } else {
+            None
+        }
+    }
+}
+
 /// A unit a record's column may be in: declared by the column name's suffix, or by a setting.
 pub trait ColumnUnit: Copy + PartialEq {
     /// The unit the suffix of the column name `column` declares, if any.
@@ -154,7 +204,7 @@ macro_rules! column_unit {
         }
     )*};
 }
-column_unit!(SpeedUnit, TorqueUnit, ForceUnit);
+column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit);
 
 #[cfg(test)]
 mod tests {

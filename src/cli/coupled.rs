@@ -7,7 +7,9 @@ use bitrock::eval::Backend;
 use bitrock::eval::strings::Ran;
 use bitrock::simulate::coupled::{self, Assembly, Axial, Bit, CoupledJob, CoupledSummary, Sample, Schedule};
 use bitrock::stability::map;
-use bitrock::units::RAD_S_PER_RPM;
+use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
+use bitrock::fit::coupled::{CoupledCalibration, bit_of, calibrate};
+use bitrock::units::{ForceUnit, RAD_S_PER_RPM, RateUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use serde_json::json;
 use std::io::Write;
@@ -15,6 +17,9 @@ use std::process::ExitCode;
 
 /// m/h in m/s.
 const M_S_PER_M_H: f64 = 1.0 / 3600.0;
+
+/// Posterior draws a calibration's intervals are read from.
+const CALIBRATION_DRAWS: usize = 4_000;
 
 #[derive(Debug, Args)]
 pub struct CoupledCmd {
@@ -94,6 +99,20 @@ pub struct CoupledCmd {
     /// exists, else the CPU, saying so).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Calibrate the bit on a drilling record (bit speed, torque on bit, weight on bit, rate of
+    /// penetration; the bit's axial speed where present): ε, ζ, the wear flats' contact force
+    /// and μ·γ, with 90 % intervals; with --map, the regimes' probabilities over the posterior.
+    /// --radius-m, --contact-stress-mpa, --gamma and --blades stay as given.
+    #[arg(long, value_name = "RECORD")]
+    pub calibrate: Option<std::path::PathBuf>,
+    #[command(flatten)]
+    pub columns: DrillingArgs,
+    /// Posterior draws each map cell is simulated for (with --calibrate --map).
+    #[arg(long, default_value_t = 20, value_name = "S", requires = "calibrate")]
+    pub samples: usize,
+    /// Seed of the posterior draws.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
     /// The record (one string: time, bit speed, torque, WOB, axial speed, rate of penetration)
     /// or the map (one row per cell) as CSV.
     #[arg(long, value_name = "FILE")]
@@ -104,6 +123,54 @@ pub struct CoupledCmd {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The columns of a drilling record and their units.
+#[derive(Debug, Args)]
+pub struct DrillingArgs {
+    /// Bit speed column [default: the one whose name holds 'speed', not 'axial'].
+    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    pub speed_col: Option<String>,
+    /// Torque-on-bit column [default: the one whose name holds 'torque'].
+    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    pub torque_col: Option<String>,
+    /// Weight-on-bit column [default: the one whose name holds 'wob'].
+    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    pub wob_col: Option<String>,
+    /// Rate-of-penetration column [default: the one whose name holds 'rop' or 'penetration'].
+    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    pub rop_col: Option<String>,
+    /// The bit's axial speed column [default: the one whose name holds 'axial', if any].
+    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    pub axial_speed_col: Option<String>,
+    /// Unit of the bit speed [default: from its name's suffix].
+    #[arg(long, value_enum, requires = "calibrate")]
+    pub speed_unit: Option<SpeedUnit>,
+    /// Unit of the torque on bit [default: from its name's suffix].
+    #[arg(long, value_enum, requires = "calibrate")]
+    pub torque_unit: Option<TorqueUnit>,
+    /// Unit of the weight on bit [default: from its name's suffix].
+    #[arg(long, value_enum, requires = "calibrate")]
+    pub wob_unit: Option<ForceUnit>,
+    /// Unit of the rate of penetration and axial speed [default: from their names' suffixes].
+    #[arg(long, value_enum, requires = "calibrate")]
+    pub rop_unit: Option<RateUnit>,
+}
+
+impl DrillingArgs {
+    fn options(&self) -> DrillingOptions {
+        DrillingOptions {
+            speed_column: self.speed_col.clone(),
+            torque_column: self.torque_col.clone(),
+            wob_column: self.wob_col.clone(),
+            rop_column: self.rop_col.clone(),
+            axial_speed_column: self.axial_speed_col.clone(),
+            speed_unit: self.speed_unit,
+            torque_unit: self.torque_unit,
+            wob_unit: self.wob_unit,
+            rop_unit: self.rop_unit,
+        }
+    }
 }
 
 impl CoupledCmd {
@@ -143,8 +210,12 @@ impl CoupledCmd {
     }
 
     fn job(&self, omega_rpm: f64, axial: Option<f64>) -> anyhow::Result<CoupledJob> {
+        self.job_with(self.bit(), omega_rpm, axial)
+    }
+
+    fn job_with(&self, bit: Bit, omega_rpm: f64, axial: Option<f64>) -> anyhow::Result<CoupledJob> {
         let job = CoupledJob {
-            bit: self.bit(),
+            bit,
             omega_rad_s: omega_rpm * RAD_S_PER_RPM,
             axial: self.axial(axial),
             kick_rad_s: self.kick_rpm * RAD_S_PER_RPM,
@@ -160,8 +231,23 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
+    let calibration = match &cmd.calibrate {
+        Some(path) => {
+            let record = DrillingRecord::read(path, &cmd.columns.options())?;
+            cmd.bit().validate()?;
+            let c = calibrate(&record, cmd.radius_m, CALIBRATION_DRAWS, cmd.seed)?;
+            if let Some(w) = &c.warning {
+                super::print::note(format_args!("warning: {w}"));
+            }
+            Some(c)
+        }
+        None => None,
+    };
     if cmd.map {
-        return run_map(cmd, &assembly, &schedule);
+        return run_map(cmd, &assembly, &schedule, calibration.as_ref());
+    }
+    if let Some(c) = &calibration {
+        return print_calibration(cmd, c);
     }
     let job = cmd.job(cmd.omega_rpm, None)?;
     let mut samples = Vec::new();
@@ -262,27 +348,50 @@ fn write_record(samples: &[Sample], out: &mut dyn Write) -> std::io::Result<()> 
 
 /// `--map`: one string per cell, the regimes as a table (speeds down, weights across) or JSON,
 /// the cells to `--out`.
-fn run_map(cmd: &CoupledCmd, assembly: &Assembly, schedule: &Schedule) -> anyhow::Result<ExitCode> {
-    let feed = cmd.wob_kn.is_none();
+/// The map's speeds (rpm) and its second axis (values, name, unit): weights or feeds.
+fn axes(cmd: &CoupledCmd) -> anyhow::Result<(Vec<f64>, Vec<f64>, &'static str, &'static str)> {
     let rpm = map::parse_axis(&cmd.map_rpm, "map_rpm")?;
-    let (axis, axis_name, axis_unit) = if feed {
-        (map::parse_axis(&cmd.map_feed_m_h, "map_feed_m_h")?, "feed_m_h", "m/h")
+    Ok(if cmd.wob_kn.is_none() {
+        (rpm, map::parse_axis(&cmd.map_feed_m_h, "map_feed_m_h")?, "feed_m_h", "m/h")
     } else {
-        (map::parse_axis(&cmd.map_wob_kn, "map_wob_kn")?, "wob_kn", "kN")
-    };
-    let mut jobs = Vec::with_capacity(rpm.len() * axis.len());
-    for &r in &rpm {
-        for &a in &axis {
-            jobs.push(cmd.job(r, Some(a))?);
-        }
-    }
-    let (summaries, ran) = bitrock::eval::coupled::integrate(assembly, schedule, &jobs, cmd.backend, &mut |line| {
+        (rpm, map::parse_axis(&cmd.map_wob_kn, "map_wob_kn")?, "wob_kn", "kN")
+    })
+}
+
+/// Every job's summary on the command's backend, and where they ran.
+fn integrate(
+    cmd: &CoupledCmd,
+    assembly: &Assembly,
+    schedule: &Schedule,
+    jobs: &[CoupledJob],
+) -> anyhow::Result<(Vec<CoupledSummary>, String)> {
+    let (summaries, ran) = bitrock::eval::coupled::integrate(assembly, schedule, jobs, cmd.backend, &mut |line| {
         super::print::note(format_args!("{line}"))
     })?;
     let ran = match ran {
         Ran::Gpu(name) => format!("GPU {name}"),
         Ran::Cpu => "CPU".to_string(),
     };
+    Ok((summaries, ran))
+}
+
+fn run_map(
+    cmd: &CoupledCmd,
+    assembly: &Assembly,
+    schedule: &Schedule,
+    calibration: Option<&CoupledCalibration>,
+) -> anyhow::Result<ExitCode> {
+    if let Some(c) = calibration {
+        return run_posterior_map(cmd, assembly, schedule, c);
+    }
+    let (rpm, axis, axis_name, axis_unit) = axes(cmd)?;
+    let mut jobs = Vec::with_capacity(rpm.len() * axis.len());
+    for &r in &rpm {
+        for &a in &axis {
+            jobs.push(cmd.job(r, Some(a))?);
+        }
+    }
+    let (summaries, ran) = integrate(cmd, assembly, schedule, &jobs)?;
     if let Some(path) = &cmd.out {
         bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
             let mut w = csv::Writer::from_writer(file);
@@ -340,16 +449,188 @@ fn run_map(cmd: &CoupledCmd, assembly: &Assembly, schedule: &Schedule) -> anyhow
     for (i, r) in rpm.iter().enumerate() {
         write!(out, "{r:>9.1}")?;
         for s in &summaries[i * axis.len()..(i + 1) * axis.len()] {
-            let mark = match s.regime() {
-                coupled::Regime::Steady => ".",
-                coupled::Regime::StickSlip => "S",
-                coupled::Regime::BitBounce => "B",
-                coupled::Regime::Both => "X",
-                coupled::Regime::Diverged => "!",
-            };
-            write!(out, " {mark:>5}")?;
+            write!(out, " {:>5}", mark(s.regime()))?;
         }
         writeln!(out)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The regime's mark in the printed maps.
+fn mark(regime: coupled::Regime) -> &'static str {
+    match regime {
+        coupled::Regime::Steady => ".",
+        coupled::Regime::StickSlip => "S",
+        coupled::Regime::BitBounce => "B",
+        coupled::Regime::Both => "X",
+        coupled::Regime::Diverged => "!",
+    }
+}
+
+/// The regimes counted, in the order steady, stick-slip, bit bounce, both, diverged.
+const REGIMES: [coupled::Regime; 5] = [
+    coupled::Regime::Steady,
+    coupled::Regime::StickSlip,
+    coupled::Regime::BitBounce,
+    coupled::Regime::Both,
+    coupled::Regime::Diverged,
+];
+
+/// `--calibrate --map`: every cell simulated for each of `--samples` posterior draws; each
+/// regime's probability per cell.
+fn run_posterior_map(
+    cmd: &CoupledCmd,
+    assembly: &Assembly,
+    schedule: &Schedule,
+    calibration: &CoupledCalibration,
+) -> anyhow::Result<ExitCode> {
+    if cmd.samples == 0 {
+        return Err(bitrock::Error::setting("samples", "must be at least 1").into());
+    }
+    let template = cmd.bit();
+    let bits: Vec<Bit> = calibration
+        .draws
+        .iter()
+        .map(|d| bit_of(d, &template))
+        .filter(|b| b.validate().is_ok())
+        .take(cmd.samples)
+        .collect();
+    if bits.len() < cmd.samples {
+        return Err(bitrock::Error::setting(
+            "samples",
+            format!(
+                "the calibration's draws give only {} bits within the physical bounds",
+                bits.len()
+            ),
+        )
+        .into());
+    }
+    let (rpm, axis, axis_name, axis_unit) = axes(cmd)?;
+    let mut jobs = Vec::with_capacity(rpm.len() * axis.len() * bits.len());
+    for &r in &rpm {
+        for &a in &axis {
+            for b in &bits {
+                jobs.push(cmd.job_with(*b, r, Some(a))?);
+            }
+        }
+    }
+    let (summaries, ran) = integrate(cmd, assembly, schedule, &jobs)?;
+    // Per cell: each regime's share of the draws, and the median rate of penetration (m/h).
+    let cells: Vec<([f64; 5], f64)> = summaries
+        .chunks(bits.len())
+        .map(|draws| {
+            let mut p = [0.0; 5];
+            for s in draws {
+                let k = REGIMES.iter().position(|r| *r == s.regime()).expect("a regime");
+                p[k] += 1.0 / draws.len() as f64;
+            }
+            let rates: Vec<f64> = draws.iter().map(|s| s.rate_m_s() * 3600.0).collect();
+            (p, bitrock::numerics::quantile(&rates, 0.5))
+        })
+        .collect();
+    if let Some(path) = &cmd.out {
+        bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
+            let mut w = csv::Writer::from_writer(file);
+            w.write_record([
+                "omega_rpm",
+                axis_name,
+                "p_steady",
+                "p_stick_slip",
+                "p_bit_bounce",
+                "p_both",
+                "p_diverged",
+                "rop_median_m_h",
+            ])?;
+            for (k, (p, rop)) in cells.iter().enumerate() {
+                let mut row = vec![format!("{}", rpm[k / axis.len()]), format!("{}", axis[k % axis.len()])];
+                row.extend(p.iter().map(|v| format!("{v:.4}")));
+                row.push(format!("{rop:.3}"));
+                w.write_record(row)?;
+            }
+            w.flush()
+        })?;
+    }
+    let mut out = super::print::stdout();
+    if cmd.json {
+        let grid: Vec<Vec<serde_json::Value>> = cells
+            .chunks(axis.len())
+            .map(|row| {
+                row.iter()
+                    .map(|(p, rop)| {
+                        json!({"steady": p[0], "stick_slip": p[1], "bit_bounce": p[2], "both": p[3], "diverged": p[4], "rop_median_m_h": rop})
+                    })
+                    .collect()
+            })
+            .collect();
+        writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&json!({"omega_rpm": rpm, axis_name: axis, "samples": bits.len(), "probabilities": grid, "backend": ran, "calibration": calibration_json(calibration)}))?
+        )?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    print_estimates(&mut out, calibration)?;
+    writeln!(
+        out,
+        "probability the bit vibrates (stick-slip, bounce or both), % of {} posterior draws per cell; \
+         {} strings on the {ran}",
+        bits.len(),
+        jobs.len()
+    )?;
+    write!(out, "{:>9}", format!("rpm\\{axis_unit}"))?;
+    for a in &axis {
+        write!(out, " {a:>5}")?;
+    }
+    writeln!(out)?;
+    for (i, r) in rpm.iter().enumerate() {
+        write!(out, "{r:>9.1}")?;
+        for (p, _) in &cells[i * axis.len()..(i + 1) * axis.len()] {
+            write!(out, " {:>5.0}", 100.0 * p[1..].iter().sum::<f64>())?;
+        }
+        writeln!(out)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A calibration as JSON: its estimates, lines and samples.
+fn calibration_json(c: &CoupledCalibration) -> serde_json::Value {
+    json!({
+        "samples": c.samples,
+        "cutting_samples": c.cutting_samples,
+        "depth_of_cut_mm": [c.depth_of_cut_mm.0, c.depth_of_cut_mm.1],
+        "weight_line": c.weight_line,
+        "torque_line": c.torque_line,
+        "estimates": c.estimates,
+        "draws_out_of_bounds": c.draws_out_of_bounds,
+        "warning": c.warning,
+    })
+}
+
+/// The estimates with their intervals, and what they came from.
+fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{} of {} samples cutting, depth of cut {:.2}-{:.2} mm a turn (5th-95th percentile); \
+         weight line R² {:.3}, torque line R² {:.3}",
+        c.cutting_samples, c.samples, c.depth_of_cut_mm.0, c.depth_of_cut_mm.1, c.weight_line.r_squared, c.torque_line.r_squared
+    )?;
+    for e in &c.estimates {
+        writeln!(
+            out,
+            "{:<22} {:>10.4} {:<4} 90 % [{:.4}, {:.4}]",
+            e.name, e.value, if e.unit == "1" { "" } else { e.unit }, e.lo, e.hi
+        )?;
+    }
+    Ok(())
+}
+
+/// `--calibrate` without `--map`: the estimates.
+fn print_calibration(cmd: &CoupledCmd, c: &CoupledCalibration) -> anyhow::Result<ExitCode> {
+    let mut out = super::print::stdout();
+    if cmd.json {
+        writeln!(out, "{}", serde_json::to_string_pretty(&calibration_json(c))?)?;
+    } else {
+        print_estimates(&mut out, c)?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -312,7 +312,7 @@ impl Roles {
     }
 }
 
-fn format_error(path: &Path, message: String) -> Error {
+pub(super) fn format_error(path: &Path, message: String) -> Error {
     Error::Format {
         path: path.to_path_buf(),
         line: Some(1),
@@ -322,7 +322,7 @@ fn format_error(path: &Path, message: String) -> Error {
 
 /// The column named `wanted` (refused where the header lacks it), else the one column that
 /// `accept`s (`None` when none does, refused when several do).
-fn pick(
+pub(super) fn pick(
     header: &[String],
     wanted: Option<&str>,
     role: &str,
@@ -358,7 +358,7 @@ fn pick(
 }
 
 /// The refusal of a record without a column of a required role.
-fn missing(header: &[String], path: &Path, what: &str, hint: &str, field: &str) -> Error {
+pub(super) fn missing(header: &[String], path: &Path, what: &str, hint: &str, field: &str) -> Error {
     format_error(
         path,
         format!(

@@ -1,0 +1,185 @@
+//! Records of drilling at the bit for the coupled axial-torsional bit: bit speed, torque on bit,
+//! weight on bit and rate of penetration, and the bit's axial speed where the record has it.
+//! Columns are found by role: a name holding `speed` (and not `axial`) is the bit's speed, one
+//! holding `torque` the torque on bit, `wob` the weight on bit, `rop` or `penetration` the rate
+//! of penetration, `axial` the axial speed; each can be named instead. Surface channels are
+//! never read as the bit's. Units come from the names' suffixes or the options.
+
+use super::surface::{format_error, missing, pick};
+use super::{is_surface_channel, resolve_unit};
+use crate::error::{Error, Result};
+use crate::files::{csv_rows, csv_with_header};
+use crate::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Which columns of a drilling record to read, and in which units.
+#[derive(Clone, Debug, Default)]
+pub struct DrillingOptions {
+    pub speed_column: Option<String>,
+    pub torque_column: Option<String>,
+    pub wob_column: Option<String>,
+    pub rop_column: Option<String>,
+    /// The bit's axial speed; `None` uses the one whose name holds `axial`, if any.
+    pub axial_speed_column: Option<String>,
+    pub speed_unit: Option<SpeedUnit>,
+    pub torque_unit: Option<TorqueUnit>,
+    pub wob_unit: Option<ForceUnit>,
+    /// Unit of the rate of penetration and of the axial speed.
+    pub rop_unit: Option<RateUnit>,
+}
+
+/// The columns a drilling record was read from, by role.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DrillingColumns {
+    pub speed: String,
+    pub torque: String,
+    pub wob: String,
+    pub rop: String,
+    pub axial_speed: Option<String>,
+}
+
+/// A drilling record in SI, in file order.
+#[derive(Clone, Debug)]
+pub struct DrillingRecord {
+    pub source: PathBuf,
+    pub columns: DrillingColumns,
+    pub speed_rad_s: Vec<f64>,
+    pub torque_nm: Vec<f64>,
+    pub wob_n: Vec<f64>,
+    pub rop_m_s: Vec<f64>,
+    pub axial_speed_m_s: Option<Vec<f64>>,
+}
+
+impl DrillingRecord {
+    /// Reads the drilling record at `path` (a CSV with a header).
+    pub fn read(path: &Path, opts: &DrillingOptions) -> Result<Self> {
+        let (mut reader, header) = csv_with_header(path)?;
+        let lower = |i: usize| header[i].to_ascii_lowercase();
+        let bit = |i: usize| !is_surface_channel(&header[i]);
+        let role = |wanted: Option<&str>, what: &str, field: &str, accept: &dyn Fn(usize) -> bool| {
+            pick(&header, wanted, what, field, path, accept)
+        };
+        let speed = role(opts.speed_column.as_deref(), "bit speed", "speed_column", &|i| {
+            lower(i).contains("speed") && !lower(i).contains("axial") && bit(i)
+        })?
+        .ok_or_else(|| missing(&header, path, "a bit speed", "speed", "speed_column"))?;
+        let torque = role(opts.torque_column.as_deref(), "torque on bit", "torque_column", &|i| {
+            lower(i).contains("torque") && bit(i)
+        })?
+        .ok_or_else(|| missing(&header, path, "a torque on bit", "torque", "torque_column"))?;
+        let wob = role(opts.wob_column.as_deref(), "weight on bit", "wob_column", &|i| {
+            lower(i).contains("wob")
+        })?
+        .ok_or_else(|| missing(&header, path, "a weight on bit", "wob", "wob_column"))?;
+        let rop = role(opts.rop_column.as_deref(), "rate of penetration", "rop_column", &|i| {
+            lower(i).contains("rop") || lower(i).contains("penetration")
+        })?
+        .ok_or_else(|| missing(&header, path, "a rate of penetration", "rop", "rop_column"))?;
+        let axial = role(
+            opts.axial_speed_column.as_deref(),
+            "axial speed",
+            "axial_speed_column",
+            &|i| lower(i).contains("axial"),
+        )?;
+        let chosen = [Some(speed), Some(torque), Some(wob), Some(rop), axial];
+        for (k, a) in chosen.iter().enumerate() {
+            if let Some(a) = a
+                && chosen[k + 1..].contains(&Some(*a))
+            {
+                return Err(format_error(
+                    path,
+                    format!("column '{}' is chosen for two roles", header[*a]),
+                ));
+            }
+        }
+        let speed_unit = resolve_unit(&header[speed], opts.speed_unit, "speed_unit", path)?;
+        let torque_unit = resolve_unit(&header[torque], opts.torque_unit, "torque_unit", path)?;
+        let wob_unit = resolve_unit(&header[wob], opts.wob_unit, "wob_unit", path)?;
+        let rop_unit = resolve_unit(&header[rop], opts.rop_unit, "rop_unit", path)?;
+        let axial_unit = match axial {
+            Some(i) => Some((i, resolve_unit(&header[i], opts.rop_unit, "rop_unit", path)?)),
+            None => None,
+        };
+        let mut out = Self {
+            source: path.to_path_buf(),
+            columns: DrillingColumns {
+                speed: header[speed].clone(),
+                torque: header[torque].clone(),
+                wob: header[wob].clone(),
+                rop: header[rop].clone(),
+                axial_speed: axial.map(|i| header[i].clone()),
+            },
+            speed_rad_s: Vec::new(),
+            torque_nm: Vec::new(),
+            wob_n: Vec::new(),
+            rop_m_s: Vec::new(),
+            axial_speed_m_s: axial.map(|_| Vec::new()),
+        };
+        for row in csv_rows(&mut reader, path, &header) {
+            let row = row?;
+            out.speed_rad_s.push(speed_unit.to_rad_s(row.number(speed)?));
+            out.torque_nm.push(row.number(torque)? * torque_unit.newton_metres());
+            out.wob_n.push(row.number(wob)? * wob_unit.newtons());
+            out.rop_m_s.push(row.number(rop)? * rop_unit.metres_per_second());
+            if let (Some((i, unit)), Some(v)) = (axial_unit, out.axial_speed_m_s.as_mut()) {
+                v.push(row.number(i)? * unit.metres_per_second());
+            }
+        }
+        if out.speed_rad_s.is_empty() {
+            return Err(Error::Format {
+                path: path.to_path_buf(),
+                line: None,
+                message: "the record holds no data rows".into(),
+            });
+        }
+        Ok(out)
+    }
+
+    pub fn len(&self) -> usize {
+        self.speed_rad_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.speed_rad_s.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(text: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bit.csv");
+        std::fs::write(&path, text).unwrap();
+        (dir, path)
+    }
+
+    #[test]
+    fn roles_and_units_are_read_from_the_names() {
+        let (_d, path) = write(
+            "time_s,bit_speed_rpm,torque_on_bit_knm,wob_kn,axial_speed_m_h,rop_m_h,surface_torque_knm\n\
+             0,60,10,150,36,36,12\n0.02,30,11,151,0,18,12\n",
+        );
+        let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
+        assert_eq!(r.columns.speed, "bit_speed_rpm");
+        assert_eq!(r.columns.torque, "torque_on_bit_knm");
+        assert_eq!(r.columns.axial_speed.as_deref(), Some("axial_speed_m_h"));
+        assert!((r.speed_rad_s[0] - 2.0 * std::f64::consts::PI).abs() < 1e-12);
+        assert!((r.torque_nm[1] - 11_000.0).abs() < 1e-9);
+        assert!((r.wob_n[0] - 150_000.0).abs() < 1e-9);
+        assert!((r.rop_m_s[0] - 0.01).abs() < 1e-15);
+        assert_eq!(r.axial_speed_m_s.unwrap()[1], 0.0);
+    }
+
+    #[test]
+    fn a_record_without_a_rate_of_penetration_is_refused_naming_the_role() {
+        let (_d, path) = write("bit_speed_rpm,torque_knm,wob_kn\n60,10,150\n");
+        let e = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("rate of penetration") && e.contains("rop_column"), "{e}");
+        let (_d, path) = write("bit_speed_rpm,torque_knm,wob_kn,rop\n60,10,150,30\n");
+        let e = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("'rop'") && e.contains("rop_unit"), "{e}");
+    }
+}

@@ -1,0 +1,270 @@
+//! The coupled bit (RGD) calibrated from a drilling record. While a blade cuts, the bit's weight
+//! and torque are linear in the depth of cut per revolution d = 2π·ROP/Ω:
+//!
+//! ```text
+//! W = a·ζ·ε·d + W_f,      T = ½·a²·ε·d + ½·a·μ·γ·W_f
+//! ```
+//!
+//! so two straight lines through the cutting samples give every combination of the bit's
+//! parameters that acts: ε from the torque line's slope (the radius known), ζ from the two
+//! slopes, the wear flats' contact force W_f = a·l·σ from the weight line's intercept, and μ·γ
+//! from the torque line's. l and σ apart, and μ and γ apart, no record can tell. The lines'
+//! least-squares uncertainty (Gaussian, flat prior) gives the posterior draws the maps are
+//! simulated for.
+//!
+//! Samples count as cutting where the bit turns (above the stuck threshold) and penetrates,
+//! and, where the record has the bit's axial speed, moves down: a bit held or lifting carries
+//! only part of the wear flats' contact, which would pull the weight line's intercept down.
+
+use crate::data::STUCK_SPEED_RAD_S;
+use crate::data::drilling::DrillingRecord;
+use crate::error::{Error, Result};
+use crate::numerics::quantile;
+use crate::simulate::coupled::Bit;
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::Serialize;
+
+/// Fewest cutting samples a calibration takes.
+pub const MIN_CUTTING_SAMPLES: usize = 20;
+
+/// Least spread of the depth of cut (its coefficient of variation) that separates cutting from
+/// friction: below it the lines' slopes and intercepts trade off freely.
+pub const MIN_DEPTH_SPREAD: f64 = 0.05;
+
+/// A straight line y = slope·x + intercept by least squares, with its uncertainty.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Line {
+    pub slope: f64,
+    pub intercept: f64,
+    pub slope_sd: f64,
+    pub intercept_sd: f64,
+    /// Covariance of slope and intercept.
+    pub covariance: f64,
+    /// Share of y's variance the line explains.
+    pub r_squared: f64,
+}
+
+impl Line {
+    /// The least-squares line through (x, y).
+    pub fn fit(x: &[f64], y: &[f64]) -> Self {
+        let n = x.len() as f64;
+        let mx = x.iter().sum::<f64>() / n;
+        let my = y.iter().sum::<f64>() / n;
+        let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
+        let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+        let syy: f64 = y.iter().map(|v| (v - my).powi(2)).sum();
+        let slope = sxy / sxx;
+        let intercept = my - slope * mx;
+        let ssr: f64 = x.iter().zip(y).map(|(a, b)| (b - slope * a - intercept).powi(2)).sum();
+        let s2 = ssr / (n - 2.0);
+        Self {
+            slope,
+            intercept,
+            slope_sd: (s2 / sxx).sqrt(),
+            intercept_sd: (s2 * (1.0 / n + mx * mx / sxx)).sqrt(),
+            covariance: -mx * s2 / sxx,
+            r_squared: if syy > 0.0 { 1.0 - ssr / syy } else { 1.0 },
+        }
+    }
+
+    /// A draw of (slope, intercept) from the line's Gaussian uncertainty.
+    fn draw(&self, rng: &mut StdRng) -> (f64, f64) {
+        let (z1, z2): (f64, f64) = (StandardNormal.sample(rng), StandardNormal.sample(rng));
+        let l11 = self.slope_sd;
+        let l21 = if l11 > 0.0 { self.covariance / l11 } else { 0.0 };
+        let l22 = (self.intercept_sd.powi(2) - l21 * l21).max(0.0).sqrt();
+        (self.slope + l11 * z1, self.intercept + l21 * z1 + l22 * z2)
+    }
+}
+
+/// One calibrated quantity: its estimate and 90 % interval.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Estimate {
+    pub name: &'static str,
+    pub unit: &'static str,
+    pub value: f64,
+    pub lo: f64,
+    pub hi: f64,
+}
+
+/// Names and units of a posterior draw's values, in order.
+pub const CALIBRATED: [(&str, &str); 4] = [
+    ("intrinsic_energy_mpa", "MPa"),
+    ("zeta", "1"),
+    ("contact_force_kn", "kN"),
+    ("mu_gamma", "1"),
+];
+
+/// What a drilling record says of the bit.
+#[derive(Clone, Debug, Serialize)]
+pub struct CoupledCalibration {
+    pub samples: usize,
+    /// Samples where the bit was cutting, which the lines go through.
+    pub cutting_samples: usize,
+    /// The depth of cut per revolution's 5th and 95th percentiles (mm).
+    pub depth_of_cut_mm: (f64, f64),
+    /// Weight (N) against depth of cut (m): slope a·ζ·ε, intercept W_f.
+    pub weight_line: Line,
+    /// Torque (N·m) against depth of cut (m): slope ½·a²·ε, intercept ½·a·μ·γ·W_f.
+    pub torque_line: Line,
+    /// ε, ζ, W_f and μ·γ at the lines' estimates with 90 % intervals from the draws.
+    pub estimates: Vec<Estimate>,
+    /// Draws of (ε MPa, ζ, W_f kN, μ·γ) from the lines' uncertainty.
+    pub draws: Vec<[f64; 4]>,
+    /// Draws left out because they leave the physical bounds (a negative contact force...).
+    pub draws_out_of_bounds: usize,
+    /// Said where the record cannot tell a cutting bit from a held or lifting one.
+    pub warning: Option<String>,
+}
+
+/// Why a record without the bit's axial speed gives biased lines, as said to the user.
+pub const NO_AXIAL_SPEED: &str = "the record has no axial speed of the bit: samples of a bit held or lifting count as \
+cutting with its wear flats fully in contact, which biases the lines where the bit vibrates axially (on a simulated \
+stick-slip record: ε 50 MPa for 60, ζ 0.40 for 0.6)";
+
+/// ε (MPa), ζ, W_f (kN) and μ·γ of a weight line's and a torque line's (slope, intercept).
+fn derived(radius_m: f64, weight: (f64, f64), torque: (f64, f64)) -> [f64; 4] {
+    let eps = 2.0 * torque.0 / (radius_m * radius_m);
+    [
+        eps / 1e6,
+        weight.0 / (radius_m * eps),
+        weight.1 / 1e3,
+        2.0 * torque.1 / (radius_m * weight.1),
+    ]
+}
+
+/// Calibrates the bit of radius `radius_m` on `record`, with `draws` posterior draws from `seed`.
+pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64) -> Result<CoupledCalibration> {
+    let refuse = |message: String| Error::Format {
+        path: record.source.clone(),
+        line: None,
+        message,
+    };
+    let mut depth = Vec::new();
+    let mut weight = Vec::new();
+    let mut torque = Vec::new();
+    for i in 0..record.len() {
+        let w = record.speed_rad_s[i];
+        let moving_down = record.axial_speed_m_s.as_ref().is_none_or(|v| v[i] > 0.0);
+        if w > STUCK_SPEED_RAD_S && record.rop_m_s[i] > 0.0 && moving_down {
+            depth.push(std::f64::consts::TAU * record.rop_m_s[i] / w);
+            weight.push(record.wob_n[i]);
+            torque.push(record.torque_nm[i]);
+        }
+    }
+    if depth.len() < MIN_CUTTING_SAMPLES {
+        return Err(refuse(format!(
+            "{} of its {} samples show the bit cutting (turning, penetrating{}): at least \
+             {MIN_CUTTING_SAMPLES} are needed",
+            depth.len(),
+            record.len(),
+            if record.axial_speed_m_s.is_some() { ", moving down" } else { "" }
+        )));
+    }
+    let mean = depth.iter().sum::<f64>() / depth.len() as f64;
+    let sd = (depth.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / depth.len() as f64).sqrt();
+    if sd < MIN_DEPTH_SPREAD * mean {
+        return Err(refuse(format!(
+            "the depth of cut hardly varies ({:.2} mm a turn ± {:.1} %): cutting cannot be told \
+             from the wear flats' friction; record several weights on bit, or stick-slip",
+            1e3 * mean,
+            100.0 * sd / mean
+        )));
+    }
+    let weight_line = Line::fit(&depth, &weight);
+    let torque_line = Line::fit(&depth, &torque);
+    let bounds = [
+        crate::simulate::coupled::BIT_BOUNDS[1],
+        crate::simulate::coupled::BIT_BOUNDS[2],
+        (0.0, f64::INFINITY),
+        (0.0, 6.0),
+    ];
+    let inside = |v: &[f64; 4]| v.iter().zip(bounds).all(|(x, (lo, hi))| x.is_finite() && *x > lo && *x <= hi);
+    let mut rng = StdRng::seed_from_u64(seed);
+    let mut kept = Vec::with_capacity(draws);
+    let mut out_of_bounds = 0;
+    for _ in 0..draws {
+        let v = derived(radius_m, weight_line.draw(&mut rng), torque_line.draw(&mut rng));
+        if inside(&v) {
+            kept.push(v);
+        } else {
+            out_of_bounds += 1;
+        }
+    }
+    let point = derived(
+        radius_m,
+        (weight_line.slope, weight_line.intercept),
+        (torque_line.slope, torque_line.intercept),
+    );
+    let q = |values: &[f64], p: f64| if values.is_empty() { f64::NAN } else { quantile(values, p) };
+    let estimates = CALIBRATED
+        .iter()
+        .enumerate()
+        .map(|(k, (name, unit))| {
+            let column: Vec<f64> = kept.iter().map(|v| v[k]).collect();
+            Estimate {
+                name,
+                unit,
+                value: point[k],
+                lo: q(&column, 0.05),
+                hi: q(&column, 0.95),
+            }
+        })
+        .collect();
+    Ok(CoupledCalibration {
+        samples: record.len(),
+        cutting_samples: depth.len(),
+        depth_of_cut_mm: (
+            1e3 * quantile(&depth, 0.05),
+            1e3 * quantile(&depth, 0.95),
+        ),
+        weight_line,
+        torque_line,
+        estimates,
+        draws: kept,
+        draws_out_of_bounds: out_of_bounds,
+        warning: record.axial_speed_m_s.is_none().then(|| NO_AXIAL_SPEED.to_string()),
+    })
+}
+
+/// `template` with a calibrated draw's ε, ζ and, through its contact stress and geometry factor,
+/// the wear-flat length l = W_f/(a·σ) and friction μ = μγ/γ.
+pub fn bit_of(draw: &[f64; 4], template: &Bit) -> Bit {
+    Bit {
+        intrinsic_energy_mpa: draw[0],
+        zeta: draw[1],
+        wear_flat_mm: 1e3 * draw[2] * 1e3 / (template.radius_m * template.contact_stress_mpa * 1e6),
+        friction: draw[3] / template.gamma,
+        ..*template
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_line_through_exact_points_is_recovered_with_no_uncertainty() {
+        let x: Vec<f64> = (0..10).map(|i| 1.0 + i as f64).collect();
+        let y: Vec<f64> = x.iter().map(|v| 3.0 * v + 2.0).collect();
+        let l = Line::fit(&x, &y);
+        assert!((l.slope - 3.0).abs() < 1e-12 && (l.intercept - 2.0).abs() < 1e-12);
+        assert!(l.slope_sd < 1e-6 && (l.r_squared - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_bit_s_own_lines_give_its_parameters_back() {
+        let b = Bit::default();
+        let a = b.radius_m;
+        let weight = (b.cutting_weight_n_per_m(), b.contact_weight_n());
+        let torque = (b.cutting_torque_nm_per_m(), b.friction_arm_m() * b.contact_weight_n());
+        let v = derived(a, weight, torque);
+        for (got, want) in v.iter().zip([60.0, 0.6, b.contact_weight_n() / 1e3, 0.6]) {
+            assert!((got - want).abs() < 1e-9 * want, "{v:?}");
+        }
+        let back = bit_of(&v, &b);
+        assert!((back.wear_flat_mm - 11.0).abs() < 1e-9 && (back.friction - 0.6).abs() < 1e-12);
+    }
+}
