@@ -188,3 +188,91 @@ fn bad_parameters_are_refused_by_flag_with_nothing_written() {
         assert!(!csv.exists(), "{args:?}");
     }
 }
+
+/// A record of the public bit at 45 rpm under 150 kN (stick-slip), noise of `torque_nm` and
+/// `wob_n` added from `seed`; with the bit's axial speed or without.
+fn drilling_record(torque_nm: f64, wob_n: f64, seed: u64, axial: bool) -> bitrock::data::drilling::DrillingRecord {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let mut samples = Vec::new();
+    let sched = Schedule::new(1e-4, 50.0, 30.0, 60.0).unwrap();
+    coupled::integrate_with(&Assembly::default(), &sched, &job(45.0, WOB_150_KN), &mut |s| samples.push(*s));
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let (nt, nw) = (Normal::new(0.0, torque_nm).unwrap(), Normal::new(0.0, wob_n).unwrap());
+    bitrock::data::drilling::DrillingRecord {
+        source: "simulated.csv".into(),
+        columns: bitrock::data::drilling::DrillingColumns {
+            speed: "bit_speed_rpm".into(),
+            torque: "torque_on_bit_knm".into(),
+            wob: "wob_kn".into(),
+            rop: "rop_m_h".into(),
+            axial_speed: axial.then(|| "axial_speed_m_h".into()),
+        },
+        speed_rad_s: samples.iter().map(|s| s.bit_speed_rad_s).collect(),
+        torque_nm: samples.iter().map(|s| s.torque_nm + nt.sample(&mut rng)).collect(),
+        wob_n: samples.iter().map(|s| s.wob_n + nw.sample(&mut rng)).collect(),
+        rop_m_s: samples.iter().map(|s| s.cutting_rate_m_s).collect(),
+        axial_speed_m_s: axial.then(|| samples.iter().map(|s| s.axial_speed_m_s).collect()),
+    }
+}
+
+#[test]
+fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
+    use bitrock::fit::coupled::calibrate;
+    let b = Bit::default();
+    let truth = [60.0, 0.6, b.contact_weight_n() / 1e3, 0.6];
+    // Noise-free, with the bit's axial speed: the lines are the bit's own.
+    let exact = calibrate(&drilling_record(0.0, 0.0, 0, true), b.radius_m, 400, 1).unwrap();
+    for (e, t) in exact.estimates.iter().zip(truth) {
+        assert!((e.value - t).abs() < 1e-6 * t, "{e:?}");
+    }
+    assert!(exact.warning.is_none());
+    // 0.3 kN·m and 5 kN of noise: the 90 % intervals hold the truth in 20 records of 20, as
+    // often as they should (at least 15; 18 expected).
+    let mut covered = [0; 4];
+    for seed in 0..20 {
+        let c = calibrate(&drilling_record(300.0, 5e3, seed, true), b.radius_m, 2000, seed).unwrap();
+        for (k, (e, t)) in c.estimates.iter().zip(truth).enumerate() {
+            covered[k] += usize::from(e.lo <= t && t <= e.hi);
+        }
+    }
+    assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
+    // Without the axial speed, a held or lifting bit counts as cutting: said.
+    let blind = calibrate(&drilling_record(0.0, 0.0, 0, false), b.radius_m, 400, 1).unwrap();
+    assert!(blind.warning.as_deref().unwrap().contains("no axial speed"));
+}
+
+#[test]
+fn a_steady_record_cannot_calibrate_the_bit_and_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("steady.csv");
+    let (code, _, stderr) = outcome(bin().args(["coupled", "--omega-rpm", "150", "--wob-kn", "150", "--duration-s", "10", "--settle-s", "10", "--out"]).arg(&csv));
+    assert_eq!(code, 0, "{stderr}");
+    let (code, _, stderr) = outcome(bin().args(["coupled", "--calibrate"]).arg(&csv));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("steady.csv") && stderr.contains("hardly varies") && stderr.contains("several weights"), "{stderr}");
+}
+
+#[test]
+fn the_calibrated_bit_s_regimes_come_with_their_probabilities() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("rgd.csv");
+    let (code, _, stderr) = outcome(bin().args(["coupled", "--omega-rpm", "45", "--wob-kn", "150", "--duration-s", "30", "--settle-s", "10", "--out"]).arg(&record));
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args(["coupled", "--calibrate"])
+            .arg(&record)
+            .args(["--map", "--wob-kn", "150", "--map-rpm", "45:180:2", "--map-wob-kn", "150:151:2", "--samples", "4"])
+            .args(["--duration-s", "30", "--settle-s", "20", "--backend", "cpu", "--json"]),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["samples"], 4);
+    let p = &v["probabilities"];
+    // The record's own operating point stick-slips for every draw; 180 rpm drills steadily.
+    assert_eq!(p[0][0]["stick_slip"], 1.0, "{p}");
+    assert_eq!(p[1][0]["steady"], 1.0, "{p}");
+    let e = &v["calibration"]["estimates"];
+    assert!((e[0]["value"].as_f64().unwrap() - 60.0).abs() < 0.01, "{e}");
+}
