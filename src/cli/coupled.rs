@@ -3,28 +3,21 @@
 //! (or feed), one simulated string per cell.
 
 use super::args::{LumpedArgs, finite_number};
-use bitrock::eval::Backend;
-use bitrock::eval::strings::Ran;
-use bitrock::simulate::coupled::{self, Assembly, Axial, Bit, CoupledJob, CoupledSummary, Sample, Schedule};
-use bitrock::stability::map;
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
-use bitrock::fit::coupled::{CoupledCalibration, bit_of, calibrate};
+use bitrock::eval::Backend;
+use bitrock::fit::coupled::CoupledCalibration;
+use bitrock::run::coupled::{self, Map, One, PosteriorMap, Settings};
+use bitrock::simulate::coupled::{Regime, Sample};
 use bitrock::units::{ForceUnit, RAD_S_PER_RPM, RateUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use serde_json::json;
 use std::io::Write;
 use std::process::ExitCode;
 
-/// m/h in m/s.
-const M_S_PER_M_H: f64 = 1.0 / 3600.0;
-
-/// Posterior draws a calibration's intervals are read from.
-const CALIBRATION_DRAWS: usize = 4_000;
-
 #[derive(Debug, Args)]
 pub struct CoupledCmd {
     /// Top-drive speed Omega_0, rpm.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 60.0, value_name = "RPM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().omega_rpm, value_name = "RPM")]
     pub omega_rpm: f64,
     /// A constant weight on the bit assembly (the hook held at a set weight), kN.
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KN", conflicts_with = "feed_m_h")]
@@ -33,67 +26,67 @@ pub struct CoupledCmd {
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "M_H")]
     pub feed_m_h: Option<f64>,
     /// Bit radius a, m.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Bit::default().radius_m, value_name = "M")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().radius_m, value_name = "M")]
     pub radius_m: f64,
     /// Intrinsic specific energy of the rock epsilon, MPa.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Bit::default().intrinsic_energy_mpa, value_name = "MPA")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().intrinsic_energy_mpa, value_name = "MPA")]
     pub intrinsic_energy_mpa: f64,
     /// Ratio zeta of the cutting force's axial to its tangential component.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Bit::default().zeta)]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().zeta)]
     pub zeta: f64,
     /// Contact stress sigma on the wear flats, MPa.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Bit::default().contact_stress_mpa, value_name = "MPA")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().contact_stress_mpa, value_name = "MPA")]
     pub contact_stress_mpa: f64,
     /// Total wear-flat length l of the blades, mm.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Bit::default().wear_flat_mm, value_name = "MM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().wear_flat_mm, value_name = "MM")]
     pub wear_flat_mm: f64,
     /// Friction coefficient mu of the wear flats on the rock.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Bit::default().friction)]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().friction)]
     pub friction: f64,
     /// Bit geometry factor gamma.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Bit::default().gamma)]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().gamma)]
     pub gamma: f64,
     /// Blades N.
-    #[arg(long, default_value_t = Bit::default().blades)]
+    #[arg(long, default_value_t = Settings::default().blades)]
     pub blades: u32,
     #[command(flatten)]
     pub lumped: LumpedArgs,
     /// Mass of the bit assembly M, kg.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Assembly::default().mass_kg, value_name = "KG")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().mass_kg, value_name = "KG")]
     pub mass_kg: f64,
     /// Axial stiffness of the string K_a (felt under a feed), kN/m.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Assembly::default().axial_stiffness_n_per_m / 1e3, value_name = "KN_M")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().axial_stiffness_kn_m, value_name = "KN_M")]
     pub axial_stiffness_kn_m: f64,
     /// Axial damping on the bit assembly C_a, kN·s/m.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Assembly::default().axial_damping_ns_per_m / 1e3, value_name = "KNS_M")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().axial_damping_kns_m, value_name = "KNS_M")]
     pub axial_damping_kns_m: f64,
     /// Recorded duration, s.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 60.0, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().duration_s, value_name = "SECONDS")]
     pub duration_s: f64,
     /// Simulated time discarded before recording starts (lets the motion settle), s.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 30.0, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().settle_s, value_name = "SECONDS")]
     pub settle_s: f64,
     /// Output sample rate, Hz.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 50.0, value_name = "HZ")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().sample_hz, value_name = "HZ")]
     pub sample_hz: f64,
     /// Integration step, s (the stuck share converges to about 1 % at 1e-4 s).
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 1e-4, value_name = "SECONDS")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().dt_s, value_name = "SECONDS")]
     pub dt_s: f64,
     /// Bit-speed kick from steady drilling at t = 0, rpm.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = 1.0, value_name = "RPM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().kick_rpm, value_name = "RPM")]
     pub kick_rpm: f64,
     /// A regime map instead of one string: one string per cell of --map-rpm × --map-wob-kn (or
     /// --map-feed-m-h with --feed-m-h).
     #[arg(long)]
     pub map: bool,
     /// The map's top-drive speeds, rpm, as MIN:MAX:COUNT.
-    #[arg(long, default_value = "20:200:10", value_name = "MIN:MAX:COUNT", requires = "map")]
+    #[arg(long, default_value_t = Settings::default().map_rpm, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_rpm: String,
     /// The map's weights on bit, kN, as MIN:MAX:COUNT.
-    #[arg(long, default_value = "80:280:9", value_name = "MIN:MAX:COUNT", requires = "map")]
+    #[arg(long, default_value_t = Settings::default().map_wob_kn, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_wob_kn: String,
     /// The map's feeds, m/h, as MIN:MAX:COUNT (with --feed-m-h).
-    #[arg(long, default_value = "10:60:6", value_name = "MIN:MAX:COUNT", requires = "map")]
+    #[arg(long, default_value_t = Settings::default().map_feed_m_h, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_feed_m_h: String,
     /// Where the map's strings are integrated: gpu, cpu, or auto (the GPU when an adapter
     /// exists, else the CPU, saying so).
@@ -108,10 +101,10 @@ pub struct CoupledCmd {
     #[command(flatten)]
     pub columns: DrillingArgs,
     /// Posterior draws each map cell is simulated for (with --calibrate --map).
-    #[arg(long, default_value_t = 20, value_name = "S", requires = "calibrate")]
+    #[arg(long, default_value_t = Settings::default().samples, value_name = "S", requires = "calibrate")]
     pub samples: usize,
     /// Seed of the posterior draws.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = Settings::default().seed)]
     pub seed: u64,
     /// The record (one string: time, bit speed, torque, WOB, axial speed, rate of penetration)
     /// or the map (one row per cell) as CSV.
@@ -174,8 +167,12 @@ impl DrillingArgs {
 }
 
 impl CoupledCmd {
-    fn bit(&self) -> Bit {
-        Bit {
+    /// The run's settings from the flags.
+    fn settings(&self) -> Settings {
+        Settings {
+            omega_rpm: self.omega_rpm,
+            wob_kn: self.wob_kn,
+            feed_m_h: self.feed_m_h,
             radius_m: self.radius_m,
             intrinsic_energy_mpa: self.intrinsic_energy_mpa,
             zeta: self.zeta,
@@ -184,137 +181,124 @@ impl CoupledCmd {
             friction: self.friction,
             gamma: self.gamma,
             blades: self.blades,
-        }
-    }
-
-    fn assembly(&self) -> anyhow::Result<Assembly> {
-        let a = Assembly {
-            torsion: self.lumped.lumped(),
+            inertia_kg_m2: self.lumped.inertia_kg_m2,
+            omega_n_rad_s: self.lumped.omega_n_rad_s,
+            damping_ratio: self.lumped.damping_ratio,
             mass_kg: self.mass_kg,
-            axial_stiffness_n_per_m: self.axial_stiffness_kn_m * 1e3,
-            axial_damping_ns_per_m: self.axial_damping_kns_m * 1e3,
-        };
-        a.validate()?;
-        Ok(a)
-    }
-
-    fn axial(&self, value: Option<f64>) -> Axial {
-        match (self.wob_kn, self.feed_m_h) {
-            (Some(wob), _) => Axial::Weight {
-                wob_n: value.unwrap_or(wob) * 1e3,
-            },
-            (None, feed) => Axial::Feed {
-                rate_m_s: value.or(feed).unwrap_or(30.0) * M_S_PER_M_H,
-            },
+            axial_stiffness_kn_m: self.axial_stiffness_kn_m,
+            axial_damping_kns_m: self.axial_damping_kns_m,
+            duration_s: self.duration_s,
+            settle_s: self.settle_s,
+            sample_hz: self.sample_hz,
+            dt_s: self.dt_s,
+            kick_rpm: self.kick_rpm,
+            map_rpm: self.map_rpm.clone(),
+            map_wob_kn: self.map_wob_kn.clone(),
+            map_feed_m_h: self.map_feed_m_h.clone(),
+            samples: self.samples,
+            seed: self.seed,
+            backend: self.backend,
         }
-    }
-
-    fn job(&self, omega_rpm: f64, axial: Option<f64>) -> anyhow::Result<CoupledJob> {
-        self.job_with(self.bit(), omega_rpm, axial)
-    }
-
-    fn job_with(&self, bit: Bit, omega_rpm: f64, axial: Option<f64>) -> anyhow::Result<CoupledJob> {
-        let job = CoupledJob {
-            bit,
-            omega_rad_s: omega_rpm * RAD_S_PER_RPM,
-            axial: self.axial(axial),
-            kick_rad_s: self.kick_rpm * RAD_S_PER_RPM,
-        };
-        job.validate()?;
-        Ok(job)
     }
 }
 
 pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
-    let assembly = cmd.assembly()?;
-    let schedule = Schedule::new(cmd.dt_s, cmd.sample_hz, cmd.settle_s, cmd.duration_s)?;
+    let settings = cmd.settings();
+    settings.assembly()?;
+    settings.schedule()?;
     if let Some(path) = &cmd.out {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
+    let note = &mut |line: String| super::print::note(format_args!("{line}"));
     let calibration = match &cmd.calibrate {
         Some(path) => {
             let record = DrillingRecord::read(path, &cmd.columns.options())?;
-            cmd.bit().validate()?;
-            let c = calibrate(&record, cmd.radius_m, CALIBRATION_DRAWS, cmd.seed)?;
+            let c = coupled::calibration(&record, &settings)?;
             if let Some(w) = &c.warning {
-                super::print::note(format_args!("warning: {w}"));
+                note(format!("warning: {w}"));
             }
             Some(c)
         }
         None => None,
     };
-    if cmd.map {
-        return run_map(cmd, &assembly, &schedule, calibration.as_ref());
-    }
-    if let Some(c) = &calibration {
-        return print_calibration(cmd, c);
-    }
-    let job = cmd.job(cmd.omega_rpm, None)?;
-    let mut samples = Vec::new();
-    let summary = coupled::integrate_with(&assembly, &schedule, &job, &mut |s| {
-        if cmd.out.is_some() {
-            samples.push(*s)
-        }
-    });
-    if let Some(path) = &cmd.out {
-        bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_record(&samples, file))?;
-    }
-    let steady = job.steady(&assembly);
     let mut out = super::print::stdout();
-    if cmd.json {
-        let mut value = summary_json(&summary, cmd.sample_hz);
-        value["steady"] = json!({
-            "depth_of_cut_mm": 1e3 * f64::from(job.bit.blades) * steady.depth_per_blade_m,
-            "rop_m_h": steady.rate_m_s * 3600.0,
-            "wob_kn": steady.wob_n / 1e3,
-            "torque_knm": steady.torque_nm / 1e3,
-        });
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
-    } else {
-        writeln!(
-            out,
-            "{} at {} rpm: rate of penetration {:.1} m/h (steady drilling {:.1}), stuck {:.1} % of the time, off bottom {:.1} %",
-            summary.regime().name(),
-            cmd.omega_rpm,
-            summary.rate_m_s() * 3600.0,
-            steady.rate_m_s * 3600.0,
-            100.0 * summary.stuck_share(),
-            100.0 * summary.off_bottom_share()
-        )?;
-        writeln!(
-            out,
-            "bit speed {:.0}-{:.0} rpm, WOB {:.0}-{:.0} kN (mean {:.0}), torque {:.2}-{:.2} kN·m (mean {:.2}){}",
-            summary.speed_min_rad_s / RAD_S_PER_RPM,
-            summary.speed_max_rad_s / RAD_S_PER_RPM,
-            summary.wob_min_n / 1e3,
-            summary.wob_max_n / 1e3,
-            summary.wob_mean_n() / 1e3,
-            summary.torque_min_nm / 1e3,
-            summary.torque_max_nm / 1e3,
-            summary.torque_mean_nm() / 1e3,
-            summary
-                .period_s(cmd.sample_hz)
-                .map_or(String::new(), |p| format!(", stick-slip period {p:.2} s"))
-        )?;
+    match (cmd.map, &calibration) {
+        (true, Some(c)) => {
+            let map = coupled::posterior_map(&settings, c, note)?;
+            if let Some(path) = &cmd.out {
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_posterior_map(&map, file))?;
+            }
+            if cmd.json {
+                let value = json!({"map": map, "calibration": c});
+                writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+            } else {
+                print_estimates(&mut out, c)?;
+                print_posterior_map(&mut out, &map)?;
+            }
+        }
+        (true, None) => {
+            let map = coupled::map(&settings, note)?;
+            if let Some(path) = &cmd.out {
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_map(&map, &settings, file))?;
+            }
+            if cmd.json {
+                writeln!(out, "{}", serde_json::to_string_pretty(&map)?)?;
+            } else {
+                print_map(&mut out, &map, &settings)?;
+            }
+        }
+        (false, Some(c)) => {
+            if cmd.json {
+                writeln!(out, "{}", serde_json::to_string_pretty(c)?)?;
+            } else {
+                print_estimates(&mut out, c)?;
+            }
+        }
+        (false, None) => {
+            let mut samples = Vec::new();
+            let one = coupled::one(&settings, &mut |s| {
+                if cmd.out.is_some() {
+                    samples.push(*s)
+                }
+            })?;
+            if let Some(path) = &cmd.out {
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_record(&samples, file))?;
+            }
+            if cmd.json {
+                writeln!(out, "{}", serde_json::to_string_pretty(&one)?)?;
+            } else {
+                print_one(&mut out, &one, cmd.omega_rpm)?;
+            }
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
 
-/// A summary as the JSON of the command and of each map cell.
-fn summary_json(s: &CoupledSummary, sample_hz: f64) -> serde_json::Value {
-    json!({
-        "regime": s.regime(),
-        "rop_m_h": s.rate_m_s() * 3600.0,
-        "stuck_share": s.stuck_share(),
-        "off_bottom_share": s.off_bottom_share(),
-        "backward_share": f64::from(s.backward) / f64::from(s.samples.max(1)),
-        "period_s": s.period_s(sample_hz),
-        "bit_speed_rpm": {"min": s.speed_min_rad_s / RAD_S_PER_RPM, "max": s.speed_max_rad_s / RAD_S_PER_RPM, "mean": s.speed_mean_rad_s() / RAD_S_PER_RPM},
-        "wob_kn": {"min": s.wob_min_n / 1e3, "max": s.wob_max_n / 1e3, "mean": s.wob_mean_n() / 1e3},
-        "torque_knm": {"min": s.torque_min_nm / 1e3, "max": s.torque_max_nm / 1e3, "mean": s.torque_mean_nm() / 1e3},
-        "samples": s.samples,
-        "diverged": s.diverged,
-    })
+fn print_one(out: &mut dyn Write, one: &One, omega_rpm: f64) -> std::io::Result<()> {
+    let s = &one.summary;
+    writeln!(
+        out,
+        "{} at {omega_rpm} rpm: rate of penetration {:.1} m/h (steady drilling {:.1}), stuck {:.1} % of the time, off bottom {:.1} %",
+        s.regime.name(),
+        s.rop_m_h,
+        one.steady.rop_m_h,
+        100.0 * s.stuck_share,
+        100.0 * s.off_bottom_share
+    )?;
+    writeln!(
+        out,
+        "bit speed {:.0}-{:.0} rpm, WOB {:.0}-{:.0} kN (mean {:.0}), torque {:.2}-{:.2} kN·m (mean {:.2}){}",
+        s.bit_speed_rpm.min,
+        s.bit_speed_rpm.max,
+        s.wob_kn.min,
+        s.wob_kn.max,
+        s.wob_kn.mean,
+        s.torque_knm.min,
+        s.torque_knm.max,
+        s.torque_knm.mean,
+        s.period_s
+            .map_or(String::new(), |p| format!(", stick-slip period {p:.2} s"))
+    )
 }
 
 /// The record's columns, units in their names.
@@ -346,264 +330,128 @@ fn write_record(samples: &[Sample], out: &mut dyn Write) -> std::io::Result<()> 
     w.flush()
 }
 
-/// `--map`: one string per cell, the regimes as a table (speeds down, weights across) or JSON,
-/// the cells to `--out`.
-/// The map's speeds (rpm) and its second axis (values, name, unit): weights or feeds.
-fn axes(cmd: &CoupledCmd) -> anyhow::Result<(Vec<f64>, Vec<f64>, &'static str, &'static str)> {
-    let rpm = map::parse_axis(&cmd.map_rpm, "map_rpm")?;
-    Ok(if cmd.wob_kn.is_none() {
-        (rpm, map::parse_axis(&cmd.map_feed_m_h, "map_feed_m_h")?, "feed_m_h", "m/h")
+/// The drive axis' name and unit in the printed maps.
+fn drive_axis(settings: &Settings) -> (&'static str, &'static str) {
+    if settings.is_feed() {
+        ("feed_m_h", "m/h")
     } else {
-        (rpm, map::parse_axis(&cmd.map_wob_kn, "map_wob_kn")?, "wob_kn", "kN")
-    })
-}
-
-/// Every job's summary on the command's backend, and where they ran.
-fn integrate(
-    cmd: &CoupledCmd,
-    assembly: &Assembly,
-    schedule: &Schedule,
-    jobs: &[CoupledJob],
-) -> anyhow::Result<(Vec<CoupledSummary>, String)> {
-    let (summaries, ran) = bitrock::eval::coupled::integrate(assembly, schedule, jobs, cmd.backend, &mut |line| {
-        super::print::note(format_args!("{line}"))
-    })?;
-    let ran = match ran {
-        Ran::Gpu(name) => format!("GPU {name}"),
-        Ran::Cpu => "CPU".to_string(),
-    };
-    Ok((summaries, ran))
-}
-
-fn run_map(
-    cmd: &CoupledCmd,
-    assembly: &Assembly,
-    schedule: &Schedule,
-    calibration: Option<&CoupledCalibration>,
-) -> anyhow::Result<ExitCode> {
-    if let Some(c) = calibration {
-        return run_posterior_map(cmd, assembly, schedule, c);
+        ("wob_kn", "kN")
     }
-    let (rpm, axis, axis_name, axis_unit) = axes(cmd)?;
-    let mut jobs = Vec::with_capacity(rpm.len() * axis.len());
-    for &r in &rpm {
-        for &a in &axis {
-            jobs.push(cmd.job(r, Some(a))?);
+}
+
+fn write_map(map: &Map, settings: &Settings, file: &mut dyn Write) -> std::io::Result<()> {
+    let mut w = csv::Writer::from_writer(file);
+    w.write_record([
+        "omega_rpm",
+        drive_axis(settings).0,
+        "regime",
+        "stuck_share",
+        "off_bottom_share",
+        "rop_m_h",
+        "period_s",
+        "wob_mean_kn",
+        "torque_mean_knm",
+    ])?;
+    let drive = map.axes.drive();
+    for (row, r) in map.cells.iter().zip(&map.axes.omega_rpm) {
+        for (s, a) in row.iter().zip(drive) {
+            w.write_record([
+                format!("{r}"),
+                format!("{a}"),
+                s.regime.name().to_string(),
+                format!("{:.4}", s.stuck_share),
+                format!("{:.4}", s.off_bottom_share),
+                format!("{:.3}", s.rop_m_h),
+                s.period_s.map_or(String::new(), |p| format!("{p:.3}")),
+                format!("{:.3}", s.wob_kn.mean),
+                format!("{:.4}", s.torque_knm.mean),
+            ])?;
         }
     }
-    let (summaries, ran) = integrate(cmd, assembly, schedule, &jobs)?;
-    if let Some(path) = &cmd.out {
-        bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
-            let mut w = csv::Writer::from_writer(file);
-            w.write_record([
-                "omega_rpm",
-                axis_name,
-                "regime",
-                "stuck_share",
-                "off_bottom_share",
-                "rop_m_h",
-                "period_s",
-                "wob_mean_kn",
-                "torque_mean_knm",
-            ])?;
-            for (k, s) in summaries.iter().enumerate() {
-                let (r, a) = (rpm[k / axis.len()], axis[k % axis.len()]);
-                w.write_record([
-                    format!("{r}"),
-                    format!("{a}"),
-                    s.regime().name().to_string(),
-                    format!("{:.4}", s.stuck_share()),
-                    format!("{:.4}", s.off_bottom_share()),
-                    format!("{:.3}", s.rate_m_s() * 3600.0),
-                    s.period_s(cmd.sample_hz).map_or(String::new(), |p| format!("{p:.3}")),
-                    format!("{:.3}", s.wob_mean_n() / 1e3),
-                    format!("{:.4}", s.torque_mean_nm() / 1e3),
-                ])?;
-            }
-            w.flush()
-        })?;
-    }
-    let mut out = super::print::stdout();
-    if cmd.json {
-        let cells: Vec<_> = summaries.iter().map(|s| summary_json(s, cmd.sample_hz)).collect();
-        let grid: Vec<_> = cells.chunks(axis.len()).map(<[serde_json::Value]>::to_vec).collect();
-        writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&json!({"omega_rpm": rpm, axis_name: axis, "cells": grid, "backend": ran}))?
-        )?;
-        return Ok(ExitCode::SUCCESS);
-    }
-    writeln!(
-        out,
-        "regimes ({} s after {} s settling, {} strings on the {ran}; . steady, S stick-slip, B bit bounce, X both, ! diverged)",
-        cmd.duration_s,
-        cmd.settle_s,
-        jobs.len()
-    )?;
-    write!(out, "{:>9}", format!("rpm\\{axis_unit}"))?;
-    for a in &axis {
+    w.flush()
+}
+
+/// The map's header row: the drive's values across.
+fn print_header(out: &mut dyn Write, unit: &str, drive: &[f64]) -> std::io::Result<()> {
+    write!(out, "{:>9}", format!("rpm\\{unit}"))?;
+    for a in drive {
         write!(out, " {a:>5}")?;
     }
-    writeln!(out)?;
-    for (i, r) in rpm.iter().enumerate() {
+    writeln!(out)
+}
+
+fn print_map(out: &mut dyn Write, map: &Map, settings: &Settings) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "regimes ({} s after {} s settling, {} strings on the {}; . steady, S stick-slip, B bit bounce, X both, ! diverged)",
+        settings.duration_s, settings.settle_s, map.axes.strings, map.axes.backend
+    )?;
+    print_header(out, drive_axis(settings).1, map.axes.drive())?;
+    for (row, r) in map.cells.iter().zip(&map.axes.omega_rpm) {
         write!(out, "{r:>9.1}")?;
-        for s in &summaries[i * axis.len()..(i + 1) * axis.len()] {
-            write!(out, " {:>5}", mark(s.regime()))?;
+        for s in row {
+            write!(out, " {:>5}", mark(s.regime))?;
         }
         writeln!(out)?;
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
 /// The regime's mark in the printed maps.
-fn mark(regime: coupled::Regime) -> &'static str {
+fn mark(regime: Regime) -> &'static str {
     match regime {
-        coupled::Regime::Steady => ".",
-        coupled::Regime::StickSlip => "S",
-        coupled::Regime::BitBounce => "B",
-        coupled::Regime::Both => "X",
-        coupled::Regime::Diverged => "!",
+        Regime::Steady => ".",
+        Regime::StickSlip => "S",
+        Regime::BitBounce => "B",
+        Regime::Both => "X",
+        Regime::Diverged => "!",
     }
 }
 
-/// The regimes counted, in the order steady, stick-slip, bit bounce, both, diverged.
-const REGIMES: [coupled::Regime; 5] = [
-    coupled::Regime::Steady,
-    coupled::Regime::StickSlip,
-    coupled::Regime::BitBounce,
-    coupled::Regime::Both,
-    coupled::Regime::Diverged,
-];
-
-/// `--calibrate --map`: every cell simulated for each of `--samples` posterior draws; each
-/// regime's probability per cell.
-fn run_posterior_map(
-    cmd: &CoupledCmd,
-    assembly: &Assembly,
-    schedule: &Schedule,
-    calibration: &CoupledCalibration,
-) -> anyhow::Result<ExitCode> {
-    if cmd.samples == 0 {
-        return Err(bitrock::Error::setting("samples", "must be at least 1").into());
-    }
-    let template = cmd.bit();
-    let bits: Vec<Bit> = calibration
-        .draws
-        .iter()
-        .map(|d| bit_of(d, &template))
-        .filter(|b| b.validate().is_ok())
-        .take(cmd.samples)
-        .collect();
-    if bits.len() < cmd.samples {
-        return Err(bitrock::Error::setting(
-            "samples",
-            format!(
-                "the calibration's draws give only {} bits within the physical bounds",
-                bits.len()
-            ),
-        )
-        .into());
-    }
-    let (rpm, axis, axis_name, axis_unit) = axes(cmd)?;
-    let mut jobs = Vec::with_capacity(rpm.len() * axis.len() * bits.len());
-    for &r in &rpm {
-        for &a in &axis {
-            for b in &bits {
-                jobs.push(cmd.job_with(*b, r, Some(a))?);
-            }
+fn write_posterior_map(map: &PosteriorMap, file: &mut dyn Write) -> std::io::Result<()> {
+    let mut w = csv::Writer::from_writer(file);
+    let drive_name = if map.axes.wob_kn.is_some() { "wob_kn" } else { "feed_m_h" };
+    w.write_record([
+        "omega_rpm",
+        drive_name,
+        "p_steady",
+        "p_stick_slip",
+        "p_bit_bounce",
+        "p_both",
+        "p_diverged",
+        "rop_median_m_h",
+    ])?;
+    for (row, r) in map.probabilities.iter().zip(&map.axes.omega_rpm) {
+        for (p, a) in row.iter().zip(map.axes.drive()) {
+            let mut cells = vec![format!("{r}"), format!("{a}")];
+            cells.extend(
+                [p.steady, p.stick_slip, p.bit_bounce, p.both, p.diverged]
+                    .iter()
+                    .map(|v| format!("{v:.4}")),
+            );
+            cells.push(format!("{:.3}", p.rop_median_m_h));
+            w.write_record(cells)?;
         }
     }
-    let (summaries, ran) = integrate(cmd, assembly, schedule, &jobs)?;
-    // Per cell: each regime's share of the draws, and the median rate of penetration (m/h).
-    let cells: Vec<([f64; 5], f64)> = summaries
-        .chunks(bits.len())
-        .map(|draws| {
-            let mut p = [0.0; 5];
-            for s in draws {
-                let k = REGIMES.iter().position(|r| *r == s.regime()).expect("a regime");
-                p[k] += 1.0 / draws.len() as f64;
-            }
-            let rates: Vec<f64> = draws.iter().map(|s| s.rate_m_s() * 3600.0).collect();
-            (p, bitrock::numerics::quantile(&rates, 0.5))
-        })
-        .collect();
-    if let Some(path) = &cmd.out {
-        bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
-            let mut w = csv::Writer::from_writer(file);
-            w.write_record([
-                "omega_rpm",
-                axis_name,
-                "p_steady",
-                "p_stick_slip",
-                "p_bit_bounce",
-                "p_both",
-                "p_diverged",
-                "rop_median_m_h",
-            ])?;
-            for (k, (p, rop)) in cells.iter().enumerate() {
-                let mut row = vec![format!("{}", rpm[k / axis.len()]), format!("{}", axis[k % axis.len()])];
-                row.extend(p.iter().map(|v| format!("{v:.4}")));
-                row.push(format!("{rop:.3}"));
-                w.write_record(row)?;
-            }
-            w.flush()
-        })?;
-    }
-    let mut out = super::print::stdout();
-    if cmd.json {
-        let grid: Vec<Vec<serde_json::Value>> = cells
-            .chunks(axis.len())
-            .map(|row| {
-                row.iter()
-                    .map(|(p, rop)| {
-                        json!({"steady": p[0], "stick_slip": p[1], "bit_bounce": p[2], "both": p[3], "diverged": p[4], "rop_median_m_h": rop})
-                    })
-                    .collect()
-            })
-            .collect();
-        writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&json!({"omega_rpm": rpm, axis_name: axis, "samples": bits.len(), "probabilities": grid, "backend": ran, "calibration": calibration_json(calibration)}))?
-        )?;
-        return Ok(ExitCode::SUCCESS);
-    }
-    print_estimates(&mut out, calibration)?;
+    w.flush()
+}
+
+fn print_posterior_map(out: &mut dyn Write, map: &PosteriorMap) -> std::io::Result<()> {
     writeln!(
         out,
-        "probability the bit vibrates (stick-slip, bounce or both), % of {} posterior draws per cell; \
-         {} strings on the {ran}",
-        bits.len(),
-        jobs.len()
+        "probability the bit vibrates (stick-slip, bounce or both), % of {} posterior draws per cell; {} strings on the {}",
+        map.samples, map.axes.strings, map.axes.backend
     )?;
-    write!(out, "{:>9}", format!("rpm\\{axis_unit}"))?;
-    for a in &axis {
-        write!(out, " {a:>5}")?;
-    }
-    writeln!(out)?;
-    for (i, r) in rpm.iter().enumerate() {
+    let unit = if map.axes.wob_kn.is_some() { "kN" } else { "m/h" };
+    print_header(out, unit, map.axes.drive())?;
+    for (row, r) in map.probabilities.iter().zip(&map.axes.omega_rpm) {
         write!(out, "{r:>9.1}")?;
-        for (p, _) in &cells[i * axis.len()..(i + 1) * axis.len()] {
-            write!(out, " {:>5.0}", 100.0 * p[1..].iter().sum::<f64>())?;
+        for p in row {
+            write!(out, " {:>5.0}", 100.0 * p.vibrating())?;
         }
         writeln!(out)?;
     }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// A calibration as JSON: its estimates, lines and samples.
-fn calibration_json(c: &CoupledCalibration) -> serde_json::Value {
-    json!({
-        "samples": c.samples,
-        "cutting_samples": c.cutting_samples,
-        "depth_of_cut_mm": [c.depth_of_cut_mm.0, c.depth_of_cut_mm.1],
-        "weight_line": c.weight_line,
-        "torque_line": c.torque_line,
-        "estimates": c.estimates,
-        "draws_out_of_bounds": c.draws_out_of_bounds,
-        "warning": c.warning,
-    })
+    Ok(())
 }
 
 /// The estimates with their intervals, and what they came from.
@@ -618,19 +466,12 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
         writeln!(
             out,
             "{:<22} {:>10.4} {:<4} 90 % [{:.4}, {:.4}]",
-            e.name, e.value, if e.unit == "1" { "" } else { e.unit }, e.lo, e.hi
+            e.name,
+            e.value,
+            if e.unit == "1" { "" } else { e.unit },
+            e.lo,
+            e.hi
         )?;
     }
     Ok(())
-}
-
-/// `--calibrate` without `--map`: the estimates.
-fn print_calibration(cmd: &CoupledCmd, c: &CoupledCalibration) -> anyhow::Result<ExitCode> {
-    let mut out = super::print::stdout();
-    if cmd.json {
-        writeln!(out, "{}", serde_json::to_string_pretty(&calibration_json(c))?)?;
-    } else {
-        print_estimates(&mut out, c)?;
-    }
-    Ok(ExitCode::SUCCESS)
 }

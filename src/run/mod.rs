@@ -14,9 +14,13 @@
 //!   paper's estimates;
 //! - [`strings`]: simulated strings: onset and escape maps from a posterior, and
 //!   [`advice`], the operating advice read from them.
+//! - [`surface`]: laws from a surface record through simulated strings;
+//! - [`coupled`]: the coupled axial-torsional bit: one string, a regime map, a drilling
+//!   record's calibration and the regimes' probabilities over its posterior.
 
 pub mod abc;
 pub mod advice;
+pub mod coupled;
 pub mod dir;
 pub mod evidence;
 pub mod scoring;

@@ -268,8 +268,9 @@ fn the_calibrated_bit_s_regimes_come_with_their_probabilities() {
     );
     assert_eq!(code, 0, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
-    assert_eq!(v["samples"], 4);
-    let p = &v["probabilities"];
+    assert_eq!(v["map"]["samples"], 4);
+    assert_eq!(v["map"]["strings"], 16, "2 × 2 cells × 4 draws");
+    let p = &v["map"]["probabilities"];
     // The record's own operating point stick-slips for every draw; 180 rpm drills steadily.
     assert_eq!(p[0][0]["stick_slip"], 1.0, "{p}");
     assert_eq!(p[1][0]["steady"], 1.0, "{p}");

@@ -1,0 +1,470 @@
+//! The coupled axial-torsional bit's runs: one string simulated to its record and regime, a
+//! regime map over top-drive speed and weight on bit (or feed), and a drilling record's
+//! calibration with the regimes' probabilities over its posterior. The command and Python fill
+//! one [`Settings`] and get the same reports.
+
+use crate::data::drilling::DrillingRecord;
+use crate::error::{Error, Result};
+use crate::eval::Backend;
+use crate::eval::strings::Ran;
+use crate::fit::coupled::{CoupledCalibration, bit_of, calibrate};
+use crate::simulate::coupled::{
+    self, Assembly, Axial, Bit, CoupledJob, CoupledSummary, Regime, Sample, Schedule, Steady,
+};
+use crate::stability::lumped::Lumped;
+use crate::stability::map::parse_axis;
+use crate::units::RAD_S_PER_RPM;
+use serde::{Deserialize, Serialize};
+
+/// m/s per m/h.
+const M_S_PER_M_H: f64 = 1.0 / 3600.0;
+
+/// Feed (m/h) where neither a weight nor a feed is given.
+pub const DEFAULT_FEED_M_H: f64 = 30.0;
+
+/// Posterior draws a calibration's intervals are read from.
+pub const CALIBRATION_DRAWS: usize = 4_000;
+
+/// Everything a coupled-bit run is made from, in the units the command and Python speak.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// Top-drive speed Ω₀ (rpm).
+    pub omega_rpm: f64,
+    /// A constant weight on the bit assembly (kN); the drive where given.
+    pub wob_kn: Option<f64>,
+    /// The top fed down at this rate (m/h) where no weight is given ([`DEFAULT_FEED_M_H`] where
+    /// neither is).
+    pub feed_m_h: Option<f64>,
+    /// Bit radius a (m).
+    pub radius_m: f64,
+    /// Intrinsic specific energy ε of the rock (MPa).
+    pub intrinsic_energy_mpa: f64,
+    /// Ratio ζ of the cutting force's axial to its tangential component.
+    pub zeta: f64,
+    /// Contact stress σ on the wear flats (MPa).
+    pub contact_stress_mpa: f64,
+    /// Total wear-flat length l (mm).
+    pub wear_flat_mm: f64,
+    /// Friction coefficient μ of the wear flats.
+    pub friction: f64,
+    /// Bit geometry factor γ.
+    pub gamma: f64,
+    /// Blades N.
+    pub blades: u32,
+    /// The string's equivalent inertia I (kg·m²).
+    pub inertia_kg_m2: f64,
+    /// The string's natural frequency ω_n (rad/s).
+    pub omega_n_rad_s: f64,
+    /// The string's torsional damping ratio ξ.
+    pub damping_ratio: f64,
+    /// Mass of the bit assembly M (kg).
+    pub mass_kg: f64,
+    /// Axial stiffness of the string K_a (kN/m), felt under a feed.
+    pub axial_stiffness_kn_m: f64,
+    /// Axial damping on the bit assembly C_a (kN·s/m).
+    pub axial_damping_kns_m: f64,
+    /// Recorded duration (s).
+    pub duration_s: f64,
+    /// Simulated time before recording (s).
+    pub settle_s: f64,
+    /// Sample rate of the record (Hz).
+    pub sample_hz: f64,
+    /// Integration step (s).
+    pub dt_s: f64,
+    /// Bit-speed kick from steady drilling at t = 0 (rpm).
+    pub kick_rpm: f64,
+    /// The map's top-drive speeds (rpm), MIN:MAX:COUNT.
+    pub map_rpm: String,
+    /// The map's weights on bit (kN), MIN:MAX:COUNT, under a weight.
+    pub map_wob_kn: String,
+    /// The map's feeds (m/h), MIN:MAX:COUNT, under a feed.
+    pub map_feed_m_h: String,
+    /// Posterior draws each cell of a calibrated map is simulated for.
+    pub samples: usize,
+    /// Seed of the calibration's posterior draws.
+    pub seed: u64,
+    /// Where the map's strings are integrated.
+    pub backend: Backend,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        let bit = Bit::default();
+        let assembly = Assembly::default();
+        Self {
+            omega_rpm: 60.0,
+            wob_kn: None,
+            feed_m_h: None,
+            radius_m: bit.radius_m,
+            intrinsic_energy_mpa: bit.intrinsic_energy_mpa,
+            zeta: bit.zeta,
+            contact_stress_mpa: bit.contact_stress_mpa,
+            wear_flat_mm: bit.wear_flat_mm,
+            friction: bit.friction,
+            gamma: bit.gamma,
+            blades: bit.blades,
+            inertia_kg_m2: assembly.torsion.inertia_kg_m2,
+            omega_n_rad_s: assembly.torsion.omega_n_rad_s,
+            damping_ratio: assembly.torsion.damping_ratio,
+            mass_kg: assembly.mass_kg,
+            axial_stiffness_kn_m: assembly.axial_stiffness_n_per_m / 1e3,
+            axial_damping_kns_m: assembly.axial_damping_ns_per_m / 1e3,
+            duration_s: 60.0,
+            settle_s: 30.0,
+            sample_hz: 50.0,
+            dt_s: 1e-4,
+            kick_rpm: 1.0,
+            map_rpm: "20:200:10".into(),
+            map_wob_kn: "80:280:9".into(),
+            map_feed_m_h: "10:60:6".into(),
+            samples: 20,
+            seed: 1,
+            backend: Backend::Auto,
+        }
+    }
+}
+
+impl Settings {
+    /// The bit these settings describe (validate before use).
+    pub fn bit(&self) -> Bit {
+        Bit {
+            radius_m: self.radius_m,
+            intrinsic_energy_mpa: self.intrinsic_energy_mpa,
+            zeta: self.zeta,
+            contact_stress_mpa: self.contact_stress_mpa,
+            wear_flat_mm: self.wear_flat_mm,
+            friction: self.friction,
+            gamma: self.gamma,
+            blades: self.blades,
+        }
+    }
+
+    /// The drill string, validated.
+    pub fn assembly(&self) -> Result<Assembly> {
+        let a = Assembly {
+            torsion: Lumped {
+                inertia_kg_m2: self.inertia_kg_m2,
+                omega_n_rad_s: self.omega_n_rad_s,
+                damping_ratio: self.damping_ratio,
+            },
+            mass_kg: self.mass_kg,
+            axial_stiffness_n_per_m: self.axial_stiffness_kn_m * 1e3,
+            axial_damping_ns_per_m: self.axial_damping_kns_m * 1e3,
+        };
+        a.validate()?;
+        Ok(a)
+    }
+
+    /// The schedule, validated.
+    pub fn schedule(&self) -> Result<Schedule> {
+        Schedule::new(self.dt_s, self.sample_hz, self.settle_s, self.duration_s)
+    }
+
+    /// Whether the bit is fed (no weight given).
+    pub fn is_feed(&self) -> bool {
+        self.wob_kn.is_none()
+    }
+
+    /// A string of `bit` at `omega_rpm` under the drive, its value `drive` (kN or m/h) where
+    /// given, else the settings' own; validated.
+    pub fn job(&self, bit: Bit, omega_rpm: f64, drive: Option<f64>) -> Result<CoupledJob> {
+        let axial = match self.wob_kn {
+            Some(wob) => Axial::Weight {
+                wob_n: drive.unwrap_or(wob) * 1e3,
+            },
+            None => Axial::Feed {
+                rate_m_s: drive.or(self.feed_m_h).unwrap_or(DEFAULT_FEED_M_H) * M_S_PER_M_H,
+            },
+        };
+        let job = CoupledJob {
+            bit,
+            omega_rad_s: omega_rpm * RAD_S_PER_RPM,
+            axial,
+            kick_rad_s: self.kick_rpm * RAD_S_PER_RPM,
+        };
+        job.validate()?;
+        Ok(job)
+    }
+
+    /// The map's speeds (rpm) and its second axis: weights (kN) or feeds (m/h).
+    pub fn axes(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        let rpm = parse_axis(&self.map_rpm, "map_rpm")?;
+        let axis = if self.is_feed() {
+            parse_axis(&self.map_feed_m_h, "map_feed_m_h")?
+        } else {
+            parse_axis(&self.map_wob_kn, "map_wob_kn")?
+        };
+        Ok((rpm, axis))
+    }
+}
+
+/// What a string did while recorded, in the units the command prints.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SummaryReport {
+    pub regime: Regime,
+    pub rop_m_h: f64,
+    pub stuck_share: f64,
+    pub off_bottom_share: f64,
+    pub backward_share: f64,
+    pub period_s: Option<f64>,
+    pub bit_speed_rpm: Range,
+    pub wob_kn: Range,
+    pub torque_knm: Range,
+    pub samples: u32,
+    pub diverged: bool,
+}
+
+/// A channel's least, greatest and mean value over the recorded samples.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Range {
+    pub min: f64,
+    pub max: f64,
+    pub mean: f64,
+}
+
+impl SummaryReport {
+    pub fn of(s: &CoupledSummary, sample_hz: f64) -> Self {
+        Self {
+            regime: s.regime(),
+            rop_m_h: s.rate_m_s() * 3600.0,
+            stuck_share: s.stuck_share(),
+            off_bottom_share: s.off_bottom_share(),
+            backward_share: f64::from(s.backward) / f64::from(s.samples.max(1)),
+            period_s: s.period_s(sample_hz),
+            bit_speed_rpm: Range {
+                min: s.speed_min_rad_s / RAD_S_PER_RPM,
+                max: s.speed_max_rad_s / RAD_S_PER_RPM,
+                mean: s.speed_mean_rad_s() / RAD_S_PER_RPM,
+            },
+            wob_kn: Range {
+                min: s.wob_min_n / 1e3,
+                max: s.wob_max_n / 1e3,
+                mean: s.wob_mean_n() / 1e3,
+            },
+            torque_knm: Range {
+                min: s.torque_min_nm / 1e3,
+                max: s.torque_max_nm / 1e3,
+                mean: s.torque_mean_nm() / 1e3,
+            },
+            samples: s.samples,
+            diverged: s.diverged,
+        }
+    }
+}
+
+/// Steady drilling at a string's drive.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SteadyReport {
+    pub depth_of_cut_mm: f64,
+    pub rop_m_h: f64,
+    pub wob_kn: f64,
+    pub torque_knm: f64,
+}
+
+impl SteadyReport {
+    fn of(s: &Steady, blades: u32) -> Self {
+        Self {
+            depth_of_cut_mm: 1e3 * f64::from(blades) * s.depth_per_blade_m,
+            rop_m_h: s.rate_m_s * 3600.0,
+            wob_kn: s.wob_n / 1e3,
+            torque_knm: s.torque_nm / 1e3,
+        }
+    }
+}
+
+/// One string: what it did and what steady drilling would have been.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct One {
+    #[serde(flatten)]
+    pub summary: SummaryReport,
+    pub steady: SteadyReport,
+}
+
+/// One string at the settings' speed and drive, each recorded sample given to `on_sample`.
+pub fn one(settings: &Settings, on_sample: &mut dyn FnMut(&Sample)) -> Result<One> {
+    let assembly = settings.assembly()?;
+    let schedule = settings.schedule()?;
+    let job = settings.job(settings.bit(), settings.omega_rpm, None)?;
+    let summary = coupled::integrate_with(&assembly, &schedule, &job, on_sample);
+    Ok(One {
+        summary: SummaryReport::of(&summary, settings.sample_hz),
+        steady: SteadyReport::of(&job.steady(&assembly), job.bit.blades),
+    })
+}
+
+/// The map's axes and where its strings ran.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Axes {
+    pub omega_rpm: Vec<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wob_kn: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub feed_m_h: Option<Vec<f64>>,
+    /// Strings simulated.
+    pub strings: usize,
+    pub backend: String,
+}
+
+impl Axes {
+    /// The second axis' values.
+    pub fn drive(&self) -> &[f64] {
+        self.wob_kn.as_deref().or(self.feed_m_h.as_deref()).unwrap_or_default()
+    }
+}
+
+/// A regime map: one string per cell, speeds down, drives across.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Map {
+    #[serde(flatten)]
+    pub axes: Axes,
+    pub cells: Vec<Vec<SummaryReport>>,
+}
+
+/// Each regime's probability in a cell of a calibrated map.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CellProbabilities {
+    pub steady: f64,
+    pub stick_slip: f64,
+    pub bit_bounce: f64,
+    pub both: f64,
+    pub diverged: f64,
+    /// The median of the draws' rates of penetration (m/h).
+    pub rop_median_m_h: f64,
+}
+
+impl CellProbabilities {
+    /// The probability the bit vibrates: stick-slip, bounce, both (or runs away).
+    pub fn vibrating(&self) -> f64 {
+        self.stick_slip + self.bit_bounce + self.both + self.diverged
+    }
+}
+
+/// A calibrated map: each cell simulated for every posterior draw.
+#[derive(Clone, Debug, Serialize)]
+pub struct PosteriorMap {
+    #[serde(flatten)]
+    pub axes: Axes,
+    pub samples: usize,
+    pub probabilities: Vec<Vec<CellProbabilities>>,
+}
+
+/// Every string of `jobs` on the settings' backend (a GPU fallback said through `note`).
+fn integrate(
+    settings: &Settings,
+    assembly: &Assembly,
+    schedule: &Schedule,
+    jobs: &[CoupledJob],
+    note: &mut dyn FnMut(String),
+) -> Result<(Vec<CoupledSummary>, String)> {
+    let (summaries, ran) = crate::eval::coupled::integrate(assembly, schedule, jobs, settings.backend, note)?;
+    let ran = match ran {
+        Ran::Gpu(name) => format!("GPU {name}"),
+        Ran::Cpu => "CPU".to_string(),
+    };
+    Ok((summaries, ran))
+}
+
+/// The map's jobs for each of `bits`, cell by cell (speeds outer, drives inner, bits innermost).
+fn map_jobs(settings: &Settings, bits: &[Bit]) -> Result<(Vec<f64>, Vec<f64>, Vec<CoupledJob>)> {
+    let (rpm, axis) = settings.axes()?;
+    let mut jobs = Vec::with_capacity(rpm.len() * axis.len() * bits.len());
+    for &r in &rpm {
+        for &a in &axis {
+            for b in bits {
+                jobs.push(settings.job(*b, r, Some(a))?);
+            }
+        }
+    }
+    Ok((rpm, axis, jobs))
+}
+
+fn axes(settings: &Settings, omega_rpm: Vec<f64>, axis: Vec<f64>, strings: usize, backend: String) -> Axes {
+    let (wob_kn, feed_m_h) = if settings.is_feed() {
+        (None, Some(axis))
+    } else {
+        (Some(axis), None)
+    };
+    Axes {
+        omega_rpm,
+        wob_kn,
+        feed_m_h,
+        strings,
+        backend,
+    }
+}
+
+/// The regime map of the settings' bit.
+pub fn map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Map> {
+    let assembly = settings.assembly()?;
+    let schedule = settings.schedule()?;
+    let (rpm, axis, jobs) = map_jobs(settings, &[settings.bit()])?;
+    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, note)?;
+    let cells = summaries
+        .chunks(axis.len())
+        .map(|row| row.iter().map(|s| SummaryReport::of(s, settings.sample_hz)).collect())
+        .collect();
+    Ok(Map {
+        axes: axes(settings, rpm, axis, jobs.len(), ran),
+        cells,
+    })
+}
+
+/// The bit calibrated on `record` (its radius the settings'), with the settings' seed.
+pub fn calibration(record: &DrillingRecord, settings: &Settings) -> Result<CoupledCalibration> {
+    settings.bit().validate()?;
+    calibrate(record, settings.radius_m, CALIBRATION_DRAWS, settings.seed)
+}
+
+/// The regimes' probabilities per cell over the first `samples` of the calibration's draws that
+/// make a bit within bounds (its radius, contact stress, γ and blades the settings').
+pub fn posterior_map(
+    settings: &Settings,
+    calibration: &CoupledCalibration,
+    note: &mut dyn FnMut(String),
+) -> Result<PosteriorMap> {
+    if settings.samples == 0 {
+        return Err(Error::setting("samples", "must be at least 1"));
+    }
+    let template = settings.bit();
+    let bits: Vec<Bit> = calibration
+        .draws
+        .iter()
+        .map(|d| bit_of(d, &template))
+        .filter(|b| b.validate().is_ok())
+        .take(settings.samples)
+        .collect();
+    if bits.len() < settings.samples {
+        return Err(Error::setting(
+            "samples",
+            format!(
+                "the calibration's draws give only {} bits within the physical bounds",
+                bits.len()
+            ),
+        ));
+    }
+    let assembly = settings.assembly()?;
+    let schedule = settings.schedule()?;
+    let (rpm, axis, jobs) = map_jobs(settings, &bits)?;
+    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, note)?;
+    let cells: Vec<CellProbabilities> = summaries
+        .chunks(bits.len())
+        .map(|draws| {
+            let share = |regime: Regime| draws.iter().filter(|s| s.regime() == regime).count() as f64 / draws.len() as f64;
+            let rates: Vec<f64> = draws.iter().map(|s| s.rate_m_s() * 3600.0).collect();
+            CellProbabilities {
+                steady: share(Regime::Steady),
+                stick_slip: share(Regime::StickSlip),
+                bit_bounce: share(Regime::BitBounce),
+                both: share(Regime::Both),
+                diverged: share(Regime::Diverged),
+                rop_median_m_h: crate::numerics::quantile(&rates, 0.5),
+            }
+        })
+        .collect();
+    Ok(PosteriorMap {
+        samples: bits.len(),
+        probabilities: cells.chunks(axis.len()).map(<[CellProbabilities]>::to_vec).collect(),
+        axes: axes(settings, rpm, axis, jobs.len(), ran),
+    })
+}
