@@ -13,6 +13,7 @@ mod run;
 mod selection;
 mod stability;
 mod strings;
+mod coupled;
 mod surface;
 mod watch;
 
@@ -42,6 +43,8 @@ mod _bitrock {
     use crate::stability::stability;
     #[pymodule_export]
     use crate::strings::simulate_strings;
+    #[pymodule_export]
+    use crate::coupled::{coupled, coupled_calibrate};
     #[pymodule_export]
     use crate::surface::surface;
     #[pymodule_export]

@@ -169,3 +169,51 @@ def test_the_ring_form_agrees_with_the_delay_form(cli, case, bit, extra):
     assert (ring["period_s"] is None) == (delay["period_s"] is None), (ring, delay)
     if delay["period_s"] is not None:
         assert abs(ring["period_s"] - delay["period_s"]) <= 0.02 * delay["period_s"], (ring, delay)
+
+
+def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
+    """``bitrock.coupled`` and ``bitrock.coupled_calibrate`` are the command's runs: the same
+    settings by the same names, the same reports."""
+    import bitrock
+
+    short = dict(duration_s=20.0, settle_s=10.0)
+    one = bitrock.coupled(omega_rpm=45, wob_kn=150, record=True, **short)
+    assert one == {**ring_form(cli, 45.0, wob_kn=150.0, extra=("--duration-s", "20", "--settle-s", "10")), "record": one["record"]}
+    record = one["record"]
+    assert len(record["time_s"]) == 1000 and one["regime"] == "stick_slip"
+    stuck = sum(abs(w) < 1.0 for w in record["bit_speed_rpm"]) / 1000
+    assert stuck == pytest.approx(one["stuck_share"], abs=1e-12)
+
+    cells = bitrock.coupled(map=True, wob_kn=150, map_rpm="45:180:2", map_wob_kn="150:220:2", backend="cpu", **short)
+    done = run_cli(cli, "coupled", "--map", "--wob-kn", "150", "--map-rpm", "45:180:2", "--map-wob-kn", "150:220:2", "--backend", "cpu", "--duration-s", "20", "--settle-s", "10", "--json")
+    assert cells == json.loads(done.stdout)
+    assert [[c["regime"] for c in row] for row in cells["cells"]][1] == ["steady", "steady"]
+
+    path = tmp_path / "rgd.csv"
+    import pandas as pd
+
+    pd.DataFrame({k: v for k, v in record.items()}).to_csv(path, index=False)
+    calibration = bitrock.coupled_calibrate(path)
+    done = run_cli(cli, "coupled", "--calibrate", str(path), "--json")
+    assert calibration == json.loads(done.stdout)
+    estimates = {e["name"]: e for e in calibration["estimates"]}
+    # The record's values are written at six decimals: the lines are the bit's to 1e-4.
+    assert estimates["intrinsic_energy_mpa"]["value"] == pytest.approx(60.0, rel=1e-4)
+    assert estimates["zeta"]["value"] == pytest.approx(0.6, rel=1e-4)
+    assert estimates["mu_gamma"]["value"] == pytest.approx(0.6, rel=1e-4)
+
+
+def test_every_coupled_setting_is_a_keyword_and_a_stray_one_is_refused():
+    import inspect
+
+    import bitrock
+
+    fields = bitrock._bitrock.settings_fields("coupled")
+    assert {"intrinsic_energy_mpa", "wob_kn", "map_rpm", "samples", "backend"} <= set(fields)
+    for function in (bitrock.coupled, bitrock.coupled_calibrate):
+        keywords = inspect.signature(function).parameters
+        assert [f for f in fields if f not in keywords] == [], function.__name__
+    with pytest.raises(bitrock.InputError, match="zeta"):
+        bitrock.coupled(zeta=-1.0, duration_s=1.0, settle_s=0.0)
+    with pytest.raises(TypeError):
+        bitrock.coupled(zeta_=0.5)

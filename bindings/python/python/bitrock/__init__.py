@@ -40,6 +40,8 @@ __all__ = [
     "Evidence",
     "abc",
     "check_selection",
+    "coupled",
+    "coupled_calibrate",
     "evidence",
     "fit",
     "load_law",
@@ -760,6 +762,109 @@ def surface(
         os.fspath(path), None if laws is None else [str(law) for law in laws], options, _note
     )
     return json.loads(text)
+
+
+def coupled(
+    *,
+    omega_rpm: float | None = None,
+    wob_kn: float | None = None,
+    feed_m_h: float | None = None,
+    radius_m: float | None = None,
+    intrinsic_energy_mpa: float | None = None,
+    zeta: float | None = None,
+    contact_stress_mpa: float | None = None,
+    wear_flat_mm: float | None = None,
+    friction: float | None = None,
+    gamma: float | None = None,
+    blades: int | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    mass_kg: float | None = None,
+    axial_stiffness_kn_m: float | None = None,
+    axial_damping_kns_m: float | None = None,
+    duration_s: float | None = None,
+    settle_s: float | None = None,
+    sample_hz: float | None = None,
+    dt_s: float | None = None,
+    kick_rpm: float | None = None,
+    map_rpm: str | None = None,
+    map_wob_kn: str | None = None,
+    map_feed_m_h: str | None = None,
+    samples: int | None = None,
+    seed: int | None = None,
+    backend: str | None = None,
+    record: bool = False,
+    map: bool = False,
+) -> dict:
+    """The coupled axial-torsional bit (Richard, Germay & Detournay) on the 1-DOF string, as
+    ``bitrock coupled`` simulates it (the same settings, by the same names; docs/coupled.md):
+    one string's regime, rate of penetration (m/h), stuck and off-bottom shares, period and the
+    ranges of bit speed (rpm), weight (kN) and torque (kN·m), with ``steady`` drilling at its
+    drive; with ``record=True`` its samples under ``record`` as columns. With ``map=True`` the
+    regime map over ``map_rpm`` × ``map_wob_kn`` (or ``map_feed_m_h`` under a feed): ``cells``,
+    speeds down, drives across. The bit is held down by ``wob_kn`` or fed at ``feed_m_h``
+    (30 m/h where neither is given)."""
+    import json
+
+    options = {k: v for k, v in locals().items() if k not in ("record", "map", "json")}
+    return json.loads(_bitrock.coupled(options, record, map, _note))
+
+
+def coupled_calibrate(
+    path: str | os.PathLike[str],
+    *,
+    speed_col: str | None = None,
+    torque_col: str | None = None,
+    wob_col: str | None = None,
+    rop_col: str | None = None,
+    axial_speed_col: str | None = None,
+    speed_unit: str | None = None,
+    torque_unit: str | None = None,
+    wob_unit: str | None = None,
+    rop_unit: str | None = None,
+    omega_rpm: float | None = None,
+    wob_kn: float | None = None,
+    feed_m_h: float | None = None,
+    radius_m: float | None = None,
+    intrinsic_energy_mpa: float | None = None,
+    zeta: float | None = None,
+    contact_stress_mpa: float | None = None,
+    wear_flat_mm: float | None = None,
+    friction: float | None = None,
+    gamma: float | None = None,
+    blades: int | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    mass_kg: float | None = None,
+    axial_stiffness_kn_m: float | None = None,
+    axial_damping_kns_m: float | None = None,
+    duration_s: float | None = None,
+    settle_s: float | None = None,
+    sample_hz: float | None = None,
+    dt_s: float | None = None,
+    kick_rpm: float | None = None,
+    map_rpm: str | None = None,
+    map_wob_kn: str | None = None,
+    map_feed_m_h: str | None = None,
+    samples: int | None = None,
+    seed: int | None = None,
+    backend: str | None = None,
+    map: bool = False,
+) -> dict:
+    """The coupled bit calibrated on a drilling record (bit speed, torque on bit, weight on bit,
+    rate of penetration; the bit's axial speed where present; a CSV file), as ``bitrock coupled
+    --calibrate`` does: the weight and torque lines through the cutting samples, ε (MPa), ζ, the
+    wear flats' contact force (kN) and μ·γ with 90 % intervals, and a ``warning`` where the
+    record cannot tell a cutting bit from a held one. With ``map=True``: ``{"calibration": ...,
+    "map": ...}``, the map giving each regime's probability per cell over ``samples`` posterior
+    draws."""
+    import json
+
+    columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}
+    options = {k: v for k, v in locals().items() if k not in columns and k not in ("path", "map", "columns", "json")}
+    return json.loads(_bitrock.coupled_calibrate(os.fspath(path), columns, options, map, _note))
 
 
 def simulate_strings(

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -131,6 +131,19 @@ def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, opti
     candidates are scored by the dispatcher's workers, `parallelism` tasks a batch.
     """
 
+def coupled(options: dict, record: bool, map: bool, note: Any | None) -> str:
+    """
+    `bitrock coupled` with the settings in `options`: one string (its summary and steady
+    drilling, and with `record` its samples as columns), or with `map` the regime map; as JSON
+    text.
+    """
+
+def coupled_calibrate(path: str | PathLike[str], columns: dict, options: dict, map: bool, note: Any | None) -> str:
+    """
+    The bit calibrated on the drilling record at `path` (columns and units in `columns`), and
+    with `map` the regimes' probabilities over its posterior; as JSON text.
+    """
+
 def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
     """
     The evidence of `laws` (`None`: all four) on the record, with the options of
@@ -219,7 +232,7 @@ def serve(request: bytes, problem: bytes | None = None, context: bytes | None = 
 
 def settings_fields(kind: str) -> list[str]:
     """
-    The fields of a kind of run's settings (`abc`, `evidence`): the keyword arguments its Python
+    The fields of a kind of run's settings (`abc`, `evidence`, `coupled`): the keyword arguments its Python
     function must take, as the command takes their flags.
     """
 

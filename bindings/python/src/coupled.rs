@@ -1,0 +1,103 @@
+//! The coupled axial-torsional bit (RGD): one string, a regime map, a drilling record's
+//! calibration and the regimes' probabilities over its posterior, as `bitrock coupled` runs
+//! them (`bitrock::run::coupled`).
+
+use crate::errors::*;
+use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
+use bitrock::run::coupled::{self as run, Settings};
+use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+/// Calls `note` with each of the run's notes (a GPU fallback), once it is done.
+fn say(py: Python<'_>, note: &Option<Py<PyAny>>, notes: Vec<String>) -> PyResult<()> {
+    if let Some(callback) = note {
+        for line in notes {
+            callback.call1(py, (as_arguments(&line),))?;
+        }
+    }
+    Ok(())
+}
+
+/// `bitrock coupled` with the settings in `options`: one string (its summary and steady
+/// drilling, and with `record` its samples as columns), or with `map` the regime map; as JSON
+/// text.
+#[pyfunction]
+#[pyo3(signature = (options, record, map, note))]
+pub(crate) fn coupled(
+    py: Python<'_>,
+    options: &Bound<'_, PyDict>,
+    record: bool,
+    map: bool,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let settings: Settings = settings(options)?;
+    let mut notes = Vec::new();
+    let value = if map {
+        let m = py.detach(|| run::map(&settings, &mut |line| notes.push(line)));
+        serde_json::to_value(check(py, m)?)
+    } else {
+        let mut samples = Vec::new();
+        let one = py.detach(|| {
+            run::one(&settings, &mut |s| {
+                if record {
+                    samples.push(*s)
+                }
+            })
+        });
+        let mut value = serde_json::to_value(check(py, one)?).expect("a report serialises");
+        if record {
+            let column = |f: &dyn Fn(&bitrock::simulate::coupled::Sample) -> f64| samples.iter().map(f).collect::<Vec<f64>>();
+            value["record"] = serde_json::json!({
+                "time_s": column(&|s| s.time_s),
+                "bit_speed_rpm": column(&|s| s.bit_speed_rad_s / bitrock::units::RAD_S_PER_RPM),
+                "torque_on_bit_knm": column(&|s| s.torque_nm / 1e3),
+                "wob_kn": column(&|s| s.wob_n / 1e3),
+                "axial_speed_m_h": column(&|s| s.axial_speed_m_s * 3600.0),
+                "rop_m_h": column(&|s| s.cutting_rate_m_s * 3600.0),
+                "depth_of_cut_mm": column(&|s| s.depth_per_blade_m * 1e3),
+            });
+        }
+        Ok(value)
+    };
+    say(py, &note, notes)?;
+    Ok(value.expect("a report serialises").to_string())
+}
+
+/// The bit calibrated on the drilling record at `path` (columns and units in `columns`), and
+/// with `map` the regimes' probabilities over its posterior; as JSON text.
+#[pyfunction]
+#[pyo3(signature = (path, columns, options, map, note))]
+pub(crate) fn coupled_calibrate(
+    py: Python<'_>,
+    path: PathBuf,
+    columns: &Bound<'_, PyDict>,
+    options: &Bound<'_, PyDict>,
+    map: bool,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let settings: Settings = settings(options)?;
+    let opts = DrillingOptions {
+        speed_column: kwarg(columns, "speed_col")?,
+        torque_column: kwarg(columns, "torque_col")?,
+        wob_column: kwarg(columns, "wob_col")?,
+        rop_column: kwarg(columns, "rop_col")?,
+        axial_speed_column: kwarg(columns, "axial_speed_col")?,
+        speed_unit: unit(py, "speed_unit", kwarg(columns, "speed_unit")?, SpeedUnit::from_suffix)?,
+        torque_unit: unit(py, "torque_unit", kwarg(columns, "torque_unit")?, TorqueUnit::from_suffix)?,
+        wob_unit: unit(py, "wob_unit", kwarg(columns, "wob_unit")?, ForceUnit::from_suffix)?,
+        rop_unit: unit(py, "rop_unit", kwarg(columns, "rop_unit")?, RateUnit::from_suffix)?,
+    };
+    let record = check(py, DrillingRecord::read(&path, &opts))?;
+    let calibration = check(py, run::calibration(&record, &settings))?;
+    let mut notes: Vec<String> = calibration.warning.iter().map(|w| format!("warning: {w}")).collect();
+    let value = if map {
+        let m = py.detach(|| run::posterior_map(&settings, &calibration, &mut |line| notes.push(line)));
+        serde_json::json!({"map": check(py, m)?, "calibration": calibration})
+    } else {
+        serde_json::to_value(&calibration).expect("a calibration serialises")
+    };
+    say(py, &note, notes)?;
+    Ok(value.to_string())
+}
