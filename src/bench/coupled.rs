@@ -62,7 +62,8 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
         let mut regimes = [0.0; 4];
         for _ in 0..opts.repetitions {
             let t = std::time::Instant::now();
-            let (summaries, r) = crate::eval::coupled::integrate(&assembly, &schedule, &jobs, backend, &mut |l| log(l))?;
+            let (summaries, r) =
+                crate::eval::coupled::integrate(&assembly, &schedule, &jobs, backend, &mut |l| log(l))?;
             walls.push(t.elapsed().as_secs_f64());
             regimes = [0.0; 4];
             for s in &summaries {

@@ -410,7 +410,11 @@ fn mark(regime: Regime) -> &'static str {
 
 fn write_posterior_map(map: &PosteriorMap, file: &mut dyn Write) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(file);
-    let drive_name = if map.axes.wob_kn.is_some() { "wob_kn" } else { "feed_m_h" };
+    let drive_name = if map.axes.wob_kn.is_some() {
+        "wob_kn"
+    } else {
+        "feed_m_h"
+    };
     w.write_record([
         "omega_rpm",
         drive_name,
@@ -460,7 +464,12 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
         out,
         "{} of {} samples cutting, depth of cut {:.2}-{:.2} mm a turn (5th-95th percentile); \
          weight line R² {:.3}, torque line R² {:.3}",
-        c.cutting_samples, c.samples, c.depth_of_cut_mm.0, c.depth_of_cut_mm.1, c.weight_line.r_squared, c.torque_line.r_squared
+        c.cutting_samples,
+        c.samples,
+        c.depth_of_cut_mm.0,
+        c.depth_of_cut_mm.1,
+        c.weight_line.r_squared,
+        c.torque_line.r_squared
     )?;
     for e in &c.estimates {
         writeln!(

@@ -27,7 +27,10 @@ pub fn integrate(
                 .map(|(i, j)| (i, *j))
                 .unzip();
             for (part, at) in kind.chunks(STRINGS_PER_CALL).zip(index.chunks(STRINGS_PER_CALL)) {
-                for (summary, &i) in gpu::coupled::integrate_batch(assembly, schedule, part)?.into_iter().zip(at) {
+                for (summary, &i) in gpu::coupled::integrate_batch(assembly, schedule, part)?
+                    .into_iter()
+                    .zip(at)
+                {
                     out[i] = Some(summary);
                 }
             }

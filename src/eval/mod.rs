@@ -1,11 +1,11 @@
 //! Scoring candidates: the [`Evaluator`] trait the samplers call, and the [`Problem`] every
 //! backend scores against. The CPU evaluator (f64) is the reference; the GPU one must match it.
 
+pub mod coupled;
 pub mod cpu;
 pub mod gpu;
 mod problem;
 pub mod records;
-pub mod coupled;
 pub mod strings;
 pub mod surface;
 

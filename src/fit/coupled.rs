@@ -160,7 +160,11 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
              {MIN_CUTTING_SAMPLES} are needed",
             depth.len(),
             record.len(),
-            if record.axial_speed_m_s.is_some() { ", moving down" } else { "" }
+            if record.axial_speed_m_s.is_some() {
+                ", moving down"
+            } else {
+                ""
+            }
         )));
     }
     let mean = depth.iter().sum::<f64>() / depth.len() as f64;
@@ -181,7 +185,11 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
         (0.0, f64::INFINITY),
         (0.0, 6.0),
     ];
-    let inside = |v: &[f64; 4]| v.iter().zip(bounds).all(|(x, (lo, hi))| x.is_finite() && *x > lo && *x <= hi);
+    let inside = |v: &[f64; 4]| {
+        v.iter()
+            .zip(bounds)
+            .all(|(x, (lo, hi))| x.is_finite() && *x > lo && *x <= hi)
+    };
     let mut rng = StdRng::seed_from_u64(seed);
     let mut kept = Vec::with_capacity(draws);
     let mut out_of_bounds = 0;
@@ -198,7 +206,13 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
         (weight_line.slope, weight_line.intercept),
         (torque_line.slope, torque_line.intercept),
     );
-    let q = |values: &[f64], p: f64| if values.is_empty() { f64::NAN } else { quantile(values, p) };
+    let q = |values: &[f64], p: f64| {
+        if values.is_empty() {
+            f64::NAN
+        } else {
+            quantile(values, p)
+        }
+    };
     let estimates = CALIBRATED
         .iter()
         .enumerate()
@@ -216,10 +230,7 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
     Ok(CoupledCalibration {
         samples: record.len(),
         cutting_samples: depth.len(),
-        depth_of_cut_mm: (
-            1e3 * quantile(&depth, 0.05),
-            1e3 * quantile(&depth, 0.95),
-        ),
+        depth_of_cut_mm: (1e3 * quantile(&depth, 0.05), 1e3 * quantile(&depth, 0.95)),
         weight_line,
         torque_line,
         estimates,

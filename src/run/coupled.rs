@@ -450,7 +450,8 @@ pub fn posterior_map(
     let cells: Vec<CellProbabilities> = summaries
         .chunks(bits.len())
         .map(|draws| {
-            let share = |regime: Regime| draws.iter().filter(|s| s.regime() == regime).count() as f64 / draws.len() as f64;
+            let share =
+                |regime: Regime| draws.iter().filter(|s| s.regime() == regime).count() as f64 / draws.len() as f64;
             let rates: Vec<f64> = draws.iter().map(|s| s.rate_m_s() * 3600.0).collect();
             CellProbabilities {
                 steady: share(Regime::Steady),

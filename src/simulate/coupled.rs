@@ -601,7 +601,11 @@ impl CoupledString {
         } else {
             (tau, true)
         };
-        let mut w_new = if stuck { 0.0 } else { w + (tau - torque) / self.inertia * dt };
+        let mut w_new = if stuck {
+            0.0
+        } else {
+            w + (tau - torque) / self.inertia * dt
+        };
         if on_bottom && w != 0.0 && (w_new * w <= 0.0) {
             w_new = 0.0;
         }
@@ -803,7 +807,11 @@ impl Accumulator {
         o.wob_max_n = o.wob_max_n.max(s.wob_n);
         o.torque_min_nm = o.torque_min_nm.min(s.torque_nm);
         o.torque_max_nm = o.torque_max_nm.max(s.torque_nm);
-        for (b, v) in self.block.iter_mut().zip([s.bit_speed_rad_s, s.axial_speed_m_s, s.wob_n, s.torque_nm]) {
+        for (b, v) in self
+            .block
+            .iter_mut()
+            .zip([s.bit_speed_rad_s, s.axial_speed_m_s, s.wob_n, s.torque_nm])
+        {
             *b += v;
         }
         o.samples += 1;
@@ -848,7 +856,9 @@ mod tests {
         }
     }
 
-    const FEED_30_M_H: Axial = Axial::Feed { rate_m_s: 30.0 / 3600.0 };
+    const FEED_30_M_H: Axial = Axial::Feed {
+        rate_m_s: 30.0 / 3600.0,
+    };
 
     #[test]
     fn steady_drilling_has_the_closed_form_forces_and_stays() {
@@ -859,7 +869,9 @@ mod tests {
         assert!((d - 0.016_667).abs() < 1e-6, "{d}");
         let b = Bit::default();
         assert!((s.wob_n - (0.108 * 0.6 * 60e6 * d + 0.108 * 0.011 * 60e6)).abs() < 1e-6);
-        assert!((s.torque_nm - (0.5 * 0.108 * 0.108 * 60e6 * d + 0.5 * 0.108 * 0.6 * b.contact_weight_n())).abs() < 1e-6);
+        assert!(
+            (s.torque_nm - (0.5 * 0.108 * 0.108 * 60e6 * d + 0.5 * 0.108 * 0.6 * b.contact_weight_n())).abs() < 1e-6
+        );
         // Unperturbed, the integrator holds steady drilling (to rounding) over a few steps.
         let mut string = CoupledString::new(&Assembly::default(), &j);
         for _ in 0..50 {
@@ -881,14 +893,22 @@ mod tests {
     #[test]
     fn a_weight_within_the_wear_flats_contact_does_not_drill() {
         let b = Bit::default();
-        let j = job(60.0, Axial::Weight { wob_n: 0.5 * b.contact_weight_n() }, 0.0);
+        let j = job(
+            60.0,
+            Axial::Weight {
+                wob_n: 0.5 * b.contact_weight_n(),
+            },
+            0.0,
+        );
         let st = j.steady(&Assembly::default());
         assert!(st.depth_per_blade_m == 0.0 && st.rate_m_s == 0.0);
         let sched = Schedule::new(1e-3, 10.0, 1.0, 5.0).unwrap();
         let s = integrate(&Assembly::default(), &sched, &j);
         assert!(s.rate_m_s().abs() < 1e-9, "{s:?}");
         // The bit rubs: its torque is the friction of the weight it carries.
-        assert!((s.torque_mean_nm() - b.friction_arm_m() * 0.5 * b.contact_weight_n()).abs() < 1e-6 * s.torque_mean_nm());
+        assert!(
+            (s.torque_mean_nm() - b.friction_arm_m() * 0.5 * b.contact_weight_n()).abs() < 1e-6 * s.torque_mean_nm()
+        );
     }
 
     #[test]

@@ -35,7 +35,12 @@ fn a_fast_bit_drills_steadily_at_the_closed_form_rate_and_forces() {
     assert_eq!(s.regime(), Regime::Steady, "{s:?}");
     let rel = |a: f64, b: f64| (a - b).abs() / b.abs();
     assert!((steady.rate_m_s * 3600.0 - 210.54).abs() < 0.01, "{steady:?}");
-    assert!(rel(s.rate_m_s(), steady.rate_m_s) < 1e-4, "{} vs {}", s.rate_m_s(), steady.rate_m_s);
+    assert!(
+        rel(s.rate_m_s(), steady.rate_m_s) < 1e-4,
+        "{} vs {}",
+        s.rate_m_s(),
+        steady.rate_m_s
+    );
     assert!(rel(s.wob_mean_n(), steady.wob_n) < 1e-4);
     assert!(rel(s.torque_mean_nm(), steady.torque_nm) < 1e-4);
     assert!(s.speed_max_rad_s - s.speed_min_rad_s < 1e-3 * j.omega_rad_s, "{s:?}");
@@ -50,11 +55,18 @@ fn the_bit_stick_slips_below_a_critical_speed_and_drills_steadily_above() {
     let out = coupled::integrate_batch(&Assembly::default(), &schedule(), &jobs);
     for (rpm, s) in rpms.iter().zip(&out) {
         let sticks = *rpm < 80.0;
-        assert_eq!(s.regime(), if sticks { Regime::StickSlip } else { Regime::Steady }, "{rpm} rpm: {s:?}");
+        assert_eq!(
+            s.regime(),
+            if sticks { Regime::StickSlip } else { Regime::Steady },
+            "{rpm} rpm: {s:?}"
+        );
         if sticks {
             assert!(s.stuck_share() > 0.05, "{rpm} rpm: {s:?}");
             // The bit that stops and slips cuts faster on average than steady drilling would.
-            assert!(s.rate_m_s() > job(*rpm, WOB_150_KN).steady(&Assembly::default()).rate_m_s, "{rpm} rpm");
+            assert!(
+                s.rate_m_s() > job(*rpm, WOB_150_KN).steady(&Assembly::default()).rate_m_s,
+                "{rpm} rpm"
+            );
         } else {
             assert_eq!(s.stuck, 0, "{rpm} rpm");
         }
@@ -92,7 +104,12 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
         (60.0, Axial::Weight { wob_n: 160e3 }),
         (80.0, Axial::Weight { wob_n: 200e3 }),
         (120.0, Axial::Weight { wob_n: 200e3 }),
-        (30.0, Axial::Feed { rate_m_s: 30.0 / 3600.0 }),
+        (
+            30.0,
+            Axial::Feed {
+                rate_m_s: 30.0 / 3600.0,
+            },
+        ),
     ];
     let jobs: Vec<_> = cells.iter().map(|&(r, a)| job(r, a)).collect();
     let assembly = Assembly::default();
@@ -102,7 +119,13 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
     let regimes: Vec<_> = cpu.iter().map(|s| s.regime()).collect();
     assert_eq!(
         regimes,
-        [Regime::StickSlip, Regime::StickSlip, Regime::BitBounce, Regime::Steady, Regime::Steady],
+        [
+            Regime::StickSlip,
+            Regime::StickSlip,
+            Regime::BitBounce,
+            Regime::Steady,
+            Regime::Steady
+        ],
         "the cells are what they are said to be"
     );
     for ((c, g), (rpm, _)) in cpu.iter().zip(&gpu).zip(&cells) {
@@ -111,11 +134,26 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
         // A bouncing bit's motion is irregular: its minute's rate moves by 1-2 % with the
         // rounding as with the step; the regular cells agree within 1 %.
         let rate = if c.regime() == Regime::BitBounce { 0.03 } else { 0.01 };
-        assert!((c.rate_m_s() - g.rate_m_s()).abs() < rate * c.rate_m_s(), "{rpm} rpm: {c:?}\n{g:?}");
-        assert!((c.stuck_share() - g.stuck_share()).abs() < 0.01, "{rpm} rpm: {c:?}\n{g:?}");
-        assert!((c.off_bottom_share() - g.off_bottom_share()).abs() < 0.015, "{rpm} rpm: {c:?}\n{g:?}");
-        assert!((c.wob_mean_n() - g.wob_mean_n()).abs() < 0.01 * c.wob_mean_n(), "{rpm} rpm");
-        assert!((c.torque_mean_nm() - g.torque_mean_nm()).abs() < 0.01 * c.torque_mean_nm(), "{rpm} rpm");
+        assert!(
+            (c.rate_m_s() - g.rate_m_s()).abs() < rate * c.rate_m_s(),
+            "{rpm} rpm: {c:?}\n{g:?}"
+        );
+        assert!(
+            (c.stuck_share() - g.stuck_share()).abs() < 0.01,
+            "{rpm} rpm: {c:?}\n{g:?}"
+        );
+        assert!(
+            (c.off_bottom_share() - g.off_bottom_share()).abs() < 0.015,
+            "{rpm} rpm: {c:?}\n{g:?}"
+        );
+        assert!(
+            (c.wob_mean_n() - g.wob_mean_n()).abs() < 0.01 * c.wob_mean_n(),
+            "{rpm} rpm"
+        );
+        assert!(
+            (c.torque_mean_nm() - g.torque_mean_nm()).abs() < 0.01 * c.torque_mean_nm(),
+            "{rpm} rpm"
+        );
     }
 }
 
@@ -123,7 +161,23 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
 fn the_command_writes_the_record_in_named_units_and_its_summary() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("rgd.csv");
-    let (code, stdout, stderr) = outcome(bin().args(["coupled", "--omega-rpm", "45", "--wob-kn", "150", "--duration-s", "20", "--settle-s", "10", "--json", "--out"]).arg(&csv));
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args([
+                "coupled",
+                "--omega-rpm",
+                "45",
+                "--wob-kn",
+                "150",
+                "--duration-s",
+                "20",
+                "--settle-s",
+                "10",
+                "--json",
+                "--out",
+            ])
+            .arg(&csv),
+    );
     assert_eq!(code, 0, "{stderr}");
     let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(summary["regime"], "stick_slip");
@@ -133,13 +187,19 @@ fn the_command_writes_the_record_in_named_units_and_its_summary() {
         lines.next().unwrap(),
         "time_s,bit_speed_rpm,torque_on_bit_knm,wob_kn,axial_speed_m_h,rop_m_h,depth_of_cut_mm"
     );
-    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
     assert_eq!(rows.len(), 1000);
     let mean = |k: usize| rows.iter().map(|r| r[k]).sum::<f64>() / rows.len() as f64;
     // The record's columns are the summary's, in kN·m, kN, m/h and rpm.
     for (column, key) in [(2, "torque_knm"), (3, "wob_kn"), (1, "bit_speed_rpm")] {
         let want = summary[key]["mean"].as_f64().unwrap();
-        assert!((mean(column) - want).abs() < 1e-4 * want.abs().max(1.0), "{key}: {} vs {want}", mean(column));
+        assert!(
+            (mean(column) - want).abs() < 1e-4 * want.abs().max(1.0),
+            "{key}: {} vs {want}",
+            mean(column)
+        );
     }
     assert!((mean(4) - summary["rop_m_h"].as_f64().unwrap()).abs() < 1e-3);
     let stuck = rows.iter().filter(|r| r[1].abs() < 1.0).count() as f64 / rows.len() as f64;
@@ -154,7 +214,16 @@ fn the_command_maps_the_regimes_over_speed_and_weight() {
     let csv = dir.path().join("map.csv");
     let (code, stdout, stderr) = outcome(
         bin()
-            .args(["coupled", "--map", "--wob-kn", "150", "--map-rpm", "45:180:2", "--map-wob-kn", "150:220:2"])
+            .args([
+                "coupled",
+                "--map",
+                "--wob-kn",
+                "150",
+                "--map-rpm",
+                "45:180:2",
+                "--map-wob-kn",
+                "150:220:2",
+            ])
             .args(["--duration-s", "30", "--settle-s", "20", "--backend", "cpu", "--out"])
             .arg(&csv),
     );
@@ -196,7 +265,9 @@ fn drilling_record(torque_nm: f64, wob_n: f64, seed: u64, axial: bool) -> bitroc
     use rand_distr::{Distribution, Normal};
     let mut samples = Vec::new();
     let sched = Schedule::new(1e-4, 50.0, 30.0, 60.0).unwrap();
-    coupled::integrate_with(&Assembly::default(), &sched, &job(45.0, WOB_150_KN), &mut |s| samples.push(*s));
+    coupled::integrate_with(&Assembly::default(), &sched, &job(45.0, WOB_150_KN), &mut |s| {
+        samples.push(*s)
+    });
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let (nt, nw) = (Normal::new(0.0, torque_nm).unwrap(), Normal::new(0.0, wob_n).unwrap());
     bitrock::data::drilling::DrillingRecord {
@@ -246,24 +317,67 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
 fn a_steady_record_cannot_calibrate_the_bit_and_says_why() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("steady.csv");
-    let (code, _, stderr) = outcome(bin().args(["coupled", "--omega-rpm", "150", "--wob-kn", "150", "--duration-s", "10", "--settle-s", "10", "--out"]).arg(&csv));
+    let (code, _, stderr) = outcome(
+        bin()
+            .args([
+                "coupled",
+                "--omega-rpm",
+                "150",
+                "--wob-kn",
+                "150",
+                "--duration-s",
+                "10",
+                "--settle-s",
+                "10",
+                "--out",
+            ])
+            .arg(&csv),
+    );
     assert_eq!(code, 0, "{stderr}");
     let (code, _, stderr) = outcome(bin().args(["coupled", "--calibrate"]).arg(&csv));
     assert_eq!(code, 2, "{stderr}");
-    assert!(stderr.contains("steady.csv") && stderr.contains("hardly varies") && stderr.contains("several weights"), "{stderr}");
+    assert!(
+        stderr.contains("steady.csv") && stderr.contains("hardly varies") && stderr.contains("several weights"),
+        "{stderr}"
+    );
 }
 
 #[test]
 fn the_calibrated_bit_s_regimes_come_with_their_probabilities() {
     let dir = tempfile::tempdir().unwrap();
     let record = dir.path().join("rgd.csv");
-    let (code, _, stderr) = outcome(bin().args(["coupled", "--omega-rpm", "45", "--wob-kn", "150", "--duration-s", "30", "--settle-s", "10", "--out"]).arg(&record));
+    let (code, _, stderr) = outcome(
+        bin()
+            .args([
+                "coupled",
+                "--omega-rpm",
+                "45",
+                "--wob-kn",
+                "150",
+                "--duration-s",
+                "30",
+                "--settle-s",
+                "10",
+                "--out",
+            ])
+            .arg(&record),
+    );
     assert_eq!(code, 0, "{stderr}");
     let (code, stdout, stderr) = outcome(
         bin()
             .args(["coupled", "--calibrate"])
             .arg(&record)
-            .args(["--map", "--wob-kn", "150", "--map-rpm", "45:180:2", "--map-wob-kn", "150:151:2", "--samples", "4"])
+            .args([
+                "--map",
+                "--wob-kn",
+                "150",
+                "--map-rpm",
+                "45:180:2",
+                "--map-wob-kn",
+                "150:151:2",
+                "--samples",
+                "4",
+            ])
             .args(["--duration-s", "30", "--settle-s", "20", "--backend", "cpu", "--json"]),
     );
     assert_eq!(code, 0, "{stderr}");

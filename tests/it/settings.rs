@@ -36,7 +36,10 @@ fn every_setting_of_every_kind_is_a_flag_of_its_command() {
     let missing = missing_flags::<bitrock::run::evidence::Settings>("evidence", &[]);
     assert!(missing.is_empty(), "evidence settings without a flag: {missing:?}");
     let coupled = bitrock::run::settings::fields::<bitrock::run::coupled::Settings>();
-    assert!(coupled.len() >= 25 && coupled.contains(&"intrinsic_energy_mpa".to_string()), "{coupled:?}");
+    assert!(
+        coupled.len() >= 25 && coupled.contains(&"intrinsic_energy_mpa".to_string()),
+        "{coupled:?}"
+    );
     let missing = missing_flags::<bitrock::run::coupled::Settings>("coupled", &[]);
     assert!(missing.is_empty(), "coupled settings without a flag: {missing:?}");
 }

@@ -48,7 +48,8 @@ pub(crate) fn coupled(
         });
         let mut value = serde_json::to_value(check(py, one)?).expect("a report serialises");
         if record {
-            let column = |f: &dyn Fn(&bitrock::simulate::coupled::Sample) -> f64| samples.iter().map(f).collect::<Vec<f64>>();
+            let column =
+                |f: &dyn Fn(&bitrock::simulate::coupled::Sample) -> f64| samples.iter().map(f).collect::<Vec<f64>>();
             value["record"] = serde_json::json!({
                 "time_s": column(&|s| s.time_s),
                 "bit_speed_rpm": column(&|s| s.bit_speed_rad_s / bitrock::units::RAD_S_PER_RPM),
@@ -85,7 +86,12 @@ pub(crate) fn coupled_calibrate(
         rop_column: kwarg(columns, "rop_col")?,
         axial_speed_column: kwarg(columns, "axial_speed_col")?,
         speed_unit: unit(py, "speed_unit", kwarg(columns, "speed_unit")?, SpeedUnit::from_suffix)?,
-        torque_unit: unit(py, "torque_unit", kwarg(columns, "torque_unit")?, TorqueUnit::from_suffix)?,
+        torque_unit: unit(
+            py,
+            "torque_unit",
+            kwarg(columns, "torque_unit")?,
+            TorqueUnit::from_suffix,
+        )?,
         wob_unit: unit(py, "wob_unit", kwarg(columns, "wob_unit")?, ForceUnit::from_suffix)?,
         rop_unit: unit(py, "rop_unit", kwarg(columns, "rop_unit")?, RateUnit::from_suffix)?,
     };

@@ -199,7 +199,10 @@ pub(crate) fn settings_fields(py: Python<'_>, kind: &str) -> PyResult<Vec<String
         "coupled" => Ok(bitrock::run::settings::fields::<bitrock::run::coupled::Settings>()),
         other => Err(to_py(
             py,
-            Error::setting("kind", format!("no kind of run `{other}`; the kinds are abc, evidence, coupled")),
+            Error::setting(
+                "kind",
+                format!("no kind of run `{other}`; the kinds are abc, evidence, coupled"),
+            ),
         )),
     }
 }

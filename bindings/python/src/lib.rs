@@ -3,6 +3,7 @@
 //! results leave as JSON documents (the ones `run.json` and `fit --json` hold) and NumPy
 //! arrays. Work runs with the interpreter released; Ctrl-C stops a run between batches.
 
+mod coupled;
 mod distributed;
 mod errors;
 mod evidence;
@@ -13,7 +14,6 @@ mod run;
 mod selection;
 mod stability;
 mod strings;
-mod coupled;
 mod surface;
 mod watch;
 
@@ -23,6 +23,8 @@ use pyo3::prelude::*;
 /// wraps these in pandas and xarray; signatures here may change between releases.
 #[pymodule]
 mod _bitrock {
+    #[pymodule_export]
+    use crate::coupled::{coupled, coupled_calibrate};
     #[pymodule_export]
     use crate::distributed::{needs_payloads, serve};
     #[pymodule_export]
@@ -43,8 +45,6 @@ mod _bitrock {
     use crate::stability::stability;
     #[pymodule_export]
     use crate::strings::simulate_strings;
-    #[pymodule_export]
-    use crate::coupled::{coupled, coupled_calibrate};
     #[pymodule_export]
     use crate::surface::surface;
     #[pymodule_export]
