@@ -2,8 +2,8 @@
 //! ([`super::gpu::coupled`]) or its CPU twin ([`crate::simulate::coupled`]), the GPU falling
 //! back to the CPU under `auto` and saying so.
 
-use super::strings::{Ran, STRINGS_PER_CALL};
-use super::{Backend, fall_back_to_cpu, gpu};
+use super::strings::{Ran, STRINGS_PER_CALL, on_backend};
+use super::{Backend, gpu};
 use crate::error::Result;
 use crate::simulate::coupled::{self, Assembly, CoupledJob, CoupledSummary, Schedule};
 
@@ -17,39 +17,29 @@ pub fn integrate(
     backend: Backend,
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<CoupledSummary>, Ran)> {
-    let on_gpu = |jobs: &[CoupledJob]| -> std::result::Result<Vec<CoupledSummary>, gpu::GpuError> {
-        let mut out = vec![None; jobs.len()];
-        for feed in [false, true] {
-            let (index, kind): (Vec<usize>, Vec<CoupledJob>) = jobs
-                .iter()
-                .enumerate()
-                .filter(|(_, j)| j.axial.is_feed() == feed)
-                .map(|(i, j)| (i, *j))
-                .unzip();
-            for (part, at) in kind.chunks(STRINGS_PER_CALL).zip(index.chunks(STRINGS_PER_CALL)) {
-                for (summary, &i) in gpu::coupled::integrate_batch(assembly, schedule, part)?
-                    .into_iter()
-                    .zip(at)
-                {
-                    out[i] = Some(summary);
+    on_backend(
+        backend,
+        note,
+        || {
+            let mut out = vec![None; jobs.len()];
+            for feed in [false, true] {
+                let (index, kind): (Vec<usize>, Vec<CoupledJob>) = jobs
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, j)| j.axial.is_feed() == feed)
+                    .map(|(i, j)| (i, *j))
+                    .unzip();
+                for (part, at) in kind.chunks(STRINGS_PER_CALL).zip(index.chunks(STRINGS_PER_CALL)) {
+                    for (summary, &i) in gpu::coupled::integrate_batch(assembly, schedule, part)?
+                        .into_iter()
+                        .zip(at)
+                    {
+                        out[i] = Some(summary);
+                    }
                 }
             }
-        }
-        Ok(out.into_iter().map(|s| s.expect("every string integrated")).collect())
-    };
-    let adapter = || gpu::context().map(|c| c.describe());
-    match backend {
-        Backend::Cpu => Ok((coupled::integrate_batch(assembly, schedule, jobs), Ran::Cpu)),
-        Backend::Gpu => {
-            let name = adapter()?;
-            Ok((on_gpu(jobs)?, Ran::Gpu(name)))
-        }
-        Backend::Auto => match adapter().and_then(|name| Ok((on_gpu(jobs)?, name))) {
-            Ok((out, name)) => Ok((out, Ran::Gpu(name))),
-            Err(e) => {
-                fall_back_to_cpu(e, note)?;
-                Ok((coupled::integrate_batch(assembly, schedule, jobs), Ran::Cpu))
-            }
+            Ok(out.into_iter().map(|s| s.expect("every string integrated")).collect())
         },
-    }
+        || coupled::integrate_batch(assembly, schedule, jobs),
+    )
 }

@@ -26,25 +26,40 @@ pub fn integrate(
     backend: Backend,
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<(Summary, StringState)>, Ran)> {
-    let on_gpu = |jobs: &[StringJob]| -> std::result::Result<Vec<(Summary, StringState)>, gpu::GpuError> {
-        let mut out = Vec::with_capacity(jobs.len());
-        for part in jobs.chunks(STRINGS_PER_CALL) {
-            out.extend(gpu::strings::integrate_batch(chain, schedule, part)?);
-        }
-        Ok(out)
-    };
+    on_backend(
+        backend,
+        note,
+        || {
+            let mut out = Vec::with_capacity(jobs.len());
+            for part in jobs.chunks(STRINGS_PER_CALL) {
+                out.extend(gpu::strings::integrate_batch(chain, schedule, part)?);
+            }
+            Ok(out)
+        },
+        || strings::integrate_batch(chain, schedule, jobs),
+    )
+}
+
+/// `on_gpu` on `backend`'s GPU with the adapter's name, or `on_cpu`: under `auto` a GPU that
+/// cannot be set up (or fails) is said through `note` and the CPU computes.
+pub(crate) fn on_backend<T>(
+    backend: Backend,
+    note: &mut dyn FnMut(String),
+    on_gpu: impl FnOnce() -> std::result::Result<T, gpu::GpuError>,
+    on_cpu: impl FnOnce() -> T,
+) -> Result<(T, Ran)> {
     let adapter = || gpu::context().map(|c| c.describe());
     match backend {
-        Backend::Cpu => Ok((strings::integrate_batch(chain, schedule, jobs), Ran::Cpu)),
+        Backend::Cpu => Ok((on_cpu(), Ran::Cpu)),
         Backend::Gpu => {
             let name = adapter()?;
-            Ok((on_gpu(jobs)?, Ran::Gpu(name)))
+            Ok((on_gpu()?, Ran::Gpu(name)))
         }
-        Backend::Auto => match adapter().and_then(|name| Ok((on_gpu(jobs)?, name))) {
+        Backend::Auto => match adapter().and_then(|name| Ok((on_gpu()?, name))) {
             Ok((out, name)) => Ok((out, Ran::Gpu(name))),
             Err(e) => {
                 fall_back_to_cpu(e, note)?;
-                Ok((strings::integrate_batch(chain, schedule, jobs), Ran::Cpu))
+                Ok((on_cpu(), Ran::Cpu))
             }
         },
     }

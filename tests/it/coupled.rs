@@ -157,28 +157,30 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
     }
 }
 
-#[test]
-fn the_command_writes_the_record_in_named_units_and_its_summary() {
-    let dir = tempfile::tempdir().unwrap();
-    let csv = dir.path().join("rgd.csv");
+/// `bitrock coupled` at `rpm` under 150 kN, `seconds` recorded after 10 s, its record written
+/// to `name` in `dir`: the summary's JSON and the record's path.
+fn simulated_record(dir: &std::path::Path, name: &str, rpm: f64, seconds: f64) -> (String, std::path::PathBuf) {
+    let csv = dir.join(name);
     let (code, stdout, stderr) = outcome(
         bin()
+            .args(["coupled", "--wob-kn", "150", "--settle-s", "10", "--json"])
             .args([
-                "coupled",
                 "--omega-rpm",
-                "45",
-                "--wob-kn",
-                "150",
+                &rpm.to_string(),
                 "--duration-s",
-                "20",
-                "--settle-s",
-                "10",
-                "--json",
+                &seconds.to_string(),
                 "--out",
             ])
             .arg(&csv),
     );
     assert_eq!(code, 0, "{stderr}");
+    (stdout, csv)
+}
+
+#[test]
+fn the_command_writes_the_record_in_named_units_and_its_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let (stdout, csv) = simulated_record(dir.path(), "rgd.csv", 45.0, 20.0);
     let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(summary["regime"], "stick_slip");
     let text = std::fs::read_to_string(&csv).unwrap();
@@ -316,24 +318,7 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
 #[test]
 fn a_steady_record_cannot_calibrate_the_bit_and_says_why() {
     let dir = tempfile::tempdir().unwrap();
-    let csv = dir.path().join("steady.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args([
-                "coupled",
-                "--omega-rpm",
-                "150",
-                "--wob-kn",
-                "150",
-                "--duration-s",
-                "10",
-                "--settle-s",
-                "10",
-                "--out",
-            ])
-            .arg(&csv),
-    );
-    assert_eq!(code, 0, "{stderr}");
+    let (_, csv) = simulated_record(dir.path(), "steady.csv", 150.0, 10.0);
     let (code, _, stderr) = outcome(bin().args(["coupled", "--calibrate"]).arg(&csv));
     assert_eq!(code, 2, "{stderr}");
     assert!(
@@ -345,24 +330,7 @@ fn a_steady_record_cannot_calibrate_the_bit_and_says_why() {
 #[test]
 fn the_calibrated_bit_s_regimes_come_with_their_probabilities() {
     let dir = tempfile::tempdir().unwrap();
-    let record = dir.path().join("rgd.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args([
-                "coupled",
-                "--omega-rpm",
-                "45",
-                "--wob-kn",
-                "150",
-                "--duration-s",
-                "30",
-                "--settle-s",
-                "10",
-                "--out",
-            ])
-            .arg(&record),
-    );
-    assert_eq!(code, 0, "{stderr}");
+    let (_, record) = simulated_record(dir.path(), "rgd.csv", 45.0, 30.0);
     let (code, stdout, stderr) = outcome(
         bin()
             .args(["coupled", "--calibrate"])
