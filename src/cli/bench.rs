@@ -381,21 +381,32 @@ fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The backends a simulator's benchmark measures: both where none (or auto) is named.
+fn simulated_backends(cmd: &BenchCmd) -> Vec<Backend> {
+    match cmd.backend {
+        Some(Backend::Auto) | None => vec![Backend::Gpu, Backend::Cpu],
+        Some(b) => vec![b],
+    }
+}
+
+/// `--strings-n`, or the batch `quick` or `full` without it; at least one string.
+fn strings_n(cmd: &BenchCmd, quick: usize, full: usize) -> anyhow::Result<usize> {
+    let n = cmd.strings_n.unwrap_or(if cmd.quick { quick } else { full });
+    if n == 0 {
+        return Err(Error::setting("strings_n", "must be at least 1").into());
+    }
+    Ok(n)
+}
+
 /// `--coupled`: the coupled bit's simulator throughput, per backend.
 fn coupled(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let opts = bitrock::bench::coupled::CoupledBenchOptions {
-        strings: cmd.strings_n.unwrap_or(if cmd.quick { 1_024 } else { 16_384 }),
+        strings: strings_n(cmd, 1_024, 16_384)?,
         seconds: 60.0,
         dt_s: 1e-4,
-        backends: match cmd.backend {
-            Some(Backend::Auto) | None => vec![Backend::Gpu, Backend::Cpu],
-            Some(b) => vec![b],
-        },
+        backends: simulated_backends(cmd),
         repetitions: cmd.reps,
     };
-    if opts.strings == 0 {
-        return Err(Error::setting("strings_n", "must be at least 1").into());
-    }
     let report = bitrock::bench::coupled::run(&opts, &mut say(cmd, ""))?;
     let mut out = super::print::stdout();
     if json_report(cmd, &mut out, &report)? {
@@ -429,19 +440,13 @@ fn coupled(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
 /// `--strings`: the simulator's throughput and an escape map's time, per backend.
 fn strings(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let opts = bitrock::bench::strings::StringsBenchOptions {
-        strings: cmd.strings_n.unwrap_or(if cmd.quick { 4_096 } else { 65_536 }),
+        strings: strings_n(cmd, 4_096, 65_536)?,
         seconds: 60.0,
         dt_s: bitrock::run::strings::DEFAULT_DT_S,
         map: if cmd.quick { (10, 10, 20) } else { (50, 50, 100) },
-        backends: match cmd.backend {
-            Some(Backend::Auto) | None => vec![Backend::Gpu, Backend::Cpu],
-            Some(b) => vec![b],
-        },
+        backends: simulated_backends(cmd),
         repetitions: cmd.reps,
     };
-    if opts.strings == 0 {
-        return Err(Error::setting("strings_n", "must be at least 1").into());
-    }
     let report = bitrock::bench::strings::run(&opts, &mut say(cmd, ""))?;
     let mut out = super::print::stdout();
     if json_report(cmd, &mut out, &report)? {
