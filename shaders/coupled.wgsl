@@ -31,7 +31,8 @@ struct CoupledJob {
     // The slice of sample periods this dispatch integrates: [first_period, end_period).
     first_period: u32,
     end_period: u32,
-    _pad0: u32,
+    // 1 where the host wrote each string's start into `states`, 0 for steady drilling.
+    start_given: u32,
     _pad1: u32,
     _pad2: u32,
     dt_s: f32,
@@ -48,7 +49,8 @@ struct CoupledJob {
 // Per string: radius (m), ε (MPa), ζ, σ (MPa), l (mm), μ, γ, N, Ω₀ (rad/s), the drive (W₀ in N
 // or V_f in m/s), the kick (rad/s), unused.
 @group(0) @binding(1) var<storage, read> inputs: array<f32>;
-// Per string: the state (STATE_WORDS), written by the first slice, carried by the others.
+// Per string: the state (STATE_WORDS): the host's start or written by the first slice, carried
+// by the others.
 @group(0) @binding(2) var<storage, read_write> states: array<f32>;
 // Per string: samples, stuck, onsets, first onset, last onset, off bottom, backward (u32 bits);
 // speed min, max, sum (rad/s); axial speed sum (m/s); WOB min, max, sum (N); torque min, max,
@@ -247,8 +249,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     ring_at = sb + RING_AT;
     let o = SUMMARY_WORDS * i;
 
-    var s: State;
-    if (job.first_period == 0u) {
+    var s = State(states[sb], states[sb + 1u], states[sb + 2u], states[sb + 3u], states[sb + 4u], states[sb + 5u], states[sb + 6u]);
+    if (job.first_period == 0u && job.start_given == 0u) {
         // Steady drilling at the drive (CoupledJob::steady), its surface in the ring.
         let turns = omega / TAU;
         var dn0 = drive / (blades * turns);
@@ -268,6 +270,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             states[ring_at + k] = -dn0 * (1.0 - ahead / sector);
         }
         s.behind_old = -dn0 * (1.0 + 0.5 * b.cell / sector);
+    }
+    if (job.first_period == 0u) {
         for (var k = 0u; k < SUMMARY_WORDS; k = k + 1u) {
             summaries[o + k] = 0.0;
         }
@@ -277,8 +281,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         summaries[o + 12u] = -3.0e38;
         summaries[o + 14u] = 3.0e38;
         summaries[o + 15u] = -3.0e38;
-    } else {
-        s = State(states[sb], states[sb + 1u], states[sb + 2u], states[sb + 3u], states[sb + 4u], states[sb + 5u], states[sb + 6u]);
     }
     var diverged = bitcast<u32>(summaries[o + 17u]) != 0u;
     if (diverged) {

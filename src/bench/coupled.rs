@@ -63,7 +63,7 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
         for _ in 0..opts.repetitions {
             let t = std::time::Instant::now();
             let (summaries, r) =
-                crate::eval::coupled::integrate(&assembly, &schedule, &jobs, backend, &mut |l| log(l))?;
+                crate::eval::coupled::integrate(&assembly, &schedule, &jobs, None, backend, &mut |l| log(l))?;
             walls.push(t.elapsed().as_secs_f64());
             regimes = [0.0; 4];
             for s in &summaries {

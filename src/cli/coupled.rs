@@ -79,6 +79,11 @@ pub struct CoupledCmd {
     /// --map-feed-m-h with --feed-m-h).
     #[arg(long)]
     pub map: bool,
+    /// With --map: the escape map, every cell continued from where the bit is at --omega-rpm
+    /// under its weight or feed (settled for --settle-s and --duration-s), and the way out of
+    /// the motion it is in.
+    #[arg(long, requires = "map", conflicts_with = "calibrate")]
+    pub escape: bool,
     /// The map's top-drive speeds, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value_t = Settings::default().map_rpm, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_rpm: String,
@@ -195,6 +200,7 @@ impl CoupledCmd {
             map_rpm: self.map_rpm.clone(),
             map_wob_kn: self.map_wob_kn.clone(),
             map_feed_m_h: self.map_feed_m_h.clone(),
+            escape: self.escape,
             samples: self.samples,
             seed: self.seed,
             backend: self.backend,
@@ -234,6 +240,32 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
             } else {
                 print_estimates(&mut out, c)?;
                 print_posterior_map(&mut out, &map)?;
+            }
+        }
+        (true, None) if cmd.escape => {
+            let map = coupled::escape_map(&settings, note)?;
+            let plain = Map {
+                axes: map.axes.clone(),
+                cells: map.cells.clone(),
+            };
+            if let Some(path) = &cmd.out {
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_map(&plain, &settings, file))?;
+            }
+            if cmd.json {
+                writeln!(out, "{}", serde_json::to_string_pretty(&map)?)?;
+            } else {
+                writeln!(
+                    out,
+                    "from {} at {} rpm and {} {}: stuck {:.1} % of the time, off bottom {:.1} %",
+                    map.from.summary.regime.name(),
+                    map.from.omega_rpm,
+                    map.from.drive,
+                    drive_axis(&settings).1,
+                    100.0 * map.from.summary.stuck_share,
+                    100.0 * map.from.summary.off_bottom_share
+                )?;
+                print_map(&mut out, &plain, &settings)?;
+                writeln!(out, "{}", map.advice.words)?;
             }
         }
         (true, None) => {

@@ -5,15 +5,17 @@
 use super::strings::{Ran, STRINGS_PER_CALL, on_backend};
 use super::{Backend, gpu};
 use crate::error::Result;
-use crate::simulate::coupled::{self, Assembly, CoupledJob, CoupledSummary, Schedule};
+use crate::simulate::coupled::{self, Assembly, CoupledJob, CoupledState, CoupledSummary, Schedule};
 
 /// The batch's summaries, in order, on `backend` (a GPU that cannot be set up under `auto`:
-/// said through `note`, the CPU computes). The kernel takes one kind of axial drive per
-/// batch: a batch that mixes weights and feeds runs in two.
+/// said through `note`, the CPU computes), every string from steady drilling at its drive or,
+/// where given, from `start`. The kernel takes one kind of axial drive per batch: a batch that
+/// mixes weights and feeds runs in two.
 pub fn integrate(
     assembly: &Assembly,
     schedule: &Schedule,
     jobs: &[CoupledJob],
+    start: Option<&CoupledState>,
     backend: Backend,
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<CoupledSummary>, Ran)> {
@@ -30,7 +32,7 @@ pub fn integrate(
                     .map(|(i, j)| (i, *j))
                     .unzip();
                 for (part, at) in kind.chunks(STRINGS_PER_CALL).zip(index.chunks(STRINGS_PER_CALL)) {
-                    for (summary, &i) in gpu::coupled::integrate_batch(assembly, schedule, part)?
+                    for (summary, &i) in gpu::coupled::integrate_batch(assembly, schedule, part, start)?
                         .into_iter()
                         .zip(at)
                     {
@@ -40,6 +42,6 @@ pub fn integrate(
             }
             Ok(out.into_iter().map(|s| s.expect("every string integrated")).collect())
         },
-        || coupled::integrate_batch(assembly, schedule, jobs),
+        || coupled::integrate_batch(assembly, schedule, jobs, start),
     )
 }

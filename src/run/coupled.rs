@@ -9,7 +9,7 @@ use crate::eval::Backend;
 use crate::eval::strings::Ran;
 use crate::fit::coupled::{CoupledCalibration, bit_of, calibrate};
 use crate::simulate::coupled::{
-    self, Assembly, Axial, Bit, CoupledJob, CoupledSummary, Regime, Sample, Schedule, Steady,
+    self, Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, Regime, Sample, Schedule, Steady,
 };
 use crate::stability::lumped::Lumped;
 use crate::stability::map::parse_axis;
@@ -24,6 +24,13 @@ pub const DEFAULT_FEED_M_H: f64 = 30.0;
 
 /// Posterior draws a calibration's intervals are read from.
 pub const CALIBRATION_DRAWS: usize = 4_000;
+
+/// String steps per second above any machine's: a work estimate at this rate is a lower bound.
+const FASTEST_STRING_STEPS_PER_S: f64 = 1e12;
+
+/// Memory a string of a map holds at once on the host and the device (its job, summary and, on
+/// the device, its state and ring), bytes, with room to spare.
+const BYTES_PER_STRING: f64 = 2048.0;
 
 /// Everything a coupled-bit run is made from, in the units the command and Python speak.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -80,6 +87,9 @@ pub struct Settings {
     pub map_wob_kn: String,
     /// The map's feeds (m/h), MIN:MAX:COUNT, under a feed.
     pub map_feed_m_h: String,
+    /// The map from where the bit is (at `omega_rpm` under the drive, settled): whether each
+    /// cell ends the motion it is in, rather than whether steady drilling starts to vibrate.
+    pub escape: bool,
     /// Posterior draws each cell of a calibrated map is simulated for.
     pub samples: usize,
     /// Seed of the calibration's posterior draws.
@@ -118,6 +128,7 @@ impl Default for Settings {
             map_rpm: "20:200:10".into(),
             map_wob_kn: "80:280:9".into(),
             map_feed_m_h: "10:60:6".into(),
+            escape: false,
             samples: 20,
             seed: 1,
             backend: Backend::Auto,
@@ -349,15 +360,26 @@ pub struct PosteriorMap {
     pub probabilities: Vec<Vec<CellProbabilities>>,
 }
 
-/// Every string of `jobs` on the settings' backend (a GPU fallback said through `note`).
+/// Every string of `jobs` on the settings' backend, from steady drilling or `start` (a GPU
+/// fallback said through `note`); refused before any work where it would take more than a day
+/// even at [`FASTEST_STRING_STEPS_PER_S`] or more memory than there is.
 fn integrate(
     settings: &Settings,
     assembly: &Assembly,
     schedule: &Schedule,
     jobs: &[CoupledJob],
+    start: Option<&CoupledState>,
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<CoupledSummary>, String)> {
-    let (summaries, ran) = crate::eval::coupled::integrate(assembly, schedule, jobs, settings.backend, note)?;
+    let what = format!("simulating {} coupled strings of {} s", jobs.len(), schedule.seconds());
+    crate::limits::check_work(
+        "map_rpm",
+        jobs.len() as f64 * schedule.steps() as f64,
+        FASTEST_STRING_STEPS_PER_S,
+        &what,
+    )?;
+    crate::limits::check_memory("map_rpm", jobs.len() as f64 * BYTES_PER_STRING, &what)?;
+    let (summaries, ran) = crate::eval::coupled::integrate(assembly, schedule, jobs, start, settings.backend, note)?;
     let ran = match ran {
         Ran::Gpu(name) => format!("GPU {name}"),
         Ran::Cpu => "CPU".to_string(),
@@ -399,7 +421,7 @@ pub fn map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Map> {
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
     let (rpm, axis, jobs) = map_jobs(settings, &[settings.bit()])?;
-    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, note)?;
+    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
     let cells = summaries
         .chunks(axis.len())
         .map(|row| row.iter().map(|s| SummaryReport::of(s, settings.sample_hz)).collect())
@@ -426,6 +448,12 @@ pub fn posterior_map(
     if settings.samples == 0 {
         return Err(Error::setting("samples", "must be at least 1"));
     }
+    if settings.escape {
+        return Err(Error::setting(
+            "escape",
+            "a calibrated map starts from steady drilling; an escape map is of one bit",
+        ));
+    }
     let template = settings.bit();
     let bits: Vec<Bit> = calibration
         .draws
@@ -446,7 +474,7 @@ pub fn posterior_map(
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
     let (rpm, axis, jobs) = map_jobs(settings, &bits)?;
-    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, note)?;
+    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
     let cells: Vec<CellProbabilities> = summaries
         .chunks(bits.len())
         .map(|draws| {
@@ -468,4 +496,143 @@ pub fn posterior_map(
         probabilities: cells.chunks(axis.len()).map(<[CellProbabilities]>::to_vec).collect(),
         axes: axes(settings, rpm, axis, jobs.len(), ran),
     })
+}
+
+/// Where an escape map starts: the bit's operating point, what it does there.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EscapeFrom {
+    pub omega_rpm: f64,
+    /// The drive there: kN under a weight, m/h under a feed.
+    pub drive: f64,
+    pub summary: SummaryReport,
+}
+
+/// The way out of the motion at the start read off an escape map: the slowest speed at the
+/// start's drive, and the lightest change of the drive at the start's speed, where the bit
+/// drills steadily.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EscapeAdvice {
+    /// The start's speed and drive are steady already.
+    pub steady_already: bool,
+    /// The slowest speed of the map at or above the start's, in the start's drive column,
+    /// from which on the column drills steadily (rpm).
+    pub faster_rpm: Option<f64>,
+    /// The drive of the map nearest the start's, at or below it, in the start's speed row,
+    /// from which down the row drills steadily (kN or m/h).
+    pub lighter_drive: Option<f64>,
+    pub words: String,
+}
+
+/// An escape map: every cell continued from the state the bit is in at the start.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EscapeMap {
+    #[serde(flatten)]
+    pub axes: Axes,
+    pub from: EscapeFrom,
+    pub cells: Vec<Vec<SummaryReport>>,
+    pub advice: EscapeAdvice,
+}
+
+/// The index of the value of `axis` nearest `v`.
+fn nearest(axis: &[f64], v: f64) -> usize {
+    (0..axis.len())
+        .min_by(|&a, &b| (axis[a] - v).abs().total_cmp(&(axis[b] - v).abs()))
+        .expect("an axis has values")
+}
+
+/// The escape map of the settings' bit from where it is at `omega_rpm` under its drive.
+pub fn escape_map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<EscapeMap> {
+    let assembly = settings.assembly()?;
+    let schedule = settings.schedule()?;
+    let bit = settings.bit();
+    let here = settings.job(bit, settings.omega_rpm, None)?;
+    let (at_start, state) = coupled::integrate_from(&assembly, &schedule, &here, None, &mut |_| {});
+    let (rpm, axis, jobs) = map_jobs(settings, &[bit])?;
+    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, Some(&state), note)?;
+    let cells: Vec<Vec<SummaryReport>> = summaries
+        .chunks(axis.len())
+        .map(|row| row.iter().map(|s| SummaryReport::of(s, settings.sample_hz)).collect())
+        .collect();
+    let drive = settings.wob_kn.or(settings.feed_m_h).unwrap_or(DEFAULT_FEED_M_H);
+    let from = EscapeFrom {
+        omega_rpm: settings.omega_rpm,
+        drive,
+        summary: SummaryReport::of(&at_start, settings.sample_hz),
+    };
+    let advice = advise(settings, &rpm, &axis, &cells, &from);
+    Ok(EscapeMap {
+        axes: axes(settings, rpm, axis, jobs.len(), ran),
+        from,
+        cells,
+        advice,
+    })
+}
+
+/// The way out read off the escape map's cells.
+fn advise(
+    settings: &Settings,
+    rpm: &[f64],
+    axis: &[f64],
+    cells: &[Vec<SummaryReport>],
+    from: &EscapeFrom,
+) -> EscapeAdvice {
+    let steady = |i: usize, j: usize| cells[i][j].regime == Regime::Steady;
+    let (column, row) = (nearest(axis, from.drive), nearest(rpm, from.omega_rpm));
+    let unit = if settings.is_feed() { "m/h" } else { "kN" };
+    let drive_name = if settings.is_feed() {
+        "the feed"
+    } else {
+        "the weight on bit"
+    };
+    if from.summary.regime == Regime::Steady {
+        return EscapeAdvice {
+            steady_already: true,
+            faster_rpm: None,
+            lighter_drive: None,
+            words: format!(
+                "the bit drills steadily at {} rpm and {} {unit}: nothing to escape",
+                from.omega_rpm, from.drive
+            ),
+        };
+    }
+    // The first speed at or above the start's from which the whole column is steady.
+    let faster_rpm = (0..rpm.len())
+        .filter(|&i| rpm[i] >= from.omega_rpm)
+        .find(|&i| (i..rpm.len()).all(|k| steady(k, column)))
+        .map(|i| rpm[i]);
+    let lighter_drive = (0..axis.len())
+        .rev()
+        .filter(|&j| axis[j] <= from.drive)
+        .find(|&j| (0..=j).all(|k| steady(row, k)))
+        .map(|j| axis[j]);
+    let mut ways = Vec::new();
+    if let Some(r) = faster_rpm {
+        ways.push(format!("turning at {r} rpm"));
+    }
+    if let Some(d) = lighter_drive {
+        ways.push(format!("lowering {drive_name} to {d} {unit}"));
+    }
+    let words = if ways.is_empty() {
+        format!(
+            "the bit is in {} at {} rpm and {} {unit}, and no speed or lighter {} on this map ends it",
+            from.summary.regime.name(),
+            from.omega_rpm,
+            from.drive,
+            if settings.is_feed() { "feed" } else { "weight" }
+        )
+    } else {
+        format!(
+            "the bit is in {} at {} rpm and {} {unit}: {} ends it",
+            from.summary.regime.name(),
+            from.omega_rpm,
+            from.drive,
+            ways.join(", or ")
+        )
+    };
+    EscapeAdvice {
+        steady_already: false,
+        faster_rpm,
+        lighter_drive,
+        words,
+    }
 }

@@ -460,6 +460,24 @@ pub struct Sample {
     pub depth_per_blade_m: f64,
 }
 
+/// Where a string is: what carries its motion on when its drive changes (its lags, speeds
+/// and the rock surface its blades left), in SI. Depths are below the string's own reference.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoupledState {
+    /// Torsional lag Ω₀t − φ (rad) and bit speed (rad/s).
+    pub lag_rad: f64,
+    pub speed_rad_s: f64,
+    /// Axial spring compression (m; under a feed) and axial speed (m/s).
+    pub compression_m: f64,
+    pub axial_speed_m_s: f64,
+    /// The bit's depth below the reference, and the blades' phase in their sector (rad).
+    pub depth_m: f64,
+    pub phase_rad: f64,
+    /// The surface just behind the blade before this pass, and the ring's cells (m).
+    pub behind_old_m: f64,
+    pub ring_m: Vec<f64>,
+}
+
 /// The forces of one step and the depth they came from.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Forces {
@@ -550,6 +568,35 @@ impl CoupledString {
         // The cell behind the blade (its centre half a cell back), before this pass crossed it.
         s.behind_old = -dn * (1.0 + 0.5 * cell / sector);
         s
+    }
+
+    /// A string of `job` on `assembly` that carries on from `state` (left by a string of the
+    /// same bit): the top drive and the axial drive change, the motion and the rock do not.
+    pub fn resume(assembly: &Assembly, job: &CoupledJob, state: &CoupledState) -> Self {
+        let mut s = Self::new(assembly, job);
+        s.lag = state.lag_rad;
+        s.speed = state.speed_rad_s;
+        s.compression = state.compression_m;
+        s.axial_speed = state.axial_speed_m_s;
+        s.depth = state.depth_m;
+        s.phase = state.phase_rad;
+        s.behind_old = state.behind_old_m;
+        s.ring.copy_from_slice(&state.ring_m);
+        s
+    }
+
+    /// Where the string is now.
+    pub fn state(&self) -> CoupledState {
+        CoupledState {
+            lag_rad: self.lag,
+            speed_rad_s: self.speed,
+            compression_m: self.compression,
+            axial_speed_m_s: self.axial_speed,
+            depth_m: self.depth,
+            phase_rad: self.phase,
+            behind_old_m: self.behind_old,
+            ring_m: self.ring.to_vec(),
+        }
     }
 
     /// The surface the last pass left under the blade (m, below the reference): linear between
@@ -712,7 +759,22 @@ pub fn integrate_with(
     job: &CoupledJob,
     on_sample: &mut dyn FnMut(&Sample),
 ) -> CoupledSummary {
-    let mut s = CoupledString::new(assembly, job);
+    integrate_from(assembly, schedule, job, None, on_sample).0
+}
+
+/// Integrates one string on `schedule` from `start` (steady drilling at the job's drive where
+/// `None`), calling `on_sample` with each recorded sample: its summary and where it ended.
+pub fn integrate_from(
+    assembly: &Assembly,
+    schedule: &Schedule,
+    job: &CoupledJob,
+    start: Option<&CoupledState>,
+    on_sample: &mut dyn FnMut(&Sample),
+) -> (CoupledSummary, CoupledState) {
+    let mut s = match start {
+        Some(state) => CoupledString::resume(assembly, job, state),
+        None => CoupledString::new(assembly, job),
+    };
     let mut sum = Accumulator::default();
     let periods = schedule.settle_samples + schedule.record_samples;
     let mut forces = Forces::default();
@@ -731,7 +793,7 @@ pub fn integrate_with(
             on_sample(&sample);
         }
     }
-    sum.finish()
+    (sum.finish(), s.state())
 }
 
 /// Integrates one string on `schedule` to its summary.
@@ -739,10 +801,18 @@ pub fn integrate(assembly: &Assembly, schedule: &Schedule, job: &CoupledJob) -> 
     integrate_with(assembly, schedule, job, &mut |_| {})
 }
 
-/// Every string of a batch on the CPU (rayon), in the batch's order.
-pub fn integrate_batch(assembly: &Assembly, schedule: &Schedule, jobs: &[CoupledJob]) -> Vec<CoupledSummary> {
+/// Every string of a batch on the CPU (rayon), in the batch's order, from steady drilling or,
+/// where `start` is given, from that state.
+pub fn integrate_batch(
+    assembly: &Assembly,
+    schedule: &Schedule,
+    jobs: &[CoupledJob],
+    start: Option<&CoupledState>,
+) -> Vec<CoupledSummary> {
     use rayon::prelude::*;
-    jobs.par_iter().map(|job| integrate(assembly, schedule, job)).collect()
+    jobs.par_iter()
+        .map(|job| integrate_from(assembly, schedule, job, start, &mut |_| {}).0)
+        .collect()
 }
 
 /// Samples summed in blocks of this many before the block joins the total, as the kernel sums.

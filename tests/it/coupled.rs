@@ -52,7 +52,7 @@ fn the_bit_stick_slips_below_a_critical_speed_and_drills_steadily_above() {
     // the falling torque comes from the depth of cut alone.
     let rpms = [45.0, 60.0, 100.0, 120.0, 150.0];
     let jobs: Vec<_> = rpms.iter().map(|&r| job(r, WOB_150_KN)).collect();
-    let out = coupled::integrate_batch(&Assembly::default(), &schedule(), &jobs);
+    let out = coupled::integrate_batch(&Assembly::default(), &schedule(), &jobs, None);
     for (rpm, s) in rpms.iter().zip(&out) {
         let sticks = *rpm < 80.0;
         assert_eq!(
@@ -114,8 +114,8 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
     let jobs: Vec<_> = cells.iter().map(|&(r, a)| job(r, a)).collect();
     let assembly = Assembly::default();
     let sched = Schedule::new(1e-4, 50.0, 20.0, 40.0).unwrap();
-    let cpu = coupled::integrate_batch(&assembly, &sched, &jobs);
-    let (gpu, _) = backend::integrate(&assembly, &sched, &jobs, Backend::Gpu, &mut |_| {}).unwrap();
+    let cpu = coupled::integrate_batch(&assembly, &sched, &jobs, None);
+    let (gpu, _) = backend::integrate(&assembly, &sched, &jobs, None, Backend::Gpu, &mut |_| {}).unwrap();
     let regimes: Vec<_> = cpu.iter().map(|s| s.regime()).collect();
     assert_eq!(
         regimes,
@@ -358,4 +358,71 @@ fn the_calibrated_bit_s_regimes_come_with_their_probabilities() {
     assert_eq!(p[1][0]["steady"], 1.0, "{p}");
     let e = &v["calibration"]["estimates"];
     assert!((e[0]["value"].as_f64().unwrap() - 60.0).abs() < 0.01, "{e}");
+}
+
+#[test]
+fn a_stick_slipping_bit_needs_more_to_escape_than_steady_drilling_to_stay_and_the_advice_works() {
+    use bitrock::run::coupled::{Settings, escape_map, map};
+    let settings = Settings {
+        omega_rpm: 45.0,
+        wob_kn: Some(150.0),
+        map_rpm: "40:120:5".into(),
+        map_wob_kn: "120:160:5".into(),
+        backend: Backend::Cpu,
+        ..Settings::default()
+    };
+    let onset = map(&settings, &mut |_| {}).unwrap();
+    let escape = escape_map(&settings, &mut |_| {}).unwrap();
+    assert_eq!(escape.from.summary.regime, Regime::StickSlip);
+    // At 140 kN and 40-60 rpm steady drilling stays steady, but a bit already stick-slipping
+    // at 45 rpm and 150 kN keeps stick-slipping there: the bistable band.
+    let regime = |m: &[Vec<bitrock::run::coupled::SummaryReport>], i: usize, j: usize| m[i][j].regime;
+    for i in [0, 1] {
+        assert_eq!(regime(&onset.cells, i, 2), Regime::Steady, "onset, row {i}");
+        assert_eq!(regime(&escape.cells, i, 2), Regime::StickSlip, "escape, row {i}");
+    }
+    assert_eq!(escape.advice.lighter_drive, Some(130.0), "{:?}", escape.advice);
+    // The advice, applied: from the stuck state, the speed it names drills steadily for two
+    // minutes, and the speed below it does not.
+    let faster = escape.advice.faster_rpm.expect("a way out by speed");
+    assert_eq!(faster, 80.0, "{:?}", escape.advice);
+    let assembly = Assembly::default();
+    let settle = Schedule::new(1e-4, 50.0, 30.0, 60.0).unwrap();
+    let (_, state) = coupled::integrate_from(&assembly, &settle, &job(45.0, WOB_150_KN), None, &mut |_| {});
+    let after = Schedule::new(1e-4, 50.0, 0.0, 120.0).unwrap();
+    let at = |rpm: f64| coupled::integrate_from(&assembly, &after, &job(rpm, WOB_150_KN), Some(&state), &mut |_| {}).0;
+    let (escaped, stayed) = (at(faster), at(60.0));
+    assert!(escaped.stuck_share() < 0.01 && escaped.stick_onsets <= 1, "{escaped:?}");
+    assert!(stayed.stuck_share() > 0.1, "{stayed:?}");
+    assert!(
+        escape.advice.words.contains("turning at 80 rpm"),
+        "{}",
+        escape.advice.words
+    );
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn the_kernel_continues_a_string_from_its_state_as_the_cpu_does() {
+    require_gpu();
+    let assembly = Assembly::default();
+    let settle = Schedule::new(1e-4, 50.0, 0.0, 30.0).unwrap();
+    let (_, state) = coupled::integrate_from(&assembly, &settle, &job(45.0, WOB_150_KN), None, &mut |_| {});
+    let after = Schedule::new(1e-4, 50.0, 10.0, 40.0).unwrap();
+    let jobs: Vec<_> = [(45.0, 150e3), (60.0, 150e3), (120.0, 150e3)]
+        .iter()
+        .map(|&(r, w)| job(r, Axial::Weight { wob_n: w }))
+        .collect();
+    let cpu = coupled::integrate_batch(&assembly, &after, &jobs, Some(&state));
+    let (gpu, _) = backend::integrate(&assembly, &after, &jobs, Some(&state), Backend::Gpu, &mut |_| {}).unwrap();
+    let regimes: Vec<_> = cpu.iter().map(|s| s.regime()).collect();
+    assert_eq!(regimes, [Regime::StickSlip, Regime::StickSlip, Regime::Steady]);
+    for (c, g) in cpu.iter().zip(&gpu) {
+        assert_eq!(c.regime(), g.regime());
+        assert!((c.stuck_share() - g.stuck_share()).abs() < 0.01, "{c:?}\n{g:?}");
+        assert!(
+            (c.rate_m_s() - g.rate_m_s()).abs() < 0.01 * c.rate_m_s(),
+            "{c:?}\n{g:?}"
+        );
+    }
 }

@@ -21,8 +21,8 @@ fn say(py: Python<'_>, note: &Option<Py<PyAny>>, notes: Vec<String>) -> PyResult
 }
 
 /// `bitrock coupled` with the settings in `options`: one string (its summary and steady
-/// drilling, and with `record` its samples as columns), or with `map` the regime map; as JSON
-/// text.
+/// drilling, and with `record` its samples as columns), or with `map` the regime map (the
+/// escape map with the `escape` setting); as JSON text.
 #[pyfunction]
 #[pyo3(signature = (options, record, map, note))]
 pub(crate) fn coupled(
@@ -34,7 +34,10 @@ pub(crate) fn coupled(
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
     let mut notes = Vec::new();
-    let value = if map {
+    let value = if map && settings.escape {
+        let m = py.detach(|| run::escape_map(&settings, &mut |line| notes.push(line)));
+        serde_json::to_value(check(py, m)?)
+    } else if map {
         let m = py.detach(|| run::map(&settings, &mut |line| notes.push(line)));
         serde_json::to_value(check(py, m)?)
     } else {

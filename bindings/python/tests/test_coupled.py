@@ -217,3 +217,14 @@ def test_every_coupled_setting_is_a_keyword_and_a_stray_one_is_refused():
         bitrock.coupled(zeta=-1.0, duration_s=1.0, settle_s=0.0)
     with pytest.raises(TypeError):
         bitrock.coupled(zeta_=0.5)
+
+
+def test_python_gives_the_command_s_escape_map(cli):
+    import bitrock
+
+    args = dict(omega_rpm=45, wob_kn=150, map_rpm="40:120:3", map_wob_kn="130:150:2", backend="cpu", duration_s=30.0, settle_s=20.0)
+    escape = bitrock.coupled(map=True, escape=True, **args)
+    done = run_cli(cli, "coupled", "--map", "--escape", "--omega-rpm", "45", "--wob-kn", "150", "--map-rpm", "40:120:3", "--map-wob-kn", "130:150:2", "--backend", "cpu", "--duration-s", "30", "--settle-s", "20", "--json")
+    assert escape == json.loads(done.stdout)
+    assert escape["from"]["summary"]["regime"] == "stick_slip"
+    assert (escape["advice"]["faster_rpm"], escape["advice"]["lighter_drive"]) == (80.0, 130.0), escape["advice"]

@@ -3,7 +3,7 @@
 //! twin of [`crate::simulate::coupled::integrate_batch`].
 
 use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
-use crate::simulate::coupled::{Assembly, CoupledJob, CoupledSummary, STUCK_SPEED_RAD_S, Schedule};
+use crate::simulate::coupled::{Assembly, CoupledJob, CoupledState, CoupledSummary, STUCK_SPEED_RAD_S, Schedule};
 use bytemuck::{Pod, Zeroable};
 
 /// Words per string of the kernel's buffers. Keep in sync with shaders/coupled.wgsl.
@@ -37,7 +37,7 @@ struct KernelJob {
     feed: u32,
     first_period: u32,
     end_period: u32,
-    _pad0: u32,
+    start_given: u32,
     _pad1: u32,
     _pad2: u32,
     dt_s: f32,
@@ -50,12 +50,14 @@ struct KernelJob {
     stuck_speed: f32,
 }
 
-/// Integrates every string of `jobs` on the GPU: their summaries, in order. Every job must
-/// share one kind of axial drive (a weight or a feed).
+/// Integrates every string of `jobs` on the GPU from steady drilling or, where given, from
+/// `start`: their summaries, in order. Every job must share one kind of axial drive (a weight
+/// or a feed).
 pub fn integrate_batch(
     assembly: &Assembly,
     schedule: &Schedule,
     jobs: &[CoupledJob],
+    start: Option<&CoupledState>,
 ) -> Result<Vec<CoupledSummary>, GpuError> {
     let feed = jobs.first().is_some_and(|j| j.axial.is_feed());
     assert!(
@@ -91,11 +93,12 @@ pub fn integrate_batch(
         k_a: assembly.axial_stiffness_n_per_m as f32,
         c_a: assembly.axial_damping_ns_per_m as f32,
         stuck_speed: STUCK_SPEED_RAD_S as f32,
+        start_given: u32::from(start.is_some()),
         ..KernelJob::zeroed()
     };
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        out.extend(run_chunk(ctx, &kernel, job, chunk)?);
+        out.extend(run_chunk(ctx, &kernel, job, chunk, start)?);
     }
     Ok(out)
 }
@@ -105,6 +108,7 @@ fn run_chunk(
     kernel: &super::Kernel,
     mut job: KernelJob,
     jobs: &[CoupledJob],
+    start: Option<&CoupledState>,
 ) -> Result<Vec<CoupledSummary>, GpuError> {
     let n = jobs.len();
     let mut inputs = vec![0.0f32; INPUT_WORDS * n];
@@ -126,7 +130,22 @@ fn run_chunk(
         wgpu::BufferUsages::UNIFORM | copy,
     )?;
     let input_buffer = ctx.buffer("coupled inputs", 4 * inputs.len() as u64, storage | copy)?;
-    let state_buffer = ctx.buffer("coupled states", state_bytes, storage)?;
+    let state_buffer = ctx.buffer("coupled states", state_bytes, storage | copy)?;
+    if let Some(start) = start {
+        let mut one = vec![
+            start.lag_rad as f32,
+            start.speed_rad_s as f32,
+            start.compression_m as f32,
+            start.axial_speed_m_s as f32,
+            start.depth_m as f32,
+            start.phase_rad as f32,
+            start.behind_old_m as f32,
+        ];
+        one.extend(start.ring_m.iter().map(|&h| h as f32));
+        debug_assert_eq!(one.len(), STATE_WORDS);
+        let states: Vec<f32> = std::iter::repeat_n(one, n).flatten().collect();
+        ctx.queue.write_buffer(&state_buffer, 0, bytemuck::cast_slice(&states));
+    }
     let summary_buffer = ctx.buffer(
         "coupled summaries",
         summary_bytes,

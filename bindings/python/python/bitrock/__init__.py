@@ -791,6 +791,7 @@ def coupled(
     map_rpm: str | None = None,
     map_wob_kn: str | None = None,
     map_feed_m_h: str | None = None,
+    escape: bool | None = None,
     samples: int | None = None,
     seed: int | None = None,
     backend: str | None = None,
@@ -803,8 +804,10 @@ def coupled(
     ranges of bit speed (rpm), weight (kN) and torque (kN·m), with ``steady`` drilling at its
     drive; with ``record=True`` its samples under ``record`` as columns. With ``map=True`` the
     regime map over ``map_rpm`` × ``map_wob_kn`` (or ``map_feed_m_h`` under a feed): ``cells``,
-    speeds down, drives across. The bit is held down by ``wob_kn`` or fed at ``feed_m_h``
-    (30 m/h where neither is given)."""
+    speeds down, drives across; with ``escape=True`` too, every cell continues from where the
+    bit is at ``omega_rpm`` under its drive, with ``from`` and the way out under ``advice``.
+    The bit is held down by ``wob_kn`` or fed at ``feed_m_h`` (30 m/h where neither is
+    given)."""
     import json
 
     options = {k: v for k, v in locals().items() if k not in ("record", "map", "json")}
@@ -848,6 +851,7 @@ def coupled_calibrate(
     map_rpm: str | None = None,
     map_wob_kn: str | None = None,
     map_feed_m_h: str | None = None,
+    escape: bool | None = None,
     samples: int | None = None,
     seed: int | None = None,
     backend: str | None = None,

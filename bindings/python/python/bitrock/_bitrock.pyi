@@ -134,8 +134,8 @@ def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, opti
 def coupled(options: dict, record: bool, map: bool, note: Any | None) -> str:
     """
     `bitrock coupled` with the settings in `options`: one string (its summary and steady
-    drilling, and with `record` its samples as columns), or with `map` the regime map; as JSON
-    text.
+    drilling, and with `record` its samples as columns), or with `map` the regime map (the
+    escape map with the `escape` setting); as JSON text.
     """
 
 def coupled_calibrate(path: str | PathLike[str], columns: dict, options: dict, map: bool, note: Any | None) -> str:
