@@ -16,7 +16,8 @@ fn missing_flags<S: serde::Serialize + Default>(command: &str, renamed: &[(&str,
                 || format!("--{}", field.replace('_', "-")),
                 |(_, flag)| (*flag).to_string(),
             );
-            !help.contains(&format!("{flag} "))
+            // A flag with a value is followed by it; a switch ends its line.
+            !help.contains(&format!("{flag} ")) && !help.contains(&format!("{flag}\n"))
         })
         .collect()
 }
