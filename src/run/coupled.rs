@@ -294,6 +294,9 @@ pub struct One {
 
 /// One string at the settings' speed and drive, each recorded sample given to `on_sample`.
 pub fn one(settings: &Settings, on_sample: &mut dyn FnMut(&Sample)) -> Result<One> {
+    if settings.escape {
+        return Err(Error::setting("escape", "an escape map is a map: ask for the map too"));
+    }
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
     let job = settings.job(settings.bit(), settings.omega_rpm, None)?;

@@ -217,6 +217,8 @@ def test_every_coupled_setting_is_a_keyword_and_a_stray_one_is_refused():
         bitrock.coupled(zeta=-1.0, duration_s=1.0, settle_s=0.0)
     with pytest.raises(TypeError):
         bitrock.coupled(zeta_=0.5)
+    with pytest.raises(bitrock.InputError, match="escape"):
+        bitrock.coupled(escape=True, duration_s=1.0, settle_s=0.0)
 
 
 def test_python_gives_the_command_s_escape_map(cli):
