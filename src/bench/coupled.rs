@@ -79,10 +79,7 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
         }
         let wall = super::Spread::of(&walls);
         let m = CoupledThroughput {
-            backend: match ran {
-                Ran::Gpu(name) => format!("gpu ({name})"),
-                Ran::Cpu => "cpu".into(),
-            },
+            backend: super::strings::name(&Some(ran)),
             strings: opts.strings,
             seconds_per_string: schedule.seconds(),
             dt_s: schedule.dt_s,

@@ -78,7 +78,7 @@ fn chains() -> Result<Vec<(&'static str, Chain)>> {
     ])
 }
 
-fn name(ran: &Option<Ran>) -> String {
+pub(super) fn name(ran: &Option<Ran>) -> String {
     match ran {
         Some(Ran::Gpu(name)) => format!("gpu ({name})"),
         _ => "cpu".into(),

@@ -8,7 +8,7 @@ use bitrock::eval::Backend;
 use bitrock::fit::coupled::CoupledCalibration;
 use bitrock::run::coupled::{self, Map, One, PosteriorMap, Settings};
 use bitrock::simulate::coupled::{Regime, Sample};
-use bitrock::units::{ForceUnit, RAD_S_PER_RPM, RateUnit, SpeedUnit, TorqueUnit};
+use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use serde_json::json;
 use std::io::Write;
@@ -244,12 +244,8 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
         }
         (true, None) if cmd.escape => {
             let map = coupled::escape_map(&settings, note)?;
-            let plain = Map {
-                axes: map.axes.clone(),
-                cells: map.cells.clone(),
-            };
             if let Some(path) = &cmd.out {
-                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_map(&plain, &settings, file))?;
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_map(&map.map, file))?;
             }
             if cmd.json {
                 writeln!(out, "{}", serde_json::to_string_pretty(&map)?)?;
@@ -260,18 +256,18 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
                     map.from.summary.regime.name(),
                     map.from.omega_rpm,
                     map.from.drive,
-                    drive_axis(&settings).1,
+                    map.map.axes.drive_axis().1,
                     100.0 * map.from.summary.stuck_share,
                     100.0 * map.from.summary.off_bottom_share
                 )?;
-                print_map(&mut out, &plain, &settings)?;
+                print_map(&mut out, &map.map, &settings)?;
                 writeln!(out, "{}", map.advice.words)?;
             }
         }
         (true, None) => {
             let map = coupled::map(&settings, note)?;
             if let Some(path) = &cmd.out {
-                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_map(&map, &settings, file))?;
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_map(&map, file))?;
             }
             if cmd.json {
                 writeln!(out, "{}", serde_json::to_string_pretty(&map)?)?;
@@ -335,47 +331,20 @@ fn print_one(out: &mut dyn Write, one: &One, omega_rpm: f64) -> std::io::Result<
 
 /// The record's columns, units in their names.
 fn write_record(samples: &[Sample], out: &mut dyn Write) -> std::io::Result<()> {
+    let columns = coupled::record_columns(samples);
     let mut w = csv::Writer::from_writer(out);
-    w.write_record([
-        "time_s",
-        "bit_speed_rpm",
-        "torque_on_bit_knm",
-        "wob_kn",
-        "axial_speed_m_h",
-        "rop_m_h",
-        "depth_of_cut_mm",
-    ])?;
-    for s in samples {
-        w.write_record(
-            [
-                s.time_s,
-                s.bit_speed_rad_s / RAD_S_PER_RPM,
-                s.torque_nm / 1e3,
-                s.wob_n / 1e3,
-                s.axial_speed_m_s * 3600.0,
-                s.cutting_rate_m_s * 3600.0,
-                s.depth_per_blade_m * 1e3,
-            ]
-            .map(|v| format!("{v:.6}")),
-        )?;
+    w.write_record(columns.iter().map(|(name, _)| *name))?;
+    for k in 0..samples.len() {
+        w.write_record(columns.iter().map(|(_, values)| format!("{:.6}", values[k])))?;
     }
     w.flush()
 }
 
-/// The drive axis' name and unit in the printed maps.
-fn drive_axis(settings: &Settings) -> (&'static str, &'static str) {
-    if settings.is_feed() {
-        ("feed_m_h", "m/h")
-    } else {
-        ("wob_kn", "kN")
-    }
-}
-
-fn write_map(map: &Map, settings: &Settings, file: &mut dyn Write) -> std::io::Result<()> {
+fn write_map(map: &Map, file: &mut dyn Write) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(file);
     w.write_record([
         "omega_rpm",
-        drive_axis(settings).0,
+        map.axes.drive_axis().0,
         "regime",
         "stuck_share",
         "off_bottom_share",
@@ -418,7 +387,7 @@ fn print_map(out: &mut dyn Write, map: &Map, settings: &Settings) -> std::io::Re
         "regimes ({} s after {} s settling, {} strings on the {}; . steady, S stick-slip, B bit bounce, X both, ! diverged)",
         settings.duration_s, settings.settle_s, map.axes.strings, map.axes.backend
     )?;
-    print_header(out, drive_axis(settings).1, map.axes.drive())?;
+    print_header(out, map.axes.drive_axis().1, map.axes.drive())?;
     for (row, r) in map.cells.iter().zip(&map.axes.omega_rpm) {
         write!(out, "{r:>9.1}")?;
         for s in row {
@@ -442,11 +411,7 @@ fn mark(regime: Regime) -> &'static str {
 
 fn write_posterior_map(map: &PosteriorMap, file: &mut dyn Write) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(file);
-    let drive_name = if map.axes.wob_kn.is_some() {
-        "wob_kn"
-    } else {
-        "feed_m_h"
-    };
+    let drive_name = map.axes.drive_axis().0;
     w.write_record([
         "omega_rpm",
         drive_name,
@@ -478,8 +443,7 @@ fn print_posterior_map(out: &mut dyn Write, map: &PosteriorMap) -> std::io::Resu
         "probability the bit vibrates (stick-slip, bounce or both), % of {} posterior draws per cell; {} strings on the {}",
         map.samples, map.axes.strings, map.axes.backend
     )?;
-    let unit = if map.axes.wob_kn.is_some() { "kN" } else { "m/h" };
-    print_header(out, unit, map.axes.drive())?;
+    print_header(out, map.axes.drive_axis().1, map.axes.drive())?;
     for (row, r) in map.probabilities.iter().zip(&map.axes.omega_rpm) {
         write!(out, "{r:>9.1}")?;
         for p in row {

@@ -280,10 +280,7 @@ fn simulate(
 
 /// Where the strings ran, in words.
 fn ran(maps: &SimulatedMaps) -> String {
-    match &maps.ran {
-        Some(Ran::Gpu(name)) => format!("GPU {name}"),
-        _ => "CPU".to_string(),
-    }
+    maps.ran.as_ref().unwrap_or(&Ran::Cpu).to_string()
 }
 
 fn grid_json(grid: &Grid) -> serde_json::Value {

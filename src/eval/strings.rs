@@ -17,6 +17,16 @@ pub enum Ran {
     Cpu,
 }
 
+impl std::fmt::Display for Ran {
+    /// Where the batch ran, in words: `GPU <adapter>` or `CPU`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Ran::Gpu(name) => write!(f, "GPU {name}"),
+            Ran::Cpu => write!(f, "CPU"),
+        }
+    }
+}
+
 /// The batch's summaries and final states, in order, on `backend` (a GPU that cannot be set up
 /// under `auto`: said through `note`, the CPU computes).
 pub fn integrate(

@@ -179,12 +179,10 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
     }
     let weight_line = Line::fit(&depth, &weight);
     let torque_line = Line::fit(&depth, &torque);
-    let bounds = [
-        crate::simulate::coupled::BIT_BOUNDS[1],
-        crate::simulate::coupled::BIT_BOUNDS[2],
-        (0.0, f64::INFINITY),
-        (0.0, 6.0),
-    ];
+    // ε and ζ within the bit's bounds, a contact force, and μ·γ no more than the largest μ
+    // times the largest γ.
+    let b = crate::simulate::coupled::BIT_BOUNDS;
+    let bounds = [b[1], b[2], (0.0, f64::INFINITY), (0.0, b[5].1 * b[6].1)];
     let inside = |v: &[f64; 4]| {
         v.iter()
             .zip(bounds)

@@ -6,7 +6,6 @@
 use crate::data::drilling::DrillingRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
-use crate::eval::strings::Ran;
 use crate::fit::coupled::{CoupledCalibration, bit_of, calibrate};
 use crate::simulate::coupled::{
     self, Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, Regime, Sample, Schedule, Steady,
@@ -177,16 +176,22 @@ impl Settings {
         self.wob_kn.is_none()
     }
 
+    /// The drive's value: the weight (kN), else the feed (m/h), [`DEFAULT_FEED_M_H`] where
+    /// neither is given.
+    pub fn drive(&self) -> f64 {
+        self.wob_kn.or(self.feed_m_h).unwrap_or(DEFAULT_FEED_M_H)
+    }
+
     /// A string of `bit` at `omega_rpm` under the drive, its value `drive` (kN or m/h) where
     /// given, else the settings' own; validated.
     pub fn job(&self, bit: Bit, omega_rpm: f64, drive: Option<f64>) -> Result<CoupledJob> {
-        let axial = match self.wob_kn {
-            Some(wob) => Axial::Weight {
-                wob_n: drive.unwrap_or(wob) * 1e3,
-            },
-            None => Axial::Feed {
-                rate_m_s: drive.or(self.feed_m_h).unwrap_or(DEFAULT_FEED_M_H) * M_S_PER_M_H,
-            },
+        let value = drive.unwrap_or(self.drive());
+        let axial = if self.is_feed() {
+            Axial::Feed {
+                rate_m_s: value * M_S_PER_M_H,
+            }
+        } else {
+            Axial::Weight { wob_n: value * 1e3 }
         };
         let job = CoupledJob {
             bit,
@@ -307,6 +312,21 @@ pub fn one(settings: &Settings, on_sample: &mut dyn FnMut(&Sample)) -> Result<On
     })
 }
 
+/// A string's record as named columns in the units their names carry, the command's CSV and
+/// Python's `record`.
+pub fn record_columns(samples: &[Sample]) -> Vec<(&'static str, Vec<f64>)> {
+    let column = |f: &dyn Fn(&Sample) -> f64| samples.iter().map(f).collect::<Vec<f64>>();
+    vec![
+        ("time_s", column(&|s| s.time_s)),
+        ("bit_speed_rpm", column(&|s| s.bit_speed_rad_s / RAD_S_PER_RPM)),
+        ("torque_on_bit_knm", column(&|s| s.torque_nm / 1e3)),
+        ("wob_kn", column(&|s| s.wob_n / 1e3)),
+        ("axial_speed_m_h", column(&|s| s.axial_speed_m_s * 3600.0)),
+        ("rop_m_h", column(&|s| s.cutting_rate_m_s * 3600.0)),
+        ("depth_of_cut_mm", column(&|s| s.depth_per_blade_m * 1e3)),
+    ]
+}
+
 /// The map's axes and where its strings ran.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Axes {
@@ -324,6 +344,15 @@ impl Axes {
     /// The second axis' values.
     pub fn drive(&self) -> &[f64] {
         self.wob_kn.as_deref().or(self.feed_m_h.as_deref()).unwrap_or_default()
+    }
+
+    /// The second axis' name and unit: `wob_kn`, kN, or `feed_m_h`, m/h.
+    pub fn drive_axis(&self) -> (&'static str, &'static str) {
+        if self.wob_kn.is_some() {
+            ("wob_kn", "kN")
+        } else {
+            ("feed_m_h", "m/h")
+        }
     }
 }
 
@@ -364,8 +393,7 @@ pub struct PosteriorMap {
 }
 
 /// Every string of `jobs` on the settings' backend, from steady drilling or `start` (a GPU
-/// fallback said through `note`); refused before any work where it would take more than a day
-/// even at [`FASTEST_STRING_STEPS_PER_S`] or more memory than there is.
+/// fallback said through `note`).
 fn integrate(
     settings: &Settings,
     assembly: &Assembly,
@@ -374,25 +402,25 @@ fn integrate(
     start: Option<&CoupledState>,
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<CoupledSummary>, String)> {
-    let what = format!("simulating {} coupled strings of {} s", jobs.len(), schedule.seconds());
+    let (summaries, ran) = crate::eval::coupled::integrate(assembly, schedule, jobs, start, settings.backend, note)?;
+    Ok((summaries, ran.to_string()))
+}
+
+/// The map's jobs for each of `bits`, cell by cell (speeds outer, drives inner, bits innermost);
+/// refused before they are made where they would take more than a day even at
+/// [`FASTEST_STRING_STEPS_PER_S`], or more memory than there is.
+fn map_jobs(settings: &Settings, bits: &[Bit]) -> Result<(Vec<f64>, Vec<f64>, Vec<CoupledJob>)> {
+    let (rpm, axis) = settings.axes()?;
+    let strings = (rpm.len() * axis.len() * bits.len()) as f64;
+    let schedule = settings.schedule()?;
+    let what = format!("simulating {strings} coupled strings of {} s", schedule.seconds());
     crate::limits::check_work(
         "map_rpm",
-        jobs.len() as f64 * schedule.steps() as f64,
+        strings * schedule.steps() as f64,
         FASTEST_STRING_STEPS_PER_S,
         &what,
     )?;
-    crate::limits::check_memory("map_rpm", jobs.len() as f64 * BYTES_PER_STRING, &what)?;
-    let (summaries, ran) = crate::eval::coupled::integrate(assembly, schedule, jobs, start, settings.backend, note)?;
-    let ran = match ran {
-        Ran::Gpu(name) => format!("GPU {name}"),
-        Ran::Cpu => "CPU".to_string(),
-    };
-    Ok((summaries, ran))
-}
-
-/// The map's jobs for each of `bits`, cell by cell (speeds outer, drives inner, bits innermost).
-fn map_jobs(settings: &Settings, bits: &[Bit]) -> Result<(Vec<f64>, Vec<f64>, Vec<CoupledJob>)> {
-    let (rpm, axis) = settings.axes()?;
+    crate::limits::check_memory("map_rpm", strings * BYTES_PER_STRING, &what)?;
     let mut jobs = Vec::with_capacity(rpm.len() * axis.len() * bits.len());
     for &r in &rpm {
         for &a in &axis {
@@ -425,14 +453,18 @@ pub fn map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Map> {
     let schedule = settings.schedule()?;
     let (rpm, axis, jobs) = map_jobs(settings, &[settings.bit()])?;
     let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
-    let cells = summaries
-        .chunks(axis.len())
-        .map(|row| row.iter().map(|s| SummaryReport::of(s, settings.sample_hz)).collect())
-        .collect();
     Ok(Map {
+        cells: rows(&summaries, axis.len(), settings.sample_hz),
         axes: axes(settings, rpm, axis, jobs.len(), ran),
-        cells,
     })
+}
+
+/// The summaries of a map's cells as rows of `width` reports.
+fn rows(summaries: &[CoupledSummary], width: usize, sample_hz: f64) -> Vec<Vec<SummaryReport>> {
+    summaries
+        .chunks(width)
+        .map(|row| row.iter().map(|s| SummaryReport::of(s, sample_hz)).collect())
+        .collect()
 }
 
 /// The bit calibrated on `record` (its radius the settings'), with the settings' seed.
@@ -530,9 +562,8 @@ pub struct EscapeAdvice {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct EscapeMap {
     #[serde(flatten)]
-    pub axes: Axes,
+    pub map: Map,
     pub from: EscapeFrom,
-    pub cells: Vec<Vec<SummaryReport>>,
     pub advice: EscapeAdvice,
 }
 
@@ -552,21 +583,19 @@ pub fn escape_map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<E
     let (at_start, state) = coupled::integrate_from(&assembly, &schedule, &here, None, &mut |_| {});
     let (rpm, axis, jobs) = map_jobs(settings, &[bit])?;
     let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, Some(&state), note)?;
-    let cells: Vec<Vec<SummaryReport>> = summaries
-        .chunks(axis.len())
-        .map(|row| row.iter().map(|s| SummaryReport::of(s, settings.sample_hz)).collect())
-        .collect();
-    let drive = settings.wob_kn.or(settings.feed_m_h).unwrap_or(DEFAULT_FEED_M_H);
+    let cells = rows(&summaries, axis.len(), settings.sample_hz);
     let from = EscapeFrom {
         omega_rpm: settings.omega_rpm,
-        drive,
+        drive: settings.drive(),
         summary: SummaryReport::of(&at_start, settings.sample_hz),
     };
     let advice = advise(settings, &rpm, &axis, &cells, &from);
     Ok(EscapeMap {
-        axes: axes(settings, rpm, axis, jobs.len(), ran),
+        map: Map {
+            cells,
+            axes: axes(settings, rpm, axis, jobs.len(), ran),
+        },
         from,
-        cells,
         advice,
     })
 }

@@ -41,10 +41,10 @@
 use crate::error::{Error, Result};
 use crate::stability::lumped::Lumped;
 
-pub use super::strings::{MAX_SAMPLES, STICK_SLIP_STUCK_SHARE, STUCK_SPEED_RAD_S};
+pub use super::strings::{STICK_SLIP_STUCK_SHARE, STUCK_SPEED_RAD_S};
 
-/// Cells of the rock-surface ring of one string: 240 f32 and the 16 words of the rest of the
-/// state make 1 kB a string on the device.
+/// Cells of the rock-surface ring of one string: 240 f32 and the seven words of the rest of the
+/// state make 988 B a string on the device.
 pub const RING_CELLS: usize = 240;
 
 /// Depth by which the bit may move from its reference before the reference follows it (m).
@@ -487,7 +487,7 @@ struct Forces {
 }
 
 /// One string being integrated: the job's constants and the state.
-pub struct CoupledString {
+struct CoupledString {
     // Constants of the job.
     omega: f64,
     feed: bool,
@@ -525,7 +525,7 @@ pub struct CoupledString {
 
 impl CoupledString {
     /// A string drilling steadily at its drive, its bit speed kicked by the job's kick.
-    pub fn new(assembly: &Assembly, job: &CoupledJob) -> Self {
+    fn new(assembly: &Assembly, job: &CoupledJob) -> Self {
         let b = &job.bit;
         let steady = job.steady(assembly);
         let sector = b.sector_rad();
@@ -572,7 +572,7 @@ impl CoupledString {
 
     /// A string of `job` on `assembly` that carries on from `state` (left by a string of the
     /// same bit): the top drive and the axial drive change, the motion and the rock do not.
-    pub fn resume(assembly: &Assembly, job: &CoupledJob, state: &CoupledState) -> Self {
+    fn resume(assembly: &Assembly, job: &CoupledJob, state: &CoupledState) -> Self {
         let mut s = Self::new(assembly, job);
         s.lag = state.lag_rad;
         s.speed = state.speed_rad_s;
@@ -586,7 +586,7 @@ impl CoupledString {
     }
 
     /// Where the string is now.
-    pub fn state(&self) -> CoupledState {
+    fn state(&self) -> CoupledState {
         CoupledState {
             lag_rad: self.lag,
             speed_rad_s: self.speed,
@@ -605,8 +605,7 @@ impl CoupledString {
         let x = self.phase / self.cell - 0.5;
         let behind = x.floor();
         let frac = x - behind;
-        let ahead = ((behind + 1.0) as i64).rem_euclid(RING_CELLS as i64) as usize;
-        self.behind_old + frac * (self.ring[ahead] - self.behind_old)
+        self.behind_old + frac * (self.ring[cell_index(behind + 1.0)] - self.behind_old)
     }
 
     /// Advances one step of `dt` (s), returning the step's forces.
@@ -692,7 +691,7 @@ impl CoupledString {
             while (k + 0.5) * self.cell <= end && crossed < RING_CELLS {
                 let at = (k + 0.5) * self.cell;
                 let depth = from + (to - from) * (at - start) / turn;
-                let c = (k as i64).rem_euclid(RING_CELLS as i64) as usize;
+                let c = cell_index(k);
                 self.behind_old = self.ring[c];
                 self.ring[c] = self.ring[c].max(depth);
                 k += 1.0;
@@ -703,10 +702,9 @@ impl CoupledString {
             let mut k = (start / self.cell - 0.5).floor();
             let mut crossed = 0;
             while (k + 0.5) * self.cell > end && crossed < RING_CELLS {
-                let c = (k as i64).rem_euclid(RING_CELLS as i64) as usize;
-                let before = ((k - 1.0) as i64).rem_euclid(RING_CELLS as i64) as usize;
+                let c = cell_index(k);
                 self.ring[c] = self.behind_old;
-                self.behind_old = self.ring[before];
+                self.behind_old = self.ring[cell_index(k - 1.0)];
                 k -= 1.0;
                 crossed += 1;
             }
@@ -746,6 +744,11 @@ impl CoupledString {
     fn runaway(&self) -> bool {
         !(self.speed.abs() <= self.runaway && self.axial_speed.abs() < 1e3 && self.lag.abs() < 1e30)
     }
+}
+
+/// The ring's cell of centre number `k` (whole, any sign: the ring wraps).
+fn cell_index(k: f64) -> usize {
+    (k as i64).rem_euclid(RING_CELLS as i64) as usize
 }
 
 /// How long and how finely a batch is integrated: the torsional strings' [`Schedule`].

@@ -379,7 +379,7 @@ fn a_stick_slipping_bit_needs_more_to_escape_than_steady_drilling_to_stay_and_th
     let regime = |m: &[Vec<bitrock::run::coupled::SummaryReport>], i: usize, j: usize| m[i][j].regime;
     for i in [0, 1] {
         assert_eq!(regime(&onset.cells, i, 2), Regime::Steady, "onset, row {i}");
-        assert_eq!(regime(&escape.cells, i, 2), Regime::StickSlip, "escape, row {i}");
+        assert_eq!(regime(&escape.map.cells, i, 2), Regime::StickSlip, "escape, row {i}");
     }
     assert_eq!(escape.advice.lighter_drive, Some(130.0), "{:?}", escape.advice);
     // The advice, applied: from the stuck state, the speed it names drills steadily for two

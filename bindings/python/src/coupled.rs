@@ -51,17 +51,10 @@ pub(crate) fn coupled(
         });
         let mut value = serde_json::to_value(check(py, one)?).expect("a report serialises");
         if record {
-            let column =
-                |f: &dyn Fn(&bitrock::simulate::coupled::Sample) -> f64| samples.iter().map(f).collect::<Vec<f64>>();
-            value["record"] = serde_json::json!({
-                "time_s": column(&|s| s.time_s),
-                "bit_speed_rpm": column(&|s| s.bit_speed_rad_s / bitrock::units::RAD_S_PER_RPM),
-                "torque_on_bit_knm": column(&|s| s.torque_nm / 1e3),
-                "wob_kn": column(&|s| s.wob_n / 1e3),
-                "axial_speed_m_h": column(&|s| s.axial_speed_m_s * 3600.0),
-                "rop_m_h": column(&|s| s.cutting_rate_m_s * 3600.0),
-                "depth_of_cut_mm": column(&|s| s.depth_per_blade_m * 1e3),
-            });
+            let columns = run::record_columns(&samples)
+                .into_iter()
+                .map(|(name, values)| (name.to_string(), values.into()));
+            value["record"] = serde_json::Value::Object(columns.collect());
         }
         Ok(value)
     };
