@@ -21,10 +21,12 @@ BIT = dict(a=0.108, eps=60e6, zeta=0.6, sigma=60e6, l=0.011, mu=0.6, gamma=1.0, 
 STRING = dict(inertia=383.33, omega_n=0.85, xi=0.25, mass=40_000.0, k_a=1.4e5, c_a=5e4)
 
 
-def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60.0, dt=2e-4, sample_hz=50.0, kick_rpm=1.0):
+def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60.0, dt=2e-4, sample_hz=50.0, kick_rpm=1.0, then_rpm=None, then_at=None):
     """The RGD bit on the 1-DOF string in its delay form: semi-implicit Euler at `dt`, the contact
-    decided from the step's forces, a speed that crosses zero on bottom set to rest. Returns the
-    recorded samples' statistics as `bitrock coupled --json` names them."""
+    decided from the step's forces, a speed that crosses zero on bottom set to rest. With
+    `then_rpm`, the top drive turns at `then_rpm` from `then_at` seconds on (the end of the
+    settling where not given), the string carrying on from where it is. Returns the recorded samples' statistics as `bitrock coupled
+    --json` names them."""
     b, s = bit, STRING
     n = b["n"]
     sector = 2.0 * math.pi / n
@@ -70,6 +72,8 @@ def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60
     samples, stuck, off, onsets, first, last, last_stuck = 0, 0, 0, 0, 0, 0, False
     v_sum = 0.0
     for period in range(periods):
+        if then_rpm is not None and period == round((settle if then_at is None else then_at) * sample_hz):
+            omega = then_rpm * RPM
         for _ in range(steps_per_sample):
             dn = u_pos - surface_behind(phi)
             on = dn >= 0.0
@@ -230,3 +234,25 @@ def test_python_gives_the_command_s_escape_map(cli):
     assert escape == json.loads(done.stdout)
     assert escape["from"]["summary"]["regime"] == "stick_slip"
     assert (escape["advice"]["faster_rpm"], escape["advice"]["lighter_drive"]) == (80.0, 130.0), escape["advice"]
+
+
+def test_the_escape_advice_gets_the_delay_form_s_stuck_bit_out(cli):
+    """The way out `bitrock coupled --map --escape` reads off its ring-form strings, applied to
+    the delay-form bit where it is stuck: judged as the map judges a cell (30 s after the change,
+    a minute recorded, stick-slip from 1 % of the time stuck), the advised speed ends the
+    stick-slip and the map's speed below it does not."""
+    done = run_cli(
+        cli, "coupled", "--map", "--escape", "--omega-rpm", "45", "--wob-kn", "150",
+        "--map-rpm", "40:120:5", "--map-wob-kn", "120:160:5", "--backend", "cpu", "--json",
+    )
+    advice = json.loads(done.stdout)["advice"]
+    faster = advice["faster_rpm"]
+    assert faster is not None and faster > 45.0, advice
+    # Stuck at 45 rpm under 150 kN for 90 s (the escape map's start), then the top drive turned.
+    stuck = delay_form(45.0, wob_kn=150.0, settle=60.0, seconds=30.0, dt=DT_S)
+    assert stuck["stuck_share"] > 0.2, stuck
+    turned = dict(wob_kn=150.0, settle=120.0, seconds=60.0, dt=DT_S, then_at=90.0)
+    out = delay_form(45.0, then_rpm=faster, **turned)
+    assert out["stuck_share"] < 0.01, (faster, out)
+    below = delay_form(45.0, then_rpm=faster - 20.0, **turned)
+    assert below["stuck_share"] > 0.1, (faster - 20.0, below)
