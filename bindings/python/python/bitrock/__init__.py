@@ -858,8 +858,8 @@ def coupled_calibrate(
     map: bool = False,
 ) -> dict:
     """The coupled bit calibrated on a drilling record (bit speed, torque on bit, weight on bit,
-    rate of penetration; the bit's axial speed where present; a CSV file), as ``bitrock coupled
-    --calibrate`` does: the weight and torque lines through the cutting samples, ε (MPa), ζ, the
+    rate of penetration; the bit's axial speed where present; a CSV file), as the ``coupled``
+    command calibrates it: the weight and torque lines through the cutting samples, ε (MPa), ζ, the
     wear flats' contact force (kN) and μ·γ with 90 % intervals, and a ``warning`` where the
     record cannot tell a cutting bit from a held one. With ``map=True``: ``{"calibration": ...,
     "map": ...}``, the map giving each regime's probability per cell over ``samples`` posterior
