@@ -6,7 +6,9 @@
 //! `_kn`, `_n`, time `_s`). Every refusal names the file, and where it applies the line and the
 //! column.
 
+pub mod clock;
 pub mod drilling;
+pub mod mnemonics;
 pub mod surface;
 
 use crate::error::{Error, Result};
@@ -227,6 +229,19 @@ pub struct FieldData {
     /// records stored without it.
     #[serde(default)]
     pub bit: Option<BitSeen>,
+    /// How the time column read (elapsed seconds, or a wall clock counted from a midnight
+    /// UTC), where the record has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clock: Option<clock::Clock>,
+}
+
+impl FieldData {
+    /// How a wall-clock time column was read (`time 'TIME': ISO 8601 stamps, s since …`), for
+    /// the lines that describe the record; `None` for elapsed time or no time column.
+    pub fn clock_note(&self) -> Option<String> {
+        let clock = self.clock.filter(|c| c.is_wall())?;
+        Some(format!("time '{}': {clock}", self.columns.time.as_deref().unwrap_or("time")))
+    }
 }
 
 /// Bit speed below which a sample counts as stuck (rad/s): 1 rpm, as downhole tools count it.
@@ -364,20 +379,20 @@ pub fn demo_field_data(opts: &DataOptions) -> Result<FieldData> {
     parse_field_data(DEMO_CSV.as_bytes(), Path::new(DEMO_SOURCE), opts)
 }
 
-/// Index of the column named `wanted`, or of the single column whose name contains `hint`.
 /// True for a column a rig measures at the surface (its name holds `surface`, `top_drive` or
-/// `rotary`): never read as the bit's speed or torque unless named.
+/// `rotary`, or a surface mnemonic: [`mnemonics::is_surface`]): never read as the bit's speed
+/// or torque unless named.
 pub fn is_surface_channel(name: &str) -> bool {
-    let name = name.to_ascii_lowercase();
-    ["surface", "top_drive", "rotary"]
-        .iter()
-        .any(|mark| name.contains(mark))
+    mnemonics::is_surface(name)
 }
 
+/// Index of the column named `wanted`, or of the single column whose name contains `hint`, or
+/// else of the single one a rig-log mnemonic gives the role `role` ([`mnemonics::role`]).
 fn resolve_column(
     headers: &csv::StringRecord,
     wanted: Option<&str>,
     hint: &str,
+    role: mnemonics::Role,
     field: &str,
     required: bool,
     path: &Path,
@@ -396,12 +411,20 @@ fn resolve_column(
             }),
         };
     }
-    let (surface, matches): (Vec<usize>, Vec<usize>) = headers
-        .iter()
-        .enumerate()
-        .filter(|(_, h)| h.to_ascii_lowercase().contains(hint))
-        .map(|(i, _)| i)
-        .partition(|&i| is_surface_channel(&headers[i]));
+    let candidates = |named: &dyn Fn(&str) -> bool| -> (Vec<usize>, Vec<usize>) {
+        headers
+            .iter()
+            .enumerate()
+            .filter(|(_, h)| named(h))
+            .map(|(i, _)| i)
+            .partition(|&i| is_surface_channel(&headers[i]))
+    };
+    let (mut surface, mut matches) = candidates(&|h| h.to_ascii_lowercase().contains(hint));
+    if matches.is_empty() {
+        let (more_surface, by_mnemonic) = candidates(&|h| mnemonics::role(h) == Some(role));
+        matches = by_mnemonic;
+        surface.extend(more_surface.into_iter().filter(|i| !surface.contains(i)).collect::<Vec<_>>());
+    }
     match matches.as_slice() {
         [i] => Ok(Some(*i)),
         [] if !required => Ok(None),
@@ -433,7 +456,7 @@ fn resolve_column(
             path: path.to_path_buf(),
             line: Some(1),
             message: format!(
-                "no column name contains '{hint}'; name the column with `{field}` (the header has: {})",
+                "no column name contains '{hint}' or a rig log's mnemonic of it (the table in docs/records.md); name the column with `{field}` (the header has: {})",
                 listing()
             ),
         }),
@@ -519,7 +542,8 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
     check_time_window(&layout.indices, opts, path)?;
 
     let (all, backwards) = read_rows(&mut rdr, &layout)?;
-    assemble(all, backwards, &headers, &layout.indices, &layout.units, opts, path)
+    let clock = layout.clock();
+    assemble(all, backwards, clock, &headers, &layout.indices, &layout.units, opts, path)
 }
 
 /// A field record from named columns already in memory (a pandas DataFrame's, in the units
@@ -589,6 +613,7 @@ pub fn field_data_from_columns(
         ..Samples::default()
     };
     let mut backwards = None;
+    let time = clock::TimeReader::new(units.time_in_ms);
     for row in 0..rows {
         all.speed_rad_s.push(units.speed.to_rad_s(value(indices.speed, row)?));
         all.torque_nm
@@ -597,7 +622,9 @@ pub fn field_data_from_columns(
             v.push(value(i, row)? * u.newtons());
         }
         if let (Some(i), Some(v)) = (indices.time, all.time_s.as_mut()) {
-            let t = value(i, row)? * units.time_s_per_unit();
+            let t = time
+                .number(value(i, row)?)
+                .map_err(|e| refuse(format!("column '{}', row {row}: {e}", names[i])))?;
             if let Some(&previous) = v.last()
                 && t < previous
                 && backwards.is_none()
@@ -607,7 +634,7 @@ pub fn field_data_from_columns(
             v.push(t);
         }
     }
-    assemble(all, backwards, &headers, &indices, &units, opts, source)
+    assemble(all, backwards, time.clock(), &headers, &indices, &units, opts, source)
 }
 
 /// Refuses a time window without a time column.
@@ -624,9 +651,11 @@ fn check_time_window(indices: &ColumnIndices, opts: &DataOptions, path: &Path) -
 
 /// The record from every row read (`all`, in SI): filtered, split and looked over for
 /// warnings. Refuses a record without rows.
+#[allow(clippy::too_many_arguments)]
 fn assemble(
     all: Samples,
     backwards: Option<Backwards>,
+    clock: Option<clock::Clock>,
     headers: &csv::StringRecord,
     indices: &ColumnIndices,
     units: &ColumnUnits,
@@ -647,13 +676,14 @@ fn assemble(
         wob: indices.wob.map(name),
         time: indices.time.map(name),
     };
-    assemble_columns(all, backwards, columns, units, opts, path)
+    assemble_columns(all, backwards, clock, columns, units, opts, path)
 }
 
 /// [`assemble`] of the columns `columns` names.
 fn assemble_columns(
     all: Samples,
     backwards: Option<Backwards>,
+    clock: Option<clock::Clock>,
     columns: ColumnsUsed,
     units: &ColumnUnits,
     opts: &DataOptions,
@@ -661,10 +691,12 @@ fn assemble_columns(
 ) -> Result<FieldData> {
     let rows_read = all.len();
     // Judged on every row read: a unit off by a factor moves rows across the filters.
-    let implausible = unit_warnings(path, &columns, units, &all);
+    let wall_clock = clock.is_some_and(clock::Clock::is_wall);
+    let implausible = unit_warnings(path, &columns, units, wall_clock, &all);
     let (rows_used, calibration, validation) = filter_and_split(&all, opts, path, &columns)?;
     let bit = seen_in_window(&all, opts);
     let mut warnings = implausible;
+    warnings.extend(ambiguous_mnemonics(path, &columns, opts));
     warnings.extend(record_warnings(
         path,
         &columns,
@@ -684,6 +716,7 @@ fn assemble_columns(
         validation,
         warnings,
         bit,
+        clock,
     })
 }
 
@@ -715,7 +748,7 @@ pub fn field_data_from_samples(
         time: columns.time.filter(|_| all.time_s.is_some()),
         ..columns
     };
-    assemble_columns(all, backwards, columns, &units, opts, source)
+    assemble_columns(all, backwards, None, columns, &units, opts, source)
 }
 
 /// Whether row `i` of `all` lies in the options' time window (every row without a time column).
@@ -784,6 +817,8 @@ pub struct RowLayout {
     headers: csv::StringRecord,
     indices: ColumnIndices,
     units: ColumnUnits,
+    /// The time column's clock, decided at its first cell.
+    time: clock::TimeReader,
     delimiter: u8,
     path: PathBuf,
 }
@@ -800,6 +835,7 @@ impl RowLayout {
             headers: headers.clone(),
             indices,
             units,
+            time: clock::TimeReader::new(units.time_in_ms),
             delimiter,
             path: path.to_path_buf(),
         })
@@ -808,6 +844,11 @@ impl RowLayout {
     /// The header's names.
     pub fn headers(&self) -> &csv::StringRecord {
         &self.headers
+    }
+
+    /// How the time column reads, once a row has been read.
+    pub fn clock(&self) -> Option<clock::Clock> {
+        self.time.clock()
     }
 
     /// The torque unit of the record's torque column.
@@ -841,13 +882,21 @@ impl RowLayout {
                 (Some(i), Some(u)) => Some(cell(i)? * u.newtons()),
                 _ => None,
             },
-            time_s: self
-                .indices
-                .time
-                .map(cell)
-                .transpose()?
-                .map(|t| t * self.units.time_s_per_unit()),
+            time_s: self.indices.time.map(|i| self.time_cell(record, i, line)).transpose()?,
             top_drive_rad_s: None,
+        })
+    }
+}
+
+impl RowLayout {
+    /// The time in column `i` of `record` (on `line`), s; refused naming its line and column.
+    fn time_cell(&self, record: &csv::StringRecord, i: usize, line: u64) -> Result<f64> {
+        self.time.text(record.get(i).unwrap_or("")).map_err(|message| Error::Cell {
+            path: self.path.clone(),
+            line,
+            column: i + 1,
+            name: self.headers[i].to_string(),
+            message,
         })
     }
 }
@@ -868,6 +917,7 @@ impl ColumnIndices {
             headers,
             opts.speed_column.as_deref(),
             "speed",
+            mnemonics::Role::Speed,
             "speed_column",
             true,
             path,
@@ -877,13 +927,30 @@ impl ColumnIndices {
             headers,
             opts.torque_column.as_deref(),
             "torque",
+            mnemonics::Role::Torque,
             "torque_column",
             true,
             path,
         )?
         .expect("required");
-        let wob = resolve_column(headers, opts.wob_column.as_deref(), "wob", "wob_column", false, path)?;
-        let time = resolve_column(headers, opts.time_column.as_deref(), "time", "time_column", false, path)?;
+        let wob = resolve_column(
+            headers,
+            opts.wob_column.as_deref(),
+            "wob",
+            mnemonics::Role::Wob,
+            "wob_column",
+            false,
+            path,
+        )?;
+        let time = resolve_column(
+            headers,
+            opts.time_column.as_deref(),
+            "time",
+            mnemonics::Role::Time,
+            "time_column",
+            false,
+            path,
+        )?;
         let roles = [
             ("speed_column", Some(speed)),
             ("torque_column", Some(torque)),
@@ -931,13 +998,6 @@ pub struct Declared {
     /// A top-drive speed column and its unit, where the source has one (a watch's operating
     /// point; `fit` reads none).
     pub top_drive: Option<(String, SpeedUnit)>,
-}
-
-impl ColumnUnits {
-    /// Seconds per unit of the time column.
-    fn time_s_per_unit(&self) -> f64 {
-        if self.time_in_ms { 1e-3 } else { 1.0 }
-    }
 }
 
 impl ColumnUnits {
@@ -1056,7 +1116,13 @@ const IMPLAUSIBLE_STEP_S: f64 = 5.0;
 /// is below [`IMPLAUSIBLE_LOW_RPM`] or one in rad/s above [`IMPLAUSIBLE_HIGH_RAD_S`], a weight
 /// on bit in kN whose median exceeds [`IMPLAUSIBLE_WOB_KN`], and most non-zero speeds negative.
 /// Each warning names the column, its unit and the likelier one.
-fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &Samples) -> Vec<String> {
+fn unit_warnings(
+    path: &Path,
+    columns: &ColumnsUsed,
+    units: &ColumnUnits,
+    wall_clock: bool,
+    all: &Samples,
+) -> Vec<String> {
     let quantile = |values: &[f64], q: f64| -> f64 {
         crate::numerics::quantile(&values.iter().map(|x| x.abs()).collect::<Vec<_>>(), q)
     };
@@ -1086,6 +1152,7 @@ fn unit_warnings(path: &Path, columns: &ColumnsUsed, units: &ColumnUnits, all: &
     }
     if let (Some(time), Some(name)) = (&all.time_s, &columns.time)
         && !units.time_in_ms
+        && !wall_clock
     {
         let steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
         let step = crate::numerics::median(&steps).unwrap_or(0.0);
@@ -1142,6 +1209,25 @@ impl SpeedChannel<'_> {
             _ => None,
         }
     }
+}
+
+/// The bit's speed or torque found by a mnemonic that rig logs also give the surface channel
+/// (`RPM`, `TQ`) without a downhole mark: said, since surface channels are never to be fitted
+/// as the bit's.
+fn ambiguous_mnemonics(path: &Path, columns: &ColumnsUsed, opts: &DataOptions) -> Vec<String> {
+    [
+        (&columns.speed, opts.speed_column.is_some(), "speed", "speed_column"),
+        (&columns.torque, opts.torque_column.is_some(), "torque", "torque_column"),
+    ]
+    .into_iter()
+    .filter(|(name, named, _, _)| !named && mnemonics::ambiguous(name))
+    .map(|(name, _, what, field)| {
+        format!(
+            "{}: column '{name}' is read as the bit's {what}, as downhole tools name it; rig logs name the surface channel so too: if it was measured at the surface, infer the law with `bitrock surface`, and to read it as the bit's without this note name it with `{field}`",
+            path.display()
+        )
+    })
+    .collect()
 }
 
 /// What the record looks wrong in without being unusable: a time column that runs backwards

@@ -520,18 +520,10 @@ fn prior_json(prior: &Prior, unit: TorqueUnit) -> Value {
         .collect()
 }
 
-/// The suffix of torque columns in the record's unit (`nm`, `knm`).
-fn torque_suffix(unit: TorqueUnit) -> &'static str {
-    match unit {
-        TorqueUnit::Nm => "nm",
-        TorqueUnit::KNm => "knm",
-    }
-}
-
 /// envelopes.csv: the predictive envelopes, one block of rows per law, in the record's torque
 /// unit.
 pub fn envelopes_csv(envelopes: &[Envelope], unit: TorqueUnit) -> Vec<u8> {
-    let suffix = torque_suffix(unit);
+    let suffix = unit.suffix();
     let to_unit = 1.0 / unit.newton_metres();
     let header = [
         "law".to_string(),
@@ -556,7 +548,7 @@ pub fn envelopes_csv(envelopes: &[Envelope], unit: TorqueUnit) -> Vec<u8> {
 
 /// data.csv: the calibration and validation samples the envelopes are drawn against.
 pub fn data_csv(data: &FieldData) -> Vec<u8> {
-    let suffix = torque_suffix(data.torque_unit);
+    let suffix = data.torque_unit.suffix();
     let to_unit = 1.0 / data.torque_unit.newton_metres();
     let header = ["set".to_string(), "speed_rad_s".into(), format!("torque_{suffix}")];
     let rows = [("calibration", &data.calibration), ("validation", &data.validation)]

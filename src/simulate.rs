@@ -318,25 +318,29 @@ pub enum Channels {
 /// The header of a record's channels and how each row is written.
 struct Columns {
     channels: Channels,
-    header: Vec<&'static str>,
+    header: Vec<String>,
+    /// N·m per unit of the torque columns.
     per_unit: f64,
+    /// N per unit of the weight column.
+    wob_per_unit: f64,
 }
 
 impl Columns {
     fn of(channels: Channels, unit: TorqueUnit) -> Self {
-        let (torque, surface_torque, wob) = match unit {
-            TorqueUnit::KNm => ("torque_knm", "surface_torque_knm", "wob_kn"),
-            TorqueUnit::Nm => ("torque_nm", "surface_torque_nm", "wob_n"),
-        };
+        let torque = format!("torque_{}", unit.suffix());
+        let surface_torque = format!("surface_torque_{}", unit.suffix());
+        let wob = format!("wob_{}", unit.force_unit().suffix());
+        let named = |names: &[&str]| names.iter().map(|n| n.to_string()).collect();
         let header = match channels {
-            Channels::Bit => vec!["time_s", "bit_speed_rpm", torque, wob],
-            Channels::Surface => vec!["time_s", "top_drive_rpm", surface_torque, wob],
-            Channels::All => vec!["time_s", "bit_speed_rpm", torque, wob, "top_drive_rpm", surface_torque],
+            Channels::Bit => named(&["time_s", "bit_speed_rpm", &torque, &wob]),
+            Channels::Surface => named(&["time_s", "top_drive_rpm", &surface_torque, &wob]),
+            Channels::All => named(&["time_s", "bit_speed_rpm", &torque, &wob, "top_drive_rpm", &surface_torque]),
         };
         Self {
             channels,
             header,
             per_unit: unit.newton_metres(),
+            wob_per_unit: unit.force_unit().newtons(),
         }
     }
 
@@ -346,7 +350,7 @@ impl Columns {
             format!("{:.4}", trace.time_s[i]),
             format!("{:.3}", trace.bit_speed_rad_s[i] / RAD_S_PER_RPM),
             format!("{:.4}", trace.torque_nm[i] / self.per_unit),
-            format!("{:.3}", trace.wob_n[i] / self.per_unit),
+            format!("{:.3}", trace.wob_n[i] / self.wob_per_unit),
         ]
     }
 
@@ -361,7 +365,7 @@ impl Columns {
                 format!("{:.4}", trace.time_s[i]),
                 top_drive,
                 surface,
-                format!("{:.3}", trace.wob_n[i] / self.per_unit),
+                format!("{:.3}", trace.wob_n[i] / self.wob_per_unit),
             ],
             Channels::All => {
                 let mut row = self.bit_row(trace, i);
@@ -389,9 +393,9 @@ pub fn write_record_csv<W: std::io::Write>(
     let bit_only = channels == Channels::Bit;
     if well.is_some() {
         if bit_only {
-            header.push("top_drive_rpm");
+            header.push("top_drive_rpm".into());
         }
-        header.push("segment");
+        header.push("segment".into());
     }
     writer.write_record(&header)?;
     for i in 0..record.trace.len() {

@@ -6,6 +6,34 @@ use std::f64::consts::PI;
 
 /// rad/s per rpm.
 pub const RAD_S_PER_RPM: f64 = 2.0 * PI / 60.0;
+/// N per pound-force (exact by the international pound and standard gravity).
+pub const NEWTONS_PER_POUND_FORCE: f64 = 4.448_221_615_260_5;
+/// N·m per foot pound-force (0.3048 m × one pound-force).
+pub const NEWTON_METRES_PER_FOOT_POUND_FORCE: f64 = 0.3048 * NEWTONS_PER_POUND_FORCE;
+
+/// The unit symbol a column name ends with in brackets (`TQ (kN.m)`, `WOB [klbf]`), as rig
+/// logs and WITSML logs name their channels.
+pub fn bracketed(column: &str) -> Option<&str> {
+    let c = column.trim_end();
+    let close = c.chars().last()?;
+    let open = match close {
+        ')' => '(',
+        ']' => '[',
+        _ => return None,
+    };
+    let start = c.rfind(open)?;
+    Some(c[start + 1..c.len() - 1].trim())
+}
+
+/// A unit symbol as the tables compare it: lower case, without spaces and the separators logs
+/// put between a product's factors (`kN.m`, `kN·m`, `kN-m`, `kN*m` are all `knm`).
+fn squeezed(symbol: &str) -> String {
+    symbol
+        .chars()
+        .filter(|c| !matches!(c, ' ' | '.' | '·' | '-' | '*' | '_'))
+        .flat_map(char::to_lowercase)
+        .collect()
+}
 
 /// Unit of bit or rotary speed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -36,13 +64,28 @@ impl SpeedUnit {
             SpeedUnit::RadS => "rad/s",
         }
     }
-    /// The unit a column name's suffix declares (`bit_speed_rpm`, `w_rad_s`), if any.
+    /// The unit a log writes as `symbol` (`rpm`, `c/min`, `rev/min`, `rad/s`), if bitrock reads
+    /// it.
+    pub fn from_symbol(symbol: &str) -> Option<Self> {
+        match squeezed(symbol).as_str() {
+            "rpm" | "c/min" | "rev/min" | "1/min" | "r/min" => Some(SpeedUnit::Rpm),
+            "rad/s" => Some(SpeedUnit::RadS),
+            _ => None,
+        }
+    }
+    /// The unit a column name declares (`bit_speed_rpm`, `w_rad_s`, `RPM [c/min]`), if any.
     pub fn from_suffix(column: &str) -> Option<Self> {
+        if let Some(symbol) = bracketed(column) {
+            return Self::from_symbol(symbol);
+        }
         let c = column.to_ascii_lowercase();
         if c.ends_with("_rpm") {
             Some(SpeedUnit::Rpm)
         } else if c.ends_with("_rad_s") {
             Some(SpeedUnit::RadS)
+        } else if c.split(|ch: char| !ch.is_ascii_alphanumeric()).any(|word| word == "rpm") {
+            // A rig mnemonic (`RPM_DH`, `DH RPM`) names its unit.
+            Some(SpeedUnit::Rpm)
         } else {
             None
         }
@@ -61,6 +104,14 @@ pub enum TorqueUnit {
     #[cfg_attr(feature = "cli", value(name = "knm"))]
     #[serde(rename = "kN·m")]
     KNm,
+    /// Foot pounds-force (rigs' imperial logs).
+    #[cfg_attr(feature = "cli", value(name = "ftlbf"))]
+    #[serde(rename = "ft·lbf")]
+    FtLbf,
+    /// Thousands of foot pounds-force.
+    #[cfg_attr(feature = "cli", value(name = "kftlbf"))]
+    #[serde(rename = "kft·lbf")]
+    KFtLbf,
 }
 
 impl TorqueUnit {
@@ -69,6 +120,8 @@ impl TorqueUnit {
         match self {
             TorqueUnit::Nm => 1.0,
             TorqueUnit::KNm => 1000.0,
+            TorqueUnit::FtLbf => NEWTON_METRES_PER_FOOT_POUND_FORCE,
+            TorqueUnit::KFtLbf => 1000.0 * NEWTON_METRES_PER_FOOT_POUND_FORCE,
         }
     }
     /// Printed name.
@@ -76,17 +129,54 @@ impl TorqueUnit {
         match self {
             TorqueUnit::Nm => "N·m",
             TorqueUnit::KNm => "kN·m",
+            TorqueUnit::FtLbf => "ft·lbf",
+            TorqueUnit::KFtLbf => "kft·lbf",
         }
     }
-    /// The unit a column name's suffix declares (`torque_knm`, `tob_nm`), if any.
+    /// The suffix of a column in this unit (`torque_knm`, `tq_ftlbf`).
+    pub fn suffix(self) -> &'static str {
+        match self {
+            TorqueUnit::Nm => "nm",
+            TorqueUnit::KNm => "knm",
+            TorqueUnit::FtLbf => "ftlbf",
+            TorqueUnit::KFtLbf => "kftlbf",
+        }
+    }
+    /// The unit of weight on bit logged beside torque in this unit: N with N·m, kN with kN·m,
+    /// lbf with ft·lbf, klbf with kft·lbf.
+    pub fn force_unit(self) -> ForceUnit {
+        match self {
+            TorqueUnit::Nm => ForceUnit::N,
+            TorqueUnit::KNm => ForceUnit::KN,
+            TorqueUnit::FtLbf => ForceUnit::Lbf,
+            TorqueUnit::KFtLbf => ForceUnit::KLbf,
+        }
+    }
+    /// The unit a column name declares (`torque_knm`, `tob_nm`, `TQ_kftlbf`, `TQ (kN.m)`), if
+    /// any.
     pub fn from_suffix(column: &str) -> Option<Self> {
+        if let Some(symbol) = bracketed(column) {
+            return Self::from_symbol(symbol);
+        }
         let c = column.to_ascii_lowercase();
-        if c.ends_with("_knm") {
-            Some(TorqueUnit::KNm)
-        } else if c.ends_with("_nm") {
-            Some(TorqueUnit::Nm)
-        } else {
-            None
+        [
+            ("_knm", TorqueUnit::KNm),
+            ("_nm", TorqueUnit::Nm),
+            ("_kftlbf", TorqueUnit::KFtLbf),
+            ("_ftlbf", TorqueUnit::FtLbf),
+        ]
+        .into_iter()
+        .find_map(|(suffix, unit)| c.ends_with(suffix).then_some(unit))
+    }
+    /// The unit a log writes as `symbol` (`kN.m`, `N·m`, `ft.lbf`, `kft-lbf`, `klbf.ft`), if
+    /// bitrock reads it.
+    pub fn from_symbol(symbol: &str) -> Option<Self> {
+        match squeezed(symbol).as_str() {
+            "knm" => Some(TorqueUnit::KNm),
+            "nm" => Some(TorqueUnit::Nm),
+            "ftlbf" | "lbfft" | "ftlb" | "ftlbs" => Some(TorqueUnit::FtLbf),
+            "kftlbf" | "klbfft" | "kftlb" | "kftlbs" => Some(TorqueUnit::KFtLbf),
+            _ => None,
         }
     }
 }
@@ -103,6 +193,14 @@ pub enum ForceUnit {
     #[cfg_attr(feature = "cli", value(name = "kn"))]
     #[serde(rename = "kN")]
     KN,
+    /// Pounds-force (rigs' imperial logs).
+    #[cfg_attr(feature = "cli", value(name = "lbf"))]
+    #[serde(rename = "lbf")]
+    Lbf,
+    /// Thousands of pounds-force (kips), as rigs log weight on bit.
+    #[cfg_attr(feature = "cli", value(name = "klbf"))]
+    #[serde(rename = "klbf")]
+    KLbf,
 }
 
 impl ForceUnit {
@@ -111,6 +209,8 @@ impl ForceUnit {
         match self {
             ForceUnit::N => 1.0,
             ForceUnit::KN => 1000.0,
+            ForceUnit::Lbf => NEWTONS_PER_POUND_FORCE,
+            ForceUnit::KLbf => 1000.0 * NEWTONS_PER_POUND_FORCE,
         }
     }
     /// Printed name.
@@ -118,17 +218,42 @@ impl ForceUnit {
         match self {
             ForceUnit::N => "N",
             ForceUnit::KN => "kN",
+            ForceUnit::Lbf => "lbf",
+            ForceUnit::KLbf => "klbf",
         }
     }
-    /// The unit a column name's suffix declares (`wob_kn`, `wob_n`), if any.
+    /// The suffix of a column in this unit (`wob_kn`, `wob_klbf`).
+    pub fn suffix(self) -> &'static str {
+        match self {
+            ForceUnit::N => "n",
+            ForceUnit::KN => "kn",
+            ForceUnit::Lbf => "lbf",
+            ForceUnit::KLbf => "klbf",
+        }
+    }
+    /// The unit a column name declares (`wob_kn`, `wob_n`, `WOB_klbf`, `WOB [klbf]`), if any.
     pub fn from_suffix(column: &str) -> Option<Self> {
+        if let Some(symbol) = bracketed(column) {
+            return Self::from_symbol(symbol);
+        }
         let c = column.to_ascii_lowercase();
-        if c.ends_with("_kn") {
-            Some(ForceUnit::KN)
-        } else if c.ends_with("_n") {
-            Some(ForceUnit::N)
-        } else {
-            None
+        [
+            ("_kn", ForceUnit::KN),
+            ("_n", ForceUnit::N),
+            ("_klbf", ForceUnit::KLbf),
+            ("_lbf", ForceUnit::Lbf),
+        ]
+        .into_iter()
+        .find_map(|(suffix, unit)| c.ends_with(suffix).then_some(unit))
+    }
+    /// The unit a log writes as `symbol` (`kN`, `N`, `lbf`, `klbf`, `kip`), if bitrock reads it.
+    pub fn from_symbol(symbol: &str) -> Option<Self> {
+        match squeezed(symbol).as_str() {
+            "kn" => Some(ForceUnit::KN),
+            "n" => Some(ForceUnit::N),
+            "lbf" | "lb" | "lbs" => Some(ForceUnit::Lbf),
+            "klbf" | "klb" | "klbs" | "kip" | "kips" => Some(ForceUnit::KLbf),
+            _ => None,
         }
     }
 }
@@ -168,8 +293,22 @@ impl RateUnit {
             RateUnit::FtH => "ft/h",
         }
     }
-    /// The unit a column name's suffix declares (`rop_m_h`, `axial_speed_m_s`, `rop_ft_h`).
+    /// The unit a log writes as `symbol` (`m/h`, `m/hr`, `m/s`, `ft/h`, `ft/hr`), if bitrock
+    /// reads it.
+    pub fn from_symbol(symbol: &str) -> Option<Self> {
+        match squeezed(symbol).as_str() {
+            "m/h" | "m/hr" => Some(RateUnit::MH),
+            "m/s" => Some(RateUnit::MS),
+            "ft/h" | "ft/hr" => Some(RateUnit::FtH),
+            _ => None,
+        }
+    }
+    /// The unit a column name declares (`rop_m_h`, `axial_speed_m_s`, `rop_ft_h`,
+    /// `ROP [ft/h]`).
     pub fn from_suffix(column: &str) -> Option<Self> {
+        if let Some(symbol) = bracketed(column) {
+            return Self::from_symbol(symbol);
+        }
         let c = column.to_ascii_lowercase();
         if c.ends_with("_m_h") {
             Some(RateUnit::MH)
@@ -183,9 +322,10 @@ impl RateUnit {
     }
 }
 
-/// A unit a record's column may be in: declared by the column name's suffix, or by a setting.
+/// A unit a record's column may be in: declared by the column name (a suffix, a bracketed
+/// symbol), or by a setting.
 pub trait ColumnUnit: Copy + PartialEq {
-    /// The unit the suffix of the column name `column` declares, if any.
+    /// The unit the column name `column` declares, if any.
     fn declared_by(column: &str) -> Option<Self>;
     /// The unit's symbol, for messages.
     fn symbol(self) -> &'static str;
@@ -215,10 +355,40 @@ mod tests {
         assert_eq!(SpeedUnit::from_suffix("bit_speed_rpm"), Some(SpeedUnit::Rpm));
         assert_eq!(SpeedUnit::from_suffix("W_RAD_S"), Some(SpeedUnit::RadS));
         assert_eq!(SpeedUnit::from_suffix("speed"), None);
+        assert_eq!(SpeedUnit::from_suffix("RPM_DH"), Some(SpeedUnit::Rpm));
         assert_eq!(TorqueUnit::from_suffix("torque_knm"), Some(TorqueUnit::KNm));
         assert_eq!(TorqueUnit::from_suffix("torque_nm"), Some(TorqueUnit::Nm));
         assert_eq!(ForceUnit::from_suffix("wob_kn"), Some(ForceUnit::KN));
         assert_eq!(ForceUnit::from_suffix("wob_n"), Some(ForceUnit::N));
+        assert_eq!(TorqueUnit::from_suffix("TQ_kNm"), Some(TorqueUnit::KNm));
+        assert_eq!(TorqueUnit::from_suffix("TQ_kftlbf"), Some(TorqueUnit::KFtLbf));
+        assert_eq!(TorqueUnit::from_suffix("tq_ftlbf"), Some(TorqueUnit::FtLbf));
+        assert_eq!(ForceUnit::from_suffix("WOB_klbf"), Some(ForceUnit::KLbf));
+        assert_eq!(ForceUnit::from_suffix("wob_lbf"), Some(ForceUnit::Lbf));
+    }
+
+    #[test]
+    fn bracketed_symbols_name_units_as_logs_write_them() {
+        assert_eq!(TorqueUnit::from_suffix("TQ (kN.m)"), Some(TorqueUnit::KNm));
+        assert_eq!(TorqueUnit::from_suffix("Torque [kft.lbf]"), Some(TorqueUnit::KFtLbf));
+        assert_eq!(TorqueUnit::from_suffix("TOB [ft-lbf]"), Some(TorqueUnit::FtLbf));
+        assert_eq!(TorqueUnit::from_suffix("TOB [daN.m]"), None);
+        assert_eq!(ForceUnit::from_suffix("WOB (klbf)"), Some(ForceUnit::KLbf));
+        assert_eq!(ForceUnit::from_suffix("WOB [kN]"), Some(ForceUnit::KN));
+        assert_eq!(SpeedUnit::from_suffix("RPM [c/min]"), Some(SpeedUnit::Rpm));
+        assert_eq!(SpeedUnit::from_suffix("DRPM (rad/s)"), Some(SpeedUnit::RadS));
+        assert_eq!(RateUnit::from_suffix("ROP [ft/hr]"), Some(RateUnit::FtH));
+        // A bracket decides: a suffix inside the name before it does not.
+        assert_eq!(TorqueUnit::from_suffix("tq_knm [ft.lbf]"), Some(TorqueUnit::FtLbf));
+    }
+
+    #[test]
+    fn imperial_units_convert_by_their_definitions() {
+        // 1 lbf = 0.45359237 kg × 9.80665 m/s²; 1 ft = 0.3048 m.
+        assert!((ForceUnit::Lbf.newtons() - 0.453_592_37 * 9.806_65).abs() < 1e-12);
+        assert!((ForceUnit::KLbf.newtons() - 4_448.221_615_260_5).abs() < 1e-9);
+        assert!((TorqueUnit::FtLbf.newton_metres() - 1.355_817_948_331_400_4).abs() < 1e-12);
+        assert!((TorqueUnit::KFtLbf.newton_metres() - 1_355.817_948_331_400_4).abs() < 1e-9);
     }
 
     #[test]

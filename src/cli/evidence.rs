@@ -325,6 +325,9 @@ fn tables(
         evidence.data_points,
         data.torque_unit.label()
     )?;
+    if let Some(note) = data.clock_note() {
+        writeln!(out, "{note}")?;
+    }
     writeln!(
         out,
         "model evidence: tempered SMC per law, {} islands × {} particles {}; noise model: {}{}",

@@ -78,6 +78,9 @@ pub fn fit_tables(out: &mut impl Write, data: &FieldData, fits: &[LawFit]) -> io
         data.columns.torque,
         torque
     )?;
+    if let Some(note) = data.clock_note() {
+        writeln!(out, "{note}")?;
+    }
     writeln!(
         out,
         "rows: {} read, {} used ({} calibration, {} validation)",

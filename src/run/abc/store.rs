@@ -600,6 +600,8 @@ impl Store {
             validation: self.load_samples("validation")?,
             warnings: data_meta.warnings,
             bit: data_meta.bit,
+            // The run keeps its times, not how the record stamped them.
+            clock: None,
         };
         let fits = self.load_fits(RecordScales::of(&data.calibration))?;
         let prior = self.load_prior()?;

@@ -1,0 +1,121 @@
+//! The names rig logs give their channels (WITS and WITSML mnemonics, service companies' and
+//! memory tools' exports), by the role bitrock reads them in. A column's name is split into
+//! words at `_`, `-`, `.`, spaces and brackets (a bracketed unit aside), and a word is compared
+//! with the table, case aside: `RPM_DH`, `DH RPM [rpm]` and `TOB (kN.m)` are the bit's speed and
+//! torque. The table is in docs/records.md; a column that it misses is named with the
+//! command's column flag.
+
+/// A role a record's column can play: the bit's speed, torque or weight, or the clock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Speed,
+    Torque,
+    Wob,
+    Time,
+}
+
+/// Words that name a channel of the bit itself, unambiguously (downhole tools' and WITS's
+/// downhole mnemonics, or a word with a downhole mark).
+const BIT_WORDS: &[(Role, &[&str])] = &[
+    (Role::Speed, &["drpm", "dhrpm", "rpmdh", "bitrpm", "rpmb", "brpm"]),
+    (Role::Torque, &["tob", "dtor", "dtq", "dhtq", "tqdh", "dhtor", "tqb"]),
+    (Role::Wob, &["wob", "dwob", "dhwob", "wobdh", "woba", "swob"]),
+    (Role::Time, &["tim", "dtim", "timestamp", "datetime"]),
+];
+
+/// Words that name a speed or torque without saying where it was measured: read as the bit's
+/// where nothing else is, and said ([`ambiguous`]).
+const BARE_WORDS: &[(Role, &[&str])] = &[(Role::Speed, &["rpm"]), (Role::Torque, &["tq", "trq"])];
+
+/// Words that mark a channel measured downhole.
+const DOWNHOLE_WORDS: &[&str] = &["dh", "downhole", "bit", "mwd", "memory"];
+
+/// Words that mark a channel measured at the surface (top-drive speed, surface torque, hook
+/// load): never read as the bit's unless named.
+const SURFACE_WORDS: &[&str] = &[
+    "surface", "surf", "rotary", "topdrive", "td", "tds", "tdrpm", "tdtq", "tqa", "rpma", "srpm", "stor", "stq",
+];
+
+/// The words of a column's name, lower case, a bracketed unit left out.
+fn words(name: &str) -> Vec<String> {
+    let name = match crate::units::bracketed(name) {
+        Some(unit) => &name.trim_end()[..name.trim_end().len() - unit.len() - 2],
+        None => name,
+    };
+    name.split(|c: char| matches!(c, '_' | '-' | '.' | ' ' | '(' | ')' | '[' | ']' | '/'))
+        .filter(|w| !w.is_empty())
+        .map(str::to_ascii_lowercase)
+        .collect()
+}
+
+/// True for a column whose name marks it as measured at the surface (its name holds
+/// `surface`, `top_drive` or `rotary`, or a surface mnemonic as a word: `TQA`, `RPMA`,
+/// `SRPM`, `TD_RPM`).
+pub fn is_surface(name: &str) -> bool {
+    let lower = name.to_ascii_lowercase();
+    ["surface", "top_drive", "rotary"].iter().any(|mark| lower.contains(mark))
+        || words(name).iter().any(|w| SURFACE_WORDS.contains(&w.as_str()))
+}
+
+/// The role a column's name gives it by the mnemonics' table, if any.
+pub fn role(name: &str) -> Option<Role> {
+    let words = words(name);
+    let has = |table: &[(Role, &[&str])]| {
+        table
+            .iter()
+            .find(|(_, names)| words.iter().any(|w| names.contains(&w.as_str())))
+            .map(|(role, _)| *role)
+    };
+    has(BIT_WORDS).or_else(|| has(BARE_WORDS))
+}
+
+/// Whether a column read by the mnemonics' table is named by a word rig logs also use for the
+/// surface channel (`RPM`, `TQ`) with no downhole mark beside it.
+pub fn ambiguous(name: &str) -> bool {
+    let words = words(name);
+    let bare = BARE_WORDS
+        .iter()
+        .any(|(_, names)| words.iter().any(|w| names.contains(&w.as_str())));
+    let bit = BIT_WORDS
+        .iter()
+        .any(|(_, names)| words.iter().any(|w| names.contains(&w.as_str())));
+    bare && !bit && !words.iter().any(|w| DOWNHOLE_WORDS.contains(&w.as_str()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rig_mnemonics_name_their_roles() {
+        assert_eq!(role("RPM_DH"), Some(Role::Speed));
+        assert_eq!(role("DH RPM [rpm]"), Some(Role::Speed));
+        assert_eq!(role("DRPM"), Some(Role::Speed));
+        assert_eq!(role("TQ_kNm"), Some(Role::Torque));
+        assert_eq!(role("TOB (kN.m)"), Some(Role::Torque));
+        assert_eq!(role("DWOB"), Some(Role::Wob));
+        assert_eq!(role("DTIM"), Some(Role::Time));
+        assert_eq!(role("depth_m"), None);
+        // A bracketed unit is no word of the name.
+        assert_eq!(role("depth [rpm]"), None);
+    }
+
+    #[test]
+    fn surface_mnemonics_and_marks_are_the_surface() {
+        for name in ["TQA", "RPMA", "SRPM", "TD_RPM", "Surf RPM", "top_drive_rpm", "surface_torque_knm"] {
+            assert!(is_surface(name), "{name}");
+        }
+        for name in ["RPM_DH", "TOB", "bit_speed_rpm", "TQ_kNm", "stored_torque_knm"] {
+            assert!(!is_surface(name), "{name}");
+        }
+    }
+
+    #[test]
+    fn bare_speed_and_torque_words_are_said_unless_marked_downhole() {
+        assert!(ambiguous("TQ_kNm"));
+        assert!(ambiguous("RPM"));
+        assert!(!ambiguous("RPM_DH"));
+        assert!(!ambiguous("TOB"));
+        assert!(!ambiguous("bit_speed_rpm"));
+    }
+}
