@@ -10,6 +10,7 @@ pub mod clock;
 pub mod drilling;
 pub mod mnemonics;
 pub mod surface;
+pub mod witsml;
 
 use crate::error::{Error, Result};
 use crate::units::{ForceUnit, RAD_S_PER_RPM, SpeedUnit, TorqueUnit};
@@ -240,7 +241,10 @@ impl FieldData {
     /// the lines that describe the record; `None` for elapsed time or no time column.
     pub fn clock_note(&self) -> Option<String> {
         let clock = self.clock.filter(|c| c.is_wall())?;
-        Some(format!("time '{}': {clock}", self.columns.time.as_deref().unwrap_or("time")))
+        Some(format!(
+            "time '{}': {clock}",
+            self.columns.time.as_deref().unwrap_or("time")
+        ))
     }
 }
 
@@ -423,7 +427,12 @@ fn resolve_column(
     if matches.is_empty() {
         let (more_surface, by_mnemonic) = candidates(&|h| mnemonics::role(h) == Some(role));
         matches = by_mnemonic;
-        surface.extend(more_surface.into_iter().filter(|i| !surface.contains(i)).collect::<Vec<_>>());
+        surface.extend(
+            more_surface
+                .into_iter()
+                .filter(|i| !surface.contains(i))
+                .collect::<Vec<_>>(),
+        );
     }
     match matches.as_slice() {
         [i] => Ok(Some(*i)),
@@ -531,6 +540,9 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
         path: path.to_path_buf(),
         source,
     })?;
+    if witsml::is_xml(&text) {
+        return parse_witsml(&text, path, opts);
+    }
     let delimiter = detect_delimiter(&text, path)?;
     let mut rdr = csv::ReaderBuilder::new()
         .delimiter(delimiter)
@@ -541,9 +553,71 @@ pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions)
     let layout = RowLayout::new(&headers, delimiter, opts, path)?;
     check_time_window(&layout.indices, opts, path)?;
 
-    let (all, backwards) = read_rows(&mut rdr, &layout)?;
+    let records = rdr.records().map(|r| {
+        let record = r.map_err(|e| csv_error(path, e))?;
+        let line = record.position().map_or(0, |p| p.line());
+        Ok((record, line))
+    });
+    let (all, backwards) = read_rows(records, &layout)?;
     let clock = layout.clock();
-    assemble(all, backwards, clock, &headers, &layout.indices, &layout.units, opts, path)
+    assemble(
+        all,
+        backwards,
+        clock,
+        &headers,
+        &layout.indices,
+        &layout.units,
+        opts,
+        path,
+    )
+}
+
+/// A field record from a WITSML time log's text ([`witsml`]): its channels read as a CSV's
+/// columns named `MNEMONIC [unit]`, its index as the time column unless `opts` names one; rows
+/// with no value in a column read are left out and said.
+fn parse_witsml(text: &[u8], path: &Path, opts: &DataOptions) -> Result<FieldData> {
+    let text = std::str::from_utf8(text).map_err(|e| Error::Data {
+        path: path.to_path_buf(),
+        message: format!("the XML is not UTF-8 (at byte {})", e.valid_up_to()),
+    })?;
+    let log = witsml::read(text, path)?;
+    let mut opts = opts.clone();
+    if opts.time_column.is_none() {
+        opts.time_column = log.time_index.map(|i| log.headers[i].to_string());
+    }
+    let layout = RowLayout::new(&log.headers, b',', &opts, path)?;
+    check_time_window(&layout.indices, &opts, path)?;
+    let read = layout.used_columns();
+    let rows = log.rows.len();
+    let (kept, left_out): (Vec<_>, Vec<_>) = log.rows.into_iter().partition(|(record, _)| {
+        !read
+            .iter()
+            .any(|&i| witsml::is_null(record.get(i).unwrap_or(""), &log.nulls[i]))
+    });
+    let (all, backwards) = read_rows(kept.into_iter().map(Ok), &layout)?;
+    let mut data = assemble(
+        all,
+        backwards,
+        layout.clock(),
+        &log.headers,
+        &layout.indices,
+        &layout.units,
+        &opts,
+        path,
+    )?;
+    if let Some((_, line)) = left_out.first() {
+        let names: Vec<&str> = read.iter().map(|&i| &log.headers[i]).collect();
+        data.warnings.insert(
+            0,
+            format!(
+                "{}: {} of {rows} rows hold no value in a channel read ({}), the first on line {line}: left out",
+                path.display(),
+                left_out.len(),
+                names.join(", ")
+            ),
+        );
+    }
+    Ok(data)
 }
 
 /// A field record from named columns already in memory (a pandas DataFrame's, in the units
@@ -846,6 +920,22 @@ impl RowLayout {
         &self.headers
     }
 
+    /// The header's indices of the columns read (speed, torque, and weight on bit and time
+    /// where the record has them), in the header's order.
+    pub fn used_columns(&self) -> Vec<usize> {
+        let mut used: Vec<usize> = [
+            Some(self.indices.speed),
+            Some(self.indices.torque),
+            self.indices.wob,
+            self.indices.time,
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        used.sort_unstable();
+        used
+    }
+
     /// How the time column reads, once a row has been read.
     pub fn clock(&self) -> Option<clock::Clock> {
         self.time.clock()
@@ -891,13 +981,15 @@ impl RowLayout {
 impl RowLayout {
     /// The time in column `i` of `record` (on `line`), s; refused naming its line and column.
     fn time_cell(&self, record: &csv::StringRecord, i: usize, line: u64) -> Result<f64> {
-        self.time.text(record.get(i).unwrap_or("")).map_err(|message| Error::Cell {
-            path: self.path.clone(),
-            line,
-            column: i + 1,
-            name: self.headers[i].to_string(),
-            message,
-        })
+        self.time
+            .text(record.get(i).unwrap_or(""))
+            .map_err(|message| Error::Cell {
+                path: self.path.clone(),
+                line,
+                column: i + 1,
+                name: self.headers[i].to_string(),
+                message,
+            })
     }
 }
 
@@ -1033,7 +1125,10 @@ type Backwards = (String, f64, f64);
 
 /// Every data row in SI, in file order, and the first place the time column runs backwards.
 /// Refuses the first cell that is not a finite number, naming its line and column.
-fn read_rows(rdr: &mut csv::Reader<&[u8]>, layout: &RowLayout) -> Result<(Samples, Option<Backwards>)> {
+fn read_rows(
+    records: impl Iterator<Item = Result<(csv::StringRecord, u64)>>,
+    layout: &RowLayout,
+) -> Result<(Samples, Option<Backwards>)> {
     let path = layout.path.as_path();
     let mut all = Samples {
         wob_n: layout.indices.wob.map(|_| Vec::new()),
@@ -1041,9 +1136,8 @@ fn read_rows(rdr: &mut csv::Reader<&[u8]>, layout: &RowLayout) -> Result<(Sample
         ..Samples::default()
     };
     let mut backwards: Option<Backwards> = None;
-    let mut record = csv::StringRecord::new();
-    while rdr.read_record(&mut record).map_err(|e| csv_error(path, e))? {
-        let line = record.position().map(|p| p.line()).unwrap_or(0);
+    for record in records {
+        let (record, line) = record?;
         let row = layout.row(&record, line)?;
         all.speed_rad_s.push(row.speed_rad_s);
         all.torque_nm.push(row.torque_nm);

@@ -334,7 +334,14 @@ impl Columns {
         let header = match channels {
             Channels::Bit => named(&["time_s", "bit_speed_rpm", &torque, &wob]),
             Channels::Surface => named(&["time_s", "top_drive_rpm", &surface_torque, &wob]),
-            Channels::All => named(&["time_s", "bit_speed_rpm", &torque, &wob, "top_drive_rpm", &surface_torque]),
+            Channels::All => named(&[
+                "time_s",
+                "bit_speed_rpm",
+                &torque,
+                &wob,
+                "top_drive_rpm",
+                &surface_torque,
+            ]),
         };
         Self {
             channels,

@@ -83,7 +83,10 @@ impl SpeedUnit {
             Some(SpeedUnit::Rpm)
         } else if c.ends_with("_rad_s") {
             Some(SpeedUnit::RadS)
-        } else if c.split(|ch: char| !ch.is_ascii_alphanumeric()).any(|word| word == "rpm") {
+        } else if c
+            .split(|ch: char| !ch.is_ascii_alphanumeric())
+            .any(|word| word == "rpm")
+        {
             // A rig mnemonic (`RPM_DH`, `DH RPM`) names its unit.
             Some(SpeedUnit::Rpm)
         } else {

@@ -43,9 +43,10 @@ impl Clock {
 impl fmt::Display for Clock {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let midnight = |day_start: i64| {
-            jiff::Timestamp::from_second(day_start).map_or_else(|_| format!("{day_start} s since 1970"), |t| {
-                t.strftime("%Y-%m-%d 00:00 UTC").to_string()
-            })
+            jiff::Timestamp::from_second(day_start).map_or_else(
+                |_| format!("{day_start} s since 1970"),
+                |t| t.strftime("%Y-%m-%d 00:00 UTC").to_string(),
+            )
         };
         match *self {
             Clock::Elapsed => write!(f, "s from the logger's start"),
@@ -180,7 +181,10 @@ mod tests {
                 zoned: true
             })
         );
-        assert_eq!(r.clock().unwrap().to_string(), "ISO 8601 stamps, s since 2026-11-29 00:00 UTC");
+        assert_eq!(
+            r.clock().unwrap().to_string(),
+            "ISO 8601 stamps, s since 2026-11-29 00:00 UTC"
+        );
         assert!(r.text("12.5").unwrap_err().contains("a number where"));
     }
 
@@ -202,7 +206,11 @@ mod tests {
         assert_eq!(named.number(at * 1e3), Ok(52_200.125));
         assert_eq!(s.clock(), Some(Clock::EpochSeconds { day_start: DAY as i64 }));
         assert_eq!(ms.clock(), Some(Clock::EpochMilliseconds { day_start: DAY as i64 }));
-        assert!(s.text("2026-11-29T14:30:00Z").unwrap_err().contains("a time stamp where"));
+        assert!(
+            s.text("2026-11-29T14:30:00Z")
+                .unwrap_err()
+                .contains("a time stamp where")
+        );
     }
 
     #[test]
@@ -214,6 +222,11 @@ mod tests {
         let ms = TimeReader::new(true);
         assert_eq!(ms.text("1500"), Ok(1.5));
         assert_eq!(ms.clock(), Some(Clock::Elapsed));
-        assert!(TimeReader::new(false).text("12:30").unwrap_err().contains("neither a number"));
+        assert!(
+            TimeReader::new(false)
+                .text("12:30")
+                .unwrap_err()
+                .contains("neither a number")
+        );
     }
 }

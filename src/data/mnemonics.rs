@@ -53,7 +53,9 @@ fn words(name: &str) -> Vec<String> {
 /// `SRPM`, `TD_RPM`).
 pub fn is_surface(name: &str) -> bool {
     let lower = name.to_ascii_lowercase();
-    ["surface", "top_drive", "rotary"].iter().any(|mark| lower.contains(mark))
+    ["surface", "top_drive", "rotary"]
+        .iter()
+        .any(|mark| lower.contains(mark))
         || words(name).iter().any(|w| SURFACE_WORDS.contains(&w.as_str()))
 }
 
@@ -102,7 +104,15 @@ mod tests {
 
     #[test]
     fn surface_mnemonics_and_marks_are_the_surface() {
-        for name in ["TQA", "RPMA", "SRPM", "TD_RPM", "Surf RPM", "top_drive_rpm", "surface_torque_knm"] {
+        for name in [
+            "TQA",
+            "RPMA",
+            "SRPM",
+            "TD_RPM",
+            "Surf RPM",
+            "top_drive_rpm",
+            "surface_torque_knm",
+        ] {
             assert!(is_surface(name), "{name}");
         }
         for name in ["RPM_DH", "TOB", "bit_speed_rpm", "TQ_kNm", "stored_torque_knm"] {

@@ -236,3 +236,293 @@ fn a_time_column_in_milliseconds_is_read_by_its_name_and_hinted_at_without_one()
         data.warnings
     );
 }
+
+/// A rig's export of the embedded record: ISO 8601 stamps with a zone, epoch milliseconds,
+/// mnemonics for names, imperial units, units in brackets. Each reads as the same record in
+/// SI, its times counted from midnight UTC of its first day (13:30 UTC = 48,600 s).
+#[test]
+fn rig_exports_with_stamps_mnemonics_and_imperial_units_read_as_the_record_in_si() {
+    use bitrock::data::{DEMO_CSV, DataOptions, parse_field_data};
+    use bitrock::units::{ForceUnit, TorqueUnit};
+    let rows: Vec<Vec<f64>> = DEMO_CSV
+        .lines()
+        .skip(1)
+        .map(|line| line.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let iso = |t: f64| {
+        // 14:30 at +01:00; the demo's stamps are whole hundredths of a second.
+        let cs = (t * 100.0).round() as u64;
+        format!(
+            "2026-11-29T14:{:02}:{:02}.{:02}+01:00",
+            30 + cs / 6000,
+            (cs / 100) % 60,
+            cs % 100
+        )
+    };
+    let lbf = ForceUnit::Lbf.newtons();
+    let kftlbf = TorqueUnit::KFtLbf.newton_metres();
+    let stamped = std::iter::once("TIME,RPM_DH,TQ_kNm,WOB [klbf]".to_string())
+        .chain(
+            rows.iter()
+                .map(|r| format!("{},{},{},{:e}", iso(r[0]), r[1], r[2], r[3] / lbf)),
+        )
+        .collect::<Vec<_>>()
+        .join("\n");
+    let epoch = std::iter::once("TIME,DH RPM (rpm),TOB (kft.lbf),DWOB [lbf]".to_string())
+        .chain(rows.iter().map(|r| {
+            let ms = 1_795_959_000_000 + (r[0] * 1000.0).round() as u64;
+            format!("{ms},{},{:e},{:e}", r[1], r[2] * 1e3 / kftlbf, r[3] * 1e3 / lbf)
+        }))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let path = std::path::Path::new("rig.csv");
+    let si = parse_field_data(DEMO_CSV.as_bytes(), path, &DataOptions::default()).unwrap();
+    for text in [&stamped, &epoch] {
+        let data = parse_field_data(text.as_bytes(), path, &DataOptions::default()).unwrap();
+        assert_eq!(data.rows_used, si.rows_used);
+        for (got, want) in [(&data.calibration, &si.calibration), (&data.validation, &si.validation)] {
+            assert_eq!(got.speed_rad_s, want.speed_rad_s);
+            let close =
+                |a: &[f64], b: &[f64], tol: f64| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol * y.abs().max(1.0));
+            assert!(close(&got.torque_nm, &want.torque_nm, 1e-12));
+            assert!(close(got.wob_n.as_ref().unwrap(), want.wob_n.as_ref().unwrap(), 1e-12));
+            let shifted: Vec<f64> = want.time_s.as_ref().unwrap().iter().map(|t| t + 48_600.0).collect();
+            assert!(
+                close(got.time_s.as_ref().unwrap(), &shifted, 1e-9),
+                "{:?}",
+                &got.time_s.as_ref().unwrap()[..3]
+            );
+        }
+        assert!(
+            data.clock_note().unwrap().contains("2026-11-29 00:00 UTC"),
+            "{:?}",
+            data.clock_note()
+        );
+        // The time window in those seconds.
+        let window = DataOptions {
+            t_start_s: Some(48_610.0),
+            t_end_s: Some(48_620.0),
+            ..DataOptions::default()
+        };
+        let part = parse_field_data(text.as_bytes(), path, &window).unwrap();
+        let si_window = DataOptions {
+            t_start_s: Some(10.0),
+            t_end_s: Some(20.0),
+            ..DataOptions::default()
+        };
+        assert_eq!(
+            part.rows_used,
+            parse_field_data(DEMO_CSV.as_bytes(), path, &si_window)
+                .unwrap()
+                .rows_used
+        );
+    }
+    // The bare `TQ` is said (rig logs name surface torque so); `TOB` is not.
+    let said = |text: &str| {
+        parse_field_data(text.as_bytes(), path, &DataOptions::default())
+            .unwrap()
+            .warnings
+    };
+    assert!(
+        said(&stamped)
+            .iter()
+            .any(|w| w.contains("'TQ_kNm' is read as the bit's torque"))
+    );
+    assert!(
+        said(&epoch).iter().all(|w| !w.contains("is read as the bit's")),
+        "{:?}",
+        said(&epoch)
+    );
+
+    // A stamp that is no time is refused naming its line and column, exit 2, by the command.
+    let mut bad = stamped.lines().take(50).collect::<Vec<_>>().join("\n");
+    bad.push_str("\n2026-11-29T25:00:00Z,60,7,54\n");
+    let file = tempfile::Builder::new().suffix(".csv").tempfile().unwrap();
+    std::fs::write(file.path(), bad).unwrap();
+    let (code, _, err) = run(&["fit", file.path().to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(":51:1: column 'TIME'") && err.contains("ISO 8601"),
+        "{err}"
+    );
+}
+
+/// The embedded record's rows: time (s), bit speed (rpm), torque (kN·m), WOB (kN).
+fn demo_rows() -> Vec<Vec<f64>> {
+    bitrock::data::DEMO_CSV
+        .lines()
+        .skip(1)
+        .map(|line| line.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect()
+}
+
+/// A demo row's time as a server stamps it: 14:30 at −05:00 plus `t`, seven decimals.
+fn server_stamp(t: f64) -> String {
+    let cs = (t * 100.0).round() as u64;
+    format!(
+        "2026-11-29T14:{:02}:{:02}.{:02}00000-05:00",
+        30 + cs / 6000,
+        (cs / 100) % 60,
+        cs % 100
+    )
+}
+
+/// The embedded record as a WITSML 1.4.1.1 time log written the way servers write them: a
+/// default namespace and unused prefixes, curve infos in another order than the data's
+/// mnemonics, surface channels beside the bit's, the index's unit left empty, a log-level null
+/// value and an empty trailing value, torque in kft·lbf and weight in klbf.
+fn witsml_141(rows: &[Vec<f64>]) -> String {
+    let kftlbf = bitrock::units::TorqueUnit::KFtLbf.newton_metres();
+    let klbf = bitrock::units::ForceUnit::KLbf.newtons();
+    let mut xml = String::from(
+        r#"<?xml version="1.0" encoding="utf-8"?>
+<logs xmlns="http://www.witsml.org/schemas/1series" xmlns:gml="http://www.opengis.net/gml/3.2" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" version="1.4.1.1">
+  <log uidWell="W-1" uidWellbore="B-1" uid="L-1">
+    <nameWell>Well 1</nameWell>
+    <nameWellbore>Wellbore 1</nameWellbore>
+    <name>Downhole 50 Hz</name>
+    <objectGrowing>false</objectGrowing>
+    <indexType>date time</indexType>
+    <direction>increasing</direction>
+    <indexCurve>RIGTIME</indexCurve>
+    <nullValue>-999.25</nullValue>
+    <logCurveInfo uid="TOB"><mnemonic>TOB</mnemonic><unit>kft.lbf</unit><typeLogData>double</typeLogData></logCurveInfo>
+    <logCurveInfo uid="RIGTIME"><mnemonic>RIGTIME</mnemonic><unit>s</unit><typeLogData>date time</typeLogData></logCurveInfo>
+    <logCurveInfo uid="DRPM"><mnemonic>DRPM</mnemonic><unit>rpm</unit><typeLogData>double</typeLogData></logCurveInfo>
+    <logCurveInfo uid="DWOB"><mnemonic>DWOB</mnemonic><unit>klbf</unit><typeLogData>double</typeLogData></logCurveInfo>
+    <logCurveInfo uid="TQA"><mnemonic>TQA</mnemonic><unit>kft.lbf</unit><typeLogData>double</typeLogData></logCurveInfo>
+    <logCurveInfo uid="RPMA"><mnemonic>RPMA</mnemonic><unit>rpm</unit><typeLogData>double</typeLogData></logCurveInfo>
+    <logData>
+      <mnemonicList>RIGTIME,DRPM,TOB,DWOB,TQA,RPMA</mnemonicList>
+      <unitList>,rpm,kft.lbf,klbf,kft.lbf,rpm</unitList>
+"#,
+    );
+    for (k, r) in rows.iter().enumerate() {
+        // The surface channels' nulls (-999.25, empty) touch no row the record reads.
+        let surface = if k % 7 == 0 {
+            "-999.25,".to_string()
+        } else {
+            format!("{:.3},120", r[2] * 1e3 / kftlbf + 2.0)
+        };
+        xml.push_str(&format!(
+            "      <data>{},{},{:e},{:e},{surface}</data>\n",
+            server_stamp(r[0]),
+            r[1],
+            r[2] * 1e3 / kftlbf,
+            r[3] * 1e3 / klbf
+        ));
+    }
+    xml.push_str("    </logData>\n  </log>\n</logs>\n");
+    xml
+}
+
+/// The embedded record as a WITSML 2.0 channel set: prefixed common elements, an index of
+/// stamps, a channel with point metadata (`[value, flag]`), JSON rows across lines with a
+/// trailing comma, a surface channel with `null`s.
+fn witsml_20(rows: &[Vec<f64>]) -> String {
+    let mut xml = String::from(
+        r#"<?xml version="1.0" encoding="utf-8"?>
+<Log xmlns="http://www.energistics.org/energyml/data/witsmlv2" xmlns:eml="http://www.energistics.org/energyml/data/commonv2" schemaVersion="2.0" uuid="0b6b3c1e-0000-4000-8000-000000000001">
+  <eml:Citation><eml:Title>Downhole 50 Hz</eml:Title><eml:Originator>rig</eml:Originator></eml:Citation>
+  <ChannelSet uuid="0b6b3c1e-0000-4000-8000-000000000002">
+    <eml:Citation><eml:Title>Bit</eml:Title></eml:Citation>
+    <Index><IndexType>date time</IndexType><Uom>s</Uom><Direction>increasing</Direction><Mnemonic>TIME</Mnemonic></Index>
+    <Channel uuid="c1"><Mnemonic>RPM_DH</Mnemonic><DataType>double</DataType><Uom>rpm</Uom></Channel>
+    <Channel uuid="c2"><Mnemonic>TOB</Mnemonic><DataType>double</DataType><Uom>kN.m</Uom></Channel>
+    <Channel uuid="c3"><Mnemonic>DWOB</Mnemonic><DataType>double</DataType><Uom>kN</Uom></Channel>
+    <Channel uuid="c4"><Mnemonic>Surf RPM</Mnemonic><DataType>double</DataType><Uom>rpm</Uom></Channel>
+    <Data>
+      <Data>[
+"#,
+    );
+    for (k, r) in rows.iter().enumerate() {
+        let surface = if k % 5 == 0 {
+            "null".to_string()
+        } else {
+            "120.0".to_string()
+        };
+        xml.push_str(&format!(
+            "        [[\"{}\"], [{}, [{}, true], {}, {surface}]],\n",
+            server_stamp(r[0]),
+            r[1],
+            r[2],
+            r[3]
+        ));
+    }
+    xml.push_str("      ]</Data>\n    </Data>\n  </ChannelSet>\n</Log>\n");
+    xml
+}
+
+/// WITSML 1.4.1 and 2.0 time logs read as the record they hold, by the library and by `fit`,
+/// their stamps counted from midnight UTC (14:30 at −05:00 = 19:30 UTC = 70,200 s); a null in
+/// a channel read leaves its row out and is said; a malformed log is refused naming its line.
+#[test]
+fn witsml_time_logs_read_as_the_record_they_hold() {
+    use bitrock::data::{DEMO_CSV, DataOptions, parse_field_data};
+    let rows = demo_rows();
+    let path = std::path::Path::new("log.xml");
+    let si = parse_field_data(DEMO_CSV.as_bytes(), path, &DataOptions::default()).unwrap();
+    for xml in [witsml_141(&rows), witsml_20(&rows)] {
+        let data = parse_field_data(xml.as_bytes(), path, &DataOptions::default()).unwrap();
+        assert_eq!(data.rows_read, rows.len());
+        assert_eq!(data.rows_used, si.rows_used);
+        for (got, want) in [(&data.calibration, &si.calibration), (&data.validation, &si.validation)] {
+            assert_eq!(got.speed_rad_s, want.speed_rad_s);
+            let close =
+                |a: &[f64], b: &[f64], tol: f64| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol * y.abs().max(1.0));
+            assert!(close(&got.torque_nm, &want.torque_nm, 1e-12));
+            assert!(close(got.wob_n.as_ref().unwrap(), want.wob_n.as_ref().unwrap(), 1e-12));
+            let shifted: Vec<f64> = want.time_s.as_ref().unwrap().iter().map(|t| t + 70_200.0).collect();
+            assert!(close(got.time_s.as_ref().unwrap(), &shifted, 1e-9));
+        }
+        assert!(data.warnings.is_empty(), "{:?}", data.warnings);
+        assert!(
+            data.clock_note()
+                .unwrap()
+                .contains("ISO 8601 stamps, s since 2026-11-29 00:00 UTC")
+        );
+    }
+
+    // A null where the record reads: the row left out and said with its line.
+    let mut xml = witsml_141(&rows[..400]);
+    xml = xml.replacen(&format!(",{},", rows[10][1]), ",-999.25,", 1);
+    let data = parse_field_data(xml.as_bytes(), path, &DataOptions::default()).unwrap();
+    assert_eq!(data.rows_read, 399);
+    assert!(
+        data.warnings[0].contains(
+            "1 of 400 rows hold no value in a channel read (RIGTIME, DRPM [rpm], TOB [kft.lbf], DWOB [klbf])"
+        ) && data.warnings[0].contains("line 31"),
+        "{:?}",
+        data.warnings
+    );
+
+    // By the command: the same fit as the embedded record's, to the printed digits.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("log.xml");
+    std::fs::write(&file, witsml_20(&rows)).unwrap();
+    let (code, out, err) = run(&["fit", file.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, demo, err) = run(&["fit", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(best_rho(&json(&out)), best_rho(&json(&demo)));
+
+    // Malformed: a row of the wrong length, XML that does not parse, another root.
+    let short = witsml_141(&rows[..50]).replacen("</data>", ",1</data>", 1);
+    let bad_xml = witsml_20(&rows[..50]).replacen("</Channel>", "</Chanel>", 1);
+    for (text, want) in [
+        (short, "log.xml:21: a row of 7 values for 6 mnemonics"),
+        (
+            bad_xml,
+            "log.xml:7: column 92: the XML does not parse: expected 'Channel' tag, not 'Chanel'\n",
+        ),
+        (
+            "<?xml version=\"1.0\"?>\n<well/>".to_string(),
+            "log.xml:2: an XML file whose root is <well>",
+        ),
+    ] {
+        std::fs::write(&file, &text).unwrap();
+        let (code, _, err) = run(&["fit", file.to_str().unwrap()]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(want), "{want}: {err}");
+    }
+}

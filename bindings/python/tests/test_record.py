@@ -182,3 +182,38 @@ def test_a_record_pickles_to_the_bit(demo) -> None:
     # The same record gives the same run, bit for bit.
     runs = [bitrock.abc(r, particles=200, seed=3, backend="cpu", max_populations=2, progress=False) for r in (demo, again)]
     assert runs[0].model_probabilities.equals(runs[1].model_probabilities)
+
+
+def test_a_rig_export_with_iso_stamps_mnemonics_and_imperial_units(tmp_path) -> None:
+    """A rig's export of the demo record (ISO 8601 stamps at +01:00, ``RPM_DH``/``TOB``
+    mnemonics, weight in klbf, torque in kft·lbf) reads as the demo record by path and as a
+    DataFrame, its clock counted from midnight UTC (13:30 UTC = 48,600 s)."""
+    frame = pd.read_csv(DEMO_CSV)
+    stamps = pd.Timestamp("2026-11-29T14:30:00+01:00") + pd.to_timedelta(frame["time_s"], unit="s")
+    rig = pd.DataFrame(
+        {
+            "TIME": stamps.dt.strftime("%Y-%m-%dT%H:%M:%S.%f%z").str.replace(r"(\d\d)(\d\d)$", r"\1:\2", regex=True),
+            "RPM_DH": frame["bit_speed_rpm"],
+            "TOB (kft.lbf)": frame["torque_knm"] * 1e3 / 1355.8179483314004,
+            "WOB [klbf]": frame["wob_kn"] * 1e3 / 4448.2216152605,
+        }
+    )
+    path = tmp_path / "rig.csv"
+    rig.to_csv(path, index=False, float_format="%.17g")
+    window = {"t_start_s": 48_610.0, "t_end_s": 48_620.0}
+    demo = bitrock.read_record(frame, t_start_s=10.0, t_end_s=20.0)
+    read = [
+        bitrock.read_record(str(path), **window),
+        bitrock.read_record(pd.read_csv(path), **window),
+        bitrock.read_record(pd.read_csv(path, parse_dates=["TIME"]), **window),
+    ]
+    for record in read:
+        assert record.rows_used == demo.rows_used
+        assert record.torque_unit == "kft·lbf"
+        speed, torque = record.calibration()
+        np.testing.assert_array_equal(speed, demo.calibration()[0])
+        np.testing.assert_allclose(torque, demo.calibration()[1], rtol=1e-12)
+    # Given by keyword, the imperial units are accepted as the command's flags are.
+    renamed = pd.read_csv(path).rename(columns={"TOB (kft.lbf)": "TOB", "WOB [klbf]": "WOB"})
+    record = bitrock.read_record(renamed, torque_unit="kftlbf", wob_unit="klbf", **window)
+    np.testing.assert_allclose(record.calibration()[1], demo.calibration()[1], rtol=1e-12)

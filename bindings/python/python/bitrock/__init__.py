@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import pathlib
+import re
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -99,10 +100,12 @@ def read_record(
 
     ``source`` is a CSV path, a pandas DataFrame (its columns read as a CSV's would be), or
     ``None`` for the embedded demo record. Columns are found by name (``speed``, ``torque``,
-    ``wob``, ``time``) unless named; units come from the column suffixes (``_rpm``, ``_knm``)
-    unless given (``rpm``, ``rad_s``, ``nm``, ``knm``, ``n``, ``kn``). A DataFrame's
-    ``timedelta64`` column is read in seconds, a ``datetime64`` one in seconds from its first
-    row. Rows below ``min_speed_rpm`` are dropped, and the rest split into calibration and
+    ``wob``, ``time``, or a rig log's mnemonic such as ``RPM_DH`` or ``TOB``) unless named; units
+    come from the column names (``_rpm``, ``_knm``, ``_klbf``, ``TQ (kN.m)``) unless given
+    (``rpm``, ``rad_s``, ``nm``, ``knm``, ``ftlbf``, ``kftlbf``, ``n``, ``kn``, ``lbf``, ``klbf``). A DataFrame's
+    ``timedelta64`` column is read in seconds; a ``datetime64`` column, or one of ISO 8601 text
+    stamps, in seconds since midnight UTC of its first row's day, as the command reads a
+    record's wall clock. Rows below ``min_speed_rpm`` are dropped, and the rest split into calibration and
     validation samples (``calibration_fraction``, ``split`` ``"block"`` or ``"interleaved"``).
     What the record looks wrong in (a column whose values its unit can hardly mean, torques or
     speeds of the wrong sign, time running backwards) is raised as a ``BitrockWarning`` and kept
@@ -161,13 +164,27 @@ def _arrays_frame(source: Any, arrays: dict[str, Any], options: dict[str, Any]) 
     return pd.DataFrame(columns)
 
 
+def _iso_stamps(column: pd.Series) -> bool:
+    """Whether a text column holds ISO 8601 time stamps (its first value starts with a date)."""
+    if not (pd.api.types.is_object_dtype(column) or pd.api.types.is_string_dtype(column)) or column.empty:
+        return False
+    first = column.iloc[0]
+    return isinstance(first, str) and re.match(r"\s*\d{4}-\d{2}-\d{2}[T ]\d", first) is not None
+
+
 def _numbers(column: pd.Series) -> np.ndarray | None:
     """A DataFrame column as contiguous float64 (missing values NaN, refused by the reader
     if the column is used), times in seconds; ``None`` when it holds no numbers."""
     if pd.api.types.is_timedelta64_dtype(column):
         return np.ascontiguousarray(column.dt.total_seconds().to_numpy(dtype=np.float64, na_value=np.nan))
+    if _iso_stamps(column):
+        column = pd.to_datetime(column, utc=True, format="ISO8601")
     if pd.api.types.is_datetime64_any_dtype(column):
-        return np.ascontiguousarray((column - column.iloc[0]).dt.total_seconds().to_numpy(dtype=np.float64, na_value=np.nan))
+        # The wall clock as the command reads it: s since midnight UTC of the first row's day
+        # (a column without a zone read as UTC).
+        utc = column.dt.tz_convert("UTC") if column.dt.tz is not None else column.dt.tz_localize("UTC")
+        seconds = (utc - utc.iloc[0].floor("D")).dt.total_seconds()
+        return np.ascontiguousarray(seconds.to_numpy(dtype=np.float64, na_value=np.nan))
     if pd.api.types.is_bool_dtype(column) or not pd.api.types.is_numeric_dtype(column):
         return None
     return np.ascontiguousarray(column.to_numpy(dtype=np.float64, na_value=np.nan))
