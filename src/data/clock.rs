@@ -18,6 +18,8 @@ const EPOCH_SECONDS_FROM: f64 = 1e8;
 const EPOCH_MILLISECONDS_FROM: f64 = 1e11;
 /// Seconds in a day.
 const DAY_S: i64 = 86_400;
+/// Nanoseconds in a day.
+const NS_PER_DAY: i128 = 86_400 * 1_000_000_000;
 
 /// How a record's time column reads.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -94,17 +96,19 @@ impl TimeReader {
         if let Ok(v) = text.parse::<f64>() {
             return self.number(v);
         }
-        let Some((at_s, zoned)) = iso_instant(text) else {
+        let Some((at_ns, zoned)) = iso_instant(text) else {
             return Err(format!(
                 "'{text}' is neither a number nor an ISO 8601 time stamp (2026-11-29T14:30:00.125Z)"
             ));
         };
         let clock = *self.clock.get_or_init(|| Clock::Iso {
-            day_start: day_start(at_s),
+            day_start: at_ns.div_euclid(NS_PER_DAY) as i64 * DAY_S,
             zoned,
         });
         match clock {
-            Clock::Iso { day_start, .. } => Ok(at_s - day_start as f64),
+            // In integer nanoseconds from midnight, then one division: the stamp's decimal
+            // rounded once, as the same time written as a number of seconds is.
+            Clock::Iso { day_start, .. } => Ok((at_ns - i128::from(day_start) * 1_000_000_000) as f64 / 1e9),
             _ => Err(format!(
                 "'{text}' is a time stamp where the column's first row holds a number ({clock})"
             )),
@@ -146,16 +150,15 @@ fn day_start(at_s: f64) -> i64 {
     (at_s.floor() as i64).div_euclid(DAY_S) * DAY_S
 }
 
-/// An ISO 8601 stamp as s since 1970 and whether it carried its zone (without one it is read
+/// An ISO 8601 stamp as ns since 1970 and whether it carried its zone (without one it is read
 /// as UTC).
-fn iso_instant(text: &str) -> Option<(f64, bool)> {
-    let seconds = |t: jiff::Timestamp| t.as_second() as f64 + f64::from(t.subsec_nanosecond()) * 1e-9;
+fn iso_instant(text: &str) -> Option<(i128, bool)> {
     if let Ok(t) = text.parse::<jiff::Timestamp>() {
-        return Some((seconds(t), true));
+        return Some((t.as_nanosecond(), true));
     }
     let civil = text.parse::<jiff::civil::DateTime>().ok()?;
     let t = jiff::tz::TimeZone::UTC.to_timestamp(civil).ok()?;
-    Some((seconds(t), false))
+    Some((t.as_nanosecond(), false))
 }
 
 #[cfg(test)]
@@ -174,6 +177,13 @@ mod tests {
         assert_eq!(r.text("2026-11-29T14:30:02.5000000+00:00"), Ok(52_202.5));
         // Past midnight the count goes on.
         assert_eq!(r.text("2026-11-30T00:00:01Z"), Ok(86_401.0));
+        // A stamp's decimals rounded once, as the same time written in seconds.
+        let epoch = TimeReader::new(false);
+        assert_eq!(
+            epoch.text("1970-01-01T00:00:12.34Z"),
+            Ok("12.34".parse::<f64>().unwrap())
+        );
+        assert_eq!(epoch.text("1970-01-01T00:00:00.07Z"), Ok(0.07));
         assert_eq!(
             r.clock(),
             Some(Clock::Iso {

@@ -37,6 +37,7 @@ pub mod store;
 pub mod view;
 pub mod window;
 pub mod wits;
+pub mod witsml;
 
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;

@@ -1,4 +1,5 @@
-//! Where a watch reads its record: a CSV file (whole, or followed as it grows), standard
+//! Where a watch reads its record: a CSV file (whole, or followed as it grows), a WITSML log
+//! or a folder of its chunks (whole, or followed for new chunks: [`super::witsml`]), standard
 //! input, a file replayed against its own time column, or a TCP feed (reconnected with
 //! back-off when it drops). Each carries CSV lines (a header first) or WITS level-0 blocks
 //! ([`super::wits`]), told apart by the first line. Rows come one at a time; a line that
@@ -170,8 +171,22 @@ impl Rows {
     /// with [`Error::Interrupted`].
     pub fn open(source: &Source, opts: &DataOptions, wits: &WitsItems, stop: &dyn Fn() -> bool) -> Result<Self> {
         let name = source.name();
+        let mut opts = opts.clone();
+        // A WITSML log or folder of chunks read as the CSV text of its channels, its index the
+        // clock unless one is named.
+        let mut file = |path: &Path, follow: bool| -> Result<Box<dyn BufRead + Send>> {
+            if !super::witsml::is_witsml(path) {
+                return Ok(Box::new(BufReader::new(open(path)?)));
+            }
+            let mut chunks = super::witsml::Chunks::new(path, follow, FOLLOW_POLL)?;
+            chunks.first(stop)?;
+            if opts.time_column.is_none() {
+                opts.time_column = chunks.time_column();
+            }
+            Ok(Box::new(BufReader::new(chunks)))
+        };
         let (reader, follow, replay, feed): (Box<dyn BufRead + Send>, bool, _, _) = match source {
-            Source::File { path, follow } => (Box::new(BufReader::new(open(path)?)), *follow, None, None),
+            Source::File { path, follow } => (file(path, *follow)?, *follow, None, None),
             Source::Stdin => (Box::new(BufReader::new(std::io::stdin())), false, None, None),
             Source::Replay { path, speed } => {
                 if !(speed.is_finite() && *speed > 0.0) {
@@ -191,7 +206,7 @@ impl Rows {
                         ),
                     ));
                 }
-                (Box::new(BufReader::new(open(path)?)), false, Some((*speed, None)), None)
+                (file(path, false)?, false, Some((*speed, None)), None)
             }
             Source::Tcp { address } => {
                 let stream = connect(address).map_err(|source| Error::Read {
@@ -211,7 +226,7 @@ impl Rows {
             }
             _ => None,
         };
-        let rows = Self::from_reader(reader, name, opts, wits, stop)?;
+        let rows = Self::from_reader(reader, name, &opts, wits, stop)?;
         Ok(Self {
             follow,
             replay,

@@ -1473,3 +1473,109 @@ fn lines_are_bounded_and_a_long_file_s_work_is_said() {
     let windows: f64 = said.split_whitespace().nth(2).unwrap().parse().unwrap();
     assert!((11_000.0..12_500.0).contains(&windows), "{said}");
 }
+
+/// The rows of the CSV record `record` as WITSML 1.4.1 log chunks, as a server writes a growing
+/// log into a folder: `parts` files of consecutive rows, each a whole log, the stamps ISO 8601
+/// from 1970-01-01T00:00:00Z (so that the wall clock's seconds are the record's own), the
+/// channels by rig mnemonics with their units in the unit list.
+fn witsml_chunks(record: &Path, parts: usize) -> Vec<String> {
+    let text = std::fs::read_to_string(record).unwrap();
+    let rows: Vec<&str> = text.lines().skip(1).collect();
+    let per = rows.len().div_ceil(parts);
+    rows.chunks(per)
+        .map(|chunk| {
+            let mut xml = String::from(
+                "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<logs xmlns=\"http://www.witsml.org/schemas/1series\" version=\"1.4.1.1\">\n\
+                 <log uidWell=\"W\" uidWellbore=\"B\" uid=\"L\"><name>bit</name><indexType>date time</indexType><indexCurve>TIME</indexCurve>\n\
+                 <logData><mnemonicList>TIME,RPM_DH,TOB,DWOB,top_drive</mnemonicList><unitList>s,rpm,kN.m,kN,rpm</unitList>\n",
+            );
+            for row in chunk {
+                let v: Vec<&str> = row.split(',').collect();
+                let tenths_ms = (v[0].parse::<f64>().unwrap() * 1e4).round() as u64;
+                let stamp = format!(
+                    "1970-01-01T00:{:02}:{:02}.{:04}Z",
+                    tenths_ms / 600_000,
+                    (tenths_ms / 10_000) % 60,
+                    tenths_ms % 10_000
+                );
+                xml.push_str(&format!("<data>{stamp},{},{},{},{}</data>\n", v[1], v[2], v[3], v[4]));
+            }
+            xml.push_str("</logData></log></logs>\n");
+            xml
+        })
+        .collect()
+}
+
+/// A WITSML log's folder of chunks gives the CSV record's windows: read whole, and followed
+/// while a server writes its chunks (the newest one caught half-written); a single log file
+/// too, which cannot be followed.
+#[test]
+fn a_folder_of_witsml_log_chunks_gives_the_csv_record_s_windows_read_whole_or_followed() {
+    use std::io::{BufRead, Read};
+    let dir = tempfile::tempdir().unwrap();
+    let record = simulate_well(dir.path());
+    let args = [&WINDOWS[..], &["--particles", "100"]].concat();
+    let whole = watch(&[&args[..], &[record.to_str().unwrap()]].concat());
+    let chunks = witsml_chunks(&record, 3);
+
+    let folder = dir.path().join("log");
+    std::fs::create_dir(&folder).unwrap();
+    for (k, chunk) in chunks.iter().enumerate() {
+        std::fs::write(folder.join(format!("chunk-{k:03}.xml")), chunk).unwrap();
+    }
+    std::fs::write(folder.join("notes.txt"), "not a chunk").unwrap();
+    let read = watch(&[&args[..], &[folder.to_str().unwrap()]].concat());
+    assert_eq!(without_latency(&read), without_latency(&whole));
+    let single = dir.path().join("one.xml");
+    std::fs::write(&single, witsml_chunks(&record, 1).remove(0)).unwrap();
+    let read = watch(&[&args[..], &[single.to_str().unwrap()]].concat());
+    assert_eq!(without_latency(&read), without_latency(&whole));
+    let (code, _, stderr) = outcome(watch_command().arg(&single).arg("--follow"));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--follow") && stderr.contains("give the folder"),
+        "{stderr}"
+    );
+
+    // Followed: the first chunk there at the start, the rest written while the watch waits,
+    // the last caught half-written first.
+    let growing = dir.path().join("growing");
+    std::fs::create_dir(&growing).unwrap();
+    std::fs::write(growing.join("chunk-000.xml"), &chunks[0]).unwrap();
+    let mut child = watch_command()
+        .args(&args)
+        .arg(&growing)
+        .arg("--follow")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let writer = {
+        let (growing, chunks) = (growing.clone(), chunks.clone());
+        std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_secs(2));
+            std::fs::write(growing.join("chunk-001.xml"), &chunks[1]).unwrap();
+            std::thread::sleep(std::time::Duration::from_secs(2));
+            let last = growing.join("chunk-002.xml");
+            std::fs::write(&last, &chunks[2][..chunks[2].len() / 2]).unwrap();
+            std::thread::sleep(std::time::Duration::from_secs(2));
+            std::fs::write(&last, &chunks[2]).unwrap();
+        })
+    };
+    // Followed, the last window (which ends with the record) waits for rows after it.
+    let n = whole.len() - 1;
+    let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
+    let mut followed = Vec::new();
+    while followed.len() < n {
+        let mut line = String::new();
+        assert!(reader.read_line(&mut line).unwrap() > 0, "the watch ended early");
+        followed.push(serde_json::from_str::<serde_json::Value>(&line).unwrap());
+    }
+    writer.join().unwrap();
+    let (code, _, _) = outcome(std::process::Command::new("kill").args(["-INT", &child.id().to_string()]));
+    assert_eq!(code, 0);
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    let mut stderr = String::new();
+    child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
+    assert_eq!(without_latency(&followed), without_latency(&whole[..n]), "{stderr}");
+}
