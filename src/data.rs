@@ -59,6 +59,9 @@ pub struct DataOptions {
     pub calibration_fraction: f64,
     /// How calibration rows are chosen.
     pub split: SplitRule,
+    /// A column map file naming the rig's columns and units by role
+    /// ([`mnemonics::ColumnMap`]); the column and unit options above win over it.
+    pub column_map: Option<PathBuf>,
 }
 
 impl Default for DataOptions {
@@ -77,6 +80,7 @@ impl Default for DataOptions {
             thin: 1,
             calibration_fraction: 0.5,
             split: SplitRule::Block,
+            column_map: None,
         }
     }
 }
@@ -535,6 +539,7 @@ pub(crate) fn detect_delimiter(text: &[u8], path: &Path) -> Result<u8> {
 /// (`detect_delimiter`); numbers take a decimal point.
 pub fn parse_field_data<R: Read>(mut reader: R, path: &Path, opts: &DataOptions) -> Result<FieldData> {
     opts.validate()?;
+    let opts = &mnemonics::ColumnMap::apply(opts)?;
     let mut text = Vec::new();
     reader.read_to_end(&mut text).map_err(|source| Error::Read {
         path: path.to_path_buf(),
@@ -660,6 +665,7 @@ pub fn field_data_from_columns(
         e => e,
     };
     opts.validate()?;
+    let opts = &mnemonics::ColumnMap::apply(opts)?;
     let headers = csv::StringRecord::from(names.to_vec());
     check_headers(&headers, source).map_err(headerless)?;
     let indices = ColumnIndices::resolve(&headers, opts, source).map_err(headerless)?;
@@ -902,6 +908,7 @@ impl RowLayout {
     /// refuses what [`parse_field_data`] refuses of a header.
     pub fn new(headers: &csv::StringRecord, delimiter: u8, opts: &DataOptions, path: &Path) -> Result<Self> {
         opts.validate()?;
+        let opts = &mnemonics::ColumnMap::apply(opts)?;
         check_headers(headers, path)?;
         let indices = ColumnIndices::resolve(headers, opts, path)?;
         let units = ColumnUnits::resolve(headers, &indices, opts, path)?;

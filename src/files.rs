@@ -250,6 +250,18 @@ pub fn read_text(path: &Path, what: &str, max_bytes: u64) -> Result<String> {
     })
 }
 
+/// A settings file (TOML, at most [`crate::limits::MAX_SETTINGS_FILE_BYTES`]) read as `T`; a
+/// syntax error or an unknown key is refused naming the file and its line.
+pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = read_text(path, what, crate::limits::MAX_SETTINGS_FILE_BYTES)?;
+    toml::from_str(&text).map_err(|e| Error::Format {
+        path: path.to_path_buf(),
+        // Lines are 1-based: count the newlines before the offending byte.
+        line: e.span().map(|s| text[..s.start].matches('\n').count() as u64 + 1),
+        message: e.message().trim_end().to_string(),
+    })
+}
+
 #[cfg(target_os = "linux")]
 fn libc_nonblock() -> i32 {
     libc::O_NONBLOCK

@@ -69,7 +69,7 @@ impl SpeedUnit {
     pub fn from_symbol(symbol: &str) -> Option<Self> {
         match squeezed(symbol).as_str() {
             "rpm" | "c/min" | "rev/min" | "1/min" | "r/min" => Some(SpeedUnit::Rpm),
-            "rad/s" => Some(SpeedUnit::RadS),
+            "rad/s" | "rads" => Some(SpeedUnit::RadS),
             _ => None,
         }
     }

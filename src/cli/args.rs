@@ -36,6 +36,11 @@ pub struct ColumnArgs {
     /// Unit of the weight-on-bit column [default: from its suffix, _n or _kn].
     #[arg(long, value_enum)]
     pub wob_unit: Option<ForceUnit>,
+    /// A column map file (TOML: `speed`, `torque`, `wob`, `time` and `speed_unit`,
+    /// `torque_unit`, `wob_unit`) naming a rig's columns and units by role; the flags above
+    /// win over it.
+    #[arg(long, value_name = "FILE")]
+    pub column_map: Option<PathBuf>,
     /// Drop rows whose bit speed is below this, rpm: the laws hold for a turning bit, and
     /// stick-phase samples say nothing about them.
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = DataOptions::default().min_speed_rpm, value_name = "RPM")]
@@ -54,6 +59,7 @@ impl ColumnArgs {
             torque_unit: self.torque_unit,
             wob_unit: self.wob_unit,
             min_speed_rpm: self.min_speed_rpm,
+            column_map: self.column_map.clone(),
             ..DataOptions::default()
         }
     }

@@ -35,6 +35,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("torque_unit", "--torque-unit"),
     ("param_torque_unit", "--param-torque-unit"),
     ("wob_unit", "--wob-unit"),
+    ("column_map", "--column-map"),
     ("min_speed_rpm", "--min-speed-rpm"),
     ("t_start_s", "--t-start-s"),
     ("t_end_s", "--t-end-s"),

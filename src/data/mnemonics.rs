@@ -3,7 +3,7 @@
 //! words at `_`, `-`, `.`, spaces and brackets (a bracketed unit aside), and a word is compared
 //! with the table, case aside: `RPM_DH`, `DH RPM [rpm]` and `TOB (kN.m)` are the bit's speed and
 //! torque. The table is in docs/records.md; a column that it misses is named with the
-//! command's column flag.
+//! command's column flag, or in a column map file ([`ColumnMap`]).
 
 /// A role a record's column can play: the bit's speed, torque or weight, or the clock.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,6 +35,57 @@ const DOWNHOLE_WORDS: &[&str] = &["dh", "downhole", "bit", "mwd", "memory"];
 const SURFACE_WORDS: &[&str] = &[
     "surface", "surf", "rotary", "topdrive", "td", "tds", "tdrpm", "tdtq", "tqa", "rpma", "srpm", "stor", "stq",
 ];
+
+/// A rig's channel names by role, from a column map file (TOML), for records whose names the
+/// table misses: `speed`, `torque`, `wob` and `time` name the columns, `speed_unit`,
+/// `torque_unit` and `wob_unit` their units as the rig writes them (`rpm`, `kN.m`, `kft.lbf`,
+/// `klbf`). A column or unit given by its own setting beside the map wins.
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColumnMap {
+    speed: Option<String>,
+    torque: Option<String>,
+    wob: Option<String>,
+    time: Option<String>,
+    speed_unit: Option<String>,
+    torque_unit: Option<String>,
+    wob_unit: Option<String>,
+}
+
+impl ColumnMap {
+    /// `opts` with the map at `opts.column_map` filling the columns and units it leaves open;
+    /// a unit the map names that bitrock does not read is refused naming the file and the key.
+    pub fn apply(opts: &super::DataOptions) -> crate::error::Result<super::DataOptions> {
+        use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
+        let Some(path) = &opts.column_map else {
+            return Ok(opts.clone());
+        };
+        let map: ColumnMap = crate::files::read_toml(path, "a column map")?;
+        let unit = |key: &str, text: &Option<String>, parse: &dyn Fn(&str) -> bool| match text {
+            Some(t) if !parse(t) => Err(crate::error::Error::Format {
+                path: path.clone(),
+                line: None,
+                message: format!("{key} = \"{t}\": a unit bitrock does not read (docs/records.md lists them)"),
+            }),
+            _ => Ok(()),
+        };
+        unit("speed_unit", &map.speed_unit, &|t| SpeedUnit::from_symbol(t).is_some())?;
+        unit("torque_unit", &map.torque_unit, &|t| TorqueUnit::from_symbol(t).is_some())?;
+        unit("wob_unit", &map.wob_unit, &|t| ForceUnit::from_symbol(t).is_some())?;
+        let or = |given: &Option<String>, mapped: Option<String>| given.clone().or(mapped);
+        Ok(super::DataOptions {
+            speed_column: or(&opts.speed_column, map.speed),
+            torque_column: or(&opts.torque_column, map.torque),
+            wob_column: or(&opts.wob_column, map.wob),
+            time_column: or(&opts.time_column, map.time),
+            speed_unit: opts.speed_unit.or(map.speed_unit.as_deref().and_then(SpeedUnit::from_symbol)),
+            torque_unit: opts.torque_unit.or(map.torque_unit.as_deref().and_then(TorqueUnit::from_symbol)),
+            wob_unit: opts.wob_unit.or(map.wob_unit.as_deref().and_then(ForceUnit::from_symbol)),
+            column_map: None,
+            ..opts.clone()
+        })
+    }
+}
 
 /// The words of a column's name, lower case, a bracketed unit left out.
 fn words(name: &str) -> Vec<String> {

@@ -164,13 +164,7 @@ impl DrillString {
     /// Reads a TOML file overriding any subset of the keys, then validates it. Errors name the
     /// file and, for TOML syntax and unknown keys, the line; invalid values name the key.
     pub fn from_toml_file(path: &Path) -> Result<Self> {
-        let text = crate::files::read_text(path, "a drill-string file", crate::limits::MAX_SETTINGS_FILE_BYTES)?;
-        let string: DrillString = toml::from_str(&text).map_err(|e| Error::Format {
-            path: path.to_path_buf(),
-            // Lines are 1-based: count the newlines before the offending byte.
-            line: e.span().map(|s| text[..s.start].matches('\n').count() as u64 + 1),
-            message: e.message().trim_end().to_string(),
-        })?;
+        let string: DrillString = crate::files::read_toml(path, "a drill-string file")?;
         if let Some(bad) = string.first_invalid() {
             return Err(Error::Format {
                 path: path.to_path_buf(),

@@ -526,3 +526,55 @@ fn witsml_time_logs_read_as_the_record_they_hold() {
         assert!(err.contains(want), "{want}: {err}");
     }
 }
+
+/// A rig whose channels no name rule finds: a column map file names them and their units; a
+/// flag beside it wins; a unit it names that bitrock does not read, or a key it does not know,
+/// is refused naming the file (and the key or line), exit 2.
+#[test]
+fn a_column_map_file_names_a_rig_s_channels_and_units() {
+    let rows = demo_rows();
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("rig.csv");
+    let kftlbf = bitrock::units::TorqueUnit::KFtLbf.newton_metres();
+    let text: String = std::iter::once("T,CH1,CH2,CH3\n".to_string())
+        .chain(rows.iter().map(|r| format!("{},{},{:e},{}\n", r[0], r[1], r[2] * 1e3 / kftlbf, r[3])))
+        .collect();
+    std::fs::write(&record, text).unwrap();
+    let map = dir.path().join("rig.toml");
+    std::fs::write(
+        &map,
+        "# the rig's memory tool\nspeed = \"CH1\"\nspeed_unit = \"rpm\"\ntorque = \"CH2\"\ntorque_unit = \"kft.lbf\"\nwob = \"CH3\"\nwob_unit = \"kN\"\ntime = \"T\"\n",
+    )
+    .unwrap();
+    let (code, demo, err) = run(&["fit", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = run(&["fit", record.to_str().unwrap(), "--column-map", map.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    // The torque through kft·lbf and back: the same fits to the last digits.
+    for ((law, rho), (want_law, want)) in best_rho(&json(&out)).into_iter().zip(best_rho(&json(&demo))) {
+        assert_eq!(law, want_law);
+        assert!((rho - want).abs() <= 1e-12 * want, "{law}: {rho} vs {want}");
+    }
+    // A flag wins over the map: the torque read as kN·m is off by the unit's factor.
+    let (code, out, err) = run(&[
+        "fit",
+        record.to_str().unwrap(),
+        "--column-map",
+        map.to_str().unwrap(),
+        "--torque-unit",
+        "knm",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(json(&out)["torque_unit"], "kN·m", "{out}");
+
+    for (text, want) in [
+        ("speed = \"CH1\"\ntorque_unit = \"daN.m\"\n", "rig.toml: torque_unit = \"daN.m\": a unit bitrock does not read"),
+        ("speed = \"CH1\"\nrpm = \"CH1\"\n", "rig.toml:2"),
+    ] {
+        std::fs::write(&map, text).unwrap();
+        let (code, _, err) = run(&["fit", record.to_str().unwrap(), "--column-map", map.to_str().unwrap()]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(want), "{want}: {err}");
+    }
+}

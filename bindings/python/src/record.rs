@@ -186,6 +186,7 @@ pub(crate) fn data_options(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<D
         thin: kwarg(kw, "thin")?.unwrap_or(defaults.thin),
         calibration_fraction: kwarg(kw, "calibration_fraction")?.unwrap_or(defaults.calibration_fraction),
         split: named(py, "split", kwarg(kw, "split")?)?.unwrap_or(defaults.split),
+        column_map: kwarg(kw, "column_map")?,
     })
 }
 

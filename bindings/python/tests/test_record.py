@@ -217,3 +217,22 @@ def test_a_rig_export_with_iso_stamps_mnemonics_and_imperial_units(tmp_path) -> 
     renamed = pd.read_csv(path).rename(columns={"TOB (kft.lbf)": "TOB", "WOB [klbf]": "WOB"})
     record = bitrock.read_record(renamed, torque_unit="kftlbf", wob_unit="klbf", **window)
     np.testing.assert_allclose(record.calibration()[1], demo.calibration()[1], rtol=1e-12)
+
+
+def test_a_column_map_names_a_rig_s_columns_and_units(tmp_path) -> None:
+    """``column_map`` reads a rig's columns by the command's column map file; a keyword beside
+    it wins."""
+    frame = pd.read_csv(DEMO_CSV)
+    rig = pd.DataFrame({"T": frame["time_s"], "CH1": frame["bit_speed_rpm"], "CH2": frame["torque_knm"]})
+    path = tmp_path / "rig.csv"
+    rig.to_csv(path, index=False)
+    column_map = tmp_path / "rig.toml"
+    column_map.write_text('speed = "CH1"\nspeed_unit = "rpm"\ntorque = "CH2"\ntorque_unit = "kN.m"\ntime = "T"\n')
+    demo = bitrock.read_record(frame)
+    record = bitrock.read_record(path, column_map=column_map)
+    np.testing.assert_array_equal(record.calibration()[1], demo.calibration()[1])
+    assert record.columns[:2] == ("CH1", "CH2")
+    assert bitrock.read_record(path, column_map=column_map, torque_unit="nm").torque_unit == "N·m"
+    column_map.write_text('speed = "CH1"\ntorque_unit = "daN.m"\n')
+    with pytest.raises(bitrock.InputError, match="a unit bitrock does not read"):
+        bitrock.read_record(path, column_map=column_map)

@@ -91,6 +91,7 @@ def read_record(
     thin: int | None = None,
     calibration_fraction: float | None = None,
     split: str | None = None,
+    column_map: str | os.PathLike[str] | None = None,
     speed: Any = None,
     torque: Any = None,
     wob: Any = None,
@@ -98,8 +99,9 @@ def read_record(
 ) -> Record:
     """Reads a record of bit speed and torque on bit (and weight on bit, time).
 
-    ``source`` is a CSV path, a pandas DataFrame (its columns read as a CSV's would be), or
-    ``None`` for the embedded demo record. Columns are found by name (``speed``, ``torque``,
+    ``source`` is a CSV path or a WITSML time log, a pandas DataFrame (its columns read as a
+    CSV's would be), or ``None`` for the embedded demo record. ``column_map`` is a column map
+    file naming a rig's columns and units by role, as ``--column-map`` (docs/records.md). Columns are found by name (``speed``, ``torque``,
     ``wob``, ``time``, or a rig log's mnemonic such as ``RPM_DH`` or ``TOB``) unless named; units
     come from the column names (``_rpm``, ``_knm``, ``_klbf``, ``TQ (kN.m)``) unless given
     (``rpm``, ``rad_s``, ``nm``, ``knm``, ``ftlbf``, ``kftlbf``, ``n``, ``kn``, ``lbf``, ``klbf``). A DataFrame's
@@ -117,6 +119,8 @@ def read_record(
     """
     arrays = {"speed": speed, "torque": torque, "wob": wob, "time": time}
     options = {k: v for k, v in locals().items() if k not in ("source", "arrays", *arrays)}
+    if column_map is not None:
+        options["column_map"] = os.fspath(column_map)
     label = "<DataFrame>"
     if any(v is not None for v in arrays.values()):
         source, label = _arrays_frame(source, arrays, options), "<arrays>"
