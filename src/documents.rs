@@ -253,6 +253,7 @@ impl RunSummary<'_> {
                     "best": {"index": s.best.index, "rho": s.best.rho, "params": conv(&s.best.params)},
                     "map": conv(&s.map),
                     "map_bandwidth": conv(&s.map_bandwidth),
+                    "identified": s.identified,
                 })
             })
             .collect();

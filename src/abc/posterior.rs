@@ -57,6 +57,21 @@ pub struct LawSummary {
     /// weights) and d the number of parameters that vary. 0 for a parameter that
     /// does not vary, whose MAP is then its constant value.
     pub map_bandwidth: Vec<f64>,
+    /// False for a parameter the record has not narrowed within its prior box ([`identified`]
+    /// on the central 98 %): its interval and estimates are the box's, not the data's. All
+    /// true until [`PosteriorSummary::mark_identified`] is given the boxes.
+    pub identified: Vec<bool>,
+}
+
+/// A parameter counts as identified when its posterior's central interval at `level` is
+/// narrower than this share of its prior box's own central interval at that level (a uniform
+/// box's spans `level` of its width): the record has narrowed the box by more than a fifth.
+pub const IDENTIFIED_BELOW: f64 = 0.7 / 0.9;
+
+/// Whether a posterior's central interval [`low`, `high`] at `level` (0.9, 0.98) shows the
+/// record narrowed the prior box [`box_lower`, `box_upper`] ([`IDENTIFIED_BELOW`]).
+pub fn identified(low: f64, high: f64, box_lower: f64, box_upper: f64, level: f64) -> bool {
+    high - low < IDENTIFIED_BELOW * level * (box_upper - box_lower)
 }
 
 /// The whole population at a glance.
@@ -69,6 +84,29 @@ pub struct PosteriorSummary {
     /// P(law | data) for every law in `laws_considered`, in that order; 0 for a law that died
     /// out, so that a report still names it.
     pub model_probabilities: Vec<(Law, f64)>,
+}
+
+impl PosteriorSummary {
+    /// Marks each law's parameters that the record has not narrowed within their box of
+    /// `prior` ([`LawSummary::identified`]); a law without a box keeps its marks.
+    pub fn mark_identified(&mut self, prior: &crate::prior::Prior) {
+        for s in &mut self.laws {
+            let Some(b) = prior.boxes.iter().find(|b| b.law == s.law) else {
+                continue;
+            };
+            s.identified = (0..s.q01.len())
+                .map(|j| {
+                    identified(
+                        s.q01[j],
+                        s.q99[j],
+                        f64::from(b.lower[j]),
+                        f64::from(b.upper[j]),
+                        Q_HIGH - Q_LOW,
+                    )
+                })
+                .collect();
+        }
+    }
 }
 
 /// Summarises a population. `laws_considered` are the laws the sampler competed (their order
@@ -217,6 +255,7 @@ pub(crate) fn summarize_law(law: Law, members: &[&Particle], probability: f64) -
         best,
         map,
         map_bandwidth,
+        identified: vec![true; law.n_params()],
     }
 }
 

@@ -344,7 +344,16 @@ pub fn posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: Torqu
             for c in &cols {
                 write!(out, " {:>12}", number(c[j]))?;
             }
-            writeln!(out, "  {}", spec.unit(unit.label()))?;
+            writeln!(
+                out,
+                "  {}{}",
+                spec.unit(unit.label()),
+                if s.identified[j] {
+                    ""
+                } else {
+                    "  (not identified: its 98 % interval spans most of its prior box)"
+                }
+            )?;
         }
     }
     Ok(())

@@ -70,7 +70,9 @@ impl ColumnMap {
             _ => Ok(()),
         };
         unit("speed_unit", &map.speed_unit, &|t| SpeedUnit::from_symbol(t).is_some())?;
-        unit("torque_unit", &map.torque_unit, &|t| TorqueUnit::from_symbol(t).is_some())?;
+        unit("torque_unit", &map.torque_unit, &|t| {
+            TorqueUnit::from_symbol(t).is_some()
+        })?;
         unit("wob_unit", &map.wob_unit, &|t| ForceUnit::from_symbol(t).is_some())?;
         let or = |given: &Option<String>, mapped: Option<String>| given.clone().or(mapped);
         Ok(super::DataOptions {
@@ -78,9 +80,15 @@ impl ColumnMap {
             torque_column: or(&opts.torque_column, map.torque),
             wob_column: or(&opts.wob_column, map.wob),
             time_column: or(&opts.time_column, map.time),
-            speed_unit: opts.speed_unit.or(map.speed_unit.as_deref().and_then(SpeedUnit::from_symbol)),
-            torque_unit: opts.torque_unit.or(map.torque_unit.as_deref().and_then(TorqueUnit::from_symbol)),
-            wob_unit: opts.wob_unit.or(map.wob_unit.as_deref().and_then(ForceUnit::from_symbol)),
+            speed_unit: opts
+                .speed_unit
+                .or(map.speed_unit.as_deref().and_then(SpeedUnit::from_symbol)),
+            torque_unit: opts
+                .torque_unit
+                .or(map.torque_unit.as_deref().and_then(TorqueUnit::from_symbol)),
+            wob_unit: opts
+                .wob_unit
+                .or(map.wob_unit.as_deref().and_then(ForceUnit::from_symbol)),
             column_map: None,
             ..opts.clone()
         })

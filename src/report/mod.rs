@@ -754,8 +754,13 @@ impl Prepared<'_> {
                 for (j, spec) in ls.law.params().iter().enumerate() {
                     let _ = writeln!(
                         md,
-                        "| {} | {} | {} | {} | {} | {} |",
+                        "| {}{} | {} | {} | {} | {} | {} |",
                         spec.name,
+                        if ls.identified[j] {
+                            ""
+                        } else {
+                            " (not identified: its 98 % interval spans most of its prior box)"
+                        },
                         plot::unit(spec, self.unit),
                         plot::short(map[j]),
                         plot::short(mean[j]),

@@ -77,7 +77,13 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::abc::Setup, Vec<ReportRun
             });
         }
         let now = stored.state();
-        let mut run = ReportRun::new(&runs, dir, &config, stored.populations, None);
+        // The summary here, where the run's boxes are known, to mark what they set.
+        let summary = stored.populations.last().map(|last| {
+            let mut summary = crate::abc::posterior::summarize(&last.particles, &config.laws);
+            summary.mark_identified(&stored.setup.prior);
+            summary
+        });
+        let mut run = ReportRun::new(&runs, dir, &config, stored.populations, summary);
         run.early_end = early_end;
         run.selection = crate::run::selection::read(dir)?.map(|check| {
             let stale = check.stale(&now);

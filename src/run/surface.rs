@@ -201,14 +201,11 @@ pub struct ParamPosterior {
     pub q05: f64,
     pub median: f64,
     pub q95: f64,
-    /// False when the central 90 % still spans [`UNIDENTIFIED_SHARE`] of the prior box or
-    /// more: the record has not narrowed the prior, which then sets the interval.
+    /// False when the central 90 % still spans 0.7 of the prior box or more
+    /// ([`crate::abc::posterior::identified`]): the record has not narrowed the prior, which
+    /// then sets the interval.
     pub identified: bool,
 }
-
-/// The share of its prior box a parameter's central 90 % must fall below to count as
-/// identified (the prior's own central 90 % spans 0.9 of it).
-pub const UNIDENTIFIED_SHARE: f64 = 0.7;
 
 /// How the re-simulated records of one law were classified.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -718,13 +715,18 @@ fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
                 .map(|(j, spec)| {
                     let values: Vec<f64> = own.iter().map(|p| p.params[j]).collect();
                     let q = |p: f64| weighted_quantile(&values, &weights, p);
-                    let width = f64::from(bx.upper[j]) - f64::from(bx.lower[j]);
                     ParamPosterior {
                         name: spec.name.to_string(),
                         q05: q(0.05),
                         median: q(0.5),
                         q95: q(0.95),
-                        identified: q(0.95) - q(0.05) < UNIDENTIFIED_SHARE * width,
+                        identified: crate::abc::posterior::identified(
+                            q(0.05),
+                            q(0.95),
+                            f64::from(bx.lower[j]),
+                            f64::from(bx.upper[j]),
+                            0.9,
+                        ),
                     }
                 })
                 .collect();

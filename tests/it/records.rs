@@ -537,7 +537,10 @@ fn a_column_map_file_names_a_rig_s_channels_and_units() {
     let record = dir.path().join("rig.csv");
     let kftlbf = bitrock::units::TorqueUnit::KFtLbf.newton_metres();
     let text: String = std::iter::once("T,CH1,CH2,CH3\n".to_string())
-        .chain(rows.iter().map(|r| format!("{},{},{:e},{}\n", r[0], r[1], r[2] * 1e3 / kftlbf, r[3])))
+        .chain(
+            rows.iter()
+                .map(|r| format!("{},{},{:e},{}\n", r[0], r[1], r[2] * 1e3 / kftlbf, r[3])),
+        )
         .collect();
     std::fs::write(&record, text).unwrap();
     let map = dir.path().join("rig.toml");
@@ -548,7 +551,13 @@ fn a_column_map_file_names_a_rig_s_channels_and_units() {
     .unwrap();
     let (code, demo, err) = run(&["fit", "--json"]);
     assert_eq!(code, 0, "{err}");
-    let (code, out, err) = run(&["fit", record.to_str().unwrap(), "--column-map", map.to_str().unwrap(), "--json"]);
+    let (code, out, err) = run(&[
+        "fit",
+        record.to_str().unwrap(),
+        "--column-map",
+        map.to_str().unwrap(),
+        "--json",
+    ]);
     assert_eq!(code, 0, "{err}");
     // The torque through kft·lbf and back: the same fits to the last digits.
     for ((law, rho), (want_law, want)) in best_rho(&json(&out)).into_iter().zip(best_rho(&json(&demo))) {
@@ -569,7 +578,10 @@ fn a_column_map_file_names_a_rig_s_channels_and_units() {
     assert_eq!(json(&out)["torque_unit"], "kN·m", "{out}");
 
     for (text, want) in [
-        ("speed = \"CH1\"\ntorque_unit = \"daN.m\"\n", "rig.toml: torque_unit = \"daN.m\": a unit bitrock does not read"),
+        (
+            "speed = \"CH1\"\ntorque_unit = \"daN.m\"\n",
+            "rig.toml: torque_unit = \"daN.m\": a unit bitrock does not read",
+        ),
         ("speed = \"CH1\"\nrpm = \"CH1\"\n", "rig.toml:2"),
     ] {
         std::fs::write(&map, text).unwrap();
@@ -577,4 +589,55 @@ fn a_column_map_file_names_a_rig_s_channels_and_units() {
         assert_eq!(code, 2, "{err}");
         assert!(err.contains(want), "{want}: {err}");
     }
+}
+
+/// A parameter whose posterior is still its prior box is marked wherever its estimate is
+/// printed: population 0 alone (the prior's draws) leaves every one marked in the table and
+/// run.json; the paper's run on the embedded record narrows m2's dynamic torque tcb (1 % to
+/// 99 % over 4.3–6.4 kN·m in its box of 3.4–7.8 kN·m) and leaves it unmarked.
+#[test]
+fn estimates_the_record_leaves_to_the_prior_box_are_marked_in_the_table_and_run_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let prior_only = dir.path().join("prior");
+    let (code, out, err) = run(&[
+        "abc",
+        "--laws",
+        "m2",
+        "--max-populations",
+        "1",
+        "--backend",
+        "cpu",
+        "--out",
+        prior_only.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        out.matches("(not identified: its 98 % interval spans most of its prior box)")
+            .count(),
+        3,
+        "{out}"
+    );
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(prior_only.join("run.json")).unwrap()).unwrap();
+    assert_eq!(
+        doc["posterior"]["laws"][0]["identified"],
+        serde_json::json!([false, false, false])
+    );
+
+    let paper = dir.path().join("paper");
+    let (code, out, err) = run(&[
+        "abc",
+        "--laws",
+        "m2",
+        "--backend",
+        "cpu",
+        "--out",
+        paper.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let tcb = out.lines().find(|l| l.trim_start().starts_with("tcb")).unwrap();
+    assert!(!tcb.contains("not identified"), "{out}");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(paper.join("run.json")).unwrap()).unwrap();
+    assert_eq!(doc["posterior"]["laws"][0]["identified"][1], true);
 }

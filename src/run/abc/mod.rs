@@ -141,7 +141,8 @@ impl Analysis {
             }
             _ => &last.particles,
         };
-        let posterior = summarize(particles, laws);
+        let mut posterior = summarize(particles, laws);
+        posterior.mark_identified(&outcome.setup.prior);
         let envelopes = envelopes(particles, laws, &outcome.setup.data);
         Ok(Self {
             summary_population: last.record.index,

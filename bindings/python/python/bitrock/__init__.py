@@ -1124,7 +1124,9 @@ class Result:
 
     def summary(self) -> pd.DataFrame:
         """The summarised population's posterior per law and parameter: probability, mean,
-        standard deviation, 1 %, 50 % and 99 % quantiles, MAP, in the record's torque unit."""
+        standard deviation, 1 %, 50 % and 99 % quantiles, MAP, in the record's torque unit, and
+        ``identified``: false where the record has not narrowed the prior box (its central 98 %
+        still spans over 76 % of the box), so that the box, not the data, sets those numbers."""
         rows = []
         for s in self.document["posterior"]["laws"]:
             for i, name in enumerate(s["names"]):
@@ -1140,6 +1142,8 @@ class Result:
                         "q50": s["q50"][i],
                         "q99": s["q99"][i],
                         "map": s["map"][i],
+                        # A run.json written without the marks counts every parameter identified.
+                        "identified": s.get("identified", [True] * len(s["names"]))[i],
                     }
                 )
         return pd.DataFrame(rows)
