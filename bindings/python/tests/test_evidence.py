@@ -116,6 +116,10 @@ def test_an_evidence_directory_reads_back_and_maps_as_the_evidence_in_memory(cli
     read = bitrock.read_evidence(tmp_path / "ev")
     assert read.document == json.loads(json.dumps(kept.document))
     assert read.table.equals(kept.table)
+    # The record travels with the evidence, in memory and in its directory.
+    for evidence in (kept, read):
+        np.testing.assert_array_equal(evidence.record.calibration()[1], record.calibration()[1])
+    assert read.summary().equals(kept.summary())
     axes = {"omega_rpm": "40:160:4", "wob_kn": "100:300:3", "samples": 40, "backend": "cpu"}
     from_dir = bitrock.stability(tmp_path / "ev", **axes)
     from_memory = bitrock.stability(kept, **axes)
@@ -355,3 +359,26 @@ def test_the_evidence_is_nested_sampling_s_within_the_errors(tmp_path) -> None:
     assert np.abs(probabilities - reference).max() <= 0.05, (probabilities, reference)
     # Not a record on which every law but one is ruled out.
     assert np.sort(reference)[-2] > 0.01, reference
+
+
+def test_the_evidence_summary_is_its_posterior_sets_weighted(small) -> None:
+    """``Evidence.summary()`` reads as ``Result.summary()``: per law and parameter, the weighted
+    moments and quantiles of the law's posterior sets, and whether the record narrowed its box."""
+    table = small.summary()
+    assert list(table.columns) == ["law", "parameter", "unit", "probability", "mean", "std_dev", "q01", "q50", "q99", "identified"]
+    for law in small.laws:
+        frame, weights = small.posterior(law)
+        rows = table[table["law"] == law].set_index("parameter")
+        assert list(rows.index) == list(frame.columns)
+        w = weights / weights.sum()
+        for name in frame.columns:
+            values = frame[name].to_numpy()
+            assert rows.loc[name, "mean"] == pytest.approx(float(np.sum(w * values)), rel=1e-12)
+            assert rows.loc[name, "q01"] <= rows.loc[name, "q50"] <= rows.loc[name, "q99"]
+            # The weighted median: at least half the weight on each side.
+            assert w[values <= rows.loc[name, "q50"]].sum() >= 0.5 - 1e-12
+            assert w[values >= rows.loc[name, "q50"]].sum() >= 0.5 - 1e-12
+    # bitrock.plot.fit draws an evidence over its own record.
+    pytest.importorskip("matplotlib")
+    ax = bitrock.plot.fit(small)
+    assert any(c.get_gid() == "record" for c in ax.collections)

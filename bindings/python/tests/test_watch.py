@@ -53,6 +53,8 @@ def test_the_updates_are_the_command_lines(cli, well) -> None:
     assert (history["p_m2"] + history["p_m3"]).round(12).eq(1.0).all()
     first = updates[0]
     assert first.most_probable == "m2" and list(first.laws.index) == ["m2", "m3"]
+    # Every field of the line tab-completes as the attribute it is.
+    assert set(first.document) <= set(dir(first)) and "laws" in dir(first)
     assert watch.ended["windows"] == 11
 
 

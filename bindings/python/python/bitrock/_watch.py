@@ -61,6 +61,10 @@ class WatchUpdate:
         except KeyError:
             raise AttributeError(name) from None
 
+    def __dir__(self) -> list[str]:
+        """The line's fields beside the methods, so that they tab-complete."""
+        return sorted({*super().__dir__(), *self.document})
+
     @property
     def laws(self) -> pd.DataFrame:
         """Per law: the carried ``probability``, this window's alone (``window_probability``),

@@ -24,7 +24,13 @@ __all__ = ["fit", "marginals", "model_probabilities", "stability"]
 # Radians per second in one revolution per minute.
 _RAD_S_PER_RPM = 2.0 * math.pi / 60.0
 # The torque units of documents, as ``bitrock.torque`` names them.
-_TORQUE_UNITS = {"kN·m": "knm", "N·m": "nm"}
+# A record's torque unit as bitrock names it: the name ``torque`` takes, and N·m per unit.
+_TORQUE_UNITS = {
+    "kN·m": ("knm", 1000.0),
+    "N·m": ("nm", 1.0),
+    "ft·lbf": ("ftlbf", 1.3558179483314004),
+    "kft·lbf": ("kftlbf", 1355.8179483314004),
+}
 
 
 def _pyplot() -> Any:
@@ -71,7 +77,7 @@ def _bands(source: Any, kind: str, laws: list[str], speeds: np.ndarray, level: f
         return {law: np.stack([bands[v].sel(law=law).to_numpy() for v in ("lower", "median", "upper")]) for law in bands.law.to_numpy()}
     from . import torque
 
-    unit = _TORQUE_UNITS[source.document["torque_unit"]]
+    unit = _TORQUE_UNITS[source.document["torque_unit"]][0]
     out = {}
     for law in laws:
         params, weights = source.posterior(law)
@@ -96,18 +102,16 @@ def fit(
     weighted quantiles of the posterior's torque curves: a run's ``predictive``, the
     evidence posterior's inverse weighted distribution), labelled with the law's posterior
     probability. ``source``: a :class:`bitrock.Result` (its ``population``, the last by
-    default; its record unless ``record`` is given) or a :class:`bitrock.Evidence` (its
-    posterior; give the ``record`` it was computed on). Returns the axes."""
+    default) or a :class:`bitrock.Evidence` (its posterior), drawn over the record it was
+    computed on unless ``record`` is given. Returns the axes."""
     kind = _source_kind(source)
     if not 0 < level < 1:
         raise InputError(f"level: must lie in (0, 1), got {level}", "level")
     if record is None:
-        if kind == "evidence":
-            raise InputError("record: give the record the evidence was computed on", "record")
         record = source.record
     doc = source.document
     unit = doc["torque_unit"] if kind == "evidence" else doc["data"]["torque_unit"]
-    scale = 1000.0 if unit == "kN·m" else 1.0
+    scale = _TORQUE_UNITS[unit][1]
     chosen = list(source.laws if laws is None else laws)
     speed, torque_nm = record.calibration()
     grid = np.linspace(max(0.0, float(np.min(speed))), float(np.max(speed)), 200)
@@ -127,7 +131,7 @@ def fit(
             ax.fill_between(grid / _RAD_S_PER_RPM, lower, upper, color=colour, alpha=0.25, linewidth=0, label=f"{law}: P = {p:.3f}, {level:.0%} band", gid=f"band-{law}")
             ax.plot(grid / _RAD_S_PER_RPM, median, color=colour, linewidth=1.2, gid=f"median-{law}")
         if law in fits and all(v is not None for v in fits[law]["params"]):
-            curve = torque(law, grid, fits[law]["params"], torque_unit=_TORQUE_UNITS[unit])
+            curve = torque(law, grid, fits[law]["params"], torque_unit=_TORQUE_UNITS[unit][0])
             ax.plot(grid / _RAD_S_PER_RPM, curve, color=colour, linestyle="--", linewidth=1.0, label=f"{law} least squares", gid=f"fit-{law}")
     ax.set_xlabel("bit speed (rpm)")
     ax.set_ylabel(f"torque on bit ({unit})")
