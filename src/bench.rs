@@ -385,6 +385,7 @@ fn measure_throughput(opts: &BenchOptions, reps: usize, log: &mut dyn FnMut(Stri
                 let wish = gpu::tune::ShapeWish {
                     recorded: None,
                     candidates: n,
+                    explicit: false,
                 };
                 let ev = evaluator(synthetic_problem(law, d, 1), backend, wish, &mut |_| {})?;
                 let mut rho = vec![0.0; n];

@@ -101,7 +101,7 @@ fn words(name: &str) -> Vec<String> {
         Some(unit) => &name.trim_end()[..name.trim_end().len() - unit.len() - 2],
         None => name,
     };
-    name.split(|c: char| matches!(c, '_' | '-' | '.' | ' ' | '(' | ')' | '[' | ']' | '/'))
+    name.split(['_', '-', '.', ' ', '(', ')', '[', ']', '/'])
         .filter(|w| !w.is_empty())
         .map(str::to_ascii_lowercase)
         .collect()

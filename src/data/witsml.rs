@@ -39,7 +39,7 @@ pub fn is_null(cell: &str, nulls: &[String]) -> bool {
                 || n.parse::<f64>()
                     .ok()
                     .zip(cell.parse::<f64>().ok())
-                    .is_some_and(|(a, b)| a == b)
+                    .is_some_and(|(a, b): (f64, f64)| a.to_bits() == b.to_bits())
         })
 }
 

@@ -1,6 +1,7 @@
 //! Scoring candidates: the [`Evaluator`] trait the samplers call, and the [`Problem`] every
 //! backend scores against. The CPU evaluator (f64) is the reference; the GPU one must match it.
 
+pub mod auto;
 pub mod coupled;
 pub mod cpu;
 pub mod gpu;
@@ -138,7 +139,7 @@ pub(crate) const GPU_BACKEND_NOTE: &str = "GPU backend";
 /// it rather than warn. Every other note names something the user should act on or know about
 /// the result (a fallback to the CPU, a moved floor, a resume).
 pub fn is_information(note: &str) -> bool {
-    note.starts_with(GPU_BACKEND_NOTE)
+    note.starts_with(GPU_BACKEND_NOTE) || note.starts_with(auto::AUTO_NOTE)
 }
 
 /// The evaluator for `backend`, a GPU one in the shape `wish` leads to (see
@@ -166,6 +167,20 @@ pub fn evaluator(
             Ok(Box::new(gpu))
         }
         Backend::Auto => match gpu::residual::GpuEvaluator::wished(problem.clone(), wish) {
+            // A software driver runs on the CPU's own cores: the faster of the two is kept.
+            Ok(gpu) if gpu.is_software() => {
+                let cpu = cpu::CpuEvaluator::new(problem);
+                let race = auto::race(&gpu, &cpu, wish)?;
+                if let Some(race) = race {
+                    note(race.said(&gpu.adapter()));
+                }
+                if race.is_some_and(|r| r.cpu_wins()) {
+                    Ok(Box::new(cpu))
+                } else {
+                    note(said(&gpu));
+                    Ok(Box::new(gpu))
+                }
+            }
             Ok(gpu) => {
                 note(said(&gpu));
                 Ok(Box::new(gpu))

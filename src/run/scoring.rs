@@ -80,5 +80,9 @@ impl<'w> Scoring<'_, 'w> {
 /// What a run of `config` asks of the GPU scoring shape: its recorded one, for dispatches of
 /// its size.
 pub fn shape_wish(config: &Config) -> ShapeWish {
-    ShapeWish::for_run(config.gpu_shape, config.sampler.schedule().particles)
+    ShapeWish {
+        // The SMC sampler scores its perturbed particles as explicit candidates.
+        explicit: matches!(config.sampler, crate::run::abc::SamplerConfig::Smc(_)),
+        ..ShapeWish::for_run(config.gpu_shape, config.sampler.schedule().particles)
+    }
 }

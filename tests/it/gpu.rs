@@ -794,3 +794,72 @@ per_shape! {
         assert!(worst <= PARITY_TOLERANCE, "{worst:e}");
     }
 }
+
+/// `auto` on a software driver (lavapipe, here) races it against the CPU on the run's own
+/// dispatches and says so: the evidence's small explicit dispatches (60 particles × 2 islands ×
+/// 2 starts × 2 laws = 480 candidates) go to the CPU, whose evidence is then `--backend cpu`'s
+/// bit for bit; the race is kept in the cache and a second run reads it; with tuning off there
+/// is no race and the GPU scores. On a hardware GPU there is no race at all.
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
+    require_gpu();
+    let software = gpu::context().unwrap().info.device_type == wgpu::DeviceType::Cpu;
+    let cache = tempfile::tempdir().unwrap();
+    let cache_dir = cache.path().to_str().unwrap();
+    let args = |backend: &'static str| {
+        [
+            "evidence",
+            "--laws",
+            "m2,m3",
+            "--particles",
+            "60",
+            "--islands",
+            "2",
+            "--seed",
+            "3",
+            "--noise",
+            "iid",
+            "--json",
+            "--backend",
+            backend,
+        ]
+    };
+    let (code, cpu, err) = run_bitrock_with(&[("BITROCK_CACHE_DIR", cache_dir)], &args("cpu"));
+    assert_eq!(code, 0, "{err}");
+    let ln_z = |out: &str| -> Vec<f64> {
+        let doc: serde_json::Value = serde_json::from_str(out).unwrap();
+        doc["laws"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|l| l["ln_z"].as_f64().unwrap())
+            .collect()
+    };
+    for _ in 0..2 {
+        let (code, auto, err) = run_bitrock_with(&[("BITROCK_CACHE_DIR", cache_dir)], &args("auto"));
+        assert_eq!(code, 0, "{err}");
+        if software {
+            assert!(
+                err.contains("auto: scoring on the CPU rather than") && err.contains("480 candidates"),
+                "{err}"
+            );
+            assert_eq!(ln_z(&auto), ln_z(&cpu));
+        } else {
+            assert!(!err.contains("auto: scoring on"), "{err}");
+        }
+    }
+    if software {
+        let kept = std::fs::read_to_string(cache.path().join("gpu-shapes.json")).unwrap();
+        assert!(kept.contains("512 candidates | explicit"), "{kept}");
+    }
+    let (code, _, err) = run_bitrock_with(
+        &[("BITROCK_CACHE_DIR", cache_dir), ("BITROCK_GPU_TUNING", "off")],
+        &args("auto"),
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        !err.contains("auto: scoring on") && err.contains("GPU backend"),
+        "{err}"
+    );
+}

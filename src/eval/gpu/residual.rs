@@ -142,6 +142,16 @@ impl GpuEvaluator {
         self.context.describe()
     }
 
+    /// What identifies its adapter and kernels ([`super::tune::adapter_key`]).
+    pub fn adapter_key(&self) -> String {
+        super::tune::adapter_key(self.context)
+    }
+
+    /// Whether the adapter is a software driver on the CPU (lavapipe, SwiftShader).
+    pub fn is_software(&self) -> bool {
+        self.context.info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// The scoring shape this evaluator dispatches.
     pub fn shape(&self) -> Shape {
         self.shape

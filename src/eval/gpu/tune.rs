@@ -151,6 +151,11 @@ impl Tuning {
 pub struct ShapeWish {
     pub recorded: Option<Shape>,
     pub candidates: usize,
+    /// Whether the run scores explicit candidates (the SMC samplers' perturbed particles, the
+    /// evidence's moves) rather than ranges of the prior's streams: what `auto` races on a
+    /// software driver ([`crate::eval::auto`]).
+    #[serde(default)]
+    pub explicit: bool,
 }
 
 impl Default for ShapeWish {
@@ -158,6 +163,7 @@ impl Default for ShapeWish {
         Self {
             recorded: None,
             candidates: SIZES[1],
+            explicit: false,
         }
     }
 }
@@ -170,6 +176,7 @@ impl ShapeWish {
         Self {
             recorded,
             candidates: particles.saturating_mul(8).clamp(SIZES[0], SIZES[SIZES.len() - 1]),
+            explicit: false,
         }
     }
 }
@@ -436,6 +443,10 @@ pub fn cache_path() -> Option<PathBuf> {
 #[derive(Debug, Default, Serialize, Deserialize)]
 pub struct Cache {
     pub tunings: Vec<Tuning>,
+    /// `auto`'s races of a software driver against the CPU ([`crate::eval::auto`]), so that a
+    /// machine keeps its choice from run to run.
+    #[serde(default)]
+    pub races: Vec<crate::eval::auto::StoredRace>,
 }
 
 /// The most the cache of scoring shapes may hold, bytes: a tuning is about 1 kB, one per
@@ -467,12 +478,26 @@ pub fn write_cache(path: &std::path::Path, tuning: &Tuning) -> crate::Result<()>
     let mut cache = read_cache(path).unwrap_or_default();
     cache.tunings.retain(|t| t.key != tuning.key);
     cache.tunings.push(tuning.clone());
+    replace_cache(path, &cache)
+}
+
+/// Adds `race` to the cache file at `path` (replacing one of the same key), as
+/// [`write_cache`].
+pub fn write_race(path: &std::path::Path, race: &crate::eval::auto::StoredRace) -> crate::Result<()> {
+    let mut cache = read_cache(path).unwrap_or_default();
+    cache.races.retain(|r| r.key != race.key);
+    cache.races.push(race.clone());
+    replace_cache(path, &cache)
+}
+
+/// Writes `cache` to `path`, whole or not at all.
+fn replace_cache(path: &std::path::Path, cache: &Cache) -> crate::Result<()> {
     let dir = crate::files::parent_dir(path);
     std::fs::create_dir_all(dir).map_err(|source| crate::Error::Write {
         path: dir.to_path_buf(),
         source,
     })?;
-    let text = serde_json::to_string_pretty(&cache).expect("tunings serialise");
+    let text = serde_json::to_string_pretty(cache).expect("tunings serialise");
     crate::files::write_own(path, CACHE_DIR_VAR, |out| out.write_all(text.as_bytes()))
 }
 

@@ -606,10 +606,22 @@ impl Job {
     }
 
     /// Where the job's candidates are scored: on its backend, one device, the default GPU
-    /// scoring shape.
+    /// scoring shape, for dispatches of every island's particles at once, explicit candidates
+    /// (what `auto` races on a software driver).
     fn placement(&self) -> Placement {
+        let starts = if self.sampler.start == crate::abc::evidence::Start::Both {
+            2
+        } else {
+            1
+        };
+        let particles: usize = self.laws.iter().map(|&law| self.sampler.particles_of(law)).sum();
         Placement {
             backend: self.backend,
+            shape: crate::eval::gpu::tune::ShapeWish {
+                candidates: particles.saturating_mul(starts * self.sampler.islands).max(1),
+                explicit: true,
+                ..Default::default()
+            },
             ..Placement::default()
         }
     }
