@@ -1,10 +1,12 @@
-//! Field data: a CSV record of bit speed and torque on bit (optionally time and weight on bit)
-//! read into SI, filtered, and split into a calibration and a validation part.
+//! Field data: a record of bit speed and torque on bit (optionally time and weight on bit), a
+//! CSV file or a WITSML time log ([`witsml`]), read into SI, filtered, and split into a
+//! calibration and a validation part.
 //!
-//! Columns are chosen by name (flags) or found by what their names contain (`speed`, `torque`,
-//! `time`, `wob`); units come from flags or from name suffixes (`_rpm`, `_rad_s`, `_nm`, `_knm`,
-//! `_kn`, `_n`, time `_s`). Every refusal names the file, and where it applies the line and the
-//! column.
+//! Columns are chosen by name (flags, or a column map file) or found by what their names contain
+//! (`speed`, `torque`, `time`, `wob`), else by rig mnemonics ([`mnemonics`]); units come from
+//! flags or from the names (suffixes such as `_rpm`, `_knm`, `_klbf`, or a unit in brackets);
+//! time in seconds, milliseconds or a wall clock ([`clock`]). Every refusal names the file, and
+//! where it applies the line and the column.
 
 pub mod clock;
 pub mod drilling;
@@ -427,16 +429,10 @@ fn resolve_column(
             .map(|(i, _)| i)
             .partition(|&i| is_surface_channel(&headers[i]))
     };
-    let (mut surface, mut matches) = candidates(&|h| h.to_ascii_lowercase().contains(hint));
+    let (surface, mut matches) = candidates(&|h| h.to_ascii_lowercase().contains(hint));
     if matches.is_empty() {
-        let (more_surface, by_mnemonic) = candidates(&|h| mnemonics::role(h) == Some(role));
-        matches = by_mnemonic;
-        surface.extend(
-            more_surface
-                .into_iter()
-                .filter(|i| !surface.contains(i))
-                .collect::<Vec<_>>(),
-        );
+        // Surface channels a mnemonic names are said below as the record's surface channels.
+        matches = candidates(&|h| mnemonics::role(h) == Some(role)).1;
     }
     match matches.as_slice() {
         [i] => Ok(Some(*i)),
@@ -812,6 +808,8 @@ pub fn field_data_from_samples(
     opts: &DataOptions,
 ) -> Result<FieldData> {
     opts.validate()?;
+    // The columns a map names are named: no note on their names.
+    let opts = &mnemonics::ColumnMap::apply(opts)?;
     if all.is_empty() {
         return Err(Error::Data {
             path: source.to_path_buf(),

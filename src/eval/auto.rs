@@ -94,7 +94,7 @@ pub fn race(gpu: &GpuEvaluator, cpu: &CpuEvaluator, wish: ShapeWish) -> Result<O
     let candidates = wish.candidates.max(1);
     let key = format!(
         "{} | {} samples | {} candidates | {}",
-        gpu.adapter_key(),
+        tune::adapter_key(gpu.context()),
         gpu.problem().data_len().next_power_of_two(),
         candidates.next_power_of_two(),
         if wish.explicit { "explicit" } else { "streams" }

@@ -75,7 +75,7 @@ fn bad_input_exits_2_and_names_the_place() {
         "{stderr}"
     );
 
-    let f = csv_file("time_s,rpm,torque_knm\n0,60,10\n");
+    let f = csv_file("time_s,w,torque_knm\n0,60,10\n");
     let (code, _, stderr) = run(&["fit", f.path().to_str().unwrap()]);
     assert_eq!(code, 2);
     assert!(stderr.contains("--speed-col"), "{stderr}");

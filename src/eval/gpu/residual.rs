@@ -142,9 +142,9 @@ impl GpuEvaluator {
         self.context.describe()
     }
 
-    /// What identifies its adapter and kernels ([`super::tune::adapter_key`]).
-    pub fn adapter_key(&self) -> String {
-        super::tune::adapter_key(self.context)
+    /// The GPU it runs on.
+    pub fn context(&self) -> &'static GpuContext {
+        self.context
     }
 
     /// Whether the adapter is a software driver on the CPU (lavapipe, SwiftShader).
