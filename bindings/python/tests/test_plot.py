@@ -104,8 +104,11 @@ def test_the_evidence_draws_its_posterior(demo: bitrock.Record) -> None:
     ax = bitrock.plot.model_probabilities(ev)
     bars = [p for p in ax.patches if p.get_gid() == "probabilities"]
     np.testing.assert_array_equal([b.get_height() for b in bars], ev.probabilities.to_numpy())
+    # Without a record, the evidence's own; an evidence made from its document alone has none.
+    own = bitrock.plot.fit(ev, laws=["m2"])
+    np.testing.assert_array_equal(_by_gid(own, "collections", "record").get_offsets(), _by_gid(bitrock.plot.fit(ev, demo, laws=["m2"]), "collections", "record").get_offsets())
     with pytest.raises(bitrock.InputError) as caught:
-        bitrock.plot.fit(ev)
+        bitrock.plot.fit(bitrock.Evidence(ev.document))
     assert caught.value.argument == "record"
     ax = bitrock.plot.fit(ev, demo, laws=["m2"])
     grid = _grid(demo)
