@@ -62,42 +62,48 @@ pub fn read(text: &str, path: &Path) -> Result<Log> {
         )
     })?;
     let root = doc.root_element();
-    let line_of = |node: roxmltree::Node| u64::from(doc.text_pos_at(node.range().start).row);
     match root.tag_name().name() {
-        "logs" => {
-            let logs: Vec<_> = children(root, "log").collect();
-            match logs.as_slice() {
-                [log] => read_141(*log, &line_of, path),
-                [] => Err(refuse(None, "the WITSML <logs> holds no <log>".into())),
-                many => Err(refuse(
-                    Some(line_of(many[1])),
-                    format!(
-                        "the WITSML <logs> holds {} logs; bitrock reads one record at a time: keep one <log> per file",
-                        many.len()
-                    ),
-                )),
-            }
-        }
-        "log" => read_141(root, &line_of, path),
-        "Log" => {
-            let sets: Vec<_> = children(root, "ChannelSet").collect();
-            match sets.as_slice() {
-                [set] => read_20(*set, &doc, path),
-                [] => Err(refuse(None, "the WITSML <Log> holds no <ChannelSet>".into())),
-                many => Err(refuse(
-                    Some(line_of(many[1])),
-                    format!(
-                        "the WITSML <Log> holds {} channel sets; bitrock reads one record at a time: keep one <ChannelSet> per file",
-                        many.len()
-                    ),
-                )),
-            }
-        }
+        "logs" => read_141(only_child(&doc, root, "log", path)?, &doc, path),
+        "log" => read_141(root, &doc, path),
+        "Log" => read_20(only_child(&doc, root, "ChannelSet", path)?, &doc, path),
         "ChannelSet" => read_20(root, &doc, path),
         other => Err(refuse(
-            Some(line_of(root)),
+            Some(line_of(&doc, root)),
             format!("an XML file whose root is <{other}>, not a WITSML log (<logs>, <log>, <Log> or <ChannelSet>)"),
         )),
+    }
+}
+
+/// The line `node` starts on.
+fn line_of(doc: &roxmltree::Document, node: roxmltree::Node) -> u64 {
+    u64::from(doc.text_pos_at(node.range().start).row)
+}
+
+/// The one child of `parent` named `name`: a file holds one record, so none or several are
+/// refused (several at the second's line).
+fn only_child<'a, 'i>(
+    doc: &roxmltree::Document,
+    parent: roxmltree::Node<'a, 'i>,
+    name: &'static str,
+    path: &Path,
+) -> Result<roxmltree::Node<'a, 'i>> {
+    let parent_name = parent.tag_name().name();
+    let found: Vec<_> = children(parent, name).collect();
+    match found.as_slice() {
+        [one] => Ok(*one),
+        [] => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: None,
+            message: format!("the WITSML <{parent_name}> holds no <{name}>"),
+        }),
+        many => Err(Error::Format {
+            path: path.to_path_buf(),
+            line: Some(line_of(doc, many[1])),
+            message: format!(
+                "the WITSML <{parent_name}> holds {} <{name}> elements; bitrock reads one record at a time: keep one <{name}> per file",
+                many.len()
+            ),
+        }),
     }
 }
 
@@ -132,10 +138,10 @@ fn is_time_index(index_type: Option<&str>) -> bool {
 }
 
 /// A WITSML 1.4.1 `<log>`.
-fn read_141(log: roxmltree::Node, line_of: &dyn Fn(roxmltree::Node) -> u64, path: &Path) -> Result<Log> {
+fn read_141(log: roxmltree::Node, doc: &roxmltree::Document, path: &Path) -> Result<Log> {
     let refuse = |node: roxmltree::Node, message: String| Error::Format {
         path: path.to_path_buf(),
-        line: Some(line_of(node)),
+        line: Some(line_of(doc, node)),
         message,
     };
     let curves: Vec<_> = children(log, "logCurveInfo").collect();
@@ -216,7 +222,7 @@ fn read_141(log: roxmltree::Node, line_of: &dyn Fn(roxmltree::Node) -> u64, path
                     format!("a row of {} values for {} mnemonics", cells.len(), mnemonics.len()),
                 ));
             }
-            rows.push((csv::StringRecord::from(cells), line_of(data)));
+            rows.push((csv::StringRecord::from(cells), line_of(doc, data)));
         }
     }
     Ok(Log {
@@ -229,7 +235,6 @@ fn read_141(log: roxmltree::Node, line_of: &dyn Fn(roxmltree::Node) -> u64, path
 
 /// A WITSML 2.0 `<ChannelSet>`.
 fn read_20(set: roxmltree::Node, doc: &roxmltree::Document, path: &Path) -> Result<Log> {
-    let line_of = |node: roxmltree::Node| u64::from(doc.text_pos_at(node.range().start).row);
     let refuse = |line: u64, message: String| Error::Format {
         path: path.to_path_buf(),
         line: Some(line),
@@ -248,7 +253,7 @@ fn read_20(set: roxmltree::Node, doc: &roxmltree::Document, path: &Path) -> Resu
     );
     let Some(data) = children(set, "Data").next().and_then(|d| children(d, "Data").next()) else {
         return Err(refuse(
-            line_of(set),
+            line_of(doc, set),
             "the WITSML channel set holds no <Data><Data>: no rows to read".into(),
         ));
     };

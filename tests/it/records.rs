@@ -244,27 +244,13 @@ fn a_time_column_in_milliseconds_is_read_by_its_name_and_hinted_at_without_one()
 fn rig_exports_with_stamps_mnemonics_and_imperial_units_read_as_the_record_in_si() {
     use bitrock::data::{DEMO_CSV, DataOptions, parse_field_data};
     use bitrock::units::{ForceUnit, TorqueUnit};
-    let rows: Vec<Vec<f64>> = DEMO_CSV
-        .lines()
-        .skip(1)
-        .map(|line| line.split(',').map(|v| v.parse().unwrap()).collect())
-        .collect();
-    let iso = |t: f64| {
-        // 14:30 at +01:00; the demo's stamps are whole hundredths of a second.
-        let cs = (t * 100.0).round() as u64;
-        format!(
-            "2026-11-29T14:{:02}:{:02}.{:02}+01:00",
-            30 + cs / 6000,
-            (cs / 100) % 60,
-            cs % 100
-        )
-    };
+    let rows = demo_rows();
     let lbf = ForceUnit::Lbf.newtons();
     let kftlbf = TorqueUnit::KFtLbf.newton_metres();
     let stamped = std::iter::once("TIME,RPM_DH,TQ_kNm,WOB [klbf]".to_string())
         .chain(
             rows.iter()
-                .map(|r| format!("{},{},{},{:e}", iso(r[0]), r[1], r[2], r[3] / lbf)),
+                .map(|r| format!("{},{},{},{:e}", stamp(r[0], "", "+01:00"), r[1], r[2], r[3] / lbf)),
         )
         .collect::<Vec<_>>()
         .join("\n");
@@ -279,20 +265,7 @@ fn rig_exports_with_stamps_mnemonics_and_imperial_units_read_as_the_record_in_si
     let si = parse_field_data(DEMO_CSV.as_bytes(), path, &DataOptions::default()).unwrap();
     for text in [&stamped, &epoch] {
         let data = parse_field_data(text.as_bytes(), path, &DataOptions::default()).unwrap();
-        assert_eq!(data.rows_used, si.rows_used);
-        for (got, want) in [(&data.calibration, &si.calibration), (&data.validation, &si.validation)] {
-            assert_eq!(got.speed_rad_s, want.speed_rad_s);
-            let close =
-                |a: &[f64], b: &[f64], tol: f64| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol * y.abs().max(1.0));
-            assert!(close(&got.torque_nm, &want.torque_nm, 1e-12));
-            assert!(close(got.wob_n.as_ref().unwrap(), want.wob_n.as_ref().unwrap(), 1e-12));
-            let shifted: Vec<f64> = want.time_s.as_ref().unwrap().iter().map(|t| t + 48_600.0).collect();
-            assert!(
-                close(got.time_s.as_ref().unwrap(), &shifted, 1e-9),
-                "{:?}",
-                &got.time_s.as_ref().unwrap()[..3]
-            );
-        }
+        assert_reads_as(&data, &si, 48_600.0);
         assert!(
             data.clock_note().unwrap().contains("2026-11-29 00:00 UTC"),
             "{:?}",
@@ -356,15 +329,33 @@ fn demo_rows() -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// A demo row's time as a server stamps it: 14:30 at −05:00 plus `t`, seven decimals.
-fn server_stamp(t: f64) -> String {
+/// A demo row's time `t` as an ISO 8601 stamp: 14:30 on 2026-11-29 in `zone` plus `t`, its
+/// hundredths of a second (the demo's stamps are whole ones) followed by `pad` (`"00000"`: the
+/// seven decimals servers write).
+fn stamp(t: f64, pad: &str, zone: &str) -> String {
     let cs = (t * 100.0).round() as u64;
     format!(
-        "2026-11-29T14:{:02}:{:02}.{:02}00000-05:00",
+        "2026-11-29T14:{:02}:{:02}.{:02}{pad}{zone}",
         30 + cs / 6000,
         (cs / 100) % 60,
         cs % 100
     )
+}
+
+/// `data` holds the samples of `si` (the embedded record in SI): the same rows used, speeds bit
+/// for bit, torques and weights within 1e-12 relative (through other units and back), times
+/// later by `shift_s` within 1e-9 s (a wall clock counted from its midnight UTC).
+fn assert_reads_as(data: &bitrock::data::FieldData, si: &bitrock::data::FieldData, shift_s: f64) {
+    assert_eq!(data.rows_used, si.rows_used);
+    let close = |a: &[f64], b: &[f64], tol: f64| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol * y.abs().max(1.0));
+    for (got, want) in [(&data.calibration, &si.calibration), (&data.validation, &si.validation)] {
+        assert_eq!(got.speed_rad_s, want.speed_rad_s);
+        assert!(close(&got.torque_nm, &want.torque_nm, 1e-12));
+        assert!(close(got.wob_n.as_ref().unwrap(), want.wob_n.as_ref().unwrap(), 1e-12));
+        let shifted: Vec<f64> = want.time_s.as_ref().unwrap().iter().map(|t| t + shift_s).collect();
+        let times = got.time_s.as_ref().unwrap();
+        assert!(close(times, &shifted, 1e-9), "{:?}", &times[..3]);
+    }
 }
 
 /// The embedded record as a WITSML 1.4.1.1 time log written the way servers write them: a
@@ -406,7 +397,7 @@ fn witsml_141(rows: &[Vec<f64>]) -> String {
         };
         xml.push_str(&format!(
             "      <data>{},{},{:e},{:e},{surface}</data>\n",
-            server_stamp(r[0]),
+            stamp(r[0], "00000", "-05:00"),
             r[1],
             r[2] * 1e3 / kftlbf,
             r[3] * 1e3 / klbf
@@ -443,7 +434,7 @@ fn witsml_20(rows: &[Vec<f64>]) -> String {
         };
         xml.push_str(&format!(
             "        [[\"{}\"], [{}, [{}, true], {}, {surface}]],\n",
-            server_stamp(r[0]),
+            stamp(r[0], "00000", "-05:00"),
             r[1],
             r[2],
             r[3]
@@ -465,16 +456,7 @@ fn witsml_time_logs_read_as_the_record_they_hold() {
     for xml in [witsml_141(&rows), witsml_20(&rows)] {
         let data = parse_field_data(xml.as_bytes(), path, &DataOptions::default()).unwrap();
         assert_eq!(data.rows_read, rows.len());
-        assert_eq!(data.rows_used, si.rows_used);
-        for (got, want) in [(&data.calibration, &si.calibration), (&data.validation, &si.validation)] {
-            assert_eq!(got.speed_rad_s, want.speed_rad_s);
-            let close =
-                |a: &[f64], b: &[f64], tol: f64| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol * y.abs().max(1.0));
-            assert!(close(&got.torque_nm, &want.torque_nm, 1e-12));
-            assert!(close(got.wob_n.as_ref().unwrap(), want.wob_n.as_ref().unwrap(), 1e-12));
-            let shifted: Vec<f64> = want.time_s.as_ref().unwrap().iter().map(|t| t + 70_200.0).collect();
-            assert!(close(got.time_s.as_ref().unwrap(), &shifted, 1e-9));
-        }
+        assert_reads_as(&data, &si, 70_200.0);
         assert!(data.warnings.is_empty(), "{:?}", data.warnings);
         assert!(
             data.clock_note()
@@ -506,11 +488,16 @@ fn witsml_time_logs_read_as_the_record_they_hold() {
     assert_eq!(code, 0, "{err}");
     assert_eq!(best_rho(&json(&out)), best_rho(&json(&demo)));
 
-    // Malformed: a row of the wrong length, XML that does not parse, another root.
+    // Malformed: a row of the wrong length, XML that does not parse, another root, two logs
+    // in one file (the second on line 73: 20 lines of header, 50 rows, the first's end).
     let short = witsml_141(&rows[..50]).replacen("</data>", ",1</data>", 1);
     let bad_xml = witsml_20(&rows[..50]).replacen("</Channel>", "</Chanel>", 1);
+    let one = witsml_141(&rows[..50]);
+    let log = &one[one.find("  <log ").unwrap()..one.find("</logs>").unwrap()];
+    let two = one.replacen("</logs>", &format!("{log}</logs>"), 1);
     for (text, want) in [
         (short, "log.xml:21: a row of 7 values for 6 mnemonics"),
+        (two, "log.xml:73: the WITSML <logs> holds 2 <log> elements"),
         (
             bad_xml,
             "log.xml:7: column 92: the XML does not parse: expected 'Channel' tag, not 'Chanel'\n",
