@@ -174,6 +174,7 @@ pub fn run(cmd: &AbcCmd) -> anyhow::Result<ExitCode> {
         let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("clap requires one");
         print::population_table(&mut out, &done.outcome.run)?;
         print::posterior(&mut out, &done.posterior, done.outcome.setup.data.torque_unit)?;
+        print::answer(&mut out, done.answer.as_ref())?;
         writeln!(out, "\nrun written to {}", dir.display())?;
     }
     Ok(ExitCode::SUCCESS)

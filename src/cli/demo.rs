@@ -15,6 +15,7 @@ use bitrock::report::ReportRun;
 use bitrock::report::ReportSummary;
 use bitrock::run;
 use bitrock::run::abc::SamplerConfig;
+use bitrock::run::answer::Answer;
 use bitrock::run::dir::Owned;
 use bitrock::run::evidence::EvidenceAnalysis;
 use bitrock::{Error, files};
@@ -109,13 +110,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         headlines.push(Headline {
             delta,
             eps_min,
-            best_rho: done
-                .outcome
-                .setup
-                .fits
-                .iter()
-                .map(|f| f.rho)
-                .fold(f64::INFINITY, f64::min),
+            answer: done.answer.clone(),
             populations: done.outcome.run.populations.len(),
             posterior: done.posterior.clone(),
             caveats: done
@@ -128,13 +123,9 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         // The report takes the runs as they are, with their summaries (no store reload, no
         // second kernel density estimate).
         let bitrock::run::abc::Outcome { config, setup, run, .. } = done.outcome;
-        report_runs.push(ReportRun::new(
-            &report_runs,
-            &dir,
-            &config,
-            run.populations,
-            Some(done.posterior),
-        ));
+        let mut report_run = ReportRun::new(&report_runs, &dir, &config, run.populations, Some(done.posterior));
+        report_run.answer = done.answer;
+        report_runs.push(report_run);
         report_setup.get_or_insert(setup);
     }
     writeln!(
@@ -233,8 +224,8 @@ fn mark_root(root: &Path) -> anyhow::Result<()> {
 struct Headline {
     delta: f64,
     eps_min: f64,
-    /// The run's best least-squares ρ (its fits, as the run scaled its torques).
-    best_rho: f64,
+    /// The run's answer to "which law, how sure".
+    answer: Option<Answer>,
     populations: usize,
     posterior: PosteriorSummary,
     /// Which final probabilities are 0 by construction, and whether best-fit ρ alone decides.
@@ -252,6 +243,9 @@ fn print_headline(
     report: &ReportSummary,
 ) -> std::io::Result<()> {
     writeln!(out, "\n== bitrock demo: headline ==")?;
+    if let Some(answer) = evidence.answer(None) {
+        writeln!(out, "answer: {}", answer.sentence())?;
+    }
     writeln!(
         out,
         "the paper's ABC model probabilities (ε = {}; shares of each law's prior box below ε):",
@@ -274,10 +268,9 @@ fn print_headline(
         for caveat in &h.caveats {
             writeln!(out, "    {caveat}")?;
         }
-    }
-    let first = &headlines[0];
-    if let Some(caveat) = bitrock::abc::prior_volume_caveat(first.eps_min, first.best_rho, data.calibration.len()) {
-        writeln!(out, "    {caveat}")?;
+        if let Some(answer) = &h.answer {
+            writeln!(out, "    its answer: {}", answer.sentence())?;
+        }
     }
     let laws = &evidence.evidence.laws;
     let probabilities: Vec<String> = laws

@@ -99,7 +99,7 @@ pub struct EvidenceCmd {
         "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
         "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "boxes", "prior_scale", "delta", "prior", "noise",
-        "start", "particles", "islands", "max_stages", "ess_share", "max_sweeps", "seed",
+        "start_from", "particles", "islands", "max_stages", "ess_share", "max_sweeps", "seed",
     ])]
     pub resume: Option<PathBuf>,
     /// No progress lines on stderr.
@@ -259,7 +259,7 @@ fn finish(
         let dir = cmd.resume.as_ref().or(cmd.out.as_ref()).expect("a directory under way");
         let mut document = document(true);
         if let Some(check) = &check {
-            document["check"] = serde_json::to_value(check)?;
+            analysis.with_check(&mut document, check);
         }
         unfinished.finish(&document, analysis, job, data)?;
         print::note(format_args!(
@@ -273,7 +273,7 @@ fn finish(
     if cmd.json {
         let mut document = document(false);
         if let Some(check) = &check {
-            document["check"] = serde_json::to_value(check)?;
+            analysis.with_check(&mut document, check);
         }
         print::json(&mut out, document)?;
     } else {
@@ -288,6 +288,7 @@ fn finish(
                 advice.words
             )?;
         }
+        print::answer(&mut out, analysis.answer(check.as_ref()).as_ref())?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -214,6 +214,29 @@ mod tests {
         assert_eq!(as_flags("`out`: R/`x`: cannot write"), "--out: R/`x`: cannot write");
     }
 
+    /// Every conflict names an argument of its command: release builds skip clap's own checks
+    /// (`debug_assert`, run too), and there a misspelt name is silently no rule at all.
+    #[test]
+    fn every_conflict_names_a_real_argument() {
+        let mut cli = crate::cli::Cli::command();
+        cli.build();
+        for command in cli.get_subcommands() {
+            for arg in command.get_arguments() {
+                // clap panics on a conflict with an argument the command does not have.
+                let named = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    command.get_arg_conflicts_with(arg).len()
+                }));
+                assert!(
+                    named.is_ok(),
+                    "{}: a conflict of --{} names no argument",
+                    command.get_name(),
+                    arg.get_id()
+                );
+            }
+        }
+        cli.debug_assert();
+    }
+
     /// Every flag of the table is a flag of some command, and each setting appears once.
     #[test]
     fn the_table_names_real_flags() {

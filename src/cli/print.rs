@@ -8,6 +8,7 @@ use bitrock::abc::posterior::PosteriorSummary;
 use bitrock::data::FieldData;
 use bitrock::documents::{fit_in_record_units, to_record_units};
 use bitrock::fit::LawFit;
+use bitrock::run::answer::{Answer, Method};
 use bitrock::separation::Separation;
 use bitrock::units::TorqueUnit;
 use std::io::{self, Write};
@@ -238,6 +239,11 @@ pub fn population_table(out: &mut impl Write, run: &Run) -> io::Result<()> {
         );
     };
     let laws: Vec<Law> = first.record.per_law.iter().map(|l| l.law).collect();
+    writeln!(
+        out,
+        "model probabilities by {}: the share of each law's prior box below ε",
+        Method::PaperAbc.label()
+    )?;
     write!(
         out,
         "{:>4}  {:>10}  {:>12}  {:>8}  {:>9}",
@@ -322,7 +328,7 @@ pub fn posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: Torqu
     for s in &posterior.laws {
         writeln!(
             out,
-            "\n{}  P = {:.4}  ({} particles; best ρ = {:.5})",
+            "\n{}  P(m | ρ < ε) = {:.4}  ({} particles; best ρ = {:.5})",
             s.law, s.probability, s.count, s.best.rho
         )?;
         let conv = |v: &[f64]| to_record_units(s.law, v, unit);
@@ -357,6 +363,14 @@ pub fn posterior(out: &mut impl Write, posterior: &PosteriorSummary, unit: Torqu
         }
     }
     Ok(())
+}
+
+/// The headline: one answer to "which law, how sure", with its strength.
+pub fn answer(out: &mut impl Write, answer: Option<&Answer>) -> io::Result<()> {
+    match answer {
+        Some(answer) => writeln!(out, "\nanswer: {}", super::fields::as_flags(&answer.sentence())),
+        None => writeln!(out, "\nanswer: no law holds a particle: nothing was selected"),
+    }
 }
 
 /// One row of a confusion matrix: the law that made the data, the mean probability and the

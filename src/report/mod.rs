@@ -76,6 +76,8 @@ pub struct ReportRun {
     /// How the run ended when not by its own stopping rules (interrupted, or stopped on a
     /// budget): said in the report ([`crate::run::abc::Store::early_end`]).
     pub early_end: Option<String>,
+    /// The last population's answer to "which law, how sure" ([`crate::run::abc::answer`]).
+    pub answer: Option<crate::run::answer::Answer>,
 }
 
 /// The structures and axes of the stability maps. [`Default`] is the paper's.
@@ -601,12 +603,17 @@ impl Prepared<'_> {
     /// The model probabilities of each run's last population, with the notes on how runs
     /// ended early, on `0*` and the records' caveats.
     fn probabilities_markdown(&self, md: &mut String) {
-        let _ = writeln!(md, "\n## Model probabilities\n");
+        let _ = writeln!(md, "\n## Model probabilities by the paper's ABC\n");
+        let _ = writeln!(
+            md,
+            "P(m | ρ < ε): the share of each law's prior box whose misfit ρ falls below the tolerance ε. \
+             They weigh the record only where ε lies near its likelihood scale.\n"
+        );
         let _ = writeln!(md, "### Last population\n");
         let laws = self.all_laws();
         let _ = write!(md, "| run | δ | population | ε |");
         for law in &laws {
-            let _ = write!(md, " P({law}) |");
+            let _ = write!(md, " P({law} \\| ρ < ε) |");
         }
         let _ = writeln!(md, "\n|---|---|---|---|{}", "---|".repeat(laws.len()));
         for r in &self.runs {
@@ -624,6 +631,11 @@ impl Prepared<'_> {
                 let _ = write!(md, " {} |", p.map_or("—".into(), |p| probability_text(p, zero)));
             }
             let _ = writeln!(md);
+        }
+        for r in &self.runs {
+            if let Some(answer) = &r.run.answer {
+                let _ = writeln!(md, "\n**{}, answer:** {}.", r.run.label, answer.sentence());
+            }
         }
         for r in &self.runs {
             if let Some(why) = &r.run.early_end {

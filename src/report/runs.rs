@@ -34,6 +34,7 @@ impl ReportRun {
             summary,
             selection: None,
             early_end: None,
+            answer: None,
         }
     }
 }
@@ -83,8 +84,15 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::abc::Setup, Vec<ReportRun
             summary.mark_identified(&stored.setup.prior);
             summary
         });
+        let answer = match (stored.populations.last(), &summary) {
+            (Some(last), Some(summary)) => {
+                run::abc::answer(&stored.setup, &config.fit, &last.record, &summary.model_probabilities)?.1
+            }
+            _ => None,
+        };
         let mut run = ReportRun::new(&runs, dir, &config, stored.populations, summary);
         run.early_end = early_end;
+        run.answer = answer;
         run.selection = crate::run::selection::read(dir)?.map(|check| {
             let stale = check.stale(&now);
             (check, stale)

@@ -6,6 +6,7 @@
 //! its lock, checked again there, staged beside what it replaces; the names of what each kind
 //! holds), [`sqlite`] (a store made whole, opened behind its schema gate) and [`settings`] (the gate each kind's settings pass, once, whichever surface filled them). A folder or file per kind:
 //!
+//! - [`answer`]: one answer to "which law, and how sure" from either kind of selection;
 //! - [`abc`]: the paper's ABC run (rejection or SMC): [`abc::Job`], its populations in
 //!   `run.sqlite`, resumed by [`abc::resume`];
 //! - [`evidence`]: the model evidence per law and the Bayes factors, [`evidence::Job`], with its
@@ -20,6 +21,7 @@
 
 pub mod abc;
 pub mod advice;
+pub mod answer;
 pub mod coupled;
 pub mod dir;
 pub mod evidence;

@@ -243,7 +243,22 @@ fn demo_prints_fits_and_the_population_table() {
     let markdown = std::fs::read_to_string(report.join("report.md")).unwrap();
     for delta in ["δ = 0.4", "δ = 0.6", "δ = 0.8"] {
         assert!(markdown.contains(delta), "{delta}");
+        // Each run's answer, as its probabilities are: ratios of prior volumes at ε = 0.014.
+        assert!(
+            markdown.contains(&format!("**{delta}, answer:** m"))
+                && markdown.contains("decided by the boxes (the paper's ABC"),
+            "{markdown}"
+        );
     }
+    assert!(
+        markdown.contains("## Model probabilities by the paper's ABC"),
+        "{markdown}"
+    );
+    // The headline opens with the one answer that weighs the record, the evidence's, and gives
+    // each ABC run's beside its probabilities.
+    let headline = stdout.split("== bitrock demo: headline ==").nth(1).unwrap();
+    assert!(headline.trim_start().starts_with("answer: m3 over "), "{headline}");
+    assert_eq!(headline.matches("    its answer: m").count(), 3, "{headline}");
     for stem in [
         "fig01_data_and_fits",
         "fig02_model_probabilities",
@@ -257,6 +272,66 @@ fn demo_prints_fits_and_the_population_table() {
     // Run again: the demo replaces its own run directory.
     let (code, _, stderr) = demo("500");
     assert_eq!(code, 0, "{stderr}");
+}
+
+/// The paper's ABC at the embedded record's ε = 0.014, thousands of likelihood scales above its
+/// best fit, measures the laws' prior volumes: its one answer is decided by the boxes whatever
+/// its probabilities, and every place they appear names them.
+#[test]
+fn the_paper_s_abc_answers_with_its_label_and_a_strength_its_tolerance_allows() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let out = out.to_str().unwrap();
+    let args = [
+        "abc",
+        "--particles",
+        "1000",
+        "--seed",
+        "3",
+        "--backend",
+        "cpu",
+        "--out",
+        out,
+    ];
+    let (code, stdout, stderr) = run(&args);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stderr.contains("likelihood scales above the best fit"), "{stderr}");
+    assert!(
+        stdout.contains(
+            "model probabilities by the paper's ABC, P(m | ρ < ε): the share of each law's prior box below ε"
+        ),
+        "{stdout}"
+    );
+    assert_eq!(stdout.matches("  P(m | ρ < ε) = ").count(), 4, "{stdout}");
+    let document: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("run/run.json")).unwrap()).unwrap();
+    let posterior = &document["posterior"];
+    assert_eq!(posterior["label"], "the paper's ABC, P(m | ρ < ε)");
+    let answer = &document["answer"];
+    assert_eq!(
+        (&answer["method"], &answer["strength"]),
+        (&"paper_abc".into(), &"decided_by_the_boxes".into()),
+        "{answer}"
+    );
+    // The law ranked first and the next are the population's two largest probabilities.
+    let mut ranked: Vec<(String, f64)> = posterior["model_probabilities"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(law, p)| (law.clone(), p.as_f64().unwrap()))
+        .collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    assert_eq!(answer["law"], ranked[0].0.as_str());
+    assert_eq!(answer["runner_up"], ranked[1].0.as_str());
+    assert_eq!(answer["probability"].as_f64(), Some(ranked[0].1));
+    let expected = (ranked[0].1 / ranked[1].1).ln();
+    assert!((answer["ln_b"].as_f64().unwrap() - expected).abs() < 1e-12, "{answer}");
+    let sentence = answer["sentence"].as_str().unwrap();
+    assert!(stdout.contains(&format!("\nanswer: {sentence}\n")), "{stdout}");
+    assert!(
+        sentence.contains("ratios of the laws' prior volumes below ε, not evidence"),
+        "{sentence}"
+    );
 }
 
 #[test]

@@ -1248,9 +1248,31 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
     let m1 = pair("m1");
     assert!(number(m1, "data_nats") >= 5.0, "{m1}");
     assert_eq!(m1["strength"], "very_strong", "{m1}");
-    // The table says the same, with both parts beside the word.
+    // The one answer is the pair's, with the boxes' word and why, however large ln B is.
+    let answer = &document["answer"];
+    assert_eq!(
+        (&answer["law"], &answer["runner_up"], &answer["strength"]),
+        (&"m2".into(), &"m4".into(), &"decided_by_the_boxes".into()),
+        "{answer}"
+    );
+    assert_eq!(number(answer, "ln_b"), number(m4, "ln_b"), "{answer}");
+    // The fits' gap of the pair is below 5 nats: the record cannot separate them at all.
+    let why = answer["why"].as_str().unwrap();
+    assert!(number(m4, "separation_nats") < 5.0, "{m4}");
+    assert!(
+        why.starts_with("the record does not separate m2 from m4 (the fits' gap ")
+            && why.ends_with("the priors decide"),
+        "{why}"
+    );
+    // The table says the same, with both parts beside the word, and ends with the answer.
     let (code, stdout, err) = outcome(bin().args(args).arg(&record));
     assert_eq!(code, 0, "{err}");
+    let last = stdout.lines().last().unwrap();
+    assert_eq!(last, format!("answer: {}", answer["sentence"].as_str().unwrap()));
+    assert!(
+        last.starts_with("answer: m2 over m4: decided by the boxes (the model evidence, P(m | y): "),
+        "{last}"
+    );
     let line = stdout.lines().find(|l| l.trim_start().starts_with("m2 vs m4")).unwrap();
     assert!(
         line.contains("decided by the boxes") && line.contains("data -") && line.contains("boxes "),

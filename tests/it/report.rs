@@ -48,6 +48,7 @@ fn runs_with(config: &RejectionConfig, deltas: &[f64], thin: usize) -> (FieldDat
                 summary: None,
                 selection: None,
                 early_end: None,
+                answer: None,
             }
         })
         .collect();

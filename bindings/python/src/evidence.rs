@@ -171,7 +171,7 @@ fn compute(
         advice.as_ref(),
     );
     if let Some(selection) = selection {
-        document["check"] = serde_json::to_value(&selection).expect("the check serialises");
+        analysis.with_check(&mut document, &selection);
     }
     if let Some(unfinished) = unfinished {
         check(py, py.detach(|| unfinished.finish(&document, &analysis, job, data)))?;

@@ -435,6 +435,14 @@ pub(crate) fn finish_run(
         return Err(e);
     }
     let analysis = check(py, result)?;
+    // What the command says after a run's tables, said as Python's warnings (the record's
+    // own were said when it was read).
+    for warning in analysis.run_warnings() {
+        observer.note(warning);
+    }
+    if let Some(e) = observer.raised.take() {
+        return Err(e);
+    }
     let mut run = run_of(analysis, path);
     run.traffic = traffic;
     Ok(run)

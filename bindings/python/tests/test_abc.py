@@ -3,6 +3,7 @@ refusals and interruption."""
 
 from __future__ import annotations
 
+import html
 import os
 import pickle
 import signal
@@ -32,6 +33,24 @@ def test_population_and_probability_tables(small_run: bitrock.Result) -> None:
     assert list(probabilities.columns) == ["m1", "m2", "m3", "m4", "epsilon"]
     assert len(probabilities) == len(populations)
     np.testing.assert_allclose(probabilities[["m1", "m2", "m3", "m4"]].sum(axis=1), 1.0, rtol=0, atol=1e-12)
+
+
+def test_the_paper_s_abc_answers_with_its_label_and_says_what_its_tolerance_makes_of_it(demo: bitrock.Record) -> None:
+    with pytest.warns(bitrock.BitrockWarning, match=r"likelihood scales above the best fit") as caught:
+        run = bitrock.abc(demo, particles=300, seed=11, backend="cpu", progress=False)
+    assert [str(w.message) for w in caught] == run.document["warnings"]
+    assert caught[0].filename == __file__
+    answer = run.answer
+    assert answer is not None and answer["method"] == "paper_abc"
+    # At ε = 0.014, far above the demo record's likelihood scale, the priors decide.
+    assert answer["strength"] == "decided_by_the_boxes"
+    last = run.model_probabilities.iloc[-1].drop("epsilon").sort_values(ascending=False)
+    assert (answer["law"], answer["runner_up"]) == (last.index[0], last.index[1])
+    assert answer["ln_b"] == pytest.approx(np.log(last.iloc[0] / last.iloc[1]), abs=1e-12)
+    for frame in (run.model_probabilities, run.summary()):
+        assert frame.attrs["label"] == "the paper's ABC, P(m | ρ < ε)"
+    assert "P(m | ρ < ε)" in repr(run) and "(decided by the boxes)" in repr(run)
+    assert answer["sentence"] in html.unescape(run._repr_html_())
 
 
 def test_get_distribution_as_pyabc_returns_it(small_run: bitrock.Result) -> None:
@@ -99,9 +118,14 @@ def test_the_same_seed_gives_the_same_particles(demo: bitrock.Record, small_run:
 
 
 def test_smc_with_a_schedule(demo: bitrock.Record) -> None:
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # a schedule ends the run: no note about a floor
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         run = bitrock.abc(demo, particles=300, sampler="smc", epsilons=[0.05, 0.03, 0.02], seed=3, backend="cpu", progress=False)
+    # A schedule ends the run: no note about a floor; the one warning is what ε = 0.02 makes of
+    # the probabilities, as the command says it.
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and said[0].startswith("ε = 0.02000 lies ") and "ratios of the laws' prior volumes" in said[0], said
+    assert run.document["warnings"] == said
     assert list(run.populations["epsilon"])[1:] == [0.05, 0.03, 0.02]
     assert run.document["stop_reason"] == "schedule_exhausted"
     assert run.document["stop_description"] == "the `epsilons` schedule ran out"

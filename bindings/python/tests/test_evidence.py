@@ -168,6 +168,13 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
     separations = small.separations
     assert len(separations) == 2 and set(separations["truth"]) == {"m2", "m3"}
     assert "most probable" in repr(small)
+    # One answer: the pair's Bayes factor, its word and numbers, as the command prints it last.
+    answer = small.answer
+    assert answer["method"] == "evidence"
+    assert (answer["law"], answer["runner_up"]) == (favoured, against)
+    assert (answer["ln_b"], answer["strength"]) == (factor.ln_b, factor.strength)
+    assert answer["probability"] == table.loc[favoured, "probability"]
+    assert f"({factor.strength.replace('_', ' ')})>" in repr(small)
 
 
 @pytest.mark.parametrize(
@@ -202,6 +209,7 @@ def test_the_check_by_resimulation_is_the_command_lines(cli) -> None:
     )
     document = json.loads(done.stdout)["check"]
     assert document["rows"] == checked.document["check"]["rows"]
+    assert json.loads(done.stdout)["answer"] == checked.answer
     table = checked.check
     assert list(table.index) == ["m2", "m3"]
     shares = table[["decided_right", "undecided", "decided_wrong"]].sum(axis=1)
@@ -273,6 +281,7 @@ def test_check_selection_of_an_evidence_directory_is_the_evidence_s_own_check(tm
     # The same replicates as the evidence's own check, written into the directory.
     document = matrix.attrs["document"]
     assert document["rows"] == checked.document["check"]["rows"]
+    assert json.loads(done.stdout)["answer"] == checked.answer
     assert bitrock.read_evidence(tmp_path / "ev").document["check"] == document
     assert list(matrix.index) == ["m2", "m3"] and list(matrix.columns) == ["m2", "m3"]
     np.testing.assert_allclose(matrix.sum(axis=1), 1.0, atol=1e-12)

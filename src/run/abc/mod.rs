@@ -12,7 +12,9 @@ use crate::error::{Error, Result};
 use crate::files;
 use crate::prior::PriorFile;
 
+use crate::run::answer::{Answer, Method};
 use crate::run::{self, Scoring};
+use crate::separation::Separation;
 use std::path::Path;
 
 pub mod config;
@@ -52,6 +54,12 @@ pub struct Analysis {
     pub posterior: PosteriorSummary,
     /// The 98 % predictive envelope of every law with particles in the summarised population.
     pub envelopes: Vec<Envelope>,
+    /// What the record separates: every ordered pair of the laws' fits
+    /// ([`crate::separation`]).
+    pub separations: Vec<Separation>,
+    /// The summarised population's answer to "which law, how sure"; `None` where no law
+    /// holds a particle.
+    pub answer: Option<Answer>,
 }
 
 impl Job {
@@ -143,11 +151,15 @@ impl Analysis {
         };
         let mut posterior = summarize(particles, laws);
         posterior.mark_identified(&outcome.setup.prior);
-        let envelopes = envelopes(particles, laws, &outcome.setup.data);
+        let setup = &outcome.setup;
+        let envelopes = envelopes(particles, laws, &setup.data);
+        let (separations, answer) = answer(setup, &outcome.config.fit, &last.record, &posterior.model_probabilities)?;
         Ok(Self {
             summary_population: last.record.index,
             posterior,
             envelopes,
+            separations,
+            answer,
             outcome,
         })
     }
@@ -180,17 +192,10 @@ impl Analysis {
                 "every law fits the record exactly (ρ < {EXACT_FIT_RHO:e}): the torque does not depend on the bit speed here (a constant record?), and the model probabilities say nothing"
             ));
         }
-        // An exact fit has no likelihood scale: the warning above says what matters there.
-        let best = setup.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
         if let Some(last) = self.outcome.run.populations.last()
             && let Some(epsilon) = last.record.epsilon
-            && best >= EXACT_FIT_RHO
         {
-            out.extend(crate::abc::prior_volume_caveat(
-                epsilon,
-                best,
-                setup.data.calibration.len(),
-            ));
+            out.extend(prior_volume_caveat(setup, epsilon));
         }
         let thin: Vec<String> = self
             .outcome
@@ -243,7 +248,7 @@ impl Analysis {
         let outcome = &self.outcome;
         let mut config = serde_json::to_value(&outcome.config).expect("the configuration serialises");
         config["threads"] = rayon::current_num_threads().into();
-        RunSummary {
+        let mut document = RunSummary {
             data: &outcome.setup.data,
             fits: &outcome.setup.fits,
             prior: &outcome.setup.prior,
@@ -254,7 +259,10 @@ impl Analysis {
             seed: outcome.config.seed,
             backend: outcome.backend,
         }
-        .json(self.warnings())
+        .json(self.warnings());
+        document["posterior"]["label"] = Method::PaperAbc.label().into();
+        document["answer"] = self.answer.as_ref().map_or(serde_json::Value::Null, Answer::json);
+        document
     }
 
     /// Writes run.json, envelopes.csv and data.csv into the run directory `dir`, each whole or
@@ -275,6 +283,40 @@ impl Analysis {
         }
         Ok(())
     }
+}
+
+/// A population's answer to "which law, how sure" ([`Answer::of_abc`]) from its `record`
+/// and model `probabilities`, with the fits' separations it weighs them by (the run's fits
+/// under its fit options `fit`).
+pub fn answer(
+    setup: &Setup,
+    fit: &crate::fit::FitOptions,
+    record: &crate::abc::PopulationRecord,
+    probabilities: &[(crate::Law, f64)],
+) -> Result<(Vec<Separation>, Option<Answer>)> {
+    let separations = crate::separation::separations(&setup.fits, &setup.data.calibration, fit)?;
+    let prior_volumes = record
+        .epsilon
+        .is_some_and(|eps| prior_volume_caveat(setup, eps).is_some());
+    let answer = Answer::of_abc(
+        probabilities,
+        &setup.prior.weights,
+        record.ess,
+        prior_volumes,
+        &separations,
+    );
+    Ok((separations, answer))
+}
+
+/// The caveat a run's model probabilities at tolerance `epsilon` earn where ε lies far
+/// above the record's likelihood scale ([`crate::abc::prior_volume_caveat`]). An exact fit has
+/// no likelihood scale: the warning of exact fits says what matters there. One law has no
+/// probabilities to misread.
+fn prior_volume_caveat(setup: &Setup, epsilon: f64) -> Option<String> {
+    let best = setup.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
+    (best >= EXACT_FIT_RHO && setup.fits.len() > 1)
+        .then(|| crate::abc::prior_volume_caveat(epsilon, best, setup.data.calibration.len()))
+        .flatten()
 }
 
 /// The refusal of a run stopped before its first population, saying how to continue it.

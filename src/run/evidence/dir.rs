@@ -317,7 +317,7 @@ pub fn check_dir(
         ));
     }
     let check = check(&job, &data, &analysis, replicates, scoring, progress, observer)?;
-    document["check"] = serde_json::to_value(&check).expect("a check serialises");
+    analysis.with_check(&mut document, &check);
     // Still the evidence's alone after the work; only its document changes (written whole).
     files::refuse_foreign(dir, "run", &owned)?;
     let json = pretty(&document);

@@ -11,6 +11,7 @@ use crate::eval::{Backend, Problem};
 use crate::fit::{self, FitOptions, LawFit};
 use crate::laws::Law;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
+use crate::run::answer::Answer;
 use crate::run::{Placement, Scoring};
 use crate::separation::{self, Separation};
 use serde::{Deserialize, Serialize};
@@ -418,6 +419,29 @@ impl EvidenceAnalysis {
         document
     }
 
+    /// The evidence's answer to "which law, how sure" ([`Answer::of_evidence`]), weighed by
+    /// its `check` where one ran ([`Answer::checked`]).
+    pub fn answer(&self, check: Option<&EvidenceCheck>) -> Option<Answer> {
+        let answer = Answer::of_evidence(&self.evidence, &self.separations)?;
+        let row = check.and_then(|c| {
+            c.rows
+                .iter()
+                .find(|r| r.law == answer.law)
+                .map(|r| (r.decided_right, c.replicates))
+        });
+        Some(match row {
+            Some((right, replicates)) => answer.checked(right, replicates),
+            None => answer,
+        })
+    }
+
+    /// `document` (from [`document`](Self::document)) with the evidence's `check` and the
+    /// answer it weighs.
+    pub fn with_check(&self, document: &mut serde_json::Value, check: &EvidenceCheck) {
+        document["check"] = serde_json::to_value(check).expect("a check serialises");
+        document["answer"] = self.answer(Some(check)).map_or(serde_json::Value::Null, |a| a.json());
+    }
+
     /// `bitrock evidence --json`'s document of the analysis of `data` (`prior` describing its
     /// boxes); with `posterior_sets`, each law's posterior sets too (`"posterior": {"params",
     /// "weights"}`, in the record's torque unit), as an evidence directory and Python keep it.
@@ -433,6 +457,7 @@ impl EvidenceAnalysis {
             &self.noise_models,
             prior,
         );
+        document["answer"] = self.answer(None).map_or(serde_json::Value::Null, |a| a.json());
         // Each warning with its words (`message`) beside its fields.
         document["warnings"] = self
             .warnings()

@@ -1032,8 +1032,28 @@ class Result:
         return frame.set_index("population") if len(frame) else frame
 
     @property
+    def _label(self) -> str:
+        """What the run's model probabilities are (a run.json written without it: the paper's
+        ABC's, as every run's)."""
+        return self.document["posterior"].get("label", "the paper's ABC, P(m | ρ < ε)")
+
+    @property
+    def answer(self) -> dict[str, Any] | None:
+        """The run's answer to "which law, how sure": ``law`` and ``probability``, the
+        ``runner_up`` and its probability, ``ln_b`` ± ``error`` between them, ``strength``
+        (``undecided``, ``decided_by_the_boxes``, ``positive``, ``strong``, ``very_strong``;
+        never stronger than what the record separates), ``why`` and the ``sentence`` the command
+        prints. The paper's ABC's probabilities far above the record's likelihood scale are
+        ratios of prior volumes: their answer is decided by the boxes (see
+        :func:`evidence` for the model evidence). ``None`` where no law holds a particle."""
+        return self.document.get("answer")
+
+    @property
     def model_probabilities(self) -> pd.DataFrame:
-        """Population × law posterior probabilities, with each population's ε."""
+        """Population × law model probabilities by the paper's ABC, P(m | ρ < ε): the share
+        of each law's prior box below each population's ε (also a column). They weigh the
+        record only where ε lies near its likelihood scale (:attr:`answer`, and the run's
+        warning where it does not); ``frame.attrs["label"]`` says what they are."""
         doc = self.document
         laws = doc["config"]["laws"]
         rows = []
@@ -1043,6 +1063,7 @@ class Result:
             rows.append(row)
         frame = pd.DataFrame(rows, columns=[*laws, "epsilon"])
         frame.index.name = "population"
+        frame.attrs["label"] = self._label
         return frame
 
     def _population(self, population: int) -> int:
@@ -1123,7 +1144,8 @@ class Result:
         return frame, weights / total if total > 0 else weights
 
     def summary(self) -> pd.DataFrame:
-        """The summarised population's posterior per law and parameter: probability, mean,
+        """The summarised population's posterior per law and parameter: probability (the
+        paper's ABC's, P(m | ρ < ε), as ``frame.attrs["label"]`` says), mean,
         standard deviation, 1 %, 50 % and 99 % quantiles, MAP, in the record's torque unit, and
         ``identified``: false where the record has not narrowed the prior box (its central 98 %
         still spans over 76 % of the box), so that the box, not the data, sets those numbers."""
@@ -1146,7 +1168,9 @@ class Result:
                         "identified": s.get("identified", [True] * len(s["names"]))[i],
                     }
                 )
-        return pd.DataFrame(rows)
+        frame = pd.DataFrame(rows)
+        frame.attrs["label"] = self._label
+        return frame
 
     def to_datatree(self, population: int = -1, *, resample: bool | int = False) -> Any:
         """The population (the last by default) as an ``xarray.DataTree``: one node per law
@@ -1205,7 +1229,9 @@ class Result:
         doc = self.document
         probabilities = ", ".join(f"{k} {v:.3f}" for k, v in doc["posterior"]["model_probabilities"].items())
         where = self.path or "in memory"
-        return f"<bitrock.Result {len(doc['populations'])} populations ({where}); {probabilities}>"
+        answer = self.answer
+        strength = f"; first {answer['law']} ({answer['strength'].replace('_', ' ')})" if answer else ""
+        return f"<bitrock.Result {len(doc['populations'])} populations ({where}); P(m | ρ < ε): {probabilities}{strength}>"
 
     def _repr_html_(self) -> str:
         """A notebook's view: where the run lives, the model probabilities of every population
@@ -1216,9 +1242,11 @@ class Result:
         where = html.escape(str(self.path)) if self.path is not None else "in memory"
         table = self.model_probabilities.to_html(float_format=lambda v: f"{v:.4f}")
         warnings = "".join(f"<li>warning: {html.escape(w)}</li>" for w in doc.get("warnings", []))
+        answer = self.answer
         return (
             f"<div><b>bitrock.Result</b>: {len(doc['populations'])} populations ({where}), "
-            f"model probabilities by population{table}"
+            f"model probabilities by {html.escape(self._label)}, by population{table}"
+            + (f"<p><b>answer</b>: {html.escape(answer['sentence'])}</p>" if answer else "")
             + (f"<ul>{warnings}</ul>" if warnings else "")
             + "</div>"
         )

@@ -138,6 +138,16 @@ class Evidence:
         return pd.DataFrame(self._doc["noise_models"])
 
     @property
+    def answer(self) -> dict[str, Any] | None:
+        """The evidence's answer to "which law, how sure": the law of the largest evidence
+        (``law``, ``probability``) over the next (``runner_up``), ``ln_b`` ± ``error`` between
+        them, ``strength`` as in :attr:`bayes_factors` (never stronger than what the record
+        separates; taken back where the check does not decide records made by the law), ``why``
+        and the ``sentence`` the command prints last. ``None`` for a document written without
+        it."""
+        return self._doc.get("answer")
+
+    @property
     def probabilities(self) -> pd.Series:
         """P(m | y) by law."""
         return self.table["probability"]
@@ -240,9 +250,11 @@ class Evidence:
         table = self.table[columns].to_html(float_format=lambda v: f"{v:.4f}")
         notes = self.warnings
         items = "".join(f"<li>warning: {html.escape(n)}</li>" for n in notes)
+        answer = self.answer
         return (
             f"<div><b>bitrock.Evidence</b> on {html.escape(doc['source'])} ({doc['data_points']} samples; "
             f"ln Z with torques in N·m; {html.escape(doc['prior'])}){table}"
+            + (f"<p><b>answer</b>: {html.escape(answer['sentence'])}</p>" if answer else "")
             + (f"<ul>{items}</ul>" if items else "")
             + "</div>"
         )
@@ -250,7 +262,9 @@ class Evidence:
     def __repr__(self) -> str:
         best = max(self._doc["laws"], key=lambda law: law["probability"])
         parts = ", ".join(f"P({law['law']}) = {law['probability']:.3f}" for law in self._doc["laws"])
-        return f"<bitrock.Evidence {parts}; most probable {best['law']}>"
+        answer = self.answer
+        strength = f" ({answer['strength'].replace('_', ' ')})" if answer else ""
+        return f"<bitrock.Evidence {parts}; most probable {best['law']}{strength}>"
 
 
 def evidence(

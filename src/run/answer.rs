@@ -1,0 +1,343 @@
+//! One answer to "which law, and how sure", whichever kind of run asked: the law ranked
+//! first, the one after it, and a strength word never stronger than what the record separates.
+//!
+//! The model evidence gives a Bayes factor split into the record's part and the boxes'
+//! ([`BayesFactor`]), and its word is the record's ([`Strength::of`]). The paper's ABC gives
+//! model probabilities P(m | ρ < ε): shares of each law's prior box below the tolerance. They
+//! weigh the record only where ε lies near its likelihood scale; far above it they are ratios
+//! of prior volumes ([`crate::abc::prior_volume_caveat`]), and the priors, not the record,
+//! decide. Either way a pair whose least-squares fits the record does not separate
+//! ([`crate::separation::UNDECIDED_NATS`]) is left to the priors, whatever the numbers say.
+
+use crate::abc::evidence::{BayesFactor, Evidence, Strength};
+use crate::laws::Law;
+use crate::separation::Separation;
+use serde::{Deserialize, Serialize};
+
+/// Where an answer's numbers come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The model evidence: P(m | y) from each law's marginal likelihood.
+    Evidence,
+    /// The paper's ABC: P(m | ρ < ε), shares of each law's prior box below the tolerance.
+    PaperAbc,
+}
+
+impl Method {
+    /// What the probabilities are, in the user's words.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Evidence => "the model evidence, P(m | y)",
+            Self::PaperAbc => "the paper's ABC, P(m | ρ < ε)",
+        }
+    }
+}
+
+/// The law ranked first, how far ahead of the next, and how sure that makes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Answer {
+    pub method: Method,
+    /// The law ranked first, and its probability.
+    pub law: Law,
+    pub probability: f64,
+    /// The law ranked next and its probability; `None` where one law was compared.
+    pub runner_up: Option<Law>,
+    pub runner_up_probability: Option<f64>,
+    /// ln of the Bayes factor of `law` over `runner_up` (for the paper's ABC, of its
+    /// probabilities over the laws' prior weights), and its Monte-Carlo error.
+    pub ln_b: Option<f64>,
+    pub error: Option<f64>,
+    pub strength: Strength,
+    /// Why the strength is what it is, where that needs saying.
+    pub why: Option<String>,
+}
+
+impl Answer {
+    /// The evidence's answer: its law of largest evidence against the next, in the words of
+    /// their Bayes factor ([`Evidence::bayes_factors`]); `None` for an evidence of no law.
+    pub fn of_evidence(evidence: &Evidence, separations: &[Separation]) -> Option<Self> {
+        let probability = |law: Law| evidence.laws.iter().find(|l| l.law == law).map(|l| l.probability);
+        let factors = evidence.bayes_factors(separations);
+        let Some(next) = factors.first() else {
+            let only = evidence.laws.first()?;
+            return Some(Self::alone(Method::Evidence, only.law, only.probability));
+        };
+        Some(Self {
+            method: Method::Evidence,
+            law: next.favoured,
+            probability: probability(next.favoured).unwrap_or(f64::NAN),
+            runner_up: Some(next.against),
+            runner_up_probability: probability(next.against),
+            ln_b: Some(next.ln_b),
+            error: Some(next.error),
+            strength: next.strength,
+            why: evidence_why(next),
+        })
+    }
+
+    /// The paper's ABC's answer from the model probabilities of its summarised population
+    /// (`probabilities`, in the laws' order, with their prior weights `prior_weights` and the
+    /// population's effective sample size `ess`), the caveat its tolerance earns
+    /// ([`crate::abc::prior_volume_caveat`]) and the fits' separations; `None` where no law
+    /// holds a particle.
+    pub fn of_abc(
+        probabilities: &[(Law, f64)],
+        prior_weights: &[f64],
+        ess: f64,
+        prior_volumes: bool,
+        separations: &[Separation],
+    ) -> Option<Self> {
+        let weight = |law: Law| {
+            probabilities
+                .iter()
+                .position(|(l, _)| *l == law)
+                .and_then(|i| prior_weights.get(i).copied())
+                .unwrap_or(1.0)
+        };
+        let mut order: Vec<(Law, f64)> = probabilities.to_vec();
+        order.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let (law, p) = *order.first().filter(|(_, p)| *p > 0.0)?;
+        let Some(&(next, q)) = order.get(1) else {
+            return Some(Self::alone(Method::PaperAbc, law, p));
+        };
+        // A law with no particle has less than one particle's share: its probability is
+        // bounded by 1/ESS, and so the factor from below.
+        let ess = ess.max(1.0);
+        let q_seen = q.max(1.0 / ess);
+        let ln_b = (p / weight(law)).ln() - (q_seen / weight(next)).ln();
+        // Multinomial shares: var(ln p − ln q) ≈ (1/p + 1/q) / ESS.
+        let error = ((1.0 / p + 1.0 / q_seen) / ess).sqrt();
+        let gap = gap_nats(separations, law, next);
+        let (strength, why) = if prior_volumes {
+            (
+                Strength::DecidedByTheBoxes,
+                Some(
+                    "at this tolerance the probabilities are ratios of the laws' prior volumes below ε, not \
+                     evidence (the run's warning); the model evidence weighs the record"
+                        .to_string(),
+                ),
+            )
+        } else {
+            let strength = Strength::of(ln_b, error, None, gap);
+            (strength, separation_why(strength, law, next, gap))
+        };
+        Some(Self {
+            method: Method::PaperAbc,
+            law,
+            probability: p,
+            runner_up: Some(next),
+            runner_up_probability: Some(q),
+            ln_b: Some(ln_b),
+            error: Some(error),
+            strength,
+            why,
+        })
+    }
+
+    /// An answer among one law: nothing was compared.
+    fn alone(method: Method, law: Law, probability: f64) -> Self {
+        Self {
+            method,
+            law,
+            probability,
+            runner_up: None,
+            runner_up_probability: None,
+            ln_b: None,
+            error: None,
+            strength: Strength::Undecided,
+            why: Some("one law was compared: nothing was selected".into()),
+        }
+    }
+
+    /// The answer weighed by the evidence's check: where records made by the answer's law
+    /// were decided for it in fewer than half the check's replicates (`decided_right`, a
+    /// share of `replicates`), a decided answer says so, and the strength no longer decides.
+    pub fn checked(mut self, decided_right: f64, replicates: usize) -> Self {
+        if self.strength.decides() && decided_right < 0.5 {
+            let right = (decided_right * replicates as f64).round() as usize;
+            self.strength = Strength::Undecided;
+            self.why = Some(format!(
+                "the check decided only {right} of {replicates} records made by {} for it: records like this one do not settle the question",
+                self.law
+            ));
+        }
+        self
+    }
+
+    /// The answer as documents keep it: its fields, and its `sentence` for people.
+    pub fn json(&self) -> serde_json::Value {
+        let mut document = serde_json::to_value(self).expect("an answer serialises");
+        document["sentence"] = self.sentence().into();
+        document
+    }
+
+    /// The headline: the law, its strength against the next, the numbers, and why.
+    pub fn sentence(&self) -> String {
+        let Some(next) = self.runner_up else {
+            return format!(
+                "{} ({}), {}",
+                self.law,
+                self.method.label(),
+                self.why.as_deref().unwrap_or("")
+            );
+        };
+        let odds = match (self.ln_b, self.error) {
+            (Some(ln_b), Some(error)) => format!(", ln B = {ln_b:.2} ± {error:.2}"),
+            _ => String::new(),
+        };
+        let mut line = format!(
+            "{} over {}: {} ({}: {:.3} against {:.3}{odds})",
+            self.law,
+            next,
+            self.strength.words(),
+            self.method.label(),
+            self.probability,
+            self.runner_up_probability.unwrap_or(f64::NAN),
+        );
+        if let Some(why) = &self.why {
+            line.push_str("; ");
+            line.push_str(why);
+        }
+        line
+    }
+}
+
+/// The fits' expected gap with `truth` as fitted making the record and `rival` fitting it.
+fn gap_nats(separations: &[Separation], truth: Law, rival: Law) -> Option<f64> {
+    separations
+        .iter()
+        .find(|s| s.truth == truth && s.rival == rival)
+        .map(|s| s.gap_nats)
+}
+
+/// Why a pair the fits do not separate is left to the priors.
+fn separation_why(strength: Strength, law: Law, next: Law, gap: Option<f64>) -> Option<String> {
+    match (strength, gap) {
+        (Strength::DecidedByTheBoxes, Some(gap)) if gap < crate::separation::UNDECIDED_NATS => Some(format!(
+            "the record does not separate {law} from {next} (the fits' gap {gap:.1} nats, below {}): the priors decide",
+            crate::separation::UNDECIDED_NATS
+        )),
+        _ => None,
+    }
+}
+
+/// Why the evidence's word is what it is, where the boxes, not the record, made it.
+fn evidence_why(factor: &BayesFactor) -> Option<String> {
+    if factor.strength != Strength::DecidedByTheBoxes {
+        return None;
+    }
+    separation_why(factor.strength, factor.favoured, factor.against, factor.separation_nats).or_else(|| {
+        factor.data_nats.map(|d| {
+            format!(
+                "the record's part of ln B is {d:.2} nats (below {}): the boxes' Occam factors make it",
+                crate::abc::evidence::DATA_DECIDES_NATS
+            )
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn separation(truth: Law, rival: Law, gap_nats: f64) -> Separation {
+        Separation {
+            truth,
+            rival,
+            gap_nats,
+            misranking: 0.5,
+            bands: Vec::new(),
+            parts_below_rad_s: None,
+            parts_above_rad_s: None,
+        }
+    }
+
+    #[test]
+    fn the_paper_s_abc_far_above_the_likelihood_scale_is_decided_by_the_priors() {
+        let p = [(Law::M1, 0.29), (Law::M2, 0.29), (Law::M3, 0.37), (Law::M4, 0.05)];
+        let a = Answer::of_abc(&p, &[1.0; 4], 25_000.0, true, &[]).unwrap();
+        assert_eq!(
+            (a.method, a.law, a.runner_up),
+            (Method::PaperAbc, Law::M3, Some(Law::M1))
+        );
+        assert_eq!(a.strength, Strength::DecidedByTheBoxes);
+        assert!(
+            a.sentence()
+                .starts_with("m3 over m1: decided by the boxes (the paper's ABC, P(m | ρ < ε): 0.370 against 0.290")
+        );
+        assert!(a.sentence().contains("ratios of the laws' prior volumes"));
+    }
+
+    #[test]
+    fn the_paper_s_abc_near_the_likelihood_scale_is_worded_by_its_odds_and_the_fits_gap() {
+        // ln(0.9/0.1) = 2.197 on 10,000 particles: positive; error √((1/0.9 + 1/0.1)/1e4).
+        let p = [(Law::M2, 0.9), (Law::M3, 0.1)];
+        let a = Answer::of_abc(&p, &[1.0, 1.0], 1e4, false, &[separation(Law::M2, Law::M3, 40.0)]).unwrap();
+        assert_eq!(a.strength, Strength::Positive);
+        assert!((a.ln_b.unwrap() - 9f64.ln()).abs() < 1e-12);
+        assert!((a.error.unwrap() - ((1.0 / 0.9 + 10.0) / 1e4f64).sqrt()).abs() < 1e-15);
+        assert_eq!(a.why, None);
+        // Unequal prior weights: the odds are the data's, the weights divided out.
+        let a = Answer::of_abc(&p, &[3.0, 1.0], 1e4, false, &[]).unwrap();
+        assert!((a.ln_b.unwrap() - 3f64.ln()).abs() < 1e-12);
+        // A pair the fits do not separate: the priors decide, whatever the odds.
+        let a = Answer::of_abc(&p, &[1.0, 1.0], 1e4, false, &[separation(Law::M2, Law::M3, 0.4)]).unwrap();
+        assert_eq!(a.strength, Strength::DecidedByTheBoxes);
+        assert!(
+            a.why
+                .unwrap()
+                .contains("does not separate m2 from m3 (the fits' gap 0.4 nats")
+        );
+        // A runner-up with no particle: its share is below 1/ESS, so ln B is at least this.
+        let a = Answer::of_abc(&[(Law::M2, 1.0), (Law::M3, 0.0)], &[1.0, 1.0], 100.0, false, &[]).unwrap();
+        assert!((a.ln_b.unwrap() - 100f64.ln()).abs() < 1e-12);
+        assert_eq!(a.strength, Strength::Strong);
+        // No particle at all, or one law: nothing selected.
+        assert!(Answer::of_abc(&[(Law::M2, 0.0), (Law::M3, 0.0)], &[1.0, 1.0], 0.0, false, &[]).is_none());
+        let one = Answer::of_abc(&[(Law::M2, 1.0)], &[1.0], 10.0, false, &[]).unwrap();
+        assert_eq!((one.runner_up, one.strength), (None, Strength::Undecided));
+    }
+
+    #[test]
+    fn the_evidence_s_word_says_whether_the_fits_or_the_data_s_part_left_it_to_the_boxes() {
+        use crate::abc::evidence::LawEvidence;
+        let (m2, m4) = (
+            LawEvidence::for_tests(Law::M2, -100.0, Vec::new(), Some(-90.0)),
+            LawEvidence::for_tests(Law::M4, -104.0, Vec::new(), Some(-86.5)),
+        );
+        // The data's part points to m4 (−3.5 nats), the fits separate the pair well.
+        let factor = BayesFactor::between(&m2, &m4, &[separation(Law::M2, Law::M4, 30.0)]);
+        assert_eq!(factor.strength, Strength::DecidedByTheBoxes);
+        let why = evidence_why(&factor).unwrap();
+        assert_eq!(
+            why,
+            "the record's part of ln B is -3.50 nats (below 1): the boxes' Occam factors make it"
+        );
+        // Fits the record does not separate: that is said first.
+        let factor = BayesFactor::between(&m2, &m4, &[separation(Law::M2, Law::M4, 0.9)]);
+        assert!(
+            evidence_why(&factor)
+                .unwrap()
+                .starts_with("the record does not separate m2 from m4")
+        );
+        // A word the data make needs no why.
+        let m1 = LawEvidence::for_tests(Law::M1, -130.0, Vec::new(), Some(-120.0));
+        let factor = BayesFactor::between(&m2, &m1, &[]);
+        assert_eq!((factor.strength, evidence_why(&factor)), (Strength::VeryStrong, None));
+    }
+
+    #[test]
+    fn a_check_that_does_not_decide_the_law_s_own_records_takes_the_word_back() {
+        let p = [(Law::M2, 0.999), (Law::M3, 0.001)];
+        let a = Answer::of_abc(&p, &[1.0, 1.0], 1e5, false, &[]).unwrap();
+        assert!(a.strength.decides());
+        assert_eq!(a.clone().checked(0.6, 5), a);
+        let weak = a.checked(0.0, 5);
+        assert_eq!(weak.strength, Strength::Undecided);
+        assert!(
+            weak.sentence()
+                .contains("the check decided only 0 of 5 records made by m2 for it")
+        );
+    }
+}
