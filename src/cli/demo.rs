@@ -146,7 +146,10 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         &report_setup.expect("three runs"),
         &report_runs,
         Some(&evidence.evidence),
-        Some(Default::default()),
+        bitrock::report::StabilitySettings {
+            simulated: Some(Default::default()),
+            ..Default::default()
+        },
     )?;
     print_headline(&mut out, &headlines, &evidence, &data, root, &report)?;
     Ok(ExitCode::SUCCESS)

@@ -1,6 +1,8 @@
 //! `bitrock report`: the paper's figures and report.md from run directories; a watch's or an
 //! evidence's report from its directory.
 
+use super::args::{FeArgs, LumpedArgs};
+use bitrock::report::StabilitySettings;
 use bitrock::watch::store::is_watch_dir;
 use clap::Args;
 use std::io::Write;
@@ -25,6 +27,27 @@ pub struct ReportCmd {
     /// record's operating point, the bistable band between them (a table and a figure).
     #[arg(long)]
     pub simulate: bool,
+    /// The 1-DOF string of the runs' maps and advice [default: the paper's 5 km field string].
+    #[command(flatten)]
+    pub lumped: LumpedArgs,
+    /// A finite-element string compared with the 1-DOF one, instead of the paper's three.
+    #[command(flatten)]
+    pub fe: FeArgs,
+}
+
+/// The maps the flags describe: the string given, else the paper's.
+fn stability(cmd: &ReportCmd) -> bitrock::Result<StabilitySettings> {
+    let fe = cmd.fe.settings();
+    let paper = StabilitySettings::default();
+    Ok(StabilitySettings {
+        lumped: cmd.lumped.lumped(),
+        strings: match fe.first_given() {
+            Some(_) => vec![fe.drill_string()?],
+            None => paper.strings.clone(),
+        },
+        simulated: cmd.simulate.then(Default::default),
+        ..paper
+    })
 }
 
 pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
@@ -47,7 +70,7 @@ pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
         ([(dir, _)], 1) => bitrock::report::write_evidence_report(&cmd.out, dir)?,
         ([], _) => {
             let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;
-            bitrock::report::write_paper_report(&cmd.out, &setup, &runs, None, cmd.simulate.then(Default::default))?
+            bitrock::report::write_paper_report(&cmd.out, &setup, &runs, None, stability(cmd)?)?
         }
         ([(dir, what), ..], _) => {
             return Err(bitrock::Error::setting(

@@ -851,6 +851,9 @@ impl Prepared<'_> {
         for st in &self.structures {
             let _ = writeln!(md, "| {} | {:.2} |", st.label, st.critical_nms);
         }
+        for warning in self.off_the_map() {
+            let _ = writeln!(md, "\n> **Off the map:** {warning}.");
+        }
         self.advice_markdown(md);
     }
 
@@ -908,6 +911,22 @@ impl Prepared<'_> {
             }
             let _ = writeln!(md);
         }
+    }
+
+    /// What the 1-DOF string's maps draw nothing of: boundaries wholly off their weights on
+    /// bit ([`map::Boundaries::off_the_map`]).
+    fn off_the_map(&self) -> Vec<String> {
+        let s = &self.input.stability;
+        let inputs: Vec<LawSamples> = self.map_laws().into_iter().cloned().collect();
+        let criterion = map::Criterion::Lumped(s.lumped);
+        map::boundaries(
+            &inputs,
+            &s.omega_rpm,
+            criterion.critical_nms(),
+            self.w_ref_n,
+            s.percentile,
+        )
+        .off_the_map(&s.omega_rpm, &s.wob_kn, &criterion, s.percentile)
     }
 
     /// The table of the 1-DOF string's boundaries at the table's speeds: MAP and percentile per

@@ -1,7 +1,7 @@
 //! The report's runs from where they live: run directories (`bitrock report`) or runs just
 //! finished (`bitrock demo`), labelled by their δ; then the report with the paper's maps.
 
-use super::{ReportInput, ReportRun, ReportSummary, SimulatedReport, StabilitySettings, write_report};
+use super::{ReportInput, ReportRun, ReportSummary, StabilitySettings, write_report};
 use crate::abc::Population;
 use crate::abc::posterior::PosteriorSummary;
 use crate::error::{Error, Result};
@@ -104,23 +104,20 @@ pub fn read_run_dirs(dirs: &[PathBuf]) -> Result<(run::abc::Setup, Vec<ReportRun
     Ok((setup, runs))
 }
 
-/// The report of `runs` (all of the record and fits in `setup`) with the paper's map settings
-/// (and the maps by simulated strings where `simulated` asks for them), written into `out`.
+/// The report of `runs` (all of the record and fits in `setup`) with the maps `stability`
+/// describes (the string, the axes, the maps by simulated strings), written into `out`.
 pub fn write_paper_report(
     out: &Path,
     setup: &run::abc::Setup,
     runs: &[ReportRun],
     evidence: Option<&crate::abc::evidence::Evidence>,
-    simulated: Option<SimulatedReport>,
+    stability: StabilitySettings,
 ) -> Result<ReportSummary> {
     let input = ReportInput {
         data: &setup.data,
         fits: &setup.fits,
         runs,
-        stability: StabilitySettings {
-            simulated,
-            ..StabilitySettings::default()
-        },
+        stability,
         evidence,
     };
     write_report(out, &input)

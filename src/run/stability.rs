@@ -238,6 +238,9 @@ impl StabilityJob {
         }
         let c = self.criterion.critical_nms();
         let boundaries = map::boundaries(&inputs, &self.omega_rpm, c, self.w_ref_n, self.percentile);
+        for warning in boundaries.off_the_map(&self.omega_rpm, &self.wob_kn, &self.criterion, self.percentile) {
+            note(format!("warning: {warning}"));
+        }
         let mut backend = self.backend;
         let note = std::cell::RefCell::new(note);
         let total = (self.cells() * self.samples * inputs.len()) as u64;

@@ -189,6 +189,39 @@ pub struct Boundaries {
     pub mixture_wob_kn: Option<Vec<Option<f64>>>,
 }
 
+impl Boundaries {
+    /// What a map of these boundaries (at the speeds `omega_rpm`, percentile `p`) over the
+    /// weights `wob_kn` on `criterion` draws nothing of: each law whose MAP or percentile
+    /// boundary lies wholly off the map ([`OffTheMap`]), said once per law, and the mixture's
+    /// where some law's boundary is on it.
+    pub fn off_the_map(&self, omega_rpm: &[f64], wob_kn: &[f64], criterion: &Criterion, p: f64) -> Vec<String> {
+        let mut out = Vec::new();
+        let percent = p * 100.0;
+        for l in &self.laws {
+            let map = OffTheMap::of(&l.map_wob_kn, omega_rpm, wob_kn);
+            let pct = OffTheMap::of(&l.p_wob_kn, omega_rpm, wob_kn);
+            match (map, pct) {
+                (Some(off), _) => out.push(off.describe(&format!("law {}'s MAP boundary", l.law), wob_kn, criterion)),
+                (None, Some(off)) => out.push(off.describe(
+                    &format!("law {}'s {percent} % percentile boundary", l.law),
+                    wob_kn,
+                    criterion,
+                )),
+                (None, None) => {}
+            }
+        }
+        if out.len() < self.laws.len()
+            && let Some(off) = self
+                .mixture_wob_kn
+                .as_ref()
+                .and_then(|m| OffTheMap::of(m, omega_rpm, wob_kn))
+        {
+            out.push(off.describe(&format!("the mixture's {percent} % boundary"), wob_kn, criterion));
+        }
+        out
+    }
+}
+
 /// Deterministic, percentile (`p`) and mixture boundaries of `inputs` at `omega_rpm`.
 pub fn boundaries(inputs: &[LawSamples], omega_rpm: &[f64], critical_nms: f64, w_ref_n: f64, p: f64) -> Boundaries {
     let laws = inputs
@@ -209,6 +242,68 @@ pub fn boundaries(inputs: &[LawSamples], omega_rpm: &[f64], critical_nms: f64, w
         mixture_boundary_kn(&components, omega_rpm, critical_nms, w_ref_n, p)
     });
     Boundaries { laws, mixture_wob_kn }
+}
+
+/// Where a boundary lies when no part of it crosses a map's weights on bit: the map is then
+/// one colour, and its figure draws no curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum OffTheMap {
+    /// Above the map's highest weight at every speed, or nowhere: stable throughout. The
+    /// lowest boundary weight (kN) and its speed (rpm), where there is one.
+    Above { lowest: Option<(f64, f64)> },
+    /// Below the map's lowest weight at every speed: unstable throughout. The highest
+    /// boundary weight (kN) and its speed (rpm).
+    Below { highest: (f64, f64) },
+}
+
+impl OffTheMap {
+    /// Where `boundary` (kN per speed of `omega_rpm`; `None`: never unstable) lies against the
+    /// weights on bit `wob_kn` (ascending), when it lies wholly to one side of them; `None`
+    /// where it crosses them, lies on both sides, or is unknown somewhere.
+    pub fn of(boundary: &[Option<f64>], omega_rpm: &[f64], wob_kn: &[f64]) -> Option<Self> {
+        let (&lo, &hi) = (wob_kn.first()?, wob_kn.last()?);
+        if boundary.iter().flatten().any(|w| w.is_nan()) {
+            return None;
+        }
+        let finite = || {
+            boundary
+                .iter()
+                .zip(omega_rpm)
+                .filter_map(|(w, &rpm)| w.map(|w| (w, rpm)))
+        };
+        if finite().all(|(w, _)| w > hi) {
+            let lowest = finite().min_by(|a, b| a.0.total_cmp(&b.0));
+            return Some(Self::Above { lowest });
+        }
+        if boundary.iter().all(|w| w.is_some_and(|w| w < lo)) {
+            let highest = finite().max_by(|a, b| a.0.total_cmp(&b.0))?;
+            return Some(Self::Below { highest });
+        }
+        None
+    }
+
+    /// What a reader of a map drawn on `criterion` over the weights `wob_kn` must be told
+    /// about the boundary `what` ("m2's MAP boundary").
+    pub fn describe(&self, what: &str, wob_kn: &[f64], criterion: &Criterion) -> String {
+        let (lo, hi) = (wob_kn[0], wob_kn[wob_kn.len() - 1]);
+        let string = match criterion {
+            Criterion::Lumped(l) if *l == Lumped::default() => {
+                "; it is drawn for the paper's 5 km field string: a laboratory rig or another well needs its own string (the 1-DOF string's inertia, natural frequency and damping ratio, or a finite-element string file), and a record's torque unit read wrongly moves it a thousandfold"
+            }
+            _ => "; the string and the record's torque unit set where it lies",
+        };
+        match self {
+            Self::Above { lowest: Some((w, rpm)) } => format!(
+                "{what} lies above the map's highest weight on bit ({hi} kN) at every speed (lowest {w:.4e} kN, at {rpm} rpm): the whole map is stable and draws no boundary{string}"
+            ),
+            Self::Above { lowest: None } => format!(
+                "{what} does not exist at any speed of the map (the bit damping is positive there): the whole map is stable and draws no boundary"
+            ),
+            Self::Below { highest: (w, rpm) } => format!(
+                "{what} lies below the map's lowest weight on bit ({lo} kN) at every speed (highest {w:.4e} kN, at {rpm} rpm): the whole map is unstable and draws no boundary{string}"
+            ),
+        }
+    }
 }
 
 /// What decides stability at a cell: the 1-DOF closed form or a critical bit damping.
@@ -362,6 +457,52 @@ pub fn growth_rate_grid(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_boundary_wholly_off_the_map_is_said_with_where_it_lies() {
+        use super::{Criterion, Lumped, OffTheMap};
+        let (omega, wob) = ([20.0, 120.0, 220.0], [20.0, 700.0]);
+        // A laboratory record's torques on the field string: hundreds of thousands of kN.
+        let above = OffTheMap::of(&[Some(1.9e9), Some(3.1e5), Some(282_716.0)], &omega, &wob);
+        assert_eq!(
+            above,
+            Some(OffTheMap::Above {
+                lowest: Some((282_716.0, 220.0))
+            })
+        );
+        let words = above
+            .unwrap()
+            .describe("law m2's MAP boundary", &wob, &Criterion::Lumped(Lumped::default()));
+        assert!(words.starts_with("law m2's MAP boundary lies above the map's highest weight on bit (700 kN) at every speed (lowest 2.8272e5 kN, at 220 rpm): the whole map is stable"), "{words}");
+        assert!(words.contains("the paper's 5 km field string"), "{words}");
+        let own = Lumped {
+            inertia_kg_m2: 0.05,
+            ..Lumped::default()
+        };
+        assert!(
+            !above
+                .unwrap()
+                .describe("b", &wob, &Criterion::Lumped(own))
+                .contains("5 km")
+        );
+        // Never unstable at any speed, and below the lowest weight everywhere.
+        assert_eq!(
+            OffTheMap::of(&[None, None, None], &omega, &wob),
+            Some(OffTheMap::Above { lowest: None })
+        );
+        assert_eq!(
+            OffTheMap::of(&[Some(3.0), Some(1.0), Some(19.9)], &omega, &wob),
+            Some(OffTheMap::Below { highest: (19.9, 220.0) })
+        );
+        // On the map somewhere, on both sides, or unknown somewhere: nothing to say.
+        assert_eq!(OffTheMap::of(&[Some(1e6), Some(500.0), None], &omega, &wob), None);
+        assert_eq!(OffTheMap::of(&[Some(1e6), Some(5.0), Some(1e6)], &omega, &wob), None);
+        assert_eq!(
+            OffTheMap::of(&[Some(1e6), Some(f64::NAN), Some(1e6)], &omega, &wob),
+            None
+        );
+        assert_eq!(OffTheMap::of(&[Some(5.0), None, Some(5.0)], &omega, &wob), None);
+    }
+
     use super::*;
 
     fn m2_nm() -> Vec<f64> {

@@ -192,6 +192,49 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         at(0, 0) <= 0.01 && at(0, 1) >= 0.99,
         "P(unstable) at 100 rpm, 50 N and 500 N: {p:?}"
     );
+
+    // The same run on the paper's field string and map: its torques of a few N·m put every
+    // boundary hundreds of times above the map's 700 kN. Said, with where it lies, not drawn
+    // blank in silence.
+    let (code, _, stderr) = run(&["stability", "--run", out_s, "--backend", "cpu", "--samples", "50"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains(
+            "warning: law m3's MAP boundary lies above the map's highest weight on bit (700 kN) at every speed (lowest "
+        ) && stderr.contains("the paper's 5 km field string"),
+        "{stderr}"
+    );
+    // The report says so too, and takes the rig's string: then m3's boundary lies on its map.
+    let report = |dir: &str, string: &[&str]| {
+        let report = out.parent().unwrap().join(dir);
+        let mut args = vec!["report", out_s, "--out", report.to_str().unwrap()];
+        args.extend_from_slice(string);
+        let (code, _, stderr) = run(&args);
+        assert_eq!(code, 0, "{stderr}");
+        std::fs::read_to_string(report.join("report.md")).unwrap()
+    };
+    let paper = report("paper", &[]);
+    assert!(
+        paper.contains("> **Off the map:** law m3's MAP boundary lies above"),
+        "{paper}"
+    );
+    assert!(
+        paper.contains("Some boundaries lie wholly off this map and are not drawn"),
+        "{paper}"
+    );
+    let rig = report(
+        "rig",
+        &[
+            "--inertia-kg-m2",
+            "0.02",
+            "--omega-n-rad-s",
+            "5",
+            "--damping-ratio",
+            "0.1",
+        ],
+    );
+    assert!(rig.contains("| 1-DOF (ω_n = 5 rad/s, ξ = 0.1) | -0.02 |"), "{rig}");
+    assert!(!rig.contains("law m3's MAP boundary lies"), "{rig}");
 }
 
 /// A time column in milliseconds: read as such where its name says so (its time window set in

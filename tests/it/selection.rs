@@ -130,7 +130,9 @@ fn a_law_that_fits_far_better_is_recovered_in_every_replicate() {
         Some(&(c.clone(), None)),
         "a fresh check is not stale"
     );
-    let report = bitrock::report::write_paper_report(&dir.path().join("report"), &setup, &runs, None, None).unwrap();
+    let report =
+        bitrock::report::write_paper_report(&dir.path().join("report"), &setup, &runs, None, Default::default())
+            .unwrap();
     let md = std::fs::read_to_string(report.dir.join("report.md")).unwrap();
     assert!(md.contains("## Can the selection be trusted?"), "{md}");
     assert!(md.contains(&c.rows[0].verdict));

@@ -31,6 +31,15 @@ fn map_ranges(p: &Prepared) -> ((f64, f64), (f64, f64)) {
     )
 }
 
+/// A map figure's caption where some boundary lies wholly off the map (report.md says which).
+fn off_the_map_caption(p: &Prepared) -> &'static str {
+    if p.off_the_map().is_empty() {
+        ""
+    } else {
+        " Some boundaries lie wholly off this map and are not drawn (report.md, Stability, says where)."
+    }
+}
+
 /// Figure 8, deterministic: the 1-DOF string's stability map with each law's MAP parameters.
 pub(super) fn render_deterministic_map(p: &Prepared) -> Result<Rendered> {
     let (omega_range, wob_range) = map_ranges(p);
@@ -38,8 +47,9 @@ pub(super) fn render_deterministic_map(p: &Prepared) -> Result<Rendered> {
         "fig08_map_deterministic".into(),
         format!(
             "Stability map of the 1-DOF string with each law's MAP parameters ({}): operating points above a \
-             curve are unstable, below it stable.",
-            p.runs[0].run.label
+             curve are unstable, below it stable.{}",
+            p.runs[0].run.label,
+            off_the_map_caption(p)
         ),
         FIGURE_SIZE,
         &BoundaryPanels {
@@ -81,10 +91,11 @@ pub(super) fn render_stochastic_map(p: &Prepared) -> Result<Rendered> {
         format!(
             "P(unstable) of the 1-DOF string under the mixture of the laws weighted by their probability (colour; {} samples per law), \
              each law's MAP boundary (solid), its {} % percentile boundary (dashed) and the mixture's {} % \
-             boundary (black dashed).",
+             boundary (black dashed).{}",
             s.samples_per_law,
             s.percentile * 100.0,
-            s.percentile * 100.0
+            s.percentile * 100.0,
+            off_the_map_caption(p)
         ),
         FIGURE_SIZE,
         &stochastic,
