@@ -2,7 +2,7 @@
 //! [`bitrock::run::abc`]; then the population table and posterior, or run.json on stdout.
 
 use super::args::finite_number;
-use super::args::{DataArgs, FitArgs, load_data, set_threads};
+use super::args::{DataArgs, FitArgs, StructureArgs, load_data, set_threads};
 use super::print;
 use super::progress::RunProgress;
 use bitrock::Error;
@@ -146,6 +146,7 @@ pub struct AbcCmd {
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
         "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior_rule", "prior_k", "prior", "epsilons",
         "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights", "refill", "law_proposal", "perturbation",
+        "structure", "fe_file", "dp_elements", "bha_elements", "alpha", "beta", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
     ])]
     pub resume: Option<PathBuf>,
     /// No progress bar or population lines on stderr.
@@ -155,6 +156,10 @@ pub struct AbcCmd {
     pub data_args: DataArgs,
     #[command(flatten)]
     pub fit: FitArgs,
+    /// The drill string of the run's maps and advice, kept with the run (stability --run and
+    /// report map on it).
+    #[command(flatten)]
+    pub string: StructureArgs,
     #[command(flatten)]
     pub abc: AbcArgs,
     /// Print JSON instead of tables.
@@ -201,7 +206,10 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
         }
         (None, Some(dir)) => {
             let job = abc::Job {
-                config: run_config(&cmd.fit, &cmd.abc)?,
+                config: bitrock::run::abc::Config {
+                    string: cmd.string.given().spec()?,
+                    ..run_config(&cmd.fit, &cmd.abc)?
+                },
                 summary_population: cmd.abc.summary_population,
                 out: Some(bitrock::run::Dir {
                     path: dir.clone(),

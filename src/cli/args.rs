@@ -4,7 +4,7 @@
 use bitrock::Law;
 use bitrock::data::{self, DataOptions, FieldData, SplitRule};
 use bitrock::fit::FitOptions;
-use bitrock::run::stability::Structure;
+use bitrock::run::stability::{DrillStringSpec, StringGiven, Structure};
 use bitrock::stability::fe::DrillStringSettings;
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -219,13 +219,14 @@ pub struct FeArgs {
 }
 
 /// The drill string stability is judged on: the 1-DOF model or the finite-element string,
-/// with the settings of each.
+/// with the settings of each; what is not given comes from the string it is laid over (a run's
+/// or an evidence's own, else the paper's).
 #[derive(Debug, Args)]
 pub struct StructureArgs {
-    /// Structure: 1dof (the paper's) or fe (the finite-element string, its critical bit
-    /// damping found by bisection before any map).
-    #[arg(long, value_enum, default_value_t = Structure::Lumped)]
-    pub structure: Structure,
+    /// Structure: 1dof (the 1-DOF string) or fe (the finite-element string, its critical bit
+    /// damping found by bisection before any map) [default: a run's own, else 1dof].
+    #[arg(long, value_enum)]
+    pub structure: Option<Structure>,
     #[command(flatten)]
     pub fe: FeArgs,
     #[command(flatten)]
@@ -233,36 +234,46 @@ pub struct StructureArgs {
 }
 
 impl StructureArgs {
-    /// What decides stability on the structure these flags describe (the finite-element
-    /// string's bisection runs here).
-    pub fn criterion(&self) -> bitrock::Result<bitrock::stability::map::Criterion> {
-        bitrock::run::stability::criterion(self.structure, self.lumped.lumped(), &self.fe.settings(), &mut |line| {
-            super::print::note(line)
-        })
+    /// The string as these flags give it.
+    pub fn given(&self) -> StringGiven {
+        StringGiven {
+            structure: self.structure,
+            inertia_kg_m2: self.lumped.inertia_kg_m2,
+            omega_n_rad_s: self.lumped.omega_n_rad_s,
+            damping_ratio: self.lumped.damping_ratio,
+            fe: self.fe.settings(),
+        }
+    }
+
+    /// The string these flags give, laid over `base` (a run's own; `None`: the paper's).
+    pub fn over(&self, base: Option<&DrillStringSpec>) -> (Structure, Lumped, DrillStringSettings) {
+        self.given().over(base)
     }
 }
 
-/// The equivalent 1-DOF string.
+/// The equivalent 1-DOF string [default: a run's own, else the paper's 5 km field string].
 #[derive(Debug, Args, Clone)]
 pub struct LumpedArgs {
-    /// Equivalent moment of inertia I_eq, kg·m².
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Lumped::default().inertia_kg_m2, value_name = "KG_M2")]
-    pub inertia_kg_m2: f64,
-    /// Natural frequency omega_n, rad/s.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Lumped::default().omega_n_rad_s, value_name = "RAD_S")]
-    pub omega_n_rad_s: f64,
-    /// Damping ratio xi.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Lumped::default().damping_ratio, value_name = "XI")]
-    pub damping_ratio: f64,
+    /// Equivalent moment of inertia I_eq, kg·m² [default: the paper's 383.33].
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KG_M2")]
+    pub inertia_kg_m2: Option<f64>,
+    /// Natural frequency omega_n, rad/s [default: the paper's 0.85].
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "RAD_S")]
+    pub omega_n_rad_s: Option<f64>,
+    /// Damping ratio xi [default: the paper's 0.25].
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "XI")]
+    pub damping_ratio: Option<f64>,
 }
 
 impl LumpedArgs {
-    /// The 1-DOF model these flags describe (validate before use).
+    /// The 1-DOF model these flags describe, the paper's where they are silent (validate
+    /// before use).
     pub fn lumped(&self) -> Lumped {
+        let paper = Lumped::default();
         Lumped {
-            inertia_kg_m2: self.inertia_kg_m2,
-            omega_n_rad_s: self.omega_n_rad_s,
-            damping_ratio: self.damping_ratio,
+            inertia_kg_m2: self.inertia_kg_m2.unwrap_or(paper.inertia_kg_m2),
+            omega_n_rad_s: self.omega_n_rad_s.unwrap_or(paper.omega_n_rad_s),
+            damping_ratio: self.damping_ratio.unwrap_or(paper.damping_ratio),
         }
     }
 
@@ -283,6 +294,7 @@ impl FeArgs {
             bha_elements: self.bha_elements,
             alpha: self.alpha,
             beta: self.beta,
+            base: None,
         }
     }
 }

@@ -1,7 +1,7 @@
 //! `bitrock evidence`: the marginal likelihood of each law on a record and the posterior law
 //! probabilities it gives, through [`bitrock::run::evidence`]; tables or JSON.
 
-use super::args::{DataArgs, FitArgs, finite_number, load_data, set_threads};
+use super::args::{DataArgs, FitArgs, StructureArgs, finite_number, load_data, set_threads};
 use super::print;
 use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, Start, describe_starts};
 use bitrock::data::FieldData;
@@ -24,6 +24,9 @@ pub struct EvidenceCmd {
     pub data_args: DataArgs,
     #[command(flatten)]
     pub fit: FitArgs,
+    /// The drill string of the advice, kept with the evidence (stability --run maps on it).
+    #[command(flatten)]
+    pub string: StructureArgs,
     /// The prior boxes integrated over.
     #[arg(long, value_enum, default_value_t = Boxes::Physical)]
     pub boxes: Boxes,
@@ -100,6 +103,7 @@ pub struct EvidenceCmd {
         "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
         "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "boxes", "prior_scale", "delta", "prior", "noise",
         "start_from", "particles", "islands", "max_stages", "ess_share", "max_sweeps", "seed",
+        "structure", "fe_file", "dp_elements", "bha_elements", "alpha", "beta", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
     ])]
     pub resume: Option<PathBuf>,
     /// No progress lines on stderr.
@@ -204,7 +208,9 @@ fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<run::evidence::Job> {
         seed: cmd.seed,
         backend: cmd.backend.unwrap_or_default(),
     };
-    Ok(settings.job(cmd.fit.laws()?, cmd.fit.options()?)?)
+    let mut job = settings.job(cmd.fit.laws()?, cmd.fit.options()?)?;
+    job.string = cmd.string.given().spec()?;
+    Ok(job)
 }
 
 /// The evidence's check, its directory and posterior written, its tables or JSON printed.
@@ -247,7 +253,7 @@ fn finish(
             )
         })
         .transpose()?;
-    let advice = analysis.record_advice(data, job.backend);
+    let advice = analysis.record_advice(data, job, &mut |line| print::note(line))?;
     let document = |sets: bool| {
         EvidenceAnalysis::with_advice(
             analysis.document(data, &job.prior.describe(), sets),
@@ -282,9 +288,13 @@ fn finish(
             check_table(&mut out, check)?;
         }
         if let Some(advice) = &advice {
+            let string = job
+                .string
+                .as_ref()
+                .map_or_else(|| "the paper's 1-DOF string".to_string(), |s| s.describe());
             writeln!(
                 out,
-                "\nadvice at the record's operating point (the paper's 1-DOF string): {}",
+                "\nadvice at the record's operating point ({string}): {}",
                 advice.words
             )?;
         }

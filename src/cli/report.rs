@@ -3,6 +3,7 @@
 
 use super::args::{FeArgs, LumpedArgs};
 use bitrock::report::StabilitySettings;
+use bitrock::run::stability::StringGiven;
 use bitrock::watch::store::is_watch_dir;
 use clap::Args;
 use std::io::Write;
@@ -35,15 +36,29 @@ pub struct ReportCmd {
     pub fe: FeArgs,
 }
 
-/// The maps the flags describe: the string given, else the paper's.
-fn stability(cmd: &ReportCmd) -> bitrock::Result<StabilitySettings> {
-    let fe = cmd.fe.settings();
+/// The maps the flags describe: the string they give, laid over the first run's own (else the
+/// paper's); a finite-element string given or kept is compared instead of the paper's three.
+fn stability(cmd: &ReportCmd) -> anyhow::Result<StabilitySettings> {
+    let stored = bitrock::run::stability::stored_string(&cmd.runs[0])?;
+    if let Some(string) = &stored {
+        super::print::note(format_args!("note: the run's own drill string: {}", string.describe()));
+    }
+    let given = StringGiven {
+        inertia_kg_m2: cmd.lumped.inertia_kg_m2,
+        omega_n_rad_s: cmd.lumped.omega_n_rad_s,
+        damping_ratio: cmd.lumped.damping_ratio,
+        fe: cmd.fe.settings(),
+        ..StringGiven::default()
+    };
+    let (_, lumped, fe) = given.over(stored.as_ref());
     let paper = StabilitySettings::default();
+    let own_fe = fe.first_given().is_some() || fe.base.is_some();
     Ok(StabilitySettings {
-        lumped: cmd.lumped.lumped(),
-        strings: match fe.first_given() {
-            Some(_) => vec![fe.drill_string()?],
-            None => paper.strings.clone(),
+        lumped,
+        strings: if own_fe {
+            vec![fe.drill_string()?]
+        } else {
+            paper.strings.clone()
         },
         simulated: cmd.simulate.then(Default::default),
         ..paper

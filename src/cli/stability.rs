@@ -8,6 +8,7 @@ use bitrock::data::BitSeen;
 use bitrock::eval::Backend;
 use bitrock::eval::strings::Ran;
 use bitrock::laws::PAPER_W_REF_N;
+use bitrock::run;
 use bitrock::run::advice::{self, Adviser};
 use bitrock::run::stability::{DEFAULT_OMEGA_RPM, DEFAULT_PERCENT, DEFAULT_SAMPLES, DEFAULT_WOB_KN, Structure};
 use bitrock::run::stability::{MapSource, StabilityJob};
@@ -117,22 +118,28 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     }
     let (source, own_w_ref_n, evidence_bit) = map_source(cmd)?;
     let w_ref_n = map_w_ref_n(cmd.w_ref_kn, own_w_ref_n);
+    // A run's own string, under what the flags give.
+    let stored = cmd
+        .run
+        .as_deref()
+        .map(run::stability::stored_string)
+        .transpose()?
+        .flatten();
+    if let Some(string) = &stored {
+        super::print::note(format_args!("note: the run's own drill string: {}", string.describe()));
+    }
+    let (structure, lumped, fe) = cmd.string.over(stored.as_ref());
     let job = StabilityJob {
         source,
         omega_rpm: omega,
         wob_kn: wob,
-        criterion: Criterion::Lumped(cmd.string.lumped.lumped()),
+        criterion: Criterion::Lumped(lumped),
         w_ref_n,
         percentile: cmd.percentile / 100.0,
         samples: cmd.samples,
         backend: cmd.backend,
     }
-    .on(
-        cmd.string.structure,
-        cmd.string.lumped.lumped(),
-        &cmd.string.fe.settings(),
-        &mut |line| super::print::note(line),
-    )?;
+    .on(structure, lumped, &fe, &mut |line| super::print::note(line))?;
     let maps = job.run(&mut |line| super::print::note(line))?;
     if let (MapSource::Run(dir), Some(why)) = (&job.source, &maps.early_end) {
         super::print::note(format_args!("note: {}: {why}", dir.display()));
@@ -153,11 +160,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     }
     // A string the simulator cannot hold is refused where the simulated maps are asked for;
     // the record's advice then says only what the linear maps can.
-    let chain = strings::chain(
-        cmd.string.structure,
-        &cmd.string.lumped.lumped(),
-        &cmd.string.fe.settings(),
-    );
+    let chain = strings::chain(structure, &lumped, &fe);
     // At the record, the parameters are for the W_ref its posterior was scaled to, or for
     // the weight on bit it drilled with.
     let scaled_w_ref_n = cmd.w_ref_kn.map(|kn| kn * 1000.0).or(own_w_ref_n).or(maps.run_w_ref_n);
@@ -179,7 +182,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let mut out = super::print::stdout();
     if cmd.json {
         let mut v = json!({
-            "structure": match cmd.string.structure { Structure::Lumped => "1dof", Structure::Fe => "fe" },
+            "structure": match structure { Structure::Lumped => "1dof", Structure::Fe => "fe" },
             "critical_bit_damping_nms": c,
             "percentile": cmd.percentile,
             "omega_rpm": omega,
@@ -196,7 +199,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         }
         super::print::json(&mut out, v)?;
     } else {
-        print_table(&mut out, cmd.string.structure, c, omega, &columns)?;
+        print_table(&mut out, structure, c, omega, &columns)?;
         if let Some(sim) = &simulated {
             print_simulated(sim, &mut out)?;
         }

@@ -233,6 +233,7 @@ pub fn run(cmd: &WatchCmd) -> anyhow::Result<ExitCode> {
 
 /// The watch's settings from the flags.
 fn settings(cmd: &WatchCmd) -> anyhow::Result<WatchSettings> {
+    let (structure, lumped, fe) = cmd.string.over(None);
     let defaults = WatchSettings::default();
     Ok(WatchSettings {
         laws: parse_laws(&cmd.laws)?,
@@ -260,17 +261,15 @@ fn settings(cmd: &WatchCmd) -> anyhow::Result<WatchSettings> {
         backend: cmd.backend,
         warm_start: !cmd.cold_start,
         criterion: {
-            if cmd.string.structure == Structure::Fe {
+            if structure == Structure::Fe {
                 print::note(format_args!(
                     "note: finding the finite-element string's critical bit damping (its eigenvalues, by bisection)"
                 ));
             }
-            cmd.string.criterion()?
+            bitrock::run::stability::criterion(structure, lumped, &fe, &mut |line| print::note(line))?
         },
-        fe_chain: match cmd.string.structure {
-            Structure::Fe => {
-                bitrock::run::strings::chain(Structure::Fe, &cmd.string.lumped.lumped(), &cmd.string.fe.settings()).ok()
-            }
+        fe_chain: match structure {
+            Structure::Fe => bitrock::run::strings::chain(Structure::Fe, &lumped, &fe).ok(),
             Structure::Lumped => None,
         },
         wits: cmd

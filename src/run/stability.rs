@@ -7,7 +7,7 @@ use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::laws::Law;
 use crate::run;
-use crate::stability::fe::DrillStringSettings;
+use crate::stability::fe::{DrillString, DrillStringSettings};
 use crate::stability::lumped::Lumped;
 use crate::stability::map::{self, Boundaries, Criterion, LawSamples};
 use std::path::PathBuf;
@@ -320,6 +320,110 @@ impl StabilityJob {
         }
         map::probability_grid_with(&grid, pace)
     }
+}
+
+/// A drill string resolved, as a run or an evidence keeps it: the structure its maps and advice
+/// are judged on, the 1-DOF string, and for the finite-element structure the string as read
+/// and overridden when the run was made (a file changed later does not change the run).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DrillStringSpec {
+    pub structure: Structure,
+    pub lumped: Lumped,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fe: Option<DrillString>,
+}
+
+impl DrillStringSpec {
+    /// The string `structure`, `lumped` and `fe` describe, checked as [`criterion`] checks it.
+    pub fn of(structure: Structure, lumped: Lumped, fe: &DrillStringSettings) -> Result<Self> {
+        check_structure(structure, &lumped, fe)?;
+        let fe = match structure {
+            Structure::Lumped => None,
+            Structure::Fe => Some(fe.drill_string()?),
+        };
+        Ok(Self { structure, lumped, fe })
+    }
+
+    /// In one line, for a run's summary and a report.
+    pub fn describe(&self) -> String {
+        let l = &self.lumped;
+        let one_dof = format!(
+            "1-DOF string I_eq = {} kg·m², ω_n = {} rad/s, ξ = {}",
+            l.inertia_kg_m2, l.omega_n_rad_s, l.damping_ratio
+        );
+        match &self.fe {
+            Some(s) => format!(
+                "finite-element string of {} + {} elements (α = {} 1/s, β = {} s); {one_dof}",
+                s.dp_elements, s.bha_elements, s.alpha, s.beta
+            ),
+            None => one_dof,
+        }
+    }
+}
+
+/// A drill string as a user gives it, a field at a time: what is not given comes from the
+/// string it is laid over (a run's or an evidence's own, else the paper's).
+#[derive(Clone, Debug, Default)]
+pub struct StringGiven {
+    pub structure: Option<Structure>,
+    pub inertia_kg_m2: Option<f64>,
+    pub omega_n_rad_s: Option<f64>,
+    pub damping_ratio: Option<f64>,
+    /// The finite-element string's file and overrides (its `base` is set by [`Self::over`]).
+    pub fe: DrillStringSettings,
+}
+
+impl StringGiven {
+    /// True where any field is given.
+    pub fn is_given(&self) -> bool {
+        self.structure.is_some()
+            || self.inertia_kg_m2.is_some()
+            || self.omega_n_rad_s.is_some()
+            || self.damping_ratio.is_some()
+            || self.fe.first_given().is_some()
+    }
+
+    /// The string laid over `base` (`None`: the paper's 1-DOF string): the structure, the 1-DOF
+    /// string and the finite-element settings every map and simulation takes.
+    pub fn over(&self, base: Option<&DrillStringSpec>) -> (Structure, Lumped, DrillStringSettings) {
+        let paper = Lumped::default();
+        let lumped = base.map_or(paper, |b| b.lumped);
+        let structure = self.structure.or(base.map(|b| b.structure)).unwrap_or_default();
+        let lumped = Lumped {
+            inertia_kg_m2: self.inertia_kg_m2.unwrap_or(lumped.inertia_kg_m2),
+            omega_n_rad_s: self.omega_n_rad_s.unwrap_or(lumped.omega_n_rad_s),
+            damping_ratio: self.damping_ratio.unwrap_or(lumped.damping_ratio),
+        };
+        let fe = DrillStringSettings {
+            base: base.and_then(|b| b.fe.clone()),
+            ..self.fe.clone()
+        };
+        (structure, lumped, fe)
+    }
+
+    /// The string a run made with these settings keeps: `None` where none is given (its maps
+    /// take the paper's), refused as [`criterion`] refuses it.
+    pub fn spec(&self) -> Result<Option<DrillStringSpec>> {
+        if !self.is_given() {
+            return Ok(None);
+        }
+        let (structure, lumped, fe) = self.over(None);
+        DrillStringSpec::of(structure, lumped, &fe).map(Some)
+    }
+}
+
+/// The drill string kept with the run or the evidence in `dir`, where it was made with one.
+pub fn stored_string(dir: &std::path::Path) -> Result<Option<DrillStringSpec>> {
+    if run::dir::is_evidence_dir(dir) {
+        return Ok(run::evidence::dir::job(dir)?.and_then(|job| job.string));
+    }
+    if !run::dir::is_run_dir(dir) {
+        return Ok(None);
+    }
+    let config = run::abc::Store::open(dir)?.config()?;
+    Ok(serde_json::from_value::<run::abc::Config>(config)
+        .ok()
+        .and_then(|c| c.string))
 }
 
 /// Refuses finite-element settings given for the 1-DOF string, and a 1-DOF model that is not

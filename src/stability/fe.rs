@@ -124,6 +124,9 @@ pub struct DrillStringSettings {
     pub alpha: Option<f64>,
     /// Stiffness-proportional Rayleigh damping β, s.
     pub beta: Option<f64>,
+    /// The string the settings apply over where no file is given (a run's stored string);
+    /// `None`: the paper's.
+    pub base: Option<DrillString>,
 }
 
 impl DrillStringSettings {
@@ -142,9 +145,10 @@ impl DrillStringSettings {
 
     /// The drill string: the file's (or the paper's) with the overrides, validated.
     pub fn drill_string(&self) -> Result<DrillString> {
-        let mut s = match &self.fe_file {
-            Some(path) => DrillString::from_toml_file(path)?,
-            None => DrillString::default(),
+        let mut s = match (&self.fe_file, &self.base) {
+            (Some(path), _) => DrillString::from_toml_file(path)?,
+            (None, Some(base)) => base.clone(),
+            (None, None) => DrillString::default(),
         };
         s.dp_elements = self.dp_elements.unwrap_or(s.dp_elements);
         s.bha_elements = self.bha_elements.unwrap_or(s.bha_elements);

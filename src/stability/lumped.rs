@@ -10,7 +10,7 @@
 use crate::error::{Error, Result};
 
 /// The equivalent single-degree-of-freedom drill string.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Lumped {
     /// Equivalent moment of inertia I_eq (kg·m²).
     pub inertia_kg_m2: f64,

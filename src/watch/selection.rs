@@ -121,6 +121,8 @@ impl Watch {
             noise: Some(self.settings.evidence.noise),
             warm,
             separations: false,
+            // The watch advises on its own string, once per window, not through the evidence.
+            string: None,
         };
         let mut analysis = match of_window(job.run(data, crate::run::Scoring::Here, observer))? {
             Ok(analysis) => analysis,

@@ -1012,7 +1012,7 @@ fn finish(
     data: &bitrock::data::FieldData,
 ) -> serde_json::Value {
     // As `bitrock evidence --out` writes it: with the advice at the record's operating point.
-    let advice = analysis.record_advice(data, job.backend);
+    let advice = analysis.record_advice(data, job, &mut |_| {}).unwrap();
     let document = EvidenceAnalysis::with_advice(
         analysis.document(data, &job.prior.describe(), true),
         data,

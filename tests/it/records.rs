@@ -132,7 +132,16 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     let out_s = out.to_str().unwrap();
-    let (code, _, stderr) = run(&[
+    // The rig's own light string, given to the run and kept with it.
+    let rig_string = [
+        "--inertia-kg-m2",
+        "0.02",
+        "--omega-n-rad-s",
+        "5",
+        "--damping-ratio",
+        "0.1",
+    ];
+    let mut args = vec![
         "abc",
         path,
         "--particles",
@@ -142,18 +151,20 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         "--out",
         out_s,
         "--quiet",
-    ]);
+    ];
+    args.extend_from_slice(&rig_string);
+    let (code, _, stderr) = run(&args);
     assert_eq!(code, 0, "{stderr}");
+    let document = json(&std::fs::read_to_string(out.join("run.json")).unwrap());
+    assert_eq!(
+        document["config"]["string"],
+        serde_json::json!({"structure": "1dof", "lumped": {"inertia_kg_m2": 0.02, "omega_n_rad_s": 5.0, "damping_ratio": 0.1}})
+    );
+    // Mapped on the run's own string without naming it again.
     let (code, stdout, stderr) = run(&[
         "stability",
         "--run",
         out_s,
-        "--inertia-kg-m2",
-        "0.02",
-        "--omega-n-rad-s",
-        "5",
-        "--damping-ratio",
-        "0.1",
         "--w-ref-kn",
         "0.5",
         "--omega-rpm",
@@ -166,6 +177,10 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
     ]);
     assert_eq!(code, 0, "{stderr}");
     let map = json(&stdout);
+    assert!(
+        stderr.contains("note: the run's own drill string: 1-DOF string I_eq = 0.02 kg·m², ω_n = 5 rad/s, ξ = 0.1"),
+        "{stderr}"
+    );
     // 1-DOF: c_b* = −c_eq = −2 ξ ω_n I = −0.02 N·m·s/rad.
     let critical = map["critical_bit_damping_nms"].as_f64().unwrap();
     assert!((critical + 0.02).abs() < 1e-12, "{critical}");
@@ -193,10 +208,20 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         "P(unstable) at 100 rpm, 50 N and 500 N: {p:?}"
     );
 
-    // The same run on the paper's field string and map: its torques of a few N·m put every
-    // boundary hundreds of times above the map's 700 kN. Said, with where it lies, not drawn
-    // blank in silence.
-    let (code, _, stderr) = run(&["stability", "--run", out_s, "--backend", "cpu", "--samples", "50"]);
+    // The same run on the paper's field string (flags over the run's own) and map: its torques
+    // of a few N·m put every boundary hundreds of times above the map's 700 kN. Said, with
+    // where it lies, not drawn blank in silence.
+    let paper_string = [
+        "--inertia-kg-m2",
+        "383.33",
+        "--omega-n-rad-s",
+        "0.85",
+        "--damping-ratio",
+        "0.25",
+    ];
+    let mut args = vec!["stability", "--run", out_s, "--backend", "cpu", "--samples", "50"];
+    args.extend_from_slice(&paper_string);
+    let (code, _, stderr) = run(&args);
     assert_eq!(code, 0, "{stderr}");
     assert!(
         stderr.contains(
@@ -204,7 +229,8 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         ) && stderr.contains("the paper's 5 km field string"),
         "{stderr}"
     );
-    // The report says so too, and takes the rig's string: then m3's boundary lies on its map.
+    // The report says so too, and takes the run's own string: then m3's boundary lies on its
+    // map.
     let report = |dir: &str, string: &[&str]| {
         let report = out.parent().unwrap().join(dir);
         let mut args = vec!["report", out_s, "--out", report.to_str().unwrap()];
@@ -213,7 +239,7 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         assert_eq!(code, 0, "{stderr}");
         std::fs::read_to_string(report.join("report.md")).unwrap()
     };
-    let paper = report("paper", &[]);
+    let paper = report("paper", &paper_string);
     assert!(
         paper.contains("> **Off the map:** law m3's MAP boundary lies above"),
         "{paper}"
@@ -222,19 +248,72 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         paper.contains("Some boundaries lie wholly off this map and are not drawn"),
         "{paper}"
     );
-    let rig = report(
-        "rig",
-        &[
-            "--inertia-kg-m2",
-            "0.02",
-            "--omega-n-rad-s",
-            "5",
-            "--damping-ratio",
-            "0.1",
-        ],
-    );
+    let rig = report("rig", &[]);
     assert!(rig.contains("| 1-DOF (ω_n = 5 rad/s, ξ = 0.1) | -0.02 |"), "{rig}");
     assert!(!rig.contains("law m3's MAP boundary lies"), "{rig}");
+}
+
+/// An evidence given the rig's string keeps it: its advice is drawn on it and said to be, and
+/// its map is the rig's without naming the string again.
+#[test]
+fn the_evidence_keeps_its_drill_string_for_its_advice_and_maps() {
+    let path = rig_record().to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("evidence");
+    let out_s = out.to_str().unwrap();
+    let (code, stdout, stderr) = run(&[
+        "evidence",
+        path,
+        "--laws",
+        "m2,m3",
+        "--particles",
+        "100",
+        "--islands",
+        "2",
+        "--noise",
+        "iid",
+        "--backend",
+        "cpu",
+        "--inertia-kg-m2",
+        "0.02",
+        "--omega-n-rad-s",
+        "5",
+        "--damping-ratio",
+        "0.1",
+        "--out",
+        out_s,
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains(
+            "advice at the record's operating point (1-DOF string I_eq = 0.02 kg·m², ω_n = 5 rad/s, ξ = 0.1): "
+        ),
+        "{stdout}"
+    );
+    let job = json(&std::fs::read_to_string(out.join("job.json")).unwrap());
+    assert_eq!(job["job"]["string"]["lumped"]["inertia_kg_m2"], 0.02, "{job}");
+    let (code, stdout, stderr) = run(&[
+        "stability",
+        "--run",
+        out_s,
+        "--backend",
+        "cpu",
+        "--samples",
+        "20",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("note: the run's own drill string: 1-DOF string I_eq = 0.02 kg·m²"),
+        "{stderr}"
+    );
+    let critical = json(&stdout)["critical_bit_damping_nms"].as_f64().unwrap();
+    assert!((critical + 0.02).abs() < 1e-12, "{critical}");
+    // A resumed evidence keeps its own string: a string given with --resume is refused.
+    let (code, _, stderr) = run(&["evidence", "--resume", out_s, "--damping-ratio", "0.2"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--damping-ratio"), "{stderr}");
 }
 
 /// A time column in milliseconds: read as such where its name says so (its time window set in

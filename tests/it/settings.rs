@@ -44,3 +44,32 @@ fn every_setting_of_every_kind_is_a_flag_of_its_command() {
     let missing = missing_flags::<bitrock::run::coupled::Settings>("coupled", &[]);
     assert!(missing.is_empty(), "coupled settings without a flag: {missing:?}");
 }
+
+/// The drill string is a setting of every command that maps or advises, by the same flags:
+/// `abc` and `evidence` keep it with what they write, `stability`, `report` and `watch` map
+/// and advise on it.
+#[test]
+fn the_drill_string_is_a_flag_of_every_command_that_maps_or_advises() {
+    let string = [
+        "--inertia-kg-m2",
+        "--omega-n-rad-s",
+        "--damping-ratio",
+        "--fe-file",
+        "--dp-elements",
+        "--bha-elements",
+        "--alpha",
+        "--beta",
+    ];
+    for command in ["abc", "evidence", "stability", "watch", "report"] {
+        let (code, help, _) = outcome(bin().args([command, "--help"]));
+        assert_eq!(code, 0);
+        let missing: Vec<&str> = string
+            .iter()
+            .copied()
+            .filter(|flag| !help.contains(&format!("{flag} ")))
+            .collect();
+        assert!(missing.is_empty(), "{command} lacks {missing:?}");
+        // The report maps on the 1-DOF string and compares a finite-element one: no choice.
+        assert_eq!(help.contains("--structure "), command != "report", "{command}");
+    }
+}

@@ -31,6 +31,7 @@ fn config(particles: usize, max_populations: usize, eps_min: f64) -> run::abc::C
             ..Schedule::default()
         })),
         eps_min_from_record: false,
+        string: None,
     }
 }
 

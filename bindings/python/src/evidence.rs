@@ -33,7 +33,8 @@ pub(crate) fn evidence(
 ) -> PyResult<String> {
     let laws = self::laws(py, laws)?.unwrap_or_else(|| Law::ALL.to_vec());
     let settings: run::evidence::Settings = crate::errors::settings(options)?;
-    let job = check(py, settings.job(laws, fit_options(py, options)?))?;
+    let mut job = check(py, settings.job(laws, fit_options(py, options)?))?;
+    job.string = check(py, crate::stability::string_given(py, options)?.spec())?;
     let replicates: Option<usize> = kwarg(options, "check")?;
     if let Some(k) = replicates {
         check(py, check_replicates(k))?;
@@ -164,7 +165,17 @@ fn compute(
         return Err(e);
     }
     let (analysis, selection) = check(py, result)?;
-    let advice = py.detach(|| analysis.record_advice(data, job.backend));
+    let mut said = Vec::new();
+    let advice = check(
+        py,
+        py.detach(|| analysis.record_advice(data, job, &mut |line| said.push(line))),
+    )?;
+    for line in said {
+        bitrock::abc::Observer::note(&mut observer, line);
+    }
+    if let Some(e) = observer.take_raised() {
+        return Err(e);
+    }
     let mut document = bitrock::run::evidence::EvidenceAnalysis::with_advice(
         analysis.document(data, &job.prior.describe(), true),
         data,

@@ -333,6 +333,14 @@ impl Run {
         Some((setup.data.bit, w_ref_n))
     }
 
+    /// The drill string a run kept in memory was made with, where it was given one.
+    pub(crate) fn string_in_memory(&self) -> Option<bitrock::run::stability::DrillStringSpec> {
+        let setup = &self.kept.as_ref()?.setup;
+        serde_json::from_value::<run::abc::Config>(setup.config.clone())
+            .ok()?
+            .string
+    }
+
     /// Population `g`'s particles: held in memory, or read from the store.
     fn population_particles(
         &self,
@@ -534,5 +542,7 @@ pub(crate) fn read_summary(dir: &Path) -> bitrock::Result<String> {
 pub(crate) fn run_config(py: Python<'_>, kw: &Bound<'_, PyDict>) -> PyResult<run::abc::Config> {
     let settings: Settings = crate::errors::settings(kw)?;
     let laws = laws(py, kwarg(kw, "laws")?)?;
-    check(py, settings.config(laws, fit_options(py, kw)?))
+    let config = check(py, settings.config(laws, fit_options(py, kw)?))?;
+    let string = check(py, crate::stability::string_given(py, kw)?.spec())?;
+    Ok(run::abc::Config { string, ..config })
 }

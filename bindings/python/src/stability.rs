@@ -2,7 +2,7 @@
 
 use crate::errors::*;
 use bitrock::error::Error;
-use bitrock::run::stability::Structure;
+use bitrock::run::stability::{StringGiven, Structure};
 use bitrock::stability::{fe::DrillStringSettings, lumped::Lumped};
 use bitrock::units::TorqueUnit;
 use numpy::{PyArray1, PyArrayMethods};
@@ -10,28 +10,33 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
 
-/// The structure stability is judged on, from `structure` ("1dof" or "fe"), the 1-DOF model's
-/// `inertia_kg_m2`, `omega_n_rad_s`, `damping_ratio` and the finite-element string's `fe_file`,
-/// `dp_elements`, `bha_elements`, `alpha`, `beta` (as the command line's flags).
+/// The drill string the keyword arguments give (`structure`, `inertia_kg_m2`, `omega_n_rad_s`,
+/// `damping_ratio`, `fe_file`, `dp_elements`, `bha_elements`, `alpha`, `beta`), each field
+/// given or not.
+pub(crate) fn string_given(py: Python<'_>, options: &Bound<'_, PyDict>) -> PyResult<StringGiven> {
+    Ok(StringGiven {
+        structure: named(py, "structure", kwarg(options, "structure")?)?,
+        inertia_kg_m2: kwarg(options, "inertia_kg_m2")?,
+        omega_n_rad_s: kwarg(options, "omega_n_rad_s")?,
+        damping_ratio: kwarg(options, "damping_ratio")?,
+        fe: DrillStringSettings {
+            fe_file: kwarg(options, "fe_file")?,
+            dp_elements: kwarg(options, "dp_elements")?,
+            bha_elements: kwarg(options, "bha_elements")?,
+            alpha: kwarg(options, "alpha")?,
+            beta: kwarg(options, "beta")?,
+            base: None,
+        },
+    })
+}
+
+/// The structure, 1-DOF string and finite-element settings the keyword arguments give, over
+/// the paper's string.
 pub(crate) fn structure_options(
     py: Python<'_>,
     options: &Bound<'_, PyDict>,
 ) -> PyResult<(Structure, Lumped, DrillStringSettings)> {
-    let lumped_defaults = Lumped::default();
-    let lumped = Lumped {
-        inertia_kg_m2: kwarg(options, "inertia_kg_m2")?.unwrap_or(lumped_defaults.inertia_kg_m2),
-        omega_n_rad_s: kwarg(options, "omega_n_rad_s")?.unwrap_or(lumped_defaults.omega_n_rad_s),
-        damping_ratio: kwarg(options, "damping_ratio")?.unwrap_or(lumped_defaults.damping_ratio),
-    };
-    let fe = DrillStringSettings {
-        fe_file: kwarg(options, "fe_file")?,
-        dp_elements: kwarg(options, "dp_elements")?,
-        bha_elements: kwarg(options, "bha_elements")?,
-        alpha: kwarg(options, "alpha")?,
-        beta: kwarg(options, "beta")?,
-    };
-    let structure: Structure = named(py, "structure", kwarg(options, "structure")?)?.unwrap_or_default();
-    Ok((structure, lumped, fe))
+    Ok(string_given(py, options)?.over(None))
 }
 
 /// The axis `options[key]`: values, or "MIN:MAX:COUNT" as on the command line; `default`'s
@@ -67,6 +72,12 @@ pub(crate) fn stability<'py>(
         .as_ref()
         .and_then(|run| run.get().record_in_memory())
         .unwrap_or((None, None));
+    // A run's or an evidence's own string, under what the keywords give.
+    let stored = match (&run, &in_memory) {
+        (Some(dir), _) => check(py, bitrock::run::stability::stored_string(dir))?,
+        (None, Some(run)) => run.get().string_in_memory(),
+        (None, None) => None,
+    };
     let source = match (run, law, params) {
         (None, None, None) if posterior.is_some() => {
             MapSource::Posterior(posterior_particles(py, posterior.as_deref().expect("given"))?)
@@ -103,7 +114,7 @@ pub(crate) fn stability<'py>(
         }
     };
     let axis = |key: &str, default: &str| axis(py, options, key, default);
-    let (structure, lumped, fe) = structure_options(py, options)?;
+    let (structure, lumped, fe) = string_given(py, options)?.over(stored.as_ref());
     let job = StabilityJob {
         source,
         omega_rpm: axis("omega_rpm", job::DEFAULT_OMEGA_RPM)?,

@@ -229,6 +229,33 @@ def test_every_run_setting_is_a_keyword() -> None:
     assert [f for f in fields if f not in keywords] == []
 
 
+def test_the_drill_string_is_a_keyword_wherever_it_maps_or_advises() -> None:
+    import inspect
+
+    string = ["structure", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio", "fe_file", "dp_elements", "bha_elements", "alpha", "beta"]
+    for function in (bitrock.abc, bitrock.evidence, bitrock.stability):
+        keywords = inspect.signature(function).parameters
+        assert [k for k in string if k not in keywords] == [], function.__name__
+
+
+def test_a_run_keeps_its_drill_string_and_maps_on_it(demo: bitrock.Record, tmp_path) -> None:
+    rig = {"inertia_kg_m2": 0.02, "omega_n_rad_s": 5.0, "damping_ratio": 0.1}
+    run = bitrock.abc(demo, particles=300, seed=11, backend="cpu", progress=False, out=tmp_path / "run", **rig)
+    assert run.document["config"]["string"] == {"structure": "1dof", "lumped": rig}
+    # The map of the stored run is on its own string: c_b* = −2ξω_n·I = −0.02 N·m·s/rad, so
+    # the boundary is the paper string's scaled by 0.02 / 162.9 (c_b* of the paper's string).
+    own = bitrock.stability(run.path, omega_rpm=[60.0], wob_kn=[100.0], backend="cpu", samples=10)
+    paper = bitrock.stability(run.path, omega_rpm=[60.0], wob_kn=[100.0], backend="cpu", samples=10, inertia_kg_m2=383.33, omega_n_rad_s=0.85, damping_ratio=0.25)
+    ratio = own["map_wob_kn"].values / paper["map_wob_kn"].values
+    np.testing.assert_allclose(ratio, 0.02 / (2 * 0.25 * 0.85 * 383.33), rtol=1e-9)
+    # A run kept in memory maps on its own string too.
+    in_memory = bitrock.abc(demo, particles=300, seed=11, backend="cpu", progress=False, **rig)
+    kept = bitrock.stability(in_memory, omega_rpm=[60.0], wob_kn=[100.0], backend="cpu", samples=10)
+    np.testing.assert_array_equal(kept["map_wob_kn"].values, own["map_wob_kn"].values)
+    with pytest.raises(bitrock.InputError, match="damping_ratio"):
+        bitrock.abc(demo, particles=300, backend="cpu", progress=False, damping_ratio=-1.0)
+
+
 def test_a_named_value_is_read_in_any_case(demo: bitrock.Record) -> None:
     upper = bitrock.abc(demo, laws="m2", particles=50, sampler="Rejection", backend="CPU", progress=False, seed=3)
     lower = bitrock.abc(demo, laws="m2", particles=50, sampler="rejection", backend="cpu", progress=False, seed=3)

@@ -48,6 +48,10 @@ pub struct Config {
     /// sets it when `--eps-min` is not given; [`Default`] leaves eps_min as given.
     #[serde(default)]
     pub eps_min_from_record: bool,
+    /// The drill string the run's maps and advice are drawn for, where the run was given one
+    /// (`None`: the paper's 1-DOF string).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub string: Option<crate::run::stability::DrillStringSpec>,
 }
 
 impl Default for Config {
@@ -64,6 +68,7 @@ impl Default for Config {
             gpu_shape: None,
             sampler: SamplerConfig::Rejection(RejectionConfig::default()),
             eps_min_from_record: false,
+            string: None,
         }
     }
 }
@@ -282,6 +287,8 @@ impl Settings {
             gpu_shape: None,
             sampler,
             eps_min_from_record: self.eps_min.is_none() && user_schedule.is_none(),
+            // Given beside the settings ([`crate::run::stability::StringGiven::spec`]).
+            string: None,
         })
     }
 

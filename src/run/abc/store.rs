@@ -566,6 +566,16 @@ impl Store {
         })
     }
 
+    /// The run's configuration as stored (a [`super::Config`]'s JSON), without its record or
+    /// populations.
+    pub fn config(&self) -> Result<serde_json::Value> {
+        let value: String = self
+            .conn
+            .query_row("SELECT value FROM meta WHERE key = 'config'", [], |r| r.get(0))
+            .map_err(sql_error(&self.path))?;
+        serde_json::from_str(&value).map_err(json_error(&self.path))
+    }
+
     /// Reads the whole run back, bit for bit as it was written.
     pub fn load(&self) -> Result<Stored> {
         self.load_with(true)

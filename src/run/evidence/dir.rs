@@ -325,6 +325,20 @@ pub fn check_dir(
     Ok(check)
 }
 
+/// The job of the evidence directory `dir` as it keeps it; `None` where an earlier bitrock kept
+/// none.
+pub fn job(dir: &Path) -> Result<Option<Job>> {
+    let path = dir.join(JOB_JSON);
+    stored_job(&path)?
+        .map(|job| {
+            serde_json::from_value(job).map_err(|e| Error::Data {
+                path: path.clone(),
+                message: format!("its job does not read: {e}"),
+            })
+        })
+        .transpose()
+}
+
 /// The document of the evidence directory `dir`, its law files' laws registered in this
 /// process (read from its job, where it keeps one).
 pub fn read(dir: &Path) -> Result<serde_json::Value> {

@@ -88,6 +88,10 @@ pub struct Job {
     /// Whether to find [`EvidenceAnalysis::separations`] (a least-squares fit of every law to
     /// every other's curve, one after the other): a watch's windows do without.
     pub separations: bool,
+    /// The drill string the evidence's advice and maps are drawn for, where it was given one
+    /// (`None`: the paper's 1-DOF string).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub string: Option<crate::run::stability::DrillStringSpec>,
 }
 
 impl Default for Job {
@@ -103,6 +107,7 @@ impl Default for Job {
             noise: None,
             warm: None,
             separations: true,
+            string: None,
         }
     }
 }
@@ -386,22 +391,29 @@ impl EvidenceAnalysis {
         warnings
     }
 
-    /// The advice at `data`'s own operating point from the posterior, on the paper's 1-DOF
-    /// string (its way out of stick-slip simulated on `backend`); `None` where the record
-    /// keeps no account of its bit.
-    pub fn record_advice(&self, data: &FieldData, backend: Backend) -> Option<crate::run::advice::Advice> {
+    /// The advice at `data`'s own operating point from the posterior, on `job`'s drill string
+    /// (the paper's 1-DOF string where it has none; its way out of stick-slip simulated on
+    /// `job`'s backend); `None` where the record keeps no account of its bit. A
+    /// finite-element string's critical bit damping is found here (said through `note`).
+    pub fn record_advice(
+        &self,
+        data: &FieldData,
+        job: &Job,
+        note: &mut dyn FnMut(String),
+    ) -> Result<Option<crate::run::advice::Advice>> {
         use crate::run::advice::{Adviser, params_w_ref_n};
-        let seen = data.bit?;
-        let lumped = crate::stability::lumped::Lumped::default();
-        let adviser = Adviser::for_record(
-            crate::stability::map::Criterion::Lumped(lumped),
-            Some(crate::simulate::strings::Chain::one_dof(&lumped)),
-            backend,
-        );
+        let Some(seen) = data.bit else {
+            return Ok(None);
+        };
+        let (structure, lumped, fe) = crate::run::stability::StringGiven::default().over(job.string.as_ref());
+        let criterion = crate::run::stability::criterion(structure, lumped, &fe, note)?;
+        // A string the simulator cannot hold leaves the advice to the linear maps.
+        let chain = crate::run::strings::chain(structure, &lumped, &fe).ok();
+        let adviser = Adviser::for_record(criterion, chain, job.backend);
         let inputs =
             crate::abc::posterior::map_inputs_of(&self.evidence.particles(), crate::run::advice::ADVICE_SAMPLES);
         let w_ref_n = params_w_ref_n(self.fit.w_ref_n, &seen, crate::laws::PAPER_W_REF_N);
-        Some(adviser.advise_record(&inputs, w_ref_n, &seen))
+        Ok(Some(adviser.advise_record(&inputs, w_ref_n, &seen)))
     }
 
     /// `document` with what `data`'s bit did (`"record_bit"`) and `advice` (from

@@ -133,6 +133,8 @@ impl Settings {
                 ..EvidenceConfig::default()
             },
             noise: self.noise.model(),
+            // Given beside the settings ([`crate::run::stability::StringGiven::spec`]).
+            string: None,
             warm: None,
             separations: true,
         };

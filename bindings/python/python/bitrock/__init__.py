@@ -378,6 +378,15 @@ def abc(
     seed: int | None = None,
     backend: str | None = None,
     devices: str | None = None,
+    structure: str | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    fe_file: str | os.PathLike[str] | None = None,
+    dp_elements: int | None = None,
+    bha_elements: int | None = None,
+    alpha: float | None = None,
+    beta: float | None = None,
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     progress: bool | Callable[..., Any] = True,
@@ -397,7 +406,12 @@ def abc(
     ``concurrent.futures.Executor`` (a ``ProcessPoolExecutor`` must spawn, not fork), a
     ``dask.distributed.Client``, or :func:`ray_executor`. The particles are the ones one
     process gives, bit for bit, whatever the number of workers, the order tasks finish in,
-    or tasks lost and run again; :attr:`Result.traffic` says what travelled."""
+    or tasks lost and run again; :attr:`Result.traffic` says what travelled.
+
+    ``structure``, ``inertia_kg_m2``, ``omega_n_rad_s``, ``damping_ratio`` and the finite-element
+    string's ``fe_file``, ``dp_elements``, ``bha_elements``, ``alpha``, ``beta`` (as for
+    :func:`stability`) give the drill string the run keeps: its maps and advice are drawn on it
+    (the paper's 5 km field string where none is given)."""
     if executor is not None and devices is not None:
         raise InputError(
             "devices: applies to a run in this process; with `executor`, each worker uses the GPU "
@@ -410,6 +424,8 @@ def abc(
     settings["epsilons"] = _number_list(epsilons, "epsilons")
     if settings["prior_file"] is not None:
         settings["prior_file"] = os.fspath(settings["prior_file"])
+    if settings["fe_file"] is not None:
+        settings["fe_file"] = os.fspath(settings["fe_file"])
     dispatcher = None if executor is None else Dispatcher(executor)
     callback, close = _progress(progress)
     try:

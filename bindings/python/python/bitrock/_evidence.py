@@ -289,6 +289,15 @@ def evidence(
     check: int | None = None,
     noise: str = "auto",
     start_from: str = "both",
+    structure: str | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    fe_file: str | os.PathLike[str] | None = None,
+    dp_elements: int | None = None,
+    bha_elements: int | None = None,
+    alpha: float | None = None,
+    beta: float | None = None,
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
     executor: Any = None,
@@ -323,7 +332,11 @@ def evidence(
     ``executor`` scores the samplers' candidates on a pool of workers (a
     ``concurrent.futures`` executor, a ``dask.distributed.Client`` or :func:`ray_executor`;
     each worker on ``backend``), and its check's too: the evidence is the one computed here,
-    bit for bit where the workers score on the CPU."""
+    bit for bit where the workers score on the CPU.
+
+    ``structure``, ``inertia_kg_m2``, ``omega_n_rad_s``, ``damping_ratio``, ``fe_file``,
+    ``dp_elements``, ``bha_elements``, ``alpha``, ``beta`` (as for :func:`stability`) give the
+    drill string of the advice, kept with the evidence (the paper's where none is given)."""
     from . import _law_names, _note, _record
     from ._distributed import Dispatcher
 
@@ -346,6 +359,15 @@ def evidence(
         "check": check,
         "noise": noise,
         "start_from": start_from,
+        "structure": structure,
+        "inertia_kg_m2": inertia_kg_m2,
+        "omega_n_rad_s": omega_n_rad_s,
+        "damping_ratio": damping_ratio,
+        "fe_file": None if fe_file is None else os.fspath(fe_file),
+        "dp_elements": dp_elements,
+        "bha_elements": bha_elements,
+        "alpha": alpha,
+        "beta": beta,
         "out": None if out is None else os.fspath(out),
         "force": force,
     }
