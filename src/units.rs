@@ -11,6 +11,20 @@ pub const NEWTONS_PER_POUND_FORCE: f64 = 4.448_221_615_260_5;
 /// N·m per foot pound-force (0.3048 m × one pound-force).
 pub const NEWTON_METRES_PER_FOOT_POUND_FORCE: f64 = 0.3048 * NEWTONS_PER_POUND_FORCE;
 
+/// A weight on bit in kN, with the digits a reading needs: whole kN from 10 kN (a field
+/// string's), tenths from 1 kN, two significant digits below (a laboratory rig's hundreds of
+/// newtons, which whole kN would round to 0).
+pub fn kn_text(kn: f64) -> String {
+    let digits = if kn.abs() >= 10.0 || kn == 0.0 || !kn.is_finite() {
+        0
+    } else if kn.abs() >= 1.0 {
+        1
+    } else {
+        (1 - kn.abs().log10().floor() as i32) as usize
+    };
+    format!("{kn:.digits$} kN")
+}
+
 /// The unit symbol a column name ends with in brackets (`TQ (kN.m)`, `WOB [klbf]`), as rig
 /// logs and WITSML logs name their channels.
 pub fn bracketed(column: &str) -> Option<&str> {
@@ -351,6 +365,16 @@ column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit);
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_weight_on_bit_keeps_the_digits_its_scale_needs() {
+        assert_eq!(super::kn_text(146.4), "146 kN");
+        assert_eq!(super::kn_text(24.6), "25 kN");
+        assert_eq!(super::kn_text(2.46), "2.5 kN");
+        assert_eq!(super::kn_text(0.39), "0.39 kN");
+        assert_eq!(super::kn_text(0.0512), "0.051 kN");
+        assert_eq!(super::kn_text(0.0), "0 kN");
+    }
+
     use super::*;
 
     #[test]

@@ -209,7 +209,8 @@ impl Adviser {
         let safe_wob_kn = nearest(&weights, &by_weight, wob_kn);
         let words = if p_unstable < risk {
             format!(
-                "steady rotation at {omega_rpm:.0} rpm and {wob_kn:.0} kN: P(stick-slip) = {p_unstable:.2}, below {risk}"
+                "steady rotation at {omega_rpm:.0} rpm and {}: P(stick-slip) = {p_unstable:.2}, below {risk}",
+                crate::units::kn_text(wob_kn)
             )
         } else {
             let mut ways = Vec::new();
@@ -221,8 +222,9 @@ impl Adviser {
             }
             if let Some(w) = safe_wob_kn {
                 ways.push(format!(
-                    "{} the weight on bit to {w:.0} kN",
-                    if w > wob_kn { "raise" } else { "lower" }
+                    "{} the weight on bit to {}",
+                    if w > wob_kn { "raise" } else { "lower" },
+                    crate::units::kn_text(w)
                 ));
             }
             let ways = if ways.is_empty() {
@@ -230,7 +232,10 @@ impl Adviser {
             } else {
                 ways.join(", or ")
             };
-            format!("stick-slip likely at {omega_rpm:.0} rpm and {wob_kn:.0} kN (P = {p_unstable:.2}): {ways}")
+            format!(
+                "stick-slip likely at {omega_rpm:.0} rpm and {} (P = {p_unstable:.2}): {ways}",
+                crate::units::kn_text(wob_kn)
+            )
         };
         Advice {
             omega_rpm,
@@ -263,9 +268,9 @@ impl Adviser {
             wob_kn: advice.wob_kn,
         };
         let now = format!(
-            "stick-slip now at {:.0} rpm and {:.0} kN (bit stuck {:.0} % of the {span}{})",
+            "stick-slip now at {:.0} rpm and {} (bit stuck {:.0} % of the {span}{})",
             point.omega_rpm,
-            point.wob_kn,
+            crate::units::kn_text(point.wob_kn),
             100.0 * advice.stuck_share,
             advice.severity.map_or(String::new(), |s| format!(", severity {s:.2}"))
         );
@@ -322,11 +327,12 @@ pub const RECORD_ESCAPE_MIN_PROBABILITY: f64 = 0.05;
 
 /// A record's operating point: its mean bit speed (over a stick-slip cycle the bit turns on
 /// average as fast as the top drive), rpm, and its mean weight on bit (`w_ref_n` where it has
-/// no column for it), kN; each at least 1.
+/// no column for it), kN; at least 1 rpm and 1 N (a laboratory rig's weight is hundreds of
+/// newtons).
 pub fn record_point(seen: &BitSeen, w_ref_n: f64) -> OperatingPoint {
     OperatingPoint {
         omega_rpm: seen.mean_speed_rpm.max(1.0),
-        wob_kn: seen.mean_wob_kn.unwrap_or(w_ref_n / 1000.0).max(1.0),
+        wob_kn: seen.mean_wob_kn.unwrap_or(w_ref_n / 1000.0).max(1e-3),
     }
 }
 

@@ -700,17 +700,17 @@ impl EscapeAdvice {
         }
         if let Some(w) = self.wob_kn {
             ways.push(format!(
-                "lower the weight on bit to {:.0} kN ({})",
-                w.to,
+                "lower the weight on bit to {} ({})",
+                crate::units::kn_text(w.to),
                 w.probability_text()
             ));
         }
         if ways.is_empty() {
             let p = self.point;
             return format!(
-                "no top-drive speed up to {:.0} rpm nor weight on bit down to {:.0} kN ends it in the simulated strings",
+                "no top-drive speed up to {:.0} rpm nor weight on bit down to {} ends it in the simulated strings",
                 self.speed_scan.omega_rpm.last().copied().unwrap_or(p.omega_rpm),
-                self.wob_scan.wob_kn.iter().copied().fold(p.wob_kn, f64::min)
+                crate::units::kn_text(self.wob_scan.wob_kn.iter().copied().fold(p.wob_kn, f64::min))
             );
         }
         ways.join(", or ")
@@ -720,9 +720,9 @@ impl EscapeAdvice {
     pub fn text(&self) -> String {
         let p = self.point;
         format!(
-            "stick-slip at {:.0} rpm and {:.0} kN (simulated P = {:.2}): {}",
+            "stick-slip at {:.0} rpm and {} (simulated P = {:.2}): {}",
             p.omega_rpm,
-            p.wob_kn,
+            crate::units::kn_text(p.wob_kn),
             self.stick_slip_probability,
             self.ways()
         )

@@ -291,6 +291,11 @@ fn the_evidence_keeps_its_drill_string_for_its_advice_and_maps() {
         ),
         "{stdout}"
     );
+    // At the rig's own weight on bit (about 500 N), in the digits it needs.
+    assert!(
+        stdout.contains("stick-slip now at 99 rpm and 0.52 kN (bit stuck "),
+        "{stdout}"
+    );
     let job = json(&std::fs::read_to_string(out.join("job.json")).unwrap());
     assert_eq!(job["job"]["string"]["lumped"]["inertia_kg_m2"], 0.02, "{job}");
     let (code, stdout, stderr) = run(&[
