@@ -27,6 +27,11 @@ use std::str::FromStr;
 // from laws/*.toml.
 include!(concat!(env!("OUT_DIR"), "/laws.rs"));
 
+/// The colours of law files' laws, in turn: black, a dark yellow, brown and grey, apart from the
+/// built-in laws' (Okabe & Ito's reddish purple, orange, bluish green and sky blue) and the
+/// data's (its vermillion and blue).
+const LAW_FILE_COLOURS: [u32; 4] = [0x000000, 0xb8a000, 0x8c564b, 0x7f7f7f];
+
 /// A built-in law as its file (`laws/<name>.toml`) defines it.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct BuiltIn {
@@ -183,6 +188,21 @@ impl Law {
             Law::File(id) => Some(crate::laws::file::registered(id).file),
             _ => None,
         }
+    }
+
+    /// The law's colour in every figure, page and plot (0xRRGGBB): Okabe & Ito's palette,
+    /// told apart with any colour vision; a built-in law's from its file, law files' laws the
+    /// palette's others in turn.
+    pub fn colour(self) -> u32 {
+        match self {
+            Law::File(_) => LAW_FILE_COLOURS[(self.index() - Law::ALL.len()) % LAW_FILE_COLOURS.len()],
+            built_in => built_in.built_in().colour,
+        }
+    }
+
+    /// [`Self::colour`] as CSS and matplotlib write it, `#rrggbb`.
+    pub fn colour_hex(self) -> String {
+        format!("#{:06x}", self.colour())
     }
 
     /// Identifier used on the command line and in outputs.
@@ -395,6 +415,22 @@ pub fn parse_law_list(s: &str) -> Result<Vec<Law>, String> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn every_built_in_law_has_its_own_colour_blind_safe_colour_apart_from_the_data_s() {
+        // Okabe & Ito (2008): black, orange, sky blue, bluish green, yellow, blue, vermillion,
+        // reddish purple.
+        const OKABE_ITO: [u32; 8] = [
+            0x000000, 0xe69f00, 0x56b4e9, 0x009e73, 0xf0e442, 0x0072b2, 0xd55e00, 0xcc79a7,
+        ];
+        let colours: Vec<u32> = Law::ALL.iter().map(|law| law.colour()).collect();
+        assert!(colours.iter().all(|c| OKABE_ITO.contains(c)), "{colours:06x?}");
+        let distinct: std::collections::BTreeSet<u32> = colours.iter().copied().collect();
+        assert_eq!(distinct.len(), colours.len());
+        // The report's data: vermillion calibration circles, blue validation dots.
+        assert!(!colours.contains(&0xd55e00) && !colours.contains(&0x0072b2));
+        assert_eq!(Law::M3.colour_hex(), "#009e73");
+    }
+
     use super::*;
 
     #[test]

@@ -74,38 +74,38 @@ const fn hex(c: u32) -> RGBColor {
     RGBColor((c >> 16) as u8, (c >> 8) as u8, c as u8)
 }
 
-/// One colour per law, fixed across figures: a built-in law's its file's (m1 purple, m2
-/// orange, m3 green, m4 brown), none of them the data's red and blue.
+/// One colour per law, the same in every figure, the live page and Python's plots
+/// ([`crate::Law::colour`]).
 pub(crate) fn law_color(law: crate::Law) -> RGBColor {
-    match law {
-        // Law files' laws: pink, olive, cyan, grey, then round again.
-        crate::Law::File(_) => {
-            const MORE: [u32; 4] = [0xe377c2, 0xbcbd22, 0x17becf, 0x7f7f7f];
-            hex(MORE[(law.index() - crate::Law::ALL.len()) % MORE.len()])
-        }
-        built_in => hex(built_in.built_in().colour),
-    }
+    hex(law.colour())
 }
 
 /// One colour per run (δ), in run order.
 pub(crate) fn run_color(i: usize) -> RGBColor {
-    const RUNS: [u32; 6] = [0x1f77b4, 0xd62728, 0x222222, 0x17becf, 0xe377c2, 0xbcbd22];
+    // Okabe & Ito's blue, vermillion, black, sky blue, reddish purple, orange.
+    const RUNS: [u32; 6] = [0x0072b2, 0xd55e00, 0x222222, 0x56b4e9, 0xcc79a7, 0xe69f00];
     hex(RUNS[i % RUNS.len()])
 }
 
-/// Calibration data (red circles) and validation data (blue dots), as in the paper.
-pub(crate) const CALIBRATION: RGBColor = hex(0xd62728);
-pub(crate) const VALIDATION: RGBColor = hex(0x1f77b4);
+/// Calibration data (red circles) and validation data (blue dots), as in the paper: Okabe &
+/// Ito's vermillion and blue.
+pub(crate) const CALIBRATION: RGBColor = hex(0xd55e00);
+pub(crate) const VALIDATION: RGBColor = hex(0x0072b2);
 pub(crate) const GRID: RGBColor = hex(0xe6e6e6);
 
-/// The heat map's colour of a probability p ∈ [0, 1]: white to blue, light enough at 1 that
-/// black and coloured curves stay readable on it.
+/// The maps' scale of a probability, (p, 0xRRGGBB) stops blended between: a pale blue-grey
+/// (a stable cell, drawn, not blank) to blue, one hue, so that no reader has to tell red from
+/// green; light enough at 1 that black and coloured curves stay readable on it. The report's
+/// maps and the watch's page both draw with it.
+pub const PROBABILITY_SCALE: [(f64, u32); 4] = [(0.0, 0xeef2f8), (0.1, 0xdeebf7), (0.5, 0x9ecae1), (1.0, 0x4a90c8)];
+
+/// The heat map's colour of a probability p ∈ [0, 1] on [`PROBABILITY_SCALE`].
 pub(crate) fn heat_color(p: f64) -> RGBColor {
     // A cell whose probability is unknown (the torque has no value there): grey, never "stable".
     if p.is_nan() {
         return RGBColor(0xbb, 0xbb, 0xbb);
     }
-    const STOPS: [(f64, u32); 4] = [(0.0, 0xffffff), (0.1, 0xdeebf7), (0.5, 0x9ecae1), (1.0, 0x4a90c8)];
+    const STOPS: [(f64, u32); 4] = PROBABILITY_SCALE;
     let p = p.clamp(0.0, 1.0);
     let k = STOPS.iter().position(|s| s.0 >= p).unwrap_or(STOPS.len() - 1).max(1);
     let ((p0, c0), (p1, c1)) = (STOPS[k - 1], STOPS[k]);

@@ -65,6 +65,7 @@ pub fn page_meta(meta: &super::store::WatchMeta) -> serde_json::Value {
                 .map(|law| {
                     serde_json::json!({
                         "name": law.name(),
+                        "colour": law.colour_hex(),
                         "formula": law.formula(),
                         "params": law.params().iter().map(|p| serde_json::json!({
                             "name": p.name,
@@ -84,6 +85,10 @@ pub fn page_meta(meta: &super::store::WatchMeta) -> serde_json::Value {
         "risk": meta.settings["risk"],
         "criterion": super::store::criterion_words(&meta.settings),
         "laws": laws,
+        "probability_scale": crate::report::plot::PROBABILITY_SCALE
+            .iter()
+            .map(|(p, c)| serde_json::json!([p, format!("#{c:06x}")]))
+            .collect::<Vec<_>>(),
         "bitrock_version": meta.bitrock_version,
     })
 }

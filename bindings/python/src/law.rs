@@ -156,6 +156,17 @@ pub(crate) fn parity(
     serde_json::to_string(&report).map_err(|e| to_py(py, Error::Numerical(e.to_string())))
 }
 
+/// Each law's colour (`#rrggbb`) by its name, the same in every figure of the report, on the
+/// watch's page and in `bitrock.plot`.
+#[pyfunction]
+pub(crate) fn law_colours(py: Python<'_>, laws: Vec<String>) -> PyResult<Vec<String>> {
+    Ok(self::laws(py, Some(laws))?
+        .unwrap_or_default()
+        .into_iter()
+        .map(|law| law.colour_hex())
+        .collect())
+}
+
 /// Reads, compiles and registers the law file at `path`; its law's name, for `laws=` and
 /// `law=` everywhere in this process.
 #[pyfunction]

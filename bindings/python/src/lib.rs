@@ -34,7 +34,7 @@ mod _bitrock {
     #[pymodule_export]
     use crate::fit::fit;
     #[pymodule_export]
-    use crate::law::{load_law, parity, simulate, torque};
+    use crate::law::{law_colours, load_law, parity, simulate, torque};
     #[pymodule_export]
     use crate::record::{Record, read_columns, read_csv};
     #[pymodule_export]

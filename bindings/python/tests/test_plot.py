@@ -52,6 +52,13 @@ def test_the_fit_figure_draws_the_record_the_fits_and_the_bands(small_run: bitro
     last = small_run.model_probabilities.iloc[-1]
     for law in bands.law.to_numpy():
         assert f"{law}: P = {last[law]:.3f}, 98% band" in labels
+    # Each law in its one colour, the report's and the live page's (Okabe & Ito's palette).
+    from matplotlib.colors import to_hex
+
+    expected = {"m1": "#cc79a7", "m2": "#e69f00", "m3": "#009e73", "m4": "#56b4e9"}
+    for law in bands.law.to_numpy():
+        assert to_hex(_by_gid(ax, "lines", f"median-{law}").get_color()) == expected[law]
+    assert bitrock._bitrock.law_colours(list(expected)) == list(expected.values())
 
 
 def test_the_probabilities_are_the_runs(small_run: bitrock.Result) -> None:

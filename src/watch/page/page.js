@@ -3,7 +3,8 @@
 // request leaves the server the page came from.
 'use strict';
 
-const PALETTE = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2', '#17becf'];
+// Okabe & Ito's palette, for a law the watch's meta does not colour.
+const PALETTE = ['#cc79a7', '#e69f00', '#009e73', '#56b4e9', '#000000', '#0072b2', '#d55e00', '#7f7f7f'];
 
 const state = {
   meta: null,
@@ -26,7 +27,10 @@ function lawNames() {
   return last ? last.laws.map((l) => l.law) : [];
 }
 
+// Each law's colour is the one of every figure and plot, sent with the watch's laws.
 function color(law) {
+  const spec = state.meta && state.meta.laws ? state.meta.laws.find((l) => l.name === law) : null;
+  if (spec && spec.colour) return spec.colour;
   const k = lawNames().indexOf(law);
   return PALETTE[(k < 0 ? 0 : k) % PALETTE.length];
 }
@@ -386,9 +390,19 @@ function drawCloud(canvas) {
 }
 
 // P(stick-slip) as a colour: pale green at 0, deep red at 1.
+// P(stick-slip) on the report's scale, sent with the watch's meta (one hue: no red against
+// green).
 function shade(p) {
-  const mix = (a, b) => Math.round(a + (b - a) * p);
-  return `rgb(${mix(226, 200)}, ${mix(242, 30)}, ${mix(226, 35)})`;
+  const stops = (state.meta && state.meta.probability_scale) || [[0, '#c8ccd1'], [1, '#5b6570']];
+  const rgb = (hex) => [1, 3, 5].map((i) => parseInt(hex.slice(i, i + 2), 16));
+  const q = Math.min(Math.max(p, 0), 1);
+  let k = stops.findIndex((s) => s[0] >= q);
+  if (k < 1) k = 1;
+  const [p0, a] = [stops[k - 1][0], rgb(stops[k - 1][1])];
+  const [p1, b] = [stops[k][0], rgb(stops[k][1])];
+  const t = (q - p0) / (p1 - p0);
+  const mix = (i) => Math.round(a[i] + (b[i] - a[i]) * t);
+  return `rgb(${mix(0)}, ${mix(1)}, ${mix(2)})`;
 }
 
 function drawMap(canvas) {

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "evidence", "fit", "is_evidence_dir", "is_information", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class Record:
@@ -166,6 +166,12 @@ def is_evidence_dir(dir: str | PathLike[str]) -> bool:
 def is_information(note: str) -> bool:
     """
     True for a note that only informs (which GPU scores): logged, not warned.
+    """
+
+def law_colours(laws: SupportsGetItem[int, str]) -> list[str]:
+    """
+    Each law's colour (`#rrggbb`) by its name, the same in every figure of the report, on the
+    watch's page and in `bitrock.plot`.
     """
 
 def load_law(path: str | PathLike[str]) -> str:

@@ -122,9 +122,7 @@ def fit(
     from . import torque
 
     fits = {f["law"]: f for f in doc["fits"]}
-    colours = _pyplot().rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, law in enumerate(chosen):
-        colour = colours[i % len(colours)]
+    for law, colour in zip(chosen, _law_colours(chosen)):
         p = probabilities.get(law, 0.0)
         if law in bands:
             lower, median, upper = bands[law]
@@ -137,6 +135,14 @@ def fit(
     ax.set_ylabel(f"torque on bit ({unit})")
     ax.legend(fontsize="small", loc="best")
     return ax
+
+
+def _law_colours(laws: Sequence[str]) -> list[str]:
+    """Each law's colour, the one of the report's figures and the watch's page (Okabe & Ito's
+    palette, told apart with any colour vision)."""
+    from . import _bitrock
+
+    return _bitrock.law_colours(list(laws))
 
 
 def _probabilities(source: Any, kind: str, population: int) -> dict[str, float]:
@@ -157,7 +163,7 @@ def model_probabilities(source: Any, *, ax: Any = None) -> Any:
         laws = source.document["laws"]
         names = [law["law"] for law in laws]
         values = [law["probability"] for law in laws]
-        bars = ax.bar(names, values, color="tab:blue", gid="probabilities")
+        bars = ax.bar(names, values, color=_law_colours(names), gid="probabilities")
         for bar, law in zip(bars, laws):
             ax.annotate(f"ln Z {law['ln_z']:.1f} ± {law['ln_z_error']:.1f}", (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom", fontsize="small")
         ax.set_ylabel("P(m | y)")
@@ -166,13 +172,13 @@ def model_probabilities(source: Any, *, ax: Any = None) -> Any:
     table = source.model_probabilities
     bottom = np.zeros(len(table))
     x = np.arange(len(table))
-    for law in source.laws:
+    for law, colour in zip(source.laws, _law_colours(source.laws)):
         values = table[law].to_numpy()
-        ax.bar(x, values, bottom=bottom, label=law, gid=f"population-{law}")
+        ax.bar(x, values, bottom=bottom, label=law, color=colour, gid=f"population-{law}")
         bottom += values
     ax.set_xticks(x, [f"{g}\nε {'∞' if math.isinf(e) else f'{e:.3g}'}" for g, e in zip(table.index, table["epsilon"])], fontsize="small")
     ax.set_xlabel("population")
-    ax.set_ylabel("P(m | ε)")
+    ax.set_ylabel("P(m | ρ < ε), the paper's ABC")
     ax.set_ylim(0, 1)
     ax.legend(fontsize="small", loc="upper left")
     return ax
@@ -196,8 +202,9 @@ def marginals(source: Any, law: str, *, population: int = -1, bins: int = 40, fi
     axes = fig.subplots(1, frame.shape[1], squeeze=False)[0]
     fits = {f["law"]: f for f in source.document["fits"]}
     units = fits[law]["units"] if law in fits else [""] * frame.shape[1]
+    (colour,) = _law_colours([law])
     for j, (ax, name) in enumerate(zip(axes, frame.columns)):
-        ax.hist(frame[name].to_numpy(), bins=bins, weights=weights, density=True, color="tab:blue", alpha=0.7, gid=f"marginal-{name}")
+        ax.hist(frame[name].to_numpy(), bins=bins, weights=weights, density=True, color=colour, alpha=0.7, gid=f"marginal-{name}")
         if law in fits and fits[law]["params"][j] is not None:
             ax.axvline(fits[law]["params"][j], color="k", linestyle="--", linewidth=1, gid=f"fit-{name}")
         ax.set_xlabel(f"{name} ({units[j]})" if units[j] else name)
@@ -231,7 +238,7 @@ def stability(maps: Any, *, law: str | None = None, ax: Any = None) -> Any:
         boundary = maps.p_wob_kn.sel(law=law).to_numpy()
         map_boundary = maps.map_wob_kn.sel(law=law).to_numpy()
     ax = _axes(ax)
-    mesh = ax.pcolormesh(omega, wob, probability.T, shading="nearest", cmap="RdYlGn_r", vmin=0, vmax=1, gid="probability-unstable")
+    mesh = ax.pcolormesh(omega, wob, probability.T, shading="nearest", cmap="Blues", vmin=0, vmax=1, gid="probability-unstable")
     ax.figure.colorbar(mesh, ax=ax, label="P(stick-slip)")
     if map_boundary is not None:
         ax.plot(omega, map_boundary, color="k", linewidth=1.5, label="MAP boundary", gid="map-boundary")
