@@ -42,6 +42,7 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
     let rendered = figures::render_evidence(&EvidenceFigures {
         particles: &particles,
         laws: laws.iter().map(|l| (l.law, l.probability)).collect(),
+        ln_z: laws.iter().map(|l| (l.ln_z, l.ln_z_error)).collect(),
         samples: &samples,
         w_ref_kn,
     })?;
@@ -68,9 +69,13 @@ pub fn write_evidence_report(out: &Path, evidence_dir: &Path) -> Result<ReportSu
         document["seconds"].as_f64().unwrap_or(f64::NAN),
         document["prior"].as_str().unwrap_or("?"),
     );
+    if let Some(answer) = document["answer"]["sentence"].as_str() {
+        let _ = writeln!(md, "**Answer:** {answer}.\n");
+    }
     laws_markdown(&mut md, &laws);
     let factors = bayes_factors(&document, &laws, evidence_dir)?;
     bayes_factors_markdown(&mut md, &factors);
+    check_markdown(&mut md, &document);
     noise_models_markdown(&mut md, &document);
     separations_markdown(&mut md, &document);
     let infos: Vec<super::FigureInfo> = rendered.iter().map(|r| r.info.clone()).collect();
@@ -222,6 +227,34 @@ fn law_lines(document: &Value, dir: &Path) -> Result<Vec<LawLine>> {
             })
         })
         .collect()
+}
+
+/// The evidence's check by re-simulation, where it ran: per law that made the synthetic
+/// records, how many of them were decided for it, undecided or decided for another, and its
+/// verdict.
+fn check_markdown(md: &mut String, document: &Value) {
+    let Ok(check) = serde_json::from_value::<crate::run::evidence::EvidenceCheck>(document["check"].clone()) else {
+        return;
+    };
+    let _ = writeln!(
+        md,
+        "\n## Check by re-simulation\n\n{} synthetic records per law, each made from the law's posterior with the \
+         record's own residuals and put through the same evidence:\n",
+        check.replicates
+    );
+    let _ = writeln!(md, "| made by | decided right | undecided | decided wrong | verdict |");
+    let _ = writeln!(md, "|---|---|---|---|---|");
+    for row in &check.rows {
+        let _ = writeln!(
+            md,
+            "| {} | {:.0} % | {:.0} % | {:.0} % | {} |",
+            row.law,
+            100.0 * row.decided_right,
+            100.0 * row.undecided,
+            100.0 * row.decided_wrong,
+            row.verdict
+        );
+    }
 }
 
 /// The models of the residuals compared, where there were several.

@@ -712,7 +712,8 @@ fn an_evidence_directory_holds_the_document_and_its_posterior_and_stability_maps
         data.lines().filter(|l| l.starts_with("calibration,")).count() as u64,
         stored["data_points"].as_u64().unwrap()
     );
-    for stem in ["fig01_evidence_envelopes", "fig02_evidence_probabilities"] {
+    assert!(!md.contains("## Check by re-simulation"), "no check ran: {md}");
+    for stem in ["fig01_evidence_envelopes", "fig02_evidence"] {
         for ext in ["svg", "png"] {
             assert!(
                 report.join("figures").join(format!("{stem}.{ext}")).is_file(),
@@ -858,6 +859,29 @@ fn check_selection_of_an_evidence_directory_is_the_evidence_s_own_check() {
         posterior,
         "the rest is kept"
     );
+    // The report shows the check, a row per law that made the records, and the answer the
+    // check weighed.
+    let report = dir.path().join("report");
+    let (code, _, err) = outcome(bin().args(["report", out.to_str().unwrap(), "--out", report.to_str().unwrap()]));
+    assert_eq!(code, 0, "{err}");
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(
+        md.contains("## Check by re-simulation\n\n2 synthetic records per law"),
+        "{md}"
+    );
+    for row in stored["check"]["rows"].as_array().unwrap() {
+        let line = format!(
+            "| {} | {:.0} % | {:.0} % | {:.0} % | {} |",
+            row["law"].as_str().unwrap(),
+            100.0 * row["decided_right"].as_f64().unwrap(),
+            100.0 * row["undecided"].as_f64().unwrap(),
+            100.0 * row["decided_wrong"].as_f64().unwrap(),
+            row["verdict"].as_str().unwrap()
+        );
+        assert!(md.contains(&line), "{line} not in\n{md}");
+    }
+    let answer = stored["answer"]["sentence"].as_str().unwrap();
+    assert!(md.contains(&format!("**Answer:** {answer}.")), "{md}");
     // The directory is still bitrock's own: replaced with --force, reported.
     let (code, _, err) = evidence(&["--out", out.to_str().unwrap(), "--force", "--seed", "9"]);
     assert_eq!(code, 0, "{err}");
