@@ -236,13 +236,7 @@ pub struct StructureArgs {
 impl StructureArgs {
     /// The string as these flags give it.
     pub fn given(&self) -> StringGiven {
-        StringGiven {
-            structure: self.structure,
-            inertia_kg_m2: self.lumped.inertia_kg_m2,
-            omega_n_rad_s: self.lumped.omega_n_rad_s,
-            damping_ratio: self.lumped.damping_ratio,
-            fe: self.fe.settings(),
-        }
+        self.lumped.given(self.structure, &self.fe)
     }
 
     /// The string these flags give, laid over `base` (a run's own; `None`: the paper's).
@@ -266,6 +260,18 @@ pub struct LumpedArgs {
 }
 
 impl LumpedArgs {
+    /// The string these flags, `structure` and the finite-element flags `fe` give, field by
+    /// field.
+    pub fn given(&self, structure: Option<Structure>, fe: &FeArgs) -> StringGiven {
+        StringGiven {
+            structure,
+            inertia_kg_m2: self.inertia_kg_m2,
+            omega_n_rad_s: self.omega_n_rad_s,
+            damping_ratio: self.damping_ratio,
+            fe: fe.settings(),
+        }
+    }
+
     /// The 1-DOF model these flags describe, the paper's where they are silent (validate
     /// before use).
     pub fn lumped(&self) -> Lumped {

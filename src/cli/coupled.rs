@@ -174,6 +174,7 @@ impl DrillingArgs {
 impl CoupledCmd {
     /// The run's settings from the flags.
     fn settings(&self) -> Settings {
+        let lumped = self.lumped.lumped();
         Settings {
             omega_rpm: self.omega_rpm,
             wob_kn: self.wob_kn,
@@ -186,9 +187,9 @@ impl CoupledCmd {
             friction: self.friction,
             gamma: self.gamma,
             blades: self.blades,
-            inertia_kg_m2: self.lumped.lumped().inertia_kg_m2,
-            omega_n_rad_s: self.lumped.lumped().omega_n_rad_s,
-            damping_ratio: self.lumped.lumped().damping_ratio,
+            inertia_kg_m2: lumped.inertia_kg_m2,
+            omega_n_rad_s: lumped.omega_n_rad_s,
+            damping_ratio: lumped.damping_ratio,
             mass_kg: self.mass_kg,
             axial_stiffness_kn_m: self.axial_stiffness_kn_m,
             axial_damping_kns_m: self.axial_damping_kns_m,

@@ -3,7 +3,6 @@
 
 use super::args::{FeArgs, LumpedArgs};
 use bitrock::report::StabilitySettings;
-use bitrock::run::stability::StringGiven;
 use bitrock::watch::store::is_watch_dir;
 use clap::Args;
 use std::io::Write;
@@ -43,14 +42,8 @@ fn stability(cmd: &ReportCmd) -> anyhow::Result<StabilitySettings> {
     if let Some(string) = &stored {
         super::print::note(format_args!("note: the run's own drill string: {}", string.describe()));
     }
-    let given = StringGiven {
-        inertia_kg_m2: cmd.lumped.inertia_kg_m2,
-        omega_n_rad_s: cmd.lumped.omega_n_rad_s,
-        damping_ratio: cmd.lumped.damping_ratio,
-        fe: cmd.fe.settings(),
-        ..StringGiven::default()
-    };
-    let (_, lumped, fe) = given.over(stored.as_ref());
+    // The report maps on the 1-DOF string and compares a finite-element one: no structure.
+    let (_, lumped, fe) = cmd.lumped.given(None, &cmd.fe).over(stored.as_ref());
     let paper = StabilitySettings::default();
     let own_fe = fe.first_given().is_some() || fe.base.is_some();
     Ok(StabilitySettings {

@@ -336,6 +336,9 @@ struct Prepared<'a> {
     record_advice: Option<RecordAdvice>,
     /// The maps by simulated strings, where asked for.
     simulated: Option<SimulatedMaps>,
+    /// What the 1-DOF string's maps draw nothing of: boundaries wholly off their weights on
+    /// bit ([`map::Boundaries::off_the_map`]), said in report.md and the maps' captions.
+    off_the_map: Vec<String>,
 }
 
 /// For each of `laws`, whether its probability in the population is 0 by construction (ε at
@@ -494,7 +497,7 @@ impl<'a> Prepared<'a> {
             .collect();
         let w_ref_n = reference.run.w_ref_n.unwrap_or(s.w_ref_n);
         let (record_advice, simulated) = simulated_advice(input, reference.run.w_ref_n, &map_inputs)?;
-        Ok(Self {
+        let mut prepared = Self {
             input,
             torque_scale: input.data.torque_unit.newton_metres(),
             unit: input.data.torque_unit.label(),
@@ -505,7 +508,10 @@ impl<'a> Prepared<'a> {
             deterministic,
             record_advice,
             simulated,
-        })
+            off_the_map: Vec::new(),
+        };
+        prepared.off_the_map = prepared.boundaries_off_the_map();
+        Ok(prepared)
     }
 
     /// Parameters in display units (torques in the record's unit).
@@ -851,7 +857,7 @@ impl Prepared<'_> {
         for st in &self.structures {
             let _ = writeln!(md, "| {} | {:.2} |", st.label, st.critical_nms);
         }
-        for warning in self.off_the_map() {
+        for warning in &self.off_the_map {
             let _ = writeln!(md, "\n> **Off the map:** {warning}.");
         }
         self.advice_markdown(md);
@@ -913,9 +919,8 @@ impl Prepared<'_> {
         }
     }
 
-    /// What the 1-DOF string's maps draw nothing of: boundaries wholly off their weights on
-    /// bit ([`map::Boundaries::off_the_map`]).
-    fn off_the_map(&self) -> Vec<String> {
+    /// The boundaries of the 1-DOF string's maps wholly off their weights on bit, in words.
+    fn boundaries_off_the_map(&self) -> Vec<String> {
         let s = &self.input.stability;
         let inputs: Vec<LawSamples> = self.map_laws().into_iter().cloned().collect();
         let criterion = map::Criterion::Lumped(s.lumped);

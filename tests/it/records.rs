@@ -8,6 +8,16 @@ use bitrock::bench::SelectionRecord;
 use std::io::Write;
 use std::sync::OnceLock;
 
+/// The rig's light string: the one its record was simulated on.
+const RIG_STRING: [&str; 6] = [
+    "--inertia-kg-m2",
+    "0.02",
+    "--omega-n-rad-s",
+    "5",
+    "--damping-ratio",
+    "0.1",
+];
+
 /// The rig record as a CSV file in N·m and N, written once per test binary: the selection
 /// benchmark's rig ([`SelectionRecord::Rig`], the new law m3 with a nearly linear velocity
 /// weakening on a light string at 100 rpm and 500 N, r = 1, with 0.15 N·m torque noise and
@@ -133,14 +143,6 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
     let out = dir.path().join("run");
     let out_s = out.to_str().unwrap();
     // The rig's own light string, given to the run and kept with it.
-    let rig_string = [
-        "--inertia-kg-m2",
-        "0.02",
-        "--omega-n-rad-s",
-        "5",
-        "--damping-ratio",
-        "0.1",
-    ];
     let mut args = vec![
         "abc",
         path,
@@ -152,7 +154,7 @@ fn stability_of_the_rig_run_agrees_with_the_closed_form_and_the_simulated_stick_
         out_s,
         "--quiet",
     ];
-    args.extend_from_slice(&rig_string);
+    args.extend_from_slice(&RIG_STRING);
     let (code, _, stderr) = run(&args);
     assert_eq!(code, 0, "{stderr}");
     let document = json(&std::fs::read_to_string(out.join("run.json")).unwrap());
@@ -261,7 +263,7 @@ fn the_evidence_keeps_its_drill_string_for_its_advice_and_maps() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("evidence");
     let out_s = out.to_str().unwrap();
-    let (code, stdout, stderr) = run(&[
+    let mut args = vec![
         "evidence",
         path,
         "--laws",
@@ -274,16 +276,12 @@ fn the_evidence_keeps_its_drill_string_for_its_advice_and_maps() {
         "iid",
         "--backend",
         "cpu",
-        "--inertia-kg-m2",
-        "0.02",
-        "--omega-n-rad-s",
-        "5",
-        "--damping-ratio",
-        "0.1",
         "--out",
         out_s,
         "-q",
-    ]);
+    ];
+    args.extend_from_slice(&RIG_STRING);
+    let (code, stdout, stderr) = run(&args);
     assert_eq!(code, 0, "{stderr}");
     assert!(
         stdout.contains(

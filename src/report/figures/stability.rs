@@ -33,7 +33,7 @@ fn map_ranges(p: &Prepared) -> ((f64, f64), (f64, f64)) {
 
 /// A map figure's caption where some boundary lies wholly off the map (report.md says which).
 fn off_the_map_caption(p: &Prepared) -> &'static str {
-    if p.off_the_map().is_empty() {
+    if p.off_the_map.is_empty() {
         ""
     } else {
         " Some boundaries lie wholly off this map and are not drawn (report.md, Stability, says where)."
