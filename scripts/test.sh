@@ -64,6 +64,37 @@ rm -rf "$STUBS"
 # pytest exits 5 when it collects no test: set -e fails the run then too.
 BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q bindings/python/tests
 
+# ArviZ 1.x (it needs Python ≥ 3.12) reads the runs' and the evidence's DataTrees as the 0.2x
+# line above does: the package's abi3 wheel, built by the install above, in a second environment.
+newer_python() {
+    local p
+    for p in python3.14 python3.13 python3.12; do
+        if command -v "$p" >/dev/null && "$p" -c 'import sys; assert sys.version_info >= (3, 12)' 2>/dev/null; then
+            command -v "$p"
+            return
+        fi
+    done
+    if command -v pyenv >/dev/null; then
+        for p in $(pyenv versions --bare 2>/dev/null | sort -rV); do
+            case "$p" in 3.1[2-9]*) echo "$(pyenv root)/versions/$p/bin/python3"; return ;; esac
+        done
+    fi
+}
+PYTHON_NEW="$(newer_python || true)"
+if [ -n "$PYTHON_NEW" ]; then
+    VENV_NEW="$TARGET/python-venv-arviz1"
+    [ -x "$VENV_NEW/bin/python" ] || "$PYTHON_NEW" -m venv "$VENV_NEW"
+    WHEELS="$(mktemp -d)"
+    (cd bindings/python && "$VENV/bin/maturin" build --release -q -o "$WHEELS")
+    "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEELS"/bitrock-*.whl
+    "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check "arviz>=1,<2" "xarray>=2024.10" "pandas>=2.0" pytest
+    rm -rf "$WHEELS"
+    BITROCK_BIN="$TARGET/release/bitrock" "$VENV_NEW/bin/python" -m pytest -q -k arviz \
+        bindings/python/tests/test_abc.py bindings/python/tests/test_evidence.py
+else
+    echo "ArviZ 1.x tests not run: it needs Python 3.12 or newer, and none was found here" >&2
+fi
+
 # The live page of `bitrock watch --serve` in a real browser: headless Chromium driven through
 # its WebDriver (selenium), against the binary built above.
 "$VENV/bin/python" -m pip install -q --disable-pip-version-check -r tests/browser/requirements.txt

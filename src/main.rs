@@ -16,6 +16,7 @@ use std::io::ErrorKind;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    quiet_device_select();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => return parse_error(&e),
@@ -43,6 +44,18 @@ fn main() -> ExitCode {
                 .any(|e| e.downcast_ref::<Error>().is_some_and(Error::is_bad_input));
             ExitCode::from(if bad_input { exit::BAD_INPUT } else { exit::FAILURE })
         }
+    }
+}
+
+/// Switches off Mesa's device-select Vulkan layer unless the user set `NODEVICE_SELECT`: it only
+/// orders the Vulkan devices (bitrock ranks the adapters itself), and where no desktop session
+/// runs it prints "XDG_RUNTIME_DIR is invalid or not set" twice on every command that may use a
+/// GPU.
+fn quiet_device_select() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: the first thing `main` does, before any other thread exists to read the
+        // environment at the same time.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
     }
 }
 

@@ -261,6 +261,23 @@ fn parity_command_reports_agreement_as_json(shape: Shape) {
 }
 }
 
+/// Where no desktop session runs (no XDG_RUNTIME_DIR), Mesa's device-select layer would print
+/// its complaint twice on every command that looks for a GPU: the binary switches it off.
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn a_command_on_the_gpu_prints_no_desktop_session_complaint() {
+    require_gpu();
+    let out = crate::support::bin()
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .args(["parity", "--candidates", "2000", "--json"])
+        .output()
+        .expect("run bitrock");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+}
+
 #[test]
 fn a_refused_shape_setting_exits_2_naming_the_variable() {
     let dir = tempfile::tempdir().unwrap();

@@ -329,6 +329,7 @@ fn the_report_shows_the_model_evidence_beside_the_runs_when_it_was_computed() {
         candidates_scored: 100,
         best_rho: 0.01,
         posterior: Vec::new(),
+        posterior_island: Vec::new(),
         cut_by_box: Vec::new(),
         starts: Vec::new(),
         mean_ln_l: None,

@@ -8,7 +8,8 @@ use crate::run::PyObserver;
 use bitrock::Law;
 use bitrock::data::FieldData;
 use bitrock::error::Error;
-use bitrock::run::evidence::dir::Unfinished;
+use bitrock::run::evidence::EvidenceAnalysis;
+use bitrock::run::evidence::dir::{self, Unfinished};
 use bitrock::run::evidence::{Progress, check as check_evidence, check_replicates, check_size};
 use bitrock::run::{self, MakeWorkers, Placement, Scoring};
 use pyo3::prelude::*;
@@ -17,7 +18,8 @@ use std::path::PathBuf;
 
 /// The evidence of `laws` (`None`: all four) on the record, with the options of
 /// `bitrock.evidence`: `bitrock evidence --json`'s document, with each law's posterior sets
-/// (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added. With
+/// (`"posterior": {"params": [[...]], "weights": [...], "island": [...]}`, the record's torque
+/// unit) added, kept whole so that it can be saved as an evidence directory later. With
 /// a `dispatcher` (`bitrock._distributed.Dispatcher`), the samplers' candidates are scored by
 /// its workers, `parallelism` tasks a batch unless it says otherwise.
 #[pyfunction]
@@ -30,7 +32,7 @@ pub(crate) fn evidence(
     note: Option<Py<PyAny>>,
     dispatcher: Option<Py<PyAny>>,
     parallelism: usize,
-) -> PyResult<String> {
+) -> PyResult<ComputedEvidence> {
     let laws = self::laws(py, laws)?.unwrap_or_else(|| Law::ALL.to_vec());
     let settings: run::evidence::Settings = crate::errors::settings(options)?;
     let mut job = check(py, settings.job(laws, fit_options(py, options)?))?;
@@ -78,7 +80,7 @@ pub(crate) fn resume_evidence(
     note: Option<Py<PyAny>>,
     dispatcher: Option<Py<PyAny>>,
     parallelism: usize,
-) -> PyResult<String> {
+) -> PyResult<ComputedEvidence> {
     if let Some(k) = check {
         crate::errors::check(py, check_replicates(k))?;
     }
@@ -129,8 +131,44 @@ pub(crate) fn make_workers(transport: &PyTransport) -> Box<MakeWorkers<'_>> {
     Box::new(move |problem, placement: &Placement, _note: &mut dyn FnMut(String)| make(problem, placement))
 }
 
+/// An evidence computed in this process: its document (`bitrock evidence --json`'s, each law's
+/// posterior sets added) and what writing it as an evidence directory needs.
+#[pyclass(frozen, module = "bitrock._bitrock")]
+pub(crate) struct ComputedEvidence {
+    document: serde_json::Value,
+    analysis: EvidenceAnalysis,
+    job: run::evidence::Job,
+    data: FieldData,
+}
+
+#[pymethods]
+impl ComputedEvidence {
+    /// The evidence's document, as JSON.
+    #[getter]
+    fn document(&self) -> String {
+        as_arguments(&self.document.to_string())
+    }
+
+    /// Writes the evidence as the evidence directory `path` (`force` replaces an evidence
+    /// there), as `bitrock evidence --out` writes one.
+    fn save(&self, py: Python<'_>, path: PathBuf, force: bool) -> PyResult<()> {
+        let saved = py.detach(|| dir::save(&path, force, &self.document, &self.analysis, &self.job, &self.data));
+        // The library names the directory by the command line's flag; here it is the argument.
+        check(
+            py,
+            saved.map_err(|err| match err {
+                Error::InvalidSetting { field, message } if field == "out" => Error::InvalidSetting {
+                    field: "path".into(),
+                    message,
+                },
+                err => err,
+            }),
+        )
+    }
+}
+
 /// `job`'s evidence on `data` from `progress` (kept as it goes in `unfinished`, and written
-/// there once done), checked with `replicates` per law where given: its document.
+/// there once done), checked with `replicates` per law where given.
 #[allow(clippy::too_many_arguments)]
 fn compute(
     py: Python<'_>,
@@ -141,7 +179,7 @@ fn compute(
     replicates: Option<usize>,
     workers: Workers,
     note: Option<Py<PyAny>>,
-) -> PyResult<String> {
+) -> PyResult<ComputedEvidence> {
     let mut observer = PyObserver::new(None, note);
     let transport = workers.transport();
     let result = py.detach(|| {
@@ -187,7 +225,12 @@ fn compute(
     if let Some(unfinished) = unfinished {
         check(py, py.detach(|| unfinished.finish(&document, &analysis, job, data)))?;
     }
-    Ok(as_arguments(&document.to_string()))
+    Ok(ComputedEvidence {
+        document,
+        analysis,
+        job: job.clone(),
+        data: data.clone(),
+    })
 }
 
 /// The document of the evidence directory `dir` (`bitrock evidence --out`, `bitrock.evidence(...,

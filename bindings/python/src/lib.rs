@@ -30,7 +30,7 @@ mod _bitrock {
     #[pymodule_export]
     use crate::errors::settings_fields;
     #[pymodule_export]
-    use crate::evidence::{evidence, is_evidence_dir, read_evidence, resume_evidence};
+    use crate::evidence::{ComputedEvidence, evidence, is_evidence_dir, read_evidence, resume_evidence};
     #[pymodule_export]
     use crate::fit::fit;
     #[pymodule_export]

@@ -85,3 +85,16 @@ def test_which_gpu_scores_is_logged_not_warned(demo, caplog) -> None:
         with caplog.at_level(logging.INFO, logger="bitrock"):
             bitrock.abc(demo, laws=["m2"], particles=100, seed=1, backend="gpu", max_populations=1, progress=False)
     assert any(r.name == "bitrock" and r.getMessage().startswith("GPU backend:") for r in caplog.records)
+
+
+def test_a_gpu_run_prints_no_desktop_session_complaint() -> None:
+    """Where no desktop session runs (no XDG_RUNTIME_DIR), Mesa's device-select layer would print
+    its complaint twice on the first GPU use: the package switches it off as it loads."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("XDG_RUNTIME_DIR", "NODEVICE_SELECT")}
+    script = "import bitrock; bitrock.abc(bitrock.read_record(), laws=['m2'], particles=100, seed=1, backend='gpu', max_populations=1, progress=False)"
+    done = subprocess.run([sys.executable, "-W", "ignore", "-c", script], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "XDG_RUNTIME_DIR" not in done.stderr, done.stderr

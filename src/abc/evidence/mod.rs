@@ -286,10 +286,12 @@ fn law_evidence(
     let k = island_ln_z.len() as f64;
     let ratios: Vec<f64> = island_ln_z.iter().map(|v| (v - mean_ln_z).exp()).collect();
     let mut posterior = Vec::new();
-    for (island, share) in own.iter().zip(&ratios) {
+    let mut posterior_island = Vec::new();
+    for (index, (island, share)) in own.iter().zip(&ratios).enumerate() {
         for (p, w) in island.theta.iter().zip(&island.weights).filter(|(_, w)| **w > 0.0) {
             let params = p[..island.dims].iter().map(|&v| f64::from(v)).collect();
             posterior.push((params, share / k * w));
+            posterior_island.push(index as u32);
         }
     }
     let cut_by_box = box_ends_reached(bx.law, &bx.lower, &bx.upper, &posterior);
@@ -314,6 +316,7 @@ fn law_evidence(
         candidates_scored: all.iter().map(|i| i.scored).sum(),
         best_rho: all.iter().map(|i| i.best_rho).fold(f64::INFINITY, f64::min),
         posterior,
+        posterior_island,
         starts,
     };
     law.box_changes = sensitivity::box_changes(&law, &bx.lower, &bx.upper);
@@ -591,6 +594,22 @@ mod tests {
         assert!(pooled.starts.iter().all(|e| e.kept));
         assert_eq!(pooled.island_ln_z.len(), 2 * config.islands);
         assert_eq!(pooled.island_ln_z[..config.islands], m4.island_ln_z[..]);
+        // Each pooled set names its island, and each island's sets weigh its share of the
+        // islands' mean Z: Z_i / (k·Z̄), Z̄ the mean of the kept islands' Z.
+        assert_eq!(pooled.posterior_island.len(), pooled.posterior.len());
+        let k = pooled.island_ln_z.len();
+        let top = pooled.island_ln_z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let mean_z = pooled.island_ln_z.iter().map(|v| (v - top).exp()).sum::<f64>() / k as f64;
+        for (i, ln_z) in pooled.island_ln_z.iter().enumerate() {
+            let weight: f64 = (pooled.posterior.iter().zip(&pooled.posterior_island))
+                .filter(|(_, island)| **island as usize == i)
+                .map(|((_, w), _)| w)
+                .sum();
+            assert!(
+                (weight - (ln_z - top).exp() / (k as f64 * mean_z)).abs() < 1e-9,
+                "island {i}: {weight}"
+            );
+        }
         assert_eq!(pooled.starts[0].ln_z.to_bits(), m4.ln_z.to_bits());
         assert!(pooled.starts.iter().all(|e| pooled.ln_z_error < e.ln_z_error));
         assert_within_errors(pooled, expected, 0.3);

@@ -31,6 +31,12 @@ pub struct LawEvidence {
     /// Posterior parameter sets (SI), pooled over the islands; each island's sets weighed by its
     /// share of Z. Weights sum to 1.
     pub posterior: Vec<(Vec<f64>, f64)>,
+    /// The island each of `posterior`'s sets comes from (an index into `island_ln_z`): the
+    /// islands are independent samplers of one target, so that, as chains, they say whether
+    /// they agree (R-hat) and how many independent draws they hold. Empty in documents
+    /// written without it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub posterior_island: Vec<u32>,
     /// The parameters whose posterior reaches an end of its box that is not a physical bound
     /// ("a1 upper"): there the box, not the data, ends the posterior, and ln Z depends on
     /// where the box was drawn by more than the Occam factor of [`LN_Z_PER_DOUBLING`].
@@ -80,6 +86,7 @@ impl LawEvidence {
             stages: vec![1],
             candidates_scored: 1,
             best_rho: 0.1,
+            posterior_island: Vec::new(),
             posterior,
             cut_by_box: Vec::new(),
             starts: Vec::new(),

@@ -456,7 +456,8 @@ impl EvidenceAnalysis {
 
     /// `bitrock evidence --json`'s document of the analysis of `data` (`prior` describing its
     /// boxes); with `posterior_sets`, each law's posterior sets too (`"posterior": {"params",
-    /// "weights"}`, in the record's torque unit), as an evidence directory and Python keep it.
+    /// "weights", "island"}`, in the record's torque unit, each set's island beside it), as an
+    /// evidence directory and Python keep it.
     pub fn document(&self, data: &FieldData, prior: &str, posterior_sets: bool) -> serde_json::Value {
         let mut document = crate::documents::evidence_json(
             data,
@@ -494,6 +495,9 @@ impl EvidenceAnalysis {
                     .collect();
                 let weights: Vec<f64> = law.posterior.iter().map(|(_, w)| *w).collect();
                 entry["posterior"] = serde_json::json!({"params": params, "weights": weights});
+                if !law.posterior_island.is_empty() {
+                    entry["posterior"]["island"] = serde_json::json!(law.posterior_island);
+                }
             }
         }
         document

@@ -24,6 +24,11 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import pandas as pd
 
+# Mesa's device-select Vulkan layer only orders the Vulkan devices (bitrock ranks the adapters
+# itself), and where no desktop session runs it prints "XDG_RUNTIME_DIR is invalid or not set"
+# twice on the first GPU use: switched off unless the user set it, before the extension loads.
+os.environ.setdefault("NODEVICE_SELECT", "1")
+
 from . import _bitrock
 from ._distributed import Dispatcher, ray_executor
 from ._errors import BitrockError, BitrockWarning, GpuError, InputError

@@ -8,7 +8,24 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+
+@final
+class ComputedEvidence:
+    """
+    An evidence computed in this process: its document (`bitrock evidence --json`'s, each law's
+    posterior sets added) and what writing it as an evidence directory needs.
+    """
+    @property
+    def document(self, /) -> str:
+        """
+        The evidence's document, as JSON.
+        """
+    def save(self, /, path: str | PathLike[str], force: bool) -> None:
+        """
+        Writes the evidence as the evidence directory `path` (`force` replaces an evidence
+        there), as `bitrock evidence --out` writes one.
+        """
 
 @final
 class Record:
@@ -144,11 +161,12 @@ def coupled_calibrate(path: str | PathLike[str], columns: dict, options: dict, m
     with `map` the regimes' probabilities over its posterior; as JSON text.
     """
 
-def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
+def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> ComputedEvidence:
     """
     The evidence of `laws` (`None`: all four) on the record, with the options of
     `bitrock.evidence`: `bitrock evidence --json`'s document, with each law's posterior sets
-    (`"posterior": {"params": [[...]], "weights": [...]}`, the record's torque unit) added. With
+    (`"posterior": {"params": [[...]], "weights": [...], "island": [...]}`, the record's torque
+    unit) added, kept whole so that it can be saved as an evidence directory later. With
     a `dispatcher` (`bitrock._distributed.Dispatcher`), the samplers' candidates are scored by
     its workers, `parallelism` tasks a batch unless it says otherwise.
     """
@@ -224,7 +242,7 @@ def resume(path: str | PathLike[str], more: dict, progress: Any | None, note: An
     Continues the run in `path` with the stopping rules in `more`.
     """
 
-def resume_evidence(dir: str | PathLike[str], backend: str | None, check: SupportsIndex | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
+def resume_evidence(dir: str | PathLike[str], backend: str | None, check: SupportsIndex | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> ComputedEvidence:
     """
     Continues the evidence under way in `dir` (on `backend`, default its own), checks it with
     `check` replicates per law where given, and writes the directory: the document, as

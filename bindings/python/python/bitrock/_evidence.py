@@ -18,9 +18,28 @@ class Evidence:
     i.i.d. or AR(1), σ integrated out), its Monte-Carlo error, the posterior law probabilities
     P(m | y) it gives, and what the least-squares fits alone say about telling the laws apart."""
 
-    def __init__(self, document: dict[str, Any], record: Any = None) -> None:
+    def __init__(
+        self, document: dict[str, Any], record: Any = None, *, computed: Any = None, path: str | None = None
+    ) -> None:
         self._doc = document
         self._record = record
+        self._computed = computed
+        self.path = path
+        """The evidence directory that holds this evidence, or ``None`` for one kept in memory
+        (:meth:`save` writes it)."""
+
+    def save(self, path: str | os.PathLike[str], *, force: bool = False) -> "Evidence":
+        """Writes an evidence kept in memory as the evidence directory ``path`` (``force``
+        replaces an evidence there), as :func:`evidence` with ``out=path`` would have written
+        it, so that :func:`read_evidence`, :func:`stability`, ``bitrock stability`` and
+        ``bitrock report`` read it. Returns the stored evidence."""
+        from ._errors import InputError
+
+        if self._computed is None:
+            where = f", in {self.path}" if self.path is not None else ""
+            raise InputError(f"path: the evidence is stored already{where}", "path")
+        self._computed.save(os.fspath(path), force)
+        return read_evidence(path)
 
     @property
     def record(self) -> Any:
@@ -240,6 +259,62 @@ class Evidence:
 
         raise InputError(f"law {law!r} was not compared (compared: {', '.join(self.laws)})")
 
+    def to_datatree(self, *, draws: int | None = None) -> Any:
+        """The evidence as an ``xarray.DataTree``: one node per law with the groups ArviZ reads,
+        ``posterior`` (each parameter over ``chain`` × ``draw``, in the record's torque unit) and
+        ``sample_stats`` (``island_ln_z``, each chain's ln Z), and at the root each law's
+        ``ln_z``, ``ln_z_error`` and ``probability``. The chains are the law's islands: independent
+        tempered samplers of the same posterior, so that ArviZ's R-hat says whether they found the
+        same one (near 1) or not, as their ln Z's spread does. Each island's weighted particles are
+        resampled systematically to ``draws`` equal-weight draws (deterministic; by default as
+        many as the island's largest set), so that ArviZ's summaries, which treat draws as equal,
+        are those of the island's weighted posterior; a particle drawn twice counts once in
+        ArviZ's ESS. Every island weighs the same here: :meth:`posterior` pools them weighed by
+        their Z. An evidence directory written without its islands' membership gives one chain.
+        ArviZ 1.x reads a law's node directly (``tree["m2"]``); ArviZ 0.23 through
+        ``arviz.InferenceData.from_datatree(tree["m2"])``."""
+        import xarray as xr
+
+        from . import __version__, _positive_count, _systematic_resample
+
+        laws = self._doc["laws"]
+        nodes: dict[str, xr.Dataset] = {
+            "/": xr.Dataset(
+                {
+                    "ln_z": ("law", [law["ln_z"] for law in laws]),
+                    "ln_z_error": ("law", [law["ln_z_error"] for law in laws]),
+                    "probability": ("law", [law["probability"] for law in laws]),
+                },
+                coords={"law": self.laws},
+                attrs={"source": self._doc["source"], "ln_z_units": "nats, with torques in N·m"},
+            )
+        }
+        for law in laws:
+            frame, weights = self.posterior(law["law"])
+            params = frame.to_numpy()
+            sets = law["posterior"]
+            # Without the islands' membership, the pooled sets are one chain of ln Z the law's.
+            island = np.asarray(sets["island"], dtype=int) if "island" in sets else np.zeros(len(weights), dtype=int)
+            island_ln_z = law["island_ln_z"] if "island" in sets else [law["ln_z"]]
+            chains = [int(i) for i in np.unique(island)]
+            members = [np.flatnonzero(island == i) for i in chains]
+            count = max((len(m) for m in members), default=0) if draws is None else _positive_count(draws, "draws")
+            drawn = np.array([m[_systematic_resample(weights[m], count)] for m in members], dtype=int).reshape(len(chains), count)
+            coords = {"chain": np.arange(len(chains)), "draw": np.arange(count)}
+            nodes[f"/{law['law']}/posterior"] = xr.Dataset(
+                {
+                    name: (("chain", "draw"), params[:, i][drawn], {"units": unit})
+                    for i, (name, unit) in enumerate(zip(law["names"], law["units"]))
+                },
+                coords=coords,
+                attrs={"law": law["law"], "inference_library": "bitrock", "inference_library_version": __version__},
+            )
+            nodes[f"/{law['law']}/sample_stats"] = xr.Dataset(
+                {"island_ln_z": ("chain", np.array([island_ln_z[i] for i in chains], dtype=float))},
+                coords={"chain": coords["chain"]},
+            )
+        return xr.DataTree.from_dict(nodes)
+
     def _repr_html_(self) -> str:
         """A notebook's view: the evidence table, the boxes it integrates over, and what the
         command warns about (:attr:`warnings`)."""
@@ -372,7 +447,7 @@ def evidence(
         "force": force,
     }
     dispatcher = None if executor is None else Dispatcher(executor)
-    document = _bitrock.evidence(
+    computed = _bitrock.evidence(
         _record(record),
         _law_names(laws),
         options,
@@ -380,7 +455,10 @@ def evidence(
         dispatcher,
         1 if dispatcher is None else dispatcher.parallelism,
     )
-    return _warned(Evidence(json.loads(document), _record(record)))
+    document = json.loads(computed.document)
+    if out is not None:
+        return _warned(Evidence(document, _record(record), path=os.fspath(out)))
+    return _warned(Evidence(document, _record(record), computed=computed))
 
 
 def _warned(result: Evidence) -> Evidence:
@@ -412,7 +490,7 @@ def resume_evidence(
     from ._distributed import Dispatcher
 
     dispatcher = None if executor is None else Dispatcher(executor)
-    document = _bitrock.resume_evidence(
+    computed = _bitrock.resume_evidence(
         os.fspath(directory),
         backend,
         check,
@@ -420,14 +498,14 @@ def resume_evidence(
         dispatcher,
         1 if dispatcher is None else dispatcher.parallelism,
     )
-    return _warned(Evidence(json.loads(document), _stored_record(directory)))
+    return _warned(Evidence(json.loads(computed.document), _stored_record(directory), path=os.fspath(directory)))
 
 
 def read_evidence(directory: str | os.PathLike[str]) -> Evidence:
     """The evidence stored in ``directory`` (``bitrock evidence --out`` or
     ``bitrock.evidence(..., out=...)``), each law's posterior sets included."""
     directory = os.fspath(directory)
-    return Evidence(json.loads(_bitrock.read_evidence(directory)), _stored_record(directory))
+    return Evidence(json.loads(_bitrock.read_evidence(directory)), _stored_record(directory), path=directory)
 
 
 def _stored_record(directory: str | os.PathLike[str]) -> Any:
