@@ -8,9 +8,11 @@
 //! that its runs choose alike.
 
 use super::Evaluator;
+use super::Problem;
 use super::cpu::CpuEvaluator;
 use super::gpu::residual::GpuEvaluator;
 use super::gpu::tune::ShapeWish;
+use super::gpu::{GpuContext, Shape};
 use crate::error::Result;
 use crate::laws::MAX_PARAMS;
 use crate::prior::Candidate;
@@ -58,7 +60,7 @@ impl Race {
             (adapter.to_string(), "the CPU".to_string())
         };
         format!(
-            "{AUTO_NOTE} {chosen} rather than {other}: a dispatch of this record's {} candidates measured at {} on the CPU and {} on the software GPU (a + b·n from {} and {} candidates; the GPU kept where {GPU_MARGIN}× faster)",
+            "{AUTO_NOTE} {chosen} rather than {other}: a dispatch of {} candidates measured at {} on the CPU and {} on the software GPU (a + b·n from {} and {} candidates; the GPU kept where {GPU_MARGIN}× faster)",
             self.candidates,
             ms(self.cpu_s),
             ms(self.gpu_s),
@@ -82,11 +84,38 @@ pub struct StoredRace {
 /// Races decided in this process, by key.
 static RACES: Mutex<Option<HashMap<String, StoredRace>>> = Mutex::new(None);
 
-/// The race of `gpu` against `cpu` (on the same problem) for the dispatches `wish` describes:
-/// its size, and ranges of the prior's streams or explicit candidates. Decided once per
-/// machine: held by the process, kept in the cache of scoring shapes where it can be written,
-/// and read from it; with `BITROCK_GPU_TUNING=off`, not measured (`None`: the GPU is kept).
-pub fn race(gpu: &GpuEvaluator, cpu: &CpuEvaluator, wish: ShapeWish) -> Result<Option<Race>> {
+/// Whether the CPU scores `problem` instead of the software GPU `ctx` (in `shape`) for the
+/// dispatches `wish` describes: the race ([`race`]) said through `note`, the CPU kept where it
+/// wins (or where the GPU fails while racing).
+pub fn cpu_beats(
+    ctx: &'static GpuContext,
+    problem: &Problem,
+    shape: Shape,
+    wish: ShapeWish,
+    note: &mut dyn FnMut(String),
+) -> Result<bool> {
+    let race = match race(ctx, problem, shape, wish) {
+        // A GPU that fails while racing is one `auto` cannot use.
+        Err(crate::Error::Gpu(e)) => {
+            note(super::no_usable_gpu(&e));
+            return Ok(true);
+        }
+        raced => raced?,
+    };
+    let Some(race) = race else {
+        return Ok(false);
+    };
+    note(race.said(&ctx.describe()));
+    Ok(race.cpu_wins())
+}
+
+/// The race of the GPU `ctx` (in `shape`) against the CPU on `problem` for the dispatches
+/// `wish` describes: its size, and ranges of the prior's streams or explicit candidates.
+/// Decided once per machine: held by the process, kept in the cache of scoring shapes where
+/// it can be written, and read from it (no evaluator built then: a software driver's pipelines
+/// take a few tenths of a second to compile); with `BITROCK_GPU_TUNING=off`, not measured
+/// (`None`: the GPU is kept).
+pub fn race(ctx: &'static GpuContext, problem: &Problem, shape: Shape, wish: ShapeWish) -> Result<Option<Race>> {
     use super::gpu::tune;
     if !tune::tuning_on()? {
         return Ok(None);
@@ -94,8 +123,8 @@ pub fn race(gpu: &GpuEvaluator, cpu: &CpuEvaluator, wish: ShapeWish) -> Result<O
     let candidates = wish.candidates.max(1);
     let key = format!(
         "{} | {} samples | {} candidates | {}",
-        tune::adapter_key(gpu.context()),
-        gpu.problem().data_len().next_power_of_two(),
+        tune::adapter_key(ctx),
+        problem.data_len().next_power_of_two(),
         candidates.next_power_of_two(),
         if wish.explicit { "explicit" } else { "streams" }
     );
@@ -118,10 +147,12 @@ pub fn race(gpu: &GpuEvaluator, cpu: &CpuEvaluator, wish: ShapeWish) -> Result<O
         held.insert(key, stored.clone());
         return Ok(Some(found(&stored)));
     }
+    let gpu = GpuEvaluator::on(problem.clone(), shape, ctx)?;
+    let cpu = CpuEvaluator::new(problem.clone());
     let stored = StoredRace {
         key: key.clone(),
-        gpu_s: projected(gpu, candidates, wish.explicit)?,
-        cpu_s: projected(cpu, candidates, wish.explicit)?,
+        gpu_s: projected(&gpu, candidates, wish.explicit)?,
+        cpu_s: projected(&cpu, candidates, wish.explicit)?,
     };
     // A cache that cannot be written costs a race in the next process, no more.
     if let Some(path) = &cache {

@@ -166,30 +166,26 @@ pub fn evaluator(
             note(said(&gpu));
             Ok(Box::new(gpu))
         }
-        Backend::Auto => match gpu::residual::GpuEvaluator::wished(problem.clone(), wish) {
+        Backend::Auto => {
             // A software driver runs on the CPU's own cores: the faster of the two is kept.
-            Ok(gpu) if gpu.is_software() => {
-                let cpu = cpu::CpuEvaluator::new(problem);
-                let race = auto::race(&gpu, &cpu, wish)?;
-                if let Some(race) = race {
-                    note(race.said(&gpu.adapter()));
-                }
-                if race.is_some_and(|r| r.cpu_wins()) {
-                    Ok(Box::new(cpu))
-                } else {
+            let software = gpu::context().and_then(|ctx| Ok((ctx, gpu::tune::choose(ctx, &problem, wish)?)));
+            if let Ok((ctx, choice)) = software
+                && ctx.is_software()
+                && auto::cpu_beats(ctx, &problem, choice.shape, wish, note)?
+            {
+                return Ok(Box::new(cpu::CpuEvaluator::new(problem)));
+            }
+            match gpu::residual::GpuEvaluator::wished(problem.clone(), wish) {
+                Ok(gpu) => {
                     note(said(&gpu));
                     Ok(Box::new(gpu))
                 }
+                Err(e) => {
+                    fall_back_to_cpu(e, note)?;
+                    Ok(Box::new(cpu::CpuEvaluator::new(problem)))
+                }
             }
-            Ok(gpu) => {
-                note(said(&gpu));
-                Ok(Box::new(gpu))
-            }
-            Err(e) => {
-                fall_back_to_cpu(e, note)?;
-                Ok(Box::new(cpu::CpuEvaluator::new(problem)))
-            }
-        },
+        }
     }
 }
 
@@ -199,8 +195,13 @@ pub(crate) fn fall_back_to_cpu(e: gpu::GpuError, note: &mut dyn FnMut(String)) -
     if let gpu::GpuError::Setting { .. } = e {
         return Err(e.into());
     }
-    note(format!("no usable GPU ({e}); computing on the CPU"));
+    note(no_usable_gpu(&e));
     Ok(())
+}
+
+/// What `auto` says when the GPU it found fails: the CPU computes instead.
+pub(crate) fn no_usable_gpu(e: &dyn std::fmt::Display) -> String {
+    format!("no usable GPU ({e}); computing on the CPU")
 }
 
 // The requests of the batched scoring ([`records`]), shared by its CPU and GPU scorers.

@@ -74,13 +74,17 @@ pub struct RecordBatch {
 }
 
 impl RecordBatch {
-    /// A batch on `backend` (with `Auto`, the GPU when one can be set up, else the CPU, said
-    /// through `note`), on the GPU in the shape `wish` leads to ([`gpu::tune::choose`], with
-    /// `problem` to measure on where this adapter was never measured).
+    /// A batch of `records` records on `backend` (with `Auto`, the GPU when one can be set up,
+    /// else the CPU, said through `note`), on the GPU in the shape `wish` leads to
+    /// ([`gpu::tune::choose`], with `problem`, a record like the batch's, to measure on where
+    /// this adapter was never measured). A software GPU under `Auto` scores only where it beats
+    /// the CPU ([`super::auto`]) at the batch's dispatches: `records` times `wish`'s candidates,
+    /// raced on `problem` (a dispatch costs the same per candidate whichever record it scores).
     pub fn new(
         backend: Backend,
         wish: gpu::tune::ShapeWish,
         problem: &Problem,
+        records: usize,
         note: &mut dyn FnMut(String),
     ) -> Result<Arc<Self>> {
         let setup = || gpu::context().and_then(|ctx| Ok((ctx, gpu::tune::choose(ctx, problem, wish)?)));
@@ -88,6 +92,13 @@ impl RecordBatch {
             Backend::Cpu => None,
             Backend::Gpu => Some(setup()?),
             Backend::Auto => match setup() {
+                Ok((ctx, choice)) if ctx.is_software() => {
+                    let batched = gpu::tune::ShapeWish {
+                        candidates: wish.candidates.saturating_mul(records.max(1)),
+                        ..wish
+                    };
+                    (!super::auto::cpu_beats(ctx, problem, choice.shape, batched, note)?).then_some((ctx, choice))
+                }
                 Ok(gpu) => Some(gpu),
                 Err(e) => {
                     super::fall_back_to_cpu(e, note)?;

@@ -563,6 +563,7 @@ pub fn check(
             options.backend.unwrap_or(config.backend),
             run::scoring::shape_wish(config),
             &problem,
+            chunk.len(),
             &mut |line| batch_notes.push(line),
         )?;
         // Every seat is taken before any sampler starts (see RecordBatch::seat).

@@ -228,7 +228,14 @@ fn run_samplers(batch: &std::sync::Arc<RecordBatch>, problems: &[Problem]) -> Ve
 #[test]
 fn samplers_that_wait_and_leave_get_their_own_evaluators_results() {
     let problems = mixed_records();
-    let batch = RecordBatch::new(Backend::Cpu, Default::default(), &problems[0], &mut |_| {}).unwrap();
+    let batch = RecordBatch::new(
+        Backend::Cpu,
+        Default::default(),
+        &problems[0],
+        problems.len(),
+        &mut |_| {},
+    )
+    .unwrap();
     assert_eq!(batch.backend(), "cpu");
     let results = run_samplers(&batch, &problems);
     for (r, calls) in results.iter().take(5).enumerate() {

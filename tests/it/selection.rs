@@ -411,6 +411,55 @@ fn the_check_does_not_depend_on_the_backend(shape: Shape) {
 }
 }
 
+/// `auto` on a software GPU (lavapipe: CI's) scores the check's batches where the race at the
+/// batch's size says, and says so; the CPU's check is then the CPU backend's exactly. A real
+/// GPU is kept without a race.
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn auto_races_the_check_s_batches_on_a_software_gpu() {
+    require_gpu();
+    let software = gpu::context().unwrap().info.device_type == wgpu::DeviceType::Cpu;
+    let dir = tempfile::tempdir().unwrap();
+    let data = record(|w| 6.5e3 * (-w).exp() + 6.5e3, 100.0, 17);
+    let run = run_dir(dir.path(), data, &[Law::M2, Law::M4], 200, 1.5e-3, None);
+    let check = |backend: &str| {
+        let out = bin()
+            .env("BITROCK_CACHE_DIR", dir.path())
+            .args([
+                "check-selection",
+                run.to_str().unwrap(),
+                "--replicates",
+                "2",
+                "--backend",
+                backend,
+                "--json",
+            ])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        (serde_json::from_slice::<SelectionCheck>(&out.stdout).unwrap(), stderr)
+    };
+    let (auto, said) = check("auto");
+    if !software {
+        assert!(!said.contains("auto: scoring on") && auto.backend == "gpu", "{said}");
+        return;
+    }
+    // Four records (two laws, two replicates) of 4,096 candidates a request: one race, at 16,384.
+    assert_eq!(said.matches("auto: scoring on").count(), 1, "{said}");
+    assert!(said.contains("a dispatch of 16384 candidates"), "{said}");
+    let cpu_won = said.contains("auto: scoring on the CPU rather than");
+    assert_eq!(auto.backend, if cpu_won { "cpu" } else { "gpu" }, "{said}");
+    if cpu_won {
+        let (cpu, _) = check("cpu");
+        let replicates = |c: &SelectionCheck| c.rows.iter().map(|r| r.replicates.clone()).collect::<Vec<_>>();
+        assert_eq!(replicates(&auto), replicates(&cpu));
+    }
+    // The race is kept beside the scoring shapes: the next check reads it, measuring nothing.
+    let kept = std::fs::read_to_string(dir.path().join("gpu-shapes.json")).unwrap();
+    assert!(kept.contains("16384 candidates | streams"), "{kept}");
+}
+
 #[test]
 fn bench_selection_times_the_check_and_splits_its_phases() {
     let out = bin()

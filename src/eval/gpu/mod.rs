@@ -486,6 +486,11 @@ fn context_on(adapter: wgpu::Adapter) -> Result<GpuContext, GpuError> {
 }
 
 impl GpuContext {
+    /// Whether the adapter is a software driver on the CPU (lavapipe, SwiftShader).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// One line naming the adapter, for logs and reports.
     pub fn describe(&self) -> String {
         let i = &self.info;

@@ -149,7 +149,7 @@ impl GpuEvaluator {
 
     /// Whether the adapter is a software driver on the CPU (lavapipe, SwiftShader).
     pub fn is_software(&self) -> bool {
-        self.context.info.device_type == wgpu::DeviceType::Cpu
+        self.context.is_software()
     }
 
     /// The scoring shape this evaluator dispatches.
