@@ -308,8 +308,9 @@ pub fn rust(laws: &[BuiltIn]) -> String {
         let paper: Option<Vec<String>> = law.params.iter().map(|p| p.paper_estimate.map(float)).collect();
         writeln!(
             out,
-            "    BuiltIn {{\n        name: {:?},\n        formula: {:?},\n        params: &[{}],\n        paper_estimate: {},\n        colour: {:#08x},\n    }},",
+            "    BuiltIn {{\n        name: {:?},\n        title: {:?},\n        formula: {:?},\n        params: &[{}],\n        paper_estimate: {},\n        colour: {:#08x},\n    }},",
             law.name,
+            law.title,
             law.formula,
             specs.join(", "),
             match paper {

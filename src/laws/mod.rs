@@ -36,6 +36,8 @@ const LAW_FILE_COLOURS: [u32; 4] = [0x000000, 0xb8a000, 0x8c564b, 0x7f7f7f];
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct BuiltIn {
     pub name: &'static str,
+    /// Whose law it is, in words ("Navarro-Lopez & Suarez").
+    pub title: &'static str,
     /// The torque as every output prints it.
     pub formula: &'static str,
     pub params: &'static [ParamSpec],
@@ -210,6 +212,15 @@ impl Law {
         match self {
             Law::File(id) => &crate::laws::file::registered(id).file.name,
             built_in => built_in.built_in().name,
+        }
+    }
+
+    /// Whose law it is, in words, beside its name where people read it ("Navarro-Lopez &
+    /// Suarez" for m2): a built-in law's title, a law file's description if it has one.
+    pub fn title(self) -> Option<&'static str> {
+        match self {
+            Law::File(id) => crate::laws::file::registered(id).file.description.as_deref(),
+            built_in => Some(built_in.built_in().title),
         }
     }
 

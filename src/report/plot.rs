@@ -211,9 +211,69 @@ pub(crate) fn short(v: f64) -> String {
     }
 }
 
+/// The power of ten an axis over `lo..hi` counts in, so that its ticks read short: 0 where its
+/// largest magnitude lies in [1e-2, 1e4), else that magnitude's power (a0 ≈ 1.05·10¹⁰ kN·m:
+/// ticks 0.5, 1, 1.5 in 10¹⁰ kN·m, not 5.000e9 overlapping 1.000e10).
+pub(crate) fn axis_power(lo: f64, hi: f64) -> i32 {
+    let a = lo.abs().max(hi.abs());
+    if !a.is_finite() || a == 0.0 || (1e-2..1e4).contains(&a) {
+        0
+    } else {
+        a.log10().floor() as i32
+    }
+}
+
+/// The tick of `v` on an axis counting in 10^`power` ([`axis_power`]).
+pub(crate) fn tick_in(v: f64, power: i32) -> String {
+    short(v / 10f64.powi(power))
+}
+
+/// An axis name in the power of ten `power` its ticks count in: "a0 (kN·m)" reads
+/// "a0 (10¹⁰ kN·m)", "density" reads "density (10⁻¹⁰)".
+pub(crate) fn in_power(name: &str, power: i32) -> String {
+    if power == 0 {
+        return name.to_string();
+    }
+    const DIGITS: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+    let mut exponent: String = power
+        .unsigned_abs()
+        .to_string()
+        .chars()
+        .map(|d| DIGITS[d.to_digit(10).expect("a digit") as usize])
+        .collect();
+    if power < 0 {
+        exponent.insert(0, '⁻');
+    }
+    match name.strip_suffix(')').and_then(|n| n.split_once(" (")) {
+        Some((head, unit)) => format!("{head} (10{exponent} {unit})"),
+        None => format!("{name} (10{exponent})"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_axis_of_long_numbers_counts_in_a_power_of_ten() {
+        assert_eq!(axis_power(1.2e9, 2.0e10), 10);
+        assert_eq!(axis_power(-8.0e-5, -3.5e-5), -5);
+        assert_eq!(axis_power(0.0, 1.0e-10), -10);
+        assert_eq!(
+            (
+                axis_power(-300.0, -100.0),
+                axis_power(0.0, 0.0),
+                axis_power(0.01, 9999.0)
+            ),
+            (0, 0, 0)
+        );
+        assert_eq!(tick_in(1.5e10, 10), "1.5");
+        assert_eq!(tick_in(-6.0e-5, -5), "-6");
+        assert_eq!(in_power("a0 (kN·m)", 10), "a0 (10¹⁰ kN·m)");
+        assert_eq!(in_power("c2 (N·m·s²/rad²)", -5), "c2 (10⁻⁵ N·m·s²/rad²)");
+        assert_eq!(in_power("density", -10), "density (10⁻¹⁰)");
+        assert_eq!(in_power("a1 (s²/rad²)", 0), "a1 (s²/rad²)");
+    }
 
     #[test]
     fn curves_are_cut_at_gaps_and_at_the_frame() {

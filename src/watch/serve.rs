@@ -65,6 +65,7 @@ pub fn page_meta(meta: &super::store::WatchMeta) -> serde_json::Value {
                 .map(|law| {
                     serde_json::json!({
                         "name": law.name(),
+                        "title": law.title(),
                         "colour": law.colour_hex(),
                         "formula": law.formula(),
                         "params": law.params().iter().map(|p| serde_json::json!({

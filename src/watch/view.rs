@@ -5,7 +5,7 @@
 //! to every viewer: at most [`CLOUD_POINTS`] samples, [`BAND_SPEEDS`] speeds and
 //! [`MAP_SPEEDS_RPM`] × [`MAP_WEIGHTS`] cells.
 
-use crate::data::Row;
+use crate::data::{BitSeen, Row};
 use crate::laws::Law;
 use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
 use crate::units::{RAD_S_PER_RPM, TorqueUnit};
@@ -29,6 +29,14 @@ pub struct View {
     /// The window's samples (at most [`CLOUD_POINTS`]): bit speed, rpm, and torque.
     pub speed_rpm: Vec<f64>,
     pub torque: Vec<f64>,
+    /// The same samples' times along the record, s: the strip chart's axis. Empty where the
+    /// record has no clock (and in views stored without them).
+    #[serde(default)]
+    pub time_s: Vec<f64>,
+    /// What the window's bit speed shows, over all its samples: the share stuck, the
+    /// severity, the mean speed and weight on bit (`None` in views stored without it).
+    #[serde(default)]
+    pub bit: Option<BitSeen>,
     /// The mixture posterior's curves; `None` before the first informative window.
     pub band: Option<Band>,
     /// P(stick-slip) over (Ω, W); `None` before the first informative window.
@@ -89,6 +97,14 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
     let cloud: Vec<&Row> = rows.iter().step_by(stride).collect();
     let speed_rpm: Vec<f64> = cloud.iter().map(|r| r.speed_rad_s / RAD_S_PER_RPM).collect();
     let torque: Vec<f64> = cloud.iter().map(|r| r.torque_nm / per_unit).collect();
+    let time_s: Vec<f64> = cloud
+        .iter()
+        .map(|r| r.time_s)
+        .collect::<Option<_>>()
+        .unwrap_or_default();
+    let speeds: Vec<f64> = rows.iter().map(|r| r.speed_rad_s).collect();
+    let wob_n: Option<Vec<f64>> = rows.iter().map(|r| r.wob_n).collect();
+    let bit = BitSeen::of(&speeds, wob_n.as_deref());
     let (band, map) = match posterior {
         Some(p) if !p.inputs.is_empty() => {
             let (lo, hi) = rows
@@ -120,6 +136,8 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
         torque_unit: unit,
         speed_rpm,
         torque,
+        time_s,
+        bit,
         band,
         map,
     }
@@ -182,7 +200,7 @@ mod tests {
 
     fn row(w: f64, t: f64) -> Row {
         Row {
-            time_s: Some(0.0),
+            time_s: Some(w),
             speed_rad_s: w,
             torque_nm: t,
             wob_n: None,
@@ -235,11 +253,37 @@ mod tests {
     }
 
     #[test]
-    fn before_any_posterior_only_the_cloud() {
+    fn before_any_posterior_only_the_cloud_and_the_strip() {
         let rows: Vec<Row> = (0..10).map(|i| row(i as f64, 1.0)).collect();
         let v = view(0, &rows, TorqueUnit::Nm, None);
         assert_eq!(v.speed_rpm.len(), 10);
         assert_eq!(v.torque, vec![1.0; 10]);
+        assert_eq!(v.time_s, (0..10).map(f64::from).collect::<Vec<_>>());
         assert!(v.band.is_none() && v.map.is_none());
+        // Speeds 0..9 rad/s: one sample (0) below 1 rpm; severity (9 − 0) / (2 · 4.5) = 1.
+        let bit = v.bit.unwrap();
+        assert_eq!((bit.samples, bit.stuck_share), (10, 0.1));
+        assert!((bit.severity.unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(bit.mean_wob_kn, None);
+    }
+
+    #[test]
+    fn the_strip_is_every_sample_s_time_and_the_bit_is_seen_over_all_of_them() {
+        // 1,500 samples, every third drawn; the bit stuck in the first 300 (0 rad/s), at 10 kN.
+        let rows: Vec<Row> = (0..1500)
+            .map(|i| Row {
+                time_s: Some(100.0 + i as f64 * 0.02),
+                wob_n: Some(10_000.0),
+                ..row(if i < 300 { 0.0 } else { 6.0 }, 1.0)
+            })
+            .collect();
+        let v = view(1, &rows, TorqueUnit::Nm, None);
+        assert_eq!(v.time_s.len(), 500);
+        assert_eq!((v.time_s[0], v.time_s[1]), (100.0, 100.06));
+        let bit = v.bit.unwrap();
+        assert_eq!((bit.samples, bit.stuck_share, bit.mean_wob_kn), (1500, 0.2, Some(10.0)));
+        // A record without a clock draws no strip.
+        let clockless: Vec<Row> = rows.iter().map(|r| Row { time_s: None, ..*r }).collect();
+        assert!(view(1, &clockless, TorqueUnit::Nm, None).time_s.is_empty());
     }
 }

@@ -24,6 +24,8 @@ from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import WebDriverWait
 
 BIN = os.path.abspath(os.environ.get("BITROCK_BIN", Path(__file__).resolve().parents[2] / "target/release/bitrock"))
+# Where the page's screenshots are kept, to be looked at: every run leaves them there.
+ARTEFACTS = Path(os.environ.get("BITROCK_ARTEFACTS", Path(__file__).resolve().parents[2] / "target/test-artefacts"))
 
 # m2 at the paper's estimate for 90 s, then m3 for 90 s, at 20 Hz, where the bit sticks and slips.
 WELL = """sample_hz = 20
@@ -184,8 +186,8 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
         pixels = list(area.get_flattened_data() if hasattr(area, "get_flattened_data") else area.getdata())
         coloured = sum(1 for p in pixels if p != (255, 255, 255))
         assert coloured > 0.9 * len(pixels), f"{coloured} of {len(pixels)} map pixels drawn"
-        if os.environ.get("BITROCK_PAGE_SCREENSHOT"):
-            shot.save(os.environ["BITROCK_PAGE_SCREENSHOT"])
+        ARTEFACTS.mkdir(parents=True, exist_ok=True)
+        shot.save(ARTEFACTS / "live-page.png")
 
         # Every panel is drawn: each canvas holds coloured pixels, read from the canvas itself
         # (the share of its pixels that are neither blank nor white), whatever is on screen.
@@ -203,12 +205,46 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
             return out;
             """
         )
-        assert sorted(drawn) == ["along", "cloud", "map", "params"], drawn
+        assert sorted(drawn) == ["along", "cloud", "map", "params", "strip"], drawn
         # Measured on this well: along 0.65 (stacked probabilities), cloud 0.07 (points and band),
-        # map 0.73 (cells), params 0.25 (bands): each must keep about half of that.
-        least = {"along": 0.3, "cloud": 0.04, "map": 0.5, "params": 0.1}
+        # map 0.73 (cells), params 0.25 (bands), strip 0.04 (two traces): each must keep about
+        # half of that.
+        least = {"along": 0.3, "cloud": 0.04, "map": 0.5, "params": 0.1, "strip": 0.02}
         for panel, share in drawn.items():
             assert share > least[panel], f"{panel}: {share:.4f} of its pixels drawn"
+        # The strip's caption: what the last window's bit shows, as its view says.
+        view = driver.execute_script("return window.bitrockPage.view")
+        caption = driver.find_element(By.ID, "strip-caption").text
+        assert f"the bit stuck {view['bit']['stuck_share'] * 100:.0f} % of the time" in caption, caption
+        assert f"severity {view['bit']['severity']:.2f}" in caption, caption
+        # Each law's name with whose law it is, from the meta.
+        titles = {l["name"]: l["title"] for l in driver.execute_script("return window.bitrockPage.meta.laws")}
+        assert titles == {"m2": "Navarro-Lopez & Suarez", "m3": "The paper's new law"}
+        for law, title in titles.items():
+            cell = driver.find_element(By.CSS_SELECTOR, f"#probabilities tr[data-law='{law}'] td[data-key='law']")
+            assert cell.text == f"{law} {title}"
+        assert driver.find_element(By.ID, "most-probable-title").text == titles["m3"]
+        # Every legend lies within its canvas, wrapped onto more rows where the page is narrow.
+        for width in (1400, 640):
+            driver.set_window_size(width, 2000)
+            WebDriverWait(driver, 10).until(
+                lambda d: d.execute_script("return document.getElementById('map').clientWidth") < width
+            )
+            driver.execute_script("window.dispatchEvent(new Event('resize'))")
+            time.sleep(0.5)
+            legends = driver.execute_script("return window.bitrockPage.legends")
+            for panel in ("along", "cloud", "map"):
+                assert legends[panel]["rows"] >= 1 and legends[panel]["right"] <= legends[panel]["width"], (width, legends)
+            driver.save_screenshot(str(ARTEFACTS / f"live-page-{width}px.png"))
+        # Four laws' names in a narrow plot wrap onto rows that each fit.
+        rows = driver.execute_script(
+            "const g = document.createElement('canvas').getContext('2d');"
+            "return legend(g, 'probe', 58, 300, arguments[0].map((t) => [t, '#000']));",
+            ["m1 Tucker & Wang", "m2 Navarro-Lopez & Suarez", "m3 The paper's new law", "m4 Ritto & Aguiar's cubic"],
+        )
+        probe = driver.execute_script("return window.bitrockPage.legends.probe")
+        assert rows >= 2 and probe["right"] <= 300, (rows, probe)
+        driver.set_window_size(1400, 2000)
 
         # The print view of the current state: its pages hold the page's text.
         pdf = driver.execute_cdp_cmd("Page.printToPDF", {"printBackground": True})

@@ -209,6 +209,37 @@ fn the_report_has_every_figure_in_both_formats_and_the_tables() {
     }
 }
 
+/// A parameter the record does not identify can wander to 10¹⁰ (m3's a0 on physical boxes):
+/// its axes count in a power of ten, so that no tick reads 1.000e10 over its neighbour.
+#[test]
+fn long_numbers_are_counted_in_a_power_of_ten_on_the_marginals() {
+    let (data, fits, mut runs) = runs(400, &[0.4], 8);
+    for population in &mut runs[0].populations {
+        for particle in population.particles.iter_mut().filter(|q| q.law == Law::M3) {
+            particle.params[0] *= 1e10;
+        }
+    }
+    let input = ReportInput {
+        data: &data,
+        fits: &fits,
+        runs: &runs,
+        stability: StabilitySettings::default(),
+        evidence: None,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    write_report(dir.path(), &input).unwrap();
+    for stem in ["fig05_marginals_m3", "fig06_correlation_m3"] {
+        let svg = std::fs::read_to_string(dir.path().join("figures").join(format!("{stem}.svg"))).unwrap();
+        assert!(svg.contains("a0 (10¹⁰ kN·m)"), "{stem}: no power of ten on a0's axis");
+        assert!(
+            !svg.contains("e10<") && !svg.contains("e9<"),
+            "{stem}: a tick in e-notation"
+        );
+    }
+    let marginals = std::fs::read_to_string(dir.path().join("figures/fig05_marginals_m3.svg")).unwrap();
+    assert!(marginals.contains("density (10⁻¹⁰)"), "a0's density counts in 10⁻¹⁰");
+}
+
 #[test]
 fn unequal_weights_and_refused_input() {
     let (data, fits, mut runs) = runs(400, &[0.6], 8);

@@ -122,24 +122,26 @@ impl Figure for Marginals {
         let (main, strip) = area.split_vertically(area.dim_in_pixel().1 - LEGEND_STRIP);
         for (panel, (name, range, hists)) in panels(&main, self.params.len()).iter().zip(&self.params) {
             let top = hists.iter().flat_map(|h| h.1.iter().copied()).fold(0.0, f64::max);
+            let y_top = (top * 1.08).max(1e-300);
+            let (x_power, y_power) = (plot::axis_power(range.0, range.1), plot::axis_power(0.0, y_top));
             let mut chart = ChartBuilder::on(panel)
                 .margin(10)
                 .margin_right(22)
                 .x_label_area_size(58)
                 .y_label_area_size(84)
-                .build_cartesian_2d(range.0..range.1, 0.0..(top * 1.08).max(1e-300))?;
+                .build_cartesian_2d(range.0..range.1, 0.0..y_top)?;
             chart
                 .configure_mesh()
-                .x_desc(name.as_str())
-                .y_desc("density")
+                .x_desc(plot::in_power(name, x_power))
+                .y_desc(plot::in_power("density", y_power))
                 .axis_desc_style(font(AXIS - 2))
                 .label_style(font(TICK - 3))
                 .max_light_lines(0)
                 .bold_line_style(GRID)
                 .x_labels(4)
                 .y_labels(5)
-                .x_label_formatter(&|x| plot::short(*x))
-                .y_label_formatter(&|y| plot::short(*y))
+                .x_label_formatter(&|x| plot::tick_in(*x, x_power))
+                .y_label_formatter(&|y| plot::tick_in(*y, y_power))
                 .draw()?;
             for (i, density) in hists {
                 let c = run_color(*i);
@@ -248,6 +250,15 @@ impl Figure for Correlation {
                 .x_label_area_size(if i + 1 == d { 52 } else { 6 })
                 .y_label_area_size(if j == 0 { 76 } else { 6 })
                 .build_cartesian_2d(x_range.0..x_range.1, y_range.0..y_range.1)?;
+            // The parameters' axes count in a power of ten where their numbers are long.
+            let x_power = plot::axis_power(ranges[j].0, ranges[j].1);
+            let y_power = if i > j {
+                plot::axis_power(ranges[i].0, ranges[i].1)
+            } else {
+                0
+            };
+            let x_tick = |x: &f64| plot::tick_in(*x, x_power);
+            let y_tick = |y: &f64| plot::tick_in(*y, y_power);
             let mut mesh = chart.configure_mesh();
             mesh.max_light_lines(0)
                 .disable_mesh()
@@ -255,15 +266,15 @@ impl Figure for Correlation {
                 .axis_desc_style(font(small + 1))
                 .x_labels(3)
                 .y_labels(3)
-                .x_label_formatter(&|x| plot::short(*x))
-                .y_label_formatter(&|y| plot::short(*y));
+                .x_label_formatter(&x_tick)
+                .y_label_formatter(&y_tick);
             if i + 1 == d {
-                mesh.x_desc(self.names[j].as_str());
+                mesh.x_desc(plot::in_power(&self.names[j], x_power));
             } else {
                 mesh.x_labels(0);
             }
             if j == 0 && i != 0 {
-                mesh.y_desc(self.names[i].as_str());
+                mesh.y_desc(plot::in_power(&self.names[i], y_power));
             } else if j == 0 {
                 mesh.y_desc(format!("density of {}", self.names[0].split(' ').next().unwrap_or("")));
             }

@@ -16,6 +16,8 @@ const state = {
   // (ms since the epoch): what the browser test measures.
   timings: [],
   pending: [],
+  // Each canvas's legend: rows and the right end of its widest row (CSS px).
+  legends: {},
 };
 window.bitrockPage = state;
 
@@ -131,6 +133,7 @@ function render() {
     : '';
   drawAlong($('along'));
   drawCloud($('cloud'));
+  drawStrip($('strip'));
   drawMap($('map'));
   drawParams($('params'));
 }
@@ -141,6 +144,8 @@ function renderNow(u) {
   $('samples').textContent = `${u.samples_used} of ${u.samples}`;
   $('latency').textContent = `${fixed(u.latency_s, 2)} s`;
   $('most-probable').textContent = u.most_probable || '—';
+  const title = u.most_probable ? titled(u.most_probable).slice(u.most_probable.length + 1) : '';
+  $('most-probable-title').textContent = title;
   const change = $('change');
   change.textContent = u.change ? `changed here (${fixed(u.change_nats, 0)} nats)` : u.uninformative ? 'this window informs nothing' : 'same';
   change.className = u.change ? 'changed' : '';
@@ -158,7 +163,7 @@ function renderNow(u) {
       const tr = document.createElement('tr');
       tr.dataset.law = l.law;
       for (const [text, key] of [
-        [l.law, 'law'],
+        [titled(l.law), 'law'],
         [fixed(l.probability, 3), 'probability'],
         [fixed(l.window_probability, 3), 'window_probability'],
         [l.ln_z === null ? '— (ABC)' : `${fixed(l.ln_z, 1)} ± ${fixed(l.ln_z_error, 1)}`, 'ln_z'],
@@ -209,7 +214,7 @@ function renderLawSelect() {
       ...names.map((n) => {
         const o = document.createElement('option');
         o.value = n;
-        o.textContent = n;
+        o.textContent = titled(n);
         return o;
       }),
     );
@@ -222,8 +227,8 @@ function renderLawSelect() {
 
 // ---- drawing ----
 
-// A plot area on a canvas: axes from `x` and `y` ([lo, hi]), labels, and mapping functions.
-function frame(canvas, x, y, xlabel, ylabel) {
+// A canvas sized to its box on screen (device pixels), cleared: its context and CSS size.
+function surface(canvas) {
   const ratio = window.devicePixelRatio || 1;
   const w = canvas.clientWidth || canvas.width;
   const h = canvas.clientHeight || canvas.height;
@@ -232,7 +237,15 @@ function frame(canvas, x, y, xlabel, ylabel) {
   const g = canvas.getContext('2d');
   g.setTransform(ratio, 0, 0, ratio, 0, 0);
   g.clearRect(0, 0, w, h);
-  const box = { left: 58, right: w - 12, top: 26, bottom: h - 38 };
+  return { g, w, h };
+}
+
+// A plot area on a canvas: axes from `x` and `y` ([lo, hi]), labels, the legend `items`
+// ([label, colour]) in as many rows above the plot as its width needs, and mapping functions.
+function frame(canvas, x, y, xlabel, ylabel, items = []) {
+  const { g, w, h } = surface(canvas);
+  const rows = legend(g, canvas.id, 58, w - 12, items);
+  const box = { left: 58, right: w - 12, top: 10 + LEGEND_ROW * rows, bottom: h - 38 };
   const px = (v) => box.left + ((v - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
   const py = (v) => box.bottom - ((v - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
   g.strokeStyle = '#9aa3ad';
@@ -289,21 +302,44 @@ function extent(values) {
   return [lo - pad, hi + pad];
 }
 
-// A row of swatches above the plot area.
-function legend(g, box, items) {
-  let x = box.left;
+// Height of a legend row, px.
+const LEGEND_ROW = 16;
+
+// The swatches and labels of `items` from the top of the canvas, between `left` and `right`,
+// wrapped onto as many rows as they need; their extent is kept in `state.legends[id]` (what the
+// browser test checks: nothing drawn past the canvas). Returns the rows used.
+function legend(g, id, left, right, items) {
   g.font = '11px system-ui, sans-serif';
   g.textAlign = 'left';
+  let x = left;
+  let row = 0;
+  let widest = left;
   for (const [label, c] of items) {
+    const width = 13 + g.measureText(label).width;
+    if (x > left && x + width > right) {
+      row += 1;
+      x = left;
+    }
+    const top = 4 + row * LEGEND_ROW;
     g.fillStyle = c;
-    g.fillRect(x, box.top - 18, 10, 10);
+    g.fillRect(x, top, 10, 10);
     g.strokeStyle = '#9aa3ad';
     g.lineWidth = 0.5;
-    g.strokeRect(x, box.top - 18, 10, 10);
+    g.strokeRect(x, top, 10, 10);
     g.fillStyle = '#1b1f24';
-    g.fillText(label, x + 13, box.top - 9);
-    x += g.measureText(label).width + 24;
+    g.fillText(label, x + 13, top + 9);
+    widest = Math.max(widest, x + width);
+    x += width + 11;
   }
+  const rows = items.length ? row + 1 : 0;
+  state.legends[id] = { rows, right: widest, width: right + 12 };
+  return rows;
+}
+
+// A law's name with whose law it is ("m2 Navarro-Lopez & Suarez"), where the meta says.
+function titled(law) {
+  const spec = state.meta && state.meta.laws ? state.meta.laws.find((l) => l.name === law) : null;
+  return spec && spec.title ? `${law} ${spec.title}` : law;
 }
 
 // The path of the points (xs[k], ys[k]).
@@ -343,9 +379,10 @@ function drawAlong(canvas) {
   const updates = state.updates;
   if (updates.length === 0) return message(canvas, 'no window yet');
   const x = [Math.min(...updates.map((u) => u.start_s)), Math.max(...updates.map((u) => u.end_s))];
-  const f = frame(canvas, x, [0, 1], 'end of the window along the record, s', 'P(law)');
-  const { g, px, py, box } = f;
   const names = lawNames();
+  const items = names.map((n) => [titled(n), color(n)]).concat([['change', '#b3261e']]);
+  const f = frame(canvas, x, [0, 1], 'end of the window along the record, s', 'P(law)', items);
+  const { g, px, py, box } = f;
   // Uninformative windows: grey.
   g.fillStyle = '#e8eaed';
   for (const u of updates) {
@@ -359,7 +396,6 @@ function drawAlong(canvas) {
     below = above;
   }
   changeLines(f, updates, [0, 1]);
-  legend(g, box, names.map((n) => [n, color(n)]).concat([['change', '#b3261e']]));
 }
 
 function drawCloud(canvas) {
@@ -368,25 +404,26 @@ function drawCloud(canvas) {
   const band = v.band;
   const ys = v.torque.concat(band ? band.lower.concat(band.upper) : []);
   const xs = v.speed_rpm.concat(band ? band.speed_rpm : []);
-  const f = frame(canvas, extent(xs), extent(ys), `bit speed, rpm (window ${v.window})`, `torque, ${v.torque_unit}`);
-  const { g, px, py, box } = f;
+  const items = band
+    ? band.curves
+        .map((c) => [`${c.law} MAP (P ${c.probability.toFixed(2)})`, color(c.law)])
+        .concat([[`${Math.round(band.level * 100)} % band of the mixture`, 'rgba(31, 119, 180, 0.35)']])
+    : [];
+  const f = frame(canvas, extent(xs), extent(ys), `bit speed, rpm (window ${v.window})`, `torque, ${v.torque_unit}`, items);
+  const { g, px, py } = f;
   if (band) {
     fillBetween(g, px, py, band.speed_rpm, band.upper, band.lower, 'rgb(31, 119, 180)', 0.18);
   }
   g.fillStyle = 'rgba(60, 60, 60, 0.45)';
   v.speed_rpm.forEach((s, k) => g.fillRect(px(s) - 1, py(v.torque[k]) - 1, 2, 2));
-  const items = [];
   if (band) {
     for (const c of band.curves) {
       polyline(g, px, py, band.speed_rpm, c.torque);
       g.strokeStyle = color(c.law);
       g.lineWidth = 1 + 3 * c.probability;
       g.stroke();
-      items.push([`${c.law} MAP (P ${c.probability.toFixed(2)})`, color(c.law)]);
     }
-    items.push([`${Math.round(band.level * 100)} % band of the mixture`, 'rgba(31, 119, 180, 0.35)']);
   }
-  legend(g, box, items);
 }
 
 // P(stick-slip) as a colour: pale green at 0, deep red at 1.
@@ -414,7 +451,14 @@ function drawMap(canvas) {
   const dy = (m.wob_kn[nw - 1] - m.wob_kn[0]) / Math.max(nw - 1, 1);
   const x = [m.omega_rpm[0] - dx / 2, m.omega_rpm[m.omega_rpm.length - 1] + dx / 2];
   const y = [m.wob_kn[0] - dy / 2, m.wob_kn[nw - 1] + dy / 2];
-  const f = frame(canvas, x, y, 'top-drive speed, rpm', 'weight on bit, kN');
+  const u = state.updates.filter((u) => u.advice).pop();
+  const items = [[`P = 0`, shade(0)], [`P = 1`, shade(1)], [`black line: P = ${m.risk}`, '#1b1f24']];
+  if (u) {
+    const a = u.advice;
+    items.push([`now: ${a.omega_rpm.toFixed(0)} rpm, ${a.wob_kn.toFixed(0)} kN, P ${a.p_unstable.toFixed(2)}`, '#1b1f24']);
+    if (a.safe_omega_rpm !== null || a.safe_wob_kn !== null) items.push(['advised', '#1b7f3b']);
+  }
+  const f = frame(canvas, x, y, 'top-drive speed, rpm', 'weight on bit, kN', items);
   const { g, px, py } = f;
   const p = (i, j) => m.p_unstable[i * nw + j];
   m.omega_rpm.forEach((o, i) => {
@@ -444,8 +488,6 @@ function drawMap(canvas) {
     }
   }
   g.stroke();
-  const u = state.updates.filter((u) => u.advice).pop();
-  const items = [[`P = 0`, shade(0)], [`P = 1`, shade(1)], [`black line: P = ${m.risk}`, '#1b1f24']];
   if (u) {
     const a = u.advice;
     const mark = (o, w, fill, r) => {
@@ -471,10 +513,7 @@ function drawMap(canvas) {
       mark(o, w, '#1b7f3b', 5);
     }
     mark(a.omega_rpm, a.wob_kn, '#1b1f24', 6);
-    items.push([`now: ${a.omega_rpm.toFixed(0)} rpm, ${a.wob_kn.toFixed(0)} kN, P ${a.p_unstable.toFixed(2)}`, '#1b1f24']);
-    if (a.safe_omega_rpm !== null || a.safe_wob_kn !== null) items.push(['advised', '#1b7f3b']);
   }
-  legend(g, f.box, items);
 }
 
 function drawParams(canvas) {
@@ -483,17 +522,12 @@ function drawParams(canvas) {
   if (!law || updates.length === 0) return message(canvas, 'no posterior yet');
   const spec = state.meta && state.meta.laws ? state.meta.laws.find((l) => l.name === law) : null;
   const count = updates[0].laws.find((l) => l.law === law).mean.length;
-  const ratio = window.devicePixelRatio || 1;
-  const w = canvas.clientWidth || canvas.width;
   const rowHeight = 90;
-  canvas.style.height = `${rowHeight * count + 20}px`;
-  const h = rowHeight * count + 20;
-  canvas.width = Math.round(w * ratio);
-  canvas.height = Math.round(h * ratio);
-  const g = canvas.getContext('2d');
-  g.setTransform(ratio, 0, 0, ratio, 0, 0);
-  g.clearRect(0, 0, w, h);
+  // Below the last panel: its time ticks and the axis's name.
+  canvas.style.height = `${rowHeight * count + 36}px`;
+  const { g, w, h } = surface(canvas);
   const x = [updates[0].end_s, updates[updates.length - 1].end_s];
+  const times = ticks(x[0], x[1], 6);
   for (let j = 0; j < count; j++) {
     const rows = updates.map((u) => u.laws.find((l) => l.law === law));
     const lo = rows.map((r) => r.q01[j]);
@@ -502,8 +536,15 @@ function drawParams(canvas) {
     const box = { left: 58, right: w - 12, top: j * rowHeight + 8, bottom: (j + 1) * rowHeight - 8 };
     const px = (v) => box.left + ((v - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
     const py = (v) => box.bottom - ((v - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
-    g.strokeStyle = '#9aa3ad';
+    g.strokeStyle = '#eef0f2';
     g.lineWidth = 1;
+    for (const t of times) {
+      g.beginPath();
+      g.moveTo(px(t), box.top);
+      g.lineTo(px(t), box.bottom);
+      g.stroke();
+    }
+    g.strokeStyle = '#9aa3ad';
     g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
     const ends = updates.map((u) => u.end_s);
     fillBetween(g, px, py, ends, hi, lo, color(law), 0.25);
@@ -521,9 +562,70 @@ function drawParams(canvas) {
     g.fillStyle = '#5b6570';
     g.fillText(short(y[1]), box.left - 4, box.top + 10);
     g.fillText(short(y[0]), box.left - 4, box.bottom);
+    if (j === count - 1) {
+      g.textAlign = 'center';
+      for (const t of times) g.fillText(short(t), px(t), box.bottom + 14);
+      g.fillText('end of the window along the record, s', (box.left + box.right) / 2, h - 4);
+    }
   }
-  g.textAlign = 'center';
-  g.fillText('end of the window along the record, s', w / 2, h - 4);
+}
+
+// The window's bit speed and torque along time, one above the other, the stuck band
+// (|bit speed| < 1 rpm) shaded, and what the bit shows over the window in the caption.
+function drawStrip(canvas) {
+  const v = state.view;
+  const caption = $('strip-caption');
+  const bit = v && v.bit;
+  caption.textContent = bit
+    ? `Window ${v.window}: the bit stuck ${fixed(bit.stuck_share * 100, 0)} % of the time (|bit speed| < 1 rpm), ` +
+      `stick-slip severity ${fixed(bit.severity, 2)} ((max − min) / (2 · mean) of the bit speed; 0 turns steadily, ` +
+      `1 or more sticks), mean ${fixed(bit.mean_speed_rpm, 0)} rpm` +
+      (bit.mean_wob_kn !== null && bit.mean_wob_kn !== undefined ? `, weight on bit ${short(bit.mean_wob_kn)} kN.` : '.')
+    : '';
+  if (!v) return message(canvas, 'no window yet');
+  if (!v.time_s || v.time_s.length === 0) return message(canvas, 'the record has no clock: no strip chart');
+  const { g, w, h } = surface(canvas);
+  const x = extent(v.time_s);
+  const half = (h - 38) / 2;
+  const panels = [
+    { values: v.speed_rpm, label: 'bit speed, rpm', top: 8, colour: '#0072b2' },
+    { values: v.torque, label: `torque, ${v.torque_unit}`, top: 8 + half, colour: '#d55e00' },
+  ];
+  const times = ticks(x[0], x[1], 6);
+  panels.forEach((panel, k) => {
+    const y = extent(k === 0 ? panel.values.concat([0]) : panel.values);
+    const box = { left: 58, right: w - 12, top: panel.top, bottom: panel.top + half - 12 };
+    const px = (t) => box.left + ((t - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
+    const py = (u) => box.bottom - ((u - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
+    if (k === 0) {
+      // The stuck band: where a downhole tool counts the bit stuck.
+      g.fillStyle = 'rgba(179, 38, 30, 0.15)';
+      const [a, b] = [py(Math.min(1, y[1])), py(Math.max(-1, y[0]))];
+      g.fillRect(box.left, a, box.right - box.left, b - a);
+    }
+    g.strokeStyle = '#9aa3ad';
+    g.lineWidth = 1;
+    g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
+    polyline(g, px, py, v.time_s, panel.values);
+    g.strokeStyle = panel.colour;
+    g.lineWidth = 1.2;
+    g.stroke();
+    g.fillStyle = '#5b6570';
+    g.font = '11px system-ui, sans-serif';
+    g.textAlign = 'right';
+    for (const t of ticks(y[0], y[1], 3)) g.fillText(short(t), box.left - 4, py(t) + 4);
+    g.save();
+    g.translate(12, (box.top + box.bottom) / 2);
+    g.rotate(-Math.PI / 2);
+    g.textAlign = 'center';
+    g.fillText(panel.label, 0, 0);
+    g.restore();
+    if (k === 1) {
+      g.textAlign = 'center';
+      for (const t of times) g.fillText(short(t), px(t), box.bottom + 14);
+      g.fillText('time along the record, s', (box.left + box.right) / 2, h - 4);
+    }
+  });
 }
 
 document.addEventListener('DOMContentLoaded', () => {
