@@ -887,6 +887,9 @@ pub struct Row {
     /// Top-drive (surface) speed, rad/s, where the reader of the stream has a column for it
     /// (a watch's operating point); `None` from [`RowLayout::row`].
     pub top_drive_rad_s: Option<f64>,
+    /// The bit's depth, m, where the record has a depth column whose name says its unit
+    /// ([`depth_column`]): shown beside a window, never inferred from.
+    pub depth_m: Option<f64>,
 }
 
 /// How the rows of a record are read one at a time (a stream that grows): the columns and
@@ -897,6 +900,8 @@ pub struct RowLayout {
     units: ColumnUnits,
     /// The time column's clock, decided at its first cell.
     time: clock::TimeReader,
+    /// The depth column and its unit, where the record has one ([`depth_column`]).
+    depth: Option<(usize, crate::units::LengthUnit)>,
     delimiter: u8,
     path: PathBuf,
 }
@@ -912,9 +917,12 @@ impl RowLayout {
         let units = ColumnUnits::resolve(headers, &indices, opts, path)?;
         Ok(Self {
             headers: headers.clone(),
+            time: clock::TimeReader::new(units.time_in_ms),
+            depth: depth_column(headers).filter(|(i, _)| {
+                ![Some(indices.speed), Some(indices.torque), indices.wob, indices.time].contains(&Some(*i))
+            }),
             indices,
             units,
-            time: clock::TimeReader::new(units.time_in_ms),
             delimiter,
             path: path.to_path_buf(),
         })
@@ -979,6 +987,11 @@ impl RowLayout {
             },
             time_s: self.indices.time.map(|i| self.time_cell(record, i, line)).transpose()?,
             top_drive_rad_s: None,
+            // A depth cell that is no number leaves the row without a depth, never refused.
+            depth_m: self.depth.and_then(|(i, unit)| {
+                let value: f64 = record.get(i)?.trim().parse().ok()?;
+                value.is_finite().then(|| value * unit.metres())
+            }),
         })
     }
 }
@@ -995,6 +1008,25 @@ impl RowLayout {
                 name: self.headers[i].to_string(),
                 message,
             })
+    }
+}
+
+/// The bit's depth column of a record whose header is `headers`, and its unit: the one column
+/// a depth's name or mnemonic names ([`mnemonics::depth_rank`]), the bit's before the hole's,
+/// whose name says its unit (`bit_depth_m`, `DBTM [ft]`). `None` where there is none, or where
+/// that is ambiguous: a depth is shown beside a window, never inferred from, so that a record
+/// is never refused for it.
+pub fn depth_column(headers: &csv::StringRecord) -> Option<(usize, crate::units::LengthUnit)> {
+    use crate::units::ColumnUnit;
+    let ranked: Vec<(usize, usize)> = headers
+        .iter()
+        .enumerate()
+        .filter_map(|(i, h)| mnemonics::depth_rank(h).map(|rank| (rank, i)))
+        .collect();
+    let best = ranked.iter().map(|(rank, _)| *rank).min()?;
+    match ranked.iter().filter(|(rank, _)| *rank == best).collect::<Vec<_>>()[..] {
+        [(_, i)] => crate::units::LengthUnit::declared_by(&headers[*i]).map(|unit| (*i, unit)),
+        _ => None,
     }
 }
 
@@ -1487,6 +1519,38 @@ mod tests {
 
     const GOOD: &str =
         "time_s,bit_speed_rpm,torque_knm,wob_kn\n0,60,10,240\n0.02,2,11,241\n0.04,90,9,242\n0.06,120,8,243\n";
+
+    #[test]
+    fn the_bit_s_depth_is_read_where_its_name_says_its_unit_and_never_refuses_a_row() {
+        let layout = |header: &str| {
+            let headers = csv::StringRecord::from(header.split(',').collect::<Vec<_>>());
+            RowLayout::new(&headers, b',', &DataOptions::default(), Path::new("x.csv")).unwrap()
+        };
+        let row = |layout: &RowLayout, line: &str| {
+            layout
+                .row(&csv::StringRecord::from(line.split(',').collect::<Vec<_>>()), 2)
+                .unwrap()
+        };
+        // The bit's depth before the hole's; feet converted at the edge.
+        let both = layout("time_s,bit_speed_rpm,torque_knm,hole_depth_m,DBTM [ft]");
+        assert_eq!(row(&both, "0,60,10,1525.0,5000").depth_m, Some(5000.0 * 0.3048));
+        // A cell that is no number leaves the row without a depth.
+        assert_eq!(row(&both, "0,60,10,1525.0,-999.25x").depth_m, None);
+        assert_eq!(row(&both, "0,60,10,1525.0,").depth_m, None);
+        assert_eq!(
+            row(&layout("bit_speed_rpm,torque_knm,depth_m"), "60,10,1525.5").depth_m,
+            Some(1525.5)
+        );
+        // No unit in its name, or two depths alike: no depth, and the record reads.
+        assert_eq!(
+            row(&layout("bit_speed_rpm,torque_knm,depth"), "60,10,1525.5").depth_m,
+            None
+        );
+        assert_eq!(
+            row(&layout("bit_speed_rpm,torque_knm,md_depth_m,tvd_depth_m"), "60,10,1,2").depth_m,
+            None
+        );
+    }
 
     #[test]
     fn reads_si_and_filters_slow_rows() {

@@ -339,6 +339,52 @@ impl RateUnit {
     }
 }
 
+/// Unit of a depth along the hole (the bit's measured depth).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LengthUnit {
+    /// Metres.
+    #[serde(rename = "m")]
+    M,
+    /// Feet.
+    #[serde(rename = "ft")]
+    Ft,
+}
+
+impl LengthUnit {
+    /// m per one of this unit.
+    pub fn metres(self) -> f64 {
+        match self {
+            LengthUnit::M => 1.0,
+            LengthUnit::Ft => 0.3048,
+        }
+    }
+    /// Printed name.
+    pub fn label(self) -> &'static str {
+        match self {
+            LengthUnit::M => "m",
+            LengthUnit::Ft => "ft",
+        }
+    }
+    /// The unit a log writes as `symbol` (`m`, `ft`, `feet`), if bitrock reads it.
+    pub fn from_symbol(symbol: &str) -> Option<Self> {
+        match squeezed(symbol).as_str() {
+            "m" | "metres" | "meters" => Some(LengthUnit::M),
+            "ft" | "feet" | "f" => Some(LengthUnit::Ft),
+            _ => None,
+        }
+    }
+    /// The unit a column name declares (`bit_depth_m`, `depth_ft`, `DBTM [m]`), if any.
+    pub fn from_suffix(column: &str) -> Option<Self> {
+        if let Some(symbol) = bracketed(column) {
+            return Self::from_symbol(symbol);
+        }
+        let c = column.to_ascii_lowercase();
+        [("_m", LengthUnit::M), ("_ft", LengthUnit::Ft)]
+            .into_iter()
+            .find_map(|(suffix, unit)| c.ends_with(suffix).then_some(unit))
+    }
+}
+
 /// A unit a record's column may be in: declared by the column name (a suffix, a bracketed
 /// symbol), or by a setting.
 pub trait ColumnUnit: Copy + PartialEq {
@@ -361,7 +407,7 @@ macro_rules! column_unit {
         }
     )*};
 }
-column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit);
+column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit, LengthUnit);
 
 #[cfg(test)]
 mod tests {

@@ -27,6 +27,24 @@ const BIT_WORDS: &[(Role, &[&str])] = &[
 /// where nothing else is, and said ([`ambiguous`]).
 const BARE_WORDS: &[(Role, &[&str])] = &[(Role::Speed, &["rpm"]), (Role::Torque, &["tq", "trq"])];
 
+/// Words that name a depth along the hole, the bit's first (`DBTM`, WITS item 0108) and the
+/// hole's after (`DMEA`, 0110: the bit's while it drills on bottom): [`depth_rank`].
+const DEPTH_WORDS: [&[&str]; 2] = [&["dbtm", "bitdepth", "bdep"], &["depth", "dept", "dmea", "hdep"]];
+
+/// How a column's name names a depth: 0 the bit's (a bit-depth mnemonic, or a depth word beside
+/// `bit`), 1 another depth (the hole's, or a depth that does not say), `None` no depth.
+pub fn depth_rank(name: &str) -> Option<usize> {
+    let words = words(name);
+    let has = |table: &[&str]| words.iter().any(|w| table.contains(&w.as_str()));
+    if has(DEPTH_WORDS[0]) || (has(DEPTH_WORDS[1]) && words.iter().any(|w| w == "bit")) {
+        Some(0)
+    } else if has(DEPTH_WORDS[1]) {
+        Some(1)
+    } else {
+        None
+    }
+}
+
 /// Words that mark a channel measured downhole.
 const DOWNHOLE_WORDS: &[&str] = &["dh", "downhole", "bit", "mwd", "memory"];
 
@@ -157,6 +175,11 @@ mod tests {
         assert_eq!(role("DWOB"), Some(Role::Wob));
         assert_eq!(role("DTIM"), Some(Role::Time));
         assert_eq!(role("depth_m"), None);
+        assert_eq!(depth_rank("DBTM [m]"), Some(0));
+        assert_eq!(depth_rank("bit_depth_ft"), Some(0));
+        assert_eq!(depth_rank("hole_depth_m"), Some(1));
+        assert_eq!(depth_rank("DMEA [ft]"), Some(1));
+        assert_eq!(depth_rank("bit_speed_rpm"), None);
         // A bracketed unit is no word of the name.
         assert_eq!(role("depth [rpm]"), None);
     }

@@ -37,6 +37,10 @@ pub struct View {
     /// severity, the mean speed and weight on bit (`None` in views stored without it).
     #[serde(default)]
     pub bit: Option<BitSeen>,
+    /// The bit's depth over the window, m, first and last (where the record has a depth
+    /// column: [`crate::data::depth_column`]).
+    #[serde(default)]
+    pub depth_m: Option<[f64; 2]>,
     /// The mixture posterior's curves; `None` before the first informative window.
     pub band: Option<Band>,
     /// P(stick-slip) over (Ω, W); `None` before the first informative window.
@@ -105,6 +109,8 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
     let speeds: Vec<f64> = rows.iter().map(|r| r.speed_rad_s).collect();
     let wob_n: Option<Vec<f64>> = rows.iter().map(|r| r.wob_n).collect();
     let bit = BitSeen::of(&speeds, wob_n.as_deref());
+    let mut depths = rows.iter().filter_map(|r| r.depth_m);
+    let depth_m = depths.next().map(|first| [first, depths.next_back().unwrap_or(first)]);
     let (band, map) = match posterior {
         Some(p) if !p.inputs.is_empty() => {
             let (lo, hi) = rows
@@ -138,6 +144,7 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
         torque,
         time_s,
         bit,
+        depth_m,
         band,
         map,
     }
@@ -205,6 +212,7 @@ mod tests {
             torque_nm: t,
             wob_n: None,
             top_drive_rad_s: None,
+            depth_m: None,
         }
     }
 
@@ -282,6 +290,20 @@ mod tests {
         assert_eq!((v.time_s[0], v.time_s[1]), (100.0, 100.06));
         let bit = v.bit.unwrap();
         assert_eq!((bit.samples, bit.stuck_share, bit.mean_wob_kn), (1500, 0.2, Some(10.0)));
+        assert_eq!(v.depth_m, None);
+        // The depth's first and last over the window, where rows carry one.
+        let drilling: Vec<Row> = rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| Row {
+                depth_m: (i % 7 != 0).then_some(1500.0 + i as f64 * 0.001),
+                ..*r
+            })
+            .collect();
+        assert_eq!(
+            view(1, &drilling, TorqueUnit::Nm, None).depth_m,
+            Some([1500.001, 1501.499])
+        );
         // A record without a clock draws no strip.
         let clockless: Vec<Row> = rows.iter().map(|r| Row { time_s: None, ..*r }).collect();
         assert!(view(1, &clockless, TorqueUnit::Nm, None).time_s.is_empty());

@@ -255,6 +255,7 @@ mod tests {
             torque_nm: 1.0,
             wob_n: None,
             top_drive_rad_s: None,
+            depth_m: None,
         }
     }
 

@@ -282,6 +282,7 @@ impl WitsReader {
                 torque_nm: torque * self.torque_unit.newton_metres(),
                 wob_n: wob,
                 top_drive_rad_s: top_drive,
+                depth_m: None,
             })
         })())
     }

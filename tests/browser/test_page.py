@@ -95,6 +95,12 @@ def well(tmp_path_factory):
     d = tmp_path_factory.mktemp("well")
     (d / "well.toml").write_text(WELL)
     subprocess.run([BIN, "simulate", "--well", "well.toml", "-o", "well.csv"], cwd=d, check=True, capture_output=True)
+    # The bit's depth, as a rig's log gives it: drilling ahead at 36 m/h from 1500 m.
+    lines = (d / "well.csv").read_text().splitlines()
+    depths = [f"{1500.0 + float(line.split(',')[0]) * 0.01:.3f}" for line in lines[1:]]
+    (d / "well.csv").write_text(
+        "\n".join([lines[0] + ",DBTM [m]"] + [f"{line},{depth}" for line, depth in zip(lines[1:], depths)]) + "\n"
+    )
     return d
 
 
@@ -217,6 +223,10 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
         caption = driver.find_element(By.ID, "strip-caption").text
         assert f"the bit stuck {view['bit']['stuck_share'] * 100:.0f} % of the time" in caption, caption
         assert f"severity {view['bit']['severity']:.2f}" in caption, caption
+        # The window's depth, from the record's DBTM column: 1500 m plus 0.01 m a second.
+        top, bottom = view["depth_m"]
+        assert abs(top - (1500.0 + 0.01 * lines[-1]["start_s"])) < 0.02 and bottom > top, view["depth_m"]
+        assert f"bit depth {top:.1f}–{bottom:.1f} m" in caption, caption
         # Each law's name with whose law it is, from the meta.
         titles = {l["name"]: l["title"] for l in driver.execute_script("return window.bitrockPage.meta.laws")}
         assert titles == {"m2": "Navarro-Lopez & Suarez", "m3": "The paper's new law"}

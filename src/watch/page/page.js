@@ -580,7 +580,8 @@ function drawStrip(canvas) {
     ? `Window ${v.window}: the bit stuck ${fixed(bit.stuck_share * 100, 0)} % of the time (|bit speed| < 1 rpm), ` +
       `stick-slip severity ${fixed(bit.severity, 2)} ((max − min) / (2 · mean) of the bit speed; 0 turns steadily, ` +
       `1 or more sticks), mean ${fixed(bit.mean_speed_rpm, 0)} rpm` +
-      (bit.mean_wob_kn !== null && bit.mean_wob_kn !== undefined ? `, weight on bit ${short(bit.mean_wob_kn)} kN.` : '.')
+      (bit.mean_wob_kn !== null && bit.mean_wob_kn !== undefined ? `, weight on bit ${short(bit.mean_wob_kn)} kN` : '') +
+      (v.depth_m ? `, bit depth ${fixed(v.depth_m[0], 1)}–${fixed(v.depth_m[1], 1)} m.` : '.')
     : '';
   if (!v) return message(canvas, 'no window yet');
   if (!v.time_s || v.time_s.length === 0) return message(canvas, 'the record has no clock: no strip chart');
