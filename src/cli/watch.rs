@@ -241,7 +241,7 @@ fn settings(cmd: &WatchCmd) -> anyhow::Result<WatchSettings> {
         thin: cmd.thin,
         window_s: cmd.window_s,
         step_s: cmd.step_s,
-        evidence: EvidenceConfig {
+        evidence: bitrock::run::evidence::Settings {
             particles: match cmd.abc {
                 true => defaults.evidence.particles,
                 false => cmd.particles.unwrap_or(defaults.evidence.particles),

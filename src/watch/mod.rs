@@ -41,14 +41,14 @@ pub mod witsml;
 
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
-use crate::abc::evidence::{EvidenceConfig, NoiseModel, Start};
+use crate::abc::evidence::{EvidenceConfig, Start};
 use crate::data::{BitSeen, DataOptions, FieldData, Row, Samples};
 use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::run::advice::{Adviser, EscapeSettings};
-use crate::run::evidence::{EvidenceAnalysis, EvidencePrior, WarmStart};
+use crate::run::evidence::{EvidenceAnalysis, WarmStart};
 use crate::run::strings::OperatingPoint;
 use crate::simulate::strings::Chain;
 use crate::stability::lumped::Lumped;
@@ -91,6 +91,9 @@ pub struct Watch {
     said: std::collections::HashSet<String>,
     /// The picture of the latest window given.
     view: Option<view::View>,
+    /// Each window's evidence job as the evidence's settings make it ([`WatchSettings::evidence`],
+    /// validated once); `None` where the watch runs the paper's ABC on each window.
+    evidence: Option<crate::run::evidence::Job>,
 }
 
 impl Watch {
@@ -152,13 +155,21 @@ impl Watch {
                 ));
             }
         }
-        match &settings.abc {
-            Some(config) => config.validate()?,
-            None => {
-                settings.evidence.validate()?;
-                settings.evidence.check_memory(&settings.laws)?;
+        let evidence = match &settings.abc {
+            Some(config) => {
+                config.validate()?;
+                None
             }
-        }
+            None => {
+                let mut job = settings.evidence.job(settings.laws.clone(), FitOptions::default())?;
+                job.sampler.check_memory(&settings.laws)?;
+                // Its backend is the watch's; the watch advises on its own string, once per
+                // window, and judges a change by its own rule, not by the separations.
+                job.backend = settings.backend;
+                job.separations = false;
+                Some(job)
+            }
+        };
         Ok(Self {
             windows: Windows::new(length, step).thinned(thin),
             settings,
@@ -170,6 +181,7 @@ impl Watch {
             declared,
             said: Default::default(),
             view: None,
+            evidence,
         })
     }
 

@@ -105,24 +105,15 @@ impl Watch {
             },
             _ => FitOptions::default(),
         };
+        let template = self.evidence.as_ref().expect("a watch by the evidence keeps its job");
         let job = run::evidence::Job {
-            laws: self.settings.laws.clone(),
             fit,
-            prior: EvidencePrior::Physical {
-                scale: self.settings.prior_scale,
-            },
-            prior_file: None,
-            prior_text: None,
-            backend: self.settings.backend,
             sampler: EvidenceConfig {
-                seed: self.settings.evidence.seed.wrapping_add(window.index as u64),
-                ..self.settings.evidence.clone()
+                seed: template.sampler.seed.wrapping_add(window.index as u64),
+                ..template.sampler.clone()
             },
-            noise: Some(self.settings.evidence.noise),
             warm,
-            separations: false,
-            // The watch advises on its own string, once per window, not through the evidence.
-            string: None,
+            ..template.clone()
         };
         let mut analysis = match of_window(job.run(data, crate::run::Scoring::Here, observer))? {
             Ok(analysis) => analysis,

@@ -14,10 +14,10 @@ pub struct WatchSettings {
     /// Window length and step, s; `None`: from the record's rate, thinned ([`default_windows`]).
     pub window_s: Option<f64>,
     pub step_s: Option<f64>,
-    /// The evidence sampler of each window.
-    pub evidence: EvidenceConfig,
-    /// Width of the physical boxes, in record scales.
-    pub prior_scale: f64,
+    /// The evidence of each window, through the evidence's own settings (its gate, validated
+    /// once when the watch starts): physical boxes `prior_scale` wide, its particles, islands,
+    /// seed (window k's: seed + k) and noise model; its backend is the watch's.
+    pub evidence: crate::run::evidence::Settings,
     /// λ in (0, 1]: the weight of the probabilities carried from one window length before
     /// (overlapping windows each bring in their step's share of it).
     pub forgetting: f64,
@@ -61,16 +61,15 @@ impl Default for WatchSettings {
             thin: None,
             window_s: None,
             step_s: None,
-            evidence: EvidenceConfig {
+            evidence: crate::run::evidence::Settings {
                 particles: 300,
                 islands: 2,
-                noise: NoiseModel::Iid,
+                noise: crate::run::evidence::Noise::Iid,
                 // Each window from the window before; a cold one (the first, or after a
                 // change of rock) from the boxes.
-                start: Start::Box,
-                ..EvidenceConfig::default()
+                start_from: Start::Box,
+                ..Default::default()
             },
-            prior_scale: crate::run::evidence::DEFAULT_PRIOR_SCALE,
             forgetting: 0.5,
             floor: 0.01,
             change_nats: 30.0,

@@ -95,7 +95,7 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
         "islands": settings.evidence.islands,
         "seed": settings.evidence.seed,
         "noise": format!("{:?}", settings.evidence.noise),
-        "prior_scale": settings.prior_scale,
+        "prior_scale": settings.evidence.prior_scale,
         "forgetting": settings.forgetting,
         "floor": settings.floor,
         "change_nats": settings.change_nats,

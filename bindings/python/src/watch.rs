@@ -80,7 +80,7 @@ pub(crate) fn watch(
         thin: kwarg(options, "thin")?,
         window_s: kwarg(options, "window_s")?,
         step_s: kwarg(options, "step_s")?,
-        evidence: bitrock::abc::evidence::EvidenceConfig {
+        evidence: bitrock::run::evidence::Settings {
             particles: particles.filter(|_| !abc).unwrap_or(defaults.evidence.particles),
             islands: islands.unwrap_or(defaults.evidence.islands),
             seed: kwarg(options, "seed")?.unwrap_or(defaults.evidence.seed),
