@@ -5,7 +5,6 @@ use super::args::{LumpedArgs, finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
-use bitrock::prior::PriorFile;
 use bitrock::run::surface::{self, SurfaceResult, SurfaceSettings};
 use bitrock::simulate::surface::Integration;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -118,26 +117,28 @@ impl SurfaceCmd {
         }
     }
 
+    /// The run's settings from the flags, through the surface run's gate.
     fn settings(&self) -> anyhow::Result<SurfaceSettings> {
-        let mut s = SurfaceSettings::new(self.laws()?);
-        s.prior_file = self.prior.as_deref().map(PriorFile::read).transpose()?;
-        s.prior_scale = self.prior_scale;
-        s.structure = self.lumped.validated()?;
-        s.w_ref_n = self.w_ref_kn.map(|w| w * 1000.0);
-        s.noise_sd_nm = self.noise_sd_knm.map(|n| n * 1000.0);
-        s.pilot = self.pilot;
-        s.check_replicates = self.check_replicates;
-        s.predictive_draws = self.predictive_draws;
-        s.advice = !self.no_advice;
-        s.integration = Integration {
+        let settings = surface::Settings {
+            prior_file: self.prior.clone(),
+            prior_scale: self.prior_scale,
+            inertia_kg_m2: self.lumped.inertia_kg_m2,
+            omega_n_rad_s: self.lumped.omega_n_rad_s,
+            damping_ratio: self.lumped.damping_ratio,
+            w_ref_kn: self.w_ref_kn,
+            noise_sd_knm: self.noise_sd_knm,
+            particles: self.particles,
+            max_populations: self.max_populations,
+            max_seconds: self.max_seconds,
+            pilot: self.pilot,
+            check_replicates: self.check_replicates,
+            predictive_draws: self.predictive_draws,
+            advice: !self.no_advice,
             dt_s: self.dt_s,
             settle_s: self.settle_s,
+            seed: self.seed,
         };
-        s.smc.schedule.particles = self.particles;
-        s.smc.schedule.max_populations = self.max_populations;
-        s.smc.schedule.max_seconds = self.max_seconds;
-        s.validate()?;
-        Ok(s)
+        Ok(settings.config(self.laws()?)?)
     }
 }
 

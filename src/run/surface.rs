@@ -40,6 +40,106 @@ use crate::units::RAD_S_PER_RPM;
 use rayon::prelude::*;
 use serde::Serialize;
 
+/// A surface run's settings as a user gives them (the command's flags, Python's keyword
+/// arguments: the gate of [`crate::run::settings`]), validated once into the
+/// [`SurfaceSettings`] it runs; [`Default`] is the command's defaults. The laws come beside
+/// them, as for every kind of run.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// A prior file (TOML) with bounds per law and law weights, torques in the record's unit.
+    pub prior_file: Option<std::path::PathBuf>,
+    /// Width of the prior boxes: k of each parameter's scale from its physical bound.
+    pub prior_scale: f64,
+    /// The 1-DOF string's equivalent moment of inertia I_eq, kg·m² (the paper's where none
+    /// is given).
+    pub inertia_kg_m2: Option<f64>,
+    /// The string's natural frequency ω_n, rad/s (the paper's where none is given).
+    pub omega_n_rad_s: Option<f64>,
+    /// The string's damping ratio ξ (the paper's where none is given).
+    pub damping_ratio: Option<f64>,
+    /// Reference weight on bit W_ref of the laws' parameters, kN; none: r = 1 throughout.
+    pub w_ref_kn: Option<f64>,
+    /// Standard deviation of the surface torque's noise, kN·m; none: estimated from the record.
+    pub noise_sd_knm: Option<f64>,
+    /// Particles per population.
+    pub particles: usize,
+    /// Most populations, the first included.
+    pub max_populations: usize,
+    /// Wall-time budget of the sampler, s (the population in progress is dropped).
+    pub max_seconds: Option<f64>,
+    /// Prior simulations that scale the distance and classify the check's records.
+    pub pilot: usize,
+    /// Records re-simulated per law to check the model choice.
+    pub check_replicates: usize,
+    /// Posterior draws simulated for the bit's predicted speed.
+    pub predictive_draws: usize,
+    /// Whether to simulate the escape advice where the bit stick-slips.
+    pub advice: bool,
+    /// Largest integration step of the simulated strings, s.
+    pub dt_s: f64,
+    /// Time each simulated string settles before the record's first sample, s.
+    pub settle_s: f64,
+    /// Seed of every stream: the same seed gives the same result.
+    pub seed: u64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        let run = SurfaceSettings::new(Vec::new());
+        Self {
+            prior_file: None,
+            prior_scale: run.prior_scale,
+            inertia_kg_m2: None,
+            omega_n_rad_s: None,
+            damping_ratio: None,
+            w_ref_kn: None,
+            noise_sd_knm: None,
+            particles: run.smc.schedule.particles,
+            max_populations: run.smc.schedule.max_populations,
+            max_seconds: None,
+            pilot: run.pilot,
+            check_replicates: run.check_replicates,
+            predictive_draws: run.predictive_draws,
+            advice: run.advice,
+            dt_s: run.integration.dt_s,
+            settle_s: run.integration.settle_s,
+            seed: 1,
+        }
+    }
+}
+
+impl Settings {
+    /// What these settings run for `laws`, validated and its prior file read: a setting it
+    /// cannot run is refused here, by name, before any work.
+    pub fn config(&self, laws: Vec<Law>) -> Result<SurfaceSettings> {
+        let mut run = SurfaceSettings::new(laws);
+        run.prior_file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        run.prior_scale = self.prior_scale;
+        let paper = Lumped::default();
+        run.structure = Lumped {
+            inertia_kg_m2: self.inertia_kg_m2.unwrap_or(paper.inertia_kg_m2),
+            omega_n_rad_s: self.omega_n_rad_s.unwrap_or(paper.omega_n_rad_s),
+            damping_ratio: self.damping_ratio.unwrap_or(paper.damping_ratio),
+        };
+        run.w_ref_n = self.w_ref_kn.map(|w| w * 1000.0);
+        run.noise_sd_nm = self.noise_sd_knm.map(|n| n * 1000.0);
+        run.pilot = self.pilot;
+        run.check_replicates = self.check_replicates;
+        run.predictive_draws = self.predictive_draws;
+        run.advice = self.advice;
+        run.integration = Integration {
+            dt_s: self.dt_s,
+            settle_s: self.settle_s,
+        };
+        run.smc.schedule.particles = self.particles;
+        run.smc.schedule.max_populations = self.max_populations;
+        run.smc.schedule.max_seconds = self.max_seconds;
+        run.validate()?;
+        Ok(run)
+    }
+}
+
 /// How a surface record is read into laws.
 #[derive(Clone, Debug)]
 pub struct SurfaceSettings {
@@ -129,7 +229,10 @@ impl SurfaceSettings {
         if let Some(s) = self.noise_sd_nm
             && !(s.is_finite() && s >= 0.0)
         {
-            return Err(Error::setting("noise_sd", format!("must be ≥ 0, got {s}")));
+            return Err(Error::setting(
+                "noise_sd_knm",
+                format!("must be ≥ 0, got {}", s / 1000.0),
+            ));
         }
         if let Some(w) = self.w_ref_n
             && !(w.is_finite() && w > 0.0)

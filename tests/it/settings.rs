@@ -43,6 +43,16 @@ fn every_setting_of_every_kind_is_a_flag_of_its_command() {
     );
     let missing = missing_flags::<bitrock::run::coupled::Settings>("coupled", &[]);
     assert!(missing.is_empty(), "coupled settings without a flag: {missing:?}");
+    let surface = bitrock::run::settings::fields::<bitrock::run::surface::Settings>();
+    assert!(
+        surface.len() >= 17 && surface.contains(&"check_replicates".to_string()),
+        "{surface:?}"
+    );
+    let missing = missing_flags::<bitrock::run::surface::Settings>(
+        "surface",
+        &[("prior_file", "--prior"), ("advice", "--no-advice")],
+    );
+    assert!(missing.is_empty(), "surface settings without a flag: {missing:?}");
 }
 
 /// The drill string is a setting of every command that maps or advises, by the same flags:

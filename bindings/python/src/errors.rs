@@ -191,7 +191,7 @@ where
     check(py, from_named(named))
 }
 
-/// The fields of a kind of run's settings (`abc`, `evidence`, `coupled`): the keyword arguments its Python
+/// The fields of a kind of run's settings (`abc`, `evidence`, `coupled`, `surface`): the keyword arguments its Python
 /// function must take, as the command takes their flags.
 #[pyfunction]
 pub(crate) fn settings_fields(py: Python<'_>, kind: &str) -> PyResult<Vec<String>> {
@@ -199,11 +199,12 @@ pub(crate) fn settings_fields(py: Python<'_>, kind: &str) -> PyResult<Vec<String
         "abc" => Ok(bitrock::run::settings::fields::<bitrock::run::abc::Settings>()),
         "evidence" => Ok(bitrock::run::settings::fields::<bitrock::run::evidence::Settings>()),
         "coupled" => Ok(bitrock::run::settings::fields::<bitrock::run::coupled::Settings>()),
+        "surface" => Ok(bitrock::run::settings::fields::<bitrock::run::surface::Settings>()),
         other => Err(to_py(
             py,
             Error::setting(
                 "kind",
-                format!("no kind of run `{other}`; the kinds are abc, evidence, coupled"),
+                format!("no kind of run `{other}`; the kinds are abc, evidence, coupled, surface"),
             ),
         )),
     }

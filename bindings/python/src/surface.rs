@@ -3,9 +3,7 @@
 use crate::errors::*;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
-use bitrock::prior::PriorFile;
-use bitrock::run::surface::{SurfaceSettings, infer};
-use bitrock::simulate::surface::Integration;
+use bitrock::run::surface::{Settings as SurfaceRunSettings, infer};
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -28,29 +26,8 @@ pub(crate) fn surface(
             .chain(bitrock::laws::file::registered_laws())
             .collect()
     });
-    let mut s = SurfaceSettings::new(laws);
-    if let Some(file) = kwarg::<PathBuf>(options, "prior_file")? {
-        s.prior_file = Some(check(py, PriorFile::read(&file))?);
-    }
-    s.prior_scale = kwarg(options, "prior_scale")?.unwrap_or(s.prior_scale);
-    s.structure.inertia_kg_m2 = kwarg(options, "inertia_kg_m2")?.unwrap_or(s.structure.inertia_kg_m2);
-    s.structure.omega_n_rad_s = kwarg(options, "omega_n_rad_s")?.unwrap_or(s.structure.omega_n_rad_s);
-    s.structure.damping_ratio = kwarg(options, "damping_ratio")?.unwrap_or(s.structure.damping_ratio);
-    s.w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map(|w| w * 1000.0);
-    s.noise_sd_nm = kwarg::<f64>(options, "noise_sd_knm")?.map(|n| n * 1000.0);
-    s.pilot = kwarg(options, "pilot")?.unwrap_or(s.pilot);
-    s.check_replicates = kwarg(options, "check_replicates")?.unwrap_or(s.check_replicates);
-    s.predictive_draws = kwarg(options, "predictive_draws")?.unwrap_or(s.predictive_draws);
-    s.advice = kwarg(options, "advice")?.unwrap_or(s.advice);
-    s.integration = Integration {
-        dt_s: kwarg(options, "dt_s")?.unwrap_or(s.integration.dt_s),
-        settle_s: kwarg(options, "settle_s")?.unwrap_or(s.integration.settle_s),
-    };
-    let schedule = &mut s.smc.schedule;
-    schedule.particles = kwarg(options, "particles")?.unwrap_or(schedule.particles);
-    schedule.max_populations = kwarg(options, "max_populations")?.unwrap_or(schedule.max_populations);
-    schedule.max_seconds = kwarg(options, "max_seconds")?;
-    let seed = kwarg(options, "seed")?.unwrap_or(1u64);
+    let settings: SurfaceRunSettings = crate::errors::settings(options)?;
+    let seed = settings.seed;
     let columns = SurfaceOptions {
         time_column: kwarg(options, "time_col")?,
         top_drive_column: kwarg(options, "top_drive_col")?,
@@ -72,7 +49,7 @@ pub(crate) fn surface(
     };
     let mut notes = Vec::new();
     let text = py.detach(|| {
-        s.validate()?;
+        let s = settings.config(laws)?;
         let record = SurfaceRecord::read(&path, &columns)?;
         let result = infer(&record, &s, seed, &mut |line| notes.push(line))?;
         let mut document = serde_json::to_value(&result).expect("a result serialises");

@@ -71,3 +71,23 @@ def test_a_simulated_surface_record_goes_through_and_bad_settings_name_their_arg
         bitrock.surface(path, top_drive_col="rotary")
     with pytest.raises(bitrock.InputError, match="channels"):
         bitrock.simulate("m2", omega_rpm=60, channels="downhole")
+
+
+def test_every_surface_setting_is_a_keyword_and_a_bad_value_is_refused_by_name(tmp_path):
+    import inspect
+
+    fields = bitrock._bitrock.settings_fields("surface")
+    assert {"pilot", "check_replicates", "noise_sd_knm", "prior_file", "advice", "seed"} <= set(fields)
+    keywords = inspect.signature(bitrock.surface).parameters
+    assert [f for f in fields if f not in keywords] == []
+    path = tmp_path / "surface.csv"
+    bitrock.simulate("m2", omega_rpm=60, duration_s=30, settle_s=10, sample_hz=1, channels="surface", seed=2).to_csv(
+        path, index=False
+    )
+    # Refused by the gate, before any simulation, naming the keyword.
+    with pytest.raises(bitrock.InputError, match="noise_sd_knm") as caught:
+        bitrock.surface(path, laws=["m2"], noise_sd_knm=-0.1)
+    assert caught.value.argument == "noise_sd_knm"
+    with pytest.raises(bitrock.InputError, match="particles") as caught:
+        bitrock.surface(path, laws=["m2"], particles="many")
+    assert caught.value.argument == "particles"

@@ -256,7 +256,7 @@ def serve(request: bytes, problem: bytes | None = None, context: bytes | None = 
 
 def settings_fields(kind: str) -> list[str]:
     """
-    The fields of a kind of run's settings (`abc`, `evidence`, `coupled`): the keyword arguments its Python
+    The fields of a kind of run's settings (`abc`, `evidence`, `coupled`, `surface`): the keyword arguments its Python
     function must take, as the command takes their flags.
     """
 
