@@ -134,15 +134,52 @@ pub(crate) fn make_workers(transport: &PyTransport) -> Box<MakeWorkers<'_>> {
 /// An evidence computed in this process: its document (`bitrock evidence --json`'s, each law's
 /// posterior sets added) and what writing it as an evidence directory needs.
 #[pyclass(frozen, module = "bitrock._bitrock")]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub(crate) struct ComputedEvidence {
     document: serde_json::Value,
-    analysis: EvidenceAnalysis,
+    /// The posterior's particle CSV ([`EvidenceAnalysis::posterior_csv`]).
+    posterior_csv: String,
     job: run::evidence::Job,
     data: FieldData,
 }
 
+impl ComputedEvidence {
+    fn new(
+        document: serde_json::Value,
+        analysis: &EvidenceAnalysis,
+        job: &run::evidence::Job,
+        data: &FieldData,
+    ) -> Self {
+        let csv = analysis.posterior_csv(&job.laws, data);
+        Self {
+            document,
+            posterior_csv: String::from_utf8(csv).expect("a CSV bitrock writes is UTF-8"),
+            job: job.clone(),
+            data: data.clone(),
+        }
+    }
+}
+
 #[pymethods]
 impl ComputedEvidence {
+    /// Pickling: the document, the posterior's CSV, the job and the record, as JSON exact to
+    /// the bit; rebuilt by [`ComputedEvidence::_from_state`].
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
+        let state = serde_json::to_string(slf.get()).expect("an evidence serialises");
+        Ok((slf.get_type().getattr("_from_state")?, (state,)))
+    }
+
+    /// The evidence a pickle's state describes.
+    #[staticmethod]
+    fn _from_state(py: Python<'_>, state: &str) -> PyResult<Self> {
+        serde_json::from_str(state).map_err(|e| {
+            to_py(
+                py,
+                Error::setting("evidence", format!("the pickled evidence cannot be read: {e}")),
+            )
+        })
+    }
+
     /// The evidence's document, as JSON.
     #[getter]
     fn document(&self) -> String {
@@ -152,7 +189,16 @@ impl ComputedEvidence {
     /// Writes the evidence as the evidence directory `path` (`force` replaces an evidence
     /// there), as `bitrock evidence --out` writes one.
     fn save(&self, py: Python<'_>, path: PathBuf, force: bool) -> PyResult<()> {
-        let saved = py.detach(|| dir::save(&path, force, &self.document, &self.analysis, &self.job, &self.data));
+        let saved = py.detach(|| {
+            dir::save(
+                &path,
+                force,
+                &self.document,
+                self.posterior_csv.as_bytes(),
+                &self.job,
+                &self.data,
+            )
+        });
         // The library names the directory by the command line's flag; here it is the argument.
         check(
             py,
@@ -225,12 +271,7 @@ fn compute(
     if let Some(unfinished) = unfinished {
         check(py, py.detach(|| unfinished.finish(&document, &analysis, job, data)))?;
     }
-    Ok(ComputedEvidence {
-        document,
-        analysis,
-        job: job.clone(),
-        data: data.clone(),
-    })
+    Ok(ComputedEvidence::new(document, &analysis, job, data))
 }
 
 /// The document of the evidence directory `dir` (`bitrock evidence --out`, `bitrock.evidence(...,

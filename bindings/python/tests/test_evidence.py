@@ -163,6 +163,14 @@ def test_an_evidence_in_memory_saves_as_the_directory_out_writes(small, tmp_path
         small.save(tmp_path / "saved")
     assert caught.value.argument == "path"
     small.save(tmp_path / "saved", force=True)
+    # An evidence in memory pickles whole (to a worker and back, say) and saves alike.
+    import pickle
+
+    copy = pickle.loads(pickle.dumps(small))
+    assert copy.document == small.document and copy.path is None
+    copy.save(tmp_path / "pickled")
+    for name in ("evidence.json", "posterior.csv", "data.csv", "record.json", "job.json"):
+        assert (tmp_path / "pickled" / name).read_bytes() == (tmp_path / "saved" / name).read_bytes(), name
 
 
 def test_the_evidence_s_islands_are_the_chains_arviz_reads(small) -> None:

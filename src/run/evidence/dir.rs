@@ -188,7 +188,14 @@ impl Unfinished {
         job: &Job,
         data: &FieldData,
     ) -> Result<()> {
-        save(&self.dir, true, document, analysis, job, data)
+        save(
+            &self.dir,
+            true,
+            document,
+            &analysis.posterior_csv(&job.laws, data),
+            job,
+            data,
+        )
     }
 }
 
@@ -217,15 +224,16 @@ fn read_record(path: &Path) -> Result<FieldData> {
     })
 }
 
-/// Writes the evidence directory `dir` (checked by [`check_out`]) of `job`'s `analysis` on
-/// `data`: `document` (the evidence's document with each law's posterior sets), the
-/// posterior's particle CSV, the samples, the record, and the job with the text of its law
-/// files, replacing what an earlier evidence wrote there in one step.
+/// Writes the evidence directory `dir` (checked by [`check_out`]) of `job` on `data`:
+/// `document` (the evidence's document with each law's posterior sets), the posterior's
+/// particle CSV (`posterior_csv`, [`EvidenceAnalysis::posterior_csv`]), the samples, the
+/// record, and the job with the text of its law files, replacing what an earlier evidence
+/// wrote there in one step.
 pub fn save(
     dir: &Path,
     force: bool,
     document: &serde_json::Value,
-    analysis: &EvidenceAnalysis,
+    posterior_csv: &[u8],
     job: &Job,
     data: &FieldData,
 ) -> Result<()> {
@@ -233,7 +241,7 @@ pub fn save(
     let record = serde_json::to_vec(data).expect("a record serialises");
     let contents = [
         (PathBuf::from(EVIDENCE_JSON), pretty(document)),
-        (PathBuf::from(POSTERIOR_CSV), analysis.posterior_csv(&job.laws, data)),
+        (PathBuf::from(POSTERIOR_CSV), posterior_csv.to_vec()),
         (PathBuf::from(DATA_CSV), crate::documents::data_csv(data)),
         (PathBuf::from(RECORD_JSON), record),
         (PathBuf::from(JOB_JSON), job_json(job)),

@@ -16,6 +16,16 @@ class ComputedEvidence:
     An evidence computed in this process: its document (`bitrock evidence --json`'s, each law's
     posterior sets added) and what writing it as an evidence directory needs.
     """
+    def __reduce__(self, /) -> tuple[Any, tuple[str]]:
+        """
+        Pickling: the document, the posterior's CSV, the job and the record, as JSON exact to
+        the bit; rebuilt by [`ComputedEvidence::_from_state`].
+        """
+    @staticmethod
+    def _from_state(state: str) -> ComputedEvidence:
+        """
+        The evidence a pickle's state describes.
+        """
     @property
     def document(self, /) -> str:
         """
