@@ -268,8 +268,9 @@ class Evidence:
         same one (near 1) or not, as their ln Z's spread does. Each island's weighted particles are
         resampled systematically to ``draws`` equal-weight draws (deterministic; by default as
         many as the island's largest set), so that ArviZ's summaries, which treat draws as equal,
-        are those of the island's weighted posterior; a particle drawn twice counts once in
-        ArviZ's ESS. Every island weighs the same here: :meth:`posterior` pools them weighed by
+        are those of the island's weighted posterior (a particle drawn more than once gives draws
+        side by side, which ArviZ's ESS counts as the correlated draws they are). Every island
+        weighs the same here: :meth:`posterior` pools them weighed by
         their Z. An evidence directory written without its islands' membership gives one chain.
         ArviZ 1.x reads a law's node directly (``tree["m2"]``); ArviZ 0.23 through
         ``arviz.InferenceData.from_datatree(tree["m2"])``."""
