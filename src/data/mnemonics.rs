@@ -136,6 +136,28 @@ pub fn is_surface(name: &str) -> bool {
         || words(name).iter().any(|w| SURFACE_WORDS.contains(&w.as_str()))
 }
 
+/// Words that name a surface channel's speed or torque (`RPMA`, `TD_RPM`, `TQA`, `STOR`), beside
+/// a surface mark or as a surface mnemonic themselves ([`surface_role`]).
+const SURFACE_SPEED_WORDS: &[&str] = &["rpma", "srpm", "tdrpm", "rpm", "speed"];
+const SURFACE_TORQUE_WORDS: &[&str] = &["tqa", "stor", "stq", "tdtq", "tq", "trq", "torque"];
+
+/// The role a surface channel's name gives it (the top drive's speed or the surface torque),
+/// where the name marks it as measured at the surface ([`is_surface`]); `None` otherwise.
+pub fn surface_role(name: &str) -> Option<Role> {
+    if !is_surface(name) {
+        return None;
+    }
+    let words = words(name);
+    let has = |table: &[&str]| words.iter().any(|w| table.contains(&w.as_str()));
+    if has(SURFACE_TORQUE_WORDS) {
+        Some(Role::Torque)
+    } else if has(SURFACE_SPEED_WORDS) {
+        Some(Role::Speed)
+    } else {
+        None
+    }
+}
+
 /// The role a column's name gives it by the mnemonics' table, if any.
 pub fn role(name: &str) -> Option<Role> {
     let words = words(name);
@@ -175,6 +197,12 @@ mod tests {
         assert_eq!(role("DWOB"), Some(Role::Wob));
         assert_eq!(role("DTIM"), Some(Role::Time));
         assert_eq!(role("depth_m"), None);
+        assert_eq!(surface_role("RPMA [rpm]"), Some(Role::Speed));
+        assert_eq!(surface_role("TD_RPM"), Some(Role::Speed));
+        assert_eq!(surface_role("TQA (kft.lbf)"), Some(Role::Torque));
+        assert_eq!(surface_role("STOR [kN.m]"), Some(Role::Torque));
+        assert_eq!(surface_role("top_drive_rpm"), Some(Role::Speed));
+        assert_eq!(surface_role("DRPM"), None, "the bit's");
         assert_eq!(depth_rank("DBTM [m]"), Some(0));
         assert_eq!(depth_rank("bit_depth_ft"), Some(0));
         assert_eq!(depth_rank("hole_depth_m"), Some(1));

@@ -2,8 +2,10 @@
 //! where present, weight on bit, on a regular clock. Columns are found by role: a name holding
 //! `top_drive` or `rotary` (and not `torque`) is the top drive's speed, one holding `torque`
 //! and `surface` (or `top_drive`, `rotary`) the surface torque, one holding `wob` the weight on
-//! bit, one holding `time` the clock; each can be named instead. Units come from the names'
-//! suffixes or the options, as for a bit record. The bit's channels, where a record also holds
+//! bit, one holding `time` the clock; else a rig log's mnemonic for the role (`RPMA`, `TQA`,
+//! `SWOB`, `DTIM`: [`super::mnemonics::surface_role`]); each can be named instead. Units come
+//! from the names' suffixes or bracketed units, or the options, and the clock is read as a bit
+//! record's (elapsed, epoch or ISO 8601 stamps). The bit's channels, where a record also holds
 //! them, are listed and left alone: surface torque is never read as torque on bit, nor the
 //! reverse.
 
@@ -77,9 +79,15 @@ impl SurfaceRecord {
         let mut surface_torque_nm = Vec::new();
         let mut wob_n = roles.wob.map(|_| Vec::new());
         let mut lines = Vec::new();
+        // Elapsed seconds or milliseconds, epoch seconds or milliseconds, or ISO 8601 stamps.
+        let clock = super::clock::TimeReader::new(roles.time_in_ms);
         for row in csv_rows(&mut reader, path, &header) {
             let row = row?;
-            time_s.push(row.number(roles.time)? * roles.time_s_per_unit);
+            time_s.push(
+                clock
+                    .text(row.cell(roles.time))
+                    .map_err(|message| row.bad_cell(roles.time, message))?,
+            );
             top_drive_rad_s.push(roles.top_drive_unit.to_rad_s(row.number(roles.top_drive)?));
             surface_torque_nm.push(row.number(roles.surface_torque)? * roles.torque_unit.newton_metres());
             if let (Some((i, unit)), Some(w)) = (roles.wob, wob_n.as_mut()) {
@@ -215,7 +223,8 @@ pub fn check_clock(time_s: &[f64], path: &Path, place: &dyn Fn(usize) -> String)
 /// The columns of each role and their units.
 struct Roles {
     time: usize,
-    time_s_per_unit: f64,
+    /// The time column's name says milliseconds.
+    time_in_ms: bool,
     top_drive: usize,
     top_drive_unit: SpeedUnit,
     surface_torque: usize,
@@ -226,23 +235,43 @@ struct Roles {
 
 impl Roles {
     fn resolve(header: &[String], opts: &SurfaceOptions, path: &Path) -> Result<Self> {
+        use super::mnemonics::{Role, role, surface_role};
         let lower = |i: usize| header[i].to_ascii_lowercase();
+        // Each role by its words first (`top_drive`, `surface` and `torque`, `time`, `wob`),
+        // else by a rig log's mnemonic (`RPMA`, `TQA`, `DTIM`, `SWOB`: docs/records.md).
+        let pick =
+            |wanted: Option<&str>, name: &str, field: &str, words: &dyn Fn(usize) -> bool, mnemonic: Role| match pick(
+                header, wanted, name, field, path, words,
+            )? {
+                Some(i) => Ok(Some(i)),
+                None => pick(header, None, name, field, path, &|i| {
+                    let by_role = if matches!(mnemonic, Role::Speed | Role::Torque) {
+                        surface_role(&header[i])
+                    } else {
+                        role(&header[i])
+                    };
+                    by_role == Some(mnemonic)
+                }),
+            };
         let is_top_drive = |i: usize| {
             let n = lower(i);
             (n.contains("top_drive") || n.contains("rotary")) && !n.contains("torque")
         };
         let is_surface_torque = |i: usize| lower(i).contains("torque") && is_surface_channel(&header[i]);
-        let time = pick(header, opts.time_column.as_deref(), "time", "time_column", path, &|i| {
-            lower(i).contains("time")
-        })?
+        let time = pick(
+            opts.time_column.as_deref(),
+            "time",
+            "time_column",
+            &|i| lower(i).contains("time"),
+            Role::Time,
+        )?
         .ok_or_else(|| missing(header, path, "a time", "time", "time_column"))?;
         let top_drive = pick(
-            header,
             opts.top_drive_column.as_deref(),
             "top_drive",
             "top_drive_column",
-            path,
             &is_top_drive,
+            Role::Speed,
         )?
         .ok_or_else(|| {
             missing(
@@ -254,12 +283,11 @@ impl Roles {
             )
         })?;
         let surface_torque = pick(
-            header,
             opts.surface_torque_column.as_deref(),
             "surface torque",
             "surface_torque_column",
-            path,
             &is_surface_torque,
+            Role::Torque,
         )?
         .ok_or_else(|| {
             missing(
@@ -270,9 +298,13 @@ impl Roles {
                 "surface_torque_column",
             )
         })?;
-        let wob = pick(header, opts.wob_column.as_deref(), "wob", "wob_column", path, &|i| {
-            lower(i).contains("wob")
-        })?;
+        let wob = pick(
+            opts.wob_column.as_deref(),
+            "wob",
+            "wob_column",
+            &|i| lower(i).contains("wob"),
+            Role::Wob,
+        )?;
         let chosen = [Some(time), Some(top_drive), Some(surface_torque), wob];
         if let Some(i) = [top_drive, surface_torque].into_iter().find(|&i| i == time) {
             return Err(format_error(
@@ -298,7 +330,7 @@ impl Roles {
             .collect();
         Ok(Self {
             time,
-            time_s_per_unit: if names_milliseconds(&header[time]) { 1e-3 } else { 1.0 },
+            time_in_ms: names_milliseconds(&header[time]),
             top_drive,
             top_drive_unit: resolve_unit(&header[top_drive], opts.top_drive_unit, "top_drive_unit", path)?,
             surface_torque,
@@ -406,6 +438,52 @@ mod tests {
         assert!((r.wob_ratio(Some(100_000.0))[0] - 2.0).abs() < 1e-15);
         assert!((r.sample_period_s - 1.0).abs() < 1e-15);
         assert!(r.roles_text().contains("not read"), "{}", r.roles_text());
+    }
+
+    #[test]
+    fn a_rig_export_s_mnemonics_imperial_units_and_iso_clock_read_as_the_plain_record() {
+        let plain = rows(
+            "time_s,top_drive_rpm,surface_torque_knm,wob_kn",
+            |k| format!("{k},60,{},200", 9.0 + (k % 7) as f64),
+            40,
+        );
+        // The same channels as a rig logs them: WITS mnemonics, kft·lbf and klbf, ISO 8601
+        // stamps with a zone, one a second.
+        let kft_lbf_per_knm = 1000.0 / crate::units::TorqueUnit::FtLbf.newton_metres() / 1000.0;
+        let klbf_per_kn = 1000.0 / crate::units::ForceUnit::KLbf.newtons();
+        let rig = rows(
+            "DTIM,RPMA [rpm],TQA (kft.lbf),SWOB [klbf]",
+            |k| {
+                format!(
+                    "2026-11-30T10:00:{k:02}+01:00,60,{},{}",
+                    (9.0 + (k % 7) as f64) * kft_lbf_per_knm,
+                    200.0 * klbf_per_kn
+                )
+            },
+            40,
+        );
+        let ((_a, plain), (_b, rig)) = (write(&plain), write(&rig));
+        let (plain, rig) = (
+            SurfaceRecord::read(&plain, &SurfaceOptions::default()).unwrap(),
+            SurfaceRecord::read(&rig, &SurfaceOptions::default()).unwrap(),
+        );
+        assert_eq!(
+            (
+                rig.columns.time.as_str(),
+                rig.columns.top_drive.as_str(),
+                rig.columns.surface_torque.as_str()
+            ),
+            ("DTIM", "RPMA [rpm]", "TQA (kft.lbf)")
+        );
+        assert_eq!(rig.columns.wob.as_deref(), Some("SWOB [klbf]"));
+        assert_eq!(rig.time_s, plain.time_s);
+        assert_eq!(rig.top_drive_rad_s, plain.top_drive_rad_s);
+        for (a, b) in rig.surface_torque_nm.iter().zip(&plain.surface_torque_nm) {
+            assert!((a - b).abs() < 1e-9 * b, "{a} vs {b}");
+        }
+        for (a, b) in rig.wob_n.unwrap().iter().zip(plain.wob_n.as_ref().unwrap()) {
+            assert!((a - b).abs() < 1e-9 * b, "{a} vs {b}");
+        }
     }
 
     #[test]
