@@ -69,30 +69,25 @@ impl Watch {
             .posterior
             .as_ref()
             .map(|posterior| crate::abc::posterior::map_inputs_of(posterior, crate::run::advice::ADVICE_SAMPLES));
-        if let Some(inputs) = &inputs {
-            let speeds: Vec<f64> = window.rows.iter().map(|r| r.speed_rad_s).collect();
-            let seen = BitSeen::of(&speeds, None);
-            // The parameters describe the torque at the window's own weight on bit: that
-            // weight is the advice's W_ref.
-            update.advice = Some(self.adviser().advise(
-                inputs,
-                wob_kn * 1000.0,
-                OperatingPoint { omega_rpm, wob_kn },
-                seen.as_ref().map(|s| (s, "window")),
-            ));
-        }
         let posterior = inputs.as_deref().map(|inputs| view::Posterior {
             inputs,
             criterion: self.settings.criterion,
             wob_kn,
             risk: self.settings.risk,
         });
-        self.view = Some(view::view(
-            window.index,
-            &window.rows,
-            self.declared.units.torque,
-            posterior,
-        ));
+        let view = view::view(window.index, &window.rows, self.declared.units.torque, posterior);
+        if let Some(inputs) = &inputs {
+            // The parameters describe the torque at the window's own weight on bit: that
+            // weight is the advice's W_ref. What the bit did is the view's (its speeds seen
+            // once).
+            update.advice = Some(self.adviser().advise(
+                inputs,
+                wob_kn * 1000.0,
+                OperatingPoint { omega_rpm, wob_kn },
+                view.bit.as_ref().map(|s| (s, "window")),
+            ));
+        }
+        self.view = Some(view);
         update.latency_s = self.last_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
         update
     }

@@ -42,7 +42,7 @@ pub mod witsml;
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
 use crate::abc::evidence::{EvidenceConfig, Start};
-use crate::data::{BitSeen, DataOptions, FieldData, Row, Samples};
+use crate::data::{DataOptions, FieldData, Row, Samples};
 use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;

@@ -32,6 +32,38 @@ pub(crate) fn as_arguments(message: &str) -> String {
     })
 }
 
+/// Pickling by JSON, exact to the bit (shortest round-trip decimals): `state` as text, and
+/// `object`'s type to rebuild it with its `_from_state` ([`from_json_state`]).
+pub(crate) fn reduce_to_json<'py>(
+    object: &Bound<'py, PyAny>,
+    state: &impl serde::Serialize,
+    what: &str,
+) -> PyResult<(Bound<'py, PyAny>, (String,))> {
+    let text = serde_json::to_string(state).map_err(|e| {
+        to_py(
+            object.py(),
+            Error::Numerical(format!("the {what} cannot be pickled: {e}")),
+        )
+    })?;
+    Ok((object.get_type().getattr("_from_state")?, (text,)))
+}
+
+/// What a pickle's JSON `state` ([`reduce_to_json`]) describes; one that does not read is an
+/// `InputError` naming `argument`.
+pub(crate) fn from_json_state<T: serde::de::DeserializeOwned>(
+    py: Python<'_>,
+    state: &str,
+    argument: &str,
+    what: &str,
+) -> PyResult<T> {
+    serde_json::from_str(state).map_err(|e| {
+        to_py(
+            py,
+            Error::setting(argument, format!("the pickled {what} cannot be read: {e}")),
+        )
+    })
+}
+
 /// The Python exception for a library error: `InputError` naming the argument, the matching
 /// `OSError` for files, `GpuError`, `KeyboardInterrupt` for a run stopped by Ctrl-C,
 /// `BitrockError` otherwise (all but the last two defined in Python, so that they pickle).

@@ -165,19 +165,13 @@ impl ComputedEvidence {
     /// Pickling: the document, the posterior's CSV, the job and the record, as JSON exact to
     /// the bit; rebuilt by [`ComputedEvidence::_from_state`].
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
-        let state = serde_json::to_string(slf.get()).expect("an evidence serialises");
-        Ok((slf.get_type().getattr("_from_state")?, (state,)))
+        crate::errors::reduce_to_json(slf.as_any(), slf.get(), "evidence")
     }
 
     /// The evidence a pickle's state describes.
     #[staticmethod]
     fn _from_state(py: Python<'_>, state: &str) -> PyResult<Self> {
-        serde_json::from_str(state).map_err(|e| {
-            to_py(
-                py,
-                Error::setting("evidence", format!("the pickled evidence cannot be read: {e}")),
-            )
-        })
+        crate::errors::from_json_state(py, state, "evidence", "evidence")
     }
 
     /// The evidence's document, as JSON.

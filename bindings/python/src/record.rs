@@ -59,18 +59,12 @@ impl Record {
     /// Pickling: the record whole (samples, units, columns, warnings) as JSON, exact to the
     /// bit (shortest round-trip decimals), rebuilt by [`Record::_from_state`].
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
-        let state = serde_json::to_string(&slf.get().data).expect("a record serialises");
-        Ok((slf.get_type().getattr("_from_state")?, (state,)))
+        crate::errors::reduce_to_json(slf.as_any(), &slf.get().data, "record")
     }
     /// The record a pickle's state describes.
     #[staticmethod]
     fn _from_state(py: Python<'_>, state: &str) -> PyResult<Self> {
-        let data: FieldData = serde_json::from_str(state).map_err(|e| {
-            to_py(
-                py,
-                bitrock::Error::setting("record", format!("the pickled record cannot be read: {e}")),
-            )
-        })?;
+        let data: FieldData = crate::errors::from_json_state(py, state, "record", "record")?;
         Ok(Record { data })
     }
     fn __repr__(&self) -> String {

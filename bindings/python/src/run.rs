@@ -163,19 +163,12 @@ impl Run {
     /// Pickling: the document, the directory, and a run in memory's populations with their
     /// particles, as JSON exact to the bit; rebuilt by [`Run::_from_state`].
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
-        let state = serde_json::to_string(slf.get())
-            .map_err(|e| to_py(slf.py(), Error::Numerical(format!("the run cannot be pickled: {e}"))))?;
-        Ok((slf.get_type().getattr("_from_state")?, (state,)))
+        crate::errors::reduce_to_json(slf.as_any(), slf.get(), "run")
     }
     /// The run a pickle's state describes.
     #[staticmethod]
     fn _from_state(py: Python<'_>, state: &str) -> PyResult<Self> {
-        serde_json::from_str(state).map_err(|e| {
-            to_py(
-                py,
-                Error::setting("result", format!("the pickled run cannot be read: {e}")),
-            )
-        })
+        crate::errors::from_json_state(py, state, "result", "run")
     }
     /// Writes a run kept in memory to the run directory `path` (`force` replaces a run
     /// there), as `bitrock abc --out` would have written it, and returns the stored run.
