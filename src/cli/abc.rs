@@ -141,13 +141,10 @@ pub struct AbcCmd {
     /// Continue the run in DIR (killed or finished) after its last stored population: more
     /// populations, a lower --eps-min, a new --max-draws/--max-seconds or --backend, another
     /// --summary-population. The populations are exactly those an uninterrupted run gives.
-    #[arg(long, value_name = "DIR", conflicts_with_all = [
-        "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
-        "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
-        "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "particles", "delta", "prior_rule", "prior_k", "prior", "epsilons",
-        "start_epsilon", "mode", "seed", "sampler", "p_stay", "kernel_scale", "smc_weights", "refill", "law_proposal", "perturbation",
-        "structure", "fe_file", "dp_elements", "bha_elements", "alpha", "beta", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
-    ])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = super::args::resume_conflicts!(
+        "particles", "delta", "prior_rule", "prior_k", "prior", "epsilons", "start_epsilon", "mode", "seed",
+        "sampler", "p_stay", "kernel_scale", "smc_weights", "refill", "law_proposal", "perturbation",
+    ))]
     pub resume: Option<PathBuf>,
     /// No progress bar or population lines on stderr.
     #[arg(long, short)]

@@ -11,6 +11,20 @@ use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use std::path::{Path, PathBuf};
 
+/// The flags `--resume` refuses: a run or an evidence resumed takes its record, its fit and its
+/// drill string from its directory, and then the kind's own settings, `$own`.
+macro_rules! resume_conflicts {
+    ($($own:literal),* $(,)?) => {
+        [
+            "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
+            "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
+            "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "structure", "fe_file", "dp_elements", "bha_elements",
+            "alpha", "beta", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio", $($own),*
+        ]
+    };
+}
+pub(crate) use resume_conflicts;
+
 /// Which columns of the CSV to read, their units, and the slowest bit speed kept: what a
 /// record's rows are read by, whole (`fit`, `abc`…) or as a stream (`watch`).
 #[derive(Debug, Args, Clone)]

@@ -7,7 +7,7 @@ use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
 use bitrock::eval::Backend;
 use bitrock::fit::coupled::CoupledCalibration;
 use bitrock::run::coupled::{self, Map, One, PosteriorMap, Settings};
-use bitrock::simulate::coupled::{Regime, Sample};
+use bitrock::simulate::coupled::{Bit, Regime, Sample};
 use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use serde_json::json;
@@ -26,28 +26,28 @@ pub struct CoupledCmd {
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "M_H")]
     pub feed_m_h: Option<f64>,
     /// Bit radius a, m.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().radius_m, value_name = "M")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().bit.radius_m, value_name = "M")]
     pub radius_m: f64,
     /// Intrinsic specific energy of the rock epsilon, MPa.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().intrinsic_energy_mpa, value_name = "MPA")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().bit.intrinsic_energy_mpa, value_name = "MPA")]
     pub intrinsic_energy_mpa: f64,
     /// Ratio zeta of the cutting force's axial to its tangential component.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().zeta)]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().bit.zeta)]
     pub zeta: f64,
     /// Contact stress sigma on the wear flats, MPa.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().contact_stress_mpa, value_name = "MPA")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().bit.contact_stress_mpa, value_name = "MPA")]
     pub contact_stress_mpa: f64,
     /// Total wear-flat length l of the blades, mm.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().wear_flat_mm, value_name = "MM")]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().bit.wear_flat_mm, value_name = "MM")]
     pub wear_flat_mm: f64,
     /// Friction coefficient mu of the wear flats on the rock.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().friction)]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().bit.friction)]
     pub friction: f64,
     /// Bit geometry factor gamma.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().gamma)]
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().bit.gamma)]
     pub gamma: f64,
     /// Blades N.
-    #[arg(long, default_value_t = Settings::default().blades)]
+    #[arg(long, default_value_t = Settings::default().bit.blades)]
     pub blades: u32,
     #[command(flatten)]
     pub lumped: LumpedArgs,
@@ -179,14 +179,16 @@ impl CoupledCmd {
             omega_rpm: self.omega_rpm,
             wob_kn: self.wob_kn,
             feed_m_h: self.feed_m_h,
-            radius_m: self.radius_m,
-            intrinsic_energy_mpa: self.intrinsic_energy_mpa,
-            zeta: self.zeta,
-            contact_stress_mpa: self.contact_stress_mpa,
-            wear_flat_mm: self.wear_flat_mm,
-            friction: self.friction,
-            gamma: self.gamma,
-            blades: self.blades,
+            bit: Bit {
+                radius_m: self.radius_m,
+                intrinsic_energy_mpa: self.intrinsic_energy_mpa,
+                zeta: self.zeta,
+                contact_stress_mpa: self.contact_stress_mpa,
+                wear_flat_mm: self.wear_flat_mm,
+                friction: self.friction,
+                gamma: self.gamma,
+                blades: self.blades,
+            },
             inertia_kg_m2: lumped.inertia_kg_m2,
             omega_n_rad_s: lumped.omega_n_rad_s,
             damping_ratio: lumped.damping_ratio,

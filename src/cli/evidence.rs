@@ -98,13 +98,10 @@ pub struct EvidenceCmd {
     /// Continue the evidence under way in DIR (killed or stopped part-way) from its last saved
     /// state, with its record and settings: the evidence the uninterrupted command gives, bit
     /// for bit on the same backend. Then written to DIR as --out writes it.
-    #[arg(long, value_name = "DIR", conflicts_with_all = [
-        "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
-        "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
-        "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "boxes", "prior_scale", "delta", "prior", "noise",
-        "start_from", "particles", "islands", "max_stages", "ess_share", "max_sweeps", "seed",
-        "structure", "fe_file", "dp_elements", "bha_elements", "alpha", "beta", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
-    ])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = super::args::resume_conflicts!(
+        "boxes", "prior_scale", "delta", "prior", "noise", "start_from", "particles", "islands", "max_stages",
+        "ess_share", "max_sweeps", "seed",
+    ))]
     pub resume: Option<PathBuf>,
     /// No progress lines on stderr.
     #[arg(long, short)]

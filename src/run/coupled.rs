@@ -42,22 +42,9 @@ pub struct Settings {
     /// The top fed down at this rate (m/h) where no weight is given ([`DEFAULT_FEED_M_H`] where
     /// neither is).
     pub feed_m_h: Option<f64>,
-    /// Bit radius a (m).
-    pub radius_m: f64,
-    /// Intrinsic specific energy ε of the rock (MPa).
-    pub intrinsic_energy_mpa: f64,
-    /// Ratio ζ of the cutting force's axial to its tangential component.
-    pub zeta: f64,
-    /// Contact stress σ on the wear flats (MPa).
-    pub contact_stress_mpa: f64,
-    /// Total wear-flat length l (mm).
-    pub wear_flat_mm: f64,
-    /// Friction coefficient μ of the wear flats.
-    pub friction: f64,
-    /// Bit geometry factor γ.
-    pub gamma: f64,
-    /// Blades N.
-    pub blades: u32,
+    /// The bit and the rock, its fields named as settings of their own (`radius_m`, `zeta`, …).
+    #[serde(flatten)]
+    pub bit: Bit,
     /// The string's equivalent inertia I (kg·m²).
     pub inertia_kg_m2: f64,
     /// The string's natural frequency ω_n (rad/s).
@@ -99,20 +86,12 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        let bit = Bit::default();
         let assembly = Assembly::default();
         Self {
             omega_rpm: 60.0,
             wob_kn: None,
             feed_m_h: None,
-            radius_m: bit.radius_m,
-            intrinsic_energy_mpa: bit.intrinsic_energy_mpa,
-            zeta: bit.zeta,
-            contact_stress_mpa: bit.contact_stress_mpa,
-            wear_flat_mm: bit.wear_flat_mm,
-            friction: bit.friction,
-            gamma: bit.gamma,
-            blades: bit.blades,
+            bit: Bit::default(),
             inertia_kg_m2: assembly.torsion.inertia_kg_m2,
             omega_n_rad_s: assembly.torsion.omega_n_rad_s,
             damping_ratio: assembly.torsion.damping_ratio,
@@ -136,20 +115,6 @@ impl Default for Settings {
 }
 
 impl Settings {
-    /// The bit these settings describe (validate before use).
-    pub fn bit(&self) -> Bit {
-        Bit {
-            radius_m: self.radius_m,
-            intrinsic_energy_mpa: self.intrinsic_energy_mpa,
-            zeta: self.zeta,
-            contact_stress_mpa: self.contact_stress_mpa,
-            wear_flat_mm: self.wear_flat_mm,
-            friction: self.friction,
-            gamma: self.gamma,
-            blades: self.blades,
-        }
-    }
-
     /// The drill string, validated.
     pub fn assembly(&self) -> Result<Assembly> {
         let a = Assembly {
@@ -304,7 +269,7 @@ pub fn one(settings: &Settings, on_sample: &mut dyn FnMut(&Sample)) -> Result<On
     }
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
-    let job = settings.job(settings.bit(), settings.omega_rpm, None)?;
+    let job = settings.job(settings.bit, settings.omega_rpm, None)?;
     let summary = coupled::integrate_with(&assembly, &schedule, &job, on_sample);
     Ok(One {
         summary: SummaryReport::of(&summary, settings.sample_hz),
@@ -451,7 +416,7 @@ fn axes(settings: &Settings, omega_rpm: Vec<f64>, axis: Vec<f64>, strings: usize
 pub fn map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Map> {
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
-    let (rpm, axis, jobs) = map_jobs(settings, &[settings.bit()])?;
+    let (rpm, axis, jobs) = map_jobs(settings, &[settings.bit])?;
     let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
     Ok(Map {
         cells: rows(&summaries, axis.len(), settings.sample_hz),
@@ -469,8 +434,8 @@ fn rows(summaries: &[CoupledSummary], width: usize, sample_hz: f64) -> Vec<Vec<S
 
 /// The bit calibrated on `record` (its radius the settings'), with the settings' seed.
 pub fn calibration(record: &DrillingRecord, settings: &Settings) -> Result<CoupledCalibration> {
-    settings.bit().validate()?;
-    calibrate(record, settings.radius_m, CALIBRATION_DRAWS, settings.seed)
+    settings.bit.validate()?;
+    calibrate(record, settings.bit.radius_m, CALIBRATION_DRAWS, settings.seed)
 }
 
 /// The regimes' probabilities per cell over the first `samples` of the calibration's draws that
@@ -489,7 +454,7 @@ pub fn posterior_map(
             "a calibrated map starts from steady drilling; an escape map is of one bit",
         ));
     }
-    let template = settings.bit();
+    let template = settings.bit;
     let bits: Vec<Bit> = calibration
         .draws
         .iter()
@@ -578,7 +543,7 @@ fn nearest(axis: &[f64], v: f64) -> usize {
 pub fn escape_map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<EscapeMap> {
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
-    let bit = settings.bit();
+    let bit = settings.bit;
     let here = settings.job(bit, settings.omega_rpm, None)?;
     let (at_start, state) = coupled::integrate_from(&assembly, &schedule, &here, None, &mut |_| {});
     let (rpm, axis, jobs) = map_jobs(settings, &[bit])?;
@@ -666,5 +631,33 @@ fn advise(
         faster_rpm,
         lighter_drive,
         words,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_bits_fields_are_settings_of_their_own_and_unknown_names_are_refused() {
+        let fields = crate::run::settings::fields::<Settings>();
+        for name in [
+            "radius_m",
+            "intrinsic_energy_mpa",
+            "zeta",
+            "contact_stress_mpa",
+            "wear_flat_mm",
+            "friction",
+            "gamma",
+            "blades",
+        ] {
+            assert!(fields.iter().any(|f| f == name), "{name} in {fields:?}");
+        }
+        assert!(!fields.iter().any(|f| f == "bit"));
+        let s: Settings = serde_json::from_str(r#"{"radius_m": 0.1, "blades": 5, "omega_rpm": 90}"#).unwrap();
+        assert_eq!((s.bit.radius_m, s.bit.blades, s.omega_rpm), (0.1, 5, 90.0));
+        assert_eq!(s.bit.zeta, Bit::default().zeta);
+        let unknown = serde_json::from_str::<Settings>(r#"{"radius_m": 0.1, "radius": 0.2}"#);
+        assert!(unknown.unwrap_err().to_string().contains("radius"));
     }
 }

@@ -54,9 +54,10 @@ pub const REBASE_M: f64 = 0.01;
 pub const BOUNCE_SHARE: f64 = 0.01;
 
 /// The bit and the rock: the RGD parameters, in the units drilling speaks (SI through the
-/// methods).
+/// methods). Flattened into a coupled run's settings, which refuse unknown names themselves;
+/// a field not given is the public parameter set's.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default)]
 pub struct Bit {
     /// Bit radius a (m).
     pub radius_m: f64,

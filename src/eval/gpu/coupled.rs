@@ -2,7 +2,8 @@
 //! invocation, each from its own bit, top-drive speed and axial drive, to its summary. The GPU
 //! twin of [`crate::simulate::coupled::integrate_batch`].
 
-use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
+use super::string_batch::Head;
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM};
 use crate::simulate::coupled::{Assembly, CoupledJob, CoupledState, CoupledSummary, STUCK_SPEED_RAD_S, Schedule};
 use bytemuck::{Pod, Zeroable};
 
@@ -28,12 +29,7 @@ const STRINGS_PER_DISPATCH: usize = 1 << 14;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct KernelJob {
-    first: u32,
-    count: u32,
-    row_width: u32,
-    steps_per_sample: u32,
-    settle_samples: u32,
-    record_samples: u32,
+    head: Head,
     feed: u32,
     first_period: u32,
     end_period: u32,
@@ -80,10 +76,12 @@ pub fn integrate_batch(
         &[],
     )?;
     let t = &assembly.torsion;
-    let job = KernelJob {
-        steps_per_sample: schedule.steps_per_sample,
-        settle_samples: schedule.settle_samples,
-        record_samples: schedule.record_samples,
+    let mut job = KernelJob {
+        head: Head::sampling(
+            schedule.steps_per_sample,
+            schedule.settle_samples,
+            schedule.record_samples,
+        ),
         feed: u32::from(feed),
         dt_s: schedule.dt_s as f32,
         mass_kg: assembly.mass_kg as f32,
@@ -96,6 +94,8 @@ pub fn integrate_batch(
         start_given: u32::from(start.is_some()),
         ..KernelJob::zeroed()
     };
+    // From no sample periods (0..0) to the first slice of them.
+    super::string_batch::StringsUniform::next_slice(&mut job);
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
         out.extend(run_chunk(ctx, &kernel, job, chunk, start)?);
@@ -103,10 +103,27 @@ pub fn integrate_batch(
     Ok(out)
 }
 
+impl super::string_batch::StringsUniform for KernelJob {
+    fn head(&mut self) -> &mut Head {
+        &mut self.head
+    }
+
+    fn next_slice(&mut self) -> bool {
+        let periods = self.head.settle_samples + self.head.record_samples;
+        if self.end_period >= periods {
+            return false;
+        }
+        let per_slice = (STEPS_PER_SLICE / self.head.steps_per_sample).max(1);
+        self.first_period = self.end_period;
+        self.end_period = (self.first_period + per_slice).min(periods);
+        true
+    }
+}
+
 fn run_chunk(
     ctx: &super::GpuContext,
     kernel: &super::Kernel,
-    mut job: KernelJob,
+    job: KernelJob,
     jobs: &[CoupledJob],
     start: Option<&CoupledState>,
 ) -> Result<Vec<CoupledSummary>, GpuError> {
@@ -120,74 +137,34 @@ fn run_chunk(
         row[9] = j.axial.value() as f32;
         row[10] = j.kick_rad_s as f32;
     }
-    let copy = wgpu::BufferUsages::COPY_DST;
-    let storage = wgpu::BufferUsages::STORAGE;
-    let state_bytes = 4 * (STATE_WORDS * n) as u64;
-    let summary_bytes = 4 * (SUMMARY_WORDS * n) as u64;
-    let job_buffer = ctx.buffer(
-        "coupled job",
-        size_of::<KernelJob>() as u64,
-        wgpu::BufferUsages::UNIFORM | copy,
-    )?;
-    let input_buffer = ctx.buffer("coupled inputs", 4 * inputs.len() as u64, storage | copy)?;
-    let state_buffer = ctx.buffer("coupled states", state_bytes, storage | copy)?;
-    if let Some(start) = start {
-        let mut one = vec![
-            start.lag_rad as f32,
-            start.speed_rad_s as f32,
-            start.compression_m as f32,
-            start.axial_speed_m_s as f32,
-            start.depth_m as f32,
-            start.phase_rad as f32,
-            start.behind_old_m as f32,
-        ];
-        one.extend(start.ring_m.iter().map(|&h| h as f32));
-        debug_assert_eq!(one.len(), STATE_WORDS);
-        let states: Vec<f32> = std::iter::repeat_n(one, n).flatten().collect();
-        ctx.queue.write_buffer(&state_buffer, 0, bytemuck::cast_slice(&states));
-    }
-    let summary_buffer = ctx.buffer(
-        "coupled summaries",
-        summary_bytes,
-        storage | wgpu::BufferUsages::COPY_SRC,
-    )?;
-    let staging = ctx.buffer("coupled staging", summary_bytes, wgpu::BufferUsages::MAP_READ | copy)?;
-    ctx.queue.write_buffer(&input_buffer, 0, bytemuck::cast_slice(&inputs));
-    let group = ctx.bind_group(
-        "coupled",
-        &kernel.layout,
-        &[&job_buffer, &input_buffer, &state_buffer, &summary_buffer],
-    )?;
-    let new_encoder = || {
-        ctx.device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("coupled") })
-    };
-    let mut encoder = new_encoder();
-    let periods = job.settle_samples + job.record_samples;
-    let per_slice = (STEPS_PER_SLICE / job.steps_per_sample).max(1);
-    let mut first_period = 0;
-    while first_period < periods {
-        job.first_period = first_period;
-        job.end_period = (first_period + per_slice).min(periods);
-        for first in (0..n).step_by(STRINGS_PER_DISPATCH) {
-            let count = STRINGS_PER_DISPATCH.min(n - first);
-            let (x, y, row_width) = ctx.grid(count as u32, WORKGROUP_SIZE);
-            job.first = first as u32;
-            job.count = count as u32;
-            job.row_width = row_width;
-            ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
-            super::encode_dispatch(&mut encoder, "coupled", &kernel.pipeline, &group, (x, y));
-            if job.end_period < periods || first + STRINGS_PER_DISPATCH < n {
-                // The next dispatch rewrites the job uniform: submit this one first.
-                ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
-                encoder = new_encoder();
-            }
+    let states = match start {
+        Some(start) => {
+            let mut one = vec![
+                start.lag_rad as f32,
+                start.speed_rad_s as f32,
+                start.compression_m as f32,
+                start.axial_speed_m_s as f32,
+                start.depth_m as f32,
+                start.phase_rad as f32,
+                start.behind_old_m as f32,
+            ];
+            one.extend(start.ring_m.iter().map(|&h| h as f32));
+            debug_assert_eq!(one.len(), STATE_WORDS);
+            std::iter::repeat_n(one, n).flatten().collect()
         }
-        first_period = job.end_period;
-    }
-    encoder.copy_buffer_to_buffer(&summary_buffer, 0, &staging, 0, summary_bytes);
-    let raw = ctx.finish_and_read(encoder, &staging, summary_bytes)?;
-    let sums: &[f32] = bytemuck::cast_slice(&raw);
+        // The kernel starts each string from steady drilling (`start_given` 0).
+        None => vec![0.0f32; STATE_WORDS * n],
+    };
+    let chunk = super::string_batch::Chunk {
+        label: "coupled",
+        strings: n,
+        inputs: &inputs,
+        states: &states,
+        summary_words: SUMMARY_WORDS,
+        strings_per_dispatch: STRINGS_PER_DISPATCH,
+        read_states: false,
+    };
+    let sums = super::string_batch::integrate_chunk(ctx, kernel, job, &chunk)?.summaries;
     Ok(sums
         .chunks(SUMMARY_WORDS)
         .map(|o| {

@@ -142,33 +142,26 @@ impl Scratch {
                 .write_buffer(&buffers.target, 0, bytemuck::cast_slice(&pack(targets, |_| [0.0, 0.0])));
             let count = targets.len() as u32;
             let (x, y, row_width) = ctx.grid(count, WORKGROUP_SIZE);
-            let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("kernel_sums"),
-            });
+            let mut encoder = ctx.encoder("kernel_sums");
             for s0 in (0..n_sources).step_by(SOURCES_PER_DISPATCH) {
+                let source_end = (s0 + SOURCES_PER_DISPATCH).min(n_sources);
                 let job = SumsJob {
                     count,
                     source_start: s0 as u32,
-                    source_end: (s0 + SOURCES_PER_DISPATCH).min(n_sources) as u32,
+                    source_end: source_end as u32,
                     row_width,
                     accumulate: u32::from(s0 > 0),
                     _pad: [0; 3],
                 };
-                ctx.queue.write_buffer(&buffers.job, 0, bytemuck::bytes_of(&job));
-                super::encode_dispatch(
+                ctx.dispatch_job(
                     &mut encoder,
                     "kernel_sums",
-                    &kernel.pipeline,
+                    &kernel,
                     &buffers.bind_group,
+                    (&buffers.job, &job),
                     (x, y),
-                );
-                if s0 + SOURCES_PER_DISPATCH < n_sources {
-                    // The next slice rewrites the job uniform: submit this one first.
-                    ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
-                    encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("kernel_sums"),
-                    });
-                }
+                    source_end < n_sources,
+                )?;
             }
             let bytes = 4 * u64::from(count);
             encoder.copy_buffer_to_buffer(&buffers.sum, 0, &buffers.staging, 0, bytes);

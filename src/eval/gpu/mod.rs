@@ -19,6 +19,7 @@ pub mod records;
 pub mod residual;
 pub mod shape;
 pub mod stability;
+mod string_batch;
 pub mod strings;
 pub mod tune;
 
@@ -524,6 +525,36 @@ impl GpuContext {
         Ok(value)
     }
 
+    /// A command encoder labelled `label`.
+    fn encoder(&self, label: &str) -> wgpu::CommandEncoder {
+        self.device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+    }
+
+    /// Writes `job` into its uniform `job_buffer` and records a dispatch of `kernel` over `grid`
+    /// into `encoder`. Where another dispatch follows (`more`), this one is submitted at once and
+    /// `encoder` starts anew: a queued write lands before every command submitted after it, so
+    /// the next job must not be written while this one waits unsubmitted.
+    #[allow(clippy::too_many_arguments)]
+    fn dispatch_job<J: bytemuck::Pod>(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &str,
+        kernel: &Kernel,
+        group: &wgpu::BindGroup,
+        (job_buffer, job): (&wgpu::Buffer, &J),
+        grid: (u32, u32),
+        more: bool,
+    ) -> Result<(), GpuError> {
+        self.queue.write_buffer(job_buffer, 0, bytemuck::bytes_of(job));
+        encode_dispatch(encoder, label, &kernel.pipeline, group, grid);
+        if more {
+            let recorded = std::mem::replace(encoder, self.encoder(label));
+            self.scoped(|| self.queue.submit([recorded.finish()]))?;
+        }
+        Ok(())
+    }
+
     /// The compute pipeline of entry point `entry` of `source` (called only when the pipeline
     /// is not built yet: once per context) with an explicit layout in group 0, a buffer of each
     /// kind of `bindings` bound in order to bindings 0, 1, ..., and
@@ -678,9 +709,7 @@ impl GpuContext {
         )?;
         self.queue.write_buffer(&input_buffer, 0, input);
         let bind_group = self.bind_group(label, &kernel.layout, &[&input_buffer, &output])?;
-        let mut encoder = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        let mut encoder = self.encoder(label);
         let (x, y, _) = self.grid(count, WORKGROUP_SIZE);
         encode_dispatch(&mut encoder, label, &kernel.pipeline, &bind_group, (x, y));
         encoder.copy_buffer_to_buffer(&output, 0, &staging, 0, output_bytes);

@@ -183,9 +183,7 @@ pub fn stability_grid(grid: &Grid) -> Result<(Vec<u32>, Vec<f32>), GpuError> {
         &[&job_buffer, &wob_buffer, &slopes, &counts, &growth],
     )?;
     let (x, y, row_width) = ctx.grid(cells as u32, WORKGROUP_SIZE);
-    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-        label: Some("stability"),
-    });
+    let mut encoder = ctx.encoder("stability");
     super::encode_dispatch(&mut encoder, "slopes", &slope_kernel.pipeline, &slope_group, (sx, sy));
     for s0 in (0..samples.len()).step_by(SAMPLES_PER_DISPATCH) {
         let slice = (s0, (s0 + SAMPLES_PER_DISPATCH).min(samples.len()));
@@ -196,15 +194,16 @@ pub fn stability_grid(grid: &Grid) -> Result<(Vec<u32>, Vec<f32>), GpuError> {
             criterion,
             w_ref_n,
         );
-        ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
-        super::encode_dispatch(&mut encoder, "stability", &kernel.pipeline, &bind_group, (x, y));
-        if s0 + SAMPLES_PER_DISPATCH < samples.len() {
-            // The next slice rewrites the job uniform: submit this one first.
-            ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
-            encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("stability"),
-            });
-        }
+        let more = slice.1 < samples.len();
+        ctx.dispatch_job(
+            &mut encoder,
+            "stability",
+            &kernel,
+            &bind_group,
+            (&job_buffer, &job),
+            (x, y),
+            more,
+        )?;
     }
     encoder.copy_buffer_to_buffer(&counts, 0, &staging, 0, bytes);
     encoder.copy_buffer_to_buffer(&growth, 0, &staging, bytes, bytes);

@@ -2,7 +2,8 @@
 //! law, parameters, operating point and start, to its summary and final state. The GPU twin of
 //! [`crate::simulate::strings::integrate_batch`].
 
-use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
+use super::string_batch::Head;
+use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM};
 use crate::simulate::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Schedule, StringJob, StringState, Summary};
 use bytemuck::{Pod, Zeroable};
 
@@ -23,12 +24,7 @@ const STRINGS_PER_DISPATCH: usize = 1 << 16;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct StringsJob {
-    first: u32,
-    count: u32,
-    row_width: u32,
-    steps_per_sample: u32,
-    settle_samples: u32,
-    record_samples: u32,
+    head: Head,
     _pad0: u32,
     _pad1: u32,
     dt_s: f32,
@@ -68,9 +64,11 @@ pub fn integrate_batch(
         &[("NODES", nodes as f64), ("LAW", law_override)],
     )?;
     let mut job = StringsJob::zeroed();
-    job.steps_per_sample = schedule.steps_per_sample;
-    job.settle_samples = schedule.settle_samples;
-    job.record_samples = schedule.record_samples;
+    job.head = Head::sampling(
+        schedule.steps_per_sample,
+        schedule.settle_samples,
+        schedule.record_samples,
+    );
     job.dt_s = schedule.dt_s as f32;
     job.alpha = chain.alpha_per_s as f32;
     job.beta = chain.beta_s as f32;
@@ -85,10 +83,16 @@ pub fn integrate_batch(
     Ok(out)
 }
 
+impl super::string_batch::StringsUniform for StringsJob {
+    fn head(&mut self) -> &mut Head {
+        &mut self.head
+    }
+}
+
 fn run_chunk(
     ctx: &super::GpuContext,
     kernel: &super::Kernel,
-    mut job: StringsJob,
+    job: StringsJob,
     jobs: &[StringJob],
 ) -> Result<Vec<(Summary, StringState)>, GpuError> {
     let n = jobs.len();
@@ -109,55 +113,17 @@ fn run_chunk(
         }
         states[s + 2 * MAX_NODES] = if j.start.stuck { 1.0 } else { 0.0 };
     }
-    let copy = wgpu::BufferUsages::COPY_DST;
-    let storage = wgpu::BufferUsages::STORAGE;
-    let src = wgpu::BufferUsages::COPY_SRC;
-    let state_bytes = 4 * states.len() as u64;
-    let summary_bytes = 4 * (SUMMARY_WORDS * n) as u64;
-    let job_buffer = ctx.buffer(
-        "strings job",
-        size_of::<StringsJob>() as u64,
-        wgpu::BufferUsages::UNIFORM | copy,
-    )?;
-    let input_buffer = ctx.buffer("string inputs", 4 * inputs.len() as u64, storage | copy)?;
-    let state_buffer = ctx.buffer("string states", state_bytes, storage | copy | src)?;
-    let summary_buffer = ctx.buffer("string summaries", summary_bytes, storage | src)?;
-    let staging = ctx.buffer(
-        "strings staging",
-        state_bytes + summary_bytes,
-        wgpu::BufferUsages::MAP_READ | copy,
-    )?;
-    ctx.queue.write_buffer(&input_buffer, 0, bytemuck::cast_slice(&inputs));
-    ctx.queue.write_buffer(&state_buffer, 0, bytemuck::cast_slice(&states));
-    let group = ctx.bind_group(
-        "strings",
-        &kernel.layout,
-        &[&job_buffer, &input_buffer, &state_buffer, &summary_buffer],
-    )?;
-    let mut encoder = ctx
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("strings") });
-    for first in (0..n).step_by(STRINGS_PER_DISPATCH) {
-        let count = STRINGS_PER_DISPATCH.min(n - first);
-        let (x, y, row_width) = ctx.grid(count as u32, WORKGROUP_SIZE);
-        job.first = first as u32;
-        job.count = count as u32;
-        job.row_width = row_width;
-        ctx.queue.write_buffer(&job_buffer, 0, bytemuck::bytes_of(&job));
-        super::encode_dispatch(&mut encoder, "strings", &kernel.pipeline, &group, (x, y));
-        if first + STRINGS_PER_DISPATCH < n {
-            // The next dispatch rewrites the job uniform: submit this one first.
-            ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
-            encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("strings") });
-        }
-    }
-    encoder.copy_buffer_to_buffer(&state_buffer, 0, &staging, 0, state_bytes);
-    encoder.copy_buffer_to_buffer(&summary_buffer, 0, &staging, state_bytes, summary_bytes);
-    let raw = ctx.finish_and_read(encoder, &staging, state_bytes + summary_bytes)?;
-    let states: &[f32] = bytemuck::cast_slice(&raw[..state_bytes as usize]);
-    let sums: &[f32] = bytemuck::cast_slice(&raw[state_bytes as usize..]);
+    let chunk = super::string_batch::Chunk {
+        label: "strings",
+        strings: n,
+        inputs: &inputs,
+        states: &states,
+        summary_words: SUMMARY_WORDS,
+        strings_per_dispatch: STRINGS_PER_DISPATCH,
+        read_states: true,
+    };
+    let out = super::string_batch::integrate_chunk(ctx, kernel, job, &chunk)?;
+    let (states, sums) = (&out.states, &out.summaries);
     Ok((0..n)
         .map(|i| {
             let s = &states[STATE_WORDS * i..STATE_WORDS * (i + 1)];
