@@ -655,8 +655,12 @@ mod tests {
         }
         assert!(!fields.iter().any(|f| f == "bit"));
         let s: Settings = serde_json::from_str(r#"{"radius_m": 0.1, "blades": 5, "omega_rpm": 90}"#).unwrap();
-        assert_eq!((s.bit.radius_m, s.bit.blades, s.omega_rpm), (0.1, 5, 90.0));
-        assert_eq!(s.bit.zeta, Bit::default().zeta);
+        let given = Bit {
+            radius_m: 0.1,
+            blades: 5,
+            ..Bit::default()
+        };
+        assert_eq!((s.bit, s.omega_rpm.to_bits()), (given, 90f64.to_bits()));
         let unknown = serde_json::from_str::<Settings>(r#"{"radius_m": 0.1, "radius": 0.2}"#);
         assert!(unknown.unwrap_err().to_string().contains("radius"));
     }
