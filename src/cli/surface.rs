@@ -5,7 +5,7 @@ use super::args::{LumpedArgs, finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
-use bitrock::run::surface::{self, SurfaceResult, SurfaceSettings};
+use bitrock::run::surface::{self, AtTheBit, SurfaceResult, SurfaceSettings};
 use bitrock::simulate::surface::Integration;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
@@ -268,6 +268,13 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
     }
     writeln!(out, "verdict: {}", r.check.verdict)?;
     writeln!(out)?;
+    posterior_lines(out, unit, r)?;
+    at_the_bit_lines(out, &r.at_the_bit)
+}
+
+/// Each law's posterior medians and 90 % intervals, in the record's torque unit.
+fn posterior_lines(out: &mut impl Write, unit: TorqueUnit, r: &SurfaceResult) -> std::io::Result<()> {
+    let per_unit = unit.newton_metres();
     for law in r.laws.iter().filter(|l| l.particles > 0) {
         let params: Vec<String> = law
             .params
@@ -292,7 +299,11 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
             .collect();
         writeln!(out, "{} (P = {:.3}): {}", law.law, law.probability, params.join(", "))?;
     }
-    let b = &r.at_the_bit;
+    Ok(())
+}
+
+/// What the surface implies at the bit: its stuck share, severity and the advice.
+fn at_the_bit_lines(out: &mut impl Write, b: &AtTheBit) -> std::io::Result<()> {
     writeln!(out)?;
     writeln!(
         out,
