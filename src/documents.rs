@@ -111,6 +111,8 @@ pub fn evidence_json(
                 "converged": law.converged(),
                 "prior_probability": law.prior_probability,
                 "probability": law.probability,
+                "probability_error": law.probability_error,
+                "refinements": law.refinements,
                 "posterior_mean": to_record_units(law.law, &mean_si, data.torque_unit),
                 "best_rho": law.best_rho,
                 // ⟨ln L⟩ over the posterior and the Occam factor ln Z − ⟨ln L⟩ (N·m, nats).

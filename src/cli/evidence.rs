@@ -3,7 +3,7 @@
 
 use super::args::{DataArgs, FitArgs, StructureArgs, finite_number, load_data, set_threads};
 use super::print;
-use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, Start, describe_starts};
+use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, REFINE_ABOVE_NATS, Start, describe_starts};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
 use bitrock::eval::Backend;
@@ -65,6 +65,11 @@ pub struct EvidenceCmd {
     /// Most Metropolis sweeps after each tempering step.
     #[arg(long, default_value_t = EvidenceConfig::default().max_sweeps, value_name = "COUNT")]
     pub max_sweeps: usize,
+    /// Most times a law's islands of one start are run again, each time with twice the
+    /// particles, while their ln Z spread by more than a nat and the law's ln Z is uncertain
+    /// by more than half a nat (0: never). What is still apart after them is ln Z's error.
+    #[arg(long, default_value_t = EvidenceConfig::default().refine_rounds, value_name = "COUNT")]
+    pub refine_rounds: usize,
     /// Seed of the samplers' streams: the same seed gives the same result.
     #[arg(long, default_value_t = EvidenceConfig::default().seed)]
     pub seed: u64,
@@ -100,7 +105,7 @@ pub struct EvidenceCmd {
     /// for bit on the same backend. Then written to DIR as --out writes it.
     #[arg(long, value_name = "DIR", conflicts_with_all = super::args::resume_conflicts!(
         "boxes", "prior_scale", "delta", "prior", "noise", "start_from", "particles", "islands", "max_stages",
-        "ess_share", "max_sweeps", "seed",
+        "ess_share", "max_sweeps", "refine_rounds", "seed",
     ))]
     pub resume: Option<PathBuf>,
     /// No progress lines on stderr.
@@ -202,6 +207,7 @@ fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<run::evidence::Job> {
         max_stages: cmd.max_stages,
         ess_share: cmd.ess_share,
         max_sweeps: cmd.max_sweeps,
+        refine_rounds: cmd.refine_rounds,
         seed: cmd.seed,
         backend: cmd.backend.unwrap_or_default(),
     };
@@ -349,20 +355,37 @@ fn tables(
     print::separation_tables(out, &analysis.separations, &job.laws)?;
     writeln!(
         out,
-        "law       ln Z (N·m)   ± MC error   P(m | y)     best ρ   stages   candidates"
+        "law       ln Z (N·m)   ± MC error   P(m | y)        ±     best ρ   stages   candidates"
     )?;
     for law in &evidence.laws {
         let stages = law.stages.iter().sum::<usize>() as f64 / law.stages.len() as f64;
         writeln!(
             out,
-            "{:<6} {:>14.3} {:>12.3} {:>10.4} {:>10.5} {:>8.1} {:>12}",
+            "{:<6} {:>14.3} {:>12.3} {:>10.4} {:>8.4} {:>10.5} {:>8.1} {:>12}",
             law.law.name(),
             law.ln_z,
             law.ln_z_error,
             law.probability,
+            law.probability_error,
             law.best_rho,
             stages,
             law.candidates_scored
+        )?;
+    }
+    for law in evidence.laws.iter().filter(|l| l.refinements > 0) {
+        let particles = config.particles_of(law.law) << law.refinements;
+        writeln!(
+            out,
+            "{}: islands that ended more than a nat apart were run again {} time(s), the last with {particles} \
+             particles each; its islands now span {:.2} nats{}",
+            law.law,
+            law.refinements,
+            law.island_spread,
+            if law.island_spread > REFINE_ABOVE_NATS {
+                ", which its error carries"
+            } else {
+                ""
+            }
         )?;
     }
     starts_table(out, evidence)?;

@@ -61,6 +61,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("max_stages", "--max-stages"),
     ("ess_share", "--ess-share"),
     ("max_sweeps", "--max-sweeps"),
+    ("refine_rounds", "--refine-rounds"),
     ("eps_min", "--eps-min"),
     ("epsilons", "--epsilons"),
     ("start_epsilon", "--start-epsilon"),

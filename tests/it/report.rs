@@ -356,6 +356,8 @@ fn the_report_shows_the_model_evidence_beside_the_runs_when_it_was_computed() {
         island_ln_z,
         prior_probability: 0.5,
         probability,
+        probability_error: 0.0,
+        refinements: 0,
         stages: vec![3, 3],
         candidates_scored: 100,
         best_rho: 0.01,

@@ -32,32 +32,50 @@ pub(super) fn encode_state(seconds: f64, islands: &[Island]) -> Vec<u8> {
 
 /// The islands of a saved state (kept in `origin`), checked against `fresh` (those the job
 /// makes at its start): the same laws, slots, streams and particle counts, or the state is
-/// another job's.
-pub(super) fn decode_state(bytes: &[u8], origin: &std::path::Path, fresh: &[Island]) -> Result<(f64, Vec<Island>)> {
+/// another job's. Islands beyond `fresh` are refinements ([`refine`](super::refine)), each
+/// checked against the first-round island it refines (`span` streams a round).
+pub(super) fn decode_state(
+    bytes: &[u8],
+    origin: &std::path::Path,
+    fresh: &[Island],
+    span: u32,
+) -> Result<(f64, Vec<Island>)> {
     let refuse = |why: &str| Error::Data {
         path: origin.to_path_buf(),
         message: format!("the saved state of the evidence's samplers is not this job's: {why}"),
     };
     let (seconds, mut islands): (f64, Vec<Island>) =
         postcard::from_bytes(bytes).map_err(|e| refuse(&format!("it does not read ({e})")))?;
-    if islands.len() != fresh.len() {
+    if islands.len() < fresh.len() {
         return Err(refuse(&format!(
             "{} samplers where the job runs {}",
             islands.len(),
             fresh.len()
         )));
     }
-    for (saved, new) in islands.iter_mut().zip(fresh) {
+    for (k, saved) in islands.iter_mut().enumerate() {
+        let (round, first) = super::refine::round_of(saved, span);
+        let new = match fresh.get(k) {
+            Some(new) if round == 0 => new,
+            None if round > 0 => fresh.iter().find(|f| f.stream.stream == first).ok_or_else(|| {
+                refuse(&format!(
+                    "its sampler {} refines none of the job's",
+                    saved.stream.stream
+                ))
+            })?,
+            _ => return Err(refuse(&format!("its sampler {} is out of order", saved.stream.stream))),
+        };
         let particles = |i: &Island| i.theta.len().max(i.proposals.len());
+        let let_go = saved.let_go_of();
         if saved.law != new.law
             || saved.slot != new.slot
             || saved.dims != new.dims
             || saved.lower.map(f32::to_bits) != new.lower.map(f32::to_bits)
             || saved.upper.map(f32::to_bits) != new.upper.map(f32::to_bits)
             || saved.stream.seed != new.stream.seed
-            || saved.stream.stream != new.stream.stream
-            || particles(saved) != particles(new)
-            || started_from_reference(saved) != new.reference.is_some()
+            || first != new.stream.stream
+            || (!let_go && particles(saved) != particles(new) << round)
+            || (!let_go && started_from_reference(saved) != new.reference.is_some())
         {
             return Err(refuse(&format!(
                 "its sampler {} of law {} differs",

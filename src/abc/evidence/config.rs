@@ -38,7 +38,21 @@ pub struct EvidenceConfig {
     /// none ran from the box, and reads so.
     #[serde(default)]
     pub start: Start,
+    /// Most times a law's islands of one start are run again, each time with twice the
+    /// particles, while their ln Z spread by more than [`REFINE_ABOVE_NATS`]: the budget
+    /// spent on a posterior the first islands did not follow alike. A stored job that names
+    /// none refined nothing, and reads so.
+    #[serde(default)]
+    pub refine_rounds: usize,
 }
+
+/// Islands of one law and start whose ln Z spread by more than this many nats are run again
+/// with twice the particles (up to [`EvidenceConfig::refine_rounds`] times): a nat is where a
+/// Bayes factor's word starts to depend on which island was lucky.
+pub const REFINE_ABOVE_NATS: f64 = 1.0;
+
+/// Most refinement rounds: the last round's islands hold 2^this times the particles.
+pub const MAX_REFINE_ROUNDS: usize = 6;
 
 /// Where a law's samplers start their tempered path to the posterior. Either way ln Z is the
 /// evidence under the law's prior box: the start changes the cost and the variance, not what
@@ -167,6 +181,7 @@ impl Default for EvidenceConfig {
             noise: NoiseModel::Iid,
             law_particles: Vec::new(),
             start: Start::Both,
+            refine_rounds: 2,
         }
     }
 }
@@ -180,12 +195,23 @@ impl EvidenceConfig {
             .map_or(self.particles, |(_, n)| *n)
     }
 
+    /// The settings of refinement round `round` (0: the first islands): every particle count
+    /// 2^round times.
+    pub(super) fn of_round(&self, round: usize) -> Self {
+        let times = 1usize << round;
+        Self {
+            particles: self.particles * times,
+            law_particles: self.law_particles.iter().map(|&(l, n)| (l, n * times)).collect(),
+            ..self.clone()
+        }
+    }
+
     /// Refuses, naming the setting, samplers whose particles for `laws` laws would not fit in
     /// this machine's memory (estimated at [`BYTES_PER_PARTICLE`] each, every island of every
     /// law and start held at once), before any work.
     pub fn check_memory(&self, laws: &[Law]) -> Result<()> {
         let starts = if self.start == Start::Both { 2.0 } else { 1.0 };
-        let particles: f64 =
+        let first: f64 =
             laws.iter().map(|&law| self.particles_of(law) as f64).sum::<f64>() * self.islands as f64 * starts;
         let field = if self.islands > self.particles {
             "islands"
@@ -194,12 +220,23 @@ impl EvidenceConfig {
         };
         crate::limits::check_memory(
             field,
-            particles * BYTES_PER_PARTICLE,
+            first * BYTES_PER_PARTICLE,
             &format!(
-                "{particles:.3e} particles ({} per island, {} islands per law and start, {} laws)",
+                "{first:.3e} particles ({} per island, {} islands per law and start, {} laws)",
                 self.particles,
                 self.islands,
                 laws.len()
+            ),
+        )?;
+        // Refined islands replace those they refine, which are let go: at worst every law and
+        // start in its last round at once.
+        let times = 1u64 << self.refine_rounds.min(MAX_REFINE_ROUNDS);
+        crate::limits::check_memory(
+            "refine_rounds",
+            first * times as f64 * BYTES_PER_PARTICLE,
+            &format!(
+                "{} refinement rounds ({} times the {first:.3e} particles at worst)",
+                self.refine_rounds, times
             ),
         )
     }
@@ -234,6 +271,15 @@ impl EvidenceConfig {
         }
         if self.max_sweeps == 0 {
             return Err(Error::setting("max_sweeps", "must be at least 1"));
+        }
+        if self.refine_rounds > MAX_REFINE_ROUNDS {
+            return Err(Error::setting(
+                "refine_rounds",
+                format!(
+                    "at most {MAX_REFINE_ROUNDS} (each round doubles the particles), got {}",
+                    self.refine_rounds
+                ),
+            ));
         }
         Ok(())
     }

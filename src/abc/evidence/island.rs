@@ -44,7 +44,9 @@ impl Stream {
 /// ln Z from independent islands' estimates (`island_ln_z`) and its Monte-Carlo error: ln of
 /// the mean of their Z, and the standard error of that mean relative to it, where the islands
 /// agree. Where they disagree by nats, one island carries the mean and that error saturates
-/// near 1 whatever the spread: then the standard error of the islands' ln Z is the honest one.
+/// near 1 whatever the spread: then the standard error of the islands' ln Z is the honest one,
+/// and where they spread by more than [`REFINE_ABOVE_NATS`] (after any refinement) ln Z may
+/// lie anywhere among them: the error is at least half their range.
 pub(super) fn pooled_ln_z(island_ln_z: &[f64]) -> (f64, f64) {
     let ln_z = log_mean_exp(island_ln_z.iter().copied());
     let k = island_ln_z.len() as f64;
@@ -54,8 +56,10 @@ pub(super) fn pooled_ln_z(island_ln_z: &[f64]) -> (f64, f64) {
         .sum::<f64>()
         / (k - 1.0);
     let mean_ln_z = island_ln_z.iter().sum::<f64>() / k;
-    let spread = (island_ln_z.iter().map(|v| (v - mean_ln_z).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
-    (ln_z, (variance / k).sqrt().max(spread / k.sqrt()))
+    let deviation = (island_ln_z.iter().map(|v| (v - mean_ln_z).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+    let range = spread_of(island_ln_z);
+    let apart = if range > REFINE_ABOVE_NATS { range / 2.0 } else { 0.0 };
+    (ln_z, (variance / k).sqrt().max(deviation / k.sqrt()).max(apart))
 }
 
 /// The mean of independent estimates (value, standard error) weighed by their inverse
@@ -237,6 +241,28 @@ impl Island {
             ln_q: Vec::new(),
             proposal_ln_q,
         }
+    }
+
+    /// Drops the particles of an island a refinement replaced; its ln Z, counts and stream
+    /// stay, for the record of what was spent.
+    pub(super) fn let_go(&mut self) {
+        for v in [&mut self.theta, &mut self.proposals] {
+            *v = Vec::new();
+        }
+        for v in [
+            &mut self.loglik,
+            &mut self.weights,
+            &mut self.ln_q,
+            &mut self.proposal_ln_q,
+        ] {
+            *v = Vec::new();
+        }
+        self.inside = Vec::new();
+    }
+
+    /// Whether a refinement replaced this island ([`let_go`](Self::let_go)).
+    pub(super) fn let_go_of(&self) -> bool {
+        self.phase == Phase::Done && self.theta.is_empty()
     }
 
     /// ln π − ln q at a particle inside the box with ln q = `ln_q` (0 without a reference).

@@ -22,6 +22,14 @@ pub struct LawEvidence {
     pub prior_probability: f64,
     /// P(m | y) ∝ π(m)·Z_m over the laws compared.
     pub probability: f64,
+    /// Its standard error, carried from every law's `ln_z_error` (islands still apart after
+    /// their refinements among them).
+    #[serde(default)]
+    pub probability_error: f64,
+    /// Rounds of refinement its reported islands went through ([`REFINE_ABOVE_NATS`]): each
+    /// doubled their particles.
+    #[serde(default)]
+    pub refinements: usize,
     /// Tempering steps of each island.
     pub stages: Vec<usize>,
     /// Candidates scored for this law.
@@ -83,6 +91,8 @@ impl LawEvidence {
             island_spread: 0.0,
             prior_probability: 0.5,
             probability: 0.5,
+            probability_error: 0.0,
+            refinements: 0,
             stages: vec![1],
             candidates_scored: 1,
             best_rho: 0.1,

@@ -79,6 +79,9 @@ pub struct Settings {
     pub ess_share: f64,
     /// Most Metropolis sweeps after each tempering step.
     pub max_sweeps: usize,
+    /// Most times a law's islands of one start are run again with twice the particles while
+    /// they spread by more than a nat and the law's ln Z is uncertain by more than half a nat.
+    pub refine_rounds: usize,
     /// Seed of the samplers' streams: the same seed gives the same result.
     pub seed: u64,
     /// Where ρ is computed.
@@ -100,6 +103,7 @@ impl Default for Settings {
             max_stages: sampler.max_stages,
             ess_share: sampler.ess_share,
             max_sweeps: sampler.max_sweeps,
+            refine_rounds: sampler.refine_rounds,
             seed: sampler.seed,
             backend: Backend::default(),
         }
@@ -129,6 +133,7 @@ impl Settings {
                 max_stages: self.max_stages,
                 ess_share: self.ess_share,
                 max_sweeps: self.max_sweeps,
+                refine_rounds: self.refine_rounds,
                 start: self.start_from,
                 ..EvidenceConfig::default()
             },

@@ -317,6 +317,15 @@ fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
         &["evidence", "rec.csv", "--islands", "100000000", "--out", "E"],
         &["--islands", "islands per law and start", "memory"],
     );
+    // Refinements whose last round would not fit, and more rounds than the doubling allows.
+    refused(
+        &["evidence", "rec.csv", "--particles", "200000", "--refine-rounds", "6", "--out", "E"],
+        &["--refine-rounds", "6 refinement rounds (64 times the", "memory"],
+    );
+    refused(
+        &["evidence", "rec.csv", "--refine-rounds", "7", "--out", "E"],
+        &["--refine-rounds", "at most 6"],
+    );
     // A check of more records than a day computes, refused before the evidence itself.
     refused(
         &["evidence", "rec.csv", "--check", "1000000000", "--out", "E"],

@@ -101,7 +101,9 @@ class Evidence:
     @property
     def table(self) -> pd.DataFrame:
         """One row per law: ln Z (torques in N·m) and its Monte-Carlo error, the prior and
-        posterior law probabilities, the best ρ reached, the mean number of tempering steps,
+        posterior law probabilities (the latter's standard error from every law's ln Z error in
+        ``probability_error``), the rounds of refinement its islands went through
+        (``refinements``: each doubled their particles), the best ρ reached, the mean number of tempering steps,
         candidates scored, the parameters whose posterior a box end cuts, and the lag-1
         autocorrelation of the law's least-squares residuals in time order (near 0 where the
         i.i.d. noise model holds)."""
@@ -112,6 +114,8 @@ class Evidence:
                 "ln_z_error": law["ln_z_error"],
                 "prior_probability": law["prior_probability"],
                 "probability": law["probability"],
+                "probability_error": law.get("probability_error", 0.0),
+                "refinements": law.get("refinements", 0),
                 "best_rho": law["best_rho"],
                 "stages": float(np.mean(law["stages"])),
                 "candidates_scored": law["candidates_scored"],
@@ -358,6 +362,7 @@ def evidence(
     max_stages: int | None = None,
     ess_share: float | None = None,
     max_sweeps: int | None = None,
+    refine_rounds: int | None = None,
     bounds: bool = True,
     starts: int | None = None,
     scale_by_wob: bool = False,
@@ -387,7 +392,10 @@ def evidence(
     Monte-Carlo error; the same ``seed`` gives the same result. ``max_stages`` (500) bounds an
     island's tempering steps, ``ess_share`` (0.5) is the share of the effective sample size each
     step keeps (higher: more, gentler steps) and ``max_sweeps`` (30) bounds the Metropolis sweeps
-    after each. ``noise`` is the residuals'
+    after each. A law's islands of one start that end more than a nat apart, where that leaves
+    its ln Z uncertain by more than half a nat, are run again with twice the particles, at most
+    ``refine_rounds`` (2) times; what is still apart after them is its ln Z's error
+    (:attr:`Evidence.laws`' ``refinements`` and ``probability_error``). ``noise`` is the residuals'
     model: ``"iid"``, ``"ar1"`` (correlated from one sample to the next), or ``"auto"``, each
     model's evidence and the one the data favour reported (see :attr:`Evidence.noise_models`).
     ``start_from`` is where each law's samplers start: ``"box"``, the box (the whole tempered path;
@@ -428,6 +436,7 @@ def evidence(
         "max_stages": max_stages,
         "ess_share": ess_share,
         "max_sweeps": max_sweeps,
+        "refine_rounds": refine_rounds,
         "bounds": bounds,
         "starts": starts,
         "scale_by_wob": scale_by_wob,
