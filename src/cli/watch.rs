@@ -343,7 +343,7 @@ fn header(out: &mut impl Write, laws: &[bitrock::Law]) -> std::io::Result<()> {
     for law in laws {
         write!(out, " {:>6}", format!("P({law})"))?;
     }
-    writeln!(out, "  change  advice")
+    writeln!(out, "  change  {:<34}  advice", "this window's answer")
 }
 
 fn line(out: &mut impl Write, u: &Update, laws: &[bitrock::Law]) -> std::io::Result<()> {
@@ -363,5 +363,6 @@ fn line(out: &mut impl Write, u: &Update, laws: &[bitrock::Law]) -> std::io::Res
         (None, Some(a)) => a.words.clone(),
         (None, None) => String::new(),
     };
-    writeln!(out, "  {change:<6}  {advice}")
+    let answer = u.answer.as_ref().map_or("-".into(), |a| a.headline());
+    writeln!(out, "  {change:<6}  {answer:<34}  {advice}")
 }

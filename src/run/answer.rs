@@ -172,6 +172,21 @@ impl Answer {
         document
     }
 
+    /// Serialises an optional answer as [`json`](Self::json) does, its `sentence` beside its
+    /// fields (for `#[serde(serialize_with)]`; reading it back ignores the sentence).
+    pub fn serialize_with_sentence<S: serde::Serializer>(answer: &Option<Self>, to: S) -> Result<S::Ok, S::Error> {
+        use serde::Serialize;
+        answer.as_ref().map(Self::json).serialize(to)
+    }
+
+    /// The answer in a few words: the law, and its strength against the next.
+    pub fn headline(&self) -> String {
+        match self.runner_up {
+            Some(next) => format!("{} over {}: {}", self.law, next, self.strength.words()),
+            None => format!("{} alone", self.law),
+        }
+    }
+
     /// The headline: the law, its strength against the next, the numbers, and why.
     pub fn sentence(&self) -> String {
         let Some(next) = self.runner_up else {

@@ -327,6 +327,7 @@ impl Watch {
         let Judged { loss, level, change } = judged;
         update.candidates_scored = selection.candidates;
         update.epsilon = selection.epsilon;
+        update.answer = selection.answer.clone();
         update.change = change;
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
         self.carry_window(&window, &selection, &data, (loss, change));
@@ -514,6 +515,7 @@ impl Update {
             samples_used: 0,
             uninformative: None,
             most_probable: None,
+            answer: None,
             laws: Vec::new(),
             change: false,
             change_nats: None,

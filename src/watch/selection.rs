@@ -19,6 +19,8 @@ pub(super) struct Selection {
     /// The W_ref (N) of the posterior's torque parameters where they are for the torque scaled
     /// by WOB / W_ref; `None` for the torque as the laws give it.
     pub(super) w_ref_n: Option<f64>,
+    /// The window's own answer to "which law, how sure", as its evidence or its ABC gives it.
+    pub(super) answer: Option<crate::run::answer::Answer>,
 }
 
 impl Selection {
@@ -174,6 +176,7 @@ impl Watch {
             candidates,
             epsilon: None,
             w_ref_n: analysis.fit.w_ref_n,
+            answer: analysis.answer(None),
         };
         Ok(Ok((selection, judged)))
     }
@@ -230,7 +233,7 @@ impl Watch {
             Ok(outcome) => outcome,
             Err(why) => return Ok(Err(why)),
         };
-        let run = outcome.run;
+        let (setup, fit, run) = (outcome.setup, outcome.config.fit, outcome.run);
         let candidates = run.populations.iter().map(|p| p.record.candidates_scored).sum();
         let Some(last) = run.populations.into_iter().last() else {
             return Ok(Err(format!(
@@ -261,12 +264,20 @@ impl Watch {
                 }
             })
             .collect();
+        let probabilities: Vec<(Law, f64)> = self
+            .settings
+            .laws
+            .iter()
+            .map(|&law| (law, last.record.probability_of(law)))
+            .collect();
+        let (_, answer) = crate::run::abc::answer(&setup, &fit, &last.record, &probabilities)?;
         let selection = Selection {
             fits,
             laws,
             candidates,
             epsilon: last.record.epsilon,
             w_ref_n,
+            answer,
         };
         Ok(Ok((selection, judged)))
     }

@@ -68,6 +68,10 @@ impl Default for WatchSettings {
                 // Each window from the window before; a cold one (the first, or after a
                 // change of rock) from the boxes.
                 start_from: Start::Box,
+                // A window's latency matters more than half a nat of its ln Z, which later
+                // windows weigh and forget: its islands are not run again, and their spread is
+                // its error.
+                refine_rounds: 0,
                 ..Default::default()
             },
             forgetting: 0.5,

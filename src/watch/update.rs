@@ -42,6 +42,10 @@ pub struct Update {
     pub uninformative: Option<String>,
     /// The most probable law (carried probabilities).
     pub most_probable: Option<Law>,
+    /// The window's own answer to "which law, how sure" (its evidence's Bayes factor, or its
+    /// ABC's probabilities, in their words); the carried probabilities weigh earlier windows too.
+    #[serde(default, serialize_with = "crate::run::answer::Answer::serialize_with_sentence")]
+    pub answer: Option<crate::run::answer::Answer>,
     pub laws: Vec<LawUpdate>,
     /// Whether this window starts a new formation, and the log-likelihood (nats) the fits of
     /// the latest window sharing no time with it lose on it, beyond their running level.

@@ -105,6 +105,26 @@ fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     for u in whole.iter().filter(|u| end(u) <= BOUNDARY_S) {
         assert_eq!(u["most_probable"], "m2", "{u}");
         assert_eq!(u["change"], false, "{u}");
+        // The window's own answer, in the evidence's words: the law of the window's largest
+        // P(m | window) over the next.
+        let answer = &u["answer"];
+        assert_eq!(answer["method"], "evidence", "{u}");
+        let laws = u["laws"].as_array().unwrap();
+        let first = laws
+            .iter()
+            .max_by(|a, b| {
+                a["window_probability"]
+                    .as_f64()
+                    .unwrap()
+                    .total_cmp(&b["window_probability"].as_f64().unwrap())
+            })
+            .unwrap();
+        assert_eq!(answer["law"], first["law"], "{u}");
+        let sentence = answer["sentence"].as_str().unwrap();
+        assert!(
+            sentence.starts_with(&format!("{} over ", first["law"].as_str().unwrap())),
+            "{sentence}"
+        );
         let m2 = &u["laws"][0];
         for key in ["mean", "map"] {
             let estimate: Vec<f64> = m2[key]

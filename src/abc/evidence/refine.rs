@@ -1,7 +1,7 @@
 //! Refinement: where a law's reported ln Z is uncertain by more than half of
-//! [`REFINE_ABOVE_NATS`] because the islands of a start spread by more than that, those
-//! islands are run again, each from its own fresh stream, with twice the particles, up to
-//! [`EvidenceConfig::refine_rounds`] times. The islands refined are let go
+//! [`REFINE_ABOVE_NATS`] because the islands of a start it keeps spread by more than that,
+//! those islands are run again, each from its own fresh stream, with twice the particles, up
+//! to [`EvidenceConfig::refine_rounds`] times. The islands refined are let go
 //! (their particles dropped, their counts kept), and the law reports its latest round.
 //!
 //! Every first-round island has a stream below [`round_span`]; its refinement in round r runs
@@ -76,6 +76,11 @@ pub(super) fn refine(
         }
         let starts = starts_of(config, reference_of(references, bx.law));
         for (start, reference) in starts.into_iter().enumerate() {
+            // A start whose estimate the law does not keep (the lower of two that disagree)
+            // spends nothing more either: refining it would not make the law's ln Z surer.
+            if kept.starts.get(start).is_some_and(|s| !s.kept) {
+                continue;
+            }
             let group: Vec<usize> = (0..islands.len())
                 .filter(|&k| {
                     let (_, first) = round_of(&islands[k], span);

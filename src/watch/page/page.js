@@ -146,6 +146,8 @@ function renderNow(u) {
   $('most-probable').textContent = u.most_probable || '—';
   const title = u.most_probable ? titled(u.most_probable).slice(u.most_probable.length + 1) : '';
   $('most-probable-title').textContent = title;
+  const answer = $('answer');
+  answer.textContent = `this window's answer: ${u.answer ? u.answer.sentence : '—'}`;
   const change = $('change');
   change.textContent = u.change ? `changed here (${fixed(u.change_nats, 0)} nats)` : u.uninformative ? 'this window informs nothing' : 'same';
   change.className = u.change ? 'changed' : '';

@@ -319,7 +319,16 @@ fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
     );
     // Refinements whose last round would not fit, and more rounds than the doubling allows.
     refused(
-        &["evidence", "rec.csv", "--particles", "200000", "--refine-rounds", "6", "--out", "E"],
+        &[
+            "evidence",
+            "rec.csv",
+            "--particles",
+            "200000",
+            "--refine-rounds",
+            "6",
+            "--out",
+            "E",
+        ],
         &["--refine-rounds", "6 refinement rounds (64 times the", "memory"],
     );
     refused(
