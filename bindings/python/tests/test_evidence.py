@@ -78,14 +78,15 @@ def test_the_evidence_warns_what_its_document_warns() -> None:
 
 def test_the_samplers_start_from_the_boxes_the_fits_or_both_as_on_the_command_line(cli) -> None:
     record = bitrock.read_record(DEMO_CSV, thin=4)
-    # One model of the residuals, so that each start's evidence is of the same one.
-    model = {"noise": "iid", "scale_by_wob": True}
+    # One model of the residuals, so that each start's evidence is of the same one; no
+    # refinement, which runs again only a start the law keeps (the box alone is always kept).
+    model = {"noise": "iid", "scale_by_wob": True, "refine_rounds": 0}
     from_fits = bitrock.evidence(record, **SMALL, **model, start_from="fit")
     from_boxes = bitrock.evidence(record, **SMALL, **model, start_from="box")
     from_both = bitrock.evidence(record, **SMALL, **model)
     done = run_cli(
         cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
-        "--seed", "5", "--backend", "cpu", "--noise", "iid", "--scale-by-wob", "--json",
+        "--seed", "5", "--backend", "cpu", "--noise", "iid", "--scale-by-wob", "--refine-rounds", "0", "--json",
     )
     document = json.loads(done.stdout)
     assert from_fits.document["sampler"]["start"] == "fit"
@@ -186,22 +187,25 @@ def test_the_evidence_s_islands_are_the_chains_arviz_reads(small) -> None:
         posterior = node["posterior"].to_dataset()
         assert list(posterior.data_vars) == entry["names"]
         assert posterior[entry["names"][0]].attrs["units"] == entry["units"][0]
-        # One chain per island, each island's ln Z beside it.
+        # One chain per island the law kept (of one start, or of both where they agree), each
+        # island's ln Z beside it.
         island = np.asarray(entry["posterior"]["island"])
-        assert posterior.sizes["chain"] == len(entry["island_ln_z"]) == SMALL["islands"]
+        chains = len(entry["island_ln_z"])
+        assert posterior.sizes["chain"] == chains and chains in (SMALL["islands"], 2 * SMALL["islands"])
         np.testing.assert_array_equal(node["sample_stats"].to_dataset()["island_ln_z"].values, entry["island_ln_z"])
         frame, weights = small.posterior(law)
         count = max(np.bincount(island))
         assert posterior.sizes["draw"] == count
         name = entry["names"][0]
-        for chain in range(SMALL["islands"]):
+        for chain in range(chains):
             own = island == chain
             w = weights[own] / weights[own].sum()
             values, drawn = np.unique(posterior[name].values[chain], return_counts=True)
-            # Systematic resampling within the island: each set ⌊N·w⌋ or ⌈N·w⌉ times.
+            # Systematic resampling within the island: each set ⌊N·w⌋ or ⌈N·w⌉ times (sets
+            # of one value, which a sampler's resampling leaves, between the sums of those).
             for value, n in zip(values, drawn):
-                share = w[frame[name].to_numpy()[own] == value].sum()
-                assert np.floor(count * share) - 1e-9 <= n <= np.ceil(count * share) + 1e-9
+                shares = count * w[frame[name].to_numpy()[own] == value]
+                assert np.floor(shares).sum() - 1e-9 <= n <= np.ceil(shares).sum() + 1e-9
         major = int(az.__version__.split(".")[0])
         data = node if major >= 1 else az.InferenceData.from_datatree(node)
         summary = az.summary(data, kind="diagnostics")
@@ -241,7 +245,9 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
         assert law["ln_z"] - law["mean_ln_l"] == pytest.approx(law["occam_nats"], abs=1e-9)
     params, weights = small.posterior("m2")
     assert list(params.columns) == ["tsb", "tcb", "g"]
-    assert len(params) == len(weights) == 3 * 60
+    # Every particle of every island m2 kept (both starts here, which agree), none refined.
+    assert laws["m2"]["refinements"] == 0
+    assert len(params) == len(weights) == 60 * len(laws["m2"]["island_ln_z"])
     assert weights.sum() == pytest.approx(1.0, abs=1e-12)
     # kN·m, the record's unit: the static torque of the demo record is of order 10 kN·m.
     assert 1.0 < float(np.average(params["tsb"], weights=weights)) < 100.0
@@ -472,3 +478,30 @@ def test_the_evidence_summary_is_its_posterior_sets_weighted(small) -> None:
     pytest.importorskip("matplotlib")
     ax = bitrock.plot.fit(small)
     assert any(c.get_gid() == "record" for c in ax.collections)
+
+
+def test_islands_apart_are_refined_as_on_the_command_line(cli) -> None:
+    """Islands of a start the law keeps that end more than a nat apart are run again with twice
+    the particles, ``refine_rounds`` times at most, as ``--refine-rounds`` says; what is still
+    apart is ln Z's error, and P(m | y) carries its standard error."""
+    record = bitrock.read_record(DEMO_CSV, thin=4)
+    refined = bitrock.evidence(record, **SMALL)
+    plain = bitrock.evidence(record, **SMALL, refine_rounds=0)
+    table, plain_table = refined.table, plain.table
+    assert (plain_table["refinements"] == 0).all()
+    assert (table["refinements"] <= 2).all()
+    # Each start's islands still apart carry half their range as their error.
+    for _, row in refined.starts.iterrows():
+        if row["island_spread"] > 1.0:
+            assert row["ln_z_error"] >= row["island_spread"] / 2
+    for law in refined.document["laws"]:
+        assert 0.0 <= law["probability_error"] <= 0.5
+    done = run_cli(
+        cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
+        "--seed", "5", "--backend", "cpu", "--refine-rounds", "0", "--json",
+    )
+    document = json.loads(done.stdout)
+    assert [law["ln_z"] for law in document["laws"]] == [law["ln_z"] for law in plain.document["laws"]]
+    assert [law["refinements"] for law in document["laws"]] == [0, 0]
+    with pytest.raises(bitrock.InputError, match="refine_rounds"):
+        bitrock.evidence(record, **SMALL, refine_rounds=7)
