@@ -28,7 +28,7 @@ pub struct EvidenceAnalysis {
     /// What the fits alone say about telling the laws apart on these samples.
     pub separations: Vec<Separation>,
     /// The lag-1 autocorrelation of each fit's residuals in time order, in `fits` order
-    /// ([`separation::residual_lag1`]).
+    /// ([`crate::separation::residual_lag1`]).
     pub residual_lag1: Vec<f64>,
     /// The nats by which the data prefer AR(1) residuals to i.i.d. ones at each fit, in `fits`
     /// order ([`evidence::noise::ar1_preference_nats`]): the check on the i.i.d. noise model.
