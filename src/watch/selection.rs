@@ -270,7 +270,10 @@ impl Watch {
             .iter()
             .map(|&law| (law, last.record.probability_of(law)))
             .collect();
-        let (_, answer) = crate::run::abc::answer(&setup, &fit, &last.record, &probabilities)?;
+        let answer = match of_window(crate::run::abc::answer(&setup, &fit, &last.record, &probabilities))? {
+            Ok((_, answer)) => answer,
+            Err(why) => return Ok(Err(why)),
+        };
         let selection = Selection {
             fits,
             laws,

@@ -1029,6 +1029,8 @@ fn the_paper_s_abc_on_each_window_is_bitrock_abc_on_the_window_s_rows() {
         let last = run["populations"].as_array().unwrap().last().unwrap().clone();
         let u = &updates[k];
         assert_eq!(u["epsilon"], last["epsilon"], "window {k}");
+        // The window's answer is the run's, in the same words.
+        assert_eq!(u["answer"], run["answer"], "window {k}");
         for l in u["laws"].as_array().unwrap() {
             let law = l["law"].as_str().unwrap();
             assert_eq!(

@@ -569,11 +569,24 @@ mod tests {
         (lower, upper, ln_volume)
     }
 
+    /// The cubic record of 200 samples as a linear model (m4), its least-squares estimate,
+    /// a box of ±12 standard errors (the likelihood outside it is below e^-70 of its peak)
+    /// and ln Z in closed form.
+    struct LinearCase {
+        data: Samples,
+        d: usize,
+        inverse: DMatrix<f64>,
+        theta: DVector<f64>,
+        sigma2: f64,
+        lower: Vec<f32>,
+        upper: Vec<f32>,
+        expected: f64,
+    }
+
     /// ln Z of a linear model with a box prior that holds all of the likelihood: the integral
     /// of ½Γ(n/2)(πS)^(−n/2) over ℝᵈ, S = S_min + (θ − θ̂)ᵀXᵀX(θ − θ̂), is
     /// ½ π^(−(n−d)/2) Γ((n−d)/2) S_min^(−(n−d)/2) |XᵀX|^(−1/2); divided by the box's volume.
-    #[test]
-    fn the_evidence_of_a_linear_law_is_the_closed_form_integral() {
+    fn linear_case() -> LinearCase {
         let data = cubic_record(200, 600.0);
         let (n, d) = (200usize, 4usize);
         let x = DMatrix::from_fn(n, d, |i, j| data.speed_rad_s[i].powi(j as i32));
@@ -582,7 +595,6 @@ mod tests {
         let inverse = xtx.clone().try_inverse().unwrap();
         let theta = &inverse * x.transpose() * &y;
         let s_min = (&y - &x * &theta).norm_squared();
-        // A box of ±12 standard errors: the likelihood outside it is below e^-70 of its peak.
         let sigma2 = s_min / (n - d) as f64;
         let (lower, upper, ln_volume) = twelve_standard_errors(theta.as_slice(), &inverse, sigma2);
         let m = (n - d) as f64 / 2.0;
@@ -590,6 +602,32 @@ mod tests {
             - m * s_min.ln()
             - 0.5 * xtx.determinant().ln()
             - ln_volume;
+        LinearCase {
+            data,
+            d,
+            inverse,
+            theta,
+            sigma2,
+            lower,
+            upper,
+            expected,
+        }
+    }
+
+    /// The tempered samplers give [`linear_case`]'s closed form from the box, the fit, both
+    /// and warm starts.
+    #[test]
+    fn the_evidence_of_a_linear_law_is_the_closed_form_integral() {
+        let LinearCase {
+            data,
+            d,
+            inverse,
+            theta,
+            sigma2,
+            lower,
+            upper,
+            expected,
+        } = linear_case();
         let evaluator = m4_alone(lower, upper, &data);
         let config = EvidenceConfig {
             particles: 400,
@@ -705,21 +743,13 @@ mod tests {
     /// evidence.
     #[test]
     fn islands_that_disagree_are_refined_and_their_spread_is_the_error() {
-        let data = cubic_record(200, 600.0);
-        let (n, d) = (200usize, 4usize);
-        let x = DMatrix::from_fn(n, d, |i, j| data.speed_rad_s[i].powi(j as i32));
-        let y = DVector::from_column_slice(&data.torque_nm);
-        let xtx = x.transpose() * &x;
-        let inverse = xtx.clone().try_inverse().unwrap();
-        let theta = &inverse * x.transpose() * &y;
-        let s_min = (&y - &x * &theta).norm_squared();
-        let sigma2 = s_min / (n - d) as f64;
-        let (lower, upper, ln_volume) = twelve_standard_errors(theta.as_slice(), &inverse, sigma2);
-        let m = (n - d) as f64 / 2.0;
-        let expected = -std::f64::consts::LN_2 - m * std::f64::consts::PI.ln() + noise::ln_gamma(m)
-            - m * s_min.ln()
-            - 0.5 * xtx.determinant().ln()
-            - ln_volume;
+        let LinearCase {
+            data,
+            lower,
+            upper,
+            expected,
+            ..
+        } = linear_case();
         let evaluator = m4_alone(lower, upper, &data);
         let unrefined = EvidenceConfig {
             particles: MIN_ISLAND_PARTICLES,
