@@ -618,17 +618,10 @@ mod tests {
     /// and warm starts.
     #[test]
     fn the_evidence_of_a_linear_law_is_the_closed_form_integral() {
-        let LinearCase {
-            data,
-            d,
-            inverse,
-            theta,
-            sigma2,
-            lower,
-            upper,
-            expected,
-        } = linear_case();
-        let evaluator = m4_alone(lower, upper, &data);
+        let case = linear_case();
+        let (data, d, inverse, theta, sigma2) = (&case.data, case.d, &case.inverse, &case.theta, case.sigma2);
+        let (lower, upper, expected) = (case.lower.clone(), case.upper.clone(), case.expected);
+        let evaluator = m4_alone(lower, upper, data);
         let config = EvidenceConfig {
             particles: 400,
             islands: 8,
@@ -743,14 +736,9 @@ mod tests {
     /// evidence.
     #[test]
     fn islands_that_disagree_are_refined_and_their_spread_is_the_error() {
-        let LinearCase {
-            data,
-            lower,
-            upper,
-            expected,
-            ..
-        } = linear_case();
-        let evaluator = m4_alone(lower, upper, &data);
+        let case = linear_case();
+        let (data, lower, upper, expected) = (&case.data, case.lower.clone(), case.upper.clone(), case.expected);
+        let evaluator = m4_alone(lower, upper, data);
         let unrefined = EvidenceConfig {
             particles: MIN_ISLAND_PARTICLES,
             islands: 4,
