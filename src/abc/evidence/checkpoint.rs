@@ -33,12 +33,13 @@ pub(super) fn encode_state(seconds: f64, islands: &[Island]) -> Vec<u8> {
 /// The islands of a saved state (kept in `origin`), checked against `fresh` (those the job
 /// makes at its start): the same laws, slots, streams and particle counts, or the state is
 /// another job's. Islands beyond `fresh` are refinements ([`refine`](super::refine)), each
-/// checked against the first-round island it refines (`span` streams a round).
+/// checked against the first-round island it refines (`span` streams a round, at most
+/// `rounds` rounds), each stream once.
 pub(super) fn decode_state(
     bytes: &[u8],
     origin: &std::path::Path,
     fresh: &[Island],
-    span: u32,
+    (span, rounds): (u32, usize),
 ) -> Result<(f64, Vec<Island>)> {
     let refuse = |why: &str| Error::Data {
         path: origin.to_path_buf(),
@@ -53,8 +54,15 @@ pub(super) fn decode_state(
             fresh.len()
         )));
     }
+    let mut streams = std::collections::HashSet::new();
     for (k, saved) in islands.iter_mut().enumerate() {
         let (round, first) = super::refine::round_of(saved, span);
+        if round > rounds || !streams.insert(saved.stream.stream) {
+            return Err(refuse(&format!(
+                "its sampler {} is not one of the job's refinements",
+                saved.stream.stream
+            )));
+        }
         let new = match fresh.get(k) {
             Some(new) if round == 0 => new,
             None if round > 0 => fresh.iter().find(|f| f.stream.stream == first).ok_or_else(|| {

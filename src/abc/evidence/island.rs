@@ -44,9 +44,8 @@ impl Stream {
 /// ln Z from independent islands' estimates (`island_ln_z`) and its Monte-Carlo error: ln of
 /// the mean of their Z, and the standard error of that mean relative to it, where the islands
 /// agree. Where they disagree by nats, one island carries the mean and that error saturates
-/// near 1 whatever the spread: then the standard error of the islands' ln Z is the honest one,
-/// and where they spread by more than [`REFINE_ABOVE_NATS`] (after any refinement) ln Z may
-/// lie anywhere among them: the error is at least half their range.
+/// near 1 whatever the spread: then the standard error of the islands' ln Z is the honest one.
+/// Where they spread by more than [`REFINE_ABOVE_NATS`], see [`apart`].
 pub(super) fn pooled_ln_z(island_ln_z: &[f64]) -> (f64, f64) {
     let ln_z = log_mean_exp(island_ln_z.iter().copied());
     let k = island_ln_z.len() as f64;
@@ -57,9 +56,21 @@ pub(super) fn pooled_ln_z(island_ln_z: &[f64]) -> (f64, f64) {
         / (k - 1.0);
     let mean_ln_z = island_ln_z.iter().sum::<f64>() / k;
     let deviation = (island_ln_z.iter().map(|v| (v - mean_ln_z).powi(2)).sum::<f64>() / (k - 1.0)).sqrt();
+    (ln_z, (variance / k).sqrt().max(deviation / k.sqrt()))
+}
+
+/// The error `error` of an estimate from islands `island_ln_z`, as reported: where they
+/// spread by more than [`REFINE_ABOVE_NATS`] (after any refinement) ln Z may lie anywhere
+/// among them, and the error is at least half their range. (Whether two starts agree is judged
+/// on their standard errors: the range would let a start that missed nats of the posterior
+/// pass for one that agrees.)
+pub(super) fn apart(island_ln_z: &[f64], error: f64) -> f64 {
     let range = spread_of(island_ln_z);
-    let apart = if range > REFINE_ABOVE_NATS { range / 2.0 } else { 0.0 };
-    (ln_z, (variance / k).sqrt().max(deviation / k.sqrt()).max(apart))
+    if range > REFINE_ABOVE_NATS {
+        error.max(range / 2.0)
+    } else {
+        error
+    }
 }
 
 /// The mean of independent estimates (value, standard error) weighed by their inverse

@@ -112,7 +112,7 @@ pub fn run_from(
     if let Some(c) = &checkpoints
         && let Some(from) = c.from
     {
-        (seconds_before, islands) = decode_state(from, c.origin, &islands, span)?;
+        (seconds_before, islands) = decode_state(from, c.origin, &islands, (span, config.refine_rounds))?;
     }
     let seconds = |started: Instant| seconds_before + started.elapsed().as_secs_f64();
     let mut saved = Instant::now();
@@ -221,15 +221,27 @@ fn kept_estimate<'a>(all: &[&'a Island], config: &EvidenceConfig, constant: f64)
         };
         starts = vec![estimate(Start::Box, &from_box), estimate(Start::Fit, &from_fit)];
         if let Some(kept) = kept_start(&starts[0], &starts[1]) {
-            own = if kept == Start::Box { from_box } else { from_fit };
+            own = if kept == Start::Box {
+                from_box.clone()
+            } else {
+                from_fit.clone()
+            };
             for estimate in &mut starts {
                 estimate.kept = estimate.start == kept;
             }
         }
+        // Judged on their standard errors; reported, and weighed, with their islands' range.
+        for (estimate, group) in starts.iter_mut().zip([&from_box, &from_fit]) {
+            estimate.ln_z_error = apart(&ln_z_of(group), estimate.ln_z_error);
+        }
     }
     let (ln_z, ln_z_error) = match &starts[..] {
         [a, b] if a.kept && b.kept => inverse_variance_mean(&[(a.ln_z, a.ln_z_error), (b.ln_z, b.ln_z_error)]),
-        _ => pooled_ln_z(&ln_z_of(&own)),
+        _ => {
+            let island_ln_z = ln_z_of(&own);
+            let (ln_z, error) = pooled_ln_z(&island_ln_z);
+            (ln_z, apart(&island_ln_z, error))
+        }
     };
     Kept {
         starts,
@@ -327,11 +339,11 @@ fn law_evidence(
     // Every island of the law counts for what was spent; its latest rounds for its evidence.
     let spent: Vec<&Island> = islands.iter().filter(|i| i.slot == slot).collect();
     let all = current(islands, slot, span, (laws * config.islands) as u32);
-    let refinements = all.iter().map(|i| round_of(i, span).0).max().unwrap_or(0);
     let kept = kept_estimate(&all, config, constant);
     let (starts, own, ln_z, ln_z_error) = (kept.starts, kept.own, kept.ln_z, kept.ln_z_error);
     let island_ln_z: Vec<f64> = own.iter().map(|i| i.ln_z + constant).collect();
     let island_spread = spread_of(&island_ln_z);
+    let refinements = own.iter().map(|i| round_of(i, span).0).max().unwrap_or(0);
     // The islands' mean Z weighs their particles.
     let mean_ln_z = log_mean_exp(island_ln_z.iter().copied());
     let k = island_ln_z.len() as f64;
@@ -811,7 +823,7 @@ mod tests {
                     bytes,
                     std::path::Path::new("state"),
                     &new_islands(&evaluator.problem().prior, &refined_config, &[]),
-                    span,
+                    (span, refined_config.refine_rounds),
                 )
                 .unwrap();
                 islands.len() > fresh && islands.iter().any(|i| i.phase != Phase::Done)
@@ -844,9 +856,22 @@ mod tests {
             middle,
             std::path::Path::new("state"),
             &new_islands(&evaluator.problem().prior, &other, &[]),
-            round_span(1, &other),
+            (round_span(1, &other), other.refine_rounds),
         );
         assert!(refused.is_err());
+        // As is one whose refinements go beyond the job's rounds.
+        let fewer = EvidenceConfig {
+            refine_rounds: 0,
+            ..refined_config.clone()
+        };
+        let beyond = decode_state(
+            middle,
+            std::path::Path::new("state"),
+            &new_islands(&evaluator.problem().prior, &fewer, &[]),
+            (span, fewer.refine_rounds),
+        );
+        let why = beyond.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(why.contains("not one of the job's refinements"), "{why}");
     }
 
     /// ln Z of a linear law under the AR(1) model against its closed form per φ, integrated

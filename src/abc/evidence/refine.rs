@@ -65,8 +65,9 @@ pub(super) fn refine(
     let laws = prior.boxes.len();
     let span = round_span(laws, config);
     let per_start = (laws * config.islands) as u32;
-    let mut added = Vec::new();
-    let mut refined = Vec::new();
+    // (island to let go, its refinement's law slot, stream, settings and reference): all of
+    // them let go before any refinement is made, so that memory holds one round at a time.
+    let mut planned = Vec::new();
     for (slot, bx) in prior.boxes.iter().enumerate() {
         // A law whose reported ln Z is already this precise (its kept start's islands agree,
         // or a precise start outweighs a scattered one) spends nothing more.
@@ -98,21 +99,23 @@ pub(super) fn refine(
             if round >= config.refine_rounds || spread_of(&ln_z) <= REFINE_ABOVE_NATS {
                 continue;
             }
-            let next = config.of_round(round + 1);
             for &k in &latest {
                 let first = round_of(&islands[k], span).1;
                 let stream = (round as u32 + 1) * span + first;
-                added.push(Island::new(
-                    bx.law, slot, &bx.lower, &bx.upper, &next, stream, reference,
-                ));
-                refined.push(k);
+                planned.push((k, slot, stream, round + 1, reference));
             }
         }
     }
-    for k in refined {
+    for &(k, ..) in &planned {
         islands[k].let_go();
     }
-    let any = !added.is_empty();
-    islands.extend(added);
+    let any = !planned.is_empty();
+    for (_, slot, stream, round, reference) in planned {
+        let bx = &prior.boxes[slot];
+        let next = config.of_round(round);
+        islands.push(Island::new(
+            bx.law, slot, &bx.lower, &bx.upper, &next, stream, reference,
+        ));
+    }
     any
 }
