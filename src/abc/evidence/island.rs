@@ -257,18 +257,13 @@ impl Island {
     /// Drops the particles of an island a refinement replaced; its ln Z, counts and stream
     /// stay, for the record of what was spent.
     pub(super) fn let_go(&mut self) {
-        for v in [&mut self.theta, &mut self.proposals] {
-            *v = Vec::new();
-        }
-        for v in [
-            &mut self.loglik,
-            &mut self.weights,
-            &mut self.ln_q,
-            &mut self.proposal_ln_q,
-        ] {
-            *v = Vec::new();
-        }
+        self.theta = Vec::new();
+        self.proposals = Vec::new();
         self.inside = Vec::new();
+        self.loglik = Vec::new();
+        self.weights = Vec::new();
+        self.ln_q = Vec::new();
+        self.proposal_ln_q = Vec::new();
     }
 
     /// Whether a refinement replaced this island ([`let_go`](Self::let_go)).

@@ -65,13 +65,14 @@ pub(super) fn refine(
     let laws = prior.boxes.len();
     let span = round_span(laws, config);
     let per_start = (laws * config.islands) as u32;
-    // (island to let go, its refinement's law slot, stream, settings and reference): all of
-    // them let go before any refinement is made, so that memory holds one round at a time.
+    // (stream to let go, its refinement's law slot, stream, round and reference): all of them
+    // let go before any refinement is made, so that memory holds one round at a time.
     let mut planned = Vec::new();
     for (slot, bx) in prior.boxes.iter().enumerate() {
+        let now = current(islands, slot, span, per_start);
         // A law whose reported ln Z is already this precise (its kept start's islands agree,
         // or a precise start outweighs a scattered one) spends nothing more.
-        let kept = kept_estimate(&current(islands, slot, span, per_start), config, 0.0);
+        let kept = kept_estimate(&now, config, 0.0);
         if kept.ln_z_error <= REFINE_ABOVE_NATS / 2.0 {
             continue;
         }
@@ -82,32 +83,29 @@ pub(super) fn refine(
             if kept.starts.get(start).is_some_and(|s| !s.kept) {
                 continue;
             }
-            let group: Vec<usize> = (0..islands.len())
-                .filter(|&k| {
-                    let (_, first) = round_of(&islands[k], span);
-                    islands[k].slot == slot && first / per_start == start as u32
-                })
+            let latest: Vec<&Island> = now
+                .iter()
+                .copied()
+                .filter(|i| round_of(i, span).1 / per_start == start as u32)
                 .collect();
-            let Some(round) = group.iter().map(|&k| round_of(&islands[k], span).0).max() else {
+            let Some(round) = latest.first().map(|i| round_of(i, span).0) else {
                 continue;
             };
-            let latest: Vec<usize> = group
-                .into_iter()
-                .filter(|&k| round_of(&islands[k], span).0 == round)
-                .collect();
-            let ln_z: Vec<f64> = latest.iter().map(|&k| islands[k].ln_z).collect();
+            let ln_z: Vec<f64> = latest.iter().map(|i| i.ln_z).collect();
             if round >= config.refine_rounds || spread_of(&ln_z) <= REFINE_ABOVE_NATS {
                 continue;
             }
-            for &k in &latest {
-                let first = round_of(&islands[k], span).1;
+            for island in latest {
+                let first = round_of(island, span).1;
                 let stream = (round as u32 + 1) * span + first;
-                planned.push((k, slot, stream, round + 1, reference));
+                planned.push((island.stream.stream, slot, stream, round + 1, reference));
             }
         }
     }
-    for &(k, ..) in &planned {
-        islands[k].let_go();
+    for island in islands.iter_mut() {
+        if planned.iter().any(|&(old, ..)| old == island.stream.stream) {
+            island.let_go();
+        }
     }
     let any = !planned.is_empty();
     for (_, slot, stream, round, reference) in planned {

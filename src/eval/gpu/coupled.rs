@@ -137,29 +137,28 @@ fn run_chunk(
         row[9] = j.axial.value() as f32;
         row[10] = j.kick_rad_s as f32;
     }
-    let states = match start {
-        Some(start) => {
-            let mut one = vec![
-                start.lag_rad as f32,
-                start.speed_rad_s as f32,
-                start.compression_m as f32,
-                start.axial_speed_m_s as f32,
-                start.depth_m as f32,
-                start.phase_rad as f32,
-                start.behind_old_m as f32,
-            ];
-            one.extend(start.ring_m.iter().map(|&h| h as f32));
-            debug_assert_eq!(one.len(), STATE_WORDS);
-            std::iter::repeat_n(one, n).flatten().collect()
-        }
-        // The kernel starts each string from steady drilling (`start_given` 0).
-        None => vec![0.0f32; STATE_WORDS * n],
-    };
+    // Without a start the kernel begins each string from steady drilling (`start_given` 0)
+    // and reads no state.
+    let states: Option<Vec<f32>> = start.map(|start| {
+        let mut one = vec![
+            start.lag_rad as f32,
+            start.speed_rad_s as f32,
+            start.compression_m as f32,
+            start.axial_speed_m_s as f32,
+            start.depth_m as f32,
+            start.phase_rad as f32,
+            start.behind_old_m as f32,
+        ];
+        one.extend(start.ring_m.iter().map(|&h| h as f32));
+        debug_assert_eq!(one.len(), STATE_WORDS);
+        std::iter::repeat_n(one, n).flatten().collect()
+    });
     let chunk = super::string_batch::Chunk {
         label: "coupled",
         strings: n,
         inputs: &inputs,
-        states: &states,
+        state_words: STATE_WORDS,
+        states: states.as_deref(),
         summary_words: SUMMARY_WORDS,
         strings_per_dispatch: STRINGS_PER_DISPATCH,
         read_states: false,

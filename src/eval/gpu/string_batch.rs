@@ -52,7 +52,10 @@ pub(super) struct Chunk<'a> {
     pub label: &'a str,
     pub strings: usize,
     pub inputs: &'a [f32],
-    pub states: &'a [f32],
+    /// Words of state per string, and the starting states where the kernel reads them (a
+    /// kernel told to start from steady conditions gets a zeroed buffer, uploaded from nothing).
+    pub state_words: usize,
+    pub states: Option<&'a [f32]>,
     pub summary_words: usize,
     pub strings_per_dispatch: usize,
     /// Whether the final states come back (for a run that goes on from them).
@@ -78,7 +81,7 @@ pub(super) fn integrate_chunk<J: StringsUniform>(
     let copy = wgpu::BufferUsages::COPY_DST;
     let storage = wgpu::BufferUsages::STORAGE;
     let src = wgpu::BufferUsages::COPY_SRC;
-    let state_bytes = 4 * chunk.states.len() as u64;
+    let state_bytes = 4 * (chunk.state_words * strings) as u64;
     let read_state_bytes = if chunk.read_states { state_bytes } else { 0 };
     let summary_bytes = 4 * (chunk.summary_words * strings) as u64;
     let job_buffer = ctx.buffer(
@@ -100,8 +103,10 @@ pub(super) fn integrate_chunk<J: StringsUniform>(
     )?;
     ctx.queue
         .write_buffer(&input_buffer, 0, bytemuck::cast_slice(chunk.inputs));
-    ctx.queue
-        .write_buffer(&state_buffer, 0, bytemuck::cast_slice(chunk.states));
+    if let Some(states) = chunk.states {
+        debug_assert_eq!(states.len(), chunk.state_words * strings);
+        ctx.queue.write_buffer(&state_buffer, 0, bytemuck::cast_slice(states));
+    }
     let group = ctx.bind_group(
         label,
         &kernel.layout,
