@@ -38,6 +38,50 @@ impl Spread {
     }
 }
 
+/// How fast one backend simulated a batch of strings: the part every simulator bench shares.
+#[derive(Clone, Debug, Serialize)]
+pub struct SimulatedThroughput {
+    pub backend: String,
+    pub strings: usize,
+    pub seconds_per_string: f64,
+    /// Wall seconds, median and range over the repetitions.
+    pub wall_s: Spread,
+    /// String-seconds simulated per wall second (median).
+    pub string_seconds_per_s: f64,
+}
+
+impl SimulatedThroughput {
+    /// `strings` strings of `seconds_per_string` simulated s each, in `walls` wall seconds per
+    /// repetition.
+    fn of(backend: String, strings: usize, seconds_per_string: f64, walls: &[f64]) -> Self {
+        let wall_s = Spread::of(walls);
+        SimulatedThroughput {
+            backend,
+            strings,
+            seconds_per_string,
+            string_seconds_per_s: strings as f64 * seconds_per_string / wall_s.median,
+            wall_s,
+        }
+    }
+}
+
+impl std::fmt::Display for SimulatedThroughput {
+    /// The table's cells: backend, strings × seconds, the median wall time (min–max), the rate.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:<40} {:>8} strings × {:>5.1} s  {:>8.3} s ({:.3}–{:.3})  {:.3e} string-s/s",
+            self.backend,
+            self.strings,
+            self.seconds_per_string,
+            self.wall_s.median,
+            self.wall_s.min,
+            self.wall_s.max,
+            self.string_seconds_per_s
+        )
+    }
+}
+
 /// Throughput of one backend and law at one size.
 #[derive(Clone, Debug, Serialize)]
 pub struct Throughput {

@@ -23,14 +23,9 @@ pub struct CoupledBenchOptions {
 /// One measurement.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CoupledThroughput {
-    pub backend: String,
-    pub strings: usize,
-    pub seconds_per_string: f64,
+    #[serde(flatten)]
+    pub throughput: super::SimulatedThroughput,
     pub dt_s: f64,
-    /// Wall seconds, median and range over the repetitions.
-    pub wall_s: super::Spread,
-    /// String-seconds simulated per wall second (median).
-    pub string_seconds_per_s: f64,
     /// Share of the strings in each regime (a check that the backends did the same work):
     /// steady, stick-slip, bit bounce, both.
     pub regimes: [f64; 4],
@@ -77,20 +72,17 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
             }
             ran = r;
         }
-        let wall = super::Spread::of(&walls);
         let m = CoupledThroughput {
-            backend: super::strings::name(&Some(ran)),
-            strings: opts.strings,
-            seconds_per_string: schedule.seconds(),
+            throughput: super::SimulatedThroughput::of(
+                super::strings::name(&Some(ran)),
+                opts.strings,
+                schedule.seconds(),
+                &walls,
+            ),
             dt_s: schedule.dt_s,
-            string_seconds_per_s: opts.strings as f64 * schedule.seconds() / wall.median,
-            wall_s: wall,
             regimes,
         };
-        log(format!(
-            "coupled {}: {} × {} s in {:.3} s: {:.3e} string-s/s",
-            m.backend, m.strings, m.seconds_per_string, m.wall_s.median, m.string_seconds_per_s
-        ));
+        log(format!("coupled {}", m.throughput));
         out.push(m);
     }
     Ok(out)

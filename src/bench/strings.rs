@@ -35,13 +35,8 @@ pub struct StringsThroughput {
     pub what: String,
     /// `1dof` or `fe` (the paper's 10-element string lumped).
     pub string: String,
-    pub backend: String,
-    pub strings: usize,
-    pub seconds_per_string: f64,
-    /// Wall seconds, median and range over the repetitions.
-    pub wall_s: super::Spread,
-    /// String-seconds simulated per wall second (median).
-    pub string_seconds_per_s: f64,
+    #[serde(flatten)]
+    pub throughput: super::SimulatedThroughput,
     /// Stuck share averaged over the strings (a check that both backends did the same work).
     pub mean_stuck_share: f64,
 }
@@ -103,21 +98,13 @@ pub fn run(opts: &StringsBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
                 stuck = results.iter().map(|r| r.0.stuck_share()).sum::<f64>() / results.len() as f64;
                 ran = Some(r);
             }
-            let wall = super::Spread::of(&walls);
             let m = StringsThroughput {
                 what: "throughput".into(),
                 string: string.into(),
-                backend: name(&ran),
-                strings: opts.strings,
-                seconds_per_string: schedule.seconds(),
-                string_seconds_per_s: opts.strings as f64 * schedule.seconds() / wall.median,
-                wall_s: wall,
+                throughput: super::SimulatedThroughput::of(name(&ran), opts.strings, schedule.seconds(), &walls),
                 mean_stuck_share: stuck,
             };
-            log(format!(
-                "strings {string} {}: {} × {} s in {:.3} s: {:.3e} string-s/s",
-                m.backend, m.strings, m.seconds_per_string, m.wall_s.median, m.string_seconds_per_s
-            ));
+            log(format!("strings {string} {}", m.throughput));
             out.push(m);
         }
     }
@@ -166,18 +153,16 @@ pub fn run(opts: &StringsBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
             share = grid.probability.iter().filter(|p| p.is_finite()).sum::<f64>() / grid.probability.len() as f64;
             ran = sim.ran.clone();
         }
-        let wall = super::Spread::of(&walls);
         let m = StringsThroughput {
             what: format!("escape map {speeds}×{weights}×{samples}"),
             string: "1dof".into(),
-            backend: name(&ran),
-            strings,
-            seconds_per_string: seconds / strings as f64,
-            string_seconds_per_s: seconds / wall.median,
-            wall_s: wall,
+            throughput: super::SimulatedThroughput::of(name(&ran), strings, seconds / strings as f64, &walls),
             mean_stuck_share: share,
         };
-        log(format!("{} {}: {:.3} s", m.what, m.backend, m.wall_s.median));
+        log(format!(
+            "{} {}: {:.3} s",
+            m.what, m.throughput.backend, m.throughput.wall_s.median
+        ));
         out.push(m);
     }
     Ok(out)

@@ -2,7 +2,7 @@
 //! [`bitrock::run::abc`]; then the population table and posterior, or run.json on stdout.
 
 use super::args::finite_number;
-use super::args::{DataArgs, FitArgs, StructureArgs, load_data, set_threads};
+use super::args::{FitArgs, InferenceArgs, load_data, set_threads};
 use super::print;
 use super::progress::RunProgress;
 use bitrock::Error;
@@ -129,8 +129,6 @@ pub struct AbcArgs {
 
 #[derive(Debug, Args)]
 pub struct AbcCmd {
-    /// Field record (CSV with a header) [default: the embedded demo record].
-    pub data: Option<PathBuf>,
     /// Run directory to write: run.sqlite (the run store: every population and particle,
     /// written as each population completes), run.json (summary) and envelopes.csv.
     #[arg(long, value_name = "DIR", required_unless_present = "resume")]
@@ -150,13 +148,7 @@ pub struct AbcCmd {
     #[arg(long, short)]
     pub quiet: bool,
     #[command(flatten)]
-    pub data_args: DataArgs,
-    #[command(flatten)]
-    pub fit: FitArgs,
-    /// The drill string of the run's maps and advice, kept with the run (stability --run and
-    /// report map on it).
-    #[command(flatten)]
-    pub string: StructureArgs,
+    pub input: InferenceArgs,
     #[command(flatten)]
     pub abc: AbcArgs,
     /// Print JSON instead of tables.
@@ -204,8 +196,8 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
         (None, Some(dir)) => {
             let job = abc::Job {
                 config: bitrock::run::abc::Config {
-                    string: cmd.string.given().spec()?,
-                    ..run_config(&cmd.fit, &cmd.abc)?
+                    string: cmd.input.string.given().spec()?,
+                    ..run_config(&cmd.input.fit, &cmd.abc)?
                 },
                 summary_population: cmd.abc.summary_population,
                 out: Some(bitrock::run::Dir {
@@ -213,7 +205,7 @@ fn start_or_resume(cmd: &AbcCmd) -> anyhow::Result<Analysis> {
                     replace: cmd.force,
                 }),
             };
-            let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+            let data = load_data(&cmd.input.record)?;
             Ok(job.run(data, Default::default(), &mut progress)?)
         }
         (None, None) => Err(Error::setting("out", "give the run directory to write").into()),

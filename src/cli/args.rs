@@ -9,7 +9,7 @@ use bitrock::stability::fe::DrillStringSettings;
 use bitrock::stability::lumped::Lumped;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The flags `--resume` refuses: a run or an evidence resumed takes its record, its fit and its
 /// drill string from its directory, and then the kind's own settings, `$own`.
@@ -79,9 +79,11 @@ impl ColumnArgs {
     }
 }
 
-/// Which columns of the CSV to read, their units, and which rows to use.
+/// The record: the CSV, which of its columns to read, their units, and which rows to use.
 #[derive(Debug, Args, Clone)]
 pub struct DataArgs {
+    /// Field record (CSV with a header) [default: the embedded demo record].
+    pub data: Option<PathBuf>,
     #[command(flatten)]
     pub columns: ColumnArgs,
     /// Use only rows at or after this time, s (needs a time column).
@@ -185,10 +187,10 @@ pub fn finite_number(text: &str) -> Result<f64, String> {
     }
 }
 
-/// The record at `path`, or the embedded demo record (saying so) when there is none.
-pub fn load_data(path: Option<&Path>, args: &DataArgs) -> anyhow::Result<FieldData> {
+/// The record the flags name, or the embedded demo record (saying so) when they name none.
+pub fn load_data(args: &DataArgs) -> anyhow::Result<FieldData> {
     let opts = args.options();
-    let data = match path {
+    let data = match args.data.as_deref() {
         Some(path) => data::read_field_data(path, &opts)?,
         None => {
             super::print::note("note: no DATA given; using the embedded synthetic demo record");
@@ -230,6 +232,19 @@ pub struct FeArgs {
     /// Stiffness-proportional Rayleigh damping β, s.
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "BETA")]
     pub beta: Option<f64>,
+}
+
+/// What a run and an evidence start from, and what `--resume` takes from their directory
+/// instead: the record, the laws and their fits, and the drill string of their maps and advice
+/// (kept with them: `stability --run` and `report` map on it).
+#[derive(Debug, Args)]
+pub struct InferenceArgs {
+    #[command(flatten)]
+    pub record: DataArgs,
+    #[command(flatten)]
+    pub fit: FitArgs,
+    #[command(flatten)]
+    pub string: StructureArgs,
 }
 
 /// The drill string stability is judged on: the 1-DOF model or the finite-element string,

@@ -88,14 +88,7 @@ pub fn run(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     }
     let opts = options(cmd)?;
     let report = bitrock::bench::run(&opts, &mut say(cmd, ""))?;
-    let mut out = super::print::stdout();
-    if cmd.json {
-        serde_json::to_writer_pretty(&mut out, &report)?;
-        writeln!(out)?;
-    } else {
-        print_tables(&mut out, &report)?;
-    }
-    Ok(ExitCode::SUCCESS)
+    print_report(cmd, &report, print_tables)
 }
 
 /// What a bench says while it runs, each line after `prefix`, on standard error; nothing with
@@ -142,7 +135,7 @@ fn options(cmd: &BenchCmd) -> anyhow::Result<bitrock::bench::BenchOptions> {
 /// The bench's report as tables: the machine, the scoring shapes, throughput per backend and
 /// law, the small call, the stability grid, the selection check, the SMC schemes and the
 /// paper-scale run.
-fn print_tables(out: &mut impl Write, report: &bitrock::bench::BenchReport) -> anyhow::Result<()> {
+fn print_tables(out: &mut dyn Write, report: &bitrock::bench::BenchReport) -> std::io::Result<()> {
     writeln!(
         out,
         "machine: {} ({} cores); adapter: {}",
@@ -222,7 +215,7 @@ fn print_tables(out: &mut impl Write, report: &bitrock::bench::BenchReport) -> a
 }
 
 /// The selection check's table: one row per record.
-fn print_selection(out: &mut impl Write, selection: &[bitrock::bench::SelectionBench]) -> anyhow::Result<()> {
+fn print_selection(out: &mut dyn Write, selection: &[bitrock::bench::SelectionBench]) -> std::io::Result<()> {
     if let Some(first) = selection.first() {
         writeln!(
             out,
@@ -265,7 +258,7 @@ fn print_selection(out: &mut impl Write, selection: &[bitrock::bench::SelectionB
 }
 
 /// The SMC schemes against rejection: one table per record.
-fn print_smc(out: &mut impl Write, smc: &[bitrock::bench::smc_comparison::SmcComparison]) -> anyhow::Result<()> {
+fn print_smc(out: &mut dyn Write, smc: &[bitrock::bench::smc_comparison::SmcComparison]) -> std::io::Result<()> {
     for c in smc {
         writeln!(
             out,
@@ -300,46 +293,51 @@ fn watch(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
     let scratch = tempfile::tempdir()?;
     let backend = cmd.backend.unwrap_or(Backend::Auto);
     let report = bitrock::watch::bench::run(cmd.quick, backend, scratch.path(), &mut say(cmd, "note: "))?;
-    let mut out = super::print::stdout();
-    if json_report(cmd, &mut out, &report)? {
-        return Ok(ExitCode::SUCCESS);
-    }
-    writeln!(out, "watch of {}", report.record)?;
-    writeln!(
-        out,
-        "start  windows  latency median   p90     p99   candidates/window (median)  total        changes  whole (s)"
-    )?;
-    for r in &report.runs {
+    print_report(cmd, &report, |out, report| {
+        writeln!(out, "watch of {}", report.record)?;
         writeln!(
             out,
-            "{:<5}  {:>7}  {:>12.3} s  {:>5.2} s  {:>5.2} s  {:>26}  {:>11}  {:>7}  {:>9.1}",
-            r.start,
-            r.windows,
-            r.latency_median_s,
-            r.latency_p90_s,
-            r.latency_p99_s,
-            r.candidates_median,
-            r.candidates_total,
-            format!("{:?}", r.changes),
-            r.seconds
+            "start  windows  latency median   p90     p99   candidates/window (median)  total        changes  whole (s)"
         )?;
-    }
-    let windows = report.runs.first().map_or(0, |r| r.windows);
-    writeln!(
-        out,
-        "warm and cold: probabilities within 0.05 in {} of {windows} windows, the same law first in {}",
-        report.agree_within_005, report.same_most_probable
-    )?;
-    Ok(ExitCode::SUCCESS)
+        for r in &report.runs {
+            writeln!(
+                out,
+                "{:<5}  {:>7}  {:>12.3} s  {:>5.2} s  {:>5.2} s  {:>26}  {:>11}  {:>7}  {:>9.1}",
+                r.start,
+                r.windows,
+                r.latency_median_s,
+                r.latency_p90_s,
+                r.latency_p99_s,
+                r.candidates_median,
+                r.candidates_total,
+                format!("{:?}", r.changes),
+                r.seconds
+            )?;
+        }
+        let windows = report.runs.first().map_or(0, |r| r.windows);
+        writeln!(
+            out,
+            "warm and cold: probabilities within 0.05 in {} of {windows} windows, the same law first in {}",
+            report.agree_within_005, report.same_most_probable
+        )?;
+        Ok(())
+    })
 }
 
-/// With `--json`, `report` as JSON to `out` (true: nothing else to print).
-fn json_report(cmd: &BenchCmd, out: &mut impl Write, report: &impl serde::Serialize) -> anyhow::Result<bool> {
+/// `report` on standard output: as JSON with `--json`, else as `table` writes it.
+fn print_report<R: serde::Serialize>(
+    cmd: &BenchCmd,
+    report: &R,
+    table: impl FnOnce(&mut dyn Write, &R) -> std::io::Result<()>,
+) -> anyhow::Result<ExitCode> {
+    let mut out = super::print::stdout();
     if cmd.json {
-        serde_json::to_writer_pretty(&mut *out, report)?;
+        serde_json::to_writer_pretty(&mut out, report)?;
         writeln!(out)?;
+    } else {
+        table(&mut out, report)?;
     }
-    Ok(cmd.json)
+    Ok(ExitCode::SUCCESS)
 }
 
 /// `--surface`: a surface record's inference end to end.
@@ -350,35 +348,33 @@ fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         repetitions: cmd.reps,
     };
     let report = bitrock::bench::surface::run(&opts, &mut say(cmd, ""))?;
-    let mut out = super::print::stdout();
-    if json_report(cmd, &mut out, &report)? {
-        return Ok(ExitCode::SUCCESS);
-    }
-    writeln!(
-        out,
-        "surface inference: {}, four laws, N = {}",
-        report.record, report.particles
-    )?;
-    writeln!(
-        out,
-        "wall time {:.1} s (median of {}; {:.1}–{:.1}), {} strings simulated",
-        report.wall_s.median, cmd.reps, report.wall_s.min, report.wall_s.max, report.strings
-    )?;
-    writeln!(
-        out,
-        "strings per particle: {:.1}; rejection ABC to the same ε: {}",
-        report.strings_per_particle,
-        report
-            .rejection_strings_per_particle
-            .map_or("more than the pilot".to_string(), |n| format!("{n:.0}"))
-    )?;
-    let probabilities: Vec<String> = report
-        .probabilities
-        .iter()
-        .map(|(l, p)| format!("{l} {p:.3}"))
-        .collect();
-    writeln!(out, "P(law): {}; {}", probabilities.join(", "), report.verdict)?;
-    Ok(ExitCode::SUCCESS)
+    print_report(cmd, &report, |out, report| {
+        writeln!(
+            out,
+            "surface inference: {}, four laws, N = {}",
+            report.record, report.particles
+        )?;
+        writeln!(
+            out,
+            "wall time {:.1} s (median of {}; {:.1}–{:.1}), {} strings simulated",
+            report.wall_s.median, cmd.reps, report.wall_s.min, report.wall_s.max, report.strings
+        )?;
+        writeln!(
+            out,
+            "strings per particle: {:.1}; rejection ABC to the same ε: {}",
+            report.strings_per_particle,
+            report
+                .rejection_strings_per_particle
+                .map_or("more than the pilot".to_string(), |n| format!("{n:.0}"))
+        )?;
+        let probabilities: Vec<String> = report
+            .probabilities
+            .iter()
+            .map(|(l, p)| format!("{l} {p:.3}"))
+            .collect();
+        writeln!(out, "P(law): {}; {}", probabilities.join(", "), report.verdict)?;
+        Ok(())
+    })
 }
 
 /// The backends a simulator's benchmark measures: both where none (or auto) is named.
@@ -408,33 +404,22 @@ fn coupled(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         repetitions: cmd.reps,
     };
     let report = bitrock::bench::coupled::run(&opts, &mut say(cmd, ""))?;
-    let mut out = super::print::stdout();
-    if json_report(cmd, &mut out, &report)? {
-        return Ok(ExitCode::SUCCESS);
-    }
-    writeln!(
-        out,
-        "coupled bit (RGD) strings, dt = {} s, medians of {} repetitions (min–max)",
-        opts.dt_s, opts.repetitions
-    )?;
-    for m in &report {
+    print_report(cmd, &report, |out, report| {
         writeln!(
             out,
-            "{:<40} {:>8} strings × {:>5.1} s  {:>8.3} s ({:.3}–{:.3})  {:.3e} string-s/s  steady {:.2}, stick-slip {:.2}, bounce {:.2}, both {:.2}",
-            m.backend,
-            m.strings,
-            m.seconds_per_string,
-            m.wall_s.median,
-            m.wall_s.min,
-            m.wall_s.max,
-            m.string_seconds_per_s,
-            m.regimes[0],
-            m.regimes[1],
-            m.regimes[2],
-            m.regimes[3]
+            "coupled bit (RGD) strings, dt = {} s, medians of {} repetitions (min–max)",
+            opts.dt_s, opts.repetitions
         )?;
-    }
-    Ok(ExitCode::SUCCESS)
+        for m in report {
+            let [steady, stick_slip, bounce, both] = m.regimes;
+            writeln!(
+                out,
+                "{}  steady {steady:.2}, stick-slip {stick_slip:.2}, bounce {bounce:.2}, both {both:.2}",
+                m.throughput
+            )?;
+        }
+        Ok(())
+    })
 }
 
 /// `--strings`: the simulator's throughput and an escape map's time, per backend.
@@ -448,29 +433,15 @@ fn strings(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         repetitions: cmd.reps,
     };
     let report = bitrock::bench::strings::run(&opts, &mut say(cmd, ""))?;
-    let mut out = super::print::stdout();
-    if json_report(cmd, &mut out, &report)? {
-        return Ok(ExitCode::SUCCESS);
-    }
-    writeln!(
-        out,
-        "simulated strings, dt = {} s, medians of {} repetitions (min–max)",
-        opts.dt_s, opts.repetitions
-    )?;
-    for m in &report {
+    print_report(cmd, &report, |out, report| {
         writeln!(
             out,
-            "{:<22} {:<5} {:<40} {:>8} strings × {:>5.1} s  {:>8.3} s ({:.3}–{:.3})  {:.3e} string-s/s",
-            m.what,
-            m.string,
-            m.backend,
-            m.strings,
-            m.seconds_per_string,
-            m.wall_s.median,
-            m.wall_s.min,
-            m.wall_s.max,
-            m.string_seconds_per_s
+            "simulated strings, dt = {} s, medians of {} repetitions (min–max)",
+            opts.dt_s, opts.repetitions
         )?;
-    }
-    Ok(ExitCode::SUCCESS)
+        for m in report {
+            writeln!(out, "{:<22} {:<5} {}", m.what, m.string, m.throughput)?;
+        }
+        Ok(())
+    })
 }

@@ -1,7 +1,7 @@
 //! `bitrock evidence`: the marginal likelihood of each law on a record and the posterior law
 //! probabilities it gives, through [`bitrock::run::evidence`]; tables or JSON.
 
-use super::args::{DataArgs, FitArgs, StructureArgs, finite_number, load_data, set_threads};
+use super::args::{InferenceArgs, finite_number, load_data, set_threads};
 use super::print;
 use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, REFINE_ABOVE_NATS, Start, describe_starts};
 use bitrock::data::FieldData;
@@ -18,15 +18,8 @@ use std::process::ExitCode;
 
 #[derive(Debug, Args)]
 pub struct EvidenceCmd {
-    /// Field record (CSV with a header) [default: the embedded demo record].
-    pub data: Option<PathBuf>,
     #[command(flatten)]
-    pub data_args: DataArgs,
-    #[command(flatten)]
-    pub fit: FitArgs,
-    /// The drill string of the advice, kept with the evidence (stability --run maps on it).
-    #[command(flatten)]
-    pub string: StructureArgs,
+    pub input: InferenceArgs,
     /// The prior boxes integrated over.
     #[arg(long, value_enum, default_value_t = Boxes::Physical)]
     pub boxes: Boxes,
@@ -176,7 +169,7 @@ fn start_or_resume(
     if let Some(dir) = &cmd.out {
         evidence::dir::check_out(dir, cmd.force)?;
     }
-    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    let data = load_data(&cmd.input.record)?;
     cmd.check.map(|k| evidence::check_size(k, &job, &data)).transpose()?;
     match &cmd.out {
         None => {
@@ -211,8 +204,8 @@ fn new_job(cmd: &EvidenceCmd) -> anyhow::Result<run::evidence::Job> {
         seed: cmd.seed,
         backend: cmd.backend.unwrap_or_default(),
     };
-    let mut job = settings.job(cmd.fit.laws()?, cmd.fit.options()?)?;
-    job.string = cmd.string.given().spec()?;
+    let mut job = settings.job(cmd.input.fit.laws()?, cmd.input.fit.options()?)?;
+    job.string = cmd.input.string.given().spec()?;
     Ok(job)
 }
 

@@ -6,13 +6,10 @@ use bitrock::Law;
 use bitrock::data::FieldData;
 use bitrock::fit::{self, FitOptions};
 use clap::Args;
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Debug, Args)]
 pub struct FitCmd {
-    /// Field record (CSV with a header) [default: the embedded demo record].
-    pub data: Option<PathBuf>,
     #[command(flatten)]
     pub data_args: DataArgs,
     #[command(flatten)]
@@ -24,7 +21,7 @@ pub struct FitCmd {
 
 pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
     let opts = cmd.fit.options()?;
-    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    let data = load_data(&cmd.data_args)?;
     fit_and_print(&data, &cmd.fit.laws()?, &opts, cmd.json)?;
     Ok(ExitCode::SUCCESS)
 }

@@ -4,13 +4,10 @@ use super::args::finite_number;
 use super::args::{DataArgs, load_data};
 use clap::Args;
 use std::io::Write;
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Debug, Args)]
 pub struct ParityCmd {
-    /// Field record (CSV with a header) [default: the embedded demo record].
-    pub data: Option<PathBuf>,
     #[command(flatten)]
     pub data_args: DataArgs,
     /// Laws to compare, comma-separated, built-in and --law-file laws (priors from their
@@ -32,7 +29,7 @@ pub struct ParityCmd {
 }
 
 pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
-    let data = load_data(cmd.data.as_deref(), &cmd.data_args)?;
+    let data = load_data(&cmd.data_args)?;
     let report = bitrock::bench::parity_on(
         &data,
         &super::args::parse_laws(&cmd.laws)?,
