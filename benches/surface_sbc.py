@@ -1,0 +1,143 @@
+"""Simulation-based calibration of ``bitrock surface``: does what it infers from the surface
+cover what the bit did?
+
+For each replicate, m2's torques and decay rate are drawn from uniform ranges (tsb 10-16
+kN·m, tcb 4-8 kN·m, g 0.2-0.5 s/rad), a record is made by ``bitrock simulate --channels all
+--initial rest`` (the surface channels the inference reads, the bit's kept as the truth; the
+string started from rest as the inference starts its strings, so that a steady record carries
+no transient the model cannot know), and ``bitrock surface
+--laws m2`` infers from its surface channels alone. Per replicate it scores:
+
+* each parameter the run calls identified: whether its central 90 % interval (q05-q95) holds
+  the drawn value (the unidentified ones are counted apart: their interval is the box's);
+* the bit's speed: the share of samples at which the 90 % band of the posterior predictive
+  (``--bit-out``) holds the record's true bit speed;
+* the stuck share: the record's own (samples whose bit speed is below 1 rpm, the library's
+  threshold) against the posterior's median, within 0.05, and inside its 90 % range.
+
+It prints the rates over the replicates and, with ``--out``, writes every replicate's figures as
+JSON. Only the standard library and the ``bitrock`` binary are needed:
+
+    python3 benches/surface_sbc.py --bitrock target/release/bitrock [--replicates 50] \\
+        [--sample-hz 1] [--particles 300] [--max-populations 6] [--pilot 300] [--out sbc.json]
+"""
+
+import argparse
+import csv
+import json
+import os
+import random
+import statistics
+import subprocess
+import sys
+import tempfile
+
+RANGES = {"tsb": (10.0, 16.0), "tcb": (4.0, 8.0), "g": (0.2, 0.5)}
+TORQUES = {"tsb", "tcb"}
+STUCK_RPM = 1.0
+
+
+def run(cmd):
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr}")
+    return done.stdout
+
+
+def replicate(args, index, scratch):
+    rng = random.Random(index)
+    truth = {name: rng.uniform(*bounds) for name, bounds in RANGES.items()}
+    record = os.path.join(scratch, f"r{index}.csv")
+    bit_out = os.path.join(scratch, f"r{index}-bit.csv")
+    params = ",".join(f"{truth[n]:.6g}" for n in ("tsb", "tcb", "g"))
+    run([args.bitrock, "simulate", "--law", "m2", "--params", params,
+         "--omega-rpm", str(args.omega_rpm), "--duration-s", str(args.duration_s),
+         "--settle-s", "60", "--initial", "rest", "--sample-hz", str(args.sample_hz),
+         "--noise-torque-knm", str(args.noise_knm), "--channels", "all",
+         "--seed", str(index), "--out", record])
+    result = json.loads(run([args.bitrock, "surface", record, "--laws", "m2",
+                             "--particles", str(args.particles),
+                             "--max-populations", str(args.max_populations),
+                             "--pilot", str(args.pilot), "--seed", str(index),
+                             "--no-advice", "--json", "--bit-out", bit_out]))
+    with open(record, newline="") as f:
+        true_rpm = [float(row["bit_speed_rpm"]) for row in csv.DictReader(f)]
+    with open(bit_out, newline="") as f:
+        band = [(float(r["bit_speed_rpm_p05"]), float(r["bit_speed_rpm_p95"])) for r in csv.DictReader(f)]
+    if len(band) != len(true_rpm):
+        sys.exit(f"replicate {index}: {len(band)} predicted samples for {len(true_rpm)} recorded")
+    law = next(l for l in result["laws"] if l["law"] == "m2")
+    covered = {}
+    for p in law["params"]:
+        value = truth[p["name"]] * (1000.0 if p["name"] in TORQUES else 1.0)
+        covered[p["name"]] = {
+            "identified": p["identified"],
+            "covered": p["q05"] <= value <= p["q95"],
+        }
+    stuck_true = sum(abs(w) < STUCK_RPM for w in true_rpm) / len(true_rpm)
+    low, median, high = result["at_the_bit"]["stuck_share"]
+    return {
+        "index": index,
+        "truth": truth,
+        "params": covered,
+        "band_coverage": sum(lo <= w <= hi for (lo, hi), w in zip(band, true_rpm)) / len(band),
+        "stuck_true": stuck_true,
+        "stuck_predicted": [low, median, high],
+        "stuck_within_005": abs(median - stuck_true) <= 0.05,
+        "stuck_inside_90": low <= stuck_true <= high,
+        "epsilon_over_floor": result["final_epsilon"] / result["noise_floor"] if result["noise_floor"] > 0 else None,
+        "seconds": result["seconds"],
+    }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--bitrock", default="target/release/bitrock")
+    parser.add_argument("--replicates", type=int, default=50)
+    parser.add_argument("--sample-hz", type=float, default=1.0)
+    parser.add_argument("--duration-s", type=float, default=300.0)
+    parser.add_argument("--omega-rpm", type=float, default=60.0)
+    parser.add_argument("--noise-knm", type=float, default=0.2)
+    parser.add_argument("--particles", type=int, default=300)
+    parser.add_argument("--max-populations", type=int, default=6)
+    parser.add_argument("--pilot", type=int, default=300)
+    parser.add_argument("--out")
+    args = parser.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        for index in range(1, args.replicates + 1):
+            rows.append(replicate(args, index, scratch))
+            r = rows[-1]
+            print(f"replicate {index}: stuck {r['stuck_true']:.3f} -> {r['stuck_predicted'][1]:.3f}, "
+                  f"band {r['band_coverage']:.3f}, "
+                  + ", ".join(f"{n} {'in' if c['covered'] else 'OUT'}{'' if c['identified'] else ' (box)'}"
+                              for n, c in r["params"].items()), file=sys.stderr)
+    n = len(rows)
+    print(f"{n} replicates of m2 at {args.omega_rpm:g} rpm, {args.duration_s:g} s at {args.sample_hz:g} Hz, "
+          f"{args.noise_knm:g} kN·m of noise; surface --laws m2 --particles {args.particles} "
+          f"--max-populations {args.max_populations} --pilot {args.pilot}")
+    for name in RANGES:
+        identified = [r["params"][name]["covered"] for r in rows if r["params"][name]["identified"]]
+        boxed = [r["params"][name]["covered"] for r in rows if not r["params"][name]["identified"]]
+        line = f"  {name}: identified in {len(identified)} of {n}"
+        if identified:
+            line += f", its 90 % interval holds the truth in {sum(identified)} ({sum(identified) / len(identified):.0%})"
+        if boxed:
+            line += f"; unidentified in {len(boxed)} (the box's interval holds it in {sum(boxed)})"
+        print(line)
+    bands = [r["band_coverage"] for r in rows]
+    print(f"  bit speed inside its 90 % band: {statistics.mean(bands):.1%} of samples "
+          f"(median replicate {statistics.median(bands):.1%}, lowest {min(bands):.1%})")
+    stuck = [r for r in rows if r["stuck_true"] > 0]
+    print(f"  stuck share within 0.05 of the truth in {sum(r['stuck_within_005'] for r in rows)} of {n}, "
+          f"inside its 90 % range in {sum(r['stuck_inside_90'] for r in rows)} ({len(stuck)} stick-slipping)")
+    ratios = [r["epsilon_over_floor"] for r in rows if r["epsilon_over_floor"]]
+    print(f"  final ε over the noise floor: median {statistics.median(ratios):.1f}; "
+          f"{statistics.median(r['seconds'] for r in rows):.1f} s per inference (median)")
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump({"settings": vars(args), "replicates": rows}, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
