@@ -66,8 +66,16 @@ impl SimulatedThroughput {
 }
 
 impl std::fmt::Display for SimulatedThroughput {
-    /// The table's cells: backend, strings × seconds, the median wall time (min–max), the rate.
+    /// The table's cells: backend, strings × seconds, the median wall time (min–max), the rate;
+    /// `{:#}` the same unpadded, for a progress line.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if f.alternate() {
+            return write!(
+                f,
+                "{}: {} × {} s in {:.3} s: {:.3e} string-s/s",
+                self.backend, self.strings, self.seconds_per_string, self.wall_s.median, self.string_seconds_per_s
+            );
+        }
         write!(
             f,
             "{:<40} {:>8} strings × {:>5.1} s  {:>8.3} s ({:.3}–{:.3})  {:.3e} string-s/s",

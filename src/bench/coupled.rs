@@ -82,7 +82,7 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
             dt_s: schedule.dt_s,
             regimes,
         };
-        log(format!("coupled {}", m.throughput));
+        log(format!("coupled {:#}", m.throughput));
         out.push(m);
     }
     Ok(out)

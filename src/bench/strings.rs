@@ -104,7 +104,7 @@ pub fn run(opts: &StringsBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
                 throughput: super::SimulatedThroughput::of(name(&ran), opts.strings, schedule.seconds(), &walls),
                 mean_stuck_share: stuck,
             };
-            log(format!("strings {string} {}", m.throughput));
+            log(format!("strings {string} {:#}", m.throughput));
             out.push(m);
         }
     }

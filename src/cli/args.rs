@@ -17,7 +17,7 @@ macro_rules! resume_conflicts {
     ($($own:literal),* $(,)?) => {
         [
             "data", "out", "force", "speed_col", "torque_col", "wob_col", "time_col", "speed_unit", "torque_unit",
-            "wob_unit", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
+            "wob_unit", "column_map", "t_start_s", "t_end_s", "thin", "min_speed_rpm", "calibration_fraction", "split", "laws",
             "no_bounds", "starts", "scale_by_wob", "w_ref_kn", "structure", "fe_file", "dp_elements", "bha_elements",
             "alpha", "beta", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio", $($own),*
         ]

@@ -707,6 +707,7 @@ fn flags_that_do_not_apply_to_the_run_are_refused_naming_flag_and_mode() {
         &["--force"],
         &["--min-speed-rpm", "10"],
         &["--w-ref-kn", "100"],
+        &["--column-map", "map.toml"],
     ] {
         let mut args = vec!["abc", "--resume", "R", "-q"];
         args.extend_from_slice(extra);
