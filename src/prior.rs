@@ -169,7 +169,7 @@ pub struct Prior {
 /// - a polynomial coefficient (t = 1, s > 0): the largest torque over the fastest speed to the
 ///   power s, so that at k scales its term alone reaches k times the largest torque at the
 ///   fastest speed. Narrower cuts real fits: a cubic's least-squares fits on stick-slip records
-///   have terms of two to three times the largest torque that cancel one another;
+///   have terms of up to three times the largest torque and more that cancel one another;
 /// - a rate or a width (t = 0, s > 0: exp(−g·w), tanh(b·w), a bump's 1/width²): one over the
 ///   slowest recorded speeds to the power s (as sharp as the record resolves);
 /// - a speed (s < 0, a bump's centre): a tenth of the fastest speed, its box from a tenth of

@@ -915,30 +915,27 @@ mod tests {
         assert_eq!(again.ln_z.to_bits(), law.ln_z.to_bits());
         assert_eq!(again.candidates_scored, law.candidates_scored);
         assert_eq!(again.posterior, law.posterior);
+        // The saved state read back by the job of `config`.
+        let decode_for = |config: &EvidenceConfig| {
+            decode_state(
+                middle,
+                std::path::Path::new("state"),
+                &new_islands(&evaluator.problem().prior, config, &[]),
+                (round_span(1, config), config.refine_rounds),
+            )
+        };
         // A state whose refinements name a stream the job does not make is another job's.
         let other = EvidenceConfig {
             islands: 3,
             ..refined_config.clone()
         };
-        let refused = decode_state(
-            middle,
-            std::path::Path::new("state"),
-            &new_islands(&evaluator.problem().prior, &other, &[]),
-            (round_span(1, &other), other.refine_rounds),
-        );
-        assert!(refused.is_err());
+        assert!(decode_for(&other).is_err());
         // As is one whose refinements go beyond the job's rounds.
         let fewer = EvidenceConfig {
             refine_rounds: 0,
             ..refined_config.clone()
         };
-        let beyond = decode_state(
-            middle,
-            std::path::Path::new("state"),
-            &new_islands(&evaluator.problem().prior, &fewer, &[]),
-            (span, fewer.refine_rounds),
-        );
-        let why = beyond.err().map(|e| e.to_string()).unwrap_or_default();
+        let why = decode_for(&fewer).err().map(|e| e.to_string()).unwrap_or_default();
         assert!(why.contains("not one of the job's refinements"), "{why}");
     }
 
