@@ -845,8 +845,10 @@ fn a_feed_that_never_sends_its_first_line_is_stopped_by_ctrl_c() {
     // A listener that accepts and then says nothing.
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = listener.local_addr().unwrap().port();
+    let (connected, accepted) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let held = listener.accept();
+        connected.send(()).unwrap();
         std::thread::sleep(std::time::Duration::from_secs(60));
         drop(held);
     });
@@ -856,7 +858,12 @@ fn a_feed_that_never_sends_its_first_line_is_stopped_by_ctrl_c() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // Connected: its Ctrl-C handler is in place (however slowly a loaded machine started it),
+    // and it waits for the first line.
+    accepted
+        .recv_timeout(std::time::Duration::from_secs(60))
+        .expect("the watch connects to the feed");
+    std::thread::sleep(std::time::Duration::from_millis(200));
     let (code, _, _) = outcome(std::process::Command::new("kill").args(["-INT", &child.id().to_string()]));
     assert_eq!(code, 0);
     let started = std::time::Instant::now();

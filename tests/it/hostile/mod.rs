@@ -238,8 +238,13 @@ fn a_kill_during_force_leaves_the_old_run_or_the_new_one() {
                 KillAt::Start(ms) => started.elapsed() >= Duration::from_millis(ms),
                 KillAt::Swap(_) => swapped,
             };
-            if due || child.try_wait().unwrap().is_some() {
+            if due {
                 break swapped;
+            }
+            if child.try_wait().unwrap().is_some() {
+                // Ended: whether it swapped is what R is now (it may have swapped and ended
+                // since the look above).
+                break std::fs::metadata(&r).unwrap().ino() != old_inode;
             }
             assert!(started.elapsed() < Duration::from_secs(120), "no swap in 120 s");
             std::thread::sleep(Duration::from_millis(1));
