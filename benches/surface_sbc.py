@@ -22,6 +22,14 @@ JSON (after each replicate, so that a long run stopped part-way keeps what it di
 
     python3 benches/surface_sbc.py --bitrock target/release/bitrock [--replicates 50] \\
         [--sample-hz 1] [--particles 300] [--max-populations 6] [--pilot 300] [--out sbc.json]
+
+With ``--twin`` the records come from an independent integrator instead of bitrock's: scipy's
+LSODA with its own stick handling (an event at zero bit speed, the stuck bit held until the
+string's torque reaches the static torque), the twin of the Python package's tests, on the same
+string from rest, with white noise from numpy. It needs the package's test extras (numpy, scipy,
+pandas, pytest), so run it with the tests' environment's Python:
+
+    target/python-venv/bin/python benches/surface_sbc.py --twin [--replicates 50]
 """
 
 import argparse
@@ -37,6 +45,8 @@ import tempfile
 RANGES = {"tsb": (10.0, 16.0), "tcb": (4.0, 8.0), "g": (0.2, 0.5)}
 TORQUES = {"tsb", "tcb"}
 STUCK_RPM = 1.0
+# Drive held before recording starts, s.
+SETTLE_S = 60.0
 STICK_SLIP_SHARE = 0.01
 # The surface run warns of a final ε this many times its noise floor or more.
 UNCONVERGED = 4.0
@@ -49,17 +59,43 @@ def run(cmd):
     return done.stdout
 
 
+def twin_record(args, truth, index, path):
+    """m2 with `truth` on the paper's 1-DOF string from rest (no lag, the bit stuck), settled
+    SETTLE_S then recorded, by the tests' LSODA twin: the columns `bitrock simulate --channels
+    all` writes that the scoring reads (the surface channels and the bit's speed)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bindings", "python", "tests"))
+    import numpy as np
+    from test_strings import RPM, integrate, one_dof
+
+    chain = one_dof()
+    omega = args.omega_rpm * RPM
+    p_nm = [1000.0 * truth["tsb"], 1000.0 * truth["tcb"], truth["g"]]
+    rest = (np.zeros(2), True, 1.0)
+    surface = []
+    speeds, _ = integrate(chain, "m2", p_nm, omega, 1.0, rest, SETTLE_S, args.duration_s,
+                          sample_hz=args.sample_hz, surface=surface)
+    noise = np.random.default_rng(index).normal(0.0, 1000.0 * args.noise_knm, len(surface))
+    with open(path, "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(["time_s", "top_drive_rpm", "surface_torque_knm", "wob_kn", "bit_speed_rpm"])
+        for i, (torque, speed) in enumerate(zip(np.array(surface) + noise, speeds)):
+            out.writerow([i / args.sample_hz, args.omega_rpm, torque / 1000.0, 244.2, speed / RPM])
+
+
 def replicate(args, index, scratch):
     rng = random.Random(index)
     truth = {name: rng.uniform(*bounds) for name, bounds in RANGES.items()}
     record = os.path.join(scratch, f"r{index}.csv")
     bit_out = os.path.join(scratch, f"r{index}-bit.csv")
-    params = ",".join(f"{truth[n]:.6g}" for n in ("tsb", "tcb", "g"))
-    run([args.bitrock, "simulate", "--law", "m2", "--params", params,
-         "--omega-rpm", str(args.omega_rpm), "--duration-s", str(args.duration_s),
-         "--settle-s", "60", "--initial", "rest", "--sample-hz", str(args.sample_hz),
-         "--noise-torque-knm", str(args.noise_knm), "--channels", "all",
-         "--seed", str(index), "--out", record])
+    if args.twin:
+        twin_record(args, truth, index, record)
+    else:
+        params = ",".join(f"{truth[n]:.6g}" for n in ("tsb", "tcb", "g"))
+        run([args.bitrock, "simulate", "--law", "m2", "--params", params,
+             "--omega-rpm", str(args.omega_rpm), "--duration-s", str(args.duration_s),
+             "--settle-s", str(SETTLE_S), "--initial", "rest", "--sample-hz", str(args.sample_hz),
+             "--noise-torque-knm", str(args.noise_knm), "--channels", "all",
+             "--seed", str(index), "--out", record])
     result = json.loads(run([args.bitrock, "surface", record, "--laws", "m2",
                              "--particles", str(args.particles),
                              "--max-populations", str(args.max_populations),
@@ -108,6 +144,8 @@ def main():
     parser.add_argument("--max-populations", type=int, default=6)
     parser.add_argument("--pilot", type=int, default=300)
     parser.add_argument("--stuck-tolerance", type=float, default=0.05)
+    parser.add_argument("--twin", action="store_true",
+                        help="records from the tests' LSODA twin instead of bitrock simulate")
     parser.add_argument("--out")
     args = parser.parse_args()
     if args.replicates < 1:
@@ -125,7 +163,7 @@ def main():
                   + ", ".join(f"{n} {'in' if c['covered'] else 'OUT'}{'' if c['identified'] else ' (box)'}"
                               for n, c in r["params"].items()), file=sys.stderr)
     n = len(rows)
-    print(f"{n} replicates of m2 at {args.omega_rpm:g} rpm, {args.duration_s:g} s at {args.sample_hz:g} Hz, "
+    print(f"{n} replicates ({'scipy LSODA twin' if args.twin else 'bitrock simulate'}) of m2 at {args.omega_rpm:g} rpm, {args.duration_s:g} s at {args.sample_hz:g} Hz, "
           f"{args.noise_knm:g} kN·m of noise; surface --laws m2 --particles {args.particles} "
           f"--max-populations {args.max_populations} --pilot {args.pilot}")
     for name in RANGES:

@@ -6,6 +6,8 @@ use std::f64::consts::PI;
 
 /// rad/s per rpm.
 pub const RAD_S_PER_RPM: f64 = 2.0 * PI / 60.0;
+/// m/s per m/h (a rate of penetration or a feed).
+pub const M_S_PER_M_H: f64 = 1.0 / 3600.0;
 /// N per pound-force (exact by the international pound and standard gravity).
 pub const NEWTONS_PER_POUND_FORCE: f64 = 4.448_221_615_260_5;
 /// N·m per foot pound-force (0.3048 m × one pound-force).

@@ -1,14 +1,15 @@
 //! `bitrock coupled`: the coupled axial-torsional bit (RGD) on the 1-DOF string, one string as
 //! a record with its summary, or `--map` a regime map over top-drive speed and weight on bit
-//! (or feed), one simulated string per cell.
+//! (or feed), one simulated string per cell, or `--well` one string drilled through formations.
 
 use super::args::{LumpedArgs, finite_number};
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
 use bitrock::eval::Backend;
 use bitrock::fit::coupled::CoupledCalibration;
 use bitrock::run::coupled::{self, Map, One, PosteriorMap, Settings};
+use bitrock::simulate::coupled::well::CoupledWell;
 use bitrock::simulate::coupled::{Bit, Regime, Sample};
-use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
+use bitrock::units::{ForceUnit, RAD_S_PER_RPM, RateUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use serde_json::json;
 use std::io::Write;
@@ -16,6 +17,16 @@ use std::process::ExitCode;
 
 #[derive(Debug, Args)]
 pub struct CoupledCmd {
+    /// A well file (TOML): segments in drilling order, each with its rock, top-drive speed and
+    /// weight or feed, drilled by one string carried from each into the next; the record gains
+    /// the columns segment and top_drive_rpm (format in docs/coupled.md).
+    #[arg(long, value_name = "FILE", conflicts_with_all = [
+        "omega_rpm", "wob_kn", "feed_m_h", "radius_m", "intrinsic_energy_mpa", "zeta", "contact_stress_mpa",
+        "wear_flat_mm", "friction", "gamma", "blades", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
+        "mass_kg", "axial_stiffness_kn_m", "axial_damping_kns_m", "duration_s", "settle_s", "sample_hz", "dt_s",
+        "kick_rpm", "map", "calibrate",
+    ])]
+    pub well: Option<std::path::PathBuf>,
     /// Top-drive speed Omega_0, rpm.
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().omega_rpm, value_name = "RPM")]
     pub omega_rpm: f64,
@@ -212,6 +223,9 @@ impl CoupledCmd {
 }
 
 pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
+    if let Some(path) = &cmd.well {
+        return run_well(cmd, &CoupledWell::load(path)?);
+    }
     let settings = cmd.settings();
     settings.assembly()?;
     settings.schedule()?;
@@ -303,6 +317,91 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// A well drilled through its segments: a table of them (or JSON), and the record with `--out`.
+fn run_well(cmd: &CoupledCmd, well: &CoupledWell) -> anyhow::Result<ExitCode> {
+    if let Some(path) = &cmd.out {
+        bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
+    }
+    let mut samples = Vec::new();
+    let segments = coupled::well(well, &mut |i, s| {
+        if cmd.out.is_some() {
+            samples.push((i, *s));
+        }
+    })?;
+    if let Some(path) = &cmd.out {
+        bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_well_record(well, &samples, file))?;
+    }
+    let mut out = super::print::stdout();
+    if cmd.json {
+        writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&json!({ "segments": segments }))?
+        )?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let width = segments
+        .iter()
+        .map(|s| s.name.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(7);
+    writeln!(
+        out,
+        "{:<width$} {:>7} {:>6} {:>9} {:<11} {:>8} {:>8} {:>8} {:>9}",
+        "segment", "from s", "rpm", "drive", "regime", "ROP m/h", "steady", "stuck %", "off bot %"
+    )?;
+    for s in &segments {
+        let drive = match (s.wob_kn, s.feed_m_h) {
+            (Some(kn), _) => format!("{kn} kN"),
+            (None, Some(m_h)) => format!("{m_h} m/h"),
+            (None, None) => String::new(),
+        };
+        writeln!(
+            out,
+            "{:<width$} {:>7.1} {:>6} {:>9} {:<11} {:>8.1} {:>8.1} {:>8.1} {:>9.1}",
+            s.name,
+            s.start_s,
+            s.omega_rpm,
+            drive,
+            s.summary.regime.name(),
+            s.summary.rop_m_h,
+            s.steady.rop_m_h,
+            100.0 * s.summary.stuck_share,
+            100.0 * s.summary.off_bottom_share
+        )?;
+    }
+    if segments.len() < well.segments.len() {
+        writeln!(
+            out,
+            "the bit ran away in segment {}: the segments after it were not drilled",
+            segments.len()
+        )?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A well's record: the single string's columns with each sample's segment and top-drive speed.
+fn write_well_record(well: &CoupledWell, samples: &[(usize, Sample)], out: &mut dyn Write) -> std::io::Result<()> {
+    let record: Vec<Sample> = samples.iter().map(|(_, s)| *s).collect();
+    let columns = coupled::record_columns(&record);
+    let mut w = csv::Writer::from_writer(out);
+    let mut header = vec!["time_s", "segment", "top_drive_rpm"];
+    header.extend(columns.iter().skip(1).map(|(name, _)| *name));
+    w.write_record(&header)?;
+    for (k, (i, _)) in samples.iter().enumerate() {
+        let segment = &well.segments[*i];
+        let mut row = vec![
+            format!("{:.6}", columns[0].1[k]),
+            segment.name.clone(),
+            format!("{:.6}", segment.job.omega_rad_s / RAD_S_PER_RPM),
+        ];
+        row.extend(columns.iter().skip(1).map(|(_, values)| format!("{:.6}", values[k])));
+        w.write_record(&row)?;
+    }
+    w.flush()
 }
 
 fn print_one(out: &mut dyn Write, one: &One, omega_rpm: f64) -> std::io::Result<()> {

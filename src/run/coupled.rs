@@ -7,19 +7,16 @@ use crate::data::drilling::DrillingRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::fit::coupled::{CoupledCalibration, bit_of, calibrate};
+use crate::simulate::coupled::well::CoupledWell;
 use crate::simulate::coupled::{
     self, Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, Regime, Sample, Schedule, Steady,
 };
 use crate::stability::lumped::Lumped;
 use crate::stability::map::parse_axis;
-use crate::units::RAD_S_PER_RPM;
+use crate::units::{M_S_PER_M_H, RAD_S_PER_RPM};
 use serde::{Deserialize, Serialize};
 
-/// m/s per m/h.
-const M_S_PER_M_H: f64 = 1.0 / 3600.0;
-
-/// Feed (m/h) where neither a weight nor a feed is given.
-pub const DEFAULT_FEED_M_H: f64 = 30.0;
+pub use crate::simulate::coupled::DEFAULT_FEED_M_H;
 
 /// Posterior draws a calibration's intervals are read from.
 pub const CALIBRATION_DRAWS: usize = 4_000;
@@ -117,18 +114,17 @@ impl Default for Settings {
 impl Settings {
     /// The drill string, validated.
     pub fn assembly(&self) -> Result<Assembly> {
-        let a = Assembly {
-            torsion: Lumped {
-                inertia_kg_m2: self.inertia_kg_m2,
-                omega_n_rad_s: self.omega_n_rad_s,
-                damping_ratio: self.damping_ratio,
-            },
-            mass_kg: self.mass_kg,
-            axial_stiffness_n_per_m: self.axial_stiffness_kn_m * 1e3,
-            axial_damping_ns_per_m: self.axial_damping_kns_m * 1e3,
+        let torsion = Lumped {
+            inertia_kg_m2: self.inertia_kg_m2,
+            omega_n_rad_s: self.omega_n_rad_s,
+            damping_ratio: self.damping_ratio,
         };
-        a.validate()?;
-        Ok(a)
+        Assembly::of_units(
+            torsion,
+            self.mass_kg,
+            self.axial_stiffness_kn_m,
+            self.axial_damping_kns_m,
+        )
     }
 
     /// The schedule, validated.
@@ -275,6 +271,53 @@ pub fn one(settings: &Settings, on_sample: &mut dyn FnMut(&Sample)) -> Result<On
         summary: SummaryReport::of(&summary, settings.sample_hz),
         steady: SteadyReport::of(&job.steady(&assembly), job.bit.blades),
     })
+}
+
+/// One segment of a well: where it starts, its drive, what the bit did and what steady
+/// drilling there would have been.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WellSegment {
+    pub name: String,
+    /// First recorded time of the segment (s from the record's start).
+    pub start_s: f64,
+    pub duration_s: f64,
+    pub omega_rpm: f64,
+    /// The weight (kN) or the feed (m/h) the segment is drilled under.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wob_kn: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub feed_m_h: Option<f64>,
+    #[serde(flatten)]
+    pub summary: SummaryReport,
+    pub steady: SteadyReport,
+}
+
+/// A well drilled by one string through its segments, each recorded sample given to
+/// `on_sample` with its segment's index. Segments after one whose bit ran away are not drilled
+/// (the report ends with that one, `diverged`).
+pub fn well(well: &CoupledWell, on_sample: &mut dyn FnMut(usize, &Sample)) -> Result<Vec<WellSegment>> {
+    let runs = well.simulate(on_sample)?;
+    Ok(runs
+        .iter()
+        .zip(&well.segments)
+        .map(|(run, segment)| {
+            let job = &segment.job;
+            let (wob_kn, feed_m_h) = match job.axial {
+                Axial::Weight { wob_n } => (Some(wob_n / 1e3), None),
+                Axial::Feed { rate_m_s } => (None, Some(rate_m_s / M_S_PER_M_H)),
+            };
+            WellSegment {
+                name: segment.name.clone(),
+                start_s: run.start_s,
+                duration_s: segment.duration_s,
+                omega_rpm: job.omega_rad_s / RAD_S_PER_RPM,
+                wob_kn,
+                feed_m_h,
+                summary: SummaryReport::of(&run.summary, well.sample_hz),
+                steady: SteadyReport::of(&job.steady(&well.assembly), job.bit.blades),
+            }
+        })
+        .collect())
 }
 
 /// A string's record as named columns in the units their names carry, the command's CSV and

@@ -43,12 +43,17 @@ use crate::stability::lumped::Lumped;
 
 pub use super::strings::{STICK_SLIP_STUCK_SHARE, STUCK_SPEED_RAD_S};
 
+pub mod well;
+
 /// Cells of the rock-surface ring of one string: 240 f32 and the seven words of the rest of the
 /// state make 988 B a string on the device.
 pub const RING_CELLS: usize = 240;
 
 /// Depth by which the bit may move from its reference before the reference follows it (m).
 pub const REBASE_M: f64 = 0.01;
+
+/// Feed (m/h) of a string given neither a weight nor a feed.
+pub const DEFAULT_FEED_M_H: f64 = 30.0;
 
 /// Share of the recorded samples off bottom from which a string is said to bounce.
 pub const BOUNCE_SHARE: f64 = 0.01;
@@ -227,6 +232,24 @@ impl Default for Assembly {
 }
 
 impl Assembly {
+    /// The string from the units drilling speaks (the axial stiffness in kN/m, the damping in
+    /// kN·s/m), validated.
+    pub fn of_units(
+        torsion: Lumped,
+        mass_kg: f64,
+        axial_stiffness_kn_m: f64,
+        axial_damping_kns_m: f64,
+    ) -> Result<Self> {
+        let a = Self {
+            torsion,
+            mass_kg,
+            axial_stiffness_n_per_m: axial_stiffness_kn_m * 1e3,
+            axial_damping_ns_per_m: axial_damping_kns_m * 1e3,
+        };
+        a.validate()?;
+        Ok(a)
+    }
+
     /// Refuses non-positive masses or stiffnesses and negative damping, naming each.
     pub fn validate(&self) -> Result<()> {
         self.torsion.validate()?;

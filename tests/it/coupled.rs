@@ -260,6 +260,90 @@ fn bad_parameters_are_refused_by_flag_with_nothing_written() {
     }
 }
 
+#[test]
+fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let well = dir.path().join("well.toml");
+    std::fs::write(
+        &well,
+        "settle_s = 10\n\
+         [[segment]]\nname = \"shale\"\nduration_s = 20\nomega_rpm = 45\nwob_kn = 150\n\
+         [[segment]]\nname = \"sandstone\"\nduration_s = 20\nomega_rpm = 45\nwob_kn = 150\nintrinsic_energy_mpa = 90\n",
+    )
+    .unwrap();
+    let csv = dir.path().join("well.csv");
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args(["coupled", "--json", "--well"])
+            .arg(&well)
+            .arg("--out")
+            .arg(&csv),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let segments = report["segments"].as_array().unwrap();
+    assert_eq!(segments.len(), 2);
+    assert_eq!(
+        (segments[1]["name"].as_str(), segments[1]["start_s"].as_f64()),
+        (Some("sandstone"), Some(20.0))
+    );
+    // The first segment is the single string of the same settings, figure for figure.
+    let (single, _) = simulated_record(dir.path(), "single.csv", 45.0, 20.0);
+    let single: serde_json::Value = serde_json::from_str(&single).unwrap();
+    for key in ["regime", "rop_m_h", "stuck_share", "torque_knm", "steady"] {
+        assert_eq!(segments[0][key], single[key], "{key}");
+    }
+    // The harder rock's steady drilling is slower.
+    let steady = |k: usize| segments[k]["steady"]["rop_m_h"].as_f64().unwrap();
+    assert!(steady(1) < 0.8 * steady(0), "{} {}", steady(0), steady(1));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "time_s,segment,top_drive_rpm,bit_speed_rpm,torque_on_bit_knm,wob_kn,axial_speed_m_h,rop_m_h,depth_of_cut_mm"
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2000);
+    assert_eq!((rows[999][1], rows[1000][1]), ("shale", "sandstone"));
+    assert_eq!((rows[1000][0], rows[1000][2]), ("20.000000", "45.000000"));
+    // Each segment's recorded mean torque is its summary's.
+    for (k, segment) in segments.iter().enumerate() {
+        let torques: Vec<f64> = rows[1000 * k..1000 * (k + 1)]
+            .iter()
+            .map(|r| r[4].parse().unwrap())
+            .collect();
+        let mean = torques.iter().sum::<f64>() / torques.len() as f64;
+        let want = segment["torque_knm"]["mean"].as_f64().unwrap();
+        assert!((mean - want).abs() < 1e-4 * want, "{mean} vs {want}");
+    }
+    // The table names each segment; a single string's flag beside a well is refused by name,
+    // and a bad file by its line and column, with nothing written.
+    let (code, stdout, _) = outcome(bin().args(["coupled", "--well"]).arg(&well));
+    assert_eq!(code, 0);
+    assert!(
+        stdout.contains("sandstone") && stdout.contains("stick-slip"),
+        "{stdout}"
+    );
+    let never = dir.path().join("never.csv");
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["coupled", "--omega-rpm", "60", "--well"])
+            .arg(&well)
+            .arg("--out")
+            .arg(&never),
+    );
+    assert_eq!(code, 2);
+    assert!(stderr.contains("--well") && stderr.contains("--omega-rpm"), "{stderr}");
+    std::fs::write(&well, "[[segment]]\nduration_s = 20\nomega_rpm = 45\nblades = 3\n").unwrap();
+    let (code, _, stderr) = outcome(bin().args(["coupled", "--well"]).arg(&well).arg("--out").arg(&never));
+    assert_eq!(code, 2);
+    assert!(
+        stderr.contains("well.toml:4:1") && stderr.contains("unknown field `blades`"),
+        "{stderr}"
+    );
+    assert!(!never.exists());
+}
+
 /// A record of the public bit at 45 rpm under 150 kN (stick-slip), noise of `torque_nm` and
 /// `wob_n` added from `seed`; with the bit's axial speed or without.
 fn drilling_record(torque_nm: f64, wob_n: f64, seed: u64, axial: bool) -> bitrock::data::drilling::DrillingRecord {

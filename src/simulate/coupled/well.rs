@@ -1,0 +1,439 @@
+//! A well drilled with the coupled bit through formations: one string carried from segment to
+//! segment (its lags, speeds and the rock surface its blades left), each segment with its own
+//! rock and drive, for `bitrock coupled --well FILE`.
+//!
+//! ```toml
+//! sample_hz = 50              # the recorder (default 50 Hz)
+//! dt_s = 1e-4                 # integration step (default 1e-4 s)
+//! settle_s = 30               # drilled at the first segment's drive before recording (default 30 s)
+//!
+//! [bit]                       # one bit drills the well: radius_m, blades, wear_flat_mm, gamma
+//! radius_m = 0.108            # (default: the public parameter set's)
+//! blades = 4
+//!
+//! [string]                    # inertia_kg_m2, omega_n_rad_s, damping_ratio, mass_kg,
+//! mass_kg = 40000             # axial_stiffness_kn_m, axial_damping_kns_m (default: the paper's
+//!                             # torsional string over a 40-t assembly)
+//! [[segment]]                 # in drilling order
+//! name = "shale"              # the record's `segment` column (default: its number)
+//! duration_s = 60
+//! omega_rpm = 60
+//! wob_kn = 100                # or feed_m_h = 30: every segment the same kind of drive
+//! intrinsic_energy_mpa = 40   # the rock: intrinsic_energy_mpa, zeta, contact_stress_mpa,
+//! contact_stress_mpa = 40     # friction (default: the public parameter set's)
+//! ```
+//!
+//! The bit is the well's: its radius and blades shape the ring of rock-surface cells the
+//! string carries across every boundary. A new formation acts from its segment's first step,
+//! on the surface the last one left. Units are in the keys' names; every refusal names the
+//! file, the line and the column.
+
+use super::{
+    Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, DEFAULT_FEED_M_H, Sample, Schedule, integrate_from,
+};
+use crate::error::{Error, Result};
+use crate::stability::lumped::Lumped;
+use crate::units::{M_S_PER_M_H, RAD_S_PER_RPM};
+use serde::Deserialize;
+use std::path::Path;
+use toml::Spanned;
+
+/// Largest well file read, bytes.
+const MAX_FILE_BYTES: u64 = 1 << 20;
+
+/// One stretch of the well: its rock and how the rig drives through it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoupledSegment {
+    /// The record's `segment` column.
+    pub name: String,
+    /// Recorded time in the segment (s).
+    pub duration_s: f64,
+    /// The string of the segment: the well's bit with this rock, the top drive and the axial
+    /// drive (the kick applies to the first segment only, from steady drilling).
+    pub job: CoupledJob,
+}
+
+/// A well of [`CoupledSegment`]s drilled by one string.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoupledWell {
+    pub segments: Vec<CoupledSegment>,
+    pub assembly: Assembly,
+    /// Drilled at the first segment's drive before recording starts (s).
+    pub settle_s: f64,
+    pub sample_hz: f64,
+    pub dt_s: f64,
+}
+
+/// What one segment did while recorded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SegmentRun {
+    pub summary: CoupledSummary,
+    /// The segment's first recorded time (s from the record's start).
+    pub start_s: f64,
+}
+
+impl CoupledWell {
+    /// Reads and checks the well file at `path`.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = crate::files::read_text(path, "a well file", MAX_FILE_BYTES)?;
+        Self::parse(&text, path)
+    }
+
+    /// The well the file text `source` describes; `path` names it in refusals.
+    pub fn parse(source: &str, path: &Path) -> Result<Self> {
+        let at = |offset: usize, message: String| {
+            let (line, column) = crate::files::line_column(source, offset);
+            Error::Syntax {
+                path: path.to_path_buf(),
+                line,
+                column,
+                message,
+            }
+        };
+        let file: WellFile = toml::from_str(source).map_err(|e| {
+            let offset = e.span().map_or(0, |s| s.start);
+            at(offset, e.message().trim().to_string())
+        })?;
+        let Some(first) = file.segment.first() else {
+            return Err(at(0, "the well has no [[segment]]".into()));
+        };
+        let assembly = file
+            .string
+            .assembly()
+            .map_err(|e| at(0, format!("[string]: {}", field_message(e))))?;
+        let feed = first.get_ref().wob_kn.is_none();
+        let kick_rad_s = file.kick_rpm * RAD_S_PER_RPM;
+        let mut segments = Vec::with_capacity(file.segment.len());
+        for (i, spanned) in file.segment.iter().enumerate() {
+            let s = spanned.get_ref();
+            let refuse = |message: String| at(spanned.span().start, format!("segment {}: {message}", i + 1));
+            if s.wob_kn.is_some() && s.feed_m_h.is_some() {
+                return Err(refuse("give wob_kn or feed_m_h, not both".into()));
+            }
+            if s.wob_kn.is_none() != feed {
+                return Err(refuse(format!(
+                    "the well is drilled under {} from its first segment: every segment gives {}",
+                    if feed { "a feed" } else { "a weight" },
+                    if feed {
+                        "feed_m_h (or neither: 30 m/h)"
+                    } else {
+                        "wob_kn"
+                    },
+                )));
+            }
+            let axial = match s.wob_kn {
+                Some(kn) => Axial::Weight { wob_n: kn * 1e3 },
+                None => Axial::Feed {
+                    rate_m_s: s.feed_m_h.unwrap_or(DEFAULT_FEED_M_H) * M_S_PER_M_H,
+                },
+            };
+            let job = CoupledJob {
+                bit: s.in_rock(file.bit.bit()),
+                omega_rad_s: s.omega_rpm * RAD_S_PER_RPM,
+                axial,
+                kick_rad_s,
+            };
+            job.validate().map_err(|e| refuse(field_message(e)))?;
+            if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
+                return Err(refuse(format!(
+                    "duration_s: must be positive and finite, got {}",
+                    s.duration_s
+                )));
+            }
+            segments.push(CoupledSegment {
+                name: s.name.clone().unwrap_or_else(|| (i + 1).to_string()),
+                duration_s: s.duration_s,
+                job,
+            });
+        }
+        let well = Self {
+            segments,
+            assembly,
+            settle_s: file.settle_s,
+            sample_hz: file.sample_hz,
+            dt_s: file.dt_s,
+        };
+        for i in 0..well.segments.len() {
+            well.schedule(i).map_err(|e| {
+                at(
+                    file.segment[i].span().start,
+                    format!("segment {}: {}", i + 1, field_message(e)),
+                )
+            })?;
+        }
+        Ok(well)
+    }
+
+    /// Segment `i`'s schedule: the settling before the first, none before the others.
+    pub fn schedule(&self, i: usize) -> Result<Schedule> {
+        let settle_s = if i == 0 { self.settle_s } else { 0.0 };
+        Schedule::new(self.dt_s, self.sample_hz, settle_s, self.segments[i].duration_s)
+    }
+
+    /// Drills the well: the first segment from steady drilling at its drive (kicked), each
+    /// next from where the one before left the string; `on_sample` hears every recorded
+    /// sample with its segment's index, times from the record's start.
+    pub fn simulate(&self, on_sample: &mut dyn FnMut(usize, &Sample)) -> Result<Vec<SegmentRun>> {
+        let mut runs = Vec::with_capacity(self.segments.len());
+        let mut state: Option<CoupledState> = None;
+        let mut start_s = 0.0;
+        for (i, segment) in self.segments.iter().enumerate() {
+            let schedule = self.schedule(i)?;
+            let (summary, end) = integrate_from(&self.assembly, &schedule, &segment.job, state.as_ref(), &mut |s| {
+                let mut s = *s;
+                s.time_s += start_s;
+                on_sample(i, &s);
+            });
+            let diverged = summary.diverged;
+            runs.push(SegmentRun { summary, start_s });
+            if diverged {
+                // The bit ran away: the segments after it would start from nonsense.
+                break;
+            }
+            start_s += f64::from(schedule.record_samples) / self.sample_hz;
+            state = Some(end);
+        }
+        Ok(runs)
+    }
+}
+
+/// A setting's refusal as `field: message`, the form a file's refusal names it in.
+fn field_message(e: Error) -> String {
+    match e {
+        Error::InvalidSetting { field, message } => format!("{field}: {message}"),
+        other => other.to_string(),
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WellFile {
+    #[serde(default = "default_sample_hz")]
+    sample_hz: f64,
+    #[serde(default = "default_dt_s")]
+    dt_s: f64,
+    #[serde(default = "default_settle_s")]
+    settle_s: f64,
+    #[serde(default = "default_kick_rpm")]
+    kick_rpm: f64,
+    #[serde(default)]
+    bit: BitFile,
+    #[serde(default)]
+    string: StringFile,
+    segment: Vec<Spanned<SegmentFile>>,
+}
+
+fn default_sample_hz() -> f64 {
+    50.0
+}
+fn default_dt_s() -> f64 {
+    1e-4
+}
+fn default_settle_s() -> f64 {
+    30.0
+}
+fn default_kick_rpm() -> f64 {
+    1.0
+}
+
+/// The well's bit: its geometry and wear, the public set's where not given.
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct BitFile {
+    radius_m: Option<f64>,
+    blades: Option<u32>,
+    wear_flat_mm: Option<f64>,
+    gamma: Option<f64>,
+}
+
+impl BitFile {
+    /// The bit in the public set's rock.
+    fn bit(&self) -> Bit {
+        let public = Bit::default();
+        Bit {
+            radius_m: self.radius_m.unwrap_or(public.radius_m),
+            blades: self.blades.unwrap_or(public.blades),
+            wear_flat_mm: self.wear_flat_mm.unwrap_or(public.wear_flat_mm),
+            gamma: self.gamma.unwrap_or(public.gamma),
+            ..public
+        }
+    }
+}
+
+/// The string: any of its values, the default assembly's where not given.
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct StringFile {
+    inertia_kg_m2: Option<f64>,
+    omega_n_rad_s: Option<f64>,
+    damping_ratio: Option<f64>,
+    mass_kg: Option<f64>,
+    axial_stiffness_kn_m: Option<f64>,
+    axial_damping_kns_m: Option<f64>,
+}
+
+impl StringFile {
+    fn assembly(&self) -> Result<Assembly> {
+        let d = Assembly::default();
+        let torsion = Lumped {
+            inertia_kg_m2: self.inertia_kg_m2.unwrap_or(d.torsion.inertia_kg_m2),
+            omega_n_rad_s: self.omega_n_rad_s.unwrap_or(d.torsion.omega_n_rad_s),
+            damping_ratio: self.damping_ratio.unwrap_or(d.torsion.damping_ratio),
+        };
+        Assembly::of_units(
+            torsion,
+            self.mass_kg.unwrap_or(d.mass_kg),
+            self.axial_stiffness_kn_m.unwrap_or(d.axial_stiffness_n_per_m / 1e3),
+            self.axial_damping_kns_m.unwrap_or(d.axial_damping_ns_per_m / 1e3),
+        )
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SegmentFile {
+    name: Option<String>,
+    duration_s: f64,
+    omega_rpm: f64,
+    wob_kn: Option<f64>,
+    feed_m_h: Option<f64>,
+    intrinsic_energy_mpa: Option<f64>,
+    zeta: Option<f64>,
+    contact_stress_mpa: Option<f64>,
+    friction: Option<f64>,
+}
+
+impl SegmentFile {
+    /// `bit` in this segment's rock (the values it gives in place of the bit's).
+    fn in_rock(&self, bit: Bit) -> Bit {
+        Bit {
+            intrinsic_energy_mpa: self.intrinsic_energy_mpa.unwrap_or(bit.intrinsic_energy_mpa),
+            zeta: self.zeta.unwrap_or(bit.zeta),
+            contact_stress_mpa: self.contact_stress_mpa.unwrap_or(bit.contact_stress_mpa),
+            friction: self.friction.unwrap_or(bit.friction),
+            ..bit
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::coupled::{Regime, integrate_with};
+
+    fn parse(text: &str) -> Result<CoupledWell> {
+        CoupledWell::parse(text, Path::new("well.toml"))
+    }
+
+    fn drilled(well: &CoupledWell) -> (Vec<SegmentRun>, Vec<(usize, Sample)>) {
+        let mut samples = Vec::new();
+        let runs = well.simulate(&mut |i, s| samples.push((i, *s))).unwrap();
+        (runs, samples)
+    }
+
+    #[test]
+    fn a_well_of_one_rock_and_drive_is_the_single_string_carried_on() {
+        // Stick-slipping (the public bit at 60 rpm under 150 kN): the state crosses the
+        // boundary mid-cycle, ring and all.
+        let well = parse(
+            "settle_s = 10\n[[segment]]\nduration_s = 10\nomega_rpm = 60\nwob_kn = 150\n\
+             [[segment]]\nname = \"on\"\nduration_s = 15\nomega_rpm = 60\nwob_kn = 150\n",
+        )
+        .unwrap();
+        let (runs, samples) = drilled(&well);
+        assert_eq!((runs.len(), runs[1].start_s), (2, 10.0));
+        let schedule = Schedule::new(1e-4, 50.0, 10.0, 25.0).unwrap();
+        let mut single = Vec::new();
+        let whole = integrate_with(&well.assembly, &schedule, &well.segments[0].job, &mut |s| {
+            single.push(*s)
+        });
+        assert!(whole.stuck > 0, "the test string stick-slips");
+        assert_eq!(samples.len(), single.len());
+        for (k, ((segment, a), b)) in samples.iter().zip(&single).enumerate() {
+            assert_eq!(*segment, usize::from(k >= 500));
+            assert!((a.time_s - b.time_s).abs() < 1e-9, "{a:?} {b:?}");
+            assert_eq!(Sample { time_s: b.time_s, ..*a }, *b, "sample {k}");
+        }
+        assert_eq!(runs[0].summary.stuck + runs[1].summary.stuck, whole.stuck);
+    }
+
+    #[test]
+    fn each_formation_drills_at_its_own_steady_rate_once_the_bit_turns_fast() {
+        // Stuck and slipping at 60 rpm; at 180 rpm the bit settles to steady drilling, at the
+        // closed form's rate of penetration in each rock: slower in the harder one.
+        let well = parse(
+            "settle_s = 5\n\
+             [[segment]]\nduration_s = 20\nomega_rpm = 60\nwob_kn = 150\n\
+             [[segment]]\nduration_s = 40\nomega_rpm = 180\nwob_kn = 150\n\
+             [[segment]]\nduration_s = 40\nomega_rpm = 180\nwob_kn = 150\nintrinsic_energy_mpa = 90\nfriction = 0.5\n",
+        )
+        .unwrap();
+        let (runs, samples) = drilled(&well);
+        assert_eq!(runs[0].summary.regime(), Regime::StickSlip);
+        let mut rates = Vec::new();
+        for (i, (run, segment)) in runs.iter().zip(&well.segments).enumerate().skip(1) {
+            let steady = segment.job.steady(&well.assembly);
+            // The last ten seconds: the segment's start holds the way out of the cycle (the
+            // bit stuck at first, while the string winds up to the new speed).
+            let end = run.start_s + segment.duration_s;
+            let tail: Vec<&Sample> = samples
+                .iter()
+                .filter(|(k, s)| *k == i && s.time_s >= end - 10.0)
+                .map(|(_, s)| s)
+                .collect();
+            assert_eq!(tail.len(), 500);
+            assert!(tail.iter().all(|s| s.bit_speed_rad_s > 0.9 * segment.job.omega_rad_s));
+            let rate = tail.iter().map(|s| s.cutting_rate_m_s).sum::<f64>() / tail.len() as f64;
+            assert!(
+                (rate - steady.rate_m_s).abs() < 1e-3 * steady.rate_m_s,
+                "{rate} vs {steady:?}"
+            );
+            rates.push(rate);
+        }
+        assert!(rates[1] < 0.8 * rates[0], "{rates:?}");
+    }
+
+    #[test]
+    fn a_bad_well_is_refused_where_it_is_wrong() {
+        let refused = |text: &str| parse(text).unwrap_err().to_string();
+        let segment = "[[segment]]\nduration_s = 10\nomega_rpm = 60\n";
+        let e = refused(&format!("{segment}zetta = 0.7\n"));
+        assert!(
+            e.starts_with("well.toml:4:1:") && e.contains("unknown field `zetta`"),
+            "{e}"
+        );
+        let e = refused(&format!("{segment}zeta = \"x\"\n"));
+        assert!(e.starts_with("well.toml:4:8:") && e.contains("expected f64"), "{e}");
+        let e = refused(&format!("{segment}radius_m = 0.1\n"));
+        assert!(
+            e.contains("well.toml:4:1:") && e.contains("unknown field `radius_m`"),
+            "{e}"
+        );
+        let e = refused(&format!("{segment}zeta = 5\n"));
+        assert!(
+            e.starts_with("well.toml:1:1:") && e.contains("segment 1: zeta: must lie in [0.1, 2]"),
+            "{e}"
+        );
+        let e = refused(&format!("{segment}wob_kn = 100\nfeed_m_h = 20\n"));
+        assert!(e.contains("segment 1: give wob_kn or feed_m_h, not both"), "{e}");
+        let e = refused(&format!("{segment}wob_kn = 100\n{segment}feed_m_h = 20\n"));
+        assert!(
+            e.starts_with("well.toml:5:1:") && e.contains("segment 2: the well is drilled under a weight"),
+            "{e}"
+        );
+        let e = refused(&format!("{segment}duration_s = 0\n"));
+        assert!(e.contains("duplicate key"), "{e}");
+        let e = refused("[[segment]]\nduration_s = 0\nomega_rpm = 60\n");
+        assert!(e.contains("segment 1: duration_s: must be positive"), "{e}");
+        let e = refused(&format!("[bit]\nblades = 0\n{segment}"));
+        assert!(e.contains("segment 1: blades: must lie in [1, 12]"), "{e}");
+        let e = refused(&format!("[string]\nmass_kg = -1\n{segment}"));
+        assert!(e.contains("[string]: mass_kg: must be positive"), "{e}");
+        let e = refused(&format!("dt_s = 0.5\n{segment}"));
+        assert!(e.contains("segment 1: dt_s: the integration step 0.5 s exceeds"), "{e}");
+        let e = refused("sample_hz = 50\n");
+        assert!(e.contains("missing field `segment`"), "{e}");
+        let e = refused("segment = []\n");
+        assert!(e.contains("the well has no [[segment]]"), "{e}");
+    }
+}
