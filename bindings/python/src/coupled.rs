@@ -1,10 +1,11 @@
 //! The coupled axial-torsional bit (RGD): one string, a regime map, a drilling record's
-//! calibration and the regimes' probabilities over its posterior, as `bitrock coupled` runs
-//! them (`bitrock::run::coupled`).
+//! calibration and the regimes' probabilities over its posterior, a well of formations, as
+//! `bitrock coupled` runs them (`bitrock::run::coupled`).
 
 use crate::errors::*;
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
 use bitrock::run::coupled::{self as run, Settings};
+use bitrock::simulate::coupled::well::CoupledWell;
 use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -60,6 +61,37 @@ pub(crate) fn coupled(
     };
     say(py, &note, notes)?;
     Ok(value.expect("a report serialises").to_string())
+}
+
+/// One string drilled through the well file at `path` (`bitrock coupled --well`): each
+/// segment's report, and with `record` the samples as columns (`segment` each sample's
+/// segment's index); as JSON text.
+#[pyfunction]
+#[pyo3(signature = (path, record))]
+pub(crate) fn coupled_well(py: Python<'_>, path: PathBuf, record: bool) -> PyResult<String> {
+    let well = check(py, CoupledWell::load(&path))?;
+    let mut samples = Vec::new();
+    let segments = py.detach(|| {
+        run::well(&well, &mut |i, s| {
+            if record {
+                samples.push((i, *s))
+            }
+        })
+    });
+    let mut value = serde_json::json!({ "segments": check(py, segments)? });
+    if record {
+        let only: Vec<_> = samples.iter().map(|(_, s)| *s).collect();
+        let mut columns: serde_json::Map<String, serde_json::Value> = run::record_columns(&only)
+            .into_iter()
+            .map(|(name, values)| (name.to_string(), values.into()))
+            .collect();
+        columns.insert(
+            "segment".into(),
+            samples.iter().map(|(i, _)| *i).collect::<Vec<_>>().into(),
+        );
+        value["record"] = serde_json::Value::Object(columns);
+    }
+    Ok(value.to_string())
 }
 
 /// The bit calibrated on the drilling record at `path` (columns and units in `columns`), and

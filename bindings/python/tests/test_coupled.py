@@ -207,6 +207,27 @@ def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
     assert estimates["mu_gamma"]["value"] == pytest.approx(0.6, rel=1e-4)
 
 
+def test_python_drills_the_command_s_well(cli, tmp_path):
+    import bitrock
+
+    well = tmp_path / "well.toml"
+    well.write_text(
+        "settle_s = 10\n"
+        "[[segment]]\nname = \"shale\"\nduration_s = 10\nomega_rpm = 45\nwob_kn = 150\n"
+        "[[segment]]\nname = \"sandstone\"\nduration_s = 10\nomega_rpm = 180\nwob_kn = 150\nintrinsic_energy_mpa = 90\n"
+    )
+    drilled = bitrock.coupled_well(well, record=True)
+    done = run_cli(cli, "coupled", "--well", str(well), "--json")
+    assert drilled["segments"] == json.loads(done.stdout)["segments"]
+    record = drilled["record"]
+    assert record["segment"] == ["shale"] * 500 + ["sandstone"] * 500
+    assert record["time_s"][500] == pytest.approx(10.0, abs=1e-12)
+    assert [s["regime"] for s in drilled["segments"]][0] == "stick_slip"
+    with pytest.raises(bitrock.InputError, match=r"well.toml:4:1: .*blades"):
+        well.write_text("[[segment]]\nduration_s = 10\nomega_rpm = 45\nblades = 3\n")
+        bitrock.coupled_well(well)
+
+
 def test_every_coupled_setting_is_a_keyword_and_a_stray_one_is_refused():
     import inspect
 

@@ -48,6 +48,7 @@ __all__ = [
     "check_selection",
     "coupled",
     "coupled_calibrate",
+    "coupled_well",
     "evidence",
     "fit",
     "load_law",
@@ -854,6 +855,22 @@ def coupled(
 
     options = {k: v for k, v in locals().items() if k not in ("record", "map", "json")}
     return json.loads(_bitrock.coupled(options, record, map, _note))
+
+
+def coupled_well(path: str | os.PathLike[str], *, record: bool = False) -> dict:
+    """One string of the coupled bit drilled through the well file at ``path`` (TOML: the bit,
+    the string and ``[[segment]]``s in drilling order, each with its rock, top-drive speed and
+    weight or feed; docs/coupled.md), as ``bitrock coupled --well`` drills it: under
+    ``segments`` each segment's name, start (s), drive, regime, rate of penetration (m/h),
+    stuck and off-bottom shares and ranges, with its ``steady`` drilling; with ``record=True``
+    the samples under ``record`` as columns, ``segment`` naming each sample's segment."""
+    import json
+
+    well = json.loads(_bitrock.coupled_well(os.fspath(path), record))
+    if record:
+        names = [s["name"] for s in well["segments"]]
+        well["record"]["segment"] = [names[i] for i in well["record"]["segment"]]
+    return well
 
 
 def coupled_calibrate(

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class ComputedEvidence:
@@ -169,6 +169,13 @@ def coupled_calibrate(path: str | PathLike[str], columns: dict, options: dict, m
     """
     The bit calibrated on the drilling record at `path` (columns and units in `columns`), and
     with `map` the regimes' probabilities over its posterior; as JSON text.
+    """
+
+def coupled_well(path: str | PathLike[str], record: bool) -> str:
+    """
+    One string drilled through the well file at `path` (`bitrock coupled --well`): each
+    segment's report, and with `record` the samples as columns (`segment` each sample's
+    segment's index); as JSON text.
     """
 
 def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> ComputedEvidence:
