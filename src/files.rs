@@ -751,9 +751,37 @@ pub fn exchange_dirs(a: &Path, b: &Path) -> std::io::Result<()> {
     std::fs::rename(&aside, b)
 }
 
+/// A file the user wrote (a law file, a well file): its text, and its path to name in refusals.
+pub(crate) struct UserFile<'a> {
+    pub source: &'a str,
+    pub path: &'a Path,
+}
+
+impl UserFile<'_> {
+    /// A refusal at byte `offset` of the file, by its line and column.
+    pub fn at(&self, offset: usize, message: String) -> Error {
+        let (line, column) = line_column(self.source, offset);
+        Error::Syntax {
+            path: self.path.to_path_buf(),
+            line,
+            column,
+            message,
+        }
+    }
+
+    /// The file's TOML read as `T`: a syntax error, an unknown key or a value of the wrong type
+    /// refused where it stands.
+    pub fn toml<T: serde::de::DeserializeOwned>(&self) -> Result<T> {
+        toml::from_str(self.source).map_err(|e| {
+            let offset = e.span().map_or(0, |s| s.start);
+            self.at(offset, e.message().trim().to_string())
+        })
+    }
+}
+
 /// Line and column (1-based, in characters) of byte `offset` of `text`: where a refusal of a
 /// file the user wrote (a law file, a well file) points.
-pub(crate) fn line_column(text: &str, offset: usize) -> (u64, usize) {
+fn line_column(text: &str, offset: usize) -> (u64, usize) {
     let before = &text[..offset.min(text.len())];
     let line = before.matches('\n').count() as u64 + 1;
     let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;

@@ -28,8 +28,8 @@ use serde::Deserialize;
 use std::path::Path;
 use toml::Spanned;
 
-/// Largest well file read, bytes: a well of thousands of segments is far smaller.
-const MAX_FILE_BYTES: u64 = 1 << 20;
+/// Largest well file read (of either bit), bytes: a well of thousands of segments is far smaller.
+pub(crate) const MAX_FILE_BYTES: u64 = 1 << 20;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -159,19 +159,9 @@ impl Well {
 
     /// The well the file text `source` describes; `path` names it in refusals.
     pub fn parse(source: &str, path: &Path) -> Result<Self> {
-        let at = |offset: usize, message: String| {
-            let (line, column) = crate::files::line_column(source, offset);
-            Error::Syntax {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message,
-            }
-        };
-        let file: WellFile = toml::from_str(source).map_err(|e| {
-            let offset = e.span().map_or(0, |s| s.start);
-            at(offset, e.message().trim().to_string())
-        })?;
+        let text = crate::files::UserFile { source, path };
+        let at = |offset: usize, message: String| text.at(offset, message);
+        let file: WellFile = text.toml()?;
         if file.segment.is_empty() {
             return Err(at(0, "the well has no [[segment]]".into()));
         }

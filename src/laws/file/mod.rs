@@ -26,7 +26,7 @@ use crate::{Error, Law, Result};
 use expr::{Dim, Expr, Var, parse_unit};
 use serde::Deserialize;
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::RwLock;
 use toml::Spanned;
 
@@ -382,19 +382,9 @@ impl LawFile {
 
     /// Compiles the law file text `source`; `path` names it in errors.
     pub fn parse(source: &str, path: &Path) -> Result<Self> {
-        let at = |offset: usize, message: String| {
-            let (line, column) = crate::files::line_column(source, offset);
-            Error::Syntax {
-                path: PathBuf::from(path),
-                line,
-                column,
-                message,
-            }
-        };
-        let raw: RawLaw = toml::from_str(source).map_err(|e| {
-            let offset = e.span().map_or(0, |s| s.start);
-            at(offset, e.message().trim().to_string())
-        })?;
+        let text = crate::files::UserFile { source, path };
+        let at = |offset: usize, message: String| text.at(offset, message);
+        let raw: RawLaw = text.toml()?;
         let name = law_name(&raw.name, &at)?;
         if raw.parameter.len() > MAX_PARAMS {
             return Err(at(

@@ -38,9 +38,6 @@ use serde::Deserialize;
 use std::path::Path;
 use toml::Spanned;
 
-/// Largest well file read, bytes.
-const MAX_FILE_BYTES: u64 = 1 << 20;
-
 /// One stretch of the well: its rock and how the rig drives through it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CoupledSegment {
@@ -75,25 +72,15 @@ pub struct SegmentRun {
 impl CoupledWell {
     /// Reads and checks the well file at `path`.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = crate::files::read_text(path, "a well file", MAX_FILE_BYTES)?;
+        let text = crate::files::read_text(path, "a well file", crate::simulate::well::MAX_FILE_BYTES)?;
         Self::parse(&text, path)
     }
 
     /// The well the file text `source` describes; `path` names it in refusals.
     pub fn parse(source: &str, path: &Path) -> Result<Self> {
-        let at = |offset: usize, message: String| {
-            let (line, column) = crate::files::line_column(source, offset);
-            Error::Syntax {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message,
-            }
-        };
-        let file: WellFile = toml::from_str(source).map_err(|e| {
-            let offset = e.span().map_or(0, |s| s.start);
-            at(offset, e.message().trim().to_string())
-        })?;
+        let text = crate::files::UserFile { source, path };
+        let at = |offset: usize, message: String| text.at(offset, message);
+        let file: WellFile = text.toml()?;
         let Some(first) = file.segment.first() else {
             return Err(at(0, "the well has no [[segment]]".into()));
         };
