@@ -2,7 +2,7 @@
 //! weight on bit and rate of penetration, and the bit's axial speed where the record has it.
 //! Columns are found by role: a name holding `speed` (and not `axial`) is the bit's speed, one
 //! holding `torque` the torque on bit, `wob` the weight on bit, `rop` or `penetration` the rate
-//! of penetration, `axial` the axial speed; each can be named instead. Surface channels are
+//! of penetration, `axial` (and not `acc`) the axial speed; each can be named instead. Surface channels are
 //! never read as the bit's. Units come from the names' suffixes or the options.
 
 use super::surface::{format_error, missing, pick};
@@ -80,7 +80,7 @@ impl DrillingRecord {
             opts.axial_speed_column.as_deref(),
             "axial speed",
             "axial_speed_column",
-            &|i| lower(i).contains("axial"),
+            &|i| lower(i).contains("axial") && !lower(i).contains("acc"),
         )?;
         let chosen = [Some(speed), Some(torque), Some(wob), Some(rop), axial];
         for (k, a) in chosen.iter().enumerate() {

@@ -330,6 +330,7 @@ pub fn record_columns(samples: &[Sample]) -> Vec<(&'static str, Vec<f64>)> {
         ("torque_on_bit_knm", column(&|s| s.torque_nm / 1e3)),
         ("wob_kn", column(&|s| s.wob_n / 1e3)),
         ("axial_speed_m_h", column(&|s| s.axial_speed_m_s * 3600.0)),
+        ("axial_acceleration_m_s2", column(&|s| s.axial_acceleration_m_s2)),
         ("rop_m_h", column(&|s| s.cutting_rate_m_s * 3600.0)),
         ("depth_of_cut_mm", column(&|s| s.depth_per_blade_m * 1e3)),
     ]

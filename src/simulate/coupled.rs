@@ -478,6 +478,10 @@ pub struct Sample {
     pub wob_n: f64,
     /// The bit's axial speed (m/s, downward positive).
     pub axial_speed_m_s: f64,
+    /// The bit's axial acceleration (m/s², downward positive), its mean over the sample period
+    /// (the change of axial speed since the sample before over the period): what an
+    /// accelerometer on the bit filtered over its period reads, the contact's stops included.
+    pub axial_acceleration_m_s2: f64,
     /// Rate at which the blades deepen the hole: N·d_n·Ω/2π while cutting (m/s).
     pub cutting_rate_m_s: f64,
     /// Depth of cut per blade (m); negative off bottom.
@@ -747,7 +751,7 @@ impl CoupledString {
     }
 
     /// The sample of the state after a step with `forces`.
-    fn sample(&self, time_s: f64, forces: Forces) -> Sample {
+    fn sample(&self, time_s: f64, forces: Forces, axial_acceleration_m_s2: f64) -> Sample {
         let dn = forces.depth_per_blade_m;
         let cutting = dn > 0.0 && self.speed > 0.0;
         Sample {
@@ -756,6 +760,7 @@ impl CoupledString {
             torque_nm: forces.torque_nm,
             wob_n: forces.wob_n,
             axial_speed_m_s: self.axial_speed,
+            axial_acceleration_m_s2,
             cutting_rate_m_s: if cutting {
                 self.blades * dn * self.speed / std::f64::consts::TAU
             } else {
@@ -805,7 +810,9 @@ pub fn integrate_from(
     let mut sum = Accumulator::default();
     let periods = schedule.settle_samples + schedule.record_samples;
     let mut forces = Forces::default();
+    let period_s = schedule.sample_period_s();
     for period in 0..periods {
+        let axial_speed_before = s.axial_speed;
         for _ in 0..schedule.steps_per_sample {
             forces = s.step(schedule.dt_s);
         }
@@ -814,8 +821,8 @@ pub fn integrate_from(
             break;
         }
         if period >= schedule.settle_samples {
-            let t = f64::from(period - schedule.settle_samples) * schedule.sample_period_s();
-            let sample = s.sample(t, forces);
+            let t = f64::from(period - schedule.settle_samples) * period_s;
+            let sample = s.sample(t, forces, (s.axial_speed - axial_speed_before) / period_s);
             sum.push(&sample);
             on_sample(&sample);
         }
