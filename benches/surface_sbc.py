@@ -63,7 +63,9 @@ def twin_record(args, truth, index, path):
     """m2 with `truth` on the paper's 1-DOF string from rest (no lag, the bit stuck), settled
     SETTLE_S then recorded, by the tests' LSODA twin: the columns `bitrock simulate --channels
     all` writes that the scoring reads (the surface channels and the bit's speed)."""
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bindings", "python", "tests"))
+    tests = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bindings", "python", "tests")
+    if tests not in sys.path:
+        sys.path.insert(0, tests)
     import numpy as np
     from test_strings import RPM, integrate, one_dof
 
@@ -72,8 +74,11 @@ def twin_record(args, truth, index, path):
     p_nm = [1000.0 * truth["tsb"], 1000.0 * truth["tcb"], truth["g"]]
     rest = (np.zeros(2), True, 1.0)
     surface = []
-    speeds, _ = integrate(chain, "m2", p_nm, omega, 1.0, rest, SETTLE_S, args.duration_s,
-                          sample_hz=args.sample_hz, surface=surface)
+    done = integrate(chain, "m2", p_nm, omega, 1.0, rest, SETTLE_S, args.duration_s,
+                     sample_hz=args.sample_hz, surface=surface)
+    if done is None:
+        sys.exit(f"replicate {index}: the twin's bit ran away with {truth}")
+    speeds, _ = done
     noise = np.random.default_rng(index).normal(0.0, 1000.0 * args.noise_knm, len(surface))
     with open(path, "w", newline="") as f:
         out = csv.writer(f)

@@ -93,6 +93,15 @@ pub enum Error {
 }
 
 impl Error {
+    /// A refused setting as `field: message`, any other error as it reads: how a file's refusal
+    /// names the key it points at.
+    pub fn keyed(self) -> String {
+        match self {
+            Error::InvalidSetting { field, message } => format!("{field}: {message}"),
+            other => other.to_string(),
+        }
+    }
+
     /// Shorthand for [`Error::InvalidSetting`].
     pub fn setting(field: impl Into<String>, message: impl Into<String>) -> Self {
         Error::InvalidSetting {

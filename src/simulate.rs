@@ -418,8 +418,9 @@ pub fn write_record_csv<W: std::io::Write>(
     writer.flush()
 }
 
-/// RK4 steps per second above any machine's: the time estimate is a lower bound.
-const FASTEST_STEPS_PER_S: f64 = 1e9;
+/// Integration steps of one string per second above any machine's: a time estimate from it is
+/// a lower bound.
+pub(crate) const FASTEST_STEPS_PER_S: f64 = 1e9;
 /// Memory of one recorded sample: time, bit speed, torque and weight on bit, f64 each.
 const TRACE_BYTES_PER_SAMPLE: f64 = 4.0 * 8.0;
 
@@ -576,10 +577,7 @@ impl Well {
         }
         (0..self.segments.len()).try_for_each(|i| {
             self.check_segment(i).map_err(|e| {
-                let message = match e {
-                    Error::InvalidSetting { field, message } => format!("{field}: {message}"),
-                    other => other.to_string(),
-                };
+                let message = e.keyed();
                 Error::setting(
                     "segment",
                     format!("segment {} ({}): {message}", i + 1, self.segments[i].name),

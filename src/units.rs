@@ -341,55 +341,6 @@ impl RateUnit {
     }
 }
 
-/// Unit of an acceleration (an accelerometer's channel).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
-pub enum AccelerationUnit {
-    /// Metres per second squared.
-    #[cfg_attr(feature = "cli", value(name = "m_s2"))]
-    #[serde(rename = "m/s²")]
-    MS2,
-    /// Standard gravity (9.80665 m/s²), as vibration tools log.
-    #[cfg_attr(feature = "cli", value(name = "g"))]
-    #[serde(rename = "g")]
-    G,
-}
-
-impl AccelerationUnit {
-    /// m/s² per one of this unit.
-    pub fn metres_per_second_squared(self) -> f64 {
-        match self {
-            AccelerationUnit::MS2 => 1.0,
-            AccelerationUnit::G => 9.806_65,
-        }
-    }
-    /// Printed name.
-    pub fn label(self) -> &'static str {
-        match self {
-            AccelerationUnit::MS2 => "m/s²",
-            AccelerationUnit::G => "g",
-        }
-    }
-    /// The unit a column name declares (`axial_acceleration_m_s2`, `axial_acc_g`, `ACCX [g]`).
-    pub fn from_suffix(column: &str) -> Option<Self> {
-        if let Some(symbol) = bracketed(column) {
-            return match squeezed(symbol).as_str() {
-                "m/s2" | "m/s^2" | "m/s²" => Some(AccelerationUnit::MS2),
-                "g" => Some(AccelerationUnit::G),
-                _ => None,
-            };
-        }
-        let c = column.to_ascii_lowercase();
-        if c.ends_with("_m_s2") {
-            Some(AccelerationUnit::MS2)
-        } else if c.ends_with("_g") {
-            Some(AccelerationUnit::G)
-        } else {
-            None
-        }
-    }
-}
-
 /// Unit of a depth along the hole (the bit's measured depth).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum LengthUnit {
@@ -458,7 +409,7 @@ macro_rules! column_unit {
         }
     )*};
 }
-column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit, LengthUnit, AccelerationUnit);
+column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit, LengthUnit);
 
 #[cfg(test)]
 mod tests {

@@ -24,7 +24,7 @@ pub struct CoupledCmd {
         "omega_rpm", "wob_kn", "feed_m_h", "radius_m", "intrinsic_energy_mpa", "zeta", "contact_stress_mpa",
         "wear_flat_mm", "friction", "gamma", "blades", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
         "mass_kg", "axial_stiffness_kn_m", "axial_damping_kns_m", "duration_s", "settle_s", "sample_hz", "dt_s",
-        "kick_rpm", "map", "calibrate",
+        "kick_rpm", "map", "calibrate", "seed", "backend",
     ])]
     pub well: Option<std::path::PathBuf>,
     /// Top-drive speed Omega_0, rpm.
@@ -122,8 +122,9 @@ pub struct CoupledCmd {
     /// Seed of the posterior draws.
     #[arg(long, default_value_t = Settings::default().seed)]
     pub seed: u64,
-    /// The record (one string: time, bit speed, torque, WOB, axial speed, rate of penetration)
-    /// or the map (one row per cell) as CSV.
+    /// The record (one string or a well: time, bit speed, torque, WOB, axial speed and
+    /// acceleration, rate of penetration; a well's with each sample's segment and top-drive
+    /// speed) or the map (one row per cell) as CSV.
     #[arg(long, value_name = "FILE")]
     pub out: Option<std::path::PathBuf>,
     /// Overwrite --out if it exists.
@@ -149,7 +150,7 @@ pub struct DrillingArgs {
     /// Rate-of-penetration column [default: the one whose name holds 'rop' or 'penetration'].
     #[arg(long, value_name = "NAME", requires = "calibrate")]
     pub rop_col: Option<String>,
-    /// The bit's axial speed column [default: the one whose name holds 'axial', if any].
+    /// The bit's axial speed column [default: the one whose name holds 'axial' and not 'acc', if any].
     #[arg(long, value_name = "NAME", requires = "calibrate")]
     pub axial_speed_col: Option<String>,
     /// Unit of the bit speed [default: from its name's suffix].
@@ -323,6 +324,7 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
 fn run_well(cmd: &CoupledCmd, well: &CoupledWell) -> anyhow::Result<ExitCode> {
     if let Some(path) = &cmd.out {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
+        well.check_record_memory()?;
     }
     let mut samples = Vec::new();
     let segments = coupled::well(well, &mut |i, s| {
@@ -354,7 +356,7 @@ fn run_well(cmd: &CoupledCmd, well: &CoupledWell) -> anyhow::Result<ExitCode> {
         "segment", "from s", "rpm", "drive", "regime", "ROP m/h", "steady", "stuck %", "off bot %"
     )?;
     for s in &segments {
-        let drive = match (s.wob_kn, s.feed_m_h) {
+        let drive = match (s.drive.wob_kn, s.drive.feed_m_h) {
             (Some(kn), _) => format!("{kn} kN"),
             (None, Some(m_h)) => format!("{m_h} m/h"),
             (None, None) => String::new(),

@@ -20,7 +20,7 @@ pub struct DrillingOptions {
     pub torque_column: Option<String>,
     pub wob_column: Option<String>,
     pub rop_column: Option<String>,
-    /// The bit's axial speed; `None` uses the one whose name holds `axial`, if any.
+    /// The bit's axial speed; `None` uses the one whose name holds `axial` and not `acc`, if any.
     pub axial_speed_column: Option<String>,
     pub speed_unit: Option<SpeedUnit>,
     pub torque_unit: Option<TorqueUnit>,

@@ -96,10 +96,10 @@ impl Default for Settings {
             axial_stiffness_kn_m: assembly.axial_stiffness_n_per_m / 1e3,
             axial_damping_kns_m: assembly.axial_damping_ns_per_m / 1e3,
             duration_s: 60.0,
-            settle_s: 30.0,
-            sample_hz: 50.0,
-            dt_s: 1e-4,
-            kick_rpm: 1.0,
+            settle_s: coupled::DEFAULT_SETTLE_S,
+            sample_hz: coupled::DEFAULT_SAMPLE_HZ,
+            dt_s: coupled::DEFAULT_DT_S,
+            kick_rpm: coupled::DEFAULT_KICK_RPM,
             map_rpm: "20:200:10".into(),
             map_wob_kn: "80:280:9".into(),
             map_feed_m_h: "10:60:6".into(),
@@ -280,16 +280,23 @@ pub struct WellSegment {
     pub name: String,
     /// First recorded time of the segment (s from the record's start).
     pub start_s: f64,
+    /// Time recorded (s): whole sample periods.
     pub duration_s: f64,
     pub omega_rpm: f64,
     /// The weight (kN) or the feed (m/h) the segment is drilled under.
+    pub drive: WellDrive,
+    #[serde(flatten)]
+    pub summary: SummaryReport,
+    pub steady: SteadyReport,
+}
+
+/// What holds a segment's bit down, as the well file gives it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct WellDrive {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wob_kn: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub feed_m_h: Option<f64>,
-    #[serde(flatten)]
-    pub summary: SummaryReport,
-    pub steady: SteadyReport,
 }
 
 /// A well drilled by one string through its segments, each recorded sample given to
@@ -300,22 +307,17 @@ pub fn well(well: &CoupledWell, on_sample: &mut dyn FnMut(usize, &Sample)) -> Re
     Ok(runs
         .iter()
         .zip(&well.segments)
-        .map(|(run, segment)| {
-            let job = &segment.job;
-            let (wob_kn, feed_m_h) = match job.axial {
-                Axial::Weight { wob_n } => (Some(wob_n / 1e3), None),
-                Axial::Feed { rate_m_s } => (None, Some(rate_m_s / M_S_PER_M_H)),
-            };
-            WellSegment {
-                name: segment.name.clone(),
-                start_s: run.start_s,
-                duration_s: segment.duration_s,
-                omega_rpm: job.omega_rad_s / RAD_S_PER_RPM,
-                wob_kn,
-                feed_m_h,
-                summary: SummaryReport::of(&run.summary, well.sample_hz),
-                steady: SteadyReport::of(&job.steady(&well.assembly), job.bit.blades),
-            }
+        .map(|(run, segment)| WellSegment {
+            name: segment.name.clone(),
+            start_s: run.start_s,
+            duration_s: run.duration_s,
+            omega_rpm: segment.omega_rpm,
+            drive: WellDrive {
+                wob_kn: segment.wob_kn,
+                feed_m_h: segment.feed_m_h,
+            },
+            summary: SummaryReport::of(&run.summary, well.sample_hz),
+            steady: SteadyReport::of(&segment.job.steady(&well.assembly), segment.job.bit.blades),
         })
         .collect())
 }

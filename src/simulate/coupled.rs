@@ -55,6 +55,13 @@ pub const REBASE_M: f64 = 0.01;
 /// Feed (m/h) of a string given neither a weight nor a feed.
 pub const DEFAULT_FEED_M_H: f64 = 30.0;
 
+/// A coupled record's clock and start where none is given: 50 Hz, steps of 1e-4 s (the stuck
+/// share converges to about 1 % there), 30 s of settling, the bit kicked by 1 rpm.
+pub const DEFAULT_SAMPLE_HZ: f64 = 50.0;
+pub const DEFAULT_DT_S: f64 = 1e-4;
+pub const DEFAULT_SETTLE_S: f64 = 30.0;
+pub const DEFAULT_KICK_RPM: f64 = 1.0;
+
 /// Share of the recorded samples off bottom from which a string is said to bounce.
 pub const BOUNCE_SHARE: f64 = 0.01;
 

@@ -20,7 +20,7 @@
 //! and the column.
 
 use super::{DEFAULT_KICK_RPM, DEFAULT_SEED, Initial, Profile, Segment, Well};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::stability::lumped::Lumped;
 use crate::units::{RAD_S_PER_RPM, TorqueUnit};
@@ -225,10 +225,7 @@ impl Well {
         // A segment's settings refused where the segment begins.
         for (i, spanned) in file.segment.iter().enumerate() {
             well.check_segment(i).map_err(|e| {
-                let message = match e {
-                    Error::InvalidSetting { field, message } => format!("{field}: {message}"),
-                    other => other.to_string(),
-                };
+                let message = e.keyed();
                 at(spanned.span().start, format!("segment {}: {message}", i + 1))
             })?;
         }

@@ -301,6 +301,14 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
         (segments[1]["name"].as_str(), segments[1]["start_s"].as_f64()),
         (Some("sandstone"), Some(20.0))
     );
+    // The drive as the file gives it, apart from the weight the bit felt (its range).
+    assert_eq!(segments[1]["drive"], serde_json::json!({"wob_kn": 150.0}));
+    assert_eq!(segments[1]["omega_rpm"], 45.0);
+    assert!(
+        segments[1]["wob_kn"]["max"].as_f64().unwrap() > 150.0,
+        "{}",
+        segments[1]
+    );
     // The first segment is the single string of the same settings, figure for figure.
     let (single, _) = simulated_record(dir.path(), "single.csv", 45.0, 20.0);
     let single: serde_json::Value = serde_json::from_str(&single).unwrap();
@@ -339,15 +347,19 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
         "{stdout}"
     );
     let never = dir.path().join("never.csv");
-    let (code, _, stderr) = outcome(
-        bin()
-            .args(["coupled", "--omega-rpm", "60", "--well"])
-            .arg(&well)
-            .arg("--out")
-            .arg(&never),
-    );
-    assert_eq!(code, 2);
-    assert!(stderr.contains("--well") && stderr.contains("--omega-rpm"), "{stderr}");
+    for flag in [["--omega-rpm", "60"], ["--seed", "3"], ["--backend", "cpu"]] {
+        let (code, _, stderr) = outcome(
+            bin()
+                .arg("coupled")
+                .args(flag)
+                .arg("--well")
+                .arg(&well)
+                .arg("--out")
+                .arg(&never),
+        );
+        assert_eq!(code, 2);
+        assert!(stderr.contains("--well") && stderr.contains(flag[0]), "{stderr}");
+    }
     std::fs::write(&well, "[[segment]]\nduration_s = 20\nomega_rpm = 45\nblades = 3\n").unwrap();
     let (code, _, stderr) = outcome(bin().args(["coupled", "--well"]).arg(&well).arg("--out").arg(&never));
     assert_eq!(code, 2);

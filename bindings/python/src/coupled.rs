@@ -70,6 +70,9 @@ pub(crate) fn coupled(
 #[pyo3(signature = (path, record))]
 pub(crate) fn coupled_well(py: Python<'_>, path: PathBuf, record: bool) -> PyResult<String> {
     let well = check(py, CoupledWell::load(&path))?;
+    if record {
+        check(py, well.check_record_memory())?;
+    }
     let mut samples = Vec::new();
     let segments = py.detach(|| {
         run::well(&well, &mut |i, s| {

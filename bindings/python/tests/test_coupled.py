@@ -223,6 +223,7 @@ def test_python_drills_the_command_s_well(cli, tmp_path):
     assert record["segment"] == ["shale"] * 500 + ["sandstone"] * 500
     assert record["time_s"][500] == pytest.approx(10.0, abs=1e-12)
     assert [s["regime"] for s in drilled["segments"]][0] == "stick_slip"
+    assert [s["drive"] for s in drilled["segments"]] == [{"wob_kn": 150.0}] * 2
     with pytest.raises(bitrock.InputError, match=r"well.toml:4:1: .*blades"):
         well.write_text("[[segment]]\nduration_s = 10\nomega_rpm = 45\nblades = 3\n")
         bitrock.coupled_well(well)

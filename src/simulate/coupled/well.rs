@@ -29,7 +29,8 @@
 //! file, the line and the column.
 
 use super::{
-    Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, DEFAULT_FEED_M_H, Sample, Schedule, integrate_from,
+    Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, DEFAULT_DT_S, DEFAULT_FEED_M_H, DEFAULT_KICK_RPM,
+    DEFAULT_SAMPLE_HZ, DEFAULT_SETTLE_S, Sample, Schedule, integrate_from,
 };
 use crate::error::{Error, Result};
 use crate::stability::lumped::Lumped;
@@ -43,10 +44,16 @@ use toml::Spanned;
 pub struct CoupledSegment {
     /// The record's `segment` column.
     pub name: String,
-    /// Recorded time in the segment (s).
+    /// Time recorded in the segment as the file gives it (s); the record holds whole sample
+    /// periods of it ([`SegmentRun::duration_s`]).
     pub duration_s: f64,
-    /// The string of the segment: the well's bit with this rock, the top drive and the axial
-    /// drive (the kick applies to the first segment only, from steady drilling).
+    /// The top drive's speed (rpm), and the weight (kN) or the feed (m/h), as the file gives
+    /// them (the feed at [`DEFAULT_FEED_M_H`] where it gives neither).
+    pub omega_rpm: f64,
+    pub wob_kn: Option<f64>,
+    pub feed_m_h: Option<f64>,
+    /// The string of the segment: the well's bit in this rock, the top drive and the axial
+    /// drive in SI (the kick applies to the first segment only, from steady drilling).
     pub job: CoupledJob,
 }
 
@@ -67,7 +74,13 @@ pub struct SegmentRun {
     pub summary: CoupledSummary,
     /// The segment's first recorded time (s from the record's start).
     pub start_s: f64,
+    /// The time it recorded: its samples over the sample rate (s).
+    pub duration_s: f64,
 }
+
+/// Bytes a recorded sample of a well holds where the caller keeps them (its segment and its
+/// channels, with room for the columns written from them).
+pub const BYTES_PER_RECORDED_SAMPLE: f64 = 256.0;
 
 impl CoupledWell {
     /// Reads and checks the well file at `path`.
@@ -84,13 +97,38 @@ impl CoupledWell {
         let Some(first) = file.segment.first() else {
             return Err(at(0, "the well has no [[segment]]".into()));
         };
-        let assembly = file
-            .string
-            .assembly()
-            .map_err(|e| at(0, format!("[string]: {}", field_message(e))))?;
+        // The well's own keys, each refused where it stands (the start of the file where it
+        // is not given).
+        let key = |v: &Option<Spanned<f64>>, default: f64| v.as_ref().map_or(default, |s| *s.get_ref());
+        let key_at = |v: &Option<Spanned<f64>>| v.as_ref().map_or(0, |s| s.span().start);
+        let (sample_hz, dt_s, settle_s, kick_rpm) = (
+            key(&file.sample_hz, DEFAULT_SAMPLE_HZ),
+            key(&file.dt_s, DEFAULT_DT_S),
+            key(&file.settle_s, DEFAULT_SETTLE_S),
+            key(&file.kick_rpm, DEFAULT_KICK_RPM),
+        );
+        Schedule::new(dt_s, sample_hz, settle_s, 1.0 / sample_hz).map_err(|e| {
+            let place = match &e {
+                Error::InvalidSetting { field, .. } if field == "sample_hz" => key_at(&file.sample_hz),
+                Error::InvalidSetting { field, .. } if field == "settle_s" => key_at(&file.settle_s),
+                _ => key_at(&file.dt_s),
+            };
+            at(place, e.keyed())
+        })?;
+        if !kick_rpm.is_finite() {
+            return Err(at(key_at(&file.kick_rpm), "kick_rpm: must be finite".into()));
+        }
+        let bit = file.bit.as_ref().map_or_else(Bit::default, |b| b.get_ref().bit());
+        let bit_at = file.bit.as_ref().map_or(0, |b| b.span().start);
+        bit.validate()
+            .map_err(|e| at(bit_at, format!("[bit]: {}", e.keyed())))?;
+        let string = file.string.as_ref();
+        let assembly = string
+            .map_or_else(|| Ok(Assembly::default()), |s| s.get_ref().assembly())
+            .map_err(|e| at(string.map_or(0, |s| s.span().start), format!("[string]: {}", e.keyed())))?;
         let feed = first.get_ref().wob_kn.is_none();
-        let kick_rad_s = file.kick_rpm * RAD_S_PER_RPM;
         let mut segments = Vec::with_capacity(file.segment.len());
+        let mut steps = 0.0;
         for (i, spanned) in file.segment.iter().enumerate() {
             let s = spanned.get_ref();
             let refuse = |message: String| at(spanned.span().start, format!("segment {}: {message}", i + 1));
@@ -102,59 +140,81 @@ impl CoupledWell {
                     "the well is drilled under {} from its first segment: every segment gives {}",
                     if feed { "a feed" } else { "a weight" },
                     if feed {
-                        "feed_m_h (or neither: 30 m/h)"
+                        format!("feed_m_h (or neither: {DEFAULT_FEED_M_H} m/h)")
                     } else {
-                        "wob_kn"
+                        "wob_kn".to_string()
                     },
                 )));
             }
-            let axial = match s.wob_kn {
-                Some(kn) => Axial::Weight { wob_n: kn * 1e3 },
-                None => Axial::Feed {
-                    rate_m_s: s.feed_m_h.unwrap_or(DEFAULT_FEED_M_H) * M_S_PER_M_H,
+            let feed_m_h = (s.wob_kn.is_none()).then(|| s.feed_m_h.unwrap_or(DEFAULT_FEED_M_H));
+            let axial = match (s.wob_kn, feed_m_h) {
+                (Some(kn), _) => Axial::Weight { wob_n: kn * 1e3 },
+                (None, m_h) => Axial::Feed {
+                    rate_m_s: m_h.unwrap_or(DEFAULT_FEED_M_H) * M_S_PER_M_H,
                 },
             };
             let job = CoupledJob {
-                bit: s.in_rock(file.bit.bit()),
+                bit: s.in_rock(bit),
                 omega_rad_s: s.omega_rpm * RAD_S_PER_RPM,
                 axial,
-                kick_rad_s,
+                kick_rad_s: kick_rpm * RAD_S_PER_RPM,
             };
-            job.validate().map_err(|e| refuse(field_message(e)))?;
+            job.validate().map_err(|e| refuse(e.keyed()))?;
             if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
                 return Err(refuse(format!(
                     "duration_s: must be positive and finite, got {}",
                     s.duration_s
                 )));
             }
+            let schedule = Schedule::new(dt_s, sample_hz, if i == 0 { settle_s } else { 0.0 }, s.duration_s)
+                .map_err(|e| refuse(e.keyed().replacen("record_s", "duration_s", 1)))?;
+            steps += schedule.steps() as f64;
             segments.push(CoupledSegment {
                 name: s.name.clone().unwrap_or_else(|| (i + 1).to_string()),
                 duration_s: s.duration_s,
+                omega_rpm: s.omega_rpm,
+                wob_kn: s.wob_kn,
+                feed_m_h,
                 job,
             });
         }
-        let well = Self {
+        // One string, step after step: at most a day's work even at a rate above any machine's.
+        crate::limits::check_work(
+            "segment",
+            steps,
+            crate::simulate::FASTEST_STEPS_PER_S,
+            &format!("drilling the well's {} segments in steps of {dt_s} s", segments.len()),
+        )
+        .map_err(|e| at(0, e.keyed()))?;
+        Ok(Self {
             segments,
             assembly,
-            settle_s: file.settle_s,
-            sample_hz: file.sample_hz,
-            dt_s: file.dt_s,
-        };
-        for i in 0..well.segments.len() {
-            well.schedule(i).map_err(|e| {
-                at(
-                    file.segment[i].span().start,
-                    format!("segment {}: {}", i + 1, field_message(e)),
-                )
-            })?;
-        }
-        Ok(well)
+            settle_s,
+            sample_hz,
+            dt_s,
+        })
     }
 
     /// Segment `i`'s schedule: the settling before the first, none before the others.
     pub fn schedule(&self, i: usize) -> Result<Schedule> {
         let settle_s = if i == 0 { self.settle_s } else { 0.0 };
         Schedule::new(self.dt_s, self.sample_hz, settle_s, self.segments[i].duration_s)
+    }
+
+    /// Samples the well records, all its segments together.
+    pub fn recorded_samples(&self) -> Result<u64> {
+        (0..self.segments.len()).try_fold(0, |n, i| Ok(n + u64::from(self.schedule(i)?.record_samples)))
+    }
+
+    /// Refuses to keep the whole record where it would not fit in memory (`bitrock coupled
+    /// --well --out`, Python's `record=True`).
+    pub fn check_record_memory(&self) -> Result<()> {
+        let samples = self.recorded_samples()? as f64;
+        crate::limits::check_memory(
+            "well",
+            samples * BYTES_PER_RECORDED_SAMPLE,
+            &format!("keeping the well's record ({samples:.3e} samples)"),
+        )
     }
 
     /// Drills the well: the first segment from steady drilling at its drive (kicked), each
@@ -172,59 +232,37 @@ impl CoupledWell {
                 on_sample(i, &s);
             });
             let diverged = summary.diverged;
-            runs.push(SegmentRun { summary, start_s });
+            let duration_s = f64::from(schedule.record_samples) / self.sample_hz;
+            runs.push(SegmentRun {
+                summary,
+                start_s,
+                duration_s,
+            });
             if diverged {
                 // The bit ran away: the segments after it would start from nonsense.
                 break;
             }
-            start_s += f64::from(schedule.record_samples) / self.sample_hz;
+            start_s += duration_s;
             state = Some(end);
         }
         Ok(runs)
     }
 }
 
-/// A setting's refusal as `field: message`, the form a file's refusal names it in.
-fn field_message(e: Error) -> String {
-    match e {
-        Error::InvalidSetting { field, message } => format!("{field}: {message}"),
-        other => other.to_string(),
-    }
-}
-
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct WellFile {
-    #[serde(default = "default_sample_hz")]
-    sample_hz: f64,
-    #[serde(default = "default_dt_s")]
-    dt_s: f64,
-    #[serde(default = "default_settle_s")]
-    settle_s: f64,
-    #[serde(default = "default_kick_rpm")]
-    kick_rpm: f64,
-    #[serde(default)]
-    bit: BitFile,
-    #[serde(default)]
-    string: StringFile,
+    sample_hz: Option<Spanned<f64>>,
+    dt_s: Option<Spanned<f64>>,
+    settle_s: Option<Spanned<f64>>,
+    kick_rpm: Option<Spanned<f64>>,
+    bit: Option<Spanned<BitFile>>,
+    string: Option<Spanned<StringFile>>,
     segment: Vec<Spanned<SegmentFile>>,
 }
 
-fn default_sample_hz() -> f64 {
-    50.0
-}
-fn default_dt_s() -> f64 {
-    1e-4
-}
-fn default_settle_s() -> f64 {
-    30.0
-}
-fn default_kick_rpm() -> f64 {
-    1.0
-}
-
 /// The well's bit: its geometry and wear, the public set's where not given.
-#[derive(Deserialize, Default)]
+#[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct BitFile {
     radius_m: Option<f64>,
@@ -248,7 +286,7 @@ impl BitFile {
 }
 
 /// The string: any of its values, the default assembly's where not given.
-#[derive(Deserialize, Default)]
+#[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct StringFile {
     inertia_kg_m2: Option<f64>,
@@ -362,13 +400,9 @@ mod tests {
             let steady = segment.job.steady(&well.assembly);
             // The last ten seconds: the segment's start holds the way out of the cycle (the
             // bit stuck at first, while the string winds up to the new speed).
-            let end = run.start_s + segment.duration_s;
-            let tail: Vec<&Sample> = samples
-                .iter()
-                .filter(|(k, s)| *k == i && s.time_s >= end - 10.0)
-                .map(|(_, s)| s)
-                .collect();
-            assert_eq!(tail.len(), 500);
+            let own: Vec<&Sample> = samples.iter().filter(|(k, _)| *k == i).map(|(_, s)| s).collect();
+            assert_eq!((own.len(), run.duration_s), (2000, segment.duration_s));
+            let tail = &own[own.len() - 500..];
             assert!(tail.iter().all(|s| s.bit_speed_rad_s > 0.9 * segment.job.omega_rad_s));
             let rate = tail.iter().map(|s| s.cutting_rate_m_s).sum::<f64>() / tail.len() as f64;
             assert!(
@@ -412,12 +446,33 @@ mod tests {
         assert!(e.contains("duplicate key"), "{e}");
         let e = refused("[[segment]]\nduration_s = 0\nomega_rpm = 60\n");
         assert!(e.contains("segment 1: duration_s: must be positive"), "{e}");
-        let e = refused(&format!("[bit]\nblades = 0\n{segment}"));
-        assert!(e.contains("segment 1: blades: must lie in [1, 12]"), "{e}");
-        let e = refused(&format!("[string]\nmass_kg = -1\n{segment}"));
-        assert!(e.contains("[string]: mass_kg: must be positive"), "{e}");
-        let e = refused(&format!("dt_s = 0.5\n{segment}"));
-        assert!(e.contains("segment 1: dt_s: the integration step 0.5 s exceeds"), "{e}");
+        let e = refused(&format!("sample_hz = 50\n[bit]\nblades = 0\n{segment}"));
+        assert!(
+            e.starts_with("well.toml:2:1: [bit]: blades: must lie in [1, 12]"),
+            "{e}"
+        );
+        let e = refused(&format!("sample_hz = 50\n[string]\nmass_kg = -1\n{segment}"));
+        assert!(
+            e.starts_with("well.toml:2:1: [string]: mass_kg: must be positive"),
+            "{e}"
+        );
+        let e = refused(&format!("sample_hz = 50\ndt_s = 0.5\n{segment}"));
+        assert!(
+            e.starts_with("well.toml:2:8: dt_s: the integration step 0.5 s exceeds"),
+            "{e}"
+        );
+        let e = refused(&format!("settle_s = -1\n{segment}"));
+        assert!(
+            e.starts_with("well.toml:1:12: settle_s: must be finite and not negative"),
+            "{e}"
+        );
+        let e = refused(&format!("kick_rpm = inf\n{segment}"));
+        assert!(e.starts_with("well.toml:1:12: kick_rpm: must be finite"), "{e}");
+        let e = refused(&format!("{segment}[[segment]]\nduration_s = 2000\nomega_rpm = 60\n"));
+        assert!(
+            e.contains("well.toml:4:1: segment 2: duration_s: 100000 periods at 50 Hz"),
+            "{e}"
+        );
         let e = refused("sample_hz = 50\n");
         assert!(e.contains("missing field `segment`"), "{e}");
         let e = refused("segment = []\n");

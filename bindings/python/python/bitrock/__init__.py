@@ -861,8 +861,9 @@ def coupled_well(path: str | os.PathLike[str], *, record: bool = False) -> dict:
     """One string of the coupled bit drilled through the well file at ``path`` (TOML: the bit,
     the string and ``[[segment]]``s in drilling order, each with its rock, top-drive speed and
     weight or feed; docs/coupled.md), as ``bitrock coupled --well`` drills it: under
-    ``segments`` each segment's name, start (s), drive, regime, rate of penetration (m/h),
-    stuck and off-bottom shares and ranges, with its ``steady`` drilling; with ``record=True``
+    ``segments`` each segment's name, start and duration (s), top-drive speed (rpm), ``drive``
+    (``wob_kn`` or ``feed_m_h``), regime, rate of penetration (m/h), stuck and off-bottom
+    shares and ranges, with its ``steady`` drilling; with ``record=True``
     the samples under ``record`` as columns, ``segment`` naming each sample's segment."""
     import json
 
