@@ -174,6 +174,20 @@ mod tests {
     }
 
     #[test]
+    fn an_acceleration_column_is_never_read_as_the_axial_speed() {
+        let header = "bit_speed_rpm,torque_knm,wob_kn,rop_m_h";
+        let (_d, path) = write(&format!(
+            "{header},axial_acceleration_m_s2,axial_speed_m_h\n60,10,150,30,0.5,30\n"
+        ));
+        let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
+        assert_eq!(r.columns.axial_speed.as_deref(), Some("axial_speed_m_h"));
+        // Alone, an accelerometer's channel gives no axial speed (the calibration says so).
+        let (_d, path) = write(&format!("{header},axial_acc_g\n60,10,150,30,0.05\n"));
+        let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
+        assert_eq!((r.columns.axial_speed, r.axial_speed_m_s), (None, None));
+    }
+
+    #[test]
     fn a_record_without_a_rate_of_penetration_is_refused_naming_the_role() {
         let (_d, path) = write("bit_speed_rpm,torque_knm,wob_kn\n60,10,150\n");
         let e = DrillingRecord::read(&path, &DrillingOptions::default())
