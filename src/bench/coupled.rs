@@ -50,6 +50,7 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
     let assembly = Assembly::default();
     let schedule = Schedule::new(opts.dt_s, 50.0, 0.0, opts.seconds)?;
     let jobs = batch(opts.strings);
+    jobs.iter().try_for_each(|j| j.check_step(schedule.dt_s))?;
     let mut out = Vec::new();
     for &backend in &opts.backends {
         let mut walls = Vec::new();

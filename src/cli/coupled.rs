@@ -307,6 +307,9 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
                     samples.push(*s)
                 }
             })?;
+            if let Some(w) = &one.warning {
+                note(format!("warning: {w}"));
+            }
             if let Some(path) = &cmd.out {
                 bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_record(&samples, file))?;
             }
@@ -334,6 +337,11 @@ fn run_well(cmd: &CoupledCmd, well: &CoupledWell) -> anyhow::Result<ExitCode> {
     })?;
     if let Some(path) = &cmd.out {
         bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_well_record(well, &samples, file))?;
+    }
+    for s in &segments {
+        if let Some(w) = &s.warning {
+            super::print::note(format_args!("warning: segment {}: {w}", s.name));
+        }
     }
     let mut out = super::print::stdout();
     if cmd.json {

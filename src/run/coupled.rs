@@ -161,6 +161,7 @@ impl Settings {
             kick_rad_s: self.kick_rpm * RAD_S_PER_RPM,
         };
         job.validate()?;
+        job.check_step(self.dt_s)?;
         Ok(job)
     }
 
@@ -256,6 +257,25 @@ pub struct One {
     #[serde(flatten)]
     pub summary: SummaryReport,
     pub steady: SteadyReport,
+    /// Said where the bit was off bottom nearly throughout ([`off_bottom_warning`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
+}
+
+/// Share of a record off bottom from which the bit is said to have bounced clear of the rock
+/// nearly throughout (the rest are landings).
+pub const OFF_BOTTOM_THROUGHOUT: f64 = 0.9;
+
+/// What a record spent off bottom nearly throughout is worth, said where the bit was off
+/// bottom for at least [`OFF_BOTTOM_THROUGHOUT`] of it (`None` otherwise).
+pub fn off_bottom_warning(summary: &SummaryReport) -> Option<String> {
+    (summary.samples > 0 && summary.off_bottom_share >= OFF_BOTTOM_THROUGHOUT).then(|| {
+        format!(
+            "the bit was off bottom for {:.0} % of the record: it bounced clear of the rock nearly throughout, \
+             and its forces and rate of penetration are those of its landings, not of cutting",
+            100.0 * summary.off_bottom_share
+        )
+    })
 }
 
 /// One string at the settings' speed and drive, each recorded sample given to `on_sample`.
@@ -266,9 +286,13 @@ pub fn one(settings: &Settings, on_sample: &mut dyn FnMut(&Sample)) -> Result<On
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
     let job = settings.job(settings.bit, settings.omega_rpm, None)?;
-    let summary = coupled::integrate_with(&assembly, &schedule, &job, on_sample);
+    let summary = SummaryReport::of(
+        &coupled::integrate_with(&assembly, &schedule, &job, on_sample),
+        settings.sample_hz,
+    );
     Ok(One {
-        summary: SummaryReport::of(&summary, settings.sample_hz),
+        warning: off_bottom_warning(&summary),
+        summary,
         steady: SteadyReport::of(&job.steady(&assembly), job.bit.blades),
     })
 }
@@ -288,6 +312,9 @@ pub struct WellSegment {
     #[serde(flatten)]
     pub summary: SummaryReport,
     pub steady: SteadyReport,
+    /// Said where the bit was off bottom nearly throughout the segment.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
 }
 
 /// What holds a segment's bit down, as the well file gives it.
@@ -318,6 +345,11 @@ pub fn well(well: &CoupledWell, on_sample: &mut dyn FnMut(usize, &Sample)) -> Re
             },
             summary: SummaryReport::of(&run.summary, well.sample_hz),
             steady: SteadyReport::of(&segment.job.steady(&well.assembly), segment.job.bit.blades),
+            warning: None,
+        })
+        .map(|mut segment| {
+            segment.warning = off_bottom_warning(&segment.summary);
+            segment
         })
         .collect())
 }

@@ -55,6 +55,13 @@ pub const REBASE_M: f64 = 0.01;
 /// Feed (m/h) of a string given neither a weight nor a feed.
 pub const DEFAULT_FEED_M_H: f64 = 30.0;
 
+/// How many times the top drive's speed a slipping bit reaches, for the step's check: a
+/// stick-slip cycle peaks at two to three times it.
+pub const PEAK_SPEED_FACTOR: f64 = 3.0;
+
+/// Steps a blade sector must take at least at that speed ([`CoupledJob::check_step`]).
+pub const MIN_STEPS_PER_SECTOR: f64 = 10.0;
+
 /// A coupled record's clock and start where none is given: 50 Hz, steps of 1e-4 s (the stuck
 /// share converges to about 1 % there), 30 s of settling, the bit kicked by 1 rpm.
 pub const DEFAULT_SAMPLE_HZ: f64 = 50.0;
@@ -329,6 +336,29 @@ impl CoupledJob {
             )),
             _ => Ok(()),
         }
+    }
+
+    /// Refuses a step `dt_s` (s) at which a slipping bit, turning at [`PEAK_SPEED_FACTOR`] times
+    /// the top drive's speed, crosses a blade sector in fewer than [`MIN_STEPS_PER_SECTOR`]
+    /// steps: the depth of cut a blade reads would then be taken over much of the delay it
+    /// stands for, and the rock surface is not resolved.
+    pub fn check_step(&self, dt_s: f64) -> Result<()> {
+        let per_step = PEAK_SPEED_FACTOR * self.omega_rad_s * dt_s;
+        let sector = self.bit.sector_rad();
+        if per_step * MIN_STEPS_PER_SECTOR <= sector {
+            return Ok(());
+        }
+        Err(Error::setting(
+            "dt_s",
+            format!(
+                "at {} rpm a slipping bit ({PEAK_SPEED_FACTOR} times the top drive) turns {per_step:.3} rad in a step of {dt_s} s, \
+                 more than 1/{MIN_STEPS_PER_SECTOR} of the sector of its {} blades ({sector:.3} rad): the rock surface is not resolved; \
+                 take a step of at most {:.1e} s",
+                self.omega_rad_s / crate::units::RAD_S_PER_RPM,
+                self.bit.blades,
+                sector / (MIN_STEPS_PER_SECTOR * PEAK_SPEED_FACTOR * self.omega_rad_s)
+            ),
+        ))
     }
 
     /// Steady drilling at this drive on `assembly`: under a weight W₀, part of it spent on the

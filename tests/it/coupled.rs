@@ -266,6 +266,10 @@ fn bad_parameters_are_refused_by_flag_with_nothing_written() {
         (vec!["--wear-flat-mm", "500"], "--wear-flat-mm"),
         (vec!["--mass-kg", "0"], "--mass-kg"),
         (vec!["--map", "--map-rpm", "200:20:5"], "--map-rpm"),
+        // A step the ring cannot resolve: at 200 rpm a slipping bit crosses a tenth of a
+        // blade sector in 2.5 ms; on a map, at its fastest cell.
+        (vec!["--omega-rpm", "200", "--dt-s", "0.005"], "--dt-s"),
+        (vec!["--map", "--map-rpm", "20:200:3", "--dt-s", "0.005"], "--dt-s"),
     ] {
         let (code, _, stderr) = outcome(bin().arg("coupled").args(&args).arg("--out").arg(&csv));
         assert_eq!(code, 2, "{args:?}: {stderr}");
@@ -368,6 +372,50 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
         "{stderr}"
     );
     assert!(!never.exists());
+}
+
+#[test]
+fn a_bit_off_bottom_nearly_throughout_is_said() {
+    // Undamped axially, the bit pumps energy into its bounce: off bottom 96 % of the time.
+    let args = [
+        "coupled",
+        "--axial-damping-kns-m",
+        "0",
+        "--omega-rpm",
+        "60",
+        "--wob-kn",
+        "200",
+    ];
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args(args)
+            .args(["--duration-s", "20", "--settle-s", "60", "--json"]),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let one: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let share = one["off_bottom_share"].as_f64().unwrap();
+    assert!(share >= 0.9, "{share}");
+    let warning = one["warning"].as_str().unwrap();
+    assert!(
+        warning.contains(&format!("off bottom for {:.0} % of the record", 100.0 * share)),
+        "{warning}"
+    );
+    assert!(stderr.contains(warning), "{stderr}");
+    // A bit that cuts has no such warning.
+    let (_, stdout, _) = outcome(bin().args([
+        "coupled",
+        "--omega-rpm",
+        "180",
+        "--wob-kn",
+        "150",
+        "--duration-s",
+        "5",
+        "--settle-s",
+        "5",
+        "--json",
+    ]));
+    let one: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(one.get("warning").is_none(), "{one}");
 }
 
 /// A record of the public bit at 45 rpm under 150 kN (stick-slip), noise of `torque_nm` and

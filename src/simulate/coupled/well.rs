@@ -159,7 +159,9 @@ impl CoupledWell {
                 axial,
                 kick_rad_s: kick_rpm * RAD_S_PER_RPM,
             };
-            job.validate().map_err(|e| refuse(e.keyed()))?;
+            job.validate()
+                .and_then(|()| job.check_step(dt_s))
+                .map_err(|e| refuse(e.keyed()))?;
             if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
                 return Err(refuse(format!(
                     "duration_s: must be positive and finite, got {}",
@@ -468,6 +470,13 @@ mod tests {
         );
         let e = refused(&format!("kick_rpm = inf\n{segment}"));
         assert!(e.starts_with("well.toml:1:12: kick_rpm: must be finite"), "{e}");
+        let e = refused(&format!(
+            "dt_s = 0.005\n{segment}[[segment]]\nduration_s = 10\nomega_rpm = 200\n"
+        ));
+        assert!(
+            e.starts_with("well.toml:5:1: segment 2: dt_s: at 200 rpm a slipping bit"),
+            "{e}"
+        );
         let e = refused(&format!("{segment}[[segment]]\nduration_s = 2000\nomega_rpm = 60\n"));
         assert!(
             e.contains("well.toml:4:1: segment 2: duration_s: 100000 periods at 50 Hz"),
