@@ -6,6 +6,7 @@
 //! sample_hz = 50              # the recorder (default 50 Hz)
 //! dt_s = 1e-4                 # integration step (default 1e-4 s)
 //! settle_s = 30               # drilled at the first segment's drive before recording (default 30 s)
+//! kick_rpm = 1                # the bit's speed kicked from steady drilling at the start (default 1 rpm)
 //!
 //! [bit]                       # one bit drills the well: radius_m, blades, wear_flat_mm, gamma
 //! radius_m = 0.108            # (default: the public parameter set's)
