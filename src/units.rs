@@ -299,7 +299,7 @@ impl RateUnit {
     /// m/s per one of this unit.
     pub fn metres_per_second(self) -> f64 {
         match self {
-            RateUnit::MH => 1.0 / 3600.0,
+            RateUnit::MH => M_S_PER_M_H,
             RateUnit::MS => 1.0,
             RateUnit::FtH => 0.3048 / 3600.0,
         }

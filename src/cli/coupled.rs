@@ -9,7 +9,7 @@ use bitrock::fit::coupled::CoupledCalibration;
 use bitrock::run::coupled::{self, Map, One, PosteriorMap, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
 use bitrock::simulate::coupled::{Bit, Regime, Sample};
-use bitrock::units::{ForceUnit, RAD_S_PER_RPM, RateUnit, SpeedUnit, TorqueUnit};
+use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use serde_json::json;
 use std::io::Write;
@@ -393,21 +393,15 @@ fn run_well(cmd: &CoupledCmd, well: &CoupledWell) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// A well's record: the single string's columns with each sample's segment and top-drive speed.
+/// A well's record: each sample's time, its segment's name, then the other columns.
 fn write_well_record(well: &CoupledWell, samples: &[(usize, Sample)], out: &mut dyn Write) -> std::io::Result<()> {
-    let record: Vec<Sample> = samples.iter().map(|(_, s)| *s).collect();
-    let columns = coupled::record_columns(&record);
+    let (segments, columns) = coupled::well_record_columns(well, samples);
     let mut w = csv::Writer::from_writer(out);
-    let mut header = vec!["time_s", "segment", "top_drive_rpm"];
+    let mut header = vec![columns[0].0, "segment"];
     header.extend(columns.iter().skip(1).map(|(name, _)| *name));
     w.write_record(&header)?;
-    for (k, (i, _)) in samples.iter().enumerate() {
-        let segment = &well.segments[*i];
-        let mut row = vec![
-            format!("{:.6}", columns[0].1[k]),
-            segment.name.clone(),
-            format!("{:.6}", segment.job.omega_rad_s / RAD_S_PER_RPM),
-        ];
+    for (k, i) in segments.iter().enumerate() {
+        let mut row = vec![format!("{:.6}", columns[0].1[k]), well.segments[*i].name.clone()];
         row.extend(columns.iter().skip(1).map(|(_, values)| format!("{:.6}", values[k])));
         w.write_record(&row)?;
     }

@@ -334,24 +334,37 @@ pub fn well(well: &CoupledWell, on_sample: &mut dyn FnMut(usize, &Sample)) -> Re
     Ok(runs
         .iter()
         .zip(&well.segments)
-        .map(|(run, segment)| WellSegment {
-            name: segment.name.clone(),
-            start_s: run.start_s,
-            duration_s: run.duration_s,
-            omega_rpm: segment.omega_rpm,
-            drive: WellDrive {
-                wob_kn: segment.wob_kn,
-                feed_m_h: segment.feed_m_h,
-            },
-            summary: SummaryReport::of(&run.summary, well.sample_hz),
-            steady: SteadyReport::of(&segment.job.steady(&well.assembly), segment.job.bit.blades),
-            warning: None,
-        })
-        .map(|mut segment| {
-            segment.warning = off_bottom_warning(&segment.summary);
-            segment
+        .map(|(run, segment)| {
+            let summary = SummaryReport::of(&run.summary, well.sample_hz);
+            WellSegment {
+                name: segment.name.clone(),
+                start_s: run.start_s,
+                duration_s: run.duration_s,
+                omega_rpm: segment.omega_rpm,
+                drive: WellDrive {
+                    wob_kn: segment.wob_kn,
+                    feed_m_h: segment.feed_m_h,
+                },
+                warning: off_bottom_warning(&summary),
+                summary,
+                steady: SteadyReport::of(&segment.job.steady(&well.assembly), segment.job.bit.blades),
+            }
         })
         .collect())
+}
+
+/// A well's record, the command's CSV and Python's `record`: each sample's segment (its index
+/// in the well), and the string's columns ([`record_columns`]) with the segment's top-drive
+/// speed (rpm) after the time.
+pub fn well_record_columns(
+    well: &CoupledWell,
+    samples: &[(usize, Sample)],
+) -> (Vec<usize>, Vec<(&'static str, Vec<f64>)>) {
+    let record: Vec<Sample> = samples.iter().map(|(_, s)| *s).collect();
+    let mut columns = record_columns(&record);
+    let top_drive = samples.iter().map(|(i, _)| well.segments[*i].omega_rpm).collect();
+    columns.insert(1, ("top_drive_rpm", top_drive));
+    (samples.iter().map(|(i, _)| *i).collect(), columns)
 }
 
 /// A string's record as named columns in the units their names carry, the command's CSV and

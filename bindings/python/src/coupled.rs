@@ -50,7 +50,9 @@ pub(crate) fn coupled(
                 }
             })
         });
-        let mut value = serde_json::to_value(check(py, one)?).expect("a report serialises");
+        let one = check(py, one)?;
+        notes.extend(one.warning.as_ref().map(|w| format!("warning: {w}")));
+        let mut value = serde_json::to_value(one).expect("a report serialises");
         if record {
             let columns = run::record_columns(&samples)
                 .into_iter()
@@ -65,10 +67,10 @@ pub(crate) fn coupled(
 
 /// One string drilled through the well file at `path` (`bitrock coupled --well`): each
 /// segment's report, and with `record` the samples as columns (`segment` each sample's
-/// segment's index); as JSON text.
+/// segment's index); as JSON text. `note` hears a segment spent off bottom.
 #[pyfunction]
-#[pyo3(signature = (path, record))]
-pub(crate) fn coupled_well(py: Python<'_>, path: PathBuf, record: bool) -> PyResult<String> {
+#[pyo3(signature = (path, record, note))]
+pub(crate) fn coupled_well(py: Python<'_>, path: PathBuf, record: bool, note: Option<Py<PyAny>>) -> PyResult<String> {
     let well = check(py, CoupledWell::load(&path))?;
     if record {
         check(py, well.check_record_memory())?;
@@ -81,17 +83,20 @@ pub(crate) fn coupled_well(py: Python<'_>, path: PathBuf, record: bool) -> PyRes
             }
         })
     });
-    let mut value = serde_json::json!({ "segments": check(py, segments)? });
+    let segments = check(py, segments)?;
+    let notes = segments
+        .iter()
+        .filter_map(|s| s.warning.as_ref().map(|w| format!("warning: segment {}: {w}", s.name)))
+        .collect();
+    say(py, &note, notes)?;
+    let mut value = serde_json::json!({ "segments": segments });
     if record {
-        let only: Vec<_> = samples.iter().map(|(_, s)| *s).collect();
-        let mut columns: serde_json::Map<String, serde_json::Value> = run::record_columns(&only)
+        let (segment, columns) = run::well_record_columns(&well, &samples);
+        let mut columns: serde_json::Map<String, serde_json::Value> = columns
             .into_iter()
             .map(|(name, values)| (name.to_string(), values.into()))
             .collect();
-        columns.insert(
-            "segment".into(),
-            samples.iter().map(|(i, _)| *i).collect::<Vec<_>>().into(),
-        );
+        columns.insert("segment".into(), segment.into());
         value["record"] = serde_json::Value::Object(columns);
     }
     Ok(value.to_string())

@@ -221,9 +221,14 @@ def test_python_drills_the_command_s_well(cli, tmp_path):
     assert drilled["segments"] == json.loads(done.stdout)["segments"]
     record = drilled["record"]
     assert record["segment"] == ["shale"] * 500 + ["sandstone"] * 500
+    assert record["top_drive_rpm"] == [45.0] * 500 + [180.0] * 500
     assert record["time_s"][500] == pytest.approx(10.0, abs=1e-12)
     assert [s["regime"] for s in drilled["segments"]][0] == "stick_slip"
     assert [s["drive"] for s in drilled["segments"]] == [{"wob_kn": 150.0}] * 2
+    # A bit off bottom nearly throughout is said, as the command says it.
+    with pytest.warns(bitrock.BitrockWarning, match="off bottom for 9"):
+        one = bitrock.coupled(axial_damping_kns_m=0.0, omega_rpm=60, wob_kn=200, duration_s=20.0, settle_s=60.0)
+    assert one["off_bottom_share"] >= 0.9 and "off bottom" in one["warning"]
     with pytest.raises(bitrock.InputError, match=r"well.toml:4:1: .*blades"):
         well.write_text("[[segment]]\nduration_s = 10\nomega_rpm = 45\nblades = 3\n")
         bitrock.coupled_well(well)

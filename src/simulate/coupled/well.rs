@@ -147,12 +147,17 @@ impl CoupledWell {
                     },
                 )));
             }
-            let feed_m_h = (s.wob_kn.is_none()).then(|| s.feed_m_h.unwrap_or(DEFAULT_FEED_M_H));
-            let axial = match (s.wob_kn, feed_m_h) {
-                (Some(kn), _) => Axial::Weight { wob_n: kn * 1e3 },
-                (None, m_h) => Axial::Feed {
-                    rate_m_s: m_h.unwrap_or(DEFAULT_FEED_M_H) * M_S_PER_M_H,
-                },
+            let (axial, feed_m_h) = match s.wob_kn {
+                Some(kn) => (Axial::Weight { wob_n: kn * 1e3 }, None),
+                None => {
+                    let m_h = s.feed_m_h.unwrap_or(DEFAULT_FEED_M_H);
+                    (
+                        Axial::Feed {
+                            rate_m_s: m_h * M_S_PER_M_H,
+                        },
+                        Some(m_h),
+                    )
+                }
             };
             let job = CoupledJob {
                 bit: s.in_rock(bit),

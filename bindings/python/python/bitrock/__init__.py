@@ -863,11 +863,12 @@ def coupled_well(path: str | os.PathLike[str], *, record: bool = False) -> dict:
     weight or feed; docs/coupled.md), as ``bitrock coupled --well`` drills it: under
     ``segments`` each segment's name, start and duration (s), top-drive speed (rpm), ``drive``
     (``wob_kn`` or ``feed_m_h``), regime, rate of penetration (m/h), stuck and off-bottom
-    shares and ranges, with its ``steady`` drilling; with ``record=True``
-    the samples under ``record`` as columns, ``segment`` naming each sample's segment."""
+    shares and ranges, with its ``steady`` drilling; with ``record=True`` the samples under
+    ``record`` as columns (``top_drive_rpm`` among them), ``segment`` naming each sample's
+    segment. A segment spent off bottom nearly throughout is said as a ``BitrockWarning``."""
     import json
 
-    well = json.loads(_bitrock.coupled_well(os.fspath(path), record))
+    well = json.loads(_bitrock.coupled_well(os.fspath(path), record, _note))
     if record:
         names = [s["name"] for s in well["segments"]]
         well["record"]["segment"] = [names[i] for i in well["record"]["segment"]]

@@ -171,11 +171,11 @@ def coupled_calibrate(path: str | PathLike[str], columns: dict, options: dict, m
     with `map` the regimes' probabilities over its posterior; as JSON text.
     """
 
-def coupled_well(path: str | PathLike[str], record: bool) -> str:
+def coupled_well(path: str | PathLike[str], record: bool, note: Any | None) -> str:
     """
     One string drilled through the well file at `path` (`bitrock coupled --well`): each
     segment's report, and with `record` the samples as columns (`segment` each sample's
-    segment's index); as JSON text.
+    segment's index); as JSON text. `note` hears a segment spent off bottom.
     """
 
 def evidence(record: Record, laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> ComputedEvidence:
