@@ -222,7 +222,32 @@ pub fn fit_record_from(
     opts: &FitOptions,
     known: &[(Law, Vec<f64>)],
 ) -> Result<Vec<LawFit>> {
-    fit_laws_from(laws, &data.calibration, &data.validation, opts, known).map_err(|e| match e {
+    fit_record_to(laws, data, opts, known, 0.0)
+}
+
+/// [`fit_record_from`] for fits whose sums of squared residuals matter only to within
+/// `resolution_nm2` (N·m², > 0; [`fit_law_within`]): the validation samples are not used.
+pub fn fit_record_within(
+    laws: &[Law],
+    data: &FieldData,
+    opts: &FitOptions,
+    known: &[(Law, Vec<f64>)],
+    resolution_nm2: f64,
+) -> Result<Vec<LawFit>> {
+    fit_record_to(laws, data, opts, known, resolution_nm2.max(0.0))
+}
+
+/// [`fit_record_from`], each run stopped once its gain falls below `resolution_nm2` where > 0.
+fn fit_record_to(
+    laws: &[Law],
+    data: &FieldData,
+    opts: &FitOptions,
+    known: &[(Law, Vec<f64>)],
+    resolution_nm2: f64,
+) -> Result<Vec<LawFit>> {
+    let empty = Samples::default();
+    let validation = if resolution_nm2 > 0.0 { &empty } else { &data.validation };
+    fit_laws_to(laws, &data.calibration, validation, opts, known, resolution_nm2).map_err(|e| match e {
         Error::Fit { law, message, .. } => Error::Fit {
             record: Some(data.source.clone()),
             law,
@@ -248,6 +273,18 @@ pub fn fit_laws_from(
     opts: &FitOptions,
     known: &[(Law, Vec<f64>)],
 ) -> Result<Vec<LawFit>> {
+    fit_laws_to(laws, calibration, validation, opts, known, 0.0)
+}
+
+/// [`fit_laws_from`], each run stopped once its gain falls below `resolution_nm2` where > 0.
+fn fit_laws_to(
+    laws: &[Law],
+    calibration: &Samples,
+    validation: &Samples,
+    opts: &FitOptions,
+    known: &[(Law, Vec<f64>)],
+    resolution_nm2: f64,
+) -> Result<Vec<LawFit>> {
     opts.validate_for(calibration)?;
     let fits: Vec<Result<LawFit>> = laws
         .par_iter()
@@ -257,7 +294,7 @@ pub fn fit_laws_from(
                 .filter(|(l, _)| *l == law)
                 .map(|(_, p)| p.clone())
                 .collect();
-            fit_law_from(law, calibration, validation, opts, &starts)
+            fit_law_to(law, calibration, validation, opts, &starts, resolution_nm2)
         })
         .collect();
     fits.into_iter().collect()

@@ -17,7 +17,7 @@ use bitrock::run;
 use bitrock::run::abc::SamplerConfig;
 use bitrock::run::answer::Answer;
 use bitrock::run::dir::Owned;
-use bitrock::run::evidence::EvidenceAnalysis;
+use bitrock::run::evidence::{EvidenceAnalysis, EvidenceCheck};
 use bitrock::{Error, files};
 use clap::Args;
 use std::io::Write;
@@ -132,14 +132,24 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         out,
         "\nmodel evidence: tempered SMC per law over physical boxes (no fit involved), i.i.d. and AR(1) residuals, the noise model chosen by its evidence"
     )?;
-    let evidence = run::evidence::Settings {
+    let evidence_job = run::evidence::Settings {
         particles: (cmd.particles / 50).clamp(20, EvidenceConfig::default().particles),
         seed: cmd.seed,
         backend: cmd.backend,
         ..Default::default()
     }
-    .job(defaults.laws.clone(), defaults.fit)?
-    .run(&data, Default::default(), &mut RunProgress::new(false))?;
+    .job(defaults.laws.clone(), defaults.fit)?;
+    let evidence = evidence_job.run(&data, Default::default(), &mut RunProgress::new(false))?;
+    // The evidence's answer checked as `bitrock evidence` checks it by default.
+    let check = run::evidence::check(
+        &evidence_job,
+        &data,
+        &evidence,
+        run::evidence::DEFAULT_REPLICATES,
+        &mut Default::default(),
+        &mut |_, _| {},
+        &mut RunProgress::new(false),
+    )?;
     let report_dir = root.join(REPORT_DIR);
     let report = bitrock::report::write_paper_report(
         &report_dir,
@@ -151,7 +161,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             ..Default::default()
         },
     )?;
-    print_headline(&mut out, &headlines, &evidence, &data, root, &report)?;
+    print_headline(&mut out, &headlines, (&evidence, &check), &data, root, &report)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -240,13 +250,13 @@ struct Headline {
 fn print_headline(
     out: &mut impl Write,
     headlines: &[Headline],
-    evidence: &EvidenceAnalysis,
+    (evidence, check): (&EvidenceAnalysis, &EvidenceCheck),
     data: &FieldData,
     root: &Path,
     report: &ReportSummary,
 ) -> std::io::Result<()> {
     writeln!(out, "\n== bitrock demo: headline ==")?;
-    if let Some(answer) = evidence.answer(None) {
+    if let Some(answer) = evidence.answer(Some(check)) {
         writeln!(out, "answer: {}", answer.sentence())?;
     }
     writeln!(

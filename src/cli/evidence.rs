@@ -75,9 +75,11 @@ pub struct EvidenceCmd {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Then check the answer by re-simulation: K synthetic records per law, each made from
-    /// the law's evidence posterior and the record's own residuals, each through the same
-    /// evidence over the same boxes; a confusion matrix with the share decided, undecided and
-    /// decided wrongly (costs K times the evidence per law).
+    /// the law's evidence posterior and the record's own residuals, each through a lighter
+    /// evidence over the same boxes (at most 200 particles in 2 islands per law, from the
+    /// replicate's fit); a confusion matrix with the share decided, undecided and decided
+    /// wrongly, and the answer undecided where the check does not tell its pair's records
+    /// apart [default: 4; 0: no check].
     #[arg(long, value_name = "K")]
     pub check: Option<usize>,
     /// Write the posterior (every law's sets, weighed by its P(m | y)) as particle CSV to FILE,
@@ -120,7 +122,6 @@ impl bitrock::abc::Observer for Notes {
 
 pub fn run(cmd: &EvidenceCmd) -> anyhow::Result<ExitCode> {
     set_threads(cmd.threads)?;
-    cmd.check.map(evidence::check_replicates).transpose()?;
     if let Some(path) = &cmd.posterior_out {
         bitrock::run::dir::check_output_file(path, "posterior_out", false)?;
     }
@@ -159,7 +160,9 @@ fn start_or_resume(
         if let Some(backend) = cmd.backend {
             job.backend = backend;
         }
-        cmd.check.map(|k| evidence::check_size(k, &job, &data)).transpose()?;
+        evidence::replicates_asked(cmd.check)
+            .map(|k| evidence::check_size(k, &job, &data))
+            .transpose()?;
         let analysis = unfinished
             .run(&job, &data, progress, Default::default(), &mut Notes)
             .inspect_err(|e| still_under_way(dir, Some(e)))?;
@@ -170,7 +173,9 @@ fn start_or_resume(
         evidence::dir::check_out(dir, cmd.force)?;
     }
     let data = load_data(&cmd.input.record)?;
-    cmd.check.map(|k| evidence::check_size(k, &job, &data)).transpose()?;
+    evidence::replicates_asked(cmd.check)
+        .map(|k| evidence::check_size(k, &job, &data))
+        .transpose()?;
     match &cmd.out {
         None => {
             let analysis = job.run(&data, Default::default(), &mut Notes)?;
@@ -230,8 +235,7 @@ fn finish(
         }
     }
     let quiet = cmd.quiet;
-    let check = cmd
-        .check
+    let check = evidence::replicates_asked(cmd.check)
         .map(|k| {
             let mut progress = |done: usize, total: usize| {
                 if !quiet {
@@ -534,9 +538,17 @@ fn scaling(w_ref_kn: Option<f64>) -> String {
 
 /// The check's confusion matrix and verdicts.
 pub(super) fn check_table(out: &mut impl Write, check: &EvidenceCheck) -> std::io::Result<()> {
+    let sampled = check.sampler.as_ref().map_or(String::new(), |s| {
+        format!(
+            ", each evidence {} islands × {} particles {}",
+            s.islands,
+            s.particles,
+            s.start.describe()
+        )
+    });
     writeln!(
         out,
-        "\nEvidence check: {} synthetic records per law (parameters from its evidence posterior, noise resampled from its fit's residuals), the same boxes; {} candidates scored in {:.1} s",
+        "\nEvidence check: {} synthetic records per law (parameters from its evidence posterior, noise resampled from its fit's residuals), the same boxes{sampled}; {} candidates scored in {:.1} s",
         check.replicates, check.candidates_scored, check.seconds
     )?;
     writeln!(

@@ -51,6 +51,22 @@ pub struct Answer {
     pub strength: Strength,
     /// Why the strength is what it is, where that needs saying.
     pub why: Option<String>,
+    /// What the evidence's check by re-simulation said of the pair, where one ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub check: Option<AnswerCheck>,
+}
+
+/// The evidence's check by re-simulation, read for an answer's pair: how many records made by
+/// the answer's law it decided for that law, and how many made by the runner-up it decided
+/// for the answer's law too.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AnswerCheck {
+    /// Synthetic records per law.
+    pub replicates: usize,
+    /// Records made by the answer's law decided for it.
+    pub decided_right: usize,
+    /// Records made by the runner-up decided for the answer's law; `None` without a runner-up.
+    pub runner_up_decided_for_law: Option<usize>,
 }
 
 impl Answer {
@@ -73,6 +89,7 @@ impl Answer {
             error: Some(next.error),
             strength: next.strength,
             why: evidence_why(next),
+            check: None,
         })
     }
 
@@ -132,6 +149,7 @@ impl Answer {
             error: Some(error),
             strength,
             why,
+            check: None,
         })
     }
 
@@ -147,21 +165,23 @@ impl Answer {
             error: None,
             strength: Strength::Undecided,
             why: Some("one law was compared: nothing was selected".into()),
+            check: None,
         }
     }
 
-    /// The answer weighed by the evidence's check: where records made by the answer's law
-    /// were decided for it in fewer than half the check's replicates (`decided_right`, a
-    /// share of `replicates`), a decided answer says so, and the strength no longer decides.
-    pub fn checked(mut self, decided_right: f64, replicates: usize) -> Self {
-        if self.strength.decides() && decided_right < 0.5 {
-            let right = (decided_right * replicates as f64).round() as usize;
+    /// The answer weighed by the evidence's `check`: where it decided fewer than half the
+    /// records made by the answer's law for it, or half or more of the runner-up's for the
+    /// answer's law too, records like this one do not settle the question, and a decided
+    /// answer becomes undecided.
+    pub fn checked(mut self, check: AnswerCheck) -> Self {
+        let k = check.replicates;
+        let misses_own = 2 * check.decided_right < k;
+        let takes_rival = check.runner_up_decided_for_law.is_some_and(|n| 2 * n >= k);
+        if self.strength.decides() && (misses_own || takes_rival) {
             self.strength = Strength::Undecided;
-            self.why = Some(format!(
-                "the check decided only {right} of {replicates} records made by {} for it: records like this one do not settle the question",
-                self.law
-            ));
+            self.why = Some("the check by re-simulation does not decide records like this one".into());
         }
+        self.check = Some(check);
         self
     }
 
@@ -213,6 +233,16 @@ impl Answer {
         if let Some(why) = &self.why {
             line.push_str("; ");
             line.push_str(why);
+        }
+        if let Some(check) = &self.check {
+            let k = check.replicates;
+            line.push_str(&format!(
+                "; the check decided {} of {k} records made by {} for it",
+                check.decided_right, self.law
+            ));
+            if let Some(n) = check.runner_up_decided_for_law {
+                line.push_str(&format!(" and {n} of {k} made by {next} for {}", self.law));
+            }
         }
         line
     }
@@ -343,16 +373,39 @@ mod tests {
     }
 
     #[test]
-    fn a_check_that_does_not_decide_the_law_s_own_records_takes_the_word_back() {
+    fn a_check_that_does_not_tell_the_pair_s_records_apart_takes_the_word_back() {
         let p = [(Law::M2, 0.999), (Law::M3, 0.001)];
         let a = Answer::of_abc(&p, &[1.0, 1.0], 1e5, false, &[]).unwrap();
         assert!(a.strength.decides());
-        assert_eq!(a.clone().checked(0.6, 5), a);
-        let weak = a.checked(0.0, 5);
-        assert_eq!(weak.strength, Strength::Undecided);
+        let check = |decided_right, rival| AnswerCheck {
+            replicates: 5,
+            decided_right,
+            runner_up_decided_for_law: rival,
+        };
+        // Three of five of its own decided, two of five of the rival's taken: the word stands,
+        // with the check beside it.
+        let kept = a.clone().checked(check(3, Some(2)));
+        assert_eq!((kept.strength, &kept.why), (a.strength, &a.why));
         assert!(
-            weak.sentence()
-                .contains("the check decided only 0 of 5 records made by m2 for it")
+            kept.sentence()
+                .ends_with("; the check decided 3 of 5 records made by m2 for it and 2 of 5 made by m3 for m2")
         );
+        // Two of five of its own: undecided.
+        let weak = a.clone().checked(check(2, Some(0)));
+        assert_eq!(weak.strength, Strength::Undecided);
+        assert!(weak.sentence().contains(
+            "undecided (the paper's ABC, P(m | ρ < ε): 0.999 against 0.001, ln B = 6.91 ± 0.10); the check by re-simulation does not decide records like this one; the check decided 2 of 5"
+        ));
+        // Its own all decided, but the rival's records decided for it in three of five: the
+        // check cannot tell the pair apart.
+        assert_eq!(a.clone().checked(check(5, Some(3))).strength, Strength::Undecided);
+        // An answer that did not decide is not made to, and keeps its why.
+        let boxes = Answer {
+            strength: Strength::DecidedByTheBoxes,
+            why: Some("boxes".into()),
+            ..a
+        };
+        let checked = boxes.clone().checked(check(5, Some(0)));
+        assert_eq!((checked.strength, checked.why), (boxes.strength, boxes.why));
     }
 }

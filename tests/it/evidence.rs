@@ -296,6 +296,24 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
     let total: f64 = laws.iter().map(|l| l["probability"].as_f64().unwrap()).sum();
     assert!((total - 1.0).abs() < 1e-12, "{total}");
     assert!(laws.iter().any(|l| l["starts"].as_array().unwrap().len() == 2));
+    // Checked by default: 4 records per law, each through a lighter evidence (its islands'
+    // particles capped, two islands, from its fit), and the answer says what the check said.
+    let check = &doc["check"];
+    assert_eq!(check["replicates"], 4);
+    assert_eq!(
+        check["sampler"],
+        serde_json::json!({"particles": 100, "islands": 2, "start": "fit"})
+    );
+    assert_eq!(check["rows"].as_array().unwrap().len(), 2);
+    assert_eq!(doc["answer"]["check"]["replicates"], 4, "{}", doc["answer"]);
+    assert!(
+        doc["answer"]["sentence"]
+            .as_str()
+            .unwrap()
+            .contains("the check decided"),
+        "{}",
+        doc["answer"]
+    );
     for law in laws {
         assert!(law["ln_z"].as_f64().unwrap().is_finite());
         assert!(law["ln_z_error"].as_f64().unwrap() > 0.0);
@@ -325,9 +343,13 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
     assert!(doc["w_ref_kn"].is_null() && best["w_ref_kn"].is_null());
     let total: f64 = models.iter().map(|m| m["probability"].as_f64().unwrap()).sum();
     assert!((total - 1.0).abs() < 1e-12, "{total}");
-    let (code, named, err) = outcome(&mut args(&["--json", "--noise", "ar1"]));
+    let (code, named, err) = outcome(&mut args(&["--json", "--noise", "ar1", "--check", "0"]));
     assert_eq!(code, 0, "{err}");
     let named: serde_json::Value = serde_json::from_str(&named).unwrap();
+    assert!(
+        named["check"].is_null() && named["answer"]["check"].is_null(),
+        "{named}"
+    );
     assert_eq!(named["noise_model"], "ar1");
     assert_eq!(named["noise_models"].as_array().unwrap().len(), 1);
     // Physical boxes: from the bound 0 of the static torque, in the record's kN·m.
@@ -364,7 +386,7 @@ fn the_command_prints_the_evidence_as_json_and_tables_and_refuses_bad_settings()
         ("--prior-scale", "0", "--prior-scale"),
         ("--particles", "5", "--particles"),
         ("--max-stages", "0", "--max-stages"),
-        ("--check", "0", "--check"),
+        ("--check", "two", "--check"),
         ("--noise", "ar2", "--noise"),
     ] {
         let (code, out, err) = outcome(&mut args(&[flag, value]));
@@ -633,7 +655,7 @@ fn an_evidence_directory_holds_the_document_and_its_posterior_and_stability_maps
         cmd.args(extra);
         outcome(&mut cmd)
     };
-    let (code, json, err) = evidence(&["--json", "--out", out.to_str().unwrap()]);
+    let (code, json, err) = evidence(&["--json", "--check", "0", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     let printed: serde_json::Value = serde_json::from_str(&json).unwrap();
     let stored: serde_json::Value =
@@ -1112,7 +1134,15 @@ fn an_evidence_stopped_part_way_and_resumed_is_the_uninterrupted_evidence() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("under way") && err.contains("--resume"), "{err}");
 
-    let (code, json, err) = outcome(bin().args(["evidence", "--resume", out.to_str().unwrap(), "--json", "--quiet"]));
+    let (code, json, err) = outcome(bin().args([
+        "evidence",
+        "--resume",
+        out.to_str().unwrap(),
+        "--json",
+        "--quiet",
+        "--check",
+        "0",
+    ]));
     assert_eq!(code, 0, "{err}");
     let printed: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(printed["laws"].as_array().unwrap().len(), 2);

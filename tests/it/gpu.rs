@@ -837,6 +837,8 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
             "3",
             "--noise",
             "iid",
+            "--check",
+            "0",
             "--json",
             "--backend",
             backend,

@@ -10,7 +10,7 @@ use bitrock::data::FieldData;
 use bitrock::error::Error;
 use bitrock::run::evidence::EvidenceAnalysis;
 use bitrock::run::evidence::dir::{self, Unfinished};
-use bitrock::run::evidence::{Progress, check as check_evidence, check_replicates, check_size};
+use bitrock::run::evidence::{Progress, check as check_evidence, check_size, replicates_asked};
 use bitrock::run::{self, MakeWorkers, Placement, Scoring};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -37,10 +37,7 @@ pub(crate) fn evidence(
     let settings: run::evidence::Settings = crate::errors::settings(options)?;
     let mut job = check(py, settings.job(laws, fit_options(py, options)?))?;
     job.string = check(py, crate::stability::string_given(py, options)?.spec())?;
-    let replicates: Option<usize> = kwarg(options, "check")?;
-    if let Some(k) = replicates {
-        check(py, check_replicates(k))?;
-    }
+    let replicates = replicates_asked(kwarg(options, "check")?);
     let out: Option<PathBuf> = kwarg(options, "out")?;
     let force: bool = kwarg(options, "force")?.unwrap_or(false);
     let data = &record.data;
@@ -68,7 +65,7 @@ pub(crate) fn evidence(
 }
 
 /// Continues the evidence under way in `dir` (on `backend`, default its own), checks it with
-/// `check` replicates per law where given, and writes the directory: the document, as
+/// `check` replicates per law ([`replicates_asked`]: by default the small check; 0 none), and writes the directory: the document, as
 /// [`evidence`] returns it.
 #[pyfunction]
 #[pyo3(signature = (dir, backend, check, note, dispatcher=None, parallelism=1))]
@@ -81,9 +78,7 @@ pub(crate) fn resume_evidence(
     dispatcher: Option<Py<PyAny>>,
     parallelism: usize,
 ) -> PyResult<ComputedEvidence> {
-    if let Some(k) = check {
-        crate::errors::check(py, check_replicates(k))?;
-    }
+    let check = replicates_asked(check);
     // The library names the directory by the command line's flag; here it is the argument.
     let opened = py.detach(|| Unfinished::open(&dir)).map_err(|err| match err {
         Error::InvalidSetting { field, message } if field == "resume" => Error::InvalidSetting {
@@ -95,6 +90,9 @@ pub(crate) fn resume_evidence(
     let (unfinished, mut job, data, progress) = crate::errors::check(py, opened)?;
     if let Some(backend) = named(py, "backend", backend)? {
         job.backend = backend;
+    }
+    if let Some(k) = check {
+        crate::errors::check(py, check_size(k, &job, &data))?;
     }
     let workers = Workers {
         dispatcher,

@@ -270,7 +270,7 @@ def test_the_evidence_reads_as_tables_and_posterior_sets(small) -> None:
         ({"boxes": "wide"}, "boxes"),
         ({"prior_scale": -1.0}, "prior_scale"),
         ({"particles": "many"}, "particles"),
-        ({"check": 0}, "check"),
+        ({"check": -1}, "check"),
         ({"start_from": "prior"}, "start_from"),
         ({"ess_share": 1.5}, "ess_share"),
         ({"max_sweeps": True}, "max_sweeps"),
@@ -305,8 +305,15 @@ def test_the_check_by_resimulation_is_the_command_lines(cli) -> None:
         assert table.loc[law, "p_m2"] == document["rows"][["m2", "m3"].index(law)]["mean_probability"][0]
 
 
-def test_no_check_is_none(small) -> None:
-    assert small.check is None
+def test_the_check_runs_by_default_and_check_0_turns_it_off(small) -> None:
+    document = small.document["check"]
+    assert document["replicates"] == 4
+    assert document["sampler"] == {"particles": 60, "islands": 2, "start": "fit"}
+    assert list(small.check.index) == ["m2", "m3"]
+    assert small.answer["check"]["replicates"] == 4
+    assert "the check decided" in small.answer["sentence"]
+    unchecked = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=8), **SMALL, check=0)
+    assert unchecked.check is None and "check" not in unchecked.answer
 
 
 def test_the_evidence_posterior_maps_with_its_law_probabilities(small) -> None:
@@ -414,11 +421,10 @@ def test_an_evidence_stopped_by_ctrl_c_is_resumed_to_the_uninterrupted_one(tmp_p
     with pytest.raises(bitrock.InputError, match="resume_evidence") as caught:
         bitrock.evidence(record, **settings, out=tmp_path / "ev")
     assert caught.value.argument == "out"
-    resumed = bitrock.resume_evidence(tmp_path / "ev", check=1)
+    # Checked by default, as the uninterrupted evidence was, to the same check.
+    resumed = bitrock.resume_evidence(tmp_path / "ev")
     assert resumed.check is not None
-    document = _without_seconds(resumed.document)
-    del document["check"]
-    assert document == _without_seconds(whole.document)
+    assert _without_seconds(resumed.document) == _without_seconds(whole.document)
     assert _without_seconds(bitrock.read_evidence(tmp_path / "ev").document) == _without_seconds(resumed.document)
     with pytest.raises(bitrock.InputError, match="finished evidence") as caught:
         bitrock.resume_evidence(tmp_path / "ev")

@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::fit::{FitOptions, LawFit};
 use crate::laws::Law;
 use crate::prior::Prior;
-use crate::run::answer::Answer;
+use crate::run::answer::{Answer, AnswerCheck};
 use crate::separation::Separation;
 use serde::{Deserialize, Serialize};
 
@@ -187,16 +187,28 @@ impl EvidenceAnalysis {
     /// its `check` where one ran ([`Answer::checked`]).
     pub fn answer(&self, check: Option<&EvidenceCheck>) -> Option<Answer> {
         let answer = Answer::of_evidence(&self.evidence, &self.separations)?;
-        let row = check.and_then(|c| {
-            c.rows
-                .iter()
-                .find(|r| r.law == answer.law)
-                .map(|r| (r.decided_right, c.replicates))
-        });
-        Some(match row {
-            Some((right, replicates)) => answer.checked(right, replicates),
-            None => answer,
-        })
+        let Some(check) = check else {
+            return Some(answer);
+        };
+        // Records made by `made_by` that the check decided for the answer's law.
+        let decided_for_law = |made_by: Law| {
+            let row = check.rows.iter().find(|r| r.law == made_by)?;
+            Some(
+                row.replicates
+                    .iter()
+                    .filter(|r| r.decided && r.first == answer.law)
+                    .count(),
+            )
+        };
+        let Some(decided_right) = decided_for_law(answer.law) else {
+            return Some(answer);
+        };
+        let runner_up_decided_for_law = answer.runner_up.and_then(decided_for_law);
+        Some(answer.checked(AnswerCheck {
+            replicates: check.replicates,
+            decided_right,
+            runner_up_decided_for_law,
+        }))
     }
 
     /// `document` (from [`document`](Self::document)) with the evidence's `check` and the

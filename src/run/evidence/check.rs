@@ -8,6 +8,13 @@
 //! estimates and the generating parameters) and its evidence computed over the *same* boxes
 //! as the record's, with its own seed ([`crate::run::selection::replicate_seed`]).
 //!
+//! Each replicate's evidence is a lighter one than the record's ([`Job::for_replicates`]): at
+//! most [`REPLICATE_PARTICLES`] particles in [`REPLICATE_ISLANDS`] islands per law, from the
+//! replicate's own least-squares fit where the record's job starts from it, and no refinement.
+//! The check asks whether the data decide, which a replicate's fits and its posterior's mean
+//! log-likelihood say, not for each replicate's ln Z to a tenth of a nat; so it costs about a
+//! third of the record's own evidence at [`DEFAULT_REPLICATES`] per law, and runs by default.
+//!
 //! A replicate's answer is the law of the largest posterior probability, and it is *decided*
 //! when it beats every other law by at least positive odds beyond twice their error *and* by
 //! the data ([`Strength::decides`]): its posterior's mean log-likelihood lies at least
@@ -21,7 +28,7 @@
 
 use super::{EvidenceAnalysis, Job};
 use crate::abc::Observer;
-use crate::abc::evidence::{NoiseModel, Strength};
+use crate::abc::evidence::{NoiseModel, Start, Strength};
 use crate::data::FieldData;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
@@ -86,11 +93,67 @@ pub struct EvidenceCheck {
     pub laws: Vec<Law>,
     /// Replicates per law, K.
     pub replicates: usize,
+    /// How each replicate's evidence was sampled (absent from checks kept before it was said).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampler: Option<ReplicateSampler>,
     pub rows: Vec<CheckRow>,
     /// Candidates scored by all replicates' samplers.
     pub candidates_scored: u64,
     /// Wall time of the check, s.
     pub seconds: f64,
+}
+
+/// Log-likelihood within which a replicate's least-squares fits are polished, nats: far below
+/// the nats that decide ([`crate::separation::UNDECIDED_NATS`],
+/// [`DATA_DECIDES_NATS`](crate::abc::evidence::DATA_DECIDES_NATS)).
+const FIT_RESOLUTION_NATS: f64 = 0.02;
+
+/// Replicates per law of the check an evidence runs unless told otherwise.
+pub const DEFAULT_REPLICATES: usize = 4;
+
+/// Most particles of each island of a replicate's samplers.
+pub const REPLICATE_PARTICLES: usize = 200;
+
+/// Most islands per law and start of a replicate's samplers (two give its ln Z an error).
+pub const REPLICATE_ISLANDS: usize = 2;
+
+/// The replicates per law an evidence is checked with, from what the user asked: none asked,
+/// [`DEFAULT_REPLICATES`]; 0, no check.
+pub fn replicates_asked(asked: Option<usize>) -> Option<usize> {
+    match asked {
+        None => Some(DEFAULT_REPLICATES),
+        Some(0) => None,
+        Some(k) => Some(k),
+    }
+}
+
+/// How each replicate's evidence was sampled, as the check's document says it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReplicateSampler {
+    pub particles: usize,
+    pub islands: usize,
+    pub start: Start,
+}
+
+impl Job {
+    /// The evidence of each replicate: the record's job with at most [`REPLICATE_PARTICLES`]
+    /// particles in [`REPLICATE_ISLANDS`] islands, from the replicate's own fit where the job
+    /// starts from fits (a law whose fit has no covariance still starts from its box), not
+    /// refined.
+    pub fn for_replicates(&self) -> Job {
+        let mut job = self.clone();
+        let sampler = &mut job.sampler;
+        sampler.particles = sampler.particles.min(REPLICATE_PARTICLES);
+        for (_, n) in &mut sampler.law_particles {
+            *n = (*n).min(REPLICATE_PARTICLES);
+        }
+        sampler.islands = sampler.islands.min(REPLICATE_ISLANDS);
+        if sampler.start == Start::Both {
+            sampler.start = Start::Fit;
+        }
+        sampler.refine_rounds = 0;
+        job
+    }
 }
 
 /// Refuses, naming `check`, a check of no replicates (before any work).
@@ -101,20 +164,26 @@ pub fn check_replicates(replicates: usize) -> Result<()> {
     Ok(())
 }
 
-/// Refuses, naming `check`, a check of `replicates` records per law that could not finish in a
-/// day (each record gets the whole evidence `job` on `data`'s calibration samples: at least
-/// two scored batches of every island of every law), before any work.
+/// Refuses, naming `check`, a check of `replicates` records per law whose results would not
+/// fit in memory or that could not finish in a day (each record gets the replicates' evidence
+/// ([`Job::for_replicates`]) on `data`'s calibration samples: at least two scored batches of
+/// every island of every law), before any work.
 pub fn check_size(replicates: usize, job: &Job, data: &FieldData) -> Result<()> {
     check_replicates(replicates)?;
+    let job = job.for_replicates();
     let sampler = &job.sampler;
-    let starts = if sampler.start == crate::abc::evidence::Start::Both {
-        2.0
-    } else {
-        1.0
-    };
+    let starts = if sampler.start == Start::Both { 2.0 } else { 1.0 };
     let particles: f64 = job.laws.iter().map(|&law| sampler.particles_of(law) as f64).sum();
     let records = replicates as f64 * job.laws.len() as f64;
     let samples = data.calibration.len() as f64;
+    // Every replicate's result is kept: its parameters, and each law's ln Z and probability.
+    let params = job.laws.iter().map(|law| law.n_params()).max().unwrap_or(0);
+    let per_record = std::mem::size_of::<CheckReplicate>() + 8 * (params + 2 * job.laws.len());
+    crate::limits::check_memory(
+        "check",
+        records * per_record as f64,
+        &format!("the results of {records:.3e} synthetic records"),
+    )?;
     crate::limits::check_work(
         "check",
         records * particles * sampler.islands as f64 * starts * samples * 2.0,
@@ -137,6 +206,7 @@ pub fn check(
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
     check_size(replicates, job, data)?;
+    let job = &job.for_replicates();
     let started = Instant::now();
     let laws: Vec<Law> = analysis.evidence.laws.iter().map(|l| l.law).collect();
     // The backend the analysis ended on: a fallback to the CPU is said once, not per replicate.
@@ -165,6 +235,11 @@ pub fn check(
     Ok(EvidenceCheck {
         laws,
         replicates,
+        sampler: Some(ReplicateSampler {
+            particles: job.sampler.particles,
+            islands: job.sampler.islands,
+            start: job.sampler.start,
+        }),
         rows,
         candidates_scored,
         seconds: started.elapsed().as_secs_f64(),
@@ -208,8 +283,13 @@ fn replicate_of(
     let known: Vec<(Law, Vec<f64>)> = std::iter::once((law, params_si.clone()))
         .chain(analysis.fits.iter().map(|f| (f.law, f.params_si.clone())))
         .collect();
+    // A replicate's fits decide by whole nats: each is polished only while it gains more
+    // than [`FIT_RESOLUTION_NATS`] of log-likelihood, at the generating law's noise level
+    // ((n/2)·ΔS/S nats for a change ΔS of the sum of squares S).
+    let n = synthetic.calibration.len().max(1) as f64;
+    let resolution_nm2 = 2.0 * FIT_RESOLUTION_NATS * fit.rho * data.calibration.sum_sq_torque() / n;
     let basis = super::Basis::new(
-        crate::fit::fit_record_from(&job.laws, &synthetic, &analysis.fit, &known)?,
+        crate::fit::fit_record_within(&job.laws, &synthetic, &analysis.fit, &known, resolution_nm2)?,
         analysis.prior.clone(),
         analysis.fit,
         &synthetic,

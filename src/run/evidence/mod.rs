@@ -22,7 +22,7 @@ pub mod dir;
 pub mod settings;
 
 pub use analysis::{EvidenceAnalysis, EvidenceWarning};
-pub use check::{EvidenceCheck, check, check_replicates, check_size};
+pub use check::{DEFAULT_REPLICATES, EvidenceCheck, check, check_replicates, check_size, replicates_asked};
 pub use settings::{Boxes, Noise, Settings};
 
 /// The default width of the physical boxes, in record scales ([`PhysicalScales`]).

@@ -335,10 +335,10 @@ fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
         &["evidence", "rec.csv", "--refine-rounds", "7", "--out", "E"],
         &["--refine-rounds", "at most 6"],
     );
-    // A check of more records than a day computes, refused before the evidence itself.
+    // A check of more records than memory keeps, refused before the evidence itself.
     refused(
         &["evidence", "rec.csv", "--check", "1000000000", "--out", "E"],
-        &["--check", "synthetic records", "a day's work"],
+        &["--check", "synthetic records", "of memory"],
     );
     assert!(!tmp.path().join("W").exists() && !tmp.path().join("E").exists());
 }

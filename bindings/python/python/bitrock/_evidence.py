@@ -165,8 +165,9 @@ class Evidence:
         """The evidence's answer to "which law, how sure": the law of the largest evidence
         (``law``, ``probability``) over the next (``runner_up``), ``ln_b`` ± ``error`` between
         them, ``strength`` as in :attr:`bayes_factors` (never stronger than what the record
-        separates; taken back where the check does not decide records made by the law), ``why``
-        and the ``sentence`` the command prints last. ``None`` for a document written without
+        separates; taken back where the check does not tell the pair's records apart), ``why``,
+        ``check`` (records made by the law decided for it, and by the runner-up for it too, of
+        ``replicates``) and the ``sentence`` the command prints last. ``None`` for a document written without
         it."""
         return self._doc.get("answer")
 
@@ -230,7 +231,7 @@ class Evidence:
 
     @property
     def check(self) -> pd.DataFrame | None:
-        """The check by re-simulation (``check=K``), ``None`` without one: one row per law that
+        """The check by re-simulation (by default; ``None`` with ``check=0``): one row per law that
         made the synthetic records, with the mean P(m | y) of every law (``p_m1``…), the share
         of replicates ranking each law first (``first_m1``…), and the shares decided for the
         generating law, undecided, and decided for another law. A replicate is decided when
@@ -404,10 +405,12 @@ def evidence(
     candidates; it under-estimates a law whose posterior is a funnel wider than its fit's
     covariance, m3 on a record of the law it nests), or ``"both"`` (the default), as many
     islands from each, weighed by their inverse variances where they agree and the higher
-    kept where they do not (:attr:`Evidence.starts`); the evidence is of the boxes either way. ``check=K`` then checks the
-    answer by re-simulation (K synthetic records per law from its evidence posterior and the
-    record's own residuals, each through the same evidence over the same boxes; K times the
-    cost per law): see :attr:`Evidence.check`. ``out`` writes an evidence directory, as
+    kept where they do not (:attr:`Evidence.starts`); the evidence is of the boxes either way. The answer is then checked
+    by re-simulation: ``check`` (4 by default; 0: no check) synthetic records per law from its
+    evidence posterior and the record's own residuals, each through a lighter evidence over the
+    same boxes (at most 200 particles in 2 islands per law, from the replicate's fit), and the
+    answer made undecided where the check does not tell its pair's records apart: see
+    :attr:`Evidence.check`. ``out`` writes an evidence directory, as
     ``bitrock evidence --out``: :func:`read_evidence` reads it back and
     :func:`stability` maps it (``force=True`` replaces the evidence it holds); meanwhile the
     directory keeps the evidence under way, which :func:`resume_evidence` continues if the call
