@@ -132,24 +132,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         out,
         "\nmodel evidence: tempered SMC per law over physical boxes (no fit involved), i.i.d. and AR(1) residuals, the noise model chosen by its evidence"
     )?;
-    let evidence_job = run::evidence::Settings {
-        particles: (cmd.particles / 50).clamp(20, EvidenceConfig::default().particles),
-        seed: cmd.seed,
-        backend: cmd.backend,
-        ..Default::default()
-    }
-    .job(defaults.laws.clone(), defaults.fit)?;
-    let evidence = evidence_job.run(&data, Default::default(), &mut RunProgress::new(false))?;
-    // The evidence's answer checked as `bitrock evidence` checks it by default.
-    let check = run::evidence::check(
-        &evidence_job,
-        &data,
-        &evidence,
-        run::evidence::DEFAULT_REPLICATES,
-        &mut Default::default(),
-        &mut |_, _| {},
-        &mut RunProgress::new(false),
-    )?;
+    let (evidence, check) = checked_evidence(cmd, &data, &defaults)?;
     let report_dir = root.join(REPORT_DIR);
     let report = bitrock::report::write_paper_report(
         &report_dir,
@@ -163,6 +146,33 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     )?;
     print_headline(&mut out, &headlines, (&evidence, &check), &data, root, &report)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// The model evidence of the demo's laws on `data`, at particles scaled from the ABC runs',
+/// checked by re-simulation as `bitrock evidence` checks it by default.
+fn checked_evidence(
+    cmd: &DemoCmd,
+    data: &FieldData,
+    defaults: &run::abc::Config,
+) -> anyhow::Result<(EvidenceAnalysis, EvidenceCheck)> {
+    let job = run::evidence::Settings {
+        particles: (cmd.particles / 50).clamp(20, EvidenceConfig::default().particles),
+        seed: cmd.seed,
+        backend: cmd.backend,
+        ..Default::default()
+    }
+    .job(defaults.laws.clone(), defaults.fit)?;
+    let evidence = job.run(data, Default::default(), &mut RunProgress::new(false))?;
+    let check = run::evidence::check(
+        &job,
+        data,
+        &evidence,
+        run::evidence::DEFAULT_REPLICATES,
+        &mut Default::default(),
+        &mut |_, _| {},
+        &mut RunProgress::new(false),
+    )?;
+    Ok((evidence, check))
 }
 
 /// Refuses an `--out` that holds something the demo did not write: a directory that is not

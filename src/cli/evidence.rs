@@ -77,9 +77,11 @@ pub struct EvidenceCmd {
     /// Then check the answer by re-simulation: K synthetic records per law, each made from
     /// the law's evidence posterior and the record's own residuals, each through a lighter
     /// evidence over the same boxes (at most 200 particles in 2 islands per law, from the
-    /// replicate's fit); a confusion matrix with the share decided, undecided and decided
-    /// wrongly, and the answer undecided where the check does not tell its pair's records
-    /// apart [default: 4; 0: no check].
+    /// replicate's fit where the evidence starts from fits); a confusion matrix with the share
+    /// decided, undecided and decided wrongly, and the answer undecided where the check decides
+    /// fewer than half the records made by its law for it (against every other law), or half
+    /// or more of the runner-up's for it too [default: 4 where two laws or more are compared;
+    /// 0: no check; with --resume, the resuming command's].
     #[arg(long, value_name = "K")]
     pub check: Option<usize>,
     /// Write the posterior (every law's sets, weighed by its P(m | y)) as particle CSV to FILE,
@@ -160,7 +162,7 @@ fn start_or_resume(
         if let Some(backend) = cmd.backend {
             job.backend = backend;
         }
-        evidence::replicates_asked(cmd.check)
+        evidence::replicates_asked(cmd.check, job.laws.len())
             .map(|k| evidence::check_size(k, &job, &data))
             .transpose()?;
         let analysis = unfinished
@@ -173,7 +175,7 @@ fn start_or_resume(
         evidence::dir::check_out(dir, cmd.force)?;
     }
     let data = load_data(&cmd.input.record)?;
-    evidence::replicates_asked(cmd.check)
+    evidence::replicates_asked(cmd.check, job.laws.len())
         .map(|k| evidence::check_size(k, &job, &data))
         .transpose()?;
     match &cmd.out {
@@ -235,7 +237,7 @@ fn finish(
         }
     }
     let quiet = cmd.quiet;
-    let check = evidence::replicates_asked(cmd.check)
+    let check = evidence::replicates_asked(cmd.check, job.laws.len())
         .map(|k| {
             let mut progress = |done: usize, total: usize| {
                 if !quiet {

@@ -239,7 +239,7 @@ fn check_markdown(md: &mut String, document: &Value) {
     let _ = writeln!(
         md,
         "\n## Check by re-simulation\n\n{} synthetic records per law, each made from the law's posterior with the \
-         record's own residuals and put through the same evidence:\n",
+         record's own residuals and put through a lighter evidence over the same boxes:\n",
         check.replicates
     );
     let _ = writeln!(md, "| made by | decided right | undecided | decided wrong | verdict |");

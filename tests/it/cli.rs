@@ -254,10 +254,18 @@ fn demo_prints_fits_and_the_population_table() {
         markdown.contains("## Model probabilities by the paper's ABC"),
         "{markdown}"
     );
-    // The headline opens with the one answer that weighs the record, the evidence's, and gives
-    // each ABC run's beside its probabilities.
+    // The headline opens with the one answer that weighs the record, the evidence's, checked
+    // by re-simulation (m3's records decided for it: the embedded record separates m3), and
+    // gives each ABC run's beside its probabilities.
     let headline = stdout.split("== bitrock demo: headline ==").nth(1).unwrap();
-    assert!(headline.trim_start().starts_with("answer: m3 over "), "{headline}");
+    let answer = headline.trim_start().lines().next().unwrap();
+    assert!(answer.starts_with("answer: m3 over "), "{headline}");
+    assert!(
+        answer.contains(": very strong (")
+            && answer.contains("; the check decided ")
+            && answer.contains(" records made by m3 for it"),
+        "{answer}"
+    );
     assert_eq!(headline.matches("    its answer: m").count(), 3, "{headline}");
     for stem in [
         "fig01_data_and_fits",

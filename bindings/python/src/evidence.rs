@@ -37,7 +37,7 @@ pub(crate) fn evidence(
     let settings: run::evidence::Settings = crate::errors::settings(options)?;
     let mut job = check(py, settings.job(laws, fit_options(py, options)?))?;
     job.string = check(py, crate::stability::string_given(py, options)?.spec())?;
-    let replicates = replicates_asked(kwarg(options, "check")?);
+    let replicates = replicates_asked(kwarg(options, "check")?, job.laws.len());
     let out: Option<PathBuf> = kwarg(options, "out")?;
     let force: bool = kwarg(options, "force")?.unwrap_or(false);
     let data = &record.data;
@@ -65,8 +65,8 @@ pub(crate) fn evidence(
 }
 
 /// Continues the evidence under way in `dir` (on `backend`, default its own), checks it with
-/// `check` replicates per law ([`replicates_asked`]: by default the small check; 0 none), and writes the directory: the document, as
-/// [`evidence`] returns it.
+/// `check` replicates per law (by default the small check; 0 none), and writes the directory:
+/// the document, as [`evidence`] returns it.
 #[pyfunction]
 #[pyo3(signature = (dir, backend, check, note, dispatcher=None, parallelism=1))]
 pub(crate) fn resume_evidence(
@@ -78,7 +78,6 @@ pub(crate) fn resume_evidence(
     dispatcher: Option<Py<PyAny>>,
     parallelism: usize,
 ) -> PyResult<ComputedEvidence> {
-    let check = replicates_asked(check);
     // The library names the directory by the command line's flag; here it is the argument.
     let opened = py.detach(|| Unfinished::open(&dir)).map_err(|err| match err {
         Error::InvalidSetting { field, message } if field == "resume" => Error::InvalidSetting {
@@ -91,6 +90,7 @@ pub(crate) fn resume_evidence(
     if let Some(backend) = named(py, "backend", backend)? {
         job.backend = backend;
     }
+    let check = replicates_asked(check, job.laws.len());
     if let Some(k) = check {
         crate::errors::check(py, check_size(k, &job, &data))?;
     }

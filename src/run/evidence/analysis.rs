@@ -187,7 +187,8 @@ impl EvidenceAnalysis {
     /// its `check` where one ran ([`Answer::checked`]).
     pub fn answer(&self, check: Option<&EvidenceCheck>) -> Option<Answer> {
         let answer = Answer::of_evidence(&self.evidence, &self.separations)?;
-        let Some(check) = check else {
+        // One law compared: nothing to tell it from.
+        let Some(check) = check.filter(|_| answer.runner_up.is_some()) else {
             return Some(answer);
         };
         // Records made by `made_by` that the check decided for the answer's law.

@@ -12,8 +12,9 @@
 //! most [`REPLICATE_PARTICLES`] particles in [`REPLICATE_ISLANDS`] islands per law, from the
 //! replicate's own least-squares fit where the record's job starts from it, and no refinement.
 //! The check asks whether the data decide, which a replicate's fits and its posterior's mean
-//! log-likelihood say, not for each replicate's ln Z to a tenth of a nat; so it costs about a
-//! third of the record's own evidence at [`DEFAULT_REPLICATES`] per law, and runs by default.
+//! log-likelihood say, not for each replicate's ln Z to a tenth of a nat; so at
+//! [`DEFAULT_REPLICATES`] per law it costs a fraction of the record's own evidence (a fifth on
+//! the embedded record), and runs by default wherever two laws or more are compared.
 //!
 //! A replicate's answer is the law of the largest posterior probability, and it is *decided*
 //! when it beats every other law by at least positive odds beyond twice their error *and* by
@@ -93,7 +94,7 @@ pub struct EvidenceCheck {
     pub laws: Vec<Law>,
     /// Replicates per law, K.
     pub replicates: usize,
-    /// How each replicate's evidence was sampled (absent from checks kept before it was said).
+    /// How each replicate's evidence was sampled (absent from checks an earlier bitrock wrote).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sampler: Option<ReplicateSampler>,
     pub rows: Vec<CheckRow>,
@@ -117,11 +118,12 @@ pub const REPLICATE_PARTICLES: usize = 200;
 /// Most islands per law and start of a replicate's samplers (two give its ln Z an error).
 pub const REPLICATE_ISLANDS: usize = 2;
 
-/// The replicates per law an evidence is checked with, from what the user asked: none asked,
-/// [`DEFAULT_REPLICATES`]; 0, no check.
-pub fn replicates_asked(asked: Option<usize>) -> Option<usize> {
+/// The replicates per law an evidence of `laws` laws is checked with, from what the user
+/// asked: none asked, [`DEFAULT_REPLICATES`] where two laws or more are compared (a single law
+/// has nothing to be told from); 0, no check.
+pub fn replicates_asked(asked: Option<usize>, laws: usize) -> Option<usize> {
     match asked {
-        None => Some(DEFAULT_REPLICATES),
+        None => (laws >= 2).then_some(DEFAULT_REPLICATES),
         Some(0) => None,
         Some(k) => Some(k),
     }
@@ -156,10 +158,10 @@ impl Job {
     }
 }
 
-/// Refuses, naming `check`, a check of no replicates (before any work).
-pub fn check_replicates(replicates: usize) -> Result<()> {
+/// Refuses, naming `field`, a check of no replicates (before any work).
+pub fn check_replicates(replicates: usize, field: &str) -> Result<()> {
     if replicates == 0 {
-        return Err(Error::setting("check", "must be at least 1 replicate per law"));
+        return Err(Error::setting(field, "must be at least 1 replicate per law"));
     }
     Ok(())
 }
@@ -169,7 +171,7 @@ pub fn check_replicates(replicates: usize) -> Result<()> {
 /// ([`Job::for_replicates`]) on `data`'s calibration samples: at least two scored batches of
 /// every island of every law), before any work.
 pub fn check_size(replicates: usize, job: &Job, data: &FieldData) -> Result<()> {
-    check_replicates(replicates)?;
+    check_replicates(replicates, "check")?;
     let job = job.for_replicates();
     let sampler = &job.sampler;
     let starts = if sampler.start == Start::Both { 2.0 } else { 1.0 };
@@ -193,7 +195,8 @@ pub fn check_size(replicates: usize, job: &Job, data: &FieldData) -> Result<()> 
 }
 
 /// Checks `analysis`, the evidence `job` computed on `data`: `replicates` synthetic records
-/// per law, each through the same job over the same boxes, its samplers scored where
+/// per law, each through the replicates' lighter job ([`Job::for_replicates`]) over the same
+/// boxes, its samplers scored where
 /// `scoring` says (the same check here or on a pool of workers). `progress(done, total)` hears
 /// each finished replicate; `observer` is asked whether to stop between and within replicates.
 pub fn check(
@@ -449,5 +452,67 @@ fn summarize(law: Law, laws: &[Law], replicates: Vec<CheckReplicate>) -> CheckRo
         decided_wrong,
         verdict,
         replicates,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_check_runs_by_default_where_two_laws_or_more_are_compared_and_0_turns_it_off() {
+        assert_eq!(replicates_asked(None, 4), Some(DEFAULT_REPLICATES));
+        assert_eq!(replicates_asked(None, 1), None);
+        assert_eq!(replicates_asked(Some(0), 4), None);
+        assert_eq!(replicates_asked(Some(7), 1), Some(7));
+    }
+
+    #[test]
+    fn a_replicate_s_evidence_is_lighter_and_starts_from_its_fit() {
+        let mut job = Job::default();
+        job.sampler.particles = 500;
+        job.sampler.islands = 4;
+        job.sampler.law_particles = vec![(Law::M3, 1000), (Law::M1, 50)];
+        job.sampler.start = Start::Both;
+        job.sampler.refine_rounds = 2;
+        let light = job.for_replicates().sampler;
+        assert_eq!(
+            (light.particles, light.islands),
+            (REPLICATE_PARTICLES, REPLICATE_ISLANDS)
+        );
+        assert_eq!(light.law_particles, vec![(Law::M3, REPLICATE_PARTICLES), (Law::M1, 50)]);
+        assert_eq!((light.start, light.refine_rounds), (Start::Fit, 0));
+        // Already light, and from the box as asked: kept.
+        job.sampler.particles = 60;
+        job.sampler.islands = 2;
+        job.sampler.start = Start::Box;
+        let light = job.for_replicates().sampler;
+        assert_eq!((light.particles, light.islands, light.start), (60, 2, Start::Box));
+    }
+
+    #[test]
+    fn a_check_whose_results_would_not_fit_in_memory_is_refused_by_name() {
+        let data = crate::data::demo_field_data(&Default::default()).unwrap();
+        let job = Job {
+            laws: Law::ALL.to_vec(),
+            ..Job::default()
+        };
+        assert!(check_size(DEFAULT_REPLICATES, &job, &data).is_ok());
+        let memory = check_size(usize::MAX / 16, &job, &data).unwrap_err().to_string();
+        assert!(
+            memory.contains("check") && memory.contains("synthetic records") && memory.contains("of memory"),
+            "{memory}"
+        );
+        let none = check_size(0, &job, &data).unwrap_err().to_string();
+        assert!(none.contains("check") && none.contains("at least 1"), "{none}");
+    }
+
+    #[test]
+    fn a_check_an_earlier_bitrock_wrote_reads_without_its_sampler() {
+        let check: EvidenceCheck = serde_json::from_value(serde_json::json!({
+            "laws": ["m2", "m3"], "replicates": 1, "rows": [], "candidates_scored": 0, "seconds": 0.5,
+        }))
+        .unwrap();
+        assert_eq!(check.sampler, None);
     }
 }

@@ -280,7 +280,7 @@ pub fn check_dir(
     progress: &mut dyn FnMut(usize, usize),
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
-    check_replicates(replicates)?;
+    check_replicates(replicates, "replicates")?;
     // The check is written into the directory's document: a directory bitrock may not write
     // (files copied without their marks, or changed) is refused before the work.
     let owned = |rel: &Path, is_dir: bool| owns_unchanged(Owned::Evidence, dir, rel, is_dir);
@@ -296,13 +296,13 @@ pub fn check_dir(
         Some(job) => serde_json::from_value(job).map_err(|e| refuse(format!("its job does not read: {e}")))?,
         None => {
             return Err(refuse(
-                "missing: an earlier bitrock wrote this evidence without its job; compute it again with its check (`bitrock evidence --check K`, or `check=K` in Python)".into(),
+                "missing: an earlier bitrock wrote this evidence without its job; compute it again (`bitrock evidence` checks it, `--check K` sets its size; `check=K` in Python)".into(),
             ));
         }
     };
     if let Some(prior_file) = job.prior_file.as_ref().filter(|_| job.prior_text.is_none()) {
         return Err(refuse(format!(
-            "its boxes came from the prior file {0}, which an earlier bitrock did not keep in the directory: compute it again with its check (`bitrock evidence --prior {0} --check K`, or `prior=\"{0}\", check=K` in Python)",
+            "its boxes came from the prior file {0}, which an earlier bitrock did not keep in the directory: compute it again (`bitrock evidence --prior {0}` checks it, `--check K` sets its size; `prior=\"{0}\", check=K` in Python)",
             prior_file.display()
         )));
     }

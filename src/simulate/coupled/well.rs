@@ -127,64 +127,23 @@ impl CoupledWell {
         let assembly = string
             .map_or_else(|| Ok(Assembly::default()), |s| s.get_ref().assembly())
             .map_err(|e| at(string.map_or(0, |s| s.span().start), format!("[string]: {}", e.keyed())))?;
-        let feed = first.get_ref().wob_kn.is_none();
+        let shared = Shared {
+            bit,
+            feed: first.get_ref().wob_kn.is_none(),
+            kick_rpm,
+            dt_s,
+            sample_hz,
+            settle_s,
+        };
         let mut segments = Vec::with_capacity(file.segment.len());
         let mut steps = 0.0;
         for (i, spanned) in file.segment.iter().enumerate() {
-            let s = spanned.get_ref();
-            let refuse = |message: String| at(spanned.span().start, format!("segment {}: {message}", i + 1));
-            if s.wob_kn.is_some() && s.feed_m_h.is_some() {
-                return Err(refuse("give wob_kn or feed_m_h, not both".into()));
-            }
-            if s.wob_kn.is_none() != feed {
-                return Err(refuse(format!(
-                    "the well is drilled under {} from its first segment: every segment gives {}",
-                    if feed { "a feed" } else { "a weight" },
-                    if feed {
-                        format!("feed_m_h (or neither: {DEFAULT_FEED_M_H} m/h)")
-                    } else {
-                        "wob_kn".to_string()
-                    },
-                )));
-            }
-            let (axial, feed_m_h) = match s.wob_kn {
-                Some(kn) => (Axial::Weight { wob_n: kn * 1e3 }, None),
-                None => {
-                    let m_h = s.feed_m_h.unwrap_or(DEFAULT_FEED_M_H);
-                    (
-                        Axial::Feed {
-                            rate_m_s: m_h * M_S_PER_M_H,
-                        },
-                        Some(m_h),
-                    )
-                }
-            };
-            let job = CoupledJob {
-                bit: s.in_rock(bit),
-                omega_rad_s: s.omega_rpm * RAD_S_PER_RPM,
-                axial,
-                kick_rad_s: kick_rpm * RAD_S_PER_RPM,
-            };
-            job.validate()
-                .and_then(|()| job.check_step(dt_s))
-                .map_err(|e| refuse(e.keyed()))?;
-            if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
-                return Err(refuse(format!(
-                    "duration_s: must be positive and finite, got {}",
-                    s.duration_s
-                )));
-            }
-            let schedule = Schedule::new(dt_s, sample_hz, if i == 0 { settle_s } else { 0.0 }, s.duration_s)
-                .map_err(|e| refuse(e.keyed().replacen("record_s", "duration_s", 1)))?;
-            steps += schedule.steps() as f64;
-            segments.push(CoupledSegment {
-                name: s.name.clone().unwrap_or_else(|| (i + 1).to_string()),
-                duration_s: s.duration_s,
-                omega_rpm: s.omega_rpm,
-                wob_kn: s.wob_kn,
-                feed_m_h,
-                job,
-            });
+            let (segment, cost) = spanned
+                .get_ref()
+                .segment(i, &shared)
+                .map_err(|message| at(spanned.span().start, format!("segment {}: {message}", i + 1)))?;
+            steps += cost;
+            segments.push(segment);
         }
         // One string, step after step: at most a day's work even at a rate above any machine's.
         crate::limits::check_work(
@@ -336,7 +295,77 @@ struct SegmentFile {
     friction: Option<f64>,
 }
 
+/// What every segment of a well shares: its bit, whether it is drilled under a feed (or a
+/// weight), its kick and its clock.
+struct Shared {
+    bit: Bit,
+    feed: bool,
+    kick_rpm: f64,
+    dt_s: f64,
+    sample_hz: f64,
+    settle_s: f64,
+}
+
 impl SegmentFile {
+    /// Segment `i` (from 0) of a well, checked against what the well's segments share, with
+    /// the integration steps it costs; a refusal is its message, placed by the caller.
+    fn segment(&self, i: usize, shared: &Shared) -> std::result::Result<(CoupledSegment, f64), String> {
+        let feed = shared.feed;
+        if self.wob_kn.is_some() && self.feed_m_h.is_some() {
+            return Err("give wob_kn or feed_m_h, not both".into());
+        }
+        if self.wob_kn.is_none() != feed {
+            return Err(format!(
+                "the well is drilled under {} from its first segment: every segment gives {}",
+                if feed { "a feed" } else { "a weight" },
+                if feed {
+                    format!("feed_m_h (or neither: {DEFAULT_FEED_M_H} m/h)")
+                } else {
+                    "wob_kn".to_string()
+                },
+            ));
+        }
+        let (axial, feed_m_h) = match self.wob_kn {
+            Some(kn) => (Axial::Weight { wob_n: kn * 1e3 }, None),
+            None => {
+                let m_h = self.feed_m_h.unwrap_or(DEFAULT_FEED_M_H);
+                (
+                    Axial::Feed {
+                        rate_m_s: m_h * M_S_PER_M_H,
+                    },
+                    Some(m_h),
+                )
+            }
+        };
+        let job = CoupledJob {
+            bit: self.in_rock(shared.bit),
+            omega_rad_s: self.omega_rpm * RAD_S_PER_RPM,
+            axial,
+            kick_rad_s: shared.kick_rpm * RAD_S_PER_RPM,
+        };
+        job.validate()
+            .and_then(|()| job.check_step(shared.dt_s))
+            .map_err(|e| e.keyed())?;
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            return Err(format!(
+                "duration_s: must be positive and finite, got {}",
+                self.duration_s
+            ));
+        }
+        let settle_s = if i == 0 { shared.settle_s } else { 0.0 };
+        let schedule = Schedule::new(shared.dt_s, shared.sample_hz, settle_s, self.duration_s)
+            .map_err(|e| e.keyed().replacen("record_s", "duration_s", 1))?;
+        let segment = CoupledSegment {
+            name: self.name.clone().unwrap_or_else(|| (i + 1).to_string()),
+            duration_s: self.duration_s,
+            omega_rpm: self.omega_rpm,
+            wob_kn: self.wob_kn,
+            feed_m_h,
+            job,
+        };
+        Ok((segment, schedule.steps() as f64))
+    }
+
     /// `bit` in this segment's rock (the values it gives in place of the bit's).
     fn in_rock(&self, bit: Bit) -> Bit {
         Bit {

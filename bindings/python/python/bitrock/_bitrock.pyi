@@ -262,8 +262,8 @@ def resume(path: str | PathLike[str], more: dict, progress: Any | None, note: An
 def resume_evidence(dir: str | PathLike[str], backend: str | None, check: SupportsIndex | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> ComputedEvidence:
     """
     Continues the evidence under way in `dir` (on `backend`, default its own), checks it with
-    `check` replicates per law where given, and writes the directory: the document, as
-    [`evidence`] returns it.
+    `check` replicates per law (by default the small check; 0 none), and writes the directory:
+    the document, as [`evidence`] returns it.
     """
 
 def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:

@@ -165,7 +165,8 @@ class Evidence:
         """The evidence's answer to "which law, how sure": the law of the largest evidence
         (``law``, ``probability``) over the next (``runner_up``), ``ln_b`` ± ``error`` between
         them, ``strength`` as in :attr:`bayes_factors` (never stronger than what the record
-        separates; taken back where the check does not tell the pair's records apart), ``why``,
+        separates; taken back where the check decides fewer than half the records made by the law
+        for it, against every other law, or half or more of the runner-up's for it too), ``why``,
         ``check`` (records made by the law decided for it, and by the runner-up for it too, of
         ``replicates``) and the ``sentence`` the command prints last. ``None`` for a document written without
         it."""
@@ -406,10 +407,12 @@ def evidence(
     covariance, m3 on a record of the law it nests), or ``"both"`` (the default), as many
     islands from each, weighed by their inverse variances where they agree and the higher
     kept where they do not (:attr:`Evidence.starts`); the evidence is of the boxes either way. The answer is then checked
-    by re-simulation: ``check`` (4 by default; 0: no check) synthetic records per law from its
-    evidence posterior and the record's own residuals, each through a lighter evidence over the
-    same boxes (at most 200 particles in 2 islands per law, from the replicate's fit), and the
-    answer made undecided where the check does not tell its pair's records apart: see
+    by re-simulation: ``check`` (4 by default where two laws or more are compared; 0: no check)
+    synthetic records per law from its evidence posterior and the record's own residuals, each
+    through a lighter evidence over the same boxes (at most 200 particles in 2 islands per law,
+    from the replicate's fit where the evidence starts from fits), and the answer made
+    undecided where the check decides fewer than half the records made by its law for it
+    (against every other law), or half or more of the runner-up's for it too: see
     :attr:`Evidence.check`. ``out`` writes an evidence directory, as
     ``bitrock evidence --out``: :func:`read_evidence` reads it back and
     :func:`stability` maps it (``force=True`` replaces the evidence it holds); meanwhile the
@@ -497,7 +500,8 @@ def resume_evidence(
     out=directory)`` or ``bitrock evidence --out`` started and that was stopped or killed
     part-way) from its last saved state, with its record and settings, then writes the
     directory: the evidence the uninterrupted call gives, bit for bit on the same backend.
-    ``backend`` (default: the evidence's), ``check`` and ``executor`` as for :func:`evidence`.
+    ``backend`` (default: the evidence's), ``check`` (the check is this call's: the small one
+    unless it says otherwise) and ``executor`` as for :func:`evidence`.
     As ``bitrock evidence --resume``."""
     from . import _note
     from ._distributed import Dispatcher
