@@ -352,41 +352,7 @@ fn tables(
     )?;
     writeln!(out, "prior: {}\n", job.prior.describe())?;
     print::separation_tables(out, &analysis.separations, &job.laws)?;
-    writeln!(
-        out,
-        "law       ln Z (N·m)   ± MC error   P(m | y)        ±     best ρ   stages   candidates"
-    )?;
-    for law in &evidence.laws {
-        let stages = law.stages.iter().sum::<usize>() as f64 / law.stages.len() as f64;
-        writeln!(
-            out,
-            "{:<6} {:>14.3} {:>12.3} {:>10.4} {:>8.4} {:>10.5} {:>8.1} {:>12}",
-            law.law.name(),
-            law.ln_z,
-            law.ln_z_error,
-            law.probability,
-            law.probability_error,
-            law.best_rho,
-            stages,
-            law.candidates_scored
-        )?;
-    }
-    for law in evidence.laws.iter().filter(|l| l.refinements > 0) {
-        let particles = config.particles_of(law.law) << law.refinements;
-        writeln!(
-            out,
-            "{}: islands that ended more than a nat apart were run again {} time(s), the last with {particles} \
-             particles each; its islands now span {:.2} nats{}",
-            law.law,
-            law.refinements,
-            law.island_spread,
-            if law.island_spread > REFINE_ABOVE_NATS {
-                ", which its error carries"
-            } else {
-                ""
-            }
-        )?;
-    }
+    law_table(out, evidence)?;
     starts_table(out, evidence)?;
     bayes_factor_table(out, analysis)?;
     let lag1: Vec<String> = analysis
@@ -427,6 +393,47 @@ fn tables(
             models.len(),
             models.iter().map(|m| m.candidates_scored).sum::<u64>(),
             models.iter().map(|m| m.seconds).sum::<f64>()
+        )?;
+    }
+    Ok(())
+}
+
+/// Each law's evidence, probability and cost, and what its refinement rounds did.
+fn law_table(out: &mut impl Write, evidence: &bitrock::abc::evidence::Evidence) -> std::io::Result<()> {
+    let config = &evidence.config;
+    writeln!(
+        out,
+        "law       ln Z (N·m)   ± MC error   P(m | y)        ±     best ρ   stages   candidates"
+    )?;
+    for law in &evidence.laws {
+        let stages = law.stages.iter().sum::<usize>() as f64 / law.stages.len() as f64;
+        writeln!(
+            out,
+            "{:<6} {:>14.3} {:>12.3} {:>10.4} {:>8.4} {:>10.5} {:>8.1} {:>12}",
+            law.law.name(),
+            law.ln_z,
+            law.ln_z_error,
+            law.probability,
+            law.probability_error,
+            law.best_rho,
+            stages,
+            law.candidates_scored
+        )?;
+    }
+    for law in evidence.laws.iter().filter(|l| l.refinements > 0) {
+        let particles = config.particles_of(law.law) << law.refinements;
+        writeln!(
+            out,
+            "{}: islands that ended more than a nat apart were run again {} time(s), the last with {particles} \
+             particles each; its islands now span {:.2} nats{}",
+            law.law,
+            law.refinements,
+            law.island_spread,
+            if law.island_spread > REFINE_ABOVE_NATS {
+                ", which its error carries"
+            } else {
+                ""
+            }
         )?;
     }
     Ok(())

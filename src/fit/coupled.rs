@@ -135,13 +135,20 @@ fn derived(radius_m: f64, weight: (f64, f64), torque: (f64, f64)) -> [f64; 4] {
     ]
 }
 
-/// Calibrates the bit of radius `radius_m` on `record`, with `draws` posterior draws from `seed`.
-pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64) -> Result<CoupledCalibration> {
-    let refuse = |message: String| Error::Format {
+/// A refusal of `record`, saying `message`.
+fn refusal(record: &DrillingRecord, message: String) -> Error {
+    Error::Format {
         path: record.source.clone(),
         line: None,
         message,
-    };
+    }
+}
+
+/// The samples that show the bit cutting (turning, penetrating and, where the record says,
+/// moving down): each one's depth of cut (m a turn), weight on bit (N) and torque (N·m);
+/// refused where too few do.
+fn cutting(record: &DrillingRecord) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let refuse = |message: String| refusal(record, message);
     let mut depth = Vec::new();
     let mut weight = Vec::new();
     let mut torque = Vec::new();
@@ -167,6 +174,13 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
             }
         )));
     }
+    Ok((depth, weight, torque))
+}
+
+/// Calibrates the bit of radius `radius_m` on `record`, with `draws` posterior draws from `seed`.
+pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64) -> Result<CoupledCalibration> {
+    let refuse = |message: String| refusal(record, message);
+    let (depth, weight, torque) = cutting(record)?;
     let mean = depth.iter().sum::<f64>() / depth.len() as f64;
     let sd = (depth.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / depth.len() as f64).sqrt();
     if sd < MIN_DEPTH_SPREAD * mean {

@@ -15,7 +15,8 @@ import pytest
 import bitrock
 from conftest import DEMO_CSV, REPO, run_cli
 
-SMALL = {"laws": ["m2", "m3"], "particles": 60, "islands": 3, "seed": 5, "backend": "cpu"}
+# The check by re-simulation has tests of its own; the others go without it.
+SMALL = {"laws": ["m2", "m3"], "particles": 60, "islands": 3, "seed": 5, "backend": "cpu", "check": 0}
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +27,7 @@ def small(demo: bitrock.Record) -> bitrock.Evidence:
 def test_python_and_the_command_line_give_the_same_evidence(cli, small) -> None:
     done = run_cli(
         cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
-        "--seed", "5", "--backend", "cpu", "--json",
+        "--seed", "5", "--backend", "cpu", "--check", "0", "--json",
     )
     document = json.loads(done.stdout)
     for a, b in zip(document["laws"], small.document["laws"]):
@@ -288,7 +289,7 @@ def test_an_unknown_law_is_refused(small) -> None:
 
 
 def test_the_check_by_resimulation_is_the_command_lines(cli) -> None:
-    checked = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), check=2, **SMALL)
+    checked = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=4), **{**SMALL, "check": 2})
     done = run_cli(
         cli, "evidence", str(DEMO_CSV), "--thin", "4", "--laws", "m2,m3", "--particles", "60", "--islands", "3",
         "--seed", "5", "--backend", "cpu", "--check", "2", "--json", "--quiet",
@@ -306,14 +307,15 @@ def test_the_check_by_resimulation_is_the_command_lines(cli) -> None:
 
 
 def test_the_check_runs_by_default_and_check_0_turns_it_off(small) -> None:
-    document = small.document["check"]
+    default = {key: value for key, value in SMALL.items() if key != "check"}
+    checked = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=8), **default)
+    document = checked.document["check"]
     assert document["replicates"] == 4
     assert document["sampler"] == {"particles": 60, "islands": 2, "start": "fit"}
-    assert list(small.check.index) == ["m2", "m3"]
-    assert small.answer["check"]["replicates"] == 4
-    assert "the check decided" in small.answer["sentence"]
-    unchecked = bitrock.evidence(bitrock.read_record(DEMO_CSV, thin=8), **SMALL, check=0)
-    assert unchecked.check is None and "check" not in unchecked.answer
+    assert list(checked.check.index) == ["m2", "m3"]
+    assert checked.answer["check"]["replicates"] == 4
+    assert "the check decided" in checked.answer["sentence"]
+    assert small.check is None and "check" not in small.answer
 
 
 def test_the_evidence_posterior_maps_with_its_law_probabilities(small) -> None:
@@ -368,7 +370,7 @@ def test_a_record_with_weight_on_bit_compares_the_torque_scaled_by_it() -> None:
 
 def test_check_selection_of_an_evidence_directory_is_the_evidence_s_own_check(tmp_path) -> None:
     record = bitrock.read_record(DEMO_CSV, thin=4)
-    checked = bitrock.evidence(record, **SMALL, check=2)
+    checked = bitrock.evidence(record, **{**SMALL, "check": 2})
     bitrock.evidence(record, **SMALL, out=tmp_path / "ev")
     matrix = bitrock.check_selection(tmp_path / "ev", replicates=2, progress=False)
     # The same replicates as the evidence's own check, written into the directory.
