@@ -759,11 +759,11 @@ impl SelectionRecord {
                 244_200.0,
             );
             c.duration_s = 180.0;
-            c.settle_s = 40.0;
-            c.initial = kick;
-            c.noise_torque_nm = 1000.0;
-            c.wob_fluctuation_n = 12_200.0;
-            c.seed = seed;
+            c.recording.settle_s = 40.0;
+            c.recording.initial = kick;
+            c.recording.noise_torque_nm = 1000.0;
+            c.recording.wob_fluctuation_n = 12_200.0;
+            c.recording.seed = seed;
             (c, TorqueUnit::KNm)
         };
         let (config, unit) = match self {
@@ -781,12 +781,12 @@ impl SelectionRecord {
                     damping_ratio: 0.1,
                 };
                 c.w_ref_n = 500.0;
-                c.settle_s = 10.0;
-                c.noise_torque_nm = 0.15;
-                c.noise_speed_rad_s = 2.0 * RAD_S_PER_RPM;
-                c.wob_fluctuation_n = 100.0;
-                c.wob_correlation_s = 5.0;
-                c.seed = 7;
+                c.recording.settle_s = 10.0;
+                c.recording.noise_torque_nm = 0.15;
+                c.recording.noise_speed_rad_s = 2.0 * RAD_S_PER_RPM;
+                c.recording.wob_fluctuation_n = 100.0;
+                c.recording.wob_correlation_s = 5.0;
+                c.recording.seed = 7;
                 (c, TorqueUnit::Nm)
             }
             Self::M2 => field(Law::M2, &[13.0, 6.5, 0.3], 2024),

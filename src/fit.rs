@@ -222,11 +222,12 @@ pub fn fit_record_from(
     opts: &FitOptions,
     known: &[(Law, Vec<f64>)],
 ) -> Result<Vec<LawFit>> {
-    fit_record_to(laws, data, opts, known, 0.0)
+    fit_record_within(laws, data, opts, known, 0.0)
 }
 
 /// [`fit_record_from`] for fits whose sums of squared residuals matter only to within
-/// `resolution_nm2` (N·m², > 0; [`fit_law_within`]): the validation samples are not used.
+/// `resolution_nm2` (N·m², > 0; [`fit_law_within`]), the validation samples not used; at 0,
+/// [`fit_record_from`] itself.
 pub fn fit_record_within(
     laws: &[Law],
     data: &FieldData,
@@ -234,17 +235,7 @@ pub fn fit_record_within(
     known: &[(Law, Vec<f64>)],
     resolution_nm2: f64,
 ) -> Result<Vec<LawFit>> {
-    fit_record_to(laws, data, opts, known, resolution_nm2.max(0.0))
-}
-
-/// [`fit_record_from`], each run stopped once its gain falls below `resolution_nm2` where > 0.
-fn fit_record_to(
-    laws: &[Law],
-    data: &FieldData,
-    opts: &FitOptions,
-    known: &[(Law, Vec<f64>)],
-    resolution_nm2: f64,
-) -> Result<Vec<LawFit>> {
+    let resolution_nm2 = resolution_nm2.max(0.0);
     let empty = Samples::default();
     let validation = if resolution_nm2 > 0.0 { &empty } else { &data.validation };
     fit_laws_to(laws, &data.calibration, validation, opts, known, resolution_nm2).map_err(|e| match e {

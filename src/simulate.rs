@@ -78,6 +78,16 @@ pub struct SimConfig {
     pub w_ref_n: f64,
     /// Length of the recorded trace (s).
     pub duration_s: f64,
+    /// How the trace is recorded: settling, clock, step, start, noise, WOB fluctuation, seed.
+    pub recording: Recording,
+}
+
+/// How a simulated string is recorded, alike for one configuration and a well: the settling
+/// before, the sample clock and integration step, the state it starts from, the noise on the
+/// recorded channels, the slow fluctuation of the weight on bit, and the seed they are drawn
+/// from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Recording {
     /// Time simulated before recording starts (s), to let transients die out.
     pub settle_s: f64,
     /// Recording rate (Hz); the paper's downhole recorder runs at 50 Hz.
@@ -100,6 +110,26 @@ pub struct SimConfig {
     pub seed: u64,
 }
 
+impl Default for Recording {
+    /// 50 Hz after no settling, dt = 1 ms, starting on the equilibrium without a kick, no
+    /// noise, no WOB fluctuation (correlation time 20 s, unused until one is set), seed 0.
+    fn default() -> Self {
+        Self {
+            settle_s: 0.0,
+            sample_hz: 50.0,
+            dt_s: 1e-3,
+            initial: Initial::Equilibrium {
+                speed_perturbation_rad_s: 0.0,
+            },
+            noise_torque_nm: 0.0,
+            noise_speed_rad_s: 0.0,
+            wob_fluctuation_n: 0.0,
+            wob_correlation_s: 20.0,
+            seed: 0,
+        }
+    }
+}
+
 impl SimConfig {
     /// A noise-free configuration on the paper's drill string: W_ref = 244.2 kN, 60 s recorded
     /// at 50 Hz after no settling, dt = 1 ms, starting on the equilibrium without a kick,
@@ -113,17 +143,7 @@ impl SimConfig {
             wob_n,
             w_ref_n: PAPER_W_REF_N,
             duration_s: 60.0,
-            settle_s: 0.0,
-            sample_hz: 50.0,
-            dt_s: 1e-3,
-            initial: Initial::Equilibrium {
-                speed_perturbation_rad_s: 0.0,
-            },
-            noise_torque_nm: 0.0,
-            noise_speed_rad_s: 0.0,
-            wob_fluctuation_n: 0.0,
-            wob_correlation_s: 20.0,
-            seed: 0,
+            recording: Recording::default(),
         }
     }
 
@@ -149,9 +169,9 @@ impl SimConfig {
             ("wob_kn", self.wob_n, 1000.0),
             ("w_ref_kn", self.w_ref_n, 1000.0),
             ("duration_s", self.duration_s, 1.0),
-            ("sample_hz", self.sample_hz, 1.0),
-            ("dt_s", self.dt_s, 1.0),
-            ("wob_correlation_s", self.wob_correlation_s, 1.0),
+            ("sample_hz", self.recording.sample_hz, 1.0),
+            ("dt_s", self.recording.dt_s, 1.0),
+            ("wob_correlation_s", self.recording.wob_correlation_s, 1.0),
         ];
         for (field, value, unit) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -162,10 +182,10 @@ impl SimConfig {
             }
         }
         let non_negative = [
-            ("settle_s", self.settle_s, 1.0),
-            ("noise_torque_knm", self.noise_torque_nm, 1000.0),
-            ("noise_speed_rpm", self.noise_speed_rad_s, RAD_S_PER_RPM),
-            ("wob_fluctuation_kn", self.wob_fluctuation_n, 1000.0),
+            ("settle_s", self.recording.settle_s, 1.0),
+            ("noise_torque_knm", self.recording.noise_torque_nm, 1000.0),
+            ("noise_speed_rpm", self.recording.noise_speed_rad_s, RAD_S_PER_RPM),
+            ("wob_fluctuation_kn", self.recording.wob_fluctuation_n, 1000.0),
         ];
         for (field, value, unit) in non_negative {
             if !(value.is_finite() && value >= 0.0) {
@@ -175,49 +195,49 @@ impl SimConfig {
                 ));
             }
         }
-        if self.duration_s * self.sample_hz < 1.0 {
+        if self.duration_s * self.recording.sample_hz < 1.0 {
             return Err(Error::setting(
                 "duration_s",
                 format!(
                     "{} s at {} Hz records no sample; record at least one sample period",
-                    self.duration_s, self.sample_hz
+                    self.duration_s, self.recording.sample_hz
                 ),
             ));
         }
-        let samples = self.duration_s * self.sample_hz;
+        let samples = self.duration_s * self.recording.sample_hz;
         crate::limits::check_memory(
             "duration_s",
             samples * TRACE_BYTES_PER_SAMPLE,
             &format!(
                 "recording {samples:.3e} samples ({} s at {} Hz)",
-                self.duration_s, self.sample_hz
+                self.duration_s, self.recording.sample_hz
             ),
         )?;
         // RK4 steps of the settling and the recording: at most a day's work even at a rate
         // above any machine's (the steps themselves are serial).
         crate::limits::check_work(
             "dt_s",
-            (self.settle_s + self.duration_s) / self.dt_s,
+            (self.recording.settle_s + self.duration_s) / self.recording.dt_s,
             FASTEST_STEPS_PER_S,
             &format!(
                 "integrating {} s in steps of {} s",
-                self.settle_s + self.duration_s,
-                self.dt_s
+                self.recording.settle_s + self.duration_s,
+                self.recording.dt_s
             ),
         )?;
-        if self.dt_s > 1.0 / self.sample_hz {
+        if self.recording.dt_s > 1.0 / self.recording.sample_hz {
             return Err(Error::setting(
                 "dt_s",
                 format!(
                     "the integration step {} s exceeds the sample period {} s",
-                    self.dt_s,
-                    1.0 / self.sample_hz
+                    self.recording.dt_s,
+                    1.0 / self.recording.sample_hz
                 ),
             ));
         }
         if let Initial::Equilibrium {
             speed_perturbation_rad_s,
-        } = self.initial
+        } = self.recording.initial
             && !speed_perturbation_rad_s.is_finite()
         {
             return Err(Error::setting(
@@ -461,16 +481,8 @@ pub struct Well {
     pub structure: Lumped,
     /// Reference weight on bit W_ref (N) of every segment's parameters.
     pub w_ref_n: f64,
-    /// Time simulated before recording starts (s), with the first segment's inputs.
-    pub settle_s: f64,
-    pub sample_hz: f64,
-    pub dt_s: f64,
-    pub initial: Initial,
-    pub noise_torque_nm: f64,
-    pub noise_speed_rad_s: f64,
-    pub wob_fluctuation_n: f64,
-    pub wob_correlation_s: f64,
-    pub seed: u64,
+    /// How the well is recorded (its settling with the first segment's inputs).
+    pub recording: Recording,
 }
 
 /// One stretch of a well: a formation (law and parameters) and how the rig drives through it.
@@ -552,15 +564,7 @@ impl Well {
             }],
             structure: cfg.structure,
             w_ref_n: cfg.w_ref_n,
-            settle_s: cfg.settle_s,
-            sample_hz: cfg.sample_hz,
-            dt_s: cfg.dt_s,
-            initial: cfg.initial,
-            noise_torque_nm: cfg.noise_torque_nm,
-            noise_speed_rad_s: cfg.noise_speed_rad_s,
-            wob_fluctuation_n: cfg.wob_fluctuation_n,
-            wob_correlation_s: cfg.wob_correlation_s,
-            seed: cfg.seed,
+            recording: cfg.recording,
         }
     }
 
@@ -594,15 +598,7 @@ impl Well {
                 structure: self.structure,
                 w_ref_n: self.w_ref_n,
                 duration_s: segment.duration_s,
-                settle_s: self.settle_s,
-                sample_hz: self.sample_hz,
-                dt_s: self.dt_s,
-                initial: self.initial,
-                noise_torque_nm: self.noise_torque_nm,
-                noise_speed_rad_s: self.noise_speed_rad_s,
-                wob_fluctuation_n: self.wob_fluctuation_n,
-                wob_correlation_s: self.wob_correlation_s,
-                seed: self.seed,
+                recording: self.recording,
                 ..SimConfig::new(segment.law, segment.params_nm.clone(), omega, wob)
             }
             .validate()?;
@@ -621,13 +617,14 @@ pub fn simulate_well_with(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Re
 /// The one integration loop: settles with the first segment's inputs at t = 0, then records
 /// the samples, the inputs of each interval between samples those at its first sample.
 fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> {
-    let total_s = well.settle_s + well.duration_s();
-    let total_steps = (total_s / well.dt_s).ceil().max(1.0) as u64;
+    let rec = well.recording;
+    let total_s = rec.settle_s + well.duration_s();
+    let total_steps = (total_s / rec.dt_s).ceil().max(1.0) as u64;
     let mut pace = crate::limits::Pace::new(
         "dt_s",
         format!(
             "integrating {total_s} s in steps of {} s ({total_steps:.3e} steps)",
-            well.dt_s
+            rec.dt_s
         ),
         total_steps,
         progress,
@@ -646,10 +643,10 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         (i, s, s.omega_rad_s.at(fraction), s.wob_n.at(fraction))
     };
 
-    let mut rng = StdRng::seed_from_u64(well.seed);
-    let mut surface_rng = StdRng::seed_from_u64(well.seed ^ SURFACE_NOISE_STREAM);
+    let mut rng = StdRng::seed_from_u64(rec.seed);
+    let mut surface_rng = StdRng::seed_from_u64(rec.seed ^ SURFACE_NOISE_STREAM);
     let (_, first, omega0, wob_mean_n) = drive(0.0);
-    let mut wob = Wob::new(wob_mean_n, well.wob_fluctuation_n, well.wob_correlation_s, &mut rng);
+    let mut wob = Wob::new(wob_mean_n, rec.wob_fluctuation_n, rec.wob_correlation_s, &mut rng);
     let r0 = wob.ratio(well.w_ref_n);
     let chain = Chain::one_dof(&well.structure);
     let job = first_job(well, &chain, first, omega0, r0);
@@ -660,7 +657,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         if span_s <= 0.0 {
             return Ok(());
         }
-        let steps = (span_s / well.dt_s).ceil().max(1.0);
+        let steps = (span_s / rec.dt_s).ceil().max(1.0);
         let h = span_s / steps;
         for _ in 0..steps as u64 {
             pace.advance(1)?;
@@ -680,19 +677,19 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
     };
 
     let mut omega = omega0;
-    advance(&mut sim, &mut wob, &mut rng, well.settle_s, well.settle_s, omega)?;
+    advance(&mut sim, &mut wob, &mut rng, rec.settle_s, rec.settle_s, omega)?;
     // Samples at k / sample_hz for k = 0, 1, ...: duration × sample_hz of them, end excluded.
-    let n_samples = (well.duration_s() * well.sample_hz * (1.0 + 1e-12)).floor() as usize;
+    let n_samples = (well.duration_s() * rec.sample_hz * (1.0 + 1e-12)).floor() as usize;
     let mut out = WellTrace::with_capacity(n_samples);
     let mut previous_s = 0.0;
     for k in 0..n_samples {
-        let t_s = k as f64 / well.sample_hz;
+        let t_s = k as f64 / rec.sample_hz;
         advance(
             &mut sim,
             &mut wob,
             &mut rng,
             t_s - previous_s,
-            well.settle_s + t_s,
+            rec.settle_s + t_s,
             omega,
         )?;
         previous_s = t_s;
@@ -710,12 +707,12 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         let z_surface: f64 = StandardNormal.sample(&mut surface_rng);
         out.push(
             t_s,
-            sim.bit_speed_rad_s() + well.noise_speed_rad_s * z_speed,
-            sim.bit_torque_nm() + well.noise_torque_nm * z_torque,
+            sim.bit_speed_rad_s() + rec.noise_speed_rad_s * z_speed,
+            sim.bit_torque_nm() + rec.noise_torque_nm * z_torque,
             wob.current_n(),
             (
                 omega,
-                sim.surface_torque_nm() + well.noise_torque_nm * z_surface,
+                sim.surface_torque_nm() + rec.noise_torque_nm * z_surface,
                 segment,
             ),
         );
@@ -726,7 +723,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
 /// The string's first job: the first segment's law at its speed and WOB ratio `r0`, from the
 /// well's initial state (steady rotation, perturbed, or a bit at rest on bottom).
 fn first_job(well: &Well, chain: &Chain, first: &Segment, omega0: f64, r0: f64) -> StringJob {
-    let start = match well.initial {
+    let start = match well.recording.initial {
         Initial::Equilibrium {
             speed_perturbation_rad_s,
         } => steady_start(chain, first.law, &first.params_nm, omega0, r0, speed_perturbation_rad_s),
@@ -850,8 +847,11 @@ mod tests {
 
     fn kicked(law: Law, omega_rad_s: f64) -> SimConfig {
         SimConfig {
-            initial: Initial::Equilibrium {
-                speed_perturbation_rad_s: 2.0,
+            recording: Recording {
+                initial: Initial::Equilibrium {
+                    speed_perturbation_rad_s: 2.0,
+                },
+                ..Recording::default()
             },
             ..SimConfig::new(law, paper_nm(law), omega_rad_s, PAPER_W_REF_N)
         }
@@ -897,8 +897,11 @@ mod tests {
         for (law, settle_s) in [(Law::M3, 100.0), (Law::M2, 60.0)] {
             let omega = rpm(150.0);
             let cfg = SimConfig {
-                settle_s,
                 duration_s: 20.0,
+                recording: Recording {
+                    settle_s,
+                    ..kicked(law, omega).recording
+                },
                 ..kicked(law, omega)
             };
             assert!(cfg.bit_damping_nms() > cfg.structure.critical_bit_damping_nms());
@@ -936,8 +939,11 @@ mod tests {
         let law = Law::M3;
         let omega = rpm(60.0);
         let cfg = SimConfig {
-            initial: Initial::Rest,
             duration_s: 40.0,
+            recording: Recording {
+                initial: Initial::Rest,
+                ..Recording::default()
+            },
             ..SimConfig::new(law, paper_nm(law), omega, PAPER_W_REF_N)
         };
         let s = cfg.structure;
@@ -958,7 +964,7 @@ mod tests {
         assert!(checked > 100);
         assert!(trace.torque_nm[0] < 0.1 * ts);
         // Every later stick phase: the torque rises at kΩ between consecutive stuck samples.
-        let dt = 1.0 / cfg.sample_hz;
+        let dt = 1.0 / cfg.recording.sample_hz;
         let mut later = 0;
         for i in 1..trace.len() {
             if trace.time_s[i - 1] > release_s && trace.bit_speed_rad_s[i - 1] == 0.0 && trace.bit_speed_rad_s[i] == 0.0
@@ -977,9 +983,12 @@ mod tests {
         let law = Law::M3;
         let run = |dt_s: f64| {
             let cfg = SimConfig {
-                initial: Initial::Rest,
                 duration_s: 20.0,
-                dt_s,
+                recording: Recording {
+                    initial: Initial::Rest,
+                    dt_s,
+                    ..Recording::default()
+                },
                 ..SimConfig::new(law, paper_nm(law), rpm(60.0), PAPER_W_REF_N)
             };
             simulate(&cfg).unwrap().bit_speed_rad_s
@@ -1006,10 +1015,13 @@ mod tests {
         let law = Law::M2;
         let cfg = SimConfig {
             duration_s: 10.0,
-            noise_speed_rad_s: 0.1,
-            noise_torque_nm: 200.0,
-            wob_fluctuation_n: 10e3,
-            seed: 7,
+            recording: Recording {
+                noise_speed_rad_s: 0.1,
+                noise_torque_nm: 200.0,
+                wob_fluctuation_n: 10e3,
+                seed: 7,
+                ..kicked(law, rpm(60.0)).recording
+            },
             ..kicked(law, rpm(60.0))
         };
         let a = simulate(&cfg).unwrap();
@@ -1018,7 +1030,14 @@ mod tests {
         assert_eq!(bits(&a.bit_speed_rad_s), bits(&b.bit_speed_rad_s));
         assert_eq!(bits(&a.torque_nm), bits(&b.torque_nm));
         assert_eq!(bits(&a.wob_n), bits(&b.wob_n));
-        let c = simulate(&SimConfig { seed: 8, ..cfg.clone() }).unwrap();
+        let c = simulate(&SimConfig {
+            recording: Recording {
+                seed: 8,
+                ..cfg.clone().recording
+            },
+            ..cfg.clone()
+        })
+        .unwrap();
         let differing = a
             .torque_nm
             .iter()
@@ -1028,7 +1047,7 @@ mod tests {
         assert_eq!(differing, a.len());
         // The WOB wanders around its mean with about the requested spread.
         let mean = a.wob_n.iter().sum::<f64>() / a.len() as f64;
-        assert!((mean - cfg.wob_n).abs() < 4.0 * cfg.wob_fluctuation_n);
+        assert!((mean - cfg.wob_n).abs() < 4.0 * cfg.recording.wob_fluctuation_n);
     }
 
     #[test]
@@ -1036,7 +1055,10 @@ mod tests {
         // M4's cubic turns negative above ≈ 32 rad/s; stick-slip at 150 rpm overshoots there.
         let law = Law::M4;
         let cfg = SimConfig {
-            initial: Initial::Rest,
+            recording: Recording {
+                initial: Initial::Rest,
+                ..Recording::default()
+            },
             ..SimConfig::new(law, paper_nm(law), rpm(150.0), PAPER_W_REF_N)
         };
         let err = simulate(&cfg).unwrap_err();
@@ -1055,8 +1077,11 @@ mod tests {
                 damping_ratio: 0.1,
             },
             w_ref_n: 500.0,
-            initial: Initial::Equilibrium {
-                speed_perturbation_rad_s: rpm(10.0),
+            recording: Recording {
+                initial: Initial::Equilibrium {
+                    speed_perturbation_rad_s: rpm(10.0),
+                },
+                ..Recording::default()
             },
             ..SimConfig::new(Law::M4, vec![3.0, -0.12, 0.0, 0.0], rpm(100.0), 500.0)
         };
@@ -1097,56 +1122,80 @@ mod tests {
             (
                 "sample_hz",
                 SimConfig {
-                    sample_hz: f64::INFINITY,
+                    recording: Recording {
+                        sample_hz: f64::INFINITY,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
             (
                 "dt_s",
                 SimConfig {
-                    dt_s: 0.0,
+                    recording: Recording {
+                        dt_s: 0.0,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
             (
                 "dt_s",
                 SimConfig {
-                    dt_s: 0.05,
+                    recording: Recording {
+                        dt_s: 0.05,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
             (
                 "settle_s",
                 SimConfig {
-                    settle_s: -1.0,
+                    recording: Recording {
+                        settle_s: -1.0,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
             (
                 "noise_torque_knm",
                 SimConfig {
-                    noise_torque_nm: -1.0,
+                    recording: Recording {
+                        noise_torque_nm: -1.0,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
             (
                 "noise_speed_rpm",
                 SimConfig {
-                    noise_speed_rad_s: f64::NAN,
+                    recording: Recording {
+                        noise_speed_rad_s: f64::NAN,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
             (
                 "wob_fluctuation_kn",
                 SimConfig {
-                    wob_fluctuation_n: -1.0,
+                    recording: Recording {
+                        wob_fluctuation_n: -1.0,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
             (
                 "wob_correlation_s",
                 SimConfig {
-                    wob_correlation_s: 0.0,
+                    recording: Recording {
+                        wob_correlation_s: 0.0,
+                        ..base.clone().recording
+                    },
                     ..base.clone()
                 },
             ),
@@ -1225,17 +1274,24 @@ mod tests {
         );
     }
 
-    fn well_of(segments: Vec<Segment>) -> Well {
-        let cfg = SimConfig {
-            noise_torque_nm: 300.0,
-            noise_speed_rad_s: 0.05,
-            wob_fluctuation_n: 5_000.0,
-            seed: 9,
+    /// m2 at 60 rpm with noise on both channels and a fluctuating weight on bit.
+    fn noisy_m2() -> SimConfig {
+        SimConfig {
+            recording: Recording {
+                noise_torque_nm: 300.0,
+                noise_speed_rad_s: 0.05,
+                wob_fluctuation_n: 5_000.0,
+                seed: 9,
+                ..Recording::default()
+            },
             ..SimConfig::new(Law::M2, paper_nm(Law::M2), rpm(60.0), PAPER_W_REF_N)
-        };
+        }
+    }
+
+    fn well_of(segments: Vec<Segment>) -> Well {
         Well {
             segments,
-            ..Well::of(&cfg)
+            ..Well::of(&noisy_m2())
         }
     }
 
@@ -1276,11 +1332,7 @@ mod tests {
         let cfg = SimConfig {
             duration_s: 20.0,
             wob_n: 200_000.0,
-            noise_torque_nm: 300.0,
-            noise_speed_rad_s: 0.05,
-            wob_fluctuation_n: 5_000.0,
-            seed: 9,
-            ..SimConfig::new(Law::M2, paper_nm(Law::M2), rpm(60.0), PAPER_W_REF_N)
+            ..noisy_m2()
         };
         assert_eq!(simulate(&cfg).unwrap(), a.trace);
     }
@@ -1333,7 +1385,7 @@ mod tests {
             }
         );
         assert_eq!(well.segments[1].wob_n, Profile::Constant(180_000.0));
-        assert_eq!((well.seed, well.noise_torque_nm), (3, 600.0));
+        assert_eq!((well.recording.seed, well.recording.noise_torque_nm), (3, 600.0));
         let refused = |text: &str| Well::parse(text, path).unwrap_err().to_string();
         let e = refused("[[segment]]\nduration_s = 30\nlaw = \"m2\"\nomega_rpm = 80\nspeed = 3\n");
         assert!(

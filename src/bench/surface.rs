@@ -7,7 +7,7 @@ use crate::data::surface::{SurfaceColumns, SurfaceRecord};
 use crate::error::Result;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::run::surface::{SurfaceSettings, infer};
-use crate::simulate::{self, Initial, SimConfig};
+use crate::simulate::{self, Initial, Recording, SimConfig};
 use crate::units::{RAD_S_PER_RPM, SpeedUnit, TorqueUnit};
 
 /// What to measure.
@@ -43,14 +43,17 @@ pub fn record(seconds: f64) -> Result<SurfaceRecord> {
     let params = law.scale_torque(law.paper_estimate().expect("m2 has one"), 1000.0);
     let cfg = SimConfig {
         duration_s: seconds,
-        settle_s: 60.0,
-        sample_hz: 1.0,
-        dt_s: 2e-3,
-        initial: Initial::Equilibrium {
-            speed_perturbation_rad_s: simulate::DEFAULT_KICK_RPM * RAD_S_PER_RPM,
+        recording: Recording {
+            settle_s: 60.0,
+            sample_hz: 1.0,
+            dt_s: 2e-3,
+            initial: Initial::Equilibrium {
+                speed_perturbation_rad_s: simulate::DEFAULT_KICK_RPM * RAD_S_PER_RPM,
+            },
+            noise_torque_nm: 200.0,
+            seed: 1,
+            ..Recording::default()
         },
-        noise_torque_nm: 200.0,
-        seed: 1,
         ..SimConfig::new(law, params, 60.0 * RAD_S_PER_RPM, PAPER_W_REF_N)
     };
     let trace = simulate::simulate_record_with(&cfg, &mut |_, _| {})?;

@@ -5,7 +5,7 @@ use super::args::LumpedArgs;
 use super::args::finite_number;
 use bitrock::Law;
 use bitrock::laws::PAPER_W_REF_N;
-use bitrock::simulate::{self, Initial, SimConfig};
+use bitrock::simulate::{self, Initial, Recording, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -135,20 +135,22 @@ pub fn run(cmd: &SimulateCmd) -> anyhow::Result<ExitCode> {
         wob_n: cmd.wob_kn * 1000.0,
         w_ref_n: cmd.w_ref_kn * 1000.0,
         duration_s: cmd.duration_s,
-        settle_s: cmd.settle_s,
-        sample_hz: cmd.sample_hz,
-        dt_s: cmd.dt_s,
-        initial: match cmd.initial {
-            InitialState::Equilibrium => Initial::Equilibrium {
-                speed_perturbation_rad_s: cmd.kick_rpm * RAD_S_PER_RPM,
+        recording: Recording {
+            settle_s: cmd.settle_s,
+            sample_hz: cmd.sample_hz,
+            dt_s: cmd.dt_s,
+            initial: match cmd.initial {
+                InitialState::Equilibrium => Initial::Equilibrium {
+                    speed_perturbation_rad_s: cmd.kick_rpm * RAD_S_PER_RPM,
+                },
+                InitialState::Rest => Initial::Rest,
             },
-            InitialState::Rest => Initial::Rest,
+            noise_torque_nm: cmd.noise_torque_knm * 1000.0,
+            noise_speed_rad_s: cmd.noise_speed_rpm * RAD_S_PER_RPM,
+            wob_fluctuation_n: cmd.wob_fluctuation_kn * 1000.0,
+            wob_correlation_s: cmd.wob_correlation_s,
+            seed: cmd.seed,
         },
-        noise_torque_nm: cmd.noise_torque_knm * 1000.0,
-        noise_speed_rad_s: cmd.noise_speed_rpm * RAD_S_PER_RPM,
-        wob_fluctuation_n: cmd.wob_fluctuation_kn * 1000.0,
-        wob_correlation_s: cmd.wob_correlation_s,
-        seed: cmd.seed,
     };
     config.validate()?;
     if let Some(path) = &cmd.out {

@@ -847,11 +847,14 @@ mod tests {
         let omega = 60.0 * RAD_S_PER_RPM;
         let p = paper_nm(Law::M2);
         let cfg = crate::simulate::SimConfig {
-            settle_s: 60.0,
             duration_s: 60.02,
-            dt_s: 0.01,
-            initial: crate::simulate::Initial::Equilibrium {
-                speed_perturbation_rad_s: 0.1 * omega,
+            recording: crate::simulate::Recording {
+                settle_s: 60.0,
+                dt_s: 0.01,
+                initial: crate::simulate::Initial::Equilibrium {
+                    speed_perturbation_rad_s: 0.1 * omega,
+                },
+                ..crate::simulate::Recording::default()
             },
             ..crate::simulate::SimConfig::new(Law::M2, p[..3].to_vec(), omega, PAPER_W_REF_N)
         };

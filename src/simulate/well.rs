@@ -19,7 +19,7 @@
 //! `inertia_kg_m2`, `omega_n_rad_s`, `damping_ratio`. Every refusal names the file, the line
 //! and the column.
 
-use super::{DEFAULT_KICK_RPM, DEFAULT_SEED, Initial, Profile, Segment, Well};
+use super::{DEFAULT_KICK_RPM, DEFAULT_SEED, Initial, Profile, Recording, Segment, Well};
 use crate::error::Result;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::stability::lumped::Lumped;
@@ -210,17 +210,19 @@ impl Well {
                 damping_ratio: file.string.damping_ratio,
             },
             w_ref_n: file.w_ref_kn * 1000.0,
-            settle_s: file.settle_s,
-            sample_hz: file.sample_hz,
-            dt_s: file.dt_s,
-            initial: Initial::Equilibrium {
-                speed_perturbation_rad_s: file.kick_rpm * RAD_S_PER_RPM,
+            recording: Recording {
+                settle_s: file.settle_s,
+                sample_hz: file.sample_hz,
+                dt_s: file.dt_s,
+                initial: Initial::Equilibrium {
+                    speed_perturbation_rad_s: file.kick_rpm * RAD_S_PER_RPM,
+                },
+                noise_torque_nm: file.noise_torque_knm * 1000.0,
+                noise_speed_rad_s: file.noise_speed_rpm * RAD_S_PER_RPM,
+                wob_fluctuation_n: file.wob_fluctuation_kn * 1000.0,
+                wob_correlation_s: file.wob_correlation_s,
+                seed: file.seed,
             },
-            noise_torque_nm: file.noise_torque_knm * 1000.0,
-            noise_speed_rad_s: file.noise_speed_rpm * RAD_S_PER_RPM,
-            wob_fluctuation_n: file.wob_fluctuation_kn * 1000.0,
-            wob_correlation_s: file.wob_correlation_s,
-            seed: file.seed,
         };
         // A segment's settings refused where the segment begins.
         for (i, spanned) in file.segment.iter().enumerate() {

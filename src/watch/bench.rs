@@ -145,7 +145,7 @@ pub fn run(quick: bool, backend: Backend, scratch: &Path, note: &mut dyn FnMut(S
                 ""
             },
             well.duration_s().round(),
-            well.sample_hz,
+            well.recording.sample_hz,
             WatchSettings::default().evidence.islands,
             WatchSettings::default().evidence.particles,
             super::ABC_PARTICLES,

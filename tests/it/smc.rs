@@ -480,12 +480,12 @@ fn near_the_floor_smc_keeps_a_ridge_law_as_rejection_does() {
         bitrock::laws::PAPER_W_REF_N,
     );
     sim.duration_s = 240.0;
-    sim.sample_hz = 10.0;
-    sim.noise_torque_nm = 600.0;
-    sim.initial = bitrock::simulate::Initial::Equilibrium {
+    sim.recording.sample_hz = 10.0;
+    sim.recording.noise_torque_nm = 600.0;
+    sim.recording.initial = bitrock::simulate::Initial::Equilibrium {
         speed_perturbation_rad_s: bitrock::simulate::DEFAULT_KICK_RPM * bitrock::units::RAD_S_PER_RPM,
     };
-    sim.seed = 3;
+    sim.recording.seed = 3;
     let trace = bitrock::simulate::simulate(&sim).unwrap();
     let mut csv = Vec::new();
     bitrock::simulate::write_csv(&trace, &mut csv).unwrap();

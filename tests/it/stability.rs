@@ -4,7 +4,7 @@
 use crate::support::bin;
 use bitrock::Law;
 use bitrock::run;
-use bitrock::simulate::{Initial, SimConfig, simulate};
+use bitrock::simulate::{Initial, Recording, SimConfig, simulate};
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
 use bitrock::stability::map::{critical_wob_n, parse_axis};
@@ -50,9 +50,12 @@ fn the_simulator_confirms_the_deterministic_boundary() {
         for (factor, unstable) in [(0.9, false), (1.1, true)] {
             let cfg = SimConfig {
                 duration_s: 20.0,
-                settle_s: 280.0,
-                initial: Initial::Equilibrium {
-                    speed_perturbation_rad_s: 0.2,
+                recording: Recording {
+                    settle_s: 280.0,
+                    initial: Initial::Equilibrium {
+                        speed_perturbation_rad_s: 0.2,
+                    },
+                    ..Recording::default()
                 },
                 ..SimConfig::new(law, p.clone(), omega, factor * w_star)
             };

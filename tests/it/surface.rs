@@ -7,7 +7,7 @@ use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::run::surface::{SurfaceResult, SurfaceSettings, infer};
 use bitrock::simulate::strings::Summary;
-use bitrock::simulate::{self, Channels, Initial, SimConfig};
+use bitrock::simulate::{self, Channels, Initial, Recording, SimConfig};
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
 use std::path::PathBuf;
 
@@ -24,14 +24,17 @@ fn record(
     let params = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
     let cfg = SimConfig {
         duration_s: seconds,
-        settle_s: 60.0,
-        sample_hz: hz,
-        dt_s: 2e-3,
-        initial: Initial::Equilibrium {
-            speed_perturbation_rad_s: 5.0 * RAD_S_PER_RPM,
+        recording: Recording {
+            settle_s: 60.0,
+            sample_hz: hz,
+            dt_s: 2e-3,
+            initial: Initial::Equilibrium {
+                speed_perturbation_rad_s: 5.0 * RAD_S_PER_RPM,
+            },
+            noise_torque_nm: noise_knm * 1000.0,
+            seed,
+            ..Recording::default()
         },
-        noise_torque_nm: noise_knm * 1000.0,
-        seed,
         ..SimConfig::new(law, params, rpm * RAD_S_PER_RPM, bitrock::laws::PAPER_W_REF_N)
     };
     let trace = simulate::simulate_record_with(&cfg, &mut |_, _| {}).unwrap();

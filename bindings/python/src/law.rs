@@ -75,11 +75,11 @@ pub(crate) fn simulate(
     c.structure.omega_n_rad_s = kwarg(options, "omega_n_rad_s")?.unwrap_or(c.structure.omega_n_rad_s);
     c.structure.damping_ratio = kwarg(options, "damping_ratio")?.unwrap_or(c.structure.damping_ratio);
     c.duration_s = kwarg(options, "duration_s")?.unwrap_or(c.duration_s);
-    c.settle_s = kwarg(options, "settle_s")?.unwrap_or(c.settle_s);
-    c.sample_hz = kwarg(options, "sample_hz")?.unwrap_or(c.sample_hz);
-    c.dt_s = kwarg(options, "dt_s")?.unwrap_or(c.dt_s);
+    c.recording.settle_s = kwarg(options, "settle_s")?.unwrap_or(c.recording.settle_s);
+    c.recording.sample_hz = kwarg(options, "sample_hz")?.unwrap_or(c.recording.sample_hz);
+    c.recording.dt_s = kwarg(options, "dt_s")?.unwrap_or(c.recording.dt_s);
     let kick_rpm = kwarg(options, "kick_rpm")?.unwrap_or(sim::DEFAULT_KICK_RPM);
-    c.initial = match kwarg::<String>(options, "initial")?
+    c.recording.initial = match kwarg::<String>(options, "initial")?
         .as_deref()
         .map(str::to_lowercase)
         .as_deref()
@@ -95,11 +95,12 @@ pub(crate) fn simulate(
             ));
         }
     };
-    c.noise_torque_nm = kn("noise_torque_knm")?.unwrap_or(c.noise_torque_nm);
-    c.noise_speed_rad_s = kwarg::<f64>(options, "noise_speed_rpm")?.map_or(c.noise_speed_rad_s, |v| v * RAD_S_PER_RPM);
-    c.wob_fluctuation_n = kn("wob_fluctuation_kn")?.unwrap_or(c.wob_fluctuation_n);
-    c.wob_correlation_s = kwarg(options, "wob_correlation_s")?.unwrap_or(c.wob_correlation_s);
-    c.seed = kwarg(options, "seed")?.unwrap_or(sim::DEFAULT_SEED);
+    c.recording.noise_torque_nm = kn("noise_torque_knm")?.unwrap_or(c.recording.noise_torque_nm);
+    c.recording.noise_speed_rad_s =
+        kwarg::<f64>(options, "noise_speed_rpm")?.map_or(c.recording.noise_speed_rad_s, |v| v * RAD_S_PER_RPM);
+    c.recording.wob_fluctuation_n = kn("wob_fluctuation_kn")?.unwrap_or(c.recording.wob_fluctuation_n);
+    c.recording.wob_correlation_s = kwarg(options, "wob_correlation_s")?.unwrap_or(c.recording.wob_correlation_s);
+    c.recording.seed = kwarg(options, "seed")?.unwrap_or(sim::DEFAULT_SEED);
     let channels = match kwarg::<String>(options, "channels")?
         .as_deref()
         .map(str::to_lowercase)
