@@ -226,8 +226,8 @@ pub fn fit_record_from(
 }
 
 /// [`fit_record_from`] for fits whose sums of squared residuals matter only to within
-/// `resolution_nm2` (N·m², > 0; [`fit_law_within`]), the validation samples not used; at 0,
-/// [`fit_record_from`] itself.
+/// `resolution_nm2` (N·m²; [`fit_law_within`]), the validation samples not used where it is
+/// positive; at 0, [`fit_record_from`] itself.
 pub fn fit_record_within(
     laws: &[Law],
     data: &FieldData,

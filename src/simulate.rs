@@ -446,7 +446,7 @@ const TRACE_BYTES_PER_SAMPLE: f64 = 4.0 * 8.0;
 
 /// Simulates the configuration and returns the recorded trace.
 ///
-/// Random draws, all standard normal from one `StdRng` seeded with `cfg.seed`, in this fixed
+/// Random draws, all standard normal from one `StdRng` seeded with `cfg.recording.seed`, in this fixed
 /// order: the initial WOB fluctuation; then, at each sample, speed noise and torque noise; and
 /// after each integration step, the WOB fluctuation update. Draws happen whatever the standard
 /// deviations, so switching measurement noise on or off does not change the dynamics.

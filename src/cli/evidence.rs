@@ -163,7 +163,7 @@ fn start_or_resume(
             job.backend = backend;
         }
         evidence::replicates_asked(cmd.check, job.laws.len())
-            .map(|k| evidence::check_size(k, &job, &data))
+            .map(|k| evidence::check_size(k, "check", &job, &data))
             .transpose()?;
         let analysis = unfinished
             .run(&job, &data, progress, Default::default(), &mut Notes)
@@ -176,7 +176,7 @@ fn start_or_resume(
     }
     let data = load_data(&cmd.input.record)?;
     evidence::replicates_asked(cmd.check, job.laws.len())
-        .map(|k| evidence::check_size(k, &job, &data))
+        .map(|k| evidence::check_size(k, "check", &job, &data))
         .transpose()?;
     match &cmd.out {
         None => {

@@ -42,7 +42,7 @@ pub(crate) fn evidence(
     let force: bool = kwarg(options, "force")?.unwrap_or(false);
     let data = &record.data;
     if let Some(k) = replicates {
-        check(py, check_size(k, &job, data))?;
+        check(py, check_size(k, "check", &job, data))?;
     }
     let unfinished = match &out {
         None => None,
@@ -92,7 +92,7 @@ pub(crate) fn resume_evidence(
     }
     let check = replicates_asked(check, job.laws.len());
     if let Some(k) = check {
-        crate::errors::check(py, check_size(k, &job, &data))?;
+        crate::errors::check(py, check_size(k, "check", &job, &data))?;
     }
     let workers = Workers {
         dispatcher,

@@ -184,10 +184,16 @@ def test_laws_are_refused_as_the_command_refuses_them(well) -> None:
 
 def test_ctrl_c_in_the_loop_body_stops_the_watch(well) -> None:
     watch = bitrock.watch(well, laws="m2", window_s=20, step_s=10, backend="cpu", particles=100)
-    with pytest.raises(KeyboardInterrupt):
-        for _ in watch:
-            # As a Ctrl-C in the user's code between two updates: no code of the watch runs.
-            signal.raise_signal(signal.SIGINT)
+    # Taken as an interactive session takes it: a test runner started in the background
+    # inherits SIGINT ignored.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            for _ in watch:
+                # As a Ctrl-C in the user's code between two updates: no code of the watch runs.
+                signal.raise_signal(signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     watch._thread.join(timeout=60)
     assert not watch._thread.is_alive()
     assert watch.ended["stopped"] and watch.ended["windows"] < 11, watch.ended

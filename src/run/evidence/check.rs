@@ -166,12 +166,12 @@ pub fn check_replicates(replicates: usize, field: &str) -> Result<()> {
     Ok(())
 }
 
-/// Refuses, naming `check`, a check of `replicates` records per law whose results would not
+/// Refuses, naming `field`, a check of `replicates` records per law whose results would not
 /// fit in memory or that could not finish in a day (each record gets the replicates' evidence
 /// ([`Job::for_replicates`]) on `data`'s calibration samples: at least two scored batches of
 /// every island of every law), before any work.
-pub fn check_size(replicates: usize, job: &Job, data: &FieldData) -> Result<()> {
-    check_replicates(replicates, "check")?;
+pub fn check_size(replicates: usize, field: &str, job: &Job, data: &FieldData) -> Result<()> {
+    check_replicates(replicates, field)?;
     let job = job.for_replicates();
     let sampler = &job.sampler;
     let starts = if sampler.start == Start::Both { 2.0 } else { 1.0 };
@@ -182,12 +182,12 @@ pub fn check_size(replicates: usize, job: &Job, data: &FieldData) -> Result<()> 
     let params = job.laws.iter().map(|law| law.n_params()).max().unwrap_or(0);
     let per_record = std::mem::size_of::<CheckReplicate>() + 8 * (params + 2 * job.laws.len());
     crate::limits::check_memory(
-        "check",
+        field,
         records * per_record as f64,
         &format!("the results of {records:.3e} synthetic records"),
     )?;
     crate::limits::check_work(
-        "check",
+        field,
         records * particles * sampler.islands as f64 * starts * samples * 2.0,
         crate::limits::FASTEST_EVALUATIONS_PER_S,
         &format!("the evidence of {records:.3e} synthetic records ({samples} samples each)"),
@@ -208,7 +208,7 @@ pub fn check(
     progress: &mut dyn FnMut(usize, usize),
     observer: &mut dyn Observer,
 ) -> Result<EvidenceCheck> {
-    check_size(replicates, job, data)?;
+    check_size(replicates, "check", job, data)?;
     let job = &job.for_replicates();
     let started = Instant::now();
     let laws: Vec<Law> = analysis.evidence.laws.iter().map(|l| l.law).collect();
@@ -497,13 +497,15 @@ mod tests {
             laws: Law::ALL.to_vec(),
             ..Job::default()
         };
-        assert!(check_size(DEFAULT_REPLICATES, &job, &data).is_ok());
-        let memory = check_size(usize::MAX / 16, &job, &data).unwrap_err().to_string();
+        assert!(check_size(DEFAULT_REPLICATES, "check", &job, &data).is_ok());
+        let memory = check_size(usize::MAX / 16, "check", &job, &data)
+            .unwrap_err()
+            .to_string();
         assert!(
             memory.contains("check") && memory.contains("synthetic records") && memory.contains("of memory"),
             "{memory}"
         );
-        let none = check_size(0, &job, &data).unwrap_err().to_string();
+        let none = check_size(0, "check", &job, &data).unwrap_err().to_string();
         assert!(none.contains("check") && none.contains("at least 1"), "{none}");
     }
 

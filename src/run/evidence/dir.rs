@@ -307,7 +307,7 @@ pub fn check_dir(
         )));
     }
     let data = read_record(&dir.join(RECORD_JSON))?;
-    check_size(replicates, &job, &data)?;
+    check_size(replicates, "replicates", &job, &data)?;
     if let Some(backend) = backend {
         job.backend = backend;
     }
