@@ -184,9 +184,17 @@ def test_laws_are_refused_as_the_command_refuses_them(well) -> None:
 
 def test_ctrl_c_in_the_loop_body_stops_the_watch(well) -> None:
     watch = bitrock.watch(well, laws="m2", window_s=20, step_s=10, backend="cpu", particles=100)
-    # Taken as an interactive session takes it: a test runner started in the background
-    # inherits SIGINT ignored.
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    # Taken as an interactive session takes it: the watches' handler (installed with the
+    # process's first watch), then KeyboardInterrupt, even where the test runner, started in
+    # the background, inherited SIGINT ignored.
+    watches = signal.getsignal(signal.SIGINT)
+    assert callable(watches)
+
+    def interactive(signum, frame) -> None:
+        watches(signum, frame)
+        signal.default_int_handler(signum, frame)
+
+    previous = signal.signal(signal.SIGINT, interactive)
     try:
         with pytest.raises(KeyboardInterrupt):
             for _ in watch:
