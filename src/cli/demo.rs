@@ -42,6 +42,10 @@ pub struct DemoCmd {
     /// Where ρ is computed (auto, gpu, cpu).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Synthetic records per law with which the model evidence's answer is checked by
+    /// re-simulation, as `bitrock evidence --check` checks it [default: 4; 0: no check].
+    #[arg(long, value_name = "K")]
+    pub check: Option<usize>,
 }
 
 /// Marks a directory the demo wrote, so that a later demo may replace it (and nothing else).
@@ -60,13 +64,24 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
     let root = &cmd.out;
     check_root(root)?;
     set_threads(cmd.threads)?;
+    let defaults = bitrock::run::abc::Config::default();
+    let evidence_job = run::evidence::Settings {
+        particles: (cmd.particles / 50).clamp(20, EvidenceConfig::default().particles),
+        seed: cmd.seed,
+        backend: cmd.backend,
+        ..Default::default()
+    }
+    .job(defaults.laws.clone(), defaults.fit)?;
+    let replicates = run::evidence::replicates_asked(cmd.check, evidence_job.laws.len());
+    if let Some(replicates) = replicates {
+        run::evidence::check_size(replicates, "check", &evidence_job, &data)?;
+    }
     let mut out = super::print::stdout();
     writeln!(
         out,
         "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
     )?;
     writeln!(out, "the paper's field data are not public.\n")?;
-    let defaults = bitrock::run::abc::Config::default();
     fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
     mark_root(root)?;
     let mut report_runs = Vec::new();
@@ -132,7 +147,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         out,
         "\nmodel evidence: tempered SMC per law over physical boxes (no fit involved), i.i.d. and AR(1) residuals, the noise model chosen by its evidence"
     )?;
-    let (evidence, check) = checked_evidence(cmd, &data, &defaults)?;
+    let (evidence, check) = checked_evidence(&evidence_job, replicates, &data)?;
     let report_dir = root.join(REPORT_DIR);
     let report = bitrock::report::write_paper_report(
         &report_dir,
@@ -144,34 +159,31 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
             ..Default::default()
         },
     )?;
-    print_headline(&mut out, &headlines, (&evidence, &check), &data, root, &report)?;
+    print_headline(&mut out, &headlines, (&evidence, check.as_ref()), &data, root, &report)?;
     Ok(ExitCode::SUCCESS)
 }
 
-/// The model evidence of the demo's laws on `data`, at particles scaled from the ABC runs',
-/// checked by re-simulation as `bitrock evidence` checks it by default.
+/// The model evidence of the demo's laws on `data` (its particles scaled from the ABC runs'),
+/// checked by re-simulation with `replicates` records per law as `bitrock evidence` checks it.
 fn checked_evidence(
-    cmd: &DemoCmd,
+    job: &run::evidence::Job,
+    replicates: Option<usize>,
     data: &FieldData,
-    defaults: &run::abc::Config,
-) -> anyhow::Result<(EvidenceAnalysis, EvidenceCheck)> {
-    let job = run::evidence::Settings {
-        particles: (cmd.particles / 50).clamp(20, EvidenceConfig::default().particles),
-        seed: cmd.seed,
-        backend: cmd.backend,
-        ..Default::default()
-    }
-    .job(defaults.laws.clone(), defaults.fit)?;
+) -> anyhow::Result<(EvidenceAnalysis, Option<EvidenceCheck>)> {
     let evidence = job.run(data, Default::default(), &mut RunProgress::new(false))?;
-    let check = run::evidence::check(
-        &job,
-        data,
-        &evidence,
-        run::evidence::DEFAULT_REPLICATES,
-        &mut Default::default(),
-        &mut |_, _| {},
-        &mut RunProgress::new(false),
-    )?;
+    let check = replicates
+        .map(|replicates| {
+            run::evidence::check(
+                job,
+                data,
+                &evidence,
+                replicates,
+                &mut Default::default(),
+                &mut |_, _| {},
+                &mut RunProgress::new(false),
+            )
+        })
+        .transpose()?;
     Ok((evidence, check))
 }
 
@@ -260,13 +272,13 @@ struct Headline {
 fn print_headline(
     out: &mut impl Write,
     headlines: &[Headline],
-    (evidence, check): (&EvidenceAnalysis, &EvidenceCheck),
+    (evidence, check): (&EvidenceAnalysis, Option<&EvidenceCheck>),
     data: &FieldData,
     root: &Path,
     report: &ReportSummary,
 ) -> std::io::Result<()> {
     writeln!(out, "\n== bitrock demo: headline ==")?;
-    if let Some(answer) = evidence.answer(Some(check)) {
+    if let Some(answer) = evidence.answer(check) {
         writeln!(out, "answer: {}", answer.sentence())?;
     }
     writeln!(

@@ -274,6 +274,8 @@ fn the_evidence_keeps_its_drill_string_for_its_advice_and_maps() {
         "2",
         "--noise",
         "iid",
+        "--check",
+        "0",
         "--backend",
         "cpu",
         "--out",

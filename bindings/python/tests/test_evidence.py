@@ -351,7 +351,7 @@ def test_a_record_with_weight_on_bit_compares_the_torque_scaled_by_it() -> None:
         wob_correlation_s=5, seed=3,
     )
     record = bitrock.read_record(frame)
-    ev = bitrock.evidence(record, laws=["m2", "m4"], particles=60, islands=2, seed=5, backend="cpu")
+    ev = bitrock.evidence(record, laws=["m2", "m4"], particles=60, islands=2, seed=5, backend="cpu", check=0)
     models = ev.noise_models
     assert len(models) == 4 and models["w_ref_kn"].notna().sum() == 2
     # W_ref is the calibration samples' mean weight on bit, near the record's.
@@ -444,7 +444,7 @@ def test_the_evidence_is_nested_sampling_s_within_the_errors(tmp_path) -> None:
     reference of two million draws, −573.00 ± 0.01, with an error of 0.09)."""
     frame = bitrock.simulate("m2", omega_rpm=60, duration_s=40, sample_hz=5, noise_torque_knm=1.5, seed=3)
     out = tmp_path / "evidence"
-    ev = bitrock.evidence(bitrock.read_record(frame), noise="iid", islands=8, backend="cpu", seed=2, out=out)
+    ev = bitrock.evidence(bitrock.read_record(frame), noise="iid", islands=8, backend="cpu", seed=2, check=0, out=out)
     result = tmp_path / "nested.json"
     done = subprocess.run(
         [sys.executable, str(REPO / "benches" / "evidence_nested.py"), str(out), "--nlive", "400", "--seed", "1",

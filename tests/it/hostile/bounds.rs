@@ -340,5 +340,12 @@ fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
         &["evidence", "rec.csv", "--check", "1000000000", "--out", "E"],
         &["--check", "synthetic records", "of memory"],
     );
-    assert!(!tmp.path().join("W").exists() && !tmp.path().join("E").exists());
+    // The demo's check too, before its runs.
+    refused(
+        &["demo", "--check", "1000000000", "--out", "D"],
+        &["--check", "synthetic records", "of memory"],
+    );
+    for made in ["W", "E", "D"] {
+        assert!(!tmp.path().join(made).exists(), "{made}");
+    }
 }

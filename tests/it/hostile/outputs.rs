@@ -6,15 +6,41 @@
 use super::{assert_refused, export, names, run_in, small_run};
 use std::path::Path;
 
+/// A small demo into `cwd/D`, without the evidence's check (the demo's own test has it).
 fn demo(cwd: &Path) -> (i32, String, String) {
-    run_in(cwd, &["demo", "--out", "D", "--particles", "200", "--backend", "cpu"])
+    run_in(
+        cwd,
+        &[
+            "demo",
+            "--out",
+            "D",
+            "--particles",
+            "200",
+            "--check",
+            "0",
+            "--backend",
+            "cpu",
+        ],
+    )
 }
 
 #[test]
 fn demo_never_deletes_what_the_user_put_in_its_directory() {
     let tmp = tempfile::tempdir().unwrap();
-    let (code, _, err) = demo(tmp.path());
+    let (code, out, err) = demo(tmp.path());
     assert_eq!(code, 0, "{err}");
+    // Without its check, the headline's answer is the evidence's alone.
+    let answer = out
+        .split("== bitrock demo: headline ==\n")
+        .nth(1)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap();
+    assert!(
+        answer.starts_with("answer: m3 over ") && !answer.contains("check"),
+        "{answer}"
+    );
     let d = tmp.path().join("D");
     let report_before = std::fs::read(d.join("report/report.md")).unwrap();
     // Each of the user's files, wherever in the demo's tree, refuses the next demo before any
