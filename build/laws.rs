@@ -33,6 +33,7 @@ struct RawLaw {
     dtorque_dw: Option<String>,
     gradient: Option<Vec<String>>,
     colour: String,
+    prior_curve_within: Option<f64>,
     parameter: Vec<RawParam>,
 }
 
@@ -53,6 +54,7 @@ pub struct BuiltIn {
     title: String,
     formula: String,
     colour: u32,
+    prior_curve_within: Option<f64>,
     params: Vec<Param>,
     torque: Expr,
     dtorque_dw: Expr,
@@ -116,6 +118,11 @@ fn compile(path: &Path, text: &str) -> Result<BuiltIn, String> {
         .filter(|hex| hex.len() == 6)
         .and_then(|hex| u32::from_str_radix(hex, 16).ok())
         .ok_or_else(|| format!("colour '{}': write #rrggbb", raw.colour))?;
+    if let Some(k) = raw.prior_curve_within
+        && !(k.is_finite() && k > 0.0)
+    {
+        return Err(format!("prior_curve_within = {k}: a positive number"));
+    }
     let mut params = Vec::new();
     for p in &raw.parameter {
         if expr::is_reserved(&p.name) || !p.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
@@ -178,6 +185,7 @@ fn compile(path: &Path, text: &str) -> Result<BuiltIn, String> {
         title: raw.title,
         formula: raw.formula,
         colour,
+        prior_curve_within: raw.prior_curve_within,
         params,
         torque,
         dtorque_dw,
@@ -308,7 +316,7 @@ pub fn rust(laws: &[BuiltIn]) -> String {
         let paper: Option<Vec<String>> = law.params.iter().map(|p| p.paper_estimate.map(float)).collect();
         writeln!(
             out,
-            "    BuiltIn {{\n        name: {:?},\n        title: {:?},\n        formula: {:?},\n        params: &[{}],\n        paper_estimate: {},\n        colour: {:#08x},\n    }},",
+            "    BuiltIn {{\n        name: {:?},\n        title: {:?},\n        formula: {:?},\n        params: &[{}],\n        paper_estimate: {},\n        colour: {:#08x},\n        prior_curve_within: {},\n    }},",
             law.name,
             law.title,
             law.formula,
@@ -317,7 +325,8 @@ pub fn rust(laws: &[BuiltIn]) -> String {
                 Some(values) => format!("Some(&[{}])", values.join(", ")),
                 None => "None".into(),
             },
-            law.colour
+            law.colour,
+            law.prior_curve_within.map_or("None".into(), |k| format!("Some({})", float(k)))
         )
         .unwrap();
     }

@@ -287,7 +287,7 @@ pub fn synthetic_problem(law: Law, d: usize, seed: u64) -> Problem {
         .iter()
         .map(|&p| ((p * 0.6).min(p * 1.4) as f32, (p * 0.6).max(p * 1.4) as f32))
         .unzip();
-    let prior = Prior::new(vec![LawBox { law, lower, upper }], vec![1.0]).expect("one positive weight");
+    let prior = Prior::new(vec![LawBox::new(law, lower, upper)], vec![1.0]).expect("one positive weight");
     Problem::new(prior, seed, &data, None)
 }
 

@@ -131,6 +131,15 @@ pub fn evidence_json(
                     })
                 }).collect::<Vec<_>>(),
                 "cut_by_box": law.cut_by_box,
+                // The box cut to curves within the record's torques, where the law's is: the
+                // limit in the record's torque unit, up to which speed, and the box's share.
+                "prior_curve": law.curve.as_ref().map(|c| json!({
+                    "within": c.within,
+                    "limit": c.limit_nm / data.torque_unit.newton_metres(),
+                    "speeds_rad_s": [0.0, c.speeds_rad_s.last().copied().unwrap_or(0.0)],
+                    "ln_share": c.ln_share,
+                    "ln_share_error": c.ln_share_error,
+                })),
                 "starts": law.starts,
                 "residual_lag1": of_fit(residual_lag1),
                 // ln p(y | AR(1)) − ln p(y | i.i.d.) at the fit (nats).

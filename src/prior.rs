@@ -29,6 +29,10 @@
 //! (seed, population, index) through Philox (see [`crate::rng`]); parameters are f32 so that a
 //! WGSL kernel reproduces them bit for bit.
 
+mod curve;
+
+pub use curve::CurveLimit;
+
 use crate::error::{Error, Result};
 use crate::fit::LawFit;
 use crate::laws::{Law, MAX_PARAMS, ParamSpec};
@@ -43,10 +47,24 @@ pub struct LawBox {
     pub law: Law,
     pub lower: Vec<f32>,
     pub upper: Vec<f32>,
+    /// Where the law's prior is the box cut to curves within the record's torques (the
+    /// evidence's, for a law whose file says so); `None`: the box alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub curve: Option<CurveLimit>,
 }
 
 impl LawBox {
-    /// True when `params` lie inside the box (ends included).
+    /// The box of `law` from `lower` to `upper` (SI), uniform.
+    pub fn new(law: Law, lower: Vec<f32>, upper: Vec<f32>) -> Self {
+        Self {
+            law,
+            lower,
+            upper,
+            curve: None,
+        }
+    }
+
+    /// True when `params` lie inside the box (ends included); a [`CurveLimit`] is not asked.
     pub fn contains(&self, params: &[f64]) -> bool {
         params
             .iter()
@@ -474,13 +492,31 @@ impl Prior {
                 upper.push(hi as f32);
                 law_rules.push(rule);
             }
-            boxes.push(LawBox { law, lower, upper });
+            boxes.push(LawBox::new(law, lower, upper));
             rules.push(law_rules);
             weights.push(file.and_then(|f| f.weights.get(law.name()).copied()).unwrap_or(1.0));
         }
         let mut prior = Self::new(boxes, weights)?;
         prior.rules = rules;
         Ok(prior)
+    }
+
+    /// The prior with each law whose file sets `prior_curve_within` cut to the curves within
+    /// that many times the record's largest torque, from rest to its fastest speed
+    /// ([`CurveLimit`]): the evidence's physical prior.
+    pub fn with_curve_limits(mut self, scales: &PhysicalScales) -> Result<Self> {
+        for bx in &mut self.boxes {
+            if let Some(within) = bx.law.prior_curve_within() {
+                bx.curve = Some(CurveLimit::new(
+                    bx.law,
+                    within,
+                    scales.torque_max,
+                    scales.speed_high,
+                    (&bx.lower, &bx.upper),
+                )?);
+            }
+        }
+        Ok(self)
     }
 
     /// A prior from explicit boxes (SI) and unnormalised law weights.

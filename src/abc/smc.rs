@@ -1249,11 +1249,7 @@ mod tests {
 
     /// Equally likely m2 and m4 on the boxes `[lower, upper]` given.
     fn m2_and_m4(m2: [[f32; 3]; 2], m4: [[f32; 4]; 2]) -> Prior {
-        let law_box = |law, [lower, upper]: [&[f32]; 2]| LawBox {
-            law,
-            lower: lower.to_vec(),
-            upper: upper.to_vec(),
-        };
+        let law_box = |law, [lower, upper]: [&[f32]; 2]| LawBox::new(law, lower.to_vec(), upper.to_vec());
         Prior::new(
             vec![law_box(Law::M2, [&m2[0], &m2[1]]), law_box(Law::M4, [&m4[0], &m4[1]])],
             vec![1.0, 1.0],
@@ -1319,11 +1315,7 @@ mod tests {
     /// m4 with its first parameter free on [0, 4] and the others fixed at 0.
     fn one_free_parameter_prior() -> Prior {
         Prior::new(
-            vec![LawBox {
-                law: Law::M4,
-                lower: vec![0.0, 0.0, 0.0, 0.0],
-                upper: vec![4.0, 0.0, 0.0, 0.0],
-            }],
+            vec![LawBox::new(Law::M4, vec![0.0, 0.0, 0.0, 0.0], vec![4.0, 0.0, 0.0, 0.0])],
             vec![1.0],
         )
         .unwrap()

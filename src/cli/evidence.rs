@@ -534,6 +534,19 @@ fn boxes_table(out: &mut impl Write, data: &FieldData, analysis: &EvidenceAnalys
             .map(|(name, (a, b))| format!("{name} [{a:.4e}, {b:.4e}]"))
             .collect();
         writeln!(out, "  {:<6} {}", bx.law.name(), ranges.join("  "))?;
+        if let Some(curve) = &bx.curve {
+            writeln!(
+                out,
+                "         cut to the curves within ±{:.4e} {} ({} times the largest torque) from rest to {:.3} rad/s: {:.3} of the box (ln {:.3} ± {:.3})",
+                curve.limit_nm / data.torque_unit.newton_metres(),
+                data.torque_unit.label(),
+                curve.within,
+                curve.speeds_rad_s.last().copied().unwrap_or(0.0),
+                curve.ln_share.exp(),
+                curve.ln_share,
+                curve.ln_share_error
+            )?;
+        }
     }
     Ok(())
 }

@@ -45,6 +45,9 @@ pub(crate) struct BuiltIn {
     pub paper_estimate: Option<&'static [f64]>,
     /// The law's colour in every figure (0xRRGGBB).
     pub colour: u32,
+    /// The evidence's prior keeps the law's curve within this many times the record's largest
+    /// torque over its speeds ([`crate::prior::CurveLimit`]); `None`: its boxes alone.
+    pub prior_curve_within: Option<f64>,
 }
 
 /// The handle of a registered law file: its place in the process's registry. Handles order by
@@ -253,6 +256,17 @@ impl Law {
         match self {
             Law::File(id) => crate::laws::file::registered(id).reference_knm,
             built_in => built_in.built_in().paper_estimate,
+        }
+    }
+
+    /// How far the evidence's prior lets the law's torque reach over the record's speeds, in
+    /// multiples of its largest torque (its file's `prior_curve_within`), where it says:
+    /// a law of free polynomial coefficients needs wide boxes for its terms, which cancel, and
+    /// the limit keeps its curves to the torques its rivals' boxes reach.
+    pub fn prior_curve_within(self) -> Option<f64> {
+        match self {
+            Law::File(id) => crate::laws::file::registered(id).file.prior_curve_within,
+            built_in => built_in.built_in().prior_curve_within,
         }
     }
 

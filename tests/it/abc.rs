@@ -17,11 +17,7 @@ use rand_distr::{Distribution, Normal};
 /// ρ(c0) = (1 − c0)² and the accepted set at ε is |c0 − 1| < √ε.
 fn one_parameter_problem(seed: u64) -> Problem {
     let prior = Prior::new(
-        vec![LawBox {
-            law: Law::M4,
-            lower: vec![0.0, 0.0, 0.0, 0.0],
-            upper: vec![2.0, 0.0, 0.0, 0.0],
-        }],
+        vec![LawBox::new(Law::M4, vec![0.0, 0.0, 0.0, 0.0], vec![2.0, 0.0, 0.0, 0.0])],
         vec![1.0],
     )
     .unwrap();

@@ -109,11 +109,11 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
         (reference_mean_ln_l - finer_mean_ln_l).abs() < 0.01,
         "quadrature ⟨ln L⟩ {reference_mean_ln_l} vs {finer_mean_ln_l}"
     );
-    let bx = LawBox {
-        law: Law::M2,
-        lower: lower.iter().map(|&v| v as f32).collect(),
-        upper: upper.iter().map(|&v| v as f32).collect(),
-    };
+    let bx = LawBox::new(
+        Law::M2,
+        lower.iter().map(|&v| v as f32).collect(),
+        upper.iter().map(|&v| v as f32).collect(),
+    );
     let prior = Prior::new(vec![bx], vec![1.0]).unwrap();
     let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &data, None))));
     let config = EvidenceConfig {
@@ -182,7 +182,7 @@ fn the_evidence_of_a_nonlinear_law_matches_quadrature() {
 #[test]
 fn the_same_seed_gives_the_same_evidence_and_another_seed_agrees_within_its_error() {
     let data = noisy_m2();
-    let bx = |law: Law, lower: Vec<f32>, upper: Vec<f32>| LawBox { law, lower, upper };
+    let bx = LawBox::new;
     let prior = Prior::new(
         vec![
             bx(Law::M2, vec![4e3, 0.0, 0.02], vec![3e4, 1.2e4, 2.0]),
@@ -1219,8 +1219,10 @@ fn an_evidence_started_from_the_fits_resumes_to_the_uninterrupted_evidence() {
 /// On a record made by m4 (its paper estimate, 60 rpm, 0.6 kN·m of noise, a fluctuating weight
 /// on bit) m2 has the larger evidence, but only through its boxes: m4's curves follow the record
 /// better (the data's part points to m4), and m2's smaller Occam penalty outweighs that. The
-/// pair is "decided by the boxes"; m2 against m1, which cannot follow the record, is decided by
-/// the data.
+/// pair is "decided by the boxes", and no law is given more than 0.9; m2 against m1, which
+/// cannot follow the record, is decided by the data. m4's prior is its box cut to the cubics
+/// within twice the record's largest torque, and a box change reweighted there is what
+/// sampling again with the changed box gives.
 #[test]
 fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
     let dir = tempfile::tempdir().unwrap();
@@ -1242,7 +1244,7 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
         "--wob-correlation-s",
         "5",
         "--seed",
-        "3",
+        "1",
         "--out",
         record.to_str().unwrap(),
     ]));
@@ -1302,6 +1304,21 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
     let m1 = pair("m1");
     assert!(number(m1, "data_nats") >= 5.0, "{m1}");
     assert_eq!(m1["strength"], "very_strong", "{m1}");
+    let laws = document["laws"].as_array().unwrap();
+    for law in laws {
+        assert!(number(law, "probability") <= 0.9, "{law}");
+        // m4's prior alone is cut, keeping the box's share that the box's shape gives it on
+        // any record (a grid over the unit box gives ln 0.090 = −2.41).
+        let curve = &law["prior_curve"];
+        if law["law"] == "m4" {
+            assert_eq!(number(curve, "within"), 2.0, "{curve}");
+            assert!((number(curve, "ln_share") + 2.412).abs() < 0.03, "{curve}");
+            assert!(number(curve, "ln_share_error") < 0.02, "{curve}");
+            assert_eq!(curve["speeds_rad_s"][0], 0.0, "{curve}");
+        } else {
+            assert!(curve.is_null(), "{law}");
+        }
+    }
     // The one answer is the pair's, with the boxes' word and why, however large ln B is.
     let answer = &document["answer"];
     assert_eq!(
@@ -1336,8 +1353,8 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
         stdout.contains("warning: m2 leads m4 by ln B = ") && stdout.contains("through the boxes, not the data"),
         "{stdout}"
     );
-    // One box changed at a time, by reweighting the posterior: a single box of m4 narrowed
-    // brings the pair within a nat or so, a box of m1 does not reach m2.
+    // One box changed at a time, by reweighting the posterior: a single box of m2 changed
+    // brings the pair within half a nat, a box of m1 does not reach m2.
     let range = &m4["sensitivity"];
     assert!(
         number(range, "lowest") < number(m4, "ln_b") && number(range, "highest") > number(m4, "ln_b"),
@@ -1345,31 +1362,29 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
     );
     assert!(number(&m1["sensitivity"], "lowest") > 10.0, "{m1}");
 
-    // The reweighted changes are what sampling again with the changed box gives: m2's static
-    // torque's box narrowed (it cuts the posterior: ln 2 plus the log of the mass kept) and its
-    // decay rate's widened (−ln 2), each sampled again from a prior file.
-    let m2 = document["laws"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|l| l["law"] == "m2")
-        .unwrap();
-    let change = |parameter: &str, factor: f64| {
-        m2["box_changes"]
+    // The reweighted changes are what sampling again with the changed box gives: m1's b3 box
+    // narrowed (it cuts the posterior: ln 2 plus the log of the mass kept) and m2's decay
+    // rate's widened (−ln 2), each sampled again from a prior file.
+    let change = |law: &'static str, parameter: &str, factor: f64| {
+        let of_law = laws.iter().find(|l| l["law"] == law).unwrap();
+        let c = of_law["box_changes"]
             .as_array()
             .unwrap()
             .iter()
             .find(|c| c["parameter"] == parameter && c["factor"] == factor)
             .unwrap()
-            .clone()
+            .clone();
+        (law, of_law, c)
     };
-    for c in [change("tsb", 0.5), change("g", 2.0)] {
+    for (law, before, c) in [change("m1", "b3", 0.5), change("m2", "g", 2.0)] {
         let shift = number(&c, "ln_z_shift");
-        let prior = dir.path().join(format!("{}.toml", c["parameter"].as_str().unwrap()));
+        let prior = dir
+            .path()
+            .join(format!("{law}-{}.toml", c["parameter"].as_str().unwrap()));
         std::fs::write(
             &prior,
             format!(
-                "[m2]\n{} = [{}, {}]\n",
+                "[{law}]\n{} = [{}, {}]\n",
                 c["parameter"].as_str().unwrap(),
                 c["lower"],
                 c["upper"]
@@ -1379,22 +1394,68 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
         let (code, stdout, err) = outcome(bin().args(args).arg(&record).arg("--json").arg("--prior").arg(&prior));
         assert_eq!(code, 0, "{err}");
         let again: serde_json::Value = serde_json::from_str(&stdout).unwrap();
-        let m2_again = again["laws"]
+        let law_again = again["laws"]
             .as_array()
             .unwrap()
             .iter()
-            .find(|l| l["law"] == "m2")
+            .find(|l| l["law"] == law)
             .unwrap();
-        let sampled = number(m2_again, "ln_z") - number(m2, "ln_z");
-        let error = number(m2_again, "ln_z_error").hypot(number(m2, "ln_z_error"));
-        eprintln!("{c}: reweighted {shift:.3}, sampled again {sampled:.3} ± {error:.3}");
+        let sampled = number(law_again, "ln_z") - number(before, "ln_z");
+        let error = number(law_again, "ln_z_error").hypot(number(before, "ln_z_error"));
+        eprintln!("{law} {c}: reweighted {shift:.3}, sampled again {sampled:.3} ± {error:.3}");
         assert!(
             (sampled - shift).abs() < 0.1 + 3.0 * error,
-            "{c}: sampled again {sampled} ± {error}"
+            "{law} {c}: sampled again {sampled} ± {error}"
         );
     }
     assert!(
-        number(&change("tsb", 0.5), "ln_z_shift") < 0.6,
+        number(&change("m1", "b3", 0.5).2, "ln_z_shift") < 0.67,
         "the narrowed box cuts the posterior"
+    );
+
+    // m4's c1 box halved: the cut keeps another share of the new box, and the reweighted shift
+    // (ln 2, the posterior mass kept, and the shares' ratio) is what m4 alone sampled again
+    // over the changed box gives, against m4 alone over its own.
+    let m4 = laws.iter().find(|l| l["law"] == "m4").unwrap();
+    let c1 = m4["box_changes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["parameter"] == "c1" && c["factor"] == 0.5)
+        .unwrap();
+    let shift = number(c1, "ln_z_shift");
+    let prior = dir.path().join("c1.toml");
+    std::fs::write(&prior, format!("[m4]\nc1 = [{}, {}]\n", c1["lower"], c1["upper"])).unwrap();
+    let alone = |extra: &[&std::ffi::OsStr]| {
+        let mut cmd = bin();
+        cmd.args([
+            "evidence",
+            "--backend",
+            "cpu",
+            "--noise",
+            "iid",
+            "--scale-by-wob",
+            "--laws",
+            "m4",
+            "--json",
+        ])
+        .arg(&record)
+        .args(extra);
+        let (code, stdout, err) = outcome(&mut cmd);
+        assert_eq!(code, 0, "{err}");
+        let doc: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        doc["laws"][0].clone()
+    };
+    let (own, again) = (alone(&[]), alone(&["--prior".as_ref(), prior.as_os_str()]));
+    assert!(
+        number(&again["prior_curve"], "ln_share") > number(&own["prior_curve"], "ln_share"),
+        "a narrower c1 keeps more of its box within the limit: {again}"
+    );
+    let sampled = number(&again, "ln_z") - number(&own, "ln_z");
+    let error = number(&again, "ln_z_error").hypot(number(&own, "ln_z_error"));
+    eprintln!("m4 c1 ×0.5: reweighted {shift:.3}, sampled again {sampled:.3} ± {error:.3}");
+    assert!(
+        (sampled - shift).abs() < 0.1 + 3.0 * error,
+        "sampled again {sampled} ± {error}, reweighted {shift}"
     );
 }

@@ -187,6 +187,7 @@ fn random_expressions_agree_on_the_gpu_with_their_twins() {
         let law = LawFile {
             name: "random".into(),
             description: None,
+            prior_curve_within: None,
             formula: text.clone(),
             params: names
                 .iter()
@@ -726,4 +727,68 @@ fn a_law_files_upper_bounds_hold_in_the_fit_and_the_prior() {
     // Values beyond the cap are refused as parameters.
     let err = capped.check_params(&[13e3, 6.5e3, 2.0 * cap], "params").unwrap_err();
     assert!(err.to_string().contains("is above its physical bound"), "{err}");
+}
+
+/// A law file's `prior_curve_within` cuts its evidence prior as m4's file cuts m4's: the cubic
+/// written as a law file with the same limit gets the same boxes, the same share of them within
+/// the limit (the same draws) and the same evidence within its errors; a limit that is not a
+/// positive number is refused naming the file, line and column.
+#[test]
+fn a_law_file_s_prior_curve_limit_is_the_built_in_cubic_s() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let cubic =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/laws/cubic.toml")).unwrap();
+    let with_limit = |limit: &str| cubic.replacen("torque = ", &format!("prior_curve_within = {limit}\ntorque = "), 1);
+    let law = tmp.path().join("cubic.toml");
+    std::fs::write(&law, with_limit("2")).unwrap();
+    let (code, stdout, stderr) = run(
+        &cache,
+        &[
+            "evidence",
+            "--law-file",
+            law.to_str().unwrap(),
+            "--laws",
+            "m4,cubic",
+            "--thin",
+            "8",
+            "--particles",
+            "100",
+            "--islands",
+            "2",
+            "--noise",
+            "iid",
+            "--check",
+            "0",
+            "--backend",
+            "cpu",
+            "--json",
+        ],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let doc: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let (m4, file) = (&doc["laws"][0], &doc["laws"][1]);
+    assert_eq!(file["law"], "cubic");
+    assert_eq!(m4["prior_curve"], file["prior_curve"]);
+    assert!(
+        (m4["prior_curve"]["ln_share"].as_f64().unwrap() + 2.412).abs() < 0.03,
+        "{m4}"
+    );
+    let number = |l: &serde_json::Value, key: &str| l[key].as_f64().unwrap();
+    let error = number(m4, "ln_z_error").hypot(number(file, "ln_z_error"));
+    assert!(
+        (number(m4, "ln_z") - number(file, "ln_z")).abs() < 0.1 + 3.0 * error,
+        "m4 {} against the file's {} ± {error}",
+        number(m4, "ln_z"),
+        number(file, "ln_z")
+    );
+    for bad in ["0", "-1", "nan"] {
+        std::fs::write(&law, with_limit(bad)).unwrap();
+        let (code, _, stderr) = run(&cache, &["fit", "--law-file", law.to_str().unwrap(), "--laws", "cubic"]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(
+            stderr.contains(&format!("{}:5:22: prior_curve_within = ", law.display())),
+            "{bad}: {stderr}"
+        );
+    }
 }

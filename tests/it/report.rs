@@ -367,6 +367,7 @@ fn the_report_shows_the_model_evidence_beside_the_runs_when_it_was_computed() {
         starts: Vec::new(),
         mean_ln_l: None,
         box_changes: Vec::new(),
+        curve: None,
     };
     let evidence = Evidence {
         laws: vec![

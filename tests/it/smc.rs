@@ -18,18 +18,10 @@ use bitrock::prior::{LawBox, Prior};
 /// m4 with c0 ~ U[0, 2] and c1..c3 fixed at 0 against y ≡ 1 (ρ = (1 − c0)²), plus, with
 /// prior weight `other`, an m2 law whose torque is ≥ 50 everywhere (ρ ≥ 49²): it cannot fit.
 fn one_parameter_problem(seed: u64, other: Option<f64>) -> Problem {
-    let mut boxes = vec![LawBox {
-        law: Law::M4,
-        lower: vec![0.0, 0.0, 0.0, 0.0],
-        upper: vec![2.0, 0.0, 0.0, 0.0],
-    }];
+    let mut boxes = vec![LawBox::new(Law::M4, vec![0.0, 0.0, 0.0, 0.0], vec![2.0, 0.0, 0.0, 0.0])];
     let mut weights = vec![1.0];
     if let Some(w) = other {
-        boxes.push(LawBox {
-            law: Law::M2,
-            lower: vec![50.0, 50.0, 0.1],
-            upper: vec![60.0, 60.0, 0.2],
-        });
+        boxes.push(LawBox::new(Law::M2, vec![50.0, 50.0, 0.1], vec![60.0, 60.0, 0.2]));
         weights.push(w);
     }
     let data = Samples::new((0..64).map(|i| 1.0 + i as f64 * 0.25).collect(), vec![1.0; 64]);

@@ -352,6 +352,10 @@ def test_a_record_with_weight_on_bit_compares_the_torque_scaled_by_it() -> None:
     )
     record = bitrock.read_record(frame)
     ev = bitrock.evidence(record, laws=["m2", "m4"], particles=60, islands=2, seed=5, backend="cpu", check=0)
+    # m4's prior is its box cut to the cubics within twice the record's largest torque: the
+    # share of the box it keeps is the box's shape's, on any record; m2's is its box.
+    assert ev.table.loc["m2", "prior_share"] == 1.0
+    assert abs(np.log(ev.table.loc["m4", "prior_share"]) + 2.412) < 0.03
     models = ev.noise_models
     assert len(models) == 4 and models["w_ref_kn"].notna().sum() == 2
     # W_ref is the calibration samples' mean weight on bit, near the record's.

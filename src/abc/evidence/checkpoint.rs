@@ -92,6 +92,7 @@ pub(super) fn decode_state(
         }
         // The reference is not saved: the job makes it again, the same.
         saved.reference = new.reference.clone();
+        saved.curve = new.curve.clone();
     }
     Ok((seconds, islands))
 }

@@ -164,9 +164,18 @@ pub(super) struct Island {
     /// each particle's ln q.
     #[serde(skip)]
     pub(super) reference: Option<Kernels>,
+    /// The law's prior cut to curves within the record's torques, where it is: the prior's
+    /// support is then the box's part that keeps it (the job makes it again on a resume).
+    #[serde(skip)]
+    pub(super) curve: Option<CurveLimit>,
     pub(super) ln_q: Vec<f64>,
     pub(super) proposal_ln_q: Vec<f64>,
 }
+
+/// Box draws an island starting from a law's prior makes for one particle inside a curve's
+/// limit before it keeps one outside (weight 0): never reached where the limit keeps the
+/// 0.15 % of the box [`CurveLimit`] requires.
+const MAX_CURVE_ATTEMPTS: usize = 1_000_000;
 
 /// Acceptance rate the random walk's scale is adapted towards (Roberts, Gelman & Gilks).
 pub(super) const TARGET_ACCEPTANCE: f64 = 0.234;
@@ -175,14 +184,13 @@ pub(super) const UNMOVED: f64 = 0.05;
 
 impl Island {
     pub(super) fn new(
-        law: Law,
         slot: usize,
-        lower: &[f32],
-        upper: &[f32],
+        bx: &LawBox,
         config: &EvidenceConfig,
         stream: u32,
         reference: Option<&Reference>,
     ) -> Self {
+        let (law, lower, upper) = (bx.law, &bx.lower, &bx.upper);
         let dims = law.n_params();
         let mut lo = [0.0f32; MAX_PARAMS];
         let mut hi = [0.0f32; MAX_PARAMS];
@@ -203,17 +211,26 @@ impl Island {
                     None => true,
                     Some(_) => stream.uniform() < DEFENSIVE_SHARE,
                 };
+                let keeps_curve = |p: &[f32; MAX_PARAMS]| bx.curve.as_ref().is_none_or(|c| c.holds(law, &p[..dims]));
                 if from_box {
-                    for block in (0..dims).step_by(4) {
-                        let w = stream.draw();
-                        for (k, &word) in (block..dims.min(block + 4)).zip(&w) {
-                            p[k] = uniform_between(lo[k], hi[k], word);
+                    // From the prior itself where the island starts from it: the box's draws
+                    // until one keeps the curve's limit (its share is at least 0.15 %). A
+                    // reference's defensive draws stay the box's, as its density says.
+                    for attempt in 0.. {
+                        for block in (0..dims).step_by(4) {
+                            let w = stream.draw();
+                            for (k, &word) in (block..dims.min(block + 4)).zip(&w) {
+                                p[k] = uniform_between(lo[k], hi[k], word);
+                            }
+                        }
+                        if reference.is_some() || keeps_curve(&p) || attempt == MAX_CURVE_ATTEMPTS {
+                            break;
                         }
                     }
-                    inside.push(true);
+                    inside.push(keeps_curve(&p));
                 } else if let Some(kernels) = &reference {
                     kernels.draw(&mut stream, &mut p);
-                    inside.push((0..dims).all(|j| p[j] >= lo[j] && p[j] <= hi[j]));
+                    inside.push((0..dims).all(|j| p[j] >= lo[j] && p[j] <= hi[j]) && keeps_curve(&p));
                 }
                 p
             })
@@ -249,6 +266,7 @@ impl Island {
             scored: 0,
             best_rho: f64::INFINITY,
             reference,
+            curve: bx.curve.clone(),
             ln_q: Vec::new(),
             proposal_ln_q,
         }
@@ -271,9 +289,12 @@ impl Island {
         self.phase == Phase::Done && self.theta.is_empty()
     }
 
-    /// ln π − ln q at a particle inside the box with ln q = `ln_q` (0 without a reference).
+    /// ln π − ln q at a particle inside the prior's support with ln q = `ln_q` (0 without a
+    /// reference): π is uniform there, 1/V on the box, 1/(V·P_B(C)) on a box cut to a curve's
+    /// limit C.
     pub(super) fn prior_over_reference(&self, ln_q: f64) -> f64 {
-        self.reference.as_ref().map_or(0.0, |g| -g.ln_volume - ln_q)
+        let ln_share = self.curve.as_ref().map_or(0.0, |c| c.ln_share);
+        self.reference.as_ref().map_or(0.0, |g| -g.ln_volume - ln_share - ln_q)
     }
 
     /// ⟨ln L⟩ over the island's posterior (β = 1), without the likelihood's constant: the
@@ -485,7 +506,8 @@ impl Island {
         floored_cholesky(cov, &self.lower[..d], &self.upper[..d]) * (2.38 / (d as f64).sqrt())
     }
 
-    /// A random-walk proposal per particle; those outside the box are rejected unscored.
+    /// A random-walk proposal per particle; those outside the prior's support (the box, and a
+    /// curve's limit where the law has one) are rejected unscored.
     pub(super) fn propose(&mut self) {
         let d = self.dims;
         let mut z = [0.0f64; MAX_PARAMS];
@@ -500,6 +522,9 @@ impl Island {
                 let v = (f64::from(self.theta[i][j]) + self.scale * step) as f32;
                 inside &= v >= self.lower[j] && v <= self.upper[j];
                 *slot = v;
+            }
+            if inside && let Some(curve) = &self.curve {
+                inside = curve.holds(self.law, &p[..d]);
             }
             self.proposals[i] = p;
             self.inside[i] = inside;

@@ -54,7 +54,7 @@ use super::shard::{Workers, score_candidates};
 use crate::error::{Error, Result};
 use crate::eval::Problem;
 use crate::laws::{Law, MAX_PARAMS};
-use crate::prior::Candidate;
+use crate::prior::{Candidate, CurveLimit, LawBox};
 use crate::rng::{box_muller, key_of_seed, open_unit, philox4x32_10, uniform_between};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -282,9 +282,7 @@ fn new_islands(prior: &crate::prior::Prior, config: &EvidenceConfig, references:
         for (group, reference) in starts.into_iter().enumerate() {
             for island in 0..config.islands {
                 let stream = ((group * laws + slot) * config.islands + island) as u32;
-                islands.push(Island::new(
-                    bx.law, slot, &bx.lower, &bx.upper, config, stream, reference,
-                ));
+                islands.push(Island::new(slot, bx, config, stream, reference));
             }
         }
     }
@@ -340,7 +338,12 @@ fn law_evidence(
     let spent: Vec<&Island> = islands.iter().filter(|i| i.slot == slot).collect();
     let all = current(islands, slot, span, (laws * config.islands) as u32);
     let kept = kept_estimate(&all, config, constant);
-    let (starts, own, ln_z, ln_z_error) = (kept.starts, kept.own, kept.ln_z, kept.ln_z_error);
+    let (starts, own, ln_z) = (kept.starts, kept.own, kept.ln_z);
+    // A warm start's prior density holds the curve limit's estimated share: its error too.
+    let ln_z_error = bx
+        .curve
+        .as_ref()
+        .map_or(kept.ln_z_error, |c| kept.ln_z_error.hypot(c.ln_share_error));
     let island_ln_z: Vec<f64> = own.iter().map(|i| i.ln_z + constant).collect();
     let island_spread = spread_of(&island_ln_z);
     let refinements = own.iter().map(|i| round_of(i, span).0).max().unwrap_or(0);
@@ -365,6 +368,7 @@ fn law_evidence(
             .map(|(island, share)| share / k * island.posterior_mean_ln_l())
             .sum::<f64>();
     let mut law = LawEvidence {
+        curve: bx.curve.clone(),
         mean_ln_l: Some(mean_ln_l),
         box_changes: Vec::new(),
         island_spread,
@@ -384,7 +388,7 @@ fn law_evidence(
         posterior_island,
         starts,
     };
-    law.box_changes = sensitivity::box_changes(&law, &bx.lower, &bx.upper);
+    law.box_changes = sensitivity::box_changes(&law, bx);
     law
 }
 
@@ -554,15 +558,7 @@ mod tests {
 
     /// m4 alone on the box [`lower`, `upper`], scored on the CPU against `data`.
     fn m4_alone(lower: Vec<f32>, upper: Vec<f32>, data: &Samples) -> Local<Box<CpuEvaluator>> {
-        let prior = Prior::new(
-            vec![LawBox {
-                law: Law::M4,
-                lower,
-                upper,
-            }],
-            vec![1.0],
-        )
-        .unwrap();
+        let prior = Prior::new(vec![LawBox::new(Law::M4, lower, upper)], vec![1.0]).unwrap();
         Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, data, None))))
     }
 

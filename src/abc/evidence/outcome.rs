@@ -64,6 +64,10 @@ pub struct LawEvidence {
     /// ([`sensitivity`]); empty in documents written without them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub box_changes: Vec<BoxChange>,
+    /// Where the law's prior is its box cut to curves within the record's torques: the limit,
+    /// and the box's share that keeps it (ln Z is over that prior, normalised).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub curve: Option<CurveLimit>,
 }
 
 /// How much ln Z changes when every parameter's box of a law doubles in width, per parameter,
@@ -84,6 +88,7 @@ impl LawEvidence {
     #[cfg(test)]
     pub(crate) fn for_tests(law: Law, ln_z: f64, posterior: Vec<(Vec<f64>, f64)>, mean_ln_l: Option<f64>) -> Self {
         Self {
+            curve: None,
             law,
             ln_z,
             ln_z_error: 0.1,

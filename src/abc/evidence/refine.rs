@@ -111,9 +111,7 @@ pub(super) fn refine(
     for (_, slot, stream, round, reference) in planned {
         let bx = &prior.boxes[slot];
         let next = config.of_round(round);
-        islands.push(Island::new(
-            bx.law, slot, &bx.lower, &bx.upper, &next, stream, reference,
-        ));
+        islands.push(Island::new(slot, bx, &next, stream, reference));
     }
     any
 }

@@ -6,10 +6,13 @@
 //! Z'/Z = (V/V')·P(θ ∈ B' | y), the posterior mass it keeps; a box B' ⊃ B (widened) by V/V'
 //! exactly where the posterior lies inside B (no mass near the ends that move). A widened box
 //! whose moved end the posterior reaches, and a narrowed one that keeps too little of it, cannot
-//! be reweighted: they are named, not guessed.
+//! be reweighted: they are named, not guessed. Where the law's prior is its box cut to a
+//! curve's limit C ([`CurveLimit`]), its density is 1/(V·P_B(C)) on B ∩ C, and each change
+//! also moves ln Z by ln P_B(C) − ln P_B'(C), the shares estimated with the same draws.
 
 use super::{EDGE_MASS, EDGE_SHARE, LawEvidence};
 use crate::laws::Law;
+use crate::prior::{CurveLimit, LawBox};
 use serde::{Deserialize, Serialize};
 
 /// How much each box is widened and narrowed.
@@ -35,10 +38,22 @@ pub struct BoxChange {
     pub ln_z_shift: Option<f64>,
 }
 
-/// The box changes of `law`'s evidence over its box (`lower`, `upper`, SI): each parameter's
-/// widened and narrowed. A box keeps its end at a physical bound and grows or shrinks away
-/// from it; a box with no end at a bound (or both) about its centre.
-pub fn box_changes(law: &LawEvidence, lower: &[f32], upper: &[f32]) -> Vec<BoxChange> {
+/// The box changes of `law`'s evidence over its prior `bx` (SI): each parameter's widened and
+/// narrowed. A box keeps its end at a physical bound and grows or shrinks away from it; a box
+/// with no end at a bound (or both) about its centre.
+pub fn box_changes(law: &LawEvidence, bx: &LawBox) -> Vec<BoxChange> {
+    let (lower, upper) = (&bx.lower, &bx.upper);
+    // ln P_B(C) − ln P_B'(C) for the box with parameter j's ends `ends`; `None` where the
+    // changed box keeps too little of the limit to estimate.
+    let curve_shift = |j: usize, ends: (f64, f64)| -> Option<f64> {
+        let Some(curve) = &bx.curve else {
+            return Some(0.0);
+        };
+        let mut lo: Vec<f64> = lower.iter().map(|&v| f64::from(v)).collect();
+        let mut hi: Vec<f64> = upper.iter().map(|&v| f64::from(v)).collect();
+        (lo[j], hi[j]) = ends;
+        share_shift(curve, law.law, (&lo, &hi))
+    };
     let mut changes = Vec::new();
     for (j, spec) in law.law.params().iter().enumerate() {
         let (a, b) = (f64::from(lower[j]), f64::from(upper[j]));
@@ -73,7 +88,9 @@ pub fn box_changes(law: &LawEvidence, lower: &[f32], upper: &[f32]) -> Vec<BoxCh
             factor: (hi - lo) / width,
             lower: lo,
             upper: hi,
-            ln_z_shift: (!reaches_moved_end).then(|| -((hi - lo) / width).ln()),
+            ln_z_shift: (!reaches_moved_end)
+                .then(|| curve_shift(j, (lo, hi)).map(|c| c - ((hi - lo) / width).ln()))
+                .flatten(),
         });
         // Narrowed: the posterior mass the smaller box keeps.
         let (lo, hi) = resized(1.0 / FACTOR);
@@ -84,10 +101,19 @@ pub fn box_changes(law: &LawEvidence, lower: &[f32], upper: &[f32]) -> Vec<BoxCh
             lower: lo,
             upper: hi,
             ln_z_shift: (kept >= MIN_KEPT_MASS && particles >= MIN_KEPT_PARTICLES)
-                .then(|| (width / (hi - lo)).ln() + kept.ln()),
+                .then(|| curve_shift(j, (lo, hi)).map(|c| c + (width / (hi - lo)).ln() + kept.ln()))
+                .flatten(),
         });
     }
     changes
+}
+
+/// ln P_B(C) − ln P_B'(C) of `curve` (its share of the box B it was made on) for the box B'
+/// (`lower`, `upper`, SI) of `law`.
+fn share_shift(curve: &CurveLimit, law: Law, (lower, upper): (&[f64], &[f64])) -> Option<f64> {
+    curve
+        .share_in(law, lower, upper)
+        .map(|(ln_share, _)| curve.ln_share - ln_share)
 }
 
 /// A Bayes factor over the boxes changed one at a time (either law's, one parameter, widened
@@ -187,10 +213,14 @@ mod tests {
     const LOWER: [f32; 3] = [0.0, 0.0, 0.0];
     const UPPER: [f32; 3] = [10.0, 10.0, 4.0];
 
+    fn m2_box() -> LawBox {
+        LawBox::new(Law::M2, LOWER.to_vec(), UPPER.to_vec())
+    }
+
     #[test]
     fn a_posterior_inside_both_boxes_moves_ln_z_by_the_volume_ratio_alone() {
         let law = m2(0.0, [2.0, 3.0, 1.0], 0.2);
-        let changes = box_changes(&law, &LOWER, &UPPER);
+        let changes = box_changes(&law, &m2_box());
         assert_eq!(changes.len(), 6);
         for pair in changes.chunks(2) {
             let (wide, narrow) = (&pair[0], &pair[1]);
@@ -209,21 +239,21 @@ mod tests {
     fn a_narrowed_box_keeps_the_posterior_mass_inside_it_and_the_rest_is_named() {
         // tsb's particles spread over 4 to 6: the half box [0, 5] keeps half of them.
         let law = m2(0.0, [5.0, 3.0, 1.0], 2.0);
-        let changes = box_changes(&law, &LOWER, &UPPER);
+        let changes = box_changes(&law, &m2_box());
         let narrow_tsb = &changes[1];
         assert_eq!((narrow_tsb.parameter.as_str(), narrow_tsb.upper), ("tsb", 5.0));
         assert!((narrow_tsb.ln_z_shift.unwrap() - (2.0f64.ln() + 0.5f64.ln())).abs() < 1e-12);
         // A posterior outside the narrowed box, and one at the end a widened box moves, are not
         // reweighted.
         let law = m2(0.0, [9.9, 3.0, 1.0], 0.1);
-        let changes = box_changes(&law, &LOWER, &UPPER);
+        let changes = box_changes(&law, &m2_box());
         assert_eq!((changes[0].ln_z_shift, changes[1].ln_z_shift), (None, None));
     }
 
     #[test]
     fn a_pair_whose_order_a_single_box_can_change_is_prior_dependent() {
         let mut favoured = m2(-100.0, [2.0, 3.0, 1.0], 0.2);
-        favoured.box_changes = box_changes(&favoured, &LOWER, &UPPER);
+        favoured.box_changes = box_changes(&favoured, &m2_box());
         let mut against = m2(-101.2, [2.0, 3.0, 1.0], 0.2);
         against.law = Law::M1;
         against.box_changes = vec![BoxChange {

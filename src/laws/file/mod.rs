@@ -74,6 +74,9 @@ pub struct LawFile {
     pub gradient: Vec<Expr>,
     /// The file's whole text: what a run stores, so that it never depends on the file again.
     pub source: String,
+    /// How far the evidence's prior lets the torque reach over the record's speeds, in
+    /// multiples of its largest torque ([`crate::laws::Law::prior_curve_within`]).
+    pub prior_curve_within: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -82,6 +85,7 @@ struct RawLaw {
     name: Spanned<String>,
     description: Option<String>,
     torque: Spanned<String>,
+    prior_curve_within: Option<Spanned<f64>>,
     #[serde(default)]
     parameter: Vec<Spanned<RawParam>>,
 }
@@ -428,7 +432,20 @@ impl LawFile {
             ));
         }
         let gradient = (0..params.len()).map(|i| torque.derivative(Var::Param(i))).collect();
+        let prior_curve_within = match raw.prior_curve_within {
+            Some(k) if !(k.get_ref().is_finite() && *k.get_ref() > 0.0) => {
+                return Err(at(
+                    k.span().start,
+                    format!(
+                        "prior_curve_within = {}: give a positive number of the record's largest torques",
+                        k.get_ref()
+                    ),
+                ));
+            }
+            k => k.map(Spanned::into_inner),
+        };
         let law = Self {
+            prior_curve_within,
             name,
             description: raw.description,
             formula,

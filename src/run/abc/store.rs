@@ -748,11 +748,11 @@ impl Store {
             }
             rules.push(law_rules);
             // Written from f32, so the narrowing is exact.
-            boxes.push(LawBox {
+            boxes.push(LawBox::new(
                 law,
-                lower: values.iter().map(|v| v.0 as f32).collect(),
-                upper: values.iter().map(|v| v.1 as f32).collect(),
-            });
+                values.iter().map(|v| v.0 as f32).collect(),
+                values.iter().map(|v| v.1 as f32).collect(),
+            ));
             weights.push(probability);
             thresholds.push(threshold as u64);
         }

@@ -305,13 +305,10 @@ impl Job {
             let fits = fit::fit_record_from(&self.laws, data, &fit_options, known)?;
             let unit = data.torque_unit.newton_metres();
             let prior = match self.prior {
-                EvidencePrior::Physical { scale } => Prior::physical(
-                    &self.laws,
-                    &PhysicalScales::of(&data.calibration),
-                    scale,
-                    file.as_ref(),
-                    unit,
-                )?,
+                EvidencePrior::Physical { scale } => {
+                    let scales = PhysicalScales::of(&data.calibration);
+                    Prior::physical(&self.laws, &scales, scale, file.as_ref(), unit)?.with_curve_limits(&scales)?
+                }
                 EvidencePrior::Delta { delta } => Prior::from_fits(&fits, delta, file.as_ref(), unit)?,
             };
             let basis = Basis::new(fits, prior, fit_options, data);

@@ -106,7 +106,9 @@ class Evidence:
         (``refinements``: each doubled their particles), the best ρ reached, the mean number of tempering steps,
         candidates scored, the parameters whose posterior a box end cuts, and the lag-1
         autocorrelation of the law's least-squares residuals in time order (near 0 where the
-        i.i.d. noise model holds)."""
+        i.i.d. noise model holds). ``prior_share``: the share of the law's box its prior keeps
+        (1 where the prior is the box; below 1 where the law's file cuts it to the curves
+        within the record's torques, ``document["laws"][k]["prior_curve"]``)."""
         rows = [
             {
                 "law": law["law"],
@@ -121,6 +123,7 @@ class Evidence:
                 "candidates_scored": law["candidates_scored"],
                 "cut_by_box": list(law["cut_by_box"]),
                 "residual_lag1": law.get("residual_lag1"),
+                "prior_share": float(np.exp(law["prior_curve"]["ln_share"])) if law.get("prior_curve") else 1.0,
             }
             for law in self._doc["laws"]
         ]
