@@ -48,8 +48,9 @@ pub struct LawBox {
     pub lower: Vec<f32>,
     pub upper: Vec<f32>,
     /// Where the law's prior is the box cut to curves within the record's torques (the
-    /// evidence's, for a law whose file says so); `None`: the box alone.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// evidence's, for a law whose file says so); `None`: the box alone. (Always written:
+    /// the workers read a problem in postcard, which does not describe itself.)
+    #[serde(default)]
     pub curve: Option<CurveLimit>,
 }
 

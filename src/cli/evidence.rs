@@ -3,6 +3,7 @@
 
 use super::args::{InferenceArgs, finite_number, load_data, set_threads};
 use super::print;
+use bitrock::abc::evidence::sensitivity::every_box_widened;
 use bitrock::abc::evidence::{Evidence, EvidenceConfig, LN_Z_PER_DOUBLING, REFINE_ABOVE_NATS, Start, describe_starts};
 use bitrock::data::FieldData;
 use bitrock::documents::to_record_units;
@@ -451,11 +452,19 @@ fn bayes_factor_table(out: &mut impl Write, analysis: &EvidenceAnalysis) -> std:
              (⟨ln L⟩ over the posteriors) and the boxes' (Occam factors); the word is the data's:",
             first.favoured
         )?;
+        // Every box twice as wide: each parameter costs ln 2 more where the posterior lies
+        // inside its box (a prior cut to the record's torques gets most of it back).
+        let widened = |law: bitrock::laws::Law| {
+            analysis
+                .prior
+                .boxes
+                .iter()
+                .find(|b| b.law == law)
+                .and_then(every_box_widened)
+                .unwrap_or(LN_Z_PER_DOUBLING * law.n_params() as f64)
+        };
         for factor in &factors {
-            // Every box twice as wide: each parameter costs ln 2 more where the posterior
-            // lies inside its box.
-            let doubled = factor.ln_b
-                + LN_Z_PER_DOUBLING * (factor.favoured.n_params() as f64 - factor.against.n_params() as f64);
+            let doubled = factor.ln_b + widened(factor.favoured) - widened(factor.against);
             writeln!(
                 out,
                 "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {:<20} ({}; boxes twice as wide: ln B {:.2})",

@@ -128,7 +128,7 @@ fn bayes_factors_markdown(md: &mut String, factors: &[BayesFactor]) {
             md,
             "\nBayes factors of {}, the law of the largest evidence, against each other law, split into the data's \
              part (⟨ln L⟩ over the posteriors) and the boxes' part (the Occam factors, which boxes twice as wide move \
-             by ln 2 per parameter). Kass & Raftery's words, on the data's part: undecided below 1 nat or within \
+             by ln 2 per parameter, less where a law's prior is cut to the record's torques). Kass & Raftery's words, on the data's part: undecided below 1 nat or within \
              twice the error; decided by the boxes where the data's part is below {} nat or the fits do not \
              separate the pair:\n",
             first.favoured,

@@ -61,17 +61,7 @@ pub fn box_changes(law: &LawEvidence, bx: &LawBox) -> Vec<BoxChange> {
         if width.is_nan() || width <= 0.0 {
             continue;
         }
-        let at_lower_bound = a <= spec.lower;
-        let at_upper_bound = b >= spec.upper;
-        let resized = |factor: f64| -> (f64, f64) {
-            let w = width * factor;
-            let (lo, hi) = match (at_lower_bound, at_upper_bound) {
-                (true, false) => (a, a + w),
-                (false, true) => (b - w, b),
-                _ => (0.5 * (a + b) - 0.5 * w, 0.5 * (a + b) + 0.5 * w),
-            };
-            (lo.max(spec.lower), hi.min(spec.upper))
-        };
+        let resized = |factor: f64| resized(law.law, j, (a, b), factor);
         let mass = |inside: &dyn Fn(f64) -> bool| -> (f64, usize) {
             law.posterior
                 .iter()
@@ -106,6 +96,44 @@ pub fn box_changes(law: &LawEvidence, bx: &LawBox) -> Vec<BoxChange> {
         });
     }
     changes
+}
+
+/// Parameter `j`'s box (`a`, `b`, SI) of `law` resized by `factor`: kept at its end on a
+/// physical bound and grown or shrunk away from it; about its centre where neither end (or
+/// both) is on one; clipped to the bounds.
+fn resized(law: Law, j: usize, (a, b): (f64, f64), factor: f64) -> (f64, f64) {
+    let spec = law.params()[j];
+    let w = (b - a) * factor;
+    let (lo, hi) = match (a <= spec.lower, b >= spec.upper) {
+        (true, false) => (a, a + w),
+        (false, true) => (b - w, b),
+        _ => (0.5 * (a + b) - 0.5 * w, 0.5 * (a + b) + 0.5 * w),
+    };
+    (lo.max(spec.lower), hi.min(spec.upper))
+}
+
+/// ln Z′ − ln Z of the law of prior `bx` with every box [`FACTOR`]× as wide (as [`box_changes`]
+/// widens one), for a posterior inside the boxes: the volume ratio, −ln 2 per parameter, and
+/// where the prior is cut to a curve's limit the ratio of the shares it keeps, which gives most
+/// of that back (the limit, not the boxes, bounds the curves); `None` where the wider boxes
+/// keep too little of the limit to estimate.
+pub fn every_box_widened(bx: &LawBox) -> Option<f64> {
+    let ends: Vec<(f64, f64)> = (0..bx.lower.len())
+        .map(|j| resized(bx.law, j, (f64::from(bx.lower[j]), f64::from(bx.upper[j])), FACTOR))
+        .collect();
+    let volume: f64 = ends
+        .iter()
+        .zip(bx.lower.iter().zip(&bx.upper))
+        .map(|(&(lo, hi), (&a, &b))| ((hi - lo) / (f64::from(b) - f64::from(a))).ln())
+        .sum();
+    let curve = match &bx.curve {
+        None => 0.0,
+        Some(curve) => {
+            let (lo, hi): (Vec<f64>, Vec<f64>) = ends.into_iter().unzip();
+            share_shift(curve, bx.law, (&lo, &hi))?
+        }
+    };
+    Some(curve - volume)
 }
 
 /// ln P_B(C) − ln P_B'(C) of `curve` (its share of the box B it was made on) for the box B'
@@ -271,5 +299,33 @@ mod tests {
         // Far apart, no single box changes the order.
         let range = Sensitivity::of(&favoured, &against, 8.0, 0.1).unwrap();
         assert!(!range.prior_dependent && range.not_reweighted.is_empty(), "{range:?}");
+    }
+
+    #[test]
+    fn every_box_widened_costs_ln_2_per_parameter_less_what_a_curve_limit_gives_back() {
+        // m2's boxes start at their physical bounds (0) and double away from them.
+        let plain = every_box_widened(&m2_box()).unwrap();
+        assert!((plain + 3.0 * std::f64::consts::LN_2).abs() < 1e-12, "{plain}");
+        // m4's unit box (c0 in [0, 2], c1..c3 in ±10) cut to |T| ≤ 2 from rest to 1: its
+        // doubled boxes are c0 in [0, 4] and ±20, and the shift is −4 ln 2 plus the shares'
+        // ratio, the doubled box's share from its own limit.
+        let lower = vec![0.0f32, -10.0, -10.0, -10.0];
+        let upper = vec![2.0f32, 10.0, 10.0, 10.0];
+        let mut bx = LawBox::new(Law::M4, lower.clone(), upper.clone());
+        bx.curve = Some(CurveLimit::new(Law::M4, 2.0, 1.0, 1.0, (&lower, &upper)).unwrap());
+        let doubled = CurveLimit::new(
+            Law::M4,
+            2.0,
+            1.0,
+            1.0,
+            (&[0.0, -20.0, -20.0, -20.0], &[4.0, 20.0, 20.0, 20.0]),
+        )
+        .unwrap();
+        let curve = bx.curve.as_ref().unwrap();
+        let want = -4.0 * std::f64::consts::LN_2 + curve.ln_share - doubled.ln_share;
+        let got = every_box_widened(&bx).unwrap();
+        assert!((got - want).abs() < 1e-9, "{got} against {want}");
+        // Most of the 2.77 nats come back: the limit, not the boxes, bounds the curves.
+        assert!(got > -1.5 && got < 0.5, "{got}");
     }
 }
