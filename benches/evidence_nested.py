@@ -27,12 +27,18 @@ with the law's torque T from ``bitrock.torque`` (the library's own, law files in
 sampling, S at each law's least-squares estimate is checked against the ρ = S / Σy² that
 bitrock reported for it (relative 1e-9): the data, the scaling and the torque are bitrock's.
 
+Where a law's prior is its box cut to the curves within a torque (``prior_curve``: |T(w)| at
+most ``limit`` at 33 speeds from rest to the fastest, at r = 1), the likelihood is 0 outside the
+cut, so that dynesty integrates L over the box's part inside it, and ln Z is that less ln of the
+part's share of the box, estimated here by this script's own Monte Carlo (``--share-draws``).
+
 Needs the Python package with dynesty (both installed by ``./scripts/test.sh`` into
 ``target/python-venv``: dynesty is among the package's test extras), or:
 
     target/python-venv/bin/pip install "dynesty==2.1.*"
     target/python-venv/bin/python benches/evidence_nested.py DIR [--nlive 500] \\
-        [--dlogz 0.05] [--sample rwalk] [--seed 1] [--laws m1,m3] [--out result.json]
+        [--dlogz 0.05] [--sample rwalk] [--seed 1] [--laws m1,m3] [--share-draws 200000] \\
+        [--out result.json]
 """
 
 import argparse
@@ -65,16 +71,26 @@ def law_torque_unit(units: list[str]) -> tuple[str, float]:
 
 
 class Likelihood:
-    """bitrock's i.i.d. likelihood of one law on the calibration samples."""
+    """bitrock's i.i.d. likelihood of one law on the calibration samples; 0 outside a prior's cut
+    (``cut``: the limit in N·m and the speeds it holds at) where the law's prior has one."""
 
-    def __init__(self, law: str, units: list[str], speed: np.ndarray, torque_nm: np.ndarray, r: np.ndarray):
+    def __init__(self, law: str, units: list[str], speed: np.ndarray, torque_nm: np.ndarray, r: np.ndarray,
+                 cut: tuple[float, np.ndarray] | None = None):
         self.law = law
         self.unit, self.newton_metres = law_torque_unit(units)
         self.speed, self.y, self.r = speed, torque_nm, r
         self.n = len(speed)
         self.sum_y2 = float(np.sum(torque_nm * torque_nm))
         self.constant = math.lgamma(self.n / 2) - math.log(2.0) - self.n / 2 * math.log(math.pi)
+        self.cut = cut
         self.calls = 0
+
+    def inside_cut(self, params: np.ndarray) -> bool:
+        if self.cut is None:
+            return True
+        limit_nm, speeds = self.cut
+        t = bitrock.torque(self.law, speeds, list(params), torque_unit=self.unit) * self.newton_metres
+        return bool(np.all(np.abs(t) <= limit_nm))
 
     def sum_of_squares(self, params: np.ndarray) -> float:
         t = bitrock.torque(self.law, self.speed, list(params), torque_unit=self.unit) * self.newton_metres
@@ -83,6 +99,8 @@ class Likelihood:
 
     def __call__(self, params: np.ndarray) -> float:
         self.calls += 1
+        if not self.inside_cut(params):
+            return -1e300
         s = self.sum_of_squares(params)
         if not math.isfinite(s) or s <= 0.0:
             return -1e300
@@ -97,6 +115,8 @@ def main() -> None:
     parser.add_argument("--sample", default="rwalk", help="dynesty's way of sampling within its bounds (default rwalk; rslice, slice, unif)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--laws", help="comma-separated laws (default: every law of the evidence)")
+    parser.add_argument("--share-draws", type=int, default=200_000,
+                        help="draws of a cut prior's box that estimate the share it keeps (default 200,000)")
     parser.add_argument("--out", type=pathlib.Path, help="write the results as JSON here")
     args = parser.parse_args()
 
@@ -124,7 +144,12 @@ def main() -> None:
         if wanted is not None and name not in wanted:
             continue
         lower, upper = np.asarray(law["lower"], dtype=float), np.asarray(law["upper"], dtype=float)
-        likelihood = Likelihood(name, law["units"], speed, torque_nm, r)
+        cut = None
+        if law.get("prior_curve"):
+            curve = law["prior_curve"]
+            limit_nm = curve["limit"] * TORQUE_UNITS[evidence["torque_unit"]][1]
+            cut = (limit_nm, np.linspace(0.0, curve["speeds_rad_s"][1], 33))
+        likelihood = Likelihood(name, law["units"], speed, torque_nm, r, cut)
         fit = fits[name]
         rho = likelihood.sum_of_squares(np.asarray(fit["params"])) / likelihood.sum_y2
         if abs(rho - fit["rho"]) > 1e-9 * fit["rho"]:
@@ -150,6 +175,15 @@ def main() -> None:
         seconds = time.perf_counter() - started
         run = sampler.results
         ln_z, ln_z_error = float(run.logz[-1]), float(run.logzerr[-1])
+        share = None
+        if cut is not None:
+            # The box's share inside the cut, by this script's own draws: ln Z over the cut prior
+            # is ln ∫ L over the box (what dynesty integrated, L being 0 outside) less its ln.
+            draws = np.random.default_rng(args.seed).uniform(lower, upper, size=(args.share_draws, len(lower)))
+            inside = sum(likelihood.inside_cut(p) for p in draws)
+            share = inside / args.share_draws
+            ln_z -= math.log(share)
+            ln_z_error = math.hypot(ln_z_error, math.sqrt((1.0 - share) / inside))
         joint = math.hypot(ln_z_error, law["ln_z_error"])
         results.append({
             "law": name,
@@ -159,6 +193,7 @@ def main() -> None:
             "dynesty_ln_z": ln_z,
             "dynesty_ln_z_error": ln_z_error,
             "dynesty_likelihood_calls": likelihood.calls,
+            "prior_share": share,
             "dynesty_seconds": seconds,
             "difference": law["ln_z"] - ln_z,
             "difference_in_joint_errors": (law["ln_z"] - ln_z) / joint if joint > 0 else math.inf,
