@@ -31,7 +31,7 @@
 
 mod curve;
 
-pub use curve::CurveLimit;
+pub use curve::{CURVE_SPEEDS, CurveLimit, MIN_INSIDE, SHARE_DRAWS};
 
 use crate::error::{Error, Result};
 use crate::fit::LawFit;

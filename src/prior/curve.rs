@@ -23,7 +23,7 @@ pub const SHARE_DRAWS: u64 = 1 << 16;
 
 /// The fewest of [`SHARE_DRAWS`] that must keep the limit: below, the limit leaves too little
 /// of the box to sample or to estimate (ln P below about −6.5).
-const MIN_INSIDE: u64 = 100;
+pub const MIN_INSIDE: u64 = 100;
 
 /// The Philox block and seed of the share's draws: the same draws for every record and run.
 const SHARE_BLOCK: u32 = 0x4375_7276;
