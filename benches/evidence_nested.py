@@ -28,7 +28,7 @@ sampling, S at each law's least-squares estimate is checked against the ρ = S /
 bitrock reported for it (relative 1e-9): the data, the scaling and the torque are bitrock's.
 
 Where a law's prior is its box cut to the curves within a torque (``prior_curve``: |T(w)| at
-most ``limit`` at 33 speeds from rest to the fastest, at r = 1), the likelihood is 0 outside the
+most ``limit`` at ``speeds`` speeds from rest to the fastest, at r = 1), the likelihood is 0 outside the
 cut, so that dynesty integrates L over the box's part inside it, and ln Z is that less ln of the
 part's share of the box, estimated here by this script's own Monte Carlo (``--share-draws``).
 
@@ -148,7 +148,7 @@ def main() -> None:
         if law.get("prior_curve"):
             curve = law["prior_curve"]
             limit_nm = curve["limit"] * TORQUE_UNITS[evidence["torque_unit"]][1]
-            cut = (limit_nm, np.linspace(0.0, curve["speeds_rad_s"][1], 33))
+            cut = (limit_nm, np.linspace(0.0, curve["speeds_rad_s"][1], curve["speeds"]))
         likelihood = Likelihood(name, law["units"], speed, torque_nm, r, cut)
         fit = fits[name]
         rho = likelihood.sum_of_squares(np.asarray(fit["params"])) / likelihood.sum_y2
@@ -181,6 +181,8 @@ def main() -> None:
             # is ln ∫ L over the box (what dynesty integrated, L being 0 outside) less its ln.
             draws = np.random.default_rng(args.seed).uniform(lower, upper, size=(args.share_draws, len(lower)))
             inside = sum(likelihood.inside_cut(p) for p in draws)
+            if inside == 0:
+                sys.exit(f"{name}: none of {args.share_draws} draws of its box lies inside its prior's cut")
             share = inside / args.share_draws
             ln_z -= math.log(share)
             ln_z_error = math.hypot(ln_z_error, math.sqrt((1.0 - share) / inside))

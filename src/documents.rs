@@ -136,6 +136,7 @@ pub fn evidence_json(
                 "prior_curve": law.curve.as_ref().map(|c| json!({
                     "within": c.within,
                     "limit": c.limit_nm / data.torque_unit.newton_metres(),
+                    "speeds": c.speeds_rad_s.len(),
                     "speeds_rad_s": [0.0, c.speeds_rad_s.last().copied().unwrap_or(0.0)],
                     "ln_share": c.ln_share,
                     "ln_share_error": c.ln_share_error,

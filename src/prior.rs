@@ -65,6 +65,13 @@ impl LawBox {
         }
     }
 
+    /// True when `params` (SI) lie in the law's prior: inside the box and, where the prior is
+    /// cut, within its [`CurveLimit`].
+    pub fn admits(&self, params: &[f64]) -> bool {
+        let as_f32: Vec<f32> = params.iter().map(|&v| v as f32).collect();
+        self.contains(params) && self.curve.as_ref().is_none_or(|c| c.holds(self.law, &as_f32))
+    }
+
     /// True when `params` lie inside the box (ends included); a [`CurveLimit`] is not asked.
     pub fn contains(&self, params: &[f64]) -> bool {
         params

@@ -453,28 +453,35 @@ fn bayes_factor_table(out: &mut impl Write, analysis: &EvidenceAnalysis) -> std:
             first.favoured
         )?;
         // Every box twice as wide: each parameter costs ln 2 more where the posterior lies
-        // inside its box (a prior cut to the record's torques gets most of it back).
-        let widened = |law: bitrock::laws::Law| {
-            analysis
-                .prior
-                .boxes
-                .iter()
-                .find(|b| b.law == law)
-                .and_then(every_box_widened)
-                .unwrap_or(LN_Z_PER_DOUBLING * law.n_params() as f64)
-        };
+        // inside its box (a prior cut to the record's torques gets most of it back; where the
+        // wider boxes keep too little of its cut to estimate, no number is given).
+        let widened: Vec<(bitrock::laws::Law, Option<f64>)> = analysis
+            .prior
+            .boxes
+            .iter()
+            .map(|b| {
+                let shift = match b.curve {
+                    None => Some(LN_Z_PER_DOUBLING * b.law.n_params() as f64),
+                    Some(_) => every_box_widened(b),
+                };
+                (b.law, shift)
+            })
+            .collect();
+        let shift = |law| widened.iter().find(|(l, _)| *l == law).and_then(|(_, s)| *s);
         for factor in &factors {
-            let doubled = factor.ln_b + widened(factor.favoured) - widened(factor.against);
+            let doubled = match (shift(factor.favoured), shift(factor.against)) {
+                (Some(a), Some(b)) => format!("{:.2}", factor.ln_b + a - b),
+                _ => "n/a (a cut prior's wider boxes keep too little of it)".to_string(),
+            };
             writeln!(
                 out,
-                "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {:<20} ({}; boxes twice as wide: ln B {:.2})",
+                "  {} vs {:<6} ln B = {:>10.2} ± {:.2}  {:<20} ({}; boxes twice as wide: ln B {doubled})",
                 factor.favoured,
                 factor.against.name(),
                 factor.ln_b,
                 factor.error,
                 factor.strength.words(),
                 factor.parts(),
-                doubled
             )?;
             if let Some(range) = &factor.sensitivity {
                 writeln!(out, "                   {}", range.describe())?;

@@ -12,6 +12,7 @@
 use crate::error::{Error, Result};
 use crate::laws::{Law, MAX_PARAMS};
 use crate::rng::{key_of_seed, philox4x32_10, uniform_between};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Speeds of the grid the limit holds at, evenly from rest to the record's fastest.
@@ -40,8 +41,9 @@ pub struct CurveLimit {
     pub limit_nm: f64,
     /// The speeds the limit holds at, rad/s.
     pub speeds_rad_s: Vec<f64>,
-    /// ln P_B(C), the box's share that keeps the limit, and its Monte-Carlo standard error.
+    /// ln P_B(C), the share of the box that keeps the limit.
     pub ln_share: f64,
+    /// Its Monte-Carlo standard error, nats.
     pub ln_share_error: f64,
 }
 
@@ -72,7 +74,7 @@ impl CurveLimit {
             Error::setting(
                 "prior_curve_within",
                 format!(
-                    "law {law}: fewer than {MIN_INSIDE} of {SHARE_DRAWS} draws of its box keep its torque within {within} times the record's largest ({:.4e} N·m) from rest to {speed_high_rad_s:.4} rad/s; raise the law file's prior_curve_within",
+                    "law {law}: fewer than {MIN_INSIDE} of {SHARE_DRAWS} draws of its box keep its torque within {within} times the record's largest ({:.4e} N·m) from rest to {speed_high_rad_s:.4} rad/s; narrow the law's boxes (the prior scale, or a prior file), or raise its law file's prior_curve_within",
                     limit.limit_nm
                 ),
             )
@@ -100,6 +102,7 @@ impl CurveLimit {
         let d = law.n_params();
         let key = key_of_seed(SHARE_SEED);
         let inside: u64 = (0..SHARE_DRAWS)
+            .into_par_iter()
             .filter(|&index| {
                 let mut p = [0.0f32; MAX_PARAMS];
                 for block in (0..d).step_by(4) {

@@ -32,7 +32,7 @@ pub(super) fn missed_mode(analysis: &EvidenceAnalysis, n: usize) -> bool {
             .boxes
             .iter()
             .find(|b| b.law == fit.law)
-            .is_some_and(|b| b.contains(&fit.params_si));
+            .is_some_and(|b| b.admits(&fit.params_si));
         let gap = n as f64 / 2.0 * (e.best_rho / fit.rho).ln();
         reachable && fit.rho > 0.0 && gap > MISSED_NATS && e.ln_z + gap >= best
     })

@@ -90,6 +90,21 @@ pub(super) fn decode_state(
                 saved.stream.stream, saved.law
             )));
         }
+        // A law's prior cut to the record's torques is not saved either: a state whose scored
+        // particles lie outside the cut was sampled under another prior (the whole box).
+        if let Some(curve) = &new.curve {
+            let outside = saved
+                .theta
+                .iter()
+                .zip(&saved.loglik)
+                .any(|(p, l)| *l > f64::NEG_INFINITY && !curve.holds(saved.law, &p[..saved.dims]));
+            if outside {
+                return Err(refuse(&format!(
+                    "its sampler {} of law {} holds particles outside the law's prior (its box cut to the curves within the record's torques): it was sampled under another prior",
+                    saved.stream.stream, saved.law
+                )));
+            }
+        }
         // The reference is not saved: the job makes it again, the same.
         saved.reference = new.reference.clone();
         saved.curve = new.curve.clone();

@@ -216,6 +216,7 @@ impl Island {
                     // From the prior itself where the island starts from it: the box's draws
                     // until one keeps the curve's limit (its share is at least 0.15 %). A
                     // reference's defensive draws stay the box's, as its density says.
+                    let mut keeps = false;
                     for attempt in 0.. {
                         for block in (0..dims).step_by(4) {
                             let w = stream.draw();
@@ -223,11 +224,12 @@ impl Island {
                                 p[k] = uniform_between(lo[k], hi[k], word);
                             }
                         }
-                        if reference.is_some() || keeps_curve(&p) || attempt == MAX_CURVE_ATTEMPTS {
+                        keeps = keeps_curve(&p);
+                        if reference.is_some() || keeps || attempt == MAX_CURVE_ATTEMPTS {
                             break;
                         }
                     }
-                    inside.push(keeps_curve(&p));
+                    inside.push(keeps);
                 } else if let Some(kernels) = &reference {
                     kernels.draw(&mut stream, &mut p);
                     inside.push((0..dims).all(|j| p[j] >= lo[j] && p[j] <= hi[j]) && keeps_curve(&p));

@@ -935,6 +935,101 @@ mod tests {
         assert!(why.contains("not one of the job's refinements"), "{why}");
     }
 
+    /// A prior cut to the curves within a torque is normalised by the share of the box it
+    /// keeps: where the cut holds the whole likelihood, ln Z is the box's closed form less
+    /// ln P_B(C), from the box (drawn inside the cut) and from the fit (weighed by the cut
+    /// prior's density) alike. A state saved by a sampler of the whole box is not the cut
+    /// job's: its particles lie outside the cut.
+    #[test]
+    fn a_cut_prior_s_evidence_is_the_box_s_closed_form_less_its_share() {
+        let case = linear_case();
+        let mut bx = LawBox::new(Law::M4, case.lower.clone(), case.upper.clone());
+        // |T| ≤ 1.15 × 11,800 N·m from rest to 20 rad/s: the fitted cubic peaks at about
+        // 11,800 at rest with a posterior a few hundred N·m wide; much of the box's ±12
+        // standard errors reaches beyond.
+        bx.curve = Some(CurveLimit::new(Law::M4, 1.15, 11_800.0, 20.0, (&bx.lower, &bx.upper)).unwrap());
+        let curve = bx.curve.clone().unwrap();
+        eprintln!("the cut keeps {:.3} of the box", curve.ln_share.exp());
+        assert!(curve.ln_share < -0.5, "{}", curve.ln_share);
+        let prior = Prior::new(vec![bx], vec![1.0]).unwrap();
+        let evaluator = Local(Box::new(CpuEvaluator::new(Problem::new(prior, 1, &case.data, None))));
+        let expected = case.expected - curve.ln_share;
+        let config = EvidenceConfig {
+            particles: 300,
+            islands: 4,
+            seed: 5,
+            ..EvidenceConfig::default()
+        };
+        let from_box = run(&evaluator, &config, &mut super::super::Silent).unwrap();
+        let m4 = from_box.of(Law::M4).unwrap();
+        eprintln!(
+            "from the box: ln Z = {:.3} ± {:.3}, closed form {expected:.3}",
+            m4.ln_z, m4.ln_z_error
+        );
+        assert_within_errors(m4, expected, 0.3);
+        assert!(m4.posterior.iter().all(|(p, _)| {
+            let p: Vec<f32> = p.iter().map(|&v| v as f32).collect();
+            curve.holds(Law::M4, &p)
+        }));
+        let d = case.d;
+        let covariance: Vec<f64> = (0..d * d)
+            .map(|i| 4.0 * case.sigma2 * case.inverse[(i / d, i % d)])
+            .collect();
+        let reference = Reference::gaussian(Law::M4, case.theta.iter().copied().collect(), &covariance);
+        let from_fit = EvidenceConfig {
+            start: Start::Fit,
+            ..config.clone()
+        };
+        let started = run_from(
+            &evaluator,
+            &from_fit,
+            std::slice::from_ref(&reference),
+            None,
+            &mut super::super::Silent,
+        )
+        .unwrap();
+        let m4 = started.of(Law::M4).unwrap();
+        eprintln!("from the fit: ln Z = {:.3} ± {:.3}", m4.ln_z, m4.ln_z_error);
+        assert_within_errors(m4, expected, 0.3);
+
+        // The state a sampler of the whole box saves after its first batch holds its draws
+        // from the box, many beyond the cut, scored: the cut job refuses it (the state before
+        // any batch holds no particle).
+        let whole = m4_alone(case.lower.clone(), case.upper.clone(), &case.data);
+        let mut states: Vec<Vec<u8>> = Vec::new();
+        let mut save = |bytes: &[u8]| {
+            states.push(bytes.to_vec());
+            Ok(())
+        };
+        run_from(
+            &whole,
+            &config,
+            &[],
+            Some(Checkpoints {
+                from: None,
+                origin: std::path::Path::new("state"),
+                every_s: 0.0,
+                save: &mut save,
+            }),
+            &mut super::super::Silent,
+        )
+        .unwrap();
+        assert!(states.len() > 2);
+        let why = decode_state(
+            &states[1],
+            std::path::Path::new("state"),
+            &new_islands(&evaluator.problem().prior, &config, &[]),
+            (round_span(1, &config), config.refine_rounds),
+        )
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+        assert!(
+            why.contains("outside the law's prior") && why.contains("law m4"),
+            "{why}"
+        );
+    }
+
     /// ln Z of a linear law under the AR(1) model against its closed form per φ, integrated
     /// over φ: at fixed φ the AR(1) quadratic form is Q = (y − Xθ)ᵀP(y − Xθ) with the precision
     /// P = I + φ²·D − φ·L (D the diagonal without its ends, L the two off-diagonals), so the

@@ -73,7 +73,8 @@ pub struct LawEvidence {
 /// How much ln Z changes when every parameter's box of a law doubles in width, per parameter,
 /// for a posterior that lies inside its boxes: −ln 2 (the prior density halves where the
 /// likelihood is). A Bayes factor between laws of d_a and d_b parameters moves by
-/// (d_b − d_a)·ln 2 per doubling: how much of it the choice of boxes sets.
+/// (d_b − d_a)·ln 2 per doubling: how much of it the choice of boxes sets. A prior cut to the
+/// record's torques moves less ([`sensitivity::every_box_widened`]).
 pub const LN_Z_PER_DOUBLING: f64 = -std::f64::consts::LN_2;
 
 /// Islands whose ln Z differ by more than this many nats have not converged alike: the law's
@@ -308,7 +309,8 @@ impl std::fmt::Display for Strength {
 ///
 /// The data's part is how much better law a's plausible curves follow the record than law
 /// b's; the boxes' part is how much less of its box law a's posterior leaves out, which grows
-/// by ln 2 per parameter each time its boxes double.
+/// by ln 2 per parameter each time its boxes double (less for a prior cut to the record's
+/// torques).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BayesFactor {
     /// The law of the larger evidence.

@@ -61,7 +61,7 @@ pub fn box_changes(law: &LawEvidence, bx: &LawBox) -> Vec<BoxChange> {
         if width.is_nan() || width <= 0.0 {
             continue;
         }
-        let resized = |factor: f64| resized(law.law, j, (a, b), factor);
+        let resized_by = |factor: f64| resized(law.law, j, (a, b), factor);
         let mass = |inside: &dyn Fn(f64) -> bool| -> (f64, usize) {
             law.posterior
                 .iter()
@@ -69,7 +69,7 @@ pub fn box_changes(law: &LawEvidence, bx: &LawBox) -> Vec<BoxChange> {
                 .fold((0.0, 0), |(m, k), (_, w)| (m + w, k + 1))
         };
         // Widened: exact where the posterior keeps away from every end that moves.
-        let (lo, hi) = resized(FACTOR);
+        let (lo, hi) = resized_by(FACTOR);
         let margin = EDGE_SHARE * width;
         let reaches_moved_end = (lo < a && mass(&|v| v <= a + margin).0 > EDGE_MASS)
             || (hi > b && mass(&|v| v >= b - margin).0 > EDGE_MASS);
@@ -83,7 +83,7 @@ pub fn box_changes(law: &LawEvidence, bx: &LawBox) -> Vec<BoxChange> {
                 .flatten(),
         });
         // Narrowed: the posterior mass the smaller box keeps.
-        let (lo, hi) = resized(1.0 / FACTOR);
+        let (lo, hi) = resized_by(1.0 / FACTOR);
         let (kept, particles) = mass(&|v| (lo..=hi).contains(&v));
         changes.push(BoxChange {
             parameter: spec.name.to_string(),

@@ -54,7 +54,7 @@ impl EvidencePrior {
     pub fn describe(&self) -> String {
         match *self {
             EvidencePrior::Physical { scale } => format!(
-                "physical boxes: each parameter from its physical bound over {scale} times the record's scale of its unit (no fit involved)"
+                "physical boxes: each parameter from its physical bound over {scale} times the record's scale of its unit (no fit involved); a law whose file sets prior_curve_within cut to the curves within that many times the record's largest torque"
             ),
             EvidencePrior::Delta { delta } => format!(
                 "the paper's boxes φ̂(1 ± {delta}) around the least-squares estimates of this record (the data used twice)"

@@ -203,7 +203,8 @@ class Evidence:
         """The law of the largest evidence against each other law, one row per pair: ln B and
         its Monte-Carlo error split into the data's part (``data_nats``: ⟨ln L⟩ over the
         favoured law's posterior less the other's) and the boxes' part (``boxes_nats``: the
-        Occam factors, which boxes twice as wide move by ln 2 per parameter), the fits' expected
+        Occam factors, which boxes twice as wide move by ln 2 per parameter, less where a law's
+        prior is cut to the record's torques), the fits' expected
         gap (``separation_nats``), and the word (``strength``): Kass & Raftery's on the data's
         part, ``decided_by_the_boxes`` where that part is below 1 nat, points the other way, or
         the fits do not separate the pair; ``sensitivity``: ln B's range with one box of either
