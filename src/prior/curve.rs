@@ -175,4 +175,17 @@ mod tests {
             .to_string();
         assert!(err.contains("prior_curve_within") && err.contains("law m4"), "{err}");
     }
+
+    #[test]
+    fn a_box_cut_to_a_curve_admits_what_both_keep() {
+        let (lower, upper) = (vec![0.0f32, -10.0, -10.0, -10.0], vec![2.0f32, 10.0, 10.0, 10.0]);
+        let mut bx = crate::prior::LawBox::new(Law::M4, lower.clone(), upper.clone());
+        assert!(bx.admits(&[1.5, 5.0, 0.0, 0.0]));
+        bx.curve = Some(CurveLimit::new(Law::M4, 2.0, 1.0, 1.0, (&lower, &upper)).unwrap());
+        // 1.5 + 0.5·w reaches 2 at the fastest speed: kept; 1.5 + 5·w reaches 6.5: not.
+        assert!(bx.admits(&[1.5, 0.5, 0.0, 0.0]));
+        assert!(!bx.admits(&[1.5, 5.0, 0.0, 0.0]));
+        // Outside the box, whatever the curve.
+        assert!(!bx.admits(&[2.5, 0.0, 0.0, 0.0]));
+    }
 }

@@ -1429,21 +1429,12 @@ fn a_bayes_factor_the_boxes_make_is_said_to_be_theirs() {
     let shift = number(c1, "ln_z_shift");
     let prior = dir.path().join("c1.toml");
     std::fs::write(&prior, format!("[m4]\nc1 = [{}, {}]\n", c1["lower"], c1["upper"])).unwrap();
+    // The same command with m4 alone (`--laws` is its last flag).
+    let mut m4_args = args.to_vec();
+    *m4_args.last_mut().unwrap() = "m4";
     let alone = |extra: &[&std::ffi::OsStr]| {
         let mut cmd = bin();
-        cmd.args([
-            "evidence",
-            "--backend",
-            "cpu",
-            "--noise",
-            "iid",
-            "--scale-by-wob",
-            "--laws",
-            "m4",
-            "--json",
-        ])
-        .arg(&record)
-        .args(extra);
+        cmd.args(&m4_args).arg("--json").arg(&record).args(extra);
         let (code, stdout, err) = outcome(&mut cmd);
         assert_eq!(code, 0, "{err}");
         let doc: serde_json::Value = serde_json::from_str(&stdout).unwrap();
