@@ -1033,7 +1033,7 @@ mod tests {
         let c = simulate(&SimConfig {
             recording: Recording {
                 seed: 8,
-                ..cfg.clone().recording
+                ..cfg.recording
             },
             ..cfg.clone()
         })
@@ -1124,7 +1124,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         sample_hz: f64::INFINITY,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },
@@ -1134,7 +1134,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         dt_s: 0.0,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },
@@ -1144,7 +1144,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         dt_s: 0.05,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },
@@ -1154,7 +1154,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         settle_s: -1.0,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },
@@ -1164,7 +1164,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         noise_torque_nm: -1.0,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },
@@ -1174,7 +1174,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         noise_speed_rad_s: f64::NAN,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },
@@ -1184,7 +1184,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         wob_fluctuation_n: -1.0,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },
@@ -1194,7 +1194,7 @@ mod tests {
                 SimConfig {
                     recording: Recording {
                         wob_correlation_s: 0.0,
-                        ..base.clone().recording
+                        ..base.recording
                     },
                     ..base.clone()
                 },

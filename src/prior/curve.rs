@@ -6,8 +6,9 @@
 //! record or the other laws' boxes hold. The Occam factor charges the law for that volume.
 //! Where a law's file says so (`prior_curve_within = k`), the evidence's prior of the law is its
 //! box B cut to C = {θ : |T(w; θ)| ≤ k·|y|max at every speed of a grid from rest to the record's
-//! fastest}, uniform on B ∩ C: density 1/(V_B·P_B(C)) there. The samplers start inside C and
-//! never leave it; the share P_B(C) is estimated once by Monte Carlo over the box.
+//! fastest}, uniform on B ∩ C: density 1/(V_B·P_B(C)) there. The samplers from the prior
+//! start inside C, a warm start's draws outside it weigh 0, and no proposal leaves it; the
+//! share P_B(C) is estimated once by Monte Carlo over the box.
 
 use crate::error::{Error, Result};
 use crate::laws::{Law, MAX_PARAMS};
@@ -19,7 +20,7 @@ use serde::{Deserialize, Serialize};
 pub const CURVE_SPEEDS: usize = 33;
 
 /// Draws of the box that estimate its share inside the limit: the share's relative error is
-/// √((1 − P)/(N·P)), 0.013 nats at P = 0.09.
+/// √((1 − P)/(N·P)), 0.012 nats at P = 0.09.
 pub const SHARE_DRAWS: u64 = 1 << 16;
 
 /// The fewest of [`SHARE_DRAWS`] that must keep the limit: below, the limit leaves too little
