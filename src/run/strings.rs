@@ -187,6 +187,38 @@ pub struct Grid {
 }
 
 impl Grid {
+    /// Scans along one axis joined in order: parts that share their weights (a scan of
+    /// speeds) or their speeds (a scan of weights).
+    fn joined(parts: Vec<Grid>) -> Grid {
+        let mut parts = parts.into_iter();
+        let Some(mut out) = parts.next() else {
+            return Grid {
+                omega_rpm: Vec::new(),
+                wob_kn: Vec::new(),
+                probability: Vec::new(),
+                stick_slip_weight: Vec::new(),
+                diverged_weight: Vec::new(),
+                diverged: 0,
+            };
+        };
+        for part in parts {
+            if part.wob_kn == out.wob_kn && out.wob_kn.len() == 1 {
+                out.omega_rpm.extend(part.omega_rpm);
+            } else {
+                assert!(
+                    part.omega_rpm == out.omega_rpm && out.omega_rpm.len() == 1,
+                    "scans are joined along one axis"
+                );
+                out.wob_kn.extend(part.wob_kn);
+            }
+            out.probability.extend(part.probability);
+            out.stick_slip_weight.extend(part.stick_slip_weight);
+            out.diverged_weight.extend(part.diverged_weight);
+            out.diverged += part.diverged;
+        }
+        out
+    }
+
     /// The probability at speed index `i` and weight index `j`.
     pub fn at(&self, i: usize, j: usize) -> f64 {
         self.probability[i * self.wob_kn.len() + j]
@@ -608,18 +640,56 @@ impl<'a> Simulator<'a> {
     /// the same weight) and the nearest weight on bit below it (at the same speed) whose
     /// P(stick-slip ends) reaches [`ADVICE_CONFIDENCE`], each with that probability, searched
     /// on `speeds_rpm` and `weights_kn`.
+    ///
+    /// The scans go nearest first, and on the CPU a few cells at a time: they stop after the
+    /// cells in which a change first ends it, since the cells beyond cannot be nearer (the
+    /// advice is the same as from the whole scan, with fewer strings). A GPU takes each scan in
+    /// one batch.
     pub fn escape_advice(&mut self, from: &AtPoint, speeds_rpm: &[f64], weights_kn: &[f64]) -> Result<EscapeAdvice> {
         let p = from.point;
-        let by_speed = self.escape(from, speeds_rpm, &[p.wob_kn])?;
-        let by_weight = self.escape(from, &[p.omega_rpm], weights_kn)?;
+        let cells = self.cells_per_scan_batch(from.replicas.len(), speeds_rpm.len().max(weights_kn.len()));
+        let mut speed_parts = Vec::new();
+        for part in speeds_rpm.chunks(cells) {
+            let grid = self.escape(from, part, &[p.wob_kn])?;
+            let ends = Way::nearest(part, &grid, false).is_some();
+            speed_parts.push(grid);
+            if ends {
+                break;
+            }
+        }
+        // The weights ascend: the nearest below the operating point is the last.
+        let mut weight_parts = Vec::new();
+        for part in weights_kn.rchunks(cells) {
+            let grid = self.escape(from, &[p.omega_rpm], part)?;
+            let ends = Way::nearest(part, &grid, true).is_some();
+            weight_parts.push(grid);
+            if ends {
+                break;
+            }
+        }
+        weight_parts.reverse();
+        let (by_speed, by_weight) = (Grid::joined(speed_parts), Grid::joined(weight_parts));
         Ok(EscapeAdvice {
             point: p,
             stick_slip_probability: from.stick_slip_probability,
-            speed_rpm: Way::nearest(speeds_rpm, &by_speed, false),
-            wob_kn: Way::nearest(weights_kn, &by_weight, true),
+            speed_rpm: Way::nearest(&by_speed.omega_rpm, &by_speed, false),
+            wob_kn: Way::nearest(&by_weight.wob_kn, &by_weight, true),
             speed_scan: by_speed,
             wob_scan: by_weight,
         })
+    }
+
+    /// Cells of an advice's scan integrated together: enough strings to keep every CPU
+    /// thread busy (four each), all of them where a GPU integrates.
+    fn cells_per_scan_batch(&self, strings_per_cell: usize, cells: usize) -> usize {
+        let on_cpu = self.settings.backend == Backend::Cpu || self.ran == Some(Ran::Cpu);
+        if on_cpu {
+            (4 * rayon::current_num_threads())
+                .div_ceil(strings_per_cell.max(1))
+                .max(1)
+        } else {
+            cells.max(1)
+        }
     }
 }
 
@@ -680,9 +750,11 @@ pub struct EscapeAdvice {
     pub speed_rpm: Option<Way>,
     /// The nearest lighter weight (kN) that ends it.
     pub wob_kn: Option<Way>,
-    /// P(stick-slip persists) along the speeds at the operating weight.
+    /// P(stick-slip persists) along the speeds at the operating weight: every speed where
+    /// none ends it, otherwise at least those up to the nearest that does.
     pub speed_scan: Grid,
-    /// P(stick-slip persists) along the weights at the operating speed.
+    /// P(stick-slip persists) along the weights at the operating speed, likewise (from the
+    /// nearest down).
     pub wob_scan: Grid,
 }
 

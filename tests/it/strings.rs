@@ -174,3 +174,67 @@ fn the_escape_map_is_the_same_on_the_gpu() {
         );
     }
 }
+
+/// The nearest cell of `axis` (in its order) where the strings end stick-slip with the advice's
+/// confidence, read off a whole scan.
+fn nearest_ending(axis: &[f64], scan: &Grid, reversed: bool) -> Option<(f64, f64)> {
+    let mut cells: Vec<(f64, f64)> = (0..axis.len())
+        .map(|k| (axis[k], 1.0 - scan.stick_slip_weight[k] - scan.diverged_weight[k]))
+        .collect();
+    if reversed {
+        cells.reverse();
+    }
+    cells
+        .into_iter()
+        .find(|(_, p)| *p >= bitrock::run::strings::ADVICE_CONFIDENCE)
+}
+
+#[test]
+fn the_advice_stops_its_scans_where_a_change_ends_stick_slip_and_says_what_the_whole_scans_say() {
+    // m2 and m3 at their paper estimates, stick-slipping at 60 rpm and 244 kN.
+    let inputs: Vec<LawSamples> = [Law::M2, Law::M3]
+        .into_iter()
+        .map(|law| {
+            let p = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
+            LawSamples {
+                law,
+                probability: 0.5,
+                map_si: p.clone(),
+                samples_si: vec![p],
+            }
+        })
+        .collect();
+    let settings = SimulatedSettings::new(Chain::one_dof(&Lumped::default()), PAPER_W_REF_N, Backend::Cpu);
+    let mut note = |_| {};
+    let mut sim = Simulator::new(&settings, &inputs, &mut note).unwrap();
+    let point = OperatingPoint {
+        omega_rpm: 60.0,
+        wob_kn: 244.2,
+    };
+    let at = sim.at_point(point).unwrap();
+    let speeds = bitrock::run::strings::advice_speeds_rpm(point.omega_rpm);
+    let weights = bitrock::run::strings::advice_weights_kn(point.wob_kn);
+    let advice = sim.escape_advice(&at, &speeds, &weights).unwrap();
+    let whole_speeds = sim.escape(&at, &speeds, &[point.wob_kn]).unwrap();
+    let whole_weights = sim.escape(&at, &[point.omega_rpm], &weights).unwrap();
+    let by_speed = nearest_ending(&speeds, &whole_speeds, false).expect("a speed scanned ends it");
+    let way = advice.speed_rpm.expect("the advice finds the speed");
+    assert_eq!((way.to, way.ends_probability), by_speed);
+    // The scan stopped short of the top speed, its cells the whole scan's first ones.
+    let scanned = advice.speed_scan.omega_rpm.len();
+    assert!(scanned < speeds.len(), "{scanned} of {} speeds", speeds.len());
+    assert_eq!(advice.speed_scan.omega_rpm, speeds[..scanned]);
+    assert_eq!(
+        advice.speed_scan.stick_slip_weight,
+        whole_speeds.stick_slip_weight[..scanned]
+    );
+    // The weights go down from the operating point: the same nearest (or none).
+    let by_weight = nearest_ending(&weights, &whole_weights, true);
+    assert_eq!(advice.wob_kn.map(|w| (w.to, w.ends_probability)), by_weight);
+    let kept = advice.wob_scan.wob_kn.len();
+    assert_eq!(advice.wob_scan.wob_kn, weights[weights.len() - kept..]);
+    assert_eq!(
+        advice.wob_scan.stick_slip_weight,
+        whole_weights.stick_slip_weight[weights.len() - kept..]
+    );
+}
