@@ -360,6 +360,19 @@ fn start_watch(
             rate_hz / thin as f64
         ));
     }
+    if let Some(items) = rows.wits_items() {
+        let surface: Vec<String> = items
+            .surface_averages()
+            .iter()
+            .map(|(code, what)| format!("item {code} is WITS record 01's {what}"))
+            .collect();
+        if !surface.is_empty() {
+            observer.note(format!(
+                "warning: {}, a surface average, read as the bit's: where it was measured at the surface, the laws fitted to it describe the string's top, not the bit (a stuck bit's surface torque still swings); the MWD's downhole items are named with `wits_items`, and a surface record's law is inferred with `bitrock surface`",
+                surface.join(" and ")
+            ));
+        }
+    }
     if let Some(config) = &settings.abc {
         observer.note(format!(
             "each window's law probabilities by the paper's ABC ({} sampler, {} particles, δ = {}): ratios of the laws' prior volumes below each window's ε, not evidence",

@@ -340,6 +340,14 @@ impl Rows {
         &self.name
     }
 
+    /// The WITS items read, where the source sends WITS blocks.
+    pub fn wits_items(&self) -> Option<&WitsItems> {
+        match &self.format {
+            Format::Wits(reader) => Some(reader.items()),
+            Format::Csv { .. } => None,
+        }
+    }
+
     /// The channels read and their units.
     pub fn declared(&self) -> crate::data::Declared {
         match &self.format {

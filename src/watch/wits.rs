@@ -53,6 +53,20 @@ impl Default for WitsItems {
 }
 
 impl WitsItems {
+    /// The items read as the bit's speed and torque that WITS record 01 defines as surface
+    /// averages (0120 rotary speed, 0118 rotary torque), each with what it is: read as the
+    /// bit's, they are said to be surface channels.
+    pub fn surface_averages(&self) -> Vec<(&str, &'static str)> {
+        [
+            (&self.speed, "0120", "rotary speed"),
+            (&self.torque, "0118", "rotary torque"),
+        ]
+        .into_iter()
+        .filter(|(code, surface, _)| code.as_str() == *surface)
+        .map(|(code, _, what)| (code.as_str(), what))
+        .collect()
+    }
+
     /// Items from `spec`, `key=CODE` pairs separated by commas over the defaults: keys
     /// `speed`, `torque`, `wob`, `top_drive`, `date`, `time` (HHMMSS) and `seconds` (an item in
     /// seconds, instead of date and time); `wob=none` reads no weight on bit.
@@ -169,6 +183,11 @@ impl WitsReader {
     }
 
     /// The items read, named by their codes, and their units (the time in seconds).
+    /// The items it reads.
+    pub fn items(&self) -> &WitsItems {
+        &self.items
+    }
+
     pub fn declared(&self) -> crate::data::Declared {
         let item = |code: &str| format!("item {code}");
         crate::data::Declared {

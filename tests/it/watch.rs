@@ -453,8 +453,21 @@ fn a_tcp_feed_of_csv_or_wits_gives_the_file_s_windows_through_a_dropped_connecti
     }
     let items = ["--wits-items", "seconds=0901,speed=0902,top_drive=0120"];
     let units = ["--torque-unit", "knm", "--wob-unit", "kn"];
-    let (fed, _) = watch_feed(serve(vec![wits.clone()]), &[&items[..], &units[..]].concat(), n);
+    let (fed, stderr) = watch_feed(serve(vec![wits.clone()]), &[&items[..], &units[..]].concat(), n);
     assert_eq!(without_latency(&fed), without_latency(&whole[..n]));
+    // The torque's item is record 01's surface average: read as the bit's, that is said; the
+    // speed's is a downhole item.
+    assert_eq!(
+        stderr
+            .matches("item 0118 is WITS record 01's rotary torque, a surface average")
+            .count(),
+        1,
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("named with --wits-items") && !stderr.contains("item 0902 is"),
+        "{stderr}"
+    );
 
     // WITS names no units: the torque's is asked for.
     let (code, _, stderr) = outcome(
