@@ -502,13 +502,27 @@ pub struct Segment {
 
 /// A value over a segment: constant, or a linear ramp from its start to its end (applied at
 /// the samples and held between them).
-#[derive(Clone, Copy, Debug, PartialEq)]
+///
+/// Written as the well files give it: a number, or `{"from": …, "to": …}`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(untagged)]
 pub enum Profile {
     Constant(f64),
     Ramp { from: f64, to: f64 },
 }
 
 impl Profile {
+    /// The profile in another unit: each value times `per_unit`.
+    pub fn scaled(self, per_unit: f64) -> Profile {
+        match self {
+            Profile::Constant(v) => Profile::Constant(v * per_unit),
+            Profile::Ramp { from, to } => Profile::Ramp {
+                from: from * per_unit,
+                to: to * per_unit,
+            },
+        }
+    }
+
     /// The value at `fraction` (0 at the segment's start, 1 at its end).
     pub fn at(self, fraction: f64) -> f64 {
         match self {
@@ -522,6 +536,16 @@ impl Profile {
         match self {
             Profile::Constant(v) => [v, v],
             Profile::Ramp { from, to } => [from, to],
+        }
+    }
+}
+
+impl std::fmt::Display for Profile {
+    /// The value, or `from→to` for a ramp (padded as a number is).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Profile::Constant(v) => f.pad(&v.to_string()),
+            Profile::Ramp { from, to } => f.pad(&format!("{from}→{to}")),
         }
     }
 }

@@ -7,6 +7,7 @@ use crate::data::drilling::DrillingRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::fit::coupled::{CoupledCalibration, bit_of, calibrate};
+use crate::simulate::Profile;
 use crate::simulate::coupled::well::CoupledWell;
 use crate::simulate::coupled::{
     self, Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, Regime, Sample, Schedule, Steady,
@@ -306,11 +307,13 @@ pub struct WellSegment {
     pub start_s: f64,
     /// Time recorded (s): whole sample periods.
     pub duration_s: f64,
-    pub omega_rpm: f64,
-    /// The weight (kN) or the feed (m/h) the segment is drilled under.
+    /// The top drive's speed (rpm): a value, or a ramp `{from, to}`.
+    pub omega_rpm: Profile,
+    /// The weight (kN) or the feed (m/h) the segment is drilled under, each likewise.
     pub drive: WellDrive,
     #[serde(flatten)]
     pub summary: SummaryReport,
+    /// Steady drilling at the segment's drive (at its end, where it ramps).
     pub steady: SteadyReport,
     /// Said where the bit was off bottom nearly throughout the segment.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -321,9 +324,9 @@ pub struct WellSegment {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct WellDrive {
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub wob_kn: Option<f64>,
+    pub wob_kn: Option<Profile>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub feed_m_h: Option<f64>,
+    pub feed_m_h: Option<Profile>,
 }
 
 /// A well drilled by one string through its segments, each recorded sample given to
@@ -347,22 +350,33 @@ pub fn well(well: &CoupledWell, on_sample: &mut dyn FnMut(usize, &Sample)) -> Re
                 },
                 warning: off_bottom_warning(&summary),
                 summary,
-                steady: SteadyReport::of(&segment.job.steady(&well.assembly), segment.job.bit.blades),
+                steady: SteadyReport::of(&segment.job_at_end().steady(&well.assembly), segment.job.bit.blades),
             }
         })
         .collect())
 }
 
 /// A well's record, the command's CSV and Python's `record`: each sample's segment (its index
-/// in the well), and the string's columns ([`record_columns`]) with the segment's top-drive
-/// speed (rpm) after the time.
+/// in the well), and the string's columns ([`record_columns`]) with the top-drive speed (rpm)
+/// that drove the sample's period after the time.
 pub fn well_record_columns(
     well: &CoupledWell,
     samples: &[(usize, Sample)],
 ) -> (Vec<usize>, Vec<(&'static str, Vec<f64>)>) {
     let record: Vec<Sample> = samples.iter().map(|(_, s)| *s).collect();
     let mut columns = record_columns(&record);
-    let top_drive = samples.iter().map(|(i, _)| well.segments[*i].omega_rpm).collect();
+    let mut in_segment = (usize::MAX, 0);
+    let top_drive = samples
+        .iter()
+        .map(|(i, _)| {
+            in_segment = if in_segment.0 == *i {
+                (*i, in_segment.1 + 1)
+            } else {
+                (*i, 0)
+            };
+            well.segments[*i].top_drive_rpm(in_segment.1, well.sample_hz)
+        })
+        .collect();
     columns.insert(1, ("top_drive_rpm", top_drive));
     (samples.iter().map(|(i, _)| *i).collect(), columns)
 }

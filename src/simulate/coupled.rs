@@ -38,6 +38,7 @@
 //! crosses zero on bottom is set to rest and the contact holds it (or lets it go) from the next
 //! step. First order in time at the events, which the step keeps far below the cycle's period.
 
+use super::Profile;
 use crate::error::{Error, Result};
 use crate::stability::lumped::Lumped;
 
@@ -650,6 +651,14 @@ impl CoupledString {
         s
     }
 
+    /// The top drive's speed (rad/s) and the axial drive (the job's kind: a weight, N, or a
+    /// feed, m/s) from now on: what a string resumed under a job of these does.
+    fn set_drive(&mut self, omega_rad_s: f64, axial: f64) {
+        self.omega = omega_rad_s;
+        self.drive = axial;
+        self.runaway = 1e3 * omega_rad_s.max(1.0);
+    }
+
     /// Where the string is now.
     fn state(&self) -> CoupledState {
         CoupledState {
@@ -840,6 +849,30 @@ pub fn integrate_from(
     start: Option<&CoupledState>,
     on_sample: &mut dyn FnMut(&Sample),
 ) -> (CoupledSummary, CoupledState) {
+    integrate_ramped(assembly, schedule, job, start, None, on_sample)
+}
+
+/// The drive of a recorded stretch ramped from its start to its end: the top drive's speed
+/// (rad/s) and the axial drive (the job's kind: N or m/s), each sample period driven by the
+/// values at its first sample (held between samples), sample j's at the fraction
+/// j / sample rate / `duration_s` of the ramps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ramp {
+    pub omega_rad_s: Profile,
+    pub axial: Profile,
+    pub duration_s: f64,
+}
+
+/// [`integrate_from`] with the recorded samples' drive ramped (the settling keeps the job's):
+/// the string carried through one-sample stretches at the ramps' values, sample for sample.
+pub fn integrate_ramped(
+    assembly: &Assembly,
+    schedule: &Schedule,
+    job: &CoupledJob,
+    start: Option<&CoupledState>,
+    ramp: Option<&Ramp>,
+    on_sample: &mut dyn FnMut(&Sample),
+) -> (CoupledSummary, CoupledState) {
     let mut s = match start {
         Some(state) => CoupledString::resume(assembly, job, state),
         None => CoupledString::new(assembly, job),
@@ -849,6 +882,11 @@ pub fn integrate_from(
     let mut forces = Forces::default();
     let period_s = schedule.sample_period_s();
     for period in 0..periods {
+        if let Some(ramp) = ramp.filter(|_| period >= schedule.settle_samples) {
+            let t = f64::from(period - schedule.settle_samples) * period_s;
+            let fraction = (t / ramp.duration_s).clamp(0.0, 1.0);
+            s.set_drive(ramp.omega_rad_s.at(fraction), ramp.axial.at(fraction));
+        }
         let axial_speed_before = s.axial_speed;
         for _ in 0..schedule.steps_per_sample {
             forces = s.step(schedule.dt_s);

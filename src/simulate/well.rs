@@ -102,23 +102,23 @@ struct SegmentFile {
     wob_kn: Option<Spanned<ProfileFile>>,
 }
 
-/// A value, or `[from, to]` for a ramp.
-#[derive(Deserialize)]
+/// A value, or `[from, to]` for a ramp: a well file's value over a segment (the coupled
+/// bit's wells read theirs so too).
+#[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(untagged)]
-enum ProfileFile {
+pub(crate) enum ProfileFile {
     Constant(f64),
     Ramp([f64; 2]),
 }
 
 impl ProfileFile {
-    fn profile(&self, per_unit: f64) -> Profile {
+    /// The profile in the file's unit times `per_unit`.
+    pub(crate) fn profile(&self, per_unit: f64) -> Profile {
         match *self {
-            ProfileFile::Constant(v) => Profile::Constant(v * per_unit),
-            ProfileFile::Ramp([from, to]) => Profile::Ramp {
-                from: from * per_unit,
-                to: to * per_unit,
-            },
+            ProfileFile::Constant(v) => Profile::Constant(v),
+            ProfileFile::Ramp([from, to]) => Profile::Ramp { from, to },
         }
+        .scaled(per_unit)
     }
 }
 

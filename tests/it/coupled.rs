@@ -350,6 +350,39 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
         stdout.contains("sandstone") && stdout.contains("stick-slip"),
         "{stdout}"
     );
+    // A ramp: as the file gives it in the JSON and the table, followed by the record.
+    let ramp = dir.path().join("ramp.toml");
+    std::fs::write(
+        &ramp,
+        "settle_s = 2\n[[segment]]\nduration_s = 4\nomega_rpm = [45, 90]\nwob_kn = [150, 120]\n",
+    )
+    .unwrap();
+    let ramp_csv = dir.path().join("ramp.csv");
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args(["coupled", "--json", "--well"])
+            .arg(&ramp)
+            .arg("--out")
+            .arg(&ramp_csv),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let segment = &report["segments"][0];
+    assert_eq!(segment["omega_rpm"], serde_json::json!({"from": 45.0, "to": 90.0}));
+    assert_eq!(
+        segment["drive"],
+        serde_json::json!({"wob_kn": {"from": 150.0, "to": 120.0}})
+    );
+    let text = std::fs::read_to_string(&ramp_csv).unwrap();
+    let top_drive: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!((top_drive.len(), top_drive[0], top_drive[100]), (200, 45.0, 67.5));
+    let (code, stdout, _) = outcome(bin().args(["coupled", "--well"]).arg(&ramp));
+    assert_eq!(code, 0);
+    assert!(stdout.contains("45→90") && stdout.contains("150→120 kN"), "{stdout}");
     let never = dir.path().join("never.csv");
     for flag in [["--omega-rpm", "60"], ["--seed", "3"], ["--backend", "cpu"]] {
         let (code, _, stderr) = outcome(

@@ -225,6 +225,14 @@ def test_python_drills_the_command_s_well(cli, tmp_path):
     assert record["time_s"][500] == pytest.approx(10.0, abs=1e-12)
     assert [s["regime"] for s in drilled["segments"]][0] == "stick_slip"
     assert [s["drive"] for s in drilled["segments"]] == [{"wob_kn": 150.0}] * 2
+    # A ramped segment: its drive as the file gives it, the record's top drive following it.
+    ramp = tmp_path / "ramp.toml"
+    ramp.write_text("settle_s = 2\n[[segment]]\nduration_s = 4\nomega_rpm = [45, 90]\nfeed_m_h = [20, 40]\n")
+    ramped = bitrock.coupled_well(ramp, record=True)
+    assert ramped["segments"] == json.loads(run_cli(cli, "coupled", "--well", str(ramp), "--json").stdout)["segments"]
+    assert ramped["segments"][0]["omega_rpm"] == {"from": 45.0, "to": 90.0}
+    assert ramped["segments"][0]["drive"] == {"feed_m_h": {"from": 20.0, "to": 40.0}}
+    assert ramped["record"]["top_drive_rpm"][::50] == pytest.approx([45.0, 56.25, 67.5, 78.75], abs=1e-12)
     # A bit off bottom nearly throughout is said, as the command says it.
     with pytest.warns(bitrock.BitrockWarning, match="off bottom for 9"):
         one = bitrock.coupled(axial_damping_kns_m=0.0, omega_rpm=60, wob_kn=200, duration_s=20.0, settle_s=60.0)

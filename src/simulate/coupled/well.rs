@@ -18,22 +18,25 @@
 //! [[segment]]                 # in drilling order
 //! name = "shale"              # the record's `segment` column (default: its number)
 //! duration_s = 60
-//! omega_rpm = 60
-//! wob_kn = 100                # or feed_m_h = 30: every segment the same kind of drive
+//! omega_rpm = 60              # a value, or [from, to]: a ramp over the segment
+//! wob_kn = 100                # or feed_m_h = 30: every segment the same kind of drive (a
+//!                             # value or a ramp)
 //! intrinsic_energy_mpa = 40   # the rock: intrinsic_energy_mpa, zeta, contact_stress_mpa,
 //! contact_stress_mpa = 40     # friction (default: the public parameter set's)
 //! ```
 //!
 //! The bit is the well's: its radius and blades shape the ring of rock-surface cells the
 //! string carries across every boundary. A new formation acts from its segment's first step,
-//! on the surface the last one left. Units are in the keys' names; every refusal names the
-//! file, the line and the column.
+//! on the surface the last one left. A ramp is applied at the samples and held between them.
+//! Units are in the keys' names; every refusal names the file, the line and the column.
 
 use super::{
     Assembly, Axial, Bit, CoupledJob, CoupledState, CoupledSummary, DEFAULT_DT_S, DEFAULT_FEED_M_H, DEFAULT_KICK_RPM,
-    DEFAULT_SAMPLE_HZ, DEFAULT_SETTLE_S, Sample, Schedule, integrate_from,
+    DEFAULT_SAMPLE_HZ, DEFAULT_SETTLE_S, Ramp, Sample, Schedule, integrate_ramped,
 };
 use crate::error::{Error, Result};
+use crate::simulate::Profile;
+use crate::simulate::well::ProfileFile;
 use crate::stability::lumped::Lumped;
 use crate::units::{M_S_PER_M_H, RAD_S_PER_RPM};
 use serde::Deserialize;
@@ -49,13 +52,47 @@ pub struct CoupledSegment {
     /// periods of it ([`SegmentRun::duration_s`]).
     pub duration_s: f64,
     /// The top drive's speed (rpm), and the weight (kN) or the feed (m/h), as the file gives
-    /// them (the feed at [`DEFAULT_FEED_M_H`] where it gives neither).
-    pub omega_rpm: f64,
-    pub wob_kn: Option<f64>,
-    pub feed_m_h: Option<f64>,
+    /// them, each a value or a ramp (the feed at [`DEFAULT_FEED_M_H`] where it gives neither).
+    pub omega_rpm: Profile,
+    pub wob_kn: Option<Profile>,
+    pub feed_m_h: Option<Profile>,
     /// The string of the segment: the well's bit in this rock, the top drive and the axial
-    /// drive in SI (the kick applies to the first segment only, from steady drilling).
+    /// drive at the segment's start in SI (the kick applies to the first segment only, from
+    /// steady drilling).
     pub job: CoupledJob,
+    /// Where the segment ramps its drive: the ramps in SI.
+    pub ramp: Option<Ramp>,
+}
+
+impl CoupledSegment {
+    /// The segment's job with the drive at its end (the start's where nothing ramps).
+    pub fn job_at_end(&self) -> CoupledJob {
+        let Some(ramp) = &self.ramp else {
+            return self.job;
+        };
+        let axial = match self.job.axial {
+            Axial::Weight { .. } => Axial::Weight {
+                wob_n: ramp.axial.at(1.0),
+            },
+            Axial::Feed { .. } => Axial::Feed {
+                rate_m_s: ramp.axial.at(1.0),
+            },
+        };
+        CoupledJob {
+            omega_rad_s: ramp.omega_rad_s.at(1.0),
+            axial,
+            ..self.job
+        }
+    }
+
+    /// The top drive's speed (rpm) over the sample period ending at recorded sample `j`.
+    pub fn top_drive_rpm(&self, j: usize, sample_hz: f64) -> f64 {
+        let fraction = (j as f64 / sample_hz / self.duration_s).clamp(0.0, 1.0);
+        match &self.ramp {
+            Some(ramp) => ramp.omega_rad_s.at(fraction) / RAD_S_PER_RPM,
+            None => self.omega_rpm.at(0.0),
+        }
+    }
 }
 
 /// A well of [`CoupledSegment`]s drilled by one string.
@@ -193,11 +230,19 @@ impl CoupledWell {
         let mut start_s = 0.0;
         for (i, segment) in self.segments.iter().enumerate() {
             let schedule = self.schedule(i)?;
-            let (summary, end) = integrate_from(&self.assembly, &schedule, &segment.job, state.as_ref(), &mut |s| {
-                let mut s = *s;
-                s.time_s += start_s;
-                on_sample(i, &s);
-            });
+            let ramp = segment.ramp.as_ref();
+            let (summary, end) = integrate_ramped(
+                &self.assembly,
+                &schedule,
+                &segment.job,
+                state.as_ref(),
+                ramp,
+                &mut |s| {
+                    let mut s = *s;
+                    s.time_s += start_s;
+                    on_sample(i, &s);
+                },
+            );
             let diverged = summary.diverged;
             let duration_s = f64::from(schedule.record_samples) / self.sample_hz;
             runs.push(SegmentRun {
@@ -286,9 +331,9 @@ impl StringFile {
 struct SegmentFile {
     name: Option<String>,
     duration_s: f64,
-    omega_rpm: f64,
-    wob_kn: Option<f64>,
-    feed_m_h: Option<f64>,
+    omega_rpm: ProfileFile,
+    wob_kn: Option<ProfileFile>,
+    feed_m_h: Option<ProfileFile>,
     intrinsic_energy_mpa: Option<f64>,
     zeta: Option<f64>,
     contact_stress_mpa: Option<f64>,
@@ -325,27 +370,44 @@ impl SegmentFile {
                 },
             ));
         }
-        let (axial, feed_m_h) = match self.wob_kn {
-            Some(kn) => (Axial::Weight { wob_n: kn * 1e3 }, None),
+        let omega_rpm = self.omega_rpm.profile(1.0);
+        let wob_kn = self.wob_kn.map(|w| w.profile(1.0));
+        // The axial drive also in SI, a weight (N) or a feed (m/s).
+        let (feed_m_h, axial) = match wob_kn {
+            Some(w) => (None, w.scaled(1e3)),
             None => {
-                let m_h = self.feed_m_h.unwrap_or(DEFAULT_FEED_M_H);
-                (
-                    Axial::Feed {
-                        rate_m_s: m_h * M_S_PER_M_H,
-                    },
-                    Some(m_h),
-                )
+                let f = self
+                    .feed_m_h
+                    .map_or(Profile::Constant(DEFAULT_FEED_M_H), |f| f.profile(1.0));
+                (Some(f), f.scaled(M_S_PER_M_H))
             }
         };
-        let job = CoupledJob {
+        let job_at = |fraction: f64| CoupledJob {
             bit: self.in_rock(shared.bit),
-            omega_rad_s: self.omega_rpm * RAD_S_PER_RPM,
-            axial,
+            omega_rad_s: omega_rpm.at(fraction) * RAD_S_PER_RPM,
+            axial: if feed {
+                Axial::Feed {
+                    rate_m_s: axial.at(fraction),
+                }
+            } else {
+                Axial::Weight {
+                    wob_n: axial.at(fraction),
+                }
+            },
             kick_rad_s: shared.kick_rpm * RAD_S_PER_RPM,
         };
-        job.validate()
-            .and_then(|()| job.check_step(shared.dt_s))
-            .map_err(|e| e.keyed())?;
+        let job = job_at(0.0);
+        let ramped = matches!(omega_rpm, Profile::Ramp { .. }) || matches!(axial, Profile::Ramp { .. });
+        // Both ends of a ramp are drives the string can be given (what lies between is too).
+        for (fraction, end) in [(0.0, ""), (1.0, "the ramp's end: ")]
+            .into_iter()
+            .take(if ramped { 2 } else { 1 })
+        {
+            let at = job_at(fraction);
+            at.validate()
+                .and_then(|()| at.check_step(shared.dt_s))
+                .map_err(|e| format!("{end}{}", e.keyed()))?;
+        }
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             return Err(format!(
                 "duration_s: must be positive and finite, got {}",
@@ -358,10 +420,15 @@ impl SegmentFile {
         let segment = CoupledSegment {
             name: self.name.clone().unwrap_or_else(|| (i + 1).to_string()),
             duration_s: self.duration_s,
-            omega_rpm: self.omega_rpm,
-            wob_kn: self.wob_kn,
+            omega_rpm,
+            wob_kn,
             feed_m_h,
             job,
+            ramp: ramped.then_some(Ramp {
+                omega_rad_s: omega_rpm.scaled(RAD_S_PER_RPM),
+                axial,
+                duration_s: self.duration_s,
+            }),
         };
         Ok((segment, schedule.steps() as f64))
     }
@@ -452,6 +519,62 @@ mod tests {
     }
 
     #[test]
+    fn a_ramp_is_the_string_carried_through_one_sample_segments_of_its_values() {
+        // 60 → 180 rpm and 150 → 100 kN over 2 s at 50 Hz, from stick-slip.
+        let ramped =
+            parse("settle_s = 10\n[[segment]]\nduration_s = 2\nomega_rpm = [60, 180]\nwob_kn = [150, 100]\n").unwrap();
+        let (runs, samples) = drilled(&ramped);
+        assert_eq!(samples.len(), 100);
+        // The same string given a segment per sample, each at the ramps' values there.
+        let mut steps = String::from("settle_s = 10\n");
+        for j in 0..100 {
+            let fraction = f64::from(j) / 50.0 / 2.0;
+            steps.push_str(&format!(
+                "[[segment]]\nduration_s = 0.02\nomega_rpm = {}\nwob_kn = {}\n",
+                60.0 + 120.0 * fraction,
+                150.0 - 50.0 * fraction
+            ));
+        }
+        let (_, stepped) = drilled(&parse(&steps).unwrap());
+        assert_eq!(stepped.len(), 100);
+        let mut moved = false;
+        for (k, ((_, a), (_, b))) in samples.iter().zip(&stepped).enumerate() {
+            assert!((a.time_s - b.time_s).abs() < 1e-9, "{a:?} {b:?}");
+            // The drive's values agree to rounding (the ramp scales to SI before it
+            // interpolates); the motion they drive agrees as closely.
+            for (x, y) in [
+                (a.bit_speed_rad_s, b.bit_speed_rad_s),
+                (a.torque_nm, b.torque_nm),
+                (a.wob_n, b.wob_n),
+                (a.axial_speed_m_s, b.axial_speed_m_s),
+            ] {
+                assert!((x - y).abs() <= 1e-9 * (1.0 + x.abs()), "sample {k}: {a:?} {b:?}");
+            }
+            moved |= a.bit_speed_rad_s > 100.0 * RAD_S_PER_RPM;
+        }
+        assert!(moved, "the ramp drives the bit past 100 rpm");
+        // The record's top drive follows the ramp; steady drilling is the end's.
+        let segment = &ramped.segments[0];
+        assert_eq!(segment.top_drive_rpm(0, 50.0), 60.0);
+        assert!((segment.top_drive_rpm(50, 50.0) - 120.0).abs() < 1e-12);
+        let end = segment.job_at_end();
+        assert!((end.omega_rad_s - 180.0 * RAD_S_PER_RPM).abs() < 1e-12);
+        assert!(matches!(end.axial, Axial::Weight { wob_n } if (wob_n - 100e3).abs() < 1e-9));
+        assert!(runs[0].summary.samples > 0);
+    }
+
+    #[test]
+    fn a_ramp_from_a_value_to_itself_is_the_constant_segment() {
+        let constant = parse("settle_s = 5\n[[segment]]\nduration_s = 4\nomega_rpm = 60\nfeed_m_h = 40\n").unwrap();
+        let ramp =
+            parse("settle_s = 5\n[[segment]]\nduration_s = 4\nomega_rpm = [60, 60]\nfeed_m_h = [40, 40]\n").unwrap();
+        assert!(ramp.segments[0].ramp.is_some() && constant.segments[0].ramp.is_none());
+        let ((a_runs, a), (b_runs, b)) = (drilled(&constant), drilled(&ramp));
+        assert_eq!(a, b, "sample for sample, bit for bit");
+        assert_eq!(a_runs, b_runs);
+    }
+
+    #[test]
     fn a_bad_well_is_refused_where_it_is_wrong() {
         let refused = |text: &str| parse(text).unwrap_err().to_string();
         let segment = "[[segment]]\nduration_s = 10\nomega_rpm = 60\n";
@@ -517,6 +640,15 @@ mod tests {
             e.contains("well.toml:4:1: segment 2: duration_s: 100000 periods at 50 Hz"),
             "{e}"
         );
+        let e = refused("[[segment]]\nduration_s = 10\nomega_rpm = [60, -5]\n");
+        assert!(
+            e.starts_with("well.toml:1:1: segment 1: the ramp's end: omega_rpm"),
+            "{e}"
+        );
+        let e = refused("[[segment]]\nduration_s = 10\nomega_rpm = 60\nwob_kn = [150, 0]\n");
+        assert!(e.contains("segment 1: the ramp's end: wob_kn"), "{e}");
+        let e = refused("[[segment]]\nduration_s = 10\nomega_rpm = [60]\n");
+        assert!(e.starts_with("well.toml:3:13:"), "{e}");
         let e = refused("sample_hz = 50\n");
         assert!(e.contains("missing field `segment`"), "{e}");
         let e = refused("segment = []\n");

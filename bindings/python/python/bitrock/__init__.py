@@ -862,8 +862,9 @@ def coupled_well(path: str | os.PathLike[str], *, record: bool = False) -> dict:
     the string and ``[[segment]]``s in drilling order, each with its rock, top-drive speed and
     weight or feed; docs/coupled.md), as ``bitrock coupled --well`` drills it: under
     ``segments`` each segment's name, start and duration (s), top-drive speed (rpm), ``drive``
-    (``wob_kn`` or ``feed_m_h``), regime, rate of penetration (m/h), stuck and off-bottom
-    shares and ranges, with its ``steady`` drilling; with ``record=True`` the samples under
+    (``wob_kn`` or ``feed_m_h``), each a number or, where the segment ramps it, ``{"from": …,
+    "to": …}``, regime, rate of penetration (m/h), stuck and off-bottom shares and ranges, with
+    its ``steady`` drilling (at the ramp's end); with ``record=True`` the samples under
     ``record`` as columns (``top_drive_rpm`` among them), ``segment`` naming each sample's
     segment. A segment spent off bottom nearly throughout is said as a ``BitrockWarning``."""
     import json
