@@ -555,7 +555,7 @@ mod tests {
         assert!(moved, "the ramp drives the bit past 100 rpm");
         // The record's top drive follows the ramp; steady drilling is the end's.
         let segment = &ramped.segments[0];
-        assert_eq!(segment.top_drive_rpm(0, 50.0), 60.0);
+        assert_eq!(segment.top_drive_rpm(0, 50.0).to_bits(), 60f64.to_bits());
         assert!((segment.top_drive_rpm(50, 50.0) - 120.0).abs() < 1e-12);
         let end = segment.job_at_end();
         assert!((end.omega_rad_s - 180.0 * RAD_S_PER_RPM).abs() < 1e-12);
