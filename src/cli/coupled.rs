@@ -358,23 +358,32 @@ fn run_well(cmd: &CoupledCmd, well: &CoupledWell) -> anyhow::Result<ExitCode> {
         .max()
         .unwrap_or(0)
         .max(7);
-    writeln!(
-        out,
-        "{:<width$} {:>7} {:>6} {:>9} {:<11} {:>8} {:>8} {:>8} {:>9}",
-        "segment", "from s", "rpm", "drive", "regime", "ROP m/h", "steady", "stuck %", "off bot %"
-    )?;
-    for s in &segments {
-        let drive = match (s.drive.wob_kn, s.drive.feed_m_h) {
+    let drives: Vec<String> = segments
+        .iter()
+        .map(|s| match (s.drive.wob_kn, s.drive.feed_m_h) {
             (Some(kn), _) => format!("{kn} kN"),
             (None, Some(m_h)) => format!("{m_h} m/h"),
             (None, None) => String::new(),
-        };
+        })
+        .collect();
+    // A ramp (`60→120`) widens its columns.
+    let rpm_width = segments
+        .iter()
+        .map(|s| s.omega_rpm.to_string().chars().count())
+        .fold(6, usize::max);
+    let drive_width = drives.iter().map(|d| d.chars().count()).fold(9, usize::max);
+    writeln!(
+        out,
+        "{:<width$} {:>7} {:>rpm_width$} {:>drive_width$} {:<11} {:>8} {:>8} {:>8} {:>9}",
+        "segment", "from s", "rpm", "drive", "regime", "ROP m/h", "steady", "stuck %", "off bot %"
+    )?;
+    for (s, drive) in segments.iter().zip(&drives) {
         writeln!(
             out,
-            "{:<width$} {:>7.1} {:>6} {:>9} {:<11} {:>8.1} {:>8.1} {:>8.1} {:>9.1}",
+            "{:<width$} {:>7.1} {:>rpm_width$} {:>drive_width$} {:<11} {:>8.1} {:>8.1} {:>8.1} {:>9.1}",
             s.name,
             s.start_s,
-            s.omega_rpm,
+            s.omega_rpm.to_string(),
             drive,
             s.summary.regime.name(),
             s.summary.rop_m_h,

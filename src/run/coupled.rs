@@ -365,7 +365,7 @@ pub fn well_record_columns(
 ) -> (Vec<usize>, Vec<(&'static str, Vec<f64>)>) {
     let record: Vec<Sample> = samples.iter().map(|(_, s)| *s).collect();
     let mut columns = record_columns(&record);
-    let mut in_segment = (usize::MAX, 0);
+    let mut in_segment = (usize::MAX, 0u32);
     let top_drive = samples
         .iter()
         .map(|(i, _)| {
@@ -374,7 +374,7 @@ pub fn well_record_columns(
             } else {
                 (*i, 0)
             };
-            well.segments[*i].top_drive_rpm(in_segment.1, well.sample_hz)
+            well.segments[*i].top_drive_rpm(in_segment.1)
         })
         .collect();
     columns.insert(1, ("top_drive_rpm", top_drive));

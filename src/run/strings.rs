@@ -171,6 +171,13 @@ pub fn phases(members: usize) -> usize {
     16usize.div_ceil(members.max(1)).clamp(1, 8)
 }
 
+/// The axis an advice's scan runs along.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Axis {
+    Speed,
+    Weight,
+}
+
 /// Probabilities over a grid, row-major over (Ω, W): NaN where any member's string diverged.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Grid {
@@ -187,29 +194,25 @@ pub struct Grid {
 }
 
 impl Grid {
-    /// Scans along one axis joined in order: parts that share their weights (a scan of
-    /// speeds) or their speeds (a scan of weights).
-    fn joined(parts: Vec<Grid>) -> Grid {
-        let mut parts = parts.into_iter();
-        let Some(mut out) = parts.next() else {
-            return Grid {
-                omega_rpm: Vec::new(),
-                wob_kn: Vec::new(),
-                probability: Vec::new(),
-                stick_slip_weight: Vec::new(),
-                diverged_weight: Vec::new(),
-                diverged: 0,
-            };
+    /// Parts of one scan joined in order: along the speeds at the one weight `at` (kN), or
+    /// along the weights at the one speed `at` (rpm).
+    fn joined(parts: Vec<Grid>, along: Axis, at: f64) -> Grid {
+        let (omega_rpm, wob_kn) = match along {
+            Axis::Speed => (Vec::new(), vec![at]),
+            Axis::Weight => (vec![at], Vec::new()),
+        };
+        let mut out = Grid {
+            omega_rpm,
+            wob_kn,
+            probability: Vec::new(),
+            stick_slip_weight: Vec::new(),
+            diverged_weight: Vec::new(),
+            diverged: 0,
         };
         for part in parts {
-            if part.wob_kn == out.wob_kn && out.wob_kn.len() == 1 {
-                out.omega_rpm.extend(part.omega_rpm);
-            } else {
-                assert!(
-                    part.omega_rpm == out.omega_rpm && out.omega_rpm.len() == 1,
-                    "scans are joined along one axis"
-                );
-                out.wob_kn.extend(part.wob_kn);
+            match along {
+                Axis::Speed => out.omega_rpm.extend(part.omega_rpm),
+                Axis::Weight => out.wob_kn.extend(part.wob_kn),
             }
             out.probability.extend(part.probability);
             out.stick_slip_weight.extend(part.stick_slip_weight);
@@ -668,7 +671,8 @@ impl<'a> Simulator<'a> {
             }
         }
         weight_parts.reverse();
-        let (by_speed, by_weight) = (Grid::joined(speed_parts), Grid::joined(weight_parts));
+        let by_speed = Grid::joined(speed_parts, Axis::Speed, p.wob_kn);
+        let by_weight = Grid::joined(weight_parts, Axis::Weight, p.omega_rpm);
         Ok(EscapeAdvice {
             point: p,
             stick_slip_probability: from.stick_slip_probability,

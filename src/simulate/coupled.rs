@@ -853,14 +853,25 @@ pub fn integrate_from(
 }
 
 /// The drive of a recorded stretch ramped from its start to its end: the top drive's speed
-/// (rad/s) and the axial drive (the job's kind: N or m/s), each sample period driven by the
-/// values at its first sample (held between samples), sample j's at the fraction
-/// j / sample rate / `duration_s` of the ramps.
+/// (rad/s) and the axial drive (the job's kind: N or m/s), the sample period that ends in
+/// recorded sample j driven by the ramps' values at j·`period_s` / `duration_s` (so the last
+/// period runs one period short of the ramps' end).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ramp {
     pub omega_rad_s: Profile,
     pub axial: Profile,
+    /// The stretch's length as given (s) and its schedule's sample period (s).
     pub duration_s: f64,
+    pub period_s: f64,
+}
+
+impl Ramp {
+    /// The top drive's speed (rad/s) and the axial drive over the period ending in recorded
+    /// sample `j`.
+    pub fn drive_at(&self, j: u32) -> (f64, f64) {
+        let fraction = (f64::from(j) * self.period_s / self.duration_s).clamp(0.0, 1.0);
+        (self.omega_rad_s.at(fraction), self.axial.at(fraction))
+    }
 }
 
 /// [`integrate_from`] with the recorded samples' drive ramped (the settling keeps the job's):
@@ -883,9 +894,8 @@ pub fn integrate_ramped(
     let period_s = schedule.sample_period_s();
     for period in 0..periods {
         if let Some(ramp) = ramp.filter(|_| period >= schedule.settle_samples) {
-            let t = f64::from(period - schedule.settle_samples) * period_s;
-            let fraction = (t / ramp.duration_s).clamp(0.0, 1.0);
-            s.set_drive(ramp.omega_rad_s.at(fraction), ramp.axial.at(fraction));
+            let (omega_rad_s, axial) = ramp.drive_at(period - schedule.settle_samples);
+            s.set_drive(omega_rad_s, axial);
         }
         let axial_speed_before = s.axial_speed;
         for _ in 0..schedule.steps_per_sample {

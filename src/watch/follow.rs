@@ -367,8 +367,13 @@ fn start_watch(
             .map(|(code, what)| format!("item {code} is WITS record 01's {what}"))
             .collect();
         if !surface.is_empty() {
+            let (average, it_was, it) = if surface.len() > 1 {
+                ("surface averages", "they were", "them")
+            } else {
+                ("a surface average", "it was", "it")
+            };
             observer.note(format!(
-                "warning: {}, a surface average, read as the bit's: where it was measured at the surface, the laws fitted to it describe the string's top, not the bit (a stuck bit's surface torque still swings); the MWD's downhole items are named with `wits_items`, and a surface record's law is inferred with `bitrock surface`",
+                "warning: {}, {average}, read as the bit's: where {it_was} measured at the surface, the laws fitted to {it} describe the string's top, not the bit (a stuck bit's surface torque still swings); the MWD's downhole items are named with `wits_items`, and a surface record's law is inferred with `bitrock surface`",
                 surface.join(" and ")
             ));
         }

@@ -182,12 +182,12 @@ impl WitsReader {
         self.torque_unit
     }
 
-    /// The items read, named by their codes, and their units (the time in seconds).
     /// The items it reads.
     pub fn items(&self) -> &WitsItems {
         &self.items
     }
 
+    /// The items read, named by their codes, and their units (the time in seconds).
     pub fn declared(&self) -> crate::data::Declared {
         let item = |code: &str| format!("item {code}");
         crate::data::Declared {
@@ -351,6 +351,19 @@ mod tests {
 
     fn rows(reader: &mut WitsReader, text: &str) -> Vec<std::result::Result<Row, String>> {
         text.lines().filter_map(|l| reader.line(l)).collect()
+    }
+
+    #[test]
+    fn record_01_s_surface_averages_are_told_apart_from_downhole_items() {
+        let defaults = WitsItems::default();
+        assert_eq!(
+            defaults.surface_averages(),
+            [("0120", "rotary speed"), ("0118", "rotary torque")]
+        );
+        let downhole = WitsItems::parse("speed=0902,torque=0903,top_drive=0120").unwrap();
+        assert!(downhole.surface_averages().is_empty());
+        let torque_only = WitsItems::parse("speed=0902").unwrap();
+        assert_eq!(torque_only.surface_averages(), [("0118", "rotary torque")]);
     }
 
     #[test]

@@ -85,11 +85,10 @@ impl CoupledSegment {
         }
     }
 
-    /// The top drive's speed (rpm) over the sample period ending at recorded sample `j`.
-    pub fn top_drive_rpm(&self, j: usize, sample_hz: f64) -> f64 {
-        let fraction = (j as f64 / sample_hz / self.duration_s).clamp(0.0, 1.0);
+    /// The top drive's speed (rpm) over the sample period ending in recorded sample `j`.
+    pub fn top_drive_rpm(&self, j: u32) -> f64 {
         match &self.ramp {
-            Some(ramp) => ramp.omega_rad_s.at(fraction) / RAD_S_PER_RPM,
+            Some(ramp) => ramp.drive_at(j).0 / RAD_S_PER_RPM,
             None => self.omega_rpm.at(0.0),
         }
     }
@@ -428,6 +427,7 @@ impl SegmentFile {
                 omega_rad_s: omega_rpm.scaled(RAD_S_PER_RPM),
                 axial,
                 duration_s: self.duration_s,
+                period_s: schedule.sample_period_s(),
             }),
         };
         Ok((segment, schedule.steps() as f64))
@@ -518,21 +518,25 @@ mod tests {
         assert!(rates[1] < 0.8 * rates[0], "{rates:?}");
     }
 
-    #[test]
-    fn a_ramp_is_the_string_carried_through_one_sample_segments_of_its_values() {
-        // 60 → 180 rpm and 150 → 100 kN over 2 s at 50 Hz, from stick-slip.
-        let ramped =
-            parse("settle_s = 10\n[[segment]]\nduration_s = 2\nomega_rpm = [60, 180]\nwob_kn = [150, 100]\n").unwrap();
+    /// A ramp of the top drive from 60 to 180 rpm and of `drive` (`wob_kn` or `feed_m_h`)
+    /// from `from` to `to` over 2 s at 50 Hz, from stick-slip, against the same string given a
+    /// segment per sample at the ramps' values there: every channel agrees to 10⁻⁹ (the drive's
+    /// values agree to rounding: the ramp scales to SI before it interpolates).
+    fn assert_ramp_is_one_sample_segments(drive: &str, from: f64, to: f64) -> CoupledWell {
+        let ramped = parse(&format!(
+            "settle_s = 10\n[[segment]]\nduration_s = 2\nomega_rpm = [60, 180]\n{drive} = [{from}, {to}]\n"
+        ))
+        .unwrap();
         let (runs, samples) = drilled(&ramped);
         assert_eq!(samples.len(), 100);
-        // The same string given a segment per sample, each at the ramps' values there.
+        assert!(runs[0].summary.samples > 0);
         let mut steps = String::from("settle_s = 10\n");
         for j in 0..100 {
             let fraction = f64::from(j) / 50.0 / 2.0;
             steps.push_str(&format!(
-                "[[segment]]\nduration_s = 0.02\nomega_rpm = {}\nwob_kn = {}\n",
+                "[[segment]]\nduration_s = 0.02\nomega_rpm = {}\n{drive} = {}\n",
                 60.0 + 120.0 * fraction,
-                150.0 - 50.0 * fraction
+                from + (to - from) * fraction
             ));
         }
         let (_, stepped) = drilled(&parse(&steps).unwrap());
@@ -540,27 +544,37 @@ mod tests {
         let mut moved = false;
         for (k, ((_, a), (_, b))) in samples.iter().zip(&stepped).enumerate() {
             assert!((a.time_s - b.time_s).abs() < 1e-9, "{a:?} {b:?}");
-            // The drive's values agree to rounding (the ramp scales to SI before it
-            // interpolates); the motion they drive agrees as closely.
             for (x, y) in [
                 (a.bit_speed_rad_s, b.bit_speed_rad_s),
                 (a.torque_nm, b.torque_nm),
                 (a.wob_n, b.wob_n),
                 (a.axial_speed_m_s, b.axial_speed_m_s),
+                (a.axial_acceleration_m_s2, b.axial_acceleration_m_s2),
+                (a.cutting_rate_m_s, b.cutting_rate_m_s),
+                (a.depth_per_blade_m, b.depth_per_blade_m),
             ] {
-                assert!((x - y).abs() <= 1e-9 * (1.0 + x.abs()), "sample {k}: {a:?} {b:?}");
+                assert!(
+                    (x - y).abs() <= 1e-9 * (1.0 + x.abs()),
+                    "{drive}, sample {k}: {a:?} {b:?}"
+                );
             }
             moved |= a.bit_speed_rad_s > 100.0 * RAD_S_PER_RPM;
         }
-        assert!(moved, "the ramp drives the bit past 100 rpm");
+        assert!(moved, "{drive}: the ramp drives the bit past 100 rpm");
+        ramped
+    }
+
+    #[test]
+    fn a_ramp_is_the_string_carried_through_one_sample_segments_of_its_values() {
+        let ramped = assert_ramp_is_one_sample_segments("wob_kn", 150.0, 100.0);
+        assert_ramp_is_one_sample_segments("feed_m_h", 40.0, 80.0);
         // The record's top drive follows the ramp; steady drilling is the end's.
         let segment = &ramped.segments[0];
-        assert_eq!(segment.top_drive_rpm(0, 50.0).to_bits(), 60f64.to_bits());
-        assert!((segment.top_drive_rpm(50, 50.0) - 120.0).abs() < 1e-12);
+        assert_eq!(segment.top_drive_rpm(0).to_bits(), 60f64.to_bits());
+        assert!((segment.top_drive_rpm(50) - 120.0).abs() < 1e-12);
         let end = segment.job_at_end();
         assert!((end.omega_rad_s - 180.0 * RAD_S_PER_RPM).abs() < 1e-12);
         assert!(matches!(end.axial, Axial::Weight { wob_n } if (wob_n - 100e3).abs() < 1e-9));
-        assert!(runs[0].summary.samples > 0);
     }
 
     #[test]
