@@ -18,8 +18,9 @@ use std::process::ExitCode;
 #[derive(Debug, Args)]
 pub struct CoupledCmd {
     /// A well file (TOML): segments in drilling order, each with its rock, top-drive speed and
-    /// weight or feed, drilled by one string carried from each into the next; the record gains
-    /// the columns segment and top_drive_rpm (format in docs/coupled.md).
+    /// weight or feed (a value, or [from, to] for a ramp), drilled by one string carried from
+    /// each into the next; the record gains the columns segment and top_drive_rpm (format in
+    /// docs/coupled.md).
     #[arg(long, value_name = "FILE", conflicts_with_all = [
         "omega_rpm", "wob_kn", "feed_m_h", "radius_m", "intrinsic_energy_mpa", "zeta", "contact_stress_mpa",
         "wear_flat_mm", "friction", "gamma", "blades", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
