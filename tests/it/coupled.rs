@@ -289,16 +289,20 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
          [[segment]]\nname = \"sandstone\"\nduration_s = 20\nomega_rpm = 45\nwob_kn = 150\nintrinsic_energy_mpa = 90\n",
     )
     .unwrap();
+    // The well drilled with its JSON printed and its record written to `csv`.
+    let drill = |well: &std::path::Path, csv: &std::path::Path| -> serde_json::Value {
+        let (code, stdout, stderr) = outcome(
+            bin()
+                .args(["coupled", "--json", "--well"])
+                .arg(well)
+                .arg("--out")
+                .arg(csv),
+        );
+        assert_eq!(code, 0, "{stderr}");
+        serde_json::from_str(&stdout).unwrap()
+    };
     let csv = dir.path().join("well.csv");
-    let (code, stdout, stderr) = outcome(
-        bin()
-            .args(["coupled", "--json", "--well"])
-            .arg(&well)
-            .arg("--out")
-            .arg(&csv),
-    );
-    assert_eq!(code, 0, "{stderr}");
-    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let report = drill(&well, &csv);
     let segments = report["segments"].as_array().unwrap();
     assert_eq!(segments.len(), 2);
     assert_eq!(
@@ -358,15 +362,7 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
     )
     .unwrap();
     let ramp_csv = dir.path().join("ramp.csv");
-    let (code, stdout, stderr) = outcome(
-        bin()
-            .args(["coupled", "--json", "--well"])
-            .arg(&ramp)
-            .arg("--out")
-            .arg(&ramp_csv),
-    );
-    assert_eq!(code, 0, "{stderr}");
-    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let report = drill(&ramp, &ramp_csv);
     let segment = &report["segments"][0];
     assert_eq!(segment["omega_rpm"], serde_json::json!({"from": 45.0, "to": 90.0}));
     assert_eq!(
