@@ -38,6 +38,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 use strings::{Chain, MAX_NODES, Stepper, StringJob, StringState, padded, steady_start};
+use surface::Extremes;
 
 /// How the string starts at t = 0.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -333,6 +334,10 @@ pub enum Channels {
     Surface,
     /// Both: the bit's columns, then `top_drive_rpm,surface_torque_knm`.
     All,
+    /// What a rig streams with an MWD tool's stick-slip channels: the surface columns, then the
+    /// bit speed's least and greatest since the sample before (`downhole_min_rpm,
+    /// downhole_max_rpm`, over the integration steps, noise-free).
+    Mwd,
 }
 
 /// The header of a record's channels and how each row is written.
@@ -362,6 +367,14 @@ impl Columns {
                 "top_drive_rpm",
                 &surface_torque,
             ]),
+            Channels::Mwd => named(&[
+                "time_s",
+                "top_drive_rpm",
+                &surface_torque,
+                &wob,
+                "downhole_min_rpm",
+                "downhole_max_rpm",
+            ]),
         };
         Self {
             channels,
@@ -386,14 +399,25 @@ impl Columns {
         let trace = &record.trace;
         let top_drive = format!("{:.3}", record.top_drive_rad_s[i] / RAD_S_PER_RPM);
         let surface = format!("{:.4}", record.surface_torque_nm[i] / self.per_unit);
+        let surface_row = || {
+            vec![
+                format!("{:.4}", trace.time_s[i]),
+                top_drive.clone(),
+                surface.clone(),
+                format!("{:.3}", trace.wob_n[i] / self.wob_per_unit),
+            ]
+        };
         match self.channels {
             Channels::Bit => self.bit_row(trace, i),
-            Channels::Surface => vec![
-                format!("{:.4}", trace.time_s[i]),
-                top_drive,
-                surface,
-                format!("{:.3}", trace.wob_n[i] / self.wob_per_unit),
-            ],
+            Channels::Surface => surface_row(),
+            Channels::Mwd => {
+                let mut row = surface_row();
+                row.extend(
+                    [record.bit_least_rad_s[i], record.bit_greatest_rad_s[i]]
+                        .map(|w| format!("{:.3}", w / RAD_S_PER_RPM)),
+                );
+                row
+            }
             Channels::All => {
                 let mut row = self.bit_row(trace, i);
                 row.extend([top_drive, surface]);
@@ -560,6 +584,11 @@ pub struct WellTrace {
     pub surface_torque_nm: Vec<f64>,
     /// Index into [`Well::segments`] of each sample.
     pub segment: Vec<usize>,
+    /// The bit speed's least and greatest (rad/s, noise-free) over the integration steps since
+    /// the sample before, the sample's own included (the first sample's: its own): what an MWD
+    /// tool's downhole minimum and maximum read.
+    pub bit_least_rad_s: Vec<f64>,
+    pub bit_greatest_rad_s: Vec<f64>,
 }
 
 impl Well {
@@ -677,7 +706,14 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
     let mut sim = Stepper::new(&chain, &job);
     let mut segment_now = 0;
 
-    let mut advance = |sim: &mut Stepper, wob: &mut Wob, rng: &mut StdRng, span_s: f64, t_s: f64, omega: f64| {
+    // Integrates `span_s`, noting the bit speed's extremes.
+    let mut advance = |sim: &mut Stepper,
+                       wob: &mut Wob,
+                       rng: &mut StdRng,
+                       extremes: &mut Extremes,
+                       span_s: f64,
+                       t_s: f64,
+                       omega: f64| {
         if span_s <= 0.0 {
             return Ok(());
         }
@@ -687,6 +723,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
             pace.advance(1)?;
             sim.set_operating_point(omega, wob.ratio(well.w_ref_n));
             sim.step(h);
+            extremes.see(sim.bit_speed_rad_s());
             if !sim.in_bounds() {
                 // A law whose torque turns negative at high speed (m4's cubic beyond its
                 // fitted range) accelerates the bit without bound.
@@ -701,7 +738,18 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
     };
 
     let mut omega = omega0;
-    advance(&mut sim, &mut wob, &mut rng, rec.settle_s, rec.settle_s, omega)?;
+    // The bit speed's extremes since the sample before (the first sample's: its own).
+    let mut extremes = Extremes::default();
+    advance(
+        &mut sim,
+        &mut wob,
+        &mut rng,
+        &mut extremes,
+        rec.settle_s,
+        rec.settle_s,
+        omega,
+    )?;
+    extremes = Extremes::default();
     // Samples at k / sample_hz for k = 0, 1, ...: duration × sample_hz of them, end excluded.
     let n_samples = (well.duration_s() * rec.sample_hz * (1.0 + 1e-12)).floor() as usize;
     let mut out = WellTrace::with_capacity(n_samples);
@@ -712,6 +760,7 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
             &mut sim,
             &mut wob,
             &mut rng,
+            &mut extremes,
             t_s - previous_s,
             rec.settle_s + t_s,
             omega,
@@ -729,6 +778,10 @@ fn record(well: &Well, progress: &mut dyn FnMut(u64, u64)) -> Result<WellTrace> 
         let z_speed: f64 = StandardNormal.sample(&mut rng);
         let z_torque: f64 = StandardNormal.sample(&mut rng);
         let z_surface: f64 = StandardNormal.sample(&mut surface_rng);
+        extremes.see(sim.bit_speed_rad_s());
+        out.bit_least_rad_s.push(extremes.least);
+        out.bit_greatest_rad_s.push(extremes.greatest);
+        extremes = Extremes::default();
         out.push(
             t_s,
             sim.bit_speed_rad_s() + rec.noise_speed_rad_s * z_speed,
@@ -780,6 +833,8 @@ impl WellTrace {
             top_drive_rad_s: Vec::with_capacity(n),
             surface_torque_nm: Vec::with_capacity(n),
             segment: Vec::with_capacity(n),
+            bit_least_rad_s: Vec::with_capacity(n),
+            bit_greatest_rad_s: Vec::with_capacity(n),
         }
     }
 

@@ -65,6 +65,8 @@ pub fn record(seconds: f64) -> Result<SurfaceRecord> {
             surface_torque: "surface_torque_knm".into(),
             wob: Some("wob_kn".into()),
             bit: Vec::new(),
+            downhole_min: None,
+            downhole_max: None,
         },
         top_drive_unit: SpeedUnit::Rpm,
         torque_unit: TorqueUnit::KNm,
@@ -73,6 +75,7 @@ pub fn record(seconds: f64) -> Result<SurfaceRecord> {
         surface_torque_nm: trace.surface_torque_nm.clone(),
         wob_n: Some(trace.trace.wob_n.clone()),
         sample_period_s: 1.0,
+        downhole: None,
     })
 }
 

@@ -27,6 +27,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("time_column", "--time-col"),
     ("top_drive_column", "--top-drive-col"),
     ("surface_torque_column", "--surface-torque-col"),
+    ("downhole_min_column", "--downhole-min-col"),
+    ("downhole_max_column", "--downhole-max-col"),
     ("rop_column", "--rop-col"),
     ("axial_speed_column", "--axial-speed-col"),
     ("rop_unit", "--rop-unit"),

@@ -90,7 +90,9 @@ pub struct SimulateCmd {
     #[arg(long, value_enum, default_value_t = TorqueUnit::KNm)]
     pub torque_unit: TorqueUnit,
     /// Channels recorded: the bit's (a downhole memory tool's), the surface's (what a rig
-    /// streams: top_drive_rpm, surface_torque_knm, wob_kn) or all of them.
+    /// streams: top_drive_rpm, surface_torque_knm, wob_kn), all of them, or the surface's with
+    /// an MWD tool's stick-slip channels (downhole_min_rpm, downhole_max_rpm: the bit speed's
+    /// least and greatest since the sample before).
     #[arg(long, value_enum, default_value_t = simulate::Channels::Bit)]
     pub channels: simulate::Channels,
     /// Output CSV (time_s, bit_speed_rpm, torque_knm, wob_kn; torque_nm, wob_n with

@@ -39,6 +39,21 @@ pub struct SurfaceCmd {
     /// Unit of the weight on bit [default: from the column's suffix].
     #[arg(long, value_enum)]
     pub wob_unit: Option<ForceUnit>,
+    /// An MWD tool's downhole minimum bit speed column, compared with each string's [default:
+    /// the downhole speed whose name says "min", if any].
+    #[arg(long = "downhole-min-col", value_name = "NAME")]
+    pub downhole_min_column: Option<String>,
+    /// The MWD tool's downhole maximum bit speed column [default: the downhole speed whose
+    /// name says "max", if any].
+    #[arg(long = "downhole-max-col", value_name = "NAME")]
+    pub downhole_max_column: Option<String>,
+    /// Unit of the downhole minimum and maximum [default: from the column's suffix].
+    #[arg(long, value_enum)]
+    pub downhole_unit: Option<SpeedUnit>,
+    /// The window the MWD tool takes its minimum and maximum over, s [default: the record's
+    /// clock period].
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
+    pub downhole_window_s: Option<f64>,
     #[arg(long, value_name = "LAWS", help = concat!(
         "Laws to infer, comma-separated: the built-in laws (",
         bitrock::built_in_law_list!(),
@@ -158,6 +173,10 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
         top_drive_unit: cmd.top_drive_unit,
         torque_unit: cmd.torque_unit,
         wob_unit: cmd.wob_unit,
+        downhole_min_column: cmd.downhole_min_column.clone(),
+        downhole_max_column: cmd.downhole_max_column.clone(),
+        downhole_unit: cmd.downhole_unit,
+        downhole_window_s: cmd.downhole_window_s,
     };
     let record = SurfaceRecord::read(&cmd.data, &options)?;
     print::note(format_args!("{}: {}", cmd.data.display(), record.roles_text()));

@@ -158,7 +158,9 @@ pub fn surface_role(name: &str) -> Option<Role> {
     }
 }
 
-/// The role a column's name gives it by the mnemonics' table, if any.
+/// The role a column's name gives it by the mnemonics' table, if any. A speed that names an
+/// extreme (an MWD tool's downhole minimum or maximum, [`downhole_extreme`]) is no speed of
+/// the bit's: its samples are a window's extremes, not the bit's speed at the sample.
 pub fn role(name: &str) -> Option<Role> {
     let words = words(name);
     let has = |table: &[(Role, &[&str])]| {
@@ -167,7 +169,42 @@ pub fn role(name: &str) -> Option<Role> {
             .find(|(_, names)| words.iter().any(|w| names.contains(&w.as_str())))
             .map(|(role, _)| *role)
     };
-    has(BIT_WORDS).or_else(|| has(BARE_WORDS))
+    has(BIT_WORDS)
+        .or_else(|| has(BARE_WORDS))
+        .filter(|&role| role != Role::Speed || downhole_extreme(name).is_none())
+}
+
+/// Which extreme of the bit speed over a window a column holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Extreme {
+    Least,
+    Greatest,
+}
+
+const LEAST_WORDS: &[&str] = &["min", "minimum"];
+const GREATEST_WORDS: &[&str] = &["max", "maximum"];
+
+/// The extreme a column's name says it holds where it names a speed beside `min` or `max`
+/// (`downhole_min_rpm`, `DRPM_MIN`, `bit speed max [rpm]`): an MWD tool's downhole minimum or
+/// maximum bit speed. A surface channel's name is for the caller to set aside.
+pub fn downhole_extreme(name: &str) -> Option<Extreme> {
+    let words = words(name);
+    let has = |table: &[&str]| words.iter().any(|w| table.contains(&w.as_str()));
+    let names_speed = words.iter().any(|w| {
+        w == "speed"
+            || BIT_WORDS
+                .iter()
+                .chain(BARE_WORDS)
+                .any(|(role, names)| *role == Role::Speed && names.contains(&w.as_str()))
+    });
+    if !names_speed {
+        return None;
+    }
+    match (has(LEAST_WORDS), has(GREATEST_WORDS)) {
+        (true, false) => Some(Extreme::Least),
+        (false, true) => Some(Extreme::Greatest),
+        _ => None,
+    }
 }
 
 /// Whether a column read by the mnemonics' table is named by a word rig logs also use for the

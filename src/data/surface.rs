@@ -12,6 +12,7 @@
 use super::{is_surface_channel, names_milliseconds, resolve_unit};
 use crate::error::{Error, Result};
 use crate::files::{csv_rows, csv_with_header};
+use crate::simulate::surface::{DownholeExtremes, N_DOWNHOLE_SUMMARIES, downhole_summaries};
 use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -30,6 +31,15 @@ pub struct SurfaceOptions {
     pub top_drive_unit: Option<SpeedUnit>,
     pub torque_unit: Option<TorqueUnit>,
     pub wob_unit: Option<ForceUnit>,
+    /// An MWD tool's downhole minimum bit speed column; `None` finds the one downhole speed
+    /// whose name says `min` (`downhole_min_rpm`, `DRPM_MIN`), if any.
+    pub downhole_min_column: Option<String>,
+    /// Its maximum's column; `None` finds the one downhole speed whose name says `max`.
+    pub downhole_max_column: Option<String>,
+    pub downhole_unit: Option<SpeedUnit>,
+    /// The window the tool takes its minimum and maximum over (s); `None`: the record's clock
+    /// period (each sample's extremes since the sample before).
+    pub downhole_window_s: Option<f64>,
 }
 
 /// The columns a surface record was read from, by role.
@@ -41,6 +51,23 @@ pub struct SurfaceColumns {
     pub wob: Option<String>,
     /// Bit channels the record also holds (bit speed, torque on bit), not read here.
     pub bit: Vec<String>,
+    /// An MWD tool's downhole minimum and maximum bit speed, where the record holds them.
+    #[serde(default)]
+    pub downhole_min: Option<String>,
+    #[serde(default)]
+    pub downhole_max: Option<String>,
+}
+
+/// An MWD tool's downhole stick-slip channels: the bit speed's minimum and maximum over a
+/// window ending at each sample (rad/s), either or both.
+#[derive(Clone, Debug)]
+pub struct DownholeChannels {
+    pub least_rad_s: Option<Vec<f64>>,
+    pub greatest_rad_s: Option<Vec<f64>>,
+    pub unit: SpeedUnit,
+    /// The window as the user gave it (s), and in whole samples of the clock.
+    pub window_s: f64,
+    pub extremes: DownholeExtremes,
 }
 
 /// A surface record in SI on its regular clock.
@@ -60,6 +87,8 @@ pub struct SurfaceRecord {
     pub wob_n: Option<Vec<f64>>,
     /// The clock's period (s): the median spacing of the stamps.
     pub sample_period_s: f64,
+    /// An MWD tool's downhole minimum and maximum bit speed, where the record holds them.
+    pub downhole: Option<DownholeChannels>,
 }
 
 /// Most a stamp's spacing may differ from the clock's period, as a share of it: the string is
@@ -78,6 +107,8 @@ impl SurfaceRecord {
         let mut top_drive_rad_s = Vec::new();
         let mut surface_torque_nm = Vec::new();
         let mut wob_n = roles.wob.map(|_| Vec::new());
+        let mut least = roles.downhole_min.map(|_| Vec::new());
+        let mut greatest = roles.downhole_max.map(|_| Vec::new());
         let mut lines = Vec::new();
         // Elapsed seconds or milliseconds, epoch seconds or milliseconds, or ISO 8601 stamps.
         let clock = super::clock::TimeReader::new(roles.time_in_ms);
@@ -93,6 +124,11 @@ impl SurfaceRecord {
             if let (Some((i, unit)), Some(w)) = (roles.wob, wob_n.as_mut()) {
                 w.push(row.number(i)? * unit.newtons());
             }
+            for (column, values) in [(roles.downhole_min, &mut least), (roles.downhole_max, &mut greatest)] {
+                if let (Some(i), Some(values)) = (column, values.as_mut()) {
+                    values.push(roles.downhole_unit.to_rad_s(row.number(i)?));
+                }
+            }
             lines.push(row.line);
         }
         let name = |i: usize| header[i].clone();
@@ -102,8 +138,32 @@ impl SurfaceRecord {
             surface_torque: name(roles.surface_torque),
             wob: roles.wob.map(|(i, _)| name(i)),
             bit: roles.bit.iter().map(|&i| name(i)).collect(),
+            downhole_min: roles.downhole_min.map(name),
+            downhole_max: roles.downhole_max.map(name),
         };
         let sample_period_s = check_clock(&time_s, path, &|k| format!("line {}", lines[k]))?;
+        let downhole = if least.is_some() || greatest.is_some() {
+            let window_s = opts.downhole_window_s.unwrap_or(sample_period_s);
+            if !(window_s.is_finite() && window_s >= (1.0 - CLOCK_TOLERANCE) * sample_period_s) {
+                return Err(Error::setting(
+                    "downhole_window_s",
+                    format!("must be at least the record's clock period {sample_period_s} s, got {window_s}"),
+                ));
+            }
+            Some(DownholeChannels {
+                extremes: DownholeExtremes {
+                    window_samples: ((window_s / sample_period_s).round() as usize).max(1),
+                    least: least.is_some(),
+                    greatest: greatest.is_some(),
+                },
+                least_rad_s: least,
+                greatest_rad_s: greatest,
+                unit: roles.downhole_unit,
+                window_s,
+            })
+        } else {
+            None
+        };
         let t0 = time_s[0];
         time_s.iter_mut().for_each(|t| *t -= t0);
         Ok(Self {
@@ -116,6 +176,19 @@ impl SurfaceRecord {
             surface_torque_nm,
             wob_n,
             sample_period_s,
+            downhole,
+        })
+    }
+
+    /// The MWD tool's channels this record holds, as the simulated strings are to give them.
+    pub fn downhole_extremes(&self) -> Option<DownholeExtremes> {
+        self.downhole.as_ref().map(|d| d.extremes)
+    }
+
+    /// The summaries of the record's downhole channels (zeros without them).
+    pub fn downhole_summaries(&self) -> [f64; N_DOWNHOLE_SUMMARIES] {
+        self.downhole.as_ref().map_or([0.0; N_DOWNHOLE_SUMMARIES], |d| {
+            downhole_summaries(d.least_rad_s.as_deref(), d.greatest_rad_s.as_deref())
         })
     }
 
@@ -165,6 +238,19 @@ impl SurfaceRecord {
         match &c.wob {
             Some(w) => text.push_str(&format!("weight on bit from '{w}'")),
             None => text.push_str("no weight on bit (the law's parameters hold at the record's weight)"),
+        }
+        if let Some(d) = &self.downhole {
+            let named: Vec<String> = [("minimum", &c.downhole_min), ("maximum", &c.downhole_max)]
+                .into_iter()
+                .filter_map(|(what, column)| column.as_ref().map(|n| format!("{what} from '{n}'")))
+                .collect();
+            text.push_str(&format!(
+                "; the MWD's downhole bit speed {} ({}, over {} sample(s), {} s)",
+                named.join(" and "),
+                d.unit.label(),
+                d.extremes.window_samples,
+                d.window_s
+            ));
         }
         text.push_str(&format!(
             "; {} samples every {} s ({} s)",
@@ -231,12 +317,35 @@ struct Roles {
     torque_unit: TorqueUnit,
     wob: Option<(usize, ForceUnit)>,
     bit: Vec<usize>,
+    downhole_min: Option<usize>,
+    downhole_max: Option<usize>,
+    /// The downhole channels' unit (rpm where the record has none).
+    downhole_unit: SpeedUnit,
 }
 
 impl Roles {
     fn resolve(header: &[String], opts: &SurfaceOptions, path: &Path) -> Result<Self> {
-        use super::mnemonics::{Role, role, surface_role};
+        use super::mnemonics::{Extreme, Role, downhole_extreme, role, surface_role};
         let lower = |i: usize| header[i].to_ascii_lowercase();
+        // An MWD tool's downhole minimum and maximum bit speed, by name (`min`, `max` beside a
+        // downhole speed) or as named.
+        let extreme = |wanted: Option<&str>, which: Extreme, what: &str, field: &str| {
+            pick(header, wanted, what, field, path, &|i| {
+                !is_surface_channel(&header[i]) && downhole_extreme(&header[i]) == Some(which)
+            })
+        };
+        let downhole_min = extreme(
+            opts.downhole_min_column.as_deref(),
+            Extreme::Least,
+            "downhole minimum bit speed",
+            "downhole_min_column",
+        )?;
+        let downhole_max = extreme(
+            opts.downhole_max_column.as_deref(),
+            Extreme::Greatest,
+            "downhole maximum bit speed",
+            "downhole_max_column",
+        )?;
         // Each role by its words first (`top_drive`, `surface` and `torque`, `time`, `wob`),
         // else by a rig log's mnemonic (`RPMA`, `TQA`, `DTIM`, `SWOB`: docs/records.md).
         let pick =
@@ -305,7 +414,28 @@ impl Roles {
             &|i| lower(i).contains("wob"),
             Role::Wob,
         )?;
-        let chosen = [Some(time), Some(top_drive), Some(surface_torque), wob];
+        let chosen = [
+            Some(time),
+            Some(top_drive),
+            Some(surface_torque),
+            wob,
+            downhole_min,
+            downhole_max,
+        ];
+        let downhole_twice = downhole_min.is_some() && downhole_min == downhole_max;
+        if let Some(i) = [downhole_min, downhole_max]
+            .into_iter()
+            .flatten()
+            .find(|&i| downhole_twice || chosen[..4].contains(&Some(i)))
+        {
+            return Err(format_error(
+                path,
+                format!(
+                    "column '{}' is chosen for a downhole extreme and another role",
+                    header[i]
+                ),
+            ));
+        }
         if let Some(i) = [top_drive, surface_torque].into_iter().find(|&i| i == time) {
             return Err(format_error(
                 path,
@@ -340,6 +470,12 @@ impl Roles {
                 None => None,
             },
             bit,
+            downhole_min,
+            downhole_max,
+            downhole_unit: match downhole_min.or(downhole_max) {
+                Some(i) => resolve_unit(&header[i], opts.downhole_unit, "downhole_unit", path)?,
+                None => SpeedUnit::Rpm,
+            },
         })
     }
 }
@@ -508,5 +644,70 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 22") && e.contains("2.5 s after"), "{e}");
+    }
+
+    #[test]
+    fn an_mwd_tool_s_downhole_extremes_are_read_by_name_or_mnemonic_and_their_window_checked() {
+        // By name, in rpm, over the clock's period by default.
+        let text = rows(
+            "time_s,top_drive_rpm,surface_torque_knm,downhole_min_rpm,downhole_max_rpm",
+            |k| format!("{k},60,{},{},{}", 9.0 + (k % 7) as f64, k % 3, 100 + k),
+            40,
+        );
+        let (_dir, path) = write(&text);
+        let r = SurfaceRecord::read(&path, &SurfaceOptions::default()).unwrap();
+        assert_eq!(r.columns.downhole_min.as_deref(), Some("downhole_min_rpm"));
+        assert_eq!(r.columns.downhole_max.as_deref(), Some("downhole_max_rpm"));
+        assert!(r.columns.bit.is_empty(), "{:?}", r.columns.bit);
+        let d = r.downhole.as_ref().unwrap();
+        assert_eq!(d.extremes.window_samples, 1);
+        assert!((d.least_rad_s.as_ref().unwrap()[2] - 2.0 * crate::units::RAD_S_PER_RPM).abs() < 1e-15);
+        let s = r.downhole_summaries();
+        assert!((s[2] - 119.5 * crate::units::RAD_S_PER_RPM).abs() < 1e-12, "{s:?}");
+        assert!(
+            r.roles_text().contains("minimum from 'downhole_min_rpm'"),
+            "{}",
+            r.roles_text()
+        );
+        // A rig's mnemonics, the maximum alone, its unit named and a 5 s window on a 1 s clock.
+        let text = rows(
+            "DTIM,RPMA [rpm],TQA (kN.m),DRPM_MAX",
+            |k| format!("{k},60,{},{}", 9.0 + (k % 7) as f64, 12.0 + k as f64),
+            40,
+        );
+        let (_dir, path) = write(&text);
+        let opts = SurfaceOptions {
+            downhole_unit: Some(SpeedUnit::RadS),
+            downhole_window_s: Some(5.0),
+            ..SurfaceOptions::default()
+        };
+        let r = SurfaceRecord::read(&path, &opts).unwrap();
+        assert_eq!(r.columns.downhole_min, None);
+        assert_eq!(r.columns.downhole_max.as_deref(), Some("DRPM_MAX"));
+        let d = r.downhole.as_ref().unwrap();
+        assert_eq!(
+            (d.extremes.window_samples, d.extremes.least, d.extremes.greatest),
+            (5, false, true)
+        );
+        assert_eq!(d.greatest_rad_s.as_ref().unwrap()[0].to_bits(), 12.0f64.to_bits());
+        // Without its unit, a name that does not say it is refused naming the setting.
+        let e = SurfaceRecord::read(&path, &SurfaceOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("DRPM_MAX") && e.contains("downhole_unit"), "{e}");
+        // A window shorter than the clock's period cannot be: refused by name.
+        let opts = SurfaceOptions {
+            downhole_unit: Some(SpeedUnit::Rpm),
+            downhole_window_s: Some(0.5),
+            ..SurfaceOptions::default()
+        };
+        let e = SurfaceRecord::read(&path, &opts).unwrap_err().to_string();
+        assert!(e.contains("downhole_window_s") && e.contains("clock period 1 s"), "{e}");
+        // A bit record's reader never takes an extreme for the bit's speed.
+        assert_eq!(super::super::mnemonics::role("DRPM_MAX"), None);
+        assert_eq!(
+            super::super::mnemonics::role("DRPM"),
+            Some(super::super::mnemonics::Role::Speed)
+        );
     }
 }

@@ -7,7 +7,8 @@
 //! then a function of the parameters, as for a bit record, so that a particle keeps its ρ from
 //! one population to the next and a run is reproduced exactly.
 //!
-//! **Distance.** ρ = √(mean_j ((s_j − s_j^obs)/σ_j)²) over the [`N_SUMMARIES`] summaries, σ_j
+//! **Distance.** ρ = √(mean_j ((s_j − s_j^obs)/σ_j)²) over the record's summaries (the
+//! surface torque's, and the downhole extremes' where it holds them), σ_j
 //! the median absolute deviation (×1.4826) of summary j over a pilot of prior simulations
 //! (their standard deviation where the MAD is 0, 1 where both are): each summary counts by
 //! how much it varies across the prior, not by its unit (Prangle 2017's scaling, fixed after
@@ -19,7 +20,9 @@ use crate::laws::Law;
 use crate::prior::{Candidate, Prior};
 use crate::rng::{box_muller, key_of_seed, philox4x32_10};
 use crate::simulate::strings::Chain;
-use crate::simulate::surface::{Drive, Integration, N_SUMMARIES, OnClock, simulate_on_clock, summaries};
+use crate::simulate::surface::{
+    DownholeExtremes, Drive, Integration, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, simulate_on_clock, summaries,
+};
 use rayon::prelude::*;
 
 /// A record's summaries.
@@ -33,6 +36,9 @@ pub struct SurfaceModel {
     pub integration: Integration,
     /// Standard deviation of the white noise on the surface torque (N·m).
     pub noise_sd_nm: f64,
+    /// The MWD tool's downhole extremes the record holds, compared as the tool reports them
+    /// (no noise is added to them).
+    pub downhole: Option<DownholeExtremes>,
 }
 
 /// Which noise a simulation gets: a candidate's own ([`NoiseKey::of`]) or a re-simulation's.
@@ -48,6 +54,11 @@ impl NoiseKey {
             h = splitmix(h ^ u64::from(p.to_bits()));
         }
         Self(h)
+    }
+
+    /// The key of the `draw`-th other noise draw on the same string (`draw` ≥ 1).
+    pub fn redrawn(self, draw: u64) -> Self {
+        Self(self.0 ^ draw.wrapping_mul(0x9e37_79b9_7f4a_7c15))
     }
 
     /// Key `index` of a stream of re-simulations under `seed`.
@@ -99,7 +110,23 @@ impl SurfaceModel {
     /// The summaries of `candidate`'s simulation under `seed` (`None` where it diverged).
     pub fn summaries_of(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> Option<Summaries> {
         let run = self.simulate_candidate(prior, seed, candidate);
-        (!run.diverged).then(|| summaries(&run.surface_torque_nm, self.drive.period_s))
+        (!run.diverged).then(|| self.summaries_of_run(&run))
+    }
+
+    /// The summaries of a simulated string, its surface torque as it stands.
+    pub fn summaries_of_run(&self, run: &OnClock) -> Summaries {
+        summaries(&run.surface_torque_nm, self.drive.period_s, &self.downhole_of(run))
+    }
+
+    /// The downhole summaries the record's tool would give of `run` (zeros without one).
+    pub fn downhole_of(&self, run: &OnClock) -> [f64; N_DOWNHOLE_SUMMARIES] {
+        self.downhole
+            .map_or([0.0; N_DOWNHOLE_SUMMARIES], |d| d.summaries_of(run))
+    }
+
+    /// Which summaries the distance compares.
+    pub fn active(&self) -> [bool; N_SUMMARIES] {
+        DownholeExtremes::active(self.downhole.as_ref())
     }
 }
 
@@ -108,6 +135,9 @@ impl SurfaceModel {
 pub struct Distance {
     pub observed: Summaries,
     pub scales: Summaries,
+    /// The summaries compared: the record's (a record without downhole channels leaves
+    /// theirs out).
+    pub active: [bool; N_SUMMARIES],
 }
 
 impl Distance {
@@ -118,11 +148,12 @@ impl Distance {
     /// mostly strings far from the record (steady ones, for a stick-slipping record): scales
     /// over all of it would measure how steady strings differ from stick-slipping ones, not
     /// how candidates near the record differ from each other.
-    pub fn from_pilot(observed: Summaries, pilot: &[Summaries]) -> Self {
+    pub fn from_pilot(observed: Summaries, active: [bool; N_SUMMARIES], pilot: &[Summaries]) -> Self {
         let global = scales_over(pilot.iter(), &[1.0; N_SUMMARIES]);
         let mut distance = Self {
             observed,
             scales: global,
+            active,
         };
         let keep = ((pilot.len() as f64 * LOCAL_SHARE) as usize)
             .max(LOCAL_LEAST)
@@ -148,8 +179,9 @@ impl Distance {
 
     /// The scaled distance between two sets of summaries.
     pub fn between(&self, a: &Summaries, b: &Summaries) -> f64 {
-        let sum: f64 = (0..N_SUMMARIES).map(|j| ((a[j] - b[j]) / self.scales[j]).powi(2)).sum();
-        (sum / N_SUMMARIES as f64).sqrt()
+        let compared = (0..N_SUMMARIES).filter(|&j| self.active[j]);
+        let sum: f64 = compared.clone().map(|j| ((a[j] - b[j]) / self.scales[j]).powi(2)).sum();
+        (sum / compared.count().max(1) as f64).sqrt()
     }
 }
 

@@ -31,8 +31,8 @@ use crate::numerics::weighted_quantile;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
-    Drive, Integration, MEAN, N_SUMMARIES, PERIOD, PERIOD_STRENGTH, SUMMARY_NAMES, noise_sd, simulate_on_clock,
-    summaries,
+    Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH, SUMMARY_NAMES,
+    noise_sd, simulate_on_clock, summaries,
 };
 use crate::stability::lumped::Lumped;
 use crate::stability::map::LawSamples;
@@ -465,6 +465,7 @@ fn model(record: &SurfaceRecord, settings: &SurfaceSettings, noise_sd_nm: f64) -
         },
         integration: settings.integration,
         noise_sd_nm,
+        downhole: record.downhole_extremes(),
     }
 }
 
@@ -496,7 +497,11 @@ pub fn infer(
     let started = std::time::Instant::now();
     let chain = Chain::one_dof(&settings.structure);
     chain.check_step(settings.integration.dt_s)?;
-    let observed = summaries(&record.surface_torque_nm, record.sample_period_s);
+    let observed = summaries(
+        &record.surface_torque_nm,
+        record.sample_period_s,
+        &record.downhole_summaries(),
+    );
     let cycle = Cycle::of(&observed, record.duration_s());
     let prior = Prior::physical(
         &settings.laws,
@@ -512,7 +517,7 @@ pub fn infer(
     let noise = Noise::of(settings.noise_sd_nm, &record.surface_torque_nm, &cycle, period_s);
     let noise_sd_nm = noise.sd_nm;
     model.noise_sd_nm = noise_sd_nm;
-    let (table, pilot_distance) = pilot.distance(noise_sd_nm, period_s, &observed);
+    let (table, pilot_distance) = pilot.distance(noise_sd_nm, period_s, &observed, model.active());
     let scout = Scout::run(&model, &prior, settings, seed, &pilot_distance)?;
     simulations += scout.simulations;
     let distance = scout.distance(&pilot_distance, noise_sd_nm, period_s);
@@ -548,9 +553,9 @@ pub fn infer(
     Ok(SurfaceResult {
         roles: record.roles_text(),
         noise,
-        summary_names: SUMMARY_NAMES.to_vec(),
-        observed: observed.to_vec(),
-        scales: distance.scales.to_vec(),
+        summary_names: compared(&SUMMARY_NAMES, &distance.active),
+        observed: compared(&observed, &distance.active),
+        scales: compared(&distance.scales, &distance.active),
         cycle,
         mean_torque_nm: observed[MEAN] / ratio_mean,
         mean_top_drive_rpm: record.mean_top_drive_rad_s() / RAD_S_PER_RPM,
@@ -573,12 +578,46 @@ pub fn infer(
     })
 }
 
+/// A simulated string's noise-free surface torque (N·m) and downhole summaries, kept whole so
+/// that the record's noise, once estimated, can be added to it.
+struct Noiseless {
+    /// The noise its own summaries get.
+    key: NoiseKey,
+    torque_nm: Vec<f64>,
+    downhole: [f64; N_DOWNHOLE_SUMMARIES],
+}
+
+impl Noiseless {
+    fn of(model: &SurfaceModel, key: NoiseKey, run: OnClock) -> Self {
+        Self {
+            key,
+            downhole: model.downhole_of(&run),
+            torque_nm: run.surface_torque_nm,
+        }
+    }
+
+    /// Its summaries with noise of `sd_nm` drawn under `key`.
+    fn summaries(&self, sd_nm: f64, period_s: f64, key: NoiseKey) -> Summaries {
+        let mut noisy = self.torque_nm.clone();
+        add_noise(&mut noisy, sd_nm, key);
+        summaries(&noisy, period_s, &self.downhole)
+    }
+}
+
+/// The entries of `all` that `active` marks (the summaries a distance compares), in order.
+fn compared<T: Clone>(all: &[T; N_SUMMARIES], active: &[bool; N_SUMMARIES]) -> Vec<T> {
+    all.iter()
+        .zip(active)
+        .filter(|(_, a)| **a)
+        .map(|(v, _)| v.clone())
+        .collect()
+}
+
 /// The pilot: prior simulations, noise-free, kept whole so that the record's noise, once
 /// estimated, can be added to them.
 struct Pilot {
-    /// Per simulation that stayed in bounds: its law's slot, its candidate's noise key and its
-    /// noise-free surface torque (N·m).
-    runs: Vec<(usize, NoiseKey, Vec<f64>)>,
+    /// Per simulation that stayed in bounds: its law's slot and its string.
+    runs: Vec<(usize, Noiseless)>,
 }
 
 /// Pilot strings, and noise draws on each, that measure the summaries' spread under the noise.
@@ -587,13 +626,13 @@ const NOISE_REPLICATES: usize = 5;
 
 impl Pilot {
     fn simulate(model: &SurfaceModel, prior: &Prior, seed: u64, count: usize) -> Result<Self> {
-        let runs: Vec<Option<(usize, NoiseKey, Vec<f64>)>> = (0..count)
+        let runs: Vec<Option<(usize, Noiseless)>> = (0..count)
             .into_par_iter()
             .with_max_len(1)
             .map(|i| {
                 let c = prior.candidate(seed, 0, i as u64);
                 let run = model.simulate_candidate(prior, seed, &c);
-                (!run.diverged).then(|| (c.slot, NoiseKey::of(seed, &c), run.surface_torque_nm))
+                (!run.diverged).then(|| (c.slot, Noiseless::of(model, NoiseKey::of(seed, &c), run)))
             })
             .collect();
         let runs: Vec<_> = runs.into_iter().flatten().collect();
@@ -610,26 +649,25 @@ impl Pilot {
     fn table(&self, sd_nm: f64, period_s: f64) -> Vec<(usize, Summaries)> {
         self.runs
             .par_iter()
-            .map(|(slot, key, torque)| {
-                let mut noisy = torque.clone();
-                add_noise(&mut noisy, sd_nm, *key);
-                (*slot, summaries(&noisy, period_s))
-            })
+            .map(|(slot, run)| (*slot, run.summaries(sd_nm, period_s, run.key)))
             .collect()
     }
 
     /// The reference table with noise of `sd_nm` and the distance it scales, each scale no
     /// narrower than the summary's spread under the noise alone (see [`Pilot::noise_spread`]).
-    fn distance(&self, sd_nm: f64, period_s: f64, observed: &Summaries) -> (Vec<(usize, Summaries)>, Distance) {
+    fn distance(
+        &self,
+        sd_nm: f64,
+        period_s: f64,
+        observed: &Summaries,
+        active: [bool; N_SUMMARIES],
+    ) -> (Vec<(usize, Summaries)>, Distance) {
         let table = self.table(sd_nm, period_s);
-        let mut distance = Distance::from_pilot(*observed, &table.iter().map(|t| t.1).collect::<Vec<_>>());
+        let mut distance = Distance::from_pilot(*observed, active, &table.iter().map(|t| t.1).collect::<Vec<_>>());
         let mut near: Vec<(f64, usize)> = table.iter().enumerate().map(|(i, t)| (distance.rho(&t.1), i)).collect();
         let k = NOISE_NEIGHBOURS.min(near.len());
         near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-        let traces: Vec<(NoiseKey, &[f64])> = near[..k]
-            .iter()
-            .map(|&(_, i)| (self.runs[i].1, self.runs[i].2.as_slice()))
-            .collect();
+        let traces: Vec<&Noiseless> = near[..k].iter().map(|&(_, i)| &self.runs[i].1).collect();
         let spread = noise_spread(&traces, sd_nm, period_s);
         for (scale, spread) in distance.scales.iter_mut().zip(spread) {
             *scale = scale.max(spread);
@@ -641,24 +679,16 @@ impl Pilot {
 /// Each summary's spread (standard deviation) over [`NOISE_REPLICATES`] draws of noise of
 /// `sd_nm` on each noise-free torque of `traces`, averaged: how far a string's summaries move
 /// by the noise alone. Differences below it say nothing of the law.
-fn noise_spread(traces: &[(NoiseKey, &[f64])], sd_nm: f64, period_s: f64) -> Summaries {
+fn noise_spread(traces: &[&Noiseless], sd_nm: f64, period_s: f64) -> Summaries {
     let mut spread = [0.0; N_SUMMARIES];
     if sd_nm <= 0.0 || traces.is_empty() {
         return spread;
     }
     let per_string: Vec<Summaries> = traces
         .par_iter()
-        .map(|(key, torque)| {
+        .map(|run| {
             let draws: Vec<Summaries> = (0..NOISE_REPLICATES as u64)
-                .map(|r| {
-                    let mut noisy = torque.to_vec();
-                    add_noise(
-                        &mut noisy,
-                        sd_nm,
-                        NoiseKey(key.0 ^ (r + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15)),
-                    );
-                    summaries(&noisy, period_s)
-                })
+                .map(|r| run.summaries(sd_nm, period_s, run.key.redrawn(r + 1)))
                 .collect();
             let mut sd = [0.0; N_SUMMARIES];
             for (j, sd) in sd.iter_mut().enumerate() {
@@ -687,8 +717,8 @@ const SCOUT_NARROWEST: f64 = 0.02;
 /// differ, as an adaptive distance's scales would be after its first populations; fixed for
 /// the main run so that ρ stays a function of the parameters).
 struct Scout {
-    /// The posterior strings' noise-free surface torque (N·m) and noise keys.
-    draws: Vec<(NoiseKey, Vec<f64>)>,
+    /// The posterior strings and their laws.
+    draws: Vec<(Law, Noiseless)>,
     simulations: u64,
 }
 
@@ -714,18 +744,14 @@ impl Scout {
             .map(|p| p.particles.iter().collect())
             .unwrap_or_default();
         let drawn = resample(&particles, SCOUT_DRAWS, seed ^ SCOUT_STREAM);
-        let draws: Vec<(NoiseKey, Vec<f64>)> = drawn
+        let draws: Vec<(Law, Noiseless)> = drawn
             .par_iter()
             .enumerate()
             .with_max_len(1)
             .filter_map(|(k, p)| {
                 let run = simulate_on_clock(&model.chain, &model.drive, p.law, &p.params, model.integration);
-                (!run.diverged).then(|| {
-                    (
-                        NoiseKey::replicate(seed ^ SCOUT_STREAM, k as u64),
-                        run.surface_torque_nm,
-                    )
-                })
+                let key = NoiseKey::replicate(seed ^ SCOUT_STREAM, k as u64);
+                (!run.diverged).then(|| (p.law, Noiseless::of(model, key, run)))
             })
             .collect();
         Ok(Self {
@@ -740,39 +766,28 @@ impl Scout {
         let apart: Vec<f64> = self
             .draws
             .par_iter()
-            .map(|(key, torque)| {
-                let draw = |r: u64| {
-                    let mut noisy = torque.clone();
-                    add_noise(
-                        &mut noisy,
-                        sd_nm,
-                        NoiseKey(key.0 ^ r.wrapping_mul(0x9e37_79b9_7f4a_7c15)),
-                    );
-                    summaries(&noisy, period_s)
-                };
+            .map(|(_, run)| {
+                let draw = |r: u64| run.summaries(sd_nm, period_s, run.key.redrawn(r));
                 distance.between(&draw(1), &draw(2))
             })
             .collect();
         crate::numerics::median(&apart).unwrap_or(0.0)
     }
 
-    /// The main run's distance: the scales of the scout's strings' summaries with noise of
-    /// `sd_nm`, none narrower than [`SCOUT_NARROWEST`] of `pilot`'s.
+    /// The main run's distance: the spread of the scout's strings' summaries with noise of
+    /// `sd_nm` within each law, pooled ([`within_laws`]), none narrower than
+    /// [`SCOUT_NARROWEST`] of `pilot`'s.
     fn distance(&self, pilot: &Distance, sd_nm: f64, period_s: f64) -> Distance {
         if self.draws.len() < 10 {
             return pilot.clone();
         }
-        let set: Vec<Summaries> = self
+        let set: Vec<(Law, Summaries)> = self
             .draws
             .iter()
-            .map(|(key, torque)| {
-                let mut noisy = torque.clone();
-                add_noise(&mut noisy, sd_nm, *key);
-                summaries(&noisy, period_s)
-            })
+            .map(|(law, run)| (*law, run.summaries(sd_nm, period_s, run.key)))
             .collect();
-        let mut scales = crate::eval::surface::scales_over(set.iter(), &pilot.scales);
-        let traces: Vec<(NoiseKey, &[f64])> = self.draws.iter().map(|(k, t)| (*k, t.as_slice())).collect();
+        let mut scales = crate::eval::surface::scales_over(within_laws(&set).iter(), &pilot.scales);
+        let traces: Vec<&Noiseless> = self.draws.iter().map(|(_, run)| run).collect();
         let spread = noise_spread(&traces, sd_nm, period_s);
         for j in 0..N_SUMMARIES {
             scales[j] = scales[j].max(SCOUT_NARROWEST * pilot.scales[j]).max(spread[j]);
@@ -780,8 +795,35 @@ impl Scout {
         Distance {
             observed: pilot.observed,
             scales,
+            active: pilot.active,
         }
     }
+}
+
+/// Each set of summaries less its law's medians: their spread is the spread within a law,
+/// pooled over the laws. A summary in which the laws differ and each law's strings agree (an
+/// MWD's minimum bit speed: 0 for a law that holds the bit, a creep for one that does not)
+/// then weighs by how little it varies within a law, not by how far the laws lie apart;
+/// with one law it is the summaries' own spread.
+fn within_laws(set: &[(Law, Summaries)]) -> Vec<Summaries> {
+    let mut medians: Vec<(Law, Summaries)> = Vec::new();
+    for &(law, _) in set {
+        if medians.iter().any(|(l, _)| *l == law) {
+            continue;
+        }
+        let mut median = [0.0; N_SUMMARIES];
+        for (j, m) in median.iter_mut().enumerate() {
+            let values: Vec<f64> = set.iter().filter(|(l, _)| *l == law).map(|(_, s)| s[j]).collect();
+            *m = crate::numerics::median(&values).expect("the law has a draw");
+        }
+        medians.push((law, median));
+    }
+    set.iter()
+        .map(|(law, s)| {
+            let median = &medians.iter().find(|(l, _)| l == law).expect("every law's median").1;
+            std::array::from_fn(|j| s[j] - median[j])
+        })
+        .collect()
 }
 
 /// Seed offset of the scout run.
@@ -909,7 +951,7 @@ fn check(
                     &p.params,
                     NoiseKey::replicate(seed, (slot * replicates + k) as u64),
                 );
-                (!run.diverged).then(|| classify(&summaries(&run.surface_torque_nm, model.drive.period_s)))
+                (!run.diverged).then(|| classify(&model.summaries_of_run(&run)))
             })
             .collect();
         let mut counts = vec![0usize; prior.boxes.len()];
@@ -1125,6 +1167,40 @@ fn escape_advice(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_spread_within_laws_is_each_law_s_own_pooled() {
+        // Summary 0 tells the laws apart (0 for m2, 10 + a little for m1) and varies little
+        // within each; summary 1 varies alike in both. Within the laws summary 0's spread is
+        // m1's small one, not the gap between the laws; summary 1's is unchanged.
+        let summaries = |a: f64, b: f64| {
+            let mut s = [0.0; N_SUMMARIES];
+            s[0] = a;
+            s[1] = b;
+            s
+        };
+        let set: Vec<(Law, Summaries)> = (0..5)
+            .map(|k| (Law::M2, summaries(0.0, k as f64)))
+            .chain((0..5).map(|k| (Law::M1, summaries(10.0 + 0.1 * k as f64, k as f64))))
+            .collect();
+        let pooled = crate::eval::surface::scales_over(set.iter().map(|(_, s)| s), &[1.0; N_SUMMARIES]);
+        let within = crate::eval::surface::scales_over(within_laws(&set).iter(), &[1.0; N_SUMMARIES]);
+        assert!(pooled[0] > 5.0, "{}", pooled[0]);
+        assert!(within[0] < 0.2, "{}", within[0]);
+        assert_eq!(within[1].to_bits(), pooled[1].to_bits());
+        // One law: its own spread, to rounding.
+        let one: Vec<(Law, Summaries)> = set.iter().filter(|(l, _)| *l == Law::M1).copied().collect();
+        let own = crate::eval::surface::scales_over(one.iter().map(|(_, s)| s), &[1.0; N_SUMMARIES]);
+        let within_one = crate::eval::surface::scales_over(within_laws(&one).iter(), &[1.0; N_SUMMARIES]);
+        for j in 0..N_SUMMARIES {
+            assert!(
+                (own[j] - within_one[j]).abs() <= 1e-12 * own[j].abs(),
+                "{j}: {} {}",
+                own[j],
+                within_one[j]
+            );
+        }
+    }
 
     fn posterior(law: Law, probability: f64) -> LawPosterior {
         LawPosterior {

@@ -14,7 +14,9 @@
 //! up: the rise share tracks the stuck share), its autocovariance at 2, 4 and 6 s relative to
 //! γ(1), the cycle's period (the first peak of the autocorrelation past its first zero,
 //! refined by a parabola; 0 where there is none) and its time asymmetry over 1 and 2 s (a
-//! slow wind-up and a fast release).
+//! slow wind-up and a fast release). Where the rig also streams an MWD tool's downhole
+//! minimum or maximum bit speed ([`DownholeExtremes`]), their means and medians follow: the
+//! surface cannot tell a bit held still from one that creeps, the minimum can.
 
 use super::strings::{Chain, MAX_NODES, Stepper, StringJob, StringState, padded};
 use crate::laws::Law;
@@ -59,6 +61,11 @@ pub struct OnClock {
     pub surface_torque_nm: Vec<f64>,
     /// Bit speed per sample (rad/s).
     pub bit_speed_rad_s: Vec<f64>,
+    /// Per sample, the bit speed's least and greatest (rad/s) over the integration steps
+    /// since the sample before, the sample's own included (the first sample's: its own): what
+    /// an MWD tool's downhole minimum and maximum are taken from ([`DownholeExtremes`]).
+    pub bit_least_rad_s: Vec<f64>,
+    pub bit_greatest_rad_s: Vec<f64>,
     /// The motion left physical bounds (a law whose torque turns negative at speed): the
     /// samples stop there and mean nothing.
     pub diverged: bool,
@@ -76,6 +83,8 @@ pub fn simulate_on_clock(
     let mut out = OnClock {
         surface_torque_nm: Vec::with_capacity(n),
         bit_speed_rad_s: Vec::with_capacity(n),
+        bit_least_rad_s: Vec::with_capacity(n),
+        bit_greatest_rad_s: Vec::with_capacity(n),
         diverged: false,
     };
     if n == 0 {
@@ -93,34 +102,140 @@ pub fn simulate_on_clock(
         },
     };
     let mut string = Stepper::new(chain, &job);
-    let advance = |string: &mut Stepper, span_s: f64| -> bool {
+    // The bit speed's extremes since the sample before (the first sample's: its own).
+    let mut extremes = Extremes::default();
+    let advance = |string: &mut Stepper, span_s: f64, extremes: &mut Extremes| -> bool {
         let steps = (span_s / integration.dt_s).ceil().max(1.0);
         let h = span_s / steps;
         for _ in 0..steps as u64 {
             string.step(h);
+            extremes.see(string.bit_speed_rad_s());
         }
         string.in_bounds()
     };
-    if integration.settle_s > 0.0 && !advance(&mut string, integration.settle_s) {
+    if integration.settle_s > 0.0 && !advance(&mut string, integration.settle_s, &mut Extremes::default()) {
         out.diverged = true;
         return out;
     }
     for k in 0..n {
         if k > 0 {
             string.set_operating_point(drive.omega_rad_s[k - 1], drive.ratio[k - 1]);
-            if !advance(&mut string, drive.period_s) {
+            if !advance(&mut string, drive.period_s, &mut extremes) {
                 out.diverged = true;
                 return out;
             }
         }
+        let speed = string.bit_speed_rad_s();
+        extremes.see(speed);
         out.surface_torque_nm.push(string.surface_torque_nm());
-        out.bit_speed_rad_s.push(string.bit_speed_rad_s());
+        out.bit_speed_rad_s.push(speed);
+        out.bit_least_rad_s.push(extremes.least);
+        out.bit_greatest_rad_s.push(extremes.greatest);
+        extremes = Extremes::default();
+    }
+    out
+}
+
+/// The least and greatest of the values seen.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Extremes {
+    pub(crate) least: f64,
+    pub(crate) greatest: f64,
+}
+
+impl Default for Extremes {
+    fn default() -> Self {
+        Self {
+            least: f64::INFINITY,
+            greatest: f64::NEG_INFINITY,
+        }
+    }
+}
+
+impl Extremes {
+    pub(crate) fn see(&mut self, value: f64) {
+        self.least = self.least.min(value);
+        self.greatest = self.greatest.max(value);
+    }
+}
+
+/// What an MWD tool streams of the bit's stick-slip, as a surface record carries it: the bit
+/// speed's minimum and maximum (either or both) over a window of whole samples ending at each
+/// sample. The tool takes them from its own fast sampling; a string takes them from its
+/// integration steps ([`OnClock::bit_least_rad_s`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct DownholeExtremes {
+    /// The window, in samples of the record's clock (1: since the sample before).
+    pub window_samples: usize,
+    /// The record holds the minimum, the maximum.
+    pub least: bool,
+    pub greatest: bool,
+}
+
+impl DownholeExtremes {
+    /// The summaries of `run`'s bit as this tool would report it: its extremes over the
+    /// window, summarised by [`downhole_summaries`].
+    pub fn summaries_of(&self, run: &OnClock) -> [f64; N_DOWNHOLE_SUMMARIES] {
+        let m = self.window_samples.max(1);
+        let over_window = |per_sample: &[f64], pick: fn(f64, f64) -> f64| -> Vec<f64> {
+            (0..per_sample.len())
+                .map(|k| {
+                    per_sample[(k + 1).saturating_sub(m)..=k]
+                        .iter()
+                        .copied()
+                        .reduce(pick)
+                        .expect("k is in range")
+                })
+                .collect()
+        };
+        let least = self.least.then(|| over_window(&run.bit_least_rad_s, f64::min));
+        let greatest = self.greatest.then(|| over_window(&run.bit_greatest_rad_s, f64::max));
+        downhole_summaries(least.as_deref(), greatest.as_deref())
+    }
+
+    /// Which of the [`N_SUMMARIES`] summaries a record with these channels compares: the
+    /// surface torque's, and the downhole ones of the channels it holds.
+    pub fn active(this: Option<&Self>) -> [bool; N_SUMMARIES] {
+        let mut active = [false; N_SUMMARIES];
+        active[..N_TORQUE_SUMMARIES].fill(true);
+        if let Some(d) = this {
+            active[DOWNHOLE_LEAST] = d.least;
+            active[DOWNHOLE_LEAST + 1] = d.least;
+            active[DOWNHOLE_GREATEST] = d.greatest;
+            active[DOWNHOLE_GREATEST + 1] = d.greatest;
+        }
+        active
+    }
+}
+
+/// The downhole summaries of a tool's minimum and maximum bit speed per sample (rad/s), where
+/// the record holds them (0 where not): each channel's mean and median. A bit held still reads
+/// a minimum of 0; a law that only slows it (no static torque) leaves it creeping at a few
+/// rpm, which the surface torque cannot tell apart.
+pub fn downhole_summaries(least_rad_s: Option<&[f64]>, greatest_rad_s: Option<&[f64]>) -> [f64; N_DOWNHOLE_SUMMARIES] {
+    let mean_and_median = |values: &[f64]| {
+        let mean = values.iter().sum::<f64>() / values.len().max(1) as f64;
+        (mean, crate::numerics::median(values).unwrap_or(0.0))
+    };
+    let mut out = [0.0; N_DOWNHOLE_SUMMARIES];
+    if let Some(least) = least_rad_s {
+        (out[0], out[1]) = mean_and_median(least);
+    }
+    if let Some(greatest) = greatest_rad_s {
+        (out[2], out[3]) = mean_and_median(greatest);
     }
     out
 }
 
 /// How many summaries a surface torque record is reduced to.
-pub const N_SUMMARIES: usize = 15;
+pub const N_TORQUE_SUMMARIES: usize = 15;
+/// How many summaries an MWD tool's downhole extremes add ([`downhole_summaries`]).
+pub const N_DOWNHOLE_SUMMARIES: usize = 4;
+/// Every summary a surface record may have: the torque's, then the downhole extremes'.
+pub const N_SUMMARIES: usize = N_TORQUE_SUMMARIES + N_DOWNHOLE_SUMMARIES;
+/// Where the downhole minimum's and maximum's summaries start.
+const DOWNHOLE_LEAST: usize = N_TORQUE_SUMMARIES;
+const DOWNHOLE_GREATEST: usize = N_TORQUE_SUMMARIES + 2;
 
 /// Where the mean torque, the cycle's period and its autocorrelation stand among the summaries.
 pub const MEAN: usize = 0;
@@ -144,11 +259,16 @@ pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
     "period_strength",
     "asymmetry_1s",
     "asymmetry_2s",
+    "downhole_min_mean_rad_s",
+    "downhole_min_median_rad_s",
+    "downhole_max_mean_rad_s",
+    "downhole_max_median_rad_s",
 ];
 
 /// The summaries of a surface torque record (N·m) sampled every `period_s` (see the module
-/// documentation).
-pub fn summaries(torque_nm: &[f64], period_s: f64) -> [f64; N_SUMMARIES] {
+/// documentation), then the `downhole` ones ([`downhole_summaries`]; zeros for a record
+/// without downhole channels).
+pub fn summaries(torque_nm: &[f64], period_s: f64, downhole: &[f64; N_DOWNHOLE_SUMMARIES]) -> [f64; N_SUMMARIES] {
     let n = torque_nm.len();
     let mean = torque_nm.iter().sum::<f64>() / n.max(1) as f64;
     let centred: Vec<f64> = torque_nm.iter().map(|y| y - mean).collect();
@@ -185,6 +305,10 @@ pub fn summaries(torque_nm: &[f64], period_s: f64) -> [f64; N_SUMMARIES] {
         strength,
         asymmetry(torque_nm, lag_of(1.0), signal),
         asymmetry(torque_nm, lag_of(2.0), signal),
+        downhole[0],
+        downhole[1],
+        downhole[2],
+        downhole[3],
     ]
 }
 
@@ -324,7 +448,7 @@ mod tests {
                 }
             })
             .collect();
-        let s = summaries(&torque, 1.0);
+        let s = summaries(&torque, 1.0, &[0.0; N_DOWNHOLE_SUMMARIES]);
         let mean = torque.iter().sum::<f64>() / 1000.0;
         assert!((s[0] - mean).abs() < 1e-12);
         // 8 rises in each 10 differences (the last difference of the record is a rise too).
@@ -388,7 +512,7 @@ mod tests {
             .count() as f64
             / 600.0;
         assert!((stuck - 0.475).abs() < 0.03, "stuck share {stuck}");
-        let s = summaries(&run.surface_torque_nm, 1.0);
+        let s = summaries(&run.surface_torque_nm, 1.0, &[0.0; N_DOWNHOLE_SUMMARIES]);
         // The cycle of the paper's string at 60 rpm: 9.7-9.8 s (measured at 10 Hz).
         assert!((s[11] - 9.75).abs() < 0.3, "period {}", s[11]);
         let static_nm = law.torque(&params, 0.0, 1.0);
@@ -400,5 +524,97 @@ mod tests {
         );
         // More rises than falls: the string winds up slowly while the bit is stuck.
         assert!(s[7] > 0.5, "rise share {}", s[7]);
+    }
+
+    #[test]
+    fn a_string_s_downhole_extremes_are_those_of_its_every_step() {
+        // The same string on a clock of one step (20 ms) and on one of fifty (1 s): the same
+        // steps, so each coarse sample's least and greatest bit speed are those of the fine
+        // samples since the coarse sample before, to the bit. m2 sticks (least 0), m1 creeps.
+        let chain = Chain::one_dof(&Lumped::default());
+        let omega = 60.0 * RAD_S_PER_RPM;
+        let on = |law: Law, period_s: f64, n: usize| {
+            let params = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
+            let drive = Drive {
+                omega_rad_s: vec![omega; n],
+                ratio: vec![1.0; n],
+                period_s,
+            };
+            simulate_on_clock(&chain, &drive, law, &params, Integration::default())
+        };
+        for law in [Law::M1, Law::M2] {
+            let coarse = on(law, 1.0, 40);
+            let fine = on(law, 0.02, 39 * 50 + 1);
+            assert_eq!(coarse.bit_speed_rad_s[0].to_bits(), fine.bit_speed_rad_s[0].to_bits());
+            assert_eq!(coarse.bit_least_rad_s[0].to_bits(), coarse.bit_speed_rad_s[0].to_bits());
+            for k in 1..40 {
+                let since = &fine.bit_speed_rad_s[50 * (k - 1) + 1..=50 * k];
+                let least = since.iter().copied().fold(f64::INFINITY, f64::min);
+                let greatest = since.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                assert_eq!(coarse.bit_least_rad_s[k].to_bits(), least.to_bits(), "{law} sample {k}");
+                assert_eq!(
+                    coarse.bit_greatest_rad_s[k].to_bits(),
+                    greatest.to_bits(),
+                    "{law} sample {k}"
+                );
+            }
+            let least = coarse.bit_least_rad_s.iter().copied().fold(f64::INFINITY, f64::min);
+            match law {
+                Law::M2 => assert!(least.abs() < 1e-12, "m2 holds its bit: least {least}"),
+                _ => assert!(least > 0.5 * RAD_S_PER_RPM, "m1 lets its bit creep: least {least}"),
+            }
+            // Over a window of 3 samples the tool reads the extremes of the last three.
+            let tool = DownholeExtremes {
+                window_samples: 3,
+                least: true,
+                greatest: true,
+            };
+            let windowed: Vec<f64> = (0..40)
+                .map(|k| {
+                    coarse.bit_least_rad_s[k.max(2) - 2..=k]
+                        .iter()
+                        .copied()
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .collect();
+            let greatest: Vec<f64> = (0..40)
+                .map(|k| {
+                    coarse.bit_greatest_rad_s[k.max(2) - 2..=k]
+                        .iter()
+                        .copied()
+                        .fold(f64::NEG_INFINITY, f64::max)
+                })
+                .collect();
+            assert_eq!(
+                tool.summaries_of(&coarse).map(f64::to_bits),
+                downhole_summaries(Some(&windowed), Some(&greatest)).map(f64::to_bits)
+            );
+        }
+    }
+
+    #[test]
+    fn downhole_summaries_are_each_channel_s_mean_and_median() {
+        let least = [0.0, 0.0, 3.0, 1.0];
+        let greatest = [10.0, 20.0, 30.0];
+        let bits = |s: [f64; N_DOWNHOLE_SUMMARIES]| s.map(f64::to_bits);
+        assert_eq!(
+            bits(downhole_summaries(Some(&least), Some(&greatest))),
+            bits([1.0, 0.5, 20.0, 20.0])
+        );
+        assert_eq!(
+            bits(downhole_summaries(None, Some(&greatest))),
+            bits([0.0, 0.0, 20.0, 20.0])
+        );
+        let active = DownholeExtremes::active(Some(&DownholeExtremes {
+            window_samples: 1,
+            least: true,
+            greatest: false,
+        }));
+        assert_eq!(active.iter().filter(|a| **a).count(), N_TORQUE_SUMMARIES + 2);
+        assert!(active[N_TORQUE_SUMMARIES] && !active[N_SUMMARIES - 1]);
+        assert_eq!(
+            DownholeExtremes::active(None).iter().filter(|a| **a).count(),
+            N_TORQUE_SUMMARIES
+        );
     }
 }

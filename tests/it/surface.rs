@@ -21,6 +21,19 @@ fn record(
     noise_knm: f64,
     seed: u64,
 ) -> (tempfile::TempDir, PathBuf, Vec<f64>) {
+    record_of(law, rpm, seconds, hz, noise_knm, seed, Channels::All)
+}
+
+/// [`record`] written with `channels`.
+fn record_of(
+    law: Law,
+    rpm: f64,
+    seconds: f64,
+    hz: f64,
+    noise_knm: f64,
+    seed: u64,
+    channels: Channels,
+) -> (tempfile::TempDir, PathBuf, Vec<f64>) {
     let params = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
     let cfg = SimConfig {
         duration_s: seconds,
@@ -41,7 +54,7 @@ fn record(
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("rig.csv");
     let mut file = std::fs::File::create(&path).unwrap();
-    simulate::write_record_csv(&trace, None, Channels::All, TorqueUnit::KNm, &mut file).unwrap();
+    simulate::write_record_csv(&trace, None, channels, TorqueUnit::KNm, &mut file).unwrap();
     (dir, path, trace.trace.bit_speed_rad_s)
 }
 
@@ -114,6 +127,38 @@ fn the_surface_of_a_stick_slipping_bit_gives_its_torques_and_its_stuck_share() {
         .filter(|(w, q)| q[0] - 0.5 <= **w && **w <= q[2] + 0.5)
         .count();
     assert!(inside as f64 >= 0.85 * rpm.len() as f64, "{inside} of {}", rpm.len());
+}
+
+#[test]
+fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() {
+    // m2 at 60 rpm, five minutes at 1 Hz. From the surface torque alone m1, whose bit creeps
+    // at 1-3 rpm where m2's is held, draws the same cycle: the check calls neither. With an MWD
+    // tool's downhole minimum and maximum since the sample before (the same simulation, the
+    // same surface torque), m1's strings cannot reach the record's minimum of 0 and m2 is
+    // called, its torques within their 90 % intervals.
+    let laws = vec![Law::M1, Law::M2];
+    let (_dir, surface_only, _) = record(Law::M2, 60.0, 300.0, 1.0, 0.2, 3);
+    let blind = run(&surface_only, &small(laws.clone()), 1);
+    assert_eq!(blind.check.decided, None, "{}", blind.check.verdict);
+    let (_dir, path, _) = record_of(Law::M2, 60.0, 300.0, 1.0, 0.2, 3, Channels::Mwd);
+    let mwd = read(&path);
+    assert_eq!(
+        mwd.surface_torque_nm,
+        read(&surface_only).surface_torque_nm,
+        "the same surface channels"
+    );
+    let r = run(&path, &small(laws), 1);
+    assert!(
+        r.summary_names.contains(&"downhole_min_median_rad_s"),
+        "{:?}",
+        r.summary_names
+    );
+    assert_eq!(r.check.decided, Some(Law::M2), "{}", r.check.verdict);
+    let m2 = &r.laws[1];
+    assert!(m2.probability > 0.9, "{:?}", r.laws);
+    for (p, truth) in m2.params.iter().zip([13_000.0, 6_500.0]) {
+        assert!(p.q05 <= truth && truth <= p.q95, "{p:?}");
+    }
 }
 
 #[test]

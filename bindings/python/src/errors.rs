@@ -16,6 +16,8 @@ pub(crate) const ARGUMENTS: &[(&str, &str)] = &[
     ("time_column", "time_col"),
     ("top_drive_column", "top_drive_col"),
     ("surface_torque_column", "surface_torque_col"),
+    ("downhole_min_column", "downhole_min_col"),
+    ("downhole_max_column", "downhole_max_col"),
     ("rop_column", "rop_col"),
     ("axial_speed_column", "axial_speed_col"),
     ("noise_sd", "noise_sd_knm"),

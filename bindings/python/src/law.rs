@@ -109,10 +109,11 @@ pub(crate) fn simulate(
         None | Some("bit") => sim::Channels::Bit,
         Some("surface") => sim::Channels::Surface,
         Some("all") => sim::Channels::All,
+        Some("mwd") => sim::Channels::Mwd,
         Some(other) => {
             return Err(to_py(
                 py,
-                Error::setting("channels", format!("`{other}` is not one of bit, surface, all")),
+                Error::setting("channels", format!("`{other}` is not one of bit, surface, all, mwd")),
             ));
         }
     };

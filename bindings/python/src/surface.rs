@@ -46,6 +46,15 @@ pub(crate) fn surface(
             TorqueUnit::from_suffix,
         )?,
         wob_unit: unit(py, "wob_unit", kwarg(options, "wob_unit")?, ForceUnit::from_suffix)?,
+        downhole_min_column: kwarg(options, "downhole_min_col")?,
+        downhole_max_column: kwarg(options, "downhole_max_col")?,
+        downhole_unit: unit(
+            py,
+            "downhole_unit",
+            kwarg(options, "downhole_unit")?,
+            SpeedUnit::from_suffix,
+        )?,
+        downhole_window_s: kwarg(options, "downhole_window_s")?,
     };
     let mut notes = Vec::new();
     let text = py.detach(|| {

@@ -73,6 +73,30 @@ def test_a_simulated_surface_record_goes_through_and_bad_settings_name_their_arg
         bitrock.simulate("m2", omega_rpm=60, channels="downhole")
 
 
+def test_an_mwd_tool_s_downhole_extremes_are_read_and_compared(tmp_path):
+    frame = bitrock.simulate("m2", omega_rpm=60, duration_s=120, settle_s=60, sample_hz=1, channels="mwd", seed=2)
+    assert list(frame.columns)[-2:] == ["downhole_min_rpm", "downhole_max_rpm"]
+    # m2 holds its bit: the least speed since the sample before is 0 at most samples, and
+    # never above the greatest.
+    assert (frame["downhole_min_rpm"] <= frame["downhole_max_rpm"]).all()
+    assert (frame["downhole_min_rpm"] == 0.0).mean() > 0.4
+    path = tmp_path / "mwd.csv"
+    frame.to_csv(path, index=False)
+    small = dict(SMALL, particles=100, max_populations=2, pilot=100, check_replicates=2, predictive_draws=10)
+    result = bitrock.surface(path, laws=["m2"], downhole_window_s=2.0, **small)
+    assert result["summary_names"][-4:] == [
+        "downhole_min_mean_rad_s",
+        "downhole_min_median_rad_s",
+        "downhole_max_mean_rad_s",
+        "downhole_max_median_rad_s",
+    ]
+    assert "over 2 sample(s)" in result["roles"]
+    with pytest.raises(bitrock.InputError, match="downhole_window_s"):
+        bitrock.surface(path, laws=["m2"], downhole_window_s=0.5)
+    with pytest.raises(bitrock.InputError, match="downhole_min_col"):
+        bitrock.surface(path, laws=["m2"], downhole_min_col="dh_min")
+
+
 def test_every_surface_setting_is_a_keyword_and_a_bad_value_is_refused_by_name(tmp_path):
     import inspect
 

@@ -752,7 +752,9 @@ def simulate(
     back with :func:`read_record`. A torque parameter beyond any drill bit's (1,000 kN·m) is
     simulated but warned of (a ``BitrockWarning``): values in N·m given as kN·m. ``channels``
     ``"surface"`` gives what a rig streams instead (``time_s``, ``top_drive_rpm``,
-    ``surface_torque_knm``, ``wob_kn``), ``"all"`` both, for :func:`surface`."""
+    ``surface_torque_knm``, ``wob_kn``), ``"all"`` both, ``"mwd"`` the surface's with an MWD
+    tool's stick-slip channels (``downhole_min_rpm``, ``downhole_max_rpm``: the bit speed's
+    least and greatest since the sample before), for :func:`surface`."""
     import io
 
     options = {k: v for k, v in locals().items() if k not in ("law", "params", "omega_rpm", "io")}
@@ -773,6 +775,10 @@ def surface(
     top_drive_unit: str | None = None,
     torque_unit: str | None = None,
     wob_unit: str | None = None,
+    downhole_min_col: str | None = None,
+    downhole_max_col: str | None = None,
+    downhole_unit: str | None = None,
+    downhole_window_s: float | None = None,
     inertia_kg_m2: float | None = None,
     omega_n_rad_s: float | None = None,
     damping_ratio: float | None = None,
@@ -796,8 +802,10 @@ def surface(
     ``identified: False``), the check of the model choice by re-simulation and its verdict
     (``check["decided"]`` is ``None`` where the record cannot tell the laws apart), and
     ``at_the_bit``: the bit's speed band per sample of ``time_s`` (rpm), its stuck share overall
-    and per law, P(stick-slip) and the escape advice. docs/surface.md says what a surface record
-    can and cannot tell."""
+    and per law, P(stick-slip) and the escape advice. Where the rig also streams an MWD tool's
+    downhole minimum or maximum bit speed (found by name, or ``downhole_min_col`` and
+    ``downhole_max_col``, taken over ``downhole_window_s``), each string's is compared with it.
+    docs/surface.md says what a surface record can and cannot tell."""
     import json
 
     options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json")}
