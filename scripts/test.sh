@@ -35,13 +35,8 @@ BITROCK_CACHE_DIR="$(mktemp -d)"
 export BITROCK_CACHE_DIR
 trap 'rm -rf "$BITROCK_CACHE_DIR"' EXIT
 
-# Slow tests (fits, simulations, ABC runs, GPU parity) run in release.
-cargo test --release --all-targets
-# --all-targets leaves out the doctests (the crate documentation's example of the library API).
-cargo test --release --doc
-
-# The Python package, installed as its users install it (pip builds the wheel with maturin)
-# into a virtual environment of its own, then its tests against the binary built above.
+# The Python tests' virtual environment.
+mkdir -p "${CARGO_TARGET_DIR:-target}"
 TARGET="$(cd "${CARGO_TARGET_DIR:-target}" && pwd)"
 VENV="$TARGET/python-venv"
 if [ ! -x "$VENV/bin/python" ] && ! python3 -m venv "$VENV" >/dev/null 2>&1; then
@@ -50,6 +45,38 @@ if [ ! -x "$VENV/bin/python" ] && ! python3 -m venv "$VENV" >/dev/null 2>&1; the
     apt_install python3 python3-venv
     python3 -m venv "$VENV"
 fi
+# The Python tests' dependencies (the package's, its test extra's, the browser test's) are
+# installed while the Rust tests run: pip mostly unpacks, on one core, while the tests keep
+# both busy. Read from pyproject.toml where the environment's Python reads TOML (3.11 on);
+# elsewhere the package's install below fetches them.
+python_dependencies() {
+    "$VENV/bin/python" - <<'PY' > "$TARGET/python-dependencies.txt"
+try:
+    import tomllib
+except ImportError:
+    raise SystemExit(0)
+with open("bindings/python/pyproject.toml", "rb") as f:
+    project = tomllib.load(f)["project"]
+print("\n".join(project["dependencies"] + project["optional-dependencies"]["test"]))
+PY
+    "$VENV/bin/python" -m pip install -q --disable-pip-version-check \
+        -r "$TARGET/python-dependencies.txt" -r tests/browser/requirements.txt
+}
+python_dependencies > "$TARGET/python-dependencies.log" 2>&1 &
+DEPENDENCIES=$!
+
+# Slow tests (fits, simulations, ABC runs, GPU parity) run in release.
+cargo test --release --all-targets
+# --all-targets leaves out the doctests (the crate documentation's example of the library API).
+cargo test --release --doc
+
+if ! wait "$DEPENDENCIES"; then
+    cat "$TARGET/python-dependencies.log" >&2
+    echo "installing the Python tests' dependencies failed (above)" >&2
+    exit 1
+fi
+# The Python package, installed as its users install it (pip builds the wheel with maturin)
+# into the virtual environment, then its tests against the binary built above.
 "$VENV/bin/python" -m pip install -q --disable-pip-version-check "./bindings/python[test]"
 # The extension's type stubs are generated from its Rust signatures and doc comments (PyO3's
 # introspection), never written by hand: the committed ones must be what the code gives.

@@ -32,7 +32,7 @@ use crate::prior::{PhysicalScales, Prior, PriorFile};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
     Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH, SUMMARY_NAMES,
-    noise_sd, simulate_on_clock, summaries,
+    least_scales, noise_sd, simulate_on_clock, summaries,
 };
 use crate::stability::lumped::Lumped;
 use crate::stability::map::LawSamples;
@@ -618,6 +618,8 @@ fn compared<T: Clone>(all: &[T; N_SUMMARIES], active: &[bool; N_SUMMARIES]) -> V
 struct Pilot {
     /// Per simulation that stayed in bounds: its law's slot and its string.
     runs: Vec<(usize, Noiseless)>,
+    /// Samples of the record's clock.
+    samples: usize,
 }
 
 /// Pilot strings, and noise draws on each, that measure the summaries' spread under the noise.
@@ -642,7 +644,10 @@ impl Pilot {
                 count - runs.len()
             )));
         }
-        Ok(Self { runs })
+        Ok(Self {
+            runs,
+            samples: model.drive.omega_rad_s.len(),
+        })
     }
 
     /// The reference table with noise of `sd_nm`: each run's law slot and summaries.
@@ -669,8 +674,9 @@ impl Pilot {
         near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
         let traces: Vec<&Noiseless> = near[..k].iter().map(|&(_, i)| &self.runs[i].1).collect();
         let spread = noise_spread(&traces, sd_nm, period_s);
-        for (scale, spread) in distance.scales.iter_mut().zip(spread) {
-            *scale = scale.max(spread);
+        let least = least_scales(self.samples);
+        for ((scale, spread), least) in distance.scales.iter_mut().zip(spread).zip(least) {
+            *scale = scale.max(spread).max(least);
         }
         (table, distance)
     }
@@ -789,8 +795,12 @@ impl Scout {
         let mut scales = crate::eval::surface::scales_over(within_laws(&set).iter(), &pilot.scales);
         let traces: Vec<&Noiseless> = self.draws.iter().map(|(_, run)| run).collect();
         let spread = noise_spread(&traces, sd_nm, period_s);
+        let least = least_scales(self.draws[0].1.torque_nm.len());
         for j in 0..N_SUMMARIES {
-            scales[j] = scales[j].max(SCOUT_NARROWEST * pilot.scales[j]).max(spread[j]);
+            scales[j] = scales[j]
+                .max(SCOUT_NARROWEST * pilot.scales[j])
+                .max(spread[j])
+                .max(least[j]);
         }
         Distance {
             observed: pilot.observed,

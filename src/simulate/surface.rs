@@ -15,10 +15,12 @@
 //! γ(1), the cycle's period (the first peak of the autocorrelation past its first zero,
 //! refined by a parabola; 0 where there is none) and its time asymmetry over 1 and 2 s (a
 //! slow wind-up and a fast release). Where the rig also streams an MWD tool's downhole
-//! minimum or maximum bit speed ([`DownholeExtremes`]), their means and medians follow: the
-//! surface cannot tell a bit held still from one that creeps, the minimum can.
+//! minimum or maximum bit speed ([`DownholeExtremes`]), their summaries follow
+//! ([`downhole_summaries`]): the surface cannot tell a bit held still from one that creeps,
+//! the minimum can.
 
-use super::strings::{Chain, MAX_NODES, Stepper, StringJob, StringState, padded};
+use super::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Stepper, StringJob, StringState, padded};
+use crate::units::RAD_S_PER_RPM;
 use crate::laws::Law;
 
 /// A record's drive of the string: top-drive speed and weight ratio per sample on a regular
@@ -209,22 +211,41 @@ impl DownholeExtremes {
 }
 
 /// The downhole summaries of a tool's minimum and maximum bit speed per sample (rad/s), where
-/// the record holds them (0 where not): each channel's mean and median. A bit held still reads
-/// a minimum of 0; a law that only slows it (no static torque) leaves it creeping at a few
-/// rpm, which the surface torque cannot tell apart.
+/// the record holds them (0 where not): the minimum's mean and the share of samples at which
+/// it is below [`STUCK_SPEED_RAD_S`] (the bit held at some moment of the window: the stuck
+/// share where the bit is seen), the maximum's mean and 90 % quantile (the slips' peaks). A
+/// law that only slows the bit (no static torque) leaves it creeping at a few rpm, which the
+/// surface torque cannot tell from a bit held still. Medians are left out: with the bit stuck
+/// about half the time a median flips between 0 and a slip's speed.
 pub fn downhole_summaries(least_rad_s: Option<&[f64]>, greatest_rad_s: Option<&[f64]>) -> [f64; N_DOWNHOLE_SUMMARIES] {
-    let mean_and_median = |values: &[f64]| {
-        let mean = values.iter().sum::<f64>() / values.len().max(1) as f64;
-        (mean, crate::numerics::median(values).unwrap_or(0.0))
-    };
+    let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len().max(1) as f64;
     let mut out = [0.0; N_DOWNHOLE_SUMMARIES];
     if let Some(least) = least_rad_s {
-        (out[0], out[1]) = mean_and_median(least);
+        out[0] = mean(least);
+        out[1] = least.iter().filter(|w| w.abs() < STUCK_SPEED_RAD_S).count() as f64 / least.len().max(1) as f64;
     }
     if let Some(greatest) = greatest_rad_s {
-        (out[2], out[3]) = mean_and_median(greatest);
+        let mut sorted = greatest.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        out[2] = mean(greatest);
+        out[3] = crate::numerics::quantile_of_sorted(&sorted, 0.9);
     }
     out
+}
+
+/// The least a downhole summary's scale may be: the MWD's speeds compared to within 0.1 rpm
+/// (a tool's resolution), the share to within one sample of `samples`; 0 for the surface
+/// torque's summaries, whose scales never fall below what the noise moves them. Strings that
+/// turn steadily all read the top drive's speed, equal to rounding: a scale of their spread
+/// would be rounding.
+pub fn least_scales(samples: usize) -> [f64; N_SUMMARIES] {
+    let mut least = [0.0; N_SUMMARIES];
+    let resolution = 0.1 * RAD_S_PER_RPM;
+    least[DOWNHOLE_LEAST] = resolution;
+    least[DOWNHOLE_LEAST + 1] = 1.0 / samples.max(1) as f64;
+    least[DOWNHOLE_GREATEST] = resolution;
+    least[DOWNHOLE_GREATEST + 1] = resolution;
+    least
 }
 
 /// How many summaries a surface torque record is reduced to.
@@ -260,9 +281,9 @@ pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
     "asymmetry_1s",
     "asymmetry_2s",
     "downhole_min_mean_rad_s",
-    "downhole_min_median_rad_s",
+    "downhole_held_share",
     "downhole_max_mean_rad_s",
-    "downhole_max_median_rad_s",
+    "downhole_max_q90_rad_s",
 ];
 
 /// The summaries of a surface torque record (N·m) sampled every `period_s` (see the module
@@ -433,7 +454,6 @@ impl<'a> Autocorrelation<'a> {
 mod tests {
     use super::*;
     use crate::stability::lumped::Lumped;
-    use crate::units::RAD_S_PER_RPM;
 
     #[test]
     fn a_sawtooth_s_summaries_are_its_closed_forms() {
@@ -593,17 +613,19 @@ mod tests {
     }
 
     #[test]
-    fn downhole_summaries_are_each_channel_s_mean_and_median() {
-        let least = [0.0, 0.0, 3.0, 1.0];
-        let greatest = [10.0, 20.0, 30.0];
+    fn downhole_summaries_are_the_channels_means_held_share_and_peaks() {
+        // Two of four minima below 1 rpm (0.1 rad/s): held half the time.
+        let least = [0.0, 0.0625, 3.0, 0.9375];
+        let greatest: Vec<f64> = (1..=11).map(|k| 10.0 * k as f64).collect();
         let bits = |s: [f64; N_DOWNHOLE_SUMMARIES]| s.map(f64::to_bits);
+        // The 90 % quantile of 10, 20, …, 110 (linear between order statistics): 100.
         assert_eq!(
             bits(downhole_summaries(Some(&least), Some(&greatest))),
-            bits([1.0, 0.5, 20.0, 20.0])
+            bits([1.0, 0.5, 60.0, 100.0])
         );
         assert_eq!(
             bits(downhole_summaries(None, Some(&greatest))),
-            bits([0.0, 0.0, 20.0, 20.0])
+            bits([0.0, 0.0, 60.0, 100.0])
         );
         let active = DownholeExtremes::active(Some(&DownholeExtremes {
             window_samples: 1,

@@ -140,7 +140,7 @@ fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() 
     let (_dir, surface_only, _) = record(Law::M2, 60.0, 300.0, 1.0, 0.2, 3);
     let blind = run(&surface_only, &small(laws.clone()), 1);
     assert_eq!(blind.check.decided, None, "{}", blind.check.verdict);
-    let (_dir, path, _) = record_of(Law::M2, 60.0, 300.0, 1.0, 0.2, 3, Channels::Mwd);
+    let (_dir, path, bit_speed) = record_of(Law::M2, 60.0, 300.0, 1.0, 0.2, 3, Channels::Mwd);
     let mwd = read(&path);
     assert_eq!(
         mwd.surface_torque_nm,
@@ -149,7 +149,7 @@ fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() 
     );
     let r = run(&path, &small(laws), 1);
     assert!(
-        r.summary_names.contains(&"downhole_min_median_rad_s"),
+        r.summary_names.contains(&"downhole_held_share"),
         "{:?}",
         r.summary_names
     );
@@ -159,6 +159,14 @@ fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() 
     for (p, truth) in m2.params.iter().zip([13_000.0, 6_500.0]) {
         assert!(p.q05 <= truth && truth <= p.q95, "{p:?}");
     }
+    // At the bit: the stuck share the laws disagreed on is the bit's.
+    let mut seen = Summary::default();
+    for w in &bit_speed {
+        seen.push(*w, f64::NAN, f64::NAN);
+    }
+    let (truth, predicted) = (seen.stuck_share(), r.at_the_bit.stuck_share);
+    assert!((predicted[1] - truth).abs() <= 0.05, "{predicted:?} against {truth}");
+    assert!(predicted[0] <= truth && truth <= predicted[2], "{predicted:?} against {truth}");
 }
 
 #[test]

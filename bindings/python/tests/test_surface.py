@@ -86,9 +86,9 @@ def test_an_mwd_tool_s_downhole_extremes_are_read_and_compared(tmp_path):
     result = bitrock.surface(path, laws=["m2"], downhole_window_s=2.0, **small)
     assert result["summary_names"][-4:] == [
         "downhole_min_mean_rad_s",
-        "downhole_min_median_rad_s",
+        "downhole_held_share",
         "downhole_max_mean_rad_s",
-        "downhole_max_median_rad_s",
+        "downhole_max_q90_rad_s",
     ]
     assert "over 2 sample(s)" in result["roles"]
     with pytest.raises(bitrock.InputError, match="downhole_window_s"):
