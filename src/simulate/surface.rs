@@ -20,8 +20,8 @@
 //! the minimum can.
 
 use super::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Stepper, StringJob, StringState, padded};
-use crate::units::RAD_S_PER_RPM;
 use crate::laws::Law;
+use crate::units::RAD_S_PER_RPM;
 
 /// A record's drive of the string: top-drive speed and weight ratio per sample on a regular
 /// clock.

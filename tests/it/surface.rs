@@ -166,7 +166,10 @@ fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() 
     }
     let (truth, predicted) = (seen.stuck_share(), r.at_the_bit.stuck_share);
     assert!((predicted[1] - truth).abs() <= 0.05, "{predicted:?} against {truth}");
-    assert!(predicted[0] <= truth && truth <= predicted[2], "{predicted:?} against {truth}");
+    assert!(
+        predicted[0] <= truth && truth <= predicted[2],
+        "{predicted:?} against {truth}"
+    );
 }
 
 #[test]
