@@ -64,6 +64,8 @@ PY
 }
 python_dependencies > "$TARGET/python-dependencies.log" 2>&1 &
 DEPENDENCIES=$!
+# A run that stops early stops the install too.
+trap 'kill "$DEPENDENCIES" 2>/dev/null || true; rm -rf "$BITROCK_CACHE_DIR"' EXIT
 
 # Slow tests (fits, simulations, ABC runs, GPU parity) run in release.
 cargo test --release --all-targets

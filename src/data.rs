@@ -422,10 +422,11 @@ fn resolve_column(
         };
     }
     let candidates = |named: &dyn Fn(&str) -> bool| -> (Vec<usize>, Vec<usize>) {
+        // An MWD tool's downhole minimum or maximum is a window's extreme, never the bit's speed.
         headers
             .iter()
             .enumerate()
-            .filter(|(_, h)| named(h))
+            .filter(|(_, h)| named(h) && (role != mnemonics::Role::Speed || mnemonics::downhole_extreme(h).is_none()))
             .map(|(i, _)| i)
             .partition(|&i| is_surface_channel(&headers[i]))
     };

@@ -465,8 +465,10 @@ pub fn write_record_csv<W: std::io::Write>(
 /// Integration steps of one string per second above any machine's: a time estimate from it is
 /// a lower bound.
 pub(crate) const FASTEST_STEPS_PER_S: f64 = 1e9;
-/// Memory of one recorded sample: time, bit speed, torque and weight on bit, f64 each.
-const TRACE_BYTES_PER_SAMPLE: f64 = 4.0 * 8.0;
+/// Memory of one recorded sample: time, bit speed, torque, weight on bit, top-drive speed and
+/// torque, the bit speed's least and greatest since the sample before, and the segment, 8
+/// bytes each.
+const TRACE_BYTES_PER_SAMPLE: f64 = 9.0 * 8.0;
 
 /// Simulates the configuration and returns the recorded trace.
 ///

@@ -33,6 +33,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("axial_speed_column", "--axial-speed-col"),
     ("rop_unit", "--rop-unit"),
     ("top_drive_unit", "--top-drive-unit"),
+    ("downhole_unit", "--downhole-unit"),
+    ("downhole_window_s", "--downhole-window-s"),
     ("speed_unit", "--speed-unit"),
     ("torque_unit", "--torque-unit"),
     ("param_torque_unit", "--param-torque-unit"),

@@ -61,7 +61,10 @@ impl DrillingRecord {
             pick(&header, wanted, what, field, path, accept)
         };
         let speed = role(opts.speed_column.as_deref(), "bit speed", "speed_column", &|i| {
-            lower(i).contains("speed") && !lower(i).contains("axial") && bit(i)
+            lower(i).contains("speed")
+                && !lower(i).contains("axial")
+                && bit(i)
+                && super::mnemonics::downhole_extreme(&header[i]).is_none()
         })?
         .ok_or_else(|| missing(&header, path, "a bit speed", "speed", "speed_column"))?;
         let torque = role(opts.torque_column.as_deref(), "torque on bit", "torque_column", &|i| {

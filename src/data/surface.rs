@@ -12,7 +12,6 @@
 use super::{is_surface_channel, names_milliseconds, resolve_unit};
 use crate::error::{Error, Result};
 use crate::files::{csv_rows, csv_with_header};
-use crate::simulate::surface::{DownholeExtremes, N_DOWNHOLE_SUMMARIES, downhole_summaries};
 use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -67,7 +66,7 @@ pub struct DownholeChannels {
     pub unit: SpeedUnit,
     /// The window as the user gave it (s), and in whole samples of the clock.
     pub window_s: f64,
-    pub extremes: DownholeExtremes,
+    pub window_samples: usize,
 }
 
 /// A surface record in SI on its regular clock.
@@ -142,6 +141,18 @@ impl SurfaceRecord {
             downhole_max: roles.downhole_max.map(name),
         };
         let sample_period_s = check_clock(&time_s, path, &|k| format!("line {}", lines[k]))?;
+        if least.is_none() && greatest.is_none() {
+            let given = [
+                ("downhole_unit", opts.downhole_unit.is_some()),
+                ("downhole_window_s", opts.downhole_window_s.is_some()),
+            ];
+            if let Some((field, _)) = given.iter().find(|(_, given)| *given) {
+                return Err(Error::setting(
+                    *field,
+                    "is given, but the record has no downhole minimum or maximum bit speed (a speed named beside `min` or `max`, or one named by `downhole_min_column` or `downhole_max_column`)",
+                ));
+            }
+        }
         let downhole = if least.is_some() || greatest.is_some() {
             let window_s = opts.downhole_window_s.unwrap_or(sample_period_s);
             if !(window_s.is_finite() && window_s >= (1.0 - CLOCK_TOLERANCE) * sample_period_s) {
@@ -151,11 +162,7 @@ impl SurfaceRecord {
                 ));
             }
             Some(DownholeChannels {
-                extremes: DownholeExtremes {
-                    window_samples: ((window_s / sample_period_s).round() as usize).max(1),
-                    least: least.is_some(),
-                    greatest: greatest.is_some(),
-                },
+                window_samples: ((window_s / sample_period_s).round() as usize).max(1),
                 least_rad_s: least,
                 greatest_rad_s: greatest,
                 unit: roles.downhole_unit,
@@ -177,18 +184,6 @@ impl SurfaceRecord {
             wob_n,
             sample_period_s,
             downhole,
-        })
-    }
-
-    /// The MWD tool's channels this record holds, as the simulated strings are to give them.
-    pub fn downhole_extremes(&self) -> Option<DownholeExtremes> {
-        self.downhole.as_ref().map(|d| d.extremes)
-    }
-
-    /// The summaries of the record's downhole channels (zeros without them).
-    pub fn downhole_summaries(&self) -> [f64; N_DOWNHOLE_SUMMARIES] {
-        self.downhole.as_ref().map_or([0.0; N_DOWNHOLE_SUMMARIES], |d| {
-            downhole_summaries(d.least_rad_s.as_deref(), d.greatest_rad_s.as_deref())
         })
     }
 
@@ -248,7 +243,7 @@ impl SurfaceRecord {
                 "; the MWD's downhole bit speed {} ({}, over {} sample(s), {} s)",
                 named.join(" and "),
                 d.unit.label(),
-                d.extremes.window_samples,
+                d.window_samples,
                 d.window_s
             ));
         }
@@ -431,7 +426,7 @@ impl Roles {
             return Err(format_error(
                 path,
                 format!(
-                    "column '{}' is chosen for a downhole extreme and another role",
+                    "column '{}' is chosen for a downhole extreme and another role; name the downhole minimum's and maximum's columns with `downhole_min_column` and `downhole_max_column`",
                     header[i]
                 ),
             ));
@@ -660,10 +655,9 @@ mod tests {
         assert_eq!(r.columns.downhole_max.as_deref(), Some("downhole_max_rpm"));
         assert!(r.columns.bit.is_empty(), "{:?}", r.columns.bit);
         let d = r.downhole.as_ref().unwrap();
-        assert_eq!(d.extremes.window_samples, 1);
+        assert_eq!(d.window_samples, 1);
         assert!((d.least_rad_s.as_ref().unwrap()[2] - 2.0 * crate::units::RAD_S_PER_RPM).abs() < 1e-15);
-        let s = r.downhole_summaries();
-        assert!((s[2] - 119.5 * crate::units::RAD_S_PER_RPM).abs() < 1e-12, "{s:?}");
+        assert!((d.greatest_rad_s.as_ref().unwrap()[39] - 139.0 * crate::units::RAD_S_PER_RPM).abs() < 1e-12);
         assert!(
             r.roles_text().contains("minimum from 'downhole_min_rpm'"),
             "{}",
@@ -685,10 +679,8 @@ mod tests {
         assert_eq!(r.columns.downhole_min, None);
         assert_eq!(r.columns.downhole_max.as_deref(), Some("DRPM_MAX"));
         let d = r.downhole.as_ref().unwrap();
-        assert_eq!(
-            (d.extremes.window_samples, d.extremes.least, d.extremes.greatest),
-            (5, false, true)
-        );
+        assert_eq!(d.window_samples, 5);
+        assert!(d.least_rad_s.is_none());
         assert_eq!(d.greatest_rad_s.as_ref().unwrap()[0].to_bits(), 12.0f64.to_bits());
         // Without its unit, a name that does not say it is refused naming the setting.
         let e = SurfaceRecord::read(&path, &SurfaceOptions::default())
@@ -703,6 +695,22 @@ mod tests {
         };
         let e = SurfaceRecord::read(&path, &opts).unwrap_err().to_string();
         assert!(e.contains("downhole_window_s") && e.contains("clock period 1 s"), "{e}");
+        // The tool's window or unit given for a record without its channels is refused by name.
+        let text = rows(
+            "time_s,top_drive_rpm,surface_torque_knm",
+            |k| format!("{k},60,{}", 9 + k % 7),
+            40,
+        );
+        let (_dir, path) = write(&text);
+        let opts = SurfaceOptions {
+            downhole_window_s: Some(5.0),
+            ..SurfaceOptions::default()
+        };
+        let e = SurfaceRecord::read(&path, &opts).unwrap_err().to_string();
+        assert!(
+            e.contains("downhole_window_s") && e.contains("no downhole minimum"),
+            "{e}"
+        );
         // A bit record's reader never takes an extreme for the bit's speed.
         assert_eq!(super::super::mnemonics::role("DRPM_MAX"), None);
         assert_eq!(

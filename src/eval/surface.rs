@@ -144,12 +144,20 @@ impl Distance {
     /// Scales from the summaries of a pilot's simulations that did not diverge: first over the
     /// whole pilot, then, [`LOCAL_ROUNDS`] times, over its [`LOCAL_SHARE`] nearest the record
     /// (a summary that does not vary there keeps its scale of the round before; none narrower
-    /// than [`LOCAL_NARROWEST`] of the whole pilot's). A prior is
+    /// than [`LOCAL_NARROWEST`] of the whole pilot's, nor than `least`). A prior is
     /// mostly strings far from the record (steady ones, for a stick-slipping record): scales
     /// over all of it would measure how steady strings differ from stick-slipping ones, not
     /// how candidates near the record differ from each other.
-    pub fn from_pilot(observed: Summaries, active: [bool; N_SUMMARIES], pilot: &[Summaries]) -> Self {
-        let global = scales_over(pilot.iter(), &[1.0; N_SUMMARIES]);
+    pub fn from_pilot(
+        observed: Summaries,
+        active: [bool; N_SUMMARIES],
+        least: &Summaries,
+        pilot: &[Summaries],
+    ) -> Self {
+        let mut global = scales_over(pilot.iter(), &[1.0; N_SUMMARIES]);
+        for (scale, least) in global.iter_mut().zip(least) {
+            *scale = scale.max(*least);
+        }
         let mut distance = Self {
             observed,
             scales: global,
@@ -166,7 +174,7 @@ impl Distance {
             near.select_nth_unstable_by(keep - 1, |a, b| a.0.total_cmp(&b.0));
             let local = scales_over(near[..keep].iter().map(|n| n.1), &distance.scales);
             for j in 0..N_SUMMARIES {
-                distance.scales[j] = local[j].max(LOCAL_NARROWEST * global[j]);
+                distance.scales[j] = local[j].max(LOCAL_NARROWEST * global[j]).max(least[j]);
             }
         }
         distance

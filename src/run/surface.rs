@@ -31,8 +31,8 @@ use crate::numerics::weighted_quantile;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
-    Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH, SUMMARY_NAMES,
-    least_scales, noise_sd, simulate_on_clock, summaries,
+    DownholeExtremes, Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH,
+    SUMMARY_NAMES, least_scales, noise_sd, simulate_on_clock, summaries,
 };
 use crate::stability::lumped::Lumped;
 use crate::stability::map::LawSamples;
@@ -465,7 +465,7 @@ fn model(record: &SurfaceRecord, settings: &SurfaceSettings, noise_sd_nm: f64) -
         },
         integration: settings.integration,
         noise_sd_nm,
-        downhole: record.downhole_extremes(),
+        downhole: DownholeExtremes::of(record),
     }
 }
 
@@ -500,7 +500,7 @@ pub fn infer(
     let observed = summaries(
         &record.surface_torque_nm,
         record.sample_period_s,
-        &record.downhole_summaries(),
+        &DownholeExtremes::record_summaries(record),
     );
     let cycle = Cycle::of(&observed, record.duration_s());
     let prior = Prior::physical(
@@ -668,15 +668,16 @@ impl Pilot {
         active: [bool; N_SUMMARIES],
     ) -> (Vec<(usize, Summaries)>, Distance) {
         let table = self.table(sd_nm, period_s);
-        let mut distance = Distance::from_pilot(*observed, active, &table.iter().map(|t| t.1).collect::<Vec<_>>());
+        let least = least_scales(self.samples);
+        let pilot: Vec<Summaries> = table.iter().map(|t| t.1).collect();
+        let mut distance = Distance::from_pilot(*observed, active, &least, &pilot);
         let mut near: Vec<(f64, usize)> = table.iter().enumerate().map(|(i, t)| (distance.rho(&t.1), i)).collect();
         let k = NOISE_NEIGHBOURS.min(near.len());
         near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
         let traces: Vec<&Noiseless> = near[..k].iter().map(|&(_, i)| &self.runs[i].1).collect();
         let spread = noise_spread(&traces, sd_nm, period_s);
-        let least = least_scales(self.samples);
-        for ((scale, spread), least) in distance.scales.iter_mut().zip(spread).zip(least) {
-            *scale = scale.max(spread).max(least);
+        for (scale, spread) in distance.scales.iter_mut().zip(spread) {
+            *scale = scale.max(spread);
         }
         (table, distance)
     }

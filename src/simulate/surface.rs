@@ -20,6 +20,7 @@
 //! the minimum can.
 
 use super::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Stepper, StringJob, StringState, padded};
+use crate::data::surface::SurfaceRecord;
 use crate::laws::Law;
 use crate::units::RAD_S_PER_RPM;
 
@@ -175,24 +176,48 @@ pub struct DownholeExtremes {
 }
 
 impl DownholeExtremes {
-    /// The summaries of `run`'s bit as this tool would report it: its extremes over the
-    /// window, summarised by [`downhole_summaries`].
-    pub fn summaries_of(&self, run: &OnClock) -> [f64; N_DOWNHOLE_SUMMARIES] {
-        let m = self.window_samples.max(1);
-        let over_window = |per_sample: &[f64], pick: fn(f64, f64) -> f64| -> Vec<f64> {
-            (0..per_sample.len())
-                .map(|k| {
-                    per_sample[(k + 1).saturating_sub(m)..=k]
-                        .iter()
-                        .copied()
-                        .reduce(pick)
-                        .expect("k is in range")
-                })
-                .collect()
+    /// The MWD channels `record` holds, if any.
+    pub fn of(record: &SurfaceRecord) -> Option<Self> {
+        record.downhole.as_ref().map(|d| Self {
+            window_samples: d.window_samples,
+            least: d.least_rad_s.is_some(),
+            greatest: d.greatest_rad_s.is_some(),
+        })
+    }
+
+    /// The summaries of `record`'s own downhole channels (zeros without them), from the
+    /// sample its strings' are taken from ([`Self::first_whole`]).
+    pub fn record_summaries(record: &SurfaceRecord) -> [f64; N_DOWNHOLE_SUMMARIES] {
+        let (Some(d), Some(tool)) = (record.downhole.as_ref(), Self::of(record)) else {
+            return [0.0; N_DOWNHOLE_SUMMARIES];
         };
-        let least = self.least.then(|| over_window(&run.bit_least_rad_s, f64::min));
-        let greatest = self.greatest.then(|| over_window(&run.bit_greatest_rad_s, f64::max));
-        downhole_summaries(least.as_deref(), greatest.as_deref())
+        let from = tool.first_whole();
+        downhole_summaries(
+            d.least_rad_s.as_deref().map(|v| &v[from.min(v.len())..]),
+            d.greatest_rad_s.as_deref().map(|v| &v[from.min(v.len())..]),
+        )
+    }
+
+    /// The summaries of `run`'s bit as this tool would report it: its extremes over the
+    /// window, summarised by [`downhole_summaries`] from the sample [`Self::first_whole`] on.
+    pub fn summaries_of(&self, run: &OnClock) -> [f64; N_DOWNHOLE_SUMMARIES] {
+        let m = self.window_samples;
+        let least = self.least.then(|| windowed(&run.bit_least_rad_s, m, |a, b| a <= b));
+        let greatest = self
+            .greatest
+            .then(|| windowed(&run.bit_greatest_rad_s, m, |a, b| a >= b));
+        let from = self.first_whole();
+        downhole_summaries(
+            least.as_deref().map(|v| &v[from.min(v.len())..]),
+            greatest.as_deref().map(|v| &v[from.min(v.len())..]),
+        )
+    }
+
+    /// The first sample summarised: the tool's windows before it reach back before the record
+    /// starts, a string's do not (its first sample is its own speed alone), so a record and
+    /// its strings are both summarised from here.
+    pub fn first_whole(&self) -> usize {
+        self.window_samples.max(1)
     }
 
     /// Which of the [`N_SUMMARIES`] summaries a record with these channels compares: the
@@ -210,10 +235,32 @@ impl DownholeExtremes {
     }
 }
 
+/// Per sample k, the extreme of `per_sample` over the `window` samples ending at k (fewer at
+/// the start), the extreme being what `beats` every other (`a <= b`: the least): a monotone
+/// queue, O(n) whatever the window.
+fn windowed(per_sample: &[f64], window: usize, beats: fn(f64, f64) -> bool) -> Vec<f64> {
+    let window = window.max(1);
+    let mut queue = std::collections::VecDeque::new();
+    let mut out = Vec::with_capacity(per_sample.len());
+    for (k, &value) in per_sample.iter().enumerate() {
+        // A candidate the new value beats can never be the window's extreme again.
+        while queue.back().is_some_and(|&j: &usize| beats(value, per_sample[j])) {
+            queue.pop_back();
+        }
+        queue.push_back(k);
+        if queue.front().is_some_and(|&j| j + window <= k) {
+            queue.pop_front();
+        }
+        out.push(per_sample[*queue.front().expect("k was pushed")]);
+    }
+    out
+}
+
 /// The downhole summaries of a tool's minimum and maximum bit speed per sample (rad/s), where
 /// the record holds them (0 where not): the minimum's mean and the share of samples at which
-/// it is below [`STUCK_SPEED_RAD_S`] (the bit held at some moment of the window: the stuck
-/// share where the bit is seen), the maximum's mean and 90 % quantile (the slips' peaks). A
+/// it is below [`STUCK_SPEED_RAD_S`] (the bit held, or turned back, at some moment of the
+/// window: the stuck share where the bit is seen), the maximum's mean and 90 % quantile (the
+/// slips' peaks). A
 /// law that only slows the bit (no static torque) leaves it creeping at a few rpm, which the
 /// surface torque cannot tell from a bit held still. Medians are left out: with the bit stuck
 /// about half the time a median flips between 0 and a slip's speed.
@@ -222,9 +269,9 @@ pub fn downhole_summaries(least_rad_s: Option<&[f64]>, greatest_rad_s: Option<&[
     let mut out = [0.0; N_DOWNHOLE_SUMMARIES];
     if let Some(least) = least_rad_s {
         out[0] = mean(least);
-        out[1] = least.iter().filter(|w| w.abs() < STUCK_SPEED_RAD_S).count() as f64 / least.len().max(1) as f64;
+        out[1] = least.iter().filter(|w| **w < STUCK_SPEED_RAD_S).count() as f64 / least.len().max(1) as f64;
     }
-    if let Some(greatest) = greatest_rad_s {
+    if let Some(greatest) = greatest_rad_s.filter(|g| !g.is_empty()) {
         let mut sorted = greatest.to_vec();
         sorted.sort_by(f64::total_cmp);
         out[2] = mean(greatest);
@@ -607,8 +654,35 @@ mod tests {
                 .collect();
             assert_eq!(
                 tool.summaries_of(&coarse).map(f64::to_bits),
-                downhole_summaries(Some(&windowed), Some(&greatest)).map(f64::to_bits)
+                downhole_summaries(Some(&windowed[3..]), Some(&greatest[3..])).map(f64::to_bits)
             );
+        }
+    }
+
+    #[test]
+    fn a_window_s_extremes_by_the_monotone_queue_are_the_brute_force_ones() {
+        // Values from a small set (ties) on a 64-bit LCG, windows of 1 to 9 samples.
+        let mut state = 7u64;
+        let values: Vec<f64> = (0..300)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((state >> 33) % 7) as f64 - 2.0
+            })
+            .collect();
+        for window in 1..10 {
+            let least = windowed(&values, window, |a, b| a <= b);
+            let greatest = windowed(&values, window, |a, b| a >= b);
+            for k in 0..values.len() {
+                let span = &values[(k + 1).saturating_sub(window)..=k];
+                let bits = |v: f64| v.to_bits();
+                assert_eq!(bits(least[k]), bits(span.iter().copied().fold(f64::INFINITY, f64::min)));
+                assert_eq!(
+                    bits(greatest[k]),
+                    bits(span.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+                );
+            }
         }
     }
 

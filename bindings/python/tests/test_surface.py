@@ -76,10 +76,10 @@ def test_a_simulated_surface_record_goes_through_and_bad_settings_name_their_arg
 def test_an_mwd_tool_s_downhole_extremes_are_read_and_compared(tmp_path):
     frame = bitrock.simulate("m2", omega_rpm=60, duration_s=120, settle_s=60, sample_hz=1, channels="mwd", seed=2)
     assert list(frame.columns)[-2:] == ["downhole_min_rpm", "downhole_max_rpm"]
-    # m2 holds its bit: the least speed since the sample before is 0 at most samples, and
-    # never above the greatest.
-    assert (frame["downhole_min_rpm"] <= frame["downhole_max_rpm"]).all()
+    # m2 holds its bit: the least speed since the sample before is 0 at most samples, while
+    # the greatest is the slips' (m2 at 60 rpm peaks near three times the top drive's speed).
     assert (frame["downhole_min_rpm"] == 0.0).mean() > 0.4
+    assert frame["downhole_max_rpm"].max() > 120.0
     path = tmp_path / "mwd.csv"
     frame.to_csv(path, index=False)
     small = dict(SMALL, particles=100, max_populations=2, pilot=100, check_replicates=2, predictive_draws=10)
