@@ -1554,6 +1554,25 @@ mod tests {
     }
 
     #[test]
+    fn an_mwd_tool_s_downhole_extremes_beside_the_bit_s_speed_are_not_its_speed() {
+        let text = "time_s,bit_speed_rpm,bit_speed_max_rpm,torque_knm\n0,60,90,10\n0.02,30,60,11\n0.04,90,95,9\n0.06,120,125,8\n";
+        let all = DataOptions {
+            calibration_fraction: 1.0,
+            ..Default::default()
+        };
+        let d = parse(text, &all).unwrap();
+        assert_eq!(d.columns.speed, "bit_speed_rpm");
+        // Alone, an extreme is no speed of the bit's: the record is refused naming the setting.
+        let e = parse(
+            "time_s,DRPM_MAX,torque_knm\n0,60,10\n0.02,2,11\n",
+            &DataOptions::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("speed_column"), "{e}");
+    }
+
+    #[test]
     fn reads_si_and_filters_slow_rows() {
         let d = parse(
             GOOD,

@@ -161,8 +161,18 @@ impl SurfaceRecord {
                     format!("must be at least the record's clock period {sample_period_s} s, got {window_s}"),
                 ));
             }
+            let window_samples = ((window_s / sample_period_s).round() as usize).max(1);
+            if 2 * window_samples > time_s.len() {
+                return Err(Error::setting(
+                    "downhole_window_s",
+                    format!(
+                        "must be at most half the record ({} s), got {window_s}: the samples whose window lies inside the record are compared",
+                        time_s.len() as f64 * sample_period_s / 2.0
+                    ),
+                ));
+            }
             Some(DownholeChannels {
-                window_samples: ((window_s / sample_period_s).round() as usize).max(1),
+                window_samples,
                 least_rad_s: least,
                 greatest_rad_s: greatest,
                 unit: roles.downhole_unit,
@@ -695,6 +705,17 @@ mod tests {
         };
         let e = SurfaceRecord::read(&path, &opts).unwrap_err().to_string();
         assert!(e.contains("downhole_window_s") && e.contains("clock period 1 s"), "{e}");
+        // Nor one past half the record: too few samples would have a window inside it.
+        let opts = SurfaceOptions {
+            downhole_unit: Some(SpeedUnit::Rpm),
+            downhole_window_s: Some(25.0),
+            ..SurfaceOptions::default()
+        };
+        let e = SurfaceRecord::read(&path, &opts).unwrap_err().to_string();
+        assert!(
+            e.contains("downhole_window_s") && e.contains("half the record (20 s)"),
+            "{e}"
+        );
         // The tool's window or unit given for a record without its channels is refused by name.
         let text = rows(
             "time_s,top_drive_rpm,surface_torque_knm",
