@@ -65,7 +65,8 @@ PY
 python_dependencies > "$TARGET/python-dependencies.log" 2>&1 &
 DEPENDENCIES=$!
 # A run that stops early stops the install too (pip, then the shell that started it).
-trap 'pkill -P "$DEPENDENCIES" 2>/dev/null; kill "$DEPENDENCIES" 2>/dev/null; rm -rf "$BITROCK_CACHE_DIR"' EXIT
+# (Neither may fail the run: the install has usually ended by then.)
+trap '{ pkill -P "$DEPENDENCIES"; kill "$DEPENDENCIES"; } 2>/dev/null || true; rm -rf "$BITROCK_CACHE_DIR"' EXIT
 
 # Slow tests (fits, simulations, ABC runs, GPU parity) run in release.
 cargo test --release --all-targets
