@@ -12,25 +12,34 @@ import bitrock
 M2_NM = [13000.0, 6500.0, 0.3]
 
 
-def twin_record(path, rpm=60.0, seconds=300.0, noise_nm=200.0, seed=5):
+def twin_record(path, rpm=60.0, seconds=300.0, noise_nm=200.0, seed=5, mwd_hz=None):
     """m2 at the paper's estimate at `rpm`: a surface record at 1 Hz (top-drive speed, surface
-    torque with white noise, weight on bit) written to `path`, and the bit's true speeds."""
+    torque with white noise, weight on bit) written to `path`, and the bit's true speeds at
+    1 Hz. With `mwd_hz`, the string is sampled that finely and the record also holds an MWD
+    tool's downhole minimum and maximum bit speed since the sample before (rpm)."""
     chain = one_dof()
     omega = rpm * RPM
     t0 = torque_law("m2")(M2_NM, omega)
     y = np.array([t0 / chain[1][0], omega + 0.1 * omega])
+    fine = mwd_hz or 1.0
+    step = int(round(fine))
     surface = []
-    speeds, _ = integrate(chain, "m2", M2_NM, omega, 1.0, (y, False, 1.0), 60.0, seconds, sample_hz=1.0, surface=surface)
+    speeds, _ = integrate(chain, "m2", M2_NM, omega, 1.0, (y, False, 1.0), 60.0, seconds, sample_hz=fine, surface=surface)
+    surface = np.array(surface)[::step]
     noise = np.random.default_rng(seed).normal(0.0, noise_nm, len(surface))
-    pd.DataFrame(
-        {
-            "time_s": np.arange(len(surface), dtype=float),
-            "top_drive_rpm": rpm,
-            "surface_torque_knm": (np.array(surface) + noise) / 1000.0,
-            "wob_kn": 244.2,
-        }
-    ).to_csv(path, index=False)
-    return speeds
+    columns = {
+        "time_s": np.arange(len(surface), dtype=float),
+        "top_drive_rpm": rpm,
+        "surface_torque_knm": (surface + noise) / 1000.0,
+        "wob_kn": 244.2,
+    }
+    if mwd_hz:
+        # Sample k's window: the fine samples after sample k - 1, up to and with sample k.
+        windows = [speeds[max(k * step - step + 1, 0) : k * step + 1] for k in range(len(surface))]
+        columns["downhole_min_rpm"] = [w.min() / RPM for w in windows]
+        columns["downhole_max_rpm"] = [w.max() / RPM for w in windows]
+    pd.DataFrame(columns).to_csv(path, index=False)
+    return speeds[::step]
 
 
 SMALL = dict(particles=300, max_populations=6, pilot=300, check_replicates=4, predictive_draws=40, advice=False)
@@ -54,6 +63,19 @@ def test_an_independent_string_s_surface_gives_its_torques_and_stuck_share(tmp_p
     inside = np.mean((band[:, 0] - 0.5 <= rpm) & (rpm <= band[:, 2] + 0.5))
     assert inside >= 0.85, inside
     assert len(result["time_s"]) == len(rpm)
+
+
+def test_an_independent_string_s_mwd_extremes_tell_its_held_bit_from_a_creeping_one(tmp_path):
+    # The LSODA twin's m2 (its own stick handling), sampled at 50 Hz for the MWD's minimum and
+    # maximum: m1, whose bit creeps, is left no probability, and the stuck share is the twin's.
+    path = tmp_path / "mwd.csv"
+    speeds = twin_record(path, mwd_hz=50.0)
+    true_share = float(np.mean(np.abs(speeds) < STUCK_RAD_S))
+    result = bitrock.surface(path, laws=["m1", "m2"], seed=2, **SMALL)
+    probability = {law["law"]: law["probability"] for law in result["laws"]}
+    assert probability["m2"] > 0.9, result["laws"]
+    stuck = result["at_the_bit"]["stuck_share"]
+    assert abs(stuck[1] - true_share) <= 0.05, (stuck, true_share)
 
 
 def test_a_simulated_surface_record_goes_through_and_bad_settings_name_their_argument(tmp_path):
