@@ -1248,7 +1248,7 @@ mod tests {
                     philox: [b0, b1].concat().try_into().expect("8 words"),
                     slot: c.slot as u32,
                     // Unused parameters are 0 on both backends.
-                    param_bits: c.params.map(f32::to_bits),
+                    param_bits: c.law_params().map(f32::to_bits),
                 }
             })
             .collect()

@@ -257,18 +257,29 @@ impl PhysicalScales {
     }
 }
 
-/// A candidate drawn from the prior: which box (index into [`Prior::boxes`]) and its parameters.
+/// Most coordinates a prior box has: a law's parameters ([`MAX_PARAMS`]) and, where a run
+/// infers the drill string with the law (`bitrock surface`), its natural frequency and damping
+/// ratio after them.
+pub const MAX_DIMS: usize = MAX_PARAMS + 2;
+
+/// A candidate drawn from the prior: which box (index into [`Prior::boxes`]) and its
+/// coordinates (the law's parameters first; unused ones 0).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Candidate {
     pub slot: usize,
-    pub params: [f32; MAX_PARAMS],
+    pub params: [f32; MAX_DIMS],
 }
 
 impl Candidate {
-    /// The parameters widened exactly to f64 (unused ones 0), on the stack: what the f64
+    /// The coordinates widened exactly to f64 (unused ones 0), on the stack: what the f64
     /// twins evaluate, with no allocation per candidate.
-    pub fn widened(&self) -> [f64; MAX_PARAMS] {
+    pub fn widened(&self) -> [f64; MAX_DIMS] {
         self.params.map(f64::from)
+    }
+
+    /// The law's parameters as f32, the rest left out: what a GPU proposal carries.
+    pub fn law_params(&self) -> [f32; MAX_PARAMS] {
+        std::array::from_fn(|j| self.params[j])
     }
 }
 
@@ -564,8 +575,8 @@ impl Prior {
     /// Candidate `index` of population `population` in the stream of `seed`.
     ///
     /// Block 0 of the counter gives the law (word 0) and parameters 0..2 (words 1..3), block 1
-    /// parameters 3..5. Parameter j = [`uniform_between`]`(lower, upper, word)`, bit-identical
-    /// on every backend.
+    /// parameters 3..5, block 2 coordinates 6..7 (a box of more than six). Parameter j =
+    /// [`uniform_between`]`(lower, upper, word)`, bit-identical on every backend.
     #[inline]
     pub fn candidate(&self, seed: u64, population: u32, index: u64) -> Candidate {
         let key = key_of_seed(seed);
@@ -573,12 +584,16 @@ impl Prior {
         let slot = self.slot_of_word(u64::from(b0[0]));
         let bx = &self.boxes[slot];
         let n = bx.lower.len();
-        let mut words = [b0[1], b0[2], b0[3], 0, 0, 0];
+        let mut words = [b0[1], b0[2], b0[3], 0, 0, 0, 0, 0];
         if n > 3 {
             let b1 = philox4x32_10(candidate_counter(population, index, 1), key);
-            words[3..].copy_from_slice(&b1[..3]);
+            words[3..6].copy_from_slice(&b1[..3]);
         }
-        let mut params = [0.0f32; MAX_PARAMS];
+        if n > 6 {
+            let b2 = philox4x32_10(candidate_counter(population, index, 2), key);
+            words[6..].copy_from_slice(&b2[..2]);
+        }
+        let mut params = [0.0f32; MAX_DIMS];
         for j in 0..n {
             params[j] = uniform_between(bx.lower[j], bx.upper[j], words[j]);
         }
@@ -598,6 +613,25 @@ impl Prior {
             .iter()
             .position(|&t| word < t)
             .unwrap_or(self.boxes.len() - 1)
+    }
+
+    /// The prior with `lower..=upper` appended to every law's box: coordinates a run infers
+    /// with each law's parameters (the string's, for `bitrock surface`), uniform and
+    /// independent of them. A coordinate whose bounds are equal is held at that value.
+    pub fn with_coordinates(mut self, lower: &[f32], upper: &[f32]) -> Self {
+        assert_eq!(lower.len(), upper.len(), "a lower and an upper bound per coordinate");
+        for bx in &mut self.boxes {
+            assert!(
+                bx.lower.len() + lower.len() <= MAX_DIMS,
+                "at most {MAX_DIMS} coordinates"
+            );
+            bx.lower.extend_from_slice(lower);
+            bx.upper.extend_from_slice(upper);
+        }
+        for rules in &mut self.rules {
+            rules.extend(std::iter::repeat_n(BoxRule::Given, lower.len()));
+        }
+        self
     }
 
     /// The laws of the boxes, in slot order.
@@ -813,5 +847,39 @@ mod tests {
         assert!((count[0] as f64 - 10_000.0).abs() < 5.0 * 87.0, "{count:?}");
         assert_ne!(p.candidate(9, 2, 0), p.candidate(9, 3, 0));
         assert_ne!(p.candidate(9, 2, 0), p.candidate(10, 2, 0));
+    }
+
+    #[test]
+    fn coordinates_appended_to_every_box_leave_the_law_s_draws_as_they_were() {
+        let fits = [
+            fit(Law::M2, vec![13.0, 6.5, 0.3]),
+            fit(Law::M3, vec![2.72, 1.0, 0.09, 9.52, 4.0, 0.08]),
+        ];
+        let laws_only = Prior::from_fits(&fits, 0.4, None, 1.0).unwrap();
+        // ω_n inferred within [0.5, 2], ξ held at 0.25: m3's two land in block 2's words.
+        let with_string = laws_only.clone().with_coordinates(&[0.5, 0.25], &[2.0, 0.25]);
+        for ((bx, rules), n) in with_string.boxes.iter().zip(&with_string.rules).zip([3, 6]) {
+            assert_eq!((bx.lower.len(), bx.upper.len(), rules.len()), (n + 2, n + 2, n + 2));
+        }
+        let (mut sum, mut count) = ([0.0f64; 2], [0usize; 2]);
+        for i in 0..4_000u64 {
+            let (a, b) = (laws_only.candidate(4, 1, i), with_string.candidate(4, 1, i));
+            assert_eq!(a.slot, b.slot);
+            let n = laws_only.boxes[a.slot].lower.len();
+            assert_eq!(a.params[..n], b.params[..n], "candidate {i}");
+            assert!(a.params[n..].iter().all(|v| v.to_bits() == 0), "{a:?}");
+            let string = &b.params[n..n + 2];
+            assert!((0.5..=2.0).contains(&string[0]), "{string:?}");
+            assert_eq!(string[1].to_bits(), 0.25f32.to_bits());
+            sum[a.slot] += f64::from(string[0]);
+            count[a.slot] += 1;
+        }
+        // Uniform on [0.5, 2] for each law: mean 1.25, σ of the mean 0.43/√n < 0.01.
+        for (sum, count) in sum.iter().zip(count) {
+            assert!(
+                count > 1_000 && (sum / count as f64 - 1.25).abs() < 0.05,
+                "{sum} over {count}"
+            );
+        }
     }
 }

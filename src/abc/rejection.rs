@@ -306,11 +306,13 @@ fn scan(problem: &crate::eval::Problem, fill: &mut Filling, batch: &Found, weigh
     let stream = fill.stream;
     fill.particles.par_extend(accepted.into_par_iter().map(|(index, rho)| {
         let c = prior.candidate(problem.seed, stream, index);
-        let law = prior.law(c.slot);
         Particle {
-            law,
+            law: prior.law(c.slot),
             index,
-            params: c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
+            params: c.params[..prior.boxes[c.slot].lower.len()]
+                .iter()
+                .map(|&v| f64::from(v))
+                .collect(),
             rho,
             weight,
         }

@@ -85,9 +85,8 @@ use super::shard::{self, Found, Local, Proposal, Proposed, Round, Task, Workers}
 use super::{Observer, Particle, Population, Run, Silent, StopReason};
 use crate::error::{Error, Result};
 use crate::eval::{Evaluator, KernelSums, PARITY_TOLERANCE, Problem};
-use crate::laws::MAX_PARAMS;
 use crate::numerics::compensated_sum;
-use crate::prior::{Candidate, Prior};
+use crate::prior::{Candidate, MAX_DIMS, Prior};
 use crate::rng::{box_muller, candidate_counter, key_of_seed, open_unit, philox4x32_10};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -332,7 +331,7 @@ struct LawKernel {
     members: Vec<usize>,
     /// The ancestors' whitened coordinates, in the order of `members`: the kernel sums'
     /// sources, and each ancestor's e of the local perturbation.
-    sources: Vec<[f64; MAX_PARAMS]>,
+    sources: Vec<[f64; MAX_DIMS]>,
     /// Cumulative weights of the ancestors, normalised to end at 1.
     cdf: Vec<f64>,
     /// The ancestors' share of the previous population's weight.
@@ -451,9 +450,9 @@ impl LawKernel {
     }
 
     /// Whitened coordinates L⁻¹(φ − mean) of the free parameters of `params`, zero-padded.
-    fn whiten(&self, params: &[f64]) -> [f64; MAX_PARAMS] {
+    fn whiten(&self, params: &[f64]) -> [f64; MAX_DIMS] {
         let k = self.free.len();
-        let mut y = [0.0; MAX_PARAMS];
+        let mut y = [0.0; MAX_DIMS];
         for a in 0..k {
             let s = (params[self.free[a]] - self.mean[a]) - (0..a).map(|b| self.chol[a * k + b] * y[b]).sum::<f64>();
             y[a] = s / self.chol[a * k + a];
@@ -602,7 +601,7 @@ impl Kernels {
         let problem = evaluator.problem();
         let key = key_of_seed(problem.seed);
         let start = indexes.start;
-        let proposals: Vec<(usize, Option<[f32; MAX_PARAMS]>)> = (0..(indexes.end - start) as usize)
+        let proposals: Vec<(usize, Option<[f32; MAX_DIMS]>)> = (0..(indexes.end - start) as usize)
             .into_par_iter()
             .with_min_len(256)
             .map(|k| self.propose(&problem.prior, previous, key, stream, start + k as u64))
@@ -638,7 +637,7 @@ impl Kernels {
         key: [u32; 2],
         stream: u32,
         index: u64,
-    ) -> (usize, Option<[f32; MAX_PARAMS]>) {
+    ) -> (usize, Option<[f32; MAX_DIMS]>) {
         let b0 = philox4x32_10(candidate_counter(stream, index, 0), key);
         let b1 = philox4x32_10(candidate_counter(stream, index, 1), key);
         let b2 = philox4x32_10(candidate_counter(stream, index, 2), key);
@@ -646,9 +645,9 @@ impl Kernels {
         let law = self.laws[slot].as_ref().expect("proposals go to alive laws");
         let at = inverse_cdf(&law.cdf, open_unit(b0[3]));
         let ancestor = &previous[law.members[at]];
-        let words = [b1[0], b1[1], b1[2], b1[3], b2[0], b2[1]];
-        let mut z = [0.0; MAX_PARAMS];
-        for pair in 0..MAX_PARAMS / 2 {
+        let words = [b1[0], b1[1], b1[2], b1[3], b2[0], b2[1], b2[2], b2[3]];
+        let mut z = [0.0; MAX_DIMS];
+        for pair in 0..MAX_DIMS / 2 {
             let [x, y] = box_muller(words[2 * pair], words[2 * pair + 1]);
             z[2 * pair] = x;
             z[2 * pair + 1] = y;
@@ -668,7 +667,7 @@ impl Kernels {
             }
         }
         let bx = &prior.boxes[slot];
-        let mut params = [0.0f32; MAX_PARAMS];
+        let mut params = [0.0f32; MAX_DIMS];
         for (j, p) in params.iter_mut().enumerate().take(bx.lower.len()) {
             *p = ancestor.params[j] as f32;
         }
@@ -722,7 +721,7 @@ impl Kernels {
             if new.is_empty() {
                 continue;
             }
-            let targets: Vec<[f64; MAX_PARAMS]> = new.iter().map(|&i| law.whiten(&particles[i].params)).collect();
+            let targets: Vec<[f64; MAX_DIMS]> = new.iter().map(|&i| law.whiten(&particles[i].params)).collect();
             let mut weights: Vec<f64> = law
                 .members
                 .iter()
@@ -916,7 +915,10 @@ fn accept_found(problem: &Problem, fill: &mut Filling, context: &Context, found:
             Particle {
                 law,
                 index,
-                params: params[..law.n_params()].iter().map(|&v| f64::from(v)).collect(),
+                params: params[..prior.boxes[slot].lower.len()]
+                    .iter()
+                    .map(|&v| f64::from(v))
+                    .collect(),
                 rho,
                 weight: 0.0,
             }

@@ -1,11 +1,13 @@
 //! `bitrock surface`: the law at the bit inferred from what the rig streams (top-drive speed
 //! and surface torque) through simulated strings; what the surface implies at the bit.
 
-use super::args::{LumpedArgs, finite_number, parse_laws, set_threads};
+use super::args::{finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
-use bitrock::run::surface::{self, AtTheBit, SurfaceResult, SurfaceSettings};
+use bitrock::run::surface::{
+    self, AtTheBit, ParamPosterior, StringPosterior, SurfaceResult, SurfaceSettings, ValueOrBounds,
+};
 use bitrock::simulate::surface::Integration;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
@@ -66,8 +68,17 @@ pub struct SurfaceCmd {
     /// Width of the prior boxes: k of each parameter's scale from its physical bound.
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = surface::DEFAULT_PRIOR_SCALE, value_name = "K")]
     pub prior_scale: f64,
-    #[command(flatten)]
-    pub lumped: LumpedArgs,
+    /// Equivalent moment of inertia I_eq of the 1-DOF string, kg·m² [default: the paper's 383.33].
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KG_M2")]
+    pub inertia_kg_m2: Option<f64>,
+    /// The string's natural frequency omega_n, rad/s: a value, or LO:HI to infer it with the
+    /// law within those bounds [default: the paper's 0.85].
+    #[arg(long, allow_hyphen_values = true, value_name = "RAD_S|LO:HI")]
+    pub omega_n_rad_s: Option<ValueOrBounds>,
+    /// The string's damping ratio xi: a value, or LO:HI to infer it with the law within those
+    /// bounds [default: the paper's 0.25].
+    #[arg(long, allow_hyphen_values = true, value_name = "XI|LO:HI")]
+    pub damping_ratio: Option<ValueOrBounds>,
     /// Reference weight on bit W_ref of the laws' parameters, kN: the recorded weight scales the
     /// law's torque by r = W/W_ref [default: r = 1 throughout].
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KN")]
@@ -137,9 +148,9 @@ impl SurfaceCmd {
         let settings = surface::Settings {
             prior_file: self.prior.clone(),
             prior_scale: self.prior_scale,
-            inertia_kg_m2: self.lumped.inertia_kg_m2,
-            omega_n_rad_s: self.lumped.omega_n_rad_s,
-            damping_ratio: self.lumped.damping_ratio,
+            inertia_kg_m2: self.inertia_kg_m2,
+            omega_n_rad_s: self.omega_n_rad_s,
+            damping_ratio: self.damping_ratio,
             w_ref_kn: self.w_ref_kn,
             noise_sd_knm: self.noise_sd_knm,
             particles: self.particles,
@@ -318,7 +329,45 @@ fn posterior_lines(out: &mut impl Write, unit: TorqueUnit, r: &SurfaceResult) ->
             .collect();
         writeln!(out, "{} (P = {:.3}): {}", law.law, law.probability, params.join(", "))?;
     }
-    Ok(())
+    string_line(out, &r.string)
+}
+
+/// The string the candidates were simulated with: inferred (its posterior) or given.
+fn string_line(out: &mut impl Write, s: &StringPosterior) -> std::io::Result<()> {
+    let part = |p: &ParamPosterior, unit: &str| {
+        if p.q05.to_bits() == p.q95.to_bits() {
+            format!("{} {:.4}{unit} (given)", p.name, p.median)
+        } else {
+            format!(
+                "{} {:.4} [{:.4}, {:.4}]{unit}{}",
+                p.name,
+                p.median,
+                p.q05,
+                p.q95,
+                if p.identified {
+                    ""
+                } else {
+                    " (not identified: its bounds set it)"
+                }
+            )
+        }
+    };
+    let k = s.stiffness_knm_per_rad;
+    writeln!(
+        out,
+        "string{}: I_eq {} kg·m² (given), {}, {}; stiffness {:.4} [{:.4}, {:.4}] kN·m/rad",
+        if s.inferred {
+            ", inferred with the laws"
+        } else {
+            " (given)"
+        },
+        s.inertia_kg_m2,
+        part(&s.omega_n_rad_s, " rad/s"),
+        part(&s.damping_ratio, ""),
+        k[1],
+        k[0],
+        k[2]
+    )
 }
 
 /// What the surface implies at the bit: its stuck share, severity and the advice.

@@ -14,8 +14,8 @@ use super::gpu::residual::GpuEvaluator;
 use super::gpu::tune::ShapeWish;
 use super::gpu::{GpuContext, Shape};
 use crate::error::Result;
-use crate::laws::MAX_PARAMS;
 use crate::prior::Candidate;
+use crate::prior::MAX_DIMS;
 use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -170,7 +170,7 @@ fn projected(evaluator: &dyn Evaluator, candidates: usize, explicit: bool) -> Re
     let probes: Vec<Candidate> = (0..PROBES[1])
         .map(|i| {
             let slot = i % boxes.len();
-            let mut params = [0.0f32; MAX_PARAMS];
+            let mut params = [0.0f32; MAX_DIMS];
             for (j, p) in params.iter_mut().enumerate().take(boxes[slot].lower.len()) {
                 *p = 0.5 * (boxes[slot].lower[j] + boxes[slot].upper[j]);
             }

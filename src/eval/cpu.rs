@@ -7,6 +7,7 @@ use crate::laws::file::program::BLOCK;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::numerics;
 use crate::prior::Candidate;
+use crate::prior::MAX_DIMS;
 use rayon::prelude::*;
 
 /// Scores candidates on the CPU. Thread count follows the ambient rayon pool.
@@ -237,6 +238,22 @@ const BLOCKS_PER_GROUP: usize = 64;
 /// every target, rayon across targets, each sum in a fixed order (bit-identical on any number
 /// of threads).
 pub fn kernel_sums(sums: &KernelSums, out: &mut [f64]) {
+    // Coordinates past a law's parameters are 0 except where a run infers the string: the
+    // shorter loop then, its sums the same to the bit (each skipped term is + 0).
+    let law_only = sums
+        .targets
+        .iter()
+        .chain(sums.sources)
+        .all(|p| p[MAX_PARAMS..].iter().all(|v| v.to_bits() == 0));
+    if law_only {
+        kernel_sums_over::<MAX_PARAMS>(sums, out);
+    } else {
+        kernel_sums_over::<MAX_DIMS>(sums, out);
+    }
+}
+
+/// [`kernel_sums`] over the first `D` coordinates.
+fn kernel_sums_over<const D: usize>(sums: &KernelSums, out: &mut [f64]) {
     assert_eq!(sums.targets.len(), out.len(), "one sum per target");
     assert_eq!(sums.sources.len(), sums.weights.len(), "one weight per source");
     if let Some(c) = sums.rank_one {
@@ -256,12 +273,12 @@ pub fn kernel_sums(sums: &KernelSums, out: &mut [f64]) {
                 let mut s = 0.0f64;
                 for (j, (x, &w)) in xs.iter().zip(ws).enumerate() {
                     let mut r2 = 0.0f64;
-                    for k in 0..MAX_PARAMS {
+                    for k in 0..D {
                         let d = y[k] - x[k];
                         r2 += d * d;
                     }
                     if let Some(c) = sums.rank_one {
-                        let along: f64 = (0..MAX_PARAMS).map(|k| (y[k] - x[k]) * x[k]).sum();
+                        let along: f64 = (0..D).map(|k| (y[k] - x[k]) * x[k]).sum();
                         // The difference of two near-equal squares can round below 0.
                         r2 = (r2 - c[block * TERMS_PER_BLOCK + j] * along * along).max(0.0);
                     }
@@ -288,8 +305,8 @@ mod tests {
         // Source x = (1, 2) with c = 1/6 has covariance Σ = I + x xᵀ = [[2, 2], [2, 5]],
         // Σ⁻¹ = [[5, −2], [−2, 2]] / 6; a target at (0, 0.5): d = (−1, −1.5), dᵀΣ⁻¹d =
         // (5 − 6 + 4.5) / 6 = 3.5 / 6.
-        let x = [1.0, 2.0, 0.0, 0.0, 0.0, 0.0];
-        let y = [0.0, 0.5, 0.0, 0.0, 0.0, 0.0];
+        let x = [1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let y = [0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         let mut out = [0.0];
         kernel_sums(
             &KernelSums {
@@ -308,9 +325,9 @@ mod tests {
     fn kernel_sums_are_the_weighted_gaussian_sums() {
         // Sources 0, 1, 2 on the first axis with weights 0.5, 0.25, 0.25; target at 1:
         // S = 0.5 e^{-1/2} + 0.25 + 0.25 e^{-1/2}.
-        let p = |x: f64| [x, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let p = |x: f64| [x, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         let sources = [p(0.0), p(1.0), p(2.0)];
-        let targets = [p(1.0), [1.0, 2.0, 0.0, 0.0, 0.0, 0.0]];
+        let targets = [p(1.0), [1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]];
         let mut out = [0.0; 2];
         kernel_sums(
             &KernelSums {
@@ -329,5 +346,31 @@ mod tests {
             "{}",
             out[1]
         );
+    }
+
+    #[test]
+    fn kernel_sums_count_the_coordinates_past_a_law_s_parameters() {
+        // A target and a source 1 apart in coordinate 0 and, for a run that infers the string,
+        // 2 apart in coordinate 7 (the damping ratio of a six-parameter law): e^{-1/2} e^{-2}.
+        let source = [0.0; MAX_DIMS];
+        let mut target = [0.0; MAX_DIMS];
+        target[0] = 1.0;
+        let mut out = [0.0];
+        let sums = |target: [f64; MAX_DIMS], out: &mut [f64]| {
+            kernel_sums(
+                &KernelSums {
+                    rank_one: None,
+                    targets: &[target],
+                    sources: &[source],
+                    weights: &[1.0],
+                },
+                out,
+            )
+        };
+        sums(target, &mut out);
+        assert_eq!(out[0].to_bits(), crate::numerics::exp(-0.5).to_bits());
+        target[7] = 2.0;
+        sums(target, &mut out);
+        assert!((out[0] - (-2.5f64).exp()).abs() <= 1e-15, "{}", out[0]);
     }
 }

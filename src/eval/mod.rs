@@ -13,8 +13,7 @@ pub mod surface;
 pub use problem::Problem;
 
 use crate::error::Result;
-use crate::laws::MAX_PARAMS;
-use crate::prior::Candidate;
+use crate::prior::{Candidate, MAX_DIMS};
 
 /// Largest relative difference of ρ between the GPU (f32) and the CPU (f64) that bitrock
 /// accepts; candidates whose ρ lies this close to ε may be accepted by one backend only.
@@ -41,8 +40,8 @@ pub(crate) fn rho_of_sum(ssr: f64, sum_sq_torque: f64) -> f64 {
 /// particles below ε).
 #[derive(Clone, Copy, Debug)]
 pub struct KernelSums<'a> {
-    pub targets: &'a [[f64; MAX_PARAMS]],
-    pub sources: &'a [[f64; MAX_PARAMS]],
+    pub targets: &'a [[f64; MAX_DIMS]],
+    pub sources: &'a [[f64; MAX_DIMS]],
     /// w_j, one per source.
     pub weights: &'a [f64],
     /// c_j, one per source; `None`: all 0.

@@ -16,14 +16,16 @@
 
 use super::{Evaluator, Problem};
 use crate::error::Result;
-use crate::laws::Law;
+use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::{Candidate, Prior};
 use crate::rng::{box_muller, key_of_seed, philox4x32_10};
 use crate::simulate::strings::Chain;
 use crate::simulate::surface::{
     DownholeExtremes, Drive, Integration, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, simulate_on_clock, summaries,
 };
+use crate::stability::lumped::Lumped;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// A record's summaries.
 pub type Summaries = [f64; N_SUMMARIES];
@@ -31,7 +33,11 @@ pub type Summaries = [f64; N_SUMMARIES];
 /// The string and drive every candidate is simulated with, and the noise added.
 #[derive(Clone, Debug)]
 pub struct SurfaceModel {
+    /// The string as given; where [`Self::string`] is set, each candidate's own instead.
     pub chain: Chain,
+    /// Where the run infers the string with the law: its natural frequency and damping ratio
+    /// are every candidate's two coordinates after its law's parameters.
+    pub string: Option<InferredString>,
     pub drive: Drive,
     pub integration: Integration,
     /// Standard deviation of the white noise on the surface torque (N·m).
@@ -46,11 +52,14 @@ pub struct SurfaceModel {
 pub struct NoiseKey(pub u64);
 
 impl NoiseKey {
-    /// The key of `candidate` under `seed`: its slot and f32 parameters' bits mixed (splitmix64).
+    /// The key of `candidate` under `seed`: its slot and f32 coordinates' bits mixed
+    /// (splitmix64). Coordinates past a law's parameters' room enter only where set, so that a
+    /// run that does not infer the string keeps its keys.
     pub fn of(seed: u64, candidate: &Candidate) -> Self {
         let mut h = splitmix(seed ^ 0x5355_5246);
         h = splitmix(h ^ candidate.slot as u64);
-        for p in candidate.params {
+        let (law_room, beyond) = candidate.params.split_at(MAX_PARAMS);
+        for p in law_room.iter().chain(beyond.iter().filter(|p| p.to_bits() != 0)) {
             h = splitmix(h ^ u64::from(p.to_bits()));
         }
         Self(h)
@@ -89,11 +98,51 @@ fn splitmix(x: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// A 1-DOF string whose natural frequency and damping ratio a run infers with the law.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InferredString {
+    /// The equivalent inertia I_eq (kg·m²), given: the stiffness k = I_eq·ω_n² follows.
+    pub inertia_kg_m2: f64,
+    /// ω_n (rad/s) where given exactly (its coordinate then spans no width), else `None`.
+    pub omega_n_rad_s: Option<f64>,
+    /// ξ where given exactly, else `None`.
+    pub damping_ratio: Option<f64>,
+}
+
+impl InferredString {
+    /// The string of a candidate's two string coordinates [ω_n, ξ].
+    pub fn lumped(&self, coordinates: &[f64]) -> Lumped {
+        Lumped {
+            inertia_kg_m2: self.inertia_kg_m2,
+            omega_n_rad_s: self.omega_n_rad_s.unwrap_or(coordinates[0]),
+            damping_ratio: self.damping_ratio.unwrap_or(coordinates[1]),
+        }
+    }
+}
+
 impl SurfaceModel {
-    /// The string of `law` with `params_nm` on the record's clock, its surface torque with the
-    /// noise of `key`.
-    pub fn simulate(&self, law: Law, params_nm: &[f64], key: NoiseKey) -> OnClock {
-        let mut run = simulate_on_clock(&self.chain, &self.drive, law, params_nm, self.integration);
+    /// The string a candidate of `law` with coordinates `params` drives: the given one, or the
+    /// one its string coordinates make.
+    pub fn chain_of(&self, law: Law, params: &[f64]) -> Cow<'_, Chain> {
+        match &self.string {
+            None => Cow::Borrowed(&self.chain),
+            Some(string) => {
+                let n = law.n_params();
+                Cow::Owned(Chain::one_dof(&string.lumped(&params[n..n + 2])))
+            }
+        }
+    }
+
+    /// The string of `law` with coordinates `params` (its parameters SI, then the string's
+    /// where inferred) on the record's clock, noise-free.
+    pub fn simulate_noiseless(&self, law: Law, params: &[f64]) -> OnClock {
+        let chain = self.chain_of(law, params);
+        simulate_on_clock(&chain, &self.drive, law, &params[..law.n_params()], self.integration)
+    }
+
+    /// [`Self::simulate_noiseless`], its surface torque with the noise of `key`.
+    pub fn simulate(&self, law: Law, params: &[f64], key: NoiseKey) -> OnClock {
+        let mut run = self.simulate_noiseless(law, params);
         if !run.diverged {
             add_noise(&mut run.surface_torque_nm, self.noise_sd_nm, key);
         }
@@ -103,8 +152,8 @@ impl SurfaceModel {
     /// `candidate`'s string (a candidate of `prior`), with its own noise under `seed`.
     pub fn simulate_candidate(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> OnClock {
         let law = prior.law(candidate.slot);
-        let params = candidate.widened();
-        self.simulate(law, &params[..law.n_params()], NoiseKey::of(seed, candidate))
+        let dims = prior.boxes[candidate.slot].lower.len();
+        self.simulate(law, &candidate.widened()[..dims], NoiseKey::of(seed, candidate))
     }
 
     /// The summaries of `candidate`'s simulation under `seed` (`None` where it diverged).

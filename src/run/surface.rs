@@ -25,14 +25,14 @@ use crate::abc::{Particle, Run};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
-use crate::eval::surface::{Distance, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
+use crate::eval::surface::{Distance, InferredString, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
 use crate::laws::Law;
 use crate::numerics::weighted_quantile;
 use crate::prior::{PhysicalScales, Prior, PriorFile};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
     DownholeExtremes, Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH,
-    SUMMARY_NAMES, least_scales, noise_sd, simulate_on_clock, summaries,
+    SUMMARY_NAMES, least_scales, noise_sd, summaries,
 };
 use crate::stability::lumped::Lumped;
 use crate::stability::map::LawSamples;
@@ -54,10 +54,12 @@ pub struct Settings {
     /// The 1-DOF string's equivalent moment of inertia I_eq, kg·m² (the paper's where none
     /// is given).
     pub inertia_kg_m2: Option<f64>,
-    /// The string's natural frequency ω_n, rad/s (the paper's where none is given).
-    pub omega_n_rad_s: Option<f64>,
-    /// The string's damping ratio ξ (the paper's where none is given).
-    pub damping_ratio: Option<f64>,
+    /// The string's natural frequency ω_n, rad/s: a value, or bounds [lo, hi] within which it
+    /// is inferred with the law (the paper's 0.85 where none is given).
+    pub omega_n_rad_s: Option<ValueOrBounds>,
+    /// The string's damping ratio ξ: a value, or bounds [lo, hi] within which it is inferred
+    /// with the law (the paper's 0.25 where none is given).
+    pub damping_ratio: Option<ValueOrBounds>,
     /// Reference weight on bit W_ref of the laws' parameters, kN; none: r = 1 throughout.
     pub w_ref_kn: Option<f64>,
     /// Standard deviation of the surface torque's noise, kN·m; none: estimated from the record.
@@ -109,6 +111,44 @@ impl Default for Settings {
     }
 }
 
+/// A string parameter as given: a value, or bounds within which a run infers it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum ValueOrBounds {
+    Value(f64),
+    Bounds([f64; 2]),
+}
+
+impl ValueOrBounds {
+    /// The value a string is built with (the bounds' middle) and the bounds where inferred.
+    fn split(given: Option<Self>, paper: f64) -> (f64, Option<[f64; 2]>) {
+        match given {
+            None => (paper, None),
+            Some(Self::Value(v)) => (v, None),
+            Some(Self::Bounds([lo, hi])) => (0.5 * (lo + hi), Some([lo, hi])),
+        }
+    }
+}
+
+impl std::str::FromStr for ValueOrBounds {
+    type Err = String;
+
+    /// `VALUE` or `LO:HI`.
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let number = |t: &str| {
+            t.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("`{t}` is not a finite number (a value, or bounds LO:HI)"))
+        };
+        match text.split_once(':') {
+            None => Ok(Self::Value(number(text)?)),
+            Some((lo, hi)) => Ok(Self::Bounds([number(lo)?, number(hi)?])),
+        }
+    }
+}
+
 impl Settings {
     /// What these settings run for `laws`, validated and its prior file read: a setting it
     /// cannot run is refused here, by name, before any work.
@@ -117,11 +157,17 @@ impl Settings {
         run.prior_file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
         run.prior_scale = self.prior_scale;
         let paper = Lumped::default();
+        let (omega_n_rad_s, omega_bounds) = ValueOrBounds::split(self.omega_n_rad_s, paper.omega_n_rad_s);
+        let (damping_ratio, damping_bounds) = ValueOrBounds::split(self.damping_ratio, paper.damping_ratio);
         run.structure = Lumped {
             inertia_kg_m2: self.inertia_kg_m2.unwrap_or(paper.inertia_kg_m2),
-            omega_n_rad_s: self.omega_n_rad_s.unwrap_or(paper.omega_n_rad_s),
-            damping_ratio: self.damping_ratio.unwrap_or(paper.damping_ratio),
+            omega_n_rad_s,
+            damping_ratio,
         };
+        run.string_bounds = (omega_bounds.is_some() || damping_bounds.is_some()).then(|| StringBounds {
+            omega_n_rad_s: omega_bounds.unwrap_or([omega_n_rad_s; 2]),
+            damping_ratio: damping_bounds.unwrap_or([damping_ratio; 2]),
+        });
         run.w_ref_n = self.w_ref_kn.map(|w| w * 1000.0);
         run.noise_sd_nm = self.noise_sd_knm.map(|n| n * 1000.0);
         run.pilot = self.pilot;
@@ -148,8 +194,11 @@ pub struct SurfaceSettings {
     pub prior_file: Option<PriorFile>,
     /// k: each box spans k of its parameter's scales from its physical bound.
     pub prior_scale: f64,
-    /// The 1-DOF string.
+    /// The 1-DOF string (an inferred parameter at its bounds' middle).
     pub structure: Lumped,
+    /// Where the string's natural frequency and damping ratio are inferred with the law, their
+    /// bounds; `None`: the string as given.
+    pub string_bounds: Option<StringBounds>,
     /// Reference weight on bit of the laws' parameters (N); `None`: r = 1 throughout.
     pub w_ref_n: Option<f64>,
     pub integration: Integration,
@@ -164,6 +213,32 @@ pub struct SurfaceSettings {
     pub smc: SmcConfig,
     /// Whether to simulate the escape advice where the bit stick-slips.
     pub advice: bool,
+}
+
+/// Bounds of the string's natural frequency (rad/s) and damping ratio within which a run
+/// infers them with the law, uniform; a parameter given exactly has equal bounds.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct StringBounds {
+    pub omega_n_rad_s: [f64; 2],
+    pub damping_ratio: [f64; 2],
+}
+
+impl StringBounds {
+    /// The value of a parameter with equal bounds (given exactly), else `None`.
+    fn fixed(bounds: [f64; 2]) -> Option<f64> {
+        (bounds[0].to_bits() == bounds[1].to_bits()).then_some(bounds[0])
+    }
+
+    /// The strings at the corners of the bounds, with the inertia `inertia_kg_m2`.
+    fn corners(&self, inertia_kg_m2: f64) -> impl Iterator<Item = Lumped> + '_ {
+        self.omega_n_rad_s.into_iter().flat_map(move |omega_n_rad_s| {
+            self.damping_ratio.into_iter().map(move |damping_ratio| Lumped {
+                inertia_kg_m2,
+                omega_n_rad_s,
+                damping_ratio,
+            })
+        })
+    }
 }
 
 /// The default prior scale k: as wide as the evidence's boxes.
@@ -200,6 +275,7 @@ impl SurfaceSettings {
             prior_file: None,
             prior_scale: DEFAULT_PRIOR_SCALE,
             structure: Lumped::default(),
+            string_bounds: None,
             w_ref_n: None,
             integration: Integration::default(),
             noise_sd_nm: None,
@@ -254,7 +330,25 @@ impl SurfaceSettings {
                 format!("must be ≥ 0, got {}", self.integration.settle_s),
             ));
         }
-        self.structure.validate()
+        self.structure.validate()?;
+        if let Some(bounds) = &self.string_bounds {
+            for (field, [lo, hi]) in [
+                ("omega_n_rad_s", bounds.omega_n_rad_s),
+                ("damping_ratio", bounds.damping_ratio),
+            ] {
+                if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+                    return Err(Error::setting(
+                        field,
+                        format!("bounds must be positive and in order (LO:HI), got {lo}:{hi}"),
+                    ));
+                }
+            }
+            // The step must resolve the stiffest string the bounds admit.
+            for corner in bounds.corners(self.structure.inertia_kg_m2) {
+                Chain::one_dof(&corner).check_step(self.integration.dt_s)?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -308,6 +402,80 @@ pub struct ParamPosterior {
     /// ([`crate::abc::posterior::identified`]): the record has not narrowed the prior, which
     /// then sets the interval.
     pub identified: bool,
+}
+
+/// The string the candidates were simulated with, as the run found it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StringPosterior {
+    /// True where ω_n or ξ was inferred with the laws (their posterior over every law's
+    /// particles), false where the string was given whole.
+    pub inferred: bool,
+    /// I_eq, kg·m² (given).
+    pub inertia_kg_m2: f64,
+    /// ω_n, rad/s, and ξ: a given one has its value at every quantile.
+    pub omega_n_rad_s: ParamPosterior,
+    pub damping_ratio: ParamPosterior,
+    /// The torsional stiffness k = I_eq·ω_n², kN·m/rad: 5 %, median, 95 %.
+    pub stiffness_knm_per_rad: [f64; 3],
+}
+
+impl StringPosterior {
+    /// The string of `settings` as the final population `particles` has it.
+    fn of(settings: &SurfaceSettings, particles: &[Particle]) -> Self {
+        let s = &settings.structure;
+        let given = |name: &str, value: f64| ParamPosterior {
+            name: name.to_string(),
+            q05: value,
+            median: value,
+            q95: value,
+            identified: true,
+        };
+        let inferred = |name: &str, value: f64, coordinate: usize, [lo, hi]: [f64; 2]| {
+            if lo.to_bits() == hi.to_bits() {
+                return given(name, value);
+            }
+            let values: Vec<f64> = particles
+                .iter()
+                .map(|p| p.params[p.law.n_params() + coordinate])
+                .collect();
+            let weights: Vec<f64> = particles.iter().map(|p| p.weight).collect();
+            let q = |level: f64| weighted_quantile(&values, &weights, level);
+            ParamPosterior {
+                name: name.to_string(),
+                q05: q(0.05),
+                median: q(0.5),
+                q95: q(0.95),
+                identified: crate::abc::posterior::identified(q(0.05), q(0.95), lo, hi, 0.9),
+            }
+        };
+        let (omega, xi) = match &settings.string_bounds {
+            None => (
+                given("omega_n_rad_s", s.omega_n_rad_s),
+                given("damping_ratio", s.damping_ratio),
+            ),
+            Some(b) => (
+                inferred("omega_n_rad_s", s.omega_n_rad_s, 0, b.omega_n_rad_s),
+                inferred("damping_ratio", s.damping_ratio, 1, b.damping_ratio),
+            ),
+        };
+        let k = |omega: f64| s.inertia_kg_m2 * omega * omega / 1000.0;
+        Self {
+            inferred: settings.string_bounds.is_some(),
+            inertia_kg_m2: s.inertia_kg_m2,
+            stiffness_knm_per_rad: [k(omega.q05), k(omega.median), k(omega.q95)],
+            omega_n_rad_s: omega,
+            damping_ratio: xi,
+        }
+    }
+
+    /// The string at the posterior medians.
+    pub fn median(&self) -> Lumped {
+        Lumped {
+            inertia_kg_m2: self.inertia_kg_m2,
+            omega_n_rad_s: self.omega_n_rad_s.median,
+            damping_ratio: self.damping_ratio.median,
+        }
+    }
 }
 
 /// How the re-simulated records of one law were classified.
@@ -369,6 +537,8 @@ pub struct SurfaceResult {
     pub mean_torque_nm: f64,
     pub mean_top_drive_rpm: f64,
     pub laws: Vec<LawPosterior>,
+    /// The string the candidates were simulated with: given, or inferred with the laws.
+    pub string: StringPosterior,
     pub check: ModelCheck,
     pub at_the_bit: AtTheBit,
     pub populations: usize,
@@ -458,6 +628,11 @@ impl Cost {
 fn model(record: &SurfaceRecord, settings: &SurfaceSettings, noise_sd_nm: f64) -> SurfaceModel {
     SurfaceModel {
         chain: Chain::one_dof(&settings.structure),
+        string: settings.string_bounds.map(|b| InferredString {
+            inertia_kg_m2: settings.structure.inertia_kg_m2,
+            omega_n_rad_s: StringBounds::fixed(b.omega_n_rad_s),
+            damping_ratio: StringBounds::fixed(b.damping_ratio),
+        }),
         drive: Drive {
             omega_rad_s: record.top_drive_rad_s.clone(),
             ratio: record.wob_ratio(settings.w_ref_n),
@@ -495,21 +670,24 @@ pub fn infer(
 ) -> Result<SurfaceResult> {
     settings.validate()?;
     let started = std::time::Instant::now();
-    let chain = Chain::one_dof(&settings.structure);
-    chain.check_step(settings.integration.dt_s)?;
+    Chain::one_dof(&settings.structure).check_step(settings.integration.dt_s)?;
     let observed = summaries(
         &record.surface_torque_nm,
         record.sample_period_s,
         &DownholeExtremes::record_summaries(record),
     );
     let cycle = Cycle::of(&observed, record.duration_s());
-    let prior = Prior::physical(
+    let mut prior = Prior::physical(
         &settings.laws,
         &scales(record),
         settings.prior_scale,
         settings.prior_file.as_ref(),
         record.torque_unit.newton_metres(),
     )?;
+    if let Some(b) = &settings.string_bounds {
+        let [omega, xi] = [b.omega_n_rad_s, b.damping_ratio];
+        prior = prior.with_coordinates(&[omega[0] as f32, xi[0] as f32], &[omega[1] as f32, xi[1] as f32]);
+    }
     let mut model = model(record, settings, 0.0);
     let mut simulations = settings.pilot as u64;
     let pilot = Pilot::simulate(&model, &prior, seed ^ PILOT_STREAM, settings.pilot)?;
@@ -531,6 +709,7 @@ pub fn infer(
     let cost = Cost::of(sampler_strings, last, &table, &distance);
     let particles = &last.particles;
     let laws = posteriors(&prior, particles);
+    let string = StringPosterior::of(settings, particles);
 
     let check = check(
         &prior,
@@ -547,6 +726,7 @@ pub fn infer(
     let mut at_the_bit = at_the_bit(&model, particles, settings.predictive_draws, seed);
     simulations += at_the_bit.draws as u64;
     if settings.advice && at_the_bit.stick_slip_probability >= 0.5 {
+        let chain = Chain::one_dof(&string.median());
         at_the_bit.advice = Some(escape_advice(record, settings, &chain, &laws, particles, note)?);
     }
     let ratio_mean = model.drive.ratio.iter().sum::<f64>() / model.drive.ratio.len() as f64;
@@ -560,6 +740,7 @@ pub fn infer(
         mean_torque_nm: observed[MEAN] / ratio_mean,
         mean_top_drive_rpm: record.mean_top_drive_rad_s() / RAD_S_PER_RPM,
         laws,
+        string,
         check,
         at_the_bit,
         populations: run.populations.len(),
@@ -570,7 +751,7 @@ pub fn infer(
         simulations,
         cost,
         noise_floor,
-        warnings: convergence_warning(last.record.epsilon, noise_floor)
+        warnings: convergence_warning(last.record.epsilon, noise_floor, settings.string_bounds.is_none())
             .into_iter()
             .collect(),
         seconds: started.elapsed().as_secs_f64(),
@@ -756,7 +937,7 @@ impl Scout {
             .enumerate()
             .with_max_len(1)
             .filter_map(|(k, p)| {
-                let run = simulate_on_clock(&model.chain, &model.drive, p.law, &p.params, model.integration);
+                let run = model.simulate_noiseless(p.law, &p.params);
                 let key = NoiseKey::replicate(seed ^ SCOUT_STREAM, k as u64);
                 (!run.diverged).then(|| (p.law, Noiseless::of(model, key, run)))
             })
@@ -844,13 +1025,19 @@ const SCOUT_STREAM: u64 = 0x5343_4f55_5400_0000;
 /// than the record allows.
 pub const UNCONVERGED_FACTOR: f64 = 4.0;
 
-/// The warning of a sampler that stopped at `epsilon` far above the noise floor.
-fn convergence_warning(epsilon: Option<f64>, floor: f64) -> Option<String> {
+/// The warning of a sampler that stopped at `epsilon` far above the noise floor; where the
+/// string was given whole, a wrong string is the other cause named.
+fn convergence_warning(epsilon: Option<f64>, floor: f64, string_given: bool) -> Option<String> {
     let epsilon = epsilon.unwrap_or(f64::INFINITY);
     (floor > 0.0 && epsilon >= UNCONVERGED_FACTOR * floor).then(|| {
         format!(
-            "the sampler stopped at ε = {epsilon:.3}, {:.1} times the noise's own distance {floor:.3}: the strings do not yet reproduce the record, and the posterior and the bit's figures are wider or further off than the record allows; raise `max_populations` or `particles`",
-            epsilon / floor
+            "the sampler stopped at ε = {epsilon:.3}, {:.1} times the noise's own distance {floor:.3}: the strings do not yet reproduce the record, and the posterior and the bit's figures are wider or further off than the record allows; raise `max_populations` or `particles`{}",
+            epsilon / floor,
+            if string_given {
+                ", or, where the string's natural frequency or damping is not known, infer them within bounds (`omega_n_rad_s`, `damping_ratio` LO:HI)"
+            } else {
+                ""
+            }
         )
     })
 }
@@ -1063,7 +1250,7 @@ fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: 
     let runs: Vec<_> = drawn
         .par_iter()
         .with_max_len(1)
-        .map(|p| simulate_on_clock(&model.chain, &model.drive, p.law, &p.params, model.integration))
+        .map(|p| model.simulate_noiseless(p.law, &p.params))
         .collect();
     let good: Vec<_> = runs.iter().filter(|r| !r.diverged).collect();
     let n = model.drive.omega_rad_s.len();
@@ -1150,7 +1337,7 @@ fn escape_advice(
             let own: Vec<&Particle> = particles.iter().filter(|p| p.law == l.law).collect();
             let samples_si = resample(&own, ADVICE_SAMPLES, 0x4144_5649)
                 .iter()
-                .map(|p| p.params.clone())
+                .map(|p| p.params[..l.law.n_params()].to_vec())
                 .collect();
             LawSamples {
                 law: l.law,
@@ -1178,6 +1365,49 @@ fn escape_advice(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_string_value_is_a_number_or_bounds_lo_hi_in_text_and_in_json() {
+        assert_eq!("0.85".parse(), Ok(ValueOrBounds::Value(0.85)));
+        assert_eq!(" 0.5 : 1.5".parse(), Ok(ValueOrBounds::Bounds([0.5, 1.5])));
+        for bad in ["", "x", "0.5:", "0.5:nan", "0.5:1:2", "inf"] {
+            let error = bad.parse::<ValueOrBounds>().unwrap_err();
+            assert!(error.contains("not a finite number"), "{bad}: {error}");
+        }
+        let parsed: Vec<ValueOrBounds> = serde_json::from_str("[0.85, [0.5, 1.5]]").unwrap();
+        assert_eq!(parsed, [ValueOrBounds::Value(0.85), ValueOrBounds::Bounds([0.5, 1.5])]);
+    }
+
+    #[test]
+    fn string_bounds_infer_what_they_bound_and_hold_a_given_value() {
+        let settings = Settings {
+            omega_n_rad_s: Some(ValueOrBounds::Bounds([0.6, 1.8])),
+            damping_ratio: Some(ValueOrBounds::Value(0.1)),
+            ..Settings::default()
+        };
+        let run = settings.config(vec![Law::M2]).unwrap();
+        let bounds = run.string_bounds.unwrap();
+        assert_eq!((bounds.omega_n_rad_s, bounds.damping_ratio), ([0.6, 1.8], [0.1, 0.1]));
+        assert_eq!((run.structure.omega_n_rad_s, run.structure.damping_ratio), (1.2, 0.1));
+        assert_eq!(StringBounds::fixed(bounds.omega_n_rad_s), None);
+        assert_eq!(StringBounds::fixed(bounds.damping_ratio), Some(0.1));
+        // Given whole, nothing is inferred.
+        let run = Settings::default().config(vec![Law::M2]).unwrap();
+        assert_eq!(run.string_bounds, None);
+        for (omega, xi, field) in [
+            ([1.8, 0.6], [0.1, 0.2], "omega_n_rad_s"),
+            ([0.6, 1.8], [0.0, 0.2], "damping_ratio"),
+            ([0.6, 1.8], [0.1, f64::INFINITY], "damping_ratio"),
+        ] {
+            let settings = Settings {
+                omega_n_rad_s: Some(ValueOrBounds::Bounds(omega)),
+                damping_ratio: Some(ValueOrBounds::Bounds(xi)),
+                ..Settings::default()
+            };
+            let error = settings.config(vec![Law::M2]).unwrap_err().to_string();
+            assert!(error.contains(field), "{omega:?} {xi:?}: {error}");
+        }
+    }
 
     #[test]
     fn the_spread_within_laws_is_each_law_s_own_pooled() {

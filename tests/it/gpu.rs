@@ -12,7 +12,7 @@ use bitrock::eval::cpu::CpuEvaluator;
 use bitrock::eval::gpu::{self, Shape, candidates, residual::GpuEvaluator};
 use bitrock::eval::{Evaluator, PARITY_TOLERANCE, Problem};
 use bitrock::fit::{FitOptions, fit_laws};
-use bitrock::prior::Prior;
+use bitrock::prior::{MAX_DIMS, Prior};
 
 /// Stops a GPU test with what to do when no adapter exists. Built with
 /// BITROCK_SKIP_GPU_TESTS=1, the GPU tests are compiled as ignored instead (see `build.rs`).
@@ -395,11 +395,11 @@ fn a_million_data_points_and_a_two_dimensional_dispatch_agree_with_the_cpu(shape
     let (max, _) = rho_difference(&big, 512, shape);
     eprintln!("{shape} D = 2^20: largest relative difference of rho {max:.2e}");
     assert!(max <= PARITY_TOLERANCE, "{max:e}");
-    // 4,194,304 candidates in one dispatch: 262,144 tiles, past 65,535 workgroups (tiled: one
-    // per tile), so the grid is 2-D.
+    // 1,048,592 candidates in one dispatch: 65,537 tiles, past 65,535 workgroups (tiled: one
+    // per tile), so the grid is 2-D: 65,535 × 2 workgroups, two of the second row with a tile.
     let small = bitrock::bench::synthetic_problem(Law::M2, 64, 6);
-    let (max, _) = rho_difference(&small, 1 << 22, shape);
-    eprintln!("{shape} 4,194,304 candidates: largest relative difference of rho {max:.2e}");
+    let (max, _) = rho_difference(&small, (1 << 20) + 16, shape);
+    eprintln!("{shape} 1,048,592 candidates: largest relative difference of rho {max:.2e}");
     assert!(max <= PARITY_TOLERANCE, "{max:e}");
 }
 
@@ -567,9 +567,9 @@ fn kernel_sums_agree_with_the_cpu_twin() {
         let u2 = f64::from(w[1]) / 4_294_967_296.0;
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
     };
-    let point = |i: u32| -> [f64; 6] { std::array::from_fn(|j| if j < 4 { normal(i, j as u32) } else { 0.0 }) };
-    let sources: Vec<[f64; 6]> = (0..70_000).map(point).collect();
-    let targets: Vec<[f64; 6]> = (100_000..103_000).map(point).collect();
+    let point = |i: u32| -> [f64; MAX_DIMS] { std::array::from_fn(|j| if j < 4 { normal(i, j as u32) } else { 0.0 }) };
+    let sources: Vec<[f64; MAX_DIMS]> = (0..70_000).map(point).collect();
+    let targets: Vec<[f64; MAX_DIMS]> = (100_000..103_000).map(point).collect();
     let raw: Vec<f64> = (0..70_000u32).map(|i| 0.5 + normal(i, 9).abs()).collect();
     let total: f64 = raw.iter().sum();
     let weights: Vec<f64> = raw.iter().map(|w| w / total).collect();
@@ -644,7 +644,7 @@ fn an_smc_run_gives_the_same_populations_on_both_backends(shape: Shape) {
                     .find(|p| p.index == index)
                     .unwrap();
                 let slot = problem.prior.boxes.iter().position(|b| b.law == p.law).unwrap();
-                let mut params = [0.0f32; 6];
+                let mut params = [0.0f32; MAX_DIMS];
                 for (d, &s) in params.iter_mut().zip(&p.params) {
                     *d = s as f32;
                 }

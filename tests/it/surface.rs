@@ -8,6 +8,7 @@ use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::run::surface::{SurfaceResult, SurfaceSettings, infer};
 use bitrock::simulate::strings::Summary;
 use bitrock::simulate::{self, Channels, Initial, Recording, SimConfig};
+use bitrock::stability::lumped::Lumped;
 use bitrock::units::{RAD_S_PER_RPM, TorqueUnit};
 use std::path::PathBuf;
 
@@ -34,6 +35,21 @@ fn record_of(
     seed: u64,
     channels: Channels,
 ) -> (tempfile::TempDir, PathBuf, Vec<f64>) {
+    record_on(Lumped::default(), law, rpm, seconds, hz, noise_knm, seed, channels)
+}
+
+/// [`record_of`] on the 1-DOF string `structure`.
+#[allow(clippy::too_many_arguments)]
+fn record_on(
+    structure: Lumped,
+    law: Law,
+    rpm: f64,
+    seconds: f64,
+    hz: f64,
+    noise_knm: f64,
+    seed: u64,
+    channels: Channels,
+) -> (tempfile::TempDir, PathBuf, Vec<f64>) {
     let params = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
     let cfg = SimConfig {
         duration_s: seconds,
@@ -48,6 +64,7 @@ fn record_of(
             seed,
             ..Recording::default()
         },
+        structure,
         ..SimConfig::new(law, params, rpm * RAD_S_PER_RPM, bitrock::laws::PAPER_W_REF_N)
     };
     let trace = simulate::simulate_record_with(&cfg, &mut |_, _| {}).unwrap();
@@ -170,6 +187,107 @@ fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() 
         predicted[0] <= truth && truth <= predicted[2],
         "{predicted:?} against {truth}"
     );
+}
+
+/// The bit's stuck share over a true speed record.
+fn stuck_share(bit_speed: &[f64]) -> f64 {
+    let mut seen = Summary::default();
+    for w in bit_speed {
+        seen.push(*w, f64::NAN, f64::NAN);
+    }
+    seen.stuck_share()
+}
+
+#[test]
+fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_their_bounds() {
+    // m2 at its paper estimate on a string stiffer and less damped than the paper's (ω_n 1.2
+    // rad/s and ξ 0.15 for 0.85 and 0.25): 60 rpm, five minutes at 1 Hz, 0.2 kN·m of noise.
+    let string = Lumped {
+        omega_n_rad_s: 1.2,
+        damping_ratio: 0.15,
+        ..Lumped::default()
+    };
+    let (_dir, path, bit_speed) = record_on(string, Law::M2, 60.0, 300.0, 1.0, 0.2, 3, Channels::All);
+    let true_share = stuck_share(&bit_speed);
+    let infer = |string: &[&str]| {
+        let mut args = vec![
+            "surface",
+            path.to_str().unwrap(),
+            "--laws",
+            "m2",
+            "--particles",
+            "300",
+            "--max-populations",
+            "6",
+            "--pilot",
+            "300",
+            "--check-replicates",
+            "4",
+            "--predictive-draws",
+            "40",
+            "--no-advice",
+            "--json",
+        ];
+        args.extend(string);
+        let (code, out, err) = outcome(bin().args(&args));
+        assert_eq!(code, 0, "{err}");
+        (serde_json::from_str::<serde_json::Value>(&out).unwrap(), err)
+    };
+    let (inferred, _) = infer(&["--omega-n-rad-s", "0.6:1.8", "--damping-ratio", "0.05:0.5"]);
+    let s = &inferred["string"];
+    assert_eq!(s["inferred"], true);
+    for (name, truth, [lo, hi]) in [("omega_n_rad_s", 1.2, [0.6, 1.8]), ("damping_ratio", 0.15, [0.05, 0.5])] {
+        let p = &s[name];
+        let (q05, q95) = (p["q05"].as_f64().unwrap(), p["q95"].as_f64().unwrap());
+        assert!(q05 <= truth && truth <= q95, "{name}: {p}");
+        assert!(lo <= q05 && q95 <= hi, "{name}: {p}");
+    }
+    // The natural frequency is identified: its interval well inside its bounds.
+    let omega = &s["omega_n_rad_s"];
+    assert_eq!(omega["identified"], true, "{omega}");
+    assert!(
+        omega["q95"].as_f64().unwrap() - omega["q05"].as_f64().unwrap() < 0.5 * 1.2,
+        "{omega}"
+    );
+    let k = s["stiffness_knm_per_rad"][1].as_f64().unwrap();
+    let median = omega["median"].as_f64().unwrap();
+    assert_eq!(k.to_bits(), (383.33 * median * median / 1000.0).to_bits());
+    let share = |r: &serde_json::Value| r["at_the_bit"]["stuck_share"][1].as_f64().unwrap();
+    assert!(
+        (share(&inferred) - true_share).abs() <= 0.1,
+        "{} for {true_share}",
+        share(&inferred)
+    );
+    // The paper's string given in its place: the strings cannot reproduce the record, the
+    // warning says so and names the string's bounds as the way out.
+    let (given, err) = infer(&[]);
+    assert_eq!(given["string"]["inferred"], false);
+    assert_eq!(given["string"]["omega_n_rad_s"]["median"], 0.85);
+    assert!(err.contains("--omega-n-rad-s"), "{err}");
+    assert!(
+        (share(&given) - true_share).abs() > (share(&inferred) - true_share).abs(),
+        "{} against {} for {true_share}",
+        share(&given),
+        share(&inferred)
+    );
+}
+
+#[test]
+fn a_string_s_bounds_are_refused_by_their_flag_when_they_cannot_be_run() {
+    let (_dir, path, _) = record(Law::M2, 60.0, 60.0, 1.0, 0.2, 3);
+    let path = path.to_str().unwrap();
+    for (args, names) in [
+        (vec!["--omega-n-rad-s", "1.8:0.6"], "--omega-n-rad-s"),
+        (vec!["--damping-ratio", "0:0.5"], "--damping-ratio"),
+        (vec!["--omega-n-rad-s", "0.6:x"], "--omega-n-rad-s"),
+        // The stiffest string the bounds admit must be resolved by the step.
+        (vec!["--omega-n-rad-s", "0.5:400", "--dt-s", "0.02"], "--dt-s"),
+    ] {
+        let (code, out, err) = outcome(bin().args(["surface", path]).args(&args));
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(out.is_empty(), "{args:?}: {out}");
+        assert!(err.contains(names), "{args:?}: {err}");
+    }
 }
 
 #[test]

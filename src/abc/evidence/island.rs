@@ -316,9 +316,11 @@ impl Island {
             return;
         }
         for (p, _) in self.proposals.iter().zip(&self.inside).filter(|(_, inside)| **inside) {
+            let mut params = [0.0f32; crate::prior::MAX_DIMS];
+            params[..p.len()].copy_from_slice(p);
             out.push(Candidate {
                 slot: self.slot,
-                params: *p,
+                params,
             });
         }
     }

@@ -5,6 +5,7 @@
 use super::{GpuContext, GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM, WORKGROUP_SIZE};
 use crate::eval::KernelSums;
 use crate::laws::MAX_PARAMS;
+use crate::prior::MAX_DIMS;
 use bytemuck::{Pod, Zeroable};
 use std::sync::Mutex;
 
@@ -26,14 +27,19 @@ struct SumsJob {
 }
 
 /// Two vec4 per point: coordinates 0-3, then 4-5 and the two numbers of `extra` (a source's
-/// weight and rank-one coefficient; zeros for a target).
-fn pack(points: &[[f64; MAX_PARAMS]], extra: impl Fn(usize) -> [f64; 2]) -> Vec<f32> {
+/// weight and rank-one coefficient; zeros for a target). The kernel takes a law's parameters
+/// only: a run that infers the string with the law weighs its particles on the CPU.
+fn pack(points: &[[f64; MAX_DIMS]], extra: impl Fn(usize) -> [f64; 2]) -> Vec<f32> {
     points
         .iter()
         .enumerate()
         .flat_map(|(i, p)| {
+            assert!(
+                p[MAX_PARAMS..].iter().all(|v| v.to_bits() == 0),
+                "the GPU's kernel sums take at most {MAX_PARAMS} coordinates"
+            );
             let mut v = [0.0f32; 8];
-            for (dst, &src) in v.iter_mut().zip(p) {
+            for (dst, &src) in v.iter_mut().zip(&p[..MAX_PARAMS]) {
                 *dst = src as f32;
             }
             let [a, b] = extra(i);

@@ -292,7 +292,7 @@ impl GpuRecords {
                         let prior = &self.priors[request.record].0;
                         plan.proposals.extend(piece.iter().map(|&o| {
                             let c = &candidates[o as usize];
-                            GpuProposal::new(prior.law(c.slot), c.params)
+                            GpuProposal::new(prior.law(c.slot), c.law_params())
                         }));
                         (1, 0, (plan.proposals.len() - take) as u64)
                     }

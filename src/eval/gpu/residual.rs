@@ -302,7 +302,7 @@ impl GpuEvaluator {
         {
             let upload: Vec<GpuProposal> = cands
                 .iter()
-                .map(|c| GpuProposal::new(self.problem.prior.law(c.slot), c.params))
+                .map(|c| GpuProposal::new(self.problem.prior.law(c.slot), c.law_params()))
                 .collect();
             self.context
                 .queue

@@ -780,8 +780,8 @@ def surface(
     downhole_unit: str | None = None,
     downhole_window_s: float | None = None,
     inertia_kg_m2: float | None = None,
-    omega_n_rad_s: float | None = None,
-    damping_ratio: float | None = None,
+    omega_n_rad_s: float | tuple[float, float] | None = None,
+    damping_ratio: float | tuple[float, float] | None = None,
     w_ref_kn: float | None = None,
     noise_sd_knm: float | None = None,
     particles: int | None = None,
@@ -805,7 +805,10 @@ def surface(
     and per law, P(stick-slip) and the escape advice. Where the rig also streams an MWD tool's
     downhole minimum or maximum bit speed (found by name, or ``downhole_min_col`` and
     ``downhole_max_col``, taken over ``downhole_window_s``), each string's is compared with it.
-    docs/surface.md says what a surface record can and cannot tell."""
+    The string is the paper's, or the one ``inertia_kg_m2``, ``omega_n_rad_s`` and
+    ``damping_ratio`` give; a pair ``(lo, hi)`` for ``omega_n_rad_s`` or ``damping_ratio``
+    infers it with the laws within those bounds (``string`` in the result: its posterior and
+    the stiffness it implies). docs/surface.md says what a surface record can and cannot tell."""
     import json
 
     options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json")}
