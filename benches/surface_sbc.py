@@ -23,6 +23,11 @@ JSON (after each replicate, so that a long run stopped part-way keeps what it di
     python3 benches/surface_sbc.py --bitrock target/release/bitrock [--replicates 50] \\
         [--sample-hz 1] [--particles 300] [--max-populations 6] [--pilot 300] [--out sbc.json]
 
+With ``--string`` each replicate's string is drawn too (natural frequency 0.6-1.4 rad/s,
+damping ratio 0.1-0.4, the paper's inertia) and inferred with the law within wider bounds
+(``--omega-n-rad-s 0.5:1.5 --damping-ratio 0.05:0.5``): the string's two are scored as the
+law's parameters are.
+
 With ``--twin`` the records come from an independent integrator instead of bitrock's: scipy's
 LSODA with its own stick handling (an event at zero bit speed, the stuck bit held until the
 string's torque reaches the static torque), the twin of the Python package's tests, on the same
@@ -43,6 +48,10 @@ import sys
 import tempfile
 
 RANGES = {"tsb": (10.0, 16.0), "tcb": (4.0, 8.0), "g": (0.2, 0.5)}
+# With --string: the string's natural frequency (rad/s) and damping ratio drawn, and the
+# bounds the inference is given.
+STRING_RANGES = {"omega_n_rad_s": (0.6, 1.4), "damping_ratio": (0.1, 0.4)}
+STRING_BOUNDS = {"omega_n_rad_s": "0.5:1.5", "damping_ratio": "0.05:0.5"}
 TORQUES = {"tsb", "tcb"}
 STUCK_RPM = 1.0
 # Drive held before recording starts, s.
@@ -87,9 +96,16 @@ def twin_record(args, truth, index, path):
             out.writerow([i / args.sample_hz, args.omega_rpm, torque / 1000.0, 244.2, speed / RPM])
 
 
+def flag(name):
+    return "--" + name.replace("_", "-")
+
+
 def replicate(args, index, scratch):
     rng = random.Random(index)
     truth = {name: rng.uniform(*bounds) for name, bounds in RANGES.items()}
+    string = {name: rng.uniform(*bounds) for name, bounds in STRING_RANGES.items()} if args.string else {}
+    if string and args.twin:
+        sys.exit("--string draws bitrock's strings; the twin's string is the paper's")
     record = os.path.join(scratch, f"r{index}.csv")
     bit_out = os.path.join(scratch, f"r{index}-bit.csv")
     if args.twin:
@@ -100,12 +116,14 @@ def replicate(args, index, scratch):
              "--omega-rpm", str(args.omega_rpm), "--duration-s", str(args.duration_s),
              "--settle-s", str(SETTLE_S), "--initial", "rest", "--sample-hz", str(args.sample_hz),
              "--noise-torque-knm", str(args.noise_knm), "--channels", "all",
-             "--seed", str(index), "--out", record])
+             "--seed", str(index), "--out", record]
+            + [a for name, value in string.items() for a in (flag(name), f"{value:.6g}")])
+    bounds = [a for name in string for a in (flag(name), STRING_BOUNDS[name])]
     result = json.loads(run([args.bitrock, "surface", record, "--laws", "m2",
                              "--particles", str(args.particles),
                              "--max-populations", str(args.max_populations),
                              "--pilot", str(args.pilot), "--seed", str(index),
-                             "--no-advice", "--json", "--bit-out", bit_out]))
+                             "--no-advice", "--json", "--bit-out", bit_out] + bounds))
     with open(record, newline="") as f:
         true_rpm = [float(row["bit_speed_rpm"]) for row in csv.DictReader(f)]
     with open(bit_out, newline="") as f:
@@ -120,6 +138,10 @@ def replicate(args, index, scratch):
             "identified": p["identified"],
             "covered": p["q05"] <= value <= p["q95"],
         }
+    for name, value in string.items():
+        p = result["string"][name]
+        covered[name] = {"identified": p["identified"], "covered": p["q05"] <= value <= p["q95"]}
+    truth.update(string)
     stuck_true = sum(abs(w) < STUCK_RPM for w in true_rpm) / len(true_rpm)
     low, median, high = result["at_the_bit"]["stuck_share"]
     return {
@@ -149,6 +171,8 @@ def main():
     parser.add_argument("--max-populations", type=int, default=6)
     parser.add_argument("--pilot", type=int, default=300)
     parser.add_argument("--stuck-tolerance", type=float, default=0.05)
+    parser.add_argument("--string", action="store_true",
+                        help="draw each record's string too and infer it with the law")
     parser.add_argument("--twin", action="store_true",
                         help="records from the tests' LSODA twin instead of bitrock simulate")
     parser.add_argument("--out")
@@ -169,9 +193,10 @@ def main():
                               for n, c in r["params"].items()), file=sys.stderr)
     n = len(rows)
     print(f"{n} replicates ({'scipy LSODA twin' if args.twin else 'bitrock simulate'}) of m2 at {args.omega_rpm:g} rpm, {args.duration_s:g} s at {args.sample_hz:g} Hz, "
-          f"{args.noise_knm:g} kN·m of noise; surface --laws m2 --particles {args.particles} "
+          + ("the string drawn and inferred, " if args.string else "")
+          + f"{args.noise_knm:g} kN·m of noise; surface --laws m2 --particles {args.particles} "
           f"--max-populations {args.max_populations} --pilot {args.pilot}")
-    for name in RANGES:
+    for name in list(RANGES) + (list(STRING_RANGES) if args.string else []):
         identified = [r["params"][name]["covered"] for r in rows if r["params"][name]["identified"]]
         boxed = [r["params"][name]["covered"] for r in rows if not r["params"][name]["identified"]]
         line = f"  {name}: identified in {len(identified)} of {n}"

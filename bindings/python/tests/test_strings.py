@@ -38,8 +38,8 @@ PAPER = {
 }
 
 
-def one_dof():
-    inertia, omega_n, xi = 383.33, 0.85, 0.25
+def one_dof(inertia=383.33, omega_n=0.85, xi=0.25):
+    """The 1-DOF string (the paper's by default): inertia, stiffness, no α, β = c / k."""
     k = inertia * omega_n**2
     return np.array([inertia]), np.array([k]), 0.0, 2.0 * xi * inertia * omega_n / k
 

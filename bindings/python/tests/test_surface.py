@@ -12,12 +12,13 @@ import bitrock
 M2_NM = [13000.0, 6500.0, 0.3]
 
 
-def twin_record(path, rpm=60.0, seconds=300.0, noise_nm=200.0, seed=5, mwd_hz=None):
+def twin_record(path, rpm=60.0, seconds=300.0, noise_nm=200.0, seed=5, mwd_hz=None, string=()):
     """m2 at the paper's estimate at `rpm`: a surface record at 1 Hz (top-drive speed, surface
     torque with white noise, weight on bit) written to `path`, and the bit's true speeds at
     1 Hz. With `mwd_hz`, the string is sampled that finely and the record also holds an MWD
-    tool's downhole minimum and maximum bit speed since the sample before (rpm)."""
-    chain = one_dof()
+    tool's downhole minimum and maximum bit speed since the sample before (rpm). `string`:
+    the 1-DOF string's inertia, natural frequency and damping ratio (the paper's by default)."""
+    chain = one_dof(*string)
     omega = rpm * RPM
     t0 = torque_law("m2")(M2_NM, omega)
     y = np.array([t0 / chain[1][0], omega + 0.1 * omega])
@@ -76,6 +77,33 @@ def test_an_independent_string_s_mwd_extremes_tell_its_held_bit_from_a_creeping_
     assert probability["m2"] > 0.9, result["laws"]
     stuck = result["at_the_bit"]["stuck_share"]
     assert abs(stuck[1] - true_share) <= 0.05, (stuck, true_share)
+
+
+def test_an_independent_string_s_natural_frequency_and_damping_are_inferred_with_the_law(tmp_path):
+    # The twin's string stiffer and less damped than the paper's (ω_n 1.2 rad/s, ξ 0.15): given
+    # as bounds, both are inferred with the law, and their intervals hold the twin's.
+    path = tmp_path / "rig.csv"
+    speeds = twin_record(path, string=(383.33, 1.2, 0.15))
+    true_share = float(np.mean(np.abs(speeds) < STUCK_RAD_S))
+    result = bitrock.surface(
+        path, laws=["m2"], seed=2, omega_n_rad_s=(0.6, 1.8), damping_ratio=(0.05, 0.5), **SMALL
+    )
+    string = result["string"]
+    assert string["inferred"]
+    for name, truth in (("omega_n_rad_s", 1.2), ("damping_ratio", 0.15)):
+        p = string[name]
+        assert p["q05"] <= truth <= p["q95"], (name, p)
+    assert string["omega_n_rad_s"]["identified"], string
+    k = string["stiffness_knm_per_rad"][1]
+    assert k == pytest.approx(383.33 * string["omega_n_rad_s"]["median"] ** 2 / 1000.0, rel=1e-12)
+    stuck = result["at_the_bit"]["stuck_share"]
+    assert abs(stuck[1] - true_share) <= 0.1, (stuck, true_share)
+    # A given value holds: every quantile is it.
+    held = bitrock.surface(path, laws=["m2"], seed=2, omega_n_rad_s=(0.6, 1.8), damping_ratio=0.15, **SMALL)
+    assert {held["string"]["damping_ratio"][q] for q in ("q05", "median", "q95")} == {0.15}
+    with pytest.raises(bitrock.InputError, match="omega_n_rad_s") as caught:
+        bitrock.surface(path, laws=["m2"], omega_n_rad_s=(1.8, 0.6))
+    assert caught.value.argument == "omega_n_rad_s"
 
 
 def test_a_simulated_surface_record_goes_through_and_bad_settings_name_their_argument(tmp_path):
