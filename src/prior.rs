@@ -277,7 +277,8 @@ impl Candidate {
         self.params.map(f64::from)
     }
 
-    /// The law's parameters as f32, the rest left out: what a GPU proposal carries.
+    /// The first [`MAX_PARAMS`] coordinates as f32: what a GPU proposal carries (a law's
+    /// parameters; the GPU scores boxes of a law's parameters only).
     pub fn law_params(&self) -> [f32; MAX_PARAMS] {
         std::array::from_fn(|j| self.params[j])
     }
@@ -850,7 +851,7 @@ mod tests {
     }
 
     #[test]
-    fn coordinates_appended_to_every_box_leave_the_law_s_draws_as_they_were() {
+    fn coordinates_appended_to_every_box_leave_the_law_s_draws_the_same() {
         let fits = [
             fit(Law::M2, vec![13.0, 6.5, 0.3]),
             fit(Law::M3, vec![2.72, 1.0, 0.09, 9.52, 4.0, 0.08]),

@@ -31,6 +31,8 @@ pub struct Particle {
     /// Candidate index within its stream: with the seed and population it regenerates the
     /// particle (see `crate::rng`).
     pub index: u64,
+    /// The law's parameters (SI), then any coordinates its prior box carries past them (the
+    /// string's natural frequency and damping ratio of a run that infers them).
     pub params: Vec<f64>,
     pub rho: f64,
     /// Importance weight, normalised over the population (Σ w = 1). Rejection sampling gives

@@ -30,7 +30,7 @@
 //!      kernel K_M: stay at m′ with probability `p_stay` (default 0.7), otherwise jump
 //!      uniformly to another *alive* law (words 1, 2); with one alive law, always stay;
 //! 2. an ancestor φ_j among the law's ancestors, by inverse CDF of their weights (word 3);
-//! 3. φ = φ_j + L_m z, z ~ N(0, I) by Box–Muller from words 4-9 in pairs (w_a, w_b):
+//! 3. φ = φ_j + L_m z, z ~ N(0, I) by Box–Muller from words 4-11 in pairs (w_a, w_b):
 //!    u_a = (w_a + ½)·2⁻³², u_b = w_b·2⁻³², z = √(−2 ln u_a) (cos 2πu_b, sin 2πu_b), f64;
 //! 4. φ rounded to f32 (what both backends score, and the particle's parameters). A proposal
 //!    outside the prior box is *counted as rejected*: it is a draw of its law, is not scored,

@@ -6,7 +6,7 @@ use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::run::surface::{
-    self, AtTheBit, ParamPosterior, StringPosterior, SurfaceResult, SurfaceSettings, ValueOrBounds,
+    self, AtTheBit, StringParam, StringPosterior, SurfaceResult, SurfaceSettings, ValueOrBounds,
 };
 use bitrock::simulate::surface::Integration;
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -334,8 +334,9 @@ fn posterior_lines(out: &mut impl Write, unit: TorqueUnit, r: &SurfaceResult) ->
 
 /// The string the candidates were simulated with: inferred (its posterior) or given.
 fn string_line(out: &mut impl Write, s: &StringPosterior) -> std::io::Result<()> {
-    let part = |p: &ParamPosterior, unit: &str| {
-        if p.q05.to_bits() == p.q95.to_bits() {
+    let part = |p: &StringParam, unit: &str| {
+        let (given, p) = (p.given, &p.posterior);
+        if given {
             format!("{} {:.4}{unit} (given)", p.name, p.median)
         } else {
             format!(

@@ -53,8 +53,8 @@ pub struct NoiseKey(pub u64);
 
 impl NoiseKey {
     /// The key of `candidate` under `seed`: its slot and f32 coordinates' bits mixed
-    /// (splitmix64). Coordinates past a law's parameters' room enter only where set, so that a
-    /// run that does not infer the string keeps its keys.
+    /// (splitmix64), the first [`MAX_PARAMS`] always and those past them only where set: a
+    /// candidate of a law's parameters alone is keyed by those.
     pub fn of(seed: u64, candidate: &Candidate) -> Self {
         let mut h = splitmix(seed ^ 0x5355_5246);
         h = splitmix(h ^ candidate.slot as u64);

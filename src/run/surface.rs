@@ -6,7 +6,10 @@
 //!    estimate on a clock fine enough for the cycle, an upper bound on a coarser one.
 //! 2. **The prior**: per law, boxes k scales wide from the physical bounds ([`Prior::physical`]),
 //!    the scales from the record (the largest surface torque; speeds from the top drive's, the
-//!    bit's peaks taken as three times it), replaced where a prior file gives bounds.
+//!    bit's peaks taken as three times it), replaced where a prior file gives bounds; where
+//!    the string's natural frequency or damping ratio is given as bounds, every box carries
+//!    both after the law's parameters ([`Prior::with_coordinates`]; one given exactly spans no
+//!    width), each candidate's string built from them.
 //! 3. **The pilot and the scout**: prior simulations give first scales of the distance and the
 //!    reference table of the check; a short ABC-SMC on them finds the strings near the record,
 //!    whose spread scales the main run's distance (see `Scout`).
@@ -120,12 +123,17 @@ pub enum ValueOrBounds {
 }
 
 impl ValueOrBounds {
-    /// The value a string is built with (the bounds' middle) and the bounds where inferred.
+    /// The value a string is built with (the bounds' middle) and the bounds where inferred,
+    /// each rounded to the f32 the candidates are drawn in.
     fn split(given: Option<Self>, paper: f64) -> (f64, Option<[f64; 2]>) {
         match given {
             None => (paper, None),
             Some(Self::Value(v)) => (v, None),
-            Some(Self::Bounds([lo, hi])) => (0.5 * (lo + hi), Some([lo, hi])),
+            // As candidates draw them: f32 (a coordinate of the prior box).
+            Some(Self::Bounds(bounds)) => {
+                let [lo, hi] = bounds.map(|b| f64::from(b as f32));
+                (lo + 0.5 * (hi - lo), Some([lo, hi]))
+            }
         }
     }
 }
@@ -216,7 +224,8 @@ pub struct SurfaceSettings {
 }
 
 /// Bounds of the string's natural frequency (rad/s) and damping ratio within which a run
-/// infers them with the law, uniform; a parameter given exactly has equal bounds.
+/// infers them with the law, uniform, as the f32 the candidates are drawn in; a parameter
+/// given exactly has equal bounds.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct StringBounds {
     pub omega_n_rad_s: [f64; 2],
@@ -224,6 +233,13 @@ pub struct StringBounds {
 }
 
 impl StringBounds {
+    /// True where some bound spans a width: a coordinate the run infers.
+    pub fn infers(&self) -> bool {
+        [self.omega_n_rad_s, self.damping_ratio]
+            .iter()
+            .any(|b| Self::fixed(*b).is_none())
+    }
+
     /// The value of a parameter with equal bounds (given exactly), else `None`.
     fn fixed(bounds: [f64; 2]) -> Option<f64> {
         (bounds[0].to_bits() == bounds[1].to_bits()).then_some(bounds[0])
@@ -330,7 +346,6 @@ impl SurfaceSettings {
                 format!("must be ≥ 0, got {}", self.integration.settle_s),
             ));
         }
-        self.structure.validate()?;
         if let Some(bounds) = &self.string_bounds {
             for (field, [lo, hi]) in [
                 ("omega_n_rad_s", bounds.omega_n_rad_s),
@@ -339,13 +354,24 @@ impl SurfaceSettings {
                 if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
                     return Err(Error::setting(
                         field,
-                        format!("bounds must be positive and in order (LO:HI), got {lo}:{hi}"),
+                        format!("bounds must be positive, finite and low to high (as f32), got {lo} to {hi}"),
                     ));
                 }
             }
+        }
+        self.structure.validate()?;
+        if let Some(bounds) = &self.string_bounds {
             // The step must resolve the stiffest string the bounds admit.
             for corner in bounds.corners(self.structure.inertia_kg_m2) {
-                Chain::one_dof(&corner).check_step(self.integration.dt_s)?;
+                Chain::one_dof(&corner).check_step(self.integration.dt_s).map_err(|e| {
+                    Error::setting(
+                        "dt_s",
+                        format!(
+                            "{e}, the string of the bounds' corner ω_n {} rad/s, ξ {} (`omega_n_rad_s`, `damping_ratio`)",
+                            corner.omega_n_rad_s, corner.damping_ratio
+                        ),
+                    )
+                })?;
             }
         }
         Ok(())
@@ -412,23 +438,34 @@ pub struct StringPosterior {
     pub inferred: bool,
     /// I_eq, kg·m² (given).
     pub inertia_kg_m2: f64,
-    /// ω_n, rad/s, and ξ: a given one has its value at every quantile.
-    pub omega_n_rad_s: ParamPosterior,
-    pub damping_ratio: ParamPosterior,
+    /// ω_n, rad/s, and ξ.
+    pub omega_n_rad_s: StringParam,
+    pub damping_ratio: StringParam,
     /// The torsional stiffness k = I_eq·ω_n², kN·m/rad: 5 %, median, 95 %.
     pub stiffness_knm_per_rad: [f64; 3],
+}
+
+/// A string parameter: given (its value at every quantile), or its posterior.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StringParam {
+    pub given: bool,
+    #[serde(flatten)]
+    pub posterior: ParamPosterior,
 }
 
 impl StringPosterior {
     /// The string of `settings` as the final population `particles` has it.
     fn of(settings: &SurfaceSettings, particles: &[Particle]) -> Self {
         let s = &settings.structure;
-        let given = |name: &str, value: f64| ParamPosterior {
-            name: name.to_string(),
-            q05: value,
-            median: value,
-            q95: value,
-            identified: true,
+        let given = |name: &str, value: f64| StringParam {
+            given: true,
+            posterior: ParamPosterior {
+                name: name.to_string(),
+                q05: value,
+                median: value,
+                q95: value,
+                identified: true,
+            },
         };
         let inferred = |name: &str, value: f64, coordinate: usize, [lo, hi]: [f64; 2]| {
             if lo.to_bits() == hi.to_bits() {
@@ -440,12 +477,15 @@ impl StringPosterior {
                 .collect();
             let weights: Vec<f64> = particles.iter().map(|p| p.weight).collect();
             let q = |level: f64| weighted_quantile(&values, &weights, level);
-            ParamPosterior {
-                name: name.to_string(),
-                q05: q(0.05),
-                median: q(0.5),
-                q95: q(0.95),
-                identified: crate::abc::posterior::identified(q(0.05), q(0.95), lo, hi, 0.9),
+            StringParam {
+                given: false,
+                posterior: ParamPosterior {
+                    name: name.to_string(),
+                    q05: q(0.05),
+                    median: q(0.5),
+                    q95: q(0.95),
+                    identified: crate::abc::posterior::identified(q(0.05), q(0.95), lo, hi, 0.9),
+                },
             }
         };
         let (omega, xi) = match &settings.string_bounds {
@@ -459,10 +499,11 @@ impl StringPosterior {
             ),
         };
         let k = |omega: f64| s.inertia_kg_m2 * omega * omega / 1000.0;
+        let w = &omega.posterior;
         Self {
-            inferred: settings.string_bounds.is_some(),
+            inferred: settings.string_bounds.is_some_and(|b| b.infers()),
             inertia_kg_m2: s.inertia_kg_m2,
-            stiffness_knm_per_rad: [k(omega.q05), k(omega.median), k(omega.q95)],
+            stiffness_knm_per_rad: [k(w.q05), k(w.median), k(w.q95)],
             omega_n_rad_s: omega,
             damping_ratio: xi,
         }
@@ -472,8 +513,8 @@ impl StringPosterior {
     pub fn median(&self) -> Lumped {
         Lumped {
             inertia_kg_m2: self.inertia_kg_m2,
-            omega_n_rad_s: self.omega_n_rad_s.median,
-            damping_ratio: self.damping_ratio.median,
+            omega_n_rad_s: self.omega_n_rad_s.posterior.median,
+            damping_ratio: self.damping_ratio.posterior.median,
         }
     }
 }
@@ -751,9 +792,13 @@ pub fn infer(
         simulations,
         cost,
         noise_floor,
-        warnings: convergence_warning(last.record.epsilon, noise_floor, settings.string_bounds.is_none())
-            .into_iter()
-            .collect(),
+        warnings: convergence_warning(
+            last.record.epsilon,
+            noise_floor,
+            !settings.string_bounds.is_some_and(|b| b.infers()),
+        )
+        .into_iter()
+        .collect(),
         seconds: started.elapsed().as_secs_f64(),
         run: Some(run),
     })
@@ -821,8 +866,13 @@ impl Pilot {
         let runs: Vec<_> = runs.into_iter().flatten().collect();
         if runs.len() < count / 2 {
             return Err(Error::Numerical(format!(
-                "{} of the pilot's {count} prior strings left physical bounds: the prior boxes admit laws whose torque turns negative at speed; narrow them with a prior file",
-                count - runs.len()
+                "{} of the pilot's {count} prior strings left physical bounds: the prior boxes admit laws whose torque turns negative at speed; narrow them with a prior file{}",
+                count - runs.len(),
+                if model.string.is_some() {
+                    ", or narrow the string's bounds (`omega_n_rad_s`, `damping_ratio`)"
+                } else {
+                    ""
+                }
             )));
         }
         Ok(Self {
@@ -1034,7 +1084,7 @@ fn convergence_warning(epsilon: Option<f64>, floor: f64, string_given: bool) -> 
             "the sampler stopped at ε = {epsilon:.3}, {:.1} times the noise's own distance {floor:.3}: the strings do not yet reproduce the record, and the posterior and the bit's figures are wider or further off than the record allows; raise `max_populations` or `particles`{}",
             epsilon / floor,
             if string_given {
-                ", or, where the string's natural frequency or damping is not known, infer them within bounds (`omega_n_rad_s`, `damping_ratio` LO:HI)"
+                ", or, where the string's natural frequency or damping is not known, give them as bounds to infer them within (`omega_n_rad_s`, `damping_ratio`)"
             } else {
                 ""
             }
@@ -1387,17 +1437,30 @@ mod tests {
         };
         let run = settings.config(vec![Law::M2]).unwrap();
         let bounds = run.string_bounds.unwrap();
-        assert_eq!((bounds.omega_n_rad_s, bounds.damping_ratio), ([0.6, 1.8], [0.1, 0.1]));
-        assert_eq!((run.structure.omega_n_rad_s, run.structure.damping_ratio), (1.2, 0.1));
+        // Bounds as the f32 the candidates are drawn in; a value as given.
+        let (lo, hi) = (f64::from(0.6f32), f64::from(1.8f32));
+        assert_eq!((bounds.omega_n_rad_s, bounds.damping_ratio), ([lo, hi], [0.1, 0.1]));
+        assert_eq!(run.structure.omega_n_rad_s, lo + 0.5 * (hi - lo));
+        assert_eq!(run.structure.damping_ratio, 0.1);
         assert_eq!(StringBounds::fixed(bounds.omega_n_rad_s), None);
         assert_eq!(StringBounds::fixed(bounds.damping_ratio), Some(0.1));
-        // Given whole, nothing is inferred.
+        assert!(bounds.infers());
+        // Given whole, nothing is inferred; bounds of no width infer nothing either.
         let run = Settings::default().config(vec![Law::M2]).unwrap();
         assert_eq!(run.string_bounds, None);
+        let settings = Settings {
+            omega_n_rad_s: Some(ValueOrBounds::Bounds([1.0, 1.0])),
+            ..Settings::default()
+        };
+        assert!(!settings.config(vec![Law::M2]).unwrap().string_bounds.unwrap().infers());
         for (omega, xi, field) in [
             ([1.8, 0.6], [0.1, 0.2], "omega_n_rad_s"),
+            ([-1.0, 0.5], [0.1, 0.2], "omega_n_rad_s"),
             ([0.6, 1.8], [0.0, 0.2], "damping_ratio"),
+            // Positive in f64, 0 in f32.
+            ([0.6, 1.8], [1e-46, 0.2], "damping_ratio"),
             ([0.6, 1.8], [0.1, f64::INFINITY], "damping_ratio"),
+            ([1e308, 1.7e308], [0.1, 0.2], "omega_n_rad_s"),
         ] {
             let settings = Settings {
                 omega_n_rad_s: Some(ValueOrBounds::Bounds(omega)),

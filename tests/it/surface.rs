@@ -235,7 +235,10 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
     };
     let (inferred, _) = infer(&["--omega-n-rad-s", "0.6:1.8", "--damping-ratio", "0.05:0.5"]);
     let s = &inferred["string"];
-    assert_eq!(s["inferred"], true);
+    assert_eq!(
+        (&s["inferred"], &s["omega_n_rad_s"]["given"]),
+        (&true.into(), &false.into())
+    );
     for (name, truth, [lo, hi]) in [("omega_n_rad_s", 1.2, [0.6, 1.8]), ("damping_ratio", 0.15, [0.05, 0.5])] {
         let p = &s[name];
         let (q05, q95) = (p["q05"].as_f64().unwrap(), p["q95"].as_f64().unwrap());
@@ -262,6 +265,7 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
     // warning says so and names the string's bounds as the way out.
     let (given, err) = infer(&[]);
     assert_eq!(given["string"]["inferred"], false);
+    assert_eq!(given["string"]["damping_ratio"]["given"], true);
     assert_eq!(given["string"]["omega_n_rad_s"]["median"], 0.85);
     assert!(err.contains("--omega-n-rad-s"), "{err}");
     assert!(

@@ -100,6 +100,7 @@ def test_an_independent_string_s_natural_frequency_and_damping_are_inferred_with
     assert abs(stuck[1] - true_share) <= 0.1, (stuck, true_share)
     # A given value holds: every quantile is it.
     held = bitrock.surface(path, laws=["m2"], seed=2, omega_n_rad_s=(0.6, 1.8), damping_ratio=0.15, **SMALL)
+    assert held["string"]["damping_ratio"]["given"] and not held["string"]["omega_n_rad_s"]["given"]
     assert {held["string"]["damping_ratio"][q] for q in ("q05", "median", "q95")} == {0.15}
     with pytest.raises(bitrock.InputError, match="omega_n_rad_s") as caught:
         bitrock.surface(path, laws=["m2"], omega_n_rad_s=(1.8, 0.6))

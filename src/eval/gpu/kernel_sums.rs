@@ -34,10 +34,6 @@ fn pack(points: &[[f64; MAX_DIMS]], extra: impl Fn(usize) -> [f64; 2]) -> Vec<f3
         .iter()
         .enumerate()
         .flat_map(|(i, p)| {
-            assert!(
-                p[MAX_PARAMS..].iter().all(|v| v.to_bits() == 0),
-                "the GPU's kernel sums take at most {MAX_PARAMS} coordinates"
-            );
             let mut v = [0.0f32; 8];
             for (dst, &src) in v.iter_mut().zip(&p[..MAX_PARAMS]) {
                 *dst = src as f32;
@@ -120,6 +116,16 @@ impl Scratch {
         if sums.sources.is_empty() {
             out.fill(0.0);
             return Ok(());
+        }
+        if sums
+            .targets
+            .iter()
+            .chain(sums.sources)
+            .any(|p| p[MAX_PARAMS..].iter().any(|v| v.to_bits() != 0))
+        {
+            return Err(GpuError::TooLarge(format!(
+                "the kernel sums take at most {MAX_PARAMS} coordinates"
+            )));
         }
         let kernel = ctx.kernel("kernel_sums", "main", super::kernel_sums_source, &BINDINGS, &[])?;
         // Targets per dispatch: within the binding limit (32 bytes each) and 2²² at most.
