@@ -1440,8 +1440,8 @@ mod tests {
         // Bounds as the f32 the candidates are drawn in; a value as given.
         let (lo, hi) = (f64::from(0.6f32), f64::from(1.8f32));
         assert_eq!((bounds.omega_n_rad_s, bounds.damping_ratio), ([lo, hi], [0.1, 0.1]));
-        assert_eq!(run.structure.omega_n_rad_s, lo + 0.5 * (hi - lo));
-        assert_eq!(run.structure.damping_ratio, 0.1);
+        assert_eq!(run.structure.omega_n_rad_s.to_bits(), (lo + 0.5 * (hi - lo)).to_bits());
+        assert_eq!(run.structure.damping_ratio.to_bits(), 0.1f64.to_bits());
         assert_eq!(StringBounds::fixed(bounds.omega_n_rad_s), None);
         assert_eq!(StringBounds::fixed(bounds.damping_ratio), Some(0.1));
         assert!(bounds.infers());
