@@ -22,23 +22,10 @@ fn record(
     noise_knm: f64,
     seed: u64,
 ) -> (tempfile::TempDir, PathBuf, Vec<f64>) {
-    record_of(law, rpm, seconds, hz, noise_knm, seed, Channels::All)
+    record_on(Lumped::default(), law, rpm, seconds, hz, noise_knm, seed, Channels::All)
 }
 
-/// [`record`] written with `channels`.
-fn record_of(
-    law: Law,
-    rpm: f64,
-    seconds: f64,
-    hz: f64,
-    noise_knm: f64,
-    seed: u64,
-    channels: Channels,
-) -> (tempfile::TempDir, PathBuf, Vec<f64>) {
-    record_on(Lumped::default(), law, rpm, seconds, hz, noise_knm, seed, channels)
-}
-
-/// [`record_of`] on the 1-DOF string `structure`.
+/// [`record`] on the 1-DOF string `structure`, written with `channels`.
 #[allow(clippy::too_many_arguments)]
 fn record_on(
     structure: Lumped,
@@ -157,7 +144,7 @@ fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() 
     let (_dir, surface_only, _) = record(Law::M2, 60.0, 300.0, 1.0, 0.2, 3);
     let blind = run(&surface_only, &small(laws.clone()), 1);
     assert_eq!(blind.check.decided, None, "{}", blind.check.verdict);
-    let (_dir, path, bit_speed) = record_of(Law::M2, 60.0, 300.0, 1.0, 0.2, 3, Channels::Mwd);
+    let (_dir, path, bit_speed) = record_on(Lumped::default(), Law::M2, 60.0, 300.0, 1.0, 0.2, 3, Channels::Mwd);
     let mwd = read(&path);
     assert_eq!(
         mwd.surface_torque_nm,
