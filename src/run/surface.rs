@@ -132,7 +132,12 @@ impl ValueOrBounds {
             // As candidates draw them: f32 (a coordinate of the prior box).
             Some(Self::Bounds(bounds)) => {
                 let [lo, hi] = bounds.map(|b| f64::from(b as f32));
-                (lo + 0.5 * (hi - lo), Some([lo, hi]))
+                let middle = if StringBounds::fixed([lo, hi]).is_some() {
+                    lo
+                } else {
+                    lo + 0.5 * (hi - lo)
+                };
+                (middle, Some([lo, hi]))
             }
         }
     }
@@ -351,10 +356,16 @@ impl SurfaceSettings {
                 ("omega_n_rad_s", bounds.omega_n_rad_s),
                 ("damping_ratio", bounds.damping_ratio),
             ] {
-                if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+                // A value given exactly is the string's own, checked with it below.
+                if StringBounds::fixed([lo, hi]).is_none()
+                    && !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi)
+                {
                     return Err(Error::setting(
                         field,
-                        format!("bounds must be positive, finite and low to high (as f32), got {lo} to {hi}"),
+                        format!(
+                            "bounds must be positive, finite (as f32) and low to high, got {} to {}",
+                            lo as f32, hi as f32
+                        ),
                     ));
                 }
             }
@@ -363,14 +374,15 @@ impl SurfaceSettings {
         if let Some(bounds) = &self.string_bounds {
             // The step must resolve the stiffest string the bounds admit.
             for corner in bounds.corners(self.structure.inertia_kg_m2) {
-                Chain::one_dof(&corner).check_step(self.integration.dt_s).map_err(|e| {
-                    Error::setting(
-                        "dt_s",
+                Chain::one_dof(&corner).check_step(self.integration.dt_s).map_err(|e| match e {
+                    Error::InvalidSetting { field, message } => Error::setting(
+                        field,
                         format!(
-                            "{e}, the string of the bounds' corner ω_n {} rad/s, ξ {} (`omega_n_rad_s`, `damping_ratio`)",
-                            corner.omega_n_rad_s, corner.damping_ratio
+                            "{message}: the string at the bounds' corner ω_n {} rad/s, ξ {} (`omega_n_rad_s`, `damping_ratio`)",
+                            corner.omega_n_rad_s as f32, corner.damping_ratio as f32
                         ),
-                    )
+                    ),
+                    other => other,
                 })?;
             }
         }
@@ -1084,7 +1096,7 @@ fn convergence_warning(epsilon: Option<f64>, floor: f64, string_given: bool) -> 
             "the sampler stopped at ε = {epsilon:.3}, {:.1} times the noise's own distance {floor:.3}: the strings do not yet reproduce the record, and the posterior and the bit's figures are wider or further off than the record allows; raise `max_populations` or `particles`{}",
             epsilon / floor,
             if string_given {
-                ", or, where the string's natural frequency or damping is not known, give them as bounds to infer them within (`omega_n_rad_s`, `damping_ratio`)"
+                ", or, where the string's natural frequency or damping is not known, infer it by giving bounds for it (`omega_n_rad_s`, `damping_ratio`)"
             } else {
                 ""
             }

@@ -123,8 +123,8 @@ impl Scratch {
             .chain(sums.sources)
             .any(|p| p[MAX_PARAMS..].iter().any(|v| v.to_bits() != 0))
         {
-            return Err(GpuError::TooLarge(format!(
-                "the kernel sums take at most {MAX_PARAMS} coordinates"
+            return Err(GpuError::Validation(format!(
+                "the kernel sums take at most {MAX_PARAMS} coordinates; a run with more weighs on the CPU"
             )));
         }
         let kernel = ctx.kernel("kernel_sums", "main", super::kernel_sums_source, &BINDINGS, &[])?;
