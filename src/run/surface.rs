@@ -810,6 +810,7 @@ pub fn infer(
             !settings.string_bounds.is_some_and(|b| b.infers()),
         )
         .into_iter()
+        .chain(damping_warning(settings.string_bounds.as_ref()))
         .collect(),
         seconds: started.elapsed().as_secs_f64(),
         run: Some(run),
@@ -1086,6 +1087,17 @@ const SCOUT_STREAM: u64 = 0x5343_4f55_5400_0000;
 /// A final tolerance this many times the noise floor or more: the posterior is still wider
 /// than the record allows.
 pub const UNCONVERGED_FACTOR: f64 = 4.0;
+
+/// The warning of a run that infers the string's damping ratio: the surface's cycle tells it
+/// weakly (docs/surface.md: on simulated records a well-damped string was taken for a less
+/// damped one with a higher dynamic torque, at 1 Hz and at 20 Hz, converged or not).
+fn damping_warning(bounds: Option<&StringBounds>) -> Option<String> {
+    bounds
+        .filter(|b| StringBounds::fixed(b.damping_ratio).is_none())
+        .map(|_| {
+            "the string's damping ratio is inferred, and the surface's cycle tells it weakly: a well-damped string can be taken for a less damped one with a higher dynamic torque, overstating the bit's stuck share; bound it as tightly as it is known (`damping_ratio`)".to_string()
+        })
+}
 
 /// The warning of a sampler that stopped at `epsilon` far above the noise floor; where the
 /// string was given whole, a wrong string is the other cause named.
