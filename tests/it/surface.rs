@@ -220,7 +220,12 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
         assert_eq!(code, 0, "{err}");
         (serde_json::from_str::<serde_json::Value>(&out).unwrap(), err)
     };
-    let (inferred, _) = infer(&["--omega-n-rad-s", "0.6:1.8", "--damping-ratio", "0.05:0.5"]);
+    let (inferred, err) = infer(&["--omega-n-rad-s", "0.6:1.8", "--damping-ratio", "0.05:0.5"]);
+    // The damping ratio, weakly told by the surface, is said to be so.
+    assert!(
+        err.contains("damping ratio is inferred") && err.contains("--damping-ratio"),
+        "{err}"
+    );
     let s = &inferred["string"];
     assert_eq!(
         (&s["inferred"], &s["omega_n_rad_s"]["given"]),
