@@ -6,8 +6,7 @@ use crate::error::Result;
 use crate::laws::file::program::BLOCK;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::numerics;
-use crate::prior::Candidate;
-use crate::prior::MAX_DIMS;
+use crate::prior::{Candidate, MAX_DIMS};
 use rayon::prelude::*;
 
 /// Scores candidates on the CPU. Thread count follows the ambient rayon pool.
@@ -240,12 +239,7 @@ const BLOCKS_PER_GROUP: usize = 64;
 pub fn kernel_sums(sums: &KernelSums, out: &mut [f64]) {
     // Coordinates past a law's parameters are 0 except where a run infers the string: the
     // shorter loop then, its sums the same to the bit (each skipped term is + 0).
-    let law_only = sums
-        .targets
-        .iter()
-        .chain(sums.sources)
-        .all(|p| p[MAX_PARAMS..].iter().all(|v| v.to_bits() == 0));
-    if law_only {
+    if sums.law_only() {
         kernel_sums_over::<MAX_PARAMS>(sums, out);
     } else {
         kernel_sums_over::<MAX_DIMS>(sums, out);

@@ -48,6 +48,17 @@ pub struct KernelSums<'a> {
     pub rank_one: Option<&'a [f64]>,
 }
 
+impl KernelSums<'_> {
+    /// True where every point's coordinates past a law's parameters are 0: a run that does
+    /// not infer the string with the law.
+    pub fn law_only(&self) -> bool {
+        self.targets
+            .iter()
+            .chain(self.sources)
+            .all(|p| p[crate::laws::MAX_PARAMS..].iter().all(|v| v.to_bits() == 0))
+    }
+}
+
 /// Scores candidates: contiguous ranges of the prior's candidate streams, or explicit
 /// parameter vectors. Implementations must return, for candidate i of population g, ρ of
 /// `problem.prior.candidate(seed, g, i)` against the data.

@@ -116,7 +116,7 @@ impl Default for Settings {
 
 /// A string parameter as given: a value, or bounds within which a run infers it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
-#[serde(untagged)]
+#[serde(untagged, expecting = "a number, or bounds as a pair (low, high)")]
 pub enum ValueOrBounds {
     Value(f64),
     Bounds([f64; 2]),

@@ -661,15 +661,9 @@ mod tests {
 
     #[test]
     fn a_window_s_extremes_by_the_monotone_queue_are_the_brute_force_ones() {
-        // Values from a small set (ties) on a 64-bit LCG, windows of 1 to 9 samples.
-        let mut state = 7u64;
-        let values: Vec<f64> = (0..300)
-            .map(|_| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((state >> 33) % 7) as f64 - 2.0
-            })
+        // Values from a small set (ties) drawn from Philox, windows of 1 to 9 samples.
+        let values: Vec<f64> = (0..300u32)
+            .map(|i| f64::from(crate::rng::philox4x32_10([i, 0, 0, 0], [7, 7])[0] % 7) - 2.0)
             .collect();
         for window in 1..10 {
             let least = windowed(&values, window, |a, b| a <= b);

@@ -117,12 +117,7 @@ impl Scratch {
             out.fill(0.0);
             return Ok(());
         }
-        if sums
-            .targets
-            .iter()
-            .chain(sums.sources)
-            .any(|p| p[MAX_PARAMS..].iter().any(|v| v.to_bits() != 0))
-        {
+        if !sums.law_only() {
             return Err(GpuError::Validation(format!(
                 "the kernel sums take at most {MAX_PARAMS} coordinates; a run with more weighs on the CPU"
             )));
