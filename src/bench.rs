@@ -240,9 +240,9 @@ pub struct BenchOptions {
     pub particles: usize,
     /// Stability grid (side, samples): 512 × 512 cells × 10,000 samples.
     pub stability: (usize, usize),
-    /// Measure only `bitrock check-selection` ([`selection_checks`]) with this many replicates
-    /// per law (20 by default), instead of the other sections.
-    pub selection_replicates: Option<usize>,
+    /// Measure only `bitrock check-selection` ([`selection_checks`]) with (replicates per law,
+    /// N), instead of the other sections: (20, [`SELECTION_PARTICLES`]) by default.
+    pub selection: Option<(usize, usize)>,
     /// Measure the GPU scoring shapes again (and keep the new table) even where a table is
     /// cached.
     pub retune: bool,
@@ -261,7 +261,7 @@ impl Default for BenchOptions {
             sizes: vec![(65_536, 5_000), (1_048_576, 5_000), (65_536, 100_000), (25_000, 2_687)],
             particles: 25_000,
             stability: (512, 10_000),
-            selection_replicates: None,
+            selection: None,
             retune: false,
             smc: None,
         }
@@ -316,7 +316,7 @@ fn time_calls(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<Vec<f64>
 }
 
 /// Runs the benchmark, reporting progress lines through `log`: with
-/// [`BenchOptions::selection_replicates`] only the selection check ([`selection_checks`]),
+/// [`BenchOptions::selection`] only the selection check ([`selection_checks`]),
 /// else each other section in turn: evaluator throughput, the small call, the paper-scale run
 /// end to end, rejection against SMC, and the GPU stability grid.
 pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchReport> {
@@ -353,13 +353,13 @@ pub fn run(opts: &BenchOptions, log: &mut dyn FnMut(String)) -> Result<BenchRepo
             ..report
         });
     }
-    if let Some(k) = opts.selection_replicates {
+    if let Some((k, particles)) = opts.selection {
         let backend = match opts.backends.as_slice() {
             [only] => *only,
             _ => Backend::Auto,
         };
         return Ok(BenchReport {
-            selection: selection_checks(&SelectionRecord::ALL, k, SELECTION_PARTICLES, backend, reps.min(3), log)?,
+            selection: selection_checks(&SelectionRecord::ALL, k, particles, backend, reps.min(3), log)?,
             ..report
         });
     }
@@ -682,7 +682,7 @@ fn measure_stability(
     })
 }
 
-/// Particles of the selection benchmark's runs and of their replicates.
+/// Particles of the selection benchmark's runs and of their replicates (without `--quick`).
 pub const SELECTION_PARTICLES: usize = 5_000;
 
 /// A record the selection benchmark checks a run of: the embedded one, or one `bitrock

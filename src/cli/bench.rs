@@ -23,8 +23,8 @@ pub struct BenchCmd {
     /// Measure only `bitrock check-selection`: on the embedded record, a laboratory rig's
     /// record (N·m) and records from m2 and m4 (kN·m), all four made as `bitrock simulate`
     /// makes them, a run of every law (N = 5,000, to the record's floor), then K replicates
-    /// per law checked, timed (up to 3 repetitions); K = 20, or 2 with --quick. --backend
-    /// picks the backend [default: auto].
+    /// per law checked, timed (up to 3 repetitions); K = 20 (K = 2 and N = 1,000 with
+    /// --quick). --backend picks the backend [default: auto].
     #[arg(long)]
     pub selection: bool,
     /// Measure only the SMC schemes against the rejection sampler near the noise floor (ε_min
@@ -120,7 +120,11 @@ fn options(cmd: &BenchCmd) -> anyhow::Result<bitrock::bench::BenchOptions> {
         opts.stability = (128, 1_000);
     }
     if cmd.selection {
-        opts.selection_replicates = Some(if cmd.quick { 2 } else { 20 });
+        opts.selection = Some(if cmd.quick {
+            (2, 1_000)
+        } else {
+            (20, bitrock::bench::SELECTION_PARTICLES)
+        });
         // The check runs on one backend: the one asked for, auto otherwise.
         opts.backends = vec![cmd.backend.unwrap_or(Backend::Auto)];
     }

@@ -711,7 +711,7 @@ per_shape! {
         use bitrock::prior::PhysicalScales;
         require_gpu();
         let data = demo_field_data(&DataOptions {
-            thin: 4,
+            thin: 8,
             ..Default::default()
         })
         .unwrap();
@@ -839,6 +839,8 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
             "iid",
             "--check",
             "0",
+            "--thin",
+            "4",
             "--json",
             "--backend",
             backend,

@@ -335,7 +335,7 @@ fn a_run_with_a_law_file_is_the_same_on_both_backends_and_resumes_without_the_fi
         "--law-file",
         law.to_str().unwrap(),
         "--particles",
-        "1500",
+        "800",
         "--seed",
         "5",
         "-q",

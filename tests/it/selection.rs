@@ -492,7 +492,7 @@ fn bench_selection_times_the_check_and_splits_its_phases() {
                 s["replicates_per_law"].as_u64(),
                 s["particles"].as_u64()
             ),
-            (Some(4), Some(2), Some(5000))
+            (Some(4), Some(2), Some(1000))
         );
         // The embedded record keeps the paper's floor; the others' noise puts theirs above it.
         let eps_min = s["eps_min"].as_f64().unwrap();
