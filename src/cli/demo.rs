@@ -82,7 +82,8 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         "bitrock demo: the embedded record is synthetic (made by `bitrock simulate`, see data/README.md);"
     )?;
     writeln!(out, "the paper's field data are not public.\n")?;
-    fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
+    // The runs below fit the record as this does: they take these fits.
+    let fits = fit_and_print(&data, &defaults.laws, &defaults.fit, false)?;
     mark_root(root)?;
     let mut report_runs = Vec::new();
     let mut report_setup = None;
@@ -116,7 +117,12 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
                 replace: true,
             }),
         };
-        let done = job.run(data.clone(), Default::default(), &mut RunProgress::new(false))?;
+        let done = job.run_fitted(
+            data.clone(),
+            Some(fits.clone()),
+            Default::default(),
+            &mut RunProgress::new(false),
+        )?;
         for warning in done.run_warnings() {
             super::print::note(format_args!("warning: {warning}"));
         }

@@ -4,7 +4,7 @@ use super::args::{DataArgs, FitArgs, load_data};
 use super::print;
 use bitrock::Law;
 use bitrock::data::FieldData;
-use bitrock::fit::{self, FitOptions};
+use bitrock::fit::{self, FitOptions, LawFit};
 use clap::Args;
 use std::process::ExitCode;
 
@@ -27,7 +27,7 @@ pub fn run(cmd: &FitCmd) -> anyhow::Result<ExitCode> {
 }
 
 /// Fits `laws` to `data` and prints them (also the start of `bitrock demo`).
-pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bool) -> anyhow::Result<()> {
+pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bool) -> anyhow::Result<Vec<LawFit>> {
     let fits = fit::fit_record(laws, data, opts)?;
     let separations = bitrock::separation::separations(&fits, &data.calibration, opts)?;
     let mut out = super::print::stdout();
@@ -39,5 +39,5 @@ pub fn fit_and_print(data: &FieldData, laws: &[Law], opts: &FitOptions, json: bo
         print::fit_tables(&mut out, data, &fits)?;
         print::separation_tables(&mut out, &separations, laws)?;
     }
-    Ok(())
+    Ok(fits)
 }

@@ -80,6 +80,19 @@ impl Job {
     /// is one. Nothing is written when something is refused. Workers elsewhere
     /// ([`Scoring::Workers`]) give the result scoring here gives.
     pub fn run(&self, data: FieldData, scoring: Scoring, observer: &mut dyn Observer) -> Result<Analysis> {
+        self.run_fitted(data, None, scoring, observer)
+    }
+
+    /// [`Job::run`] with the record's least-squares fits where the caller has made them, as
+    /// `fit::fit_record(&config.laws, &data, &config.fit)` makes them (several runs of one
+    /// record fit it once); `None`: fitted here.
+    pub fn run_fitted(
+        &self,
+        data: FieldData,
+        fits: Option<Vec<crate::fit::LawFit>>,
+        scoring: Scoring,
+        observer: &mut dyn Observer,
+    ) -> Result<Analysis> {
         self.config.validate()?;
         self.config.check_summary_population(self.summary_population)?;
         let prior_file = self.config.prior_file.as_deref().map(PriorFile::read).transpose()?;
@@ -89,7 +102,7 @@ impl Job {
         let how = Start {
             dir: self.out.as_ref(),
             prior_file: prior_file.as_ref(),
-            fits: None,
+            fits,
             scoring,
         };
         let outcome = start(data, self.config.clone(), how, observer)?;
