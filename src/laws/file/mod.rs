@@ -207,7 +207,19 @@ pub fn load_and_register(path: &Path) -> Result<Law> {
 }
 
 pub(crate) fn registered(id: FileLaw) -> &'static Registered {
-    REGISTRY.read().expect("law registry")[usize::from(id.0)]
+    // Asked for at every torque a fit or a simulated string evaluates: each thread reads its
+    // own copy of the registry (entries are never changed or removed, only added), and takes
+    // the lock only for a law registered since it last looked.
+    thread_local! {
+        static SEEN: std::cell::RefCell<Vec<&'static Registered>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+    let k = usize::from(id.0);
+    SEEN.with_borrow_mut(|seen| {
+        if k >= seen.len() {
+            seen.clone_from(&REGISTRY.read().expect("law registry"));
+        }
+        seen[k]
+    })
 }
 
 /// The registered law named `name`.
