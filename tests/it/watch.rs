@@ -79,6 +79,18 @@ fn watch(args: &[&str]) -> Vec<serde_json::Value> {
 /// Windows of 20 s every 10 s.
 const WINDOWS: [&str; 4] = ["--window-s", "20", "--step-s", "10"];
 
+/// The updates of `--particles 100` with [`WINDOWS`] on the well of [`WELL`] read as a file:
+/// what a stream, a folder of WITSML chunks and a served page are each compared with, watched
+/// once for all of them (the well's record is the same to the byte wherever it is made).
+fn well_windows() -> &'static [serde_json::Value] {
+    static UPDATES: std::sync::OnceLock<Vec<serde_json::Value>> = std::sync::OnceLock::new();
+    UPDATES.get_or_init(|| {
+        let dir = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
+        let record = simulate_well(dir.path());
+        watch(&[&WINDOWS[..], &["--particles", "100", record.to_str().unwrap()]].concat())
+    })
+}
+
 #[test]
 fn the_watch_finds_each_formations_law_and_the_change_between_them() {
     let dir = tempfile::tempdir().unwrap();
@@ -422,7 +434,7 @@ fn a_tcp_feed_of_csv_or_wits_gives_the_file_s_windows_through_a_dropped_connecti
     let mut lines = text.lines();
     let header = lines.next().unwrap().to_string();
     let rows: Vec<&str> = lines.collect();
-    let whole = watch(&[&WINDOWS[..], &["--particles", "100", record.to_str().unwrap()]].concat());
+    let whole = well_windows();
     // A feed never ends: its last window (which ends with the record) is not given.
     let n = whole.len() - 1;
 
@@ -627,7 +639,7 @@ fn stalled_viewers_of_the_live_page_change_nothing_and_bad_addresses_are_refused
         "10",
         record.to_str().unwrap(),
     ];
-    let plain = watch(&args);
+    let plain = well_windows();
 
     // Fifty viewers that ask for the stream and never read it: the watch gives the same
     // windows and ends (their queues drop, their writes time out, none is waited for).
@@ -1557,7 +1569,7 @@ fn a_folder_of_witsml_log_chunks_gives_the_csv_record_s_windows_read_whole_or_fo
     let dir = tempfile::tempdir().unwrap();
     let record = simulate_well(dir.path());
     let args = [&WINDOWS[..], &["--particles", "100"]].concat();
-    let whole = watch(&[&args[..], &[record.to_str().unwrap()]].concat());
+    let whole = well_windows();
     let chunks = witsml_chunks(&record, 3);
 
     let folder = dir.path().join("log");
