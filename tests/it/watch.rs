@@ -663,7 +663,7 @@ fn stalled_viewers_of_the_live_page_change_nothing_and_bad_addresses_are_refused
     child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
     assert!(child.wait().unwrap().success());
     let served: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    assert_eq!(without_latency(&served), without_latency(&plain));
+    assert_eq!(without_latency(&served), without_latency(plain));
     drop(stalled);
 
     // A port in use, and an address that is none, are refused naming the flag.
@@ -1579,11 +1579,11 @@ fn a_folder_of_witsml_log_chunks_gives_the_csv_record_s_windows_read_whole_or_fo
     }
     std::fs::write(folder.join("notes.txt"), "not a chunk").unwrap();
     let read = watch(&[&args[..], &[folder.to_str().unwrap()]].concat());
-    assert_eq!(without_latency(&read), without_latency(&whole));
+    assert_eq!(without_latency(&read), without_latency(whole));
     let single = dir.path().join("one.xml");
     std::fs::write(&single, witsml_chunks(&record, 1).remove(0)).unwrap();
     let read = watch(&[&args[..], &[single.to_str().unwrap()]].concat());
-    assert_eq!(without_latency(&read), without_latency(&whole));
+    assert_eq!(without_latency(&read), without_latency(whole));
     let (code, _, stderr) = outcome(watch_command().arg(&single).arg("--follow"));
     assert_eq!(code, 2, "{stderr}");
     assert!(
