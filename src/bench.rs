@@ -682,8 +682,10 @@ fn measure_stability(
     })
 }
 
-/// Particles of the selection benchmark's runs and of their replicates (without `--quick`).
+/// Particles of the selection benchmark's runs and of their replicates.
 pub const SELECTION_PARTICLES: usize = 5_000;
+/// [`SELECTION_PARTICLES`] of `bitrock bench --selection --quick`.
+pub const SELECTION_QUICK_PARTICLES: usize = 1_000;
 
 /// A record the selection benchmark checks a run of: the embedded one, or one `bitrock
 /// simulate` makes (the command is [`SelectionRecord::command`]), read back from its CSV as

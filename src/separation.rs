@@ -158,7 +158,7 @@ fn misranking_chance(gap_nats: f64, truth: &DMatrix<f64>, rival: &DMatrix<f64>) 
 }
 
 /// Every ordered pair of `fits` (made on `calibration` with `opts`). Worked out once per
-/// process for the same inputs ([`MEMO`]).
+/// process for the same inputs: asked again, the same separations come back.
 pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) -> Result<Vec<Separation>> {
     let key = memo_key(fits, calibration, opts);
     let memo = || MEMO.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -181,9 +181,22 @@ static MEMO: std::sync::Mutex<Vec<(u64, Vec<Separation>)>> = std::sync::Mutex::n
 const MEMO_SIZE: usize = 8;
 
 /// A hash of what [`separations`] reads, to the bit: each fit's law, estimates and ρ, the
-/// calibration samples' speeds, torques and weights on bit, and the fit options.
+/// calibration samples' speeds, torques and weights on bit (not their clock), and the fit
+/// options. The options and samples are taken apart field by field, so that a field added to
+/// either must be placed here or left out on purpose.
 fn memo_key(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) -> u64 {
     use std::hash::{Hash, Hasher};
+    let FitOptions {
+        bounded,
+        starts,
+        w_ref_n,
+    } = *opts;
+    let Samples {
+        speed_rad_s,
+        torque_nm,
+        wob_n,
+        time_s: _,
+    } = calibration;
     let mut h = std::collections::hash_map::DefaultHasher::new();
     let bits = |h: &mut std::collections::hash_map::DefaultHasher, values: &[f64]| {
         values.len().hash(h);
@@ -195,13 +208,13 @@ fn memo_key(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) -> u64 {
         bits(&mut h, &fit.params_si);
         fit.rho.to_bits().hash(&mut h);
     }
-    bits(&mut h, &calibration.speed_rad_s);
-    bits(&mut h, &calibration.torque_nm);
-    calibration.wob_n.is_some().hash(&mut h);
-    if let Some(wob) = &calibration.wob_n {
+    bits(&mut h, speed_rad_s);
+    bits(&mut h, torque_nm);
+    wob_n.is_some().hash(&mut h);
+    if let Some(wob) = wob_n {
         bits(&mut h, wob);
     }
-    (opts.bounded, opts.starts, opts.w_ref_n.map(f64::to_bits)).hash(&mut h);
+    (bounded, starts, w_ref_n.map(f64::to_bits)).hash(&mut h);
     h.finish()
 }
 

@@ -121,7 +121,7 @@ fn options(cmd: &BenchCmd) -> anyhow::Result<bitrock::bench::BenchOptions> {
     }
     if cmd.selection {
         opts.selection = Some(if cmd.quick {
-            (2, 1_000)
+            (2, bitrock::bench::SELECTION_QUICK_PARTICLES)
         } else {
             (20, bitrock::bench::SELECTION_PARTICLES)
         });

@@ -1,8 +1,9 @@
 //! The whole ABC job in one call: a loaded record → least-squares fits → prior → populations
 //! → posterior summary → predictive envelopes, optionally written to a run directory
 //! (run.sqlite as each population completes, then run.json, envelopes.csv and data.csv).
-//! `bitrock abc` and `bitrock demo` are two callers of [`Job::run`] and [`resume`]; a
-//! program that wants what `bitrock abc` does calls them too.
+//! `bitrock abc` and `bitrock demo` are two callers of [`Job::run`] (the demo through
+//! [`Job::run_fitted`], its three runs of one record fitted once) and [`resume`]; a program that
+//! wants what `bitrock abc` does calls them too.
 
 use crate::abc::posterior::{ENVELOPE_LEVEL, Envelope, PosteriorSummary, predictive_envelope, speed_grid, summarize};
 use crate::abc::{Observer, Particle};
@@ -83,9 +84,9 @@ impl Job {
         self.run_fitted(data, None, scoring, observer)
     }
 
-    /// [`Job::run`] with the record's least-squares fits where the caller has made them, as
-    /// `fit::fit_record(&config.laws, &data, &config.fit)` makes them (several runs of one
-    /// record fit it once); `None`: fitted here.
+    /// [`Job::run`] with the record's least-squares fits where the caller has made them
+    /// ([`Start::fits`]: several runs of one record fit it once); `None`: fitted
+    /// here.
     pub fn run_fitted(
         &self,
         data: FieldData,
