@@ -403,6 +403,56 @@ mod tests {
         assert_eq!(all.len(), 6);
     }
 
+    /// Asked again, the separations are the ones worked out afresh; two records that differ only
+    /// in their weight on bit (which scales each sample's torque with WOB / W_ref) are not
+    /// taken for one another.
+    #[test]
+    fn remembered_separations_are_the_fresh_ones_of_the_same_inputs() {
+        let speeds: Vec<f64> = (0..60).map(|i| 0.5 + 14.5 * i as f64 / 59.0).collect();
+        let torque: Vec<f64> = speeds
+            .iter()
+            .enumerate()
+            .map(|(i, &w)| Law::M2.torque(&[13_000.0, 6_500.0, 0.6], w, 1.0) * (1.0 + 0.02 * ((i % 5) as f64 - 2.0)))
+            .collect();
+        let opts = FitOptions {
+            w_ref_n: Some(244_200.0),
+            ..FitOptions::default()
+        };
+        let with_wob = |wob_n: f64| {
+            let mut data = Samples::new(speeds.clone(), torque.clone());
+            data.wob_n = Some(
+                speeds
+                    .iter()
+                    .enumerate()
+                    .map(|(i, _)| wob_n + 1_000.0 * (i % 3) as f64)
+                    .collect(),
+            );
+            data
+        };
+        let (light, heavy) = (with_wob(200_000.0), with_wob(300_000.0));
+        let fits_of = |data: &Samples| fit_laws(&[Law::M2, Law::M4], data, &Samples::default(), &opts).unwrap();
+        let (fits_light, fits_heavy) = (fits_of(&light), fits_of(&heavy));
+        // The same inputs twice (the second from the memo), and the heavy record between.
+        let first = separations(&fits_light, &light, &opts).unwrap();
+        let other = separations(&fits_heavy, &heavy, &opts).unwrap();
+        let again = separations(&fits_light, &light, &opts).unwrap();
+        let fresh = separations_to(&fits_light, &light, &opts, GAP_RESOLUTION_NATS).unwrap();
+        assert_eq!(first, fresh);
+        assert_eq!(again, fresh);
+        assert_eq!(
+            other,
+            separations_to(&fits_heavy, &heavy, &opts, GAP_RESOLUTION_NATS).unwrap()
+        );
+        assert_ne!(other, first);
+        // The fits alone do not tell the records apart: the same fits on the heavy record.
+        let crossed = separations(&fits_light, &heavy, &opts).unwrap();
+        assert_eq!(
+            crossed,
+            separations_to(&fits_light, &heavy, &opts, GAP_RESOLUTION_NATS).unwrap()
+        );
+        assert_ne!(crossed, first);
+    }
+
     /// AR(1) noise e_t = φ·e_{t−1} + η_t on an m2 record (4,000 samples in time order): the
     /// lag-1 of the fit's residuals is φ within its sampling error (about √((1 − φ²)/n) ≈ 0.01
     /// for φ = 0.8, 0.016 for φ = 0); a record holding too few residuals has none.
