@@ -119,12 +119,12 @@ pub enum Next {
 
 /// How the lines of a source are read.
 enum Format {
-    /// CSV: the columns of its header, an optional top-drive column, the delimiter, and the
-    /// header's text (a feed sends it again on each connection).
+    /// CSV: the columns of its header, an optional top-drive column, the parser of its lines,
+    /// and the header's text (a feed sends it again on each connection).
     Csv {
         layout: RowLayout,
         top_drive: Option<(usize, SpeedUnit)>,
-        delimiter: u8,
+        lines: Box<LineParser>,
         header: String,
     },
     /// WITS level-0 blocks.
@@ -296,7 +296,8 @@ impl Rows {
         } else {
             let delimiter = crate::data::detect_delimiter(first.as_bytes(), &name)?;
             let header = first.trim_end().to_string();
-            let headers = parse_line(&header, delimiter).ok_or_else(|| Error::Format {
+            let mut lines = Box::new(LineParser::new(delimiter));
+            let headers = lines.parse(&header).ok_or_else(|| Error::Format {
                 path: name.clone(),
                 line: Some(line),
                 message: "the header line cannot be read as CSV".into(),
@@ -304,7 +305,7 @@ impl Rows {
             Format::Csv {
                 layout: RowLayout::new(&headers, delimiter, opts, &name)?,
                 top_drive: top_drive_column(&headers, &name, line)?,
-                delimiter,
+                lines,
                 header,
             }
         };
@@ -471,14 +472,14 @@ impl Rows {
                 Format::Csv {
                     layout,
                     top_drive,
-                    delimiter,
+                    lines,
                     header,
                 } => {
                     // A feed sends its header again with each connection.
                     if self.feed.is_some() && content.trim_end() == header {
                         continue;
                     }
-                    csv_row(content, layout, *top_drive, *delimiter, self.line)
+                    csv_row(content, layout, *top_drive, lines, self.line)
                 }
                 Format::Wits(reader) => match reader.line(content) {
                     Some(row) => row,
@@ -535,10 +536,10 @@ fn csv_row(
     content: &str,
     layout: &RowLayout,
     top_drive: Option<(usize, SpeedUnit)>,
-    delimiter: u8,
+    lines: &mut LineParser,
     line: u64,
 ) -> std::result::Result<Row, String> {
-    let record = parse_line(content, delimiter).ok_or_else(|| "not a CSV line".to_string())?;
+    let record = lines.parse(content).ok_or_else(|| "not a CSV line".to_string())?;
     let mut row = layout.row(&record, line).map_err(|e| e.to_string())?;
     if let Some((i, unit)) = top_drive {
         let text = record.get(i).unwrap_or("");
@@ -608,17 +609,55 @@ fn open(path: &Path) -> Result<impl Read + Send + use<>> {
     })
 }
 
-/// One CSV line as a record (fields trimmed), or `None` when it is not one.
-fn parse_line(line: &str, delimiter: u8) -> Option<csv::StringRecord> {
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .delimiter(delimiter)
-        .trim(csv::Trim::All)
-        .from_reader(line.as_bytes());
-    let mut record = csv::StringRecord::new();
-    match reader.read_record(&mut record) {
-        Ok(true) => Some(record),
-        _ => None,
+/// The lines of a CSV source read one at a time, each on its own (a quote left open on one
+/// never runs into the next). The parser is built once per source and reset per line:
+/// building one is most of the cost of reading a short line.
+struct LineParser {
+    core: csv_core::Reader,
+    /// The line's fields, unquoted, one after another.
+    fields: Vec<u8>,
+    /// Where each field ends in `fields`.
+    ends: Vec<usize>,
+}
+
+impl LineParser {
+    fn new(delimiter: u8) -> Self {
+        Self {
+            core: csv_core::ReaderBuilder::new().delimiter(delimiter).build(),
+            fields: vec![0; 256],
+            ends: vec![0; 16],
+        }
+    }
+
+    /// One CSV line as a record (fields trimmed), or `None` when it is not one (its fields
+    /// are not UTF-8).
+    fn parse(&mut self, line: &str) -> Option<csv::StringRecord> {
+        use csv_core::ReadRecordResult as Read;
+        self.core.reset();
+        let mut input = line.as_bytes();
+        let (mut written, mut ended) = (0, 0);
+        loop {
+            let (result, read, out, end) =
+                self.core
+                    .read_record(input, &mut self.fields[written..], &mut self.ends[ended..]);
+            input = &input[read..];
+            written += out;
+            ended += end;
+            match result {
+                Read::InputEmpty => {}
+                Read::OutputFull => self.fields.resize(2 * self.fields.len(), 0),
+                Read::OutputEndsFull => self.ends.resize(2 * self.ends.len(), 0),
+                Read::Record => break,
+                Read::End => return None,
+            }
+        }
+        let mut record = csv::StringRecord::with_capacity(written, ended);
+        let mut start = 0;
+        for &end in &self.ends[..ended] {
+            record.push_field(std::str::from_utf8(&self.fields[start..end]).ok()?.trim());
+            start = end;
+        }
+        Some(record)
     }
 }
 
