@@ -39,7 +39,7 @@ pub struct DemoCmd {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
-    /// Where ρ is computed (auto, gpu, cpu).
+    /// Where ρ is computed and the report's strings integrated (auto, gpu, cpu).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Synthetic records per law with which the model evidence's answer is checked by
@@ -162,6 +162,7 @@ pub fn run(cmd: &DemoCmd) -> anyhow::Result<ExitCode> {
         Some(&evidence.evidence),
         bitrock::report::StabilitySettings {
             simulated: Some(Default::default()),
+            backend: cmd.backend,
             ..Default::default()
         },
     )?;

@@ -27,6 +27,10 @@ pub struct ReportCmd {
     /// record's operating point, the bistable band between them (a table and a figure).
     #[arg(long)]
     pub simulate: bool,
+    /// Where the strings of the record's advice and of --simulate's maps are integrated: gpu,
+    /// cpu, or auto (the GPU when an adapter exists, else the CPU, saying so).
+    #[arg(long, value_enum, default_value_t = bitrock::eval::Backend::Auto)]
+    pub backend: bitrock::eval::Backend,
     /// The 1-DOF string of the runs' maps and advice [default: the paper's 5 km field string].
     #[command(flatten)]
     pub lumped: LumpedArgs,
@@ -54,6 +58,7 @@ fn stability(cmd: &ReportCmd) -> anyhow::Result<StabilitySettings> {
             paper.strings.clone()
         },
         simulated: cmd.simulate.then(Default::default),
+        backend: cmd.backend,
         ..paper
     })
 }

@@ -280,9 +280,11 @@ impl Adviser {
         };
         let inputs = thinned(inputs, escape.samples, escape.min_probability);
         let settings = SimulatedSettings::new(escape.chain.clone(), w_ref_n, escape.backend);
-        let mut quiet = |_: String| {};
+        // What the simulator says (auto's fallback to the CPU) goes into the advice's words.
+        let mut said = Vec::new();
+        let mut say = |note: String| said.push(note);
         let (speeds, weights) = (advice_speeds_rpm(point.omega_rpm), advice_weights_kn(point.wob_kn));
-        let simulated = Simulator::new(&settings, &inputs, &mut quiet).and_then(|mut sim| {
+        let simulated = Simulator::new(&settings, &inputs, &mut say).and_then(|mut sim| {
             let at = sim.at_point(point)?;
             let all = sim.escape_advice(&at, &speeds, &weights)?;
             let peaks = at.peaks();
@@ -316,6 +318,10 @@ impl Adviser {
                 );
             }
             Err(e) => advice.words = format!("{now}: the simulated strings failed ({e})"),
+        }
+        said.dedup();
+        for note in said {
+            advice.words.push_str(&format!(" [{note}]"));
         }
     }
 }

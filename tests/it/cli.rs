@@ -193,6 +193,63 @@ fn a_failure_that_stopped_the_work_exits_3() {
     assert!(!out.exists());
 }
 
+/// The report's strings (the record's advice) go where `--backend` says: with no adapter, the
+/// GPU's advice says it failed, the CPU's is computed, and auto's is the CPU's saying why.
+#[test]
+fn the_report_s_strings_run_on_the_backend_asked_and_auto_says_when_it_falls_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let run_dir = run_dir.to_str().unwrap();
+    let (code, _, stderr) = run(&[
+        "abc",
+        "--particles",
+        "200",
+        "--max-populations",
+        "2",
+        "--backend",
+        "cpu",
+        "-q",
+        "--out",
+        run_dir,
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let advice = |backend: &str| -> String {
+        let out = dir.path().join(format!("report-{backend}"));
+        let result = bin()
+            .args(["report", run_dir, "--backend", backend, "--out", out.to_str().unwrap()])
+            .env("WGPU_ADAPTER_NAME", "no-such-adapter")
+            .output()
+            .unwrap();
+        assert_eq!(
+            result.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&result.stderr)
+        );
+        let markdown = std::fs::read_to_string(out.join("report.md")).unwrap();
+        let line = markdown
+            .lines()
+            .find(|l| l.starts_with("**Advice at the record's operating point**"));
+        line.expect("the record's advice").to_string()
+    };
+    let cpu = advice("cpu");
+    assert!(
+        cpu.contains("stick-slip now") && cpu.contains("raise the top-drive speed to"),
+        "{cpu}"
+    );
+    assert!(!cpu.contains("GPU"), "{cpu}");
+    let gpu = advice("gpu");
+    assert!(
+        gpu.contains("the simulated strings failed (no GPU for this process: WGPU_ADAPTER_NAME=no-such-adapter"),
+        "{gpu}"
+    );
+    let auto = advice("auto");
+    let note = " [no usable GPU (no GPU for this process: WGPU_ADAPTER_NAME=no-such-adapter";
+    let (before, after) = auto.split_once(note).expect(&auto);
+    let (_, rest) = after.split_once("); computing on the CPU]").expect(&auto);
+    assert_eq!(format!("{before}{rest}"), cpu);
+}
+
 #[test]
 fn a_closed_pipe_ends_quietly_with_status_141() {
     // 600 s at 50 Hz: about 1 MB of CSV, far more than a pipe holds.
@@ -206,17 +263,10 @@ fn a_closed_pipe_ends_quietly_with_status_141() {
 fn demo_prints_fits_and_the_population_table() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo-run");
-    // On the CPU: a software Vulkan driver (CI's) takes minutes over the model evidence's
-    // small batches; the GPU's own agreement is tested in gpu.rs.
-    let (code, stdout, stderr) = run(&[
-        "demo",
-        "--particles",
-        "2000",
-        "--backend",
-        "cpu",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    // auto: the model evidence's small batches are scored where a measured dispatch is faster
+    // (on a software Vulkan driver, CI's, the CPU), the report's strings on the adapter; the
+    // GPU's own agreement is tested in gpu.rs.
+    let (code, stdout, stderr) = run(&["demo", "--particles", "2000", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("synthetic"));
     for law in ["m1", "m2", "m3", "m4"] {
