@@ -156,7 +156,8 @@ pub struct BenchReport {
     pub small_call_seconds: Vec<(String, Spread)>,
     pub end_to_end: Vec<EndToEnd>,
     /// Rejection and SMC to the same eps_min with the same N on the embedded record: the
-    /// paper's ε_min with the end-to-end N, and 1.1 × the smallest least-squares ρ with N / 5.
+    /// paper's ε_min with the end-to-end N, and 1.1 × the smallest least-squares ρ with
+    /// [`BenchOptions::floor_particles`].
     pub samplers: Vec<SamplerRun>,
     /// Stability grid on the GPU: cells × samples per second (median), with the grid size.
     pub stability: Option<StabilityThroughput>,
@@ -238,6 +239,9 @@ pub struct BenchOptions {
     pub sizes: Vec<(usize, usize)>,
     /// Particles of the end-to-end run (the paper's 25,000).
     pub particles: usize,
+    /// Particles of the samplers' comparison near the noise floor, where rejection from the
+    /// prior accepts about one candidate in a thousand (5,000).
+    pub floor_particles: usize,
     /// Stability grid (side, samples): 512 × 512 cells × 10,000 samples.
     pub stability: (usize, usize),
     /// Measure only `bitrock check-selection` ([`selection_checks`]) with (replicates per law,
@@ -260,6 +264,7 @@ impl Default for BenchOptions {
             // The last: the paper's N and the embedded record's length, the size users run.
             sizes: vec![(65_536, 5_000), (1_048_576, 5_000), (65_536, 100_000), (25_000, 2_687)],
             particles: 25_000,
+            floor_particles: 5_000,
             stability: (512, 10_000),
             selection: None,
             retune: false,
@@ -564,8 +569,7 @@ fn measure_end_to_end(
 
 /// Rejection and SMC to the same ε_min with the same N on each backend: at the paper's ε_min
 /// (`paper_eps_min`) with the end-to-end N, and near the noise floor (1.1 × the smallest
-/// least-squares ρ) with N / 5, where rejection from the prior accepts about one candidate in
-/// a thousand.
+/// least-squares ρ) with [`BenchOptions::floor_particles`].
 fn compare_samplers(
     opts: &BenchOptions,
     reps: usize,
@@ -575,10 +579,7 @@ fn compare_samplers(
 ) -> Result<Vec<SamplerRun>> {
     let mut samplers = Vec::new();
     let floor = embedded.fits.iter().map(|f| f.rho).fold(f64::INFINITY, f64::min);
-    let targets = [
-        (paper_eps_min, opts.particles),
-        (1.1 * floor, (opts.particles / 5).max(100)),
-    ];
+    let targets = [(paper_eps_min, opts.particles), (1.1 * floor, opts.floor_particles)];
     for &backend in &opts.backends {
         let ev = embedded.evaluator(backend, opts.particles)?;
         for &(eps_min, particles) in &targets {

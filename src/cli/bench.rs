@@ -17,7 +17,8 @@ pub struct BenchCmd {
     /// Only this backend [default: both].
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
-    /// Small sizes only (65,536 × 5,000; end-to-end with N = 5,000): a smoke test in seconds.
+    /// Small sizes only (65,536 × 5,000; end-to-end with N = 5,000; the samplers near the noise
+    /// floor with N = 200): a smoke test in seconds.
     #[arg(long)]
     pub quick: bool,
     /// Measure only `bitrock check-selection`: on the embedded record, a laboratory rig's
@@ -117,6 +118,7 @@ fn options(cmd: &BenchCmd) -> anyhow::Result<bitrock::bench::BenchOptions> {
     if cmd.quick {
         opts.sizes = vec![(65_536, 5_000)];
         opts.particles = 5_000;
+        opts.floor_particles = 200;
         opts.stability = (128, 1_000);
     }
     if cmd.selection {
