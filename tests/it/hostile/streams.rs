@@ -26,6 +26,8 @@ fn a_full_standard_error_never_panics_and_keeps_the_exit_status() {
         "abc",
         "--out",
         "F",
+        "--thin",
+        "4",
         "--particles",
         "200",
         "--max-populations",
