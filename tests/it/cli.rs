@@ -202,6 +202,8 @@ fn the_report_s_strings_run_on_the_backend_asked_and_auto_says_when_it_falls_bac
     let run_dir = run_dir.to_str().unwrap();
     let (code, _, stderr) = run(&[
         "abc",
+        "--thin",
+        "4",
         "--particles",
         "200",
         "--max-populations",
