@@ -323,6 +323,8 @@ fn the_environment_names_the_gpu_or_says_why_not() {
         let done = cmd
             .args([
                 "abc",
+                "--thin",
+                "4",
                 "--particles",
                 "300",
                 "--max-populations",

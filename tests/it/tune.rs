@@ -104,8 +104,11 @@ fn the_first_run_measures_the_next_reads_the_cache_and_measuring_can_be_turned_o
     let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
     let abc = |cache: &Path, env: &[(&str, &str)], name: &str| {
         let out = out(name);
+        // The embedded record thinned by 4: the shapes are measured on a problem of their own.
         let args = [
             "abc",
+            "--thin",
+            "4",
             "--particles",
             "200",
             "--max-populations",
@@ -170,6 +173,8 @@ fn a_resumed_run_and_its_selection_check_score_in_the_recorded_shape() {
     let start = |out: &str, populations: &str| {
         let args = [
             "abc",
+            "--thin",
+            "4",
             "--particles",
             "300",
             "--seed",
