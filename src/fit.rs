@@ -16,6 +16,7 @@ pub mod coupled;
 use crate::data::{FieldData, SAME_SPEED_TOLERANCE, Samples};
 use crate::error::{Error, Result};
 use crate::laws::{Law, PAPER_W_REF_N};
+use crate::memo::{Key, Memo};
 use crate::numerics::{compensated_sum, geomspace, quantile};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
@@ -210,9 +211,24 @@ pub fn misfit(law: Law, params: &[f64], w: &[f64], y: &[f64], r: &[f64], sum_y2:
 }
 
 /// Fits every law in `laws` to a record's calibration samples ([`fit_laws`]); a fit the
-/// samples defeat is refused as bad input naming the record ([`Error::Fit`]).
+/// samples defeat is refused as bad input naming the record ([`Error::Fit`]). Worked out once
+/// per process for the same laws, samples and options: asked again (every run on one record,
+/// the report of each), the same fits come back.
 pub fn fit_record(laws: &[Law], data: &FieldData, opts: &FitOptions) -> Result<Vec<LawFit>> {
-    fit_record_from(laws, data, opts, &[])
+    static MEMO: Memo<Vec<LawFit>> = Memo::new();
+    let FitOptions {
+        bounded,
+        starts,
+        w_ref_n,
+    } = *opts;
+    let mut key = Key::new();
+    // A law's name is its definition within a process: a second law file of the same name
+    // and another law is refused.
+    key.value(laws.iter().map(|l| l.name()).collect::<Vec<_>>());
+    key.samples(&data.calibration).samples(&data.validation);
+    key.value(&data.source)
+        .value((bounded, starts, w_ref_n.map(f64::to_bits)));
+    MEMO.get_or_try(key.finish(), || fit_record_from(laws, data, opts, &[]))
 }
 
 /// [`fit_record`] with known starting points, SI, by law ([`fit_law_from`]).

@@ -77,6 +77,7 @@ pub mod files;
 pub mod fit;
 pub mod laws;
 pub mod limits;
+mod memo;
 pub mod numerics;
 pub mod prior;
 pub mod report;

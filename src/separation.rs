@@ -33,6 +33,7 @@ use crate::data::Samples;
 use crate::error::Result;
 use crate::fit::{FitOptions, LawFit, fit_law_within, normalised_jacobian};
 use crate::laws::Law;
+use crate::memo::{Key, Memo};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -160,62 +161,29 @@ fn misranking_chance(gap_nats: f64, truth: &DMatrix<f64>, rival: &DMatrix<f64>) 
 /// Every ordered pair of `fits` (made on `calibration` with `opts`). Worked out once per
 /// process for the same inputs: asked again, the same separations come back.
 pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) -> Result<Vec<Separation>> {
-    let key = memo_key(fits, calibration, opts);
-    let memo = || MEMO.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    if let Some((_, known)) = memo().iter().find(|(k, _)| *k == key) {
-        return Ok(known.clone());
-    }
-    let worked_out = separations_to(fits, calibration, opts, GAP_RESOLUTION_NATS)?;
-    let mut memo = memo();
-    if memo.len() == MEMO_SIZE {
-        memo.remove(0);
-    }
-    memo.push((key, worked_out.clone()));
-    Ok(worked_out)
+    static MEMO: Memo<Vec<Separation>> = Memo::new();
+    MEMO.get_or_try(memo_key(fits, calibration, opts), || {
+        separations_to(fits, calibration, opts, GAP_RESOLUTION_NATS)
+    })
 }
 
-/// The separations this process has worked out, by a hash of everything they are made of
-/// ([`memo_key`]): a run's answer, its report and the demo ask for one record's separations
-/// several times, and each is a dozen fits. The last [`MEMO_SIZE`] are kept.
-static MEMO: std::sync::Mutex<Vec<(u64, Vec<Separation>)>> = std::sync::Mutex::new(Vec::new());
-const MEMO_SIZE: usize = 8;
-
 /// A hash of what [`separations`] reads, to the bit: each fit's law, estimates and ρ, the
-/// calibration samples' speeds, torques and weights on bit (not their clock), and the fit
-/// options. The options and samples are taken apart field by field, so that a field added to
-/// either must be placed here or left out on purpose.
+/// calibration samples ([`Key::samples`]), and the fit options, taken apart field by field so
+/// that a field added must be placed here or left out on purpose.
 fn memo_key(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) -> u64 {
-    use std::hash::{Hash, Hasher};
     let FitOptions {
         bounded,
         starts,
         w_ref_n,
     } = *opts;
-    let Samples {
-        speed_rad_s,
-        torque_nm,
-        wob_n,
-        time_s: _,
-    } = calibration;
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    let bits = |h: &mut std::collections::hash_map::DefaultHasher, values: &[f64]| {
-        values.len().hash(h);
-        values.iter().for_each(|v| v.to_bits().hash(h));
-    };
-    fits.len().hash(&mut h);
+    let mut key = Key::new();
+    key.value(fits.len());
     for fit in fits {
-        fit.law.name().hash(&mut h);
-        bits(&mut h, &fit.params_si);
-        fit.rho.to_bits().hash(&mut h);
+        key.value(fit.law.name()).floats(&fit.params_si).floats(&[fit.rho]);
     }
-    bits(&mut h, speed_rad_s);
-    bits(&mut h, torque_nm);
-    wob_n.is_some().hash(&mut h);
-    if let Some(wob) = wob_n {
-        bits(&mut h, wob);
-    }
-    (bounded, starts, w_ref_n.map(f64::to_bits)).hash(&mut h);
-    h.finish()
+    key.samples(calibration)
+        .value((bounded, starts, w_ref_n.map(f64::to_bits)));
+    key.finish()
 }
 
 /// [`separations`] with each gap resolved to `resolution_nats` (0: every rival's fit run to

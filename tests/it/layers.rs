@@ -7,12 +7,13 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 /// Each top-level module of the library and its layer, lowest first.
-const LAYERS: [(&str, u8); 20] = [
+const LAYERS: [(&str, u8); 21] = [
     ("error", 0),
     ("units", 0),
     ("rng", 0),
     ("numerics", 0),
     ("limits", 0),
+    ("memo", 0),
     ("data", 0),
     ("files", 0),
     ("laws", 1),
