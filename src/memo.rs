@@ -31,13 +31,15 @@ impl<T: Clone> Memo<T> {
             return Ok(known.clone());
         }
         // Not held while working: other threads' lookups go on, and two threads that miss the
-        // same key both work it out, to the same result.
+        // same key both work it out, to the same result, kept once.
         let worked_out = work()?;
         let mut entries = entries();
-        if entries.len() == Self::SIZE {
-            entries.remove(0);
+        if !entries.iter().any(|(k, _)| *k == key) {
+            if entries.len() == Self::SIZE {
+                entries.remove(0);
+            }
+            entries.push((key, worked_out.clone()));
         }
-        entries.push((key, worked_out.clone()));
         Ok(worked_out)
     }
 }

@@ -211,8 +211,11 @@ pub(crate) fn fall_back_to_cpu(e: gpu::GpuError, note: &mut dyn FnMut(String)) -
 
 /// What `auto` says when the GPU it found fails: the CPU computes instead.
 pub(crate) fn no_usable_gpu(e: &dyn std::fmt::Display) -> String {
-    format!("no usable GPU ({e}); computing on the CPU")
+    format!("{NO_USABLE_GPU} ({e}); computing on the CPU")
 }
+
+/// How [`no_usable_gpu`]'s words begin: what tells auto's fallback from other notes.
+pub(crate) const NO_USABLE_GPU: &str = "no usable GPU";
 
 // The requests of the batched scoring ([`records`]), shared by its CPU and GPU scorers.
 

@@ -280,9 +280,14 @@ impl Adviser {
         };
         let inputs = thinned(inputs, escape.samples, escape.min_probability);
         let settings = SimulatedSettings::new(escape.chain.clone(), w_ref_n, escape.backend);
-        // What the simulator says (auto's fallback to the CPU) goes into the advice's words.
+        // Auto's fallback to the CPU goes into the advice's words; the simulator's progress
+        // lines do not (they depend on the machine's speed).
         let mut said = Vec::new();
-        let mut say = |note: String| said.push(note);
+        let mut say = |note: String| {
+            if note.starts_with(crate::eval::NO_USABLE_GPU) {
+                said.push(note);
+            }
+        };
         let (speeds, weights) = (advice_speeds_rpm(point.omega_rpm), advice_weights_kn(point.wob_kn));
         let simulated = Simulator::new(&settings, &inputs, &mut say).and_then(|mut sim| {
             let at = sim.at_point(point)?;

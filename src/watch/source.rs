@@ -629,8 +629,7 @@ impl LineParser {
         }
     }
 
-    /// One CSV line as a record (fields trimmed), or `None` when it is not one (its fields
-    /// are not UTF-8).
+    /// One CSV line as a record (fields trimmed), or `None` when it holds none.
     fn parse(&mut self, line: &str) -> Option<csv::StringRecord> {
         use csv_core::ReadRecordResult as Read;
         self.core.reset();

@@ -8,7 +8,10 @@ use std::path::Path;
 
 /// A small demo into `cwd/D`, without the evidence's check (the demo's own test has it).
 fn demo(cwd: &Path) -> (i32, String, String) {
-    run_in(cwd, &["demo", "--out", "D", "--particles", "200", "--check", "0"])
+    run_in(
+        cwd,
+        &["demo", "--out", "D", "--particles", "200", "--check", "0", "--backend", "cpu"],
+    )
 }
 
 #[test]
@@ -61,7 +64,7 @@ fn demo_never_deletes_what_the_user_put_in_its_directory() {
     std::fs::create_dir(tmp.path().join("E")).unwrap();
     std::fs::write(tmp.path().join("E/x"), "mine").unwrap();
     assert_refused(
-        run_in(tmp.path(), &["demo", "--out", "E", "--particles", "200"]),
+        run_in(tmp.path(), &["demo", "--out", "E", "--particles", "200", "--backend", "cpu"]),
         &["--out", "not written by `bitrock demo`"],
     );
     // With only its own files there, the demo replaces them.
@@ -328,7 +331,7 @@ fn no_run_is_placed_inside_another_run() {
         );
     }
     assert_refused(
-        run_in(tmp.path(), &["demo", "--out", "R/demo", "--particles", "200"]),
+        run_in(tmp.path(), &["demo", "--out", "R/demo", "--particles", "200", "--backend", "cpu"]),
         &["--out", "inside the run directory"],
     );
     assert_eq!(names(&tmp.path().join("R")), files_before);
