@@ -10,7 +10,17 @@ use std::path::Path;
 fn demo(cwd: &Path) -> (i32, String, String) {
     run_in(
         cwd,
-        &["demo", "--out", "D", "--particles", "200", "--check", "0", "--backend", "cpu"],
+        &[
+            "demo",
+            "--out",
+            "D",
+            "--particles",
+            "200",
+            "--check",
+            "0",
+            "--backend",
+            "cpu",
+        ],
     )
 }
 
@@ -64,7 +74,10 @@ fn demo_never_deletes_what_the_user_put_in_its_directory() {
     std::fs::create_dir(tmp.path().join("E")).unwrap();
     std::fs::write(tmp.path().join("E/x"), "mine").unwrap();
     assert_refused(
-        run_in(tmp.path(), &["demo", "--out", "E", "--particles", "200", "--backend", "cpu"]),
+        run_in(
+            tmp.path(),
+            &["demo", "--out", "E", "--particles", "200", "--backend", "cpu"],
+        ),
         &["--out", "not written by `bitrock demo`"],
     );
     // With only its own files there, the demo replaces them.
@@ -331,7 +344,10 @@ fn no_run_is_placed_inside_another_run() {
         );
     }
     assert_refused(
-        run_in(tmp.path(), &["demo", "--out", "R/demo", "--particles", "200", "--backend", "cpu"]),
+        run_in(
+            tmp.path(),
+            &["demo", "--out", "R/demo", "--particles", "200", "--backend", "cpu"],
+        ),
         &["--out", "inside the run directory"],
     );
     assert_eq!(names(&tmp.path().join("R")), files_before);
