@@ -74,6 +74,17 @@ impl Default for FitOptions {
 }
 
 impl FitOptions {
+    /// The options into a memo's key ([`crate::memo`]), taken apart field by field so that a
+    /// field added must be placed here or left out on purpose.
+    pub(crate) fn hash_into(&self, key: &mut Key) {
+        let FitOptions {
+            bounded,
+            starts,
+            w_ref_n,
+        } = *self;
+        key.value((bounded, starts, w_ref_n.map(f64::to_bits)));
+    }
+
     /// Refuses options that cannot fit, naming the flag: no starting point, a W_ref that is
     /// not a positive number.
     pub fn validate(&self) -> Result<()> {
@@ -216,18 +227,12 @@ pub fn misfit(law: Law, params: &[f64], w: &[f64], y: &[f64], r: &[f64], sum_y2:
 /// the report of each), the same fits come back.
 pub fn fit_record(laws: &[Law], data: &FieldData, opts: &FitOptions) -> Result<Vec<LawFit>> {
     static MEMO: Memo<Vec<LawFit>> = Memo::new();
-    let FitOptions {
-        bounded,
-        starts,
-        w_ref_n,
-    } = *opts;
     let mut key = Key::new();
     // A law's name is its definition within a process: a second law file of the same name
     // and another law is refused.
     key.value(laws.iter().map(|l| l.name()).collect::<Vec<_>>());
-    key.samples(&data.calibration).samples(&data.validation);
-    key.value(&data.source)
-        .value((bounded, starts, w_ref_n.map(f64::to_bits)));
+    key.samples(&data.calibration).samples(&data.validation).value(&data.source);
+    opts.hash_into(&mut key);
     MEMO.get_or_try(key.finish(), || fit_record_from(laws, data, opts, &[]))
 }
 

@@ -168,21 +168,15 @@ pub fn separations(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) ->
 }
 
 /// A hash of what [`separations`] reads, to the bit: each fit's law, estimates and ρ, the
-/// calibration samples ([`Key::samples`]), and the fit options, taken apart field by field so
-/// that a field added must be placed here or left out on purpose.
+/// calibration samples ([`Key::samples`]), and the fit options ([`FitOptions::hash_into`]).
 fn memo_key(fits: &[LawFit], calibration: &Samples, opts: &FitOptions) -> u64 {
-    let FitOptions {
-        bounded,
-        starts,
-        w_ref_n,
-    } = *opts;
     let mut key = Key::new();
     key.value(fits.len());
     for fit in fits {
         key.value(fit.law.name()).floats(&fit.params_si).floats(&[fit.rho]);
     }
-    key.samples(calibration)
-        .value((bounded, starts, w_ref_n.map(f64::to_bits)));
+    key.samples(calibration);
+    opts.hash_into(&mut key);
     key.finish()
 }
 
