@@ -231,7 +231,9 @@ pub fn fit_record(laws: &[Law], data: &FieldData, opts: &FitOptions) -> Result<V
     // A law's name is its definition within a process: a second law file of the same name
     // and another law is refused.
     key.value(laws.iter().map(|l| l.name()).collect::<Vec<_>>());
-    key.samples(&data.calibration).samples(&data.validation).value(&data.source);
+    key.samples(&data.calibration)
+        .samples(&data.validation)
+        .value(&data.source);
     opts.hash_into(&mut key);
     MEMO.get_or_try(key.finish(), || fit_record_from(laws, data, opts, &[]))
 }
