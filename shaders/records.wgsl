@@ -32,7 +32,7 @@ struct Segment {
 }
 
 @group(0) @binding(0) var<storage, read> priors: array<Prior>;
-@group(0) @binding(1) var<uniform> job: Job;
+@group(0) @binding(1) var<storage, read> job: Job;
 @group(0) @binding(6) var<storage, read> segments: array<Segment>;
 @group(0) @binding(7) var<storage, read> tile_segment: array<u32>;
 @group(0) @binding(8) var<storage, read> proposals: array<Proposal>;

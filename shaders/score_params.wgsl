@@ -6,7 +6,7 @@
 // shared/tile.wgsl.
 
 @group(0) @binding(0) var<storage, read> proposals: array<Proposal>;
-@group(0) @binding(1) var<uniform> job: Job;
+@group(0) @binding(1) var<storage, read> job: Job;
 
 fn job_candidate(job: Job, k: u32) -> JobCandidate {
     let proposal = proposals[job.start.x + k];

@@ -813,10 +813,11 @@ per_shape! {
 }
 
 /// `auto` on a software driver (lavapipe, here) races it against the CPU on the run's own
-/// dispatches and says so: the evidence's small explicit dispatches (60 particles × 2 islands ×
-/// 2 starts × 2 laws = 480 candidates) go to the CPU, whose evidence is then `--backend cpu`'s
-/// bit for bit; the race is kept in the cache and a second run reads it; with tuning off there
-/// is no race and the GPU scores. On a hardware GPU there is no race at all.
+/// dispatches and says which it keeps: the evidence's explicit dispatches (60 particles × 2
+/// islands × 2 starts × 2 laws = 480 candidates) go to the faster, whose evidence is then
+/// `--backend cpu`'s or `--backend gpu`'s bit for bit; the race is kept in the cache and a
+/// second run reads it to the same choice; with tuning off there is no race and the GPU scores.
+/// On a hardware GPU there is no race at all.
 #[test]
 #[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
 fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
@@ -848,6 +849,8 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
     };
     let (code, cpu, err) = run_bitrock_with(&[("BITROCK_CACHE_DIR", cache_dir)], &args("cpu"));
     assert_eq!(code, 0, "{err}");
+    let (code, gpu, err) = run_bitrock_with(&[("BITROCK_CACHE_DIR", cache_dir)], &args("gpu"));
+    assert_eq!(code, 0, "{err}");
     let ln_z = |out: &str| -> Vec<f64> {
         let doc: serde_json::Value = serde_json::from_str(out).unwrap();
         doc["laws"]
@@ -857,20 +860,28 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
             .map(|l| l["ln_z"].as_f64().unwrap())
             .collect()
     };
+    // The first run races, the second reads the race back: the same choice, said the same way.
+    let mut said = Vec::new();
     for _ in 0..2 {
         let (code, auto, err) = run_bitrock_with(&[("BITROCK_CACHE_DIR", cache_dir)], &args("auto"));
         assert_eq!(code, 0, "{err}");
         if software {
-            assert!(
-                err.contains("auto: scoring on the CPU rather than") && err.contains("480 candidates"),
-                "{err}"
-            );
-            assert_eq!(ln_z(&auto), ln_z(&cpu));
+            let line = err
+                .lines()
+                .find(|l| l.contains("auto: scoring on"))
+                .unwrap_or_else(|| panic!("no race said: {err}"))
+                .to_string();
+            assert!(line.contains("a dispatch of 480 candidates"), "{line}");
+            let chose_cpu = line.contains("auto: scoring on the CPU rather than");
+            assert!(chose_cpu || line.contains("rather than the CPU"), "{line}");
+            assert_eq!(ln_z(&auto), ln_z(if chose_cpu { &cpu } else { &gpu }), "{line}");
+            said.push(line);
         } else {
             assert!(!err.contains("auto: scoring on"), "{err}");
         }
     }
     if software {
+        assert_eq!(said[0], said[1]);
         let kept = std::fs::read_to_string(cache.path().join("gpu-shapes.json")).unwrap();
         assert!(kept.contains("512 candidates | explicit"), "{kept}");
     }

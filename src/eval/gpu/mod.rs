@@ -972,10 +972,14 @@ const STORAGE_READ: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage {
 const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage { read_only: false };
 /// The bindings a scoring kernel that reads its candidates from a buffer starts with: the
 /// candidates (proposals, or the records' priors), the job, the speed, torque and ratio
-/// columns, the sums of squares it writes.
+/// columns, the sums of squares it writes. The job is a read-only storage buffer here, not a
+/// uniform one: lavapipe (Mesa 22.3) inlined the uniform values the proposals' kernel's loops
+/// read into the shader and compiled it again at every dispatch, 25 ms where scoring the SMC's
+/// or the evidence's few hundred proposals takes one (the records' kernel shares the layout).
+/// The streaming kernels keep their uniforms: there it compiles once, and they run faster.
 const STORED_CANDIDATE_BINDINGS: [wgpu::BufferBindingType; 6] = [
     STORAGE_READ,
-    UNIFORM,
+    STORAGE_READ,
     STORAGE_READ,
     STORAGE_READ,
     STORAGE_READ,

@@ -159,7 +159,7 @@ impl GpuRecords {
         context
             .queue
             .write_buffer(&priors, 0, bytemuck::cast_slice(&priors_upload));
-        let job = context.buffer("job", size_of::<Job>() as u64, wgpu::BufferUsages::UNIFORM | copy)?;
+        let job = context.buffer("job", size_of::<Job>() as u64, wgpu::BufferUsages::STORAGE | copy)?;
         let ssr_bytes = 4 * chunk as u64;
         let (ssr, staging) = context.output_and_staging("ssr", ssr_bytes)?;
         let segments = context.buffer(

@@ -83,7 +83,11 @@ impl GpuEvaluator {
             size_of::<GpuPrior>() as u64,
             wgpu::BufferUsages::UNIFORM | copy,
         )?;
-        let job = context.buffer("job", size_of::<Job>() as u64, wgpu::BufferUsages::UNIFORM | copy)?;
+        let job = context.buffer(
+            "job",
+            size_of::<Job>() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::STORAGE | copy,
+        )?;
         let mut data = Vec::new();
         for (name, column) in ["speed", "torque", "ratio"].iter().zip(&columns) {
             let buffer = context.buffer(name, column_bytes, wgpu::BufferUsages::STORAGE | copy)?;
