@@ -6,22 +6,10 @@
 use super::{assert_refused, export, names, run_in, small_run};
 use std::path::Path;
 
-/// A small demo into `cwd/D`, without the evidence's check (the demo's own test has it).
+/// A small demo into `cwd/D`, without the evidence's check (the demo's own test has it), on the
+/// backend a user gets.
 fn demo(cwd: &Path) -> (i32, String, String) {
-    run_in(
-        cwd,
-        &[
-            "demo",
-            "--out",
-            "D",
-            "--particles",
-            "200",
-            "--check",
-            "0",
-            "--backend",
-            "cpu",
-        ],
-    )
+    run_in(cwd, &["demo", "--out", "D", "--particles", "200", "--check", "0"])
 }
 
 #[test]
@@ -74,10 +62,7 @@ fn demo_never_deletes_what_the_user_put_in_its_directory() {
     std::fs::create_dir(tmp.path().join("E")).unwrap();
     std::fs::write(tmp.path().join("E/x"), "mine").unwrap();
     assert_refused(
-        run_in(
-            tmp.path(),
-            &["demo", "--out", "E", "--particles", "200", "--backend", "cpu"],
-        ),
+        run_in(tmp.path(), &["demo", "--out", "E", "--particles", "200"]),
         &["--out", "not written by `bitrock demo`"],
     );
     // With only its own files there, the demo replaces them.
