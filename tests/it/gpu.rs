@@ -860,6 +860,8 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
             .map(|l| l["ln_z"].as_f64().unwrap())
             .collect()
     };
+    // The two backends' evidences differ in their last bits, so that each tells which one ran.
+    assert_ne!(ln_z(&cpu), ln_z(&gpu));
     // The first run races, the second reads the race back: the same choice, said the same way.
     let mut said = Vec::new();
     for _ in 0..2 {
@@ -874,10 +876,22 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
             assert!(line.contains("a dispatch of 480 candidates"), "{line}");
             let chose_cpu = line.contains("auto: scoring on the CPU rather than");
             assert!(chose_cpu || line.contains("rather than the CPU"), "{line}");
+            // The faster kept, the GPU only by its margin (the times as said, to 0.1 ms).
+            let ms = |before: &str| -> f64 {
+                let at = line.find(before).unwrap_or_else(|| panic!("{before}: {line}"));
+                line[..at].rsplit(' ').next().unwrap().parse().unwrap()
+            };
+            let (cpu_ms, gpu_ms) = (ms(" ms on the CPU"), ms(" ms on the software GPU"));
+            if chose_cpu {
+                assert!(cpu_ms <= 1.2 * gpu_ms + 0.15, "{line}");
+            } else {
+                assert!(cpu_ms + 0.15 >= 1.2 * gpu_ms, "{line}");
+            }
             assert_eq!(ln_z(&auto), ln_z(if chose_cpu { &cpu } else { &gpu }), "{line}");
             said.push(line);
         } else {
             assert!(!err.contains("auto: scoring on"), "{err}");
+            assert_eq!(ln_z(&auto), ln_z(&gpu));
         }
     }
     if software {

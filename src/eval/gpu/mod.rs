@@ -1,5 +1,5 @@
 //! The GPU backend: one wgpu device per process, the WGSL kernels, and the host twins of their
-//! uniform structs.
+//! job and prior structs.
 //!
 //! Kernels live in `shaders/`, one per file with entry point `main`; the shared code of
 //! `shaders/shared/` is prepended to each (concatenation, never string replacement) by build.rs,
@@ -846,7 +846,7 @@ fn candidates_per_dispatch(d: usize, limits: &wgpu::Limits) -> (usize, usize) {
     (chunk, chunk.min(1 << 20).min((max_binding / 32) as usize))
 }
 
-/// A scoring kernel bound to its buffers: its pipeline and bind group, the job uniform and the
+/// A scoring kernel bound to its buffers: its pipeline and bind group, the job's buffer and the
 /// SSR buffers (bindings 1 and 5, and the buffer SSR is read back through).
 struct ScoringBuffers<'a> {
     pipeline: &'a wgpu::ComputePipeline,
@@ -887,7 +887,7 @@ fn score_dispatch(
         ctx.queue.write_buffer(buffers.job, 0, bytemuck::bytes_of(&slice));
         encode_dispatch(&mut encoder, "scoring", buffers.pipeline, buffers.bind_group, (x, y));
         if s0 + SAMPLES_PER_DISPATCH < data_len {
-            // The next slice rewrites the job uniform: submit this one first.
+            // The next slice rewrites the job: submit this one first.
             ctx.scoped(|| ctx.queue.submit([encoder.finish()]))?;
             encoder = new_encoder();
         }
@@ -973,10 +973,11 @@ const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage 
 /// The bindings a scoring kernel that reads its candidates from a buffer starts with: the
 /// candidates (proposals, or the records' priors), the job, the speed, torque and ratio
 /// columns, the sums of squares it writes. The job is a read-only storage buffer here, not a
-/// uniform one: lavapipe (Mesa 22.3) inlined the uniform values the proposals' kernel's loops
-/// read into the shader and compiled it again at every dispatch, 25 ms where scoring the SMC's
-/// or the evidence's few hundred proposals takes one (the records' kernel shares the layout).
-/// The streaming kernels keep their uniforms: there it compiles once, and they run faster.
+/// uniform one: from a uniform job, lavapipe (Mesa 22.3) compiles the proposals' kernel again at
+/// every dispatch (it inlines uniform values into the shader), 25 ms where scoring the SMC's or
+/// the evidence's few hundred proposals takes one; the records' kernel shares the layout. The
+/// streaming, kernel-sum and stability kernels keep uniform jobs: on lavapipe their tests ran
+/// longer with storage ones (2026-12-01).
 const STORED_CANDIDATE_BINDINGS: [wgpu::BufferBindingType; 6] = [
     STORAGE_READ,
     STORAGE_READ,

@@ -2,7 +2,7 @@
 //! is written whole or not at all, one writer per run directory, no flag hangs or exhausts the
 //! machine, and data or targets that cannot work exit 2 naming the file or flag. The modules
 //! below hold one class of failure each. Every run is small (the embedded record, a few hundred
-//! particles, the CPU).
+//! particles, the CPU; the demo's on the backend a user gets).
 
 mod bounds;
 mod degenerate;
