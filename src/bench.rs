@@ -440,9 +440,8 @@ fn measure_throughput(opts: &BenchOptions, reps: usize, log: &mut dyn FnMut(Stri
         for &(n, d) in &opts.sizes {
             for &law in &opts.laws {
                 let wish = gpu::tune::ShapeWish {
-                    recorded: None,
                     candidates: n,
-                    explicit: false,
+                    ..Default::default()
                 };
                 let ev = evaluator(synthetic_problem(law, d, 1), backend, wish, &mut |_| {})?;
                 let mut rho = vec![0.0; n];

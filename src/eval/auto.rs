@@ -125,7 +125,11 @@ pub fn race(ctx: &'static GpuContext, problem: &Problem, shape: Shape, wish: Sha
         tune::adapter_key(ctx),
         problem.data_len().next_power_of_two(),
         candidates.next_power_of_two(),
-        if wish.explicit { "explicit" } else { "streams" }
+        match (wish.explicit, wish.lagged) {
+            (true, true) => "explicit lagged",
+            (true, false) => "explicit",
+            (false, _) => "streams",
+        }
     );
     let found = |stored: &StoredRace| Race {
         candidates,
@@ -150,8 +154,8 @@ pub fn race(ctx: &'static GpuContext, problem: &Problem, shape: Shape, wish: Sha
     let cpu = CpuEvaluator::new(problem.clone());
     let stored = StoredRace {
         key: key.clone(),
-        gpu_s: projected(&gpu, candidates, wish.explicit)?,
-        cpu_s: projected(&cpu, candidates, wish.explicit)?,
+        gpu_s: projected(&gpu, candidates, wish)?,
+        cpu_s: projected(&cpu, candidates, wish)?,
     };
     // A cache that cannot be written costs a race in the next process, no more.
     if let Some(path) = &cache {
@@ -162,9 +166,10 @@ pub fn race(ctx: &'static GpuContext, problem: &Problem, shape: Shape, wish: Sha
 }
 
 /// Seconds of a dispatch of `candidates` on `evaluator`: a + b·n through its times at the two
-/// probe sizes (its first call untimed: pipelines built, caches warm). `explicit`: explicit
-/// candidates, the middle of each law's box in turn, else the first of the prior's stream 0.
-fn projected(evaluator: &dyn Evaluator, candidates: usize, explicit: bool) -> Result<f64> {
+/// probe sizes (its first call untimed: pipelines built, caches warm). Explicit candidates (the
+/// middle of each law's box in turn, with their lag-1 sums where `wish` is lagged) where `wish`
+/// asks for them, else the first of the prior's stream 0.
+fn projected(evaluator: &dyn Evaluator, candidates: usize, wish: ShapeWish) -> Result<f64> {
     let boxes = &evaluator.problem().prior.boxes;
     let probes: Vec<Candidate> = (0..PROBES[1])
         .map(|i| {
@@ -176,13 +181,11 @@ fn projected(evaluator: &dyn Evaluator, candidates: usize, explicit: bool) -> Re
             Candidate { slot, params }
         })
         .collect();
-    let mut out = vec![0.0; PROBES[1]];
-    let mut call = |n: usize| {
-        if explicit {
-            evaluator.score_params(&probes[..n], &mut out[..n])
-        } else {
-            evaluator.score(0, 0, &mut out[..n])
-        }
+    let (mut out, mut lag) = (vec![0.0; PROBES[1]], vec![0.0; PROBES[1]]);
+    let mut call = |n: usize| match (wish.explicit, wish.lagged) {
+        (true, true) => evaluator.score_params_lagged(&probes[..n], &mut out[..n], &mut lag[..n]),
+        (true, false) => evaluator.score_params(&probes[..n], &mut out[..n]),
+        (false, _) => evaluator.score(0, 0, &mut out[..n]),
     };
     call(PROBES[0])?;
     let mut times = [0.0; 2];

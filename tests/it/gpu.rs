@@ -816,8 +816,9 @@ per_shape! {
 /// dispatches and says which it keeps: the evidence's explicit dispatches (60 particles × 2
 /// islands × 2 starts × 2 laws = 480 candidates) go to the faster, whose evidence is then
 /// `--backend cpu`'s or `--backend gpu`'s bit for bit; the race is kept in the cache and a
-/// second run reads it to the same choice; with tuning off there is no race and the GPU scores.
-/// On a hardware GPU there is no race at all.
+/// second run reads it to the same choice; the AR(1) noise model's calls (with their lag-1
+/// sums) are raced apart; with tuning off there is no race and the GPU scores. On a hardware
+/// GPU there is no race at all.
 #[test]
 #[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
 fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
@@ -897,7 +898,18 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
     if software {
         assert_eq!(said[0], said[1]);
         let kept = std::fs::read_to_string(cache.path().join("gpu-shapes.json")).unwrap();
-        assert!(kept.contains("512 candidates | explicit"), "{kept}");
+        assert!(kept.contains("512 candidates | explicit\""), "{kept}");
+        // Under the AR(1) noise model the evidence scores the lag-1 sums too (two dispatches on
+        // the GPU, one pass on the CPU): a race of its own, on those calls.
+        let ar1: Vec<&str> = args("auto")
+            .into_iter()
+            .map(|a| if a == "iid" { "ar1" } else { a })
+            .collect();
+        let (code, _, err) = run_bitrock_with(&[("BITROCK_CACHE_DIR", cache_dir)], &ar1);
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("auto: scoring on"), "{err}");
+        let kept = std::fs::read_to_string(cache.path().join("gpu-shapes.json")).unwrap();
+        assert!(kept.contains("512 candidates | explicit lagged\""), "{kept}");
     }
     let (code, _, err) = run_bitrock_with(
         &[("BITROCK_CACHE_DIR", cache_dir), ("BITROCK_GPU_TUNING", "off")],

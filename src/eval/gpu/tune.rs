@@ -156,6 +156,11 @@ pub struct ShapeWish {
     /// software driver ([`crate::eval::auto`]).
     #[serde(default)]
     pub explicit: bool,
+    /// Whether those explicit candidates are scored with their lag-1 sums too (the evidence
+    /// under the AR(1) noise model: two dispatches on the GPU, one pass on the CPU), which is
+    /// then what `auto` races.
+    #[serde(default)]
+    pub lagged: bool,
 }
 
 impl Default for ShapeWish {
@@ -164,6 +169,7 @@ impl Default for ShapeWish {
             recorded: None,
             candidates: SIZES[1],
             explicit: false,
+            lagged: false,
         }
     }
 }
@@ -177,6 +183,7 @@ impl ShapeWish {
             recorded,
             candidates: particles.saturating_mul(8).clamp(SIZES[0], SIZES[SIZES.len() - 1]),
             explicit: false,
+            lagged: false,
         }
     }
 }

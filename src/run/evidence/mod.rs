@@ -409,6 +409,8 @@ impl Job {
             shape: crate::eval::gpu::tune::ShapeWish {
                 candidates: particles.saturating_mul(starts * self.sampler.islands).max(1),
                 explicit: true,
+                // Every noise model's evidence but the iid one's scores the lag-1 sums too.
+                lagged: self.noise != Some(NoiseModel::Iid),
                 ..Default::default()
             },
             ..Placement::default()
