@@ -974,8 +974,9 @@ const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage 
 /// candidates (proposals, or the records' priors), the job, the speed, torque and ratio
 /// columns, the sums of squares it writes. The job is a read-only storage buffer here, not a
 /// uniform one: from a uniform job, lavapipe (Mesa 22.3) compiles the proposals' kernel again at
-/// every dispatch (it inlines uniform values into the shader), 25 ms where scoring the SMC's or
-/// the evidence's few hundred proposals takes one; the records' kernel shares the layout. The
+/// every dispatch (by its profile, inlining uniform values into the shader), 25 ms where
+/// scoring the SMC's or the evidence's few hundred proposals takes one; the records' kernel
+/// shares the layout. The
 /// streaming, kernel-sum and stability kernels keep uniform jobs: on lavapipe their tests ran
 /// longer with storage ones (2026-12-01).
 const STORED_CANDIDATE_BINDINGS: [wgpu::BufferBindingType; 6] = [
