@@ -976,9 +976,8 @@ const STORAGE_WRITE: wgpu::BufferBindingType = wgpu::BufferBindingType::Storage 
 /// uniform one: from a uniform job, lavapipe (Mesa 22.3) compiles the proposals' kernel again at
 /// every dispatch (by its profile, inlining uniform values into the shader), 25 ms where
 /// scoring the SMC's or the evidence's few hundred proposals takes one; the records' kernel
-/// shares the layout. The
-/// streaming, kernel-sum and stability kernels keep uniform jobs: on lavapipe their tests ran
-/// longer with storage ones (2026-12-01).
+/// shares the layout. The streaming, kernel-sum and stability kernels keep uniform jobs: on
+/// lavapipe their tests ran longer with storage ones (2026-12-01).
 const STORED_CANDIDATE_BINDINGS: [wgpu::BufferBindingType; 6] = [
     STORAGE_READ,
     STORAGE_READ,
