@@ -267,7 +267,7 @@ fn demo_prints_fits_and_the_population_table() {
     let out = dir.path().join("demo-run");
     // On the backend a user gets (auto: raced on a software driver, the GPU on a hardware one);
     // the GPU's own agreement with the CPU is tested in gpu.rs.
-    let (code, stdout, stderr) = run(&["demo", "--particles", "2000", "--out", out.to_str().unwrap()]);
+    let (code, stdout, stderr) = run(&["demo", "--particles", "1000", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("synthetic"));
     for law in ["m1", "m2", "m3", "m4"] {

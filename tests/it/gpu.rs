@@ -154,7 +154,7 @@ fn rho_agrees_with_the_cpu_for_every_law(shape: Shape) {
 fn a_rejection_run_gives_the_same_populations_on_both_backends(shape: Shape) {
     require_gpu();
     let problem = demo_problem(&Law::ALL, 21);
-    let config = RejectionConfig::from(Schedule { particles: 2_000, eps_min: 0.014, ..Schedule::default() });
+    let config = RejectionConfig::from(Schedule { particles: 1_000, eps_min: 0.014, ..Schedule::default() });
     let cpu = rejection::run(&CpuEvaluator::new(problem.clone()), &config).unwrap();
     let gpu_run = rejection::run(&gpu_evaluator(&problem, shape), &config).unwrap();
     assert_eq!(cpu.populations.len(), gpu_run.populations.len());

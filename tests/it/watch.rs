@@ -937,11 +937,11 @@ fn a_fast_record_is_thinned_to_fifty_hertz_and_watched_as_its_thinned_copy() {
     assert!(whole.iter().all(|u| u["samples"] == 4000), "{whole:?}");
 }
 
-/// m2 for 60 s then m3 for 60 s, logged at 1 kHz: thinned to 50 Hz by default, windows of
+/// m2 for 40 s then m3 for 40 s, logged at 1 kHz: thinned to 50 Hz by default, windows of
 /// 10 s every 2 s.
 const LOGGER_WELL: &str = "sample_hz = 1000\nnoise_torque_knm = 0.3\nnoise_speed_rpm = 0.5\nseed = 7\n\n\
-[[segment]]\nname = \"claystone\"\nduration_s = 60\nlaw = \"m2\"\nomega_rpm = 60\nwob_kn = 244.2\n\n\
-[[segment]]\nname = \"sandstone\"\nduration_s = 60\nlaw = \"m3\"\nomega_rpm = 60\nwob_kn = 244.2\n";
+[[segment]]\nname = \"claystone\"\nduration_s = 40\nlaw = \"m2\"\nomega_rpm = 60\nwob_kn = 244.2\n\n\
+[[segment]]\nname = \"sandstone\"\nduration_s = 40\nlaw = \"m3\"\nomega_rpm = 60\nwob_kn = 244.2\n";
 
 #[test]
 fn a_logger_s_record_ranks_each_formation_s_law_first_in_every_window_inside_it() {
@@ -956,15 +956,16 @@ fn a_logger_s_record_ranks_each_formation_s_law_first_in_every_window_inside_it(
         "{stderr}"
     );
     let updates: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    assert_eq!(updates.len(), 56);
+    // Windows of 10 s every 2 s over 80 s: starts 0, 2, …, 70.
+    assert_eq!(updates.len(), 36);
     let start = |u: &serde_json::Value| u["start_s"].as_f64().unwrap();
     // Every window inside a formation (after the first 10 s, the simulation's start-up
     // before the bit sticks) ranks its law first: a warm start that misses a posterior the
     // window before did not have (m3's, in the sandstone) is found again from the boxes.
     for u in &updates {
-        let want = if start(u) >= 10.0 && start(u) + 10.0 <= 60.0 {
+        let want = if start(u) >= 10.0 && start(u) + 10.0 <= 40.0 {
             "m2"
-        } else if start(u) >= 60.0 {
+        } else if start(u) >= 40.0 {
             "m3"
         } else {
             continue;
@@ -972,7 +973,7 @@ fn a_logger_s_record_ranks_each_formation_s_law_first_in_every_window_inside_it(
         assert_eq!(u["most_probable"], want, "window {} at {} s", u["window"], start(u));
     }
     // A change where the start-up ends, and one within two windows of the first that holds
-    // the sandstone (window 26, [52, 62) s); none elsewhere.
+    // the sandstone (window 16, [32, 42) s); none elsewhere.
     let changes: Vec<u64> = updates
         .iter()
         .filter(|u| u["change"] == true)
@@ -980,7 +981,7 @@ fn a_logger_s_record_ranks_each_formation_s_law_first_in_every_window_inside_it(
         .collect();
     assert_eq!(changes.len(), 2, "{changes:?}");
     assert_eq!(changes[0], 5);
-    assert!((26..=28).contains(&changes[1]), "{changes:?}");
+    assert!((16..=18).contains(&changes[1]), "{changes:?}");
 }
 
 /// The rows of `record` (a CSV with a `time_s` column first) with `start` ≤ t < `end`, as a
