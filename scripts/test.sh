@@ -91,9 +91,11 @@ if ! diff -u bindings/python/python/bitrock/_bitrock.pyi "$STUBS/bitrock/_bitroc
     exit 1
 fi
 rm -rf "$STUBS"
-# On two workers, each test file on one (its module fixtures made once). pytest exits 5 when it
-# collects no test (on xdist's workers too): set -e fails the run then.
-BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q -n 2 --dist loadfile bindings/python/tests
+# On two workers, each test file on one (its module fixtures made once), the ten slowest
+# listed at the end. pytest exits 5 when it collects no test (on xdist's workers too): set -e
+# fails the run then.
+BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q -n 2 --dist loadfile --durations=10 \
+    bindings/python/tests
 
 # ArviZ 1.x (it needs Python ≥ 3.12) reads the runs' and the evidence's DataTrees as the 0.2x
 # line above does: the package's abi3 wheel, built by the install above, in a second environment.
