@@ -7,6 +7,7 @@ use bitrock::Law;
 use bitrock::data::DataOptions;
 use bitrock::error::Error;
 use bitrock::units::TorqueUnit;
+use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -177,19 +178,20 @@ pub(crate) fn load_law(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Str
     Ok(law.name().to_string())
 }
 
-/// The law's torque r·T(w) at the bit speeds `speed_rad_s` (rad/s), its parameters `params` in
-/// its order with torques in `torque_unit` (kN·m by default); the torques in that unit. A
-/// speed where the torque has no value gives NaN.
+/// The law's torque r·T(w) at the bit speeds `speed_rad_s` (rad/s, a contiguous float64
+/// array, read without a copy), its parameters `params` in its order with torques in
+/// `torque_unit` (kN·m by default); the torques in that unit, as a new array. A speed where the
+/// torque has no value gives NaN.
 #[pyfunction]
 #[pyo3(signature = (law, speed_rad_s, params, r, torque_unit))]
-pub(crate) fn torque(
-    py: Python<'_>,
+pub(crate) fn torque<'py>(
+    py: Python<'py>,
     law: String,
-    speed_rad_s: Vec<f64>,
+    speed_rad_s: PyReadonlyArray1<'py, f64>,
     params: Vec<f64>,
     r: f64,
     torque_unit: Option<String>,
-) -> PyResult<Vec<f64>> {
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let law = self::laws(py, Some(vec![law]))?.expect("one law")[0];
     let unit = unit(py, "torque_unit", torque_unit, TorqueUnit::from_suffix)?.unwrap_or(TorqueUnit::KNm);
     if params.len() != law.n_params() || params.iter().any(|v| !v.is_finite()) {
@@ -201,15 +203,16 @@ pub(crate) fn torque(
             bitrock::Error::setting("r", format!("must be a finite number, got {r}")),
         ));
     }
-    if let Some(w) = speed_rad_s.iter().find(|w| !w.is_finite()) {
+    let speeds = speed_rad_s.as_slice()?;
+    if let Some(w) = speeds.iter().find(|w| !w.is_finite()) {
         return Err(to_py(
             py,
             bitrock::Error::setting("speed_rad_s", format!("must be finite numbers, got {w}")),
         ));
     }
     let si = law.scale_torque(&params, unit.newton_metres());
-    Ok(speed_rad_s
-        .iter()
-        .map(|&w| law.torque(&si, w, r) / unit.newton_metres())
-        .collect())
+    Ok(PyArray1::from_iter(
+        py,
+        speeds.iter().map(|&w| law.torque(&si, w, r) / unit.newton_metres()),
+    ))
 }

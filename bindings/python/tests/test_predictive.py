@@ -21,6 +21,19 @@ def test_a_laws_torque_is_its_closed_form_in_either_unit() -> None:
     np.testing.assert_allclose(bitrock.torque("m2", w, [13e3, 6.5e3, 0.3], torque_unit="nm"), 1e3 * expected, rtol=1e-14)
     np.testing.assert_allclose(bitrock.torque("m2", w, [13.0, 6.5, 0.3], r=0.5), 0.5 * expected, rtol=1e-14)
     assert float(bitrock.torque("m4", 2.0, [1.0, 2.0, 3.0, 4.0])) == pytest.approx(1 + 4 + 12 + 32)
+    # Speeds in any layout and number type: a strided view, a transposed array, float32,
+    # integers and a list give each speed's own torque, and the speeds stay as they were.
+    big = np.linspace(0.0, 20.0, 41)
+    whole = bitrock.torque("m2", big, [13.0, 6.5, 0.3])
+    np.testing.assert_array_equal(bitrock.torque("m2", big[::4], [13.0, 6.5, 0.3]), whole[::4])
+    np.testing.assert_array_equal(bitrock.torque("m2", w.T, [13.0, 6.5, 0.3]), got.T)
+    np.testing.assert_array_equal(
+        bitrock.torque("m2", big.astype(np.float32), [13.0, 6.5, 0.3]),
+        bitrock.torque("m2", big.astype(np.float32).astype(float), [13.0, 6.5, 0.3]),
+    )
+    np.testing.assert_array_equal(bitrock.torque("m2", np.arange(3), [13.0, 6.5, 0.3]), whole[[0, 2, 4]])
+    np.testing.assert_array_equal(bitrock.torque("m2", [0.0, 0.5], [13.0, 6.5, 0.3]), whole[:2])
+    np.testing.assert_array_equal(big, np.linspace(0.0, 20.0, 41))
 
 
 @pytest.mark.parametrize(

@@ -716,8 +716,9 @@ def torque(
     ``"nm"``), at the weight-on-bit ratio ``r``; the torques in the same unit and shape (NaN
     where a law file's torque has no value)."""
     speeds = np.asarray(speed_rad_s, dtype=float)
-    values = _bitrock.torque(law, [float(w) for w in speeds.ravel()], [float(p) for p in params], float(r), torque_unit)
-    return np.asarray(values, dtype=float).reshape(speeds.shape)
+    flat = np.ascontiguousarray(speeds.ravel())
+    values = _bitrock.torque(law, flat, [float(p) for p in params], float(r), torque_unit)
+    return values.reshape(speeds.shape)
 
 
 def simulate(

@@ -304,11 +304,12 @@ def surface(path: str | PathLike[str], laws: SupportsGetItem[int, str] | None, o
     run (a GPU fallback of the advice's strings, say) go to `note` once it is done.
     """
 
-def torque(law: str, speed_rad_s: SupportsGetItem[int, SupportsFloat | SupportsIndex], params: SupportsGetItem[int, SupportsFloat | SupportsIndex], r: SupportsFloat | SupportsIndex, torque_unit: str | None) -> list[float]:
+def torque(law: str, speed_rad_s: Incomplete, params: SupportsGetItem[int, SupportsFloat | SupportsIndex], r: SupportsFloat | SupportsIndex, torque_unit: str | None) -> Incomplete:
     """
-    The law's torque r·T(w) at the bit speeds `speed_rad_s` (rad/s), its parameters `params` in
-    its order with torques in `torque_unit` (kN·m by default); the torques in that unit. A
-    speed where the torque has no value gives NaN.
+    The law's torque r·T(w) at the bit speeds `speed_rad_s` (rad/s, a contiguous float64
+    array, read without a copy), its parameters `params` in its order with torques in
+    `torque_unit` (kN·m by default); the torques in that unit, as a new array. A speed where the
+    torque has no value gives NaN.
     """
 
 def version() -> str:
