@@ -716,8 +716,8 @@ def torque(
     ``"nm"``), at the weight-on-bit ratio ``r``; the torques in the same unit and shape (NaN
     where a law file's torque has no value)."""
     speeds = np.asarray(speed_rad_s, dtype=float)
-    flat = np.ascontiguousarray(speeds.ravel())
-    values = _bitrock.torque(law, flat, [float(p) for p in params], float(r), torque_unit)
+    # ravel gives one contiguous row (copying only a strided or transposed array).
+    values = _bitrock.torque(law, speeds.ravel(), [float(p) for p in params], float(r), torque_unit)
     return values.reshape(speeds.shape)
 
 
