@@ -29,24 +29,35 @@ struct StringsJob {
     steps_per_sample: u32,
     settle_samples: u32,
     record_samples: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // On a record's clock (`on_clock`): the settling's steps and where the drive starts in
+    // the inputs.
+    settle_steps: u32,
+    drive_offset: u32,
     dt_s: f32,
     alpha: f32,
     beta: f32,
     stuck_speed: f32,
+    // On a record's clock: the settling's step (s).
+    settle_dt_s: f32,
+    _pad0: f32,
+    _pad1: f32,
+    _pad2: f32,
     inertia: array<vec4<f32>, 4>,
     stiffness: array<vec4<f32>, 4>,
 }
 
 @group(0) @binding(0) var<uniform> job: StringsJob;
-// Per string: law id (bits), Ω (rad/s), r, unused, six parameters (N·m), two unused.
+// Per string: law id (bits), Ω (rad/s), r, unused, six parameters (N·m), then, on a record's
+// clock, the top element's stiffness (N·m/rad) and β (s). On a record's clock the drive
+// follows the strings' inputs from `drive_offset`: Ω (rad/s) and r per sample.
 @group(0) @binding(1) var<storage, read> inputs: array<f32>;
 // Per string: 16 lags (rad), 16 speeds (rad/s), stuck (0/1), slip direction (±1); read as the
 // start, written back as the end.
 @group(0) @binding(2) var<storage, read_write> states: array<f32>;
 // Per string: samples, stuck, onsets, first onset, last onset (u32 bits), speed min, max, sum
 // (rad/s), bit torque min, max, surface torque min, max (N·m), diverged, last stuck (u32 bits).
+// On a record's clock: per sample the surface torque (N·m), the bit speed and its least and
+// greatest since the sample before (rad/s), then the samples reached (u32 bits).
 @group(0) @binding(3) var<storage, read_write> summaries: array<f32>;
 
 struct State {
@@ -64,12 +75,20 @@ var<private> params: array<f32, 6>;
 var<private> omega: f32;
 var<private> ratio: f32;
 var<private> static_nm: f32;
+// The top element's stiffness and the stiffness-proportional damping β: the job's, or, on a
+// record's clock, each string's own (a run that infers the string gives every candidate its
+// own).
+var<private> top_stiffness: f32;
+var<private> beta: f32;
 
 fn inertia(j: u32) -> f32 {
     return job.inertia[j / 4u][j % 4u];
 }
 
 fn stiffness(j: u32) -> f32 {
+    if (j == 0u) {
+        return top_stiffness;
+    }
     return job.stiffness[j / 4u][j % 4u];
 }
 
@@ -88,10 +107,10 @@ fn string_torque(s: State, j: u32) -> f32 {
     }
     let v = omega - s.w[j];
     let k = stiffness(j);
-    var f = k * (s.u[j] - u_above) + job.beta * k * (v - v_above) + job.alpha * inertia(j) * v;
+    var f = k * (s.u[j] - u_above) + beta * k * (v - v_above) + job.alpha * inertia(j) * v;
     if (j + 1u < NODES) {
         let kb = stiffness(j + 1u);
-        f = f - (kb * (s.u[j + 1u] - s.u[j]) + job.beta * kb * ((omega - s.w[j + 1u]) - v));
+        f = f - (kb * (s.u[j + 1u] - s.u[j]) + beta * kb * ((omega - s.w[j + 1u]) - v));
     }
     return f;
 }
@@ -217,7 +236,7 @@ fn bit_torque(m: Motion) -> f32 {
 
 fn surface_torque(m: Motion) -> f32 {
     let k = stiffness(0u);
-    return k * m.s.u[0] + job.beta * k * (omega - m.s.w[0]);
+    return k * m.s.u[0] + beta * k * (omega - m.s.w[0]);
 }
 
 @compute @workgroup_size(64)
@@ -233,6 +252,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     ratio = inputs[b + 2u];
     params = array<f32, 6>(inputs[b + 4u], inputs[b + 5u], inputs[b + 6u], inputs[b + 7u], inputs[b + 8u], inputs[b + 9u]);
     static_nm = max(ratio * torque_at(law, params, 0.0), 0.0);
+    top_stiffness = job.stiffness[0].x;
+    beta = job.beta;
     let runaway = 1000.0 * max(abs(omega), 1.0);
 
     let sb = STATE_WORDS * i;
@@ -317,4 +338,78 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     summaries[o + 11u] = surface_max;
     summaries[o + 12u] = bitcast<f32>(select(0u, 1u, diverged));
     summaries[o + 13u] = bitcast<f32>(select(0u, 1u, last_stuck));
+}
+
+// The drive of sample `k` of a record's clock from now on (the twin's set_operating_point).
+fn drive_at(k: u32) {
+    let d = job.drive_offset + 2u * k;
+    omega = inputs[d];
+    ratio = inputs[d + 1u];
+    static_nm = max(ratio * torque_at(law, params, 0.0), 0.0);
+}
+
+// Still within physical bounds under the current drive (the twin's in_bounds).
+fn in_bounds(m: Motion) -> bool {
+    let bit = NODES - 1u;
+    let runaway = 1000.0 * max(abs(omega), 1.0);
+    return abs(m.s.w[bit]) <= runaway && abs(m.s.u[bit]) < 3.0e38;
+}
+
+// One string on a record's clock, the twin of `simulate_on_clock` in src/simulate/surface.rs:
+// from rest with the bit stuck, settled at the first sample's drive, then each sample's surface
+// torque and bit speed, and the bit speed's extremes over the steps since the sample before.
+// `steps_per_sample` steps of `dt_s` per sample, `settle_steps` of `settle_dt_s` before.
+@compute @workgroup_size(64)
+fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let local = gid.x + gid.y * job.row_width;
+    if (local >= job.count) {
+        return;
+    }
+    let i = job.first + local;
+    let b = INPUT_WORDS * i;
+    law = select(bitcast<u32>(inputs[b]), LAW, LAW != ANY_LAW);
+    params = array<f32, 6>(inputs[b + 4u], inputs[b + 5u], inputs[b + 6u], inputs[b + 7u], inputs[b + 8u], inputs[b + 9u]);
+    top_stiffness = inputs[b + 10u];
+    beta = inputs[b + 11u];
+    let bit = NODES - 1u;
+    let samples = job.record_samples;
+    let o = (4u * samples + 1u) * i;
+
+    var m: Motion;
+    for (var j = 0u; j < NODES; j = j + 1u) {
+        m.s.u[j] = 0.0;
+        m.s.w[j] = 0.0;
+    }
+    m.stuck = true;
+    m.dir = 1.0;
+    drive_at(0u);
+    for (var k = 0u; k < job.settle_steps; k = k + 1u) {
+        m = step(m, job.settle_dt_s);
+    }
+    var reached = 0u;
+    if (in_bounds(m)) {
+        for (var n = 0u; n < samples; n = n + 1u) {
+            var least = 3.0e38;
+            var greatest = -3.0e38;
+            if (n > 0u) {
+                drive_at(n - 1u);
+                for (var k = 0u; k < job.steps_per_sample; k = k + 1u) {
+                    m = step(m, job.dt_s);
+                    least = min(least, m.s.w[bit]);
+                    greatest = max(greatest, m.s.w[bit]);
+                }
+                if (!in_bounds(m)) {
+                    break;
+                }
+            }
+            let w = m.s.w[bit];
+            let at = o + 4u * n;
+            summaries[at] = surface_torque(m);
+            summaries[at + 1u] = w;
+            summaries[at + 2u] = min(least, w);
+            summaries[at + 3u] = max(greatest, w);
+            reached = n + 1u;
+        }
+    }
+    summaries[o + 4u * samples] = bitcast<f32>(reached);
 }

@@ -1,10 +1,11 @@
 //! `bitrock bench --surface`: a surface record's inference end to end, timed: a 10-minute record
 //! at 1 Hz of m2 at 60 rpm (the bit stuck half the time, 0.2 kN·m of noise on the surface
-//! torque), four laws, a final population of 2,000; the strings it simulated per particle,
-//! against what rejection ABC would simulate to the same tolerance.
+//! torque), four laws, a final population of 2,000, on one backend; the strings it simulated
+//! per particle, against what rejection ABC would simulate to the same tolerance.
 
 use crate::data::surface::{SurfaceColumns, SurfaceRecord};
 use crate::error::Result;
+use crate::eval::Backend;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::run::surface::{SurfaceSettings, infer};
 use crate::simulate::{self, Initial, Recording, SimConfig};
@@ -17,12 +18,16 @@ pub struct SurfaceBenchOptions {
     pub record_s: f64,
     pub particles: usize,
     pub repetitions: usize,
+    /// Where the strings are simulated.
+    pub backend: Backend,
 }
 
 /// The measurement.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SurfaceBench {
     pub record: String,
+    /// Where the strings were simulated: `CPU` or `GPU <adapter>`.
+    pub backend: String,
     pub laws: Vec<Law>,
     pub particles: usize,
     /// Wall seconds of the whole inference (pilot, scout, sampler, check, predictive; no
@@ -86,6 +91,7 @@ pub fn run(opts: &SurfaceBenchOptions, log: &mut dyn FnMut(String)) -> Result<Su
     let mut settings = SurfaceSettings::new(laws.clone());
     settings.smc.schedule.particles = opts.particles;
     settings.advice = false;
+    settings.backend = opts.backend;
     let mut walls = Vec::new();
     let mut last = None;
     for rep in 0..opts.repetitions {
@@ -103,6 +109,7 @@ pub fn run(opts: &SurfaceBenchOptions, log: &mut dyn FnMut(String)) -> Result<Su
     }
     let result = last.expect("at least one repetition");
     Ok(SurfaceBench {
+        backend: result.backend.clone(),
         record: format!("{} s of m2 at 60 rpm, 1 Hz, 0.2 kN·m of noise", opts.record_s),
         laws,
         particles: opts.particles,

@@ -49,8 +49,9 @@ pub struct BenchCmd {
     #[arg(long, conflicts_with_all = ["selection", "smc", "watch"])]
     pub strings: bool,
     /// Measure only a surface record's inference (`bitrock surface`): ten minutes of m2 at 60
-    /// rpm at 1 Hz, four laws, N = 2,000 (two minutes and N = 300 with --quick), on the CPU:
-    /// wall time, strings per particle and rejection ABC's to the same tolerance.
+    /// rpm at 1 Hz, four laws, N = 2,000 (two minutes and N = 300 with --quick), on the GPU
+    /// and the CPU (or the --backend named): wall time, strings per particle and rejection
+    /// ABC's to the same tolerance.
     #[arg(long, conflicts_with_all = ["selection", "smc", "watch", "strings"])]
     pub surface: bool,
     /// Measure only the coupled axial-torsional bit's simulator (`bitrock coupled`):
@@ -346,39 +347,45 @@ fn print_report<R: serde::Serialize>(
     Ok(ExitCode::SUCCESS)
 }
 
-/// `--surface`: a surface record's inference end to end.
+/// `--surface`: a surface record's inference end to end, on each backend asked for.
 fn surface(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
-    let opts = bitrock::bench::surface::SurfaceBenchOptions {
-        record_s: if cmd.quick { 120.0 } else { 600.0 },
-        particles: if cmd.quick { 300 } else { 2000 },
-        repetitions: cmd.reps,
-    };
-    let report = bitrock::bench::surface::run(&opts, &mut say(cmd, ""))?;
-    print_report(cmd, &report, |out, report| {
-        writeln!(
-            out,
-            "surface inference: {}, four laws, N = {}",
-            report.record, report.particles
-        )?;
-        writeln!(
-            out,
-            "wall time {:.1} s (median of {}; {:.1}–{:.1}), {} strings simulated",
-            report.wall_s.median, cmd.reps, report.wall_s.min, report.wall_s.max, report.strings
-        )?;
-        writeln!(
-            out,
-            "strings per particle: {:.1}; rejection ABC to the same ε: {}",
-            report.strings_per_particle,
-            report
-                .rejection_strings_per_particle
-                .map_or("more than the pilot".to_string(), |n| format!("{n:.0}"))
-        )?;
-        let probabilities: Vec<String> = report
-            .probabilities
-            .iter()
-            .map(|(l, p)| format!("{l} {p:.3}"))
-            .collect();
-        writeln!(out, "P(law): {}; {}", probabilities.join(", "), report.verdict)?;
+    let mut reports = Vec::new();
+    for backend in simulated_backends(cmd) {
+        let opts = bitrock::bench::surface::SurfaceBenchOptions {
+            record_s: if cmd.quick { 120.0 } else { 600.0 },
+            particles: if cmd.quick { 300 } else { 2000 },
+            repetitions: cmd.reps,
+            backend,
+        };
+        reports.push(bitrock::bench::surface::run(&opts, &mut say(cmd, ""))?);
+    }
+    print_report(cmd, &reports, |out, reports| {
+        for report in reports {
+            writeln!(
+                out,
+                "surface inference on the {}: {}, four laws, N = {}",
+                report.backend, report.record, report.particles
+            )?;
+            writeln!(
+                out,
+                "wall time {:.1} s (median of {}; {:.1}–{:.1}), {} strings simulated",
+                report.wall_s.median, cmd.reps, report.wall_s.min, report.wall_s.max, report.strings
+            )?;
+            writeln!(
+                out,
+                "strings per particle: {:.1}; rejection ABC to the same ε: {}",
+                report.strings_per_particle,
+                report
+                    .rejection_strings_per_particle
+                    .map_or("more than the pilot".to_string(), |n| format!("{n:.0}"))
+            )?;
+            let probabilities: Vec<String> = report
+                .probabilities
+                .iter()
+                .map(|(l, p)| format!("{l} {p:.3}"))
+                .collect();
+            writeln!(out, "P(law): {}; {}", probabilities.join(", "), report.verdict)?;
+        }
         Ok(())
     })
 }

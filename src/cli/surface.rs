@@ -5,6 +5,7 @@ use super::args::{finite_number, parse_laws, set_threads};
 use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
+use bitrock::eval::Backend;
 use bitrock::run::surface::{
     self, AtTheBit, StringParam, StringPosterior, SurfaceResult, SurfaceSettings, ValueOrBounds,
 };
@@ -115,6 +116,10 @@ pub struct SurfaceCmd {
     pub settle_s: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Where the strings are simulated: gpu, cpu, or auto (the GPU when an adapter exists, a
+    /// software one too, else the CPU, saying so).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
@@ -163,6 +168,7 @@ impl SurfaceCmd {
             dt_s: self.dt_s,
             settle_s: self.settle_s,
             seed: self.seed,
+            backend: self.backend,
         };
         Ok(settings.config(self.laws()?)?)
     }
@@ -264,12 +270,13 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
     )?;
     writeln!(
         out,
-        "ABC-SMC on simulated strings: {} populations, final ε {} (the noise's own distance {:.4}), {} strings simulated in {:.1} s ({})",
+        "ABC-SMC on simulated strings: {} populations, final ε {} (the noise's own distance {:.4}), {} strings simulated in {:.1} s on the {} ({})",
         r.populations,
         r.final_epsilon.map_or("∞".into(), |e| format!("{e:.4}")),
         r.noise_floor,
         r.simulations,
         r.seconds,
+        r.backend,
         r.stop
     )?;
     let c = &r.cost;

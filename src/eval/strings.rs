@@ -50,6 +50,32 @@ pub fn integrate(
     )
 }
 
+/// Where a run's strings go, decided once before it starts: [`Backend::Gpu`] or
+/// [`Backend::Cpu`], and in words. `auto` takes any GPU that can be set up, a software driver
+/// too (lavapipe integrates a batch of strings several times faster than the CPU twin: its
+/// compiled kernel runs a vector lane per string), and the CPU where none can, saying so.
+pub fn resolve(backend: Backend, note: &mut dyn FnMut(String)) -> Result<(Backend, Ran)> {
+    let on_gpu = |ctx: &gpu::GpuContext, note: &mut dyn FnMut(String)| {
+        note(format!(
+            "{}: {} (simulated strings)",
+            super::GPU_BACKEND_NOTE,
+            ctx.describe()
+        ));
+        (Backend::Gpu, Ran::Gpu(ctx.describe()))
+    };
+    match backend {
+        Backend::Cpu => Ok((Backend::Cpu, Ran::Cpu)),
+        Backend::Gpu => Ok(on_gpu(gpu::context()?, note)),
+        Backend::Auto => match gpu::context() {
+            Ok(ctx) => Ok(on_gpu(ctx, note)),
+            Err(e) => {
+                fall_back_to_cpu(e, note)?;
+                Ok((Backend::Cpu, Ran::Cpu))
+            }
+        },
+    }
+}
+
 /// `on_gpu` on `backend`'s GPU with the adapter's name, or `on_cpu`: under `auto` a GPU that
 /// cannot be set up (or fails) is said through `note` and the CPU computes.
 pub(crate) fn on_backend<T>(

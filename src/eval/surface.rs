@@ -14,7 +14,8 @@
 //! how much it varies across the prior, not by its unit (Prangle 2017's scaling, fixed after
 //! the pilot so that ρ stays a function of the parameters). A diverged string scores +∞.
 
-use super::{Evaluator, Problem};
+use super::gpu::strings::OnClockJob;
+use super::{Backend, Evaluator, Problem};
 use crate::error::Result;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::{Candidate, Prior};
@@ -45,6 +46,10 @@ pub struct SurfaceModel {
     /// The MWD tool's downhole extremes the record holds, compared as the tool reports them
     /// (no noise is added to them).
     pub downhole: Option<DownholeExtremes>,
+    /// Where the strings are simulated: [`Backend::Gpu`] (f32, the batch at once) or
+    /// [`Backend::Cpu`] (f64, rayon across strings), resolved before a run starts
+    /// ([`Backend::Auto`] simulates on the CPU).
+    pub backend: Backend,
 }
 
 /// Which noise a simulation gets: a candidate's own ([`NoiseKey::of`]) or a re-simulation's.
@@ -140,26 +145,53 @@ impl SurfaceModel {
         simulate_on_clock(&chain, &self.drive, law, &params[..law.n_params()], self.integration)
     }
 
-    /// [`Self::simulate_noiseless`], its surface torque with the noise of `key`.
-    pub fn simulate(&self, law: Law, params: &[f64], key: NoiseKey) -> OnClock {
-        let mut run = self.simulate_noiseless(law, params);
+    /// [`Self::simulate_noiseless`] for every `(law, coordinates)` of `strings`, in order, on
+    /// the model's backend: the GPU simulates the batch at once.
+    pub fn simulate_noiseless_many(&self, strings: &[(Law, &[f64])]) -> Result<Vec<OnClock>> {
+        if self.backend != Backend::Gpu {
+            return Ok(strings
+                .par_iter()
+                .with_max_len(1)
+                .map(|(law, params)| self.simulate_noiseless(*law, params))
+                .collect());
+        }
+        let chains: Vec<Cow<'_, Chain>> = strings.iter().map(|(law, p)| self.chain_of(*law, p)).collect();
+        let jobs: Vec<OnClockJob<'_>> = strings
+            .iter()
+            .zip(&chains)
+            .map(|((law, params), chain)| OnClockJob {
+                law: *law,
+                params_nm: &params[..law.n_params()],
+                chain,
+            })
+            .collect();
+        Ok(super::gpu::strings::on_clock_batch(
+            &self.drive,
+            self.integration,
+            &jobs,
+        )?)
+    }
+
+    /// Adds the model's noise, drawn under `key`, to a simulated string's surface torque (none
+    /// to a string that diverged).
+    pub fn add_noise(&self, run: &mut OnClock, key: NoiseKey) {
         if !run.diverged {
             add_noise(&mut run.surface_torque_nm, self.noise_sd_nm, key);
         }
-        run
     }
 
-    /// `candidate`'s string (a candidate of `prior`), with its own noise under `seed`.
-    pub fn simulate_candidate(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> OnClock {
-        let law = prior.law(candidate.slot);
-        let dims = prior.boxes[candidate.slot].lower.len();
-        self.simulate(law, &candidate.widened()[..dims], NoiseKey::of(seed, candidate))
-    }
-
-    /// The summaries of `candidate`'s simulation under `seed` (`None` where it diverged).
-    pub fn summaries_of(&self, prior: &Prior, seed: u64, candidate: &Candidate) -> Option<Summaries> {
-        let run = self.simulate_candidate(prior, seed, candidate);
-        (!run.diverged).then(|| self.summaries_of_run(&run))
+    /// The noise-free strings of `candidates` (candidates of `prior`), in order, on the
+    /// model's backend.
+    pub fn simulate_candidates_noiseless(&self, prior: &Prior, candidates: &[Candidate]) -> Result<Vec<OnClock>> {
+        let widened: Vec<(Law, Vec<f64>)> = candidates
+            .iter()
+            .map(|c| {
+                let dims = prior.boxes[c.slot].lower.len();
+                (prior.law(c.slot), c.widened()[..dims].to_vec())
+            })
+            .collect();
+        let strings: Vec<(Law, &[f64])> = widened.iter().map(|(law, p)| (*law, p.as_slice())).collect();
+        self.simulate_noiseless_many(&strings)
     }
 
     /// The summaries of a simulated string, its surface torque as it stands.
@@ -304,7 +336,11 @@ impl SurfaceEvaluator {
 
 impl Evaluator for SurfaceEvaluator {
     fn backend(&self) -> &'static str {
-        "cpu"
+        if self.model.backend == Backend::Gpu {
+            "gpu"
+        } else {
+            "cpu"
+        }
     }
 
     fn problem(&self) -> &Problem {
@@ -321,15 +357,18 @@ impl Evaluator for SurfaceEvaluator {
 
     fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
         let p = &self.problem;
-        candidates
-            .par_iter()
+        let runs = self.model.simulate_candidates_noiseless(&p.prior, candidates)?;
+        runs.into_par_iter()
+            .zip(candidates)
             .zip(out.par_iter_mut())
             .with_max_len(1)
-            .for_each(|(c, rho)| {
-                *rho = self
-                    .model
-                    .summaries_of(&p.prior, p.seed, c)
-                    .map_or(f64::INFINITY, |s| self.distance.rho(&s));
+            .for_each(|((mut run, c), rho)| {
+                self.model.add_noise(&mut run, NoiseKey::of(p.seed, c));
+                *rho = if run.diverged {
+                    f64::INFINITY
+                } else {
+                    self.distance.rho(&self.model.summaries_of_run(&run))
+                };
             });
         Ok(())
     }

@@ -31,7 +31,7 @@ use crate::eval::Backend;
 use crate::eval::surface::{Distance, InferredString, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
 use crate::laws::Law;
 use crate::numerics::weighted_quantile;
-use crate::prior::{PhysicalScales, Prior, PriorFile};
+use crate::prior::{Candidate, PhysicalScales, Prior, PriorFile};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
     DownholeExtremes, Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH,
@@ -87,6 +87,9 @@ pub struct Settings {
     pub settle_s: f64,
     /// Seed of every stream: the same seed gives the same result.
     pub seed: u64,
+    /// Where the strings are simulated: `auto` (the GPU where one can be set up, else the CPU,
+    /// saying so), `gpu` or `cpu`.
+    pub backend: Backend,
 }
 
 impl Default for Settings {
@@ -110,6 +113,7 @@ impl Default for Settings {
             dt_s: run.integration.dt_s,
             settle_s: run.integration.settle_s,
             seed: 1,
+            backend: run.backend,
         }
     }
 }
@@ -194,6 +198,7 @@ impl Settings {
         run.smc.schedule.particles = self.particles;
         run.smc.schedule.max_populations = self.max_populations;
         run.smc.schedule.max_seconds = self.max_seconds;
+        run.backend = self.backend;
         run.validate()?;
         Ok(run)
     }
@@ -226,6 +231,8 @@ pub struct SurfaceSettings {
     pub smc: SmcConfig,
     /// Whether to simulate the escape advice where the bit stick-slips.
     pub advice: bool,
+    /// Where the strings are simulated ([`Backend::Auto`]: the GPU where one can be set up).
+    pub backend: Backend,
 }
 
 /// Bounds of the string's natural frequency (rad/s) and damping ratio within which a run
@@ -305,6 +312,7 @@ impl SurfaceSettings {
             predictive_draws: DEFAULT_PREDICTIVE_DRAWS,
             smc,
             advice: true,
+            backend: Backend::Auto,
         }
     }
 
@@ -581,6 +589,8 @@ pub struct AtTheBit {
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfaceResult {
     pub roles: String,
+    /// Where the strings were simulated: `CPU` or `GPU <adapter>`.
+    pub backend: String,
     pub noise: Noise,
     pub summary_names: Vec<&'static str>,
     pub observed: Vec<f64>,
@@ -694,7 +704,13 @@ fn model(record: &SurfaceRecord, settings: &SurfaceSettings, noise_sd_nm: f64) -
         integration: settings.integration,
         noise_sd_nm,
         downhole: DownholeExtremes::of(record),
+        backend: settings.backend,
     }
+}
+
+/// The `(law, coordinates)` of each particle, for [`SurfaceModel::simulate_noiseless_many`].
+fn strings_of<'p>(particles: &[&'p Particle]) -> Vec<(Law, &'p [f64])> {
+    particles.iter().map(|p| (p.law, p.params.as_slice())).collect()
 }
 
 /// The prior's scales from a surface record: its largest torque, and speeds from the top
@@ -741,7 +757,9 @@ pub fn infer(
         let [omega, xi] = [b.omega_n_rad_s, b.damping_ratio];
         prior = prior.with_coordinates(&[omega[0] as f32, xi[0] as f32], &[omega[1] as f32, xi[1] as f32]);
     }
+    let (backend, ran) = crate::eval::strings::resolve(settings.backend, note)?;
     let mut model = model(record, settings, 0.0);
+    model.backend = backend;
     let mut simulations = settings.pilot as u64;
     let pilot = Pilot::simulate(&model, &prior, seed ^ PILOT_STREAM, settings.pilot)?;
     let period_s = model.drive.period_s;
@@ -774,17 +792,20 @@ pub fn infer(
         settings.check_replicates,
         seed,
         &cycle,
-    );
+    )?;
     simulations += check.rows.iter().map(|r| r.replicates as u64).sum::<u64>();
-    let mut at_the_bit = at_the_bit(&model, particles, settings.predictive_draws, seed);
+    let mut at_the_bit = at_the_bit(&model, particles, settings.predictive_draws, seed)?;
     simulations += at_the_bit.draws as u64;
     if settings.advice && at_the_bit.stick_slip_probability >= 0.5 {
         let chain = Chain::one_dof(&string.median());
-        at_the_bit.advice = Some(escape_advice(record, settings, &chain, &laws, particles, note)?);
+        at_the_bit.advice = Some(escape_advice(
+            record, settings, backend, &chain, &laws, particles, note,
+        )?);
     }
     let ratio_mean = model.drive.ratio.iter().sum::<f64>() / model.drive.ratio.len() as f64;
     Ok(SurfaceResult {
         roles: record.roles_text(),
+        backend: ran.to_string(),
         noise,
         summary_names: compared(&SUMMARY_NAMES, &distance.active),
         observed: compared(&observed, &distance.active),
@@ -867,16 +888,14 @@ const NOISE_REPLICATES: usize = 5;
 
 impl Pilot {
     fn simulate(model: &SurfaceModel, prior: &Prior, seed: u64, count: usize) -> Result<Self> {
-        let runs: Vec<Option<(usize, Noiseless)>> = (0..count)
-            .into_par_iter()
-            .with_max_len(1)
-            .map(|i| {
-                let c = prior.candidate(seed, 0, i as u64);
-                let run = model.simulate_candidate(prior, seed, &c);
-                (!run.diverged).then(|| (c.slot, Noiseless::of(model, NoiseKey::of(seed, &c), run)))
-            })
+        let candidates: Vec<Candidate> = (0..count).map(|i| prior.candidate(seed, 0, i as u64)).collect();
+        let simulated = model.simulate_candidates_noiseless(prior, &candidates)?;
+        let runs: Vec<(usize, Noiseless)> = candidates
+            .iter()
+            .zip(simulated)
+            .filter(|(_, run)| !run.diverged)
+            .map(|(c, run)| (c.slot, Noiseless::of(model, NoiseKey::of(seed, c), run)))
             .collect();
-        let runs: Vec<_> = runs.into_iter().flatten().collect();
         if runs.len() < count / 2 {
             return Err(Error::Numerical(format!(
                 "{} of the pilot's {count} prior strings left physical bounds: the prior boxes admit laws whose torque turns negative at speed; narrow them with a prior file{}",
@@ -995,12 +1014,12 @@ impl Scout {
             .map(|p| p.particles.iter().collect())
             .unwrap_or_default();
         let drawn = resample(&particles, SCOUT_DRAWS, seed ^ SCOUT_STREAM);
+        let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
         let draws: Vec<(Law, Noiseless)> = drawn
-            .par_iter()
+            .iter()
+            .zip(runs)
             .enumerate()
-            .with_max_len(1)
-            .filter_map(|(k, p)| {
-                let run = model.simulate_noiseless(p.law, &p.params);
+            .filter_map(|(k, (p, run))| {
                 let key = NoiseKey::replicate(seed ^ SCOUT_STREAM, k as u64);
                 (!run.diverged).then(|| (p.law, Noiseless::of(model, key, run)))
             })
@@ -1192,7 +1211,7 @@ fn check(
     replicates: usize,
     seed: u64,
     cycle: &Cycle,
-) -> ModelCheck {
+) -> Result<ModelCheck> {
     let neighbours = (table.len() / 20).max(10).min(table.len());
     let classify = |s: &Summaries| -> usize {
         let mut near: Vec<(f64, usize)> = table.iter().map(|(slot, t)| (distance.between(s, t), *slot)).collect();
@@ -1213,16 +1232,14 @@ fn check(
         }
         let own: Vec<&Particle> = particles.iter().filter(|p| p.law == posterior.law).collect();
         let drawn = resample(&own, replicates, seed ^ (slot as u64 + 1));
-        let classes: Vec<Option<usize>> = drawn
-            .par_iter()
+        let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
+        let classes: Vec<Option<usize>> = runs
+            .into_par_iter()
             .enumerate()
             .with_max_len(1)
-            .map(|(k, p)| {
-                let run = model.simulate(
-                    p.law,
-                    &p.params,
-                    NoiseKey::replicate(seed, (slot * replicates + k) as u64),
-                );
+            .map(|(k, mut run)| {
+                let key = NoiseKey::replicate(seed, (slot * replicates + k) as u64);
+                model.add_noise(&mut run, key);
                 (!run.diverged).then(|| classify(&model.summaries_of_run(&run)))
             })
             .collect();
@@ -1239,13 +1256,13 @@ fn check(
         });
     }
     let (decided, verdict) = verdict(laws, &rows, cycle);
-    ModelCheck {
+    Ok(ModelCheck {
         reference: table.len(),
         neighbours,
         rows,
         decided,
         verdict,
-    }
+    })
 }
 
 /// The law called and why (see [`CHECK_RECOGNISED`]).
@@ -1317,15 +1334,11 @@ fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<L
 }
 
 /// The bit's speed on the record's clock from posterior draws (see [`AtTheBit`]).
-fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: u64) -> AtTheBit {
+fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: u64) -> Result<AtTheBit> {
     let all: Vec<&Particle> = particles.iter().collect();
     let drawn = resample(&all, draws, seed ^ 0x4249_5400);
     // The bit's speed and stuck share carry no measurement noise: the strings as they are.
-    let runs: Vec<_> = drawn
-        .par_iter()
-        .with_max_len(1)
-        .map(|p| model.simulate_noiseless(p.law, &p.params))
-        .collect();
+    let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
     let good: Vec<_> = runs.iter().filter(|r| !r.diverged).collect();
     let n = model.drive.omega_rad_s.len();
     let three = |mut v: Vec<f64>| -> [f64; 3] {
@@ -1365,7 +1378,7 @@ fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: 
             (law, shares.len(), three(shares))
         })
         .collect();
-    AtTheBit {
+    Ok(AtTheBit {
         draws: drawn.len(),
         speed_rpm,
         stuck_share: three(reductions.iter().map(Summary::stuck_share).collect()),
@@ -1381,7 +1394,7 @@ fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: 
         stuck_share_by_law,
         diverged: runs.len() - good.len(),
         advice: None,
-    }
+    })
 }
 
 /// Posterior samples per law for the simulated advice.
@@ -1391,6 +1404,7 @@ const ADVICE_SAMPLES: usize = 20;
 fn escape_advice(
     record: &SurfaceRecord,
     settings: &SurfaceSettings,
+    backend: Backend,
     chain: &Chain,
     laws: &[LawPosterior],
     particles: &[Particle],
@@ -1421,7 +1435,7 @@ fn escape_advice(
             }
         })
         .collect();
-    let simulated = SimulatedSettings::new(chain.clone(), w_ref_n, Backend::Cpu);
+    let simulated = SimulatedSettings::new(chain.clone(), w_ref_n, backend);
     let mut simulator = Simulator::new(&simulated, &inputs, note)?;
     let point = OperatingPoint {
         omega_rpm: record.mean_top_drive_rad_s() / RAD_S_PER_RPM,

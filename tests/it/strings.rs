@@ -3,10 +3,15 @@
 
 use crate::gpu::require_gpu;
 use bitrock::Law;
+use bitrock::eval::gpu::strings::{self as gpu_strings, OnClockJob};
 use bitrock::eval::{Backend, strings};
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::run::strings::{Grid, OperatingPoint, SimulatedSettings, Simulator};
+use bitrock::simulate::strings::STUCK_SPEED_RAD_S;
 use bitrock::simulate::strings::{Chain, Schedule, StringJob, StringState, Summary, padded, steady_start};
+use bitrock::simulate::surface::{
+    DownholeExtremes, Drive, Integration, N_SUMMARIES, OnClock, SUMMARY_NAMES, simulate_on_clock, summaries,
+};
 use bitrock::stability::fe::DrillString;
 use bitrock::stability::lumped::Lumped;
 use bitrock::stability::map::LawSamples;
@@ -245,4 +250,137 @@ fn advice_against_whole_scans() {
         advice.wob_scan.stick_slip_weight,
         whole_weights.stick_slip_weight[weights.len() - kept..]
     );
+}
+
+/// The summaries a surface run compares, of a string on a record's clock.
+fn clock_summaries(run: &OnClock, period_s: f64) -> [f64; N_SUMMARIES] {
+    let tool = DownholeExtremes {
+        window_samples: 3,
+        least: true,
+        greatest: true,
+    };
+    summaries(&run.surface_torque_nm, period_s, &tool.summaries_of(run))
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
+    require_gpu();
+    // A record's drive at 1 Hz: 60 rpm under r = 1 for 90 s, then 120 rpm under r = 0.8 for
+    // 90 s (m2 stick-slips, then turns steadily). Every law, each at two strings of its own
+    // (the paper's, and one stiffer and less damped), and m4 at 400 rpm, which runs away.
+    let mut omega = vec![60.0 * RAD_S_PER_RPM; 90];
+    omega.extend(vec![120.0 * RAD_S_PER_RPM; 90]);
+    let mut ratio = vec![1.0; 90];
+    ratio.extend(vec![0.8; 90]);
+    let drive = Drive {
+        omega_rad_s: omega,
+        ratio,
+        period_s: 1.0,
+    };
+    let integration = Integration::default();
+    let paper = Lumped::default();
+    let stiffer = Lumped {
+        omega_n_rad_s: 1.3 * paper.omega_n_rad_s,
+        damping_ratio: 0.5 * paper.damping_ratio,
+        ..paper
+    };
+    let chains = [Chain::one_dof(&paper), Chain::one_dof(&stiffer)];
+    let params: Vec<(Law, Vec<f64>)> = Law::ALL
+        .iter()
+        .map(|&law| (law, law.scale_torque(law.paper_estimate().unwrap(), 1000.0)))
+        .collect();
+    let mut jobs: Vec<OnClockJob<'_>> = Vec::new();
+    for (law, p) in &params {
+        for chain in &chains {
+            jobs.push(OnClockJob {
+                law: *law,
+                params_nm: p,
+                chain,
+            });
+        }
+    }
+    let gpu = gpu_strings::on_clock_batch(&drive, integration, &jobs).unwrap();
+    let (mut slipping, mut steady) = (0, 0);
+    for (job, g) in jobs.iter().zip(&gpu) {
+        let c = simulate_on_clock(job.chain, &drive, job.law, job.params_nm, integration);
+        let what = format!("{} on k = {:.0} N·m/rad", job.law, job.chain.stiffness_nm_per_rad[0]);
+        assert!(!c.diverged && !g.diverged, "{what}");
+        assert_eq!(c.surface_torque_nm.len(), g.surface_torque_nm.len(), "{what}");
+        // Phase-blind, as the surface run compares them: the torque's mean and quantiles
+        // within 1 % of the torque's range, the stuck share and the held share within 0.02, the
+        // cycle's period within 3 %, the speeds' means within 1 % of the largest speed
+        // (measured on lavapipe: the same stuck shares, the means within 4·10⁻⁷ of their
+        // values, the periods within 10⁻⁶ s).
+        let (sc, sg) = (clock_summaries(&c, 1.0), clock_summaries(g, 1.0));
+        let range = sc[6] - sc[2] + 0.01 * sc[0].abs();
+        for j in [0, 2, 3, 4, 5, 6] {
+            assert!(
+                (sc[j] - sg[j]).abs() <= 0.01 * range,
+                "{what}: {} {} vs {}",
+                SUMMARY_NAMES[j],
+                sc[j],
+                sg[j]
+            );
+        }
+        let share = |r: &OnClock| {
+            r.bit_speed_rad_s.iter().filter(|w| w.abs() < STUCK_SPEED_RAD_S).count() as f64
+                / r.bit_speed_rad_s.len() as f64
+        };
+        assert!(
+            (share(&c) - share(g)).abs() <= 0.02,
+            "{what}: stuck {} vs {}",
+            share(&c),
+            share(g)
+        );
+        assert!((sc[16] - sg[16]).abs() <= 0.02, "{what}: held {} vs {}", sc[16], sg[16]);
+        assert!(
+            (sc[11] - sg[11]).abs() <= 0.03 * sc[11].max(1.0),
+            "{what}: period {} vs {}",
+            sc[11],
+            sg[11]
+        );
+        let fastest = sc[18].max(120.0 * RAD_S_PER_RPM);
+        for j in [15, 17, 18] {
+            assert!(
+                (sc[j] - sg[j]).abs() <= 0.01 * fastest,
+                "{what}: {} {} vs {}",
+                SUMMARY_NAMES[j],
+                sc[j],
+                sg[j]
+            );
+        }
+        // Steady at 120 rpm: sample by sample, within 10⁻³ of the torque and of the speed.
+        for k in 150..180 {
+            let (tc, tg) = (c.surface_torque_nm[k], g.surface_torque_nm[k]);
+            let (wc, wg) = (c.bit_speed_rad_s[k], g.bit_speed_rad_s[k]);
+            if (wc - 120.0 * RAD_S_PER_RPM).abs() < 0.01 {
+                assert!((tc - tg).abs() <= 1e-3 * tc.abs(), "{what}: sample {k}: {tc} vs {tg}");
+                assert!((wc - wg).abs() <= 1e-3 * wc, "{what}: sample {k}: {wc} vs {wg}");
+                steady += 1;
+            }
+        }
+        slipping += usize::from(share(&c) > 0.1);
+    }
+    assert!(steady >= 30, "{steady} steady samples compared");
+    assert!(
+        slipping >= 2 && slipping < jobs.len(),
+        "{slipping} of {} stick-slip",
+        jobs.len()
+    );
+    // A law that runs away is said so on both, with the samples up to where it left bounds.
+    let m4 = Law::M4.scale_torque(Law::M4.paper_estimate().unwrap(), 1000.0);
+    let fast = Drive {
+        omega_rad_s: vec![400.0 * RAD_S_PER_RPM; 60],
+        ratio: vec![1.0; 60],
+        period_s: 1.0,
+    };
+    let runaway = [OnClockJob {
+        law: Law::M4,
+        params_nm: &m4,
+        chain: &chains[0],
+    }];
+    let c = simulate_on_clock(&chains[0], &fast, Law::M4, &m4, integration);
+    let g = &gpu_strings::on_clock_batch(&fast, integration, &runaway).unwrap()[0];
+    assert!(c.diverged && g.diverged, "cpu {} gpu {}", c.diverged, g.diverged);
 }

@@ -58,7 +58,7 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
         ("kernel_sums", kernel_sums_source(), &["main"]),
         ("slopes", slopes_source(), &["main"]),
         ("stability", stability_source(), &["main"]),
-        ("strings", strings_source(), &["main"]),
+        ("strings", strings_source(), &["main", "on_clock"]),
         ("coupled", coupled_source(), &["main"]),
         ("test_uniform_between", test_uniform_between_source(), &["main"]),
     ]

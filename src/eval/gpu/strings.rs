@@ -4,7 +4,9 @@
 
 use super::string_batch::Head;
 use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM};
+use crate::laws::Law;
 use crate::simulate::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Schedule, StringJob, StringState, Summary};
+use crate::simulate::surface::{Drive, Integration, OnClock};
 use bytemuck::{Pod, Zeroable};
 
 /// Words per string of the kernel's buffers. Keep in sync with shaders/strings.wgsl.
@@ -25,12 +27,14 @@ const STRINGS_PER_DISPATCH: usize = 1 << 16;
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct StringsJob {
     head: Head,
-    _pad0: u32,
-    _pad1: u32,
+    settle_steps: u32,
+    drive_offset: u32,
     dt_s: f32,
     alpha: f32,
     beta: f32,
     stuck_speed: f32,
+    settle_dt_s: f32,
+    _pad: [f32; 3],
     inertia: [f32; MAX_NODES],
     stiffness: [f32; MAX_NODES],
 }
@@ -43,26 +47,7 @@ pub fn integrate_batch(
 ) -> Result<Vec<(Summary, StringState)>, GpuError> {
     let ctx = super::context()?;
     let mut out = Vec::with_capacity(jobs.len());
-    let laws = crate::laws::file::among(jobs.iter().map(|j| j.law));
-    let bindings = [UNIFORM, STORAGE_READ, STORAGE_WRITE, STORAGE_WRITE];
-    let nodes = chain.nodes();
-    // One law for the whole batch (the usual case) is compiled in.
-    let single = jobs
-        .first()
-        .map(|j| j.law)
-        .filter(|law| jobs.iter().all(|j| j.law == *law));
-    let law_override = single.map_or(f64::from(u32::MAX), |l| l.index() as f64);
-    let kernel = ctx.kernel(
-        &format!(
-            "{} ({nodes} nodes, law {})",
-            super::file_laws::label("strings", &laws),
-            single.map_or("any".to_string(), |l| l.index().to_string())
-        ),
-        "main",
-        || super::strings_source_for(&laws, nodes),
-        &bindings,
-        &[("NODES", nodes as f64), ("LAW", law_override)],
-    )?;
+    let kernel = strings_kernel(ctx, "main", chain.nodes(), jobs.iter().map(|j| j.law))?;
     let mut job = StringsJob::zeroed();
     job.head = Head::sampling(
         schedule.steps_per_sample,
@@ -79,6 +64,125 @@ pub fn integrate_batch(
     }
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
         out.extend(run_chunk(ctx, &kernel, job, chunk)?);
+    }
+    Ok(out)
+}
+
+/// The strings kernel's entry point `entry` for a chain of `nodes` and the laws of a batch: one
+/// law for the whole batch (the usual case) is compiled in.
+fn strings_kernel(
+    ctx: &super::GpuContext,
+    entry: &str,
+    nodes: usize,
+    laws_of_batch: impl Iterator<Item = Law> + Clone,
+) -> Result<super::Kernel, GpuError> {
+    let laws = crate::laws::file::among(laws_of_batch.clone());
+    let bindings = [UNIFORM, STORAGE_READ, STORAGE_WRITE, STORAGE_WRITE];
+    let mut all = laws_of_batch;
+    let first = all.next();
+    let single = first.filter(|law| all.all(|l| l == *law));
+    let law_override = single.map_or(f64::from(u32::MAX), |l| l.index() as f64);
+    ctx.kernel(
+        &format!(
+            "{} {entry} ({nodes} nodes, law {})",
+            super::file_laws::label("strings", &laws),
+            single.map_or("any".to_string(), |l| l.index().to_string())
+        ),
+        entry,
+        || super::strings_source_for(&laws, nodes),
+        &bindings,
+        &[("NODES", nodes as f64), ("LAW", law_override)],
+    )
+}
+
+/// One string of a batch on a record's clock: its law, parameters (N·m) and 1-DOF string.
+#[derive(Clone, Debug)]
+pub struct OnClockJob<'a> {
+    pub law: Law,
+    pub params_nm: &'a [f64],
+    pub chain: &'a Chain,
+}
+
+/// Bytes of trace a chunk of strings on a record's clock holds at most on the device: the
+/// storage-buffer bindings every adapter allows.
+const TRACE_BYTES_PER_CHUNK: usize = 64 << 20;
+
+/// Every string of `jobs` (1-DOF strings sharing their inertia) driven by `drive` on its clock,
+/// on the GPU: the twin of [`crate::simulate::surface::simulate_on_clock`] in f32, in order.
+pub fn on_clock_batch(
+    drive: &Drive,
+    integration: Integration,
+    jobs: &[OnClockJob<'_>],
+) -> Result<Vec<OnClock>, GpuError> {
+    let Some(first) = jobs.first() else {
+        return Ok(Vec::new());
+    };
+    let samples = drive.omega_rad_s.len();
+    if samples == 0 {
+        return Ok(jobs.iter().map(|_| OnClock::default()).collect());
+    }
+    debug_assert!(jobs.iter().all(|j| j.chain.nodes() == 1
+        && j.chain.inertia_kg_m2 == first.chain.inertia_kg_m2
+        && j.chain.alpha_per_s == 0.0));
+    let ctx = super::context()?;
+    let kernel = strings_kernel(ctx, "on_clock", 1, jobs.iter().map(|j| j.law))?;
+    // The twin's steps: each span split into equal steps no longer than dt.
+    let steps_of = |span_s: f64| {
+        let steps = (span_s / integration.dt_s).ceil().max(1.0);
+        (steps as u32, (span_s / steps) as f32)
+    };
+    let mut job = StringsJob::zeroed();
+    let (sample_steps, sample_h) = steps_of(drive.period_s);
+    job.head = Head::sampling(sample_steps, 0, samples as u32);
+    job.dt_s = sample_h;
+    if integration.settle_s > 0.0 {
+        (job.settle_steps, job.settle_dt_s) = steps_of(integration.settle_s);
+    }
+    job.stuck_speed = STUCK_SPEED_RAD_S as f32;
+    job.inertia[0] = first.chain.inertia_kg_m2[0] as f32;
+    let trace_words = 4 * samples + 1;
+    let per_chunk = (TRACE_BYTES_PER_CHUNK / (4 * trace_words)).clamp(1, STRINGS_PER_CHUNK);
+    let mut out = Vec::with_capacity(jobs.len());
+    for chunk in jobs.chunks(per_chunk) {
+        let n = chunk.len();
+        job.drive_offset = (INPUT_WORDS * n) as u32;
+        let mut inputs = vec![0.0f32; INPUT_WORDS * n + 2 * samples];
+        for (i, j) in chunk.iter().enumerate() {
+            let b = INPUT_WORDS * i;
+            inputs[b] = f32::from_bits(j.law.index() as u32);
+            for (k, &p) in j.params_nm.iter().take(6).enumerate() {
+                inputs[b + 4 + k] = p as f32;
+            }
+            inputs[b + 10] = j.chain.stiffness_nm_per_rad[0] as f32;
+            inputs[b + 11] = j.chain.beta_s as f32;
+        }
+        let drive_words = &mut inputs[INPUT_WORDS * n..];
+        for (k, (omega, ratio)) in drive.omega_rad_s.iter().zip(&drive.ratio).enumerate() {
+            drive_words[2 * k] = *omega as f32;
+            drive_words[2 * k + 1] = *ratio as f32;
+        }
+        let layout = super::string_batch::Chunk {
+            label: "strings on a clock",
+            strings: n,
+            inputs: &inputs,
+            state_words: 1,
+            states: None,
+            summary_words: trace_words,
+            strings_per_dispatch: STRINGS_PER_DISPATCH,
+            read_states: false,
+        };
+        let traces = super::string_batch::integrate_chunk(ctx, &kernel, job, &layout)?.summaries;
+        out.extend(traces.chunks_exact(trace_words).map(|t| {
+            let reached = t[4 * samples].to_bits() as usize;
+            let column = |c: usize| -> Vec<f64> { (0..reached).map(|k| f64::from(t[4 * k + c])).collect() };
+            OnClock {
+                surface_torque_nm: column(0),
+                bit_speed_rad_s: column(1),
+                bit_least_rad_s: column(2),
+                bit_greatest_rad_s: column(3),
+                diverged: reached < samples,
+            }
+        }));
     }
     Ok(out)
 }

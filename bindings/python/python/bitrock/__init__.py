@@ -795,6 +795,7 @@ def surface(
     dt_s: float | None = None,
     settle_s: float | None = None,
     seed: int | None = None,
+    backend: str | None = None,
 ) -> dict:
     """The law at the bit from a surface record (top-drive speed, surface torque and weight on
     bit on a regular clock, a CSV file) through drill strings simulated per candidate, as
@@ -809,7 +810,9 @@ def surface(
     The string is the paper's, or the one ``inertia_kg_m2``, ``omega_n_rad_s`` and
     ``damping_ratio`` give; a pair ``(lo, hi)`` for ``omega_n_rad_s`` or ``damping_ratio``
     infers it with the laws within those bounds (``string`` in the result: its posterior and
-    the stiffness it implies). docs/surface.md says what a surface record can and cannot tell."""
+    the stiffness it implies). The strings are simulated on ``backend`` (``"auto"``: the GPU
+    where one is usable, else the CPU; ``"gpu"``, ``"cpu"``); the result's ``backend`` says
+    where. docs/surface.md says what a surface record can and cannot tell."""
     import json
 
     options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json")}
