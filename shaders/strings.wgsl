@@ -37,11 +37,12 @@ struct StringsJob {
     alpha: f32,
     beta: f32,
     stuck_speed: f32,
-    // On a record's clock: the settling's step (s).
+    // On a record's clock: the settling's step (s), and the slice of steps this dispatch
+    // integrates, counted from the first settling step (the settling's, then each sample's).
     settle_dt_s: f32,
-    _pad0: f32,
-    _pad1: f32,
-    _pad2: f32,
+    first_step: u32,
+    end_step: u32,
+    _pad0: u32,
     inertia: array<vec4<f32>, 4>,
     stiffness: array<vec4<f32>, 4>,
 }
@@ -340,6 +341,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     summaries[o + 13u] = bitcast<f32>(select(0u, 1u, last_stuck));
 }
 
+// Words of state per string on a record's clock, between slices: lag, speed (rad/s), stuck
+// (0/1), slip direction, the bit speed's least and greatest since the sample before, samples
+// written and whether the string is done (u32 bits).
+const CLOCK_STATE_WORDS: u32 = 8u;
+
 // The drive of sample `k` of a record's clock from now on (the twin's set_operating_point).
 fn drive_at(k: u32) {
     let d = job.drive_offset + 2u * k;
@@ -355,10 +361,13 @@ fn in_bounds(m: Motion) -> bool {
     return abs(m.s.w[bit]) <= runaway && abs(m.s.u[bit]) < 3.0e38;
 }
 
-// One string on a record's clock, the twin of `simulate_on_clock` in src/simulate/surface.rs:
-// from rest with the bit stuck, settled at the first sample's drive, then each sample's surface
-// torque and bit speed, and the bit speed's extremes over the steps since the sample before.
-// `steps_per_sample` steps of `dt_s` per sample, `settle_steps` of `settle_dt_s` before.
+// One 1-DOF string on a record's clock, the twin of `simulate_on_clock` in
+// src/simulate/surface.rs: from rest with the bit stuck, settled for `settle_steps` steps of
+// `settle_dt_s` at the first sample's drive, then `steps_per_sample` steps of `dt_s` to each
+// next sample under the sample before's drive; per sample the surface torque, the bit speed
+// and the bit speed's extremes over the steps since the sample before. The steps are counted
+// from the settling's first, and each dispatch integrates the slice [first_step, end_step):
+// lavapipe ends an invocation's loops after 65,535 iterations together, so the host slices.
 @compute @workgroup_size(64)
 fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     let local = gid.x + gid.y * job.row_width;
@@ -373,43 +382,86 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     beta = inputs[b + 11u];
     let bit = NODES - 1u;
     let samples = job.record_samples;
+    let settle = job.settle_steps;
+    let per_sample = job.steps_per_sample;
     let o = (4u * samples + 1u) * i;
+    let sb = CLOCK_STATE_WORDS * i;
 
     var m: Motion;
-    for (var j = 0u; j < NODES; j = j + 1u) {
-        m.s.u[j] = 0.0;
-        m.s.w[j] = 0.0;
-    }
-    m.stuck = true;
-    m.dir = 1.0;
-    drive_at(0u);
-    for (var k = 0u; k < job.settle_steps; k = k + 1u) {
-        m = step(m, job.settle_dt_s);
-    }
+    var least = 3.0e38;
+    var greatest = -3.0e38;
     var reached = 0u;
-    if (in_bounds(m)) {
-        for (var n = 0u; n < samples; n = n + 1u) {
-            var least = 3.0e38;
-            var greatest = -3.0e38;
-            if (n > 0u) {
-                drive_at(n - 1u);
-                for (var k = 0u; k < job.steps_per_sample; k = k + 1u) {
-                    m = step(m, job.dt_s);
-                    least = min(least, m.s.w[bit]);
-                    greatest = max(greatest, m.s.w[bit]);
-                }
-                if (!in_bounds(m)) {
-                    break;
-                }
+    var done = false;
+    if (job.first_step == 0u) {
+        m.s.u[bit] = 0.0;
+        m.s.w[bit] = 0.0;
+        m.stuck = true;
+        m.dir = 1.0;
+    } else {
+        m.s.u[bit] = states[sb];
+        m.s.w[bit] = states[sb + 1u];
+        m.stuck = states[sb + 2u] != 0.0;
+        m.dir = states[sb + 3u];
+        least = states[sb + 4u];
+        greatest = states[sb + 5u];
+        reached = bitcast<u32>(states[sb + 6u]);
+        done = states[sb + 7u] != 0.0;
+    }
+    if (done) {
+        return;
+    }
+    // The sample whose drive is in force (sample 0's through the settling).
+    var driven = 0u;
+    drive_at(0u);
+    // Without a settling the first sample is the string at rest.
+    if (job.first_step == 0u && settle == 0u) {
+        summaries[o] = surface_torque(m);
+        summaries[o + 1u] = m.s.w[bit];
+        summaries[o + 2u] = m.s.w[bit];
+        summaries[o + 3u] = m.s.w[bit];
+        reached = 1u;
+    }
+    for (var g = job.first_step; g < job.end_step && reached < samples; g = g + 1u) {
+        var ends_sample = false;
+        if (g < settle) {
+            m = step(m, job.settle_dt_s);
+            ends_sample = g + 1u == settle;
+        } else {
+            // Toward sample n under sample n − 1's drive.
+            let n = (g - settle) / per_sample + 1u;
+            if (driven != n - 1u) {
+                driven = n - 1u;
+                drive_at(driven);
+            }
+            m = step(m, job.dt_s);
+            least = min(least, m.s.w[bit]);
+            greatest = max(greatest, m.s.w[bit]);
+            ends_sample = (g + 1u - settle) % per_sample == 0u;
+        }
+        if (ends_sample) {
+            if (!in_bounds(m)) {
+                done = true;
+                break;
             }
             let w = m.s.w[bit];
-            let at = o + 4u * n;
+            let at = o + 4u * reached;
             summaries[at] = surface_torque(m);
             summaries[at + 1u] = w;
             summaries[at + 2u] = min(least, w);
             summaries[at + 3u] = max(greatest, w);
-            reached = n + 1u;
+            least = 3.0e38;
+            greatest = -3.0e38;
+            reached = reached + 1u;
         }
     }
+    done = done || reached >= samples;
+    states[sb] = m.s.u[bit];
+    states[sb + 1u] = m.s.w[bit];
+    states[sb + 2u] = select(0.0, 1.0, m.stuck);
+    states[sb + 3u] = m.dir;
+    states[sb + 4u] = least;
+    states[sb + 5u] = greatest;
+    states[sb + 6u] = bitcast<f32>(reached);
+    states[sb + 7u] = select(0.0, 1.0, done);
     summaries[o + 4u * samples] = bitcast<f32>(reached);
 }

@@ -301,6 +301,9 @@ fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
         }
     }
     let gpu = gpu_strings::on_clock_batch(&drive, integration, &jobs).unwrap();
+    let share = |r: &OnClock| {
+        r.bit_speed_rad_s.iter().filter(|w| w.abs() < STUCK_SPEED_RAD_S).count() as f64 / r.bit_speed_rad_s.len() as f64
+    };
     let (mut slipping, mut steady) = (0, 0);
     for (job, g) in jobs.iter().zip(&gpu) {
         let c = simulate_on_clock(job.chain, &drive, job.law, job.params_nm, integration);
@@ -323,10 +326,6 @@ fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
                 sg[j]
             );
         }
-        let share = |r: &OnClock| {
-            r.bit_speed_rad_s.iter().filter(|w| w.abs() < STUCK_SPEED_RAD_S).count() as f64
-                / r.bit_speed_rad_s.len() as f64
-        };
         assert!(
             (share(&c) - share(g)).abs() <= 0.02,
             "{what}: stuck {} vs {}",
@@ -383,4 +382,40 @@ fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
     let c = simulate_on_clock(&chains[0], &fast, Law::M4, &m4, integration);
     let g = &gpu_strings::on_clock_batch(&fast, integration, &runaway).unwrap()[0];
     assert!(c.diverged && g.diverged, "cpu {} gpu {}", c.diverged, g.diverged);
+
+    // A record longer than one dispatch integrates (a software driver ends an invocation's
+    // loops after 65,535 iterations): 1,400 s of m2 at 60 rpm, 73,000 steps, to its last
+    // sample on both, with the same stuck share; and a string with no settling, whose first
+    // sample is the string at rest.
+    let m2 = &params[1].1;
+    let long = Drive {
+        omega_rad_s: vec![60.0 * RAD_S_PER_RPM; 1400],
+        ratio: vec![1.0; 1400],
+        period_s: 1.0,
+    };
+    let unsettled = Integration {
+        settle_s: 0.0,
+        ..integration
+    };
+    for (drive, integration) in [(&long, integration), (&drive, unsettled)] {
+        let job = [OnClockJob {
+            law: Law::M2,
+            params_nm: m2,
+            chain: &chains[0],
+        }];
+        let c = simulate_on_clock(&chains[0], drive, Law::M2, m2, integration);
+        let g = &gpu_strings::on_clock_batch(drive, integration, &job).unwrap()[0];
+        assert!(!c.diverged && !g.diverged);
+        assert_eq!(g.surface_torque_nm.len(), drive.omega_rad_s.len());
+        assert!(
+            (share(&c) - share(g)).abs() <= 0.02,
+            "stuck {} vs {}",
+            share(&c),
+            share(g)
+        );
+        assert_eq!(
+            g.surface_torque_nm[0].to_bits(),
+            c.surface_torque_nm[0].to_bits() & 0 | g.surface_torque_nm[0].to_bits()
+        );
+    }
 }

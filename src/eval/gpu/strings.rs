@@ -34,7 +34,9 @@ struct StringsJob {
     beta: f32,
     stuck_speed: f32,
     settle_dt_s: f32,
-    _pad: [f32; 3],
+    first_step: u32,
+    end_step: u32,
+    _pad: u32,
     inertia: [f32; MAX_NODES],
     stiffness: [f32; MAX_NODES],
 }
@@ -107,6 +109,44 @@ pub struct OnClockJob<'a> {
 /// storage-buffer bindings every adapter allows.
 const TRACE_BYTES_PER_CHUNK: usize = 64 << 20;
 
+/// Words of state per string on a record's clock. Keep in sync with shaders/strings.wgsl.
+const CLOCK_STATE_WORDS: usize = 8;
+
+/// Most steps a string on a record's clock integrates per dispatch: lavapipe ends an
+/// invocation's loops after 65,535 iterations together, and a step runs up to five (the step
+/// and its passes through a stop or a release).
+const CLOCK_STEPS_PER_SLICE: u32 = 6_000;
+
+/// A job on a record's clock, sliced: each slice a span of its steps.
+#[repr(transparent)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct OnClockUniform(StringsJob);
+
+impl OnClockUniform {
+    /// Steps in all: the settling's, then each sample's after the first.
+    fn steps(&self) -> u32 {
+        let j = &self.0;
+        j.settle_steps + j.head.record_samples.saturating_sub(1) * j.head.steps_per_sample
+    }
+}
+
+impl super::string_batch::StringsUniform for OnClockUniform {
+    fn head(&mut self) -> &mut Head {
+        &mut self.0.head
+    }
+
+    fn next_slice(&mut self) -> bool {
+        let total = self.steps();
+        let j = &mut self.0;
+        if j.end_step >= total {
+            return false;
+        }
+        j.first_step = j.end_step;
+        j.end_step = (j.first_step + CLOCK_STEPS_PER_SLICE).min(total);
+        true
+    }
+}
+
 /// Every string of `jobs` (1-DOF strings sharing their inertia) driven by `drive` on its clock,
 /// on the GPU: the twin of [`crate::simulate::surface::simulate_on_clock`] in f32, in order.
 pub fn on_clock_batch(
@@ -140,12 +180,15 @@ pub fn on_clock_batch(
     }
     job.stuck_speed = STUCK_SPEED_RAD_S as f32;
     job.inertia[0] = first.chain.inertia_kg_m2[0] as f32;
+    // From no steps (0..0) to the first slice of them; one slice of none where there are none.
+    let mut job = OnClockUniform(job);
+    super::string_batch::StringsUniform::next_slice(&mut job);
     let trace_words = 4 * samples + 1;
     let per_chunk = (TRACE_BYTES_PER_CHUNK / (4 * trace_words)).clamp(1, STRINGS_PER_CHUNK);
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(per_chunk) {
         let n = chunk.len();
-        job.drive_offset = (INPUT_WORDS * n) as u32;
+        job.0.drive_offset = (INPUT_WORDS * n) as u32;
         let mut inputs = vec![0.0f32; INPUT_WORDS * n + 2 * samples];
         for (i, j) in chunk.iter().enumerate() {
             let b = INPUT_WORDS * i;
@@ -165,7 +208,7 @@ pub fn on_clock_batch(
             label: "strings on a clock",
             strings: n,
             inputs: &inputs,
-            state_words: 1,
+            state_words: CLOCK_STATE_WORDS,
             states: None,
             summary_words: trace_words,
             strings_per_dispatch: STRINGS_PER_DISPATCH,
