@@ -2,6 +2,8 @@
 with its own stick handling, the twin of test_strings.py): the surface channels inferred from,
 the bit's speed kept as the truth."""
 
+import os
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -66,13 +68,27 @@ def test_an_independent_string_s_surface_gives_its_torques_and_stuck_share(tmp_p
     assert len(result["time_s"]) == len(rpm)
 
 
-def test_an_independent_string_s_mwd_extremes_tell_its_held_bit_from_a_creeping_one(tmp_path):
+# The GPU's f32 strings part ways with the CPU's f64 ones where a candidate's cycle is
+# irregular, so a run on each backend is its own realisation: at SMALL's budget the GPU's run of
+# seed 2 stops further from the record (measured on lavapipe, 2026-12-01: ε 2.37 against the
+# CPU's 0.94, P(m2) 0.88; seeds 3 and 4 give 0.97 and 1.0), at 600 particles and 8 populations
+# P(m2) = 1.0 for seeds 2, 3 and 4.
+ON_THE_GPU = pytest.param(
+    "gpu",
+    {**SMALL, "particles": 600, "max_populations": 8},
+    marks=pytest.mark.skipif(os.environ.get("BITROCK_SKIP_GPU_TESTS") == "1", reason="BITROCK_SKIP_GPU_TESTS=1"),
+)
+
+
+@pytest.mark.parametrize("backend, budget", [("cpu", SMALL), ON_THE_GPU])
+def test_an_independent_string_s_mwd_extremes_tell_its_held_bit_from_a_creeping_one(tmp_path, backend, budget):
     # The LSODA twin's m2 (its own stick handling), sampled at 50 Hz for the MWD's minimum and
     # maximum: m1, whose bit creeps, is left no probability, and the stuck share is the twin's.
     path = tmp_path / "mwd.csv"
     speeds = twin_record(path, mwd_hz=50.0)
     true_share = float(np.mean(np.abs(speeds) < STUCK_RAD_S))
-    result = bitrock.surface(path, laws=["m1", "m2"], seed=2, **SMALL)
+    result = bitrock.surface(path, laws=["m1", "m2"], seed=2, backend=backend, **budget)
+    assert result["backend"].lower().startswith(backend), result["backend"]
     probability = {law["law"]: law["probability"] for law in result["laws"]}
     assert probability["m2"] > 0.9, result["laws"]
     stuck = result["at_the_bit"]["stuck_share"]
