@@ -37,8 +37,9 @@ struct StringsJob {
     alpha: f32,
     beta: f32,
     stuck_speed: f32,
-    // On a record's clock: the settling's step (s), and the slice of steps this dispatch
-    // integrates, counted from the first settling step (the settling's, then each sample's).
+    // On a record's clock: the settling's step (s). The slice this dispatch integrates: of the
+    // sample periods (`main`), or of the steps counted from the first settling step
+    // (`on_clock`).
     settle_dt_s: f32,
     first_step: u32,
     end_step: u32,
@@ -264,7 +265,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         m.s.w[j] = states[sb + MAX_NODES + j];
     }
     m.stuck = states[sb + 2u * MAX_NODES] != 0.0;
+    // A string's slip direction from its speed at its start (the twin's), from where it was
+    // left on a later slice.
     m.dir = select(1.0, -1.0, m.s.w[NODES - 1u] < 0.0);
+    if (job.first_step > 0u) {
+        m.dir = states[sb + 2u * MAX_NODES + 1u];
+    }
 
     var samples = 0u;
     var stuck_count = 0u;
@@ -280,8 +286,30 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var surface_min = 3.0e38;
     var surface_max = -3.0e38;
     var diverged = false;
-    let periods = job.settle_samples + job.record_samples;
-    for (var period = 0u; period < periods; period = period + 1u) {
+    // A slice after the first goes on from the summary so far (the state is in `states`).
+    let o = SUMMARY_WORDS * i;
+    if (job.first_step > 0u) {
+        samples = bitcast<u32>(summaries[o]);
+        stuck_count = bitcast<u32>(summaries[o + 1u]);
+        onsets = bitcast<u32>(summaries[o + 2u]);
+        first_onset = bitcast<u32>(summaries[o + 3u]);
+        last_onset = bitcast<u32>(summaries[o + 4u]);
+        speed_min = summaries[o + 5u];
+        speed_max = summaries[o + 6u];
+        speed_sum = summaries[o + 7u];
+        bit_min = summaries[o + 8u];
+        bit_max = summaries[o + 9u];
+        surface_min = summaries[o + 10u];
+        surface_max = summaries[o + 11u];
+        diverged = bitcast<u32>(summaries[o + 12u]) != 0u;
+        last_stuck = bitcast<u32>(summaries[o + 13u]) != 0u;
+        if (diverged) {
+            return;
+        }
+    }
+    // This dispatch's slice of the sample periods (settling's first): lavapipe ends an
+    // invocation's loops after 65,535 iterations together, so the host slices.
+    for (var period = job.first_step; period < job.end_step; period = period + 1u) {
         for (var k = 0u; k < job.steps_per_sample; k = k + 1u) {
             m = step(m, job.dt_s);
         }
@@ -324,7 +352,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     states[sb + 2u * MAX_NODES] = select(0.0, 1.0, m.stuck);
     states[sb + 2u * MAX_NODES + 1u] = m.dir;
-    let o = SUMMARY_WORDS * i;
     summaries[o] = bitcast<f32>(samples);
     summaries[o + 1u] = bitcast<f32>(stuck_count);
     summaries[o + 2u] = bitcast<f32>(onsets);

@@ -422,3 +422,30 @@ fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
         }
     }
 }
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn a_string_longer_than_one_dispatch_is_integrated_to_its_end() {
+    require_gpu();
+    // 700 s at 0.01 s: 70,000 steps, past the 65,535 loop iterations a software driver allows
+    // an invocation. The kernel integrates it in slices, its state and summary carried between
+    // them: every sample, as the twin's (compare's tolerances).
+    let chain = Chain::one_dof(&Lumped::default());
+    let schedule = Schedule::new(0.01, 1.0, 0.0, 700.0).unwrap();
+    let omega = 60.0 * RAD_S_PER_RPM;
+    let jobs: Vec<StringJob> = [Law::M2, Law::M3]
+        .into_iter()
+        .map(|law| {
+            let p = padded(&law.scale_torque(law.paper_estimate().unwrap(), 1000.0));
+            StringJob {
+                law,
+                params_nm: p,
+                omega_rad_s: omega,
+                ratio: 1.0,
+                start: steady_start(&chain, law, &p, omega, 1.0, 0.1 * omega),
+            }
+        })
+        .collect();
+    let cpu = compare(&chain, &schedule, &jobs);
+    assert!(cpu.iter().all(|(s, _)| s.samples == 700 && s.stick_slips()));
+}

@@ -64,8 +64,18 @@ pub fn integrate_batch(
         job.inertia[j] = chain.inertia_kg_m2[j] as f32;
         job.stiffness[j] = chain.stiffness_nm_per_rad[j] as f32;
     }
+    // From no sample periods (0..0) to the first slice of them.
+    super::string_batch::StringsUniform::next_slice(&mut job);
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
         out.extend(run_chunk(ctx, &kernel, job, chunk)?);
+    }
+    // A driver that ends a kernel's loops early must not pass for a shorter record.
+    let expected = schedule.record_samples;
+    if let Some((s, _)) = out.iter().find(|(s, _)| !s.diverged && s.samples != expected) {
+        return Err(GpuError::Readback(format!(
+            "a string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
+            s.samples
+        )));
     }
     Ok(out)
 }
@@ -112,10 +122,10 @@ const TRACE_BYTES_PER_CHUNK: usize = 64 << 20;
 /// Words of state per string on a record's clock. Keep in sync with shaders/strings.wgsl.
 const CLOCK_STATE_WORDS: usize = 8;
 
-/// Most steps a string on a record's clock integrates per dispatch: lavapipe ends an
-/// invocation's loops after 65,535 iterations together, and a step runs up to five (the step
-/// and its passes through a stop or a release).
-const CLOCK_STEPS_PER_SLICE: u32 = 6_000;
+/// Most steps a string integrates per dispatch: lavapipe ends an invocation's loops after
+/// 65,535 iterations together, and a step runs up to five (the step and its passes through a
+/// stop or a release).
+const STEPS_PER_SLICE: u32 = 6_000;
 
 /// A job on a record's clock, sliced: each slice a span of its steps.
 #[repr(transparent)]
@@ -142,7 +152,7 @@ impl super::string_batch::StringsUniform for OnClockUniform {
             return false;
         }
         j.first_step = j.end_step;
-        j.end_step = (j.first_step + CLOCK_STEPS_PER_SLICE).min(total);
+        j.end_step = (j.first_step + STEPS_PER_SLICE).min(total);
         true
     }
 }
@@ -233,6 +243,19 @@ pub fn on_clock_batch(
 impl super::string_batch::StringsUniform for StringsJob {
     fn head(&mut self) -> &mut Head {
         &mut self.head
+    }
+
+    /// The next slice of sample periods (the settling's first), as many as
+    /// [`STEPS_PER_SLICE`] steps hold (one at least).
+    fn next_slice(&mut self) -> bool {
+        let periods = self.head.settle_samples + self.head.record_samples;
+        if self.end_step >= periods {
+            return false;
+        }
+        let per_slice = (STEPS_PER_SLICE / self.head.steps_per_sample.max(1)).max(1);
+        self.first_step = self.end_step;
+        self.end_step = (self.first_step + per_slice).min(periods);
+        true
     }
 }
 
