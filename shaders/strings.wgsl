@@ -59,7 +59,8 @@ struct StringsJob {
 // Per string: samples, stuck, onsets, first onset, last onset (u32 bits), speed min, max, sum
 // (rad/s), bit torque min, max, surface torque min, max (N·m), diverged, last stuck (u32 bits).
 // On a record's clock: per sample the surface torque (N·m), the bit speed and its least and
-// greatest since the sample before (rad/s), then the samples reached (u32 bits).
+// greatest since the sample before (rad/s), then the samples reached and whether the string
+// diverged (u32 bits).
 @group(0) @binding(3) var<storage, read_write> summaries: array<f32>;
 
 struct State {
@@ -370,7 +371,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // Words of state per string on a record's clock, between slices: lag, speed (rad/s), stuck
 // (0/1), slip direction, the bit speed's least and greatest since the sample before, samples
-// written and whether the string is done (u32 bits).
+// written (u32 bits), and 0 while running, 1 once done, 2 once diverged.
 const CLOCK_STATE_WORDS: u32 = 8u;
 
 // The drive of sample `k` of a record's clock from now on (the twin's set_operating_point).
@@ -411,7 +412,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     let samples = job.record_samples;
     let settle = job.settle_steps;
     let per_sample = job.steps_per_sample;
-    let o = (4u * samples + 1u) * i;
+    let o = (4u * samples + 2u) * i;
     let sb = CLOCK_STATE_WORDS * i;
 
     var m: Motion;
@@ -419,6 +420,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     var greatest = -3.0e38;
     var reached = 0u;
     var done = false;
+    var diverged = false;
     if (job.first_step == 0u) {
         m.s.u[bit] = 0.0;
         m.s.w[bit] = 0.0;
@@ -433,6 +435,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
         greatest = states[sb + 5u];
         reached = bitcast<u32>(states[sb + 6u]);
         done = states[sb + 7u] != 0.0;
+        diverged = states[sb + 7u] == 2.0;
     }
     if (done) {
         return;
@@ -467,7 +470,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         if (ends_sample) {
             if (!in_bounds(m)) {
-                done = true;
+                diverged = true;
                 break;
             }
             let w = m.s.w[bit];
@@ -481,7 +484,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
             reached = reached + 1u;
         }
     }
-    done = done || reached >= samples;
+    done = diverged || reached >= samples;
     states[sb] = m.s.u[bit];
     states[sb + 1u] = m.s.w[bit];
     states[sb + 2u] = select(0.0, 1.0, m.stuck);
@@ -489,6 +492,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     states[sb + 4u] = least;
     states[sb + 5u] = greatest;
     states[sb + 6u] = bitcast<f32>(reached);
-    states[sb + 7u] = select(0.0, 1.0, done);
+    states[sb + 7u] = select(select(0.0, 1.0, done), 2.0, diverged);
     summaries[o + 4u * samples] = bitcast<f32>(reached);
+    summaries[o + 4u * samples + 1u] = bitcast<f32>(select(0u, 1u, diverged));
 }

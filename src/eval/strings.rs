@@ -52,8 +52,8 @@ pub fn integrate(
 
 /// Where a run's strings go, decided once before it starts: [`Backend::Gpu`] or
 /// [`Backend::Cpu`], and in words. `auto` takes any GPU that can be set up, a software driver
-/// too (lavapipe's compiled kernel runs a vector lane per string: a surface inference on it
-/// took 0.57 of the CPU twin's time on two cores), and the CPU where none can, saying so.
+/// too (lavapipe's compiled kernel runs a vector lane per string: docs/benchmarks.md has a
+/// surface inference on it and on the CPU), and the CPU where none can, saying so.
 pub fn resolve(backend: Backend, note: &mut dyn FnMut(String)) -> Result<(Backend, Ran)> {
     let on_gpu = |ctx: &gpu::GpuContext, note: &mut dyn FnMut(String)| {
         note(format!(

@@ -183,13 +183,7 @@ impl SurfaceModel {
     /// The noise-free strings of `candidates` (candidates of `prior`), in order, on the
     /// model's backend.
     pub fn simulate_candidates_noiseless(&self, prior: &Prior, candidates: &[Candidate]) -> Result<Vec<OnClock>> {
-        let widened: Vec<(Law, Vec<f64>)> = candidates
-            .iter()
-            .map(|c| {
-                let dims = prior.boxes[c.slot].lower.len();
-                (prior.law(c.slot), c.widened()[..dims].to_vec())
-            })
-            .collect();
+        let widened: Vec<(Law, Vec<f64>)> = candidates.iter().map(|c| coordinates(prior, c)).collect();
         let strings: Vec<(Law, &[f64])> = widened.iter().map(|(law, p)| (*law, p.as_slice())).collect();
         self.simulate_noiseless_many(&strings)
     }
@@ -307,8 +301,19 @@ pub fn scales_over<'a>(set: impl Iterator<Item = &'a Summaries> + Clone, fallbac
     scales
 }
 
-/// Scores candidates by simulating their strings on the record's clock (CPU, rayon across
-/// candidates).
+/// A candidate of `prior`'s law and coordinates (its parameters SI, then the string's where
+/// its box carries them).
+fn coordinates(prior: &Prior, candidate: &Candidate) -> (Law, Vec<f64>) {
+    let dims = prior.boxes[candidate.slot].lower.len();
+    (prior.law(candidate.slot), candidate.widened()[..dims].to_vec())
+}
+
+/// Samples of trace (each four f64 channels) a GPU batch of the evaluator holds on the host at
+/// once: 128 MB.
+const GPU_TRACE_VALUES: usize = 1 << 22;
+
+/// Scores candidates by simulating their strings on the record's clock (on the GPU in
+/// batches, or on the CPU with rayon across candidates).
 pub struct SurfaceEvaluator {
     problem: Problem,
     model: SurfaceModel,
@@ -357,19 +362,35 @@ impl Evaluator for SurfaceEvaluator {
 
     fn score_params(&self, candidates: &[Candidate], out: &mut [f64]) -> Result<()> {
         let p = &self.problem;
-        let runs = self.model.simulate_candidates_noiseless(&p.prior, candidates)?;
-        runs.into_par_iter()
-            .zip(candidates)
-            .zip(out.par_iter_mut())
-            .with_max_len(1)
-            .for_each(|((mut run, c), rho)| {
-                self.model.add_noise(&mut run, NoiseKey::of(p.seed, c));
-                *rho = if run.diverged {
-                    f64::INFINITY
-                } else {
-                    self.distance.rho(&self.model.summaries_of_run(&run))
-                };
-            });
+        let rho_of = |mut run: OnClock, c: &Candidate| {
+            self.model.add_noise(&mut run, NoiseKey::of(p.seed, c));
+            if run.diverged {
+                f64::INFINITY
+            } else {
+                self.distance.rho(&self.model.summaries_of_run(&run))
+            }
+        };
+        if self.model.backend != Backend::Gpu {
+            // Each string summarised as soon as it is simulated: memory stays one string a task.
+            candidates
+                .par_iter()
+                .zip(out.par_iter_mut())
+                .with_max_len(1)
+                .for_each(|(c, rho)| {
+                    let (law, params) = coordinates(&p.prior, c);
+                    *rho = rho_of(self.model.simulate_noiseless(law, &params), c);
+                });
+            return Ok(());
+        }
+        // On the GPU in batches whose traces stay a bounded share of memory.
+        let per_batch = (GPU_TRACE_VALUES / self.model.drive.omega_rad_s.len().max(1)).max(1);
+        for (part, rhos) in candidates.chunks(per_batch).zip(out.chunks_mut(per_batch)) {
+            let runs = self.model.simulate_candidates_noiseless(&p.prior, part)?;
+            runs.into_par_iter()
+                .zip(part)
+                .zip(rhos.par_iter_mut())
+                .for_each(|((run, c), rho)| *rho = rho_of(run, c));
+        }
         Ok(())
     }
 }

@@ -385,8 +385,8 @@ fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
 
     // A record longer than one dispatch integrates (a software driver ends an invocation's
     // loops after 65,535 iterations): 1,400 s of m2 at 60 rpm, 73,000 steps, to its last
-    // sample on both, with the same stuck share; and a string with no settling, whose first
-    // sample is the string at rest.
+    // sample on both, with the same stuck share; a string with no settling, whose first sample
+    // is the string at rest; and one whose settling fills one slice exactly.
     let m2 = &params[1].1;
     let long = Drive {
         omega_rad_s: vec![60.0 * RAD_S_PER_RPM; 1400],
@@ -397,7 +397,12 @@ fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
         settle_s: 0.0,
         ..integration
     };
-    for (drive, integration) in [(&long, integration), (&drive, unsettled)] {
+    // A settling of exactly one slice (6,000 steps of 20 ms): a slice ends with the settling.
+    let one_slice = Integration {
+        settle_s: 120.0,
+        ..integration
+    };
+    for (drive, integration) in [(&long, integration), (&drive, unsettled), (&drive, one_slice)] {
         let job = [OnClockJob {
             law: Law::M2,
             params_nm: m2,

@@ -134,6 +134,7 @@ struct OnClockUniform(StringsJob);
 
 impl OnClockUniform {
     /// Steps in all: the settling's, then each sample's after the first.
+    /// (At most `u32::MAX`: [`on_clock_batch`] refuses longer strings.)
     fn steps(&self) -> u32 {
         let j = &self.0;
         j.settle_steps + j.head.record_samples.saturating_sub(1) * j.head.steps_per_sample
@@ -171,9 +172,13 @@ pub fn on_clock_batch(
     if samples == 0 {
         return Ok(jobs.iter().map(|_| OnClock::default()).collect());
     }
-    debug_assert!(jobs.iter().all(|j| j.chain.nodes() == 1
-        && j.chain.inertia_kg_m2 == first.chain.inertia_kg_m2
-        && j.chain.alpha_per_s == 0.0));
+    // The kernel reads each string's stiffness and β, the batch's inertia, and no α.
+    let fits = |c: &Chain| c.nodes() == 1 && c.inertia_kg_m2 == first.chain.inertia_kg_m2 && c.alpha_per_s == 0.0;
+    if !jobs.iter().all(|j| fits(j.chain)) {
+        return Err(GpuError::Validation(
+            "strings on a record's clock must be 1-DOF strings of one inertia without mass-proportional damping".into(),
+        ));
+    }
     let ctx = super::context()?;
     let kernel = strings_kernel(ctx, "on_clock", 1, jobs.iter().map(|j| j.law))?;
     // The twin's steps: each span split into equal steps no longer than dt.
@@ -190,10 +195,17 @@ pub fn on_clock_batch(
     }
     job.stuck_speed = STUCK_SPEED_RAD_S as f32;
     job.inertia[0] = first.chain.inertia_kg_m2[0] as f32;
+    let steps = u64::from(job.settle_steps) + (samples as u64 - 1) * u64::from(sample_steps);
+    if steps > u64::from(u32::MAX) {
+        return Err(GpuError::TooLarge(format!(
+            "{steps} integration steps a string (the settling and {samples} samples of {sample_steps}); at most {} on the GPU",
+            u32::MAX
+        )));
+    }
     // From no steps (0..0) to the first slice of them; one slice of none where there are none.
     let mut job = OnClockUniform(job);
     super::string_batch::StringsUniform::next_slice(&mut job);
-    let trace_words = 4 * samples + 1;
+    let trace_words = 4 * samples + 2;
     let per_chunk = (TRACE_BYTES_PER_CHUNK / (4 * trace_words)).clamp(1, STRINGS_PER_CHUNK);
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(per_chunk) {
@@ -225,17 +237,24 @@ pub fn on_clock_batch(
             read_states: false,
         };
         let traces = super::string_batch::integrate_chunk(ctx, &kernel, job, &layout)?.summaries;
-        out.extend(traces.chunks_exact(trace_words).map(|t| {
+        for t in traces.chunks_exact(trace_words) {
             let reached = t[4 * samples].to_bits() as usize;
+            let diverged = t[4 * samples + 1].to_bits() != 0;
+            // A driver that ends a kernel's loops early must not pass for a diverged string.
+            if reached < samples && !diverged {
+                return Err(GpuError::Readback(format!(
+                    "a string came back with {reached} of its {samples} samples and no divergence: the driver ended its integration early"
+                )));
+            }
             let column = |c: usize| -> Vec<f64> { (0..reached).map(|k| f64::from(t[4 * k + c])).collect() };
-            OnClock {
+            out.push(OnClock {
                 surface_torque_nm: column(0),
                 bit_speed_rad_s: column(1),
                 bit_least_rad_s: column(2),
                 bit_greatest_rad_s: column(3),
-                diverged: reached < samples,
-            }
-        }));
+                diverged,
+            });
+        }
     }
     Ok(out)
 }
