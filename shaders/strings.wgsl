@@ -242,6 +242,13 @@ fn surface_torque(m: Motion) -> f32 {
     return k * m.s.u[0] + beta * k * (omega - m.s.w[0]);
 }
 
+// The law (the batch's where it is compiled in) and parameters of the string whose inputs
+// start at `b`.
+fn read_law(b: u32) {
+    law = select(bitcast<u32>(inputs[b]), LAW, LAW != ANY_LAW);
+    params = array<f32, 6>(inputs[b + 4u], inputs[b + 5u], inputs[b + 6u], inputs[b + 7u], inputs[b + 8u], inputs[b + 9u]);
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let local = gid.x + gid.y * job.row_width;
@@ -250,10 +257,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let i = job.first + local;
     let b = INPUT_WORDS * i;
-    law = select(bitcast<u32>(inputs[b]), LAW, LAW != ANY_LAW);
+    read_law(b);
     omega = inputs[b + 1u];
     ratio = inputs[b + 2u];
-    params = array<f32, 6>(inputs[b + 4u], inputs[b + 5u], inputs[b + 6u], inputs[b + 7u], inputs[b + 8u], inputs[b + 9u]);
     static_nm = max(ratio * torque_at(law, params, 0.0), 0.0);
     top_stiffness = job.stiffness[0].x;
     beta = job.beta;
@@ -404,8 +410,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let i = job.first + local;
     let b = INPUT_WORDS * i;
-    law = select(bitcast<u32>(inputs[b]), LAW, LAW != ANY_LAW);
-    params = array<f32, 6>(inputs[b + 4u], inputs[b + 5u], inputs[b + 6u], inputs[b + 7u], inputs[b + 8u], inputs[b + 9u]);
+    read_law(b);
     top_stiffness = inputs[b + 10u];
     beta = inputs[b + 11u];
     let bit = NODES - 1u;

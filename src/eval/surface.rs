@@ -18,7 +18,7 @@ use super::gpu::strings::OnClockJob;
 use super::{Backend, Evaluator, Problem};
 use crate::error::Result;
 use crate::laws::{Law, MAX_PARAMS};
-use crate::prior::{Candidate, Prior};
+use crate::prior::{Candidate, MAX_DIMS, Prior};
 use crate::rng::{box_muller, key_of_seed, philox4x32_10};
 use crate::simulate::strings::Chain;
 use crate::simulate::surface::{
@@ -183,8 +183,8 @@ impl SurfaceModel {
     /// The noise-free strings of `candidates` (candidates of `prior`), in order, on the
     /// model's backend.
     pub fn simulate_candidates_noiseless(&self, prior: &Prior, candidates: &[Candidate]) -> Result<Vec<OnClock>> {
-        let widened: Vec<(Law, Vec<f64>)> = candidates.iter().map(|c| coordinates(prior, c)).collect();
-        let strings: Vec<(Law, &[f64])> = widened.iter().map(|(law, p)| (*law, p.as_slice())).collect();
+        let widened: Vec<_> = candidates.iter().map(|c| coordinates(prior, c)).collect();
+        let strings: Vec<(Law, &[f64])> = widened.iter().map(|(law, p, dims)| (*law, &p[..*dims])).collect();
         self.simulate_noiseless_many(&strings)
     }
 
@@ -303,9 +303,10 @@ pub fn scales_over<'a>(set: impl Iterator<Item = &'a Summaries> + Clone, fallbac
 
 /// A candidate of `prior`'s law and coordinates (its parameters SI, then the string's where
 /// its box carries them).
-fn coordinates(prior: &Prior, candidate: &Candidate) -> (Law, Vec<f64>) {
+/// The coordinates are the first `dims` of the array, kept on the stack.
+fn coordinates(prior: &Prior, candidate: &Candidate) -> (Law, [f64; MAX_DIMS], usize) {
     let dims = prior.boxes[candidate.slot].lower.len();
-    (prior.law(candidate.slot), candidate.widened()[..dims].to_vec())
+    (prior.law(candidate.slot), candidate.widened(), dims)
 }
 
 /// Samples of trace (each four f64 channels) a GPU batch of the evaluator holds on the host at
@@ -377,8 +378,8 @@ impl Evaluator for SurfaceEvaluator {
                 .zip(out.par_iter_mut())
                 .with_max_len(1)
                 .for_each(|(c, rho)| {
-                    let (law, params) = coordinates(&p.prior, c);
-                    *rho = rho_of(self.model.simulate_noiseless(law, &params), c);
+                    let (law, params, dims) = coordinates(&p.prior, c);
+                    *rho = rho_of(self.model.simulate_noiseless(law, &params[..dims]), c);
                 });
             return Ok(());
         }
