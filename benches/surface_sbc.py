@@ -123,7 +123,8 @@ def replicate(args, index, scratch):
                              "--particles", str(args.particles),
                              "--max-populations", str(args.max_populations),
                              "--pilot", str(args.pilot), "--seed", str(index),
-                             "--no-advice", "--json", "--bit-out", bit_out] + bounds))
+                             "--no-advice", "--json", "--bit-out", bit_out] + bounds
+                            + (["--semi-automatic"] if args.semi_automatic else [])))
     with open(record, newline="") as f:
         true_rpm = [float(row["bit_speed_rpm"]) for row in csv.DictReader(f)]
     with open(bit_out, newline="") as f:
@@ -137,10 +138,12 @@ def replicate(args, index, scratch):
         covered[p["name"]] = {
             "identified": p["identified"],
             "covered": p["q05"] <= value <= p["q95"],
+            "width": (p["q95"] - p["q05"]) / value,
         }
     for name, value in string.items():
         p = result["string"][name]
-        covered[name] = {"identified": p["identified"], "covered": p["q05"] <= value <= p["q95"]}
+        covered[name] = {"identified": p["identified"], "covered": p["q05"] <= value <= p["q95"],
+                         "width": (p["q95"] - p["q05"]) / value}
     truth.update(string)
     stuck_true = sum(abs(w) < STUCK_RPM for w in true_rpm) / len(true_rpm)
     low, median, high = result["at_the_bit"]["stuck_share"]
@@ -175,6 +178,8 @@ def main():
                         help="draw each record's string too and infer it with the law")
     parser.add_argument("--twin", action="store_true",
                         help="records from the tests' LSODA twin instead of bitrock simulate")
+    parser.add_argument("--semi-automatic", action="store_true",
+                        help="run the inference with --semi-automatic (regression-projected summaries)")
     parser.add_argument("--out")
     args = parser.parse_args()
     if args.replicates < 1:
@@ -195,7 +200,8 @@ def main():
     print(f"{n} replicates ({'scipy LSODA twin' if args.twin else 'bitrock simulate'}) of m2 at {args.omega_rpm:g} rpm, {args.duration_s:g} s at {args.sample_hz:g} Hz, "
           + ("the string drawn and inferred, " if args.string else "")
           + f"{args.noise_knm:g} kN·m of noise; surface --laws m2 --particles {args.particles} "
-          f"--max-populations {args.max_populations} --pilot {args.pilot}")
+          f"--max-populations {args.max_populations} --pilot {args.pilot}"
+          + (" --semi-automatic" if args.semi_automatic else ""))
     for name in list(RANGES) + (list(STRING_RANGES) if args.string else []):
         identified = [r["params"][name]["covered"] for r in rows if r["params"][name]["identified"]]
         boxed = [r["params"][name]["covered"] for r in rows if not r["params"][name]["identified"]]
@@ -204,6 +210,7 @@ def main():
             line += f", its 90 % interval holds the truth in {sum(identified)} ({sum(identified) / len(identified):.0%})"
         if boxed:
             line += f"; unidentified in {len(boxed)} (the box's interval holds it in {sum(boxed)})"
+        line += f"; interval width over the truth, median {statistics.median(r['params'][name]['width'] for r in rows):.2f}"
         print(line)
     bands = [r["band_coverage"] for r in rows]
     print(f"  bit speed inside its 90 % band: {statistics.mean(bands):.1%} of samples "

@@ -120,6 +120,11 @@ pub struct SurfaceCmd {
     /// software one too, else the CPU, saying so).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Semi-automatic ABC: compare what linear regressions on the pilot strings nearest the
+    /// record predict from the summaries (each law's parameters, the string's where inferred,
+    /// each law's probability), each with its R², instead of the summaries themselves.
+    #[arg(long)]
+    pub semi_automatic: bool,
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
@@ -169,6 +174,7 @@ impl SurfaceCmd {
             settle_s: self.settle_s,
             seed: self.seed,
             backend: self.backend,
+            semi_automatic: self.semi_automatic,
         };
         Ok(settings.config(self.laws()?)?)
     }
@@ -289,6 +295,19 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
             None => format!("more than {} (no pilot string below it)", c.pilot),
         }
     )?;
+    if let Some(p) = &r.projection {
+        let fitted: Vec<String> = p
+            .features
+            .iter()
+            .map(|f| format!("{} {:.2}", f.name, f.r_squared))
+            .collect();
+        writeln!(
+            out,
+            "semi-automatic summaries, R² of each regression on the {} pilot strings nearest the record: {}",
+            p.training,
+            fitted.join(", ")
+        )?;
+    }
     writeln!(out)?;
     writeln!(out, "law   P(law)   re-simulated records recognised as it")?;
     for law in &r.laws {

@@ -6,6 +6,7 @@ pub mod coupled;
 pub mod cpu;
 pub mod gpu;
 mod problem;
+pub mod projection;
 pub mod records;
 pub mod strings;
 pub mod surface;

@@ -15,6 +15,7 @@
 //! the pilot so that ρ stays a function of the parameters). A diverged string scores +∞.
 
 use super::gpu::strings::OnClockJob;
+use super::projection::Projection;
 use super::{Backend, Evaluator, Problem};
 use crate::error::Result;
 use crate::laws::{Law, MAX_PARAMS};
@@ -213,6 +214,9 @@ pub struct Distance {
     /// The summaries compared: the record's (a record without downhole channels leaves
     /// theirs out).
     pub active: [bool; N_SUMMARIES],
+    /// Where set, what the distance compares instead of the scaled summaries: the
+    /// predictions of semi-automatic ABC's regressions.
+    pub projection: Option<Projection>,
 }
 
 impl Distance {
@@ -237,6 +241,7 @@ impl Distance {
             observed,
             scales: global,
             active,
+            projection: None,
         };
         let keep = ((pilot.len() as f64 * LOCAL_SHARE) as usize)
             .max(LOCAL_LEAST)
@@ -260,8 +265,19 @@ impl Distance {
         self.between(s, &self.observed)
     }
 
-    /// The scaled distance between two sets of summaries.
+    /// The scaled distance between two sets of summaries, or between their predictions where
+    /// the distance has a projection.
     pub fn between(&self, a: &Summaries, b: &Summaries) -> f64 {
+        if let Some(projection) = &self.projection {
+            let d = std::array::from_fn(|j| {
+                if self.active[j] {
+                    (a[j] - b[j]) / self.scales[j]
+                } else {
+                    0.0
+                }
+            });
+            return projection.rho(&d);
+        }
         let compared = (0..N_SUMMARIES).filter(|&j| self.active[j]);
         let sum: f64 = compared.clone().map(|j| ((a[j] - b[j]) / self.scales[j]).powi(2)).sum();
         (sum / compared.count().max(1) as f64).sqrt()

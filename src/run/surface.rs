@@ -28,6 +28,7 @@ use crate::abc::{Particle, Run};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
+use crate::eval::projection::{Projection, Training};
 use crate::eval::surface::{Distance, InferredString, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
 use crate::laws::Law;
 use crate::numerics::weighted_quantile;
@@ -90,6 +91,11 @@ pub struct Settings {
     /// Where the strings are simulated: `auto` (the GPU where one can be set up, else the CPU,
     /// saying so), `gpu` or `cpu`.
     pub backend: Backend,
+    /// Semi-automatic ABC (Fearnhead & Prangle 2012): the distance compares what linear
+    /// regressions on the pilot strings nearest the record predict from the summaries (each
+    /// law's parameters, the string's where inferred, and each law's probability) instead of
+    /// the summaries themselves.
+    pub semi_automatic: bool,
 }
 
 impl Default for Settings {
@@ -114,6 +120,7 @@ impl Default for Settings {
             settle_s: run.integration.settle_s,
             seed: 1,
             backend: run.backend,
+            semi_automatic: run.semi_automatic,
         }
     }
 }
@@ -199,6 +206,7 @@ impl Settings {
         run.smc.schedule.max_populations = self.max_populations;
         run.smc.schedule.max_seconds = self.max_seconds;
         run.backend = self.backend;
+        run.semi_automatic = self.semi_automatic;
         run.validate()?;
         Ok(run)
     }
@@ -233,6 +241,9 @@ pub struct SurfaceSettings {
     pub advice: bool,
     /// Where the strings are simulated ([`Backend::Auto`]: the GPU where one can be set up).
     pub backend: Backend,
+    /// Whether the distance compares the predictions of regressions learned on the pilot
+    /// (semi-automatic ABC, [`crate::eval::projection`]) instead of the scaled summaries.
+    pub semi_automatic: bool,
 }
 
 /// Bounds of the string's natural frequency (rad/s) and damping ratio within which a run
@@ -313,6 +324,7 @@ impl SurfaceSettings {
             smc,
             advice: true,
             backend: Backend::Auto,
+            semi_automatic: false,
         }
     }
 
@@ -595,6 +607,12 @@ pub struct SurfaceResult {
     pub summary_names: Vec<&'static str>,
     pub observed: Vec<f64>,
     pub scales: Vec<f64>,
+    /// What the distance compared: `scaled` summaries, or their `semi-automatic` projection.
+    pub summaries: &'static str,
+    /// Semi-automatic ABC's predictions, each with the R² of its regression on the training
+    /// strings: a parameter the summaries do not predict is one the record does not inform
+    /// through them.
+    pub projection: Option<Projection>,
     pub cycle: Cycle,
     /// T(Ω) the mean surface torque states (N·m at r = 1) and the speed (rpm).
     pub mean_torque_nm: f64,
@@ -769,7 +787,18 @@ pub fn infer(
     let (table, pilot_distance) = pilot.distance(noise_sd_nm, period_s, &observed, model.active());
     let scout = Scout::run(&model, &prior, settings, seed, &pilot_distance)?;
     simulations += scout.simulations;
-    let distance = scout.distance(&pilot_distance, noise_sd_nm, period_s);
+    let mut distance = scout.distance(&pilot_distance, noise_sd_nm, period_s);
+    let mut warnings = Vec::new();
+    if settings.semi_automatic {
+        distance.projection = pilot.projection(&prior, &table, &distance);
+        if distance.projection.is_none() {
+            warnings.push(format!(
+                "semi-automatic summaries: too few pilot strings near the record to regress on ({} of the pilot's {}); the scaled summaries were compared",
+                ((table.len() as f64 * TRAINING_SHARE).ceil() as usize),
+                settings.pilot
+            ));
+        }
+    }
     let noise_floor = scout.noise_floor(&distance, noise_sd_nm, period_s);
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
@@ -825,14 +854,21 @@ pub fn infer(
         simulations,
         cost,
         noise_floor,
-        warnings: convergence_warning(
-            last.record.epsilon,
-            noise_floor,
-            !settings.string_bounds.is_some_and(|b| b.infers()),
-        )
-        .into_iter()
-        .chain(damping_warning(settings.string_bounds.as_ref()))
-        .collect(),
+        summaries: if distance.projection.is_some() {
+            "semi-automatic"
+        } else {
+            "scaled"
+        },
+        projection: distance.projection.clone(),
+        warnings: warnings
+            .into_iter()
+            .chain(convergence_warning(
+                last.record.epsilon,
+                noise_floor,
+                !settings.string_bounds.is_some_and(|b| b.infers()),
+            ))
+            .chain(damping_warning(settings.string_bounds.as_ref()))
+            .collect(),
         seconds: started.elapsed().as_secs_f64(),
         run: Some(run),
     })
@@ -878,9 +914,14 @@ fn compared<T: Clone>(all: &[T; N_SUMMARIES], active: &[bool; N_SUMMARIES]) -> V
 struct Pilot {
     /// Per simulation that stayed in bounds: its law's slot and its string.
     runs: Vec<(usize, Noiseless)>,
+    /// Each run's coordinates (SI), in the order of `runs`.
+    coordinates: Vec<Vec<f64>>,
     /// Samples of the record's clock.
     samples: usize,
 }
+
+/// Share of the pilot, nearest the record, that semi-automatic ABC's regressions are fitted on.
+pub const TRAINING_SHARE: f64 = 0.5;
 
 /// Pilot strings, and noise draws on each, that measure the summaries' spread under the noise.
 const NOISE_NEIGHBOURS: usize = 20;
@@ -890,12 +931,18 @@ impl Pilot {
     fn simulate(model: &SurfaceModel, prior: &Prior, seed: u64, count: usize) -> Result<Self> {
         let candidates: Vec<Candidate> = (0..count).map(|i| prior.candidate(seed, 0, i as u64)).collect();
         let simulated = model.simulate_candidates_noiseless(prior, &candidates)?;
-        let runs: Vec<(usize, Noiseless)> = candidates
+        let (runs, coordinates): (Vec<(usize, Noiseless)>, Vec<Vec<f64>>) = candidates
             .iter()
             .zip(simulated)
             .filter(|(_, run)| !run.diverged)
-            .map(|(c, run)| (c.slot, Noiseless::of(model, NoiseKey::of(seed, c), run)))
-            .collect();
+            .map(|(c, run)| {
+                let dims = prior.boxes[c.slot].lower.len();
+                (
+                    (c.slot, Noiseless::of(model, NoiseKey::of(seed, c), run)),
+                    c.widened()[..dims].to_vec(),
+                )
+            })
+            .unzip();
         if runs.len() < count / 2 {
             return Err(Error::Numerical(format!(
                 "{} of the pilot's {count} prior strings left physical bounds: the prior boxes admit laws whose torque turns negative at speed; narrow them with a prior file{}",
@@ -909,8 +956,57 @@ impl Pilot {
         }
         Ok(Self {
             runs,
+            coordinates,
             samples: model.drive.omega_rad_s.len(),
         })
+    }
+
+    /// Semi-automatic ABC's regressions, fitted on the [`TRAINING_SHARE`] of the pilot's
+    /// strings nearest the record under `distance` (its `table`, with the record's noise): the
+    /// prior truncated to where the record lies, as Fearnhead & Prangle's pilot run does.
+    fn projection(&self, prior: &Prior, table: &[(usize, Summaries)], distance: &Distance) -> Option<Projection> {
+        let mut near: Vec<(f64, usize)> = table.iter().enumerate().map(|(i, t)| (distance.rho(&t.1), i)).collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        near.truncate(((table.len() as f64 * TRAINING_SHARE).ceil() as usize).max(1));
+        let training: Vec<Training<'_>> = near
+            .iter()
+            .map(|&(_, i)| Training {
+                slot: table[i].0,
+                law: prior.law(table[i].0),
+                coordinates: &self.coordinates[i],
+                summaries: table[i].1,
+            })
+            .collect();
+        let bounds: Vec<(Vec<f64>, Vec<f64>)> = prior
+            .boxes
+            .iter()
+            .map(|b| {
+                let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect();
+                (widen(&b.lower), widen(&b.upper))
+            })
+            .collect();
+        let names: Vec<Vec<String>> = prior
+            .boxes
+            .iter()
+            .map(|b| {
+                let mut names: Vec<String> = b.law.params().iter().map(|p| p.name.to_string()).collect();
+                names.extend(
+                    ["omega_n_rad_s", "damping_ratio"]
+                        .into_iter()
+                        .take(b.lower.len().saturating_sub(names.len()))
+                        .map(str::to_string),
+                );
+                names
+            })
+            .collect();
+        Projection::learn(
+            &training,
+            &distance.observed,
+            &distance.scales,
+            &distance.active,
+            &bounds,
+            &names,
+        )
     }
 
     /// The reference table with noise of `sd_nm`: each run's law slot and summaries.
@@ -1070,6 +1166,7 @@ impl Scout {
             observed: pilot.observed,
             scales,
             active: pilot.active,
+            projection: None,
         }
     }
 }

@@ -133,6 +133,58 @@ fn the_surface_of_a_stick_slipping_bit_gives_its_torques_and_its_stuck_share() {
     assert!(inside as f64 >= 0.85 * rpm.len() as f64, "{inside} of {}", rpm.len());
 }
 
+/// Semi-automatic ABC on the stick-slipping record above: the distance compares what the
+/// regressions on the pilot's nearest strings predict. They predict the dynamic torque,
+/// which sets the mean surface torque, almost exactly, the decay rate g, which the surface
+/// hardly sees, least; the torques are found within their intervals and the bit's stuck
+/// share within its 90 % range.
+#[test]
+fn semi_automatic_summaries_say_what_they_predict_and_find_the_torques() {
+    let (_dir, path, bit_speed) = record(Law::M2, 60.0, 300.0, 1.0, 0.2, 3);
+    let mut settings = small(vec![Law::M2]);
+    settings.semi_automatic = true;
+    let r = run(&path, &settings, 1);
+    assert_eq!(r.summaries, "semi-automatic");
+    let projection = r.projection.as_ref().expect("a projection");
+    // Half the pilot's strings that stayed in bounds (its reference table), the nearest.
+    assert_eq!(projection.training, r.cost.pilot.div_ceil(2));
+    let r2 = |name: &str| {
+        projection
+            .features
+            .iter()
+            .find(|f| f.name == name)
+            .unwrap_or_else(|| panic!("{name} in {projection:?}"))
+            .r_squared
+    };
+    assert_eq!(
+        projection.features.len(),
+        3,
+        "one law: its three parameters, no indicator"
+    );
+    eprintln!(
+        "R²: tsb {:.3}, tcb {:.3}, g {:.3}",
+        r2("m2.tsb"),
+        r2("m2.tcb"),
+        r2("m2.g")
+    );
+    assert!(r2("m2.tcb") > 0.95, "{projection:?}");
+    assert!(r2("m2.g") < r2("m2.tsb") && r2("m2.g") < r2("m2.tcb"), "{projection:?}");
+    let m2 = &r.laws[0];
+    for (p, truth) in m2.params.iter().zip([13_000.0, 6_500.0]) {
+        assert!(p.identified && p.q05 <= truth && truth <= p.q95, "{p:?}");
+    }
+    let mut seen = Summary::default();
+    for w in &bit_speed {
+        seen.push(*w, f64::NAN, f64::NAN);
+    }
+    let predicted = r.at_the_bit.stuck_share;
+    eprintln!("stuck share {predicted:?} against {}", seen.stuck_share());
+    assert!(
+        predicted[0] <= seen.stuck_share() && seen.stuck_share() <= predicted[2],
+        "{predicted:?}"
+    );
+}
+
 #[test]
 fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() {
     // m2 at 60 rpm, five minutes at 1 Hz. From the surface torque alone m1, whose bit creeps

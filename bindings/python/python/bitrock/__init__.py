@@ -796,6 +796,7 @@ def surface(
     settle_s: float | None = None,
     seed: int | None = None,
     backend: str | None = None,
+    semi_automatic: bool | None = None,
 ) -> dict:
     """The law at the bit from a surface record (top-drive speed, surface torque and weight on
     bit on a regular clock, a CSV file) through drill strings simulated per candidate, as
@@ -812,7 +813,10 @@ def surface(
     infers it with the laws within those bounds (``string`` in the result: its posterior and
     the stiffness it implies). The strings are simulated on ``backend`` (``"auto"``: the GPU
     where one is usable, else the CPU; ``"gpu"``, ``"cpu"``); the result's ``backend`` says
-    where. docs/surface.md says what a surface record can and cannot tell."""
+    where. ``semi_automatic=True`` compares what linear regressions on the pilot strings nearest
+    the record predict from the summaries (each law's parameters, the string's where inferred,
+    each law's probability) instead of the summaries: ``projection`` in the result names each
+    prediction with its R². docs/surface.md says what a surface record can and cannot tell."""
     import json
 
     options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json")}
