@@ -333,6 +333,18 @@ pub fn particles_csv(populations: &[&Population], laws: &[Law], unit: TorqueUnit
 /// Groups of particles (population index, particles) as CSV, as [`particles_csv`] writes
 /// them; a ρ that is not kept (NaN) is an empty cell.
 pub fn particle_groups_csv(groups: &[(usize, &[Particle])], laws: &[Law], unit: TorqueUnit) -> Vec<u8> {
+    particle_groups_csv_with(groups, laws, unit, &[])
+}
+
+/// [`particle_groups_csv`] with a column per `(header, coordinate)` of `coordinates` after the
+/// laws' parameters: the particle's coordinate at that index past its law's parameters (a
+/// surface run's string, inferred with the law), as it stands.
+pub fn particle_groups_csv_with(
+    groups: &[(usize, &[Particle])],
+    laws: &[Law],
+    unit: TorqueUnit,
+    coordinates: &[(&str, usize)],
+) -> Vec<u8> {
     let rows = groups.iter().flat_map(|&(population, particles)| {
         particles.iter().map(move |p| {
             let mut row = vec![
@@ -348,15 +360,19 @@ pub fn particle_groups_csv(groups: &[(usize, &[Particle])], laws: &[Law], unit: 
             ];
             for law in laws {
                 if *law == p.law {
-                    row.extend(to_record_units(p.law, &p.params, unit).iter().map(|v| format!("{v:e}")));
+                    row.extend(to_record_units(p.law, &p.params[..law.n_params()], unit).iter().map(|v| format!("{v:e}")));
                 } else {
                     row.extend(std::iter::repeat_n(String::new(), law.n_params()));
                 }
             }
+            let n = p.law.n_params();
+            row.extend(coordinates.iter().map(|&(_, k)| format!("{:e}", p.params[n + k])));
             row
         })
     });
-    csv_text(std::iter::once(particle_header(laws, unit)).chain(rows))
+    let mut header = particle_header(laws, unit);
+    header.extend(coordinates.iter().map(|(name, _)| name.to_string()));
+    csv_text(std::iter::once(header).chain(rows))
 }
 
 /// Weighted particles from a CSV in [`particles_csv`]'s layout (SI): a `law` and a `weight`

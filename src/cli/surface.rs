@@ -131,10 +131,15 @@ pub struct SurfaceCmd {
     /// The bit's predicted speed per sample (time_s, bit_speed_rpm_p05, _p50, _p95) as CSV.
     #[arg(long, value_name = "FILE")]
     pub bit_out: Option<PathBuf>,
+    /// The final population's particles as CSV (each law's share of the weight its
+    /// probability; the string's natural frequency and damping ratio after the laws'
+    /// parameters where inferred): `bitrock stability --posterior FILE` maps them.
+    #[arg(long, value_name = "FILE")]
+    pub posterior_out: Option<PathBuf>,
     /// The whole result as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,
-    /// Replace --out and --bit-out files even when bitrock did not write them.
+    /// Replace --out, --bit-out and --posterior-out files even when bitrock did not write them.
     #[arg(long)]
     pub force: bool,
     /// Print JSON instead of tables.
@@ -183,7 +188,11 @@ impl SurfaceCmd {
 pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
     set_threads(cmd.threads)?;
     let settings = cmd.settings()?;
-    for (path, field) in [(&cmd.out, "out"), (&cmd.bit_out, "bit_out")] {
+    for (path, field) in [
+        (&cmd.out, "out"),
+        (&cmd.bit_out, "bit_out"),
+        (&cmd.posterior_out, "posterior_out"),
+    ] {
         if let Some(path) = path {
             bitrock::run::dir::check_output_file(path, field, cmd.force)?;
         }
@@ -221,6 +230,12 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
     }
     if let Some(path) = &cmd.bit_out {
         bitrock::run::dir::write_whole(path, "bit_out", cmd.force, |file| bit_csv(file, &record, &result))?;
+    }
+    if let Some(path) = &cmd.posterior_out {
+        let csv = result
+            .posterior_csv(&settings.laws, record.torque_unit)
+            .expect("a finished run keeps its populations");
+        bitrock::run::dir::write_whole(path, "posterior_out", cmd.force, |file| file.write_all(&csv))?;
     }
     let mut out = print::stdout();
     if cmd.json {

@@ -705,6 +705,27 @@ impl Cost {
     }
 }
 
+impl SurfaceResult {
+    /// The final population's particles as CSV in the layout `bitrock stability --posterior`
+    /// reads (each law's share of the weight is its probability; torques in `unit`), with the
+    /// string's natural frequency and damping ratio after the laws' parameters where the run
+    /// inferred them. `None` for a result without its run.
+    pub fn posterior_csv(&self, laws: &[Law], unit: crate::units::TorqueUnit) -> Option<Vec<u8>> {
+        let last = self.run.as_ref()?.populations.last()?;
+        let string: &[(&str, usize)] = if self.string.inferred {
+            &[("string.omega_n [rad/s]", 0), ("string.damping_ratio [1]", 1)]
+        } else {
+            &[]
+        };
+        Some(crate::documents::particle_groups_csv_with(
+            &[(last.record.index, &last.particles)],
+            laws,
+            unit,
+            string,
+        ))
+    }
+}
+
 /// The model a record drives: its string, its clock and its noise.
 fn model(record: &SurfaceRecord, settings: &SurfaceSettings, noise_sd_nm: f64) -> SurfaceModel {
     SurfaceModel {

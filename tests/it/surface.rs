@@ -272,7 +272,15 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
         assert_eq!(code, 0, "{err}");
         (serde_json::from_str::<serde_json::Value>(&out).unwrap(), err)
     };
-    let (inferred, err) = infer(&["--omega-n-rad-s", "0.6:1.8", "--damping-ratio", "0.05:0.5"]);
+    let posterior = path.with_file_name("posterior.csv");
+    let (inferred, err) = infer(&[
+        "--omega-n-rad-s",
+        "0.6:1.8",
+        "--damping-ratio",
+        "0.05:0.5",
+        "--posterior-out",
+        posterior.to_str().unwrap(),
+    ]);
     // The damping ratio, weakly told by the surface, is said to be so.
     assert!(
         err.contains("damping ratio is inferred") && err.contains("--damping-ratio"),
@@ -296,6 +304,31 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
         omega["q95"].as_f64().unwrap() - omega["q05"].as_f64().unwrap() < 0.5 * 1.2,
         "{omega}"
     );
+    // The final population as particles: the string's coordinates after the law's
+    // parameters, their weighted median the result's; `stability --posterior` maps them.
+    let text = std::fs::read_to_string(&posterior).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "population,law,candidate,rho,weight,m2.tsb [kN·m],m2.tcb [kN·m],m2.g [s/rad],string.omega_n [rad/s],string.damping_ratio [1]"
+    );
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').skip(4).map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 300);
+    let weights: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    assert!((weights.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+    for (column, name) in [(4, "omega_n_rad_s"), (5, "damping_ratio")] {
+        let values: Vec<f64> = rows.iter().map(|r| r[column]).collect();
+        let median = bitrock::numerics::weighted_quantile(&values, &weights, 0.5);
+        assert_eq!(median.to_bits(), s[name]["median"].as_f64().unwrap().to_bits(), "{name}");
+    }
+    let (code, _, err) = outcome(
+        bin()
+            .args(["stability", "--json", "--omega-n-rad-s", "1.2", "--damping-ratio", "0.15", "--posterior"])
+            .arg(&posterior),
+    );
+    assert_eq!(code, 0, "{err}");
     let k = s["stiffness_knm_per_rad"][1].as_f64().unwrap();
     let median = omega["median"].as_f64().unwrap();
     assert_eq!(k.to_bits(), (383.33 * median * median / 1000.0).to_bits());
