@@ -360,7 +360,11 @@ pub fn particle_groups_csv_with(
             ];
             for law in laws {
                 if *law == p.law {
-                    row.extend(to_record_units(p.law, &p.params[..law.n_params()], unit).iter().map(|v| format!("{v:e}")));
+                    row.extend(
+                        to_record_units(p.law, &p.params[..law.n_params()], unit)
+                            .iter()
+                            .map(|v| format!("{v:e}")),
+                    );
                 } else {
                     row.extend(std::iter::repeat_n(String::new(), law.n_params()));
                 }

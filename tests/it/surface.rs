@@ -321,11 +321,23 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
     for (column, name) in [(4, "omega_n_rad_s"), (5, "damping_ratio")] {
         let values: Vec<f64> = rows.iter().map(|r| r[column]).collect();
         let median = bitrock::numerics::weighted_quantile(&values, &weights, 0.5);
-        assert_eq!(median.to_bits(), s[name]["median"].as_f64().unwrap().to_bits(), "{name}");
+        assert_eq!(
+            median.to_bits(),
+            s[name]["median"].as_f64().unwrap().to_bits(),
+            "{name}"
+        );
     }
     let (code, _, err) = outcome(
         bin()
-            .args(["stability", "--json", "--omega-n-rad-s", "1.2", "--damping-ratio", "0.15", "--posterior"])
+            .args([
+                "stability",
+                "--json",
+                "--omega-n-rad-s",
+                "1.2",
+                "--damping-ratio",
+                "0.15",
+                "--posterior",
+            ])
             .arg(&posterior),
     );
     assert_eq!(code, 0, "{err}");
