@@ -133,7 +133,8 @@ pub struct SurfaceCmd {
     pub bit_out: Option<PathBuf>,
     /// The final population's particles as CSV (each law's share of the weight its
     /// probability; the string's natural frequency and damping ratio after the laws'
-    /// parameters where inferred): `bitrock stability --posterior FILE` maps them.
+    /// parameters where inferred): `bitrock stability --posterior FILE` maps the laws'
+    /// parameters on the string its flags give.
     #[arg(long, value_name = "FILE")]
     pub posterior_out: Option<PathBuf>,
     /// The whole result as JSON to FILE.
@@ -314,11 +315,11 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
         let fitted: Vec<String> = p
             .features
             .iter()
-            .map(|f| format!("{} {:.2}", f.name, f.r_squared))
+            .map(|f| format!("{} {:.2}", f.name, f.adjusted_r_squared))
             .collect();
         writeln!(
             out,
-            "semi-automatic summaries, R² of each regression on the {} pilot strings nearest the record: {}",
+            "semi-automatic summaries, adjusted R² of each regression on the {} pilot strings nearest the record (a law's parameters on its own strings): {}",
             p.training,
             fitted.join(", ")
         )?;

@@ -2,8 +2,8 @@
 //! summaries themselves, what a linear regression on strings near the record predicts from
 //! them: each law's coordinates (Ê[θ | s]) and each law's indicator (P̂(m | s), Prangle,
 //! Fearnhead, Cox, Biggs & French 2014). A summary that moves with no coordinate gets no
-//! weight, however much it varies; a coordinate the summaries do not predict (R² near 0)
-//! barely moves the distance, since each prediction is scaled by the spread of what it
+//! weight, however much it varies; a coordinate the summaries do not predict (adjusted R² near
+//! 0) barely moves the distance, since each prediction is scaled by the spread of what it
 //! predicts, not by its own.
 //!
 //! The predictions are linear in the summaries, so the distance between two sets of summaries
@@ -16,9 +16,9 @@ use crate::simulate::surface::N_SUMMARIES;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-/// Fewest training strings of a law (beyond one per compared summary) for its coordinates to
-/// be regressed: fewer would fit their noise.
-pub const MIN_STRINGS_PER_SUMMARY: usize = 3;
+/// Fewest training strings per regressed term (each compared summary and the intercept) for a
+/// law's coordinates to be regressed on its strings: fewer would fit their noise.
+pub const MIN_STRINGS_PER_TERM: usize = 3;
 /// The ridge's weight, relative to the training strings' count: a summary the others nearly
 /// predict does not get a large weight of either sign.
 pub const RIDGE: f64 = 1e-3;
@@ -33,8 +33,12 @@ pub struct Feature {
     /// Per summary (0 for those not compared).
     #[serde(skip)]
     pub weights: Summaries,
-    /// The share of its target's variance over the training strings the prediction explains.
-    pub r_squared: f64,
+    /// The share of its target's variance the prediction explains over the strings it was
+    /// fitted on, adjusted for the summaries' count (1 − (1 − R²)(n − 1)/(n − p − 1), at
+    /// least 0): what the summaries tell of it, not what fitting their noise adds.
+    pub adjusted_r_squared: f64,
+    /// The strings it was fitted on: its law's for a coordinate, all for an indicator.
+    pub strings: usize,
 }
 
 /// The predictions a distance compares.
@@ -43,6 +47,9 @@ pub struct Projection {
     pub features: Vec<Feature>,
     /// Training strings the regressions were fitted on.
     pub training: usize,
+    /// Laws with too few training strings ([`MIN_STRINGS_PER_TERM`]) for their coordinates to
+    /// be regressed: their parameters are compared only through the other predictions.
+    pub unregressed: Vec<Law>,
 }
 
 /// A training string: its law's slot in the prior, its coordinates (SI) and its summaries
@@ -56,15 +63,19 @@ pub struct Training<'a> {
 
 impl Projection {
     /// The regressions on `training`, of the summaries scaled by `scales` relative to
-    /// `observed` (only `active` ones): for each law with enough strings, each coordinate
-    /// whose box `bounds[slot]` spans a width, as a share of that width, on that law's strings;
-    /// with two laws or more, each law's indicator on all strings. `coordinate_names[slot]`
-    /// names the law's coordinates. `None` where no regression could be fitted.
+    /// `observed` (only `active` ones): for each law of `laws` (by slot) with enough strings,
+    /// each coordinate whose box `bounds[slot]` spans a width, as a share of that width, on
+    /// that law's strings; with two laws or more, each law's indicator on all strings, each
+    /// weighed by √((K − 1)/K) for K laws (the indicators sum to 1, so they carry K − 1
+    /// predictions' worth). `coordinate_names[slot]` names the law's coordinates. `None` where
+    /// no regression could be fitted.
+    #[allow(clippy::too_many_arguments)]
     pub fn learn(
         training: &[Training<'_>],
         observed: &Summaries,
         scales: &Summaries,
         active: &[bool; N_SUMMARIES],
+        laws: &[Law],
         bounds: &[(Vec<f64>, Vec<f64>)],
         coordinate_names: &[Vec<String>],
     ) -> Option<Self> {
@@ -80,10 +91,15 @@ impl Projection {
             })
         };
         let mut features = Vec::new();
-        let least = MIN_STRINGS_PER_SUMMARY * (compared.len() + 1);
+        let mut unregressed = Vec::new();
+        let least = MIN_STRINGS_PER_TERM * (compared.len() + 1);
         for (slot, (lower, upper)) in bounds.iter().enumerate() {
             let rows: Vec<&Training<'_>> = training.iter().filter(|t| t.slot == slot).collect();
+            let varies = lower.iter().zip(upper).any(|(lo, hi)| hi > lo);
             if rows.len() < least {
+                if varies {
+                    unregressed.push(laws[slot]);
+                }
                 continue;
             }
             let x = design(&rows);
@@ -93,31 +109,31 @@ impl Projection {
                 }
                 let target =
                     DVector::from_iterator(rows.len(), rows.iter().map(|t| (t.coordinates[d] - lo) / (hi - lo)));
-                if let Some((weights, r_squared)) = regress(&x, &target, &compared) {
+                if let Some((weights, adjusted_r_squared)) = regress(&x, &target, &compared) {
                     features.push(Feature {
-                        name: format!("{}.{}", rows[0].law.name(), coordinate_names[slot][d]),
+                        name: format!("{}.{}", laws[slot].name(), coordinate_names[slot][d]),
                         weights,
-                        r_squared,
+                        adjusted_r_squared,
+                        strings: rows.len(),
                     });
                 }
             }
         }
-        let laws: Vec<(usize, Law)> = {
-            let mut seen: Vec<(usize, Law)> = training.iter().map(|t| (t.slot, t.law)).collect();
-            seen.sort_by_key(|s| s.0);
-            seen.dedup_by_key(|s| s.0);
-            seen
-        };
-        if laws.len() >= 2 && training.len() >= least {
+        let present: Vec<usize> = (0..bounds.len())
+            .filter(|&slot| training.iter().any(|t| t.slot == slot))
+            .collect();
+        if present.len() >= 2 && training.len() >= least {
             let all: Vec<&Training<'_>> = training.iter().collect();
             let x = design(&all);
-            for (slot, law) in laws {
+            let share = ((present.len() - 1) as f64 / present.len() as f64).sqrt();
+            for &slot in &present {
                 let target = DVector::from_iterator(all.len(), all.iter().map(|t| f64::from(u8::from(t.slot == slot))));
-                if let Some((weights, r_squared)) = regress(&x, &target, &compared) {
+                if let Some((weights, adjusted_r_squared)) = regress(&x, &target, &compared) {
                     features.push(Feature {
-                        name: format!("P({})", law.name()),
-                        weights,
-                        r_squared,
+                        name: format!("P({})", laws[slot].name()),
+                        weights: weights.map(|w| share * w),
+                        adjusted_r_squared,
+                        strings: all.len(),
                     });
                 }
             }
@@ -125,6 +141,7 @@ impl Projection {
         (!features.is_empty()).then_some(Self {
             features,
             training: training.len(),
+            unregressed,
         })
     }
 
@@ -141,12 +158,14 @@ impl Projection {
 
 /// The ridge regression of `target` on the design `x` (a column of ones, then the compared
 /// summaries): the summaries' weights divided by the target's standard deviation, placed at
-/// their summaries, and R². `None` for a target that does not vary or a singular system.
+/// their summaries, and the adjusted R². `None` for a target that does not vary, a singular
+/// system or a fit that is not finite.
 fn regress(x: &DMatrix<f64>, target: &DVector<f64>, compared: &[usize]) -> Option<(Summaries, f64)> {
     let n = target.len() as f64;
+    let terms = compared.len() as f64;
     let mean = target.mean();
     let total: f64 = target.iter().map(|t| (t - mean).powi(2)).sum();
-    if total <= 0.0 || !total.is_finite() {
+    if total <= 0.0 || !total.is_finite() || n <= terms + 1.0 {
         return None;
     }
     let sd = (total / (n - 1.0)).sqrt();
@@ -156,11 +175,15 @@ fn regress(x: &DMatrix<f64>, target: &DVector<f64>, compared: &[usize]) -> Optio
     }
     let beta = gram.cholesky()?.solve(&(x.transpose() * target));
     let residual: f64 = (x * &beta - target).iter().map(|r| r * r).sum();
+    let adjusted = 1.0 - (residual / total) * (n - 1.0) / (n - terms - 1.0);
+    if !(adjusted.is_finite() && beta.iter().all(|b| b.is_finite())) {
+        return None;
+    }
     let mut weights = [0.0; N_SUMMARIES];
     for (c, &j) in compared.iter().enumerate() {
         weights[j] = beta[c + 1] / sd;
     }
-    Some((weights, (1.0 - residual / total).max(0.0)))
+    Some((weights, adjusted.max(0.0)))
 }
 
 #[cfg(test)]
@@ -208,14 +231,16 @@ mod tests {
         let active = [true; N_SUMMARIES];
         let bounds = vec![(vec![0.0, 2.0], vec![1.0, 5.0])];
         let names = vec![vec!["a".to_string(), "b".to_string()]];
-        let p = Projection::learn(&training, &observed, &scales, &active, &bounds, &names).unwrap();
+        let p = Projection::learn(&training, &observed, &scales, &active, &[Law::M2], &bounds, &names).unwrap();
+        assert!(p.unregressed.is_empty());
         assert_eq!(p.features.len(), 2, "one law: its coordinates, no indicator");
         assert_eq!(
             (p.features[0].name.as_str(), p.features[1].name.as_str()),
             ("m2.a", "m2.b")
         );
         for f in &p.features {
-            assert!(f.r_squared > 0.99, "{}: R² {}", f.name, f.r_squared);
+            assert!(f.adjusted_r_squared > 0.99, "{}: R² {}", f.name, f.adjusted_r_squared);
+            assert_eq!(f.strings, 400);
             let carried: f64 = f.weights[..2].iter().map(|w| w.abs()).sum();
             let noise: f64 = f.weights[2..].iter().map(|w| w.abs()).sum();
             assert!(noise < 0.02 * carried, "{}: {:?}", f.name, f.weights);
@@ -261,11 +286,13 @@ mod tests {
         active[4] = true;
         let bounds = vec![(vec![0.0], vec![1.0]); 2];
         let names = vec![vec!["x".to_string()]; 2];
+        let laws = [Law::M1, Law::M2];
         let p = Projection::learn(
             &training,
             &[0.0; N_SUMMARIES],
             &[1.0; N_SUMMARIES],
             &active,
+            &laws,
             &bounds,
             &names,
         )
@@ -273,8 +300,13 @@ mod tests {
         // The coordinate does not vary: no coordinate feature, two indicators.
         let names: Vec<&str> = p.features.iter().map(|f| f.name.as_str()).collect();
         assert_eq!(names, ["P(m1)", "P(m2)"]);
+        // Opposite predictions of one quantity, each weighed by √(1/2): together they count
+        // as one.
+        let d: Summaries = std::array::from_fn(|j| if j == 3 { 1.0 } else { 0.0 });
+        let one = p.features[0].weights[3].abs();
+        assert!((p.rho(&d) - one).abs() < 1e-12 * one, "{} vs {one}", p.rho(&d));
         for f in &p.features {
-            assert!(f.r_squared > 0.99, "{}: {}", f.name, f.r_squared);
+            assert!(f.adjusted_r_squared > 0.99, "{}: {}", f.name, f.adjusted_r_squared);
             assert!(f.weights[4].abs() < 0.01 * f.weights[3].abs(), "{:?}", f.weights);
             assert!(f.weights.iter().enumerate().all(|(j, w)| active[j] || w.to_bits() == 0));
         }

@@ -12,7 +12,9 @@
 //! the median absolute deviation (×1.4826) of summary j over a pilot of prior simulations
 //! (their standard deviation where the MAD is 0, 1 where both are): each summary counts by
 //! how much it varies across the prior, not by its unit (Prangle 2017's scaling, fixed after
-//! the pilot so that ρ stays a function of the parameters). A diverged string scores +∞.
+//! the pilot so that ρ stays a function of the parameters). Where the run asks for
+//! semi-automatic summaries, ρ compares instead what regressions fitted on the pilot predict
+//! from the scaled summaries ([`super::projection`]). A diverged string scores +∞.
 
 use super::gpu::strings::OnClockJob;
 use super::projection::Projection;

@@ -13,8 +13,10 @@
 //! 3. **The pilot and the scout**: prior simulations give first scales of the distance and the
 //!    reference table of the check; a short ABC-SMC on them finds the strings near the record,
 //!    whose spread scales the main run's distance (see `Scout`).
-//! 4. **ABC-SMC** ([`crate::abc::smc`]) on ρ = the scaled distance of summaries, every candidate a
-//!    string simulated on the record's clock ([`SurfaceEvaluator`]).
+//! 4. **ABC-SMC** ([`crate::abc::smc`]) on ρ = the scaled distance of summaries (or, with
+//!    `semi_automatic`, of the predictions of regressions fitted on the half of the pilot
+//!    nearest the record: [`crate::eval::projection`]), every candidate a string simulated on
+//!    the record's clock ([`SurfaceEvaluator`]).
 //! 5. **The check**: records re-simulated from each law's posterior are classified by their
 //!    nearest neighbours in the reference table. Summaries that are not sufficient can make
 //!    ABC model choice inconsistent (Robert, Cornuet, Marin & Pillai 2011); the law is called
@@ -28,7 +30,7 @@ use crate::abc::{Particle, Run};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
-use crate::eval::projection::{Projection, Training};
+use crate::eval::projection::{MIN_STRINGS_PER_TERM, Projection, Training};
 use crate::eval::surface::{Distance, InferredString, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
 use crate::laws::Law;
 use crate::numerics::weighted_quantile;
@@ -607,8 +609,8 @@ pub struct SurfaceResult {
     pub summary_names: Vec<&'static str>,
     pub observed: Vec<f64>,
     pub scales: Vec<f64>,
-    /// What the distance compared: `scaled` summaries, or their `semi-automatic` projection.
-    pub summaries: &'static str,
+    /// What the distance compared: `scaled summaries`, or `semi-automatic` predictions.
+    pub distance: &'static str,
     /// Semi-automatic ABC's predictions, each with the R² of its regression on the training
     /// strings: a parameter the summaries do not predict is one the record does not inform
     /// through them.
@@ -812,12 +814,22 @@ pub fn infer(
     let mut warnings = Vec::new();
     if settings.semi_automatic {
         distance.projection = pilot.projection(&prior, &table, &distance);
-        if distance.projection.is_none() {
-            warnings.push(format!(
-                "semi-automatic summaries: too few pilot strings near the record to regress on ({} of the pilot's {}); the scaled summaries were compared",
-                ((table.len() as f64 * TRAINING_SHARE).ceil() as usize),
-                settings.pilot
-            ));
+        let least = MIN_STRINGS_PER_TERM * (distance.active.iter().filter(|a| **a).count() + 1);
+        match &distance.projection {
+            None => warnings.push(format!(
+                "semi-automatic summaries: no regression could be fitted on the {} pilot strings nearest the record (a law's coordinates need {least} of its own); the scaled summaries were compared: raise `pilot`",
+                training_size(table.len()),
+            )),
+            Some(p) if !p.unregressed.is_empty() => {
+                let laws: Vec<String> = p.unregressed.iter().map(|l| l.to_string()).collect();
+                warnings.push(format!(
+                    "semi-automatic summaries: {} had fewer than {least} of the {} pilot strings nearest the record, too few to regress {} parameters on; they are compared only through the other predictions: raise `pilot`",
+                    laws.join(", "),
+                    p.training,
+                    if laws.len() == 1 { "its" } else { "their" }
+                ));
+            }
+            Some(_) => {}
         }
     }
     let noise_floor = scout.noise_floor(&distance, noise_sd_nm, period_s);
@@ -875,10 +887,10 @@ pub fn infer(
         simulations,
         cost,
         noise_floor,
-        summaries: if distance.projection.is_some() {
+        distance: if distance.projection.is_some() {
             "semi-automatic"
         } else {
-            "scaled"
+            "scaled summaries"
         },
         projection: distance.projection.clone(),
         warnings: warnings
@@ -944,6 +956,11 @@ struct Pilot {
 /// Share of the pilot, nearest the record, that semi-automatic ABC's regressions are fitted on.
 pub const TRAINING_SHARE: f64 = 0.5;
 
+/// The training strings of semi-automatic ABC out of a reference table of `table` strings.
+fn training_size(table: usize) -> usize {
+    ((table as f64 * TRAINING_SHARE).ceil() as usize).max(1)
+}
+
 /// Pilot strings, and noise draws on each, that measure the summaries' spread under the noise.
 const NOISE_NEIGHBOURS: usize = 20;
 const NOISE_REPLICATES: usize = 5;
@@ -988,7 +1005,7 @@ impl Pilot {
     fn projection(&self, prior: &Prior, table: &[(usize, Summaries)], distance: &Distance) -> Option<Projection> {
         let mut near: Vec<(f64, usize)> = table.iter().enumerate().map(|(i, t)| (distance.rho(&t.1), i)).collect();
         near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        near.truncate(((table.len() as f64 * TRAINING_SHARE).ceil() as usize).max(1));
+        near.truncate(training_size(table.len()));
         let training: Vec<Training<'_>> = near
             .iter()
             .map(|&(_, i)| Training {
@@ -1020,11 +1037,13 @@ impl Pilot {
                 names
             })
             .collect();
+        let laws: Vec<Law> = prior.laws().collect();
         Projection::learn(
             &training,
             &distance.observed,
             &distance.scales,
             &distance.active,
+            &laws,
             &bounds,
             &names,
         )

@@ -816,7 +816,7 @@ def surface(
     where. ``semi_automatic=True`` compares what linear regressions on the pilot strings nearest
     the record predict from the summaries (each law's parameters, the string's where inferred,
     each law's probability) instead of the summaries: ``projection`` in the result names each
-    prediction with its R². docs/surface.md says what a surface record can and cannot tell."""
+    prediction with its adjusted R². docs/surface.md says what a surface record can and cannot tell."""
     import json
 
     options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json")}
