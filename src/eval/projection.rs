@@ -10,9 +10,8 @@
 //! is that of the predictions' difference, B·(a − b): a function of the summaries alone, fixed
 //! after the training strings, as the scaled distance is after its pilot.
 
-use super::surface::Summaries;
 use crate::laws::Law;
-use crate::simulate::surface::N_SUMMARIES;
+use crate::simulate::surface::{N_SUMMARIES, Summaries};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 

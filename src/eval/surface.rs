@@ -31,8 +31,7 @@ use crate::stability::lumped::Lumped;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
-/// A record's summaries.
-pub type Summaries = [f64; N_SUMMARIES];
+pub use crate::simulate::surface::Summaries;
 
 /// The string and drive every candidate is simulated with, and the noise added.
 #[derive(Clone, Debug)]

@@ -285,7 +285,7 @@ pub fn downhole_summaries(least_rad_s: Option<&[f64]>, greatest_rad_s: Option<&[
 /// torque's summaries, whose scales never fall below what the noise moves them. Strings that
 /// turn steadily all read the top drive's speed, equal to rounding: a scale of their spread
 /// would be rounding.
-pub fn least_scales(samples: usize) -> [f64; N_SUMMARIES] {
+pub fn least_scales(samples: usize) -> Summaries {
     let mut least = [0.0; N_SUMMARIES];
     let resolution = 0.1 * RAD_S_PER_RPM;
     least[DOWNHOLE_LEAST] = resolution;
@@ -309,6 +309,9 @@ const DOWNHOLE_GREATEST: usize = N_TORQUE_SUMMARIES + 2;
 pub const MEAN: usize = 0;
 pub const PERIOD: usize = 11;
 pub const PERIOD_STRENGTH: usize = 12;
+
+/// A record's summaries, in the order of [`SUMMARY_NAMES`].
+pub type Summaries = [f64; N_SUMMARIES];
 
 /// The summaries' names, in order (torques in N·m, times in s).
 pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
@@ -336,7 +339,7 @@ pub const SUMMARY_NAMES: [&str; N_SUMMARIES] = [
 /// The summaries of a surface torque record (N·m) sampled every `period_s` (see the module
 /// documentation), then the `downhole` ones ([`downhole_summaries`]; zeros for a record
 /// without downhole channels).
-pub fn summaries(torque_nm: &[f64], period_s: f64, downhole: &[f64; N_DOWNHOLE_SUMMARIES]) -> [f64; N_SUMMARIES] {
+pub fn summaries(torque_nm: &[f64], period_s: f64, downhole: &[f64; N_DOWNHOLE_SUMMARIES]) -> Summaries {
     let n = torque_nm.len();
     let mean = torque_nm.iter().sum::<f64>() / n.max(1) as f64;
     let centred: Vec<f64> = torque_nm.iter().map(|y| y - mean).collect();
