@@ -122,7 +122,7 @@ pub struct SurfaceCmd {
     pub backend: Backend,
     /// Semi-automatic ABC: compare what linear regressions on the pilot strings nearest the
     /// record predict from the summaries (each law's parameters, the string's where inferred,
-    /// each law's probability), each with its R², instead of the summaries themselves.
+    /// each law's probability), each with its adjusted R², instead of the summaries themselves.
     #[arg(long)]
     pub semi_automatic: bool,
     /// Worker threads [default: all cores].

@@ -18,6 +18,12 @@ use serde::Serialize;
 /// Fewest training strings per regressed term (each compared summary and the intercept) for a
 /// law's coordinates to be regressed on its strings: fewer would fit their noise.
 pub const MIN_STRINGS_PER_TERM: usize = 3;
+/// Fewest training strings of a law for its coordinates to be regressed, where `active`
+/// marks the summaries compared ([`MIN_STRINGS_PER_TERM`] per summary and the intercept).
+pub fn least_strings(active: &[bool; N_SUMMARIES]) -> usize {
+    MIN_STRINGS_PER_TERM * (active.iter().filter(|a| **a).count() + 1)
+}
+
 /// The ridge's weight, relative to the training strings' count: a summary the others nearly
 /// predict does not get a large weight of either sign.
 pub const RIDGE: f64 = 1e-3;
@@ -91,7 +97,7 @@ impl Projection {
         };
         let mut features = Vec::new();
         let mut unregressed = Vec::new();
-        let least = MIN_STRINGS_PER_TERM * (compared.len() + 1);
+        let least = least_strings(active);
         for (slot, (lower, upper)) in bounds.iter().enumerate() {
             let rows: Vec<&Training<'_>> = training.iter().filter(|t| t.slot == slot).collect();
             let varies = lower.iter().zip(upper).any(|(lo, hi)| hi > lo);
@@ -260,6 +266,47 @@ mod tests {
         };
         let rho = |s: &Summaries| p.rho(&std::array::from_fn(|j| s[j] - observed[j]));
         assert!(rho(&same) < 0.2 * rho(&off), "{} vs {}", rho(&same), rho(&off));
+    }
+
+    /// A law with fewer training strings than its regressions need is named, not regressed;
+    /// the law with enough is.
+    #[test]
+    fn a_law_too_sparse_to_regress_is_named() {
+        let mut active = [false; N_SUMMARIES];
+        active[0] = true;
+        assert_eq!(least_strings(&active), 6);
+        let coordinates: Vec<Vec<f64>> = (0..30).map(|i| vec![f64::from(i) / 30.0]).collect();
+        let training: Vec<Training<'_>> = coordinates
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let slot = usize::from(i >= 25);
+                let mut s = [0.0; N_SUMMARIES];
+                s[0] = c[0] + 0.01 * ((i * 7 % 5) as f64);
+                Training {
+                    slot,
+                    law: [Law::M2, Law::M3][slot],
+                    coordinates: c,
+                    summaries: s,
+                }
+            })
+            .collect();
+        let bounds = vec![(vec![0.0], vec![1.0]); 2];
+        let names = vec![vec!["x".to_string()]; 2];
+        let p = Projection::learn(
+            &training,
+            &[0.0; N_SUMMARIES],
+            &[1.0; N_SUMMARIES],
+            &active,
+            &[Law::M2, Law::M3],
+            &bounds,
+            &names,
+        )
+        .unwrap();
+        assert_eq!(p.unregressed, [Law::M3], "five strings of m3, six needed");
+        let names: Vec<&str> = p.features.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["m2.x", "P(m2)", "P(m3)"]);
+        assert_eq!(p.features[0].strings, 25);
     }
 
     /// Two laws told apart by one summary: the indicators' regressions weigh that summary

@@ -30,11 +30,11 @@ use crate::abc::{Particle, Run};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
-use crate::eval::projection::{MIN_STRINGS_PER_TERM, Projection, Training};
+use crate::eval::projection::{Projection, Training, least_strings};
 use crate::eval::surface::{Distance, InferredString, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
 use crate::laws::Law;
 use crate::numerics::weighted_quantile;
-use crate::prior::{Candidate, PhysicalScales, Prior, PriorFile};
+use crate::prior::{Candidate, MAX_DIMS, PhysicalScales, Prior, PriorFile};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
     DownholeExtremes, Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH,
@@ -213,6 +213,10 @@ impl Settings {
         Ok(run)
     }
 }
+
+/// The string's coordinates a candidate carries after its law's parameters where the run
+/// infers the string, by the names the result gives them.
+pub const STRING_COORDINATES: [&str; 2] = ["omega_n_rad_s", "damping_ratio"];
 
 /// How a surface record is read into laws.
 #[derive(Clone, Debug)]
@@ -611,9 +615,9 @@ pub struct SurfaceResult {
     pub scales: Vec<f64>,
     /// What the distance compared: `scaled summaries`, or `semi-automatic` predictions.
     pub distance: &'static str,
-    /// Semi-automatic ABC's predictions, each with the R² of its regression on the training
-    /// strings: a parameter the summaries do not predict is one the record does not inform
-    /// through them.
+    /// Semi-automatic ABC's predictions, each with the adjusted R² of its regression on the
+    /// training strings: a parameter the summaries do not predict is one the record does not
+    /// inform through them.
     pub projection: Option<Projection>,
     pub cycle: Cycle,
     /// T(Ω) the mean surface torque states (N·m at r = 1) and the speed (rpm).
@@ -814,7 +818,7 @@ pub fn infer(
     let mut warnings = Vec::new();
     if settings.semi_automatic {
         distance.projection = pilot.projection(&prior, &table, &distance);
-        let least = MIN_STRINGS_PER_TERM * (distance.active.iter().filter(|a| **a).count() + 1);
+        let least = least_strings(&distance.active);
         match &distance.projection {
             None => warnings.push(format!(
                 "semi-automatic summaries: no regression could be fitted on the {} pilot strings nearest the record (a law's coordinates need {least} of its own); the scaled summaries were compared: raise `pilot`",
@@ -947,8 +951,8 @@ fn compared<T: Clone>(all: &[T; N_SUMMARIES], active: &[bool; N_SUMMARIES]) -> V
 struct Pilot {
     /// Per simulation that stayed in bounds: its law's slot and its string.
     runs: Vec<(usize, Noiseless)>,
-    /// Each run's coordinates (SI), in the order of `runs`.
-    coordinates: Vec<Vec<f64>>,
+    /// Each run's coordinates (SI; its box's count of them first), in the order of `runs`.
+    coordinates: Vec<[f64; MAX_DIMS]>,
     /// Samples of the record's clock.
     samples: usize,
 }
@@ -969,17 +973,11 @@ impl Pilot {
     fn simulate(model: &SurfaceModel, prior: &Prior, seed: u64, count: usize) -> Result<Self> {
         let candidates: Vec<Candidate> = (0..count).map(|i| prior.candidate(seed, 0, i as u64)).collect();
         let simulated = model.simulate_candidates_noiseless(prior, &candidates)?;
-        let (runs, coordinates): (Vec<(usize, Noiseless)>, Vec<Vec<f64>>) = candidates
+        let (runs, coordinates): (Vec<(usize, Noiseless)>, Vec<[f64; MAX_DIMS]>) = candidates
             .iter()
             .zip(simulated)
             .filter(|(_, run)| !run.diverged)
-            .map(|(c, run)| {
-                let dims = prior.boxes[c.slot].lower.len();
-                (
-                    (c.slot, Noiseless::of(model, NoiseKey::of(seed, c), run)),
-                    c.widened()[..dims].to_vec(),
-                )
-            })
+            .map(|(c, run)| ((c.slot, Noiseless::of(model, NoiseKey::of(seed, c), run)), c.widened()))
             .unzip();
         if runs.len() < count / 2 {
             return Err(Error::Numerical(format!(
@@ -1011,7 +1009,7 @@ impl Pilot {
             .map(|&(_, i)| Training {
                 slot: table[i].0,
                 law: prior.law(table[i].0),
-                coordinates: &self.coordinates[i],
+                coordinates: &self.coordinates[i][..prior.boxes[table[i].0].lower.len()],
                 summaries: table[i].1,
             })
             .collect();
@@ -1029,7 +1027,7 @@ impl Pilot {
             .map(|b| {
                 let mut names: Vec<String> = b.law.params().iter().map(|p| p.name.to_string()).collect();
                 names.extend(
-                    ["omega_n_rad_s", "damping_ratio"]
+                    STRING_COORDINATES
                         .into_iter()
                         .take(b.lower.len().saturating_sub(names.len()))
                         .map(str::to_string),

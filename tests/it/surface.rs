@@ -167,7 +167,7 @@ fn semi_automatic_summaries_say_what_they_predict_and_find_the_torques() {
         "one law: its three parameters, no indicator"
     );
     eprintln!(
-        "R²: tsb {:.3}, tcb {:.3}, g {:.3}",
+        "adjusted R²: tsb {:.3}, tcb {:.3}, g {:.3}",
         r2("m2.tsb"),
         r2("m2.tcb"),
         r2("m2.g")
