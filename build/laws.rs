@@ -247,10 +247,15 @@ impl BuiltIn {
     /// `let pK = p[K];` for every parameter `exprs` use (locals keep the loops free of bounds
     /// checks, so that they vectorise).
     fn locals(&self, exprs: &[&Expr], indent: &str) -> String {
+        self.locals_at(exprs, indent, "")
+    }
+
+    /// [`Self::locals`] read at `index` of each parameter's array (`let pK = p[K][l];`).
+    fn locals_at(&self, exprs: &[&Expr], indent: &str, index: &str) -> String {
         let mut out = String::new();
         for i in 0..self.params.len() {
             if exprs.iter().any(|e| e.uses(Var::Param(i))) {
-                writeln!(out, "{indent}let p{i} = p[{i}];").unwrap();
+                writeln!(out, "{indent}let p{i} = p[{i}]{index};").unwrap();
             }
         }
         out
@@ -365,7 +370,13 @@ pub fn rust(laws: &[BuiltIn]) -> String {
     let function = |out: &mut String, doc: &str, signature: &str, arm: &dyn Fn(&BuiltIn) -> String| {
         writeln!(
             out,
-            "    /// {doc}\n    {ALLOW}\n    #[inline]\n    {signature} {{\n        match self {{"
+            "    /// {doc}\n    {ALLOW}\n    {}{signature} {{\n        match self {{",
+            // A signature may give its own inlining.
+            if signature.contains("#[inline") {
+                ""
+            } else {
+                "#[inline]\n    "
+            }
         )
         .unwrap();
         for law in laws {
@@ -390,6 +401,18 @@ pub fn rust(laws: &[BuiltIn]) -> String {
                 "{}                {}\n",
                 law.locals(&[&law.torque], "                "),
                 law.torque.rust("f64::exp", "f64::tanh")
+            )
+        },
+    );
+    function(
+        &mut out,
+        "r·T(w) of a built-in law on `L` lanes at once (lane `l` reads `p[·][l]`, `w[l]`, `r[l]`),\n    /// with the vectorisable exp and tanh of [`crate::numerics`]: the strings' CPU twin's law.",
+        "#[inline(always)]\n    #[allow(clippy::needless_range_loop)]\n    fn built_in_torque_lanes<const L: usize>(self, p: &[[f64; L]; 6], w: &[f64; L], r: &[f64; L]) -> [f64; L]",
+        &|law| {
+            format!(
+                "                let mut out = [0.0; L];\n                for l in 0..L {{\n                    let (w, r) = (w[l], r[l]);\n{}                    out[l] = {};\n                }}\n                out\n",
+                law.locals_at(&[&law.torque], "                    ", "[l]"),
+                law.torque.rust("crate::numerics::exp", "crate::numerics::tanh")
             )
         },
     );

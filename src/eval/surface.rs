@@ -16,16 +16,16 @@
 //! semi-automatic summaries, ρ compares instead what regressions fitted on the pilot predict
 //! from the scaled summaries ([`super::projection`]). A diverged string scores +∞.
 
-use super::gpu::strings::OnClockJob;
 use super::projection::Projection;
 use super::{Backend, Evaluator, Problem};
 use crate::error::Result;
 use crate::laws::{Law, MAX_PARAMS};
 use crate::prior::{Candidate, MAX_DIMS, Prior};
 use crate::rng::{box_muller, key_of_seed, philox4x32_10};
-use crate::simulate::strings::Chain;
+use crate::simulate::strings::{Chain, LANES};
 use crate::simulate::surface::{
-    DownholeExtremes, Drive, Integration, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, simulate_on_clock, summaries,
+    DownholeExtremes, Drive, Integration, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, OnClockJob, simulate_on_clock,
+    simulate_on_clock_many, summaries,
 };
 use crate::stability::lumped::Lumped;
 use rayon::prelude::*;
@@ -150,13 +150,6 @@ impl SurfaceModel {
     /// [`Self::simulate_noiseless`] for every `(law, coordinates)` of `strings`, in order, on
     /// the model's backend: the GPU simulates the batch at once.
     pub fn simulate_noiseless_many(&self, strings: &[(Law, &[f64])]) -> Result<Vec<OnClock>> {
-        if self.backend != Backend::Gpu {
-            return Ok(strings
-                .par_iter()
-                .with_max_len(1)
-                .map(|(law, params)| self.simulate_noiseless(*law, params))
-                .collect());
-        }
         let chains: Vec<Cow<'_, Chain>> = strings.iter().map(|(law, p)| self.chain_of(*law, p)).collect();
         let jobs: Vec<OnClockJob<'_>> = strings
             .iter()
@@ -167,6 +160,9 @@ impl SurfaceModel {
                 chain,
             })
             .collect();
+        if self.backend != Backend::Gpu {
+            return Ok(simulate_on_clock_many(&jobs, &self.drive, self.integration));
+        }
         Ok(super::gpu::strings::on_clock_batch(
             &self.drive,
             self.integration,
@@ -326,9 +322,9 @@ fn coordinates(prior: &Prior, candidate: &Candidate) -> (Law, [f64; MAX_DIMS], u
     (prior.law(candidate.slot), candidate.widened(), dims)
 }
 
-/// Samples of trace (each four f64 channels) a GPU batch of the evaluator holds on the host at
+/// Samples of trace (each four f64 channels) a batch of the evaluator holds on the host at
 /// once: 128 MB.
-const GPU_TRACE_VALUES: usize = 1 << 22;
+const TRACE_VALUES: usize = 1 << 22;
 
 /// Scores candidates by simulating their strings on the record's clock (on the GPU in
 /// batches, or on the CPU with rayon across candidates).
@@ -388,20 +384,9 @@ impl Evaluator for SurfaceEvaluator {
                 self.distance.rho(&self.model.summaries_of_run(&run))
             }
         };
-        if self.model.backend != Backend::Gpu {
-            // Each string summarised as soon as it is simulated: memory stays one string a task.
-            candidates
-                .par_iter()
-                .zip(out.par_iter_mut())
-                .with_max_len(1)
-                .for_each(|(c, rho)| {
-                    let (law, params, dims) = coordinates(&p.prior, c);
-                    *rho = rho_of(self.model.simulate_noiseless(law, &params[..dims]), c);
-                });
-            return Ok(());
-        }
-        // On the GPU in batches whose traces stay a bounded share of memory.
-        let per_batch = (GPU_TRACE_VALUES / self.model.drive.omega_rad_s.len().max(1)).max(1);
+        // In batches whose traces stay a bounded share of memory (the CPU simulates a batch's
+        // strings of one law eight at a time, the GPU all at once).
+        let per_batch = (TRACE_VALUES / self.model.drive.omega_rad_s.len().max(1)).max(LANES);
         for (part, rhos) in candidates.chunks(per_batch).zip(out.chunks_mut(per_batch)) {
             let runs = self.model.simulate_candidates_noiseless(&p.prior, part)?;
             runs.into_par_iter()

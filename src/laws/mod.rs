@@ -289,6 +289,25 @@ impl Law {
         }
     }
 
+    /// r·T(w) on `L` strings at once, lane `l` with the parameters `p[·][l]`, the bit speed
+    /// `w[l]` (rad/s) and the ratio `r[l]`: the strings' CPU twin's law. A built-in law's lanes
+    /// compute together (through [`crate::numerics`]'s exp and tanh, within 2 ulp of libm's); a
+    /// law file's one after the other, as [`Law::torque`].
+    #[inline(always)]
+    pub fn torque_lanes<const L: usize>(self, p: &[[f64; L]; 6], w: &[f64; L], r: &[f64; L]) -> [f64; L] {
+        match self {
+            Law::File(id) => {
+                let file = &crate::laws::file::registered(id).file;
+                let n = self.n_params();
+                std::array::from_fn(|l| {
+                    let lane: [f64; 6] = std::array::from_fn(|i| p[i][l]);
+                    file.torque(&lane[..n], w[l], r[l])
+                })
+            }
+            built_in => built_in.built_in_torque_lanes(p, w, r),
+        }
+    }
+
     /// dT/dw at bit speed `w` (rad/s): the paper's analytic derivatives (a law file's symbolic
     /// one), scaled by `r`. The unit is the torque unit per rad/s (kN·m·s/rad for the paper's
     /// parameters).

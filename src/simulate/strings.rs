@@ -418,306 +418,481 @@ impl Summary {
     }
 }
 
-/// A string's state inside the integrator: `N` nodes' lags (rad) and speeds (rad/s). The
-/// 1-DOF string gets arrays of one, so that a step copies and zeroes 16 bytes, not 256.
+/// Strings integrated together: the batch's strings of one law go through the integrator
+/// [`LANES`] at a time, every array holding one value per string, so that the arithmetic of
+/// the RK4 stages and the law's exp and tanh run on the CPU's vector units. Each lane's
+/// arithmetic is the one-string integrator's, operation for operation, so a string's summary
+/// does not depend on which strings share its lanes.
+pub const LANES: usize = 8;
+
+/// The states of `L` strings of `N` nodes, string `l` in lane `l` of every array: lags (rad),
+/// speeds (rad/s), and whether each bit is stuck. The 1-DOF string gets arrays of one node,
+/// so that a step copies and zeroes L·16 bytes, not L·256.
 #[derive(Clone, Copy)]
-struct Nodes<const N: usize> {
-    lag: [f64; N],
-    speed: [f64; N],
-    stuck: bool,
+struct Nodes<const N: usize, const L: usize> {
+    lag: [[f64; L]; N],
+    speed: [[f64; L]; N],
+    stuck: [bool; L],
 }
 
-impl<const N: usize> Nodes<N> {
-    fn of(s: &StringState) -> Self {
+impl<const N: usize, const L: usize> Nodes<N, L> {
+    fn of(starts: [&StringState; L]) -> Self {
         Self {
-            lag: std::array::from_fn(|j| s.lag_rad[j]),
-            speed: std::array::from_fn(|j| s.speed_rad_s[j]),
-            stuck: s.stuck,
+            lag: std::array::from_fn(|j| std::array::from_fn(|l| starts[l].lag_rad[j])),
+            speed: std::array::from_fn(|j| std::array::from_fn(|l| starts[l].speed_rad_s[j])),
+            stuck: std::array::from_fn(|l| starts[l].stuck),
         }
     }
 
-    fn state(&self) -> StringState {
+    /// String `l`'s state.
+    fn lane(&self, l: usize) -> StringState {
         let mut s = StringState {
             lag_rad: [0.0; MAX_NODES],
             speed_rad_s: [0.0; MAX_NODES],
-            stuck: self.stuck,
+            stuck: self.stuck[l],
         };
-        s.lag_rad[..N].copy_from_slice(&self.lag);
-        s.speed_rad_s[..N].copy_from_slice(&self.speed);
+        for j in 0..N {
+            s.lag_rad[j] = self.lag[j][l];
+            s.speed_rad_s[j] = self.speed[j][l];
+        }
         s
+    }
+
+    /// String `l`'s state taken from `from`.
+    fn take_lane(&mut self, from: &Self, l: usize) {
+        for j in 0..N {
+            self.lag[j][l] = from.lag[j][l];
+            self.speed[j][l] = from.speed[j][l];
+        }
+        self.stuck[l] = from.stuck[l];
     }
 }
 
-/// One string being integrated: the chain (of at most `N` nodes), the law at its operating
-/// point, and the state.
-struct Integrator<'a, const N: usize> {
-    chain: &'a Chain,
-    /// The chain's nodes (≤ N).
+/// What ends a lane's pass of the event rule short of the step's end.
+#[derive(Clone, Copy, PartialEq)]
+enum Event {
+    /// None: the lane has finished its step (or had none to take).
+    Done,
+    /// The stuck bit is released inside the step.
+    Release,
+    /// The slipping bit's speed reaches zero inside the step.
+    Stop,
+}
+
+/// `L` strings of one law being integrated: each string's chain (all of the same number of
+/// nodes, at most `N`), law parameters and operating point, and the states.
+struct Integrator<const N: usize, const L: usize> {
+    /// The chains' nodes (≤ N).
     n: usize,
+    /// Each chain's lumped inertias (kg·m²), `inertia[j][l]` string `l`'s node `j`.
+    inertia: [[f64; L]; N],
+    /// Each chain's element stiffnesses (N·m/rad), element j above node j.
+    stiffness: [[f64; L]; N],
+    /// Each chain's Rayleigh damping: α (1/s) and β (s).
+    alpha: [f64; L],
+    beta: [f64; L],
     law: Law,
-    /// The law's parameters (N·m), padded; the law reads its first `n_params`.
-    params: [f64; 6],
-    n_params: usize,
-    omega: f64,
-    ratio: f64,
+    /// The law's parameters (N·m), padded: `params[i][l]` is string `l`'s i-th; the law reads
+    /// its first `n_params`.
+    params: [[f64; L]; 6],
+    omega: [f64; L],
+    ratio: [f64; L],
     /// Static torque T_s = max(r·T(0), 0) (N·m).
-    static_nm: f64,
+    static_nm: [f64; L],
     /// Bit speed beyond which the motion has run away (rad/s): a thousand times the rotary
     /// speed, and never under 1,000 rad/s (≈ 9,550 rpm), far above any stick-slip peak (a few
     /// times Ω) yet far below where f64 overflows, so that a law whose torque turns negative at
     /// high speed is reported instead of producing a finite trace of absurd speeds.
-    runaway: f64,
-    state: Nodes<N>,
+    runaway: [f64; L],
+    state: Nodes<N, L>,
     /// Direction of slip (±1) while not stuck.
-    dir: f64,
+    dir: [f64; L],
+    /// Lanes still integrated: a string that has left physical bounds is not (its state stays
+    /// as it was then, and its lane takes no part in the event rule).
+    live: [bool; L],
 }
 
-impl<'a, const N: usize> Integrator<'a, N> {
-    fn new(chain: &'a Chain, job: &StringJob) -> Self {
-        let n = chain.nodes();
-        debug_assert!(n <= N);
-        let w_bit = job.start.speed_rad_s[n - 1];
-        let mut out = Self {
-            chain,
-            n: if N == 1 { 1 } else { n },
-            law: job.law,
-            params: job.params_nm,
-            n_params: job.law.n_params(),
-            omega: 0.0,
-            ratio: 0.0,
-            static_nm: 0.0,
-            runaway: 0.0,
-            state: Nodes::of(&job.start),
-            dir: if w_bit < 0.0 { -1.0 } else { 1.0 },
+// The lanes' loops index several arrays by lane at once, as a kernel's threads do.
+#[allow(clippy::needless_range_loop)]
+impl<const N: usize, const L: usize> Integrator<N, L> {
+    /// The strings of `jobs`, all of one law, string `l` on `chains[l]` (all of as many nodes).
+    fn new(chains: [&Chain; L], jobs: [&StringJob; L]) -> Self {
+        let n = chains[0].nodes();
+        debug_assert!(n <= N && chains.iter().all(|c| c.nodes() == n));
+        let node = |values: fn(&Chain) -> &[f64]| -> [[f64; L]; N] {
+            std::array::from_fn(|j| std::array::from_fn(|l| values(chains[l]).get(j).copied().unwrap_or(0.0)))
         };
-        out.set_operating_point(job.omega_rad_s, job.ratio);
+        let law = jobs[0].law;
+        debug_assert!(jobs.iter().all(|j| j.law == law));
+        let bit = n - 1;
+        let mut out = Self {
+            n: if N == 1 { 1 } else { n },
+            inertia: node(|c| &c.inertia_kg_m2),
+            stiffness: node(|c| &c.stiffness_nm_per_rad),
+            alpha: chains.map(|c| c.alpha_per_s),
+            beta: chains.map(|c| c.beta_s),
+            law,
+            params: std::array::from_fn(|i| std::array::from_fn(|l| jobs[l].params_nm[i])),
+            omega: [0.0; L],
+            ratio: [0.0; L],
+            static_nm: [0.0; L],
+            runaway: [0.0; L],
+            state: Nodes::of(jobs.map(|j| &j.start)),
+            dir: jobs.map(|j| if j.start.speed_rad_s[bit] < 0.0 { -1.0 } else { 1.0 }),
+            live: [true; L],
+        };
+        out.set_operating_point(jobs.map(|j| j.omega_rad_s), jobs.map(|j| j.ratio));
         out
     }
 
-    /// The top drive's speed Ω (rad/s) and the weight ratio r from now on.
-    fn set_operating_point(&mut self, omega_rad_s: f64, ratio: f64) {
+    /// The top drive's speed Ω (rad/s) and the weight ratio r of each string from now on.
+    fn set_operating_point(&mut self, omega_rad_s: [f64; L], ratio: [f64; L]) {
         self.omega = omega_rad_s;
         self.ratio = ratio;
-        self.static_nm = self.torque(0.0).max(0.0);
-        self.runaway = 1e3 * omega_rad_s.abs().max(1.0);
+        self.static_nm = self.torque(&[0.0; L]).map(|t| t.max(0.0));
+        self.runaway = omega_rad_s.map(|o| 1e3 * o.abs().max(1.0));
     }
 
-    /// The law and its parameters (N·m) from now on.
-    fn set_law(&mut self, law: Law, params_nm: &[f64]) {
-        self.law = law;
-        self.params = padded(params_nm);
-        self.n_params = law.n_params();
-        self.set_operating_point(self.omega, self.ratio);
-    }
-
-    /// r·T(w), the law's torque at the current weight (N·m).
-    fn torque(&self, w: f64) -> f64 {
-        self.law.torque(&self.params[..self.n_params], w, self.ratio)
+    /// r·T(w) of each string, its law's torque at its weight (N·m).
+    #[inline(always)]
+    fn torque(&self, w: &[f64; L]) -> [f64; L] {
+        self.law.torque_lanes(&self.params, w, &self.ratio)
     }
 
     /// F_j = (K u)_j + (C v)_j with v = Ω − w, at node `j` (N·m).
-    fn string_torque(&self, u: &[f64; N], w: &[f64; N], j: usize) -> f64 {
-        let c = self.chain;
-        let (u_above, v_above) = if j == 0 {
-            (0.0, 0.0)
-        } else {
-            (u[j - 1], self.omega - w[j - 1])
-        };
-        let v = self.omega - w[j];
-        let k = c.stiffness_nm_per_rad[j];
-        let mut f = k * (u[j] - u_above) + c.beta_s * k * (v - v_above) + c.alpha_per_s * c.inertia_kg_m2[j] * v;
-        if j + 1 < self.n {
-            let kb = c.stiffness_nm_per_rad[j + 1];
-            f -= kb * (u[j + 1] - u[j]) + c.beta_s * kb * ((self.omega - w[j + 1]) - v);
+    #[inline(always)]
+    fn string_torque(&self, u: &[[f64; L]; N], w: &[[f64; L]; N], j: usize) -> [f64; L] {
+        let below = j + 1 < self.n;
+        let mut out = [0.0; L];
+        for l in 0..L {
+            let (k, beta) = (self.stiffness[j][l], self.beta[l]);
+            let (u_above, v_above) = if j == 0 {
+                (0.0, 0.0)
+            } else {
+                (u[j - 1][l], self.omega[l] - w[j - 1][l])
+            };
+            let v = self.omega[l] - w[j][l];
+            let mut f = k * (u[j][l] - u_above) + beta * k * (v - v_above) + self.alpha[l] * self.inertia[j][l] * v;
+            if below {
+                let kb = self.stiffness[j + 1][l];
+                f -= kb * (u[j + 1][l] - u[j][l]) + beta * kb * ((self.omega[l] - w[j + 1][l]) - v);
+            }
+            out[l] = f;
         }
-        f
+        out
     }
 
-    /// The time derivative of (u, w): the bit held at rest when `stuck`, slipping in `dir`
+    /// The time derivative of (u, w): each bit held at rest where `stuck`, slipping in `dir`
     /// otherwise.
-    fn derivative(&self, s: &Nodes<N>, stuck: bool, dir: f64) -> ([f64; N], [f64; N]) {
+    #[inline(always)]
+    fn derivative(&self, s: &Nodes<N, L>, stuck: &[bool; L], dir: &[f64; L]) -> ([[f64; L]; N], [[f64; L]; N]) {
         let n = self.n;
-        let mut du = [0.0; N];
-        let mut dw = [0.0; N];
+        let mut du = [[0.0; L]; N];
+        let mut dw = [[0.0; L]; N];
         for j in 0..n {
-            du[j] = self.omega - s.speed[j];
-            let mut f = self.string_torque(&s.lag, &s.speed, j);
-            if j == n - 1 {
-                if stuck {
-                    continue;
-                }
-                f -= dir * self.torque(dir * s.speed[j]);
+            let f = self.string_torque(&s.lag, &s.speed, j);
+            for l in 0..L {
+                du[j][l] = self.omega[l] - s.speed[j][l];
             }
-            dw[j] = f / self.chain.inertia_kg_m2[j];
+            if j == n - 1 {
+                let mut along = [0.0; L];
+                for l in 0..L {
+                    along[l] = dir[l] * s.speed[j][l];
+                }
+                let torque = self.torque(&along);
+                for l in 0..L {
+                    dw[j][l] = if stuck[l] {
+                        0.0
+                    } else {
+                        (f[l] - dir[l] * torque[l]) / self.inertia[j][l]
+                    };
+                }
+            } else {
+                for l in 0..L {
+                    dw[j][l] = f[l] / self.inertia[j][l];
+                }
+            }
         }
         (du, dw)
     }
 
-    /// One classical RK4 step of `h` (s) from `s`.
-    fn rk4(&self, s: &Nodes<N>, stuck: bool, dir: f64, h: f64) -> Nodes<N> {
+    /// One classical RK4 step from `s`, of `h[l]` (s) in lane `l`.
+    #[inline(always)]
+    fn rk4(&self, s: &Nodes<N, L>, stuck: &[bool; L], dir: &[f64; L], h: &[f64; L]) -> Nodes<N, L> {
         let n = self.n;
-        let along = |d: &([f64; N], [f64; N]), f: f64| {
+        let along = |d: &([[f64; L]; N], [[f64; L]; N]), f: &[f64; L]| {
             let mut t = *s;
             for j in 0..n {
-                t.lag[j] += f * d.0[j];
-                t.speed[j] += f * d.1[j];
+                for l in 0..L {
+                    t.lag[j][l] += f[l] * d.0[j][l];
+                    t.speed[j][l] += f[l] * d.1[j][l];
+                }
             }
             t
         };
+        let mut half = [0.0; L];
+        for l in 0..L {
+            half[l] = 0.5 * h[l];
+        }
         let k1 = self.derivative(s, stuck, dir);
-        let k2 = self.derivative(&along(&k1, 0.5 * h), stuck, dir);
-        let k3 = self.derivative(&along(&k2, 0.5 * h), stuck, dir);
+        let k2 = self.derivative(&along(&k1, &half), stuck, dir);
+        let k3 = self.derivative(&along(&k2, &half), stuck, dir);
         let k4 = self.derivative(&along(&k3, h), stuck, dir);
         let mut out = *s;
         for j in 0..n {
-            out.lag[j] += h / 6.0 * (k1.0[j] + 2.0 * (k2.0[j] + k3.0[j]) + k4.0[j]);
-            out.speed[j] += h / 6.0 * (k1.1[j] + 2.0 * (k2.1[j] + k3.1[j]) + k4.1[j]);
+            for l in 0..L {
+                out.lag[j][l] += h[l] / 6.0 * (k1.0[j][l] + 2.0 * (k2.0[j][l] + k3.0[j][l]) + k4.0[j][l]);
+                out.speed[j][l] += h[l] / 6.0 * (k1.1[j][l] + 2.0 * (k2.1[j][l] + k3.1[j][l]) + k4.1[j][l]);
+            }
         }
         out
     }
 
-    /// The torque the string drives the bit with (N·m).
-    fn bit_drive(&self, s: &Nodes<N>) -> f64 {
+    /// The torque the string drives each bit with (N·m).
+    #[inline(always)]
+    fn bit_drive(&self, s: &Nodes<N, L>) -> [f64; L] {
         self.string_torque(&s.lag, &s.speed, self.n - 1)
     }
 
-    /// Stuck or slipping, for a bit at rest in state `s`.
-    fn settle_at_rest(&mut self) {
-        let f = self.bit_drive(&self.state);
-        self.state.stuck = f.abs() <= self.static_nm;
-        if !self.state.stuck {
-            self.dir = if f > 0.0 { 1.0 } else { -1.0 };
+    /// Stuck or slipping, for bit `l` at rest, driven by the string's torque `drive` (N·m).
+    #[inline(always)]
+    fn settle_at_rest(&mut self, l: usize, drive: f64) {
+        self.state.stuck[l] = drive.abs() <= self.static_nm[l];
+        if !self.state.stuck[l] {
+            self.dir[l] = if drive > 0.0 { 1.0 } else { -1.0 };
         }
     }
 
-    /// Advances one step of `h` (s).
+    /// Advances every live string one step of `h` (s): a pass integrates each lane to the end
+    /// of what remains of its step, or, where its bit stops or is released inside it, to that
+    /// event (one more RK4 from the pass's start, for the lanes that need it), and goes on from
+    /// there in the next pass.
+    #[inline(always)]
     fn step(&mut self, h: f64) {
         let bit = self.n - 1;
-        let mut remaining = h;
+        let mut remaining = [0.0; L];
+        for l in 0..L {
+            if self.live[l] {
+                remaining[l] = h;
+            }
+        }
         for _ in 0..EVENT_PASSES {
-            if remaining <= 0.0 {
+            if remaining.iter().all(|&r| r <= 0.0) {
                 break;
             }
             let start = self.state;
-            if start.stuck {
-                let end = self.rk4(&start, true, self.dir, remaining);
-                let (f0, f1) = (self.bit_drive(&start), self.bit_drive(&end));
-                if f1.abs() <= self.static_nm {
-                    self.state = end;
-                    break;
+            let stuck = start.stuck;
+            let dir = self.dir;
+            let end = self.rk4(&start, &stuck, &dir, &remaining);
+            let (f0, f1) = (self.bit_drive(&start), self.bit_drive(&end));
+            let mut to_event = [0.0; L];
+            let mut event = [Event::Done; L];
+            for l in 0..L {
+                if remaining[l] <= 0.0 {
+                    continue;
                 }
-                // Released inside the step, where F_bit reaches ±T_s (linear in between).
-                let bound = if f1 > 0.0 { self.static_nm } else { -self.static_nm };
-                let fraction = if (f1 - f0).abs() > 0.0 {
-                    ((bound - f0) / (f1 - f0)).clamp(0.0, 1.0)
+                if stuck[l] {
+                    if f1[l].abs() <= self.static_nm[l] {
+                        self.state.take_lane(&end, l);
+                        remaining[l] = 0.0;
+                        continue;
+                    }
+                    // Released inside the step, where F_bit reaches ±T_s (linear in between).
+                    let bound = if f1[l] > 0.0 {
+                        self.static_nm[l]
+                    } else {
+                        -self.static_nm[l]
+                    };
+                    let fraction = if (f1[l] - f0[l]).abs() > 0.0 {
+                        ((bound - f0[l]) / (f1[l] - f0[l])).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    to_event[l] = fraction * remaining[l];
+                    event[l] = Event::Release;
                 } else {
-                    0.0
-                };
-                let to_release = fraction * remaining;
-                self.state = self.rk4(&start, true, self.dir, to_release);
-                self.state.stuck = false;
-                self.dir = if f1 > 0.0 { 1.0 } else { -1.0 };
-                remaining -= to_release;
-            } else {
-                let end = self.rk4(&start, false, self.dir, remaining);
-                let (w0, w1) = (self.dir * start.speed[bit], self.dir * end.speed[bit]);
-                if w1 > 0.0 {
-                    self.state = end;
-                    break;
+                    let (w0, w1) = (dir[l] * start.speed[bit][l], dir[l] * end.speed[bit][l]);
+                    if w1 > 0.0 {
+                        self.state.take_lane(&end, l);
+                        remaining[l] = 0.0;
+                        continue;
+                    }
+                    self.state.take_lane(&end, l);
+                    if w0 <= 0.0 {
+                        // Released at rest, yet not moving forward at the step's end: at rest again.
+                        self.state.speed[bit][l] = 0.0;
+                        let drive = self.bit_drive(&self.state)[l];
+                        self.settle_at_rest(l, drive);
+                        remaining[l] = 0.0;
+                        continue;
+                    }
+                    // The bit speed crosses zero inside the step: one secant, then re-integrate to it.
+                    to_event[l] = remaining[l] * w0 / (w0 - w1);
+                    event[l] = Event::Stop;
                 }
-                if w0 <= 0.0 {
-                    // Released at rest, yet not moving forward at the step's end: at rest again.
-                    self.state = end;
-                    self.state.speed[bit] = 0.0;
-                    self.settle_at_rest();
-                    break;
+            }
+            if event.iter().all(|&e| e == Event::Done) {
+                continue;
+            }
+            let part = self.rk4(&start, &stuck, &dir, &to_event);
+            for l in 0..L {
+                match event[l] {
+                    Event::Done => {}
+                    Event::Release => {
+                        self.state.take_lane(&part, l);
+                        self.state.stuck[l] = false;
+                        self.dir[l] = if f1[l] > 0.0 { 1.0 } else { -1.0 };
+                        remaining[l] -= to_event[l];
+                    }
+                    Event::Stop => {
+                        self.state.take_lane(&part, l);
+                        self.state.speed[bit][l] = 0.0;
+                        remaining[l] -= to_event[l];
+                        let drive = self.bit_drive(&self.state)[l];
+                        self.settle_at_rest(l, drive);
+                    }
                 }
-                // The bit speed crosses zero inside the step: one secant, then re-integrate to it.
-                let to_zero = remaining * w0 / (w0 - w1);
-                self.state = self.rk4(&start, false, self.dir, to_zero);
-                self.state.speed[bit] = 0.0;
-                remaining -= to_zero;
-                self.settle_at_rest();
             }
         }
     }
 
-    /// True while the motion stays within physical bounds (checked once per sample period, as
-    /// the kernel does).
-    fn in_bounds(&self) -> bool {
+    /// Whether each string's motion stays within physical bounds (checked once per sample
+    /// period, as the kernel does).
+    #[inline(always)]
+    fn in_bounds(&self) -> [bool; L] {
         let bit = self.n - 1;
-        self.state.speed[bit].abs() <= self.runaway && self.state.lag[bit].abs() < 3.0e38
-    }
-
-    /// Torque on bit (N·m): the reaction while stuck, the law's torque while slipping.
-    fn bit_torque(&self) -> f64 {
-        let bit = self.n - 1;
-        if self.state.stuck {
-            self.bit_drive(&self.state).clamp(-self.static_nm, self.static_nm)
-        } else {
-            self.dir * self.torque(self.dir * self.state.speed[bit])
+        let mut inside = [false; L];
+        for l in 0..L {
+            inside[l] = self.state.speed[bit][l].abs() <= self.runaway[l] && self.state.lag[bit][l].abs() < 3.0e38;
         }
+        inside
     }
 
-    /// Torque the top drive applies (N·m): the top element's spring and its β-damping.
-    fn surface_torque(&self) -> f64 {
-        let c = self.chain;
-        let k = c.stiffness_nm_per_rad[0];
-        k * self.state.lag[0] + c.beta_s * k * (self.omega - self.state.speed[0])
+    /// Torque on each bit (N·m): the reaction while stuck, the law's torque while slipping.
+    #[inline(always)]
+    fn bit_torque(&self) -> [f64; L] {
+        let bit = self.n - 1;
+        let drive = self.bit_drive(&self.state);
+        let mut along = [0.0; L];
+        for l in 0..L {
+            along[l] = self.dir[l] * self.state.speed[bit][l];
+        }
+        let torque = self.torque(&along);
+        let mut out = [0.0; L];
+        for l in 0..L {
+            out[l] = if self.state.stuck[l] {
+                drive[l].clamp(-self.static_nm[l], self.static_nm[l])
+            } else {
+                self.dir[l] * torque[l]
+            };
+        }
+        out
     }
 
-    /// Integrates the string through `schedule`: its summary and its final state.
-    fn run(mut self, schedule: &Schedule) -> (Summary, StringState) {
-        let mut summary = Summary::default();
+    /// Torque the top drive applies to each string (N·m): the top element's spring and its
+    /// β-damping.
+    #[inline(always)]
+    fn surface_torque(&self) -> [f64; L] {
+        let mut out = [0.0; L];
+        for l in 0..L {
+            let k = self.stiffness[0][l];
+            out[l] = k * self.state.lag[0][l] + self.beta[l] * k * (self.omega[l] - self.state.speed[0][l]);
+        }
+        out
+    }
+
+    /// Integrates the strings through `schedule`: each one's summary and final state.
+    #[inline(always)]
+    fn run(mut self, schedule: &Schedule) -> [(Summary, StringState); L] {
+        let mut summaries = [Summary::default(); L];
         let h = schedule.dt_s;
         let bit = self.n - 1;
+        let mut ended: [Option<StringState>; L] = [None; L];
         for period in 0..schedule.settle_samples + schedule.record_samples {
             for _ in 0..schedule.steps_per_sample {
                 self.step(h);
             }
-            if !self.in_bounds() {
-                summary.diverged = true;
+            for (l, inside) in self.in_bounds().into_iter().enumerate() {
+                if self.live[l] && !inside {
+                    summaries[l].diverged = true;
+                    ended[l] = Some(self.state.lane(l));
+                    self.live[l] = false;
+                }
+            }
+            if !self.live.contains(&true) {
                 break;
             }
             if period >= schedule.settle_samples {
-                summary.push(self.state.speed[bit], self.bit_torque(), self.surface_torque());
+                let (bit_torque, surface_torque) = (self.bit_torque(), self.surface_torque());
+                for l in (0..L).filter(|&l| self.live[l]) {
+                    summaries[l].push(self.state.speed[bit][l], bit_torque[l], surface_torque[l]);
+                }
             }
         }
-        (summary, self.state.state())
+        std::array::from_fn(|l| (summaries[l], ended[l].unwrap_or_else(|| self.state.lane(l))))
     }
+}
+
+/// Integrates the strings of `jobs` (one law, [`LANES`] of them) through `schedule` together,
+/// with AVX2 where the CPU has it (the same operations, in wider registers: the same bits).
+fn integrate_lanes<const N: usize>(
+    chain: &Chain,
+    schedule: &Schedule,
+    jobs: [&StringJob; LANES],
+) -> [(Summary, StringState); LANES] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2, checked just above.
+        return unsafe { integrate_lanes_avx2::<N>(chain, schedule, jobs) };
+    }
+    Integrator::<N, LANES>::new([chain; LANES], jobs).run(schedule)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn integrate_lanes_avx2<const N: usize>(
+    chain: &Chain,
+    schedule: &Schedule,
+    jobs: [&StringJob; LANES],
+) -> [(Summary, StringState); LANES] {
+    Integrator::<N, LANES>::new([chain; LANES], jobs).run(schedule)
 }
 
 /// Integrates one string through `schedule`: its summary and its final state. The 1-DOF
 /// string runs on arrays of one node, a chain on arrays of [`MAX_NODES`]; the arithmetic is
 /// the same.
 pub fn integrate(chain: &Chain, schedule: &Schedule, job: &StringJob) -> (Summary, StringState) {
-    if chain.nodes() == 1 {
-        Integrator::<1>::new(chain, job).run(schedule)
+    let [out] = if chain.nodes() == 1 {
+        Integrator::<1, 1>::new([chain], [job]).run(schedule)
     } else {
-        Integrator::<MAX_NODES>::new(chain, job).run(schedule)
-    }
+        Integrator::<MAX_NODES, 1>::new([chain], [job]).run(schedule)
+    };
+    out
 }
 
 /// The 1-DOF string integrated step by step, its law, parameters and operating point
 /// changeable between steps: what `simulate` records a trace with, where the batch summarises
 /// the same steps ([`integrate`]).
-pub struct Stepper<'a>(Integrator<'a, 1>);
+pub struct Stepper(Integrator<1, 1>);
 
-impl<'a> Stepper<'a> {
+impl Stepper {
     /// The string of `job` on `chain`, a chain of one node ([`Chain::one_dof`]), at its start.
-    pub fn new(chain: &'a Chain, job: &StringJob) -> Self {
+    pub fn new(chain: &Chain, job: &StringJob) -> Self {
         assert_eq!(chain.nodes(), 1, "a stepper integrates the 1-DOF string");
-        Self(Integrator::new(chain, job))
+        Self(Integrator::new([chain], [job]))
     }
 
     /// The top drive's speed Ω (rad/s) and the weight ratio r = W/W_ref from now on.
     pub fn set_operating_point(&mut self, omega_rad_s: f64, ratio: f64) {
-        self.0.set_operating_point(omega_rad_s, ratio);
+        self.0.set_operating_point([omega_rad_s], [ratio]);
     }
 
     /// The law at the bit and its parameters (torques in N·m) from now on.
     pub fn set_law(&mut self, law: Law, params_nm: &[f64]) {
-        self.0.set_law(law, params_nm);
+        let padded = padded(params_nm);
+        self.0.law = law;
+        self.0.params = std::array::from_fn(|i| [padded[i]]);
+        self.0.set_operating_point(self.0.omega, self.0.ratio);
     }
 
     /// Advances one step of `h_s` (s) through any stop or release inside it.
@@ -728,22 +903,76 @@ impl<'a> Stepper<'a> {
     /// False once the motion has left physical bounds (a bit speed past a thousand times the
     /// rotary speed, or a state no longer finite).
     pub fn in_bounds(&self) -> bool {
-        self.0.in_bounds()
+        self.0.in_bounds()[0]
     }
 
     /// The bit's speed (rad/s).
     pub fn bit_speed_rad_s(&self) -> f64 {
-        self.0.state.speed[0]
+        self.0.state.speed[0][0]
     }
 
     /// Torque on bit (N·m): the reaction while stuck, the law's torque while slipping.
     pub fn bit_torque_nm(&self) -> f64 {
-        self.0.bit_torque()
+        self.0.bit_torque()[0]
     }
 
     /// Torque the top drive applies to the string (N·m): what a rig's surface torque channel
     /// measures.
     pub fn surface_torque_nm(&self) -> f64 {
+        self.0.surface_torque()[0]
+    }
+}
+
+/// `L` 1-DOF strings of one law integrated step by step together, each on its own chain, under
+/// one drive: [`Stepper`]'s steps lane by lane, what a surface run's candidates are simulated
+/// with on the CPU. A lane once stopped ([`Steppers::stop`]) keeps its state.
+pub struct Steppers<const L: usize>(Integrator<1, L>);
+
+impl<const L: usize> Steppers<L> {
+    /// The strings of `jobs` (all of one law), string `l` on `chains[l]`, each a chain of one
+    /// node.
+    #[inline(always)]
+    pub fn new(chains: [&Chain; L], jobs: [&StringJob; L]) -> Self {
+        assert!(
+            chains.iter().all(|c| c.nodes() == 1),
+            "steppers integrate the 1-DOF string"
+        );
+        Self(Integrator::new(chains, jobs))
+    }
+
+    /// Every string's top-drive speed Ω (rad/s) and weight ratio r = W/W_ref from now on.
+    #[inline(always)]
+    pub fn set_operating_point(&mut self, omega_rad_s: f64, ratio: f64) {
+        self.0.set_operating_point([omega_rad_s; L], [ratio; L]);
+    }
+
+    /// Advances every string not stopped one step of `h_s` (s).
+    #[inline(always)]
+    pub fn step(&mut self, h_s: f64) {
+        self.0.step(h_s);
+    }
+
+    /// Integrates lane `l` no further.
+    #[inline(always)]
+    pub fn stop(&mut self, l: usize) {
+        self.0.live[l] = false;
+    }
+
+    /// Whether each string's motion is within physical bounds ([`Stepper::in_bounds`]).
+    #[inline(always)]
+    pub fn in_bounds(&self) -> [bool; L] {
+        self.0.in_bounds()
+    }
+
+    /// Each bit's speed (rad/s).
+    #[inline(always)]
+    pub fn bit_speeds_rad_s(&self) -> [f64; L] {
+        self.0.state.speed[0]
+    }
+
+    /// Torque the top drive applies to each string (N·m).
+    #[inline(always)]
+    pub fn surface_torques_nm(&self) -> [f64; L] {
         self.0.surface_torque()
     }
 }
@@ -779,10 +1008,53 @@ pub fn padded(params_nm: &[f64]) -> [f64; 6] {
     p
 }
 
-/// Every string of a batch on the CPU (rayon), in the batch's order.
+/// Every string of a batch on the CPU, in the batch's order, [`LANES`] at a time
+/// ([`in_lanes`]).
 pub fn integrate_batch(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) -> Vec<(Summary, StringState)> {
+    in_lanes(
+        jobs,
+        |job| job.law,
+        |lanes| {
+            if chain.nodes() == 1 {
+                integrate_lanes::<1>(chain, schedule, lanes)
+            } else {
+                integrate_lanes::<MAX_NODES>(chain, schedule, lanes)
+            }
+        },
+    )
+}
+
+/// `run` over `items` [`LANES`] at a time, the results in the items' order: each law's items
+/// in groups of [`LANES`] (a last, short group padded with copies of its first item, whose
+/// results are dropped), the groups on rayon's threads.
+pub fn in_lanes<T: Sync, R: Send>(
+    items: &[T],
+    law_of: impl Fn(&T) -> Law,
+    run: impl Fn([&T; LANES]) -> [R; LANES] + Sync,
+) -> Vec<R> {
     use rayon::prelude::*;
-    jobs.par_iter().map(|job| integrate(chain, schedule, job)).collect()
+    let mut order: Vec<usize> = (0..items.len()).collect();
+    order.sort_by_key(|&i| law_of(&items[i]));
+    let groups: Vec<&[usize]> = order
+        .chunk_by(|&a, &b| law_of(&items[a]) == law_of(&items[b]))
+        .flat_map(|law| law.chunks(LANES))
+        .collect();
+    let results: Vec<[R; LANES]> = groups
+        .par_iter()
+        .with_max_len(1)
+        .map(|group| {
+            run(std::array::from_fn(|l| {
+                &items[group.get(l).copied().unwrap_or(group[0])]
+            }))
+        })
+        .collect();
+    let mut out: Vec<Option<R>> = std::iter::repeat_with(|| None).take(items.len()).collect();
+    for (group, lanes) in groups.iter().zip(results) {
+        for (&i, result) in group.iter().zip(lanes) {
+            out[i] = Some(result);
+        }
+    }
+    out.into_iter().map(|r| r.expect("every item is in a group")).collect()
 }
 
 #[cfg(test)]

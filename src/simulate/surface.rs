@@ -19,7 +19,7 @@
 //! ([`downhole_summaries`]): the surface cannot tell a bit held still from one that creeps,
 //! the minimum can.
 
-use super::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Stepper, StringJob, StringState, padded};
+use super::strings::{Chain, LANES, MAX_NODES, STUCK_SPEED_RAD_S, Steppers, StringJob, StringState, in_lanes, padded};
 use crate::data::surface::SurfaceRecord;
 use crate::laws::Law;
 use crate::units::RAD_S_PER_RPM;
@@ -74,6 +74,14 @@ pub struct OnClock {
     pub diverged: bool,
 }
 
+/// One string of a batch on a record's clock: its law, parameters (N·m) and 1-DOF string.
+#[derive(Clone, Copy, Debug)]
+pub struct OnClockJob<'a> {
+    pub law: Law,
+    pub params_nm: &'a [f64],
+    pub chain: &'a Chain,
+}
+
 /// The string `chain` (1-DOF) with `law` at the bit (parameters in N·m) driven by `drive`.
 pub fn simulate_on_clock(
     chain: &Chain,
@@ -82,61 +90,123 @@ pub fn simulate_on_clock(
     params_nm: &[f64],
     integration: Integration,
 ) -> OnClock {
+    let [out] = on_clock_lanes([&OnClockJob { law, params_nm, chain }], drive, integration);
+    out
+}
+
+/// Every string of `jobs` driven by `drive`, in order, on the CPU: [`LANES`] at a time
+/// ([`in_lanes`]), each string's samples the same to the bit as [`simulate_on_clock`]'s.
+pub fn simulate_on_clock_many(jobs: &[OnClockJob<'_>], drive: &Drive, integration: Integration) -> Vec<OnClock> {
+    in_lanes(
+        jobs,
+        |job| job.law,
+        |lanes| {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2, checked just above.
+                return unsafe { on_clock_lanes_avx2(lanes, drive, integration) };
+            }
+            on_clock_lanes(lanes, drive, integration)
+        },
+    )
+}
+
+/// [`on_clock_lanes`] in AVX2's registers (the same operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn on_clock_lanes_avx2(jobs: [&OnClockJob<'_>; LANES], drive: &Drive, integration: Integration) -> [OnClock; LANES] {
+    on_clock_lanes(jobs, drive, integration)
+}
+
+/// The strings of `jobs` (one law) driven by `drive` together, lane by lane.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn on_clock_lanes<const L: usize>(jobs: [&OnClockJob<'_>; L], drive: &Drive, integration: Integration) -> [OnClock; L] {
     let n = drive.omega_rad_s.len();
-    let mut out = OnClock {
+    let mut out: [OnClock; L] = std::array::from_fn(|_| OnClock {
         surface_torque_nm: Vec::with_capacity(n),
         bit_speed_rad_s: Vec::with_capacity(n),
         bit_least_rad_s: Vec::with_capacity(n),
         bit_greatest_rad_s: Vec::with_capacity(n),
         diverged: false,
-    };
+    });
     if n == 0 {
         return out;
     }
-    let job = StringJob {
-        law,
-        params_nm: padded(params_nm),
+    let rest = StringState {
+        lag_rad: [0.0; MAX_NODES],
+        speed_rad_s: [0.0; MAX_NODES],
+        stuck: true,
+    };
+    let string_jobs = jobs.map(|job| StringJob {
+        law: job.law,
+        params_nm: padded(job.params_nm),
         omega_rad_s: drive.omega_rad_s[0],
         ratio: drive.ratio[0],
-        start: StringState {
-            lag_rad: [0.0; MAX_NODES],
-            speed_rad_s: [0.0; MAX_NODES],
-            stuck: true,
-        },
-    };
-    let mut string = Stepper::new(chain, &job);
-    // The bit speed's extremes since the sample before (the first sample's: its own).
-    let mut extremes = Extremes::default();
-    let advance = |string: &mut Stepper, span_s: f64, extremes: &mut Extremes| -> bool {
-        let steps = (span_s / integration.dt_s).ceil().max(1.0);
-        let h = span_s / steps;
-        for _ in 0..steps as u64 {
-            string.step(h);
-            extremes.see(string.bit_speed_rad_s());
-        }
-        string.in_bounds()
-    };
-    if integration.settle_s > 0.0 && !advance(&mut string, integration.settle_s, &mut Extremes::default()) {
-        out.diverged = true;
-        return out;
+        start: rest,
+    });
+    let mut strings = Steppers::new(jobs.map(|job| job.chain), string_jobs.each_ref());
+    // Each bit speed's extremes since the sample before (the first sample's: its own).
+    let mut extremes = [Extremes::default(); L];
+    if integration.settle_s > 0.0 {
+        advance(
+            &mut strings,
+            integration,
+            integration.settle_s,
+            &mut [Extremes::default(); L],
+            &mut out,
+        );
     }
     for k in 0..n {
-        if k > 0 {
-            string.set_operating_point(drive.omega_rad_s[k - 1], drive.ratio[k - 1]);
-            if !advance(&mut string, drive.period_s, &mut extremes) {
-                out.diverged = true;
-                return out;
-            }
+        if out.iter().all(|o| o.diverged) {
+            break;
         }
-        let speed = string.bit_speed_rad_s();
-        extremes.see(speed);
-        out.surface_torque_nm.push(string.surface_torque_nm());
-        out.bit_speed_rad_s.push(speed);
-        out.bit_least_rad_s.push(extremes.least);
-        out.bit_greatest_rad_s.push(extremes.greatest);
-        extremes = Extremes::default();
+        if k > 0 {
+            strings.set_operating_point(drive.omega_rad_s[k - 1], drive.ratio[k - 1]);
+            advance(&mut strings, integration, drive.period_s, &mut extremes, &mut out);
+        }
+        let (speeds, torques) = (strings.bit_speeds_rad_s(), strings.surface_torques_nm());
+        for l in 0..L {
+            if out[l].diverged {
+                continue;
+            }
+            extremes[l].see(speeds[l]);
+            out[l].surface_torque_nm.push(torques[l]);
+            out[l].bit_speed_rad_s.push(speeds[l]);
+            out[l].bit_least_rad_s.push(extremes[l].least);
+            out[l].bit_greatest_rad_s.push(extremes[l].greatest);
+            extremes[l] = Extremes::default();
+        }
     }
     out
+}
+
+/// Advances every string by `span_s` (s), in equal steps no longer than the integration's,
+/// each bit speed's extremes seen at every step; a string that leaves physical bounds is done.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn advance<const L: usize>(
+    strings: &mut Steppers<L>,
+    integration: Integration,
+    span_s: f64,
+    extremes: &mut [Extremes; L],
+    out: &mut [OnClock; L],
+) {
+    let steps = (span_s / integration.dt_s).ceil().max(1.0);
+    let h = span_s / steps;
+    for _ in 0..steps as u64 {
+        strings.step(h);
+        let speeds = strings.bit_speeds_rad_s();
+        for l in 0..L {
+            extremes[l].see(speeds[l]);
+        }
+    }
+    for (l, inside) in strings.in_bounds().into_iter().enumerate() {
+        if !inside && !out[l].diverged {
+            out[l].diverged = true;
+            strings.stop(l);
+        }
+    }
 }
 
 /// The least and greatest of the values seen.

@@ -107,13 +107,7 @@ fn strings_kernel(
     )
 }
 
-/// One string of a batch on a record's clock: its law, parameters (N·m) and 1-DOF string.
-#[derive(Clone, Debug)]
-pub struct OnClockJob<'a> {
-    pub law: Law,
-    pub params_nm: &'a [f64],
-    pub chain: &'a Chain,
-}
+pub use crate::simulate::surface::OnClockJob;
 
 /// Bytes of trace a chunk of strings on a record's clock holds at most on the device: the
 /// storage-buffer bindings every adapter allows.
