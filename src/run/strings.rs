@@ -684,11 +684,11 @@ impl<'a> Simulator<'a> {
     }
 
     /// Cells of an advice's scan integrated together: enough strings to keep every CPU
-    /// thread busy (four each), all of them where a GPU integrates.
+    /// thread busy (a group of lanes each), all of them where a GPU integrates.
     fn cells_per_scan_batch(&self, strings_per_cell: usize, cells: usize) -> usize {
         let on_cpu = self.settings.backend == Backend::Cpu || self.ran == Some(Ran::Cpu);
         if on_cpu {
-            (4 * rayon::current_num_threads())
+            (crate::simulate::strings::LANES * rayon::current_num_threads())
                 .div_ceil(strings_per_cell.max(1))
                 .max(1)
         } else {

@@ -1218,6 +1218,52 @@ mod tests {
     }
 
     #[test]
+    fn a_string_s_result_does_not_depend_on_the_strings_sharing_its_lanes() {
+        // Fourteen 1-DOF strings of four laws (a full group of eight, short groups padded), one
+        // of which runs away, and nine strings on a lumped FE chain: the batch gives each string,
+        // to the bit, what integrating it alone gives.
+        let one = Chain::one_dof(&Lumped::default());
+        let fe = Chain::lumped_fe(&DrillString {
+            dp_elements: 4,
+            bha_elements: 2,
+            ..DrillString::default()
+        })
+        .unwrap();
+        let schedule = |chain: &Chain| {
+            let dt = (MAX_STEP_TIMES_RATE / chain.fastest_mode().rate_per_s).min(0.01);
+            Schedule::new(dt, 20.0, 20.0, 20.0).unwrap()
+        };
+        let mut jobs = Vec::new();
+        for rpm in [40.0, 60.0, 80.0, 100.0, 120.0, 140.0, 160.0, 180.0, 200.0] {
+            jobs.push(job(Law::M2, &one, rpm, 1.0, 0.1));
+        }
+        jobs.push(job(Law::M4, &one, 400.0, 1.0, 0.1));
+        jobs.push(job(Law::M3, &one, 60.0, 0.8, 0.1));
+        jobs.push(job(Law::M1, &one, 60.0, 1.0, 0.1));
+        jobs.push(job(Law::M3, &one, 90.0, 1.2, -0.1));
+        jobs.push(job(Law::M2, &one, 50.0, 0.5, 0.0));
+        let fe_jobs: Vec<StringJob> = [30.0, 45.0, 60.0, 75.0, 90.0, 105.0, 120.0, 135.0, 150.0]
+            .into_iter()
+            .map(|rpm| job(Law::M2, &fe, rpm, 1.0, 0.1))
+            .collect();
+        for (chain, jobs) in [(&one, &jobs), (&fe, &fe_jobs)] {
+            let schedule = schedule(chain);
+            let batch = integrate_batch(chain, &schedule, jobs);
+            for (k, (job, together)) in jobs.iter().zip(&batch).enumerate() {
+                let alone = integrate(chain, &schedule, job);
+                assert_eq!(format!("{together:?}"), format!("{alone:?}"), "string {k}");
+            }
+            assert!(batch.iter().any(|(s, _)| s.stick_slips()));
+        }
+        let diverged: Vec<bool> = integrate_batch(&one, &schedule(&one), &jobs)
+            .iter()
+            .map(|(s, _)| s.diverged)
+            .collect();
+        assert_eq!(diverged.iter().filter(|&&d| d).count(), 1, "{diverged:?}");
+        assert!(diverged[9]);
+    }
+
+    #[test]
     fn a_record_s_summary_counts_stick_phases_and_their_period() {
         // 10 s at 50 Hz: stuck for 1 s every 2.5 s (four phases), 8 rad/s between.
         let mut s = Summary::default();

@@ -667,6 +667,57 @@ mod tests {
     }
 
     #[test]
+    fn strings_simulated_together_are_each_the_string_simulated_alone() {
+        // Eleven strings of three laws on strings of their own stiffness and damping, under a
+        // drive that steps from 60 to 120 rpm; one (m4 turning negative at speed) runs away.
+        // Simulated together, each gives to the bit what it gives alone.
+        let omega = 60.0 * RAD_S_PER_RPM;
+        let drive = Drive {
+            omega_rad_s: (0..60).map(|k| if k < 30 { omega } else { 2.0 * omega }).collect(),
+            ratio: vec![1.0; 60],
+            period_s: 1.0,
+        };
+        let chains: Vec<Chain> = (0..11)
+            .map(|k| {
+                Chain::one_dof(&Lumped {
+                    omega_n_rad_s: 0.6 + 0.1 * k as f64,
+                    damping_ratio: 0.05 + 0.02 * k as f64,
+                    ..Lumped::default()
+                })
+            })
+            .collect();
+        let paper = |law: Law| law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
+        let runaway = vec![5000.0, 0.0, 0.0, -2000.0];
+        let params: Vec<(Law, Vec<f64>)> = (0..11)
+            .map(|k| match k {
+                3 => (Law::M4, runaway.clone()),
+                k if k % 3 == 0 => (Law::M3, paper(Law::M3)),
+                _ => (
+                    Law::M2,
+                    paper(Law::M2).iter().map(|p| p * (0.8 + 0.05 * k as f64)).collect(),
+                ),
+            })
+            .collect();
+        let jobs: Vec<OnClockJob<'_>> = params
+            .iter()
+            .zip(&chains)
+            .map(|((law, p), chain)| OnClockJob {
+                law: *law,
+                params_nm: p,
+                chain,
+            })
+            .collect();
+        let together = simulate_on_clock_many(&jobs, &drive, Integration::default());
+        for (k, (job, run)) in jobs.iter().zip(&together).enumerate() {
+            let alone = simulate_on_clock(job.chain, &drive, job.law, job.params_nm, Integration::default());
+            assert_eq!(format!("{run:?}"), format!("{alone:?}"), "string {k}");
+        }
+        let diverged: Vec<bool> = together.iter().map(|r| r.diverged).collect();
+        assert_eq!(diverged.iter().filter(|&&d| d).count(), 1, "{diverged:?}");
+        assert!(diverged[3]);
+    }
+
+    #[test]
     fn a_string_s_downhole_extremes_are_those_of_its_every_step() {
         // The same string on a clock of one step (20 ms) and on one of fifty (1 s): the same
         // steps, so each coarse sample's least and greatest bit speed are those of the fine
