@@ -116,8 +116,8 @@ pub struct SurfaceCmd {
     pub settle_s: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Where the strings are simulated: gpu, cpu, or auto (the GPU when an adapter exists, a
-    /// software one too, else the CPU, saying so).
+    /// Where the strings are simulated: gpu, cpu, or auto (a hardware GPU where one exists,
+    /// else the CPU, saying so: a software driver runs more slowly than the CPU's own lanes).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Semi-automatic ABC: compare what linear regressions on the pilot strings nearest the

@@ -50,10 +50,11 @@ pub fn integrate(
     )
 }
 
-/// Where a run's strings go, decided once before it starts: [`Backend::Gpu`] or
-/// [`Backend::Cpu`], and in words. `auto` takes any GPU that can be set up, a software driver
-/// too (lavapipe's compiled kernel runs a vector lane per string: docs/benchmarks.md has a
-/// surface inference on it and on the CPU), and the CPU where none can, saying so.
+/// Where a surface run's strings go, decided once before it starts: [`Backend::Gpu`] or
+/// [`Backend::Cpu`], and in words. `auto` takes a hardware GPU that can be set up, and the CPU
+/// otherwise, saying so: a software driver (lavapipe) runs on the CPU's own cores, where the
+/// CPU twin's lanes simulate a record's strings faster (docs/surface.md measures both); `gpu`
+/// takes a software driver too.
 pub fn resolve(backend: Backend, note: &mut dyn FnMut(String)) -> Result<(Backend, Ran)> {
     let on_gpu = |ctx: &gpu::GpuContext, note: &mut dyn FnMut(String)| {
         note(format!(
@@ -67,7 +68,14 @@ pub fn resolve(backend: Backend, note: &mut dyn FnMut(String)) -> Result<(Backen
         Backend::Cpu => Ok((Backend::Cpu, Ran::Cpu)),
         Backend::Gpu => Ok(on_gpu(gpu::context()?, note)),
         Backend::Auto => match gpu::context() {
-            Ok(ctx) => Ok(on_gpu(ctx, note)),
+            Ok(ctx) if !ctx.is_software() => Ok(on_gpu(ctx, note)),
+            Ok(ctx) => {
+                note(format!(
+                    "auto: simulated strings on the CPU rather than the software GPU {}, which runs on the same cores more slowly (`backend gpu` insists on it)",
+                    ctx.describe()
+                ));
+                Ok((Backend::Cpu, Ran::Cpu))
+            }
             Err(e) => {
                 fall_back_to_cpu(e, note)?;
                 Ok((Backend::Cpu, Ran::Cpu))
