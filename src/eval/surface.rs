@@ -49,7 +49,8 @@ pub struct SurfaceModel {
     /// (no noise is added to them).
     pub downhole: Option<DownholeExtremes>,
     /// Where the strings are simulated: [`Backend::Gpu`] (f32, the batch at once) or
-    /// [`Backend::Cpu`] (f64, rayon across strings), resolved before a run starts
+    /// [`Backend::Cpu`] (f64, eight strings of a law at a time, the groups on rayon's threads),
+    /// resolved before a run starts
     /// ([`Backend::Auto`] simulates on the CPU).
     pub backend: Backend,
 }
@@ -326,8 +327,8 @@ fn coordinates(prior: &Prior, candidate: &Candidate) -> (Law, [f64; MAX_DIMS], u
 /// once: 128 MB.
 const TRACE_VALUES: usize = 1 << 22;
 
-/// Scores candidates by simulating their strings on the record's clock (on the GPU in
-/// batches, or on the CPU with rayon across candidates).
+/// Scores candidates by simulating their strings on the record's clock, in batches (on the
+/// GPU, or on the CPU eight strings of a law at a time).
 pub struct SurfaceEvaluator {
     problem: Problem,
     model: SurfaceModel,
@@ -384,9 +385,10 @@ impl Evaluator for SurfaceEvaluator {
                 self.distance.rho(&self.model.summaries_of_run(&run))
             }
         };
-        // In batches whose traces stay a bounded share of memory (the CPU simulates a batch's
-        // strings of one law eight at a time, the GPU all at once).
-        let per_batch = (TRACE_VALUES / self.model.drive.omega_rad_s.len().max(1)).max(LANES);
+        // In batches whose traces stay a bounded share of memory, yet keep every CPU thread busy
+        // (the CPU simulates a batch's strings of one law eight at a time, the GPU all at once).
+        let per_batch =
+            (TRACE_VALUES / self.model.drive.omega_rad_s.len().max(1)).max(LANES * rayon::current_num_threads());
         for (part, rhos) in candidates.chunks(per_batch).zip(out.chunks_mut(per_batch)) {
             let runs = self.model.simulate_candidates_noiseless(&p.prior, part)?;
             runs.into_par_iter()

@@ -987,7 +987,9 @@ pub fn steady_start(
     ratio: f64,
     kick_rad_s: f64,
 ) -> StringState {
-    let torque = law.torque(&params_nm[..law.n_params()], omega_rad_s, ratio);
+    // The integrator's own torque, so that a kick of zero starts exactly on its equilibrium.
+    let p = padded(&params_nm[..law.n_params()]);
+    let [torque] = law.torque_lanes(&p.map(|v| [v]), &[omega_rad_s], &[ratio]);
     let mut state = StringState {
         lag_rad: [0.0; MAX_NODES],
         speed_rad_s: [0.0; MAX_NODES],

@@ -811,8 +811,8 @@ def surface(
     The string is the paper's, or the one ``inertia_kg_m2``, ``omega_n_rad_s`` and
     ``damping_ratio`` give; a pair ``(lo, hi)`` for ``omega_n_rad_s`` or ``damping_ratio``
     infers it with the laws within those bounds (``string`` in the result: its posterior and
-    the stiffness it implies). The strings are simulated on ``backend`` (``"auto"``: the GPU
-    where one is usable, else the CPU; ``"gpu"``, ``"cpu"``); the result's ``backend`` says
+    the stiffness it implies). The strings are simulated on ``backend`` (``"auto"``: a hardware GPU
+    where one is usable, else the CPU, whose lanes outrun a software GPU; ``"gpu"``, ``"cpu"``); the result's ``backend`` says
     where. ``semi_automatic=True`` compares what linear regressions on the pilot strings nearest
     the record predict from the summaries (each law's parameters, the string's where inferred,
     each law's probability) instead of the summaries: ``projection`` in the result names each
