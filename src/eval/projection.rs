@@ -61,7 +61,6 @@ pub struct Projection {
 /// (with the record's noise).
 pub struct Training<'a> {
     pub slot: usize,
-    pub law: Law,
     pub coordinates: &'a [f64],
     pub summaries: Summaries,
 }
@@ -226,7 +225,6 @@ mod tests {
             .zip(&summaries)
             .map(|(c, s)| Training {
                 slot: 0,
-                law: Law::M2,
                 coordinates: c,
                 summaries: *s,
             })
@@ -285,7 +283,6 @@ mod tests {
                 s[0] = c[0] + 0.01 * ((i * 7 % 5) as f64);
                 Training {
                     slot,
-                    law: [Law::M2, Law::M3][slot],
                     coordinates: c,
                     summaries: s,
                 }
@@ -322,7 +319,6 @@ mod tests {
             s[4] = ((i * 53 % 17) as f64 - 8.0) / 8.0;
             training.push(Training {
                 slot,
-                law: [Law::M1, Law::M2][slot],
                 coordinates: c,
                 summaries: s,
             });

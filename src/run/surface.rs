@@ -1008,7 +1008,6 @@ impl Pilot {
             .iter()
             .map(|&(_, i)| Training {
                 slot: table[i].0,
-                law: prior.law(table[i].0),
                 coordinates: &self.coordinates[i][..prior.boxes[table[i].0].lower.len()],
                 summaries: table[i].1,
             })
