@@ -46,7 +46,7 @@ if [ ! -x "$VENV/bin/python" ] && ! python3 -m venv "$VENV" >/dev/null 2>&1; the
     python3 -m venv "$VENV"
 fi
 # The Python tests' dependencies (the package's, its test extra's, the browser test's) are
-# installed while the Rust tests run: pip mostly unpacks, on one core, while the tests keep
+# installed while the Rust tests build: pip mostly unpacks, on one core, while the build keeps
 # both busy. Read from pyproject.toml where the environment's Python reads TOML (3.11 on);
 # elsewhere the package's install below fetches them.
 python_dependencies() {
@@ -64,11 +64,53 @@ PY
 }
 python_dependencies > "$TARGET/python-dependencies.log" 2>&1 &
 DEPENDENCIES=$!
-# A run that stops early stops the install too (pip, then the shell that started it).
-# (Neither may fail the run: the install has usually ended by then.)
-trap '{ pkill -P "$DEPENDENCIES"; kill "$DEPENDENCIES"; } 2>/dev/null || true; rm -rf "$BITROCK_CACHE_DIR"' EXIT
 
-# Slow tests (fits, simulations, ABC runs, GPU parity) run in release.
+# ArviZ 1.x (it needs Python ≥ 3.12) reads the runs' and the evidence's DataTrees as the 0.2x
+# line does: the package's abi3 wheel in a second environment, made beside the build too.
+newer_python() {
+    local p
+    for p in python3.14 python3.13 python3.12; do
+        if command -v "$p" >/dev/null && "$p" -c 'import sys; assert sys.version_info >= (3, 12)' 2>/dev/null; then
+            command -v "$p"
+            return
+        fi
+    done
+    if command -v pyenv >/dev/null; then
+        for p in $(pyenv versions --bare 2>/dev/null | sort -rV); do
+            case "$p" in 3.1[2-9]*) echo "$(pyenv root)/versions/$p/bin/python3"; return ;; esac
+        done
+    fi
+}
+PYTHON_NEW="$(newer_python || true)"
+VENV_NEW="$TARGET/python-venv-arviz1"
+arviz1_environment() {
+    [ -x "$VENV_NEW/bin/python" ] || "$PYTHON_NEW" -m venv "$VENV_NEW"
+    "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check "arviz>=1,<2" "xarray>=2024.10" "pandas>=2.0" pytest
+}
+ARVIZ1=""
+if [ -n "$PYTHON_NEW" ]; then
+    arviz1_environment > "$TARGET/python-arviz1.log" 2>&1 &
+    ARVIZ1=$!
+fi
+# A run that stops early stops these too (pip, then the shell that started it).
+# (Neither may fail the run: they have usually ended by then.)
+stop_background() {
+    local job
+    for job in "$@"; do
+        { pkill -P "$job"; kill "$job"; } 2>/dev/null || true
+    done
+}
+WHEEL_JOB=""
+WHEELS="$(mktemp -d)"
+trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB; rm -rf "$BITROCK_CACHE_DIR" "$WHEELS"' EXIT
+
+# Slow tests (fits, simulations, ABC runs, GPU parity) run in release. Built first, so that the
+# Python package's wheel (pip builds it with maturin, linking the very build of the library
+# made here) is made while the Rust tests run.
+cargo test --release --all-targets --no-run
+"$VENV/bin/python" -m pip wheel -q --disable-pip-version-check --no-deps -w "$WHEELS" ./bindings/python \
+    > "$TARGET/python-wheel.log" 2>&1 &
+WHEEL_JOB=$!
 cargo test --release --all-targets
 # --all-targets leaves out the doctests (the crate documentation's example of the library API).
 cargo test --release --doc
@@ -78,9 +120,16 @@ if ! wait "$DEPENDENCIES"; then
     echo "installing the Python tests' dependencies failed (above)" >&2
     exit 1
 fi
-# The Python package, installed as its users install it (pip builds the wheel with maturin)
-# into the virtual environment, then its tests against the binary built above.
-"$VENV/bin/python" -m pip install -q --disable-pip-version-check "./bindings/python[test]"
+if ! wait "$WHEEL_JOB"; then
+    cat "$TARGET/python-wheel.log" >&2
+    echo "building the Python package's wheel failed (above)" >&2
+    exit 1
+fi
+WHEEL="$(ls "$WHEELS"/bitrock-*.whl)"
+# The Python package, installed as its users install it (from its wheel), then its tests
+# against the binary built above.
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check "$WHEEL[test]"
 # The extension's type stubs are generated from its Rust signatures and doc comments (PyO3's
 # introspection), never written by hand: the committed ones must be what the code gives.
 STUBS="$(mktemp -d)"
@@ -97,31 +146,13 @@ rm -rf "$STUBS"
 BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q -n 2 --dist loadfile --durations=10 \
     bindings/python/tests
 
-# ArviZ 1.x (it needs Python ≥ 3.12) reads the runs' and the evidence's DataTrees as the 0.2x
-# line above does: the package's abi3 wheel, built by the install above, in a second environment.
-newer_python() {
-    local p
-    for p in python3.14 python3.13 python3.12; do
-        if command -v "$p" >/dev/null && "$p" -c 'import sys; assert sys.version_info >= (3, 12)' 2>/dev/null; then
-            command -v "$p"
-            return
-        fi
-    done
-    if command -v pyenv >/dev/null; then
-        for p in $(pyenv versions --bare 2>/dev/null | sort -rV); do
-            case "$p" in 3.1[2-9]*) echo "$(pyenv root)/versions/$p/bin/python3"; return ;; esac
-        done
+if [ -n "$ARVIZ1" ]; then
+    if ! wait "$ARVIZ1"; then
+        cat "$TARGET/python-arviz1.log" >&2
+        echo "making the ArviZ 1.x environment failed (above)" >&2
+        exit 1
     fi
-}
-PYTHON_NEW="$(newer_python || true)"
-if [ -n "$PYTHON_NEW" ]; then
-    VENV_NEW="$TARGET/python-venv-arviz1"
-    [ -x "$VENV_NEW/bin/python" ] || "$PYTHON_NEW" -m venv "$VENV_NEW"
-    WHEELS="$(mktemp -d)"
-    (cd bindings/python && "$VENV/bin/maturin" build --release -q -o "$WHEELS")
-    "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEELS"/bitrock-*.whl
-    "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check "arviz>=1,<2" "xarray>=2024.10" "pandas>=2.0" pytest
-    rm -rf "$WHEELS"
+    "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"
     BITROCK_BIN="$TARGET/release/bitrock" "$VENV_NEW/bin/python" -m pytest -q -k arviz \
         bindings/python/tests/test_abc.py bindings/python/tests/test_evidence.py
 else
