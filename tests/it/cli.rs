@@ -453,20 +453,26 @@ fn abc_writes_a_run_directory_and_json_with_its_keys() {
     assert!(envelopes.starts_with("law,speed_rad_s,lower_knm,median_knm,upper_knm"));
     assert!(out.join("data.csv").exists());
 
-    // Same seed, same populations.
+    // Same seed, same backend, same populations. (`auto` measures which backend is faster
+    // where the GPU is a software driver, and a busy machine may measure the other way: the
+    // second run asks for the backend the first one used.)
     let again = dir.path().join("again");
-    let (code, stdout2, _) = run(&[
+    let backend = v["backend"].as_str().unwrap();
+    let (code, stdout2, stderr) = run(&[
         "abc",
         "--particles",
         "1000",
         "--seed",
         "3",
+        "--backend",
+        backend,
         "--out",
         again.to_str().unwrap(),
         "--json",
     ]);
-    assert_eq!(code, 0);
+    assert_eq!(code, 0, "{stderr}");
     let w: serde_json::Value = serde_json::from_str(&stdout2).unwrap();
+    assert_eq!(w["backend"], backend);
     for (a, b) in pops.iter().zip(w["populations"].as_array().unwrap()) {
         assert_eq!(
             (&a["epsilon"], &a["draws"], &a["model_probabilities"]),
