@@ -146,6 +146,9 @@ rm -rf "$STUBS"
 BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q -n 2 --dist loadfile --durations=10 \
     bindings/python/tests
 
+# ArviZ 1.x's tests beside the browser's (they share no files; each is mostly waiting or one
+# core), reported after it.
+ARVIZ1_TESTS=""
 if [ -n "$ARVIZ1" ]; then
     if ! wait "$ARVIZ1"; then
         cat "$TARGET/python-arviz1.log" >&2
@@ -154,12 +157,25 @@ if [ -n "$ARVIZ1" ]; then
     fi
     "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"
     BITROCK_BIN="$TARGET/release/bitrock" "$VENV_NEW/bin/python" -m pytest -q -k arviz \
-        bindings/python/tests/test_abc.py bindings/python/tests/test_evidence.py
+        bindings/python/tests/test_abc.py bindings/python/tests/test_evidence.py \
+        > "$TARGET/python-arviz1-tests.log" 2>&1 &
+    ARVIZ1_TESTS=$!
 else
     echo "ArviZ 1.x tests not run: it needs Python 3.12 or newer, and none was found here" >&2
 fi
+trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS; rm -rf "$BITROCK_CACHE_DIR" "$WHEELS"' EXIT
 
 # The live page of `bitrock watch --serve` in a real browser: headless Chromium driven through
 # its WebDriver (selenium), against the binary built above.
 "$VENV/bin/python" -m pip install -q --disable-pip-version-check -r tests/browser/requirements.txt
 BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q tests/browser
+
+if [ -n "$ARVIZ1_TESTS" ]; then
+    echo "ArviZ 1.x:"
+    if ! wait "$ARVIZ1_TESTS"; then
+        cat "$TARGET/python-arviz1-tests.log" >&2
+        echo "the ArviZ 1.x tests failed (above)" >&2
+        exit 1
+    fi
+    cat "$TARGET/python-arviz1-tests.log"
+fi
