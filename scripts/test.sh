@@ -92,8 +92,8 @@ if [ -n "$PYTHON_NEW" ]; then
     arviz1_environment > "$TARGET/python-arviz1.log" 2>&1 &
     ARVIZ1=$!
 fi
-# A run that stops early stops these too (pip, then the shell that started it).
-# (Neither may fail the run: they have usually ended by then.)
+# A run that stops early stops these too (pip, then the shell that started it); a job waited
+# for is forgotten, so that its number, which the system may give again, is never signalled.
 stop_background() {
     local job
     for job in "$@"; do
@@ -120,11 +120,13 @@ if ! wait "$DEPENDENCIES"; then
     echo "installing the Python tests' dependencies failed (above)" >&2
     exit 1
 fi
+DEPENDENCIES=""
 if ! wait "$WHEEL_JOB"; then
     cat "$TARGET/python-wheel.log" >&2
     echo "building the Python package's wheel failed (above)" >&2
     exit 1
 fi
+WHEEL_JOB=""
 WHEEL="$(ls "$WHEELS"/bitrock-*.whl)"
 # The Python package, installed as its users install it (from its wheel), then its tests
 # against the binary built above.
@@ -155,6 +157,7 @@ if [ -n "$ARVIZ1" ]; then
         echo "making the ArviZ 1.x environment failed (above)" >&2
         exit 1
     fi
+    ARVIZ1=""
     "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"
     BITROCK_BIN="$TARGET/release/bitrock" "$VENV_NEW/bin/python" -m pytest -q -k arviz \
         bindings/python/tests/test_abc.py bindings/python/tests/test_evidence.py \
@@ -177,5 +180,6 @@ if [ -n "$ARVIZ1_TESTS" ]; then
         echo "the ArviZ 1.x tests failed (above)" >&2
         exit 1
     fi
+    ARVIZ1_TESTS=""
     cat "$TARGET/python-arviz1-tests.log"
 fi
