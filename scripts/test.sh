@@ -101,8 +101,9 @@ stop_background() {
     done
 }
 WHEEL_JOB=""
+ARVIZ1_TESTS=""
 WHEELS="$(mktemp -d)"
-trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB; rm -rf "$BITROCK_CACHE_DIR" "$WHEELS"' EXIT
+trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS; rm -rf "$BITROCK_CACHE_DIR" "$WHEELS"' EXIT
 
 # Slow tests (fits, simulations, ABC runs, GPU parity) run in release. Built first, so that the
 # Python package's wheel (pip builds it with maturin, linking the very build of the library
@@ -148,9 +149,7 @@ rm -rf "$STUBS"
 BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q -n 2 --dist loadfile --durations=10 \
     bindings/python/tests
 
-# ArviZ 1.x's tests beside the browser's (they share no files; each is mostly waiting or one
-# core), reported after it.
-ARVIZ1_TESTS=""
+# ArviZ 1.x's tests beside the browser's (they share no files), reported after it.
 if [ -n "$ARVIZ1" ]; then
     if ! wait "$ARVIZ1"; then
         cat "$TARGET/python-arviz1.log" >&2
@@ -166,7 +165,6 @@ if [ -n "$ARVIZ1" ]; then
 else
     echo "ArviZ 1.x tests not run: it needs Python 3.12 or newer, and none was found here" >&2
 fi
-trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS; rm -rf "$BITROCK_CACHE_DIR" "$WHEELS"' EXIT
 
 # The live page of `bitrock watch --serve` in a real browser: headless Chromium driven through
 # its WebDriver (selenium), against the binary built above.
