@@ -11,7 +11,7 @@ use super::Evaluator;
 use super::Problem;
 use super::cpu::CpuEvaluator;
 use super::gpu::residual::GpuEvaluator;
-use super::gpu::tune::ShapeWish;
+use super::gpu::tune::{Choice, ShapeWish};
 use super::gpu::{GpuContext, Shape};
 use crate::error::Result;
 use crate::prior::{Candidate, MAX_DIMS};
@@ -83,29 +83,45 @@ pub struct StoredRace {
 /// Races decided in this process, by key.
 static RACES: Mutex<Option<HashMap<String, StoredRace>>> = Mutex::new(None);
 
-/// Whether the CPU scores `problem` instead of the software GPU `ctx` (in `shape`) for the
-/// dispatches `wish` describes: the race ([`race`]) said through `note`, the CPU kept where it
-/// wins (or where the GPU fails while racing).
+/// Which backend `auto` keeps for a software GPU, once raced ([`cpu_beats`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kept {
+    /// The CPU: faster, or the GPU failed while racing (said either way).
+    Cpu,
+    /// The GPU; `said` when the race's line already named it with its shape, so that the
+    /// caller does not name it again (false only where nothing was raced:
+    /// `BITROCK_GPU_TUNING=off`).
+    Gpu { said: bool },
+}
+
+/// Whether the CPU scores `problem` instead of the software GPU `ctx` (in `choice`'s shape)
+/// for the dispatches `wish` describes: the race ([`race`]) said through `note` in one line
+/// that names the backend kept, the CPU kept where it wins (or where the GPU fails while
+/// racing).
 pub fn cpu_beats(
     ctx: &'static GpuContext,
     problem: &Problem,
-    shape: Shape,
+    choice: Choice,
     wish: ShapeWish,
     note: &mut dyn FnMut(String),
-) -> Result<bool> {
-    let race = match race(ctx, problem, shape, wish) {
+) -> Result<Kept> {
+    let race = match race(ctx, problem, choice.shape, wish) {
         // A GPU that fails while racing is one `auto` cannot use.
         Err(crate::Error::Gpu(e)) => {
             note(super::no_usable_gpu(&e));
-            return Ok(true);
+            return Ok(Kept::Cpu);
         }
         raced => raced?,
     };
     let Some(race) = race else {
-        return Ok(false);
+        return Ok(Kept::Gpu { said: false });
     };
-    note(race.said(&ctx.describe()));
-    Ok(race.cpu_wins())
+    note(race.said(&super::gpu_named(&ctx.describe(), choice.shape, choice.source)));
+    Ok(if race.cpu_wins() {
+        Kept::Cpu
+    } else {
+        Kept::Gpu { said: true }
+    })
 }
 
 /// The race of the GPU `ctx` (in `shape`) against the CPU on `problem` for the dispatches

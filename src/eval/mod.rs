@@ -146,6 +146,12 @@ pub enum Backend {
 /// How every line that names the GPU scoring a run (adapter, shape) begins.
 pub(crate) const GPU_BACKEND_NOTE: &str = "GPU backend";
 
+/// A GPU named with the shape it scores in and where that shape came from, as the notes that
+/// say which backend scores a run name it.
+pub(crate) fn gpu_named(adapter: &str, shape: gpu::Shape, source: gpu::tune::Source) -> String {
+    format!("{adapter} ({shape} scoring, {source})")
+}
+
 /// True for a note that only informs (which GPU scores, in which shape): front ends may log
 /// it rather than warn. Every other note names something the user should act on or know about
 /// the result (a fallback to the CPU, a moved floor, a resume).
@@ -164,10 +170,8 @@ pub fn evaluator(
 ) -> Result<Box<dyn Evaluator>> {
     let said = |gpu: &gpu::residual::GpuEvaluator| {
         format!(
-            "{GPU_BACKEND_NOTE}: {} ({} scoring, {})",
-            gpu.adapter(),
-            gpu.shape(),
-            gpu.shape_source()
+            "{GPU_BACKEND_NOTE}: {}",
+            gpu_named(&gpu.adapter(), gpu.shape(), gpu.shape_source())
         )
     };
     match backend {
@@ -180,15 +184,20 @@ pub fn evaluator(
         Backend::Auto => {
             // A software driver runs on the CPU's own cores: the faster of the two is kept.
             let software = gpu::context().and_then(|ctx| Ok((ctx, gpu::tune::choose(ctx, &problem, wish)?)));
+            let mut kept_said = false;
             if let Ok((ctx, choice)) = software
                 && ctx.is_software()
-                && auto::cpu_beats(ctx, &problem, choice.shape, wish, note)?
             {
-                return Ok(Box::new(cpu::CpuEvaluator::new(problem)));
+                match auto::cpu_beats(ctx, &problem, choice, wish, note)? {
+                    auto::Kept::Cpu => return Ok(Box::new(cpu::CpuEvaluator::new(problem))),
+                    auto::Kept::Gpu { said } => kept_said = said,
+                }
             }
             match gpu::residual::GpuEvaluator::wished(problem.clone(), wish) {
                 Ok(gpu) => {
-                    note(said(&gpu));
+                    if !kept_said {
+                        note(said(&gpu));
+                    }
                     Ok(Box::new(gpu))
                 }
                 Err(e) => {

@@ -88,18 +88,22 @@ impl RecordBatch {
         note: &mut dyn FnMut(String),
     ) -> Result<Arc<Self>> {
         let setup = || gpu::context().and_then(|ctx| Ok((ctx, gpu::tune::choose(ctx, problem, wish)?)));
+        // The GPU kept, and whether the race already said so.
         let gpu = match backend {
             Backend::Cpu => None,
-            Backend::Gpu => Some(setup()?),
+            Backend::Gpu => Some((setup()?, false)),
             Backend::Auto => match setup() {
                 Ok((ctx, choice)) if ctx.is_software() => {
                     let batched = gpu::tune::ShapeWish {
                         candidates: wish.candidates.saturating_mul(records.max(1)),
                         ..wish
                     };
-                    (!super::auto::cpu_beats(ctx, problem, choice.shape, batched, note)?).then_some((ctx, choice))
+                    match super::auto::cpu_beats(ctx, problem, choice, batched, note)? {
+                        super::auto::Kept::Cpu => None,
+                        super::auto::Kept::Gpu { said } => Some(((ctx, choice), said)),
+                    }
                 }
-                Ok(gpu) => Some(gpu),
+                Ok(gpu) => Some((gpu, false)),
                 Err(e) => {
                     super::fall_back_to_cpu(e, note)?;
                     None
@@ -107,14 +111,14 @@ impl RecordBatch {
             },
         };
         let scorer = match gpu {
-            Some((ctx, choice)) => {
-                note(format!(
-                    "{}: {} ({} scoring, {}; records batched)",
-                    crate::eval::GPU_BACKEND_NOTE,
-                    ctx.describe(),
-                    choice.shape,
-                    choice.source
-                ));
+            Some(((ctx, choice), said)) => {
+                if !said {
+                    note(format!(
+                        "{}: {}; records batched",
+                        crate::eval::GPU_BACKEND_NOTE,
+                        super::gpu_named(&ctx.describe(), choice.shape, choice.source)
+                    ));
+                }
                 Scorer::Gpu {
                     shape: choice.shape,
                     records: None,

@@ -877,6 +877,9 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
             assert!(line.contains("a dispatch of 480 candidates"), "{line}");
             let chose_cpu = line.contains("auto: scoring on the CPU rather than");
             assert!(chose_cpu || line.contains("rather than the CPU"), "{line}");
+            // One line says where the run is scored; the GPU it names comes with its shape.
+            assert!(!err.contains("GPU backend"), "{err}");
+            assert!(line.contains(" scoring, "), "{line}");
             // The faster kept, the GPU only by its margin (the times as said, to 0.1 ms).
             let ms = |before: &str| -> f64 {
                 let at = line.find(before).unwrap_or_else(|| panic!("{before}: {line}"));
@@ -899,6 +902,25 @@ fn auto_races_a_software_driver_against_the_cpu_and_keeps_the_faster() {
         assert_eq!(said[0], said[1]);
         let kept = std::fs::read_to_string(cache.path().join("gpu-shapes.json")).unwrap();
         assert!(kept.contains("512 candidates | explicit\""), "{kept}");
+        // The other outcome, read from a race kept the other way (the GPU ten times faster or
+        // slower than the CPU): said once too, and the run scored where it says.
+        let chose_cpu = said[0].contains("auto: scoring on the CPU rather than");
+        let mut doc: serde_json::Value = serde_json::from_str(&kept).unwrap();
+        for race in doc["races"].as_array_mut().unwrap() {
+            let cpu_s = race["cpu_s"].as_f64().unwrap();
+            race["gpu_s"] = serde_json::json!(if chose_cpu { cpu_s / 10.0 } else { cpu_s * 10.0 });
+        }
+        std::fs::write(cache.path().join("gpu-shapes.json"), doc.to_string()).unwrap();
+        let (code, flipped, err) = run_bitrock_with(&[("BITROCK_CACHE_DIR", cache_dir)], &args("auto"));
+        assert_eq!(code, 0, "{err}");
+        let lines: Vec<&str> = err
+            .lines()
+            .filter(|l| l.contains("auto: scoring on") || l.contains("GPU backend"))
+            .collect();
+        assert_eq!(lines.len(), 1, "{err}");
+        let now_cpu = lines[0].contains("auto: scoring on the CPU rather than");
+        assert_eq!(now_cpu, !chose_cpu, "{err}");
+        assert_eq!(ln_z(&flipped), ln_z(if now_cpu { &cpu } else { &gpu }), "{err}");
         // Under the AR(1) noise model the evidence scores the lag-1 sums too (two dispatches on
         // the GPU, one pass on the CPU): a race of its own, on those calls.
         let ar1: Vec<&str> = args("auto")
