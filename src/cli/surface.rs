@@ -6,6 +6,7 @@ use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::eval::Backend;
+use bitrock::run::surface::dir::{self, SurfaceDir};
 use bitrock::run::surface::{
     self, AtTheBit, StringParam, StringPosterior, SurfaceResult, SurfaceSettings, ValueOrBounds,
 };
@@ -20,7 +21,8 @@ use std::process::ExitCode;
 pub struct SurfaceCmd {
     /// Surface record (CSV with a header): a time column, the top-drive speed, the surface
     /// torque and, where recorded, the weight on bit, on a regular clock.
-    pub data: PathBuf,
+    #[arg(required_unless_present = "resume")]
+    pub data: Option<PathBuf>,
     /// Time column (s; ms where its name ends in _ms) [default: the one whose name holds "time"].
     #[arg(long = "time-col", value_name = "NAME")]
     pub time_column: Option<String>,
@@ -90,9 +92,9 @@ pub struct SurfaceCmd {
     /// Particles per population.
     #[arg(long, default_value_t = 2000, value_name = "N")]
     pub particles: usize,
-    /// Most populations, the first included.
-    #[arg(long, default_value_t = 8, value_name = "COUNT")]
-    pub max_populations: usize,
+    /// Most populations, the first included [default: 8; with --resume, the run's own].
+    #[arg(long, value_name = "COUNT")]
+    pub max_populations: Option<usize>,
     /// Wall-time budget of the sampler, s (the population in progress is dropped).
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
@@ -117,9 +119,10 @@ pub struct SurfaceCmd {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Where the strings are simulated: gpu, cpu, or auto (a hardware GPU where one exists,
-    /// else the CPU, saying so: a software driver runs more slowly than the CPU's own lanes).
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
-    pub backend: Backend,
+    /// else the CPU, saying so: a software driver runs more slowly than the CPU's own lanes)
+    /// [default: auto; with --resume, the run's own].
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
     /// Semi-automatic ABC: compare what linear regressions on the pilot strings nearest the
     /// record predict from the summaries (each law's parameters, the string's where inferred,
     /// each law's probability), each with its adjusted R², instead of the summaries themselves.
@@ -137,12 +140,26 @@ pub struct SurfaceCmd {
     /// parameters on the string its flags give.
     #[arg(long, value_name = "FILE")]
     pub posterior_out: Option<PathBuf>,
-    /// The whole result as JSON to FILE.
-    #[arg(long, value_name = "FILE")]
+    /// A surface directory to write: surface.json (the whole result), posterior.csv, bit.csv,
+    /// and what continues the run (record.csv, surface-job.json, and populations.bin, stored
+    /// as each population completes).
+    #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Replace --out, --bit-out and --posterior-out files even when bitrock did not write them.
+    /// Replace a surface run in --out, and --bit-out and --posterior-out files even when
+    /// bitrock did not write them.
     #[arg(long)]
     pub force: bool,
+    /// Continue the surface run in DIR (killed or finished) after its last stored population:
+    /// more --max-populations, a new --max-seconds or --backend. The populations are exactly
+    /// those an uninterrupted run gives; the check and the bit are computed again and DIR
+    /// written anew.
+    #[arg(long, value_name = "DIR", conflicts_with_all = [
+        "data", "out", "time_column", "top_drive_column", "surface_torque_column", "wob_column",
+        "top_drive_unit", "torque_unit", "wob_unit", "downhole_min_column", "downhole_max_column",
+        "downhole_unit", "downhole_window_s", "laws", "prior", "inertia_kg_m2", "omega_n_rad_s",
+        "damping_ratio", "w_ref_kn", "noise_sd_knm", "no_advice", "semi_automatic",
+    ])]
+    pub resume: Option<PathBuf>,
     /// Print JSON instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -159,9 +176,9 @@ impl SurfaceCmd {
         }
     }
 
-    /// The run's settings from the flags, through the surface run's gate.
-    fn settings(&self) -> anyhow::Result<SurfaceSettings> {
-        let settings = surface::Settings {
+    /// The run's settings as the flags give them.
+    fn given(&self) -> surface::Settings {
+        surface::Settings {
             prior_file: self.prior.clone(),
             prior_scale: self.prior_scale,
             inertia_kg_m2: self.inertia_kg_m2,
@@ -170,7 +187,7 @@ impl SurfaceCmd {
             w_ref_kn: self.w_ref_kn,
             noise_sd_knm: self.noise_sd_knm,
             particles: self.particles,
-            max_populations: self.max_populations,
+            max_populations: self.max_populations.unwrap_or(surface::DEFAULT_MAX_POPULATIONS),
             max_seconds: self.max_seconds,
             pilot: self.pilot,
             check_replicates: self.check_replicates,
@@ -179,58 +196,107 @@ impl SurfaceCmd {
             dt_s: self.dt_s,
             settle_s: self.settle_s,
             seed: self.seed,
-            backend: self.backend,
+            backend: self.backend.unwrap_or_default(),
             semi_automatic: self.semi_automatic,
-        };
-        Ok(settings.config(self.laws()?)?)
+        }
+    }
+
+    fn columns(&self) -> SurfaceOptions {
+        SurfaceOptions {
+            time_column: self.time_column.clone(),
+            top_drive_column: self.top_drive_column.clone(),
+            surface_torque_column: self.surface_torque_column.clone(),
+            wob_column: self.wob_column.clone(),
+            top_drive_unit: self.top_drive_unit,
+            torque_unit: self.torque_unit,
+            wob_unit: self.wob_unit,
+            downhole_min_column: self.downhole_min_column.clone(),
+            downhole_max_column: self.downhole_max_column.clone(),
+            downhole_unit: self.downhole_unit,
+            downhole_window_s: self.downhole_window_s,
+        }
+    }
+
+    /// Refuses, before any work, files and a directory that cannot be written.
+    fn check_outputs(&self) -> anyhow::Result<()> {
+        for (path, field) in [(&self.bit_out, "bit_out"), (&self.posterior_out, "posterior_out")] {
+            if let Some(path) = path {
+                bitrock::run::dir::check_output_file(path, field, self.force)?;
+            }
+        }
+        Ok(())
     }
 }
 
 pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
     set_threads(cmd.threads)?;
-    let settings = cmd.settings()?;
-    for (path, field) in [
-        (&cmd.out, "out"),
-        (&cmd.bit_out, "bit_out"),
-        (&cmd.posterior_out, "posterior_out"),
-    ] {
-        if let Some(path) = path {
-            bitrock::run::dir::check_output_file(path, field, cmd.force)?;
-        }
+    if let Some(dir) = &cmd.resume {
+        return resume(cmd, dir);
     }
-    let options = SurfaceOptions {
-        time_column: cmd.time_column.clone(),
-        top_drive_column: cmd.top_drive_column.clone(),
-        surface_torque_column: cmd.surface_torque_column.clone(),
-        wob_column: cmd.wob_column.clone(),
-        top_drive_unit: cmd.top_drive_unit,
-        torque_unit: cmd.torque_unit,
-        wob_unit: cmd.wob_unit,
-        downhole_min_column: cmd.downhole_min_column.clone(),
-        downhole_max_column: cmd.downhole_max_column.clone(),
-        downhole_unit: cmd.downhole_unit,
-        downhole_window_s: cmd.downhole_window_s,
-    };
-    let record = SurfaceRecord::read(&cmd.data, &options)?;
-    print::note(format_args!("{}: {}", cmd.data.display(), record.roles_text()));
+    let data = cmd.data.as_ref().expect("clap asks for the record without --resume");
+    let laws = cmd.laws()?;
+    let given = cmd.given();
+    let settings = given.config(laws.clone())?;
+    cmd.check_outputs()?;
+    if let Some(out) = &cmd.out {
+        dir::check_out(out, cmd.force)?;
+    }
+    let columns = cmd.columns();
+    let record = SurfaceRecord::read(data, &columns)?;
+    print::note(format_args!("{}: {}", data.display(), record.roles_text()));
     print::note(format_args!(
         "simulating the string for every candidate: {} particles, up to {} populations",
         settings.smc.schedule.particles, settings.smc.schedule.max_populations
     ));
-    let result = surface::infer(&record, &settings, cmd.seed, &mut |line| {
+    let mut note = |line| print::note(format_args!("note: {line}"));
+    let result = match &cmd.out {
+        Some(out) => {
+            let run = SurfaceDir::start(out, cmd.force, dir::Job::new(laws, given, columns, data)?)?;
+            let result = run.run(&record, &settings, Vec::new(), &mut note)?;
+            run.finish(&record, &result)?;
+            result
+        }
+        None => surface::infer(&record, &settings, cmd.seed, &mut note)?,
+    };
+    report(cmd, &record, &settings, &result)
+}
+
+/// Continues the surface run in `path` with the stopping rules and backend the flags give.
+fn resume(cmd: &SurfaceCmd, path: &std::path::Path) -> anyhow::Result<ExitCode> {
+    cmd.check_outputs()?;
+    let (run, record, previous) = SurfaceDir::open(path)?;
+    let more = dir::Continuation {
+        max_populations: cmd.max_populations,
+        max_seconds: cmd.max_seconds,
+        backend: cmd.backend,
+    };
+    let settings = dir::continued(run.job(), &more)?;
+    print::note(format_args!(
+        "continuing {} after population {} ({} stored), up to {} populations",
+        path.display(),
+        previous.len() as i64 - 1,
+        previous.len(),
+        settings.smc.schedule.max_populations
+    ));
+    let result = run.run(&record, &settings, previous, &mut |line| {
         print::note(format_args!("note: {line}"))
     })?;
+    run.finish(&record, &result)?;
+    report(cmd, &record, &settings, &result)
+}
+
+/// Warnings, the extra files the flags ask for, and the result on stdout.
+fn report(
+    cmd: &SurfaceCmd,
+    record: &SurfaceRecord,
+    settings: &SurfaceSettings,
+    result: &SurfaceResult,
+) -> anyhow::Result<ExitCode> {
     for warning in &result.warnings {
         print::note(format_args!("warning: {}", super::fields::as_flags(warning)));
     }
-    let document = serde_json::to_value(&result)?;
-    if let Some(path) = &cmd.out {
-        bitrock::run::dir::write_whole(path, "out", cmd.force, |mut file| {
-            print::json(&mut file, document.clone())
-        })?;
-    }
     if let Some(path) = &cmd.bit_out {
-        bitrock::run::dir::write_whole(path, "bit_out", cmd.force, |file| bit_csv(file, &record, &result))?;
+        bitrock::run::dir::write_whole(path, "bit_out", cmd.force, |file| result.bit_csv(record, file))?;
     }
     if let Some(path) = &cmd.posterior_out {
         let csv = result
@@ -240,21 +306,11 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
     }
     let mut out = print::stdout();
     if cmd.json {
-        print::json(&mut out, document)?;
+        print::json(&mut out, serde_json::to_value(result)?)?;
     } else {
-        tables(&mut out, &record, &result)?;
+        tables(&mut out, record, result)?;
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// The bit's predicted speed per sample.
-fn bit_csv(out: &mut dyn Write, record: &SurfaceRecord, result: &SurfaceResult) -> std::io::Result<()> {
-    let mut writer = csv::Writer::from_writer(out);
-    writer.write_record(["time_s", "bit_speed_rpm_p05", "bit_speed_rpm_p50", "bit_speed_rpm_p95"])?;
-    for (t, q) in record.time_s.iter().zip(&result.at_the_bit.speed_rpm) {
-        writer.write_record([t, &q[0], &q[1], &q[2]].map(|v| format!("{v:.4}")))?;
-    }
-    writer.flush()
 }
 
 /// The result as people read it: what the record shows, the laws with the check, the

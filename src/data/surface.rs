@@ -17,7 +17,8 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Which columns of a surface record to read, and in which units.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct SurfaceOptions {
     /// Time column (s, or ms by its name); `None` finds the one whose name holds `time`.
     pub time_column: Option<String>,

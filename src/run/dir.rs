@@ -54,6 +54,17 @@ pub const JOB_JSON: &str = "job.json";
 pub const UNFINISHED_DIR: &str = "unfinished";
 /// The samplers' progress of an evidence under way (postcard bytes).
 pub const PROGRESS_BIN: &str = "progress.bin";
+/// A surface directory's document (`bitrock surface --out DIR`): the inference, its check and
+/// what it implies at the bit.
+pub const SURFACE_JSON: &str = "surface.json";
+/// A surface directory's job (settings, columns, the prior file's and law files' texts).
+pub const SURFACE_JOB_JSON: &str = "surface-job.json";
+/// A surface directory's record: the bytes of the CSV it was started on.
+pub const RECORD_CSV: &str = "record.csv";
+/// A surface directory's sampler populations (postcard bytes), stored as each completes.
+pub const POPULATIONS_BIN: &str = "populations.bin";
+/// A surface directory's predicted bit speed per sample (median and 90 % band).
+pub const SURFACE_BIT_CSV: &str = "bit.csv";
 /// A report's document.
 pub const REPORT_MD: &str = "report.md";
 /// A report's figures directory (SVG and PNG).
@@ -73,6 +84,9 @@ pub enum Owned {
     Watch,
     /// An evidence directory: evidence.json, posterior.csv and data.csv.
     Evidence,
+    /// A surface directory: surface.json, posterior.csv, bit.csv, record.csv, its job and
+    /// populations.
+    Surface,
 }
 
 impl Owned {
@@ -101,6 +115,18 @@ impl Owned {
             }
             (Owned::Evidence, [UNFINISHED_DIR, name]) => {
                 !is_dir && [JOB_JSON, RECORD_JSON, PROGRESS_BIN].contains(name)
+            }
+            (Owned::Surface, [name]) => {
+                !is_dir
+                    && [
+                        SURFACE_JSON,
+                        POSTERIOR_CSV,
+                        SURFACE_BIT_CSV,
+                        RECORD_CSV,
+                        SURFACE_JOB_JSON,
+                        POPULATIONS_BIN,
+                    ]
+                    .contains(name)
             }
             (Owned::Report, [REPORT_MD]) => !is_dir,
             (Owned::Report, [FIGURES_DIR]) => is_dir,
@@ -520,4 +546,65 @@ mod tests {
         assert!(!Owned::Report.owns(p("my-notes.md"), false));
         assert!(!Owned::Report.owns(p("figures/sub"), true));
     }
+}
+
+// Job files: what computes a directory's result again (an evidence's, a surface run's), with
+// the text of every law file whose law it names, so that the directory computes without them.
+
+/// The key of a job file's law files: each law file's text by its law's name.
+const LAW_FILES: &str = "law_files";
+/// The key of a job file's job.
+const JOB: &str = "job";
+/// The most a job file may hold, bytes.
+const MAX_JOB_BYTES: u64 = 1 << 30;
+
+/// A JSON document as bitrock writes it: indented, with a final newline.
+pub(crate) fn pretty_json(document: &serde_json::Value) -> Vec<u8> {
+    let mut json = serde_json::to_vec_pretty(document).expect("a document serialises");
+    json.push(b'\n');
+    json
+}
+
+/// The JSON document at `path` (`what` it is, named in errors), refused above `max_bytes`.
+pub(crate) fn read_json_file(path: &Path, what: &str, max_bytes: u64) -> Result<serde_json::Value> {
+    let text = files::read_text(path, what, max_bytes)?;
+    serde_json::from_str(&text).map_err(|e| Error::Data {
+        path: path.to_path_buf(),
+        message: format!("not {what}: {e}"),
+    })
+}
+
+/// A job file's bytes: `job` and the text of each law file among `laws`.
+pub(crate) fn job_file(job: &impl serde::Serialize, laws: &[crate::laws::Law]) -> Vec<u8> {
+    let law_files: serde_json::Map<String, serde_json::Value> = laws
+        .iter()
+        .filter_map(|law| law.file())
+        .map(|file| (file.name.clone(), file.source.clone().into()))
+        .collect();
+    pretty_json(&serde_json::json!({ JOB: job, LAW_FILES: law_files }))
+}
+
+/// The job of the job file at `path` ([`job_file`]), its law files' laws registered in this
+/// process; `None` where there is no such file (a directory an earlier bitrock wrote without
+/// one).
+pub(crate) fn read_job_file(path: &Path) -> Result<Option<serde_json::Value>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let mut stored = read_json_file(path, "a job file", MAX_JOB_BYTES)?;
+    if let Some(law_files) = stored.get(LAW_FILES) {
+        let law_files = law_files.as_object().ok_or_else(|| Error::Data {
+            path: path.to_path_buf(),
+            message: format!("'{LAW_FILES}' is not a table of law files' texts by name"),
+        })?;
+        for (name, source) in law_files {
+            let source = source.as_str().ok_or_else(|| Error::Data {
+                path: path.to_path_buf(),
+                message: format!("{LAW_FILES}: the law file of '{name}' is not a text"),
+            })?;
+            let origin = path.join(format!("{LAW_FILES}/{name}"));
+            crate::laws::file::register(crate::laws::file::LawFile::parse(source, &origin)?)?;
+        }
+    }
+    Ok(stored.get_mut(JOB).map(serde_json::Value::take))
 }

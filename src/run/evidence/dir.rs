@@ -24,7 +24,8 @@ use crate::files;
 use crate::run::Scoring;
 use crate::run::dir::{
     DATA_CSV, EVIDENCE_JSON, JOB_JSON, Owned, POSTERIOR_CSV, PROGRESS_BIN, RECORD_JSON, UNFINISHED_DIR, is_run_dir,
-    is_unfinished_evidence_dir, owns_unchanged, refuse_inside_kept_dir,
+    is_unfinished_evidence_dir, job_file, owns_unchanged, pretty_json, read_job_file, read_json_file,
+    refuse_inside_kept_dir,
 };
 use crate::units::TorqueUnit;
 use std::path::{Path, PathBuf};
@@ -97,7 +98,7 @@ impl Unfinished {
         files::write_own(&unfinished.join(RECORD_JSON), "out", |out| {
             serde_json::to_writer(out, data).map_err(std::io::Error::from)
         })?;
-        files::write_own(&unfinished.join(JOB_JSON), "out", |out| out.write_all(&job_json(job)))?;
+        files::write_own(&unfinished.join(JOB_JSON), "out", |out| out.write_all(&job_file(job, &job.laws)))?;
         Ok(Self {
             dir: dir.to_path_buf(),
             _lock: lock,
@@ -120,9 +121,9 @@ impl Unfinished {
         }
         let lock = files::DirLock::acquire(dir)?;
         let job_path = unfinished.join(JOB_JSON);
-        let stored = stored_job(&job_path)?.ok_or_else(|| Error::Data {
+        let stored = read_job_file(&job_path)?.ok_or_else(|| Error::Data {
             path: job_path.clone(),
-            message: format!("no '{JOB}' in it"),
+            message: "no job in it".to_string(),
         })?;
         let job: Job = serde_json::from_value(stored).map_err(|e| Error::Data {
             path: job_path.clone(),
@@ -199,17 +200,6 @@ impl Unfinished {
     }
 }
 
-/// [`JOB_JSON`]'s bytes: the job and the text of each law file whose law it compares.
-fn job_json(job: &Job) -> Vec<u8> {
-    let law_files: serde_json::Map<String, serde_json::Value> = job
-        .laws
-        .iter()
-        .filter_map(|law| law.file())
-        .map(|file| (file.name.clone(), file.source.clone().into()))
-        .collect();
-    pretty(&serde_json::json!({ JOB: job, LAW_FILES: law_files }))
-}
-
 /// The record an evidence directory's evidence was computed on, whole.
 pub fn record(dir: &Path) -> Result<FieldData> {
     read_record(&dir.join(RECORD_JSON))
@@ -240,11 +230,11 @@ pub fn save(
     check_out(dir, force)?;
     let record = serde_json::to_vec(data).expect("a record serialises");
     let contents = [
-        (PathBuf::from(EVIDENCE_JSON), pretty(document)),
+        (PathBuf::from(EVIDENCE_JSON), pretty_json(document)),
         (PathBuf::from(POSTERIOR_CSV), posterior_csv.to_vec()),
         (PathBuf::from(DATA_CSV), crate::documents::data_csv(data)),
         (PathBuf::from(RECORD_JSON), record),
-        (PathBuf::from(JOB_JSON), job_json(job)),
+        (PathBuf::from(JOB_JSON), job_file(job, &job.laws)),
     ];
     files::replace_dir(
         dir,
@@ -252,17 +242,6 @@ pub fn save(
         &|rel, is_dir| owns_unchanged(Owned::Evidence, dir, rel, is_dir),
         &contents,
     )
-}
-
-/// The key of [`JOB_JSON`]'s law files: each law file's text by its law's name.
-const LAW_FILES: &str = "law_files";
-/// The key of [`JOB_JSON`]'s job ([`Job`]).
-const JOB: &str = "job";
-
-fn pretty(document: &serde_json::Value) -> Vec<u8> {
-    let mut json = serde_json::to_vec_pretty(document).expect("a document serialises");
-    json.push(b'\n');
-    json
 }
 
 /// Checks the evidence of the evidence directory `dir` by re-simulation ([`check`]):
@@ -285,8 +264,8 @@ pub fn check_dir(
     // (files copied without their marks, or changed) is refused before the work.
     let owned = |rel: &Path, is_dir: bool| owns_unchanged(Owned::Evidence, dir, rel, is_dir);
     files::refuse_foreign(dir, "run", &owned)?;
-    let stored = stored_job(&dir.join(JOB_JSON))?;
-    let mut document = read_json(&dir.join(EVIDENCE_JSON), "an evidence document")?;
+    let stored = read_job_file(&dir.join(JOB_JSON))?;
+    let mut document = read_json_file(&dir.join(EVIDENCE_JSON), "an evidence document", MAX_DOCUMENT_BYTES)?;
     let path = dir.join(JOB_JSON);
     let refuse = |message: String| Error::Data {
         path: path.clone(),
@@ -328,7 +307,7 @@ pub fn check_dir(
     analysis.with_check(&mut document, &check);
     // Still the evidence's alone after the work; only its document changes (written whole).
     files::refuse_foreign(dir, "run", &owned)?;
-    let json = pretty(&document);
+    let json = pretty_json(&document);
     files::write_own(&dir.join(EVIDENCE_JSON), "run", |out| out.write_all(&json))?;
     Ok(check)
 }
@@ -337,7 +316,7 @@ pub fn check_dir(
 /// none.
 pub fn job(dir: &Path) -> Result<Option<Job>> {
     let path = dir.join(JOB_JSON);
-    stored_job(&path)?
+    read_job_file(&path)?
         .map(|job| {
             serde_json::from_value(job).map_err(|e| Error::Data {
                 path: path.clone(),
@@ -350,8 +329,8 @@ pub fn job(dir: &Path) -> Result<Option<Job>> {
 /// The document of the evidence directory `dir`, its law files' laws registered in this
 /// process (read from its job, where it keeps one).
 pub fn read(dir: &Path) -> Result<serde_json::Value> {
-    stored_job(&dir.join(JOB_JSON))?;
-    read_json(&dir.join(EVIDENCE_JSON), "an evidence document")
+    read_job_file(&dir.join(JOB_JSON))?;
+    read_json_file(&dir.join(EVIDENCE_JSON), "an evidence document", MAX_DOCUMENT_BYTES)
 }
 
 /// The most an evidence directory's document or job may hold, bytes (the document holds the
@@ -360,38 +339,6 @@ const MAX_DOCUMENT_BYTES: u64 = 1 << 30;
 /// The most its record may hold, bytes (every sample, 40 bytes a row or so: a day at 1 kHz is
 /// 3.5 GB; read straight into the record's columns).
 const MAX_RECORD_BYTES: u64 = 1 << 33;
-
-fn read_json(path: &Path, what: &str) -> Result<serde_json::Value> {
-    let text = files::read_text(path, what, MAX_DOCUMENT_BYTES)?;
-    serde_json::from_str(&text).map_err(|e| Error::Data {
-        path: path.to_path_buf(),
-        message: format!("not {what}: {e}"),
-    })
-}
-
-/// The job of an evidence directory's [`JOB_JSON`] at `path`, its law files' laws registered in
-/// this process; `None` for a directory an earlier bitrock wrote without one.
-fn stored_job(path: &Path) -> Result<Option<serde_json::Value>> {
-    if !path.exists() {
-        return Ok(None);
-    }
-    let mut stored = read_json(path, "an evidence's job")?;
-    if let Some(law_files) = stored.get(LAW_FILES) {
-        let law_files = law_files.as_object().ok_or_else(|| Error::Data {
-            path: path.to_path_buf(),
-            message: format!("'{LAW_FILES}' is not a table of law files' texts by name"),
-        })?;
-        for (name, source) in law_files {
-            let source = source.as_str().ok_or_else(|| Error::Data {
-                path: path.to_path_buf(),
-                message: format!("{LAW_FILES}: the law file of '{name}' is not a text"),
-            })?;
-            let origin = path.join(format!("{LAW_FILES}/{name}"));
-            crate::laws::file::register(crate::laws::file::LawFile::parse(source, &origin)?)?;
-        }
-    }
-    Ok(stored.get_mut(JOB).map(serde_json::Value::take))
-}
 
 /// The posterior particles of the evidence directory `dir` (SI) and the weight on bit its
 /// torque parameters are for, N, where the evidence scaled each torque by WOB / W_ref.

@@ -25,8 +25,11 @@
 //!    median and 90 % band per sample, the stuck share and severity, and, where the bit
 //!    stick-slips, the simulated escape advice.
 
+pub mod dir;
+
 use crate::abc::smc::{self, SmcConfig};
-use crate::abc::{Particle, Run};
+use crate::abc::shard::Local;
+use crate::abc::{Observer, Particle, Population, Run};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
@@ -179,8 +182,14 @@ impl Settings {
     /// What these settings run for `laws`, validated and its prior file read: a setting it
     /// cannot run is refused here, by name, before any work.
     pub fn config(&self, laws: Vec<Law>) -> Result<SurfaceSettings> {
+        let prior = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        self.config_with_prior(laws, prior)
+    }
+
+    /// [`Self::config`] with the prior file already read (a surface directory keeps its text).
+    pub fn config_with_prior(&self, laws: Vec<Law>, prior: Option<PriorFile>) -> Result<SurfaceSettings> {
         let mut run = SurfaceSettings::new(laws);
-        run.prior_file = self.prior_file.as_deref().map(PriorFile::read).transpose()?;
+        run.prior_file = prior;
         run.prior_scale = self.prior_scale;
         let paper = Lumped::default();
         let (omega_n_rad_s, omega_bounds) = ValueOrBounds::split(self.omega_n_rad_s, paper.omega_n_rad_s);
@@ -288,6 +297,8 @@ impl StringBounds {
 
 /// The default prior scale k: as wide as the evidence's boxes.
 pub const DEFAULT_PRIOR_SCALE: f64 = crate::run::evidence::DEFAULT_PRIOR_SCALE;
+/// Most populations by default, the first included.
+pub const DEFAULT_MAX_POPULATIONS: usize = 8;
 /// Pilot simulations by default.
 pub const DEFAULT_PILOT: usize = 1000;
 /// Re-simulations per law by default: a small check, run always.
@@ -312,7 +323,7 @@ impl SurfaceSettings {
         let mut smc = SmcConfig::default();
         smc.schedule.particles = 2000;
         smc.schedule.eps_min = 0.0;
-        smc.schedule.max_populations = 8;
+        smc.schedule.max_populations = DEFAULT_MAX_POPULATIONS;
         smc.schedule.min_acceptance = 0.01;
         smc.schedule.max_batch = 4096;
         Self {
@@ -712,6 +723,17 @@ impl Cost {
 }
 
 impl SurfaceResult {
+    /// The bit's predicted speed per sample of `record` (time_s, bit_speed_rpm_p05, _p50,
+    /// _p95) as CSV.
+    pub fn bit_csv(&self, record: &SurfaceRecord, out: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let mut writer = csv::Writer::from_writer(out);
+        writer.write_record(["time_s", "bit_speed_rpm_p05", "bit_speed_rpm_p50", "bit_speed_rpm_p95"])?;
+        for (t, q) in record.time_s.iter().zip(&self.at_the_bit.speed_rpm) {
+            writer.write_record([t, &q[0], &q[1], &q[2]].map(|v| format!("{v:.4}")))?;
+        }
+        writer.flush()
+    }
+
     /// The final population's particles as CSV in the layout `bitrock stability --posterior`
     /// reads (each law's share of the weight is its probability; torques in `unit`), with the
     /// string's natural frequency and damping ratio after the laws' parameters where the run
@@ -782,6 +804,51 @@ pub fn infer(
     seed: u64,
     note: &mut dyn FnMut(String),
 ) -> Result<SurfaceResult> {
+    let mut keep = |_: &[Population]| Ok(());
+    let sampling = Sampling {
+        previous: Vec::new(),
+        keep: &mut keep,
+    };
+    infer_continuing(record, settings, seed, sampling, note)
+}
+
+/// Where a surface run's sampler starts and what it hands on: what a surface directory
+/// ([`dir`]) stores and continues.
+pub struct Sampling<'a> {
+    /// The populations completed before (empty: the sampler starts from the prior). The run
+    /// continued after them gives exactly the populations an uninterrupted one gives.
+    pub previous: Vec<Population>,
+    /// Hears every population as it completes, with all before it.
+    pub keep: &'a mut dyn FnMut(&[Population]) -> Result<()>,
+}
+
+/// The sampler's observer that hands every completed population to [`Sampling::keep`].
+struct Keeping<'a> {
+    populations: Vec<Population>,
+    keep: &'a mut dyn FnMut(&[Population]) -> Result<()>,
+    note: &'a mut dyn FnMut(String),
+}
+
+impl Observer for Keeping<'_> {
+    fn population_done(&mut self, population: &Population, _previous: Option<&Population>) -> Result<()> {
+        self.populations.push(population.clone());
+        (self.keep)(&self.populations)
+    }
+
+    fn note(&mut self, line: String) {
+        (self.note)(line)
+    }
+}
+
+/// [`infer`], its sampler continuing after `sampling`'s populations and handing on each new
+/// one.
+pub fn infer_continuing(
+    record: &SurfaceRecord,
+    settings: &SurfaceSettings,
+    seed: u64,
+    sampling: Sampling,
+    note: &mut dyn FnMut(String),
+) -> Result<SurfaceResult> {
     settings.validate()?;
     let started = std::time::Instant::now();
     Chain::one_dof(&settings.structure).check_step(settings.integration.dt_s)?;
@@ -839,7 +906,12 @@ pub fn infer(
     let noise_floor = scout.noise_floor(&distance, noise_sd_nm, period_s);
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
-    let run = smc::run(&evaluator, &settings.smc)?;
+    let mut keeping = Keeping {
+        populations: sampling.previous.clone(),
+        keep: sampling.keep,
+        note,
+    };
+    let run = smc::run_on(&Local(&evaluator), &settings.smc, sampling.previous, &mut keeping)?;
     let sampler_strings: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();
     simulations += sampler_strings;
     let last = run.populations.last().expect("a run has a population");

@@ -1,0 +1,289 @@
+//! A surface directory (`bitrock surface RECORD --out DIR`, `bitrock.surface(..., out=DIR)`):
+//! the inference's document (`surface.json`), its posterior particles (`posterior.csv`, what
+//! `bitrock stability --posterior` maps), the bit's predicted speed (`bit.csv`), and what
+//! continues it: the record as it was read (`record.csv`, its bytes), the job with the text of
+//! the prior file and of every law file it names (`surface-job.json`), and the sampler's
+//! populations (`populations.bin`), stored as each completes.
+//!
+//! `bitrock surface --resume DIR` continues the sampler after the last stored population with
+//! new stopping rules (more populations, more time), to the populations an uninterrupted run
+//! gives; a run killed part-way continues the same way. The check and the bit are then
+//! computed again and the directory written anew, whole ([`files::replace_dir`]).
+
+use super::{Sampling, Settings, SurfaceResult, SurfaceSettings, infer_continuing};
+use crate::abc::Population;
+use crate::data::surface::{SurfaceOptions, SurfaceRecord};
+use crate::error::{Error, Result};
+use crate::eval::Backend;
+use crate::files;
+use crate::laws::Law;
+use crate::prior::PriorFile;
+use crate::run::dir::{
+    EVIDENCE_JSON, Owned, POPULATIONS_BIN, POSTERIOR_CSV, RECORD_CSV, SURFACE_BIT_CSV, SURFACE_JOB_JSON, SURFACE_JSON,
+    is_run_dir, job_file, owns_unchanged, pretty_json, read_job_file, refuse_inside_kept_dir,
+};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// What a surface directory's inference is computed from, besides its record.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Job {
+    pub laws: Vec<Law>,
+    /// The settings as given (the prior file's path kept only to name it).
+    pub settings: Settings,
+    /// The prior file's text, read once: what the prior is made from when the run continues.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior_text: Option<String>,
+    /// How the record's columns were read.
+    pub columns: SurfaceOptions,
+    /// The record's path when the run started (to name it; the directory keeps its bytes).
+    pub source: PathBuf,
+}
+
+impl Job {
+    /// The job of `settings` for `laws` on the record at `source` read with `columns`, the
+    /// prior file's text read now.
+    pub fn new(laws: Vec<Law>, settings: Settings, columns: SurfaceOptions, source: &Path) -> Result<Self> {
+        let prior_text = settings.prior_file.as_deref().map(PriorFile::read_text).transpose()?;
+        Ok(Self {
+            laws,
+            settings,
+            prior_text,
+            columns,
+            source: source.to_path_buf(),
+        })
+    }
+
+    /// The run's settings, through the surface run's gate, the prior made from the text kept.
+    pub fn config(&self) -> Result<SurfaceSettings> {
+        let origin = self.settings.prior_file.clone().unwrap_or_else(|| PathBuf::from("prior"));
+        let prior = self
+            .prior_text
+            .as_deref()
+            .map(|text| PriorFile::parse(text, &origin))
+            .transpose()?;
+        self.settings.config_with_prior(self.laws.clone(), prior)
+    }
+}
+
+/// New stopping rules of a continued surface run, and where its strings are simulated; `None`
+/// keeps the stored one.
+#[derive(Clone, Debug, Default)]
+pub struct Continuation {
+    /// Most populations, the first and those stored included.
+    pub max_populations: Option<usize>,
+    /// Wall-time budget of this invocation's sampler, s.
+    pub max_seconds: Option<f64>,
+    pub backend: Option<Backend>,
+}
+
+/// Refuses, before any work and naming `out`, a directory a surface run cannot be written to:
+/// a file, an ABC run or an evidence directory (or one inside a kept directory), one holding
+/// anything bitrock did not write there, and a surface run without `force`.
+pub fn check_out(dir: &Path, force: bool) -> Result<()> {
+    files::check_output_dir(dir, "out")?;
+    refuse_inside_kept_dir(dir, "out")?;
+    if is_run_dir(dir) || dir.join(EVIDENCE_JSON).is_file() {
+        return Err(Error::setting(
+            "out",
+            format!(
+                "{} holds an ABC run or an evidence: write the surface run to a directory of its own",
+                dir.display()
+            ),
+        ));
+    }
+    files::refuse_foreign(dir, "out", &|rel, is_dir| {
+        owns_unchanged(Owned::Surface, dir, rel, is_dir)
+    })?;
+    if is_surface_dir(dir) && !force {
+        return Err(Error::setting(
+            "out",
+            format!(
+                "{0} holds a surface run; continue it with `bitrock surface --resume {0}` (Python: `bitrock.resume_surface`), or pass `force` to start again",
+                dir.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// True when `dir` holds a surface run (its job).
+pub fn is_surface_dir(dir: &Path) -> bool {
+    dir.join(SURFACE_JOB_JSON).is_file()
+}
+
+/// A surface directory being written: locked (one writer at a time), its record and job in
+/// place, its populations stored as they complete.
+pub struct SurfaceDir {
+    dir: PathBuf,
+    _lock: files::DirLock,
+    /// The record's bytes, written again with the result.
+    record_bytes: Vec<u8>,
+    job: Job,
+}
+
+impl SurfaceDir {
+    /// Starts `job`'s run in `dir` (refused as [`check_out`] refuses, before the directory
+    /// exists and again under its lock): what an earlier run there wrote is removed, the
+    /// record's bytes and the job written.
+    pub fn start(dir: &Path, force: bool, job: Job) -> Result<Self> {
+        let (lock, ()) = crate::run::dir::claim(dir, "out", || check_out(dir, force))?;
+        let record_bytes = std::fs::read(&job.source).map_err(|source| Error::Read {
+            path: job.source.clone(),
+            source,
+        })?;
+        let started = Self {
+            dir: dir.to_path_buf(),
+            _lock: lock,
+            record_bytes,
+            job,
+        };
+        // Under the lock, in place (a directory swapped in would not be the one locked): an
+        // earlier run's results and populations go first, so that a run killed now continues
+        // this job, never the earlier one's populations.
+        for name in [SURFACE_JSON, POSTERIOR_CSV, SURFACE_BIT_CSV, POPULATIONS_BIN, SURFACE_JOB_JSON] {
+            match std::fs::remove_file(dir.join(name)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::output("out", dir, e)),
+                _ => {}
+            }
+        }
+        for (name, bytes) in started.kept() {
+            files::write_own(&dir.join(name), "out", |out| out.write_all(&bytes))?;
+        }
+        Ok(started)
+    }
+
+    /// The surface run in `dir`, locked, to continue: its job (its law files' laws registered
+    /// in this process), its record read again from its bytes, and its stored populations.
+    pub fn open(dir: &Path) -> Result<(Self, SurfaceRecord, Vec<Population>)> {
+        if !is_surface_dir(dir) {
+            return Err(Error::setting(
+                "resume",
+                format!(
+                    "{} holds no surface run (`bitrock surface RECORD --out DIR` starts one; Python: `bitrock.surface(..., out=DIR)`)",
+                    dir.display()
+                ),
+            ));
+        }
+        let lock = files::DirLock::acquire(dir)?;
+        files::remove_stale(dir);
+        let job_path = dir.join(SURFACE_JOB_JSON);
+        let stored = read_job_file(&job_path)?.ok_or_else(|| Error::Data {
+            path: job_path.clone(),
+            message: "no job in it".to_string(),
+        })?;
+        let job: Job = serde_json::from_value(stored).map_err(|e| Error::Data {
+            path: job_path.clone(),
+            message: format!("its job does not read: {e}"),
+        })?;
+        let record_path = dir.join(RECORD_CSV);
+        let record = SurfaceRecord::read(&record_path, &job.columns)?;
+        let record_bytes = std::fs::read(&record_path).map_err(|source| Error::Read {
+            path: record_path.clone(),
+            source,
+        })?;
+        let populations_path = dir.join(POPULATIONS_BIN);
+        let populations = match std::fs::read(&populations_path) {
+            Ok(bytes) => postcard::from_bytes(&bytes).map_err(|e| Error::Data {
+                path: populations_path.clone(),
+                message: format!("not the populations of a surface run bitrock wrote: {e}"),
+            })?,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+            Err(source) => {
+                return Err(Error::Read {
+                    path: populations_path,
+                    source,
+                });
+            }
+        };
+        Ok((
+            Self {
+                dir: dir.to_path_buf(),
+                _lock: lock,
+                record_bytes,
+                job,
+            },
+            record,
+            populations,
+        ))
+    }
+
+    /// The run's job.
+    pub fn job(&self) -> &Job {
+        &self.job
+    }
+
+    /// Infers the laws from `record` with `settings` (the job's, continued), the sampler
+    /// continuing after `previous` and every completed population stored.
+    pub fn run(
+        &self,
+        record: &SurfaceRecord,
+        settings: &SurfaceSettings,
+        previous: Vec<Population>,
+        note: &mut dyn FnMut(String),
+    ) -> Result<SurfaceResult> {
+        let path = self.dir.join(POPULATIONS_BIN);
+        let mut keep = |populations: &[Population]| {
+            let bytes = postcard::to_stdvec(populations).expect("populations serialise");
+            files::write_own(&path, "out", |out| out.write_all(&bytes))
+        };
+        let sampling = Sampling {
+            previous,
+            keep: &mut keep,
+        };
+        infer_continuing(record, settings, self.job.settings.seed, sampling, note)
+    }
+
+    /// Writes the finished run's document, posterior particles and predicted bit speed beside
+    /// its record, job and populations, the directory replaced whole.
+    pub fn finish(self, record: &SurfaceRecord, result: &SurfaceResult) -> Result<()> {
+        let document = serde_json::to_value(result).expect("a surface result serialises");
+        let mut contents = self.kept();
+        contents.push((PathBuf::from(SURFACE_JSON), pretty_json(&document)));
+        if let Some(csv) = result.posterior_csv(&self.job.laws, record.torque_unit) {
+            contents.push((PathBuf::from(POSTERIOR_CSV), csv));
+        }
+        let mut bit = Vec::new();
+        result
+            .bit_csv(record, &mut bit)
+            .expect("a CSV is written to memory");
+        contents.push((PathBuf::from(SURFACE_BIT_CSV), bit));
+        if let Some(run) = &result.run {
+            let populations = postcard::to_stdvec(&run.populations).expect("populations serialise");
+            contents.push((PathBuf::from(POPULATIONS_BIN), populations));
+        }
+        files::replace_dir(
+            &self.dir,
+            "out",
+            &|rel, is_dir| owns_unchanged(Owned::Surface, &self.dir, rel, is_dir),
+            &contents,
+        )
+    }
+
+    /// The files that continue the run: its record and job.
+    fn kept(&self) -> Vec<(PathBuf, Vec<u8>)> {
+        vec![
+            (PathBuf::from(RECORD_CSV), self.record_bytes.clone()),
+            (
+                PathBuf::from(SURFACE_JOB_JSON),
+                job_file(&self.job, &self.job.laws),
+            ),
+        ]
+    }
+}
+
+/// Applies `more` to the stored job's settings: the run continued with them gives the
+/// populations an uninterrupted run with them gives.
+pub fn continued(job: &Job, more: &Continuation) -> Result<SurfaceSettings> {
+    let mut job = job.clone();
+    if let Some(n) = more.max_populations {
+        job.settings.max_populations = n;
+    }
+    if more.max_seconds.is_some() {
+        job.settings.max_seconds = more.max_seconds;
+    }
+    if let Some(backend) = more.backend {
+        job.settings.backend = backend;
+    }
+    job.config()
+}
