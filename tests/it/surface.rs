@@ -480,3 +480,96 @@ fn surface_and_bit_records_each_go_to_their_own_command() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--pilot"), "{err}");
 }
+
+#[test]
+fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives() {
+    let (tmp, path, _) = record(Law::M2, 60.0, 120.0, 1.0, 0.2, 7);
+    let dir = tmp.path().join("run");
+    let args = |extra: &[&str]| {
+        let mut args = vec![
+            "surface",
+            path.to_str().unwrap(),
+            "--laws",
+            "m1,m2",
+            "--particles",
+            "150",
+            "--pilot",
+            "100",
+            "--check-replicates",
+            "4",
+            "--predictive-draws",
+            "40",
+            "--no-advice",
+            "--backend",
+            "cpu",
+            "--seed",
+            "11",
+            "--json",
+        ];
+        args.extend(extra);
+        args.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let document = |out: &str| {
+        let mut v: serde_json::Value = serde_json::from_str(out).unwrap();
+        v.as_object_mut().unwrap().remove("seconds");
+        v
+    };
+    let (code, _, err) = outcome(bin().args(args(&["--max-populations", "2", "--out", dir.to_str().unwrap()])));
+    assert_eq!(code, 0, "{err}");
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| !n.starts_with('.'))
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        ["bit.csv", "populations.bin", "posterior.csv", "record.csv", "surface-job.json", "surface.json"]
+    );
+    assert_eq!(std::fs::read(&path).unwrap(), std::fs::read(dir.join("record.csv")).unwrap());
+    let two: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("surface.json")).unwrap()).unwrap();
+    assert_eq!(two["populations"], 2);
+
+    // Continued to three populations, from the directory alone (the record moved away):
+    // exactly the uninterrupted run of three.
+    let moved = path.with_file_name("moved.csv");
+    std::fs::rename(&path, &moved).unwrap();
+    let (code, continued, err) = outcome(bin().args([
+        "surface",
+        "--resume",
+        dir.to_str().unwrap(),
+        "--max-populations",
+        "3",
+        "--json",
+    ]));
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("after population 1 (2 stored)"), "{err}");
+    std::fs::rename(&moved, &path).unwrap();
+    let (code, whole, err) = outcome(bin().args(args(&["--max-populations", "3"])));
+    assert_eq!(code, 0, "{err}");
+    let (continued, whole) = (document(&continued), document(&whole));
+    assert_eq!(continued["populations"], 3);
+    assert_eq!(continued, whole);
+    let written: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("surface.json")).unwrap()).unwrap();
+    assert_eq!(written["epsilons"], whole["epsilons"]);
+
+    // A run already there is not replaced unless asked, a directory of the user's never, and a
+    // directory without a surface run is not continued.
+    let (code, _, err) = outcome(bin().args(args(&["--out", dir.to_str().unwrap()])));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--out") && err.contains("--resume"), "{err}");
+    let theirs = tmp.path().join("theirs");
+    std::fs::create_dir(&theirs).unwrap();
+    std::fs::write(theirs.join("notes.txt"), "mine").unwrap();
+    let (code, _, err) = outcome(bin().args(args(&["--out", theirs.to_str().unwrap(), "--force"])));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("notes.txt"), "{err}");
+    assert_eq!(std::fs::read_to_string(theirs.join("notes.txt")).unwrap(), "mine");
+    let (code, _, err) = outcome(bin().args(["surface", "--resume", theirs.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--resume") && err.contains("holds no surface run"), "{err}");
+    // The record and the laws are the run's own when it continues.
+    let (code, _, err) = outcome(bin().args(["surface", "--resume", dir.to_str().unwrap(), "--laws", "m2"]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--laws"), "{err}");
+}
