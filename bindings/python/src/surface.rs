@@ -3,22 +3,26 @@
 use crate::errors::*;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
-use bitrock::run::surface::{Settings as SurfaceRunSettings, infer};
+use bitrock::run::surface::dir::{self, SurfaceDir};
+use bitrock::run::surface::{Settings as SurfaceRunSettings, SurfaceResult, infer};
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
 
-/// `bitrock surface` on the record at `path`: the whole result as JSON text. The notes of the
-/// run (a GPU fallback of the advice's strings, say) go to `note` once it is done.
+/// `bitrock surface` on the record at `path`: the whole result as JSON text, written as a
+/// surface directory to `out` where given. The notes of the run (a GPU fallback of the
+/// advice's strings, say) go to `note` once it is done.
 #[pyfunction]
-#[pyo3(signature = (path, laws, options, note))]
+#[pyo3(signature = (path, laws, options, note, out=None, force=false))]
 pub(crate) fn surface(
     py: Python<'_>,
     path: PathBuf,
     laws: Option<Vec<String>>,
     options: &Bound<'_, PyDict>,
     note: Option<Py<PyAny>>,
+    out: Option<PathBuf>,
+    force: bool,
 ) -> PyResult<String> {
     let laws = crate::errors::laws(py, laws)?.unwrap_or_else(|| {
         Law::ALL
@@ -58,17 +62,70 @@ pub(crate) fn surface(
     };
     let mut notes = Vec::new();
     let text = py.detach(|| {
-        let s = settings.config(laws)?;
+        let s = settings.config(laws.clone())?;
+        if let Some(out) = &out {
+            dir::check_out(out, force)?;
+        }
         let record = SurfaceRecord::read(&path, &columns)?;
-        let result = infer(&record, &s, seed, &mut |line| notes.push(line))?;
-        let mut document = serde_json::to_value(&result).expect("a result serialises");
-        document["time_s"] = serde_json::to_value(&record.time_s).expect("numbers serialise");
-        Ok::<_, bitrock::Error>(document.to_string())
+        let mut note = |line| notes.push(line);
+        let result = match &out {
+            Some(out) => {
+                let run = SurfaceDir::start(out, force, dir::Job::new(laws, settings, columns, &path)?)?;
+                let result = run.run(&record, &s, Vec::new(), &mut note)?;
+                run.finish(&record, &result)?;
+                result
+            }
+            None => infer(&record, &s, seed, &mut note)?,
+        };
+        Ok::<_, bitrock::Error>(document(&record, &result))
     });
-    if let Some(callback) = &note {
-        for line in &notes {
+    said(py, &note, &notes)?;
+    check(py, text)
+}
+
+/// `bitrock surface --resume`: the surface run in `dir` continued with `more`'s stopping rules
+/// and backend, the directory written anew; the whole result as JSON text.
+#[pyfunction]
+#[pyo3(signature = (dir, max_populations, max_seconds, backend, note))]
+pub(crate) fn resume_surface(
+    py: Python<'_>,
+    dir: PathBuf,
+    max_populations: Option<usize>,
+    max_seconds: Option<f64>,
+    backend: Option<String>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let backend = named(py, "backend", backend)?;
+    let more = dir::Continuation {
+        max_populations,
+        max_seconds,
+        backend,
+    };
+    let mut notes = Vec::new();
+    let text = py.detach(|| {
+        let (run, record, previous) = SurfaceDir::open(&dir)?;
+        let settings = dir::continued(run.job(), &more)?;
+        let result = run.run(&record, &settings, previous, &mut |line| notes.push(line))?;
+        run.finish(&record, &result)?;
+        Ok::<_, bitrock::Error>(document(&record, &result))
+    });
+    said(py, &note, &notes)?;
+    check(py, text)
+}
+
+/// A result as Python reads it: the document with the record's clock.
+fn document(record: &SurfaceRecord, result: &SurfaceResult) -> String {
+    let mut document = serde_json::to_value(result).expect("a result serialises");
+    document["time_s"] = serde_json::to_value(&record.time_s).expect("numbers serialise");
+    document.to_string()
+}
+
+/// Hands the run's notes to `note`.
+fn said(py: Python<'_>, note: &Option<Py<PyAny>>, notes: &[String]) -> PyResult<()> {
+    if let Some(callback) = note {
+        for line in notes {
             callback.call1(py, (as_arguments(line),))?;
         }
     }
-    check(py, text)
+    Ok(())
 }

@@ -182,3 +182,45 @@ def test_every_surface_setting_is_a_keyword_and_a_bad_value_is_refused_by_name(t
     with pytest.raises(bitrock.InputError, match="particles") as caught:
         bitrock.surface(path, laws=["m2"], particles="many")
     assert caught.value.argument == "particles"
+
+
+def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path):
+    path = tmp_path / "surface.csv"
+    bitrock.simulate(
+        "m2", omega_rpm=60, duration_s=120, settle_s=60, sample_hz=1, channels="surface", noise_torque_knm=0.2, seed=7
+    ).to_csv(path, index=False)
+    small = dict(
+        laws=["m1", "m2"],
+        particles=150,
+        pilot=100,
+        check_replicates=4,
+        predictive_draws=40,
+        advice=False,
+        backend="cpu",
+        seed=11,
+    )
+    out = tmp_path / "run"
+    first = bitrock.surface(path, max_populations=2, out=out, **small)
+    assert first["populations"] == 2
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == [
+        "bit.csv",
+        "populations.bin",
+        "posterior.csv",
+        "record.csv",
+        "surface-job.json",
+        "surface.json",
+    ]
+    continued = bitrock.resume_surface(out, max_populations=3)
+    whole = bitrock.surface(path, max_populations=3, **small)
+    for result in (continued, whole):
+        result.pop("seconds")
+    assert continued["populations"] == 3
+    assert continued == whole
+    with pytest.raises(bitrock.InputError, match="resume_surface") as caught:
+        bitrock.surface(path, max_populations=2, out=out, **small)
+    assert caught.value.argument == "out"
+    with pytest.raises(bitrock.InputError, match="holds no surface run"):
+        bitrock.resume_surface(tmp_path)
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.resume_surface(out, backend="abacus")
+    assert caught.value.argument == "backend"

@@ -63,6 +63,7 @@ __all__ = [
     "simulate",
     "simulate_strings",
     "surface",
+    "resume_surface",
     "stability",
     "torque",
     "watch",
@@ -797,6 +798,8 @@ def surface(
     seed: int | None = None,
     backend: str | None = None,
     semi_automatic: bool | None = None,
+    out: str | os.PathLike[str] | None = None,
+    force: bool = False,
 ) -> dict:
     """The law at the bit from a surface record (top-drive speed, surface torque and weight on
     bit on a regular clock, a CSV file) through drill strings simulated per candidate, as
@@ -816,13 +819,40 @@ def surface(
     where. ``semi_automatic=True`` compares what linear regressions on the pilot strings nearest
     the record predict from the summaries (each law's parameters, the string's where inferred,
     each law's probability) instead of the summaries: ``projection`` in the result names each
-    prediction with its adjusted R². docs/surface.md says what a surface record can and cannot tell."""
+    prediction with its adjusted R². With ``out``, the run is written to that surface directory
+    (``surface.json``, ``posterior.csv``, ``bit.csv``, and the record, job and populations that
+    :func:`resume_surface` continues; ``force=True`` replaces a surface run there), as
+    ``bitrock surface --out``. docs/surface.md says what a surface record can and cannot tell."""
     import json
 
-    options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json")}
+    options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json", "out", "force")}
     text = _bitrock.surface(
-        os.fspath(path), None if laws is None else [str(law) for law in laws], options, _note
+        os.fspath(path),
+        None if laws is None else [str(law) for law in laws],
+        options,
+        _note,
+        None if out is None else os.fspath(out),
+        force,
     )
+    return json.loads(text)
+
+
+def resume_surface(
+    directory: str | os.PathLike[str],
+    *,
+    max_populations: int | None = None,
+    max_seconds: float | None = None,
+    backend: str | None = None,
+) -> dict:
+    """Continues the surface run in ``directory`` (one that ``bitrock.surface(..., out=directory)``
+    or ``bitrock surface --out`` wrote, finished or killed part-way) after its last stored
+    population, with its record and settings: ``max_populations`` (the first and those stored
+    included), ``max_seconds`` and ``backend`` replace the run's own. The populations are those
+    an uninterrupted run gives; the check and the bit are computed again and the directory
+    written anew. Returns the result as :func:`surface` does. As ``bitrock surface --resume``."""
+    import json
+
+    text = _bitrock.resume_surface(os.fspath(directory), max_populations, max_seconds, backend, _note)
     return json.loads(text)
 
 

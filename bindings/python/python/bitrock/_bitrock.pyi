@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "resume_surface", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class ComputedEvidence:
@@ -266,6 +266,12 @@ def resume_evidence(dir: str | PathLike[str], backend: str | None, check: Suppor
     the document, as [`evidence`] returns it.
     """
 
+def resume_surface(dir: str | PathLike[str], max_populations: SupportsIndex | None, max_seconds: SupportsFloat | SupportsIndex | None, backend: str | None, note: Any | None) -> str:
+    """
+    `bitrock surface --resume`: the surface run in `dir` continued with `more`'s stopping rules
+    and backend, the directory written anew; the whole result as JSON text.
+    """
+
 def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:
     """
     Answers a task on a worker process (see `bitrock::abc::shard::wire`).
@@ -298,10 +304,11 @@ def stability(run: str | PathLike[str] | None, law: str | None, params: Supports
     `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
     """
 
-def surface(path: str | PathLike[str], laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None) -> str:
+def surface(path: str | PathLike[str], laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, out: str | PathLike[str] | None = None, force: bool = False) -> str:
     """
-    `bitrock surface` on the record at `path`: the whole result as JSON text. The notes of the
-    run (a GPU fallback of the advice's strings, say) go to `note` once it is done.
+    `bitrock surface` on the record at `path`: the whole result as JSON text, written as a
+    surface directory to `out` where given. The notes of the run (a GPU fallback of the
+    advice's strings, say) go to `note` once it is done.
     """
 
 def torque(law: str, speed_rad_s: Incomplete, params: SupportsGetItem[int, SupportsFloat | SupportsIndex], r: SupportsFloat | SupportsIndex, torque_unit: str | None) -> Incomplete:
