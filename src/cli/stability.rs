@@ -27,7 +27,8 @@ use std::process::ExitCode;
 #[derive(Debug, Args)]
 pub struct StabilityCmd {
     /// ABC run directory (from `bitrock abc`): MAP, posterior samples and law probabilities;
-    /// or an evidence directory (`bitrock evidence --out`): its posterior.
+    /// an evidence directory (`bitrock evidence --out`) or a surface directory (`bitrock
+    /// surface --out`): its posterior, on the string it was computed for.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["law", "params", "posterior"])]
     pub run: Option<PathBuf>,
     /// Weighted posterior particles as CSV (`bitrock evidence --posterior-out`, `bitrock export
@@ -50,7 +51,8 @@ pub struct StabilityCmd {
     #[command(flatten)]
     pub string: StructureArgs,
     /// Reference weight on bit W_ref of the law's parameters, kN [default: the paper's 244.2;
-    /// an evidence directory's own where its evidence scaled each torque by WOB / W_ref].
+    /// an evidence directory's own where its evidence scaled each torque by WOB / W_ref; a
+    /// surface directory's own, or its record's mean weight on bit].
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KN")]
     pub w_ref_kn: Option<f64>,
     /// Top-drive speeds, rpm, as MIN:MAX:COUNT.
@@ -216,7 +218,7 @@ fn map_w_ref_n(w_ref_kn: Option<f64>, own_w_ref_n: Option<f64>) -> f64 {
         (Some(kn), _) => kn * 1000.0,
         (None, Some(n)) => {
             super::print::note(format_args!(
-                "note: the posterior's torque parameters are for W_ref = {:.3} kN (its evidence scaled each torque by WOB / W_ref): mapped at that reference",
+                "note: the posterior's torque parameters are for W_ref = {:.3} kN (the directory's own: its evidence scaled each torque by WOB / W_ref, or its surface run inferred them at the record's mean weight on bit): mapped at that reference",
                 n / 1000.0
             ));
             n
@@ -391,6 +393,15 @@ fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<f64>, Opt
             let (particles, w_ref_n) = bitrock::run::evidence::dir::posterior(dir)?;
             let bit = bitrock::run::evidence::dir::record(dir)?.bit;
             Ok((MapSource::Posterior(particles), w_ref_n, bit))
+        }
+        (Some(dir), _, _) if bitrock::run::surface::dir::is_surface_dir(dir) => {
+            let (particles, w_ref_n) = bitrock::run::surface::dir::posterior(dir)?;
+            let bit = bitrock::run::surface::dir::bit(dir)?;
+            super::print::note(format_args!(
+                "note: the bit as the surface implies it (posterior medians): stuck {:.2} of the time at {:.1} rpm",
+                bit.stuck_share, bit.mean_speed_rpm
+            ));
+            Ok((MapSource::Posterior(particles), Some(w_ref_n), Some(bit)))
         }
         (Some(dir), _, _) => Ok((MapSource::Run(dir.clone()), None, None)),
         (None, Some(law), Some(params)) => Ok((

@@ -414,6 +414,13 @@ impl StringGiven {
 
 /// The drill string kept with the run or the evidence in `dir`, where it was made with one.
 pub fn stored_string(dir: &std::path::Path) -> Result<Option<DrillStringSpec>> {
+    if run::surface::dir::is_surface_dir(dir) {
+        return Ok(Some(DrillStringSpec {
+            structure: Structure::Lumped,
+            lumped: run::surface::dir::string(dir)?,
+            fe: None,
+        }));
+    }
     if run::dir::is_evidence_dir(dir) {
         return Ok(run::evidence::dir::job(dir)?.and_then(|job| job.string));
     }

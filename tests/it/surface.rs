@@ -572,4 +572,23 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     let (code, _, err) = outcome(bin().args(["surface", "--resume", dir.to_str().unwrap(), "--laws", "m2"]));
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--laws"), "{err}");
+
+    // Its posterior mapped on its own string, at the record's mean weight (the laws inferred
+    // at r = 1 hold there), with the advice at its operating point from the bit it implies.
+    let (code, out, err) = outcome(bin().args(["stability", "--run", dir.to_str().unwrap(), "--json"]));
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("the run's own drill string"), "{err}");
+    let maps: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let at_the_bit = &written["at_the_bit"];
+    assert_eq!(maps["record"]["stuck_share"], at_the_bit["stuck_share"][1]);
+    assert_eq!(maps["record"]["severity"], at_the_bit["severity"][1]);
+    let mean_rpm = maps["record"]["mean_speed_rpm"].as_f64().unwrap();
+    assert!((mean_rpm - 60.0).abs() < 1e-9, "{mean_rpm}");
+    let wob_kn = maps["record"]["mean_wob_kn"].as_f64().unwrap();
+    assert!((wob_kn - bitrock::laws::PAPER_W_REF_N / 1000.0).abs() < 1e-6, "{wob_kn}");
+    assert!(maps["advice"]["words"].as_str().is_some(), "{out}");
+    // What reads ABC runs says what the directory is.
+    let (code, _, err) = outcome(bin().args(["report", dir.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("holds a surface run"), "{err}");
 }

@@ -342,6 +342,12 @@ impl Store {
     /// Opens the store of run directory `dir`; a directory without one, or with a store of
     /// another schema, is refused with a message naming it.
     pub fn open(dir: &Path) -> Result<Self> {
+        if crate::run::surface::dir::is_surface_dir(dir) && !dir.join(STORE_FILE).exists() {
+            return Err(Error::Data {
+                path: dir.to_path_buf(),
+                message: "holds a surface run (`bitrock surface --out`), not an ABC run: its result is surface.json, `bitrock stability --run` maps its posterior, and `bitrock surface --resume` continues it".into(),
+            });
+        }
         let kind = sqlite::Kind {
             file: STORE_FILE,
             what: "run",

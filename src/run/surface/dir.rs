@@ -11,7 +11,9 @@
 //! computed again and the directory written anew, whole ([`files::replace_dir`]).
 
 use super::{Sampling, Settings, SurfaceResult, SurfaceSettings, infer_continuing};
-use crate::abc::Population;
+use crate::abc::{Particle, Population};
+use crate::stability::lumped::Lumped;
+use crate::data::BitSeen;
 use crate::data::surface::{SurfaceOptions, SurfaceRecord};
 use crate::error::{Error, Result};
 use crate::eval::Backend;
@@ -20,7 +22,7 @@ use crate::laws::Law;
 use crate::prior::PriorFile;
 use crate::run::dir::{
     EVIDENCE_JSON, Owned, POPULATIONS_BIN, POSTERIOR_CSV, RECORD_CSV, SURFACE_BIT_CSV, SURFACE_JOB_JSON, SURFACE_JSON,
-    is_run_dir, job_file, owns_unchanged, pretty_json, read_job_file, refuse_inside_kept_dir,
+    is_run_dir, job_file, owns_unchanged, pretty_json, read_job_file, read_json_file, refuse_inside_kept_dir,
 };
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -167,15 +169,7 @@ impl SurfaceDir {
         }
         let lock = files::DirLock::acquire(dir)?;
         files::remove_stale(dir);
-        let job_path = dir.join(SURFACE_JOB_JSON);
-        let stored = read_job_file(&job_path)?.ok_or_else(|| Error::Data {
-            path: job_path.clone(),
-            message: "no job in it".to_string(),
-        })?;
-        let job: Job = serde_json::from_value(stored).map_err(|e| Error::Data {
-            path: job_path.clone(),
-            message: format!("its job does not read: {e}"),
-        })?;
+        let job = job(dir)?;
         let record_path = dir.join(RECORD_CSV);
         let record = SurfaceRecord::read(&record_path, &job.columns)?;
         let record_bytes = std::fs::read(&record_path).map_err(|source| Error::Read {
@@ -286,4 +280,89 @@ pub fn continued(job: &Job, more: &Continuation) -> Result<SurfaceSettings> {
         job.settings.backend = backend;
     }
     job.config()
+}
+
+/// The job of the surface directory `dir`, its law files' laws registered in this process.
+pub fn job(dir: &Path) -> Result<Job> {
+    let path = dir.join(SURFACE_JOB_JSON);
+    let stored = read_job_file(&path)?.ok_or_else(|| Error::Data {
+        path: path.clone(),
+        message: "no job in it".to_string(),
+    })?;
+    serde_json::from_value(stored).map_err(|e| Error::Data {
+        path,
+        message: format!("its job does not read: {e}"),
+    })
+}
+
+/// The finished document of the surface directory `dir` (its law files' laws registered).
+pub fn read(dir: &Path) -> Result<serde_json::Value> {
+    job(dir)?;
+    let path = dir.join(SURFACE_JSON);
+    if !path.is_file() {
+        return Err(Error::Data {
+            path: dir.to_path_buf(),
+            message: format!(
+                "holds a surface run under way, not finished; continue it with `bitrock surface --resume {}` (Python: `bitrock.resume_surface`)",
+                dir.display()
+            ),
+        });
+    }
+    read_json_file(&path, "a surface run's document", MAX_DOCUMENT_BYTES)
+}
+
+/// The most a surface run's document may hold, bytes (it holds the bit's band per sample).
+const MAX_DOCUMENT_BYTES: u64 = 1 << 30;
+
+/// The final population's particles of the finished surface run in `dir` (SI), and the
+/// weight on bit its torque parameters are for (N): its W_ref, or without one the record's
+/// mean weight on bit (the laws inferred at r = 1 hold there).
+pub fn posterior(dir: &Path) -> Result<(Vec<Particle>, f64)> {
+    read(dir)?;
+    let job = job(dir)?;
+    let record = SurfaceRecord::read(&dir.join(RECORD_CSV), &job.columns)?;
+    let particles = crate::documents::read_particles_csv(&dir.join(POSTERIOR_CSV))?;
+    let w_ref_n = job.settings.w_ref_kn.map(|kn| kn * 1000.0);
+    Ok((particles, w_ref_n.unwrap_or_else(|| super::mean_wob_n(&record, None))))
+}
+
+/// The bit of the finished surface run in `dir` as the surface implies it: the posterior
+/// medians of its stuck share and severity, at the top drive's mean speed and the record's
+/// mean weight on bit (where recorded).
+pub fn bit(dir: &Path) -> Result<BitSeen> {
+    let document = read(dir)?;
+    let job = job(dir)?;
+    let record = SurfaceRecord::read(&dir.join(RECORD_CSV), &job.columns)?;
+    let median = |name: &str| {
+        document["at_the_bit"][name][1].as_f64().ok_or_else(|| Error::Data {
+            path: dir.join(SURFACE_JSON),
+            message: format!("at_the_bit.{name} has no median"),
+        })
+    };
+    Ok(BitSeen {
+        samples: record.time_s.len(),
+        stuck_share: median("stuck_share")?,
+        severity: Some(median("severity")?),
+        mean_speed_rpm: record.mean_top_drive_rad_s() / crate::units::RAD_S_PER_RPM,
+        peak_speed_rpm: None,
+        mean_wob_kn: record.wob_n.is_some().then(|| super::mean_wob_n(&record, None) / 1000.0),
+    })
+}
+
+/// The 1-DOF string the finished surface run in `dir` simulated its candidates on: as given,
+/// or where it inferred the natural frequency or damping ratio, their posterior medians.
+pub fn string(dir: &Path) -> Result<Lumped> {
+    let document = read(dir)?;
+    let string = &document["string"];
+    let number = |value: &serde_json::Value, name: &str| {
+        value.as_f64().ok_or_else(|| Error::Data {
+            path: dir.join(SURFACE_JSON),
+            message: format!("string.{name} is not a number"),
+        })
+    };
+    Ok(Lumped {
+        inertia_kg_m2: number(&string["inertia_kg_m2"], "inertia_kg_m2")?,
+        omega_n_rad_s: number(&string["omega_n_rad_s"]["median"], "omega_n_rad_s.median")?,
+        damping_ratio: number(&string["damping_ratio"]["median"], "damping_ratio.median")?,
+    })
 }

@@ -1607,6 +1607,16 @@ fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: 
 const ADVICE_SAMPLES: usize = 20;
 
 /// The simulated escape advice from the record's mean operating point.
+/// The record's mean weight on bit, N; without a WOB channel, `w_ref_n` or the paper's. Without
+/// a reference weight the laws were inferred at r = 1: their parameters hold at this weight,
+/// which is then their reference.
+pub fn mean_wob_n(record: &SurfaceRecord, w_ref_n: Option<f64>) -> f64 {
+    record.wob_n.as_ref().map_or_else(
+        || w_ref_n.unwrap_or(crate::laws::PAPER_W_REF_N),
+        |w| w.iter().sum::<f64>() / w.len() as f64,
+    )
+}
+
 fn escape_advice(
     record: &SurfaceRecord,
     settings: &SurfaceSettings,
@@ -1617,12 +1627,7 @@ fn escape_advice(
     note: &mut dyn FnMut(String),
 ) -> Result<String> {
     use crate::run::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn};
-    // Without a reference weight the laws were inferred at r = 1: their parameters hold at the
-    // record's own mean weight, which is then the reference.
-    let wob_n = record.wob_n.as_ref().map_or_else(
-        || settings.w_ref_n.unwrap_or(crate::laws::PAPER_W_REF_N),
-        |w| w.iter().sum::<f64>() / w.len() as f64,
-    );
+    let wob_n = mean_wob_n(record, settings.w_ref_n);
     let w_ref_n = settings.w_ref_n.unwrap_or(wob_n);
     let inputs: Vec<LawSamples> = laws
         .iter()
