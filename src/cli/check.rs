@@ -17,7 +17,8 @@ pub struct CheckCmd {
     /// in RUN_DIR/selection/ (selection.json, matrix.csv, replicates.csv, confusion.svg/png);
     /// or evidence directory (written by `bitrock evidence --out`), its evidence computed again
     /// and checked as `bitrock evidence --check K` checks it, the check written into its
-    /// evidence.json.
+    /// evidence.json; or surface directory (written by `bitrock surface --out`), its check by
+    /// re-simulation made again with K records per law and written into its surface.json.
     #[arg(value_name = "RUN_DIR")]
     pub run: PathBuf,
     /// Synthetic records per law, K.
@@ -44,6 +45,9 @@ pub struct CheckCmd {
 pub fn run(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     if bitrock::run::dir::is_evidence_dir(&cmd.run) {
         return check_evidence(cmd);
+    }
+    if bitrock::run::surface::dir::is_surface_dir(&cmd.run) {
+        return check_surface(cmd);
     }
     let options = CheckOptions {
         replicates: cmd.replicates,
@@ -182,4 +186,52 @@ fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
         writeln!(out, "{}{source}", row.verdict)?;
     }
     Ok(())
+}
+
+/// The surface run in `cmd.run` checked again by re-simulation with `--replicates` records per
+/// law: its populations as stored (none added), the check, the bit and the directory written
+/// anew.
+fn check_surface(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
+    use bitrock::run::surface::dir::{self, SurfaceDir};
+    set_threads(cmd.threads)?;
+    if cmd.replicates == 0 {
+        return Err(bitrock::Error::setting("replicates", "must be at least 1").into());
+    }
+    if cmd.batch.is_some() {
+        return Err(bitrock::Error::setting(
+            "batch",
+            "applies to an ABC run's check; a surface run's re-simulated records are simulated together",
+        )
+        .into());
+    }
+    // Finished, or refused with how to finish it.
+    dir::read(&cmd.run)?;
+    let (run, record, previous) = SurfaceDir::open(&cmd.run)?;
+    let more = dir::Continuation {
+        max_populations: Some(previous.len()),
+        max_seconds: None,
+        backend: cmd.backend,
+        check_replicates: Some(cmd.replicates),
+    };
+    let settings = dir::continued(run.job(), &more)?;
+    let quiet = cmd.quiet;
+    let result = run.run(&record, &settings, previous, &mut |line| {
+        if !quiet {
+            super::print::note(format_args!("note: {line}"));
+        }
+    })?;
+    run.finish(&record, &result)?;
+    let mut out = std::io::stdout().lock();
+    if cmd.json {
+        serde_json::to_writer_pretty(&mut out, &result.check)?;
+        writeln!(out)?;
+    } else {
+        super::surface::check_table(&mut out, &result)?;
+        writeln!(
+            out,
+            "\ncheck written to {}",
+            cmd.run.join(bitrock::run::dir::SURFACE_JSON).display()
+        )?;
+    }
+    Ok(ExitCode::SUCCESS)
 }

@@ -101,9 +101,10 @@ pub struct SurfaceCmd {
     /// Prior simulations that scale the distance and classify the check's records.
     #[arg(long, default_value_t = surface::DEFAULT_PILOT, value_name = "N")]
     pub pilot: usize,
-    /// Records re-simulated per law to check the model choice.
-    #[arg(long, default_value_t = surface::DEFAULT_CHECK_REPLICATES, value_name = "K")]
-    pub check_replicates: usize,
+    /// Records re-simulated per law to check the model choice [default: 10; with --resume,
+    /// the run's own].
+    #[arg(long, value_name = "K")]
+    pub check_replicates: Option<usize>,
     /// Posterior draws simulated for the bit's predicted speed.
     #[arg(long, default_value_t = surface::DEFAULT_PREDICTIVE_DRAWS, value_name = "N")]
     pub predictive_draws: usize,
@@ -150,14 +151,15 @@ pub struct SurfaceCmd {
     #[arg(long)]
     pub force: bool,
     /// Continue the surface run in DIR (killed or finished) after its last stored population:
-    /// more --max-populations, a new --max-seconds or --backend. The populations are exactly
-    /// those an uninterrupted run gives; the check and the bit are computed again and DIR
-    /// written anew.
+    /// more --max-populations, a new --max-seconds, --backend or --check-replicates. The
+    /// populations are exactly those an uninterrupted run gives; the check and the bit are
+    /// computed again and DIR written anew.
     #[arg(long, value_name = "DIR", conflicts_with_all = [
         "data", "out", "time_column", "top_drive_column", "surface_torque_column", "wob_column",
         "top_drive_unit", "torque_unit", "wob_unit", "downhole_min_column", "downhole_max_column",
         "downhole_unit", "downhole_window_s", "laws", "prior", "inertia_kg_m2", "omega_n_rad_s",
-        "damping_ratio", "w_ref_kn", "noise_sd_knm", "no_advice", "semi_automatic",
+        "damping_ratio", "w_ref_kn", "noise_sd_knm", "no_advice", "semi_automatic", "prior_scale",
+        "particles", "pilot", "predictive_draws", "dt_s", "settle_s", "seed",
     ])]
     pub resume: Option<PathBuf>,
     /// Print JSON instead of tables.
@@ -190,7 +192,7 @@ impl SurfaceCmd {
             max_populations: self.max_populations.unwrap_or(surface::DEFAULT_MAX_POPULATIONS),
             max_seconds: self.max_seconds,
             pilot: self.pilot,
-            check_replicates: self.check_replicates,
+            check_replicates: self.check_replicates.unwrap_or(surface::DEFAULT_CHECK_REPLICATES),
             predictive_draws: self.predictive_draws,
             advice: !self.no_advice,
             dt_s: self.dt_s,
@@ -269,6 +271,7 @@ fn resume(cmd: &SurfaceCmd, path: &std::path::Path) -> anyhow::Result<ExitCode> 
         max_populations: cmd.max_populations,
         max_seconds: cmd.max_seconds,
         backend: cmd.backend,
+        check_replicates: cmd.check_replicates,
     };
     let settings = dir::continued(run.job(), &more)?;
     print::note(format_args!(
@@ -381,6 +384,14 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
         )?;
     }
     writeln!(out)?;
+    check_table(out, r)?;
+    writeln!(out)?;
+    posterior_lines(out, unit, r)?;
+    at_the_bit_lines(out, &r.at_the_bit)
+}
+
+/// Each law's probability with its re-simulated records recognised, and the verdict.
+pub(super) fn check_table(out: &mut impl Write, r: &SurfaceResult) -> std::io::Result<()> {
     writeln!(out, "law   P(law)   re-simulated records recognised as it")?;
     for law in &r.laws {
         let row = r.check.rows.iter().find(|c| c.law == law.law);
@@ -394,10 +405,7 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
             law.probability
         )?;
     }
-    writeln!(out, "verdict: {}", r.check.verdict)?;
-    writeln!(out)?;
-    posterior_lines(out, unit, r)?;
-    at_the_bit_lines(out, &r.at_the_bit)
+    writeln!(out, "verdict: {}", r.check.verdict)
 }
 
 /// Each law's posterior medians and 90 % intervals, in the record's torque unit.

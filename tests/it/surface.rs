@@ -524,9 +524,19 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     names.sort();
     assert_eq!(
         names,
-        ["bit.csv", "populations.bin", "posterior.csv", "record.csv", "surface-job.json", "surface.json"]
+        [
+            "bit.csv",
+            "populations.bin",
+            "posterior.csv",
+            "record.csv",
+            "surface-job.json",
+            "surface.json"
+        ]
     );
-    assert_eq!(std::fs::read(&path).unwrap(), std::fs::read(dir.join("record.csv")).unwrap());
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        std::fs::read(dir.join("record.csv")).unwrap()
+    );
     let two: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("surface.json")).unwrap()).unwrap();
     assert_eq!(two["populations"], 2);
 
@@ -567,11 +577,17 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     assert_eq!(std::fs::read_to_string(theirs.join("notes.txt")).unwrap(), "mine");
     let (code, _, err) = outcome(bin().args(["surface", "--resume", theirs.to_str().unwrap()]));
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("--resume") && err.contains("holds no surface run"), "{err}");
+    assert!(
+        err.contains("--resume") && err.contains("holds no surface run"),
+        "{err}"
+    );
     // The record and the laws are the run's own when it continues.
     let (code, _, err) = outcome(bin().args(["surface", "--resume", dir.to_str().unwrap(), "--laws", "m2"]));
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--laws"), "{err}");
+    let (code, _, err) = outcome(bin().args(["surface", "--resume", dir.to_str().unwrap(), "--seed", "3"]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--seed"), "{err}");
 
     // Its posterior mapped on its own string, at the record's mean weight (the laws inferred
     // at r = 1 hold there), with the advice at its operating point from the bit it implies.
@@ -585,8 +601,24 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     let mean_rpm = maps["record"]["mean_speed_rpm"].as_f64().unwrap();
     assert!((mean_rpm - 60.0).abs() < 1e-9, "{mean_rpm}");
     let wob_kn = maps["record"]["mean_wob_kn"].as_f64().unwrap();
-    assert!((wob_kn - bitrock::laws::PAPER_W_REF_N / 1000.0).abs() < 1e-6, "{wob_kn}");
+    assert!(
+        (wob_kn - bitrock::laws::PAPER_W_REF_N / 1000.0).abs() < 1e-6,
+        "{wob_kn}"
+    );
     assert!(maps["advice"]["words"].as_str().is_some(), "{out}");
+    // Checked again with more records per law: the populations as they were.
+    let (code, out, err) =
+        outcome(bin().args(["check-selection", dir.to_str().unwrap(), "--replicates", "6", "--json"]));
+    assert_eq!(code, 0, "{err}");
+    let check: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let rechecked: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("surface.json")).unwrap()).unwrap();
+    assert_eq!(rechecked["check"], check);
+    for row in check["rows"].as_array().unwrap() {
+        assert_eq!(row["replicates"], 6, "{check}");
+    }
+    assert_eq!(rechecked["epsilons"], whole["epsilons"]);
+    assert_eq!(rechecked["laws"], whole["laws"]);
     // What reads ABC runs says what the directory is.
     let (code, _, err) = outcome(bin().args(["report", dir.to_str().unwrap()]));
     assert_eq!(code, 2, "{err}");

@@ -86,13 +86,14 @@ pub(crate) fn surface(
 /// `bitrock surface --resume`: the surface run in `dir` continued with `more`'s stopping rules
 /// and backend, the directory written anew; the whole result as JSON text.
 #[pyfunction]
-#[pyo3(signature = (dir, max_populations, max_seconds, backend, note))]
+#[pyo3(signature = (dir, max_populations, max_seconds, backend, check_replicates, note))]
 pub(crate) fn resume_surface(
     py: Python<'_>,
     dir: PathBuf,
     max_populations: Option<usize>,
     max_seconds: Option<f64>,
     backend: Option<String>,
+    check_replicates: Option<usize>,
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let backend = named(py, "backend", backend)?;
@@ -100,6 +101,7 @@ pub(crate) fn resume_surface(
         max_populations,
         max_seconds,
         backend,
+        check_replicates,
     };
     let mut notes = Vec::new();
     let text = py.detach(|| {

@@ -216,6 +216,10 @@ def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path
         result.pop("seconds")
     assert continued["populations"] == 3
     assert continued == whole
+    # Checked again with more records per law, the populations as they were.
+    rechecked = bitrock.resume_surface(out, max_populations=3, check_replicates=6)
+    assert [row["replicates"] for row in rechecked["check"]["rows"]] == [6, 6]
+    assert rechecked["epsilons"] == whole["epsilons"]
     with pytest.raises(bitrock.InputError, match="resume_surface") as caught:
         bitrock.surface(path, max_populations=2, out=out, **small)
     assert caught.value.argument == "out"

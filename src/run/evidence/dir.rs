@@ -98,7 +98,9 @@ impl Unfinished {
         files::write_own(&unfinished.join(RECORD_JSON), "out", |out| {
             serde_json::to_writer(out, data).map_err(std::io::Error::from)
         })?;
-        files::write_own(&unfinished.join(JOB_JSON), "out", |out| out.write_all(&job_file(job, &job.laws)))?;
+        files::write_own(&unfinished.join(JOB_JSON), "out", |out| {
+            out.write_all(&job_file(job, &job.laws))
+        })?;
         Ok(Self {
             dir: dir.to_path_buf(),
             _lock: lock,

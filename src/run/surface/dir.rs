@@ -12,7 +12,6 @@
 
 use super::{Sampling, Settings, SurfaceResult, SurfaceSettings, infer_continuing};
 use crate::abc::{Particle, Population};
-use crate::stability::lumped::Lumped;
 use crate::data::BitSeen;
 use crate::data::surface::{SurfaceOptions, SurfaceRecord};
 use crate::error::{Error, Result};
@@ -24,6 +23,7 @@ use crate::run::dir::{
     EVIDENCE_JSON, Owned, POPULATIONS_BIN, POSTERIOR_CSV, RECORD_CSV, SURFACE_BIT_CSV, SURFACE_JOB_JSON, SURFACE_JSON,
     is_run_dir, job_file, owns_unchanged, pretty_json, read_job_file, read_json_file, refuse_inside_kept_dir,
 };
+use crate::stability::lumped::Lumped;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -58,7 +58,11 @@ impl Job {
 
     /// The run's settings, through the surface run's gate, the prior made from the text kept.
     pub fn config(&self) -> Result<SurfaceSettings> {
-        let origin = self.settings.prior_file.clone().unwrap_or_else(|| PathBuf::from("prior"));
+        let origin = self
+            .settings
+            .prior_file
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("prior"));
         let prior = self
             .prior_text
             .as_deref()
@@ -77,6 +81,8 @@ pub struct Continuation {
     /// Wall-time budget of this invocation's sampler, s.
     pub max_seconds: Option<f64>,
     pub backend: Option<Backend>,
+    /// Records re-simulated per law for this invocation's check.
+    pub check_replicates: Option<usize>,
 }
 
 /// Refuses, before any work and naming `out`, a directory a surface run cannot be written to:
@@ -143,7 +149,13 @@ impl SurfaceDir {
         // Under the lock, in place (a directory swapped in would not be the one locked): an
         // earlier run's results and populations go first, so that a run killed now continues
         // this job, never the earlier one's populations.
-        for name in [SURFACE_JSON, POSTERIOR_CSV, SURFACE_BIT_CSV, POPULATIONS_BIN, SURFACE_JOB_JSON] {
+        for name in [
+            SURFACE_JSON,
+            POSTERIOR_CSV,
+            SURFACE_BIT_CSV,
+            POPULATIONS_BIN,
+            SURFACE_JOB_JSON,
+        ] {
             match std::fs::remove_file(dir.join(name)) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::output("out", dir, e)),
                 _ => {}
@@ -238,9 +250,7 @@ impl SurfaceDir {
             contents.push((PathBuf::from(POSTERIOR_CSV), csv));
         }
         let mut bit = Vec::new();
-        result
-            .bit_csv(record, &mut bit)
-            .expect("a CSV is written to memory");
+        result.bit_csv(record, &mut bit).expect("a CSV is written to memory");
         contents.push((PathBuf::from(SURFACE_BIT_CSV), bit));
         if let Some(run) = &result.run {
             let populations = postcard::to_stdvec(&run.populations).expect("populations serialise");
@@ -258,10 +268,7 @@ impl SurfaceDir {
     fn kept(&self) -> Vec<(PathBuf, Vec<u8>)> {
         vec![
             (PathBuf::from(RECORD_CSV), self.record_bytes.clone()),
-            (
-                PathBuf::from(SURFACE_JOB_JSON),
-                job_file(&self.job, &self.job.laws),
-            ),
+            (PathBuf::from(SURFACE_JOB_JSON), job_file(&self.job, &self.job.laws)),
         ]
     }
 }
@@ -278,6 +285,9 @@ pub fn continued(job: &Job, more: &Continuation) -> Result<SurfaceSettings> {
     }
     if let Some(backend) = more.backend {
         job.settings.backend = backend;
+    }
+    if let Some(k) = more.check_replicates {
+        job.settings.check_replicates = k;
     }
     job.config()
 }
@@ -345,7 +355,10 @@ pub fn bit(dir: &Path) -> Result<BitSeen> {
         severity: Some(median("severity")?),
         mean_speed_rpm: record.mean_top_drive_rad_s() / crate::units::RAD_S_PER_RPM,
         peak_speed_rpm: None,
-        mean_wob_kn: record.wob_n.is_some().then(|| super::mean_wob_n(&record, None) / 1000.0),
+        mean_wob_kn: record
+            .wob_n
+            .is_some()
+            .then(|| super::mean_wob_n(&record, None) / 1000.0),
     })
 }
 

@@ -27,8 +27,8 @@
 
 pub mod dir;
 
-use crate::abc::smc::{self, SmcConfig};
 use crate::abc::shard::Local;
+use crate::abc::smc::{self, SmcConfig};
 use crate::abc::{Observer, Particle, Population, Run};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};

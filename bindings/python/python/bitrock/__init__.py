@@ -843,16 +843,21 @@ def resume_surface(
     max_populations: int | None = None,
     max_seconds: float | None = None,
     backend: str | None = None,
+    check_replicates: int | None = None,
 ) -> dict:
     """Continues the surface run in ``directory`` (one that ``bitrock.surface(..., out=directory)``
     or ``bitrock surface --out`` wrote, finished or killed part-way) after its last stored
     population, with its record and settings: ``max_populations`` (the first and those stored
-    included), ``max_seconds`` and ``backend`` replace the run's own. The populations are those
-    an uninterrupted run gives; the check and the bit are computed again and the directory
-    written anew. Returns the result as :func:`surface` does. As ``bitrock surface --resume``."""
+    included), ``max_seconds``, ``backend`` and ``check_replicates`` replace the run's own. The
+    populations are those an uninterrupted run gives; the check and the bit are computed again
+    and the directory written anew. Returns the result as :func:`surface` does. As ``bitrock
+    surface --resume``; ``max_populations`` at the stored count with a larger
+    ``check_replicates`` checks the run again, as ``bitrock check-selection DIR`` does."""
     import json
 
-    text = _bitrock.resume_surface(os.fspath(directory), max_populations, max_seconds, backend, _note)
+    text = _bitrock.resume_surface(
+        os.fspath(directory), max_populations, max_seconds, backend, check_replicates, _note
+    )
     return json.loads(text)
 
 

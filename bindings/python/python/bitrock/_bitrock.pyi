@@ -266,7 +266,7 @@ def resume_evidence(dir: str | PathLike[str], backend: str | None, check: Suppor
     the document, as [`evidence`] returns it.
     """
 
-def resume_surface(dir: str | PathLike[str], max_populations: SupportsIndex | None, max_seconds: SupportsFloat | SupportsIndex | None, backend: str | None, note: Any | None) -> str:
+def resume_surface(dir: str | PathLike[str], max_populations: SupportsIndex | None, max_seconds: SupportsFloat | SupportsIndex | None, backend: str | None, check_replicates: SupportsIndex | None, note: Any | None) -> str:
     """
     `bitrock surface --resume`: the surface run in `dir` continued with `more`'s stopping rules
     and backend, the directory written anew; the whole result as JSON text.
