@@ -492,62 +492,6 @@ fn is_run_store(path: &Path) -> bool {
             .is_ok_and(|()| &magic == b"SQLite format 3\0")
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A claim refuses before the directory exists what its check refuses, and refuses again
-    /// under the lock what another writer put there in between; a claim that holds the lock
-    /// keeps every other claim out until it is dropped.
-    #[test]
-    fn a_claim_checks_before_the_directory_exists_and_again_under_its_lock() {
-        let root = tempfile::tempdir().unwrap();
-        let dir = root.path().join("out");
-        let refused = claim(&dir, "out", || Err::<(), _>(Error::setting("out", "refused")));
-        assert!(refused.is_err());
-        assert!(!dir.exists(), "nothing made for a refused claim");
-        // Passes the first check; the second finds what another writer wrote meanwhile.
-        let calls = std::cell::Cell::new(0);
-        let raced = claim(&dir, "out", || {
-            calls.set(calls.get() + 1);
-            match calls.get() {
-                1 => Ok(()),
-                _ => Err(Error::setting("out", "written meanwhile")),
-            }
-        });
-        assert_eq!(calls.get(), 2);
-        assert!(raced.unwrap_err().to_string().contains("written meanwhile"));
-        let (held, found) = claim(&dir, "out", || Ok(7)).unwrap();
-        assert_eq!(found, 7);
-        assert!(claim(&dir, "out", || Ok(())).is_err(), "a second writer is kept out");
-        drop(held);
-        assert!(claim(&dir, "out", || Ok(())).is_ok());
-    }
-
-    #[test]
-    fn ownership_by_kind_of_directory() {
-        let p = Path::new;
-        assert!(Owned::Run.owns(p("run.sqlite"), false));
-        assert!(Owned::Run.owns(p("selection/matrix.csv"), false));
-        assert!(!Owned::Run.owns(p("selection/notes.txt"), false));
-        assert!(!Owned::Run.owns(p("notes.txt"), false));
-        assert!(!Owned::Run.owns(p("run.json"), true));
-        assert!(Owned::Evidence.owns(p("evidence.json"), false));
-        assert!(Owned::Evidence.owns(p("posterior.csv"), false));
-        assert!(!Owned::Evidence.owns(p("run.sqlite"), false) && !Owned::Evidence.owns(p("evidence.json"), true));
-        assert!(
-            Owned::Evidence.owns(p("unfinished"), true) && Owned::Evidence.owns(p("unfinished/progress.bin"), false)
-        );
-        assert!(
-            !Owned::Evidence.owns(p("unfinished/notes.txt"), false) && !Owned::Evidence.owns(p("unfinished"), false)
-        );
-        assert!(Owned::Report.owns(p("figures/fits.png"), false));
-        assert!(!Owned::Report.owns(p("figures/my-notes.md"), false));
-        assert!(!Owned::Report.owns(p("my-notes.md"), false));
-        assert!(!Owned::Report.owns(p("figures/sub"), true));
-    }
-}
-
 // Job files: what computes a directory's result again (an evidence's, a surface run's), with
 // the text of every law file whose law it names, so that the directory computes without them.
 
@@ -607,4 +551,60 @@ pub(crate) fn read_job_file(path: &Path) -> Result<Option<serde_json::Value>> {
         }
     }
     Ok(stored.get_mut(JOB).map(serde_json::Value::take))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A claim refuses before the directory exists what its check refuses, and refuses again
+    /// under the lock what another writer put there in between; a claim that holds the lock
+    /// keeps every other claim out until it is dropped.
+    #[test]
+    fn a_claim_checks_before_the_directory_exists_and_again_under_its_lock() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("out");
+        let refused = claim(&dir, "out", || Err::<(), _>(Error::setting("out", "refused")));
+        assert!(refused.is_err());
+        assert!(!dir.exists(), "nothing made for a refused claim");
+        // Passes the first check; the second finds what another writer wrote meanwhile.
+        let calls = std::cell::Cell::new(0);
+        let raced = claim(&dir, "out", || {
+            calls.set(calls.get() + 1);
+            match calls.get() {
+                1 => Ok(()),
+                _ => Err(Error::setting("out", "written meanwhile")),
+            }
+        });
+        assert_eq!(calls.get(), 2);
+        assert!(raced.unwrap_err().to_string().contains("written meanwhile"));
+        let (held, found) = claim(&dir, "out", || Ok(7)).unwrap();
+        assert_eq!(found, 7);
+        assert!(claim(&dir, "out", || Ok(())).is_err(), "a second writer is kept out");
+        drop(held);
+        assert!(claim(&dir, "out", || Ok(())).is_ok());
+    }
+
+    #[test]
+    fn ownership_by_kind_of_directory() {
+        let p = Path::new;
+        assert!(Owned::Run.owns(p("run.sqlite"), false));
+        assert!(Owned::Run.owns(p("selection/matrix.csv"), false));
+        assert!(!Owned::Run.owns(p("selection/notes.txt"), false));
+        assert!(!Owned::Run.owns(p("notes.txt"), false));
+        assert!(!Owned::Run.owns(p("run.json"), true));
+        assert!(Owned::Evidence.owns(p("evidence.json"), false));
+        assert!(Owned::Evidence.owns(p("posterior.csv"), false));
+        assert!(!Owned::Evidence.owns(p("run.sqlite"), false) && !Owned::Evidence.owns(p("evidence.json"), true));
+        assert!(
+            Owned::Evidence.owns(p("unfinished"), true) && Owned::Evidence.owns(p("unfinished/progress.bin"), false)
+        );
+        assert!(
+            !Owned::Evidence.owns(p("unfinished/notes.txt"), false) && !Owned::Evidence.owns(p("unfinished"), false)
+        );
+        assert!(Owned::Report.owns(p("figures/fits.png"), false));
+        assert!(!Owned::Report.owns(p("figures/my-notes.md"), false));
+        assert!(!Owned::Report.owns(p("my-notes.md"), false));
+        assert!(!Owned::Report.owns(p("figures/sub"), true));
+    }
 }
