@@ -15,7 +15,9 @@ pub struct ReportCmd {
     /// one watch directory (written by `bitrock watch --out`): the law probabilities,
     /// parameters and risk of stick-slip along its record, changes marked; or one evidence
     /// directory (written by `bitrock evidence --out`): each law's evidence, its posterior
-    /// predictive envelope over the samples, the Bayes factors.
+    /// predictive envelope over the samples, the Bayes factors; or one surface directory
+    /// (written by `bitrock surface --out`): the laws with their check, the string, and the
+    /// bit's speed the surface implies.
     #[arg(required = true, value_name = "DIR")]
     pub runs: Vec<PathBuf>,
     /// Report directory: report.md and figures/, replaced as a whole (a directory holding
@@ -73,6 +75,8 @@ pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
                 Some((d, "a watch"))
             } else if bitrock::run::dir::is_evidence_dir(d) {
                 Some((d, "an evidence"))
+            } else if bitrock::run::surface::dir::is_surface_dir(d) {
+                Some((d, "a surface run"))
             } else {
                 None
             }
@@ -80,6 +84,7 @@ pub fn run(cmd: &ReportCmd) -> anyhow::Result<ExitCode> {
         .collect();
     let summary = match (alone.as_slice(), cmd.runs.len()) {
         ([(dir, "a watch")], 1) => bitrock::watch::report::write(&cmd.out, &bitrock::watch::store::read(dir)?)?,
+        ([(dir, "a surface run")], 1) => bitrock::report::write_surface_report(&cmd.out, dir)?,
         ([(dir, _)], 1) => bitrock::report::write_evidence_report(&cmd.out, dir)?,
         ([], _) => {
             let (setup, runs) = bitrock::report::read_run_dirs(&cmd.runs)?;

@@ -18,9 +18,11 @@ pub(crate) mod figures;
 pub(crate) mod plot;
 mod runs;
 mod stats;
+mod surface;
 
 pub use evidence::write_evidence_report;
 pub use runs::{read_run_dirs, write_paper_report};
+pub use surface::write_surface_report;
 
 use figures::confusion_figure;
 

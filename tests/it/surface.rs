@@ -619,8 +619,25 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     }
     assert_eq!(rechecked["epsilons"], whole["epsilons"]);
     assert_eq!(rechecked["laws"], whole["laws"]);
-    // What reads ABC runs says what the directory is.
-    let (code, _, err) = outcome(bin().args(["report", dir.to_str().unwrap()]));
+    // Reported: the laws with the check as the document has them, and the figure.
+    let report = tmp.path().join("report");
+    let (code, _, err) = outcome(bin().args(["report", dir.to_str().unwrap(), "--out", report.to_str().unwrap()]));
+    assert_eq!(code, 0, "{err}");
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains(rechecked["check"]["verdict"].as_str().unwrap()), "{md}");
+    for law in rechecked["laws"].as_array().unwrap() {
+        let line = format!(
+            "| {} | {:.3} |",
+            law["law"].as_str().unwrap(),
+            law["probability"].as_f64().unwrap()
+        );
+        assert!(md.contains(&line), "{line}: {md}");
+    }
+    for ext in ["svg", "png"] {
+        assert!(report.join(format!("figures/fig01_surface_and_bit.{ext}")).is_file());
+    }
+    // What reads ABC runs only says what the directory is.
+    let (code, _, err) = outcome(bin().args(["export", dir.to_str().unwrap()]));
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("holds a surface run"), "{err}");
 }

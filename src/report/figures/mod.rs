@@ -8,6 +8,7 @@ mod marginals;
 mod probabilities;
 mod selection;
 mod stability;
+mod surface;
 
 pub(crate) use evidence::{EvidenceFigures, render_evidence};
 use fits::{render_data_and_fits, render_envelopes};
@@ -16,6 +17,7 @@ use probabilities::{render_final_probabilities, render_model_probabilities, rend
 pub(crate) use selection::confusion_figure;
 use selection::render_selection_checks;
 use stability::{render_deterministic_map, render_simulated_map, render_stochastic_map, render_structures};
+pub(crate) use surface::{SurfaceFigure, render_surface};
 
 use super::plot::{
     self, AXIS, CALIBRATION, DrawResult, Figure, GRID, LEGEND, TICK, TITLE, VALIDATION, clip_curve, font, heat_color,

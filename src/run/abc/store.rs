@@ -345,7 +345,7 @@ impl Store {
         if crate::run::surface::dir::is_surface_dir(dir) && !dir.join(STORE_FILE).exists() {
             return Err(Error::Data {
                 path: dir.to_path_buf(),
-                message: "holds a surface run (`bitrock surface --out`), not an ABC run: its result is surface.json, `bitrock stability --run` maps its posterior, and `bitrock surface --resume` continues it".into(),
+                message: "holds a surface run (`bitrock surface --out`), not an ABC run: its result is surface.json, `bitrock report` and `bitrock stability --run` read it, and `bitrock surface --resume` continues it".into(),
             });
         }
         let kind = sqlite::Kind {
