@@ -115,6 +115,19 @@ pub(crate) fn resume_surface(
     check(py, text)
 }
 
+/// The finished surface run in `dir`: its document with the record's clock, as JSON text.
+#[pyfunction]
+pub(crate) fn read_surface(py: Python<'_>, dir: PathBuf) -> PyResult<String> {
+    let text = py.detach(|| {
+        let mut document = dir::read(&dir)?;
+        let job = dir::job(&dir)?;
+        let record = SurfaceRecord::read(&dir.join(bitrock::run::dir::RECORD_CSV), &job.columns)?;
+        document["time_s"] = serde_json::to_value(&record.time_s).expect("numbers serialise");
+        Ok::<_, bitrock::Error>(document.to_string())
+    });
+    check(py, text)
+}
+
 /// A result as Python reads it: the document with the record's clock.
 fn document(record: &SurfaceRecord, result: &SurfaceResult) -> String {
     let mut document = serde_json::to_value(result).expect("a result serialises");

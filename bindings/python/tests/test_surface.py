@@ -210,6 +210,8 @@ def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path
         "surface-job.json",
         "surface.json",
     ]
+    read = bitrock.read_surface(out)
+    assert read == first
     continued = bitrock.resume_surface(out, max_populations=3)
     whole = bitrock.surface(path, max_populations=3, **small)
     for result in (continued, whole):

@@ -64,6 +64,7 @@ __all__ = [
     "simulate_strings",
     "surface",
     "resume_surface",
+    "read_surface",
     "stability",
     "torque",
     "watch",
@@ -835,6 +836,14 @@ def surface(
         force,
     )
     return json.loads(text)
+
+
+def read_surface(directory: str | os.PathLike[str]) -> dict:
+    """The finished surface run in ``directory`` (``bitrock.surface(..., out=directory)`` or
+    ``bitrock surface --out``), as :func:`surface` returns it, without computing anything."""
+    import json
+
+    return json.loads(_bitrock.read_surface(os.fspath(directory)))
 
 
 def resume_surface(

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_watch", "resume", "resume_evidence", "resume_surface", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_surface", "read_watch", "resume", "resume_evidence", "resume_surface", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class ComputedEvidence:
@@ -246,6 +246,11 @@ def read_evidence(dir: str | PathLike[str]) -> str:
     """
     The document of the evidence directory `dir` (`bitrock evidence --out`, `bitrock.evidence(...,
     out=...)`), as JSON.
+    """
+
+def read_surface(dir: str | PathLike[str]) -> str:
+    """
+    The finished surface run in `dir`: its document with the record's clock, as JSON text.
     """
 
 def read_watch(dir: str | PathLike[str]) -> tuple[str, list[str]]:
