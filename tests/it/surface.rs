@@ -636,6 +636,18 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     for ext in ["svg", "png"] {
         assert!(report.join(format!("figures/fig01_surface_and_bit.{ext}")).is_file());
     }
+    // A run killed after storing its populations, before its results: said where its
+    // results are asked for, and continued to them.
+    for name in ["surface.json", "posterior.csv", "bit.csv"] {
+        std::fs::remove_file(dir.join(name)).unwrap();
+    }
+    let (code, _, err) = outcome(bin().args(["stability", "--run", dir.to_str().unwrap()]));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("under way") && err.contains("--resume"), "{err}");
+    let (code, out, err) = outcome(bin().args(["surface", "--resume", dir.to_str().unwrap(), "--json"]));
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(document(&out)["epsilons"], whole["epsilons"]);
+    assert!(dir.join("surface.json").is_file());
     // What reads ABC runs only says what the directory is.
     let (code, _, err) = outcome(bin().args(["export", dir.to_str().unwrap()]));
     assert_eq!(code, 2, "{err}");
