@@ -1,0 +1,126 @@
+//! What the surface implies at the bit: its speed on the record's clock from posterior draws,
+//! and the simulated escape advice where it stick-slips.
+
+use super::*;
+
+/// The bit's speed on the record's clock from posterior draws (see [`AtTheBit`]).
+pub(super) fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: u64) -> Result<AtTheBit> {
+    let all: Vec<&Particle> = particles.iter().collect();
+    let drawn = resample(&all, draws, seed ^ 0x4249_5400);
+    // The bit's speed and stuck share carry no measurement noise: the strings as they are.
+    let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
+    let good: Vec<_> = runs.iter().filter(|r| !r.diverged).collect();
+    let n = model.drive.omega_rad_s.len();
+    let three = |mut v: Vec<f64>| -> [f64; 3] {
+        if v.is_empty() {
+            return [f64::NAN; 3];
+        }
+        v.sort_by(f64::total_cmp);
+        [0.05, 0.5, 0.95].map(|q| crate::numerics::quantile_of_sorted(&v, q))
+    };
+    let speed_rpm = (0..n)
+        .map(|k| three(good.iter().map(|r| r.bit_speed_rad_s[k] / RAD_S_PER_RPM).collect()))
+        .collect();
+    let reduced: Vec<(Law, Summary)> = drawn
+        .iter()
+        .zip(&runs)
+        .filter(|(_, r)| !r.diverged)
+        .map(|(p, r)| {
+            let mut s = Summary::default();
+            for (w, t) in r.bit_speed_rad_s.iter().zip(&r.surface_torque_nm) {
+                s.push(*w, f64::NAN, *t);
+            }
+            (p.law, s)
+        })
+        .collect();
+    let reductions: Vec<Summary> = reduced.iter().map(|r| r.1).collect();
+    let mut laws: Vec<Law> = reduced.iter().map(|r| r.0).collect();
+    laws.sort();
+    laws.dedup();
+    let stuck_share_by_law = laws
+        .into_iter()
+        .map(|law| {
+            let shares: Vec<f64> = reduced
+                .iter()
+                .filter(|r| r.0 == law)
+                .map(|r| r.1.stuck_share())
+                .collect();
+            (law, shares.len(), three(shares))
+        })
+        .collect();
+    Ok(AtTheBit {
+        draws: drawn.len(),
+        speed_rpm,
+        stuck_share: three(reductions.iter().map(Summary::stuck_share).collect()),
+        severity: three(
+            reductions
+                .iter()
+                .map(Summary::severity)
+                .filter(|s| s.is_finite())
+                .collect(),
+        ),
+        stick_slip_probability: reductions.iter().filter(|s| s.stick_slips()).count() as f64
+            / reductions.len().max(1) as f64,
+        stuck_share_by_law,
+        diverged: runs.len() - good.len(),
+        advice: None,
+    })
+}
+
+/// Posterior samples per law for the simulated advice.
+pub(super) const ADVICE_SAMPLES: usize = 20;
+
+/// The simulated escape advice from the record's mean operating point.
+/// The record's mean weight on bit, N; without a WOB channel, `w_ref_n` or the paper's. Without
+/// a reference weight the laws were inferred at r = 1: their parameters hold at this weight,
+/// which is then their reference.
+pub fn mean_wob_n(record: &SurfaceRecord, w_ref_n: Option<f64>) -> f64 {
+    record.wob_n.as_ref().map_or_else(
+        || w_ref_n.unwrap_or(crate::laws::PAPER_W_REF_N),
+        |w| w.iter().sum::<f64>() / w.len() as f64,
+    )
+}
+
+pub(super) fn escape_advice(
+    record: &SurfaceRecord,
+    settings: &SurfaceSettings,
+    backend: Backend,
+    chain: &Chain,
+    laws: &[LawPosterior],
+    particles: &[Particle],
+    note: &mut dyn FnMut(String),
+) -> Result<String> {
+    use crate::run::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn};
+    let wob_n = mean_wob_n(record, settings.w_ref_n);
+    let w_ref_n = settings.w_ref_n.unwrap_or(wob_n);
+    let inputs: Vec<LawSamples> = laws
+        .iter()
+        .filter(|l| l.particles > 0)
+        .map(|l| {
+            let own: Vec<&Particle> = particles.iter().filter(|p| p.law == l.law).collect();
+            let samples_si = resample(&own, ADVICE_SAMPLES, 0x4144_5649)
+                .iter()
+                .map(|p| p.params[..l.law.n_params()].to_vec())
+                .collect();
+            LawSamples {
+                law: l.law,
+                probability: l.probability,
+                map_si: l.params.iter().map(|p| p.median).collect(),
+                samples_si,
+            }
+        })
+        .collect();
+    let simulated = SimulatedSettings::new(chain.clone(), w_ref_n, backend);
+    let mut simulator = Simulator::new(&simulated, &inputs, note)?;
+    let point = OperatingPoint {
+        omega_rpm: record.mean_top_drive_rad_s() / RAD_S_PER_RPM,
+        wob_kn: wob_n / 1000.0,
+    };
+    let at = simulator.at_point(point)?;
+    let advice = simulator.escape_advice(
+        &at,
+        &advice_speeds_rpm(point.omega_rpm),
+        &advice_weights_kn(point.wob_kn),
+    )?;
+    Ok(advice.text())
+}

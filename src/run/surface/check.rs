@@ -1,0 +1,138 @@
+//! The model choice checked by re-simulation: records re-simulated from each law's posterior,
+//! classified by their nearest neighbours in the pilot's reference table, and the verdict.
+
+use super::*;
+
+/// The model choice checked by re-simulation (see the module documentation).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn check(
+    prior: &Prior,
+    model: &SurfaceModel,
+    distance: &Distance,
+    table: &[(usize, Summaries)],
+    laws: &[LawPosterior],
+    particles: &[Particle],
+    replicates: usize,
+    seed: u64,
+    cycle: &Cycle,
+) -> Result<ModelCheck> {
+    let neighbours = (table.len() / 20).max(10).min(table.len());
+    let classify = |s: &Summaries| -> usize {
+        let mut near: Vec<(f64, usize)> = table.iter().map(|(slot, t)| (distance.between(s, t), *slot)).collect();
+        near.select_nth_unstable_by(neighbours - 1, |a, b| a.0.total_cmp(&b.0));
+        let mut votes = vec![0usize; prior.boxes.len()];
+        for (_, slot) in &near[..neighbours] {
+            votes[*slot] += 1;
+        }
+        // Ties go to the earlier law: deterministic.
+        (0..votes.len())
+            .max_by_key(|&k| (votes[k], std::cmp::Reverse(k)))
+            .expect("a law")
+    };
+    let mut rows = Vec::new();
+    for (slot, posterior) in laws.iter().enumerate() {
+        if posterior.particles == 0 {
+            continue;
+        }
+        let own: Vec<&Particle> = particles.iter().filter(|p| p.law == posterior.law).collect();
+        let drawn = resample(&own, replicates, seed ^ (slot as u64 + 1));
+        let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
+        let classes: Vec<Option<usize>> = runs
+            .into_par_iter()
+            .enumerate()
+            .with_max_len(1)
+            .map(|(k, mut run)| {
+                let key = NoiseKey::replicate(seed, (slot * replicates + k) as u64);
+                model.add_noise(&mut run, key);
+                (!run.diverged).then(|| classify(&model.summaries_of_run(&run)))
+            })
+            .collect();
+        let mut counts = vec![0usize; prior.boxes.len()];
+        for c in classes.iter().flatten() {
+            counts[*c] += 1;
+        }
+        let seen = classes.iter().flatten().count().max(1);
+        rows.push(CheckRow {
+            law: posterior.law,
+            replicates: drawn.len(),
+            classified_as: prior.laws().zip(counts.iter().copied()).collect(),
+            recognised: counts[slot] as f64 / seen as f64,
+        });
+    }
+    let (decided, verdict) = verdict(laws, &rows, cycle);
+    Ok(ModelCheck {
+        reference: table.len(),
+        neighbours,
+        rows,
+        decided,
+        verdict,
+    })
+}
+
+/// The law called and why (see [`CHECK_RECOGNISED`]).
+pub(super) fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<Law>, String) {
+    if !cycle.informs() {
+        return (
+            None,
+            match cycle.period_s {
+                None => "no stick-slip cycle in the surface torque: the record informs the law only through T(Ω) at its speed, not its shape; no law is called".into(),
+                Some(p) => format!(
+                    "the record holds {:.1} cycles of {p:.1} s, fewer than {MIN_CYCLES}: too few to tell the laws apart; no law is called",
+                    cycle.cycles
+                ),
+            },
+        );
+    }
+    let Some(best) = laws.iter().max_by(|a, b| a.probability.total_cmp(&b.probability)) else {
+        return (None, "no law has particles".into());
+    };
+    let recognised = |law: Law| rows.iter().find(|r| r.law == law).map_or(0.0, |r| r.recognised);
+    let taken_for_best = |r: &CheckRow| {
+        let n: usize = r.classified_as.iter().map(|c| c.1).sum();
+        r.classified_as
+            .iter()
+            .find(|c| c.0 == best.law)
+            .map_or(0.0, |c| c.1 as f64 / n.max(1) as f64)
+    };
+    let confused: Vec<Law> = rows
+        .iter()
+        .filter(|r| r.law != best.law)
+        .filter(|r| taken_for_best(r) > CHECK_CONFUSED)
+        .map(|r| r.law)
+        .collect();
+    let own = recognised(best.law);
+    if own < CHECK_RECOGNISED {
+        return (
+            None,
+            format!(
+                "{} leads (P = {:.2}), but only {:.0} % of the records re-simulated from it are recognised as it: the summaries do not tell it apart; undecided",
+                best.law,
+                best.probability,
+                100.0 * own
+            ),
+        );
+    }
+    if !confused.is_empty() {
+        let names: Vec<String> = confused.iter().map(|l| l.to_string()).collect();
+        return (
+            None,
+            format!(
+                "{} leads (P = {:.2}), but records re-simulated from {} are taken for it too: undecided between {} and {}",
+                best.law,
+                best.probability,
+                names.join(", "),
+                best.law,
+                names.join(", ")
+            ),
+        );
+    }
+    (
+        Some(best.law),
+        format!(
+            "{} (P = {:.2}); {:.0} % of the records re-simulated from it are recognised as it, and no other law's are taken for it",
+            best.law,
+            best.probability,
+            100.0 * own
+        ),
+    )
+}
