@@ -206,16 +206,16 @@ fn check_surface(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
     }
     // Finished, or refused with how to finish it.
     dir::read(&cmd.run)?;
-    let (run, record, previous) = SurfaceDir::open(&cmd.run)?;
+    let (mut run, record, sampled) = SurfaceDir::open(&cmd.run)?;
     let more = dir::Continuation {
-        max_populations: Some(previous.len()),
-        max_seconds: None,
         backend: cmd.backend,
         check_replicates: Some(cmd.replicates),
+        ..dir::Continuation::default()
     };
-    let settings = dir::continued(run.job(), &more)?;
+    let settings = run.continued(&more, sampled.populations.len())?;
     let quiet = cmd.quiet;
-    let result = run.run(&record, &settings, previous, &mut |line| {
+    // The sampler does not run: the stored populations, ended as they ended, are checked.
+    let result = run.run(&record, &settings, sampled, true, &mut |line| {
         if !quiet {
             super::print::note(format_args!("note: {line}"));
         }

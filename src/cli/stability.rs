@@ -165,7 +165,11 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
     let chain = strings::chain(structure, &lumped, &fe);
     // At the record, the parameters are for the W_ref its posterior was scaled to, or for
     // the weight on bit it drilled with.
-    let scaled_w_ref_n = cmd.w_ref_kn.map(|kn| kn * 1000.0).or(own_w_ref_n).or(maps.run_w_ref_n);
+    let scaled_w_ref_n = cmd
+        .w_ref_kn
+        .map(|kn| kn * 1000.0)
+        .or(own_w_ref_n.map(|(n, _)| n))
+        .or(maps.run_w_ref_n);
     let at_record = record_bit.map(|seen| (seen, advice::params_w_ref_n(scaled_w_ref_n, &seen, w_ref_n)));
     let advice = at_record.map(|(seen, record_w_ref_n)| {
         let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), cmd.backend);
@@ -213,12 +217,12 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
 }
 
 /// W_ref of the maps, N: the one given, else the posterior's own (said), else the paper's.
-fn map_w_ref_n(w_ref_kn: Option<f64>, own_w_ref_n: Option<f64>) -> f64 {
+fn map_w_ref_n(w_ref_kn: Option<f64>, own_w_ref_n: Option<(f64, &str)>) -> f64 {
     match (w_ref_kn, own_w_ref_n) {
         (Some(kn), _) => kn * 1000.0,
-        (None, Some(n)) => {
+        (None, Some((n, why))) => {
             super::print::note(format_args!(
-                "note: the posterior's torque parameters are for W_ref = {:.3} kN (the directory's own: its evidence scaled each torque by WOB / W_ref, or its surface run inferred them at the record's mean weight on bit): mapped at that reference",
+                "note: the posterior's torque parameters are for W_ref = {:.3} kN ({why}): mapped at that reference",
                 n / 1000.0
             ));
             n
@@ -377,10 +381,11 @@ fn print_simulated(maps: &SimulatedMaps, out: &mut impl Write) -> std::io::Resul
     Ok(())
 }
 
-/// Whose maps: `--run` (a run or an evidence directory), `--posterior`, or `--law` at
-/// `--params` (in `--torque-unit`, made SI here); the W_ref (N) an evidence directory's
-/// torque parameters are for, where its evidence scaled them; and what its record's bit did.
-fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<f64>, Option<BitSeen>)> {
+/// Whose maps: `--run` (a run, an evidence or a surface directory), `--posterior`, or `--law`
+/// at `--params` (in `--torque-unit`, made SI here); the W_ref (N) an evidence or a surface
+/// directory's torque parameters are for, where it has its own, and why; and what its
+/// record's bit did (a surface run's: as the surface implies it).
+fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<(f64, &'static str)>, Option<BitSeen>)> {
     if let Some(path) = &cmd.posterior {
         return Ok((
             MapSource::Posterior(bitrock::documents::read_particles_csv(path)?),
@@ -392,16 +397,17 @@ fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<f64>, Opt
         (Some(dir), _, _) if bitrock::run::dir::is_evidence_dir(dir) => {
             let (particles, w_ref_n) = bitrock::run::evidence::dir::posterior(dir)?;
             let bit = bitrock::run::evidence::dir::record(dir)?.bit;
-            Ok((MapSource::Posterior(particles), w_ref_n, bit))
+            let own = w_ref_n.map(|n| (n, "its evidence scaled each torque by WOB / W_ref"));
+            Ok((MapSource::Posterior(particles), own, bit))
         }
         (Some(dir), _, _) if bitrock::run::surface::dir::is_surface_dir(dir) => {
-            let (particles, w_ref_n) = bitrock::run::surface::dir::posterior(dir)?;
+            let (particles, w_ref_n, why) = bitrock::run::surface::dir::posterior(dir)?;
             let bit = bitrock::run::surface::dir::bit(dir)?;
             super::print::note(format_args!(
                 "note: the bit as the surface implies it (posterior medians): stuck {:.2} of the time at {:.1} rpm",
                 bit.stuck_share, bit.mean_speed_rpm
             ));
-            Ok((MapSource::Posterior(particles), Some(w_ref_n), Some(bit)))
+            Ok((MapSource::Posterior(particles), Some((w_ref_n, why)), Some(bit)))
         }
         (Some(dir), _, _) => Ok((MapSource::Run(dir.clone()), None, None)),
         (None, Some(law), Some(params)) => Ok((

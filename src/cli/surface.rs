@@ -6,7 +6,7 @@ use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::eval::Backend;
-use bitrock::run::surface::dir::{self, SurfaceDir};
+use bitrock::run::surface::dir::{self, Sampled, SurfaceDir};
 use bitrock::run::surface::{
     self, AtTheBit, StringParam, StringPosterior, SurfaceResult, SurfaceSettings, ValueOrBounds,
 };
@@ -251,37 +251,45 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
         settings.smc.schedule.particles, settings.smc.schedule.max_populations
     ));
     let mut note = |line| print::note(format_args!("note: {line}"));
-    let result = match &cmd.out {
+    match &cmd.out {
         Some(out) => {
-            let run = SurfaceDir::start(out, cmd.force, dir::Job::new(laws, given, columns, data)?)?;
-            let result = run.run(&record, &settings, Vec::new(), &mut note)?;
+            // The record and the prior file as the directory keeps them, read once.
+            let job = dir::Job::new(laws, given, columns, data)?;
+            let settings = job.config()?;
+            let (run, record) = SurfaceDir::start(out, cmd.force, job)?;
+            let result = run.run(&record, &settings, Sampled::default(), false, &mut note)?;
             run.finish(&record, &result)?;
-            result
+            report(cmd, &record, &settings, &result)
         }
-        None => surface::infer(&record, &settings, cmd.seed, &mut note)?,
-    };
-    report(cmd, &record, &settings, &result)
+        None => {
+            let result = surface::infer(&record, &settings, cmd.seed, &mut note)?;
+            report(cmd, &record, &settings, &result)
+        }
+    }
 }
 
 /// Continues the surface run in `path` with the stopping rules and backend the flags give.
 fn resume(cmd: &SurfaceCmd, path: &std::path::Path) -> anyhow::Result<ExitCode> {
     cmd.check_outputs()?;
-    let (run, record, previous) = SurfaceDir::open(path)?;
+    let (mut run, record, sampled) = SurfaceDir::open(path)?;
     let more = dir::Continuation {
         max_populations: cmd.max_populations,
         max_seconds: cmd.max_seconds,
         backend: cmd.backend,
         check_replicates: cmd.check_replicates,
     };
-    let settings = dir::continued(run.job(), &more)?;
+    let stored = sampled.populations.len();
+    let settings = run.continued(&more, stored)?;
+    let from = match stored {
+        0 => "from its first population (none stored)".to_string(),
+        n => format!("after population {} ({n} stored)", n - 1),
+    };
     print::note(format_args!(
-        "continuing {} after population {} ({} stored), up to {} populations",
+        "continuing {} {from}, up to {} populations",
         path.display(),
-        previous.len() as i64 - 1,
-        previous.len(),
         settings.smc.schedule.max_populations
     ));
-    let result = run.run(&record, &settings, previous, &mut |line| {
+    let result = run.run(&record, &settings, sampled, false, &mut |line| {
         print::note(format_args!("note: {line}"))
     })?;
     run.finish(&record, &result)?;

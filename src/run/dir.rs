@@ -439,6 +439,8 @@ fn kept_kind(dir: &Path) -> Option<&'static str> {
         Some("evidence")
     } else if dir.join(WATCH_STORE_FILE).is_file() {
         Some("watch")
+    } else if crate::run::surface::dir::is_surface_dir(dir) {
+        Some("surface")
     } else {
         None
     }

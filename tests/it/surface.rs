@@ -588,6 +588,12 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     let (code, _, err) = outcome(bin().args(["surface", "--resume", dir.to_str().unwrap(), "--seed", "3"]));
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--seed"), "{err}");
+    let (code, _, err) = outcome(bin().args(["surface", "--resume", dir.to_str().unwrap(), "--max-populations", "2"]));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--max-populations") && err.contains("holds 3 populations"),
+        "{err}"
+    );
 
     // Its posterior mapped on its own string, at the record's mean weight (the laws inferred
     // at r = 1 hold there), with the advice at its operating point from the bit it implies.
@@ -652,4 +658,50 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     let (code, _, err) = outcome(bin().args(["export", dir.to_str().unwrap()]));
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("holds a surface run"), "{err}");
+}
+
+#[test]
+fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
+    use bitrock::abc::Population;
+    use bitrock::run::surface::{Sampling, infer_continuing};
+    let (_dir, path, _) = record(Law::M2, 60.0, 120.0, 1.0, 0.2, 7);
+    let mut settings = small(vec![Law::M1, Law::M2]);
+    settings.smc.schedule.particles = 150;
+    settings.smc.schedule.max_populations = 3;
+    settings.pilot = 100;
+    let record = read(&path);
+    let text = |r: &SurfaceResult| {
+        let mut v = serde_json::to_value(r).unwrap();
+        v.as_object_mut().unwrap().remove("seconds");
+        v.to_string()
+    };
+    // Each population handed on as it completes, with all before it: what a directory stores.
+    let mut kept: Vec<Vec<Population>> = Vec::new();
+    let whole = {
+        let mut keep = |populations: &[Population]| {
+            kept.push(populations.to_vec());
+            Ok(())
+        };
+        let sampling = Sampling {
+            previous: Vec::new(),
+            stopped: None,
+            keep: &mut keep,
+        };
+        infer_continuing(&record, &settings, 11, sampling, &mut |_| {}).unwrap()
+    };
+    let run = whole.run.as_ref().unwrap();
+    assert_eq!(run.populations.len(), 3);
+    assert_eq!(kept.len(), 3);
+    for (k, populations) in kept.iter().enumerate() {
+        assert_eq!(populations.as_slice(), &run.populations[..=k]);
+    }
+    // What a run killed after its first population leaves, continued: the same result.
+    let mut ignore = |_: &[Population]| Ok(());
+    let sampling = Sampling {
+        previous: kept[0].clone(),
+        stopped: None,
+        keep: &mut ignore,
+    };
+    let continued = infer_continuing(&record, &settings, 11, sampling, &mut |_| {}).unwrap();
+    assert_eq!(text(&continued), text(&whole));
 }

@@ -3,7 +3,7 @@
 use crate::errors::*;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
-use bitrock::run::surface::dir::{self, SurfaceDir};
+use bitrock::run::surface::dir::{self, Sampled, SurfaceDir};
 use bitrock::run::surface::{Settings as SurfaceRunSettings, SurfaceResult, infer};
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use pyo3::prelude::*;
@@ -68,16 +68,18 @@ pub(crate) fn surface(
         }
         let record = SurfaceRecord::read(&path, &columns)?;
         let mut note = |line| notes.push(line);
-        let result = match &out {
+        match &out {
             Some(out) => {
-                let run = SurfaceDir::start(out, force, dir::Job::new(laws, settings, columns, &path)?)?;
-                let result = run.run(&record, &s, Vec::new(), &mut note)?;
+                // The record and the prior file as the directory keeps them, read once.
+                let job = dir::Job::new(laws, settings, columns, &path)?;
+                let s = job.config()?;
+                let (run, record) = SurfaceDir::start(out, force, job)?;
+                let result = run.run(&record, &s, Sampled::default(), false, &mut note)?;
                 run.finish(&record, &result)?;
-                result
+                Ok(document(&record, &result))
             }
-            None => infer(&record, &s, seed, &mut note)?,
-        };
-        Ok::<_, bitrock::Error>(document(&record, &result))
+            None => Ok::<_, bitrock::Error>(document(&record, &infer(&record, &s, seed, &mut note)?)),
+        }
     });
     said(py, &note, &notes)?;
     check(py, text)
@@ -105,9 +107,9 @@ pub(crate) fn resume_surface(
     };
     let mut notes = Vec::new();
     let text = py.detach(|| {
-        let (run, record, previous) = SurfaceDir::open(&dir)?;
-        let settings = dir::continued(run.job(), &more)?;
-        let result = run.run(&record, &settings, previous, &mut |line| notes.push(line))?;
+        let (mut run, record, sampled) = SurfaceDir::open(&dir)?;
+        let settings = run.continued(&more, sampled.populations.len())?;
+        let result = run.run(&record, &settings, sampled, false, &mut |line| notes.push(line))?;
         run.finish(&record, &result)?;
         Ok::<_, bitrock::Error>(document(&record, &result))
     });

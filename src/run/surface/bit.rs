@@ -70,7 +70,6 @@ pub(super) fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: us
 /// Posterior samples per law for the simulated advice.
 pub(super) const ADVICE_SAMPLES: usize = 20;
 
-/// The simulated escape advice from the record's mean operating point.
 /// The record's mean weight on bit, N; without a WOB channel, `w_ref_n` or the paper's. Without
 /// a reference weight the laws were inferred at r = 1: their parameters hold at this weight,
 /// which is then their reference.
@@ -81,6 +80,7 @@ pub fn mean_wob_n(record: &SurfaceRecord, w_ref_n: Option<f64>) -> f64 {
     )
 }
 
+/// The simulated escape advice from the record's mean operating point.
 pub(super) fn escape_advice(
     record: &SurfaceRecord,
     settings: &SurfaceSettings,

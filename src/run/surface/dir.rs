@@ -11,7 +11,7 @@
 //! computed again and the directory written anew, whole ([`files::replace_dir`]).
 
 use super::{Sampling, Settings, SurfaceResult, SurfaceSettings, infer_continuing};
-use crate::abc::{Particle, Population};
+use crate::abc::{Particle, Population, StopReason};
 use crate::data::BitSeen;
 use crate::data::surface::{SurfaceOptions, SurfaceRecord};
 use crate::error::{Error, Result};
@@ -120,6 +120,18 @@ pub fn is_surface_dir(dir: &Path) -> bool {
     dir.join(SURFACE_JOB_JSON).is_file()
 }
 
+/// What a surface directory keeps of its sampler ([`POPULATIONS_BIN`], postcard bytes).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Sampled {
+    /// Every completed population, in order.
+    pub populations: Vec<Population>,
+    /// Why the sampler ended, once the run was finished; `None` while it runs (or was killed).
+    pub stop: Option<StopReason>,
+    /// Where the populations' strings were simulated (`CPU`, `GPU <adapter>`): the pilot's
+    /// distance is computed there too, so a run continued elsewhere gives other bits.
+    pub backend: String,
+}
+
 /// A surface directory being written: locked (one writer at a time), its record and job in
 /// place, its populations stored as they complete.
 pub struct SurfaceDir {
@@ -133,8 +145,9 @@ pub struct SurfaceDir {
 impl SurfaceDir {
     /// Starts `job`'s run in `dir` (refused as [`check_out`] refuses, before the directory
     /// exists and again under its lock): what an earlier run there wrote is removed, the
-    /// record's bytes and the job written.
-    pub fn start(dir: &Path, force: bool, job: Job) -> Result<Self> {
+    /// record's bytes and the job written. Returns the record as read from the bytes kept (a
+    /// file still being written is read once).
+    pub fn start(dir: &Path, force: bool, job: Job) -> Result<(Self, SurfaceRecord)> {
         let (lock, ()) = crate::run::dir::claim(dir, "out", || check_out(dir, force))?;
         let record_bytes = std::fs::read(&job.source).map_err(|source| Error::Read {
             path: job.source.clone(),
@@ -164,12 +177,15 @@ impl SurfaceDir {
         for (name, bytes) in started.kept() {
             files::write_own(&dir.join(name), "out", |out| out.write_all(&bytes))?;
         }
-        Ok(started)
+        let record = SurfaceRecord::read(&dir.join(RECORD_CSV), &started.job.columns)?;
+        Ok((started, record))
     }
 
     /// The surface run in `dir`, locked, to continue: its job (its law files' laws registered
-    /// in this process), its record read again from its bytes, and its stored populations.
-    pub fn open(dir: &Path) -> Result<(Self, SurfaceRecord, Vec<Population>)> {
+    /// in this process), its record read again from its bytes, and what its sampler stored. A
+    /// directory holding anything bitrock did not write is refused before any work (its
+    /// results could not be written back).
+    pub fn open(dir: &Path) -> Result<(Self, SurfaceRecord, Sampled)> {
         if !is_surface_dir(dir) {
             return Err(Error::setting(
                 "resume",
@@ -181,6 +197,9 @@ impl SurfaceDir {
         }
         let lock = files::DirLock::acquire(dir)?;
         files::remove_stale(dir);
+        files::refuse_foreign(dir, "resume", &|rel, is_dir| {
+            owns_unchanged(Owned::Surface, dir, rel, is_dir)
+        })?;
         let job = job(dir)?;
         let record_path = dir.join(RECORD_CSV);
         let record = SurfaceRecord::read(&record_path, &job.columns)?;
@@ -188,16 +207,16 @@ impl SurfaceDir {
             path: record_path.clone(),
             source,
         })?;
-        let populations_path = dir.join(POPULATIONS_BIN);
-        let populations = match std::fs::read(&populations_path) {
+        let sampled_path = dir.join(POPULATIONS_BIN);
+        let sampled = match std::fs::read(&sampled_path) {
             Ok(bytes) => postcard::from_bytes(&bytes).map_err(|e| Error::Data {
-                path: populations_path.clone(),
+                path: sampled_path.clone(),
                 message: format!("not the populations of a surface run bitrock wrote: {e}"),
             })?,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Sampled::default(),
             Err(source) => {
                 return Err(Error::Read {
-                    path: populations_path,
+                    path: sampled_path,
                     source,
                 });
             }
@@ -210,7 +229,7 @@ impl SurfaceDir {
                 job,
             },
             record,
-            populations,
+            sampled,
         ))
     }
 
@@ -219,29 +238,74 @@ impl SurfaceDir {
         &self.job
     }
 
+    /// The run's settings continued with `more` after the `stored` populations, kept in its
+    /// job when the run is written: the next continuation starts from them. Fewer populations
+    /// than those stored are refused.
+    pub fn continued(&mut self, more: &Continuation, stored: usize) -> Result<SurfaceSettings> {
+        if let Some(n) = more.max_populations {
+            if n < stored {
+                return Err(Error::setting(
+                    "max_populations",
+                    format!("the run holds {stored} populations already: give {stored} or more"),
+                ));
+            }
+            self.job.settings.max_populations = n;
+        }
+        if more.max_seconds.is_some() {
+            self.job.settings.max_seconds = more.max_seconds;
+        }
+        if let Some(backend) = more.backend {
+            self.job.settings.backend = backend;
+        }
+        if let Some(k) = more.check_replicates {
+            self.job.settings.check_replicates = k;
+        }
+        self.job.config()
+    }
+
     /// Infers the laws from `record` with `settings` (the job's, continued), the sampler
-    /// continuing after `previous` and every completed population stored.
+    /// continuing after `sampled`'s populations (or, with `again`, not running: the check and
+    /// the bit computed again from them), every completed population stored. A run continued
+    /// on another backend than its populations' is said: its populations are not bit for bit
+    /// those of an uninterrupted run there.
     pub fn run(
         &self,
         record: &SurfaceRecord,
         settings: &SurfaceSettings,
-        previous: Vec<Population>,
+        sampled: Sampled,
+        again: bool,
         note: &mut dyn FnMut(String),
     ) -> Result<SurfaceResult> {
+        // Where the strings go, decided as `infer` decides it (said there).
+        let (_, ran) = crate::eval::strings::resolve(settings.backend, &mut |_| {})?;
+        let backend = ran.to_string();
+        if !sampled.populations.is_empty() && sampled.backend != backend {
+            note(format!(
+                "the stored populations' strings were simulated on the {}, these on the {backend}: the distance is measured again there, so the run is not bit for bit one uninterrupted run",
+                sampled.backend
+            ));
+        }
         let path = self.dir.join(POPULATIONS_BIN);
         let mut keep = |populations: &[Population]| {
-            let bytes = postcard::to_stdvec(populations).expect("populations serialise");
+            let kept = SampledRef {
+                populations,
+                stop: None,
+                backend: &backend,
+            };
+            let bytes = postcard::to_stdvec(&kept).expect("populations serialise");
             files::write_own(&path, "out", |out| out.write_all(&bytes))
         };
         let sampling = Sampling {
-            previous,
+            stopped: if again { sampled.stop } else { None },
+            previous: sampled.populations,
             keep: &mut keep,
         };
         infer_continuing(record, settings, self.job.settings.seed, sampling, note)
     }
 
     /// Writes the finished run's document, posterior particles and predicted bit speed beside
-    /// its record, job and populations, the directory replaced whole.
+    /// its record, job (with the settings it was continued with) and populations, the
+    /// directory replaced whole.
     pub fn finish(self, record: &SurfaceRecord, result: &SurfaceResult) -> Result<()> {
         let document = serde_json::to_value(result).expect("a surface result serialises");
         let mut contents = self.kept();
@@ -253,8 +317,15 @@ impl SurfaceDir {
         result.bit_csv(record, &mut bit).expect("a CSV is written to memory");
         contents.push((PathBuf::from(SURFACE_BIT_CSV), bit));
         if let Some(run) = &result.run {
-            let populations = postcard::to_stdvec(&run.populations).expect("populations serialise");
-            contents.push((PathBuf::from(POPULATIONS_BIN), populations));
+            let sampled = SampledRef {
+                populations: &run.populations,
+                stop: Some(run.stop),
+                backend: &result.backend,
+            };
+            contents.push((
+                PathBuf::from(POPULATIONS_BIN),
+                postcard::to_stdvec(&sampled).expect("populations serialise"),
+            ));
         }
         files::replace_dir(
             &self.dir,
@@ -273,23 +344,12 @@ impl SurfaceDir {
     }
 }
 
-/// Applies `more` to the stored job's settings: the run continued with them gives the
-/// populations an uninterrupted run with them gives.
-pub fn continued(job: &Job, more: &Continuation) -> Result<SurfaceSettings> {
-    let mut job = job.clone();
-    if let Some(n) = more.max_populations {
-        job.settings.max_populations = n;
-    }
-    if more.max_seconds.is_some() {
-        job.settings.max_seconds = more.max_seconds;
-    }
-    if let Some(backend) = more.backend {
-        job.settings.backend = backend;
-    }
-    if let Some(k) = more.check_replicates {
-        job.settings.check_replicates = k;
-    }
-    job.config()
+/// [`Sampled`] borrowed, for writing without a copy.
+#[derive(Serialize)]
+struct SampledRef<'a> {
+    populations: &'a [Population],
+    stop: Option<StopReason>,
+    backend: &'a str,
 }
 
 /// The job of the surface directory `dir`, its law files' laws registered in this process.
@@ -324,16 +384,26 @@ pub fn read(dir: &Path) -> Result<serde_json::Value> {
 /// The most a surface run's document may hold, bytes (it holds the bit's band per sample).
 const MAX_DOCUMENT_BYTES: u64 = 1 << 30;
 
-/// The final population's particles of the finished surface run in `dir` (SI), and the
-/// weight on bit its torque parameters are for (N): its W_ref, or without one the record's
-/// mean weight on bit (the laws inferred at r = 1 hold there).
-pub fn posterior(dir: &Path) -> Result<(Vec<Particle>, f64)> {
+/// The final population's particles of the finished surface run in `dir` (SI), the weight on
+/// bit its torque parameters are for (N): its W_ref, or without one the record's mean weight on
+/// bit (the laws inferred at r = 1 hold there), and why, in words.
+pub fn posterior(dir: &Path) -> Result<(Vec<Particle>, f64, &'static str)> {
     read(dir)?;
     let job = job(dir)?;
     let record = SurfaceRecord::read(&dir.join(RECORD_CSV), &job.columns)?;
     let particles = crate::documents::read_particles_csv(&dir.join(POSTERIOR_CSV))?;
-    let w_ref_n = job.settings.w_ref_kn.map(|kn| kn * 1000.0);
-    Ok((particles, w_ref_n.unwrap_or_else(|| super::mean_wob_n(&record, None))))
+    let (w_ref_n, why) = match (job.settings.w_ref_kn, &record.wob_n) {
+        (Some(kn), _) => (kn * 1000.0, "the surface run's own"),
+        (None, Some(_)) => (
+            super::mean_wob_n(&record, None),
+            "the surface run inferred the laws at its record's mean weight on bit",
+        ),
+        (None, None) => (
+            super::mean_wob_n(&record, None),
+            "the surface run's record holds no weight on bit: the laws hold at the paper's W_ref",
+        ),
+    };
+    Ok((particles, w_ref_n, why))
 }
 
 /// The bit of the finished surface run in `dir` as the surface implies it: the posterior

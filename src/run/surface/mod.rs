@@ -39,7 +39,7 @@ pub use settings::*;
 
 use crate::abc::shard::Local;
 use crate::abc::smc::{self, SmcConfig};
-use crate::abc::{Observer, Particle, Population, Run};
+use crate::abc::{Observer, Particle, Population, Run, StopReason};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
@@ -439,6 +439,7 @@ pub fn infer(
     let mut keep = |_: &[Population]| Ok(());
     let sampling = Sampling {
         previous: Vec::new(),
+        stopped: None,
         keep: &mut keep,
     };
     infer_continuing(record, settings, seed, sampling, note)
@@ -450,6 +451,9 @@ pub struct Sampling<'a> {
     /// The populations completed before (empty: the sampler starts from the prior). The run
     /// continued after them gives exactly the populations an uninterrupted one gives.
     pub previous: Vec<Population>,
+    /// Where the run has ended already (`previous` not empty): the sampler does not run, and
+    /// the stored populations are the run's, ended for this reason (a check made again).
+    pub stopped: Option<StopReason>,
     /// Hears every population as it completes, with all before it.
     pub keep: &'a mut dyn FnMut(&[Population]) -> Result<()>,
 }
@@ -538,12 +542,22 @@ pub fn infer_continuing(
     let noise_floor = scout.noise_floor(&distance, noise_sd_nm, period_s);
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
-    let mut keeping = Keeping {
-        populations: sampling.previous.clone(),
-        keep: sampling.keep,
-        note,
+    let run = match sampling.stopped {
+        Some(stop) if !sampling.previous.is_empty() => Run {
+            populations: sampling.previous,
+            stop,
+            evaluations: 0,
+            seconds: 0.0,
+        },
+        _ => {
+            let mut keeping = Keeping {
+                populations: sampling.previous.clone(),
+                keep: sampling.keep,
+                note,
+            };
+            smc::run_on(&Local(&evaluator), &settings.smc, sampling.previous, &mut keeping)?
+        }
     };
-    let run = smc::run_on(&Local(&evaluator), &settings.smc, sampling.previous, &mut keeping)?;
     let sampler_strings: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();
     simulations += sampler_strings;
     let last = run.populations.last().expect("a run has a population");
