@@ -217,7 +217,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
 }
 
 /// W_ref of the maps, N: the one given, else the posterior's own (said), else the paper's.
-fn map_w_ref_n(w_ref_kn: Option<f64>, own_w_ref_n: Option<(f64, &str)>) -> f64 {
+fn map_w_ref_n(w_ref_kn: Option<f64>, own_w_ref_n: Option<OwnWRef>) -> f64 {
     match (w_ref_kn, own_w_ref_n) {
         (Some(kn), _) => kn * 1000.0,
         (None, Some((n, why))) => {
@@ -381,11 +381,14 @@ fn print_simulated(maps: &SimulatedMaps, out: &mut impl Write) -> std::io::Resul
     Ok(())
 }
 
+/// A directory's own W_ref (N) and why it holds, in words.
+type OwnWRef = (f64, &'static str);
+
 /// Whose maps: `--run` (a run, an evidence or a surface directory), `--posterior`, or `--law`
 /// at `--params` (in `--torque-unit`, made SI here); the W_ref (N) an evidence or a surface
 /// directory's torque parameters are for, where it has its own, and why; and what its
 /// record's bit did (a surface run's: as the surface implies it).
-fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<(f64, &'static str)>, Option<BitSeen>)> {
+fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<OwnWRef>, Option<BitSeen>)> {
     if let Some(path) = &cmd.posterior {
         return Ok((
             MapSource::Posterior(bitrock::documents::read_particles_csv(path)?),
