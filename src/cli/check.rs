@@ -192,11 +192,7 @@ fn table(out: &mut impl Write, check: &SelectionCheck) -> std::io::Result<()> {
 /// law: its populations as stored (none added), the check, the bit and the directory written
 /// anew.
 fn check_surface(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
-    use bitrock::run::surface::dir::{self, SurfaceDir};
     set_threads(cmd.threads)?;
-    if cmd.replicates == 0 {
-        return Err(bitrock::Error::setting("replicates", "must be at least 1").into());
-    }
     if cmd.batch.is_some() {
         return Err(bitrock::Error::setting(
             "batch",
@@ -204,23 +200,12 @@ fn check_surface(cmd: &CheckCmd) -> anyhow::Result<ExitCode> {
         )
         .into());
     }
-    // Finished, or refused with how to finish it.
-    dir::read(&cmd.run)?;
-    let (mut run, record, sampled) = SurfaceDir::open(&cmd.run)?;
-    let more = dir::Continuation {
-        backend: cmd.backend,
-        check_replicates: Some(cmd.replicates),
-        ..dir::Continuation::default()
-    };
-    let settings = run.continued(&more, sampled.populations.len())?;
     let quiet = cmd.quiet;
-    // The sampler does not run: the stored populations, ended as they ended, are checked.
-    let result = run.run(&record, &settings, sampled, true, &mut |line| {
+    let result = bitrock::run::surface::dir::check_again(&cmd.run, cmd.replicates, cmd.backend, &mut |line| {
         if !quiet {
             super::print::note(format_args!("note: {line}"));
         }
     })?;
-    run.finish(&record, &result)?;
     let mut out = std::io::stdout().lock();
     if cmd.json {
         serde_json::to_writer_pretty(&mut out, &result.check)?;

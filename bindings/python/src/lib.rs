@@ -46,7 +46,7 @@ mod _bitrock {
     #[pymodule_export]
     use crate::strings::simulate_strings;
     #[pymodule_export]
-    use crate::surface::{read_surface, resume_surface, surface};
+    use crate::surface::{check_surface, is_surface_dir, read_surface, resume_surface, surface};
     #[pymodule_export]
     use crate::watch::{read_watch, watch};
     use pyo3::prelude::*;

@@ -130,6 +130,37 @@ pub(crate) fn read_surface(py: Python<'_>, dir: PathBuf) -> PyResult<String> {
     check(py, text)
 }
 
+/// `bitrock check-selection` on the surface directory `dir`: its check made again with
+/// `replicates` records per law (default: the command's), on `backend` (default: the run's),
+/// the directory written anew;
+/// the whole result as JSON text.
+#[pyfunction]
+#[pyo3(signature = (dir, replicates, backend, note))]
+pub(crate) fn check_surface(
+    py: Python<'_>,
+    dir: PathBuf,
+    replicates: Option<usize>,
+    backend: Option<String>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let backend = named(py, "backend", backend)?;
+    let replicates = replicates.unwrap_or(bitrock::run::selection::CheckOptions::default().replicates);
+    let mut notes = Vec::new();
+    let text = py.detach(|| {
+        let result = dir::check_again(&dir, replicates, backend, &mut |line| notes.push(line))?;
+        let record = SurfaceRecord::read(&dir.join(bitrock::run::dir::RECORD_CSV), &dir::job(&dir)?.columns)?;
+        Ok::<_, bitrock::Error>(document(&record, &result))
+    });
+    said(py, &note, &notes)?;
+    check(py, text)
+}
+
+/// True when `dir` holds a surface run (`bitrock surface --out`).
+#[pyfunction]
+pub(crate) fn is_surface_dir(dir: PathBuf) -> bool {
+    dir::is_surface_dir(&dir)
+}
+
 /// A result as Python reads it: the document with the record's clock.
 fn document(record: &SurfaceRecord, result: &SurfaceResult) -> String {
     let mut document = serde_json::to_value(result).expect("a result serialises");

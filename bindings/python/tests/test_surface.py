@@ -222,6 +222,19 @@ def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path
     rechecked = bitrock.resume_surface(out, max_populations=3, check_replicates=6)
     assert [row["replicates"] for row in rechecked["check"]["rows"]] == [6, 6]
     assert rechecked["epsilons"] == whole["epsilons"]
+    # check_selection of the directory: the check made again, as a matrix of shares.
+    matrix = bitrock.check_selection(out, replicates=5)
+    document = bitrock.read_surface(out)
+    assert matrix.attrs["document"] == document["check"]
+    assert list(matrix.index) == ["m1", "m2"] and list(matrix.columns) == ["m1", "m2"]
+    assert matrix.sum(axis=1).tolist() == pytest.approx([1.0, 1.0])
+    for row in document["check"]["rows"]:
+        assert row["replicates"] == 5
+        assert matrix.loc[row["law"], row["law"]] == pytest.approx(row["recognised"])
+    assert document["epsilons"] == whole["epsilons"]
+    with pytest.raises(bitrock.InputError) as caught:
+        bitrock.check_selection(out, batch=2)
+    assert caught.value.argument == "batch"
     with pytest.raises(bitrock.InputError, match="resume_surface") as caught:
         bitrock.surface(path, max_populations=2, out=out, **small)
     assert caught.value.argument == "out"

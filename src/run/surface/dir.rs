@@ -352,6 +352,32 @@ struct SampledRef<'a> {
     backend: &'a str,
 }
 
+/// The finished surface run in `dir` checked again by re-simulation with `replicates` records
+/// per law (on `backend`, default the run's): the sampler does not run (the stored
+/// populations, ended as they ended, are the run's), the check and the bit are computed again
+/// and the directory written anew. A run under way is refused with how to finish it.
+pub fn check_again(
+    dir: &Path,
+    replicates: usize,
+    backend: Option<Backend>,
+    note: &mut dyn FnMut(String),
+) -> Result<SurfaceResult> {
+    if replicates == 0 {
+        return Err(Error::setting("replicates", "must be at least 1"));
+    }
+    read(dir)?;
+    let (mut run, record, sampled) = SurfaceDir::open(dir)?;
+    let more = Continuation {
+        backend,
+        check_replicates: Some(replicates),
+        ..Continuation::default()
+    };
+    let settings = run.continued(&more, sampled.populations.len())?;
+    let result = run.run(&record, &settings, sampled, true, note)?;
+    run.finish(&record, &result)?;
+    Ok(result)
+}
+
 /// The job of the surface directory `dir`, its law files' laws registered in this process.
 pub fn job(dir: &Path) -> Result<Job> {
     let path = dir.join(SURFACE_JOB_JSON);

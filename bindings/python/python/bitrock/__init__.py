@@ -641,7 +641,11 @@ def check_selection(
     evidence directory (``evidence(..., out=DIR)``): its evidence is computed again and checked
     as ``evidence(check=K)`` checks it, the check written into its document (``batch`` does not
     apply); ``executor`` (as for :func:`evidence`) then scores its candidates on a pool of
-    workers, the same check as here.
+    workers, the same check as here. ``source`` may also be a surface directory
+    (``surface(..., out=DIR)``): its check by re-simulation is made again with ``replicates``
+    records per law from its stored populations and written into its document; the matrix then
+    holds the share of each law's re-simulated records classified as each law, ``attrs`` its
+    ``verdict``, ``decided`` and ``document`` (``batch`` and ``executor`` do not apply).
 
     Returns the confusion matrix: one row per generating law, one column per law, the mean
     posterior probability over its replicates. ``attrs`` holds ``first_share`` (the share of
@@ -656,6 +660,8 @@ def check_selection(
         source = source.path
     elif not isinstance(source, (str, os.PathLike)):
         raise InputError(f"source: give a Result, a run directory or an evidence directory, got {type(source).__name__}", "source")
+    if in_memory is None and _bitrock.is_surface_dir(os.fspath(source)):
+        return _check_surface(os.fspath(source), replicates, batch, backend, executor)
     dispatcher = None if executor is None else Dispatcher(executor)
     callback, close = _replicate_progress(progress)
     try:
@@ -846,6 +852,24 @@ def read_surface(directory: str | os.PathLike[str]) -> dict:
     return json.loads(_bitrock.read_surface(os.fspath(directory)))
 
 
+def _check_surface(directory: str, replicates: int | None, batch: int | None, backend: str | None, executor: Any) -> pd.DataFrame:
+    """:func:`check_selection` of a surface directory."""
+    import json
+
+    for name, value in (("batch", batch), ("executor", executor)):
+        if value is not None:
+            raise InputError(f"{name}: applies to an ABC run's or an evidence's check, not a surface run's", name)
+    check = json.loads(_bitrock.check_surface(directory, replicates, backend, _note))["check"]
+    laws = [law for law, _ in check["rows"][0]["classified_as"]] if check["rows"] else []
+    matrix = pd.DataFrame(
+        [[count / row["replicates"] for _, count in row["classified_as"]] for row in check["rows"]],
+        index=pd.Index([row["law"] for row in check["rows"]], name="generating"),
+        columns=pd.Index(laws, name="law"),
+    )
+    matrix.attrs = {"verdict": check["verdict"], "decided": check["decided"], "document": check}
+    return matrix
+
+
 def resume_surface(
     directory: str | os.PathLike[str],
     *,
@@ -860,8 +884,8 @@ def resume_surface(
     included), ``max_seconds``, ``backend`` and ``check_replicates`` replace the run's own. The
     populations are those an uninterrupted run gives; the check and the bit are computed again
     and the directory written anew. Returns the result as :func:`surface` does. As ``bitrock
-    surface --resume``; ``max_populations`` at the stored count with a larger
-    ``check_replicates`` checks the run again, as ``bitrock check-selection DIR`` does."""
+    surface --resume``; :func:`check_selection` of the directory checks it again without
+    sampling."""
     import json
 
     text = _bitrock.resume_surface(

@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "coupled", "coupled_calibrate", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_surface", "read_watch", "resume", "resume_evidence", "resume_surface", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "check_surface", "coupled", "coupled_calibrate", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "is_surface_dir", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_surface", "read_watch", "resume", "resume_evidence", "resume_surface", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class ComputedEvidence:
@@ -158,6 +158,14 @@ def check_selection(run: str | PathLike[str] | None, in_memory: Run | None, opti
     candidates are scored by the dispatcher's workers, `parallelism` tasks a batch.
     """
 
+def check_surface(dir: str | PathLike[str], replicates: SupportsIndex | None, backend: str | None, note: Any | None) -> str:
+    """
+    `bitrock check-selection` on the surface directory `dir`: its check made again with
+    `replicates` records per law (default: the command's), on `backend` (default: the run's),
+    the directory written anew;
+    the whole result as JSON text.
+    """
+
 def coupled(options: dict, record: bool, map: bool, note: Any | None) -> str:
     """
     `bitrock coupled` with the settings in `options`: one string (its summary and steady
@@ -201,6 +209,11 @@ def is_evidence_dir(dir: str | PathLike[str]) -> bool:
 def is_information(note: str) -> bool:
     """
     True for a note that only informs (which GPU scores): logged, not warned.
+    """
+
+def is_surface_dir(dir: str | PathLike[str]) -> bool:
+    """
+    True when `dir` holds a surface run (`bitrock surface --out`).
     """
 
 def law_colours(laws: SupportsGetItem[int, str]) -> list[str]:
