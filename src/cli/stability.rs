@@ -404,8 +404,9 @@ fn map_source(cmd: &StabilityCmd) -> anyhow::Result<(MapSource, Option<OwnWRef>,
             Ok((MapSource::Posterior(particles), own, bit))
         }
         (Some(dir), _, _) if bitrock::run::surface::dir::is_surface_dir(dir) => {
-            let (particles, w_ref_n, why) = bitrock::run::surface::dir::posterior(dir)?;
-            let bit = bitrock::run::surface::dir::bit(dir)?;
+            let finished = bitrock::run::surface::dir::Finished::read(dir)?;
+            let (particles, w_ref_n, why) = finished.posterior()?;
+            let bit = finished.bit()?;
             super::print::note(format_args!(
                 "note: the bit as the surface implies it (posterior medians): stuck {:.2} of the time at {:.1} rpm",
                 bit.stuck_share, bit.mean_speed_rpm

@@ -151,9 +151,9 @@ pub struct SurfaceCmd {
     #[arg(long)]
     pub force: bool,
     /// Continue the surface run in DIR (killed or finished) after its last stored population:
-    /// more --max-populations, a new --max-seconds, --backend or --check-replicates. The
-    /// populations are exactly those an uninterrupted run gives; the check and the bit are
-    /// computed again and DIR written anew.
+    /// more --max-populations, a new --max-seconds, --backend or --check-replicates (kept for
+    /// the next continuation). On the same backend the populations are exactly those an
+    /// uninterrupted run gives; the check and the bit are computed again and DIR written anew.
     #[arg(long, value_name = "DIR", conflicts_with_all = [
         "data", "out", "time_column", "top_drive_column", "surface_torque_column", "wob_column",
         "top_drive_unit", "torque_unit", "wob_unit", "downhole_min_column", "downhole_max_column",
@@ -236,15 +236,14 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
         return resume(cmd, dir);
     }
     let data = cmd.data.as_ref().expect("clap asks for the record without --resume");
-    let laws = cmd.laws()?;
-    let given = cmd.given();
-    let settings = given.config(laws.clone())?;
+    // The prior file read once, into the job a surface directory keeps.
+    let job = dir::Job::new(cmd.laws()?, cmd.given(), cmd.columns(), data)?;
+    let settings = job.config()?;
     cmd.check_outputs()?;
     if let Some(out) = &cmd.out {
         dir::check_out(out, cmd.force)?;
     }
-    let columns = cmd.columns();
-    let record = SurfaceRecord::read(data, &columns)?;
+    let record = SurfaceRecord::read(data, &job.columns)?;
     print::note(format_args!("{}: {}", data.display(), record.roles_text()));
     print::note(format_args!(
         "simulating the string for every candidate: {} particles, up to {} populations",
@@ -253,9 +252,7 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
     let mut note = |line| print::note(format_args!("note: {line}"));
     match &cmd.out {
         Some(out) => {
-            // The record and the prior file as the directory keeps them, read once.
-            let job = dir::Job::new(laws, given, columns, data)?;
-            let settings = job.config()?;
+            // The record as the directory keeps it, read from its bytes.
             let (run, record) = SurfaceDir::start(out, cmd.force, job)?;
             let result = run.run(&record, &settings, Sampled::default(), false, &mut note)?;
             run.finish(&record, &result)?;

@@ -5,10 +5,9 @@
 
 use super::figures::{SurfaceFigure, render_surface};
 use super::{ReportSummary, figures_markdown, replace_report};
-use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::laws::Law;
-use crate::run::dir::{RECORD_CSV, SURFACE_JSON};
+use crate::run::dir::SURFACE_JSON;
 use crate::run::surface::dir;
 use crate::units::RAD_S_PER_RPM;
 use serde_json::Value;
@@ -20,9 +19,9 @@ use std::time::Instant;
 /// every report is).
 pub fn write_surface_report(out: &Path, surface_dir: &Path) -> Result<ReportSummary> {
     let start = Instant::now();
-    let document = dir::read(surface_dir)?;
-    let job = dir::job(surface_dir)?;
-    let record = SurfaceRecord::read(&surface_dir.join(RECORD_CSV), &job.columns)?;
+    let dir::Finished {
+        job, document, record, ..
+    } = dir::Finished::read(surface_dir)?;
     let unit = record.torque_unit;
     let per_unit = unit.newton_metres();
     let number = |v: &Value, name: &str| {

@@ -412,12 +412,13 @@ impl StringGiven {
     }
 }
 
-/// The drill string kept with the run or the evidence in `dir`, where it was made with one.
+/// The drill string kept with the run or the evidence in `dir`, where it was made with one; a
+/// surface run's, as it simulated its candidates on it.
 pub fn stored_string(dir: &std::path::Path) -> Result<Option<DrillStringSpec>> {
     if run::surface::dir::is_surface_dir(dir) {
         return Ok(Some(DrillStringSpec {
             structure: Structure::Lumped,
-            lumped: run::surface::dir::string(dir)?,
+            lumped: run::surface::dir::Finished::read(dir)?.string()?,
             fe: None,
         }));
     }

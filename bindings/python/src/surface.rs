@@ -62,17 +62,17 @@ pub(crate) fn surface(
     };
     let mut notes = Vec::new();
     let text = py.detach(|| {
-        let s = settings.config(laws.clone())?;
+        // The prior file read once, into the job a surface directory keeps.
+        let job = dir::Job::new(laws, settings, columns, &path)?;
+        let s = job.config()?;
         if let Some(out) = &out {
             dir::check_out(out, force)?;
         }
-        let record = SurfaceRecord::read(&path, &columns)?;
+        let record = SurfaceRecord::read(&path, &job.columns)?;
         let mut note = |line| notes.push(line);
         match &out {
             Some(out) => {
-                // The record and the prior file as the directory keeps them, read once.
-                let job = dir::Job::new(laws, settings, columns, &path)?;
-                let s = job.config()?;
+                // The record as the directory keeps it, read from its bytes.
                 let (run, record) = SurfaceDir::start(out, force, job)?;
                 let result = run.run(&record, &s, Sampled::default(), false, &mut note)?;
                 run.finish(&record, &result)?;
@@ -114,26 +114,31 @@ pub(crate) fn resume_surface(
         Ok::<_, bitrock::Error>(document(&record, &result))
     });
     said(py, &note, &notes)?;
-    check(py, text)
+    check(py, directory_named(text))
+}
+
+/// The library names the directory by the command line's flag (`resume`); here it is the
+/// argument `directory`.
+fn directory_named<T>(result: bitrock::Result<T>) -> bitrock::Result<T> {
+    result.map_err(|err| match err {
+        bitrock::Error::InvalidSetting { field, message } if field == "resume" => bitrock::Error::InvalidSetting {
+            field: "directory".into(),
+            message,
+        },
+        err => err,
+    })
 }
 
 /// The finished surface run in `dir`: its document with the record's clock, as JSON text.
 #[pyfunction]
 pub(crate) fn read_surface(py: Python<'_>, dir: PathBuf) -> PyResult<String> {
-    let text = py.detach(|| {
-        let mut document = dir::read(&dir)?;
-        let job = dir::job(&dir)?;
-        let record = SurfaceRecord::read(&dir.join(bitrock::run::dir::RECORD_CSV), &job.columns)?;
-        document["time_s"] = serde_json::to_value(&record.time_s).expect("numbers serialise");
-        Ok::<_, bitrock::Error>(document.to_string())
-    });
-    check(py, text)
+    let text = py.detach(|| Ok::<_, bitrock::Error>(dir::Finished::read(&dir)?.with_clock().to_string()));
+    check(py, directory_named(text))
 }
 
 /// `bitrock check-selection` on the surface directory `dir`: its check made again with
 /// `replicates` records per law (default: the command's), on `backend` (default: the run's),
-/// the directory written anew;
-/// the whole result as JSON text.
+/// the directory written anew; the whole result as JSON text.
 #[pyfunction]
 #[pyo3(signature = (dir, replicates, backend, note))]
 pub(crate) fn check_surface(
@@ -147,12 +152,11 @@ pub(crate) fn check_surface(
     let replicates = replicates.unwrap_or(bitrock::run::selection::CheckOptions::default().replicates);
     let mut notes = Vec::new();
     let text = py.detach(|| {
-        let result = dir::check_again(&dir, replicates, backend, &mut |line| notes.push(line))?;
-        let record = SurfaceRecord::read(&dir.join(bitrock::run::dir::RECORD_CSV), &dir::job(&dir)?.columns)?;
-        Ok::<_, bitrock::Error>(document(&record, &result))
+        dir::check_again(&dir, replicates, backend, &mut |line| notes.push(line))?;
+        Ok::<_, bitrock::Error>(dir::Finished::read(&dir)?.with_clock().to_string())
     });
     said(py, &note, &notes)?;
-    check(py, text)
+    check(py, directory_named(text))
 }
 
 /// True when `dir` holds a surface run (`bitrock surface --out`).

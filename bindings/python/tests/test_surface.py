@@ -238,8 +238,9 @@ def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path
     with pytest.raises(bitrock.InputError, match="resume_surface") as caught:
         bitrock.surface(path, max_populations=2, out=out, **small)
     assert caught.value.argument == "out"
-    with pytest.raises(bitrock.InputError, match="holds no surface run"):
+    with pytest.raises(bitrock.InputError, match="holds no surface run") as caught:
         bitrock.resume_surface(tmp_path)
+    assert caught.value.argument == "directory"
     with pytest.raises(bitrock.InputError) as caught:
         bitrock.resume_surface(out, backend="abacus")
     assert caught.value.argument == "backend"

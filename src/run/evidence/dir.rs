@@ -335,7 +335,7 @@ pub fn read(dir: &Path) -> Result<serde_json::Value> {
     read_json_file(&dir.join(EVIDENCE_JSON), "an evidence document", MAX_DOCUMENT_BYTES)
 }
 
-/// The most an evidence directory's document or job may hold, bytes (the document holds the
+/// The most an evidence directory's document may hold, bytes (the document holds the
 /// posterior sets; it is read whole as a JSON tree).
 const MAX_DOCUMENT_BYTES: u64 = 1 << 30;
 /// The most its record may hold, bytes (every sample, 40 bytes a row or so: a day at 1 kHz is

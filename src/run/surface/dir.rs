@@ -7,7 +7,7 @@
 //!
 //! `bitrock surface --resume DIR` continues the sampler after the last stored population with
 //! new stopping rules (more populations, more time), to the populations an uninterrupted run
-//! gives; a run killed part-way continues the same way. The check and the bit are then
+//! gives on the same backend; a run killed part-way continues the same way. The check and the bit are then
 //! computed again and the directory written anew, whole ([`files::replace_dir`]).
 
 use super::{Sampling, Settings, SurfaceResult, SurfaceSettings, infer_continuing};
@@ -20,8 +20,9 @@ use crate::files;
 use crate::laws::Law;
 use crate::prior::PriorFile;
 use crate::run::dir::{
-    EVIDENCE_JSON, Owned, POPULATIONS_BIN, POSTERIOR_CSV, RECORD_CSV, SURFACE_BIT_CSV, SURFACE_JOB_JSON, SURFACE_JSON,
-    is_run_dir, job_file, owns_unchanged, pretty_json, read_job_file, read_json_file, refuse_inside_kept_dir,
+    Owned, POPULATIONS_BIN, POSTERIOR_CSV, RECORD_CSV, SURFACE_BIT_CSV, SURFACE_JOB_JSON, SURFACE_JSON,
+    is_evidence_dir, is_run_dir, is_unfinished_evidence_dir, job_file, owns_unchanged, pretty_json, read_job_file,
+    read_json_file, refuse_inside_kept_dir,
 };
 use crate::stability::lumped::Lumped;
 use serde::{Deserialize, Serialize};
@@ -72,8 +73,8 @@ impl Job {
     }
 }
 
-/// New stopping rules of a continued surface run, and where its strings are simulated; `None`
-/// keeps the stored one.
+/// New stopping rules of a continued surface run, where its strings are simulated and the size
+/// of its check; `None` keeps the stored one, a value is kept for the next continuation.
 #[derive(Clone, Debug, Default)]
 pub struct Continuation {
     /// Most populations, the first and those stored included.
@@ -81,7 +82,7 @@ pub struct Continuation {
     /// Wall-time budget of this invocation's sampler, s.
     pub max_seconds: Option<f64>,
     pub backend: Option<Backend>,
-    /// Records re-simulated per law for this invocation's check.
+    /// Records re-simulated per law for the check.
     pub check_replicates: Option<usize>,
 }
 
@@ -91,7 +92,7 @@ pub struct Continuation {
 pub fn check_out(dir: &Path, force: bool) -> Result<()> {
     files::check_output_dir(dir, "out")?;
     refuse_inside_kept_dir(dir, "out")?;
-    if is_run_dir(dir) || dir.join(EVIDENCE_JSON).is_file() {
+    if is_run_dir(dir) || is_evidence_dir(dir) || is_unfinished_evidence_dir(dir) {
         return Err(Error::setting(
             "out",
             format!(
@@ -410,68 +411,95 @@ pub fn read(dir: &Path) -> Result<serde_json::Value> {
 /// The most a surface run's document may hold, bytes (it holds the bit's band per sample).
 const MAX_DOCUMENT_BYTES: u64 = 1 << 30;
 
-/// The final population's particles of the finished surface run in `dir` (SI), the weight on
-/// bit its torque parameters are for (N): its W_ref, or without one the record's mean weight on
-/// bit (the laws inferred at r = 1 hold there), and why, in words.
-pub fn posterior(dir: &Path) -> Result<(Vec<Particle>, f64, &'static str)> {
-    read(dir)?;
-    let job = job(dir)?;
-    let record = SurfaceRecord::read(&dir.join(RECORD_CSV), &job.columns)?;
-    let particles = crate::documents::read_particles_csv(&dir.join(POSTERIOR_CSV))?;
-    let (w_ref_n, why) = match (job.settings.w_ref_kn, &record.wob_n) {
-        (Some(kn), _) => (kn * 1000.0, "the surface run's own"),
-        (None, Some(_)) => (
-            super::mean_wob_n(&record, None),
-            "the surface run inferred the laws at its record's mean weight on bit",
-        ),
-        (None, None) => (
-            super::mean_wob_n(&record, None),
-            "the surface run's record holds no weight on bit: the laws hold at the paper's W_ref",
-        ),
-    };
-    Ok((particles, w_ref_n, why))
+/// A finished surface directory, read once: its job (its law files' laws registered in this
+/// process), its document and its record.
+pub struct Finished {
+    pub dir: PathBuf,
+    pub job: Job,
+    pub document: serde_json::Value,
+    pub record: SurfaceRecord,
 }
 
-/// The bit of the finished surface run in `dir` as the surface implies it: the posterior
-/// medians of its stuck share and severity, at the top drive's mean speed and the record's
-/// mean weight on bit (where recorded).
-pub fn bit(dir: &Path) -> Result<BitSeen> {
-    let document = read(dir)?;
-    let job = job(dir)?;
-    let record = SurfaceRecord::read(&dir.join(RECORD_CSV), &job.columns)?;
-    let median = |name: &str| {
-        document["at_the_bit"][name][1].as_f64().ok_or_else(|| Error::Data {
-            path: dir.join(SURFACE_JSON),
-            message: format!("at_the_bit.{name} has no median"),
+impl Finished {
+    /// The finished surface run in `dir`; one under way is refused with how to finish it.
+    pub fn read(dir: &Path) -> Result<Self> {
+        let document = read(dir)?;
+        let job = job(dir)?;
+        let record = SurfaceRecord::read(&dir.join(RECORD_CSV), &job.columns)?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            job,
+            document,
+            record,
         })
-    };
-    Ok(BitSeen {
-        samples: record.time_s.len(),
-        stuck_share: median("stuck_share")?,
-        severity: Some(median("severity")?),
-        mean_speed_rpm: record.mean_top_drive_rad_s() / crate::units::RAD_S_PER_RPM,
-        peak_speed_rpm: None,
-        mean_wob_kn: record
-            .wob_n
-            .is_some()
-            .then(|| super::mean_wob_n(&record, None) / 1000.0),
-    })
-}
+    }
 
-/// The 1-DOF string the finished surface run in `dir` simulated its candidates on: as given,
-/// or where it inferred the natural frequency or damping ratio, their posterior medians.
-pub fn string(dir: &Path) -> Result<Lumped> {
-    let document = read(dir)?;
-    let string = &document["string"];
-    let number = |value: &serde_json::Value, name: &str| {
-        value.as_f64().ok_or_else(|| Error::Data {
-            path: dir.join(SURFACE_JSON),
-            message: format!("string.{name} is not a number"),
+    /// The final population's particles (SI), the weight on bit their torque parameters are
+    /// for (N): the run's W_ref, or without one the record's mean weight on bit (the laws
+    /// inferred at r = 1 hold there), and why, in words.
+    pub fn posterior(&self) -> Result<(Vec<Particle>, f64, &'static str)> {
+        let particles = crate::documents::read_particles_csv(&self.dir.join(POSTERIOR_CSV))?;
+        let mean_wob_n = super::mean_wob_n(&self.record, None);
+        let (w_ref_n, why) = match (self.job.settings.w_ref_kn, &self.record.wob_n) {
+            (Some(kn), _) => (kn * 1000.0, "the surface run's own"),
+            (None, Some(_)) => (
+                mean_wob_n,
+                "the surface run inferred the laws at its record's mean weight on bit",
+            ),
+            (None, None) => (
+                mean_wob_n,
+                "the surface run's record holds no weight on bit: the laws hold at the paper's W_ref",
+            ),
+        };
+        Ok((particles, w_ref_n, why))
+    }
+
+    /// The bit as the surface implies it: the posterior medians of its stuck share and
+    /// severity, at the top drive's mean speed and the record's mean weight on bit (where
+    /// recorded).
+    pub fn bit(&self) -> Result<BitSeen> {
+        let record = &self.record;
+        let median = |name: &str| {
+            self.document["at_the_bit"][name][1]
+                .as_f64()
+                .ok_or_else(|| self.malformed(format!("at_the_bit.{name} has no median")))
+        };
+        Ok(BitSeen {
+            samples: record.time_s.len(),
+            stuck_share: median("stuck_share")?,
+            severity: Some(median("severity")?),
+            mean_speed_rpm: record.mean_top_drive_rad_s() / crate::units::RAD_S_PER_RPM,
+            peak_speed_rpm: None,
+            mean_wob_kn: record.wob_n.is_some().then(|| super::mean_wob_n(record, None) / 1000.0),
         })
-    };
-    Ok(Lumped {
-        inertia_kg_m2: number(&string["inertia_kg_m2"], "inertia_kg_m2")?,
-        omega_n_rad_s: number(&string["omega_n_rad_s"]["median"], "omega_n_rad_s.median")?,
-        damping_ratio: number(&string["damping_ratio"]["median"], "damping_ratio.median")?,
-    })
+    }
+
+    /// The 1-DOF string the run simulated its candidates on: as given, or where it inferred
+    /// the natural frequency or damping ratio, their posterior medians.
+    pub fn string(&self) -> Result<Lumped> {
+        let string = &self.document["string"];
+        let number = |value: &serde_json::Value, name: &str| {
+            value
+                .as_f64()
+                .ok_or_else(|| self.malformed(format!("string.{name} is not a number")))
+        };
+        Ok(Lumped {
+            inertia_kg_m2: number(&string["inertia_kg_m2"], "inertia_kg_m2")?,
+            omega_n_rad_s: number(&string["omega_n_rad_s"]["median"], "omega_n_rad_s.median")?,
+            damping_ratio: number(&string["damping_ratio"]["median"], "damping_ratio.median")?,
+        })
+    }
+
+    /// The document as Python reads it: with the record's clock.
+    pub fn with_clock(mut self) -> serde_json::Value {
+        self.document["time_s"] = serde_json::to_value(&self.record.time_s).expect("numbers serialise");
+        self.document
+    }
+
+    fn malformed(&self, message: String) -> Error {
+        Error::Data {
+            path: self.dir.join(SURFACE_JSON),
+            message,
+        }
+    }
 }

@@ -659,7 +659,7 @@ def check_selection(
             in_memory = source._run
         source = source.path
     elif not isinstance(source, (str, os.PathLike)):
-        raise InputError(f"source: give a Result, a run directory or an evidence directory, got {type(source).__name__}", "source")
+        raise InputError(f"source: give a Result, a run, an evidence or a surface directory, got {type(source).__name__}", "source")
     if in_memory is None and _bitrock.is_surface_dir(os.fspath(source)):
         return _check_surface(os.fspath(source), replicates, batch, backend, executor)
     dispatcher = None if executor is None else Dispatcher(executor)
@@ -881,8 +881,9 @@ def resume_surface(
     """Continues the surface run in ``directory`` (one that ``bitrock.surface(..., out=directory)``
     or ``bitrock surface --out`` wrote, finished or killed part-way) after its last stored
     population, with its record and settings: ``max_populations`` (the first and those stored
-    included), ``max_seconds``, ``backend`` and ``check_replicates`` replace the run's own. The
-    populations are those an uninterrupted run gives; the check and the bit are computed again
+    included), ``max_seconds``, ``backend`` and ``check_replicates`` replace the run's own (and
+    are kept for the next continuation). On the same backend the populations are those an
+    uninterrupted run gives (on another, the run says its bits differ); the check and the bit are computed again
     and the directory written anew. Returns the result as :func:`surface` does. As ``bitrock
     surface --resume``; :func:`check_selection` of the directory checks it again without
     sampling."""

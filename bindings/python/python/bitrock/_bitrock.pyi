@@ -162,8 +162,7 @@ def check_surface(dir: str | PathLike[str], replicates: SupportsIndex | None, ba
     """
     `bitrock check-selection` on the surface directory `dir`: its check made again with
     `replicates` records per law (default: the command's), on `backend` (default: the run's),
-    the directory written anew;
-    the whole result as JSON text.
+    the directory written anew; the whole result as JSON text.
     """
 
 def coupled(options: dict, record: bool, map: bool, note: Any | None) -> str:
