@@ -876,21 +876,32 @@ fn check_headers(headers: &csv::StringRecord, path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// One row of a record in SI, as a stream reads it (see [`RowLayout`]).
+/// One row of a record in SI, as a stream reads it (see [`RowLayout`], and
+/// [`surface::SurfaceRowLayout`] for a record of surface channels).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Row {
     /// Time, s, where the record has a time column.
     pub time_s: Option<f64>,
-    pub speed_rad_s: f64,
-    pub torque_nm: f64,
+    /// The bit's speed and torque; `None` in a record of surface channels, whose surface
+    /// torque is never read as the bit's.
+    pub bit: Option<BitReading>,
     /// Weight on bit, N, where the record has a column for it.
     pub wob_n: Option<f64>,
     /// Top-drive (surface) speed, rad/s, where the reader of the stream has a column for it
-    /// (a watch's operating point); `None` from [`RowLayout::row`].
+    /// (a watch's operating point; a surface record's drive); `None` from [`RowLayout::row`].
     pub top_drive_rad_s: Option<f64>,
+    /// Surface torque, N·m, in a record of surface channels.
+    pub surface_torque_nm: Option<f64>,
     /// The bit's depth, m, where the record has a depth column whose name says its unit
     /// ([`depth_column`]): shown beside a window, never inferred from.
     pub depth_m: Option<f64>,
+}
+
+/// The bit's own channels in a row, SI.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BitReading {
+    pub speed_rad_s: f64,
+    pub torque_nm: f64,
 }
 
 /// How the rows of a record are read one at a time (a stream that grows): the columns and
@@ -972,6 +983,7 @@ impl RowLayout {
             },
             units: self.units,
             top_drive: None,
+            surface: None,
         }
     }
 
@@ -980,8 +992,11 @@ impl RowLayout {
     pub fn row(&self, record: &csv::StringRecord, line: u64) -> Result<Row> {
         let cell = |i: usize| parse_cell(record, i, line, &self.headers, self.delimiter, &self.path);
         Ok(Row {
-            speed_rad_s: self.units.speed.to_rad_s(cell(self.indices.speed)?),
-            torque_nm: cell(self.indices.torque)? * self.units.torque.newton_metres(),
+            bit: Some(BitReading {
+                speed_rad_s: self.units.speed.to_rad_s(cell(self.indices.speed)?),
+                torque_nm: cell(self.indices.torque)? * self.units.torque.newton_metres(),
+            }),
+            surface_torque_nm: None,
             wob_n: match (self.indices.wob, self.units.wob) {
                 (Some(i), Some(u)) => Some(cell(i)? * u.newtons()),
                 _ => None,
@@ -1128,6 +1143,9 @@ pub struct Declared {
     /// A top-drive speed column and its unit, where the source has one (a watch's operating
     /// point; `fit` reads none).
     pub top_drive: Option<(String, SpeedUnit)>,
+    /// The columns of a source of surface channels, where it is one: then `columns` and
+    /// `units` name its top-drive speed and surface torque, which no bit law is fitted to.
+    pub surface: Option<surface::SurfaceColumns>,
 }
 
 impl ColumnUnits {
@@ -1177,8 +1195,9 @@ fn read_rows(
     for record in records {
         let (record, line) = record?;
         let row = layout.row(&record, line)?;
-        all.speed_rad_s.push(row.speed_rad_s);
-        all.torque_nm.push(row.torque_nm);
+        let bit = row.bit.expect("a bit record's layout reads the bit's channels");
+        all.speed_rad_s.push(bit.speed_rad_s);
+        all.torque_nm.push(bit.torque_nm);
         if let (Some(w), Some(v)) = (row.wob_n, all.wob_n.as_mut()) {
             v.push(w);
         }
@@ -1197,7 +1216,7 @@ fn read_rows(
 
 /// The number in column `i` (0-based) of `record`, on `line`; refuses text that is not a
 /// finite number, hinting at decimal commas in a record not separated by commas.
-fn parse_cell(
+pub(crate) fn parse_cell(
     record: &csv::StringRecord,
     i: usize,
     line: u64,

@@ -60,7 +60,8 @@ pub struct WatchCmd {
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = WatchSettings::default().risk, value_name = "P")]
     pub risk: f64,
     /// Particles of each island of each window's evidence [default: 300]; with --abc, of each
-    /// window's ABC population [default: 4,000].
+    /// window's ABC population [default: 4,000]; in a record of surface channels alone, of
+    /// each population of each window's sampler of simulated strings [default: 300].
     #[arg(long, value_name = "N")]
     pub particles: Option<usize>,
     /// Islands of each window's evidence (their spread is ln Z's error) [default: 2].
@@ -250,6 +251,10 @@ fn settings(cmd: &WatchCmd) -> anyhow::Result<WatchSettings> {
             seed: cmd.seed,
             ..defaults.evidence.clone()
         },
+        surface: bitrock::run::surface::Settings {
+            particles: cmd.particles.unwrap_or(defaults.surface.particles),
+            ..defaults.surface.clone()
+        },
         abc: cmd
             .abc
             .then(|| abc_config(cmd.sampler.unwrap_or_default(), cmd.particles, cmd.delta, cmd.eps_min))
@@ -363,6 +368,10 @@ fn line(out: &mut impl Write, u: &Update, laws: &[bitrock::Law]) -> std::io::Res
         (None, Some(a)) => a.words.clone(),
         (None, None) => String::new(),
     };
-    let answer = u.answer.as_ref().map_or("-".into(), |a| a.headline());
+    let answer = match (&u.answer, &u.check) {
+        (Some(a), _) => a.headline(),
+        (None, Some(check)) => check.headline(),
+        (None, None) => "-".into(),
+    };
     writeln!(out, "  {change:<6}  {answer:<34}  {advice}")
 }

@@ -274,6 +274,130 @@ impl SurfaceRecord {
     }
 }
 
+/// How the rows of a surface record are read one at a time (a watch's stream): its roles
+/// found in its header by the rules that read a whole file ([`SurfaceRecord::read`]). Its
+/// rows carry no bit channels: the bit's, where the header holds them, are left alone.
+pub struct SurfaceRowLayout {
+    roles: Roles,
+    header: csv::StringRecord,
+    clock: super::clock::TimeReader,
+    delimiter: u8,
+    path: PathBuf,
+}
+
+impl SurfaceRowLayout {
+    /// The layout of a record whose header is `header` (fields separated by `delimiter`).
+    pub fn new(header: &[String], delimiter: u8, opts: &SurfaceOptions, path: &Path) -> Result<Self> {
+        let roles = Roles::resolve(header, opts, path)?;
+        Ok(Self {
+            clock: super::clock::TimeReader::new(roles.time_in_ms),
+            roles,
+            header: csv::StringRecord::from(header.to_vec()),
+            delimiter,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The bit's channels the header also holds (not read here).
+    pub fn bit_channels(&self) -> Vec<&str> {
+        self.roles.bit.iter().map(|&i| &self.header[i]).collect()
+    }
+
+    /// The columns read, by role.
+    pub fn columns(&self) -> SurfaceColumns {
+        let name = |i: usize| self.header[i].to_string();
+        let r = &self.roles;
+        SurfaceColumns {
+            time: name(r.time),
+            top_drive: name(r.top_drive),
+            surface_torque: name(r.surface_torque),
+            wob: r.wob.map(|(i, _)| name(i)),
+            bit: r.bit.iter().map(|&i| name(i)).collect(),
+            downhole_min: None,
+            downhole_max: None,
+        }
+    }
+
+    pub fn top_drive_unit(&self) -> SpeedUnit {
+        self.roles.top_drive_unit
+    }
+
+    pub fn torque_unit(&self) -> TorqueUnit {
+        self.roles.torque_unit
+    }
+
+    pub fn wob_unit(&self) -> Option<ForceUnit> {
+        self.roles.wob.map(|(_, unit)| unit)
+    }
+
+    /// Record `record` (on `line`) in SI; a cell that is not a finite number is refused
+    /// naming its line and column, as in a whole file.
+    pub fn row(&self, record: &csv::StringRecord, line: u64) -> Result<super::Row> {
+        let cell = |i: usize| super::parse_cell(record, i, line, &self.header, self.delimiter, &self.path);
+        let r = &self.roles;
+        let time_s = self
+            .clock
+            .text(record.get(r.time).unwrap_or(""))
+            .map_err(|message| Error::Cell {
+                path: self.path.clone(),
+                line,
+                column: r.time + 1,
+                name: self.header[r.time].to_string(),
+                message,
+            })?;
+        Ok(super::Row {
+            time_s: Some(time_s),
+            bit: None,
+            wob_n: r.wob.map(|(i, unit)| cell(i).map(|w| w * unit.newtons())).transpose()?,
+            top_drive_rad_s: Some(r.top_drive_unit.to_rad_s(cell(r.top_drive)?)),
+            surface_torque_nm: Some(cell(r.surface_torque)? * r.torque_unit.newton_metres()),
+            depth_m: None,
+        })
+    }
+}
+
+impl SurfaceRecord {
+    /// A surface record of rows read one at a time (a watch's window), named `source`: its
+    /// clock checked as a whole file's, its times from its first row's. Rows without a time,
+    /// top-drive speed or surface torque are refused.
+    pub fn of_rows(
+        rows: &[super::Row],
+        source: &Path,
+        columns: SurfaceColumns,
+        top_drive_unit: SpeedUnit,
+        torque_unit: TorqueUnit,
+    ) -> Result<Self> {
+        let channels: Option<Vec<(f64, f64, f64)>> = rows
+            .iter()
+            .map(|r| Some((r.time_s?, r.top_drive_rad_s?, r.surface_torque_nm?)))
+            .collect();
+        let channels = channels.ok_or_else(|| Error::Data {
+            path: source.to_path_buf(),
+            message: "a row without a time, a top-drive speed or a surface torque: not a surface record".into(),
+        })?;
+        let mut time_s: Vec<f64> = channels.iter().map(|c| c.0).collect();
+        let sample_period_s = check_clock(&time_s, source, &|k| format!("sample {}", k + 1))?;
+        let t0 = time_s.first().copied().unwrap_or(0.0);
+        time_s.iter_mut().for_each(|t| *t -= t0);
+        let wob_n: Option<Vec<f64>> = columns
+            .wob
+            .as_ref()
+            .and_then(|_| rows.iter().map(|r| r.wob_n).collect());
+        Ok(Self {
+            source: source.to_path_buf(),
+            columns,
+            top_drive_unit,
+            torque_unit,
+            time_s,
+            top_drive_rad_s: channels.iter().map(|c| c.1).collect(),
+            surface_torque_nm: channels.iter().map(|c| c.2).collect(),
+            wob_n,
+            sample_period_s,
+            downhole: None,
+        })
+    }
+}
+
 /// The clock's period (s), refusing a record too short, a clock that does not run forwards, or
 /// one whose spacing departs from its median by more than [`CLOCK_TOLERANCE`]; `place(k)` names
 /// sample k for the messages.

@@ -2,6 +2,7 @@
 //! strings' escape where it stick-slips, at the window's operating point.
 
 use super::*;
+use crate::data::BitSeen;
 
 /// Posterior samples per law simulated for the escape advice of a stick-slipping window.
 pub(super) const ESCAPE_SAMPLES: usize = 4;
@@ -14,13 +15,11 @@ pub(super) const ESCAPE_MIN_PROBABILITY: f64 = 0.05;
 /// where the record has no column for it), kN, which a glitch of the WOB channel over less than
 /// half the window does not move; each at least 1.
 pub(super) fn operating_point(rows: &[Row], w_ref_n: f64) -> (f64, f64) {
-    let n = rows.len().max(1) as f64;
-    let omega_rpm = rows
+    let speeds: Vec<f64> = rows
         .iter()
-        .map(|r| r.top_drive_rad_s.unwrap_or(r.speed_rad_s))
-        .sum::<f64>()
-        / n
-        / RAD_S_PER_RPM;
+        .filter_map(|r| r.top_drive_rad_s.or(r.bit.map(|b| b.speed_rad_s)))
+        .collect();
+    let omega_rpm = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64 / RAD_S_PER_RPM;
     let wob: Vec<f64> = rows.iter().map(|r| r.wob_n.unwrap_or(w_ref_n)).collect();
     let wob_kn = crate::numerics::median(&wob).unwrap_or(w_ref_n) / 1000.0;
     (omega_rpm.max(1.0), wob_kn.max(1.0))
@@ -60,8 +59,9 @@ impl Watch {
         }
     }
 
-    /// Adds the advice (from the latest posterior), the window's picture and the latency.
-    pub(super) fn completed(&mut self, mut update: Update, window: &Window) -> Update {
+    /// Adds the advice (from the latest posterior), the window's picture and the latency;
+    /// `implied`: the bit a window of surface channels implies, taken for the bit seen.
+    pub(super) fn completed(&mut self, mut update: Update, window: &Window, implied: Option<BitSeen>) -> Update {
         self.carried.window = Some(window.index);
         let (omega_rpm, wob_kn) = operating_point(&window.rows, self.settings.w_ref_n);
         let inputs = self
@@ -84,7 +84,7 @@ impl Watch {
                 inputs,
                 wob_kn * 1000.0,
                 OperatingPoint { omega_rpm, wob_kn },
-                view.bit.as_ref().map(|s| (s, "window")),
+                implied.as_ref().or(view.bit.as_ref()).map(|s| (s, "window")),
             ));
         }
         self.view = Some(view);

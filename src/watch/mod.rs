@@ -42,7 +42,7 @@ pub mod witsml;
 use crate::abc::Observer;
 use crate::abc::evidence::Reference;
 use crate::abc::evidence::{EvidenceConfig, Start};
-use crate::data::{DataOptions, FieldData, Row, Samples};
+use crate::data::{BitReading, DataOptions, FieldData, Row, Samples};
 use crate::error::Result;
 use crate::eval::Backend;
 use crate::fit::FitOptions;
@@ -64,12 +64,14 @@ mod change;
 mod follow;
 mod selection;
 mod settings;
+mod surface;
 mod update;
 pub use carried::*;
 use change::*;
 pub use follow::*;
 use selection::*;
 pub use settings::*;
+pub use surface::{SURFACE_PARTICLES, default_surface_settings};
 pub use update::*;
 
 /// A watch in progress.
@@ -94,6 +96,9 @@ pub struct Watch {
     /// Each window's evidence job as the evidence's settings make it ([`WatchSettings::evidence`],
     /// validated once); `None` where the watch runs the paper's ABC on each window.
     evidence: Option<crate::run::evidence::Job>,
+    /// Each window's surface run, validated once, where the source holds surface channels
+    /// alone ([`surface`]).
+    surface: Option<crate::run::surface::SurfaceSettings>,
 }
 
 impl Watch {
@@ -170,7 +175,18 @@ impl Watch {
                 Some(job)
             }
         };
+        let surface = match declared.surface {
+            Some(_) if settings.abc.is_some() => {
+                return Err(crate::Error::setting(
+                    "abc",
+                    "the paper's ABC fits the bit's torque to its speed; a record of surface channels alone is inferred through simulated strings: drop it",
+                ));
+            }
+            Some(_) => Some(Self::surface_settings(&settings)?),
+            None => None,
+        };
         Ok(Self {
+            surface,
             windows: Windows::new(length, step).thinned(thin),
             settings,
             source,
@@ -300,18 +316,21 @@ impl Watch {
             ));
         }
         let mut update = Update::empty(&window);
+        if let Some(config) = self.surface.clone() {
+            return self.surface_update(&config, update, &window, observer);
+        }
         let data = match self.window_data(&window) {
             Ok(data) => data,
             Err(why) => {
                 update.uninformative = Some(why);
-                return Ok(self.completed(update, &window));
+                return Ok(self.completed(update, &window, None));
             }
         };
         self.say_record_checks(&window, &data, observer);
         update.samples_used = data.calibration.len();
         if let Some(why) = self.cannot_inform(&data) {
             update.uninformative = Some(why);
-            return Ok(self.completed(update, &window));
+            return Ok(self.completed(update, &window, None));
         }
         let selected = match &self.settings.abc {
             None => self.by_evidence(&window, &data, observer)?,
@@ -321,27 +340,56 @@ impl Watch {
             Ok(selected) => selected,
             Err(why) => {
                 update.uninformative = Some(why);
-                return Ok(self.completed(update, &window));
+                return Ok(self.completed(update, &window, None));
             }
         };
         let Judged { loss, level, change } = judged;
-        update.candidates_scored = selection.candidates;
-        update.epsilon = selection.epsilon;
-        update.answer = selection.answer.clone();
         update.change = change;
         update.change_nats = loss.map(|l| l - level.unwrap_or(0.0));
         self.carry_window(&window, &selection, &data, (loss, change));
+        self.carry_selection(&mut update, selection, data.torque_unit);
+        Ok(self.completed(update, &window, None))
+    }
 
-        // Carried law probabilities: P_t ∝ P_{t−1}^(λ^γ) · P(m | window)^γ, floored, γ the
-        // share of a window its step brings in (each sample counted once however the windows
-        // overlap; the evidence of a window length ago weighs λ).
+    /// The update of a window of surface channels ([`surface`]): its laws through simulated
+    /// strings, its advice from the bit they imply.
+    fn surface_update(
+        &mut self,
+        config: &crate::run::surface::SurfaceSettings,
+        mut update: Update,
+        window: &Window,
+        observer: &mut dyn Observer,
+    ) -> Result<Update> {
+        update.samples_used = window.rows.len();
+        match self.by_surface(config, window, observer)? {
+            Ok(selected) => {
+                update.check = Some(selected.check);
+                self.carry_selection(&mut update, selected.selection, self.declared.units.torque);
+                Ok(self.completed(update, window, Some(selected.bit)))
+            }
+            Err(why) => {
+                update.uninformative = Some(why);
+                Ok(self.completed(update, window, None))
+            }
+        }
+    }
+
+    /// A window's selection into its update and what the watch carries: its law
+    /// probabilities, P_t ∝ P_{t−1}^(λ^γ) · P(m | window)^γ, floored, γ the share of a window
+    /// its step brings in (each sample counted once however the windows overlap; the evidence
+    /// of a window length ago weighs λ), restarted at a change; each law's summary in `unit`;
+    /// the mixture posterior.
+    fn carry_selection(&mut self, update: &mut Update, selection: Selection, unit: crate::units::TorqueUnit) {
+        update.candidates_scored = selection.candidates;
+        update.epsilon = selection.epsilon;
+        update.answer = selection.answer.clone();
         let window_p: Vec<f64> = self
             .settings
             .laws
             .iter()
             .map(|&law| selection.of(law).map_or(0.0, |l| l.probability))
             .collect();
-        let carried = match (&self.carried.probabilities, change) {
+        let carried = match (&self.carried.probabilities, update.change) {
             (Some(before), false) => {
                 let (length, step) = self.windows.shape();
                 let new_share = (step / length).min(1.0);
@@ -355,7 +403,6 @@ impl Watch {
             }
             _ => normalise_with_floor(&window_p, self.settings.floor),
         };
-        let unit = data.torque_unit;
         for (k, &law) in self.settings.laws.iter().enumerate() {
             let Some(selected) = selection.of(law) else { continue };
             update.laws.push(law_update(selected, carried[k], unit));
@@ -371,7 +418,6 @@ impl Watch {
         self.carried.probabilities = Some(carried);
         self.carried.posterior = Some(posterior);
         self.carried.posterior_scaled = selection.w_ref_n.is_some();
-        Ok(self.completed(update, &window))
     }
 
     /// What the watch carries on from a window: its losses (cleared at a change), its fits
@@ -437,9 +483,10 @@ impl Watch {
             return Err("no sample in the window (a gap in the record)".into());
         }
         // The rows are SI already: handed to the record's filters and checks as they are.
+        let bit: Vec<BitReading> = rows.iter().filter_map(|r| r.bit).collect();
         let samples = Samples {
-            speed_rad_s: rows.iter().map(|r| r.speed_rad_s).collect(),
-            torque_nm: rows.iter().map(|r| r.torque_nm).collect(),
+            speed_rad_s: bit.iter().map(|b| b.speed_rad_s).collect(),
+            torque_nm: bit.iter().map(|b| b.torque_nm).collect(),
             wob_n: rows.iter().map(|r| r.wob_n).collect(),
             time_s: rows.iter().map(|r| r.time_s).collect(),
         };
@@ -522,6 +569,7 @@ impl Update {
             advice: None,
             candidates_scored: 0,
             epsilon: None,
+            check: None,
             latency_s: 0.0,
         }
     }

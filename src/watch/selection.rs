@@ -40,6 +40,33 @@ pub(super) struct Selected {
     pub(super) ln_z: Option<(f64, f64)>,
 }
 
+impl Selected {
+    /// Each of `laws` in a sampler's last `population`: its probability, and its particles
+    /// weighted within the law.
+    pub(super) fn of_population(laws: &[Law], population: &crate::abc::Population) -> Vec<Self> {
+        laws.iter()
+            .map(|&law| {
+                let probability = population.record.probability_of(law);
+                Selected {
+                    law,
+                    probability,
+                    // Weights relative to the law's own: its share of the population's.
+                    posterior: population
+                        .particles
+                        .iter()
+                        .filter(|p| p.law == law)
+                        .map(|p| crate::abc::Particle {
+                            weight: p.weight / probability,
+                            ..p.clone()
+                        })
+                        .collect(),
+                    ln_z: None,
+                }
+            })
+            .collect()
+    }
+}
+
 /// What the fits of the window before say of this one.
 pub(super) struct Judged {
     /// Nats of log-likelihood the earlier fits lose here; `None` without an earlier window.
@@ -241,29 +268,7 @@ impl Watch {
                 run.stop.describe()
             )));
         };
-        let laws = self
-            .settings
-            .laws
-            .iter()
-            .map(|&law| {
-                let probability = last.record.probability_of(law);
-                Selected {
-                    law,
-                    probability,
-                    // Weights relative to the law's own: its share of the population's.
-                    posterior: last
-                        .particles
-                        .iter()
-                        .filter(|p| p.law == law)
-                        .map(|p| crate::abc::Particle {
-                            weight: p.weight / probability,
-                            ..p.clone()
-                        })
-                        .collect(),
-                    ln_z: None,
-                }
-            })
-            .collect();
+        let laws = Selected::of_population(&self.settings.laws, &last);
         let probabilities: Vec<(Law, f64)> = self
             .settings
             .laws

@@ -51,6 +51,11 @@ pub struct WatchSettings {
     /// δ and floor (its laws, seed and backend are the watch's; window k is seeded seed + k).
     /// Its law probabilities are ratios of the laws' prior volumes below ε, not evidence.
     pub abc: Option<crate::run::abc::Config>,
+    /// Each window of a record of surface channels alone, through the surface run's own
+    /// settings (its gate, validated once when the watch starts): particles, populations,
+    /// pilot, check and prior. Its laws, string, backend and seed (window k's: the watch's
+    /// seed + k) are the watch's.
+    pub surface: crate::run::surface::Settings,
 }
 
 impl Default for WatchSettings {
@@ -87,6 +92,7 @@ impl Default for WatchSettings {
             wits: wits::WitsItems::default(),
             warm_start: true,
             abc: None,
+            surface: super::default_surface_settings(),
         }
     }
 }

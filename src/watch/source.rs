@@ -6,6 +6,7 @@
 //! cannot be read is skipped and counted, never fatal.
 
 use super::wits::{WitsItems, WitsReader};
+use crate::data::surface::{SurfaceOptions, SurfaceRowLayout};
 use crate::data::{DataOptions, Row, RowLayout};
 use crate::error::{Error, Result};
 use crate::units::SpeedUnit;
@@ -124,6 +125,13 @@ enum Format {
     Csv {
         layout: RowLayout,
         top_drive: Option<(usize, SpeedUnit)>,
+        lines: Box<LineParser>,
+        header: String,
+    },
+    /// CSV of surface channels alone (top-drive speed, surface torque, weight on bit): rows
+    /// without the bit's, each window inferred through simulated strings.
+    SurfaceCsv {
+        layout: SurfaceRowLayout,
         lines: Box<LineParser>,
         header: String,
     },
@@ -302,11 +310,18 @@ impl Rows {
                 line: Some(line),
                 message: "the header line cannot be read as CSV".into(),
             })?;
-            Format::Csv {
-                layout: RowLayout::new(&headers, delimiter, opts, &name)?,
-                top_drive: top_drive_column(&headers, &name, line)?,
-                lines,
-                header,
+            match RowLayout::new(&headers, delimiter, opts, &name) {
+                Ok(layout) => Format::Csv {
+                    layout,
+                    top_drive: top_drive_column(&headers, &name, line)?,
+                    lines,
+                    header,
+                },
+                // A record of surface channels alone: its rows carry them, never as the bit's.
+                Err(bit) => match surface_layout(&headers, delimiter, opts, &name) {
+                    Some(layout) => Format::SurfaceCsv { layout, lines, header },
+                    None => return Err(bit),
+                },
             }
         };
         Ok(Self {
@@ -345,7 +360,7 @@ impl Rows {
     pub fn wits_items(&self) -> Option<&WitsItems> {
         match &self.format {
             Format::Wits(reader) => Some(reader.items()),
-            Format::Csv { .. } => None,
+            Format::Csv { .. } | Format::SurfaceCsv { .. } => None,
         }
     }
 
@@ -356,6 +371,25 @@ impl Rows {
                 top_drive: top_drive.map(|(i, unit)| (layout.headers()[i].trim().to_string(), unit)),
                 ..layout.declared()
             },
+            Format::SurfaceCsv { layout, .. } => {
+                let columns = layout.columns();
+                crate::data::Declared {
+                    columns: crate::data::ColumnsUsed {
+                        speed: columns.top_drive.clone(),
+                        torque: columns.surface_torque.clone(),
+                        wob: columns.wob.clone(),
+                        time: Some(columns.time.clone()),
+                    },
+                    units: crate::data::ColumnUnits {
+                        speed: layout.top_drive_unit(),
+                        torque: layout.torque_unit(),
+                        wob: layout.wob_unit(),
+                        time_in_ms: false,
+                    },
+                    top_drive: Some((columns.top_drive.clone(), layout.top_drive_unit())),
+                    surface: Some(columns),
+                }
+            }
             Format::Wits(reader) => reader.declared(),
         }
     }
@@ -481,6 +515,13 @@ impl Rows {
                     }
                     csv_row(content, layout, *top_drive, lines, self.line)
                 }
+                Format::SurfaceCsv { layout, lines, header } => {
+                    if self.feed.is_some() && content.trim_end() == header {
+                        continue;
+                    }
+                    let record = lines.parse(content).ok_or_else(|| "not a CSV line".to_string());
+                    record.and_then(|record| layout.row(&record, self.line).map_err(|e| e.to_string()))
+                }
                 Format::Wits(reader) => match reader.line(content) {
                     Some(row) => row,
                     None => continue,
@@ -553,6 +594,32 @@ fn csv_row(
         row.top_drive_rad_s = Some(unit.to_rad_s(value));
     }
     Ok(row)
+}
+
+/// The layout of a header of surface channels alone (a top-drive speed and a surface torque
+/// found by the rules of `bitrock surface`, and no bit channel); `None` for any other header,
+/// which the bit's layout then refuses in its own words.
+fn surface_layout(
+    headers: &csv::StringRecord,
+    delimiter: u8,
+    opts: &DataOptions,
+    name: &Path,
+) -> Option<SurfaceRowLayout> {
+    // The bit's columns named: the bit's layout says what is wrong with them.
+    if opts.speed_column.is_some() || opts.torque_column.is_some() || opts.speed_unit.is_some() {
+        return None;
+    }
+    let header: Vec<String> = headers.iter().map(|h| h.trim().to_string()).collect();
+    let surface = SurfaceOptions {
+        time_column: opts.time_column.clone(),
+        wob_column: opts.wob_column.clone(),
+        torque_unit: opts.torque_unit,
+        wob_unit: opts.wob_unit,
+        ..SurfaceOptions::default()
+    };
+    SurfaceRowLayout::new(&header, delimiter, &surface, name)
+        .ok()
+        .filter(|layout| layout.bit_channels().is_empty())
 }
 
 /// A connection to a feed at `address`, its reads waiting at most [`FOLLOW_POLL`].
@@ -687,8 +754,8 @@ mod tests {
             panic!()
         };
         assert_eq!(row.time_s, Some(0.0));
-        assert!((row.speed_rad_s - 60.0 * std::f64::consts::PI / 30.0).abs() < 1e-12);
-        assert!((row.torque_nm - 10_000.0).abs() < 1e-9);
+        assert!((row.bit.unwrap().speed_rad_s - 60.0 * std::f64::consts::PI / 30.0).abs() < 1e-12);
+        assert!((row.bit.unwrap().torque_nm - 10_000.0).abs() < 1e-9);
         let Next::Skipped(why) = rows.next_row().unwrap() else {
             panic!()
         };
@@ -754,7 +821,7 @@ mod tests {
         };
         writer.join().unwrap();
         assert_eq!(row.time_s, Some(0.1));
-        assert!((row.speed_rad_s - 61.0 * std::f64::consts::PI / 30.0).abs() < 1e-12);
+        assert!((row.bit.unwrap().speed_rad_s - 61.0 * std::f64::consts::PI / 30.0).abs() < 1e-12);
         assert!(matches!(next_event(&mut rows), Next::Stalled(_)));
     }
 

@@ -115,7 +115,21 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
             "fit": c.fit,
         })),
         "criterion": criterion_json(&settings.criterion),
+        // A record of surface channels: what of the surface run's settings is the watch's own
+        // (its laws, string, seed and backend are the watch's).
+        "surface": surface_json(&settings.surface),
     })
+}
+
+/// The surface run's settings a watch keeps: all but those the watch gives it.
+fn surface_json(settings: &crate::run::surface::Settings) -> serde_json::Value {
+    let mut json = serde_json::to_value(settings).expect("settings serialise");
+    if let Some(fields) = json.as_object_mut() {
+        for own in ["inertia_kg_m2", "omega_n_rad_s", "damping_ratio", "seed", "backend"] {
+            fields.remove(own);
+        }
+    }
+    json
 }
 
 /// What decides the advice's stability, as JSON: the 1-DOF model's constants, or the

@@ -26,6 +26,28 @@ pub struct LawUpdate {
     pub ess: f64,
 }
 
+/// The check by re-simulation of a surface window's model choice: records simulated from each
+/// law's posterior, classified by their summaries. Summaries that are not sufficient can make
+/// ABC model choice inconsistent: a law is called only where its own re-simulations are
+/// recognised and the others' are not taken for it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WindowCheck {
+    /// The law called, where the window and the check allow one.
+    pub decided: Option<Law>,
+    /// Why, in words.
+    pub verdict: String,
+}
+
+impl WindowCheck {
+    /// In a few words: the law called, or none.
+    pub fn headline(&self) -> String {
+        match self.decided {
+            Some(law) => format!("{law}, its check agrees"),
+            None => "no law called by its check".into(),
+        }
+    }
+}
+
 /// The advice of a window.
 pub use crate::run::advice::Advice;
 
@@ -56,6 +78,9 @@ pub struct Update {
     /// The tolerance the window's ABC ended at (the paper's procedure); none for the evidence.
     #[serde(default)]
     pub epsilon: Option<f64>,
+    /// A window of surface channels: what the check by re-simulation says of its model choice.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub check: Option<WindowCheck>,
     /// Seconds from the window's last sample arriving to this update.
     pub latency_s: f64,
 }

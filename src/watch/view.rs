@@ -5,7 +5,7 @@
 //! to every viewer: at most [`CLOUD_POINTS`] samples, [`BAND_SPEEDS`] speeds and
 //! [`MAP_SPEEDS_RPM`] × [`MAP_WEIGHTS`] cells.
 
-use crate::data::{BitSeen, Row};
+use crate::data::{BitReading, BitSeen, Row};
 use crate::laws::Law;
 use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
 use crate::units::{RAD_S_PER_RPM, TorqueUnit};
@@ -99,14 +99,16 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
     let per_unit = unit.newton_metres();
     let stride = rows.len().div_ceil(CLOUD_POINTS).max(1);
     let cloud: Vec<&Row> = rows.iter().step_by(stride).collect();
-    let speed_rpm: Vec<f64> = cloud.iter().map(|r| r.speed_rad_s / RAD_S_PER_RPM).collect();
-    let torque: Vec<f64> = cloud.iter().map(|r| r.torque_nm / per_unit).collect();
+    // The bit's channels only: a surface record's torque is never drawn as the bit's.
+    let readings: Vec<BitReading> = cloud.iter().filter_map(|r| r.bit).collect();
+    let speed_rpm: Vec<f64> = readings.iter().map(|b| b.speed_rad_s / RAD_S_PER_RPM).collect();
+    let torque: Vec<f64> = readings.iter().map(|b| b.torque_nm / per_unit).collect();
     let time_s: Vec<f64> = cloud
         .iter()
         .map(|r| r.time_s)
         .collect::<Option<_>>()
         .unwrap_or_default();
-    let speeds: Vec<f64> = rows.iter().map(|r| r.speed_rad_s).collect();
+    let speeds: Vec<f64> = rows.iter().filter_map(|r| r.bit).map(|b| b.speed_rad_s).collect();
     let wob_n: Option<Vec<f64>> = rows.iter().map(|r| r.wob_n).collect();
     let bit = BitSeen::of(&speeds, wob_n.as_deref());
     let mut depths = rows.iter().filter_map(|r| r.depth_m);
@@ -115,7 +117,8 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
         Some(p) if !p.inputs.is_empty() => {
             let (lo, hi) = rows
                 .iter()
-                .map(|r| r.speed_rad_s)
+                .filter_map(|r| r.bit)
+                .map(|b| b.speed_rad_s)
                 .filter(|w| w.is_finite())
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), w| (a.min(w), b.max(w)));
             let band = (lo < hi).then(|| {
@@ -208,10 +211,13 @@ mod tests {
     fn row(w: f64, t: f64) -> Row {
         Row {
             time_s: Some(w),
-            speed_rad_s: w,
-            torque_nm: t,
+            bit: Some(crate::data::BitReading {
+                speed_rad_s: w,
+                torque_nm: t,
+            }),
             wob_n: None,
             top_drive_rad_s: None,
+            surface_torque_nm: None,
             depth_m: None,
         }
     }

@@ -251,10 +251,13 @@ mod tests {
     fn row(t: f64) -> Row {
         Row {
             time_s: Some(t),
-            speed_rad_s: t,
-            torque_nm: 1.0,
+            bit: Some(crate::data::BitReading {
+                speed_rad_s: t,
+                torque_nm: 1.0,
+            }),
             wob_n: None,
             top_drive_rad_s: None,
+            surface_torque_nm: None,
             depth_m: None,
         }
     }

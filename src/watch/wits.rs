@@ -211,6 +211,7 @@ impl WitsReader {
                 .top_drive
                 .as_deref()
                 .map(|code| (item(code), self.speed_unit)),
+            surface: None,
         }
     }
 
@@ -297,10 +298,13 @@ impl WitsReader {
             };
             Ok(Row {
                 time_s: Some(time_s),
-                speed_rad_s: self.speed_unit.to_rad_s(speed),
-                torque_nm: torque * self.torque_unit.newton_metres(),
+                bit: Some(crate::data::BitReading {
+                    speed_rad_s: self.speed_unit.to_rad_s(speed),
+                    torque_nm: torque * self.torque_unit.newton_metres(),
+                }),
                 wob_n: wob,
                 top_drive_rad_s: top_drive,
+                surface_torque_nm: None,
                 depth_m: None,
             })
         })())
@@ -380,8 +384,8 @@ mod tests {
         assert_eq!(got.len(), 4, "another record's block is passed over: {got:?}");
         let first = got[0].as_ref().unwrap();
         assert_eq!(first.time_s, Some(86_399.0));
-        assert!((first.speed_rad_s - 2.0 * std::f64::consts::PI).abs() < 1e-12);
-        assert!((first.torque_nm - 10_500.0).abs() < 1e-9);
+        assert!((first.bit.unwrap().speed_rad_s - 2.0 * std::f64::consts::PI).abs() < 1e-12);
+        assert!((first.bit.unwrap().torque_nm - 10_500.0).abs() < 1e-9);
         assert_eq!(first.wob_n, Some(120_000.0));
         assert_eq!(got[1].as_ref().unwrap().time_s, Some(86_401.5), "the next day");
         assert!(

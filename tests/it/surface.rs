@@ -705,3 +705,96 @@ fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
     let continued = infer_continuing(&record, &settings, 11, sampling, &mut |_| {}).unwrap();
     assert_eq!(text(&continued), text(&whole));
 }
+
+/// A watch of a record of surface channels alone: each window through simulated strings,
+/// the same inference as `bitrock surface` on the window's rows (window k seeded seed + k),
+/// its model choice checked, and its advice from the bit the surface implies.
+#[test]
+fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
+    // m2 at 60 rpm, four minutes at 1 Hz, surface channels only: the bit stuck about half the
+    // time.
+    let (dir, path, bit_speed) = record_on(Lumped::default(), Law::M2, 60.0, 240.0, 1.0, 0.2, 3, Channels::Surface);
+    let watch = |path: &std::path::Path, laws: &str, extra: &[&str]| {
+        let (code, out, err) = outcome(
+            bin()
+                .arg("watch")
+                .arg(path)
+                .args([
+                    "--laws",
+                    laws,
+                    "--window-s",
+                    "120",
+                    "--step-s",
+                    "60",
+                    "--backend",
+                    "cpu",
+                ])
+                .args(["--seed", "7", "--json"])
+                .args(extra),
+        );
+        let updates: Vec<serde_json::Value> = out.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        (code, updates, err)
+    };
+    let (code, updates, err) = watch(&path, "m2", &[]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(updates.len(), 3, "{err}");
+    for u in &updates {
+        assert!(u["uninformative"].is_null(), "{u}");
+        assert_eq!(u["check"]["decided"], "m2", "{u}");
+        // The bit's stuck share over the window, as its surface implies it, against the truth.
+        let (from, to) = (
+            u["start_s"].as_f64().unwrap() as usize,
+            u["end_s"].as_f64().unwrap() as usize,
+        );
+        let mut seen = Summary::default();
+        for w in &bit_speed[from..to] {
+            seen.push(*w, f64::NAN, f64::NAN);
+        }
+        let advice = &u["advice"];
+        let implied = advice["stuck_share"].as_f64().unwrap();
+        assert!(seen.stuck_share() > 0.4, "{}", seen.stuck_share());
+        assert!(
+            (implied - seen.stuck_share()).abs() <= 0.06,
+            "{implied} against {}",
+            seen.stuck_share()
+        );
+        assert_eq!(advice["stick_slip_now"], true, "{advice}");
+        assert!(advice["escape_omega_rpm"][0].as_f64().unwrap() > 60.0, "{advice}");
+    }
+    // Window 0 is `bitrock surface` on its 120 rows with the watch's settings and seed.
+    let text = std::fs::read_to_string(&path).unwrap();
+    let first = dir.path().join("first.csv");
+    std::fs::write(&first, text.lines().take(121).collect::<Vec<_>>().join("\n") + "\n").unwrap();
+    let (code, out, err) = outcome(
+        bin()
+            .arg("surface")
+            .arg(&first)
+            .args(["--laws", "m2", "--backend", "cpu", "--seed", "7", "--particles", "300"])
+            .args(["--max-populations", "6", "--pilot", "300", "--check-replicates", "10"])
+            .args(["--predictive-draws", "40", "--no-advice", "--json"]),
+    );
+    assert_eq!(code, 0, "{err}");
+    let alone: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(
+        updates[0]["advice"]["stuck_share"],
+        alone["at_the_bit"]["stuck_share"][1]
+    );
+    assert_eq!(updates[0]["epsilon"], alone["final_epsilon"]);
+    assert_eq!(updates[0]["candidates_scored"], alone["simulations"]);
+
+    // A bit that turns steadily (150 rpm): its surface torque shows no cycle, and no window
+    // is taken to inform the law.
+    let (_steady_dir, steady, _) = record_on(Lumped::default(), Law::M2, 150.0, 240.0, 1.0, 0.1, 5, Channels::Surface);
+    let (code, updates, err) = watch(&steady, "m1,m2", &[]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(updates.len(), 3);
+    for u in &updates {
+        let why = u["uninformative"].as_str().unwrap_or_default();
+        assert!(why.contains("only through T(Ω)"), "{u}");
+        assert!(u["laws"].as_array().unwrap().is_empty() && u["advice"].is_null(), "{u}");
+    }
+    // The paper's ABC fits the bit's torque: refused on surface channels, by its flag.
+    let (code, _, err) = watch(&path, "m2", &["--abc"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("abc") && err.contains("simulated strings"), "{err}");
+}

@@ -86,6 +86,10 @@ pub(crate) fn watch(
             seed: kwarg(options, "seed")?.unwrap_or(defaults.evidence.seed),
             ..defaults.evidence.clone()
         },
+        surface: bitrock::run::surface::Settings {
+            particles: particles.filter(|_| !abc).unwrap_or(defaults.surface.particles),
+            ..defaults.surface.clone()
+        },
         forgetting: kwarg(options, "forgetting")?.unwrap_or(defaults.forgetting),
         floor: kwarg(options, "floor")?.unwrap_or(defaults.floor),
         change_nats: kwarg(options, "change_nats")?.unwrap_or(defaults.change_nats),

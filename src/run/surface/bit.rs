@@ -3,6 +3,20 @@
 
 use super::*;
 
+/// The bit as the surface implies it: the posterior medians of its `stuck_share` and
+/// `severity`, at the top drive's mean speed and the record's mean weight on bit (where
+/// recorded): what the advice takes for the bit seen.
+pub fn implied_bit(record: &SurfaceRecord, stuck_share: f64, severity: f64) -> crate::data::BitSeen {
+    crate::data::BitSeen {
+        samples: record.time_s.len(),
+        stuck_share,
+        severity: Some(severity),
+        mean_speed_rpm: record.mean_top_drive_rad_s() / RAD_S_PER_RPM,
+        peak_speed_rpm: None,
+        mean_wob_kn: record.wob_n.is_some().then(|| mean_wob_n(record, None) / 1000.0),
+    }
+}
+
 /// The bit's speed on the record's clock from posterior draws (see [`AtTheBit`]).
 pub(super) fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: usize, seed: u64) -> Result<AtTheBit> {
     let all: Vec<&Particle> = particles.iter().collect();

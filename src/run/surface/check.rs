@@ -71,17 +71,8 @@ pub(super) fn check(
 
 /// The law called and why (see [`CHECK_RECOGNISED`]).
 pub(super) fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<Law>, String) {
-    if !cycle.informs() {
-        return (
-            None,
-            match cycle.period_s {
-                None => "no stick-slip cycle in the surface torque: the record informs the law only through T(Ω) at its speed, not its shape; no law is called".into(),
-                Some(p) => format!(
-                    "the record holds {:.1} cycles of {p:.1} s, fewer than {MIN_CYCLES}: too few to tell the laws apart; no law is called",
-                    cycle.cycles
-                ),
-            },
-        );
+    if let Some(why) = cycle.uninformative("record") {
+        return (None, format!("{why}; no law is called"));
     }
     let Some(best) = laws.iter().max_by(|a, b| a.probability.total_cmp(&b.probability)) else {
         return (None, "no law has particles".into());

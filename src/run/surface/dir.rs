@@ -464,14 +464,7 @@ impl Finished {
                 .as_f64()
                 .ok_or_else(|| self.malformed(format!("at_the_bit.{name} has no median")))
         };
-        Ok(BitSeen {
-            samples: record.time_s.len(),
-            stuck_share: median("stuck_share")?,
-            severity: Some(median("severity")?),
-            mean_speed_rpm: record.mean_top_drive_rad_s() / crate::units::RAD_S_PER_RPM,
-            peak_speed_rpm: None,
-            mean_wob_kn: record.wob_n.is_some().then(|| super::mean_wob_n(record, None) / 1000.0),
-        })
+        Ok(super::implied_bit(record, median("stuck_share")?, median("severity")?))
     }
 
     /// The 1-DOF string the run simulated its candidates on: as given, or where it inferred

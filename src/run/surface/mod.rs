@@ -31,8 +31,8 @@ pub mod dir;
 mod pilot;
 mod settings;
 
-pub use bit::mean_wob_n;
 use bit::*;
+pub use bit::{implied_bit, mean_wob_n};
 use check::*;
 use pilot::*;
 pub use settings::*;
@@ -86,6 +86,33 @@ impl Cycle {
     /// [`MIN_CYCLES`] times.
     pub fn informs(&self) -> bool {
         self.period_s.is_some() && self.cycles >= MIN_CYCLES
+    }
+
+    /// Why the dynamics of a `span` (`record`, `window`) cannot inform the law, where they
+    /// cannot: no cycle, or too few.
+    pub fn uninformative(&self, span: &str) -> Option<String> {
+        if self.informs() {
+            return None;
+        }
+        Some(match self.period_s {
+            None => format!(
+                "no stick-slip cycle in the surface torque: the {span} informs the law only through T(Ω) at its speed, not its shape"
+            ),
+            Some(p) => format!(
+                "the {span} holds {:.1} cycles of {p:.1} s, fewer than {MIN_CYCLES}: too few to tell the laws apart",
+                self.cycles
+            ),
+        })
+    }
+
+    /// What `record`'s surface torque shows, before any string is simulated.
+    pub fn of_record(record: &SurfaceRecord) -> Self {
+        let observed = summaries(
+            &record.surface_torque_nm,
+            record.sample_period_s,
+            &DownholeExtremes::record_summaries(record),
+        );
+        Self::of(&observed, record.duration_s())
     }
 }
 
@@ -355,6 +382,11 @@ impl Cost {
 }
 
 impl SurfaceResult {
+    /// The bit as this result implies it on `record` ([`implied_bit`]).
+    pub fn bit_seen(&self, record: &SurfaceRecord) -> crate::data::BitSeen {
+        implied_bit(record, self.at_the_bit.stuck_share[1], self.at_the_bit.severity[1])
+    }
+
     /// The bit's predicted speed per sample of `record` (time_s, bit_speed_rpm_p05, _p50,
     /// _p95) as CSV.
     pub fn bit_csv(&self, record: &SurfaceRecord, out: &mut dyn std::io::Write) -> std::io::Result<()> {
