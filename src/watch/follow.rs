@@ -431,6 +431,7 @@ fn start_watch(
                 rate_hz,
                 torque_unit: unit,
                 bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
+                surface: rows.declared().surface,
             };
             if let Some(dir) = options.dir {
                 kept = Some(store::WatchStore::create(dir, &meta)?);

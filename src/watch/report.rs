@@ -42,21 +42,44 @@ fn markdown(watch: &StoredWatch) -> String {
         meta.torque_unit.label(),
         updates.len(),
     );
+    let laws = settings["laws"]
+        .as_array()
+        .map(|l| l.iter().filter_map(|v| v.as_str()).collect::<Vec<_>>().join(", "))
+        .unwrap_or_default();
+    let per_window = match &meta.surface {
+        Some(columns) => {
+            let s = &settings["surface"];
+            format!(
+                "a record of surface channels alone (top-drive speed '{}', surface torque '{}'), each window's laws \
+                 through strings simulated per candidate: ABC-SMC of {} particles, at most {} populations, a pilot of {}, \
+                 its model choice checked by {} records re-simulated per law (seed {})",
+                columns.top_drive,
+                columns.surface_torque,
+                s["particles"],
+                s["max_populations"],
+                s["pilot"],
+                s["check_replicates"],
+                settings["seed"],
+            )
+        }
+        None => format!(
+            "the evidence of each law per window from {} particles × {} islands (seed {})",
+            settings["particles"], settings["islands"], settings["seed"],
+        ),
+    };
+    let change = match &meta.surface {
+        Some(_) => "no change of formation judged (the change rule compares fits of the bit's channels)".to_string(),
+        None => format!(
+            "a change declared beyond {} nats over the running level",
+            settings["change_nats"]
+        ),
+    };
     let _ = writeln!(
         md,
-        "Settings: laws {}; the evidence of each law per window from {} particles × {} islands (seed {}); \
-         probabilities carried with forgetting {} and floor {}; a change declared beyond {} nats over the \
-         running level; advice below a risk of {}. Watched by bitrock {}.\n",
-        settings["laws"]
-            .as_array()
-            .map(|l| l.iter().filter_map(|v| v.as_str()).collect::<Vec<_>>().join(", "))
-            .unwrap_or_default(),
-        settings["particles"],
-        settings["islands"],
-        settings["seed"],
+        "Settings: laws {laws}; {per_window}; probabilities carried with forgetting {} and floor {}; \
+         {change}; advice below a risk of {}. Watched by bitrock {}.\n",
         settings["forgetting"],
         settings["floor"],
-        settings["change_nats"],
         settings["risk"],
         meta.bitrock_version,
     );
@@ -169,8 +192,16 @@ fn last_window_section(md: &mut String, last: &Update) {
             l.law, l.probability, l.window_probability
         );
     }
+    if let Some(check) = &last.check {
+        let _ = writeln!(md, "\nIts model choice, checked by re-simulation: {}.", check.verdict);
+    }
     if let Some(epsilon) = last.epsilon {
-        let _ = writeln!(md, "\nThe window's ABC ended at ε = {epsilon:.5}.");
+        let sampler = if last.check.is_some() {
+            "sampler of simulated strings"
+        } else {
+            "ABC"
+        };
+        let _ = writeln!(md, "\nThe window's {sampler} ended at ε = {epsilon:.5}.");
     }
     if let Some(advice) = &last.advice {
         let _ = writeln!(md, "\nAdvice: {}.", advice.words);

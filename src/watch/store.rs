@@ -64,6 +64,10 @@ pub struct WatchMeta {
     /// The record's torque unit (parameters are reported in it).
     pub torque_unit: crate::units::TorqueUnit,
     pub bitrock_version: String,
+    /// The columns of a record of surface channels alone, each window of which was inferred
+    /// through simulated strings; `None` for a record of the bit's channels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface: Option<crate::data::surface::SurfaceColumns>,
 }
 
 /// The settings that decide a watch's numbers, as JSON: what a resumed watch must match.

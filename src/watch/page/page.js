@@ -147,7 +147,7 @@ function renderNow(u) {
   const title = u.most_probable ? titled(u.most_probable).slice(u.most_probable.length + 1) : '';
   $('most-probable-title').textContent = title;
   const answer = $('answer');
-  answer.textContent = `this window's answer: ${u.answer ? u.answer.sentence : '—'}`;
+  answer.textContent = `this window's answer: ${u.answer ? u.answer.sentence : u.check ? `checked by re-simulation: ${u.check.verdict}` : '—'}`;
   const change = $('change');
   change.textContent = u.change ? `changed here (${fixed(u.change_nats, 0)} nats)` : u.uninformative ? 'this window informs nothing' : 'same';
   change.className = u.change ? 'changed' : '';
