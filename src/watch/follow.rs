@@ -373,7 +373,7 @@ fn start_watch(
                 ("a surface average", "it was", "it")
             };
             observer.note(format!(
-                "warning: {}, {average}, read as the bit's: where {it_was} measured at the surface, the laws fitted to {it} describe the string's top, not the bit (a stuck bit's surface torque still swings); the MWD's downhole items are named with `wits_items`, and a surface record's law is inferred with `bitrock surface`",
+                "warning: {}, {average}, read as the bit's: where {it_was} measured at the surface, the laws fitted to {it} describe the string's top, not the bit (a stuck bit's surface torque still swings); the MWD's downhole items are named with `wits_items`; read as surface channels (`wits_items` surface_torque=0118), each window's law is inferred through simulated strings",
                 surface.join(" and ")
             ));
         }

@@ -78,10 +78,7 @@ fn markdown(watch: &StoredWatch) -> String {
         md,
         "Settings: laws {laws}; {per_window}; probabilities carried with forgetting {} and floor {}; \
          {change}; advice below a risk of {}. Watched by bitrock {}.\n",
-        settings["forgetting"],
-        settings["floor"],
-        settings["risk"],
-        meta.bitrock_version,
+        settings["forgetting"], settings["floor"], settings["risk"], meta.bitrock_version,
     );
 
     changes_section(&mut md, updates);

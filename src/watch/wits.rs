@@ -9,6 +9,7 @@
 //! WITS carries no units: the torque's unit (and the weight on bit's, where one is read) must
 //! be named; the speed is in rpm unless named.
 
+use crate::data::surface::SurfaceColumns;
 use crate::data::{DataOptions, Row};
 use crate::error::{Error, Result};
 use crate::units::{ForceUnit, SpeedUnit, TorqueUnit};
@@ -33,6 +34,11 @@ pub struct WitsItems {
     pub wob: Option<String>,
     pub top_drive: Option<String>,
     pub time: WitsTime,
+    /// The surface torque's item: a feed of surface channels alone, read as what they are
+    /// (the top-drive speed from `top_drive`, record 01's 0120 where none is named; no bit
+    /// channel), each window inferred through simulated strings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_torque: Option<String>,
 }
 
 impl Default for WitsItems {
@@ -48,6 +54,7 @@ impl Default for WitsItems {
                 date: "0105".into(),
                 time: "0106".into(),
             },
+            surface_torque: None,
         }
     }
 }
@@ -57,6 +64,9 @@ impl WitsItems {
     /// averages (0120 rotary speed, 0118 rotary torque), each with what it is: read as the
     /// bit's, they are said to be surface channels.
     pub fn surface_averages(&self) -> Vec<(&str, &'static str)> {
+        if self.surface_torque.is_some() {
+            return Vec::new();
+        }
         [
             (&self.speed, "0120", "rotary speed"),
             (&self.torque, "0118", "rotary torque"),
@@ -68,11 +78,13 @@ impl WitsItems {
     }
 
     /// Items from `spec`, `key=CODE` pairs separated by commas over the defaults: keys
-    /// `speed`, `torque`, `wob`, `top_drive`, `date`, `time` (HHMMSS) and `seconds` (an item in
-    /// seconds, instead of date and time); `wob=none` reads no weight on bit.
+    /// `speed`, `torque`, `wob`, `top_drive`, `date`, `time` (HHMMSS), `seconds` (an item in
+    /// seconds, instead of date and time) and `surface_torque` (a feed of surface channels
+    /// alone: [`WitsItems::surface_torque`]); `wob=none` reads no weight on bit.
     pub fn parse(spec: &str) -> Result<Self> {
         let refuse = |message: String| Error::setting("wits_items", message);
         let mut items = Self::default();
+        let mut bit_keys = Vec::new();
         for pair in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let (key, code) = pair
                 .split_once('=')
@@ -88,11 +100,15 @@ impl WitsItems {
                 )));
             }
             let code = code.to_string();
+            if matches!(key.trim(), "speed" | "torque") {
+                bit_keys.push(key.trim().to_string());
+            }
             match key.trim() {
                 "speed" => items.speed = code,
                 "torque" => items.torque = code,
                 "wob" => items.wob = Some(code),
                 "top_drive" => items.top_drive = Some(code),
+                "surface_torque" => items.surface_torque = Some(code),
                 "seconds" => items.time = WitsTime::Seconds(code),
                 "date" | "time" => {
                     let (mut date, mut time) = match &items.time {
@@ -108,18 +124,36 @@ impl WitsItems {
                 }
                 other => {
                     return Err(refuse(format!(
-                        "unknown key '{other}' (speed, torque, wob, top_drive, date, time, seconds)"
+                        "unknown key '{other}' (speed, torque, wob, top_drive, surface_torque, date, time, seconds)"
                     )));
                 }
             }
         }
+        if items.surface_torque.is_some() && !bit_keys.is_empty() {
+            return Err(refuse(format!(
+                "{} name the bit's channels, and surface_torque a feed of surface channels alone: keep one",
+                bit_keys.join(" and ")
+            )));
+        }
         Ok(items)
     }
 
+    /// A feed of surface channels alone: its top-drive speed's item and its surface torque's.
+    pub fn surface(&self) -> Option<(&str, &str)> {
+        let torque = self.surface_torque.as_deref()?;
+        Some((self.top_drive.as_deref().unwrap_or(RECORD_01_ROTARY_SPEED), torque))
+    }
+
     fn codes(&self) -> Vec<&str> {
-        let mut codes = vec![self.speed.as_str(), self.torque.as_str()];
+        let mut codes = match self.surface() {
+            Some((top_drive, torque)) => vec![top_drive, torque],
+            None => {
+                let mut codes = vec![self.speed.as_str(), self.torque.as_str()];
+                codes.extend(self.top_drive.as_deref());
+                codes
+            }
+        };
         codes.extend(self.wob.as_deref());
-        codes.extend(self.top_drive.as_deref());
         match &self.time {
             WitsTime::Clock { date, time } => codes.extend([date.as_str(), time.as_str()]),
             WitsTime::Seconds(code) => codes.push(code),
@@ -127,6 +161,10 @@ impl WitsItems {
         codes
     }
 }
+
+/// WITS record 01's rotary speed, a surface average: a surface feed's top-drive speed unless
+/// another item is named.
+const RECORD_01_ROTARY_SPEED: &str = "0120";
 
 /// Most items a WITS block may hold before its `!!`: a record has some tens; a block never
 /// closed is given up at this many instead of growing without end.
@@ -154,7 +192,7 @@ impl WitsReader {
                 "torque_unit",
                 format!(
                     "a WITS feed names no units: give the unit of its torque (item {})",
-                    items.torque
+                    items.surface().map_or(items.torque.as_str(), |(_, torque)| torque)
                 ),
             )
         })?;
@@ -190,15 +228,26 @@ impl WitsReader {
     /// The items read, named by their codes, and their units (the time in seconds).
     pub fn declared(&self) -> crate::data::Declared {
         let item = |code: &str| format!("item {code}");
+        let time = match &self.items.time {
+            WitsTime::Clock { date, time } => format!("items {date} and {time}"),
+            WitsTime::Seconds(code) => item(code),
+        };
+        let (speed, torque) = self.items.surface().unwrap_or((&self.items.speed, &self.items.torque));
+        let surface = self.items.surface().map(|(top_drive, torque)| SurfaceColumns {
+            time: time.clone(),
+            top_drive: item(top_drive),
+            surface_torque: item(torque),
+            wob: self.items.wob.as_deref().map(item),
+            bit: Vec::new(),
+            downhole_min: None,
+            downhole_max: None,
+        });
         crate::data::Declared {
             columns: crate::data::ColumnsUsed {
-                speed: item(&self.items.speed),
-                torque: item(&self.items.torque),
+                speed: item(speed),
+                torque: item(torque),
                 wob: self.items.wob.as_deref().map(item),
-                time: Some(match &self.items.time {
-                    WitsTime::Clock { date, time } => format!("items {date} and {time}"),
-                    WitsTime::Seconds(code) => item(code),
-                }),
+                time: Some(time),
             },
             units: crate::data::ColumnUnits {
                 speed: self.speed_unit,
@@ -206,12 +255,11 @@ impl WitsReader {
                 wob: self.wob_unit,
                 time_in_ms: false,
             },
-            top_drive: self
-                .items
-                .top_drive
-                .as_deref()
-                .map(|code| (item(code), self.speed_unit)),
-            surface: None,
+            top_drive: match self.items.surface() {
+                Some((code, _)) => Some((item(code), self.speed_unit)),
+                None => self.items.top_drive.as_deref().map(|code| (item(code), SpeedUnit::Rpm)),
+            },
+            surface,
         }
     }
 
@@ -266,15 +314,28 @@ impl WitsReader {
             value(code)?.ok_or_else(|| format!("a WITS block without item {code} ({what})"))
         };
         Some((|| {
-            let speed = required(&self.items.speed, "speed")?;
-            let torque = required(&self.items.torque, "torque")?;
+            // A surface feed's channels as what they are; a bit feed's as the bit's.
+            let (bit, top_drive, surface_torque_nm) = match self.items.surface() {
+                Some((top_drive, torque)) => (
+                    None,
+                    Some(self.speed_unit.to_rad_s(required(top_drive, "top-drive speed")?)),
+                    Some(required(torque, "surface torque")? * self.torque_unit.newton_metres()),
+                ),
+                None => (
+                    Some(crate::data::BitReading {
+                        speed_rad_s: self.speed_unit.to_rad_s(required(&self.items.speed, "speed")?),
+                        torque_nm: required(&self.items.torque, "torque")? * self.torque_unit.newton_metres(),
+                    }),
+                    match &self.items.top_drive {
+                        Some(code) => Some(SpeedUnit::Rpm.to_rad_s(required(code, "top-drive speed")?)),
+                        None => None,
+                    },
+                    None,
+                ),
+            };
             let wob = match (&self.items.wob, self.wob_unit) {
                 (Some(code), Some(unit)) => Some(required(code, "weight on bit")? * unit.newtons()),
                 _ => None,
-            };
-            let top_drive = match &self.items.top_drive {
-                Some(code) => Some(SpeedUnit::Rpm.to_rad_s(required(code, "top-drive speed")?)),
-                None => None,
             };
             let time_s = match self.items.time.clone() {
                 WitsTime::Seconds(code) => required(&code, "time, s")?,
@@ -298,13 +359,10 @@ impl WitsReader {
             };
             Ok(Row {
                 time_s: Some(time_s),
-                bit: Some(crate::data::BitReading {
-                    speed_rad_s: self.speed_unit.to_rad_s(speed),
-                    torque_nm: torque * self.torque_unit.newton_metres(),
-                }),
+                bit,
                 wob_n: wob,
                 top_drive_rad_s: top_drive,
-                surface_torque_nm: None,
+                surface_torque_nm,
                 depth_m: None,
             })
         })())
@@ -368,6 +426,36 @@ mod tests {
         assert!(downhole.surface_averages().is_empty());
         let torque_only = WitsItems::parse("speed=0902").unwrap();
         assert_eq!(torque_only.surface_averages(), [("0118", "rotary torque")]);
+    }
+
+    #[test]
+    fn a_feed_of_surface_channels_is_read_as_what_it_is() {
+        let items = WitsItems::parse("surface_torque=0118").unwrap();
+        assert!(items.surface_averages().is_empty(), "nothing read as the bit's");
+        let mut r = reader(items);
+        let got = rows(&mut r, "&&\n0105261127\n0106120000\n012060\n011810.5\n0116 120\n!!\n");
+        let row = got[0].as_ref().unwrap();
+        assert_eq!(row.bit, None);
+        assert!((row.top_drive_rad_s.unwrap() - 2.0 * std::f64::consts::PI).abs() < 1e-12);
+        assert!((row.surface_torque_nm.unwrap() - 10_500.0).abs() < 1e-9);
+        assert_eq!(row.wob_n, Some(120_000.0));
+        let declared = r.declared();
+        let surface = declared.surface.unwrap();
+        assert_eq!(
+            (surface.top_drive.as_str(), surface.surface_torque.as_str()),
+            ("item 0120", "item 0118")
+        );
+        // A block without the surface torque is skipped, naming it.
+        let got = rows(&mut r, "&&\n0105261127\n0106120001\n012060\n0116 120\n!!\n");
+        assert!(
+            got[0].as_ref().unwrap_err().contains("0118 (surface torque)"),
+            "{got:?}"
+        );
+        // The bit's channels and a surface feed at once: refused.
+        let both = WitsItems::parse("speed=0902,surface_torque=0118")
+            .unwrap_err()
+            .to_string();
+        assert!(both.contains("speed") && both.contains("surface_torque"), "{both}");
     }
 
     #[test]

@@ -782,6 +782,39 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
     assert_eq!(updates[0]["epsilon"], alone["final_epsilon"]);
     assert_eq!(updates[0]["candidates_scored"], alone["simulations"]);
 
+    // The same record as a rig's WITS feed of surface channels (item 0999 its seconds, 0120
+    // the rotary speed, 0118 the rotary torque, 0116 the WOB): the same windows, number for
+    // number.
+    let wits = dir.path().join("rig.wits");
+    let blocks: String = text
+        .lines()
+        .skip(1)
+        .map(|line| {
+            let cells: Vec<&str> = line.split(',').collect();
+            format!(
+                "&&\n0999{}\n0120{}\n0118{}\n0116{}\n!!\n",
+                cells[0], cells[1], cells[2], cells[3]
+            )
+        })
+        .collect();
+    std::fs::write(&wits, blocks).unwrap();
+    let items = [
+        "--wits-items",
+        "seconds=0999,surface_torque=0118",
+        "--torque-unit",
+        "knm",
+        "--wob-unit",
+        "kn",
+    ];
+    let (code, fed, err) = watch(&wits, "m2", &items);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(fed.len(), updates.len());
+    for (fed, read) in fed.iter().zip(&updates) {
+        for field in ["epsilon", "candidates_scored", "laws", "advice", "check"] {
+            assert_eq!(fed[field], read[field], "{field}");
+        }
+    }
+
     // A bit that turns steadily (150 rpm): its surface torque shows no cycle, and no window
     // is taken to inform the law.
     let (_steady_dir, steady, _) = record_on(Lumped::default(), Law::M2, 150.0, 240.0, 1.0, 0.1, 5, Channels::Surface);
