@@ -365,7 +365,13 @@ impl Watch {
             Ok(selected) => {
                 update.check = Some(selected.check);
                 self.carry_selection(&mut update, selected.selection, self.declared.units.torque);
-                Ok(self.completed(update, window, Some(selected.bit)))
+                let mut update = self.completed(update, window, Some(selected.bit));
+                if let (Some(advice), Some(caveat)) = (update.advice.as_mut(), &selected.caveat)
+                    && (advice.escape_omega_rpm.is_some() || advice.escape_wob_kn.is_some())
+                {
+                    advice.words.push_str(caveat);
+                }
+                Ok(update)
             }
             Err(why) => {
                 update.uninformative = Some(why);

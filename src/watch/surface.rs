@@ -10,7 +10,7 @@
 use super::*;
 use crate::data::BitSeen;
 use crate::data::surface::SurfaceRecord;
-use crate::run::surface::{Cycle, SurfaceSettings, ValueOrBounds};
+use crate::run::surface::{Cycle, SurfaceSettings, ValueOrBounds, unidentified_caveat};
 
 /// Particles per population of each surface window's sampler by default.
 pub const SURFACE_PARTICLES: usize = 300;
@@ -37,6 +37,8 @@ pub(super) struct SurfaceSelected {
     pub(super) bit: BitSeen,
     /// The check by re-simulation of the model choice.
     pub(super) check: WindowCheck,
+    /// What a way out would rest on that the window does not tell ([`unidentified_caveat`]).
+    pub(super) caveat: Option<String>,
 }
 
 impl Watch {
@@ -101,6 +103,7 @@ impl Watch {
         let laws = Selected::of_population(&self.settings.laws, last);
         Ok(Ok(SurfaceSelected {
             bit: result.bit_seen(&record),
+            caveat: unidentified_caveat(&result.laws, advice::ESCAPE_MIN_PROBABILITY),
             check: WindowCheck {
                 decided: result.check.decided,
                 verdict: result.check.verdict.clone(),

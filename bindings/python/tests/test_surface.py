@@ -2,14 +2,16 @@
 with its own stick handling, the twin of test_strings.py): the surface channels inferred from,
 the bit's speed kept as the truth."""
 
+import json
 import os
 
 import numpy as np
 import pandas as pd
 import pytest
-from test_strings import RPM, STUCK_RAD_S, integrate, one_dof, torque_law
+from test_strings import RPM, STUCK_RAD_S, after_change, cycles_at, integrate, one_dof, torque_law
 
 import bitrock
+from conftest import run_cli
 
 M2_NM = [13000.0, 6500.0, 0.3]
 
@@ -244,3 +246,41 @@ def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path
     with pytest.raises(bitrock.InputError) as caught:
         bitrock.resume_surface(out, backend="abacus")
     assert caught.value.argument == "backend"
+
+
+def test_a_watch_of_an_independent_string_s_surface_implies_its_bit_window_by_window(cli, tmp_path):
+    # The independent integrator's m2 at 60 rpm, five minutes of surface channels at 1 Hz,
+    # watched in two windows of 150 s: each window's laws through simulated strings, its model
+    # choice checked, and the bit it implies against the twin's own bit.
+    path = tmp_path / "rig.csv"
+    speeds = twin_record(path)
+    watch = bitrock.watch(path, laws=["m2", "m3"], window_s=150, step_s=150, backend="cpu", seed=4)
+    updates = list(watch)
+    assert len(updates) == 2
+    for u in updates:
+        assert u.uninformative is None, u
+        assert u.check["verdict"], u.check
+        start, end = int(u.start_s), int(u.end_s)
+        truth = float(np.mean(np.abs(speeds[start:end]) < STUCK_RAD_S))
+        assert truth > 0.4
+        assert abs(u.advice["stuck_share"] - truth) <= 0.06, (u.advice, truth)
+        assert u.advice["stick_slip_now"] and u.advice["escape_omega_rpm"][0] > 60.0, u.advice
+    # Each way out applied in the twin's own string from its cycle at 60 rpm, at eight phases:
+    # where it does not end the stick-slip, the advice says what it rests on that the surface
+    # leaves to the prior (here m2's g: the cycle at one speed does not tell how the torque
+    # falls with speed).
+    chain, p_nm = one_dof(), np.array(M2_NM)
+    for u in updates:
+        rpm = u.advice["escape_omega_rpm"][0]
+        left = max(after_change(chain, "m2", p_nm, rpm * RPM, 1.0, state) for _, state in cycles_at(chain, "m2", p_nm, 60.0 * RPM, 1.0))
+        assert left == 0.0 or "m2's g to the prior" in u.advice["words"], (rpm, left, u.advice["words"])
+    lines = [
+        json.loads(line)
+        for line in run_cli(
+            cli, "watch", str(path), "--json", "--laws", "m2,m3", "--window-s", "150", "--step-s", "150",
+            "--backend", "cpu", "--seed", "4",
+        ).stdout.splitlines()
+    ]
+    for ours, theirs in zip(updates, lines, strict=True):
+        for key in ("laws", "advice", "check", "epsilon"):
+            assert ours.document[key] == theirs[key], key

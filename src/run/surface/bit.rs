@@ -95,6 +95,31 @@ pub fn mean_wob_n(record: &SurfaceRecord, w_ref_n: Option<f64>) -> f64 {
 }
 
 /// The simulated escape advice from the record's mean operating point.
+/// What a surface run's way out rests on that its record does not tell: the parameters of the
+/// laws at least `min_probability` likely that the record leaves to their prior boxes. The
+/// cycle at one top-drive speed does not say how the torque falls with speed (m2's g): strings
+/// whose cycle matches the record's may leave it at speeds far apart. `None` where every such
+/// parameter is identified.
+pub fn unidentified_caveat(laws: &[LawPosterior], min_probability: f64) -> Option<String> {
+    let named: Vec<String> = laws
+        .iter()
+        .filter(|l| l.probability >= min_probability)
+        .flat_map(|l| {
+            l.params
+                .iter()
+                .filter(|p| !p.identified)
+                .map(move |p| format!("{}'s {}", l.law, p.name))
+        })
+        .collect();
+    (!named.is_empty()).then(|| {
+        format!(
+            "; but the record leaves {} to the prior, and the way out depends on {}: the speed or weight that ends the stick-slip may lie further (the cycle seen at a second top-drive speed, or a downhole record, tells)",
+            named.join(", "),
+            if named.len() == 1 { "it" } else { "them" }
+        )
+    })
+}
+
 pub(super) fn escape_advice(
     record: &SurfaceRecord,
     settings: &SurfaceSettings,
@@ -136,5 +161,6 @@ pub(super) fn escape_advice(
         &advice_speeds_rpm(point.omega_rpm),
         &advice_weights_kn(point.wob_kn),
     )?;
-    Ok(advice.text())
+    let caveat = unidentified_caveat(laws, 0.0).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
+    Ok(advice.text() + caveat.as_deref().unwrap_or(""))
 }

@@ -32,7 +32,7 @@ mod pilot;
 mod settings;
 
 use bit::*;
-pub use bit::{implied_bit, mean_wob_n};
+pub use bit::{implied_bit, mean_wob_n, unidentified_caveat};
 use check::*;
 use pilot::*;
 pub use settings::*;

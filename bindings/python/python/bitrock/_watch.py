@@ -49,8 +49,10 @@ class WatchUpdate:
     """One window's update: the fields of ``bitrock watch --json``'s line as attributes
     (``window``, ``start_s``, ``end_s``, ``samples_used``, ``uninformative``,
     ``most_probable``, ``change``, ``change_nats``, ``advice``, ``candidates_scored``,
-    ``epsilon`` (the tolerance of the window's ABC, ``None`` for the evidence), ``latency_s``),
-    ``laws`` as a DataFrame indexed by law, and the whole line as ``document``."""
+    ``epsilon`` (the tolerance of the window's ABC, ``None`` for the evidence), ``latency_s``,
+    and, for a record of surface channels alone, ``check``: the check by re-simulation of the
+    window's model choice, ``{"decided": law or None, "verdict": words}``), ``laws`` as a
+    DataFrame indexed by law, and the whole line as ``document``."""
 
     def __init__(self, document: dict[str, Any]) -> None:
         self.document = document
@@ -277,6 +279,11 @@ def watch(
     window). ``abc=True`` gives each window's law probabilities by the paper's ABC instead of
     the evidence (``sampler``, ``particles``, ``delta``, ``eps_min`` as for :func:`abc`; each
     update's ``epsilon`` is the tolerance its window ended at, and its laws have no ``ln_z``).
+    A record of surface channels alone (a top-drive speed and a surface torque, no bit channel;
+    or a WITS feed whose ``wits_items`` name ``surface_torque``) goes window by window through
+    simulated strings as :func:`surface` does (``particles`` per population, window k seeded
+    ``seed`` + k): each update's ``check`` is its model choice's check by re-simulation, and its
+    advice starts from the bit the surface implies.
     Keyword arguments are the command's flags without dashes."""
     from . import _law_names
 
