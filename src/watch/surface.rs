@@ -92,7 +92,20 @@ impl Watch {
         }
         let seed = self.settings.evidence.seed.wrapping_add(window.index as u64);
         let mut notes = WindowNotes(observer);
-        let result = crate::run::surface::infer(&record, config, seed, &mut |line| notes.note(line));
+        // From the window before's posterior (the carried mixture), where the watch warm-starts.
+        let warm = match (&self.carried.posterior, self.settings.warm_start) {
+            (Some(posterior), true) => posterior.as_slice(),
+            _ => &[],
+        };
+        let mut keep = |_: &[crate::abc::Population]| Ok(());
+        let sampling = crate::run::surface::Sampling {
+            previous: Vec::new(),
+            stopped: None,
+            keep: &mut keep,
+            warm,
+        };
+        let result =
+            crate::run::surface::infer_continuing(&record, config, seed, sampling, &mut |line| notes.note(line));
         let result = match follow::of_window(result)? {
             Ok(result) => result,
             Err(why) => return Ok(Err(why)),

@@ -686,6 +686,7 @@ fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
             previous: Vec::new(),
             stopped: None,
             keep: &mut keep,
+            warm: &[],
         };
         infer_continuing(&record, &settings, 11, sampling, &mut |_| {}).unwrap()
     };
@@ -701,9 +702,34 @@ fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
         previous: kept[0].clone(),
         stopped: None,
         keep: &mut ignore,
+        warm: &[],
     };
     let continued = infer_continuing(&record, &settings, 11, sampling, &mut |_| {}).unwrap();
     assert_eq!(text(&continued), text(&whole));
+    // Warm-started from that run's posterior (as a watch's next window is): population 0 is
+    // drawn near it and weighted back to the prior, and the same three populations end nearer
+    // the record, the torques found within the cold run's intervals.
+    let last = &run.populations.last().unwrap().particles;
+    let sampling = Sampling {
+        previous: Vec::new(),
+        stopped: None,
+        keep: &mut ignore,
+        warm: last,
+    };
+    let warm = infer_continuing(&record, &settings, 12, sampling, &mut |_| {}).unwrap();
+    let warm_run = warm.run.as_ref().unwrap();
+    assert_eq!(warm_run.populations.len(), 3);
+    assert_eq!(warm_run.populations[0].record.epsilon, None);
+    assert!(
+        warm.final_epsilon.unwrap() < whole.final_epsilon.unwrap(),
+        "{:?} against {:?}",
+        warm.final_epsilon,
+        whole.final_epsilon
+    );
+    let m2 = |r: &SurfaceResult| r.laws.iter().find(|l| l.law == Law::M2).unwrap().params.clone();
+    for (w, c) in m2(&warm).iter().zip(m2(&whole)) {
+        assert!(c.q05 <= w.median && w.median <= c.q95, "{w:?} against {c:?}");
+    }
 }
 
 /// A watch of a record of surface channels alone: each window through simulated strings,

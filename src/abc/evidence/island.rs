@@ -13,21 +13,21 @@ pub(super) fn words(seed: u64, stream: u32, index: u64) -> [u32; 4] {
 
 /// A sequential stream of Philox words for one island.
 #[derive(Serialize, Deserialize)]
-pub(super) struct Stream {
-    pub(super) seed: u64,
-    pub(super) stream: u32,
-    pub(super) next: u64,
+pub(crate) struct Stream {
+    pub(crate) seed: u64,
+    pub(crate) stream: u32,
+    pub(crate) next: u64,
 }
 
 impl Stream {
-    pub(super) fn draw(&mut self) -> [u32; 4] {
+    pub(crate) fn draw(&mut self) -> [u32; 4] {
         let w = words(self.seed, self.stream, self.next);
         self.next += 1;
         w
     }
 
     /// A uniform on (0, 1).
-    pub(super) fn uniform(&mut self) -> f64 {
+    pub(crate) fn uniform(&mut self) -> f64 {
         open_unit(self.draw()[0])
     }
 

@@ -73,6 +73,7 @@ mod reference;
 mod refine;
 pub use checkpoint::*;
 pub use config::*;
+pub(crate) use island::Stream;
 use island::*;
 pub use outcome::*;
 pub use reference::*;

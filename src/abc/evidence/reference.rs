@@ -117,7 +117,7 @@ pub(super) fn floored_cholesky(mut cov: DMatrix<f64>, lower: &[f32], upper: &[f3
 /// A reference made ready for one box: its kernels' Cholesky factor, the centres whitened by
 /// it, the log-normaliser and the box's log-volume.
 #[derive(Clone, Debug)]
-pub(super) struct Kernels {
+pub(crate) struct Kernels {
     pub(super) dims: usize,
     pub(super) centres: Vec<[f64; MAX_PARAMS]>,
     /// L⁻¹·c for each centre c: a kernel's exponent is then one difference of whitened points.
@@ -133,7 +133,7 @@ pub(super) struct Kernels {
 }
 
 impl Kernels {
-    pub(super) fn new(reference: &Reference, lower: &[f32], upper: &[f32]) -> Self {
+    pub(crate) fn new(reference: &Reference, lower: &[f32], upper: &[f32]) -> Self {
         let d = lower.len();
         let width = KERNEL_WIDTH * KERNEL_WIDTH;
         let covariance = DMatrix::from_row_slice(d, d, &reference.covariance) * width;
@@ -171,7 +171,7 @@ impl Kernels {
     }
 
     /// A draw from the kernels (not the box): a centre by its weight, plus its kernel's noise.
-    pub(super) fn draw(&self, stream: &mut Stream, out: &mut [f32]) {
+    pub(crate) fn draw(&self, stream: &mut Stream, out: &mut [f32]) {
         let total = self.cumulative.last().copied().unwrap_or(1.0);
         let u = stream.uniform() * total;
         let i = self.cumulative.partition_point(|&c| c <= u).min(self.centres.len() - 1);
@@ -185,7 +185,7 @@ impl Kernels {
 
     /// ln q(θ) of the mixture (1 − s)·Σ w_i·N(c_i, h²Σ) + s·U(box), `inside` whether θ is in
     /// the box.
-    pub(super) fn ln_q(&self, theta: &[f32], inside: bool) -> f64 {
+    pub(crate) fn ln_q(&self, theta: &[f32], inside: bool) -> f64 {
         let d = self.dims;
         let mut x = [0.0f64; MAX_PARAMS];
         for (x, &t) in x.iter_mut().zip(&theta[..d]) {

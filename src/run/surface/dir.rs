@@ -300,6 +300,7 @@ impl SurfaceDir {
             stopped: if again { sampled.stop } else { None },
             previous: sampled.populations,
             keep: &mut keep,
+            warm: &[],
         };
         infer_continuing(record, settings, self.job.settings.seed, sampling, note)
     }

@@ -30,12 +30,15 @@ mod check;
 pub mod dir;
 mod pilot;
 mod settings;
+mod warm;
 
 use bit::*;
 pub use bit::{implied_bit, mean_wob_n, unidentified_caveat};
 use check::*;
 use pilot::*;
 pub use settings::*;
+pub use warm::LAW_DEFENSIVE_SHARE;
+use warm::*;
 
 use crate::abc::shard::Local;
 use crate::abc::smc::{self, SmcConfig};
@@ -473,6 +476,7 @@ pub fn infer(
         previous: Vec::new(),
         stopped: None,
         keep: &mut keep,
+        warm: &[],
     };
     infer_continuing(record, settings, seed, sampling, note)
 }
@@ -488,6 +492,10 @@ pub struct Sampling<'a> {
     pub stopped: Option<StopReason>,
     /// Hears every population as it completes, with all before it.
     pub keep: &'a mut dyn FnMut(&[Population]) -> Result<()>,
+    /// An earlier posterior (a watch's window before) to start from where `previous` is empty:
+    /// population 0 drawn near it and weighted back to the prior (see `warm`); empty: from the
+    /// prior.
+    pub warm: &'a [Particle],
 }
 
 /// The sampler's observer that hands every completed population to [`Sampling::keep`].
@@ -574,6 +582,12 @@ pub fn infer_continuing(
     let noise_floor = scout.noise_floor(&distance, noise_sd_nm, period_s);
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
+    let mut sampling = sampling;
+    if sampling.previous.is_empty() && !sampling.warm.is_empty() && can_warm_start(&prior) {
+        let start = warm_population(&evaluator, sampling.warm, settings.smc.schedule.particles, seed)?;
+        (sampling.keep)(std::slice::from_ref(&start))?;
+        sampling.previous = vec![start];
+    }
     let run = match sampling.stopped {
         Some(stop) if !sampling.previous.is_empty() => Run {
             populations: sampling.previous,

@@ -1,0 +1,285 @@
+//! A sampler warm-started from an earlier posterior (a watch's window before): population 0
+//! drawn near it, weighted back to the prior.
+//!
+//! Population 0 is an importance sample of the prior: N candidates inside the boxes from
+//! q(m, θ) = q(m)·q_m(θ), each weighted π(m)·π(θ|m) / q(m, θ) and normalised. The law is drawn
+//! by q(m) = (1 − f)·P_before(m) + f·π(m), f = [`LAW_DEFENSIVE_SHARE`]: every law keeps
+//! draws, so a law the window before ruled out can return. A law's θ comes from the kernel
+//! density of its earlier particles mixed with its box ([`Kernels`], the evidence's warm start:
+//! a tenth from the box), or from its box alone where it had too few particles. Restricted to
+//! ρ < ε a weighted sample of the prior is one of the ABC posterior at ε, so the SMC goes on
+//! from it as from a population drawn from the prior: its survivors and kernels simply start
+//! where the earlier posterior was. Where the rock has changed, the box's share keeps the
+//! weights bounded and the sampler finds the new posterior from there.
+
+use super::*;
+use crate::abc::evidence::{DEFENSIVE_SHARE, Kernels, Reference, Stream};
+use crate::eval::Evaluator;
+use crate::rng::uniform_between;
+
+/// Share of population 0's laws drawn by the prior's law weights rather than the earlier
+/// posterior's.
+pub const LAW_DEFENSIVE_SHARE: f64 = 0.1;
+
+/// Seed offset of population 0's draws, apart from every other stream of a run.
+const WARM_STREAM: u64 = 0x5741_524d_0000_0000;
+
+/// Most candidates drawn per particle before population 0 is given up (a kernel density
+/// almost wholly outside its box).
+const MOST_DRAWS_PER_PARTICLE: usize = 100;
+
+/// Whether a run of `prior` can be warm-started: boxes without curve limits (whose prior
+/// density is one over the box's volume) holding a law's parameters alone.
+pub(super) fn can_warm_start(prior: &Prior) -> bool {
+    prior
+        .boxes
+        .iter()
+        .all(|b| b.curve.is_none() && b.lower.len() == b.law.n_params())
+}
+
+/// Population 0 of `n` particles near `before` (an earlier posterior, weights summing to
+/// any positive total), scored by `evaluator` (see the module documentation).
+pub(super) fn warm_population(
+    evaluator: &SurfaceEvaluator,
+    before: &[Particle],
+    n: usize,
+    seed: u64,
+) -> Result<Population> {
+    let started = std::time::Instant::now();
+    let problem = evaluator.problem();
+    let prior = &problem.prior;
+    let slots = prior.boxes.len();
+    let Drawn {
+        candidates,
+        ln_weights,
+        drawn,
+        draws,
+    } = draw_near(prior, before, n, seed)?;
+    let mut rhos = vec![0.0; candidates.len()];
+    evaluator.score_params(&candidates, &mut rhos)?;
+    // A string that left physical bounds never lies below a tolerance: weight 0.
+    let kept: Vec<usize> = (0..candidates.len()).filter(|&i| rhos[i].is_finite()).collect();
+    let top = kept.iter().map(|&i| ln_weights[i]).fold(f64::NEG_INFINITY, f64::max);
+    let raw: Vec<f64> = kept.iter().map(|&i| (ln_weights[i] - top).exp()).collect();
+    let sum: f64 = raw.iter().sum();
+    let particles: Vec<Particle> = kept
+        .iter()
+        .zip(&raw)
+        .map(|(&i, w)| {
+            let c = &candidates[i];
+            let d = prior.boxes[c.slot].lower.len();
+            Particle {
+                law: prior.law(c.slot),
+                index: i as u64,
+                params: c.widened()[..d].to_vec(),
+                rho: rhos[i],
+                weight: w / sum,
+            }
+        })
+        .collect();
+    let weights: Vec<f64> = particles.iter().map(|p| p.weight).collect();
+    let per_law = (0..slots)
+        .map(|s| {
+            let law = prior.law(s);
+            let own = particles.iter().filter(|p| p.law == law);
+            let accepted = own.clone().count();
+            let probability = own.map(|p| p.weight).sum();
+            crate::abc::LawRecord::new(
+                law,
+                drawn[s],
+                accepted,
+                probability,
+                accepted > 0,
+                problem,
+                f64::INFINITY,
+            )
+        })
+        .collect();
+    let scored = candidates.len() as u64;
+    Ok(Population {
+        record: crate::abc::PopulationRecord {
+            index: 0,
+            epsilon: None,
+            draws,
+            accepted: particles.len(),
+            acceptance_rate: particles.len() as f64 / draws as f64,
+            per_law,
+            candidates_scored: scored,
+            evaluations: scored * problem.data_len() as u64,
+            near_threshold: 0,
+            ess: crate::abc::effective_sample_size(&weights),
+            seconds: started.elapsed().as_secs_f64(),
+            stream: 0,
+        },
+        particles,
+    })
+}
+
+/// Candidates drawn near an earlier posterior, with their log importance weights
+/// ln π(m, θ) − ln q(m, θ) (unnormalised).
+struct Drawn {
+    candidates: Vec<Candidate>,
+    ln_weights: Vec<f64>,
+    /// Candidates drawn per prior slot (inside their box or not), and in all.
+    drawn: Vec<u64>,
+    draws: u64,
+}
+
+/// `n` candidates inside the boxes of `prior` from q(m, θ) near `before` (see the module
+/// documentation).
+fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Result<Drawn> {
+    let slots = prior.boxes.len();
+    let total: f64 = before.iter().map(|p| p.weight).sum();
+    let share = |law: Law| before.iter().filter(|p| p.law == law).map(|p| p.weight).sum::<f64>() / total;
+    let q_law: Vec<f64> = (0..slots)
+        .map(|s| (1.0 - LAW_DEFENSIVE_SHARE) * share(prior.law(s)) + LAW_DEFENSIVE_SHARE * prior.weights[s])
+        .collect();
+    let kernels: Vec<Option<Kernels>> = prior
+        .boxes
+        .iter()
+        .map(|b| {
+            let own: Vec<(&[f64], f64)> = before
+                .iter()
+                .filter(|p| p.law == b.law)
+                .map(|p| (p.params.as_slice(), p.weight))
+                .collect();
+            Reference::from_posterior(b.law, &own).map(|r| Kernels::new(&r, &b.lower, &b.upper))
+        })
+        .collect();
+    let ln_volume = |s: usize| -> f64 {
+        let b = &prior.boxes[s];
+        b.lower
+            .iter()
+            .zip(&b.upper)
+            .map(|(lo, hi)| (f64::from(*hi) - f64::from(*lo)).ln())
+            .sum()
+    };
+    let mut stream = Stream {
+        seed: seed ^ WARM_STREAM,
+        stream: 0,
+        next: 0,
+    };
+    let mut candidates = Vec::with_capacity(n);
+    let mut ln_weights = Vec::with_capacity(n);
+    let mut drawn = vec![0u64; slots];
+    let mut draws = 0u64;
+    while candidates.len() < n {
+        if draws as usize >= MOST_DRAWS_PER_PARTICLE * n {
+            return Err(Error::Numerical(format!(
+                "the earlier posterior's kernel density lies outside the prior boxes: {} of {draws} draws inside",
+                candidates.len()
+            )));
+        }
+        draws += 1;
+        let u = stream.uniform();
+        let mut cumulative = 0.0;
+        let slot = (0..slots)
+            .find(|&s| {
+                cumulative += q_law[s];
+                u < cumulative
+            })
+            .unwrap_or(slots - 1);
+        drawn[slot] += 1;
+        let b = &prior.boxes[slot];
+        let d = b.lower.len();
+        let mut params = [0.0f32; MAX_DIMS];
+        match &kernels[slot] {
+            Some(k) if stream.uniform() >= DEFENSIVE_SHARE => k.draw(&mut stream, &mut params),
+            _ => {
+                for block in (0..d).step_by(4) {
+                    let w = stream.draw();
+                    for (j, &word) in (block..d.min(block + 4)).zip(&w) {
+                        params[j] = uniform_between(b.lower[j], b.upper[j], word);
+                    }
+                }
+            }
+        }
+        if !(0..d).all(|j| params[j] >= b.lower[j] && params[j] <= b.upper[j]) {
+            continue; // the prior's density is 0 there: weight 0
+        }
+        let ln_q_theta = match &kernels[slot] {
+            Some(k) => k.ln_q(&params[..d], true),
+            None => -ln_volume(slot),
+        };
+        ln_weights.push(prior.weights[slot].ln() - ln_volume(slot) - q_law[slot].ln() - ln_q_theta);
+        candidates.push(Candidate { slot, params });
+    }
+    Ok(Drawn {
+        candidates,
+        ln_weights,
+        drawn,
+        draws,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::prior::LawBox;
+
+    /// Weighted, population 0 is the prior: its law shares are the prior's law weights and
+    /// each coordinate's weighted mean is its box's middle, though most draws lie near the
+    /// earlier posterior.
+    #[test]
+    fn population_0_near_an_earlier_posterior_is_weighted_back_to_the_prior() {
+        let prior = Prior::new(
+            vec![
+                LawBox::new(Law::M1, vec![0.0, 0.0, 0.0, 0.0], vec![10.0, 5.0, 5.0, 5.0]),
+                LawBox::new(Law::M2, vec![1000.0, 500.0, 0.0], vec![20_000.0, 10_000.0, 10.0]),
+            ],
+            vec![0.5, 0.5],
+        )
+        .unwrap();
+        // The earlier posterior: m2 alone, tight around (13,000, 6,500, 0.3).
+        let mut state = 7u64;
+        let mut jitter = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let before: Vec<Particle> = (0..300)
+            .map(|i| Particle {
+                law: Law::M2,
+                index: i,
+                params: vec![
+                    13_000.0 + 400.0 * jitter(),
+                    6_500.0 + 200.0 * jitter(),
+                    0.3 + 0.1 * jitter(),
+                ],
+                rho: 0.0,
+                weight: 1.0 / 300.0,
+            })
+            .collect();
+        let n = 20_000;
+        let drawn = draw_near(&prior, &before, n, 3).unwrap();
+        assert_eq!(drawn.candidates.len(), n);
+        let top = drawn.ln_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let w: Vec<f64> = drawn.ln_weights.iter().map(|l| (l - top).exp()).collect();
+        let total: f64 = w.iter().sum();
+        let of = |slot: usize| drawn.candidates.iter().zip(&w).filter(move |(c, _)| c.slot == slot);
+        let m2_share = of(1).map(|(_, w)| w).sum::<f64>() / total;
+        assert!((m2_share - 0.5).abs() < 0.05, "{m2_share}");
+        let m2_weight: f64 = of(1).map(|(_, w)| w).sum();
+        for (j, (lo, hi)) in [(1000.0, 20_000.0), (500.0, 10_000.0), (0.0, 10.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let mean = of(1).map(|(c, w)| w * f64::from(c.params[j])).sum::<f64>() / m2_weight;
+            let middle = 0.5 * (lo + hi);
+            assert!(
+                (mean - middle).abs() < 0.06 * (hi - lo),
+                "coordinate {j}: {mean} against {middle}"
+            );
+        }
+        // Most draws are m2's, near the earlier posterior.
+        let near = drawn
+            .candidates
+            .iter()
+            .filter(|c| c.slot == 1 && (f64::from(c.params[0]) - 13_000.0).abs() < 2_000.0)
+            .count();
+        assert!(near as f64 > 0.6 * n as f64, "{near} of {n}");
+        // Every law keeps draws: one the earlier posterior ruled out can return.
+        assert!(drawn.drawn[0] as f64 > 0.03 * n as f64, "{:?}", drawn.drawn);
+    }
+}
