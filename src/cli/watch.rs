@@ -105,7 +105,7 @@ pub struct WatchCmd {
     pub string: StructureArgs,
     /// Each window's evidence from the laws' boxes, the whole procedure repeated as the paper
     /// would (by default each starts from the window before's posterior: the same evidence,
-    /// fewer candidates).
+    /// fewer candidates); a record of surface channels: each window's sampler from the prior.
     #[arg(long)]
     pub cold_start: bool,
     /// One JSON line per window instead of the table.

@@ -45,7 +45,9 @@ pub struct WatchSettings {
     pub wits: wits::WitsItems,
     /// Each window's evidence samplers start from the last informative window's posterior
     /// (its kernel density, mixed with the box) instead of the boxes, each law with particles
-    /// by its worth: the same evidence, fewer candidates while the rock stays the same.
+    /// by its worth: the same evidence, fewer candidates while the rock stays the same. A
+    /// window of surface channels: its sampler's population 0 drawn near that posterior and
+    /// weighted back to the prior ([`crate::run::surface::Sampling::warm`]).
     pub warm_start: bool,
     /// The paper's ABC on each window instead of the evidence: this run's sampler, particles,
     /// δ and floor (its laws, seed and backend are the watch's; window k is seeded seed + k).
