@@ -311,7 +311,7 @@ const KERNEL_FLOOR: f64 = 1e-4;
 
 /// The first index whose cumulative value exceeds `u` (inverse CDF; `cdf` ends at ≥ u).
 #[inline]
-fn inverse_cdf(cdf: &[f64], u: f64) -> usize {
+pub(crate) fn inverse_cdf(cdf: &[f64], u: f64) -> usize {
     cdf.partition_point(|&c| c <= u).min(cdf.len() - 1)
 }
 
@@ -1047,7 +1047,7 @@ pub fn run_on(
 
 /// The cumulative sums of `weights` over their total, the last exactly 1: what a draw by
 /// weight searches. `weights` is not empty (an alive law has a particle; a population, a law).
-fn normalised_cdf(weights: &[f64]) -> Vec<f64> {
+pub(crate) fn normalised_cdf(weights: &[f64]) -> Vec<f64> {
     let mut running = 0.0;
     let mut cdf: Vec<f64> = weights
         .iter()

@@ -151,6 +151,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("follow", "--follow"),
     ("wits_items", "--wits-items"),
     ("cold_start", "--cold-start"),
+    ("abc", "--abc"),
     ("serve", "--serve"),
     ("address", "--address"),
     ("segment", "--well"),

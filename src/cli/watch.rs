@@ -252,7 +252,10 @@ fn settings(cmd: &WatchCmd) -> anyhow::Result<WatchSettings> {
             ..defaults.evidence.clone()
         },
         surface: bitrock::run::surface::Settings {
-            particles: cmd.particles.unwrap_or(defaults.surface.particles),
+            particles: match cmd.abc {
+                true => defaults.surface.particles,
+                false => cmd.particles.unwrap_or(defaults.surface.particles),
+            },
             ..defaults.surface.clone()
         },
         abc: cmd

@@ -266,7 +266,7 @@ impl SurfaceRecord {
         ));
         if !c.bit.is_empty() {
             text.push_str(&format!(
-                "; the bit's channels ({}) are not read: a record with them is calibrated by `fit` and `abc`",
+                "; the bit's channels ({}) are not read: a record with them is calibrated by `bitrock fit` and `bitrock abc`",
                 c.bit.join(", ")
             ));
         }
@@ -313,8 +313,8 @@ impl SurfaceRowLayout {
             surface_torque: name(r.surface_torque),
             wob: r.wob.map(|(i, _)| name(i)),
             bit: r.bit.iter().map(|&i| name(i)).collect(),
-            downhole_min: None,
-            downhole_max: None,
+            downhole_min: r.downhole_min.map(name),
+            downhole_max: r.downhole_max.map(name),
         }
     }
 
@@ -359,7 +359,8 @@ impl SurfaceRowLayout {
 impl SurfaceRecord {
     /// A surface record of rows read one at a time (a watch's window), named `source`: its
     /// clock checked as a whole file's, its times from its first row's. Rows without a time,
-    /// top-drive speed or surface torque are refused.
+    /// top-drive speed or surface torque are refused. Rows carry no MWD downhole channel: the
+    /// record has none, whatever `columns` names.
     pub fn of_rows(
         rows: &[super::Row],
         source: &Path,
@@ -385,7 +386,11 @@ impl SurfaceRecord {
             .and_then(|_| rows.iter().map(|r| r.wob_n).collect());
         Ok(Self {
             source: source.to_path_buf(),
-            columns,
+            columns: SurfaceColumns {
+                downhole_min: None,
+                downhole_max: None,
+                ..columns
+            },
             top_drive_unit,
             torque_unit,
             time_s,

@@ -246,6 +246,25 @@ fn resume_stored(
 ) -> Result<(store::WatchStore, store::StoredWatch)> {
     let dir = dir.ok_or_else(|| crate::Error::setting("resume", "needs the watch directory (`out`) to go on with"))?;
     let (kept, stored) = store::WatchStore::resume(dir)?;
+    let kind = |surface: bool| {
+        if surface {
+            "surface channels alone"
+        } else {
+            "the bit's channels"
+        }
+    };
+    let (was, now) = (stored.meta.surface.is_some(), rows.declared().surface.is_some());
+    if was != now {
+        return Err(crate::Error::setting(
+            "resume",
+            format!(
+                "the watch in {} read {}; this record holds {} (a watch goes on with its own kind of record)",
+                dir.display(),
+                kind(was),
+                kind(now)
+            ),
+        ));
+    }
     check_same_watch(&stored.meta, settings, dir)?;
     settings.window_s = Some(stored.meta.window_s);
     settings.step_s = Some(stored.meta.step_s);
@@ -345,6 +364,27 @@ fn start_watch(
         }
     };
     let declared = rows.declared();
+    if let Some(columns) = &declared.surface {
+        let downhole: Vec<&str> = [&columns.downhole_min, &columns.downhole_max]
+            .into_iter()
+            .flatten()
+            .map(String::as_str)
+            .collect();
+        observer.note(format!(
+            "a record of surface channels alone (top-drive speed {}, surface torque {}{}): each window's laws through strings simulated per candidate, its model choice checked by re-simulation{}",
+            columns.top_drive,
+            columns.surface_torque,
+            columns.wob.as_ref().map_or(String::new(), |w| format!(", weight on bit {w}")),
+            if downhole.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; its MWD downhole channels ({}) are not read by the watch (`bitrock surface` reads them)",
+                    downhole.join(", ")
+                )
+            }
+        ));
+    }
     let unit = declared.units.torque;
     let source = rows.name().to_path_buf();
     let mut made = Watch::new(settings.clone(), source.clone(), rate_hz, declared)?;
@@ -425,7 +465,7 @@ fn start_watch(
         None => {
             let meta = store::WatchMeta {
                 source: source.display().to_string(),
-                settings: store::settings_json(settings),
+                settings: store::settings_json(settings, rows.declared().surface.is_some()),
                 window_s: length,
                 step_s: step,
                 rate_hz,
@@ -483,8 +523,9 @@ fn check_same_law_files(was: &serde_json::Value, now: &serde_json::Value, dir: &
 /// Refuses to go on with a stored watch under other settings: its windows would not be the
 /// ones it would have given.
 pub(super) fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings, dir: &Path) -> Result<()> {
-    let now = store::settings_json(settings);
-    let defaults = store::settings_json(&WatchSettings::default());
+    let surface = meta.surface.is_some();
+    let now = store::settings_json(settings, surface);
+    let defaults = store::settings_json(&WatchSettings::default(), surface);
     let (Some(stored), Some(now)) = (meta.settings.as_object(), now.as_object()) else {
         return Ok(());
     };

@@ -363,13 +363,25 @@ impl Watch {
         update.samples_used = window.rows.len();
         match self.by_surface(config, window, observer)? {
             Ok(selected) => {
+                for warning in &selected.warnings {
+                    self.say_once(&format!("window {}: {warning}", window.index), observer);
+                }
                 update.check = Some(selected.check);
                 self.carry_selection(&mut update, selected.selection, self.declared.units.torque);
                 let mut update = self.completed(update, window, Some(selected.bit));
-                if let (Some(advice), Some(caveat)) = (update.advice.as_mut(), &selected.caveat)
+                // What the way out rests on that the window leaves to the prior, among the laws
+                // the advice simulates (those carried at least ESCAPE_MIN_PROBABILITY likely).
+                let carried = update.laws.clone();
+                let taking_part = |law: Law| {
+                    carried
+                        .iter()
+                        .any(|l| l.law == law && l.probability >= advice::ESCAPE_MIN_PROBABILITY)
+                };
+                let caveat = crate::run::surface::unidentified_caveat(&selected.laws, &taking_part);
+                if let (Some(advice), Some(caveat)) = (update.advice.as_mut(), caveat)
                     && (advice.escape_omega_rpm.is_some() || advice.escape_wob_kn.is_some())
                 {
-                    advice.words.push_str(caveat);
+                    advice.words.push_str(&caveat);
                 }
                 Ok(update)
             }
@@ -471,13 +483,18 @@ impl Watch {
             channel.unit_warning(&data.source.display().to_string(), &speeds)
         });
         for warning in data.warnings.iter().chain(&top_drive) {
-            // The same check on another window differs only by its numbers.
-            if self
-                .said
-                .insert(warning.chars().filter(|c| !c.is_ascii_digit()).collect())
-            {
-                observer.note(format!("warning: {warning}"));
-            }
+            self.say_once(warning, observer);
+        }
+    }
+
+    /// Says `warning` through `observer` unless one differing only by its numbers was said
+    /// (the same check on another window).
+    fn say_once(&mut self, warning: &str, observer: &mut dyn Observer) {
+        if self
+            .said
+            .insert(warning.chars().filter(|c| !c.is_ascii_digit()).collect())
+        {
+            observer.note(format!("warning: {warning}"));
         }
     }
 

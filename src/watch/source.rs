@@ -319,7 +319,11 @@ impl Rows {
                 },
                 // A record of surface channels alone: its rows carry them, never as the bit's.
                 Err(bit) => match surface_layout(&headers, delimiter, opts, &name) {
-                    Some(layout) => Format::SurfaceCsv { layout, lines, header },
+                    Some(layout) => Format::SurfaceCsv {
+                        layout: layout?,
+                        lines,
+                        header,
+                    },
                     None => return Err(bit),
                 },
             }
@@ -597,29 +601,39 @@ fn csv_row(
 }
 
 /// The layout of a header of surface channels alone (a top-drive speed and a surface torque
-/// found by the rules of `bitrock surface`, and no bit channel); `None` for any other header,
-/// which the bit's layout then refuses in its own words.
+/// found by the rules of `bitrock surface`, in `speed_unit` where given, and no bit channel),
+/// or what is wrong with it; `None` for a header that names a bit channel, which the bit's
+/// layout then refuses in its own words.
 fn surface_layout(
     headers: &csv::StringRecord,
     delimiter: u8,
     opts: &DataOptions,
     name: &Path,
-) -> Option<SurfaceRowLayout> {
+) -> Option<Result<SurfaceRowLayout>> {
     // The bit's columns named: the bit's layout says what is wrong with them.
-    if opts.speed_column.is_some() || opts.torque_column.is_some() || opts.speed_unit.is_some() {
+    if opts.speed_column.is_some() || opts.torque_column.is_some() {
         return None;
     }
     let header: Vec<String> = headers.iter().map(|h| h.trim().to_string()).collect();
+    let names_the_bit = |h: &String| {
+        let lower = h.to_ascii_lowercase();
+        !crate::data::is_surface_channel(h) && (lower.contains("speed") || lower.contains("torque"))
+    };
+    if !header.iter().any(|h| crate::data::is_surface_channel(h)) || header.iter().any(names_the_bit) {
+        return None;
+    }
     let surface = SurfaceOptions {
         time_column: opts.time_column.clone(),
         wob_column: opts.wob_column.clone(),
+        top_drive_unit: opts.speed_unit,
         torque_unit: opts.torque_unit,
         wob_unit: opts.wob_unit,
         ..SurfaceOptions::default()
     };
-    SurfaceRowLayout::new(&header, delimiter, &surface, name)
-        .ok()
-        .filter(|layout| layout.bit_channels().is_empty())
+    match SurfaceRowLayout::new(&header, delimiter, &surface, name) {
+        Ok(layout) if !layout.bit_channels().is_empty() => None,
+        made => Some(made),
+    }
 }
 
 /// A connection to a feed at `address`, its reads waiting at most [`FOLLOW_POLL`].

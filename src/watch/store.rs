@@ -70,11 +70,12 @@ pub struct WatchMeta {
     pub surface: Option<crate::data::surface::SurfaceColumns>,
 }
 
-/// The settings that decide a watch's numbers, as JSON: what a resumed watch must match.
+/// The settings that decide a watch's numbers, as JSON: what a resumed watch must match; with
+/// `surface`, those of a watch of surface channels too.
 /// The backend and thread count are not among them (they change no more than the last bits
 /// of ρ, within the parity contract).
-pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
-    serde_json::json!({
+pub fn settings_json(settings: &WatchSettings, surface: bool) -> serde_json::Value {
+    let mut json = serde_json::json!({
         "laws": settings.laws.iter().map(|l| l.name()).collect::<Vec<_>>(),
         // The text of each law file whose law the watch compares: a resumed watch must compare
         // the same laws, not others under their names.
@@ -119,19 +120,21 @@ pub fn settings_json(settings: &WatchSettings) -> serde_json::Value {
             "fit": c.fit,
         })),
         "criterion": criterion_json(&settings.criterion),
+    });
+    if surface {
         // A record of surface channels: what of the surface run's settings is the watch's own
         // (its laws, string, seed and backend are the watch's).
-        "surface": surface_json(&settings.surface),
-    })
-}
-
-/// The surface run's settings a watch keeps: all but those the watch gives it.
-fn surface_json(settings: &crate::run::surface::Settings) -> serde_json::Value {
-    let mut json = serde_json::to_value(settings).expect("settings serialise");
-    if let Some(fields) = json.as_object_mut() {
-        for own in ["inertia_kg_m2", "omega_n_rad_s", "damping_ratio", "seed", "backend"] {
-            fields.remove(own);
-        }
+        let s = &settings.surface;
+        json["surface"] = serde_json::json!({
+            "particles": s.particles,
+            "max_populations": s.max_populations,
+            "pilot": s.pilot,
+            "check_replicates": s.check_replicates,
+            "predictive_draws": s.predictive_draws,
+            "prior_scale": s.prior_scale,
+            "dt_s": s.dt_s,
+            "settle_s": s.settle_s,
+        });
     }
     json
 }

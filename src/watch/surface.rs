@@ -10,7 +10,7 @@
 use super::*;
 use crate::data::BitSeen;
 use crate::data::surface::SurfaceRecord;
-use crate::run::surface::{Cycle, SurfaceSettings, ValueOrBounds, unidentified_caveat};
+use crate::run::surface::{Cycle, SurfaceSettings, ValueOrBounds};
 
 /// Particles per population of each surface window's sampler by default.
 pub const SURFACE_PARTICLES: usize = 300;
@@ -37,8 +37,11 @@ pub(super) struct SurfaceSelected {
     pub(super) bit: BitSeen,
     /// The check by re-simulation of the model choice.
     pub(super) check: WindowCheck,
-    /// What a way out would rest on that the window does not tell ([`unidentified_caveat`]).
-    pub(super) caveat: Option<String>,
+    /// The window's law posteriors: what a way out rests on that the window does not tell
+    /// ([`unidentified_caveat`]).
+    pub(super) laws: Vec<crate::run::surface::LawPosterior>,
+    /// What the user should know of the window's run (a sampler stopped far above its floor).
+    pub(super) warnings: Vec<String>,
 }
 
 impl Watch {
@@ -48,7 +51,7 @@ impl Watch {
     pub(super) fn surface_settings(settings: &WatchSettings) -> Result<SurfaceSettings> {
         let Criterion::Lumped(string) = settings.criterion else {
             return Err(crate::Error::setting(
-                "fe_file",
+                "structure",
                 "a record of surface channels is inferred through the 1-DOF string simulated per candidate: give its inertia, natural frequency and damping ratio instead of a finite-element string",
             ));
         };
@@ -116,7 +119,8 @@ impl Watch {
         let laws = Selected::of_population(&self.settings.laws, last);
         Ok(Ok(SurfaceSelected {
             bit: result.bit_seen(&record),
-            caveat: unidentified_caveat(&result.laws, advice::ESCAPE_MIN_PROBABILITY),
+            laws: result.laws.clone(),
+            warnings: result.warnings.clone(),
             check: WindowCheck {
                 decided: result.check.decided,
                 verdict: result.check.verdict.clone(),

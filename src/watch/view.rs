@@ -105,6 +105,7 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
     let torque: Vec<f64> = readings.iter().map(|b| b.torque_nm / per_unit).collect();
     let time_s: Vec<f64> = cloud
         .iter()
+        .filter(|r| r.bit.is_some())
         .map(|r| r.time_s)
         .collect::<Option<_>>()
         .unwrap_or_default();

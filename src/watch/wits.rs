@@ -129,10 +129,13 @@ impl WitsItems {
                 }
             }
         }
+        bit_keys.sort();
+        bit_keys.dedup();
         if items.surface_torque.is_some() && !bit_keys.is_empty() {
             return Err(refuse(format!(
-                "{} name the bit's channels, and surface_torque a feed of surface channels alone: keep one",
-                bit_keys.join(" and ")
+                "{} {} the bit's channels, and surface_torque a feed of surface channels alone: keep one",
+                bit_keys.join(" and "),
+                if bit_keys.len() == 1 { "names" } else { "name" }
             )));
         }
         Ok(items)

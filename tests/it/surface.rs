@@ -764,6 +764,7 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
     let (code, updates, err) = watch(&path, "m2", &[]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(updates.len(), 3, "{err}");
+    assert!(err.contains("a record of surface channels alone (top-drive speed top_drive_rpm"), "{err}");
     for u in &updates {
         assert!(u["uninformative"].is_null(), "{u}");
         assert_eq!(u["check"]["decided"], "m2", "{u}");
@@ -844,7 +845,9 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
     // A bit that turns steadily (150 rpm): its surface torque shows no cycle, and no window
     // is taken to inform the law.
     let (_steady_dir, steady, _) = record_on(Lumped::default(), Law::M2, 150.0, 240.0, 1.0, 0.1, 5, Channels::Surface);
-    let (code, updates, err) = watch(&steady, "m1,m2", &[]);
+    let kept = dir.path().join("steady-watch");
+    let out = ["--out", kept.to_str().unwrap()];
+    let (code, updates, err) = watch(&steady, "m1,m2", &out);
     assert_eq!(code, 0, "{err}");
     assert_eq!(updates.len(), 3);
     for u in &updates {
@@ -852,8 +855,23 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
         assert!(why.contains("only through T(Ω)"), "{u}");
         assert!(u["laws"].as_array().unwrap().is_empty() && u["advice"].is_null(), "{u}");
     }
+    // A watch of surface channels goes on with surface channels only.
+    let (_bit_dir, bit, _) = record_on(Lumped::default(), Law::M2, 60.0, 60.0, 1.0, 0.1, 5, Channels::Bit);
+    let (code, _, err) = watch(&bit, "m1,m2", &[&out[..], &["--resume"]].concat());
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--resume") && err.contains("read surface channels alone"), "{err}");
+    // A record of surface channels without a clock is refused in the surface record's words.
+    let clockless = dir.path().join("clockless.csv");
+    let text_without_time: String = text
+        .lines()
+        .map(|line| line.split(',').skip(1).collect::<Vec<_>>().join(",") + "\n")
+        .collect();
+    std::fs::write(&clockless, text_without_time).unwrap();
+    let (code, _, err) = watch(&clockless, "m2", &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("time") && !err.contains("bitrock surface"), "{err}");
     // The paper's ABC fits the bit's torque: refused on surface channels, by its flag.
     let (code, _, err) = watch(&path, "m2", &["--abc"]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("abc") && err.contains("simulated strings"), "{err}");
+    assert!(err.contains("--abc") && err.contains("simulated strings"), "{err}");
 }

@@ -94,16 +94,15 @@ pub fn mean_wob_n(record: &SurfaceRecord, w_ref_n: Option<f64>) -> f64 {
     )
 }
 
-/// The simulated escape advice from the record's mean operating point.
 /// What a surface run's way out rests on that its record does not tell: the parameters of the
-/// laws at least `min_probability` likely that the record leaves to their prior boxes. The
+/// laws the advice simulates (`taking_part`) that the record leaves to their prior boxes. The
 /// cycle at one top-drive speed does not say how the torque falls with speed (m2's g): strings
 /// whose cycle matches the record's may leave it at speeds far apart. `None` where every such
 /// parameter is identified.
-pub fn unidentified_caveat(laws: &[LawPosterior], min_probability: f64) -> Option<String> {
+pub fn unidentified_caveat(laws: &[LawPosterior], taking_part: &dyn Fn(Law) -> bool) -> Option<String> {
     let named: Vec<String> = laws
         .iter()
-        .filter(|l| l.probability >= min_probability)
+        .filter(|l| l.particles > 0 && taking_part(l.law))
         .flat_map(|l| {
             l.params
                 .iter()
@@ -120,6 +119,7 @@ pub fn unidentified_caveat(laws: &[LawPosterior], min_probability: f64) -> Optio
     })
 }
 
+/// The simulated escape advice from the record's mean operating point.
 pub(super) fn escape_advice(
     record: &SurfaceRecord,
     settings: &SurfaceSettings,
@@ -161,6 +161,8 @@ pub(super) fn escape_advice(
         &advice_speeds_rpm(point.omega_rpm),
         &advice_weights_kn(point.wob_kn),
     )?;
-    let caveat = unidentified_caveat(laws, 0.0).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
+    // Every law with particles is simulated (`inputs` above).
+    let caveat =
+        unidentified_caveat(laws, &|_| true).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
     Ok(advice.text() + caveat.as_deref().unwrap_or(""))
 }

@@ -24,10 +24,6 @@ pub const LAW_DEFENSIVE_SHARE: f64 = 0.1;
 /// Seed offset of population 0's draws, apart from every other stream of a run.
 const WARM_STREAM: u64 = 0x5741_524d_0000_0000;
 
-/// Most candidates drawn per particle before population 0 is given up (a kernel density
-/// almost wholly outside its box).
-const MOST_DRAWS_PER_PARTICLE: usize = 100;
-
 /// Whether a run of `prior` can be warm-started: boxes without curve limits (whose prior
 /// density is one over the box's volume) holding a law's parameters alone.
 pub(super) fn can_warm_start(prior: &Prior) -> bool {
@@ -37,14 +33,15 @@ pub(super) fn can_warm_start(prior: &Prior) -> bool {
         .all(|b| b.curve.is_none() && b.lower.len() == b.law.n_params())
 }
 
-/// Population 0 of `n` particles near `before` (an earlier posterior, weights summing to
-/// any positive total), scored by `evaluator` (see the module documentation).
+/// Population 0 of up to `n` particles near `before` (an earlier posterior, weights summing
+/// to any positive total), scored by `evaluator` (see the module documentation); `None` where
+/// every string left physical bounds (the sampler then starts from the prior).
 pub(super) fn warm_population(
     evaluator: &SurfaceEvaluator,
     before: &[Particle],
     n: usize,
     seed: u64,
-) -> Result<Population> {
+) -> Result<Option<Population>> {
     let started = std::time::Instant::now();
     let problem = evaluator.problem();
     let prior = &problem.prior;
@@ -54,11 +51,14 @@ pub(super) fn warm_population(
         ln_weights,
         drawn,
         draws,
-    } = draw_near(prior, before, n, seed)?;
+    } = draw_near(prior, before, n, seed);
     let mut rhos = vec![0.0; candidates.len()];
     evaluator.score_params(&candidates, &mut rhos)?;
     // A string that left physical bounds never lies below a tolerance: weight 0.
     let kept: Vec<usize> = (0..candidates.len()).filter(|&i| rhos[i].is_finite()).collect();
+    if kept.is_empty() {
+        return Ok(None);
+    }
     let top = kept.iter().map(|&i| ln_weights[i]).fold(f64::NEG_INFINITY, f64::max);
     let raw: Vec<f64> = kept.iter().map(|&i| (ln_weights[i] - top).exp()).collect();
     let sum: f64 = raw.iter().sum();
@@ -96,7 +96,7 @@ pub(super) fn warm_population(
         })
         .collect();
     let scored = candidates.len() as u64;
-    Ok(Population {
+    Ok(Some(Population {
         record: crate::abc::PopulationRecord {
             index: 0,
             epsilon: None,
@@ -112,7 +112,7 @@ pub(super) fn warm_population(
             stream: 0,
         },
         particles,
-    })
+    }))
 }
 
 /// Candidates drawn near an earlier posterior, with their log importance weights
@@ -127,13 +127,14 @@ struct Drawn {
 
 /// `n` candidates inside the boxes of `prior` from q(m, θ) near `before` (see the module
 /// documentation).
-fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Result<Drawn> {
+fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
     let slots = prior.boxes.len();
     let total: f64 = before.iter().map(|p| p.weight).sum();
     let share = |law: Law| before.iter().filter(|p| p.law == law).map(|p| p.weight).sum::<f64>() / total;
     let q_law: Vec<f64> = (0..slots)
         .map(|s| (1.0 - LAW_DEFENSIVE_SHARE) * share(prior.law(s)) + LAW_DEFENSIVE_SHARE * prior.weights[s])
         .collect();
+    let law_cdf = crate::abc::smc::normalised_cdf(&q_law);
     let kernels: Vec<Option<Kernels>> = prior
         .boxes
         .iter()
@@ -146,14 +147,18 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Result<
             Reference::from_posterior(b.law, &own).map(|r| Kernels::new(&r, &b.lower, &b.upper))
         })
         .collect();
-    let ln_volume = |s: usize| -> f64 {
-        let b = &prior.boxes[s];
-        b.lower
-            .iter()
-            .zip(&b.upper)
-            .map(|(lo, hi)| (f64::from(*hi) - f64::from(*lo)).ln())
-            .sum()
-    };
+    // ln of each box's volume: the prior's density is its negative inside.
+    let ln_volume: Vec<f64> = prior
+        .boxes
+        .iter()
+        .map(|b| {
+            b.lower
+                .iter()
+                .zip(&b.upper)
+                .map(|(lo, hi)| (f64::from(*hi) - f64::from(*lo)).ln())
+                .sum()
+        })
+        .collect();
     let mut stream = Stream {
         seed: seed ^ WARM_STREAM,
         stream: 0,
@@ -163,22 +168,11 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Result<
     let mut ln_weights = Vec::with_capacity(n);
     let mut drawn = vec![0u64; slots];
     let mut draws = 0u64;
+    // Every law's draws are its box's at least DEFENSIVE_SHARE of the time, all inside it: the
+    // loop ends.
     while candidates.len() < n {
-        if draws as usize >= MOST_DRAWS_PER_PARTICLE * n {
-            return Err(Error::Numerical(format!(
-                "the earlier posterior's kernel density lies outside the prior boxes: {} of {draws} draws inside",
-                candidates.len()
-            )));
-        }
         draws += 1;
-        let u = stream.uniform();
-        let mut cumulative = 0.0;
-        let slot = (0..slots)
-            .find(|&s| {
-                cumulative += q_law[s];
-                u < cumulative
-            })
-            .unwrap_or(slots - 1);
+        let slot = crate::abc::smc::inverse_cdf(&law_cdf, stream.uniform());
         drawn[slot] += 1;
         let b = &prior.boxes[slot];
         let d = b.lower.len();
@@ -199,17 +193,17 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Result<
         }
         let ln_q_theta = match &kernels[slot] {
             Some(k) => k.ln_q(&params[..d], true),
-            None => -ln_volume(slot),
+            None => -ln_volume[slot],
         };
-        ln_weights.push(prior.weights[slot].ln() - ln_volume(slot) - q_law[slot].ln() - ln_q_theta);
+        ln_weights.push(prior.weights[slot].ln() - ln_volume[slot] - q_law[slot].ln() - ln_q_theta);
         candidates.push(Candidate { slot, params });
     }
-    Ok(Drawn {
+    Drawn {
         candidates,
         ln_weights,
         drawn,
         draws,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -252,7 +246,7 @@ mod tests {
             })
             .collect();
         let n = 20_000;
-        let drawn = draw_near(&prior, &before, n, 3).unwrap();
+        let drawn = draw_near(&prior, &before, n, 3);
         assert_eq!(drawn.candidates.len(), n);
         let top = drawn.ln_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let w: Vec<f64> = drawn.ln_weights.iter().map(|l| (l - top).exp()).collect();
