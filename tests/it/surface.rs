@@ -764,7 +764,10 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
     let (code, updates, err) = watch(&path, "m2", &[]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(updates.len(), 3, "{err}");
-    assert!(err.contains("a record of surface channels alone (top-drive speed top_drive_rpm"), "{err}");
+    assert!(
+        err.contains("a record of surface channels alone (top-drive speed top_drive_rpm"),
+        "{err}"
+    );
     for u in &updates {
         assert!(u["uninformative"].is_null(), "{u}");
         assert_eq!(u["check"]["decided"], "m2", "{u}");
@@ -859,7 +862,10 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
     let (_bit_dir, bit, _) = record_on(Lumped::default(), Law::M2, 60.0, 60.0, 1.0, 0.1, 5, Channels::Bit);
     let (code, _, err) = watch(&bit, "m1,m2", &[&out[..], &["--resume"]].concat());
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("--resume") && err.contains("read surface channels alone"), "{err}");
+    assert!(
+        err.contains("--resume") && err.contains("read surface channels alone"),
+        "{err}"
+    );
     // A record of surface channels without a clock is refused in the surface record's words.
     let clockless = dir.path().join("clockless.csv");
     let text_without_time: String = text

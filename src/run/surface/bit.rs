@@ -162,7 +162,6 @@ pub(super) fn escape_advice(
         &advice_weights_kn(point.wob_kn),
     )?;
     // Every law with particles is simulated (`inputs` above).
-    let caveat =
-        unidentified_caveat(laws, &|_| true).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
+    let caveat = unidentified_caveat(laws, &|_| true).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
     Ok(advice.text() + caveat.as_deref().unwrap_or(""))
 }

@@ -583,11 +583,13 @@ pub fn infer_continuing(
 
     let evaluator = SurfaceEvaluator::new(prior.clone(), seed, model.clone(), distance.clone());
     let mut sampling = sampling;
-    if sampling.previous.is_empty() && !sampling.warm.is_empty() && can_warm_start(&prior) {
-        if let Some(start) = warm_population(&evaluator, sampling.warm, settings.smc.schedule.particles, seed)? {
-            (sampling.keep)(std::slice::from_ref(&start))?;
-            sampling.previous = vec![start];
-        }
+    if sampling.previous.is_empty()
+        && !sampling.warm.is_empty()
+        && can_warm_start(&prior)
+        && let Some(start) = warm_population(&evaluator, sampling.warm, settings.smc.schedule.particles, seed)?
+    {
+        (sampling.keep)(std::slice::from_ref(&start))?;
+        sampling.previous = vec![start];
     }
     let run = match sampling.stopped {
         Some(stop) if !sampling.previous.is_empty() => Run {
