@@ -131,16 +131,7 @@ impl SurfaceRecord {
             }
             lines.push(row.line);
         }
-        let name = |i: usize| header[i].clone();
-        let columns = SurfaceColumns {
-            time: name(roles.time),
-            top_drive: name(roles.top_drive),
-            surface_torque: name(roles.surface_torque),
-            wob: roles.wob.map(|(i, _)| name(i)),
-            bit: roles.bit.iter().map(|&i| name(i)).collect(),
-            downhole_min: roles.downhole_min.map(name),
-            downhole_max: roles.downhole_max.map(name),
-        };
+        let columns = roles.columns(&|i| header[i].clone());
         let sample_period_s = check_clock(&time_s, path, &|k| format!("line {}", lines[k]))?;
         if least.is_none() && greatest.is_none() {
             let given = [
@@ -305,17 +296,7 @@ impl SurfaceRowLayout {
 
     /// The columns read, by role.
     pub fn columns(&self) -> SurfaceColumns {
-        let name = |i: usize| self.header[i].to_string();
-        let r = &self.roles;
-        SurfaceColumns {
-            time: name(r.time),
-            top_drive: name(r.top_drive),
-            surface_torque: name(r.surface_torque),
-            wob: r.wob.map(|(i, _)| name(i)),
-            bit: r.bit.iter().map(|&i| name(i)).collect(),
-            downhole_min: r.downhole_min.map(name),
-            downhole_max: r.downhole_max.map(name),
-        }
+        self.roles.columns(&|i| self.header[i].to_string())
     }
 
     pub fn top_drive_unit(&self) -> SpeedUnit {
@@ -459,6 +440,19 @@ struct Roles {
 }
 
 impl Roles {
+    /// The columns of each role, named by `name`.
+    fn columns(&self, name: &dyn Fn(usize) -> String) -> SurfaceColumns {
+        SurfaceColumns {
+            time: name(self.time),
+            top_drive: name(self.top_drive),
+            surface_torque: name(self.surface_torque),
+            wob: self.wob.map(|(i, _)| name(i)),
+            bit: self.bit.iter().map(|&i| name(i)).collect(),
+            downhole_min: self.downhole_min.map(name),
+            downhole_max: self.downhole_max.map(name),
+        }
+    }
+
     fn resolve(header: &[String], opts: &SurfaceOptions, path: &Path) -> Result<Self> {
         use super::mnemonics::{Extreme, Role, downhole_extreme, role, surface_role};
         let lower = |i: usize| header[i].to_ascii_lowercase();

@@ -270,10 +270,13 @@ def test_a_watch_of_an_independent_string_s_surface_implies_its_bit_window_by_wi
     # leaves to the prior (here m2's g: the cycle at one speed does not tell how the torque
     # falls with speed).
     chain, p_nm = one_dof(), np.array(M2_NM)
+    states = [state for _, state in cycles_at(chain, "m2", p_nm, 60.0 * RPM, 1.0)]
+    left = {}
     for u in updates:
         rpm = u.advice["escape_omega_rpm"][0]
-        left = max(after_change(chain, "m2", p_nm, rpm * RPM, 1.0, state) for _, state in cycles_at(chain, "m2", p_nm, 60.0 * RPM, 1.0))
-        assert left == 0.0 or "m2's g to the prior" in u.advice["words"], (rpm, left, u.advice["words"])
+        if rpm not in left:
+            left[rpm] = max(after_change(chain, "m2", p_nm, rpm * RPM, 1.0, state) for state in states)
+        assert left[rpm] == 0.0 or "m2's g to the prior" in u.advice["words"], (rpm, left[rpm], u.advice["words"])
     lines = [
         json.loads(line)
         for line in run_cli(
