@@ -364,7 +364,8 @@ fn start_watch(
         }
     };
     let declared = rows.declared();
-    if let Some(columns) = &declared.surface {
+    let surface_columns = declared.surface.clone();
+    if let Some(columns) = &surface_columns {
         let downhole: Vec<&str> = [&columns.downhole_min, &columns.downhole_max]
             .into_iter()
             .flatten()
@@ -379,7 +380,7 @@ fn start_watch(
                 String::new()
             } else {
                 format!(
-                    "; its MWD downhole channels ({}) are not read by the watch (`bitrock surface` reads them)",
+                    "; its MWD downhole channels ({}) are not read by the watch (a surface run reads them)",
                     downhole.join(", ")
                 )
             }
@@ -465,13 +466,13 @@ fn start_watch(
         None => {
             let meta = store::WatchMeta {
                 source: source.display().to_string(),
-                settings: store::settings_json(settings, rows.declared().surface.is_some()),
+                settings: store::settings_json(settings, surface_columns.is_some()),
                 window_s: length,
                 step_s: step,
                 rate_hz,
                 torque_unit: unit,
                 bitrock_version: env!("CARGO_PKG_VERSION").to_string(),
-                surface: rows.declared().surface,
+                surface: surface_columns,
             };
             if let Some(dir) = options.dir {
                 kept = Some(store::WatchStore::create(dir, &meta)?);

@@ -371,9 +371,9 @@ impl Watch {
                 let mut update = self.completed(update, window, Some(selected.bit));
                 // What the way out rests on that the window leaves to the prior, among the laws
                 // the advice simulates (those carried at least ESCAPE_MIN_PROBABILITY likely).
-                let carried = update.laws.clone();
                 let taking_part = |law: Law| {
-                    carried
+                    update
+                        .laws
                         .iter()
                         .any(|l| l.law == law && l.probability >= advice::ESCAPE_MIN_PROBABILITY)
                 };

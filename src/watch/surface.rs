@@ -117,13 +117,12 @@ impl Watch {
             return Ok(Err(format!("no population of its sampler completed ({})", result.stop)));
         };
         let laws = Selected::of_population(&self.settings.laws, last);
+        let bit = result.bit_seen(&record);
         Ok(Ok(SurfaceSelected {
-            bit: result.bit_seen(&record),
-            laws: result.laws.clone(),
-            warnings: result.warnings.clone(),
+            bit,
             check: WindowCheck {
                 decided: result.check.decided,
-                verdict: result.check.verdict.clone(),
+                verdict: result.check.verdict,
             },
             selection: Selection {
                 fits: Vec::new(),
@@ -134,6 +133,8 @@ impl Watch {
                 w_ref_n: None,
                 answer: None,
             },
+            laws: result.laws,
+            warnings: result.warnings,
         }))
     }
 }

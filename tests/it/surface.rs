@@ -74,6 +74,16 @@ fn small(laws: Vec<Law>) -> SurfaceSettings {
     s
 }
 
+/// Smaller still, for what is checked number for number: 150 particles, 3 populations, a
+/// pilot of 100.
+fn tiny(laws: Vec<Law>) -> SurfaceSettings {
+    let mut s = small(laws);
+    s.smc.schedule.particles = 150;
+    s.smc.schedule.max_populations = 3;
+    s.pilot = 100;
+    s
+}
+
 fn read(path: &std::path::Path) -> SurfaceRecord {
     SurfaceRecord::read(path, &SurfaceOptions::default()).unwrap()
 }
@@ -417,10 +427,7 @@ fn a_steady_record_informs_the_law_only_through_its_mean_torque() {
 #[test]
 fn the_same_seed_gives_the_same_inference() {
     let (_dir, path, _) = record(Law::M2, 60.0, 120.0, 1.0, 0.2, 7);
-    let mut settings = small(vec![Law::M1, Law::M2]);
-    settings.smc.schedule.particles = 150;
-    settings.smc.schedule.max_populations = 3;
-    settings.pilot = 100;
+    let settings = tiny(vec![Law::M1, Law::M2]);
     let a = run(&path, &settings, 11);
     let b = run(&path, &settings, 11);
     let text = |r: &SurfaceResult| {
@@ -665,10 +672,7 @@ fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
     use bitrock::abc::Population;
     use bitrock::run::surface::{Sampling, infer_continuing};
     let (_dir, path, _) = record(Law::M2, 60.0, 120.0, 1.0, 0.2, 7);
-    let mut settings = small(vec![Law::M1, Law::M2]);
-    settings.smc.schedule.particles = 150;
-    settings.smc.schedule.max_populations = 3;
-    settings.pilot = 100;
+    let settings = tiny(vec![Law::M1, Law::M2]);
     let record = read(&path);
     let text = |r: &SurfaceResult| {
         let mut v = serde_json::to_value(r).unwrap();

@@ -31,6 +31,18 @@ impl Stream {
         open_unit(self.draw()[0])
     }
 
+    /// A uniform draw in the box from `lower` to `upper` into `out`'s first coordinates (one
+    /// Philox block per four of them).
+    pub(crate) fn uniform_in(&mut self, lower: &[f32], upper: &[f32], out: &mut [f32]) {
+        let d = lower.len();
+        for block in (0..d).step_by(4) {
+            let w = self.draw();
+            for (k, &word) in (block..d.min(block + 4)).zip(&w) {
+                out[k] = uniform_between(lower[k], upper[k], word);
+            }
+        }
+    }
+
     /// `d` standard normals.
     pub(super) fn normals(&mut self, d: usize, out: &mut [f64]) {
         for pair in out[..d].chunks_mut(2) {
@@ -218,12 +230,7 @@ impl Island {
                     // reference's defensive draws stay the box's, as its density says.
                     let mut keeps = false;
                     for attempt in 0.. {
-                        for block in (0..dims).step_by(4) {
-                            let w = stream.draw();
-                            for (k, &word) in (block..dims.min(block + 4)).zip(&w) {
-                                p[k] = uniform_between(lo[k], hi[k], word);
-                            }
-                        }
+                        stream.uniform_in(&lo[..dims], &hi[..dims], &mut p);
                         keeps = keeps_curve(&p);
                         if reference.is_some() || keeps || attempt == MAX_CURVE_ATTEMPTS {
                             break;

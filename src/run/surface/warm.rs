@@ -15,7 +15,6 @@
 use super::*;
 use crate::abc::evidence::{DEFENSIVE_SHARE, Kernels, Reference, Stream};
 use crate::eval::Evaluator;
-use crate::rng::uniform_between;
 
 /// Share of population 0's laws drawn by the prior's law weights rather than the earlier
 /// posterior's.
@@ -179,14 +178,7 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
         let mut params = [0.0f32; MAX_DIMS];
         match &kernels[slot] {
             Some(k) if stream.uniform() >= DEFENSIVE_SHARE => k.draw(&mut stream, &mut params),
-            _ => {
-                for block in (0..d).step_by(4) {
-                    let w = stream.draw();
-                    for (j, &word) in (block..d.min(block + 4)).zip(&w) {
-                        params[j] = uniform_between(b.lower[j], b.upper[j], word);
-                    }
-                }
-            }
+            _ => stream.uniform_in(&b.lower, &b.upper, &mut params),
         }
         if !(0..d).all(|j| params[j] >= b.lower[j] && params[j] <= b.upper[j]) {
             continue; // the prior's density is 0 there: weight 0
