@@ -197,7 +197,7 @@ pub fn run_on(
                         schedule.max_batch,
                         budget,
                     );
-                    let shares = shard::split(fill.position, size, workers.parallelism());
+                    let shares = shard::split_for(workers, fill.position, size);
                     let round = Round {
                         population: g,
                         context: None,

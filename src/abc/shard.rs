@@ -155,6 +155,11 @@ pub trait Workers: Sync {
     fn parallelism(&self) -> usize {
         1
     }
+    /// Candidates a task of a round holds at least, unless the round is smaller: below it a
+    /// task's round trip outweighs its work.
+    fn least_task(&self) -> u64 {
+        MIN_TASK
+    }
     /// The GPU scoring shape the workers score in, where one is known (for the run's record).
     fn gpu_shape(&self) -> Option<Shape> {
         None
@@ -174,6 +179,10 @@ impl<W: Workers + ?Sized> Workers for &W {
 
     fn parallelism(&self) -> usize {
         (**self).parallelism()
+    }
+
+    fn least_task(&self) -> u64 {
+        (**self).least_task()
     }
 
     fn gpu_shape(&self) -> Option<Shape> {
@@ -417,10 +426,21 @@ fn slot_counts(n: usize, start: u64, slots: &[u8], kept: &[(u64, f64)]) -> (Vec<
 /// task's round trip outweighs its work.
 pub const MIN_TASK: u64 = 4096;
 
+/// [`MIN_TASK`] for candidates that are each a string simulated over a record (a millisecond
+/// or more, not a microsecond): enough for a worker's lanes of eight strings on each of its
+/// threads.
+pub const MIN_STRING_TASK: u64 = 64;
+
 /// Cuts `start .. start + len` into at most `pieces` contiguous ranges of near-equal length,
 /// none shorter than [`MIN_TASK`] unless the whole is.
 pub fn split(start: u64, len: u64, pieces: usize) -> Vec<(u64, u64)> {
     split_from(start, len, pieces, MIN_TASK)
+}
+
+/// Cuts a round's `start .. start + len` into the tasks `workers` take: at most one per unit
+/// of their parallelism, none shorter than their [`Workers::least_task`] unless the whole is.
+pub fn split_for(workers: &(impl Workers + ?Sized), start: u64, len: u64) -> Vec<(u64, u64)> {
+    split_from(start, len, workers.parallelism(), workers.least_task())
 }
 
 /// Explicit candidates a [`Task::Score`] holds at least, unless the batch is smaller: a

@@ -1013,7 +1013,7 @@ pub fn run_on(
             let size = ((1.05 * missing / rate.max(1e-4)).ceil() as u64 + 16)
                 .min(schedule.max_batch as u64)
                 .min(budget);
-            let tasks = shard::split(fill.position, size, workers.parallelism());
+            let tasks = shard::split_for(workers, fill.position, size);
             let round = Round {
                 population: t,
                 context: Some(context.as_ref()),

@@ -9,7 +9,7 @@ use super::shard::{self, Proposal};
 use super::smc;
 use crate::error::{Error, Result};
 use crate::eval::gpu::tune::ShapeWish;
-use crate::eval::{Backend, Evaluator, Problem};
+use crate::eval::{Backend, Evaluator, Objective, Problem};
 use std::sync::{Arc, Mutex};
 
 /// The environment variable that overrides, on a worker, the backend the driver asked for
@@ -22,7 +22,7 @@ type EvaluatorKey = (u64, Backend, ShapeWish);
 /// Payloads and evaluators a worker process keeps, the most recently used last.
 #[derive(Default)]
 struct Held {
-    problems: Vec<(u64, Arc<Problem>)>,
+    problems: Vec<(u64, Arc<Objective>)>,
     evaluators: Vec<(EvaluatorKey, Arc<dyn Evaluator>)>,
     contexts: Vec<((u64, u64), Arc<dyn Proposal>)>,
 }
@@ -87,12 +87,8 @@ fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Res
         let evaluator = match find(&mut held.evaluators, key) {
             Some(e) => e,
             None => {
-                let made: Arc<dyn Evaluator> = Arc::from(crate::eval::evaluator(
-                    (*the_problem).clone(),
-                    backend,
-                    request.shape,
-                    &mut |_| {},
-                )?);
+                let made: Arc<dyn Evaluator> =
+                    Arc::from((*the_problem).clone().evaluator(backend, request.shape, &mut |_| {})?);
                 hold(&mut held.evaluators, key, made.clone());
                 made
             }
@@ -103,7 +99,7 @@ fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Res
                 if let Some(bytes) = context
                     && find(&mut held.contexts, (request.problem, key)).is_none()
                 {
-                    let made = proposal(&the_problem, bytes)?;
+                    let made = proposal(the_problem.problem(), bytes)?;
                     hold(&mut held.contexts, (request.problem, key), made);
                 }
                 match find(&mut held.contexts, (request.problem, key)) {

@@ -6,6 +6,7 @@ use super::print;
 use bitrock::Law;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::eval::Backend;
+use bitrock::run::Scoring;
 use bitrock::run::surface::dir::{self, Sampled, SurfaceDir};
 use bitrock::run::surface::{
     self, AtTheBit, StringParam, StringPosterior, SurfaceResult, SurfaceSettings, ValueOrBounds,
@@ -254,7 +255,7 @@ pub fn run(cmd: &SurfaceCmd) -> anyhow::Result<ExitCode> {
         Some(out) => {
             // The record as the directory keeps it, read from its bytes.
             let (run, record) = SurfaceDir::start(out, cmd.force, job)?;
-            let result = run.run(&record, &settings, Sampled::default(), false, &mut note)?;
+            let result = run.run(&record, &settings, Sampled::default(), false, Scoring::Here, &mut note)?;
             run.finish(&record, &result)?;
             report(cmd, &record, &settings, &result)
         }
@@ -286,7 +287,7 @@ fn resume(cmd: &SurfaceCmd, path: &std::path::Path) -> anyhow::Result<ExitCode> 
         path.display(),
         settings.smc.schedule.max_populations
     ));
-    let result = run.run(&record, &settings, sampled, false, &mut |line| {
+    let result = run.run(&record, &settings, sampled, false, Scoring::Here, &mut |line| {
         print::note(format_args!("note: {line}"))
     })?;
     run.finish(&record, &result)?;

@@ -1,5 +1,6 @@
 //! Scoring candidates: the [`Evaluator`] trait the samplers call, and the [`Problem`] every
 //! backend scores against. The CPU evaluator (f64) is the reference; the GPU one must match it.
+//! What a run's candidates are scored against travels to workers as an [`Objective`].
 
 pub mod auto;
 pub mod coupled;
@@ -157,6 +158,51 @@ pub(crate) fn gpu_named(adapter: &str, shape: gpu::Shape, source: gpu::tune::Sou
 /// the result (a fallback to the CPU, a moved floor, a resume).
 pub fn is_information(note: &str) -> bool {
     note.starts_with(GPU_BACKEND_NOTE) || note.starts_with(auto::AUTO_NOTE)
+}
+
+/// What a run's candidates are scored against, from which one process, or a worker elsewhere,
+/// makes its evaluator ([`Objective::evaluator`]).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub enum Objective {
+    /// ρ of each candidate's torque against a record's bit speed and torque.
+    Record(Problem),
+    /// The distance of each candidate's simulated string from a surface record's summaries,
+    /// its strings on the backend the driver resolved (a worker resolves its own).
+    Strings(Box<surface::SurfaceEvaluator>),
+}
+
+impl Objective {
+    /// The problem: the prior and the seed the candidates come from (and, for a record, its
+    /// data).
+    pub fn problem(&self) -> &Problem {
+        match self {
+            Objective::Record(problem) => problem,
+            Objective::Strings(strings) => strings.problem(),
+        }
+    }
+
+    /// The evaluator on `backend` ([`evaluator`] for a record; for strings, the backend
+    /// resolved as a surface run resolves it, [`strings::resolve`]).
+    pub fn evaluator(
+        self,
+        backend: Backend,
+        wish: gpu::tune::ShapeWish,
+        note: &mut dyn FnMut(String),
+    ) -> Result<Box<dyn Evaluator>> {
+        match self {
+            Objective::Record(problem) => evaluator(problem, backend, wish, note),
+            Objective::Strings(strings) => {
+                let (backend, _) = strings::resolve(backend, note)?;
+                Ok(Box::new(strings.on(backend)))
+            }
+        }
+    }
+}
+
+impl From<Problem> for Objective {
+    fn from(problem: Problem) -> Self {
+        Objective::Record(problem)
+    }
 }
 
 /// The evaluator for `backend`, a GPU one in the shape `wish` leads to (see

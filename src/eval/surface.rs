@@ -16,7 +16,7 @@
 //! semi-automatic summaries, ρ compares instead what regressions fitted on the pilot predict
 //! from the scaled summaries ([`super::projection`]). A diverged string scores +∞.
 
-use super::projection::Projection;
+use super::projection::{Feature, Projection};
 use super::{Backend, Evaluator, Problem};
 use crate::error::Result;
 use crate::laws::{Law, MAX_PARAMS};
@@ -34,7 +34,7 @@ use std::borrow::Cow;
 pub use crate::simulate::surface::Summaries;
 
 /// The string and drive every candidate is simulated with, and the noise added.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SurfaceModel {
     /// The string as given; where [`Self::string`] is set, each candidate's own instead.
     pub chain: Chain,
@@ -107,7 +107,7 @@ fn splitmix(x: u64) -> u64 {
 }
 
 /// A 1-DOF string whose natural frequency and damping ratio a run infers with the law.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct InferredString {
     /// The equivalent inertia I_eq (kg·m²), given: the stiffness k = I_eq·ω_n² follows.
     pub inertia_kg_m2: f64,
@@ -329,10 +329,83 @@ const TRACE_VALUES: usize = 1 << 22;
 
 /// Scores candidates by simulating their strings on the record's clock, in batches (on the
 /// GPU, or on the CPU eight strings of a law at a time).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(into = "Shipped", from = "Shipped")]
 pub struct SurfaceEvaluator {
     problem: Problem,
     model: SurfaceModel,
     distance: Distance,
+}
+
+/// A [`SurfaceEvaluator`] as it travels to a worker: its parts, the projection's weights
+/// included (a result's JSON leaves them out).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Shipped {
+    problem: Problem,
+    model: SurfaceModel,
+    observed: Summaries,
+    scales: Summaries,
+    active: [bool; N_SUMMARIES],
+    /// The features (name, weights, adjusted R², strings), the training strings, the laws
+    /// left unregressed.
+    projection: Option<(Vec<ShippedFeature>, usize, Vec<Law>)>,
+}
+
+/// A projection's feature as it travels: name, weights, adjusted R², strings.
+type ShippedFeature = (String, Summaries, f64, usize);
+
+impl From<SurfaceEvaluator> for Shipped {
+    fn from(e: SurfaceEvaluator) -> Self {
+        let Distance {
+            observed,
+            scales,
+            active,
+            projection,
+        } = e.distance;
+        Self {
+            problem: e.problem,
+            model: e.model,
+            observed,
+            scales,
+            active,
+            projection: projection.map(|p| {
+                let features = p
+                    .features
+                    .into_iter()
+                    .map(|f| (f.name, f.weights, f.adjusted_r_squared, f.strings))
+                    .collect();
+                (features, p.training, p.unregressed)
+            }),
+        }
+    }
+}
+
+impl From<Shipped> for SurfaceEvaluator {
+    fn from(s: Shipped) -> Self {
+        let projection = s.projection.map(|(features, training, unregressed)| Projection {
+            features: features
+                .into_iter()
+                .map(|(name, weights, adjusted_r_squared, strings)| Feature {
+                    name,
+                    weights,
+                    adjusted_r_squared,
+                    strings,
+                })
+                .collect(),
+            training,
+            unregressed,
+        });
+        Self {
+            problem: s.problem,
+            model: s.model,
+            distance: Distance {
+                observed: s.observed,
+                scales: s.scales,
+                active: s.active,
+                projection,
+            },
+        }
+    }
 }
 
 impl SurfaceEvaluator {
@@ -351,6 +424,13 @@ impl SurfaceEvaluator {
             model,
             distance,
         }
+    }
+
+    /// The same evaluator, its strings simulated on `backend` ([`Backend::Gpu`] or
+    /// [`Backend::Cpu`]).
+    pub fn on(mut self, backend: Backend) -> Self {
+        self.model.backend = backend;
+        self
     }
 }
 

@@ -5,7 +5,7 @@ use super::abc::Config;
 use crate::abc::shard::{self, Devices, Local, Workers};
 use crate::error::Result;
 use crate::eval::gpu::tune::ShapeWish;
-use crate::eval::{Backend, Evaluator, Problem};
+use crate::eval::{Backend, Evaluator, Objective, Problem};
 
 /// Where a run's candidates are scored.
 #[derive(Default)]
@@ -26,10 +26,11 @@ pub enum Scoring<'a, 'w> {
 /// elsewhere).
 pub type MakeEvaluator<'a> = dyn FnMut(Problem, &mut dyn FnMut(String)) -> Result<Box<dyn Evaluator>> + 'a;
 
-/// Makes the workers that run a job's tasks from its problem and where the job asks them to
-/// score (a continued run's with the continuation's backend and devices), saying what the
-/// user should know through the third argument.
-pub type MakeWorkers<'a> = dyn FnMut(Problem, &Placement, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
+/// Makes the workers that run a job's tasks from what it scores against and where the job
+/// asks them to score (a continued run's with the continuation's backend and devices), saying
+/// what the user should know through the third argument.
+pub type MakeWorkers<'a> =
+    dyn FnMut(Objective, &Placement, &mut dyn FnMut(String)) -> Result<Box<dyn Workers + 'a>> + 'a;
 
 /// Where a job asks its candidates to be scored: the backend, this machine's devices and the
 /// GPU scoring shape. A pool of workers takes the backend and shape to each worker.
@@ -62,17 +63,21 @@ impl<'w> Scoring<'_, 'w> {
         }
     }
 
-    /// The workers that score `problem` where `placement` says.
+    /// The workers that score `objective` where `placement` says. Strings are simulated in
+    /// this process on the backend their run resolved, unless workers elsewhere take them.
     pub fn workers(
         &mut self,
-        problem: Problem,
+        objective: impl Into<Objective>,
         placement: &Placement,
         note: &mut dyn FnMut(String),
     ) -> Result<Box<dyn Workers + '_>> {
-        match self {
-            Scoring::Here => shard::here(problem, placement.backend, placement.devices, placement.shape, note),
-            Scoring::Workers(make) => make(problem, placement, note),
-            Scoring::Evaluator(make) => Ok(Box::new(Local(make(problem, note)?))),
+        match (self, objective.into()) {
+            (Scoring::Workers(make), objective) => make(objective, placement, note),
+            (_, Objective::Strings(strings)) => Ok(Box::new(Local(strings))),
+            (Scoring::Here, Objective::Record(problem)) => {
+                shard::here(problem, placement.backend, placement.devices, placement.shape, note)
+            }
+            (Scoring::Evaluator(make), Objective::Record(problem)) => Ok(Box::new(Local(make(problem, note)?))),
         }
     }
 }

@@ -43,7 +43,7 @@ const EVENT_PASSES: usize = 4;
 /// A drill string as the batched integrator sees it: lumped inertias from the top down, the
 /// last one the bit, joined by torsional springs (element j joins node j − 1 to node j, node 0
 /// being the top drive), with Rayleigh damping C = αM + βK.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Chain {
     /// Lumped inertia of each node (kg·m²), top first, the bit last.
     pub inertia_kg_m2: Vec<f64>,

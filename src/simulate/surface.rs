@@ -26,7 +26,7 @@ use crate::units::RAD_S_PER_RPM;
 
 /// A record's drive of the string: top-drive speed and weight ratio per sample on a regular
 /// clock.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Drive {
     /// Ω per sample (rad/s).
     pub omega_rad_s: Vec<f64>,
@@ -37,7 +37,7 @@ pub struct Drive {
 }
 
 /// How finely and after how long a settling the string is sampled.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Integration {
     /// Largest integration step (s): each sample period is split into equal steps no longer.
     pub dt_s: f64,
@@ -236,7 +236,7 @@ impl Extremes {
 /// speed's minimum and maximum (either or both) over a window of whole samples ending at each
 /// sample. The tool takes them from its own fast sampling; a string takes them from its
 /// integration steps ([`OnClock::bit_least_rad_s`]).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DownholeExtremes {
     /// The window, in samples of the record's clock (1: since the sample before).
     pub window_samples: usize,

@@ -106,6 +106,7 @@ impl Watch {
             stopped: None,
             keep: &mut keep,
             warm,
+            scoring: crate::run::Scoring::Here,
         };
         let result =
             crate::run::surface::infer_continuing(&record, config, seed, sampling, &mut |line| notes.note(line));

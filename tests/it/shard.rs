@@ -19,15 +19,17 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// Workers in this process behind bytes: requests served on the rayon pool in a shuffled
 /// order, every third reply (by a seeded coin) lost and the task run again, payloads attached
 /// only when a worker asks for them.
-struct Scrambling {
+pub(crate) struct Scrambling {
     pieces: usize,
     rng: Mutex<rand::rngs::StdRng>,
-    lost: AtomicU64,
-    asked: AtomicU64,
+    /// Replies lost (their tasks run again).
+    pub(crate) lost: AtomicU64,
+    /// Requests answered "missing" (sent again with the payloads).
+    pub(crate) asked: AtomicU64,
 }
 
 impl Scrambling {
-    fn new(pieces: usize, seed: u64) -> Self {
+    pub(crate) fn new(pieces: usize, seed: u64) -> Self {
         Self {
             pieces,
             rng: Mutex::new(rand::rngs::StdRng::seed_from_u64(seed)),
@@ -181,7 +183,7 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
             task: task.clone(),
         })
     };
-    let payload = wire::encode_problem(&problem);
+    let payload = wire::encode_problem(&problem.clone().into());
     let key = wire::key_of(&payload) ^ 0x5eed; // a key this process has never held
     let missing = worker::serve(&request(wire::build(), key), None, None);
     assert!(wire::needs_payloads(&missing));

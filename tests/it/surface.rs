@@ -667,9 +667,54 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     assert!(err.contains("holds a surface run"), "{err}");
 }
 
+/// Through workers that answer in any order, lose replies and run tasks twice (the transport
+/// `shard.rs` tests record runs with): the surface run of one process, number for number. Two
+/// laws, the string's natural frequency inferred with them and semi-automatic summaries, so
+/// that the string's coordinates and the regressions' weights travel too.
+#[test]
+fn a_surface_run_through_workers_is_the_one_process_run() {
+    use bitrock::abc::Population;
+    use bitrock::abc::shard::{Remote, Workers};
+    use bitrock::run::surface::{Sampling, StringBounds, infer_continuing};
+    use bitrock::run::{MakeWorkers, Placement, Scoring};
+    use std::sync::atomic::Ordering;
+    let (_dir, path, _) = record(Law::M2, 60.0, 120.0, 1.0, 0.2, 5);
+    let mut settings = tiny(vec![Law::M1, Law::M2]);
+    settings.semi_automatic = true;
+    settings.string_bounds = Some(StringBounds {
+        omega_n_rad_s: [0.6, 0.9],
+        damping_ratio: [0.05, 0.05],
+    });
+    let record = read(&path);
+    let text = |r: &SurfaceResult| {
+        let mut v = serde_json::to_value(r).unwrap();
+        v.as_object_mut().unwrap().remove("seconds");
+        v.to_string()
+    };
+    let here = infer(&record, &settings, 4, &mut |_| {}).unwrap();
+    assert!(here.projection.is_some() && here.string.inferred);
+    let workers = super::shard::Scrambling::new(3, 8);
+    let mut make = |objective, placement: &Placement, _: &mut dyn FnMut(String)| {
+        let remote = Remote::new(objective, placement.backend, placement.shape, &workers);
+        Ok(Box::new(remote) as Box<dyn Workers + '_>)
+    };
+    let mut ignore = |_: &[Population]| Ok(());
+    let sampling = Sampling {
+        previous: Vec::new(),
+        stopped: None,
+        keep: &mut ignore,
+        warm: &[],
+        scoring: Scoring::Workers(&mut make as &mut MakeWorkers),
+    };
+    let there = infer_continuing(&record, &settings, 4, sampling, &mut |_| {}).unwrap();
+    assert!(workers.lost.load(Ordering::Relaxed) > 0 && workers.asked.load(Ordering::Relaxed) > 0);
+    assert_eq!(text(&there), text(&here));
+}
+
 #[test]
 fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
     use bitrock::abc::Population;
+    use bitrock::run::Scoring;
     use bitrock::run::surface::{Sampling, infer_continuing};
     let (_dir, path, _) = record(Law::M2, 60.0, 120.0, 1.0, 0.2, 7);
     let settings = tiny(vec![Law::M1, Law::M2]);
@@ -691,6 +736,7 @@ fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
             stopped: None,
             keep: &mut keep,
             warm: &[],
+            scoring: Scoring::Here,
         };
         infer_continuing(&record, &settings, 11, sampling, &mut |_| {}).unwrap()
     };
@@ -707,6 +753,7 @@ fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
         stopped: None,
         keep: &mut ignore,
         warm: &[],
+        scoring: Scoring::Here,
     };
     let continued = infer_continuing(&record, &settings, 11, sampling, &mut |_| {}).unwrap();
     assert_eq!(text(&continued), text(&whole));
@@ -719,6 +766,7 @@ fn the_populations_kept_as_they_complete_continue_to_the_uninterrupted_run() {
         stopped: None,
         keep: &mut ignore,
         warm: last,
+        scoring: Scoring::Here,
     };
     let warm = infer_continuing(&record, &settings, 12, sampling, &mut |_| {}).unwrap();
     let warm_run = warm.run.as_ref().unwrap();

@@ -4,6 +4,7 @@
 use bitrock::abc::shard::wire::{Exchanged, Payloads, Traffic};
 use bitrock::abc::shard::{Remote, Transport, Workers};
 use bitrock::error::Error;
+use bitrock::eval::Objective;
 use bitrock::run::Placement;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
@@ -92,12 +93,12 @@ pub(crate) fn remote_on<'a>(
     cell: &'a OnceLock<Remote<PyTransport>>,
     dispatcher: Py<PyAny>,
     parallelism: usize,
-) -> impl FnMut(bitrock::eval::Problem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
+) -> impl FnMut(Objective, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
     let mut transport = Some(PyTransport::new(dispatcher, parallelism));
-    move |problem, placement| {
+    move |objective, placement| {
         let transport = transport.take().expect("a run makes its workers once");
         Ok(Box::new(cell.get_or_init(|| {
-            Remote::new(problem, placement.backend, placement.shape, transport)
+            Remote::new(objective, placement.backend, placement.shape, transport)
         })))
     }
 }
@@ -107,10 +108,10 @@ pub(crate) fn remote_on<'a>(
 #[allow(clippy::needless_lifetimes)] // eliding 'a leaves the boxed workers' lifetime unnamed
 pub(crate) fn remote_each<'a>(
     transport: &'a PyTransport,
-) -> impl FnMut(bitrock::eval::Problem, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
-    move |problem, placement| {
+) -> impl FnMut(Objective, &Placement) -> bitrock::Result<Box<dyn Workers + 'a>> {
+    move |objective, placement| {
         Ok(Box::new(Remote::new(
-            problem,
+            objective,
             placement.backend,
             placement.shape,
             transport,

@@ -1,20 +1,26 @@
 //! Laws from a surface record (top-drive speed and surface torque) through simulated strings.
 
+use crate::distributed::{PyTransport, after_remote, remote_on};
 use crate::errors::*;
 use bitrock::Law;
+use bitrock::abc::shard::Remote;
 use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::run::surface::dir::{self, Sampled, SurfaceDir};
-use bitrock::run::surface::{Settings as SurfaceRunSettings, SurfaceResult, infer};
+use bitrock::run::surface::{Sampling, Settings as SurfaceRunSettings, SurfaceResult, infer_continuing};
+use bitrock::run::{Placement, Scoring};
 use bitrock::units::{ForceUnit, SpeedUnit, TorqueUnit};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
+use std::sync::OnceLock;
 
 /// `bitrock surface` on the record at `path`: the whole result as JSON text, written as a
-/// surface directory to `out` where given. The notes of the run (a GPU fallback of the
-/// advice's strings, say) go to `note` once it is done.
+/// surface directory to `out` where given, its sampler's strings simulated by the workers of
+/// `dispatcher` where given (the result then carries their `traffic`). The notes of the run
+/// (a GPU fallback of the advice's strings, say) go to `note` once it is done.
 #[pyfunction]
-#[pyo3(signature = (path, laws, options, note, out=None, force=false))]
+#[pyo3(signature = (path, laws, options, note, out=None, force=false, dispatcher=None, parallelism=1))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn surface(
     py: Python<'_>,
     path: PathBuf,
@@ -23,6 +29,8 @@ pub(crate) fn surface(
     note: Option<Py<PyAny>>,
     out: Option<PathBuf>,
     force: bool,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
 ) -> PyResult<String> {
     let laws = crate::errors::laws(py, laws)?.unwrap_or_else(|| {
         Law::ALL
@@ -61,6 +69,7 @@ pub(crate) fn surface(
         downhole_window_s: kwarg(options, "downhole_window_s")?,
     };
     let mut notes = Vec::new();
+    let cell = OnceLock::new();
     let text = py.detach(|| {
         // The prior file read once, into the job a surface directory keeps.
         let job = dir::Job::new(laws, settings, columns, &path)?;
@@ -70,25 +79,79 @@ pub(crate) fn surface(
         }
         let record = SurfaceRecord::read(&path, &job.columns)?;
         let mut note = |line| notes.push(line);
-        match &out {
-            Some(out) => {
-                // The record as the directory keeps it, read from its bytes.
-                let (run, record) = SurfaceDir::start(out, force, job)?;
-                let result = run.run(&record, &s, Sampled::default(), false, &mut note)?;
-                run.finish(&record, &result)?;
-                Ok(document(&record, &result))
+        on_workers(&cell, dispatcher, parallelism, |scoring| {
+            match &out {
+                Some(out) => {
+                    // The record as the directory keeps it, read from its bytes.
+                    let (run, record) = SurfaceDir::start(out, force, job)?;
+                    let result = run.run(&record, &s, Sampled::default(), false, scoring, &mut note)?;
+                    run.finish(&record, &result)?;
+                    Ok((record, result))
+                }
+                None => {
+                    let mut keep = |_: &[bitrock::abc::Population]| Ok(());
+                    let sampling = Sampling {
+                        previous: Vec::new(),
+                        stopped: None,
+                        keep: &mut keep,
+                        warm: &[],
+                        scoring,
+                    };
+                    let result = infer_continuing(&record, &s, seed, sampling, &mut note)?;
+                    Ok((record, result))
+                }
             }
-            None => Ok::<_, bitrock::Error>(document(&record, &infer(&record, &s, seed, &mut note)?)),
-        }
+        })
     });
     said(py, &note, &notes)?;
+    let text = with_traffic(cell, text)?;
     check(py, text)
 }
 
+/// `run` with the sampler's strings on the workers of `dispatcher` (through `cell`, which
+/// keeps them for their traffic), or here; the result as Python reads it.
+fn on_workers<'a>(
+    cell: &'a OnceLock<Remote<PyTransport>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
+    run: impl FnOnce(Scoring<'_, 'a>) -> bitrock::Result<(SurfaceRecord, SurfaceResult)>,
+) -> bitrock::Result<serde_json::Value> {
+    let (record, result) = match dispatcher {
+        None => run(Scoring::Here)?,
+        Some(dispatcher) => {
+            let mut make = remote_on(cell, dispatcher, parallelism);
+            let mut workers =
+                move |objective, placement: &Placement, _note: &mut dyn FnMut(String)| make(objective, placement);
+            run(Scoring::Workers(&mut workers))?
+        }
+    };
+    Ok(document(&record, &result))
+}
+
+/// The document's text, with the workers' traffic where the run had workers; the Python
+/// exception that stopped them, where one did.
+fn with_traffic(
+    cell: OnceLock<Remote<PyTransport>>,
+    document: bitrock::Result<serde_json::Value>,
+) -> PyResult<bitrock::Result<String>> {
+    let (traffic, raised) = after_remote(cell);
+    if let Some(e) = raised {
+        return Err(e);
+    }
+    Ok(document.map(|mut document| {
+        if let Some(traffic) = traffic {
+            document["traffic"] = serde_json::from_str(&traffic).expect("traffic is JSON");
+        }
+        document.to_string()
+    }))
+}
+
 /// `bitrock surface --resume`: the surface run in `dir` continued with `more`'s stopping rules
-/// and backend, the directory written anew; the whole result as JSON text.
+/// and backend, the directory written anew, on the workers of `dispatcher` where given; the
+/// whole result as JSON text.
 #[pyfunction]
-#[pyo3(signature = (dir, max_populations, max_seconds, backend, check_replicates, note))]
+#[pyo3(signature = (dir, max_populations, max_seconds, backend, check_replicates, note, dispatcher=None, parallelism=1))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn resume_surface(
     py: Python<'_>,
     dir: PathBuf,
@@ -97,6 +160,8 @@ pub(crate) fn resume_surface(
     backend: Option<String>,
     check_replicates: Option<usize>,
     note: Option<Py<PyAny>>,
+    dispatcher: Option<Py<PyAny>>,
+    parallelism: usize,
 ) -> PyResult<String> {
     let backend = named(py, "backend", backend)?;
     let more = dir::Continuation {
@@ -106,14 +171,20 @@ pub(crate) fn resume_surface(
         check_replicates,
     };
     let mut notes = Vec::new();
+    let cell = OnceLock::new();
     let text = py.detach(|| {
         let (mut run, record, sampled) = SurfaceDir::open(&dir)?;
         let settings = run.continued(&more, sampled.populations.len())?;
-        let result = run.run(&record, &settings, sampled, false, &mut |line| notes.push(line))?;
-        run.finish(&record, &result)?;
-        Ok::<_, bitrock::Error>(document(&record, &result))
+        on_workers(&cell, dispatcher, parallelism, |scoring| {
+            let result = run.run(&record, &settings, sampled, false, scoring, &mut |line| {
+                notes.push(line)
+            })?;
+            run.finish(&record, &result)?;
+            Ok((record, result))
+        })
     });
     said(py, &note, &notes)?;
+    let text = with_traffic(cell, text)?;
     check(py, directory_named(text))
 }
 
@@ -166,10 +237,10 @@ pub(crate) fn is_surface_dir(dir: PathBuf) -> bool {
 }
 
 /// A result as Python reads it: the document with the record's clock.
-fn document(record: &SurfaceRecord, result: &SurfaceResult) -> String {
+fn document(record: &SurfaceRecord, result: &SurfaceResult) -> serde_json::Value {
     let mut document = serde_json::to_value(result).expect("a result serialises");
     document["time_s"] = serde_json::to_value(&record.time_s).expect("numbers serialise");
-    document.to_string()
+    document
 }
 
 /// Hands the run's notes to `note`.

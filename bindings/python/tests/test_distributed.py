@@ -294,6 +294,33 @@ def test_a_dask_worker_killed_mid_population_changes_nothing(demo, one_process, 
     assert_same_store(one_process[1], tmp_path / "killed")
 
 
+def test_a_surface_run_on_dask_workers_is_the_one_process_run(dask_client, tmp_path) -> None:
+    """The surface sampler's strings simulated on the cluster: the result of one process, and a
+    surface directory stopped after two populations and continued there, the run it would
+    have been."""
+    path = tmp_path / "surface.csv"
+    bitrock.simulate(
+        "m2", omega_rpm=60, duration_s=120, settle_s=60, sample_hz=1, channels="surface", noise_torque_knm=0.2, seed=7
+    ).to_csv(path, index=False)
+    small = dict(
+        laws=["m1", "m2"], particles=150, pilot=100, check_replicates=4, predictive_draws=20, advice=False,
+        backend="cpu", seed=11,
+    )
+    here = bitrock.surface(path, max_populations=3, **small)
+    there = bitrock.surface(path, max_populations=3, executor=dask_client, **small)
+    # Every population's tasks on the workers; the record and the string travel once to each.
+    traffic = there.pop("traffic")
+    assert [t["population"] for t in traffic] == [0, 1, 2]
+    assert all(t["tasks"] >= 2 for t in traffic)
+    assert traffic[0]["payload_bytes"] > 0
+    assert _without_clock(there) == _without_clock(here)
+    first = bitrock.surface(path, max_populations=2, out=tmp_path / "run", executor=dask_client, **small)
+    assert first["populations"] == 2
+    continued = bitrock.resume_surface(tmp_path / "run", max_populations=3, executor=dask_client)
+    continued.pop("traffic")
+    assert _without_clock(continued) == _without_clock(here)
+
+
 #: An evidence small enough for a test: two laws, every model of the residuals (the embedded
 #: record's weight on bit varies, so four in all), each batch of a few hundred candidates, and
 #: its check by one replicate per law.

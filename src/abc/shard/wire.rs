@@ -2,7 +2,8 @@
 //! driver's side ([`Remote`], over any [`Transport`]); the worker's side is
 //! [`crate::abc::worker`].
 //!
-//! A request names its problem (record, prior, seed) and, for proposal tasks, its proposal
+//! A request names its problem (prior, seed, and the record, or the surface record's summaries
+//! and the string its candidates drive: an [`Objective`]) and, for proposal tasks, its proposal
 //! (for SMC, the previous population) by key, without their contents. A worker that does not hold them
 //! yet answers [`Reply::Missing`], and the transport sends the same request again with both
 //! payloads attached; the worker keeps them (and the problem's evaluator: one GPU context and
@@ -15,7 +16,7 @@
 use super::{Output, Round, Task, Workers};
 use crate::error::{Error, Result};
 use crate::eval::gpu::{Shape, tune::ShapeWish};
-use crate::eval::{Backend, Problem};
+use crate::eval::{Backend, Objective, Problem};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
 use std::hash::{Hash, Hasher};
@@ -44,18 +45,18 @@ pub fn build() -> &'static str {
     })
 }
 
-/// The problem's payload: the sources of its law files' laws, then the problem itself (its
+/// The objective's payload: the sources of its law files' laws, then the objective itself (its
 /// laws named), so that a worker registers the laws before it reads their names.
-pub fn encode_problem(problem: &Problem) -> Vec<u8> {
-    let sources: Vec<&str> = crate::laws::file::among(problem.prior.laws())
+pub fn encode_problem(objective: &Objective) -> Vec<u8> {
+    let sources: Vec<&str> = crate::laws::file::among(objective.problem().prior.laws())
         .into_iter()
         .filter_map(|law| law.file().map(|f| f.source.as_str()))
         .collect();
-    encode(&(sources, encode(problem)))
+    encode(&(sources, encode(objective)))
 }
 
-/// Reads a problem's payload ([`encode_problem`]), registering its law files' laws.
-pub fn decode_problem(bytes: &[u8]) -> Result<Problem> {
+/// Reads an objective's payload ([`encode_problem`]), registering its law files' laws.
+pub fn decode_problem(bytes: &[u8]) -> Result<Objective> {
     let (sources, problem): (Vec<String>, Vec<u8>) = decode(bytes, "problem")?;
     for source in sources {
         let file = crate::laws::file::LawFile::parse(&source, std::path::Path::new("law file of the driver"))?;
@@ -175,7 +176,7 @@ pub struct Traffic {
 
 /// Workers reached through a [`Transport`]: the driver's side of a distributed run.
 pub struct Remote<T> {
-    problem: Problem,
+    objective: Objective,
     problem_bytes: Vec<u8>,
     problem_key: u64,
     backend: Backend,
@@ -191,13 +192,15 @@ pub struct Remote<T> {
 }
 
 impl<T: Transport> Remote<T> {
-    /// Workers for `problem` through `transport`, asked to score on `backend` (a GPU in the
-    /// shape `shape` leads to on each worker: the same everywhere once the run recorded one).
-    pub fn new(problem: Problem, backend: Backend, shape: ShapeWish, transport: T) -> Self {
-        let problem_bytes = encode_problem(&problem);
+    /// Workers for `objective` (a record's [`Problem`], or strings simulated against a surface
+    /// record) through `transport`, asked to score on `backend` (a GPU in the shape `shape`
+    /// leads to on each worker: the same everywhere once the run recorded one).
+    pub fn new(objective: impl Into<Objective>, backend: Backend, shape: ShapeWish, transport: T) -> Self {
+        let objective = objective.into();
+        let problem_bytes = encode_problem(&objective);
         Self {
             problem_key: key_of(&problem_bytes),
-            problem,
+            objective,
             problem_bytes,
             backend,
             shape,
@@ -246,7 +249,7 @@ struct EncodedContext {
 
 impl<T: Transport> Workers for Remote<T> {
     fn problem(&self) -> &Problem {
-        &self.problem
+        self.objective.problem()
     }
 
     fn backend(&self) -> &'static str {
@@ -264,6 +267,13 @@ impl<T: Transport> Workers for Remote<T> {
 
     fn parallelism(&self) -> usize {
         self.transport.parallelism().max(1)
+    }
+
+    fn least_task(&self) -> u64 {
+        match self.objective {
+            Objective::Record(_) => super::MIN_TASK,
+            Objective::Strings(_) => super::MIN_STRING_TASK,
+        }
     }
 
     /// The one shape the GPU workers reported; none before any did, or when they differ.

@@ -19,6 +19,7 @@ use crate::eval::Backend;
 use crate::files;
 use crate::laws::Law;
 use crate::prior::PriorFile;
+use crate::run::Scoring;
 use crate::run::dir::{
     Owned, POPULATIONS_BIN, POSTERIOR_CSV, RECORD_CSV, SURFACE_BIT_CSV, SURFACE_JOB_JSON, SURFACE_JSON,
     is_evidence_dir, is_run_dir, is_unfinished_evidence_dir, job_file, owns_unchanged, pretty_json, read_job_file,
@@ -275,6 +276,7 @@ impl SurfaceDir {
         settings: &SurfaceSettings,
         sampled: Sampled,
         again: bool,
+        scoring: Scoring<'_, '_>,
         note: &mut dyn FnMut(String),
     ) -> Result<SurfaceResult> {
         // Where the strings go, decided as `infer` decides it (said there).
@@ -301,6 +303,7 @@ impl SurfaceDir {
             previous: sampled.populations,
             keep: &mut keep,
             warm: &[],
+            scoring,
         };
         infer_continuing(record, settings, self.job.settings.seed, sampling, note)
     }
@@ -375,7 +378,7 @@ pub fn check_again(
         ..Continuation::default()
     };
     let settings = run.continued(&more, sampled.populations.len())?;
-    let result = run.run(&record, &settings, sampled, true, note)?;
+    let result = run.run(&record, &settings, sampled, true, Scoring::Here, note)?;
     run.finish(&record, &result)?;
     Ok(result)
 }

@@ -40,17 +40,17 @@ pub use settings::*;
 pub use warm::LAW_DEFENSIVE_SHARE;
 use warm::*;
 
-use crate::abc::shard::Local;
 use crate::abc::smc::{self, SmcConfig};
 use crate::abc::{Observer, Particle, Population, Run, StopReason};
 use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
-use crate::eval::Backend;
 use crate::eval::projection::{Projection, Training, least_strings};
 use crate::eval::surface::{Distance, InferredString, NoiseKey, Summaries, SurfaceEvaluator, SurfaceModel, add_noise};
+use crate::eval::{Backend, Objective};
 use crate::laws::Law;
 use crate::numerics::weighted_quantile;
 use crate::prior::{Candidate, MAX_DIMS, PhysicalScales, Prior, PriorFile};
+use crate::run::{Placement, Scoring};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
     DownholeExtremes, Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH,
@@ -477,13 +477,14 @@ pub fn infer(
         stopped: None,
         keep: &mut keep,
         warm: &[],
+        scoring: Scoring::Here,
     };
     infer_continuing(record, settings, seed, sampling, note)
 }
 
 /// Where a surface run's sampler starts and what it hands on: what a surface directory
 /// ([`dir`]) stores and continues.
-pub struct Sampling<'a> {
+pub struct Sampling<'a, 'w> {
     /// The populations completed before (empty: the sampler starts from the prior). The run
     /// continued after them gives exactly the populations an uninterrupted one gives.
     pub previous: Vec<Population>,
@@ -496,6 +497,9 @@ pub struct Sampling<'a> {
     /// population 0 drawn near it and weighted back to the prior (see `warm`); empty: from the
     /// prior.
     pub warm: &'a [Particle],
+    /// Where the sampler's strings are simulated: here, or by workers elsewhere (the
+    /// populations are the same).
+    pub scoring: Scoring<'a, 'w>,
 }
 
 /// The sampler's observer that hands every completed population to [`Sampling::keep`].
@@ -604,7 +608,13 @@ pub fn infer_continuing(
                 keep: sampling.keep,
                 note,
             };
-            smc::run_on(&Local(&evaluator), &settings.smc, sampling.previous, &mut keeping)?
+            let placement = Placement {
+                backend: settings.backend,
+                ..Placement::default()
+            };
+            let objective = Objective::Strings(Box::new(evaluator.clone()));
+            let workers = sampling.scoring.workers(objective, &placement, keeping.note)?;
+            smc::run_on(&*workers, &settings.smc, sampling.previous, &mut keeping)?
         }
     };
     let sampler_strings: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();

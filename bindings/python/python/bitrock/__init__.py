@@ -807,6 +807,7 @@ def surface(
     semi_automatic: bool | None = None,
     out: str | os.PathLike[str] | None = None,
     force: bool = False,
+    executor: Any = None,
 ) -> dict:
     """The law at the bit from a surface record (top-drive speed, surface torque and weight on
     bit on a regular clock, a CSV file) through drill strings simulated per candidate, as
@@ -829,10 +830,14 @@ def surface(
     prediction with its adjusted R². With ``out``, the run is written to that surface directory
     (``surface.json``, ``posterior.csv``, ``bit.csv``, and the record, job and populations that
     :func:`resume_surface` continues; ``force=True`` replaces a surface run there), as
-    ``bitrock surface --out``. docs/surface.md says what a surface record can and cannot tell."""
+    ``bitrock surface --out``. ``executor`` (as for :func:`abc`) simulates the sampler's
+    strings on a pool of workers, the populations those of one process bit for bit;
+    ``traffic`` in the result says what travelled. docs/surface.md says what a surface record
+    can and cannot tell."""
     import json
 
-    options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json", "out", "force")}
+    options = {k: v for k, v in locals().items() if k not in ("path", "laws", "json", "out", "force", "executor")}
+    dispatcher = None if executor is None else Dispatcher(executor)
     text = _bitrock.surface(
         os.fspath(path),
         None if laws is None else [str(law) for law in laws],
@@ -840,6 +845,8 @@ def surface(
         _note,
         None if out is None else os.fspath(out),
         force,
+        dispatcher,
+        1 if dispatcher is None else dispatcher.parallelism,
     )
     return json.loads(text)
 
@@ -877,6 +884,7 @@ def resume_surface(
     max_seconds: float | None = None,
     backend: str | None = None,
     check_replicates: int | None = None,
+    executor: Any = None,
 ) -> dict:
     """Continues the surface run in ``directory`` (one that ``bitrock.surface(..., out=directory)``
     or ``bitrock surface --out`` wrote, finished or killed part-way) after its last stored
@@ -886,11 +894,19 @@ def resume_surface(
     uninterrupted run gives (on another, the run says its bits differ); the check and the bit are computed again
     and the directory written anew. Returns the result as :func:`surface` does. As ``bitrock
     surface --resume``; :func:`check_selection` of the directory checks it again without
-    sampling."""
+    sampling. ``executor`` as for :func:`surface`."""
     import json
 
+    dispatcher = None if executor is None else Dispatcher(executor)
     text = _bitrock.resume_surface(
-        os.fspath(directory), max_populations, max_seconds, backend, check_replicates, _note
+        os.fspath(directory),
+        max_populations,
+        max_seconds,
+        backend,
+        check_replicates,
+        _note,
+        dispatcher,
+        1 if dispatcher is None else dispatcher.parallelism,
     )
     return json.loads(text)
 

@@ -283,10 +283,11 @@ def resume_evidence(dir: str | PathLike[str], backend: str | None, check: Suppor
     the document, as [`evidence`] returns it.
     """
 
-def resume_surface(dir: str | PathLike[str], max_populations: SupportsIndex | None, max_seconds: SupportsFloat | SupportsIndex | None, backend: str | None, check_replicates: SupportsIndex | None, note: Any | None) -> str:
+def resume_surface(dir: str | PathLike[str], max_populations: SupportsIndex | None, max_seconds: SupportsFloat | SupportsIndex | None, backend: str | None, check_replicates: SupportsIndex | None, note: Any | None, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
     """
     `bitrock surface --resume`: the surface run in `dir` continued with `more`'s stopping rules
-    and backend, the directory written anew; the whole result as JSON text.
+    and backend, the directory written anew, on the workers of `dispatcher` where given; the
+    whole result as JSON text.
     """
 
 def serve(request: bytes, problem: bytes | None = None, context: bytes | None = None) -> bytes:
@@ -321,11 +322,12 @@ def stability(run: str | PathLike[str] | None, law: str | None, params: Supports
     `torque_unit`): a dict of NumPy arrays the Python layer makes a Dataset of.
     """
 
-def surface(path: str | PathLike[str], laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, out: str | PathLike[str] | None = None, force: bool = False) -> str:
+def surface(path: str | PathLike[str], laws: SupportsGetItem[int, str] | None, options: dict, note: Any | None, out: str | PathLike[str] | None = None, force: bool = False, dispatcher: Any | None = None, parallelism: SupportsIndex = 1) -> str:
     """
     `bitrock surface` on the record at `path`: the whole result as JSON text, written as a
-    surface directory to `out` where given. The notes of the run (a GPU fallback of the
-    advice's strings, say) go to `note` once it is done.
+    surface directory to `out` where given, its sampler's strings simulated by the workers of
+    `dispatcher` where given (the result then carries their `traffic`). The notes of the run
+    (a GPU fallback of the advice's strings, say) go to `note` once it is done.
     """
 
 def torque(law: str, speed_rad_s: Incomplete, params: SupportsGetItem[int, SupportsFloat | SupportsIndex], r: SupportsFloat | SupportsIndex, torque_unit: str | None) -> Incomplete:
