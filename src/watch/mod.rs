@@ -369,6 +369,10 @@ impl Watch {
                 update.check = Some(selected.check);
                 self.carry_selection(&mut update, selected.selection, self.declared.units.torque);
                 let mut update = self.completed(update, window, Some(selected.bit));
+                if let Some(view) = self.view.as_mut() {
+                    view.bit = Some(selected.bit);
+                    view.surface = Some(selected.strip);
+                }
                 // What the way out rests on that the window leaves to the prior, among the laws
                 // the advice simulates (those carried at least ESCAPE_MIN_PROBABILITY likely).
                 let taking_part = |law: Law| {

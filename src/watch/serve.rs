@@ -91,6 +91,8 @@ pub fn page_meta(meta: &super::store::WatchMeta) -> serde_json::Value {
             .map(|(p, c)| serde_json::json!([p, format!("#{c:06x}")]))
             .collect::<Vec<_>>(),
         "bitrock_version": meta.bitrock_version,
+        // A watch of surface channels: its windows have no bit channels to draw.
+        "surface": meta.surface.is_some(),
     })
 }
 

@@ -42,6 +42,8 @@ pub(super) struct SurfaceSelected {
     pub(super) laws: Vec<crate::run::surface::LawPosterior>,
     /// What the user should know of the window's run (a sampler stopped far above its floor).
     pub(super) warnings: Vec<String>,
+    /// What the page's strip chart draws of the window.
+    pub(super) strip: super::view::SurfaceStrip,
 }
 
 impl Watch {
@@ -119,7 +121,10 @@ impl Watch {
         };
         let laws = Selected::of_population(&self.settings.laws, last);
         let bit = result.bit_seen(&record);
+        let start_s = window.rows.first().and_then(|r| r.time_s).unwrap_or(0.0);
+        let strip = super::view::SurfaceStrip::of(&record, start_s, &result.at_the_bit.speed_rpm);
         Ok(Ok(SurfaceSelected {
+            strip,
             bit,
             check: WindowCheck {
                 decided: result.check.decided,

@@ -34,7 +34,8 @@ pub struct View {
     #[serde(default)]
     pub time_s: Vec<f64>,
     /// What the window's bit speed shows, over all its samples: the share stuck, the
-    /// severity, the mean speed and weight on bit (`None` in views stored without it).
+    /// severity, the mean speed and weight on bit (`None` in views stored without it); for a
+    /// window of surface channels, the bit its strings imply.
     #[serde(default)]
     pub bit: Option<BitSeen>,
     /// The bit's depth over the window, m, first and last (where the record has a depth
@@ -45,6 +46,40 @@ pub struct View {
     pub band: Option<Band>,
     /// P(stick-slip) over (Ω, W); `None` before the first informative window.
     pub map: Option<MapView>,
+    /// A window of surface channels that went through the surface sampler: what the rig
+    /// streamed and the bit speed its strings imply (the cloud and the bit's strip are then
+    /// empty: the window has no bit channels).
+    #[serde(default)]
+    pub surface: Option<SurfaceStrip>,
+}
+
+/// A window of surface channels as the strip chart draws it, at most [`CLOUD_POINTS`] of its
+/// samples, evenly strided.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceStrip {
+    /// Time along the record, s.
+    pub time_s: Vec<f64>,
+    pub top_drive_rpm: Vec<f64>,
+    /// In the view's torque unit.
+    pub surface_torque: Vec<f64>,
+    /// The bit speed the posterior's strings imply, rpm: 5 %, median and 95 % per sample.
+    pub bit_rpm: Vec<[f64; 3]>,
+}
+
+impl SurfaceStrip {
+    /// The strip of `record` (a window's, its clock from the window's start at `start_s`
+    /// along the record) with the implied bit speed `bit_rpm` per sample of it.
+    pub(super) fn of(record: &crate::data::surface::SurfaceRecord, start_s: f64, bit_rpm: &[[f64; 3]]) -> Self {
+        let stride = record.time_s.len().div_ceil(CLOUD_POINTS).max(1);
+        let per_unit = record.torque_unit.newton_metres();
+        let every = |values: &[f64], per: f64| -> Vec<f64> { values.iter().step_by(stride).map(|v| v / per).collect() };
+        Self {
+            time_s: record.time_s.iter().step_by(stride).map(|t| start_s + t).collect(),
+            top_drive_rpm: every(&record.top_drive_rad_s, RAD_S_PER_RPM),
+            surface_torque: every(&record.surface_torque_nm, per_unit),
+            bit_rpm: bit_rpm.iter().step_by(stride).copied().collect(),
+        }
+    }
 }
 
 /// The band of the mixture's torque curves T(w) at the window's weight on bit.
@@ -151,6 +186,7 @@ pub(super) fn view(window: usize, rows: &[Row], unit: TorqueUnit, posterior: Opt
         depth_m,
         band,
         map,
+        surface: None,
     }
 }
 

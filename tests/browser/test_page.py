@@ -113,6 +113,25 @@ def log_rows(driver):
     return rows
 
 
+def inked(driver):
+    """Per canvas of the page, the share of its pixels that are neither blank nor white, read
+    from the canvas itself."""
+    return driver.execute_script(
+        """
+        const out = {};
+        for (const c of document.querySelectorAll('canvas')) {
+          const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+          let inked = 0;
+          for (let i = 0; i < d.length; i += 4) {
+            if (d[i + 3] > 0 && !(d[i] > 245 && d[i + 1] > 245 && d[i + 2] > 245)) inked++;
+          }
+          out[c.id] = inked / (c.width * c.height);
+        }
+        return out;
+        """
+    )
+
+
 def shown_probabilities(update):
     if update["uninformative"]:
         return "uninformative"
@@ -195,22 +214,8 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
         ARTEFACTS.mkdir(parents=True, exist_ok=True)
         shot.save(ARTEFACTS / "live-page.png")
 
-        # Every panel is drawn: each canvas holds coloured pixels, read from the canvas itself
-        # (the share of its pixels that are neither blank nor white), whatever is on screen.
-        drawn = driver.execute_script(
-            """
-            const out = {};
-            for (const c of document.querySelectorAll('canvas')) {
-              const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-              let inked = 0;
-              for (let i = 0; i < d.length; i += 4) {
-                if (d[i + 3] > 0 && !(d[i] > 245 && d[i + 1] > 245 && d[i + 2] > 245)) inked++;
-              }
-              out[c.id] = inked / (c.width * c.height);
-            }
-            return out;
-            """
-        )
+        # Every panel is drawn: each canvas holds coloured pixels, whatever is on screen.
+        drawn = inked(driver)
         assert sorted(drawn) == ["along", "cloud", "map", "params", "strip"], drawn
         # Measured on this well: along 0.65 (stacked probabilities), cloud 0.07 (points and band),
         # map 0.73 (cells), params 0.25 (bands), strip 0.04 (two traces): each must keep about
@@ -303,3 +308,43 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
     serve.proc.send_signal(signal.SIGINT)
     assert serve.proc.wait(30) == 0, "".join(serve.stderr)
     print(f"page weight: {weight} bytes")
+
+
+def test_a_watch_of_surface_channels_draws_the_bit_its_strings_imply(tmp_path):
+    """A record of surface channels alone (m2 at 60 rpm, the bit stuck about half the time),
+    watched and served: the strip draws the surface channels and the bit speed its strings
+    imply, the torque-speed cloud says why it has nothing to draw."""
+    subprocess.run(
+        [BIN, "simulate", "--law", "m2", "--omega-rpm", "60", "--duration-s", "180", "--settle-s", "60",
+         "--sample-hz", "1", "--channels", "surface", "--noise-torque-knm", "0.2", "--seed", "3", "-o", "rig.csv"],
+        cwd=tmp_path, check=True, capture_output=True,
+    )
+    done = subprocess.run(
+        [BIN, "watch", "rig.csv", "--laws", "m2", "--window-s", "120", "--step-s", "60", "--backend", "cpu",
+         "--json", "--out", "w"],
+        cwd=tmp_path, capture_output=True, text=True, env=dict(os.environ, NODEVICE_SELECT="1"),
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert len(lines) == 2 and all(u["uninformative"] is None for u in lines), lines
+    serve = Process(["serve", "w", "--address", "127.0.0.1:0"], cwd=tmp_path)
+    url = serve.wait_for_address()
+    driver = browser()
+    try:
+        driver.get(url)
+        WebDriverWait(driver, 60).until(lambda d: d.execute_script("return window.bitrockPage.updates.length") == 2)
+        view = driver.execute_script("return window.bitrockPage.view")
+        assert view["speed_rpm"] == [] and len(view["surface"]["bit_rpm"]) == 120
+        drawn = inked(driver)
+        driver.save_screenshot(str(ARTEFACTS / "surface-page.png"))
+        # The strip's band, traces and stuck band ink a good share of it (0.26 on this record);
+        # the cloud only its frame and the words that say why (0.027).
+        assert drawn["strip"] > 0.13 and drawn["cloud"] < 0.04, drawn
+        caption = driver.find_element(By.ID, "strip-caption").text
+        assert "the bit speed its simulated strings imply" in caption, caption
+        assert f"stuck {view['bit']['stuck_share'] * 100:.0f} % of the time" in caption, caption
+        assert drawn["map"] > 0.5 and drawn["params"] > 0.1, drawn
+    finally:
+        driver.quit()
+        serve.proc.send_signal(signal.SIGINT)
+    assert serve.proc.wait(30) == 0, "".join(serve.stderr)

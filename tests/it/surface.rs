@@ -813,7 +813,8 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
         let updates: Vec<serde_json::Value> = out.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
         (code, updates, err)
     };
-    let (code, updates, err) = watch(&path, "m2", &[]);
+    let stored = dir.path().join("m2-watch");
+    let (code, updates, err) = watch(&path, "m2", &["--out", stored.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert_eq!(updates.len(), 3, "{err}");
     assert!(
@@ -843,6 +844,40 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
         assert_eq!(advice["stick_slip_now"], true, "{advice}");
         assert!(advice["escape_omega_rpm"][0].as_f64().unwrap() > 60.0, "{advice}");
     }
+    // The page's picture of the last window: no bit channels to draw, the surface channels
+    // and the bit speed the strings imply, sample for sample on the window's stretch of the
+    // record, the median band stuck about as often as the bit was.
+    let view = bitrock::watch::store::read(&stored).unwrap().view.unwrap();
+    assert!(view.speed_rpm.is_empty() && view.band.is_none(), "{view:?}");
+    let strip = view.surface.expect("a surface window's strip");
+    let last = updates.last().unwrap();
+    let (from, to) = (last["start_s"].as_f64().unwrap(), last["end_s"].as_f64().unwrap());
+    assert_eq!(strip.time_s.len(), 120);
+    assert!(
+        strip.time_s[0] >= from && *strip.time_s.last().unwrap() < to,
+        "{from}..{to}"
+    );
+    assert_eq!(strip.bit_rpm.len(), strip.time_s.len());
+    assert!(strip.top_drive_rpm.iter().all(|w| (w - 60.0).abs() < 1e-6));
+    let record_torque: Vec<f64> = {
+        let record = read(&path);
+        record.surface_torque_nm[from as usize..to as usize]
+            .iter()
+            .map(|t| t / 1000.0)
+            .collect()
+    };
+    assert_eq!(strip.surface_torque, record_torque, "kN·m, the record's unit");
+    assert!(strip.bit_rpm.iter().all(|q| q[0] <= q[1] && q[1] <= q[2]));
+    let stuck = strip.bit_rpm.iter().filter(|q| q[1].abs() < 1.0).count() as f64 / 120.0;
+    let mut seen = Summary::default();
+    for w in &bit_speed[from as usize..to as usize] {
+        seen.push(*w, f64::NAN, f64::NAN);
+    }
+    assert!(
+        (stuck - seen.stuck_share()).abs() <= 0.15,
+        "{stuck} against {}",
+        seen.stuck_share()
+    );
     // Window 0 is `bitrock surface` on its 120 rows with the watch's settings and seed.
     let text = std::fs::read_to_string(&path).unwrap();
     let first = dir.path().join("first.csv");

@@ -400,9 +400,17 @@ function drawAlong(canvas) {
   changeLines(f, updates, [0, 1]);
 }
 
+// True for a watch of surface channels: its windows carry no bit channels.
+function surfaceWatch() {
+  return Boolean(state.meta && state.meta.surface);
+}
+
 function drawCloud(canvas) {
   const v = state.view;
   if (!v) return message(canvas, 'no window yet');
+  if (v.speed_rpm.length === 0 && (v.surface || surfaceWatch())) {
+    return message(canvas, 'surface channels only: no bit speed or torque on bit to draw');
+  }
   const band = v.band;
   const ys = v.torque.concat(band ? band.lower.concat(band.upper) : []);
   const xs = v.speed_rpm.concat(band ? band.speed_rpm : []);
@@ -586,6 +594,8 @@ function drawStrip(canvas) {
       (v.depth_m ? `, bit depth ${fixed(v.depth_m[0], 1)}–${fixed(v.depth_m[1], 1)} m.` : '.')
     : '';
   if (!v) return message(canvas, 'no window yet');
+  if (v.surface) return drawSurfaceStrip(canvas, v);
+  if (surfaceWatch()) return message(canvas, `window ${v.window} of surface channels informed nothing: no bit speed implied`);
   if (!v.time_s || v.time_s.length === 0) return message(canvas, 'the record has no clock: no strip chart');
   const { g, w, h } = surface(canvas);
   const x = extent(v.time_s);
@@ -624,6 +634,74 @@ function drawStrip(canvas) {
     g.fillText(panel.label, 0, 0);
     g.restore();
     if (k === 1) {
+      g.textAlign = 'center';
+      for (const t of times) g.fillText(short(t), px(t), box.bottom + 14);
+      g.fillText('time along the record, s', (box.left + box.right) / 2, h - 4);
+    }
+  });
+}
+
+// A window of surface channels along time: above, the bit speed its strings imply (the 90 %
+// band of the posterior's strings, their median) with the top-drive speed and the stuck band;
+// below, the surface torque.
+function drawSurfaceStrip(canvas, v) {
+  const s = v.surface;
+  const caption = $('strip-caption');
+  const bit = v.bit;
+  caption.textContent =
+    `Window ${v.window} of surface channels: the bit speed its simulated strings imply (median and 90 % band)` +
+    (bit ? `, stuck ${fixed(bit.stuck_share * 100, 0)} % of the time, stick-slip severity ${fixed(bit.severity, 2)}` : '') +
+    `, under the top-drive speed the rig streamed; the surface torque below.`;
+  const { g, w, h } = surface(canvas);
+  const x = extent(s.time_s);
+  const half = (h - 38) / 2;
+  const lower = s.bit_rpm.map((q) => q[0]);
+  const median = s.bit_rpm.map((q) => q[1]);
+  const upper = s.bit_rpm.map((q) => q[2]);
+  const panels = [
+    { lines: [[median, '#0072b2'], [s.top_drive_rpm, '#5b6570']], label: 'speed, rpm', top: 8, band: true },
+    { lines: [[s.surface_torque, '#d55e00']], label: `surface torque, ${v.torque_unit}`, top: 8 + half },
+  ];
+  const times = ticks(x[0], x[1], 6);
+  panels.forEach((panel, k) => {
+    const values = panel.band ? upper.concat(lower, s.top_drive_rpm, [0]) : s.surface_torque;
+    const y = extent(values);
+    const box = { left: 58, right: w - 12, top: panel.top, bottom: panel.top + half - 12 };
+    const px = (t) => box.left + ((t - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
+    const py = (u) => box.bottom - ((u - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
+    if (panel.band) {
+      g.fillStyle = 'rgba(179, 38, 30, 0.15)';
+      const [a, b] = [py(Math.min(1, y[1])), py(Math.max(-1, y[0]))];
+      g.fillRect(box.left, a, box.right - box.left, b - a);
+      if (s.bit_rpm.length === s.time_s.length) fillBetween(g, px, py, s.time_s, upper, lower, 'rgb(0, 114, 178)', 0.2);
+    }
+    g.strokeStyle = '#9aa3ad';
+    g.lineWidth = 1;
+    g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
+    for (const [line, colour] of panel.lines) {
+      if (line.length !== s.time_s.length) continue;
+      polyline(g, px, py, s.time_s, line);
+      g.strokeStyle = colour;
+      g.lineWidth = 1.2;
+      g.stroke();
+    }
+    g.fillStyle = '#5b6570';
+    g.font = '11px system-ui, sans-serif';
+    g.textAlign = 'right';
+    for (const t of ticks(y[0], y[1], 3)) g.fillText(short(t), box.left - 4, py(t) + 4);
+    g.save();
+    g.translate(12, (box.top + box.bottom) / 2);
+    g.rotate(-Math.PI / 2);
+    g.textAlign = 'center';
+    g.fillText(panel.label, 0, 0);
+    g.restore();
+    if (k === 0) {
+      g.textAlign = 'left';
+      g.fillStyle = '#0072b2';
+      g.fillText('bit (implied)', box.left + 6, box.top + 12);
+      g.fillStyle = '#5b6570';
+      g.fillText('top drive', box.left + 90, box.top + 12);
+    } else {
       g.textAlign = 'center';
       for (const t of times) g.fillText(short(t), px(t), box.bottom + 14);
       g.fillText('time along the record, s', (box.left + box.right) / 2, h - 4);
