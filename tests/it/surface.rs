@@ -143,6 +143,64 @@ fn the_surface_of_a_stick_slipping_bit_gives_its_torques_and_its_stuck_share() {
     assert!(inside as f64 >= 0.85 * rpm.len() as f64, "{inside} of {}", rpm.len());
 }
 
+/// The way out where the record leaves a parameter open: m2 at 60 rpm seen from the surface
+/// leaves g, how fast the torque falls with speed, to its prior, and the escape speed depends
+/// on it (165 rpm at g = 0.1 s/rad, 125 at the truth's 0.3, 85 at 1). The advice's strings,
+/// drawn from the posterior, find a way out that the true bit, stuck at 60 rpm, does not take;
+/// the strings along the posterior's spread of g find one it takes.
+#[test]
+fn the_way_out_along_an_open_parameter_s_spread_gets_the_true_bit_out() {
+    use bitrock::run::strings::{OperatingPoint, SimulatedSettings, Simulator};
+    use bitrock::simulate::strings::Chain;
+    use bitrock::stability::map::LawSamples;
+    let (_dir, path, _) = record(Law::M2, 60.0, 300.0, 1.0, 0.2, 3);
+    let mut settings = small(vec![Law::M2]);
+    settings.advice = true;
+    let r = run(&path, &settings, 1);
+    let advice = r.at_the_bit.advice.as_deref().unwrap();
+    let open = r.at_the_bit.open_advice.as_ref().expect("g is left open");
+    eprintln!("{advice}\n{open:?}");
+    assert_eq!(open.open, ["m2's g"]);
+    let drawn: f64 = advice
+        .split("raise the top-drive speed to ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .expect("a speed that ends it");
+    let spread = open.speed_rpm.expect("a speed that ends it along g's spread");
+    assert!(spread > drawn, "{spread} against {drawn}");
+    // Applied to the true string, stuck at 60 rpm under the record's weight.
+    let truth = Law::M2.scale_torque(Law::M2.paper_estimate().unwrap(), 1000.0);
+    let inputs = vec![LawSamples {
+        law: Law::M2,
+        probability: 1.0,
+        map_si: truth.clone(),
+        samples_si: vec![truth],
+    }];
+    let wob_kn = bitrock::laws::PAPER_W_REF_N / 1000.0;
+    let simulated = SimulatedSettings::new(
+        Chain::one_dof(&Lumped::default()),
+        wob_kn * 1000.0,
+        bitrock::eval::Backend::Cpu,
+    );
+    let mut quiet = |_| {};
+    let mut simulator = Simulator::new(&simulated, &inputs, &mut quiet).unwrap();
+    let at = simulator
+        .at_point(OperatingPoint {
+            omega_rpm: 60.0,
+            wob_kn,
+        })
+        .unwrap();
+    assert_eq!(at.stick_slip_probability, 1.0);
+    let persists = simulator.escape(&at, &[drawn, spread], &[wob_kn]).unwrap().probability;
+    eprintln!("stick-slip persists at {drawn} and {spread} rpm: {persists:?}");
+    assert_eq!(persists, [1.0, 0.0]);
+    // And the lighter weight at 60 rpm.
+    let lighter = open.wob_kn.expect("a weight that ends it along g's spread");
+    let persists = simulator.escape(&at, &[60.0], &[lighter]).unwrap().probability;
+    assert_eq!(persists, [0.0], "at {lighter} kN");
+}
+
 /// Semi-automatic ABC on the stick-slipping record above: the distance compares what the
 /// regressions on the pilot's nearest strings predict. They predict the dynamic torque,
 /// which sets the mean surface torque, almost exactly, the decay rate g, which the surface

@@ -70,6 +70,26 @@ def test_an_independent_string_s_surface_gives_its_torques_and_stuck_share(tmp_p
     assert len(result["time_s"]) == len(rpm)
 
 
+def test_the_way_out_along_g_s_spread_gets_the_independent_string_s_bit_out(tmp_path):
+    # The twin's surface leaves m2's g to the prior; the strings drawn from the posterior end
+    # the stick-slip at a speed the twin's bit, stuck at 60 rpm, may not take, and the result
+    # says so. Every string along the posterior's spread of g ending it: the speed and the
+    # weight found there, applied at four phases of the twin's cycle, get its bit out.
+    path = tmp_path / "rig.csv"
+    twin_record(path)
+    result = bitrock.surface(path, laws=["m2"], seed=2, **dict(SMALL, advice=True))
+    at = result["at_the_bit"]
+    assert "leaves m2's g to the prior" in at["advice"], at["advice"]
+    open_advice = at["open_advice"]
+    assert open_advice["open"] == ["m2's g"]
+    chain = one_dof()
+    cycles = cycles_at(chain, "m2", M2_NM, 60.0 * RPM, 1.0, phases=4)
+    assert all(share > 0.3 for share, _ in cycles), cycles
+    for share, state in cycles:
+        assert after_change(chain, "m2", M2_NM, open_advice["speed_rpm"] * RPM, 1.0, state) < 0.01
+        assert after_change(chain, "m2", M2_NM, 60.0 * RPM, open_advice["wob_kn"] / 244.2, state) < 0.01
+
+
 # The GPU's f32 strings part ways with the CPU's f64 ones where a candidate's cycle is
 # irregular, so a run on each backend is its own realisation: at SMALL's budget the GPU's run of
 # seed 2 stops further from the record (measured on lavapipe, 2026-12-01: ε 2.37 against the

@@ -78,6 +78,7 @@ pub(super) fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: us
         stuck_share_by_law,
         diverged: runs.len() - good.len(),
         advice: None,
+        open_advice: None,
     })
 }
 
@@ -119,7 +120,67 @@ pub fn unidentified_caveat(laws: &[LawPosterior], taking_part: &dyn Fn(Law) -> b
     })
 }
 
-/// The simulated escape advice from the record's mean operating point.
+/// Where along each parameter the record leaves open a way out is scanned: the posterior's
+/// quantiles there, its tails included.
+const OPEN_QUANTILES: [f64; 5] = [0.02, 0.25, 0.5, 0.75, 0.98];
+
+/// For each law whose parameters the record leaves to their prior boxes (`laws`' unidentified
+/// ones), the posterior particles at [`OPEN_QUANTILES`] of each such parameter, each as many
+/// strings of the law's probability; a law the record identifies whole keeps its samples. A
+/// way out must end every such string: the record cannot say which of them is the bit's (the
+/// escape speed need not grow toward a box's end: m2's stick-slip at 60 rpm needs 165 rpm at
+/// g = 0.1 s/rad, 85 rpm at 1 and vanishes at 0.02 and 10). Empty where the record leaves
+/// nothing open.
+fn open_spread(inputs: &[LawSamples], laws: &[LawPosterior], particles: &[Particle]) -> Vec<LawSamples> {
+    let open_of = |law: Law| -> Vec<usize> {
+        laws.iter()
+            .find(|l| l.law == law)
+            .map(|l| (0..l.params.len()).filter(|&j| !l.params[j].identified).collect())
+            .unwrap_or_default()
+    };
+    if inputs.iter().all(|input| open_of(input.law).is_empty()) {
+        return Vec::new();
+    }
+    inputs
+        .iter()
+        .map(|input| {
+            let open = open_of(input.law);
+            if open.is_empty() {
+                return input.clone();
+            }
+            let n = input.law.n_params();
+            let own: Vec<&Particle> = particles.iter().filter(|p| p.law == input.law).collect();
+            let total: f64 = own.iter().map(|p| p.weight).sum();
+            let mut samples_si: Vec<Vec<f64>> = Vec::new();
+            for &j in &open {
+                let mut sorted = own.clone();
+                sorted.sort_by(|a, b| a.params[j].total_cmp(&b.params[j]));
+                for q in OPEN_QUANTILES {
+                    let mut cumulative = 0.0;
+                    let at = sorted
+                        .iter()
+                        .find(|p| {
+                            cumulative += p.weight;
+                            cumulative >= q * total
+                        })
+                        .or(sorted.last());
+                    if let Some(p) = at {
+                        samples_si.push(p.params[..n].to_vec());
+                    }
+                }
+            }
+            LawSamples {
+                samples_si,
+                ..input.clone()
+            }
+        })
+        .collect()
+}
+
+/// The simulated escape advice from the record's mean operating point, in words, and, where
+/// the record leaves parameters of the laws to their prior boxes, the way out scanned again
+/// along the posterior's spread of them ([`open_spread`]).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn escape_advice(
     record: &SurfaceRecord,
     settings: &SurfaceSettings,
@@ -128,7 +189,7 @@ pub(super) fn escape_advice(
     laws: &[LawPosterior],
     particles: &[Particle],
     note: &mut dyn FnMut(String),
-) -> Result<String> {
+) -> Result<(String, Option<OpenAdvice>)> {
     use crate::run::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn};
     let wob_n = mean_wob_n(record, settings.w_ref_n);
     let w_ref_n = settings.w_ref_n.unwrap_or(wob_n);
@@ -163,5 +224,62 @@ pub(super) fn escape_advice(
     )?;
     // Every law with particles is simulated (`inputs` above).
     let caveat = unidentified_caveat(laws, &|_| true).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
-    Ok(advice.text() + caveat.as_deref().unwrap_or(""))
+    let mut text = advice.text() + caveat.as_deref().unwrap_or("");
+    let spread = open_spread(&inputs, laws, particles);
+    if spread.is_empty() {
+        return Ok((text, None));
+    }
+    // Every string must end: the record cannot say which of them is the bit's.
+    let mut simulator = Simulator::new(&simulated, &spread, note)?;
+    let at = simulator.at_point(point)?;
+    let speeds = advice_speeds_rpm(point.omega_rpm);
+    let weights = advice_weights_kn(point.wob_kn);
+    let by_speed = simulator.escape(&at, &speeds, &[point.wob_kn])?;
+    let by_weight = simulator.escape(&at, &[point.omega_rpm], &weights)?;
+    let all_end =
+        |grid: &crate::run::strings::Grid, k: usize| grid.stick_slip_weight[k] + grid.diverged_weight[k] <= 1e-12;
+    let speed_rpm = (0..speeds.len()).find(|&k| all_end(&by_speed, k)).map(|k| speeds[k]);
+    // The weights ascend: the nearest below the operating point is the last.
+    let wob_kn = (0..weights.len())
+        .rev()
+        .find(|&k| all_end(&by_weight, k))
+        .map(|k| weights[k]);
+    let names: Vec<String> = laws
+        .iter()
+        .filter(|l| l.particles > 0)
+        .flat_map(|l| {
+            l.params
+                .iter()
+                .filter(|p| !p.identified)
+                .map(move |p| format!("{}'s {}", l.law, p.name))
+        })
+        .collect();
+    let mut ways = Vec::new();
+    if let Some(rpm) = speed_rpm {
+        ways.push(format!("raise the top-drive speed to {rpm:.0} rpm"));
+    }
+    if let Some(kn) = wob_kn {
+        ways.push(format!("lower the weight on bit to {}", crate::units::kn_text(kn)));
+    }
+    let ways = if ways.is_empty() {
+        format!(
+            "no top-drive speed up to {:.0} rpm nor weight on bit down to {} ends it in all of them",
+            speeds.last().copied().unwrap_or(point.omega_rpm),
+            crate::units::kn_text(weights.first().copied().unwrap_or(point.wob_kn))
+        )
+    } else {
+        ways.join(", or ")
+    };
+    text.push_str(&format!(
+        "; to end it in every string along the posterior's spread of {} (its 2 %, quartiles and 98 %): {ways}",
+        names.join(", "),
+    ));
+    Ok((
+        text,
+        Some(OpenAdvice {
+            open: names,
+            speed_rpm,
+            wob_kn,
+        }),
+    ))
 }

@@ -274,6 +274,23 @@ pub struct AtTheBit {
     pub diverged: usize,
     /// What ends the stick-slip, by simulated strings (where the bit stick-slips).
     pub advice: Option<String>,
+    /// Where the record leaves some of the laws' parameters to their prior boxes: the way out
+    /// of strings along the posterior's spread of those parameters, tails included, which ends
+    /// the stick-slip whichever of them is the bit's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub open_advice: Option<OpenAdvice>,
+}
+
+/// The way out scanned again along the posterior's spread of every parameter the record
+/// leaves open.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OpenAdvice {
+    /// The parameters left open (`m2's g`).
+    pub open: Vec<String>,
+    /// The nearest top-drive speed (rpm) and lighter weight on bit (kN) that end it there;
+    /// `None` where none scanned does.
+    pub speed_rpm: Option<f64>,
+    pub wob_kn: Option<f64>,
 }
 
 /// Everything a surface inference finds.
@@ -641,9 +658,9 @@ pub fn infer_continuing(
     simulations += at_the_bit.draws as u64;
     if settings.advice && at_the_bit.stick_slip_probability >= 0.5 {
         let chain = Chain::one_dof(&string.median());
-        at_the_bit.advice = Some(escape_advice(
-            record, settings, backend, &chain, &laws, particles, note,
-        )?);
+        let (advice, open) = escape_advice(record, settings, backend, &chain, &laws, particles, note)?;
+        at_the_bit.advice = Some(advice);
+        at_the_bit.open_advice = open;
     }
     let ratio_mean = model.drive.ratio.iter().sum::<f64>() / model.drive.ratio.len() as f64;
     Ok(SurfaceResult {
