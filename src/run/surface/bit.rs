@@ -101,16 +101,7 @@ pub fn mean_wob_n(record: &SurfaceRecord, w_ref_n: Option<f64>) -> f64 {
 /// whose cycle matches the record's may leave it at speeds far apart. `None` where every such
 /// parameter is identified.
 pub fn unidentified_caveat(laws: &[LawPosterior], taking_part: &dyn Fn(Law) -> bool) -> Option<String> {
-    let named: Vec<String> = laws
-        .iter()
-        .filter(|l| l.particles > 0 && taking_part(l.law))
-        .flat_map(|l| {
-            l.params
-                .iter()
-                .filter(|p| !p.identified)
-                .map(move |p| format!("{}'s {}", l.law, p.name))
-        })
-        .collect();
+    let named = open_parameters(laws, taking_part);
     (!named.is_empty()).then(|| {
         format!(
             "; but the record leaves {} to the prior, and the way out depends on {}: the speed or weight that ends the stick-slip may lie further (the cycle seen at a second top-drive speed, or a downhole record, tells)",
@@ -118,6 +109,20 @@ pub fn unidentified_caveat(laws: &[LawPosterior], taking_part: &dyn Fn(Law) -> b
             if named.len() == 1 { "it" } else { "them" }
         )
     })
+}
+
+/// The parameters of the laws with particles and `taking_part` that the record leaves to
+/// their prior boxes, named as `m2's g`.
+fn open_parameters(laws: &[LawPosterior], taking_part: &dyn Fn(Law) -> bool) -> Vec<String> {
+    laws.iter()
+        .filter(|l| l.particles > 0 && taking_part(l.law))
+        .flat_map(|l| {
+            l.params
+                .iter()
+                .filter(|p| !p.identified)
+                .map(move |p| format!("{}'s {}", l.law, p.name))
+        })
+        .collect()
 }
 
 /// Where along each parameter the record leaves open a way out is scanned: the posterior's
@@ -244,16 +249,7 @@ pub(super) fn escape_advice(
         .rev()
         .find(|&k| all_end(&by_weight, k))
         .map(|k| weights[k]);
-    let names: Vec<String> = laws
-        .iter()
-        .filter(|l| l.particles > 0)
-        .flat_map(|l| {
-            l.params
-                .iter()
-                .filter(|p| !p.identified)
-                .map(move |p| format!("{}'s {}", l.law, p.name))
-        })
-        .collect();
+    let names = open_parameters(laws, &|_| true);
     let mut ways = Vec::new();
     if let Some(rpm) = speed_rpm {
         ways.push(format!("raise the top-drive speed to {rpm:.0} rpm"));

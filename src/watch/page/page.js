@@ -597,48 +597,10 @@ function drawStrip(canvas) {
   if (v.surface) return drawSurfaceStrip(canvas, v);
   if (surfaceWatch()) return message(canvas, `window ${v.window} of surface channels informed nothing: no bit speed implied`);
   if (!v.time_s || v.time_s.length === 0) return message(canvas, 'the record has no clock: no strip chart');
-  const { g, w, h } = surface(canvas);
-  const x = extent(v.time_s);
-  const half = (h - 38) / 2;
-  const panels = [
-    { values: v.speed_rpm, label: 'bit speed, rpm', top: 8, colour: '#0072b2' },
-    { values: v.torque, label: `torque, ${v.torque_unit}`, top: 8 + half, colour: '#d55e00' },
-  ];
-  const times = ticks(x[0], x[1], 6);
-  panels.forEach((panel, k) => {
-    const y = extent(k === 0 ? panel.values.concat([0]) : panel.values);
-    const box = { left: 58, right: w - 12, top: panel.top, bottom: panel.top + half - 12 };
-    const px = (t) => box.left + ((t - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
-    const py = (u) => box.bottom - ((u - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
-    if (k === 0) {
-      // The stuck band: where a downhole tool counts the bit stuck.
-      g.fillStyle = 'rgba(179, 38, 30, 0.15)';
-      const [a, b] = [py(Math.min(1, y[1])), py(Math.max(-1, y[0]))];
-      g.fillRect(box.left, a, box.right - box.left, b - a);
-    }
-    g.strokeStyle = '#9aa3ad';
-    g.lineWidth = 1;
-    g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
-    polyline(g, px, py, v.time_s, panel.values);
-    g.strokeStyle = panel.colour;
-    g.lineWidth = 1.2;
-    g.stroke();
-    g.fillStyle = '#5b6570';
-    g.font = '11px system-ui, sans-serif';
-    g.textAlign = 'right';
-    for (const t of ticks(y[0], y[1], 3)) g.fillText(short(t), box.left - 4, py(t) + 4);
-    g.save();
-    g.translate(12, (box.top + box.bottom) / 2);
-    g.rotate(-Math.PI / 2);
-    g.textAlign = 'center';
-    g.fillText(panel.label, 0, 0);
-    g.restore();
-    if (k === 1) {
-      g.textAlign = 'center';
-      for (const t of times) g.fillText(short(t), px(t), box.bottom + 14);
-      g.fillText('time along the record, s', (box.left + box.right) / 2, h - 4);
-    }
-  });
+  drawTimePanels(canvas, v.time_s, [
+    { lines: [[v.speed_rpm, '#0072b2']], range: v.speed_rpm.concat([0]), label: 'bit speed, rpm', stuck: true },
+    { lines: [[v.torque, '#d55e00']], range: v.torque, label: `torque, ${v.torque_unit}` },
+  ]);
 }
 
 // A window of surface channels along time: above, the bit speed its strings imply (the 90 %
@@ -652,35 +614,51 @@ function drawSurfaceStrip(canvas, v) {
     `Window ${v.window} of surface channels: the bit speed its simulated strings imply (median and 90 % band)` +
     (bit ? `, stuck ${fixed(bit.stuck_share * 100, 0)} % of the time, stick-slip severity ${fixed(bit.severity, 2)}` : '') +
     `, under the top-drive speed the rig streamed; the surface torque below.`;
-  const { g, w, h } = surface(canvas);
-  const x = extent(s.time_s);
-  const half = (h - 38) / 2;
   const lower = s.bit_rpm.map((q) => q[0]);
   const median = s.bit_rpm.map((q) => q[1]);
   const upper = s.bit_rpm.map((q) => q[2]);
-  const panels = [
-    { lines: [[median, '#0072b2'], [s.top_drive_rpm, '#5b6570']], label: 'speed, rpm', top: 8, band: true },
-    { lines: [[s.surface_torque, '#d55e00']], label: `surface torque, ${v.torque_unit}`, top: 8 + half },
-  ];
+  drawTimePanels(canvas, s.time_s, [
+    {
+      lines: [[median, '#0072b2'], [s.top_drive_rpm, '#5b6570']],
+      range: upper.concat(lower, s.top_drive_rpm, [0]),
+      label: 'speed, rpm',
+      stuck: true,
+      fill: [upper, lower],
+      legend: [['bit (implied)', '#0072b2'], ['top drive', '#5b6570']],
+    },
+    { lines: [[s.surface_torque, '#d55e00']], range: s.surface_torque, label: `surface torque, ${v.torque_unit}` },
+  ]);
+}
+
+// Panels one above the other along `time_s` (time along the record, s), each with its lines
+// ([values, colour]), the values its y axis spans (`range`) and its label; where asked, the
+// stuck band (|speed| < 1 rpm, where a downhole tool counts the bit stuck) shaded, a band
+// between `fill`'s upper and lower values, and a legend of [text, colour].
+function drawTimePanels(canvas, time_s, panels) {
+  const { g, w, h } = surface(canvas);
+  const x = extent(time_s);
+  const height = (h - 38) / panels.length;
   const times = ticks(x[0], x[1], 6);
   panels.forEach((panel, k) => {
-    const values = panel.band ? upper.concat(lower, s.top_drive_rpm, [0]) : s.surface_torque;
-    const y = extent(values);
-    const box = { left: 58, right: w - 12, top: panel.top, bottom: panel.top + half - 12 };
+    const y = extent(panel.range);
+    const top = 8 + k * height;
+    const box = { left: 58, right: w - 12, top, bottom: top + height - 12 };
     const px = (t) => box.left + ((t - x[0]) / (x[1] - x[0] || 1)) * (box.right - box.left);
     const py = (u) => box.bottom - ((u - y[0]) / (y[1] - y[0] || 1)) * (box.bottom - box.top);
-    if (panel.band) {
+    if (panel.stuck) {
       g.fillStyle = 'rgba(179, 38, 30, 0.15)';
       const [a, b] = [py(Math.min(1, y[1])), py(Math.max(-1, y[0]))];
       g.fillRect(box.left, a, box.right - box.left, b - a);
-      if (s.bit_rpm.length === s.time_s.length) fillBetween(g, px, py, s.time_s, upper, lower, 'rgb(0, 114, 178)', 0.2);
+    }
+    if (panel.fill && panel.fill[0].length === time_s.length) {
+      fillBetween(g, px, py, time_s, panel.fill[0], panel.fill[1], 'rgb(0, 114, 178)', 0.2);
     }
     g.strokeStyle = '#9aa3ad';
     g.lineWidth = 1;
     g.strokeRect(box.left, box.top, box.right - box.left, box.bottom - box.top);
     for (const [line, colour] of panel.lines) {
-      if (line.length !== s.time_s.length) continue;
-      polyline(g, px, py, s.time_s, line);
+      if (line.length !== time_s.length) continue;
+      polyline(g, px, py, time_s, line);
       g.strokeStyle = colour;
       g.lineWidth = 1.2;
       g.stroke();
@@ -695,13 +673,15 @@ function drawSurfaceStrip(canvas, v) {
     g.textAlign = 'center';
     g.fillText(panel.label, 0, 0);
     g.restore();
-    if (k === 0) {
+    let at = box.left + 6;
+    for (const [text, colour] of panel.legend || []) {
       g.textAlign = 'left';
-      g.fillStyle = '#0072b2';
-      g.fillText('bit (implied)', box.left + 6, box.top + 12);
+      g.fillStyle = colour;
+      g.fillText(text, at, box.top + 12);
+      at += g.measureText(text).width + 16;
+    }
+    if (k === panels.length - 1) {
       g.fillStyle = '#5b6570';
-      g.fillText('top drive', box.left + 90, box.top + 12);
-    } else {
       g.textAlign = 'center';
       for (const t of times) g.fillText(short(t), px(t), box.bottom + 14);
       g.fillText('time along the record, s', (box.left + box.right) / 2, h - 4);
