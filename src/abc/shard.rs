@@ -157,7 +157,7 @@ pub trait Workers: Sync {
     }
     /// Candidates a task of a round holds at least, unless the round is smaller: below it a
     /// task's round trip outweighs its work.
-    fn least_task(&self) -> u64 {
+    fn min_task_len(&self) -> u64 {
         MIN_TASK
     }
     /// The GPU scoring shape the workers score in, where one is known (for the run's record).
@@ -181,8 +181,8 @@ impl<W: Workers + ?Sized> Workers for &W {
         (**self).parallelism()
     }
 
-    fn least_task(&self) -> u64 {
-        (**self).least_task()
+    fn min_task_len(&self) -> u64 {
+        (**self).min_task_len()
     }
 
     fn gpu_shape(&self) -> Option<Shape> {
@@ -438,9 +438,9 @@ pub fn split(start: u64, len: u64, pieces: usize) -> Vec<(u64, u64)> {
 }
 
 /// Cuts a round's `start .. start + len` into the tasks `workers` take: at most one per unit
-/// of their parallelism, none shorter than their [`Workers::least_task`] unless the whole is.
+/// of their parallelism, none shorter than their [`Workers::min_task_len`] unless the whole is.
 pub fn split_for(workers: &(impl Workers + ?Sized), start: u64, len: u64) -> Vec<(u64, u64)> {
-    split_from(start, len, workers.parallelism(), workers.least_task())
+    split_from(start, len, workers.parallelism(), workers.min_task_len())
 }
 
 /// Explicit candidates a [`Task::Score`] holds at least, unless the batch is smaller: a

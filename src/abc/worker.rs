@@ -4,7 +4,7 @@
 //! worker. It names the samplers whose proposals a worker can rebuild (`proposal`): a
 //! sampler that proposes registers here.
 
-use super::shard::wire::{Reply, Request, build, decode, decode_problem, encode};
+use super::shard::wire::{Reply, Request, build, decode, decode_objective, encode};
 use super::shard::{self, Proposal};
 use super::smc;
 use crate::error::{Error, Result};
@@ -77,7 +77,7 @@ fn answer(request: &[u8], problem: Option<&[u8]>, context: Option<&[u8]>) -> Res
         if let Some(bytes) = problem
             && find(&mut held.problems, request.problem).is_none()
         {
-            let decoded = decode_problem(bytes)?;
+            let decoded = decode_objective(bytes)?;
             hold(&mut held.problems, request.problem, Arc::new(decoded));
         }
         let Some(the_problem) = find(&mut held.problems, request.problem) else {

@@ -167,8 +167,8 @@ pub enum Objective {
     /// ρ of each candidate's torque against a record's bit speed and torque.
     Record(Problem),
     /// The distance of each candidate's simulated string from a surface record's summaries,
-    /// its strings on the backend the driver resolved (a worker resolves its own).
-    Strings(Box<surface::SurfaceEvaluator>),
+    /// its strings on the backend the run resolved (the one its workers are asked to use).
+    Surface(Box<surface::SurfaceEvaluator>),
 }
 
 impl Objective {
@@ -177,7 +177,7 @@ impl Objective {
     pub fn problem(&self) -> &Problem {
         match self {
             Objective::Record(problem) => problem,
-            Objective::Strings(strings) => strings.problem(),
+            Objective::Surface(strings) => strings.problem(),
         }
     }
 
@@ -191,7 +191,7 @@ impl Objective {
     ) -> Result<Box<dyn Evaluator>> {
         match self {
             Objective::Record(problem) => evaluator(problem, backend, wish, note),
-            Objective::Strings(strings) => {
+            Objective::Surface(strings) => {
                 let (backend, _) = strings::resolve(backend, note)?;
                 Ok(Box::new(strings.on(backend)))
             }

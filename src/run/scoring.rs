@@ -63,8 +63,9 @@ impl<'w> Scoring<'_, 'w> {
         }
     }
 
-    /// The workers that score `objective` where `placement` says. Strings are simulated in
-    /// this process on the backend their run resolved, unless workers elsewhere take them.
+    /// The workers that score `objective` where `placement` says. A surface run's strings are
+    /// simulated by its own evaluator, on the backend the run resolved, unless workers
+    /// elsewhere take them (a caller's evaluator maker scores records).
     pub fn workers(
         &mut self,
         objective: impl Into<Objective>,
@@ -73,7 +74,7 @@ impl<'w> Scoring<'_, 'w> {
     ) -> Result<Box<dyn Workers + '_>> {
         match (self, objective.into()) {
             (Scoring::Workers(make), objective) => make(objective, placement, note),
-            (_, Objective::Strings(strings)) => Ok(Box::new(Local(strings))),
+            (_, Objective::Surface(strings)) => Ok(Box::new(Local(strings))),
             (Scoring::Here, Objective::Record(problem)) => {
                 shard::here(problem, placement.backend, placement.devices, placement.shape, note)
             }

@@ -62,7 +62,8 @@ pub struct SurfaceStrip {
     pub top_drive_rpm: Vec<f64>,
     /// In the view's torque unit.
     pub surface_torque: Vec<f64>,
-    /// The bit speed the posterior's strings imply, rpm: 5 %, median and 95 % per sample.
+    /// The bit speed the posterior's strings imply, rpm: 5 %, median and 95 % per sample;
+    /// empty where a sample has none (every draw's string left physical bounds).
     pub bit_rpm: Vec<[f64; 3]>,
 }
 
@@ -77,7 +78,11 @@ impl SurfaceStrip {
             time_s: record.time_s.iter().step_by(stride).map(|t| start_s + t).collect(),
             top_drive_rpm: every(&record.top_drive_rad_s, RAD_S_PER_RPM),
             surface_torque: every(&record.surface_torque_nm, per_unit),
-            bit_rpm: bit_rpm.iter().step_by(stride).copied().collect(),
+            bit_rpm: if bit_rpm.iter().flatten().all(|v| v.is_finite()) {
+                bit_rpm.iter().step_by(stride).copied().collect()
+            } else {
+                Vec::new()
+            },
         }
     }
 }

@@ -183,7 +183,7 @@ fn a_worker_refuses_another_version_and_asks_for_what_it_lacks() {
             task: task.clone(),
         })
     };
-    let payload = wire::encode_problem(&problem.clone().into());
+    let payload = wire::encode_objective(&problem.clone().into());
     let key = wire::key_of(&payload) ^ 0x5eed; // a key this process has never held
     let missing = worker::serve(&request(wire::build(), key), None, None);
     assert!(wire::needs_payloads(&missing));

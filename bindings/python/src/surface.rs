@@ -103,8 +103,9 @@ pub(crate) fn surface(
             }
         })
     });
-    said(py, &note, &notes)?;
+    // The workers' exception first: it is what stopped the run.
     let text = with_traffic(cell, text)?;
+    said(py, &note, &notes)?;
     check(py, text)
 }
 
@@ -183,8 +184,9 @@ pub(crate) fn resume_surface(
             Ok((record, result))
         })
     });
-    said(py, &note, &notes)?;
+    // The workers' exception first: it is what stopped the run.
     let text = with_traffic(cell, text)?;
+    said(py, &note, &notes)?;
     check(py, directory_named(text))
 }
 

@@ -47,7 +47,7 @@ pub fn build() -> &'static str {
 
 /// The objective's payload: the sources of its law files' laws, then the objective itself (its
 /// laws named), so that a worker registers the laws before it reads their names.
-pub fn encode_problem(objective: &Objective) -> Vec<u8> {
+pub fn encode_objective(objective: &Objective) -> Vec<u8> {
     let sources: Vec<&str> = crate::laws::file::among(objective.problem().prior.laws())
         .into_iter()
         .filter_map(|law| law.file().map(|f| f.source.as_str()))
@@ -55,8 +55,8 @@ pub fn encode_problem(objective: &Objective) -> Vec<u8> {
     encode(&(sources, encode(objective)))
 }
 
-/// Reads an objective's payload ([`encode_problem`]), registering its law files' laws.
-pub fn decode_problem(bytes: &[u8]) -> Result<Objective> {
+/// Reads an objective's payload ([`encode_objective`]), registering its law files' laws.
+pub fn decode_objective(bytes: &[u8]) -> Result<Objective> {
     let (sources, problem): (Vec<String>, Vec<u8>) = decode(bytes, "problem")?;
     for source in sources {
         let file = crate::laws::file::LawFile::parse(&source, std::path::Path::new("law file of the driver"))?;
@@ -197,7 +197,7 @@ impl<T: Transport> Remote<T> {
     /// leads to on each worker: the same everywhere once the run recorded one).
     pub fn new(objective: impl Into<Objective>, backend: Backend, shape: ShapeWish, transport: T) -> Self {
         let objective = objective.into();
-        let problem_bytes = encode_problem(&objective);
+        let problem_bytes = encode_objective(&objective);
         Self {
             problem_key: key_of(&problem_bytes),
             objective,
@@ -269,10 +269,10 @@ impl<T: Transport> Workers for Remote<T> {
         self.transport.parallelism().max(1)
     }
 
-    fn least_task(&self) -> u64 {
+    fn min_task_len(&self) -> u64 {
         match self.objective {
             Objective::Record(_) => super::MIN_TASK,
-            Objective::Strings(_) => super::MIN_STRING_TASK,
+            Objective::Surface(_) => super::MIN_STRING_TASK,
         }
     }
 

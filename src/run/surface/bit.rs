@@ -2,6 +2,7 @@
 //! and the simulated escape advice where it stick-slips.
 
 use super::*;
+use crate::run::advice::RECORD_ESCAPE_MIN_PROBABILITY;
 
 /// The bit as the surface implies it: the posterior medians of its `stuck_share` and
 /// `severity`, at the top drive's mean speed and the record's mean weight on bit (where
@@ -78,7 +79,7 @@ pub(super) fn at_the_bit(model: &SurfaceModel, particles: &[Particle], draws: us
         stuck_share_by_law,
         diverged: runs.len() - good.len(),
         advice: None,
-        open_advice: None,
+        spread_advice: None,
     })
 }
 
@@ -129,14 +130,15 @@ fn open_parameters(laws: &[LawPosterior], taking_part: &dyn Fn(Law) -> bool) -> 
 /// quantiles there, its tails included.
 const OPEN_QUANTILES: [f64; 5] = [0.02, 0.25, 0.5, 0.75, 0.98];
 
-/// For each law whose parameters the record leaves to their prior boxes (`laws`' unidentified
-/// ones), the posterior particles at [`OPEN_QUANTILES`] of each such parameter, each as many
-/// strings of the law's probability; a law the record identifies whole keeps its samples. A
-/// way out must end every such string: the record cannot say which of them is the bit's (the
-/// escape speed need not grow toward a box's end: m2's stick-slip at 60 rpm needs 165 rpm at
-/// g = 0.1 s/rad, 85 rpm at 1 and vanishes at 0.02 and 10). Empty where the record leaves
-/// nothing open.
-fn open_spread(inputs: &[LawSamples], laws: &[LawPosterior], particles: &[Particle]) -> Vec<LawSamples> {
+/// For each law at least [`RECORD_ESCAPE_MIN_PROBABILITY`] likely whose parameters the
+/// record leaves to their prior boxes (`laws`' unidentified ones), the posterior particles
+/// nearest the [`OPEN_QUANTILES`] of each such parameter ([`weighted_quantile`]), each as many
+/// strings of the law's probability; such a law the record identifies whole keeps its drawn
+/// samples. A way out must end every one of these strings: the record cannot say which of them
+/// is the bit's (the escape speed need not grow toward a box's end: m2's stick-slip at 60 rpm
+/// needs 165 rpm at g = 0.1 s/rad, 85 rpm at 1 and vanishes at 0.02 and 10). Empty where the
+/// record leaves nothing open.
+fn along_open_parameters(inputs: &[LawSamples], laws: &[LawPosterior], particles: &[Particle]) -> Vec<LawSamples> {
     let open_of = |law: Law| -> Vec<usize> {
         laws.iter()
             .find(|l| l.law == law)
@@ -148,30 +150,25 @@ fn open_spread(inputs: &[LawSamples], laws: &[LawPosterior], particles: &[Partic
     }
     inputs
         .iter()
+        .filter(|input| input.probability >= RECORD_ESCAPE_MIN_PROBABILITY)
         .map(|input| {
             let open = open_of(input.law);
-            if open.is_empty() {
+            let own: Vec<&Particle> = particles.iter().filter(|p| p.law == input.law).collect();
+            if open.is_empty() || own.is_empty() {
                 return input.clone();
             }
             let n = input.law.n_params();
-            let own: Vec<&Particle> = particles.iter().filter(|p| p.law == input.law).collect();
-            let total: f64 = own.iter().map(|p| p.weight).sum();
+            let weights: Vec<f64> = own.iter().map(|p| p.weight).collect();
             let mut samples_si: Vec<Vec<f64>> = Vec::new();
             for &j in &open {
-                let mut sorted = own.clone();
-                sorted.sort_by(|a, b| a.params[j].total_cmp(&b.params[j]));
+                let values: Vec<f64> = own.iter().map(|p| p.params[j]).collect();
                 for q in OPEN_QUANTILES {
-                    let mut cumulative = 0.0;
-                    let at = sorted
+                    let at = weighted_quantile(&values, &weights, q);
+                    let nearest = own
                         .iter()
-                        .find(|p| {
-                            cumulative += p.weight;
-                            cumulative >= q * total
-                        })
-                        .or(sorted.last());
-                    if let Some(p) = at {
-                        samples_si.push(p.params[..n].to_vec());
-                    }
+                        .min_by(|a, b| (a.params[j] - at).abs().total_cmp(&(b.params[j] - at).abs()))
+                        .expect("particles of the law");
+                    samples_si.push(nearest.params[..n].to_vec());
                 }
             }
             LawSamples {
@@ -184,7 +181,7 @@ fn open_spread(inputs: &[LawSamples], laws: &[LawPosterior], particles: &[Partic
 
 /// The simulated escape advice from the record's mean operating point, in words, and, where
 /// the record leaves parameters of the laws to their prior boxes, the way out scanned again
-/// along the posterior's spread of them ([`open_spread`]).
+/// along the posterior's spread of them ([`along_open_parameters`]).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn escape_advice(
     record: &SurfaceRecord,
@@ -194,7 +191,7 @@ pub(super) fn escape_advice(
     laws: &[LawPosterior],
     particles: &[Particle],
     note: &mut dyn FnMut(String),
-) -> Result<(String, Option<OpenAdvice>)> {
+) -> Result<(String, Option<SpreadAdvice>)> {
     use crate::run::strings::{OperatingPoint, SimulatedSettings, Simulator, advice_speeds_rpm, advice_weights_kn};
     let wob_n = mean_wob_n(record, settings.w_ref_n);
     let w_ref_n = settings.w_ref_n.unwrap_or(wob_n);
@@ -230,7 +227,7 @@ pub(super) fn escape_advice(
     // Every law with particles is simulated (`inputs` above).
     let caveat = unidentified_caveat(laws, &|_| true).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
     let mut text = advice.text() + caveat.as_deref().unwrap_or("");
-    let spread = open_spread(&inputs, laws, particles);
+    let spread = along_open_parameters(&inputs, laws, particles);
     if spread.is_empty() {
         return Ok((text, None));
     }
@@ -272,7 +269,7 @@ pub(super) fn escape_advice(
     ));
     Ok((
         text,
-        Some(OpenAdvice {
+        Some(SpreadAdvice {
             open: names,
             speed_rpm,
             wob_kn,

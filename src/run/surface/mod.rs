@@ -278,13 +278,13 @@ pub struct AtTheBit {
     /// of strings along the posterior's spread of those parameters, tails included, which ends
     /// the stick-slip whichever of them is the bit's.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub open_advice: Option<OpenAdvice>,
+    pub spread_advice: Option<SpreadAdvice>,
 }
 
 /// The way out scanned again along the posterior's spread of every parameter the record
 /// leaves open.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct OpenAdvice {
+pub struct SpreadAdvice {
     /// The parameters left open (`m2's g`).
     pub open: Vec<String>,
     /// The nearest top-drive speed (rpm) and lighter weight on bit (kN) that end it there;
@@ -625,13 +625,24 @@ pub fn infer_continuing(
                 keep: sampling.keep,
                 note,
             };
+            // Workers simulate on the backend resolved here, as the rest of the run does: a
+            // run's strings on one backend, its result saying which.
             let placement = Placement {
-                backend: settings.backend,
+                backend,
                 ..Placement::default()
             };
-            let objective = Objective::Strings(Box::new(evaluator.clone()));
+            let objective = Objective::Surface(Box::new(evaluator.clone()));
             let workers = sampling.scoring.workers(objective, &placement, keeping.note)?;
-            smc::run_on(&*workers, &settings.smc, sampling.previous, &mut keeping)?
+            let run = smc::run_on(&*workers, &settings.smc, sampling.previous, &mut keeping)?;
+            let here = if backend == Backend::Gpu { "gpu" } else { "cpu" };
+            if workers.backend() != here {
+                warnings.push(format!(
+                    "the sampler's strings were simulated on {} by its workers (a worker's BITROCK_WORKER_BACKEND), the rest of the run on {}: its populations are not those of one process",
+                    workers.backend(),
+                    ran
+                ));
+            }
+            run
         }
     };
     let sampler_strings: u64 = run.populations.iter().map(|p| p.record.candidates_scored).sum();
@@ -660,7 +671,7 @@ pub fn infer_continuing(
         let chain = Chain::one_dof(&string.median());
         let (advice, open) = escape_advice(record, settings, backend, &chain, &laws, particles, note)?;
         at_the_bit.advice = Some(advice);
-        at_the_bit.open_advice = open;
+        at_the_bit.spread_advice = open;
     }
     let ratio_mean = model.drive.ratio.iter().sum::<f64>() / model.drive.ratio.len() as f64;
     Ok(SurfaceResult {
