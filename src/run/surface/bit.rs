@@ -132,7 +132,9 @@ const OPEN_QUANTILES: [f64; 5] = [0.02, 0.25, 0.5, 0.75, 0.98];
 
 /// For each law at least [`RECORD_ESCAPE_MIN_PROBABILITY`] likely whose parameters the
 /// record leaves to their prior boxes (`laws`' unidentified ones), the posterior particles
-/// nearest the [`OPEN_QUANTILES`] of each such parameter ([`weighted_quantile`]), each as many
+/// at the [`OPEN_QUANTILES`] of each such parameter (the first particle, in the parameter's
+/// order, whose share of the law's weight up to it exceeds the quantile: the inverse of the
+/// posterior's distribution, a particle's own value), each as many
 /// strings of the law's probability; such a law the record identifies whole keeps its drawn
 /// samples. A way out must end every one of these strings: the record cannot say which of them
 /// is the bit's (the escape speed need not grow toward a box's end: m2's stick-slip at 60 rpm
@@ -158,17 +160,14 @@ fn along_open_parameters(inputs: &[LawSamples], laws: &[LawPosterior], particles
                 return input.clone();
             }
             let n = input.law.n_params();
-            let weights: Vec<f64> = own.iter().map(|p| p.weight).collect();
             let mut samples_si: Vec<Vec<f64>> = Vec::new();
             for &j in &open {
-                let values: Vec<f64> = own.iter().map(|p| p.params[j]).collect();
+                let mut sorted = own.clone();
+                sorted.sort_by(|a, b| a.params[j].total_cmp(&b.params[j]));
+                let weights: Vec<f64> = sorted.iter().map(|p| p.weight).collect();
+                let cdf = crate::abc::smc::normalised_cdf(&weights);
                 for q in OPEN_QUANTILES {
-                    let at = weighted_quantile(&values, &weights, q);
-                    let nearest = own
-                        .iter()
-                        .min_by(|a, b| (a.params[j] - at).abs().total_cmp(&(b.params[j] - at).abs()))
-                        .expect("particles of the law");
-                    samples_si.push(nearest.params[..n].to_vec());
+                    samples_si.push(sorted[crate::abc::smc::inverse_cdf(&cdf, q)].params[..n].to_vec());
                 }
             }
             LawSamples {
