@@ -649,12 +649,24 @@ impl<'a> Simulator<'a> {
     /// advice is the same as from the whole scan, with fewer strings). A GPU takes each scan in
     /// one batch.
     pub fn escape_advice(&mut self, from: &AtPoint, speeds_rpm: &[f64], weights_kn: &[f64]) -> Result<EscapeAdvice> {
+        self.escape_advice_with(from, speeds_rpm, weights_kn, ADVICE_CONFIDENCE)
+    }
+
+    /// [`Self::escape_advice`] with the ways that end the stick-slip with P ≥ `confidence`
+    /// (1: in every string).
+    pub fn escape_advice_with(
+        &mut self,
+        from: &AtPoint,
+        speeds_rpm: &[f64],
+        weights_kn: &[f64],
+        confidence: f64,
+    ) -> Result<EscapeAdvice> {
         let p = from.point;
         let cells = self.cells_per_scan_batch(from.replicas.len(), speeds_rpm.len().max(weights_kn.len()));
         let mut speed_parts = Vec::new();
         for part in speeds_rpm.chunks(cells) {
             let grid = self.escape(from, part, &[p.wob_kn])?;
-            let ends = Way::nearest(part, &grid, false).is_some();
+            let ends = Way::nearest(part, &grid, false, confidence).is_some();
             speed_parts.push(grid);
             if ends {
                 break;
@@ -664,7 +676,7 @@ impl<'a> Simulator<'a> {
         let mut weight_parts = Vec::new();
         for part in weights_kn.rchunks(cells) {
             let grid = self.escape(from, &[p.omega_rpm], part)?;
-            let ends = Way::nearest(part, &grid, true).is_some();
+            let ends = Way::nearest(part, &grid, true, confidence).is_some();
             weight_parts.push(grid);
             if ends {
                 break;
@@ -676,8 +688,8 @@ impl<'a> Simulator<'a> {
         Ok(EscapeAdvice {
             point: p,
             stick_slip_probability: from.stick_slip_probability,
-            speed_rpm: Way::nearest(&by_speed.omega_rpm, &by_speed, false),
-            wob_kn: Way::nearest(&by_weight.wob_kn, &by_weight, true),
+            speed_rpm: Way::nearest(&by_speed.omega_rpm, &by_speed, false, confidence),
+            wob_kn: Way::nearest(&by_weight.wob_kn, &by_weight, true, confidence),
             speed_scan: by_speed,
             wob_scan: by_weight,
         })
@@ -712,8 +724,8 @@ pub struct Way {
 
 impl Way {
     /// The first value of `axis` (the scan `grid` along it, in its order, or `reversed`) whose
-    /// P(it ends) reaches [`ADVICE_CONFIDENCE`].
-    fn nearest(axis: &[f64], grid: &Grid, reversed: bool) -> Option<Way> {
+    /// P(it ends) reaches `confidence` ([`ADVICE_CONFIDENCE`] for the advice).
+    fn nearest(axis: &[f64], grid: &Grid, reversed: bool, confidence: f64) -> Option<Way> {
         let mut cells: Vec<Way> = axis
             .iter()
             .zip(grid.stick_slip_weight.iter().zip(&grid.diverged_weight))
@@ -726,7 +738,7 @@ impl Way {
         if reversed {
             cells.reverse();
         }
-        cells.into_iter().find(|w| w.ends_probability >= ADVICE_CONFIDENCE)
+        cells.into_iter().find(|w| w.ends_probability >= confidence)
     }
 
     /// P(it ends) in words: "P(it ends) = 0.97", or a lower bound with the strings that left
@@ -861,7 +873,7 @@ mod tests {
         // P(it ends) = 1 − stick-slip − diverged: 0.85 at 200 kN (below 0.9), 0.95 at 100 kN.
         let g = grid([0.0, 0.05, 0.6, 1.0], [0.05, 0.1, 0.0, 0.0]);
         let axis = g.wob_kn.clone();
-        let way = Way::nearest(&axis, &g, true).unwrap();
+        let way = Way::nearest(&axis, &g, true, ADVICE_CONFIDENCE).unwrap();
         // The values are the grid's own, copied: compared bit for bit.
         assert_eq!(way.to.to_bits(), 100f64.to_bits());
         assert!((way.ends_probability - 0.95).abs() < 1e-12, "{way:?}");
@@ -872,9 +884,17 @@ mod tests {
             way.probability_text()
         );
         // Scanned upwards from the lightest, the first that ends it is the same here.
-        assert_eq!(Way::nearest(&axis, &g, false).unwrap().to.to_bits(), 100f64.to_bits());
         assert_eq!(
-            Way::nearest(&axis[2..], &grid([0.6, 1.0, 0.6, 1.0], [0.0; 4]), false),
+            Way::nearest(&axis, &g, false, ADVICE_CONFIDENCE).unwrap().to.to_bits(),
+            100f64.to_bits()
+        );
+        assert_eq!(
+            Way::nearest(
+                &axis[2..],
+                &grid([0.6, 1.0, 0.6, 1.0], [0.0; 4]),
+                false,
+                ADVICE_CONFIDENCE
+            ),
             None
         );
     }

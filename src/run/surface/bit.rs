@@ -233,45 +233,24 @@ pub(super) fn escape_advice(
     // Every string must end: the record cannot say which of them is the bit's.
     let mut simulator = Simulator::new(&simulated, &spread, note)?;
     let at = simulator.at_point(point)?;
-    let speeds = advice_speeds_rpm(point.omega_rpm);
-    let weights = advice_weights_kn(point.wob_kn);
-    let by_speed = simulator.escape(&at, &speeds, &[point.wob_kn])?;
-    let by_weight = simulator.escape(&at, &[point.omega_rpm], &weights)?;
-    let all_end =
-        |grid: &crate::run::strings::Grid, k: usize| grid.stick_slip_weight[k] + grid.diverged_weight[k] <= 1e-12;
-    let speed_rpm = (0..speeds.len()).find(|&k| all_end(&by_speed, k)).map(|k| speeds[k]);
-    // The weights ascend: the nearest below the operating point is the last.
-    let wob_kn = (0..weights.len())
-        .rev()
-        .find(|&k| all_end(&by_weight, k))
-        .map(|k| weights[k]);
+    let open = simulator.escape_advice_with(
+        &at,
+        &advice_speeds_rpm(point.omega_rpm),
+        &advice_weights_kn(point.wob_kn),
+        1.0,
+    )?;
     let names = open_parameters(laws, &|_| true);
-    let mut ways = Vec::new();
-    if let Some(rpm) = speed_rpm {
-        ways.push(format!("raise the top-drive speed to {rpm:.0} rpm"));
-    }
-    if let Some(kn) = wob_kn {
-        ways.push(format!("lower the weight on bit to {}", crate::units::kn_text(kn)));
-    }
-    let ways = if ways.is_empty() {
-        format!(
-            "no top-drive speed up to {:.0} rpm nor weight on bit down to {} ends it in all of them",
-            speeds.last().copied().unwrap_or(point.omega_rpm),
-            crate::units::kn_text(weights.first().copied().unwrap_or(point.wob_kn))
-        )
-    } else {
-        ways.join(", or ")
-    };
     text.push_str(&format!(
-        "; to end it in every string along the posterior's spread of {} (its 2 %, quartiles and 98 %): {ways}",
+        "; to end it in every string along the posterior's spread of {} (its 2 %, quartiles and 98 %): {}",
         names.join(", "),
+        open.ways()
     ));
     Ok((
         text,
         Some(SpreadAdvice {
             open: names,
-            speed_rpm,
-            wob_kn,
+            speed_rpm: open.speed_rpm.map(|w| w.to),
+            wob_kn: open.wob_kn.map(|w| w.to),
         }),
     ))
 }

@@ -631,7 +631,7 @@ pub fn infer_continuing(
                 backend,
                 ..Placement::default()
             };
-            let objective = Objective::Surface(Box::new(evaluator.clone()));
+            let objective = Objective::Surface(Box::new(evaluator));
             let workers = sampling.scoring.workers(objective, &placement, keeping.note)?;
             let run = smc::run_on(&*workers, &settings.smc, sampling.previous, &mut keeping)?;
             let here = if backend == Backend::Gpu { "gpu" } else { "cpu" };
