@@ -16,6 +16,7 @@
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::eval::strings::Ran;
+use crate::eval::surface::InferredString;
 use crate::run::stability::Structure;
 use crate::simulate::strings::{Chain, MAX_NODES, Schedule, StringJob, StringState, Summary, padded, steady_start};
 use crate::stability::fe::DrillStringSettings;
@@ -55,7 +56,13 @@ const FASTEST_STRING_STEPS_PER_S: f64 = 1e12;
 /// How the simulated maps are made.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimulatedSettings {
+    /// The string every sample is simulated on (where `string` is set, the samples' strings
+    /// replace it).
     pub chain: Chain,
+    /// Where the posterior inferred the string with the law: each sample carries its string's
+    /// coordinates [ω_n, ξ] after its law's parameters and is simulated on its own 1-DOF string
+    /// (the strings a record allows differ in where stick-slip ends, not only the laws).
+    pub string: Option<InferredString>,
     /// Integration step (s).
     pub dt_s: f64,
     /// The onset maps' kick, a share of Ω.
@@ -73,6 +80,7 @@ impl SimulatedSettings {
     pub fn new(chain: Chain, w_ref_n: f64, backend: Backend) -> Self {
         Self {
             chain,
+            string: None,
             dt_s: DEFAULT_DT_S,
             kick: DEFAULT_KICK,
             settle_s: DEFAULT_SETTLE_S,
@@ -129,24 +137,56 @@ struct Member {
     law: crate::laws::Law,
     params_nm: [f64; 6],
     weight: f64,
+    /// Its string: an index into the simulator's chains.
+    chain: usize,
 }
 
-/// The mixture's members: each law's samples, each weighing its law's probability over its
-/// sample count.
-fn members(inputs: &[LawSamples]) -> Vec<Member> {
+/// The mixture's members, each law's samples each weighing its law's probability over its
+/// sample count, and the strings they are simulated on: `settings.chain` alone, or, where
+/// the settings infer the string, each sample's own, one chain per distinct string (refused,
+/// naming the setting, where a sample lacks its string's coordinates or its string's fastest
+/// mode forbids the step).
+fn members(settings: &SimulatedSettings, inputs: &[LawSamples]) -> Result<(Vec<Member>, Vec<Chain>)> {
     let total: f64 = inputs.iter().map(|i| i.probability).sum();
-    inputs
-        .iter()
-        .filter(|i| !i.samples_si.is_empty() && i.probability > 0.0)
-        .flat_map(|i| {
-            let w = i.probability / total / i.samples_si.len() as f64;
-            i.samples_si.iter().map(move |p| Member {
-                law: i.law,
-                params_nm: padded(p),
-                weight: w,
-            })
-        })
-        .collect()
+    let mut members = Vec::new();
+    let mut chains = vec![settings.chain.clone()];
+    for input in inputs.iter().filter(|i| !i.samples_si.is_empty() && i.probability > 0.0) {
+        let weight = input.probability / total / input.samples_si.len() as f64;
+        let n = input.law.n_params();
+        for p in &input.samples_si {
+            let chain = match &settings.string {
+                None => 0,
+                Some(inferred) => {
+                    let Some(coordinates) = p.get(n..n + 2) else {
+                        return Err(Error::setting(
+                            "string",
+                            format!(
+                                "a sample of {} has {} values: the law's {n} parameters and the string's ω_n and ξ are needed",
+                                input.law,
+                                p.len()
+                            ),
+                        ));
+                    };
+                    let own = Chain::one_dof(&inferred.lumped(coordinates));
+                    match chains.iter().position(|c| *c == own) {
+                        Some(same) => same,
+                        None => {
+                            own.check_step(settings.dt_s)?;
+                            chains.push(own);
+                            chains.len() - 1
+                        }
+                    }
+                }
+            };
+            members.push(Member {
+                law: input.law,
+                params_nm: padded(p.get(..n).unwrap_or(p)),
+                weight,
+                chain,
+            });
+        }
+    }
+    Ok((members, chains))
 }
 
 /// Each law of `inputs` at least `min_probability` probable, with at most `count` of its
@@ -431,6 +471,8 @@ impl Peaks {
 pub struct Simulator<'a> {
     settings: &'a SimulatedSettings,
     members: Vec<Member>,
+    /// The strings the members are simulated on ([`Member::chain`]).
+    chains: Vec<Chain>,
     note: &'a mut dyn FnMut(String),
     /// Where the last batch ran.
     pub ran: Option<Ran>,
@@ -447,13 +489,14 @@ impl<'a> Simulator<'a> {
         note: &'a mut dyn FnMut(String),
     ) -> Result<Self> {
         settings.validate()?;
-        let members = members(inputs);
+        let (members, chains) = members(settings, inputs)?;
         if members.is_empty() {
             return Err(Error::setting("samples", "no posterior sample to simulate"));
         }
         Ok(Self {
             settings,
             members,
+            chains,
             note,
             ran: None,
             strings: 0,
@@ -461,12 +504,14 @@ impl<'a> Simulator<'a> {
         })
     }
 
-    fn job(&self, m: &Member, omega_rpm: f64, wob_kn: f64, start: Option<StringState>) -> StringJob {
+    /// The member's string at (`omega_rpm`, `wob_kn`) from `start`, or kicked from steady
+    /// rotation there; with the index of the string it is simulated on.
+    fn job(&self, m: &Member, omega_rpm: f64, wob_kn: f64, start: Option<StringState>) -> (usize, StringJob) {
         let omega = omega_rpm * RAD_S_PER_RPM;
         let ratio = wob_kn * 1000.0 / self.settings.w_ref_n;
         let start = start.unwrap_or_else(|| {
             steady_start(
-                &self.settings.chain,
+                &self.chains[m.chain],
                 m.law,
                 &m.params_nm,
                 omega,
@@ -474,17 +519,22 @@ impl<'a> Simulator<'a> {
                 self.settings.kick * omega,
             )
         });
-        StringJob {
-            law: m.law,
-            params_nm: m.params_nm,
-            omega_rad_s: omega,
-            ratio,
-            start,
-        }
+        (
+            m.chain,
+            StringJob {
+                law: m.law,
+                params_nm: m.params_nm,
+                omega_rad_s: omega,
+                ratio,
+                start,
+            },
+        )
     }
 
-    /// Integrates `jobs` in batches on the settings' backend, saying the progress of long runs.
-    fn integrate(&mut self, schedule: &Schedule, jobs: &[StringJob]) -> Result<Vec<(Summary, StringState)>> {
+    /// Integrates `jobs` (each with the index of its string) in batches on the settings'
+    /// backend, one string's jobs at a time, saying the progress of long runs; the results in
+    /// the jobs' order.
+    fn integrate(&mut self, schedule: &Schedule, jobs: &[(usize, StringJob)]) -> Result<Vec<(Summary, StringState)>> {
         let steps = jobs.len() as f64 * schedule.steps() as f64;
         crate::limits::check_work(
             "sim_omega_rpm",
@@ -494,21 +544,31 @@ impl<'a> Simulator<'a> {
         )?;
         let start = std::time::Instant::now();
         let mut last = start;
-        let mut out = Vec::with_capacity(jobs.len());
+        let mut out: Vec<Option<(Summary, StringState)>> = vec![None; jobs.len()];
+        let mut done = 0;
         let mut backend = self.settings.backend;
         let batch = if backend == Backend::Cpu { CPU_BATCH } else { GPU_BATCH };
-        for part in jobs.chunks(batch) {
-            let (results, ran) =
-                crate::eval::strings::integrate(&self.settings.chain, schedule, part, backend, self.note)?;
+        let mut order: Vec<usize> = (0..jobs.len()).collect();
+        order.sort_by_key(|&i| jobs[i].0);
+        let parts = order
+            .chunk_by(|&a, &b| jobs[a].0 == jobs[b].0)
+            .flat_map(|one_string| one_string.chunks(batch));
+        for part in parts {
+            let chain = &self.chains[jobs[part[0]].0];
+            let part_jobs: Vec<StringJob> = part.iter().map(|&i| jobs[i].1.clone()).collect();
+            let (results, ran) = crate::eval::strings::integrate(chain, schedule, &part_jobs, backend, self.note)?;
             if ran == Ran::Cpu {
                 backend = Backend::Cpu;
             }
             self.ran = Some(ran);
-            out.extend(results);
+            for (&i, result) in part.iter().zip(results) {
+                out[i] = Some(result);
+            }
+            done += part.len();
             let elapsed = start.elapsed().as_secs_f64();
             if elapsed > 2.0 && last.elapsed().as_secs_f64() >= 10.0 {
                 last = std::time::Instant::now();
-                let done = out.len() as f64 / jobs.len() as f64;
+                let done = done as f64 / jobs.len() as f64;
                 (self.note)(format!(
                     "simulated strings: {:.0} % of {} after {} (about {} to go)",
                     100.0 * done,
@@ -520,7 +580,7 @@ impl<'a> Simulator<'a> {
         }
         self.strings += jobs.len() as u64;
         self.simulated_s += jobs.len() as f64 * schedule.seconds();
-        Ok(out)
+        Ok(out.into_iter().map(|r| r.expect("every job is in a part")).collect())
     }
 
     /// Weighted probability of stick-slip over the members, cell by cell, on the grid
@@ -571,7 +631,7 @@ impl<'a> Simulator<'a> {
     /// Each member's string at the operating point, started from rest (a bit on bottom at the
     /// start of rotation: the cycle's basin where the cycle exists) and settled. A change meets
     /// the cycle at any phase, and near the escape boundary the phase decides: each member is
-    /// settled [`phases`] times, for lengths spread over one period of the string's fundamental
+    /// settled [`phases`] times, for lengths spread over one period of its string's fundamental
     /// mode, and the probabilities weigh the phases alike.
     pub fn at_point(&mut self, point: OperatingPoint) -> Result<AtPoint> {
         let rest = StringState {
@@ -590,19 +650,27 @@ impl<'a> Simulator<'a> {
                 })
             })
             .collect();
-        let period_s = 2.0 * std::f64::consts::PI / self.settings.chain.fundamental_rad_s();
         let mut summaries = vec![Summary::default(); replicas.len()];
         let mut states = vec![rest; replicas.len()];
-        for phase in 0..phases {
-            let schedule = self.settings.settling(period_s * phase as f64 / phases as f64)?;
-            let idx: Vec<usize> = (phase..replicas.len()).step_by(phases).collect();
-            let jobs: Vec<StringJob> = idx
-                .iter()
-                .map(|&i| self.job(&replicas[i], point.omega_rpm, point.wob_kn, Some(rest)))
-                .collect();
-            for (k, (s, state)) in self.integrate(&schedule, &jobs)?.into_iter().enumerate() {
-                summaries[idx[k]] = s;
-                states[idx[k]] = state;
+        for (c, chain) in self.chains.clone().iter().enumerate() {
+            let period_s = 2.0 * std::f64::consts::PI / chain.fundamental_rad_s();
+            for phase in 0..phases {
+                let schedule = self.settings.settling(period_s * phase as f64 / phases as f64)?;
+                let idx: Vec<usize> = (phase..replicas.len())
+                    .step_by(phases)
+                    .filter(|&i| replicas[i].chain == c)
+                    .collect();
+                if idx.is_empty() {
+                    continue;
+                }
+                let jobs: Vec<(usize, StringJob)> = idx
+                    .iter()
+                    .map(|&i| self.job(&replicas[i], point.omega_rpm, point.wob_kn, Some(rest)))
+                    .collect();
+                for (k, (s, state)) in self.integrate(&schedule, &jobs)?.into_iter().enumerate() {
+                    summaries[idx[k]] = s;
+                    states[idx[k]] = state;
+                }
             }
         }
         let here = Self::grid(&replicas, &summaries, &[point.omega_rpm], &[point.wob_kn]);

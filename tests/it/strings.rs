@@ -4,6 +4,7 @@
 use crate::gpu::require_gpu;
 use bitrock::Law;
 use bitrock::eval::gpu::strings::{self as gpu_strings, OnClockJob};
+use bitrock::eval::surface::InferredString;
 use bitrock::eval::{Backend, strings};
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::run::strings::{Grid, OperatingPoint, SimulatedSettings, Simulator};
@@ -453,4 +454,88 @@ fn a_string_longer_than_one_dispatch_is_integrated_to_its_end() {
         .collect();
     let cpu = compare(&chain, &schedule, &jobs);
     assert!(cpu.iter().all(|(s, _)| s.samples == 700 && s.stick_slips()));
+}
+
+/// m2 at the paper's estimate settled in stick-slip at 60 rpm and 244 kN on the strings
+/// `strings` (ω_n rad/s, ξ), one sample each on the paper's inertia: P(stick-slip at the
+/// point) and P(it persists) at 85, 100, 120, 135 and 150 rpm. `inferred`: the samples carry
+/// their strings (the settings infer it), else the one string alone.
+fn m2_on_strings(strings: &[(f64, f64)], inferred: bool, backend: Backend) -> (f64, Vec<f64>) {
+    let law = Law::M2;
+    let p = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
+    let paper = Lumped::default();
+    let samples_si = strings
+        .iter()
+        .map(|&(w, xi)| if inferred { [p.as_slice(), &[w, xi]].concat() } else { p.clone() })
+        .collect();
+    let inputs = vec![LawSamples {
+        law,
+        probability: 1.0,
+        map_si: p.clone(),
+        samples_si,
+    }];
+    let (w, xi) = strings[0];
+    let one = Lumped {
+        omega_n_rad_s: w,
+        damping_ratio: xi,
+        ..paper
+    };
+    // Where inferred, the settings' string is the paper's, which no sample is on.
+    let chain = Chain::one_dof(if inferred { &paper } else { &one });
+    let settings = SimulatedSettings {
+        string: inferred.then_some(InferredString {
+            inertia_kg_m2: paper.inertia_kg_m2,
+            omega_n_rad_s: None,
+            damping_ratio: None,
+        }),
+        ..SimulatedSettings::new(chain, PAPER_W_REF_N, backend)
+    };
+    let mut note = |_| {};
+    let mut sim = Simulator::new(&settings, &inputs, &mut note).unwrap();
+    let at = sim
+        .at_point(OperatingPoint {
+            omega_rpm: 60.0,
+            wob_kn: 244.2,
+        })
+        .unwrap();
+    let grid = sim.escape(&at, &[85.0, 100.0, 120.0, 135.0, 150.0], &[244.2]).unwrap();
+    (at.stick_slip_probability, grid.probability)
+}
+
+#[test]
+fn each_sample_is_simulated_on_its_own_string_where_the_string_was_inferred() {
+    // The string decides where stick-slip ends as much as the law: measured, the paper's
+    // string (0.85 rad/s, ξ 0.25) keeps m2's bit stuck up to 120 rpm, a softer one (0.5) up
+    // to 150, a stiffer one (1.5) nowhere from 85 rpm up.
+    let strings = [(0.85, 0.25), (0.5, 0.25), (1.5, 0.25)];
+    let alone: Vec<(f64, Vec<f64>)> = strings.iter().map(|s| m2_on_strings(&[*s], false, Backend::Cpu)).collect();
+    assert_eq!(alone[0].1[4], 0.0, "the paper's string escapes by 150 rpm: {:?}", alone[0]);
+    assert!(alone[1].1[4] > 0.5, "the softer string is still stuck at 150 rpm: {:?}", alone[1]);
+    assert_eq!(alone[2].1, vec![0.0; 5], "the stiffer string escapes at 85 rpm: {:?}", alone[2]);
+    // One sample carrying its string is that string alone, exactly: phases and all.
+    for (s, one) in strings.iter().zip(&alone) {
+        assert_eq!(&m2_on_strings(&[*s], true, Backend::Cpu), one, "{s:?}");
+    }
+    // Two samples weigh their own strings alike: cell by cell, the mean of the strings alone
+    // (each met at as many phases as alone, over its own string's period).
+    let (now, mixed) = m2_on_strings(&strings[..2], true, Backend::Cpu);
+    let mean = |k: usize| (alone[0].1[k] + alone[1].1[k]) / 2.0;
+    assert!((now - (alone[0].0 + alone[1].0) / 2.0).abs() < 1e-12);
+    for (k, p) in mixed.iter().enumerate() {
+        assert!((p - mean(k)).abs() < 1e-12, "cell {k}: {p} against {}", mean(k));
+    }
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn samples_on_their_own_strings_escape_alike_on_the_gpu() {
+    require_gpu();
+    let strings = [(0.85, 0.25), (0.5, 0.25)];
+    let (cpu_now, cpu) = m2_on_strings(&strings, true, Backend::Cpu);
+    let (gpu_now, gpu) = m2_on_strings(&strings, true, Backend::Gpu);
+    assert_eq!((cpu_now, gpu_now), (1.0, 1.0));
+    // A driver may fuse and reassociate: one phase of sixteen strings may fall the other way.
+    for (c, g) in cpu.iter().zip(&gpu) {
+        assert!((c - g).abs() <= 0.0625 + 1e-12, "cpu {cpu:?}, gpu {gpu:?}");
+    }
 }

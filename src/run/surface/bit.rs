@@ -140,7 +140,12 @@ const OPEN_QUANTILES: [f64; 5] = [0.02, 0.25, 0.5, 0.75, 0.98];
 /// is the bit's (the escape speed need not grow toward a box's end: m2's stick-slip at 60 rpm
 /// needs 165 rpm at g = 0.1 s/rad, 85 rpm at 1 and vanishes at 0.02 and 10). Empty where the
 /// record leaves nothing open.
-fn along_open_parameters(inputs: &[LawSamples], laws: &[LawPosterior], particles: &[Particle]) -> Vec<LawSamples> {
+fn along_open_parameters(
+    inputs: &[LawSamples],
+    laws: &[LawPosterior],
+    particles: &[Particle],
+    string: Option<InferredString>,
+) -> Vec<LawSamples> {
     let open_of = |law: Law| -> Vec<usize> {
         laws.iter()
             .find(|l| l.law == law)
@@ -159,7 +164,6 @@ fn along_open_parameters(inputs: &[LawSamples], laws: &[LawPosterior], particles
             if open.is_empty() || own.is_empty() {
                 return input.clone();
             }
-            let n = input.law.n_params();
             let mut samples_si: Vec<Vec<f64>> = Vec::new();
             for &j in &open {
                 let mut sorted = own.clone();
@@ -167,7 +171,7 @@ fn along_open_parameters(inputs: &[LawSamples], laws: &[LawPosterior], particles
                 let weights: Vec<f64> = sorted.iter().map(|p| p.weight).collect();
                 let cdf = crate::abc::smc::normalised_cdf(&weights);
                 for q in OPEN_QUANTILES {
-                    samples_si.push(sorted[crate::abc::smc::inverse_cdf(&cdf, q)].params[..n].to_vec());
+                    samples_si.push(advised(sorted[crate::abc::smc::inverse_cdf(&cdf, q)], string));
                 }
             }
             LawSamples {
@@ -178,15 +182,24 @@ fn along_open_parameters(inputs: &[LawSamples], laws: &[LawPosterior], particles
         .collect()
 }
 
+/// A particle's coordinates as the advice's strings take them: its law's parameters, then,
+/// where the run inferred the string (`string`), its string's [ω_n, ξ].
+fn advised(particle: &Particle, string: Option<InferredString>) -> Vec<f64> {
+    let n = particle.law.n_params() + if string.is_some() { 2 } else { 0 };
+    particle.params[..n].to_vec()
+}
+
 /// The simulated escape advice from the record's mean operating point, in words, and, where
 /// the record leaves parameters of the laws to their prior boxes, the way out scanned again
-/// along the posterior's spread of them ([`along_open_parameters`]).
+/// along the posterior's spread of them ([`along_open_parameters`]). Where the run inferred
+/// the string (`string`), every sample is simulated on its own, not on `chain`.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn escape_advice(
     record: &SurfaceRecord,
     settings: &SurfaceSettings,
     backend: Backend,
     chain: &Chain,
+    string: Option<InferredString>,
     laws: &[LawPosterior],
     particles: &[Particle],
     note: &mut dyn FnMut(String),
@@ -201,7 +214,7 @@ pub(super) fn escape_advice(
             let own: Vec<&Particle> = particles.iter().filter(|p| p.law == l.law).collect();
             let samples_si = resample(&own, ADVICE_SAMPLES, 0x4144_5649)
                 .iter()
-                .map(|p| p.params[..l.law.n_params()].to_vec())
+                .map(|p| advised(p, string))
                 .collect();
             LawSamples {
                 law: l.law,
@@ -211,7 +224,10 @@ pub(super) fn escape_advice(
             }
         })
         .collect();
-    let simulated = SimulatedSettings::new(chain.clone(), w_ref_n, backend);
+    let simulated = SimulatedSettings {
+        string,
+        ..SimulatedSettings::new(chain.clone(), w_ref_n, backend)
+    };
     let mut simulator = Simulator::new(&simulated, &inputs, note)?;
     let point = OperatingPoint {
         omega_rpm: record.mean_top_drive_rad_s() / RAD_S_PER_RPM,
@@ -226,7 +242,7 @@ pub(super) fn escape_advice(
     // Every law with particles is simulated (`inputs` above).
     let caveat = unidentified_caveat(laws, &|_| true).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
     let mut text = advice.text() + caveat.as_deref().unwrap_or("");
-    let spread = along_open_parameters(&inputs, laws, particles);
+    let spread = along_open_parameters(&inputs, laws, particles, string);
     if spread.is_empty() {
         return Ok((text, None));
     }

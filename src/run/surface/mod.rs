@@ -669,7 +669,7 @@ pub fn infer_continuing(
     simulations += at_the_bit.draws as u64;
     if settings.advice && at_the_bit.stick_slip_probability >= 0.5 {
         let chain = Chain::one_dof(&string.median());
-        let (advice, open) = escape_advice(record, settings, backend, &chain, &laws, particles, note)?;
+        let (advice, open) = escape_advice(record, settings, backend, &chain, model.string, &laws, particles, note)?;
         at_the_bit.advice = Some(advice);
         at_the_bit.spread_advice = open;
     }
