@@ -785,14 +785,13 @@ pub fn map_inputs_of(particles: &[Particle], count: usize) -> Vec<crate::stabili
     summarize(particles, &[])
         .laws
         .iter()
-        .map(|summary| crate::stability::map::LawSamples {
-            law: summary.law,
-            probability: summary.probability,
-            map_si: summary.map.clone(),
-            samples_si: law_samples(particles, summary.law, count)
-                .into_iter()
-                .map(|p| p.params.clone())
-                .collect(),
+        .map(|summary| {
+            crate::stability::map::LawSamples::of_particles(
+                summary.law,
+                summary.probability,
+                summary.map.clone(),
+                &law_samples(particles, summary.law, count),
+            )
         })
         .collect()
 }

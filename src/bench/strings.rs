@@ -124,6 +124,7 @@ pub fn run(opts: &StringsBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
                     .collect()
             })
             .collect(),
+        strings: Vec::new(),
     }];
     let omega: Vec<f64> = (0..speeds)
         .map(|i| 20.0 + 200.0 * i as f64 / (speeds.max(2) - 1) as f64)

@@ -7,6 +7,7 @@ use bitrock::Error;
 use bitrock::data::BitSeen;
 use bitrock::eval::Backend;
 use bitrock::eval::strings::Ran;
+use bitrock::eval::surface::InferredString;
 use bitrock::laws::PAPER_W_REF_N;
 use bitrock::run;
 use bitrock::run::advice::{self, Adviser};
@@ -127,8 +128,20 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         .map(run::stability::stored_string)
         .transpose()?
         .flatten();
+    // A surface run that inferred its string: every sample's own for the simulated strings.
+    let sample_strings = cmd
+        .run
+        .as_deref()
+        .map(|dir| run::stability::sample_strings(dir, &cmd.string.given()))
+        .transpose()?
+        .flatten();
     if let Some(string) = &stored {
         super::print::note(format_args!("note: the run's own drill string: {}", string.describe()));
+    }
+    if sample_strings.is_some() {
+        super::print::note(format_args!(
+            "note: the run inferred its string with the laws: the linear maps take the posterior medians above, the simulated strings each sample's own"
+        ));
     }
     let (structure, lumped, fe) = cmd.string.over(stored.as_ref());
     let job = StabilityJob {
@@ -171,9 +184,15 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
         .or(own_w_ref_n.map(|(n, _)| n))
         .or(maps.run_w_ref_n);
     let at_record = record_bit.map(|seen| (seen, advice::params_w_ref_n(scaled_w_ref_n, &seen, w_ref_n)));
+    // Each sample's string, where the run inferred it, for the simulated strings.
+    let sim_inputs = match (&sample_strings, &cmd.run) {
+        (Some(_), Some(dir)) => run::stability::with_sample_strings(dir, &maps.inputs, cmd.samples)?,
+        _ => maps.inputs.clone(),
+    };
     let advice = at_record.map(|(seen, record_w_ref_n)| {
-        let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), cmd.backend);
-        (seen, adviser.advise_record(&maps.inputs, record_w_ref_n, &seen))
+        let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), cmd.backend)
+            .with_sample_strings(sample_strings);
+        (seen, adviser.advise_record(&sim_inputs, record_w_ref_n, &seen))
     });
     let simulated = if cmd.simulate {
         let (at, sim_w_ref_n) = match (cmd.at_rpm, cmd.at_kn, at_record) {
@@ -181,7 +200,7 @@ pub fn run(cmd: &StabilityCmd) -> anyhow::Result<ExitCode> {
             (_, _, Some((seen, record_w_ref_n))) => (Some(advice::record_point(&seen, record_w_ref_n)), record_w_ref_n),
             _ => (None, w_ref_n),
         };
-        Some(simulate(cmd, chain?, at, &maps.inputs, sim_w_ref_n)?)
+        Some(simulate(cmd, chain?, sample_strings, at, &sim_inputs, sim_w_ref_n)?)
     } else {
         None
     };
@@ -266,10 +285,12 @@ fn boundary_columns(
     (boundaries, grids, columns)
 }
 
-/// The simulated maps on `chain`, the escape map and its advice from `at` where known.
+/// The simulated maps on `chain` (each sample's own string where `sample_strings` is set),
+/// the escape map and its advice from `at` where known.
 fn simulate(
     cmd: &StabilityCmd,
     chain: Chain,
+    sample_strings: Option<InferredString>,
     at: Option<OperatingPoint>,
     inputs: &[LawSamples],
     w_ref_n: f64,
@@ -277,6 +298,7 @@ fn simulate(
     let job = SimulatedJob {
         settings: SimulatedSettings {
             dt_s: cmd.dt_s,
+            string: sample_strings,
             ..SimulatedSettings::new(chain, w_ref_n, cmd.backend)
         },
         omega_rpm: map::parse_axis(&cmd.sim_omega_rpm, "sim_omega_rpm")?,

@@ -470,15 +470,12 @@ impl<'a> Prepared<'a> {
                     .iter()
                     .find(|p| p.0 == law)
                     .map_or(law_summary.probability, |p| p.1);
-                LawSamples {
+                LawSamples::of_particles(
                     law,
                     probability,
-                    map_si: law_summary.map.clone(),
-                    samples_si: posterior::law_samples(&reference.last.particles, law, s.samples_per_law)
-                        .into_iter()
-                        .map(|p| p.params.clone())
-                        .collect(),
-                }
+                    law_summary.map.clone(),
+                    &posterior::law_samples(&reference.last.particles, law, s.samples_per_law),
+                )
             })
             .collect();
         let laws: std::collections::BTreeSet<Law> =

@@ -16,6 +16,7 @@ use super::strings::{
 };
 use crate::data::BitSeen;
 use crate::eval::Backend;
+use crate::eval::surface::InferredString;
 use crate::simulate::strings::Chain;
 use crate::stability::map::{Criterion, LawSamples, mixture_probability_grid};
 use serde::{Deserialize, Serialize};
@@ -148,6 +149,9 @@ impl CycleCheck {
 pub struct EscapeSettings {
     /// The string simulated.
     pub chain: Chain,
+    /// Where the posterior inferred the string: each sample's own instead
+    /// ([`SimulatedSettings::string`]).
+    pub string: Option<InferredString>,
     /// Posterior samples per law simulated (evenly spaced through each law's).
     pub samples: usize,
     /// Laws less probable than this are left out of the simulations.
@@ -279,7 +283,10 @@ impl Adviser {
             return;
         };
         let inputs = thinned(inputs, escape.samples, escape.min_probability);
-        let settings = SimulatedSettings::new(escape.chain.clone(), w_ref_n, escape.backend);
+        let settings = SimulatedSettings {
+            string: escape.string,
+            ..SimulatedSettings::new(escape.chain.clone(), w_ref_n, escape.backend)
+        };
         // Auto's fallback to the CPU goes into the advice's words; the simulator's progress
         // lines do not (they depend on the machine's speed).
         let mut said = Vec::new();
@@ -368,11 +375,21 @@ impl Adviser {
             risk: DEFAULT_RISK,
             escape: chain.map(|chain| EscapeSettings {
                 chain,
+                string: None,
                 samples: RECORD_ESCAPE_SAMPLES,
                 min_probability: RECORD_ESCAPE_MIN_PROBABILITY,
                 backend,
             }),
         }
+    }
+
+    /// The adviser whose simulated strings are each sample's own where `string` is set (a
+    /// posterior that inferred the string with the law).
+    pub fn with_sample_strings(mut self, string: Option<InferredString>) -> Self {
+        if let Some(escape) = &mut self.escape {
+            escape.string = string;
+        }
+        self
     }
 
     /// The advice at the record's own operating point ([`record_point`]), from what its bit

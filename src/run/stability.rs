@@ -5,6 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::eval::Backend;
+use crate::eval::surface::InferredString;
 use crate::laws::Law;
 use crate::run;
 use crate::stability::fe::{DrillString, DrillStringSettings};
@@ -212,6 +213,7 @@ impl StabilityJob {
                     probability: 1.0,
                     map_si: params_si.clone(),
                     samples_si: vec![params_si.clone()],
+                    strings: Vec::new(),
                 }],
                 None,
                 None,
@@ -432,6 +434,35 @@ pub fn stored_string(dir: &std::path::Path) -> Result<Option<DrillStringSpec>> {
     Ok(serde_json::from_value::<run::abc::Config>(config)
         .ok()
         .and_then(|c| c.string))
+}
+
+/// Where the surface run in `dir` inferred its string and `given` sets none of it: the
+/// string every posterior sample carries after its law's parameters, on which the simulated
+/// strings take it ([`crate::run::strings::SimulatedSettings::string`]); the linear maps
+/// take the posterior medians.
+pub fn sample_strings(dir: &std::path::Path, given: &StringGiven) -> Result<Option<InferredString>> {
+    if given.is_given() || !run::surface::dir::is_surface_dir(dir) {
+        return Ok(None);
+    }
+    run::surface::dir::Finished::read(dir)?.sample_strings()
+}
+
+/// The maps' `inputs` of the surface run in `dir` (`count` samples per law) with each
+/// sample's string, where the run inferred it: the same particles, drawn as the maps drew
+/// them ([`crate::abc::posterior::law_samples`]), with their strings' coordinates.
+pub fn with_sample_strings(dir: &std::path::Path, inputs: &[LawSamples], count: usize) -> Result<Vec<LawSamples>> {
+    let particles = run::surface::dir::Finished::read(dir)?.particles()?;
+    Ok(inputs
+        .iter()
+        .map(|input| {
+            LawSamples::of_particles(
+                input.law,
+                input.probability,
+                input.map_si.clone(),
+                &crate::abc::posterior::law_samples(&particles, input.law, count),
+            )
+        })
+        .collect())
 }
 
 /// Refuses finite-element settings given for the 1-DOF string, and a 1-DOF model that is not

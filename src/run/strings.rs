@@ -150,20 +150,23 @@ fn members(settings: &SimulatedSettings, inputs: &[LawSamples]) -> Result<(Vec<M
     let total: f64 = inputs.iter().map(|i| i.probability).sum();
     let mut members = Vec::new();
     let mut chains = vec![settings.chain.clone()];
-    for input in inputs.iter().filter(|i| !i.samples_si.is_empty() && i.probability > 0.0) {
+    for input in inputs
+        .iter()
+        .filter(|i| !i.samples_si.is_empty() && i.probability > 0.0)
+    {
         let weight = input.probability / total / input.samples_si.len() as f64;
-        let n = input.law.n_params();
-        for p in &input.samples_si {
+        for (k, p) in input.samples_si.iter().enumerate() {
             let chain = match &settings.string {
                 None => 0,
                 Some(inferred) => {
-                    let Some(coordinates) = p.get(n..n + 2) else {
+                    let Some(coordinates) = input.strings.get(k) else {
                         return Err(Error::setting(
                             "string",
                             format!(
-                                "a sample of {} has {} values: the law's {n} parameters and the string's ω_n and ξ are needed",
+                                "{} samples of {} carry their string's ω_n and ξ, of {}: each sample's is needed where the string was inferred",
+                                input.strings.len(),
                                 input.law,
-                                p.len()
+                                input.samples_si.len()
                             ),
                         ));
                     };
@@ -180,7 +183,7 @@ fn members(settings: &SimulatedSettings, inputs: &[LawSamples]) -> Result<(Vec<M
             };
             members.push(Member {
                 law: input.law,
-                params_nm: padded(p.get(..n).unwrap_or(p)),
+                params_nm: padded(p),
                 weight,
                 chain,
             });
@@ -199,6 +202,7 @@ pub fn thinned(inputs: &[LawSamples], count: usize, min_probability: f64) -> Vec
             let step = i.samples_si.len().div_ceil(count.max(1)).max(1);
             LawSamples {
                 samples_si: i.samples_si.iter().step_by(step).cloned().collect(),
+                strings: i.strings.iter().step_by(step).copied().collect(),
                 ..i.clone()
             }
         })

@@ -52,6 +52,7 @@ impl Watch {
             }
             .map(|chain| EscapeSettings {
                 chain,
+                string: None,
                 samples: ESCAPE_SAMPLES,
                 min_probability: ESCAPE_MIN_PROBABILITY,
                 backend: Backend::Cpu,

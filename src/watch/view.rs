@@ -273,6 +273,7 @@ mod tests {
             probability: 1.0,
             map_si: params.clone(),
             samples_si: vec![params.clone(); 10],
+            strings: Vec::new(),
         }];
         let rows: Vec<Row> = (0..1500).map(|i| row(1.0 + i as f64 / 100.0, 5000.0)).collect();
         let v = view(

@@ -58,6 +58,7 @@ fn truth_persists(speeds_rpm: &[f64], weights_kn: &[f64]) -> Vec<f64> {
         probability: 1.0,
         map_si: params.clone(),
         samples_si: vec![params],
+        strings: Vec::new(),
     }];
     let settings = SimulatedSettings::new(Chain::one_dof(&Lumped::default()), 244.2e3, Backend::Cpu);
     let mut quiet = |_| {};
@@ -149,6 +150,7 @@ fn demo_advice(params_knm: &[f64]) -> bitrock::run::advice::Advice {
         probability: 1.0,
         map_si: params.clone(),
         samples_si: vec![params],
+        strings: Vec::new(),
     }];
     let lumped = Lumped::default();
     let adviser = Adviser::for_record(Criterion::Lumped(lumped), Some(Chain::one_dof(&lumped)), Backend::Cpu);

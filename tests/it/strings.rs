@@ -134,6 +134,7 @@ fn m2_escape(backend: Backend) -> (Grid, f64) {
         probability: 1.0,
         map_si: p.clone(),
         samples_si: vec![p],
+        strings: Vec::new(),
     }];
     let settings = SimulatedSettings::new(Chain::one_dof(&Lumped::default()), PAPER_W_REF_N, backend);
     let mut note = |_| {};
@@ -215,6 +216,7 @@ fn advice_against_whole_scans() {
                 probability: 0.5,
                 map_si: p.clone(),
                 samples_si: vec![p],
+                strings: Vec::new(),
             }
         })
         .collect();
@@ -464,15 +466,16 @@ fn m2_on_strings(strings: &[(f64, f64)], inferred: bool, backend: Backend) -> (f
     let law = Law::M2;
     let p = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
     let paper = Lumped::default();
-    let samples_si = strings
-        .iter()
-        .map(|&(w, xi)| if inferred { [p.as_slice(), &[w, xi]].concat() } else { p.clone() })
-        .collect();
     let inputs = vec![LawSamples {
         law,
         probability: 1.0,
         map_si: p.clone(),
-        samples_si,
+        samples_si: vec![p.clone(); strings.len()],
+        strings: if inferred {
+            strings.iter().map(|&(w, xi)| [w, xi]).collect()
+        } else {
+            Vec::new()
+        },
     }];
     let (w, xi) = strings[0];
     let one = Lumped {
@@ -508,10 +511,26 @@ fn each_sample_is_simulated_on_its_own_string_where_the_string_was_inferred() {
     // string (0.85 rad/s, ξ 0.25) keeps m2's bit stuck up to 120 rpm, a softer one (0.5) up
     // to 150, a stiffer one (1.5) nowhere from 85 rpm up.
     let strings = [(0.85, 0.25), (0.5, 0.25), (1.5, 0.25)];
-    let alone: Vec<(f64, Vec<f64>)> = strings.iter().map(|s| m2_on_strings(&[*s], false, Backend::Cpu)).collect();
-    assert_eq!(alone[0].1[4], 0.0, "the paper's string escapes by 150 rpm: {:?}", alone[0]);
-    assert!(alone[1].1[4] > 0.5, "the softer string is still stuck at 150 rpm: {:?}", alone[1]);
-    assert_eq!(alone[2].1, vec![0.0; 5], "the stiffer string escapes at 85 rpm: {:?}", alone[2]);
+    let alone: Vec<(f64, Vec<f64>)> = strings
+        .iter()
+        .map(|s| m2_on_strings(&[*s], false, Backend::Cpu))
+        .collect();
+    assert_eq!(
+        alone[0].1[4], 0.0,
+        "the paper's string escapes by 150 rpm: {:?}",
+        alone[0]
+    );
+    assert!(
+        alone[1].1[4] > 0.5,
+        "the softer string is still stuck at 150 rpm: {:?}",
+        alone[1]
+    );
+    assert_eq!(
+        alone[2].1,
+        vec![0.0; 5],
+        "the stiffer string escapes at 85 rpm: {:?}",
+        alone[2]
+    );
     // One sample carrying its string is that string alone, exactly: phases and all.
     for (s, one) in strings.iter().zip(&alone) {
         assert_eq!(&m2_on_strings(&[*s], true, Backend::Cpu), one, "{s:?}");

@@ -176,6 +176,7 @@ fn the_way_out_along_an_open_parameter_s_spread_gets_the_true_bit_out() {
         probability: 1.0,
         map_si: truth.clone(),
         samples_si: vec![truth],
+        strings: Vec::new(),
     }];
     let wob_kn = bitrock::laws::PAPER_W_REF_N / 1000.0;
     let simulated = SimulatedSettings::new(
@@ -350,6 +351,7 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
         (serde_json::from_str::<serde_json::Value>(&out).unwrap(), err)
     };
     let posterior = path.with_file_name("posterior.csv");
+    let out_dir = path.with_file_name("run");
     let (inferred, err) = infer(&[
         "--omega-n-rad-s",
         "0.6:1.8",
@@ -357,6 +359,8 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
         "0.05:0.5",
         "--posterior-out",
         posterior.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
     ]);
     // The damping ratio, weakly told by the surface, is said to be so.
     assert!(
@@ -418,6 +422,31 @@ fn a_string_s_natural_frequency_and_damping_are_inferred_with_the_law_within_the
             .arg(&posterior),
     );
     assert_eq!(code, 0, "{err}");
+    // The directory mapped: its simulated strings each on its sample's own string, unless a
+    // string is given.
+    let map = |string: &[&str]| {
+        let mut args = vec![
+            "stability",
+            "--run",
+            out_dir.to_str().unwrap(),
+            "--simulate",
+            "--sim-omega-rpm",
+            "60:120:2",
+            "--sim-wob-kn",
+            "200:244:2",
+            "--sim-samples",
+            "2",
+        ];
+        args.extend(string);
+        let (code, _, err) = outcome(bin().args(&args));
+        assert_eq!(code, 0, "{err}");
+        err
+    };
+    let own = "the simulated strings each sample's own";
+    let err = map(&[]);
+    assert!(err.contains(own), "{err}");
+    let err = map(&["--omega-n-rad-s", "1.2"]);
+    assert!(!err.contains(own), "{err}");
     let k = s["stiffness_knm_per_rad"][1].as_f64().unwrap();
     let median = omega["median"].as_f64().unwrap();
     assert_eq!(k.to_bits(), (383.33 * median * median / 1000.0).to_bits());
@@ -1022,4 +1051,83 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
     let (code, _, err) = watch(&path, "m2", &["--abc"]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--abc") && err.contains("simulated strings"), "{err}");
+}
+
+/// The true string's m2 at its paper estimate, settled stuck at 60 rpm under the paper's
+/// W_ref: P(stick-slip persists) at each of `speeds_rpm` (at that weight), then at each of
+/// `weights_kn` (at 60 rpm).
+fn true_bit_after(string: Lumped, speeds_rpm: &[f64], weights_kn: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    use bitrock::run::strings::{OperatingPoint, SimulatedSettings, Simulator};
+    use bitrock::simulate::strings::Chain;
+    use bitrock::stability::map::LawSamples;
+    let truth = Law::M2.scale_torque(Law::M2.paper_estimate().unwrap(), 1000.0);
+    let inputs = vec![LawSamples {
+        law: Law::M2,
+        probability: 1.0,
+        map_si: truth.clone(),
+        samples_si: vec![truth],
+        strings: Vec::new(),
+    }];
+    let wob_kn = bitrock::laws::PAPER_W_REF_N / 1000.0;
+    let simulated = SimulatedSettings::new(Chain::one_dof(&string), wob_kn * 1000.0, bitrock::eval::Backend::Cpu);
+    let mut quiet = |_| {};
+    let mut simulator = Simulator::new(&simulated, &inputs, &mut quiet).unwrap();
+    let at = simulator
+        .at_point(OperatingPoint {
+            omega_rpm: 60.0,
+            wob_kn,
+        })
+        .unwrap();
+    assert_eq!(at.stick_slip_probability, 1.0);
+    let by_speed = simulator.escape(&at, speeds_rpm, &[wob_kn]).unwrap().probability;
+    let by_weight = if weights_kn.is_empty() {
+        Vec::new()
+    } else {
+        simulator.escape(&at, &[60.0], weights_kn).unwrap().probability
+    };
+    (by_speed, by_weight)
+}
+
+#[test]
+fn on_a_string_inferred_with_the_law_the_way_out_along_the_spread_gets_the_true_bit_out() {
+    use bitrock::run::surface::StringBounds;
+    // m2 at its paper estimate on a softer string than the paper's (ω_n 0.6 rad/s): its bit
+    // stays stuck at 60 rpm until 165 rpm (P(persists) 0.625 at 150), or until the weight is
+    // lowered to 60 kN (still stuck at 80).
+    let string = Lumped {
+        omega_n_rad_s: 0.6,
+        ..Lumped::default()
+    };
+    let (_dir, path, _) = record_on(string, Law::M2, 60.0, 300.0, 1.0, 0.2, 3, Channels::All);
+    let mut settings = SurfaceSettings::new(vec![Law::M2]);
+    settings.advice = true;
+    settings.string_bounds = Some(StringBounds {
+        omega_n_rad_s: [0.4, 1.8],
+        damping_ratio: [0.25, 0.25],
+    });
+    let r = run(&path, &settings, 1);
+    let omega = &r.string.omega_n_rad_s.posterior;
+    assert!(omega.q05 <= 0.6 && 0.6 <= omega.q95, "{omega:?}");
+    let open = r.at_the_bit.spread_advice.as_ref().expect("g is left open");
+    let advice = r.at_the_bit.advice.as_deref().unwrap();
+    eprintln!("{advice}\n{open:?}");
+    assert_eq!(open.open, ["m2's g"]);
+    let lighter = open.wob_kn.expect("a weight that ends it along g's spread");
+    let drawn: f64 = advice
+        .split("raise the top-drive speed to ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .expect("a speed that ends it in the drawn strings");
+    let (persists, _) = true_bit_after(string, &[drawn], &[]);
+    assert_eq!(
+        persists,
+        [1.0],
+        "the drawn strings' {drawn} rpm leaves the true bit stuck"
+    );
+    let speeds: Vec<f64> = open.speed_rpm.into_iter().collect();
+    let (by_speed, by_weight) = true_bit_after(string, &speeds, &[lighter]);
+    eprintln!("the true bit after {speeds:?} rpm: {by_speed:?}; after {lighter} kN: {by_weight:?}");
+    assert!(by_speed.iter().all(|p| *p == 0.0), "{by_speed:?} at {speeds:?} rpm");
+    assert_eq!(by_weight, [0.0], "at {lighter} kN");
 }

@@ -16,6 +16,7 @@ use crate::data::BitSeen;
 use crate::data::surface::{SurfaceOptions, SurfaceRecord};
 use crate::error::{Error, Result};
 use crate::eval::Backend;
+use crate::eval::surface::InferredString;
 use crate::files;
 use crate::laws::Law;
 use crate::prior::PriorFile;
@@ -396,6 +397,44 @@ pub fn job(dir: &Path) -> Result<Job> {
     })
 }
 
+/// The string's coordinates of a run that inferred it, its natural frequency and damping
+/// ratio, read from the particle file `path` and put after each particle's law's parameters,
+/// as the sampler had them.
+fn append_string_columns(path: &Path, particles: &mut [Particle]) -> Result<()> {
+    let malformed = |message: String| Error::Data {
+        path: path.to_path_buf(),
+        message,
+    };
+    let mut reader = csv::Reader::from_path(path).map_err(|e| malformed(e.to_string()))?;
+    let header = reader.headers().map_err(|e| malformed(e.to_string()))?.clone();
+    let names = ["string.omega_n [rad/s]", "string.damping_ratio [1]"];
+    let columns = names.map(|name| header.iter().position(|h| h == name));
+    let [Some(omega), Some(xi)] = columns else {
+        return Err(malformed(format!(
+            "the run inferred its string, but its particles lack the columns {}",
+            names.join(" and ")
+        )));
+    };
+    let mut rows = reader.records();
+    for (i, particle) in particles.iter_mut().enumerate() {
+        let row = rows
+            .next()
+            .ok_or_else(|| malformed(format!("{} particles, fewer rows", i + 1)))?
+            .map_err(|e| malformed(e.to_string()))?;
+        for column in [omega, xi] {
+            let value = row.get(column).and_then(|v| v.parse::<f64>().ok()).ok_or_else(|| {
+                malformed(format!(
+                    "row {}: '{}' is not a number",
+                    i + 2,
+                    header.get(column).unwrap_or("")
+                ))
+            })?;
+            particle.params.push(value);
+        }
+    }
+    Ok(())
+}
+
 /// The finished document of the surface directory `dir` (its law files' laws registered).
 pub fn read(dir: &Path) -> Result<serde_json::Value> {
     job(dir)?;
@@ -458,6 +497,17 @@ impl Finished {
         Ok((particles, w_ref_n, why))
     }
 
+    /// The final population's particles as the sampler had them: where the run inferred its
+    /// string, its two coordinates after each particle's law's parameters.
+    pub fn particles(&self) -> Result<Vec<Particle>> {
+        let path = self.dir.join(POSTERIOR_CSV);
+        let mut particles = crate::documents::read_particles_csv(&path)?;
+        if self.sample_strings()?.is_some() {
+            append_string_columns(&path, &mut particles)?;
+        }
+        Ok(particles)
+    }
+
     /// The bit as the surface implies it: the posterior medians of its stuck share and
     /// severity, at the top drive's mean speed and the record's mean weight on bit (where
     /// recorded).
@@ -485,6 +535,27 @@ impl Finished {
             omega_n_rad_s: number(&string["omega_n_rad_s"]["median"], "omega_n_rad_s.median")?,
             damping_ratio: number(&string["damping_ratio"]["median"], "damping_ratio.median")?,
         })
+    }
+
+    /// Where the run inferred its string: the string its particles carry after their laws'
+    /// parameters ([`crate::eval::surface::InferredString`]), what it held given exactly.
+    pub fn sample_strings(&self) -> Result<Option<InferredString>> {
+        let inferred = self.document["string"]["inferred"].as_bool().unwrap_or(false);
+        if !inferred {
+            return Ok(None);
+        }
+        let lumped = self.string()?;
+        let given = |name: &str, value: f64| {
+            self.document["string"][name]["given"]
+                .as_bool()
+                .unwrap_or(false)
+                .then_some(value)
+        };
+        Ok(Some(InferredString {
+            inertia_kg_m2: lumped.inertia_kg_m2,
+            omega_n_rad_s: given("omega_n_rad_s", lumped.omega_n_rad_s),
+            damping_ratio: given("damping_ratio", lumped.damping_ratio),
+        }))
     }
 
     /// The document as Python reads it: with the record's clock.
