@@ -771,6 +771,33 @@ pub fn law_samples(particles: &[Particle], law: Law, count: usize) -> Vec<&Parti
         .collect()
 }
 
+/// `law`'s samples for the stability maps and the simulated strings, of its `particles`: their
+/// law's parameters, and, where every one carries its string's two coordinates past them (a
+/// surface run that inferred its string), those.
+pub fn law_samples_of(
+    law: Law,
+    probability: f64,
+    map_si: Vec<f64>,
+    particles: &[&Particle],
+) -> crate::stability::map::LawSamples {
+    let n = law.n_params();
+    let strings = if particles.iter().all(|p| p.params.len() == n + 2) {
+        particles.iter().map(|p| [p.params[n], p.params[n + 1]]).collect()
+    } else {
+        Vec::new()
+    };
+    crate::stability::map::LawSamples {
+        law,
+        probability,
+        map_si,
+        samples_si: particles
+            .iter()
+            .map(|p| p.params[..n.min(p.params.len())].to_vec())
+            .collect(),
+        strings,
+    }
+}
+
 /// The stability maps' inputs of `population`: every law with particles in it, its MAP, its
 /// probability and `count` of its particles ([`law_samples`]: the first ones, or a systematic
 /// resample by weight for an SMC population), SI.
@@ -786,7 +813,7 @@ pub fn map_inputs_of(particles: &[Particle], count: usize) -> Vec<crate::stabili
         .laws
         .iter()
         .map(|summary| {
-            crate::stability::map::LawSamples::of_particles(
+            law_samples_of(
                 summary.law,
                 summary.probability,
                 summary.map.clone(),

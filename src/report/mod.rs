@@ -470,7 +470,7 @@ impl<'a> Prepared<'a> {
                     .iter()
                     .find(|p| p.0 == law)
                     .map_or(law_summary.probability, |p| p.1);
-                LawSamples::of_particles(
+                crate::abc::posterior::law_samples_of(
                     law,
                     probability,
                     law_summary.map.clone(),

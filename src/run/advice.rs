@@ -42,6 +42,18 @@ pub fn speeds_rpm() -> Vec<f64> {
     crate::abc::posterior::speed_grid(lo, hi, count)
 }
 
+/// The way out scanned again along the posterior's spread of every parameter the record
+/// leaves open: it must end the stick-slip in every string there.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpreadAdvice {
+    /// The parameters left open (`m2's g`).
+    pub open: Vec<String>,
+    /// The nearest top-drive speed (rpm) and lighter weight on bit (kN) that end it there;
+    /// `None` where none scanned does.
+    pub speed_rpm: Option<f64>,
+    pub wob_kn: Option<f64>,
+}
+
 /// The advice at an operating point.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Advice {
@@ -80,6 +92,10 @@ pub struct Advice {
     /// stick-slipped and both are known.
     #[serde(default)]
     pub cycle: Option<CycleCheck>,
+    /// Where the window leaves a law's parameter to its prior (a window of surface channels):
+    /// the way out along the posterior's spread of it.
+    #[serde(default)]
+    pub spread: Option<SpreadAdvice>,
 }
 
 /// The cycle the bit was seen in against the posterior's simulated strings at the same
@@ -254,6 +270,7 @@ impl Adviser {
             escape_omega_rpm: None,
             escape_wob_kn: None,
             cycle: None,
+            spread: None,
         }
     }
 

@@ -455,7 +455,7 @@ pub fn with_sample_strings(dir: &std::path::Path, inputs: &[LawSamples], count: 
     Ok(inputs
         .iter()
         .map(|input| {
-            LawSamples::of_particles(
+            crate::abc::posterior::law_samples_of(
                 input.law,
                 input.probability,
                 input.map_si.clone(),

@@ -170,30 +170,8 @@ pub struct LawSamples {
     /// Each sample's string [ω_n rad/s, ξ], where the posterior inferred it with the law (a
     /// surface run's); empty otherwise. The simulated strings take it
     /// ([`crate::run::strings::SimulatedSettings::string`]); the linear maps do not.
+    /// [`crate::abc::posterior::law_samples_of`] makes them of particles.
     pub strings: Vec<[f64; 2]>,
-}
-
-impl LawSamples {
-    /// `law`'s samples `particles`: their law's parameters, and, where every one carries its
-    /// string's two coordinates past them, those.
-    pub fn of_particles(law: Law, probability: f64, map_si: Vec<f64>, particles: &[&crate::abc::Particle]) -> Self {
-        let n = law.n_params();
-        let strings = if particles.iter().all(|p| p.params.len() == n + 2) {
-            particles.iter().map(|p| [p.params[n], p.params[n + 1]]).collect()
-        } else {
-            Vec::new()
-        };
-        Self {
-            law,
-            probability,
-            map_si,
-            samples_si: particles
-                .iter()
-                .map(|p| p.params[..n.min(p.params.len())].to_vec())
-                .collect(),
-            strings,
-        }
-    }
 }
 
 /// One law's boundaries (kN per speed, `None` where no weight on bit destabilises).

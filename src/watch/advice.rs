@@ -60,6 +60,37 @@ impl Watch {
         }
     }
 
+    /// Where the window leaves a law's parameter to its prior and the bit stick-slips: the way
+    /// out along the carried posterior's spread of it, every string there ended
+    /// ([`crate::run::surface::spread_way_out`]), added to `advice` (its words say where the
+    /// strings failed).
+    pub(super) fn spread_advice(&self, advice: &mut Advice, laws: &[crate::run::surface::LawPosterior]) {
+        let (Some(posterior), Some(escape)) = (&self.carried.posterior, self.adviser().escape) else {
+            return;
+        };
+        let inputs = thinned(
+            &crate::abc::posterior::map_inputs_of(posterior, crate::run::advice::ADVICE_SAMPLES),
+            escape.samples,
+            escape.min_probability,
+        );
+        let point = OperatingPoint {
+            omega_rpm: advice.omega_rpm,
+            wob_kn: advice.wob_kn,
+        };
+        // The laws hold at the window's own weight on bit: its W_ref.
+        let settings = SimulatedSettings::new(escape.chain, point.wob_kn * 1000.0, escape.backend);
+        match crate::run::surface::spread_way_out(&settings, &inputs, laws, posterior, point, &mut |_| {}) {
+            Ok(Some((words, spread))) => {
+                advice.words.push_str(&words);
+                advice.spread = Some(spread);
+            }
+            Ok(None) => {}
+            Err(e) => advice.words.push_str(&format!(
+                "; along the posterior's spread the simulated strings failed ({e})"
+            )),
+        }
+    }
+
     /// Adds the advice (from the latest posterior), the window's picture and the latency;
     /// `implied`: the bit a window of surface channels implies, taken for the bit seen.
     pub(super) fn completed(&mut self, mut update: Update, window: &Window, implied: Option<BitSeen>) -> Update {

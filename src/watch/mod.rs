@@ -49,7 +49,7 @@ use crate::fit::FitOptions;
 use crate::laws::{Law, PAPER_W_REF_N};
 use crate::run::advice::{Adviser, EscapeSettings};
 use crate::run::evidence::{EvidenceAnalysis, WarmStart};
-use crate::run::strings::OperatingPoint;
+use crate::run::strings::{OperatingPoint, SimulatedSettings, thinned};
 use crate::simulate::strings::Chain;
 use crate::stability::lumped::Lumped;
 use crate::stability::map::Criterion;
@@ -386,6 +386,7 @@ impl Watch {
                     && (advice.escape_omega_rpm.is_some() || advice.escape_wob_kn.is_some())
                 {
                     advice.words.push_str(&caveat);
+                    self.spread_advice(advice, &selected.laws);
                 }
                 Ok(update)
             }

@@ -930,7 +930,28 @@ fn a_watch_of_surface_channels_infers_each_window_through_simulated_strings() {
         );
         assert_eq!(advice["stick_slip_now"], true, "{advice}");
         assert!(advice["escape_omega_rpm"][0].as_f64().unwrap() > 60.0, "{advice}");
+        // The window leaves g open: the way out along its spread too.
+        assert_eq!(advice["spread"]["open"], serde_json::json!(["m2's g"]), "{advice}");
     }
+    // Applied to the true string stuck at 60 rpm: the last window's drawn strings end the
+    // stick-slip at a speed and a weight its bit does not (70 rpm and 220 kN, measured), the
+    // strings along g's spread at ones it does (150 rpm and 73 kN).
+    let advice = &updates.last().unwrap()["advice"];
+    let number = |v: &serde_json::Value| v.as_f64().unwrap();
+    let drawn = (
+        number(&advice["escape_omega_rpm"][0]),
+        number(&advice["escape_wob_kn"][0]),
+    );
+    let spread = (
+        number(&advice["spread"]["speed_rpm"]),
+        number(&advice["spread"]["wob_kn"]),
+    );
+    let (by_speed, by_weight) = true_bit_after(Lumped::default(), &[drawn.0, spread.0], &[drawn.1, spread.1]);
+    assert_eq!(
+        (by_speed, by_weight),
+        (vec![1.0, 0.0], vec![1.0, 0.0]),
+        "{drawn:?} and {spread:?}"
+    );
     // The page's picture of the last window: no bit channels to draw, the surface channels
     // and the bit speed the strings imply, sample for sample on the window's stretch of the
     // record, the median band stuck about as often as the bit was.

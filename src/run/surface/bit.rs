@@ -171,7 +171,7 @@ fn along_open_parameters(inputs: &[LawSamples], laws: &[LawPosterior], particles
                     chosen.push(sorted[crate::abc::smc::inverse_cdf(&cdf, q)]);
                 }
             }
-            LawSamples::of_particles(input.law, input.probability, input.map_si.clone(), &chosen)
+            crate::abc::posterior::law_samples_of(input.law, input.probability, input.map_si.clone(), &chosen)
         })
         .collect()
 }
@@ -199,7 +199,7 @@ pub(super) fn escape_advice(
         .filter(|l| l.particles > 0)
         .map(|l| {
             let own: Vec<&Particle> = particles.iter().filter(|p| p.law == l.law).collect();
-            LawSamples::of_particles(
+            crate::abc::posterior::law_samples_of(
                 l.law,
                 l.probability,
                 l.params.iter().map(|p| p.median).collect(),
@@ -225,12 +225,34 @@ pub(super) fn escape_advice(
     // Every law with particles is simulated (`inputs` above).
     let caveat = unidentified_caveat(laws, &|_| true).filter(|_| advice.speed_rpm.is_some() || advice.wob_kn.is_some());
     let mut text = advice.text() + caveat.as_deref().unwrap_or("");
-    let spread = along_open_parameters(&inputs, laws, particles);
-    if spread.is_empty() {
-        return Ok((text, None));
+    match spread_way_out(&simulated, &inputs, laws, particles, point, note)? {
+        Some((words, spread)) => {
+            text.push_str(&words);
+            Ok((text, Some(spread)))
+        }
+        None => Ok((text, None)),
     }
-    // Every string must end: the record cannot say which of them is the bit's.
-    let mut simulator = Simulator::new(&simulated, &spread, note)?;
+}
+
+/// The way out from `point` on `simulated` along the posterior's spread of what `laws` leave
+/// open ([`along_open_parameters`] of the drawn `inputs` and the `particles` they were drawn
+/// from): the words the advice adds and the advice; `None` where the laws taking part leave
+/// nothing open. Every string must end: the record cannot say which of them is the bit's.
+pub(crate) fn spread_way_out(
+    simulated: &crate::run::strings::SimulatedSettings,
+    inputs: &[LawSamples],
+    laws: &[LawPosterior],
+    particles: &[Particle],
+    point: crate::run::strings::OperatingPoint,
+    note: &mut dyn FnMut(String),
+) -> Result<Option<(String, SpreadAdvice)>> {
+    use crate::run::strings::{Simulator, advice_speeds_rpm, advice_weights_kn};
+    let spread = along_open_parameters(inputs, laws, particles);
+    let names = open_parameters(laws, &|law| spread.iter().any(|s| s.law == law));
+    if names.is_empty() {
+        return Ok(None);
+    }
+    let mut simulator = Simulator::new(simulated, &spread, note)?;
     let at = simulator.at_point(point)?;
     let open = simulator.escape_advice_with(
         &at,
@@ -238,18 +260,20 @@ pub(super) fn escape_advice(
         &advice_weights_kn(point.wob_kn),
         1.0,
     )?;
-    let names = open_parameters(laws, &|_| true);
-    text.push_str(&format!(
-        "; to end it in every string along the posterior's spread of {} (11 of its quantiles, 1 % to 99 %): {}",
+    let words = format!(
+        "; to end it in every string along the posterior's spread of {} ({} of its quantiles, {} % to {} %): {}",
         names.join(", "),
+        OPEN_QUANTILES.len(),
+        100.0 * OPEN_QUANTILES[0],
+        100.0 * OPEN_QUANTILES[OPEN_QUANTILES.len() - 1],
         open.ways()
-    ));
-    Ok((
-        text,
-        Some(SpreadAdvice {
+    );
+    Ok(Some((
+        words,
+        SpreadAdvice {
             open: names,
             speed_rpm: open.speed_rpm.map(|w| w.to),
             wob_kn: open.wob_kn.map(|w| w.to),
-        }),
-    ))
+        },
+    )))
 }

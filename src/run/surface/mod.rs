@@ -32,6 +32,7 @@ mod pilot;
 mod settings;
 mod warm;
 
+pub(crate) use bit::spread_way_out;
 use bit::*;
 pub use bit::{implied_bit, mean_wob_n, unidentified_caveat};
 use check::*;
@@ -281,17 +282,7 @@ pub struct AtTheBit {
     pub spread_advice: Option<SpreadAdvice>,
 }
 
-/// The way out scanned again along the posterior's spread of every parameter the record
-/// leaves open.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct SpreadAdvice {
-    /// The parameters left open (`m2's g`).
-    pub open: Vec<String>,
-    /// The nearest top-drive speed (rpm) and lighter weight on bit (kN) that end it there;
-    /// `None` where none scanned does.
-    pub speed_rpm: Option<f64>,
-    pub wob_kn: Option<f64>,
-}
+pub use crate::run::advice::SpreadAdvice;
 
 /// Everything a surface inference finds.
 #[derive(Clone, Debug, Serialize)]
