@@ -301,6 +301,15 @@ def test_a_watch_of_an_independent_string_s_surface_implies_its_bit_window_by_wi
         if rpm not in left:
             left[rpm] = max(after_change(chain, "m2", p_nm, rpm * RPM, 1.0, state) for state in states)
         assert left[rpm] == 0.0 or "m2's g to the prior" in u.advice["words"], (rpm, left[rpm], u.advice["words"])
+    # The way out along the posterior's spread of g, every string there ended, gets the twin's
+    # bit out at every phase (measured: 140 and 165 rpm, 73 kN, where the drawn strings' 80 rpm
+    # and 159-183 kN leave it stuck 41-47 % of the time).
+    for u in updates:
+        spread = u.advice["spread"]
+        assert spread["open"] == ["m2's g"], u.advice
+        for rpm, ratio in ((spread["speed_rpm"], 1.0), (60.0, spread["wob_kn"] / 244.2)):
+            stuck = max(after_change(chain, "m2", p_nm, rpm * RPM, ratio, state) for state in states)
+            assert stuck == 0.0, (rpm, ratio, stuck, u.advice["words"])
     lines = [
         json.loads(line)
         for line in run_cli(
