@@ -78,7 +78,10 @@ impl Watch {
             wob_kn: advice.wob_kn,
         };
         // The laws hold at the window's own weight on bit: its W_ref.
-        let settings = SimulatedSettings::new(escape.chain, point.wob_kn * 1000.0, escape.backend);
+        let settings = SimulatedSettings {
+            string: escape.string,
+            ..SimulatedSettings::new(escape.chain, point.wob_kn * 1000.0, escape.backend)
+        };
         match crate::run::surface::spread_way_out(&settings, &inputs, laws, posterior, point, &mut |_| {}) {
             Ok(Some((words, spread))) => {
                 advice.words.push_str(&words);

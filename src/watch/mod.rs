@@ -383,9 +383,11 @@ impl Watch {
                 };
                 let caveat = crate::run::surface::unidentified_caveat(&selected.laws, &taking_part);
                 if let (Some(advice), Some(caveat)) = (update.advice.as_mut(), caveat)
-                    && (advice.escape_omega_rpm.is_some() || advice.escape_wob_kn.is_some())
+                    && advice.stick_slip_now
                 {
-                    advice.words.push_str(&caveat);
+                    if advice.escape_omega_rpm.is_some() || advice.escape_wob_kn.is_some() {
+                        advice.words.push_str(&caveat);
+                    }
                     self.spread_advice(advice, &selected.laws);
                 }
                 Ok(update)

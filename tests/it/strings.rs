@@ -515,6 +515,11 @@ fn each_sample_is_simulated_on_its_own_string_where_the_string_was_inferred() {
         .iter()
         .map(|s| m2_on_strings(&[*s], false, Backend::Cpu))
         .collect();
+    assert!(
+        alone[0].1[2] > 0.5,
+        "the paper's string is still stuck at 120 rpm: {:?}",
+        alone[0]
+    );
     assert_eq!(
         alone[0].1[4], 0.0,
         "the paper's string escapes by 150 rpm: {:?}",
@@ -542,6 +547,25 @@ fn each_sample_is_simulated_on_its_own_string_where_the_string_was_inferred() {
     assert!((now - (alone[0].0 + alone[1].0) / 2.0).abs() < 1e-12);
     for (k, p) in mixed.iter().enumerate() {
         assert!((p - mean(k)).abs() < 1e-12, "cell {k}: {p} against {}", mean(k));
+    }
+}
+
+#[test]
+fn thinned_samples_keep_their_own_strings() {
+    use bitrock::run::strings::thinned;
+    let samples_si: Vec<Vec<f64>> = (0..10).map(|k| vec![k as f64, 0.0, 0.0]).collect();
+    let strings: Vec<[f64; 2]> = (0..10).map(|k| [0.5 + 0.1 * k as f64, k as f64]).collect();
+    let inputs = vec![LawSamples {
+        law: Law::M2,
+        probability: 1.0,
+        map_si: vec![0.0; 3],
+        samples_si,
+        strings,
+    }];
+    let kept = &thinned(&inputs, 3, 0.0)[0];
+    assert_eq!((kept.samples_si.len(), kept.strings.len()), (3, 3));
+    for (sample, string) in kept.samples_si.iter().zip(&kept.strings) {
+        assert_eq!(sample[0], string[1], "{kept:?}");
     }
 }
 

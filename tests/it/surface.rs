@@ -1146,7 +1146,7 @@ fn on_a_string_inferred_with_the_law_the_way_out_along_the_spread_gets_the_true_
         [1.0],
         "the drawn strings' {drawn} rpm leaves the true bit stuck"
     );
-    let speeds: Vec<f64> = open.speed_rpm.into_iter().collect();
+    let speeds = [open.speed_rpm.expect("a speed that ends it along g's spread")];
     let (by_speed, by_weight) = true_bit_after(string, &speeds, &[lighter]);
     eprintln!("the true bit after {speeds:?} rpm: {by_speed:?}; after {lighter} kN: {by_weight:?}");
     assert!(by_speed.iter().all(|p| *p == 0.0), "{by_speed:?} at {speeds:?} rpm");

@@ -128,8 +128,8 @@ fn open_parameters(laws: &[LawPosterior], taking_part: &dyn Fn(Law) -> bool) -> 
 
 /// Where along each parameter the record leaves open a way out is scanned: the posterior's
 /// quantiles there, dense in its tails, where the escape changes fastest (m2's between g = 0.1
-/// and 1 s/rad: measured on a string inferred with the law, the 2 %, quartiles and 98 % alone
-/// missed the g of a bit that stayed stuck at their advice).
+/// and 1 s/rad: on a string inferred with the law, the 2 %, quartiles and 98 % alone miss the
+/// g of a bit their advice leaves stuck; docs/surface.md, item 9).
 const OPEN_QUANTILES: [f64; 11] = [0.01, 0.02, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.98, 0.99];
 
 /// For each law at least [`RECORD_ESCAPE_MIN_PROBABILITY`] likely whose parameters the

@@ -401,34 +401,42 @@ pub fn job(dir: &Path) -> Result<Job> {
 /// ratio, read from the particle file `path` and put after each particle's law's parameters,
 /// as the sampler had them.
 fn append_string_columns(path: &Path, particles: &mut [Particle]) -> Result<()> {
-    let malformed = |message: String| Error::Data {
+    let malformed = |line: Option<u64>, message: String| Error::Format {
         path: path.to_path_buf(),
+        line,
         message,
     };
-    let mut reader = csv::Reader::from_path(path).map_err(|e| malformed(e.to_string()))?;
-    let header = reader.headers().map_err(|e| malformed(e.to_string()))?.clone();
+    let mut reader = csv::Reader::from_path(path).map_err(|e| malformed(None, e.to_string()))?;
+    let header = reader.headers().map_err(|e| malformed(Some(1), e.to_string()))?.clone();
     let names = ["string.omega_n [rad/s]", "string.damping_ratio [1]"];
-    let columns = names.map(|name| header.iter().position(|h| h == name));
+    let columns = names.map(|name| header.iter().position(|h| h.trim() == name));
     let [Some(omega), Some(xi)] = columns else {
-        return Err(malformed(format!(
-            "the run inferred its string, but its particles lack the columns {}",
-            names.join(" and ")
-        )));
+        return Err(malformed(
+            Some(1),
+            format!(
+                "the run inferred its string, but its particles lack the columns {}",
+                names.join(" and ")
+            ),
+        ));
     };
     let mut rows = reader.records();
+    let n = particles.len();
     for (i, particle) in particles.iter_mut().enumerate() {
+        let line = Some(i as u64 + 2);
         let row = rows
             .next()
-            .ok_or_else(|| malformed(format!("{} particles, fewer rows", i + 1)))?
-            .map_err(|e| malformed(e.to_string()))?;
+            .ok_or_else(|| malformed(line, format!("{n} particles but only {i} rows")))?
+            .map_err(|e| malformed(line, e.to_string()))?;
         for column in [omega, xi] {
-            let value = row.get(column).and_then(|v| v.parse::<f64>().ok()).ok_or_else(|| {
-                malformed(format!(
-                    "row {}: '{}' is not a number",
-                    i + 2,
-                    header.get(column).unwrap_or("")
-                ))
-            })?;
+            let value = row
+                .get(column)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .ok_or_else(|| {
+                    malformed(
+                        line,
+                        format!("'{}' is not a number", header.get(column).unwrap_or("").trim()),
+                    )
+                })?;
             particle.params.push(value);
         }
     }
