@@ -72,6 +72,27 @@ pub(crate) fn stability<'py>(
         .as_ref()
         .and_then(|run| run.get().record_in_memory())
         .unwrap_or((None, None));
+    // A surface directory: its posterior, the W_ref its laws hold at and the bit its surface
+    // implies, as `bitrock stability --run` reads them.
+    let surface = match &run {
+        Some(dir) if bitrock::run::surface::dir::is_surface_dir(dir) => {
+            let finished = check(py, bitrock::run::surface::dir::Finished::read(dir))?;
+            let (particles, w_ref_n, _) = check(py, finished.posterior())?;
+            Some((particles, w_ref_n, check(py, finished.bit())?))
+        }
+        _ => None,
+    };
+    let surface_w_ref_n = surface.as_ref().map(|s| s.1);
+    let surface_dir = run.clone().filter(|_| surface.is_some());
+    // A surface run that inferred its string: every sample's own for the simulated strings.
+    let sample_strings = match &surface_dir {
+        Some(dir) => check(
+            py,
+            bitrock::run::stability::sample_strings(dir, &string_given(py, options)?),
+        )?,
+        None => None,
+    };
+    let surface_bit = surface.as_ref().map(|s| s.2);
     // A run's or an evidence's own string, under what the keywords give.
     let stored = match (&run, &in_memory) {
         (Some(dir), _) => check(py, bitrock::run::stability::stored_string(dir))?,
@@ -92,6 +113,7 @@ pub(crate) fn stability<'py>(
             })?;
             MapSource::Posterior(particles.to_vec())
         }
+        (Some(_), None, None) if surface.is_some() => MapSource::Posterior(surface.expect("a surface directory").0),
         (Some(dir), None, None) => MapSource::Run(dir),
         (None, Some(law), Some(params)) => {
             let law = self::laws(py, Some(vec![law]))?.expect("one law")[0];
@@ -120,7 +142,10 @@ pub(crate) fn stability<'py>(
         omega_rpm: axis("omega_rpm", job::DEFAULT_OMEGA_RPM)?,
         wob_kn: axis("wob_kn", job::DEFAULT_WOB_KN)?,
         criterion: map::Criterion::Lumped(lumped),
-        w_ref_n: kwarg::<f64>(options, "w_ref_kn")?.map_or(bitrock::laws::PAPER_W_REF_N, |kn| kn * 1000.0),
+        w_ref_n: kwarg::<f64>(options, "w_ref_kn")?
+            .map(|kn| kn * 1000.0)
+            .or(surface_w_ref_n)
+            .unwrap_or(bitrock::laws::PAPER_W_REF_N),
         percentile: kwarg::<f64>(options, "percentile")?.unwrap_or(job::DEFAULT_PERCENT) / 100.0,
         samples: kwarg(options, "samples")?.unwrap_or(job::DEFAULT_SAMPLES),
         backend: named(py, "backend", kwarg(options, "backend")?)?.unwrap_or_default(),
@@ -177,15 +202,26 @@ pub(crate) fn stability<'py>(
     // the record's advice then says only what the linear maps can.
     let chain = bitrock::run::strings::chain(structure, &lumped, &fe);
     let given_w_ref_n = kwarg::<f64>(options, "w_ref_kn")?.map(|kn| kn * 1000.0);
-    let record_bit = maps.record_bit.or(memory_bit);
+    let record_bit = maps.record_bit.or(memory_bit).or(surface_bit);
     let record_w_ref_n = record_bit.map(|seen| {
-        let scaled = given_w_ref_n.or(maps.run_w_ref_n).or(memory_w_ref_n);
+        let scaled = given_w_ref_n
+            .or(surface_w_ref_n)
+            .or(maps.run_w_ref_n)
+            .or(memory_w_ref_n);
         bitrock::run::advice::params_w_ref_n(scaled, &seen, job.w_ref_n)
     });
+    let sim_inputs = match (&sample_strings, &surface_dir) {
+        (Some(_), Some(dir)) => check(
+            py,
+            bitrock::run::stability::with_sample_strings(dir, &maps.inputs, job.samples),
+        )?,
+        _ => maps.inputs.clone(),
+    };
     if let (Some(seen), Some(w_ref_n)) = (&record_bit, record_w_ref_n) {
         use bitrock::run::advice::Adviser;
-        let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), job.backend);
-        let advice = py.detach(|| adviser.advise_record(&maps.inputs, w_ref_n, seen));
+        let adviser = Adviser::for_record(job.criterion, chain.as_ref().ok().cloned(), job.backend)
+            .with_sample_strings(sample_strings);
+        let advice = py.detach(|| adviser.advise_record(&sim_inputs, w_ref_n, seen));
         out.set_item(
             "record_advice",
             serde_json::json!({"record": seen, "advice": advice}).to_string(),
@@ -199,8 +235,9 @@ pub(crate) fn stability<'py>(
             py,
             options,
             &job,
-            &maps.inputs,
+            &sim_inputs,
             check(py, chain)?,
+            sample_strings,
             record_at,
             &note,
             &out,
@@ -269,6 +306,7 @@ fn simulated<'py>(
     job: &bitrock::run::stability::StabilityJob,
     inputs: &[bitrock::stability::map::LawSamples],
     chain: bitrock::simulate::strings::Chain,
+    sample_strings: Option<bitrock::eval::surface::InferredString>,
     record_at: Option<(bitrock::run::strings::OperatingPoint, f64)>,
     note: &Option<Py<PyAny>>,
     out: &Bound<'py, PyDict>,
@@ -293,6 +331,7 @@ fn simulated<'py>(
     let sim = SimulatedJob {
         settings: SimulatedSettings {
             dt_s: kwarg(options, "dt_s")?.unwrap_or(strings::DEFAULT_DT_S),
+            string: sample_strings,
             ..SimulatedSettings::new(chain, w_ref_n, job.backend)
         },
         omega_rpm: axis("sim_omega_rpm", strings::DEFAULT_OMEGA_RPM)?,

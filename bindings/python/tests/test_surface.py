@@ -210,7 +210,7 @@ def test_every_surface_setting_is_a_keyword_and_a_bad_value_is_refused_by_name(t
     assert caught.value.argument == "particles"
 
 
-def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path):
+def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(cli, tmp_path):
     path = tmp_path / "surface.csv"
     bitrock.simulate(
         "m2", omega_rpm=60, duration_s=120, settle_s=60, sample_hz=1, channels="surface", noise_torque_knm=0.2, seed=7
@@ -258,6 +258,14 @@ def test_a_surface_directory_is_continued_to_the_run_it_would_have_been(tmp_path
         assert row["replicates"] == 5
         assert matrix.loc[row["law"], row["law"]] == pytest.approx(row["recognised"])
     assert document["epsilons"] == whole["epsilons"]
+    # Its posterior mapped as `bitrock stability --run` maps it: at the W_ref its laws hold at,
+    # with the advice from the bit its surface implies.
+    maps = bitrock.stability(out)
+    theirs = json.loads(run_cli(cli, "stability", "--run", str(out), "--json").stdout)
+    for i, law in enumerate(maps.coords["law"].values):
+        grid = np.array(theirs["probability_unstable"][law], dtype=float)
+        np.testing.assert_array_equal(maps["probability_unstable"].values[i], grid)
+    assert maps.attrs["record_advice"] == {"record": theirs["record"], "advice": theirs["advice"]}
     with pytest.raises(bitrock.InputError) as caught:
         bitrock.check_selection(out, batch=2)
     assert caught.value.argument == "batch"

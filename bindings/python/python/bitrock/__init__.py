@@ -536,7 +536,8 @@ def stability(
     """Torsional stick-slip stability over top-drive speed Ω (rpm) and weight on bit W (kN),
     as ``bitrock stability`` computes it: for a run's last population (``source``, a
     :class:`Result`, in memory or written to a directory, or the directory), for the posterior of an
-    :class:`Evidence` (``source``, or its evidence directory: each law weighed by its P(m | y)), or for one ``law`` at ``params``
+    :class:`Evidence` (``source``, or its evidence directory: each law weighed by its P(m | y)), for
+    a surface directory's posterior (``bitrock.surface(..., out=DIR)``), or for one ``law`` at ``params``
     (its parameters in order, torques in ``torque_unit``, kN·m by default).
 
     Returns an ``xarray.Dataset`` over ``law`` × ``omega_rpm`` × ``wob_kn``:
