@@ -509,8 +509,8 @@ impl<'a> Simulator<'a> {
     }
 
     /// The member's string at (`omega_rpm`, `wob_kn`) from `start`, or kicked from steady
-    /// rotation there; with the index of the string it is simulated on.
-    fn job(&self, m: &Member, omega_rpm: f64, wob_kn: f64, start: Option<StringState>) -> (usize, StringJob) {
+    /// rotation there.
+    fn job(&self, m: &Member, omega_rpm: f64, wob_kn: f64, start: Option<StringState>) -> StringJob {
         let omega = omega_rpm * RAD_S_PER_RPM;
         let ratio = wob_kn * 1000.0 / self.settings.w_ref_n;
         let start = start.unwrap_or_else(|| {
@@ -523,22 +523,24 @@ impl<'a> Simulator<'a> {
                 self.settings.kick * omega,
             )
         });
-        (
-            m.chain,
-            StringJob {
-                law: m.law,
-                params_nm: m.params_nm,
-                omega_rad_s: omega,
-                ratio,
-                start,
-            },
-        )
+        StringJob {
+            law: m.law,
+            params_nm: m.params_nm,
+            omega_rad_s: omega,
+            ratio,
+            start,
+        }
     }
 
-    /// Integrates `jobs` (each with the index of its string) in batches on the settings'
+    /// Integrates `jobs` (job `i` on the string `keys[i]` indexes) in batches on the settings'
     /// backend, one string's jobs at a time, saying the progress of long runs; the results in
-    /// the jobs' order.
-    fn integrate(&mut self, schedule: &Schedule, jobs: &[(usize, StringJob)]) -> Result<Vec<(Summary, StringState)>> {
+    /// the jobs' order. Jobs all on one string go as they are, uncopied.
+    fn integrate(
+        &mut self,
+        schedule: &Schedule,
+        jobs: &[StringJob],
+        keys: &[usize],
+    ) -> Result<Vec<(Summary, StringState)>> {
         let steps = jobs.len() as f64 * schedule.steps() as f64;
         crate::limits::check_work(
             "sim_omega_rpm",
@@ -552,15 +554,25 @@ impl<'a> Simulator<'a> {
         let mut done = 0;
         let mut backend = self.settings.backend;
         let batch = if backend == Backend::Cpu { CPU_BATCH } else { GPU_BATCH };
+        let one_string = keys.windows(2).all(|w| w[0] == w[1]);
         let mut order: Vec<usize> = (0..jobs.len()).collect();
-        order.sort_by_key(|&i| jobs[i].0);
+        if !one_string {
+            order.sort_by_key(|&i| keys[i]);
+        }
         let parts = order
-            .chunk_by(|&a, &b| jobs[a].0 == jobs[b].0)
-            .flat_map(|one_string| one_string.chunks(batch));
+            .chunk_by(|&a, &b| keys[a] == keys[b])
+            .flat_map(|same| same.chunks(batch));
         for part in parts {
-            let chain = &self.chains[jobs[part[0]].0];
-            let part_jobs: Vec<StringJob> = part.iter().map(|&i| jobs[i].1.clone()).collect();
-            let (results, ran) = crate::eval::strings::integrate(chain, schedule, &part_jobs, backend, self.note)?;
+            let chain = &self.chains[keys[part[0]]];
+            // On one string the order is the jobs' own: each part is a run of them.
+            let gathered: Vec<StringJob>;
+            let part_jobs = if one_string {
+                &jobs[part[0]..part[0] + part.len()]
+            } else {
+                gathered = part.iter().map(|&i| jobs[i].clone()).collect();
+                &gathered
+            };
+            let (results, ran) = crate::eval::strings::integrate(chain, schedule, part_jobs, backend, self.note)?;
             if ran == Ran::Cpu {
                 backend = Backend::Cpu;
             }
@@ -585,6 +597,11 @@ impl<'a> Simulator<'a> {
         self.strings += jobs.len() as u64;
         self.simulated_s += jobs.len() as f64 * schedule.seconds();
         Ok(out.into_iter().map(|r| r.expect("every job is in a part")).collect())
+    }
+
+    /// The strings of `count` jobs laid out cell-major over `members` (members inner).
+    fn keys(members: &[Member], count: usize) -> Vec<usize> {
+        members.iter().map(|m| m.chain).cycle().take(count).collect()
     }
 
     /// Weighted probability of stick-slip over the members, cell by cell, on the grid
@@ -628,7 +645,12 @@ impl<'a> Simulator<'a> {
                 jobs.extend(self.members.iter().map(|m| self.job(m, o, w, None)));
             }
         }
-        let summaries: Vec<Summary> = self.integrate(&schedule, &jobs)?.into_iter().map(|r| r.0).collect();
+        let keys = Self::keys(&self.members, jobs.len());
+        let summaries: Vec<Summary> = self
+            .integrate(&schedule, &jobs, &keys)?
+            .into_iter()
+            .map(|r| r.0)
+            .collect();
         Ok(Self::grid(&self.members, &summaries, omega_rpm, wob_kn))
     }
 
@@ -656,8 +678,12 @@ impl<'a> Simulator<'a> {
             .collect();
         let mut summaries = vec![Summary::default(); replicas.len()];
         let mut states = vec![rest; replicas.len()];
-        for (c, chain) in self.chains.clone().iter().enumerate() {
-            let period_s = 2.0 * std::f64::consts::PI / chain.fundamental_rad_s();
+        let periods_s: Vec<f64> = self
+            .chains
+            .iter()
+            .map(|chain| 2.0 * std::f64::consts::PI / chain.fundamental_rad_s())
+            .collect();
+        for (c, period_s) in periods_s.into_iter().enumerate() {
             for phase in 0..phases {
                 let schedule = self.settings.settling(period_s * phase as f64 / phases as f64)?;
                 let idx: Vec<usize> = (phase..replicas.len())
@@ -667,11 +693,15 @@ impl<'a> Simulator<'a> {
                 if idx.is_empty() {
                     continue;
                 }
-                let jobs: Vec<(usize, StringJob)> = idx
+                let jobs: Vec<StringJob> = idx
                     .iter()
                     .map(|&i| self.job(&replicas[i], point.omega_rpm, point.wob_kn, Some(rest)))
                     .collect();
-                for (k, (s, state)) in self.integrate(&schedule, &jobs)?.into_iter().enumerate() {
+                for (k, (s, state)) in self
+                    .integrate(&schedule, &jobs, &vec![c; jobs.len()])?
+                    .into_iter()
+                    .enumerate()
+                {
                     summaries[idx[k]] = s;
                     states[idx[k]] = state;
                 }
@@ -707,7 +737,12 @@ impl<'a> Simulator<'a> {
                 );
             }
         }
-        let summaries: Vec<Summary> = self.integrate(&schedule, &jobs)?.into_iter().map(|r| r.0).collect();
+        let keys = Self::keys(&from.replicas, jobs.len());
+        let summaries: Vec<Summary> = self
+            .integrate(&schedule, &jobs, &keys)?
+            .into_iter()
+            .map(|r| r.0)
+            .collect();
         Ok(Self::grid(&from.replicas, &summaries, omega_rpm, wob_kn))
     }
 

@@ -150,9 +150,6 @@ fn the_surface_of_a_stick_slipping_bit_gives_its_torques_and_its_stuck_share() {
 /// the strings along the posterior's spread of g find one it takes.
 #[test]
 fn the_way_out_along_an_open_parameter_s_spread_gets_the_true_bit_out() {
-    use bitrock::run::strings::{OperatingPoint, SimulatedSettings, Simulator};
-    use bitrock::simulate::strings::Chain;
-    use bitrock::stability::map::LawSamples;
     let (_dir, path, _) = record(Law::M2, 60.0, 300.0, 1.0, 0.2, 3);
     let mut settings = small(vec![Law::M2]);
     settings.advice = true;
@@ -161,45 +158,26 @@ fn the_way_out_along_an_open_parameter_s_spread_gets_the_true_bit_out() {
     let open = r.at_the_bit.spread_advice.as_ref().expect("g is left open");
     eprintln!("{advice}\n{open:?}");
     assert_eq!(open.open, ["m2's g"]);
-    let drawn: f64 = advice
+    let drawn = drawn_speed_rpm(advice);
+    let spread = open.speed_rpm.expect("a speed that ends it along g's spread");
+    assert!(spread > drawn, "{spread} against {drawn}");
+    // Applied to the true string, stuck at 60 rpm under the record's weight; and the lighter
+    // weight at 60 rpm.
+    let lighter = open.wob_kn.expect("a weight that ends it along g's spread");
+    let (by_speed, by_weight) = true_bit_after(Lumped::default(), &[drawn, spread], &[lighter]);
+    eprintln!("stick-slip persists at {drawn} and {spread} rpm: {by_speed:?}");
+    assert_eq!(by_speed, [1.0, 0.0]);
+    assert_eq!(by_weight, [0.0], "at {lighter} kN");
+}
+
+/// The top-drive speed (rpm) the drawn strings' advice raises the speed to.
+fn drawn_speed_rpm(advice: &str) -> f64 {
+    advice
         .split("raise the top-drive speed to ")
         .nth(1)
         .and_then(|rest| rest.split(' ').next())
         .and_then(|v| v.parse().ok())
-        .expect("a speed that ends it");
-    let spread = open.speed_rpm.expect("a speed that ends it along g's spread");
-    assert!(spread > drawn, "{spread} against {drawn}");
-    // Applied to the true string, stuck at 60 rpm under the record's weight.
-    let truth = Law::M2.scale_torque(Law::M2.paper_estimate().unwrap(), 1000.0);
-    let inputs = vec![LawSamples {
-        law: Law::M2,
-        probability: 1.0,
-        map_si: truth.clone(),
-        samples_si: vec![truth],
-        strings: Vec::new(),
-    }];
-    let wob_kn = bitrock::laws::PAPER_W_REF_N / 1000.0;
-    let simulated = SimulatedSettings::new(
-        Chain::one_dof(&Lumped::default()),
-        wob_kn * 1000.0,
-        bitrock::eval::Backend::Cpu,
-    );
-    let mut quiet = |_| {};
-    let mut simulator = Simulator::new(&simulated, &inputs, &mut quiet).unwrap();
-    let at = simulator
-        .at_point(OperatingPoint {
-            omega_rpm: 60.0,
-            wob_kn,
-        })
-        .unwrap();
-    assert_eq!(at.stick_slip_probability, 1.0);
-    let persists = simulator.escape(&at, &[drawn, spread], &[wob_kn]).unwrap().probability;
-    eprintln!("stick-slip persists at {drawn} and {spread} rpm: {persists:?}");
-    assert_eq!(persists, [1.0, 0.0]);
-    // And the lighter weight at 60 rpm.
-    let lighter = open.wob_kn.expect("a weight that ends it along g's spread");
-    let persists = simulator.escape(&at, &[60.0], &[lighter]).unwrap().probability;
-    assert_eq!(persists, [0.0], "at {lighter} kN");
+        .expect("a speed that ends it in the drawn strings")
 }
 
 /// Semi-automatic ABC on the stick-slipping record above: the distance compares what the
@@ -1134,12 +1112,7 @@ fn on_a_string_inferred_with_the_law_the_way_out_along_the_spread_gets_the_true_
     eprintln!("{advice}\n{open:?}");
     assert_eq!(open.open, ["m2's g"]);
     let lighter = open.wob_kn.expect("a weight that ends it along g's spread");
-    let drawn: f64 = advice
-        .split("raise the top-drive speed to ")
-        .nth(1)
-        .and_then(|rest| rest.split(' ').next())
-        .and_then(|v| v.parse().ok())
-        .expect("a speed that ends it in the drawn strings");
+    let drawn = drawn_speed_rpm(advice);
     let (persists, _) = true_bit_after(string, &[drawn], &[]);
     assert_eq!(
         persists,
