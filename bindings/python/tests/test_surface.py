@@ -94,6 +94,30 @@ def test_the_way_out_along_g_s_spread_gets_the_independent_string_s_bit_out(tmp_
         assert after_change(chain, "m2", M2_NM, 60.0 * RPM, spread_advice["wob_kn"] / 244.2, state) < 0.01
 
 
+def test_on_an_independent_softer_string_inferred_with_the_law_the_spread_s_way_out_gets_its_bit_out(tmp_path):
+    # The twin's m2 on a softer string than the paper's (ω_n 0.6 rad/s), the string inferred
+    # with the law, each advice sample simulated on its own string: the drawn strings' speed
+    # leaves the twin's bit stuck (measured: 110 rpm, stuck 27-43 % of the time at four phases
+    # of its cycle); the speed and weight along g's spread (160 rpm, 61 kN) get it out.
+    path = tmp_path / "rig.csv"
+    soft = (383.33, 0.6, 0.25)
+    twin_record(path, string=soft)
+    result = bitrock.surface(path, laws=["m2"], seed=2, omega_n_rad_s=(0.4, 1.8), damping_ratio=0.25, advice=True)
+    omega = result["string"]["omega_n_rad_s"]
+    assert omega["q05"] <= 0.6 <= omega["q95"], omega
+    at = result["at_the_bit"]
+    spread_advice = at["spread_advice"]
+    assert spread_advice["open"] == ["m2's g"], at
+    chain = one_dof(*soft)
+    cycles = cycles_at(chain, "m2", M2_NM, 60.0 * RPM, 1.0, phases=4)
+    assert all(share > 0.3 for share, _ in cycles), cycles
+    drawn = float(at["advice"].split("raise the top-drive speed to ")[1].split(" ")[0])
+    assert max(after_change(chain, "m2", M2_NM, drawn * RPM, 1.0, state) for _, state in cycles) > 0.2
+    for _, state in cycles:
+        assert after_change(chain, "m2", M2_NM, spread_advice["speed_rpm"] * RPM, 1.0, state) < 0.01
+        assert after_change(chain, "m2", M2_NM, 60.0 * RPM, spread_advice["wob_kn"] / 244.2, state) < 0.01
+
+
 # The GPU's f32 strings part ways with the CPU's f64 ones where a candidate's cycle is
 # irregular, so a run on each backend is its own realisation: at SMALL's budget the GPU's run of
 # seed 2 stops further from the record (measured on lavapipe, 2026-12-01: ε 2.37 against the
