@@ -6,6 +6,7 @@ use super::args::{LumpedArgs, finite_number};
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
 use bitrock::eval::Backend;
 use bitrock::fit::coupled::CoupledCalibration;
+use bitrock::run::choice::{self, Choice};
 use bitrock::run::coupled::{self, Map, One, PosteriorMap, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
 use bitrock::simulate::coupled::{Bit, Regime, Sample};
@@ -16,6 +17,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("drilling_record").args(["calibrate", "select"])))]
 pub struct CoupledCmd {
     /// A well file (TOML): segments in drilling order, each with its rock, top-drive speed and
     /// weight or feed (a value, or [from, to] for a ramp), drilled by one string carried from
@@ -25,7 +27,7 @@ pub struct CoupledCmd {
         "omega_rpm", "wob_kn", "feed_m_h", "radius_m", "intrinsic_energy_mpa", "zeta", "contact_stress_mpa",
         "wear_flat_mm", "friction", "gamma", "blades", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
         "mass_kg", "axial_stiffness_kn_m", "axial_damping_kns_m", "duration_s", "settle_s", "sample_hz", "dt_s",
-        "kick_rpm", "map", "calibrate", "seed", "backend",
+        "kick_rpm", "map", "calibrate", "select", "seed", "backend",
     ])]
     pub well: Option<std::path::PathBuf>,
     /// Top-drive speed Omega_0, rpm.
@@ -115,6 +117,20 @@ pub struct CoupledCmd {
     /// --radius-m, --contact-stress-mpa, --gamma and --blades stay as given.
     #[arg(long, value_name = "RECORD")]
     pub calibrate: Option<std::path::PathBuf>,
+    /// Which structure a bit record (bit speed, torque on bit, weight on bit; recorded at
+    /// --sample-hz while the top drive turned at --omega-rpm) shows: a torsional law m1-m4 or
+    /// the coupled bit (RGD), each candidate's string simulated at the record's drive (the
+    /// weight --wob-kn, or the record's mean), by their shares of the candidates nearest the
+    /// record, checked by re-simulation. The bit's --radius-m, --contact-stress-mpa, --gamma and
+    /// --blades and the string stay as given.
+    #[arg(long, value_name = "RECORD", conflicts_with_all = ["map", "feed_m_h", "out"])]
+    pub select: Option<std::path::PathBuf>,
+    /// Candidates of each structure in the choice's reference table (with --select).
+    #[arg(long, default_value_t = Settings::default().reference, value_name = "N", requires = "select")]
+    pub reference: usize,
+    /// Records re-simulated from each structure to check the choice (with --select).
+    #[arg(long, default_value_t = Settings::default().replicates, value_name = "R", requires = "select")]
+    pub replicates: usize,
     #[command(flatten)]
     pub columns: DrillingArgs,
     /// Posterior draws each map cell is simulated for (with --calibrate --map).
@@ -140,31 +156,31 @@ pub struct CoupledCmd {
 #[derive(Debug, Args)]
 pub struct DrillingArgs {
     /// Bit speed column [default: the one whose name holds 'speed', not 'axial'].
-    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    #[arg(long, value_name = "NAME", requires = "drilling_record")]
     pub speed_col: Option<String>,
     /// Torque-on-bit column [default: the one whose name holds 'torque'].
-    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    #[arg(long, value_name = "NAME", requires = "drilling_record")]
     pub torque_col: Option<String>,
     /// Weight-on-bit column [default: the one whose name holds 'wob'].
-    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    #[arg(long, value_name = "NAME", requires = "drilling_record")]
     pub wob_col: Option<String>,
     /// Rate-of-penetration column [default: the one whose name holds 'rop' or 'penetration'].
-    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    #[arg(long, value_name = "NAME", requires = "drilling_record")]
     pub rop_col: Option<String>,
     /// The bit's axial speed column [default: the one whose name holds 'axial' and not 'acc', if any].
-    #[arg(long, value_name = "NAME", requires = "calibrate")]
+    #[arg(long, value_name = "NAME", requires = "drilling_record")]
     pub axial_speed_col: Option<String>,
     /// Unit of the bit speed [default: from its name's suffix].
-    #[arg(long, value_enum, requires = "calibrate")]
+    #[arg(long, value_enum, requires = "drilling_record")]
     pub speed_unit: Option<SpeedUnit>,
     /// Unit of the torque on bit [default: from its name's suffix].
-    #[arg(long, value_enum, requires = "calibrate")]
+    #[arg(long, value_enum, requires = "drilling_record")]
     pub torque_unit: Option<TorqueUnit>,
     /// Unit of the weight on bit [default: from its name's suffix].
-    #[arg(long, value_enum, requires = "calibrate")]
+    #[arg(long, value_enum, requires = "drilling_record")]
     pub wob_unit: Option<ForceUnit>,
     /// Unit of the rate of penetration and axial speed [default: from their names' suffixes].
-    #[arg(long, value_enum, requires = "calibrate")]
+    #[arg(long, value_enum, requires = "drilling_record")]
     pub rop_unit: Option<RateUnit>,
 }
 
@@ -218,6 +234,8 @@ impl CoupledCmd {
             map_feed_m_h: self.map_feed_m_h.clone(),
             escape: self.escape,
             samples: self.samples,
+            reference: self.reference,
+            replicates: self.replicates,
             seed: self.seed,
             backend: self.backend,
         }
@@ -235,6 +253,17 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
     let note = &mut |line: String| super::print::note(format_args!("{line}"));
+    if let Some(path) = &cmd.select {
+        let record = DrillingRecord::read(path, &cmd.columns.options())?;
+        let choice = choice::choice(&record, &settings, note)?;
+        let mut out = super::print::stdout();
+        if cmd.json {
+            writeln!(out, "{}", serde_json::to_string_pretty(&choice)?)?;
+        } else {
+            print_choice(&mut out, &choice)?;
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let calibration = match &cmd.calibrate {
         Some(path) => {
             let record = DrillingRecord::read(path, &cmd.columns.options())?;
@@ -595,4 +624,46 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
         )?;
     }
     Ok(())
+}
+
+/// The structures' probabilities, the check's rows and the verdict.
+fn print_choice(out: &mut dyn Write, c: &Choice) -> std::io::Result<()> {
+    let d = &c.drive;
+    writeln!(
+        out,
+        "{} samples ({:.1} s) at {} rpm under {:.1} kN; noise added: {:.2} rpm, {:.3} kN·m, {:.2} kN",
+        d.samples, d.duration_s, d.omega_rpm, d.wob_kn, d.noise_speed_rpm, d.noise_torque_knm, d.noise_wob_kn
+    )?;
+    writeln!(
+        out,
+        "{} candidates simulated, the {} nearest the record decide",
+        c.reference, c.accepted
+    )?;
+    writeln!(
+        out,
+        "{:<10} {:>6} {:>10}  re-simulated records taken for",
+        "structure", "P", "recognised"
+    )?;
+    for s in &c.structures {
+        let row = c.check.iter().find(|r| r.structure == s.structure);
+        let recognised = row.map_or("-".to_string(), |r| format!("{:.0} %", 100.0 * r.recognised));
+        let taken = row.map_or(String::new(), |r| {
+            r.classified_as
+                .iter()
+                .filter(|x| x.1 > 0)
+                .map(|x| format!("{} {}", x.0, x.1))
+                .collect::<Vec<_>>()
+                .join(", ")
+        });
+        writeln!(
+            out,
+            "{:<10} {:>6.2} {:>10}  {}",
+            s.structure.to_string(),
+            s.probability,
+            recognised,
+            taken
+        )?;
+    }
+    writeln!(out, "the law: {}", c.verdict)?;
+    writeln!(out, "the family: {}", c.family.verdict)
 }

@@ -2,7 +2,8 @@
 //! weight on bit and rate of penetration, and the bit's axial speed where the record has it.
 //! Columns are found by role: a name holding `speed` (and not `axial`) is the bit's speed, one
 //! holding `torque` the torque on bit, `wob` the weight on bit, `rop` or `penetration` the rate
-//! of penetration, `axial` (and not `acc`) the axial speed; each can be named instead. Surface channels are
+//! of penetration (where the record has one: the calibration needs it, the choice of structure
+//! does not), `axial` (and not `acc`) the axial speed; each can be named instead. Surface channels are
 //! never read as the bit's. Units come from the names' suffixes or the options.
 
 use super::surface::{format_error, missing, pick};
@@ -35,7 +36,8 @@ pub struct DrillingColumns {
     pub speed: String,
     pub torque: String,
     pub wob: String,
-    pub rop: String,
+    /// The rate of penetration, where the record has one.
+    pub rop: Option<String>,
     pub axial_speed: Option<String>,
 }
 
@@ -47,7 +49,8 @@ pub struct DrillingRecord {
     pub speed_rad_s: Vec<f64>,
     pub torque_nm: Vec<f64>,
     pub wob_n: Vec<f64>,
-    pub rop_m_s: Vec<f64>,
+    /// The rate of penetration (m/s), where the record has one.
+    pub rop_m_s: Option<Vec<f64>>,
     pub axial_speed_m_s: Option<Vec<f64>>,
 }
 
@@ -77,15 +80,14 @@ impl DrillingRecord {
         .ok_or_else(|| missing(&header, path, "a weight on bit", "wob", "wob_column"))?;
         let rop = role(opts.rop_column.as_deref(), "rate of penetration", "rop_column", &|i| {
             lower(i).contains("rop") || lower(i).contains("penetration")
-        })?
-        .ok_or_else(|| missing(&header, path, "a rate of penetration", "rop", "rop_column"))?;
+        })?;
         let axial = role(
             opts.axial_speed_column.as_deref(),
             "axial speed",
             "axial_speed_column",
             &|i| lower(i).contains("axial") && !lower(i).contains("acc"),
         )?;
-        let chosen = [Some(speed), Some(torque), Some(wob), Some(rop), axial];
+        let chosen = [Some(speed), Some(torque), Some(wob), rop, axial];
         for (k, a) in chosen.iter().enumerate() {
             if let Some(a) = a
                 && chosen[k + 1..].contains(&Some(*a))
@@ -99,7 +101,10 @@ impl DrillingRecord {
         let speed_unit = resolve_unit(&header[speed], opts.speed_unit, "speed_unit", path)?;
         let torque_unit = resolve_unit(&header[torque], opts.torque_unit, "torque_unit", path)?;
         let wob_unit = resolve_unit(&header[wob], opts.wob_unit, "wob_unit", path)?;
-        let rop_unit = resolve_unit(&header[rop], opts.rop_unit, "rop_unit", path)?;
+        let rop_unit = match rop {
+            Some(i) => Some((i, resolve_unit(&header[i], opts.rop_unit, "rop_unit", path)?)),
+            None => None,
+        };
         let axial_unit = match axial {
             Some(i) => Some((i, resolve_unit(&header[i], opts.rop_unit, "rop_unit", path)?)),
             None => None,
@@ -110,13 +115,13 @@ impl DrillingRecord {
                 speed: header[speed].clone(),
                 torque: header[torque].clone(),
                 wob: header[wob].clone(),
-                rop: header[rop].clone(),
+                rop: rop.map(|i| header[i].clone()),
                 axial_speed: axial.map(|i| header[i].clone()),
             },
             speed_rad_s: Vec::new(),
             torque_nm: Vec::new(),
             wob_n: Vec::new(),
-            rop_m_s: Vec::new(),
+            rop_m_s: rop.map(|_| Vec::new()),
             axial_speed_m_s: axial.map(|_| Vec::new()),
         };
         for row in csv_rows(&mut reader, path, &header) {
@@ -124,7 +129,9 @@ impl DrillingRecord {
             out.speed_rad_s.push(speed_unit.to_rad_s(row.number(speed)?));
             out.torque_nm.push(row.number(torque)? * torque_unit.newton_metres());
             out.wob_n.push(row.number(wob)? * wob_unit.newtons());
-            out.rop_m_s.push(row.number(rop)? * rop_unit.metres_per_second());
+            if let (Some((i, unit)), Some(v)) = (rop_unit, out.rop_m_s.as_mut()) {
+                v.push(row.number(i)? * unit.metres_per_second());
+            }
             if let (Some((i, unit)), Some(v)) = (axial_unit, out.axial_speed_m_s.as_mut()) {
                 v.push(row.number(i)? * unit.metres_per_second());
             }
@@ -172,7 +179,7 @@ mod tests {
         assert!((r.speed_rad_s[0] - 2.0 * std::f64::consts::PI).abs() < 1e-12);
         assert!((r.torque_nm[1] - 11_000.0).abs() < 1e-9);
         assert!((r.wob_n[0] - 150_000.0).abs() < 1e-9);
-        assert!((r.rop_m_s[0] - 0.01).abs() < 1e-15);
+        assert!((r.rop_m_s.unwrap()[0] - 0.01).abs() < 1e-15);
         assert!(r.axial_speed_m_s.unwrap()[1].abs() < f64::MIN_POSITIVE);
     }
 
@@ -191,12 +198,10 @@ mod tests {
     }
 
     #[test]
-    fn a_record_without_a_rate_of_penetration_is_refused_naming_the_role() {
+    fn a_rate_of_penetration_is_read_where_the_record_has_one_and_its_unit_is_needed() {
         let (_d, path) = write("bit_speed_rpm,torque_knm,wob_kn\n60,10,150\n");
-        let e = DrillingRecord::read(&path, &DrillingOptions::default())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("rate of penetration") && e.contains("rop_column"), "{e}");
+        let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
+        assert_eq!((r.columns.rop, r.rop_m_s), (None, None));
         let (_d, path) = write("bit_speed_rpm,torque_knm,wob_kn,rop\n60,10,150,30\n");
         let e = DrillingRecord::read(&path, &DrillingOptions::default())
             .unwrap_err()

@@ -149,14 +149,21 @@ fn refusal(record: &DrillingRecord, message: String) -> Error {
 /// refused where too few do.
 fn cutting(record: &DrillingRecord) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
     let refuse = |message: String| refusal(record, message);
+    let Some(rop_m_s) = record.rop_m_s.as_deref() else {
+        return Err(refuse(
+            "no column is a rate of penetration (a name holding 'rop' or 'penetration'), which the \
+             depth of cut is read from; name it with `rop_column`"
+                .into(),
+        ));
+    };
     let mut depth = Vec::new();
     let mut weight = Vec::new();
     let mut torque = Vec::new();
     for i in 0..record.len() {
         let w = record.speed_rad_s[i];
         let moving_down = record.axial_speed_m_s.as_ref().is_none_or(|v| v[i] > 0.0);
-        if w > STUCK_SPEED_RAD_S && record.rop_m_s[i] > 0.0 && moving_down {
-            depth.push(std::f64::consts::TAU * record.rop_m_s[i] / w);
+        if w > STUCK_SPEED_RAD_S && rop_m_s[i] > 0.0 && moving_down {
+            depth.push(std::f64::consts::TAU * rop_m_s[i] / w);
             weight.push(record.wob_n[i]);
             torque.push(record.torque_nm[i]);
         }
@@ -289,5 +296,29 @@ mod tests {
         }
         let back = bit_of(&v, &b);
         assert!((back.wear_flat_mm - 11.0).abs() < 1e-9 && (back.friction - 0.6).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_record_without_a_rate_of_penetration_is_refused_naming_the_role() {
+        let record = DrillingRecord {
+            source: "bit.csv".into(),
+            columns: crate::data::drilling::DrillingColumns {
+                speed: "bit_speed_rpm".into(),
+                torque: "torque_knm".into(),
+                wob: "wob_kn".into(),
+                rop: None,
+                axial_speed: None,
+            },
+            speed_rad_s: vec![6.0; 100],
+            torque_nm: vec![1e4; 100],
+            wob_n: vec![1.5e5; 100],
+            rop_m_s: None,
+            axial_speed_m_s: None,
+        };
+        let e = calibrate(&record, 0.108, 10, 1).unwrap_err().to_string();
+        assert!(
+            e.contains("bit.csv") && e.contains("rate of penetration") && e.contains("rop_column"),
+            "{e}"
+        );
     }
 }

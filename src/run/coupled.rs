@@ -76,7 +76,11 @@ pub struct Settings {
     pub escape: bool,
     /// Posterior draws each cell of a calibrated map is simulated for.
     pub samples: usize,
-    /// Seed of the calibration's posterior draws.
+    /// Candidates of each structure in a choice of structure's reference table.
+    pub reference: usize,
+    /// Records re-simulated from each structure to check a choice of structure.
+    pub replicates: usize,
+    /// Seed of the calibration's posterior draws and of a choice's candidates and noise.
     pub seed: u64,
     /// Where the map's strings are integrated.
     pub backend: Backend,
@@ -106,6 +110,8 @@ impl Default for Settings {
             map_feed_m_h: "10:60:6".into(),
             escape: false,
             samples: 20,
+            reference: 300,
+            replicates: 10,
             seed: 1,
             backend: Backend::Auto,
         }

@@ -17,11 +17,14 @@
 //!   [`advice`], the operating advice read from them.
 //! - [`surface`]: laws from a surface record through simulated strings;
 //! - [`coupled`]: the coupled axial-torsional bit: one string, a regime map, a drilling
-//!   record's calibration and the regimes' probabilities over its posterior.
+//!   record's calibration and the regimes' probabilities over its posterior;
+//! - [`choice`]: which structure a bit record shows, a torsional law or the coupled bit, by
+//!   simulation.
 
 pub mod abc;
 pub mod advice;
 pub mod answer;
+pub mod choice;
 pub mod coupled;
 pub mod dir;
 pub mod evidence;

@@ -465,13 +465,13 @@ fn drilling_record(torque_nm: f64, wob_n: f64, seed: u64, axial: bool) -> bitroc
             speed: "bit_speed_rpm".into(),
             torque: "torque_on_bit_knm".into(),
             wob: "wob_kn".into(),
-            rop: "rop_m_h".into(),
+            rop: Some("rop_m_h".into()),
             axial_speed: axial.then(|| "axial_speed_m_h".into()),
         },
         speed_rad_s: samples.iter().map(|s| s.bit_speed_rad_s).collect(),
         torque_nm: samples.iter().map(|s| s.torque_nm + nt.sample(&mut rng)).collect(),
         wob_n: samples.iter().map(|s| s.wob_n + nw.sample(&mut rng)).collect(),
-        rop_m_s: samples.iter().map(|s| s.cutting_rate_m_s).collect(),
+        rop_m_s: Some(samples.iter().map(|s| s.cutting_rate_m_s).collect()),
         axial_speed_m_s: axial.then(|| samples.iter().map(|s| s.axial_speed_m_s).collect()),
     }
 }

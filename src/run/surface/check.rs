@@ -91,39 +91,5 @@ pub(super) fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -
         .filter(|r| taken_for_best(r) > CHECK_CONFUSED)
         .map(|r| r.law)
         .collect();
-    let own = recognised(best.law);
-    if own < CHECK_RECOGNISED {
-        return (
-            None,
-            format!(
-                "{} leads (P = {:.2}), but only {:.0} % of the records re-simulated from it are recognised as it: the summaries do not tell it apart; undecided",
-                best.law,
-                best.probability,
-                100.0 * own
-            ),
-        );
-    }
-    if !confused.is_empty() {
-        let names: Vec<String> = confused.iter().map(|l| l.to_string()).collect();
-        return (
-            None,
-            format!(
-                "{} leads (P = {:.2}), but records re-simulated from {} are taken for it too: undecided between {} and {}",
-                best.law,
-                best.probability,
-                names.join(", "),
-                best.law,
-                names.join(", ")
-            ),
-        );
-    }
-    (
-        Some(best.law),
-        format!(
-            "{} (P = {:.2}); {:.0} % of the records re-simulated from it are recognised as it, and no other law's are taken for it",
-            best.law,
-            best.probability,
-            100.0 * own
-        ),
-    )
+    crate::run::answer::resimulation_verdict(best.law, best.probability, recognised(best.law), &confused, "law")
 }

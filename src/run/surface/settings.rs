@@ -263,12 +263,7 @@ pub const DEFAULT_PREDICTIVE_DRAWS: usize = 100;
 pub const MIN_CYCLES: f64 = 3.0;
 /// Least autocorrelation at the cycle's period for the cycle to count as seen.
 pub const MIN_CYCLE_STRENGTH: f64 = 0.3;
-/// A law is called when its own re-simulations are recognised at least this often and no
-/// other law's (any law with particles, however improbable: the probabilities are what the
-/// check checks) are taken for it more often than [`CHECK_CONFUSED`].
-pub const CHECK_RECOGNISED: f64 = 0.8;
-/// See [`CHECK_RECOGNISED`].
-pub const CHECK_CONFUSED: f64 = 0.2;
+pub use crate::run::answer::{CHECK_CONFUSED, CHECK_RECOGNISED};
 
 impl SurfaceSettings {
     /// The defaults for `laws`: N = 2,000 particles, at most 8 populations, the sampler's

@@ -1,0 +1,798 @@
+//! Which structure a bit record shows: a torsional law m1–m4 (a torque that falls with bit
+//! speed, the weight on bit a constant) or the coupled axial-torsional bit (RGD: stick-slip from
+//! the depth of cut, the weight on bit swinging with it).
+//!
+//! Every candidate's string is simulated at the record's drive, from steady rotation kicked by
+//! the settings' kick, with the record's own noise added to its channels, and reduced to
+//! summaries of its bit speed, torque and weight on bit ([`SUMMARIES`]). The reference table
+//! holds [`Settings::reference`] candidates of each structure; a structure's probability is its
+//! share of the table's candidates nearest the record (rejection ABC with equal prior weights;
+//! the distance scales each summary by its spread over the table, Prangle 2017). Summaries are
+//! not sufficient for a model choice (Robert, Cornuet, Marin & Pillai 2011), so the choice is
+//! always checked by re-simulation: records re-simulated from each structure's accepted
+//! candidates are chosen for as the record was, and a structure is called only where its own
+//! are recognised and no other's are taken for it
+//! ([`crate::run::answer::resimulation_verdict`]).
+//!
+//! **Priors.** A law's box is the paper's, φ̂(1 ± δ) around its least-squares fit to the
+//! record's turning samples (δ = [`LAW_DELTA`]). The coupled bit's radius, contact stress, γ and
+//! blades are the settings'; ε is drawn log-uniform over [`EPSILON_MPA`], ζ uniform over
+//! [`ZETA`], the wear flats' contact force uniform over [`CONTACT_SHARE`] of the weight, and μ
+//! is the one that makes steady drilling's torque the record's mean torque (a draw that needs μ
+//! outside the bit's bounds is drawn again): both structures' candidates are centred on the
+//! record, neither by a fit to its dynamics.
+
+use super::answer::{CHECK_CONFUSED, resimulation_verdict};
+use super::coupled::Settings;
+use crate::data::STUCK_SPEED_RAD_S;
+use crate::data::Samples;
+use crate::data::drilling::DrillingRecord;
+use crate::error::{Error, Result};
+use crate::eval::surface::{NoiseKey, add_noise};
+use crate::fit::{FitOptions, fit_laws};
+use crate::laws::Law;
+use crate::numerics::quantile;
+use crate::prior::Prior;
+use crate::rng::{candidate_counter, key_of_seed, open_unit, philox4x32_10};
+use crate::simulate::coupled::{self, Axial, BIT_BOUNDS, Bit, CoupledJob, Schedule};
+use crate::simulate::surface::noise_sd;
+use crate::simulate::{Initial, Recording, SimConfig};
+use crate::units::RAD_S_PER_RPM;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// A structure a bit record may come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Structure {
+    /// A torsional law: torque on bit a function of bit speed, the weight on bit constant.
+    Torsional(Law),
+    /// The coupled axial-torsional bit (Richard, Germay & Detournay 2007).
+    Coupled,
+}
+
+impl std::fmt::Display for Structure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Torsional(law) => write!(f, "{law}"),
+            Self::Coupled => f.write_str("RGD"),
+        }
+    }
+}
+
+impl Serialize for Structure {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+/// The summaries a record and every simulated string are compared by, in order (SI).
+pub const SUMMARIES: [&str; 12] = [
+    "stuck_share",
+    "speed_sd_rad_s",
+    "speed_p95_rad_s",
+    "torque_mean_nm",
+    "torque_sd_nm",
+    "torque_p05_nm",
+    "torque_p95_nm",
+    "torque_above_median_speed_nm",
+    "torque_below_median_speed_nm",
+    "speed_torque_correlation",
+    "wob_sd_n",
+    "wob_torque_correlation",
+];
+
+type Summaries = [f64; SUMMARIES.len()];
+
+/// Half-width of a law's prior box around its fit, relative (the paper's δ).
+pub const LAW_DELTA: f64 = 0.4;
+/// The coupled bit's prior range of the rock's intrinsic specific energy ε (MPa, log-uniform).
+pub const EPSILON_MPA: (f64, f64) = (10.0, 300.0);
+/// The coupled bit's prior range of ζ (uniform).
+pub const ZETA: (f64, f64) = (0.2, 1.2);
+/// The coupled bit's prior range of the wear flats' contact force, as shares of the weight on
+/// the bit assembly (uniform).
+pub const CONTACT_SHARE: (f64, f64) = (0.05, 0.95);
+/// Draws tried for one coupled candidate before its place in the table is left empty.
+const MAX_ATTEMPTS: u32 = 64;
+/// Integration step of the torsional laws' strings (s): their RK4 converges far above it.
+const TORSIONAL_DT_S: f64 = 1e-3;
+
+/// The coupled bit's drawn parameters, in a candidate's order: the [`Bit`] fields they set.
+pub const COUPLED_PARAMETERS: [(&str, &str); 4] = [
+    ("intrinsic_energy_mpa", "MPa"),
+    ("zeta", "1"),
+    ("wear_flat_mm", "mm"),
+    ("friction", "1"),
+];
+
+/// The drive every candidate is simulated at, and the noise added to its channels.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ChoiceDrive {
+    /// The top drive's speed (rpm), as set.
+    pub omega_rpm: f64,
+    /// The weight on the bit assembly (kN): as set, or the record's mean weight on bit.
+    pub wob_kn: f64,
+    /// Whether the weight is the record's mean.
+    pub wob_from_record: bool,
+    /// The record's length (s) at its sample rate, and its samples.
+    pub duration_s: f64,
+    pub samples: usize,
+    /// The white noise estimated on the record's channels and added to every simulation: bit
+    /// speed (rpm), torque (kN·m), weight on bit (kN).
+    pub noise_speed_rpm: f64,
+    pub noise_torque_knm: f64,
+    pub noise_wob_kn: f64,
+}
+
+/// A parameter's median over a structure's accepted candidates.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Estimate {
+    pub name: &'static str,
+    /// SI for a law's parameters (N·m for torques), the flag's unit for the coupled bit's.
+    pub unit: String,
+    pub median: f64,
+}
+
+/// One structure's part of the choice.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StructureShare {
+    pub structure: Structure,
+    /// Its share of the accepted candidates.
+    pub probability: f64,
+    /// Its candidates in the table (fewer than asked where draws failed) and among the accepted.
+    pub candidates: usize,
+    pub accepted: usize,
+    /// Its accepted candidates' medians (empty where none was accepted).
+    pub estimates: Vec<Estimate>,
+}
+
+/// Records re-simulated from one structure and what the choice took them for.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ChoiceCheckRow {
+    pub structure: Structure,
+    pub replicates: usize,
+    /// How many were taken for each structure.
+    pub classified_as: Vec<(Structure, usize)>,
+    /// The share taken for their own structure.
+    pub recognised: f64,
+}
+
+/// The structure a bit record shows, checked by re-simulation.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Choice {
+    pub drive: ChoiceDrive,
+    /// The record's summaries, in [`SUMMARIES`]' order.
+    pub record_summaries: Vec<(&'static str, f64)>,
+    /// Candidates in the table, and those nearest the record that decide.
+    pub reference: usize,
+    pub accepted: usize,
+    pub structures: Vec<StructureShare>,
+    pub check: Vec<ChoiceCheckRow>,
+    /// The structure called, where the check allows one.
+    pub decided: Option<Structure>,
+    pub verdict: String,
+    /// The same choice between the two families: any torsional law, or the coupled bit.
+    pub family: FamilyChoice,
+    /// What the caller should know (a structure left out, the weight taken from the record).
+    pub notes: Vec<String>,
+}
+
+/// A family of structures: the torsional laws together, or the coupled bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Family {
+    Torsional,
+    Coupled,
+}
+
+impl Family {
+    pub fn of(structure: Structure) -> Self {
+        match structure {
+            Structure::Torsional(_) => Self::Torsional,
+            Structure::Coupled => Self::Coupled,
+        }
+    }
+}
+
+impl std::fmt::Display for Family {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Torsional => "a torsional law",
+            Self::Coupled => "the coupled bit",
+        })
+    }
+}
+
+/// The choice between the families: the torsional laws' probabilities summed, their
+/// re-simulations pooled.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FamilyChoice {
+    /// P(a torsional law); the coupled bit's is the rest.
+    pub torsional_probability: f64,
+    /// The shares of each family's re-simulated records taken for its own family (`None`
+    /// where it had no accepted candidate).
+    pub torsional_recognised: Option<f64>,
+    pub coupled_recognised: Option<f64>,
+    pub decided: Option<Family>,
+    pub verdict: String,
+}
+
+/// One candidate of the table: its structure's slot, its parameters (SI for a law, the
+/// [`COUPLED_PARAMETERS`] for the coupled bit) and its summaries.
+struct Member {
+    slot: usize,
+    params: Vec<f64>,
+    summaries: Summaries,
+}
+
+/// What every candidate is simulated with.
+struct Simulator<'a> {
+    settings: &'a Settings,
+    omega_rad_s: f64,
+    wob_n: f64,
+    duration_s: f64,
+    /// Noise standard deviations: bit speed (rad/s), torque (N·m), weight on bit (N).
+    noise: [f64; 3],
+}
+
+impl Simulator<'_> {
+    /// The coupled bit of a candidate's parameters.
+    fn bit(&self, params: &[f64]) -> Bit {
+        Bit {
+            intrinsic_energy_mpa: params[0],
+            zeta: params[1],
+            wear_flat_mm: params[2],
+            friction: params[3],
+            ..self.settings.bit
+        }
+    }
+
+    fn job(&self, bit: Bit) -> CoupledJob {
+        CoupledJob {
+            bit,
+            omega_rad_s: self.omega_rad_s,
+            axial: Axial::Weight { wob_n: self.wob_n },
+            kick_rad_s: self.settings.kick_rpm * RAD_S_PER_RPM,
+        }
+    }
+
+    /// The summaries of `structure`'s string with `params`, its noise drawn under `key`;
+    /// `None` where the string diverged.
+    fn summaries(&self, structure: Structure, params: &[f64], key: NoiseKey) -> Option<Summaries> {
+        let s = self.settings;
+        let (mut speed, mut torque, mut wob) = match structure {
+            Structure::Torsional(law) => {
+                let cfg = SimConfig {
+                    law,
+                    params_nm: params.to_vec(),
+                    structure: s.assembly().ok()?.torsion,
+                    omega_rad_s: self.omega_rad_s,
+                    wob_n: self.wob_n,
+                    w_ref_n: self.wob_n,
+                    duration_s: self.duration_s,
+                    recording: Recording {
+                        settle_s: s.settle_s,
+                        sample_hz: s.sample_hz,
+                        dt_s: TORSIONAL_DT_S.min(1.0 / s.sample_hz),
+                        initial: Initial::Equilibrium {
+                            speed_perturbation_rad_s: s.kick_rpm * RAD_S_PER_RPM,
+                        },
+                        ..Recording::default()
+                    },
+                };
+                // A law whose torque turns negative at speed runs the bit away: no record.
+                let trace = crate::simulate::simulate(&cfg).ok()?;
+                (trace.bit_speed_rad_s, trace.torque_nm, trace.wob_n)
+            }
+            Structure::Coupled => {
+                let schedule = Schedule::new(s.dt_s, s.sample_hz, s.settle_s, self.duration_s).ok()?;
+                let (mut speed, mut torque, mut wob) = (Vec::new(), Vec::new(), Vec::new());
+                let summary =
+                    coupled::integrate_with(&s.assembly().ok()?, &schedule, &self.job(self.bit(params)), &mut |x| {
+                        speed.push(x.bit_speed_rad_s);
+                        torque.push(x.torque_nm);
+                        wob.push(x.wob_n);
+                    });
+                if summary.diverged {
+                    return None;
+                }
+                (speed, torque, wob)
+            }
+        };
+        add_noise(&mut speed, self.noise[0], key);
+        add_noise(&mut torque, self.noise[1], key.redrawn(1));
+        add_noise(&mut wob, self.noise[2], key.redrawn(2));
+        let out = summaries(&speed, &torque, &wob);
+        out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
+    /// The `index`-th coupled candidate under `seed`: ε, ζ and the contact force drawn, μ
+    /// making steady drilling's torque `torque_nm`; `None` where no draw of
+    /// [`MAX_ATTEMPTS`] needs a μ within the bit's bounds.
+    fn coupled_candidate(&self, seed: u64, index: u64, torque_nm: f64) -> Option<Vec<f64>> {
+        let key = key_of_seed(seed ^ 0x5247_4421);
+        let assembly = self.settings.assembly().ok()?;
+        let (mu_lo, mu_hi) = BIT_BOUNDS[5];
+        for attempt in 0..MAX_ATTEMPTS {
+            let u = philox4x32_10(candidate_counter(attempt, index, 0), key).map(open_unit);
+            let epsilon = (EPSILON_MPA.0.ln() + u[0] * (EPSILON_MPA.1 / EPSILON_MPA.0).ln()).exp();
+            let zeta = ZETA.0 + u[1] * (ZETA.1 - ZETA.0);
+            let contact_n = self.wob_n * (CONTACT_SHARE.0 + u[2] * (CONTACT_SHARE.1 - CONTACT_SHARE.0));
+            let b = self.settings.bit;
+            let wear_flat_mm = 1e3 * contact_n / (b.radius_m * b.contact_stress_mpa * 1e6);
+            let torque_at = |friction: f64| {
+                self.job(self.bit(&[epsilon, zeta, wear_flat_mm, friction]))
+                    .steady(&assembly)
+                    .torque_nm
+            };
+            let (t0, t1) = (torque_at(0.0), torque_at(1.0));
+            let friction = (torque_nm - t0) / (t1 - t0);
+            let params = vec![epsilon, zeta, wear_flat_mm, friction];
+            if friction > mu_lo && friction <= mu_hi && self.bit(&params).validate().is_ok() {
+                return Some(params);
+            }
+        }
+        None
+    }
+}
+
+/// The summaries of a record's (or a simulation's) bit speed (rad/s), torque (N·m) and weight
+/// on bit (N), in [`SUMMARIES`]' order.
+fn summaries(speed: &[f64], torque: &[f64], wob: &[f64]) -> Summaries {
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let sd = |v: &[f64]| {
+        let m = mean(v);
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+    };
+    let correlation = |a: &[f64], b: &[f64]| {
+        let (ma, mb, sa, sb) = (mean(a), mean(b), sd(a), sd(b));
+        if sa * sb > 0.0 {
+            a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum::<f64>() / (a.len() as f64 * sa * sb)
+        } else {
+            0.0
+        }
+    };
+    let stuck = speed.iter().filter(|w| w.abs() < STUCK_SPEED_RAD_S).count() as f64 / speed.len() as f64;
+    let median_speed = quantile(speed, 0.5);
+    let torque_where = |above: bool| {
+        let picked: Vec<f64> = speed
+            .iter()
+            .zip(torque)
+            .filter(|(w, _)| (**w > median_speed) == above)
+            .map(|(_, t)| *t)
+            .collect();
+        if picked.is_empty() { mean(torque) } else { mean(&picked) }
+    };
+    [
+        stuck,
+        sd(speed),
+        quantile(speed, 0.95),
+        mean(torque),
+        sd(torque),
+        quantile(torque, 0.05),
+        quantile(torque, 0.95),
+        torque_where(true),
+        torque_where(false),
+        correlation(speed, torque),
+        sd(wob),
+        correlation(wob, torque),
+    ]
+}
+
+/// Each summary's spread over the table: the MAD (×1.4826), its standard deviation where the
+/// MAD is 0, 1 where both are.
+fn scales(table: &[Member]) -> Summaries {
+    let mut out = [1.0; SUMMARIES.len()];
+    for (j, scale) in out.iter_mut().enumerate() {
+        let v: Vec<f64> = table.iter().map(|m| m.summaries[j]).collect();
+        let median = quantile(&v, 0.5);
+        let deviations: Vec<f64> = v.iter().map(|x| (x - median).abs()).collect();
+        let mad = 1.4826 * quantile(&deviations, 0.5);
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+        *scale = if mad > 0.0 {
+            mad
+        } else if sd > 0.0 {
+            sd
+        } else {
+            1.0
+        };
+    }
+    out
+}
+
+fn distance(a: &Summaries, b: &Summaries, scales: &Summaries) -> f64 {
+    let sum: f64 = a
+        .iter()
+        .zip(b)
+        .zip(scales)
+        .map(|((x, y), s)| ((x - y) / s).powi(2))
+        .sum();
+    (sum / SUMMARIES.len() as f64).sqrt()
+}
+
+/// The `k` members nearest `s`.
+fn nearest<'t>(table: &'t [Member], s: &Summaries, scales: &Summaries, k: usize) -> Vec<&'t Member> {
+    let mut near: Vec<(f64, &Member)> = table.iter().map(|m| (distance(s, &m.summaries, scales), m)).collect();
+    near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+    near.truncate(k);
+    near.into_iter().map(|(_, m)| m).collect()
+}
+
+/// The structure most of the `k` members nearest `s` come from (ties to the earlier one).
+fn classify(table: &[Member], s: &Summaries, scales: &Summaries, k: usize, structures: usize) -> usize {
+    let mut votes = vec![0usize; structures];
+    for m in nearest(table, s, scales, k) {
+        votes[m.slot] += 1;
+    }
+    (0..structures)
+        .max_by_key(|&i| (votes[i], std::cmp::Reverse(i)))
+        .expect("a structure")
+}
+
+/// The structures a choice weighs: the built-in laws and the coupled bit.
+pub fn structures() -> Vec<Structure> {
+    Law::ALL
+        .into_iter()
+        .map(Structure::Torsional)
+        .chain([Structure::Coupled])
+        .collect()
+}
+
+/// The structure `record` shows (see the module documentation), the drive and the string from
+/// `settings`: `omega_rpm` the top drive's speed while recorded, `wob_kn` where given (the
+/// record's mean weight on bit otherwise), `sample_hz` the record's rate.
+pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Choice> {
+    if settings.reference < 10 {
+        return Err(Error::setting(
+            "reference",
+            format!("must be at least 10, got {}", settings.reference),
+        ));
+    }
+    if settings.replicates == 0 {
+        return Err(Error::setting("replicates", "must be at least 1"));
+    }
+    settings.assembly()?;
+    if !(settings.omega_rpm.is_finite() && settings.omega_rpm > 0.0) {
+        return Err(Error::setting(
+            "omega_rpm",
+            format!("the top drive must turn forward, got {} rpm", settings.omega_rpm),
+        ));
+    }
+    let n = record.len();
+    let duration_s = n as f64 / settings.sample_hz;
+    Schedule::new(settings.dt_s, settings.sample_hz, settings.settle_s, duration_s)?;
+    let structures = structures();
+    let strings = (settings.reference * structures.len() + settings.replicates * structures.len()) as f64;
+    crate::limits::check_work(
+        "reference",
+        strings * (settings.settle_s + duration_s) / settings.dt_s,
+        crate::simulate::FASTEST_STEPS_PER_S,
+        &format!(
+            "simulating {strings} strings of {:.0} s",
+            settings.settle_s + duration_s
+        ),
+    )?;
+    let refuse = |message: String| Error::Format {
+        path: record.source.clone(),
+        line: None,
+        message,
+    };
+    if n < 50 {
+        return Err(refuse(format!(
+            "the record holds {n} samples: its bit speed, torque and weight on bit need at least 50 to be summarised"
+        )));
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let wob_from_record = settings.wob_kn.is_none();
+    let wob_n = settings.wob_kn.map_or_else(|| mean(&record.wob_n), |w| w * 1e3);
+    if !(wob_n.is_finite() && wob_n > 0.0) {
+        return Err(refuse(format!(
+            "its mean weight on bit is {:.3} kN: the bit is not pushed onto the rock",
+            wob_n / 1e3
+        )));
+    }
+    let torque_nm = mean(&record.torque_nm);
+    let omega_rad_s = settings.omega_rpm * RAD_S_PER_RPM;
+    let noise = [
+        noise_sd(&record.speed_rad_s),
+        noise_sd(&record.torque_nm),
+        noise_sd(&record.wob_n),
+    ];
+    let simulator = Simulator {
+        settings,
+        omega_rad_s,
+        wob_n,
+        duration_s,
+        noise,
+    };
+    let mut notes = Vec::new();
+    if wob_from_record {
+        notes.push(format!(
+            "the weight on the bit assembly is the record's mean weight on bit, {:.1} kN",
+            wob_n / 1e3
+        ));
+    }
+
+    // The laws' boxes around their fits to the turning samples.
+    let turning: Vec<usize> = (0..n).filter(|&i| record.speed_rad_s[i] > STUCK_SPEED_RAD_S).collect();
+    let calibration = Samples::new(
+        turning.iter().map(|&i| record.speed_rad_s[i]).collect(),
+        turning.iter().map(|&i| record.torque_nm[i]).collect(),
+    );
+    let laws: Vec<Law> = Law::ALL.to_vec();
+    let fits = fit_laws(
+        &laws,
+        &calibration,
+        &Samples::new(Vec::new(), Vec::new()),
+        &FitOptions::default(),
+    )?;
+    let prior = Prior::from_fits(&fits, LAW_DELTA, None, 1.0)?;
+
+    // The table: each structure's candidates, drawn and simulated.
+    let seed = settings.seed;
+    let drawn: Vec<(usize, u64, Option<Vec<f64>>)> = (0..structures.len())
+        .flat_map(|slot| (0..settings.reference as u64).map(move |i| (slot, i)))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|(slot, i)| {
+            let params = match structures[slot] {
+                Structure::Torsional(law) => {
+                    let bx = &prior.boxes[prior.slot_of(law)];
+                    let key = key_of_seed(seed ^ (slot as u64 + 1));
+                    let u = philox4x32_10(candidate_counter(0, i, 0), key);
+                    let u2 = philox4x32_10(candidate_counter(0, i, 1), key);
+                    let words = [u[0], u[1], u[2], u[3], u2[0], u2[1]];
+                    Some(
+                        (0..law.n_params())
+                            .map(|j| {
+                                let (lo, hi) = (f64::from(bx.lower[j]), f64::from(bx.upper[j]));
+                                lo + open_unit(words[j]) * (hi - lo)
+                            })
+                            .collect(),
+                    )
+                }
+                Structure::Coupled => simulator.coupled_candidate(seed, i, torque_nm),
+            };
+            (slot, i, params)
+        })
+        .collect();
+    let table: Vec<Member> = drawn
+        .into_par_iter()
+        .with_max_len(1)
+        .filter_map(|(slot, i, params)| {
+            let params = params?;
+            let key = NoiseKey::replicate(seed ^ 0x5441_424c, (slot * settings.reference) as u64 + i);
+            let summaries = simulator.summaries(structures[slot], &params, key)?;
+            Some(Member {
+                slot,
+                params,
+                summaries,
+            })
+        })
+        .collect();
+    let counts: Vec<usize> = (0..structures.len())
+        .map(|slot| table.iter().filter(|m| m.slot == slot).count())
+        .collect();
+    for (structure, count) in structures.iter().zip(&counts) {
+        if *count < settings.reference {
+            notes.push(format!(
+                "{structure}: {count} of its {} candidates simulated (the rest {}): its prior weight is its share of the table",
+                settings.reference,
+                if *structure == Structure::Coupled {
+                    "needed a friction outside the bit's bounds to make the record's mean torque, or diverged"
+                } else {
+                    "diverged"
+                }
+            ));
+        }
+    }
+    if table.len() < 10 {
+        return Err(refuse(format!(
+            "only {} candidates could be simulated at {} rpm and {:.1} kN",
+            table.len(),
+            settings.omega_rpm,
+            wob_n / 1e3
+        )));
+    }
+    for line in &notes {
+        note(line.clone());
+    }
+
+    // The choice: the structures' shares of the nearest candidates.
+    let scales = scales(&table);
+    let observed = summaries(&record.speed_rad_s, &record.torque_nm, &record.wob_n);
+    let k = (table.len() / 50).max(10).min(table.len());
+    let accepted = nearest(&table, &observed, &scales, k);
+    let shares: Vec<StructureShare> = structures
+        .iter()
+        .enumerate()
+        .map(|(slot, &structure)| {
+            let own: Vec<&Member> = accepted.iter().copied().filter(|m| m.slot == slot).collect();
+            StructureShare {
+                structure,
+                probability: own.len() as f64 / k as f64,
+                candidates: counts[slot],
+                accepted: own.len(),
+                estimates: estimates(structure, &own),
+            }
+        })
+        .collect();
+
+    // The check: records re-simulated from each structure's accepted candidates.
+    let jobs: Vec<(usize, usize, &Member)> = (0..structures.len())
+        .flat_map(|slot| {
+            let own: Vec<&Member> = accepted.iter().copied().filter(|m| m.slot == slot).collect();
+            let replicates = if own.is_empty() { 0 } else { settings.replicates };
+            (0..replicates)
+                .map(|r| (slot, r, own[r % own.len()]))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let classes: Vec<(usize, Option<usize>)> = jobs
+        .into_par_iter()
+        .with_max_len(1)
+        .map(|(slot, r, member)| {
+            let key = NoiseKey::replicate(seed ^ 0x4348_4543, (slot * settings.replicates + r) as u64);
+            let class = simulator
+                .summaries(structures[slot], &member.params, key)
+                .map(|s| classify(&table, &s, &scales, k, structures.len()));
+            (slot, class)
+        })
+        .collect();
+    let check: Vec<ChoiceCheckRow> = (0..structures.len())
+        .filter(|&slot| shares[slot].accepted > 0)
+        .map(|slot| {
+            let own: Vec<usize> = classes.iter().filter(|c| c.0 == slot).filter_map(|c| c.1).collect();
+            let count = |target: usize| own.iter().filter(|&&c| c == target).count();
+            ChoiceCheckRow {
+                structure: structures[slot],
+                replicates: settings.replicates,
+                classified_as: structures.iter().enumerate().map(|(t, &s)| (s, count(t))).collect(),
+                recognised: count(slot) as f64 / own.len().max(1) as f64,
+            }
+        })
+        .collect();
+    let best = shares
+        .iter()
+        .max_by(|a, b| a.probability.total_cmp(&b.probability))
+        .expect("a structure");
+    let taken_for_best = |row: &ChoiceCheckRow| {
+        let all: usize = row.classified_as.iter().map(|c| c.1).sum();
+        let taken = row
+            .classified_as
+            .iter()
+            .find(|c| c.0 == best.structure)
+            .map_or(0, |c| c.1);
+        taken as f64 / all.max(1) as f64
+    };
+    let confused: Vec<Structure> = check
+        .iter()
+        .filter(|r| r.structure != best.structure && taken_for_best(r) > CHECK_CONFUSED)
+        .map(|r| r.structure)
+        .collect();
+    let recognised = check
+        .iter()
+        .find(|r| r.structure == best.structure)
+        .map_or(0.0, |r| r.recognised);
+    let (decided, verdict) = resimulation_verdict(best.structure, best.probability, recognised, &confused, "structure");
+    let family = family_choice(&shares, &check);
+    Ok(Choice {
+        drive: ChoiceDrive {
+            omega_rpm: settings.omega_rpm,
+            wob_kn: wob_n / 1e3,
+            wob_from_record,
+            duration_s,
+            samples: n,
+            noise_speed_rpm: noise[0] / RAD_S_PER_RPM,
+            noise_torque_knm: noise[1] / 1e3,
+            noise_wob_kn: noise[2] / 1e3,
+        },
+        record_summaries: SUMMARIES.iter().copied().zip(observed).collect(),
+        reference: table.len(),
+        accepted: k,
+        structures: shares,
+        check,
+        decided,
+        verdict,
+        family,
+        notes,
+    })
+}
+
+/// The choice between the families (see [`FamilyChoice`]).
+fn family_choice(shares: &[StructureShare], check: &[ChoiceCheckRow]) -> FamilyChoice {
+    let torsional_probability: f64 = shares
+        .iter()
+        .filter(|s| Family::of(s.structure) == Family::Torsional)
+        .map(|s| s.probability)
+        .sum();
+    // Of `from`'s re-simulated records, the share taken for a structure of `taken_for`.
+    let share = |from: Family, taken_for: Family| {
+        let rows: Vec<&ChoiceCheckRow> = check.iter().filter(|r| Family::of(r.structure) == from).collect();
+        let all: usize = rows.iter().flat_map(|r| &r.classified_as).map(|c| c.1).sum();
+        let taken: usize = rows
+            .iter()
+            .flat_map(|r| &r.classified_as)
+            .filter(|c| Family::of(c.0) == taken_for)
+            .map(|c| c.1)
+            .sum();
+        (all > 0).then(|| taken as f64 / all as f64)
+    };
+    let (best, probability, other) = if torsional_probability >= 0.5 {
+        (Family::Torsional, torsional_probability, Family::Coupled)
+    } else {
+        (Family::Coupled, 1.0 - torsional_probability, Family::Torsional)
+    };
+    let confused: Vec<Family> = share(other, best)
+        .filter(|s| *s > CHECK_CONFUSED)
+        .map(|_| other)
+        .into_iter()
+        .collect();
+    let (decided, verdict) =
+        resimulation_verdict(best, probability, share(best, best).unwrap_or(0.0), &confused, "family");
+    FamilyChoice {
+        torsional_probability,
+        torsional_recognised: share(Family::Torsional, Family::Torsional),
+        coupled_recognised: share(Family::Coupled, Family::Coupled),
+        decided,
+        verdict,
+    }
+}
+
+/// The medians of `members`' parameters, named (none without a member).
+fn estimates(structure: Structure, members: &[&Member]) -> Vec<Estimate> {
+    if members.is_empty() {
+        return Vec::new();
+    }
+    let median = |j: usize| quantile(&members.iter().map(|m| m.params[j]).collect::<Vec<_>>(), 0.5);
+    match structure {
+        Structure::Torsional(law) => law
+            .params()
+            .iter()
+            .enumerate()
+            .map(|(j, p)| Estimate {
+                name: p.name,
+                unit: p.unit("N·m"),
+                median: median(j),
+            })
+            .collect(),
+        Structure::Coupled => COUPLED_PARAMETERS
+            .iter()
+            .enumerate()
+            .map(|(j, (name, unit))| Estimate {
+                name,
+                unit: (*unit).to_string(),
+                median: median(j),
+            })
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summaries_of_a_known_record_are_its_closed_forms() {
+        // Half the samples stuck at 0 with 12 kN·m, half turning at 2 rad/s with 8 kN·m; the
+        // weight on bit constant.
+        let speed: Vec<f64> = (0..100).map(|i| if i % 2 == 0 { 0.0 } else { 2.0 }).collect();
+        let torque: Vec<f64> = speed.iter().map(|w| if *w > 0.0 { 8e3 } else { 12e3 }).collect();
+        let wob = vec![1.5e5; 100];
+        let s = summaries(&speed, &torque, &wob);
+        let want = [0.5, 1.0, 2.0, 10e3, 2e3, 8e3, 12e3, 8e3, 12e3, -1.0, 0.0, 0.0];
+        for ((name, got), want) in SUMMARIES.iter().zip(s).zip(want) {
+            assert!(
+                (got - want).abs() < 1e-9 * want.abs().max(1.0),
+                "{name}: {got} for {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_structure_is_named_as_the_user_writes_it() {
+        assert_eq!(Structure::Torsional(Law::ALL[1]).to_string(), "m2");
+        assert_eq!(serde_json::to_string(&Structure::Coupled).unwrap(), "\"RGD\"");
+    }
+}
