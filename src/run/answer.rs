@@ -283,6 +283,53 @@ fn evidence_why(factor: &BayesFactor) -> Option<String> {
     })
 }
 
+/// A model choice checked by re-simulation: `best` (a law, or a structure: its `kind`) with
+/// probability `probability` is called where at least [`CHECK_RECOGNISED`] of the records
+/// re-simulated from it are recognised as it (`recognised`) and no other model's are taken for
+/// it more often than [`CHECK_CONFUSED`] (those that are: `confused`); undecided otherwise,
+/// saying why.
+pub fn resimulation_verdict<L: Copy + Display>(
+    best: L,
+    probability: f64,
+    recognised: f64,
+    confused: &[L],
+    kind: &str,
+) -> (Option<L>, String) {
+    if recognised < CHECK_RECOGNISED {
+        return (
+            None,
+            format!(
+                "{best} leads (P = {probability:.2}), but only {:.0} % of the records re-simulated from it are recognised as it: the summaries do not tell it apart; undecided",
+                100.0 * recognised
+            ),
+        );
+    }
+    if !confused.is_empty() {
+        let names: Vec<String> = confused.iter().map(|l| l.to_string()).collect();
+        let names = names.join(", ");
+        return (
+            None,
+            format!(
+                "{best} leads (P = {probability:.2}), but records re-simulated from {names} are taken for it too: undecided between {best} and {names}"
+            ),
+        );
+    }
+    (
+        Some(best),
+        format!(
+            "{best} (P = {probability:.2}); {:.0} % of the records re-simulated from it are recognised as it, and no other {kind}'s are taken for it",
+            100.0 * recognised
+        ),
+    )
+}
+
+/// A model is called when its own re-simulations are recognised at least this often and no
+/// other model's (any with particles, however improbable: the probabilities are what the check
+/// checks) are taken for it more often than [`CHECK_CONFUSED`].
+pub const CHECK_RECOGNISED: f64 = 0.8;
+/// See [`CHECK_RECOGNISED`].
+pub const CHECK_CONFUSED: f64 = 0.2;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -415,50 +462,3 @@ mod tests {
         assert_eq!(read, boxes);
     }
 }
-
-/// A model choice checked by re-simulation: `best` (a law, or a structure: its `kind`) with
-/// probability `probability` is called where at least [`CHECK_RECOGNISED`] of the records
-/// re-simulated from it are recognised as it (`recognised`) and no other model's are taken for
-/// it more often than [`CHECK_CONFUSED`] (those that are: `confused`); undecided otherwise,
-/// saying why.
-pub fn resimulation_verdict<L: Copy + Display>(
-    best: L,
-    probability: f64,
-    recognised: f64,
-    confused: &[L],
-    kind: &str,
-) -> (Option<L>, String) {
-    if recognised < CHECK_RECOGNISED {
-        return (
-            None,
-            format!(
-                "{best} leads (P = {probability:.2}), but only {:.0} % of the records re-simulated from it are recognised as it: the summaries do not tell it apart; undecided",
-                100.0 * recognised
-            ),
-        );
-    }
-    if !confused.is_empty() {
-        let names: Vec<String> = confused.iter().map(|l| l.to_string()).collect();
-        let names = names.join(", ");
-        return (
-            None,
-            format!(
-                "{best} leads (P = {probability:.2}), but records re-simulated from {names} are taken for it too: undecided between {best} and {names}"
-            ),
-        );
-    }
-    (
-        Some(best),
-        format!(
-            "{best} (P = {probability:.2}); {:.0} % of the records re-simulated from it are recognised as it, and no other {kind}'s are taken for it",
-            100.0 * recognised
-        ),
-    )
-}
-
-/// A model is called when its own re-simulations are recognised at least this often and no
-/// other model's (any with particles, however improbable: the probabilities are what the check
-/// checks) are taken for it more often than [`CHECK_CONFUSED`].
-pub const CHECK_RECOGNISED: f64 = 0.8;
-/// See [`CHECK_RECOGNISED`].
-pub const CHECK_CONFUSED: f64 = 0.2;
