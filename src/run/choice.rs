@@ -7,7 +7,8 @@
 //! summaries of its bit speed, torque and weight on bit ([`SUMMARIES`]). The reference table
 //! holds [`Settings::reference`] candidates of each structure; a structure's probability is its
 //! share of the table's candidates nearest the record (rejection ABC with equal prior weights;
-//! the distance scales each summary by its spread over the table, Prangle 2017). Summaries are
+//! the distance scales each summary by its spread within a structure, as Prangle 2017 by
+//! its spread over a single model's). Summaries are
 //! not sufficient for a model choice (Robert, Cornuet, Marin & Pillai 2011), so the choice is
 //! always checked by re-simulation: records re-simulated from each structure's accepted
 //! candidates are chosen for as the record was, and a structure is called only where its own
@@ -379,19 +380,33 @@ fn summaries(speed: &[f64], torque: &[f64], wob: &[f64]) -> Summaries {
     ]
 }
 
-/// Each summary's spread over the table: the MAD (×1.4826), its standard deviation where the
-/// MAD is 0, 1 where both are.
-fn scales(table: &[Member]) -> Summaries {
+/// Each summary's spread within a structure: the mean over the structures of its 10-90 %
+/// range among their own candidates, as a normal standard deviation (÷2.5631); its standard
+/// deviation over the table where that is 0, 1 where both are. Pooled over the whole table a
+/// MAD would be the majority's: four laws whose weight on bit is the noise alone would make a
+/// summary of the weight a wall that no candidate of the coupled bit passes. A MAD within each
+/// structure is its steady candidates' where most are steady, a wall again for a record that
+/// stick-slips; the 10-90 % range sees both.
+fn scales(table: &[Member], structures: usize) -> Summaries {
+    let mad = |v: &[f64]| (quantile(v, 0.9) - quantile(v, 0.1)) / 2.5631;
     let mut out = [1.0; SUMMARIES.len()];
     for (j, scale) in out.iter_mut().enumerate() {
+        let within: Vec<f64> = (0..structures)
+            .filter_map(|slot| {
+                let v: Vec<f64> = table
+                    .iter()
+                    .filter(|m| m.slot == slot)
+                    .map(|m| m.summaries[j])
+                    .collect();
+                (v.len() >= 2).then(|| mad(&v))
+            })
+            .collect();
+        let within = within.iter().sum::<f64>() / within.len().max(1) as f64;
         let v: Vec<f64> = table.iter().map(|m| m.summaries[j]).collect();
-        let median = quantile(&v, 0.5);
-        let deviations: Vec<f64> = v.iter().map(|x| (x - median).abs()).collect();
-        let mad = 1.4826 * quantile(&deviations, 0.5);
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
-        *scale = if mad > 0.0 {
-            mad
+        *scale = if within > 0.0 {
+            within
         } else if sd > 0.0 {
             sd
         } else {
@@ -600,7 +615,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     }
 
     // The choice: the structures' shares of the nearest candidates.
-    let scales = scales(&table);
+    let scales = scales(&table, structures.len());
     let observed = summaries(&record.speed_rad_s, &record.torque_nm, &record.wob_n);
     let k = (table.len() / 50).max(10).min(table.len());
     let accepted = nearest(&table, &observed, &scales, k);
