@@ -664,6 +664,23 @@ fn print_choice(out: &mut dyn Write, c: &Choice) -> std::io::Result<()> {
             taken
         )?;
     }
-    writeln!(out, "the law: {}", c.verdict)?;
-    writeln!(out, "the family: {}", c.family.verdict)
+    writeln!(out, "the structure: {}", c.verdict)?;
+    writeln!(out, "the family: {}", c.family.verdict)?;
+    if let Some(s) = c.decided.and_then(|d| c.structures.iter().find(|s| s.structure == d)) {
+        let medians: Vec<String> = s
+            .estimates
+            .iter()
+            .map(|e| match e.unit.as_str() {
+                "1" => format!("{} {:.4}", e.name, e.median),
+                unit => format!("{} {:.4} {unit}", e.name, e.median),
+            })
+            .collect();
+        writeln!(
+            out,
+            "{}'s accepted candidates, medians: {}",
+            s.structure,
+            medians.join(", ")
+        )?;
+    }
+    Ok(())
 }

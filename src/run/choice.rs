@@ -3,13 +3,14 @@
 //! the depth of cut, the weight on bit swinging with it).
 //!
 //! Every candidate's string is simulated at the record's drive, from steady rotation kicked by
-//! the settings' kick, with the record's own noise added to its channels, and reduced to
-//! summaries of its bit speed, torque and weight on bit ([`SUMMARIES`]). The reference table
+//! the settings' kick, with white noise added to each channel until its apparent noise is the
+//! record's ([`noise_variance_raw`]: what is not smooth at the record's clock, the coupled bit's
+//! swings of weight between samples among it), and reduced to summaries of its bit speed, torque and weight on bit ([`SUMMARIES`]). The reference table
 //! holds [`Settings::reference`] candidates of each structure; a structure's probability is its
 //! share of the table's candidates nearest the record (rejection ABC with equal prior weights;
-//! the distance scales each summary by its spread within a structure, as Prangle 2017 by
-//! its spread over a single model's). Summaries are
-//! not sufficient for a model choice (Robert, Cornuet, Marin & Pillai 2011), so the choice is
+//! the distance scales each summary by its spread within the structures, as Prangle 2017
+//! scales by a single model's). Summaries are not sufficient for a model choice (Robert,
+//! Cornuet, Marin & Pillai 2011), so the choice is
 //! always checked by re-simulation: records re-simulated from each structure's accepted
 //! candidates are chosen for as the record was, and a structure is called only where its own
 //! are recognised and no other's are taken for it
@@ -33,10 +34,10 @@ use crate::eval::surface::{NoiseKey, add_noise};
 use crate::fit::{FitOptions, fit_laws};
 use crate::laws::Law;
 use crate::numerics::quantile;
-use crate::prior::Prior;
+use crate::prior::{LawBox, Prior};
 use crate::rng::{candidate_counter, key_of_seed, open_unit, philox4x32_10};
 use crate::simulate::coupled::{self, Axial, BIT_BOUNDS, Bit, CoupledJob, Schedule};
-use crate::simulate::surface::noise_sd;
+use crate::simulate::surface::noise_variance_raw;
 use crate::simulate::{Initial, Recording, SimConfig};
 use crate::units::RAD_S_PER_RPM;
 use rayon::prelude::*;
@@ -118,8 +119,8 @@ pub struct ChoiceDrive {
     /// The record's length (s) at its sample rate, and its samples.
     pub duration_s: f64,
     pub samples: usize,
-    /// The white noise estimated on the record's channels and added to every simulation: bit
-    /// speed (rpm), torque (kN·m), weight on bit (kN).
+    /// The white noise the record's channels show (their variance above a smooth signal's):
+    /// bit speed (rpm), torque (kN·m), weight on bit (kN).
     pub noise_speed_rpm: f64,
     pub noise_torque_knm: f64,
     pub noise_wob_kn: f64,
@@ -232,8 +233,9 @@ struct Simulator<'a> {
     omega_rad_s: f64,
     wob_n: f64,
     duration_s: f64,
-    /// Noise standard deviations: bit speed (rad/s), torque (N·m), weight on bit (N).
-    noise: [f64; 3],
+    /// The record's apparent noise variances ([`noise_variance_raw`]): bit speed ((rad/s)²),
+    /// torque ((N·m)²), weight on bit (N²).
+    noise_variance: [f64; 3],
 }
 
 impl Simulator<'_> {
@@ -300,9 +302,17 @@ impl Simulator<'_> {
                 (speed, torque, wob)
             }
         };
-        add_noise(&mut speed, self.noise[0], key);
-        add_noise(&mut torque, self.noise[1], key.redrawn(1));
-        add_noise(&mut wob, self.noise[2], key.redrawn(2));
+        // Each channel's noise makes its apparent noise the record's: a string whose signal is
+        // not smooth at the record's clock (the coupled bit's weight swings between samples)
+        // shows part of it as noise already, and the record shows the same.
+        for (r, (channel, record)) in [&mut speed, &mut torque, &mut wob]
+            .into_iter()
+            .zip(self.noise_variance)
+            .enumerate()
+        {
+            let sd = (record - noise_variance_raw(channel)).max(0.0).sqrt();
+            add_noise(channel, sd, key.redrawn(r as u64));
+        }
         let out = summaries(&speed, &torque, &wob);
         out.iter().all(|v| v.is_finite()).then_some(out)
     }
@@ -509,17 +519,17 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     }
     let torque_nm = mean(&record.torque_nm);
     let omega_rad_s = settings.omega_rpm * RAD_S_PER_RPM;
-    let noise = [
-        noise_sd(&record.speed_rad_s),
-        noise_sd(&record.torque_nm),
-        noise_sd(&record.wob_n),
+    let noise_variance = [
+        noise_variance_raw(&record.speed_rad_s),
+        noise_variance_raw(&record.torque_nm),
+        noise_variance_raw(&record.wob_n),
     ];
     let simulator = Simulator {
         settings,
         omega_rad_s,
         wob_n,
         duration_s,
-        noise,
+        noise_variance,
     };
     let mut notes = Vec::new();
     if wob_from_record {
@@ -542,7 +552,25 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         &Samples::new(Vec::new(), Vec::new()),
         &FitOptions::default(),
     )?;
-    let prior = Prior::from_fits(&fits, LAW_DELTA, None, 1.0)?;
+    // A law whose fit is degenerate (a parameter beyond what a candidate holds) is left out.
+    // One box per law in `structures()`' order, which lists the laws first.
+    let mut left_out = Vec::new();
+    let boxes: Vec<Option<LawBox>> = fits
+        .iter()
+        .map(
+            |fit| match Prior::from_fits(std::slice::from_ref(fit), LAW_DELTA, None, 1.0) {
+                Ok(prior) => Some(prior.boxes[0].clone()),
+                Err(e) => {
+                    left_out.push(Structure::Torsional(fit.law));
+                    notes.push(format!(
+                        "{}: left out, its least-squares fit to the record's turning samples gives no box ({e})",
+                        fit.law
+                    ));
+                    None
+                }
+            },
+        )
+        .collect();
 
     // The table: each structure's candidates, drawn and simulated.
     let seed = settings.seed;
@@ -552,21 +580,18 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         .into_par_iter()
         .map(|(slot, i)| {
             let params = match structures[slot] {
-                Structure::Torsional(law) => {
-                    let bx = &prior.boxes[prior.slot_of(law)];
+                Structure::Torsional(law) => boxes[slot].as_ref().map(|bx| {
                     let key = key_of_seed(seed ^ (slot as u64 + 1));
                     let u = philox4x32_10(candidate_counter(0, i, 0), key);
                     let u2 = philox4x32_10(candidate_counter(0, i, 1), key);
                     let words = [u[0], u[1], u[2], u[3], u2[0], u2[1]];
-                    Some(
-                        (0..law.n_params())
-                            .map(|j| {
-                                let (lo, hi) = (f64::from(bx.lower[j]), f64::from(bx.upper[j]));
-                                lo + open_unit(words[j]) * (hi - lo)
-                            })
-                            .collect(),
-                    )
-                }
+                    (0..law.n_params())
+                        .map(|j| {
+                            let (lo, hi) = (f64::from(bx.lower[j]), f64::from(bx.upper[j]));
+                            lo + open_unit(words[j]) * (hi - lo)
+                        })
+                        .collect()
+                }),
                 Structure::Coupled => simulator.coupled_candidate(seed, i, torque_nm),
             };
             (slot, i, params)
@@ -590,9 +615,9 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         .map(|slot| table.iter().filter(|m| m.slot == slot).count())
         .collect();
     for (structure, count) in structures.iter().zip(&counts) {
-        if *count < settings.reference {
+        if *count < settings.reference && !left_out.contains(structure) {
             notes.push(format!(
-                "{structure}: {count} of its {} candidates simulated (the rest {}): its prior weight is its share of the table",
+                "{structure}: {count} of its {} candidates simulated (the rest {}: they cannot make the record, and count as rejected)",
                 settings.reference,
                 if *structure == Structure::Coupled {
                     "needed a friction outside the bit's bounds to make the record's mean torque, or diverged"
@@ -699,9 +724,9 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
             wob_from_record,
             duration_s,
             samples: n,
-            noise_speed_rpm: noise[0] / RAD_S_PER_RPM,
-            noise_torque_knm: noise[1] / 1e3,
-            noise_wob_kn: noise[2] / 1e3,
+            noise_speed_rpm: noise_variance[0].max(0.0).sqrt() / RAD_S_PER_RPM,
+            noise_torque_knm: noise_variance[1].max(0.0).sqrt() / 1e3,
+            noise_wob_kn: noise_variance[2].max(0.0).sqrt() / 1e3,
         },
         record_summaries: SUMMARIES.iter().copied().zip(observed).collect(),
         reference: table.len(),

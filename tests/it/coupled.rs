@@ -613,3 +613,148 @@ fn the_kernel_continues_a_string_from_its_state_as_the_cpu_does() {
         );
     }
 }
+
+/// A bit record of `truth` ("RGD": the public bit under 150 kN; a law: its paper estimate
+/// on the paper's string under W_ref) at `rpm`: 30 s at 50 Hz after 20 s from a 5-rpm kick,
+/// with white noise of 1 rpm, 0.3 kN·m and 3 kN drawn from `seed`.
+fn bit_record(truth: &str, rpm: f64, seed: u64) -> bitrock::data::drilling::DrillingRecord {
+    use bitrock::laws::{Law, PAPER_W_REF_N};
+    use bitrock::simulate::{Initial, Recording, SimConfig, simulate};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let (speed, torque, wob) = if truth == "RGD" {
+        let (mut speed, mut torque, mut wob) = (Vec::new(), Vec::new(), Vec::new());
+        let sched = Schedule::new(1e-4, 50.0, 20.0, 30.0).unwrap();
+        let kicked = CoupledJob {
+            kick_rad_s: 5.0 * RAD_S_PER_RPM,
+            ..job(rpm, WOB_150_KN)
+        };
+        coupled::integrate_with(&Assembly::default(), &sched, &kicked, &mut |s| {
+            speed.push(s.bit_speed_rad_s);
+            torque.push(s.torque_nm);
+            wob.push(s.wob_n);
+        });
+        (speed, torque, wob)
+    } else {
+        let law: Law = truth.parse().unwrap();
+        let params = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
+        let cfg = SimConfig {
+            duration_s: 30.0,
+            recording: Recording {
+                settle_s: 20.0,
+                initial: Initial::Equilibrium {
+                    speed_perturbation_rad_s: 5.0 * RAD_S_PER_RPM,
+                },
+                ..Recording::default()
+            },
+            ..SimConfig::new(law, params, rpm * RAD_S_PER_RPM, PAPER_W_REF_N)
+        };
+        let trace = simulate(&cfg).unwrap();
+        (trace.bit_speed_rad_s, trace.torque_nm, trace.wob_n)
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut noisy = |v: Vec<f64>, sd: f64| {
+        let n = Normal::new(0.0, sd).unwrap();
+        v.into_iter().map(|x| x + n.sample(&mut rng)).collect::<Vec<f64>>()
+    };
+    bitrock::data::drilling::DrillingRecord {
+        source: format!("{truth}.csv").into(),
+        columns: bitrock::data::drilling::DrillingColumns {
+            speed: "bit_speed_rpm".into(),
+            torque: "torque_on_bit_knm".into(),
+            wob: "wob_kn".into(),
+            rop: None,
+            axial_speed: None,
+        },
+        speed_rad_s: noisy(speed, RAD_S_PER_RPM),
+        torque_nm: noisy(torque, 300.0),
+        wob_n: noisy(wob, 3e3),
+        rop_m_s: None,
+        axial_speed_m_s: None,
+    }
+}
+
+#[test]
+fn the_structure_a_bit_record_shows_is_its_own_family_and_never_another_law() {
+    use bitrock::run::choice::{Family, Structure, choice};
+    use bitrock::run::coupled::Settings;
+    // The coupled bit stick-slipping (45 and 60 rpm) and drilling steadily (120 rpm); m1 and
+    // m2 on the paper's string. Two noise draws each; 100 candidates of each structure.
+    let mut called = Vec::new();
+    for (truth, rpm) in [("RGD", 45.0), ("RGD", 60.0), ("RGD", 120.0), ("m1", 40.0), ("m2", 60.0)] {
+        for seed in 0..2 {
+            let record = bit_record(truth, rpm, seed);
+            let settings = Settings {
+                omega_rpm: rpm,
+                settle_s: 20.0,
+                reference: 100,
+                replicates: 5,
+                seed,
+                ..Settings::default()
+            };
+            let c = choice(&record, &settings, &mut |_| {}).unwrap();
+            let family = if truth == "RGD" {
+                Family::Coupled
+            } else {
+                Family::Torsional
+            };
+            // The record's family is decided, by the check, in every record.
+            assert_eq!(
+                c.family.decided,
+                Some(family),
+                "{truth} at {rpm} rpm, seed {seed}: {}",
+                c.family.verdict
+            );
+            // A structure called is the one that made the record.
+            if let Some(s) = c.decided {
+                assert_eq!(s.to_string(), truth, "{truth} at {rpm} rpm, seed {seed}: {}", c.verdict);
+                called.push(s);
+            }
+            // The probabilities are shares of the accepted candidates.
+            let total: f64 = c.structures.iter().map(|s| s.probability).sum();
+            assert!((total - 1.0).abs() < 1e-12, "{total}");
+            assert_eq!(c.drive.samples, 1500);
+            // The bit assembly's weight is the record's mean weight on bit.
+            let mean_kn = record.wob_n.iter().sum::<f64>() / 1500.0 / 1e3;
+            assert!(
+                c.drive.wob_from_record && (c.drive.wob_kn - mean_kn).abs() < 1e-9,
+                "{:?}",
+                c.drive
+            );
+        }
+    }
+    // The coupled bit's records are told from every torsional law's, not only its family.
+    assert!(
+        called.iter().filter(|s| **s == Structure::Coupled).count() >= 4,
+        "{called:?}"
+    );
+}
+
+#[test]
+fn the_choice_refuses_what_it_cannot_use_by_flag_with_nothing_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, record) = simulated_record(dir.path(), "rgd.csv", 45.0, 5.0);
+    let never = dir.path().join("never.csv");
+    for (args, flag) in [
+        (vec!["--reference", "5"], "reference"),
+        (vec!["--replicates", "0"], "replicates"),
+        (vec!["--map"], "--map"),
+        (vec!["--out", never.to_str().unwrap()], "--out"),
+        (vec!["--calibrate", record.to_str().unwrap()], "--calibrate"),
+        (vec!["--wob-col", "no_such_column"], "no_such_column"),
+    ] {
+        let (code, _, stderr) = outcome(
+            bin()
+                .args(["coupled", "--omega-rpm", "45", "--select"])
+                .arg(&record)
+                .args(&args),
+        );
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stderr.contains(flag), "{args:?}: {stderr}");
+        assert!(!never.exists(), "{args:?}");
+    }
+    // The choice's own flags need the record.
+    let (code, _, stderr) = outcome(bin().args(["coupled", "--omega-rpm", "45", "--reference", "50"]));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--select"), "{stderr}");
+}
