@@ -4,6 +4,7 @@
 
 use crate::errors::*;
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
+use bitrock::run::choice::choice;
 use bitrock::run::coupled::{self as run, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
 use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
@@ -115,7 +116,22 @@ pub(crate) fn coupled_calibrate(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
-    let opts = DrillingOptions {
+    let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
+    let calibration = check(py, run::calibration(&record, &settings))?;
+    let mut notes: Vec<String> = calibration.warning.iter().map(|w| format!("warning: {w}")).collect();
+    let value = if map {
+        let m = py.detach(|| run::posterior_map(&settings, &calibration, &mut |line| notes.push(line)));
+        serde_json::json!({"map": check(py, m)?, "calibration": calibration})
+    } else {
+        serde_json::to_value(&calibration).expect("a calibration serialises")
+    };
+    say(py, &note, notes)?;
+    Ok(value.to_string())
+}
+
+/// The drilling record's columns and units named in `columns` (each defaulted where absent).
+fn drilling_options(py: Python<'_>, columns: &Bound<'_, PyDict>) -> PyResult<DrillingOptions> {
+    Ok(DrillingOptions {
         speed_column: kwarg(columns, "speed_col")?,
         torque_column: kwarg(columns, "torque_col")?,
         wob_column: kwarg(columns, "wob_col")?,
@@ -130,16 +146,26 @@ pub(crate) fn coupled_calibrate(
         )?,
         wob_unit: unit(py, "wob_unit", kwarg(columns, "wob_unit")?, ForceUnit::from_suffix)?,
         rop_unit: unit(py, "rop_unit", kwarg(columns, "rop_unit")?, RateUnit::from_suffix)?,
-    };
-    let record = check(py, DrillingRecord::read(&path, &opts))?;
-    let calibration = check(py, run::calibration(&record, &settings))?;
-    let mut notes: Vec<String> = calibration.warning.iter().map(|w| format!("warning: {w}")).collect();
-    let value = if map {
-        let m = py.detach(|| run::posterior_map(&settings, &calibration, &mut |line| notes.push(line)));
-        serde_json::json!({"map": check(py, m)?, "calibration": calibration})
-    } else {
-        serde_json::to_value(&calibration).expect("a calibration serialises")
-    };
+    })
+}
+
+/// The structure the bit record at `path` shows (columns and units in `columns`): a torsional
+/// law or the coupled bit, chosen by simulation and checked by re-simulation
+/// (`bitrock::run::choice`); as JSON text.
+#[pyfunction]
+#[pyo3(signature = (path, columns, options, note))]
+pub(crate) fn coupled_select(
+    py: Python<'_>,
+    path: PathBuf,
+    columns: &Bound<'_, PyDict>,
+    options: &Bound<'_, PyDict>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let settings: Settings = settings(options)?;
+    let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
+    let mut notes = Vec::new();
+    let c = py.detach(|| choice(&record, &settings, &mut |line| notes.push(line)));
+    let c = check(py, c)?;
     say(py, &note, notes)?;
-    Ok(value.to_string())
+    Ok(serde_json::to_string(&c).expect("a choice serialises"))
 }

@@ -249,9 +249,19 @@ def test_every_coupled_setting_is_a_keyword_and_a_stray_one_is_refused():
 
     fields = bitrock._bitrock.settings_fields("coupled")
     assert {"intrinsic_energy_mpa", "wob_kn", "map_rpm", "samples", "backend"} <= set(fields)
-    for function in (bitrock.coupled, bitrock.coupled_calibrate):
+    # The choice's own settings are the choice's; it draws the bit's rock and wear, holds the
+    # bit down by the record's weight over the record's length, and maps nothing.
+    choice_only = {"reference", "replicates"}
+    drawn_or_unused = {"intrinsic_energy_mpa", "zeta", "wear_flat_mm", "friction", "feed_m_h", "duration_s"}
+    drawn_or_unused |= {"map_rpm", "map_wob_kn", "map_feed_m_h", "escape", "samples", "backend"}
+    for function, takes in (
+        (bitrock.coupled, set(fields) - choice_only),
+        (bitrock.coupled_calibrate, set(fields) - choice_only),
+        (bitrock.coupled_select, set(fields) - drawn_or_unused),
+    ):
         keywords = inspect.signature(function).parameters
-        assert [f for f in fields if f not in keywords] == [], function.__name__
+        assert sorted(f for f in takes if f not in keywords) == [], function.__name__
+        assert sorted(f for f in set(fields) - takes if f in keywords) == [], function.__name__
     with pytest.raises(bitrock.InputError, match="zeta"):
         bitrock.coupled(zeta=-1.0, duration_s=1.0, settle_s=0.0)
     with pytest.raises(TypeError):
@@ -291,3 +301,35 @@ def test_the_escape_advice_gets_the_delay_form_s_stuck_bit_out(cli):
     assert out["stuck_share"] < 0.01, (faster, out)
     below = delay_form(45.0, then_rpm=faster - 20.0, **turned)
     assert below["stuck_share"] > 0.1, (faster - 20.0, below)
+
+
+def test_python_chooses_the_structure_as_the_command_does(cli, tmp_path):
+    """``bitrock.coupled_select`` is ``bitrock coupled --select``: the same choice, the same
+    report; a record of the coupled bit is told from the torsional laws'."""
+    import numpy as np
+    import pandas as pd
+
+    import bitrock
+
+    record = bitrock.coupled(omega_rpm=45, wob_kn=150, record=True, duration_s=20.0, settle_s=10.0)["record"]
+    rng = np.random.default_rng(7)
+    noisy = pd.DataFrame(
+        {
+            "bit_speed_rpm": np.asarray(record["bit_speed_rpm"]) + rng.normal(0.0, 1.0, 1000),
+            "torque_on_bit_knm": np.asarray(record["torque_on_bit_knm"]) + rng.normal(0.0, 0.3, 1000),
+            "wob_kn": np.asarray(record["wob_kn"]) + rng.normal(0.0, 3.0, 1000),
+        }
+    )
+    path = tmp_path / "bit.csv"
+    noisy.to_csv(path, index=False)
+    with pytest.warns(bitrock.BitrockWarning, match="the record's mean weight on bit"):
+        chosen = bitrock.coupled_select(path, omega_rpm=45, reference=100, replicates=4, settle_s=10.0)
+    done = run_cli(cli, "coupled", "--select", str(path), "--omega-rpm", "45", "--reference", "100", "--replicates", "4", "--settle-s", "10", "--json")
+    assert chosen == json.loads(done.stdout)
+    assert chosen["family"]["decided"] == "coupled", chosen["family"]["verdict"]
+    assert sum(s["probability"] for s in chosen["structures"]) == pytest.approx(1.0, abs=1e-12)
+    assert chosen["drive"]["samples"] == 1000 and chosen["drive"]["wob_from_record"]
+    with pytest.raises(bitrock.InputError, match="reference"):
+        bitrock.coupled_select(path, omega_rpm=45, reference=5)
+    with pytest.raises(bitrock.InputError, match="no_such_column"):
+        bitrock.coupled_select(path, omega_rpm=45, wob_col="no_such_column")

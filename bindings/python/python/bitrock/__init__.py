@@ -48,6 +48,7 @@ __all__ = [
     "check_selection",
     "coupled",
     "coupled_calibrate",
+    "coupled_select",
     "coupled_well",
     "evidence",
     "fit",
@@ -1036,6 +1037,50 @@ def coupled_calibrate(
     columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}
     options = {k: v for k, v in locals().items() if k not in columns and k not in ("path", "map", "columns", "json")}
     return json.loads(_bitrock.coupled_calibrate(os.fspath(path), columns, options, map, _note))
+
+
+def coupled_select(
+    path: str | os.PathLike[str],
+    *,
+    omega_rpm: float,
+    speed_col: str | None = None,
+    torque_col: str | None = None,
+    wob_col: str | None = None,
+    speed_unit: str | None = None,
+    torque_unit: str | None = None,
+    wob_unit: str | None = None,
+    wob_kn: float | None = None,
+    radius_m: float | None = None,
+    contact_stress_mpa: float | None = None,
+    gamma: float | None = None,
+    blades: int | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    mass_kg: float | None = None,
+    axial_stiffness_kn_m: float | None = None,
+    axial_damping_kns_m: float | None = None,
+    settle_s: float | None = None,
+    sample_hz: float | None = None,
+    dt_s: float | None = None,
+    kick_rpm: float | None = None,
+    reference: int | None = None,
+    replicates: int | None = None,
+    seed: int | None = None,
+) -> dict:
+    """Which structure a bit record shows (bit speed, torque on bit and weight on bit; a CSV
+    file), as ``bitrock coupled --select`` chooses it: every torsional law m1-m4 and the coupled
+    bit simulated at the record's drive (``omega_rpm``, the top drive's speed while recorded;
+    ``wob_kn``, the record's mean weight on bit where not given), ``reference`` candidates of
+    each, the structures' probabilities their shares of the candidates nearest the record, and
+    the choice checked by ``replicates`` records re-simulated from each. ``decided`` names the
+    structure where the check allows it (``None`` otherwise, ``verdict`` saying why), ``family``
+    the same choice between the torsional laws together and the coupled bit."""
+    import json
+
+    columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}
+    options = {k: v for k, v in locals().items() if k not in columns and k not in ("path", "columns", "json")}
+    return json.loads(_bitrock.coupled_select(os.fspath(path), columns, options, _note))
 
 
 def simulate_strings(
