@@ -678,11 +678,21 @@ fn bit_record(truth: &str, rpm: f64, seed: u64) -> bitrock::data::drilling::Dril
 fn the_structure_a_bit_record_shows_is_its_own_family_and_never_another_law() {
     use bitrock::run::choice::{Family, Structure, choice};
     use bitrock::run::coupled::Settings;
-    // The coupled bit stick-slipping (45 and 60 rpm) and drilling steadily (120 rpm); m1 and
-    // m2 on the paper's string. Two noise draws each; 100 candidates of each structure.
+    // The coupled bit stick-slipping (45 and 60 rpm) and drilling steadily (120 rpm), two noise
+    // draws each; the four laws on the paper's string, m1 and m2 twice; 100 candidates of each
+    // structure.
     let mut called = Vec::new();
-    for (truth, rpm) in [("RGD", 45.0), ("RGD", 60.0), ("RGD", 120.0), ("m1", 40.0), ("m2", 60.0)] {
-        for seed in 0..2 {
+    let records = [
+        ("RGD", 45.0, 2),
+        ("RGD", 60.0, 2),
+        ("RGD", 120.0, 2),
+        ("m1", 40.0, 2),
+        ("m2", 60.0, 2),
+        ("m3", 60.0, 1),
+        ("m4", 60.0, 1),
+    ];
+    for (truth, rpm, draws) in records {
+        for seed in 0..draws {
             let record = bit_record(truth, rpm, seed);
             let settings = Settings {
                 omega_rpm: rpm,
