@@ -436,18 +436,41 @@ fn distance(a: &Summaries, b: &Summaries, scales: &Summaries) -> f64 {
     (sum / SUMMARIES.len() as f64).sqrt()
 }
 
-/// The `k` members nearest `s`.
-fn nearest<'t>(table: &'t [Member], s: &Summaries, scales: &Summaries, k: usize) -> Vec<&'t Member> {
-    let mut near: Vec<(f64, &Member)> = table.iter().map(|m| (distance(s, &m.summaries, scales), m)).collect();
+/// The `k` members nearest `s`, `skip` left out.
+fn nearest<'t>(
+    table: &'t [Member],
+    s: &Summaries,
+    scales: &Summaries,
+    k: usize,
+    skip: Option<&Member>,
+) -> Vec<&'t Member> {
+    let mut near: Vec<(f64, &Member)> = table
+        .iter()
+        .filter(|m| !skip.is_some_and(|x| std::ptr::eq(x, *m)))
+        .map(|m| (distance(s, &m.summaries, scales), m))
+        .collect();
+    let k = k.min(near.len());
+    if k == 0 {
+        return Vec::new();
+    }
     near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
     near.truncate(k);
     near.into_iter().map(|(_, m)| m).collect()
 }
 
-/// The structure most of the `k` members nearest `s` come from (ties to the earlier one).
-fn classify(table: &[Member], s: &Summaries, scales: &Summaries, k: usize, structures: usize) -> usize {
+/// The structure most of the `k` members nearest `s` come from (ties to the earlier one),
+/// `source`, the member `s` was re-simulated from, left out: it is the record's twin but for
+/// the noise, and would vote for its own structure.
+fn classify(
+    table: &[Member],
+    s: &Summaries,
+    scales: &Summaries,
+    k: usize,
+    structures: usize,
+    source: &Member,
+) -> usize {
     let mut votes = vec![0usize; structures];
-    for m in nearest(table, s, scales, k) {
+    for m in nearest(table, s, scales, k, Some(source)) {
         votes[m.slot] += 1;
     }
     (0..structures)
@@ -643,7 +666,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     let scales = scales(&table, structures.len());
     let observed = summaries(&record.speed_rad_s, &record.torque_nm, &record.wob_n);
     let k = (table.len() / 50).max(10).min(table.len());
-    let accepted = nearest(&table, &observed, &scales, k);
+    let accepted = nearest(&table, &observed, &scales, k, None);
     let shares: Vec<StructureShare> = structures
         .iter()
         .enumerate()
@@ -676,7 +699,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
             let key = NoiseKey::replicate(seed ^ 0x4348_4543, (slot * settings.replicates + r) as u64);
             let class = simulator
                 .summaries(structures[slot], &member.params, key)
-                .map(|s| classify(&table, &s, &scales, k, structures.len()));
+                .map(|s| classify(&table, &s, &scales, k, structures.len(), member));
             (slot, class)
         })
         .collect();
@@ -828,6 +851,23 @@ mod tests {
                 "{name}: {got} for {want}"
             );
         }
+    }
+
+    #[test]
+    fn a_re_simulation_is_classified_without_the_member_it_came_from() {
+        let member = |slot: usize, x: f64| Member {
+            slot,
+            params: Vec::new(),
+            summaries: [x; SUMMARIES.len()],
+        };
+        // The source (slot 0) sits on the re-simulation; slot 1's two members are next.
+        let table = vec![member(0, 0.0), member(1, 1.0), member(1, 1.5), member(0, 5.0)];
+        let scales = [1.0; SUMMARIES.len()];
+        let s = [0.1; SUMMARIES.len()];
+        assert_eq!(classify(&table, &s, &scales, 1, 2, &table[0]), 1);
+        assert_eq!(nearest(&table, &s, &scales, 1, None)[0].slot, 0);
+        // k beyond the table left is the whole of it.
+        assert_eq!(nearest(&table, &s, &scales, 9, Some(&table[0])).len(), 3);
     }
 
     #[test]
