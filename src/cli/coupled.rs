@@ -30,9 +30,10 @@ pub struct CoupledCmd {
         "kick_rpm", "map", "calibrate", "select", "seed", "backend",
     ])]
     pub well: Option<std::path::PathBuf>,
-    /// Top-drive speed Omega_0, rpm.
-    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().omega_rpm, value_name = "RPM")]
-    pub omega_rpm: f64,
+    /// Top-drive speed Omega_0, rpm [default: 60]; with --select, the top drive's speed while
+    /// the record was made, needed.
+    #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "RPM")]
+    pub omega_rpm: Option<f64>,
     /// A constant weight on the bit assembly (the hook held at a set weight), kN.
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "KN", conflicts_with = "feed_m_h")]
     pub wob_kn: Option<f64>,
@@ -123,7 +124,10 @@ pub struct CoupledCmd {
     /// weight --wob-kn, or the record's mean), by their shares of the candidates nearest the
     /// record, checked by re-simulation. The bit's --radius-m, --contact-stress-mpa, --gamma and
     /// --blades and the string stay as given.
-    #[arg(long, value_name = "RECORD", conflicts_with_all = ["map", "feed_m_h", "out"])]
+    #[arg(long, value_name = "RECORD", conflicts_with_all = [
+        "map", "feed_m_h", "out", "intrinsic_energy_mpa", "zeta", "wear_flat_mm", "friction", "duration_s",
+        "samples", "backend",
+    ])]
     pub select: Option<std::path::PathBuf>,
     /// Candidates of each structure in the choice's reference table (with --select).
     #[arg(long, default_value_t = Settings::default().reference, value_name = "N", requires = "select")]
@@ -205,7 +209,7 @@ impl CoupledCmd {
     fn settings(&self) -> Settings {
         let lumped = self.lumped.lumped();
         Settings {
-            omega_rpm: self.omega_rpm,
+            omega_rpm: self.omega_rpm.unwrap_or(Settings::default().omega_rpm),
             wob_kn: self.wob_kn,
             feed_m_h: self.feed_m_h,
             bit: Bit {
@@ -254,6 +258,13 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     }
     let note = &mut |line: String| super::print::note(format_args!("{line}"));
     if let Some(path) = &cmd.select {
+        if cmd.omega_rpm.is_none() {
+            return Err(bitrock::Error::setting(
+                "omega_rpm",
+                "the top drive's speed while the record was made is needed to simulate the candidates at it",
+            )
+            .into());
+        }
         let record = DrillingRecord::read(path, &cmd.columns.options())?;
         let choice = choice::choice(&record, &settings, note)?;
         let mut out = super::print::stdout();
@@ -346,7 +357,7 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
             if cmd.json {
                 writeln!(out, "{}", serde_json::to_string_pretty(&one)?)?;
             } else {
-                print_one(&mut out, &one, cmd.omega_rpm)?;
+                print_one(&mut out, &one, settings.omega_rpm)?;
             }
         }
     }
@@ -631,7 +642,7 @@ fn print_choice(out: &mut dyn Write, c: &Choice) -> std::io::Result<()> {
     let d = &c.drive;
     writeln!(
         out,
-        "{} samples ({:.1} s) at {} rpm under {:.1} kN; noise added: {:.2} rpm, {:.3} kN·m, {:.2} kN",
+        "{} samples ({:.1} s) at {} rpm under {:.1} kN; the record's apparent noise: {:.2} rpm, {:.3} kN·m, {:.2} kN",
         d.samples, d.duration_s, d.omega_rpm, d.wob_kn, d.noise_speed_rpm, d.noise_torque_knm, d.noise_wob_kn
     )?;
     writeln!(

@@ -128,6 +128,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("at_kn", "--at-kn"),
     ("strings_n", "--strings-n"),
     ("replicates", "--replicates"),
+    ("reference", "--reference"),
     ("pilot", "--pilot"),
     ("check_replicates", "--check-replicates"),
     ("predictive_draws", "--predictive-draws"),

@@ -119,8 +119,9 @@ pub struct ChoiceDrive {
     /// The record's length (s) at its sample rate, and its samples.
     pub duration_s: f64,
     pub samples: usize,
-    /// The white noise the record's channels show (their variance above a smooth signal's):
-    /// bit speed (rpm), torque (kN·m), weight on bit (kN).
+    /// The white noise the record's channels show, standard deviations (the root of their
+    /// variance above a smooth signal's): bit speed (rpm), torque (kN·m), weight on bit (kN).
+    /// Each candidate's channels are topped up to it.
     pub noise_speed_rpm: f64,
     pub noise_torque_knm: f64,
     pub noise_wob_kn: f64,
@@ -152,7 +153,9 @@ pub struct StructureShare {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ChoiceCheckRow {
     pub structure: Structure,
+    /// The records classified, and those whose string diverged.
     pub replicates: usize,
+    pub diverged: usize,
     /// How many were taken for each structure.
     pub classified_as: Vec<(Structure, usize)>,
     /// The share taken for their own structure.
@@ -311,7 +314,7 @@ impl Simulator<'_> {
             .enumerate()
         {
             let sd = (record - noise_variance_raw(channel)).max(0.0).sqrt();
-            add_noise(channel, sd, key.redrawn(r as u64));
+            add_noise(channel, sd, key.redrawn(r as u64 + 1));
         }
         let out = summaries(&speed, &torque, &wob);
         out.iter().all(|v| v.is_finite()).then_some(out)
@@ -321,7 +324,7 @@ impl Simulator<'_> {
     /// making steady drilling's torque `torque_nm`; `None` where no draw of
     /// [`MAX_ATTEMPTS`] needs a μ within the bit's bounds.
     fn coupled_candidate(&self, seed: u64, index: u64, torque_nm: f64) -> Option<Vec<f64>> {
-        let key = key_of_seed(seed ^ 0x5247_4421);
+        let key = key_of_seed(NoiseKey::replicate(seed ^ 0x5247_4421, 0).0);
         let assembly = self.settings.assembly().ok()?;
         let (mu_lo, mu_hi) = BIT_BOUNDS[5];
         for attempt in 0..MAX_ATTEMPTS {
@@ -501,6 +504,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         return Err(Error::setting("replicates", "must be at least 1"));
     }
     settings.assembly()?;
+    settings.bit.validate()?;
     if !(settings.omega_rpm.is_finite() && settings.omega_rpm > 0.0) {
         return Err(Error::setting(
             "omega_rpm",
@@ -511,7 +515,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     let duration_s = n as f64 / settings.sample_hz;
     Schedule::new(settings.dt_s, settings.sample_hz, settings.settle_s, duration_s)?;
     let structures = structures();
-    let strings = (settings.reference * structures.len() + settings.replicates * structures.len()) as f64;
+    let strings = (settings.reference as f64 + settings.replicates as f64) * structures.len() as f64;
     crate::limits::check_work(
         "reference",
         strings * (settings.settle_s + duration_s) / settings.dt_s,
@@ -534,6 +538,11 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let wob_from_record = settings.wob_kn.is_none();
     let wob_n = settings.wob_kn.map_or_else(|| mean(&record.wob_n), |w| w * 1e3);
+    if let Some(w) = settings.wob_kn
+        && !(w.is_finite() && w > 0.0)
+    {
+        return Err(Error::setting("wob_kn", format!("must be positive, got {w} kN")));
+    }
     if !(wob_n.is_finite() && wob_n > 0.0) {
         return Err(refuse(format!(
             "its mean weight on bit is {:.3} kN: the bit is not pushed onto the rock",
@@ -568,31 +577,27 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         turning.iter().map(|&i| record.speed_rad_s[i]).collect(),
         turning.iter().map(|&i| record.torque_nm[i]).collect(),
     );
-    let laws: Vec<Law> = Law::ALL.to_vec();
-    let fits = fit_laws(
-        &laws,
-        &calibration,
-        &Samples::new(Vec::new(), Vec::new()),
-        &FitOptions::default(),
-    )?;
-    // A law whose fit is degenerate (a parameter beyond what a candidate holds) is left out.
+    // A law the turning samples cannot fit (too few of them, too few speeds) or fit only
+    // degenerately (a parameter beyond what a candidate holds) is left out, said.
     // One box per law in `structures()`' order, which lists the laws first.
     let mut left_out = Vec::new();
-    let boxes: Vec<Option<LawBox>> = fits
-        .iter()
-        .map(
-            |fit| match Prior::from_fits(std::slice::from_ref(fit), LAW_DELTA, None, 1.0) {
+    let boxes: Vec<Option<LawBox>> = Law::ALL
+        .into_iter()
+        .map(|law| {
+            let none = Samples::new(Vec::new(), Vec::new());
+            let fitted = fit_laws(&[law], &calibration, &none, &FitOptions::default())
+                .and_then(|fits| Prior::from_fits(&fits, LAW_DELTA, None, 1.0));
+            match fitted {
                 Ok(prior) => Some(prior.boxes[0].clone()),
                 Err(e) => {
-                    left_out.push(Structure::Torsional(fit.law));
+                    left_out.push(Structure::Torsional(law));
                     notes.push(format!(
-                        "{}: left out, its least-squares fit to the record's turning samples gives no box ({e})",
-                        fit.law
+                        "{law}: left out, the record's turning samples give its least-squares fit no box ({e})"
                     ));
                     None
                 }
-            },
-        )
+            }
+        })
         .collect();
 
     // The table: each structure's candidates, drawn and simulated.
@@ -604,7 +609,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         .map(|(slot, i)| {
             let params = match structures[slot] {
                 Structure::Torsional(law) => boxes[slot].as_ref().map(|bx| {
-                    let key = key_of_seed(seed ^ (slot as u64 + 1));
+                    let key = key_of_seed(NoiseKey::replicate(seed ^ 0x4341_4e44, slot as u64).0);
                     let u = philox4x32_10(candidate_counter(0, i, 0), key);
                     let u2 = philox4x32_10(candidate_counter(0, i, 1), key);
                     let words = [u[0], u[1], u[2], u[3], u2[0], u2[1]];
@@ -710,14 +715,17 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
             let count = |target: usize| own.iter().filter(|&&c| c == target).count();
             ChoiceCheckRow {
                 structure: structures[slot],
-                replicates: settings.replicates,
+                replicates: own.len(),
+                diverged: settings.replicates - own.len(),
                 classified_as: structures.iter().enumerate().map(|(t, &s)| (s, count(t))).collect(),
                 recognised: count(slot) as f64 / own.len().max(1) as f64,
             }
         })
         .collect();
+    // Ties go to the earlier structure, as in `classify`.
     let best = shares
         .iter()
+        .rev()
         .max_by(|a, b| a.probability.total_cmp(&b.probability))
         .expect("a structure");
     let taken_for_best = |row: &ChoiceCheckRow| {
@@ -738,8 +746,37 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         .iter()
         .find(|r| r.structure == best.structure)
         .map_or(0.0, |r| r.recognised);
-    let (decided, verdict) = resimulation_verdict(best.structure, best.probability, recognised, &confused, "structure");
-    let family = family_choice(&shares, &check);
+    let (mut decided, mut verdict) =
+        resimulation_verdict(best.structure, best.probability, recognised, &confused, "structure");
+    let mut family = family_choice(&shares, &check);
+    // A structure without a candidate was not compared: without the coupled bit, or without
+    // any law, neither the structure nor the family is called; without some laws, the verdict
+    // says among which it was made.
+    let missing: Vec<Structure> = structures
+        .iter()
+        .zip(&counts)
+        .filter(|(_, count)| **count == 0)
+        .map(|(structure, _)| *structure)
+        .collect();
+    let names = |list: &[Structure]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ");
+    let no_family = missing.contains(&Structure::Coupled) || counts[..Law::ALL.len()].iter().all(|c| *c == 0);
+    if no_family {
+        let why = format!(
+            "{} could not be simulated at this drive (see the notes): undecided",
+            names(&missing)
+        );
+        decided = None;
+        verdict = why.clone();
+        family.decided = None;
+        family.verdict = why;
+    } else if !missing.is_empty() {
+        let compared: Vec<Structure> = structures.iter().copied().filter(|s| !missing.contains(s)).collect();
+        verdict = format!(
+            "{verdict} (among {}; {} could not be compared)",
+            names(&compared),
+            names(&missing)
+        );
+    }
     Ok(Choice {
         drive: ChoiceDrive {
             omega_rpm: settings.omega_rpm,
@@ -770,17 +807,31 @@ fn family_choice(shares: &[StructureShare], check: &[ChoiceCheckRow]) -> FamilyC
         .filter(|s| Family::of(s.structure) == Family::Torsional)
         .map(|s| s.probability)
         .sum();
-    // Of `from`'s re-simulated records, the share taken for a structure of `taken_for`.
-    let share = |from: Family, taken_for: Family| {
-        let rows: Vec<&ChoiceCheckRow> = check.iter().filter(|r| Family::of(r.structure) == from).collect();
-        let all: usize = rows.iter().flat_map(|r| &r.classified_as).map(|c| c.1).sum();
-        let taken: usize = rows
+    // Of `from`'s re-simulated records, the share taken for a structure of `taken_for`: each
+    // structure's rows weighted by its probability, as the family's records would be drawn.
+    let probability = |structure: Structure| {
+        shares
             .iter()
-            .flat_map(|r| &r.classified_as)
-            .filter(|c| Family::of(c.0) == taken_for)
-            .map(|c| c.1)
-            .sum();
-        (all > 0).then(|| taken as f64 / all as f64)
+            .find(|s| s.structure == structure)
+            .map_or(0.0, |s| s.probability)
+    };
+    let share = |from: Family, taken_for: Family| {
+        let (mut weight, mut taken) = (0.0, 0.0);
+        for row in check
+            .iter()
+            .filter(|r| Family::of(r.structure) == from && r.replicates > 0)
+        {
+            let w = probability(row.structure);
+            let hits: usize = row
+                .classified_as
+                .iter()
+                .filter(|c| Family::of(c.0) == taken_for)
+                .map(|c| c.1)
+                .sum();
+            weight += w;
+            taken += w * hits as f64 / row.replicates as f64;
+        }
+        (weight > 0.0).then(|| taken / weight)
     };
     let (best, probability, other) = if torsional_probability >= 0.5 {
         (Family::Torsional, torsional_probability, Family::Coupled)

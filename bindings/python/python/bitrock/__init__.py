@@ -1071,7 +1071,8 @@ def coupled_select(
     """Which structure a bit record shows (bit speed, torque on bit and weight on bit; a CSV
     file), as ``bitrock coupled --select`` chooses it: every torsional law m1-m4 and the coupled
     bit simulated at the record's drive (``omega_rpm``, the top drive's speed while recorded;
-    ``wob_kn``, the record's mean weight on bit where not given), ``reference`` candidates of
+    ``wob_kn``, the record's mean weight on bit where not given; ``sample_hz``, the record's
+    rate, 50 Hz by default), ``reference`` candidates of
     each, the structures' probabilities their shares of the candidates nearest the record, and
     the choice checked by ``replicates`` records re-simulated from each. ``decided`` names the
     structure where the check allows it (``None`` otherwise, ``verdict`` saying why), ``family``
