@@ -762,7 +762,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     let no_family = missing.contains(&Structure::Coupled) || counts[..Law::ALL.len()].iter().all(|c| *c == 0);
     if no_family {
         let why = format!(
-            "{} could not be simulated at this drive (see the notes): undecided",
+            "{} had no candidate to compare (see the notes): undecided",
             names(&missing)
         );
         decided = None;

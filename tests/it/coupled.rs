@@ -770,3 +770,50 @@ fn the_choice_refuses_what_it_cannot_use_by_flag_with_nothing_written() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--select"), "{stderr}");
 }
+
+#[test]
+fn a_record_no_law_can_fit_calls_nothing_and_says_why() {
+    // A bit stuck throughout: no turning sample to fit a law on.
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("stuck.csv");
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let noise = Normal::new(0.0, 0.3).unwrap();
+    let mut text = String::from("bit_speed_rpm,torque_on_bit_knm,wob_kn\n");
+    for _ in 0..1000 {
+        let (w, t, f) = (noise.sample(&mut rng), noise.sample(&mut rng), noise.sample(&mut rng));
+        text.push_str(&format!("{w},{},{}\n", 10.0 + t, 150.0 + 10.0 * f));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let (code, stdout, stderr) = outcome(
+        bin()
+            .args([
+                "coupled",
+                "--omega-rpm",
+                "45",
+                "--reference",
+                "30",
+                "--replicates",
+                "2",
+                "--json",
+                "--select",
+            ])
+            .arg(&csv),
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let c: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(c["decided"].is_null() && c["family"]["decided"].is_null(), "{c}");
+    assert!(
+        c["verdict"]
+            .as_str()
+            .unwrap()
+            .contains("m1, m2, m3, m4 had no candidate"),
+        "{c}"
+    );
+    let notes = c["notes"].to_string();
+    assert!(
+        notes.contains("m3: left out") && notes.contains("0 calibration samples"),
+        "{notes}"
+    );
+}
