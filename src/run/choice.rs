@@ -5,15 +5,15 @@
 //! Every candidate's string is simulated at the record's drive, from steady rotation kicked by
 //! the settings' kick, with white noise added to each channel until its apparent noise is the
 //! record's ([`noise_variance_raw`]: what is not smooth at the record's clock, the coupled bit's
-//! swings of weight between samples among it), and reduced to summaries of its bit speed, torque and weight on bit ([`SUMMARIES`]). The reference table
-//! holds [`Settings::reference`] candidates of each structure; a structure's probability is its
-//! share of the table's candidates nearest the record (rejection ABC with equal prior weights;
-//! the distance scales each summary by its spread within the structures, as Prangle 2017
-//! scales by a single model's). Summaries are not sufficient for a model choice (Robert,
-//! Cornuet, Marin & Pillai 2011), so the choice is
-//! always checked by re-simulation: records re-simulated from each structure's accepted
-//! candidates are chosen for as the record was, and a structure is called only where its own
-//! are recognised and no other's are taken for it
+//! swings of weight between samples among it), and reduced to summaries of its bit speed,
+//! torque and weight on bit ([`SUMMARIES`]). The reference table holds [`Settings::reference`]
+//! candidates of each structure; a structure's probability is its share of the table's
+//! candidates nearest the record (rejection ABC with equal prior weights; the distance scales
+//! each summary by its spread within the structures, as Prangle 2017 scales by a single
+//! model's). Summaries are not sufficient for a model choice (Robert, Cornuet, Marin & Pillai
+//! 2011), so the choice is always checked by re-simulation: records re-simulated from each
+//! structure's accepted candidates are chosen for as the record was, and a structure is called
+//! only where its own are recognised and no other's are taken for it
 //! ([`crate::run::answer::resimulation_verdict`]).
 //!
 //! **Priors.** A law's box is the paper's, φ̂(1 ± δ) around its least-squares fit to the
@@ -401,7 +401,7 @@ fn summaries(speed: &[f64], torque: &[f64], wob: &[f64]) -> Summaries {
 /// structure is its steady candidates' where most are steady, a wall again for a record that
 /// stick-slips; the 10-90 % range sees both.
 fn scales(table: &[Member], structures: usize) -> Summaries {
-    let mad = |v: &[f64]| (quantile(v, 0.9) - quantile(v, 0.1)) / 2.5631;
+    let spread = |v: &[f64]| (quantile(v, 0.9) - quantile(v, 0.1)) / 2.5631;
     let mut out = [1.0; SUMMARIES.len()];
     for (j, scale) in out.iter_mut().enumerate() {
         let within: Vec<f64> = (0..structures)
@@ -411,7 +411,7 @@ fn scales(table: &[Member], structures: usize) -> Summaries {
                     .filter(|m| m.slot == slot)
                     .map(|m| m.summaries[j])
                     .collect();
-                (v.len() >= 2).then(|| mad(&v))
+                (v.len() >= 2).then(|| spread(&v))
             })
             .collect();
         let within = within.iter().sum::<f64>() / within.len().max(1) as f64;

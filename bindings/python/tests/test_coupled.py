@@ -21,12 +21,13 @@ BIT = dict(a=0.108, eps=60e6, zeta=0.6, sigma=60e6, l=0.011, mu=0.6, gamma=1.0, 
 STRING = dict(inertia=383.33, omega_n=0.85, xi=0.25, mass=40_000.0, k_a=1.4e5, c_a=5e4)
 
 
-def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60.0, dt=2e-4, sample_hz=50.0, kick_rpm=1.0, then_rpm=None, then_at=None):
+def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60.0, dt=2e-4, sample_hz=50.0, kick_rpm=1.0, then_rpm=None, then_at=None, record=None):
     """The RGD bit on the 1-DOF string in its delay form: semi-implicit Euler at `dt`, the contact
     decided from the step's forces, a speed that crosses zero on bottom set to rest. With
     `then_rpm`, the top drive turns at `then_rpm` from `then_at` seconds on (the end of the
     settling where not given), the string carrying on from where it is. Returns the recorded samples' statistics as `bitrock coupled
-    --json` names them."""
+    --json` names them; appends each sample's bit speed (rpm), torque (kN·m) and weight on bit (kN)
+    to `record` where given."""
     b, s = bit, STRING
     n = b["n"]
     sector = 2.0 * math.pi / n
@@ -112,6 +113,8 @@ def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60
             phis.append(phi)
             surfaces.append(max(u_pos, prev_surface))
         if period >= settle_samples:
+            if record is not None:
+                record.append((w / RPM, torque / 1e3, wob / 1e3))
             is_stuck = abs(w) < STUCK_RAD_S
             if is_stuck:
                 if not (samples > 0 and last_stuck):
@@ -332,3 +335,30 @@ def test_python_chooses_the_structure_as_the_command_does(cli, tmp_path):
         bitrock.coupled_select(path, omega_rpm=45, reference=5)
     with pytest.raises(bitrock.InputError, match="no_such_column"):
         bitrock.coupled_select(path, omega_rpm=45, wob_col="no_such_column")
+
+
+def test_a_record_of_the_independent_integrator_is_chosen_for_the_coupled_bit(tmp_path):
+    """The choice on a record bitrock did not simulate: the delay-form twin's bit at 45 rpm under
+    150 kN (stick-slip), with 1 rpm, 0.3 kN·m and 3 kN of white noise, is the coupled bit's."""
+    import numpy as np
+    import pandas as pd
+
+    import bitrock
+
+    rows = []
+    stats = delay_form(45.0, wob_kn=150.0, settle=20.0, seconds=30.0, record=rows)
+    assert stats["stuck_share"] > 0.1, stats
+    rng = np.random.default_rng(11)
+    speed, torque, wob = (np.asarray(c) for c in zip(*rows))
+    path = tmp_path / "twin.csv"
+    pd.DataFrame(
+        {
+            "bit_speed_rpm": speed + rng.normal(0.0, 1.0, speed.size),
+            "torque_on_bit_knm": torque + rng.normal(0.0, 0.3, speed.size),
+            "wob_kn": wob + rng.normal(0.0, 3.0, speed.size),
+        }
+    ).to_csv(path, index=False)
+    with pytest.warns(bitrock.BitrockWarning, match="the record's mean weight on bit"):
+        chosen = bitrock.coupled_select(path, omega_rpm=45, reference=100, replicates=4, settle_s=10.0)
+    assert chosen["family"]["decided"] == "coupled", chosen["family"]["verdict"]
+    assert chosen["decided"] in (None, "RGD"), chosen["verdict"]
