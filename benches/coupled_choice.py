@@ -75,10 +75,12 @@ def main() -> None:
             p = {s["structure"]: s["probability"] for s in choice["structures"]}
             name = f"{truth} {rpm} rpm" + (f", {wob_kn} kN" if wob_kn else "")
             if fluctuation_kn:
-                name += f", weight wandering ±{fluctuation_kn} kN"
+                name += f", weight wandering ±{fluctuation_kn} kN (20 s)"
             leader = max(p, key=p.get)
             called = choice["decided"] or f"undecided ({leader} leads)"
-            print(f"| {name} | {p[truth]:.2f} | {called} | {choice['family']['decided'] or 'undecided'} | {took:.0f} s |",
+            family = {"coupled": "the coupled bit", "torsional": "a torsional law"}.get(choice["family"]["decided"],
+                                                                                       "undecided")
+            print(f"| {name} | {p[truth]:.2f} | {called} | {family} | {took:.0f} s |",
                   flush=True)
 
 

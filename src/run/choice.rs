@@ -96,10 +96,10 @@ pub const ZETA: (f64, f64) = (0.2, 1.2);
 pub const CONTACT_SHARE: (f64, f64) = (0.05, 0.95);
 /// Draws tried for one coupled candidate before its place in the table is left empty.
 const MAX_ATTEMPTS: u32 = 64;
-/// Integration step of the torsional laws' strings (s). Their RK4 with the stop and release
-/// located inside a step converges well below it: on 30 s of each law's cycle on the paper's
-/// string at 50 Hz, the stuck share, the speeds' and torques' means and peaks are those of
-/// 1 ms steps to four digits.
+/// Integration step of the torsional laws' strings (s), the strings' twin's. Their RK4, with
+/// the stop and the release located inside a step, has converged at it: on 30 s of each law's
+/// cycle on the paper's string at 50 Hz, the stuck share and the speeds' and torques' means and
+/// peaks are those of 1-ms steps to four digits.
 const TORSIONAL_DT_S: f64 = 0.01;
 
 /// The coupled bit's drawn parameters, in a candidate's order: the [`Bit`] fields they set.
