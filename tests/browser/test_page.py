@@ -104,6 +104,12 @@ def well(tmp_path_factory):
     return d
 
 
+def shown(driver, condition):
+    """Whether the page holds what `condition` (JavaScript on its state `s`) asks and has drawn it: what arrives
+    is drawn on the next animation frame, not at once."""
+    return driver.execute_script(f"const s = window.bitrockPage; return ({condition}) && !s.scheduled")
+
+
 def log_rows(driver):
     """The page's table of windows: window → (probabilities, change, advice) as shown."""
     rows = {}
@@ -163,7 +169,7 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
         driver.get(url)
         for handle in (first_tab, late):
             driver.switch_to.window(handle)
-            WebDriverWait(driver, 300).until(lambda d: d.execute_script("return window.bitrockPage.ended !== null"))
+            WebDriverWait(driver, 300).until(lambda d: shown(d, "s.ended !== null"))
         assert watch.proc.wait(60) == 0, "".join(watch.stderr)
         lines = [u for _, u in watch.lines]
         assert len(lines) == 17
@@ -301,7 +307,7 @@ def test_the_page_shows_what_the_watch_says_live(well, capsys):
     driver = browser()
     try:
         driver.get(url)
-        WebDriverWait(driver, 60).until(lambda d: d.execute_script("return window.bitrockPage.updates.length") == len(lines))
+        WebDriverWait(driver, 60).until(lambda d: shown(d, f"s.updates.length === {len(lines)}"))
         assert driver.find_element(By.ID, "most-probable").text == "m3"
     finally:
         driver.quit()
@@ -332,7 +338,7 @@ def test_a_watch_of_surface_channels_draws_the_bit_its_strings_imply(tmp_path):
     driver = browser()
     try:
         driver.get(url)
-        WebDriverWait(driver, 60).until(lambda d: d.execute_script("return window.bitrockPage.updates.length") == 2)
+        WebDriverWait(driver, 60).until(lambda d: shown(d, "s.updates.length === 2"))
         view = driver.execute_script("return window.bitrockPage.view")
         assert view["speed_rpm"] == [] and len(view["surface"]["bit_rpm"]) == 120
         drawn = inked(driver)

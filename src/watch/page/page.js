@@ -18,6 +18,8 @@ const state = {
   pending: [],
   // Each canvas's legend: rows and the right end of its widest row (CSS px).
   legends: {},
+  // Whether a frame is due to draw what has arrived: the page shows what it holds once false.
+  scheduled: false,
 };
 window.bitrockPage = state;
 
@@ -102,13 +104,12 @@ function setStatus(s) {
   }[s];
 }
 
-let scheduled = false;
 function schedule() {
-  if (scheduled) return;
-  scheduled = true;
+  if (state.scheduled) return;
+  state.scheduled = true;
   requestAnimationFrame(() => {
-    scheduled = false;
     render();
+    state.scheduled = false;
     const shown = Date.now();
     for (const p of state.pending) state.timings.push({ window: p.window, received_ms: p.received_ms, shown_ms: shown });
     state.pending = [];
