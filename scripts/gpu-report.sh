@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Measurements on a machine with a GPU, results under $OUT (default ./gpu-report): parity of the
-# scorers, the simulated strings' throughput (the torsional and the coupled bit's), the simulated maps on GPU and CPU (compared
-# afterwards cell by cell), the evidence's timing and the benchmark with the scoring shapes
-# re-measured. Run from the project's root with the release binary built
-# (`cargo build --release`); see docs/benchmarks.md for how it is run on a lent NVIDIA machine.
+# Measurements on a machine with a GPU, results under $OUT (default ./gpu-report), most wanted
+# first so that a lease cut short still brings them back: parity of the scorers, the coupled
+# bit's and a surface record's throughput, the torsional strings', the evidence's and the demo's
+# timing, the benchmark with the scoring shapes re-measured, the GPU-facing integration tests
+# (where $IT names the test binary, `cargo test --release --test it --no-run`), then the
+# simulated maps on GPU and CPU (compared afterwards cell by cell) and the CPU's figures.
+# Run from the project's root with the release binary built (`cargo build --release`); see
+# docs/benchmarks.md for how it is run on a lent NVIDIA machine.
 set -u
 OUT=${OUT:-gpu-report}
 mkdir -p "$OUT"
@@ -16,12 +19,18 @@ step() { # name timeout command...
     local rc=$?
     echo "$name rc=$rc wall_ms=$(( ($(date +%s%N) - t0) / 1000000 ))" | tee -a "$OUT/steps.txt"
 }
-nproc >"$OUT/machine.txt"; date -u >>"$OUT/machine.txt"
+{ nproc; date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1; } >"$OUT/machine.txt"
 step devices 30 "$B" devices
-step parity 120 "$B" parity
-step strings_gpu 150 "$B" bench --strings --backend gpu --reps 3 --strings-n 131072 --json
-step strings_cpu 120 "$B" bench --strings --backend cpu --reps 1 --strings-n 16384 --quick --json
-step coupled_gpu 150 "$B" bench --coupled --backend gpu --reps 3 --strings-n 100000 --json
+step parity 90 "$B" parity
+step coupled_gpu 120 "$B" bench --coupled --backend gpu --reps 3 --strings-n 100000 --json
+step surface_gpu 120 "$B" bench --surface --backend gpu --reps 3 --json
+step strings_gpu 120 "$B" bench --strings --backend gpu --reps 3 --json
+for i in 1 2 3; do step "evidence_gpu_$i" 60 "$B" evidence --backend gpu --start-from box; done
+step demo 90 "$B" demo --out "$(mktemp -d)/demo"
+step bench_retune 150 "$B" bench --retune --reps 3 --json
+if [ -n "${IT:-}" ]; then
+    step tests 180 "$IT" --test-threads "$(nproc)" gpu strings:: coupled:: tune:: uniform:: surface::
+fi
 step coupled_map_gpu 60 "$B" coupled --map --wob-kn 150 --map-rpm 20:220:41 --map-wob-kn 60:300:25 --backend gpu --json
 step map_100x100x200_gpu 120 "$B" stability --law m2 --params 13,6.5,0.3 --simulate --at-rpm 60 --at-kn 244.2 \
     --sim-omega-rpm 20:220:100 --sim-wob-kn 20:700:100 --sim-samples 200 --backend gpu --json
@@ -29,5 +38,7 @@ for b in gpu cpu; do
     step "sim_posterior_$b" 120 "$B" stability --run "${RUN_DIR:-tests/it/fixtures/runs/smc}" --simulate --at-rpm 60 --at-kn 244.2 \
         --sim-omega-rpm 20:220:21 --sim-wob-kn 20:700:18 --sim-samples 20 --backend "$b" --json
 done
-for i in 1 2 3; do step "evidence_gpu_$i" 60 "$B" evidence --backend gpu --start-from box; done
-step bench_retune 200 "$B" bench --retune --reps 3 --json
+step surface_cpu 120 "$B" bench --surface --backend cpu --reps 1 --json
+step strings_cpu 120 "$B" bench --strings --backend cpu --reps 1 --strings-n 16384 --quick --json
+step coupled_cpu 120 "$B" bench --coupled --backend cpu --reps 1 --strings-n 4096 --json
+step watch 120 "$B" bench --watch --json
