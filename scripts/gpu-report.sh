@@ -6,7 +6,9 @@
 # (where $IT names the test binary, `cargo test --release --test it --no-run`), then the
 # simulated maps on GPU and CPU (compared afterwards cell by cell) and the CPU's figures.
 # Run from the project's root with the release binary built (`cargo build --release`); see
-# docs/benchmarks.md for how it is run on a lent NVIDIA machine.
+# docs/benchmarks.md for how it is run on a lent NVIDIA machine. Where $ARCHIVE names a file, the
+# whole report is packed into it after every step: a lent machine returns only a few files, and
+# a run cut short still returns the steps it finished.
 set -u
 OUT=${OUT:-gpu-report}
 mkdir -p "$OUT"
@@ -18,6 +20,7 @@ step() { # name timeout command...
     timeout "$limit" "$@" >"$OUT/$name.out" 2>"$OUT/$name.err"
     local rc=$?
     echo "$name rc=$rc wall_ms=$(( ($(date +%s%N) - t0) / 1000000 ))" | tee -a "$OUT/steps.txt"
+    if [ -n "${ARCHIVE:-}" ]; then tar czf "$ARCHIVE.part" -C "$OUT" . && mv "$ARCHIVE.part" "$ARCHIVE"; fi
 }
 { nproc; date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1; } >"$OUT/machine.txt"
 step devices 30 "$B" devices
