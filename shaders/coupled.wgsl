@@ -60,6 +60,20 @@ struct CoupledJob {
 
 // Where this invocation's ring starts in `states`.
 var<private> ring_at: u32;
+// The ring cell just ahead of the bit and its height: a cell a step reads about ten times before
+// the bit crosses it, kept here rather than read from storage at every step (on a CPU driver a
+// read per lane is a gather). Written through wherever the ring changes; NO_CELL until read.
+const NO_CELL: u32 = 0xffffffffu;
+var<private> ahead_cell: u32 = NO_CELL;
+var<private> ahead_height: f32 = 0.0;
+
+// Writes a ring cell, and the copy of it ahead of the bit where it is that cell.
+fn set_cell(c: u32, height: f32) {
+    states[ring_at + c] = height;
+    if (c == ahead_cell) {
+        ahead_height = height;
+    }
+}
 
 struct Bit {
     blades: f32,
@@ -89,17 +103,29 @@ struct Forces {
     dn: f32,
 }
 
+// A cell index k into the ring: k mod RING_CELLS. The indices met lie in [-2·RING_CELLS,
+// 2·RING_CELLS) (a step crosses at most RING_CELLS cells from a phase within one sector), so
+// selects do it; an integer modulo has no vector form on a CPU driver and costs a division per
+// lane.
 fn wrap(k: f32) -> u32 {
     let m = i32(RING_CELLS);
-    return u32(((i32(k) % m) + m) % m);
+    var j = i32(k);
+    j = select(j, j + m, j < 0);
+    j = select(j, j + m, j < 0);
+    j = select(j, j - m, j >= m);
+    return u32(j);
 }
 
 fn surface(b: Bit, s: State) -> f32 {
     let x = s.phase / b.cell - 0.5;
     let behind = floor(x);
     let frac = x - behind;
-    let ahead = states[ring_at + wrap(behind + 1.0)];
-    return s.behind_old + frac * (ahead - s.behind_old);
+    let c = wrap(behind + 1.0);
+    if (c != ahead_cell) {
+        ahead_cell = c;
+        ahead_height = states[ring_at + c];
+    }
+    return s.behind_old + frac * (ahead_height - s.behind_old);
 }
 
 fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32) -> State {
@@ -117,7 +143,7 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32) -> 
             let depth = depth_from + (depth_to - depth_from) * (at - start) / turn;
             let c = wrap(k);
             s.behind_old = states[ring_at + c];
-            states[ring_at + c] = max(s.behind_old, depth);
+            set_cell(c, max(s.behind_old, depth));
             k = k + 1.0;
             crossed = crossed + 1u;
         }
@@ -130,7 +156,7 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32) -> 
             }
             let c = wrap(k);
             let before = wrap(k - 1.0);
-            states[ring_at + c] = s.behind_old;
+            set_cell(c, s.behind_old);
             s.behind_old = states[ring_at + before];
             k = k - 1.0;
             crossed = crossed + 1u;
@@ -208,6 +234,7 @@ fn step(b: Bit, s_in: State, dt: f32) -> Stepped {
         for (var c = 0u; c < RING_CELLS; c = c + 1u) {
             states[ring_at + c] = states[ring_at + c] - by;
         }
+        ahead_height = ahead_height - by;
         s.behind_old = s.behind_old - by;
         s.depth = 0.0;
     }
