@@ -108,8 +108,12 @@ function schedule() {
   if (state.scheduled) return;
   state.scheduled = true;
   requestAnimationFrame(() => {
-    render();
-    state.scheduled = false;
+    // A frame that fails to draw must not keep the page from drawing the next data.
+    try {
+      render();
+    } finally {
+      state.scheduled = false;
+    }
     const shown = Date.now();
     for (const p of state.pending) state.timings.push({ window: p.window, received_ms: p.received_ms, shown_ms: shown });
     state.pending = [];
