@@ -20,11 +20,14 @@ step() { # name timeout command...
     timeout "$limit" "$@" >"$OUT/$name.out" 2>"$OUT/$name.err"
     local rc=$?
     echo "$name rc=$rc wall_ms=$(( ($(date +%s%N) - t0) / 1000000 ))" | tee -a "$OUT/steps.txt"
+    # A failing step's last lines on standard output too, which a lent machine always returns.
+    if [ "$rc" -ne 0 ]; then tail -n 40 "$OUT/$name.out" "$OUT/$name.err"; fi
     if [ -n "${ARCHIVE:-}" ]; then tar czf "$ARCHIVE.part" -C "$OUT" . && mv "$ARCHIVE.part" "$ARCHIVE"; fi
 }
 { nproc; date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1; } >"$OUT/machine.txt"
 step devices 30 "$B" devices
 step parity 90 "$B" parity
+cat "$OUT/parity.out"
 step coupled_gpu 120 "$B" bench --coupled --backend gpu --reps 3 --strings-n 100000 --json
 step surface_gpu 120 "$B" bench --surface --backend gpu --reps 3 --json
 step strings_gpu 120 "$B" bench --strings --backend gpu --reps 3 --json
