@@ -15,6 +15,7 @@ pub(super) fn check(
     replicates: usize,
     seed: u64,
     cycle: &Cycle,
+    unconverged: Option<f64>,
 ) -> Result<ModelCheck> {
     let neighbours = (table.len() / 20).max(10).min(table.len());
     let classify = |s: &Summaries| -> usize {
@@ -59,7 +60,7 @@ pub(super) fn check(
             recognised: counts[slot] as f64 / seen as f64,
         });
     }
-    let (decided, verdict) = verdict(laws, &rows, cycle);
+    let (decided, verdict) = verdict(laws, &rows, cycle, unconverged);
     Ok(ModelCheck {
         reference: table.len(),
         neighbours,
@@ -69,14 +70,32 @@ pub(super) fn check(
     })
 }
 
-/// The law called and why (see [`CHECK_RECOGNISED`]).
-pub(super) fn verdict(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> (Option<Law>, String) {
+/// The law called and why (see [`CHECK_RECOGNISED`]). None is called while the sampler's
+/// strings do not reproduce the record (`unconverged`: its final tolerance, in noise floors, at
+/// [`UNCONVERGED_FACTOR`] or more): the leader is then only the least wrong of the laws tried,
+/// and a law the sampler has not yet found near the record (a wide box, a law lost from the
+/// populations, which then takes no part in the check) may be the one that made it.
+pub(super) fn verdict(
+    laws: &[LawPosterior],
+    rows: &[CheckRow],
+    cycle: &Cycle,
+    unconverged: Option<f64>,
+) -> (Option<Law>, String) {
     if let Some(why) = cycle.uninformative("record") {
         return (None, format!("{why}; no law is called"));
     }
     let Some(best) = laws.iter().max_by(|a, b| a.probability.total_cmp(&b.probability)) else {
         return (None, "no law has particles".into());
     };
+    if let Some(times) = unconverged {
+        return (
+            None,
+            format!(
+                "{} leads (P = {:.2}), but the sampler stopped at {times:.1} times the noise's own distance: its strings do not yet reproduce the record, and a law it has not found near the record may be the one that made it; no law is called (raise `max_populations` or `particles`)",
+                best.law, best.probability
+            ),
+        );
+    }
     let recognised = |law: Law| rows.iter().find(|r| r.law == law).map_or(0.0, |r| r.recognised);
     let taken_for_best = |r: &CheckRow| {
         let n: usize = r.classified_as.iter().map(|c| c.1).sum();

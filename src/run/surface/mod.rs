@@ -654,6 +654,7 @@ pub fn infer_continuing(
         settings.check_replicates,
         seed,
         &cycle,
+        unconverged(last.record.epsilon, noise_floor),
     )?;
     simulations += check.rows.iter().map(|r| r.replicates as u64).sum::<u64>();
     let mut at_the_bit = at_the_bit(&model, particles, settings.predictive_draws, seed)?;
@@ -722,14 +723,20 @@ fn damping_warning(bounds: Option<&StringBounds>) -> Option<String> {
         })
 }
 
+/// How many times the noise floor the sampler's final tolerance `epsilon` lies, where that is
+/// [`UNCONVERGED_FACTOR`] or more: its strings do not yet reproduce the record.
+fn unconverged(epsilon: Option<f64>, floor: f64) -> Option<f64> {
+    let epsilon = epsilon.unwrap_or(f64::INFINITY);
+    (floor > 0.0 && epsilon >= UNCONVERGED_FACTOR * floor).then_some(epsilon / floor)
+}
+
 /// The warning of a sampler that stopped at `epsilon` far above the noise floor; where the
 /// string was given whole, a wrong string is the other cause named.
 fn convergence_warning(epsilon: Option<f64>, floor: f64, string_given: bool) -> Option<String> {
-    let epsilon = epsilon.unwrap_or(f64::INFINITY);
-    (floor > 0.0 && epsilon >= UNCONVERGED_FACTOR * floor).then(|| {
+    unconverged(epsilon, floor).map(|times| {
         format!(
-            "the sampler stopped at ε = {epsilon:.3}, {:.1} times the noise's own distance {floor:.3}: the strings do not yet reproduce the record, and the posterior and the bit's figures are wider or further off than the record allows; raise `max_populations` or `particles`{}",
-            epsilon / floor,
+            "the sampler stopped at ε = {:.3}, {times:.1} times the noise's own distance {floor:.3}: the strings do not yet reproduce the record, and the posterior and the bit's figures are wider or further off than the record allows; raise `max_populations` or `particles`{}",
+            epsilon.unwrap_or(f64::INFINITY),
             if string_given {
                 ", or, where the string's natural frequency or damping is not known, infer it by giving bounds for it (`omega_n_rad_s`, `damping_ratio`)"
             } else {
@@ -927,15 +934,37 @@ mod tests {
         // m1 holds 0.97 and its own records are all recognised, but m2's are all taken for m1:
         // the probabilities cannot excuse m2 from the check.
         let laws = [posterior(Law::M1, 0.97), posterior(Law::M2, 0.03)];
-        let (decided, text) = verdict(&laws, &[row(Law::M1, 10, 0), row(Law::M2, 10, 0)], &CYCLING);
+        let (decided, text) = verdict(&laws, &[row(Law::M1, 10, 0), row(Law::M2, 10, 0)], &CYCLING, None);
         assert_eq!(decided, None, "{text}");
         assert!(text.contains("undecided between m1 and m2"), "{text}");
         // With m2's records recognised as m2 (two of ten taken for m1), m1 is called.
-        let (decided, text) = verdict(&laws, &[row(Law::M1, 10, 0), row(Law::M2, 2, 8)], &CYCLING);
+        let (decided, text) = verdict(&laws, &[row(Law::M1, 10, 0), row(Law::M2, 2, 8)], &CYCLING, None);
         assert_eq!(decided, Some(Law::M1), "{text}");
         // A leader whose own records are recognised seven times in ten is not called.
-        let (decided, _) = verdict(&laws, &[row(Law::M1, 7, 3), row(Law::M2, 0, 10)], &CYCLING);
+        let (decided, _) = verdict(&laws, &[row(Law::M1, 7, 3), row(Law::M2, 0, 10)], &CYCLING, None);
         assert_eq!(decided, None);
+    }
+
+    #[test]
+    fn a_sampler_whose_strings_do_not_reproduce_the_record_calls_no_law() {
+        // m1's records recognised, m2's never taken for it: called where the sampler reached
+        // the record, not where it stopped at four noise floors or more (UNCONVERGED_FACTOR).
+        let laws = [posterior(Law::M1, 0.97), posterior(Law::M2, 0.03)];
+        let rows = [row(Law::M1, 10, 0), row(Law::M2, 0, 10)];
+        let converged = unconverged(Some(0.39), 0.1);
+        assert_eq!(converged, None);
+        assert_eq!(verdict(&laws, &rows, &CYCLING, converged).0, Some(Law::M1));
+        let far = unconverged(Some(0.58), 0.1);
+        assert!(far.is_some_and(|t| (t - 5.8).abs() < 1e-12), "{far:?}");
+        let (decided, text) = verdict(&laws, &rows, &CYCLING, far);
+        assert_eq!(decided, None, "{text}");
+        assert!(
+            text.starts_with("m1 leads (P = 0.97), but the sampler stopped at 5.8 times the noise's own distance")
+                && text.contains("no law is called"),
+            "{text}"
+        );
+        // A sampler that never got a finite tolerance has reproduced nothing.
+        assert_eq!(unconverged(None, 0.1), Some(f64::INFINITY));
     }
 
     #[test]
@@ -947,7 +976,7 @@ mod tests {
             cycles: 2.5,
             strength: 0.9,
         };
-        let (decided, text) = verdict(&laws, &rows, &few);
+        let (decided, text) = verdict(&laws, &rows, &few, None);
         assert_eq!(decided, None);
         assert!(text.contains("2.5 cycles") && text.contains("fewer than 3"), "{text}");
         let none = Cycle {
@@ -959,6 +988,6 @@ mod tests {
     }
 
     fn verdict_text(laws: &[LawPosterior], rows: &[CheckRow], cycle: &Cycle) -> String {
-        verdict(laws, rows, cycle).1
+        verdict(laws, rows, cycle, None).1
     }
 }
