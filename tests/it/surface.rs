@@ -93,8 +93,24 @@ fn read(path: &std::path::Path) -> SurfaceRecord {
     SurfaceRecord::read(path, &SurfaceOptions::default()).unwrap()
 }
 
+/// The surface run of `path`; every one is checked to call no law where its sampler stopped at
+/// `UNCONVERGED_FACTOR` noise floors or more, saying so.
 fn run(path: &std::path::Path, settings: &SurfaceSettings, seed: u64) -> SurfaceResult {
-    infer(&read(path), settings, seed, &mut |_| {}).unwrap()
+    let r = infer(&read(path), settings, seed, &mut |_| {}).unwrap();
+    let epsilon = r.final_epsilon.unwrap_or(f64::INFINITY);
+    if r.cycle.informs() && r.noise_floor > 0.0 && epsilon >= bitrock::run::surface::UNCONVERGED_FACTOR * r.noise_floor
+    {
+        assert_eq!(r.check.decided, None, "{}", r.check.verdict);
+        assert!(
+            r.check.verdict.contains("times the noise's own distance")
+                && r.check
+                    .verdict
+                    .ends_with("no law is called (raise `max_populations` or `particles`)"),
+            "{}",
+            r.check.verdict
+        );
+    }
+    r
 }
 
 #[test]
