@@ -110,5 +110,23 @@ pub(super) fn verdict(
         .filter(|r| taken_for_best(r) > CHECK_CONFUSED)
         .map(|r| r.law)
         .collect();
-    crate::run::answer::resimulation_verdict(best.law, best.probability, recognised(best.law), &confused, "law")
+    let (decided, text) =
+        crate::run::answer::resimulation_verdict(best.law, best.probability, recognised(best.law), &confused, "law");
+    // A law the sampler lost has no records to re-simulate: the call holds for the laws it kept,
+    // and says which it could not test (a wide box can lose the law that made the record).
+    let lost: Vec<String> = laws
+        .iter()
+        .filter(|l| l.particles == 0)
+        .map(|l| l.law.to_string())
+        .collect();
+    match decided {
+        Some(_) if !lost.is_empty() => (
+            decided,
+            format!(
+                "{text}; {} left the populations and could not be tested",
+                lost.join(", ")
+            ),
+        ),
+        _ => (decided, text),
+    }
 }

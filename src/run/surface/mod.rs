@@ -968,6 +968,21 @@ mod tests {
     }
 
     #[test]
+    fn a_call_names_the_laws_the_sampler_lost() {
+        let lost = LawPosterior {
+            particles: 0,
+            ..posterior(Law::M2, 0.0)
+        };
+        let laws = [posterior(Law::M1, 1.0), lost];
+        let (decided, text) = verdict(&laws, &[row(Law::M1, 10, 0)], &CYCLING, None);
+        assert_eq!(decided, Some(Law::M1), "{text}");
+        assert!(
+            text.ends_with("and no other law's are taken for it; m2 left the populations and could not be tested"),
+            "{text}"
+        );
+    }
+
+    #[test]
     fn a_record_without_enough_cycles_calls_no_law() {
         let laws = [posterior(Law::M1, 0.97), posterior(Law::M2, 0.03)];
         let rows = [row(Law::M1, 10, 0), row(Law::M2, 0, 10)];
