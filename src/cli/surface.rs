@@ -411,7 +411,7 @@ pub(super) fn check_table(out: &mut impl Write, r: &SurfaceResult) -> std::io::R
             law.probability
         )?;
     }
-    writeln!(out, "verdict: {}", r.check.verdict)
+    writeln!(out, "verdict: {}", super::fields::as_flags(&r.check.verdict))
 }
 
 /// Each law's posterior medians and 90 % intervals, in the record's torque unit.
