@@ -139,12 +139,14 @@ fn param_bits(p: &bitrock::abc::Particle) -> Vec<u64> {
 per_shape! {
 fn rho_agrees_with_the_cpu_for_every_law(shape: Shape) {
     require_gpu();
+    // 20,000 candidates of each law over more than one group of 4,096 samples; on lavapipe
+    // the largest difference stays under a tenth of the tolerance (7.3e-7, m2 blocked).
     for law in Law::ALL {
         let problem = demo_problem(&[law], 11);
         assert!(problem.data_len() >= 5_000);
-        let (max, median) = rho_difference(&problem, 100_000, shape);
+        let (max, median) = rho_difference(&problem, 20_000, shape);
         eprintln!(
-            "{shape} {law}: largest relative difference of rho {max:.2e}, median {median:.2e} (100,000 candidates, D = {})",
+            "{shape} {law}: largest relative difference of rho {max:.2e}, median {median:.2e} (20,000 candidates, D = {})",
             problem.data_len()
         );
         assert!(max <= PARITY_TOLERANCE, "{law}: {max:e} > {PARITY_TOLERANCE:e}");
