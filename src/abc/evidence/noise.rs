@@ -237,23 +237,30 @@ pub fn ar1_log_likelihood(s: &LagSums, half_n: f64) -> f64 {
         return f64::NEG_INFINITY;
     }
     // Nodes outwards from the mode until the integrand lies TAIL_NATS below it (a skewed or
-    // heavy tail towards |φ| = 1 gets as many nodes as it needs) or u reaches its limit.
-    let mut values = vec![peak];
-    for direction in [-1.0, 1.0] {
-        for k in 1..MAX_NODES {
-            let v = u + direction * f64::from(k) * spacing;
-            if v.abs() > U_LIMIT {
-                break;
-            }
-            let value = log_integrand(s, v, half_n);
-            values.push(value);
-            if value < peak - TAIL_NATS {
-                break;
+    // heavy tail towards |φ| = 1 gets as many nodes as it needs) or u reaches its limit. The
+    // nodes' buffer is the thread's own, kept between calls: this runs once per candidate.
+    thread_local! {
+        static NODES: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+    NODES.with_borrow_mut(|values| {
+        values.clear();
+        values.push(peak);
+        for direction in [-1.0, 1.0] {
+            for k in 1..MAX_NODES {
+                let v = u + direction * f64::from(k) * spacing;
+                if v.abs() > U_LIMIT {
+                    break;
+                }
+                let value = log_integrand(s, v, half_n);
+                values.push(value);
+                if value < peak - TAIL_NATS {
+                    break;
+                }
             }
         }
-    }
-    let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    max + values.iter().map(|v| (v - max).exp()).sum::<f64>().ln() + spacing.ln()
+        let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        max + values.iter().map(|v| (v - max).exp()).sum::<f64>().ln() + spacing.ln()
+    })
 }
 
 /// Nats by which the data must prefer AR(1) residuals to i.i.d. ones at every law's best fit
