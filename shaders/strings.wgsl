@@ -38,12 +38,12 @@ struct StringsJob {
     beta: f32,
     stuck_speed: f32,
     // On a record's clock: the settling's step (s). The slice this dispatch integrates: of the
-    // sample periods (`main`), or of the steps counted from the first settling step
-    // (`on_clock`).
+    // steps counted from the first settling step.
     settle_dt_s: f32,
     first_step: u32,
     end_step: u32,
-    _pad0: u32,
+    // The host's most steps a slice; unused here.
+    slice_steps: u32,
     inertia: array<vec4<f32>, 4>,
     stiffness: array<vec4<f32>, 4>,
 }
@@ -314,12 +314,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             return;
         }
     }
-    // This dispatch's slice of the sample periods (settling's first): lavapipe ends an
-    // invocation's loops after 65,535 iterations together, so the host slices.
-    for (var period = job.first_step; period < job.end_step; period = period + 1u) {
-        for (var k = 0u; k < job.steps_per_sample; k = k + 1u) {
-            m = step(m, job.dt_s);
+    // This dispatch's slice of the steps, counted from the settling's first: lavapipe ends an
+    // invocation's loops after 65,535 iterations together (the loops over the nodes counted
+    // too), so the host slices, inside a sample period where a period holds too many steps.
+    var k = job.first_step % job.steps_per_sample;
+    var period = job.first_step / job.steps_per_sample;
+    for (var s = job.first_step; s < job.end_step; s = s + 1u) {
+        m = step(m, job.dt_s);
+        k = k + 1u;
+        if (k < job.steps_per_sample) {
+            continue;
         }
+        k = 0u;
         let w = m.s.w[NODES - 1u];
         // A NaN fails both comparisons: diverged.
         if (!(abs(w) <= runaway) || !(abs(m.s.u[NODES - 1u]) < 3.0e38)) {
@@ -350,6 +356,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             samples = samples + 1u;
             last_stuck = stuck;
         }
+        period = period + 1u;
     }
 
     // The nodes past the chain's keep what they held.

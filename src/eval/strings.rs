@@ -28,7 +28,11 @@ impl std::fmt::Display for Ran {
 }
 
 /// The batch's summaries and final states, in order, on `backend` (a GPU that cannot be set up
-/// under `auto`: said through `note`, the CPU computes).
+/// under `auto`: said through `note`, the CPU computes). Under `auto` a software driver takes
+/// the 1-DOF string, which it runs faster than the twin on the same cores, and leaves a chain of
+/// more nodes to the CPU: it holds their arrays in memory, not registers (`bitrock bench
+/// --strings --quick` on two cores: the ten-element string 1.9e3 string-s/s on lavapipe, 6.7e4
+/// on the twin; the 1-DOF string 7.1e5 against 3.8e5).
 pub fn integrate(
     chain: &Chain,
     schedule: &Schedule,
@@ -36,6 +40,18 @@ pub fn integrate(
     backend: Backend,
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<(Summary, StringState)>, Ran)> {
+    if backend == Backend::Auto
+        && chain.nodes() > 1
+        && let Ok(ctx) = gpu::context()
+        && ctx.is_software()
+    {
+        note(format!(
+            "auto: simulated strings of {} nodes on the CPU rather than the software GPU {}, which runs them on the same cores more slowly (`backend gpu` insists on it)",
+            chain.nodes(),
+            ctx.describe()
+        ));
+        return Ok((strings::integrate_batch(chain, schedule, jobs), Ran::Cpu));
+    }
     on_backend(
         backend,
         note,

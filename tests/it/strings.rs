@@ -125,6 +125,51 @@ fn the_kernel_integrates_the_lumped_fe_string_as_its_cpu_twin_does() {
     assert_both_kinds(&compare(&chain, &schedule, &jobs));
 }
 
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn the_kernel_integrates_the_ten_element_string_through_every_slice_of_its_steps() {
+    require_gpu();
+    // The benchmark's string: ten nodes at 1e-4 s, 200 steps a sample, 15,000 steps in all.
+    // lavapipe counts the loops over the nodes against an invocation's 65,535 iterations, so
+    // the host slices the steps by the chain's length: every sample must come back.
+    let fe = DrillString {
+        dp_elements: 8,
+        bha_elements: 2,
+        ..DrillString::default()
+    };
+    let chain = Chain::lumped_fe(&fe).unwrap();
+    assert_eq!(chain.nodes(), 10);
+    let jobs: Vec<StringJob> = jobs(&chain).into_iter().step_by(10).collect();
+    let schedule = Schedule::new(1e-4, 50.0, 0.5, 1.0).unwrap();
+    let cpu = compare(&chain, &schedule, &jobs);
+    assert!(cpu.iter().all(|(s, _)| s.diverged || s.samples == 50));
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn auto_leaves_a_chain_of_nodes_to_the_cpu_only_where_the_gpu_is_a_software_driver() {
+    require_gpu();
+    let software = bitrock::eval::gpu::context().unwrap().is_software();
+    let schedule = Schedule::new(0.01, 50.0, 1.0, 2.0).unwrap();
+    let one_dof = Chain::one_dof(&Lumped::default());
+    let fe = Chain::lumped_fe(&DrillString::default()).unwrap();
+    for (chain, on_cpu) in [(&one_dof, false), (&fe, software)] {
+        let all = jobs(chain);
+        let mut notes = Vec::new();
+        let (auto, ran) =
+            strings::integrate(chain, &schedule, &all[..8], Backend::Auto, &mut |n| notes.push(n)).unwrap();
+        assert_eq!(ran == strings::Ran::Cpu, on_cpu, "{} nodes: {ran}", chain.nodes());
+        let said = notes
+            .iter()
+            .any(|n| n.contains("nodes on the CPU rather than the software GPU"));
+        assert_eq!(said, on_cpu, "{notes:?}");
+        if on_cpu {
+            let (cpu, _) = strings::integrate(chain, &schedule, &all[..8], Backend::Cpu, &mut |_| {}).unwrap();
+            assert_eq!(auto, cpu);
+        }
+    }
+}
+
 /// m2 at the paper's estimate and 244 kN, in stick-slip at 60 rpm: the simulated escape.
 fn m2_escape(backend: Backend) -> (Grid, f64) {
     let law = Law::M2;

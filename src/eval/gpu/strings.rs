@@ -36,7 +36,8 @@ struct StringsJob {
     settle_dt_s: f32,
     first_step: u32,
     end_step: u32,
-    _pad: u32,
+    /// The most steps a dispatch integrates (the host's: the kernel ignores it).
+    slice_steps: u32,
     inertia: [f32; MAX_NODES],
     stiffness: [f32; MAX_NODES],
 }
@@ -57,6 +58,16 @@ pub fn integrate_batch(
         schedule.record_samples,
     );
     job.dt_s = schedule.dt_s as f32;
+    job.slice_steps = steps_per_slice(chain.nodes());
+    let periods = u64::from(schedule.settle_samples + schedule.record_samples);
+    let steps = periods * u64::from(schedule.steps_per_sample);
+    if steps > u64::from(u32::MAX) {
+        return Err(GpuError::TooLarge(format!(
+            "{steps} integration steps a string ({periods} sample periods of {}); at most {} on the GPU",
+            schedule.steps_per_sample,
+            u32::MAX
+        )));
+    }
     job.alpha = chain.alpha_per_s as f32;
     job.beta = chain.beta_s as f32;
     job.stuck_speed = STUCK_SPEED_RAD_S as f32;
@@ -64,18 +75,31 @@ pub fn integrate_batch(
         job.inertia[j] = chain.inertia_kg_m2[j] as f32;
         job.stiffness[j] = chain.stiffness_nm_per_rad[j] as f32;
     }
-    // From no sample periods (0..0) to the first slice of them.
-    super::string_batch::StringsUniform::next_slice(&mut job);
-    for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        out.extend(run_chunk(ctx, &kernel, job, chunk)?);
-    }
-    // A driver that ends a kernel's loops early must not pass for a shorter record.
     let expected = schedule.record_samples;
-    if let Some((s, _)) = out.iter().find(|(s, _)| !s.diverged && s.samples != expected) {
-        return Err(GpuError::Readback(format!(
-            "a string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
-            s.samples
-        )));
+    for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
+        // A driver that ends a kernel's loops early must not pass for a shorter record: the
+        // chunk runs again in slices a quarter as long (slicing changes no result), down to
+        // one step a slice.
+        let mut job = job;
+        loop {
+            // From no steps (0..0) to the first slice of them.
+            (job.first_step, job.end_step) = (0, 0);
+            super::string_batch::StringsUniform::next_slice(&mut job);
+            let got = run_chunk(ctx, &kernel, job, chunk)?;
+            match got.iter().find(|(s, _)| !s.diverged && s.samples != expected) {
+                None => {
+                    out.extend(got);
+                    break;
+                }
+                Some(_) if job.slice_steps > 1 => job.slice_steps = (job.slice_steps / 4).max(1),
+                Some((s, _)) => {
+                    return Err(GpuError::Readback(format!(
+                        "a string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
+                        s.samples
+                    )));
+                }
+            }
+        }
     }
     Ok(out)
 }
@@ -116,10 +140,16 @@ const TRACE_BYTES_PER_CHUNK: usize = 64 << 20;
 /// Words of state per string on a record's clock. Keep in sync with shaders/strings.wgsl.
 const CLOCK_STATE_WORDS: usize = 8;
 
-/// Most steps a string integrates per dispatch: lavapipe ends an invocation's loops after
-/// 65,535 iterations together, and a step runs up to five (the step and its passes through a
-/// stop or a release).
-const STEPS_PER_SLICE: u32 = 6_000;
+/// Most steps a string of `nodes` nodes integrates per dispatch at first: lavapipe ends an
+/// invocation's loops after 65,535 iterations together, its loops over the nodes counted too,
+/// and runs eight strings as one: a step is a pass of the step loop and of the event loop and,
+/// where some of the eight are stuck and some slip, both branches' RK4 steps, each eight loops
+/// over the nodes (four derivatives, three intermediate states, the update). 60,000 iterations
+/// of those leave the rest for stops and releases; a chunk that still comes back short runs
+/// again in shorter slices ([`integrate_batch`]). One node: 3,333 steps; ten: 370.
+fn steps_per_slice(nodes: usize) -> u32 {
+    60_000 / (2 + 16 * nodes as u32)
+}
 
 /// A job on a record's clock, sliced: each slice a span of its steps.
 #[repr(transparent)]
@@ -147,7 +177,7 @@ impl super::string_batch::StringsUniform for OnClockUniform {
             return false;
         }
         j.first_step = j.end_step;
-        j.end_step = (j.first_step + STEPS_PER_SLICE).min(total);
+        j.end_step = (j.first_step + j.slice_steps).min(total);
         true
     }
 }
@@ -188,6 +218,7 @@ pub fn on_clock_batch(
         (job.settle_steps, job.settle_dt_s) = steps_of(integration.settle_s);
     }
     job.stuck_speed = STUCK_SPEED_RAD_S as f32;
+    job.slice_steps = steps_per_slice(1);
     job.inertia[0] = first.chain.inertia_kg_m2[0] as f32;
     let steps = u64::from(job.settle_steps) + (samples as u64 - 1) * u64::from(sample_steps);
     if steps > u64::from(u32::MAX) {
@@ -253,21 +284,27 @@ pub fn on_clock_batch(
     Ok(out)
 }
 
+impl StringsJob {
+    /// Steps in all, the settling's first (at most `u32::MAX`: [`integrate_batch`] refuses
+    /// longer schedules).
+    fn steps(&self) -> u32 {
+        (self.head.settle_samples + self.head.record_samples) * self.head.steps_per_sample
+    }
+}
+
 impl super::string_batch::StringsUniform for StringsJob {
     fn head(&mut self) -> &mut Head {
         &mut self.head
     }
 
-    /// The next slice of sample periods (the settling's first), as many as
-    /// [`STEPS_PER_SLICE`] steps hold (one at least).
+    /// The next slice of the steps (the settling's first), [`steps_per_slice`] of them.
     fn next_slice(&mut self) -> bool {
-        let periods = self.head.settle_samples + self.head.record_samples;
-        if self.end_step >= periods {
+        let total = self.steps();
+        if self.end_step >= total {
             return false;
         }
-        let per_slice = (STEPS_PER_SLICE / self.head.steps_per_sample.max(1)).max(1);
         self.first_step = self.end_step;
-        self.end_step = (self.first_step + per_slice).min(periods);
+        self.end_step = (self.first_step + self.slice_steps).min(total);
         true
     }
 }
