@@ -33,7 +33,8 @@ struct CoupledJob {
     end_period: u32,
     // 1 where the host wrote each string's start into `states`, 0 for steady drilling.
     start_given: u32,
-    _pad1: u32,
+    // The host's most steps a slice; unused here.
+    slice_steps: u32,
     _pad2: u32,
     dt_s: f32,
     mass_kg: f32,

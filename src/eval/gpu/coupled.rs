@@ -16,9 +16,10 @@ const SUMMARY_WORDS: usize = 23;
 /// summary 92), 296 MB for the chunk.
 const STRINGS_PER_CHUNK: usize = 1 << 18;
 
-/// Most steps one invocation integrates per dispatch: lavapipe stops an invocation's loops
-/// after 65,535 iterations together, and a step runs up to about six (the step, the cells it
-/// crosses, a share of a rebase), so each dispatch integrates a slice of the sample periods.
+/// Most steps one invocation integrates per dispatch at first: lavapipe stops an invocation's
+/// loops after 65,535 iterations together, and a step runs up to about six (the step, the cells
+/// it crosses, a share of a rebase), so each dispatch integrates a slice of the sample periods;
+/// a chunk the driver still cuts short runs again in shorter slices ([`integrate_batch`]).
 pub const STEPS_PER_SLICE: u32 = 6_000;
 
 /// Strings per dispatch: each dispatch is its own submission, so that no single one runs long
@@ -34,7 +35,8 @@ struct KernelJob {
     first_period: u32,
     end_period: u32,
     start_given: u32,
-    _pad1: u32,
+    /// The most steps a dispatch integrates (the host's: the kernel ignores it).
+    slice_steps: u32,
     _pad2: u32,
     dt_s: f32,
     mass_kg: f32,
@@ -76,7 +78,7 @@ pub fn integrate_batch(
         &[],
     )?;
     let t = &assembly.torsion;
-    let mut job = KernelJob {
+    let job = KernelJob {
         head: Head::sampling(
             schedule.steps_per_sample,
             schedule.settle_samples,
@@ -92,13 +94,37 @@ pub fn integrate_batch(
         c_a: assembly.axial_damping_ns_per_m as f32,
         stuck_speed: STUCK_SPEED_RAD_S as f32,
         start_given: u32::from(start.is_some()),
+        slice_steps: STEPS_PER_SLICE,
         ..KernelJob::zeroed()
     };
-    // From no sample periods (0..0) to the first slice of them.
-    super::string_batch::StringsUniform::next_slice(&mut job);
+    let expected = schedule.record_samples;
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        out.extend(run_chunk(ctx, &kernel, job, chunk, start)?);
+        // A driver that ends a kernel's loops early must not pass for a shorter record: the
+        // chunk runs again in slices a quarter as long (slicing changes no result), down to
+        // one sample period a slice.
+        let mut job = job;
+        loop {
+            // From no sample periods (0..0) to the first slice of them.
+            (job.first_period, job.end_period) = (0, 0);
+            super::string_batch::StringsUniform::next_slice(&mut job);
+            let got = run_chunk(ctx, &kernel, job, chunk, start)?;
+            match got.iter().find(|s| !s.diverged && s.samples != expected) {
+                None => {
+                    out.extend(got);
+                    break;
+                }
+                Some(_) if job.slice_steps > schedule.steps_per_sample => {
+                    job.slice_steps = (job.slice_steps / 4).max(schedule.steps_per_sample);
+                }
+                Some(s) => {
+                    return Err(GpuError::Readback(format!(
+                        "a coupled string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
+                        s.samples
+                    )));
+                }
+            }
+        }
     }
     Ok(out)
 }
@@ -113,7 +139,7 @@ impl super::string_batch::StringsUniform for KernelJob {
         if self.end_period >= periods {
             return false;
         }
-        let per_slice = (STEPS_PER_SLICE / self.head.steps_per_sample).max(1);
+        let per_slice = (self.slice_steps / self.head.steps_per_sample).max(1);
         self.first_period = self.end_period;
         self.end_period = (self.first_period + per_slice).min(periods);
         true
