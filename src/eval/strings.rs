@@ -27,12 +27,19 @@ impl std::fmt::Display for Ran {
     }
 }
 
+/// The most nodes of a chain a software driver simulates under `auto`: lavapipe runs a short
+/// chain faster than the CPU twin on the same cores and a longer one far slower, its arrays
+/// spilled to memory. `bitrock stability --law m2 --params 13,6.5,0.3 --simulate --at-rpm 60
+/// --at-kn 244.2 --structure fe` on two cores, `--backend gpu` against `cpu` (wall, the
+/// kernel's compilation included): 2 nodes 0.96 s against 1.64 s, 4 nodes 1.56 against 2.06,
+/// 6 nodes 3.12 against 2.34, 8 nodes 104 against 2.6; the 1-DOF string 7.1e5 string-s/s against
+/// 3.8e5 and the ten-element one 2.0e3 against 6.7e4 (`bitrock bench --strings --quick`).
+pub const SOFTWARE_GPU_MAX_NODES: usize = 4;
+
 /// The batch's summaries and final states, in order, on `backend` (a GPU that cannot be set up
-/// under `auto`: said through `note`, the CPU computes). Under `auto` a software driver takes
-/// the 1-DOF string, which it runs faster than the twin on the same cores, and leaves a chain of
-/// more nodes to the CPU: it holds their arrays in memory, not registers (`bitrock bench
-/// --strings --quick` on two cores: the ten-element string 1.9e3 string-s/s on lavapipe, 6.7e4
-/// on the twin; the 1-DOF string 7.1e5 against 3.8e5).
+/// under `auto`: said through `note`, the CPU computes). Under `auto` a software driver takes a
+/// chain of at most [`SOFTWARE_GPU_MAX_NODES`] nodes and leaves a longer one to the CPU, saying
+/// so.
 pub fn integrate(
     chain: &Chain,
     schedule: &Schedule,
@@ -41,7 +48,7 @@ pub fn integrate(
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<(Summary, StringState)>, Ran)> {
     if backend == Backend::Auto
-        && chain.nodes() > 1
+        && chain.nodes() > SOFTWARE_GPU_MAX_NODES
         && let Ok(ctx) = gpu::context()
         && ctx.is_software()
     {

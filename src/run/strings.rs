@@ -478,6 +478,9 @@ pub struct Simulator<'a> {
     /// The strings the members are simulated on ([`Member::chain`]).
     chains: Vec<Chain>,
     note: &'a mut dyn FnMut(String),
+    /// Where the next batch goes: the settings' backend until `auto` has once settled on the
+    /// CPU (said once, not per batch).
+    backend: Backend,
     /// Where the last batch ran.
     pub ran: Option<Ran>,
     /// Strings integrated so far, and their simulated seconds.
@@ -502,6 +505,7 @@ impl<'a> Simulator<'a> {
             members,
             chains,
             note,
+            backend: settings.backend,
             ran: None,
             strings: 0,
             simulated_s: 0.0,
@@ -552,8 +556,11 @@ impl<'a> Simulator<'a> {
         let mut last = start;
         let mut out: Vec<Option<(Summary, StringState)>> = vec![None; jobs.len()];
         let mut done = 0;
-        let mut backend = self.settings.backend;
-        let batch = if backend == Backend::Cpu { CPU_BATCH } else { GPU_BATCH };
+        let batch = if self.backend == Backend::Cpu {
+            CPU_BATCH
+        } else {
+            GPU_BATCH
+        };
         let one_string = keys.windows(2).all(|w| w[0] == w[1]);
         let mut order: Vec<usize> = (0..jobs.len()).collect();
         if !one_string {
@@ -572,9 +579,9 @@ impl<'a> Simulator<'a> {
                 gathered = part.iter().map(|&i| jobs[i].clone()).collect();
                 &gathered
             };
-            let (results, ran) = crate::eval::strings::integrate(chain, schedule, part_jobs, backend, self.note)?;
+            let (results, ran) = crate::eval::strings::integrate(chain, schedule, part_jobs, self.backend, self.note)?;
             if ran == Ran::Cpu {
-                backend = Backend::Cpu;
+                self.backend = Backend::Cpu;
             }
             self.ran = Some(ran);
             for (&i, result) in part.iter().zip(results) {

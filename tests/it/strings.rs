@@ -152,8 +152,20 @@ fn auto_leaves_a_chain_of_nodes_to_the_cpu_only_where_the_gpu_is_a_software_driv
     let software = bitrock::eval::gpu::context().unwrap().is_software();
     let schedule = Schedule::new(0.01, 50.0, 1.0, 2.0).unwrap();
     let one_dof = Chain::one_dof(&Lumped::default());
-    let fe = Chain::lumped_fe(&DrillString::default()).unwrap();
-    for (chain, on_cpu) in [(&one_dof, false), (&fe, software)] {
+    let chain_of = |dp_elements, bha_elements| {
+        Chain::lumped_fe(&DrillString {
+            dp_elements,
+            bha_elements,
+            ..DrillString::default()
+        })
+        .unwrap()
+    };
+    let (four, five) = (chain_of(3, 1), chain_of(3, 2));
+    assert_eq!(
+        (four.nodes(), five.nodes()),
+        (strings::SOFTWARE_GPU_MAX_NODES, strings::SOFTWARE_GPU_MAX_NODES + 1)
+    );
+    for (chain, on_cpu) in [(&one_dof, false), (&four, false), (&five, software)] {
         let all = jobs(chain);
         let mut notes = Vec::new();
         let (auto, ran) =
