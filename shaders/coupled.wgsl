@@ -16,7 +16,7 @@ const INPUT_WORDS: u32 = 12u;
 // lag, speed, compression, axial speed, depth, phase, behind_old, then the ring.
 const STATE_WORDS: u32 = 247u;
 const RING_AT: u32 = 7u;
-const SUMMARY_WORDS: u32 = 23u;
+const SUMMARY_WORDS: u32 = 24u;
 const TAU: f32 = 6.283185307179586;
 
 struct CoupledJob {
@@ -33,7 +33,7 @@ struct CoupledJob {
     end_period: u32,
     // 1 where the host wrote each string's start into `states`, 0 for steady drilling.
     start_given: u32,
-    // The host's most steps a slice; unused here.
+    // The host's most steps a slice (read only to tell a cut invocation).
     slice_steps: u32,
     _pad2: u32,
     dt_s: f32,
@@ -373,6 +373,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
+    let cut = bitcast<u32>(summaries[o + 23u]) != 0u || loops_were_cut();
     let last_slice = job.end_period == job.settle_samples + job.record_samples;
     if (last_slice || diverged) {
         // The open block joins the total once, at the end (as the CPU's `finish`).
@@ -409,4 +410,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     summaries[o + 20u] = block.z;
     summaries[o + 21u] = block.w;
     summaries[o + 22u] = bitcast<f32>(select(0u, 1u, last_stuck));
+    summaries[o + 23u] = bitcast<f32>(select(0u, 1u, cut));
+}
+
+// Whether the driver ended this invocation's loops early: lavapipe ends every loop at its next
+// pass once an invocation has run 65,535 iterations together, and a step cut that way still
+// ends its sample period as if whole. A loop of two passes whose bound the compiler cannot know
+// (read from the job: `slice_steps` is below 2^31) then runs one.
+fn loops_were_cut() -> bool {
+    var passes = 0u;
+    for (var t = 0u; t < 2u + (job.slice_steps >> 31u); t = t + 1u) {
+        passes = passes + 1u;
+    }
+    return passes < 2u;
 }

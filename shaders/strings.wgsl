@@ -42,7 +42,7 @@ struct StringsJob {
     settle_dt_s: f32,
     first_step: u32,
     end_step: u32,
-    // The host's most steps a slice; unused here.
+    // The host's most steps a slice (read only to tell a cut invocation).
     slice_steps: u32,
     inertia: array<vec4<f32>, 4>,
     stiffness: array<vec4<f32>, 4>,
@@ -57,7 +57,8 @@ struct StringsJob {
 // start, written back as the end.
 @group(0) @binding(2) var<storage, read_write> states: array<f32>;
 // Per string: samples, stuck, onsets, first onset, last onset (u32 bits), speed min, max, sum
-// (rad/s), bit torque min, max, surface torque min, max (N·m), diverged, last stuck (u32 bits).
+// (rad/s), bit torque min, max, surface torque min, max (N·m), diverged, last stuck, cut by
+// the driver (u32 bits).
 // On a record's clock: per sample the surface torque (N·m), the bit speed and its least and
 // greatest since the sample before (rad/s), then the samples reached and whether the string
 // diverged (u32 bits).
@@ -293,6 +294,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var surface_min = 3.0e38;
     var surface_max = -3.0e38;
     var diverged = false;
+    var cut = false;
     // A slice after the first goes on from the summary so far (the state is in `states`).
     let o = SUMMARY_WORDS * i;
     if (job.first_step > 0u) {
@@ -310,6 +312,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         surface_max = summaries[o + 11u];
         diverged = bitcast<u32>(summaries[o + 12u]) != 0u;
         last_stuck = bitcast<u32>(summaries[o + 13u]) != 0u;
+        cut = bitcast<u32>(summaries[o + 14u]) != 0u;
         if (diverged) {
             return;
         }
@@ -358,6 +361,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         period = period + 1u;
     }
+    cut = cut || loops_were_cut();
 
     // The nodes past the chain's keep what they held.
     for (var j = 0u; j < NODES; j = j + 1u) {
@@ -380,6 +384,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     summaries[o + 11u] = surface_max;
     summaries[o + 12u] = bitcast<f32>(select(0u, 1u, diverged));
     summaries[o + 13u] = bitcast<f32>(select(0u, 1u, last_stuck));
+    summaries[o + 14u] = bitcast<f32>(select(0u, 1u, cut));
+}
+
+// Whether the driver ended this invocation's loops early: lavapipe ends every loop at its next
+// pass once an invocation has run 65,535 iterations together, and a step cut that way still
+// ends its sample period as if whole. A loop of two passes whose bound the compiler cannot know
+// (read from the job: `slice_steps` is below 2^31) then runs one.
+fn loops_were_cut() -> bool {
+    var passes = 0u;
+    for (var t = 0u; t < 2u + (job.slice_steps >> 31u); t = t + 1u) {
+        passes = passes + 1u;
+    }
+    return passes < 2u;
 }
 
 // Words of state per string on a record's clock, between slices: lag, speed (rad/s), stuck

@@ -10,10 +10,10 @@ use bytemuck::{Pod, Zeroable};
 /// Words per string of the kernel's buffers. Keep in sync with shaders/coupled.wgsl.
 const INPUT_WORDS: usize = 12;
 const STATE_WORDS: usize = 7 + crate::simulate::coupled::RING_CELLS;
-const SUMMARY_WORDS: usize = 23;
+const SUMMARY_WORDS: usize = 24;
 
-/// Strings held on the device at once: 1,128 B a string (inputs 48, state and ring 988,
-/// summary 92), 296 MB for the chunk.
+/// Strings held on the device at once: 1,132 B a string (inputs 48, state and ring 988,
+/// summary 96), 297 MB for the chunk.
 const STRINGS_PER_CHUNK: usize = 1 << 18;
 
 /// Most steps one invocation integrates per dispatch at first: lavapipe stops an invocation's
@@ -35,7 +35,8 @@ struct KernelJob {
     first_period: u32,
     end_period: u32,
     start_given: u32,
-    /// The most steps a dispatch integrates (the host's: the kernel ignores it).
+    /// The most steps a dispatch integrates (the kernel reads it only to tell a cut
+    /// invocation).
     slice_steps: u32,
     _pad2: u32,
     dt_s: f32,
@@ -100,30 +101,31 @@ pub fn integrate_batch(
     let expected = schedule.record_samples;
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        // A driver that ends a kernel's loops early must not pass for a shorter record: the
-        // chunk runs again in slices a quarter as long (slicing changes no result), down to
-        // one sample period a slice.
+        // A driver that ends a kernel's loops early must not pass for a shorter record or a
+        // cut step: the chunk runs again in slices a quarter as long (slicing changes no
+        // result), down to one sample period a slice.
         let mut job = job;
         loop {
             // From no sample periods (0..0) to the first slice of them.
             (job.first_period, job.end_period) = (0, 0);
             super::string_batch::StringsUniform::next_slice(&mut job);
-            let got = run_chunk(ctx, &kernel, job, chunk, start)?;
-            match got.iter().find(|s| !s.diverged && s.samples != expected) {
-                None => {
-                    out.extend(got);
-                    break;
-                }
-                Some(_) if job.slice_steps > schedule.steps_per_sample => {
-                    job.slice_steps = (job.slice_steps / 4).max(schedule.steps_per_sample);
-                }
-                Some(s) => {
-                    return Err(GpuError::Readback(format!(
-                        "a coupled string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
-                        s.samples
-                    )));
-                }
+            let (got, cut) = run_chunk(ctx, &kernel, job, chunk, start)?;
+            let short = got.iter().find(|s| !s.diverged && s.samples != expected);
+            if !cut && short.is_none() {
+                out.extend(got);
+                break;
             }
+            if job.slice_steps / schedule.steps_per_sample > 1 {
+                job.slice_steps = (job.slice_steps / 4).max(schedule.steps_per_sample);
+                continue;
+            }
+            return Err(GpuError::Readback(match short {
+                Some(s) => format!(
+                    "a coupled string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
+                    s.samples
+                ),
+                None => "the driver ended the coupled strings' integration early even one sample period a slice".into(),
+            }));
         }
     }
     Ok(out)
@@ -146,13 +148,14 @@ impl super::string_batch::StringsUniform for KernelJob {
     }
 }
 
+/// The chunk's summaries, and whether the driver cut any string's loops.
 fn run_chunk(
     ctx: &super::GpuContext,
     kernel: &super::Kernel,
     job: KernelJob,
     jobs: &[CoupledJob],
     start: Option<&CoupledState>,
-) -> Result<Vec<CoupledSummary>, GpuError> {
+) -> Result<(Vec<CoupledSummary>, bool), GpuError> {
     let n = jobs.len();
     let mut inputs = vec![0.0f32; INPUT_WORDS * n];
     for (j, row) in jobs.iter().zip(inputs.chunks_mut(INPUT_WORDS)) {
@@ -190,7 +193,8 @@ fn run_chunk(
         read_states: false,
     };
     let sums = super::string_batch::integrate_chunk(ctx, kernel, job, &chunk)?.summaries;
-    Ok(sums
+    let cut = sums.chunks(SUMMARY_WORDS).any(|o| o[23].to_bits() != 0);
+    let summaries = sums
         .chunks(SUMMARY_WORDS)
         .map(|o| {
             let count = |k: usize| o[k].to_bits();
@@ -216,5 +220,6 @@ fn run_chunk(
                 diverged: count(17) != 0,
             }
         })
-        .collect())
+        .collect();
+    Ok((summaries, cut))
 }

@@ -36,7 +36,8 @@ struct StringsJob {
     settle_dt_s: f32,
     first_step: u32,
     end_step: u32,
-    /// The most steps a dispatch integrates (the host's: the kernel ignores it).
+    /// The most steps a dispatch integrates (the kernel reads it only to tell a cut
+    /// invocation).
     slice_steps: u32,
     inertia: [f32; MAX_NODES],
     stiffness: [f32; MAX_NODES],
@@ -48,6 +49,18 @@ pub fn integrate_batch(
     schedule: &Schedule,
     jobs: &[StringJob],
 ) -> Result<Vec<(Summary, StringState)>, GpuError> {
+    integrate_batch_in_slices(chain, schedule, jobs, steps_per_slice(chain.nodes()))
+}
+
+/// [`integrate_batch`] from slices of `slice_steps` steps a dispatch (shortened where the
+/// driver cuts them): the results are the same whatever the slices, which the tests check.
+#[doc(hidden)]
+pub fn integrate_batch_in_slices(
+    chain: &Chain,
+    schedule: &Schedule,
+    jobs: &[StringJob],
+    slice_steps: u32,
+) -> Result<Vec<(Summary, StringState)>, GpuError> {
     let ctx = super::context()?;
     let mut out = Vec::with_capacity(jobs.len());
     let kernel = strings_kernel(ctx, "main", chain.nodes(), jobs.iter().map(|j| j.law))?;
@@ -58,7 +71,7 @@ pub fn integrate_batch(
         schedule.record_samples,
     );
     job.dt_s = schedule.dt_s as f32;
-    job.slice_steps = steps_per_slice(chain.nodes());
+    job.slice_steps = slice_steps.max(1);
     let periods = u64::from(schedule.settle_samples + schedule.record_samples);
     let steps = periods * u64::from(schedule.steps_per_sample);
     if steps > u64::from(u32::MAX) {
@@ -77,28 +90,34 @@ pub fn integrate_batch(
     }
     let expected = schedule.record_samples;
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        // A driver that ends a kernel's loops early must not pass for a shorter record: the
-        // chunk runs again in slices a quarter as long (slicing changes no result), down to
-        // one step a slice.
+        // A driver that ends a kernel's loops early must not pass for a shorter record or a
+        // cut step: the chunk runs again in slices a quarter as long (slicing changes no
+        // result), down to [`SHORTEST_SLICE_STEPS`].
         let mut job = job;
         loop {
             // From no steps (0..0) to the first slice of them.
             (job.first_step, job.end_step) = (0, 0);
             super::string_batch::StringsUniform::next_slice(&mut job);
-            let got = run_chunk(ctx, &kernel, job, chunk)?;
-            match got.iter().find(|(s, _)| !s.diverged && s.samples != expected) {
-                None => {
-                    out.extend(got);
-                    break;
-                }
-                Some(_) if job.slice_steps > 1 => job.slice_steps = (job.slice_steps / 4).max(1),
-                Some((s, _)) => {
-                    return Err(GpuError::Readback(format!(
-                        "a string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
-                        s.samples
-                    )));
-                }
+            let (got, cut) = run_chunk(ctx, &kernel, job, chunk)?;
+            let short = got.iter().find(|(s, _)| !s.diverged && s.samples != expected);
+            if !cut && short.is_none() {
+                out.extend(got);
+                break;
             }
+            if job.slice_steps / 4 >= SHORTEST_SLICE_STEPS {
+                job.slice_steps /= 4;
+                continue;
+            }
+            return Err(GpuError::Readback(match short {
+                Some((s, _)) => format!(
+                    "a string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
+                    s.samples
+                ),
+                None => format!(
+                    "the driver ended the strings' integration early even in slices of {} steps",
+                    job.slice_steps
+                ),
+            }));
         }
     }
     Ok(out)
@@ -145,11 +164,19 @@ const CLOCK_STATE_WORDS: usize = 8;
 /// and runs eight strings as one: a step is a pass of the step loop and of the event loop and,
 /// where some of the eight are stuck and some slip, both branches' RK4 steps, each eight loops
 /// over the nodes (four derivatives, three intermediate states, the update). 60,000 iterations
-/// of those leave the rest for stops and releases; a chunk that still comes back short runs
-/// again in shorter slices ([`integrate_batch`]). One node: 3,333 steps; ten: 370.
+/// of those leave the rest for stops and releases: 370 steps for ten nodes. A one-node chain's
+/// loops unroll away, and its 6,000 steps are what every 1-DOF string has run at. A chunk the
+/// driver still cuts runs again in shorter slices ([`integrate_batch`]).
 fn steps_per_slice(nodes: usize) -> u32 {
+    if nodes == 1 {
+        return 6_000;
+    }
     60_000 / (2 + 16 * nodes as u32)
 }
+
+/// The shortest slice a cut chunk is run again in: below it the driver is not cutting long
+/// slices but failing, and the error says so.
+const SHORTEST_SLICE_STEPS: u32 = 16;
 
 /// A job on a record's clock, sliced: each slice a span of its steps.
 #[repr(transparent)]
@@ -177,7 +204,7 @@ impl super::string_batch::StringsUniform for OnClockUniform {
             return false;
         }
         j.first_step = j.end_step;
-        j.end_step = (j.first_step + j.slice_steps).min(total);
+        j.end_step = j.first_step.saturating_add(j.slice_steps).min(total);
         true
     }
 }
@@ -297,24 +324,25 @@ impl super::string_batch::StringsUniform for StringsJob {
         &mut self.head
     }
 
-    /// The next slice of the steps (the settling's first), [`steps_per_slice`] of them.
+    /// The next slice of the steps (the settling's first), `slice_steps` of them.
     fn next_slice(&mut self) -> bool {
         let total = self.steps();
         if self.end_step >= total {
             return false;
         }
         self.first_step = self.end_step;
-        self.end_step = (self.first_step + self.slice_steps).min(total);
+        self.end_step = self.first_step.saturating_add(self.slice_steps).min(total);
         true
     }
 }
 
+/// The chunk's summaries and final states, and whether the driver cut any string's loops.
 fn run_chunk(
     ctx: &super::GpuContext,
     kernel: &super::Kernel,
     job: StringsJob,
     jobs: &[StringJob],
-) -> Result<Vec<(Summary, StringState)>, GpuError> {
+) -> Result<(Vec<(Summary, StringState)>, bool), GpuError> {
     let n = jobs.len();
     let mut inputs = vec![0.0f32; INPUT_WORDS * n];
     let mut states = vec![0.0f32; STATE_WORDS * n];
@@ -345,7 +373,8 @@ fn run_chunk(
     };
     let out = super::string_batch::integrate_chunk(ctx, kernel, job, &chunk)?;
     let (states, sums) = (&out.states, &out.summaries);
-    Ok((0..n)
+    let cut = sums.chunks(SUMMARY_WORDS).any(|o| o[14].to_bits() != 0);
+    let results = (0..n)
         .map(|i| {
             let s = &states[STATE_WORDS * i..STATE_WORDS * (i + 1)];
             let mut state = StringState {
@@ -378,5 +407,6 @@ fn run_chunk(
             };
             (summary, state)
         })
-        .collect())
+        .collect();
+    Ok((results, cut))
 }
