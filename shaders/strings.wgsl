@@ -361,13 +361,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         period = period + 1u;
     }
-    cut = cut || loops_were_cut();
 
     // The nodes past the chain's keep what they held.
     for (var j = 0u; j < NODES; j = j + 1u) {
         states[sb + j] = m.s.u[j];
         states[sb + MAX_NODES + j] = m.s.w[j];
     }
+    // After the last loop that writes: a write-back cut short is told too.
+    cut = cut || loops_were_cut();
     states[sb + 2u * MAX_NODES] = select(0.0, 1.0, m.stuck);
     states[sb + 2u * MAX_NODES + 1u] = m.dir;
     summaries[o] = bitcast<f32>(samples);
