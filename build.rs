@@ -70,8 +70,11 @@ const KERNELS: &[(&str, &[&str])] = &[
     ("kernel_sums", &["shared/laws.wgsl", "kernel_sums.wgsl"]),
     ("slopes", &["shared/laws.wgsl", "slopes.wgsl"]),
     ("stability", &["stability.wgsl"]),
-    ("coupled", &["coupled.wgsl"]),
-    ("strings", &["shared/laws.wgsl", "strings.wgsl"]),
+    ("coupled", &["shared/loop_limit.wgsl", "coupled.wgsl"]),
+    (
+        "strings",
+        &["shared/laws.wgsl", "shared/loop_limit.wgsl", "strings.wgsl"],
+    ),
     (
         "candidates",
         &[

@@ -6,7 +6,9 @@
 // A string is integrated over several dispatches, each a slice of its sample periods: its state
 // (ring included) and its summary's running sums stay in storage between them. lavapipe stops
 // an invocation's loops once they have run 65,535 iterations together (gallivm's loop limiter),
-// so no dispatch may run more than a few thousand steps; the host slices.
+// so no dispatch may run more than a few thousand steps; the host slices, and runs a chunk
+// again in shorter slices where the kernel tells it was cut. Needs shared/loop_limit.wgsl
+// (loops_were_cut).
 
 // Keep in sync with src/simulate/coupled.rs and src/eval/gpu/coupled.rs.
 const RING_CELLS: u32 = 240u;
@@ -373,7 +375,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    let cut = bitcast<u32>(summaries[o + 23u]) != 0u || loops_were_cut();
+    let cut = bitcast<u32>(summaries[o + 23u]) != 0u || loops_were_cut(job.slice_steps >> 31u);
     let last_slice = job.end_period == job.settle_samples + job.record_samples;
     if (last_slice || diverged) {
         // The open block joins the total once, at the end (as the CPU's `finish`).
@@ -413,14 +415,3 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     summaries[o + 23u] = bitcast<f32>(select(0u, 1u, cut));
 }
 
-// Whether the driver ended this invocation's loops early: lavapipe ends every loop at its next
-// pass once an invocation has run 65,535 iterations together, and a step cut that way still
-// ends its sample period as if whole. A loop of two passes whose bound the compiler cannot know
-// (read from the job: `slice_steps` is below 2^31) then runs one.
-fn loops_were_cut() -> bool {
-    var passes = 0u;
-    for (var t = 0u; t < 2u + (job.slice_steps >> 31u); t = t + 1u) {
-        passes = passes + 1u;
-    }
-    return passes < 2u;
-}

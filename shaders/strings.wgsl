@@ -1,7 +1,7 @@
 // The batched string integrator: one drill string per invocation, integrated with a fixed step
 // and the Karnopp stick rule, reduced to a summary on the device. The twin of
 // `src/simulate/strings.rs` (f64), loop for loop: read its doc comment for the equations.
-// Needs shared/laws.wgsl (torque_at).
+// Needs shared/laws.wgsl (torque_at) and shared/loop_limit.wgsl (loops_were_cut).
 
 const MAX_NODES: u32 = 16u;
 // Words per string of the inputs, the state and the summary. Keep in sync with
@@ -368,7 +368,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         states[sb + MAX_NODES + j] = m.s.w[j];
     }
     // After the last loop that writes: a write-back cut short is told too.
-    cut = cut || loops_were_cut();
+    cut = cut || loops_were_cut(job.slice_steps >> 31u);
     states[sb + 2u * MAX_NODES] = select(0.0, 1.0, m.stuck);
     states[sb + 2u * MAX_NODES + 1u] = m.dir;
     summaries[o] = bitcast<f32>(samples);
@@ -386,18 +386,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     summaries[o + 12u] = bitcast<f32>(select(0u, 1u, diverged));
     summaries[o + 13u] = bitcast<f32>(select(0u, 1u, last_stuck));
     summaries[o + 14u] = bitcast<f32>(select(0u, 1u, cut));
-}
-
-// Whether the driver ended this invocation's loops early: lavapipe ends every loop at its next
-// pass once an invocation has run 65,535 iterations together, and a step cut that way still
-// ends its sample period as if whole. A loop of two passes whose bound the compiler cannot know
-// (read from the job: `slice_steps` is below 2^31) then runs one.
-fn loops_were_cut() -> bool {
-    var passes = 0u;
-    for (var t = 0u; t < 2u + (job.slice_steps >> 31u); t = t + 1u) {
-        passes = passes + 1u;
-    }
-    return passes < 2u;
 }
 
 // Words of state per string on a record's clock, between slices: lag, speed (rad/s), stuck

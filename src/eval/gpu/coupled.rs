@@ -101,32 +101,26 @@ pub fn integrate_batch(
     let expected = schedule.record_samples;
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        // A driver that ends a kernel's loops early must not pass for a shorter record or a
-        // cut step: the chunk runs again in slices a quarter as long (slicing changes no
-        // result), down to one sample period a slice.
-        let mut job = job;
-        loop {
-            // From no sample periods (0..0) to the first slice of them.
-            (job.first_period, job.end_period) = (0, 0);
-            super::string_batch::StringsUniform::next_slice(&mut job);
-            let (got, cut) = run_chunk(ctx, &kernel, job, chunk, start)?;
-            let short = got.iter().find(|s| !s.diverged && s.samples != expected);
-            if !cut && short.is_none() {
-                out.extend(got);
-                break;
-            }
-            if job.slice_steps / schedule.steps_per_sample > 1 {
-                job.slice_steps = (job.slice_steps / 4).max(schedule.steps_per_sample);
-                continue;
-            }
-            return Err(GpuError::Readback(match short {
-                Some(s) => format!(
-                    "a coupled string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
-                    s.samples
-                ),
-                None => "the driver ended the coupled strings' integration early even one sample period a slice".into(),
-            }));
-        }
+        // Down to one sample period a slice.
+        let shorten = |job: &mut KernelJob| {
+            let longer = job.slice_steps / schedule.steps_per_sample > 1;
+            job.slice_steps = (job.slice_steps / 4).max(schedule.steps_per_sample);
+            longer
+        };
+        out.extend(super::string_batch::until_whole(
+            job,
+            "coupled string",
+            expected,
+            shorten,
+            |job| {
+                let (got, cut) = run_chunk(ctx, &kernel, job, chunk, start)?;
+                let short_of = got
+                    .iter()
+                    .find(|s| !s.diverged && s.samples != expected)
+                    .map(|s| s.samples);
+                Ok((got, super::string_batch::Ended { cut, short_of }))
+            },
+        )?);
     }
     Ok(out)
 }
@@ -134,6 +128,10 @@ pub fn integrate_batch(
 impl super::string_batch::StringsUniform for KernelJob {
     fn head(&mut self) -> &mut Head {
         &mut self.head
+    }
+
+    fn rewind(&mut self) {
+        (self.first_period, self.end_period) = (0, 0);
     }
 
     fn next_slice(&mut self) -> bool {

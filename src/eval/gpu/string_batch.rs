@@ -44,6 +44,45 @@ pub(super) trait StringsUniform: bytemuck::Pod {
     fn next_slice(&mut self) -> bool {
         false
     }
+
+    /// Moves the job back to before its first slice (then [`Self::next_slice`] gives it).
+    fn rewind(&mut self) {}
+}
+
+/// How a chunk came back: whether its kernel told that the driver cut any string's loops, and
+/// the samples of the first string short of its record without having diverged.
+pub(super) struct Ended {
+    pub cut: bool,
+    pub short_of: Option<u32>,
+}
+
+/// A chunk run by `run` from `job`'s first slice, again in the shorter slices `shorten` makes
+/// (false where it has none shorter) while the driver cuts it: a driver that ends a kernel's
+/// loops early must not pass for a shorter record or a cut step, and slicing changes no result.
+/// An error, naming `what` and the `expected` samples, where even the shortest slices are cut.
+pub(super) fn until_whole<J: StringsUniform, T>(
+    mut job: J,
+    what: &str,
+    expected: u32,
+    mut shorten: impl FnMut(&mut J) -> bool,
+    mut run: impl FnMut(J) -> Result<(T, Ended), GpuError>,
+) -> Result<T, GpuError> {
+    loop {
+        job.rewind();
+        job.next_slice();
+        let (got, ended) = run(job)?;
+        if !ended.cut && ended.short_of.is_none() {
+            return Ok(got);
+        }
+        if !shorten(&mut job) {
+            return Err(GpuError::Readback(match ended.short_of {
+                Some(samples) => format!(
+                    "a {what} came back with {samples} of its {expected} samples and no divergence: the driver ended its integration early"
+                ),
+                None => format!("the driver ended the {what}s' integration early even in their shortest slices"),
+            }));
+        }
+    }
 }
 
 /// A chunk of `strings` strings laid out for a kernel: their `inputs` and starting `states`,

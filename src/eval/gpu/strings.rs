@@ -2,7 +2,7 @@
 //! law, parameters, operating point and start, to its summary and final state. The GPU twin of
 //! [`crate::simulate::strings::integrate_batch`].
 
-use super::string_batch::Head;
+use super::string_batch::{Ended, Head, until_whole};
 use super::{GpuError, STORAGE_READ, STORAGE_WRITE, UNIFORM};
 use crate::laws::Law;
 use crate::simulate::strings::{Chain, MAX_NODES, STUCK_SPEED_RAD_S, Schedule, StringJob, StringState, Summary};
@@ -90,35 +90,16 @@ pub fn integrate_batch_in_slices(
     }
     let expected = schedule.record_samples;
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        // A driver that ends a kernel's loops early must not pass for a shorter record or a
-        // cut step: the chunk runs again in slices a quarter as long (slicing changes no
-        // result), down to [`SHORTEST_SLICE_STEPS`].
-        let mut job = job;
-        loop {
-            // From no steps (0..0) to the first slice of them.
-            (job.first_step, job.end_step) = (0, 0);
-            super::string_batch::StringsUniform::next_slice(&mut job);
+        let shorten = |job: &mut StringsJob| {
+            job.slice_steps /= 4;
+            job.slice_steps >= SHORTEST_SLICE_STEPS
+        };
+        out.extend(until_whole(job, "string", expected, shorten, |job| {
             let (got, cut) = run_chunk(ctx, &kernel, job, chunk)?;
-            let short = got.iter().find(|(s, _)| !s.diverged && s.samples != expected);
-            if !cut && short.is_none() {
-                out.extend(got);
-                break;
-            }
-            if job.slice_steps / 4 >= SHORTEST_SLICE_STEPS {
-                job.slice_steps /= 4;
-                continue;
-            }
-            return Err(GpuError::Readback(match short {
-                Some((s, _)) => format!(
-                    "a string came back with {} of its {expected} samples and no divergence: the driver ended its integration early",
-                    s.samples
-                ),
-                None => format!(
-                    "the driver ended the strings' integration early even in slices of {} steps",
-                    job.slice_steps
-                ),
-            }));
-        }
+            let short_of = got.iter().find(|(s, _)| !s.diverged && s.samples != expected);
+            let short_of = short_of.map(|(s, _)| s.samples);
+            Ok((got, Ended { cut, short_of }))
+        })?);
     }
     Ok(out)
 }
@@ -322,6 +303,10 @@ impl StringsJob {
 impl super::string_batch::StringsUniform for StringsJob {
     fn head(&mut self) -> &mut Head {
         &mut self.head
+    }
+
+    fn rewind(&mut self) {
+        (self.first_step, self.end_step) = (0, 0);
     }
 
     /// The next slice of the steps (the settling's first), `slice_steps` of them.
