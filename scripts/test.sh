@@ -19,21 +19,44 @@ has_vulkan_driver() {
     { ls /usr/share/vulkan/icd.d/*.json || ls /etc/vulkan/icd.d/*.json; } >/dev/null 2>&1 \
         && ldconfig -p | grep libvulkan.so.1 >/dev/null
 }
+# What the tests need of the system is installed while the release build runs (apt mostly waits
+# on the network and the disk, the build on the cores), and waited for before the first test.
+SYSTEM_PACKAGES=()
 if ! has_vulkan_driver; then
     echo "installing Mesa lavapipe (mesa-vulkan-drivers, libvulkan1)..."
-    apt_install mesa-vulkan-drivers libvulkan1
+    SYSTEM_PACKAGES+=(mesa-vulkan-drivers libvulkan1)
 fi
 if ! { command -v chromium && command -v chromedriver; } >/dev/null 2>&1; then
     echo "installing Chromium and its WebDriver (chromium, chromium-driver)..."
-    apt_install chromium chromium-driver
+    SYSTEM_PACKAGES+=(chromium chromium-driver)
 fi
+SYSTEM_JOB=""
+SYSTEM_LOG="$(mktemp)"
+if [ ${#SYSTEM_PACKAGES[@]} -gt 0 ]; then
+    # sudo asks for its password here, in the foreground, where it can be typed.
+    if [ "$(id -u)" -ne 0 ]; then sudo -v; fi
+    apt_install "${SYSTEM_PACKAGES[@]}" > "$SYSTEM_LOG" 2>&1 &
+    SYSTEM_JOB=$!
+fi
+# apt's lock is held by that job until it ends: a second install waits for it. The job is never
+# stopped early (dpkg cut part way leaves the system's packages half configured).
+wait_for_system_packages() {
+    if [ -n "$SYSTEM_JOB" ]; then
+        if ! wait "$SYSTEM_JOB"; then
+            cat "$SYSTEM_LOG" >&2
+            echo "installing ${SYSTEM_PACKAGES[*]} failed (above)" >&2
+            exit 1
+        fi
+        SYSTEM_JOB=""
+    fi
+}
 # Silences a harmless warning of Mesa's device-select layer.
 export NODEVICE_SELECT=1
 # The GPU scoring shapes are measured once per test run, into a cache of its own: the tests
 # neither read nor change the user's.
 BITROCK_CACHE_DIR="$(mktemp -d)"
 export BITROCK_CACHE_DIR
-trap 'rm -rf "$BITROCK_CACHE_DIR"' EXIT
+trap 'rm -rf "$BITROCK_CACHE_DIR" "$SYSTEM_LOG"' EXIT
 
 # The Python tests' virtual environment.
 mkdir -p "${CARGO_TARGET_DIR:-target}"
@@ -42,6 +65,7 @@ VENV="$TARGET/python-venv"
 if [ ! -x "$VENV/bin/python" ] && ! python3 -m venv "$VENV" >/dev/null 2>&1; then
     rm -rf "$VENV"
     echo "installing Python's venv (python3, python3-venv)..."
+    wait_for_system_packages
     apt_install python3 python3-venv
     python3 -m venv "$VENV"
 fi
@@ -103,7 +127,7 @@ stop_background() {
 WHEEL_JOB=""
 ARVIZ1_TESTS=""
 WHEELS="$(mktemp -d)"
-trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS; rm -rf "$BITROCK_CACHE_DIR" "$WHEELS"' EXIT
+trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS; rm -rf "$BITROCK_CACHE_DIR" "$SYSTEM_LOG" "$WHEELS"' EXIT
 
 # Slow tests (fits, simulations, ABC runs, GPU parity) run in release. Built first, so that the
 # Python package's wheel (pip builds it with maturin, linking the very build of the library
@@ -112,6 +136,7 @@ cargo test --release --all-targets --no-run
 "$VENV/bin/python" -m pip wheel -q --disable-pip-version-check --no-deps -w "$WHEELS" ./bindings/python \
     > "$TARGET/python-wheel.log" 2>&1 &
 WHEEL_JOB=$!
+wait_for_system_packages
 cargo test --release --all-targets
 # --all-targets leaves out the doctests (the crate documentation's example of the library API).
 cargo test --release --doc
