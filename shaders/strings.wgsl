@@ -60,8 +60,8 @@ struct StringsJob {
 // (rad/s), bit torque min, max, surface torque min, max (N·m), diverged, last stuck, cut by
 // the driver (u32 bits).
 // On a record's clock: per sample the surface torque (N·m), the bit speed and its least and
-// greatest since the sample before (rad/s), then the samples reached and whether the string
-// diverged (u32 bits).
+// greatest since the sample before (rad/s), then the samples reached, whether the string
+// diverged and whether the driver cut its loops (u32 bits).
 @group(0) @binding(3) var<storage, read_write> summaries: array<f32>;
 
 struct State {
@@ -414,7 +414,8 @@ fn in_bounds(m: Motion) -> bool {
 // next sample under the sample before's drive; per sample the surface torque, the bit speed
 // and the bit speed's extremes over the steps since the sample before. The steps are counted
 // from the settling's first, and each dispatch integrates the slice [first_step, end_step):
-// lavapipe ends an invocation's loops after 65,535 iterations together, so the host slices.
+// lavapipe ends an invocation's loops after 65,535 iterations together, so the host slices,
+// and runs a chunk again in shorter slices where the kernel tells it was cut.
 @compute @workgroup_size(64)
 fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     let local = gid.x + gid.y * job.row_width;
@@ -430,7 +431,7 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     let samples = job.record_samples;
     let settle = job.settle_steps;
     let per_sample = job.steps_per_sample;
-    let o = (4u * samples + 2u) * i;
+    let o = (4u * samples + 3u) * i;
     let sb = CLOCK_STATE_WORDS * i;
 
     var m: Motion;
@@ -503,6 +504,8 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     done = diverged || reached >= samples;
+    // After the last loop that writes (the trace's samples): a cut slice is run again.
+    let cut = bitcast<u32>(summaries[o + 4u * samples + 2u]) != 0u || loops_were_cut(job.slice_steps >> 31u);
     states[sb] = m.s.u[bit];
     states[sb + 1u] = m.s.w[bit];
     states[sb + 2u] = select(0.0, 1.0, m.stuck);
@@ -513,4 +516,5 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
     states[sb + 7u] = select(select(0.0, 1.0, done), 2.0, diverged);
     summaries[o + 4u * samples] = bitcast<f32>(reached);
     summaries[o + 4u * samples + 1u] = bitcast<f32>(select(0u, 1u, diverged));
+    summaries[o + 4u * samples + 2u] = bitcast<f32>(select(0u, 1u, cut));
 }

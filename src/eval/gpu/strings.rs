@@ -178,6 +178,10 @@ impl super::string_batch::StringsUniform for OnClockUniform {
         &mut self.0.head
     }
 
+    fn rewind(&mut self) {
+        (self.0.first_step, self.0.end_step) = (0, 0);
+    }
+
     fn next_slice(&mut self) -> bool {
         let total = self.steps();
         let j = &mut self.0;
@@ -196,6 +200,18 @@ pub fn on_clock_batch(
     drive: &Drive,
     integration: Integration,
     jobs: &[OnClockJob<'_>],
+) -> Result<Vec<OnClock>, GpuError> {
+    on_clock_batch_in_slices(drive, integration, jobs, steps_per_slice(1))
+}
+
+/// [`on_clock_batch`] from slices of `slice_steps` steps a dispatch (shortened where the
+/// driver cuts them): the results are the same whatever the slices, which the tests check.
+#[doc(hidden)]
+pub fn on_clock_batch_in_slices(
+    drive: &Drive,
+    integration: Integration,
+    jobs: &[OnClockJob<'_>],
+    slice_steps: u32,
 ) -> Result<Vec<OnClock>, GpuError> {
     let Some(first) = jobs.first() else {
         return Ok(Vec::new());
@@ -226,7 +242,7 @@ pub fn on_clock_batch(
         (job.settle_steps, job.settle_dt_s) = steps_of(integration.settle_s);
     }
     job.stuck_speed = STUCK_SPEED_RAD_S as f32;
-    job.slice_steps = steps_per_slice(1);
+    job.slice_steps = slice_steps.max(1);
     job.inertia[0] = first.chain.inertia_kg_m2[0] as f32;
     let steps = u64::from(job.settle_steps) + (samples as u64 - 1) * u64::from(sample_steps);
     if steps > u64::from(u32::MAX) {
@@ -235,10 +251,8 @@ pub fn on_clock_batch(
             u32::MAX
         )));
     }
-    // From no steps (0..0) to the first slice of them; one slice of none where there are none.
     let mut job = OnClockUniform(job);
-    super::string_batch::StringsUniform::next_slice(&mut job);
-    let trace_words = 4 * samples + 2;
+    let trace_words = 4 * samples + 3;
     let per_chunk = (TRACE_BYTES_PER_CHUNK / (4 * trace_words)).clamp(1, STRINGS_PER_CHUNK);
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(per_chunk) {
@@ -269,25 +283,37 @@ pub fn on_clock_batch(
             strings_per_dispatch: STRINGS_PER_DISPATCH,
             read_states: false,
         };
-        let traces = super::string_batch::integrate_chunk(ctx, &kernel, job, &layout)?.summaries;
-        for t in traces.chunks_exact(trace_words) {
-            let reached = t[4 * samples].to_bits() as usize;
-            let diverged = t[4 * samples + 1].to_bits() != 0;
-            // A driver that ends a kernel's loops early must not pass for a diverged string.
-            if reached < samples && !diverged {
-                return Err(GpuError::Readback(format!(
-                    "a string came back with {reached} of its {samples} samples and no divergence: the driver ended its integration early"
-                )));
+        let shorten = |job: &mut OnClockUniform| {
+            job.0.slice_steps /= 4;
+            job.0.slice_steps >= SHORTEST_SLICE_STEPS
+        };
+        let expected = samples as u32;
+        out.extend(until_whole(job, "string", expected, shorten, |job| {
+            let traces = super::string_batch::integrate_chunk(ctx, &kernel, job, &layout)?.summaries;
+            let mut ended = Ended {
+                cut: false,
+                short_of: None,
+            };
+            let mut strings = Vec::with_capacity(n);
+            for t in traces.chunks_exact(trace_words) {
+                let reached = t[4 * samples].to_bits() as usize;
+                let diverged = t[4 * samples + 1].to_bits() != 0;
+                ended.cut |= t[4 * samples + 2].to_bits() != 0;
+                // A driver that ends a kernel's loops early must not pass for a diverged string.
+                if reached < samples && !diverged && ended.short_of.is_none() {
+                    ended.short_of = Some(reached as u32);
+                }
+                let column = |c: usize| -> Vec<f64> { (0..reached).map(|k| f64::from(t[4 * k + c])).collect() };
+                strings.push(OnClock {
+                    surface_torque_nm: column(0),
+                    bit_speed_rad_s: column(1),
+                    bit_least_rad_s: column(2),
+                    bit_greatest_rad_s: column(3),
+                    diverged,
+                });
             }
-            let column = |c: usize| -> Vec<f64> { (0..reached).map(|k| f64::from(t[4 * k + c])).collect() };
-            out.push(OnClock {
-                surface_torque_nm: column(0),
-                bit_speed_rad_s: column(1),
-                bit_least_rad_s: column(2),
-                bit_greatest_rad_s: column(3),
-                diverged,
-            });
-        }
+            Ok((strings, ended))
+        })?);
     }
     Ok(out)
 }
