@@ -19,6 +19,16 @@ has_vulkan_driver() {
     { ls /usr/share/vulkan/icd.d/*.json || ls /etc/vulkan/icd.d/*.json; } >/dev/null 2>&1 \
         && ldconfig -p | grep libvulkan.so.1 >/dev/null
 }
+# Waits for a background job; where it failed, shows its log and ends the run saying what failed.
+wait_for() {
+    local job="$1" log="$2" what="$3"
+    if ! wait "$job"; then
+        cat "$log" >&2
+        echo "$what failed (above)" >&2
+        exit 1
+    fi
+}
+
 # What the tests need of the system is installed while the release build runs (apt mostly waits
 # on the network and the disk, the build on the cores), and waited for before the first test.
 SYSTEM_PACKAGES=()
@@ -42,11 +52,7 @@ fi
 # stopped early (dpkg cut part way leaves the system's packages half configured).
 wait_for_system_packages() {
     if [ -n "$SYSTEM_JOB" ]; then
-        if ! wait "$SYSTEM_JOB"; then
-            cat "$SYSTEM_LOG" >&2
-            echo "installing ${SYSTEM_PACKAGES[*]} failed (above)" >&2
-            exit 1
-        fi
+        wait_for "$SYSTEM_JOB" "$SYSTEM_LOG" "installing ${SYSTEM_PACKAGES[*]}"
         SYSTEM_JOB=""
     fi
 }
@@ -141,17 +147,9 @@ cargo test --release --all-targets
 # --all-targets leaves out the doctests (the crate documentation's example of the library API).
 cargo test --release --doc
 
-if ! wait "$DEPENDENCIES"; then
-    cat "$TARGET/python-dependencies.log" >&2
-    echo "installing the Python tests' dependencies failed (above)" >&2
-    exit 1
-fi
+wait_for "$DEPENDENCIES" "$TARGET/python-dependencies.log" "installing the Python tests' dependencies"
 DEPENDENCIES=""
-if ! wait "$WHEEL_JOB"; then
-    cat "$TARGET/python-wheel.log" >&2
-    echo "building the Python package's wheel failed (above)" >&2
-    exit 1
-fi
+wait_for "$WHEEL_JOB" "$TARGET/python-wheel.log" "building the Python package's wheel"
 WHEEL_JOB=""
 WHEEL="$(ls "$WHEELS"/bitrock-*.whl)"
 # The Python package, installed as its users install it (from its wheel), then its tests
@@ -176,11 +174,7 @@ BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q -n 2 --dis
 
 # ArviZ 1.x's tests beside the browser's (they share no files), reported after it.
 if [ -n "$ARVIZ1" ]; then
-    if ! wait "$ARVIZ1"; then
-        cat "$TARGET/python-arviz1.log" >&2
-        echo "making the ArviZ 1.x environment failed (above)" >&2
-        exit 1
-    fi
+    wait_for "$ARVIZ1" "$TARGET/python-arviz1.log" "making the ArviZ 1.x environment"
     ARVIZ1=""
     "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"
     BITROCK_BIN="$TARGET/release/bitrock" "$VENV_NEW/bin/python" -m pytest -q -k arviz \
@@ -198,11 +192,7 @@ BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q tests/brow
 
 if [ -n "$ARVIZ1_TESTS" ]; then
     echo "ArviZ 1.x:"
-    if ! wait "$ARVIZ1_TESTS"; then
-        cat "$TARGET/python-arviz1-tests.log" >&2
-        echo "the ArviZ 1.x tests failed (above)" >&2
-        exit 1
-    fi
+    wait_for "$ARVIZ1_TESTS" "$TARGET/python-arviz1-tests.log" "the ArviZ 1.x tests"
     ARVIZ1_TESTS=""
     cat "$TARGET/python-arviz1-tests.log"
 fi
