@@ -1,17 +1,46 @@
 #!/usr/bin/env bash
-# Runs every test of bitrock, installing first what the tests need: Mesa's lavapipe, a software
-# Vulkan driver, so the GPU tests run on machines without a GPU, and Chromium with its
-# WebDriver, in which the live page is tested. The GPU tests fail loudly
+# Runs every test of bitrock, installing what the tests need beside the build: Mesa's lavapipe,
+# a software Vulkan driver, so the GPU tests run on machines without a GPU, and Chromium with
+# its WebDriver, in which the live page is tested. The GPU tests fail loudly
 # without an adapter; BITROCK_SKIP_GPU_TESTS=1 compiles them as ignored, so the summary counts
 # them as such (CI never sets it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# The background jobs and temporary files of the run, for the way out.
+SYSTEM_JOB="" SYSTEM_LOG="" DEPENDENCIES="" ARVIZ1="" WHEEL_JOB="" ARVIZ1_TESTS=""
+BITROCK_CACHE_DIR="" WHEELS=""
+# Stops pip's and the tests' jobs, then the shell that started each; a job waited for is
+# forgotten, so that its number, which the system may give again, is never signalled.
+stop_background() {
+    local job
+    for job in "$@"; do
+        { pkill -P "$job"; kill "$job"; } 2>/dev/null || true
+    done
+}
+# On the way out, whatever the reason: apt's install is waited for, never stopped (dpkg cut part
+# way leaves the system's packages half configured), and its log shown where it failed.
+cleanup() {
+    stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS
+    if [ -n "$SYSTEM_JOB" ]; then
+        echo "waiting for the system packages' install (apt) to end..." >&2
+        wait "$SYSTEM_JOB" || cat "$SYSTEM_LOG" >&2
+    fi
+    rm -rf "$BITROCK_CACHE_DIR" "$SYSTEM_LOG" "$WHEELS"
+}
+trap cleanup EXIT
+
+# A command as root: through sudo for a user (which resets the environment: `env` sets it).
+as_root() {
+    if [ "$(id -u)" -ne 0 ]; then sudo "$@"; else "$@"; fi
+}
 apt_install() {
-    local sudo=""
-    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "$@" >/dev/null
+    as_root apt-get update -qq
+    apt_get_install "$@"
+}
+# Waits up to ten minutes for another apt to let go of dpkg's lock, rather than failing at once.
+apt_get_install() {
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq "$@" >/dev/null
 }
 
 has_vulkan_driver() {
@@ -19,9 +48,11 @@ has_vulkan_driver() {
     { ls /usr/share/vulkan/icd.d/*.json || ls /etc/vulkan/icd.d/*.json; } >/dev/null 2>&1 \
         && ldconfig -p | grep libvulkan.so.1 >/dev/null
 }
-# Waits for a background job; where it failed, shows its log and ends the run saying what failed.
+# Waits for the background job whose number the variable named `$1` holds, forgotten first (see
+# stop_background); where it failed, shows its log and ends the run saying what failed.
 wait_for() {
-    local job="$1" log="$2" what="$3"
+    local job="${!1}" log="$2" what="$3"
+    printf -v "$1" '%s' ""
     if ! wait "$job"; then
         cat "$log" >&2
         echo "$what failed (above)" >&2
@@ -40,20 +71,21 @@ if ! { command -v chromium && command -v chromedriver; } >/dev/null 2>&1; then
     echo "installing Chromium and its WebDriver (chromium, chromium-driver)..."
     SYSTEM_PACKAGES+=(chromium chromium-driver)
 fi
-SYSTEM_JOB=""
-SYSTEM_LOG="$(mktemp)"
 if [ ${#SYSTEM_PACKAGES[@]} -gt 0 ]; then
-    # sudo asks for its password here, in the foreground, where it can be typed.
-    if [ "$(id -u)" -ne 0 ]; then sudo -v; fi
-    apt_install "${SYSTEM_PACKAGES[@]}" > "$SYSTEM_LOG" 2>&1 &
+    SYSTEM_LOG="$(mktemp)"
+    if [ "$(id -u)" -ne 0 ]; then
+        # In the foreground, where sudo can ask for its password (with the command it allows).
+        as_root apt-get update -qq
+        apt_get_install "${SYSTEM_PACKAGES[@]}" > "$SYSTEM_LOG" 2>&1 &
+    else
+        apt_install "${SYSTEM_PACKAGES[@]}" > "$SYSTEM_LOG" 2>&1 &
+    fi
     SYSTEM_JOB=$!
 fi
-# apt's lock is held by that job until it ends: a second install waits for it. The job is never
-# stopped early (dpkg cut part way leaves the system's packages half configured).
+# A second install (Python's venv, below) waits for this one first.
 wait_for_system_packages() {
     if [ -n "$SYSTEM_JOB" ]; then
-        wait_for "$SYSTEM_JOB" "$SYSTEM_LOG" "installing ${SYSTEM_PACKAGES[*]}"
-        SYSTEM_JOB=""
+        wait_for SYSTEM_JOB "$SYSTEM_LOG" "installing ${SYSTEM_PACKAGES[*]}"
     fi
 }
 # Silences a harmless warning of Mesa's device-select layer.
@@ -62,7 +94,6 @@ export NODEVICE_SELECT=1
 # neither read nor change the user's.
 BITROCK_CACHE_DIR="$(mktemp -d)"
 export BITROCK_CACHE_DIR
-trap 'rm -rf "$BITROCK_CACHE_DIR" "$SYSTEM_LOG"' EXIT
 
 # The Python tests' virtual environment.
 mkdir -p "${CARGO_TARGET_DIR:-target}"
@@ -117,23 +148,11 @@ arviz1_environment() {
     [ -x "$VENV_NEW/bin/python" ] || "$PYTHON_NEW" -m venv "$VENV_NEW"
     "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check "arviz>=1,<2" "xarray>=2024.10" "pandas>=2.0" pytest
 }
-ARVIZ1=""
 if [ -n "$PYTHON_NEW" ]; then
     arviz1_environment > "$TARGET/python-arviz1.log" 2>&1 &
     ARVIZ1=$!
 fi
-# A run that stops early stops these too (pip, then the shell that started it); a job waited
-# for is forgotten, so that its number, which the system may give again, is never signalled.
-stop_background() {
-    local job
-    for job in "$@"; do
-        { pkill -P "$job"; kill "$job"; } 2>/dev/null || true
-    done
-}
-WHEEL_JOB=""
-ARVIZ1_TESTS=""
 WHEELS="$(mktemp -d)"
-trap 'stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS; rm -rf "$BITROCK_CACHE_DIR" "$SYSTEM_LOG" "$WHEELS"' EXIT
 
 # Slow tests (fits, simulations, ABC runs, GPU parity) run in release. Built first, so that the
 # Python package's wheel (pip builds it with maturin, linking the very build of the library
@@ -147,10 +166,8 @@ cargo test --release --all-targets
 # --all-targets leaves out the doctests (the crate documentation's example of the library API).
 cargo test --release --doc
 
-wait_for "$DEPENDENCIES" "$TARGET/python-dependencies.log" "installing the Python tests' dependencies"
-DEPENDENCIES=""
-wait_for "$WHEEL_JOB" "$TARGET/python-wheel.log" "building the Python package's wheel"
-WHEEL_JOB=""
+wait_for DEPENDENCIES "$TARGET/python-dependencies.log" "installing the Python tests' dependencies"
+wait_for WHEEL_JOB "$TARGET/python-wheel.log" "building the Python package's wheel"
 WHEEL="$(ls "$WHEELS"/bitrock-*.whl)"
 # The Python package, installed as its users install it (from its wheel), then its tests
 # against the binary built above.
@@ -174,8 +191,7 @@ BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q -n 2 --dis
 
 # ArviZ 1.x's tests beside the browser's (they share no files), reported after it.
 if [ -n "$ARVIZ1" ]; then
-    wait_for "$ARVIZ1" "$TARGET/python-arviz1.log" "making the ArviZ 1.x environment"
-    ARVIZ1=""
+    wait_for ARVIZ1 "$TARGET/python-arviz1.log" "making the ArviZ 1.x environment"
     "$VENV_NEW/bin/python" -m pip install -q --disable-pip-version-check --force-reinstall --no-deps "$WHEEL"
     BITROCK_BIN="$TARGET/release/bitrock" "$VENV_NEW/bin/python" -m pytest -q -k arviz \
         bindings/python/tests/test_abc.py bindings/python/tests/test_evidence.py \
@@ -192,7 +208,6 @@ BITROCK_BIN="$TARGET/release/bitrock" "$VENV/bin/python" -m pytest -q tests/brow
 
 if [ -n "$ARVIZ1_TESTS" ]; then
     echo "ArviZ 1.x:"
-    wait_for "$ARVIZ1_TESTS" "$TARGET/python-arviz1-tests.log" "the ArviZ 1.x tests"
-    ARVIZ1_TESTS=""
+    wait_for ARVIZ1_TESTS "$TARGET/python-arviz1-tests.log" "the ArviZ 1.x tests"
     cat "$TARGET/python-arviz1-tests.log"
 fi

@@ -484,9 +484,10 @@ fn the_kernel_drives_strings_on_a_record_s_clock_as_its_cpu_twin_does() {
         let g = &gpu_strings::on_clock_batch(drive, integration, &job).unwrap()[0];
         assert!(!c.diverged && !g.diverged);
         if std::ptr::eq(drive, &long) {
-            // The whole record asked of one dispatch (76,000 steps: more iterations than a
-            // software driver lets an invocation's loops run, so it cuts them and the chunk
-            // runs again in shorter slices): the same bits as the default slices.
+            // The whole record asked of one dispatch (73,000 steps: more iterations than a
+            // software driver lets an invocation's loops run; the chunk comes back short of its
+            // samples or told cut, and runs again in shorter slices): the same bits as the
+            // default slices.
             let whole = &gpu_strings::on_clock_batch_in_slices(drive, integration, &job, 100_000).unwrap()[0];
             let bits = |r: &OnClock| {
                 let columns = [

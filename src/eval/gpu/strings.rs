@@ -299,7 +299,7 @@ pub fn on_clock_batch_in_slices(
                 let reached = t[4 * samples].to_bits() as usize;
                 let diverged = t[4 * samples + 1].to_bits() != 0;
                 ended.cut |= t[4 * samples + 2].to_bits() != 0;
-                // A driver that ends a kernel's loops early must not pass for a diverged string.
+                // A driver that ends a kernel's loops early must not pass for a shorter record.
                 if reached < samples && !diverged && ended.short_of.is_none() {
                     ended.short_of = Some(reached as u32);
                 }
