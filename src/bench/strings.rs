@@ -26,6 +26,10 @@ pub struct StringsBenchOptions {
     pub map: (usize, usize, usize),
     pub backends: Vec<Backend>,
     pub repetitions: usize,
+    /// Measure the GPU only where `auto` would simulate on it: a software driver's row for a
+    /// chain `auto` leaves to the CPU is left out, saying so (both backends measured by
+    /// default; `--backend gpu` measures it anyway).
+    pub gpu_where_auto_takes_it: bool,
 }
 
 /// One measurement.
@@ -88,6 +92,16 @@ pub fn run(opts: &StringsBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
         chain.check_step(opts.dt_s)?;
         let jobs = batch(&chain, opts.strings);
         for &backend in &opts.backends {
+            if backend == Backend::Gpu
+                && opts.gpu_where_auto_takes_it
+                && let Some(adapter) = crate::eval::strings::software_gpu_passed_over(chain.nodes())
+            {
+                log(format!(
+                    "strings {string} on the GPU not measured: {adapter} is a software driver, and `auto` simulates a chain of {} nodes on the CPU (`--backend gpu` measures it)",
+                    chain.nodes()
+                ));
+                continue;
+            }
             let mut walls = Vec::new();
             let mut ran = None;
             let mut stuck = 0.0;

@@ -36,6 +36,17 @@ impl std::fmt::Display for Ran {
 /// 3.8e5 and the ten-element one 2.0e3 against 6.7e4 (`bitrock bench --strings --quick`).
 pub const SOFTWARE_GPU_MAX_NODES: usize = 4;
 
+/// The software GPU that `auto` leaves a chain of `nodes` nodes to the CPU rather than take
+/// (more than [`SOFTWARE_GPU_MAX_NODES`]), described; `None` where `auto` takes the GPU (or there
+/// is none).
+pub fn software_gpu_passed_over(nodes: usize) -> Option<String> {
+    if nodes <= SOFTWARE_GPU_MAX_NODES {
+        return None;
+    }
+    let ctx = gpu::context().ok()?;
+    ctx.is_software().then(|| ctx.describe())
+}
+
 /// The batch's summaries and final states, in order, on `backend` (a GPU that cannot be set up
 /// under `auto`: said through `note`, the CPU computes). Under `auto` a software driver takes a
 /// chain of at most [`SOFTWARE_GPU_MAX_NODES`] nodes and leaves a longer one to the CPU, saying
@@ -48,14 +59,11 @@ pub fn integrate(
     note: &mut dyn FnMut(String),
 ) -> Result<(Vec<(Summary, StringState)>, Ran)> {
     if backend == Backend::Auto
-        && chain.nodes() > SOFTWARE_GPU_MAX_NODES
-        && let Ok(ctx) = gpu::context()
-        && ctx.is_software()
+        && let Some(adapter) = software_gpu_passed_over(chain.nodes())
     {
         note(format!(
-            "auto: simulated strings of {} nodes on the CPU rather than the software GPU {}, which runs them on the same cores more slowly (`backend gpu` insists on it)",
+            "auto: simulated strings of {} nodes on the CPU rather than the software GPU {adapter}, which runs them on the same cores more slowly (`backend gpu` insists on it)",
             chain.nodes(),
-            ctx.describe()
         ));
         return Ok((strings::integrate_batch(chain, schedule, jobs), Ran::Cpu));
     }

@@ -194,6 +194,35 @@ fn auto_leaves_a_chain_of_nodes_to_the_cpu_only_where_the_gpu_is_a_software_driv
     }
 }
 
+/// `bench --strings` measures the GPU where `auto` would simulate on it: by default a software
+/// driver's row for the ten-element string is left out, saying so (that chain runs on the CPU
+/// under `auto`); a hardware GPU is measured on both chains. (`--backend gpu` is not run here:
+/// lavapipe takes about 30 s to compile the ten-node kernel from an empty shader cache.)
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn bench_strings_measures_the_gpu_where_auto_would_simulate_on_it() {
+    use crate::support::{bin, outcome};
+    require_gpu();
+    let software = bitrock::eval::gpu::context().unwrap().is_software();
+    let args = ["bench", "--strings", "--quick", "--strings-n", "16", "--reps", "1"];
+    let (code, stdout, stderr) = outcome(bin().args(args));
+    assert_eq!(code, 0, "{stderr}");
+    let row = |out: &str, string: &str, backend: &str| {
+        out.lines()
+            .any(|l| l.starts_with("throughput") && l.contains(&format!(" {string} ")) && l.contains(backend))
+    };
+    for string in ["1dof", "fe"] {
+        assert!(row(&stdout, string, " cpu "), "{string}: {stdout}");
+    }
+    assert!(row(&stdout, "1dof", " gpu ("), "{stdout}");
+    assert_eq!(row(&stdout, "fe", " gpu ("), !software, "{stdout}");
+    assert_eq!(
+        stderr.contains("strings fe on the GPU not measured") && stderr.contains("`--backend gpu` measures it"),
+        software,
+        "{stderr}"
+    );
+}
+
 /// m2 at the paper's estimate and 244 kN, in stick-slip at 60 rpm: the simulated escape.
 fn m2_escape(backend: Backend) -> (Grid, f64) {
     let law = Law::M2;
