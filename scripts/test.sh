@@ -10,12 +10,15 @@ cd "$(dirname "$0")/.."
 # The background jobs and temporary files of the run, for the way out.
 SYSTEM_JOB="" SYSTEM_LOG="" DEPENDENCIES="" ARVIZ1="" WHEEL_JOB="" ARVIZ1_TESTS=""
 BITROCK_CACHE_DIR="" WHEELS=""
-# Stops pip's and the tests' jobs, then the shell that started each; a job waited for is
-# forgotten, so that its number, which the system may give again, is never signalled.
+# Stops pip's and the tests' jobs still running, then the shell that started each: a job that
+# has ended is never signalled, as its number may have been given to another process since.
 stop_background() {
-    local job
+    local job running
+    running=" $(jobs -pr | tr '\n' ' ') "
     for job in "$@"; do
-        { pkill -P "$job"; kill "$job"; } 2>/dev/null || true
+        case "$running" in
+            *" $job "*) { pkill -P "$job"; kill "$job"; } 2>/dev/null || true ;;
+        esac
     done
 }
 # On the way out, whatever the reason: apt's install is waited for, never stopped (dpkg cut part
@@ -24,23 +27,31 @@ cleanup() {
     stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS
     if [ -n "$SYSTEM_JOB" ]; then
         echo "waiting for the system packages' install (apt) to end..." >&2
-        wait "$SYSTEM_JOB" || cat "$SYSTEM_LOG" >&2
+        if ! wait "$SYSTEM_JOB"; then
+            cat "$SYSTEM_LOG" >&2
+            echo "installing ${SYSTEM_PACKAGES[*]} failed (above)" >&2
+        fi
     fi
     rm -rf "$BITROCK_CACHE_DIR" "$SYSTEM_LOG" "$WHEELS"
 }
 trap cleanup EXIT
 
-# A command as root: through sudo for a user (which resets the environment: `env` sets it).
+# A command as root: through sudo for a user. apt always runs as `env DEBIAN_FRONTEND=…
+# apt-get` (sudo resets the environment), so that one sudoers rule allows the update and the
+# install alike; the install waits up to ten minutes for another apt to let go of dpkg's lock
+# rather than failing at once (the update does not wait).
 as_root() {
     if [ "$(id -u)" -ne 0 ]; then sudo "$@"; else "$@"; fi
 }
-apt_install() {
-    as_root apt-get update -qq
-    apt_get_install "$@"
+apt_update() {
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get update -qq
 }
-# Waits up to ten minutes for another apt to let go of dpkg's lock, rather than failing at once.
 apt_get_install() {
     as_root env DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq "$@" >/dev/null
+}
+apt_install() {
+    apt_update
+    apt_get_install "$@"
 }
 
 has_vulkan_driver() {
@@ -48,12 +59,14 @@ has_vulkan_driver() {
     { ls /usr/share/vulkan/icd.d/*.json || ls /etc/vulkan/icd.d/*.json; } >/dev/null 2>&1 \
         && ldconfig -p | grep libvulkan.so.1 >/dev/null
 }
-# Waits for the background job whose number the variable named `$1` holds, forgotten first (see
-# stop_background); where it failed, shows its log and ends the run saying what failed.
+# Waits for the background job whose number the variable named `$1` holds, then forgets it
+# (a signal during the wait leaves it known to the exit's cleanup); where it failed, shows its
+# log and ends the run saying what failed.
 wait_for() {
-    local job="${!1}" log="$2" what="$3"
+    local job="${!1}" log="$2" what="$3" status=0
+    wait "$job" || status=$?
     printf -v "$1" '%s' ""
-    if ! wait "$job"; then
+    if [ "$status" -ne 0 ]; then
         cat "$log" >&2
         echo "$what failed (above)" >&2
         exit 1
@@ -74,8 +87,8 @@ fi
 if [ ${#SYSTEM_PACKAGES[@]} -gt 0 ]; then
     SYSTEM_LOG="$(mktemp)"
     if [ "$(id -u)" -ne 0 ]; then
-        # In the foreground, where sudo can ask for its password (with the command it allows).
-        as_root apt-get update -qq
+        # In the foreground, where sudo can ask for its password.
+        apt_update
         apt_get_install "${SYSTEM_PACKAGES[@]}" > "$SYSTEM_LOG" 2>&1 &
     else
         apt_install "${SYSTEM_PACKAGES[@]}" > "$SYSTEM_LOG" 2>&1 &

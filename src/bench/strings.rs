@@ -27,8 +27,8 @@ pub struct StringsBenchOptions {
     pub backends: Vec<Backend>,
     pub repetitions: usize,
     /// Measure the GPU only where `auto` would simulate on it: a software driver's row for a
-    /// chain `auto` leaves to the CPU is left out, saying so (both backends measured by
-    /// default; `--backend gpu` measures it anyway).
+    /// chain `auto` leaves to the CPU is left out, saying so (the command sets it where no
+    /// backend or `auto` is named); false measures every chain on every backend.
     pub gpu_where_auto_takes_it: bool,
 }
 
@@ -97,7 +97,7 @@ pub fn run(opts: &StringsBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
                 && let Some(adapter) = crate::eval::strings::software_gpu_passed_over(chain.nodes())
             {
                 log(format!(
-                    "strings {string} on the GPU not measured: {adapter} is a software driver, and `auto` simulates a chain of {} nodes on the CPU (`--backend gpu` measures it)",
+                    "strings {string} on the GPU not measured: {adapter} is a software driver, and `auto` simulates a chain of {} nodes on the CPU (measured with `backend` gpu)",
                     chain.nodes()
                 ));
                 continue;

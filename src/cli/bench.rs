@@ -46,8 +46,8 @@ pub struct BenchCmd {
     /// Measure only the simulated strings: string-seconds per second on the 1-DOF string and
     /// the paper's 10-element string lumped (65,536 strings × 60 s; 4,096 with --quick), and an
     /// escape map of 50 × 50 cells × 100 posterior samples (10 × 10 × 20 with --quick). Without
-    /// --backend, a software GPU is measured only where `auto` would simulate on it (not the
-    /// 10-element string, which it leaves to the CPU).
+    /// --backend (or with auto), a software GPU is measured only where `auto` would simulate on
+    /// it: not the 10-element string, which `auto` leaves to the CPU.
     #[arg(long, conflicts_with_all = ["selection", "smc", "watch"])]
     pub strings: bool,
     /// Measure only a surface record's inference (`bitrock surface`): ten minutes of m2 at 60

@@ -217,7 +217,7 @@ fn bench_strings_measures_the_gpu_where_auto_would_simulate_on_it() {
     assert!(row(&stdout, "1dof", " gpu ("), "{stdout}");
     assert_eq!(row(&stdout, "fe", " gpu ("), !software, "{stdout}");
     assert_eq!(
-        stderr.contains("strings fe on the GPU not measured") && stderr.contains("`--backend gpu` measures it"),
+        stderr.contains("strings fe on the GPU not measured") && stderr.contains("(measured with --backend gpu)"),
         software,
         "{stderr}"
     );
