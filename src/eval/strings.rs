@@ -33,7 +33,8 @@ impl std::fmt::Display for Ran {
 /// --at-kn 244.2 --structure fe` on two cores, `--backend gpu` against `cpu` (wall, the
 /// kernel's compilation included): 2 nodes 0.96 s against 1.64 s, 4 nodes 1.56 against 2.06,
 /// 6 nodes 3.12 against 2.34, 8 nodes 104 against 2.6; the 1-DOF string 7.1e5 string-s/s against
-/// 3.8e5 and the ten-element one 2.0e3 against 6.7e4 (`bitrock bench --strings --quick --backend gpu`, and `cpu`).
+/// 3.8e5 and the ten-element one 2.0e3 against 6.7e4 (`bitrock bench --strings --quick
+/// --backend gpu`, and `cpu`).
 pub const SOFTWARE_GPU_MAX_NODES: usize = 4;
 
 /// The software GPU that `auto` leaves a chain of `nodes` nodes to the CPU rather than take

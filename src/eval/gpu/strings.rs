@@ -90,10 +90,7 @@ pub fn integrate_batch_in_slices(
     }
     let expected = schedule.record_samples;
     for chunk in jobs.chunks(STRINGS_PER_CHUNK) {
-        let shorten = |job: &mut StringsJob| {
-            job.slice_steps /= 4;
-            job.slice_steps >= SHORTEST_SLICE_STEPS
-        };
+        let shorten = |job: &mut StringsJob| quarter_slice(&mut job.slice_steps);
         out.extend(until_whole(job, "string", expected, shorten, |job| {
             let (got, cut) = run_chunk(ctx, &kernel, job, chunk)?;
             let short_of = got.iter().find(|(s, _)| !s.diverged && s.samples != expected);
@@ -158,6 +155,13 @@ fn steps_per_slice(nodes: usize) -> u32 {
 /// The shortest slice a cut chunk is run again in: below it the driver is not cutting long
 /// slices but failing, and the error says so.
 const SHORTEST_SLICE_STEPS: u32 = 16;
+
+/// A cut chunk's next slice length, a quarter of `slice_steps`; false below
+/// [`SHORTEST_SLICE_STEPS`] (for [`until_whole`]).
+fn quarter_slice(slice_steps: &mut u32) -> bool {
+    *slice_steps /= 4;
+    *slice_steps >= SHORTEST_SLICE_STEPS
+}
 
 /// A job on a record's clock, sliced: each slice a span of its steps.
 #[repr(transparent)]
@@ -283,10 +287,7 @@ pub fn on_clock_batch_in_slices(
             strings_per_dispatch: STRINGS_PER_DISPATCH,
             read_states: false,
         };
-        let shorten = |job: &mut OnClockUniform| {
-            job.0.slice_steps /= 4;
-            job.0.slice_steps >= SHORTEST_SLICE_STEPS
-        };
+        let shorten = |job: &mut OnClockUniform| quarter_slice(&mut job.0.slice_steps);
         let expected = samples as u32;
         out.extend(until_whole(job, "string", expected, shorten, |job| {
             let traces = super::string_batch::integrate_chunk(ctx, &kernel, job, &layout)?.summaries;
