@@ -85,7 +85,7 @@ const WINDOWS: [&str; 4] = ["--window-s", "20", "--step-s", "10"];
 fn well_windows() -> &'static [serde_json::Value] {
     static UPDATES: std::sync::OnceLock<Vec<serde_json::Value>> = std::sync::OnceLock::new();
     UPDATES.get_or_init(|| {
-        let dir = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
+        let dir = tempfile::tempdir().unwrap();
         let record = simulate_well(dir.path());
         watch(&[&WINDOWS[..], &["--particles", "100", record.to_str().unwrap()]].concat())
     })
