@@ -309,21 +309,26 @@ fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
         ],
     );
     // Samplers beyond memory, in the watch's windows and in the evidence.
+    // (Sizes past any machine's memory, not only this one's: 153.6 TB, 76.8 TB.)
     refused(
-        &["watch", "rec.csv", "--particles", "100000000", "--out", "W"],
-        &["--particles", "8.000e8 particles", "memory"],
+        &["watch", "rec.csv", "--particles", "100000000000", "--out", "W"],
+        &["--particles", "8.000e11 particles", "memory"],
     );
     refused(
         &["evidence", "rec.csv", "--islands", "100000000", "--out", "E"],
         &["--islands", "islands per law and start", "memory"],
     );
-    // Refinements whose last round would not fit, and more rounds than the doubling allows.
+    // Refinements whose last round would not fit, and more rounds than the doubling allows: the
+    // first round an eighth of the memory here (192 B a particle, four islands per law and
+    // start: 32 for four laws from both starts), the last eight times it, whatever the machine.
+    let available = bitrock::limits::available_memory_bytes().expect("this machine's memory");
+    let particles = (available / (32 * 192) / 8).to_string();
     refused(
         &[
             "evidence",
             "rec.csv",
             "--particles",
-            "200000",
+            &particles,
             "--refine-rounds",
             "6",
             "--out",
@@ -337,12 +342,12 @@ fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
     );
     // A check of more records than memory keeps, refused before the evidence itself.
     refused(
-        &["evidence", "rec.csv", "--check", "1000000000", "--out", "E"],
+        &["evidence", "rec.csv", "--check", "100000000000", "--out", "E"],
         &["--check", "synthetic records", "of memory"],
     );
     // The demo's check too, before its runs.
     refused(
-        &["demo", "--check", "1000000000", "--out", "D"],
+        &["demo", "--check", "100000000000", "--out", "D"],
         &["--check", "synthetic records", "of memory"],
     );
     for made in ["W", "E", "D"] {
