@@ -4,7 +4,7 @@
 //! Kernels live in `shaders/`, one per file with entry point `main`; the shared code of
 //! `shaders/shared/` is prepended to each (concatenation, never string replacement) by build.rs,
 //! which validates every kernel with naga, so that one that does not compile fails the build. The
-//! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12, gl) and `WGPU_ADAPTER_NAME` (a
+//! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12; gl only where named) and `WGPU_ADAPTER_NAME` (a
 //! case-insensitive substring of the adapter's name); its own limits are requested. Pipelines
 //! are built once per context (`GpuContext::kernel`). The scoring kernels come in two
 //! [`Shape`]s, chosen by measurement per adapter ([`tune`]) or by `BITROCK_GPU_SHAPE`.
@@ -141,7 +141,7 @@ fn test_uniform_between_source() -> String {
 #[derive(Clone, Debug, thiserror::Error)]
 pub enum GpuError {
     #[error(
-        "no GPU adapter: {0}. Install a Vulkan driver (for a software one: apt-get install mesa-vulkan-drivers libvulkan1) or use `backend` cpu"
+        "no GPU adapter: {0}. Install a Vulkan driver (for a software one: apt-get install mesa-vulkan-drivers libvulkan1), name OpenGL with WGPU_BACKEND=gl, or use `backend` cpu"
     )]
     NoAdapter(String),
     /// Adapters exist, but the environment names none of them for this process, or gives it
@@ -394,25 +394,46 @@ fn same_bus(a: &str, b: &str) -> bool {
     !a.is_empty() && strip(a) == strip(b)
 }
 
-/// The adapters wgpu sees (on the backends `WGPU_BACKEND` allows), in the order
-/// [`ADAPTER_VAR`] indexes.
+/// The backends a device may come through: those `WGPU_BACKEND` names, else every one but
+/// OpenGL. wgpu's OpenGL backend serialises a device's work behind one context lock and panics
+/// where a thread waits on it for more than a second (seen with Mesa's llvmpipe when one
+/// thread's dispatch ran long while another released a buffer): a process that scores from
+/// several threads cannot rely on it, so it is used only where named.
+fn backends() -> wgpu::Backends {
+    backends_named(std::env::var("WGPU_BACKEND").ok().as_deref())
+}
+
+/// [`backends`] where `WGPU_BACKEND` is `named` (a comma-separated list, as wgpu reads it).
+fn backends_named(named: Option<&str>) -> wgpu::Backends {
+    named.map_or(
+        wgpu::Backends::all().difference(wgpu::Backends::GL),
+        wgpu::Backends::from_comma_list,
+    )
+}
+
+/// A wgpu instance on [`backends`], its other options from the environment.
+fn instance() -> wgpu::Instance {
+    wgpu::Instance::new(wgpu::InstanceDescriptor {
+        backends: backends(),
+        ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
+    })
+}
+
+/// The adapters wgpu sees (on [`backends`]), in the order [`ADAPTER_VAR`] indexes.
 pub fn adapters() -> Vec<wgpu::AdapterInfo> {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-    pollster::block_on(instance.enumerate_adapters(backends))
+    pollster::block_on(instance().enumerate_adapters(backends()))
         .iter()
         .map(wgpu::Adapter::get_info)
         .collect()
 }
 
 fn create_context() -> Result<GpuContext, GpuError> {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let instance = instance();
     let wish = AdapterWish::from_env(|name| std::env::var(name).ok())?;
     let named = match wish {
         AdapterWish::Any => None,
         wish => {
-            let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-            let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
+            let mut adapters = pollster::block_on(instance.enumerate_adapters(backends()));
             let infos: Vec<wgpu::AdapterInfo> = adapters.iter().map(wgpu::Adapter::get_info).collect();
             wish.pick(&infos)?.map(|at| adapters.swap_remove(at))
         }
@@ -436,9 +457,7 @@ pub fn every_context() -> Result<Vec<&'static GpuContext>, GpuError> {
     static ALL: OnceLock<Result<Vec<&'static GpuContext>, GpuError>> = OnceLock::new();
     ALL.get_or_init(|| {
         let wish = AdapterWish::from_env(|name| std::env::var(name).ok())?;
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-        let mut adapters: Vec<Option<wgpu::Adapter>> = pollster::block_on(instance.enumerate_adapters(backends))
+        let mut adapters: Vec<Option<wgpu::Adapter>> = pollster::block_on(instance().enumerate_adapters(backends()))
             .into_iter()
             .map(Some)
             .collect();
@@ -1023,6 +1042,20 @@ mod build_tests {
 #[cfg(test)]
 mod adapter_tests {
     use super::*;
+
+    #[test]
+    fn opengl_is_used_only_where_named() {
+        use wgpu::Backends;
+        let unnamed = backends_named(None);
+        assert!(
+            unnamed.contains(Backends::VULKAN | Backends::METAL | Backends::DX12),
+            "{unnamed:?}"
+        );
+        assert!(!unnamed.contains(Backends::GL), "{unnamed:?}");
+        assert_eq!(backends_named(Some("gl")), Backends::GL);
+        assert_eq!(backends_named(Some("vulkan,gl")), Backends::VULKAN | Backends::GL);
+        assert_eq!(backends_named(Some("vulkan")), Backends::VULKAN);
+    }
 
     fn adapter(name: &str, vendor: u32, bus: &str, backend: wgpu::Backend) -> wgpu::AdapterInfo {
         wgpu::AdapterInfo {
