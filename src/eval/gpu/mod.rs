@@ -419,7 +419,8 @@ fn instance() -> wgpu::Instance {
     })
 }
 
-/// The adapters wgpu sees (on [`backends`]), in the order [`ADAPTER_VAR`] indexes.
+/// The adapters wgpu sees (on the backends `WGPU_BACKEND` names, else every one but OpenGL),
+/// in the order [`ADAPTER_VAR`] indexes.
 pub fn adapters() -> Vec<wgpu::AdapterInfo> {
     pollster::block_on(instance().enumerate_adapters(backends()))
         .iter()
