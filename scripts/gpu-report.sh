@@ -10,13 +10,14 @@
 # Run from the project's root with the release binary built (`cargo build --release`); see
 # docs/benchmarks.md for how it is run on a lent NVIDIA machine. Where $ARCHIVE names a file, the
 # whole report is packed into it after every step: a lent machine returns only a few files, and
-# a run cut short still returns the steps it finished.
+# a run cut short still returns the steps it finished (the archive outside $OUT or at its top).
+# $EVIDENCE_RUNS sets how many times the evidence is timed (3).
 set -u
 OUT=${OUT:-gpu-report}
 mkdir -p "$OUT"
 B=${BITROCK:-target/release/bitrock}
 export NODEVICE_SELECT=1 BITROCK_CACHE_DIR=${BITROCK_CACHE_DIR:-$(mktemp -d)}
-PACKING=${ARCHIVE:+$(mktemp)}
+PACKING=${ARCHIVE:+$(mktemp "$(dirname -- "$ARCHIVE")/.packing.XXXXXX")}
 step() { # name timeout command...
     local name=$1 limit=$2; shift 2
     local t0=$(date +%s%N)
@@ -27,9 +28,13 @@ step() { # name timeout command...
     if [ "$rc" -ne 0 ]; then tail -n 40 "$OUT/$name.out" "$OUT/$name.err"; fi
     # A failing test run's panics too, which the harness prints above its last lines.
     if [ "$rc" -ne 0 ] && [[ $name == tests* ]]; then grep -A 6 '^---- ' "$OUT/$name.out" | head -n 150; fi
-    # Packed beside, then moved: an archive inside $OUT would be read while it is written.
+    # Packed under another name beside it, then renamed (a run cut while packing keeps the last
+    # whole archive); where it lies in $OUT, neither name is packed, and tar's exit status 1 (a
+    # file changed while read: the folder, as the packing is written into it) is no failure.
     if [ -n "${ARCHIVE:-}" ]; then
-        tar czf "$PACKING" --exclude="./$(basename "$ARCHIVE")" -C "$OUT" . && mv "$PACKING" "$ARCHIVE"
+        tar czf "$PACKING" --warning=no-file-changed --exclude="./$(basename "$ARCHIVE")" \
+            --exclude="./$(basename "$PACKING")" -C "$OUT" .
+        if [ $? -le 1 ]; then chmod 644 "$PACKING" && mv "$PACKING" "$ARCHIVE"; fi
     fi
 }
 { nproc; date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1; } >"$OUT/machine.txt"
