@@ -6,9 +6,9 @@
 //! which validates every kernel with naga, so that one that does not compile fails the build. The
 //! adapter follows `WGPU_BACKEND` (vulkan, metal, dx12; gl only where named) and
 //! `WGPU_ADAPTER_NAME` (a case-insensitive substring of the adapter's name); its own limits are
-//! requested. Pipelines
-//! are built once per context (`GpuContext::kernel`). The scoring kernels come in two
-//! [`Shape`]s, chosen by measurement per adapter ([`tune`]) or by `BITROCK_GPU_SHAPE`.
+//! requested. Pipelines are built once per context (`GpuContext::kernel`). The scoring kernels
+//! come in two [`Shape`]s, chosen by measurement per adapter ([`tune`]) or by
+//! `BITROCK_GPU_SHAPE`.
 
 pub mod candidates;
 pub mod coupled;

@@ -319,11 +319,11 @@ fn the_watch_and_the_evidence_bound_every_count_and_rate_before_any_work() {
         &["--islands", "islands per law and start", "memory"],
     );
     // Refinements whose last round would not fit, and more rounds than the doubling allows: the
-    // first round an eighth of the memory here (192 B a particle, four islands per law and
-    // start: 32 for four laws from both starts), the last round, 64 times the first, eight times
-    // the memory, whatever the machine.
-    let available = bitrock::limits::available_memory_bytes().expect("this machine's memory");
-    let particles = (available / (32 * 192) / 8).to_string();
+    // first round an eighth of the memory here (the default islands of four laws from both
+    // starts), the last round, 64 times the first, eight times the memory, whatever the machine.
+    let available = bitrock::limits::available_memory_bytes().expect("this machine's memory") as f64;
+    let islands = (bitrock::abc::evidence::EvidenceConfig::default().islands * 4 * 2) as f64;
+    let particles = ((available / 8.0 / (islands * bitrock::abc::evidence::BYTES_PER_PARTICLE)) as u64).to_string();
     refused(
         &[
             "evidence",
