@@ -72,6 +72,16 @@ impl LawBox {
         self.contains(params) && self.curve.as_ref().is_none_or(|c| c.holds(self.law, &as_f32))
     }
 
+    /// [`Self::admits`] for the f32 parameters a candidate carries, compared with the box's
+    /// ends as drawn.
+    pub fn admits_f32(&self, params: &[f32]) -> bool {
+        params
+            .iter()
+            .zip(self.lower.iter().zip(&self.upper))
+            .all(|(p, (lo, hi))| p >= lo && p <= hi)
+            && self.curve.as_ref().is_none_or(|c| c.holds(self.law, params))
+    }
+
     /// True when `params` lie inside the box (ends included); a [`CurveLimit`] is not asked.
     pub fn contains(&self, params: &[f64]) -> bool {
         params
@@ -261,6 +271,15 @@ impl PhysicalScales {
 /// infers the drill string with the law (`bitrock surface`), its natural frequency and damping
 /// ratio after them.
 pub const MAX_DIMS: usize = MAX_PARAMS + 2;
+
+/// Draws of a box whose prior is cut to a curve ([`CurveLimit`]) tried for one candidate: a
+/// cut keeps at least [`MIN_INSIDE`] of [`SHARE_DRAWS`] of its box, so all of them miss with
+/// probability below e⁻¹⁰⁰.
+const MAX_CURVE_ATTEMPTS: u32 = 1 << 16;
+
+/// The first counter block of a candidate's draws again inside a curve's limit (blocks 0..2
+/// are its first draw's).
+const CURVE_BLOCKS: u32 = 4;
 
 /// A candidate drawn from the prior: which box (index into [`Prior::boxes`]) and its
 /// coordinates (the law's parameters first; unused ones 0).
@@ -577,7 +596,11 @@ impl Prior {
     ///
     /// Block 0 of the counter gives the law (word 0) and parameters 0..2 (words 1..3), block 1
     /// parameters 3..5, block 2 coordinates 6..7 (a box of more than six). Parameter j =
-    /// [`uniform_between`]`(lower, upper, word)`, bit-identical on every backend.
+    /// [`uniform_between`]`(lower, upper, word)`, bit-identical on every backend. A box cut
+    /// to a curve ([`CurveLimit`]) is drawn again, from blocks 4 on, until its curve keeps
+    /// the limit: uniform on what the limit keeps. (The GPU's own candidates, those of
+    /// rejection ABC's kernels, are of boxes without a curve: a run whose prior is cut scores
+    /// the host's.)
     #[inline]
     pub fn candidate(&self, seed: u64, population: u32, index: u64) -> Candidate {
         let key = key_of_seed(seed);
@@ -597,6 +620,23 @@ impl Prior {
         let mut params = [0.0f32; MAX_DIMS];
         for j in 0..n {
             params[j] = uniform_between(bx.lower[j], bx.upper[j], words[j]);
+        }
+        if let Some(curve) = &bx.curve {
+            // Uniform on the box cut to the curve: the box drawn again, from blocks of the
+            // counter past the first draw's, until its curve keeps the limit.
+            let mut attempt = 1;
+            while !curve.holds(bx.law, &params[..n]) && attempt < MAX_CURVE_ATTEMPTS {
+                for (block, chunk) in (0..n).step_by(4).enumerate() {
+                    let words = philox4x32_10(
+                        candidate_counter(population, index, CURVE_BLOCKS + attempt * 4 + block as u32),
+                        key,
+                    );
+                    for (j, &word) in (chunk..n.min(chunk + 4)).zip(&words) {
+                        params[j] = uniform_between(bx.lower[j], bx.upper[j], word);
+                    }
+                }
+                attempt += 1;
+            }
         }
         Candidate { slot, params }
     }
@@ -848,6 +888,59 @@ mod tests {
         assert!((count[0] as f64 - 10_000.0).abs() < 5.0 * 87.0, "{count:?}");
         assert_ne!(p.candidate(9, 2, 0), p.candidate(9, 3, 0));
         assert_ne!(p.candidate(9, 2, 0), p.candidate(10, 2, 0));
+    }
+
+    #[test]
+    fn candidates_of_a_box_cut_to_a_curve_are_uniform_on_what_it_keeps() {
+        // m4 as c0 + c1·w over speeds 0..1, c0 in [0, 4], c1 in [−4, 4], cut to |T| ≤ 3:
+        // c0 ≤ 3 and −3 ≤ c0 + c1 ≤ 3, about half the box. Beside it an uncut m2 box.
+        let boxes = vec![
+            LawBox::new(Law::M2, vec![1.0, 0.5, 0.0], vec![2.0, 1.0, 1.0]),
+            LawBox::new(Law::M4, vec![0.0, -4.0, 0.0, 0.0], vec![4.0, 4.0, 0.0, 0.0]),
+        ];
+        let uncut = Prior::new(boxes, vec![1.0, 1.0]).unwrap();
+        let mut cut = uncut.clone();
+        let m4 = &mut cut.boxes[1];
+        m4.curve = Some(CurveLimit::new(Law::M4, 3.0, 1.0, 1.0, (&m4.lower, &m4.upper)).unwrap());
+        let limit = m4.curve.clone().unwrap();
+        let n = 40_000u64;
+        let (mut m4_draws, mut first_kept) = (0usize, 0usize);
+        let (mut sum_cut, mut sum_sq_cut) = (0.0f64, 0.0f64);
+        let (mut sum_kept, mut kept) = (0.0f64, 0usize);
+        for i in 0..n {
+            let (a, b) = (uncut.candidate(3, 1, i), cut.candidate(3, 1, i));
+            // The law is the first word's: the cut leaves the laws' shares as they are.
+            assert_eq!(a.slot, b.slot);
+            if b.slot == 0 {
+                assert_eq!(a, b);
+                continue;
+            }
+            m4_draws += 1;
+            assert!(cut.boxes[1].admits_f32(&b.params[..4]), "{b:?}");
+            let c0 = f64::from(b.params[0]);
+            sum_cut += c0;
+            sum_sq_cut += c0 * c0;
+            // A first draw inside the cut is kept as drawn.
+            if limit.holds(Law::M4, &a.params[..4]) {
+                assert_eq!(a, b);
+                first_kept += 1;
+                sum_kept += f64::from(a.params[0]);
+                kept += 1;
+            }
+        }
+        // Binomial(40000, 1/2): σ = 100.
+        assert!((m4_draws as f64 - 20_000.0).abs() < 500.0, "{m4_draws}");
+        assert!((first_kept as f64 / m4_draws as f64 - limit.ln_share.exp()).abs() < 0.02);
+        // Uniform on the cut: c0's mean is that of the uncut draws the cut keeps (rejection
+        // from the box), within five standard errors of the two means.
+        let mean_cut = sum_cut / m4_draws as f64;
+        let sd = (sum_sq_cut / m4_draws as f64 - mean_cut * mean_cut).sqrt();
+        let mean_kept = sum_kept / kept as f64;
+        let se = sd * (1.0 / m4_draws as f64 + 1.0 / kept as f64).sqrt();
+        assert!(
+            (mean_cut - mean_kept).abs() < 5.0 * se,
+            "{mean_cut} against {mean_kept} ± {se}"
+        );
     }
 
     #[test]

@@ -33,9 +33,11 @@
 //! 3. φ = φ_j + L_m z, z ~ N(0, I) by Box–Muller from words 4-11 in pairs (w_a, w_b):
 //!    u_a = (w_a + ½)·2⁻³², u_b = w_b·2⁻³², z = √(−2 ln u_a) (cos 2πu_b, sin 2πu_b), f64;
 //! 4. φ rounded to f32 (what both backends score, and the particle's parameters). A proposal
-//!    outside the prior box is *counted as rejected*: it is a draw of its law, is not scored,
-//!    and is not accepted. (Equivalent to redrawing: the accepted particles are the first N − S
-//!    in index order that are inside the box and below ε.)
+//!    outside the law's prior (its box, and its curve's limit where the box is cut,
+//!    [`crate::prior::CurveLimit`]) is *counted as rejected*: it is a draw of its law, is not
+//!    scored, and is not accepted. (Equivalent to redrawing: the accepted particles are the
+//!    first N − S in index order that are inside the prior and below ε.) The weights' prior
+//!    density of a cut box is one over the volume its limit keeps.
 //!
 //! **Kernel**: per law, L_m L_mᵀ = Σ_m = `kernel_scale` · C_m + (10⁻⁴ · box width)² I, where C_m
 //! is the weighted covariance (divisor Σw, no bias correction) of the law's ancestors.
@@ -425,10 +427,12 @@ impl LawKernel {
         let log_det_l = (0..k).map(|a| chol[a * k + a].ln()).sum();
         let member_weight = compensated_sum(weights.iter().copied());
         let cdf = normalised_cdf(&weights);
+        // Uniform on the box, or on the part of it its curve's limit keeps.
         let log_prior_density = -free
             .iter()
             .map(|&j| (f64::from(bx.upper[j]) - f64::from(bx.lower[j])).ln())
-            .sum::<f64>();
+            .sum::<f64>()
+            - bx.curve.as_ref().map_or(0.0, |c| c.ln_share);
         let mut kernel = Self {
             free,
             mean,
@@ -629,7 +633,7 @@ impl Kernels {
     }
 
     /// Proposal `index` of stream `stream`: its law slot, and its f32 parameters unless they
-    /// fall outside the prior box.
+    /// fall outside the law's prior.
     fn propose(
         &self,
         prior: &Prior,
@@ -676,7 +680,7 @@ impl Kernels {
             let j = law.free[a];
             params[j] = (ancestor.params[j] + step) as f32;
         }
-        let inside = (0..bx.lower.len()).all(|j| params[j] >= bx.lower[j] && params[j] <= bx.upper[j]);
+        let inside = bx.admits_f32(&params[..bx.lower.len()]);
         (slot, inside.then_some(params))
     }
 
@@ -1434,6 +1438,56 @@ mod tests {
             p.weight = if i < 2 { 0.5 } else { 0.0 };
         }
         assert!(!thin(&two));
+    }
+
+    #[test]
+    fn a_box_cut_to_a_curve_rejects_proposals_outside_it_and_weighs_by_what_it_keeps() {
+        // The model kernel's setup below, with m4's box (c0 in [0, 4], the rest 0) cut to the
+        // curves within 3: a constant torque c0, so the cut keeps c0 ≤ 3, three quarters of
+        // the box (estimated by Monte Carlo). The density of m4's prior is then one over that
+        // volume: the weight of an m4 particle grows by exp(−ln share) against the uncut
+        // setup's, the m2 one's stays.
+        let mut prior = m2_and_m4(
+            [[0.0, 1.0, 1.0], [4.0, 1.0, 1.0]],
+            [[0.0, 0.0, 0.0, 0.0], [4.0, 0.0, 0.0, 0.0]],
+        );
+        let m4 = &mut prior.boxes[1];
+        let limit = crate::prior::CurveLimit::new(Law::M4, 3.0, 1.0, 1.0, (&m4.lower, &m4.upper)).unwrap();
+        assert!(
+            (limit.ln_share.exp() - 0.75).abs() < 4.0 * 0.75 * limit.ln_share_error,
+            "{}",
+            limit.ln_share
+        );
+        let ln_share = limit.ln_share;
+        m4.curve = Some(limit);
+        let previous = vec![
+            particle(Law::M2, 0, &[1.0, 1.0, 1.0], 0.45),
+            particle(Law::M2, 1, &[3.0, 1.0, 1.0], 0.45),
+            particle(Law::M4, 2, &[1.0, 0.0, 0.0, 0.0], 0.05),
+            particle(Law::M4, 3, &[3.0, 0.0, 0.0, 0.0], 0.05),
+        ];
+        let kernels = Kernels::new(&prior, &previous, &classic(), f64::INFINITY, &|_| true).unwrap();
+        let new = [
+            particle(Law::M2, 0, &[2.0, 1.0, 1.0], 0.0),
+            particle(Law::M4, 1, &[2.0, 0.0, 0.0, 0.0], 0.0),
+        ];
+        let w = normalise_log_weights(&kernels.log_weights_with(&prior, &previous, &new, &host_sums).unwrap());
+        let expected = 0.66 / 0.34 * (-ln_share).exp();
+        assert!((w[1] / w[0] - expected).abs() < 1e-12 * expected, "{w:?}");
+        // Proposals of m4 land inside the cut or are rejected; both happen.
+        let key = key_of_seed(11);
+        let (mut inside, mut rejected) = (0, 0);
+        for i in 0..2_000 {
+            match kernels.propose(&prior, &previous, key, 1, i) {
+                (1, Some(p)) => {
+                    assert!((0.0..=3.0).contains(&p[0]), "{p:?}");
+                    inside += 1;
+                }
+                (1, None) => rejected += 1,
+                _ => {}
+            }
+        }
+        assert!(inside > 100 && rejected > 20, "{inside} inside, {rejected} rejected");
     }
 
     #[test]

@@ -441,6 +441,20 @@ fn posterior_lines(out: &mut impl Write, unit: TorqueUnit, r: &SurfaceResult) ->
             .collect();
         writeln!(out, "{} (P = {:.3}): {}", law.law, law.probability, params.join(", "))?;
     }
+    for law in &r.laws {
+        if let Some(c) = &law.prior_curve {
+            writeln!(
+                out,
+                "{}'s prior: its box cut to the curves within {} times the record's largest surface torque ({:.4} {}) from rest to {:.2} rad/s ({:.1} % of the box)",
+                law.law,
+                c.within,
+                c.limit_nm / per_unit,
+                unit.label(),
+                c.speed_high_rad_s,
+                100.0 * c.share
+            )?;
+        }
+    }
     string_line(out, &r.string)
 }
 

@@ -580,12 +580,14 @@ fn surface_and_bit_records_each_go_to_their_own_command() {
 fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives() {
     let (tmp, path, _) = record(Law::M2, 60.0, 120.0, 1.0, 0.2, 7);
     let dir = tmp.path().join("run");
+    // m4's prior is its box cut to the curves within twice the record's largest torque: the
+    // cut's draws and weights continue as the rest do.
     let args = |extra: &[&str]| {
         let mut args = vec![
             "surface",
             path.to_str().unwrap(),
             "--laws",
-            "m1,m2",
+            "m2,m4",
             "--particles",
             "150",
             "--pilot",
@@ -655,6 +657,8 @@ fn a_surface_directory_continues_to_the_populations_an_uninterrupted_run_gives()
     let (continued, whole) = (document(&continued), document(&whole));
     assert_eq!(continued["populations"], 3);
     assert_eq!(continued, whole);
+    assert!(whole["laws"][0]["prior_curve"].is_null(), "{whole}");
+    assert_eq!(whole["laws"][1]["prior_curve"]["within"], 2.0, "{whole}");
     let written: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("surface.json")).unwrap()).unwrap();
     assert_eq!(written["epsilons"], whole["epsilons"]);
 

@@ -43,6 +43,11 @@ pub struct Job {
     pub columns: SurfaceOptions,
     /// The record's path when the run started (to name it; the directory keeps its bytes).
     pub source: PathBuf,
+    /// Whether the sampler's prior cuts a law's box to its curves within the record's torques
+    /// ([`SurfaceSettings::curve_limits`]); absent from a job whose populations were drawn
+    /// from the boxes alone, which continues so.
+    #[serde(default)]
+    pub curve_limits: bool,
 }
 
 impl Job {
@@ -56,6 +61,7 @@ impl Job {
             prior_text,
             columns,
             source: source.to_path_buf(),
+            curve_limits: true,
         })
     }
 
@@ -71,7 +77,9 @@ impl Job {
             .as_deref()
             .map(|text| PriorFile::parse(text, &origin))
             .transpose()?;
-        self.settings.config_with_prior(self.laws.clone(), prior)
+        let mut config = self.settings.config_with_prior(self.laws.clone(), prior)?;
+        config.curve_limits = self.curve_limits;
+        Ok(config)
     }
 }
 
@@ -577,5 +585,31 @@ impl Finished {
             path: self.dir.join(SURFACE_JSON),
             message,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A job that does not say its prior is cut (its populations drawn from the boxes alone)
+    /// continues from the boxes alone; a new job cuts.
+    #[test]
+    fn a_job_that_does_not_say_its_prior_is_cut_continues_from_the_boxes_alone() {
+        let job = Job::new(
+            vec![Law::M2, Law::M4],
+            Settings::default(),
+            SurfaceOptions::default(),
+            Path::new("record.csv"),
+        )
+        .unwrap();
+        assert!(job.config().unwrap().curve_limits);
+        let mut stored = serde_json::to_value(&job).unwrap();
+        assert_eq!(
+            stored.as_object_mut().unwrap().remove("curve_limits"),
+            Some(true.into())
+        );
+        let older: Job = serde_json::from_value(stored).unwrap();
+        assert!(!older.config().unwrap().curve_limits);
     }
 }

@@ -127,6 +127,21 @@ pub struct LawPosterior {
     pub probability: f64,
     pub particles: usize,
     pub params: Vec<ParamPosterior>,
+    /// Where the law's prior is its box cut to the curves within the record's torques (its
+    /// file's `prior_curve_within`); `None`: the box alone.
+    pub prior_curve: Option<PriorCurve>,
+}
+
+/// A law's prior cut to the curves within a torque ([`crate::prior::CurveLimit`]), SI.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PriorCurve {
+    /// The limit in multiples of the record's largest surface torque.
+    pub within: f64,
+    /// The limit, N·m, held from rest to `speed_high_rad_s`.
+    pub limit_nm: f64,
+    pub speed_high_rad_s: f64,
+    /// The share of the box the limit keeps (Monte Carlo).
+    pub share: f64,
 }
 
 /// One parameter's posterior, SI (torques N·m).
@@ -553,6 +568,9 @@ pub fn infer_continuing(
         settings.prior_file.as_ref(),
         record.torque_unit.newton_metres(),
     )?;
+    if settings.curve_limits {
+        prior = prior.with_curve_limits(&scales(record))?;
+    }
     if let Some(b) = &settings.string_bounds {
         let [omega, xi] = [b.omega_n_rad_s, b.damping_ratio];
         prior = prior.with_coordinates(&[omega[0] as f32, xi[0] as f32], &[omega[1] as f32, xi[1] as f32]);
@@ -783,6 +801,12 @@ fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
                 probability: weights.iter().sum::<f64>() + 0.0,
                 particles: own.len(),
                 params,
+                prior_curve: bx.curve.as_ref().map(|c| PriorCurve {
+                    within: c.within,
+                    limit_nm: c.limit_nm,
+                    speed_high_rad_s: c.speeds_rad_s.last().copied().unwrap_or(0.0),
+                    share: c.ln_share.exp(),
+                }),
             }
         })
         .collect()
@@ -910,6 +934,7 @@ mod tests {
             probability,
             particles: 1,
             params: Vec::new(),
+            prior_curve: None,
         }
     }
 

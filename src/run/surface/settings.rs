@@ -213,6 +213,11 @@ pub struct SurfaceSettings {
     /// Whether the distance compares the predictions of regressions learned on the pilot
     /// (semi-automatic ABC, [`crate::eval::projection`]) instead of the scaled summaries.
     pub semi_automatic: bool,
+    /// Whether a law whose file sets `prior_curve_within` has its box cut to the curves within
+    /// that many times the record's largest torque ([`Prior::with_curve_limits`], the
+    /// evidence's physical prior). Always, but in a surface directory whose job does not say
+    /// so, whose stored populations were drawn from the boxes alone.
+    pub curve_limits: bool,
 }
 
 /// Bounds of the string's natural frequency (rad/s) and damping ratio within which a run
@@ -291,6 +296,7 @@ impl SurfaceSettings {
             advice: true,
             backend: Backend::Auto,
             semi_automatic: false,
+            curve_limits: true,
         }
     }
 

@@ -1,7 +1,8 @@
 //! A sampler warm-started from an earlier posterior (a watch's window before): population 0
 //! drawn near it, weighted back to the prior.
 //!
-//! Population 0 is an importance sample of the prior: N candidates inside the boxes from
+//! Population 0 is an importance sample of the prior: N candidates inside the laws' priors
+//! (their boxes, cut to the curves within the record's torques where a law's is) from
 //! q(m, θ) = q(m)·q_m(θ), each weighted π(m)·π(θ|m) / q(m, θ) and normalised. The law is drawn
 //! by q(m) = (1 − f)·P_before(m) + f·π(m), f = [`LAW_DEFENSIVE_SHARE`]: every law keeps
 //! draws, so a law the window before ruled out can return. A law's θ comes from the kernel
@@ -23,13 +24,9 @@ pub const LAW_DEFENSIVE_SHARE: f64 = 0.1;
 /// Seed offset of population 0's draws, apart from every other stream of a run.
 const WARM_STREAM: u64 = 0x5741_524d_0000_0000;
 
-/// Whether a run of `prior` can be warm-started: boxes without curve limits (whose prior
-/// density is one over the box's volume) holding a law's parameters alone.
+/// Whether a run of `prior` can be warm-started: boxes holding a law's parameters alone.
 pub(super) fn can_warm_start(prior: &Prior) -> bool {
-    prior
-        .boxes
-        .iter()
-        .all(|b| b.curve.is_none() && b.lower.len() == b.law.n_params())
+    prior.boxes.iter().all(|b| b.lower.len() == b.law.n_params())
 }
 
 /// Population 0 of up to `n` particles near `before` (an earlier posterior, weights summing
@@ -146,7 +143,8 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
             Reference::from_posterior(b.law, &own).map(|r| Kernels::new(&r, &b.lower, &b.upper))
         })
         .collect();
-    // ln of each box's volume: the prior's density is its negative inside.
+    // ln of the volume each law's prior is uniform on, the box's or the part of it its curve's
+    // limit keeps: the prior's density is its negative there.
     let ln_volume: Vec<f64> = prior
         .boxes
         .iter()
@@ -155,7 +153,8 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
                 .iter()
                 .zip(&b.upper)
                 .map(|(lo, hi)| (f64::from(*hi) - f64::from(*lo)).ln())
-                .sum()
+                .sum::<f64>()
+                + b.curve.as_ref().map_or(0.0, |c| c.ln_share)
         })
         .collect();
     let mut stream = Stream {
@@ -167,8 +166,8 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
     let mut ln_weights = Vec::with_capacity(n);
     let mut drawn = vec![0u64; slots];
     let mut draws = 0u64;
-    // Every law's draws are its box's at least DEFENSIVE_SHARE of the time, all inside it: the
-    // loop ends.
+    // Every law's draws are its box's at least DEFENSIVE_SHARE of the time, all inside it and a
+    // share of them inside its curve's limit: the loop ends.
     while candidates.len() < n {
         draws += 1;
         let slot = crate::abc::smc::inverse_cdf(&law_cdf, stream.uniform());
@@ -180,7 +179,7 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
             Some(k) if stream.uniform() >= DEFENSIVE_SHARE => k.draw(&mut stream, &mut params),
             _ => stream.uniform_in(&b.lower, &b.upper, &mut params),
         }
-        if !(0..d).all(|j| params[j] >= b.lower[j] && params[j] <= b.upper[j]) {
+        if !b.admits_f32(&params[..d]) {
             continue; // the prior's density is 0 there: weight 0
         }
         let ln_q_theta = match &kernels[slot] {
@@ -267,5 +266,70 @@ mod tests {
         assert!(near as f64 > 0.6 * n as f64, "{near} of {n}");
         // Every law keeps draws: one the earlier posterior ruled out can return.
         assert!(drawn.drawn[0] as f64 > 0.03 * n as f64, "{:?}", drawn.drawn);
+    }
+
+    /// A law whose box is cut to a curve is drawn inside the cut and weighted by its prior's
+    /// density there (one over the volume the cut keeps): weighted, its share is still its
+    /// prior weight and its draws are uniform on the cut.
+    #[test]
+    fn population_0_keeps_a_cut_law_s_draws_inside_its_cut_and_weighs_them_by_it() {
+        // m4 nearly c0 + c1·w over speeds 0..1 (c2 and c3 within a hundredth), cut to
+        // |T| ≤ 3 (about half its box); the earlier posterior m4 alone, tight near c0 = 1,
+        // c1 = 1.
+        let mut prior = Prior::new(
+            vec![
+                LawBox::new(Law::M2, vec![1.0, 0.5, 0.0], vec![2.0, 1.0, 1.0]),
+                LawBox::new(Law::M4, vec![0.0, -4.0, 0.0, 0.0], vec![4.0, 4.0, 0.01, 0.01]),
+            ],
+            vec![0.5, 0.5],
+        )
+        .unwrap();
+        let m4 = &mut prior.boxes[1];
+        m4.curve = Some(crate::prior::CurveLimit::new(Law::M4, 3.0, 1.0, 1.0, (&m4.lower, &m4.upper)).unwrap());
+        assert!(can_warm_start(&prior));
+        let mut state = 11u64;
+        let mut jitter = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let before: Vec<Particle> = (0..200)
+            .map(|i| Particle {
+                law: Law::M4,
+                index: i,
+                params: vec![
+                    1.0 + 0.2 * jitter(),
+                    1.0 + 0.2 * jitter(),
+                    0.005 + 0.002 * jitter(),
+                    0.005 + 0.002 * jitter(),
+                ],
+                rho: 0.0,
+                weight: 1.0 / 200.0,
+            })
+            .collect();
+        let n = 40_000;
+        let drawn = draw_near(&prior, &before, n, 5);
+        let top = drawn.ln_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let w: Vec<f64> = drawn.ln_weights.iter().map(|l| (l - top).exp()).collect();
+        let total: f64 = w.iter().sum();
+        let m4_draws = || drawn.candidates.iter().zip(&w).filter(|(c, _)| c.slot == 1);
+        for (c, _) in m4_draws() {
+            assert!(prior.boxes[1].admits_f32(&c.params[..4]), "{c:?}");
+        }
+        let m4_weight: f64 = m4_draws().map(|(_, w)| w).sum();
+        assert!((m4_weight / total - 0.5).abs() < 0.05, "{}", m4_weight / total);
+        // c0's weighted mean against its mean on the cut, from the prior's own draws.
+        let mean = m4_draws().map(|(c, w)| w * f64::from(c.params[0])).sum::<f64>() / m4_weight;
+        let (mut sum, mut count) = (0.0, 0usize);
+        for i in 0..40_000 {
+            let c = prior.candidate(8, 0, i);
+            if c.slot == 1 {
+                sum += f64::from(c.params[0]);
+                count += 1;
+            }
+        }
+        let on_cut = sum / count as f64;
+        assert!((mean - on_cut).abs() < 0.1, "{mean} against {on_cut}");
     }
 }
