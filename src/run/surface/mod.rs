@@ -6,7 +6,9 @@
 //!    estimate on a clock fine enough for the cycle, an upper bound on a coarser one.
 //! 2. **The prior**: per law, boxes k scales wide from the physical bounds ([`Prior::physical`]),
 //!    the scales from the record (the largest surface torque; speeds from the top drive's, the
-//!    bit's peaks taken as three times it), replaced where a prior file gives bounds; where
+//!    bit's peaks taken as three times it), replaced where a prior file gives bounds, a law
+//!    whose file sets `prior_curve_within` cut to its curves within the record's torques
+//!    ([`Prior::with_curve_limits`], the evidence's physical prior); where
 //!    the string's natural frequency or damping ratio is given as bounds, every box carries
 //!    both after the law's parameters ([`Prior::with_coordinates`]; one given exactly spans no
 //!    width), each candidate's string built from them.
