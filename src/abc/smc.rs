@@ -1440,6 +1440,33 @@ mod tests {
         assert!(!thin(&two));
     }
 
+    /// m2 and m4 with one free parameter each on [0, 4] (the rest fixed).
+    fn model_kernel_prior() -> Prior {
+        m2_and_m4(
+            [[0.0, 1.0, 1.0], [4.0, 1.0, 1.0]],
+            [[0.0, 0.0, 0.0, 0.0], [4.0, 0.0, 0.0, 0.0]],
+        )
+    }
+
+    /// On `prior` (of [`model_kernel_prior`]'s shape): a previous population with 90 % of its
+    /// weight in m2, ancestors at 1 and 3 in each law, its kernels, and the normalised weights
+    /// of an m2 and an m4 particle, each at 2.
+    fn model_kernel_case(prior: &Prior) -> (Vec<Particle>, Kernels, Vec<f64>) {
+        let previous = vec![
+            particle(Law::M2, 0, &[1.0, 1.0, 1.0], 0.45),
+            particle(Law::M2, 1, &[3.0, 1.0, 1.0], 0.45),
+            particle(Law::M4, 2, &[1.0, 0.0, 0.0, 0.0], 0.05),
+            particle(Law::M4, 3, &[3.0, 0.0, 0.0, 0.0], 0.05),
+        ];
+        let kernels = Kernels::new(prior, &previous, &classic(), f64::INFINITY, &|_| true).unwrap();
+        let new = [
+            particle(Law::M2, 0, &[2.0, 1.0, 1.0], 0.0),
+            particle(Law::M4, 1, &[2.0, 0.0, 0.0, 0.0], 0.0),
+        ];
+        let w = normalise_log_weights(&kernels.log_weights_with(prior, &previous, &new, &host_sums).unwrap());
+        (previous, kernels, w)
+    }
+
     #[test]
     fn a_box_cut_to_a_curve_rejects_proposals_outside_it_and_weighs_by_what_it_keeps() {
         // The model kernel's setup below, with m4's box (c0 in [0, 4], the rest 0) cut to the
@@ -1447,10 +1474,7 @@ mod tests {
         // the box (estimated by Monte Carlo). The density of m4's prior is then one over that
         // volume: the weight of an m4 particle grows by exp(−ln share) against the uncut
         // setup's, the m2 one's stays.
-        let mut prior = m2_and_m4(
-            [[0.0, 1.0, 1.0], [4.0, 1.0, 1.0]],
-            [[0.0, 0.0, 0.0, 0.0], [4.0, 0.0, 0.0, 0.0]],
-        );
+        let mut prior = model_kernel_prior();
         let m4 = &mut prior.boxes[1];
         let limit = crate::prior::CurveLimit::new(Law::M4, 3.0, 1.0, 1.0, (&m4.lower, &m4.upper)).unwrap();
         assert!(
@@ -1460,18 +1484,7 @@ mod tests {
         );
         let ln_share = limit.ln_share;
         m4.curve = Some(limit);
-        let previous = vec![
-            particle(Law::M2, 0, &[1.0, 1.0, 1.0], 0.45),
-            particle(Law::M2, 1, &[3.0, 1.0, 1.0], 0.45),
-            particle(Law::M4, 2, &[1.0, 0.0, 0.0, 0.0], 0.05),
-            particle(Law::M4, 3, &[3.0, 0.0, 0.0, 0.0], 0.05),
-        ];
-        let kernels = Kernels::new(&prior, &previous, &classic(), f64::INFINITY, &|_| true).unwrap();
-        let new = [
-            particle(Law::M2, 0, &[2.0, 1.0, 1.0], 0.0),
-            particle(Law::M4, 1, &[2.0, 0.0, 0.0, 0.0], 0.0),
-        ];
-        let w = normalise_log_weights(&kernels.log_weights_with(&prior, &previous, &new, &host_sums).unwrap());
+        let (previous, kernels, w) = model_kernel_case(&prior);
         let expected = 0.66 / 0.34 * (-ln_share).exp();
         assert!((w[1] / w[0] - expected).abs() < 1e-12 * expected, "{w:?}");
         // Proposals of m4 land inside the cut or are rejected; both happen.
@@ -1497,24 +1510,9 @@ mod tests {
         // probability 0.9·0.7 + 0.1·0.3 = 0.66, m4 with 0.34; with equal priors, identical
         // boxes and identical relative positions, the weights differ by 0.66 / 0.34 only
         // through that term and P(m) inside the within-law density.
-        let prior = m2_and_m4(
-            [[0.0, 1.0, 1.0], [4.0, 1.0, 1.0]],
-            [[0.0, 0.0, 0.0, 0.0], [4.0, 0.0, 0.0, 0.0]],
-        );
-        let previous = vec![
-            particle(Law::M2, 0, &[1.0, 1.0, 1.0], 0.45),
-            particle(Law::M2, 1, &[3.0, 1.0, 1.0], 0.45),
-            particle(Law::M4, 2, &[1.0, 0.0, 0.0, 0.0], 0.05),
-            particle(Law::M4, 3, &[3.0, 0.0, 0.0, 0.0], 0.05),
-        ];
-        let kernels = Kernels::new(&prior, &previous, &classic(), f64::INFINITY, &|_| true).unwrap();
+        let (_, kernels, w) = model_kernel_case(&model_kernel_prior());
         assert!((kernels.law_proposal_probability(0) - 0.66).abs() < 1e-15);
         assert!((kernels.law_proposal_probability(1) - 0.34).abs() < 1e-15);
-        let new = [
-            particle(Law::M2, 0, &[2.0, 1.0, 1.0], 0.0),
-            particle(Law::M4, 1, &[2.0, 0.0, 0.0, 0.0], 0.0),
-        ];
-        let w = normalise_log_weights(&kernels.log_weights_with(&prior, &previous, &new, &host_sums).unwrap());
         assert!((w[1] / w[0] - 0.66 / 0.34).abs() < 1e-12, "{w:?}");
     }
 

@@ -202,6 +202,27 @@ mod tests {
     use super::*;
     use crate::prior::LawBox;
 
+    /// `n` particles of `law` of equal weight, each parameter its `centre` plus a uniform
+    /// jitter of `width` (a linear congruential generator seeded by `seed`).
+    fn cloud(law: Law, centre: &[f64], width: &[f64], n: u64, seed: u64) -> Vec<Particle> {
+        let mut state = seed;
+        let mut jitter = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        (0..n)
+            .map(|index| Particle {
+                law,
+                index,
+                params: centre.iter().zip(width).map(|(c, w)| c + w * jitter()).collect(),
+                rho: 0.0,
+                weight: 1.0 / n as f64,
+            })
+            .collect()
+    }
+
     /// Weighted, population 0 is the prior: its law shares are the prior's law weights and
     /// each coordinate's weighted mean is its box's middle, though most draws lie near the
     /// earlier posterior.
@@ -216,26 +237,7 @@ mod tests {
         )
         .unwrap();
         // The earlier posterior: m2 alone, tight around (13,000, 6,500, 0.3).
-        let mut state = 7u64;
-        let mut jitter = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let before: Vec<Particle> = (0..300)
-            .map(|i| Particle {
-                law: Law::M2,
-                index: i,
-                params: vec![
-                    13_000.0 + 400.0 * jitter(),
-                    6_500.0 + 200.0 * jitter(),
-                    0.3 + 0.1 * jitter(),
-                ],
-                rho: 0.0,
-                weight: 1.0 / 300.0,
-            })
-            .collect();
+        let before = cloud(Law::M2, &[13_000.0, 6_500.0, 0.3], &[400.0, 200.0, 0.1], 300, 7);
         let n = 20_000;
         let drawn = draw_near(&prior, &before, n, 3);
         assert_eq!(drawn.candidates.len(), n);
@@ -287,27 +289,7 @@ mod tests {
         let m4 = &mut prior.boxes[1];
         m4.curve = Some(crate::prior::CurveLimit::new(Law::M4, 3.0, 1.0, 1.0, (&m4.lower, &m4.upper)).unwrap());
         assert!(can_warm_start(&prior));
-        let mut state = 11u64;
-        let mut jitter = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let before: Vec<Particle> = (0..200)
-            .map(|i| Particle {
-                law: Law::M4,
-                index: i,
-                params: vec![
-                    1.0 + 0.2 * jitter(),
-                    1.0 + 0.2 * jitter(),
-                    0.005 + 0.002 * jitter(),
-                    0.005 + 0.002 * jitter(),
-                ],
-                rho: 0.0,
-                weight: 1.0 / 200.0,
-            })
-            .collect();
+        let before = cloud(Law::M4, &[1.0, 1.0, 0.005, 0.005], &[0.2, 0.2, 0.002, 0.002], 200, 11);
         let n = 40_000;
         let drawn = draw_near(&prior, &before, n, 5);
         let top = drawn.ln_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
