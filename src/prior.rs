@@ -277,8 +277,8 @@ pub const MAX_DIMS: usize = MAX_PARAMS + 2;
 /// probability below e⁻¹⁰⁰.
 const MAX_CURVE_ATTEMPTS: u32 = 1 << 16;
 
-/// The first counter block of a candidate's draws again inside a curve's limit (blocks 0..2
-/// are its first draw's).
+/// Where a candidate's draws again inside a curve's limit take their counter blocks: draw
+/// a (from 1) takes the four from `CURVE_BLOCKS + 4a` (blocks 0..2 are its first draw's).
 const CURVE_BLOCKS: u32 = 4;
 
 /// A candidate drawn from the prior: which box (index into [`Prior::boxes`]) and its
@@ -597,7 +597,7 @@ impl Prior {
     /// Block 0 of the counter gives the law (word 0) and parameters 0..2 (words 1..3), block 1
     /// parameters 3..5, block 2 coordinates 6..7 (a box of more than six). Parameter j =
     /// [`uniform_between`]`(lower, upper, word)`, bit-identical on every backend. A box cut
-    /// to a curve ([`CurveLimit`]) is drawn again, from blocks 4 on, until its curve keeps
+    /// to a curve ([`CurveLimit`]) is drawn again, from blocks 8 on, until its curve keeps
     /// the limit: uniform on what the limit keeps. (The GPU's own candidates, those of
     /// rejection ABC's kernels, are of boxes without a curve: a run whose prior is cut scores
     /// the host's.)
@@ -905,8 +905,8 @@ mod tests {
         let limit = m4.curve.clone().unwrap();
         let n = 40_000u64;
         let (mut m4_draws, mut first_kept) = (0usize, 0usize);
-        let (mut sum_cut, mut sum_sq_cut) = (0.0f64, 0.0f64);
-        let (mut sum_kept, mut kept) = (0.0f64, 0usize);
+        let (mut sum_cut, mut sum_sq_cut) = ([0.0f64; 2], [0.0f64; 2]);
+        let (mut sum_kept, mut kept) = ([0.0f64; 2], 0usize);
         for i in 0..n {
             let (a, b) = (uncut.candidate(3, 1, i), cut.candidate(3, 1, i));
             // The law is the first word's: the cut leaves the laws' shares as they are.
@@ -917,30 +917,36 @@ mod tests {
             }
             m4_draws += 1;
             assert!(cut.boxes[1].admits_f32(&b.params[..4]), "{b:?}");
-            let c0 = f64::from(b.params[0]);
-            sum_cut += c0;
-            sum_sq_cut += c0 * c0;
+            for j in 0..2 {
+                let v = f64::from(b.params[j]);
+                sum_cut[j] += v;
+                sum_sq_cut[j] += v * v;
+            }
             // A first draw inside the cut is kept as drawn.
             if limit.holds(Law::M4, &a.params[..4]) {
                 assert_eq!(a, b);
                 first_kept += 1;
-                sum_kept += f64::from(a.params[0]);
+                for (j, sum) in sum_kept.iter_mut().enumerate() {
+                    *sum += f64::from(a.params[j]);
+                }
                 kept += 1;
             }
         }
         // Binomial(40000, 1/2): σ = 100.
         assert!((m4_draws as f64 - 20_000.0).abs() < 500.0, "{m4_draws}");
         assert!((first_kept as f64 / m4_draws as f64 - limit.ln_share.exp()).abs() < 0.02);
-        // Uniform on the cut: c0's mean is that of the uncut draws the cut keeps (rejection
-        // from the box), within five standard errors of the two means.
-        let mean_cut = sum_cut / m4_draws as f64;
-        let sd = (sum_sq_cut / m4_draws as f64 - mean_cut * mean_cut).sqrt();
-        let mean_kept = sum_kept / kept as f64;
-        let se = sd * (1.0 / m4_draws as f64 + 1.0 / kept as f64).sqrt();
-        assert!(
-            (mean_cut - mean_kept).abs() < 5.0 * se,
-            "{mean_cut} against {mean_kept} ± {se}"
-        );
+        // Uniform on the cut: c0's and c1's means are those of the uncut draws the cut keeps
+        // (rejection from the box), within five standard errors of the two means.
+        for j in 0..2 {
+            let mean_cut = sum_cut[j] / m4_draws as f64;
+            let sd = (sum_sq_cut[j] / m4_draws as f64 - mean_cut * mean_cut).sqrt();
+            let mean_kept = sum_kept[j] / kept as f64;
+            let se = sd * (1.0 / m4_draws as f64 + 1.0 / kept as f64).sqrt();
+            assert!(
+                (mean_cut - mean_kept).abs() < 5.0 * se,
+                "c{j}: {mean_cut} against {mean_kept} ± {se}"
+            );
+        }
     }
 
     #[test]

@@ -101,19 +101,9 @@ impl CurveLimit {
     /// estimated with the same random numbers); `None` where fewer than [`MIN_INSIDE`] keep it.
     pub fn share_in(&self, law: Law, lower: &[f64], upper: &[f64]) -> Option<(f64, f64)> {
         let d = law.n_params();
-        let key = key_of_seed(SHARE_SEED);
         let inside: u64 = (0..SHARE_DRAWS)
             .into_par_iter()
-            .filter(|&index| {
-                let mut p = [0.0f32; MAX_PARAMS];
-                for block in (0..d).step_by(4) {
-                    let words = philox4x32_10([index as u32, (index >> 32) as u32, block as u32, SHARE_BLOCK], key);
-                    for (k, &word) in (block..d.min(block + 4)).zip(&words) {
-                        p[k] = uniform_between(lower[k] as f32, upper[k] as f32, word);
-                    }
-                }
-                self.holds(law, &p[..d])
-            })
+            .filter(|&index| self.holds(law, &share_draw(d, lower, upper, index)[..d]))
             .count() as u64;
         if inside < MIN_INSIDE {
             return None;
@@ -121,6 +111,43 @@ impl CurveLimit {
         let share = inside as f64 / SHARE_DRAWS as f64;
         Some((share.ln(), ((1.0 - share) / inside as f64).sqrt()))
     }
+}
+
+impl CurveLimit {
+    /// Per parameter of `law`, the central `level` interval of the prior cut to this limit on
+    /// the box (`lower`, `upper`, SI), from the share's draws that keep it: what the prior
+    /// alone spans, against which a posterior's interval tells whether the record narrowed it.
+    pub fn central_intervals(&self, law: Law, lower: &[f64], upper: &[f64], level: f64) -> Vec<(f64, f64)> {
+        let d = law.n_params();
+        let kept: Vec<[f32; MAX_PARAMS]> = (0..SHARE_DRAWS)
+            .into_par_iter()
+            .map(|index| share_draw(d, lower, upper, index))
+            .filter(|p| self.holds(law, &p[..d]))
+            .collect();
+        (0..d)
+            .map(|j| {
+                let values: Vec<f64> = kept.iter().map(|p| f64::from(p[j])).collect();
+                (
+                    crate::numerics::quantile(&values, 0.5 * (1.0 - level)),
+                    crate::numerics::quantile(&values, 0.5 * (1.0 + level)),
+                )
+            })
+            .collect()
+    }
+}
+
+/// Draw `index` of the share's: uniform on the box (`lower`, `upper`) of `d` parameters, the
+/// same for every box.
+fn share_draw(d: usize, lower: &[f64], upper: &[f64], index: u64) -> [f32; MAX_PARAMS] {
+    let key = key_of_seed(SHARE_SEED);
+    let mut p = [0.0f32; MAX_PARAMS];
+    for block in (0..d).step_by(4) {
+        let words = philox4x32_10([index as u32, (index >> 32) as u32, block as u32, SHARE_BLOCK], key);
+        for (k, &word) in (block..d.min(block + 4)).zip(&words) {
+            p[k] = uniform_between(lower[k] as f32, upper[k] as f32, word);
+        }
+    }
+    p
 }
 
 #[cfg(test)]
@@ -165,6 +192,23 @@ mod tests {
         // A curve at the limit's edge: a constant 2 holds, 2.01 does not.
         assert!(limit.holds(Law::M4, &[2.0, 0.0, 0.0, 0.0]));
         assert!(!limit.holds(Law::M4, &[2.01, 0.0, 0.0, 0.0]));
+    }
+
+    /// m4 as a constant c0 in [0, 4] cut to |T| ≤ 3: the cut prior is uniform on [0, 3], its
+    /// central 90 % [0.15, 2.85]; a fixed parameter's interval is its value.
+    #[test]
+    fn the_central_intervals_of_a_cut_prior_are_those_of_what_it_keeps() {
+        let lower = [0.0f32, 0.0, 0.0, 0.0];
+        let upper = [4.0f32, 0.0, 0.0, 0.0];
+        let limit = CurveLimit::new(Law::M4, 3.0, 1.0, 1.0, (&lower, &upper)).unwrap();
+        let (lower, upper) = ([0.0, 0.0, 0.0, 0.0], [4.0, 0.0, 0.0, 0.0]);
+        let intervals = limit.central_intervals(Law::M4, &lower, &upper, 0.9);
+        assert_eq!(intervals.len(), 4);
+        assert!(
+            (intervals[0].0 - 0.15).abs() < 0.03 && (intervals[0].1 - 2.85).abs() < 0.03,
+            "{intervals:?}"
+        );
+        assert_eq!(intervals[1], (0.0, 0.0));
     }
 
     #[test]

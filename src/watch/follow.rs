@@ -486,15 +486,18 @@ fn start_watch(
 }
 
 /// What a window's fits, evidence or ABC give, or why its samples cannot give it (a fit, a
-/// finite likelihood, boxes a sampler reaches): that ends the window, not the watch, since the
-/// next window may be fine. Any other error ends the watch.
+/// finite likelihood, boxes a sampler reaches, a law's curve limit that keeps too little of
+/// its box on the window's torques): that ends the window, not the watch, since the next
+/// window may be fine. Any other error ends the watch.
 pub(super) fn of_window<T>(result: Result<T>) -> Result<std::result::Result<T, String>> {
     match result {
         Ok(value) => Ok(Ok(value)),
         Err(e @ (crate::Error::Data { .. } | crate::Error::Fit { .. } | crate::Error::Numerical(_))) => {
             Ok(Err(e.to_string()))
         }
-        Err(crate::Error::InvalidSetting { field, message }) if field == "prior" || field == "max_stages" => {
+        Err(crate::Error::InvalidSetting { field, message })
+            if field == "prior" || field == "max_stages" || field == "prior_curve_within" =>
+        {
             Ok(Err(message))
         }
         Err(e) => Err(e),
@@ -577,4 +580,18 @@ pub(super) fn check_same_watch(meta: &store::WatchMeta, settings: &WatchSettings
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    /// What a window's own samples make impossible ends the window; any other setting the
+    /// watch.
+    #[test]
+    fn a_window_s_own_refusals_end_the_window_and_others_the_watch() {
+        for field in ["prior", "max_stages", "prior_curve_within"] {
+            let ended = super::of_window::<()>(Err(crate::Error::setting(field, "too little of the box")));
+            assert_eq!(ended.unwrap(), Err("too little of the box".to_string()), "{field}");
+        }
+        assert!(super::of_window::<()>(Err(crate::Error::setting("particles", "no"))).is_err());
+    }
 }

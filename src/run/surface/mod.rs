@@ -154,8 +154,9 @@ pub struct ParamPosterior {
     pub median: f64,
     pub q95: f64,
     /// False when the central 90 % still spans 0.7 of the prior box or more
-    /// ([`crate::abc::posterior::identified`]): the record has not narrowed the prior, which
-    /// then sets the interval.
+    /// ([`crate::abc::posterior::identified`]; for a box cut to a curve, 0.7 of the width of
+    /// the uniform whose central 90 % is the cut prior's): the record has not narrowed the
+    /// prior, which then sets the interval.
     pub identified: bool,
 }
 
@@ -774,6 +775,18 @@ fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
             let own: Vec<&Particle> = particles.iter().filter(|p| p.law == law).collect();
             let weights: Vec<f64> = own.iter().map(|p| p.weight).collect();
             let bx = &prior.boxes[prior.slot_of(law)];
+            // What the prior alone spans per parameter: the box, or for a box cut to a curve
+            // the width of the uniform whose central 90 % is the cut prior's.
+            let lower: Vec<f64> = bx.lower.iter().map(|&v| f64::from(v)).collect();
+            let upper: Vec<f64> = bx.upper.iter().map(|&v| f64::from(v)).collect();
+            let spans: Vec<f64> = match &bx.curve {
+                Some(c) if !own.is_empty() => c
+                    .central_intervals(law, &lower, &upper, 0.9)
+                    .iter()
+                    .map(|(lo, hi)| (hi - lo) / 0.9)
+                    .collect(),
+                _ => lower.iter().zip(&upper).map(|(lo, hi)| hi - lo).collect(),
+            };
             let params = law
                 .params()
                 .iter()
@@ -787,13 +800,7 @@ fn posteriors(prior: &Prior, particles: &[Particle]) -> Vec<LawPosterior> {
                         q05: q(0.05),
                         median: q(0.5),
                         q95: q(0.95),
-                        identified: crate::abc::posterior::identified(
-                            q(0.05),
-                            q(0.95),
-                            f64::from(bx.lower[j]),
-                            f64::from(bx.upper[j]),
-                            0.9,
-                        ),
+                        identified: crate::abc::posterior::identified(q(0.05), q(0.95), 0.0, spans[j], 0.9),
                     }
                 })
                 .collect();

@@ -143,9 +143,8 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
             Reference::from_posterior(b.law, &own).map(|r| Kernels::new(&r, &b.lower, &b.upper))
         })
         .collect();
-    // ln of the volume each law's prior is uniform on, the box's or the part of it its curve's
-    // limit keeps: the prior's density is its negative there.
-    let ln_volume: Vec<f64> = prior
+    // ln of each box's volume: the density of a draw uniform on it is its negative.
+    let ln_box_volume: Vec<f64> = prior
         .boxes
         .iter()
         .map(|b| {
@@ -154,8 +153,15 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
                 .zip(&b.upper)
                 .map(|(lo, hi)| (f64::from(*hi) - f64::from(*lo)).ln())
                 .sum::<f64>()
-                + b.curve.as_ref().map_or(0.0, |c| c.ln_share)
         })
+        .collect();
+    // ln of the volume each law's prior is uniform on, the box's or the part of it its curve's
+    // limit keeps: the prior's density is its negative there.
+    let ln_prior_volume: Vec<f64> = prior
+        .boxes
+        .iter()
+        .zip(&ln_box_volume)
+        .map(|(b, v)| v + b.curve.as_ref().map_or(0.0, |c| c.ln_share))
         .collect();
     let mut stream = Stream {
         seed: seed ^ WARM_STREAM,
@@ -182,11 +188,13 @@ fn draw_near(prior: &Prior, before: &[Particle], n: usize, seed: u64) -> Drawn {
         if !b.admits_f32(&params[..d]) {
             continue; // the prior's density is 0 there: weight 0
         }
+        // q is the density the draw was made from, on the whole box (a draw outside the cut is
+        // dropped above: that leaves every kept draw's density divided by one constant).
         let ln_q_theta = match &kernels[slot] {
             Some(k) => k.ln_q(&params[..d], true),
-            None => -ln_volume[slot],
+            None => -ln_box_volume[slot],
         };
-        ln_weights.push(prior.weights[slot].ln() - ln_volume[slot] - q_law[slot].ln() - ln_q_theta);
+        ln_weights.push(prior.weights[slot].ln() - ln_prior_volume[slot] - q_law[slot].ln() - ln_q_theta);
         candidates.push(Candidate { slot, params });
     }
     Drawn {
@@ -277,7 +285,7 @@ mod tests {
     fn population_0_keeps_a_cut_law_s_draws_inside_its_cut_and_weighs_them_by_it() {
         // m4 nearly c0 + c1·w over speeds 0..1 (c2 and c3 within a hundredth), cut to
         // |T| ≤ 3 (about half its box); the earlier posterior m4 alone, tight near c0 = 1,
-        // c1 = 1.
+        // c1 = 1, or m2 alone.
         let mut prior = Prior::new(
             vec![
                 LawBox::new(Law::M2, vec![1.0, 0.5, 0.0], vec![2.0, 1.0, 1.0]),
@@ -290,19 +298,7 @@ mod tests {
         m4.curve = Some(crate::prior::CurveLimit::new(Law::M4, 3.0, 1.0, 1.0, (&m4.lower, &m4.upper)).unwrap());
         assert!(can_warm_start(&prior));
         let before = cloud(Law::M4, &[1.0, 1.0, 0.005, 0.005], &[0.2, 0.2, 0.002, 0.002], 200, 11);
-        let n = 40_000;
-        let drawn = draw_near(&prior, &before, n, 5);
-        let top = drawn.ln_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let w: Vec<f64> = drawn.ln_weights.iter().map(|l| (l - top).exp()).collect();
-        let total: f64 = w.iter().sum();
-        let m4_draws = || drawn.candidates.iter().zip(&w).filter(|(c, _)| c.slot == 1);
-        for (c, _) in m4_draws() {
-            assert!(prior.boxes[1].admits_f32(&c.params[..4]), "{c:?}");
-        }
-        let m4_weight: f64 = m4_draws().map(|(_, w)| w).sum();
-        assert!((m4_weight / total - 0.5).abs() < 0.05, "{}", m4_weight / total);
-        // c0's weighted mean against its mean on the cut, from the prior's own draws.
-        let mean = m4_draws().map(|(c, w)| w * f64::from(c.params[0])).sum::<f64>() / m4_weight;
+        // c0's mean on the cut, from the prior's own draws.
         let (mut sum, mut count) = (0.0, 0usize);
         for i in 0..40_000 {
             let c = prior.candidate(8, 0, i);
@@ -312,6 +308,24 @@ mod tests {
             }
         }
         let on_cut = sum / count as f64;
-        assert!((mean - on_cut).abs() < 0.1, "{mean} against {on_cut}");
+        // m4 drawn near its earlier particles (a kernel), then from its box alone (the
+        // earlier posterior m2's: too few of m4's for a kernel).
+        let m2_before = cloud(Law::M2, &[1.5, 0.75, 0.5], &[0.2, 0.1, 0.2], 200, 13);
+        for before in [before, m2_before] {
+            let n = 40_000;
+            let drawn = draw_near(&prior, &before, n, 5);
+            let top = drawn.ln_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let w: Vec<f64> = drawn.ln_weights.iter().map(|l| (l - top).exp()).collect();
+            let total: f64 = w.iter().sum();
+            let m4_draws = || drawn.candidates.iter().zip(&w).filter(|(c, _)| c.slot == 1);
+            for (c, _) in m4_draws() {
+                assert!(prior.boxes[1].admits_f32(&c.params[..4]), "{c:?}");
+            }
+            let m4_weight: f64 = m4_draws().map(|(_, w)| w).sum();
+            assert!((m4_weight / total - 0.5).abs() < 0.05, "{}", m4_weight / total);
+            // c0's weighted mean against its mean on the cut.
+            let mean = m4_draws().map(|(c, w)| w * f64::from(c.params[0])).sum::<f64>() / m4_weight;
+            assert!((mean - on_cut).abs() < 0.1, "{mean} against {on_cut}");
+        }
     }
 }
