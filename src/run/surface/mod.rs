@@ -847,6 +847,31 @@ fn resample<'a>(particles: &[&'a Particle], count: usize, seed: u64) -> Vec<&'a 
 mod tests {
     use super::*;
 
+    /// m4 nearly a constant c0 in [0, 4] (c1..c3 within a hundredth) cut to |T| ≤ 1 over
+    /// speeds 0..1: the cut prior holds c0 within about [0, 1]. Particles over all of that
+    /// leave c0 to the prior (against the box they would seem to narrow it); particles over
+    /// a fifth of it narrow it.
+    #[test]
+    fn a_cut_law_s_parameters_are_judged_against_what_the_cut_prior_spans() {
+        let mut bx = crate::prior::LawBox::new(Law::M4, vec![0.0; 4], vec![4.0, 0.01, 0.01, 0.01]);
+        bx.curve = Some(crate::prior::CurveLimit::new(Law::M4, 1.0, 1.0, 1.0, (&bx.lower, &bx.upper)).unwrap());
+        let prior = Prior::new(vec![bx], vec![1.0]).unwrap();
+        let particles = |from: f64, to: f64| -> Vec<Particle> {
+            (0..101)
+                .map(|i| Particle {
+                    law: Law::M4,
+                    index: i,
+                    params: vec![from + (to - from) * i as f64 / 100.0, 0.005, 0.005, 0.005],
+                    rho: 0.0,
+                    weight: 1.0 / 101.0,
+                })
+                .collect()
+        };
+        let c0_identified = |ps: &[Particle]| posteriors(&prior, ps)[0].params[0].identified;
+        assert!(!c0_identified(&particles(0.0, 0.97)));
+        assert!(c0_identified(&particles(0.4, 0.6)));
+    }
+
     #[test]
     fn a_string_value_is_a_number_or_bounds_lo_hi_in_text_and_in_json() {
         assert_eq!("0.85".parse(), Ok(ValueOrBounds::Value(0.85)));
