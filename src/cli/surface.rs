@@ -431,10 +431,10 @@ fn posterior_lines(out: &mut impl Write, unit: TorqueUnit, r: &SurfaceResult) ->
                     p.q05 / scale,
                     p.q95 / scale,
                     spec.unit(unit.label()),
-                    if p.identified {
-                        ""
-                    } else {
-                        " (not identified: the prior box sets it)"
+                    match (p.identified, &law.prior_curve) {
+                        (true, _) => "",
+                        (false, None) => " (not identified: the prior box sets it)",
+                        (false, Some(_)) => " (not identified: the prior, its box cut to its curves, sets it)",
                     }
                 )
             })

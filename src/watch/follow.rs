@@ -588,10 +588,14 @@ mod tests {
     /// watch.
     #[test]
     fn a_window_s_own_refusals_end_the_window_and_others_the_watch() {
-        for field in ["prior", "max_stages", "prior_curve_within"] {
+        for field in ["prior", "max_stages"] {
             let ended = super::of_window::<()>(Err(crate::Error::setting(field, "too little of the box")));
             assert_eq!(ended.unwrap(), Err("too little of the box".to_string()), "{field}");
         }
+        // A law's curve limit that keeps almost none of its box on the window's torques.
+        let (lower, upper) = ([0.0f32, -10.0, -10.0, -10.0], [2.0f32, 10.0, 10.0, 10.0]);
+        let refused = crate::prior::CurveLimit::new(crate::laws::Law::M4, 1e-3, 1.0, 1.0, (&lower, &upper));
+        assert!(super::of_window(refused).unwrap().is_err());
         assert!(super::of_window::<()>(Err(crate::Error::setting("particles", "no"))).is_err());
     }
 }

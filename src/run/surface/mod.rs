@@ -870,6 +870,10 @@ mod tests {
         let c0_identified = |ps: &[Particle]| posteriors(&prior, ps)[0].params[0].identified;
         assert!(!c0_identified(&particles(0.0, 0.97)));
         assert!(c0_identified(&particles(0.4, 0.6)));
+        // The cut prior's central 90 % is about [0.05, 0.94]: the span is that over 0.9, 0.99,
+        // and a posterior 90 % narrower than 0.7 of it (0.69) is narrowed: 0.66 is (against
+        // 0.89 itself the bound would be 0.62, and it would not be).
+        assert!(c0_identified(&particles(0.0, 0.73)));
     }
 
     #[test]
