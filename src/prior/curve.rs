@@ -111,9 +111,7 @@ impl CurveLimit {
         let share = inside as f64 / SHARE_DRAWS as f64;
         Some((share.ln(), ((1.0 - share) / inside as f64).sqrt()))
     }
-}
 
-impl CurveLimit {
     /// Per parameter of `law`, the central `level` interval of the prior cut to this limit on
     /// the box (`lower`, `upper`, SI), from the share's draws that keep it: what the prior
     /// alone spans, against which a posterior's interval tells whether the record narrowed it.
