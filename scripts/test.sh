@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # The background jobs and temporary files of the run, for the way out.
-SYSTEM_JOB="" SYSTEM_LOG="" DEPENDENCIES="" ARVIZ1="" WHEEL_JOB="" ARVIZ1_TESTS=""
+SYSTEM_JOB="" SYSTEM_LOG="" DEPENDENCIES="" ARVIZ1="" WHEEL_JOB="" ARVIZ1_TESTS="" UNIT_TESTS=""
 BITROCK_CACHE_DIR="" WHEELS=""
 # Stops pip's and the tests' jobs still running, then the shell that started each: a job that
 # has ended is never signalled, as its number may have been given to another process since.
@@ -24,7 +24,7 @@ stop_background() {
 # On the way out, whatever the reason: apt's install is waited for, never stopped (dpkg cut part
 # way leaves the system's packages half configured), and its log shown where it failed.
 cleanup() {
-    stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS
+    stop_background $DEPENDENCIES $ARVIZ1 $WHEEL_JOB $ARVIZ1_TESTS $UNIT_TESTS
     if [ -n "$SYSTEM_JOB" ]; then
         echo "waiting for the system packages' install (apt) to end..." >&2
         if ! wait "$SYSTEM_JOB"; then
@@ -167,15 +167,29 @@ if [ -n "$PYTHON_NEW" ]; then
 fi
 WHEELS="$(mktemp -d)"
 
-# Slow tests (fits, simulations, ABC runs, GPU parity) run in release. Built first, so that the
-# Python package's wheel (pip builds it with maturin, linking the very build of the library
-# made here) is made while the Rust tests run.
+# Slow tests (fits, simulations, ABC runs, GPU parity) run in release. The library's unit
+# tests are built first and run while the binary and the integration tests build (rustc's
+# front end keeps one core busy there, not two); everything is built before the other tests
+# run, so that the Python package's wheel (pip builds it with maturin, linking the very build
+# of the library made here) is made while they run.
+UNIT_TEST_BINARY="$(cargo test --release --lib --no-run --message-format=json | "$VENV/bin/python" -c '
+import json, sys
+for line in sys.stdin:
+    message = json.loads(line)
+    if message.get("reason") == "compiler-artifact" and message.get("executable"):
+        print(message["executable"])
+')"
+wait_for_system_packages
+"$UNIT_TEST_BINARY" > "$TARGET/unit-tests.log" 2>&1 &
+UNIT_TESTS=$!
 cargo test --release --all-targets --no-run
 "$VENV/bin/python" -m pip wheel -q --disable-pip-version-check --no-deps -w "$WHEELS" ./bindings/python \
     > "$TARGET/python-wheel.log" 2>&1 &
 WHEEL_JOB=$!
-wait_for_system_packages
-cargo test --release --all-targets
+wait_for UNIT_TESTS "$TARGET/unit-tests.log" "the library's unit tests"
+cat "$TARGET/unit-tests.log"
+# Every target but the library's unit tests, run above.
+cargo test --release --bins --test '*' --bench '*' --examples
 # --all-targets leaves out the doctests (the crate documentation's example of the library API).
 cargo test --release --doc
 

@@ -1031,7 +1031,8 @@ mod tests {
         );
     }
 
-    /// ln Z of a linear law under the AR(1) model against its closed form per φ, integrated
+    /// The cubic record of 200 samples with AR(1) errors (φ 0.6) as a linear model (m4), its
+    /// box and ln Z in closed form: ln Z of a linear law under the AR(1) model per φ, integrated
     /// over φ: at fixed φ the AR(1) quadratic form is Q = (y − Xθ)ᵀP(y − Xθ) with the precision
     /// P = I + φ²·D − φ·L (D the diagonal without its ends, L the two off-diagonals), so the
     /// θ-integral is the i.i.d. one with S_min → Q_min and XᵀX → XᵀPX, times (1 − φ²)^½; then
@@ -1042,8 +1043,19 @@ mod tests {
     /// hundreds), so the tempered particles reach its peak late: with 400 particles per island
     /// ln Z came out 1–3 nats low on most seeds, with 3,000 within its error on every seed
     /// tried (3, 4, 6, 7).
-    #[test]
-    fn the_ar1_evidence_of_a_linear_law_is_the_closed_form_integral() {
+    struct Ar1Case {
+        data: Samples,
+        expected: f64,
+        lower: Vec<f32>,
+        upper: Vec<f32>,
+        config: EvidenceConfig,
+        /// The least-squares estimate, started from as the pipeline's reference of an AR(1)
+        /// evidence is.
+        reference: Reference,
+        phi_hat: f64,
+    }
+
+    fn ar1_case() -> Ar1Case {
         let (n, d, phi_true) = (200usize, 4usize, 0.6f64);
         let mut data = cubic_record(n, 0.0);
         let mut e = 0.0;
@@ -1099,7 +1111,6 @@ mod tests {
             })
             .collect();
         let expected = log_mean_exp(terms.iter().copied()) + (cells as f64).ln() + h.ln() - ln_volume;
-        let evaluator = m4_alone(lower, upper, &data);
         let config = EvidenceConfig {
             particles: 3_000,
             islands: 8,
@@ -1107,6 +1118,40 @@ mod tests {
             noise: NoiseModel::Ar1,
             ..EvidenceConfig::default()
         };
+        // Started at the least-squares estimate with the i.i.d. fit's covariance twice as wide,
+        // widened again by (1 + φ̂)/(1 − φ̂) of the residuals' lag-1 autocorrelation, as the
+        // pipeline's reference of an AR(1) evidence is.
+        let ols = xx.clone().try_inverse().unwrap();
+        let theta_ols = &ols * &xy;
+        let e: Vec<f64> = (0..n).map(|i| y[i] - (x.row(i) * &theta_ols)[(0, 0)]).collect();
+        let s_ols: f64 = e.iter().map(|v| v * v).sum();
+        let phi_hat = e.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / s_ols;
+        let widen = 4.0 * s_ols / (n - d) as f64 * (1.0 + phi_hat) / (1.0 - phi_hat);
+        let covariance: Vec<f64> = (0..d * d).map(|i| widen * ols[(i / d, i % d)]).collect();
+        let reference = Reference::gaussian(Law::M4, theta_ols.iter().copied().collect(), &covariance);
+        Ar1Case {
+            data,
+            expected,
+            lower,
+            upper,
+            config,
+            reference,
+            phi_hat,
+        }
+    }
+
+    /// The tempered samplers give [`ar1_case`]'s closed form from the box.
+    #[test]
+    fn the_ar1_evidence_of_a_linear_law_is_the_closed_form_integral() {
+        let Ar1Case {
+            data,
+            expected,
+            lower,
+            upper,
+            config,
+            ..
+        } = ar1_case();
+        let evaluator = m4_alone(lower, upper, &data);
         let ar1 = run(&evaluator, &config, &mut super::super::Silent).unwrap();
         let m4 = ar1.of(Law::M4).unwrap();
         let iid = run(
@@ -1130,17 +1175,30 @@ mod tests {
         assert_eq!(m4.refinements, config.refine_rounds);
         assert_eq!(m4.ln_z_error.to_bits(), (m4.island_spread / 2.0).to_bits());
         assert_within_errors(m4, expected, 1.5);
-        // Started at the least-squares estimate with the i.i.d. fit's covariance twice as wide,
-        // widened again by (1 + φ̂)/(1 − φ̂) of the residuals' lag-1 autocorrelation, as the
-        // pipeline's reference of an AR(1) evidence is: the same integral at default particles.
-        let ols = xx.clone().try_inverse().unwrap();
-        let theta_ols = &ols * &xy;
-        let e: Vec<f64> = (0..n).map(|i| y[i] - (x.row(i) * &theta_ols)[(0, 0)]).collect();
-        let s_ols: f64 = e.iter().map(|v| v * v).sum();
-        let phi_hat = e.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / s_ols;
-        let widen = 4.0 * s_ols / (n - d) as f64 * (1.0 + phi_hat) / (1.0 - phi_hat);
-        let covariance: Vec<f64> = (0..d * d).map(|i| widen * ols[(i / d, i % d)]).collect();
-        let reference = Reference::gaussian(Law::M4, theta_ols.iter().copied().collect(), &covariance);
+        // Correlated residuals: the data prefer the AR(1) model by tens of nats (about
+        // (n/2)·ln(1/(1 − φ²)) = 45 less its Occam factor).
+        assert!(
+            m4.ln_z - iid.laws[0].ln_z > 20.0,
+            "{} against {}",
+            m4.ln_z,
+            iid.laws[0].ln_z
+        );
+    }
+
+    /// Started at the least-squares estimate as the pipeline's reference of an AR(1) evidence
+    /// is, [`ar1_case`]'s closed form at the default particles, from the fit and from both.
+    #[test]
+    fn the_ar1_evidence_started_from_the_fit_is_the_closed_form_integral() {
+        let Ar1Case {
+            data,
+            expected,
+            lower,
+            upper,
+            config,
+            reference,
+            phi_hat,
+        } = ar1_case();
+        let evaluator = m4_alone(lower, upper, &data);
         let at_default = |start: Start| {
             let config = EvidenceConfig {
                 particles: 500,
@@ -1172,13 +1230,5 @@ mod tests {
             from_both.ln_z, from_both.ln_z_error, from_both.starts
         );
         assert_within_errors(from_both, expected, 0.3);
-        // Correlated residuals: the data prefer the AR(1) model by tens of nats (about
-        // (n/2)·ln(1/(1 − φ²)) = 45 less its Occam factor).
-        assert!(
-            m4.ln_z - iid.laws[0].ln_z > 20.0,
-            "{} against {}",
-            m4.ln_z,
-            iid.laws[0].ln_z
-        );
     }
 }
