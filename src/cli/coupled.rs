@@ -143,9 +143,9 @@ pub struct CoupledCmd {
     /// Seed of the posterior draws.
     #[arg(long, default_value_t = Settings::default().seed)]
     pub seed: u64,
-    /// The record (one string or a well: time, bit speed, torque, WOB, axial speed and
-    /// acceleration, rate of penetration; a well's with each sample's segment and top-drive
-    /// speed) or the map (one row per cell) as CSV.
+    /// The record (one string or a well: time, what a rig streams, top-drive speed and surface
+    /// torque, then bit speed, torque on bit, WOB, axial speed and acceleration, rate of
+    /// penetration; a well's with each sample's segment) or the map (one row per cell) as CSV.
     #[arg(long, value_name = "FILE")]
     pub out: Option<std::path::PathBuf>,
     /// Overwrite --out if it exists.
@@ -352,7 +352,9 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
                 note(format!("warning: {w}"));
             }
             if let Some(path) = &cmd.out {
-                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_record(&samples, file))?;
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| {
+                    write_record(&samples, settings.omega_rpm, file)
+                })?;
             }
             if cmd.json {
                 writeln!(out, "{}", serde_json::to_string_pretty(&one)?)?;
@@ -486,8 +488,9 @@ fn print_one(out: &mut dyn Write, one: &One, omega_rpm: f64) -> std::io::Result<
 }
 
 /// The record's columns, units in their names.
-fn write_record(samples: &[Sample], out: &mut dyn Write) -> std::io::Result<()> {
-    let columns = coupled::record_columns(samples);
+/// The record of a string driven at `omega_rpm`.
+fn write_record(samples: &[Sample], omega_rpm: f64, out: &mut dyn Write) -> std::io::Result<()> {
+    let columns = coupled::record_columns(samples, &|_| omega_rpm);
     let mut w = csv::Writer::from_writer(out);
     w.write_record(columns.iter().map(|(name, _)| *name))?;
     for k in 0..samples.len() {

@@ -370,9 +370,8 @@ pub fn well_record_columns(
     samples: &[(usize, Sample)],
 ) -> (Vec<usize>, Vec<(&'static str, Vec<f64>)>) {
     let record: Vec<Sample> = samples.iter().map(|(_, s)| *s).collect();
-    let mut columns = record_columns(&record);
     let mut in_segment = (usize::MAX, 0u32);
-    let top_drive = samples
+    let top_drive: Vec<f64> = samples
         .iter()
         .map(|(i, _)| {
             in_segment = if in_segment.0 == *i {
@@ -383,16 +382,19 @@ pub fn well_record_columns(
             well.segments[*i].top_drive_rpm(in_segment.1)
         })
         .collect();
-    columns.insert(1, ("top_drive_rpm", top_drive));
+    let columns = record_columns(&record, &|k| top_drive[k]);
     (samples.iter().map(|(i, _)| *i).collect(), columns)
 }
 
 /// A string's record as named columns in the units their names carry, the command's CSV and
-/// Python's `record`.
-pub fn record_columns(samples: &[Sample]) -> Vec<(&'static str, Vec<f64>)> {
+/// Python's `record`: what a rig streams from the surface (the top drive's speed of sample `k`,
+/// `top_drive_rpm(k)`, and the surface torque), then the bit's channels.
+pub fn record_columns(samples: &[Sample], top_drive_rpm: &dyn Fn(usize) -> f64) -> Vec<(&'static str, Vec<f64>)> {
     let column = |f: &dyn Fn(&Sample) -> f64| samples.iter().map(f).collect::<Vec<f64>>();
     vec![
         ("time_s", column(&|s| s.time_s)),
+        ("top_drive_rpm", (0..samples.len()).map(top_drive_rpm).collect()),
+        ("surface_torque_knm", column(&|s| s.surface_torque_nm / 1e3)),
         ("bit_speed_rpm", column(&|s| s.bit_speed_rad_s / RAD_S_PER_RPM)),
         ("torque_on_bit_knm", column(&|s| s.torque_nm / 1e3)),
         ("wob_kn", column(&|s| s.wob_n / 1e3)),

@@ -513,6 +513,11 @@ pub struct Sample {
     pub time_s: f64,
     pub bit_speed_rad_s: f64,
     pub torque_nm: f64,
+    /// The torque the top drive turns the string with (N·m): the string's spring and damping,
+    /// k·u + c·(Ω₀ − Ω). The string carries no inertia of its own, so it is the torque it
+    /// drives the bit with: equal to the torque on bit in steady drilling, winding up at k·Ω₀
+    /// while the bit is held. What a rig's surface torque reads.
+    pub surface_torque_nm: f64,
     pub wob_n: f64,
     /// The bit's axial speed (m/s, downward positive).
     pub axial_speed_m_s: f64,
@@ -804,6 +809,7 @@ impl CoupledString {
             time_s,
             bit_speed_rad_s: self.speed,
             torque_nm: forces.torque_nm,
+            surface_torque_nm: self.k_t * self.lag + self.c_t * (self.omega - self.speed),
             wob_n: forces.wob_n,
             axial_speed_m_s: self.axial_speed,
             axial_acceleration_m_s2,
@@ -1077,6 +1083,58 @@ mod tests {
         let w = job(30.0, Axial::Weight { wob_n: s.wob_n }, 0.0).steady(&undamped);
         assert!((w.depth_per_blade_m - s.depth_per_blade_m).abs() < 1e-12);
         assert!((w.rate_m_s - 30.0 / 3600.0).abs() < 1e-12);
+    }
+
+    /// The surface torque is what the string drives the bit with: the torque on bit in steady
+    /// drilling; while the bit is held, the string winding up at k·Ω₀; and over a stick-slip
+    /// record, the torque on bit on average, less the change of the bit's angular momentum.
+    #[test]
+    fn the_surface_torque_is_what_the_string_drives_the_bit_with() {
+        let assembly = Assembly::default();
+        let (k, inertia) = (assembly.torsion.stiffness_nm_per_rad(), assembly.torsion.inertia_kg_m2);
+        let weight = Axial::Weight { wob_n: 150e3 };
+        let steady = job(120.0, weight, 0.0);
+        let at = steady.steady(&assembly);
+        let schedule = Schedule::new(1e-4, 50.0, 0.0, 1.0).unwrap();
+        integrate_with(&assembly, &schedule, &steady, &mut |s| {
+            assert!(
+                (s.surface_torque_nm - at.torque_nm).abs() < 1e-6 * at.torque_nm,
+                "{s:?} against {at:?}"
+            );
+        });
+        // Stick-slip at 45 rpm: 20 s to its cycle, then every step of 6 s recorded.
+        let (dt, duration_s) = (1e-4, 6.0);
+        let stick_slip = job(45.0, weight, 1.0);
+        let to_cycle = Schedule::new(dt, 50.0, 20.0, 1.0).unwrap();
+        let (_, state) = integrate_from(&assembly, &to_cycle, &stick_slip, None, &mut |_| {});
+        let schedule = Schedule::new(dt, 1.0 / dt, 0.0, duration_s).unwrap();
+        let mut samples = Vec::new();
+        let (summary, _) = integrate_from(&assembly, &schedule, &stick_slip, Some(&state), &mut |s| {
+            samples.push(*s)
+        });
+        assert_eq!(summary.regime(), Regime::StickSlip, "{summary:?}");
+        let wind = k * stick_slip.omega_rad_s * dt;
+        let mut held = 0;
+        for pair in samples.windows(2) {
+            if pair[0].bit_speed_rad_s == 0.0 && pair[1].bit_speed_rad_s == 0.0 {
+                held += 1;
+                let rise = pair[1].surface_torque_nm - pair[0].surface_torque_nm;
+                assert!(
+                    (rise - wind).abs() < 1e-6 * wind,
+                    "{rise} against k·Ω₀·dt {wind}: {pair:?}"
+                );
+            }
+        }
+        assert!(held > 1_000, "{held} steps held");
+        let n = samples.len() as f64;
+        let mean = |f: &dyn Fn(&Sample) -> f64| samples.iter().map(f).sum::<f64>() / n;
+        let (surface, bit) = (mean(&|s| s.surface_torque_nm), mean(&|s| s.torque_nm));
+        let momentum = inertia * (samples[samples.len() - 1].bit_speed_rad_s - samples[0].bit_speed_rad_s);
+        assert!(
+            (surface - bit - momentum / duration_s).abs() < 1e-4 * bit,
+            "surface {surface} N·m, bit {bit} N·m, I·ΔΩ/T {}",
+            momentum / duration_s
+        );
     }
 
     #[test]

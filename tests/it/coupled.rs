@@ -187,7 +187,7 @@ fn the_command_writes_the_record_in_named_units_and_its_summary() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "time_s,bit_speed_rpm,torque_on_bit_knm,wob_kn,axial_speed_m_h,axial_acceleration_m_s2,rop_m_h,depth_of_cut_mm"
+        "time_s,top_drive_rpm,surface_torque_knm,bit_speed_rpm,torque_on_bit_knm,wob_kn,axial_speed_m_h,axial_acceleration_m_s2,rop_m_h,depth_of_cut_mm"
     );
     let rows: Vec<Vec<f64>> = lines
         .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
@@ -195,7 +195,7 @@ fn the_command_writes_the_record_in_named_units_and_its_summary() {
     assert_eq!(rows.len(), 1000);
     let mean = |k: usize| rows.iter().map(|r| r[k]).sum::<f64>() / rows.len() as f64;
     // The record's columns are the summary's, in kN·m, kN, m/h and rpm.
-    for (column, key) in [(2, "torque_knm"), (3, "wob_kn"), (1, "bit_speed_rpm")] {
+    for (column, key) in [(4, "torque_knm"), (5, "wob_kn"), (3, "bit_speed_rpm")] {
         let want = summary[key]["mean"].as_f64().unwrap();
         assert!(
             (mean(column) - want).abs() < 1e-4 * want.abs().max(1.0),
@@ -203,25 +203,25 @@ fn the_command_writes_the_record_in_named_units_and_its_summary() {
             mean(column)
         );
     }
-    assert!((mean(4) - summary["rop_m_h"].as_f64().unwrap()).abs() < 1e-3);
+    assert!((mean(6) - summary["rop_m_h"].as_f64().unwrap()).abs() < 1e-3);
     // The acceleration is the axial speed's change over each sample period (0.02 s): summed,
     // it gives the speed back, as a box-filtered accelerometer's samples would.
     for k in 1..rows.len() {
-        let change_m_s = (rows[k][4] - rows[k - 1][4]) / 3600.0;
+        let change_m_s = (rows[k][6] - rows[k - 1][6]) / 3600.0;
         assert!(
-            (change_m_s - 0.02 * rows[k][5]).abs() < 1e-7,
+            (change_m_s - 0.02 * rows[k][7]).abs() < 1e-7,
             "sample {k}: {:?}",
             rows[k]
         );
     }
     assert!(
-        rows.iter().any(|r| r[5].abs() > 0.1),
+        rows.iter().any(|r| r[7].abs() > 0.1),
         "the bit's axial motion is in the record"
     );
-    let stuck = rows.iter().filter(|r| r[1].abs() < 1.0).count() as f64 / rows.len() as f64;
+    let stuck = rows.iter().filter(|r| r[3].abs() < 1.0).count() as f64 / rows.len() as f64;
     assert!((stuck - summary["stuck_share"].as_f64().unwrap()).abs() < 1e-9);
     // Torque on bit of a kN·m scale: steady drilling here takes 10.6 kN·m.
-    assert!((5.0..20.0).contains(&mean(2)), "{}", mean(2));
+    assert!((5.0..20.0).contains(&mean(4)), "{}", mean(4));
 }
 
 #[test]
@@ -330,7 +330,7 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
     let mut lines = text.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "time_s,segment,top_drive_rpm,bit_speed_rpm,torque_on_bit_knm,wob_kn,axial_speed_m_h,axial_acceleration_m_s2,rop_m_h,depth_of_cut_mm"
+        "time_s,segment,top_drive_rpm,surface_torque_knm,bit_speed_rpm,torque_on_bit_knm,wob_kn,axial_speed_m_h,axial_acceleration_m_s2,rop_m_h,depth_of_cut_mm"
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 2000);
@@ -340,7 +340,7 @@ fn a_well_is_one_string_through_its_formations_each_segment_reported_and_recorde
     for (k, segment) in segments.iter().enumerate() {
         let torques: Vec<f64> = rows[1000 * k..1000 * (k + 1)]
             .iter()
-            .map(|r| r[4].parse().unwrap())
+            .map(|r| r[5].parse().unwrap())
             .collect();
         let mean = torques.iter().sum::<f64>() / torques.len() as f64;
         let want = segment["torque_knm"]["mean"].as_f64().unwrap();

@@ -55,7 +55,7 @@ pub(crate) fn coupled(
         notes.extend(one.warning.as_ref().map(|w| format!("warning: {w}")));
         let mut value = serde_json::to_value(one).expect("a report serialises");
         if record {
-            let columns = run::record_columns(&samples)
+            let columns = run::record_columns(&samples, &|_| settings.omega_rpm)
                 .into_iter()
                 .map(|(name, values)| (name.to_string(), values.into()));
             value["record"] = serde_json::Value::Object(columns.collect());

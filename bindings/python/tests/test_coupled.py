@@ -190,6 +190,14 @@ def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
     assert len(record["time_s"]) == 1000 and one["regime"] == "stick_slip"
     stuck = sum(abs(w) < 1.0 for w in record["bit_speed_rpm"]) / 1000
     assert stuck == pytest.approx(one["stuck_share"], abs=1e-12)
+    # What a rig streams: the top drive's speed, and the surface torque, which winds up at
+    # k·Ω₀ between samples while the bit is held (the paper's string: k = I·ω_n², N·m/rad).
+    assert record["top_drive_rpm"] == [45.0] * 1000
+    wind_knm = 383.33 * 0.85**2 * 45.0 * math.pi / 30.0 / 50.0 / 1e3
+    speed, surface = record["bit_speed_rpm"], record["surface_torque_knm"]
+    rises = [b - a for a, b, u, v in zip(surface, surface[1:], speed, speed[1:]) if u == 0.0 and v == 0.0]
+    assert len(rises) > 100
+    assert rises == pytest.approx([wind_knm] * len(rises), rel=1e-9)
 
     cells = bitrock.coupled(map=True, wob_kn=150, map_rpm="45:180:2", map_wob_kn="150:220:2", backend="cpu", **short)
     done = run_cli(cli, "coupled", "--map", "--wob-kn", "150", "--map-rpm", "45:180:2", "--map-wob-kn", "150:220:2", "--backend", "cpu", "--duration-s", "20", "--settle-s", "10", "--json")

@@ -951,7 +951,8 @@ def coupled(
     ``bitrock coupled`` simulates it (the same settings, by the same names; docs/coupled.md):
     one string's regime, rate of penetration (m/h), stuck and off-bottom shares, period and the
     ranges of bit speed (rpm), weight (kN) and torque (kN·m), with ``steady`` drilling at its
-    drive; with ``record=True`` its samples under ``record`` as columns. With ``map=True`` the
+    drive; with ``record=True`` its samples under ``record`` as columns (what a rig streams,
+    ``top_drive_rpm`` and ``surface_torque_knm``, then the bit's channels). With ``map=True`` the
     regime map over ``map_rpm`` × ``map_wob_kn`` (or ``map_feed_m_h`` under a feed): ``cells``,
     speeds down, drives across; with ``escape=True`` too, every cell continues from where the
     bit is at ``omega_rpm`` under its drive, with ``from`` and the way out under ``advice``.
