@@ -1055,6 +1055,12 @@ mod tests {
         phi_hat: f64,
     }
 
+    impl Ar1Case {
+        fn evaluator(&self) -> Local<Box<CpuEvaluator>> {
+            m4_alone(self.lower.clone(), self.upper.clone(), &self.data)
+        }
+    }
+
     fn ar1_case() -> Ar1Case {
         let (n, d, phi_true) = (200usize, 4usize, 0.6f64);
         let mut data = cubic_record(n, 0.0);
@@ -1143,16 +1149,9 @@ mod tests {
     /// The tempered samplers give [`ar1_case`]'s closed form from the box.
     #[test]
     fn the_ar1_evidence_of_a_linear_law_is_the_closed_form_integral() {
-        let Ar1Case {
-            data,
-            expected,
-            lower,
-            upper,
-            config,
-            ..
-        } = ar1_case();
-        let evaluator = m4_alone(lower, upper, &data);
-        let ar1 = run(&evaluator, &config, &mut super::super::Silent).unwrap();
+        let case = ar1_case();
+        let (evaluator, config, expected) = (case.evaluator(), &case.config, case.expected);
+        let ar1 = run(&evaluator, config, &mut super::super::Silent).unwrap();
         let m4 = ar1.of(Law::M4).unwrap();
         let iid = run(
             &evaluator,
@@ -1189,16 +1188,9 @@ mod tests {
     /// is, [`ar1_case`]'s closed form at the default particles, from the fit and from both.
     #[test]
     fn the_ar1_evidence_started_from_the_fit_is_the_closed_form_integral() {
-        let Ar1Case {
-            data,
-            expected,
-            lower,
-            upper,
-            config,
-            reference,
-            phi_hat,
-        } = ar1_case();
-        let evaluator = m4_alone(lower, upper, &data);
+        let case = ar1_case();
+        let (evaluator, config, expected) = (case.evaluator(), &case.config, case.expected);
+        let (reference, phi_hat) = (&case.reference, case.phi_hat);
         let at_default = |start: Start| {
             let config = EvidenceConfig {
                 particles: 500,
@@ -1209,7 +1201,7 @@ mod tests {
             run_from(
                 &evaluator,
                 &config,
-                std::slice::from_ref(&reference),
+                std::slice::from_ref(reference),
                 None,
                 &mut super::super::Silent,
             )
