@@ -172,13 +172,19 @@ WHEELS="$(mktemp -d)"
 # front end keeps one core busy there, not two); everything is built before the other tests
 # run, so that the Python package's wheel (pip builds it with maturin, linking the very build
 # of the library made here) is made while they run.
-UNIT_TEST_BINARY="$(cargo test --release --lib --no-run --message-format=json | "$VENV/bin/python" -c '
+# Cargo's messages as JSON (the compiler's diagnostics still rendered, on stderr): the unit
+# tests' executable is the one artifact with one.
+UNIT_TEST_BINARY="$(cargo test --release --lib --no-run --message-format=json-render-diagnostics | "$VENV/bin/python" -c '
 import json, sys
 for line in sys.stdin:
     message = json.loads(line)
     if message.get("reason") == "compiler-artifact" and message.get("executable"):
         print(message["executable"])
 ')"
+if [ ! -x "$UNIT_TEST_BINARY" ]; then
+    echo "cargo named no single executable for the library's unit tests: '$UNIT_TEST_BINARY'" >&2
+    exit 1
+fi
 wait_for_system_packages
 "$UNIT_TEST_BINARY" > "$TARGET/unit-tests.log" 2>&1 &
 UNIT_TESTS=$!

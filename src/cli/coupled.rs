@@ -21,8 +21,8 @@ use std::process::ExitCode;
 pub struct CoupledCmd {
     /// A well file (TOML): segments in drilling order, each with its rock, top-drive speed and
     /// weight or feed (a value, or [from, to] for a ramp), drilled by one string carried from
-    /// each into the next; the record gains the columns segment and top_drive_rpm (format in
-    /// docs/coupled.md).
+    /// each into the next; the record gains the column segment, its top_drive_rpm following the
+    /// segments (format in docs/coupled.md).
     #[arg(long, value_name = "FILE", conflicts_with_all = [
         "omega_rpm", "wob_kn", "feed_m_h", "radius_m", "intrinsic_energy_mpa", "zeta", "contact_stress_mpa",
         "wear_flat_mm", "friction", "gamma", "blades", "inertia_kg_m2", "omega_n_rad_s", "damping_ratio",
@@ -487,8 +487,7 @@ fn print_one(out: &mut dyn Write, one: &One, omega_rpm: f64) -> std::io::Result<
     )
 }
 
-/// The record's columns, units in their names.
-/// The record of a string driven at `omega_rpm`.
+/// The record of a string driven at `omega_rpm`, units in the columns' names.
 fn write_record(samples: &[Sample], omega_rpm: f64, out: &mut dyn Write) -> std::io::Result<()> {
     let columns = coupled::record_columns(samples, &|_| omega_rpm);
     let mut w = csv::Writer::from_writer(out);

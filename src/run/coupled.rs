@@ -363,8 +363,8 @@ pub fn well(well: &CoupledWell, on_sample: &mut dyn FnMut(usize, &Sample)) -> Re
 }
 
 /// A well's record, the command's CSV and Python's `record`: each sample's segment (its index
-/// in the well), and the string's columns ([`record_columns`]) with the top-drive speed (rpm)
-/// that drove the sample's period after the time.
+/// in the well), and the string's columns ([`record_columns`]), the top-drive speed (rpm) of
+/// each the one that drove the sample's period.
 pub fn well_record_columns(
     well: &CoupledWell,
     samples: &[(usize, Sample)],

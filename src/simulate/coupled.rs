@@ -1086,8 +1086,9 @@ mod tests {
     }
 
     /// The surface torque is what the string drives the bit with: the torque on bit in steady
-    /// drilling; while the bit is held, the string winding up at k·Ω₀; and over a stick-slip
-    /// record, the torque on bit on average, less the change of the bit's angular momentum.
+    /// drilling; while the bit is held, the string winding up at k·Ω₀; while it slips, the
+    /// torque on bit plus I·Ω′ at every step; and over a stick-slip record, the torque on bit on
+    /// average plus the change of the bit's angular momentum over the record's length.
     #[test]
     fn the_surface_torque_is_what_the_string_drives_the_bit_with() {
         let assembly = Assembly::default();
@@ -1126,10 +1127,28 @@ mod tests {
             }
         }
         assert!(held > 1_000, "{held} steps held");
+        // Slipping, step by step: I·(Ω_k − Ω_{k−1})/dt is the string's torque at the step's
+        // start less the bit's torque of that step (the speeds first, semi-implicit).
+        let mut slipping = 0;
+        for pair in samples.windows(2) {
+            if pair[0].bit_speed_rad_s > 0.0 && pair[1].bit_speed_rad_s > 0.0 {
+                slipping += 1;
+                let accelerating = inertia * (pair[1].bit_speed_rad_s - pair[0].bit_speed_rad_s) / dt;
+                let net = pair[0].surface_torque_nm - pair[1].torque_nm;
+                assert!(
+                    (accelerating - net).abs() < 1e-6 * pair[1].torque_nm,
+                    "I·ΔΩ/dt {accelerating} N·m against {net}: {pair:?}"
+                );
+            }
+        }
+        assert!(slipping > 1_000, "{slipping} steps slipping");
         let n = samples.len() as f64;
         let mean = |f: &dyn Fn(&Sample) -> f64| samples.iter().map(f).sum::<f64>() / n;
         let (surface, bit) = (mean(&|s| s.surface_torque_nm), mean(&|s| s.torque_nm));
         let momentum = inertia * (samples[samples.len() - 1].bit_speed_rad_s - samples[0].bit_speed_rad_s);
+        // The record ends where the bit's momentum differs from its start's, so that the balance
+        // tells the surface torque from the torque on bit.
+        assert!(momentum.abs() / duration_s > 1e-3 * bit, "{momentum}");
         assert!(
             (surface - bit - momentum / duration_s).abs() < 1e-4 * bit,
             "surface {surface} N·m, bit {bit} N·m, I·ΔΩ/T {}",

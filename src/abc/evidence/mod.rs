@@ -1031,18 +1031,8 @@ mod tests {
         );
     }
 
-    /// The cubic record of 200 samples with AR(1) errors (φ 0.6) as a linear model (m4), its
-    /// box and ln Z in closed form: ln Z of a linear law under the AR(1) model per φ, integrated
-    /// over φ: at fixed φ the AR(1) quadratic form is Q = (y − Xθ)ᵀP(y − Xθ) with the precision
-    /// P = I + φ²·D − φ·L (D the diagonal without its ends, L the two off-diagonals), so the
-    /// θ-integral is the i.i.d. one with S_min → Q_min and XᵀX → XᵀPX, times (1 − φ²)^½; then
-    /// ½ dφ over (−1, 1) by the midpoint rule.
-    ///
-    /// The AR(1) likelihood has heavy tails in θ (φ near 1 absorbs a smooth misfit: here every
-    /// candidate of the box lies within about 25 nats of a plateau, against the i.i.d. model's
-    /// hundreds), so the tempered particles reach its peak late: with 400 particles per island
-    /// ln Z came out 1–3 nats low on most seeds, with 3,000 within its error on every seed
-    /// tried (3, 4, 6, 7).
+    /// [`ar1_case`]'s record, its box and closed form, the evidence's settings and the
+    /// reference a fit would start from.
     struct Ar1Case {
         data: Samples,
         expected: f64,
@@ -1061,6 +1051,12 @@ mod tests {
         }
     }
 
+    /// The cubic record of 200 samples with AR(1) errors (φ 0.6) as a linear model (m4), its
+    /// box and ln Z in closed form: ln Z of a linear law under the AR(1) model per φ, integrated
+    /// over φ: at fixed φ the AR(1) quadratic form is Q = (y − Xθ)ᵀP(y − Xθ) with the precision
+    /// P = I + φ²·D − φ·L (D the diagonal without its ends, L the two off-diagonals), so the
+    /// θ-integral is the i.i.d. one with S_min → Q_min and XᵀX → XᵀPX, times (1 − φ²)^½; then
+    /// ½ dφ over (−1, 1) by the midpoint rule.
     fn ar1_case() -> Ar1Case {
         let (n, d, phi_true) = (200usize, 4usize, 0.6f64);
         let mut data = cubic_record(n, 0.0);
@@ -1147,6 +1143,12 @@ mod tests {
     }
 
     /// The tempered samplers give [`ar1_case`]'s closed form from the box.
+    ///
+    /// The AR(1) likelihood has heavy tails in θ (φ near 1 absorbs a smooth misfit: here every
+    /// candidate of the box lies within about 25 nats of a plateau, against the i.i.d. model's
+    /// hundreds), so the tempered particles reach its peak late: with 400 particles per island
+    /// ln Z came out 1–3 nats low on most seeds, with 3,000 within its error on every seed
+    /// tried (3, 4, 6, 7).
     #[test]
     fn the_ar1_evidence_of_a_linear_law_is_the_closed_form_integral() {
         let case = ar1_case();
