@@ -4,6 +4,7 @@
 
 use super::args::{LumpedArgs, finite_number};
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
+use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::eval::Backend;
 use bitrock::fit::coupled::CoupledCalibration;
 use bitrock::run::choice::{self, Choice};
@@ -135,6 +136,17 @@ pub struct CoupledCmd {
     /// Records re-simulated from each structure to check the choice (with --select).
     #[arg(long, default_value_t = Settings::default().replicates, value_name = "R", requires = "select")]
     pub replicates: usize,
+    /// With --select: the record is what a rig streams (time, top-drive speed, surface torque
+    /// and, where recorded, weight on bit), the structures compared by their surface torque at
+    /// the record's steady top-drive speed (its mean), on its clock, under --wob-kn or the
+    /// record's mean weight on bit; each law's candidates drawn from `bitrock surface`'s prior.
+    #[arg(long, requires = "select", conflicts_with_all = [
+        "omega_rpm", "sample_hz", "speed_col", "torque_col", "rop_col", "axial_speed_col", "speed_unit",
+        "torque_unit", "rop_unit",
+    ])]
+    pub from_surface: bool,
+    #[command(flatten)]
+    pub surface_columns: SurfaceColumnArgs,
     #[command(flatten)]
     pub columns: DrillingArgs,
     /// Posterior draws each map cell is simulated for (with --calibrate --map).
@@ -188,6 +200,27 @@ pub struct DrillingArgs {
     pub rop_unit: Option<RateUnit>,
 }
 
+/// The columns of a surface record (with --from-surface) and their units; its weight on bit
+/// is --wob-col's.
+#[derive(Debug, Args)]
+pub struct SurfaceColumnArgs {
+    /// Time column (s; ms where its name ends in _ms) [default: the one whose name holds "time"].
+    #[arg(long = "time-col", value_name = "NAME")]
+    pub time_column: Option<String>,
+    /// Top-drive speed column [default: the one whose name holds "top_drive" or "rotary"].
+    #[arg(long = "top-drive-col", value_name = "NAME")]
+    pub top_drive_column: Option<String>,
+    /// Surface torque column [default: the surface channel whose name holds "torque"].
+    #[arg(long = "surface-torque-col", value_name = "NAME")]
+    pub surface_torque_column: Option<String>,
+    /// Unit of the top-drive speed [default: from the column's suffix].
+    #[arg(long, value_enum)]
+    pub top_drive_unit: Option<SpeedUnit>,
+    /// Unit of the surface torque [default: from the column's suffix].
+    #[arg(long, value_enum)]
+    pub surface_torque_unit: Option<TorqueUnit>,
+}
+
 impl DrillingArgs {
     fn options(&self) -> DrillingOptions {
         DrillingOptions {
@@ -205,6 +238,21 @@ impl DrillingArgs {
 }
 
 impl CoupledCmd {
+    /// The surface record's columns (with --from-surface).
+    fn surface_options(&self) -> SurfaceOptions {
+        let s = &self.surface_columns;
+        SurfaceOptions {
+            time_column: s.time_column.clone(),
+            top_drive_column: s.top_drive_column.clone(),
+            surface_torque_column: s.surface_torque_column.clone(),
+            wob_column: self.columns.wob_col.clone(),
+            top_drive_unit: s.top_drive_unit,
+            torque_unit: s.surface_torque_unit,
+            wob_unit: self.columns.wob_unit,
+            ..SurfaceOptions::default()
+        }
+    }
+
     /// The run's settings from the flags.
     fn settings(&self) -> Settings {
         let lumped = self.lumped.lumped();
@@ -257,16 +305,34 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
         bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
     }
     let note = &mut |line: String| super::print::note(format_args!("{line}"));
+    let s = &cmd.surface_columns;
+    let surface_columns_given = s.time_column.is_some()
+        || s.top_drive_column.is_some()
+        || s.surface_torque_column.is_some()
+        || s.top_drive_unit.is_some()
+        || s.surface_torque_unit.is_some();
+    if surface_columns_given && !cmd.from_surface {
+        return Err(bitrock::Error::setting(
+            "from_surface",
+            "`time_column`, `top_drive_column`, `surface_torque_column`, `top_drive_unit` and `surface_torque_unit` name a surface record's columns: give it with the record",
+        )
+        .into());
+    }
     if let Some(path) = &cmd.select {
-        if cmd.omega_rpm.is_none() {
-            return Err(bitrock::Error::setting(
-                "omega_rpm",
-                "the top drive's speed while the record was made is needed to simulate the candidates at it",
-            )
-            .into());
-        }
-        let record = DrillingRecord::read(path, &cmd.columns.options())?;
-        let choice = choice::choice(&record, &settings, note)?;
+        let choice = if cmd.from_surface {
+            let record = SurfaceRecord::read(path, &cmd.surface_options())?;
+            choice::surface_choice(&record, &settings, note)?
+        } else {
+            if cmd.omega_rpm.is_none() {
+                return Err(bitrock::Error::setting(
+                    "omega_rpm",
+                    "the top drive's speed while the record was made is needed to simulate the candidates at it",
+                )
+                .into());
+            }
+            let record = DrillingRecord::read(path, &cmd.columns.options())?;
+            choice::choice(&record, &settings, note)?
+        };
         let mut out = super::print::stdout();
         if cmd.json {
             writeln!(out, "{}", serde_json::to_string_pretty(&choice)?)?;
@@ -642,10 +708,14 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
 /// The structures' probabilities, the check's rows and the verdict.
 fn print_choice(out: &mut dyn Write, c: &Choice) -> std::io::Result<()> {
     let d = &c.drive;
+    let noise = match (d.noise_speed_rpm, d.noise_wob_kn) {
+        (Some(speed), Some(wob)) => format!("{speed:.2} rpm, {:.3} kN·m, {wob:.2} kN", d.noise_torque_knm),
+        _ => format!("{:.3} kN·m of surface torque", d.noise_torque_knm),
+    };
     writeln!(
         out,
-        "{} samples ({:.1} s) at {} rpm under {:.1} kN; the record's apparent noise: {:.2} rpm, {:.3} kN·m, {:.2} kN",
-        d.samples, d.duration_s, d.omega_rpm, d.wob_kn, d.noise_speed_rpm, d.noise_torque_knm, d.noise_wob_kn
+        "{} samples ({:.1} s) at {:.1} rpm under {:.1} kN; the record's apparent noise: {noise}",
+        d.samples, d.duration_s, d.omega_rpm, d.wob_kn
     )?;
     writeln!(
         out,

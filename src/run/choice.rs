@@ -29,6 +29,7 @@ use super::coupled::Settings;
 use crate::data::STUCK_SPEED_RAD_S;
 use crate::data::Samples;
 use crate::data::drilling::DrillingRecord;
+use crate::data::surface::SurfaceRecord;
 use crate::error::{Error, Result};
 use crate::eval::surface::{NoiseKey, add_noise};
 use crate::fit::{FitOptions, fit_laws};
@@ -36,8 +37,13 @@ use crate::laws::Law;
 use crate::numerics::quantile;
 use crate::prior::{LawBox, Prior};
 use crate::rng::{candidate_counter, key_of_seed, open_unit, philox4x32_10};
+use crate::run::surface::{DEFAULT_PRIOR_SCALE, physical_scales};
 use crate::simulate::coupled::{self, Axial, BIT_BOUNDS, Bit, CoupledJob, Schedule};
-use crate::simulate::surface::noise_variance_raw;
+use crate::simulate::strings::Chain;
+use crate::simulate::surface::{
+    Drive, Integration, N_DOWNHOLE_SUMMARIES, N_TORQUE_SUMMARIES, SUMMARY_NAMES, noise_variance_raw, simulate_on_clock,
+    summaries,
+};
 use crate::simulate::{Initial, Recording, SimConfig};
 use crate::units::RAD_S_PER_RPM;
 use rayon::prelude::*;
@@ -83,7 +89,21 @@ pub const SUMMARIES: [&str; 12] = [
     "wob_torque_correlation",
 ];
 
-type Summaries = [f64; SUMMARIES.len()];
+/// The summaries of a record from the surface, in order: the surface sampler's torque
+/// summaries (`bitrock surface`'s, [`crate::simulate::surface::summaries`]).
+pub const SURFACE_SUMMARIES: [&str; N_TORQUE_SUMMARIES] = {
+    let mut names = [""; N_TORQUE_SUMMARIES];
+    let mut i = 0;
+    while i < N_TORQUE_SUMMARIES {
+        names[i] = SUMMARY_NAMES[i];
+        i += 1;
+    }
+    names
+};
+
+/// A record's or a candidate's summaries: [`SUMMARIES`] of the bit's channels, or
+/// [`SURFACE_SUMMARIES`] of the surface torque.
+type Summaries = Vec<f64>;
 
 /// Half-width of a law's prior box around its fit, relative (the paper's δ).
 pub const LAW_DELTA: f64 = 0.4;
@@ -110,10 +130,26 @@ pub const COUPLED_PARAMETERS: [(&str, &str); 4] = [
     ("friction", "1"),
 ];
 
+/// Which of a record's channels a choice compares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Channels {
+    /// Bit speed, torque on bit and weight on bit: a memory tool's or a laboratory rig's.
+    Bit,
+    /// The surface torque at a steady top-drive speed: what a rig streams.
+    Surface,
+}
+
+/// Most a surface record's top-drive speed may stray from its mean, as a share of it: every
+/// candidate is simulated at one speed.
+pub const STEADY_TOP_DRIVE: f64 = 0.05;
+
 /// The drive every candidate is simulated at, and the noise added to its channels.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ChoiceDrive {
-    /// The top drive's speed (rpm), as set.
+    /// The channels compared.
+    pub channels: Channels,
+    /// The top drive's speed (rpm): as set, or a surface record's mean.
     pub omega_rpm: f64,
     /// The weight on the bit assembly (kN): as set, or the record's mean weight on bit.
     pub wob_kn: f64,
@@ -122,12 +158,13 @@ pub struct ChoiceDrive {
     /// The record's length (s) at its sample rate, and its samples.
     pub duration_s: f64,
     pub samples: usize,
-    /// The white noise the record's channels show, standard deviations (the root of their
-    /// variance above a smooth signal's): bit speed (rpm), torque (kN·m), weight on bit (kN).
-    /// Each candidate's channels are topped up to it.
-    pub noise_speed_rpm: f64,
+    /// The white noise the record's compared channels show, standard deviations (the root of
+    /// their variance above a smooth signal's): bit speed (rpm), torque (kN·m: on bit, or at
+    /// the surface), weight on bit (kN; the bit's channels only). Each candidate's channels
+    /// are topped up to it.
+    pub noise_speed_rpm: Option<f64>,
     pub noise_torque_knm: f64,
-    pub noise_wob_kn: f64,
+    pub noise_wob_kn: Option<f64>,
 }
 
 /// A parameter's median over a structure's accepted candidates.
@@ -169,13 +206,17 @@ pub struct ChoiceCheckRow {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Choice {
     pub drive: ChoiceDrive,
-    /// The record's summaries, in [`SUMMARIES`]' order.
+    /// The record's summaries ([`SUMMARIES`] or [`SURFACE_SUMMARIES`]), in order.
     pub record_summaries: Vec<(&'static str, f64)>,
     /// Candidates in the table, and those nearest the record that decide.
     pub reference: usize,
     pub accepted: usize,
     pub structures: Vec<StructureShare>,
     pub check: Vec<ChoiceCheckRow>,
+    /// The table's own candidates classified as the record is, each left out of its own vote
+    /// (`replicates` the structure's candidates): what the summaries tell apart over the whole
+    /// prior, where the check tells it near the record.
+    pub table_check: Vec<ChoiceCheckRow>,
     /// The structure called, where the check allows one.
     pub decided: Option<Structure>,
     pub verdict: String,
@@ -215,7 +256,9 @@ impl std::fmt::Display for Family {
 /// re-simulations pooled.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FamilyChoice {
-    /// P(a torsional law); the coupled bit's is the rest.
+    /// P(a torsional law), the two families weighed equally before the record (the table
+    /// holds a candidate of each law for each of the coupled bit's); the coupled bit's is the
+    /// rest.
     pub torsional_probability: f64,
     /// The shares of each family's re-simulated records taken for its own family (`None`
     /// where it had no accepted candidate).
@@ -239,9 +282,20 @@ struct Simulator<'a> {
     omega_rad_s: f64,
     wob_n: f64,
     duration_s: f64,
-    /// The record's apparent noise variances ([`noise_variance_raw`]): bit speed ((rad/s)²),
-    /// torque ((N·m)²), weight on bit (N²).
-    noise_variance: [f64; 3],
+    /// The record's apparent noise variances ([`noise_variance_raw`]) of the compared
+    /// channels: bit speed ((rad/s)²), torque ((N·m)²), weight on bit (N²); or the surface
+    /// torque's ((N·m)²).
+    noise_variance: Vec<f64>,
+    /// Where the record is a surface record: the laws' strings on its clock.
+    surface: Option<SurfaceStrings>,
+}
+
+/// The torsional laws' strings of a surface choice: the settings' string, from rest, at the
+/// record's top-drive speed and clock.
+struct SurfaceStrings {
+    chain: Chain,
+    drive: Drive,
+    integration: Integration,
 }
 
 impl Simulator<'_> {
@@ -269,8 +323,16 @@ impl Simulator<'_> {
     /// `None` where the string diverged.
     fn summaries(&self, structure: Structure, params: &[f64], key: NoiseKey) -> Option<Summaries> {
         let s = self.settings;
-        let (mut speed, mut torque, mut wob) = match structure {
-            Structure::Torsional(law) => {
+        let surface = self.surface.is_some();
+        let mut channels: Vec<Vec<f64>> = match (structure, &self.surface) {
+            (Structure::Torsional(law), Some(strings)) => {
+                let run = simulate_on_clock(&strings.chain, &strings.drive, law, params, strings.integration);
+                if run.diverged {
+                    return None;
+                }
+                vec![run.surface_torque_nm]
+            }
+            (Structure::Torsional(law), None) => {
                 let cfg = SimConfig {
                     law,
                     params_nm: params.to_vec(),
@@ -291,36 +353,56 @@ impl Simulator<'_> {
                 };
                 // A law whose torque turns negative at speed runs the bit away: no record.
                 let trace = crate::simulate::simulate(&cfg).ok()?;
-                (trace.bit_speed_rad_s, trace.torque_nm, trace.wob_n)
+                vec![trace.bit_speed_rad_s, trace.torque_nm, trace.wob_n]
             }
-            Structure::Coupled => {
+            (Structure::Coupled, _) => {
                 let schedule = Schedule::new(s.dt_s, s.sample_hz, s.settle_s, self.duration_s).ok()?;
-                let (mut speed, mut torque, mut wob) = (Vec::new(), Vec::new(), Vec::new());
+                let mut channels = vec![Vec::new(); if surface { 1 } else { 3 }];
                 let summary =
                     coupled::integrate_with(&s.assembly().ok()?, &schedule, &self.job(self.bit(params)), &mut |x| {
-                        speed.push(x.bit_speed_rad_s);
-                        torque.push(x.torque_nm);
-                        wob.push(x.wob_n);
+                        if surface {
+                            channels[0].push(x.surface_torque_nm);
+                        } else {
+                            channels[0].push(x.bit_speed_rad_s);
+                            channels[1].push(x.torque_nm);
+                            channels[2].push(x.wob_n);
+                        }
                     });
                 if summary.diverged {
                     return None;
                 }
-                (speed, torque, wob)
+                channels
             }
         };
         // Each channel's noise makes its apparent noise the record's: a string whose signal is
         // not smooth at the record's clock (the coupled bit's weight swings between samples)
         // shows part of it as noise already, and the record shows the same.
-        for (r, (channel, record)) in [&mut speed, &mut torque, &mut wob]
-            .into_iter()
-            .zip(self.noise_variance)
-            .enumerate()
-        {
+        for (r, (channel, record)) in channels.iter_mut().zip(&self.noise_variance).enumerate() {
             let sd = (record - noise_variance_raw(channel)).max(0.0).sqrt();
             add_noise(channel, sd, key.redrawn(r as u64 + 1));
         }
-        let out = summaries(&speed, &torque, &wob);
+        let out = match &self.surface {
+            Some(strings) => surface_summaries(&channels[0], strings.drive.period_s),
+            None => bit_summaries(&channels[0], &channels[1], &channels[2]).to_vec(),
+        };
         out.iter().all(|v| v.is_finite()).then_some(out)
+    }
+
+    /// The `index`-th candidate of `law` for a surface record under `seed`: drawn from
+    /// `prior` (`bitrock surface`'s), its torques scaled so that its torque at the top
+    /// drive's speed is `torque_nm`, as the coupled bit's friction is chosen; `None` where no
+    /// draw of [`MAX_ATTEMPTS`] has a positive torque there.
+    fn surface_law_candidate(&self, prior: &Prior, seed: u64, index: u64, torque_nm: f64) -> Option<Vec<f64>> {
+        let law = prior.law(0);
+        for attempt in 0..MAX_ATTEMPTS {
+            let c = prior.candidate(seed, attempt, index);
+            let params: Vec<f64> = c.params[..law.n_params()].iter().map(|&v| f64::from(v)).collect();
+            let at_drive = law.torque(&params, self.omega_rad_s, 1.0);
+            if at_drive.is_finite() && at_drive > 0.0 {
+                return Some(law.scale_torque(&params, torque_nm / at_drive));
+            }
+        }
+        None
     }
 
     /// The `index`-th coupled candidate under `seed`: ε, ζ and the contact force drawn, μ
@@ -355,7 +437,7 @@ impl Simulator<'_> {
 
 /// The summaries of a record's (or a simulation's) bit speed (rad/s), torque (N·m) and weight
 /// on bit (N), in [`SUMMARIES`]' order.
-fn summaries(speed: &[f64], torque: &[f64], wob: &[f64]) -> Summaries {
+fn bit_summaries(speed: &[f64], torque: &[f64], wob: &[f64]) -> [f64; SUMMARIES.len()] {
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let sd = |v: &[f64]| {
         let m = mean(v);
@@ -396,6 +478,12 @@ fn summaries(speed: &[f64], torque: &[f64], wob: &[f64]) -> Summaries {
     ]
 }
 
+/// The summaries of a surface torque (N·m) sampled every `period_s`, in
+/// [`SURFACE_SUMMARIES`]' order.
+fn surface_summaries(torque_nm: &[f64], period_s: f64) -> Summaries {
+    summaries(torque_nm, period_s, &[0.0; N_DOWNHOLE_SUMMARIES])[..N_TORQUE_SUMMARIES].to_vec()
+}
+
 /// Each summary's spread within a structure: the mean over the structures of its 10-90 %
 /// range among their own candidates, as a normal standard deviation (÷2.5631); its standard
 /// deviation over the table where that is 0, 1 where both are. Pooled over the whole table a
@@ -405,7 +493,7 @@ fn summaries(speed: &[f64], torque: &[f64], wob: &[f64]) -> Summaries {
 /// stick-slips; the 10-90 % range sees both.
 fn scales(table: &[Member], structures: usize) -> Summaries {
     let spread = |v: &[f64]| (quantile(v, 0.9) - quantile(v, 0.1)) / 2.5631;
-    let mut out = [1.0; SUMMARIES.len()];
+    let mut out = vec![1.0; table.first().map_or(0, |m| m.summaries.len())];
     for (j, scale) in out.iter_mut().enumerate() {
         let within: Vec<f64> = (0..structures)
             .filter_map(|slot| {
@@ -432,24 +520,18 @@ fn scales(table: &[Member], structures: usize) -> Summaries {
     out
 }
 
-fn distance(a: &Summaries, b: &Summaries, scales: &Summaries) -> f64 {
+fn distance(a: &[f64], b: &[f64], scales: &[f64]) -> f64 {
     let sum: f64 = a
         .iter()
         .zip(b)
         .zip(scales)
         .map(|((x, y), s)| ((x - y) / s).powi(2))
         .sum();
-    (sum / SUMMARIES.len() as f64).sqrt()
+    (sum / a.len() as f64).sqrt()
 }
 
 /// The `k` members nearest `s`, `skip` left out.
-fn nearest<'t>(
-    table: &'t [Member],
-    s: &Summaries,
-    scales: &Summaries,
-    k: usize,
-    skip: Option<&Member>,
-) -> Vec<&'t Member> {
+fn nearest<'t>(table: &'t [Member], s: &[f64], scales: &[f64], k: usize, skip: Option<&Member>) -> Vec<&'t Member> {
     let mut near: Vec<(f64, &Member)> = table
         .iter()
         .filter(|m| !skip.is_some_and(|x| std::ptr::eq(x, *m)))
@@ -467,14 +549,7 @@ fn nearest<'t>(
 /// The structure most of the `k` members nearest `s` come from (ties to the earlier one),
 /// `source`, the member `s` was re-simulated from, left out: it is the record's twin but for
 /// the noise, and would vote for its own structure.
-fn classify(
-    table: &[Member],
-    s: &Summaries,
-    scales: &Summaries,
-    k: usize,
-    structures: usize,
-    source: &Member,
-) -> usize {
+fn classify(table: &[Member], s: &[f64], scales: &[f64], k: usize, structures: usize, source: &Member) -> usize {
     let mut votes = vec![0usize; structures];
     for m in nearest(table, s, scales, k, Some(source)) {
         votes[m.slot] += 1;
@@ -493,10 +568,36 @@ pub fn structures() -> Vec<Structure> {
         .collect()
 }
 
-/// The structure `record` shows (see the module documentation), the drive and the string from
-/// `settings`: `omega_rpm` the top drive's speed while recorded, `wob_kn` where given (the
-/// record's mean weight on bit otherwise), `sample_hz` the record's rate.
-pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Choice> {
+/// What a choice decides from: the record's summaries, how each structure's candidates are
+/// drawn and simulated, and what the caller was told so far.
+struct Prepared<'a> {
+    simulator: Simulator<'a>,
+    laws: LawDraws,
+    /// The record's mean torque (N·m), on bit or at the surface: every candidate is centred
+    /// on it.
+    torque_nm: f64,
+    observed: Summaries,
+    names: &'static [&'static str],
+    /// Whether a law may be called: from a surface record, each law's candidates are spread
+    /// over `bitrock surface`'s prior, too thin near the record to tell the laws apart (its
+    /// sampler draws each law where the record is); the family is called as from the bit.
+    call_laws: bool,
+    drive: ChoiceDrive,
+    notes: Vec<String>,
+    left_out: Vec<Structure>,
+    source: std::path::PathBuf,
+}
+
+/// How a law's candidates are drawn.
+enum LawDraws {
+    /// Per law, its box around its fit to the record's turning samples (`None`: left out).
+    Fitted(Vec<Option<LawBox>>),
+    /// Per law, `bitrock surface`'s prior of it, each candidate scaled to the record's torque.
+    Scaled(Vec<Prior>),
+}
+
+/// Refuses the settings a choice cannot run with, by name.
+fn check_settings(settings: &Settings) -> Result<()> {
     if settings.reference < 10 {
         return Err(Error::setting(
             "reference",
@@ -508,6 +609,28 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     }
     settings.assembly()?;
     settings.bit.validate()?;
+    if let Some(w) = settings.wob_kn
+        && !(w.is_finite() && w > 0.0)
+    {
+        return Err(Error::setting("wob_kn", format!("must be positive, got {w} kN")));
+    }
+    Ok(())
+}
+
+/// The record's refusal: `message` about the file at `path`.
+fn refusal(path: &std::path::Path, message: String) -> Error {
+    Error::Format {
+        path: path.to_path_buf(),
+        line: None,
+        message,
+    }
+}
+
+/// The structure `record` shows (see the module documentation), the drive and the string from
+/// `settings`: `omega_rpm` the top drive's speed while recorded, `wob_kn` where given (the
+/// record's mean weight on bit otherwise), `sample_hz` the record's rate.
+pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Choice> {
+    check_settings(settings)?;
     if !(settings.omega_rpm.is_finite() && settings.omega_rpm > 0.0) {
         return Err(Error::setting(
             "omega_rpm",
@@ -517,22 +640,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     let n = record.len();
     let duration_s = n as f64 / settings.sample_hz;
     Schedule::new(settings.dt_s, settings.sample_hz, settings.settle_s, duration_s)?;
-    let structures = structures();
-    let strings = (settings.reference as f64 + settings.replicates as f64) * structures.len() as f64;
-    crate::limits::check_work(
-        "reference",
-        strings * (settings.settle_s + duration_s) / settings.dt_s,
-        crate::simulate::FASTEST_STEPS_PER_S,
-        &format!(
-            "simulating {strings} strings of {:.0} s",
-            settings.settle_s + duration_s
-        ),
-    )?;
-    let refuse = |message: String| Error::Format {
-        path: record.source.clone(),
-        line: None,
-        message,
-    };
+    let refuse = |message: String| refusal(&record.source, message);
     if n < 50 {
         return Err(refuse(format!(
             "the record holds {n} samples: its bit speed, torque and weight on bit need at least 50 to be summarised"
@@ -541,11 +649,6 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let wob_from_record = settings.wob_kn.is_none();
     let wob_n = settings.wob_kn.map_or_else(|| mean(&record.wob_n), |w| w * 1e3);
-    if let Some(w) = settings.wob_kn
-        && !(w.is_finite() && w > 0.0)
-    {
-        return Err(Error::setting("wob_kn", format!("must be positive, got {w} kN")));
-    }
     if !(wob_n.is_finite() && wob_n > 0.0) {
         return Err(refuse(format!(
             "its mean weight on bit is {:.3} kN: the bit is not pushed onto the rock",
@@ -554,17 +657,29 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     }
     let torque_nm = mean(&record.torque_nm);
     let omega_rad_s = settings.omega_rpm * RAD_S_PER_RPM;
-    let noise_variance = [
+    let noise_variance = vec![
         noise_variance_raw(&record.speed_rad_s),
         noise_variance_raw(&record.torque_nm),
         noise_variance_raw(&record.wob_n),
     ];
+    let drive = ChoiceDrive {
+        channels: Channels::Bit,
+        omega_rpm: settings.omega_rpm,
+        wob_kn: wob_n / 1e3,
+        wob_from_record,
+        duration_s,
+        samples: n,
+        noise_speed_rpm: Some(noise_variance[0].max(0.0).sqrt() / RAD_S_PER_RPM),
+        noise_torque_knm: noise_variance[1].max(0.0).sqrt() / 1e3,
+        noise_wob_kn: Some(noise_variance[2].max(0.0).sqrt() / 1e3),
+    };
     let simulator = Simulator {
         settings,
         omega_rad_s,
         wob_n,
         duration_s,
         noise_variance,
+        surface: None,
     };
     let mut notes = Vec::new();
     if wob_from_record {
@@ -602,6 +717,180 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
             }
         })
         .collect();
+    let prepared = Prepared {
+        observed: bit_summaries(&record.speed_rad_s, &record.torque_nm, &record.wob_n).to_vec(),
+        names: &SUMMARIES,
+        call_laws: true,
+        simulator,
+        laws: LawDraws::Fitted(boxes),
+        torque_nm,
+        drive,
+        notes,
+        left_out,
+        source: record.source.clone(),
+    };
+    decide(prepared, note)
+}
+
+/// The structure a surface record shows: [`choice`] on the record's surface torque alone, its
+/// top drive's mean speed the drive (refused where the speed strays more than
+/// [`STEADY_TOP_DRIVE`] from it), `wob_kn` where given (the record's mean weight on bit
+/// otherwise, refused where it has none), the record's clock the rate. Each law's
+/// candidates are drawn from `bitrock surface`'s prior of it (its physical box, m4's cut to
+/// its curves) and scaled to the record's mean torque at the drive, as the coupled bit's
+/// friction is chosen; every torsional string starts from rest on the settings' string, the
+/// coupled bit's from steady drilling, both settling `settle_s`.
+pub fn surface_choice(record: &SurfaceRecord, settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Choice> {
+    check_settings(settings)?;
+    let refuse = |message: String| refusal(&record.source, message);
+    let n = record.len();
+    if n < 50 {
+        return Err(refuse(format!(
+            "the record holds {n} samples: its surface torque needs at least 50 to be summarised"
+        )));
+    }
+    let omega_rad_s = record.mean_top_drive_rad_s();
+    let rpm = |w: f64| w / RAD_S_PER_RPM;
+    if !(omega_rad_s.is_finite() && omega_rad_s > 0.0) {
+        return Err(refuse(format!(
+            "its top drive turns at {:.2} rpm on average: the choice needs it turning forward",
+            rpm(omega_rad_s)
+        )));
+    }
+    let (lo, hi) = record
+        .top_drive_rad_s
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), w| {
+            (lo.min(*w), hi.max(*w))
+        });
+    if (hi - omega_rad_s).max(omega_rad_s - lo) > STEADY_TOP_DRIVE * omega_rad_s {
+        return Err(refuse(format!(
+            "its top drive turns from {:.1} to {:.1} rpm, more than {:.0} % from its mean {:.1} rpm: every candidate is simulated at one speed; give a stretch of steady drive",
+            rpm(lo),
+            rpm(hi),
+            100.0 * STEADY_TOP_DRIVE,
+            rpm(omega_rad_s)
+        )));
+    }
+    let wob_from_record = settings.wob_kn.is_none();
+    let wob_n = match (settings.wob_kn, &record.wob_n) {
+        (Some(w), _) => w * 1e3,
+        (None, Some(wob)) => wob.iter().sum::<f64>() / wob.len().max(1) as f64,
+        (None, None) => {
+            return Err(Error::setting(
+                "wob_kn",
+                format!(
+                    "{} holds no weight on bit: give the weight on the bit assembly",
+                    record.source.display()
+                ),
+            ));
+        }
+    };
+    if !(wob_n.is_finite() && wob_n > 0.0) {
+        return Err(refuse(format!(
+            "its mean weight on bit is {:.3} kN: the bit is not pushed onto the rock",
+            wob_n / 1e3
+        )));
+    }
+    let period_s = record.sample_period_s;
+    let settings = &Settings {
+        omega_rpm: rpm(omega_rad_s),
+        sample_hz: 1.0 / period_s,
+        ..settings.clone()
+    };
+    let duration_s = record.duration_s();
+    Schedule::new(settings.dt_s, settings.sample_hz, settings.settle_s, duration_s)?;
+    let integration = Integration {
+        dt_s: TORSIONAL_DT_S.min(period_s),
+        settle_s: settings.settle_s,
+    };
+    let chain = Chain::one_dof(&settings.assembly()?.torsion);
+    chain.check_step(integration.dt_s)?;
+    let torque = &record.surface_torque_nm;
+    let torque_nm = torque.iter().sum::<f64>() / n as f64;
+    let noise_variance = vec![noise_variance_raw(torque)];
+    let drive = ChoiceDrive {
+        channels: Channels::Surface,
+        omega_rpm: settings.omega_rpm,
+        wob_kn: wob_n / 1e3,
+        wob_from_record,
+        duration_s,
+        samples: n,
+        noise_speed_rpm: None,
+        noise_torque_knm: noise_variance[0].max(0.0).sqrt() / 1e3,
+        noise_wob_kn: None,
+    };
+    let scales = physical_scales(record);
+    let priors = Law::ALL
+        .into_iter()
+        .map(|law| Prior::physical(&[law], &scales, DEFAULT_PRIOR_SCALE, None, 1.0)?.with_curve_limits(&scales))
+        .collect::<Result<Vec<Prior>>>()?;
+    let mut notes = Vec::new();
+    if wob_from_record {
+        notes.push(format!(
+            "the weight on the bit assembly is the record's mean weight on bit, {:.1} kN",
+            wob_n / 1e3
+        ));
+    }
+    let simulator = Simulator {
+        settings,
+        omega_rad_s,
+        wob_n,
+        duration_s,
+        noise_variance,
+        surface: Some(SurfaceStrings {
+            chain,
+            drive: Drive {
+                omega_rad_s: vec![omega_rad_s; n],
+                ratio: vec![1.0; n],
+                period_s,
+            },
+            integration,
+        }),
+    };
+    let prepared = Prepared {
+        observed: surface_summaries(torque, period_s),
+        names: &SURFACE_SUMMARIES,
+        call_laws: false,
+        simulator,
+        laws: LawDraws::Scaled(priors),
+        torque_nm,
+        drive,
+        notes,
+        left_out: Vec::new(),
+        source: record.source.clone(),
+    };
+    decide(prepared, note)
+}
+
+/// The choice from `prepared`: the table drawn and simulated, the structures' shares of the
+/// candidates nearest the record, the check by re-simulation, the verdicts.
+fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice> {
+    let Prepared {
+        simulator,
+        laws,
+        torque_nm,
+        observed,
+        names: summary_names,
+        call_laws,
+        drive,
+        mut notes,
+        left_out,
+        source,
+    } = prepared;
+    let settings = simulator.settings;
+    let structures = structures();
+    let strings = (settings.reference as f64 + settings.replicates as f64) * structures.len() as f64;
+    crate::limits::check_work(
+        "reference",
+        strings * (settings.settle_s + drive.duration_s) / settings.dt_s,
+        crate::simulate::FASTEST_STEPS_PER_S,
+        &format!(
+            "simulating {strings} strings of {:.0} s",
+            settings.settle_s + drive.duration_s
+        ),
+    )?;
+    let refuse = |message: String| refusal(&source, message);
 
     // The table: each structure's candidates, drawn and simulated.
     let seed = settings.seed;
@@ -611,18 +900,24 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         .into_par_iter()
         .map(|(slot, i)| {
             let params = match structures[slot] {
-                Structure::Torsional(law) => boxes[slot].as_ref().map(|bx| {
-                    let key = key_of_seed(NoiseKey::replicate(seed ^ 0x4341_4e44, slot as u64).0);
-                    let u = philox4x32_10(candidate_counter(0, i, 0), key);
-                    let u2 = philox4x32_10(candidate_counter(0, i, 1), key);
-                    let words = [u[0], u[1], u[2], u[3], u2[0], u2[1]];
-                    (0..law.n_params())
-                        .map(|j| {
-                            let (lo, hi) = (f64::from(bx.lower[j]), f64::from(bx.upper[j]));
-                            lo + open_unit(words[j]) * (hi - lo)
-                        })
-                        .collect()
-                }),
+                Structure::Torsional(law) => match &laws {
+                    LawDraws::Fitted(boxes) => boxes[slot].as_ref().map(|bx| {
+                        let key = key_of_seed(NoiseKey::replicate(seed ^ 0x4341_4e44, slot as u64).0);
+                        let u = philox4x32_10(candidate_counter(0, i, 0), key);
+                        let u2 = philox4x32_10(candidate_counter(0, i, 1), key);
+                        let words = [u[0], u[1], u[2], u[3], u2[0], u2[1]];
+                        (0..law.n_params())
+                            .map(|j| {
+                                let (lo, hi) = (f64::from(bx.lower[j]), f64::from(bx.upper[j]));
+                                lo + open_unit(words[j]) * (hi - lo)
+                            })
+                            .collect()
+                    }),
+                    LawDraws::Scaled(priors) => {
+                        let stream = NoiseKey::replicate(seed ^ 0x5355_5246, slot as u64).0;
+                        simulator.surface_law_candidate(&priors[slot], stream, i, torque_nm)
+                    }
+                },
                 Structure::Coupled => simulator.coupled_candidate(seed, i, torque_nm),
             };
             (slot, i, params)
@@ -663,7 +958,7 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
             "only {} candidates could be simulated at {} rpm and {:.1} kN",
             table.len(),
             settings.omega_rpm,
-            wob_n / 1e3
+            drive.wob_kn
         )));
     }
     for line in &notes {
@@ -672,7 +967,6 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
 
     // The choice: the structures' shares of the nearest candidates.
     let scales = scales(&table, structures.len());
-    let observed = summaries(&record.speed_rad_s, &record.torque_nm, &record.wob_n);
     let k = (table.len() / 50).max(10).min(table.len());
     let accepted = nearest(&table, &observed, &scales, k, None);
     let shares: Vec<StructureShare> = structures
@@ -751,7 +1045,58 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         .map_or(0.0, |r| r.recognised);
     let (mut decided, mut verdict) =
         resimulation_verdict(best.structure, best.probability, recognised, &confused, "structure");
-    let mut family = family_choice(&shares, &check);
+    let table_check = table_check(&table, &scales, k, &structures);
+    let taken_in_table: Vec<(Structure, f64)> = table_check
+        .iter()
+        .filter(|r| r.structure != best.structure)
+        .map(|r| (r.structure, taken_for_best(r)))
+        .filter(|(_, share)| *share > CHECK_CONFUSED)
+        .collect();
+    if decided.is_some() && !taken_in_table.is_empty() {
+        decided = None;
+        verdict = table_verdict(best.structure, best.probability, &taken_in_table);
+    }
+    if let (Some(Structure::Torsional(law)), false) = (decided, call_laws) {
+        decided = None;
+        verdict = format!(
+            "{law} leads (P = {:.2}): which law a surface record shows is `bitrock surface`'s to say (its sampler draws each law near the record); not called here",
+            best.probability
+        );
+    }
+    // Each family's prior share: its structures' drawn candidates (a law left out drew none).
+    let drawn = |family: Family| {
+        structures
+            .iter()
+            .filter(|s| Family::of(**s) == family && !left_out.contains(s))
+            .count() as f64
+    };
+    let torsional_prior = drawn(Family::Torsional) / (drawn(Family::Torsional) + drawn(Family::Coupled));
+    let mut family = family_choice(&shares, &check, torsional_prior);
+    if let Some(called) = family.decided {
+        let other = match called {
+            Family::Torsional => Family::Coupled,
+            Family::Coupled => Family::Torsional,
+        };
+        let (mut members, mut taken) = (0, 0);
+        for row in table_check.iter().filter(|r| Family::of(r.structure) == other) {
+            members += row.replicates;
+            taken += row
+                .classified_as
+                .iter()
+                .filter(|c| Family::of(c.0) == called)
+                .map(|c| c.1)
+                .sum::<usize>();
+        }
+        let share = taken as f64 / members.max(1) as f64;
+        if share > CHECK_CONFUSED {
+            let probability = match called {
+                Family::Torsional => family.torsional_probability,
+                Family::Coupled => 1.0 - family.torsional_probability,
+            };
+            family.decided = None;
+            family.verdict = table_verdict(called, probability, &[(other, share)]);
+        }
+    }
     // A structure without a candidate was not compared: without the coupled bit, or without
     // any law, neither the structure nor the family is called; without some laws, the verdict
     // says among which it was made.
@@ -781,21 +1126,13 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         );
     }
     Ok(Choice {
-        drive: ChoiceDrive {
-            omega_rpm: settings.omega_rpm,
-            wob_kn: wob_n / 1e3,
-            wob_from_record,
-            duration_s,
-            samples: n,
-            noise_speed_rpm: noise_variance[0].max(0.0).sqrt() / RAD_S_PER_RPM,
-            noise_torque_knm: noise_variance[1].max(0.0).sqrt() / 1e3,
-            noise_wob_kn: noise_variance[2].max(0.0).sqrt() / 1e3,
-        },
-        record_summaries: SUMMARIES.iter().copied().zip(observed).collect(),
+        drive,
+        record_summaries: summary_names.iter().copied().zip(observed).collect(),
         reference: table.len(),
         accepted: k,
         structures: shares,
         check,
+        table_check,
         decided,
         verdict,
         family,
@@ -803,13 +1140,68 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
     })
 }
 
-/// The choice between the families (see [`FamilyChoice`]).
-fn family_choice(shares: &[StructureShare], check: &[ChoiceCheckRow]) -> FamilyChoice {
-    let torsional_probability: f64 = shares
+/// The table's own candidates classified as a record is ([`classify`], each left out of its
+/// own vote), counted per structure as [`ChoiceCheckRow`]s.
+fn table_check(table: &[Member], scales: &[f64], k: usize, structures: &[Structure]) -> Vec<ChoiceCheckRow> {
+    let classes: Vec<usize> = table
+        .par_iter()
+        .map(|m| classify(table, &m.summaries, scales, k, structures.len(), m))
+        .collect();
+    (0..structures.len())
+        .filter_map(|slot| {
+            let own: Vec<usize> = table
+                .iter()
+                .zip(&classes)
+                .filter(|(m, _)| m.slot == slot)
+                .map(|(_, c)| *c)
+                .collect();
+            if own.is_empty() {
+                return None;
+            }
+            let count = |target: usize| own.iter().filter(|&&c| c == target).count();
+            Some(ChoiceCheckRow {
+                structure: structures[slot],
+                replicates: own.len(),
+                diverged: 0,
+                classified_as: structures.iter().enumerate().map(|(t, &s)| (s, count(t))).collect(),
+                recognised: count(slot) as f64 / own.len() as f64,
+            })
+        })
+        .collect()
+}
+
+/// The verdict on `best`, which passed the check near the record, where the table's own
+/// candidates of other structures or families (`taken`: each with the share of its candidates
+/// taken for `best`) are taken for it more often than [`CHECK_CONFUSED`]: the table's draws
+/// near the record may have missed theirs, so nothing is called.
+fn table_verdict<L: std::fmt::Display>(best: L, probability: f64, taken: &[(L, f64)]) -> String {
+    let names: Vec<String> = taken.iter().map(|(l, _)| l.to_string()).collect();
+    let most = taken.iter().map(|t| t.1).fold(0.0, f64::max);
+    format!(
+        "{best} leads (P = {probability:.2}) and passes the check near the record, but the table's own candidates of {} are taken for it too (up to {:.0} %): undecided between {best} and {}",
+        names.join(", "),
+        100.0 * most,
+        names.join(", ")
+    )
+}
+
+/// The choice between the families (see [`FamilyChoice`]): `torsional_prior` is the
+/// torsional laws' share of the table's draws, divided out of their share of the accepted
+/// candidates so that the families weigh the same before the record (four laws to one
+/// coupled bit would otherwise make P(a torsional law) 0.8 of a record that tells nothing).
+fn family_choice(shares: &[StructureShare], check: &[ChoiceCheckRow], torsional_prior: f64) -> FamilyChoice {
+    let accepted_torsional: f64 = shares
         .iter()
         .filter(|s| Family::of(s.structure) == Family::Torsional)
         .map(|s| s.probability)
         .sum();
+    let torsional_probability = if torsional_prior > 0.0 && torsional_prior < 1.0 {
+        let torsional = accepted_torsional / torsional_prior;
+        let coupled = (1.0 - accepted_torsional) / (1.0 - torsional_prior);
+        torsional / (torsional + coupled)
+    } else {
+        accepted_torsional
+    };
     // Of `from`'s re-simulated records, the share taken for a structure of `taken_for`: each
     // structure's rows weighted by its probability, as the family's records would be drawn.
     let probability = |structure: Structure| {
@@ -889,6 +1281,7 @@ fn estimates(structure: Structure, members: &[&Member]) -> Vec<Estimate> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::prior::PhysicalScales;
 
     #[test]
     fn summaries_of_a_known_record_are_its_closed_forms() {
@@ -897,7 +1290,7 @@ mod tests {
         let speed: Vec<f64> = (0..100).map(|i| if i % 2 == 0 { 0.0 } else { 2.0 }).collect();
         let torque: Vec<f64> = speed.iter().map(|w| if *w > 0.0 { 8e3 } else { 12e3 }).collect();
         let wob = vec![1.5e5; 100];
-        let s = summaries(&speed, &torque, &wob);
+        let s = bit_summaries(&speed, &torque, &wob);
         let want = [0.5, 1.0, 2.0, 10e3, 2e3, 8e3, 12e3, 8e3, 12e3, -1.0, 0.0, 0.0];
         for ((name, got), want) in SUMMARIES.iter().zip(s).zip(want) {
             assert!(
@@ -912,7 +1305,7 @@ mod tests {
         let member = |slot: usize, x: f64| Member {
             slot,
             params: Vec::new(),
-            summaries: [x; SUMMARIES.len()],
+            summaries: vec![x; SUMMARIES.len()],
         };
         // The source (slot 0) sits on the re-simulation; slot 1's two members are next.
         let table = vec![member(0, 0.0), member(1, 1.0), member(1, 1.5), member(0, 5.0)];
@@ -922,6 +1315,126 @@ mod tests {
         assert_eq!(nearest(&table, &s, &scales, 1, None)[0].slot, 0);
         // k beyond the table left is the whole of it.
         assert_eq!(nearest(&table, &s, &scales, 9, Some(&table[0])).len(), 3);
+    }
+
+    #[test]
+    fn a_surface_choice_s_law_candidates_are_drawn_from_the_surface_prior_and_turn_at_the_record_s_torque() {
+        // Each law's candidates, as a surface choice draws them at 45 rpm for a record whose
+        // mean torque is 10 kN·m: the law's torque at the drive is that torque, the shape
+        // (every parameter but the torques) is the prior's draw, and the scaling factor is
+        // the one the draw's torque at the drive asks for.
+        let settings = Settings::default();
+        let omega_rad_s = 45.0 * RAD_S_PER_RPM;
+        let simulator = Simulator {
+            settings: &settings,
+            omega_rad_s,
+            wob_n: 150e3,
+            duration_s: 60.0,
+            noise_variance: vec![0.0],
+            surface: None,
+        };
+        let scales = PhysicalScales {
+            torque_max: 14e3,
+            speed_low: 0.1 * omega_rad_s,
+            speed_high: 3.0 * omega_rad_s,
+        };
+        for law in Law::ALL {
+            let prior = Prior::physical(&[law], &scales, DEFAULT_PRIOR_SCALE, None, 1.0)
+                .and_then(|p| p.with_curve_limits(&scales))
+                .unwrap();
+            let n = law.n_params();
+            for i in 0..20 {
+                let params = simulator.surface_law_candidate(&prior, 7, i, 10e3).unwrap();
+                let torque = law.torque(&params, omega_rad_s, 1.0);
+                assert!((torque - 10e3).abs() < 1e-9 * 10e3, "{law} #{i}: {torque} N·m");
+                // The first draw of positive torque at the drive, scaled by one factor.
+                let drawn = (0..MAX_ATTEMPTS)
+                    .map(|attempt| prior.candidate(7, attempt, i))
+                    .map(|c| c.params[..n].iter().map(|&v| f64::from(v)).collect::<Vec<f64>>())
+                    .find(|p| law.torque(p, omega_rad_s, 1.0) > 0.0)
+                    .unwrap();
+                let factor = 10e3 / law.torque(&drawn, omega_rad_s, 1.0);
+                assert!(factor > 0.0);
+                for (j, spec) in law.params().iter().enumerate() {
+                    let want = if spec.torque_power == 1 {
+                        drawn[j] * factor
+                    } else {
+                        drawn[j]
+                    };
+                    assert!(
+                        (params[j] - want).abs() <= 1e-12 * want.abs(),
+                        "{law}.{}: {} for {want}",
+                        spec.name,
+                        params[j]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_surface_record_s_summaries_are_the_surface_sampler_s_torque_summaries() {
+        let torque: Vec<f64> = (0..600).map(|i| 10e3 + 2e3 * (f64::from(i) * 0.8).sin()).collect();
+        let all = summaries(&torque, 0.1, &[0.0; N_DOWNHOLE_SUMMARIES]);
+        let ours = surface_summaries(&torque, 0.1);
+        assert_eq!(ours.len(), SURFACE_SUMMARIES.len());
+        assert_eq!(ours[..], all[..N_TORQUE_SUMMARIES]);
+        assert_eq!(SURFACE_SUMMARIES[..], SUMMARY_NAMES[..N_TORQUE_SUMMARIES]);
+        // The mean first, as named.
+        assert_eq!(SURFACE_SUMMARIES[crate::simulate::surface::MEAN], "mean_nm");
+        assert!((ours[crate::simulate::surface::MEAN] - 10e3).abs() < 20.0);
+    }
+
+    #[test]
+    fn the_families_weigh_the_same_before_the_record() {
+        // Four laws and the coupled bit, each with as many candidates: accepted shares of 0.8
+        // for the laws together and 0.2 for the coupled bit are the table's own proportions,
+        // a record that tells nothing (P = 1/2).
+        let share = |structure: Structure, probability: f64| StructureShare {
+            structure,
+            probability,
+            candidates: 100,
+            accepted: 0,
+            estimates: Vec::new(),
+        };
+        let shares = |laws: f64| {
+            let mut v: Vec<StructureShare> = Law::ALL
+                .into_iter()
+                .map(|law| share(Structure::Torsional(law), laws / 4.0))
+                .collect();
+            v.push(share(Structure::Coupled, 1.0 - laws));
+            v
+        };
+        let p = |laws: f64, prior: f64| family_choice(&shares(laws), &[], prior).torsional_probability;
+        assert!((p(0.8, 0.8) - 0.5).abs() < 1e-12);
+        // Odds (0.9/0.8)/(0.1/0.2) = 2.25: P = 2.25/3.25.
+        assert!((p(0.9, 0.8) - 2.25 / 3.25).abs() < 1e-12);
+        assert!((p(1.0, 0.8) - 1.0).abs() < 1e-12 && p(0.0, 0.8).abs() < 1e-12);
+        // Three laws compared (one left out): their prior share is 3/4.
+        assert!((p(0.75, 0.75) - 0.5).abs() < 1e-12);
+        // Without a check nothing is recognised: nothing is called.
+        assert_eq!(family_choice(&shares(1.0), &[], 0.8).decided, None);
+    }
+
+    #[test]
+    fn the_table_check_counts_every_candidate_of_each_structure_once() {
+        // Two structures in two clumps but for one member of slot 0 inside slot 1's: it is
+        // taken for slot 1, every other member for its own.
+        let member = |slot: usize, x: f64| Member {
+            slot,
+            params: Vec::new(),
+            summaries: vec![x; 3],
+        };
+        let mut table: Vec<Member> = (0..12).map(|i| member(0, f64::from(i) * 0.01)).collect();
+        table.extend((0..12).map(|i| member(1, 10.0 + f64::from(i) * 0.01)));
+        table.push(member(0, 10.05));
+        let structures = [Structure::Torsional(Law::ALL[0]), Structure::Coupled];
+        let rows = table_check(&table, &[1.0; 3], 3, &structures);
+        assert_eq!(rows.len(), 2);
+        assert_eq!((rows[0].replicates, rows[1].replicates), (13, 12));
+        assert_eq!(rows[0].classified_as, vec![(structures[0], 12), (structures[1], 1)]);
+        assert_eq!(rows[1].classified_as, vec![(structures[0], 0), (structures[1], 12)]);
+        assert!((rows[0].recognised - 12.0 / 13.0).abs() < 1e-12);
     }
 
     #[test]

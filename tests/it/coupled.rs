@@ -772,6 +772,73 @@ fn the_choice_refuses_what_it_cannot_use_by_flag_with_nothing_written() {
 }
 
 #[test]
+fn the_choice_from_the_surface_refuses_what_it_cannot_use_by_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = surface_record(dir.path(), "RGD", 45.0, 0.2, 0);
+    let select = |args: &[&str], path: &std::path::Path| {
+        outcome(
+            bin()
+                .args(["coupled", "--select"])
+                .arg(path)
+                .args(["--from-surface", "--reference", "10", "--replicates", "1"])
+                .args(args),
+        )
+    };
+    for (args, flag) in [
+        (vec!["--omega-rpm", "45"], "--omega-rpm"),
+        (vec!["--sample-hz", "10"], "--sample-hz"),
+        (vec!["--speed-col", "bit_speed_rpm"], "--speed-col"),
+        (vec!["--surface-torque-col", "no_such_column"], "no_such_column"),
+        (vec!["--reference", "5"], "--reference"),
+    ] {
+        let (code, _, stderr) = select(&args, &record);
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stderr.contains(flag), "{args:?}: {stderr}");
+    }
+    // The surface's columns need the surface.
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["coupled", "--omega-rpm", "45", "--select"])
+            .arg(&record)
+            .args(["--top-drive-col", "top_drive_rpm"]),
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--from-surface"), "{stderr}");
+    // A top drive that changes speed, and a record without a weight on bit, are refused by
+    // what is wrong with them.
+    let text = std::fs::read_to_string(&record).unwrap();
+    let stepped: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, line)| if i > 300 { line.replacen(",45,", ",60,", 1) } else { line.to_string() } + "\n")
+        .collect();
+    let stepped_path = dir.path().join("stepped.csv");
+    std::fs::write(&stepped_path, stepped).unwrap();
+    let (code, _, stderr) = select(&[], &stepped_path);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("stepped.csv") && stderr.contains("steady drive"),
+        "{stderr}"
+    );
+    let no_wob: String = text
+        .lines()
+        .map(|line| line.rsplit_once(',').unwrap().0.to_string() + "\n")
+        .collect();
+    let no_wob_path = dir.path().join("no_wob.csv");
+    std::fs::write(&no_wob_path, no_wob).unwrap();
+    let (code, _, stderr) = select(&[], &no_wob_path);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--wob-kn") && stderr.contains("no_wob.csv"), "{stderr}");
+    // Given the weight, the record is chosen from.
+    let (code, stdout, stderr) = select(&["--wob-kn", "150", "--settle-s", "10"], &no_wob_path);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains("of surface torque") && stdout.contains("the family:"),
+        "{stdout}"
+    );
+}
+
+#[test]
 fn a_record_no_law_can_fit_calls_nothing_and_says_why() {
     // A bit stuck throughout: no turning sample to fit a law on.
     use rand::SeedableRng;
@@ -816,4 +883,115 @@ fn a_record_no_law_can_fit_calls_nothing_and_says_why() {
         notes.contains("m3: left out") && notes.contains("0 calibration samples"),
         "{notes}"
     );
+}
+
+/// A surface record (time, top-drive speed, surface torque in kN·m with `noise_knm` of white
+/// noise from `seed`, weight on bit) of 60 s at 10 Hz: the coupled bit under 150 kN (`truth`
+/// "RGD") or a law at its paper estimate on the paper's string, at `rpm`; written to `dir`.
+fn surface_record(dir: &std::path::Path, truth: &str, rpm: f64, noise_knm: f64, seed: u64) -> std::path::PathBuf {
+    use bitrock::simulate::strings::Chain;
+    use bitrock::simulate::surface::{Drive, Integration, simulate_on_clock};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let (torque_nm, wob_n): (Vec<f64>, Vec<f64>) = if truth == "RGD" {
+        let mut out = (Vec::new(), Vec::new());
+        let schedule = Schedule::new(1e-4, 10.0, 30.0, 60.0).unwrap();
+        coupled::integrate_with(&Assembly::default(), &schedule, &job(rpm, WOB_150_KN), &mut |s| {
+            out.0.push(s.surface_torque_nm);
+            out.1.push(s.wob_n);
+        });
+        out
+    } else {
+        let law: bitrock::laws::Law = truth.parse().unwrap();
+        let drive = Drive {
+            omega_rad_s: vec![rpm * RAD_S_PER_RPM; 600],
+            ratio: vec![1.0; 600],
+            period_s: 0.1,
+        };
+        let params = law.scale_torque(law.paper_estimate().unwrap(), 1000.0);
+        let integration = Integration {
+            dt_s: 0.01,
+            settle_s: 60.0,
+        };
+        let run = simulate_on_clock(&Chain::one_dof(&Lumped::default()), &drive, law, &params, integration);
+        assert!(!run.diverged);
+        (run.surface_torque_nm, vec![150e3; 600])
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, noise_knm).unwrap();
+    let mut csv = String::from("time_s,top_drive_rpm,surface_torque_knm,wob_kn\n");
+    for (i, (t, w)) in torque_nm.iter().zip(&wob_n).enumerate() {
+        let torque_knm = t / 1e3 + noise.sample(&mut rng);
+        csv.push_str(&format!("{:.1},{rpm},{torque_knm:.6},{:.3}\n", i as f64 * 0.1, w / 1e3));
+    }
+    let path = dir.join(format!("{truth}_{rpm}_{seed}.csv"));
+    std::fs::write(&path, csv).unwrap();
+    path
+}
+
+#[test]
+fn the_choice_from_the_surface_torque_calls_nothing_the_record_did_not_come_from() {
+    use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
+    use bitrock::run::choice::{Channels, Family, SURFACE_SUMMARIES, Structure, surface_choice};
+    use bitrock::run::coupled::Settings;
+    use bitrock::simulate::surface::{N_DOWNHOLE_SUMMARIES, N_TORQUE_SUMMARIES, summaries};
+    // A minute of surface torque at 10 Hz with 0.2 kN·m of noise: the coupled bit
+    // stick-slipping at 45 and 60 rpm under 150 kN, each law at its paper estimate; 100
+    // candidates of each structure.
+    let dir = tempfile::tempdir().unwrap();
+    for (truth, rpm) in [
+        ("RGD", 45.0),
+        ("RGD", 60.0),
+        ("m1", 40.0),
+        ("m2", 60.0),
+        ("m3", 60.0),
+        ("m4", 60.0),
+    ] {
+        let path = surface_record(dir.path(), truth, rpm, 0.2, 0);
+        let record = SurfaceRecord::read(&path, &SurfaceOptions::default()).unwrap();
+        let settings = Settings {
+            settle_s: 20.0,
+            reference: 100,
+            ..Settings::default()
+        };
+        let c = surface_choice(&record, &settings, &mut |_| {}).unwrap();
+        let what = format!("{truth} at {rpm} rpm: {} | {}", c.verdict, c.family.verdict);
+        // The drive is the record's: its top drive, clock, weight and noise.
+        let d = &c.drive;
+        assert_eq!(d.channels, Channels::Surface);
+        assert!((d.omega_rpm - rpm).abs() < 1e-9 * rpm, "{d:?}");
+        assert_eq!(d.samples, 600);
+        assert!((d.duration_s - 60.0).abs() < 1e-6, "{d:?}");
+        let mean_wob_kn = record.wob_n.as_ref().unwrap().iter().sum::<f64>() / 600.0 / 1e3;
+        assert!(d.wob_from_record && (d.wob_kn - mean_wob_kn).abs() < 1e-9, "{d:?}");
+        assert!((d.noise_torque_knm - 0.2).abs() < 0.05, "{d:?}");
+        assert_eq!((d.noise_speed_rpm, d.noise_wob_kn), (None, None));
+        // The summaries are the surface sampler's of the record's torque.
+        let want = summaries(
+            &record.surface_torque_nm,
+            record.sample_period_s,
+            &[0.0; N_DOWNHOLE_SUMMARIES],
+        );
+        assert_eq!(c.record_summaries.len(), N_TORQUE_SUMMARIES);
+        for ((name, got), (want_name, want)) in c.record_summaries.iter().zip(SURFACE_SUMMARIES.iter().zip(want)) {
+            assert_eq!((name, *got), (want_name, want));
+        }
+        // Every candidate of the table is classified once.
+        for (row, share) in c.table_check.iter().zip(&c.structures) {
+            assert_eq!(row.structure, share.structure);
+            assert_eq!(row.replicates, share.candidates, "{row:?}");
+            assert_eq!(row.classified_as.iter().map(|x| x.1).sum::<usize>(), row.replicates);
+        }
+        // Nothing the record did not come from is called, and no law from the surface.
+        let family = if truth == "RGD" {
+            Family::Coupled
+        } else {
+            Family::Torsional
+        };
+        assert!(c.family.decided.is_none_or(|f| f == family), "{what}");
+        assert!(
+            c.decided.is_none_or(|s| s == Structure::Coupled && truth == "RGD"),
+            "{what}"
+        );
+    }
 }

@@ -1,10 +1,12 @@
 //! The coupled axial-torsional bit (RGD): one string, a regime map, a drilling record's
-//! calibration and the regimes' probabilities over its posterior, a well of formations, as
-//! `bitrock coupled` runs them (`bitrock::run::coupled`).
+//! calibration and the regimes' probabilities over its posterior, a well of formations, the
+//! structure a bit or surface record shows, as `bitrock coupled` runs them
+//! (`bitrock::run::coupled`, `bitrock::run::choice`).
 
 use crate::errors::*;
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
-use bitrock::run::choice::choice;
+use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
+use bitrock::run::choice::{choice, surface_choice};
 use bitrock::run::coupled::{self as run, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
 use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
@@ -165,6 +167,47 @@ pub(crate) fn coupled_select(
     let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
     let mut notes = Vec::new();
     let c = py.detach(|| choice(&record, &settings, &mut |line| notes.push(line)));
+    let c = check(py, c)?;
+    say(py, &note, notes)?;
+    Ok(serde_json::to_string(&c).expect("a choice serialises"))
+}
+
+/// The structure the surface record at `path` shows (columns and units in `columns`), from
+/// its surface torque at its steady top-drive speed (`bitrock::run::choice::surface_choice`);
+/// as JSON text.
+#[pyfunction]
+#[pyo3(signature = (path, columns, options, note))]
+pub(crate) fn coupled_select_surface(
+    py: Python<'_>,
+    path: PathBuf,
+    columns: &Bound<'_, PyDict>,
+    options: &Bound<'_, PyDict>,
+    note: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let settings: Settings = settings(options)?;
+    let surface = SurfaceOptions {
+        time_column: kwarg(columns, "time_col")?,
+        top_drive_column: kwarg(columns, "top_drive_col")?,
+        surface_torque_column: kwarg(columns, "surface_torque_col")?,
+        wob_column: kwarg(columns, "wob_col")?,
+        top_drive_unit: unit(
+            py,
+            "top_drive_unit",
+            kwarg(columns, "top_drive_unit")?,
+            SpeedUnit::from_suffix,
+        )?,
+        torque_unit: unit(
+            py,
+            "surface_torque_unit",
+            kwarg(columns, "surface_torque_unit")?,
+            TorqueUnit::from_suffix,
+        )?,
+        wob_unit: unit(py, "wob_unit", kwarg(columns, "wob_unit")?, ForceUnit::from_suffix)?,
+        ..SurfaceOptions::default()
+    };
+    let record = check(py, SurfaceRecord::read(&path, &surface))?;
+    let mut notes = Vec::new();
+    let c = py.detach(|| surface_choice(&record, &settings, &mut |line| notes.push(line)));
     let c = check(py, c)?;
     say(py, &note, notes)?;
     Ok(serde_json::to_string(&c).expect("a choice serialises"))

@@ -24,7 +24,7 @@ use pyo3::prelude::*;
 #[pymodule]
 mod _bitrock {
     #[pymodule_export]
-    use crate::coupled::{coupled, coupled_calibrate, coupled_select, coupled_well};
+    use crate::coupled::{coupled, coupled_calibrate, coupled_select, coupled_select_surface, coupled_well};
     #[pymodule_export]
     use crate::distributed::{needs_payloads, serve};
     #[pymodule_export]

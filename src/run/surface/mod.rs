@@ -475,7 +475,7 @@ fn strings_of<'p>(particles: &[&'p Particle]) -> Vec<(Law, &'p [f64])> {
 
 /// The prior's scales from a surface record: its largest torque, and speeds from the top
 /// drive's (a stick-slipping bit peaks at two to three times it).
-fn scales(record: &SurfaceRecord) -> PhysicalScales {
+pub fn physical_scales(record: &SurfaceRecord) -> PhysicalScales {
     let torque_max = record.surface_torque_nm.iter().fold(0.0f64, |m, y| m.max(y.abs()));
     let omega_max = record.top_drive_rad_s.iter().fold(0.0f64, |m, w| m.max(w.abs()));
     let omega_mean = record.mean_top_drive_rad_s().abs();
@@ -566,13 +566,13 @@ pub fn infer_continuing(
     let cycle = Cycle::of(&observed, record.duration_s());
     let mut prior = Prior::physical(
         &settings.laws,
-        &scales(record),
+        &physical_scales(record),
         settings.prior_scale,
         settings.prior_file.as_ref(),
         record.torque_unit.newton_metres(),
     )?;
     if settings.curve_limits {
-        prior = prior.with_curve_limits(&scales(record))?;
+        prior = prior.with_curve_limits(&physical_scales(record))?;
     }
     if let Some(b) = &settings.string_bounds {
         let [omega, xi] = [b.omega_n_rad_s, b.damping_ratio];

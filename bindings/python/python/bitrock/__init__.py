@@ -49,6 +49,7 @@ __all__ = [
     "coupled",
     "coupled_calibrate",
     "coupled_select",
+    "coupled_select_surface",
     "coupled_well",
     "evidence",
     "fit",
@@ -1083,6 +1084,47 @@ def coupled_select(
     columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}
     options = {k: v for k, v in locals().items() if k not in columns and k not in ("path", "columns", "json")}
     return json.loads(_bitrock.coupled_select(os.fspath(path), columns, options, _note))
+
+
+def coupled_select_surface(
+    path: str | os.PathLike[str],
+    *,
+    time_col: str | None = None,
+    top_drive_col: str | None = None,
+    surface_torque_col: str | None = None,
+    wob_col: str | None = None,
+    top_drive_unit: str | None = None,
+    surface_torque_unit: str | None = None,
+    wob_unit: str | None = None,
+    wob_kn: float | None = None,
+    radius_m: float | None = None,
+    contact_stress_mpa: float | None = None,
+    gamma: float | None = None,
+    blades: int | None = None,
+    inertia_kg_m2: float | None = None,
+    omega_n_rad_s: float | None = None,
+    damping_ratio: float | None = None,
+    mass_kg: float | None = None,
+    axial_stiffness_kn_m: float | None = None,
+    axial_damping_kns_m: float | None = None,
+    settle_s: float | None = None,
+    dt_s: float | None = None,
+    kick_rpm: float | None = None,
+    reference: int | None = None,
+    replicates: int | None = None,
+    seed: int | None = None,
+) -> dict:
+    """Which structure a surface record shows (time, top-drive speed, surface torque and, where
+    recorded, weight on bit; a CSV file), as ``bitrock coupled --select RECORD --from-surface``
+    chooses it: ``coupled_select``'s choice on the surface torque alone, every candidate
+    simulated at the record's mean top-drive speed (refused where it is not steady) on the
+    record's clock, under ``wob_kn`` or the record's mean weight on bit, each law's candidates
+    drawn from ``surface``'s prior of it."""
+    import json
+
+    columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}
+    options = {k: v for k, v in locals().items() if k not in columns and k not in ("path", "columns", "json")}
+    return json.loads(_bitrock.coupled_select_surface(os.fspath(path), columns, options, _note))
 
 
 def simulate_strings(
