@@ -114,6 +114,9 @@ pub const ZETA: (f64, f64) = (0.2, 1.2);
 /// The coupled bit's prior range of the wear flats' contact force, as shares of the weight on
 /// the bit assembly (uniform).
 pub const CONTACT_SHARE: (f64, f64) = (0.05, 0.95);
+/// The least probability a structure or a family is called at (odds of 4 to 1), where the
+/// checks allow it.
+pub const CALL_PROBABILITY: f64 = 0.8;
 /// Draws tried for one coupled candidate before its place in the table is left empty.
 const MAX_ATTEMPTS: u32 = 64;
 /// Integration step of the torsional laws' strings (s), the strings' twin's. Their RK4, with
@@ -1056,6 +1059,10 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
         decided = None;
         verdict = table_verdict(best.structure, best.probability, &taken_in_table);
     }
+    if decided.is_some() && best.probability < CALL_PROBABILITY {
+        decided = None;
+        verdict = weak_verdict(best.structure, best.probability);
+    }
     if let (Some(Structure::Torsional(law)), false) = (decided, call_laws) {
         decided = None;
         verdict = format!(
@@ -1088,13 +1095,16 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
                 .sum::<usize>();
         }
         let share = taken as f64 / members.max(1) as f64;
+        let probability = match called {
+            Family::Torsional => family.torsional_probability,
+            Family::Coupled => 1.0 - family.torsional_probability,
+        };
         if share > CHECK_CONFUSED {
-            let probability = match called {
-                Family::Torsional => family.torsional_probability,
-                Family::Coupled => 1.0 - family.torsional_probability,
-            };
             family.decided = None;
             family.verdict = table_verdict(called, probability, &[(other, share)]);
+        } else if probability < CALL_PROBABILITY {
+            family.decided = None;
+            family.verdict = weak_verdict(called, probability);
         }
     }
     // A structure without a candidate was not compared: without the coupled bit, or without
@@ -1182,6 +1192,14 @@ fn table_verdict<L: std::fmt::Display>(best: L, probability: f64, taken: &[(L, f
         names.join(", "),
         100.0 * most,
         names.join(", ")
+    )
+}
+
+/// The verdict on `best`, which passed the checks, where its probability is below
+/// [`CALL_PROBABILITY`].
+fn weak_verdict<L: std::fmt::Display>(best: L, probability: f64) -> String {
+    format!(
+        "{best} leads (P = {probability:.2}) and passes the checks, but a call needs P of at least {CALL_PROBABILITY}: undecided"
     )
 }
 

@@ -269,6 +269,7 @@ def test_every_coupled_setting_is_a_keyword_and_a_stray_one_is_refused():
         (bitrock.coupled, set(fields) - choice_only),
         (bitrock.coupled_calibrate, set(fields) - choice_only),
         (bitrock.coupled_select, set(fields) - drawn_or_unused),
+        (bitrock.coupled_select_surface, set(fields) - drawn_or_unused - {"omega_rpm", "sample_hz"}),
     ):
         keywords = inspect.signature(function).parameters
         assert sorted(f for f in takes if f not in keywords) == [], function.__name__
@@ -343,6 +344,43 @@ def test_python_chooses_the_structure_as_the_command_does(cli, tmp_path):
         bitrock.coupled_select(path, omega_rpm=45, reference=5)
     with pytest.raises(bitrock.InputError, match="no_such_column"):
         bitrock.coupled_select(path, omega_rpm=45, wob_col="no_such_column")
+
+
+def test_python_chooses_from_the_surface_as_the_command_does(cli, tmp_path):
+    """``bitrock.coupled_select_surface`` is ``bitrock coupled --select RECORD --from-surface``:
+    the same choice from what a rig streams, its drive the record's; a record without a weight
+    on bit needs ``wob_kn``."""
+    import numpy as np
+    import pandas as pd
+
+    import bitrock
+
+    record = bitrock.coupled(omega_rpm=45, wob_kn=150, record=True, duration_s=60.0, settle_s=10.0, sample_hz=10.0)["record"]
+    rng = np.random.default_rng(11)
+    streamed = pd.DataFrame(
+        {
+            "time_s": record["time_s"],
+            "top_drive_rpm": record["top_drive_rpm"],
+            "surface_torque_knm": np.asarray(record["surface_torque_knm"]) + rng.normal(0.0, 0.2, 600),
+        }
+    )
+    path = tmp_path / "surface.csv"
+    streamed.to_csv(path, index=False)
+    with pytest.raises(bitrock.InputError, match="wob_kn"):
+        bitrock.coupled_select_surface(path, reference=30, replicates=3)
+    chosen = bitrock.coupled_select_surface(path, wob_kn=150, reference=30, replicates=3, settle_s=10.0)
+    done = run_cli(cli, "coupled", "--select", str(path), "--from-surface", "--wob-kn", "150", "--reference", "30", "--replicates", "3", "--settle-s", "10", "--json")
+    assert chosen == json.loads(done.stdout)
+    drive = chosen["drive"]
+    assert (drive["channels"], drive["samples"], drive["wob_from_record"]) == ("surface", 600, False)
+    assert drive["omega_rpm"] == pytest.approx(45.0, rel=1e-12)
+    assert drive["noise_speed_rpm"] is None and drive["noise_torque_knm"] == pytest.approx(0.2, abs=0.05)
+    assert [name for name, _ in chosen["record_summaries"]][:2] == ["mean_nm", "signal_sd_nm"]
+    # Never a law from the surface; the family, where called, the coupled bit.
+    assert chosen["decided"] in (None, "RGD"), chosen["verdict"]
+    assert chosen["family"]["decided"] in (None, "coupled"), chosen["family"]["verdict"]
+    with pytest.raises(TypeError):
+        bitrock.coupled_select_surface(path, omega_rpm=45)
 
 
 def test_a_record_of_the_independent_integrator_is_chosen_for_the_coupled_bit(tmp_path):
