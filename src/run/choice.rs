@@ -14,7 +14,15 @@
 //! 2011), so the choice is always checked by re-simulation: records re-simulated from each
 //! structure's accepted candidates are chosen for as the record was, and a structure is called
 //! only where its own are recognised and no other's are taken for it
-//! ([`crate::run::answer::resimulation_verdict`]).
+//! ([`crate::run::answer::resimulation_verdict`]). A structure none of whose candidates came
+//! near the record escapes that check, so the table's own candidates are classified too, each
+//! left out of its own vote ([`Choice::table_check`]): where another's are taken for the leader
+//! too often nothing is called. A call also needs [`CALL_PROBABILITY`], and the two families
+//! weigh the same before the record ([`FamilyChoice::torsional_probability`]).
+//!
+//! **From the surface** ([`surface_choice`]): the same choice on the surface torque's
+//! summaries ([`SURFACE_SUMMARIES`]), every candidate at the record's steady top-drive speed
+//! and on its clock; a law is never called from it (see [`surface_choice`]).
 //!
 //! **Priors.** A law's box is the paper's, φ̂(1 ± δ) around its least-squares fit to the
 //! record's turning samples (δ = [`LAW_DELTA`]). The coupled bit's radius, contact stress, γ and
