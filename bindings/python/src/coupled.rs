@@ -5,7 +5,7 @@
 
 use crate::errors::*;
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
-use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
+use bitrock::data::surface::SurfaceRecord;
 use bitrock::run::choice::{choice, surface_choice};
 use bitrock::run::coupled::{self as run, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
@@ -185,26 +185,7 @@ pub(crate) fn coupled_select_surface(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
-    let surface = SurfaceOptions {
-        time_column: kwarg(columns, "time_col")?,
-        top_drive_column: kwarg(columns, "top_drive_col")?,
-        surface_torque_column: kwarg(columns, "surface_torque_col")?,
-        wob_column: kwarg(columns, "wob_col")?,
-        top_drive_unit: unit(
-            py,
-            "top_drive_unit",
-            kwarg(columns, "top_drive_unit")?,
-            SpeedUnit::from_suffix,
-        )?,
-        torque_unit: unit(
-            py,
-            "surface_torque_unit",
-            kwarg(columns, "surface_torque_unit")?,
-            TorqueUnit::from_suffix,
-        )?,
-        wob_unit: unit(py, "wob_unit", kwarg(columns, "wob_unit")?, ForceUnit::from_suffix)?,
-        ..SurfaceOptions::default()
-    };
+    let surface = crate::surface::surface_columns(py, columns, "surface_torque_unit")?;
     let record = check(py, SurfaceRecord::read(&path, &surface))?;
     let mut notes = Vec::new();
     let c = py.detach(|| surface_choice(&record, &settings, &mut |line| notes.push(line)));

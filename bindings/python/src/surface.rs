@@ -40,34 +40,7 @@ pub(crate) fn surface(
     });
     let settings: SurfaceRunSettings = crate::errors::settings(options)?;
     let seed = settings.seed;
-    let columns = SurfaceOptions {
-        time_column: kwarg(options, "time_col")?,
-        top_drive_column: kwarg(options, "top_drive_col")?,
-        surface_torque_column: kwarg(options, "surface_torque_col")?,
-        wob_column: kwarg(options, "wob_col")?,
-        top_drive_unit: unit(
-            py,
-            "top_drive_unit",
-            kwarg(options, "top_drive_unit")?,
-            SpeedUnit::from_suffix,
-        )?,
-        torque_unit: unit(
-            py,
-            "torque_unit",
-            kwarg(options, "torque_unit")?,
-            TorqueUnit::from_suffix,
-        )?,
-        wob_unit: unit(py, "wob_unit", kwarg(options, "wob_unit")?, ForceUnit::from_suffix)?,
-        downhole_min_column: kwarg(options, "downhole_min_col")?,
-        downhole_max_column: kwarg(options, "downhole_max_col")?,
-        downhole_unit: unit(
-            py,
-            "downhole_unit",
-            kwarg(options, "downhole_unit")?,
-            SpeedUnit::from_suffix,
-        )?,
-        downhole_window_s: kwarg(options, "downhole_window_s")?,
-    };
+    let columns = surface_columns(py, options, "torque_unit")?;
     let mut notes = Vec::new();
     let cell = OnceLock::new();
     let text = py.detach(|| {
@@ -253,4 +226,41 @@ fn said(py: Python<'_>, note: &Option<Py<PyAny>>, notes: &[String]) -> PyResult<
         }
     }
     Ok(())
+}
+
+/// A surface record's columns and units from the keyword arguments in `options` (each
+/// defaulted where absent), the surface torque's unit under `torque_unit_key`.
+pub(crate) fn surface_columns(
+    py: Python<'_>,
+    options: &Bound<'_, PyDict>,
+    torque_unit_key: &str,
+) -> PyResult<SurfaceOptions> {
+    Ok(SurfaceOptions {
+        time_column: kwarg(options, "time_col")?,
+        top_drive_column: kwarg(options, "top_drive_col")?,
+        surface_torque_column: kwarg(options, "surface_torque_col")?,
+        wob_column: kwarg(options, "wob_col")?,
+        top_drive_unit: unit(
+            py,
+            "top_drive_unit",
+            kwarg(options, "top_drive_unit")?,
+            SpeedUnit::from_suffix,
+        )?,
+        torque_unit: unit(
+            py,
+            torque_unit_key,
+            kwarg(options, torque_unit_key)?,
+            TorqueUnit::from_suffix,
+        )?,
+        wob_unit: unit(py, "wob_unit", kwarg(options, "wob_unit")?, ForceUnit::from_suffix)?,
+        downhole_min_column: kwarg(options, "downhole_min_col")?,
+        downhole_max_column: kwarg(options, "downhole_max_col")?,
+        downhole_unit: unit(
+            py,
+            "downhole_unit",
+            kwarg(options, "downhole_unit")?,
+            SpeedUnit::from_suffix,
+        )?,
+        downhole_window_s: kwarg(options, "downhole_window_s")?,
+    })
 }
