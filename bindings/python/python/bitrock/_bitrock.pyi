@@ -8,7 +8,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any, SupportsFloat, SupportsIndex, final
 
-__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "check_surface", "coupled", "coupled_calibrate", "coupled_select", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "is_surface_dir", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_surface", "read_watch", "resume", "resume_evidence", "resume_surface", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
+__all__ = ["ComputedEvidence", "Record", "Run", "abc", "check_selection", "check_surface", "coupled", "coupled_calibrate", "coupled_select", "coupled_select_surface", "coupled_well", "evidence", "fit", "is_evidence_dir", "is_information", "is_surface_dir", "law_colours", "load_law", "needs_payloads", "open_run", "parity", "read_columns", "read_csv", "read_evidence", "read_surface", "read_watch", "resume", "resume_evidence", "resume_surface", "serve", "settings_fields", "simulate", "simulate_strings", "stability", "surface", "torque", "version", "watch"]
 
 @final
 class ComputedEvidence:
@@ -183,6 +183,13 @@ def coupled_select(path: str | PathLike[str], columns: dict, options: dict, note
     The structure the bit record at `path` shows (columns and units in `columns`): a torsional
     law or the coupled bit, chosen by simulation and checked by re-simulation
     (`bitrock::run::choice`); as JSON text.
+    """
+
+def coupled_select_surface(path: str | PathLike[str], columns: dict, options: dict, note: Any | None) -> str:
+    """
+    The structure the surface record at `path` shows (columns and units in `columns`), from
+    its surface torque at its steady top-drive speed (`bitrock::run::choice::surface_choice`);
+    as JSON text.
     """
 
 def coupled_well(path: str | PathLike[str], record: bool, note: Any | None) -> str:
