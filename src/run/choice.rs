@@ -1,4 +1,4 @@
-//! Which structure a bit record shows: a torsional law m1–m4 (a torque that falls with bit
+//! Which structure a bit or surface record shows: a torsional law m1–m4 (a torque that falls with bit
 //! speed, the weight on bit a constant) or the coupled axial-torsional bit (RGD: stick-slip from
 //! the depth of cut, the weight on bit swinging with it).
 //!
@@ -228,7 +228,8 @@ pub struct Choice {
     /// (`replicates` the structure's candidates): what the summaries tell apart over the whole
     /// prior, where the check tells it near the record.
     pub table_check: Vec<ChoiceCheckRow>,
-    /// The structure called, where the check allows one.
+    /// The structure called, where the checks, [`CALL_PROBABILITY`] and the record's channels
+    /// allow one (a law is never called from the surface).
     pub decided: Option<Structure>,
     pub verdict: String,
     /// The same choice between the two families: any torsional law, or the coupled bit.
@@ -263,7 +264,7 @@ impl std::fmt::Display for Family {
     }
 }
 
-/// The choice between the families: the torsional laws' probabilities summed, their
+/// The choice between the families, weighed the same before the record; their
 /// re-simulations pooled.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct FamilyChoice {

@@ -780,7 +780,7 @@ fn the_choice_from_the_surface_refuses_what_it_cannot_use_by_flag() {
             bin()
                 .args(["coupled", "--select"])
                 .arg(path)
-                .args(["--from-surface", "--reference", "10", "--replicates", "1"])
+                .args(["--from-surface", "--replicates", "1"])
                 .args(args),
         )
     };
@@ -789,8 +789,13 @@ fn the_choice_from_the_surface_refuses_what_it_cannot_use_by_flag() {
         (vec!["--sample-hz", "10"], "--sample-hz"),
         (vec!["--speed-col", "bit_speed_rpm"], "--speed-col"),
         (vec!["--surface-torque-col", "no_such_column"], "no_such_column"),
-        (vec!["--reference", "5"], "--reference"),
+        (vec!["--reference", "5"], "at least 10"),
     ] {
+        let args: Vec<&str> = if args.contains(&"--reference") {
+            args
+        } else {
+            [args, vec!["--reference", "10"]].concat()
+        };
         let (code, _, stderr) = select(&args, &record);
         assert_eq!(code, 2, "{args:?}: {stderr}");
         assert!(stderr.contains(flag), "{args:?}: {stderr}");
@@ -814,7 +819,7 @@ fn the_choice_from_the_surface_refuses_what_it_cannot_use_by_flag() {
         .collect();
     let stepped_path = dir.path().join("stepped.csv");
     std::fs::write(&stepped_path, stepped).unwrap();
-    let (code, _, stderr) = select(&[], &stepped_path);
+    let (code, _, stderr) = select(&["--reference", "10"], &stepped_path);
     assert_eq!(code, 2, "{stderr}");
     assert!(
         stderr.contains("stepped.csv") && stderr.contains("steady drive"),
@@ -826,11 +831,14 @@ fn the_choice_from_the_surface_refuses_what_it_cannot_use_by_flag() {
         .collect();
     let no_wob_path = dir.path().join("no_wob.csv");
     std::fs::write(&no_wob_path, no_wob).unwrap();
-    let (code, _, stderr) = select(&[], &no_wob_path);
+    let (code, _, stderr) = select(&["--reference", "10"], &no_wob_path);
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--wob-kn") && stderr.contains("no_wob.csv"), "{stderr}");
     // Given the weight, the record is chosen from.
-    let (code, stdout, stderr) = select(&["--wob-kn", "150", "--settle-s", "10"], &no_wob_path);
+    let (code, stdout, stderr) = select(
+        &["--reference", "10", "--wob-kn", "150", "--settle-s", "10"],
+        &no_wob_path,
+    );
     assert_eq!(code, 0, "{stderr}");
     assert!(
         stdout.contains("of surface torque") && stdout.contains("the family:"),
