@@ -142,7 +142,7 @@ pub struct CoupledCmd {
     /// record's mean weight on bit; each law's candidates drawn from `bitrock surface`'s prior.
     #[arg(long, requires = "select", conflicts_with_all = [
         "omega_rpm", "sample_hz", "speed_col", "torque_col", "rop_col", "axial_speed_col", "speed_unit",
-        "torque_unit", "rop_unit",
+        "rop_unit",
     ])]
     pub from_surface: bool,
     #[command(flatten)]
@@ -189,7 +189,8 @@ pub struct DrillingArgs {
     /// Unit of the bit speed [default: from its name's suffix].
     #[arg(long, value_enum, requires = "drilling_record")]
     pub speed_unit: Option<SpeedUnit>,
-    /// Unit of the torque on bit [default: from its name's suffix].
+    /// Unit of the torque on bit, or with --from-surface of the surface torque [default: from
+    /// its name's suffix].
     #[arg(long, value_enum, requires = "drilling_record")]
     pub torque_unit: Option<TorqueUnit>,
     /// Unit of the weight on bit [default: from its name's suffix].
@@ -200,8 +201,8 @@ pub struct DrillingArgs {
     pub rop_unit: Option<RateUnit>,
 }
 
-/// The columns of a surface record (with --from-surface) and their units; its weight on bit
-/// is --wob-col's.
+/// The columns of a surface record (with --from-surface) and their units; its surface torque's
+/// unit is --torque-unit's, its weight on bit --wob-col's.
 #[derive(Debug, Args)]
 pub struct SurfaceColumnArgs {
     /// Time column (s; ms where its name ends in _ms) [default: the one whose name holds "time"].
@@ -216,9 +217,6 @@ pub struct SurfaceColumnArgs {
     /// Unit of the top-drive speed [default: from the column's suffix].
     #[arg(long, value_enum)]
     pub top_drive_unit: Option<SpeedUnit>,
-    /// Unit of the surface torque [default: from the column's suffix].
-    #[arg(long, value_enum)]
-    pub surface_torque_unit: Option<TorqueUnit>,
 }
 
 impl DrillingArgs {
@@ -247,7 +245,7 @@ impl CoupledCmd {
             surface_torque_column: s.surface_torque_column.clone(),
             wob_column: self.columns.wob_col.clone(),
             top_drive_unit: s.top_drive_unit,
-            torque_unit: s.surface_torque_unit,
+            torque_unit: self.columns.torque_unit,
             wob_unit: self.columns.wob_unit,
             ..SurfaceOptions::default()
         }
@@ -309,12 +307,11 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     let surface_columns_given = s.time_column.is_some()
         || s.top_drive_column.is_some()
         || s.surface_torque_column.is_some()
-        || s.top_drive_unit.is_some()
-        || s.surface_torque_unit.is_some();
+        || s.top_drive_unit.is_some();
     if surface_columns_given && !cmd.from_surface {
         return Err(bitrock::Error::setting(
             "from_surface",
-            "`time_column`, `top_drive_column`, `surface_torque_column`, `top_drive_unit` and `surface_torque_unit` name a surface record's columns: give it with the record",
+            "`time_column`, `top_drive_column`, `surface_torque_column` and `top_drive_unit` name a surface record's columns: give it with the record",
         )
         .into());
     }
@@ -722,14 +719,21 @@ fn print_choice(out: &mut dyn Write, c: &Choice) -> std::io::Result<()> {
         "{} candidates simulated, the {} nearest the record decide",
         c.reference, c.accepted
     )?;
+    // "near": its re-simulations from the candidates accepted near the record recognised as
+    // it; "table": its candidates anywhere in the table, each left out of its own vote.
     writeln!(
         out,
-        "{:<10} {:>6} {:>10}  re-simulated records taken for",
-        "structure", "P", "recognised"
+        "{:<10} {:>6} {:>6} {:>6}  re-simulated records taken for",
+        "structure", "P", "near", "table"
     )?;
     for s in &c.structures {
         let row = c.check.iter().find(|r| r.structure == s.structure);
         let recognised = row.map_or("-".to_string(), |r| format!("{:.0} %", 100.0 * r.recognised));
+        let in_table = c
+            .table_check
+            .iter()
+            .find(|r| r.structure == s.structure)
+            .map_or("-".to_string(), |r| format!("{:.0} %", 100.0 * r.recognised));
         let taken = row.map_or(String::new(), |r| {
             r.classified_as
                 .iter()
@@ -740,10 +744,11 @@ fn print_choice(out: &mut dyn Write, c: &Choice) -> std::io::Result<()> {
         });
         writeln!(
             out,
-            "{:<10} {:>6.2} {:>10}  {}",
+            "{:<10} {:>6.2} {:>6} {:>6}  {}",
             s.structure.to_string(),
             s.probability,
             recognised,
+            in_table,
             taken
         )?;
     }

@@ -33,7 +33,6 @@ const FLAGS: &[(&str, &str)] = &[
     ("axial_speed_column", "--axial-speed-col"),
     ("rop_unit", "--rop-unit"),
     ("top_drive_unit", "--top-drive-unit"),
-    ("surface_torque_unit", "--surface-torque-unit"),
     ("from_surface", "--from-surface"),
     ("downhole_unit", "--downhole-unit"),
     ("downhole_window_s", "--downhole-window-s"),

@@ -2,8 +2,8 @@
 //! speed, the weight on bit a constant) or the coupled axial-torsional bit (RGD: stick-slip from
 //! the depth of cut, the weight on bit swinging with it).
 //!
-//! Every candidate's string is simulated at the record's drive, from steady rotation kicked by
-//! the settings' kick, with white noise added to each channel until its apparent noise is the
+//! Every candidate's string is simulated at the record's drive (from the bit's channels, from
+//! steady rotation kicked by the settings' kick; from the surface's, see [`surface_choice`]), with white noise added to each channel until its apparent noise is the
 //! record's ([`noise_variance_raw`]: what is not smooth at the record's clock, the coupled bit's
 //! swings of weight between samples among it), and reduced to summaries of its bit speed,
 //! torque and weight on bit ([`SUMMARIES`]). The reference table holds [`Settings::reference`]
@@ -170,9 +170,9 @@ pub struct ChoiceDrive {
     pub duration_s: f64,
     pub samples: usize,
     /// The white noise the record's compared channels show, standard deviations (the root of
-    /// their variance above a smooth signal's): bit speed (rpm), torque (kN·m: on bit, or at
-    /// the surface), weight on bit (kN; the bit's channels only). Each candidate's channels
-    /// are topped up to it.
+    /// their variance above a smooth signal's): torque (kN·m: on bit, or at the surface); bit
+    /// speed (rpm) and weight on bit (kN) from the bit's channels (`None` from the surface).
+    /// Each candidate's channels are topped up to it.
     pub noise_speed_rpm: Option<f64>,
     pub noise_torque_knm: f64,
     pub noise_wob_kn: Option<f64>,
@@ -817,7 +817,14 @@ pub fn surface_choice(record: &SurfaceRecord, settings: &Settings, note: &mut dy
         settle_s: settings.settle_s,
     };
     let chain = Chain::one_dof(&settings.assembly()?.torsion);
-    chain.check_step(integration.dt_s)?;
+    // The step is fixed here: a string it cannot resolve is too stiff for the choice.
+    chain.check_step(integration.dt_s).map_err(|e| match e {
+        Error::InvalidSetting { message, .. } => Error::setting(
+            "omega_n_rad_s",
+            format!("the choice steps the string at a fixed step: {message}"),
+        ),
+        other => other,
+    })?;
     let torque = &record.surface_torque_nm;
     let torque_nm = torque.iter().sum::<f64>() / n as f64;
     let noise_variance = vec![noise_variance_raw(torque)];
@@ -967,7 +974,7 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
     }
     if table.len() < 10 {
         return Err(refuse(format!(
-            "only {} candidates could be simulated at {} rpm and {:.1} kN",
+            "only {} candidates could be simulated at {:.1} rpm and {:.1} kN",
             table.len(),
             settings.omega_rpm,
             drive.wob_kn
@@ -1072,7 +1079,7 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
         decided = None;
         verdict = weak_verdict(best.structure, best.probability);
     }
-    if let (Some(Structure::Torsional(law)), false) = (decided, call_laws) {
+    if let (Structure::Torsional(law), false) = (best.structure, call_laws) {
         decided = None;
         verdict = format!(
             "{law} leads (P = {:.2}): which law a surface record shows is `bitrock surface`'s to say (its sampler draws each law near the record); not called here",
@@ -1115,6 +1122,19 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
             family.decided = None;
             family.verdict = weak_verdict(called, probability);
         }
+    }
+    // A structure is called only within its family: a law's share of the accepted candidates
+    // (each structure a fifth before the record) can reach the call while the families,
+    // weighed half and half, leave the torsional one undecided.
+    if let Some(structure) = decided
+        && family.decided != Some(Family::of(structure))
+    {
+        decided = None;
+        verdict = format!(
+            "{structure} leads (P = {:.2}) and passes the checks, but whether the record shows {} is undecided: not called",
+            best.probability,
+            Family::of(structure)
+        );
     }
     // A structure without a candidate was not compared: without the coupled bit, or without
     // any law, neither the structure nor the family is called; without some laws, the verdict

@@ -834,10 +834,32 @@ fn the_choice_from_the_surface_refuses_what_it_cannot_use_by_flag() {
     let (code, _, stderr) = select(&["--reference", "10"], &no_wob_path);
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--wob-kn") && stderr.contains("no_wob.csv"), "{stderr}");
-    // Given the weight, the record is chosen from.
+    // A surface torque whose name carries no unit needs --torque-unit, which names its unit
+    // here as it names the torque on bit's elsewhere.
+    let unitless_path = dir.path().join("unitless.csv");
+    let unitless = std::fs::read_to_string(&no_wob_path)
+        .unwrap()
+        .replacen("surface_torque_knm", "surface_torque", 1);
+    std::fs::write(&unitless_path, unitless).unwrap();
+    let (code, _, stderr) = select(&["--reference", "10", "--wob-kn", "150"], &unitless_path);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--torque-unit") && stderr.contains("unitless.csv"),
+        "{stderr}"
+    );
+    // Given the weight and the unit, the record is chosen from.
     let (code, stdout, stderr) = select(
-        &["--reference", "10", "--wob-kn", "150", "--settle-s", "10"],
-        &no_wob_path,
+        &[
+            "--reference",
+            "10",
+            "--wob-kn",
+            "150",
+            "--settle-s",
+            "10",
+            "--torque-unit",
+            "knm",
+        ],
+        &unitless_path,
     );
     assert_eq!(code, 0, "{stderr}");
     assert!(

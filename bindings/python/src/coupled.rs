@@ -185,7 +185,7 @@ pub(crate) fn coupled_select_surface(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
-    let surface = crate::surface::surface_columns(py, columns, "surface_torque_unit")?;
+    let surface = crate::surface::surface_columns(py, columns)?;
     let record = check(py, SurfaceRecord::read(&path, &surface))?;
     let mut notes = Vec::new();
     let c = py.detach(|| surface_choice(&record, &settings, &mut |line| notes.push(line)));

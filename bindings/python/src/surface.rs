@@ -40,7 +40,7 @@ pub(crate) fn surface(
     });
     let settings: SurfaceRunSettings = crate::errors::settings(options)?;
     let seed = settings.seed;
-    let columns = surface_columns(py, options, "torque_unit")?;
+    let columns = surface_columns(py, options)?;
     let mut notes = Vec::new();
     let cell = OnceLock::new();
     let text = py.detach(|| {
@@ -229,12 +229,8 @@ fn said(py: Python<'_>, note: &Option<Py<PyAny>>, notes: &[String]) -> PyResult<
 }
 
 /// A surface record's columns and units from the keyword arguments in `options` (each
-/// defaulted where absent), the surface torque's unit under `torque_unit_key`.
-pub(crate) fn surface_columns(
-    py: Python<'_>,
-    options: &Bound<'_, PyDict>,
-    torque_unit_key: &str,
-) -> PyResult<SurfaceOptions> {
+/// defaulted where absent).
+pub(crate) fn surface_columns(py: Python<'_>, options: &Bound<'_, PyDict>) -> PyResult<SurfaceOptions> {
     Ok(SurfaceOptions {
         time_column: kwarg(options, "time_col")?,
         top_drive_column: kwarg(options, "top_drive_col")?,
@@ -248,8 +244,8 @@ pub(crate) fn surface_columns(
         )?,
         torque_unit: unit(
             py,
-            torque_unit_key,
-            kwarg(options, torque_unit_key)?,
+            "torque_unit",
+            kwarg(options, "torque_unit")?,
             TorqueUnit::from_suffix,
         )?,
         wob_unit: unit(py, "wob_unit", kwarg(options, "wob_unit")?, ForceUnit::from_suffix)?,

@@ -1094,7 +1094,7 @@ def coupled_select_surface(
     surface_torque_col: str | None = None,
     wob_col: str | None = None,
     top_drive_unit: str | None = None,
-    surface_torque_unit: str | None = None,
+    torque_unit: str | None = None,
     wob_unit: str | None = None,
     wob_kn: float | None = None,
     radius_m: float | None = None,
@@ -1119,7 +1119,7 @@ def coupled_select_surface(
     chooses it: ``coupled_select``'s choice on the surface torque alone, every candidate
     simulated at the record's mean top-drive speed (refused where it is not steady) on the
     record's clock, under ``wob_kn`` or the record's mean weight on bit, each law's candidates
-    drawn from ``surface``'s prior of it."""
+    drawn from ``surface``'s prior of it; ``torque_unit`` is the surface torque's."""
     import json
 
     columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}
