@@ -26,8 +26,8 @@ def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60
     decided from the step's forces, a speed that crosses zero on bottom set to rest. With
     `then_rpm`, the top drive turns at `then_rpm` from `then_at` seconds on (the end of the
     settling where not given), the string carrying on from where it is. Returns the recorded samples' statistics as `bitrock coupled
-    --json` names them; appends each sample's bit speed (rpm), torque (kN·m) and weight on bit (kN)
-    to `record` where given."""
+    --json` names them; appends each sample's bit speed (rpm), torque (kN·m), weight on bit (kN)
+    and the torque the top drive turns the string with (kN·m) to `record` where given."""
     b, s = bit, STRING
     n = b["n"]
     sector = 2.0 * math.pi / n
@@ -114,7 +114,7 @@ def delay_form(rpm, wob_kn=None, feed_m_h=None, bit=BIT, settle=30.0, seconds=60
             surfaces.append(max(u_pos, prev_surface))
         if period >= settle_samples:
             if record is not None:
-                record.append((w / RPM, torque / 1e3, wob / 1e3))
+                record.append((w / RPM, torque / 1e3, wob / 1e3, tau / 1e3))
             is_stuck = abs(w) < STUCK_RAD_S
             if is_stuck:
                 if not (samples > 0 and last_stuck):
@@ -395,7 +395,7 @@ def test_a_record_of_the_independent_integrator_is_chosen_for_the_coupled_bit(tm
     stats = delay_form(45.0, wob_kn=150.0, settle=20.0, seconds=30.0, record=rows)
     assert stats["stuck_share"] > 0.1, stats
     rng = np.random.default_rng(11)
-    speed, torque, wob = (np.asarray(c) for c in zip(*rows))
+    speed, torque, wob, _ = (np.asarray(c) for c in zip(*rows))
     path = tmp_path / "twin.csv"
     pd.DataFrame(
         {
@@ -408,3 +408,46 @@ def test_a_record_of_the_independent_integrator_is_chosen_for_the_coupled_bit(tm
         chosen = bitrock.coupled_select(path, omega_rpm=45, reference=100, replicates=4, settle_s=10.0)
     assert chosen["family"]["decided"] == "coupled", chosen["family"]["verdict"]
     assert chosen["decided"] in (None, "RGD"), chosen["verdict"]
+
+
+def test_surface_records_of_independent_integrators_are_never_taken_for_another_structure(tmp_path):
+    """The choice from the surface on records bitrock did not simulate, a minute at 10 Hz with
+    0.2 kN·m of white noise on the surface torque: the delay-form twin's bit at 45 rpm under
+    150 kN (stick-slip), and SciPy's LSODA twin of m2 at 60 rpm. Whatever it calls, structure
+    or family, is the one the record came from."""
+    import numpy as np
+    import pandas as pd
+    from test_strings import integrate, one_dof, torque_law
+
+    import bitrock
+
+    rng = np.random.default_rng(7)
+    rows = []
+    stats = delay_form(45.0, wob_kn=150.0, settle=20.0, seconds=60.0, sample_hz=10.0, record=rows)
+    assert stats["stuck_share"] > 0.1, stats
+    rgd = np.asarray([row[3] for row in rows])
+    chain = one_dof()
+    m2_nm = [13000.0, 6500.0, 0.3]
+    omega = 60.0 * RPM
+    start = np.array([torque_law("m2")(m2_nm, omega) / chain[1][0], 1.1 * omega])
+    surface = []
+    speeds, _ = integrate(chain, "m2", m2_nm, omega, 1.0, (start, False, 1.0), 60.0, 60.0, sample_hz=10.0, surface=surface)
+    assert np.mean(np.asarray(speeds) < STUCK_RAD_S) > 0.1
+    for truth, rpm, wob_kn, torque_knm in [("RGD", 45.0, 150.0, rgd), ("m2", 60.0, 244.2, np.asarray(surface) / 1e3)]:
+        assert torque_knm.size == 600
+        path = tmp_path / f"{truth}.csv"
+        pd.DataFrame(
+            {
+                "time_s": np.arange(600) / 10.0,
+                "top_drive_rpm": rpm,
+                "surface_torque_knm": torque_knm + rng.normal(0.0, 0.2, 600),
+                "wob_kn": wob_kn,
+            }
+        ).to_csv(path, index=False)
+        with pytest.warns(bitrock.BitrockWarning, match="the record's mean weight on bit"):
+            chosen = bitrock.coupled_select_surface(path, reference=60, replicates=4, settle_s=20.0)
+        assert chosen["drive"]["omega_rpm"] == pytest.approx(rpm, rel=1e-12)
+        assert chosen["drive"]["noise_torque_knm"] == pytest.approx(0.2, abs=0.05), chosen["drive"]
+        family = "coupled" if truth == "RGD" else "torsional"
+        assert chosen["decided"] in (None, truth), (truth, chosen["verdict"])
+        assert chosen["family"]["decided"] in (None, family), (truth, chosen["family"]["verdict"])
