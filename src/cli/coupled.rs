@@ -247,6 +247,8 @@ impl CoupledCmd {
             top_drive_unit: s.top_drive_unit,
             torque_unit: self.columns.torque_unit,
             wob_unit: self.columns.wob_unit,
+            // The choice compares the surface torque alone.
+            ignore_downhole: true,
             ..SurfaceOptions::default()
         }
     }
@@ -293,16 +295,6 @@ impl CoupledCmd {
 }
 
 pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
-    if let Some(path) = &cmd.well {
-        return run_well(cmd, &CoupledWell::load(path)?);
-    }
-    let settings = cmd.settings();
-    settings.assembly()?;
-    settings.schedule()?;
-    if let Some(path) = &cmd.out {
-        bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
-    }
-    let note = &mut |line: String| super::print::note(format_args!("{line}"));
     let s = &cmd.surface_columns;
     let surface_columns_given = s.time_column.is_some()
         || s.top_drive_column.is_some()
@@ -315,6 +307,19 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
         )
         .into());
     }
+    if let Some(path) = &cmd.well {
+        return run_well(cmd, &CoupledWell::load(path)?);
+    }
+    let settings = cmd.settings();
+    settings.assembly()?;
+    // From the surface, the record's clock is the schedule's (checked by the choice).
+    if !cmd.from_surface {
+        settings.schedule()?;
+    }
+    if let Some(path) = &cmd.out {
+        bitrock::run::dir::check_output_file(path, "out", cmd.force)?;
+    }
+    let note = &mut |line: String| super::print::note(format_args!("{line}"));
     if let Some(path) = &cmd.select {
         let choice = if cmd.from_surface {
             let record = SurfaceRecord::read(path, &cmd.surface_options())?;

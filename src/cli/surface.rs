@@ -217,6 +217,7 @@ impl SurfaceCmd {
             downhole_max_column: self.downhole_max_column.clone(),
             downhole_unit: self.downhole_unit,
             downhole_window_s: self.downhole_window_s,
+            ignore_downhole: false,
         }
     }
 

@@ -40,6 +40,10 @@ pub struct SurfaceOptions {
     /// The window the tool takes its minimum and maximum over (s); `None`: the record's clock
     /// period (each sample's extremes since the sample before).
     pub downhole_window_s: Option<f64>,
+    /// Read no downhole channel, for a reader that does not use them: an MWD tool's columns
+    /// are then left alone, as the bit's are. Not stored: it is the reader's, not the record's.
+    #[serde(skip)]
+    pub ignore_downhole: bool,
 }
 
 /// The columns a surface record was read from, by role.
@@ -463,18 +467,24 @@ impl Roles {
                 !is_surface_channel(&header[i]) && downhole_extreme(&header[i]) == Some(which)
             })
         };
-        let downhole_min = extreme(
-            opts.downhole_min_column.as_deref(),
-            Extreme::Least,
-            "downhole minimum bit speed",
-            "downhole_min_column",
-        )?;
-        let downhole_max = extreme(
-            opts.downhole_max_column.as_deref(),
-            Extreme::Greatest,
-            "downhole maximum bit speed",
-            "downhole_max_column",
-        )?;
+        let (downhole_min, downhole_max) = if opts.ignore_downhole {
+            (None, None)
+        } else {
+            (
+                extreme(
+                    opts.downhole_min_column.as_deref(),
+                    Extreme::Least,
+                    "downhole minimum bit speed",
+                    "downhole_min_column",
+                )?,
+                extreme(
+                    opts.downhole_max_column.as_deref(),
+                    Extreme::Greatest,
+                    "downhole maximum bit speed",
+                    "downhole_max_column",
+                )?,
+            )
+        };
         // Each role by its words first (`top_drive`, `surface` and `torque`, `time`, `wob`),
         // else by a rig log's mnemonic (`RPMA`, `TQA`, `DTIM`, `SWOB`: docs/records.md).
         let pick =

@@ -17,8 +17,9 @@
 //! ([`crate::run::answer::resimulation_verdict`]). A structure none of whose candidates came
 //! near the record escapes that check, so the table's own candidates are classified too, each
 //! left out of its own vote ([`Choice::table_check`]): where another's are taken for the leader
-//! too often nothing is called. A call also needs [`CALL_PROBABILITY`], and the two families
-//! weigh the same before the record ([`FamilyChoice::torsional_probability`]).
+//! too often nothing is called. A call also needs [`CALL_PROBABILITY`], and a structure is
+//! called only where its family is; the two families weigh the same before the record
+//! ([`FamilyChoice::torsional_probability`]).
 //!
 //! **From the surface** ([`surface_choice`]): the same choice on the surface torque's
 //! summaries ([`SURFACE_SUMMARIES`]), every candidate at the record's steady top-drive speed
@@ -228,8 +229,8 @@ pub struct Choice {
     /// (`replicates` the structure's candidates): what the summaries tell apart over the whole
     /// prior, where the check tells it near the record.
     pub table_check: Vec<ChoiceCheckRow>,
-    /// The structure called, where the checks, [`CALL_PROBABILITY`] and the record's channels
-    /// allow one (a law is never called from the surface).
+    /// The structure called, where the checks, [`CALL_PROBABILITY`], its family's call and the
+    /// record's channels allow one (a law is never called from the surface).
     pub decided: Option<Structure>,
     pub verdict: String,
     /// The same choice between the two families: any torsional law, or the coupled bit.
@@ -334,17 +335,67 @@ impl Simulator<'_> {
     /// The summaries of `structure`'s string with `params`, its noise drawn under `key`;
     /// `None` where the string diverged.
     fn summaries(&self, structure: Structure, params: &[f64], key: NoiseKey) -> Option<Summaries> {
+        self.summaries_of(structure, &[(params, key)]).pop().flatten()
+    }
+
+    /// [`Self::summaries`] of several candidates of `structure`, in their order: the coupled
+    /// bit's strings integrated side by side ([`coupled::integrate_lanes`]), each as if alone.
+    fn summaries_of(&self, structure: Structure, candidates: &[(&[f64], NoiseKey)]) -> Vec<Option<Summaries>> {
+        let channels: Vec<Option<Vec<Vec<f64>>>> = match structure {
+            Structure::Coupled => self.coupled_channels(candidates.iter().map(|c| c.0)),
+            Structure::Torsional(law) => candidates.iter().map(|c| self.law_channels(law, c.0)).collect(),
+        };
+        channels
+            .into_iter()
+            .zip(candidates)
+            .map(|(channels, &(_, key))| self.summarised(channels?, key))
+            .collect()
+    }
+
+    /// The coupled bit's compared channels with each of `candidates`' parameters (`None`
+    /// where its string diverged): its surface torque from a surface record, else its bit
+    /// speed, torque and weight on bit.
+    fn coupled_channels<'p>(&self, candidates: impl Iterator<Item = &'p [f64]>) -> Vec<Option<Vec<Vec<f64>>>> {
         let s = self.settings;
         let surface = self.surface.is_some();
-        let mut channels: Vec<Vec<f64>> = match (structure, &self.surface) {
-            (Structure::Torsional(law), Some(strings)) => {
+        let (Ok(schedule), Ok(assembly)) = (
+            Schedule::new(s.dt_s, s.sample_hz, s.settle_s, self.duration_s),
+            s.assembly(),
+        ) else {
+            return candidates.map(|_| None).collect();
+        };
+        let jobs: Vec<CoupledJob> = candidates.map(|params| self.job(self.bit(params))).collect();
+        let mut channels = vec![vec![Vec::new(); if surface { 1 } else { 3 }]; jobs.len()];
+        let ends = coupled::integrate_lanes(&assembly, &schedule, &jobs, None, None, &mut |i, x| {
+            let lane = &mut channels[i];
+            if surface {
+                lane[0].push(x.surface_torque_nm);
+            } else {
+                lane[0].push(x.bit_speed_rad_s);
+                lane[1].push(x.torque_nm);
+                lane[2].push(x.wob_n);
+            }
+        });
+        channels
+            .into_iter()
+            .zip(ends)
+            .map(|(lane, (summary, _))| (!summary.diverged).then_some(lane))
+            .collect()
+    }
+
+    /// A law's compared channels with `params` (`None` where its string diverged): its
+    /// surface torque from a surface record, else its bit speed, torque and weight on bit.
+    fn law_channels(&self, law: Law, params: &[f64]) -> Option<Vec<Vec<f64>>> {
+        let s = self.settings;
+        Some(match &self.surface {
+            Some(strings) => {
                 let run = simulate_on_clock(&strings.chain, &strings.drive, law, params, strings.integration);
                 if run.diverged {
                     return None;
                 }
                 vec![run.surface_torque_nm]
             }
-            (Structure::Torsional(law), None) => {
+            None => {
                 let cfg = SimConfig {
                     law,
                     params_nm: params.to_vec(),
@@ -367,25 +418,12 @@ impl Simulator<'_> {
                 let trace = crate::simulate::simulate(&cfg).ok()?;
                 vec![trace.bit_speed_rad_s, trace.torque_nm, trace.wob_n]
             }
-            (Structure::Coupled, _) => {
-                let schedule = Schedule::new(s.dt_s, s.sample_hz, s.settle_s, self.duration_s).ok()?;
-                let mut channels = vec![Vec::new(); if surface { 1 } else { 3 }];
-                let summary =
-                    coupled::integrate_with(&s.assembly().ok()?, &schedule, &self.job(self.bit(params)), &mut |x| {
-                        if surface {
-                            channels[0].push(x.surface_torque_nm);
-                        } else {
-                            channels[0].push(x.bit_speed_rad_s);
-                            channels[1].push(x.torque_nm);
-                            channels[2].push(x.wob_n);
-                        }
-                    });
-                if summary.diverged {
-                    return None;
-                }
-                channels
-            }
-        };
+        })
+    }
+
+    /// The summaries of a string's compared `channels`, its noise drawn under `key`; `None`
+    /// where one is not finite.
+    fn summarised(&self, mut channels: Vec<Vec<f64>>, key: NoiseKey) -> Option<Summaries> {
         // Each channel's noise makes its apparent noise the record's: a string whose signal is
         // not smooth at the record's clock (the coupled bit's weight swings between samples)
         // shows part of it as noise already, and the record shows the same.
@@ -629,6 +667,18 @@ fn check_settings(settings: &Settings) -> Result<()> {
     Ok(())
 }
 
+/// Refuses a record of more samples than a simulated string records
+/// ([`crate::simulate::strings::MAX_SAMPLES`]): every candidate is simulated on its clock.
+fn refuse_long(n: usize, refuse: &dyn Fn(String) -> Error) -> Result<()> {
+    use crate::simulate::strings::MAX_SAMPLES;
+    if n > MAX_SAMPLES as usize {
+        return Err(refuse(format!(
+            "the record holds {n} samples, and a candidate's string records at most {MAX_SAMPLES}: choose from a stretch of at most that many"
+        )));
+    }
+    Ok(())
+}
+
 /// The record's refusal: `message` about the file at `path`.
 fn refusal(path: &std::path::Path, message: String) -> Error {
     Error::Format {
@@ -650,9 +700,10 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
         ));
     }
     let n = record.len();
+    let refuse = |message: String| refusal(&record.source, message);
+    refuse_long(n, &refuse)?;
     let duration_s = n as f64 / settings.sample_hz;
     Schedule::new(settings.dt_s, settings.sample_hz, settings.settle_s, duration_s)?;
-    let refuse = |message: String| refusal(&record.source, message);
     if n < 50 {
         return Err(refuse(format!(
             "the record holds {n} samples: its bit speed, torque and weight on bit need at least 50 to be summarised"
@@ -751,11 +802,12 @@ pub fn choice(record: &DrillingRecord, settings: &Settings, note: &mut dyn FnMut
 /// candidates are drawn from `bitrock surface`'s prior of it (its physical box, m4's cut to
 /// its curves) and scaled to the record's mean torque at the drive, as the coupled bit's
 /// friction is chosen; every torsional string starts from rest on the settings' string, the
-/// coupled bit's from steady drilling, both settling `settle_s`.
+/// coupled bit's from steady drilling kicked by `kick_rpm`, both settling `settle_s`.
 pub fn surface_choice(record: &SurfaceRecord, settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Choice> {
     check_settings(settings)?;
     let refuse = |message: String| refusal(&record.source, message);
     let n = record.len();
+    refuse_long(n, &refuse)?;
     if n < 50 {
         return Err(refuse(format!(
             "the record holds {n} samples: its surface torque needs at least 50 to be summarised"
@@ -898,6 +950,9 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
         source,
     } = prepared;
     let settings = simulator.settings;
+    // The coupled bit's candidates are stepped at `dt_s`: it must resolve the rock surface at
+    // the record's drive.
+    simulator.job(settings.bit).check_step(settings.dt_s)?;
     let structures = structures();
     let strings = (settings.reference as f64 + settings.replicates as f64) * structures.len() as f64;
     crate::limits::check_work(
@@ -942,18 +997,45 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
             (slot, i, params)
         })
         .collect();
-    let table: Vec<Member> = drawn
+    // The coupled bit's candidates go to a core a few at a time, integrated side by side.
+    let drawn: Vec<(usize, u64, Vec<f64>)> = drawn
+        .into_iter()
+        .filter_map(|(slot, i, params)| Some((slot, i, params?)))
+        .collect();
+    let chunks: Vec<&[(usize, u64, Vec<f64>)]> = drawn
+        .chunk_by(|a, b| a.0 == b.0)
+        .flat_map(|same| {
+            let lanes = if structures[same[0].0] == Structure::Coupled {
+                coupled::LANES
+            } else {
+                1
+            };
+            same.chunks(lanes)
+        })
+        .collect();
+    let table: Vec<Member> = chunks
         .into_par_iter()
         .with_max_len(1)
-        .filter_map(|(slot, i, params)| {
-            let params = params?;
-            let key = NoiseKey::replicate(seed ^ 0x5441_424c, (slot * settings.reference) as u64 + i);
-            let summaries = simulator.summaries(structures[slot], &params, key)?;
-            Some(Member {
-                slot,
-                params,
-                summaries,
-            })
+        .flat_map_iter(|chunk| {
+            let candidates: Vec<(&[f64], NoiseKey)> = chunk
+                .iter()
+                .map(|(slot, i, params)| {
+                    let key = NoiseKey::replicate(seed ^ 0x5441_424c, (slot * settings.reference) as u64 + i);
+                    (params.as_slice(), key)
+                })
+                .collect();
+            let summaries = simulator.summaries_of(structures[chunk[0].0], &candidates);
+            summaries
+                .into_iter()
+                .zip(chunk)
+                .filter_map(|(summaries, (slot, _, params))| {
+                    Some(Member {
+                        slot: *slot,
+                        params: params.clone(),
+                        summaries: summaries?,
+                    })
+                })
+                .collect::<Vec<_>>()
         })
         .collect();
     let counts: Vec<usize> = (0..structures.len())
@@ -1482,6 +1564,52 @@ mod tests {
         assert_eq!(rows[0].classified_as, vec![(structures[0], 12), (structures[1], 1)]);
         assert_eq!(rows[1].classified_as, vec![(structures[0], 0), (structures[1], 12)]);
         assert!((rows[0].recognised - 12.0 / 13.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_record_longer_than_a_string_records_and_a_step_that_cannot_resolve_the_rock_are_refused() {
+        let n = crate::simulate::strings::MAX_SAMPLES as usize + 1;
+        let record = DrillingRecord {
+            source: "long.csv".into(),
+            columns: crate::data::drilling::DrillingColumns {
+                speed: "bit_speed_rpm".into(),
+                torque: "torque_knm".into(),
+                wob: "wob_kn".into(),
+                rop: None,
+                axial_speed: None,
+            },
+            speed_rad_s: vec![6.0; n],
+            torque_nm: vec![1e4; n],
+            wob_n: vec![1.5e5; n],
+            rop_m_s: None,
+            axial_speed_m_s: None,
+        };
+        let settings = Settings {
+            omega_rpm: 60.0,
+            ..Settings::default()
+        };
+        let e = choice(&record, &settings, &mut |_| {}).unwrap_err().to_string();
+        assert!(e.contains("long.csv") && e.contains("65536 samples"), "{e}");
+        // Cut to a minute at 50 Hz, with the coupled bit's step too coarse at 60 rpm: refused
+        // by that setting before any string is simulated.
+        let minute = DrillingRecord {
+            speed_rad_s: record.speed_rad_s[..3000]
+                .iter()
+                .enumerate()
+                .map(|(i, w)| w + (i % 7) as f64)
+                .collect(),
+            torque_nm: record.torque_nm[..3000].to_vec(),
+            wob_n: record.wob_n[..3000].to_vec(),
+            ..record
+        };
+        let coarse = Settings { dt_s: 0.01, ..settings };
+        match choice(&minute, &coarse, &mut |_| {}) {
+            Err(Error::InvalidSetting { field, message }) => {
+                assert_eq!(field, "dt_s", "{message}");
+                assert!(message.contains("rock surface is not resolved"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

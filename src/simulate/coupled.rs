@@ -678,18 +678,24 @@ impl CoupledString {
         }
     }
 
-    /// The surface the last pass left under the blade (m, below the reference): linear between
-    /// the cell centres around the blade.
-    fn surface(&self) -> f64 {
+    /// The blade's position among the cell centres, `phase / cell − 0.5`, and the number of
+    /// the centre at or behind it: the surface and the transport both start from them.
+    fn blade_position(&self) -> (f64, f64) {
         let x = self.phase / self.cell - 0.5;
-        let behind = x.floor();
+        (x, floor(x))
+    }
+
+    /// The surface the last pass left under the blade (m, below the reference): linear between
+    /// the cell centres around the blade (`position` is [`Self::blade_position`]).
+    fn surface(&self, (x, behind): (f64, f64)) -> f64 {
         let frac = x - behind;
         self.behind_old + frac * (self.ring[cell_index(behind + 1.0)] - self.behind_old)
     }
 
     /// Advances one step of `dt` (s), returning the step's forces.
     fn step(&mut self, dt: f64) -> Forces {
-        let dn = self.depth - self.surface();
+        let position = self.blade_position();
+        let dn = self.depth - self.surface(position);
         let on_bottom = dn >= 0.0;
         let d = if on_bottom { self.blades * dn } else { 0.0 };
         let wc = self.cut_w * d;
@@ -741,7 +747,7 @@ impl CoupledString {
             self.compression += (self.drive - v_new) * dt;
         }
         self.lag += (self.omega - w_new) * dt;
-        self.transport(w_new * dt, self.depth, depth_new);
+        self.transport(w_new * dt, self.depth, depth_new, position.1);
         self.depth = depth_new;
         self.axial_speed = v_new;
         self.speed = w_new;
@@ -759,13 +765,14 @@ impl CoupledString {
     /// centre crossed forward takes the deeper of its surface and the blade's depth there (the
     /// depth linear over the step). The last cell crossed forward gets back the surface it had
     /// when crossed backward; cells before it keep what this pass cut (a bit turning backward
-    /// is rare and is counted in the summary).
-    fn transport(&mut self, turn: f64, from: f64, to: f64) {
+    /// is rare and is counted in the summary). `behind` is the number of the centre at or
+    /// behind the blade ([`Self::blade_position`]).
+    fn transport(&mut self, turn: f64, from: f64, to: f64, behind: f64) {
         let start = self.phase;
         let end = start + turn;
         if turn > 0.0 {
             // Centres in (start, end]: the first is the one after the blade's.
-            let mut k = (start / self.cell - 0.5).floor() + 1.0;
+            let mut k = behind + 1.0;
             let mut crossed = 0;
             while (k + 0.5) * self.cell <= end && crossed < RING_CELLS {
                 let at = (k + 0.5) * self.cell;
@@ -778,7 +785,7 @@ impl CoupledString {
             }
         } else if turn < 0.0 {
             // Centres in [end, start) crossed backward: the cell behind becomes the one ahead.
-            let mut k = (start / self.cell - 0.5).floor();
+            let mut k = behind;
             let mut crossed = 0;
             while (k + 0.5) * self.cell > end && crossed < RING_CELLS {
                 let c = cell_index(k);
@@ -788,7 +795,7 @@ impl CoupledString {
                 crossed += 1;
             }
         }
-        self.phase = end.rem_euclid(self.sector);
+        self.phase = phase_in_sector(end, self.sector);
     }
 
     /// Moves the reference to the bit: every depth relative to it shifts by the same amount.
@@ -824,6 +831,25 @@ impl CoupledString {
 
     fn runaway(&self) -> bool {
         !(self.speed.abs() <= self.runaway && self.axial_speed.abs() < 1e3 && self.lag.abs() < 1e30)
+    }
+}
+
+/// `x.floor()` for |x| < 2⁶³, without the library call the baseline x86-64 target makes of
+/// it (a step's hottest call): the same value.
+fn floor(x: f64) -> f64 {
+    let truncated = x as i64 as f64;
+    if truncated > x { truncated - 1.0 } else { truncated }
+}
+
+/// `end.rem_euclid(sector)`, exactly, without a division where the blades ended this sector or
+/// the next (every step turning forward less than a sector): `end − sector` is exact there.
+fn phase_in_sector(end: f64, sector: f64) -> f64 {
+    if (0.0..sector).contains(&end) {
+        end
+    } else if end >= sector && end < 2.0 * sector {
+        end - sector
+    } else {
+        end.rem_euclid(sector)
     }
 }
 
@@ -890,35 +916,83 @@ pub fn integrate_ramped(
     ramp: Option<&Ramp>,
     on_sample: &mut dyn FnMut(&Sample),
 ) -> (CoupledSummary, CoupledState) {
-    let mut s = match start {
-        Some(state) => CoupledString::resume(assembly, job, state),
-        None => CoupledString::new(assembly, job),
-    };
-    let mut sum = Accumulator::default();
+    integrate_lanes(
+        assembly,
+        schedule,
+        std::slice::from_ref(job),
+        start,
+        ramp,
+        &mut |_, s| on_sample(s),
+    )
+    .pop()
+    .expect("one string")
+}
+
+/// The strings a core integrates side by side ([`integrate_lanes`]).
+pub const LANES: usize = 4;
+
+/// [`integrate_ramped`] for several strings at once, each as if alone (the same operations
+/// in the same order: the same numbers), `on_sample` called with the string's index. A step
+/// is a chain of dependent operations (a division, the ring's cell, the contacts' branches)
+/// that leaves a core mostly waiting; the steps of independent strings, interleaved, fill
+/// it (up to [`LANES`] strings; more gain nothing).
+pub fn integrate_lanes(
+    assembly: &Assembly,
+    schedule: &Schedule,
+    jobs: &[CoupledJob],
+    start: Option<&CoupledState>,
+    ramp: Option<&Ramp>,
+    on_sample: &mut dyn FnMut(usize, &Sample),
+) -> Vec<(CoupledSummary, CoupledState)> {
+    let mut strings: Vec<CoupledString> = jobs
+        .iter()
+        .map(|job| match start {
+            Some(state) => CoupledString::resume(assembly, job, state),
+            None => CoupledString::new(assembly, job),
+        })
+        .collect();
+    let mut sums: Vec<Accumulator> = jobs.iter().map(|_| Accumulator::default()).collect();
+    let mut forces = vec![Forces::default(); jobs.len()];
+    let mut axial_speed_before = vec![0.0; jobs.len()];
+    // The strings still integrated: one that ran away stops where it did.
+    let mut running: Vec<usize> = (0..jobs.len()).collect();
     let periods = schedule.settle_samples + schedule.record_samples;
-    let mut forces = Forces::default();
     let period_s = schedule.sample_period_s();
     for period in 0..periods {
-        if let Some(ramp) = ramp.filter(|_| period >= schedule.settle_samples) {
-            let (omega_rad_s, axial) = ramp.drive_at(period - schedule.settle_samples);
-            s.set_drive(omega_rad_s, axial);
-        }
-        let axial_speed_before = s.axial_speed;
-        for _ in 0..schedule.steps_per_sample {
-            forces = s.step(schedule.dt_s);
-        }
-        if s.runaway() {
-            sum.out.diverged = true;
+        if running.is_empty() {
             break;
         }
+        for &i in &running {
+            if let Some(ramp) = ramp.filter(|_| period >= schedule.settle_samples) {
+                let (omega_rad_s, axial) = ramp.drive_at(period - schedule.settle_samples);
+                strings[i].set_drive(omega_rad_s, axial);
+            }
+            axial_speed_before[i] = strings[i].axial_speed;
+        }
+        for _ in 0..schedule.steps_per_sample {
+            for &i in &running {
+                forces[i] = strings[i].step(schedule.dt_s);
+            }
+        }
+        running.retain(|&i| {
+            let ran_away = strings[i].runaway();
+            sums[i].out.diverged |= ran_away;
+            !ran_away
+        });
         if period >= schedule.settle_samples {
             let t = f64::from(period - schedule.settle_samples) * period_s;
-            let sample = s.sample(t, forces, (s.axial_speed - axial_speed_before) / period_s);
-            sum.push(&sample);
-            on_sample(&sample);
+            for &i in &running {
+                let s = &strings[i];
+                let sample = s.sample(t, forces[i], (s.axial_speed - axial_speed_before[i]) / period_s);
+                sums[i].push(&sample);
+                on_sample(i, &sample);
+            }
         }
     }
-    (sum.finish(), s.state())
+    sums.into_iter()
+        .zip(&strings)
+        .map(|(sum, s)| (sum.finish(), s.state()))
+        .collect()
 }
 
 /// Integrates one string on `schedule` to its summary.
@@ -935,8 +1009,12 @@ pub fn integrate_batch(
     start: Option<&CoupledState>,
 ) -> Vec<CoupledSummary> {
     use rayon::prelude::*;
-    jobs.par_iter()
-        .map(|job| integrate_from(assembly, schedule, job, start, &mut |_| {}).0)
+    jobs.par_chunks(LANES)
+        .flat_map_iter(|lanes| {
+            integrate_lanes(assembly, schedule, lanes, start, None, &mut |_, _| {})
+                .into_iter()
+                .map(|(summary, _)| summary)
+        })
         .collect()
 }
 
@@ -1189,14 +1267,15 @@ mod tests {
         let mut t = 0.0;
         while t < 2.0 * sector / w {
             let from = s.depth;
-            s.transport(w * dt, from, from + v * dt);
+            let behind = s.blade_position().1;
+            s.transport(w * dt, from, from + v * dt, behind);
             s.depth = from + v * dt;
             if s.depth.abs() > REBASE_M {
                 s.rebase();
             }
             t += dt;
         }
-        let dn = s.depth - s.surface();
+        let dn = s.depth - s.surface(s.blade_position());
         let expected = v * sector / w;
         assert!((dn - expected).abs() < 1e-6 * expected.max(1e-3), "{dn} vs {expected}");
     }

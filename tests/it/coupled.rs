@@ -835,11 +835,16 @@ fn the_choice_from_the_surface_refuses_what_it_cannot_use_by_flag() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--wob-kn") && stderr.contains("no_wob.csv"), "{stderr}");
     // A surface torque whose name carries no unit needs --torque-unit, which names its unit
-    // here as it names the torque on bit's elsewhere.
+    // here as it names the torque on bit's elsewhere. An MWD tool's column, unused by the
+    // choice, is left alone (its missing unit refuses nothing).
     let unitless_path = dir.path().join("unitless.csv");
-    let unitless = std::fs::read_to_string(&no_wob_path)
+    let unitless: String = std::fs::read_to_string(&no_wob_path)
         .unwrap()
-        .replacen("surface_torque_knm", "surface_torque", 1);
+        .replacen("surface_torque_knm", "surface_torque", 1)
+        .lines()
+        .enumerate()
+        .map(|(i, line)| format!("{line},{}\n", if i == 0 { "DRPM_MAX" } else { "50" }))
+        .collect();
     std::fs::write(&unitless_path, unitless).unwrap();
     let (code, _, stderr) = select(&["--reference", "10", "--wob-kn", "150"], &unitless_path);
     assert_eq!(code, 2, "{stderr}");

@@ -5,7 +5,7 @@
 
 use crate::errors::*;
 use bitrock::data::drilling::{DrillingOptions, DrillingRecord};
-use bitrock::data::surface::SurfaceRecord;
+use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::run::choice::{choice, surface_choice};
 use bitrock::run::coupled::{self as run, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
@@ -185,7 +185,11 @@ pub(crate) fn coupled_select_surface(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
-    let surface = crate::surface::surface_columns(py, columns)?;
+    let surface = SurfaceOptions {
+        // The choice compares the surface torque alone.
+        ignore_downhole: true,
+        ..crate::surface::surface_columns(py, columns)?
+    };
     let record = check(py, SurfaceRecord::read(&path, &surface))?;
     let mut notes = Vec::new();
     let c = py.detach(|| surface_choice(&record, &settings, &mut |line| notes.push(line)));

@@ -258,5 +258,6 @@ pub(crate) fn surface_columns(py: Python<'_>, options: &Bound<'_, PyDict>) -> Py
             SpeedUnit::from_suffix,
         )?,
         downhole_window_s: kwarg(options, "downhole_window_s")?,
+        ignore_downhole: false,
     })
 }
