@@ -3,12 +3,14 @@
 //! the depth of cut, the weight on bit swinging with it).
 //!
 //! Every candidate's string is simulated at the record's drive (from the bit's channels, from
-//! steady rotation kicked by the settings' kick; from the surface's, see [`surface_choice`]), with white noise added to each channel until its apparent noise is the
-//! record's ([`noise_variance_raw`]: what is not smooth at the record's clock, the coupled bit's
+//! steady rotation kicked by the settings' kick; from the surface's, see [`surface_choice`]),
+//! with white noise added to each channel until its apparent noise is the record's
+//! ([`noise_variance_raw`]: what is not smooth at the record's clock, the coupled bit's
 //! swings of weight between samples among it), and reduced to summaries of its bit speed,
 //! torque and weight on bit ([`SUMMARIES`]). The reference table holds [`Settings::reference`]
 //! candidates of each structure; a structure's probability is its share of the table's
-//! candidates nearest the record (rejection ABC with equal prior weights; the distance scales
+//! candidates nearest the record (rejection ABC, each structure a fifth before the record, the
+//! families a half each in [`FamilyChoice`]; the distance scales
 //! each summary by its spread within the structures, as Prangle 2017 scales by a single
 //! model's). Summaries are not sufficient for a model choice (Robert, Cornuet, Marin & Pillai
 //! 2011), so the choice is always checked by re-simulation: records re-simulated from each
@@ -873,7 +875,10 @@ pub fn surface_choice(record: &SurfaceRecord, settings: &Settings, note: &mut dy
     chain.check_step(integration.dt_s).map_err(|e| match e {
         Error::InvalidSetting { message, .. } => Error::setting(
             "omega_n_rad_s",
-            format!("the choice steps the string at a fixed step: {message}"),
+            format!(
+                "the choice steps the torsional string at {} s, which cannot resolve it ({message}): give a softer or less damped string (`omega_n_rad_s`, `damping_ratio`)",
+                integration.dt_s
+            ),
         ),
         other => other,
     })?;
@@ -1161,12 +1166,17 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
         decided = None;
         verdict = weak_verdict(best.structure, best.probability);
     }
+    // From the surface no law is called: one that passed every check is said not called
+    // here, one that did not keeps its own reason.
+    let not_here =
+        "which law a surface record shows is `bitrock surface`'s to say (its sampler draws each law near the record)";
     if let (Structure::Torsional(law), false) = (best.structure, call_laws) {
+        verdict = if decided.is_some() {
+            format!("{law} leads (P = {:.2}): {not_here}; not called here", best.probability)
+        } else {
+            format!("{verdict} (and {not_here})")
+        };
         decided = None;
-        verdict = format!(
-            "{law} leads (P = {:.2}): which law a surface record shows is `bitrock surface`'s to say (its sampler draws each law near the record); not called here",
-            best.probability
-        );
     }
     // Each family's prior share: its structures' drawn candidates (a law left out drew none).
     let drawn = |family: Family| {
