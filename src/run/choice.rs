@@ -1003,11 +1003,11 @@ fn decide(prepared: Prepared<'_>, note: &mut dyn FnMut(String)) -> Result<Choice
         })
         .collect();
     // The coupled bit's candidates go to a core a few at a time, integrated side by side.
-    let drawn: Vec<(usize, u64, Vec<f64>)> = drawn
+    let drawn_params: Vec<(usize, u64, Vec<f64>)> = drawn
         .into_iter()
         .filter_map(|(slot, i, params)| Some((slot, i, params?)))
         .collect();
-    let chunks: Vec<&[(usize, u64, Vec<f64>)]> = drawn
+    let chunks: Vec<&[(usize, u64, Vec<f64>)]> = drawn_params
         .chunk_by(|a, b| a.0 == b.0)
         .flat_map(|same| {
             let lanes = if structures[same[0].0] == Structure::Coupled {
@@ -1578,40 +1578,27 @@ mod tests {
 
     #[test]
     fn a_record_longer_than_a_string_records_and_a_step_that_cannot_resolve_the_rock_are_refused() {
-        let n = crate::simulate::strings::MAX_SAMPLES as usize + 1;
-        let record = DrillingRecord {
-            source: "long.csv".into(),
-            columns: crate::data::drilling::DrillingColumns {
-                speed: "bit_speed_rpm".into(),
-                torque: "torque_knm".into(),
-                wob: "wob_kn".into(),
-                rop: None,
-                axial_speed: None,
-            },
-            speed_rad_s: vec![6.0; n],
-            torque_nm: vec![1e4; n],
-            wob_n: vec![1.5e5; n],
-            rop_m_s: None,
-            axial_speed_m_s: None,
+        // Records as a rig writes them: `rows` samples of a turning bit.
+        let dir = tempfile::tempdir().unwrap();
+        let record = |name: &str, rows: usize| {
+            let path = dir.path().join(name);
+            let mut text = String::from("bit_speed_rpm,torque_knm,wob_kn\n");
+            for i in 0..rows {
+                text.push_str(&format!("{},10,150\n", 57 + i % 7));
+            }
+            std::fs::write(&path, text).unwrap();
+            DrillingRecord::read(&path, &Default::default()).unwrap()
         };
         let settings = Settings {
             omega_rpm: 60.0,
             ..Settings::default()
         };
-        let e = choice(&record, &settings, &mut |_| {}).unwrap_err().to_string();
+        let long = record("long.csv", crate::simulate::strings::MAX_SAMPLES as usize + 1);
+        let e = choice(&long, &settings, &mut |_| {}).unwrap_err().to_string();
         assert!(e.contains("long.csv") && e.contains("65536 samples"), "{e}");
-        // Cut to a minute at 50 Hz, with the coupled bit's step too coarse at 60 rpm: refused
-        // by that setting before any string is simulated.
-        let minute = DrillingRecord {
-            speed_rad_s: record.speed_rad_s[..3000]
-                .iter()
-                .enumerate()
-                .map(|(i, w)| w + (i % 7) as f64)
-                .collect(),
-            torque_nm: record.torque_nm[..3000].to_vec(),
-            wob_n: record.wob_n[..3000].to_vec(),
-            ..record
-        };
+        // A minute at 50 Hz, with the coupled bit's step too coarse at 60 rpm: refused by that
+        // setting before any string is simulated.
+        let minute = record("minute.csv", 3000);
         let coarse = Settings { dt_s: 0.01, ..settings };
         match choice(&minute, &coarse, &mut |_| {}) {
             Err(Error::InvalidSetting { field, message }) => {

@@ -682,7 +682,7 @@ impl CoupledString {
     /// the centre at or behind it: the surface and the transport both start from them.
     fn blade_position(&self) -> (f64, f64) {
         let x = self.phase / self.cell - 0.5;
-        (x, floor(x))
+        (x, x.floor())
     }
 
     /// The surface the last pass left under the blade (m, below the reference): linear between
@@ -795,7 +795,7 @@ impl CoupledString {
                 crossed += 1;
             }
         }
-        self.phase = phase_in_sector(end, self.sector);
+        self.phase = end.rem_euclid(self.sector);
     }
 
     /// Moves the reference to the bit: every depth relative to it shifts by the same amount.
@@ -831,26 +831,6 @@ impl CoupledString {
 
     fn runaway(&self) -> bool {
         !(self.speed.abs() <= self.runaway && self.axial_speed.abs() < 1e3 && self.lag.abs() < 1e30)
-    }
-}
-
-/// `x.floor()` for |x| < 2⁶³, without the library call the baseline x86-64 target makes of
-/// it: the same value, but +0 for −0 and 0 for NaN (a blade's position is neither: the phase
-/// is at least +0, and a NaN one makes the surface NaN all the same).
-fn floor(x: f64) -> f64 {
-    let truncated = x as i64 as f64;
-    if truncated > x { truncated - 1.0 } else { truncated }
-}
-
-/// `end.rem_euclid(sector)`, exactly, without a division where the blades ended this sector or
-/// the next (every step turning forward less than a sector): `end − sector` is exact there.
-fn phase_in_sector(end: f64, sector: f64) -> f64 {
-    if (0.0..sector).contains(&end) {
-        end
-    } else if end >= sector && end < 2.0 * sector {
-        end - sector
-    } else {
-        end.rem_euclid(sector)
     }
 }
 
