@@ -684,10 +684,13 @@ fn print_posterior_map(out: &mut dyn Write, map: &PosteriorMap) -> std::io::Resu
 fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Result<()> {
     writeln!(
         out,
-        "{} of {} samples cutting, depth of cut {:.2}-{:.2} mm a turn (5th-95th percentile); \
-         weight line R² {:.3}, torque line R² {:.3}",
+        "{} of {} samples cutting, {}{}; depth of cut {:.2}-{:.2} mm a turn (5th-95th \
+         percentile); weight line R² {:.3}, torque line R² {:.3}",
         c.cutting_samples,
         c.samples,
+        c.cutting_by.describe(),
+        c.weight_edge_noise_kn
+            .map_or(String::new(), |sd| format!(" (the weight's noise about it {sd:.2} kN)")),
         c.depth_of_cut_mm.0,
         c.depth_of_cut_mm.1,
         c.weight_line.r_squared,

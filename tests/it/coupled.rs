@@ -478,7 +478,7 @@ fn drilling_record(torque_nm: f64, wob_n: f64, seed: u64, axial: bool) -> bitroc
 
 #[test]
 fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
-    use bitrock::fit::coupled::calibrate;
+    use bitrock::fit::coupled::{CuttingBy, calibrate};
     let b = Bit::default();
     let truth = [60.0, 0.6, b.contact_weight_n() / 1e3, 0.6];
     // Noise-free, with the bit's axial speed: the lines are the bit's own.
@@ -497,9 +497,41 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
         }
     }
     assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
-    // Without the axial speed, a held or lifting bit counts as cutting: said.
+    // Without the axial speed, the samples of a bit moving down are the weight's upper edge:
+    // noise-free, the same lines, through the same samples but one (a held bit with its whole
+    // contact, on the edge as well).
     let blind = calibrate(&drilling_record(0.0, 0.0, 0, false), b.radius_m, 400, 1).unwrap();
-    assert!(blind.warning.as_deref().unwrap().contains("no axial speed"));
+    assert_eq!(blind.cutting_by, CuttingBy::WeightEdge);
+    assert!(blind.cutting_samples.abs_diff(exact.cutting_samples) <= exact.cutting_samples / 100);
+    for (e, t) in blind.estimates.iter().zip(truth) {
+        assert!((e.value - t).abs() < 1e-6 * t, "{e:?}");
+    }
+    assert!(blind.warning.is_none(), "{:?}", blind.warning);
+    // With 5 kN of noise on the weight, its noise is read off the edge within a tenth and the
+    // intervals hold the truth as often as with the axial speed.
+    let mut covered = [0; 4];
+    for seed in 0..20 {
+        let c = calibrate(&drilling_record(300.0, 5e3, seed, false), b.radius_m, 2000, seed).unwrap();
+        let noise_kn = c.weight_edge_noise_kn.unwrap();
+        assert!(
+            (noise_kn - 5.0).abs() < 0.5 && c.warning.is_none(),
+            "{noise_kn} {:?}",
+            c.warning
+        );
+        for (k, (e, t)) in c.estimates.iter().zip(truth).enumerate() {
+            covered[k] += usize::from(e.lo <= t && t <= e.hi);
+        }
+    }
+    assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
+    // With 10 kN, a held bit blurs into one moving down: said in every record.
+    for seed in 0..10 {
+        let c = calibrate(&drilling_record(300.0, 10e3, seed, false), b.radius_m, 20, seed).unwrap();
+        let warning = c.warning.unwrap_or_default();
+        assert!(
+            warning.contains("scatter") && warning.contains("axial speed"),
+            "{warning:?}"
+        );
+    }
 }
 
 #[test]

@@ -216,6 +216,18 @@ def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
     assert estimates["intrinsic_energy_mpa"]["value"] == pytest.approx(60.0, rel=1e-4)
     assert estimates["zeta"]["value"] == pytest.approx(0.6, rel=1e-4)
     assert estimates["mu_gamma"]["value"] == pytest.approx(0.6, rel=1e-4)
+    assert calibration["cutting_by"] == "axial_speed" and calibration["weight_edge_noise_kn"] is None
+    # Without the bit's axial speed (and its acceleration, which is never read as a speed), the
+    # samples of a bit moving down are the weight's upper edge: the same bit.
+    blind_path = tmp_path / "rgd-no-axial-speed.csv"
+    pd.read_csv(path).drop(columns=["axial_speed_m_h", "axial_acceleration_m_s2"]).to_csv(blind_path, index=False)
+    blind = bitrock.coupled_calibrate(blind_path)
+    done = run_cli(cli, "coupled", "--calibrate", str(blind_path), "--json")
+    assert blind == json.loads(done.stdout)
+    assert blind["cutting_by"] == "weight_edge" and blind["warning"] is None
+    assert blind["weight_edge_noise_kn"] < 1e-3
+    for e in blind["estimates"]:
+        assert e["value"] == pytest.approx(estimates[e["name"]]["value"], rel=1e-4)
 
 
 def test_python_drills_the_command_s_well(cli, tmp_path):
