@@ -97,8 +97,8 @@ pub struct CoupledCmd {
     pub map: bool,
     /// With --map: the escape map, every cell continued from where the bit is at --omega-rpm
     /// under its weight or feed (settled for --settle-s and --duration-s), and the way out of
-    /// the motion it is in.
-    #[arg(long, requires = "map", conflicts_with = "calibrate")]
+    /// the motion it is in; with --calibrate, each posterior draw's bit from where it is.
+    #[arg(long, requires = "map")]
     pub escape: bool,
     /// The map's top-drive speeds, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value_t = Settings::default().map_rpm, value_name = "MIN:MAX:COUNT", requires = "map")]
@@ -356,6 +356,27 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     };
     let mut out = super::print::stdout();
     match (cmd.map, &calibration) {
+        (true, Some(c)) if cmd.escape => {
+            let map = coupled::posterior_escape_map(&settings, c, note)?;
+            if let Some(path) = &cmd.out {
+                bitrock::run::dir::write_whole(path, "out", cmd.force, |file| write_posterior_map(&map.map, file))?;
+            }
+            if cmd.json {
+                let value = json!({"map": map, "calibration": c});
+                writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+            } else {
+                print_estimates(&mut out, c)?;
+                writeln!(
+                    out,
+                    "each draw's bit settled at {} rpm and {} {}, every cell continued from where it is",
+                    map.from.omega_rpm,
+                    map.from.drive,
+                    map.map.axes.drive_axis().1
+                )?;
+                print_posterior_map(&mut out, &map.map)?;
+                writeln!(out, "{}", map.advice.words)?;
+            }
+        }
         (true, Some(c)) => {
             let map = coupled::posterior_map(&settings, c, note)?;
             if let Some(path) = &cmd.out {

@@ -446,7 +446,7 @@ mod tests {
         // Half the samples on W = 2e6·d + 7e4, the rest below it by up to the whole 7e4.
         let depth: Vec<f64> = (0..2000).map(|i| 0.005 + 0.03 * f64::from(i % 97) / 97.0).collect();
         let lacking = |i: usize| {
-            if i % 2 == 0 {
+            if i.is_multiple_of(2) {
                 0.0
             } else {
                 7e4 * ((i * 7919) % 1000) as f64 / 1000.0

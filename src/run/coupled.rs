@@ -7,6 +7,7 @@ use crate::data::drilling::DrillingRecord;
 use crate::error::{Error, Result};
 use crate::eval::Backend;
 use crate::fit::coupled::{CoupledCalibration, bit_of, calibrate};
+use crate::run::strings::ADVICE_CONFIDENCE;
 use crate::simulate::Profile;
 use crate::simulate::coupled::well::CoupledWell;
 use crate::simulate::coupled::{
@@ -455,6 +456,21 @@ pub struct CellProbabilities {
 }
 
 impl CellProbabilities {
+    /// The regimes' shares among the strings of `draws`, one a posterior draw.
+    fn of<'a>(draws: impl ExactSizeIterator<Item = &'a CoupledSummary> + Clone) -> Self {
+        let n = draws.len() as f64;
+        let share = |regime: Regime| draws.clone().filter(|s| s.regime() == regime).count() as f64 / n;
+        let rates: Vec<f64> = draws.clone().map(|s| s.rate_m_s() * 3600.0).collect();
+        Self {
+            steady: share(Regime::Steady),
+            stick_slip: share(Regime::StickSlip),
+            bit_bounce: share(Regime::BitBounce),
+            both: share(Regime::Both),
+            diverged: share(Regime::Diverged),
+            rop_median_m_h: crate::numerics::quantile(&rates, 0.5),
+        }
+    }
+
     /// The probability the bit vibrates: stick-slip, bounce, both (or runs away).
     pub fn vibrating(&self) -> f64 {
         self.stick_slip + self.bit_bounce + self.both + self.diverged
@@ -558,14 +574,33 @@ pub fn posterior_map(
     calibration: &CoupledCalibration,
     note: &mut dyn FnMut(String),
 ) -> Result<PosteriorMap> {
-    if settings.samples == 0 {
-        return Err(Error::setting("samples", "must be at least 1"));
-    }
     if settings.escape {
         return Err(Error::setting(
             "escape",
-            "a calibrated map starts from steady drilling; an escape map is of one bit",
+            "a calibrated map from steady drilling has no way out to read; the escape map is posterior_escape_map's",
         ));
+    }
+    let bits = posterior_bits(settings, calibration)?;
+    let assembly = settings.assembly()?;
+    let schedule = settings.schedule()?;
+    let (rpm, axis, jobs) = map_jobs(settings, &bits)?;
+    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
+    let cells: Vec<CellProbabilities> = summaries
+        .chunks(bits.len())
+        .map(|draws| CellProbabilities::of(draws.iter()))
+        .collect();
+    Ok(PosteriorMap {
+        samples: bits.len(),
+        probabilities: cells.chunks(axis.len()).map(<[CellProbabilities]>::to_vec).collect(),
+        axes: axes(settings, rpm, axis, jobs.len(), ran),
+    })
+}
+
+/// The bits of the first `samples` of the calibration's draws that are within bounds (their
+/// radius, contact stress, γ and blades the settings').
+fn posterior_bits(settings: &Settings, calibration: &CoupledCalibration) -> Result<Vec<Bit>> {
+    if settings.samples == 0 {
+        return Err(Error::setting("samples", "must be at least 1"));
     }
     let template = settings.bit;
     let bits: Vec<Bit> = calibration
@@ -584,31 +619,171 @@ pub fn posterior_map(
             ),
         ));
     }
+    Ok(bits)
+}
+
+/// Where a calibrated escape map starts: the operating point, and the regimes' probabilities
+/// there over the posterior's draws.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PosteriorEscapeFrom {
+    pub omega_rpm: f64,
+    /// The drive there: kN under a weight, m/h under a feed.
+    pub drive: f64,
+    pub probabilities: CellProbabilities,
+}
+
+/// The way out read off a calibrated escape map. A change ends the motion where the draws'
+/// strings, each continued from the state its own bit is in at the start, drill steadily with
+/// at least [`ADVICE_CONFIDENCE`] (a string that left physical bounds has not ended it); as on
+/// one bit's escape map, from that speed (or drive) on, every cell of the start's column (or
+/// row) must, so the advice never lands in a band where a faster or lighter change keeps it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PosteriorEscapeAdvice {
+    /// The probability a way out ends the motion with, at least.
+    pub confidence: f64,
+    /// The draws drill steadily at the start with that probability already.
+    pub steady_already: bool,
+    /// The slowest speed at or above the start's, in the start's drive column, from which on
+    /// the column ends it: (rpm, the probability it ends there).
+    pub faster_rpm: Option<(f64, f64)>,
+    /// The drive nearest the start's, at or below it, in the start's speed row, from which
+    /// down the row ends it: (kN or m/h, the probability).
+    pub lighter_drive: Option<(f64, f64)>,
+    pub words: String,
+}
+
+/// A calibrated escape map: each posterior draw's bit settled at the start, then continued
+/// from there in every cell.
+#[derive(Clone, Debug, Serialize)]
+pub struct PosteriorEscapeMap {
+    #[serde(flatten)]
+    pub map: PosteriorMap,
+    pub from: PosteriorEscapeFrom,
+    pub advice: PosteriorEscapeAdvice,
+}
+
+/// The calibrated escape map from the settings' `omega_rpm` under its drive: every draw's bit
+/// settled there (steady drilling first, `settle_s` + `duration_s`, the rock surface
+/// included), then each cell continued from the state that bit is in.
+pub fn posterior_escape_map(
+    settings: &Settings,
+    calibration: &CoupledCalibration,
+    note: &mut dyn FnMut(String),
+) -> Result<PosteriorEscapeMap> {
+    let bits = posterior_bits(settings, calibration)?;
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
-    let (rpm, axis, jobs) = map_jobs(settings, &bits)?;
-    let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
-    let cells: Vec<CellProbabilities> = summaries
-        .chunks(bits.len())
-        .map(|draws| {
-            let share =
-                |regime: Regime| draws.iter().filter(|s| s.regime() == regime).count() as f64 / draws.len() as f64;
-            let rates: Vec<f64> = draws.iter().map(|s| s.rate_m_s() * 3600.0).collect();
-            CellProbabilities {
-                steady: share(Regime::Steady),
-                stick_slip: share(Regime::StickSlip),
-                bit_bounce: share(Regime::BitBounce),
-                both: share(Regime::Both),
-                diverged: share(Regime::Diverged),
-                rop_median_m_h: crate::numerics::quantile(&rates, 0.5),
-            }
-        })
+    let (rpm, axis, _) = map_jobs(settings, &bits)?;
+    let starts = bits
+        .iter()
+        .map(|bit| settings.job(*bit, settings.omega_rpm, None))
+        .collect::<Result<Vec<_>>>()?;
+    let (at_start, states): (Vec<CoupledSummary>, Vec<CoupledState>) = {
+        use rayon::prelude::*;
+        starts
+            .par_iter()
+            .map(|here| coupled::integrate_from(&assembly, &schedule, here, None, &mut |_| {}))
+            .unzip()
+    };
+    let mut per_bit = Vec::with_capacity(bits.len());
+    let mut ran = String::new();
+    for (bit, state) in bits.iter().zip(&states) {
+        let (_, _, jobs) = map_jobs(settings, &[*bit])?;
+        let (summaries, backend) = integrate(settings, &assembly, &schedule, &jobs, Some(state), note)?;
+        per_bit.push(summaries);
+        ran = backend;
+    }
+    let cells = rpm.len() * axis.len();
+    let probabilities: Vec<CellProbabilities> = (0..cells)
+        .map(|c| CellProbabilities::of(per_bit.iter().map(|summaries| &summaries[c])))
         .collect();
-    Ok(PosteriorMap {
-        samples: bits.len(),
-        probabilities: cells.chunks(axis.len()).map(<[CellProbabilities]>::to_vec).collect(),
-        axes: axes(settings, rpm, axis, jobs.len(), ran),
+    let from = PosteriorEscapeFrom {
+        omega_rpm: settings.omega_rpm,
+        drive: settings.drive(),
+        probabilities: CellProbabilities::of(at_start.iter()),
+    };
+    let rows: Vec<Vec<CellProbabilities>> = probabilities.chunks(axis.len()).map(<[_]>::to_vec).collect();
+    let advice = advise_posterior(settings, &rpm, &axis, &rows, &from);
+    Ok(PosteriorEscapeMap {
+        map: PosteriorMap {
+            samples: bits.len(),
+            probabilities: rows,
+            axes: axes(settings, rpm, axis, cells * bits.len(), ran),
+        },
+        from,
+        advice,
     })
+}
+
+/// The way out read off a calibrated escape map's cells.
+fn advise_posterior(
+    settings: &Settings,
+    rpm: &[f64],
+    axis: &[f64],
+    cells: &[Vec<CellProbabilities>],
+    from: &PosteriorEscapeFrom,
+) -> PosteriorEscapeAdvice {
+    let ends = |i: usize, j: usize| cells[i][j].steady >= ADVICE_CONFIDENCE;
+    let (column, row) = (nearest(axis, from.drive), nearest(rpm, from.omega_rpm));
+    let (unit, drive_name, lighter) = drive_words(settings);
+    let motion = format!(
+        "the calibrated bit vibrates at {} rpm and {} {unit} with P = {:.2} (stick-slip {:.2}, bounce {:.2}, both {:.2})",
+        from.omega_rpm,
+        from.drive,
+        from.probabilities.vibrating(),
+        from.probabilities.stick_slip,
+        from.probabilities.bit_bounce,
+        from.probabilities.both
+    );
+    if from.probabilities.steady >= ADVICE_CONFIDENCE {
+        return PosteriorEscapeAdvice {
+            confidence: ADVICE_CONFIDENCE,
+            steady_already: true,
+            faster_rpm: None,
+            lighter_drive: None,
+            words: format!(
+                "{motion}: it drills steadily there with P = {:.2}",
+                from.probabilities.steady
+            ),
+        };
+    }
+    let faster_rpm = (0..rpm.len())
+        .filter(|&i| rpm[i] >= from.omega_rpm)
+        .find(|&i| (i..rpm.len()).all(|k| ends(k, column)))
+        .map(|i| (rpm[i], cells[i][column].steady));
+    let lighter_drive = (0..axis.len())
+        .rev()
+        .filter(|&j| axis[j] <= from.drive)
+        .find(|&j| (0..=j).all(|k| ends(row, k)))
+        .map(|j| (axis[j], cells[row][j].steady));
+    let mut ways = Vec::new();
+    if let Some((r, p)) = faster_rpm {
+        ways.push(format!("turning at {r} rpm (P(it ends) = {p:.2})"));
+    }
+    if let Some((d, p)) = lighter_drive {
+        ways.push(format!("lowering {drive_name} to {d} {unit} (P(it ends) = {p:.2})"));
+    }
+    let words = if ways.is_empty() {
+        format!("{motion}, and no speed or {lighter} on this map ends it with P ≥ {ADVICE_CONFIDENCE}")
+    } else {
+        format!("{motion}: {} ends it", ways.join(", or "))
+    };
+    PosteriorEscapeAdvice {
+        confidence: ADVICE_CONFIDENCE,
+        steady_already: false,
+        faster_rpm,
+        lighter_drive,
+        words,
+    }
+}
+
+/// The drive's unit, its name and its lighter change, in words.
+fn drive_words(settings: &Settings) -> (&'static str, &'static str, &'static str) {
+    if settings.is_feed() {
+        ("m/h", "the feed", "slower feed")
+    } else {
+        ("kN", "the weight on bit", "lighter weight")
+    }
 }
 
 /// Where an escape map starts: the bit's operating point, what it does there.
@@ -688,12 +863,7 @@ fn advise(
 ) -> EscapeAdvice {
     let steady = |i: usize, j: usize| cells[i][j].regime == Regime::Steady;
     let (column, row) = (nearest(axis, from.drive), nearest(rpm, from.omega_rpm));
-    let unit = if settings.is_feed() { "m/h" } else { "kN" };
-    let drive_name = if settings.is_feed() {
-        "the feed"
-    } else {
-        "the weight on bit"
-    };
+    let (unit, drive_name, lighter) = drive_words(settings);
     if from.summary.regime == Regime::Steady {
         return EscapeAdvice {
             steady_already: true,
@@ -724,11 +894,10 @@ fn advise(
     }
     let words = if ways.is_empty() {
         format!(
-            "the bit is in {} at {} rpm and {} {unit}, and no speed or lighter {} on this map ends it",
+            "the bit is in {} at {} rpm and {} {unit}, and no speed or {lighter} on this map ends it",
             from.summary.regime.name(),
             from.omega_rpm,
             from.drive,
-            if settings.is_feed() { "feed" } else { "weight" }
         )
     } else {
         format!(

@@ -618,6 +618,52 @@ fn a_stick_slipping_bit_needs_more_to_escape_than_steady_drilling_to_stay_and_th
         "{}",
         escape.advice.words
     );
+    // The bit calibrated on a record of it without its axial speed, 5 kN and 0.3 kN·m of noise:
+    // each of 8 posterior draws' bits settled at 45 rpm and 150 kN and continued from there.
+    // In every cell most draws do what the bit does; at the bistable band's edge some differ
+    // (at 80 rpm one of 8 stays stuck), so the way out may lie one speed above the bit's own.
+    // Applied to the bit itself from its stuck state, it works.
+    let calibration =
+        bitrock::fit::coupled::calibrate(&drilling_record(300.0, 5e3, 7, false), Bit::default().radius_m, 4000, 7)
+            .unwrap();
+    let calibrated = Settings {
+        samples: 8,
+        escape: true,
+        ..settings.clone()
+    };
+    let posterior = bitrock::run::coupled::posterior_escape_map(&calibrated, &calibration, &mut |_| {}).unwrap();
+    assert_eq!(posterior.from.probabilities.stick_slip, 1.0, "{:?}", posterior.from);
+    for (i, row) in posterior.map.probabilities.iter().enumerate() {
+        for (j, p) in row.iter().enumerate() {
+            let own = f64::from(u8::from(escape.map.cells[i][j].regime == Regime::Steady));
+            assert!((p.steady - own).abs() < 0.5, "row {i}, column {j}: {p:?}");
+        }
+    }
+    let advice = &posterior.advice;
+    let (rpm, p) = advice.faster_rpm.expect("a way out by speed");
+    assert!((rpm == 80.0 || rpm == 100.0) && p >= 0.9, "{advice:?}");
+    assert_eq!(advice.lighter_drive, Some((130.0, 1.0)), "{advice:?}");
+    assert!(
+        advice
+            .words
+            .contains(&format!("turning at {rpm} rpm (P(it ends) = {p:.2})")),
+        "{}",
+        advice.words
+    );
+    let escaped = at(rpm);
+    assert!(escaped.stuck_share() < 0.01 && escaped.stick_onsets <= 1, "{escaped:?}");
+    // Lowering the weight ends it more slowly: the bit sticks four more times in the first 22 s
+    // (which the map's 30-s settle leaves out), then drills steadily.
+    let settled_after = Schedule::new(1e-4, 50.0, 30.0, 90.0).unwrap();
+    let lighter = coupled::integrate_from(
+        &assembly,
+        &settled_after,
+        &job(45.0, Axial::Weight { wob_n: 130e3 }),
+        Some(&state),
+        &mut |_| {},
+    )
+    .0;
+    assert!(lighter.stuck == 0 && lighter.regime() == Regime::Steady, "{lighter:?}");
 }
 
 #[test]

@@ -106,7 +106,8 @@ pub(crate) fn coupled_well(py: Python<'_>, path: PathBuf, record: bool, note: Op
 }
 
 /// The bit calibrated on the drilling record at `path` (columns and units in `columns`), and
-/// with `map` the regimes' probabilities over its posterior; as JSON text.
+/// with `map` the regimes' probabilities over its posterior (with the `escape` setting, each
+/// draw's bit continued from where it is at the start, and the way out); as JSON text.
 #[pyfunction]
 #[pyo3(signature = (path, columns, options, map, note))]
 pub(crate) fn coupled_calibrate(
@@ -121,7 +122,10 @@ pub(crate) fn coupled_calibrate(
     let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
     let calibration = check(py, run::calibration(&record, &settings))?;
     let mut notes: Vec<String> = calibration.warning.iter().map(|w| format!("warning: {w}")).collect();
-    let value = if map {
+    let value = if map && settings.escape {
+        let m = py.detach(|| run::posterior_escape_map(&settings, &calibration, &mut |line| notes.push(line)));
+        serde_json::json!({"map": check(py, m)?, "calibration": calibration})
+    } else if map {
         let m = py.detach(|| run::posterior_map(&settings, &calibration, &mut |line| notes.push(line)));
         serde_json::json!({"map": check(py, m)?, "calibration": calibration})
     } else {

@@ -228,6 +228,14 @@ def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
     assert blind["weight_edge_noise_kn"] < 1e-3
     for e in blind["estimates"]:
         assert e["value"] == pytest.approx(estimates[e["name"]]["value"], rel=1e-4)
+    # The calibrated escape map: the command's, each draw's bit out of its stick-slip at 120 rpm.
+    escape = dict(omega_rpm=45, wob_kn=150, map_rpm="45:120:2", map_wob_kn="130:150:2", samples=2, backend="cpu", **short)
+    escaped = bitrock.coupled_calibrate(blind_path, map=True, escape=True, **escape)
+    flags = ["--omega-rpm", "45", "--wob-kn", "150", "--map-rpm", "45:120:2", "--map-wob-kn", "130:150:2", "--samples", "2", "--backend", "cpu", "--duration-s", "20", "--settle-s", "10"]
+    done = run_cli(cli, "coupled", "--calibrate", str(blind_path), "--map", "--escape", *flags, "--json")
+    assert escaped == json.loads(done.stdout)
+    assert escaped["map"]["from"]["probabilities"]["stick_slip"] == 1.0
+    assert escaped["map"]["advice"]["faster_rpm"] == [120.0, 1.0]
 
 
 def test_python_drills_the_command_s_well(cli, tmp_path):

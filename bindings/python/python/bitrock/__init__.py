@@ -1029,11 +1029,14 @@ def coupled_calibrate(
 ) -> dict:
     """The coupled bit calibrated on a drilling record (bit speed, torque on bit, weight on bit,
     rate of penetration; the bit's axial speed where present; a CSV file), as the ``coupled``
-    command calibrates it: the weight and torque lines through the cutting samples, ε (MPa), ζ, the
-    wear flats' contact force (kN) and μ·γ with 90 % intervals, and a ``warning`` where the
-    record cannot tell a cutting bit from a held one. With ``map=True``: ``{"calibration": ...,
-    "map": ...}``, the map giving each regime's probability per cell over ``samples`` posterior
-    draws."""
+    command calibrates it: the weight and torque lines through the samples of a bit moving down
+    (by its axial speed, or without it the upper edge of the weight against the depth of cut:
+    ``cutting_by``), ε (MPa), ζ, the wear flats' contact force (kN) and μ·γ with 90 % intervals,
+    and a ``warning`` where the record cannot tell a cutting bit from a held one. With
+    ``map=True``: ``{"calibration": ..., "map": ...}``, the map giving each regime's probability
+    per cell over ``samples`` posterior draws; with ``escape=True`` too, each draw's bit settled
+    at ``omega_rpm`` under its weight or feed and continued from there, and the way out
+    (``map["advice"]``)."""
     import json
 
     columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}

@@ -175,7 +175,8 @@ def coupled(options: dict, record: bool, map: bool, note: Any | None) -> str:
 def coupled_calibrate(path: str | PathLike[str], columns: dict, options: dict, map: bool, note: Any | None) -> str:
     """
     The bit calibrated on the drilling record at `path` (columns and units in `columns`), and
-    with `map` the regimes' probabilities over its posterior; as JSON text.
+    with `map` the regimes' probabilities over its posterior (with the `escape` setting, each
+    draw's bit continued from where it is at the start, and the way out); as JSON text.
     """
 
 def coupled_select(path: str | PathLike[str], columns: dict, options: dict, note: Any | None) -> str:
