@@ -742,8 +742,8 @@ fn advise_posterior(
             faster_rpm: None,
             lighter_drive: None,
             words: format!(
-                "{motion}: it drills steadily there with P = {:.2}",
-                from.probabilities.steady
+                "the calibrated bit drills steadily at {} rpm and {} {unit} with P = {:.2}: nothing to escape",
+                from.omega_rpm, from.drive, from.probabilities.steady
             ),
         };
     }
