@@ -191,7 +191,8 @@ mod tests {
         ));
         let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
         assert_eq!(r.columns.axial_speed.as_deref(), Some("axial_speed_m_h"));
-        // Alone, an accelerometer's channel gives no axial speed (the calibration says so).
+        // Alone, an accelerometer's channel gives no axial speed: the calibration then reads the
+        // weight's upper edge.
         let (_d, path) = write(&format!("{header},axial_acc_g\n60,10,150,30,0.05\n"));
         let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
         assert_eq!((r.columns.axial_speed, r.axial_speed_m_s), (None, None));

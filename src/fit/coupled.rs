@@ -41,9 +41,10 @@ pub const EDGE_NOISE_SDS: f64 = 2.5;
 /// with which the edge's samples are told from a held bit's: a held bit's weight lies below the
 /// edge by the share of the contact it lacks, and noise blurs the two. On simulated stick-slip
 /// records (45 rpm, 150 kN, 71.3 kN of contact force; 20 of each), the 90 % intervals held the
-/// truth as often as they should up to 6 kN of noise (a share of 0.085-0.089), ε's in 14 of 20
-/// at 6.5 kN (0.092-0.098) and 8 at 7.5 kN (0.11); at 10 kN the edge was lost in some records,
-/// where the noise measured about what was taken for it is 0.26.
+/// truth as often as they should up to 6 kN of noise (a share near 0.085-0.089: 1 record of 20
+/// over 0.09), ε's in 14 of 20 at 6.5 kN (18 of 20 over 0.09) and 8 at 7.5 kN (all over); at
+/// 10 kN the edge was lost in some records, the noise about what was taken for it 24 kN (0.26
+/// of the contact force found there).
 pub const MAX_EDGE_NOISE_SHARE: f64 = 0.09;
 
 /// Most rounds of the upper edge's refit; it settles in a few.
