@@ -343,6 +343,7 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
         }
         return Ok(ExitCode::SUCCESS);
     }
+    coupled::check_escape_start(&settings, cmd.map, cmd.calibrate.is_some(), cmd.omega_rpm.is_some())?;
     let calibration = match &cmd.calibrate {
         Some(path) => {
             let record = DrillingRecord::read(path, &cmd.columns.options())?;

@@ -500,11 +500,16 @@ fn integrate(
     Ok((summaries, ran.to_string()))
 }
 
-/// The map's jobs for each of `bits`, cell by cell (speeds outer, drives inner, bits innermost);
-/// refused before they are made where they would take more than a day even at
+/// The map's jobs for each of `bits`, cell by cell (speeds outer, drives inner, bits innermost),
+/// an `escape` map's axes holding the start's speed and drive; refused before they are made where they would take more than a day even at
 /// [`FASTEST_STRING_STEPS_PER_S`], or more memory than there is.
-fn map_jobs(settings: &Settings, bits: &[Bit]) -> Result<(Vec<f64>, Vec<f64>, Vec<CoupledJob>)> {
-    let (rpm, axis) = settings.axes()?;
+fn map_jobs(settings: &Settings, bits: &[Bit], escape: bool) -> Result<(Vec<f64>, Vec<f64>, Vec<CoupledJob>)> {
+    let (mut rpm, mut axis) = settings.axes()?;
+    if escape {
+        // The way out is read at the start's own speed and drive.
+        with_value(&mut rpm, settings.omega_rpm);
+        with_value(&mut axis, settings.drive());
+    }
     let strings = (rpm.len() * axis.len() * bits.len()) as f64;
     let schedule = settings.schedule()?;
     let what = format!("simulating {strings} coupled strings of {} s", schedule.seconds());
@@ -526,6 +531,14 @@ fn map_jobs(settings: &Settings, bits: &[Bit]) -> Result<(Vec<f64>, Vec<f64>, Ve
     Ok((rpm, axis, jobs))
 }
 
+/// `axis` (ascending) with `value` in its place, where it is not there already.
+fn with_value(axis: &mut Vec<f64>, value: f64) {
+    if !axis.iter().any(|v| (v - value).abs() <= 1e-9 * value.abs().max(1.0)) {
+        let at = axis.partition_point(|v| *v < value);
+        axis.insert(at, value);
+    }
+}
+
 fn axes(settings: &Settings, omega_rpm: Vec<f64>, axis: Vec<f64>, strings: usize, backend: String) -> Axes {
     let (wob_kn, feed_m_h) = if settings.is_feed() {
         (None, Some(axis))
@@ -545,7 +558,7 @@ fn axes(settings: &Settings, omega_rpm: Vec<f64>, axis: Vec<f64>, strings: usize
 pub fn map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<Map> {
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
-    let (rpm, axis, jobs) = map_jobs(settings, &[settings.bit])?;
+    let (rpm, axis, jobs) = map_jobs(settings, &[settings.bit], false)?;
     let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
     Ok(Map {
         cells: rows(&summaries, axis.len(), settings.sample_hz),
@@ -583,7 +596,7 @@ pub fn posterior_map(
     let bits = posterior_bits(settings, calibration)?;
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
-    let (rpm, axis, jobs) = map_jobs(settings, &bits)?;
+    let (rpm, axis, jobs) = map_jobs(settings, &bits, false)?;
     let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, None, note)?;
     let cells: Vec<CellProbabilities> = summaries
         .chunks(bits.len())
@@ -643,11 +656,11 @@ pub struct PosteriorEscapeAdvice {
     pub confidence: f64,
     /// The draws drill steadily at the start with that probability already.
     pub steady_already: bool,
-    /// The slowest speed at or above the start's, in the start's drive column, from which on
-    /// the column ends it: (rpm, the probability it ends there).
+    /// The slowest speed above the start's, in the start's drive column (the map's nearest),
+    /// from which on the column ends it: (rpm, the probability it ends there).
     pub faster_rpm: Option<(f64, f64)>,
-    /// The drive nearest the start's, at or below it, in the start's speed row, from which
-    /// down the row ends it: (kN or m/h, the probability).
+    /// The drive nearest the start's, below it, in the start's speed row (the map's nearest),
+    /// from which down the row ends it: (kN or m/h, the probability).
     pub lighter_drive: Option<(f64, f64)>,
     pub words: String,
 }
@@ -662,6 +675,31 @@ pub struct PosteriorEscapeMap {
     pub advice: PosteriorEscapeAdvice,
 }
 
+/// Refuses an escape map with no start to read: `escape` without `map`, and a calibrated
+/// bit's without the top drive's speed (`speed_given`: given, not defaulted) and the weight or
+/// feed the record's bit was drilling at, which no default knows.
+pub fn check_escape_start(settings: &Settings, map: bool, calibrated: bool, speed_given: bool) -> Result<()> {
+    if !settings.escape {
+        return Ok(());
+    }
+    let needs = "the calibrated escape map starts where the record's bit was drilling";
+    if !map {
+        Err(Error::setting("escape", "is read off a map: give `map` with it"))
+    } else if calibrated && !speed_given {
+        Err(Error::setting(
+            "omega_rpm",
+            format!("{needs}: give the top drive's speed then"),
+        ))
+    } else if calibrated && settings.wob_kn.is_none() && settings.feed_m_h.is_none() {
+        Err(Error::setting(
+            "wob_kn",
+            format!("{needs}: give the weight on bit (`wob_kn`) or the feed (`feed_m_h`) then"),
+        ))
+    } else {
+        Ok(())
+    }
+}
+
 /// The calibrated escape map from the settings' `omega_rpm` under its drive: every draw's bit
 /// settled there (steady drilling first, `settle_s` + `duration_s`, the rock surface
 /// included), then each cell continued from the state that bit is in.
@@ -673,7 +711,7 @@ pub fn posterior_escape_map(
     let bits = posterior_bits(settings, calibration)?;
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
-    let (rpm, axis, _) = map_jobs(settings, &bits)?;
+    let (rpm, axis, _) = map_jobs(settings, &bits, true)?;
     let starts = bits
         .iter()
         .map(|bit| settings.job(*bit, settings.omega_rpm, None))
@@ -687,9 +725,16 @@ pub fn posterior_escape_map(
     };
     let mut per_bit = Vec::with_capacity(bits.len());
     let mut ran = String::new();
+    // Each draw's map runs on its own; what the backend says is said once.
+    let mut said = std::collections::HashSet::new();
+    let mut once = |line: String| {
+        if said.insert(line.clone()) {
+            note(line);
+        }
+    };
     for (bit, state) in bits.iter().zip(&states) {
-        let (_, _, jobs) = map_jobs(settings, &[*bit])?;
-        let (summaries, backend) = integrate(settings, &assembly, &schedule, &jobs, Some(state), note)?;
+        let (_, _, jobs) = map_jobs(settings, &[*bit], true)?;
+        let (summaries, backend) = integrate(settings, &assembly, &schedule, &jobs, Some(state), &mut once)?;
         per_bit.push(summaries);
         ran = backend;
     }
@@ -703,7 +748,7 @@ pub fn posterior_escape_map(
         probabilities: CellProbabilities::of(at_start.iter()),
     };
     let rows: Vec<Vec<CellProbabilities>> = probabilities.chunks(axis.len()).map(<[_]>::to_vec).collect();
-    let advice = advise_posterior(settings, &rpm, &axis, &rows, &from);
+    let advice = advise_posterior(settings, &rpm, &axis, &rows, &from, bits.len());
     Ok(PosteriorEscapeMap {
         map: PosteriorMap {
             samples: bits.len(),
@@ -722,18 +767,26 @@ fn advise_posterior(
     axis: &[f64],
     cells: &[Vec<CellProbabilities>],
     from: &PosteriorEscapeFrom,
+    draws: usize,
 ) -> PosteriorEscapeAdvice {
     let ends = |i: usize, j: usize| cells[i][j].steady >= ADVICE_CONFIDENCE;
     let (column, row) = (nearest(axis, from.drive), nearest(rpm, from.omega_rpm));
     let (unit, drive_name, lighter) = drive_words(settings);
+    let of_draws = |p: f64| format!("{} of {draws} draws", (p * draws as f64).round());
+    let p = &from.probabilities;
+    let left = if p.diverged > 0.0 {
+        format!(", out of physical bounds {:.2}", p.diverged)
+    } else {
+        String::new()
+    };
     let motion = format!(
-        "the calibrated bit vibrates at {} rpm and {} {unit} with P = {:.2} (stick-slip {:.2}, bounce {:.2}, both {:.2})",
+        "the calibrated bit vibrates at {} rpm and {} {unit} with P = {:.2} (stick-slip {:.2}, bounce {:.2}, both {:.2}{left})",
         from.omega_rpm,
         from.drive,
-        from.probabilities.vibrating(),
-        from.probabilities.stick_slip,
-        from.probabilities.bit_bounce,
-        from.probabilities.both
+        p.vibrating(),
+        p.stick_slip,
+        p.bit_bounce,
+        p.both
     );
     if from.probabilities.steady >= ADVICE_CONFIDENCE {
         return PosteriorEscapeAdvice {
@@ -748,20 +801,23 @@ fn advise_posterior(
         };
     }
     let faster_rpm = (0..rpm.len())
-        .filter(|&i| rpm[i] >= from.omega_rpm)
+        .filter(|&i| rpm[i] > from.omega_rpm)
         .find(|&i| (i..rpm.len()).all(|k| ends(k, column)))
         .map(|i| (rpm[i], cells[i][column].steady));
     let lighter_drive = (0..axis.len())
         .rev()
-        .filter(|&j| axis[j] <= from.drive)
+        .filter(|&j| axis[j] < from.drive)
         .find(|&j| (0..=j).all(|k| ends(row, k)))
         .map(|j| (axis[j], cells[row][j].steady));
     let mut ways = Vec::new();
     if let Some((r, p)) = faster_rpm {
-        ways.push(format!("turning at {r} rpm (P(it ends) = {p:.2})"));
+        ways.push(format!("turning at {r} rpm (it ends for {})", of_draws(p)));
     }
     if let Some((d, p)) = lighter_drive {
-        ways.push(format!("lowering {drive_name} to {d} {unit} (P(it ends) = {p:.2})"));
+        ways.push(format!(
+            "lowering {drive_name} to {d} {unit} (it ends for {})",
+            of_draws(p)
+        ));
     }
     let words = if ways.is_empty() {
         format!("{motion}, and no speed or {lighter} on this map ends it with P ≥ {ADVICE_CONFIDENCE}")
@@ -802,11 +858,11 @@ pub struct EscapeFrom {
 pub struct EscapeAdvice {
     /// The start's speed and drive are steady already.
     pub steady_already: bool,
-    /// The slowest speed of the map at or above the start's, in the start's drive column,
-    /// from which on the column drills steadily (rpm).
+    /// The slowest speed of the map above the start's, in the start's drive column (the map's
+    /// nearest), from which on the column drills steadily (rpm).
     pub faster_rpm: Option<f64>,
-    /// The drive of the map nearest the start's, at or below it, in the start's speed row,
-    /// from which down the row drills steadily (kN or m/h).
+    /// The drive of the map nearest the start's, below it, in the start's speed row (the map's
+    /// nearest), from which down the row drills steadily (kN or m/h).
     pub lighter_drive: Option<f64>,
     pub words: String,
 }
@@ -834,7 +890,7 @@ pub fn escape_map(settings: &Settings, note: &mut dyn FnMut(String)) -> Result<E
     let bit = settings.bit;
     let here = settings.job(bit, settings.omega_rpm, None)?;
     let (at_start, state) = coupled::integrate_from(&assembly, &schedule, &here, None, &mut |_| {});
-    let (rpm, axis, jobs) = map_jobs(settings, &[bit])?;
+    let (rpm, axis, jobs) = map_jobs(settings, &[bit], true)?;
     let (summaries, ran) = integrate(settings, &assembly, &schedule, &jobs, Some(&state), note)?;
     let cells = rows(&summaries, axis.len(), settings.sample_hz);
     let from = EscapeFrom {
@@ -875,14 +931,14 @@ fn advise(
             ),
         };
     }
-    // The first speed at or above the start's from which the whole column is steady.
+    // The first speed above the start's from which the whole column is steady.
     let faster_rpm = (0..rpm.len())
-        .filter(|&i| rpm[i] >= from.omega_rpm)
+        .filter(|&i| rpm[i] > from.omega_rpm)
         .find(|&i| (i..rpm.len()).all(|k| steady(k, column)))
         .map(|i| rpm[i]);
     let lighter_drive = (0..axis.len())
         .rev()
-        .filter(|&j| axis[j] <= from.drive)
+        .filter(|&j| axis[j] < from.drive)
         .find(|&j| (0..=j).all(|k| steady(row, k)))
         .map(|j| axis[j]);
     let mut ways = Vec::new();

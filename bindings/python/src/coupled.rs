@@ -37,6 +37,7 @@ pub(crate) fn coupled(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
+    check(py, run::check_escape_start(&settings, map, false, true))?;
     let mut notes = Vec::new();
     let value = if map && settings.escape {
         let m = py.detach(|| run::escape_map(&settings, &mut |line| notes.push(line)));
@@ -119,6 +120,8 @@ pub(crate) fn coupled_calibrate(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
+    let speed_given = options.get_item("omega_rpm")?.is_some_and(|v| !v.is_none());
+    check(py, run::check_escape_start(&settings, map, true, speed_given))?;
     let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
     let calibration = check(py, run::calibration(&record, &settings))?;
     let mut notes: Vec<String> = calibration.warning.iter().map(|w| format!("warning: {w}")).collect();

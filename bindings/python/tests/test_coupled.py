@@ -236,6 +236,12 @@ def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
     assert escaped == json.loads(done.stdout)
     assert escaped["map"]["from"]["probabilities"]["stick_slip"] == 1.0
     assert escaped["map"]["advice"]["faster_rpm"] == [120.0, 1.0]
+    # Its start is where the record's bit was drilling, which no default knows; and it is a map.
+    for missing, given in [("omega_rpm", dict(wob_kn=150)), ("wob_kn", dict(omega_rpm=45))]:
+        with pytest.raises(bitrock.InputError, match=missing):
+            bitrock.coupled_calibrate(blind_path, map=True, escape=True, **given)
+    with pytest.raises(bitrock.InputError, match="escape"):
+        bitrock.coupled_calibrate(blind_path, escape=True, omega_rpm=45, wob_kn=150)
 
 
 def test_python_drills_the_command_s_well(cli, tmp_path):
@@ -305,12 +311,15 @@ def test_every_coupled_setting_is_a_keyword_and_a_stray_one_is_refused():
 def test_python_gives_the_command_s_escape_map(cli):
     import bitrock
 
-    args = dict(omega_rpm=45, wob_kn=150, map_rpm="40:120:3", map_wob_kn="130:150:2", backend="cpu", duration_s=30.0, settle_s=20.0)
+    args = dict(omega_rpm=45, wob_kn=150, map_rpm="40:120:3", map_wob_kn="110:150:3", backend="cpu", duration_s=30.0, settle_s=20.0)
     escape = bitrock.coupled(map=True, escape=True, **args)
-    done = run_cli(cli, "coupled", "--map", "--escape", "--omega-rpm", "45", "--wob-kn", "150", "--map-rpm", "40:120:3", "--map-wob-kn", "130:150:2", "--backend", "cpu", "--duration-s", "30", "--settle-s", "20", "--json")
+    done = run_cli(cli, "coupled", "--map", "--escape", "--omega-rpm", "45", "--wob-kn", "150", "--map-rpm", "40:120:3", "--map-wob-kn", "110:150:3", "--backend", "cpu", "--duration-s", "30", "--settle-s", "20", "--json")
     assert escape == json.loads(done.stdout)
     assert escape["from"]["summary"]["regime"] == "stick_slip"
-    assert (escape["advice"]["faster_rpm"], escape["advice"]["lighter_drive"]) == (80.0, 130.0), escape["advice"]
+    # The way out is read in the start's own row: 45 rpm, which the map holds beside its axis.
+    assert escape["omega_rpm"] == [40.0, 45.0, 80.0, 120.0]
+    # At 45 rpm the bit still sticks at 130 kN in the 50 s simulated; at 110 kN it drills.
+    assert (escape["advice"]["faster_rpm"], escape["advice"]["lighter_drive"]) == (80.0, 110.0), escape["advice"]
 
 
 def test_the_escape_advice_gets_the_delay_form_s_stuck_bit_out(cli):
