@@ -288,9 +288,7 @@ pub fn off_bottom_warning(summary: &SummaryReport) -> Option<String> {
 
 /// One string at the settings' speed and drive, each recorded sample given to `on_sample`.
 pub fn one(settings: &Settings, on_sample: &mut dyn FnMut(&Sample)) -> Result<One> {
-    if settings.escape {
-        return Err(Error::setting("escape", "an escape map is a map: ask for the map too"));
-    }
+    check_escape_start(settings, false, false, true)?;
     let assembly = settings.assembly()?;
     let schedule = settings.schedule()?;
     let job = settings.job(settings.bit, settings.omega_rpm, None)?;
@@ -501,8 +499,9 @@ fn integrate(
 }
 
 /// The map's jobs for each of `bits`, cell by cell (speeds outer, drives inner, bits innermost),
-/// an `escape` map's axes holding the start's speed and drive; refused before they are made where they would take more than a day even at
-/// [`FASTEST_STRING_STEPS_PER_S`], or more memory than there is.
+/// an `escape` map's axes holding the start's speed and drive; refused before they are made
+/// where they would take more than a day even at [`FASTEST_STRING_STEPS_PER_S`], or more memory
+/// than there is.
 fn map_jobs(settings: &Settings, bits: &[Bit], escape: bool) -> Result<(Vec<f64>, Vec<f64>, Vec<CoupledJob>)> {
     let (mut rpm, mut axis) = settings.axes()?;
     if escape {
@@ -684,7 +683,7 @@ pub fn check_escape_start(settings: &Settings, map: bool, calibrated: bool, spee
     }
     let needs = "the calibrated escape map starts where the record's bit was drilling";
     if !map {
-        Err(Error::setting("escape", "is read off a map: give `map` with it"))
+        Err(Error::setting("escape", "an escape map is a map: ask for the map too"))
     } else if calibrated && !speed_given {
         Err(Error::setting(
             "omega_rpm",
@@ -801,12 +800,12 @@ fn advise_posterior(
         };
     }
     let faster_rpm = (0..rpm.len())
-        .filter(|&i| rpm[i] > from.omega_rpm)
+        .filter(|&i| i > row)
         .find(|&i| (i..rpm.len()).all(|k| ends(k, column)))
         .map(|i| (rpm[i], cells[i][column].steady));
     let lighter_drive = (0..axis.len())
         .rev()
-        .filter(|&j| axis[j] < from.drive)
+        .filter(|&j| j < column)
         .find(|&j| (0..=j).all(|k| ends(row, k)))
         .map(|j| (axis[j], cells[row][j].steady));
     let mut ways = Vec::new();
@@ -933,12 +932,12 @@ fn advise(
     }
     // The first speed above the start's from which the whole column is steady.
     let faster_rpm = (0..rpm.len())
-        .filter(|&i| rpm[i] > from.omega_rpm)
+        .filter(|&i| i > row)
         .find(|&i| (i..rpm.len()).all(|k| steady(k, column)))
         .map(|i| rpm[i]);
     let lighter_drive = (0..axis.len())
         .rev()
-        .filter(|&j| axis[j] < from.drive)
+        .filter(|&j| j < column)
         .find(|&j| (0..=j).all(|k| steady(row, k)))
         .map(|j| axis[j]);
     let mut ways = Vec::new();

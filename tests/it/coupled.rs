@@ -498,11 +498,12 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
     }
     assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
     // Without the axial speed, the samples of a bit moving down are the weight's upper edge:
-    // noise-free, the same lines, through the same samples but one (a held bit with its whole
-    // contact, on the edge as well).
+    // noise-free, the same lines, through the samples moving down less those beside a held bit
+    // (their residuals averaged over their neighbours fall below the edge): 936 of 1,170.
     let blind = calibrate(&drilling_record(0.0, 0.0, 0, false), b.radius_m, 400, 1).unwrap();
     assert_eq!(blind.cutting_by, CuttingBy::WeightEdge);
-    assert!(blind.cutting_samples.abs_diff(exact.cutting_samples) <= exact.cutting_samples / 100);
+    let (found, moving) = (blind.cutting_samples, exact.cutting_samples);
+    assert!(found <= moving + 1 && found >= moving * 3 / 4, "{found} of {moving}");
     for (e, t) in blind.estimates.iter().zip(truth) {
         assert!((e.value - t).abs() < 1e-6 * t, "{e:?}");
     }
@@ -540,6 +541,17 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
             assert!((e.value - t).abs() < 0.05 * t, "seed {seed}: {e:?}");
         }
     }
+    // With 7.5 kN, the residuals averaged over three samples in time still tell them: no
+    // warning, and the intervals hold the truth as often as they should.
+    let mut covered = [0; 4];
+    for seed in 0..20 {
+        let c = calibrate(&drilling_record(300.0, 7.5e3, seed, false), b.radius_m, 2000, seed).unwrap();
+        assert!(c.warning.is_none(), "{:?}", c.warning);
+        for (k, (e, t)) in c.estimates.iter().zip(truth).enumerate() {
+            covered[k] += usize::from(e.lo <= t && t <= e.hi);
+        }
+    }
+    assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
     // With 10 kN, a held bit blurs into one moving down: said in every record.
     for seed in 0..10 {
         let c = calibrate(&drilling_record(300.0, 10e3, seed, false), b.radius_m, 20, seed).unwrap();
@@ -695,7 +707,12 @@ fn a_stick_slipping_bit_needs_more_to_escape_than_steady_drilling_to_stay_and_th
             let at_edge = neighbours
                 .iter()
                 .any(|&(a, b)| a < rows && b < columns && own(a, b) != own(i, j));
-            assert!((p.steady - own(i, j)).abs() < 0.5 || at_edge, "{i}, {w} kN: {p:?}");
+            // There the draws are split, not all against the bit.
+            let agrees = (p.steady - own(i, j)).abs() < 0.5;
+            assert!(
+                agrees || (at_edge && p.steady > 0.0 && p.steady < 1.0),
+                "{i}, {w} kN: {p:?}"
+            );
         }
     }
     let advice = &posterior.advice;

@@ -1035,8 +1035,9 @@ def coupled_calibrate(
     and a ``warning`` where the record cannot tell a cutting bit from a held one. With
     ``map=True``: ``{"calibration": ..., "map": ...}``, the map giving each regime's probability
     per cell over ``samples`` posterior draws; with ``escape=True`` too, each draw's bit settled
-    at ``omega_rpm`` under its weight or feed and continued from there, and the way out
-    (``map["advice"]``)."""
+    at ``omega_rpm`` under ``wob_kn`` or ``feed_m_h`` (where the record's bit was drilling: all
+    needed) and continued from there, and the way out (``map["advice"]``); ``escape`` without
+    ``map=True`` is refused."""
     import json
 
     columns = {k: v for k, v in locals().items() if k.endswith("_col") or k.endswith("_unit")}
