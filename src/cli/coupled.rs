@@ -712,7 +712,10 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
         c.samples,
         c.cutting_by.describe(),
         c.weight_edge_noise_kn
-            .map_or(String::new(), |sd| format!(" (the weight's noise about it {sd:.2} kN)")),
+            .zip(c.weight_edge_scatter_kn)
+            .map_or(String::new(), |(sd, scatter)| format!(
+                " (the weight's noise about it {sd:.2} kN, averaged over three samples {scatter:.2} kN)"
+            )),
         c.depth_of_cut_mm.0,
         c.depth_of_cut_mm.1,
         c.weight_line.r_squared,

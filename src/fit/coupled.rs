@@ -33,13 +33,15 @@ use serde::Serialize;
 /// Fewest cutting samples a calibration takes.
 pub const MIN_CUTTING_SAMPLES: usize = 20;
 
-/// How far below the weight line (in the noise's standard deviations) a sample still counts as
-/// on it when the upper edge is sought: one in 160 samples on the line falls further.
+/// How far below the weight line (in the standard deviations of its residual averaged over its
+/// neighbours) a sample still counts as on it when the upper edge is sought: one in 160
+/// samples on the line falls further.
 pub const EDGE_NOISE_SDS: f64 = 2.5;
 
-/// How far above the weight's upper edge (in the noise's standard deviations) a sample is a
-/// spike, left out: one in 30,000 samples on the edge lies further by its noise. Where a held
-/// bit's samples below the edge are kept, the edge's own upper tail kept too balances them.
+/// How far above the weight's upper edge (in the noise's standard deviations, its own residual)
+/// a sample is a spike, left out and averaged with no neighbour: one in 30,000 samples on the
+/// edge lies further by its noise. The averages are cut as far above: where a held bit's
+/// samples below the edge are kept, the edge's own upper tail kept too balances them.
 pub const EDGE_SPIKE_SDS: f64 = 4.0;
 
 /// The most scatter about the weight's upper edge, the residuals averaged over each sample's
@@ -162,6 +164,10 @@ pub struct CoupledCalibration {
     pub cutting_by: CuttingBy,
     /// The weight's noise about its upper edge (kN, a standard deviation), where that told them.
     pub weight_edge_noise_kn: Option<f64>,
+    /// The scatter of the residuals averaged over three neighbours in time (kN, a standard
+    /// deviation; the noise's where too few have both), which the samples were told by and
+    /// the warning weighs against [`MAX_EDGE_NOISE_SHARE`] of the contact force.
+    pub weight_edge_scatter_kn: Option<f64>,
     /// The depth of cut per revolution's 5th and 95th percentiles (mm).
     pub depth_of_cut_mm: (f64, f64),
     /// Weight (N) against depth of cut (m): slope a·ζ·ε, intercept W_f.
@@ -203,8 +209,8 @@ fn refusal(record: &DrillingRecord, message: String) -> Error {
 struct Edge {
     on: Vec<bool>,
     noise_sd_n: f64,
-    /// The standard deviation of the residuals averaged over each sample's neighbours in time
-    /// (N), which the samples were told by.
+    /// The standard deviation of the residuals averaged over three neighbours in time (N; the
+    /// noise's where too few samples have both), which the samples were told by.
     smoothed_sd_n: f64,
     /// Whether the samples kept stayed the same, or came back to a set kept before, within
     /// [`MAX_EDGE_ROUNDS`].
@@ -228,13 +234,14 @@ fn half_normal_scale(above: &[f64], floor: f64) -> f64 {
 /// pulled down by the samples below the edge, so the samples above it, which the edge's own
 /// samples are most of, give a first line (every sample, where fewer than
 /// [`MIN_CUTTING_SAMPLES`] are above). Then, until the samples kept stay the same (or come back
-/// to a set kept before), the line is fitted through every sample no further below it than
-/// [`EDGE_NOISE_SDS`] times the noise nor above it than [`EDGE_SPIKE_SDS`] times. The noise is
-/// read above the line, where only the edge's samples lie: those residuals are half-normal
-/// ([`half_normal_scale`]). The samples are told by their residuals averaged over their
-/// neighbours in time (`follows[k]`: sample k is the record's next after sample k − 1): a held
-/// bit stays held for many samples, white noise does not, so the average shrinks the noise and
-/// keeps a held bit's deficit.
+/// to a set kept before), the line is fitted through the samples on it. A sample is told by
+/// its residual averaged over its neighbours in time (`follows[k]`: sample k is the record's
+/// next after sample k − 1): a held bit stays held for many samples, white noise does not, so
+/// the average shrinks the noise and keeps a held bit's deficit. It is on the line where that
+/// average is no further below it than [`EDGE_NOISE_SDS`] times the averages' scatter (scaled
+/// by √(3/n) for an average of n) nor above it than [`EDGE_SPIKE_SDS`] times, and it is no
+/// spike by its own residual. The noise and the scatter are read above the line, where only the
+/// edge's samples lie: those residuals are half-normal ([`half_normal_scale`]).
 fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
     // Noise-free, the samples on the line differ from it by rounding alone.
     let floor = 1e-9 * weight.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
@@ -257,23 +264,29 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
             settled: true,
         };
     }
-    let smooth = |r: &[f64]| -> Vec<f64> {
+    // Each residual averaged with its neighbours in time that are not spikes: the average and
+    // how many samples it holds.
+    let smooth = |r: &[f64], spike: &[bool]| -> Vec<(f64, f64)> {
         (0..r.len())
             .map(|k| {
                 let (mut sum, mut n) = (r[k], 1.0);
-                if k > 0 && follows[k] {
+                if k > 0 && follows[k] && !spike[k - 1] && !spike[k] {
                     sum += r[k - 1];
                     n += 1.0;
                 }
-                if k + 1 < r.len() && follows[k + 1] {
+                if k + 1 < r.len() && follows[k + 1] && !spike[k + 1] && !spike[k] {
                     sum += r[k + 1];
                     n += 1.0;
                 }
-                sum / n
+                (sum / n, n)
             })
             .collect()
     };
-    let mut on: Vec<bool> = smooth(&residuals_to(&first)).iter().map(|r| *r >= 0.0).collect();
+    let none = vec![false; depth.len()];
+    let mut on: Vec<bool> = smooth(&residuals_to(&first), &none)
+        .iter()
+        .map(|(r, _)| *r >= 0.0)
+        .collect();
     if on.iter().filter(|k| **k).count() < MIN_CUTTING_SAMPLES {
         on = every;
     }
@@ -303,12 +316,29 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
         let residuals = residuals_to(&line);
         let above: Vec<f64> = residuals.iter().copied().filter(|r| *r > 0.0).collect();
         noise_sd_n = half_normal_scale(&above, floor);
-        let smoothed = smooth(&residuals);
-        let above: Vec<f64> = smoothed.iter().copied().filter(|r| *r > 0.0).collect();
-        smoothed_sd_n = half_normal_scale(&above, floor);
+        // Spikes, told by the samples' own residuals, are left out and averaged with none.
+        let spike: Vec<bool> = residuals.iter().map(|r| *r > EDGE_SPIKE_SDS * noise_sd_n).collect();
+        let smoothed = smooth(&residuals, &spike);
+        // The scatter of the averages of three; a sample averaged over n is told against
+        // √(3/n) times it. Without enough of them, by the samples' own noise.
+        let whole: Vec<f64> = smoothed
+            .iter()
+            .filter(|(r, n)| *n == 3.0 && *r > 0.0)
+            .map(|(r, _)| *r)
+            .collect();
+        let (scatter, of) = if whole.len() >= MIN_CUTTING_SAMPLES {
+            (half_normal_scale(&whole, floor), 3.0)
+        } else {
+            (noise_sd_n, 1.0)
+        };
+        smoothed_sd_n = scatter;
         let next: Vec<bool> = smoothed
             .iter()
-            .map(|r| *r >= -EDGE_NOISE_SDS * smoothed_sd_n && *r <= EDGE_SPIKE_SDS * smoothed_sd_n)
+            .zip(&spike)
+            .map(|((r, n), spike)| {
+                let sd = scatter * (of / n).sqrt();
+                !spike && *r >= -EDGE_NOISE_SDS * sd && *r <= EDGE_SPIKE_SDS * sd
+            })
             .collect();
         if next == on || seen.contains(&hash(&next)) {
             return Edge {
@@ -399,11 +429,11 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     })
 }
 
-/// Where the weight's upper edge is not clear: its smoothed scatter `noise_sd_n` more than
+/// Where the weight's upper edge is not clear: its averaged residuals' scatter `scatter_n` more than
 /// [`MAX_EDGE_NOISE_SHARE`] of the wear flats' contact force `contact_n` (both N), no positive
 /// contact force, or an edge that did not settle. What such a record cannot tell, as said to
 /// the user.
-fn blurred_edge(noise_sd_n: f64, settled: bool, contact_n: f64) -> Option<String> {
+fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String> {
     if !settled {
         return Some(format!(
             "the record has no axial speed of the bit, and the weight's upper edge against the \
@@ -419,7 +449,7 @@ fn blurred_edge(noise_sd_n: f64, settled: bool, contact_n: f64) -> Option<String
             contact_n / 1e3
         ));
     }
-    let clear = noise_sd_n <= MAX_EDGE_NOISE_SHARE * contact_n;
+    let clear = scatter_n <= MAX_EDGE_NOISE_SHARE * contact_n;
     (!clear).then(|| {
         format!(
             "the record has no axial speed of the bit, and the weight's scatter about its upper \
@@ -427,7 +457,7 @@ fn blurred_edge(noise_sd_n: f64, settled: bool, contact_n: f64) -> Option<String
              wear flats' contact force ({:.1} kN): a bit held or lifting blurs into one moving \
              down, and the estimates can be biased; a record with the bit's axial speed tells \
              them apart",
-            noise_sd_n / 1e3,
+            scatter_n / 1e3,
             100.0 * MAX_EDGE_NOISE_SHARE,
             contact_n / 1e3
         )
@@ -525,6 +555,7 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
         cutting_samples: depth.len(),
         cutting_by: cutting_by(record),
         weight_edge_noise_kn: edge.as_ref().map(|e| e.noise_sd_n / 1e3),
+        weight_edge_scatter_kn: edge.as_ref().map(|e| e.smoothed_sd_n / 1e3),
         depth_of_cut_mm: (1e3 * quantile(&depth, 0.05), 1e3 * quantile(&depth, 0.95)),
         weight_line,
         torque_line,
@@ -616,13 +647,17 @@ mod tests {
                     2e6 * d + 7e4 + 5e3 * z + if spike(i) { 6e4 } else { 0.0 }
                 })
                 .collect();
-            let edge = upper_edge(&depth, &weight, &vec![false; depth.len()]);
-            assert!(
-                edge.settled && (edge.noise_sd_n - 5e3).abs() < 300.0,
-                "seed {seed}: {}",
-                edge.noise_sd_n
-            );
-            assert!((0..2000).filter(|i| spike(*i)).all(|i| !edge.on[i]), "seed {seed}");
+            // Alone and with their neighbours in time: a spike is told by its own residual, and
+            // averaged with none.
+            for follows in [vec![false; 2000], (0..2000).map(|i| i > 0).collect()] {
+                let edge = upper_edge(&depth, &weight, &follows);
+                assert!(
+                    edge.settled && (edge.noise_sd_n - 5e3).abs() < 300.0,
+                    "seed {seed}: {}",
+                    edge.noise_sd_n
+                );
+                assert!((0..2000).filter(|i| spike(*i)).all(|i| !edge.on[i]), "seed {seed}");
+            }
         }
     }
 
@@ -675,12 +710,15 @@ mod tests {
                 2e6 * depth[i] + 7e4 - lacking + 8e3 * z
             })
             .collect();
-        let held_kept = |follows: &[bool]| {
+        let kept = |follows: &[bool], of_held: bool| {
             let edge = upper_edge(&depth, &weight, follows);
-            (0..n).filter(|&i| held(i) && edge.on[i]).count()
+            (0..n).filter(|&i| held(i) == of_held && edge.on[i]).count()
         };
-        let alone = held_kept(&vec![false; n]);
-        let in_time = held_kept(&(0..n).map(|i| i > 0).collect::<Vec<_>>());
+        let in_runs: Vec<bool> = (0..n).map(|i| i > 0).collect();
+        let (alone, in_time) = (kept(&vec![false; n], true), kept(&in_runs, true));
+        // The edge's own samples are kept all the same, but some beside a held run.
+        let on_edge = kept(&in_runs, false);
+        assert!(on_edge * 10 >= n / 2 * 9, "{on_edge} of {} on the edge kept", n / 2);
         assert!(
             in_time * 10 < alone,
             "held samples kept: {in_time} with their neighbours, {alone} alone"
@@ -698,8 +736,10 @@ mod tests {
             .enumerate()
             .map(|(i, d)| 2e6 * d + 7e4 + if i % 2 == 0 { 0.5 } else { -0.5 })
             .collect();
-        let edge = upper_edge(&depth, &weight, &vec![false; depth.len()]);
-        assert!(edge.settled && edge.on.iter().all(|on| *on), "{:?}", edge.on);
+        for follows in [vec![false; 30], (0..30).map(|i| i > 0).collect()] {
+            let edge = upper_edge(&depth, &weight, &follows);
+            assert!(edge.settled && edge.on.iter().all(|on| *on), "{:?}", edge.on);
+        }
     }
 
     /// A record of `n` samples at 6 rad/s without the bit's axial speed, with rate of
