@@ -266,19 +266,19 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
     }
     // Each residual averaged with its neighbours in time that are not spikes: the average and
     // how many samples it holds.
-    let smooth = |r: &[f64], spike: &[bool]| -> Vec<(f64, f64)> {
+    let smooth = |r: &[f64], spike: &[bool]| -> Vec<(f64, u8)> {
         (0..r.len())
             .map(|k| {
-                let (mut sum, mut n) = (r[k], 1.0);
+                let (mut sum, mut n) = (r[k], 1_u8);
                 if k > 0 && follows[k] && !spike[k - 1] && !spike[k] {
                     sum += r[k - 1];
-                    n += 1.0;
+                    n += 1;
                 }
                 if k + 1 < r.len() && follows[k + 1] && !spike[k + 1] && !spike[k] {
                     sum += r[k + 1];
-                    n += 1.0;
+                    n += 1;
                 }
-                (sum / n, n)
+                (sum / f64::from(n), n)
             })
             .collect()
     };
@@ -323,7 +323,7 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
         // √(3/n) times it. Without enough of them, by the samples' own noise.
         let whole: Vec<f64> = smoothed
             .iter()
-            .filter(|(r, n)| *n == 3.0 && *r > 0.0)
+            .filter(|(r, n)| *n == 3 && *r > 0.0)
             .map(|(r, _)| *r)
             .collect();
         let (scatter, of) = if whole.len() >= MIN_CUTTING_SAMPLES {
@@ -336,7 +336,7 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
             .iter()
             .zip(&spike)
             .map(|((r, n), spike)| {
-                let sd = scatter * (of / n).sqrt();
+                let sd = scatter * (of / f64::from(*n)).sqrt();
                 !spike && *r >= -EDGE_NOISE_SDS * sd && *r <= EDGE_SPIKE_SDS * sd
             })
             .collect();
