@@ -15,9 +15,11 @@ const RING_CELLS: u32 = 240u;
 const REBASE_M: f32 = 0.01;
 const SUM_BLOCK: u32 = 64u;
 const INPUT_WORDS: u32 = 12u;
-// lag, speed, compression, axial speed, depth, phase, behind_old, then the ring.
-const STATE_WORDS: u32 = 247u;
-const RING_AT: u32 = 7u;
+// A string's state in lines of four words: lag, speed, compression, axial speed; depth, phase,
+// behind_old, unused; then the ring, four cells a line.
+const STATE_LINES: u32 = 62u;
+const RING_AT: u32 = 2u;
+const RING_LINES: u32 = 60u;
 const SUMMARY_WORDS: u32 = 24u;
 const TAU: f32 = 6.283185307179586;
 
@@ -52,30 +54,61 @@ struct CoupledJob {
 // Per string: radius (m), ε (MPa), ζ, σ (MPa), l (mm), μ, γ, N, Ω₀ (rad/s), the drive (W₀ in N
 // or V_f in m/s), the kick (rad/s), unused.
 @group(0) @binding(1) var<storage, read> inputs: array<f32>;
-// Per string: the state (STATE_WORDS): the host's start or written by the first slice, carried
+// Per string: the state (STATE_LINES of four words): the host's start or written by the first slice, carried
 // by the others.
-@group(0) @binding(2) var<storage, read_write> states: array<f32>;
+@group(0) @binding(2) var<storage, read_write> states: array<vec4<f32>>;
 // Per string: samples, stuck, onsets, first onset, last onset, off bottom, backward (u32 bits);
 // speed min, max, sum (rad/s); axial speed sum (m/s); WOB min, max, sum (N); torque min, max,
 // sum (N·m); diverged (u32 bits); then what the next slice carries on with: the open block's
 // four sums and whether the last sample was stuck.
 @group(0) @binding(3) var<storage, read_write> summaries: array<f32>;
 
-// Where this invocation's ring starts in `states`.
+// Where this invocation's ring starts in `states` (lines).
 var<private> ring_at: u32;
-// The ring cell just ahead of the bit and its height: a cell a step reads about ten times before
-// the bit crosses it, kept here rather than read from storage at every step (on a CPU driver a
-// read per lane is a gather). Written through wherever the ring changes; NO_CELL until read.
-const NO_CELL: u32 = 0xffffffffu;
-var<private> ahead_cell: u32 = NO_CELL;
-var<private> ahead_height: f32 = 0.0;
+// The ring's line (four cells) the bit is in, held here: read from storage when the bit enters
+// it and written back, where changed, when it leaves. The bit reads the cell ahead of it at
+// every step and crosses a cell every ten steps or so at 60 rpm, so a line serves some forty
+// steps. On a CPU driver each storage access of a lane-varying address is a loop over the
+// lanes, run wherever it is written whether or not a lane takes it, so a step reaches storage
+// at one place: `transport`'s pass, once per cell it crosses and once more where the line
+// ahead for the next step is another. NO_LINE until read.
+const NO_LINE: u32 = 0xffffffffu;
+var<private> line_at: u32 = NO_LINE;
+var<private> line: vec4<f32>;
+var<private> line_changed: bool = false;
 
-// Writes a ring cell, and the copy of it ahead of the bit where it is that cell.
-fn set_cell(c: u32, height: f32) {
-    states[ring_at + c] = height;
-    if (c == ahead_cell) {
-        ahead_height = height;
+// Writes the held line back where it changed.
+fn flush_line() {
+    if (line_changed) {
+        states[ring_at + line_at] = line;
+        line_changed = false;
     }
+}
+
+// Holds the ring's line `l`.
+fn hold_line(l: u32) {
+    if (l != line_at) {
+        flush_line();
+        line = states[ring_at + l];
+        line_at = l;
+    }
+}
+
+// The height (m) of ring cell `c`, in the held line.
+fn held(c: u32) -> f32 {
+    let k = c & 3u;
+    return select(select(line.x, line.y, k == 1u), select(line.z, line.w, k == 3u), k >= 2u);
+}
+
+// Sets ring cell `c`, in the held line.
+fn put(c: u32, height: f32) {
+    line = select(line, vec4<f32>(height), vec4<u32>(0u, 1u, 2u, 3u) == vec4<u32>(c & 3u));
+    line_changed = true;
+}
+
+// The cell just ahead of the bit at `phase`.
+fn ahead_of(b: Bit, phase: f32) -> u32 {
+    return wrap(floor(phase / b.cell - 0.5) + 1.0);
 }
 
 struct Bit {
@@ -119,54 +152,86 @@ fn wrap(k: f32) -> u32 {
     return u32(j);
 }
 
+// The rock surface's height (m) under the bit, from the cell behind it and the one ahead, held
+// since the last step's transport.
 fn surface(b: Bit, s: State) -> f32 {
     let x = s.phase / b.cell - 0.5;
     let behind = floor(x);
     let frac = x - behind;
-    let c = wrap(behind + 1.0);
-    if (c != ahead_cell) {
-        ahead_cell = c;
-        ahead_height = states[ring_at + c];
-    }
-    return s.behind_old + frac * (ahead_height - s.behind_old);
+    return s.behind_old + frac * (held(wrap(behind + 1.0)) - s.behind_old);
 }
 
+// What a pass of `transport` does to its cell.
+const HOLD: u32 = 0u;
+const CUT: u32 = 1u;
+const RESTORE: u32 = 2u;
+const READ_BEHIND: u32 = 3u;
+const REBASE: u32 = 4u;
+
+// Turns the bit by `turn` (rad) while its depth goes from `depth_from` to `depth_to` (m): the
+// cells it crosses forward are cut to the depth there; backward, it leaves the surface as it
+// was. Where the depth passes REBASE_M, every height is taken down by it (f32 keeps its
+// resolution near zero). One cell a pass, each through the held line, and a last pass where the
+// cell ahead of the bit lies in another line, to hold it: the sequence of reads and writes of the
+// CPU twin's `transport` and rebase.
 fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32) -> State {
     var s = s_in;
     let start = s.phase;
     let end = start + turn;
-    if (turn > 0.0) {
-        var k = floor(start / b.cell - 0.5) + 1.0;
-        var crossed = 0u;
-        loop {
-            let at = (k + 0.5) * b.cell;
-            if (!(at <= end && crossed < RING_CELLS)) {
-                break;
-            }
-            let depth = depth_from + (depth_to - depth_from) * (at - start) / turn;
-            let c = wrap(k);
-            s.behind_old = states[ring_at + c];
-            set_cell(c, max(s.behind_old, depth));
+    // end.rem_euclid(sector)
+    let phase = end - b.sector * floor(end / b.sector);
+    let ahead = ahead_of(b, phase);
+    let rebase = abs(depth_to) > REBASE_M;
+    var k = floor(start / b.cell - 0.5) + select(0.0, 1.0, turn > 0.0);
+    var crossed = 0u;
+    var behind_next = false;
+    var rebased = 0u;
+    loop {
+        var c = ahead;
+        var op = HOLD;
+        if (turn > 0.0 && (k + 0.5) * b.cell <= end && crossed < RING_CELLS) {
+            c = wrap(k);
+            op = CUT;
+        } else if (turn < 0.0 && behind_next) {
+            c = wrap(k - 1.0);
+            op = READ_BEHIND;
+        } else if (turn < 0.0 && (k + 0.5) * b.cell > end && crossed < RING_CELLS) {
+            c = wrap(k);
+            op = RESTORE;
+        } else if (rebase && rebased < RING_LINES) {
+            c = 4u * rebased;
+            op = REBASE;
+        } else if ((ahead >> 2u) == line_at) {
+            break;
+        }
+        hold_line(c >> 2u);
+        if (op == HOLD) {
+            break;
+        }
+        if (op == CUT) {
+            let depth = depth_from + (depth_to - depth_from) * ((k + 0.5) * b.cell - start) / turn;
+            s.behind_old = held(c);
+            put(c, max(s.behind_old, depth));
             k = k + 1.0;
             crossed = crossed + 1u;
-        }
-    } else if (turn < 0.0) {
-        var k = floor(start / b.cell - 0.5);
-        var crossed = 0u;
-        loop {
-            if (!((k + 0.5) * b.cell > end && crossed < RING_CELLS)) {
-                break;
-            }
-            let c = wrap(k);
-            let before = wrap(k - 1.0);
-            set_cell(c, s.behind_old);
-            s.behind_old = states[ring_at + before];
+        } else if (op == RESTORE) {
+            put(c, s.behind_old);
+            behind_next = true;
+        } else if (op == READ_BEHIND) {
+            s.behind_old = held(c);
+            behind_next = false;
             k = k - 1.0;
             crossed = crossed + 1u;
+        } else {
+            line = line - vec4<f32>(depth_to);
+            line_changed = true;
+            rebased = rebased + 1u;
         }
     }
-    // end.rem_euclid(sector)
-    s.phase = end - b.sector * floor(end / b.sector);
+    s.phase = phase;
+    if (rebase) {
+        s.behind_old = s.behind_old - depth_to;
+    }
     return s;
 }
 
@@ -229,18 +294,9 @@ fn step(b: Bit, s_in: State, dt: f32) -> Stepped {
     }
     s.lag = s.lag + (b.omega - w_new) * dt;
     s = transport(b, s, w_new * dt, s.depth, depth_new);
-    s.depth = depth_new;
+    s.depth = select(depth_new, 0.0, abs(depth_new) > REBASE_M);
     s.axial_speed = v_new;
     s.speed = w_new;
-    if (abs(s.depth) > REBASE_M) {
-        let by = s.depth;
-        for (var c = 0u; c < RING_CELLS; c = c + 1u) {
-            states[ring_at + c] = states[ring_at + c] - by;
-        }
-        ahead_height = ahead_height - by;
-        s.behind_old = s.behind_old - by;
-        s.depth = 0.0;
-    }
     return Stepped(s, Forces(wob, torque, dn));
 }
 
@@ -275,11 +331,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         omega,
         drive,
     );
-    let sb = STATE_WORDS * i;
+    let sb = STATE_LINES * i;
     ring_at = sb + RING_AT;
     let o = SUMMARY_WORDS * i;
 
-    var s = State(states[sb], states[sb + 1u], states[sb + 2u], states[sb + 3u], states[sb + 4u], states[sb + 5u], states[sb + 6u]);
+    let head = states[sb];
+    let tail = states[sb + 1u];
+    var s = State(head.x, head.y, head.z, head.w, tail.x, tail.y, tail.z);
     if (job.first_period == 0u && job.start_given == 0u) {
         // Steady drilling at the drive (CoupledJob::steady), its surface in the ring.
         let turns = omega / TAU;
@@ -295,9 +353,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         let torque0 = b.cut_t * d0 + b.arm * (wob0 - b.cut_w * d0);
         s = State(torque0 / job.k_t, omega + kick, wob0 / job.k_a, rate0, 0.0, 0.0, 0.0);
-        for (var k = 0u; k < RING_CELLS; k = k + 1u) {
-            let ahead = (f32(k) + 0.5) * b.cell;
-            states[ring_at + k] = -dn0 * (1.0 - ahead / sector);
+        for (var l = 0u; l < RING_LINES; l = l + 1u) {
+            let ahead = (f32(4u * l) + vec4<f32>(0.5, 1.5, 2.5, 3.5)) * b.cell;
+            states[ring_at + l] = -dn0 * (1.0 - ahead / sector);
         }
         s.behind_old = -dn0 * (1.0 + 0.5 * b.cell / sector);
     }
@@ -335,6 +393,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var block = vec4<f32>(summaries[o + 18u], summaries[o + 19u], summaries[o + 20u], summaries[o + 21u]);
     var last_stuck = bitcast<u32>(summaries[o + 22u]) != 0u;
     var f = Forces(0.0, 0.0, 0.0);
+    hold_line(ahead_of(b, s.phase) >> 2u);
     for (var period = job.first_period; period < job.end_period; period = period + 1u) {
         for (var k = 0u; k < job.steps_per_sample; k = k + 1u) {
             let out = step(b, s, job.dt_s);
@@ -375,6 +434,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
+    flush_line();
     let cut = bitcast<u32>(summaries[o + 23u]) != 0u || loops_were_cut(job.slice_steps >> 31u);
     let last_slice = job.end_period == job.settle_samples + job.record_samples;
     if (last_slice || diverged) {
@@ -382,13 +442,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         total = total + block;
         block = vec4<f32>(0.0);
     }
-    states[sb] = s.lag;
-    states[sb + 1u] = s.speed;
-    states[sb + 2u] = s.compression;
-    states[sb + 3u] = s.axial_speed;
-    states[sb + 4u] = s.depth;
-    states[sb + 5u] = s.phase;
-    states[sb + 6u] = s.behind_old;
+    states[sb] = vec4<f32>(s.lag, s.speed, s.compression, s.axial_speed);
+    states[sb + 1u] = vec4<f32>(s.depth, s.phase, s.behind_old, 0.0);
     summaries[o] = bitcast<f32>(samples);
     summaries[o + 1u] = bitcast<f32>(stuck_count);
     summaries[o + 2u] = bitcast<f32>(onsets);

@@ -9,11 +9,13 @@ use bytemuck::{Pod, Zeroable};
 
 /// Words per string of the kernel's buffers. Keep in sync with shaders/coupled.wgsl.
 const INPUT_WORDS: usize = 12;
-const STATE_WORDS: usize = 7 + crate::simulate::coupled::RING_CELLS;
+/// The state: seven words, one unused, then the ring; the kernel reads it in lines of four.
+const STATE_WORDS: usize = 8 + crate::simulate::coupled::RING_CELLS;
+const _: () = assert!(crate::simulate::coupled::RING_CELLS % 4 == 0);
 const SUMMARY_WORDS: usize = 24;
 
-/// Strings held on the device at once: 1,132 B a string (inputs 48, state and ring 988,
-/// summary 96), 297 MB for the chunk.
+/// Strings held on the device at once: 1,136 B a string (inputs 48, state and ring 992,
+/// summary 96), 298 MB for the chunk.
 const STRINGS_PER_CHUNK: usize = 1 << 18;
 
 /// Most steps one invocation integrates per dispatch at first: lavapipe stops an invocation's
@@ -175,6 +177,7 @@ fn run_chunk(
             start.depth_m as f32,
             start.phase_rad as f32,
             start.behind_old_m as f32,
+            0.0,
         ];
         one.extend(start.ring_m.iter().map(|&h| h as f32));
         debug_assert_eq!(one.len(), STATE_WORDS);
