@@ -470,24 +470,37 @@ fn on_clock(@builtin(global_invocation_id) gid: vec3<u32>) {
         summaries[o + 3u] = m.s.w[bit];
         reached = 1u;
     }
-    for (var g = job.first_step; g < job.end_step && reached < samples; g = g + 1u) {
-        var ends_sample = false;
-        if (g < settle) {
-            m = step(m, job.settle_dt_s);
-            ends_sample = g + 1u == settle;
-        } else {
+    // A pass per sample period (the settling one), its steps in a loop of their own: on a CPU
+    // driver what a loop's pass holds runs for every lane whether or not a lane takes it, so
+    // the drive's change (a torque of the law) and the sample's writes are reached once a
+    // period, not once a step.
+    var g = job.first_step;
+    loop {
+        if (!(g < job.end_step && reached < samples)) {
+            break;
+        }
+        let settling = g < settle;
+        var ends_at = settle;
+        var dt = job.settle_dt_s;
+        if (!settling) {
             // Toward sample n under sample n − 1's drive.
             let n = (g - settle) / per_sample + 1u;
             if (driven != n - 1u) {
                 driven = n - 1u;
                 drive_at(driven);
             }
-            m = step(m, job.dt_s);
-            least = min(least, m.s.w[bit]);
-            greatest = max(greatest, m.s.w[bit]);
-            ends_sample = (g + 1u - settle) % per_sample == 0u;
+            ends_at = settle + n * per_sample;
+            dt = job.dt_s;
         }
-        if (ends_sample) {
+        let stop = min(ends_at, job.end_step);
+        for (; g < stop; g = g + 1u) {
+            m = step(m, dt);
+            if (!settling) {
+                least = min(least, m.s.w[bit]);
+                greatest = max(greatest, m.s.w[bit]);
+            }
+        }
+        if (g == ends_at) {
             if (!in_bounds(m)) {
                 diverged = true;
                 break;
