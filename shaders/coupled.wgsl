@@ -65,13 +65,14 @@ struct CoupledJob {
 
 // Where this invocation's ring starts in `states` (lines).
 var<private> ring_at: u32;
-// The ring's line (four cells) the bit is in, held here: read from storage when the bit enters
-// it and written back, where changed, when it leaves. The bit reads the cell ahead of it at
-// every step and crosses a cell every ten steps or so at 60 rpm, so a line serves some forty
-// steps. On a CPU driver each storage access of a lane-varying address is a loop over the
-// lanes, run wherever it is written whether or not a lane takes it, so a step reaches storage
-// at one place: `transport`'s pass, once per cell it crosses and once more where the line
-// ahead for the next step is another. NO_LINE until read.
+// The ring's line (four cells) holding the cell just ahead of the bit, held here: read from
+// storage when the bit reaches it and written back, where changed, when it leaves. The bit
+// reads the cell ahead of it at every step and crosses a cell every ten steps or so at 60 rpm,
+// so a line serves some forty steps. On a CPU driver each storage access of a lane-varying
+// address is a loop over the lanes, run wherever it is written whether or not a lane takes it,
+// so the code of a step reaches storage at one place: `transport`'s pass, run once per cell the
+// bit crosses and once more where the line ahead for the next step is another, and reading or
+// writing only where the line changes. NO_LINE until read.
 const NO_LINE: u32 = 0xffffffffu;
 var<private> line_at: u32 = NO_LINE;
 var<private> line: vec4<f32>;

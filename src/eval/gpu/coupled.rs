@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 const INPUT_WORDS: usize = 12;
 /// The state: seven words, one unused, then the ring; the kernel reads it in lines of four.
 const STATE_WORDS: usize = 8 + crate::simulate::coupled::RING_CELLS;
-const _: () = assert!(crate::simulate::coupled::RING_CELLS % 4 == 0);
+const _: () = assert!(crate::simulate::coupled::RING_CELLS.is_multiple_of(4));
 const SUMMARY_WORDS: usize = 24;
 
 /// Strings held on the device at once: 1,136 B a string (inputs 48, state and ring 992,
@@ -19,8 +19,9 @@ const SUMMARY_WORDS: usize = 24;
 const STRINGS_PER_CHUNK: usize = 1 << 18;
 
 /// Most steps one invocation integrates per dispatch at first: lavapipe stops an invocation's
-/// loops after 65,535 iterations together, and a step runs up to about six (the step, the cells
-/// it crosses, a share of a rebase), so each dispatch integrates a slice of the sample periods;
+/// loops after 65,535 iterations together, and a step runs two or three (the step, a pass of
+/// its ring's loop per cell it crosses, one more where the line ahead is another, a share of a
+/// rebase's 60), so each dispatch integrates a slice of the sample periods;
 /// a chunk the driver still cuts short runs again in shorter slices ([`integrate_batch`]).
 pub const STEPS_PER_SLICE: u32 = 6_000;
 
