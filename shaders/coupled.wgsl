@@ -54,8 +54,8 @@ struct CoupledJob {
 // Per string: radius (m), ε (MPa), ζ, σ (MPa), l (mm), μ, γ, N, Ω₀ (rad/s), the drive (W₀ in N
 // or V_f in m/s), the kick (rad/s), unused.
 @group(0) @binding(1) var<storage, read> inputs: array<f32>;
-// Per string: the state (STATE_LINES of four words): the host's start or written by the first slice, carried
-// by the others.
+// Per string: the state (STATE_LINES of four words): the host's start or written by the first
+// slice, carried by the others.
 @group(0) @binding(2) var<storage, read_write> states: array<vec4<f32>>;
 // Per string: samples, stuck, onsets, first onset, last onset, off bottom, backward (u32 bits);
 // speed min, max, sum (rad/s); axial speed sum (m/s); WOB min, max, sum (N); torque min, max,
