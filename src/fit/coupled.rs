@@ -429,10 +429,10 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     })
 }
 
-/// Where the weight's upper edge is not clear: its averaged residuals' scatter `scatter_n` more than
-/// [`MAX_EDGE_NOISE_SHARE`] of the wear flats' contact force `contact_n` (both N), no positive
-/// contact force, or an edge that did not settle. What such a record cannot tell, as said to
-/// the user.
+/// Where the weight's upper edge is not clear: its averaged residuals' scatter `scatter_n` more
+/// than [`MAX_EDGE_NOISE_SHARE`] of the wear flats' contact force `contact_n` (both N), no
+/// positive contact force, or an edge that did not settle. What such a record cannot tell, as
+/// said to the user.
 fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String> {
     if !settled {
         return Some(format!(

@@ -656,10 +656,11 @@ pub struct PosteriorEscapeAdvice {
     /// The draws drill steadily at the start with that probability already.
     pub steady_already: bool,
     /// The slowest speed above the start's, in the start's drive column (an escape map holds
-    /// the start's speed and drive), from which on the column ends it: (rpm, the probability it ends there).
+    /// the start's speed and drive), from which on the column ends it: (rpm, the probability it
+    /// ends there).
     pub faster_rpm: Option<(f64, f64)>,
-    /// The drive nearest the start's, below it, in the start's speed row, from which down the row
-    /// ends it: (kN or m/h, the probability).
+    /// The drive nearest the start's, below it, in the start's speed row, from which down the
+    /// row ends it: (kN or m/h, the probability).
     pub lighter_drive: Option<(f64, f64)>,
     pub words: String,
 }
@@ -857,11 +858,11 @@ pub struct EscapeFrom {
 pub struct EscapeAdvice {
     /// The start's speed and drive are steady already.
     pub steady_already: bool,
-    /// The slowest speed of the map above the start's, in the start's drive column (an escape map holds
-    /// the start's speed and drive), from which on the column drills steadily (rpm).
+    /// The slowest speed of the map above the start's, in the start's drive column (an escape
+    /// map holds the start's speed and drive), from which on the column drills steadily (rpm).
     pub faster_rpm: Option<f64>,
-    /// The drive of the map nearest the start's, below it, in the start's speed row, from which down the row
-    /// drills steadily (kN or m/h).
+    /// The drive of the map nearest the start's, below it, in the start's speed row, from which
+    /// down the row drills steadily (kN or m/h).
     pub lighter_drive: Option<f64>,
     pub words: String,
 }
