@@ -40,19 +40,30 @@ pub const EDGE_NOISE_SDS: f64 = 2.5;
 
 /// How far above the weight's upper edge (in the noise's standard deviations, its own residual)
 /// a sample is a spike, left out and averaged with no neighbour: one in 30,000 samples on the
-/// edge lies further by its noise. The averages are cut as far above: where a held bit's
+/// edge lies further by its noise. So is a sample as far above both its neighbours, where they
+/// agree (in the noise of a difference, √2 times the noise's): a spike on a held bit, which
+/// can lift its weight onto the edge. The averages are cut as far above: where a held bit's
 /// samples below the edge are kept, the edge's own upper tail kept too balances them.
 pub const EDGE_SPIKE_SDS: f64 = 4.0;
 
-/// The most scatter about the weight's upper edge, the residuals averaged over each sample's
-/// neighbours in time, as a share of the wear flats' contact force, with which the edge's
-/// samples are told from a held bit's: a held bit's weight lies below the edge by the share of
-/// the contact it lacks, and noise blurs the two. On simulated stick-slip records (45 rpm,
-/// 150 kN, 71.3 kN of contact force, 50 Hz; 20 of each), the 90 % intervals held the truth as
-/// often as they should up to 7.5 kN of white noise (a share of 0.055-0.064), ε's in 16 of 20
-/// at 8.5 kN (0.062-0.073), 15 at 9 kN (0.066-0.077) and 10 at 10 kN (0.073-0.085), while
-/// every estimate stayed within 5 % up to 12 kN.
+/// The most scatter the weight's upper edge's samples are told by (the residuals averaged over
+/// each sample's neighbours in its state, root mean square over the samples), as a share of the
+/// wear flats' contact force, with which the edge's samples are told from a held bit's: a held
+/// bit's weight lies below the edge by the share of the contact it lacks, and noise blurs the
+/// two. On simulated stick-slip records (45 rpm, 150 kN, 71.3 kN of contact force, 60 s at 50
+/// Hz; 20 of each), the 90 % intervals held the truth as often as they should up to 9 kN of
+/// white noise (a share of 0.058-0.068 at 7.5 kN, none warned; 0.068-0.080 at 9 kN, 19
+/// warned), ε's in 14 of 20 at 10 kN (0.076-0.088) and 6 at 12 kN, while every estimate stayed
+/// within 4 % up to 12 kN. At 20 Hz (120 s), where the bit's held spells last a sample or two,
+/// ε's held it in 4 of 20 at 7.5 kN (0.060-0.081), 14 of them warned.
 pub const MAX_EDGE_NOISE_SHARE: f64 = 0.07;
+
+/// How many times less noise the upper edge found from above must read than the one found
+/// from the line through every sample to be taken instead. On simulated stick-slip records
+/// sampled at 1-5 Hz (45 rpm, 150 kN, 120 s), an edge settled about held samples read 16-28
+/// kN for noise of 0-7.5 kN; from above, a narrow band a little above the edge read down to
+/// two thirds of the noise (3.1 kN for 4.9 kN at 20 Hz).
+pub const EDGE_START_NOISE_RATIO: f64 = 2.0;
 
 /// Most rounds of the upper edge's refit; it settles in a few.
 const MAX_EDGE_ROUNDS: usize = 100;
@@ -164,9 +175,10 @@ pub struct CoupledCalibration {
     pub cutting_by: CuttingBy,
     /// The weight's noise about its upper edge (kN, a standard deviation), where that told them.
     pub weight_edge_noise_kn: Option<f64>,
-    /// The scatter of the residuals averaged over three neighbours in time (kN, a standard
-    /// deviation; the noise's where too few have both), which the samples were told by and
-    /// the warning weighs against [`MAX_EDGE_NOISE_SHARE`] of the contact force.
+    /// The standard deviation the samples were told by, root mean square over them (kN): the
+    /// scatter of the residuals averaged over three neighbours in time where both were in the
+    /// sample's state, √(3/n) times it for an average of n (the noise's where too few samples
+    /// have both). The warning weighs it against [`MAX_EDGE_NOISE_SHARE`] of the contact force.
     pub weight_edge_scatter_kn: Option<f64>,
     /// The depth of cut per revolution's 5th and 95th percentiles (mm).
     pub depth_of_cut_mm: (f64, f64),
@@ -209,9 +221,11 @@ fn refusal(record: &DrillingRecord, message: String) -> Error {
 struct Edge {
     on: Vec<bool>,
     noise_sd_n: f64,
-    /// The standard deviation of the residuals averaged over three neighbours in time (N; the
-    /// noise's where too few samples have both), which the samples were told by.
-    smoothed_sd_n: f64,
+    /// The standard deviation each sample was told by, root mean square over the samples (N):
+    /// the scatter of the residuals averaged over three neighbours in time where a sample's
+    /// neighbours were in its state, √3 times it where neither was (a held spell of a sample),
+    /// the noise's where too few samples have both.
+    told_sd_n: f64,
     /// Whether the samples kept stayed the same, or came back to a set kept before, within
     /// [`MAX_EDGE_ROUNDS`].
     settled: bool,
@@ -233,15 +247,21 @@ fn half_normal_scale(above: &[f64], floor: f64) -> f64 {
 /// The upper edge of `weight` against `depth`. The least-squares line through every sample is
 /// pulled down by the samples below the edge, so the samples above it, which the edge's own
 /// samples are most of, give a first line (every sample, where fewer than
-/// [`MIN_CUTTING_SAMPLES`] are above). Then, until the samples kept stay the same (or come back
-/// to a set kept before), the line is fitted through the samples on it. A sample is told by
+/// [`MIN_CUTTING_SAMPLES`] are above); the samples above the line through those above, and so
+/// on down to an eighth of the samples, give a second start, from above (the two starts weighed
+/// by [`EDGE_START_NOISE_RATIO`]). Then, until the samples kept stay the same (or come back to
+/// a set kept before), the line is fitted through the samples on it. A sample is told by
 /// its residual averaged over its neighbours in time (`follows[k]`: sample k is the record's
-/// next after sample k − 1): a held bit stays held for many samples, white noise does not, so
-/// the average shrinks the noise and keeps a held bit's deficit. It is on the line where that
-/// average is no further below it than [`EDGE_NOISE_SDS`] times the averages' scatter (scaled
-/// by √(3/n) for an average of n) nor above it than [`EDGE_SPIKE_SDS`] times, and it is no
-/// spike by its own residual. The noise and the scatter are read above the line, where only the
-/// edge's samples lie: those residuals are half-normal ([`half_normal_scale`]).
+/// next after sample k − 1) that are in its state: a held bit stays held for a spell, white
+/// noise does not, so the average shrinks the noise and keeps a held bit's deficit. A
+/// neighbour whose residual differs from the sample's by more than [`EDGE_NOISE_SDS`] times the
+/// difference's noise (√2 times the noise) is in another state and left out: in a record
+/// sampled so slowly that a held spell lasts a sample or two, averaging across the change
+/// would pull the edge's samples below it and lift the held ones onto it. It is on the line
+/// where that average is no further below it than [`EDGE_NOISE_SDS`] times the averages'
+/// scatter (scaled by √(3/n) for an average of n) nor above it than [`EDGE_SPIKE_SDS`] times,
+/// and it is no spike ([`EDGE_SPIKE_SDS`]). The noise and the scatter are read above the line,
+/// where only the edge's samples lie: those residuals are half-normal ([`half_normal_scale`]).
 fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
     // Noise-free, the samples on the line differ from it by rounding alone.
     let floor = 1e-9 * weight.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
@@ -260,37 +280,97 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
         return Edge {
             on: every,
             noise_sd_n: f64::NAN,
-            smoothed_sd_n: f64::NAN,
+            told_sd_n: f64::NAN,
             settled: true,
         };
     }
-    // Each residual averaged with its neighbours in time that are not spikes: the average and
-    // how many samples it holds.
-    let smooth = |r: &[f64], spike: &[bool]| -> Vec<(f64, u8)> {
+    // Each residual averaged with its neighbours in time that are not spikes and whose
+    // residuals lie within `close` of its own (further, a neighbour is in another state: the
+    // bit held where the sample moves down, or the other way): the average and how many
+    // samples it holds.
+    let smooth = |r: &[f64], spike: &[bool], close: f64| -> Vec<(f64, u8)> {
+        let joins = |k: usize, j: usize| follows[k.max(j)] && !spike[j] && !spike[k] && (r[j] - r[k]).abs() <= close;
         (0..r.len())
             .map(|k| {
                 let (mut sum, mut n) = (r[k], 1_u8);
-                if k > 0 && follows[k] && !spike[k - 1] && !spike[k] {
-                    sum += r[k - 1];
-                    n += 1;
-                }
-                if k + 1 < r.len() && follows[k + 1] && !spike[k + 1] && !spike[k] {
-                    sum += r[k + 1];
-                    n += 1;
+                for j in [k.checked_sub(1), Some(k + 1)].into_iter().flatten() {
+                    if j < r.len() && joins(k, j) {
+                        sum += r[j];
+                        n += 1;
+                    }
                 }
                 (sum / f64::from(n), n)
             })
             .collect()
     };
+    let count = |set: &[bool]| set.iter().filter(|k| **k).count();
+    let fit_through = |set: &[bool]| -> Line {
+        let (x, y): (Vec<f64>, Vec<f64>) = depth
+            .iter()
+            .zip(weight)
+            .zip(set)
+            .filter(|(_, k)| **k)
+            .map(|((d, w), _)| (*d, *w))
+            .unzip();
+        Line::fit(&x, &y)
+    };
+    // The first start: the samples above the line through all of them.
     let none = vec![false; depth.len()];
-    let mut on: Vec<bool> = smooth(&residuals_to(&first), &none)
+    let mut above_first: Vec<bool> = smooth(&residuals_to(&first), &none, f64::INFINITY)
         .iter()
         .map(|(r, _)| *r >= 0.0)
         .collect();
-    if on.iter().filter(|k| **k).count() < MIN_CUTTING_SAMPLES {
-        on = every;
+    if count(&above_first) < MIN_CUTTING_SAMPLES {
+        above_first = every.clone();
     }
-    let (mut noise_sd_n, mut smoothed_sd_n) = (f64::NAN, f64::NAN);
+    // The second start, from above: the samples above the line through those above, and so on
+    // while an eighth of the samples remain. Where a held spell lasts a sample or two, the
+    // first start's line lies among the held samples, and the refits can settle about it with
+    // a scatter that takes them in; from above they come down to the edge.
+    let fewest = MIN_CUTTING_SAMPLES.max(depth.len() / 8);
+    let mut peeled = above_first.clone();
+    loop {
+        let line = fit_through(&peeled);
+        if !finite(&line) {
+            break;
+        }
+        let higher: Vec<bool> = residuals_to(&line)
+            .iter()
+            .zip(&peeled)
+            .map(|(r, k)| *k && *r >= 0.0)
+            .collect();
+        if count(&higher) < fewest || higher == peeled {
+            break;
+        }
+        peeled = higher;
+    }
+    // Each start settled. A start that settled about held samples reads their deficits as
+    // noise, several times the noise; from above, the refits can come to rest a little above
+    // the edge, in a narrower band. The first start's edge is kept unless the second's is
+    // settled and reads less than [`EDGE_START_NOISE_RATIO`] times less noise.
+    let settle = |on: Vec<bool>| settle_edge(on, follows, fit_through, residuals_to, smooth, floor);
+    let (from_first, from_above) = (settle(above_first), settle(peeled));
+    if from_above.settled
+        && (!from_first.settled || EDGE_START_NOISE_RATIO * from_above.noise_sd_n < from_first.noise_sd_n)
+    {
+        from_above
+    } else {
+        from_first
+    }
+}
+
+/// The refits of the upper edge from the samples `on` until the samples kept stay the same (or
+/// come back to a set kept before), as [`upper_edge`] says.
+fn settle_edge(
+    mut on: Vec<bool>,
+    follows: &[bool],
+    fit_through: impl Fn(&[bool]) -> Line,
+    residuals_to: impl Fn(&Line) -> Vec<f64>,
+    smooth: impl Fn(&[f64], &[bool], f64) -> Vec<(f64, u8)>,
+    floor: f64,
+) -> Edge {
+    let finite = |line: &Line| line.slope.is_finite() && line.intercept.is_finite();
+    let (mut noise_sd_n, mut told_sd_n) = (f64::NAN, f64::NAN);
     // A set kept before comes back where samples at the band's border take turns: the edge
     // has settled as far as the noise lets it.
     // (Each set kept by its hash: a few bytes a round, however long the record.)
@@ -302,23 +382,32 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
     };
     let mut seen: Vec<u64> = Vec::new();
     for _ in 0..MAX_EDGE_ROUNDS {
-        let (x, y): (Vec<f64>, Vec<f64>) = depth
-            .iter()
-            .zip(weight)
-            .zip(&on)
-            .filter(|(_, k)| **k)
-            .map(|((d, w), _)| (*d, *w))
-            .unzip();
-        let line = Line::fit(&x, &y);
-        if x.len() < MIN_CUTTING_SAMPLES || !finite(&line) {
+        let line = fit_through(&on);
+        if on.iter().filter(|k| **k).count() < MIN_CUTTING_SAMPLES || !finite(&line) {
             break;
         }
         let residuals = residuals_to(&line);
         let above: Vec<f64> = residuals.iter().copied().filter(|r| *r > 0.0).collect();
         noise_sd_n = half_normal_scale(&above, floor);
-        // Spikes, told by the samples' own residuals, are left out and averaged with none.
-        let spike: Vec<bool> = residuals.iter().map(|r| *r > EDGE_SPIKE_SDS * noise_sd_n).collect();
-        let smoothed = smooth(&residuals, &spike);
+        // Two samples in one state differ by noise of √2 times the noise's standard deviation.
+        let close = EDGE_NOISE_SDS * std::f64::consts::SQRT_2 * noise_sd_n;
+        let jump = EDGE_SPIKE_SDS * std::f64::consts::SQRT_2 * noise_sd_n;
+        // Spikes, left out and averaged with none: samples above the line by more than
+        // [`EDGE_SPIKE_SDS`] times the noise, and samples that jump as far above both their
+        // neighbours where those agree (a spike on a held bit, which can lift it onto the line).
+        let r = &residuals;
+        let spike: Vec<bool> = (0..r.len())
+            .map(|k| {
+                let isolated = k > 0
+                    && k + 1 < r.len()
+                    && follows[k]
+                    && follows[k + 1]
+                    && (r[k - 1] - r[k + 1]).abs() <= close
+                    && r[k] - r[k - 1].max(r[k + 1]) > jump;
+                r[k] > EDGE_SPIKE_SDS * noise_sd_n || isolated
+            })
+            .collect();
+        let smoothed = smooth(&residuals, &spike, close);
         // The scatter of the averages of three; a sample averaged over n is told against
         // √(3/n) times it. Without enough of them, by the samples' own noise.
         let whole: Vec<f64> = smoothed
@@ -331,7 +420,13 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
         } else {
             (noise_sd_n, 1.0)
         };
-        smoothed_sd_n = scatter;
+        let told: Vec<f64> = smoothed
+            .iter()
+            .zip(&spike)
+            .filter(|(_, spike)| !**spike)
+            .map(|((_, n), _)| scatter * scatter * of / f64::from(*n))
+            .collect();
+        told_sd_n = (told.iter().sum::<f64>() / told.len().max(1) as f64).sqrt();
         let next: Vec<bool> = smoothed
             .iter()
             .zip(&spike)
@@ -344,7 +439,7 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
             return Edge {
                 on,
                 noise_sd_n,
-                smoothed_sd_n,
+                told_sd_n,
                 settled: true,
             };
         }
@@ -354,7 +449,7 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
     Edge {
         on,
         noise_sd_n,
-        smoothed_sd_n,
+        told_sd_n,
         settled: false,
     }
 }
@@ -429,9 +524,9 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     })
 }
 
-/// Where the weight's upper edge is not clear: its averaged residuals' scatter `scatter_n` more
-/// than [`MAX_EDGE_NOISE_SHARE`] of the wear flats' contact force `contact_n` (both N), no
-/// positive contact force, or an edge that did not settle. What such a record cannot tell, as
+/// Where the weight's upper edge is not clear: the standard deviation its samples were told by,
+/// `scatter_n`, more than [`MAX_EDGE_NOISE_SHARE`] of the wear flats' contact force `contact_n`
+/// (both N), no positive contact force, or an edge that did not settle. What such a record cannot tell, as
 /// said to the user.
 fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String> {
     if !settled {
@@ -453,7 +548,7 @@ fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String>
     (!clear).then(|| {
         format!(
             "the record has no axial speed of the bit, and the weight's scatter about its upper \
-             edge, averaged over neighbouring samples ({:.1} kN), is more than {:.0} % of the \
+             edge, as its samples were told ({:.1} kN; averaged over neighbours in one state), is more than {:.0} % of the \
              wear flats' contact force ({:.1} kN): a bit held or lifting blurs into one moving \
              down, and the estimates can be biased; a record with the bit's axial speed tells \
              them apart",
@@ -555,14 +650,14 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
         cutting_samples: depth.len(),
         cutting_by: cutting_by(record),
         weight_edge_noise_kn: edge.as_ref().map(|e| e.noise_sd_n / 1e3),
-        weight_edge_scatter_kn: edge.as_ref().map(|e| e.smoothed_sd_n / 1e3),
+        weight_edge_scatter_kn: edge.as_ref().map(|e| e.told_sd_n / 1e3),
         depth_of_cut_mm: (1e3 * quantile(&depth, 0.05), 1e3 * quantile(&depth, 0.95)),
         weight_line,
         torque_line,
         estimates,
         draws: kept,
         draws_out_of_bounds: out_of_bounds,
-        warning: edge.and_then(|e| blurred_edge(e.smoothed_sd_n, e.settled, weight_line.intercept)),
+        warning: edge.and_then(|e| blurred_edge(e.told_sd_n, e.settled, weight_line.intercept)),
     })
 }
 

@@ -447,13 +447,25 @@ fn a_bit_off_bottom_nearly_throughout_is_said() {
     assert!(one.get("warning").is_none(), "{one}");
 }
 
-/// A record of the public bit at 45 rpm under 150 kN (stick-slip), noise of `torque_nm` and
-/// `wob_n` added from `seed`; with the bit's axial speed or without.
+/// A record of the public bit at 45 rpm under 150 kN (stick-slip), 60 s at 50 Hz, noise of
+/// `torque_nm` and `wob_n` added from `seed`; with the bit's axial speed or without.
 fn drilling_record(torque_nm: f64, wob_n: f64, seed: u64, axial: bool) -> bitrock::data::drilling::DrillingRecord {
+    drilling_record_at(50.0, 60.0, torque_nm, wob_n, seed, axial)
+}
+
+/// [`drilling_record`] sampled at `hz` for `seconds`.
+fn drilling_record_at(
+    hz: f64,
+    seconds: f64,
+    torque_nm: f64,
+    wob_n: f64,
+    seed: u64,
+    axial: bool,
+) -> bitrock::data::drilling::DrillingRecord {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
     let mut samples = Vec::new();
-    let sched = Schedule::new(1e-4, 50.0, 30.0, 60.0).unwrap();
+    let sched = Schedule::new(1e-4, hz, 30.0, seconds).unwrap();
     coupled::integrate_with(&Assembly::default(), &sched, &job(45.0, WOB_150_KN), &mut |s| {
         samples.push(*s)
     });
@@ -498,15 +510,13 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
     }
     assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
     // Without the axial speed, the samples of a bit moving down are the weight's upper edge:
-    // noise-free, the same lines, through the samples moving down less those beside a held bit
-    // (their residuals averaged over their neighbours fall below the edge): 936 of 1,170.
+    // noise-free, the same lines, through the samples moving down (a neighbour held is in
+    // another state and left out of a sample's average) and one at axial rest with its whole
+    // contact: 1,171 for 1,170.
     let blind = calibrate(&drilling_record(0.0, 0.0, 0, false), b.radius_m, 400, 1).unwrap();
     assert_eq!(blind.cutting_by, CuttingBy::WeightEdge);
     let (found, moving) = (blind.cutting_samples, exact.cutting_samples);
-    assert!(
-        (0.78..=0.82).contains(&(found as f64 / moving as f64)),
-        "{found} of {moving}"
-    );
+    assert!(found.abs_diff(moving) <= moving / 100, "{found} of {moving}");
     for (e, t) in blind.estimates.iter().zip(truth) {
         assert!((e.value - t).abs() < 1e-6 * t, "{e:?}");
     }
@@ -545,7 +555,7 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
         }
     }
     // With 7.5 kN, the residuals averaged over three samples in time still tell them: no
-    // warning, and the intervals hold the truth as often as they should.
+    // warning, and the intervals hold the truth as often as they should (18, 18, 20, 17).
     let mut covered = [0; 4];
     for seed in 0..20 {
         let c = calibrate(&drilling_record(300.0, 7.5e3, seed, false), b.radius_m, 2000, seed).unwrap();
@@ -564,6 +574,43 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
             "{warning:?}"
         );
     }
+}
+
+#[test]
+fn a_record_sampled_slowly_calibrates_the_bit_from_its_weight_s_upper_edge() {
+    use bitrock::fit::coupled::calibrate;
+    let b = Bit::default();
+    let truth = [60.0, 0.6, b.contact_weight_n() / 1e3, 0.6];
+    // At 20, 5 and 2 Hz the bit's held spells last a sample or two: a held neighbour left in a
+    // sample's average would pull the edge's samples below it and the held ones onto it
+    // (ε 57.1 MPa and W_f 76.9 kN noise-free at 20 Hz, unwarned). Noise-free, the bit's own
+    // lines, no warning.
+    for hz in [20.0, 5.0, 2.0] {
+        let c = calibrate(&drilling_record_at(hz, 120.0, 0.0, 0.0, 0, false), b.radius_m, 400, 1).unwrap();
+        for (e, t) in c.estimates.iter().zip(truth) {
+            assert!((e.value - t).abs() < 1e-6 * t, "{hz} Hz: {e:?}");
+        }
+        assert!(c.warning.is_none(), "{hz} Hz: {:?}", c.warning);
+    }
+    // With 0.3 kN·m and 5 kN of noise at 5 Hz (600 samples), the 90 % intervals hold the truth
+    // as often as they should (19, 19, 19, 18 of 20; at least 15), the noise read within a
+    // fifth.
+    let mut covered = [0; 4];
+    for seed in 0..20 {
+        let c = calibrate(
+            &drilling_record_at(5.0, 120.0, 300.0, 5e3, seed, false),
+            b.radius_m,
+            2000,
+            seed,
+        )
+        .unwrap();
+        let noise_kn = c.weight_edge_noise_kn.unwrap();
+        assert!((noise_kn - 5.0).abs() < 1.0, "seed {seed}: {noise_kn}");
+        for (k, (e, t)) in c.estimates.iter().zip(truth).enumerate() {
+            covered[k] += usize::from(e.lo <= t && t <= e.hi);
+        }
+    }
+    assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
 }
 
 #[test]
