@@ -46,23 +46,24 @@ pub const EDGE_NOISE_SDS: f64 = 2.5;
 /// samples below the edge are kept, the edge's own upper tail kept too balances them.
 pub const EDGE_SPIKE_SDS: f64 = 4.0;
 
-/// The most scatter the weight's upper edge's samples are told by (the residuals averaged over
-/// each sample's neighbours in its state, root mean square over the samples), as a share of the
-/// wear flats' contact force, with which the edge's samples are told from a held bit's: a held
-/// bit's weight lies below the edge by the share of the contact it lacks, and noise blurs the
-/// two. On simulated stick-slip records (45 rpm, 150 kN, 71.3 kN of contact force, 60 s at 50
-/// Hz; 20 of each), the 90 % intervals held the truth as often as they should up to 9 kN of
-/// white noise (a share of 0.058-0.068 at 7.5 kN, none warned; 0.068-0.080 at 9 kN, 19
-/// warned), ε's in 14 of 20 at 10 kN (0.076-0.088) and 6 at 12 kN, while every estimate stayed
-/// within 4 % up to 12 kN. At 20 Hz (120 s), where the bit's held spells last a sample or two,
-/// ε's held it in 4 of 20 at 7.5 kN (0.060-0.081), 14 of them warned.
+/// The most scatter of the samples' deficits below the weight's upper edge (each read off the
+/// weight and the torque, averaged over the sample's neighbours in its state; root mean square
+/// over the samples), as a share of the wear flats' contact force, with which the edge's samples
+/// are told from a held bit's: a held bit's weight lies below the edge by the share of the
+/// contact it lacks, and noise blurs the two. On simulated stick-slip records (45 rpm, 150 kN,
+/// 71.3 kN of contact force, 60 s at 50 Hz, 0.3 kN·m of noise on the torque; 20 of each), the
+/// 90 % intervals held the truth as often as they should up to 20 kN of white noise on the
+/// weight (a share of 0.057-0.065 at 10 kN, none warned; 0.063-0.074 at 12 kN, 7 warned;
+/// 0.085-0.100 at 20 kN, all warned), every estimate within 5 %; at 30 kN (0.12-0.33, all
+/// warned) ε's in 8 of 20. With 1 kN·m on the torque and 15 kN on the weight at 20 Hz, ε's held
+/// it in 2 of 20, all warned.
 pub const MAX_EDGE_NOISE_SHARE: f64 = 0.07;
 
 /// How many times less noise the upper edge found from above must read than the one found
 /// from the line through every sample to be taken instead. On simulated stick-slip records
-/// sampled at 1-5 Hz (45 rpm, 150 kN, 120 s), an edge settled about held samples read 16-28
-/// kN for noise of 0-7.5 kN; from above, a narrow band a little above the edge read down to
-/// two thirds of the noise (3.1 kN for 4.9 kN at 20 Hz).
+/// sampled at 1-5 Hz (45 rpm, 150 kN, 120 s), an edge settled about held samples read 14-28 kN
+/// for noise of 3-7.5 kN; from above, a narrow band a little above the edge read down to half
+/// the noise the first start read on the edge.
 pub const EDGE_START_NOISE_RATIO: f64 = 2.0;
 
 /// Most rounds of the upper edge's refit; it settles in a few.
@@ -175,10 +176,11 @@ pub struct CoupledCalibration {
     pub cutting_by: CuttingBy,
     /// The weight's noise about its upper edge (kN, a standard deviation), where that told them.
     pub weight_edge_noise_kn: Option<f64>,
-    /// The standard deviation the samples were told by, root mean square over them (kN): the
-    /// scatter of the residuals averaged over three neighbours in time where both were in the
-    /// sample's state, √(3/n) times it for an average of n (the noise's where too few samples
-    /// have both). The warning weighs it against [`MAX_EDGE_NOISE_SHARE`] of the contact force.
+    /// The standard deviation the samples' deficits below the edge were told by, root mean
+    /// square over them (kN): each deficit read off the weight and the torque, the scatter of
+    /// those averaged over three neighbours in time where both were in the sample's state,
+    /// √(3/n) times it for an average of n (the deficits' noise where too few samples have
+    /// both). The warning weighs it against [`MAX_EDGE_NOISE_SHARE`] of the contact force.
     pub weight_edge_scatter_kn: Option<f64>,
     /// The depth of cut per revolution's 5th and 95th percentiles (mm).
     pub depth_of_cut_mm: (f64, f64),
@@ -222,9 +224,9 @@ struct Edge {
     on: Vec<bool>,
     noise_sd_n: f64,
     /// The standard deviation each sample was told by, root mean square over the samples (N):
-    /// the scatter of the residuals averaged over three neighbours in time where a sample's
-    /// neighbours were in its state, √3 times it where neither was (a held spell of a sample),
-    /// the noise's where too few samples have both.
+    /// the scatter of its deficit below the edge (read off the weight and the torque) averaged
+    /// over three neighbours in time where they were in its state, √3 times it where neither
+    /// was (a held spell of a sample), the deficits' noise where too few samples have both.
     told_sd_n: f64,
     /// Whether the samples kept stayed the same, or came back to a set kept before, within
     /// [`MAX_EDGE_ROUNDS`].
@@ -245,33 +247,28 @@ fn half_normal_scale(above: &[f64], floor: f64) -> f64 {
 }
 
 /// The upper edge of `weight` against `depth`. The least-squares line through every sample is
-/// pulled down by the samples below the edge, so the samples above it, which the edge's own
-/// samples are most of, give a first line (every sample, where fewer than
-/// [`MIN_CUTTING_SAMPLES`] are above); the samples above the line through those above, and so
-/// on down to an eighth of the samples, give a second start, from above (the two starts weighed
-/// by [`EDGE_START_NOISE_RATIO`]). Then, until the samples kept stay the same (or come back to
-/// a set kept before), the line is fitted through the samples on it. A sample is told by
-/// its residual averaged over its neighbours in time (`follows[k]`: sample k is the record's
-/// next after sample k − 1) that are in its state: a held bit stays held for a spell, white
-/// noise does not, so the average shrinks the noise and keeps a held bit's deficit. A
-/// neighbour whose residual differs from the sample's by more than [`EDGE_NOISE_SDS`] times the
-/// difference's noise (√2 times the noise) is in another state and left out: in a record
-/// sampled so slowly that a held spell lasts a sample or two, averaging across the change
-/// would pull the edge's samples below it and lift the held ones onto it. It is on the line
-/// where that average is no further below it than [`EDGE_NOISE_SDS`] times the averages'
-/// scatter (scaled by √(3/n) for an average of n) nor above it than [`EDGE_SPIKE_SDS`] times,
-/// and it is no spike ([`EDGE_SPIKE_SDS`]). The noise and the scatter are read above the line,
-/// where only the edge's samples lie: those residuals are half-normal ([`half_normal_scale`]).
-fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
+/// pulled down by the samples below the edge, so the samples above it, which the edge's own samples
+/// are most of, give a first line (every sample, where fewer than [`MIN_CUTTING_SAMPLES`] are
+/// above); the samples above the line through those above, and so on down to an eighth of the
+/// samples, give a second start, from above (the two starts weighed by [`EDGE_START_NOISE_RATIO`]).
+/// Then, until the samples kept stay the same (or come back to a set kept before), the line is
+/// fitted through the samples on it. A sample is told by its deficit below the line, read off its
+/// weight's residual and its torque's about the torque's line through the same samples
+/// ([`joint_residuals`]), averaged over its neighbours in time (`follows[k]`: sample k is the
+/// record's next after sample k − 1) that are in its state: a held bit stays held for a spell,
+/// white noise does not, so the average shrinks the noise and keeps a held bit's deficit. A
+/// neighbour whose deficit differs from the sample's by more than [`EDGE_NOISE_SDS`] times the
+/// difference's noise (√2 times the deficits') is in another state and left out: in a record
+/// sampled so slowly that a held spell lasts a sample or two, averaging across the change would
+/// pull the edge's samples below it and lift the held ones onto it. It is on the line where that
+/// average is no further below it than [`EDGE_NOISE_SDS`] times the averages' scatter (scaled by
+/// √(3/n) for an average of n) nor above it than [`EDGE_SPIKE_SDS`] times, and it is no spike
+/// ([`EDGE_SPIKE_SDS`]). The noises and the scatter are read above the lines, where only the edge's
+/// samples lie: those residuals are half-normal ([`half_normal_scale`]).
+fn upper_edge(depth: &[f64], weight: &[f64], torque: &[f64], follows: &[bool]) -> Edge {
     // Noise-free, the samples on the line differ from it by rounding alone.
     let floor = 1e-9 * weight.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
-    let residuals_to = |line: &Line| -> Vec<f64> {
-        depth
-            .iter()
-            .zip(weight)
-            .map(|(d, w)| w - line.slope * d - line.intercept)
-            .collect()
-    };
+    let residuals_to = |line: &Line| residuals(depth, weight, line);
     let finite = |line: &Line| line.slope.is_finite() && line.intercept.is_finite();
     let every = vec![true; depth.len()];
     let first = Line::fit(depth, weight);
@@ -304,16 +301,7 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
             .collect()
     };
     let count = |set: &[bool]| set.iter().filter(|k| **k).count();
-    let fit_through = |set: &[bool]| -> Line {
-        let (x, y): (Vec<f64>, Vec<f64>) = depth
-            .iter()
-            .zip(weight)
-            .zip(set)
-            .filter(|(_, k)| **k)
-            .map(|((d, w), _)| (*d, *w))
-            .unzip();
-        Line::fit(&x, &y)
-    };
+    let fit_through = |set: &[bool]| line_through(depth, weight, set);
     // The first start: the samples above the line through all of them.
     let none = vec![false; depth.len()];
     let mut above_first: Vec<bool> = smooth(&residuals_to(&first), &none, f64::INFINITY)
@@ -348,7 +336,7 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
     // noise, several times the noise; from above, the refits can come to rest a little above
     // the edge, in a narrower band. The first start's edge is kept unless the second's is
     // settled and reads less than [`EDGE_START_NOISE_RATIO`] times less noise.
-    let settle = |on: Vec<bool>| settle_edge(on, follows, fit_through, residuals_to, smooth, floor);
+    let settle = |on: Vec<bool>| settle_edge(on, [depth, weight, torque], follows, smooth, floor);
     let (from_first, from_above) = (settle(above_first), settle(peeled));
     if from_above.settled
         && (!from_first.settled || EDGE_START_NOISE_RATIO * from_above.noise_sd_n < from_first.noise_sd_n)
@@ -359,13 +347,60 @@ fn upper_edge(depth: &[f64], weight: &[f64], follows: &[bool]) -> Edge {
     }
 }
 
+/// The weight's residuals `residual_w` (noise `noise_w`) joined with the torque's about its own
+/// line through the samples `on`: a held bit's torque lies below its line by κ = ½·a·μ·γ times
+/// its weight's deficit, so each sample's deficit is weighed from both, by their noises. κ is
+/// the torque's residuals' regression on the weight's (through the origin), so that a torque
+/// that does not fall with the weight (κ ≤ 0) leaves the weight's residuals as they are. In
+/// weight units (N), with their noise.
+fn joint_residuals(residual_w: &[f64], noise_w: f64, [depth, torque]: [&[f64]; 2], on: &[bool]) -> (Vec<f64>, f64) {
+    let residual_t = residuals(depth, torque, &line_through(depth, torque, on));
+    let kappa = residual_w.iter().zip(&residual_t).map(|(w, t)| w * t).sum::<f64>()
+        / residual_w.iter().map(|w| w * w).sum::<f64>();
+    // The torque's noise about its line, read above it as the weight's is.
+    let above: Vec<f64> = residual_t.iter().copied().filter(|r| *r > 0.0).collect();
+    // Noise-free, the samples on the line differ from it by rounding alone.
+    let floor = 1e-9 * torque.iter().fold(0.0_f64, |m, t| m.max(t.abs()));
+    let noise_t = half_normal_scale(&above, floor);
+    if !(kappa > 0.0 && kappa.is_finite() && noise_t > 0.0 && noise_w > 0.0) {
+        return (residual_w.to_vec(), noise_w);
+    }
+    // Inverse-variance weights of the two reads of a sample's deficit: r_w, and r_t/κ.
+    let (ww, wt) = (noise_w.powi(-2), (noise_t / kappa).powi(-2));
+    let joint = residual_w
+        .iter()
+        .zip(&residual_t)
+        .map(|(rw, rt)| (ww * rw + wt * rt / kappa) / (ww + wt))
+        .collect();
+    (joint, (ww + wt).sqrt().recip())
+}
+
+/// A straight line through `y` against `x` at the samples in `set`.
+fn line_through(x: &[f64], y: &[f64], set: &[bool]) -> Line {
+    let (x, y): (Vec<f64>, Vec<f64>) = x
+        .iter()
+        .zip(y)
+        .zip(set)
+        .filter(|(_, k)| **k)
+        .map(|((x, y), _)| (*x, *y))
+        .unzip();
+    Line::fit(&x, &y)
+}
+
+/// `y`'s residuals about `line` against `x`.
+fn residuals(x: &[f64], y: &[f64], line: &Line) -> Vec<f64> {
+    x.iter()
+        .zip(y)
+        .map(|(x, y)| y - line.slope * x - line.intercept)
+        .collect()
+}
+
 /// The refits of the upper edge from the samples `on` until the samples kept stay the same (or
 /// come back to a set kept before), as [`upper_edge`] says.
 fn settle_edge(
     mut on: Vec<bool>,
+    [depth, weight, torque]: [&[f64]; 3],
     follows: &[bool],
-    fit_through: impl Fn(&[bool]) -> Line,
-    residuals_to: impl Fn(&Line) -> Vec<f64>,
     smooth: impl Fn(&[f64], &[bool], f64) -> Vec<(f64, u8)>,
     floor: f64,
 ) -> Edge {
@@ -382,15 +417,17 @@ fn settle_edge(
     };
     let mut seen: Vec<u64> = Vec::new();
     for _ in 0..MAX_EDGE_ROUNDS {
-        let line = fit_through(&on);
+        let line = line_through(depth, weight, &on);
         if on.iter().filter(|k| **k).count() < MIN_CUTTING_SAMPLES || !finite(&line) {
             break;
         }
-        let residuals = residuals_to(&line);
+        let residuals = residuals(depth, weight, &line);
         let above: Vec<f64> = residuals.iter().copied().filter(|r| *r > 0.0).collect();
         noise_sd_n = half_normal_scale(&above, floor);
+        // Each sample is told by its deficit read off both lines.
+        let (told_by, told_noise) = joint_residuals(&residuals, noise_sd_n, [depth, torque], &on);
         // Two samples in one state differ by noise of √2 times the noise's standard deviation.
-        let close = EDGE_NOISE_SDS * std::f64::consts::SQRT_2 * noise_sd_n;
+        let close = EDGE_NOISE_SDS * std::f64::consts::SQRT_2 * told_noise;
         let jump = EDGE_SPIKE_SDS * std::f64::consts::SQRT_2 * noise_sd_n;
         // Spikes, left out and averaged with none: samples above the line by more than
         // [`EDGE_SPIKE_SDS`] times the noise, and samples that jump as far above both their
@@ -402,12 +439,12 @@ fn settle_edge(
                     && k + 1 < r.len()
                     && follows[k]
                     && follows[k + 1]
-                    && (r[k - 1] - r[k + 1]).abs() <= close
+                    && (r[k - 1] - r[k + 1]).abs() <= jump * EDGE_NOISE_SDS / EDGE_SPIKE_SDS
                     && r[k] - r[k - 1].max(r[k + 1]) > jump;
                 r[k] > EDGE_SPIKE_SDS * noise_sd_n || isolated
             })
             .collect();
-        let smoothed = smooth(&residuals, &spike, close);
+        let smoothed = smooth(&told_by, &spike, close);
         // The scatter of the averages of three; a sample averaged over n is told against
         // √(3/n) times it. Without enough of them, by the samples' own noise.
         let whole: Vec<f64> = smoothed
@@ -418,7 +455,7 @@ fn settle_edge(
         let (scatter, of) = if whole.len() >= MIN_CUTTING_SAMPLES {
             (half_normal_scale(&whole, floor), 3.0)
         } else {
-            (noise_sd_n, 1.0)
+            (told_noise, 1.0)
         };
         let told: Vec<f64> = smoothed
             .iter()
@@ -495,7 +532,7 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     let mut edge_found = None;
     // Without the depth's spread no edge is found, and the calibration refuses for the spread.
     if record.axial_speed_m_s.is_none() && depth.len() >= MIN_CUTTING_SAMPLES && spread(&depth).is_ok() {
-        let edge = upper_edge(&depth, &weight, &follows);
+        let edge = upper_edge(&depth, &weight, &torque, &follows);
         let on_edge = |values: Vec<f64>| -> Vec<f64> {
             values
                 .into_iter()
@@ -547,11 +584,11 @@ fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String>
     let clear = scatter_n <= MAX_EDGE_NOISE_SHARE * contact_n;
     (!clear).then(|| {
         format!(
-            "the record has no axial speed of the bit, and the weight's scatter about its upper \
-             edge, as its samples were told ({:.1} kN; averaged over neighbours in one state), is more than {:.0} % of the \
-             wear flats' contact force ({:.1} kN): a bit held or lifting blurs into one moving \
-             down, and the estimates can be biased; a record with the bit's axial speed tells \
-             them apart",
+            "the record has no axial speed of the bit, and the samples' deficits below the \
+             weight's upper edge (read off the weight and the torque, averaged over neighbours \
+             in one state) scatter by {:.1} kN, more than {:.0} % of the wear flats' contact \
+             force ({:.1} kN): a bit held or lifting blurs into one moving down, and the \
+             estimates can be biased; a record with the bit's axial speed tells them apart",
             scatter_n / 1e3,
             100.0 * MAX_EDGE_NOISE_SHARE,
             contact_n / 1e3
@@ -686,6 +723,11 @@ mod tests {
         assert!(l.slope_sd < 1e-6 && (l.r_squared - 1.0).abs() < 1e-12);
     }
 
+    /// A torque that tells nothing of the weight's deficits: the weight's edge alone.
+    fn silent(n: usize) -> Vec<f64> {
+        vec![0.0; n]
+    }
+
     #[test]
     fn the_upper_edge_is_the_line_the_samples_below_it_lack_part_of() {
         // Half the samples on W = 2e6·d + 7e4, the rest below it by up to the whole 7e4.
@@ -702,7 +744,7 @@ mod tests {
             .enumerate()
             .map(|(i, d)| 2e6 * d + 7e4 - lacking(i))
             .collect();
-        let edge = upper_edge(&depth, &weight, &vec![false; depth.len()]);
+        let edge = upper_edge(&depth, &weight, &silent(depth.len()), &vec![false; depth.len()]);
         for (i, on) in edge.on.iter().enumerate() {
             assert_eq!(*on, lacking(i) == 0.0, "sample {i}");
         }
@@ -718,7 +760,7 @@ mod tests {
                     2e6 * d + 7e4 + 5e3 * z
                 })
                 .collect();
-            let edge = upper_edge(&depth, &noisy, &vec![false; depth.len()]);
+            let edge = upper_edge(&depth, &noisy, &silent(depth.len()), &vec![false; depth.len()]);
             let kept = edge.on.iter().filter(|on| **on).count();
             assert!(
                 kept >= 1960 && (edge.noise_sd_n - 5e3).abs() < 300.0,
@@ -745,7 +787,7 @@ mod tests {
             // Alone and with their neighbours in time: a spike is told by its own residual, and
             // averaged with none.
             for follows in [vec![false; 2000], (0..2000).map(|i| i > 0).collect()] {
-                let edge = upper_edge(&depth, &weight, &follows);
+                let edge = upper_edge(&depth, &weight, &silent(depth.len()), &follows);
                 assert!(
                     edge.settled && (edge.noise_sd_n - 5e3).abs() < 300.0,
                     "seed {seed}: {}",
@@ -806,7 +848,7 @@ mod tests {
             })
             .collect();
         let kept = |follows: &[bool], of_held: bool| {
-            let edge = upper_edge(&depth, &weight, follows);
+            let edge = upper_edge(&depth, &weight, &silent(depth.len()), follows);
             (0..n).filter(|&i| held(i) == of_held && edge.on[i]).count()
         };
         let in_runs: Vec<bool> = (0..n).map(|i| i > 0).collect();
@@ -832,7 +874,7 @@ mod tests {
             .map(|(i, d)| 2e6 * d + 7e4 + if i % 2 == 0 { 0.5 } else { -0.5 })
             .collect();
         for follows in [vec![false; 30], (0..30).map(|i| i > 0).collect()] {
-            let edge = upper_edge(&depth, &weight, &follows);
+            let edge = upper_edge(&depth, &weight, &silent(depth.len()), &follows);
             assert!(edge.settled && edge.on.iter().all(|on| *on), "{:?}", edge.on);
         }
     }

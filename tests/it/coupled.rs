@@ -554,20 +554,23 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
             assert!((e.value - t).abs() < 0.05 * t, "seed {seed}: {e:?}");
         }
     }
-    // With 7.5 kN, the residuals averaged over three samples in time still tell them: no
-    // warning, and the intervals hold the truth as often as they should (18, 18, 20, 17).
+    // With 10 kN, each sample's deficit read off the weight and the torque and averaged over
+    // three samples in time still tells them: no warning, and the intervals hold the truth as
+    // often as they should (19, 17, 19, 18; by the weight alone ε's held it in 14 of 20, and
+    // every record was warned of).
     let mut covered = [0; 4];
     for seed in 0..20 {
-        let c = calibrate(&drilling_record(300.0, 7.5e3, seed, false), b.radius_m, 2000, seed).unwrap();
+        let c = calibrate(&drilling_record(300.0, 10e3, seed, false), b.radius_m, 2000, seed).unwrap();
         assert!(c.warning.is_none(), "{:?}", c.warning);
         for (k, (e, t)) in c.estimates.iter().zip(truth).enumerate() {
             covered[k] += usize::from(e.lo <= t && t <= e.hi);
         }
     }
     assert!(covered.iter().all(|&c| c >= 15), "{covered:?} of 20");
-    // With 10 kN, a held bit blurs into one moving down: said in every record.
+    // With 10 kN on the weight and 1 kN·m on the torque, a held bit blurs into one moving
+    // down: said in every record.
     for seed in 0..10 {
-        let c = calibrate(&drilling_record(300.0, 10e3, seed, false), b.radius_m, 20, seed).unwrap();
+        let c = calibrate(&drilling_record(1e3, 10e3, seed, false), b.radius_m, 20, seed).unwrap();
         let warning = c.warning.unwrap_or_default();
         assert!(
             warning.contains("scatter") && warning.contains("axial speed"),
@@ -593,8 +596,8 @@ fn a_record_sampled_slowly_calibrates_the_bit_from_its_weight_s_upper_edge() {
         assert!(c.warning.is_none(), "{hz} Hz: {:?}", c.warning);
     }
     // With 0.3 kN·m and 5 kN of noise at 5 Hz (600 samples), the 90 % intervals hold the truth
-    // as often as they should (19, 19, 19, 18 of 20; at least 15), the noise read within a
-    // fifth.
+    // as often as they should (20, 18, 20, 19 of 20; at least 15), the noise read within a
+    // quarter.
     let mut covered = [0; 4];
     for seed in 0..20 {
         let c = calibrate(
@@ -605,7 +608,7 @@ fn a_record_sampled_slowly_calibrates_the_bit_from_its_weight_s_upper_edge() {
         )
         .unwrap();
         let noise_kn = c.weight_edge_noise_kn.unwrap();
-        assert!((noise_kn - 5.0).abs() < 1.0, "seed {seed}: {noise_kn}");
+        assert!((noise_kn - 5.0).abs() < 1.25, "seed {seed}: {noise_kn}");
         for (k, (e, t)) in c.estimates.iter().zip(truth).enumerate() {
             covered[k] += usize::from(e.lo <= t && t <= e.hi);
         }
