@@ -863,6 +863,51 @@ mod tests {
     }
 
     #[test]
+    fn a_held_bit_s_deficit_is_read_off_the_weight_and_the_torque_by_their_noises() {
+        // Half the samples on the lines, the rest lacking up to 70 kN of the contact; the torque
+        // lacks κ = 0.0324 m times as much. 8 kN on the weight, 0.3 kN·m on the torque: the
+        // torque's read of a deficit (0.3/0.0324 = 9.3 kN) and the weight's weigh about alike.
+        let n = 4000;
+        let kappa = 0.0324;
+        let depth: Vec<f64> = (0..n).map(|i| 0.005 + 0.03 * f64::from(i as u32 % 97) / 97.0).collect();
+        let deficit = |i: usize| {
+            if i.is_multiple_of(2) {
+                0.0
+            } else {
+                7e4 * ((i * 7919) % 1000) as f64 / 1000.0
+            }
+        };
+        let mut rng = StdRng::seed_from_u64(5);
+        let mut normal = |sd: f64| -> f64 {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            sd * z
+        };
+        let residual_w: Vec<f64> = (0..n).map(|i| -deficit(i) + normal(8e3)).collect();
+        let torque: Vec<f64> = (0..n)
+            .map(|i| 3e5 * depth[i] + kappa * (7e4 - deficit(i)) + normal(300.0))
+            .collect();
+        let on: Vec<bool> = (0..n).map(|i| deficit(i) == 0.0).collect();
+        let (joint, noise) = joint_residuals(&residual_w, 8e3, [&depth, &torque], &on);
+        let expected = (8e3_f64.powi(-2) + (kappa / 300.0).powi(2)).sqrt().recip();
+        assert!((noise - expected).abs() < 0.05 * expected, "{noise} for {expected}");
+        // Each deficit read within its noise: the errors' spread is the joint noise's.
+        let errors: Vec<f64> = (0..n).map(|i| joint[i] + deficit(i)).collect();
+        let sd = (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
+        assert!((sd - expected).abs() < 0.1 * expected, "{sd} for {expected}");
+        // A torque that does not fall with the weight leaves the weight's read nearly alone, and
+        // one with no noise either (an empty channel) leaves it exactly.
+        let flat: Vec<f64> = (0..n).map(|i| 3e5 * depth[i] + 2e3 + normal(300.0)).collect();
+        let (joint, noise) = joint_residuals(&residual_w, 8e3, [&depth, &flat], &on);
+        assert!(noise > 0.95 * 8e3, "{noise}");
+        let moved = (0..n).map(|i| (joint[i] - residual_w[i]).abs()).fold(0.0, f64::max);
+        assert!(moved < 0.2 * 8e3, "{moved}");
+        assert_eq!(
+            joint_residuals(&residual_w, 8e3, [&depth, &silent(n)], &on),
+            (residual_w.clone(), 8e3)
+        );
+    }
+
+    #[test]
     fn a_short_record_on_one_line_keeps_every_sample() {
         // 30 samples on the edge: those above the least-squares line are fewer than a
         // calibration takes, and the edge starts from all of them.
