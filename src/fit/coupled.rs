@@ -53,10 +53,10 @@ pub const EDGE_SPIKE_SDS: f64 = 4.0;
 /// contact it lacks, and noise blurs the two. On simulated stick-slip records (45 rpm, 150 kN,
 /// 71.3 kN of contact force, 60 s at 50 Hz, 0.3 kN·m of noise on the torque; 20 of each), the
 /// 90 % intervals held the truth as often as they should up to 20 kN of white noise on the
-/// weight (a share of 0.057-0.065 at 10 kN, none warned; 0.063-0.074 at 12 kN, 7 warned;
-/// 0.085-0.100 at 20 kN, all warned), every estimate within 5 %; at 30 kN (0.12-0.33, all
-/// warned) ε's in 8 of 20. With 1 kN·m on the torque and 15 kN on the weight at 20 Hz, ε's held
-/// it in 2 of 20, all warned.
+/// weight (a share of 0.054-0.063 at 10 kN and 0.059-0.068 at 12 kN, none warned; 0.063-0.075
+/// at 15 kN, 7 warned; 0.065-0.083 at 20 kN, 13 warned), every estimate within 5 %; at 30 kN
+/// (0.24-0.28, all warned) ε's in none. With 1 kN·m on the torque and 15 kN on the weight at 20
+/// Hz, ε's held it in 2 of 20, all warned.
 pub const MAX_EDGE_NOISE_SHARE: f64 = 0.07;
 
 /// How many times less noise the upper edge found from above must read than the one found
@@ -179,8 +179,8 @@ pub struct CoupledCalibration {
     /// The standard deviation the samples' deficits below the edge were told by, root mean
     /// square over them (kN): each deficit read off the weight and the torque, the scatter of
     /// those averaged over three neighbours in time where both were in the sample's state,
-    /// √(3/n) times it for an average of n (the deficits' noise where too few samples have
-    /// both). The warning weighs it against [`MAX_EDGE_NOISE_SHARE`] of the contact force.
+    /// √(3/n) times it for an average of n (the deficits' noise over √n where too few samples
+    /// have both). The warning weighs it against [`MAX_EDGE_NOISE_SHARE`] of the contact force.
     pub weight_edge_scatter_kn: Option<f64>,
     /// The depth of cut per revolution's 5th and 95th percentiles (mm).
     pub depth_of_cut_mm: (f64, f64),
@@ -226,7 +226,8 @@ struct Edge {
     /// The standard deviation each sample was told by, root mean square over the samples (N):
     /// the scatter of its deficit below the edge (read off the weight and the torque) averaged
     /// over three neighbours in time where they were in its state, √3 times it where neither
-    /// was (a held spell of a sample), the deficits' noise where too few samples have both.
+    /// was (a held spell of a sample); the deficits' noise over √n, for an average of n, where
+    /// too few samples have both.
     told_sd_n: f64,
     /// Whether the samples kept stayed the same, or came back to a set kept before, within
     /// [`MAX_EDGE_ROUNDS`].
@@ -349,14 +350,23 @@ fn upper_edge(depth: &[f64], weight: &[f64], torque: &[f64], follows: &[bool]) -
 
 /// The weight's residuals `residual_w` (noise `noise_w`) joined with the torque's about its own
 /// line through the samples `on`: a held bit's torque lies below its line by κ = ½·a·μ·γ times
-/// its weight's deficit, so each sample's deficit is weighed from both, by their noises. κ is
-/// the torque's residuals' regression on the weight's (through the origin), so that a torque
-/// that does not fall with the weight (κ ≤ 0) leaves the weight's residuals as they are. In
-/// weight units (N), with their noise.
+/// its weight's deficit, so each sample's deficit is weighed from both, by their noises (taken
+/// as independent: noises that move together would be read as smaller than they are). κ is the
+/// torque's residuals' regression on the weight's (through the origin), so that a torque that
+/// does not fall with the weight (κ ≤ 0) leaves the weight's residuals as they are. In weight
+/// units (N), with their noise.
 fn joint_residuals(residual_w: &[f64], noise_w: f64, [depth, torque]: [&[f64]; 2], on: &[bool]) -> (Vec<f64>, f64) {
     let residual_t = residuals(depth, torque, &line_through(depth, torque, on));
-    let kappa = residual_w.iter().zip(&residual_t).map(|(w, t)| w * t).sum::<f64>()
-        / residual_w.iter().map(|w| w * w).sum::<f64>();
+    // The weight's noise is taken out of its residuals' spread (errors in the regressor would
+    // shrink κ, most where the weight is noisiest and the torque helps most). Where the
+    // deficits spread less than the noise, κ is not read, and the weight is told alone.
+    let noise_square = residual_w.len() as f64 * noise_w * noise_w;
+    let spread_w = residual_w.iter().map(|w| w * w).sum::<f64>() - noise_square;
+    let kappa = if spread_w >= noise_square {
+        residual_w.iter().zip(&residual_t).map(|(w, t)| w * t).sum::<f64>() / spread_w
+    } else {
+        0.0
+    };
     // The torque's noise about its line, read above it as the weight's is.
     let above: Vec<f64> = residual_t.iter().copied().filter(|r| *r > 0.0).collect();
     // Noise-free, the samples on the line differ from it by rounding alone.
@@ -563,8 +573,8 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
 
 /// Where the weight's upper edge is not clear: the standard deviation its samples were told by,
 /// `scatter_n`, more than [`MAX_EDGE_NOISE_SHARE`] of the wear flats' contact force `contact_n`
-/// (both N), no positive contact force, or an edge that did not settle. What such a record cannot tell, as
-/// said to the user.
+/// (both N), no positive contact force, or an edge that did not settle. What such a record cannot
+/// tell, as said to the user.
 fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String> {
     if !settled {
         return Some(format!(

@@ -556,7 +556,7 @@ fn a_stick_slip_record_calibrates_the_bit_and_its_intervals_cover_the_truth() {
     }
     // With 10 kN, each sample's deficit read off the weight and the torque and averaged over
     // three samples in time still tells them: no warning, and the intervals hold the truth as
-    // often as they should (19, 17, 19, 18; by the weight alone ε's held it in 14 of 20, and
+    // often as they should (19, 17, 18, 18; by the weight alone ε's held it in 14 of 20, and
     // every record was warned of).
     let mut covered = [0; 4];
     for seed in 0..20 {
@@ -596,7 +596,7 @@ fn a_record_sampled_slowly_calibrates_the_bit_from_its_weight_s_upper_edge() {
         assert!(c.warning.is_none(), "{hz} Hz: {:?}", c.warning);
     }
     // With 0.3 kN·m and 5 kN of noise at 5 Hz (600 samples), the 90 % intervals hold the truth
-    // as often as they should (20, 18, 20, 19 of 20; at least 15), the noise read within a
+    // as often as they should (20, 17, 20, 20 of 20; at least 15), the noise read within a
     // quarter.
     let mut covered = [0; 4];
     for seed in 0..20 {
