@@ -714,7 +714,8 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
         c.weight_edge_noise_kn
             .zip(c.weight_edge_scatter_kn)
             .map_or(String::new(), |(sd, scatter)| format!(
-                " (the weight's noise about it {sd:.2} kN; averaged over neighbours in one state, told by {scatter:.2} kN)"
+                " (the weight's noise about it {sd:.2} kN; averaged over neighbours in one state, \
+                 told by {scatter:.2} kN)"
             )),
         c.depth_of_cut_mm.0,
         c.depth_of_cut_mm.1,

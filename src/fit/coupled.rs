@@ -60,7 +60,7 @@ pub const EDGE_SPIKE_SDS: f64 = 4.0;
 pub const MAX_EDGE_NOISE_SHARE: f64 = 0.07;
 
 /// How many times less noise the upper edge found from above must read than the one found
-/// from the line through every sample to be taken instead. On simulated stick-slip records
+/// from the samples above the line through every sample to be taken instead. On simulated stick-slip records
 /// sampled at 1-5 Hz (45 rpm, 150 kN, 120 s), an edge settled about held samples read 14-28 kN
 /// for noise of 3-7.5 kN; from above, a narrow band a little above the edge read down to half
 /// the noise the first start read on the edge.
@@ -348,22 +348,37 @@ fn upper_edge(depth: &[f64], weight: &[f64], torque: &[f64], follows: &[bool]) -
     }
 }
 
-/// The weight's residuals `residual_w` (noise `noise_w`) joined with the torque's about its own
-/// line through the samples `on`: a held bit's torque lies below its line by κ = ½·a·μ·γ times
+/// The weight's residuals `residual_w` (noise `noise_w`; `spike` marks its spikes) joined with
+/// the torque's about its own line through the samples `on`: a held bit's torque lies below its line by κ = ½·a·μ·γ times
 /// its weight's deficit, so each sample's deficit is weighed from both, by their noises (taken
 /// as independent: noises that move together would be read as smaller than they are). κ is the
 /// torque's residuals' regression on the weight's (through the origin), so that a torque that
 /// does not fall with the weight (κ ≤ 0) leaves the weight's residuals as they are. In weight
 /// units (N), with their noise.
-fn joint_residuals(residual_w: &[f64], noise_w: f64, [depth, torque]: [&[f64]; 2], on: &[bool]) -> (Vec<f64>, f64) {
+fn joint_residuals(
+    residual_w: &[f64],
+    noise_w: f64,
+    [depth, torque]: [&[f64]; 2],
+    on: &[bool],
+    spike: &[bool],
+) -> (Vec<f64>, f64) {
     let residual_t = residuals(depth, torque, &line_through(depth, torque, on));
-    // The weight's noise is taken out of its residuals' spread (errors in the regressor would
-    // shrink κ, most where the weight is noisiest and the torque helps most). Where the
-    // deficits spread less than the noise, κ is not read, and the weight is told alone.
-    let noise_square = residual_w.len() as f64 * noise_w * noise_w;
-    let spread_w = residual_w.iter().map(|w| w * w).sum::<f64>() - noise_square;
+    // κ from the samples that are no spikes of the weight. The weight's noise is taken out of
+    // its residuals' spread (errors in the regressor would shrink κ, most where the weight is
+    // noisiest and the torque helps most). Where the deficits spread less than the noise, κ is
+    // not read, and the weight is told alone.
+    let pairs = || {
+        residual_w
+            .iter()
+            .zip(&residual_t)
+            .zip(spike)
+            .filter(|(_, s)| !**s)
+            .map(|(p, _)| p)
+    };
+    let noise_square = pairs().count() as f64 * noise_w * noise_w;
+    let spread_w = pairs().map(|(w, _)| w * w).sum::<f64>() - noise_square;
     let kappa = if spread_w >= noise_square {
-        residual_w.iter().zip(&residual_t).map(|(w, t)| w * t).sum::<f64>() / spread_w
+        pairs().map(|(w, t)| w * t).sum::<f64>() / spread_w
     } else {
         0.0
     };
@@ -434,10 +449,6 @@ fn settle_edge(
         let residuals = residuals(depth, weight, &line);
         let above: Vec<f64> = residuals.iter().copied().filter(|r| *r > 0.0).collect();
         noise_sd_n = half_normal_scale(&above, floor);
-        // Each sample is told by its deficit read off both lines.
-        let (told_by, told_noise) = joint_residuals(&residuals, noise_sd_n, [depth, torque], &on);
-        // Two samples in one state differ by noise of √2 times the noise's standard deviation.
-        let close = EDGE_NOISE_SDS * std::f64::consts::SQRT_2 * told_noise;
         let jump = EDGE_SPIKE_SDS * std::f64::consts::SQRT_2 * noise_sd_n;
         // Spikes, left out and averaged with none: samples above the line by more than
         // [`EDGE_SPIKE_SDS`] times the noise, and samples that jump as far above both their
@@ -454,6 +465,10 @@ fn settle_edge(
                 r[k] > EDGE_SPIKE_SDS * noise_sd_n || isolated
             })
             .collect();
+        // Each sample is told by its deficit read off both lines.
+        let (told_by, told_noise) = joint_residuals(&residuals, noise_sd_n, [depth, torque], &on, &spike);
+        // Two samples in one state differ by noise of √2 times the noise's standard deviation.
+        let close = EDGE_NOISE_SDS * std::f64::consts::SQRT_2 * told_noise;
         let smoothed = smooth(&told_by, &spike, close);
         // The scatter of the averages of three; a sample averaged over n is told against
         // √(3/n) times it. Without enough of them, by the samples' own noise.
@@ -926,7 +941,7 @@ mod tests {
             .map(|i| 3e5 * depth[i] + kappa * (7e4 - deficit(i)) + normal(300.0))
             .collect();
         let on: Vec<bool> = (0..n).map(|i| deficit(i) == 0.0).collect();
-        let (joint, noise) = joint_residuals(&residual_w, 8e3, [&depth, &torque], &on);
+        let (joint, noise) = joint_residuals(&residual_w, 8e3, [&depth, &torque], &on, &vec![false; n]);
         let expected = (8e3_f64.powi(-2) + (kappa / 300.0).powi(2)).sqrt().recip();
         assert!((noise - expected).abs() < 0.05 * expected, "{noise} for {expected}");
         // Each deficit read within its noise: the errors' spread is the joint noise's.
@@ -936,12 +951,12 @@ mod tests {
         // A torque that does not fall with the weight leaves the weight's read nearly alone, and
         // one with no noise either (an empty channel) leaves it exactly.
         let flat: Vec<f64> = (0..n).map(|i| 3e5 * depth[i] + 2e3 + normal(300.0)).collect();
-        let (joint, noise) = joint_residuals(&residual_w, 8e3, [&depth, &flat], &on);
+        let (joint, noise) = joint_residuals(&residual_w, 8e3, [&depth, &flat], &on, &vec![false; n]);
         assert!(noise > 0.95 * 8e3, "{noise}");
         let moved = (0..n).map(|i| (joint[i] - residual_w[i]).abs()).fold(0.0, f64::max);
         assert!(moved < 0.2 * 8e3, "{moved}");
         assert_eq!(
-            joint_residuals(&residual_w, 8e3, [&depth, &silent(n)], &on),
+            joint_residuals(&residual_w, 8e3, [&depth, &silent(n)], &on, &vec![false; n]),
             (residual_w.clone(), 8e3)
         );
     }

@@ -732,8 +732,8 @@ fn a_stick_slipping_bit_needs_more_to_escape_than_steady_drilling_to_stay_and_th
     // each of 16 posterior draws' bits settled at 45 rpm and 150 kN and continued from there,
     // on a map reaching down to 100 kN. In every cell most draws do what the bit does but at
     // the bistable band's edge (at 80 rpm and 150 kN four of 16 stay stuck; at 45 rpm and 130
-    // kN ten vibrate), so the way out may lie one step beyond the bit's own. Applied to the bit itself from its
-    // stuck state, it works.
+    // kN ten vibrate), so the way out may lie one step beyond the bit's own. Applied to the bit
+    // itself from its stuck state, it works.
     let calibration =
         bitrock::fit::coupled::calibrate(&drilling_record(300.0, 5e3, 7, false), Bit::default().radius_m, 4000, 7)
             .unwrap();
@@ -771,8 +771,8 @@ fn a_stick_slipping_bit_needs_more_to_escape_than_steady_drilling_to_stay_and_th
     let advice = &posterior.advice;
     let (rpm, p) = advice.faster_rpm.expect("a way out by speed");
     assert!((rpm == 80.0 || rpm == 100.0) && p >= 0.9, "{advice:?}");
-    // By weight, no lighter than the bit's own way out needs (130 kN): at 45 rpm and 130 kN the
-    // draws are split, at the band's edge.
+    // By weight, between the map's lightest (100 kN) and the bit's own way out (130 kN): at 45
+    // rpm and 130 kN the draws are split, at the band's edge.
     let (lighter_kn, p_lighter) = advice.lighter_drive.expect("a way out by weight");
     assert!((100.0..=130.0).contains(&lighter_kn) && p_lighter >= 0.9, "{advice:?}");
     let draws = |p: f64| (p * 16.0).round();
