@@ -59,11 +59,11 @@ pub const EDGE_SPIKE_SDS: f64 = 4.0;
 /// Hz, ε's held it in 2 of 20, all warned.
 pub const MAX_EDGE_NOISE_SHARE: f64 = 0.07;
 
-/// How many times less noise the upper edge found from above must read than the one found
-/// from the samples above the line through every sample to be taken instead. On simulated stick-slip records
-/// sampled at 1-5 Hz (45 rpm, 150 kN, 120 s), an edge settled about held samples read 14-28 kN
-/// for noise of 3-7.5 kN; from above, a narrow band a little above the edge read down to half
-/// the noise the first start read on the edge.
+/// How many times less noise the upper edge found from above must read than the one found from the
+/// samples above the line through every sample to be taken instead. On simulated stick-slip records
+/// sampled at 1-5 Hz (45 rpm, 150 kN, 120 s), an edge settled about held samples read 14-28 kN for
+/// noise of 3-7.5 kN; from above, a narrow band a little above the edge read down to half the noise
+/// the first start read on the edge.
 pub const EDGE_START_NOISE_RATIO: f64 = 2.0;
 
 /// Most rounds of the upper edge's refit; it settles in a few.
@@ -94,6 +94,11 @@ pub struct Line {
 }
 
 impl Line {
+    /// Whether the line exists: a slope and an intercept (the x spread).
+    fn is_finite(&self) -> bool {
+        self.slope.is_finite() && self.intercept.is_finite()
+    }
+
     /// The least-squares line through (x, y).
     pub fn fit(x: &[f64], y: &[f64]) -> Self {
         let n = x.len() as f64;
@@ -270,10 +275,9 @@ fn upper_edge(depth: &[f64], weight: &[f64], torque: &[f64], follows: &[bool]) -
     // Noise-free, the samples on the line differ from it by rounding alone.
     let floor = 1e-9 * weight.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
     let residuals_to = |line: &Line| residuals(depth, weight, line);
-    let finite = |line: &Line| line.slope.is_finite() && line.intercept.is_finite();
     let every = vec![true; depth.len()];
     let first = Line::fit(depth, weight);
-    if !finite(&first) {
+    if !first.is_finite() {
         // No line through the samples (no spread of the depth): none is told from another.
         return Edge {
             on: every,
@@ -301,7 +305,6 @@ fn upper_edge(depth: &[f64], weight: &[f64], torque: &[f64], follows: &[bool]) -
             })
             .collect()
     };
-    let count = |set: &[bool]| set.iter().filter(|k| **k).count();
     let fit_through = |set: &[bool]| line_through(depth, weight, set);
     // The first start: the samples above the line through all of them.
     let none = vec![false; depth.len()];
@@ -320,7 +323,7 @@ fn upper_edge(depth: &[f64], weight: &[f64], torque: &[f64], follows: &[bool]) -
     let mut peeled = above_first.clone();
     loop {
         let line = fit_through(&peeled);
-        if !finite(&line) {
+        if !line.is_finite() {
             break;
         }
         let higher: Vec<bool> = residuals_to(&line)
@@ -337,23 +340,27 @@ fn upper_edge(depth: &[f64], weight: &[f64], torque: &[f64], follows: &[bool]) -
     // noise, several times the noise; from above, the refits can come to rest a little above
     // the edge, in a narrower band. The first start's edge is kept unless the second's is
     // settled and reads less than [`EDGE_START_NOISE_RATIO`] times less noise.
+    // Where peeling kept the first start, it is settled once.
     let settle = |on: Vec<bool>| settle_edge(on, [depth, weight, torque], follows, smooth, floor);
-    let (from_first, from_above) = (settle(above_first), settle(peeled));
-    if from_above.settled
-        && (!from_first.settled || EDGE_START_NOISE_RATIO * from_above.noise_sd_n < from_first.noise_sd_n)
-    {
-        from_above
-    } else {
-        from_first
+    let from_above = (peeled != above_first).then(|| settle(peeled));
+    let from_first = settle(above_first);
+    match from_above {
+        Some(edge)
+            if edge.settled
+                && (!from_first.settled || EDGE_START_NOISE_RATIO * edge.noise_sd_n < from_first.noise_sd_n) =>
+        {
+            edge
+        }
+        _ => from_first,
     }
 }
 
-/// The weight's residuals `residual_w` (noise `noise_w`; `spike` marks its spikes) joined with
-/// the torque's about its own line through the samples `on`: a held bit's torque lies below its line by κ = ½·a·μ·γ times
-/// its weight's deficit, so each sample's deficit is weighed from both, by their noises (taken
-/// as independent: noises that move together would be read as smaller than they are). κ is the
-/// torque's residuals' regression on the weight's (through the origin), so that a torque that
-/// does not fall with the weight (κ ≤ 0) leaves the weight's residuals as they are. In weight
+/// The weight's residuals `residual_w` (noise `noise_w`; `spike` marks its spikes) joined with the
+/// torque's about its own line through the samples `on`: a held bit's torque lies below its line by
+/// κ = ½·a·μ·γ times its weight's deficit, so each sample's deficit is weighed from both, by their
+/// noises (taken as independent: noises that move together would be read as smaller than they are).
+/// κ is the torque's residuals' regression on the weight's (through the origin), so that a torque
+/// that does not fall with the weight (κ ≤ 0) leaves the weight's residuals as they are. In weight
 /// units (N), with their noise.
 fn joint_residuals(
     residual_w: &[f64],
@@ -402,14 +409,17 @@ fn joint_residuals(
 
 /// A straight line through `y` against `x` at the samples in `set`.
 fn line_through(x: &[f64], y: &[f64], set: &[bool]) -> Line {
-    let (x, y): (Vec<f64>, Vec<f64>) = x
-        .iter()
-        .zip(y)
-        .zip(set)
-        .filter(|(_, k)| **k)
-        .map(|((x, y), _)| (*x, *y))
-        .unzip();
-    Line::fit(&x, &y)
+    Line::fit(&kept(x, set), &kept(y, set))
+}
+
+/// `values` at the samples in `set`.
+fn kept(values: &[f64], set: &[bool]) -> Vec<f64> {
+    values.iter().zip(set).filter(|(_, k)| **k).map(|(v, _)| *v).collect()
+}
+
+/// How many samples `set` holds.
+fn count(set: &[bool]) -> usize {
+    set.iter().filter(|k| **k).count()
 }
 
 /// `y`'s residuals about `line` against `x`.
@@ -429,7 +439,6 @@ fn settle_edge(
     smooth: impl Fn(&[f64], &[bool], f64) -> Vec<(f64, u8)>,
     floor: f64,
 ) -> Edge {
-    let finite = |line: &Line| line.slope.is_finite() && line.intercept.is_finite();
     let (mut noise_sd_n, mut told_sd_n) = (f64::NAN, f64::NAN);
     // A set kept before comes back where samples at the band's border take turns: the edge
     // has settled as far as the noise lets it.
@@ -443,7 +452,7 @@ fn settle_edge(
     let mut seen: Vec<u64> = Vec::new();
     for _ in 0..MAX_EDGE_ROUNDS {
         let line = line_through(depth, weight, &on);
-        if on.iter().filter(|k| **k).count() < MIN_CUTTING_SAMPLES || !finite(&line) {
+        if count(&on) < MIN_CUTTING_SAMPLES || !line.is_finite() {
             break;
         }
         let residuals = residuals(depth, weight, &line);
@@ -558,15 +567,7 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     // Without the depth's spread no edge is found, and the calibration refuses for the spread.
     if record.axial_speed_m_s.is_none() && depth.len() >= MIN_CUTTING_SAMPLES && spread(&depth).is_ok() {
         let edge = upper_edge(&depth, &weight, &torque, &follows);
-        let on_edge = |values: Vec<f64>| -> Vec<f64> {
-            values
-                .into_iter()
-                .zip(&edge.on)
-                .filter(|(_, k)| **k)
-                .map(|(v, _)| v)
-                .collect()
-        };
-        (depth, weight, torque) = (on_edge(depth), on_edge(weight), on_edge(torque));
+        (depth, weight, torque) = (kept(&depth, &edge.on), kept(&weight, &edge.on), kept(&torque, &edge.on));
         edge_found = Some(edge);
     }
     if depth.len() < MIN_CUTTING_SAMPLES {
