@@ -11,6 +11,7 @@
 //! a lower bound, its mirror below an upper one, lb + (ub − lb)(sin u + 1)/2 between both),
 //! which leave the optimiser unconstrained.
 
+pub mod axial_rests;
 pub mod coupled;
 
 use crate::data::{FieldData, SAME_SPEED_TOLERANCE, Samples};

@@ -341,6 +341,60 @@ impl RateUnit {
     }
 }
 
+/// Unit of an acceleration (an accelerometer's channel).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum AccelerationUnit {
+    /// Metres per second squared.
+    #[cfg_attr(feature = "cli", value(name = "m_s2"))]
+    #[serde(rename = "m/s²")]
+    MS2,
+    /// Standard gravity, 9.80665 m/s² (vibration tools' unit).
+    #[cfg_attr(feature = "cli", value(name = "g"))]
+    #[serde(rename = "g")]
+    G,
+}
+
+impl AccelerationUnit {
+    /// m/s² per one of this unit.
+    pub fn metres_per_second_squared(self) -> f64 {
+        match self {
+            AccelerationUnit::MS2 => 1.0,
+            AccelerationUnit::G => 9.80665,
+        }
+    }
+    /// Printed name.
+    pub fn label(self) -> &'static str {
+        match self {
+            AccelerationUnit::MS2 => "m/s²",
+            AccelerationUnit::G => "g",
+        }
+    }
+    /// The unit a log writes as `symbol` (`m/s2`, `m/s^2`, `m/s²`, `g`), if bitrock reads it.
+    pub fn from_symbol(symbol: &str) -> Option<Self> {
+        match squeezed(symbol).as_str() {
+            "m/s2" | "m/s^2" | "m/s²" | "ms2" => Some(AccelerationUnit::MS2),
+            "g" | "gn" => Some(AccelerationUnit::G),
+            _ => None,
+        }
+    }
+    /// The unit a column name declares (`axial_acceleration_m_s2`, `axial_acc_g`,
+    /// `ACCZ [g]`).
+    pub fn from_suffix(column: &str) -> Option<Self> {
+        if let Some(symbol) = bracketed(column) {
+            return Self::from_symbol(symbol);
+        }
+        let c = column.to_ascii_lowercase();
+        if c.ends_with("_m_s2") {
+            Some(AccelerationUnit::MS2)
+        } else if c.ends_with("_g") {
+            Some(AccelerationUnit::G)
+        } else {
+            None
+        }
+    }
+}
+
 /// Unit of a depth along the hole (the bit's measured depth).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum LengthUnit {
@@ -409,7 +463,7 @@ macro_rules! column_unit {
         }
     )*};
 }
-column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit, LengthUnit);
+column_unit!(SpeedUnit, TorqueUnit, ForceUnit, RateUnit, LengthUnit, AccelerationUnit);
 
 #[cfg(test)]
 mod tests {
@@ -453,6 +507,16 @@ mod tests {
         assert_eq!(SpeedUnit::from_suffix("RPM [c/min]"), Some(SpeedUnit::Rpm));
         assert_eq!(SpeedUnit::from_suffix("DRPM (rad/s)"), Some(SpeedUnit::RadS));
         assert_eq!(RateUnit::from_suffix("ROP [ft/hr]"), Some(RateUnit::FtH));
+        assert_eq!(AccelerationUnit::from_suffix("ACCZ [g]"), Some(AccelerationUnit::G));
+        assert_eq!(
+            AccelerationUnit::from_suffix("ACCZ (m/s^2)"),
+            Some(AccelerationUnit::MS2)
+        );
+        assert_eq!(AccelerationUnit::from_suffix("axial_acc_g"), Some(AccelerationUnit::G));
+        assert_eq!(
+            AccelerationUnit::from_suffix("axial_acceleration_m_s2"),
+            Some(AccelerationUnit::MS2)
+        );
         // A bracket decides: a suffix inside the name before it does not.
         assert_eq!(TorqueUnit::from_suffix("tq_knm [ft.lbf]"), Some(TorqueUnit::FtLbf));
     }

@@ -11,7 +11,7 @@ use bitrock::run::choice::{self, Choice};
 use bitrock::run::coupled::{self, Map, One, PosteriorMap, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
 use bitrock::simulate::coupled::{Bit, Regime, Sample};
-use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
+use bitrock::units::{AccelerationUnit, ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
 use clap::Args;
 use serde_json::json;
 use std::io::Write;
@@ -142,7 +142,7 @@ pub struct CoupledCmd {
     /// record's mean weight on bit; each law's candidates drawn from `bitrock surface`'s prior.
     #[arg(long, requires = "select", conflicts_with_all = [
         "omega_rpm", "sample_hz", "speed_col", "torque_col", "rop_col", "axial_speed_col", "speed_unit",
-        "rop_unit",
+        "rop_unit", "axial_acceleration_col", "acceleration_unit",
     ])]
     pub from_surface: bool,
     #[command(flatten)]
@@ -186,6 +186,11 @@ pub struct DrillingArgs {
     /// The bit's axial speed column [default: the one whose name holds 'axial' and not 'acc', if any].
     #[arg(long, value_name = "NAME", requires = "drilling_record")]
     pub axial_speed_col: Option<String>,
+    /// The bit's axial acceleration column, where the record has no axial speed: the bit's rests
+    /// on it tell the samples moving down [default: the one whose name holds 'axial' and 'acc',
+    /// if any].
+    #[arg(long, value_name = "NAME", requires = "drilling_record")]
+    pub axial_acceleration_col: Option<String>,
     /// Unit of the bit speed [default: from its name's suffix].
     #[arg(long, value_enum, requires = "drilling_record")]
     pub speed_unit: Option<SpeedUnit>,
@@ -199,13 +204,18 @@ pub struct DrillingArgs {
     /// Unit of the rate of penetration and axial speed [default: from their names' suffixes].
     #[arg(long, value_enum, requires = "drilling_record")]
     pub rop_unit: Option<RateUnit>,
+    /// Unit of the axial acceleration [default: from its name's suffix].
+    #[arg(long, value_enum, requires = "drilling_record")]
+    pub acceleration_unit: Option<AccelerationUnit>,
 }
 
 /// The columns of a surface record (with --from-surface) and their units; its surface torque's
 /// unit is --torque-unit's, its weight on bit --wob-col's.
 #[derive(Debug, Args)]
 pub struct SurfaceColumnArgs {
-    /// Time column (s; ms where its name ends in _ms) [default: the one whose name holds "time"].
+    /// Time column (s; ms where its name ends in _ms) of the surface record, or of the record
+    /// calibrated, where it has an axial acceleration and no axial speed (its clock checks the
+    /// bit's travel) [default: the one whose name holds "time"].
     #[arg(long = "time-col", value_name = "NAME")]
     pub time_column: Option<String>,
     /// Top-drive speed column [default: the one whose name holds "top_drive" or "rotary"].
@@ -220,17 +230,21 @@ pub struct SurfaceColumnArgs {
 }
 
 impl DrillingArgs {
-    fn options(&self) -> DrillingOptions {
+    /// The drilling record's columns; its clock named by `time_column` (--time-col).
+    fn options(&self, time_column: Option<String>) -> DrillingOptions {
         DrillingOptions {
+            time_column,
             speed_column: self.speed_col.clone(),
             torque_column: self.torque_col.clone(),
             wob_column: self.wob_col.clone(),
             rop_column: self.rop_col.clone(),
             axial_speed_column: self.axial_speed_col.clone(),
+            axial_acceleration_column: self.axial_acceleration_col.clone(),
             speed_unit: self.speed_unit,
             torque_unit: self.torque_unit,
             wob_unit: self.wob_unit,
             rop_unit: self.rop_unit,
+            acceleration_unit: self.acceleration_unit,
         }
     }
 }
@@ -296,14 +310,14 @@ impl CoupledCmd {
 
 pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     let s = &cmd.surface_columns;
-    let surface_columns_given = s.time_column.is_some()
+    let surface_columns_given = (s.time_column.is_some() && cmd.calibrate.is_none())
         || s.top_drive_column.is_some()
         || s.surface_torque_column.is_some()
         || s.top_drive_unit.is_some();
     if surface_columns_given && !cmd.from_surface {
         return Err(bitrock::Error::setting(
             "from_surface",
-            "`time_column`, `top_drive_column`, `surface_torque_column` and `top_drive_unit` name a surface record's columns: give it with the record",
+            "`top_drive_column`, `surface_torque_column` and `top_drive_unit` name a surface record's columns, and `time_column` a surface record's clock or that of a record calibrated: give the record",
         )
         .into());
     }
@@ -332,7 +346,7 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
                 )
                 .into());
             }
-            let record = DrillingRecord::read(path, &cmd.columns.options())?;
+            let record = DrillingRecord::read(path, &cmd.columns.options(cmd.surface_columns.time_column.clone()))?;
             choice::choice(&record, &settings, note)?
         };
         let mut out = super::print::stdout();
@@ -346,10 +360,10 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     coupled::check_escape_start(&settings, cmd.map, cmd.calibrate.is_some(), cmd.omega_rpm.is_some())?;
     let calibration = match &cmd.calibrate {
         Some(path) => {
-            let record = DrillingRecord::read(path, &cmd.columns.options())?;
+            let record = DrillingRecord::read(path, &cmd.columns.options(cmd.surface_columns.time_column.clone()))?;
             let c = coupled::calibration(&record, &settings)?;
-            if let Some(w) = &c.warning {
-                note(format!("warning: {w}"));
+            for line in c.notes() {
+                note(line);
             }
             Some(c)
         }
@@ -713,10 +727,27 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
         c.cutting_by.describe(),
         c.weight_edge_noise_kn
             .zip(c.weight_edge_scatter_kn)
-            .map_or(String::new(), |(sd, scatter)| format!(
+            .map(|(sd, scatter)| format!(
                 " (the weight's noise about it {sd:.2} kN; averaged over neighbours in one state, \
                  told by {scatter:.2} kN)"
-            )),
+            ))
+            .or(c.axial_rests.as_ref().map(|r| format!(
+                " ({} rests, {} samples, reading {:.3} m/s² with {:.3} m/s² of noise{}{})",
+                r.rests,
+                r.rest_samples,
+                r.rest_m_s2,
+                r.noise_m_s2,
+                if r.upward_positive {
+                    "; the channel reads upward positive"
+                } else {
+                    ""
+                },
+                r.travel_m.map_or(String::new(), |(moved, cut)| format!(
+                    "; the bit travelled {moved:.2} m from its first rest to its last, the rate of \
+                     penetration cut {cut:.2} m"
+                ))
+            )))
+            .unwrap_or_default(),
         c.depth_of_cut_mm.0,
         c.depth_of_cut_mm.1,
         c.weight_line.r_squared,

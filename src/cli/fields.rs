@@ -31,6 +31,8 @@ const FLAGS: &[(&str, &str)] = &[
     ("downhole_max_column", "--downhole-max-col"),
     ("rop_column", "--rop-col"),
     ("axial_speed_column", "--axial-speed-col"),
+    ("axial_acceleration_column", "--axial-acceleration-col"),
+    ("acceleration_unit", "--acceleration-unit"),
     ("rop_unit", "--rop-unit"),
     ("top_drive_unit", "--top-drive-unit"),
     ("from_surface", "--from-surface"),

@@ -3,14 +3,16 @@
 //! Columns are found by role: a name holding `speed` (and not `axial`) is the bit's speed, one
 //! holding `torque` the torque on bit, `wob` the weight on bit, `rop` or `penetration` the rate
 //! of penetration (where the record has one: the calibration needs it, the choice of structure
-//! does not), `axial` (and not `acc`) the axial speed; each can be named instead. Surface channels are
-//! never read as the bit's. Units come from the names' suffixes or the options.
+//! does not), `axial` (and not `acc`) the axial speed, `axial` and `acc` the bit's axial
+//! acceleration (a vibration tool's accelerometer), and where the record has that and no axial
+//! speed, `time` its clock; each can be named instead. Surface channels are never read as the
+//! bit's. Units come from the names' suffixes or the options.
 
 use super::surface::{format_error, missing, pick};
 use super::{is_surface_channel, resolve_unit};
 use crate::error::{Error, Result};
 use crate::files::{csv_rows, csv_with_header};
-use crate::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
+use crate::units::{AccelerationUnit, ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -23,11 +25,18 @@ pub struct DrillingOptions {
     pub rop_column: Option<String>,
     /// The bit's axial speed; `None` uses the one whose name holds `axial` and not `acc`, if any.
     pub axial_speed_column: Option<String>,
+    /// The bit's axial acceleration; `None` uses the one whose name holds `axial` and `acc`, if
+    /// any.
+    pub axial_acceleration_column: Option<String>,
+    /// The clock, read where the record has an axial acceleration and no axial speed; `None`
+    /// uses the one whose name holds `time`, if any.
+    pub time_column: Option<String>,
     pub speed_unit: Option<SpeedUnit>,
     pub torque_unit: Option<TorqueUnit>,
     pub wob_unit: Option<ForceUnit>,
     /// Unit of the rate of penetration and of the axial speed.
     pub rop_unit: Option<RateUnit>,
+    pub acceleration_unit: Option<AccelerationUnit>,
 }
 
 /// The columns a drilling record was read from, by role.
@@ -39,6 +48,10 @@ pub struct DrillingColumns {
     /// The rate of penetration, where the record has one.
     pub rop: Option<String>,
     pub axial_speed: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub axial_acceleration: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time: Option<String>,
 }
 
 /// A drilling record in SI, in file order.
@@ -52,6 +65,11 @@ pub struct DrillingRecord {
     /// The rate of penetration (m/s), where the record has one.
     pub rop_m_s: Option<Vec<f64>>,
     pub axial_speed_m_s: Option<Vec<f64>>,
+    /// The bit's axial acceleration (m/s², as its channel reads it: gravity's share and the
+    /// sensor's offset included, either sign downward), where the record has it.
+    pub axial_acceleration_m_s2: Option<Vec<f64>>,
+    /// The clock's period (s, the median spacing of its stamps), where it was read.
+    pub sample_period_s: Option<f64>,
 }
 
 impl DrillingRecord {
@@ -87,7 +105,19 @@ impl DrillingRecord {
             "axial_speed_column",
             &|i| lower(i).contains("axial") && !lower(i).contains("acc"),
         )?;
-        let chosen = [Some(speed), Some(torque), Some(wob), rop, axial];
+        let acceleration = role(
+            opts.axial_acceleration_column.as_deref(),
+            "axial acceleration",
+            "axial_acceleration_column",
+            &|i| lower(i).contains("axial") && lower(i).contains("acc"),
+        )?;
+        let time = match (axial, acceleration) {
+            (None, Some(_)) => role(opts.time_column.as_deref(), "time", "time_column", &|i| {
+                lower(i).contains("time")
+            })?,
+            _ => None,
+        };
+        let chosen = [Some(speed), Some(torque), Some(wob), rop, axial, acceleration, time];
         for (k, a) in chosen.iter().enumerate() {
             if let Some(a) = a
                 && chosen[k + 1..].contains(&Some(*a))
@@ -109,6 +139,13 @@ impl DrillingRecord {
             Some(i) => Some((i, resolve_unit(&header[i], opts.rop_unit, "rop_unit", path)?)),
             None => None,
         };
+        let acceleration_unit = match acceleration {
+            Some(i) => Some((
+                i,
+                resolve_unit(&header[i], opts.acceleration_unit, "acceleration_unit", path)?,
+            )),
+            None => None,
+        };
         let mut out = Self {
             source: path.to_path_buf(),
             columns: DrillingColumns {
@@ -117,13 +154,19 @@ impl DrillingRecord {
                 wob: header[wob].clone(),
                 rop: rop.map(|i| header[i].clone()),
                 axial_speed: axial.map(|i| header[i].clone()),
+                axial_acceleration: acceleration.map(|i| header[i].clone()),
+                time: time.map(|i| header[i].clone()),
             },
             speed_rad_s: Vec::new(),
             torque_nm: Vec::new(),
             wob_n: Vec::new(),
             rop_m_s: rop.map(|_| Vec::new()),
             axial_speed_m_s: axial.map(|_| Vec::new()),
+            axial_acceleration_m_s2: acceleration.map(|_| Vec::new()),
+            sample_period_s: None,
         };
+        let clock = time.map(|i| (i, super::clock::TimeReader::new(super::names_milliseconds(&header[i]))));
+        let mut times = Vec::new();
         for row in csv_rows(&mut reader, path, &header) {
             let row = row?;
             out.speed_rad_s.push(speed_unit.to_rad_s(row.number(speed)?));
@@ -135,7 +178,15 @@ impl DrillingRecord {
             if let (Some((i, unit)), Some(v)) = (axial_unit, out.axial_speed_m_s.as_mut()) {
                 v.push(row.number(i)? * unit.metres_per_second());
             }
+            if let (Some((i, unit)), Some(v)) = (acceleration_unit, out.axial_acceleration_m_s2.as_mut()) {
+                v.push(row.number(i)? * unit.metres_per_second_squared());
+            }
+            if let Some((i, reader)) = &clock {
+                times.push(reader.text(row.cell(*i)).map_err(|message| row.bad_cell(*i, message))?);
+            }
         }
+        let steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+        out.sample_period_s = crate::numerics::median(&steps).filter(|p| *p > 0.0);
         if out.speed_rad_s.is_empty() {
             return Err(Error::Format {
                 path: path.to_path_buf(),
@@ -191,11 +242,20 @@ mod tests {
         ));
         let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
         assert_eq!(r.columns.axial_speed.as_deref(), Some("axial_speed_m_h"));
-        // Alone, an accelerometer's channel gives no axial speed: the calibration then reads the
-        // weight's upper edge.
+        assert_eq!(r.axial_acceleration_m_s2, Some(vec![0.5]));
+        // Alone, an accelerometer's channel gives no axial speed: it is read as the axial
+        // acceleration, in g where its name says so.
         let (_d, path) = write(&format!("{header},axial_acc_g\n60,10,150,30,0.05\n"));
         let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
         assert_eq!((r.columns.axial_speed, r.axial_speed_m_s), (None, None));
+        assert_eq!(r.columns.axial_acceleration.as_deref(), Some("axial_acc_g"));
+        assert!((r.axial_acceleration_m_s2.unwrap()[0] - 0.05 * 9.80665).abs() < 1e-12);
+        // A channel whose name gives no unit is refused, naming the setting that gives it.
+        let (_d, path) = write(&format!("{header},axial_accel\n60,10,150,30,0.05\n"));
+        let e = DrillingRecord::read(&path, &DrillingOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("axial_accel") && e.contains("`acceleration_unit`"), "{e}");
     }
 
     #[test]

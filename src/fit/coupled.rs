@@ -15,11 +15,14 @@
 //! Samples count as cutting where the bit turns (above the stuck threshold), penetrates and
 //! moves down: a bit held or lifting carries only part of the wear flats' contact (W = a·ζ·ε·d +
 //! g·W_f with g < 1), which would pull both lines' intercepts down. Where the record has the
-//! bit's axial speed, its sign says which samples move down. Where it has none, they are the
-//! upper edge of the weight against the depth of cut: every turning sample lies on the weight
-//! line or below it, by the part of the wear flats' contact it lacks, and the samples on it are
-//! those with the whole contact, as a bit moving down has.
+//! bit's axial speed, its sign says which samples move down. Where it has its axial acceleration
+//! instead, the speed summed from rest to rest says it ([`super::axial_rests`]). Where it has
+//! neither, or the acceleration shows no rests, they are the upper edge of the weight against
+//! the depth of cut: every turning sample lies on the weight line or below it, by the part of
+//! the wear flats' contact it lacks, and the samples on it are those with the whole contact, as
+//! a bit moving down has.
 
+use super::axial_rests::{AxialRests, axial_rests};
 use crate::data::STUCK_SPEED_RAD_S;
 use crate::data::drilling::DrillingRecord;
 use crate::error::{Error, Result};
@@ -155,7 +158,11 @@ pub const CALIBRATED: [(&str, &str); 4] = [
 pub enum CuttingBy {
     /// The record's axial speed of the bit: positive (downward).
     AxialSpeed,
-    /// The upper edge of the weight against the depth of cut: the record has no axial speed.
+    /// The bit's axial speed summed from its axial acceleration between its rests: beyond
+    /// doubt positive (downward).
+    AxialAcceleration,
+    /// The upper edge of the weight against the depth of cut: the record has no axial speed,
+    /// and no axial acceleration that shows the bit's rests.
     WeightEdge,
 }
 
@@ -164,6 +171,9 @@ impl CuttingBy {
     pub fn describe(self) -> &'static str {
         match self {
             Self::AxialSpeed => "moving down by the bit's axial speed",
+            Self::AxialAcceleration => {
+                "moving down beyond doubt by the bit's axial speed summed from its axial acceleration between its rests"
+            }
             Self::WeightEdge => {
                 "on the upper edge of the weight against the depth of cut, the record having no axial speed"
             }
@@ -179,6 +189,13 @@ pub struct CoupledCalibration {
     pub cutting_samples: usize,
     /// How those samples were told from a held or lifting bit's.
     pub cutting_by: CuttingBy,
+    /// The bit's rests on its axial acceleration, where they told the samples.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axial_rests: Option<AxialRests>,
+    /// Why the record's axial acceleration could not tell the samples, where it has one and
+    /// the weight's upper edge told them instead.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axial_acceleration_unused: Option<String>,
     /// The weight's noise about its upper edge (kN, a standard deviation), where that told them.
     pub weight_edge_noise_kn: Option<f64>,
     /// The standard deviation the samples' deficits below the edge were told by, root mean
@@ -201,6 +218,20 @@ pub struct CoupledCalibration {
     pub draws_out_of_bounds: usize,
     /// Said where the record cannot tell a cutting bit from a held or lifting one.
     pub warning: Option<String>,
+}
+
+impl CoupledCalibration {
+    /// What the user is told beside the estimates: why the record's axial acceleration was not
+    /// used, and the warning.
+    pub fn notes(&self) -> Vec<String> {
+        let unused = self
+            .axial_acceleration_unused
+            .iter()
+            .map(|why| format!("note: {why}; the weight's upper edge against the depth of cut told them instead"));
+        unused
+            .chain(self.warning.iter().map(|w| format!("warning: {w}")))
+            .collect()
+    }
 }
 
 /// ε (MPa), ζ, W_f (kN) and μ·γ of a weight line's and a torque line's (slope, intercept).
@@ -531,13 +562,19 @@ struct Cutting {
     depth: Vec<f64>,
     weight: Vec<f64>,
     torque: Vec<f64>,
+    /// How the samples were told.
+    by: CuttingBy,
     /// The weight's upper edge, where that told the samples.
     edge: Option<Edge>,
+    /// The bit's rests, where they told the samples.
+    rests: Option<AxialRests>,
+    /// Why the axial acceleration could not tell them, where the record has one.
+    rests_unused: Option<String>,
 }
 
 /// The samples that show the bit cutting (turning, penetrating and moving down, by the axial
-/// speed or the weight's upper edge): each one's depth of cut (m a turn), weight on bit (N) and
-/// torque (N·m); refused where too few do.
+/// speed, the axial acceleration's rests or the weight's upper edge): each one's depth of cut (m
+/// a turn), weight on bit (N) and torque (N·m); refused where too few do.
 fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     let refuse = |message: String| refusal(record, message);
     let Some(rop_m_s) = record.rop_m_s.as_deref() else {
@@ -552,9 +589,31 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     let mut torque = Vec::new();
     let mut follows = Vec::new();
     let mut last = None;
+    let (rests, rests_unused) = match (&record.axial_speed_m_s, &record.axial_acceleration_m_s2) {
+        (None, Some(acceleration)) => match axial_rests(acceleration, record.sample_period_s.zip(Some(rop_m_s))) {
+            Ok(rests) => (Some(rests), None),
+            Err(why) => (
+                None,
+                Some(format!(
+                    "the axial acceleration ('{}') cannot tell the bit moving down: {why}",
+                    record.columns.axial_acceleration.as_deref().unwrap_or_default()
+                )),
+            ),
+        },
+        _ => (None, None),
+    };
+    let by = match (&record.axial_speed_m_s, &rests) {
+        (Some(_), _) => CuttingBy::AxialSpeed,
+        (None, Some(_)) => CuttingBy::AxialAcceleration,
+        (None, None) => CuttingBy::WeightEdge,
+    };
     for i in 0..record.len() {
         let w = record.speed_rad_s[i];
-        let moving_down = record.axial_speed_m_s.as_ref().is_none_or(|v| v[i] > 0.0);
+        let moving_down = match (&record.axial_speed_m_s, &rests) {
+            (Some(v), _) => v[i] > 0.0,
+            (None, Some(r)) => r.moving_down[i],
+            (None, None) => true,
+        };
         if w > STUCK_SPEED_RAD_S && rop_m_s[i] > 0.0 && moving_down {
             depth.push(std::f64::consts::TAU * rop_m_s[i] / w);
             weight.push(record.wob_n[i]);
@@ -565,7 +624,7 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     }
     let mut edge_found = None;
     // Without the depth's spread no edge is found, and the calibration refuses for the spread.
-    if record.axial_speed_m_s.is_none() && depth.len() >= MIN_CUTTING_SAMPLES && spread(&depth).is_ok() {
+    if by == CuttingBy::WeightEdge && depth.len() >= MIN_CUTTING_SAMPLES && spread(&depth).is_ok() {
         let edge = upper_edge(&depth, &weight, &torque, &follows);
         (depth, weight, torque) = (kept(&depth, &edge.on), kept(&weight, &edge.on), kept(&torque, &edge.on));
         edge_found = Some(edge);
@@ -576,14 +635,17 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
              {MIN_CUTTING_SAMPLES} are needed",
             depth.len(),
             record.len(),
-            cutting_by(record).describe()
+            by.describe()
         )));
     }
     Ok(Cutting {
         depth,
         weight,
         torque,
+        by,
         edge: edge_found,
+        rests,
+        rests_unused,
     })
 }
 
@@ -634,15 +696,6 @@ fn spread(depth: &[f64]) -> std::result::Result<(), (f64, f64)> {
     }
 }
 
-/// How `record`'s samples of a bit moving down are told.
-fn cutting_by(record: &DrillingRecord) -> CuttingBy {
-    if record.axial_speed_m_s.is_some() {
-        CuttingBy::AxialSpeed
-    } else {
-        CuttingBy::WeightEdge
-    }
-}
-
 /// Calibrates the bit of radius `radius_m` on `record`, with `draws` posterior draws from `seed`.
 pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64) -> Result<CoupledCalibration> {
     let refuse = |message: String| refusal(record, message);
@@ -650,7 +703,10 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
         depth,
         weight,
         torque,
+        by,
         edge,
+        rests,
+        rests_unused,
     } = cutting(record)?;
     if let Err((mean, sd)) = spread(&depth) {
         return Err(refuse(format!(
@@ -711,7 +767,9 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
     Ok(CoupledCalibration {
         samples: record.len(),
         cutting_samples: depth.len(),
-        cutting_by: cutting_by(record),
+        cutting_by: by,
+        axial_rests: rests,
+        axial_acceleration_unused: rests_unused,
         weight_edge_noise_kn: edge.as_ref().map(|e| e.noise_sd_n / 1e3),
         weight_edge_scatter_kn: edge.as_ref().map(|e| e.told_sd_n / 1e3),
         depth_of_cut_mm: (1e3 * quantile(&depth, 0.05), 1e3 * quantile(&depth, 0.95)),
@@ -990,12 +1048,16 @@ mod tests {
                 wob: "wob_kn".into(),
                 rop: Some("rop_m_h".into()),
                 axial_speed: None,
+                axial_acceleration: None,
+                time: None,
             },
             speed_rad_s: vec![6.0; n],
             torque_nm: vec![1e4; n],
             wob_n: (0..n).map(wob).collect(),
             rop_m_s: Some((0..n).map(rop).collect()),
             axial_speed_m_s: None,
+            axial_acceleration_m_s2: None,
+            sample_period_s: None,
         }
     }
 
@@ -1043,12 +1105,16 @@ mod tests {
                 wob: "wob_kn".into(),
                 rop: None,
                 axial_speed: None,
+                axial_acceleration: None,
+                time: None,
             },
             speed_rad_s: vec![6.0; 100],
             torque_nm: vec![1e4; 100],
             wob_n: vec![1.5e5; 100],
             rop_m_s: None,
             axial_speed_m_s: None,
+            axial_acceleration_m_s2: None,
+            sample_period_s: None,
         };
         let e = calibrate(&record, 0.108, 10, 1).unwrap_err().to_string();
         assert!(

@@ -9,7 +9,7 @@ use bitrock::data::surface::{SurfaceOptions, SurfaceRecord};
 use bitrock::run::choice::{choice, surface_choice};
 use bitrock::run::coupled::{self as run, Settings};
 use bitrock::simulate::coupled::well::CoupledWell;
-use bitrock::units::{ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
+use bitrock::units::{AccelerationUnit, ForceUnit, RateUnit, SpeedUnit, TorqueUnit};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -124,7 +124,7 @@ pub(crate) fn coupled_calibrate(
     check(py, run::check_escape_start(&settings, map, true, speed_given))?;
     let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
     let calibration = check(py, run::calibration(&record, &settings))?;
-    let mut notes: Vec<String> = calibration.warning.iter().map(|w| format!("warning: {w}")).collect();
+    let mut notes = calibration.notes();
     let value = if map && settings.escape {
         let m = py.detach(|| run::posterior_escape_map(&settings, &calibration, &mut |line| notes.push(line)));
         serde_json::json!({"map": check(py, m)?, "calibration": calibration})
@@ -146,6 +146,8 @@ fn drilling_options(py: Python<'_>, columns: &Bound<'_, PyDict>) -> PyResult<Dri
         wob_column: kwarg(columns, "wob_col")?,
         rop_column: kwarg(columns, "rop_col")?,
         axial_speed_column: kwarg(columns, "axial_speed_col")?,
+        axial_acceleration_column: kwarg(columns, "axial_acceleration_col")?,
+        time_column: kwarg(columns, "time_col")?,
         speed_unit: unit(py, "speed_unit", kwarg(columns, "speed_unit")?, SpeedUnit::from_suffix)?,
         torque_unit: unit(
             py,
@@ -155,6 +157,12 @@ fn drilling_options(py: Python<'_>, columns: &Bound<'_, PyDict>) -> PyResult<Dri
         )?,
         wob_unit: unit(py, "wob_unit", kwarg(columns, "wob_unit")?, ForceUnit::from_suffix)?,
         rop_unit: unit(py, "rop_unit", kwarg(columns, "rop_unit")?, RateUnit::from_suffix)?,
+        acceleration_unit: unit(
+            py,
+            "acceleration_unit",
+            kwarg(columns, "acceleration_unit")?,
+            AccelerationUnit::from_suffix,
+        )?,
     })
 }
 

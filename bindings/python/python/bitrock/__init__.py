@@ -992,10 +992,13 @@ def coupled_calibrate(
     wob_col: str | None = None,
     rop_col: str | None = None,
     axial_speed_col: str | None = None,
+    axial_acceleration_col: str | None = None,
+    time_col: str | None = None,
     speed_unit: str | None = None,
     torque_unit: str | None = None,
     wob_unit: str | None = None,
     rop_unit: str | None = None,
+    acceleration_unit: str | None = None,
     omega_rpm: float | None = None,
     wob_kn: float | None = None,
     feed_m_h: float | None = None,
@@ -1028,10 +1031,11 @@ def coupled_calibrate(
     map: bool = False,
 ) -> dict:
     """The coupled bit calibrated on a drilling record (bit speed, torque on bit, weight on bit,
-    rate of penetration; the bit's axial speed where present; a CSV file), as the ``coupled``
-    command calibrates it: the weight and torque lines through the samples of a bit moving down
-    (by its axial speed, or without it the upper edge of the weight against the depth of cut:
-    ``cutting_by``), ε (MPa), ζ, the wear flats' contact force (kN) and μ·γ with 90 % intervals,
+    rate of penetration; the bit's axial speed or axial acceleration where present; a CSV file),
+    as the ``coupled`` command calibrates it: the weight and torque lines through the samples of
+    a bit moving down (by its axial speed, by its axial acceleration summed between the bit's
+    rests: ``axial_rests``, or without either the upper edge of the weight against the depth of
+    cut: ``cutting_by``), ε (MPa), ζ, the wear flats' contact force (kN) and μ·γ with 90 % intervals,
     and a ``warning`` where the record cannot tell a cutting bit from a held one. With
     ``map=True``: ``{"calibration": ..., "map": ...}``, the map giving each regime's probability
     per cell over ``samples`` posterior draws; with ``escape=True`` too, each draw's bit settled
