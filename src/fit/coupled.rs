@@ -22,7 +22,7 @@
 //! the wear flats' contact it lacks, and the samples on it are those with the whole contact, as
 //! a bit moving down has.
 
-use super::axial_rests::{AxialRests, axial_rests};
+use super::axial_rests::{AxialRests, DepthCut, axial_rests};
 use crate::data::STUCK_SPEED_RAD_S;
 use crate::data::drilling::DrillingRecord;
 use crate::error::{Error, Result};
@@ -590,7 +590,7 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     let mut follows = Vec::new();
     let mut last = None;
     let (rests, rests_unused) = match (&record.axial_speed_m_s, &record.axial_acceleration_m_s2) {
-        (None, Some(acceleration)) => match axial_rests(acceleration, record.sample_period_s.zip(Some(rop_m_s))) {
+        (None, Some(acceleration)) => match axial_rests(acceleration, depth_cut(record, rop_m_s)) {
             Ok(rests) => (Some(rests), None),
             Err(why) => (
                 None,
@@ -681,6 +681,24 @@ fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String>
             100.0 * MAX_EDGE_NOISE_SHARE,
             contact_n / 1e3
         )
+    })
+}
+
+/// What the bit's travel from rest to rest on `record` is checked against, where it has a clock:
+/// the depth its rate of penetration `rop_m_s` cut, within a turn's largest depth of cut
+/// (2π·ROP/Ω over the turning samples).
+fn depth_cut<'a>(record: &DrillingRecord, rop_m_s: &'a [f64]) -> Option<DepthCut<'a>> {
+    let turn_depth_m = record
+        .speed_rad_s
+        .iter()
+        .zip(rop_m_s)
+        .filter(|(w, _)| **w > STUCK_SPEED_RAD_S)
+        .map(|(w, rop)| std::f64::consts::TAU * rop / w)
+        .fold(0.0, f64::max);
+    record.sample_period_s.map(|period_s| DepthCut {
+        period_s,
+        rop_m_s,
+        turn_depth_m,
     })
 }
 

@@ -217,8 +217,28 @@ def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
     assert estimates["zeta"]["value"] == pytest.approx(0.6, rel=1e-4)
     assert estimates["mu_gamma"]["value"] == pytest.approx(0.6, rel=1e-4)
     assert calibration["cutting_by"] == "axial_speed" and calibration["weight_edge_noise_kn"] is None
-    # Without the bit's axial speed (and its acceleration, which is never read as a speed), the
-    # samples of a bit moving down are the weight's upper edge: the same bit.
+    # With the bit's axial acceleration instead of its speed, in g and upward positive as a
+    # vibration tool may log it: the samples moving down are told from the bit's rests, and its
+    # travel from rest to rest is the depth it cut.
+    felt_path = tmp_path / "rgd-acceleration.csv"
+    felt = pd.read_csv(path).drop(columns=["axial_speed_m_h"])
+    felt["axial_acc_g"] = -felt.pop("axial_acceleration_m_s2") / 9.80665
+    felt.to_csv(felt_path, index=False)
+    felt_calibration = bitrock.coupled_calibrate(felt_path)
+    done = run_cli(cli, "coupled", "--calibrate", str(felt_path), "--json")
+    assert felt_calibration == json.loads(done.stdout)
+    assert felt_calibration["cutting_by"] == "axial_acceleration"
+    rests = felt_calibration["axial_rests"]
+    assert rests["upward_positive"] and rests["rests"] >= 3
+    moved, cut = rests["travel_m"]
+    # Within a depth of cut: at the first rest and the last the bottom under the blades lies
+    # at heights up to a turn's depth of cut apart (6 mm of 0.3 m here).
+    assert moved == pytest.approx(cut, abs=0.01)
+    assert felt_calibration["cutting_samples"] == pytest.approx(calibration["cutting_samples"], rel=0.01)
+    for e in felt_calibration["estimates"]:
+        assert e["value"] == pytest.approx(estimates[e["name"]]["value"], rel=1e-4)
+    # Without the bit's axial speed and acceleration, the samples of a bit moving down are the
+    # weight's upper edge: the same bit.
     blind_path = tmp_path / "rgd-no-axial-speed.csv"
     pd.read_csv(path).drop(columns=["axial_speed_m_h", "axial_acceleration_m_s2"]).to_csv(blind_path, index=False)
     blind = bitrock.coupled_calibrate(blind_path)
