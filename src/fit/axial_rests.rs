@@ -30,11 +30,11 @@ const REST_SDS: f64 = 3.0;
 const TRUNCATED_SD: f64 = 0.986_6;
 /// A rest lasts at least this many samples: one sample reading the rest is a moving bit's
 /// acceleration passing through it as often as a rest.
-const MIN_REST_SAMPLES: usize = 2;
+pub const MIN_REST_SAMPLES: usize = 2;
 /// Rests the speed needs to be read.
 const MIN_RESTS: usize = 3;
 /// A sample moves down where its speed lies this many standard deviations above zero.
-const MOVING_SDS: f64 = 3.0;
+pub const MOVING_SDS: f64 = 3.0;
 /// How many of its standard deviations the bit's travel summed between rests must lie from zero
 /// for the channel's direction to be read off its sign, where the record has no clock.
 const MIN_TRAVEL_SDS: f64 = 5.0;
