@@ -230,10 +230,12 @@ pub struct SurfaceColumnArgs {
 }
 
 impl DrillingArgs {
-    /// The drilling record's columns; its clock named by `time_column` (--time-col).
-    fn options(&self, time_column: Option<String>) -> DrillingOptions {
+    /// The drilling record's columns; its clock named by `time_column` (--time-col), its axial
+    /// acceleration read where `calibrating`.
+    fn options(&self, time_column: Option<String>, calibrating: bool) -> DrillingOptions {
         DrillingOptions {
             time_column,
+            read_axial_acceleration: calibrating,
             speed_column: self.speed_col.clone(),
             torque_column: self.torque_col.clone(),
             wob_column: self.wob_col.clone(),
@@ -346,7 +348,10 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
                 )
                 .into());
             }
-            let record = DrillingRecord::read(path, &cmd.columns.options(cmd.surface_columns.time_column.clone()))?;
+            let record = DrillingRecord::read(
+                path,
+                &cmd.columns.options(cmd.surface_columns.time_column.clone(), false),
+            )?;
             choice::choice(&record, &settings, note)?
         };
         let mut out = super::print::stdout();
@@ -360,7 +365,10 @@ pub fn run(cmd: &CoupledCmd) -> anyhow::Result<ExitCode> {
     coupled::check_escape_start(&settings, cmd.map, cmd.calibrate.is_some(), cmd.omega_rpm.is_some())?;
     let calibration = match &cmd.calibrate {
         Some(path) => {
-            let record = DrillingRecord::read(path, &cmd.columns.options(cmd.surface_columns.time_column.clone()))?;
+            let record = DrillingRecord::read(
+                path,
+                &cmd.columns.options(cmd.surface_columns.time_column.clone(), true),
+            )?;
             let c = coupled::calibration(&record, &settings)?;
             for line in c.notes() {
                 note(line);
@@ -742,10 +750,12 @@ fn print_estimates(out: &mut dyn Write, c: &CoupledCalibration) -> std::io::Resu
                 } else {
                     ""
                 },
-                r.travel_m.map_or(String::new(), |(moved, cut)| format!(
-                    "; the bit travelled {moved:.2} m from its first rest to its last, the rate of \
+                r.travel_m
+                    .zip(r.depth_cut_m)
+                    .map_or(String::new(), |(moved, cut)| format!(
+                        "; the bit travelled {moved:.2} m from its first rest to its last, the rate of \
                      penetration cut {cut:.2} m"
-                ))
+                    ))
             )))
             .unwrap_or_default(),
         c.depth_of_cut_mm.0,

@@ -28,9 +28,12 @@ pub struct DrillingOptions {
     /// The bit's axial acceleration; `None` uses the one whose name holds `axial` and `acc`, if
     /// any.
     pub axial_acceleration_column: Option<String>,
-    /// The clock, read where the record has an axial acceleration and no axial speed; `None`
-    /// uses the one whose name holds `time`, if any.
+    /// The clock, read with the axial acceleration; `None` uses the one whose name holds
+    /// `time`, if any.
     pub time_column: Option<String>,
+    /// Whether to read the bit's axial acceleration and the clock where the record has no axial
+    /// speed (the calibration does; the choice of structure does not).
+    pub read_axial_acceleration: bool,
     pub speed_unit: Option<SpeedUnit>,
     pub torque_unit: Option<TorqueUnit>,
     pub wob_unit: Option<ForceUnit>,
@@ -68,9 +71,17 @@ pub struct DrillingRecord {
     /// The bit's axial acceleration (m/s², as its channel reads it: gravity's share and the
     /// sensor's offset included, either sign downward), where the record has it.
     pub axial_acceleration_m_s2: Option<Vec<f64>>,
-    /// The clock's period (s, the median spacing of its stamps), where it was read.
+    /// The clock's period (s, the median spacing of its stamps), where it was read and regular.
     pub sample_period_s: Option<f64>,
+    /// Channels the calibration could have used and were not read, and why, as said to the
+    /// user (an axial acceleration found by its name whose unit or cells cannot be read, a
+    /// clock that is not regular).
+    pub unread: Vec<String>,
 }
+
+/// Most a stamp's spacing may differ from the clock's period, as a share of it, for the period
+/// to check the bit's travel by.
+const CLOCK_TOLERANCE: f64 = 0.01;
 
 impl DrillingRecord {
     /// Reads the drilling record at `path` (a CSV with a header).
@@ -105,17 +116,42 @@ impl DrillingRecord {
             "axial_speed_column",
             &|i| lower(i).contains("axial") && !lower(i).contains("acc"),
         )?;
-        let acceleration = role(
-            opts.axial_acceleration_column.as_deref(),
-            "axial acceleration",
-            "axial_acceleration_column",
-            &|i| lower(i).contains("axial") && lower(i).contains("acc"),
-        )?;
-        let time = match (axial, acceleration) {
-            (None, Some(_)) => role(opts.time_column.as_deref(), "time", "time_column", &|i| {
-                lower(i).contains("time")
-            })?,
-            _ => None,
+        // The acceleration and its clock are read only where they can tell the calibration
+        // something; what was found by name and cannot be read is said, not refused.
+        let mut unread = Vec::new();
+        let wanted = opts.read_axial_acceleration && axial.is_none();
+        let named = opts.axial_acceleration_column.is_some() || opts.acceleration_unit.is_some();
+        let acceleration = match wanted {
+            true => or_unread(
+                role(
+                    opts.axial_acceleration_column.as_deref(),
+                    "axial acceleration",
+                    "axial_acceleration_column",
+                    &|i| lower(i).contains("axial") && lower(i).contains("acc"),
+                ),
+                named,
+                &mut unread,
+            )?,
+            false => None,
+        };
+        let acceleration_unit = match acceleration {
+            Some(i) => or_unread(
+                resolve_unit(&header[i], opts.acceleration_unit, "acceleration_unit", path).map(|u| Some((i, u))),
+                named,
+                &mut unread,
+            )?,
+            None => None,
+        };
+        let acceleration = acceleration_unit.map(|(i, _)| i);
+        let time = match acceleration {
+            Some(_) => or_unread(
+                role(opts.time_column.as_deref(), "time", "time_column", &|i| {
+                    lower(i).contains("time")
+                }),
+                opts.time_column.is_some(),
+                &mut unread,
+            )?,
+            None => None,
         };
         let chosen = [Some(speed), Some(torque), Some(wob), rop, axial, acceleration, time];
         for (k, a) in chosen.iter().enumerate() {
@@ -139,13 +175,6 @@ impl DrillingRecord {
             Some(i) => Some((i, resolve_unit(&header[i], opts.rop_unit, "rop_unit", path)?)),
             None => None,
         };
-        let acceleration_unit = match acceleration {
-            Some(i) => Some((
-                i,
-                resolve_unit(&header[i], opts.acceleration_unit, "acceleration_unit", path)?,
-            )),
-            None => None,
-        };
         let mut out = Self {
             source: path.to_path_buf(),
             columns: DrillingColumns {
@@ -164,6 +193,7 @@ impl DrillingRecord {
             axial_speed_m_s: axial.map(|_| Vec::new()),
             axial_acceleration_m_s2: acceleration.map(|_| Vec::new()),
             sample_period_s: None,
+            unread,
         };
         let clock = time.map(|i| (i, super::clock::TimeReader::new(super::names_milliseconds(&header[i]))));
         let mut times = Vec::new();
@@ -179,14 +209,43 @@ impl DrillingRecord {
                 v.push(row.number(i)? * unit.metres_per_second());
             }
             if let (Some((i, unit)), Some(v)) = (acceleration_unit, out.axial_acceleration_m_s2.as_mut()) {
-                v.push(row.number(i)? * unit.metres_per_second_squared());
+                match row.number(i) {
+                    Ok(a) => v.push(a * unit.metres_per_second_squared()),
+                    Err(e) if !named => {
+                        out.unread.push(e.to_string());
+                        out.axial_acceleration_m_s2 = None;
+                        out.columns.axial_acceleration = None;
+                    }
+                    Err(e) => return Err(e),
+                }
             }
-            if let Some((i, reader)) = &clock {
-                times.push(reader.text(row.cell(*i)).map_err(|message| row.bad_cell(*i, message))?);
+            if let Some((i, reader)) = &clock
+                && out.columns.time.is_some()
+            {
+                match reader.text(row.cell(*i)) {
+                    Ok(t) => times.push(t),
+                    Err(message) if opts.time_column.is_none() => {
+                        out.unread.push(row.bad_cell(*i, message).to_string());
+                        out.columns.time = None;
+                    }
+                    Err(message) => return Err(row.bad_cell(*i, message)),
+                }
             }
         }
-        let steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
-        out.sample_period_s = crate::numerics::median(&steps).filter(|p| *p > 0.0);
+        if out.axial_acceleration_m_s2.is_some()
+            && let Some(column) = out.columns.time.clone()
+        {
+            out.sample_period_s = regular_period(&times);
+            if out.sample_period_s.is_none() {
+                out.unread.push(format!(
+                    "{}: its clock ('{column}') is not regular (a stamp's spacing departs from their \
+                     median by more than {:.0} %, or runs backwards): the bit's travel is not \
+                     checked against the depth cut",
+                    path.display(),
+                    100.0 * CLOCK_TOLERANCE
+                ));
+            }
+        }
         if out.speed_rad_s.is_empty() {
             return Err(Error::Format {
                 path: path.to_path_buf(),
@@ -204,6 +263,29 @@ impl DrillingRecord {
     pub fn is_empty(&self) -> bool {
         self.speed_rad_s.is_empty()
     }
+}
+
+/// `found`; or where finding it failed and the user named none of it, nothing, the reason kept
+/// in `unread`.
+fn or_unread<T>(found: Result<Option<T>>, named: bool, unread: &mut Vec<String>) -> Result<Option<T>> {
+    match found {
+        Err(e) if !named => {
+            unread.push(e.to_string());
+            Ok(None)
+        }
+        other => other,
+    }
+}
+
+/// The period (s) of the clock `time_s`: the median spacing of its stamps, where every spacing
+/// is positive and within [`CLOCK_TOLERANCE`] of it.
+fn regular_period(time_s: &[f64]) -> Option<f64> {
+    let steps: Vec<f64> = time_s.windows(2).map(|w| w[1] - w[0]).collect();
+    let period = crate::numerics::median(&steps).filter(|p| *p > 0.0)?;
+    steps
+        .iter()
+        .all(|d| (d - period).abs() <= CLOCK_TOLERANCE * period)
+        .then_some(period)
 }
 
 #[cfg(test)]
@@ -237,24 +319,45 @@ mod tests {
     #[test]
     fn an_acceleration_column_is_never_read_as_the_axial_speed() {
         let header = "bit_speed_rpm,torque_knm,wob_kn,rop_m_h";
+        let calibrating = DrillingOptions {
+            read_axial_acceleration: true,
+            ..DrillingOptions::default()
+        };
         let (_d, path) = write(&format!(
             "{header},axial_acceleration_m_s2,axial_speed_m_h\n60,10,150,30,0.5,30\n"
         ));
-        let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
+        let r = DrillingRecord::read(&path, &calibrating).unwrap();
         assert_eq!(r.columns.axial_speed.as_deref(), Some("axial_speed_m_h"));
-        assert_eq!(r.axial_acceleration_m_s2, Some(vec![0.5]));
+        // Beside the axial speed, the acceleration tells nothing more: not read.
+        assert_eq!(r.axial_acceleration_m_s2, None);
         // Alone, an accelerometer's channel gives no axial speed: it is read as the axial
-        // acceleration, in g where its name says so.
-        let (_d, path) = write(&format!("{header},axial_acc_g\n60,10,150,30,0.05\n"));
-        let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
+        // acceleration, in g where its name says so, with the clock where there is one.
+        let (_d, path) = write(&format!(
+            "time_s,{header},axial_acc_g\n0,60,10,150,30,0.05\n0.02,60,10,150,30,0\n"
+        ));
+        let r = DrillingRecord::read(&path, &calibrating).unwrap();
         assert_eq!((r.columns.axial_speed, r.axial_speed_m_s), (None, None));
         assert_eq!(r.columns.axial_acceleration.as_deref(), Some("axial_acc_g"));
         assert!((r.axial_acceleration_m_s2.unwrap()[0] - 0.05 * 9.80665).abs() < 1e-12);
-        // A channel whose name gives no unit is refused, naming the setting that gives it.
+        assert!((r.sample_period_s.unwrap() - 0.02).abs() < 1e-12);
+        // The choice of structure reads none of it.
+        let r = DrillingRecord::read(&path, &DrillingOptions::default()).unwrap();
+        assert_eq!((r.axial_acceleration_m_s2, r.sample_period_s), (None, None));
+        // A channel found by its name whose unit its name does not give is said and left
+        // unread; named by the user, it is refused, naming the setting that gives the unit.
         let (_d, path) = write(&format!("{header},axial_accel\n60,10,150,30,0.05\n"));
-        let e = DrillingRecord::read(&path, &DrillingOptions::default())
-            .unwrap_err()
-            .to_string();
+        let r = DrillingRecord::read(&path, &calibrating).unwrap();
+        assert_eq!(r.axial_acceleration_m_s2, None);
+        assert!(
+            r.unread.len() == 1 && r.unread[0].contains("`acceleration_unit`"),
+            "{:?}",
+            r.unread
+        );
+        let named = DrillingOptions {
+            axial_acceleration_column: Some("axial_accel".into()),
+            ..calibrating
+        };
+        let e = DrillingRecord::read(&path, &named).unwrap_err().to_string();
         assert!(e.contains("axial_accel") && e.contains("`acceleration_unit`"), "{e}");
     }
 

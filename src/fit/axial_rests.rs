@@ -6,8 +6,11 @@
 //! updates), the sum is zeroed at every rest: between two rests the speed is the acceleration
 //! summed from the first less the share of the sum's end that its place takes (a Brownian
 //! bridge, which takes a constant offset away exactly), and its spread is the noise's. A sample
-//! moves down where its speed lies more than [`MOVING_SDS`] of that spread above zero, so the
-//! samples told moving are the bit's own, whatever the noise; a noisier channel tells fewer.
+//! moves down where its speed lies more than [`MOVING_SDS`] of that spread above zero (white
+//! noise, sample by sample: one in 740 samples of a bit at rest between rests), so the samples
+//! told moving are the bit's own whatever the noise on its weight; a noisier channel tells fewer.
+//! A bit moving at a steady speed reads the rest too: its spells are taken for rests and its
+//! speed there for zero, which shortens its travel and tells fewer of its samples moving.
 //!
 //! Speeds here are in the acceleration's unit times a sample period: the choice of samples is
 //! the same whatever the period. Where the record has a clock, the bit's travel from its first
@@ -24,6 +27,8 @@ use serde::Serialize;
 const REST_SHARE: f64 = 0.1;
 /// Most rounds of the rest's estimate.
 const MAX_REST_ROUNDS: usize = 40;
+/// Fewest readings the rests are sought in.
+const MIN_READINGS: usize = 20;
 /// A sample reads the rest where it lies within this many of the noise's standard deviations.
 const REST_SDS: f64 = 3.0;
 /// The standard deviation of a normal distribution cut at ±[`REST_SDS`], as a share of its own.
@@ -82,10 +87,15 @@ pub struct AxialRests {
     /// Whether the channel reads upward positive: the bit, summed from rest to rest, went up.
     pub upward_positive: bool,
     /// The bit's travel from its first rest to its last (m, downward), where the record has a
-    /// clock, and the depth the rate of penetration cut meanwhile (m).
+    /// clock.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub travel_m: Option<(f64, f64)>,
-    /// Per sample: moving down beyond doubt.
+    pub travel_m: Option<f64>,
+    /// The depth the rate of penetration cut from the first rest to the last (m), where the
+    /// record has a clock.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_cut_m: Option<f64>,
+    /// Per sample: moving down, its speed more than [`MOVING_SDS`] standard deviations above
+    /// zero.
     #[serde(skip)]
     pub moving_down: Vec<bool>,
 }
@@ -112,11 +122,13 @@ pub fn axial_rests(acceleration: &[f64], depth_cut: Option<DepthCut<'_>>) -> Res
     let mean = acceleration.iter().sum::<f64>() / n as f64;
     if (mean - rest).abs() > MAX_REST_OFFSET_SHARE * rms {
         return Err(format!(
-            "its quiet spells read {rest:.3} m/s², {:.3} m/s² from its mean over the record, where \
-             a bit that comes back to rest reads its rest: they are no rests (a bit off bottom in \
+            "its quiet spells read {rest:.3} m/s², {:.3} m/s² from its mean over the record (more \
+             than {:.0} % of its readings' {rms:.3} m/s² root mean square about them), where a \
+             bit that comes back to rest reads its rest: they are no rests (a bit off bottom in \
              free flight reads a constant too), and a record sampled too slowly for a held spell \
              to last two samples shows none",
-            (mean - rest).abs()
+            (mean - rest).abs(),
+            100.0 * MAX_REST_OFFSET_SHARE
         ));
     }
     let rest_samples = at_rest.iter().filter(|r| **r).count();
@@ -124,6 +136,15 @@ pub fn axial_rests(acceleration: &[f64], depth_cut: Option<DepthCut<'_>>) -> Res
     // Between two rests a bit on bottom moves down by what it cuts: summed, the bridged speeds
     // are the depth it cut, positive where the channel reads downward positive.
     let (travel, travel_sd) = travel_between_rests(&speed, noise, &at_rest);
+    if travel.abs() <= MIN_TRAVEL_SDS * travel_sd || travel == 0.0 {
+        return Err(format!(
+            "the bit's travel from rest to rest, summed, lies {:.1} standard deviations of its \
+             noise from zero (more than {MIN_TRAVEL_SDS:.0} are needed): the channel does not \
+             show a bit that moves down by what it cuts (an accelerometer's readings must each \
+             be the mean over their sample period)",
+            travel.abs() / travel_sd.max(f64::MIN_POSITIVE)
+        ));
+    }
     let travel_m = depth_cut.as_ref().map(|d| {
         let first = at_rest.iter().position(|r| *r).unwrap_or(0);
         let last = at_rest.iter().rposition(|r| *r).unwrap_or(0);
@@ -134,23 +155,17 @@ pub fn axial_rests(acceleration: &[f64], depth_cut: Option<DepthCut<'_>>) -> Res
         && !(cut > 0.0 && (moved.abs() - cut).abs() <= MAX_TRAVEL_MISMATCH * cut + d.turn_depth_m)
     {
         return Err(format!(
-            "the bit's travel from its first rest to its last, {:.3} m by the acceleration \
-             summed, is not the depth the rate of penetration cut meanwhile, {cut:.3} m (within \
-             {:.0} % and a turn's depth of cut, {:.1} mm): the readings are not each the \
-             acceleration's mean over its sample period, or the rate of penetration is not the \
-             bit's",
+            "the bit's travel from its first rest (data row {}) to its last (data row {}), {:.3} \
+             m by the acceleration summed at a sample period of {:.4} s, is not the depth the rate \
+             of penetration cut meanwhile, {cut:.3} m (within {:.0} % and a turn's depth of cut, \
+             {:.1} mm): the readings are not each the acceleration's mean over its sample period, \
+             the clock is not the record's, or the rate of penetration is not the bit's",
+            at_rest.iter().position(|r| *r).unwrap_or(0) + 1,
+            at_rest.iter().rposition(|r| *r).unwrap_or(0) + 1,
             moved.abs(),
+            d.period_s,
             100.0 * MAX_TRAVEL_MISMATCH,
             1e3 * d.turn_depth_m
-        ));
-    }
-    if travel_m.is_none() && travel.abs() <= MIN_TRAVEL_SDS * travel_sd {
-        return Err(format!(
-            "the bit's travel from rest to rest, summed, lies {:.1} standard deviations of its \
-             noise from zero (at least {MIN_TRAVEL_SDS:.0} are needed): the channel does not \
-             show a bit that moves down by what it cuts (an accelerometer's readings must each \
-             be the mean over their sample period)",
-            travel.abs() / travel_sd
         ));
     }
     let upward_positive = travel < 0.0;
@@ -167,7 +182,8 @@ pub fn axial_rests(acceleration: &[f64], depth_cut: Option<DepthCut<'_>>) -> Res
         rests,
         rest_samples,
         upward_positive,
-        travel_m: travel_m.map(|(moved, cut)| (moved.abs(), cut)),
+        travel_m: travel_m.map(|(moved, _)| moved.abs()),
+        depth_cut_m: travel_m.map(|(_, cut)| cut),
         moving_down,
     })
 }
@@ -183,8 +199,8 @@ fn rest_reading(acceleration: &[f64]) -> Result<(f64, f64, Vec<bool>), String> {
     let mut sorted = acceleration.to_vec();
     sorted.sort_by(f64::total_cmp);
     let held = ((REST_SHARE * n as f64) as usize).max(MIN_REST_SAMPLES);
-    if n < held {
-        return Err(format!("it has {n} readings"));
+    if n < MIN_READINGS {
+        return Err(format!("it has {n} readings: at least {MIN_READINGS} are needed"));
     }
     let (start, width) = (0..=n - held)
         .map(|i| (i, sorted[i + held - 1] - sorted[i]))
@@ -197,12 +213,18 @@ fn rest_reading(acceleration: &[f64]) -> Result<(f64, f64, Vec<bool>), String> {
         return Err("it reads one value throughout: the bit never moved".into());
     }
     let mut at_rest = vec![false; n];
-    for _ in 0..MAX_REST_ROUNDS {
+    for round in 0..=MAX_REST_ROUNDS {
         let within = (REST_SDS * noise).max(ROUNDING_SHARE * scale);
         let quiet: Vec<bool> = acceleration.iter().map(|a| (a - rest).abs() <= within).collect();
         let next = runs_of_at_least(&quiet, MIN_REST_SAMPLES);
         if next == at_rest {
             break;
+        }
+        if round == MAX_REST_ROUNDS {
+            return Err(format!(
+                "its rests did not settle in {MAX_REST_ROUNDS} rounds (the samples within \
+                 {REST_SDS:.0} standard deviations of its noise of one reading kept changing)"
+            ));
         }
         at_rest = next;
         let readings: Vec<f64> = (0..n).filter(|&i| at_rest[i]).map(|i| acceleration[i]).collect();
@@ -331,6 +353,31 @@ mod tests {
     }
 
     #[test]
+    fn the_cut_normal_s_spread_is_its_closed_form() {
+        // √(1 − 2·k·φ(k)/(2Φ(k) − 1)) at k = 3, Φ by Simpson's rule over the density.
+        let k = REST_SDS;
+        let density = |x: f64| (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
+        let steps = 10_000;
+        let h = 2.0 * k / f64::from(steps);
+        let mass = (0..=steps)
+            .map(|i| {
+                let weight = if i == 0 || i == steps {
+                    1.0
+                } else if i % 2 == 1 {
+                    4.0
+                } else {
+                    2.0
+                };
+                weight * density(-k + h * f64::from(i))
+            })
+            .sum::<f64>()
+            * h
+            / 3.0;
+        let exact = (1.0 - 2.0 * k * density(k) / mass).sqrt();
+        assert!((exact - TRUNCATED_SD).abs() < 1e-4, "{exact}");
+    }
+
+    #[test]
     fn noise_free_the_samples_moving_down_are_the_bit_s_own_whatever_the_offset_and_sign() {
         let (a, moving) = stick_slip(20, 6);
         for (offset, sign) in [(0.0, 1.0), (9.81, 1.0), (-3.0, -1.0)] {
@@ -384,7 +431,7 @@ mod tests {
             turn_depth_m: 0.0,
         };
         let r = axial_rests(&a, Some(depth_cut(&rop))).unwrap();
-        let (moved, cut) = r.travel_m.unwrap();
+        let (moved, cut) = (r.travel_m.unwrap(), r.depth_cut_m.unwrap());
         assert!((moved - cut).abs() < 1e-9 * cut, "{moved} m for {cut} m");
         assert_eq!(r.moving_down, moving);
         // A rate of penetration a third lower: the sums are not the bit's travel.

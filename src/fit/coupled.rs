@@ -158,8 +158,8 @@ pub const CALIBRATED: [(&str, &str); 4] = [
 pub enum CuttingBy {
     /// The record's axial speed of the bit: positive (downward).
     AxialSpeed,
-    /// The bit's axial speed summed from its axial acceleration between its rests: beyond
-    /// doubt positive (downward).
+    /// The bit's axial speed summed from its axial acceleration between its rests: positive
+    /// (downward) by 3 of its standard deviations.
     AxialAcceleration,
     /// The upper edge of the weight against the depth of cut: the record has no axial speed,
     /// and no axial acceleration that shows the bit's rests.
@@ -172,7 +172,7 @@ impl CuttingBy {
         match self {
             Self::AxialSpeed => "moving down by the bit's axial speed",
             Self::AxialAcceleration => {
-                "moving down beyond doubt by the bit's axial speed summed from its axial acceleration between its rests"
+                "moving down by 3 standard deviations of the bit's axial speed summed from its axial acceleration between its rests"
             }
             Self::WeightEdge => {
                 "on the upper edge of the weight against the depth of cut, the record having no axial speed"
@@ -196,6 +196,9 @@ pub struct CoupledCalibration {
     /// the weight's upper edge told them instead.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub axial_acceleration_unused: Option<String>,
+    /// Channels of the record the calibration could have used and were not read, and why.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub unread: Vec<String>,
     /// The weight's noise about its upper edge (kN, a standard deviation), where that told them.
     pub weight_edge_noise_kn: Option<f64>,
     /// The standard deviation the samples' deficits below the edge were told by, root mean
@@ -224,11 +227,13 @@ impl CoupledCalibration {
     /// What the user is told beside the estimates: why the record's axial acceleration was not
     /// used, and the warning.
     pub fn notes(&self) -> Vec<String> {
+        let unread = self.unread.iter().map(|why| format!("note: not read: {why}"));
         let unused = self
             .axial_acceleration_unused
             .iter()
             .map(|why| format!("note: {why}; the weight's upper edge against the depth of cut told them instead"));
-        unused
+        unread
+            .chain(unused)
             .chain(self.warning.iter().map(|w| format!("warning: {w}")))
             .collect()
     }
@@ -584,44 +589,44 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
                 .into(),
         ));
     };
-    let mut depth = Vec::new();
-    let mut weight = Vec::new();
-    let mut torque = Vec::new();
-    let mut follows = Vec::new();
-    let mut last = None;
-    let (rests, rests_unused) = match (&record.axial_speed_m_s, &record.axial_acceleration_m_s2) {
+    let (mut rests, mut rests_unused) = match (&record.axial_speed_m_s, &record.axial_acceleration_m_s2) {
         (None, Some(acceleration)) => match axial_rests(acceleration, depth_cut(record, rop_m_s)) {
             Ok(rests) => (Some(rests), None),
-            Err(why) => (
-                None,
-                Some(format!(
-                    "the axial acceleration ('{}') cannot tell the bit moving down: {why}",
-                    record.columns.axial_acceleration.as_deref().unwrap_or_default()
-                )),
-            ),
+            Err(why) => (None, Some(why)),
         },
         _ => (None, None),
     };
+    let mut turning = turning_samples(record, rop_m_s, &|i| match (&record.axial_speed_m_s, &rests) {
+        (Some(v), _) => v[i] > 0.0,
+        (None, Some(r)) => r.moving_down[i],
+        (None, None) => true,
+    });
+    if rests.is_some() && turning.depth.len() < MIN_CUTTING_SAMPLES {
+        rests_unused = Some(format!(
+            "it tells {} samples of the bit moving down, turning and penetrating: at least \
+             {MIN_CUTTING_SAMPLES} are needed",
+            turning.depth.len()
+        ));
+        rests = None;
+        turning = turning_samples(record, rop_m_s, &|_| true);
+    }
+    let rests_unused = rests_unused.map(|why| {
+        format!(
+            "the axial acceleration ('{}') cannot tell the bit moving down: {why}",
+            record.columns.axial_acceleration.as_deref().unwrap_or_default()
+        )
+    });
     let by = match (&record.axial_speed_m_s, &rests) {
         (Some(_), _) => CuttingBy::AxialSpeed,
         (None, Some(_)) => CuttingBy::AxialAcceleration,
         (None, None) => CuttingBy::WeightEdge,
     };
-    for i in 0..record.len() {
-        let w = record.speed_rad_s[i];
-        let moving_down = match (&record.axial_speed_m_s, &rests) {
-            (Some(v), _) => v[i] > 0.0,
-            (None, Some(r)) => r.moving_down[i],
-            (None, None) => true,
-        };
-        if w > STUCK_SPEED_RAD_S && rop_m_s[i] > 0.0 && moving_down {
-            depth.push(std::f64::consts::TAU * rop_m_s[i] / w);
-            weight.push(record.wob_n[i]);
-            torque.push(record.torque_nm[i]);
-            follows.push(last.is_some_and(|l| l + 1 == i));
-            last = Some(i);
-        }
-    }
+    let Turning {
+        mut depth,
+        mut weight,
+        mut torque,
+        follows,
+    } = turning;
     let mut edge_found = None;
     // Without the depth's spread no edge is found, and the calibration refuses for the spread.
     if by == CuttingBy::WeightEdge && depth.len() >= MIN_CUTTING_SAMPLES && spread(&depth).is_ok() {
@@ -632,10 +637,11 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
     if depth.len() < MIN_CUTTING_SAMPLES {
         return Err(refuse(format!(
             "{} of its {} samples show the bit cutting (turning, penetrating, {}): at least \
-             {MIN_CUTTING_SAMPLES} are needed",
+             {MIN_CUTTING_SAMPLES} are needed{}",
             depth.len(),
             record.len(),
-            by.describe()
+            by.describe(),
+            rests_unused.as_ref().map_or(String::new(), |why| format!(" ({why})"))
         )));
     }
     Ok(Cutting {
@@ -647,6 +653,37 @@ fn cutting(record: &DrillingRecord) -> Result<Cutting> {
         rests,
         rests_unused,
     })
+}
+
+/// A record's turning, penetrating samples that `moving_down` keeps: each one's depth of cut (m
+/// a turn), weight (N) and torque (N·m), and whether it follows the one before in the record.
+struct Turning {
+    depth: Vec<f64>,
+    weight: Vec<f64>,
+    torque: Vec<f64>,
+    follows: Vec<bool>,
+}
+
+/// The samples of `record` (its rate of penetration `rop_m_s`) turning above the stuck speed,
+/// penetrating and moving down by `moving_down`.
+fn turning_samples(record: &DrillingRecord, rop_m_s: &[f64], moving_down: &dyn Fn(usize) -> bool) -> Turning {
+    let mut out = Turning {
+        depth: Vec::new(),
+        weight: Vec::new(),
+        torque: Vec::new(),
+        follows: Vec::new(),
+    };
+    let mut last = None;
+    for (i, (&w, &rop)) in record.speed_rad_s.iter().zip(rop_m_s).enumerate() {
+        if w > STUCK_SPEED_RAD_S && rop > 0.0 && moving_down(i) {
+            out.depth.push(std::f64::consts::TAU * rop / w);
+            out.weight.push(record.wob_n[i]);
+            out.torque.push(record.torque_nm[i]);
+            out.follows.push(last.is_some_and(|l| l + 1 == i));
+            last = Some(i);
+        }
+    }
+    out
 }
 
 /// Where the weight's upper edge is not clear: the standard deviation its samples were told by,
@@ -685,16 +722,16 @@ fn blurred_edge(scatter_n: f64, settled: bool, contact_n: f64) -> Option<String>
 }
 
 /// What the bit's travel from rest to rest on `record` is checked against, where it has a clock:
-/// the depth its rate of penetration `rop_m_s` cut, within a turn's largest depth of cut
-/// (2π·ROP/Ω over the turning samples).
+/// the depth its rate of penetration `rop_m_s` cut, within a turn's depth of cut (2π·ROP/Ω, the
+/// 95th percentile over the turning, penetrating samples: a rate of penetration smoothed over a
+/// stick gives a bit barely turning a depth it never cut).
 fn depth_cut<'a>(record: &DrillingRecord, rop_m_s: &'a [f64]) -> Option<DepthCut<'a>> {
-    let turn_depth_m = record
-        .speed_rad_s
-        .iter()
-        .zip(rop_m_s)
-        .filter(|(w, _)| **w > STUCK_SPEED_RAD_S)
-        .map(|(w, rop)| std::f64::consts::TAU * rop / w)
-        .fold(0.0, f64::max);
+    let depths = turning_samples(record, rop_m_s, &|_| true).depth;
+    let turn_depth_m = if depths.is_empty() {
+        0.0
+    } else {
+        quantile(&depths, 0.95)
+    };
     record.sample_period_s.map(|period_s| DepthCut {
         period_s,
         rop_m_s,
@@ -788,6 +825,7 @@ pub fn calibrate(record: &DrillingRecord, radius_m: f64, draws: usize, seed: u64
         cutting_by: by,
         axial_rests: rests,
         axial_acceleration_unused: rests_unused,
+        unread: record.unread.clone(),
         weight_edge_noise_kn: edge.as_ref().map(|e| e.noise_sd_n / 1e3),
         weight_edge_scatter_kn: edge.as_ref().map(|e| e.told_sd_n / 1e3),
         depth_of_cut_mm: (1e3 * quantile(&depth, 0.05), 1e3 * quantile(&depth, 0.95)),
@@ -1076,6 +1114,7 @@ mod tests {
             axial_speed_m_s: None,
             axial_acceleration_m_s2: None,
             sample_period_s: None,
+            unread: Vec::new(),
         }
     }
 
@@ -1133,6 +1172,7 @@ mod tests {
             axial_speed_m_s: None,
             axial_acceleration_m_s2: None,
             sample_period_s: None,
+            unread: Vec::new(),
         };
         let e = calibrate(&record, 0.108, 10, 1).unwrap_err().to_string();
         assert!(

@@ -122,7 +122,7 @@ pub(crate) fn coupled_calibrate(
     let settings: Settings = settings(options)?;
     let speed_given = options.get_item("omega_rpm")?.is_some_and(|v| !v.is_none());
     check(py, run::check_escape_start(&settings, map, true, speed_given))?;
-    let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
+    let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns, true)?))?;
     let calibration = check(py, run::calibration(&record, &settings))?;
     let mut notes = calibration.notes();
     let value = if map && settings.escape {
@@ -138,9 +138,11 @@ pub(crate) fn coupled_calibrate(
     Ok(value.to_string())
 }
 
-/// The drilling record's columns and units named in `columns` (each defaulted where absent).
-fn drilling_options(py: Python<'_>, columns: &Bound<'_, PyDict>) -> PyResult<DrillingOptions> {
+/// The drilling record's columns and units named in `columns` (each defaulted where absent), its
+/// axial acceleration read where `calibrating`.
+fn drilling_options(py: Python<'_>, columns: &Bound<'_, PyDict>, calibrating: bool) -> PyResult<DrillingOptions> {
     Ok(DrillingOptions {
+        read_axial_acceleration: calibrating,
         speed_column: kwarg(columns, "speed_col")?,
         torque_column: kwarg(columns, "torque_col")?,
         wob_column: kwarg(columns, "wob_col")?,
@@ -179,7 +181,7 @@ pub(crate) fn coupled_select(
     note: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let settings: Settings = settings(options)?;
-    let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns)?))?;
+    let record = check(py, DrillingRecord::read(&path, &drilling_options(py, columns, false)?))?;
     let mut notes = Vec::new();
     let c = py.detach(|| choice(&record, &settings, &mut |line| notes.push(line)));
     let c = check(py, c)?;

@@ -20,6 +20,7 @@ pub(crate) const ARGUMENTS: &[(&str, &str)] = &[
     ("downhole_max_column", "downhole_max_col"),
     ("rop_column", "rop_col"),
     ("axial_speed_column", "axial_speed_col"),
+    ("axial_acceleration_column", "axial_acceleration_col"),
     ("noise_sd", "noise_sd_knm"),
     ("prior", "prior_file"),
     ("bounded", "bounds"),

@@ -230,7 +230,7 @@ def test_python_runs_the_command_s_string_map_and_calibration(cli, tmp_path):
     assert felt_calibration["cutting_by"] == "axial_acceleration"
     rests = felt_calibration["axial_rests"]
     assert rests["upward_positive"] and rests["rests"] >= 3
-    moved, cut = rests["travel_m"]
+    moved, cut = rests["travel_m"], rests["depth_cut_m"]
     # Within a depth of cut: at the first rest and the last the bottom under the blades lies
     # at heights up to a turn's depth of cut apart (6 mm of 0.3 m here).
     assert moved == pytest.approx(cut, abs=0.01)
