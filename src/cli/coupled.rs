@@ -189,7 +189,7 @@ pub struct DrillingArgs {
     /// The bit's axial acceleration column, where the record has no axial speed: the bit's rests
     /// on it tell the samples moving down [default: the one whose name holds 'axial' and 'acc',
     /// if any].
-    #[arg(long, value_name = "NAME", requires = "drilling_record")]
+    #[arg(long, value_name = "NAME", requires = "calibrate")]
     pub axial_acceleration_col: Option<String>,
     /// Unit of the bit speed [default: from its name's suffix].
     #[arg(long, value_enum, requires = "drilling_record")]
@@ -205,7 +205,7 @@ pub struct DrillingArgs {
     #[arg(long, value_enum, requires = "drilling_record")]
     pub rop_unit: Option<RateUnit>,
     /// Unit of the axial acceleration [default: from its name's suffix].
-    #[arg(long, value_enum, requires = "drilling_record")]
+    #[arg(long, value_enum, requires = "calibrate")]
     pub acceleration_unit: Option<AccelerationUnit>,
 }
 

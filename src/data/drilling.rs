@@ -8,7 +8,7 @@
 //! speed, `time` its clock; each can be named instead. Surface channels are never read as the
 //! bit's. Units come from the names' suffixes or the options.
 
-use super::surface::{format_error, missing, pick};
+use super::surface::{CLOCK_TOLERANCE, format_error, missing, pick};
 use super::{is_surface_channel, resolve_unit};
 use crate::error::{Error, Result};
 use crate::files::{csv_rows, csv_with_header};
@@ -78,10 +78,6 @@ pub struct DrillingRecord {
     /// clock that is not regular).
     pub unread: Vec<String>,
 }
-
-/// Most a stamp's spacing may differ from the clock's period, as a share of it, for the period
-/// to check the bit's travel by.
-const CLOCK_TOLERANCE: f64 = 0.01;
 
 impl DrillingRecord {
     /// Reads the drilling record at `path` (a CSV with a header).
@@ -278,7 +274,8 @@ fn or_unread<T>(found: Result<Option<T>>, named: bool, unread: &mut Vec<String>)
 }
 
 /// The period (s) of the clock `time_s`: the median spacing of its stamps, where every spacing
-/// is positive and within [`CLOCK_TOLERANCE`] of it.
+/// is positive and within [`CLOCK_TOLERANCE`] of it (a surface record's clock, on which its
+/// strings are simulated, is held to the same).
 fn regular_period(time_s: &[f64]) -> Option<f64> {
     let steps: Vec<f64> = time_s.windows(2).map(|w| w[1] - w[0]).collect();
     let period = crate::numerics::median(&steps).filter(|p| *p > 0.0)?;

@@ -68,8 +68,8 @@ pub struct DepthCut<'a> {
     pub period_s: f64,
     /// The rate of penetration (m/s), a sample each.
     pub rop_m_s: &'a [f64],
-    /// The largest depth of cut a turn (m) the record shows: the bottom's height under the
-    /// blades varies around the hole by up to it, at the first rest as at the last.
+    /// A turn's depth of cut (m) on the record, as the caller reads it: the bottom's height
+    /// under the blades varies around the hole by up to it, at the first rest as at the last.
     pub turn_depth_m: f64,
 }
 
