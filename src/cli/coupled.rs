@@ -127,7 +127,7 @@ pub struct CoupledCmd {
     /// --blades and the string stay as given.
     #[arg(long, value_name = "RECORD", conflicts_with_all = [
         "map", "feed_m_h", "out", "intrinsic_energy_mpa", "zeta", "wear_flat_mm", "friction", "duration_s",
-        "samples", "backend",
+        "samples", "backend", "axial_acceleration_col", "acceleration_unit",
     ])]
     pub select: Option<std::path::PathBuf>,
     /// Candidates of each structure in the choice's reference table (with --select).
