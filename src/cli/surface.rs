@@ -333,6 +333,9 @@ fn tables(out: &mut impl Write, record: &SurfaceRecord, r: &SurfaceResult) -> st
             "bounded above: the clock is too coarse for the cycle to tell noise from signal; give --noise-sd-knm where the tool's noise is known"
         }
         "estimated" => "estimated from the record",
+        "wind_up" => {
+            "read on the record's wind-ups: the clock is too coarse for the cycle to tell noise from signal elsewhere; give --noise-sd-knm where the tool's noise is known"
+        }
         _ => "given",
     };
     writeln!(

@@ -259,6 +259,42 @@ fn semi_automatic_summaries_say_what_they_predict_and_find_the_torques() {
 }
 
 #[test]
+fn from_the_surface_alone_a_creeping_bit_is_told_from_a_held_one_where_the_string_is_known() {
+    // m1 (no static torque: its bit creeps at 1-4 rpm where m2's is held) and m2 at 40 rpm on
+    // the paper's string, ten minutes at 1 Hz with 0.2 kN·m of noise. The held bit lets the
+    // string wind up at k·Ω, the creeping one slower: the wind-up rates differ by 5 %, the
+    // noise is read on the wind-ups (the smooth estimate reads 0.42-0.48 kN·m there), and the
+    // generating law leads. At 1 Hz the laws' re-simulations overlap, so the check may leave
+    // it undecided, but it never calls the other law.
+    let laws = vec![Law::M1, Law::M2];
+    let wind_up = |r: &SurfaceResult| {
+        let at = r.summary_names.iter().position(|n| *n == "wind_up_nm_s").unwrap();
+        r.observed[at]
+    };
+    for seed in 1..=2 {
+        let mut rates = Vec::new();
+        for (slot, law) in laws.iter().enumerate() {
+            let (_dir, path, _) = record(*law, 40.0, 600.0, 1.0, 0.2, seed);
+            let r = run(&path, &small(laws.clone()), seed);
+            let what = format!("{law}, seed {seed}");
+            assert_eq!(r.noise.how, "wind_up", "{what}");
+            assert!((r.noise.sd_nm - 200.0).abs() < 40.0, "{what}: noise {}", r.noise.sd_nm);
+            let p = r.laws[slot].probability;
+            assert!(
+                p > 0.5,
+                "{what}: {:?}",
+                r.laws.iter().map(|l| l.probability).collect::<Vec<_>>()
+            );
+            assert!(r.check.decided.is_none_or(|d| d == *law), "{what}: {}", r.check.verdict);
+            rates.push(wind_up(&r));
+        }
+        // k·Ω = 277 N·m/rad × 4.19 rad/s = 1,160 N·m/s for the held bit.
+        assert!((rates[1] - 1160.0).abs() < 40.0, "seed {seed}: {rates:?}");
+        assert!(rates[0] < 0.97 * rates[1], "seed {seed}: {rates:?}");
+    }
+}
+
+#[test]
 fn an_mwd_tool_s_downhole_minimum_tells_a_bit_held_still_from_one_that_creeps() {
     // m2 at 60 rpm, five minutes at 1 Hz. From the surface torque alone m1, whose bit creeps
     // at 1-3 rpm where m2's is held, draws the same cycle: the check calls neither. With an MWD

@@ -1,7 +1,26 @@
 //! The model choice checked by re-simulation: records re-simulated from each law's posterior,
-//! classified by their nearest neighbours in the pilot's reference table, and the verdict.
+//! classified by their nearest neighbours among other records simulated from the laws'
+//! posteriors, as many for each law, and the verdict.
+//!
+//! The reference is each law's posterior, not the prior: the question is whether the summaries
+//! tell the laws' records apart where the record lies. A prior's reference table is mostly
+//! strings far from the record (6 of the pilot's 888 within the sampler's final tolerance on a
+//! ten-minute record), so the votes of its nearest twentieth said which law's prior puts more
+//! strings somewhere around the record, and a law whose posterior is a small corner of its box
+//! was taken for another whose box is wider there. Each law gets as many reference records, so
+//! that a law's votes are how near its records lie, not its probability (which is what the
+//! check checks), and a re-simulation never counts its own particle's reference record: a law
+//! of a handful of particles would otherwise recognise itself by its parameters alone.
 
 use super::*;
+
+/// Records simulated from each law's posterior as the check's reference.
+pub const REFERENCE_PER_LAW: usize = 60;
+/// Neighbours each classification takes among the reference records.
+pub const CHECK_NEIGHBOURS: usize = 10;
+
+/// What keys the reference records' resampling and noise apart from the re-simulations'.
+const REFERENCE_TAG: u64 = 0x5245_4653;
 
 /// The model choice checked by re-simulation (see the module documentation).
 #[allow(clippy::too_many_arguments)]
@@ -9,7 +28,6 @@ pub(super) fn check(
     prior: &Prior,
     model: &SurfaceModel,
     distance: &Distance,
-    table: &[(usize, Summaries)],
     laws: &[LawPosterior],
     particles: &[Particle],
     replicates: usize,
@@ -17,35 +35,74 @@ pub(super) fn check(
     cycle: &Cycle,
     unconverged: Option<f64>,
 ) -> Result<ModelCheck> {
-    let neighbours = (table.len() / 20).max(10).min(table.len());
-    let classify = |s: &Summaries| -> usize {
-        let mut near: Vec<(f64, usize)> = table.iter().map(|(slot, t)| (distance.between(s, t), *slot)).collect();
+    let own_of = |law: Law| -> Vec<&Particle> { particles.iter().filter(|p| p.law == law).collect() };
+    let mut reference: Vec<(usize, &Particle, Summaries)> = Vec::new();
+    for (slot, posterior) in laws.iter().enumerate() {
+        if posterior.particles == 0 {
+            continue;
+        }
+        let drawn = resample(
+            &own_of(posterior.law),
+            REFERENCE_PER_LAW,
+            seed ^ REFERENCE_TAG ^ (slot as u64 + 1),
+        );
+        let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
+        let simulated: Vec<Option<Summaries>> = runs
+            .into_par_iter()
+            .enumerate()
+            .with_max_len(1)
+            .map(|(k, mut run)| {
+                let key = NoiseKey::replicate(seed ^ REFERENCE_TAG, (slot * REFERENCE_PER_LAW + k) as u64);
+                model.add_noise(&mut run, key);
+                (!run.diverged).then(|| model.summaries_of_run(&run))
+            })
+            .collect();
+        for (particle, summaries) in drawn.into_iter().zip(simulated) {
+            if let Some(summaries) = summaries {
+                reference.push((slot, particle, summaries));
+            }
+        }
+    }
+    let neighbours = CHECK_NEIGHBOURS.min(reference.len());
+    // The law most of the re-simulation's nearest reference records were simulated from, none
+    // of them from its own particle; None where no reference record is left.
+    let classify = |s: &Summaries, source: &Particle| -> Option<usize> {
+        let mut near: Vec<(f64, usize)> = reference
+            .iter()
+            .filter(|(_, particle, _)| !std::ptr::eq(*particle, source))
+            .map(|(slot, _, r)| (distance.between(s, r), *slot))
+            .collect();
+        let neighbours = neighbours.min(near.len());
+        if neighbours == 0 {
+            return None;
+        }
         near.select_nth_unstable_by(neighbours - 1, |a, b| a.0.total_cmp(&b.0));
         let mut votes = vec![0usize; prior.boxes.len()];
         for (_, slot) in &near[..neighbours] {
             votes[*slot] += 1;
         }
         // Ties go to the earlier law: deterministic.
-        (0..votes.len())
-            .max_by_key(|&k| (votes[k], std::cmp::Reverse(k)))
-            .expect("a law")
+        (0..votes.len()).max_by_key(|&k| (votes[k], std::cmp::Reverse(k)))
     };
     let mut rows = Vec::new();
     for (slot, posterior) in laws.iter().enumerate() {
         if posterior.particles == 0 {
             continue;
         }
-        let own: Vec<&Particle> = particles.iter().filter(|p| p.law == posterior.law).collect();
-        let drawn = resample(&own, replicates, seed ^ (slot as u64 + 1));
+        let drawn = resample(&own_of(posterior.law), replicates, seed ^ (slot as u64 + 1));
         let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
         let classes: Vec<Option<usize>> = runs
             .into_par_iter()
+            .zip(drawn.par_iter())
             .enumerate()
             .with_max_len(1)
-            .map(|(k, mut run)| {
+            .map(|(k, (mut run, source))| {
                 let key = NoiseKey::replicate(seed, (slot * replicates + k) as u64);
                 model.add_noise(&mut run, key);
-                (!run.diverged).then(|| classify(&model.summaries_of_run(&run)))
+                if run.diverged {
+                    return None;
+                }
+                classify(&model.summaries_of_run(&run), source)
             })
             .collect();
         let mut counts = vec![0usize; prior.boxes.len()];
@@ -62,7 +119,7 @@ pub(super) fn check(
     }
     let (decided, verdict) = verdict(laws, &rows, cycle, unconverged);
     Ok(ModelCheck {
-        reference: table.len(),
+        reference: reference.len(),
         neighbours,
         rows,
         decided,

@@ -3,7 +3,8 @@
 //! surface implies at the bit.
 //!
 //! 1. **The record's noise**: given, or read from the surface torque ([`Noise::of`]): an
-//!    estimate on a clock fine enough for the cycle, an upper bound on a coarser one.
+//!    estimate on a clock fine enough for the cycle; on a coarser one, read on the wind-ups
+//!    where they are long enough, else an upper bound.
 //! 2. **The prior**: per law, boxes k scales wide from the physical bounds ([`Prior::physical`]),
 //!    the scales from the record (the largest surface torque; speeds from the top drive's, the
 //!    bit's peaks taken as three times it), replaced where a prior file gives bounds, a law
@@ -12,15 +13,16 @@
 //!    the string's natural frequency or damping ratio is given as bounds, every box carries
 //!    both after the law's parameters ([`Prior::with_coordinates`]; one given exactly spans no
 //!    width), each candidate's string built from them.
-//! 3. **The pilot and the scout**: prior simulations give first scales of the distance and the
-//!    reference table of the check; a short ABC-SMC on them finds the strings near the record,
+//! 3. **The pilot and the scout**: prior simulations give first scales of the distance (and
+//!    semi-automatic ABC's training strings); a short ABC-SMC on them finds the strings near the record,
 //!    whose spread scales the main run's distance (see `Scout`).
 //! 4. **ABC-SMC** ([`crate::abc::smc`]) on ρ = the scaled distance of summaries (or, with
 //!    `semi_automatic`, of the predictions of regressions fitted on the half of the pilot
 //!    nearest the record: [`crate::eval::projection`]), every candidate a string simulated on
 //!    the record's clock ([`SurfaceEvaluator`]).
 //! 5. **The check**: records re-simulated from each law's posterior are classified by their
-//!    nearest neighbours in the reference table. Summaries that are not sufficient can make
+//!    nearest neighbours among as many records simulated from each law's posterior
+//!    (the `check` module). Summaries that are not sufficient can make
 //!    ABC model choice inconsistent (Robert, Cornuet, Marin & Pillai 2011); the law is called
 //!    only where its own re-simulations are recognised and the others' are not taken for it.
 //! 6. **At the bit**: posterior draws simulated on the record's clock give the bit speed's
@@ -57,7 +59,7 @@ use crate::run::{Placement, Scoring};
 use crate::simulate::strings::{Chain, Summary};
 use crate::simulate::surface::{
     DownholeExtremes, Drive, Integration, MEAN, N_DOWNHOLE_SUMMARIES, N_SUMMARIES, OnClock, PERIOD, PERIOD_STRENGTH,
-    SUMMARY_NAMES, least_scales, noise_sd, summaries,
+    SUMMARY_NAMES, least_scales, noise_sd, summaries, wind_up_noise_sd,
 };
 use crate::stability::lumped::Lumped;
 use crate::stability::map::LawSamples;
@@ -264,7 +266,8 @@ pub struct CheckRow {
 /// The model choice's check and its verdict.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ModelCheck {
-    /// Prior simulations in the reference table, and the neighbours each classification uses.
+    /// Records simulated from the laws' posteriors as the reference (those that did not
+    /// diverge), and the neighbours each classification takes.
     pub reference: usize,
     pub neighbours: usize,
     pub rows: Vec<CheckRow>,
@@ -354,16 +357,20 @@ pub const FINE_CLOCK_SAMPLES_PER_CYCLE: f64 = 20.0;
 pub struct Noise {
     /// Standard deviation (N·m).
     pub sd_nm: f64,
-    /// `given`, `estimated` (from a clock fine enough for the cycle) or `bounded` (a coarse
-    /// clock, where the estimate also holds part of the signal: an upper bound).
+    /// `given`, `estimated` (from a clock fine enough for the cycle), `wind_up` (a coarse
+    /// clock, read on the string's wind-ups) or `bounded` (a coarse clock without wind-ups
+    /// enough, where the estimate also holds part of the signal: an upper bound).
     pub how: &'static str,
 }
 
 impl Noise {
-    /// The noise given, or read from the record by [`noise_sd`]: an estimate where
-    /// the clock gives the cycle [`FINE_CLOCK_SAMPLES_PER_CYCLE`] samples or more (or shows
-    /// none), else an upper bound. A bound adds more noise to the simulations than the record
-    /// holds, widening the posterior rather than narrowing it wrongly.
+    /// The noise given, or read from the record by [`noise_sd`]: an estimate where the clock
+    /// gives the cycle [`FINE_CLOCK_SAMPLES_PER_CYCLE`] samples or more (or shows none). On a
+    /// coarser clock that holds part of the signal, and the noise is read on the wind-ups
+    /// ([`wind_up_noise_sd`]) where they give less; else it stays an upper bound. More noise
+    /// in the simulations than in the record widens the posterior, and moves the summaries
+    /// that noise moves (the quantiles' spread, the wind-up rate), so the bound is the last
+    /// resort.
     pub fn of(given: Option<f64>, torque_nm: &[f64], cycle: &Cycle, period_s: f64) -> Self {
         if let Some(sd_nm) = given {
             return Self { sd_nm, how: "given" };
@@ -372,9 +379,18 @@ impl Noise {
         let fine = cycle
             .period_s
             .is_none_or(|p| p / period_s >= FINE_CLOCK_SAMPLES_PER_CYCLE);
-        Self {
-            sd_nm,
-            how: if fine { "estimated" } else { "bounded" },
+        if fine {
+            return Self {
+                sd_nm,
+                how: "estimated",
+            };
+        }
+        match wind_up_noise_sd(torque_nm) {
+            Some(wind_up) if wind_up < sd_nm => Self {
+                sd_nm: wind_up,
+                how: "wind_up",
+            },
+            _ => Self { sd_nm, how: "bounded" },
         }
     }
 }
@@ -669,7 +685,6 @@ pub fn infer_continuing(
         &prior,
         &model,
         &distance,
-        &table,
         &laws,
         particles,
         settings.check_replicates,
@@ -677,7 +692,7 @@ pub fn infer_continuing(
         &cycle,
         unconverged(last.record.epsilon, noise_floor),
     )?;
-    simulations += check.rows.iter().map(|r| r.replicates as u64).sum::<u64>();
+    simulations += check.reference as u64 + check.rows.iter().map(|r| r.replicates as u64).sum::<u64>();
     let mut at_the_bit = at_the_bit(&model, particles, settings.predictive_draws, seed)?;
     simulations += at_the_bit.draws as u64;
     if settings.advice && at_the_bit.stick_slip_probability >= 0.5 {
