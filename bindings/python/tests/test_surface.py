@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pandas as pd
 import pytest
-from test_strings import RPM, STUCK_RAD_S, after_change, cycles_at, integrate, one_dof, torque_law
+from test_strings import PAPER, RPM, STUCK_RAD_S, after_change, cycles_at, integrate, one_dof, torque_law
 
 import bitrock
 from conftest import run_cli
@@ -16,20 +16,24 @@ from conftest import run_cli
 M2_NM = [13000.0, 6500.0, 0.3]
 
 
-def twin_record(path, rpm=60.0, seconds=300.0, noise_nm=200.0, seed=5, mwd_hz=None, string=()):
-    """m2 at the paper's estimate at `rpm`: a surface record at 1 Hz (top-drive speed, surface
-    torque with white noise, weight on bit) written to `path`, and the bit's true speeds at
-    1 Hz. With `mwd_hz`, the string is sampled that finely and the record also holds an MWD
-    tool's downhole minimum and maximum bit speed since the sample before (rpm). `string`:
-    the 1-DOF string's inertia, natural frequency and damping ratio (the paper's by default)."""
+def twin_record(path, rpm=60.0, seconds=300.0, noise_nm=200.0, seed=5, mwd_hz=None, string=(), law="m2", params=None):
+    """`law` (m2 by default) at `params` (N·m; the paper's estimate by default) at `rpm`: a
+    surface record at 1 Hz (top-drive speed, surface torque with white noise, weight on bit)
+    written to `path`, and the bit's true speeds at 1 Hz. With `mwd_hz`, the string is sampled
+    that finely and the record also holds an MWD tool's downhole minimum and maximum bit speed
+    since the sample before (rpm). `string`: the 1-DOF string's inertia, natural frequency and
+    damping ratio (the paper's by default)."""
+    if params is None:
+        values, torques = PAPER[law]
+        params = [v * 1000.0 if torque else v for v, torque in zip(values, torques)]
     chain = one_dof(*string)
     omega = rpm * RPM
-    t0 = torque_law("m2")(M2_NM, omega)
+    t0 = torque_law(law)(params, omega)
     y = np.array([t0 / chain[1][0], omega + 0.1 * omega])
     fine = mwd_hz or 1.0
     step = int(round(fine))
     surface = []
-    speeds, _ = integrate(chain, "m2", M2_NM, omega, 1.0, (y, False, 1.0), 60.0, seconds, sample_hz=fine, surface=surface)
+    speeds, _ = integrate(chain, law, params, omega, 1.0, (y, False, 1.0), 60.0, seconds, sample_hz=fine, surface=surface)
     surface = np.array(surface)[::step]
     noise = np.random.default_rng(seed).normal(0.0, noise_nm, len(surface))
     columns = {
@@ -143,6 +147,30 @@ def test_an_independent_string_s_mwd_extremes_tell_its_held_bit_from_a_creeping_
     assert probability["m2"] > 0.9, result["laws"]
     stuck = result["at_the_bit"]["stuck_share"]
     assert abs(stuck[1] - true_share) <= 0.05, (stuck, true_share)
+
+
+def test_from_an_independent_string_s_surface_alone_a_creeping_bit_is_told_from_a_held_one(tmp_path):
+    # m1 (no static torque: its bit creeps where m2's is held) and m2 at 40 rpm on the paper's
+    # string, ten minutes at 1 Hz from the twin: the held bit lets the string wind up at k·Ω,
+    # the creeping one slower. The noise is read on the wind-ups and the check never calls the
+    # other law. m2 cannot wind up slower, so on m1's record m1 leads; m1 with a tanh steep
+    # enough nearly holds its bit, so on m2's record at 1 Hz the two stay close (m2 first in 7
+    # of 10 of bitrock's own records at the command's budget).
+    rates = {}
+    for law in ("m1", "m2"):
+        path = tmp_path / f"{law}.csv"
+        twin_record(path, rpm=40.0, seconds=600.0, seed=3, law=law)
+        result = bitrock.surface(path, laws=["m1", "m2"], seed=2, **SMALL)
+        assert result["noise"]["how"] == "wind_up"
+        assert result["noise"]["sd_nm"] == pytest.approx(200.0, abs=40.0)
+        probability = {row["law"]: row["probability"] for row in result["laws"]}
+        if law == "m1":
+            assert probability["m1"] > 0.7, probability
+        assert result["check"]["decided"] in (None, law), result["check"]["verdict"]
+        rates[law] = result["observed"][result["summary_names"].index("wind_up_nm_s")]
+    # k·Ω = 277 N·m/rad × 4.19 rad/s = 1,160 N·m/s where the bit is held.
+    assert rates["m2"] == pytest.approx(1160.0, abs=40.0)
+    assert rates["m1"] < 0.97 * rates["m2"], rates
 
 
 def test_an_independent_string_s_natural_frequency_and_damping_are_inferred_with_the_law(tmp_path):
