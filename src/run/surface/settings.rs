@@ -33,7 +33,7 @@ pub struct Settings {
     pub max_populations: usize,
     /// Wall-time budget of the sampler, s (the population in progress is dropped).
     pub max_seconds: Option<f64>,
-    /// Prior simulations that scale the distance and classify the check's records.
+    /// Prior simulations that scale the distance (and train the semi-automatic regressions).
     pub pilot: usize,
     /// Records re-simulated per law to check the model choice.
     pub check_replicates: usize,
