@@ -634,6 +634,13 @@ mod tests {
     use super::*;
     use crate::stability::lumped::Lumped;
 
+    /// `clean` with white Gaussian noise of `sd` added, drawn as the simulations' is (Philox).
+    fn with_noise(clean: &[f64], sd: f64, seed: u64) -> Vec<f64> {
+        let mut noisy = clean.to_vec();
+        crate::eval::surface::add_noise(&mut noisy, sd, crate::eval::surface::NoiseKey(seed));
+        noisy
+    }
+
     #[test]
     fn a_sawtooth_s_summaries_are_its_closed_forms() {
         // Rises for 8 samples, falls in 2: a 10-sample cycle at 1 Hz, 100 cycles.
@@ -673,20 +680,10 @@ mod tests {
             let phase = t.rem_euclid(10.0);
             if phase < 8.0 { phase } else { 4.0 * (10.0 - phase) }
         };
-        let mut state = 7u64;
-        let mut normal = move || {
-            let mut u = || {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (u(), u());
-            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-        };
         for (period_s, sd) in [(1.0, 0.0), (1.0, 0.5), (0.05, 0.0), (0.05, 2.0)] {
             let n = (20_000.0 / period_s) as usize;
-            let torque: Vec<f64> = (0..n).map(|k| saw(k as f64 * period_s) + sd * normal()).collect();
+            let clean: Vec<f64> = (0..n).map(|k| saw(k as f64 * period_s)).collect();
+            let torque = with_noise(&clean, sd, 7);
             let rate = wind_up(&torque, period_s);
             assert!((rate - 1.0).abs() < 0.01, "every {period_s} s, noise {sd}: {rate}");
         }
@@ -700,17 +697,6 @@ mod tests {
     fn the_noise_is_read_on_the_wind_ups_however_coarse_the_clock() {
         // A 10-s sawtooth at 1 Hz (8 samples a wind-up): the smooth estimate takes the drops
         // for noise, the wind-ups' second differences do not.
-        let mut state = 11u64;
-        let mut normal = move || {
-            let mut u = || {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (u(), u());
-            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-        };
         let saw = |k: usize| {
             let phase = (k % 10) as f64;
             if phase < 8.0 {
@@ -721,12 +707,12 @@ mod tests {
         };
         let clean: Vec<f64> = (0..600).map(saw).collect();
         assert!(wind_up_noise_sd(&clean).unwrap() < 1e-9);
-        let noisy: Vec<f64> = (0..600).map(|k| saw(k) + 200.0 * normal()).collect();
+        let noisy = with_noise(&clean, 200.0, 11);
         let read = wind_up_noise_sd(&noisy).unwrap();
         assert!((read - 200.0).abs() < 30.0, "{read}");
         assert!(noise_sd(&noisy) > 2.0 * read, "{}", noise_sd(&noisy));
         // White noise alone is picked at random and read whole.
-        let white: Vec<f64> = (0..6000).map(|_| 200.0 * normal()).collect();
+        let white = with_noise(&[0.0; 6000], 200.0, 12);
         let read = wind_up_noise_sd(&white).unwrap();
         assert!((read - 200.0).abs() < 10.0, "{read}");
         // Too short a record to pick from says so.
@@ -736,21 +722,10 @@ mod tests {
     #[test]
     fn white_noise_on_a_smooth_record_is_measured() {
         // A 10-s sine at 20 Hz with noise of 0.3: the estimate within 5 %.
-        let mut state = 1u64;
-        let mut normal = || {
-            // Box–Muller on a 64-bit LCG: test noise only.
-            let mut u = || {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (u(), u());
-            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-        };
-        let torque: Vec<f64> = (0..20_000)
-            .map(|k| 5.0 * (std::f64::consts::TAU * k as f64 / 200.0).sin() + 0.3 * normal())
+        let sine: Vec<f64> = (0..20_000)
+            .map(|k| 5.0 * (std::f64::consts::TAU * k as f64 / 200.0).sin())
             .collect();
+        let torque = with_noise(&sine, 0.3, 1);
         let sd = noise_sd(&torque);
         assert!((sd - 0.3).abs() < 0.015, "{sd}");
         let smooth: Vec<f64> = (0..20_000).map(|k| (k as f64 / 200.0).sin()).collect();
