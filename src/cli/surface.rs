@@ -99,7 +99,8 @@ pub struct SurfaceCmd {
     /// Wall-time budget of the sampler, s (the population in progress is dropped).
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
-    /// Prior simulations that scale the distance (and train --semi-automatic's regressions).
+    /// Prior simulations that scale the distance, train --semi-automatic's regressions and
+    /// stand for a law lost from the populations in the check.
     #[arg(long, default_value_t = surface::DEFAULT_PILOT, value_name = "N")]
     pub pilot: usize,
     /// Records re-simulated per law to check the model choice [default: 10; with --resume,

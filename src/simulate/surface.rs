@@ -674,8 +674,8 @@ mod tests {
     #[test]
     fn the_wind_up_rate_is_a_sawtooth_s_rise_whatever_the_noise_and_clock() {
         // Rises by 1 N·m/s for 8 s, drops in 2 s: the slips' drops are not picked, and white
-        // noise of half the rise per second neither pulls the median down (as the drops would)
-        // nor up (as a pick by the change's own sign would).
+        // noise of half the rise per second pulls the median neither down (as the drops would:
+        // to about 0.5) nor up (as a pick by the change's own sign would).
         let saw = |t: f64| {
             let phase = t.rem_euclid(10.0);
             if phase < 8.0 { phase } else { 4.0 * (10.0 - phase) }
@@ -685,7 +685,8 @@ mod tests {
             let clean: Vec<f64> = (0..n).map(|k| saw(k as f64 * period_s)).collect();
             let torque = with_noise(&clean, sd, 7);
             let rate = wind_up(&torque, period_s);
-            assert!((rate - 1.0).abs() < 0.01, "every {period_s} s, noise {sd}: {rate}");
+            // About 8,000 picks: the median's standard error is 0.01 at the noisier clocks.
+            assert!((rate - 1.0).abs() < 0.03, "every {period_s} s, noise {sd}: {rate}");
         }
         // A flat record has no wind-up; a steady rise is all wind-up, at its slope.
         assert!(wind_up(&[3.0; 100], 1.0).abs() < f64::MIN_POSITIVE, "no pick: 0");

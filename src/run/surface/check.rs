@@ -4,13 +4,16 @@
 //!
 //! The reference is each law's posterior, not the prior: the question is whether the summaries
 //! tell the laws' records apart where the record lies. A prior's reference table is mostly
-//! strings far from the record (6 of the pilot's 888 within the sampler's final tolerance on a
-//! ten-minute record), so the votes of its nearest twentieth said which law's prior puts more
-//! strings somewhere around the record, and a law whose posterior is a small corner of its box
-//! was taken for another whose box is wider there. Each law gets as many reference records, so
-//! that a law's votes are how near its records lie, not its probability (which is what the
-//! check checks), and a re-simulation never counts its own particle's reference record: a law
-//! of a handful of particles would otherwise recognise itself by its parameters alone.
+//! strings far from the record (6 of the pilot's 888 within the sampler's final tolerance on
+//! a ten-minute record of m1 at 40 rpm), so the votes of its nearest twentieth would say which
+//! law's prior puts more strings somewhere around the record, and a law whose posterior is a
+//! small corner of its box would be taken for another whose box is wider there. Each law gets
+//! as many reference records, so that a law's votes are how near its records lie, not its
+//! probability (which is what the check checks), and a re-simulation never counts its own
+//! particle's reference record: a law of a handful of particles would otherwise recognise
+//! itself by its parameters alone. A law lost from the populations is represented by its
+//! pilot strings nearest the record, so that a law left alone is still asked whether its
+//! records could be the others'.
 
 use super::*;
 
@@ -28,17 +31,29 @@ pub(super) fn check(
     prior: &Prior,
     model: &SurfaceModel,
     distance: &Distance,
+    table: &[(usize, Summaries)],
     laws: &[LawPosterior],
     particles: &[Particle],
     replicates: usize,
     seed: u64,
     cycle: &Cycle,
     unconverged: Option<f64>,
-) -> Result<ModelCheck> {
+) -> Result<(ModelCheck, u64)> {
     let own_of = |law: Law| -> Vec<&Particle> { particles.iter().filter(|p| p.law == law).collect() };
-    let mut reference: Vec<(usize, &Particle, Summaries)> = Vec::new();
+    // Each reference record's law, the particle it was simulated from (none for a pilot
+    // string), and its summaries.
+    let mut reference: Vec<(usize, Option<&Particle>, Summaries)> = Vec::new();
+    let mut simulated_reference = 0u64;
     for (slot, posterior) in laws.iter().enumerate() {
         if posterior.particles == 0 {
+            // A law lost from the populations: its pilot strings nearest the record.
+            let mut nearest: Vec<(f64, &Summaries)> = table
+                .iter()
+                .filter(|(s, _)| *s == slot)
+                .map(|(_, summaries)| (distance.rho(summaries), summaries))
+                .collect();
+            nearest.sort_by(|a, b| a.0.total_cmp(&b.0));
+            reference.extend(nearest.iter().take(REFERENCE_PER_LAW).map(|(_, s)| (slot, None, **s)));
             continue;
         }
         let drawn = resample(
@@ -47,6 +62,7 @@ pub(super) fn check(
             seed ^ REFERENCE_TAG ^ (slot as u64 + 1),
         );
         let runs = model.simulate_noiseless_many(&strings_of(&drawn))?;
+        simulated_reference += runs.len() as u64;
         let simulated: Vec<Option<Summaries>> = runs
             .into_par_iter()
             .enumerate()
@@ -59,7 +75,7 @@ pub(super) fn check(
             .collect();
         for (particle, summaries) in drawn.into_iter().zip(simulated) {
             if let Some(summaries) = summaries {
-                reference.push((slot, particle, summaries));
+                reference.push((slot, Some(particle), summaries));
             }
         }
     }
@@ -69,7 +85,7 @@ pub(super) fn check(
     let classify = |s: &Summaries, source: &Particle| -> Option<usize> {
         let mut near: Vec<(f64, usize)> = reference
             .iter()
-            .filter(|(_, particle, _)| !std::ptr::eq(*particle, source))
+            .filter(|(_, particle, _)| particle.is_none_or(|p| !std::ptr::eq(p, source)))
             .map(|(slot, _, r)| (distance.between(s, r), *slot))
             .collect();
         let neighbours = neighbours.min(near.len());
@@ -118,13 +134,14 @@ pub(super) fn check(
         });
     }
     let (decided, verdict) = verdict(laws, &rows, cycle, unconverged);
-    Ok(ModelCheck {
+    let check = ModelCheck {
         reference: reference.len(),
         neighbours,
         rows,
         decided,
         verdict,
-    })
+    };
+    Ok((check, simulated_reference))
 }
 
 /// The law called and why (see [`CHECK_RECOGNISED`]). None is called while the sampler's

@@ -266,8 +266,9 @@ pub struct CheckRow {
 /// The model choice's check and its verdict.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ModelCheck {
-    /// Records simulated from the laws' posteriors as the reference (those that did not
-    /// diverge), and the neighbours each classification takes.
+    /// Reference records (simulated from the laws' posteriors, those that did not diverge,
+    /// and a lost law's pilot strings nearest the record), and the neighbours each
+    /// classification takes at most.
     pub reference: usize,
     pub neighbours: usize,
     pub rows: Vec<CheckRow>,
@@ -681,10 +682,11 @@ pub fn infer_continuing(
     let laws = posteriors(&prior, particles);
     let string = StringPosterior::of(settings, particles);
 
-    let check = check(
+    let (check, simulated_reference) = check(
         &prior,
         &model,
         &distance,
+        &table,
         &laws,
         particles,
         settings.check_replicates,
@@ -692,7 +694,7 @@ pub fn infer_continuing(
         &cycle,
         unconverged(last.record.epsilon, noise_floor),
     )?;
-    simulations += check.reference as u64 + check.rows.iter().map(|r| r.replicates as u64).sum::<u64>();
+    simulations += simulated_reference + check.rows.iter().map(|r| r.replicates as u64).sum::<u64>();
     let mut at_the_bit = at_the_bit(&model, particles, settings.predictive_draws, seed)?;
     simulations += at_the_bit.draws as u64;
     if settings.advice && at_the_bit.stick_slip_probability >= 0.5 {

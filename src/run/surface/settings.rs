@@ -199,7 +199,8 @@ pub struct SurfaceSettings {
     pub integration: Integration,
     /// Standard deviation of the surface torque's noise (N·m); `None`: estimated.
     pub noise_sd_nm: Option<f64>,
-    /// Prior simulations of the pilot (scales and reference table).
+    /// Prior simulations of the pilot (the distance's first scales, the semi-automatic
+    /// regressions' training strings, and a lost law's reference in the check).
     pub pilot: usize,
     /// Re-simulated records per law for the check.
     pub check_replicates: usize,
