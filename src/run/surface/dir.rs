@@ -48,6 +48,21 @@ pub struct Job {
     /// from the boxes alone, which continues so.
     #[serde(default)]
     pub curve_limits: bool,
+    /// The form of the distance its populations were drawn under ([`DISTANCE_FORM`]); absent
+    /// from a job of the first form.
+    #[serde(default = "first_distance_form")]
+    pub distance_form: u32,
+}
+
+/// The form of the surface run's distance: which summaries it compares and how it reads the
+/// record's noise. A run's particles keep their ρ from population to population, so its
+/// populations continue only under the form they were drawn with. Form 2: the wind-up rate
+/// among the summaries, the noise read on the wind-ups on a coarse clock, and the check's
+/// reference drawn from the laws' posteriors.
+pub const DISTANCE_FORM: u32 = 2;
+
+fn first_distance_form() -> u32 {
+    1
 }
 
 impl Job {
@@ -62,6 +77,7 @@ impl Job {
             columns,
             source: source.to_path_buf(),
             curve_limits: true,
+            distance_form: DISTANCE_FORM,
         })
     }
 
@@ -212,6 +228,16 @@ impl SurfaceDir {
             owns_unchanged(Owned::Surface, dir, rel, is_dir)
         })?;
         let job = job(dir)?;
+        if job.distance_form != DISTANCE_FORM {
+            return Err(Error::setting(
+                "resume",
+                format!(
+                    "{} holds a surface run drawn under another form of the distance (its summaries, or how the record's noise is read) than this bitrock's: its populations cannot be continued or checked again; run its record again (`bitrock surface RECORD --out DIR --force`; its record is {})",
+                    dir.display(),
+                    dir.join(RECORD_CSV).display()
+                ),
+            ));
+        }
         let record_path = dir.join(RECORD_CSV);
         let record = SurfaceRecord::read(&record_path, &job.columns)?;
         let record_bytes = std::fs::read(&record_path).map_err(|source| Error::Read {
@@ -611,5 +637,41 @@ mod tests {
         );
         let older: Job = serde_json::from_value(stored).unwrap();
         assert!(!older.config().unwrap().curve_limits);
+    }
+
+    /// A job that does not say its distance's form is of the first, which this bitrock does
+    /// not continue; a new job is of this one's.
+    #[test]
+    fn a_job_of_another_distance_form_is_not_continued() {
+        let job = Job::new(
+            vec![Law::M2],
+            Settings::default(),
+            SurfaceOptions::default(),
+            Path::new("record.csv"),
+        )
+        .unwrap();
+        assert_eq!(job.distance_form, DISTANCE_FORM);
+        let mut stored = serde_json::to_value(&job).unwrap();
+        assert_eq!(
+            stored.as_object_mut().unwrap().remove("distance_form"),
+            Some(DISTANCE_FORM.into())
+        );
+        let older: Job = serde_json::from_value(stored).unwrap();
+        assert_eq!(older.distance_form, 1);
+        // Written as a directory and opened to continue: refused, naming the setting.
+        let dir = tempfile::tempdir().unwrap();
+        files::write_own(&dir.path().join(RECORD_CSV), "out", |out| {
+            out.write_all(b"time_s,top_drive_rpm,surface_torque_knm\n")
+        })
+        .unwrap();
+        files::write_own(&dir.path().join(SURFACE_JOB_JSON), "out", |out| {
+            out.write_all(&job_file(&older, &older.laws))
+        })
+        .unwrap();
+        let refused = SurfaceDir::open(dir.path()).err().expect("refused");
+        assert!(
+            refused.to_string().contains("another form of the distance"),
+            "{refused}"
+        );
     }
 }
