@@ -175,6 +175,16 @@ pub fn weighted_ks(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
     d
 }
 
+/// ∫ f over [a, b] by Simpson's rule on `steps` (even) intervals: tests' closed forms.
+#[cfg(test)]
+pub(crate) fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, steps: u32) -> f64 {
+    let h = (b - a) / f64::from(steps);
+    let inner: f64 = (1..steps)
+        .map(|i| if i % 2 == 1 { 4.0 } else { 2.0 } * f(a + h * f64::from(i)))
+        .sum();
+    (f(a) + inner + f(b)) * h / 3.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

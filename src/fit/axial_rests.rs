@@ -357,22 +357,7 @@ mod tests {
         // √(1 − 2·k·φ(k)/(2Φ(k) − 1)) at k = 3, Φ by Simpson's rule over the density.
         let k = REST_SDS;
         let density = |x: f64| (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
-        let steps = 10_000;
-        let h = 2.0 * k / f64::from(steps);
-        let mass = (0..=steps)
-            .map(|i| {
-                let weight = if i == 0 || i == steps {
-                    1.0
-                } else if i % 2 == 1 {
-                    4.0
-                } else {
-                    2.0
-                };
-                weight * density(-k + h * f64::from(i))
-            })
-            .sum::<f64>()
-            * h
-            / 3.0;
+        let mass = crate::numerics::simpson(density, -k, k, 10_000);
         let exact = (1.0 - 2.0 * k * density(k) / mass).sqrt();
         assert!((exact - TRUNCATED_SD).abs() < 1e-4, "{exact}");
     }

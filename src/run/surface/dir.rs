@@ -232,7 +232,7 @@ impl SurfaceDir {
             return Err(Error::setting(
                 "resume",
                 format!(
-                    "{} holds a surface run drawn under another form of the distance (its summaries, or how the record's noise is read) than this bitrock's: its populations cannot be continued or checked again; run its record again (`bitrock surface RECORD --out DIR --force`; its record is {})",
+                    "{} holds a surface run drawn under another form of the distance (its summaries, or how the record's noise is read) than this bitrock's: its populations cannot be continued or checked again; infer from its record again ({}) into a new directory",
                     dir.display(),
                     dir.join(RECORD_CSV).display()
                 ),
