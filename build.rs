@@ -70,7 +70,14 @@ const KERNELS: &[(&str, &[&str])] = &[
     ("kernel_sums", &["shared/laws.wgsl", "kernel_sums.wgsl"]),
     ("slopes", &["shared/laws.wgsl", "slopes.wgsl"]),
     ("stability", &["stability.wgsl"]),
-    ("coupled", &["shared/loop_limit.wgsl", "coupled.wgsl"]),
+    (
+        "coupled",
+        &["shared/any_lane.wgsl", "shared/loop_limit.wgsl", "coupled.wgsl"],
+    ),
+    (
+        "coupled_without_subgroups",
+        &["shared/each_lane.wgsl", "shared/loop_limit.wgsl", "coupled.wgsl"],
+    ),
     (
         "strings",
         &["shared/laws.wgsl", "shared/loop_limit.wgsl", "strings.wgsl"],
@@ -143,7 +150,9 @@ fn compose_kernels(built_in: &[laws::BuiltIn]) {
         let built_in = without_law_files(&source, built_in.len());
         let module = naga::front::wgsl::parse_str(&built_in)
             .unwrap_or_else(|e| panic!("kernel {name} does not parse:\n{}", e.emit_to_string(&built_in)));
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::SUBGROUP)
+            .subgroup_stages(naga::valid::ShaderStages::COMPUTE)
+            .subgroup_operations(naga::valid::SubgroupOperationSet::VOTE)
             .validate(&module)
             .unwrap_or_else(|e| panic!("kernel {name} does not validate:\n{}", e.emit_to_string(&built_in)));
         std::fs::write(out.join(format!("{name}.wgsl")), source).expect("OUT_DIR is writable");

@@ -70,13 +70,26 @@ var<private> ring_at: u32;
 // reads the cell ahead of it at every step and crosses a cell every ten steps or so at 60 rpm,
 // so a line serves some forty steps. On a CPU driver each storage access of a lane-varying
 // address is a loop over the lanes, run wherever it is written whether or not a lane takes it,
-// so the code of a step reaches storage at one place: `transport`'s pass, run once per cell the
-// bit crosses and once more where the line ahead for the next step is another, and reading or
-// writing only where the line changes. NO_LINE until read.
+// and every branch runs for all lanes; so a step's code never reaches storage. Storage is read
+// and written after the steps of the subgroup's fast loop (`main`), where one of its lanes needs
+// it: `transport`'s passes, reading or writing only where the line changes. NO_LINE until read.
 const NO_LINE: u32 = 0xffffffffu;
 var<private> line_at: u32 = NO_LINE;
 var<private> line: vec4<f32>;
 var<private> line_changed: bool = false;
+// The line after the held one, read ahead (`next_read`), and the line the bit left, to write
+// back (`back_due`): a bit that turns forward steps from one line into the next in registers,
+// and the storage passes that follow some lane's need write back and read ahead for all lanes.
+var<private> next: vec4<f32>;
+var<private> next_read: bool = false;
+var<private> back: vec4<f32>;
+var<private> back_at: u32;
+var<private> back_due: bool = false;
+
+// The line after line `l`.
+fn line_after(l: u32) -> u32 {
+    return select(l + 1u, 0u, l + 1u == RING_LINES);
+}
 
 // Writes the held line back where it changed.
 fn flush_line() {
@@ -122,6 +135,16 @@ struct Bit {
     arm: f32,
     omega: f32,
     drive: f32,
+    // The string's, from the job: read once here, not at every step (a CPU driver may gather a
+    // uniform's field lane by lane inside a loop).
+    feed: bool,
+    dt: f32,
+    mass: f32,
+    inertia: f32,
+    k_t: f32,
+    c_t: f32,
+    k_a: f32,
+    c_a: f32,
 }
 
 struct State {
@@ -239,9 +262,17 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32) -> 
 struct Stepped {
     s: State,
     f: Forces,
+    // Whether the ring's work of the step is left to `transport`, from the state `s` holds (its
+    // phase and the height behind the bit still those before the step), over `turn` (rad) while
+    // the depth goes from `depth_from` to `depth_to` (m).
+    slow: bool,
+    turn: f32,
+    depth_from: f32,
+    depth_to: f32,
 }
 
-fn step(b: Bit, s_in: State, dt: f32) -> Stepped {
+fn step(b: Bit, s_in: State) -> Stepped {
+    let dt = b.dt;
     var s = s_in;
     let dn = s.depth - surface(b, s);
     let on_bottom = dn >= 0.0;
@@ -249,15 +280,15 @@ fn step(b: Bit, s_in: State, dt: f32) -> Stepped {
     let wc = b.cut_w * d;
     let tc = b.cut_t * d;
     let wf = select(0.0, b.contact_w, on_bottom);
-    var fa = b.drive - job.c_a * s.axial_speed;
-    if (job.feed != 0u) {
-        fa = job.k_a * s.compression + job.c_a * (b.drive - s.axial_speed);
+    var fa = b.drive - b.c_a * s.axial_speed;
+    if (b.feed) {
+        fa = b.k_a * s.compression + b.c_a * (b.drive - s.axial_speed);
     }
 
     let v = s.axial_speed;
     var wob = fa;
     var mobilised = 0.0;
-    var held = false;
+    var axially_held = false;
     if (v > 0.0 || (v == 0.0 && (!on_bottom || fa > wc + wf))) {
         wob = wc + wf;
         mobilised = 1.0;
@@ -265,15 +296,15 @@ fn step(b: Bit, s_in: State, dt: f32) -> Stepped {
         wob = wc;
     } else {
         mobilised = select(0.0, (fa - wc) / wf, wf > 0.0);
-        held = true;
+        axially_held = true;
     }
-    var v_new = select(v + (fa - wob) / job.mass_kg * dt, 0.0, held);
+    var v_new = select(v + (fa - wob) / b.mass * dt, 0.0, axially_held);
     if (on_bottom && v != 0.0 && v_new * v <= 0.0) {
         v_new = 0.0;
     }
 
     let tf = b.arm * mobilised * wf;
-    let tau = job.k_t * s.lag + job.c_t * (b.omega - s.speed);
+    let tau = b.k_t * s.lag + b.c_t * (b.omega - s.speed);
     let w = s.speed;
     var torque = tau;
     var stuck = false;
@@ -284,21 +315,60 @@ fn step(b: Bit, s_in: State, dt: f32) -> Stepped {
     } else {
         stuck = true;
     }
-    var w_new = select(w + (tau - torque) / job.inertia_kg_m2 * dt, 0.0, stuck);
+    var w_new = select(w + (tau - torque) / b.inertia * dt, 0.0, stuck);
     if (on_bottom && w != 0.0 && w_new * w <= 0.0) {
         w_new = 0.0;
     }
 
     let depth_new = s.depth + v_new * dt;
-    if (job.feed != 0u) {
+    if (b.feed) {
         s.compression = s.compression + (b.drive - v_new) * dt;
     }
     s.lag = s.lag + (b.omega - w_new) * dt;
-    s = transport(b, s, w_new * dt, s.depth, depth_new);
-    s.depth = select(depth_new, 0.0, abs(depth_new) > REBASE_M);
+
+    // The ring's work done here, in the held line: a turn forward that crosses at most the cell
+    // ahead (held), with no rebase; the same operations as `transport`'s on that path. Where the
+    // next cell ahead lies in the line after, read ahead, the bit steps into it; in any other,
+    // `transport` only holds it (a turn of zero). Any other step is left to `transport` whole.
+    let turn = w_new * dt;
+    let start = s.phase;
+    let end = start + turn;
+    let k = floor(start / b.cell - 0.5) + 1.0;
+    let crosses = turn > 0.0 && (k + 0.5) * b.cell <= end;
+    let whole = turn < 0.0 || abs(depth_new) > REBASE_M || (crosses && (k + 1.5) * b.cell <= end);
+    var left = turn;
+    var depth_from = s.depth;
+    if (!whole) {
+        if (crosses) {
+            let c = wrap(k);
+            let depth = s.depth + (depth_new - s.depth) * ((k + 0.5) * b.cell - start) / turn;
+            s.behind_old = held(c);
+            put(c, max(s.behind_old, depth));
+        }
+        s.phase = end - b.sector * floor(end / b.sector);
+        left = 0.0;
+        depth_from = depth_new;
+    }
+    // The next cell ahead in the line read ahead: step into it, leaving this one to write back.
+    var slow = whole;
+    let ahead_line = ahead_of(b, s.phase) >> 2u;
+    if (!whole && ahead_line != line_at) {
+        if (ahead_line == line_after(line_at) && next_read && !back_due) {
+            back = line;
+            back_at = line_at;
+            back_due = line_changed;
+            line = next;
+            line_at = ahead_line;
+            line_changed = false;
+            next_read = false;
+        } else {
+            slow = true;
+        }
+    }
+    s.depth = depth_new;
     s.axial_speed = v_new;
     s.speed = w_new;
-    return Stepped(s, Forces(wob, torque, dn));
+    return Stepped(s, Forces(wob, torque, dn), slow, left, depth_from, depth_new);
 }
 
 @compute @workgroup_size(64)
@@ -331,6 +401,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         0.5 * radius * mu * gamma,
         omega,
         drive,
+        job.feed != 0u,
+        job.dt_s,
+        job.mass_kg,
+        job.inertia_kg_m2,
+        job.k_t,
+        job.c_t,
+        job.k_a,
+        job.c_a,
     );
     let sb = STATE_LINES * i;
     ring_at = sb + RING_AT;
@@ -395,10 +473,40 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var last_stuck = bitcast<u32>(summaries[o + 22u]) != 0u;
     var f = Forces(0.0, 0.0, 0.0);
     hold_line(ahead_of(b, s.phase) >> 2u);
+    let steps = job.steps_per_sample;
     for (var period = job.first_period; period < job.end_period; period = period + 1u) {
-        for (var k = 0u; k < job.steps_per_sample; k = k + 1u) {
-            let out = step(b, s, job.dt_s);
-            s = out.s;
+        var k = 0u;
+        loop {
+            if (k >= steps) {
+                break;
+            }
+            // Steps whose ring work needs no storage, until one of the subgroup's strings needs
+            // it: a CPU driver runs every branch for all its lanes, so the storage passes below
+            // run only after such a step, not after every one.
+            var out: Stepped;
+            loop {
+                out = step(b, s);
+                s = out.s;
+                k = k + 1u;
+                if (any_lane(out.slow) || k >= steps) {
+                    break;
+                }
+            }
+            // The storage passes, for every lane that has one due (`transport` may change
+            // any line, so the line after is read after it).
+            if (back_due) {
+                states[ring_at + back_at] = back;
+                back_due = false;
+            }
+            if (out.slow) {
+                s = transport(b, s, out.turn, out.depth_from, out.depth_to);
+                s.depth = select(s.depth, 0.0, abs(s.depth) > REBASE_M);
+                next_read = false;
+            }
+            if (!next_read) {
+                next = states[ring_at + line_after(line_at)];
+                next_read = true;
+            }
             f = out.f;
         }
         // A NaN fails every comparison: diverged.
@@ -434,6 +542,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 block = vec4<f32>(0.0);
             }
         }
+    }
+    if (back_due) {
+        states[ring_at + back_at] = back;
     }
     flush_line();
     let cut = bitcast<u32>(summaries[o + 23u]) != 0u || loops_were_cut(job.slice_steps >> 31u);

@@ -5,6 +5,7 @@
 
 use crate::gpu::require_gpu;
 use crate::support::{bin, outcome};
+use bitrock::eval::gpu::coupled::{self as gpu_coupled, Lanes};
 use bitrock::eval::{Backend, coupled as backend};
 use bitrock::simulate::coupled::{self, Assembly, Axial, Bit, CoupledJob, Regime, Schedule};
 use bitrock::stability::lumped::Lumped;
@@ -154,6 +155,47 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
             (c.torque_mean_nm() - g.torque_mean_nm()).abs() < 0.01 * c.torque_mean_nm(),
             "{rpm} rpm"
         );
+    }
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn the_kernel_gives_the_same_summaries_whether_its_lanes_leave_the_held_line_together_or_alone() {
+    require_gpu();
+    // A spread of speeds and weights side by side in each subgroup, so that lanes leave the
+    // held ring line at different steps: stuck, bouncing and steady strings, rebases of the
+    // ring every centimetre drilled, and the last step of a sample period among those that
+    // leave it. Under a weight and under a feed.
+    let weights: Vec<CoupledJob> = (0..64)
+        .map(|i| {
+            let rpm = 40.0 + 120.0 * f64::from(i % 13) / 12.0;
+            job(
+                rpm,
+                Axial::Weight {
+                    wob_n: 1e3 * (100.0 + 160.0 * f64::from(i % 11) / 10.0),
+                },
+            )
+        })
+        .collect();
+    let feeds: Vec<CoupledJob> = (0..16)
+        .map(|i| {
+            let rate_m_s = (10.0 + 5.0 * f64::from(i % 8)) / 3600.0;
+            job(30.0 + 10.0 * f64::from(i % 5), Axial::Feed { rate_m_s })
+        })
+        .collect();
+    let assembly = Assembly::default();
+    let sched = Schedule::new(1e-4, 50.0, 2.0, 20.0).unwrap();
+    for jobs in [&weights, &feeds] {
+        let run = |lanes| gpu_coupled::integrate_batch_with(&assembly, &sched, jobs, None, lanes).unwrap();
+        let (together, each) = (run(Lanes::Together), run(Lanes::Each));
+        assert_eq!(together, each);
+    }
+    let regimes: Vec<Regime> = coupled::integrate_batch(&assembly, &sched, &weights, None)
+        .iter()
+        .map(|s| s.regime())
+        .collect();
+    for regime in [Regime::Steady, Regime::StickSlip, Regime::BitBounce] {
+        assert!(regimes.contains(&regime), "no {regime:?} string among {regimes:?}");
     }
 }
 

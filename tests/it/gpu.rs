@@ -65,7 +65,11 @@ fn every_shader_parses_and_validates_with_naga() {
     for (name, source, entry_points) in gpu::kernel_sources() {
         let module =
             naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+        // The coupled kernel's `any_lane` votes in the subgroup (its twin without subgroups
+        // does not); nothing else uses subgroup operations.
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::SUBGROUP)
+            .subgroup_stages(naga::valid::ShaderStages::COMPUTE)
+            .subgroup_operations(naga::valid::SubgroupOperationSet::VOTE)
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
         for entry in entry_points {

@@ -19,9 +19,10 @@ const SUMMARY_WORDS: usize = 24;
 const STRINGS_PER_CHUNK: usize = 1 << 18;
 
 /// Most steps one invocation integrates per dispatch at first: lavapipe stops an invocation's
-/// loops after 65,535 iterations together, and a step runs two or three (the step, a pass of
-/// its ring's loop per cell it crosses, one more where the line ahead is another, a share of a
-/// rebase's 60), so each dispatch integrates a slice of the sample periods;
+/// loops after 65,535 iterations together, and a step runs one to three (the step; where the
+/// ring's work leaves the held line, a pass of the sample's loop and of the ring's loop, one
+/// per cell crossed backward or more than one forward, a share of a rebase's 60), so each
+/// dispatch integrates a slice of the sample periods;
 /// a chunk the driver still cuts short runs again in shorter slices ([`integrate_batch`]).
 pub const STEPS_PER_SLICE: u32 = 6_000;
 
@@ -52,6 +53,17 @@ struct KernelJob {
     stuck_speed: f32,
 }
 
+/// How the kernel's lanes leave the steps that stay in their held ring line (shaders/coupled.wgsl,
+/// `any_lane`). The summaries are the same either way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lanes {
+    /// A subgroup's lanes together, where the device has subgroup operations (else as `Each`):
+    /// a CPU driver then runs the ring's storage passes once for the subgroup.
+    Together,
+    /// Each lane for itself, as on a device without subgroup operations.
+    Each,
+}
+
 /// Integrates every string of `jobs` on the GPU from steady drilling or, where given, from
 /// `start`: their summaries, in order. Every job must share one kind of axial drive (a weight
 /// or a feed).
@@ -60,6 +72,17 @@ pub fn integrate_batch(
     schedule: &Schedule,
     jobs: &[CoupledJob],
     start: Option<&CoupledState>,
+) -> Result<Vec<CoupledSummary>, GpuError> {
+    integrate_batch_with(assembly, schedule, jobs, start, Lanes::Together)
+}
+
+/// [`integrate_batch`] with the kernel's `lanes`.
+pub fn integrate_batch_with(
+    assembly: &Assembly,
+    schedule: &Schedule,
+    jobs: &[CoupledJob],
+    start: Option<&CoupledState>,
+    lanes: Lanes,
 ) -> Result<Vec<CoupledSummary>, GpuError> {
     let feed = jobs.first().is_some_and(|j| j.axial.is_feed());
     assert!(
@@ -74,13 +97,13 @@ pub fn integrate_batch(
         )));
     }
     let ctx = super::context()?;
-    let kernel = ctx.kernel(
-        "coupled",
-        "main",
-        super::coupled_source,
-        &[UNIFORM, STORAGE_READ, STORAGE_WRITE, STORAGE_WRITE],
-        &[],
-    )?;
+    let bindings = [UNIFORM, STORAGE_READ, STORAGE_WRITE, STORAGE_WRITE];
+    let kernel = if lanes == Lanes::Together && ctx.has_subgroups() {
+        ctx.kernel("coupled", "main", super::coupled_source, &bindings, &[])?
+    } else {
+        let source = super::coupled_without_subgroups_source;
+        ctx.kernel("coupled_without_subgroups", "main", source, &bindings, &[])?
+    };
     let t = &assembly.torsion;
     let job = KernelJob {
         head: Head::sampling(

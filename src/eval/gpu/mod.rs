@@ -61,6 +61,11 @@ pub fn kernel_sources() -> Vec<(&'static str, String, &'static [&'static str])> 
         ("stability", stability_source(), &["main"]),
         ("strings", strings_source(), &["main", "on_clock"]),
         ("coupled", coupled_source(), &["main"]),
+        (
+            "coupled_without_subgroups",
+            coupled_without_subgroups_source(),
+            &["main"],
+        ),
         ("test_uniform_between", test_uniform_between_source(), &["main"]),
     ]
 }
@@ -128,6 +133,10 @@ fn stability_source() -> String {
 
 fn coupled_source() -> String {
     kernel!("coupled").to_string()
+}
+
+fn coupled_without_subgroups_source() -> String {
+    kernel!("coupled_without_subgroups").to_string()
 }
 
 fn candidates_source() -> String {
@@ -485,7 +494,8 @@ fn context_on(adapter: wgpu::Adapter) -> Result<GpuContext, GpuError> {
     let limits = adapter.limits();
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("bitrock"),
-        required_features: wgpu::Features::empty(),
+        // Subgroup operations where the adapter has them (the coupled kernel's `any_lane`).
+        required_features: adapter.features() & wgpu::Features::SUBGROUP,
         required_limits: limits.clone(),
         experimental_features: wgpu::ExperimentalFeatures::disabled(),
         memory_hints: wgpu::MemoryHints::Performance,
@@ -511,6 +521,11 @@ impl GpuContext {
     /// Whether the adapter is a software driver on the CPU (lavapipe, SwiftShader).
     pub fn is_software(&self) -> bool {
         self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// Whether the device was created with subgroup operations (the adapter has them).
+    pub fn has_subgroups(&self) -> bool {
+        self.device.features().contains(wgpu::Features::SUBGROUP)
     }
 
     /// One line naming the adapter, for logs and reports.
