@@ -80,6 +80,9 @@ var<private> line_changed: bool = false;
 // The line after the held one, read ahead (`next_read`), and the line the bit left, to write
 // back (`back_due`): a bit that turns forward steps from one line into the next in registers,
 // and the storage passes that follow some lane's need write back and read ahead for all lanes.
+// A step into the line after needs it read ahead, so a storage pass, which writes the line
+// behind back, comes between any two: `back` is free at each step and written back before the
+// kernel ends.
 var<private> next: vec4<f32>;
 var<private> next_read: bool = false;
 var<private> back: vec4<f32>;
@@ -198,12 +201,12 @@ const REBASE: u32 = 4u;
 // resolution near zero). One cell a pass, each through the held line, and a last pass where the
 // cell ahead of the bit lies in another line, to hold it: the sequence of reads and writes of the
 // CPU twin's `transport` and rebase.
-fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32) -> State {
+fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wrap_phase: bool) -> State {
     var s = s_in;
     let start = s.phase;
     let end = start + turn;
-    // end.rem_euclid(sector)
-    let phase = end - b.sector * floor(end / b.sector);
+    // end.rem_euclid(sector), unless the step wrapped it already.
+    let phase = select(end, end - b.sector * floor(end / b.sector), wrap_phase);
     let ahead = ahead_of(b, phase);
     let rebase = abs(depth_to) > REBASE_M;
     var k = floor(start / b.cell - 0.5) + select(0.0, 1.0, turn > 0.0);
@@ -262,10 +265,12 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32) -> 
 struct Stepped {
     s: State,
     f: Forces,
-    // Whether the ring's work of the step is left to `transport`, from the state `s` holds (its
-    // phase and the height behind the bit still those before the step), over `turn` (rad) while
-    // the depth goes from `depth_from` to `depth_to` (m).
+    // Whether the ring's work of the step is left to `transport`, from the state `s` holds, over
+    // `turn` (rad) while the depth goes from `depth_from` to `depth_to` (m): `whole`, with the
+    // phase and the height behind the bit still those before the step; else only the holding
+    // of the line ahead, the phase wrapped (a turn of zero).
     slow: bool,
+    whole: bool,
     turn: f32,
     depth_from: f32,
     depth_to: f32,
@@ -353,7 +358,7 @@ fn step(b: Bit, s_in: State) -> Stepped {
     var slow = whole;
     let ahead_line = ahead_of(b, s.phase) >> 2u;
     if (!whole && ahead_line != line_at) {
-        if (ahead_line == line_after(line_at) && next_read && !back_due) {
+        if (ahead_line == line_after(line_at) && next_read) {
             back = line;
             back_at = line_at;
             back_due = line_changed;
@@ -368,7 +373,7 @@ fn step(b: Bit, s_in: State) -> Stepped {
     s.depth = depth_new;
     s.axial_speed = v_new;
     s.speed = w_new;
-    return Stepped(s, Forces(wob, torque, dn), slow, left, depth_from, depth_new);
+    return Stepped(s, Forces(wob, torque, dn), slow, whole, left, depth_from, depth_new);
 }
 
 @compute @workgroup_size(64)
@@ -499,7 +504,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 back_due = false;
             }
             if (out.slow) {
-                s = transport(b, s, out.turn, out.depth_from, out.depth_to);
+                s = transport(b, s, out.turn, out.depth_from, out.depth_to, out.whole);
                 s.depth = select(s.depth, 0.0, abs(s.depth) > REBASE_M);
                 next_read = false;
             }
@@ -542,9 +547,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 block = vec4<f32>(0.0);
             }
         }
-    }
-    if (back_due) {
-        states[ring_at + back_at] = back;
     }
     flush_line();
     let cut = bitcast<u32>(summaries[o + 23u]) != 0u || loops_were_cut(job.slice_steps >> 31u);

@@ -162,10 +162,13 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
 #[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
 fn the_kernel_gives_the_same_summaries_whether_its_lanes_leave_the_held_line_together_or_alone() {
     require_gpu();
+    assert!(
+        bitrock::eval::gpu::context().unwrap().has_subgroups(),
+        "the device has no subgroup operations: both runs would be the kernel without them"
+    );
     // A spread of speeds and weights side by side in each subgroup, so that lanes leave the
-    // held ring line at different steps: stuck, bouncing and steady strings, rebases of the
-    // ring every centimetre drilled, and the last step of a sample period among those that
-    // leave it. Under a weight and under a feed.
+    // held ring line at different steps: stuck, bouncing and steady strings, and rebases of
+    // the ring every centimetre drilled. Under a weight and under a feed.
     let weights: Vec<CoupledJob> = (0..64)
         .map(|i| {
             let rpm = 40.0 + 120.0 * f64::from(i % 13) / 12.0;
