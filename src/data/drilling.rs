@@ -113,7 +113,21 @@ impl DrillingRecord {
             &|i| lower(i).contains("axial") && !lower(i).contains("acc"),
         )?;
         // The acceleration and its clock are read only where they can tell the calibration
-        // something; what was found by name and cannot be read is said, not refused.
+        // something; what was found by name and cannot be read is said, not refused. A column
+        // named in the settings must be in the record, read or not: a misspelt name is refused,
+        // not passed over.
+        for (named, what, field) in [
+            (
+                opts.axial_acceleration_column.as_deref(),
+                "axial acceleration",
+                "axial_acceleration_column",
+            ),
+            (opts.time_column.as_deref(), "time", "time_column"),
+        ] {
+            if named.is_some() {
+                role(named, what, field, &|_| false)?;
+            }
+        }
         let mut unread = Vec::new();
         let wanted = opts.read_axial_acceleration && axial.is_none();
         let named = opts.axial_acceleration_column.is_some() || opts.acceleration_unit.is_some();

@@ -223,6 +223,32 @@ fn simulated_record(dir: &std::path::Path, name: &str, rpm: f64, seconds: f64) -
 }
 
 #[test]
+fn a_misspelt_clock_or_acceleration_column_is_refused_where_the_axial_speed_makes_it_unneeded() {
+    // The record has the bit's axial speed, so neither its clock nor its acceleration is read;
+    // a column named for them must still be there.
+    let dir = tempfile::tempdir().unwrap();
+    let (_, csv) = simulated_record(dir.path(), "rgd.csv", 45.0, 20.0);
+    for (flag, name) in [("--time-col", "tme"), ("--axial-acceleration-col", "axial_acc")] {
+        let (code, _, stderr) = outcome(bin().args(["coupled", "--calibrate"]).arg(&csv).args([flag, name]));
+        assert_eq!(code, 2, "{flag}: {stderr}");
+        assert!(stderr.contains(&format!("no column named '{name}'")), "{stderr}");
+        assert!(stderr.contains(flag), "{stderr}");
+        assert!(
+            stderr.contains("time_s, top_drive_rpm"),
+            "the header is listed: {stderr}"
+        );
+    }
+    // Named rightly, they are taken and the calibration runs.
+    let (code, _, stderr) = outcome(
+        bin()
+            .args(["coupled", "--calibrate"])
+            .arg(&csv)
+            .args(["--time-col", "time_s"]),
+    );
+    assert_eq!(code, 0, "{stderr}");
+}
+
+#[test]
 fn the_command_writes_the_record_in_named_units_and_its_summary() {
     let dir = tempfile::tempdir().unwrap();
     let (stdout, csv) = simulated_record(dir.path(), "rgd.csv", 45.0, 20.0);
