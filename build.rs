@@ -28,6 +28,8 @@ mod expr;
 mod law_cases;
 #[path = "build/laws.rs"]
 mod laws;
+#[path = "src/eval/gpu/validator.rs"]
+mod validator;
 
 /// Every kernel: its name and its files under `shaders/`, shared ones first.
 const KERNELS: &[(&str, &[&str])] = &[
@@ -150,16 +152,7 @@ fn compose_kernels(built_in: &[laws::BuiltIn]) {
         let built_in = without_law_files(&source, built_in.len());
         let module = naga::front::wgsl::parse_str(&built_in)
             .unwrap_or_else(|e| panic!("kernel {name} does not parse:\n{}", e.emit_to_string(&built_in)));
-        // Only the coupled kernel votes in its subgroup; its twin without runs where the device
-        // has no subgroup operations, as does every other kernel.
-        let capabilities = if *name == "coupled" {
-            naga::valid::Capabilities::SUBGROUP
-        } else {
-            naga::valid::Capabilities::empty()
-        };
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
-            .subgroup_stages(naga::valid::ShaderStages::COMPUTE)
-            .subgroup_operations(naga::valid::SubgroupOperationSet::VOTE)
+        validator::validator(name)
             .validate(&module)
             .unwrap_or_else(|e| panic!("kernel {name} does not validate:\n{}", e.emit_to_string(&built_in)));
         std::fs::write(out.join(format!("{name}.wgsl")), source).expect("OUT_DIR is writable");

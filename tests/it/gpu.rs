@@ -65,16 +65,7 @@ fn every_shader_parses_and_validates_with_naga() {
     for (name, source, entry_points) in gpu::kernel_sources() {
         let module =
             naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
-        // The coupled kernel's `any_lane` votes in the subgroup; its twin without subgroup
-        // operations, and every other kernel, must run on a device that has none.
-        let capabilities = if name == "coupled" {
-            naga::valid::Capabilities::SUBGROUP
-        } else {
-            naga::valid::Capabilities::empty()
-        };
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
-            .subgroup_stages(naga::valid::ShaderStages::COMPUTE)
-            .subgroup_operations(naga::valid::SubgroupOperationSet::VOTE)
+        bitrock::eval::gpu::validator::validator(name)
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
         for entry in entry_points {

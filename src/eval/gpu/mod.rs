@@ -23,6 +23,7 @@ pub mod stability;
 mod string_batch;
 pub mod strings;
 pub mod tune;
+pub mod validator;
 
 pub use shape::{SHAPE_VAR, Shape};
 
