@@ -180,7 +180,7 @@ fn wrap(k: f32) -> u32 {
 }
 
 // The rock surface's height (m) under the bit, from the cell behind it and the one ahead, held
-// since the last step's transport.
+// since the last step.
 fn surface(b: Bit, s: State) -> f32 {
     let x = s.phase / b.cell - 0.5;
     let behind = floor(x);

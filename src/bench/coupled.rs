@@ -29,6 +29,10 @@ pub struct CoupledThroughput {
     /// Share of the strings in each regime (a check that the backends did the same work):
     /// steady, stick-slip, bit bounce, both.
     pub regimes: [f64; 4],
+    /// On a GPU: whether the kernel's lanes left their steps together by a subgroup vote (the
+    /// device has subgroup operations), else each alone.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub subgroup_vote: Option<bool>,
 }
 
 /// The public bit on the default string at 40–160 rpm and 100–260 kN.
@@ -73,6 +77,10 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
             }
             ran = r;
         }
+        let subgroup_vote = match ran {
+            Ran::Gpu(_) => Some(crate::eval::gpu::context()?.has_subgroups()),
+            Ran::Cpu => None,
+        };
         let m = CoupledThroughput {
             throughput: super::SimulatedThroughput::of(
                 super::strings::name(&Some(ran)),
@@ -82,6 +90,7 @@ pub fn run(opts: &CoupledBenchOptions, log: &mut dyn FnMut(String)) -> Result<Ve
             ),
             dt_s: schedule.dt_s,
             regimes,
+            subgroup_vote,
         };
         log(format!("coupled {:#}", m.throughput));
         out.push(m);

@@ -427,9 +427,14 @@ fn coupled(cmd: &BenchCmd) -> anyhow::Result<ExitCode> {
         )?;
         for m in report {
             let [steady, stick_slip, bounce, both] = m.regimes;
+            let lanes = match m.subgroup_vote {
+                Some(true) => ", lanes by subgroup vote",
+                Some(false) => ", each lane alone (no subgroup operations)",
+                None => "",
+            };
             writeln!(
                 out,
-                "{}  steady {steady:.2}, stick-slip {stick_slip:.2}, bounce {bounce:.2}, both {both:.2}",
+                "{}  steady {steady:.2}, stick-slip {stick_slip:.2}, bounce {bounce:.2}, both {both:.2}{lanes}",
                 m.throughput
             )?;
         }

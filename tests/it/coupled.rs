@@ -223,6 +223,31 @@ fn simulated_record(dir: &std::path::Path, name: &str, rpm: f64, seconds: f64) -
 }
 
 #[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn the_benchmark_says_how_the_kernel_s_lanes_left_their_steps() {
+    require_gpu();
+    let run = |backend: &str| {
+        let (code, stdout, stderr) = outcome(bin().args([
+            "bench",
+            "--coupled",
+            "--backend",
+            backend,
+            "--strings-n",
+            "16",
+            "--reps",
+            "1",
+            "--json",
+        ]));
+        assert_eq!(code, 0, "{stderr}");
+        let report: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        report.as_array().unwrap()[0].clone()
+    };
+    let has = bitrock::eval::gpu::context().unwrap().has_subgroups();
+    assert_eq!(run("gpu")["subgroup_vote"], has);
+    assert!(run("cpu").get("subgroup_vote").is_none());
+}
+
+#[test]
 fn a_misspelt_clock_or_acceleration_column_is_refused_where_the_axial_speed_makes_it_unneeded() {
     // The record has the bit's axial speed, so neither its clock nor its acceleration is read;
     // a column named for them must still be there.
