@@ -89,6 +89,13 @@ var<private> back: vec4<f32>;
 var<private> back_at: u32;
 var<private> back_due: bool = false;
 
+// How far (m) this dispatch's rebases took the heights in registers down: storage keeps the
+// heights as they were, a height there being the one in registers plus `unrebased`, and the
+// dispatch's end takes storage down by it. So a rebase needs no pass over the ring's sixty
+// lines (on a CPU driver each line's read and write is a loop over the lanes), and storage's
+// heights stay within a few centimetres of zero: a dispatch drills a slice of a second or so.
+var<private> unrebased: f32 = 0.0;
+
 // The line after line `l`.
 fn line_after(l: u32) -> u32 {
     return select(l + 1u, 0u, l + 1u == RING_LINES);
@@ -97,7 +104,7 @@ fn line_after(l: u32) -> u32 {
 // Writes the held line back where it changed.
 fn flush_line() {
     if (line_changed) {
-        states[ring_at + line_at] = line;
+        states[ring_at + line_at] = line + vec4<f32>(unrebased);
         line_changed = false;
     }
 }
@@ -106,7 +113,7 @@ fn flush_line() {
 fn hold_line(l: u32) {
     if (l != line_at) {
         flush_line();
-        line = states[ring_at + l];
+        line = states[ring_at + l] - vec4<f32>(unrebased);
         line_at = l;
     }
 }
@@ -193,14 +200,13 @@ const HOLD: u32 = 0u;
 const CUT: u32 = 1u;
 const RESTORE: u32 = 2u;
 const READ_BEHIND: u32 = 3u;
-const REBASE: u32 = 4u;
 
 // Turns the bit by `turn` (rad) while its depth goes from `depth_from` to `depth_to` (m): the
 // cells it crosses forward are cut to the depth there; backward, it leaves the surface as it
 // was. Where the depth passes REBASE_M, every height is taken down by it (f32 keeps its
-// resolution near zero). One cell a pass, each through the held line, and a last pass where the
-// cell ahead of the bit lies in another line, to hold it: the sequence of reads and writes of the
-// CPU twin's `transport` and rebase.
+// resolution near zero): those in registers here, those in storage by `unrebased`. One cell a
+// pass, each through the held line, and a last pass where the cell ahead of the bit lies in
+// another line, to hold it: the sequence of reads and writes of the CPU twin's `transport`.
 fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wrap_phase: bool) -> State {
     var s = s_in;
     let start = s.phase;
@@ -212,7 +218,6 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wra
     var k = floor(start / b.cell - 0.5) + select(0.0, 1.0, turn > 0.0);
     var crossed = 0u;
     var behind_next = false;
-    var rebased = 0u;
     loop {
         var c = ahead;
         var op = HOLD;
@@ -225,9 +230,6 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wra
         } else if (turn < 0.0 && (k + 0.5) * b.cell > end && crossed < RING_CELLS) {
             c = wrap(k);
             op = RESTORE;
-        } else if (rebase && rebased < RING_LINES) {
-            c = 4u * rebased;
-            op = REBASE;
         } else if ((ahead >> 2u) == line_at) {
             break;
         }
@@ -244,26 +246,23 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wra
         } else if (op == RESTORE) {
             put(c, s.behind_old);
             behind_next = true;
-        } else if (op == READ_BEHIND) {
+        } else {
             s.behind_old = held(c);
             behind_next = false;
             k = k - 1.0;
             crossed = crossed + 1u;
-        } else {
-            line = line - vec4<f32>(depth_to);
-            line_changed = true;
-            rebased = rebased + 1u;
         }
     }
     s.phase = phase;
     if (rebase) {
         s.behind_old = s.behind_old - depth_to;
+        line = line - vec4<f32>(depth_to);
+        unrebased = unrebased + depth_to;
     }
     return s;
 }
 
 struct Stepped {
-    s: State,
     f: Forces,
     // Whether the ring's work of the step is left to `transport`, from the state `s` holds, over
     // `turn` (rad) while the depth goes from `depth_from` to `depth_to` (m): `whole`, with the
@@ -276,9 +275,9 @@ struct Stepped {
     depth_to: f32,
 }
 
-fn step(b: Bit, s_in: State) -> Stepped {
+fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     let dt = b.dt;
-    var s = s_in;
+    var s = *s_at;
     let dn = s.depth - surface(b, s);
     let on_bottom = dn >= 0.0;
     let d = select(0.0, b.blades * dn, on_bottom);
@@ -350,7 +349,9 @@ fn step(b: Bit, s_in: State) -> Stepped {
             s.behind_old = held(c);
             put(c, max(s.behind_old, depth));
         }
-        s.phase = end - b.sector * floor(end / b.sector);
+        // A turn forward of at most two cells from a phase within the sector: end.rem_euclid
+        // (sector) is end or end − sector, exactly, without a division on the step's chain.
+        s.phase = select(end, end - b.sector, end >= b.sector);
         left = 0.0;
         depth_from = depth_new;
     }
@@ -373,7 +374,8 @@ fn step(b: Bit, s_in: State) -> Stepped {
     s.depth = depth_new;
     s.axial_speed = v_new;
     s.speed = w_new;
-    return Stepped(s, Forces(wob, torque, dn), slow, whole, left, depth_from, depth_new);
+    *s_at = s;
+    return Stepped(Forces(wob, torque, dn), slow, whole, left, depth_from, depth_new);
 }
 
 @compute @workgroup_size(64)
@@ -490,8 +492,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // run only after such a step, not after every one.
             var out: Stepped;
             loop {
-                out = step(b, s);
-                s = out.s;
+                out = step(b, &s);
                 k = k + 1u;
                 if (any_lane(out.slow) || k >= steps) {
                     break;
@@ -500,7 +501,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // The storage passes, for every lane that has one due (`transport` may change
             // any line, so the line after is read after it).
             if (back_due) {
-                states[ring_at + back_at] = back;
+                states[ring_at + back_at] = back + vec4<f32>(unrebased);
                 back_due = false;
             }
             if (out.slow) {
@@ -509,7 +510,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 next_read = false;
             }
             if (!next_read) {
-                next = states[ring_at + line_after(line_at)];
+                next = states[ring_at + line_after(line_at)] - vec4<f32>(unrebased);
                 next_read = true;
             }
             f = out.f;
@@ -549,6 +550,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     flush_line();
+    // Storage takes the dispatch's rebases: the next slice and the host read heights from the
+    // bit's datum.
+    if (unrebased != 0.0) {
+        for (var l = 0u; l < RING_LINES; l = l + 1u) {
+            states[ring_at + l] = states[ring_at + l] - vec4<f32>(unrebased);
+        }
+    }
     let cut = bitcast<u32>(summaries[o + 23u]) != 0u || loops_were_cut(job.slice_steps >> 31u);
     let last_slice = job.end_period == job.settle_samples + job.record_samples;
     if (last_slice || diverged) {
