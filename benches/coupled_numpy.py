@@ -123,12 +123,11 @@ def simulate(n, seconds, dt):
             lift = ~down & ((v < 0.0) | (fa < wc))
             held = ~down & ~lift
             wob = np.where(down, wc + wf, np.where(lift, wc, fa))
-            safe_wf = np.where(wf > 0.0, wf, 1.0)
-            mobilised = np.where(down, 1.0, np.where(lift, 0.0, np.where(wf > 0.0, (fa - wc) / safe_wf, 0.0)))
             v_new = np.where(held, 0.0, v + (fa - wob) / MASS * dt)
             v_new = np.where(on & (v != 0.0) & (v_new * v <= 0.0), 0.0, v_new)
-            # Torsion: the friction the wear flats give is what they carry axially.
-            tf = ARM * mobilised * wf
+            # Torsion: the friction the wear flats give is what they carry axially, the weight
+            # beyond the cutting's.
+            tf = ARM * (wob - wc)
             tau = K_T * lag + C_T * (omega - w)
             forward = (w > 0.0) | ((w == 0.0) & (tau > tc + tf))
             backward = ~forward & ((w < 0.0) | (tau < -tf))

@@ -291,15 +291,12 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
 
     let v = s.axial_speed;
     var wob = fa;
-    var mobilised = 0.0;
     var axially_held = false;
     if (v > 0.0 || (v == 0.0 && (!on_bottom || fa > wc + wf))) {
         wob = wc + wf;
-        mobilised = 1.0;
     } else if (v < 0.0 || fa < wc) {
         wob = wc;
     } else {
-        mobilised = select(0.0, (fa - wc) / wf, wf > 0.0);
         axially_held = true;
     }
     var v_new = select(v + (fa - wob) / b.mass * dt, 0.0, axially_held);
@@ -307,7 +304,7 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
         v_new = 0.0;
     }
 
-    let tf = b.arm * mobilised * wf;
+    let tf = b.arm * (wob - wc);
     let tau = b.k_t * s.lag + b.c_t * (b.omega - s.speed);
     let w = s.speed;
     var torque = tau;

@@ -709,12 +709,12 @@ impl CoupledString {
 
         // Axial: moving down (all the contact), lifting (none), or held by what it takes.
         let v = self.axial_speed;
-        let (wob, mobilised, held) = if v > 0.0 || (v == 0.0 && (!on_bottom || fa > wc + wf)) {
-            (wc + wf, 1.0, false)
+        let (wob, held) = if v > 0.0 || (v == 0.0 && (!on_bottom || fa > wc + wf)) {
+            (wc + wf, false)
         } else if v < 0.0 || fa < wc {
-            (wc, 0.0, false)
+            (wc, false)
         } else {
-            (fa, if wf > 0.0 { (fa - wc) / wf } else { 0.0 }, true)
+            (fa, true)
         };
         let mut v_new = if held { 0.0 } else { v + (fa - wob) / self.mass * dt };
         if on_bottom && v != 0.0 && (v_new * v <= 0.0) {
@@ -722,7 +722,9 @@ impl CoupledString {
         }
 
         // Torsion: the friction the wear flats can give is what they carry axially.
-        let tf = self.arm * mobilised * wf;
+        // g_a·W_f is the weight beyond the cutting's: W_f moving down, none lifting, and
+        // W − W_c (between 0 and W_f) held.
+        let tf = self.arm * (wob - wc);
         let tau = self.k_t * self.lag + self.c_t * (self.omega - self.speed);
         let w = self.speed;
         let (torque, stuck) = if w > 0.0 || (w == 0.0 && tau > tc + tf) {
