@@ -264,10 +264,10 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wra
 
 struct Stepped {
     f: Forces,
-    // Whether the ring's work of the step is left to `transport`, from the state `s` holds, over
-    // `turn` (rad) while the depth goes from `depth_from` to `depth_to` (m): `whole`, with the
-    // phase and the height behind the bit still those before the step; else only the holding
-    // of the line ahead, the phase wrapped (a turn of zero).
+    // Whether the ring's work of the step is left to `transport`, from the state the step
+    // left, over `turn` (rad) while the depth goes from `depth_from` to `depth_to` (m):
+    // `whole`, with the phase and the height behind the bit still those before the step; else
+    // only the holding of the line ahead, the phase wrapped (a turn of zero).
     slow: bool,
     whole: bool,
     turn: f32,
@@ -346,8 +346,10 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
             s.behind_old = held(c);
             put(c, max(s.behind_old, depth));
         }
-        // A turn forward of at most two cells from a phase within the sector: end.rem_euclid
-        // (sector) is end or end − sector, exactly, without a division on the step's chain.
+        // A turn forward of at most two cells from a phase within the sector: end − sector,
+        // exact, where it passes the sector, without a division on the step's chain (an end
+        // a rounding left just below zero stays there, and reads the cells end.rem_euclid
+        // (sector) would).
         s.phase = select(end, end - b.sector, end >= b.sector);
         left = 0.0;
         depth_from = depth_new;

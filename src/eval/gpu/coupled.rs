@@ -21,8 +21,9 @@ const STRINGS_PER_CHUNK: usize = 1 << 18;
 /// Most steps one invocation integrates per dispatch at first: lavapipe stops an invocation's
 /// loops after 65,535 iterations together, and a step runs one, and more where some lane of
 /// its subgroup needs storage after it (a pass of the sample's loop and one or more of the
-/// ring's: two per cell crossed backward, one per cell forward, a rebase's 60), so each
-/// dispatch integrates a slice of the sample periods;
+/// ring's: two per cell crossed backward, one per cell forward), and 60 at the dispatch's end
+/// (the ring taken down by its rebases), so each dispatch integrates a slice of the sample
+/// periods;
 /// a chunk the driver still cuts short runs again in shorter slices ([`integrate_batch`]).
 pub const STEPS_PER_SLICE: u32 = 6_000;
 
