@@ -16,12 +16,18 @@ const REBASE_M: f32 = 0.01;
 const SUM_BLOCK: u32 = 64u;
 const INPUT_WORDS: u32 = 12u;
 // A string's state in lines of four words: lag, speed, compression, axial speed; depth, phase,
-// behind_old, unused; then the ring, four cells a line.
-const STATE_LINES: u32 = 62u;
-const RING_AT: u32 = 2u;
+// behind_old, the lag's fine part; the phase's and the speed's fine parts, two unused; then
+// the ring, four cells a line.
+const STATE_LINES: u32 = 63u;
+const RING_AT: u32 = 3u;
 const RING_LINES: u32 = 60u;
 const SUMMARY_WORDS: u32 = 24u;
 const TAU: f32 = 6.283185307179586;
+// The lag (rad), the bit speed (rad/s) and the phase (rad) are each carried as a whole part, a
+// multiple of QUANTUM, and a fine part: see `carry`.
+const QUANTUM: f32 = 0.0009765625;
+const PER_QUANTUM: f32 = 1024.0;
+const CARRY_STEPS: u32 = 64u;
 
 struct CoupledJob {
     first: u32,
@@ -138,6 +144,10 @@ fn ahead_of(b: Bit, phase: f32) -> u32 {
 struct Bit {
     blades: f32,
     sector: f32,
+    // The sector as a multiple of QUANTUM and the rest: a wrapped phase keeps its whole part
+    // a multiple of QUANTUM.
+    sector_whole: f32,
+    sector_rest: f32,
     cell: f32,
     cut_w: f32,
     cut_t: f32,
@@ -159,12 +169,48 @@ struct Bit {
 
 struct State {
     lag: f32,
+    lag_fine: f32,
     speed: f32,
+    speed_fine: f32,
     compression: f32,
     axial_speed: f32,
     depth: f32,
     phase: f32,
+    phase_fine: f32,
     behind_old: f32,
+}
+
+// The lag, the bit speed and the phase are sums of a step's small increments on values large
+// beside them: the lag grows by (Ω₀ − Ω)·dt, some 10⁻⁴ rad, on tens of radians, where an f32
+// ulp is 4·10⁻⁶ (rounded each step, a stuck bit's torque rises a few per mille fast or slow,
+// the same way step after step); the phase by Ω·dt on up to π/2. Each is carried as a whole
+// part, a multiple of QUANTUM, and a fine part that the steps add to; their sum, rounded once,
+// is read where the value is needed. `carry` moves the fine part's whole quanta to the whole
+// part, exactly (a floor and powers of two: no algebra a compiler may apply undoes it, as it
+// could a compensated sum's), every CARRY_STEPS steps, so that the fine part stays below a few
+// hundredths and keeps the increments' low bits.
+fn carry(whole: f32, fine: f32) -> vec2<f32> {
+    let q = floor(fine * PER_QUANTUM) * QUANTUM;
+    return vec2<f32>(whole + q, fine - q);
+}
+
+fn carry_all(s: ptr<function, State>) {
+    let lag = carry((*s).lag, (*s).lag_fine);
+    (*s).lag = lag.x;
+    (*s).lag_fine = lag.y;
+    let speed = carry((*s).speed, (*s).speed_fine);
+    (*s).speed = speed.x;
+    (*s).speed_fine = speed.y;
+    let phase = carry((*s).phase, (*s).phase_fine);
+    (*s).phase = phase.x;
+    (*s).phase_fine = phase.y;
+}
+
+// `x` plus `fine` as a whole part and a fine part (`carry`'s form), from a value read from
+// the host or set at the start.
+fn split(x: f32, fine: f32) -> vec2<f32> {
+    let whole = floor(x * PER_QUANTUM) * QUANTUM;
+    return carry(whole, (x - whole) + fine);
 }
 
 struct Forces {
@@ -189,7 +235,7 @@ fn wrap(k: f32) -> u32 {
 // The rock surface's height (m) under the bit, from the cell behind it and the one ahead, held
 // since the last step.
 fn surface(b: Bit, s: State) -> f32 {
-    let x = s.phase / b.cell - 0.5;
+    let x = (s.phase + s.phase_fine) / b.cell - 0.5;
     let behind = floor(x);
     let frac = x - behind;
     return s.behind_old + frac * (held(wrap(behind + 1.0)) - s.behind_old);
@@ -209,10 +255,15 @@ const READ_BEHIND: u32 = 3u;
 // another line, to hold it: the sequence of reads and writes of the CPU twin's `transport`.
 fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wrap_phase: bool) -> State {
     var s = s_in;
-    let start = s.phase;
-    let end = start + turn;
+    let start = s.phase + s.phase_fine;
+    var whole = s.phase;
+    var fine = s.phase_fine + turn;
+    let end = whole + fine;
     // end.rem_euclid(sector), unless the step wrapped it already.
-    let phase = select(end, end - b.sector * floor(end / b.sector), wrap_phase);
+    let sectors = select(0.0, floor(end / b.sector), wrap_phase);
+    whole = whole - sectors * b.sector_whole;
+    fine = fine - sectors * b.sector_rest;
+    let phase = whole + fine;
     let ahead = ahead_of(b, phase);
     let rebase = abs(depth_to) > REBASE_M;
     var k = floor(start / b.cell - 0.5) + select(0.0, 1.0, turn > 0.0);
@@ -253,7 +304,8 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wra
             crossed = crossed + 1u;
         }
     }
-    s.phase = phase;
+    s.phase = whole;
+    s.phase_fine = fine;
     if (rebase) {
         s.behind_old = s.behind_old - depth_to;
         line = line - vec4<f32>(depth_to);
@@ -305,8 +357,8 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     }
 
     let tf = b.arm * (wob - wc);
-    let tau = b.k_t * s.lag + b.c_t * (b.omega - s.speed);
-    let w = s.speed;
+    let w = s.speed + s.speed_fine;
+    let tau = b.k_t * (s.lag + s.lag_fine) + b.c_t * (b.omega - w);
     var torque = tau;
     var stuck = false;
     if (w > 0.0 || (w == 0.0 && tau > tc + tf)) {
@@ -316,8 +368,11 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     } else {
         stuck = true;
     }
-    var w_new = select(w + (tau - torque) / b.inertia * dt, 0.0, stuck);
-    if (on_bottom && w != 0.0 && w_new * w <= 0.0) {
+    var w_fine = s.speed_fine + (tau - torque) / b.inertia * dt;
+    var w_new = s.speed + w_fine;
+    if (stuck || (on_bottom && w != 0.0 && w_new * w <= 0.0)) {
+        s.speed = 0.0;
+        w_fine = 0.0;
         w_new = 0.0;
     }
 
@@ -325,15 +380,16 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     if (b.feed) {
         s.compression = s.compression + (b.drive - v_new) * dt;
     }
-    s.lag = s.lag + (b.omega - w_new) * dt;
+    s.lag_fine = s.lag_fine + (b.omega - w_new) * dt;
 
     // The ring's work done here, in the held line: a turn forward that crosses at most the cell
     // ahead (held), with no rebase; the same operations as `transport`'s on that path. Where the
     // next cell ahead lies in the line after, read ahead, the bit steps into it; in any other,
     // `transport` only holds it (a turn of zero). Any other step is left to `transport` whole.
     let turn = w_new * dt;
-    let start = s.phase;
-    let end = start + turn;
+    let start = s.phase + s.phase_fine;
+    let fine = s.phase_fine + turn;
+    let end = s.phase + fine;
     let k = floor(start / b.cell - 0.5) + 1.0;
     let crosses = turn > 0.0 && (k + 0.5) * b.cell <= end;
     let whole = turn < 0.0 || abs(depth_new) > REBASE_M || (crosses && (k + 1.5) * b.cell <= end);
@@ -346,17 +402,19 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
             s.behind_old = held(c);
             put(c, max(s.behind_old, depth));
         }
-        // A turn forward of at most two cells from a phase within the sector: end − sector,
-        // exact, where it passes the sector, without a division on the step's chain (an end
-        // a rounding left just below zero stays there, and reads the cells end.rem_euclid
-        // (sector) would).
-        s.phase = select(end, end - b.sector, end >= b.sector);
+        // A turn forward of at most two cells from a phase within the sector: end − sector
+        // where it passes the sector, without a division on the step's chain (the whole part
+        // less the sector is exact; an end a rounding left just below zero stays there, and
+        // reads the cells end.rem_euclid(sector) would).
+        let wraps = end >= b.sector;
+        s.phase = select(s.phase, s.phase - b.sector_whole, wraps);
+        s.phase_fine = select(fine, fine - b.sector_rest, wraps);
         left = 0.0;
         depth_from = depth_new;
     }
     // The next cell ahead in the line read ahead: step into it, leaving this one to write back.
     var slow = whole;
-    let ahead_line = ahead_of(b, s.phase) >> 2u;
+    let ahead_line = ahead_of(b, s.phase + s.phase_fine) >> 2u;
     if (!whole && ahead_line != line_at) {
         if (ahead_line == line_after(line_at) && next_read) {
             back = line;
@@ -372,7 +430,7 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     }
     s.depth = depth_new;
     s.axial_speed = v_new;
-    s.speed = w_new;
+    s.speed_fine = w_fine;
     *s_at = s;
     return Stepped(Forces(wob, torque, dn), slow, whole, left, depth_from, depth_new);
 }
@@ -400,6 +458,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let b = Bit(
         blades,
         sector,
+        floor(sector * PER_QUANTUM) * QUANTUM,
+        sector - floor(sector * PER_QUANTUM) * QUANTUM,
         sector / f32(RING_CELLS),
         radius * zeta * eps,
         0.5 * radius * radius * eps,
@@ -422,7 +482,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     let head = states[sb];
     let tail = states[sb + 1u];
-    var s = State(head.x, head.y, head.z, head.w, tail.x, tail.y, tail.z);
+    let fine = states[sb + 2u];
+    var s = State(head.x, tail.w, head.y, fine.y, head.z, head.w, tail.x, tail.y, fine.x, tail.z);
     if (job.first_period == 0u && job.start_given == 0u) {
         // Steady drilling at the drive (CoupledJob::steady), its surface in the ring.
         let turns = omega / TAU;
@@ -437,7 +498,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             wob0 = drive - job.c_a * rate0;
         }
         let torque0 = b.cut_t * d0 + b.arm * (wob0 - b.cut_w * d0);
-        s = State(torque0 / job.k_t, omega + kick, wob0 / job.k_a, rate0, 0.0, 0.0, 0.0);
+        s = State(torque0 / job.k_t, 0.0, omega + kick, 0.0, wob0 / job.k_a, rate0, 0.0, 0.0, 0.0, 0.0);
         for (var l = 0u; l < RING_LINES; l = l + 1u) {
             let ahead = (f32(4u * l) + vec4<f32>(0.5, 1.5, 2.5, 3.5)) * b.cell;
             states[ring_at + l] = -dn0 * (1.0 - ahead / sector);
@@ -478,7 +539,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var block = vec4<f32>(summaries[o + 18u], summaries[o + 19u], summaries[o + 20u], summaries[o + 21u]);
     var last_stuck = bitcast<u32>(summaries[o + 22u]) != 0u;
     var f = Forces(0.0, 0.0, 0.0);
-    hold_line(ahead_of(b, s.phase) >> 2u);
+    let lag = split(s.lag, s.lag_fine);
+    let speed = split(s.speed, s.speed_fine);
+    let phase = split(s.phase, s.phase_fine);
+    s.lag = lag.x;
+    s.lag_fine = lag.y;
+    s.speed = speed.x;
+    s.speed_fine = speed.y;
+    s.phase = phase.x;
+    s.phase_fine = phase.y;
+    hold_line(ahead_of(b, s.phase + s.phase_fine) >> 2u);
     let steps = job.steps_per_sample;
     for (var period = job.first_period; period < job.end_period; period = period + 1u) {
         var k = 0u;
@@ -493,6 +563,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             loop {
                 out = step(b, &s);
                 k = k + 1u;
+                if (k % CARRY_STEPS == 0u) {
+                    carry_all(&s);
+                }
                 if (any_lane(out.slow) || k >= steps) {
                     break;
                 }
@@ -515,12 +588,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             f = out.f;
         }
         // A NaN fails every comparison: diverged.
-        if (!(abs(s.speed) <= runaway && abs(s.axial_speed) < 1000.0 && abs(s.lag) < 1.0e30)) {
+        let speed = s.speed + s.speed_fine;
+        if (!(abs(speed) <= runaway && abs(s.axial_speed) < 1000.0 && abs(s.lag) < 1.0e30)) {
             diverged = true;
             break;
         }
         if (period >= job.settle_samples) {
-            let stuck = abs(s.speed) < job.stuck_speed;
+            let stuck = abs(speed) < job.stuck_speed;
             if (stuck) {
                 if (!(samples > 0u && last_stuck)) {
                     if (onsets == 0u) {
@@ -533,14 +607,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             last_stuck = stuck;
             off_bottom = off_bottom + select(0u, 1u, f.dn < 0.0);
-            backward = backward + select(0u, 1u, s.speed < 0.0);
-            speed_min = min(speed_min, s.speed);
-            speed_max = max(speed_max, s.speed);
+            backward = backward + select(0u, 1u, speed < 0.0);
+            speed_min = min(speed_min, speed);
+            speed_max = max(speed_max, speed);
             wob_min = min(wob_min, f.wob);
             wob_max = max(wob_max, f.wob);
             torque_min = min(torque_min, f.torque);
             torque_max = max(torque_max, f.torque);
-            block = block + vec4<f32>(s.speed, s.axial_speed, f.wob, f.torque);
+            block = block + vec4<f32>(speed, s.axial_speed, f.wob, f.torque);
             samples = samples + 1u;
             if (samples % SUM_BLOCK == 0u) {
                 total = total + block;
@@ -564,7 +638,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         block = vec4<f32>(0.0);
     }
     states[sb] = vec4<f32>(s.lag, s.speed, s.compression, s.axial_speed);
-    states[sb + 1u] = vec4<f32>(s.depth, s.phase, s.behind_old, 0.0);
+    states[sb + 1u] = vec4<f32>(s.depth, s.phase, s.behind_old, s.lag_fine);
+    states[sb + 2u] = vec4<f32>(s.phase_fine, s.speed_fine, 0.0, 0.0);
     summaries[o] = bitcast<f32>(samples);
     summaries[o + 1u] = bitcast<f32>(stuck_count);
     summaries[o + 2u] = bitcast<f32>(onsets);

@@ -9,13 +9,14 @@ use bytemuck::{Pod, Zeroable};
 
 /// Words per string of the kernel's buffers. Keep in sync with shaders/coupled.wgsl.
 const INPUT_WORDS: usize = 12;
-/// The state: seven words, one unused, then the ring; the kernel reads it in lines of four.
-const STATE_WORDS: usize = 8 + crate::simulate::coupled::RING_CELLS;
+/// The state: ten words (the lag, the bit speed and the phase each in two parts), two unused,
+/// then the ring; the kernel reads it in lines of four.
+const STATE_WORDS: usize = 12 + crate::simulate::coupled::RING_CELLS;
 const _: () = assert!(crate::simulate::coupled::RING_CELLS.is_multiple_of(4));
 const SUMMARY_WORDS: usize = 24;
 
-/// Strings held on the device at once: 1,136 B a string (inputs 48, state and ring 992,
-/// summary 96), 298 MB for the chunk.
+/// Strings held on the device at once: 1,152 B a string (inputs 48, state and ring 1,008,
+/// summary 96), 302 MB for the chunk.
 const STRINGS_PER_CHUNK: usize = 1 << 18;
 
 /// Most steps one invocation integrates per dispatch at first: lavapipe stops an invocation's
@@ -194,14 +195,23 @@ fn run_chunk(
     // Without a start the kernel begins each string from steady drilling (`start_given` 0)
     // and reads no state.
     let states: Option<Vec<f32>> = start.map(|start| {
+        // The lag, the phase and the bit speed as f32 and what that rounding left out: the
+        // kernel carries each in two parts.
+        let (lag, lag_fine) = f32_and_rest(start.lag_rad);
+        let (phase, phase_fine) = f32_and_rest(start.phase_rad);
+        let (speed, speed_fine) = f32_and_rest(start.speed_rad_s);
         let mut one = vec![
-            start.lag_rad as f32,
-            start.speed_rad_s as f32,
+            lag,
+            speed,
             start.compression_m as f32,
             start.axial_speed_m_s as f32,
             start.depth_m as f32,
-            start.phase_rad as f32,
+            phase,
             start.behind_old_m as f32,
+            lag_fine,
+            phase_fine,
+            speed_fine,
+            0.0,
             0.0,
         ];
         one.extend(start.ring_m.iter().map(|&h| h as f32));
@@ -248,4 +258,10 @@ fn run_chunk(
         })
         .collect();
     Ok((summaries, cut))
+}
+
+/// `x` as f32 and the f32 nearest what that rounding left out.
+fn f32_and_rest(x: f64) -> (f32, f32) {
+    let near = x as f32;
+    (near, (x - f64::from(near)) as f32)
 }
