@@ -103,7 +103,7 @@ pub struct CoupledCmd {
     /// The map's top-drive speeds, rpm, as MIN:MAX:COUNT.
     #[arg(long, default_value_t = Settings::default().map_rpm, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_rpm: String,
-    /// The map's weights on bit, kN, as MIN:MAX:COUNT.
+    /// The map's weights on bit, kN, as MIN:MAX:COUNT (with --wob-kn).
     #[arg(long, default_value_t = Settings::default().map_wob_kn, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_wob_kn: String,
     /// The map's feeds, m/h, as MIN:MAX:COUNT (with --feed-m-h).

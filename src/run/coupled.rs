@@ -173,8 +173,23 @@ impl Settings {
         Ok(job)
     }
 
-    /// The map's speeds (rpm) and its second axis: weights (kN) or feeds (m/h).
+    /// The map's speeds (rpm) and its second axis: weights (kN) or feeds (m/h). The other
+    /// axis, given, is refused: the drive decides which the map is over.
     pub fn axes(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        let default = Settings::default();
+        if self.is_feed() && self.map_wob_kn != default.map_wob_kn {
+            return Err(Error::setting(
+                "map_wob_kn",
+                "maps weights on bit, which needs `wob_kn`: without it the string is fed \
+                 (`feed_m_h`, 30 m/h where not given) and the map is over `map_feed_m_h`",
+            ));
+        }
+        if !self.is_feed() && self.map_feed_m_h != default.map_feed_m_h {
+            return Err(Error::setting(
+                "map_feed_m_h",
+                "maps feeds, which needs `feed_m_h`: under `wob_kn` the map is over `map_wob_kn`",
+            ));
+        }
         let rpm = parse_axis(&self.map_rpm, "map_rpm")?;
         let axis = if self.is_feed() {
             parse_axis(&self.map_feed_m_h, "map_feed_m_h")?

@@ -384,6 +384,12 @@ fn bad_parameters_are_refused_by_flag_with_nothing_written() {
         (vec!["--wear-flat-mm", "500"], "--wear-flat-mm"),
         (vec!["--mass-kg", "0"], "--mass-kg"),
         (vec!["--map", "--map-rpm", "200:20:5"], "--map-rpm"),
+        // The other drive's axis: the drive decides which the map is over.
+        (vec!["--map", "--map-wob-kn", "130:170:5"], "--map-wob-kn"),
+        (
+            vec!["--map", "--wob-kn", "150", "--map-feed-m-h", "10:40:4"],
+            "--map-feed-m-h",
+        ),
         // A step the ring cannot resolve: at 200 rpm a slipping bit crosses a tenth of a
         // blade sector in 2.5 ms; on a map, at its fastest cell.
         (vec!["--omega-rpm", "200", "--dt-s", "0.005"], "--dt-s"),
