@@ -182,13 +182,14 @@ struct State {
 
 // The lag, the bit speed and the phase are sums of a step's small increments on values large
 // beside them: the lag grows by (Ω₀ − Ω)·dt, some 10⁻⁴ rad, on tens of radians, where an f32
-// ulp is 4·10⁻⁶ (rounded each step, a stuck bit's torque rises a few per mille fast or slow,
-// the same way step after step); the phase by Ω·dt on up to π/2. Each is carried as a whole
-// part, a multiple of QUANTUM, and a fine part that the steps add to; their sum, rounded once,
-// is read where the value is needed. `carry` moves the fine part's whole quanta to the whole
-// part, exactly (a floor and powers of two: no algebra a compiler may apply undoes it, as it
-// could a compensated sum's), every CARRY_STEPS steps, so that the fine part stays below a few
-// hundredths and keeps the increments' low bits.
+// ulp is 2-4·10⁻⁶ (rounded each step, the same way step after step, a stuck bit's torque
+// rises up to a per cent or so fast or slow); the phase by Ω·dt on up to π/2. Each is carried
+// as a whole part, a multiple of QUANTUM, and a fine part that the steps add to; their sum,
+// rounded once, is read where the value is needed. `carry` moves the fine part's whole quanta
+// to the whole part, which takes them exactly (a floor and powers of two: no algebra a compiler
+// may apply undoes it, as it could a compensated sum's), every CARRY_STEPS steps and at the end
+// of each sample period, so that the fine part stays small beside the whole (at most the
+// increments of CARRY_STEPS steps beyond a quantum) and keeps the increments' low bits.
 fn carry(whole: f32, fine: f32) -> vec2<f32> {
     let q = floor(fine * PER_QUANTUM) * QUANTUM;
     return vec2<f32>(whole + q, fine - q);
@@ -498,7 +499,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             wob0 = drive - job.c_a * rate0;
         }
         let torque0 = b.cut_t * d0 + b.arm * (wob0 - b.cut_w * d0);
-        s = State(torque0 / job.k_t, 0.0, omega + kick, 0.0, wob0 / job.k_a, rate0, 0.0, 0.0, 0.0, 0.0);
+        s = State(torque0 / job.k_t, 0.0, omega, kick, wob0 / job.k_a, rate0, 0.0, 0.0, 0.0, 0.0);
         for (var l = 0u; l < RING_LINES; l = l + 1u) {
             let ahead = (f32(4u * l) + vec4<f32>(0.5, 1.5, 2.5, 3.5)) * b.cell;
             states[ring_at + l] = -dn0 * (1.0 - ahead / sector);
@@ -587,9 +588,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             f = out.f;
         }
+        carry_all(&s);
         // A NaN fails every comparison: diverged.
         let speed = s.speed + s.speed_fine;
-        if (!(abs(speed) <= runaway && abs(s.axial_speed) < 1000.0 && abs(s.lag) < 1.0e30)) {
+        if (!(abs(speed) <= runaway && abs(s.axial_speed) < 1000.0 && abs(s.lag + s.lag_fine) < 1.0e30)) {
             diverged = true;
             break;
         }

@@ -180,14 +180,18 @@ impl Settings {
         if self.is_feed() && self.map_wob_kn != default.map_wob_kn {
             return Err(Error::setting(
                 "map_wob_kn",
-                "maps weights on bit, which needs `wob_kn`: without it the string is fed \
-                 (`feed_m_h`, 30 m/h where not given) and the map is over `map_feed_m_h`",
+                format!(
+                    "maps weights on bit, which needs `wob_kn`: without it the string is fed \
+                     (`feed_m_h`, {DEFAULT_FEED_M_H} m/h where not given) and the map is over \
+                     `map_feed_m_h`"
+                ),
             ));
         }
         if !self.is_feed() && self.map_feed_m_h != default.map_feed_m_h {
             return Err(Error::setting(
                 "map_feed_m_h",
-                "maps feeds, which needs `feed_m_h`: under `wob_kn` the map is over `map_wob_kn`",
+                "maps feeds, which a string is given without `wob_kn`: under `wob_kn` the map is \
+                 over `map_wob_kn`",
             ));
         }
         let rpm = parse_axis(&self.map_rpm, "map_rpm")?;

@@ -92,16 +92,12 @@ fn a_longer_string_stick_slips_where_a_shorter_one_drills_steadily() {
     assert!(long.period_s(50.0).unwrap() > 10.0, "{long:?}");
 }
 
-#[test]
-#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
-fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
-    require_gpu();
-    // Cells whose minute converges with the step (regular stick-slip, bounce, steady), under a
-    // weight and a feed in one batch; f32 against f64 over 600,000 steps a string. (Where the
-    // bit bounces, some cells hold two motions and the rounding picks one: 80 rpm under 220 kN
-    // bounces on the CPU and also sticks on lavapipe. Near the edge of stick-slip some cells'
-    // stick-slip is irregular: at 40 rpm under 150 kN kicks 10⁻⁵ apart move the CPU's stuck
-    // share by 0.011, as a rounding would. Those are no cells for a parity test.)
+/// The parity test's cells: regular stick-slip, bounce and steady drilling, under a weight and
+/// a feed, on its schedule (20 s settled, 40 s recorded at 1e-4 s). Near the edge of
+/// stick-slip many cells' motion is irregular: at 40 rpm under 150 kN kicks 1.00001 rpm and
+/// 1 rpm move the CPU's stuck share by 0.011, as a rounding would; where the bit bounces some
+/// cells hold two motions and the rounding picks one. Those are no cells for a parity test.
+fn parity_cells() -> ([(f64, Axial); 5], Schedule) {
     let cells = [
         (45.0, Axial::Weight { wob_n: 140e3 }),
         (60.0, Axial::Weight { wob_n: 160e3 }),
@@ -114,9 +110,46 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
             },
         ),
     ];
+    (cells, Schedule::new(1e-4, 50.0, 20.0, 40.0).unwrap())
+}
+
+#[test]
+fn the_parity_test_s_stick_slip_cells_move_regularly() {
+    // Kicks of 1 rpm and of 1 rpm times 1 + 10⁻⁵, 2·10⁻⁵, 3·10⁻⁵: the CPU's stuck shares agree
+    // within a fifth of the parity test's tolerance, its rates of penetration within a tenth.
+    let (cells, sched) = parity_cells();
+    let assembly = Assembly::default();
+    for &(rpm, axial) in &cells[..2] {
+        let kicked: Vec<_> = (0..4)
+            .map(|k| CoupledJob {
+                kick_rad_s: RAD_S_PER_RPM * (1.0 + 1e-5 * f64::from(k)),
+                ..job(rpm, axial)
+            })
+            .collect();
+        let out = coupled::integrate_batch(&assembly, &sched, &kicked, None);
+        let c = &out[0];
+        assert_eq!(c.regime(), Regime::StickSlip, "{rpm} rpm: {c:?}");
+        for other in &out[1..] {
+            assert!(
+                (other.stuck_share() - c.stuck_share()).abs() <= 0.002,
+                "{rpm} rpm: {other:?}\n{c:?}"
+            );
+            assert!(
+                (other.rate_m_s() - c.rate_m_s()).abs() < 0.001 * c.rate_m_s(),
+                "{rpm} rpm"
+            );
+        }
+    }
+}
+
+#[test]
+#[cfg_attr(skip_gpu_tests, ignore = "BITROCK_SKIP_GPU_TESTS=1")]
+fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
+    require_gpu();
+    // The cells of `parity_cells` in one batch; f32 against f64 over 600,000 steps a string.
+    let (cells, sched) = parity_cells();
     let jobs: Vec<_> = cells.iter().map(|&(r, a)| job(r, a)).collect();
     let assembly = Assembly::default();
-    let sched = Schedule::new(1e-4, 50.0, 20.0, 40.0).unwrap();
     let cpu = coupled::integrate_batch(&assembly, &sched, &jobs, None);
     let (gpu, _) = backend::integrate(&assembly, &sched, &jobs, None, Backend::Gpu, &mut |_| {}).unwrap();
     let regimes: Vec<_> = cpu.iter().map(|s| s.regime()).collect();
@@ -131,26 +164,6 @@ fn the_kernel_integrates_the_coupled_bit_as_its_cpu_twin_does() {
         ],
         "the cells are what they are said to be"
     );
-    // The stick-slip cells are regular: kicked 10⁻⁵ apart, the CPU's stuck shares agree within
-    // a fifth of the tolerance below, its rates of penetration within a tenth.
-    for (&(rpm, axial), c) in cells.iter().zip(&cpu).take(2) {
-        let kicked: Vec<_> = (1..4)
-            .map(|k| CoupledJob {
-                kick_rad_s: RAD_S_PER_RPM * (1.0 + 1e-5 * f64::from(k)),
-                ..job(rpm, axial)
-            })
-            .collect();
-        for other in coupled::integrate_batch(&assembly, &sched, &kicked, None) {
-            assert!(
-                (other.stuck_share() - c.stuck_share()).abs() <= 0.002,
-                "{rpm} rpm: {other:?}\n{c:?}"
-            );
-            assert!(
-                (other.rate_m_s() - c.rate_m_s()).abs() < 0.001 * c.rate_m_s(),
-                "{rpm} rpm"
-            );
-        }
-    }
     for ((c, g), (rpm, _)) in cpu.iter().zip(&gpu).zip(&cells) {
         assert_eq!(c.regime(), g.regime(), "{rpm} rpm");
         assert_eq!(c.samples, g.samples);
@@ -1078,9 +1091,9 @@ fn a_stuck_bit_breaks_free_when_the_cpu_s_does_on_the_gpu_at_a_fine_step() {
     // A bit held at rest while the top drive winds the string up from 70 % of its steady
     // torque: it breaks free when the lag has grown by Ω₀·t. The lag, 25-36 rad, grows by
     // Ω₀·dt (5.2·10⁻⁵ rad at 20 rpm and 2.5·10⁻⁵ s, 14 to 28 of its f32 ulps) each step:
-    // added to it in f32, each step's rounding falls the same way (a kernel that did so kept
-    // the bit 261 samples at rest where the CPU keeps it 258). The kernel keeps the
-    // increments' low bits apart.
+    // added to it in f32, each step's rounding falls the same way (on lavapipe, the 2-core
+    // build machine, 2026-12-06, a kernel that did so kept the bit 261 samples at rest where
+    // the CPU keeps it 258). The kernel keeps the increments' low bits apart.
     let dt = 2.5e-5;
     let assembly = Assembly::default();
     let at_20 = job(20.0, WOB_150_KN);
