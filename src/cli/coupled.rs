@@ -91,8 +91,8 @@ pub struct CoupledCmd {
     /// Bit-speed kick from steady drilling at t = 0, rpm.
     #[arg(long, value_parser = finite_number, allow_hyphen_values = true, default_value_t = Settings::default().kick_rpm, value_name = "RPM")]
     pub kick_rpm: f64,
-    /// A regime map instead of one string: one string per cell of --map-rpm × --map-wob-kn (or
-    /// --map-feed-m-h with --feed-m-h).
+    /// A regime map instead of one string: one string per cell of --map-rpm × --map-wob-kn with
+    /// --wob-kn, or × --map-feed-m-h under a feed (the drive without --wob-kn).
     #[arg(long)]
     pub map: bool,
     /// With --map: the escape map, every cell continued from where the bit is at --omega-rpm
@@ -106,7 +106,7 @@ pub struct CoupledCmd {
     /// The map's weights on bit, kN, as MIN:MAX:COUNT (with --wob-kn).
     #[arg(long, default_value_t = Settings::default().map_wob_kn, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_wob_kn: String,
-    /// The map's feeds, m/h, as MIN:MAX:COUNT (with --feed-m-h).
+    /// The map's feeds, m/h, as MIN:MAX:COUNT (under a feed: without --wob-kn).
     #[arg(long, default_value_t = Settings::default().map_feed_m_h, value_name = "MIN:MAX:COUNT", requires = "map")]
     pub map_feed_m_h: String,
     /// Where the map's strings are integrated: gpu, cpu, or auto (the GPU when an adapter

@@ -174,7 +174,8 @@ impl Settings {
     }
 
     /// The map's speeds (rpm) and its second axis: weights (kN) or feeds (m/h). The other
-    /// axis, given, is refused: the drive decides which the map is over.
+    /// drive's axis, set to other than its default, is refused: the drive decides which the
+    /// map is over.
     pub fn axes(&self) -> Result<(Vec<f64>, Vec<f64>)> {
         let default = Settings::default();
         if self.is_feed() && self.map_wob_kn != default.map_wob_kn {
@@ -190,8 +191,7 @@ impl Settings {
         if !self.is_feed() && self.map_feed_m_h != default.map_feed_m_h {
             return Err(Error::setting(
                 "map_feed_m_h",
-                "maps feeds, which a string is given without `wob_kn`: under `wob_kn` the map is \
-                 over `map_wob_kn`",
+                "maps feeds, the drive without `wob_kn`: under `wob_kn` the map is over `map_wob_kn`",
             ));
         }
         let rpm = parse_axis(&self.map_rpm, "map_rpm")?;
