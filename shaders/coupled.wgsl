@@ -185,16 +185,12 @@ struct State {
 // ulp is 2-4·10⁻⁶ (rounded each step, the same way step after step, a stuck bit's torque
 // rises up to a per cent or so fast or slow); the phase by Ω·dt on up to π/2. Each is carried
 // as a whole part, a multiple of QUANTUM, and a fine part that the steps add to; their sum,
-// rounded once, is read where the value is needed. `carry` moves the fine part's whole quanta
-// to the whole part, which takes them exactly (a floor and powers of two: no algebra a compiler
-// may apply undoes it, as it could a compensated sum's), every CARRY_STEPS steps and at the end
-// of each sample period, so that the fine part stays small beside the whole (at most the
-// increments of CARRY_STEPS steps beyond a quantum) and keeps the increments' low bits.
-fn carry(whole: f32, fine: f32) -> vec2<f32> {
-    let q = floor(fine * PER_QUANTUM) * QUANTUM;
-    return vec2<f32>(whole + q, fine - q);
-}
-
+// rounded once, is read where the value is needed. `carry_all` moves the fine part's whole
+// quanta to the whole part, which takes them exactly (a floor and powers of two: no algebra a
+// compiler may apply undoes it, as it could a compensated sum's), where the state is read and
+// then every CARRY_STEPS steps and at the end of each sample period, so that the fine part
+// stays small beside the whole (at most the increments of CARRY_STEPS steps beyond a quantum)
+// and keeps the increments' low bits.
 fn carry_all(s: ptr<function, State>) {
     let lag = carry((*s).lag, (*s).lag_fine);
     (*s).lag = lag.x;
@@ -207,11 +203,13 @@ fn carry_all(s: ptr<function, State>) {
     (*s).phase_fine = phase.y;
 }
 
-// `x` plus `fine` as a whole part and a fine part (`carry`'s form), from a value read from
-// the host or set at the start.
-fn split(x: f32, fine: f32) -> vec2<f32> {
+// `x` plus `fine` as a whole part, a multiple of QUANTUM, and a fine part in [0, QUANTUM).
+// Where `x` is a multiple of QUANTUM already (the steps keep it so), `x − whole` is 0.
+fn carry(x: f32, fine: f32) -> vec2<f32> {
     let whole = floor(x * PER_QUANTUM) * QUANTUM;
-    return carry(whole, (x - whole) + fine);
+    let rest = (x - whole) + fine;
+    let q = floor(rest * PER_QUANTUM) * QUANTUM;
+    return vec2<f32>(whole + q, rest - q);
 }
 
 struct Forces {
@@ -540,15 +538,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var block = vec4<f32>(summaries[o + 18u], summaries[o + 19u], summaries[o + 20u], summaries[o + 21u]);
     var last_stuck = bitcast<u32>(summaries[o + 22u]) != 0u;
     var f = Forces(0.0, 0.0, 0.0);
-    let lag = split(s.lag, s.lag_fine);
-    let speed = split(s.speed, s.speed_fine);
-    let phase = split(s.phase, s.phase_fine);
-    s.lag = lag.x;
-    s.lag_fine = lag.y;
-    s.speed = speed.x;
-    s.speed_fine = speed.y;
-    s.phase = phase.x;
-    s.phase_fine = phase.y;
+    carry_all(&s);
     hold_line(ahead_of(b, s.phase + s.phase_fine) >> 2u);
     let steps = job.steps_per_sample;
     for (var period = job.first_period; period < job.end_period; period = period + 1u) {
