@@ -138,7 +138,7 @@ fn put(c: u32, height: f32) {
 
 // The cell just ahead of the bit at `phase`.
 fn ahead_of(b: Bit, phase: f32) -> u32 {
-    return wrap(floor(phase / b.cell - 0.5) + 1.0);
+    return wrap(floor(phase * b.per_cell - 0.5) + 1.0);
 }
 
 struct Bit {
@@ -149,6 +149,8 @@ struct Bit {
     sector_whole: f32,
     sector_rest: f32,
     cell: f32,
+    // 1/cell, dt/mass and dt/inertia: a step multiplies by them, with no division on its chain.
+    per_cell: f32,
     cut_w: f32,
     cut_t: f32,
     contact_w: f32,
@@ -159,8 +161,8 @@ struct Bit {
     // uniform's field lane by lane inside a loop).
     feed: bool,
     dt: f32,
-    mass: f32,
-    inertia: f32,
+    dt_per_mass: f32,
+    dt_per_inertia: f32,
     k_t: f32,
     c_t: f32,
     k_a: f32,
@@ -234,7 +236,7 @@ fn wrap(k: f32) -> u32 {
 // The rock surface's height (m) under the bit, from the cell behind it and the one ahead, held
 // since the last step.
 fn surface(b: Bit, s: State) -> f32 {
-    let x = (s.phase + s.phase_fine) / b.cell - 0.5;
+    let x = (s.phase + s.phase_fine) * b.per_cell - 0.5;
     let behind = floor(x);
     let frac = x - behind;
     return s.behind_old + frac * (held(wrap(behind + 1.0)) - s.behind_old);
@@ -265,7 +267,7 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wra
     let phase = whole + fine;
     let ahead = ahead_of(b, phase);
     let rebase = abs(depth_to) > REBASE_M;
-    var k = floor(start / b.cell - 0.5) + select(0.0, 1.0, turn > 0.0);
+    var k = floor(start * b.per_cell - 0.5) + select(0.0, 1.0, turn > 0.0);
     var crossed = 0u;
     var behind_next = false;
     loop {
@@ -350,7 +352,7 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     } else {
         axially_held = true;
     }
-    var v_new = select(v + (fa - wob) / b.mass * dt, 0.0, axially_held);
+    var v_new = select(v + (fa - wob) * b.dt_per_mass, 0.0, axially_held);
     if (on_bottom && v != 0.0 && v_new * v <= 0.0) {
         v_new = 0.0;
     }
@@ -367,7 +369,7 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     } else {
         stuck = true;
     }
-    var w_fine = s.speed_fine + (tau - torque) / b.inertia * dt;
+    var w_fine = s.speed_fine + (tau - torque) * b.dt_per_inertia;
     var w_new = s.speed + w_fine;
     if (stuck || (on_bottom && w != 0.0 && w_new * w <= 0.0)) {
         s.speed = 0.0;
@@ -389,7 +391,7 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     let start = s.phase + s.phase_fine;
     let fine = s.phase_fine + turn;
     let end = s.phase + fine;
-    let k = floor(start / b.cell - 0.5) + 1.0;
+    let k = floor(start * b.per_cell - 0.5) + 1.0;
     let crosses = turn > 0.0 && (k + 0.5) * b.cell <= end;
     let whole = turn < 0.0 || abs(depth_new) > REBASE_M || (crosses && (k + 1.5) * b.cell <= end);
     var left = turn;
@@ -460,6 +462,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         floor(sector * PER_QUANTUM) * QUANTUM,
         sector - floor(sector * PER_QUANTUM) * QUANTUM,
         sector / f32(RING_CELLS),
+        f32(RING_CELLS) / sector,
         radius * zeta * eps,
         0.5 * radius * radius * eps,
         radius * wear * sigma,
@@ -468,8 +471,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         drive,
         job.feed != 0u,
         job.dt_s,
-        job.mass_kg,
-        job.inertia_kg_m2,
+        job.dt_s / job.mass_kg,
+        job.dt_s / job.inertia_kg_m2,
         job.k_t,
         job.c_t,
         job.k_a,
@@ -554,12 +557,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             loop {
                 out = step(b, &s);
                 k = k + 1u;
-                if (k % CARRY_STEPS == 0u) {
-                    carry_all(&s);
-                }
-                if (any_lane(out.slow) || k >= steps) {
+                if (any_lane(out.slow) || k >= steps || k % CARRY_STEPS == 0u) {
                     break;
                 }
+            }
+            // Every CARRY_STEPS steps of the string's own (its results are its own, whichever
+            // lanes leave the loop with it), here, not in the loop: a CPU driver runs a branch's
+            // body at every step, masked.
+            if (k % CARRY_STEPS == 0u) {
+                carry_all(&s);
             }
             // The storage passes, for every lane that has one due (`transport` may change
             // any line, so the line after is read after it).

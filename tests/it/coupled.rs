@@ -1012,7 +1012,7 @@ fn a_stick_slipping_bit_needs_more_to_escape_than_steady_drilling_to_stay_and_th
     // each of 16 posterior draws' bits settled at 45 rpm and 150 kN and continued from there,
     // on a map reaching down to 100 kN. In every cell most draws do what the bit does but at
     // the bistable band's edge (at 80 rpm and 150 kN four of 16 stay stuck; at 45 rpm and 130
-    // kN ten vibrate), so the way out may lie one step beyond the bit's own. Applied to the bit
+    // kN nine vibrate), so the way out may lie one step beyond the bit's own. Applied to the bit
     // itself from its stuck state, it works.
     let calibration =
         bitrock::fit::coupled::calibrate(&drilling_record(300.0, 5e3, 7, false), Bit::default().radius_m, 4000, 7)
