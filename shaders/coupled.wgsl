@@ -16,8 +16,8 @@ const REBASE_M: f32 = 0.01;
 const SUM_BLOCK: u32 = 64u;
 const INPUT_WORDS: u32 = 12u;
 // A string's state in lines of four words: lag, speed, compression, axial speed; depth, phase,
-// behind_old, the lag's fine part; the phase's and the speed's fine parts, two unused; then
-// the ring, four cells a line.
+// behind_old, the lag's fine part; the phase's, the speed's and the compression's fine parts,
+// one unused; then the ring, four cells a line.
 const STATE_LINES: u32 = 63u;
 const RING_AT: u32 = 3u;
 const RING_LINES: u32 = 60u;
@@ -175,6 +175,7 @@ struct State {
     speed: f32,
     speed_fine: f32,
     compression: f32,
+    compression_fine: f32,
     axial_speed: f32,
     depth: f32,
     phase: f32,
@@ -182,10 +183,12 @@ struct State {
     behind_old: f32,
 }
 
-// The lag, the bit speed and the phase are sums of a step's small increments on values large
-// beside them: the lag grows by (Ω₀ − Ω)·dt, some 10⁻⁴ rad, on tens of radians, where an f32
+// The lag, the bit speed, the phase and the compression are sums of a step's small increments
+// on values large beside them: the lag grows by (Ω₀ − Ω)·dt, some 10⁻⁴ rad, on tens of radians, where an f32
 // ulp is 2-4·10⁻⁶ (rounded each step, the same way step after step, a stuck bit's torque
-// rises up to a per cent or so fast or slow); the phase by Ω·dt on up to π/2. Each is carried
+// rises up to a per cent or so fast or slow); the phase by Ω·dt on up to π/2; under a feed,
+// the compression by (V_f − V)·dt, near steady drilling a few of its ulps or less than one, on
+// some 0.6-0.9 m (the weight, and the rate of penetration with it, drifted). Each is carried
 // as a whole part, a multiple of QUANTUM, and a fine part that the steps add to; their sum,
 // rounded once, is read where the value is needed. `carry_all` moves the fine part's whole
 // quanta to the whole part, which takes them exactly (a floor and powers of two: no algebra a
@@ -203,6 +206,9 @@ fn carry_all(s: ptr<function, State>) {
     let phase = carry((*s).phase, (*s).phase_fine);
     (*s).phase = phase.x;
     (*s).phase_fine = phase.y;
+    let compression = carry((*s).compression, (*s).compression_fine);
+    (*s).compression = compression.x;
+    (*s).compression_fine = compression.y;
 }
 
 // `x` plus `fine` as a whole part, a multiple of QUANTUM, and a fine part in [0, QUANTUM).
@@ -339,7 +345,7 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     let wf = select(0.0, b.contact_w, on_bottom);
     var fa = b.drive - b.c_a * s.axial_speed;
     if (b.feed) {
-        fa = b.k_a * s.compression + b.c_a * (b.drive - s.axial_speed);
+        fa = b.k_a * (s.compression + s.compression_fine) + b.c_a * (b.drive - s.axial_speed);
     }
 
     let v = s.axial_speed;
@@ -379,7 +385,7 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
 
     let depth_new = s.depth + v_new * dt;
     if (b.feed) {
-        s.compression = s.compression + (b.drive - v_new) * dt;
+        s.compression_fine = s.compression_fine + (b.drive - v_new) * dt;
     }
     s.lag_fine = s.lag_fine + (b.omega - w_new) * dt;
 
@@ -485,7 +491,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let head = states[sb];
     let tail = states[sb + 1u];
     let fine = states[sb + 2u];
-    var s = State(head.x, tail.w, head.y, fine.y, head.z, head.w, tail.x, tail.y, fine.x, tail.z);
+    var s = State(head.x, tail.w, head.y, fine.y, head.z, fine.z, head.w, tail.x, tail.y, fine.x, tail.z);
     if (job.first_period == 0u && job.start_given == 0u) {
         // Steady drilling at the drive (CoupledJob::steady), its surface in the ring.
         let turns = omega / TAU;
@@ -500,7 +506,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             wob0 = drive - job.c_a * rate0;
         }
         let torque0 = b.cut_t * d0 + b.arm * (wob0 - b.cut_w * d0);
-        s = State(torque0 / job.k_t, 0.0, omega, kick, wob0 / job.k_a, rate0, 0.0, 0.0, 0.0, 0.0);
+        s = State(torque0 / job.k_t, 0.0, omega, kick, wob0 / job.k_a, 0.0, rate0, 0.0, 0.0, 0.0, 0.0);
         for (var l = 0u; l < RING_LINES; l = l + 1u) {
             let ahead = (f32(4u * l) + vec4<f32>(0.5, 1.5, 2.5, 3.5)) * b.cell;
             states[ring_at + l] = -dn0 * (1.0 - ahead / sector);
@@ -637,7 +643,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     states[sb] = vec4<f32>(s.lag, s.speed, s.compression, s.axial_speed);
     states[sb + 1u] = vec4<f32>(s.depth, s.phase, s.behind_old, s.lag_fine);
-    states[sb + 2u] = vec4<f32>(s.phase_fine, s.speed_fine, 0.0, 0.0);
+    states[sb + 2u] = vec4<f32>(s.phase_fine, s.speed_fine, s.compression_fine, 0.0);
     summaries[o] = bitcast<f32>(samples);
     summaries[o + 1u] = bitcast<f32>(stuck_count);
     summaries[o + 2u] = bitcast<f32>(onsets);

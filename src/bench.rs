@@ -16,6 +16,7 @@ use serde::Serialize;
 use std::time::Instant;
 
 pub mod coupled;
+pub mod simulators;
 pub mod smc_comparison;
 pub mod strings;
 pub mod surface;
@@ -1096,7 +1097,12 @@ pub struct ParityReport {
     pub tolerance: f64,
     pub laws: Vec<LawParity>,
     pub philox: PhiloxParity,
-    /// Every check within tolerance: ρ, decisions away from ε, Philox and candidates exact.
+    /// The torsional strings' simulator: the kernel against its CPU twin.
+    pub strings: simulators::StringsParity,
+    /// The coupled bit's simulator: the kernel against its CPU twin.
+    pub coupled: simulators::CoupledParity,
+    /// Every check within tolerance: ρ, decisions away from ε, Philox and candidates exact, the
+    /// simulated strings within their rules.
     pub pass: bool,
     /// The GPU agrees with the CPU wherever the laws are well-conditioned in f32: a failure is
     /// the laws' (see [`LawParity::ill_conditioned_in_f32`]), not the GPU's.
@@ -1140,7 +1146,8 @@ pub fn parity_on(
 }
 
 /// Scores the same candidates on both backends for each law's prior in `prior` (one law at a
-/// time), and compares the candidate generators bit for bit.
+/// time), compares the candidate generators bit for bit, and the simulators' strings by their
+/// rules ([`simulators`]).
 pub fn parity(problem: &Problem, candidates: usize, epsilon: Option<f64>) -> Result<ParityReport> {
     // ρ on both backends, their relative differences and a sorted copy for the median.
     crate::limits::check_memory(
@@ -1206,8 +1213,12 @@ pub fn parity(problem: &Problem, candidates: usize, epsilon: Option<f64>) -> Res
     let start = (1u64 << 32) - u64::from(count) / 2;
     let got = gpu::candidates::generate(&problem.prior, problem.seed, 1, start, count)?;
     let philox = compare_candidates(&problem.prior, problem.seed, 1, start, &got);
+    let strings = simulators::strings_parity()?;
+    let coupled = simulators::coupled_parity()?;
     // A law ill-conditioned in f32 fails the check but does not blame the GPU.
-    let gpu_agrees = philox.words_differ == 0
+    let gpu_agrees = strings.pass
+        && coupled.pass
+        && philox.words_differ == 0
         && philox.candidates_differ == 0
         && laws.iter().all(|l| {
             l.ill_conditioned_in_f32
@@ -1219,6 +1230,8 @@ pub fn parity(problem: &Problem, candidates: usize, epsilon: Option<f64>) -> Res
         tolerance: PARITY_TOLERANCE,
         laws,
         philox,
+        strings,
+        coupled,
         pass,
         gpu_agrees,
     })

@@ -75,6 +75,7 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
         for d in &p.first_differences {
             writeln!(out, "  {d}")?;
         }
+        print_simulators(&mut out, &report)?;
         for l in report.laws.iter().filter(|l| l.ill_conditioned_in_f32) {
             writeln!(
                 out,
@@ -101,4 +102,61 @@ pub fn run(cmd: &ParityCmd) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::from(super::exit::DIFFERENCE)
     })
+}
+
+/// The simulators' sections of the table: each figure against its rule.
+fn print_simulators(out: &mut impl Write, report: &bitrock::bench::ParityReport) -> std::io::Result<()> {
+    use bitrock::bench::simulators as sim;
+    let s = &report.strings;
+    writeln!(
+        out,
+        "torsional strings (m1-m4 at the paper's estimates, 20-200 rpm, 1-DOF string): {}; samples or divergence differ: {}; stick-slip verdicts differ: {} ({} allowed); largest differences: stuck share {:.4} ({} allowed), speed extremes {:.2e} of the top speed ({} allowed) — {}",
+        s.strings,
+        s.samples_or_divergence_differ,
+        s.verdicts_differ,
+        (sim::STRINGS_VERDICTS_MAY_DIFFER * s.strings as f64).floor(),
+        s.max_stuck_share_diff,
+        sim::STRINGS_STUCK_SHARE,
+        s.max_speed_diff,
+        sim::STRINGS_SPEED,
+        if s.pass { "ok" } else { "differs" }
+    )?;
+    for d in &s.first_differences {
+        writeln!(out, "  {d}")?;
+    }
+    writeln!(
+        out,
+        "coupled bit (public bit, 20 s settled + 40 s at 1e-4 s; cpu / gpu; differences allowed: rate of penetration {} %, {} % bouncing; stuck share {}; off bottom {}; mean WOB and torque {} %)",
+        100.0 * sim::COUPLED_RATE,
+        100.0 * sim::COUPLED_RATE_BOUNCING,
+        sim::COUPLED_STUCK_SHARE,
+        sim::COUPLED_OFF_BOTTOM_SHARE,
+        100.0 * sim::COUPLED_MEANS
+    )?;
+    for c in &report.coupled.cells {
+        let regime = if c.regime.0 == c.regime.1 {
+            c.regime.0.name().to_string()
+        } else {
+            format!("{} / {}", c.regime.0.name(), c.regime.1.name())
+        };
+        writeln!(
+            out,
+            "  {:>5} rpm {:>8}  {:<12} ROP {:.2} / {:.2} m/h  stuck {:.3} / {:.3}  off bottom {:.3} / {:.3}  WOB {:.1} / {:.1} kN  torque {:.2} / {:.2} kN·m  {}",
+            c.omega_rpm,
+            c.drive,
+            regime,
+            c.rop_m_h.0,
+            c.rop_m_h.1,
+            c.stuck_share.0,
+            c.stuck_share.1,
+            c.off_bottom_share.0,
+            c.off_bottom_share.1,
+            c.wob_mean_kn.0,
+            c.wob_mean_kn.1,
+            c.torque_mean_knm.0,
+            c.torque_mean_knm.1,
+            if c.pass { "ok" } else { "differs" }
+        )?;
+    }
+    Ok(())
 }

@@ -260,6 +260,11 @@ fn parity_command_reports_agreement_as_json(shape: Shape) {
     for l in v["laws"].as_array().unwrap() {
         assert!(l["max_rel_diff"].as_f64().unwrap() <= PARITY_TOLERANCE);
     }
+    // The simulators' sections: 200 torsional strings, five cells of the coupled bit.
+    assert_eq!(v["strings"]["strings"], 200);
+    assert_eq!(v["strings"]["pass"], true, "{}", v["strings"]);
+    assert_eq!(v["coupled"]["cells"].as_array().unwrap().len(), 5);
+    assert_eq!(v["coupled"]["pass"], true, "{}", v["coupled"]);
 }
 }
 

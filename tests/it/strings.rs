@@ -3,6 +3,7 @@
 
 use crate::gpu::require_gpu;
 use bitrock::Law;
+use bitrock::bench::simulators;
 use bitrock::eval::gpu::strings::{self as gpu_strings, OnClockJob};
 use bitrock::eval::surface::InferredString;
 use bitrock::eval::{Backend, strings};
@@ -19,32 +20,10 @@ use bitrock::stability::lumped::Lumped;
 use bitrock::stability::map::LawSamples;
 use bitrock::units::RAD_S_PER_RPM;
 
-/// Strings over every built-in law at its paper estimate, 20 to 200 rpm, r from 0.4 to 1.6,
-/// kicked by 10 % of Ω from steady rotation.
-fn jobs(chain: &Chain) -> Vec<StringJob> {
-    let mut out = Vec::new();
-    for law in Law::ALL {
-        let p = padded(&law.scale_torque(law.paper_estimate().unwrap(), 1000.0));
-        for k in 0..10 {
-            let omega = (20.0 + 20.0 * k as f64) * RAD_S_PER_RPM;
-            for r in [0.4, 0.7, 1.0, 1.3, 1.6] {
-                out.push(StringJob {
-                    law,
-                    params_nm: p,
-                    omega_rad_s: omega,
-                    ratio: r,
-                    start: steady_start(chain, law, &p, omega, r, 0.1 * omega),
-                });
-            }
-        }
-    }
-    out
-}
-
-/// Kernel against twin, string by string: the stick-slip verdict agrees on ≥ 99 % of the
-/// strings; where both are steady or both stick-slip, the stuck share within 0.01 and the
-/// speed extremes within 1 % of the largest speed (f32 against f64 through a chaotic cycle:
-/// measured, every verdict agrees and the shares within 0.001 on lavapipe).
+/// Kernel against twin, string by string, by `bitrock parity`'s rule: the stick-slip verdict
+/// agrees on ≥ 99 % of the strings; where both are steady or both stick-slip, the stuck share
+/// within 0.01 and the speed extremes within 1 % of the largest speed (f32 against f64 through a
+/// chaotic cycle: measured, every verdict agrees and the shares within 0.001 on lavapipe).
 fn compare(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) -> Vec<(Summary, StringState)> {
     let (cpu, _) = strings::integrate(chain, schedule, jobs, Backend::Cpu, &mut |_| {}).unwrap();
     let (gpu, ran) = strings::integrate(chain, schedule, jobs, Backend::Gpu, &mut |_| {}).unwrap();
@@ -55,41 +34,8 @@ fn compare(chain: &Chain, schedule: &Schedule, jobs: &[StringJob]) -> Vec<(Summa
 
 /// [`compare`]'s rule on results already integrated.
 fn agree(jobs: &[StringJob], cpu: &[(Summary, StringState)], gpu: &[(Summary, StringState)]) {
-    let mut disagree = 0;
-    for (i, ((c, _), (g, _))) in cpu.iter().zip(gpu).enumerate() {
-        let j = &jobs[i];
-        let what = || {
-            format!(
-                "{} at {:.0} rpm, r = {}: cpu {c:?}, gpu {g:?}",
-                j.law,
-                j.omega_rad_s / RAD_S_PER_RPM,
-                j.ratio
-            )
-        };
-        assert_eq!(c.samples, g.samples, "{}", what());
-        assert_eq!(c.diverged, g.diverged, "{}", what());
-        if c.stick_slips() != g.stick_slips() {
-            disagree += 1;
-            continue;
-        }
-        let scale = c.speed_max_rad_s.abs().max(j.omega_rad_s);
-        assert!((c.stuck_share() - g.stuck_share()).abs() <= 0.01, "{}", what());
-        assert!(
-            (c.speed_max_rad_s - g.speed_max_rad_s).abs() <= 0.01 * scale,
-            "{}",
-            what()
-        );
-        assert!(
-            (c.speed_min_rad_s - g.speed_min_rad_s).abs() <= 0.01 * scale,
-            "{}",
-            what()
-        );
-    }
-    assert!(
-        disagree * 100 <= jobs.len(),
-        "{disagree} of {} verdicts differ",
-        jobs.len()
-    );
+    let parity = simulators::compare_strings(jobs, cpu, gpu);
+    assert!(parity.pass, "{parity:#?}");
 }
 
 /// Both kinds of string are in the batch the CPU twin integrated: the comparison saw cycles
@@ -109,7 +55,7 @@ fn the_kernel_integrates_the_1dof_string_as_its_cpu_twin_does() {
     require_gpu();
     let chain = Chain::one_dof(&Lumped::default());
     let schedule = Schedule::new(0.01, 50.0, 40.0, 20.0).unwrap();
-    let all = jobs(&chain);
+    let all = simulators::string_parity_jobs(&chain);
     // Every law in one batch (the law read per string), then each law's own batch (the law
     // compiled into the kernel).
     assert_both_kinds(&compare(&chain, &schedule, &all));
@@ -126,7 +72,7 @@ fn the_kernel_integrates_the_lumped_fe_string_as_its_cpu_twin_does() {
     // The paper's 2-element string: a top node above the bit (lavapipe runs the wider chains'
     // arrays slowly; the 10-element string is the benchmark's).
     let chain = Chain::lumped_fe(&DrillString::default()).unwrap();
-    let jobs: Vec<StringJob> = jobs(&chain).into_iter().step_by(2).collect();
+    let jobs: Vec<StringJob> = simulators::string_parity_jobs(&chain).into_iter().step_by(2).collect();
     let schedule = Schedule::new(0.01, 50.0, 30.0, 20.0).unwrap();
     assert_both_kinds(&compare(&chain, &schedule, &jobs));
 }
@@ -145,7 +91,7 @@ fn the_kernel_integrates_the_ten_element_string_through_every_slice_of_its_steps
     };
     let chain = Chain::lumped_fe(&fe).unwrap();
     assert_eq!(chain.nodes(), 10);
-    let jobs: Vec<StringJob> = jobs(&chain).into_iter().step_by(10).collect();
+    let jobs: Vec<StringJob> = simulators::string_parity_jobs(&chain).into_iter().step_by(10).collect();
     let schedule = Schedule::new(1e-4, 50.0, 0.2, 0.8).unwrap();
     let (cpu, _) = strings::integrate(&chain, &schedule, &jobs, Backend::Cpu, &mut |_| {}).unwrap();
     let gpu = gpu_strings::integrate_batch(&chain, &schedule, &jobs).unwrap();
@@ -179,7 +125,7 @@ fn auto_leaves_a_chain_of_nodes_to_the_cpu_only_where_the_gpu_is_a_software_driv
         (strings::SOFTWARE_GPU_MAX_NODES, strings::SOFTWARE_GPU_MAX_NODES + 1)
     );
     for (chain, on_cpu) in [(&one_dof, false), (&four, false), (&five, software)] {
-        let all = jobs(chain);
+        let all = simulators::string_parity_jobs(chain);
         let mut notes = Vec::new();
         let (auto, ran) =
             strings::integrate(chain, &schedule, &all[..8], Backend::Auto, &mut |n| notes.push(n)).unwrap();

@@ -25,6 +25,9 @@ def test_parity_passes_and_is_the_command_lines(cli) -> None:
     document = json.loads(run_cli(cli, "parity", "--laws", "m2,m3", "--candidates", "3000", "--json").stdout)
     assert document["adapter"] == report["adapter"]
     assert [law["max_rel_diff"] for law in document["laws"]] == [law["max_rel_diff"] for law in report["laws"]]
+    # The simulators' sections: the same strings, the same figures.
+    assert report["strings"]["pass"] and report["coupled"]["pass"], (report["strings"], report["coupled"])
+    assert document["strings"] == report["strings"] and document["coupled"] == report["coupled"]
     with pytest.raises(bitrock.InputError) as caught:
         bitrock.parity(candidates=0)
     assert caught.value.argument == "candidates"

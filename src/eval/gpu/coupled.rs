@@ -9,8 +9,8 @@ use bytemuck::{Pod, Zeroable};
 
 /// Words per string of the kernel's buffers. Keep in sync with shaders/coupled.wgsl.
 const INPUT_WORDS: usize = 12;
-/// The state: ten words (the lag, the bit speed and the phase each in two parts), two unused,
-/// then the ring; the kernel reads it in lines of four.
+/// The state: eleven words (the lag, the bit speed, the phase and the compression each in two
+/// parts), one unused, then the ring; the kernel reads it in lines of four.
 const STATE_WORDS: usize = 12 + crate::simulate::coupled::RING_CELLS;
 const _: () = assert!(crate::simulate::coupled::RING_CELLS.is_multiple_of(4));
 const SUMMARY_WORDS: usize = 24;
@@ -195,15 +195,16 @@ fn run_chunk(
     // Without a start the kernel begins each string from steady drilling (`start_given` 0)
     // and reads no state.
     let states: Option<Vec<f32>> = start.map(|start| {
-        // The lag, the phase and the bit speed as f32 and what that rounding left out: the
-        // kernel carries each in two parts.
+        // The lag, the phase, the bit speed and the compression as f32 and what that rounding
+        // left out: the kernel carries each in two parts.
         let (lag, lag_fine) = f32_and_rest(start.lag_rad);
         let (phase, phase_fine) = f32_and_rest(start.phase_rad);
         let (speed, speed_fine) = f32_and_rest(start.speed_rad_s);
+        let (compression, compression_fine) = f32_and_rest(start.compression_m);
         let mut one = vec![
             lag,
             speed,
-            start.compression_m as f32,
+            compression,
             start.axial_speed_m_s as f32,
             start.depth_m as f32,
             phase,
@@ -211,7 +212,7 @@ fn run_chunk(
             lag_fine,
             phase_fine,
             speed_fine,
-            0.0,
+            compression_fine,
             0.0,
         ];
         one.extend(start.ring_m.iter().map(|&h| h as f32));
