@@ -1,17 +1,17 @@
 #!/usr/bin/env bash
 # Measurements on a machine with a GPU, results under $OUT (default ./gpu-report), most wanted
-# first so that a lease cut short still brings them back: parity of the scorers, the GPU-facing
-# integration tests (where $IT names the test binary, `cargo test --release --test it
-# --no-run`, run from the tree it was built in: it calls the binary by the path it was built
-# at), a surface record's, the torsional strings' and the coupled bit's throughput, the
-# evidence's and the demo's timing, the benchmark with the scoring shapes re-measured, the
-# simulated maps on GPU and CPU (compared afterwards cell by cell), the rest of the integration
-# tests, and the CPU's figures.
-# Run from the project's root with the release binary built (`cargo build --release`); see
-# docs/benchmarks.md for how it is run on a lent NVIDIA machine. Where $ARCHIVE names a file, the
-# whole report is packed into it after every step: a lent machine returns only a few files, and
-# a run cut short still returns the steps it finished (the archive outside $OUT or at its top).
-# $EVIDENCE_RUNS sets how many times the evidence is timed (3).
+# first so that a lease cut short still brings them back: parity of the scorers and the
+# simulators, the GPU-facing integration tests (where $IT names the test binary, `cargo test
+# --release --test it --no-run`, run from the tree it was built in: it calls the binary by the
+# path it was built at), a surface record's, the torsional strings' and the coupled bit's
+# throughput, the evidence's and the demo's timing, the benchmark with the scoring shapes
+# re-measured, the simulated maps on GPU and CPU (compared afterwards cell by cell), the rest of
+# the integration tests, and the CPU's figures. Run from the project's root with the release
+# binary built (`cargo build --release`); see docs/benchmarks.md for how it is run on a lent
+# NVIDIA machine. Where $ARCHIVE names a file, the whole report is packed into it after every
+# step: a lent machine returns only a few files, and a run cut short still returns the steps it
+# finished (the archive outside $OUT or at its top). $EVIDENCE_RUNS sets how many times the
+# evidence is timed (3).
 set -u
 OUT=${OUT:-gpu-report}
 mkdir -p "$OUT"

@@ -149,7 +149,8 @@ struct Bit {
     sector_whole: f32,
     sector_rest: f32,
     cell: f32,
-    // 1/cell, dt/mass and dt/inertia: a step multiplies by them, with no division on its chain.
+    // 1/cell, dt/mass and dt/inertia: a step multiplies by them (its one division is the cut's
+    // depth where the bit crosses a cell).
     per_cell: f32,
     cut_w: f32,
     cut_t: f32,
@@ -183,19 +184,19 @@ struct State {
     behind_old: f32,
 }
 
-// The lag, the bit speed, the phase and the compression are sums of a step's small increments
-// on values large beside them: the lag grows by (Ω₀ − Ω)·dt, some 10⁻⁴ rad, on tens of radians, where an f32
-// ulp is 2-4·10⁻⁶ (rounded each step, the same way step after step, a stuck bit's torque
-// rises up to a per cent or so fast or slow); the phase by Ω·dt on up to π/2; under a feed,
-// the compression by (V_f − V)·dt, near steady drilling a few of its ulps or less than one, on
-// some 0.6-0.9 m (the weight, and the rate of penetration with it, drifted). Each is carried
-// as a whole part, a multiple of QUANTUM, and a fine part that the steps add to; their sum,
-// rounded once, is read where the value is needed. `carry_all` moves the fine part's whole
-// quanta to the whole part, which takes them exactly (a floor and powers of two: no algebra a
-// compiler may apply undoes it, as it could a compensated sum's), where the state is read and
-// then every CARRY_STEPS steps and at the end of each sample period, so that the fine part
-// stays small beside the whole (at most the increments of CARRY_STEPS steps beyond a quantum)
-// and keeps the increments' low bits.
+// The lag, the bit speed, the phase and the compression are sums of a step's small increments on
+// values large beside them: the lag grows by (Ω₀ − Ω)·dt, some 10⁻⁴ rad, on tens of radians, where
+// an f32 ulp is 2-4·10⁻⁶ (rounded each step, the same way step after step, a stuck bit's torque
+// rises up to a per cent or so fast or slow); the phase by Ω·dt on up to π/2; under a feed, the
+// compression by (V_f − V)·dt, near steady drilling a few of its ulps or less than one, on some
+// 0.6-0.9 m (summed so, a fed bit's weight and rate of penetration drift). Each is carried as a
+// whole part, a multiple of QUANTUM, and a fine part that the steps add to; their sum, rounded
+// once, is read where the value is needed. `carry_all` moves the fine part's whole quanta to the
+// whole part, which takes them exactly (a floor and powers of two: no algebra a compiler may apply
+// undoes it, as it could a compensated sum's), where the state is read and then every CARRY_STEPS
+// steps and at the end of each sample period, so that the fine part stays small beside the whole
+// (at most the increments of CARRY_STEPS steps beyond a quantum) and keeps the increments' low
+// bits.
 fn carry_all(s: ptr<function, State>) {
     let lag = carry((*s).lag, (*s).lag_fine);
     (*s).lag = lag.x;

@@ -1104,8 +1104,9 @@ pub struct ParityReport {
     /// Every check within tolerance: ρ, decisions away from ε, Philox and candidates exact, the
     /// simulated strings within their rules.
     pub pass: bool,
-    /// The GPU agrees with the CPU wherever the laws are well-conditioned in f32: a failure is
-    /// the laws' (see [`LawParity::ill_conditioned_in_f32`]), not the GPU's.
+    /// The GPU agrees with the CPU wherever the laws are well-conditioned in f32, and on the
+    /// simulated strings: a failure of `pass` alone is the laws' (see
+    /// [`LawParity::ill_conditioned_in_f32`]), not the GPU's.
     pub gpu_agrees: bool,
 }
 

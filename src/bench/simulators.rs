@@ -59,16 +59,22 @@ pub struct StringsParity {
     pub samples_or_divergence_differ: usize,
     /// Strings whose stick-slip verdict differs ([`STRINGS_VERDICTS_MAY_DIFFER`] may).
     pub verdicts_differ: usize,
+    /// Strings whose verdicts agree but whose stuck share or speeds differ beyond their rule (or
+    /// are not numbers): none may.
+    pub beyond_tolerance: usize,
     /// Where the verdicts agree: the largest difference of stuck shares.
     pub max_stuck_share_diff: f64,
     /// Where the verdicts agree: the largest difference of the speed extremes, relative.
     pub max_speed_diff: f64,
-    /// The first strings beyond a tolerance, or whose verdicts differ, described.
+    /// The first strings beyond a rule, or whose verdicts differ, described.
     pub first_differences: Vec<String>,
     pub pass: bool,
 }
 
-/// Compares the summaries of `jobs` from the CPU twin and the kernel, string by string.
+/// Compares the summaries of `jobs` from the CPU twin and the kernel, string by string: the
+/// count of samples and the divergence of every string; the verdicts and, where they agree,
+/// the stuck shares and the speed extremes of every string that recorded samples and did not
+/// run away (one that did has no figures to compare).
 pub fn compare_strings(
     jobs: &[StringJob],
     cpu: &[(Summary, StringState)],
@@ -78,6 +84,7 @@ pub fn compare_strings(
         strings: jobs.len(),
         samples_or_divergence_differ: 0,
         verdicts_differ: 0,
+        beyond_tolerance: 0,
         max_stuck_share_diff: 0.0,
         max_speed_diff: 0.0,
         first_differences: Vec::new(),
@@ -95,13 +102,15 @@ pub fn compare_strings(
         } else {
             let scale = c.speed_max_rad_s.abs().max(j.omega_rad_s);
             let stuck = (c.stuck_share() - g.stuck_share()).abs();
-            let speed = (c.speed_max_rad_s - g.speed_max_rad_s)
-                .abs()
-                .max((c.speed_min_rad_s - g.speed_min_rad_s).abs())
-                / scale;
+            // Each compared on its own: `f64::max` would drop a NaN.
+            let speeds = [
+                (c.speed_max_rad_s - g.speed_max_rad_s).abs() / scale,
+                (c.speed_min_rad_s - g.speed_min_rad_s).abs() / scale,
+            ];
             report.max_stuck_share_diff = report.max_stuck_share_diff.max(stuck);
-            report.max_speed_diff = report.max_speed_diff.max(speed);
-            differs = !(stuck <= STRINGS_STUCK_SHARE && speed <= STRINGS_SPEED);
+            report.max_speed_diff = speeds.iter().fold(report.max_speed_diff, |m, &d| m.max(d));
+            differs = !(stuck <= STRINGS_STUCK_SHARE && speeds.iter().all(|&d| d <= STRINGS_SPEED));
+            report.beyond_tolerance += usize::from(differs);
         }
         if differs && report.first_differences.len() < DIFFERENCES_SHOWN {
             report.first_differences.push(format!(
@@ -121,10 +130,19 @@ pub fn compare_strings(
             ));
         }
     }
-    report.pass = report.samples_or_divergence_differ == 0
-        && report.max_stuck_share_diff <= STRINGS_STUCK_SHARE
-        && report.max_speed_diff <= STRINGS_SPEED
+    report.pass = cpu.len() == jobs.len()
+        && gpu.len() == jobs.len()
+        && report.samples_or_divergence_differ == 0
+        && report.beyond_tolerance == 0
         && report.verdicts_differ as f64 <= STRINGS_VERDICTS_MAY_DIFFER * jobs.len() as f64;
+    if !(cpu.len() == jobs.len() && gpu.len() == jobs.len()) {
+        report.first_differences.push(format!(
+            "{} strings: {} summaries from the cpu, {} from the gpu",
+            jobs.len(),
+            cpu.len(),
+            gpu.len()
+        ));
+    }
     report
 }
 
@@ -138,9 +156,10 @@ pub fn strings_parity() -> Result<StringsParity> {
 }
 
 /// Coupled bit: each figure agrees where its difference is below these. The rate of
-/// penetration, relative, where the bit does not bounce, and where it bounces (its motion is
-/// irregular: a minute's rate moves by 1-2 % with the rounding as with the step).
+/// penetration, relative, where the bit does not bounce.
 pub const COUPLED_RATE: f64 = 0.01;
+/// The rate of penetration, relative, where the bit bounces: its motion is irregular, a
+/// minute's rate moves by 1-2 % with the rounding as with the step.
 pub const COUPLED_RATE_BOUNCING: f64 = 0.03;
 /// The stuck share.
 pub const COUPLED_STUCK_SHARE: f64 = 0.01;
@@ -209,7 +228,8 @@ pub struct CoupledParity {
     pub pass: bool,
 }
 
-/// Compares the CPU twin's summaries of `cells` with the kernel's, cell by cell.
+/// Compares the CPU twin's summaries of `cells` with the kernel's, cell by cell (a summary
+/// missing on either side fails it).
 pub fn compare_coupled(cells: &[(f64, Axial)], cpu: &[CoupledSummary], gpu: &[CoupledSummary]) -> CoupledParity {
     let within = |c: f64, g: f64, share: f64| (c - g).abs() < share * c.abs();
     let cells: Vec<CoupledCellParity> = cells
@@ -246,7 +266,7 @@ pub fn compare_coupled(cells: &[(f64, Axial)], cpu: &[CoupledSummary], gpu: &[Co
             }
         })
         .collect();
-    let pass = cells.iter().all(|c| c.pass);
+    let pass = cpu.len() == cells.len() && gpu.len() == cells.len() && cells.iter().all(|c| c.pass);
     CoupledParity { cells, pass }
 }
 
@@ -286,6 +306,15 @@ mod tests {
         assert!((off.max_speed_diff - 0.02).abs() < 1e-9, "{off:?}");
         assert_eq!(off.first_differences.len(), 2, "{off:?}");
         assert!(off.first_differences[0].starts_with(&format!("{} at 20 rpm, r = 0.7", jobs[1].law)));
+        // A speed that is not a number fails; so does a summary missing.
+        let mut nan = cpu.clone();
+        nan[0].0.speed_min_rad_s = f64::NAN;
+        let not_a_number = compare_strings(&jobs, &cpu, &nan);
+        assert!(
+            !not_a_number.pass && not_a_number.beyond_tolerance == 1,
+            "{not_a_number:?}"
+        );
+        assert!(!compare_strings(&jobs, &cpu, &cpu[..3]).pass);
     }
 
     #[test]
@@ -305,5 +334,6 @@ mod tests {
         let off = compare_coupled(cells, &cpu, &gpu);
         assert!(!off.pass && off.cells[0].pass && !off.cells[1].pass, "{off:?}");
         assert!((off.cells[1].torque_mean_knm.1 / off.cells[1].torque_mean_knm.0 - 1.011).abs() < 1e-12);
+        assert!(!compare_coupled(cells, &cpu, &cpu[..1]).pass);
     }
 }

@@ -109,8 +109,9 @@ pub enum Command {
     /// The whole paper on the embedded (synthetic) demo record: fits, ABC for δ = 0.4, 0.6, 0.8,
     /// stability maps (1-DOF and FE) and the report, ending with the headline numbers.
     Demo(demo::DemoCmd),
-    /// Score the same candidates on the CPU and the GPU and report their agreement: what to run
-    /// on new hardware before trusting its GPU. Exit status 1 when a check fails.
+    /// Score the same candidates and simulate the same strings on the CPU and the GPU, and report
+    /// their agreement: what to run on new hardware before trusting its GPU. Exit status 1 when
+    /// a check fails.
     Parity(parity::ParityCmd),
     /// Benchmark report: evaluator throughput per law and backend, the fixed cost of a call,
     /// a paper-scale ABC run end to end, and rejection versus SMC to the same ε.

@@ -1,4 +1,5 @@
-//! `bitrock parity`: the same candidates scored on the CPU and the GPU, and their agreement.
+//! `bitrock parity`: the same candidates scored and the same strings simulated on the CPU and the
+//! GPU, and their agreement.
 
 use super::args::finite_number;
 use super::args::{DataArgs, load_data};

@@ -47,7 +47,7 @@ pub use super::strings::{STICK_SLIP_STUCK_SHARE, STUCK_SPEED_RAD_S};
 pub mod well;
 
 /// Cells of the rock-surface ring of one string: 240 f32 and the twelve words of the rest of
-/// the state (two unused, so that the ring starts a line of four) make 1,008 B a string on the
+/// the state (one unused, so that the ring starts a line of four) make 1,008 B a string on the
 /// device.
 pub const RING_CELLS: usize = 240;
 
