@@ -23,8 +23,8 @@ const RING_AT: u32 = 3u;
 const RING_LINES: u32 = 60u;
 const SUMMARY_WORDS: u32 = 24u;
 const TAU: f32 = 6.283185307179586;
-// The lag (rad), the bit speed (rad/s) and the phase (rad) are each carried as a whole part, a
-// multiple of QUANTUM, and a fine part: see `carry`.
+// The lag (rad), the bit speed (rad/s), the phase (rad) and the compression (m) are each carried
+// as a whole part, a multiple of QUANTUM, and a fine part: see `carry`.
 const QUANTUM: f32 = 0.0009765625;
 const PER_QUANTUM: f32 = 1024.0;
 const CARRY_STEPS: u32 = 64u;

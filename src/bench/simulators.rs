@@ -2,6 +2,7 @@
 //! their CPU twins, compared by the rules the kernels are held to. The integration tests compare
 //! by these functions too, so that the command checks a user's GPU as the tests check lavapipe.
 
+use super::DIFFERENCES_SHOWN;
 use crate::Law;
 use crate::error::Result;
 use crate::eval::{Backend, coupled as coupled_backend, strings as strings_backend};
@@ -10,9 +11,6 @@ use crate::simulate::strings::{Chain, Schedule, StringJob, StringState, Summary,
 use crate::stability::lumped::Lumped;
 use crate::units::RAD_S_PER_RPM;
 use serde::Serialize;
-
-/// Differences described, at most, in a report.
-const DIFFERENCES_SHOWN: usize = 8;
 
 /// Torsional strings whose stick-slip verdicts may differ, as a share: f32 against f64 through
 /// a chaotic cycle, a string on the edge may go either way.

@@ -54,7 +54,8 @@ fn assert_both_kinds(cpu: &[(Summary, StringState)]) {
 fn the_kernel_integrates_the_1dof_string_as_its_cpu_twin_does() {
     require_gpu();
     let chain = Chain::one_dof(&Lumped::default());
-    let schedule = Schedule::new(0.01, 50.0, 40.0, 20.0).unwrap();
+    // `bitrock parity`'s strings and schedule.
+    let schedule = simulators::string_parity_schedule();
     let all = simulators::string_parity_jobs(&chain);
     // Every law in one batch (the law read per string), then each law's own batch (the law
     // compiled into the kernel).
