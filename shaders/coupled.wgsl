@@ -81,6 +81,11 @@ var<private> ring_at: u32;
 // it: `transport`'s passes, reading or writing only where the line changes. NO_LINE until read.
 const NO_LINE: u32 = 0xffffffffu;
 var<private> line_at: u32 = NO_LINE;
+// The held line's first cell, as f32: the steps keep their cell indices in f32 (whole numbers
+// below RING_CELLS, exact), so a step converts none (a conversion to an integer saturates on
+// the way: three operations on the step's chain) and wraps them with selects. A step into the
+// line after moves it; `line_at` follows it after the fast loop (`sync_line_at`).
+var<private> line_base: f32 = 0.0;
 var<private> line: vec4<f32>;
 var<private> line_changed: bool = false;
 // The line after the held one, read ahead (`next_read`), and the line the bit left, to write
@@ -92,7 +97,6 @@ var<private> line_changed: bool = false;
 var<private> next: vec4<f32>;
 var<private> next_read: bool = false;
 var<private> back: vec4<f32>;
-var<private> back_at: u32;
 var<private> back_due: bool = false;
 
 // How far (m) this dispatch's rebases took the heights in registers down: storage keeps the
@@ -121,13 +125,31 @@ fn hold_line(l: u32) {
         flush_line();
         line = states[ring_at + l] - vec4<f32>(unrebased);
         line_at = l;
+        line_base = f32(4u * l);
     }
+}
+
+// `line_at` from `line_base`, after the fast loop's steps.
+fn sync_line_at() {
+    line_at = u32(line_base) >> 2u;
 }
 
 // The height (m) of ring cell `c`, in the held line.
 fn held(c: u32) -> f32 {
     let k = c & 3u;
     return select(select(line.x, line.y, k == 1u), select(line.z, line.w, k == 3u), k >= 2u);
+}
+
+// The height (m) of ring cell `c` (f32, in the held line).
+fn held_at(c: f32) -> f32 {
+    let k = c - line_base;
+    return select(select(line.x, line.y, k == 1.0), select(line.z, line.w, k == 3.0), k >= 2.0);
+}
+
+// Sets ring cell `c` (f32, in the held line).
+fn put_at(c: f32, height: f32) {
+    line = select(line, vec4<f32>(height), vec4<f32>(0.0, 1.0, 2.0, 3.0) == vec4<f32>(c - line_base));
+    line_changed = true;
 }
 
 // Sets ring cell `c`, in the held line.
@@ -240,13 +262,31 @@ fn wrap(k: f32) -> u32 {
     return u32(j);
 }
 
-// The rock surface's height (m) under the bit, from the cell behind it and the one ahead, held
-// since the last step.
-fn surface(b: Bit, s: State) -> f32 {
-    let x = (s.phase + s.phase_fine) * b.per_cell - 0.5;
+// `wrap` in f32: k mod RING_CELLS for k in [-RING_CELLS, 2·RING_CELLS).
+fn wrapped(k: f32) -> f32 {
+    let m = f32(RING_CELLS);
+    let j = select(k, k + m, k < 0.0);
+    return select(j, j - m, j >= m);
+}
+
+// Where the bit is among the ring's cells: the cell just ahead of it (f32, not wrapped: in
+// [0, RING_CELLS] for a phase within the sector) and how far it is from the middle of the cell
+// behind to that of the one ahead (0 to 1). Set by `locate` from the phase each step leaves, so
+// that the next step reads it, not works it out again.
+var<private> ahead_k: f32;
+var<private> ahead_frac: f32;
+
+fn locate(b: Bit, phase: f32) {
+    let x = phase * b.per_cell - 0.5;
     let behind = floor(x);
-    let frac = x - behind;
-    return s.behind_old + frac * (held(wrap(behind + 1.0)) - s.behind_old);
+    ahead_k = behind + 1.0;
+    ahead_frac = x - behind;
+}
+
+// The rock surface's height (m) under the bit (`locate`d), from the cell behind it and the one
+// ahead, held since the last step.
+fn surface(s: State) -> f32 {
+    return s.behind_old + ahead_frac * (held_at(wrapped(ahead_k)) - s.behind_old);
 }
 
 // What a pass of `transport` does to its cell.
@@ -338,7 +378,7 @@ struct Stepped {
 fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     let dt = b.dt;
     var s = *s_at;
-    let dn = s.depth - surface(b, s);
+    let dn = s.depth - surface(s);
     let on_bottom = dn >= 0.0;
     let d = select(0.0, b.blades * dn, on_bottom);
     let wc = b.cut_w * d;
@@ -398,17 +438,17 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     let start = s.phase + s.phase_fine;
     let fine = s.phase_fine + turn;
     let end = s.phase + fine;
-    let k = floor(start * b.per_cell - 0.5) + 1.0;
+    let k = ahead_k;
     let crosses = turn > 0.0 && (k + 0.5) * b.cell <= end;
     let whole = turn < 0.0 || abs(depth_new) > REBASE_M || (crosses && (k + 1.5) * b.cell <= end);
     var left = turn;
     var depth_from = s.depth;
     if (!whole) {
         if (crosses) {
-            let c = wrap(k);
+            let c = wrapped(k);
             let depth = s.depth + (depth_new - s.depth) * ((k + 0.5) * b.cell - start) / turn;
-            s.behind_old = held(c);
-            put(c, max(s.behind_old, depth));
+            s.behind_old = held_at(c);
+            put_at(c, max(s.behind_old, depth));
         }
         // A turn forward of at most two cells from a phase within the sector: end − sector
         // where it passes the sector, without a division on the step's chain (the whole part
@@ -422,14 +462,16 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
     }
     // The next cell ahead in the line read ahead: step into it, leaving this one to write back.
     var slow = whole;
-    let ahead_line = ahead_of(b, s.phase + s.phase_fine) >> 2u;
-    if (!whole && ahead_line != line_at) {
-        if (ahead_line == line_after(line_at) && next_read) {
+    locate(b, s.phase + s.phase_fine);
+    let ahead = wrapped(ahead_k) - line_base;
+    if (!whole && !(ahead >= 0.0 && ahead < 4.0)) {
+        let next_base = select(line_base + 4.0, 0.0, line_base + 4.0 == f32(RING_CELLS));
+        let ahead_next = ahead + line_base - next_base;
+        if (ahead_next >= 0.0 && ahead_next < 4.0 && next_read) {
             back = line;
-            back_at = line_at;
             back_due = line_changed;
             line = next;
-            line_at = ahead_line;
+            line_base = next_base;
             line_changed = false;
             next_read = false;
         } else {
@@ -561,6 +603,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // it: a CPU driver runs every branch for all its lanes, so the storage passes below
             // run only after such a step, not after every one.
             var out: Stepped;
+            locate(b, s.phase + s.phase_fine);
             loop {
                 out = step(b, &s);
                 k = k + 1u;
@@ -576,7 +619,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             // The storage passes, for every lane that has one due (`transport` may change
             // any line, so the line after is read after it).
+            sync_line_at();
             if (back_due) {
+                // The line before the held one: a step into the line after needs it read
+                // ahead, so no other step comes between.
+                let back_at = select(line_at - 1u, RING_LINES - 1u, line_at == 0u);
                 states[ring_at + back_at] = back + vec4<f32>(unrebased);
                 back_due = false;
             }
