@@ -5,13 +5,21 @@ kicked by 1 rpm), the same semi-implicit Euler step with the same contact rules 
 ring of rock-surface cells per blade sector, every string advanced together (f64).
 
     python benches/coupled_numpy.py [--strings N] [--seconds S] [--dt-s DT] [--reps R]
+    python benches/coupled_numpy.py --against target/release/bitrock [--pairs P] ...
 
 Prints the wall time (median of the repetitions), string-seconds per second and the share of
 the strings in each regime (compare with the `regimes` of `bitrock bench --coupled --json`:
-steady, stick-slip, bit bounce, both)."""
+steady, stick-slip, bit bounce, both). With `--against BITROCK`, runs `BITROCK bench --coupled
+--backend gpu` on the same strings (60 s each, the same repetitions) and the twin one after the
+other, `--pairs` times, and prints each pair's rates, how many times the twin's rate the GPU's
+is, and the median of those ratios: the machine's load moves both, so the pairs are compared
+one by one."""
 
 import argparse
+import json
 import statistics
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -23,6 +31,8 @@ STUCK_SPEED_RAD_S = RPM
 STICK_SLIP_STUCK_SHARE = 0.01
 BOUNCE_SHARE = 0.01
 SAMPLE_HZ = 50.0
+# `bitrock bench --coupled`'s step (s).
+BENCH_DT_S = 1e-4
 
 # The public bit (a 0.108 m, ε 60 MPa, ζ 0.6, σ 60 MPa, l 11 mm, μ 0.6, γ 1, N 4) and the default
 # string (the paper's torsional string; 40 t; 1.4e5 N/m; 5e4 N·s/m), in SI.
@@ -162,9 +172,37 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--strings", type=int, default=256)
     parser.add_argument("--seconds", type=float, default=60.0)
-    parser.add_argument("--dt-s", type=float, default=1e-4)
+    parser.add_argument("--dt-s", type=float, default=BENCH_DT_S)
     parser.add_argument("--reps", type=int, default=1)
+    parser.add_argument("--against", metavar="BITROCK",
+                        help="a bitrock binary whose `bench --coupled --backend gpu` to compare with")
+    parser.add_argument("--pairs", type=int, default=3,
+                        help="with --against: GPU and twin runs, one after the other, this many times")
     args = parser.parse_args()
+    if args.reps < 1 or args.pairs < 1 or args.strings < 1:
+        parser.error("--strings, --reps and --pairs must be at least 1")
+    if not (args.dt_s > 0.0 and args.seconds >= 1.0 / SAMPLE_HZ):
+        parser.error(f"--dt-s must be above 0 and --seconds at least a sample, {1.0 / SAMPLE_HZ:g} s")
+    if args.against is None and args.pairs != parser.get_default("pairs"):
+        parser.error("--pairs needs --against")
+    if args.against is not None and args.dt_s != BENCH_DT_S:
+        parser.error(f"--against compares at bitrock bench's step, --dt-s {BENCH_DT_S:g}")
+    if args.against is None:
+        twin(args)
+        return
+    ratios = []
+    for pair in range(1, args.pairs + 1):
+        gpu = bitrock_rate(args)
+        numpy_rate = twin(args)
+        ratios.append(gpu / numpy_rate)
+        print(f"pair {pair}: gpu {gpu:.3e} string-s/s, numpy {numpy_rate:.3e}: "
+              f"{ratios[-1]:.1f} times")
+    print(f"gpu against the numpy twin, {args.strings} strings: {statistics.median(ratios):.1f} "
+          f"times (the median of {args.pairs} pairs: {', '.join(f'{r:.1f}' for r in ratios)})")
+
+
+def twin(args):
+    """Runs the twin `--reps` times and prints its line; returns its string-seconds per second."""
     walls, regimes, seconds = [], None, None
     with np.errstate(all="ignore"):
         for _ in range(args.reps):
@@ -173,9 +211,42 @@ def main():
             walls.append(time.perf_counter() - t)
     wall = statistics.median(walls)
     steady, stick_slip, bounce, both = regimes
+    rate = args.strings * seconds / wall
     print(f"numpy twin: {args.strings} strings x {seconds:g} s in {wall:.3f} s "
-          f"(median of {args.reps}): {args.strings * seconds / wall:.3e} string-s/s; "
-          f"steady {steady:.2f}, stick-slip {stick_slip:.2f}, bounce {bounce:.2f}, both {both:.2f}")
+          f"(median of {args.reps}): {rate:.3e} string-s/s; "
+          f"steady {steady:.2f}, stick-slip {stick_slip:.2f}, bounce {bounce:.2f}, both {both:.2f}",
+          flush=True)
+    return rate
+
+
+def fail(message, status=2):
+    """Says what is wrong and exits with `status` (2, as bitrock does on bad input)."""
+    print(f"coupled_numpy.py: error: {message}", file=sys.stderr)
+    sys.exit(status)
+
+
+def bitrock_rate(args):
+    """Runs `bitrock bench --coupled --backend gpu` on the twin's strings and step; prints its
+    line and returns its string-seconds per second."""
+    command = [args.against, "bench", "--coupled", "--backend", "gpu", "--strings-n",
+               str(args.strings), "--reps", str(args.reps), "--json"]
+    try:
+        run = subprocess.run(command, capture_output=True, text=True)
+    except OSError as error:
+        fail(f"--against {args.against}: {error.strerror}")
+    if run.returncode != 0:
+        fail(f"{' '.join(command)} failed ({run.returncode}): {run.stderr.strip()}", run.returncode)
+    try:
+        row = json.loads(run.stdout)[0]
+        backend, strings, rate = row["backend"], row["strings"], row["string_seconds_per_s"]
+        wall, seconds = row["wall_s"]["median"], row["seconds_per_string"]
+    except (ValueError, LookupError, TypeError):
+        fail(f"--against {args.against}: `bench --coupled --json` printed no coupled bench row")
+    print(f"{backend}: {strings} strings x {seconds:g} s in {wall:.3f} s (median of {args.reps}): "
+          f"{rate:.3e} string-s/s", flush=True)
+    if not backend.startswith("gpu"):
+        fail(f"--against {args.against} ran no GPU: {backend}")
+    return rate
 
 
 if __name__ == "__main__":

@@ -82,7 +82,7 @@ var<private> ring_at: u32;
 const NO_LINE: u32 = 0xffffffffu;
 var<private> line_at: u32 = NO_LINE;
 // The held line's first cell, as f32: the steps keep their cell indices in f32 (whole numbers
-// below RING_CELLS, exact), so a step converts none (a conversion to an integer saturates on
+// up to RING_CELLS, exact), so a step converts none (a conversion to an integer saturates on
 // the way: three operations on the step's chain) and wraps them with selects. A step into the
 // line after moves it; `line_at` follows it after the fast loop (`sync_line_at`).
 var<private> line_base: f32 = 0.0;
