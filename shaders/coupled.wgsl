@@ -81,10 +81,10 @@ var<private> ring_at: u32;
 // it: `transport`'s passes, reading or writing only where the line changes. NO_LINE until read.
 const NO_LINE: u32 = 0xffffffffu;
 var<private> line_at: u32 = NO_LINE;
-// The held line's first cell, as f32: the steps keep their cell indices in f32 (whole numbers
-// up to RING_CELLS, exact), so a step converts none (a conversion to an integer saturates on
-// the way: three operations on the step's chain) and wraps them with selects. A step into the
-// line after moves it; `line_at` follows it after the fast loop (`sync_line_at`).
+// The held line's first cell, as f32: cell indices are f32 (whole numbers, exact), so a step
+// converts none to an integer (a conversion saturates on the way: three operations on the
+// step's chain) and wraps them with selects; only a line's place in storage is an integer. A
+// step into the line after moves it; `line_at` follows it after the fast loop (`sync_line_at`).
 var<private> line_base: f32 = 0.0;
 var<private> line: vec4<f32>;
 var<private> line_changed: bool = false;
@@ -131,36 +131,29 @@ fn hold_line(l: u32) {
 
 // `line_at` from `line_base`, after the fast loop's steps.
 fn sync_line_at() {
-    line_at = u32(line_base) >> 2u;
+    line_at = line_of(line_base);
+}
+
+// The ring's line holding cell `c`.
+fn line_of(c: f32) -> u32 {
+    return u32(c) >> 2u;
 }
 
 // The height (m) of ring cell `c`, in the held line.
-fn held(c: u32) -> f32 {
-    let k = c & 3u;
-    return select(select(line.x, line.y, k == 1u), select(line.z, line.w, k == 3u), k >= 2u);
-}
-
-// The height (m) of ring cell `c` (f32, in the held line).
-fn held_at(c: f32) -> f32 {
+fn held(c: f32) -> f32 {
     let k = c - line_base;
     return select(select(line.x, line.y, k == 1.0), select(line.z, line.w, k == 3.0), k >= 2.0);
 }
 
-// Sets ring cell `c` (f32, in the held line).
-fn put_at(c: f32, height: f32) {
+// Sets ring cell `c`, in the held line.
+fn put(c: f32, height: f32) {
     line = select(line, vec4<f32>(height), vec4<f32>(0.0, 1.0, 2.0, 3.0) == vec4<f32>(c - line_base));
     line_changed = true;
 }
 
-// Sets ring cell `c`, in the held line.
-fn put(c: u32, height: f32) {
-    line = select(line, vec4<f32>(height), vec4<u32>(0u, 1u, 2u, 3u) == vec4<u32>(c & 3u));
-    line_changed = true;
-}
-
-// The cell just ahead of the bit at `phase`.
-fn ahead_of(b: Bit, phase: f32) -> u32 {
-    return wrap(floor(phase * b.per_cell - 0.5) + 1.0);
+// The cell just ahead of the bit at `phase` (within the sector).
+fn ahead_of(b: Bit, phase: f32) -> f32 {
+    return wrapped(floor(phase * b.per_cell - 0.5) + 1.0);
 }
 
 struct Bit {
@@ -249,24 +242,19 @@ struct Forces {
     dn: f32,
 }
 
-// A cell index k into the ring: k mod RING_CELLS. The indices met lie in [-2·RING_CELLS,
-// 2·RING_CELLS) (a step crosses at most RING_CELLS cells from a phase within one sector), so
-// selects do it; an integer modulo has no vector form on a CPU driver and costs a division per
-// lane.
-fn wrap(k: f32) -> u32 {
-    let m = i32(RING_CELLS);
-    var j = i32(k);
-    j = select(j, j + m, j < 0);
-    j = select(j, j + m, j < 0);
-    j = select(j, j - m, j >= m);
-    return u32(j);
-}
-
-// `wrap` in f32: k mod RING_CELLS for k in [-RING_CELLS, 2·RING_CELLS).
+// A cell index k into the ring, k mod RING_CELLS, for k in [-RING_CELLS, 2·RING_CELLS): the
+// cells around a phase within the sector, as a step meets them. Selects do it; an integer
+// modulo has no vector form on a CPU driver and costs a division per lane.
 fn wrapped(k: f32) -> f32 {
     let m = f32(RING_CELLS);
     let j = select(k, k + m, k < 0.0);
     return select(j, j - m, j >= m);
+}
+
+// `wrapped` for k in [-2·RING_CELLS, 2·RING_CELLS): `transport` crosses up to RING_CELLS cells
+// from a phase within one sector.
+fn wrapped_wide(k: f32) -> f32 {
+    return wrapped(select(k, k + f32(RING_CELLS), k < 0.0));
 }
 
 // Where the bit is among the ring's cells: the cell just ahead of it (f32, not wrapped: in
@@ -286,7 +274,7 @@ fn locate(b: Bit, phase: f32) {
 // The rock surface's height (m) under the bit (`locate`d), from the cell behind it and the one
 // ahead, held since the last step.
 fn surface(s: State) -> f32 {
-    return s.behind_old + ahead_frac * (held_at(wrapped(ahead_k)) - s.behind_old);
+    return s.behind_old + ahead_frac * (held(wrapped(ahead_k)) - s.behind_old);
 }
 
 // What a pass of `transport` does to its cell.
@@ -321,18 +309,18 @@ fn transport(b: Bit, s_in: State, turn: f32, depth_from: f32, depth_to: f32, wra
         var c = ahead;
         var op = HOLD;
         if (turn > 0.0 && (k + 0.5) * b.cell <= end && crossed < RING_CELLS) {
-            c = wrap(k);
+            c = wrapped_wide(k);
             op = CUT;
         } else if (turn < 0.0 && behind_next) {
-            c = wrap(k - 1.0);
+            c = wrapped_wide(k - 1.0);
             op = READ_BEHIND;
         } else if (turn < 0.0 && (k + 0.5) * b.cell > end && crossed < RING_CELLS) {
-            c = wrap(k);
+            c = wrapped_wide(k);
             op = RESTORE;
-        } else if ((ahead >> 2u) == line_at) {
+        } else if (line_of(ahead) == line_at) {
             break;
         }
-        hold_line(c >> 2u);
+        hold_line(line_of(c));
         if (op == HOLD) {
             break;
         }
@@ -447,8 +435,8 @@ fn step(b: Bit, s_at: ptr<function, State>) -> Stepped {
         if (crosses) {
             let c = wrapped(k);
             let depth = s.depth + (depth_new - s.depth) * ((k + 0.5) * b.cell - start) / turn;
-            s.behind_old = held_at(c);
-            put_at(c, max(s.behind_old, depth));
+            s.behind_old = held(c);
+            put(c, max(s.behind_old, depth));
         }
         // A turn forward of at most two cells from a phase within the sector: end − sector
         // where it passes the sector, without a division on the step's chain (the whole part
@@ -591,7 +579,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var last_stuck = bitcast<u32>(summaries[o + 22u]) != 0u;
     var f = Forces(0.0, 0.0, 0.0);
     carry_all(&s);
-    hold_line(ahead_of(b, s.phase + s.phase_fine) >> 2u);
+    hold_line(line_of(ahead_of(b, s.phase + s.phase_fine)));
     let steps = job.steps_per_sample;
     for (var period = job.first_period; period < job.end_period; period = period + 1u) {
         var k = 0u;
